@@ -1,0 +1,113 @@
+"""Physics of the envelope model (eq. 3-8) against closed forms and independent numerics."""
+
+import math
+
+import numpy as np
+import pytest
+import scipy.linalg
+from scipy import integrate, signal
+
+from wpt_receiver import TABLE_I, EnvelopeLink, LinkParams, coefficients, g22, state_matrices, steady_state, zoh_discretise
+
+P = TABLE_I
+W = 2 * math.pi * 85e3
+
+
+def test_steady_states_match_hand_phasor_solution():
+    # Hand computation with Table I: w Lm = 2 pi 85e3 * 6.25e-6, V1 = V2_rm = 4/pi * 30
+    wlm = W * 6.25e-6
+    v = 4 / math.pi * 30
+    det = 0.108 * 0.0325 + wlm**2
+    i1_rm, i2_rm = steady_state(P, v)
+    i1_sm, i2_sm = steady_state(P, 0.0)
+    assert i2_rm == pytest.approx((wlm * v - 0.108 * v) / det, rel=1e-12)
+    assert i2_sm == pytest.approx(wlm * v / det, rel=1e-12)
+    # phasor KVL of the primary: R1 I1 + w Lm I2 = V1 in both modes
+    for i1, i2 in ((i1_rm, i2_rm), (i1_sm, i2_sm)):
+        assert 0.108 * i1 + wlm * i2 == pytest.approx(v, rel=1e-12)
+    # independent SPICE of the same circuit: RM 11.18 A, SM 11.41 A -> within 2 %
+    assert i2_rm == pytest.approx(11.18, rel=0.02)
+    assert i2_sm == pytest.approx(11.41, rel=0.02)
+    # power balance in RM: source = losses + rectifier
+    p_src = 0.5 * v * i1_rm
+    p_loss = 0.5 * (0.108 * i1_rm**2 + 0.0325 * i2_rm**2)
+    p_rect = 0.5 * v * i2_rm
+    assert p_src == pytest.approx(p_loss + p_rect, rel=1e-12)
+
+
+def test_zeta_and_omega_n_match_state_matrix_eigenvalues():
+    c = coefficients(P)
+    a, _ = state_matrices(P)
+    lam = np.linalg.eigvals(a)
+    assert np.abs(lam[0]) == pytest.approx(c.omega_n, rel=1e-12)
+    assert -lam[0].real / np.abs(lam[0]) == pytest.approx(c.zeta, rel=1e-12)
+    assert 0.015 < c.zeta < 0.03  # "tiny damping" of the paper
+
+
+def test_g22_matches_state_space_transfer_function():
+    a, b = state_matrices(P)
+    num, den = signal.ss2tf(a, b, np.array([[0.0, 1.0]]), np.zeros((1, 2)), input=1)
+    tf = g22(P)
+    s = 1j * np.array([10.0, 1e3, 2.5e4, 1e6])
+    ref = np.polyval(num[0], s) / np.polyval(den, s)
+    got = np.polyval(tf.num, s) / np.polyval(tf.den, s)
+    np.testing.assert_allclose(got, ref, rtol=1e-10)
+    # DC gain: dI2/dV2 = -R1/(R1 R2 + (w Lm)^2)
+    assert tf.num[-1] / tf.den[-1] == pytest.approx(-0.108 / (0.108 * 0.0325 + (W * 6.25e-6) ** 2), rel=1e-12)
+
+
+@pytest.mark.parametrize("lm", [1e-7, 6.25e-6, 2e-5])
+@pytest.mark.parametrize("dt", [1e-7, 5.88e-6, 1e-3])
+def test_closed_form_zoh_equals_scipy_expm(lm, dt):
+    a, b = state_matrices(P, np.array([lm]))
+    ad, bd = zoh_discretise(a, b, dt)
+    m = np.zeros((4, 4))
+    m[:2, :2] = a[0]
+    m[:2, 2:] = b
+    e = scipy.linalg.expm(m * dt)
+    np.testing.assert_allclose(ad[0], e[:2, :2], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(bd[0], e[:2, 2:], rtol=1e-9, atol=1e-15)
+
+
+def test_zoh_handles_overdamped_and_critically_damped():
+    for a in (np.array([[-3.0, 0.5], [0.2, -1.0]]), np.array([[-2.0, 1.0], [0.0, -2.0]])):
+        b = np.eye(2)
+        ad, bd = zoh_discretise(a[None], b, 0.3)
+        np.testing.assert_allclose(ad[0], scipy.linalg.expm(a * 0.3), rtol=1e-7)
+
+
+def test_batched_link_against_solve_ivp_with_varying_lm():
+    lms = np.array([4e-6, 6.25e-6, 9e-6])
+    link = EnvelopeLink(P, n=3)
+    link.set_steady_state(P.v2_rm_amp_v, lm_h=lms)
+    dt, n = 2e-6, 500
+    for _ in range(n):
+        link.step(0.0, dt, lm_h=lms)
+    for j, lm in enumerate(lms):
+        a, b = state_matrices(P, lm)
+        u = np.array([P.v1_amp_v, 0.0])
+        x0 = steady_state(P, P.v2_rm_amp_v, lm)
+        sol = integrate.solve_ivp(lambda t, x: a @ x + b @ u, (0, n * dt), x0, method="DOP853", rtol=1e-11, atol=1e-11)
+        np.testing.assert_allclose(link.x[j], sol.y[:, -1], rtol=1e-7)
+
+
+def test_link_converges_to_closed_form_steady_state():
+    link = EnvelopeLink(P, n=2)
+    for _ in range(4000):  # 40 ms >> 1/(zeta wn) = 1.8 ms
+        link.step(np.array([P.v2_rm_amp_v, 0.0]), 1e-5)
+    np.testing.assert_allclose(link.i2, [steady_state(P, P.v2_rm_amp_v)[1], steady_state(P, 0)[1]], rtol=1e-6)
+
+
+@pytest.mark.parametrize("field,value", [("l1_h", 0.0), ("r2_ohm", -1.0), ("f_hz", float("nan")),
+                                         ("vdc_v", float("inf")), ("lm_h", 1e-3)])
+def test_bad_parameters_raise_with_field_name(field, value):
+    with pytest.raises(ValueError, match=field if field != "lm_h" else "k ="):
+        LinkParams(**{field: value})
+
+
+def test_bad_step_inputs_raise():
+    link = EnvelopeLink(P)
+    with pytest.raises(ValueError, match="dt_s"):
+        link.step(0.0, -1.0)
+    with pytest.raises(ValueError, match="lm_h"):
+        link.step(0.0, 1e-6, lm_h=-1.0)

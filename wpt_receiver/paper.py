@@ -1,0 +1,77 @@
+"""The paper's simulation section (Fig. 6, Table II) as a reusable scenario.
+
+The link starts at its RM steady state, the transition starts at ``t_switch_s`` and the window
+runs to ``t_end_s``. Each trajectory gives a duty sequence on the controller's grid; a *plant
+model* turns duties into current envelopes. Models register in :data:`MODELS`; the envelope
+model is built in, the switching-level model adds itself when its module is imported.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from .envelope import simulate
+from .inverse_controller import LowPassFilter
+from .metrics import TransitionMetrics, transition_metrics
+from .params import TABLE_I, LinkParams
+from .references import TRAJECTORIES, reference_duty
+from .sbar import v2_from_duty
+
+__all__ = ["PAPER_TABLE_II", "PaperRun", "MODELS", "envelope_plant", "run_paper"]
+
+#: Table II of the paper: trajectory -> (maximum current amplitude [A], overshoot [%]).
+PAPER_TABLE_II = {"step": (49.1, 368.0), "ramp": (11.4, 8.6), "proposed": (10.5, 0.0)}
+
+
+@dataclass
+class PaperRun:
+    trajectory: str
+    t_s: np.ndarray          # time grid of the envelope outputs
+    v2_ref_v: np.ndarray     # V2* on the control grid (same grid as t_ctrl_s)
+    t_ctrl_s: np.ndarray
+    d_short: np.ndarray
+    i1_a: np.ndarray
+    i2_a: np.ndarray
+    v2_v: np.ndarray         # fundamental of v2 applied by the plant
+    metrics: TransitionMetrics
+    sim_wall_s: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+
+def envelope_plant(params: LinkParams, d_short: np.ndarray, control_period_s: float, substeps: int = 4):
+    """Envelope model driven by a duty per control period (V2 = f(d), eq. 9).
+
+    Returns a dict with ``t_s, i1_a, i2_a, v2_v`` on a grid ``control_period_s / substeps``; the
+    run starts at the steady state of the first duty.
+    """
+    v2 = np.repeat(v2_from_duty(np.asarray(d_short, dtype=float), params.vl_v), substeps)
+    t, i1, i2 = simulate(params, v2, control_period_s / substeps)
+    return {"t_s": t, "i1_a": i1, "i2_a": i2, "v2_v": np.append(v2, v2[-1])}
+
+
+#: plant models: name -> callable(params, d_short, control_period_s) -> dict(t_s, i1_a, i2_a, v2_v, ...)
+MODELS: dict[str, Callable] = {"envelope": envelope_plant}
+
+
+def run_paper(params: LinkParams = TABLE_I, model: str = "envelope", t_switch_s: float = 1e-3,
+              t_end_s: float = 31e-3, control_period_s: float | None = None,
+              lpf: LowPassFilter = LowPassFilter(), trajectories=TRAJECTORIES, ramp_kind: str = "v2") -> list[PaperRun]:
+    """Run the step, ramp and proposed trajectories through plant ``model``."""
+    import time
+
+    if model not in MODELS:
+        raise ValueError(f"model={model!r} is invalid; valid values: {', '.join(sorted(MODELS))}")
+    period = params.rectifier_period_s if control_period_s is None else float(control_period_s)
+    runs = []
+    for name in trajectories:
+        t_ctrl, d, v2_ref = reference_duty(name, params, t_switch_s, t_end_s, period, lpf, ramp_kind)
+        t0 = time.perf_counter()
+        out = MODELS[model](params, d, period)
+        wall = time.perf_counter() - t0
+        m = transition_metrics(out["t_s"], out["i2_a"], t_switch_s, out["i1_a"], out["v2_v"])
+        extra = {k: v for k, v in out.items() if k not in ("t_s", "i1_a", "i2_a", "v2_v")}
+        runs.append(PaperRun(name, out["t_s"], v2_ref, t_ctrl, d, out["i1_a"], out["i2_a"], out["v2_v"], m, wall, extra))
+    return runs

@@ -1,0 +1,63 @@
+"""SBAR duty mapping (paper eq. 9) and its inverse.
+
+``v2 = f(d_short) = (4/pi) VL (1 - sin(pi/2 d_short))`` is the fundamental amplitude of the
+rectifier's input voltage when the two lower switches short the coil for ``d_short * T`` in every
+rectifier period ``T`` (half the inverter period). The relation assumes that the short window is
+centred on the peak of the i2 half-cycle: the removed part of the square wave is then the
+centred slice of width ``d_short * pi`` whose fundamental is ``(4/pi) VL sin(pi/2 d_short)``.
+For other placements of the window the fundamental is smaller in the in-phase component and a
+quadrature component appears (see the switching-level model); the paper's experiment shows the
+controller still works with the window shifted by pi/2.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["v2_from_duty", "duty_from_v2", "duty_from_v2_clipped"]
+
+_FOUR_OVER_PI = 4.0 / np.pi
+
+
+def _check_vl(vl_v: float) -> float:
+    vl_v = float(vl_v)
+    if not np.isfinite(vl_v) or vl_v <= 0:
+        raise ValueError(f"vl_v={vl_v!r} is invalid; valid range: (0, inf)")
+    return vl_v
+
+
+def v2_from_duty(d_short, vl_v: float):
+    """Fundamental amplitude of v2 [V] for short duty ``d_short`` in [0, 1] (eq. 9)."""
+    vl_v = _check_vl(vl_v)
+    d = np.asarray(d_short, dtype=float)
+    bad = ~np.isfinite(d) | (d < 0.0) | (d > 1.0)
+    if np.any(bad):
+        raise ValueError(f"d_short={d[bad].flat[0]!r} is out of range; valid range: [0, 1]")
+    out = _FOUR_OVER_PI * vl_v * (1.0 - np.sin(0.5 * np.pi * d))
+    return out if out.ndim else float(out)
+
+
+def duty_from_v2(v2_v, vl_v: float):
+    """Inverse of eq. 9: the short duty [-] that gives fundamental amplitude ``v2_v`` [V].
+
+    Valid for ``v2_v`` in ``[0, (4/pi) VL]``; anything else raises ``ValueError``.
+    """
+    vl_v = _check_vl(vl_v)
+    v = np.asarray(v2_v, dtype=float)
+    vmax = _FOUR_OVER_PI * vl_v
+    bad = ~np.isfinite(v) | (v < 0.0) | (v > vmax * (1 + 1e-12))
+    if np.any(bad):
+        raise ValueError(f"v2_v={v[bad].flat[0]!r} is out of range; valid range: [0, {vmax:.6g}] V")
+    out = duty_from_v2_clipped(v, vl_v)
+    return out if out.ndim else float(out)
+
+
+def duty_from_v2_clipped(v2_v, vl_v: float):
+    """Like :func:`duty_from_v2` but saturates ``v2_v`` into ``[0, (4/pi) VL]`` (no errors).
+
+    This is what a controller does with a command outside the actuator's range.
+    """
+    v = np.asarray(v2_v, dtype=float)
+    s = np.clip(1.0 - v / (_FOUR_OVER_PI * vl_v), 0.0, 1.0)
+    out = (2.0 / np.pi) * np.arcsin(s)
+    return out if out.ndim else float(out)
