@@ -1,0 +1,114 @@
+"""The observation / action contract and the ``Policy`` protocol, defined once.
+
+The mission runner, the gymnasium environments and every policy share this module, so every
+policy runs through the same closed loop and comparisons are fair.
+
+Observation (normalised to [-1, 1], one row per receiver; physical ranges below)
+
+=====  ====================  ===========  =====  ==================================================
+index  name                  range        unit   meaning (what the receiver can measure)
+=====  ====================  ===========  =====  ==================================================
+0      i2_amp_a              0 .. 60      A      secondary coil current envelope (sensor, noisy)
+1      battery_v             20 .. 36     V      battery terminal voltage (= VL of the SBAR)
+2      battery_current_a     -60 .. 30    A      battery current, + = charging
+3      rect_current_a        0 .. 20      A      SBAR DC output current I_L (into the battery node)
+4      soc                   0 .. 1       -      state of charge (battery management estimate)
+5      charge_cmd_a          0 .. 20      A      commanded I_L; 0 = stop charging (short mode)
+6      last_d_short          0 .. 1       -      the duty applied in the previous control period
+=====  ====================  ===========  =====  ==================================================
+
+Action: the short duty ``d_short`` in [0, 1] (0 = rectification mode, 1 = short mode), applied
+for one control period. Environments expose it as ``a in [-1, 1]`` with ``d = (a + 1) / 2``
+(:func:`action_to_duty`); discrete environments as {0: RM, 1: SM}.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from wpt_receiver import TABLE_I, LinkParams
+
+__all__ = ["ObsField", "OBS_FIELDS", "OBS_DIM", "OBS_INDEX", "normalise_obs", "denormalise_obs",
+           "action_to_duty", "duty_to_action", "PolicyContext", "Policy"]
+
+
+@dataclass(frozen=True)
+class ObsField:
+    name: str
+    lo: float
+    hi: float
+    unit: str
+    doc: str
+
+
+OBS_FIELDS: tuple[ObsField, ...] = (
+    ObsField("i2_amp_a", 0.0, 60.0, "A", "secondary coil current envelope (sensor, noisy)"),
+    ObsField("battery_v", 20.0, 36.0, "V", "battery terminal voltage (= VL of the SBAR)"),
+    ObsField("battery_current_a", -60.0, 30.0, "A", "battery current, + = charging"),
+    ObsField("rect_current_a", 0.0, 20.0, "A", "SBAR DC output current I_L"),
+    ObsField("soc", 0.0, 1.0, "-", "state of charge"),
+    ObsField("charge_cmd_a", 0.0, 20.0, "A", "commanded I_L; 0 = stop charging (short mode)"),
+    ObsField("last_d_short", 0.0, 1.0, "-", "duty applied in the previous control period"),
+)
+OBS_DIM = len(OBS_FIELDS)
+OBS_INDEX = {f.name: i for i, f in enumerate(OBS_FIELDS)}
+_LO = np.array([f.lo for f in OBS_FIELDS])
+_HI = np.array([f.hi for f in OBS_FIELDS])
+
+
+def normalise_obs(physical) -> np.ndarray:
+    """Physical values, shape (..., OBS_DIM) in the order of :data:`OBS_FIELDS` -> [-1, 1] (clipped)."""
+    x = np.asarray(physical, dtype=float)
+    return np.clip(2.0 * (x - _LO) / (_HI - _LO) - 1.0, -1.0, 1.0)
+
+
+def denormalise_obs(obs) -> np.ndarray:
+    """Inverse of :func:`normalise_obs` (values that were clipped stay at the range ends)."""
+    o = np.asarray(obs, dtype=float)
+    return _LO + (o + 1.0) * 0.5 * (_HI - _LO)
+
+
+def action_to_duty(action) -> np.ndarray:
+    """Environment action in [-1, 1] -> d_short in [0, 1] (clipped)."""
+    return np.clip((np.asarray(action, dtype=float) + 1.0) * 0.5, 0.0, 1.0)
+
+
+def duty_to_action(d_short) -> np.ndarray:
+    """d_short in [0, 1] -> environment action in [-1, 1]."""
+    return 2.0 * np.clip(np.asarray(d_short, dtype=float), 0.0, 1.0) - 1.0
+
+
+@dataclass(frozen=True)
+class PolicyContext:
+    """What a policy may know besides the observation.
+
+    link : the receiver's *assumed* link model (the truth may differ: Lm mismatch scenarios)
+    control_period_s : how often ``act`` is called
+    rated_i2_a : rated secondary coil current amplitude [A]
+    """
+
+    link: LinkParams = TABLE_I
+    control_period_s: float = TABLE_I.rectifier_period_s
+    rated_i2_a: float = 15.0
+
+    def __post_init__(self):
+        if not np.isfinite(self.control_period_s) or self.control_period_s <= 0:
+            raise ValueError(f"control_period_s={self.control_period_s!r} is invalid; valid range: (0, inf)")
+        if not np.isfinite(self.rated_i2_a) or self.rated_i2_a <= 0:
+            raise ValueError(f"rated_i2_a={self.rated_i2_a!r} is invalid; valid range: (0, inf)")
+
+
+@runtime_checkable
+class Policy(Protocol):
+    """A receiver policy: normalised observations in, short duties out, for ``n`` receivers at once."""
+
+    name: str
+
+    def reset(self, n: int = 1) -> None:
+        """Forget all internal state; the next ``act`` sees ``n`` receivers."""
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """``obs`` shape (n, OBS_DIM), normalised -> ``d_short`` shape (n,) in [0, 1]."""

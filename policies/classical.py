@@ -1,0 +1,110 @@
+"""Classical policies: step, ramp and the paper's model-based inverse controller.
+
+All three turn the charge command (a DC current ``I_L*`` into the battery, 0 = stop) into a
+target fundamental ``V2_target`` with the assumed link model, and differ only in how they move
+``V2*`` there:
+
+* step: at once (the plain mode switch of an unsynchronised ON-OFF SBAR),
+* ramp: linearly, at ``(4/pi) VL`` per ``2 L1 / R1`` (the paper's ramp slope),
+* model_based: I2ref = steady I2 for ``V2_target`` -> Q -> G22^-1 -> V2* (paper Fig. 5).
+
+The duty comes from the inverse of eq. 9 with the *measured* battery voltage as VL.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mission_sim.contract import OBS_INDEX, PolicyContext, denormalise_obs
+from wpt_receiver import InverseModelController, LowPassFilter, duty_from_v2_clipped, steady_state
+from wpt_receiver.references import ramp_duration_s
+
+__all__ = ["target_v2", "StepPolicy", "RampPolicy", "ModelBasedPolicy"]
+
+
+def target_v2(ctx: PolicyContext, charge_cmd_a, vl_v, lm_h=None) -> np.ndarray:
+    """V2 [V] that makes the SBAR deliver ``charge_cmd_a`` [A] at battery voltage ``vl_v`` in steady state.
+
+    Power balance of a lossless rectifier, ``V2 I2 / 2 = VL I_L``, with the assumed steady
+    ``I2 = (w Lm V1 - R1 V2) / det`` gives ``R1 V2^2 - w Lm V1 V2 + 2 VL I_L det = 0``; the
+    smaller root is taken and clipped into ``[0, (4/pi) VL]`` (a command beyond what RM can
+    deliver saturates at RM).
+    """
+    p = ctx.link
+    lm = p.lm_h if lm_h is None else np.asarray(lm_h, dtype=float)
+    wlm_v1 = p.omega_rad_s * lm * p.v1_amp_v
+    det = p.r1_ohm * p.r2_ohm + (p.omega_rad_s * lm) ** 2
+    il = np.maximum(np.asarray(charge_cmd_a, dtype=float), 0.0)
+    vl = np.asarray(vl_v, dtype=float)
+    disc = np.maximum(wlm_v1**2 - 8.0 * p.r1_ohm * vl * il * det, 0.0)
+    v2 = (wlm_v1 - np.sqrt(disc)) / (2.0 * p.r1_ohm)
+    return np.clip(v2, 0.0, 4.0 / np.pi * vl)
+
+
+class _CommandPolicy:
+    name = "base"
+
+    def __init__(self, ctx: PolicyContext = PolicyContext()):
+        self.ctx = ctx
+        self.n = 1
+
+    def reset(self, n: int = 1) -> None:
+        self.n = int(n)
+        self._v2 = None
+
+    def _measure(self, obs):
+        phys = denormalise_obs(np.atleast_2d(obs))
+        return phys[:, OBS_INDEX["charge_cmd_a"]], phys[:, OBS_INDEX["battery_v"]]
+
+
+class StepPolicy(_CommandPolicy):
+    """Jump to the target duty at once."""
+
+    name = "step"
+
+    def act(self, obs):
+        cmd, vl = self._measure(obs)
+        return duty_from_v2_clipped(target_v2(self.ctx, cmd, vl), vl)
+
+
+class RampPolicy(_CommandPolicy):
+    """Move V2* towards the target at the paper's ramp rate ((4/pi) VL per 2 L1/R1)."""
+
+    name = "ramp"
+
+    def act(self, obs):
+        cmd, vl = self._measure(obs)
+        tgt = target_v2(self.ctx, cmd, vl)
+        if self._v2 is None or len(self._v2) != len(tgt):
+            self._v2 = tgt.copy()
+        rate = 4.0 / np.pi * vl / ramp_duration_s(self.ctx.link) * self.ctx.control_period_s
+        self._v2 = self._v2 + np.clip(tgt - self._v2, -rate, rate)
+        return duty_from_v2_clipped(self._v2, vl)
+
+
+class ModelBasedPolicy(_CommandPolicy):
+    """The paper's inverse-model controller (Fig. 5) driven by the charge command."""
+
+    name = "model_based"
+
+    def __init__(self, ctx: PolicyContext = PolicyContext(), lpf: LowPassFilter = LowPassFilter()):
+        super().__init__(ctx)
+        self.lpf = lpf
+        self._ctl = None
+
+    def reset(self, n: int = 1) -> None:
+        super().reset(n)
+        self._ctl = None
+
+    def i2_ref(self, cmd, vl):
+        """Reference I2 [A] for a charge command: the assumed steady I2 at the target V2."""
+        return steady_state(self.ctx.link, target_v2(self.ctx, cmd, vl))[1]
+
+    def act(self, obs):
+        cmd, vl = self._measure(obs)
+        ref = self.i2_ref(cmd, vl)
+        if self._ctl is None or self._ctl.n != len(ref):
+            self._ctl = InverseModelController(self.ctx.link, self.ctx.control_period_s, self.lpf, n=len(ref))
+            self._ctl.reset(ref)
+        self._ctl.step(ref)
+        return duty_from_v2_clipped(self._ctl.v2_cmd_v, vl)
