@@ -25,6 +25,7 @@ from __future__ import annotations
 import cmath
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import pandas as pd
@@ -34,7 +35,7 @@ from .params import LinkParams
 from .switching_circuit import I1, I2, P_OPEN, S_OPEN, S_SHORT, VC1, VC2, Circuit, SwitchingConfig
 
 __all__ = ["SwitchingConfig", "Circuit", "Schedule", "SwitchingResult", "SwitchingLink", "make_schedule",
-           "simulate_ivp", "switching_plant", "fundamental"]
+           "simulate_ivp", "switching_plant", "fundamental", "sbar_relation"]
 
 _GRID = 16           # guard sampling points per rectifier period T (root bracketing)
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
@@ -210,7 +211,8 @@ class SwitchingResult:
     def envelope(self, t_a: float | None = None, t_b: float | None = None) -> pd.DataFrame:
         """Per-half-cycle envelope: peak |i2| in each window ``[(n-1/2)T, (n+1/2)T)`` around the
         nominal i2 peaks ``n T`` and peak |i1| in ``[nT, (n+1)T)``; plus the fundamental of v2
-        over the i2 window (in-phase with cos(wt): ``v2_fund_v``; quadrature ``v2_quad_v``).
+        over the i2 window (in-phase with cos(wt): ``v2_fund_v``; quadrature ``v2_quad_v``) and the
+        fundamental amplitude of i2 over the same window (``i2_fund_a``, the envelope model's I2).
 
         Peaks come from the dense samples refined by a parabola through the three samples around
         the maximum (relative error ~1e-6 for 32 samples per T)."""
@@ -231,12 +233,16 @@ class SwitchingResult:
 
         def fn(t, xx, k):
             v2 = self.outputs(xx, k)["v2"]
-            return np.stack([v2 * np.cos(w * t), v2 * np.sin(w * t)], axis=1)
+            i2 = xx[:, I2]
+            c, s = np.cos(w * t), np.sin(w * t)
+            return np.stack([v2 * c, v2 * s, i2 * c, i2 * s], axis=1)
         edges = np.append(centres - 0.5 * T, centres[-1] + 0.5 * T)
         f = self.integrate(edges, fn) * (2.0 / T)
         n1 = min(len(p1), len(p2))
-        return pd.DataFrame({"t_s": centres, "i2_env_a": p2, "t_i2_peak_s": t2, "i1_env_a": np.r_[p1[:n1], [np.nan] * (len(p2) - n1)],
-                             "v2_fund_v": f[:, 0], "v2_quad_v": f[:, 1]})
+        return pd.DataFrame({"t_s": centres, "i2_env_a": p2, "t_i2_peak_s": t2,
+                             "i1_env_a": np.r_[p1[:n1], [np.nan] * (len(p2) - n1)],
+                             "t_i1_peak_s": np.r_[t1[:n1], [np.nan] * (len(p2) - n1)],
+                             "v2_fund_v": f[:, 0], "v2_quad_v": f[:, 1], "i2_fund_a": np.hypot(f[:, 2], f[:, 3])})
 
 
     def _refine_peaks(self, tp, yp, col, iters: int = 2):
@@ -683,3 +689,93 @@ def simulate_ivp(params: LinkParams, cfg: SwitchingConfig, schedule: Schedule, x
         sel = idx == i
         xs[sel] = np.atleast_2d(pieces[i][2](t_eval[sel]).T)
     return t_eval, xs
+
+
+# ============================================================================ SBAR relation
+def sbar_relation(params: LinkParams, duties, phase_rad: float | None = 0.0, cfg: SwitchingConfig = SwitchingConfig(),
+                  periods: int = 2) -> pd.DataFrame:
+    """Fundamental of v2 in the periodic steady state against ``d_short`` (eq. 9 check).
+
+    ``phase_rad``: gate clock phase relative to the peak of the i2 fundamental (``i2 ~ cos wt``);
+    ``None`` centres the window on the i2 half-cycle itself, i.e. midway between the diode
+    commutations (found per duty by root-finding the phase that makes v2 symmetric), which is
+    exactly eq. 9's assumption. Columns: ``d_short, f_d_v`` (eq. 9), ``v2_abs_v`` (magnitude of
+    the fundamental), ``v2_inphase_v`` (component in phase with the i2 fundamental),
+    ``err_abs_pct``/``err_inphase_pct`` (relative to f(d)), ``err_abs_fs_pct`` (relative to the
+    full scale (4/pi) VL), ``phase_rad``.
+    """
+    from scipy.optimize import brentq
+
+    from .sbar import v2_from_duty
+    link = _link(params, cfg)
+    T = link.T
+    rows = []
+    for d in np.atleast_1d(np.asarray(duties, dtype=float)):
+        def phasors(ph):
+            x = link.periodic_steady_state(d, phase_rad=ph)
+            r = link.run(link.schedule(0.0, 2 * periods * T, float(d), phase_rad=ph), x)
+            return fundamental(r, 0.0, 2 * periods * T, "v2"), fundamental(r, 0.0, 2 * periods * T, "i2")
+
+        if phase_rad is None:
+            ph = brentq(lambda q: (phasors(q)[0] * np.exp(1j * q)).imag, -0.5, 0.5, xtol=1e-10)
+        else:
+            ph = float(phase_rad)
+        v2, i2 = phasors(ph)
+        f = float(v2_from_duty(d, params.vl_v))
+        inph = float((v2 * np.conj(i2)).real / abs(i2))
+        rows.append({"d_short": float(d), "f_d_v": f, "v2_abs_v": abs(v2), "v2_inphase_v": inph,
+                     "err_abs_pct": 100 * (abs(v2) - f) / f if f > 0 else float("nan"),
+                     "err_inphase_pct": 100 * (inph - f) / f if f > 0 else float("nan"),
+                     "err_abs_fs_pct": 100 * (abs(v2) - f) / params.v2_rm_amp_v, "phase_rad": ph})
+    return pd.DataFrame(rows)
+
+
+# ============================================================================ paper plant
+@lru_cache(maxsize=16)
+def _link(params: LinkParams, cfg: SwitchingConfig) -> SwitchingLink:
+    return SwitchingLink(params, cfg)
+
+
+def switching_plant(params: LinkParams, d_short, control_period_s: float, cfg: SwitchingConfig = SwitchingConfig(),
+                    phase_rad: float | None = None) -> dict:
+    """Plant model for :func:`wpt_receiver.paper.run_paper` (``MODELS["switching"]``).
+
+    Runs the duty sequence from the periodic steady state of its first duty and returns the
+    per-half-cycle envelope ``t_s, i1_a, i2_a`` (peaks), ``v2_v`` (in-phase fundamental of v2 per
+    half cycle) and the raw waveforms ``t_inst_s, i2_inst_a, i1_inst_a, i_load_a, gate`` plus
+    ``i_load_avg_a`` (battery current averaged per half cycle, on ``t_s``).
+    """
+    link = _link(params, cfg)
+    res = link.simulate(d_short, control_period_s, phase_rad=phase_rad)
+    env = res.envelope()
+    df = res.frame()
+    t = env["t_s"].to_numpy()
+    ok = np.isfinite(env["t_i1_peak_s"].to_numpy())
+    i1 = np.interp(t, env["t_i1_peak_s"].to_numpy()[ok], env["i1_env_a"].to_numpy()[ok])
+    N = cfg.samples_per_half_cycle
+    # battery current averaged over each i2 window (dense samples, window [t - T/2, t + T/2))
+    il = df["i_load_a"].to_numpy()
+    j0 = np.searchsorted(df["t_s"].to_numpy(), t[0] - 0.5 * link.T - 1e-12 * link.T)
+    il_avg = il[j0:j0 + len(t) * N].reshape(len(t), N).mean(axis=1) if j0 + len(t) * N <= len(il) else np.interp(
+        t, df["t_s"].to_numpy(), il)
+    return {"t_s": t, "i1_a": i1, "i2_a": env["i2_env_a"].to_numpy(), "v2_v": env["v2_fund_v"].to_numpy(),
+            "i2_fund_a": env["i2_fund_a"].to_numpy(),
+            "t_inst_s": df["t_s"].to_numpy(), "i2_inst_a": df["i2_a"].to_numpy(), "i1_inst_a": df["i1_a"].to_numpy(),
+            "i_load_a": il, "gate": df["gate"].to_numpy(), "i_load_avg_a": il_avg,
+            "link_params": params, "switching_config": cfg, "gate_phase_rad": link.cfg.gate_phase_rad if phase_rad is None else phase_rad}
+
+
+def _plot_extra(runs, out_dir):
+    from .switching_figures import plot_switching_waveforms
+    return plot_switching_waveforms(runs, out_dir)
+
+
+switching_plant.plot_extra = _plot_extra
+
+
+def _register():
+    from . import paper
+    paper.MODELS["switching"] = switching_plant
+
+
+_register()
