@@ -374,8 +374,10 @@ class SwitchingLink:
                     gs = self._guards[k]["sec"] if not gate else None
                     gp = self._guards[k]["pri"] if cmd == 0 else None
                     parts = [r for r in (gs, gp) if r is not None]
-                    self._guard_table[(k, gate, cmd)] = (np.vstack(parts) if parts else None,
-                                                         len(gs) if gs is not None else 0)
+                    rows = np.vstack(parts) if parts else None
+                    # guard values on the bracketing grid: (ge[j] @ z).real = guards at (j+1) h
+                    ge = None if rows is None else self._grid[k][1:, None, :] * rows[None, :, :]
+                    self._guard_table[(k, gate, cmd)] = (rows, len(gs) if gs is not None else 0, ge)
         self._v2open = {p: cir.v2_open_row(p) for p in (1, -1, P_OPEN)}
         self._v1open = {s: cir.v1_open_row(s) for s in (1, -1, S_SHORT, S_OPEN)}
         self._vout = cir.vout_row()
@@ -392,13 +394,14 @@ class SwitchingLink:
         return 1 if v > vd else (-1 if v < -vd else P_OPEN)
 
     def _modes(self, x, cmd, gate, p, s):
-        """Modes after a drive change (or after a current was set to 0)."""
+        """Modes after a drive change: the inverter follows its command (in dead time the current
+        freewheels through the diodes opposite to its sign), the SBAR shorts while the gate is on,
+        else the diode pair of the current's sign conducts; a zero current is decided by the
+        open-circuit voltage."""
         if cmd != 0:
             p = cmd
-        elif p == P_OPEN or x[I1] == 0.0:
-            p = self._primary_at_zero(x, s if s != S_OPEN or gate else S_OPEN) if x[I1] == 0.0 else p
         else:
-            p = -1 if x[I1] > 0 else 1
+            p = -1 if x[I1] > 0 else (1 if x[I1] < 0 else None)
         if gate:
             s = S_SHORT
         elif x[I2] > 0:
@@ -406,8 +409,8 @@ class SwitchingLink:
         elif x[I2] < 0:
             s = -1
         else:
-            s = self._secondary_at_zero(x, p)
-        if cmd == 0 and x[I1] == 0.0:  # re-decide the primary with the final secondary mode
+            s = self._secondary_at_zero(x, p if p is not None else P_OPEN)
+        if p is None:
             p = self._primary_at_zero(x, s)
         return p, s
 
@@ -417,6 +420,7 @@ class SwitchingLink:
         cir = self.cir
         lam, vec, inv, trans, grid = cir.lam, cir.vec, cir.inv, cir.trans, self._grid
         guards, h = self._guard_table, self._h
+        ecache = {}
         tol = 1e-12 * self.T
         ts, cmds, gates = schedule.t, schedule.cmd, schedule.gate
         x = np.array(x0, dtype=float)
@@ -458,33 +462,43 @@ class SwitchingLink:
                         z = trans[k][k2] @ z
                         k = k2
             n_same = 0
+            t_int = t
             while True:
                 seg_t.append(t)
                 seg_k.append(k)
                 seg_z.append(z)
                 tau = t_b - t
-                rows, ns = guards[(k, gate, cmd)]
+                rows, ns, ge = guards[(k, gate, cmd)]
+                if n_same == 0 and t == t_int:  # full interval: its exponential repeats, cache it
+                    key = (k, round(tau * 1e18))
+                    ez = ecache.get(key)
+                    if ez is None:
+                        ez = ecache[key] = np.exp(lam[k] * tau)
+                else:
+                    ez = np.exp(lam[k] * tau)
+                z_end = z * ez
                 if rows is None:
-                    z = z * np.exp(lam[k] * tau)
+                    z = z_end
                     break
-                c = rows * z  # (ng, m)
+                ng = len(rows)
                 nj = int(tau / h)
-                vend = (c @ np.exp(lam[k] * tau)).real
-                hit_end = (vend <= 0.0).any()
                 jh = nj
                 if nj > 0:
-                    vals = (grid[k][1:nj + 1] @ c.T).real
-                    neg = (vals <= 0.0).any(axis=1)
-                    if neg.any():
-                        jh = int(np.argmax(neg))
-                        vb = vals[jh]
+                    bad = ((ge[:nj] @ z).real <= 0.0).ravel()
+                    i = int(bad.argmax())
+                    if bad[i]:
+                        jh = i // ng
                 if jh == nj:
-                    if not hit_end:
-                        z = z * np.exp(lam[k] * tau)
+                    vb = (rows @ z_end).real
+                    if not (vb <= 0.0).any():
+                        z = z_end
                         break
-                    vb = vend
+                    b = tau
+                else:
+                    vb = (ge[jh] @ z).real
+                    b = (jh + 1) * h
                 a = jh * h
-                b = (jh + 1) * h if jh < nj else tau
+                c = rows * z
                 va = (c @ grid[k][jh]).real
                 best, which = b, -1
                 lk = lam[k].tolist()
