@@ -137,24 +137,24 @@ class SwitchingResult:
         cir = self.circuit
         cols = np.arange(cir.m) if cols is None else np.atleast_1d(cols)
         x = np.empty((len(ts), len(cols)))
-        for kk in np.unique(k):
-            sel = np.nonzero(k == kk)[0]
+        for kk, sel in _groups(k, len(cir.keys)):
             keep, wgt, dyn = cir.half[kk]
             lam = cir.lam[kk][keep]
             z = self.seg_z[j[sel]][:, keep] * wgt
             z[:, dyn] *= np.exp(np.outer(dt[sel], lam[dyn]))
             if deriv:
                 z *= lam**deriv
-            x[sel] = (z @ cir.vec[kk][np.ix_(cols, keep)].T).real
+            # einsum, not @: a tall-skinny complex matmul goes to multithreaded BLAS, which is
+            # 100x slower than this loop on a busy machine
+            x[sel] = np.einsum("nm,cm->nc", z, cir.vec[kk][np.ix_(cols, keep)]).real
         return x, k
 
     def outputs(self, x, k) -> dict:
         """v1, v2 and battery current for states ``x`` in topologies ``k``."""
         out = {name: np.empty(len(k)) for name in ("v1", "v2", "i_load")}
-        for kk in np.unique(k):
-            sel = k == kk
+        for kk, sel in _groups(k, len(self.circuit.keys)):
             for name, row in self.circuit.rows[kk].items():
-                out[name][sel] = x[sel] @ row
+                out[name][sel] = np.einsum("nm,m->n", x[sel], row)
         return out
 
     def frame(self, ts=None) -> pd.DataFrame:
@@ -300,6 +300,13 @@ class SwitchingResult:
         v = np.abs(v[:, 0])
         better = v >= yp * (1 - 1e-9)
         return np.where(better, t, tp), np.where(better, np.maximum(v, yp), yp)
+
+
+def _groups(k, nk):
+    """``(value, indices)`` for each value present in the small-integer array ``k``."""
+    order = np.argsort(k, kind="stable")
+    bounds = np.searchsorted(k[order], np.arange(nk + 1))
+    return [(v, order[bounds[v]:bounds[v + 1]]) for v in range(nk) if bounds[v + 1] > bounds[v]]
 
 
 def _window_peaks(ts, y, n):
