@@ -561,7 +561,11 @@ class SwitchingLink:
     def schedule(self, t0_s, t_end_s, d_short, control_period_s=None, phase_rad=None) -> Schedule:
         """Schedule for a duty per control period (scalar = constant duty)."""
         T = self.T
-        phase = self.cfg.gate_phase_rad if phase_rad is None else phase_rad
+        phase = self.cfg.gate_phase_rad if phase_rad is None else float(phase_rad)
+        if not math.isfinite(phase):
+            raise ValueError(f"phase_rad={phase_rad!r} is invalid; valid range: finite (radians at f)")
+        if control_period_s is not None and not (math.isfinite(control_period_s) and control_period_s > 0):
+            raise ValueError(f"control_period_s={control_period_s!r} is invalid; valid range: (0, inf)")
         w = self.params.omega_rad_s
         if np.ndim(d_short) == 0:
             dval = float(d_short)
