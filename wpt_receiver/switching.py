@@ -7,14 +7,16 @@ the state is advanced *exactly* over any duration in modal coordinates. Events:
 * scheduled: inverter commutations at ``k T`` (optional dead time), and the SBAR gate edges.
   The gate comes from the controller's own clock: the short window of rectifier period ``n`` is
   centred at ``n T + gate_phase_rad / omega`` and lasts ``d_short[n] T`` (``T`` = half the
-  inverter period). Phase 0 centres it on the i2 peak (eq. 9's assumption).
+  inverter period). Phase 0 centres it on the peak of the i2 fundamental (``i2 ~ cos wt``), the
+  place eq. 9 assumes; :func:`sbar_relation` can instead centre it on the actual half-cycle.
 * state events: diode commutations at the zero crossings of i2 (i1 in dead time) and the end of
   a blocked interval (open-circuit voltage reaching the DC voltage). They are located on a
   coarse grid of the exact solution (precomputed exponentials per topology) and refined by a
   safeguarded Newton iteration on the exact solution.
 
 Outputs are exact dense samples (a pandas DataFrame), the per-half-cycle envelope (peak of |i1|
-and |i2| in each half cycle) and the per-half-cycle fundamental of v2. :func:`simulate_ivp`
+and |i2| in each half cycle, fundamental of i2 and v2, mean battery current) and closed-form
+energy integrals. :func:`simulate_ivp`
 integrates the same circuit with ``scipy.integrate.solve_ivp`` as a slow reference.
 
 Importing this module registers ``MODELS["switching"]`` in :mod:`wpt_receiver.paper`.
@@ -252,8 +254,9 @@ class SwitchingResult:
         and the battery current averaged over the window (``i_load_avg_a``), both integrated on
         the exact solution (Gauss-Legendre on pieces split at every switching event).
 
-        Peaks come from the dense samples refined by a parabola through the three samples around
-        the maximum (relative error ~1e-6 for 32 samples per T)."""
+        Peaks: the largest dense sample per window, refined by a parabola through its neighbours
+        and then by Newton on di/dt = 0 with the exact solution (kept only if it does not lower
+        the value, e.g. at a kink where a gate edge sits on the peak)."""
         cir = self.circuit
         T, N = cir.T, cir.cfg.samples_per_half_cycle
         t_a = self.t0 if t_a is None else t_a
@@ -283,7 +286,6 @@ class SwitchingResult:
                              "v2_fund_v": f[:, 0], "v2_quad_v": f[:, 1], "i2_fund_a": np.hypot(f[:, 2], f[:, 3]),
                              "i_load_avg_a": f[:, 4]})
 
-
     def _refine_peaks(self, tp, yp, col, iters: int = 2):
         """Newton on d|i|/dt = 0 with the exact solution from the sampled peaks; a step that
         leaves the sample neighbourhood or lowers the value (a kink at the peak) is rejected."""
@@ -294,7 +296,7 @@ class SwitchingResult:
             d2, _ = self.states(t, cols=[col], deriv=2)
             with np.errstate(invalid="ignore", divide="ignore"):
                 tn = t - d1[:, 0] / d2[:, 0]
-            ok = np.isfinite(tn) & (np.abs(tn - tp) < h) & (d2[:, 0] * np.sign(d1[:, 0] * 0 + 1) != 0)
+            ok = np.isfinite(tn) & (np.abs(tn - tp) < h)
             t = np.where(ok, tn, t)
         v, _ = self.states(t, cols=[col])
         v = np.abs(v[:, 0])
