@@ -40,7 +40,6 @@ __all__ = ["SwitchingConfig", "Circuit", "Schedule", "SwitchingResult", "Switchi
            "simulate_ivp", "switching_plant", "fundamental", "sbar_relation"]
 
 _GRID = 16           # guard sampling points per rectifier period T (root bracketing)
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
 
 
 # ============================================================================ schedule
@@ -177,22 +176,42 @@ class SwitchingResult:
         h = self.circuit.T / n
         return self.t0 + np.arange(int(math.floor((self.t_end - self.t0) / h * (1 + 1e-12))) + 1) * h
 
-    def integrate(self, edges, fn) -> np.ndarray:
-        """Exact-solution Gauss-Legendre integrals of ``fn(t, x, k) -> (N, q)`` over each
-        ``[edges[i], edges[i+1]]``; every piece is smooth (split at all segment boundaries)."""
+    def linear_integrals(self, edges, forms, omegas) -> np.ndarray:
+        """Exact ``int (r_k . x) exp(j omega t) dt`` over each ``[edges[i], edges[i+1]]``.
+
+        ``forms``: callables ``k -> r`` (a row over the augmented state for topology ``k``);
+        ``omegas``: one angular frequency per form [rad/s] (0 for a plain integral). Each piece of
+        a segment contributes ``sum_a (r V)_a z_a (e^{lam_a u} e^{j w t})|_a^b / (lam_a + j w)``:
+        closed form. The real part is the integral against cos, the imaginary part against sin.
+        Returns a complex array (n_windows, n_forms)."""
+        cir = self.circuit
         edges = np.asarray(edges, dtype=float)
         cuts = self.seg_t[(self.seg_t > edges[0]) & (self.seg_t < edges[-1])]
         pts = np.unique(np.concatenate([edges, cuts]))
         a, b = pts[:-1], pts[1:]
-        half = 0.5 * (b - a)
-        tn = (0.5 * (a + b))[:, None] + half[:, None] * _GL_X[None, :]
-        x, k = self.states(tn.ravel())
-        vals = np.asarray(fn(tn.ravel(), x, k))
-        vals = vals.reshape(len(a), len(_GL_X), -1)
-        piece = np.einsum("pnq,n->pq", vals, _GL_W) * half[:, None]
-        which = np.clip(np.searchsorted(edges, 0.5 * (a + b), side="right") - 1, 0, len(edges) - 2)
-        out = np.zeros((len(edges) - 1, vals.shape[-1]))
-        np.add.at(out, which, piece)
+        mid = 0.5 * (a + b)
+        j = np.clip(np.searchsorted(self.seg_t, mid, side="right") - 1, 0, len(self.seg_k) - 1)
+        which = np.clip(np.searchsorted(edges, mid, side="right") - 1, 0, len(edges) - 2)
+        k = self.seg_k[j]
+        out = np.zeros((len(edges) - 1, len(forms)), dtype=complex)
+        phases = {w: (np.exp(1j * w * a), np.exp(1j * w * b)) for w in set(omegas) if w != 0}
+        for kk, sel in _groups(k, len(cir.keys)):
+            lam, vec = cir.lam[kk], cir.vec[kk]
+            js = j[sel]
+            s0 = self.seg_t[js]
+            e0 = np.exp(np.outer(a[sel] - s0, lam))
+            e1 = np.exp(np.outer(b[sel] - s0, lam))
+            z = self.seg_z[js]
+            for i, (form, w) in enumerate(zip(forms, omegas)):
+                mu = lam + 1j * w
+                if w != 0:
+                    num = e1 * phases[w][1][sel, None] - e0 * phases[w][0][sel, None]
+                else:
+                    num = e1 - e0
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    phi = np.where(mu == 0, (b - a)[sel, None], num / np.where(mu == 0, 1.0, mu))
+                vals = np.einsum("nm,nm,m->n", z, phi, form(kk) @ vec)
+                np.add.at(out[:, i], which[sel], vals)
         return out
 
     def quadratic_integrals(self, t_a: float, t_b: float, forms) -> np.ndarray:
@@ -251,8 +270,8 @@ class SwitchingResult:
         nominal i2 peaks ``n T`` and peak |i1| in ``[nT, (n+1)T)``; plus the fundamental of v2
         over the i2 window (in-phase with cos(wt): ``v2_fund_v``; quadrature ``v2_quad_v``) and the
         fundamental amplitude of i2 over the same window (``i2_fund_a``, the envelope model's I2)
-        and the battery current averaged over the window (``i_load_avg_a``), both integrated on
-        the exact solution (Gauss-Legendre on pieces split at every switching event).
+        and the battery current averaged over the window (``i_load_avg_a``), all integrated in
+        closed form on the exact solution.
 
         Peaks: the largest dense sample per window, refined by a parabola through its neighbours
         and then by Newton on di/dt = 0 with the exact solution (kept only if it does not lower
@@ -271,14 +290,12 @@ class SwitchingResult:
         t2, p2 = self._refine_peaks(*_window_peaks(ts, np.abs(x[:, I2]), N), I2)
         t1, p1 = self._refine_peaks(*_window_peaks(ts[N // 2:], np.abs(x[N // 2:, I1]), N), I1)
         w = cir.p.omega_rad_s
-
-        def fn(t, xx, k):
-            o = self.outputs(xx, k)
-            v2, i2 = o["v2"], xx[:, I2]
-            c, s = np.cos(w * t), np.sin(w * t)
-            return np.stack([v2 * c, v2 * s, i2 * c, i2 * s, o["i_load"] * 0.5], axis=1)
+        rows, e2 = cir.rows, np.eye(cir.m)[I2]
         edges = np.append(centres - 0.5 * T, centres[-1] + 0.5 * T)
-        f = self.integrate(edges, fn) * (2.0 / T)
+        f = self.linear_integrals(edges, [lambda k: rows[k]["v2"], lambda k: e2, lambda k: rows[k]["i_load"]],
+                                  [w, w, 0.0]) / T
+        f[:, :2] *= 2.0
+        f = np.column_stack([f[:, 0].real, f[:, 0].imag, f[:, 1].real, f[:, 1].imag, f[:, 2].real])
         n1 = min(len(p1), len(p2))
         return pd.DataFrame({"t_s": centres, "i2_env_a": p2, "t_i2_peak_s": t2,
                              "i1_env_a": np.r_[p1[:n1], [np.nan] * (len(p2) - n1)],
@@ -329,16 +346,15 @@ def _window_peaks(ts, y, n):
 
 
 def fundamental(result: SwitchingResult, t_a: float, t_b: float, signal: str = "v2") -> complex:
-    """Complex fundamental ``a - j b`` of ``signal`` ('v2', 'i2', 'i1', 'v1') over ``[t_a, t_b]``
-    (an integer number of inverter periods): ``signal ~ a cos(wt) + b sin(wt)``."""
-    w = result.circuit.p.omega_rad_s
+    """Complex fundamental ``a - j b`` of ``signal`` ('v2', 'i2', 'i1', 'v1', 'i_load') over
+    ``[t_a, t_b]`` (an integer number of inverter periods): ``signal ~ a cos(wt) + b sin(wt)``.
+    Integrated in closed form on the exact solution."""
+    cir = result.circuit
+    e = np.eye(cir.m)
     col = {"i1": I1, "i2": I2}
-
-    def fn(t, x, k):
-        y = x[:, col[signal]] if signal in col else result.outputs(x, k)[signal]
-        return np.stack([y * np.cos(w * t), y * np.sin(w * t)], axis=1)
-    a, b = result.integrate([t_a, t_b], fn)[0] * (2.0 / (t_b - t_a))
-    return complex(a, -b)
+    form = (lambda k: e[col[signal]]) if signal in col else (lambda k: cir.rows[k][signal])
+    f = result.linear_integrals([t_a, t_b], [form], [cir.p.omega_rad_s])[0, 0] * (2.0 / (t_b - t_a))
+    return complex(f.real, -f.imag)
 
 
 # ============================================================================ simulator
