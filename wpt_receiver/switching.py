@@ -665,12 +665,18 @@ def _refine(c, lam, a, ga, b, gb, tol):
 
 # ============================================================================ solve_ivp reference
 def simulate_ivp(params: LinkParams, cfg: SwitchingConfig, schedule: Schedule, x0, rtol: float = 1e-10,
-                 atol: float = 1e-10, method: str = "DOP853", t_eval=None):
+                 atol: float = 1e-10, method: str | None = None, t_eval=None):
     """Slow reference: the same circuit (written directly from eq. 1, not from the topology
     matrices) integrated by ``scipy.integrate.solve_ivp`` between events; diode commutations
-    are terminal events. Returns ``(t, x)`` with x (N, n) at ``t_eval`` (default: the ends)."""
+    are terminal events. Returns ``(t, x)`` with x (N, n) at ``t_eval`` (default: the ends).
+
+    ``method`` defaults to DOP853, or Radau when the smoothing capacitor makes the system stiff
+    (``r_bat_ohm * c_out_f < T / 10``): an explicit method then loses accuracy on the fast mode."""
     from scipy.integrate import solve_ivp
     cir = Circuit(params, cfg)
+    if method is None:
+        stiff = cir.has_cap and cfg.r_bat_ohm * cfg.c_out_f < cir.T / 10
+        method = "Radau" if stiff else "DOP853"
     P = params
     n = cir.n
     det = P.l1_h * P.l2_h - P.lm_h**2
