@@ -29,6 +29,12 @@ CONFIGS = {
 }
 
 
+def _IVP_TOL(cfg):
+    """solve_ivp tolerance: 1e-11 (DOP853); 1e-9 when the stiff capacitor selects Radau (slow)."""
+    stiff = cfg.c_out_f is not None and cfg.r_bat_ohm * cfg.c_out_f < T / 10
+    return 1e-9 if stiff else 1e-11
+
+
 def _transition(d_mid, n_rm=8, n_mid=30, n_sm=20):
     return np.r_[np.zeros(n_rm), np.full(n_mid, d_mid), np.ones(n_sm)]
 
@@ -46,18 +52,18 @@ def step25():
 # --------------------------------------------------------------------------- exactness
 @pytest.mark.parametrize("name", list(CONFIGS))
 def test_exact_stepper_matches_solve_ivp(name):
-    """Exact stepper vs solve_ivp (DOP853, rtol=atol=1e-11) of eq. 1 written out independently,
-    over RM -> phase shift (d=0.55) -> SM, 58 half-cycles. Tolerance: 1e-7 of each state's scale
+    """Exact stepper vs solve_ivp (DOP853 rtol=atol=1e-11, Radau 1e-9) of eq. 1 written out independently,
+    over RM -> phase shift (d=0.55) -> SM, 38 half-cycles. Tolerance: 1e-7 of each state's scale
     (currents ~10 A, vC1 ~1.5 kV)."""
     cfg = CONFIGS[name]
     link = SwitchingLink(P, cfg)
-    d = _transition(0.55, 8, 30, 20)
+    d = _transition(0.55, 6, 20, 12)
     x0 = link.periodic_steady_state(0.0)
     sch = link.schedule(0.0, len(d) * T, d)
     res = link.run(sch, x0)
-    ts = np.linspace(0.0, len(d) * T, 1201)
+    ts = np.linspace(0.0, len(d) * T, 761)
     x, kk = res.states(ts)
-    _, xi = simulate_ivp(P, cfg, sch, x0, rtol=1e-11, atol=1e-11, t_eval=ts)
+    _, xi = simulate_ivp(P, cfg, sch, x0, rtol=_IVP_TOL(cfg), atol=_IVP_TOL(cfg), t_eval=ts)
     n = link.cir.n
     scale = np.max(np.abs(xi), axis=0)
     err = np.max(np.abs(x[:, :n] - xi), axis=0) / scale
@@ -137,13 +143,13 @@ def test_random_links_and_duties(seed):
                           r_bat_ohm=float(rng.uniform(0.01, 1.0)) if cap else 0.0)
     p = P.with_(lm_h=float(rng.uniform(2e-6, 12e-6)), vl_v=float(rng.uniform(5.0, 120.0)))
     link = SwitchingLink(p, cfg)
-    d = np.clip(rng.uniform(-0.2, 1.2, size=40), 0.0, 1.0)
+    d = np.clip(rng.uniform(-0.2, 1.2, size=24), 0.0, 1.0)
     x0 = link.periodic_steady_state(d[0])
     sch = link.schedule(0.0, len(d) * T, d)
     res = link.run(sch, x0)
-    ts = np.linspace(0.0, len(d) * T, 801)
+    ts = np.linspace(0.0, len(d) * T, 481)
     x, k = res.states(ts)
-    _, xi = simulate_ivp(p, cfg, sch, x0, rtol=1e-11, atol=1e-11, t_eval=ts)
+    _, xi = simulate_ivp(p, cfg, sch, x0, rtol=_IVP_TOL(cfg), atol=_IVP_TOL(cfg), t_eval=ts)
     err = np.max(np.abs(x[:, :link.cir.n] - xi), axis=0) / np.max(np.abs(xi), axis=0)
     assert np.all(err < 1e-7), err
     e = res.energy_balance(0.5 * T, res.t_end - 0.5 * T)
