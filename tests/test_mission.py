@@ -186,7 +186,7 @@ def test_flight_time_gain_definition(default_runs):
 def test_gusty_wind_gates_the_pad_and_multirate_matches_all_fine():
     base = config_to_dict(load_config())
     short = {"mission.start_x_m": -1.0, "mission.cruise_altitude_m": 1.0, "mission.land_x_m": 1.0,
-             "pads.0.hover_time_s": 1.5, "battery.initial_soc": 0.5, "sim.traj_dt_s": 0.05}
+             "pads.0.hover_time_s": 0.6, "battery.initial_soc": 0.5, "sim.traj_dt_s": 0.05}
     d = apply_overrides(base, short)
     d["pads"] = d["pads"][:1]
     cfg = config_from_dict(d)
@@ -203,7 +203,7 @@ def test_gusty_wind_gates_the_pad_and_multirate_matches_all_fine():
     assert b["energy_balance_error_rel"] < 1e-9
     # strong gusts: the coupling drops below the threshold, the pad switches off and on again
     gust = config_from_dict(apply_overrides(d, {"wind.gust_sigma_m_s": 3.0, "wind.mean_speed_m_s": 6.0,
-                                                "pads.0.hover_time_s": 30.0, "sim.traj_dt_s": 0.1}))
+                                                "pads.0.hover_time_s": 15.0, "sim.traj_dt_s": 0.1}))
     g = run_mission(gust, policy(gust, "model_based"))
     ts = g.timeseries
     on = ts["tx_on"].to_numpy()
