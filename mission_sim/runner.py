@@ -26,11 +26,13 @@ Loop (one drone, one receiver):
 
 **Multi-rate.** *Fine* steps of ``sim.control_period_s`` (the policy's ``control_period_s``: it is
 called once per step) run around every event: pad ramps, command changes, a duty change returned
-by the policy. A fine window lasts at least ``min_fine_s`` and ends when the duty moves less than
+by the policy, fast Lm changes with the pad on. A fine window lasts at least ``min_fine_s`` and
+ends when the SBAR output ``1 - sin(pi d / 2)`` (= V2 / ((4/pi) VL), eq. 9) moves less than
 ``settle_duty_tol`` per step and I2 is within ``settle_i2_tol_a`` of the steady state for the held
-inputs (or after ``max_fine_s``). Otherwise *coarse* steps run to the next trajectory sample
-(Lm, power held: the ZOH step is exact for any length) with the policy called once per coarse
-step and its duty held; if that duty moves by more than ``settle_duty_tol`` a fine window starts.
+inputs (or after ``max_fine_s``); with the pad off it ends once the coil currents have died out.
+Otherwise *coarse* steps run to the next trajectory sample (Lm, power held: the ZOH step is exact
+for any length) with the policy called at most every ``coarse_policy_period_s`` and its duty held
+in between; if that duty moves by more than ``duty_event_tol`` a fine window starts.
 With the pad off and nothing pending, samples are merged into steps of up to ``sim.flight_dt_s``.
 
 Sensor noise: ``sim.i2_noise_a`` (default 0: none) adds seeded Gaussian noise to the i2
@@ -337,7 +339,10 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
                 t += dt
                 if fast_lm and v1 > 0.0:
                     continue
-                if t >= fine_until_min and (abs(d - d_prev) < sim.settle_duty_tol or v1 == 0.0) and settled(lm_s):
+                # settle on the SBAR's output (V2 / ((4/pi) VL) = 1 - sin(pi d / 2)), not on the duty:
+                # near short mode the duty is ill-conditioned (arcsin) while V2 has settled
+                dv = abs(math.sin(0.5 * math.pi * d) - math.sin(0.5 * math.pi * d_prev))
+                if t >= fine_until_min and (dv < sim.settle_duty_tol or v1 == 0.0) and settled(lm_s):
                     in_fine = False
                 elif t >= fine_deadline and v1 == (v1_nom if tx_on else 0.0):
                     in_fine = False

@@ -210,3 +210,19 @@ def test_gusty_wind_gates_the_pad_and_multirate_matches_all_fine():
     assert np.sum(np.diff(on.astype(int)) == 1) >= 2  # switched on more than once
     assert ts["k"][ts["v1_v"] == ts["v1_v"].max()].min() >= gust.coupling.tx_min_k
     assert g.summary["energy_balance_error_rel"] < 1e-9
+
+
+def test_replayed_trajectory_runs_through_the_same_loop():
+    cfg = load_config()
+    t = np.arange(0, 12.0, 0.1)
+    pos = np.zeros((len(t), 3))
+    pos[:, 2] = np.where(t < 2, 2.0 - 0.9 * t, cfg.mission.hover_gap_m)  # descend onto pad 0, then hover
+    pos[:, 2] = np.maximum(pos[:, 2], cfg.mission.hover_gap_m)
+    pos[:, 0] = 0.02 * np.sin(t)
+    tr = Trajectory.from_samples(t, pos)
+    res = run_mission(cfg, policy(cfg, "ramp"), trajectory=tr)
+    s = res.summary
+    assert s["charge_time_s"] > 8 and s["energy_from_source_j"] > 500
+    assert s["energy_balance_error_rel"] < 1e-9 and s["flight_time_gain_s"] > 0
+    with pytest.raises(ValueError, match="strictly increasing"):
+        Trajectory.from_samples(t[::-1], pos)
