@@ -172,7 +172,7 @@ def _add_mission(sub):
     p.add_argument("--out", type=Path, default=Path("out/mission"), help="output folder (default out/mission)")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help="override a config value by dotted key, e.g. --set wind.mean_speed_m_s=6 (repeatable)")
+                   help="override a config value by dotted key, e.g. --set wind.speed_m_s=6 (repeatable)")
     p.add_argument("--no-charge", action="store_true", help="never energise the pads (baseline mission)")
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
     p.set_defaults(func=_cmd_mission)

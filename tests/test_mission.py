@@ -42,7 +42,7 @@ def test_default_config_round_trip_and_package_file():
 
 @pytest.mark.parametrize("override, match", [
     ({"battery.capacity_ah": -1.0}, r"battery\.capacity_ah=-1\.0 is invalid; valid range"),
-    ({"wind.mean_speed_m_s": 99.0}, r"wind\.mean_speed_m_s=99\.0 .*\[0, 30\]"),
+    ({"wind.speed_m_s": 99.0}, r"wind\.speed_m_s=99\.0 .*\[0, 30\]"),
     ({"sim.control_period_s": 0.5}, r"sim\.control_period_s=0\.5 .*valid range"),
     ({"drone.n_rotors": 2.5}, r"drone\.n_rotors=2\.5 .*integer"),
     ({"mission.hover_gap_m": "low"}, r"mission\.hover_gap_m='low' .*number"),
@@ -68,7 +68,7 @@ def test_unknown_keys_are_named():
 # ----------------------------------------------------------------------------- trajectory
 def test_trajectory_limits_phases_and_seeded_wind():
     calm = config_from_dict(apply_overrides(config_to_dict(load_config()),
-                                            {"wind.mean_speed_m_s": 0.0, "wind.gust_sigma_m_s": 0.0}))
+                                            {"wind.speed_m_s": 0.0, "wind.gust_sigma_m_s": 0.0}))
     tr = plan_mission(calm)
     v = tr.velocity_m_s()
     m = calm.mission
@@ -202,7 +202,7 @@ def test_gusty_wind_gates_the_pad_and_multirate_matches_all_fine():
     assert a["final_soc"] == pytest.approx(b["final_soc"], rel=1e-5)
     assert b["energy_balance_error_rel"] < 1e-9
     # strong gusts: the coupling drops below the threshold, the pad switches off and on again
-    gust = config_from_dict(apply_overrides(d, {"wind.gust_sigma_m_s": 3.0, "wind.mean_speed_m_s": 6.0,
+    gust = config_from_dict(apply_overrides(d, {"wind.gust_sigma_m_s": 3.0, "wind.speed_m_s": 6.0,
                                                 "pads.0.hover_time_s": 15.0, "sim.traj_dt_s": 0.1}))
     g = run_mission(gust, policy(gust, "model_based"))
     ts = g.timeseries
