@@ -135,7 +135,7 @@ class SimConfig:
     i2_noise_a: float = 0.0
     min_fine_s: float = 0.002
     max_fine_s: float = 0.06
-    settle_duty_tol: float = 2e-6
+    settle_duty_tol: float = 1e-5
     duty_event_tol: float = 2e-3
     lm_rel_tol: float = 0.05
     coarse_policy_period_s: float = 1.0

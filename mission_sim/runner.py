@@ -33,7 +33,8 @@ inputs (or after ``max_fine_s``); with the pad off it ends once the coil current
 Otherwise *coarse* steps run to the next trajectory sample (Lm, power held: the ZOH step is exact
 for any length) with the policy called at most every ``coarse_policy_period_s`` and its duty held
 in between; if that duty moves by more than ``duty_event_tol`` a fine window starts.
-With the pad off and nothing pending, samples are merged into steps of up to ``sim.flight_dt_s``.
+With the pad off and nothing pending, samples are merged into steps of up to ``sim.flight_dt_s``
+and the policy is not called (the SBAR has nothing to do; its duty is held).
 
 Sensor noise: ``sim.i2_noise_a`` (default 0: none) adds seeded Gaussian noise to the i2
 observation only. Peak I2 and time above rated are taken on 4 points per fine step and on the
@@ -71,7 +72,7 @@ def _pad_offsets(cfg, traj: Trajectory):
 def _lm_along(cfg, model, traj: Trajectory):
     off, idx = _pad_offsets(cfg, traj)
     lm = np.zeros(len(traj))
-    _, rho_max, z_min, z_max = model._grid
+    rho_max, z_min, z_max = model.table_range_m
     near = (np.hypot(off[:, 0], off[:, 1]) < rho_max) & (off[:, 2] < z_max) & (off[:, 2] > 0.5 * z_min)
     if np.any(near):
         lm[near] = model.lm_h(off[near, 0], off[near, 1], off[near, 2], traj.tilt_rad[near],
@@ -279,9 +280,7 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
                 j += 1
             dt = float(t_all[j] - t_k)
             p_mean = float(np.dot(p_all[k:j], np.diff(t_all[k:j + 1]))) / dt
-            if t_k - t_last_act >= sim.coarse_policy_period_s - 1e-12:
-                d = act()
-                t_last_act = t_k
+            # pad off, nothing pending: the SBAR has nothing to do, the policy is not called
             do_step(t_k, dt, lm, p_mean, k, False)
             n_coarse += 1
             if bar is not None:
@@ -363,7 +362,10 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
              "battery_v", "battery_current_a", "soc", "charge_cmd_a", "fine", "e_source_j", "e_coil_loss_j",
              "e_rectifier_j", "e_battery_chem_j", "e_battery_r0_j", "e_battery_r1_j", "e_battery_c1_j",
              "e_propulsion_j")
-    df = pd.DataFrame.from_records(rows, columns=names)
+    arr = np.array(rows, dtype=float).reshape(-1, len(names))
+    df = pd.DataFrame({name: arr[:, j] for j, name in enumerate(names)})
+    df["fine"] = df["fine"].astype(bool)
+    df["_row"] = df["_row"].astype(np.int64)
     ri = df.pop("_row").to_numpy()
     pos = pos_all[ri]
     df.insert(2, "x_m", pos[:, 0])
@@ -377,7 +379,8 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
     df["p_coil_loss_w"] = df["e_coil_loss_j"] / dts
     df["p_battery_loss_w"] = (df["e_battery_r0_j"] + df["e_battery_r1_j"]) / dts
     df["phase"] = pd.Categorical(phase[ri])
-    acc = {key: math.fsum(df[col]) for key, col in (
+    col = {name: j for j, name in enumerate(names)}
+    acc = {key: math.fsum(arr[:, col[c]].tolist()) for key, c in (
         ("src", "e_source_j"), ("coil", "e_coil_loss_j"), ("rect", "e_rectifier_j"), ("chem", "e_battery_chem_j"),
         ("r0", "e_battery_r0_j"), ("r1", "e_battery_r1_j"), ("c1", "e_battery_c1_j"), ("prop", "e_propulsion_j"))}
     dw = st.stored_j(x) - w0
