@@ -98,6 +98,7 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
         res.summary["flight_time_gain_s"] = flight_time_gain_s(cfg, res.summary["final_soc"],
                                                                base.summary["final_soc"])
         res.summary["final_soc_without_charging"] = base.summary["final_soc"]
+        res.summary["battery_depleted_without_charging"] = base.summary["battery_depleted"]
     else:
         res.summary["flight_time_gain_s"] = 0.0
         res.summary["final_soc_without_charging"] = res.summary["final_soc"]
@@ -108,7 +109,8 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
 
 def flight_time_gain_s(cfg, final_soc_charged: float, final_soc_uncharged: float) -> float:
     """Extra hover time [s] the charged mission ends with: the difference of the usable chemical
-    energy left (``n Q int_0^SoC OCV``) divided by the electrical hover power."""
+    energy left (``n Q int_0^SoC OCV``, SoC clipped into [0, 1]: a depleted baseline counts as 0)
+    divided by the electrical hover power."""
     e = cfg.battery.usable_energy_j
     return float((e(final_soc_charged) - e(final_soc_uncharged)) / hover_power_w(cfg.drone))
 
@@ -187,8 +189,10 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
         beta = a0 + g * c * s0 / (2 * dt)
         disc = beta * beta - 4 * alpha * g * p_prop
         if disc < 0:
-            raise ValueError(f"battery cannot supply {p_prop:.1f} W at t={t0:.2f} s (SoC {soc:.3f}); "
-                             f"valid: propulsion power below {beta * beta / (4 * alpha * g):.1f} W")
+            raise ValueError(f"the battery cannot supply the propulsion power {p_prop:.1f} W at t={t0:.2f} s "
+                             f"(SoC {soc:.3f}, phase {traj.phase[row_k]}): valid range: below its maximum "
+                             f"{beta * beta / (4 * alpha * g):.1f} W; lighten the drone (drone.mass_kg, "
+                             f"drone.payload_kg) or use a bigger battery (battery.n_series, battery.capacity_ah)")
         vl = (beta + math.sqrt(disc)) / (2 * alpha)
         v2 = c * vl
         if fine:
@@ -409,6 +413,8 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
         "initial_soc": float(bp.initial_soc),
         "final_soc": float(soc),
         "battery_full": bool(charger.full[0]),
+        "min_soc": float(min(df["soc"].min(), bp.initial_soc)) if len(df) else float(bp.initial_soc),
+        "battery_depleted": bool(len(df) and df["soc"].min() < 0.0),
         "peak_i2_a": peak_i2,
         "rated_i2_a": rated,
         "time_above_rated_s": above,
