@@ -102,6 +102,7 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     else:
         res.summary["flight_time_gain_s"] = 0.0
         res.summary["final_soc_without_charging"] = res.summary["final_soc"]
+        res.summary["battery_depleted_without_charging"] = res.summary["battery_depleted"]
     res.summary["wall_s"] = time.perf_counter() - wall0
     res.summary["realtime_factor"] = res.summary["sim_time_s"] / max(res.summary["wall_s"], 1e-12)
     return res
