@@ -1,0 +1,324 @@
+"""Reading MAVLink telemetry logs (.tlog) and ArduPilot DataFlash logs (.bin) into pandas tables.
+
+:func:`read_log` never raises on bad *content*: corrupt frames are counted (``bad_frames``) and
+skipped, and a parser failure ends the read with what was decoded so far (``errors``). Only a
+missing file raises (``FileNotFoundError``).
+
+Tables of a :class:`FlightLog` (time ``t_s`` in seconds since the first record of the log, taken
+from the log's own timestamps ``msg._timestamp`` -- ground-station clock in a .tlog, GPS-aligned
+in a .bin -- so vehicle reboots and ``time_boot_ms`` resets do not disturb the timeline):
+
+==========  =================================================================================
+table       columns (SI units; converted once, in :data:`_CONVERT`)
+==========  =================================================================================
+position    t_s, lat_deg, lon_deg, alt_m (AMSL) -- GPS fix type >= 3 only
+attitude    t_s, roll_rad, pitch_rad
+armed       t_s, armed (bool) -- every armed-state report of the vehicle
+battery     t_s, voltage_v, current_a (+ = discharging), power_w = voltage_v * current_a
+==========  =================================================================================
+
+pymavlink must be imported with ``MAVLINK20=1`` (shared/notes/mavlink.md): :func:`mavutil`
+sets it and checks it took effect.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["mavutil", "FlightLog", "read_log", "armed_periods", "POSITION_COLUMNS", "BATTERY_COLUMNS"]
+
+POSITION_COLUMNS = ("t_s", "lat_deg", "lon_deg", "alt_m")
+ATTITUDE_COLUMNS = ("t_s", "roll_rad", "pitch_rad")
+ARMED_COLUMNS = ("t_s", "armed")
+BATTERY_COLUMNS = ("t_s", "voltage_v", "current_a", "power_w")
+
+_MAV_AUTOPILOT_INVALID = 8          # ground stations and companions send heartbeats with this
+_MAV_MODE_FLAG_SAFETY_ARMED = 128
+_UINT16_MAX = 65535
+_REBOOT_DROP_S = 10.0                 # a time_boot_ms drop this large is a reboot, not jitter
+_DF_ARMED_EVENTS = {10: True, 11: False}  # DataFlash EV Id: ARMED, DISARMED
+_DF_INT_CHARS = set("bBhHiIqQ")           # DataFlash format chars stored as plain integers
+
+
+def mavutil():
+    """``pymavlink.mavutil`` with the MAVLink 2 dialect loaded (MAVLINK20=1 set before the import)."""
+    os.environ["MAVLINK20"] = "1"
+    from pymavlink import mavutil as mu
+    if mu.mavlink.WIRE_PROTOCOL_VERSION != "2.0":
+        raise RuntimeError("pymavlink.mavutil was imported before MAVLINK20=1 was set; MAVLink 2 "
+                           "messages cannot be encoded. Import mission_sim.mavlink_io first.")
+    return mu
+
+
+# ----------------------------------------------------------------------------- unit conversion
+def _nan_if(value, *invalid):
+    return float("nan") if value in invalid else float(value)
+
+
+def _battery_status_voltage_v(msg) -> float:
+    """BATTERY_STATUS: cell voltages in mV, 65535 = unused; some vehicles put the pack in cell 0."""
+    cells = [v for v in list(msg.voltages) + list(getattr(msg, "voltages_ext", []) or []) if 0 < v < _UINT16_MAX]
+    return sum(cells) * 1e-3 if cells else float("nan")
+
+
+def _df_scale(msg, column: str, int_scale: float) -> float:
+    """DataFlash: integer columns (old CURR: cV, cA) get ``int_scale``; float columns are in SI already."""
+    fmt = msg.fmt
+    char = fmt.format[fmt.colhash[column]] if column in fmt.colhash else "f"
+    return int_scale if char in _DF_INT_CHARS else 1.0
+
+
+#: The ONE place where raw log fields become SI values: message type -> (table, row function).
+#: DFReader already applies the DataFlash format multipliers (L: 1e-7 deg, c/e: 0.01), except on
+#: plain integer columns such as the old CURR Volt/Curr in cV/cA.
+_CONVERT = {
+    "GLOBAL_POSITION_INT": ("position", lambda m: {
+        "lat_deg": m.lat * 1e-7, "lon_deg": m.lon * 1e-7, "alt_m": m.alt * 1e-3,
+        "time_boot_s": m.time_boot_ms * 1e-3}),
+    "GPS_RAW_INT": ("fix", lambda m: {"fix_type": int(m.fix_type)}),
+    "GPS": ("df_gps", lambda m: {
+        "fix_type": int(m.Status), "lat_deg": float(m.Lat), "lon_deg": float(m.Lng), "alt_m": float(m.Alt)}),
+    "ATTITUDE": ("attitude", lambda m: {"roll_rad": float(m.roll), "pitch_rad": float(m.pitch)}),
+    "ATT": ("attitude", lambda m: {"roll_rad": math.radians(m.Roll), "pitch_rad": math.radians(m.Pitch)}),
+    "HEARTBEAT": ("heartbeat", lambda m: {
+        "armed": bool(m.base_mode & _MAV_MODE_FLAG_SAFETY_ARMED), "autopilot": int(m.autopilot),
+        "mav_type": int(m.type)}),
+    "EV": ("armed", lambda m: {"armed": _DF_ARMED_EVENTS.get(int(m.Id))}),
+    "ARM": ("armed", lambda m: {"armed": bool(m.ArmState)}),
+    "SYS_STATUS": ("sys_status", lambda m: {
+        "voltage_v": _nan_if(m.voltage_battery, 0, _UINT16_MAX) * 1e-3,
+        "current_a": _nan_if(m.current_battery, -1) * 1e-2}),
+    "BATTERY_STATUS": ("battery_status", lambda m: {
+        "voltage_v": _battery_status_voltage_v(m),
+        "current_a": _nan_if(m.current_battery, -1) * 1e-2, "battery_id": int(m.id)}),
+    "CURR": ("df_curr", lambda m: {
+        "voltage_v": m.Volt * _df_scale(m, "Volt", 1e-2), "current_a": m.Curr * _df_scale(m, "Curr", 1e-2)}),
+    "BAT": ("df_bat", lambda m: {
+        "voltage_v": float(m.Volt), "current_a": float(m.Curr), "battery_id": int(getattr(m, "Instance", 0))}),
+}
+
+
+# ----------------------------------------------------------------------------- result
+@dataclass
+class FlightLog:
+    """What :func:`read_log` found in one log (tables described in the module docstring)."""
+
+    path: Path
+    kind: str                      # "tlog" or "dataflash"
+    t0_epoch_s: float              # timestamp of the first record (Unix s); nan if none
+    duration_s: float              # last minus first record timestamp
+    position: pd.DataFrame
+    attitude: pd.DataFrame
+    armed: pd.DataFrame
+    battery: pd.DataFrame
+    battery_source: str | None     # SYS_STATUS, BATTERY_STATUS, CURR or BAT
+    bad_frames: int                # corrupt frames counted and skipped
+    n_records: int                 # records decoded (bad frames included)
+    mavlink_frames: dict[int, int] = field(default_factory=dict)  # protocol version -> frames (.tlog)
+    reboots: int = 0               # time_boot_ms drops seen in GLOBAL_POSITION_INT
+    fix_checked: bool = True       # False: the log had no GPS fix information at all
+    vehicle: dict = field(default_factory=dict)
+    errors: list[str] = field(default_factory=list)
+
+    @property
+    def armed_periods(self) -> list[tuple[float, float]]:
+        return armed_periods(self.armed, self.duration_s)
+
+    @property
+    def armed_time_s(self) -> float:
+        return float(sum(b - a for a, b in self.armed_periods))
+
+
+def armed_periods(armed: pd.DataFrame, end_s: float) -> list[tuple[float, float]]:
+    """(start_s, end_s) of each armed period from armed-state reports; an open period ends at ``end_s``."""
+    periods, start = [], None
+    for t, a in zip(armed["t_s"].to_numpy(float), armed["armed"].to_numpy(bool)):
+        if a and start is None:
+            start = t
+        elif not a and start is not None:
+            periods.append((start, t))
+            start = None
+    if start is not None:
+        periods.append((start, max(float(end_s), start)))
+    return periods
+
+
+def _frame(rows: list[dict], columns) -> pd.DataFrame:
+    df = pd.DataFrame(rows) if rows else pd.DataFrame(columns=list(columns) + ["src"])
+    return df
+
+
+# ----------------------------------------------------------------------------- reading
+def _open(path: Path, mu):
+    """(reader, kind). DataFlash by magic bytes or suffix; everything else is read as a .tlog.
+
+    The readers are built directly: ``mavlink_connection`` would execute a path containing /bin/.
+    """
+    from pymavlink import DFReader
+    with open(path, "rb") as fh:
+        head = fh.read(2)
+    if head == b"\xa3\x95" or path.suffix.lower() == ".bin":
+        return DFReader.DFReader_binary(str(path)), "dataflash"
+    if path.suffix.lower() == ".log" and DFReader.DFReader_is_text_log(str(path)):
+        return DFReader.DFReader_text(str(path)), "dataflash"
+    return mu.mavmmaplog(str(path)), "tlog"
+
+
+def _collect(reader, kind: str, raw: dict, stats: dict) -> None:
+    """Decode every record into ``raw[table]`` rows (with t and source); BAD_DATA only counted.
+
+    Records are read unfiltered: with a type filter pymavlink skips .tlog frames without checking
+    them (corrupt frames would go uncounted), and the duration is over all records.
+    """
+    while True:
+        msg = reader.recv_match(blocking=False)
+        if msg is None:
+            return
+        t = getattr(msg, "_timestamp", None)
+        if t is None or not math.isfinite(t):
+            continue
+        stats["n"] += 1
+        stats["first"] = t if stats["first"] is None else stats["first"]
+        stats["last"] = t
+        mtype = msg.get_type()
+        if mtype == "BAD_DATA":
+            stats["bad"] += 1
+            continue
+        if kind == "tlog":
+            buf = msg.get_msgbuf()
+            ver = 2 if buf[:1] == b"\xfd" else 1
+            stats["versions"][ver] = stats["versions"].get(ver, 0) + 1
+        conv = _CONVERT.get(mtype)
+        if conv is None:
+            continue
+        table, fn = conv
+        try:
+            row = fn(msg)
+        except (AttributeError, TypeError, ValueError, KeyError, OverflowError):
+            stats["bad"] += 1
+            continue
+        row["t"] = t
+        row["src"] = (msg.get_srcSystem(), msg.get_srcComponent()) if kind == "tlog" else (0, 0)
+        raw.setdefault(table, []).append(row)
+
+
+def read_log(path) -> FlightLog:
+    """Read a .tlog or DataFlash log into a :class:`FlightLog`; never raises on bad content.
+
+    Raises ``FileNotFoundError`` if ``path`` does not exist or is not a file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"log {str(path)!r} does not exist or is not a file")
+    mu = mavutil()
+    raw: dict[str, list[dict]] = {}
+    stats = {"n": 0, "bad": 0, "first": None, "last": None, "versions": {}}
+    errors: list[str] = []
+    kind = "dataflash" if path.suffix.lower() == ".bin" else "tlog"
+    captured = io.StringIO()
+    if path.stat().st_size > 0:
+        # DFReader reports skipped corrupt bytes with print(); count those reports as bad frames.
+        with contextlib.redirect_stderr(captured), contextlib.redirect_stdout(captured):
+            try:
+                reader, kind = _open(path, mu)
+                _collect(reader, kind, raw, stats)
+            except Exception as exc:  # noqa: BLE001 -- untrusted bytes: keep what was decoded, report
+                errors.append(f"{type(exc).__name__}: {exc}")
+    text = captured.getvalue()
+    stats["bad"] += text.count("Skipped ") + text.count("Failed to parse")
+    return _assemble(path, kind, raw, stats, errors)
+
+
+def _assemble(path: Path, kind: str, raw: dict, stats: dict, errors: list[str]) -> FlightLog:
+    t0 = stats["first"] if stats["first"] is not None else float("nan")
+    duration = (stats["last"] - t0) if stats["first"] is not None else 0.0
+
+    def table(name):
+        df = pd.DataFrame(raw.get(name, []))
+        if len(df):
+            df.insert(0, "t_s", df.pop("t") - t0)
+        return df
+
+    vehicle: dict = {}
+    hb = table("heartbeat")
+    if kind == "tlog":
+        veh = hb[hb["autopilot"] != _MAV_AUTOPILOT_INVALID] if len(hb) else hb
+        if len(veh):
+            src = veh["src"].iloc[0]
+            vehicle = {"sysid": int(src[0]), "compid": int(src[1]), "mav_type": int(veh["mav_type"].iloc[0])}
+
+    def from_vehicle(df):
+        if not len(df) or kind != "tlog":
+            return df
+        if vehicle:
+            return df[df["src"] == (vehicle["sysid"], vehicle["compid"])]
+        return df[df["src"].map(lambda s: s[0]) != 255]  # no autopilot heartbeat: drop the usual GCS id
+
+    # position: GPS fix >= 3 and a non-zero lat/lon
+    fix_checked = True
+    if kind == "tlog":
+        pos = from_vehicle(table("position"))
+        fix = table("fix")
+        fix = fix[fix["src"].map(lambda s: s[0]) == vehicle["sysid"]] if vehicle and len(fix) else fix
+        reboots = int(np.sum(np.diff(pos["time_boot_s"].to_numpy(float)) < -_REBOOT_DROP_S)) if len(pos) else 0
+        if len(pos) and len(fix):
+            pos = pd.merge_asof(pos.sort_values("t_s", kind="stable"), fix[["t_s", "fix_type"]].sort_values(
+                "t_s", kind="stable"), on="t_s", direction="backward")
+            pos = pos[pos["fix_type"].fillna(0) >= 3]
+        elif len(pos):
+            fix_checked = False
+    else:
+        pos = table("df_gps")
+        reboots = 0
+        if len(pos):
+            pos = pos[pos["fix_type"] >= 3]
+    if len(pos):
+        ok = (pos["lat_deg"] != 0) & (pos["lon_deg"] != 0) & pos["lat_deg"].between(-90, 90) \
+            & pos["lon_deg"].between(-180, 180) & np.isfinite(pos["alt_m"])
+        pos = pos[ok]
+    position = _clean_time(pos, POSITION_COLUMNS)
+
+    attitude = _clean_time(from_vehicle(table("attitude")), ATTITUDE_COLUMNS)
+    armed_df = from_vehicle(hb)[["t_s", "armed"]] if kind == "tlog" and len(hb) else table("armed")
+    if len(armed_df):
+        armed_df = armed_df[armed_df["armed"].notna()]
+    armed = _clean_time(armed_df, ARMED_COLUMNS, dedupe=False)
+    if len(armed):
+        armed["armed"] = armed["armed"].astype(bool)
+
+    battery, source = pd.DataFrame(columns=list(BATTERY_COLUMNS)), None
+    for name, label in (("battery_status", "BATTERY_STATUS"), ("sys_status", "SYS_STATUS"),
+                        ("df_bat", "BAT"), ("df_curr", "CURR")):
+        df = from_vehicle(table(name))
+        if "battery_id" in df and len(df):
+            df = df[df["battery_id"] == df["battery_id"].min()]
+        if len(df):
+            df = df[np.isfinite(df["voltage_v"]) & np.isfinite(df["current_a"])]
+        if len(df):
+            df = df.assign(power_w=df["voltage_v"] * df["current_a"])
+            battery, source = _clean_time(df, BATTERY_COLUMNS), label
+            break
+
+    return FlightLog(path=path, kind=kind, t0_epoch_s=float(t0), duration_s=float(duration),
+                     position=position, attitude=attitude, armed=armed, battery=battery,
+                     battery_source=source, bad_frames=int(stats["bad"]), n_records=int(stats["n"]),
+                     mavlink_frames=dict(stats["versions"]), reboots=reboots, fix_checked=fix_checked,
+                     vehicle=vehicle, errors=errors)
+
+
+def _clean_time(df: pd.DataFrame, columns, dedupe: bool = True) -> pd.DataFrame:
+    """Keep ``columns``, sort by time (stable), drop repeated timestamps (the last report wins)."""
+    if not len(df):
+        return pd.DataFrame({c: pd.Series(dtype=bool if c == "armed" else float) for c in columns})
+    out = df[list(columns)].sort_values("t_s", kind="stable")
+    if dedupe:
+        out = out.drop_duplicates("t_s", keep="last")
+    return out.reset_index(drop=True)
