@@ -43,6 +43,8 @@ BATTERY_COLUMNS = ("t_s", "voltage_v", "current_a", "power_w")
 _MAV_AUTOPILOT_INVALID = 8          # ground stations and companions send heartbeats with this
 _MAV_MODE_FLAG_SAFETY_ARMED = 128
 _UINT16_MAX = 65535
+_T_MIN_S, _T_MAX_S = 0.0, 4102444800.0  # plausible record times: boot-relative .. year 2100 (Unix s)
+_TIME_SPIKE_S = 60.0                 # a record this far off its neighbours' median time is corrupt
 _REBOOT_DROP_S = 10.0                 # a time_boot_ms drop this large is a reboot, not jitter
 _DF_ARMED_EVENTS = {10: True, 11: False}  # DataFlash EV Id: ARMED, DISARMED
 _DF_INT_CHARS = set("bBhHiIqQ")           # DataFlash format chars stored as plain integers
@@ -166,7 +168,16 @@ def _open(path: Path, mu):
     with open(path, "rb") as fh:
         head = fh.read(2)
     if head == b"\xa3\x95" or path.suffix.lower() == ".bin":
-        return DFReader.DFReader_binary(str(path)), "dataflash"
+        # the Python indexer: the compiled one reports corrupt bytes on the C stderr, uncapturable
+        old = os.environ.get("PYMAVLINK_FAST_INDEX")
+        os.environ["PYMAVLINK_FAST_INDEX"] = "0"
+        try:
+            return DFReader.DFReader_binary(str(path)), "dataflash"
+        finally:
+            if old is None:
+                os.environ.pop("PYMAVLINK_FAST_INDEX")
+            else:
+                os.environ["PYMAVLINK_FAST_INDEX"] = old
     if path.suffix.lower() == ".log" and DFReader.DFReader_is_text_log(str(path)):
         return DFReader.DFReader_text(str(path)), "dataflash"
     return mu.mavmmaplog(str(path)), "tlog"
@@ -183,14 +194,12 @@ def _collect(reader, kind: str, raw: dict, stats: dict) -> None:
         if msg is None:
             return
         t = getattr(msg, "_timestamp", None)
-        if t is None or not math.isfinite(t):
-            continue
-        stats["n"] += 1
-        stats["first"] = t if stats["first"] is None else stats["first"]
-        stats["last"] = t
+        t = float(t) if isinstance(t, (int, float)) and _T_MIN_S <= t <= _T_MAX_S else float("nan")
+        rec = len(stats["ts"])
+        stats["ts"].append(t)
         mtype = msg.get_type()
-        if mtype == "BAD_DATA":
-            stats["bad"] += 1
+        stats["bad_rec"].append(mtype == "BAD_DATA")
+        if mtype == "BAD_DATA" or t != t:
             continue
         if kind == "tlog":
             buf = msg.get_msgbuf()
@@ -203,9 +212,10 @@ def _collect(reader, kind: str, raw: dict, stats: dict) -> None:
         try:
             row = fn(msg)
         except (AttributeError, TypeError, ValueError, KeyError, OverflowError):
-            stats["bad"] += 1
+            stats["bad_rec"][rec] = True
             continue
         row["t"] = t
+        row["rec"] = rec
         row["src"] = (msg.get_srcSystem(), msg.get_srcComponent()) if kind == "tlog" else (0, 0)
         raw.setdefault(table, []).append(row)
 
@@ -220,7 +230,7 @@ def read_log(path) -> FlightLog:
         raise FileNotFoundError(f"log {str(path)!r} does not exist or is not a file")
     mu = mavutil()
     raw: dict[str, list[dict]] = {}
-    stats = {"n": 0, "bad": 0, "first": None, "last": None, "versions": {}}
+    stats = {"ts": [], "bad_rec": [], "bad": 0, "versions": {}}
     errors: list[str] = []
     kind = "dataflash" if path.suffix.lower() == ".bin" else "tlog"
     captured = io.StringIO()
@@ -237,13 +247,30 @@ def read_log(path) -> FlightLog:
     return _assemble(path, kind, raw, stats, errors)
 
 
+def _good_timestamps(ts: np.ndarray) -> np.ndarray:
+    """Records whose timestamp is within :data:`_TIME_SPIKE_S` of the centred rolling median of 9.
+
+    A corrupt byte in a .tlog record's 8-byte timestamp (or in a DataFlash TimeUS) makes an
+    isolated spike of hours or years; steps (logging paused) and any spacing of a monotonic
+    clock pass, since the centred median of a sorted window is its middle element.
+    """
+    if len(ts) == 0:
+        return np.zeros(0, dtype=bool)
+    med = pd.Series(ts).rolling(9, center=True, min_periods=1).median().to_numpy()
+    return np.abs(ts - med) <= _TIME_SPIKE_S  # False for nan (implausible timestamps)
+
+
 def _assemble(path: Path, kind: str, raw: dict, stats: dict, errors: list[str]) -> FlightLog:
-    t0 = stats["first"] if stats["first"] is not None else float("nan")
-    duration = (stats["last"] - t0) if stats["first"] is not None else 0.0
+    ts = np.asarray(stats["ts"], dtype=float)
+    good = _good_timestamps(ts)
+    stats["bad"] += int(np.sum(~good | np.asarray(stats["bad_rec"], dtype=bool)))
+    t0 = float(ts[good][0]) if good.any() else float("nan")
+    duration = max(float(ts[good].max()) - t0, 0.0) if good.any() else 0.0
 
     def table(name):
         df = pd.DataFrame(raw.get(name, []))
         if len(df):
+            df = df[good[df["rec"].to_numpy()]]
             df.insert(0, "t_s", df.pop("t") - t0)
         return df
 
@@ -309,7 +336,7 @@ def _assemble(path: Path, kind: str, raw: dict, stats: dict, errors: list[str]) 
 
     return FlightLog(path=path, kind=kind, t0_epoch_s=float(t0), duration_s=float(duration),
                      position=position, attitude=attitude, armed=armed, battery=battery,
-                     battery_source=source, bad_frames=int(stats["bad"]), n_records=int(stats["n"]),
+                     battery_source=source, bad_frames=int(stats["bad"]), n_records=int(len(ts)),
                      mavlink_frames=dict(stats["versions"]), reboots=reboots, fix_checked=fix_checked,
                      vehicle=vehicle, errors=errors)
 

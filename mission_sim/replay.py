@@ -1,0 +1,245 @@
+"""Replay a real flight log through the mission world: log -> flown track about a pad -> run_mission.
+
+Pipeline (each step a small function):
+
+1. :func:`mission_sim.mavlink_io.read_log` -- position (GPS fix >= 3), attitude, armed state and
+   battery tables on the log's own timeline.
+2. :func:`track_from_log` -- local ENU metres about the pad (default pad: the first armed
+   position, :func:`default_pad`), tilt from roll and pitch, time from 0 at the first fix.
+   Heights below the pad (GPS/baro noise on the ground) are clipped to 0; ``ground_gap_m`` is
+   added so that z is the receiver coil's height above the pad coil (the gap when landed).
+3. ``run_mission(cfg, policy, trajectory=Trajectory.from_samples(...))`` -- Lm(t), SBAR, battery.
+4. :func:`compare_power` -- the logged electrical power (V I of the flight battery) against the
+   simulator's propulsion-power model over the armed periods, with the error.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .geodesy import GeoPoint, geodetic_to_enu
+from .mavlink_io import FlightLog, read_log
+
+__all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "flight_stats",
+           "logged_energy_j", "compare_power", "ReplayResult", "replay_log", "parse_window"]
+
+
+class NoPositionError(ValueError):
+    """The log holds fewer than two usable (GPS fix >= 3) positions."""
+
+
+@dataclass(frozen=True)
+class FlightTrack:
+    """The flown track: ``t_s`` (N,) from 0, ``pos_m`` (N, 3) ENU about the pad, ``tilt_rad`` (N,).
+
+    ``t_offset_s`` is the log time of ``t_s = 0``; ``height_m`` the height above the pad before
+    the ground gap was added (>= 0).
+    """
+
+    t_s: np.ndarray
+    pos_m: np.ndarray
+    tilt_rad: np.ndarray
+    height_m: np.ndarray
+    t_offset_s: float
+    pad: GeoPoint
+    ground_gap_m: float
+
+
+def parse_window(text: str | None) -> tuple[float, float] | None:
+    """``"T0,T1"`` (seconds of log time, T0 < T1) -> (t0, t1); ``ValueError`` naming the format."""
+    if text is None:
+        return None
+    fmt = "T0,T1 in seconds from the start of the log with 0 <= T0 < T1, e.g. 450,600"
+    try:
+        t0, t1 = (float(p) for p in str(text).split(","))
+    except ValueError:
+        raise ValueError(f"--window {text!r} is invalid; valid format: {fmt}") from None
+    if not (np.isfinite(t0) and np.isfinite(t1) and 0 <= t0 < t1):
+        raise ValueError(f"--window {text!r} is invalid; valid format: {fmt}")
+    return t0, t1
+
+
+def default_pad(log: FlightLog) -> GeoPoint:
+    """The first position at or after the first arming (the take-off spot), else the first position."""
+    pos = log.position
+    if len(pos) == 0:
+        raise NoPositionError(f"{log.path.name}: no usable position (GPS fix >= 3) in the log")
+    i = 0
+    periods = log.armed_periods
+    if periods:
+        after = np.flatnonzero(pos["t_s"].to_numpy() >= periods[0][0])
+        i = int(after[0]) if len(after) else len(pos) - 1
+    row = pos.iloc[i]
+    return GeoPoint(float(row.lat_deg), float(row.lon_deg), float(row.alt_m))
+
+
+def track_from_log(log: FlightLog, pad: GeoPoint | None = None, ground_gap_m: float = 0.0,
+                   window: tuple[float, float] | None = None) -> FlightTrack:
+    """The flown track about ``pad`` (None: :func:`default_pad`; a pad without altitude takes the
+    default pad's altitude), optionally cut to ``window`` = (t0, t1) seconds of log time."""
+    if not np.isfinite(ground_gap_m) or ground_gap_m < 0:
+        raise ValueError(f"ground_gap_m={ground_gap_m!r} is invalid; valid range: [0, inf) m")
+    pos = log.position
+    if window is not None:
+        pos = pos[(pos["t_s"] >= window[0]) & (pos["t_s"] <= window[1])]
+    if len(pos) < 2:
+        where = f" in the window {window[0]:g}..{window[1]:g} s" if window else ""
+        raise NoPositionError(f"{log.path.name}: no usable position (GPS fix >= 3){where}: "
+                              f"{len(pos)} sample(s), need at least 2")
+    if pad is None or pad.alt_m is None:
+        d = default_pad(log)
+        pad = d if pad is None else GeoPoint(pad.lat_deg, pad.lon_deg, d.alt_m)
+    t_log = pos["t_s"].to_numpy(float)
+    e, n, u = geodetic_to_enu(pos["lat_deg"].to_numpy(), pos["lon_deg"].to_numpy(), pos["alt_m"].to_numpy(), pad)
+    height = np.maximum(u, 0.0)
+    tilt = np.zeros_like(t_log)
+    att = log.attitude
+    if len(att) >= 2:
+        tilt_att = np.arccos(np.clip(np.cos(att["roll_rad"].to_numpy()) * np.cos(att["pitch_rad"].to_numpy()), -1, 1))
+        tilt = np.interp(t_log, att["t_s"].to_numpy(float), tilt_att)
+    return FlightTrack(t_s=t_log - t_log[0], pos_m=np.column_stack([e, n, height + ground_gap_m]),
+                       tilt_rad=tilt, height_m=height, t_offset_s=float(t_log[0]), pad=pad,
+                       ground_gap_m=float(ground_gap_m))
+
+
+def flight_stats(log: FlightLog, track: FlightTrack) -> dict:
+    """Log and track facts for the summary (times in s, lengths in m)."""
+    seg = np.diff(track.pos_m, axis=0)
+    return {
+        "duration_s": float(log.duration_s),
+        "position_span_s": float(track.t_s[-1]),
+        "distance_m": float(np.sum(np.linalg.norm(seg, axis=1))),
+        "horizontal_distance_m": float(np.sum(np.linalg.norm(seg[:, :2], axis=1))),
+        "max_alt_m": float(np.max(track.height_m)),
+        "max_range_m": float(np.max(np.linalg.norm(track.pos_m[:, :2], axis=1))),
+        "armed_time_s": float(log.armed_time_s),
+        "armed_periods_s": [[round(a, 3), round(b, 3)] for a, b in log.armed_periods],
+        "n_position_samples": int(len(track.t_s)),
+        "bad_frames": int(log.bad_frames),
+        "reboots": int(log.reboots),
+        "pad": {"lat_deg": track.pad.lat_deg, "lon_deg": track.pad.lon_deg, "alt_m": track.pad.alt_m},
+    }
+
+
+def _in_periods(t, periods) -> np.ndarray:
+    t = np.asarray(t, dtype=float)
+    mask = np.zeros(t.shape, dtype=bool)
+    for a, b in periods:
+        mask |= (t >= a) & (t <= b)
+    return mask
+
+
+def logged_energy_j(battery: pd.DataFrame, t0: float = -np.inf, t1: float = np.inf, periods=None) -> float:
+    """Trapezoid integral of the logged V I [J] over [t0, t1] (and only inside ``periods`` if given)."""
+    b = battery[(battery["t_s"] >= t0) & (battery["t_s"] <= t1)]
+    if len(b) < 2:
+        return float("nan")
+    t = b["t_s"].to_numpy(float)
+    p = b["power_w"].to_numpy(float)
+    dt = np.diff(t)
+    seg = 0.5 * (p[1:] + p[:-1]) * dt
+    if periods is not None:
+        seg = seg[_in_periods(t[:-1], periods) & _in_periods(t[1:], periods)]
+    return float(np.sum(seg))
+
+
+def compare_power(log: FlightLog, track: FlightTrack, sim_t_s, propulsion_w) -> tuple[pd.DataFrame, dict]:
+    """Logged electrical power vs the modelled propulsion power on the log's battery samples.
+
+    The model is sampled at each battery record's time (linear interpolation of the simulator's
+    time series, mapped back to log time with ``track.t_offset_s``). Compared over the armed
+    periods (motors running); when disarmed the real propulsion power is zero and the logged
+    power is the avionics alone. Returns the per-sample table and a summary:
+
+    logged/model mean power [W], mean error (model - logged) [W], RMS error [W], energies [J]
+    and their relative error, the best-fit scale ``k`` (least squares, model * k ~ logged) and
+    the RMS error after that scale (how well the *shape* is modelled).
+    """
+    bat = log.battery
+    sim_t = np.asarray(sim_t_s, dtype=float) + track.t_offset_s
+    model_w = np.asarray(propulsion_w, dtype=float)
+    keep = (bat["t_s"] >= sim_t[0]) & (bat["t_s"] <= sim_t[-1])
+    b = bat[keep]
+    t = b["t_s"].to_numpy(float)
+    armed = _in_periods(t, log.armed_periods)
+    table = pd.DataFrame({"t_s": t, "logged_w": b["power_w"].to_numpy(float),
+                          "voltage_v": b["voltage_v"].to_numpy(float), "current_a": b["current_a"].to_numpy(float),
+                          "model_w": np.interp(t, sim_t, model_w) if len(t) else np.zeros(0), "armed": armed})
+    table["error_w"] = table["model_w"] - table["logged_w"]
+    a = table[table["armed"]]
+    out: dict = {"battery_source": log.battery_source, "n_samples_armed": int(len(a))}
+    if len(a) >= 2:
+        ta = a["t_s"].to_numpy()
+        lw, mw = a["logged_w"].to_numpy(), a["model_w"].to_numpy()
+        dt = np.diff(ta)
+        inside = _in_periods(ta[:-1], log.armed_periods) & _in_periods(ta[1:], log.armed_periods) \
+            & (dt < 10.0)  # do not bridge a gap between two armed periods
+        e_log = float(np.sum((0.5 * (lw[1:] + lw[:-1]) * dt)[inside]))
+        e_mod = float(np.sum((0.5 * (mw[1:] + mw[:-1]) * dt)[inside]))
+        k = float(np.dot(mw, lw) / np.dot(mw, mw)) if np.dot(mw, mw) > 0 else float("nan")
+        out.update({
+            "logged_mean_w": float(lw.mean()), "model_mean_w": float(mw.mean()),
+            "mean_error_w": float((mw - lw).mean()), "rms_error_w": float(np.sqrt(np.mean((mw - lw) ** 2))),
+            "logged_energy_armed_j": e_log, "model_energy_armed_j": e_mod,
+            "energy_error_rel": (e_mod - e_log) / e_log if e_log > 0 else float("nan"),
+            "best_fit_scale": k,
+            "rms_error_after_scale_w": float(np.sqrt(np.mean((k * mw - lw) ** 2))) if np.isfinite(k) else float("nan"),
+            "correlation": float(np.corrcoef(mw, lw)[0, 1]) if mw.std() > 0 and lw.std() > 0 else float("nan"),
+        })
+    return table, out
+
+
+@dataclass
+class ReplayResult:
+    """A replayed log: the log, its track, the mission result and the summary (JSON-ready)."""
+
+    log: FlightLog
+    track: FlightTrack
+    mission: object                 # mission_sim.results.MissionResult
+    summary: dict
+    power_table: pd.DataFrame | None = None
+    files: list[str] = field(default_factory=list)
+
+
+def replay_log(path, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: float | None = None,
+               window: tuple[float, float] | None = None, progress: bool = False) -> ReplayResult:
+    """Read ``path``, build the track, run the mission world along it, compare the power.
+
+    ``ground_gap_m`` None: the coupling model's nominal gap (``NOMINAL_GAP_M``), i.e. landed on
+    the pad the receiver sits at its nominal height above the pad coil.
+    Raises :class:`NoPositionError` (a ``ValueError``) if the log has no usable position.
+    """
+    from .runner import run_mission
+    from .trajectory import Trajectory
+
+    if ground_gap_m is None:
+        from wpt_receiver.coupling import NOMINAL_GAP_M
+        ground_gap_m = NOMINAL_GAP_M
+    log = read_log(path)
+    track = track_from_log(log, pad=pad, ground_gap_m=ground_gap_m, window=window)
+    traj = Trajectory.from_samples(track.t_s, track.pos_m, tilt_rad=track.tilt_rad)
+    mission = run_mission(cfg, policy, trajectory=traj, progress=progress)
+    ts = mission.timeseries
+    summary = flight_stats(log, track)
+    ms = mission.summary
+    summary.update({
+        "energy_to_battery_j": float(ms["energy_to_battery_j"]),
+        "propulsion_energy_j": float(ms["propulsion_energy_j"]),
+        "energy_from_source_j": float(ms["energy_from_source_j"]),
+        "final_soc": float(ms["final_soc"]),
+        "peak_i2_a": float(ms["peak_i2_a"]),
+        "sim_time_s": float(ms["sim_time_s"]),
+        "window_s": list(window) if window else None,
+        "battery_source": log.battery_source,
+    })
+    table = None
+    if len(log.battery):
+        t0, t1 = track.t_offset_s, track.t_offset_s + float(track.t_s[-1])
+        summary["logged_energy_j"] = logged_energy_j(log.battery, t0, t1)
+        table, cmp = compare_power(log, track, ts["t_s"].to_numpy(), ts["propulsion_w"].to_numpy())
+        summary["power_comparison"] = cmp
+    return ReplayResult(log=log, track=track, mission=mission, summary=summary, power_table=table)
