@@ -28,6 +28,10 @@ __all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "f
            "logged_energy_j", "compare_power", "ReplayResult", "replay_log", "parse_window"]
 
 
+MAX_TILT_RAD = np.radians(85.0)   # the mission world takes |tilt| < 90 deg; beyond is upside down
+HOVER_SPEED_M_S = 0.3             # slower than this counts as hovering (pads may energise)
+
+
 class NoPositionError(ValueError):
     """The log holds fewer than two usable (GPS fix >= 3) positions."""
 
@@ -47,6 +51,13 @@ class FlightTrack:
     t_offset_s: float
     pad: GeoPoint
     ground_gap_m: float
+    armed: np.ndarray           # (N,) bool, inside an armed period of the log
+    n_tilt_clipped: int = 0     # samples whose tilt exceeded MAX_TILT_RAD (flips, crashes)
+
+    def phase(self, hover_speed_m_s: float = HOVER_SPEED_M_S) -> np.ndarray:
+        """Mission phases: "ground" while disarmed, else "hover" below ``hover_speed_m_s``, else "flight"."""
+        speed = np.linalg.norm(np.gradient(self.pos_m, self.t_s, axis=0), axis=1)
+        return np.where(~self.armed, "ground", np.where(speed < hover_speed_m_s, "hover", "flight")).astype(object)
 
 
 def parse_window(text: str | None) -> tuple[float, float] | None:
@@ -101,9 +112,11 @@ def track_from_log(log: FlightLog, pad: GeoPoint | None = None, ground_gap_m: fl
     if len(att) >= 2:
         tilt_att = np.arccos(np.clip(np.cos(att["roll_rad"].to_numpy()) * np.cos(att["pitch_rad"].to_numpy()), -1, 1))
         tilt = np.interp(t_log, att["t_s"].to_numpy(float), tilt_att)
+    clipped = int(np.sum(tilt > MAX_TILT_RAD))
     return FlightTrack(t_s=t_log - t_log[0], pos_m=np.column_stack([e, n, height + ground_gap_m]),
-                       tilt_rad=tilt, height_m=height, t_offset_s=float(t_log[0]), pad=pad,
-                       ground_gap_m=float(ground_gap_m))
+                       tilt_rad=np.minimum(tilt, MAX_TILT_RAD), height_m=height, t_offset_s=float(t_log[0]),
+                       pad=pad, ground_gap_m=float(ground_gap_m), armed=_in_periods(t_log, log.armed_periods),
+                       n_tilt_clipped=clipped)
 
 
 def flight_stats(log: FlightLog, track: FlightTrack) -> dict:
@@ -121,6 +134,7 @@ def flight_stats(log: FlightLog, track: FlightTrack) -> dict:
         "n_position_samples": int(len(track.t_s)),
         "bad_frames": int(log.bad_frames),
         "reboots": int(log.reboots),
+        "tilt_clipped_samples": int(track.n_tilt_clipped),
         "pad": {"lat_deg": track.pad.lat_deg, "lon_deg": track.pad.lon_deg, "alt_m": track.pad.alt_m},
     }
 
@@ -205,23 +219,24 @@ class ReplayResult:
     files: list[str] = field(default_factory=list)
 
 
-def replay_log(path, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: float | None = None,
+def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: float | None = None,
                window: tuple[float, float] | None = None, progress: bool = False) -> ReplayResult:
-    """Read ``path``, build the track, run the mission world along it, compare the power.
+    """Build the track of ``log`` (a :class:`FlightLog` or a path), run the mission world along it,
+    compare the power.
 
-    ``ground_gap_m`` None: the coupling model's nominal gap (``NOMINAL_GAP_M``), i.e. landed on
-    the pad the receiver sits at its nominal height above the pad coil.
+    ``ground_gap_m`` None: ``cfg.mission.hover_gap_m`` (the nominal gap), i.e. landed on the pad
+    the receiver coil sits at its nominal height above the pad coil.
     Raises :class:`NoPositionError` (a ``ValueError``) if the log has no usable position.
     """
     from .runner import run_mission
     from .trajectory import Trajectory
 
+    if not isinstance(log, FlightLog):
+        log = read_log(log)
     if ground_gap_m is None:
-        from wpt_receiver.coupling import NOMINAL_GAP_M
-        ground_gap_m = NOMINAL_GAP_M
-    log = read_log(path)
+        ground_gap_m = cfg.mission.hover_gap_m
     track = track_from_log(log, pad=pad, ground_gap_m=ground_gap_m, window=window)
-    traj = Trajectory.from_samples(track.t_s, track.pos_m, tilt_rad=track.tilt_rad)
+    traj = Trajectory.from_samples(track.t_s, track.pos_m, tilt_rad=track.tilt_rad, phase=track.phase())
     mission = run_mission(cfg, policy, trajectory=traj, progress=progress)
     ts = mission.timeseries
     summary = flight_stats(log, track)
