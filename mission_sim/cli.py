@@ -195,10 +195,13 @@ def _cmd_replay(args) -> int:
           f"(model, {cfg.drone.mass_kg:g} kg drone), final SoC {s['final_soc']:.3f}")
     c = s.get("power_comparison")
     if c and "logged_mean_w" in c:
-        print(f"power while armed ({c['battery_source']}): logged {c['logged_mean_w']:.0f} W, model "
-              f"{c['model_mean_w']:.0f} W, RMS error {c['rms_error_w']:.0f} W, energy error "
-              f"{100 * c['energy_error_rel']:+.1f} %; best-fit scale {c['best_fit_scale']:.2f} leaves "
-              f"{c['rms_error_after_scale_w']:.0f} W RMS")
+        print(f"power while airborne, {c['airborne_time_s']:.0f} s ({c['battery_source']}): logged "
+              f"{c['logged_mean_w']:.0f} W, model {c['model_mean_w']:.0f} W, RMS error {c['rms_error_w']:.0f} W, "
+              f"energy error {100 * c['energy_error_rel']:+.1f} %, correlation {c['correlation']:.2f}; "
+              f"best-fit scale {c['best_fit_scale']:.2f} leaves {c['rms_error_after_scale_w']:.0f} W RMS; the "
+              f"model matches the logged energy at {c['equivalent_mass_kg']:.2f} kg")
+    elif c:
+        print(f"no airborne battery samples to compare ({c['battery_source']})")
     elif not s.get("battery_source"):
         print("the log has no battery data (no SYS_STATUS / BATTERY_STATUS / CURR / BAT values)")
     for f in files:

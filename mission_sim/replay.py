@@ -10,7 +10,8 @@ Pipeline (each step a small function):
    added so that z is the receiver coil's height above the pad coil (the gap when landed).
 3. ``run_mission(cfg, policy, trajectory=Trajectory.from_samples(...))`` -- Lm(t), SBAR, battery.
 4. :func:`compare_power` -- the logged electrical power (V I of the flight battery) against the
-   simulator's propulsion-power model over the armed periods, with the error.
+   simulator's propulsion-power model while airborne, with the error; :func:`fit_mass_kg` --
+   the drone mass at which the model's energy matches the log's.
 """
 
 from __future__ import annotations
@@ -25,11 +26,13 @@ from .geodesy import GeoPoint, geodetic_to_enu
 from .mavlink_io import FlightLog, read_log
 
 __all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "flight_stats",
-           "logged_energy_j", "compare_power", "ReplayResult", "replay_log", "parse_window"]
+           "logged_energy_j", "compare_power", "fit_mass_kg", "ReplayResult", "replay_log", "parse_window"]
 
 
 MAX_TILT_RAD = np.radians(85.0)   # the mission world takes |tilt| < 90 deg; beyond is upside down
 HOVER_SPEED_M_S = 0.3             # slower than this counts as hovering (pads may energise)
+AIRBORNE_M = 1.0                  # armed and this high above the pad counts as airborne (GPS height noise ~1 m)
+_MAX_GAP_S = 10.0                 # samples further apart are not integrated across
 
 
 class NoPositionError(ValueError):
@@ -165,46 +168,85 @@ def compare_power(log: FlightLog, track: FlightTrack, sim_t_s, propulsion_w) -> 
     """Logged electrical power vs the modelled propulsion power on the log's battery samples.
 
     The model is sampled at each battery record's time (linear interpolation of the simulator's
-    time series, mapped back to log time with ``track.t_offset_s``). Compared over the armed
-    periods (motors running); when disarmed the real propulsion power is zero and the logged
-    power is the avionics alone. Returns the per-sample table and a summary:
+    time series, mapped back to log time with ``track.t_offset_s``). Compared while *airborne*:
+    armed and more than :data:`AIRBORNE_M` above the pad (armed on the ground the motors idle,
+    while the model, which knows no ground contact, gives hover power; disarmed the logged
+    power is the avionics alone). Returns the per-sample table and a summary:
 
-    logged/model mean power [W], mean error (model - logged) [W], RMS error [W], energies [J]
-    and their relative error, the best-fit scale ``k`` (least squares, model * k ~ logged) and
-    the RMS error after that scale (how well the *shape* is modelled).
+    logged / model mean power [W], mean error (model - logged) [W], RMS error [W], energies [J]
+    and their relative error, the correlation, the best-fit scale ``k`` (least squares,
+    k * model ~ logged) and the RMS error left after it (how well the *shape* is modelled).
     """
     bat = log.battery
     sim_t = np.asarray(sim_t_s, dtype=float) + track.t_offset_s
     model_w = np.asarray(propulsion_w, dtype=float)
-    keep = (bat["t_s"] >= sim_t[0]) & (bat["t_s"] <= sim_t[-1])
-    b = bat[keep]
+    b = bat[(bat["t_s"] >= sim_t[0]) & (bat["t_s"] <= sim_t[-1])]
     t = b["t_s"].to_numpy(float)
+    height = np.interp(t, track.t_s + track.t_offset_s, track.height_m) if len(t) else np.zeros(0)
     armed = _in_periods(t, log.armed_periods)
     table = pd.DataFrame({"t_s": t, "logged_w": b["power_w"].to_numpy(float),
                           "voltage_v": b["voltage_v"].to_numpy(float), "current_a": b["current_a"].to_numpy(float),
-                          "model_w": np.interp(t, sim_t, model_w) if len(t) else np.zeros(0), "armed": armed})
+                          "model_w": np.interp(t, sim_t, model_w) if len(t) else np.zeros(0),
+                          "height_m": height, "armed": armed, "airborne": armed & (height > AIRBORNE_M)})
     table["error_w"] = table["model_w"] - table["logged_w"]
-    a = table[table["armed"]]
-    out: dict = {"battery_source": log.battery_source, "n_samples_armed": int(len(a))}
+    a = table[table["airborne"]]
+    out: dict = {"battery_source": log.battery_source, "n_samples_airborne": int(len(a)),
+                 "airborne_time_s": _mask_time(t, table["airborne"].to_numpy())}
     if len(a) >= 2:
-        ta = a["t_s"].to_numpy()
-        lw, mw = a["logged_w"].to_numpy(), a["model_w"].to_numpy()
+        ta, lw, mw = a["t_s"].to_numpy(), a["logged_w"].to_numpy(), a["model_w"].to_numpy()
         dt = np.diff(ta)
-        inside = _in_periods(ta[:-1], log.armed_periods) & _in_periods(ta[1:], log.armed_periods) \
-            & (dt < 10.0)  # do not bridge a gap between two armed periods
+        inside = dt < _MAX_GAP_S  # do not bridge a landing between two airborne stretches
         e_log = float(np.sum((0.5 * (lw[1:] + lw[:-1]) * dt)[inside]))
         e_mod = float(np.sum((0.5 * (mw[1:] + mw[:-1]) * dt)[inside]))
         k = float(np.dot(mw, lw) / np.dot(mw, mw)) if np.dot(mw, mw) > 0 else float("nan")
         out.update({
             "logged_mean_w": float(lw.mean()), "model_mean_w": float(mw.mean()),
             "mean_error_w": float((mw - lw).mean()), "rms_error_w": float(np.sqrt(np.mean((mw - lw) ** 2))),
-            "logged_energy_armed_j": e_log, "model_energy_armed_j": e_mod,
+            "logged_energy_airborne_j": e_log, "model_energy_airborne_j": e_mod,
             "energy_error_rel": (e_mod - e_log) / e_log if e_log > 0 else float("nan"),
+            "correlation": float(np.corrcoef(mw, lw)[0, 1]) if mw.std() > 0 and lw.std() > 0 else float("nan"),
             "best_fit_scale": k,
             "rms_error_after_scale_w": float(np.sqrt(np.mean((k * mw - lw) ** 2))) if np.isfinite(k) else float("nan"),
-            "correlation": float(np.corrcoef(mw, lw)[0, 1]) if mw.std() > 0 and lw.std() > 0 else float("nan"),
         })
     return table, out
+
+
+def _mask_time(t, mask) -> float:
+    """Seconds covered by consecutive samples that are both inside ``mask`` (gaps < _MAX_GAP_S)."""
+    if len(t) < 2:
+        return 0.0
+    dt = np.diff(t)
+    return float(np.sum(dt[mask[1:] & mask[:-1] & (dt < _MAX_GAP_S)]))
+
+
+def fit_mass_kg(traj, drone, target_energy_j: float, t_s, mask) -> float:
+    """Drone mass [kg] that makes the model's propulsion energy over ``mask`` equal ``target_energy_j``.
+
+    ``traj`` is the replayed :class:`~mission_sim.trajectory.Trajectory`; ``t_s``, ``mask`` the
+    comparison samples (trajectory time). Bisection on [0.05, 50] kg (energy rises with mass);
+    nan if the target is outside that range. One number that says which drone the log's power
+    would correspond to under the model.
+    """
+    from dataclasses import replace
+
+    t_s = np.asarray(t_s, dtype=float)
+    mask = np.asarray(mask, dtype=bool)
+    if not np.isfinite(target_energy_j) or target_energy_j <= 0 or mask.sum() < 2:
+        return float("nan")
+    dt = np.diff(t_s)
+    seg = mask[1:] & mask[:-1] & (dt < _MAX_GAP_S)
+
+    def energy(m):
+        p = np.interp(t_s, traj.t_s, traj.propulsion_w(replace(drone, mass_kg=m)))
+        return float(np.sum((0.5 * (p[1:] + p[:-1]) * dt)[seg]))
+
+    lo, hi = 0.05, 50.0
+    if not energy(lo) <= target_energy_j <= energy(hi):
+        return float("nan")
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if energy(mid) < target_energy_j else (lo, mid)
+    return 0.5 * (lo + hi)
 
 
 @dataclass
@@ -256,5 +298,9 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
         t0, t1 = track.t_offset_s, track.t_offset_s + float(track.t_s[-1])
         summary["logged_energy_j"] = logged_energy_j(log.battery, t0, t1)
         table, cmp = compare_power(log, track, ts["t_s"].to_numpy(), ts["propulsion_w"].to_numpy())
+        air = table["airborne"].to_numpy()
+        cmp["drone_mass_kg"] = float(cfg.drone.mass_kg)
+        cmp["equivalent_mass_kg"] = fit_mass_kg(traj, cfg.drone, cmp.get("logged_energy_airborne_j", np.nan),
+                                                table["t_s"].to_numpy() - track.t_offset_s, air)
         summary["power_comparison"] = cmp
     return ReplayResult(log=log, track=track, mission=mission, summary=summary, power_table=table)

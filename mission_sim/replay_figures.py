@@ -69,13 +69,14 @@ def plot_power_comparison(result, path, title: str = "") -> str:
     _shade_armed(a, result.log.armed_periods, off)
     a.set_ylabel("power [W]"), a.grid(alpha=0.3), a.legend(fontsize=8)
     if "energy_error_rel" in cmp:
-        a.set_title(f"armed: logged {cmp['logged_mean_w']:.0f} W mean, model {cmp['model_mean_w']:.0f} W; "
-                    f"energy error {100 * cmp['energy_error_rel']:+.0f} %")
+        a.set_title(f"airborne: logged {cmp['logged_mean_w']:.0f} W mean, model {cmp['model_mean_w']:.0f} W "
+                    f"({cmp['drone_mass_kg']:g} kg); energy error {100 * cmp['energy_error_rel']:+.0f} %, "
+                    f"equivalent mass {cmp['equivalent_mass_kg']:.2f} kg")
     a = ax[1]
-    err = np.where(tab["armed"], tab["error_w"], np.nan)
+    err = np.where(tab["airborne"], tab["error_w"], np.nan)
     a.plot(t, err, lw=0.7, color="tab:red")
     a.axhline(0, color="k", lw=0.6)
-    a.set_xlabel("time [s]"), a.set_ylabel("model - logged [W] (armed)"), a.grid(alpha=0.3)
+    a.set_xlabel("time [s]"), a.set_ylabel("model - logged [W] (airborne)"), a.grid(alpha=0.3)
     if "rms_error_w" in cmp:
         a.set_title(f"RMS error {cmp['rms_error_w']:.0f} W; after scaling {cmp['rms_error_after_scale_w']:.0f} W")
     if title:
