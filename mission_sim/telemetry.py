@@ -39,7 +39,7 @@ from .geodesy import GeoPoint, enu_to_geodetic, geodetic_to_enu
 from .mavlink_io import mavutil
 
 __all__ = ["DEFAULT_HOME", "TlogWriter", "mavlink_table", "encode_tick", "stream", "StreamStats",
-           "receive_positions", "check_connect", "CONNECT_FORMAT"]
+           "follow", "FollowStats", "check_connect", "CONNECT_FORMAT"]
 
 #: ArduPilot SITL's default home (CMAC, Canberra), where two of the real logs were flown.
 DEFAULT_HOME = GeoPoint(-35.363261, 149.165230, 584.0)
@@ -251,33 +251,112 @@ def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.
                        counts=counts)
 
 
-def receive_positions(conn, home: GeoPoint | None, *, duration_s: float, max_messages: int = 100_000,
-                      idle_timeout_s: float = 5.0):
-    """Read a live vehicle's GLOBAL_POSITION_INT from ``conn`` for at most ``duration_s`` seconds and
-    ``max_messages`` messages (stops after ``idle_timeout_s`` without one once the first arrived).
+@dataclass
+class FollowStats:
+    """What :func:`follow` did: positions received, chunks simulated, frames sent, wall seconds."""
 
-    Returns (t_s, pos_m ENU about ``home``, home); ``home`` None = the first position received.
-    Times are the receiver's wall clock from the first position. Positions at lat = lon = 0 (no
-    fix) are skipped.
+    positions: int
+    chunks: int
+    frames: int
+    wall_s: float
+    final_soc: float | None
+    home: GeoPoint | None
+
+
+def _chunk_config(cfg, soc):
+    """``cfg`` with the battery starting at ``soc`` (the previous chunk's final state of charge)."""
+    from .config import apply_overrides, config_from_dict, config_to_dict
+    return config_from_dict(apply_overrides(config_to_dict(cfg), {"battery.initial_soc": float(soc)}))
+
+
+def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None = None, rate_hz: float = 10.0,
+           home: GeoPoint | None = None, tlog=None, max_wall_s: float = 60.0, chunk_s: float = 1.0,
+           max_messages: int = 1_000_000, idle_timeout_s: float = 10.0, out_conn=None) -> FollowStats:
+    """Drive the mission world from a live vehicle's GLOBAL_POSITION_INT and stream the result.
+
+    Positions from ``follow_connect`` (e.g. ``udpin:127.0.0.1:14551``; lat = lon = 0, i.e. no fix,
+    skipped) are timed by the receiver's clock and converted to the pad frame about ``home``
+    (None: the first position received is the pad). Every ``chunk_s`` seconds the new stretch
+    of track runs through ``run_mission(cfg, policy, trajectory=...)``, the battery carried
+    over from chunk to chunk by its state of charge, and its telemetry is sent at ``rate_hz``,
+    scheduled ``chunk_s`` behind the vehicle (the latency of this chunked scheme; the link's
+    electrical state restarts each chunk). The loop ends after ``max_wall_s`` seconds,
+    ``max_messages`` received messages or ``idle_timeout_s`` without a position.
     """
-    deadline = time.monotonic() + float(duration_s)
-    t, lat, lon, alt = [], [], [], []
-    n = 0
-    last_rx = None
-    while n < max_messages:
-        now = time.monotonic()
-        if now >= deadline or (last_rx is not None and now - last_rx > idle_timeout_s):
-            break
-        msg = conn.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=min(0.2, deadline - now))
-        n += 1
-        if msg is None or msg.lat == 0 and msg.lon == 0:
-            continue
-        last_rx = time.monotonic()
-        t.append(last_rx)
-        lat.append(msg.lat * 1e-7), lon.append(msg.lon * 1e-7), alt.append(msg.alt * 1e-3)
-    if not t:
-        return np.zeros(0), np.zeros((0, 3)), home
-    if home is None or home.alt_m is None:
-        home = GeoPoint(lat[0], lon[0], alt[0] if home is None or home.alt_m is None else home.alt_m)
-    e, nn, u = geodetic_to_enu(np.array(lat), np.array(lon), np.array(alt), home)
-    return np.array(t) - t[0], np.column_stack([e, nn, u]), home
+    from .trajectory import Trajectory
+
+    mu = mavutil()
+    vin = mu.mavlink_connection(check_connect(follow_connect, "--follow"), source_system=255, source_component=190)
+    own_out = out_conn is None and connect is not None
+    out = mu.mavlink_connection(check_connect(connect), source_system=1, source_component=1) if own_out else out_conn
+    mav = mu.mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    writer = TlogWriter(tlog) if tlog is not None else None
+    gap = float(cfg.mission.hover_gap_m)
+    wall0 = time.monotonic()
+    epoch0 = time.time()
+    deadline = wall0 + float(max_wall_s)
+    t_rx, pos = [], []
+    chunk_start = 0                         # index of the first sample of the next chunk
+    queue: list[tuple[float, object]] = []  # (send at wall offset, mavlink_table row)
+    soc = None
+    frames = chunks = n_msgs = 0
+    last_hb = -math.inf
+    last_rx = wall0
+    try:
+        while n_msgs < max_messages:
+            now = time.monotonic()
+            if now >= deadline or now - last_rx > idle_timeout_s:
+                break
+            wait = 0.05 if not queue else max(0.0, min(0.05, wall0 + queue[0][0] - now))
+            msg = vin.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=wait)
+            n_msgs += 1
+            if msg is not None and not (msg.lat == 0 and msg.lon == 0):
+                last_rx = time.monotonic()
+                if home is None or home.alt_m is None:
+                    home = GeoPoint(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3 if home is None or
+                                    home.alt_m is None else home.alt_m)
+                e, n, u = geodetic_to_enu(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, home)
+                t_new = last_rx - wall0
+                if not t_rx or t_new > t_rx[-1]:
+                    t_rx.append(t_new)
+                    pos.append((float(e), float(n), max(float(u), 0.0) + gap))
+            # simulate a finished chunk
+            if len(t_rx) - chunk_start >= 2 and t_rx[-1] - t_rx[chunk_start] >= chunk_s:
+                lo = max(chunk_start - 1, 0)    # overlap one sample: chunks join without a gap
+                t_seg = np.array(t_rx[lo:])
+                traj = Trajectory.from_samples(t_seg - t_seg[0], np.array(pos[lo:]))
+                c = cfg if soc is None else _chunk_config(cfg, soc)
+                res = run_mission(c, policy, trajectory=traj)
+                soc = float(res.summary["final_soc"])
+                ts = res.timeseries.copy()
+                ts["t_s"] = ts["t_s"] + t_seg[0]
+                tab = mavlink_table(ts, home, gap)
+                tick_t = np.arange(math.ceil(t_seg[0] * rate_hz), math.floor(t_seg[-1] * rate_hz) + 1) / rate_hz
+                if chunks:
+                    tick_t = tick_t[tick_t > t_seg[0]]
+                rows = np.clip(np.searchsorted(tab["t_s"].to_numpy(), tick_t + 1e-9, side="right") - 1, 0, len(tab) - 1)
+                queue.extend((tk + chunk_s, tab.iloc[int(r)]) for tk, r in zip(tick_t, rows))
+                chunk_start = len(t_rx)
+                chunks += 1
+            # send what is due
+            now = time.monotonic()
+            while queue and wall0 + queue[0][0] <= now:
+                t_send, row = queue.pop(0)
+                hb = now - last_hb >= 1.0
+                last_hb = now if hb else last_hb
+                for m in encode_tick(mav, row, hb):
+                    frame = m.pack(mav)
+                    mav.seq = (mav.seq + 1) % 256
+                    if out is not None:
+                        out.write(frame)
+                    if writer is not None:
+                        writer.write(frame, epoch0 + float(row.t_s))
+                    frames += 1
+    finally:
+        vin.close()
+        if own_out:
+            out.close()
+        if writer is not None:
+            writer.close()
+    return FollowStats(positions=len(t_rx), chunks=chunks, frames=frames, wall_s=time.monotonic() - wall0,
+                       final_soc=soc, home=home)
