@@ -123,10 +123,16 @@ def _mav_config(args, overrides=None, single_pad=False):
 
 
 def _mav_policy(cfg, name):
+    """Policy ``name`` for the mission's link: the coupling at the nominal hover gap, the sim's control
+    period and the rated secondary current (what run_mission expects)."""
     from policies import make
 
-    from .runner import policy_context
-    return make(name, policy_context(cfg))
+    from .contract import PolicyContext
+    model = cfg.coupling.model()
+    lm = float(model.lm_h(0.0, 0.0, cfg.mission.hover_gap_m))
+    link = cfg.link.link_params(model.l1_h, model.l2_h, lm)
+    return make(name, PolicyContext(link=link, control_period_s=cfg.sim.control_period_s,
+                                    rated_i2_a=cfg.link.rated_i2_a))
 
 
 def _add_replay(sub):

@@ -6,7 +6,9 @@ missing file raises (``FileNotFoundError``).
 
 Tables of a :class:`FlightLog` (time ``t_s`` in seconds since the first record of the log, taken
 from the log's own timestamps ``msg._timestamp`` -- ground-station clock in a .tlog, GPS-aligned
-in a .bin -- so vehicle reboots and ``time_boot_ms`` resets do not disturb the timeline):
+in a .bin -- so vehicle reboots and ``time_boot_ms`` resets do not disturb the timeline; position
+and attitude samples of a .tlog are spaced by the vehicle's clock within each boot, see
+:func:`_vehicle_time`):
 
 ==========  =================================================================================
 table       columns (SI units; converted once, in :data:`_CONVERT`)
@@ -88,7 +90,8 @@ _CONVERT = {
     "GPS_RAW_INT": ("fix", lambda m: {"fix_type": int(m.fix_type)}),
     "GPS": ("df_gps", lambda m: {
         "fix_type": int(m.Status), "lat_deg": float(m.Lat), "lon_deg": float(m.Lng), "alt_m": float(m.Alt)}),
-    "ATTITUDE": ("attitude", lambda m: {"roll_rad": float(m.roll), "pitch_rad": float(m.pitch)}),
+    "ATTITUDE": ("attitude", lambda m: {"roll_rad": float(m.roll), "pitch_rad": float(m.pitch),
+                                        "time_boot_s": m.time_boot_ms * 1e-3}),
     "ATT": ("attitude", lambda m: {"roll_rad": math.radians(m.Roll), "pitch_rad": math.radians(m.Pitch)}),
     "HEARTBEAT": ("heartbeat", lambda m: {
         "armed": bool(m.base_mode & _MAV_MODE_FLAG_SAFETY_ARMED), "autopilot": int(m.autopilot),
@@ -296,6 +299,7 @@ def _assemble(path: Path, kind: str, raw: dict, stats: dict, errors: list[str]) 
         fix = table("fix")
         fix = fix[fix["src"].map(lambda s: s[0]) == vehicle["sysid"]] if vehicle and len(fix) else fix
         reboots = int(np.sum(np.diff(pos["time_boot_s"].to_numpy(float)) < -_REBOOT_DROP_S)) if len(pos) else 0
+        pos = _vehicle_time(pos)
         if len(pos) and len(fix):
             pos = pd.merge_asof(pos.sort_values("t_s", kind="stable"), fix[["t_s", "fix_type"]].sort_values(
                 "t_s", kind="stable"), on="t_s", direction="backward")
@@ -313,7 +317,7 @@ def _assemble(path: Path, kind: str, raw: dict, stats: dict, errors: list[str]) 
         pos = pos[ok]
     position = _clean_time(pos, POSITION_COLUMNS)
 
-    attitude = _clean_time(from_vehicle(table("attitude")), ATTITUDE_COLUMNS)
+    attitude = _clean_time(_vehicle_time(from_vehicle(table("attitude"))), ATTITUDE_COLUMNS)
     armed_df = from_vehicle(hb)[["t_s", "armed"]] if kind == "tlog" and len(hb) else table("armed")
     if len(armed_df):
         armed_df = armed_df[armed_df["armed"].notna()]
@@ -339,6 +343,30 @@ def _assemble(path: Path, kind: str, raw: dict, stats: dict, errors: list[str]) 
                      battery_source=source, bad_frames=int(stats["bad"]), n_records=int(len(ts)),
                      mavlink_frames=dict(stats["versions"]), reboots=reboots, fix_checked=fix_checked,
                      vehicle=vehicle, errors=errors)
+
+
+def _vehicle_time(df: pd.DataFrame) -> pd.DataFrame:
+    """Sample times from the vehicle's clock, placed on the log's timeline.
+
+    A ground station stamps frames when they arrive, in bursts (the SITL log here has a median
+    spacing of 7 ms between position frames sent every 240 ms). The vehicle's ``time_boot_s``
+    spaces samples exactly but restarts on reboot. So: split at every ``time_boot`` drop larger
+    than :data:`_REBOOT_DROP_S` (a reboot), and within each boot segment use ``time_boot_s`` plus
+    the segment's median offset to the log clock. A sample that lands more than
+    :data:`_TIME_SPIKE_S` from its own log timestamp (corrupt time_boot_ms) keeps the log timestamp.
+    """
+    if not len(df) or "time_boot_s" not in df:
+        return df
+    tb = df["time_boot_s"].to_numpy(float)
+    t = df["t_s"].to_numpy(float)
+    seg = np.concatenate([[0], np.cumsum(np.diff(tb) < -_REBOOT_DROP_S)])
+    out = t.copy()
+    for k in np.unique(seg):
+        m = seg == k
+        out[m] = tb[m] + np.median(t[m] - tb[m])
+    bad = ~np.isfinite(out) | (np.abs(out - t) > _TIME_SPIKE_S)
+    out[bad] = t[bad]
+    return df.assign(t_s=out)
 
 
 def _clean_time(df: pd.DataFrame, columns, dedupe: bool = True) -> pd.DataFrame:

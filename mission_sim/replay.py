@@ -32,6 +32,7 @@ __all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "f
 MAX_TILT_RAD = np.radians(85.0)   # the mission world takes |tilt| < 90 deg; beyond is upside down
 HOVER_SPEED_M_S = 0.3             # slower than this counts as hovering (pads may energise)
 AIRBORNE_M = 1.0                  # armed and this high above the pad counts as airborne (GPS height noise ~1 m)
+MIN_DT_S = 0.05                   # closer position samples are dropped (velocity by differences)
 _MAX_GAP_S = 10.0                 # samples further apart are not integrated across
 
 
@@ -108,6 +109,8 @@ def track_from_log(log: FlightLog, pad: GeoPoint | None = None, ground_gap_m: fl
         d = default_pad(log)
         pad = d if pad is None else GeoPoint(pad.lat_deg, pad.lon_deg, d.alt_m)
     t_log = pos["t_s"].to_numpy(float)
+    keep = _min_spacing(t_log, MIN_DT_S)
+    pos, t_log = pos[keep], t_log[keep]
     e, n, u = geodetic_to_enu(pos["lat_deg"].to_numpy(), pos["lon_deg"].to_numpy(), pos["alt_m"].to_numpy(), pad)
     height = np.maximum(u, 0.0)
     tilt = np.zeros_like(t_log)
@@ -120,6 +123,17 @@ def track_from_log(log: FlightLog, pad: GeoPoint | None = None, ground_gap_m: fl
                        tilt_rad=np.minimum(tilt, MAX_TILT_RAD), height_m=height, t_offset_s=float(t_log[0]),
                        pad=pad, ground_gap_m=float(ground_gap_m), armed=_in_periods(t_log, log.armed_periods),
                        n_tilt_clipped=clipped)
+
+
+def _min_spacing(t, min_dt) -> np.ndarray:
+    """Mask keeping samples at least ``min_dt`` after the previously kept one (t sorted)."""
+    keep = np.zeros(len(t), dtype=bool)
+    last = -np.inf
+    for i, ti in enumerate(t):
+        if ti - last >= min_dt:
+            keep[i] = True
+            last = ti
+    return keep
 
 
 def flight_stats(log: FlightLog, track: FlightTrack) -> dict:

@@ -158,12 +158,13 @@ def encode_tick(mav, row, heartbeat: bool) -> list:
     msgs.append(mav.battery_status_encode(0, m.MAV_BATTERY_FUNCTION_ALL, m.MAV_BATTERY_TYPE_LIPO, _INT16,
                                           _cells_mv(r.voltage_mv), int(r.current_ca), int(r.consumed_mah),
                                           int(r.consumed_hj), int(r.remaining_pct), 0, int(r.charge_state)))
-    msgs.append(mav.global_position_int_encode(int(r.time_boot_ms), int(r.lat_e7), int(r.lon_e7), int(r.alt_mm),
-                                               int(r.relative_alt_mm), int(r.vn_cm_s), int(r.ve_cm_s),
-                                               int(r.vd_cm_s), _UINT16_MAX))
+    # the fix first: a reader checks each position against the last fix report
     msgs.append(mav.gps_raw_int_encode(int(r.time_boot_ms) * 1000, m.GPS_FIX_TYPE_3D_FIX, int(r.lat_e7),
                                        int(r.lon_e7), int(r.alt_mm), _UINT16_MAX, _UINT16_MAX,
                                        int(r.ground_speed_cm_s), _UINT16_MAX, 255))
+    msgs.append(mav.global_position_int_encode(int(r.time_boot_ms), int(r.lat_e7), int(r.lon_e7), int(r.alt_mm),
+                                               int(r.relative_alt_mm), int(r.vn_cm_s), int(r.ve_cm_s),
+                                               int(r.vd_cm_s), _UINT16_MAX))
     for name, value in ((b"I2", r.i2_a), (b"d_short", r.d_short), (b"Lm", r.lm_uh)):
         msgs.append(mav.named_value_float_encode(int(r.time_boot_ms), name, float(value)))
     return msgs
