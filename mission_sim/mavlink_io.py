@@ -301,8 +301,9 @@ def _assemble(path: Path, kind: str, raw: dict, stats: dict, errors: list[str]) 
         reboots = int(np.sum(np.diff(pos["time_boot_s"].to_numpy(float)) < -_REBOOT_DROP_S)) if len(pos) else 0
         pos = _vehicle_time(pos)
         if len(pos) and len(fix):
-            pos = pd.merge_asof(pos.sort_values("t_s", kind="stable"), fix[["t_s", "fix_type"]].sort_values(
-                "t_s", kind="stable"), on="t_s", direction="backward")
+            # the last fix report before each position *in the log's record order*
+            pos = pd.merge_asof(pos.sort_values("rec"), fix[["rec", "fix_type"]].sort_values("rec"),
+                                on="rec", direction="backward")
             pos = pos[pos["fix_type"].fillna(0) >= 3]
         elif len(pos):
             fix_checked = False
