@@ -234,6 +234,8 @@ def _add_telemetry(sub):
                    help="drive the simulation from a live vehicle's GLOBAL_POSITION_INT instead of the plan")
     p.add_argument("--follow-time", type=_positive_float("follow-time"), default=60.0, metavar="S",
                    help="with --follow: stop after S wall seconds (default 60)")
+    p.add_argument("--follow-idle", type=_positive_float("follow-idle"), default=10.0, metavar="S",
+                   help="with --follow: stop after S seconds without a position (default 10)")
     p.add_argument("--progress", action="store_true", help="show a progress bar")
     _mav_common(p)
     p.set_defaults(func=_cmd_telemetry)
@@ -252,10 +254,12 @@ def _cmd_telemetry(args) -> int:
         return _cmd_telemetry_follow(args, connect, home)
     cfg = _mav_config(args)
     from .runner import run_mission
-    res = run_mission(cfg, _mav_policy(cfg, args.policy), progress=args.progress)
+    from .trajectory import plan_mission
+    traj = plan_mission(cfg)
+    res = run_mission(cfg, _mav_policy(cfg, args.policy), trajectory=traj, progress=args.progress)
     st = telemetry.stream(res.timeseries, connect=connect, rate_hz=args.rate, speed=args.speed, home=home,
                           tlog=args.tlog, duration_s=args.duration, ground_gap_m=cfg.mission.hover_gap_m,
-                          progress=args.progress)
+                          track=(traj.t_s, traj.pos_m), progress=args.progress)
     print(f"sent {st.frames} MAVLink 2 frames in {st.ticks} ticks at {args.rate:g} Hz: {st.sim_s:.1f} s of the "
           f"mission in {st.wall_s:.1f} s wall to {connect or 'no link'}"
           + (f"; wrote {args.tlog}" if args.tlog else ""))
@@ -264,12 +268,12 @@ def _cmd_telemetry(args) -> int:
 
 def _cmd_telemetry_follow(args, connect, home) -> int:
     from . import telemetry
-    telemetry.check_connect(args.follow, "--follow")
+    vin = telemetry.open_follow(args.follow)  # listen first: the set-up below takes a while
     cfg = _mav_config(args)
     from .runner import run_mission
     st = telemetry.follow(args.follow, cfg, _mav_policy(cfg, args.policy), run_mission, connect=connect,
                           rate_hz=args.rate, home=home if args.home else None, tlog=args.tlog,
-                          max_wall_s=args.follow_time)
+                          max_wall_s=args.follow_time, idle_timeout_s=args.follow_idle, in_conn=vin)
     print(f"followed {st.positions} live positions over {st.wall_s:.1f} s in {st.chunks} chunk(s); sent "
           f"{st.frames} frames to {connect or 'no link'}" + (f"; wrote {args.tlog}" if args.tlog else ""))
     return 0

@@ -137,8 +137,10 @@ def _min_spacing(t, min_dt) -> np.ndarray:
 
 
 def flight_stats(log: FlightLog, track: FlightTrack) -> dict:
-    """Log and track facts for the summary (times in s, lengths in m)."""
+    """Log and track facts for the summary (times in s, lengths in m; armed time within the track)."""
     seg = np.diff(track.pos_m, axis=0)
+    t0, t1 = track.t_offset_s, track.t_offset_s + float(track.t_s[-1])
+    periods = [(max(a, t0), min(b, t1)) for a, b in log.armed_periods if b > t0 and a < t1]
     return {
         "duration_s": float(log.duration_s),
         "position_span_s": float(track.t_s[-1]),
@@ -146,8 +148,8 @@ def flight_stats(log: FlightLog, track: FlightTrack) -> dict:
         "horizontal_distance_m": float(np.sum(np.linalg.norm(seg[:, :2], axis=1))),
         "max_alt_m": float(np.max(track.height_m)),
         "max_range_m": float(np.max(np.linalg.norm(track.pos_m[:, :2], axis=1))),
-        "armed_time_s": float(log.armed_time_s),
-        "armed_periods_s": [[round(a, 3), round(b, 3)] for a, b in log.armed_periods],
+        "armed_time_s": float(sum(b - a for a, b in periods)),
+        "armed_periods_s": [[round(a, 3), round(b, 3)] for a, b in periods],
         "n_position_samples": int(len(track.t_s)),
         "bad_frames": int(log.bad_frames),
         "reboots": int(log.reboots),

@@ -6,12 +6,14 @@ times real time:
 ===================  ============================================================================
 message              content (from the mission time series; units as the MAVLink spec)
 ===================  ============================================================================
-HEARTBEAT            quadrotor, generic autopilot, armed while airborne; 1 Hz of wall time
+HEARTBEAT            quadrotor, generic autopilot, armed (the mission is flown throughout); 1 Hz of
+                     wall time
 SYS_STATUS           battery voltage [mV], current [cA, + = discharging], remaining [%]
 BATTERY_STATUS       pack voltage in cell 0 [mV], current [cA], consumed [mAh, hJ], remaining [%],
                      charge_state CHARGING (7) while the battery current is a net charge, else
                      OK / LOW / CRITICAL / EMERGENCY by state of charge (20 / 10 / 5 %)
-GLOBAL_POSITION_INT  position about ``home`` [1e-7 deg, mm], relative_alt [mm], velocity NED [cm/s]
+GLOBAL_POSITION_INT  position about ``home`` [1e-7 deg, mm], relative_alt [mm] (coil height less the
+                     ground gap: 0 when landed), velocity NED [cm/s]
 GPS_RAW_INT          3D fix at the same position (ground stations read the fix from it)
 NAMED_VALUE_FLOAT    I2 (secondary current envelope amplitude, A), d_short (short duty, 0..1),
                      Lm (mutual inductance, uH)
@@ -39,15 +41,16 @@ from .geodesy import GeoPoint, enu_to_geodetic, geodetic_to_enu
 from .mavlink_io import mavutil
 
 __all__ = ["DEFAULT_HOME", "TlogWriter", "mavlink_table", "encode_tick", "stream", "StreamStats",
-           "follow", "FollowStats", "check_connect", "CONNECT_FORMAT"]
+           "follow", "open_follow", "FollowStats", "check_connect", "CONNECT_FORMAT"]
 
 #: ArduPilot SITL's default home (CMAC, Canberra), where two of the real logs were flown.
 DEFAULT_HOME = GeoPoint(-35.363261, 149.165230, 584.0)
 CONNECT_FORMAT = "udpout:HOST:PORT, udpin:HOST:PORT, udp:HOST:PORT, tcp:HOST:PORT or tcpin:HOST:PORT"
 _CHARGING_A = 0.05          # net battery current above this [A] reports CHARGING
-_AIRBORNE_M = 0.5           # height above the pad coil beyond the ground gap that counts as airborne
+_REANCHOR_S = 5.0           # --follow: vehicle clock this far off ours -> re-anchor (reboot, stall)
 _INT16 = 32767
 _UINT16_MAX = 65535
+_MOTION = ("x_m", "y_m", "z_m", "vx", "vy", "vz")
 _REQUIRED = ("t_s", "x_m", "y_m", "z_m", "lm_h", "i2_amp_a", "d_short", "battery_v", "battery_current_a", "soc")
 
 
@@ -84,12 +87,20 @@ class TlogWriter:
         self.close()
 
 
-def mavlink_table(ts: pd.DataFrame, home: GeoPoint = DEFAULT_HOME, ground_gap_m: float = 0.0) -> pd.DataFrame:
-    """Mission time series -> one row per sample in MAVLink wire units (integers where the spec has them).
+def mavlink_table(ts: pd.DataFrame, home: GeoPoint = DEFAULT_HOME, ground_gap_m: float = 0.0,
+                  t_out=None, track=None) -> pd.DataFrame:
+    """Mission time series -> rows in MAVLink wire units (integers where the spec has them).
 
-    ``ts`` needs the columns t_s, x_m, y_m, z_m (ENU about the pad = ``home``), lm_h, i2_amp_a,
-    d_short, battery_v, battery_current_a (+ = charging), soc. This is the one place where the
-    sender converts units.
+    ``ts`` needs the columns t_s, x_m, y_m, z_m (receiver coil in the pad frame, pad = ``home``),
+    lm_h, i2_amp_a, d_short, battery_v, battery_current_a (+ = charging), soc. ``t_out``: the
+    times to report (default the series' own samples): positions and velocities are interpolated,
+    the electrical state is the latest sample at or before (never a value the simulation did not
+    produce). The drone's
+    altitude is the coil height less ``ground_gap_m`` (the coil's height when landed), so a
+    replay of the telemetry (which adds the gap back) sees the same coil height. ``track``:
+    ``(t_s, pos_m)`` of the trajectory the mission flew, for positions and velocities (the
+    runner's time series holds them only at its coarse steps in transit). This is the one place
+    where the sender converts units.
     """
     missing = [c for c in _REQUIRED if c not in ts]
     if missing:
@@ -97,17 +108,37 @@ def mavlink_table(ts: pd.DataFrame, home: GeoPoint = DEFAULT_HOME, ground_gap_m:
     t = ts["t_s"].to_numpy(float)
     if len(t) < 1 or not np.all(np.diff(t) > 0):
         raise ValueError("time series t_s must be non-empty and strictly increasing")
-    x, y, z = (ts[c].to_numpy(float) for c in ("x_m", "y_m", "z_m"))
-    lat, lon, alt = enu_to_geodetic(x, y, z, home)
-    vel = [np.gradient(a, t) if len(t) > 1 else np.zeros_like(t) for a in (x, y, z)]
-    v_v = ts["battery_v"].to_numpy(float)
-    i_a = ts["battery_current_a"].to_numpy(float)          # + = charging
+    col = {c: ts[c].to_numpy(float) for c in _REQUIRED}
+    tp = t
+    if track is not None:
+        tp, pos = np.asarray(track[0], dtype=float), np.asarray(track[1], dtype=float)
+        for i, c in enumerate(("x_m", "y_m", "z_m")):
+            col[c] = np.interp(t, tp, pos[:, i])
+    for i, c in enumerate(("x_m", "y_m", "z_m")):
+        src = col[c] if track is None else pos[:, i]
+        v = np.gradient(src, tp) if len(tp) > 1 else np.zeros_like(tp)
+        col["v" + c[0]] = v if track is None else np.interp(t, tp, v)
+    if track is not None and t_out is not None:   # positions straight from the track at the ticks
+        t_out = np.asarray(t_out, dtype=float)
+        exact = {c: np.interp(t_out, tp, pos[:, i]) for i, c in enumerate(("x_m", "y_m", "z_m"))}
+        exact.update({"v" + c[0]: np.interp(t_out, tp, np.gradient(pos[:, i], tp)) for i, c in enumerate("xyz")})
+    else:
+        exact = {}
     dt = np.diff(t, prepend=t[0])
-    discharged_c = np.cumsum(-i_a * dt)                       # net charge drawn [C]
-    drawn_j = np.cumsum(-v_v * i_a * dt)                      # net energy drawn [J]
+    col["drawn_c"] = np.cumsum(-col["battery_current_a"] * dt)                       # net charge drawn [C]
+    col["drawn_j"] = np.cumsum(-col["battery_v"] * col["battery_current_a"] * dt)    # net energy drawn [J]
+    if t_out is not None:
+        t_out = np.asarray(t_out, dtype=float)
+        held = np.clip(np.searchsorted(t, t_out + 1e-9, side="right") - 1, 0, len(t) - 1)
+        col = {k: (np.interp(t_out, t, v) if k in _MOTION else v[held]) for k, v in col.items()}
+        col.update(exact)
+        t = t_out
+    height = np.maximum(col["z_m"] - ground_gap_m, 0.0)
+    lat, lon, alt = enu_to_geodetic(col["x_m"], col["y_m"], height, home)
+    i_a = col["battery_current_a"]
     cur_ca = np.clip(np.round(-i_a * 100.0), -_INT16, _INT16).astype(int)
     cur_ca[cur_ca == -1] = -2                                 # -1 means "not measured" on the wire
-    soc = np.clip(ts["soc"].to_numpy(float), 0.0, 1.0)
+    soc = np.clip(col["soc"], 0.0, 1.0)
     m = mavutil().mavlink
     state = np.select([i_a > _CHARGING_A, soc < 0.05, soc < 0.10, soc < 0.20],
                       [m.MAV_BATTERY_CHARGE_STATE_CHARGING, m.MAV_BATTERY_CHARGE_STATE_EMERGENCY,
@@ -117,20 +148,19 @@ def mavlink_table(ts: pd.DataFrame, home: GeoPoint = DEFAULT_HOME, ground_gap_m:
         "t_s": t,
         "time_boot_ms": np.round(t * 1e3).astype(np.int64) % 2**32,
         "lat_e7": np.round(lat * 1e7).astype(np.int64), "lon_e7": np.round(lon * 1e7).astype(np.int64),
-        "alt_mm": np.round(alt * 1e3).astype(np.int64), "relative_alt_mm": np.round(z * 1e3).astype(np.int64),
-        "vn_cm_s": np.clip(np.round(vel[1] * 100), -_INT16, _INT16).astype(int),
-        "ve_cm_s": np.clip(np.round(vel[0] * 100), -_INT16, _INT16).astype(int),
-        "vd_cm_s": np.clip(np.round(-vel[2] * 100), -_INT16, _INT16).astype(int),
-        "ground_speed_cm_s": np.clip(np.round(np.hypot(vel[0], vel[1]) * 100), 0, _UINT16_MAX - 1).astype(int),
-        "voltage_mv": np.clip(np.round(v_v * 1e3), 1, 10 * (_UINT16_MAX - 1)).astype(int),
+        "alt_mm": np.round(alt * 1e3).astype(np.int64), "relative_alt_mm": np.round(height * 1e3).astype(np.int64),
+        "vn_cm_s": np.clip(np.round(col["vy"] * 100), -_INT16, _INT16).astype(int),
+        "ve_cm_s": np.clip(np.round(col["vx"] * 100), -_INT16, _INT16).astype(int),
+        "vd_cm_s": np.clip(np.round(-col["vz"] * 100), -_INT16, _INT16).astype(int),
+        "ground_speed_cm_s": np.clip(np.round(np.hypot(col["vx"], col["vy"]) * 100), 0, _UINT16_MAX - 1).astype(int),
+        "voltage_mv": np.clip(np.round(col["battery_v"] * 1e3), 1, 10 * (_UINT16_MAX - 1)).astype(int),
         "current_ca": cur_ca,
-        "consumed_mah": np.clip(np.round(discharged_c / 3.6), 0, 2**31 - 1).astype(np.int64),
-        "consumed_hj": np.clip(np.round(drawn_j / 100.0), 0, 2**31 - 1).astype(np.int64),
+        "consumed_mah": np.clip(np.round(col["drawn_c"] / 3.6), 0, 2**31 - 1).astype(np.int64),
+        "consumed_hj": np.clip(np.round(col["drawn_j"] / 100.0), 0, 2**31 - 1).astype(np.int64),
         "remaining_pct": np.round(soc * 100).astype(int),
         "charge_state": state.astype(int),
-        "armed": (z > ground_gap_m + _AIRBORNE_M),
-        "i2_a": ts["i2_amp_a"].to_numpy(float), "d_short": ts["d_short"].to_numpy(float),
-        "lm_uh": ts["lm_h"].to_numpy(float) * 1e6,
+        "armed": np.ones(len(t), dtype=bool),  # the simulated drone flies the whole mission
+        "i2_a": col["i2_amp_a"], "d_short": col["d_short"], "lm_uh": col["lm_h"] * 1e6,
     })
 
 
@@ -184,13 +214,14 @@ class StreamStats:
 def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.0, speed: float = 1.0,
            home: GeoPoint = DEFAULT_HOME, tlog: str | Path | None = None, ground_gap_m: float = 0.0,
            duration_s: float | None = None, start_epoch_s: float | None = None, conn=None,
-           progress: bool = False) -> StreamStats:
+           track=None, progress: bool = False) -> StreamStats:
     """Send the mission time series ``ts`` as MAVLink 2 telemetry (and/or write it to ``tlog``).
 
-    Ticks are at ``t_k = t_0 + k / rate_hz`` of simulation time (the sample at or before ``t_k``
-    is sent), paced at ``t_k / speed`` of wall time (``speed = inf``: as fast as possible). The
+    Ticks are at ``t_k = t_0 + k / rate_hz`` of simulation time (the series interpolated there),
+    paced at ``t_k / speed`` of wall time (``speed = inf``: as fast as possible). The
     loop runs at most ``duration_s * rate_hz + 1`` ticks (default: the whole series).
-    ``conn``: an open pymavlink connection to use instead of opening ``connect``.
+    ``conn``: an open pymavlink connection to use instead of opening ``connect``; ``track``:
+    ``(t_s, pos_m)`` of the flown trajectory for the positions (see :func:`mavlink_table`).
     """
     if not (math.isfinite(rate_hz) and 0 < rate_hz <= 1000):
         raise ValueError(f"rate={rate_hz!r} is invalid; valid range: (0, 1000] Hz")
@@ -199,11 +230,10 @@ def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.
     if connect is None and tlog is None and conn is None:
         raise ValueError("nothing to do: give a connection (--connect) and/or a --tlog file")
     mu = mavutil()
-    table = mavlink_table(ts, home, ground_gap_m)
-    t = table["t_s"].to_numpy()
+    t = ts["t_s"].to_numpy(float)
     span = float(t[-1] - t[0]) if duration_s is None else min(float(duration_s), float(t[-1] - t[0]))
     n_ticks = int(math.floor(span * rate_hz + 1e-9)) + 1
-    idx = np.searchsorted(t, t[0] + np.arange(n_ticks) / rate_hz + 1e-9, side="right") - 1
+    table = mavlink_table(ts, home, ground_gap_m, t_out=t[0] + np.arange(n_ticks) / rate_hz, track=track)
     own = conn is None and connect is not None
     if own:
         conn = mu.mavlink_connection(check_connect(connect), source_system=1, source_component=1)
@@ -228,7 +258,7 @@ def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.
             hb = now - last_hb >= 1.0 or (not math.isfinite(speed) and k % max(int(round(rate_hz)), 1) == 0)
             if hb:
                 last_hb = now
-            row = table.iloc[int(idx[k])]
+            row = table.iloc[k]
             for msg in encode_tick(mav, row, hb):
                 frame = msg.pack(mav)
                 mav.seq = (mav.seq + 1) % 256
@@ -270,24 +300,33 @@ def _chunk_config(cfg, soc):
     return config_from_dict(apply_overrides(config_to_dict(cfg), {"battery.initial_soc": float(soc)}))
 
 
+def open_follow(follow_connect: str):
+    """The connection a live vehicle sends to (e.g. ``udpin:127.0.0.1:14551``), as a ground station."""
+    return mavutil().mavlink_connection(check_connect(follow_connect, "--follow"), source_system=255,
+                                        source_component=190)
+
+
 def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None = None, rate_hz: float = 10.0,
            home: GeoPoint | None = None, tlog=None, max_wall_s: float = 60.0, chunk_s: float = 1.0,
-           max_messages: int = 1_000_000, idle_timeout_s: float = 10.0, out_conn=None) -> FollowStats:
+           max_messages: int = 1_000_000, idle_timeout_s: float = 10.0, out_conn=None, in_conn=None) -> FollowStats:
     """Drive the mission world from a live vehicle's GLOBAL_POSITION_INT and stream the result.
 
     Positions from ``follow_connect`` (e.g. ``udpin:127.0.0.1:14551``; lat = lon = 0, i.e. no fix,
-    skipped) are timed by the receiver's clock and converted to the pad frame about ``home``
+    skipped) are timed by the vehicle's ``time_boot_ms`` anchored to the receiver's clock, and converted to the pad frame about ``home``
     (None: the first position received is the pad). Every ``chunk_s`` seconds the new stretch
     of track runs through ``run_mission(cfg, policy, trajectory=...)``, the battery carried
     over from chunk to chunk by its state of charge, and its telemetry is sent at ``rate_hz``,
     scheduled ``chunk_s`` behind the vehicle (the latency of this chunked scheme; the link's
     electrical state restarts each chunk). The loop ends after ``max_wall_s`` seconds,
-    ``max_messages`` received messages or ``idle_timeout_s`` without a position.
+    ``max_messages`` received messages or ``idle_timeout_s`` without a position; then the last
+    partial chunk is simulated and everything still queued is sent at once. ``in_conn``: a
+    connection from :func:`open_follow` opened earlier (bind before slow set-up work, or the
+    vehicle's first messages are lost).
     """
     from .trajectory import Trajectory
 
     mu = mavutil()
-    vin = mu.mavlink_connection(check_connect(follow_connect, "--follow"), source_system=255, source_component=190)
+    vin = in_conn if in_conn is not None else open_follow(follow_connect)
     own_out = out_conn is None and connect is not None
     out = mu.mavlink_connection(check_connect(connect), source_system=1, source_component=1) if own_out else out_conn
     mav = mu.mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
@@ -300,9 +339,44 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
     chunk_start = 0                         # index of the first sample of the next chunk
     queue: list[tuple[float, object]] = []  # (send at wall offset, mavlink_table row)
     soc = None
+    tb_offset = None
     frames = chunks = n_msgs = 0
     last_hb = -math.inf
     last_rx = wall0
+    def simulate_chunk():
+        nonlocal chunk_start, chunks, soc
+        lo = max(chunk_start - 1, 0)            # overlap one sample: chunks join without a gap
+        t_seg = np.array(t_rx[lo:])
+        traj = Trajectory.from_samples(t_seg - t_seg[0], np.array(pos[lo:]))
+        res = run_mission(cfg if soc is None else _chunk_config(cfg, soc), policy, trajectory=traj)
+        soc = float(res.summary["final_soc"])
+        ts = res.timeseries.copy()
+        ts["t_s"] = ts["t_s"] + t_seg[0]
+        tick_t = np.arange(math.ceil(t_seg[0] * rate_hz), math.floor(t_seg[-1] * rate_hz) + 1) / rate_hz
+        if chunks:
+            tick_t = tick_t[tick_t > t_seg[0]]
+        if len(tick_t):
+            tab = mavlink_table(ts, home, gap, t_out=tick_t, track=(t_seg, np.array(pos[lo:])))
+            queue.extend((tk + chunk_s, tab.iloc[i]) for i, tk in enumerate(tick_t))
+        chunk_start = len(t_rx)
+        chunks += 1
+
+    def send_due(now):
+        nonlocal last_hb, frames
+        while queue and wall0 + queue[0][0] <= now:
+            _, row = queue.pop(0)
+            t_wall = time.monotonic()
+            hb = t_wall - last_hb >= 1.0
+            last_hb = t_wall if hb else last_hb
+            for m in encode_tick(mav, row, hb):
+                frame = m.pack(mav)
+                mav.seq = (mav.seq + 1) % 256
+                if out is not None:
+                    out.write(frame)
+                if writer is not None:
+                    writer.write(frame, epoch0 + float(row.t_s))
+                frames += 1
+
     try:
         while n_msgs < max_messages:
             now = time.monotonic()
@@ -317,42 +391,22 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
                     home = GeoPoint(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3 if home is None or
                                     home.alt_m is None else home.alt_m)
                 e, n, u = geodetic_to_enu(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, home)
-                t_new = last_rx - wall0
-                if not t_rx or t_new > t_rx[-1]:
+                # the vehicle's clock spaces the samples (frames may arrive in bursts); anchored to
+                # our clock at the first frame and again after a reboot or a jump
+                tb = msg.time_boot_ms * 1e-3
+                arrival = last_rx - wall0
+                if tb_offset is None or abs(tb + tb_offset - arrival) > _REANCHOR_S:
+                    tb_offset = arrival - tb
+                t_new = tb + tb_offset
+                if not t_rx or t_new > t_rx[-1] + 1e-3:
                     t_rx.append(t_new)
                     pos.append((float(e), float(n), max(float(u), 0.0) + gap))
-            # simulate a finished chunk
             if len(t_rx) - chunk_start >= 2 and t_rx[-1] - t_rx[chunk_start] >= chunk_s:
-                lo = max(chunk_start - 1, 0)    # overlap one sample: chunks join without a gap
-                t_seg = np.array(t_rx[lo:])
-                traj = Trajectory.from_samples(t_seg - t_seg[0], np.array(pos[lo:]))
-                c = cfg if soc is None else _chunk_config(cfg, soc)
-                res = run_mission(c, policy, trajectory=traj)
-                soc = float(res.summary["final_soc"])
-                ts = res.timeseries.copy()
-                ts["t_s"] = ts["t_s"] + t_seg[0]
-                tab = mavlink_table(ts, home, gap)
-                tick_t = np.arange(math.ceil(t_seg[0] * rate_hz), math.floor(t_seg[-1] * rate_hz) + 1) / rate_hz
-                if chunks:
-                    tick_t = tick_t[tick_t > t_seg[0]]
-                rows = np.clip(np.searchsorted(tab["t_s"].to_numpy(), tick_t + 1e-9, side="right") - 1, 0, len(tab) - 1)
-                queue.extend((tk + chunk_s, tab.iloc[int(r)]) for tk, r in zip(tick_t, rows))
-                chunk_start = len(t_rx)
-                chunks += 1
-            # send what is due
-            now = time.monotonic()
-            while queue and wall0 + queue[0][0] <= now:
-                t_send, row = queue.pop(0)
-                hb = now - last_hb >= 1.0
-                last_hb = now if hb else last_hb
-                for m in encode_tick(mav, row, hb):
-                    frame = m.pack(mav)
-                    mav.seq = (mav.seq + 1) % 256
-                    if out is not None:
-                        out.write(frame)
-                    if writer is not None:
-                        writer.write(frame, epoch0 + float(row.t_s))
-                    frames += 1
+                simulate_chunk()
+            send_due(time.monotonic())
+        if len(t_rx) - max(chunk_start - 1, 0) >= 2 and len(t_rx) > chunk_start:
+            simulate_chunk()                    # the last, partial chunk
+        send_due(math.inf)                      # and everything still queued, without waiting
     finally:
         vin.close()
         if own_out:

@@ -1,7 +1,7 @@
 """A stand-in live vehicle for the --follow test: plain pymavlink, no mission_sim imports.
 
-usage: python _fake_vehicle.py PORT SECONDS
-Sends HEARTBEAT (1 Hz) and GLOBAL_POSITION_INT (10 Hz) to udpout:127.0.0.1:PORT for SECONDS:
+usage: python _fake_vehicle.py PORT SECONDS [DELAY]
+After DELAY seconds (default 0) sends HEARTBEAT (1 Hz) and GLOBAL_POSITION_INT (10 Hz) to udpout:127.0.0.1:PORT for SECONDS:
 standing on the home point for 1.5 s, then flying east at 2 m/s, 3 m up. Prints the number of
 positions sent.
 """
@@ -21,6 +21,7 @@ M_PER_DEG_LON = 111412.84 * math.cos(_PHI) - 93.5 * math.cos(3 * _PHI)  # standa
 
 def main():
     port, seconds = int(sys.argv[1]), float(sys.argv[2])
+    time.sleep(float(sys.argv[3]) if len(sys.argv) > 3 else 0.0)  # let the follower bind its port
     conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1)
     t0 = time.monotonic()
     sent = 0

@@ -36,7 +36,7 @@ def pymavlink_reference(path: Path) -> dict:
 
     duration (last - first record timestamp), armed periods (vehicle HEARTBEAT base_mode bit 7 in a
     .tlog, EV 10/11 in a .bin), positions with a 3D fix (lat/lon/alt extents and count), battery
-    voltage range and sample count.
+    voltage range and sample count, (t, V I) of SYS_STATUS / CURR.
     """
     os.environ["MAVLINK20"] = "1"
     from pymavlink import mavutil
@@ -45,7 +45,7 @@ def pymavlink_reference(path: Path) -> dict:
     first = last = None
     armed_state, armed_start, periods = False, None, []
     fix = 0
-    lats, lons, alts, volts, volts_bs = [], [], [], [], []
+    lats, lons, alts, volts, volts_bs, power = [], [], [], [], [], []
     bad = 0
     while True:
         msg = m.recv_match(blocking=False)
@@ -78,13 +78,15 @@ def pymavlink_reference(path: Path) -> dict:
             lats.append(msg.Lat), lons.append(msg.Lng), alts.append(msg.Alt)
         if typ == "SYS_STATUS" and msg.voltage_battery not in (0, 65535) and msg.current_battery != -1:
             volts.append(msg.voltage_battery / 1000)
+            power.append((rel, msg.voltage_battery / 1000 * msg.current_battery / 100))
         if typ == "CURR":
             volts.append(msg.Volt / 100)
+            power.append((rel, msg.Volt / 100 * msg.Curr / 100))
         if typ == "BATTERY_STATUS" and msg.id == 0:
             volts_bs.append(sum(v for v in msg.voltages if v != 65535) / 1000)
     if armed_state:
         periods.append((armed_start, last - first))
     return {"duration_s": last - first, "armed_periods": periods, "n_pos": len(lats),
             "lat": (min(lats), max(lats)), "lon": (min(lons), max(lons)), "alt": (min(alts), max(alts)),
-            "volt": (min(volts), max(volts)) if volts else None, "n_volt": len(volts), "bad": bad,
+            "volt": (min(volts), max(volts)) if volts else None, "n_volt": len(volts), "bad": bad, "power": power,
             "volt_bs": (min(volts_bs), max(volts_bs)) if volts_bs else None, "n_volt_bs": len(volts_bs)}
