@@ -104,22 +104,11 @@ def _mav_speed(text):
 
 def _mav_config(args, overrides=None, single_pad=False):
     """Mission config from --config, --set and ``overrides``; ``single_pad``: one pad at the origin."""
-    import tomllib
-
     from .config import apply_overrides, config_from_dict, config_to_dict, load_config
     d = config_to_dict(load_config(args.config))
     if single_pad:
         d["pads"] = [{"x_m": 0.0, "y_m": 0.0, "z_m": 0.0}]
-    sets = dict(overrides or {})
-    for item in args.set:
-        key, eq, text = item.partition("=")
-        if not eq or not key.strip():
-            raise CliError(f"--set {item!r} is invalid; valid format: KEY=VALUE, e.g. drone.mass_kg=1.5")
-        try:
-            sets[key.strip()] = tomllib.loads(f"v = {text.strip()}")["v"]
-        except tomllib.TOMLDecodeError:
-            sets[key.strip()] = text.strip()
-    return config_from_dict(apply_overrides(d, sets))
+    return config_from_dict(apply_overrides(d, {**(overrides or {}), **_parse_set(args.set)}))
 
 
 def _mav_policy(cfg, name):
@@ -179,7 +168,7 @@ def _cmd_replay(args) -> int:
     s["policy"] = args.policy
     s["drone_mass_kg"] = cfg.drone.mass_kg
     args.out.mkdir(parents=True, exist_ok=True)
-    files = [str(f) for f in res.mission.write(args.out / "mission")]
+    files = [str(f) for f in res.mission.write(args.out / "mission", figures=not args.no_plot)]
     if res.power_table is not None:
         res.power_table.to_csv(args.out / "power_comparison.csv", index=False)
         files.append(str(args.out / "power_comparison.csv"))
@@ -279,12 +268,165 @@ def _cmd_telemetry_follow(args, connect, home) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- coupling
+def _finite_float(name):
+    def conv(text):
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name}={text!r} is not a number") from None
+        if v != v or abs(v) == float("inf"):
+            raise argparse.ArgumentTypeError(f"{name}={text!r} is invalid; valid range: finite")
+        return v
+    return conv
+
+
+def _add_coupling(sub):
+    p = sub.add_parser("coupling", help="inductances of the default pad/drone coils at a pose",
+                       description="L1, L2 and Lm(dx, dy, dz, tilt) of the default coils by Neumann integrals "
+                                   "(pad frame, z up; dz = height of the drone coil above the pad coil).")
+    p.add_argument("--dx", type=_finite_float("dx"), default=0.0, help="lateral offset x [m] (default 0)")
+    p.add_argument("--dy", type=_finite_float("dy"), default=0.0, help="lateral offset y [m] (default 0)")
+    p.add_argument("--dz", type=_finite_float("dz"), default=None, help="height above the pad coil [m] "
+                   "(default: the nominal hover gap)")
+    p.add_argument("--tilt-deg", type=_finite_float("tilt-deg"), default=0.0,
+                   help="tilt of the drone coil about the y axis [deg] (default 0)")
+    p.add_argument("--exact", action="store_true", help="direct Neumann integral instead of the lookup table")
+    p.add_argument("--format", choices=("table", "json"), default="table")
+    p.add_argument("--map", type=Path, default=None, metavar="PNG",
+                   help="also write a PNG map of Lm over dx, dy at this dz and tilt")
+    p.set_defaults(func=_cmd_coupling)
+
+
+def _cmd_coupling(args) -> int:
+    import math
+
+    from wpt_receiver.coupling import NOMINAL_GAP_M, default_coupling
+    m = default_coupling()
+    dz = NOMINAL_GAP_M if args.dz is None else args.dz
+    min_dz = m.tx.wire_radius_m + m.rx.wire_radius_m + max(m.rx.radius_m) * abs(math.sin(math.radians(args.tilt_deg)))
+    if dz <= min_dz:
+        raise CliError(f"--dz {dz!r} is invalid; valid range: > {min_dz:.4g} m (the coils would touch)")
+    if abs(args.tilt_deg) >= 90:
+        raise CliError(f"--tilt-deg {args.tilt_deg!r} is invalid; valid range: (-90, 90)")
+    tilt = math.radians(args.tilt_deg)
+    lm = float((m.lm_exact_h if args.exact else m.lm_h)(args.dx, args.dy, dz, tilt))
+    tx, rx = m.turn_positions(args.dx, args.dy, dz, tilt)
+    out = {"dx_m": args.dx, "dy_m": args.dy, "dz_m": dz, "tilt_rad": tilt, "lm_h": lm, "l1_h": m.l1_h,
+           "l2_h": m.l2_h, "k": float(m.k(lm)), "tx_turns": tx, "rx_turns": rx}
+    if args.map is not None:
+        from . import mission_figures
+        args.map.parent.mkdir(parents=True, exist_ok=True)
+        out["map_png"] = mission_figures.plot_lm_map(m, dz, tilt, args.map)
+    if args.format == "json":
+        print(json.dumps(out))
+        return 0
+    print(f"pose: dx={args.dx:g} m dy={args.dy:g} m dz={dz:.4f} m tilt={args.tilt_deg:g} deg")
+    print(f"L1 = {m.l1_h * 1e6:.3f} uH ({m.tx.n_turns} turns), L2 = {m.l2_h * 1e6:.3f} uH ({m.rx.n_turns} turns)")
+    print(f"Lm = {lm * 1e6:.4f} uH, k = {out['k']:.4f}")
+    if "map_png" in out:
+        print(f"figure: {out['map_png']}")
+    return 0
+
+
+# ----------------------------------------------------------------------------- mission
+def _parse_set(items):
+    import tomllib
+    out = {}
+    for item in items or ():
+        if "=" not in item:
+            raise CliError(f"--set {item!r} is invalid; valid form: KEY=VALUE (e.g. battery.capacity_ah=2.0)")
+        key, text = item.split("=", 1)
+        try:
+            value = tomllib.loads(f"v = {text}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = text
+        out[key.strip()] = value
+    return out
+
+
+def _add_mission(sub):
+    p = sub.add_parser("mission", help="run a flight mission with in-flight charging (the main job)",
+                       description="Simulate a drone mission over charging pads: coupling from the pose, the "
+                                   "WPT link, the SBAR policy, battery and propulsion. Without CONFIG the embedded "
+                                   "default mission runs. Writes the time series (Parquet, CSV), summary.json and "
+                                   "PNG figures to --out.")
+    p.add_argument("config", nargs="?", type=Path, default=None, help="mission TOML (default: embedded default)")
+    p.add_argument("--policy", default="model_based", help="receiver policy (default model_based)")
+    p.add_argument("--out", type=Path, default=Path("out/mission"), help="output folder (default out/mission)")
+    p.add_argument("--format", choices=("table", "json"), default="table")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a config value by dotted key, e.g. --set wind.speed_m_s=6 (repeatable)")
+    p.add_argument("--no-charge", action="store_true", help="never energise the pads (baseline mission)")
+    p.add_argument("--no-plot", action="store_true", help="skip the figures")
+    p.set_defaults(func=_cmd_mission)
+
+
+def _cmd_mission(args) -> int:
+    import tomllib
+
+    from . import config as mconfig
+    from .contract import PolicyContext
+    from .runner import run_mission
+    try:
+        import policies
+    except ImportError as exc:  # pragma: no cover - policies ships with dronewpt
+        raise CliError(f"the policies package is not importable: {exc}") from None
+    if args.config is not None and not args.config.is_file():
+        raise CliError(f"config file {str(args.config)!r} does not exist")
+    text = mconfig.DEFAULT_MISSION_TOML if args.config is None else args.config.read_text("utf-8")
+    try:
+        d = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise CliError(f"{args.config or 'default mission'}: not valid TOML: {exc}") from None
+    overrides = _parse_set(args.set)
+    cfg = mconfig.config_from_dict(mconfig.apply_overrides(d, overrides) if overrides else d)
+    if args.policy not in policies.available():
+        raise CliError(f"--policy {args.policy!r} is invalid; valid values: {', '.join(policies.available())}")
+    model = cfg.coupling.model()
+    assumed = cfg.link.link_params(model.l1_h, model.l2_h, float(model.lm_h(0.0, 0.0, cfg.mission.hover_gap_m)))
+    ctx = PolicyContext(link=assumed, control_period_s=cfg.sim.control_period_s, rated_i2_a=cfg.link.rated_i2_a)
+    pol = policies.make(args.policy, ctx)
+    progress = args.format != "json" and sys.stderr.isatty()
+    res = run_mission(cfg, pol, charge=not args.no_charge, progress=progress)
+    files = [str(f) for f in res.write(args.out, figures=not args.no_plot)]
+    s = res.summary
+    if args.format == "json":
+        print(json.dumps({**s, "files": files}))
+        return 0
+    rows = [
+        ("policy", s["policy"], ""),
+        ("simulated time", f"{s['sim_time_s']:.1f}", "s"),
+        ("wall time", f"{s['wall_s']:.3f}", f"s ({s['realtime_factor']:.0f}x real time)"),
+        ("energy from the pads", f"{s['energy_from_source_j']:.1f}", "J"),
+        ("energy to the battery node", f"{s['energy_to_battery_j']:.1f}", "J"),
+        ("losses (coils + battery)", f"{s['losses_j']:.1f}", f"J ({s['coil_losses_j']:.1f} + {s['battery_losses_j']:.1f})"),
+        ("propulsion energy", f"{s['propulsion_energy_j']:.1f}", "J"),
+        ("energy balance error", f"{s['energy_balance_error_rel']:.2e}", "relative"),
+        ("SoC start -> end", f"{s['initial_soc']:.4f} -> {s['final_soc']:.4f}",
+         f"(without charging {s['final_soc_without_charging']:.4f}; full: {s['battery_full']})"),
+        ("peak I2", f"{s['peak_i2_a']:.2f}", f"A (rated {s['rated_i2_a']:g} A)"),
+        ("time above rated", f"{s['time_above_rated_s'] * 1e3:.2f}", "ms"),
+        ("pad on", f"{s['charge_time_s']:.1f}", "s"),
+        ("flight time gain", f"{s['flight_time_gain_s']:.1f}", "s of hover"),
+        ("steps fine / coarse", f"{s['fine_steps']} / {s['coarse_steps']}", f"({s['fine_windows']} fine windows)"),
+    ]
+    if s.get("battery_depleted"):
+        rows.append(("WARNING", "battery depleted", f"(min SoC {s['min_soc']:.3f}; OCV held at its SoC = 0 value)"))
+    w = max(len(r[0]) for r in rows)
+    for name, val, unit in rows:
+        print(f"{name:<{w}}  {val:>24}  {unit}")
+    for f in files:
+        print(f"wrote: {f}")
+    return 0
+
+
 # ----------------------------------------------------------------------------- main
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="dronewpt", description="Flight-mission energy simulator for drones "
                                      "that charge wirelessly in flight (WPT link with an SBAR receiver).")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for add in (_add_paper, _add_replay, _add_telemetry):
+    for add in (_add_paper, _add_coupling, _add_mission, _add_replay, _add_telemetry):
         add(sub)
     return parser
 
