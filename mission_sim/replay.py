@@ -8,7 +8,9 @@ Pipeline (each step a small function):
    position, :func:`default_pad`), tilt from roll and pitch, time from 0 at the first fix.
    Heights below the pad (GPS/baro noise on the ground) are clipped to 0; ``ground_gap_m`` is
    added so that z is the receiver coil's height above the pad coil (the gap when landed).
-3. ``run_mission(cfg, policy, trajectory=Trajectory.from_samples(...))`` -- Lm(t), SBAR, battery.
+3. :func:`resample_track` onto ``sim.traj_dt_s``, then ``run_mission(cfg, policy,
+   trajectory=Trajectory.from_samples(...))`` -- Lm(t), SBAR, battery. Phases: "ground" while
+   disarmed (the pad stays off), "hover" below 0.3 m/s (the pad may energise), else "flight".
 4. :func:`compare_power` -- the logged electrical power (V I of the flight battery) against the
    simulator's propulsion-power model while airborne, with the error; :func:`fit_mass_kg` --
    the drone mass at which the model's energy matches the log's.
@@ -26,7 +28,7 @@ from .geodesy import GeoPoint, geodetic_to_enu
 from .mavlink_io import FlightLog, read_log
 
 __all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "flight_stats",
-           "logged_energy_j", "compare_power", "fit_mass_kg", "ReplayResult", "replay_log", "parse_window"]
+           "logged_energy_j", "compare_power", "fit_mass_kg", "resample_track", "ReplayResult", "replay_log", "parse_window"]
 
 
 MAX_TILT_RAD = np.radians(85.0)   # the mission world takes |tilt| < 90 deg; beyond is upside down
@@ -123,6 +125,25 @@ def track_from_log(log: FlightLog, pad: GeoPoint | None = None, ground_gap_m: fl
                        tilt_rad=np.minimum(tilt, MAX_TILT_RAD), height_m=height, t_offset_s=float(t_log[0]),
                        pad=pad, ground_gap_m=float(ground_gap_m), armed=_in_periods(t_log, log.armed_periods),
                        n_tilt_clipped=clipped)
+
+
+def resample_track(track: FlightTrack, dt_s: float) -> FlightTrack:
+    """The track on a uniform grid of ``dt_s`` (linear interpolation; armed state held).
+
+    Logged fixes come every 0.2-0.4 s with gaps of seconds (radio drop-outs, reboots); the
+    mission runner holds Lm and the propulsion power over each trajectory sample, so a uniform
+    grid at the simulator's ``sim.traj_dt_s`` keeps every held interval short.
+    """
+    if not (np.isfinite(dt_s) and dt_s > 0):
+        raise ValueError(f"dt_s={dt_s!r} is invalid; valid range: (0, inf) s")
+    t = np.arange(0.0, float(track.t_s[-1]), dt_s)
+    t = np.append(t[t < track.t_s[-1] - 1e-9], track.t_s[-1])
+    pos = np.column_stack([np.interp(t, track.t_s, track.pos_m[:, i]) for i in range(3)])
+    held = np.clip(np.searchsorted(track.t_s, t, side="right") - 1, 0, len(track.t_s) - 1)
+    return FlightTrack(t_s=t, pos_m=pos, tilt_rad=np.interp(t, track.t_s, track.tilt_rad),
+                       height_m=np.interp(t, track.t_s, track.height_m), t_offset_s=track.t_offset_s,
+                       pad=track.pad, ground_gap_m=track.ground_gap_m, armed=track.armed[held],
+                       n_tilt_clipped=track.n_tilt_clipped)
 
 
 def _min_spacing(t, min_dt) -> np.ndarray:
@@ -294,7 +315,8 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
     if ground_gap_m is None:
         ground_gap_m = cfg.mission.hover_gap_m
     track = track_from_log(log, pad=pad, ground_gap_m=ground_gap_m, window=window)
-    traj = Trajectory.from_samples(track.t_s, track.pos_m, tilt_rad=track.tilt_rad, phase=track.phase())
+    grid = resample_track(track, cfg.sim.traj_dt_s)
+    traj = Trajectory.from_samples(grid.t_s, grid.pos_m, tilt_rad=grid.tilt_rad, phase=grid.phase())
     mission = run_mission(cfg, policy, trajectory=traj, progress=progress)
     ts = mission.timeseries
     summary = flight_stats(log, track)

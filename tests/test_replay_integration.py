@@ -20,11 +20,12 @@ from mission_sim.cli import main
 from mission_sim.mavlink_io import mavutil, read_log
 
 WINDOWS = {  # log seconds: arming on the pad, take-off, some flying
-    "dronekit-python_flight.tlog": (455.0, 530.0),
-    "dronekit-la-testdata_log171.bin": (55.0, 130.0),
-    "uavlogviewer_vtol_sitl.tlog": (0.0, 60.0),
+    "dronekit-python_flight.tlog": (455.0, 505.0),
+    "dronekit-la-testdata_log171.bin": (55.0, 105.0),
+    "uavlogviewer_vtol_sitl.tlog": (0.0, 50.0),
 }
 _ref: dict = {}
+_runs: dict = {}
 
 
 def _reference(name):
@@ -34,11 +35,17 @@ def _reference(name):
 
 
 def _replay(capsys, name, tmp_path, *extra):
-    w = WINDOWS[name]
-    argv = ["replay", str(log_path(name)), "--window", f"{w[0]},{w[1]}", "--format", "json",
-            "--out", str(tmp_path / "out"), "--no-plot", *extra]
-    assert main(argv) == 0
-    return json.loads(capsys.readouterr().out)
+    """Summary of `dronewpt replay` on the log's window (cached per arguments; the output folder
+    of the first run is kept in the summary as "_out")."""
+    key = (name, *extra)
+    if key not in _runs:
+        w = WINDOWS[name]
+        out = tmp_path / "out"
+        argv = ["replay", str(log_path(name)), "--window", f"{w[0]},{w[1]}", "--format", "json",
+                "--out", str(out), "--no-plot", *extra]
+        assert main(argv) == 0
+        _runs[key] = {**json.loads(capsys.readouterr().out), "_out": str(out)}
+    return _runs[key]
 
 
 def _series_m_per_deg(lat_deg):
@@ -74,7 +81,7 @@ def test_replay_real_log(capsys, tmp_path, name):
     assert 0 <= s["energy_to_battery_j"] <= s["energy_from_source_j"] + 1e-9
     assert s["propulsion_energy_j"] > 0
     # the timeseries written closes the propulsion energy
-    ts = __import__("pandas").read_parquet(tmp_path / "out" / "mission" / "timeseries.parquet")
+    ts = __import__("pandas").read_parquet(Path(s["_out"]) / "mission" / "timeseries.parquet")
     e_prop = float(np.sum(0.5 * (ts["propulsion_w"].to_numpy()[1:] + ts["propulsion_w"].to_numpy()[:-1])
                           * np.diff(ts["t_s"].to_numpy())))
     assert s["propulsion_energy_j"] == pytest.approx(e_prop, rel=0.05)
@@ -161,21 +168,27 @@ def test_telemetry_cli_shows_charging_and_replays(capsys, tmp_path):
     assert s["energy_to_battery_j"] > 0
 
 
-def test_follow_live_vehicle(capsys, tmp_path):
+def test_follow_live_vehicle(tmp_path):
     """--follow: a separate process plays the vehicle; the simulation follows its positions."""
+    import argparse
+
+    from mission_sim import cli, telemetry
+    from mission_sim.runner import run_mission
     port = _free_port()
     tlog = tmp_path / "follow.tlog"
-    veh = subprocess.Popen([sys.executable, str(Path(__file__).with_name("_fake_vehicle.py")), str(port), "3.5",
-                            "0.5"], stdout=subprocess.PIPE, text=True)
+    vin = telemetry.open_follow(f"udpin:127.0.0.1:{port}")  # bound before the vehicle starts
+    cfg = cli._mav_config(argparse.Namespace(config=None, set=[]))
+    veh = subprocess.Popen([sys.executable, str(Path(__file__).with_name("_fake_vehicle.py")), str(port), "3.5"],
+                           stdout=subprocess.PIPE, text=True)
     try:
-        rc = main(["telemetry", "--follow", f"udpin:127.0.0.1:{port}", "--follow-time", "8", "--follow-idle", "1",
-                   "--connect", "none", "--tlog", str(tlog), "--rate", "5"])
+        st = telemetry.follow(f"udpin:127.0.0.1:{port}", cfg, cli._mav_policy(cfg, "model_based"), run_mission,
+                              rate_hz=5.0, tlog=tlog, max_wall_s=8.0, idle_timeout_s=1.0, in_conn=vin)
         sent = int(veh.communicate(timeout=10)[0].strip())
     finally:
         if veh.poll() is None:
             veh.kill()
-    assert rc == 0 and sent == 36
-    assert "followed" in capsys.readouterr().out
+    rc = 0 if st.positions == sent else 1
+    assert rc == 0 and sent == 36 and st.chunks >= 3      # every position arrived, ~1 s chunks
     log = read_log(tlog)
     assert len(log.position) >= 8 and log.battery_source == "BATTERY_STATUS"
     # the simulated drone is where the vehicle was: standing on the home point (the pad, charging),
