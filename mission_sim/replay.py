@@ -9,8 +9,9 @@ Pipeline (each step a small function):
    Heights below the pad (GPS/baro noise on the ground) are clipped to 0; ``ground_gap_m`` is
    added so that z is the receiver coil's height above the pad coil (the gap when landed).
 3. :func:`resample_track` onto ``sim.traj_dt_s``, then ``run_mission(cfg, policy,
-   trajectory=Trajectory.from_samples(...))`` -- Lm(t), SBAR, battery. Phases: "ground" while
-   disarmed (the pad stays off), "hover" below 0.3 m/s (the pad may energise), else "flight".
+   trajectory=replay_trajectory(...))`` -- Lm(t), SBAR, battery. Phases: "ground" while
+   disarmed (the pad stays off and the drone draws its avionics power only), "hover" below
+   0.3 m/s (the pad may energise), else "flight".
 4. :func:`compare_power` -- the logged electrical power (V I of the flight battery) against the
    simulator's propulsion-power model while airborne, with the error; :func:`fit_mass_kg` --
    the drone mass at which the model's energy matches the log's.
@@ -28,7 +29,7 @@ from .geodesy import GeoPoint, geodetic_to_enu
 from .mavlink_io import FlightLog, read_log
 
 __all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "flight_stats",
-           "logged_energy_j", "compare_power", "fit_mass_kg", "resample_track", "ReplayResult", "replay_log", "parse_window"]
+           "logged_energy_j", "compare_power", "fit_mass_kg", "resample_track", "replay_trajectory", "ReplayResult", "replay_log", "parse_window"]
 
 
 MAX_TILT_RAD = np.radians(85.0)   # the mission world takes |tilt| < 90 deg; beyond is upside down
@@ -286,6 +287,20 @@ def fit_mass_kg(traj, drone, target_energy_j: float, t_s, mask) -> float:
     return 0.5 * (lo + hi)
 
 
+def replay_trajectory(track: FlightTrack):
+    """A :class:`~mission_sim.trajectory.Trajectory` of the track whose propulsion power is the
+    avionics alone while disarmed ("ground": the motors are off), momentum theory otherwise."""
+    from .trajectory import Trajectory
+
+    class ReplayTrajectory(Trajectory):
+        def propulsion_w(self, drone):
+            p = np.array(super().propulsion_w(drone), dtype=float)
+            p[self.phase == "ground"] = drone.avionics_w
+            return p
+
+    return ReplayTrajectory.from_samples(track.t_s, track.pos_m, tilt_rad=track.tilt_rad, phase=track.phase())
+
+
 @dataclass
 class ReplayResult:
     """A replayed log: the log, its track, the mission result and the summary (JSON-ready)."""
@@ -308,7 +323,6 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
     Raises :class:`NoPositionError` (a ``ValueError``) if the log has no usable position.
     """
     from .runner import run_mission
-    from .trajectory import Trajectory
 
     if not isinstance(log, FlightLog):
         log = read_log(log)
@@ -316,7 +330,7 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
         ground_gap_m = cfg.mission.hover_gap_m
     track = track_from_log(log, pad=pad, ground_gap_m=ground_gap_m, window=window)
     grid = resample_track(track, cfg.sim.traj_dt_s)
-    traj = Trajectory.from_samples(grid.t_s, grid.pos_m, tilt_rad=grid.tilt_rad, phase=grid.phase())
+    traj = replay_trajectory(grid)
     mission = run_mission(cfg, policy, trajectory=traj, progress=progress)
     ts = mission.timeseries
     summary = flight_stats(log, track)
