@@ -278,7 +278,7 @@ def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.
             conn.close()
         if bar is not None:
             bar.close()
-    return StreamStats(ticks=n_ticks, frames=frames, sim_s=n_ticks / rate_hz, wall_s=time.monotonic() - wall0,
+    return StreamStats(ticks=n_ticks, frames=frames, sim_s=(n_ticks - 1) / rate_hz, wall_s=time.monotonic() - wall0,
                        counts=counts)
 
 

@@ -141,3 +141,36 @@ def test_bad_inputs():
     with pytest.raises(ValueError, match="nothing to do"):
         stream(_series())
     assert GeoPoint(0, 0, 0).alt_m == 0
+
+
+def test_mixed_mavlink1_and_2_tlog(tmp_path):
+    """A MAVLink 1 log continued by MAVLink 2 frames (as after a firmware update) reads as one log."""
+    from _flightlogs import log_path
+    data = log_path("uavlogviewer_vtol_sitl.tlog").read_bytes()
+    cut = 0
+    while cut < 60_000:  # whole records: 8-byte time + MAVLink 1 frame (6 + payload + 2 bytes)
+        assert data[cut + 8] == 0xFE
+        cut += 16 + data[cut + 9]
+    v1 = data[:cut]
+    head = tmp_path / "v1.tlog"
+    head.write_bytes(v1)
+    first = read_log(head)
+    assert set(first.mavlink_frames) == {1} and len(first.position) > 10
+    tail = tmp_path / "v2.tlog"
+    stream(_series(duration_s=5.0, dt=0.05), tlog=tail, rate_hz=5.0, speed=math.inf,
+           start_epoch_s=first.t0_epoch_s + first.duration_s + 10.0)
+    mixed = tmp_path / "mixed.tlog"
+    mixed.write_bytes(v1 + tail.read_bytes())
+    log = read_log(mixed)
+    assert log.bad_frames == first.bad_frames == 0
+    assert log.mavlink_frames[1] == first.mavlink_frames[1] and log.mavlink_frames[2] == stream_frames(tail)
+    assert len(log.position) == len(first.position) + 26
+    assert log.duration_s == pytest.approx(first.duration_s + 15.0, abs=1e-3)
+
+
+def stream_frames(path):
+    m = mavutil().mavlink_connection(str(path))
+    n = 0
+    while m.recv_match(blocking=False) is not None:
+        n += 1
+    return n
