@@ -156,11 +156,6 @@ def armed_periods(armed: pd.DataFrame, end_s: float) -> list[tuple[float, float]
     return periods
 
 
-def _frame(rows: list[dict], columns) -> pd.DataFrame:
-    df = pd.DataFrame(rows) if rows else pd.DataFrame(columns=list(columns) + ["src"])
-    return df
-
-
 # ----------------------------------------------------------------------------- reading
 def _open(path: Path, mu):
     """(reader, kind). DataFlash by magic bytes or suffix; everything else is read as a .tlog.

@@ -20,7 +20,6 @@ Pipeline (each step a small function):
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import pandas as pd

@@ -6,7 +6,6 @@ replay short.
 
 import json
 import math
-import os
 import socket
 import subprocess
 import sys
@@ -17,7 +16,7 @@ import pytest
 
 from _flightlogs import log_path, pymavlink_reference
 from mission_sim.cli import main
-from mission_sim.mavlink_io import mavutil, read_log
+from mission_sim.mavlink_io import read_log
 
 WINDOWS = {  # log seconds: arming on the pad, take-off, some flying
     "dronekit-python_flight.tlog": (455.0, 505.0),
