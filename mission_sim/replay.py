@@ -256,13 +256,16 @@ def _mask_time(t, mask) -> float:
     return float(np.sum(dt[mask[1:] & mask[:-1] & (dt < _MAX_GAP_S)]))
 
 
-def fit_mass_kg(traj, drone, target_energy_j: float, t_s, mask) -> float:
+def fit_mass_kg(traj, drone, target_energy_j: float, t_s, mask, runner_energy_j: float | None = None) -> float:
     """Drone mass [kg] that makes the model's propulsion energy over ``mask`` equal ``target_energy_j``.
 
     ``traj`` is the replayed :class:`~mission_sim.trajectory.Trajectory`; ``t_s``, ``mask`` the
     comparison samples (trajectory time). Bisection on [0.05, 50] kg (energy rises with mass);
-    nan if the target is outside that range. One number that says which drone the log's power
-    would correspond to under the model.
+    nan if the target is outside that range. ``runner_energy_j``: the runner's modelled energy
+    over the same samples at ``drone.mass_kg``; the target is scaled by the ratio of the
+    trajectory's to the runner's energy there (the runner holds the power over its steps), so
+    that a rerun at the fitted mass closes the energy. One number that says which drone the
+    log's power would correspond to under the model.
     """
     from dataclasses import replace
 
@@ -277,6 +280,8 @@ def fit_mass_kg(traj, drone, target_energy_j: float, t_s, mask) -> float:
         p = np.interp(t_s, traj.t_s, traj.propulsion_w(replace(drone, mass_kg=m)))
         return float(np.sum((0.5 * (p[1:] + p[:-1]) * dt)[seg]))
 
+    if runner_energy_j is not None and np.isfinite(runner_energy_j) and runner_energy_j > 0:
+        target_energy_j *= energy(drone.mass_kg) / runner_energy_j
     lo, hi = 0.05, 50.0
     if not energy(lo) <= target_energy_j <= energy(hi):
         return float("nan")
@@ -352,6 +357,7 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
         air = table["airborne"].to_numpy()
         cmp["drone_mass_kg"] = float(cfg.drone.mass_kg)
         cmp["equivalent_mass_kg"] = fit_mass_kg(traj, cfg.drone, cmp.get("logged_energy_airborne_j", np.nan),
-                                                table["t_s"].to_numpy() - track.t_offset_s, air)
+                                                table["t_s"].to_numpy() - track.t_offset_s, air,
+                                                cmp.get("model_energy_airborne_j"))
         summary["power_comparison"] = cmp
     return ReplayResult(log=log, track=track, mission=mission, summary=summary, power_table=table)
