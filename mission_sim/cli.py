@@ -78,7 +78,8 @@ def _cmd_paper(args) -> int:
         pm, po = paper.PAPER_TABLE_II[r.trajectory]
         print(f"{r.trajectory:<10} {pm:>8.1f} A {po:>7.1f} % | {row['rm_current_a']:>5.2f} A {row['final_current_a']:>5.2f} A "
               f"{row['max_current_a']:>5.2f} A {row['overshoot_pct']:>6.2f} % {row['settling_time_s'] * 1e3:>5.2f} ms")
-    print("overshoot = (max - final) / final; the paper's final value is 10.5 A, ours is the closed-form SM current")
+    final_src = "the closed-form SM current" if args.model == "envelope" else f"the {args.model} model's final amplitude"
+    print(f"overshoot = (max - final) / final; the paper's final value is 10.5 A, ours is {final_src}")
     for f in figs:
         print(f"figure: {f}")
     return 0
