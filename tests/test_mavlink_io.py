@@ -116,3 +116,19 @@ def test_bad_pad_names_the_format(text):
 def test_pad_parses():
     assert parse_geo_point("-35.36, 149.16") == GeoPoint(-35.36, 149.16, None)
     assert parse_geo_point("-35.36,149.16,584").alt_m == 584
+
+
+def test_compare_power_arithmetic():
+    """Known inputs: logged 200 W, model 100 W -> error -100 W, energy -50 %, best-fit scale 2."""
+    from dataclasses import replace
+
+    from mission_sim.replay import compare_power
+    log, _ = _both("dronekit-python_flight.tlog")
+    tr = track_from_log(log, ground_gap_m=0.1)
+    log2 = replace(log, battery=log.battery.assign(power_w=200.0))
+    table, c = compare_power(log2, tr, tr.t_s, np.full(len(tr.t_s), 100.0))
+    assert c["n_samples_airborne"] > 500 and 300 < c["airborne_time_s"] < log.armed_time_s
+    assert c["mean_error_w"] == pytest.approx(-100.0) and c["energy_error_rel"] == pytest.approx(-0.5)
+    assert c["best_fit_scale"] == pytest.approx(2.0) and c["rms_error_after_scale_w"] == pytest.approx(0.0, abs=1e-9)
+    # airborne = armed and more than 1 m above the pad
+    assert np.all(table.loc[table["airborne"], "height_m"] > 1.0) and table.loc[table["airborne"], "armed"].all()
