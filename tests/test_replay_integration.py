@@ -165,6 +165,11 @@ def test_telemetry_cli_shows_charging_and_replays(capsys, tmp_path):
     assert log.bad_frames == 0 and s["battery_source"] == "BATTERY_STATUS"
     assert s["n_position_samples"] == len(log.position) > 50
     assert s["energy_to_battery_j"] > 0
+    # closed loop: the "logged" power is the simulator's own (V I of its battery, no charging while
+    # airborne), so the comparison must find the model and the default 1 kg drone again
+    c = s["power_comparison"]
+    assert c["n_samples_airborne"] > 20 and abs(c["energy_error_rel"]) < 0.05
+    assert c["equivalent_mass_kg"] == pytest.approx(1.0, rel=0.05) and c["correlation"] > 0.5
 
 
 def test_follow_live_vehicle(tmp_path):
