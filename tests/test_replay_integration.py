@@ -211,3 +211,23 @@ def test_follow_live_vehicle(tmp_path):
     n = min(len(current), len(flying))
     assert np.any(current[:n][~flying[:n]] < 0)      # charging while standing on the pad
     assert np.all(current[:n][flying[:n]] > 0)       # never 3 m up
+
+
+def test_follow_through_the_cli(capsys, tmp_path):
+    """`dronewpt telemetry --follow`: end to end through the CLI (the vehicle may start before the
+    CLI listens, so only the flying part is asserted)."""
+    port = _free_port()
+    tlog = tmp_path / "cli_follow.tlog"
+    veh = subprocess.Popen([sys.executable, str(Path(__file__).with_name("_fake_vehicle.py")), str(port), "4.0"],
+                           stdout=subprocess.PIPE, text=True)
+    try:
+        rc = main(["telemetry", "--follow", f"udpin:127.0.0.1:{port}", "--follow-time", "8", "--follow-idle", "1",
+                   "--connect", "none", "--tlog", str(tlog), "--rate", "5"])
+        veh.communicate(timeout=10)
+    finally:
+        if veh.poll() is None:
+            veh.kill()
+    assert rc == 0 and "followed" in capsys.readouterr().out
+    p = read_log(tlog).position
+    east = (p["lon_deg"].to_numpy() - 149.165230) * 90882.98
+    assert len(p) >= 5 and east.max() > 1.0
