@@ -89,7 +89,8 @@ _CONVERT = {
         "time_boot_s": m.time_boot_ms * 1e-3}),
     "GPS_RAW_INT": ("fix", lambda m: {"fix_type": int(m.fix_type)}),
     "GPS": ("df_gps", lambda m: {
-        "fix_type": int(m.Status), "lat_deg": float(m.Lat), "lon_deg": float(m.Lng), "alt_m": float(m.Alt)}),
+        "fix_type": int(m.Status), "lat_deg": float(m.Lat), "lon_deg": float(m.Lng), "alt_m": float(m.Alt),
+        "gps_id": int(getattr(m, "I", getattr(m, "Instance", 0)))}),
     "ATTITUDE": ("attitude", lambda m: {"roll_rad": float(m.roll), "pitch_rad": float(m.pitch),
                                         "time_boot_s": m.time_boot_ms * 1e-3}),
     "ATT": ("attitude", lambda m: {"roll_rad": math.radians(m.Roll), "pitch_rad": math.radians(m.Pitch)}),
@@ -107,7 +108,8 @@ _CONVERT = {
     "CURR": ("df_curr", lambda m: {
         "voltage_v": m.Volt * _df_scale(m, "Volt", 1e-2), "current_a": m.Curr * _df_scale(m, "Curr", 1e-2)}),
     "BAT": ("df_bat", lambda m: {
-        "voltage_v": float(m.Volt), "current_a": float(m.Curr), "battery_id": int(getattr(m, "Instance", 0))}),
+        "voltage_v": float(m.Volt), "current_a": float(m.Curr),
+        "battery_id": int(getattr(m, "Inst", getattr(m, "Instance", 0)))}),
 }
 
 
@@ -306,7 +308,7 @@ def _assemble(path: Path, kind: str, raw: dict, stats: dict, errors: list[str]) 
         pos = table("df_gps")
         reboots = 0
         if len(pos):
-            pos = pos[pos["fix_type"] >= 3]
+            pos = pos[(pos["fix_type"] >= 3) & (pos["gps_id"] == pos["gps_id"].min())]  # first receiver
     if len(pos):
         ok = (pos["lat_deg"] != 0) & (pos["lon_deg"] != 0) & pos["lat_deg"].between(-90, 90) \
             & pos["lon_deg"].between(-180, 180) & np.isfinite(pos["alt_m"])

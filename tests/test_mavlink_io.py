@@ -132,3 +132,45 @@ def test_compare_power_arithmetic():
     assert c["best_fit_scale"] == pytest.approx(2.0) and c["rms_error_after_scale_w"] == pytest.approx(0.0, abs=1e-9)
     # airborne = armed and more than 1 m above the pad
     assert np.all(table.loc[table["airborne"], "height_m"] > 1.0) and table.loc[table["airborne"], "armed"].all()
+
+
+def _modern_dataflash() -> bytes:
+    """A small synthetic DataFlash log in the newer ArduPilot layout: two GPS receivers (column I),
+    float BAT in V and A, ARM messages. Built from the DataFlash format (FMT records first)."""
+    import struct
+    chars = {"Q": "Q", "B": "B", "L": "i", "e": "i", "f": "f"}
+
+    def fmt(typ, name, form, cols):
+        length = 3 + struct.calcsize("<" + "".join(chars[c] for c in form))
+        return b"\xa3\x95\x80" + struct.pack("<BB4s16s64s", typ, length, name.encode(), form.encode(), cols.encode())
+
+    def rec(typ, form, *vals):
+        return b"\xa3\x95" + bytes([typ]) + struct.pack("<" + "".join(chars[c] for c in form), *vals)
+
+    data = b"\xa3\x95\x80" + struct.pack("<BB4s16s64s", 128, 89, b"FMT", b"BBnNZ", b"Type,Length,Name,Format,Columns")
+    data += fmt(130, "GPS", "QBBLLe", "TimeUS,I,Status,Lat,Lng,Alt") + fmt(131, "BAT", "QBff", "TimeUS,Inst,Volt,Curr")
+    data += fmt(132, "ARM", "QB", "TimeUS,ArmState")
+    for k in range(100):
+        t = 1_000_000 + k * 200_000
+        data += rec(130, "QBBLLe", t, 0, 3, int(-35.36e7) + k * 10, int(149.16e7), 58400 + k * 10)  # Alt in cm
+        data += rec(130, "QBBLLe", t + 1000, 1, 3 if k > 50 else 1, int(-35.30e7), int(149.10e7), 50000)
+        data += rec(131, "QBff", t + 2000, 0, 24.5 - 0.01 * k, 12.5)
+        if k in (10, 80):
+            data += rec(132, "QB", t + 3000, 1 if k == 10 else 0)
+    return data
+
+
+def test_modern_dataflash_layout(tmp_path):
+    p = tmp_path / "modern.bin"
+    p.write_bytes(_modern_dataflash())
+    log = read_log(p)
+    assert log.kind == "dataflash" and log.bad_frames == 0 and log.errors == []
+    assert len(log.position) == 100                                   # receiver 0 only
+    np.testing.assert_allclose(log.position["lat_deg"], -35.36 + np.arange(100) * 1e-6, atol=1e-9)
+    np.testing.assert_allclose(log.position["alt_m"], 584.0 + np.arange(100) * 0.1, atol=1e-9)
+    np.testing.assert_allclose(np.diff(log.position["t_s"]), 0.2, atol=1e-9)
+    assert log.battery_source == "BAT"                                # floats in V and A: no scaling
+    np.testing.assert_allclose(log.battery["voltage_v"], 24.5 - 0.01 * np.arange(100), atol=1e-5)
+    np.testing.assert_allclose(log.battery["power_w"], log.battery["voltage_v"] * 12.5, rtol=1e-6)
+    (a, b), = log.armed_periods
+    assert (a, b) == pytest.approx((3.003, 17.003), abs=1e-6)
