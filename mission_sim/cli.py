@@ -257,11 +257,11 @@ def _cmd_telemetry(args) -> int:
 
 
 def _cmd_telemetry_follow(args, connect, home) -> int:
-    from . import telemetry
-    vin = telemetry.open_follow(args.follow)  # listen first: the set-up below takes a while
+    from . import follow
+    vin = follow.open_follow(args.follow)  # listen first: the set-up below takes a while
     cfg = _mav_config(args)
     from .runner import run_mission
-    st = telemetry.follow(args.follow, cfg, _mav_policy(cfg, args.policy), run_mission, connect=connect,
+    st = follow.follow(args.follow, cfg, _mav_policy(cfg, args.policy), run_mission, connect=connect,
                           rate_hz=args.rate, home=home if args.home else None, tlog=args.tlog,
                           max_wall_s=args.follow_time, idle_timeout_s=args.follow_idle, in_conn=vin)
     print(f"followed {st.positions} live positions over {st.wall_s:.1f} s in {st.chunks} chunk(s); sent "

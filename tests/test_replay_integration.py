@@ -176,16 +176,16 @@ def test_follow_live_vehicle(tmp_path):
     """--follow: a separate process plays the vehicle; the simulation follows its positions."""
     import argparse
 
-    from mission_sim import cli, telemetry
+    from mission_sim import cli, follow
     from mission_sim.runner import run_mission
     port = _free_port()
     tlog = tmp_path / "follow.tlog"
-    vin = telemetry.open_follow(f"udpin:127.0.0.1:{port}")  # bound before the vehicle starts
+    vin = follow.open_follow(f"udpin:127.0.0.1:{port}")  # bound before the vehicle starts
     cfg = cli._mav_config(argparse.Namespace(config=None, set=[]))
     veh = subprocess.Popen([sys.executable, str(Path(__file__).with_name("_fake_vehicle.py")), str(port), "3.5"],
                            stdout=subprocess.PIPE, text=True)
     try:
-        st = telemetry.follow(f"udpin:127.0.0.1:{port}", cfg, cli._mav_policy(cfg, "model_based"), run_mission,
+        st = follow.follow(f"udpin:127.0.0.1:{port}", cfg, cli._mav_policy(cfg, "model_based"), run_mission,
                               rate_hz=5.0, tlog=tlog, max_wall_s=8.0, idle_timeout_s=1.0, in_conn=vin)
         sent = int(veh.communicate(timeout=10)[0].strip())
     finally:
