@@ -125,6 +125,19 @@ def _mav_policy(cfg, name):
                                     rated_i2_a=cfg.link.rated_i2_a))
 
 
+def _mav_json_safe(obj):
+    """Plain JSON: numpy scalars to Python, nan / inf to null (not measurable, e.g. no battery data)."""
+    if isinstance(obj, dict):
+        return {k: _mav_json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_mav_json_safe(v) for v in obj]
+    if hasattr(obj, "item") and not isinstance(obj, (str, bytes)):
+        obj = obj.item()
+    if isinstance(obj, float) and obj != obj or obj in (float("inf"), float("-inf")):
+        return None
+    return obj
+
+
 def _add_replay(sub):
     p = sub.add_parser("replay", help="replay a real flight log (.tlog / DataFlash .bin) through the simulator",
                        description="Read a MAVLink telemetry log or an ArduPilot DataFlash log, build the flown "
@@ -180,9 +193,10 @@ def _cmd_replay(args) -> int:
         if res.power_table is not None and len(res.power_table):
             files.append(replay_figures.plot_power_comparison(res, args.out / "power.png", title))
     s["files"] = files
-    (args.out / "replay_summary.json").write_text(json.dumps(s, indent=2, default=float))
+    s = _mav_json_safe(s)
+    (args.out / "replay_summary.json").write_text(json.dumps(s, indent=2, allow_nan=False))
     if args.format == "json":
-        print(json.dumps(s, default=float))
+        print(json.dumps(s, allow_nan=False))
         return 0
     print(f"{args.log.name}: {s['duration_s']:.1f} s logged, {s['n_position_samples']} positions "
           f"({s['bad_frames']} bad frames skipped), {s['distance_m']:.0f} m flown, max {s['max_alt_m']:.1f} m "
@@ -191,11 +205,13 @@ def _cmd_replay(args) -> int:
           f"(model, {cfg.drone.mass_kg:g} kg drone), final SoC {s['final_soc']:.3f}")
     c = s.get("power_comparison")
     if c and "logged_mean_w" in c:
-        print(f"power while airborne, {c['airborne_time_s']:.0f} s ({c['battery_source']}): logged "
-              f"{c['logged_mean_w']:.0f} W, model {c['model_mean_w']:.0f} W, RMS error {c['rms_error_w']:.0f} W, "
-              f"energy error {100 * c['energy_error_rel']:+.1f} %, correlation {c['correlation']:.2f}; "
-              f"best-fit scale {c['best_fit_scale']:.2f} leaves {c['rms_error_after_scale_w']:.0f} W RMS; the "
-              f"model matches the logged energy at {c['equivalent_mass_kg']:.2f} kg")
+        def f(key, spec, scale=1.0):
+            return "n/a" if c.get(key) is None else format(scale * c[key], spec)
+        print(f"power while airborne, {f('airborne_time_s', '.0f')} s ({c['battery_source']}): logged "
+              f"{f('logged_mean_w', '.0f')} W, model {f('model_mean_w', '.0f')} W, RMS error {f('rms_error_w', '.0f')} W, "
+              f"energy error {f('energy_error_rel', '+.1f', 100)} %, correlation {f('correlation', '.2f')}; "
+              f"best-fit scale {f('best_fit_scale', '.2f')} leaves {f('rms_error_after_scale_w', '.0f')} W RMS; "
+              f"the model matches the logged energy at a drone mass of {f('equivalent_mass_kg', '.2f')} kg")
     elif c:
         print(f"no airborne battery samples to compare ({c['battery_source']})")
     elif not s.get("battery_source"):
