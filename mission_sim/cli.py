@@ -456,6 +456,10 @@ def main(argv=None) -> int:
         return 2
     try:
         return int(args.func(args) or 0)
+    except BrokenPipeError:  # output piped into head & co.: not an error of ours
+        import os
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except (CliError, ValueError, FileNotFoundError, OSError) as exc:
         print(f"dronewpt {args.command}: error: {exc}", file=sys.stderr)
         return 2
