@@ -182,8 +182,12 @@ def vector_potential_loop(a_m, rho_m, z_m):
 
 
 def _rx_frame(dx, dy, dz, tilt, tilt_axis):
-    """Rotation matrices (..., 3, 3) of the receiver (about a horizontal axis) and its origin (..., 3)."""
-    tilt = np.asarray(tilt, dtype=float)
+    """Rotation matrices (..., 3, 3) of the receiver (about a horizontal axis) and its origin (..., 3).
+
+    All five inputs broadcast together.
+    """
+    dx, dy, dz, tilt, tilt_axis = np.broadcast_arrays(*(np.asarray(v, dtype=float)
+                                                        for v in (dx, dy, dz, tilt, tilt_axis)))
     ux, uy = np.cos(tilt_axis), np.sin(tilt_axis)
     c, s = np.cos(tilt), np.sin(tilt)
     # Rodrigues rotation about unit axis (ux, uy, 0)
@@ -197,7 +201,7 @@ def _rx_frame(dx, dy, dz, tilt, tilt_axis):
     rot[..., 2, 0] = -uy * s
     rot[..., 2, 1] = ux * s
     rot[..., 2, 2] = c
-    org = np.stack(np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (dx, dy, dz))), axis=-1)
+    org = np.stack([dx, dy, dz], axis=-1)
     return rot, org
 
 
@@ -245,7 +249,7 @@ class CouplingModel:
 
     # ----------------------------------------------------------------- exact
     def lm_exact_h(self, dx_m, dy_m, dz_m, tilt_rad=0.0, *, n_theta: int | None = None,
-                   tilt_axis_rad: float = math.pi / 2):
+                   tilt_axis_rad=math.pi / 2):
         """Lm [H] by the loop integral of the exact (elliptic-integral) vector potential.
 
         Scalar or array poses (broadcast); slow (N_tx x N_rx x n_theta elliptic integrals per pose).
@@ -263,8 +267,7 @@ class CouplingModel:
     def _flux(self, dx, dy, dz, tilt, tilt_axis, pts, tan, w, a_over_rho):
         rot, org = _rx_frame(dx, dy, dz, tilt, tilt_axis)
         shape = org.shape[:-1]
-        rot = rot.reshape(-1, 3, 3) if rot.ndim > 2 else np.broadcast_to(rot, (1, 3, 3))
-        rot = np.broadcast_to(rot, (int(np.prod(shape, dtype=int)),) + (3, 3)) if rot.shape[0] == 1 else rot
+        rot = rot.reshape(-1, 3, 3)
         org = org.reshape(-1, 3)
         out = np.empty(len(org))
         flat_p = pts.reshape(-1, 3)
@@ -307,7 +310,7 @@ class CouplingModel:
             out[below] = self._a_exact(rho[below], z[below])
         return out
 
-    def lm_h(self, dx_m, dy_m, dz_m, tilt_rad=0.0, *, tilt_axis_rad: float = math.pi / 2):
+    def lm_h(self, dx_m, dy_m, dz_m, tilt_rad=0.0, *, tilt_axis_rad=math.pi / 2):
         """Lm [H] from the tabulated pad-coil field; vectorised over (broadcast) arrays of poses.
 
         Agrees with :meth:`lm_exact_h` to ~1e-6 relative near the hover pose (see tests).
