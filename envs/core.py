@@ -33,7 +33,7 @@ import numpy as np
 from mission_sim.contract import OBS_FIELDS
 from wpt_receiver import TABLE_I, LinkParams, duty_from_v2_clipped, state_matrices, steady_state, zoh_discretise
 
-from .plant import battery_operating_point, hover_pose_error, lm_at_pose_h
+from .plant import battery_operating_point, lm_window_h
 from .scenario import Scenario, command_profile
 
 __all__ = ["EnvConfig", "RewardWeights", "Plans", "build_plans", "advance", "reward_cost", "OBS_SCALE",
@@ -122,10 +122,9 @@ def _steady_v2(link: LinkParams, lm, il, vl):
 def build_plans(draws, scenarios: list[Scenario], cfg: EnvConfig) -> Plans:
     """Turn the episodes' random draws into what the step needs (batched over the episodes)."""
     n, T, S, link = len(draws), cfg.n_steps, cfg.n_slow, cfg.link
-    wind = np.array([d.wind_speed_m_s for d in draws])
-    innov = np.stack([d.pose_innov for d in draws])
-    dx, dy, dz, tilt = hover_pose_error(wind, innov, cfg.slow_every * cfg.dt_s)
-    lm = lm_at_pose_h(dx, dy, dz, tilt) * np.array([d.lm_scale for d in draws])[:, None]
+    t_slow = np.arange(S) * (cfg.slow_every * cfg.dt_s)
+    lm = lm_window_h([d.wind_speed_m_s for d in draws], [d.record_u for d in draws], t_slow)
+    lm *= np.array([d.lm_scale for d in draws])[:, None]
     a, b = state_matrices(link, lm.ravel())
     ad, bd = zoh_discretise(a, b, cfg.dt_s)
     am, bm = zoh_discretise(a, b, 0.5 * cfg.dt_s)
@@ -136,7 +135,7 @@ def build_plans(draws, scenarios: list[Scenario], cfg: EnvConfig) -> Plans:
 
     soc0 = np.array([d.soc0 for d in draws])
     ocv, docv, r0, r1, tau1, cap = battery_operating_point(soc0)
-    i_load = np.array([s.hover_power_w for s in scenarios]) / ocv
+    i_load = np.array([s.load_power_w for s in scenarios]) / ocv
     cmd = command_profile(draws, T, cfg.dt_s)
     # initial steady state delivering cmd[0] (fixed point through the battery voltage)
     lm0 = lm[:, 0]

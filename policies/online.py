@@ -10,7 +10,13 @@ envelope and the applied V2 (from the last duty and the measured battery voltage
 for Lm only while V2 has been steady (|V2 - its low-passed value| < ``steady_v2_v``), and smooths
 the result. When a receiver's estimate has moved by more than ``rediscretise_rel`` (1 %) from the
 Lm its inverse controller was built for, that controller is rebuilt for the new Lm (one scipy
-discretisation; never per step) and restarted at the current reference.
+discretisation; never per step). The swap is bumpless: the new controller starts in the steady
+state whose output is the V2* the old one was giving, and then follows the reference through Q
+as before (restarting it at the reference itself would turn a running transition into a step).
+Each controller's reference is computed with that controller's own Lm: H = Q G22^-1 has a DC gain
+of 1/G22(0) ~ -100 V/A, so a 1 % model/reference mismatch would be volts of V2*. Estimates are
+taken only while the controller has settled (|V2* - V2 target| < ``steady_v2_v``), so the ringing
+of a transition never enters the estimate.
 """
 
 from __future__ import annotations
@@ -67,10 +73,10 @@ class OnlineLmModelBasedPolicy:
         """Current Lm estimate per receiver [H]."""
         return self._lm.copy()
 
-    def _build(self, i, lm, ref):
+    def _build(self, i, lm, v2_now):
         link = self.ctx.link.with_(lm_h=float(lm))
         ctl = InverseModelController(link, self.ctx.control_period_s, self.lpf, n=1)
-        ctl.reset(ref)
+        ctl.reset(steady_state(link, v2_now)[1])   # bumpless: the V2* it was giving
         self._ctl[i] = ctl
         self._lm_ctl[i] = lm
         self.rebuilds += 1
@@ -88,20 +94,25 @@ class OnlineLmModelBasedPolicy:
             self._lm = np.full(n, link.lm_h)
             self._lm_ctl = np.full(n, np.nan)
             self._i2f, self._v2f = i2.copy(), v2.copy()
-        # estimator
+            self._settled = np.ones(n, dtype=bool)
+        # estimator (quasi-steady inversion of the envelope model, gated)
         self._i2f += self.a_meas * (i2 - self._i2f)
         self._v2f += self.a_meas * (v2 - self._v2f)
-        steady = np.abs(v2 - self._v2f) < self.steady_v2_v
+        steady = (np.abs(v2 - self._v2f) < self.steady_v2_v) & self._settled
         lm_inst = lm_from_steady_state(link, self._i2f, self._v2f)
         ok = steady & np.isfinite(lm_inst) & (lm_inst > 0.2 * link.lm_h) & (lm_inst < 5.0 * link.lm_h)
         self._lm = np.where(ok, self._lm + self.a_est * (lm_inst - self._lm), self._lm)
-        # controllers
-        v2_target = target_v2(self.ctx, cmd, vl, lm_h=self._lm)
-        ref = steady_state(link, v2_target, lm_h=self._lm)[1]
+        # controllers: (re)build where the estimate moved by more than rediscretise_rel
+        for i in range(n):
+            if self._ctl[i] is None:
+                self._build(i, self._lm[i], float(target_v2(self.ctx, cmd[i], vl[i], lm_h=self._lm[i])))
+            elif abs(self._lm[i] / self._lm_ctl[i] - 1.0) > self.rediscretise_rel:
+                self._build(i, self._lm[i], self._ctl[i].v2_cmd_v[0])
+        v2_target = target_v2(self.ctx, cmd, vl, lm_h=self._lm_ctl)
+        ref = steady_state(link, v2_target, lm_h=self._lm_ctl)[1]
         out = np.empty(n)
         for i in range(n):
-            if self._ctl[i] is None or abs(self._lm[i] / self._lm_ctl[i] - 1.0) > self.rediscretise_rel:
-                self._build(i, self._lm[i], ref[i])
             self._ctl[i].step(ref[i])
             out[i] = self._ctl[i].v2_cmd_v[0]
+        self._settled = np.abs(out - v2_target) < self.steady_v2_v
         return duty_from_v2_clipped(out, vl)
