@@ -43,6 +43,7 @@ HALF_PI = 0.5 * math.pi
 FOUR_OVER_PI = 4.0 / math.pi
 TWO_OVER_PI_6 = 2.0 / math.pi / 6.0  # (2/pi) times the 1/6 of Simpson's rule
 N_COEF = 12
+N_BAT = 9
 
 #: affine map physical -> [-1, 1] of :data:`mission_sim.contract.OBS_FIELDS` (same as normalise_obs)
 OBS_SCALE = np.array([2.0 / (f.hi - f.lo) for f in OBS_FIELDS])
@@ -70,6 +71,7 @@ class EnvConfig:
     n_steps : steps per episode (truncation), default 300 (30 ms)
     slow_every : pose / Lm update every this many steps
     rated_i2_a : rated secondary coil current amplitude [A] (cost above it)
+    bus_c_f : smoothing capacitor on the SBAR's DC side [F] (assumption: 4.7 mF, tau = R0 C ~ 0.45 ms)
     """
 
     link: LinkParams = TABLE_I
@@ -77,6 +79,7 @@ class EnvConfig:
     n_steps: int = 300
     slow_every: int = 10
     rated_i2_a: float = 15.0
+    bus_c_f: float = 4.7e-3
     reward: RewardWeights = RewardWeights()
 
     def __post_init__(self):
@@ -86,6 +89,8 @@ class EnvConfig:
             raise ValueError(f"n_steps={self.n_steps!r} is invalid; valid range: integer 2..1e6")
         if int(self.slow_every) != self.slow_every or self.slow_every < 1:
             raise ValueError(f"slow_every={self.slow_every!r} is invalid; valid range: integer >= 1")
+        if not (np.isfinite(self.bus_c_f) and self.bus_c_f > 0):
+            raise ValueError(f"bus_c_f={self.bus_c_f!r} is invalid; valid range: (0, inf)")
         if not (np.isfinite(self.rated_i2_a) and self.rated_i2_a > 0):
             raise ValueError(f"rated_i2_a={self.rated_i2_a!r} is invalid; valid range: (0, inf)")
 
@@ -102,7 +107,7 @@ class Plans:
     noise_a: np.ndarray      # (n, T) I2 sensor noise [A]
     coef: np.ndarray         # (n, S, 12) ZOH coefficients per slow segment (see advance)
     lm_h: np.ndarray         # (n, S) true Lm per slow segment
-    battery: np.ndarray      # (n, 8) ocv0, docv_dsoc, soc0, r0, rc_decay, rc_gain, dsoc_per_a, i_load
+    battery: np.ndarray      # (n, 9) ocv0, docv_dsoc, soc0, r0, rc_decay, rc_gain, dsoc_per_a, i_load, bus_decay
     x0: np.ndarray           # (n, 2) initial I1, I2
     vl0: np.ndarray          # (n,) initial battery voltage
     vrc0: np.ndarray         # (n,) initial RC-branch voltage
@@ -152,7 +157,9 @@ def build_plans(draws, scenarios: list[Scenario], cfg: EnvConfig) -> Plans:
     vrc0 = r1 * ib0
     vl0 = ocv + r0 * ib0 + vrc0
     decay = np.exp(-cfg.dt_s / tau1)
-    battery = np.stack([ocv, docv, soc0, r0, decay, r1 * (1.0 - decay), cfg.dt_s / (3600.0 * cap), i_load], axis=-1)
+    bus_decay = np.exp(-cfg.dt_s / (r0 * cfg.bus_c_f))
+    battery = np.stack([ocv, docv, soc0, r0, decay, r1 * (1.0 - decay), cfg.dt_s / (3600.0 * cap), i_load,
+                        bus_decay], axis=-1)
     noise = np.stack([d.noise for d in draws]) * np.array([s.i2_noise_a for s in scenarios])[:, None]
     return Plans(cmd, noise, coef, lm, battery, np.stack([i1, i2], axis=-1), vl0, vrc0, d0,
                  np.array([d.t_stop_s for d in draws]))
@@ -179,14 +186,17 @@ def advance(i1, i2, vl, soc, vrc, d, c, b, ops):
 
     ``c`` = (Ad00, Ad01, Ad10, Ad11, Bd00 V1, Bd10 V1, Bd01, Bd11, Ad10', Ad11', Bd10' V1, Bd11') with
     ' the half-step discretisation; ``b`` = battery row of :class:`Plans`. ``vl`` is the battery
-    voltage of the previous step (sets V2 = (4/pi) VL (1 - sin(pi/2 d)), eq. 9).
+    voltage of the previous step (sets V2 = (4/pi) VL (1 - sin(pi/2 d)), eq. 9). The SBAR's DC bus
+    is the battery terminal with its smoothing capacitor: VL follows ``OCV + R0 i_batt + v_rc`` with
+    the time constant R0 C_bus (without the capacitor the one-step VL -> V2 -> I2 -> I_L loop
+    through R0 would be unstable at the link's ~4 kHz resonance, where |G22| ~ 24 A/V).
 
     Returns ``(i1, i2, i2_mid, i_l, i_batt, soc, vrc, vl, v2)``: ``i2_mid`` the exact envelope at
     half the step, ``i_l = (2/pi) I2 (1 - sin(pi/2 d))`` the SBAR output current averaged over the
     step (lossless rectifier, V2 I2 / 2 = VL I_L; Simpson's rule on I2), ``i_batt = i_l - i_load``.
     """
     a00, a01, a10, a11, e0, e1, b01, b11, m10, m11, me1, mb11 = c
-    ocv0, docv, soc0, r0, rc_decay, rc_gain, dsoc, i_load = b
+    ocv0, docv, soc0, r0, rc_decay, rc_gain, dsoc, i_load, bus_decay = b
     g = 1.0 - ops.sin(HALF_PI * d)
     v2 = FOUR_OVER_PI * vl * g
     i2m = m10 * i1 + m11 * i2 + me1 + mb11 * v2
@@ -196,7 +206,7 @@ def advance(i1, i2, vl, soc, vrc, d, c, b, ops):
     ib = il - i_load
     soc = soc + dsoc * ib
     vrc = rc_decay * vrc + rc_gain * ib
-    vl = ocv0 + docv * (soc - soc0) + r0 * ib + vrc
+    vl = bus_decay * vl + (1.0 - bus_decay) * (ocv0 + docv * (soc - soc0) + r0 * ib + vrc)
     return i1n, i2n, i2m, il, ib, soc, vrc, vl, v2
 
 

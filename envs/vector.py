@@ -17,7 +17,7 @@ from gymnasium.vector.utils import batch_space
 
 from mission_sim.contract import OBS_DIM, PolicyContext
 
-from .core import (N_COEF, NUMPY_OPS, OBS_OFFSET, OBS_SCALE, EnvConfig, advance, build_plans, reward_cost)
+from .core import (N_BAT, N_COEF, NUMPY_OPS, OBS_OFFSET, OBS_SCALE, EnvConfig, advance, build_plans, reward_cost)
 from .scenario import draw_episode, get_scenario
 
 __all__ = ["SbarChargingVectorEnv", "SbarChargingDiscreteVectorEnv"]
@@ -51,7 +51,7 @@ class SbarChargingVectorEnv(VectorEnv):
         self._noise = np.zeros((n, T))
         self._coef_all = np.zeros((n, S, N_COEF))
         self._lm_all = np.zeros((n, S))
-        self._bat = np.zeros((N_COEF - 4, n))
+        self._bat = np.zeros((N_BAT, n))
         self._t_stop = np.zeros(n)
         self._coef = np.zeros((N_COEF, n))
         self._j = np.zeros(n, dtype=np.int64)
