@@ -116,13 +116,14 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
 
 def plot_transitions(traces: dict, scenario: str, out_png, episode: int = 0, window_s=(-2e-3, 12e-3),
                      rated_i2_a: float = 15.0):
-    """Figure of representative RM -> SM transitions: I2 envelope and d_short of every policy on one
-    episode of ``scenario``, time relative to the stop command."""
+    """Figure of representative RM -> SM transitions: I2 envelope and d_short of every policy (but
+    ``random``, whose 150 A noise would hide the rest) on one episode of ``scenario``, time relative
+    to the stop command."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    items = [(p, tr) for (p, s), tr in traces.items() if s == scenario]
+    items = [(p, tr) for (p, s), tr in traces.items() if s == scenario and p != "random"]   # random: noise
     if not items:
         raise ValueError(f"scenario={scenario!r} has no traces; valid: {sorted({s for _, s in traces})}")
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, height_ratios=[3, 1])
