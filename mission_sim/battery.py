@@ -29,17 +29,26 @@ of 1.3 Ah, sized for a ~1 kg drone.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["BatteryParams", "ocv_cell_v", "Battery", "StepEnergies", "CcCvParams", "CcCvCharger"]
+__all__ = ["BatteryParams", "ocv_cell_v", "ocv_cell_energy_v", "held_current_step", "Battery", "StepEnergies", "CcCvParams",
+           "CcCvCharger"]
 
 
 def ocv_cell_v(soc):
     """Open-circuit voltage of one cell [V] (Chen & Rincon-Mora 2006 fit); SoC clipped into [0, 1]."""
     s = np.clip(np.asarray(soc, dtype=float), 0.0, 1.0)
     return -1.031 * np.exp(-35.0 * s) + 3.685 + 0.2156 * s - 0.1178 * s**2 + 0.3201 * s**3
+
+
+def ocv_cell_energy_v(soc):
+    """``int_0^soc OCV(s) ds`` per cell [V] (closed form); times ``n_series * capacity_c`` gives joules."""
+    s = np.clip(np.asarray(soc, dtype=float), 0.0, 1.0)
+    return (-1.031 / 35.0 * (1.0 - np.exp(-35.0 * s)) + 3.685 * s + 0.2156 / 2 * s**2 - 0.1178 / 3 * s**3
+            + 0.3201 / 4 * s**4)
 
 
 def _check_positive(obj, names):
@@ -94,6 +103,33 @@ class BatteryParams:
     def ocv_v(self, soc):
         """Pack open-circuit voltage [V]."""
         return self.n_series * ocv_cell_v(soc)
+
+    def usable_energy_j(self, soc):
+        """Chemical energy between SoC = 0 and ``soc`` [J]: ``n Q int_0^soc OCV ds``."""
+        return self.n_series * self.capacity_c * ocv_cell_energy_v(soc)
+
+
+def _ocv_cell_scalar(s: float) -> float:
+    s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
+    return -1.031 * math.exp(-35.0 * s) + 3.685 + 0.2156 * s - 0.1178 * s * s + 0.3201 * s * s * s
+
+
+def held_current_step(p: BatteryParams, soc: float, v1_v: float, current_a: float, dt_s: float):
+    """Scalar (pure Python, for hot loops) version of :meth:`Battery.step` for one battery.
+
+    Returns ``(soc1, v1_1, chem_j, r0_loss_j, r1_loss_j, c1_delta_j)``; same formulas as the batched step.
+    """
+    r1, tau = p.r1_ohm, p.tau1_s
+    e = math.exp(-dt_s / tau)
+    i = current_a
+    vinf = r1 * i
+    dv = v1_v - vinf
+    int_v2 = vinf * vinf * dt_s + 2.0 * vinf * dv * tau * (1.0 - e) + dv * dv * 0.5 * tau * (1.0 - e * e)
+    ocv = p.n_series * _ocv_cell_scalar(soc)
+    dq = i * dt_s
+    v1n = vinf + dv * e
+    return (soc + dq / p.capacity_c, v1n, ocv * dq, p.r0_ohm * i * i * dt_s, int_v2 / r1,
+            0.5 * p.c1_f * (v1n * v1n - v1_v * v1_v))
 
 
 @dataclass

@@ -12,8 +12,8 @@
 * Tilt: the thrust vector balances weight, drag and the commanded acceleration,
   ``n ~ (m a - F_xy, m g)``; the receiver coil's normal is the thrust direction.
 
-Defaults: 3 m/s mean wind (a light breeze, Beaufort 2), gust sigma 1 m/s, tau 2 s
-(Dryden low-altitude length scale of order 10-20 m at a few m/s), hold loop 1.5 rad/s and
+Defaults: 3 m/s mean wind (a light breeze, Beaufort 2), gust sigma 0.6 m/s, tau 2 s
+(Dryden low-altitude length scale of order 10-20 m at a few m/s), hold loop 2 rad/s and
 damping 0.8 (typical of multirotor position controllers), Cd S = 0.04 m^2.
 """
 
@@ -34,22 +34,22 @@ __all__ = ["WindParams", "gust_series", "wind_series", "drag_force_n", "hover_er
 class WindParams:
     """Wind and position-hold parameters.
 
-    mean_speed_m_s [m/s], direction_deg (azimuth the wind blows *towards*, from +x, counter-clockwise),
+    speed_m_s (mean wind speed) [m/s], direction_deg (azimuth the wind blows *towards*, from +x, counter-clockwise),
     gust_sigma_m_s [m/s], gust_tau_s [s], hold_omega_rad_s [rad/s], hold_zeta [-], drag_area_m2 (Cd S) [m^2],
     air_density_kg_m3.
     """
 
-    mean_speed_m_s: float = 3.0
+    speed_m_s: float = 3.0
     direction_deg: float = 30.0
-    gust_sigma_m_s: float = 1.0
+    gust_sigma_m_s: float = 0.6
     gust_tau_s: float = 2.0
-    hold_omega_rad_s: float = 1.5
+    hold_omega_rad_s: float = 2.0
     hold_zeta: float = 0.8
     drag_area_m2: float = 0.04
     air_density_kg_m3: float = 1.225
 
     def __post_init__(self):
-        for name in ("mean_speed_m_s", "gust_sigma_m_s"):
+        for name in ("speed_m_s", "gust_sigma_m_s"):
             v = float(getattr(self, name))
             if not math.isfinite(v) or v < 0 or v > 30:
                 raise ValueError(f"{name}={v!r} is invalid; valid range: [0, 30] m/s")
@@ -74,8 +74,8 @@ def wind_series(p: WindParams, n: int, dt_s: float, rng: np.random.Generator) ->
     """Wind velocity (n, 3) [m/s] on a uniform grid of step ``dt_s``."""
     d = math.radians(p.direction_deg)
     w = np.empty((n, 3))
-    w[:, 0] = p.mean_speed_m_s * math.cos(d) + gust_series(n, dt_s, p.gust_sigma_m_s, p.gust_tau_s, rng)
-    w[:, 1] = p.mean_speed_m_s * math.sin(d) + gust_series(n, dt_s, p.gust_sigma_m_s, p.gust_tau_s, rng)
+    w[:, 0] = p.speed_m_s * math.cos(d) + gust_series(n, dt_s, p.gust_sigma_m_s, p.gust_tau_s, rng)
+    w[:, 1] = p.speed_m_s * math.sin(d) + gust_series(n, dt_s, p.gust_sigma_m_s, p.gust_tau_s, rng)
     w[:, 2] = gust_series(n, dt_s, 0.5 * p.gust_sigma_m_s, p.gust_tau_s, rng)
     return w
 
@@ -87,11 +87,15 @@ def drag_force_n(p: WindParams, wind_m_s, vel_m_s) -> np.ndarray:
 
 
 def hover_error_m(p: WindParams, force_n: np.ndarray, mass_kg: float, dt_s: float) -> np.ndarray:
-    """Position error (n, 3) [m] of the hold loop driven by the force fluctuation (force minus its mean)."""
+    """Position error (n, 3) [m] of the hold loop driven by a force disturbance (n, 3) [N].
+
+    Pass the force *fluctuation* (total drag minus the drag of the mean wind, which the loop's
+    integral action absorbs).
+    """
     f = np.asarray(force_n, dtype=float)
     if len(f) == 0:
         return np.zeros((0, 3))
-    dev = (f - f.mean(axis=0)) / mass_kg
+    dev = f / mass_kg
     w, z = p.hold_omega_rad_s, p.hold_zeta
     num, den, _ = signal.cont2discrete(([1.0], [1.0, 2 * z * w, w * w]), dt_s, method="zoh")
     return signal.lfilter(np.ravel(num), den, dev, axis=0)
