@@ -7,7 +7,7 @@ the hover power. Thin views on the mission world, no second model:
 * battery: :class:`mission_sim.battery.BatteryParams` (8S LiPo ECM: OCV(SoC), R0, R1-C1);
 * hover power: :func:`mission_sim.power.hover_power_w`.
 
-Time scales. Gusts have a 2 s correlation time and the position-hold loop 1.5 rad/s, so over a
+Time scales. Gusts have a 2 s correlation time and the position-hold loop 2 rad/s, so over a
 30 ms charging window the pose (and Lm) hardly moves; it differs a lot *between* windows. The
 coupling model costs ~30 us per pose, too much to call for every episode of a 1024-wide vector
 env, so for each wind level (1 m/s steps) a 60 s "weather record" (pose and Lm every 20 ms, fixed
@@ -15,7 +15,7 @@ seed, after a 10 s warm-up) is computed once per process; an episode starts at a
 the record and interpolates Lm along it in time. A window only starts where the pad sees
 adequate coupling (Lm within :data:`LM_WINDOW_RANGE` of the nominal value over the whole window,
 as a transmitter that checks coupling before it powers up would): strong winds with this hold loop
-(1.5 rad/s) throw the drone 10-50 cm off the pad, where charging would not be attempted.
+(2 rad/s) throw the drone 10-50 cm off the pad, where charging would not be attempted.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ LM_WINDOW_RANGE = (0.75, 1.5)
 RECORD_DT_S = 0.02
 RECORD_S = 60.0
 WARMUP_S = 10.0
-GUST_INTENSITY = 0.25   # gust sigma / mean wind speed (turbulence intensity)
+GUST_INTENSITY = 0.2    # gust sigma / mean wind speed (turbulence intensity; 0.6 at 3 m/s as WindParams)
 _DRONE = DroneParams()
 _BATTERY = BatteryParams()
 
@@ -49,7 +49,7 @@ def lm_record(wind_level_m_s: int):
     w = float(wind_level_m_s)
     if w == 0.0:
         return np.full(n, default_coupling().lm_h(0.0, 0.0, NOMINAL_GAP_M, 0.0)), np.zeros((n, 4))
-    wp = WindParams(mean_speed_m_s=w, gust_sigma_m_s=GUST_INTENSITY * w)
+    wp = WindParams(speed_m_s=w, gust_sigma_m_s=GUST_INTENSITY * w)
     nw = int(round(WARMUP_S / RECORD_DT_S))
     rng = np.random.default_rng(10_000 + int(wind_level_m_s))
     wind = wind_series(wp, n + nw, RECORD_DT_S, rng)

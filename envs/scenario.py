@@ -10,7 +10,7 @@ name           what varies
 =============  ============================================================================
 nominal        Table I link at the nominal hover pose (no wind), SoC 0.5, commands 2..7 A
 lm_mismatch    true Lm scaled by 0.8..1.25 against the Table I value every policy assumes
-windy          3..5 m/s wind with gusts: hover pose error and tilt (hence Lm) vary between windows
+windy          2..4 m/s wind with gusts: hover pose error and tilt (hence Lm) vary between windows
 battery        battery SoC 0.1..0.95 (battery voltage ~ 25..33 V instead of ~30 V)
 random         all of the above at once (the training distribution)
 =============  ============================================================================
@@ -79,9 +79,9 @@ class Scenario:
 SCENARIOS: dict[str, Scenario] = {
     "nominal": Scenario("nominal"),
     "lm_mismatch": Scenario("lm_mismatch", lm_scale=(0.8, 1.25)),
-    "windy": Scenario("windy", wind_speed_m_s=(3.0, 5.0)),
+    "windy": Scenario("windy", wind_speed_m_s=(2.0, 4.0)),
     "battery": Scenario("battery", soc=(0.1, 0.95)),
-    "random": Scenario("random", lm_scale=(0.8, 1.25), wind_speed_m_s=(0.0, 5.0), soc=(0.1, 0.95)),
+    "random": Scenario("random", lm_scale=(0.8, 1.25), wind_speed_m_s=(0.0, 4.0), soc=(0.1, 0.95)),
 }
 
 
