@@ -310,15 +310,17 @@ def _cmd_compare(args) -> int:
     print(f"{args.episodes} episodes per scenario, seeds {args.seed}..{args.seed + args.episodes - 1}, "
           "means over episodes (peak max = worst episode)")
     hdr = (f"{'scenario':<12} {'policy':<20} {'peak I2':>8} {'peak max':>8} {'overshoot':>9} {'>rated':>8} "
-           f"{'energy':>7} {'track':>6} {'cost':>7} {'return':>8}")
+           f"{'energy':>7} {'after':>7} {'track':>6} {'cost':>7} {'return':>8}")
     print(hdr)
     print("-" * len(hdr))
     for r in rows:
         print(f"{r['scenario']:<12} {r['policy'][:20]:<20} {r['peak_i2_a']:>6.2f} A {r['peak_i2_max_a']:>6.2f} A "
               f"{r['overshoot_pct']:>7.1f} % {r['time_above_rated_s'] * 1e3:>5.2f} ms {r['energy_j']:>5.2f} J "
+              f"{r['energy_after_stop_j']:>5.2f} J "
               f"{r['tracking_rmse_a']:>4.2f} A {r['cost']:>7.2f} {r['return']:>8.1f}")
     print("overshoot = (max I2 after the stop - final I2) / final I2; >rated = time with I2 above the rated 15 A; "
-          "energy into the battery node; track = RMS(I_L - command); cost = sum of the env's overcurrent cost")
+          "energy into the battery node (after = of it, after the stop command); track = RMS(I_L - command); "
+          "cost = sum of the env's overcurrent cost")
     for f in figs:
         print(f"figure: {f}")
     return 0

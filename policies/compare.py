@@ -10,6 +10,7 @@ overshoot_pct       (max I2 after the stop command - final I2) / final I2, final
                     the last 10 steps (the SM steady state) [%]
 time_above_rated_s  time with the step's peak I2 above the rated value [s]
 energy_j            energy delivered to the battery node, sum of VL I_L dt [J]
+energy_after_stop_j the part of it delivered after the stop command (unwanted) [J]
 tracking_rmse_a     RMS of (I_L - command) over the window [A]
 cost                sum of the env's cost (relative excess over the rated I2)
 return              sum of the env's reward
@@ -25,7 +26,8 @@ import numpy as np
 __all__ = ["METRICS", "EpisodeTraces", "run_policy", "compare", "DEFAULT_POLICIES", "DEFAULT_SCENARIOS",
            "plot_transitions"]
 
-METRICS = ("peak_i2_a", "overshoot_pct", "time_above_rated_s", "energy_j", "tracking_rmse_a", "cost", "return")
+METRICS = ("peak_i2_a", "overshoot_pct", "time_above_rated_s", "energy_j", "energy_after_stop_j", "tracking_rmse_a",
+           "cost", "return")
 DEFAULT_POLICIES = ("step", "ramp", "hysteresis", "model_based", "model_based_online", "rl", "random")
 DEFAULT_SCENARIOS = ("nominal", "lm_mismatch", "windy", "battery")
 
@@ -84,6 +86,7 @@ def run_policy(name: str, scenario: str, episodes: int, seed: int, config=None) 
         "overshoot_pct": 100.0 * (peak_after - final) / final,
         "time_above_rated_s": (rec["i2_peak_a"] > venv.config.rated_i2_a).sum(axis=0) * dt,
         "energy_j": rec["energy_j"].sum(axis=0),
+        "energy_after_stop_j": np.where(after, rec["energy_j"], 0.0).sum(axis=0),
         "tracking_rmse_a": np.sqrt(np.mean((rec["rect_current_a"] - rec["charge_cmd_a"]) ** 2, axis=0)),
         "cost": rec["cost"].sum(axis=0),
         "return": rew.sum(axis=0),
