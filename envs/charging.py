@@ -10,7 +10,7 @@ from mission_sim.contract import OBS_DIM, PolicyContext
 
 from .core import (OBS_OFFSET, OBS_SCALE, SCALAR_OPS, EnvConfig, advance, build_plans, reward_cost)
 from .render import draw_envelope
-from .scenario import draw_episode, get_scenario
+from .scenario import draw_episode, get_scenario, scenario_from_options
 
 __all__ = ["SbarChargingEnv", "SbarChargingDiscreteEnv"]
 
@@ -122,7 +122,7 @@ class SbarChargingEnv(gym.Env):
     # ------------------------------------------------------------------ gymnasium API
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        scn = get_scenario(options["scenario"]) if options and "scenario" in options else self.scenario
+        scn = scenario_from_options(options, self.scenario)
         draw = draw_episode(self.np_random, scn, self._T, self.config.n_slow)
         p = build_plans([draw], [scn], self.config)
         self._plan = p

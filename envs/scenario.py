@@ -22,7 +22,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-__all__ = ["Scenario", "SCENARIOS", "get_scenario", "EpisodeDraw", "draw_episode", "command_profile"]
+__all__ = ["Scenario", "SCENARIOS", "get_scenario", "EpisodeDraw", "draw_episode", "command_profile", "scenario_from_options"]
 
 
 @dataclass(frozen=True)
@@ -83,6 +83,16 @@ SCENARIOS: dict[str, Scenario] = {
     "battery": Scenario("battery", soc=(0.1, 0.95)),
     "random": Scenario("random", lm_scale=(0.8, 1.25), wind_speed_m_s=(0.0, 4.0), soc=(0.1, 0.95)),
 }
+
+
+def scenario_from_options(options, default: Scenario) -> Scenario:
+    """The scenario of ``reset(options=...)``: ``options["scenario"]`` or ``default``; other keys are errors."""
+    if not options:
+        return default
+    bad = set(options) - {"scenario"}
+    if bad:
+        raise ValueError(f"reset option {sorted(bad)[0]!r} is invalid; valid keys: 'scenario'")
+    return get_scenario(options["scenario"])
 
 
 def get_scenario(scenario) -> Scenario:

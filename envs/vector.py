@@ -18,7 +18,7 @@ from gymnasium.vector.utils import batch_space
 from mission_sim.contract import OBS_DIM, PolicyContext
 
 from .core import (N_BAT, N_COEF, NUMPY_OPS, OBS_OFFSET, OBS_SCALE, EnvConfig, advance, build_plans, reward_cost)
-from .scenario import draw_episode, get_scenario
+from .scenario import draw_episode, get_scenario, scenario_from_options
 
 __all__ = ["SbarChargingVectorEnv", "SbarChargingDiscreteVectorEnv"]
 
@@ -133,8 +133,7 @@ class SbarChargingVectorEnv(VectorEnv):
                 raise ValueError(f"seed has {len(seeds)} entries; valid: one int or num_envs={n} ints")
         if seed is not None or not self._started:
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
-        scn = (options or {}).get("scenario")
-        self._cur_scenario = self.scenario if scn is None else get_scenario(scn)
+        self._cur_scenario = scenario_from_options(options, self.scenario)
         self._start(self._ar)
         self._prev_done[:] = False
         self._started = True

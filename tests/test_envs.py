@@ -177,6 +177,8 @@ def test_scenarios_and_errors():
     assert info["lm_h"] == pytest.approx(0.8 * TABLE_I.lm_h, rel=1e-6)
     with pytest.raises(ValueError, match="nominal"):
         SbarChargingEnv(scenario="stormy")
+    with pytest.raises(ValueError, match="valid keys"):
+        env.reset(seed=0, options={"scenaro": "windy"})
     with pytest.raises(ValueError, match="soc"):
         envs.Scenario(soc=(0.5, 1.5))
     with pytest.raises(ValueError, match="valid values: 0"):
