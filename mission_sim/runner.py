@@ -48,7 +48,7 @@ import time
 
 import numpy as np
 
-from .battery import Battery, CcCvCharger, _ocv_cell_scalar, held_current_step
+from .battery import Battery, CcCvCharger, _ocv_cell_scalar, scalar_stepper
 from .contract import normalise_obs
 from .linkstep import LinkStepper
 from .power import hover_power_w
@@ -150,6 +150,7 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
     soc, vrc = float(bat.soc[0]), float(bat.v1_v[0])
     r0, r1b, n_cells = bp.r0_ohm, bp.r1_ohm, bp.n_series
     tau1 = bp.tau1_s
+    bat_step = scalar_stepper(bp)
     last_vl = float(bat.terminal_v(0.0)[0])
     last_ib = 0.0
     last_il = 0.0
@@ -185,7 +186,9 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
         a0 = n_cells * _ocv_cell_scalar(soc) + vrc * frac
         g = r0 + r1b * (1.0 - frac)
         lm_eff = lm if lm > 0 else 1e-12
-        s0, s1 = st.s2_affine(lm_eff, dt, x, v1)
+        dsc = st.disc(lm_eff, dt)
+        m10, m11, g1, s1 = dsc[3]
+        s0 = m10 * x[0] + m11 * x[1] + g1 * v1
         alpha = 1.0 - g * c * c * s1 / (2 * dt)
         beta = a0 + g * c * s0 / (2 * dt)
         disc = beta * beta - 4 * alpha * g * p_prop
@@ -202,13 +205,13 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
                     peak_i2 = i2s
                 if i2s > rated:
                     above += dt / 4
-        x1, e_src, e_coil, e_rect, int_i2 = st.step(lm_eff, dt, x, v1, v2)
+        x1, e_src, e_coil, e_rect, int_i2 = st.step(lm_eff, dt, x, v1, v2, dsc)
         i_l = 0.5 * c * int_i2 / dt
         i_p = p_prop / vl
         i_b = i_l - i_p
-        soc, vrc, e_chem, e_r0, e_r1, e_c1 = held_current_step(bp, soc, vrc, i_b, dt)
+        soc, vrc, e_chem, e_r0, e_r1, e_c1, _ = bat_step(soc, vrc, i_b, dt)
         x = x1
-        if x[1] > peak_i2:
+        if x1[1] > peak_i2:
             peak_i2 = x[1]
         if x[1] > rated:
             above += dt / 4 if fine else dt
