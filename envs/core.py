@@ -140,7 +140,7 @@ def build_plans(draws, scenarios: list[Scenario], cfg: EnvConfig) -> Plans:
 
     soc0 = np.array([d.soc0 for d in draws])
     ocv, docv, r0, r1, tau1, cap = battery_operating_point(soc0)
-    i_load = np.array([s.load_power_w for s in scenarios]) / ocv
+    i_load = np.array([s.load_power_w for s in scenarios]) / ocv   # hover draw, constant over 30 ms
     cmd = command_profile(draws, T, cfg.dt_s)
     # initial steady state delivering cmd[0] (fixed point through the battery voltage)
     lm0 = lm[:, 0]
