@@ -14,16 +14,27 @@ class CliError(Exception):
     """A user error: printed as one line, exit status 2."""
 
 
-def _positive_float(name):
+def _float_arg(name, positive=False):
+    """argparse type: a finite float (and > 0 if ``positive``), errors naming the value and the range."""
+    valid = "(0, inf)" if positive else "finite"
+
     def conv(text):
         try:
             v = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name}={text!r} is not a number") from None
-        if not v > 0 or v != v or v == float("inf"):
-            raise argparse.ArgumentTypeError(f"{name}={text!r} is invalid; valid range: (0, inf)")
+        if v != v or abs(v) == float("inf") or (positive and not v > 0):
+            raise argparse.ArgumentTypeError(f"{name}={text!r} is invalid; valid range: {valid}")
         return v
     return conv
+
+
+def _positive_float(name):
+    return _float_arg(name, positive=True)
+
+
+def _finite_float(name):
+    return _float_arg(name)
 
 
 # ----------------------------------------------------------------------------- paper
@@ -286,18 +297,6 @@ def _cmd_telemetry_follow(args, connect, home) -> int:
 
 
 # ----------------------------------------------------------------------------- coupling
-def _finite_float(name):
-    def conv(text):
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name}={text!r} is not a number") from None
-        if v != v or abs(v) == float("inf"):
-            raise argparse.ArgumentTypeError(f"{name}={text!r} is invalid; valid range: finite")
-        return v
-    return conv
-
-
 def _add_coupling(sub):
     p = sub.add_parser("coupling", help="inductances of the default pad/drone coils at a pose",
                        description="L1, L2 and Lm(dx, dy, dz, tilt) of the default coils by Neumann integrals "
