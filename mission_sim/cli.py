@@ -108,6 +108,8 @@ def _add_sweep(sub):
     p.add_argument("--out", type=Path, required=True, help="output folder (created; reused to resume)")
     p.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler "
                                                       "(e.g. tcp://10.0.0.5:8786); default: a local cluster")
+    p.add_argument("--connect-timeout", type=_positive_float("connect-timeout"), default=10.0,
+                   help="seconds to wait for --scheduler (default 10)")
     p.add_argument("--workers", type=_nonneg_int("workers"), default=None,
                    help="worker processes of the local cluster (default: one per CPU; 0 = run serially "
                         "in this process without Dask)")
@@ -118,7 +120,6 @@ def _add_sweep(sub):
 
 
 def _cmd_sweep(args) -> int:
-    import contextlib
     import signal
 
     import pandas as pd
@@ -139,15 +140,17 @@ def _cmd_sweep(args) -> int:
     def _term(signum, frame):  # SIGTERM -> KeyboardInterrupt: pending cases cancelled, cluster closed
         raise KeyboardInterrupt
 
+    factory = None  # --workers 0: serially in this process
+    if args.scheduler is not None or args.workers != 0:
+        def factory():
+            return sweep.dask_client(args.scheduler, args.workers, connect_timeout_s=args.connect_timeout)
+    if args.scheduler is not None:
+        with factory():  # a bad address fails now, before the store is touched
+            pass
     old = signal.signal(signal.SIGTERM, _term)
     try:
-        if args.scheduler is None and args.workers == 0:
-            ctx = contextlib.nullcontext(None)
-        else:
-            ctx = sweep.dask_client(args.scheduler, args.workers)
-        with ctx as client:
-            res = sweep.run_sweep(cases, runner, args.out, client=client, progress=not args.no_progress,
-                                  progress_desc=st.name)
+        res = sweep.run_sweep(cases, runner, args.out, client_factory=factory, progress=not args.no_progress,
+                              progress_desc=st.name)
     finally:
         signal.signal(signal.SIGTERM, old)
 
@@ -164,9 +167,9 @@ def _cmd_sweep(args) -> int:
         print(json.dumps({**counts, "summary": summary, "failed": errors.to_dict(orient="records"),
                           "figures": figs}))
     else:
-        print(f"study {st.name}: {res.n_cases} cases, {res.n_skipped} already done, {res.n_run} run "
-              f"in {res.wall_s:.1f} s ({counts['cases_per_s'] or 0:.2f} cases/s), {res.n_ok} ok, "
-              f"{res.n_error} failed; results in {args.out / 'cases'}")
+        rate = f" in {res.wall_s:.1f} s ({res.cases_per_s:.2f} cases/s)" if res.n_run else ""
+        print(f"study {st.name}: {res.n_cases} cases, {res.n_skipped} already done, {res.n_run} run{rate}, "
+              f"{res.n_ok} ok, {res.n_error} failed; results in {args.out / 'cases'}")
         if not table.empty:
             with pd.option_context("display.width", 200, "display.max_columns", 40, "display.float_format", "{:.4g}".format):
                 print(table.T.to_string())

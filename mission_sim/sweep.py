@@ -234,12 +234,14 @@ class SweepResult:
         return self.n_run / self.wall_s if self.wall_s > 0 else math.nan
 
 
-def run_sweep(cases: Sequence[Case], run_case: RunCase, out_dir, *, client=None, progress: bool = True,
-              progress_desc: str = "sweep") -> SweepResult:
+def run_sweep(cases: Sequence[Case], run_case: RunCase, out_dir, *, client=None, client_factory=None,
+              progress: bool = True, progress_desc: str = "sweep") -> SweepResult:
     """Run the cases not yet in ``out_dir`` and store one row per case.
 
     client : a ``distributed.Client`` (tasks are submitted to its cluster), or None to run serially
         in this process (same store, same rows; the reference for the "equal to serial" tests).
+    client_factory : instead of ``client``, a zero-argument callable returning a context manager that
+        yields a client (e.g. ``lambda: dask_client(None, 2)``); called only if there is work left.
     progress : tqdm progress bar on stderr.
 
     Cases already present (by case_id) are skipped. A case whose runner raises is stored with
@@ -261,7 +263,10 @@ def run_sweep(cases: Sequence[Case], run_case: RunCase, out_dir, *, client=None,
         bar = tqdm(total=len(cases), initial=len(done), unit="case", desc=progress_desc, disable=not progress,
                    dynamic_ncols=True)
         try:
-            if client is None:
+            if client is None and client_factory is not None and todo:
+                with client_factory() as c:
+                    n_run = _run_dask(c, todo, run_case, store, bar)
+            elif client is None:
                 for c in todo:
                     store.write([_row(c, run_case_safe(run_case, c.case_id, c.params))])
                     n_run += 1
