@@ -299,9 +299,14 @@ def _run_dask(client, todo: Sequence[Case], run_case: RunCase, store: CaseStore,
             rows = []
             for fut, res in batch:
                 case = futures[fut.key][1]
-                if fut.status != "finished" or isinstance(res, BaseException):
-                    exc = res if isinstance(res, BaseException) else RuntimeError(f"task {fut.status}")
-                    res = _infrastructure_error(case, exc)
+                if fut.status != "finished" or not isinstance(res, dict):
+                    exc = res if isinstance(res, BaseException) else None
+                    if exc is None:
+                        try:
+                            exc = fut.exception(timeout=10)
+                        except Exception as e:  # noqa: BLE001 - cancelled / lost: record what we know
+                            exc = e
+                    res = _infrastructure_error(case, exc or RuntimeError(f"task {fut.status}"))
                 rows.append(_row(case, res))
             store.write(rows)
             n += len(rows)
@@ -334,7 +339,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, *, con
     n = workers if workers is not None else (os.cpu_count() or 1)
     if n < 1:
         raise ValueError(f"workers={n!r} is invalid; valid range: integer >= 1")
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                            silence_logs=logging.ERROR)
     try:
         client = Client(cluster)
