@@ -117,3 +117,33 @@ def test_one_writer_at_a_time(tmp_path):
         with pytest.raises(ValueError, match="another sweep is writing"):
             run_sweep(cases, toy_case, tmp_path, progress=False)
     assert run_sweep(cases, toy_case, tmp_path, progress=False).n_run == 1
+
+
+def test_cli_serial_json_summary_plots_and_exit_status(tmp_path, capsys):
+    import json
+
+    from mission_sim.cli import main
+
+    study = tmp_path / "s.toml"
+    study.write_text('[study]\nname = "toy"\nrunner = "sweep_toy:factory"\n'
+                     '[grid]\n"mission.hover_time_s" = [5.0, 10.0]\n"pads.1.x_m" = [0.0, 50.0]\n'
+                     'policy = ["step", "model_based"]\nfail = [false, true]\n')
+    rc = main(["sweep", str(study), "--out", str(tmp_path / "o"), "--workers", "0", "--format", "json"])
+    cap = capsys.readouterr()
+    out = json.loads(cap.out)
+    assert rc == 1 and "8 of 16 cases failed" in cap.err.strip().splitlines()[-1]
+    assert (out["cases"], out["run"], out["ok"], out["errors"]) == (16, 16, 8, 8)
+    assert len(out["failed"]) == 8 and all("meant to fail" in f["error"] for f in out["failed"])
+    rows = {r["group"]: r for r in out["summary"]}
+    assert set(rows) == {"all", "step", "model_based"}
+    assert rows["step"]["cases"] == 8 and rows["step"]["errors"] == 4
+    # closed forms of the toy runner: gain = hover * 8 / (1 + spacing / 50), peak by policy (+-0.01 noise)
+    assert abs(rows["step"]["peak_i2_a mean"] - 50.5) < 0.05 and abs(rows["model_based"]["peak_i2_a mean"] - 11.44) < 0.05
+    assert abs(rows["all"]["flight_time_gain_s max"] - 80.0) < 0.05
+    names = sorted(pathlib.Path(f).name for f in out["figures"])
+    assert names == ["peak_i2_by_policy.png", "tradeoff_flight_time_gain_s.png"]
+    assert all(pathlib.Path(f).stat().st_size > 10_000 for f in out["figures"])
+    # the same command again: nothing to run, same outcome
+    rc = main(["sweep", str(study), "--out", str(tmp_path / "o"), "--workers", "0", "--format", "json", "--no-plot"])
+    again = json.loads(capsys.readouterr().out)
+    assert rc == 1 and (again["skipped"], again["run"]) == (16, 0)
