@@ -84,6 +84,67 @@ def _cmd_paper(args) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- coupling
+def _finite_float(name):
+    def conv(text):
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name}={text!r} is not a number") from None
+        if v != v or abs(v) == float("inf"):
+            raise argparse.ArgumentTypeError(f"{name}={text!r} is invalid; valid range: finite")
+        return v
+    return conv
+
+
+def _add_coupling(sub):
+    p = sub.add_parser("coupling", help="inductances of the default pad/drone coils at a pose",
+                       description="L1, L2 and Lm(dx, dy, dz, tilt) of the default coils by Neumann integrals "
+                                   "(pad frame, z up; dz = height of the drone coil above the pad coil).")
+    p.add_argument("--dx", type=_finite_float("dx"), default=0.0, help="lateral offset x [m] (default 0)")
+    p.add_argument("--dy", type=_finite_float("dy"), default=0.0, help="lateral offset y [m] (default 0)")
+    p.add_argument("--dz", type=_finite_float("dz"), default=None, help="height above the pad coil [m] "
+                   "(default: the nominal hover gap)")
+    p.add_argument("--tilt-deg", type=_finite_float("tilt-deg"), default=0.0,
+                   help="tilt of the drone coil about the y axis [deg] (default 0)")
+    p.add_argument("--exact", action="store_true", help="direct Neumann integral instead of the lookup table")
+    p.add_argument("--format", choices=("table", "json"), default="table")
+    p.add_argument("--map", type=Path, default=None, metavar="PNG",
+                   help="also write a PNG map of Lm over dx, dy at this dz and tilt")
+    p.set_defaults(func=_cmd_coupling)
+
+
+def _cmd_coupling(args) -> int:
+    import math
+
+    from wpt_receiver.coupling import NOMINAL_GAP_M, default_coupling
+    m = default_coupling()
+    dz = NOMINAL_GAP_M if args.dz is None else args.dz
+    min_dz = m.tx.wire_radius_m + m.rx.wire_radius_m + max(m.rx.radius_m) * abs(math.sin(math.radians(args.tilt_deg)))
+    if dz <= min_dz:
+        raise CliError(f"--dz {dz!r} is invalid; valid range: > {min_dz:.4g} m (the coils would touch)")
+    if abs(args.tilt_deg) >= 90:
+        raise CliError(f"--tilt-deg {args.tilt_deg!r} is invalid; valid range: (-90, 90)")
+    tilt = math.radians(args.tilt_deg)
+    lm = float((m.lm_exact_h if args.exact else m.lm_h)(args.dx, args.dy, dz, tilt))
+    tx, rx = m.turn_positions(args.dx, args.dy, dz, tilt)
+    out = {"dx_m": args.dx, "dy_m": args.dy, "dz_m": dz, "tilt_rad": tilt, "lm_h": lm, "l1_h": m.l1_h,
+           "l2_h": m.l2_h, "k": float(m.k(lm)), "tx_turns": tx, "rx_turns": rx}
+    if args.map is not None:
+        from . import mission_figures
+        args.map.parent.mkdir(parents=True, exist_ok=True)
+        out["map_png"] = mission_figures.plot_lm_map(m, dz, tilt, args.map)
+    if args.format == "json":
+        print(json.dumps(out))
+        return 0
+    print(f"pose: dx={args.dx:g} m dy={args.dy:g} m dz={dz:.4f} m tilt={args.tilt_deg:g} deg")
+    print(f"L1 = {m.l1_h * 1e6:.3f} uH ({m.tx.n_turns} turns), L2 = {m.l2_h * 1e6:.3f} uH ({m.rx.n_turns} turns)")
+    print(f"Lm = {lm * 1e6:.4f} uH, k = {out['k']:.4f}")
+    if "map_png" in out:
+        print(f"figure: {out['map_png']}")
+    return 0
+
+
 # ----------------------------------------------------------------------------- sweep
 def _nonneg_int(name):
     def conv(text):
@@ -190,7 +251,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="dronewpt", description="Flight-mission energy simulator for drones "
                                      "that charge wirelessly in flight (WPT link with an SBAR receiver).")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for add in (_add_paper, _add_sweep):
+    for add in (_add_paper, _add_coupling, _add_sweep):
         add(sub)
     return parser
 

@@ -1,0 +1,295 @@
+"""Mission configuration: TOML in, a validated frozen dataclass tree out.
+
+Sections (see ``default_mission.toml``, the embedded default, for every key and its unit):
+``seed``, ``[link]``, ``[coupling]``, ``[[pads]]``, ``[drone]``, ``[battery]``, ``[charger]``,
+``[wind]``, ``[mission]``, ``[sim]``. Unknown keys, wrong types and out-of-range values raise
+``ValueError`` naming the dotted key (``battery.capacity_ah``), the value and the valid range.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import tomllib
+from dataclasses import asdict, dataclass, field, fields
+from importlib import resources
+from pathlib import Path
+
+from wpt_receiver import LinkParams
+
+from .battery import BatteryParams, CcCvParams
+from .power import DroneParams
+from .wind import WindParams
+
+__all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
+           "MissionConfig", "load_config", "config_from_dict", "config_to_dict", "apply_overrides"]
+
+DEFAULT_MISSION_TOML: str = resources.files("mission_sim").joinpath("default_mission.toml").read_text("utf-8")
+
+
+def _positive(obj, *names, allow_zero=False):
+    for name in names:
+        v = getattr(obj, name)
+        ok = math.isfinite(v) and (v >= 0 if allow_zero else v > 0)
+        if not ok:
+            raise ValueError(f"{name}={v!r} is invalid; valid range: {'[0' if allow_zero else '(0'}, inf)")
+
+
+@dataclass(frozen=True)
+class LinkConfig:
+    """Link parameters besides the inductances (Table I) and the transmitter's soft start."""
+
+    r1_ohm: float = 0.108
+    r2_ohm: float = 0.0325
+    vdc_v: float = 30.0
+    f_hz: float = 85e3
+    rated_i2_a: float = 15.0
+    tx_ramp_s: float = 0.005
+
+    def __post_init__(self):
+        _positive(self, "r1_ohm", "r2_ohm", "vdc_v", "f_hz", "rated_i2_a")
+        _positive(self, "tx_ramp_s", allow_zero=True)
+
+    def link_params(self, l1_h: float, l2_h: float, lm_h: float, vl_v: float = 30.0) -> LinkParams:
+        return LinkParams(l1_h=l1_h, l2_h=l2_h, lm_h=lm_h, r1_ohm=self.r1_ohm, r2_ohm=self.r2_ohm,
+                          vdc_v=self.vdc_v, vl_v=vl_v, f_hz=self.f_hz)
+
+
+@dataclass(frozen=True)
+class CouplingConfig:
+    """Coil geometry ("default": the calibrated pair of wpt_receiver.coupling) and pad gating."""
+
+    geometry: str = "default"
+    tx_min_k: float = 0.075
+    tx_k_hysteresis: float = 0.003
+
+    def __post_init__(self):
+        if self.geometry != "default":
+            raise ValueError(f"geometry={self.geometry!r} is invalid; valid values: 'default'")
+        if not 0 < self.tx_min_k < 1:
+            raise ValueError(f"tx_min_k={self.tx_min_k!r} is invalid; valid range: (0, 1)")
+        if not 0 <= self.tx_k_hysteresis < 1 - self.tx_min_k:
+            raise ValueError(f"tx_k_hysteresis={self.tx_k_hysteresis!r} is invalid; valid range: "
+                             f"[0, {1 - self.tx_min_k:.4g})")
+
+    def model(self):
+        from wpt_receiver.coupling import default_coupling
+        return default_coupling()
+
+
+@dataclass(frozen=True)
+class PadConfig:
+    """A charging pad: coil centre (pad frame) and how long the drone hovers over it (None = mission default)."""
+
+    x_m: float = 0.0
+    y_m: float = 0.0
+    z_m: float = 0.0
+    hover_time_s: float | None = None
+
+    def __post_init__(self):
+        for name in ("x_m", "y_m", "z_m"):
+            v = getattr(self, name)
+            if not math.isfinite(v) or abs(v) > 1e5:
+                raise ValueError(f"{name}={v!r} is invalid; valid range: [-1e5, 1e5] m")
+        if self.hover_time_s is not None and not (math.isfinite(self.hover_time_s) and self.hover_time_s >= 0):
+            raise ValueError(f"hover_time_s={self.hover_time_s!r} is invalid; valid range: [0, inf)")
+
+
+@dataclass(frozen=True)
+class MissionPlan:
+    """Waypoint mission: start, pads in order, landing spot; speed and acceleration limits."""
+
+    start_x_m: float = -15.0
+    start_y_m: float = 0.0
+    land_x_m: float = 50.0
+    land_y_m: float = 0.0
+    cruise_altitude_m: float = 5.0
+    cruise_speed_m_s: float = 8.0
+    max_accel_m_s2: float = 2.5
+    climb_rate_m_s: float = 2.0
+    descent_rate_m_s: float = 1.0
+    hover_gap_m: float = 0.1748209350881188
+    hover_time_s: float = 60.0
+
+    def __post_init__(self):
+        for name in ("start_x_m", "start_y_m", "land_x_m", "land_y_m"):
+            v = getattr(self, name)
+            if not math.isfinite(v) or abs(v) > 1e5:
+                raise ValueError(f"{name}={v!r} is invalid; valid range: [-1e5, 1e5] m")
+        _positive(self, "cruise_speed_m_s", "max_accel_m_s2", "climb_rate_m_s", "descent_rate_m_s")
+        _positive(self, "hover_time_s", allow_zero=True)
+        if not 0.03 <= self.hover_gap_m <= 1.0:
+            raise ValueError(f"hover_gap_m={self.hover_gap_m!r} is invalid; valid range: [0.03, 1.0] m")
+        if not self.hover_gap_m < self.cruise_altitude_m <= 500:
+            raise ValueError(f"cruise_altitude_m={self.cruise_altitude_m!r} is invalid; valid range: "
+                             f"(hover_gap_m={self.hover_gap_m!r}, 500] m")
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Multi-rate stepping (see mission_sim/runner.py)."""
+
+    control_period_s: float = 5e-5
+    traj_dt_s: float = 0.2
+    flight_dt_s: float = 1.0
+    i2_noise_a: float = 0.0
+    min_fine_s: float = 0.002
+    max_fine_s: float = 0.06
+    settle_duty_tol: float = 1e-4
+    duty_event_tol: float = 2e-3
+    lm_rel_tol: float = 0.05
+    coarse_policy_period_s: float = 1.0
+    settle_i2_tol_a: float = 0.01
+    cmd_deadband_a: float = 0.2
+    bms_period_s: float = 2.0
+    tx_off_delay_s: float = 0.03
+
+    def __post_init__(self):
+        _positive(self, "control_period_s", "traj_dt_s", "flight_dt_s", "min_fine_s", "max_fine_s",
+                  "settle_duty_tol", "duty_event_tol", "lm_rel_tol", "coarse_policy_period_s", "settle_i2_tol_a", "bms_period_s")
+        _positive(self, "i2_noise_a", "cmd_deadband_a", "tx_off_delay_s", allow_zero=True)
+        if not 1e-7 <= self.control_period_s <= 1e-3:
+            raise ValueError(f"control_period_s={self.control_period_s!r} is invalid; valid range: [1e-7, 1e-3] s")
+        if not self.control_period_s * 10 <= self.traj_dt_s <= 1.0:
+            raise ValueError(f"traj_dt_s={self.traj_dt_s!r} is invalid; valid range: "
+                             f"[10 control periods = {10 * self.control_period_s:.3g}, 1.0] s")
+        if self.flight_dt_s < self.traj_dt_s:
+            raise ValueError(f"flight_dt_s={self.flight_dt_s!r} is invalid; valid range: [traj_dt_s="
+                             f"{self.traj_dt_s!r}, inf) s")
+        if self.max_fine_s < self.min_fine_s:
+            raise ValueError(f"max_fine_s={self.max_fine_s!r} is invalid; valid range: [min_fine_s="
+                             f"{self.min_fine_s!r}, inf) s")
+
+
+@dataclass(frozen=True)
+class MissionConfig:
+    """The whole mission (frozen dataclass tree)."""
+
+    seed: int = 7
+    link: LinkConfig = field(default_factory=LinkConfig)
+    coupling: CouplingConfig = field(default_factory=CouplingConfig)
+    pads: tuple = (PadConfig(),)
+    drone: DroneParams = field(default_factory=DroneParams)
+    battery: BatteryParams = field(default_factory=BatteryParams)
+    charger: CcCvParams = field(default_factory=CcCvParams)
+    wind: WindParams = field(default_factory=WindParams)
+    mission: MissionPlan = field(default_factory=MissionPlan)
+    sim: SimConfig = field(default_factory=SimConfig)
+
+
+_SECTIONS = {"link": LinkConfig, "coupling": CouplingConfig, "drone": DroneParams, "battery": BatteryParams,
+             "charger": CcCvParams, "wind": WindParams, "mission": MissionPlan, "sim": SimConfig}
+
+
+def _coerce(section: str, cls, name: str, value):
+    ftype = {f.name: f.type for f in fields(cls)}[name]
+    ftype = ftype if isinstance(ftype, str) else getattr(ftype, "__name__", str(ftype))
+    key = f"{section}.{name}"
+    if ftype == "str":
+        if not isinstance(value, str):
+            raise ValueError(f"{key}={value!r} is invalid; valid type: string")
+        return value
+    if ftype == "int":
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or int(value) != value:
+            raise ValueError(f"{key}={value!r} is invalid; valid type: integer")
+        return int(value)
+    if value is None and "None" in ftype:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{key}={value!r} is invalid; valid type: number")
+    return float(value)
+
+
+def _build(section: str, cls, d):
+    if not isinstance(d, dict):
+        raise ValueError(f"{section}={d!r} is invalid; valid type: table")
+    names = {f.name for f in fields(cls)}
+    for k in d:
+        if k not in names:
+            raise ValueError(f"{section}.{k} is not a valid key; valid keys: {', '.join(sorted(names))}")
+    kwargs = {k: _coerce(section, cls, k, v) for k, v in d.items()}
+    try:
+        return cls(**kwargs)
+    except ValueError as exc:
+        raise ValueError(f"{section}.{exc}") from None
+
+
+def config_from_dict(d: dict) -> MissionConfig:
+    """Validated :class:`MissionConfig` from a plain dict (as parsed from TOML)."""
+    if not isinstance(d, dict):
+        raise ValueError(f"config={d!r} is invalid; valid type: table")
+    valid = {"seed", "pads", *_SECTIONS}
+    for k in d:
+        if k not in valid:
+            raise ValueError(f"{k} is not a valid key; valid keys: {', '.join(sorted(valid))}")
+    kw = {}
+    if "seed" in d:
+        s = d["seed"]
+        if isinstance(s, bool) or not isinstance(s, int) or not 0 <= s < 2**63:
+            raise ValueError(f"seed={s!r} is invalid; valid range: integer in [0, 2^63)")
+        kw["seed"] = int(s)
+    for name, cls in _SECTIONS.items():
+        if name in d:
+            kw[name] = _build(name, cls, d[name])
+    if "pads" in d:
+        pads = d["pads"]
+        if not isinstance(pads, list) or not 1 <= len(pads) <= 100:
+            raise ValueError(f"pads={pads!r} is invalid; valid: a list of 1..100 [[pads]] tables")
+        kw["pads"] = tuple(_build(f"pads.{i}", PadConfig, p) for i, p in enumerate(pads))
+    return MissionConfig(**kw)
+
+
+def config_to_dict(cfg: MissionConfig) -> dict:
+    """Plain dict (TOML-ready: no None values) of a :class:`MissionConfig`."""
+    out = asdict(cfg)
+    out["pads"] = [{k: v for k, v in p.items() if v is not None} for p in out["pads"]]
+    return out
+
+
+def load_config(path=None) -> MissionConfig:
+    """Read a mission TOML file (``None`` = the embedded default)."""
+    if path is None:
+        text, name = DEFAULT_MISSION_TOML, "<default mission>"
+    else:
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"config file {str(path)!r} does not exist")
+        text, name = path.read_text("utf-8"), str(path)
+    try:
+        d = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{name}: not valid TOML: {exc}") from None
+    return config_from_dict(d)
+
+
+def apply_overrides(d: dict, overrides: dict) -> dict:
+    """Copy of config dict ``d`` with dotted-key overrides (``"battery.capacity_ah"``, ``"pads.0.x_m"``).
+
+    Unknown keys raise ``ValueError`` naming them; values are validated later by :func:`config_from_dict`.
+    """
+    out = copy.deepcopy(d)
+    for key, value in overrides.items():
+        parts = str(key).split(".")
+        if parts[0] == "seed" and len(parts) == 1:
+            out["seed"] = value
+            continue
+        if parts[0] == "pads":
+            if len(parts) != 3 or not parts[1].isdigit():
+                raise ValueError(f"override key {key!r} is invalid; valid form: pads.<index>.<key>")
+            i = int(parts[1])
+            pads = out.setdefault("pads", [asdict(PadConfig())])
+            if not 0 <= i < len(pads):
+                raise ValueError(f"override key {key!r} is invalid; valid pad indices: 0..{len(pads) - 1}")
+            if parts[2] not in {f.name for f in fields(PadConfig)}:
+                raise ValueError(f"override key {key!r} is invalid; valid pad keys: "
+                                 f"{', '.join(f.name for f in fields(PadConfig))}")
+            pads[i][parts[2]] = value
+            continue
+        if len(parts) != 2 or parts[0] not in _SECTIONS:
+            raise ValueError(f"override key {key!r} is invalid; valid form: <section>.<key> with section in "
+                             f"{', '.join(sorted(_SECTIONS))}, pads.<index>.<key> or seed")
+        names = {f.name for f in fields(_SECTIONS[parts[0]])}
+        if parts[1] not in names:
+            raise ValueError(f"override key {key!r} is invalid; valid keys of [{parts[0]}]: {', '.join(sorted(names))}")
+        out.setdefault(parts[0], {})[parts[1]] = value
+    return out

@@ -1,0 +1,152 @@
+"""Figures of the mission world (matplotlib, Agg backend; nothing is shown on screen)."""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+__all__ = ["plot_lm_map", "plot_mission"]
+
+
+def plot_lm_map(model, dz_m: float, tilt_rad: float, path, half_width_m: float = 0.4, n: int = 81) -> str:
+    """Map of Lm [uH] over a (dx, dy) grid at height ``dz_m`` and tilt ``tilt_rad``, coil outlines on top."""
+    x = np.linspace(-half_width_m, half_width_m, n)
+    xx, yy = np.meshgrid(x, x)
+    lm = model.lm_h(xx, yy, np.full_like(xx, dz_m), np.full_like(xx, tilt_rad)) * 1e6
+    fig, ax = plt.subplots(figsize=(6, 5))
+    im = ax.pcolormesh(xx, yy, lm, shading="auto", cmap="viridis")
+    cs = ax.contour(xx, yy, lm, levels=8, colors="w", linewidths=0.6)
+    ax.clabel(cs, fmt="%.2f", fontsize=7)
+    th = np.linspace(0, 2 * np.pi, 200)
+    for r in (min(model.tx.radius_m), max(model.tx.radius_m)):
+        ax.plot(r * np.cos(th), r * np.sin(th), "r--", lw=0.8)
+    fig.colorbar(im, ax=ax, label="Lm [uH]")
+    ax.set_aspect("equal")
+    ax.set_xlabel("dx [m]")
+    ax.set_ylabel("dy [m]")
+    ax.set_title(f"Lm over the pad at dz = {dz_m:.3f} m, tilt = {np.degrees(tilt_rad):.1f} deg (pad coil dashed)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return str(path)
+
+
+def plot_mission(result, out_dir) -> list[str]:
+    """The mission figures: trajectory over the pads, Lm(t), I2 envelope vs rated, SoC, power flows."""
+    from pathlib import Path
+    out = Path(out_dir)
+    ts = result.timeseries
+    cfg = result.config
+    t = ts["t_s"].to_numpy()
+    paths = []
+
+    # trajectory over pads
+    fig, (ax, az) = plt.subplots(1, 2, figsize=(11, 4.5), gridspec_kw={"width_ratios": [1.2, 1]})
+    tr = result.trajectory
+    ax.plot(tr.pos_m[:, 0], tr.pos_m[:, 1], color="0.4", lw=1, label="path")
+    on = ts["tx_on"].to_numpy(bool)
+    ax.plot(ts["x_m"][on], ts["y_m"][on], ".", ms=2, color="tab:orange", label="pad energised")
+    r = 0.25
+    if cfg is not None:
+        r = max(cfg.coupling.model().tx.radius_m)
+        for i, p in enumerate(cfg.pads):
+            ax.add_patch(plt.Circle((p.x_m, p.y_m), r, color="tab:red", alpha=0.4))
+            ax.annotate(f"pad {i}", (p.x_m, p.y_m), textcoords="offset points", xytext=(6, 6))
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title("trajectory over the pads (pad frame)")
+    az.plot(tr.t_s, tr.pos_m[:, 2], color="0.3")
+    az.set_xlabel("t [s]")
+    az.set_ylabel("z [m]")
+    az.set_yscale("symlog", linthresh=0.5)
+    az.set_title("height of the receiver coil")
+    az.grid(alpha=0.3)
+    fig.tight_layout()
+    paths.append(_save(fig, out / "trajectory.png"))
+
+    # Lm(t)
+    fig, ax = plt.subplots(figsize=(10, 3.8))
+    ax.plot(t, ts["lm_h"] * 1e6, color="tab:blue", lw=0.8)
+    if cfg is not None:
+        m = cfg.coupling.model()
+        kmin = cfg.coupling.tx_min_k
+        ax.axhline(kmin * np.sqrt(m.l1_h * m.l2_h) * 1e6, color="tab:red", ls="--", lw=0.8,
+                   label=f"pad switch-off threshold k = {kmin}")
+    ax.axhline(6.25, color="k", ls=":", lw=0.8, label="Table I (6.25 uH)")
+    ax.fill_between(t, 0, 1, where=on, transform=ax.get_xaxis_transform(), color="tab:orange", alpha=0.15,
+                    label="pad energised")
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("Lm [uH]")
+    ax.legend(fontsize=8, loc="upper right")
+    ax.grid(alpha=0.3)
+    ax.set_title("mutual inductance along the mission")
+    fig.tight_layout()
+    paths.append(_save(fig, out / "lm.png"))
+
+    # I2 envelope with rated current: whole mission and a zoom on the largest transient
+    fig, (ax, az) = plt.subplots(1, 2, figsize=(12, 4))
+    i2 = ts["i2_amp_a"].to_numpy()
+    rated = result.summary.get("rated_i2_a", 15.0)
+    ax.plot(t, i2, color="tab:red", lw=0.7)
+    ax.axhline(rated, color="k", ls="--", lw=0.8, label=f"rated {rated:g} A")
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("I2 [A]")
+    ax.set_title(f"secondary current envelope (peak {result.summary['peak_i2_a']:.1f} A)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    if len(i2):
+        kpk = int(np.argmax(i2))
+        w = (t > t[kpk] - 0.01) & (t < t[kpk] + 0.04)
+        az.plot((t[w] - t[kpk]) * 1e3, i2[w], ".-", ms=2, color="tab:red", lw=0.8, label="I2")
+        az2 = az.twinx()
+        az2.plot((t[w] - t[kpk]) * 1e3, ts["d_short"].to_numpy()[w], color="tab:blue", lw=0.8, label="d_short")
+        az2.set_ylabel("d_short", color="tab:blue")
+        az.axhline(rated, color="k", ls="--", lw=0.8)
+        az.set_xlabel(f"time after the peak at t = {t[kpk]:.3f} s [ms]")
+        az.set_ylabel("I2 [A]")
+        az.set_title("largest transient")
+        az.grid(alpha=0.3)
+    fig.tight_layout()
+    paths.append(_save(fig, out / "i2_envelope.png"))
+
+    # SoC
+    fig, ax = plt.subplots(figsize=(10, 3.5))
+    ax.plot(t, ts["soc"], color="tab:green")
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("SoC [-]")
+    ax2 = ax.twinx()
+    ax2.plot(t, ts["battery_v"], color="0.5", lw=0.6)
+    ax2.set_ylabel("battery terminal voltage [V]", color="0.4")
+    ax.set_title(f"state of charge (final {result.summary['final_soc']:.4f}; without charging "
+                 f"{result.summary.get('final_soc_without_charging', float('nan')):.4f})")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    paths.append(_save(fig, out / "soc.png"))
+
+    # power flows
+    fig, ax = plt.subplots(figsize=(10, 4))
+    ax.plot(t, ts["p_source_w"], lw=0.8, label="pad source")
+    ax.plot(t, ts["rect_current_a"] * ts["battery_v"], lw=0.8, label="rectifier -> battery node")
+    ax.plot(t, ts["propulsion_w"], lw=0.8, label="propulsion")
+    ax.plot(t, ts["battery_current_a"] * ts["battery_v"], lw=0.8, label="battery terminal (+ = charging)")
+    ax.plot(t, ts["p_coil_loss_w"], lw=0.8, label="coil losses")
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("power [W]")
+    ax.legend(fontsize=8, ncol=3)
+    ax.grid(alpha=0.3)
+    s = result.summary
+    ax.set_title(f"power flows (energy balance error {s['energy_balance_error_rel']:.1e} relative)")
+    fig.tight_layout()
+    paths.append(_save(fig, out / "power.png"))
+    return paths
+
+
+def _save(fig, path) -> str:
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return str(path)

@@ -1,0 +1,106 @@
+"""Electrical propulsion power of a multirotor from momentum theory (hover, climb, forward flight).
+
+For total thrust ``T`` over the rotor disk area ``A = n pi R^2`` (air density rho):
+
+* hover induced velocity ``v_h = sqrt(T / (2 rho A))`` and ideal power ``T v_h``
+  (Leishman, *Principles of Helicopter Aerodynamics*, 2nd ed., 2006, ch. 2);
+* forward flight at airspeed ``V`` with climb rate ``v_z``: Glauert's induced velocity
+  ``v_i = v_h^2 / sqrt(V_h^2 + (v_z + v_i)^2)`` (solved by Newton's method), induced + climb power
+  ``T (v_i + v_z)`` (Leishman ch. 2.15 and 5); in descent the result is floored at half the
+  hover induced power (momentum theory fails in the vortex-ring state);
+* profile power taken constant at its hover value ``(1/FM - 1) T_hover v_h`` (FM = figure of merit);
+* parasite power ``D V`` with ``D = 0.5 rho f V^2`` (``f`` equivalent flat-plate area);
+* thrust ``T = sqrt((m g + D_z)^2 + D_xy^2)`` balances weight and drag;
+* electrical power = shaft power / (motor x ESC efficiency) + avionics.
+
+Default drone (``DroneParams()``), a ~1 kg quadrotor carrying an 8S (29.6 V) pack and the WPT
+receiver: 4 x 10-inch rotors (R = 0.127 m), total mass 1.0 kg, FM = 0.6 (small-scale propellers
+measure 0.5-0.65 in static tests: Brandt & Selig, "Propeller performance data at low Reynolds
+numbers", AIAA 2011-1255), motor x ESC efficiency 0.8 (typical of small BLDC drives),
+flat-plate area 0.02 m^2, avionics 8 W. These are assumptions of typical values, not one
+airframe's measurements; hover electrical power comes out at ~99 W.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["DroneParams", "propulsion_power_w", "hover_power_w", "G_M_S2"]
+
+G_M_S2 = 9.80665
+
+
+@dataclass(frozen=True)
+class DroneParams:
+    """Multirotor parameters (SI). See module notes for where the defaults come from."""
+
+    mass_kg: float = 1.0
+    payload_kg: float = 0.0
+    n_rotors: int = 4
+    rotor_radius_m: float = 0.127
+    figure_of_merit: float = 0.6
+    drive_efficiency: float = 0.8
+    flat_plate_area_m2: float = 0.02
+    avionics_w: float = 8.0
+    air_density_kg_m3: float = 1.225
+
+    def __post_init__(self):
+        for name in ("mass_kg", "rotor_radius_m", "flat_plate_area_m2", "air_density_kg_m3"):
+            v = float(getattr(self, name))
+            if not math.isfinite(v) or v <= 0:
+                raise ValueError(f"{name}={v!r} is invalid; valid range: (0, inf)")
+        for name in ("payload_kg", "avionics_w"):
+            v = float(getattr(self, name))
+            if not math.isfinite(v) or v < 0:
+                raise ValueError(f"{name}={v!r} is invalid; valid range: [0, inf)")
+        for name in ("figure_of_merit", "drive_efficiency"):
+            v = float(getattr(self, name))
+            if not 0 < v <= 1:
+                raise ValueError(f"{name}={v!r} is invalid; valid range: (0, 1]")
+        if int(self.n_rotors) != self.n_rotors or self.n_rotors < 1:
+            raise ValueError(f"n_rotors={self.n_rotors!r} is invalid; valid range: integer >= 1")
+
+    @property
+    def total_mass_kg(self) -> float:
+        return self.mass_kg + self.payload_kg
+
+    @property
+    def disk_area_m2(self) -> float:
+        return self.n_rotors * math.pi * self.rotor_radius_m**2
+
+
+def propulsion_power_w(p: DroneParams, airspeed_m_s, climb_rate_m_s=0.0):
+    """Electrical propulsion power [W] at horizontal airspeed [m/s] and climb rate [m/s] (arrays broadcast)."""
+    v = np.abs(np.asarray(airspeed_m_s, dtype=float))
+    vz = np.asarray(climb_rate_m_s, dtype=float)
+    v, vz = np.broadcast_arrays(v, vz)
+    rho, f, area = p.air_density_kg_m3, p.flat_plate_area_m2, p.disk_area_m2
+    w = p.total_mass_kg * G_M_S2
+    d_xy = 0.5 * rho * f * v * v
+    d_z = 0.5 * rho * f * vz * np.abs(vz)
+    thrust = np.hypot(w + d_z, d_xy)
+    vh = np.sqrt(thrust / (2 * rho * area))
+    # Newton on F(vi) = vi sqrt(V^2 + (vz + vi)^2) - vh^2, start from the climb solution
+    vi = np.maximum(-0.5 * vz + np.sqrt(0.25 * vz * vz + vh * vh), 0.05 * vh)
+    for _ in range(30):
+        s = np.sqrt(v * v + (vz + vi) ** 2)
+        fval = vi * s - vh * vh
+        dfdv = s + vi * (vz + vi) / s
+        vi = np.maximum(vi - fval / dfdv, 1e-6)
+    vh_hover = math.sqrt(w / (2 * rho * area))
+    p_induced = thrust * (vi + vz)
+    p_induced = np.where(vz < 0, np.maximum(p_induced, 0.5 * w * vh_hover), p_induced)
+    p_profile = (1.0 / p.figure_of_merit - 1.0) * w * vh_hover
+    p_shaft = p_induced + p_profile + d_xy * v
+    out = p_shaft / p.drive_efficiency + p.avionics_w
+    return out if out.ndim else float(out)
+
+
+def hover_power_w(p: DroneParams) -> float:
+    """Electrical hover power [W]: ``T^1.5 / sqrt(2 rho A) / FM / eta + avionics``."""
+    w = p.total_mass_kg * G_M_S2
+    return w**1.5 / math.sqrt(2 * p.air_density_kg_m3 * p.disk_area_m2) / p.figure_of_merit / p.drive_efficiency \
+        + p.avionics_w

@@ -1,0 +1,54 @@
+"""Mission results: the time series, the summary, and writing them (Parquet, CSV, JSON, PNG)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+__all__ = ["MissionResult", "SUMMARY_KEYS", "TIMESERIES_COLUMNS"]
+
+SUMMARY_KEYS = ("sim_time_s", "wall_s", "energy_from_source_j", "energy_to_battery_j", "losses_j",
+                "propulsion_energy_j", "energy_balance_error_rel", "final_soc", "peak_i2_a", "time_above_rated_s",
+                "flight_time_gain_s")
+TIMESERIES_COLUMNS = ("t_s", "x_m", "y_m", "z_m", "lm_h", "tx_on", "i1_amp_a", "i2_amp_a", "d_short", "v2_v",
+                      "rect_current_a", "battery_v", "battery_current_a", "soc", "propulsion_w")
+
+
+@dataclass
+class MissionResult:
+    """Result of :func:`mission_sim.runner.run_mission`.
+
+    timeseries : one row per simulation step (fine and coarse; ``dt_s`` is the step length, values
+        are at the step's end, currents ``rect_current_a``/``battery_current_a`` and powers are step means)
+    summary : energies [J], SoC, peak I2, time above rated, flight-time gain, step counts, wall time
+    """
+
+    timeseries: pd.DataFrame
+    summary: dict
+    config: object = None
+    trajectory: object = None
+    extra: dict = field(default_factory=dict)
+
+    def write(self, out_dir, figures: bool = True) -> list[Path]:
+        """Write ``timeseries.parquet``, ``timeseries.csv``, ``summary.json`` and the PNG figures."""
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        paths = []
+        ts = self.timeseries.copy()
+        ts["phase"] = ts["phase"].astype(str)
+        p = out / "timeseries.parquet"
+        ts.to_parquet(p, index=False)
+        paths.append(p)
+        p = out / "timeseries.csv"
+        ts.to_csv(p, index=False)
+        paths.append(p)
+        p = out / "summary.json"
+        p.write_text(json.dumps(self.summary, indent=2))
+        paths.append(p)
+        if figures:
+            from .mission_figures import plot_mission
+            paths.extend(Path(f) for f in plot_mission(self, out))
+        return paths

@@ -1,0 +1,212 @@
+"""Trajectories: waypoint missions with speed/acceleration limits, wind-driven hover error, replays.
+
+Positions are those of the receiver coil's origin in the pad frame (local ENU metres, z up,
+origin = the first pad's coil). Every straight move starts and ends at rest and follows a
+trapezoidal speed profile (limits: cruise speed horizontally, climb / descent rate vertically,
+one acceleration limit). A planned mission is
+
+``takeoff -> (transit -> approach -> charge -> depart) per pad -> transit -> land``
+
+sampled on a uniform grid. On top of the nominal path the seeded wind model
+(:mod:`mission_sim.wind`) adds the position-hold error and sets the tilt, so Lm(t) fluctuates
+while the drone hovers over a pad.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .power import propulsion_power_w
+from .wind import drag_force_n, hover_error_m, tilt_from_force, wind_series
+
+__all__ = ["Trajectory", "plan_mission", "PHASES"]
+
+PHASES = ("ground", "takeoff", "transit", "approach", "charge", "depart", "land", "hover", "flight")
+
+
+@dataclass
+class Trajectory:
+    """Sampled trajectory.
+
+    Attributes
+    ----------
+    t_s : (N,) sample times [s], strictly increasing
+    pos_m : (N, 3) receiver coil position [m] (pad frame)
+    tilt_rad : (N,) tilt of the receiver coil [rad]
+    phase : (N,) str, one of :data:`PHASES` (the pad only energises in "charge" and "hover")
+    tilt_axis_rad : (N,) azimuth of the tilt axis [rad] (pi/2 = about y, normal leaning to +x)
+    wind_m_s : (N, 3) wind velocity [m/s] (zeros for replays)
+    """
+
+    t_s: np.ndarray
+    pos_m: np.ndarray
+    tilt_rad: np.ndarray
+    phase: np.ndarray
+    tilt_axis_rad: np.ndarray | None = None
+    wind_m_s: np.ndarray | None = None
+
+    def __post_init__(self):
+        self.t_s = np.asarray(self.t_s, dtype=float)
+        self.pos_m = np.asarray(self.pos_m, dtype=float)
+        n = len(self.t_s)
+        if self.t_s.ndim != 1 or n < 2:
+            raise ValueError(f"t_s has shape {self.t_s.shape}; valid: 1-D with at least 2 samples")
+        if not np.all(np.isfinite(self.t_s)) or np.any(np.diff(self.t_s) <= 0):
+            raise ValueError("t_s is invalid; valid: finite and strictly increasing")
+        if self.pos_m.shape != (n, 3) or not np.all(np.isfinite(self.pos_m)):
+            raise ValueError(f"pos_m has shape {self.pos_m.shape}; valid: ({n}, 3), finite")
+        self.tilt_rad = np.broadcast_to(np.asarray(self.tilt_rad, dtype=float), (n,)).copy()
+        if np.any(np.abs(self.tilt_rad) >= math.pi / 2):
+            raise ValueError("tilt_rad is invalid; valid range: (-pi/2, pi/2)")
+        self.phase = np.broadcast_to(np.asarray(self.phase, dtype=object), (n,)).copy()
+        bad = set(self.phase) - set(PHASES)
+        if bad:
+            raise ValueError(f"phase {sorted(bad)[0]!r} is invalid; valid values: {', '.join(PHASES)}")
+        self.tilt_axis_rad = np.full(n, math.pi / 2) if self.tilt_axis_rad is None else \
+            np.broadcast_to(np.asarray(self.tilt_axis_rad, dtype=float), (n,)).copy()
+        self.wind_m_s = np.zeros((n, 3)) if self.wind_m_s is None else np.asarray(self.wind_m_s, dtype=float)
+
+    def __len__(self) -> int:
+        return len(self.t_s)
+
+    @classmethod
+    def from_samples(cls, t_s, pos_m, tilt_rad=None, phase=None, hover_speed_m_s: float = 0.3) -> "Trajectory":
+        """A trajectory from logged samples (e.g. a real flight log converted to the pad frame).
+
+        ``phase=None`` labels samples slower than ``hover_speed_m_s`` as "hover" (pads may
+        energise) and the rest "flight".
+        """
+        t = np.asarray(t_s, dtype=float)
+        pos = np.asarray(pos_m, dtype=float)
+        tr = cls(t, pos, np.zeros(len(t)) if tilt_rad is None else tilt_rad, "flight")
+        if phase is None:
+            speed = np.linalg.norm(tr.velocity_m_s(), axis=1)
+            tr.phase = np.where(speed < hover_speed_m_s, "hover", "flight").astype(object)
+        else:
+            tr.phase = np.broadcast_to(np.asarray(phase, dtype=object), (len(t),)).copy()
+            cls.__post_init__(tr)
+        return tr
+
+    def velocity_m_s(self) -> np.ndarray:
+        """Velocity (N, 3) [m/s] by second-order finite differences."""
+        return np.gradient(self.pos_m, self.t_s, axis=0)
+
+    def propulsion_w(self, drone) -> np.ndarray:
+        """Electrical propulsion power (N,) [W] from momentum theory (airspeed = |v_xy - wind_xy|)."""
+        v = self.velocity_m_s()
+        air = np.hypot(v[:, 0] - self.wind_m_s[:, 0], v[:, 1] - self.wind_m_s[:, 1])
+        return propulsion_power_w(drone, air, v[:, 2])
+
+
+# --------------------------------------------------------------------------- planning
+def _profile(dist: float, vmax: float, amax: float):
+    """Trapezoidal (or triangular) rest-to-rest profile: duration and s(t), v(t), a(t) evaluators."""
+    if dist <= 0:
+        return 0.0, None
+    if dist <= vmax * vmax / amax:
+        ta = math.sqrt(dist / amax)
+        vp, tc = amax * ta, 0.0
+    else:
+        ta, vp = vmax / amax, vmax
+        tc = (dist - vmax * ta) / vmax
+    dur = 2 * ta + tc
+
+    def ev(t):
+        t = np.clip(t, 0.0, dur)
+        s = np.where(t < ta, 0.5 * amax * t * t,
+                     np.where(t < ta + tc, 0.5 * vp * ta + vp * (t - ta),
+                              dist - 0.5 * amax * (dur - t) ** 2))
+        v = np.where(t < ta, amax * t, np.where(t < ta + tc, vp, amax * (dur - t)))
+        a = np.where(t < ta, amax, np.where(t < ta + tc, 0.0, -amax))
+        return s, v, a
+    return dur, ev
+
+
+def _segments(cfg):
+    m = cfg.mission
+    alt = m.cruise_altitude_m
+    segs = []  # (kind, phase, p0, p1 or None, duration, evaluator)
+    pos = np.array([m.start_x_m, m.start_y_m, 0.0])
+
+    def move(p1, phase):
+        nonlocal pos
+        p1 = np.asarray(p1, dtype=float)
+        d = p1 - pos
+        dist = float(np.linalg.norm(d))
+        if dist < 1e-12:
+            return
+        if abs(d[2]) > 1e-9 and np.hypot(d[0], d[1]) < 1e-9:
+            vmax = m.climb_rate_m_s if d[2] > 0 else m.descent_rate_m_s
+        else:
+            vmax = m.cruise_speed_m_s
+        dur, ev = _profile(dist, vmax, m.max_accel_m_s2)
+        segs.append((phase, pos.copy(), d / dist, dur, ev))
+        pos = p1
+
+    def hold(dur, phase):
+        if dur > 0:
+            segs.append((phase, pos.copy(), None, float(dur), None))
+
+    move([pos[0], pos[1], alt], "takeoff")
+    for pad in cfg.pads:
+        move([pad.x_m, pad.y_m, alt], "transit")
+        move([pad.x_m, pad.y_m, pad.z_m + m.hover_gap_m], "approach")
+        hold(m.hover_time_s if pad.hover_time_s is None else pad.hover_time_s, "charge")
+        move([pad.x_m, pad.y_m, alt], "depart")
+    move([m.land_x_m, m.land_y_m, alt], "transit")
+    move([m.land_x_m, m.land_y_m, 0.0], "land")
+    hold(1.0, "ground")
+    return segs
+
+
+def plan_mission(cfg, rng: np.random.Generator | None = None) -> Trajectory:
+    """Plan the waypoint mission of ``cfg`` (a MissionConfig) on a grid of ``cfg.sim.traj_dt_s``.
+
+    The wind is drawn from ``rng`` (default: ``np.random.default_rng(cfg.seed)``), so the same
+    config gives the same trajectory.
+    """
+    rng = np.random.default_rng(cfg.seed) if rng is None else rng
+    dt = cfg.sim.traj_dt_s
+    segs = _segments(cfg)
+    total = sum(s[3] for s in segs)
+    t = np.arange(int(math.floor(total / dt)) + 1) * dt
+    pos = np.empty((len(t), 3))
+    vel = np.zeros((len(t), 3))
+    acc = np.zeros((len(t), 3))
+    phase = np.empty(len(t), dtype=object)
+    t0 = 0.0
+    for k, (ph, p0, u, dur, ev) in enumerate(segs):
+        last = k == len(segs) - 1
+        mask = (t >= t0) & ((t < t0 + dur) | last)
+        tau = t[mask] - t0
+        if ev is None:
+            pos[mask] = p0
+        else:
+            s, v, a = ev(tau)
+            pos[mask] = p0 + s[:, None] * u
+            vel[mask] = v[:, None] * u
+            acc[mask] = a[:, None] * u
+        phase[mask] = ph
+        t0 += dur
+    wp = cfg.wind
+    wind = wind_series(wp, len(t), dt, rng)
+    d = math.radians(wp.direction_deg)
+    mean_wind = np.array([wp.mean_speed_m_s * math.cos(d), wp.mean_speed_m_s * math.sin(d), 0.0])
+    force = drag_force_n(wp, wind, vel)
+    force_mean = drag_force_n(wp, mean_wind[None, :], vel)
+    mass = cfg.drone.total_mass_kg
+    err = hover_error_m(wp, force - force_mean, mass, dt)
+    on_ground = phase == "ground"
+    err[on_ground] = 0.0
+    pos = pos + err
+    pos[:, 2] = np.maximum(pos[:, 2], 0.0)
+    # never let the coil touch a pad while charging
+    chg = phase == "charge"
+    floor = min(0.03, cfg.mission.hover_gap_m)
+    pos[chg, 2] = np.maximum(pos[chg, 2], floor + min(p.z_m for p in cfg.pads))
+    tilt, axis = tilt_from_force(mass, acc, force)
+    tilt[on_ground] = 0.0
+    return Trajectory(t, pos, tilt, phase, axis, wind)

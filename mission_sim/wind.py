@@ -1,0 +1,116 @@
+"""Seeded wind and the hover position error it causes.
+
+* Wind = mean + gusts. Gusts per axis are first-order Gauss-Markov processes (the low-order
+  form of the Dryden turbulence model, MIL-HDBK-1797: variance ``sigma^2``, correlation time
+  ``tau = L / V``), sampled exactly: ``w_k = a w_{k-1} + sigma sqrt(1 - a^2) xi_k``,
+  ``a = exp(-dt/tau)``, started from the stationary distribution. Vertical gusts have half the
+  horizontal sigma.
+* Drag force on the airframe ``F = 0.5 rho Cd S |w - v| (w - v)``.
+* Hover position error: the position-hold loop is a second-order system
+  ``e'' + 2 zeta w_p e' + w_p^2 e = (F - F_mean) / m`` (the mean force is absorbed by the
+  loop's integral action as a steady tilt); discretised once (ZOH) and run with ``lfilter``.
+* Tilt: the thrust vector balances weight, drag and the commanded acceleration,
+  ``n ~ (m a - F_xy, m g)``; the receiver coil's normal is the thrust direction.
+
+Defaults: 3 m/s mean wind (a light breeze, Beaufort 2), gust sigma 0.6 m/s, tau 2 s
+(Dryden low-altitude length scale of order 10-20 m at a few m/s), hold loop 2 rad/s and
+damping 0.8 (typical of multirotor position controllers), Cd S = 0.04 m^2.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal
+
+from .power import G_M_S2
+
+__all__ = ["WindParams", "gust_series", "wind_series", "drag_force_n", "hover_error_m", "tilt_from_force"]
+
+
+@dataclass(frozen=True)
+class WindParams:
+    """Wind and position-hold parameters.
+
+    mean_speed_m_s [m/s], direction_deg (azimuth the wind blows *towards*, from +x, counter-clockwise),
+    gust_sigma_m_s [m/s], gust_tau_s [s], hold_omega_rad_s [rad/s], hold_zeta [-], drag_area_m2 (Cd S) [m^2],
+    air_density_kg_m3.
+    """
+
+    mean_speed_m_s: float = 3.0
+    direction_deg: float = 30.0
+    gust_sigma_m_s: float = 0.6
+    gust_tau_s: float = 2.0
+    hold_omega_rad_s: float = 2.0
+    hold_zeta: float = 0.8
+    drag_area_m2: float = 0.04
+    air_density_kg_m3: float = 1.225
+
+    def __post_init__(self):
+        for name in ("mean_speed_m_s", "gust_sigma_m_s"):
+            v = float(getattr(self, name))
+            if not math.isfinite(v) or v < 0 or v > 30:
+                raise ValueError(f"{name}={v!r} is invalid; valid range: [0, 30] m/s")
+        for name in ("gust_tau_s", "hold_omega_rad_s", "hold_zeta", "drag_area_m2", "air_density_kg_m3"):
+            v = float(getattr(self, name))
+            if not math.isfinite(v) or v <= 0:
+                raise ValueError(f"{name}={v!r} is invalid; valid range: (0, inf)")
+        if not math.isfinite(self.direction_deg):
+            raise ValueError(f"direction_deg={self.direction_deg!r} is invalid; valid range: finite")
+
+
+def gust_series(n: int, dt_s: float, sigma: float, tau_s: float, rng: np.random.Generator) -> np.ndarray:
+    """Stationary first-order Gauss-Markov samples (n,) with std ``sigma`` and correlation time ``tau_s``."""
+    a = math.exp(-dt_s / tau_s)
+    xi = rng.standard_normal(n)
+    xi[0] *= sigma
+    xi[1:] *= sigma * math.sqrt(1.0 - a * a)
+    return signal.lfilter([1.0], [1.0, -a], xi)
+
+
+def wind_series(p: WindParams, n: int, dt_s: float, rng: np.random.Generator) -> np.ndarray:
+    """Wind velocity (n, 3) [m/s] on a uniform grid of step ``dt_s``."""
+    d = math.radians(p.direction_deg)
+    w = np.empty((n, 3))
+    w[:, 0] = p.mean_speed_m_s * math.cos(d) + gust_series(n, dt_s, p.gust_sigma_m_s, p.gust_tau_s, rng)
+    w[:, 1] = p.mean_speed_m_s * math.sin(d) + gust_series(n, dt_s, p.gust_sigma_m_s, p.gust_tau_s, rng)
+    w[:, 2] = gust_series(n, dt_s, 0.5 * p.gust_sigma_m_s, p.gust_tau_s, rng)
+    return w
+
+
+def drag_force_n(p: WindParams, wind_m_s, vel_m_s) -> np.ndarray:
+    """Aerodynamic force on the airframe (n, 3) [N]: ``0.5 rho Cd S |w - v| (w - v)``."""
+    rel = np.asarray(wind_m_s, dtype=float) - np.asarray(vel_m_s, dtype=float)
+    return 0.5 * p.air_density_kg_m3 * p.drag_area_m2 * np.linalg.norm(rel, axis=-1, keepdims=True) * rel
+
+
+def hover_error_m(p: WindParams, force_n: np.ndarray, mass_kg: float, dt_s: float) -> np.ndarray:
+    """Position error (n, 3) [m] of the hold loop driven by a force disturbance (n, 3) [N].
+
+    Pass the force *fluctuation* (total drag minus the drag of the mean wind, which the loop's
+    integral action absorbs).
+    """
+    f = np.asarray(force_n, dtype=float)
+    if len(f) == 0:
+        return np.zeros((0, 3))
+    dev = f / mass_kg
+    w, z = p.hold_omega_rad_s, p.hold_zeta
+    num, den, _ = signal.cont2discrete(([1.0], [1.0, 2 * z * w, w * w]), dt_s, method="zoh")
+    return signal.lfilter(np.ravel(num), den, dev, axis=0)
+
+
+def tilt_from_force(mass_kg: float, accel_m_s2: np.ndarray, force_n: np.ndarray):
+    """Tilt magnitude [rad] and tilt-axis azimuth [rad] of the thrust vector (coil normal).
+
+    The thrust's horizontal part is ``m a_xy - F_xy``; the coil normal leans that way. The axis
+    azimuth follows :mod:`wpt_receiver.coupling`'s convention (normal leans to azimuth axis - pi/2).
+    """
+    a = np.asarray(accel_m_s2, dtype=float)
+    f = np.asarray(force_n, dtype=float)
+    h = mass_kg * a[:, :2] - f[:, :2]
+    v = mass_kg * (G_M_S2 + a[:, 2]) - f[:, 2]
+    tilt = np.arctan2(np.hypot(h[:, 0], h[:, 1]), np.maximum(v, 1e-9))
+    axis = np.arctan2(h[:, 1], h[:, 0]) + 0.5 * math.pi
+    return tilt, axis
