@@ -385,24 +385,16 @@ class MissionCaseRunner:
 
 
 def _policy_context(cfg):
-    """The PolicyContext a mission config implies (assumed link, control period, rated I2)."""
+    """The PolicyContext ``run_mission`` expects for ``cfg``: the receiver's assumed link is the
+    Table I-like model at the nominal hover pose (coil inductances of the coupling model, Lm at
+    ``(0, 0, mission.hover_gap_m)``), ``control_period_s = sim.control_period_s``,
+    ``rated_i2_a = link.rated_i2_a``."""
     from .contract import PolicyContext
 
-    kw = {}
-    link = getattr(cfg, "link", None)
-    if link is not None:
-        kw["link"] = link
-    sim = getattr(cfg, "sim", None)
-    for name in ("control_period_s",):
-        v = getattr(sim, name, None)
-        if v is not None:
-            kw[name] = v
-    for owner in (cfg, getattr(cfg, "mission", None), link):
-        v = getattr(owner, "rated_i2_a", None)
-        if v is not None:
-            kw["rated_i2_a"] = v
-            break
-    return PolicyContext(**kw)
+    model = cfg.coupling.model()
+    lm_h = float(model.lm_h(0.0, 0.0, cfg.mission.hover_gap_m))
+    return PolicyContext(link=cfg.link.link_params(model.l1_h, model.l2_h, lm_h),
+                         control_period_s=cfg.sim.control_period_s, rated_i2_a=cfg.link.rated_i2_a)
 
 
 def _import_factory(spec: str):
