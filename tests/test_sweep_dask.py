@@ -15,6 +15,8 @@ import pyarrow.parquet as pq
 import pytest
 from sweep_toy import ToyRunner, toy_case
 
+import policies
+
 from mission_sim.cli import main
 from mission_sim.study import expand_cases, load_study
 from mission_sim.sweep import CaseStore, dask_client, prepare_study, read_results, run_sweep
@@ -188,3 +190,47 @@ def test_cli_unknown_parameter_key_is_one_line_error_naming_valid_keys(tmp_path,
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "mission.hover_tme_s" in err[0] and "mission.hover_time_s" in err[0]
     assert not (tmp_path / "o").exists()
+
+
+TINY = """
+[study]
+name = "tiny"
+[fixed]
+"pads.0.hover_time_s" = 2.0
+"pads.1.y_m" = 0.0
+"pads.1.x_m" = 20.0
+"mission.land_x_m" = 25.0
+[grid]
+policy = ["step", "model_based"]
+"pads.1.hover_time_s" = [2.0, 8.0, -1.0]
+"""
+
+
+def test_real_missions_on_two_workers_equal_serial_with_physics_orderings(client, tmp_path):
+    (tmp_path / "tiny.toml").write_text(TINY)
+    runner, cases, _ = prepare_study(load_study(tmp_path / "tiny.toml"), policies.make, policies.available())
+    assert len(cases) == 6
+    res = run_sweep(cases, runner, tmp_path / "dask", client=client, progress=False)
+    serial = run_sweep(cases, runner, tmp_path / "serial", progress=False)
+
+    def stable_mission(df):
+        drop = [c for c in df.columns if "wall" in c or c in ("worker", "traceback", "realtime_factor")]
+        return df.drop(columns=drop).sort_values("case_id").reset_index(drop=True)
+
+    pd.testing.assert_frame_equal(stable_mission(res.results), stable_mission(serial.results), check_exact=True)
+    df = res.results
+    # the two cases with a negative hover time fail in config validation, naming the value
+    bad = df[df["pads.1.hover_time_s"] < 0]
+    assert (bad["status"] == "error").all() and len(bad) == 2
+    assert bad["error"].str.contains("hover_time_s=-1.0").all()
+    ok = df[df["status"] == "ok"]
+    assert len(ok) == 4 and res.n_error == 2
+    # every mission closes its energy balance; longer hover-charging gains more flight time;
+    # the step policy overshoots the secondary current, the model-based one stays below rated
+    assert (ok["energy_balance_error_rel"].abs() < 1e-9).all()
+    for pol, d in ok.groupby("policy"):
+        g = d.set_index("pads.1.hover_time_s")["flight_time_gain_s"]
+        assert g[8.0] > g[2.0] > 0, pol
+    peak = ok.groupby("policy")["peak_i2_a"].max()
+    assert peak["step"] > 1.5 * peak["model_based"]
+    assert peak["model_based"] < ok["rated_i2_a"].min()
