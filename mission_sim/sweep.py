@@ -131,7 +131,7 @@ class CaseStore:
             return None
         out = None
         if len(live) > 1:
-            table = pa.Table.from_pandas(self.read(), preserve_index=False)
+            table = _frame_to_table(self.read())
             table = table.replace_schema_metadata({**(table.schema.metadata or {}),
                                                    _ABSORBS_KEY: json.dumps([p.name for p in every]).encode()})
             out = self._write_table(table, f"compact-{time.time_ns():020d}-{uuid.uuid4().hex[:8]}.parquet")
@@ -164,14 +164,20 @@ def _to_scalar(v):
     return json.dumps(v, default=str)
 
 
-def _rows_to_table(rows: Sequence[dict]) -> pa.Table:
-    df = pd.DataFrame([{k: _to_scalar(v) for k, v in r.items()} for r in rows])
-    for col in df.columns:  # columns mixing strings and numbers: store as JSON text
+def _frame_to_table(df: pd.DataFrame) -> pa.Table:
+    """DataFrame -> Arrow table; a column mixing strings and other values is stored as JSON text."""
+    df = df.copy()
+    for col in df.columns:
         if df[col].dtype == object:
             kinds = {type(v) for v in df[col] if v is not None and not (isinstance(v, float) and math.isnan(v))}
             if len(kinds) > 1 and str in kinds:
-                df[col] = [None if v is None else (v if isinstance(v, str) else json.dumps(v)) for v in df[col]]
+                df[col] = [None if v is None or (isinstance(v, float) and math.isnan(v))
+                           else (v if isinstance(v, str) else json.dumps(v)) for v in df[col]]
     return pa.Table.from_pandas(df, preserve_index=False)
+
+
+def _rows_to_table(rows: Sequence[dict]) -> pa.Table:
+    return _frame_to_table(pd.DataFrame([{k: _to_scalar(v) for k, v in r.items()} for r in rows]))
 
 
 def read_results(out_dir) -> pd.DataFrame:
