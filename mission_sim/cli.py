@@ -232,7 +232,8 @@ def _cmd_sweep(args) -> int:
         print(f"study {st.name}: {res.n_cases} cases, {res.n_skipped} already done, {res.n_run} run{rate}, "
               f"{res.n_ok} ok, {res.n_error} failed; results in {args.out / 'cases'}")
         if not table.empty:
-            with pd.option_context("display.width", 200, "display.max_columns", 40, "display.float_format", "{:.4g}".format):
+            with pd.option_context("display.width", 200, "display.max_columns", 40,
+                                   "display.float_format", "{:.4g}".format):
                 print(table.T.to_string())
         if len(errors):
             print("failed cases (first 10):")

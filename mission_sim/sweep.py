@@ -150,7 +150,8 @@ class CaseStore:
             try:
                 fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
-                raise ValueError(f"another sweep is writing to {str(self.out_dir)!r}; wait for it or use another --out") from None
+                raise ValueError(f"another sweep is writing to {str(self.out_dir)!r}; "
+                                 "wait for it or use another --out") from None
             yield self
         finally:
             fh.close()

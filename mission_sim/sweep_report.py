@@ -153,7 +153,8 @@ def _plot_by_policy(df, path) -> str:
     names = sorted(df[POLICY_KEY].astype(str).unique())
     extra = "time_above_rated_s" in df.columns
     fig, axes = plt.subplots(1, 2 if extra else 1, figsize=(10 if extra else 5.5, 4), squeeze=False)
-    for ax, m, unit in ((axes[0, 0], "peak_i2_a", "A"),) + (((axes[0, 1], "time_above_rated_s", "s"),) if extra else ()):
+    panels = [(axes[0, 0], "peak_i2_a", "A")] + ([(axes[0, 1], "time_above_rated_s", "s")] if extra else [])
+    for ax, m, unit in panels:
         data = [pd.to_numeric(df[df[POLICY_KEY].astype(str) == n][m], errors="coerce").dropna().values for n in names]
         ax.boxplot(data, tick_labels=names, showmeans=True)
         for i, d in enumerate(data, start=1):
