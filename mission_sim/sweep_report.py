@@ -163,6 +163,10 @@ def _plot_by_policy(df, path) -> str:
         ax.set_ylabel(f"{m} [{unit}]")
         ax.set_xlabel("policy")
         ax.grid(alpha=0.3, axis="y")
+    if "rated_i2_a" in df.columns and pd.to_numeric(df["rated_i2_a"], errors="coerce").nunique() == 1:
+        rated = float(pd.to_numeric(df["rated_i2_a"]).iloc[0])
+        axes[0, 0].axhline(rated, color="tab:red", ls="--", lw=1, label=f"rated {rated:g} A")
+        axes[0, 0].legend(fontsize=8)
     axes[0, 0].set_title("peak secondary coil current per mission", fontsize=9)
     if extra:
         axes[0, 1].set_title("time with I2 above rated per mission", fontsize=9)
