@@ -145,6 +145,96 @@ def _cmd_coupling(args) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- mission
+def _parse_set(items):
+    import tomllib
+    out = {}
+    for item in items or ():
+        if "=" not in item:
+            raise CliError(f"--set {item!r} is invalid; valid form: KEY=VALUE (e.g. battery.capacity_ah=2.0)")
+        key, text = item.split("=", 1)
+        try:
+            value = tomllib.loads(f"v = {text}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = text
+        out[key.strip()] = value
+    return out
+
+
+def _add_mission(sub):
+    p = sub.add_parser("mission", help="run a flight mission with in-flight charging (the main job)",
+                       description="Simulate a drone mission over charging pads: coupling from the pose, the "
+                                   "WPT link, the SBAR policy, battery and propulsion. Without CONFIG the embedded "
+                                   "default mission runs. Writes the time series (Parquet, CSV), summary.json and "
+                                   "PNG figures to --out.")
+    p.add_argument("config", nargs="?", type=Path, default=None, help="mission TOML (default: embedded default)")
+    p.add_argument("--policy", default="model_based", help="receiver policy (default model_based)")
+    p.add_argument("--out", type=Path, default=Path("out/mission"), help="output folder (default out/mission)")
+    p.add_argument("--format", choices=("table", "json"), default="table")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a config value by dotted key, e.g. --set wind.speed_m_s=6 (repeatable)")
+    p.add_argument("--no-charge", action="store_true", help="never energise the pads (baseline mission)")
+    p.add_argument("--no-plot", action="store_true", help="skip the figures")
+    p.set_defaults(func=_cmd_mission)
+
+
+def _cmd_mission(args) -> int:
+    import tomllib
+
+    from . import config as mconfig
+    from .contract import PolicyContext
+    from .runner import run_mission
+    try:
+        import policies
+    except ImportError as exc:  # pragma: no cover - policies ships with dronewpt
+        raise CliError(f"the policies package is not importable: {exc}") from None
+    if args.config is not None and not args.config.is_file():
+        raise CliError(f"config file {str(args.config)!r} does not exist")
+    text = mconfig.DEFAULT_MISSION_TOML if args.config is None else args.config.read_text("utf-8")
+    try:
+        d = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise CliError(f"{args.config or 'default mission'}: not valid TOML: {exc}") from None
+    overrides = _parse_set(args.set)
+    cfg = mconfig.config_from_dict(mconfig.apply_overrides(d, overrides) if overrides else d)
+    if args.policy not in policies.available():
+        raise CliError(f"--policy {args.policy!r} is invalid; valid values: {', '.join(policies.available())}")
+    model = cfg.coupling.model()
+    assumed = cfg.link.link_params(model.l1_h, model.l2_h, float(model.lm_h(0.0, 0.0, cfg.mission.hover_gap_m)))
+    ctx = PolicyContext(link=assumed, control_period_s=cfg.sim.control_period_s, rated_i2_a=cfg.link.rated_i2_a)
+    pol = policies.make(args.policy, ctx)
+    progress = args.format != "json" and sys.stderr.isatty()
+    res = run_mission(cfg, pol, charge=not args.no_charge, progress=progress)
+    files = [str(f) for f in res.write(args.out, figures=not args.no_plot)]
+    s = res.summary
+    if args.format == "json":
+        print(json.dumps({**s, "files": files}))
+        return 0
+    rows = [
+        ("policy", s["policy"], ""),
+        ("simulated time", f"{s['sim_time_s']:.1f}", "s"),
+        ("wall time", f"{s['wall_s']:.3f}", f"s ({s['realtime_factor']:.0f}x real time)"),
+        ("energy from the pads", f"{s['energy_from_source_j']:.1f}", "J"),
+        ("energy to the battery node", f"{s['energy_to_battery_j']:.1f}", "J"),
+        ("losses (coils + battery)", f"{s['losses_j']:.1f}", f"J ({s['coil_losses_j']:.1f} + {s['battery_losses_j']:.1f})"),
+        ("propulsion energy", f"{s['propulsion_energy_j']:.1f}", "J"),
+        ("energy balance error", f"{s['energy_balance_error_rel']:.2e}", "relative"),
+        ("SoC start -> end", f"{s['initial_soc']:.4f} -> {s['final_soc']:.4f}",
+         f"(without charging {s['final_soc_without_charging']:.4f}; full: {s['battery_full']})"),
+        ("peak I2", f"{s['peak_i2_a']:.2f}", f"A (rated {s['rated_i2_a']:g} A)"),
+        ("time above rated", f"{s['time_above_rated_s'] * 1e3:.2f}", "ms"),
+        ("pad on", f"{s['charge_time_s']:.1f}", "s"),
+        ("flight time gain", f"{s['flight_time_gain_s']:.1f}", "s of hover"),
+        ("steps fine / coarse", f"{s['fine_steps']} / {s['coarse_steps']}", f"({s['fine_windows']} fine windows)"),
+    ]
+    w = max(len(r[0]) for r in rows)
+    for name, val, unit in rows:
+        print(f"{name:<{w}}  {val:>24}  {unit}")
+    for f in files:
+        print(f"wrote: {f}")
+    return 0
+
+
 # ----------------------------------------------------------------------------- sweep
 def _nonneg_int(name):
     def conv(text):
@@ -252,7 +342,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="dronewpt", description="Flight-mission energy simulator for drones "
                                      "that charge wirelessly in flight (WPT link with an SBAR receiver).")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for add in (_add_paper, _add_coupling, _add_sweep):
+    for add in (_add_paper, _add_coupling, _add_mission, _add_sweep):
         add(sub)
     return parser
 

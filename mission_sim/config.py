@@ -135,14 +135,14 @@ class SimConfig:
     i2_noise_a: float = 0.0
     min_fine_s: float = 0.002
     max_fine_s: float = 0.06
-    settle_duty_tol: float = 1e-4
+    settle_duty_tol: float = 1e-5
     duty_event_tol: float = 2e-3
     lm_rel_tol: float = 0.05
     coarse_policy_period_s: float = 1.0
     settle_i2_tol_a: float = 0.01
-    cmd_deadband_a: float = 0.2
-    bms_period_s: float = 2.0
-    tx_off_delay_s: float = 0.03
+    cmd_deadband_a: float = 0.25
+    bms_period_s: float = 4.0
+    tx_off_delay_s: float = 0.025
 
     def __post_init__(self):
         _positive(self, "control_period_s", "traj_dt_s", "flight_dt_s", "min_fine_s", "max_fine_s",

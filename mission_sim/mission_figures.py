@@ -99,8 +99,9 @@ def plot_mission(result, out_dir) -> list[str]:
     ax.set_title(f"secondary current envelope (peak {result.summary['peak_i2_a']:.1f} A)")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
-    if len(i2):
-        kpk = int(np.argmax(i2))
+    fine = ts["fine"].to_numpy(bool) if "fine" in ts else np.ones(len(i2), bool)
+    if np.any(fine):
+        kpk = int(np.flatnonzero(fine)[np.argmax(i2[fine])])  # largest value inside a fine window
         w = (t > t[kpk] - 0.01) & (t < t[kpk] + 0.04)
         az.plot((t[w] - t[kpk]) * 1e3, i2[w], ".-", ms=2, color="tab:red", lw=0.8, label="I2")
         az2 = az.twinx()
@@ -109,7 +110,7 @@ def plot_mission(result, out_dir) -> list[str]:
         az.axhline(rated, color="k", ls="--", lw=0.8)
         az.set_xlabel(f"time after the peak at t = {t[kpk]:.3f} s [ms]")
         az.set_ylabel("I2 [A]")
-        az.set_title("largest transient")
+        az.set_title("largest transient (fine steps)")
         az.grid(alpha=0.3)
     fig.tight_layout()
     paths.append(_save(fig, out / "i2_envelope.png"))

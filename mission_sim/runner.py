@@ -26,12 +26,15 @@ Loop (one drone, one receiver):
 
 **Multi-rate.** *Fine* steps of ``sim.control_period_s`` (the policy's ``control_period_s``: it is
 called once per step) run around every event: pad ramps, command changes, a duty change returned
-by the policy. A fine window lasts at least ``min_fine_s`` and ends when the duty moves less than
+by the policy, fast Lm changes with the pad on. A fine window lasts at least ``min_fine_s`` and
+ends when the SBAR output ``1 - sin(pi d / 2)`` (= V2 / ((4/pi) VL), eq. 9) moves less than
 ``settle_duty_tol`` per step and I2 is within ``settle_i2_tol_a`` of the steady state for the held
-inputs (or after ``max_fine_s``). Otherwise *coarse* steps run to the next trajectory sample
-(Lm, power held: the ZOH step is exact for any length) with the policy called once per coarse
-step and its duty held; if that duty moves by more than ``settle_duty_tol`` a fine window starts.
-With the pad off and nothing pending, samples are merged into steps of up to ``sim.flight_dt_s``.
+inputs (or after ``max_fine_s``); with the pad off it ends once the coil currents have died out.
+Otherwise *coarse* steps run to the next trajectory sample (Lm, power held: the ZOH step is exact
+for any length) with the policy called at most every ``coarse_policy_period_s`` and its duty held
+in between; if that duty moves by more than ``duty_event_tol`` a fine window starts.
+With the pad off and nothing pending, samples are merged into steps of up to ``sim.flight_dt_s``
+and the policy is not called (the SBAR has nothing to do; its duty is held).
 
 Sensor noise: ``sim.i2_noise_a`` (default 0: none) adds seeded Gaussian noise to the i2
 observation only. Peak I2 and time above rated are taken on 4 points per fine step and on the
@@ -45,7 +48,7 @@ import time
 
 import numpy as np
 
-from .battery import Battery, CcCvCharger, held_current_step
+from .battery import Battery, CcCvCharger, _ocv_cell_scalar, held_current_step
 from .contract import normalise_obs
 from .linkstep import LinkStepper
 from .power import hover_power_w
@@ -69,7 +72,7 @@ def _pad_offsets(cfg, traj: Trajectory):
 def _lm_along(cfg, model, traj: Trajectory):
     off, idx = _pad_offsets(cfg, traj)
     lm = np.zeros(len(traj))
-    _, rho_max, z_min, z_max = model._grid
+    rho_max, z_min, z_max = model.table_range_m
     near = (np.hypot(off[:, 0], off[:, 1]) < rho_max) & (off[:, 2] < z_max) & (off[:, 2] > 0.5 * z_min)
     if np.any(near):
         lm[near] = model.lm_h(off[near, 0], off[near, 1], off[near, 2], traj.tilt_rad[near],
@@ -142,7 +145,7 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
     cmd = 0.0
     d = 1.0                 # short mode until told otherwise
     soc, vrc = float(bat.soc[0]), float(bat.v1_v[0])
-    r0 = bp.r0_ohm
+    r0, r1b, n_cells = bp.r0_ohm, bp.r1_ohm, bp.n_series
     tau1 = bp.tau1_s
     last_vl = float(bat.terminal_v(0.0)[0])
     last_ib = 0.0
@@ -155,16 +158,13 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
     t_last_act = -math.inf
     policy.reset(1)
 
-    acc = dict(src=0.0, coil=0.0, rect=0.0, chem=0.0, r0=0.0, r1=0.0, c1=0.0, prop=0.0)
     w0 = st.stored_j(x)
     peak_i2 = 0.0
     above = 0.0
     n_fine = n_coarse = n_windows = n_cut = 0
-    cols = {c: [] for c in ("t_s", "dt_s", "x_m", "y_m", "z_m", "lm_h", "k", "tx_on", "v1_v", "i1_amp_a",
-                            "i2_amp_a", "d_short", "v2_v", "rect_current_a", "battery_v", "battery_current_a",
-                            "soc", "propulsion_w", "charge_cmd_a", "fine", "p_source_w", "p_coil_loss_w",
-                            "p_battery_loss_w")}
-    phase_col = []
+    rows = []
+    phase = traj.phase
+    pos_all = traj.pos_m
 
     def act():
         i2m = x[1] + (sim.i2_noise_a * rng.standard_normal() if sim.i2_noise_a > 0 else 0.0)
@@ -174,15 +174,13 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
 
     def do_step(t0, dt, lm, p_prop, row_k, fine):
         nonlocal x, last_vl, last_ib, last_il, peak_i2, above, soc, vrc
-        c = _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * d))
+        # SBAR fundamental (eq. 9); with I2 <= 0 the diodes block (no power flows back from the battery)
+        c = _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * d)) if x[1] > 0.0 else 0.0
         # battery: mean terminal voltage = A0 + G * i_mean (held-current RC solution); solve VL
         # implicitly with the link so V2, the battery and the propulsion power agree exactly
         frac = tau1 * (1.0 - math.exp(-dt / tau1)) / dt
-        sc = 0.0 if soc < 0.0 else (1.0 if soc > 1.0 else soc)
-        ocv = bp.n_series * (-1.031 * math.exp(-35.0 * sc) + 3.685 + 0.2156 * sc - 0.1178 * sc * sc
-                             + 0.3201 * sc * sc * sc)
-        a0 = ocv + vrc * frac
-        g = r0 + bp.r1_ohm * (1.0 - frac)
+        a0 = n_cells * _ocv_cell_scalar(soc) + vrc * frac
+        g = r0 + r1b * (1.0 - frac)
         lm_eff = lm if lm > 0 else 1e-12
         s0, s1 = st.s2_affine(lm_eff, dt, x, v1)
         alpha = 1.0 - g * c * c * s1 / (2 * dt)
@@ -204,49 +202,20 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
         i_p = p_prop / vl
         i_b = i_l - i_p
         soc, vrc, e_chem, e_r0, e_r1, e_c1 = held_current_step(bp, soc, vrc, i_b, dt)
-        acc["src"] += e_src
-        acc["coil"] += e_coil
-        acc["rect"] += e_rect
-        acc["chem"] += e_chem
-        acc["r0"] += e_r0
-        acc["r1"] += e_r1
-        acc["c1"] += e_c1
-        acc["prop"] += vl * i_p * dt
         x = x1
         if x[1] > peak_i2:
             peak_i2 = x[1]
         if x[1] > rated:
             above += dt / 4 if fine else dt
         last_vl, last_ib, last_il = vl, i_b, i_l
-        pos = traj.pos_m[row_k]
-        cols["t_s"].append(t0 + dt)
-        cols["dt_s"].append(dt)
-        cols["x_m"].append(pos[0])
-        cols["y_m"].append(pos[1])
-        cols["z_m"].append(pos[2])
-        cols["lm_h"].append(lm)
-        cols["k"].append(k_all[row_k])
-        cols["tx_on"].append(v1 > 0)
-        cols["v1_v"].append(v1)
-        cols["i1_amp_a"].append(x[0])
-        cols["i2_amp_a"].append(x[1])
-        cols["d_short"].append(d)
-        cols["v2_v"].append(v2)
-        cols["rect_current_a"].append(i_l)
-        cols["battery_v"].append(vl)
-        cols["battery_current_a"].append(i_b)
-        cols["soc"].append(soc)
-        cols["propulsion_w"].append(vl * i_p)
-        cols["charge_cmd_a"].append(cmd)
-        cols["fine"].append(fine)
-        cols["p_source_w"].append(e_src / dt)
-        cols["p_coil_loss_w"].append(e_coil / dt)
-        cols["p_battery_loss_w"].append((e_r0 + e_r1) / dt)
-        phase_col.append(traj.phase[row_k])
+        rows.append((t0 + dt, dt, row_k, lm, v1, x[0], x[1], d, v2, i_l, vl, i_b, soc, cmd, fine,
+                     e_src, e_coil, e_rect, e_chem, e_r0, e_r1, e_c1, vl * i_p * dt))
 
     def settled(lm):
         if abs(v1 - (v1_nom if tx_on else 0.0)) > 0.0:
             return False
+        if v1 == 0.0:  # pad off: the duty no longer matters once the coil currents have died out
+            return abs(x[0]) < sim.settle_i2_tol_a and abs(x[1]) < sim.settle_i2_tol_a
         c = _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * d))
         wlm = base.omega_rad_s * lm
         det = lk.r1_ohm * lk.r2_ohm + wlm * wlm
@@ -311,9 +280,7 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
                 j += 1
             dt = float(t_all[j] - t_k)
             p_mean = float(np.dot(p_all[k:j], np.diff(t_all[k:j + 1]))) / dt
-            if t_k - t_last_act >= sim.coarse_policy_period_s - 1e-12:
-                d = act()
-                t_last_act = t_k
+            # pad off, nothing pending: the SBAR has nothing to do, the policy is not called
             do_step(t_k, dt, lm, p_mean, k, False)
             n_coarse += 1
             if bar is not None:
@@ -371,7 +338,10 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
                 t += dt
                 if fast_lm and v1 > 0.0:
                     continue
-                if t >= fine_until_min and abs(d - d_prev) < sim.settle_duty_tol and settled(lm_s):
+                # settle on the SBAR's output (V2 / ((4/pi) VL) = 1 - sin(pi d / 2)), not on the duty:
+                # near short mode the duty is ill-conditioned (arcsin) while V2 has settled
+                dv = abs(math.sin(0.5 * math.pi * d) - math.sin(0.5 * math.pi * d_prev))
+                if t >= fine_until_min and (dv < sim.settle_duty_tol or v1 == 0.0) and settled(lm_s):
                     in_fine = False
                 elif t >= fine_deadline and v1 == (v1_nom if tx_on else 0.0):
                     in_fine = False
@@ -387,12 +357,38 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
     if bar is not None:
         bar.close()
 
+    import pandas as pd
+    names = ("t_s", "dt_s", "_row", "lm_h", "v1_v", "i1_amp_a", "i2_amp_a", "d_short", "v2_v", "rect_current_a",
+             "battery_v", "battery_current_a", "soc", "charge_cmd_a", "fine", "e_source_j", "e_coil_loss_j",
+             "e_rectifier_j", "e_battery_chem_j", "e_battery_r0_j", "e_battery_r1_j", "e_battery_c1_j",
+             "e_propulsion_j")
+    arr = np.array(rows, dtype=float).reshape(-1, len(names))
+    df = pd.DataFrame({name: arr[:, j] for j, name in enumerate(names)})
+    df["fine"] = df["fine"].astype(bool)
+    df["_row"] = df["_row"].astype(np.int64)
+    ri = df.pop("_row").to_numpy()
+    pos = pos_all[ri]
+    df.insert(2, "x_m", pos[:, 0])
+    df.insert(3, "y_m", pos[:, 1])
+    df.insert(4, "z_m", pos[:, 2])
+    df.insert(6, "k", df["lm_h"].to_numpy() * inv_sqrt_l1l2)
+    df.insert(7, "tx_on", df["v1_v"].to_numpy() > 0)
+    dts = df["dt_s"].to_numpy()
+    df["propulsion_w"] = df["e_propulsion_j"] / dts
+    df["p_source_w"] = df["e_source_j"] / dts
+    df["p_coil_loss_w"] = df["e_coil_loss_j"] / dts
+    df["p_battery_loss_w"] = (df["e_battery_r0_j"] + df["e_battery_r1_j"]) / dts
+    df["phase"] = pd.Categorical(phase[ri])
+    col = {name: j for j, name in enumerate(names)}
+    acc = {key: math.fsum(arr[:, col[c]].tolist()) for key, c in (
+        ("src", "e_source_j"), ("coil", "e_coil_loss_j"), ("rect", "e_rectifier_j"), ("chem", "e_battery_chem_j"),
+        ("r0", "e_battery_r0_j"), ("r1", "e_battery_r1_j"), ("c1", "e_battery_c1_j"), ("prop", "e_propulsion_j"))}
     dw = st.stored_j(x) - w0
     losses = acc["coil"] + acc["r0"] + acc["r1"]
     lhs = acc["src"]
-    rhs = acc["chem"] + acc["c1"] + dw + losses + acc["prop"]
+    rhs = math.fsum([acc["chem"], acc["c1"], dw, losses, acc["prop"]])
     scale = abs(acc["src"]) + abs(acc["chem"]) + abs(acc["prop"])
-    link_res = acc["src"] - dw - acc["coil"] - acc["rect"]
+    link_res = math.fsum([acc["src"], -dw, -acc["coil"], -acc["rect"]])
     summary = {
         "policy": getattr(policy, "name", type(policy).__name__),
         "charge": bool(charge),
@@ -421,10 +417,6 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
         "coarse_steps": n_coarse,
         "fine_windows": n_windows,
         "fine_windows_cut": n_cut,
-        "charge_time_s": float(np.sum(np.asarray(cols["dt_s"])[np.asarray(cols["tx_on"], dtype=bool)]))
-        if cols["dt_s"] else 0.0,
+        "charge_time_s": float(np.sum(dts[df["tx_on"].to_numpy()])),
     }
-    import pandas as pd
-    df = pd.DataFrame(cols)
-    df["phase"] = pd.Categorical(phase_col)
     return MissionResult(timeseries=df, summary=summary, config=cfg, trajectory=traj)

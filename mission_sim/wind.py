@@ -34,12 +34,12 @@ __all__ = ["WindParams", "gust_series", "wind_series", "drag_force_n", "hover_er
 class WindParams:
     """Wind and position-hold parameters.
 
-    mean_speed_m_s [m/s], direction_deg (azimuth the wind blows *towards*, from +x, counter-clockwise),
+    speed_m_s (mean wind speed) [m/s], direction_deg (azimuth the wind blows *towards*, from +x, counter-clockwise),
     gust_sigma_m_s [m/s], gust_tau_s [s], hold_omega_rad_s [rad/s], hold_zeta [-], drag_area_m2 (Cd S) [m^2],
     air_density_kg_m3.
     """
 
-    mean_speed_m_s: float = 3.0
+    speed_m_s: float = 3.0
     direction_deg: float = 30.0
     gust_sigma_m_s: float = 0.6
     gust_tau_s: float = 2.0
@@ -49,7 +49,7 @@ class WindParams:
     air_density_kg_m3: float = 1.225
 
     def __post_init__(self):
-        for name in ("mean_speed_m_s", "gust_sigma_m_s"):
+        for name in ("speed_m_s", "gust_sigma_m_s"):
             v = float(getattr(self, name))
             if not math.isfinite(v) or v < 0 or v > 30:
                 raise ValueError(f"{name}={v!r} is invalid; valid range: [0, 30] m/s")
@@ -74,8 +74,8 @@ def wind_series(p: WindParams, n: int, dt_s: float, rng: np.random.Generator) ->
     """Wind velocity (n, 3) [m/s] on a uniform grid of step ``dt_s``."""
     d = math.radians(p.direction_deg)
     w = np.empty((n, 3))
-    w[:, 0] = p.mean_speed_m_s * math.cos(d) + gust_series(n, dt_s, p.gust_sigma_m_s, p.gust_tau_s, rng)
-    w[:, 1] = p.mean_speed_m_s * math.sin(d) + gust_series(n, dt_s, p.gust_sigma_m_s, p.gust_tau_s, rng)
+    w[:, 0] = p.speed_m_s * math.cos(d) + gust_series(n, dt_s, p.gust_sigma_m_s, p.gust_tau_s, rng)
+    w[:, 1] = p.speed_m_s * math.sin(d) + gust_series(n, dt_s, p.gust_sigma_m_s, p.gust_tau_s, rng)
     w[:, 2] = gust_series(n, dt_s, 0.5 * p.gust_sigma_m_s, p.gust_tau_s, rng)
     return w
 

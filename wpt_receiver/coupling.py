@@ -247,6 +247,11 @@ class CouplingModel:
         self._table = None
         self._pts, self._tan, self._w = _loop_points(rx, self.n_theta)
 
+    @property
+    def table_range_m(self):
+        """``(rho_max, z_min, z_max)`` [m] of the tabulated pad field (pad frame)."""
+        return self._grid[1:]
+
     # ----------------------------------------------------------------- exact
     def lm_exact_h(self, dx_m, dy_m, dz_m, tilt_rad=0.0, *, n_theta: int | None = None,
                    tilt_axis_rad=math.pi / 2):

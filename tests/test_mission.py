@@ -1,0 +1,228 @@
+"""Mission world: config validation, trajectory limits, exact link energy integrals, the closed loop."""
+
+import json
+import math
+import tomllib
+
+import numpy as np
+import pytest
+
+from mission_sim.config import (DEFAULT_MISSION_TOML, MissionConfig, apply_overrides, config_from_dict,
+                                config_to_dict, load_config)
+from mission_sim.contract import PolicyContext
+from mission_sim.linkstep import LinkStepper
+from mission_sim.power import hover_power_w
+from mission_sim.runner import run_mission
+from mission_sim.trajectory import Trajectory, plan_mission
+from policies import make
+from wpt_receiver import TABLE_I, state_matrices, steady_state, zoh_discretise
+
+
+def policy(cfg, name):
+    return make(name, PolicyContext(control_period_s=cfg.sim.control_period_s, rated_i2_a=cfg.link.rated_i2_a))
+
+
+@pytest.fixture(scope="module")
+def default_runs():
+    cfg = load_config()
+    return cfg, {name: run_mission(cfg, policy(cfg, name)) for name in ("model_based", "step")}
+
+
+# ----------------------------------------------------------------------------- config
+def test_default_config_round_trip_and_package_file():
+    cfg = load_config()
+    assert isinstance(cfg, MissionConfig) and len(cfg.pads) == 2
+    assert config_from_dict(config_to_dict(cfg)) == cfg
+    assert config_from_dict(tomllib.loads(DEFAULT_MISSION_TOML)) == cfg
+    d = apply_overrides(config_to_dict(cfg), {"battery.capacity_ah": 2.0, "pads.1.x_m": 30.0, "seed": 3})
+    c2 = config_from_dict(d)
+    assert c2.battery.capacity_ah == 2.0 and c2.pads[1].x_m == 30.0 and c2.seed == 3
+    assert cfg.battery.capacity_ah == 1.3  # the original is untouched
+
+
+@pytest.mark.parametrize("override, match", [
+    ({"battery.capacity_ah": -1.0}, r"battery\.capacity_ah=-1\.0 is invalid; valid range"),
+    ({"wind.speed_m_s": 99.0}, r"wind\.speed_m_s=99\.0 .*\[0, 30\]"),
+    ({"sim.control_period_s": 0.5}, r"sim\.control_period_s=0\.5 .*valid range"),
+    ({"drone.n_rotors": 2.5}, r"drone\.n_rotors=2\.5 .*integer"),
+    ({"mission.hover_gap_m": "low"}, r"mission\.hover_gap_m='low' .*number"),
+    ({"pads.0.hover_time_s": -5.0}, r"pads\.0\.hover_time_s=-5\.0 .*valid range"),
+])
+def test_config_errors_name_the_key_value_and_range(override, match):
+    d = apply_overrides(config_to_dict(load_config()), override)
+    with pytest.raises(ValueError, match=match):
+        config_from_dict(d)
+
+
+def test_unknown_keys_are_named():
+    d = config_to_dict(load_config())
+    d["battery"]["capacity_mah"] = 1300
+    with pytest.raises(ValueError, match=r"battery\.capacity_mah is not a valid key"):
+        config_from_dict(d)
+    with pytest.raises(ValueError, match="'wind.speed' is invalid"):
+        apply_overrides(config_to_dict(load_config()), {"wind.speed": 1.0})
+    with pytest.raises(ValueError, match="valid pad indices: 0..1"):
+        apply_overrides(config_to_dict(load_config()), {"pads.5.x_m": 1.0})
+
+
+# ----------------------------------------------------------------------------- trajectory
+def test_trajectory_limits_phases_and_seeded_wind():
+    calm = config_from_dict(apply_overrides(config_to_dict(load_config()),
+                                            {"wind.speed_m_s": 0.0, "wind.gust_sigma_m_s": 0.0}))
+    tr = plan_mission(calm)
+    v = tr.velocity_m_s()
+    m = calm.mission
+    assert np.max(np.hypot(v[:, 0], v[:, 1])) <= m.cruise_speed_m_s * (1 + 1e-6)
+    assert np.max(v[:, 2]) <= m.climb_rate_m_s * (1 + 1e-6) and np.min(v[:, 2]) >= -m.descent_rate_m_s * (1 + 1e-6)
+    a = np.diff(v, axis=0) / np.diff(tr.t_s)[:, None]
+    assert np.max(np.linalg.norm(a, axis=1)) <= m.max_accel_m_s2 * 1.05
+    order = [p for i, p in enumerate(tr.phase) if i == 0 or p != tr.phase[i - 1]]
+    assert order == ["takeoff", "transit", "approach", "charge", "depart", "transit", "approach", "charge",
+                     "depart", "transit", "land", "ground"]
+    chg = tr.phase == "charge"
+    assert np.allclose(tr.pos_m[chg & (tr.pos_m[:, 0] < 20)], [0, 0, m.hover_gap_m])
+    assert np.sum(chg) * calm.sim.traj_dt_s == pytest.approx(60 + 120, abs=2 * calm.sim.traj_dt_s)
+    # wind: seeded, hover error of centimetres, Lm fluctuates while charging
+    cfg = load_config()
+    t1, t2 = plan_mission(cfg), plan_mission(cfg)
+    np.testing.assert_array_equal(t1.pos_m, t2.pos_m)
+    err = t1.pos_m[chg & (t1.pos_m[:, 0] < 20)] - [0, 0, m.hover_gap_m]
+    assert 0.005 < np.std(err[:, 0]) < 0.2
+    rep = Trajectory.from_samples(t1.t_s, t1.pos_m)
+    assert set(rep.phase) <= {"hover", "flight"} and np.any(rep.phase == "hover")
+
+
+# ----------------------------------------------------------------------------- link step
+def test_link_stepper_matches_zoh_and_brute_force_energy_integrals():
+    p = TABLE_I
+    st = LinkStepper(p.l1_h, p.l2_h, p.r1_ohm, p.r2_ohm, p.omega_rad_s)
+    a, b = state_matrices(p)
+    for dt in (5e-5, 3e-3):
+        ad, bd = zoh_discretise(a, b, dt)
+        (d00, d01, d10, d11), (b00, b01, b10, b11), _, _ = st.disc(p.lm_h, dt)
+        np.testing.assert_allclose([[d00, d01], [d10, d11]], ad, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose([[b00, b01], [b10, b11]], bd, rtol=1e-12, atol=1e-15)
+    # energies of one 2 ms step from rest in RM against 20000 sub-steps (trapezoid)
+    x0, v1, v2, dt = (0.0, 0.0), p.v1_amp_v, 0.6 * p.v2_rm_amp_v, 2e-3
+    x1, e_src, e_coil, e_rect, s2 = st.step(p.lm_h, dt, x0, v1, v2)
+    n = 20000
+    h = dt / n
+    ad, bd = zoh_discretise(a, b, h)
+    xs = np.empty((n + 1, 2))
+    xs[0] = x0
+    u = np.array([v1, v2])
+    for k in range(n):
+        xs[k + 1] = ad @ xs[k] + bd @ u
+    trap = lambda y: h * (y.sum() - 0.5 * (y[0] + y[-1]))  # noqa: E731
+    np.testing.assert_allclose(x1, xs[-1], rtol=1e-9)
+    assert e_src == pytest.approx(0.5 * v1 * trap(xs[:, 0]), rel=1e-6)
+    assert e_rect == pytest.approx(0.5 * v2 * trap(xs[:, 1]), rel=1e-6)
+    assert e_coil == pytest.approx(0.5 * trap(p.r1_ohm * xs[:, 0] ** 2 + p.r2_ohm * xs[:, 1] ** 2), rel=1e-6)
+    # the balance of the envelope model: source = dW + losses + rectifier, W = (L1 I1^2 + L2 I2^2) / 2
+    assert e_src == pytest.approx(st.stored_j(x1) + e_coil + e_rect, rel=1e-12)
+    # long step lands on the closed-form steady state
+    x_long = st.step(p.lm_h, 1.0, x0, v1, v2)[0]
+    np.testing.assert_allclose(x_long, steady_state(p, v2), rtol=1e-9)
+
+
+# ----------------------------------------------------------------------------- closed loop
+def test_default_mission_energy_closes_and_summary_is_complete(default_runs, tmp_path):
+    cfg, runs = default_runs
+    for res in runs.values():
+        s = res.summary
+        for key in ("sim_time_s", "wall_s", "energy_from_source_j", "energy_to_battery_j", "losses_j",
+                    "propulsion_energy_j", "energy_balance_error_rel", "final_soc", "peak_i2_a",
+                    "time_above_rated_s", "flight_time_gain_s"):
+            assert key in s and np.isfinite(s[key])
+        assert s["energy_balance_error_rel"] <= 1e-9
+        assert s["link_balance_error_rel"] <= 1e-9
+        ts = res.timeseries
+        # battery node: rectifier energy per step = VL * I_L * dt (the implicit VL is consistent)
+        np.testing.assert_allclose(ts["e_rectifier_j"], ts["battery_v"] * ts["rect_current_a"] * ts["dt_s"],
+                                   rtol=1e-9, atol=1e-12)
+        assert math.isclose(ts["dt_s"].sum(), s["sim_time_s"], rel_tol=1e-9)
+        # something substantial happened: pads delivered energy, propulsion dominated, battery charged to full
+        assert s["energy_from_source_j"] > 1e4 and s["propulsion_energy_j"] > 1e4
+        assert s["battery_full"] and s["final_soc"] > s["final_soc_without_charging"]
+    files = runs["model_based"].write(tmp_path)
+    names = {f.name for f in files}
+    assert {"timeseries.parquet", "timeseries.csv", "summary.json", "i2_envelope.png", "lm.png", "soc.png",
+            "power.png", "trajectory.png"} <= names
+    assert json.loads((tmp_path / "summary.json").read_text())["final_soc"] == runs["model_based"].summary["final_soc"]
+
+
+def test_policies_ordering_and_rated_current(default_runs):
+    cfg, runs = default_runs
+    mb, st = runs["model_based"].summary, runs["step"].summary
+    rated = cfg.link.rated_i2_a
+    # the plain mode switch (step) overshoots past the rating at RM -> SM; the inverse model does not
+    assert st["peak_i2_a"] > 1.5 * rated > rated > mb["peak_i2_a"]
+    assert st["time_above_rated_s"] > 0 and mb["time_above_rated_s"] == 0.0
+    ts = runs["model_based"].timeseries
+    on = ts["v1_v"] == ts["v1_v"].max()
+    # pad gating: energised only above the coupling threshold; steady I2 there ~ V1/(w Lm) < rated
+    assert ts["k"][on].min() >= cfg.coupling.tx_min_k
+    # at settled coarse rows the envelope equals the closed-form steady state for the held inputs
+    p = TABLE_I
+    co = ts[on & ~ts["fine"]]
+    i2_ss = steady_state(p, co["v2_v"].to_numpy(), lm_h=co["lm_h"].to_numpy())[1]
+    assert np.max(np.abs(co["i2_amp_a"].to_numpy() - i2_ss)) < 0.05
+
+
+def test_flight_time_gain_definition(default_runs):
+    cfg, runs = default_runs
+    s = runs["model_based"].summary
+    base = run_mission(cfg, policy(cfg, "model_based"), charge=False).summary
+    assert base["energy_from_source_j"] == 0.0 and base["flight_time_gain_s"] == 0.0
+    assert base["final_soc"] == pytest.approx(s["final_soc_without_charging"], rel=1e-12)
+    e = cfg.battery.usable_energy_j
+    gain = (e(s["final_soc"]) - e(base["final_soc"])) / hover_power_w(cfg.drone)
+    assert s["flight_time_gain_s"] == pytest.approx(gain, rel=1e-12)
+    # roughly: the chemical energy the pads put in, in seconds of hover
+    assert s["flight_time_gain_s"] == pytest.approx(
+        (s["battery_chem_delta_j"] - base["battery_chem_delta_j"]) / hover_power_w(cfg.drone), rel=0.05)
+
+
+def test_gusty_wind_gates_the_pad_and_multirate_matches_all_fine():
+    base = config_to_dict(load_config())
+    short = {"mission.start_x_m": -1.0, "mission.cruise_altitude_m": 1.0, "mission.land_x_m": 1.0,
+             "pads.0.hover_time_s": 0.6, "battery.initial_soc": 0.5, "sim.traj_dt_s": 0.05}
+    d = apply_overrides(base, short)
+    d["pads"] = d["pads"][:1]
+    cfg = config_from_dict(d)
+    mr = run_mission(cfg, policy(cfg, "model_based"))
+    fine_cfg = config_from_dict(apply_overrides(config_to_dict(cfg), {"sim.settle_duty_tol": 1e-300,
+                                                                      "sim.max_fine_s": 1e9}))
+    allfine = run_mission(fine_cfg, policy(fine_cfg, "model_based"))
+    a, b = mr.summary, allfine.summary
+    assert b["coarse_steps"] < a["coarse_steps"] and b["fine_steps"] > 5 * a["fine_steps"]
+    assert a["energy_from_source_j"] == pytest.approx(b["energy_from_source_j"], rel=2e-3)
+    assert a["energy_to_battery_j"] == pytest.approx(b["energy_to_battery_j"], rel=2e-3)
+    assert a["peak_i2_a"] == pytest.approx(b["peak_i2_a"], rel=1e-3)
+    assert a["final_soc"] == pytest.approx(b["final_soc"], rel=1e-5)
+    assert b["energy_balance_error_rel"] < 1e-9
+    # strong gusts: the coupling drops below the threshold, the pad switches off and on again
+    gust = config_from_dict(apply_overrides(d, {"wind.gust_sigma_m_s": 3.0, "wind.speed_m_s": 6.0,
+                                                "pads.0.hover_time_s": 15.0, "sim.traj_dt_s": 0.1}))
+    g = run_mission(gust, policy(gust, "model_based"))
+    ts = g.timeseries
+    on = ts["tx_on"].to_numpy()
+    assert np.sum(np.diff(on.astype(int)) == 1) >= 2  # switched on more than once
+    assert ts["k"][ts["v1_v"] == ts["v1_v"].max()].min() >= gust.coupling.tx_min_k
+    assert g.summary["energy_balance_error_rel"] < 1e-9
+
+
+def test_replayed_trajectory_runs_through_the_same_loop():
+    cfg = load_config()
+    t = np.arange(0, 12.0, 0.1)
+    pos = np.zeros((len(t), 3))
+    pos[:, 2] = np.where(t < 2, 2.0 - 0.9 * t, cfg.mission.hover_gap_m)  # descend onto pad 0, then hover
+    pos[:, 2] = np.maximum(pos[:, 2], cfg.mission.hover_gap_m)
+    pos[:, 0] = 0.02 * np.sin(t)
+    tr = Trajectory.from_samples(t, pos)
+    res = run_mission(cfg, policy(cfg, "ramp"), trajectory=tr)
+    s = res.summary
+    assert s["charge_time_s"] > 8 and s["energy_from_source_j"] > 500
+    assert s["energy_balance_error_rel"] < 1e-9 and s["flight_time_gain_s"] > 0
+    with pytest.raises(ValueError, match="strictly increasing"):
+        Trajectory.from_samples(t[::-1], pos)
