@@ -64,6 +64,8 @@ TOY = """
 [study]
 name = "toy"
 runner = "sweep_toy:factory"
+[fixed]
+delay_s = 0.01
 [grid]
 "mission.hover_time_s" = [5.0, 10.0, 20.0]
 "pads.1.x_m" = [20.0, 60.0]
