@@ -311,7 +311,7 @@ def _cmd_sweep(args) -> int:
     if not table.empty:
         table.to_csv(args.out / "summary.csv")
     counts = {"study": st.name, "out": str(args.out), "cases": res.n_cases, "skipped": res.n_skipped,
-              "run": res.n_run, "ok": res.n_ok, "errors": res.n_error, "wall_s": round(res.wall_s, 3),
+              "run": res.n_run, "ok": res.n_ok, "errors": res.n_error, "missing": res.n_missing, "wall_s": round(res.wall_s, 3),
               "cases_per_s": None if res.n_run == 0 else round(res.cases_per_s, 3)}
     if args.format == "json":
         summary = json.loads(table.reset_index().to_json(orient="records")) if not table.empty else []
@@ -330,6 +330,10 @@ def _cmd_sweep(args) -> int:
             print(errors.to_string(index=False, max_colwidth=120))
         for f in figs:
             print(f"figure: {f}")
+    if res.n_missing:
+        print(f"dronewpt sweep: {res.n_missing} of {res.n_cases} cases did not finish (tasks lost); "
+              "run the same command again to resume", file=sys.stderr)
+        return 1
     if res.n_error:
         print(f"dronewpt sweep: {res.n_error} of {res.n_cases} cases failed (stored with status 'error')",
               file=sys.stderr)

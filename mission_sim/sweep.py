@@ -233,12 +233,17 @@ class SweepResult:
     n_run: int
     n_ok: int
     n_error: int
-    wall_s: float
+    wall_s: float  # the whole call (includes the cluster start-up when ``client_factory`` is used)
     results: pd.DataFrame = field(repr=False)
 
     @property
     def cases_per_s(self) -> float:
         return self.n_run / self.wall_s if self.wall_s > 0 else math.nan
+
+    @property
+    def n_missing(self) -> int:
+        """Cases of the study not in the store (interrupted, or their tasks were lost)."""
+        return self.n_cases - self.n_ok - self.n_error
 
 
 def run_sweep(cases: Sequence[Case], run_case: RunCase, out_dir, *, client=None, client_factory=None,
@@ -291,7 +296,13 @@ def run_sweep(cases: Sequence[Case], run_case: RunCase, out_dir, *, client=None,
 
 
 def _run_dask(client, todo: Sequence[Case], run_case: RunCase, store: CaseStore, bar) -> int:
-    from distributed import as_completed
+    """Submit ``todo``, store results batch by batch as they complete; returns the number stored.
+
+    A task that fails outside the runner is stored as an error only if it killed its workers
+    (``KilledWorker``: the case itself is the likely cause). Other task failures (cancelled, lost
+    scheduler) are not stored, so a re-run retries those cases.
+    """
+    from distributed import KilledWorker, as_completed
 
     if not todo:
         return 0
@@ -302,7 +313,11 @@ def _run_dask(client, todo: Sequence[Case], run_case: RunCase, store: CaseStore,
         futures[f.key] = (f, c)
     n = n_err = 0
     try:
-        for batch in as_completed([f for f, _ in futures.values()], with_results=True, raise_errors=False).batches():
+        # loop=client.loop: as_completed would otherwise use the *default* client's loop, which a
+        # failed Client(...) elsewhere in the process can leave pointing at a dead loop (hang)
+        done_iter = as_completed([f for f, _ in futures.values()], loop=client.loop, with_results=True,
+                                 raise_errors=False)
+        for batch in done_iter.batches():
             rows = []
             for fut, res in batch:
                 case = futures[fut.key][1]
@@ -311,9 +326,11 @@ def _run_dask(client, todo: Sequence[Case], run_case: RunCase, store: CaseStore,
                     if exc is None:
                         try:
                             exc = fut.exception(timeout=10)
-                        except Exception as e:  # noqa: BLE001 - cancelled / lost: record what we know
+                        except Exception as e:  # noqa: BLE001 - cancelled / lost
                             exc = e
-                    res = _infrastructure_error(case, exc or RuntimeError(f"task {fut.status}"))
+                    if not isinstance(exc, KilledWorker):
+                        continue  # not the case's fault: left out of the store, retried on re-run
+                    res = _infrastructure_error(case, exc)
                 rows.append(_row(case, res))
             store.write(rows)
             n += len(rows)
@@ -334,7 +351,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, *, con
 
     if scheduler is not None:
         try:
-            client = Client(scheduler, timeout=connect_timeout_s)
+            client = Client(scheduler, timeout=connect_timeout_s, set_as_default=False)
         except Exception as exc:  # noqa: BLE001 - address errors come as OSError, TimeoutError, ValueError, ...
             msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             raise ValueError(f"--scheduler {scheduler!r}: cannot connect to a Dask scheduler ({msg})") from None
@@ -349,7 +366,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, *, con
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                            silence_logs=logging.ERROR)
     try:
-        client = Client(cluster)
+        client = Client(cluster, set_as_default=False)
         try:
             yield client
         finally:
