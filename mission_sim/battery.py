@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["BatteryParams", "ocv_cell_v", "ocv_cell_energy_v", "held_current_step", "Battery", "StepEnergies", "CcCvParams",
+__all__ = ["BatteryParams", "ocv_cell_v", "ocv_cell_energy_v", "held_current_step", "scalar_stepper", "Battery", "StepEnergies", "CcCvParams",
            "CcCvCharger"]
 
 
@@ -114,22 +114,35 @@ def _ocv_cell_scalar(s: float) -> float:
     return -1.031 * math.exp(-35.0 * s) + 3.685 + 0.2156 * s - 0.1178 * s * s + 0.3201 * s * s * s
 
 
-def held_current_step(p: BatteryParams, soc: float, v1_v: float, current_a: float, dt_s: float):
+def scalar_stepper(p: BatteryParams):
     """Scalar (pure Python, for hot loops) version of :meth:`Battery.step` for one battery.
 
-    Returns ``(soc1, v1_1, chem_j, r0_loss_j, r1_loss_j, c1_delta_j)``; same formulas as the batched step.
+    Returns ``step(soc, v1_v, current_a, dt_s) -> (soc1, v1_1, chem_j, r0_loss_j, r1_loss_j,
+    c1_delta_j, mean_terminal_v)`` with the constants of ``p`` bound; same formulas as the
+    batched step (exact for the held current; OCV held at its start-of-step value).
     """
-    r1, tau = p.r1_ohm, p.tau1_s
-    e = math.exp(-dt_s / tau)
-    i = current_a
-    vinf = r1 * i
-    dv = v1_v - vinf
-    int_v2 = vinf * vinf * dt_s + 2.0 * vinf * dv * tau * (1.0 - e) + dv * dv * 0.5 * tau * (1.0 - e * e)
-    ocv = p.n_series * _ocv_cell_scalar(soc)
-    dq = i * dt_s
-    v1n = vinf + dv * e
-    return (soc + dq / p.capacity_c, v1n, ocv * dq, p.r0_ohm * i * i * dt_s, int_v2 / r1,
-            0.5 * p.c1_f * (v1n * v1n - v1_v * v1_v))
+    r0, r1, tau, c1 = p.r0_ohm, p.r1_ohm, p.tau1_s, p.c1_f
+    n_cells, cap = p.n_series, p.capacity_c
+    exp = math.exp
+
+    def step(soc, v1_v, i, dt_s):
+        e = exp(-dt_s / tau)
+        vinf = r1 * i
+        dv = v1_v - vinf
+        int_v = vinf * dt_s + dv * tau * (1.0 - e)
+        int_v2 = vinf * vinf * dt_s + 2.0 * vinf * dv * tau * (1.0 - e) + dv * dv * 0.5 * tau * (1.0 - e * e)
+        s = 0.0 if soc < 0.0 else (1.0 if soc > 1.0 else soc)
+        ocv = n_cells * (-1.031 * exp(-35.0 * s) + 3.685 + 0.2156 * s - 0.1178 * s * s + 0.3201 * s * s * s)
+        dq = i * dt_s
+        v1n = vinf + dv * e
+        return (soc + dq / cap, v1n, ocv * dq, r0 * i * i * dt_s, int_v2 / r1, 0.5 * c1 * (v1n * v1n - v1_v * v1_v),
+                ocv + r0 * i + int_v / dt_s)
+    return step
+
+
+def held_current_step(p: BatteryParams, soc: float, v1_v: float, current_a: float, dt_s: float):
+    """One scalar battery step (see :func:`scalar_stepper`); returns its 7-tuple."""
+    return scalar_stepper(p)(soc, v1_v, current_a, dt_s)
 
 
 @dataclass

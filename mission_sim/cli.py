@@ -227,6 +227,8 @@ def _cmd_mission(args) -> int:
         ("flight time gain", f"{s['flight_time_gain_s']:.1f}", "s of hover"),
         ("steps fine / coarse", f"{s['fine_steps']} / {s['coarse_steps']}", f"({s['fine_windows']} fine windows)"),
     ]
+    if s.get("battery_depleted"):
+        rows.append(("WARNING", "battery depleted", f"(min SoC {s['min_soc']:.3f}; OCV held at its SoC = 0 value)"))
     w = max(len(r[0]) for r in rows)
     for name, val, unit in rows:
         print(f"{name:<{w}}  {val:>24}  {unit}")

@@ -99,9 +99,13 @@ class LinkStepper:
             self._lyap[lm_h] = li
         return li
 
-    def step(self, lm_h, dt_s, x0, v1, v2):
-        """Advance ``x0 = (I1, I2)``; returns ``(x1, e_src_j, e_coil_j, e_rect_j, int_i2)``."""
-        (d00, d01, d10, d11), (bd00, bd01, bd10, bd11), (i00, i01, i10, i11), _ = self.disc(lm_h, dt_s)
+    def step(self, lm_h, dt_s, x0, v1, v2, disc=None):
+        """Advance ``x0 = (I1, I2)``; returns ``(x1, e_src_j, e_coil_j, e_rect_j, int_i2)``.
+
+        ``disc`` may pass ``self.disc(lm_h, dt_s)`` when the caller already has it.
+        """
+        (d00, d01, d10, d11), (bd00, bd01, bd10, bd11), (i00, i01, i10, i11), _ = \
+            self.disc(lm_h, dt_s) if disc is None else disc
         a0, a1 = x0
         y0 = d00 * a0 + d01 * a1 + bd00 * v1 + bd01 * v2
         y1 = d10 * a0 + d11 * a1 + bd10 * v1 + bd11 * v2

@@ -48,7 +48,7 @@ import time
 
 import numpy as np
 
-from .battery import Battery, CcCvCharger, _ocv_cell_scalar, held_current_step
+from .battery import Battery, CcCvCharger, _ocv_cell_scalar, scalar_stepper
 from .contract import normalise_obs
 from .linkstep import LinkStepper
 from .power import hover_power_w
@@ -98,9 +98,11 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
         res.summary["flight_time_gain_s"] = flight_time_gain_s(cfg, res.summary["final_soc"],
                                                                base.summary["final_soc"])
         res.summary["final_soc_without_charging"] = base.summary["final_soc"]
+        res.summary["battery_depleted_without_charging"] = base.summary["battery_depleted"]
     else:
         res.summary["flight_time_gain_s"] = 0.0
         res.summary["final_soc_without_charging"] = res.summary["final_soc"]
+        res.summary["battery_depleted_without_charging"] = res.summary["battery_depleted"]
     res.summary["wall_s"] = time.perf_counter() - wall0
     res.summary["realtime_factor"] = res.summary["sim_time_s"] / max(res.summary["wall_s"], 1e-12)
     return res
@@ -108,7 +110,8 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
 
 def flight_time_gain_s(cfg, final_soc_charged: float, final_soc_uncharged: float) -> float:
     """Extra hover time [s] the charged mission ends with: the difference of the usable chemical
-    energy left (``n Q int_0^SoC OCV``) divided by the electrical hover power."""
+    energy left (``n Q int_0^SoC OCV``, SoC clipped into [0, 1]: a depleted baseline counts as 0)
+    divided by the electrical hover power."""
     e = cfg.battery.usable_energy_j
     return float((e(final_soc_charged) - e(final_soc_uncharged)) / hover_power_w(cfg.drone))
 
@@ -147,6 +150,7 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
     soc, vrc = float(bat.soc[0]), float(bat.v1_v[0])
     r0, r1b, n_cells = bp.r0_ohm, bp.r1_ohm, bp.n_series
     tau1 = bp.tau1_s
+    bat_step = scalar_stepper(bp)
     last_vl = float(bat.terminal_v(0.0)[0])
     last_ib = 0.0
     last_il = 0.0
@@ -182,13 +186,17 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
         a0 = n_cells * _ocv_cell_scalar(soc) + vrc * frac
         g = r0 + r1b * (1.0 - frac)
         lm_eff = lm if lm > 0 else 1e-12
-        s0, s1 = st.s2_affine(lm_eff, dt, x, v1)
+        dsc = st.disc(lm_eff, dt)
+        m10, m11, g1, s1 = dsc[3]
+        s0 = m10 * x[0] + m11 * x[1] + g1 * v1
         alpha = 1.0 - g * c * c * s1 / (2 * dt)
         beta = a0 + g * c * s0 / (2 * dt)
         disc = beta * beta - 4 * alpha * g * p_prop
         if disc < 0:
-            raise ValueError(f"battery cannot supply {p_prop:.1f} W at t={t0:.2f} s (SoC {soc:.3f}); "
-                             f"valid: propulsion power below {beta * beta / (4 * alpha * g):.1f} W")
+            raise ValueError(f"the battery cannot supply the propulsion power {p_prop:.1f} W at t={t0:.2f} s "
+                             f"(SoC {soc:.3f}, phase {traj.phase[row_k]}): valid range: below its maximum "
+                             f"{beta * beta / (4 * alpha * g):.1f} W; lighten the drone (drone.mass_kg, "
+                             f"drone.payload_kg) or use a bigger battery (battery.n_series, battery.capacity_ah)")
         vl = (beta + math.sqrt(disc)) / (2 * alpha)
         v2 = c * vl
         if fine:
@@ -197,13 +205,13 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
                     peak_i2 = i2s
                 if i2s > rated:
                     above += dt / 4
-        x1, e_src, e_coil, e_rect, int_i2 = st.step(lm_eff, dt, x, v1, v2)
+        x1, e_src, e_coil, e_rect, int_i2 = st.step(lm_eff, dt, x, v1, v2, dsc)
         i_l = 0.5 * c * int_i2 / dt
         i_p = p_prop / vl
         i_b = i_l - i_p
-        soc, vrc, e_chem, e_r0, e_r1, e_c1 = held_current_step(bp, soc, vrc, i_b, dt)
+        soc, vrc, e_chem, e_r0, e_r1, e_c1, _ = bat_step(soc, vrc, i_b, dt)
         x = x1
-        if x[1] > peak_i2:
+        if x1[1] > peak_i2:
             peak_i2 = x[1]
         if x[1] > rated:
             above += dt / 4 if fine else dt
@@ -409,6 +417,8 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
         "initial_soc": float(bp.initial_soc),
         "final_soc": float(soc),
         "battery_full": bool(charger.full[0]),
+        "min_soc": float(min(df["soc"].min(), bp.initial_soc)) if len(df) else float(bp.initial_soc),
+        "battery_depleted": bool(len(df) and df["soc"].min() < 0.0),
         "peak_i2_a": peak_i2,
         "rated_i2_a": rated,
         "time_above_rated_s": above,

@@ -101,3 +101,17 @@ def test_gusts_are_stationary_markov_and_hover_error_is_seeded():
     # tilt: thrust balances a horizontal drag of m g -> 45 degrees, leaning against the force
     tilt, axis = tilt_from_force(1.0, np.zeros((1, 3)), np.array([[G_M_S2, 0.0, 0.0]]))
     assert tilt[0] == pytest.approx(math.pi / 4) and math.sin(axis[0] - math.pi / 2) == pytest.approx(0, abs=1e-12)
+
+
+def test_scalar_stepper_equals_batched_step():
+    from mission_sim.battery import scalar_stepper
+    p = BatteryParams()
+    b = Battery(p, n=1, soc=0.4)
+    b.v1_v[:] = 0.03
+    out = scalar_stepper(p)(0.4, 0.03, -7.5, 2.5)
+    vt = b.mean_terminal_v(-7.5, 2.5)[0]
+    e = b.step(-7.5, 2.5)
+    np.testing.assert_allclose(out[:6], [b.soc[0], b.v1_v[0], e.chem_j[0], e.r0_loss_j[0], e.r1_loss_j[0],
+                                         e.c1_delta_j[0]], rtol=1e-13)
+    assert out[6] == pytest.approx(vt, rel=1e-13)
+    assert out[6] * -7.5 * 2.5 == pytest.approx(sum(out[2:6]), rel=1e-12)
