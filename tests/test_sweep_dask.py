@@ -175,6 +175,17 @@ def test_kill_and_resume_every_case_exactly_once_and_equal_to_serial(tmp_path):
     pd.testing.assert_frame_equal(stable(read_results(out)), stable(serial.results), check_exact=True)
 
 
+def test_cli_runs_on_an_existing_cluster_given_its_scheduler_address(client, tmp_path, capsys):
+    study_path = write_study(tmp_path / "s.toml", '[study]\nrunner = "sweep_toy:factory"\n'
+                                                  '[grid]\n"mission.hover_time_s" = [1.0, 2.0, 3.0, 4.0]\n')
+    rc = main(["sweep", str(study_path), "--out", str(tmp_path / "o"), "--scheduler", client.scheduler.address,
+               "--no-plot", "--no-progress", "--format", "json"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0 and (out["run"], out["ok"]) == (4, 4)
+    pids = set(client.run(os.getpid).values())
+    assert set(read_results(tmp_path / "o")["worker_pid"]) <= pids  # ran on that cluster's workers
+
+
 def test_cli_bad_scheduler_is_one_line_error(tmp_path, capsys):
     study_path = write_study(tmp_path / "s.toml", '[study]\nrunner = "sweep_toy:factory"\n')
     for addr in ("tcp://127.0.0.1:9", "not an address"):
