@@ -1,7 +1,7 @@
 """Study files for parameter sweeps: TOML schema, case expansion (grid x Monte Carlo), case identity.
 
 A study names a base mission and the parameters to vary. Parameter keys are the dotted override
-keys of :func:`mission_sim.config.apply_overrides` (``"mission.hover_time_s"``, ``"pads.1.x_m"``,
+keys of :func:`mission_sim.config.apply_overrides` (``"pads.1.hover_time_s"``, ``"pads.1.x_m"``,
 ``"wind.speed_m_s"``, ``"battery.capacity_ah"``, ``"seed"``, ...) plus the special key
 ``policy`` (a name for ``policies.make``; default ``"model_based"``)::
 
@@ -11,10 +11,10 @@ keys of :func:`mission_sim.config.apply_overrides` (``"mission.hover_time_s"``, 
     # runner = "pkg.mod:factory"   # optional; default: the mission runner (see mission_sim.sweep)
 
     [fixed]                   # applied to every case
-    "sim.duration_s" = 60.0
+    "pads.0.hover_time_s" = 30.0
 
     [grid]                    # full Cartesian product
-    "mission.hover_time_s" = [10.0, 20.0, 40.0]
+    "pads.1.hover_time_s" = [10.0, 20.0, 40.0]
     "pads.1.x_m" = {linspace = [20.0, 60.0, 3]}   # = [20.0, 40.0, 60.0]
     policy = ["step", "model_based"]
 
@@ -23,11 +23,11 @@ keys of :func:`mission_sim.config.apply_overrides` (``"mission.hover_time_s"``, 
     seed = 1
     [monte_carlo.params]
     "wind.speed_m_s" = {uniform = [0.0, 6.0]}
-    "battery.capacity_ah" = {normal = [5.0, 0.25]}
+    "battery.capacity_ah" = {normal = [1.3, 0.05]}
     seed = {integers = [0, 1000000]}
 
     [report]                  # optional: axes of the trade-off plots (defaults: the first varied keys)
-    x = "mission.hover_time_s"
+    x = "pads.1.hover_time_s"
     hue = "pads.1.x_m"
 
 Keys may be quoted (``"mission.hover_time_s" = ...``) or written as TOML dotted keys / sub-tables
