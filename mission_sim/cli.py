@@ -256,14 +256,14 @@ def _add_sweep(sub):
                                    "on a Dask cluster and store one Parquet row per mission under DIR/cases. "
                                    "Re-running the same command skips the cases already stored. Prints a "
                                    "summary table and writes trade-off plots to DIR/plots. Exit status 1 if "
-                                   "some cases failed (they are stored with their error).")
-    p.add_argument("study", type=Path, help="study TOML file (see examples/study_small.toml)")
-    p.add_argument("--out", type=Path, required=True, help="output folder (created; reused to resume)")
-    p.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler "
+                                   "some cases failed (stored with their error) or did not finish.")
+    p.add_argument("study", type=Path, metavar="STUDY.toml", help="study TOML file (see examples/study_small.toml)")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder (created; reused to resume)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS", help="address of an existing Dask scheduler "
                                                       "(e.g. tcp://10.0.0.5:8786); default: a local cluster")
-    p.add_argument("--connect-timeout", type=_positive_float("connect-timeout"), default=10.0,
+    p.add_argument("--connect-timeout", type=_positive_float("connect-timeout"), default=10.0, metavar="S",
                    help="seconds to wait for --scheduler (default 10)")
-    p.add_argument("--workers", type=_nonneg_int("workers"), default=None,
+    p.add_argument("--workers", type=_nonneg_int("workers"), default=None, metavar="N",
                    help="worker processes of the local cluster (default: one per CPU; 0 = run serially "
                         "in this process without Dask)")
     p.add_argument("--format", choices=("table", "json"), default="table")
@@ -281,7 +281,8 @@ def _cmd_sweep(args) -> int:
     from . import sweep, sweep_report
 
     if args.scheduler is not None and args.workers is not None:
-        raise CliError("--scheduler and --workers exclude each other (the cluster at --scheduler has its own workers)")
+        raise CliError("--scheduler and --workers exclude each other "
+                       "(the cluster at --scheduler has its own workers)")
     st = study_mod.load_study(args.study)
     make_policy = policy_names = None
     if not st.runner:
@@ -313,7 +314,8 @@ def _cmd_sweep(args) -> int:
     if not table.empty:
         table.to_csv(args.out / "summary.csv")
     counts = {"study": st.name, "out": str(args.out), "cases": res.n_cases, "skipped": res.n_skipped,
-              "run": res.n_run, "ok": res.n_ok, "errors": res.n_error, "missing": res.n_missing, "wall_s": round(res.wall_s, 3),
+              "run": res.n_run, "ok": res.n_ok, "errors": res.n_error, "missing": res.n_missing,
+              "wall_s": round(res.wall_s, 3),
               "cases_per_s": None if res.n_run == 0 else round(res.cases_per_s, 3)}
     if args.format == "json":
         summary = json.loads(table.reset_index().to_json(orient="records")) if not table.empty else []
