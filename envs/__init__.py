@@ -1,1 +1,31 @@
-"""envs package."""
+"""Gymnasium environments of a drone's SBAR receiver during a charging window.
+
+``import envs`` registers
+
+* ``dronewpt/SbarCharging-v0`` - continuous action in [-1, 1] -> d_short in [0, 1]
+* ``dronewpt/SbarChargingDiscrete-v0`` - {0: RM, 1: SM} every control period (ON-OFF)
+
+both with a batched ``vector_entry_point``::
+
+    env = gymnasium.make("dronewpt/SbarCharging-v0", scenario="nominal")
+    venv = gymnasium.make_vec("dronewpt/SbarCharging-v0", num_envs=1024, vectorization_mode="vector_entry_point")
+"""
+
+import gymnasium
+
+from .charging import SbarChargingDiscreteEnv, SbarChargingEnv
+from .core import EnvConfig, RewardWeights
+from .scenario import SCENARIOS, Scenario, get_scenario
+from .vector import SbarChargingDiscreteVectorEnv, SbarChargingVectorEnv
+
+__all__ = ["SbarChargingEnv", "SbarChargingDiscreteEnv", "SbarChargingVectorEnv", "SbarChargingDiscreteVectorEnv",
+           "EnvConfig", "RewardWeights", "Scenario", "SCENARIOS", "get_scenario", "ENV_ID", "DISCRETE_ENV_ID"]
+
+ENV_ID = "dronewpt/SbarCharging-v0"
+DISCRETE_ENV_ID = "dronewpt/SbarChargingDiscrete-v0"
+
+for _id, _ep, _vep in ((ENV_ID, "envs.charging:SbarChargingEnv", "envs.vector:SbarChargingVectorEnv"),
+                       (DISCRETE_ENV_ID, "envs.charging:SbarChargingDiscreteEnv",
+                        "envs.vector:SbarChargingDiscreteVectorEnv")):
+    if _id not in gymnasium.registry:
+        gymnasium.register(id=_id, entry_point=_ep, vector_entry_point=_vep, disable_env_checker=False)

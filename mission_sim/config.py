@@ -129,7 +129,7 @@ class MissionPlan:
 class SimConfig:
     """Multi-rate stepping (see mission_sim/runner.py)."""
 
-    control_period_s: float = 5e-5
+    control_period_s: float = 1e-4
     traj_dt_s: float = 0.2
     flight_dt_s: float = 1.0
     i2_noise_a: float = 0.0

@@ -57,18 +57,19 @@ OBS_DIM = len(OBS_FIELDS)
 OBS_INDEX = {f.name: i for i, f in enumerate(OBS_FIELDS)}
 _LO = np.array([f.lo for f in OBS_FIELDS])
 _HI = np.array([f.hi for f in OBS_FIELDS])
+_INV_SPAN = 1.0 / (_HI - _LO)
 
 
 def normalise_obs(physical) -> np.ndarray:
     """Physical values, shape (..., OBS_DIM) in the order of :data:`OBS_FIELDS` -> [-1, 1] (clipped)."""
     x = np.asarray(physical, dtype=float)
-    return np.clip(2.0 * (x - _LO) / (_HI - _LO) - 1.0, -1.0, 1.0)
+    return np.minimum(np.maximum(2.0 * (x - _LO) * _INV_SPAN - 1.0, -1.0), 1.0)
 
 
 def denormalise_obs(obs) -> np.ndarray:
     """Inverse of :func:`normalise_obs` (values that were clipped stay at the range ends)."""
     o = np.asarray(obs, dtype=float)
-    return _LO + (o + 1.0) * 0.5 * (_HI - _LO)
+    return _LO + (o + 1.0) * (0.5 * (_HI - _LO))
 
 
 def action_to_duty(action) -> np.ndarray:

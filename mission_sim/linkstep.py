@@ -46,15 +46,16 @@ class LinkStepper:
         q2 = s * s - det
         q = math.sqrt(abs(q2))
         qt = q * dt_s
-        if qt < 1e-8:
-            cc, sq = 1.0, dt_s
-        elif q2 < 0:
-            cc, sq = math.cos(qt), math.sin(qt) / q
-        else:
-            cc, sq = math.cosh(qt), math.sinh(qt) / q
         e = math.exp(s * dt_s)
-        d00, d01 = e * (cc + sq * (a00 - s)), e * sq * a01
-        d10, d11 = e * sq * a10, e * (cc + sq * (a11 - s))
+        if qt < 1e-8:
+            ec, es = e, e * dt_s
+        elif q2 < 0:
+            ec, es = e * math.cos(qt), e * math.sin(qt) / q
+        else:  # real poles s -/+ q (both negative): e^{st} cosh(qt) without overflowing cosh for long steps
+            ep, em = math.exp((s + q) * dt_s), math.exp((s - q) * dt_s)
+            ec, es = 0.5 * (ep + em), 0.5 * (ep - em) / q
+        d00, d01 = ec + es * (a00 - s), es * a01
+        d10, d11 = es * a10, ec + es * (a11 - s)
         i00, i01, i10, i11 = a11 / det, -a01 / det, -a10 / det, a00 / det
         # M = Ainv (Ad - I); Bd = M B
         m00 = i00 * (d00 - 1) + i01 * d10

@@ -178,8 +178,11 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
 
     def do_step(t0, dt, lm, p_prop, row_k, fine):
         nonlocal x, last_vl, last_ib, last_il, peak_i2, above, soc, vrc
-        # SBAR fundamental (eq. 9); with I2 <= 0 the diodes block (no power flows back from the battery)
-        c = _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * d)) if x[1] > 0.0 else 0.0
+        # SBAR fundamental (eq. 9); with I2 <= 0 the diodes block (no power flows back from the battery),
+        # and with the pad off they block too: nothing drives current through them against the battery,
+        # the coil currents ring down in R1, R2 (the envelope model has no diode to stop I2 at zero, so
+        # holding V2 over a long step would drive I2 towards -V2/R2)
+        c = _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * d)) if (x[1] > 0.0 and v1 > 0.0) else 0.0
         # battery: mean terminal voltage = A0 + G * i_mean (held-current RC solution); solve VL
         # implicitly with the link so V2, the battery and the propulsion power agree exactly
         frac = tau1 * (1.0 - math.exp(-dt / tau1)) / dt

@@ -11,6 +11,15 @@ from typing import Callable
 from mission_sim.contract import Policy, PolicyContext
 
 from .classical import ModelBasedPolicy, RampPolicy, StepPolicy
+from .onoff import HysteresisPolicy
+from .online import OnlineLmModelBasedPolicy
+from .random_policy import RandomPolicy
+
+
+def _rl(ctx, **kwargs):
+    from .rl import RLPolicy   # imports stable-baselines3 (torch): only when asked for
+    return RLPolicy(ctx, **kwargs)
+
 
 __all__ = ["make", "available", "register", "Policy", "PolicyContext"]
 
@@ -18,6 +27,10 @@ _REGISTRY: dict[str, Callable[..., Policy]] = {
     "step": StepPolicy,
     "ramp": RampPolicy,
     "model_based": ModelBasedPolicy,
+    "model_based_online": OnlineLmModelBasedPolicy,
+    "hysteresis": HysteresisPolicy,
+    "random": RandomPolicy,
+    "rl": _rl,
 }
 
 

@@ -16,10 +16,19 @@ from __future__ import annotations
 import numpy as np
 
 from mission_sim.contract import OBS_INDEX, PolicyContext, denormalise_obs
-from wpt_receiver import InverseModelController, LowPassFilter, duty_from_v2_clipped, steady_state
+
+_I_CMD, _I_VL = OBS_INDEX["charge_cmd_a"], OBS_INDEX["battery_v"]
+from wpt_receiver import InverseModelController, LowPassFilter, duty_from_v2_clipped
 from wpt_receiver.references import ramp_duration_s
 
 __all__ = ["target_v2", "StepPolicy", "RampPolicy", "ModelBasedPolicy"]
+
+
+def _link_constants(ctx: PolicyContext, lm_h=None):
+    p = ctx.link
+    lm = p.lm_h if lm_h is None else np.asarray(lm_h, dtype=float)
+    wlm = p.omega_rad_s * lm
+    return wlm * p.v1_amp_v, p.r1_ohm * p.r2_ohm + wlm**2, p.r1_ohm
 
 
 def target_v2(ctx: PolicyContext, charge_cmd_a, vl_v, lm_h=None) -> np.ndarray:
@@ -30,15 +39,16 @@ def target_v2(ctx: PolicyContext, charge_cmd_a, vl_v, lm_h=None) -> np.ndarray:
     smaller root is taken and clipped into ``[0, (4/pi) VL]`` (a command beyond what RM can
     deliver saturates at RM).
     """
-    p = ctx.link
-    lm = p.lm_h if lm_h is None else np.asarray(lm_h, dtype=float)
-    wlm_v1 = p.omega_rad_s * lm * p.v1_amp_v
-    det = p.r1_ohm * p.r2_ohm + (p.omega_rad_s * lm) ** 2
+    return _target_v2(_link_constants(ctx, lm_h), charge_cmd_a, vl_v)
+
+
+def _target_v2(consts, charge_cmd_a, vl_v):
+    wlm_v1, det, r1 = consts
     il = np.maximum(np.asarray(charge_cmd_a, dtype=float), 0.0)
     vl = np.asarray(vl_v, dtype=float)
-    disc = np.maximum(wlm_v1**2 - 8.0 * p.r1_ohm * vl * il * det, 0.0)
-    v2 = (wlm_v1 - np.sqrt(disc)) / (2.0 * p.r1_ohm)
-    return np.clip(v2, 0.0, 4.0 / np.pi * vl)
+    disc = np.maximum(wlm_v1**2 - 8.0 * r1 * vl * il * det, 0.0)
+    v2 = (wlm_v1 - np.sqrt(disc)) / (2.0 * r1)
+    return np.minimum(np.maximum(v2, 0.0), 4.0 / np.pi * vl)
 
 
 class _CommandPolicy:
@@ -47,14 +57,17 @@ class _CommandPolicy:
     def __init__(self, ctx: PolicyContext = PolicyContext()):
         self.ctx = ctx
         self.n = 1
+        self._consts = _link_constants(ctx)
 
     def reset(self, n: int = 1) -> None:
         self.n = int(n)
         self._v2 = None
 
     def _measure(self, obs):
-        phys = denormalise_obs(np.atleast_2d(obs))
-        return phys[:, OBS_INDEX["charge_cmd_a"]], phys[:, OBS_INDEX["battery_v"]]
+        phys = denormalise_obs(obs)
+        if phys.ndim == 1:
+            phys = phys[None, :]
+        return phys[:, _I_CMD], phys[:, _I_VL]
 
 
 class StepPolicy(_CommandPolicy):
@@ -64,7 +77,7 @@ class StepPolicy(_CommandPolicy):
 
     def act(self, obs):
         cmd, vl = self._measure(obs)
-        return duty_from_v2_clipped(target_v2(self.ctx, cmd, vl), vl)
+        return duty_from_v2_clipped(_target_v2(self._consts, cmd, vl), vl)
 
 
 class RampPolicy(_CommandPolicy):
@@ -74,7 +87,7 @@ class RampPolicy(_CommandPolicy):
 
     def act(self, obs):
         cmd, vl = self._measure(obs)
-        tgt = target_v2(self.ctx, cmd, vl)
+        tgt = _target_v2(self._consts, cmd, vl)
         if self._v2 is None or len(self._v2) != len(tgt):
             self._v2 = tgt.copy()
         rate = 4.0 / np.pi * vl / ramp_duration_s(self.ctx.link) * self.ctx.control_period_s
@@ -97,8 +110,10 @@ class ModelBasedPolicy(_CommandPolicy):
         self._ctl = None
 
     def i2_ref(self, cmd, vl):
-        """Reference I2 [A] for a charge command: the assumed steady I2 at the target V2."""
-        return steady_state(self.ctx.link, target_v2(self.ctx, cmd, vl))[1]
+        """Reference I2 [A] for a charge command: the assumed steady I2 at the target V2,
+        ``I2 = (w Lm V1 - R1 V2) / det``."""
+        wlm_v1, det, r1 = self._consts
+        return (wlm_v1 - r1 * _target_v2(self._consts, cmd, vl)) / det
 
     def act(self, obs):
         cmd, vl = self._measure(obs)
@@ -106,5 +121,4 @@ class ModelBasedPolicy(_CommandPolicy):
         if self._ctl is None or self._ctl.n != len(ref):
             self._ctl = InverseModelController(self.ctx.link, self.ctx.control_period_s, self.lpf, n=len(ref))
             self._ctl.reset(ref)
-        self._ctl.step(ref)
-        return duty_from_v2_clipped(self._ctl.v2_cmd_v, vl)
+        return duty_from_v2_clipped(self._ctl.update(ref), vl)

@@ -7,6 +7,8 @@ Depends on nothing else of dronewpt. Main entry points:
 * :mod:`.sbar` - duty mapping f(d_short) (eq. 9) and its inverse
 * :mod:`.inverse_controller` - the proposed controller (Fig. 5)
 * :mod:`.references`, :mod:`.metrics`, :mod:`.paper` - Table II / Fig. 6 reproduction
+* :mod:`.switching` - switching-level (instantaneous, event-exact) model of eq. 1 and the SBAR;
+  importing it registers ``paper.MODELS["switching"]``
 """
 
 from .envelope import EnvelopeLink, coefficients, g22, simulate, state_matrices, steady_state, zoh_discretise

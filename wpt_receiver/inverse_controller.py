@@ -87,6 +87,7 @@ class InverseModelController:
         # steady-state map x_ss = (I - Ad)^-1 Bd u
         self._xss = np.linalg.solve(np.eye(len(ad)) - ad, self._bd)
         self.v1_v = params.v1_amp_v
+        self._i2_sm = float(steady_state(params, 0.0)[1])
         self.x = np.zeros((self.n, len(ad)))
         self.v2_cmd_v = np.zeros(self.n)
 
@@ -94,7 +95,7 @@ class InverseModelController:
     @property
     def i2_sm_a(self) -> float:
         """Short-mode current of the assumed model at the current V1 [A]."""
-        return float(steady_state(self.params, 0.0, v1_v=self.v1_v)[1])
+        return self._i2_sm
 
     def i2_for_v2(self, v2_v):
         """Steady I2 [A] of the assumed model for a constant V2."""
@@ -104,20 +105,30 @@ class InverseModelController:
         """Start at steady state for the reference ``i2_ref_a`` (scalar or (n,)); returns d_short."""
         if v1_v is not None:
             self.v1_v = float(v1_v)
+            self._i2_sm = float(steady_state(self.params, 0.0, v1_v=self.v1_v)[1])
         u = np.broadcast_to(np.asarray(i2_ref_a, dtype=float), (self.n,)) - self.i2_sm_a
         self.x = u[:, None] * self._xss[None, :]
         self.v2_cmd_v = self.x @ self._cd + self._dd * u
         return duty_from_v2_clipped(self.v2_cmd_v, self.params.vl_v)
+
+    def update(self, i2_ref_a) -> np.ndarray:
+        """One control period: new reference in, ``V2*`` [V] out (shape (n,), before saturation).
+
+        Also stored in ``self.v2_cmd_v``. Use this when the duty is computed with a measured VL.
+        """
+        u = np.asarray(i2_ref_a, dtype=float) - self._i2_sm
+        if u.shape != (self.n,):
+            u = np.broadcast_to(u, (self.n,))
+        self.v2_cmd_v = self.x @ self._cd + self._dd * u
+        self.x = self.x @ self._ad.T + u[:, None] * self._bd
+        return self.v2_cmd_v
 
     def step(self, i2_ref_a):
         """One control period: new reference in, short duty ``d_short*`` out (shape (n,)).
 
         ``self.v2_cmd_v`` holds V2* before saturation into [0, (4/pi) VL].
         """
-        u = np.broadcast_to(np.asarray(i2_ref_a, dtype=float), (self.n,)) - self.i2_sm_a
-        self.v2_cmd_v = self.x @ self._cd + self._dd * u
-        self.x = self.x @ self._ad.T + u[:, None] * self._bd[None, :]
-        return duty_from_v2_clipped(self.v2_cmd_v, self.params.vl_v)
+        return duty_from_v2_clipped(self.update(i2_ref_a), self.params.vl_v)
 
     def run(self, i2_ref_a: np.ndarray):
         """Run a whole reference sequence (one link); returns ``(v2_cmd_v, d_short)`` arrays.

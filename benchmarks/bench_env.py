@@ -1,0 +1,115 @@
+"""Environment throughput against gymnasium's CartPole-v1, measured in the same run.
+
+* single env: steps/s of the raw env (``env.unwrapped``-style object, no wrappers) and through
+  ``gymnasium.make`` (default wrappers: OrderEnforcing, PassiveEnvChecker), each as a ratio to
+  CartPole-v1 measured the same way (goal: ratio >= 1.0). CartPole alternates its two actions
+  (long episodes), ours holds a duty; both are reset when an episode ends (reset cost included).
+* vector env: env-steps/s of ``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``
+  at N = 1024 (goal >= 1,000,000), beside gymnasium's own batched CartPoleVectorEnv at the same N.
+
+Measurements alternate between the two envs in rounds and report the median round, which damps
+the noise of a shared machine.
+
+    python benchmarks/bench_env.py [--seconds 1.0] [--rounds 5] [--n 1024] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import gymnasium as gym  # noqa: E402
+
+import envs  # noqa: E402
+
+
+def _single_rate(env, actions, seconds):
+    env.reset(seed=0)
+    n, t0 = 0, time.perf_counter()
+    step = env.step
+    while True:
+        for a in actions:
+            _, _, term, trunc, _ = step(a)
+            if term or trunc:
+                env.reset()
+        n += len(actions)
+        dt = time.perf_counter() - t0
+        if dt >= seconds:
+            return n / dt
+
+
+def _vector_rate(venv, actions, seconds):
+    venv.reset(seed=0)
+    n, t0 = 0, time.perf_counter()
+    while True:
+        for _ in range(20):
+            venv.step(actions)
+        n += 20 * venv.num_envs
+        dt = time.perf_counter() - t0
+        if dt >= seconds:
+            return n / dt
+
+
+def run(seconds=1.0, rounds=5, n_vec=1024):
+    from gymnasium.envs.classic_control.cartpole import CartPoleEnv, CartPoleVectorEnv
+
+    out = {}
+    pairs = {
+        "raw": (CartPoleEnv(), envs.SbarChargingEnv()),
+        "make": (gym.make("CartPole-v1"), gym.make(envs.ENV_ID)),
+    }
+    # CartPole alternates left/right (long episodes, few resets: its best case); ours holds a duty
+    a_cp, a_ours = [0, 1] * 250, [np.array([0.0], np.float32)] * 500
+    for label, (cp, ours) in pairs.items():
+        r_cp, r_ours = [], []
+        for _ in range(rounds):
+            r_cp.append(_single_rate(cp, a_cp, seconds))
+            r_ours.append(_single_rate(ours, a_ours, seconds))
+        ratios = [b / a for a, b in zip(r_cp, r_ours)]
+        out[f"single_{label}"] = {"cartpole_steps_s": statistics.median(r_cp), "sbar_steps_s": statistics.median(r_ours),
+                                  "ratio": statistics.median(ratios)}
+    venv = gym.make_vec(envs.ENV_ID, num_envs=n_vec, vectorization_mode="vector_entry_point")
+    cpv = CartPoleVectorEnv(num_envs=n_vec)
+    acts = np.zeros((n_vec, 1), np.float32)
+    acts_cp = np.ones(n_vec, dtype=np.int64)
+    r_v, r_cpv = [], []
+    for _ in range(rounds):
+        r_v.append(_vector_rate(venv, acts, seconds))
+        r_cpv.append(_vector_rate(cpv, acts_cp, seconds))
+    out["vector"] = {"n_envs": n_vec, "sbar_env_steps_s": statistics.median(r_v),
+                     "cartpole_vector_env_steps_s": statistics.median(r_cpv),
+                     "goal_env_steps_s": 1_000_000}
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=1.0, help="time per measurement (default 1 s)")
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--n", type=int, default=1024, help="vector env width (default 1024)")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args(argv)
+    res = run(args.seconds, args.rounds, args.n)
+    if args.json:
+        print(json.dumps(res, indent=2))
+        return 0
+    for label in ("single_raw", "single_make"):
+        r = res[label]
+        print(f"{label:<12} CartPole-v1 {r['cartpole_steps_s']:>10,.0f} steps/s   SbarCharging-v0 "
+              f"{r['sbar_steps_s']:>10,.0f} steps/s   ratio {r['ratio']:.2f} (goal >= 1.0)")
+    v = res["vector"]
+    print(f"vector N={v['n_envs']}  SbarCharging-v0 {v['sbar_env_steps_s']:>13,.0f} env-steps/s (goal >= 1,000,000); "
+          f"CartPoleVectorEnv {v['cartpole_vector_env_steps_s']:>13,.0f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,208 @@
+"""Single gymnasium environments of a drone's charging window: continuous and discrete (ON-OFF)."""
+
+from __future__ import annotations
+
+import numpy as np
+import gymnasium as gym
+from gymnasium import spaces
+
+from mission_sim.contract import OBS_DIM, PolicyContext
+
+from .core import (OBS_OFFSET, OBS_SCALE, SCALAR_OPS, EnvConfig, advance, build_plans, reward_cost)
+from .render import draw_envelope
+from .scenario import draw_episode, get_scenario, scenario_from_options
+
+__all__ = ["SbarChargingEnv", "SbarChargingDiscreteEnv"]
+
+_SC = OBS_SCALE.tolist()
+_OF = OBS_OFFSET.tolist()
+_S0, _S1, _S2, _S3, _S4, _S5, _S6 = _SC
+_O0, _O1, _O2, _O3, _O4, _O5, _O6 = _OF
+
+
+def _n(v, i):
+    x = v * _SC[i] + _OF[i]
+    return -1.0 if x < -1.0 else (1.0 if x > 1.0 else x)
+
+
+class SbarChargingEnv(gym.Env):
+    """A drone hovers over a charging pad; its SBAR receiver must follow a charge command and, when
+    the command drops to zero (battery full or departure), go from rectification mode (RM) to
+    short mode (SM) without a secondary coil current overshoot.
+
+    ## Description
+    The series-series link of the paper (Table I, envelope model eq. 4, exact ZOH) is stepped every
+    control period (100 us = 17 rectifier periods). Wind moves the drone around its hover pose, so
+    the true mutual inductance Lm follows the pose error (updated every 1 ms). The agent sets the
+    short duty ``d_short`` of the SBAR (eq. 9) for the next control period. The SBAR output feeds
+    the battery (equivalent circuit), which also supplies the hover power.
+
+    ## Action Space
+    ``Box(-1, 1, (1,), float32)``: ``d_short = (a + 1) / 2`` (:func:`mission_sim.contract.action_to_duty`);
+    -1 = rectification mode, +1 = short mode. The discrete variant (``SbarChargingDiscrete-v0``)
+    takes ``Discrete(2)``: 0 = RM, 1 = SM (the classic unsynchronised ON-OFF method).
+
+    ## Observation Space
+    ``Box(-1, 1, (7,), float32)``, the contract of :mod:`mission_sim.contract`, each field mapped
+    linearly from its physical range to [-1, 1] and clipped:
+
+    | Num | Observation         | Physical range | Unit | Meaning                                        |
+    |-----|---------------------|----------------|------|------------------------------------------------|
+    | 0   | i2_amp_a            | 0 .. 60        | A    | secondary current envelope (sensor noise added) |
+    | 1   | battery_v           | 20 .. 36       | V    | battery terminal voltage                        |
+    | 2   | battery_current_a   | -60 .. 30      | A    | battery current, + = charging                   |
+    | 3   | rect_current_a      | 0 .. 20        | A    | SBAR output current I_L (mean over the step)    |
+    | 4   | soc                 | 0 .. 1         | -    | state of charge                                 |
+    | 5   | charge_cmd_a        | 0 .. 20        | A    | command for the next step; 0 = stop charging    |
+    | 6   | last_d_short        | 0 .. 1         | -    | duty applied in the previous step               |
+
+    Physical values (true I2, the step's peak I2, I1, V2, Lm, energy, ...) are in ``info``.
+
+    ## Rewards
+    Per step, with ``I_L`` the SBAR output current, ``I*`` the command, ``I2_pk`` the largest of
+    the envelope at mid-step and at the end of the step:
+
+    | Term        | Value                                              | Default weight |
+    |-------------|----------------------------------------------------|----------------|
+    | energy      | ``+ min(I_L, I*) / 7 A`` (energy wanted by the BMS) | 1              |
+    | tracking    | ``- abs(I_L - I*) / 7 A``                           | 1              |
+    | overcurrent | ``- max(0, I2_pk / I2_rated - 1)``                  | 10             |
+
+    ``info["cost"]`` carries the overcurrent term unweighted (safety-gymnasium style), rated
+    I2 = 15 A by default.
+
+    ## Starting State
+    Steady state of the link delivering the first command (2..7 A at the nominal scenario), drawn
+    with the environment's ``np_random`` together with the pose-error path, the command profile
+    (one change at 3..8 ms, stop at 10..16 ms) and the sensor noise.
+
+    ## Episode End
+    | Condition  | When                                                        |
+    |------------|-------------------------------------------------------------|
+    | terminated | never (there is no terminal state in a charging window)      |
+    | truncated  | after ``n_steps`` steps (300 = 30 ms: covers the stop and the ringing) |
+
+    ## Arguments
+    ``gymnasium.make("dronewpt/SbarCharging-v0", scenario="nominal", render_mode=None, config=None)``;
+    ``scenario`` is a name of :data:`envs.scenario.SCENARIOS` (nominal, lm_mismatch, windy, battery,
+    random), a :class:`~envs.scenario.Scenario` or a dict of its fields; ``reset(options={"scenario":
+    ...})`` overrides it for one episode. ``config`` is an :class:`~envs.core.EnvConfig`.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
+
+    def __init__(self, scenario="nominal", render_mode: str | None = None, config: EnvConfig | None = None):
+        self.scenario = get_scenario(scenario)
+        self.config = config or EnvConfig()
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode={render_mode!r} is invalid; valid values: None, 'rgb_array'")
+        self.render_mode = render_mode
+        self.observation_space = spaces.Box(-1.0, 1.0, (OBS_DIM,), np.float32)
+        self.action_space = self._make_action_space()
+        c = self.config
+        self._T, self._M, self._dt = c.n_steps, c.slow_every, c.dt_s
+        self._inv_rated = 1.0 / c.rated_i2_a
+        self._w = c.reward
+        self._k = None
+        self._hist = None
+
+    # ------------------------------------------------------------------ interface
+    def _make_action_space(self):
+        return spaces.Box(-1.0, 1.0, (1,), np.float32)
+
+    def _duty(self, action) -> float:
+        d = (float(action[0]) + 1.0) * 0.5
+        return 0.0 if d < 0.0 else (1.0 if d > 1.0 else d)
+
+    @property
+    def policy_context(self) -> PolicyContext:
+        """What a policy may assume: Table I link (not the true Lm), the control period, the rating."""
+        return PolicyContext(link=self.config.link, control_period_s=self._dt, rated_i2_a=self.config.rated_i2_a)
+
+    # ------------------------------------------------------------------ gymnasium API
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        scn = scenario_from_options(options, self.scenario)
+        draw = draw_episode(self.np_random, scn, self._T, self.config.n_slow)
+        p = build_plans([draw], [scn], self.config)
+        self._plan = p
+        self._cmd = p.cmd_a[0].tolist()
+        self._noise = p.noise_a[0].tolist()
+        self._coef = [tuple(r) for r in p.coef[0].tolist()]
+        self._lm = p.lm_h[0].tolist()
+        self._b = tuple(p.battery[0].tolist())
+        self._i1, self._i2 = (float(v) for v in p.x0[0])
+        self._vl, self._vrc, self._d = float(p.vl0[0]), float(p.vrc0[0]), float(p.d0[0])
+        self._soc = self._b[2]
+        self._k = 0
+        il = 2.0 / np.pi * self._i2 * (1.0 - np.sin(0.5 * np.pi * self._d))
+        ib = il - self._b[7]
+        info = {"t_s": 0.0, "i2_a": self._i2, "i2_peak_a": self._i2, "i1_a": self._i1, "d_short": self._d,
+                "v2_v": 4.0 / np.pi * self._vl * (1.0 - np.sin(0.5 * np.pi * self._d)), "rect_current_a": il,
+                "battery_v": self._vl, "battery_current_a": ib, "soc": self._soc, "charge_cmd_a": self._cmd[0],
+                "lm_h": self._lm[0], "energy_j": 0.0, "cost": 0.0, "scenario": scn.name,
+                "t_stop_s": float(p.t_stop_s[0])}
+        if self.render_mode is not None:
+            self._hist = [[0.0], [self._i2], [il], [self._cmd[0]], [self._d]]
+        obs = np.array([_n(self._i2, 0), _n(self._vl, 1), _n(ib, 2), _n(il, 3), _n(self._soc, 4),
+                        _n(self._cmd[0], 5), _n(self._d, 6)], dtype=np.float32)
+        return obs, info
+
+    def step(self, action):
+        k = self._k
+        if k is None or k >= self._T:
+            raise RuntimeError("step() called before reset() or after the episode was truncated; call reset()")
+        d = self._duty(action)
+        vl_old = self._vl
+        i1, i2, i2m, il, ib, soc, vrc, vl, v2 = advance(self._i1, self._i2, vl_old, self._soc, self._vrc, d,
+                                                        self._coef[k // self._M], self._b, SCALAR_OPS)
+        cmd = self._cmd[k]
+        peak = i2m if i2m > i2 else i2
+        reward, cost = reward_cost(il, cmd, peak, self._inv_rated, self._w, SCALAR_OPS)
+        energy = vl_old * il * self._dt
+        self._i1, self._i2, self._soc, self._vrc, self._vl, self._d = i1, i2, soc, vrc, vl, d
+        k += 1
+        self._k = k
+        cmd_next = self._cmd[k]
+        # normalise (same affine map and clipping as mission_sim.contract.normalise_obs)
+        o0 = (i2 + self._noise[k - 1]) * _S0 + _O0
+        o1 = vl * _S1 + _O1
+        o2 = ib * _S2 + _O2
+        o3 = il * _S3 + _O3
+        o4 = soc * _S4 + _O4
+        obs = np.array([-1.0 if o0 < -1.0 else (1.0 if o0 > 1.0 else o0),
+                        -1.0 if o1 < -1.0 else (1.0 if o1 > 1.0 else o1),
+                        -1.0 if o2 < -1.0 else (1.0 if o2 > 1.0 else o2),
+                        -1.0 if o3 < -1.0 else (1.0 if o3 > 1.0 else o3),
+                        -1.0 if o4 < -1.0 else (1.0 if o4 > 1.0 else o4),
+                        cmd_next * _S5 + _O5, d * _S6 + _O6], dtype=np.float32)
+        info = {"t_s": k * self._dt, "i2_a": i2, "i2_peak_a": peak, "i1_a": i1, "d_short": d, "v2_v": v2,
+                "rect_current_a": il, "battery_v": vl, "battery_current_a": ib, "soc": soc,
+                "charge_cmd_a": cmd, "lm_h": self._lm[(k - 1) // self._M], "energy_j": energy, "cost": cost}
+        if self._hist is not None:
+            for lst, v in zip(self._hist, (k * self._dt, i2, il, cmd_next, d)):
+                lst.append(v)
+        return obs, reward, False, k >= self._T, info
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without render_mode; make the env with render_mode='rgb_array'")
+            return None
+        if self._hist is None:
+            raise RuntimeError("render() called before reset()")
+        t, i2, il, cmd, d = self._hist
+        return draw_envelope(t, i2, il, cmd, d, self.config.rated_i2_a, self._T * self._dt)
+
+
+class SbarChargingDiscreteEnv(SbarChargingEnv):
+    """:class:`SbarChargingEnv` with ``Discrete(2)`` actions: 0 = rectification mode (d_short = 0),
+    1 = short mode (d_short = 1), chosen every control period (unsynchronised ON-OFF)."""
+
+    def _make_action_space(self):
+        return spaces.Discrete(2)
+
+    def _duty(self, action) -> float:
+        a = int(action)
+        if a != 0 and a != 1:
+            raise ValueError(f"action={action!r} is invalid; valid values: 0 (RM), 1 (SM)")
+        return float(a)

@@ -1,0 +1,218 @@
+"""The batched physical system, reward and observation of the charging window (one implementation
+for the single and the vector environment).
+
+Composition (gym-electric-motor style):
+
+* physical system: the envelope link (paper eq. 4) stepped by exact ZOH
+  (:func:`wpt_receiver.zoh_discretise`, the closed form :class:`wpt_receiver.EnvelopeLink` uses)
+  with a true Lm that follows the hover pose error (:mod:`envs.plant`), the SBAR (eq. 9) and the
+  battery equivalent circuit;
+* reference generator: the seeded charge command (:mod:`envs.scenario`);
+* reward and cost: :func:`reward_cost`;
+* visualisation: :mod:`envs.render`.
+
+Multi-rate: the link is stepped every control period ``dt_s`` (default 100 us = 17 rectifier
+periods); the hover pose (hence Lm) is sampled every ``slow_every`` steps (default 1 ms) and held;
+the battery is the equivalent circuit linearised around the episode's initial SoC (its open-circuit
+voltage moves by < 1 mV over a 30 ms window, the RC branch is integrated exactly).
+
+Everything exogenous (command, sensor noise, pose -> Lm -> ZOH coefficients) is computed once per
+episode in :func:`build_plans` (batched over the episodes that start), so a step is only
+arithmetic. The step functions :func:`advance` and :func:`reward_cost` are written once and run on
+either numpy arrays (vector env, n rows) or Python floats (single env: the n = 1 fast path);
+``tests/test_envs.py`` checks that both give the same trajectories.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from mission_sim.contract import OBS_FIELDS
+from wpt_receiver import TABLE_I, LinkParams, duty_from_v2_clipped, state_matrices, steady_state, zoh_discretise
+
+from .plant import battery_operating_point, lm_window_h
+from .scenario import Scenario, command_profile
+
+__all__ = ["EnvConfig", "RewardWeights", "Plans", "build_plans", "advance", "reward_cost", "OBS_SCALE",
+           "OBS_OFFSET", "SCALAR_OPS", "NUMPY_OPS", "N_COEF"]
+
+HALF_PI = 0.5 * math.pi
+FOUR_OVER_PI = 4.0 / math.pi
+TWO_OVER_PI_6 = 2.0 / math.pi / 6.0  # (2/pi) times the 1/6 of Simpson's rule
+N_COEF = 12
+N_BAT = 9
+
+#: affine map physical -> [-1, 1] of :data:`mission_sim.contract.OBS_FIELDS` (same as normalise_obs)
+OBS_SCALE = np.array([2.0 / (f.hi - f.lo) for f in OBS_FIELDS])
+OBS_OFFSET = np.array([-1.0 - f.lo * 2.0 / (f.hi - f.lo) for f in OBS_FIELDS])
+
+
+@dataclass(frozen=True)
+class RewardWeights:
+    """reward = (min(I_L, I*) - tracking |I_L - I*|) / i_ref_a - overcurrent max(0, I2_peak/I2_rated - 1)
+
+    i_ref_a : current scale [A] (about what RM delivers with Table I: (2/pi) 11.07 A = 7.05 A)
+    """
+
+    tracking: float = 1.0
+    overcurrent: float = 10.0
+    i_ref_a: float = 7.0
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """Fixed settings of an environment (episode randomness lives in the :class:`Scenario`).
+
+    link : the link parameters (Table I); the true Lm replaces ``link.lm_h`` per pose
+    dt_s : control period = env step [s] (default 17 rectifier periods = 100 us)
+    n_steps : steps per episode (truncation), default 300 (30 ms)
+    slow_every : pose / Lm update every this many steps
+    rated_i2_a : rated secondary coil current amplitude [A] (cost above it)
+    bus_c_f : smoothing capacitor on the SBAR's DC side [F] (assumption: 4.7 mF, tau = R0 C ~ 0.45 ms)
+    """
+
+    link: LinkParams = TABLE_I
+    dt_s: float = 17 * TABLE_I.rectifier_period_s
+    n_steps: int = 300
+    slow_every: int = 10
+    rated_i2_a: float = 15.0
+    bus_c_f: float = 4.7e-3
+    reward: RewardWeights = RewardWeights()
+
+    def __post_init__(self):
+        if not (np.isfinite(self.dt_s) and 1e-7 <= self.dt_s <= 1e-2):
+            raise ValueError(f"dt_s={self.dt_s!r} is invalid; valid range: [1e-7, 1e-2] s")
+        if int(self.n_steps) != self.n_steps or not 2 <= self.n_steps <= 10**6:
+            raise ValueError(f"n_steps={self.n_steps!r} is invalid; valid range: integer 2..1e6")
+        if int(self.slow_every) != self.slow_every or self.slow_every < 1:
+            raise ValueError(f"slow_every={self.slow_every!r} is invalid; valid range: integer >= 1")
+        if not (np.isfinite(self.bus_c_f) and self.bus_c_f > 0):
+            raise ValueError(f"bus_c_f={self.bus_c_f!r} is invalid; valid range: (0, inf)")
+        if not (np.isfinite(self.rated_i2_a) and self.rated_i2_a > 0):
+            raise ValueError(f"rated_i2_a={self.rated_i2_a!r} is invalid; valid range: (0, inf)")
+
+    @property
+    def n_slow(self) -> int:
+        return -(-self.n_steps // self.slow_every)
+
+
+@dataclass
+class Plans:
+    """Per-episode exogenous data and initial state for ``n`` episodes (all arrays lead with n)."""
+
+    cmd_a: np.ndarray        # (n, T+1) charge command per step
+    noise_a: np.ndarray      # (n, T) I2 sensor noise [A]
+    coef: np.ndarray         # (n, S, 12) ZOH coefficients per slow segment (see advance)
+    lm_h: np.ndarray         # (n, S) true Lm per slow segment
+    battery: np.ndarray      # (n, 9) ocv0, docv_dsoc, soc0, r0, rc_decay, rc_gain, dsoc_per_a, i_load, bus_decay
+    x0: np.ndarray           # (n, 2) initial I1, I2
+    vl0: np.ndarray          # (n,) initial battery voltage
+    vrc0: np.ndarray         # (n,) initial RC-branch voltage
+    d0: np.ndarray           # (n,) initial duty (steady state for cmd0)
+    t_stop_s: np.ndarray     # (n,) time of the stop command
+
+
+def _steady_v2(link: LinkParams, lm, il, vl):
+    """V2 [V] that delivers DC current ``il`` at battery voltage ``vl`` in steady state (lossless
+    rectifier: V2 I2 / 2 = VL I_L with I2 = (w Lm V1 - R1 V2)/det), saturated at RM."""
+    x = link.omega_rad_s * lm
+    det = link.r1_ohm * link.r2_ohm + x * x
+    disc = np.maximum((x * link.v1_amp_v) ** 2 - 8.0 * link.r1_ohm * vl * il * det, 0.0)
+    return np.clip((x * link.v1_amp_v - np.sqrt(disc)) / (2.0 * link.r1_ohm), 0.0, FOUR_OVER_PI * vl)
+
+
+def build_plans(draws, scenarios: list[Scenario], cfg: EnvConfig) -> Plans:
+    """Turn the episodes' random draws into what the step needs (batched over the episodes)."""
+    n, T, S, link = len(draws), cfg.n_steps, cfg.n_slow, cfg.link
+    t_slow = np.arange(S) * (cfg.slow_every * cfg.dt_s)
+    lm = lm_window_h([d.wind_speed_m_s for d in draws], [d.record_u for d in draws], t_slow)
+    lm *= np.array([d.lm_scale for d in draws])[:, None]
+    a, b = state_matrices(link, lm.ravel())
+    ad, bd = zoh_discretise(a, b, cfg.dt_s)
+    am, bm = zoh_discretise(a, b, 0.5 * cfg.dt_s)
+    v1 = link.v1_amp_v
+    coef = np.stack([ad[:, 0, 0], ad[:, 0, 1], ad[:, 1, 0], ad[:, 1, 1], bd[:, 0, 0] * v1, bd[:, 1, 0] * v1,
+                     bd[:, 0, 1], bd[:, 1, 1], am[:, 1, 0], am[:, 1, 1], bm[:, 1, 0] * v1, bm[:, 1, 1]], axis=-1)
+    coef = coef.reshape(n, S, N_COEF)
+
+    soc0 = np.array([d.soc0 for d in draws])
+    ocv, docv, r0, r1, tau1, cap = battery_operating_point(soc0)
+    i_load = np.array([s.load_power_w for s in scenarios]) / ocv   # hover draw, constant over 30 ms
+    cmd = command_profile(draws, T, cfg.dt_s)
+    # initial steady state delivering cmd[0] (fixed point through the battery voltage)
+    lm0 = lm[:, 0]
+    vl = ocv + (r0 + r1) * (cmd[:, 0] - i_load)
+    for _ in range(2):
+        v2 = _steady_v2(link, lm0, cmd[:, 0], vl)
+        i1, i2 = steady_state(link, v2, lm0)
+        il = v2 * i2 / (2.0 * vl)
+        vl = ocv + (r0 + r1) * (il - i_load)
+    d0 = duty_from_v2_clipped(v2, vl)
+    v2 = FOUR_OVER_PI * vl * (1.0 - np.sin(HALF_PI * d0))
+    i1, i2 = steady_state(link, v2, lm0)
+    ib0 = 2.0 / np.pi * i2 * (1.0 - np.sin(HALF_PI * d0)) - i_load
+    vrc0 = r1 * ib0
+    vl0 = ocv + r0 * ib0 + vrc0
+    decay = np.exp(-cfg.dt_s / tau1)
+    bus_decay = np.exp(-cfg.dt_s / (r0 * cfg.bus_c_f))
+    battery = np.stack([ocv, docv, soc0, r0, decay, r1 * (1.0 - decay), cfg.dt_s / (3600.0 * cap), i_load,
+                        bus_decay], axis=-1)
+    noise = np.stack([d.noise for d in draws]) * np.array([s.i2_noise_a for s in scenarios])[:, None]
+    return Plans(cmd, noise, coef, lm, battery, np.stack([i1, i2], axis=-1), vl0, vrc0, d0,
+                 np.array([d.t_stop_s for d in draws]))
+
+
+class _ScalarOps:
+    sin = staticmethod(math.sin)
+    minimum = staticmethod(min)
+    maximum = staticmethod(max)
+
+
+class _NumpyOps:
+    sin = staticmethod(np.sin)
+    minimum = staticmethod(np.minimum)
+    maximum = staticmethod(np.maximum)
+
+
+SCALAR_OPS = _ScalarOps()
+NUMPY_OPS = _NumpyOps()
+
+
+def advance(i1, i2, vl, soc, vrc, d, c, b, ops):
+    """One control period with duty ``d`` held (floats, or arrays of shape (n,) with ``NUMPY_OPS``).
+
+    ``c`` = (Ad00, Ad01, Ad10, Ad11, Bd00 V1, Bd10 V1, Bd01, Bd11, Ad10', Ad11', Bd10' V1, Bd11') with
+    ' the half-step discretisation; ``b`` = battery row of :class:`Plans`. ``vl`` is the battery
+    voltage of the previous step (sets V2 = (4/pi) VL (1 - sin(pi/2 d)), eq. 9). The SBAR's DC bus
+    is the battery terminal with its smoothing capacitor: VL follows ``OCV + R0 i_batt + v_rc`` with
+    the time constant R0 C_bus (without the capacitor the one-step VL -> V2 -> I2 -> I_L loop
+    through R0 would be unstable at the link's ~4 kHz resonance, where |G22| ~ 24 A/V).
+
+    Returns ``(i1, i2, i2_mid, i_l, i_batt, soc, vrc, vl, v2)``: ``i2_mid`` the exact envelope at
+    half the step, ``i_l = (2/pi) I2 (1 - sin(pi/2 d))`` the SBAR output current averaged over the
+    step (lossless rectifier, V2 I2 / 2 = VL I_L; Simpson's rule on I2), ``i_batt = i_l - i_load``.
+    """
+    a00, a01, a10, a11, e0, e1, b01, b11, m10, m11, me1, mb11 = c
+    ocv0, docv, soc0, r0, rc_decay, rc_gain, dsoc, i_load, bus_decay = b
+    g = 1.0 - ops.sin(HALF_PI * d)
+    v2 = FOUR_OVER_PI * vl * g
+    i2m = m10 * i1 + m11 * i2 + me1 + mb11 * v2
+    i1n = a00 * i1 + a01 * i2 + e0 + b01 * v2
+    i2n = a10 * i1 + a11 * i2 + e1 + b11 * v2
+    il = TWO_OVER_PI_6 * g * (i2 + 4.0 * i2m + i2n)
+    ib = il - i_load
+    soc = soc + dsoc * ib
+    vrc = rc_decay * vrc + rc_gain * ib
+    vl = bus_decay * vl + (1.0 - bus_decay) * (ocv0 + docv * (soc - soc0) + r0 * ib + vrc)
+    return i1n, i2n, i2m, il, ib, soc, vrc, vl, v2
+
+
+def reward_cost(il, cmd, i2_peak, inv_rated, w: RewardWeights, ops):
+    """``(reward, cost)`` of one step; ``cost = max(0, I2_peak / I2_rated - 1)`` (relative excess of
+    the step's peak coil current over the rated value, 0 when within rating)."""
+    cost = ops.maximum(i2_peak * inv_rated - 1.0, 0.0)
+    r = (ops.minimum(il, cmd) - w.tracking * abs(il - cmd)) / w.i_ref_a - w.overcurrent * cost
+    return r, cost

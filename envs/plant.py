@@ -1,0 +1,109 @@
+"""The world around the link as the environment needs it: hover pose error -> true Lm, the battery,
+the hover power. Thin views on the mission world, no second model:
+
+* pose error and tilt: :mod:`mission_sim.wind` (Dryden-type gusts, drag, position-hold loop,
+  thrust tilt) for a drone of :class:`mission_sim.power.DroneParams`;
+* Lm of a pose: :func:`wpt_receiver.coupling.default_coupling` (Neumann integrals, tabulated);
+* battery: :class:`mission_sim.battery.BatteryParams` (8S LiPo ECM: OCV(SoC), R0, R1-C1);
+* hover power: :func:`mission_sim.power.hover_power_w`.
+
+Time scales. Gusts have a 2 s correlation time and the position-hold loop 2 rad/s, so over a
+30 ms charging window the pose (and Lm) hardly moves; it differs a lot *between* windows. The
+coupling model costs ~30 us per pose, too much to call for every episode of a 1024-wide vector
+env, so for each wind level (1 m/s steps) a 60 s "weather record" (pose and Lm every 20 ms, fixed
+seed, after a 10 s warm-up) is computed once per process; an episode starts at a random instant of
+the record and interpolates Lm along it in time. A window only starts where the pad sees
+adequate coupling (Lm within :data:`LM_WINDOW_RANGE` of the nominal value over the whole window,
+as a transmitter that checks coupling before it powers up would): strong winds with this hold loop
+(2 rad/s) throw the drone 10-50 cm off the pad, where charging would not be attempted.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from mission_sim.battery import BatteryParams
+from mission_sim.power import DroneParams, hover_power_w
+from mission_sim.wind import WindParams, drag_force_n, hover_error_m, tilt_from_force, wind_series
+from wpt_receiver.coupling import NOMINAL_GAP_M, default_coupling
+
+__all__ = ["RECORD_DT_S", "RECORD_S", "GUST_INTENSITY", "lm_record", "lm_window_h", "LM_WINDOW_RANGE", "battery_operating_point",
+           "default_hover_power_w"]
+
+LM_WINDOW_RANGE = (0.75, 1.5)
+RECORD_DT_S = 0.02
+RECORD_S = 60.0
+WARMUP_S = 10.0
+GUST_INTENSITY = 0.2    # gust sigma / mean wind speed (turbulence intensity; 0.6 at 3 m/s as WindParams)
+_DRONE = DroneParams()
+_BATTERY = BatteryParams()
+
+
+@lru_cache(maxsize=64)
+def lm_record(wind_level_m_s: int):
+    """``(lm_h, pose)`` along the weather record of one wind level: Lm [H] (n,) and pose (n, 4)
+    = (dx, dy, dz, tilt) [m, m, m, rad] every :data:`RECORD_DT_S` (deterministic, cached)."""
+    n = int(round(RECORD_S / RECORD_DT_S))
+    w = float(wind_level_m_s)
+    if w == 0.0:
+        return np.full(n, default_coupling().lm_h(0.0, 0.0, NOMINAL_GAP_M, 0.0)), np.zeros((n, 4))
+    wp = WindParams(speed_m_s=w, gust_sigma_m_s=GUST_INTENSITY * w)
+    nw = int(round(WARMUP_S / RECORD_DT_S))
+    rng = np.random.default_rng(10_000 + int(wind_level_m_s))
+    wind = wind_series(wp, n + nw, RECORD_DT_S, rng)
+    force = drag_force_n(wp, wind, np.zeros(3))
+    err = hover_error_m(wp, force, _DRONE.total_mass_kg, RECORD_DT_S)
+    acc = np.gradient(np.gradient(err, RECORD_DT_S, axis=0), RECORD_DT_S, axis=0)
+    tilt, axis = tilt_from_force(_DRONE.total_mass_kg, acc, force)
+    err, tilt, axis = err[nw:], tilt[nw:], axis[nw:]
+    lm = default_coupling().lm_h(err[:, 0], err[:, 1], NOMINAL_GAP_M + err[:, 2], tilt, tilt_axis_rad=axis)
+    return np.asarray(lm, dtype=float), np.column_stack([err, tilt])
+
+
+@lru_cache(maxsize=64)
+def _valid_starts(wind_level_m_s: int, n_span: int):
+    lm, _ = lm_record(wind_level_m_s)
+    nominal = default_coupling().lm_h(0.0, 0.0, NOMINAL_GAP_M, 0.0)
+    ok = (lm >= LM_WINDOW_RANGE[0] * nominal) & (lm <= LM_WINDOW_RANGE[1] * nominal)
+    # a start index i is valid when samples i .. i + n_span are all ok
+    bad = np.convolve(~ok, np.ones(n_span + 1, dtype=int), mode="valid") > 0
+    starts = np.flatnonzero(~bad)
+    if len(starts) == 0:
+        raise ValueError(f"wind speed {wind_level_m_s} m/s never leaves the drone within Lm range "
+                         f"{LM_WINDOW_RANGE} x nominal; valid: a lower wind speed")
+    return starts
+
+
+def lm_window_h(wind_speed_m_s, start_frac, t_s):
+    """True Lm [H] (n, len(t_s)) for n windows: wind speed (rounded to the 1 m/s record levels),
+    start at fraction ``start_frac`` in [0, 1) of the record's valid starts, sampled at times
+    ``t_s`` after the start (linear interpolation between the 20 ms record samples)."""
+    t_s = np.asarray(t_s, dtype=float)
+    n_span = int(np.ceil(t_s[-1] / RECORD_DT_S)) + 1
+    out = np.empty((len(start_frac), len(t_s)))
+    for i, (w, u) in enumerate(zip(wind_speed_m_s, start_frac)):
+        level = int(round(w))
+        lm, _ = lm_record(level)
+        starts = _valid_starts(level, n_span)
+        i0 = starts[min(int(u * len(starts)), len(starts) - 1)]
+        seg = lm[i0:i0 + n_span + 1]
+        out[i] = np.interp(t_s, np.arange(len(seg)) * RECORD_DT_S, seg)
+    return out
+
+
+def battery_operating_point(soc, params: BatteryParams = _BATTERY):
+    """The pack's equivalent circuit at ``soc`` (vectorised): ``(ocv_v, docv_dsoc_v, r0_ohm, r1_ohm,
+    tau1_s, capacity_ah)``, arrays of shape (n,)."""
+    s = np.asarray(soc, dtype=float)
+    h = 1e-4
+    one = np.ones_like(s)
+    return (params.ocv_v(s), (params.ocv_v(s + h) - params.ocv_v(s - h)) / (2 * h), params.r0_ohm * one,
+            params.r1_ohm * one, params.tau1_s * one, params.capacity_ah * one)
+
+
+@lru_cache(maxsize=1)
+def default_hover_power_w() -> float:
+    """Electrical hover power [W] of the default drone (momentum theory, :mod:`mission_sim.power`)."""
+    return float(hover_power_w(_DRONE))

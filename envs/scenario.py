@@ -1,0 +1,155 @@
+"""Scenarios of a charging window (domain randomisation and evaluation sets) and the seeded
+command (reference) generator.
+
+A :class:`Scenario` is a frozen set of ranges; every episode draws its own values from them with
+the environment's ``np_random`` in a fixed order (:func:`draw_episode`), so an episode is a pure
+function of (scenario, seed).
+
+=============  ============================================================================
+name           what varies
+=============  ============================================================================
+nominal        Table I link at the nominal hover pose (no wind), SoC 0.5, commands 2..7 A
+lm_mismatch    true Lm scaled by 0.8..1.25 against the Table I value every policy assumes
+windy          2..4 m/s wind with gusts: hover pose error and tilt (hence Lm) vary between windows
+battery        battery SoC 0.1..0.95 (battery voltage ~ 25..33 V instead of ~30 V)
+random         all of the above at once (the training distribution)
+=============  ============================================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+
+__all__ = ["Scenario", "SCENARIOS", "get_scenario", "EpisodeDraw", "draw_episode", "command_profile", "scenario_from_options"]
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Ranges an episode is drawn from (uniform unless stated). Units in the names.
+
+    lm_scale : multiplier on the coupling model's Lm (the truth); policies keep assuming Table I
+    wind_speed_m_s : mean wind speed; sets the hover pose error (:mod:`envs.plant`)
+    soc : initial state of charge
+    cmd_a : charge command levels before the stop [A] (RM delivers ~7 A at Table I)
+    t_change_s : time of the one command change while charging [s]
+    t_stop_s : time the command drops to 0 (battery full / departure): RM -> SM [s]
+    i2_noise_a : standard deviation of the I2 envelope sensor noise [A]
+    hover_power_w : propulsion power drawn from the battery while hovering [W]; None = the default
+        drone's momentum-theory hover power (:func:`envs.plant.default_hover_power_w`, ~99 W)
+    """
+
+    name: str = "custom"
+    lm_scale: tuple[float, float] = (1.0, 1.0)
+    wind_speed_m_s: tuple[float, float] = (0.0, 0.0)
+    soc: tuple[float, float] = (0.5, 0.5)
+    cmd_a: tuple[float, float] = (2.0, 7.0)
+    t_change_s: tuple[float, float] = (3e-3, 8e-3)
+    t_stop_s: tuple[float, float] = (10e-3, 16e-3)
+    i2_noise_a: float = 0.1
+    hover_power_w: float | None = None
+
+    def __post_init__(self):
+        limits = {"lm_scale": (0.3, 2.0), "wind_speed_m_s": (0.0, 30.0), "soc": (0.0, 1.0),
+                  "cmd_a": (0.0, 20.0), "t_change_s": (0.0, 1.0), "t_stop_s": (0.0, 1.0)}
+        for f in fields(self):
+            if f.name not in limits:
+                continue
+            lo, hi = (float(v) for v in getattr(self, f.name))
+            vlo, vhi = limits[f.name]
+            if not (vlo <= lo <= hi <= vhi):
+                raise ValueError(f"scenario {f.name}=({lo}, {hi}) is invalid; valid range: "
+                                 f"{vlo} <= low <= high <= {vhi}")
+            object.__setattr__(self, f.name, (lo, hi))
+        if not (np.isfinite(self.i2_noise_a) and self.i2_noise_a >= 0):
+            raise ValueError(f"i2_noise_a={self.i2_noise_a!r} is invalid; valid range: [0, inf)")
+        if self.hover_power_w is not None and not (np.isfinite(self.hover_power_w) and self.hover_power_w >= 0):
+            raise ValueError(f"hover_power_w={self.hover_power_w!r} is invalid; valid range: [0, inf)")
+
+    @property
+    def load_power_w(self) -> float:
+        from .plant import default_hover_power_w
+        return default_hover_power_w() if self.hover_power_w is None else float(self.hover_power_w)
+
+    def with_(self, **changes) -> "Scenario":
+        return replace(self, **changes)
+
+
+SCENARIOS: dict[str, Scenario] = {
+    "nominal": Scenario("nominal"),
+    "lm_mismatch": Scenario("lm_mismatch", lm_scale=(0.8, 1.25)),
+    "windy": Scenario("windy", wind_speed_m_s=(2.0, 4.0)),
+    "battery": Scenario("battery", soc=(0.1, 0.95)),
+    "random": Scenario("random", lm_scale=(0.8, 1.25), wind_speed_m_s=(0.0, 4.0), soc=(0.1, 0.95)),
+}
+
+
+def scenario_from_options(options, default: Scenario) -> Scenario:
+    """The scenario of ``reset(options=...)``: ``options["scenario"]`` or ``default``; other keys are errors."""
+    if not options:
+        return default
+    bad = set(options) - {"scenario"}
+    if bad:
+        raise ValueError(f"reset option {sorted(bad)[0]!r} is invalid; valid keys: 'scenario'")
+    return get_scenario(options["scenario"])
+
+
+def get_scenario(scenario) -> Scenario:
+    """A :class:`Scenario` from a name in :data:`SCENARIOS`, a Scenario, or a dict of fields."""
+    if isinstance(scenario, Scenario):
+        return scenario
+    if isinstance(scenario, str):
+        if scenario not in SCENARIOS:
+            raise ValueError(f"scenario={scenario!r} is invalid; valid values: {', '.join(SCENARIOS)}")
+        return SCENARIOS[scenario]
+    if isinstance(scenario, dict):
+        base = get_scenario(scenario.get("base", "nominal"))
+        known = {f.name for f in fields(Scenario)}
+        bad = set(scenario) - known - {"base"}
+        if bad:
+            raise ValueError(f"scenario key {sorted(bad)[0]!r} is invalid; valid keys: {', '.join(sorted(known))}")
+        return base.with_(**{k: v for k, v in scenario.items() if k != "base"})
+    raise ValueError(f"scenario={scenario!r} is invalid; give a name ({', '.join(SCENARIOS)}), a Scenario or a dict")
+
+
+@dataclass(frozen=True)
+class EpisodeDraw:
+    """The random numbers of one episode (drawn in this order from the env's ``np_random``)."""
+
+    soc0: float
+    lm_scale: float
+    wind_speed_m_s: float
+    record_u: float          # start of the window in the wind level's weather record, [0, 1)
+    cmd0_a: float
+    cmd1_a: float
+    t_change_s: float
+    t_stop_s: float
+    noise: np.ndarray        # (n_steps,) standard normals for the I2 sensor
+
+
+def _u(rng, lohi):
+    lo, hi = lohi
+    return float(rng.uniform(lo, hi)) if hi > lo else float(lo)
+
+
+def draw_episode(rng: np.random.Generator, scn: Scenario, n_steps: int, n_slow: int) -> EpisodeDraw:
+    """Draw one episode's random numbers. The same generator state gives the same episode in the
+    single and in the vector environment (each sub-environment owns a generator)."""
+    return EpisodeDraw(
+        soc0=_u(rng, scn.soc), lm_scale=_u(rng, scn.lm_scale), wind_speed_m_s=_u(rng, scn.wind_speed_m_s),
+        record_u=float(rng.uniform()),
+        cmd0_a=_u(rng, scn.cmd_a), cmd1_a=_u(rng, scn.cmd_a),
+        t_change_s=_u(rng, scn.t_change_s), t_stop_s=_u(rng, scn.t_stop_s),
+        noise=rng.standard_normal(n_steps),
+    )
+
+
+def command_profile(draws, n_steps: int, dt_s: float) -> np.ndarray:
+    """Charge command [A] per step, shape (len(draws), n_steps + 1): cmd0 until t_change, cmd1 until
+    t_stop, then 0 (stop charging -> short mode) to the end of the window."""
+    t = np.arange(n_steps + 1) * dt_s
+    out = np.empty((len(draws), n_steps + 1))
+    for i, d in enumerate(draws):
+        out[i] = np.where(t < d.t_change_s, d.cmd0_a, np.where(t < d.t_stop_s, d.cmd1_a, 0.0))
+    return out

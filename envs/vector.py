@@ -1,0 +1,194 @@
+"""Batched (numpy) vector versions of the charging environments.
+
+Every operation of a step runs on arrays of shape (num_envs,); sub-environment ``i`` owns its own
+generator (seeded ``seed + i`` like :class:`gymnasium.vector.SyncVectorEnv`), so the batched env
+reproduces ``num_envs`` single environments seeded the same way. Autoreset: ``NEXT_STEP`` (the
+step after an episode ended resets that sub-environment, returns its first observation, reward 0,
+and ignores its action).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from mission_sim.contract import OBS_DIM, PolicyContext
+
+from .core import (N_BAT, N_COEF, NUMPY_OPS, OBS_OFFSET, OBS_SCALE, EnvConfig, advance, build_plans, reward_cost)
+from .scenario import draw_episode, get_scenario, scenario_from_options
+
+__all__ = ["SbarChargingVectorEnv", "SbarChargingDiscreteVectorEnv"]
+
+
+class SbarChargingVectorEnv(VectorEnv):
+    """``num_envs`` charging windows stepped at once; see :class:`envs.charging.SbarChargingEnv` for
+    the spaces, reward and episode definition. ``info`` holds arrays of shape (num_envs,)."""
+
+    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(self, num_envs: int = 1, scenario="nominal", config: EnvConfig | None = None,
+                 render_mode: str | None = None):
+        if int(num_envs) != num_envs or num_envs < 1:
+            raise ValueError(f"num_envs={num_envs!r} is invalid; valid range: integer >= 1")
+        if render_mode is not None:
+            raise ValueError(f"render_mode={render_mode!r} is invalid for the vector env; valid values: None "
+                             "(render a single env instead)")
+        self.num_envs = int(num_envs)
+        self.render_mode = None
+        self.scenario = get_scenario(scenario)
+        self.config = c = config or EnvConfig()
+        self.single_observation_space = spaces.Box(-1.0, 1.0, (OBS_DIM,), np.float32)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.single_action_space = self._make_action_space()
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        n, T, S = self.num_envs, c.n_steps, c.n_slow
+        self._T, self._M, self._dt, self._inv_rated = T, c.slow_every, c.dt_s, 1.0 / c.rated_i2_a
+        self._ar = np.arange(n)
+        self._cmd = np.zeros((n, T + 1))
+        self._noise = np.zeros((n, T))
+        self._coef_all = np.zeros((n, S, N_COEF))
+        self._lm_all = np.zeros((n, S))
+        self._bat = np.zeros((N_BAT, n))
+        self._t_stop = np.zeros(n)
+        self._coef = np.zeros((N_COEF, n))
+        self._j = np.zeros(n, dtype=np.int64)
+        self._k = np.zeros(n, dtype=np.int64)
+        self._state = np.zeros((6, n))   # i1, i2, vl, soc, vrc, d
+        self._prev_done = np.zeros(n, dtype=bool)
+        self._rngs = [None] * n
+        self._scn = [self.scenario] * n
+        self._cur_scenario = self.scenario
+        self._started = False
+        self._obs_scale = OBS_SCALE[:, None]
+        self._obs_offset = OBS_OFFSET[:, None]
+
+    def _make_action_space(self):
+        return spaces.Box(-1.0, 1.0, (1,), np.float32)
+
+    def _duty(self, actions) -> np.ndarray:
+        a = np.asarray(actions, dtype=float).reshape(self.num_envs)
+        return np.clip((a + 1.0) * 0.5, 0.0, 1.0)
+
+    @property
+    def policy_context(self) -> PolicyContext:
+        return PolicyContext(link=self.config.link, control_period_s=self._dt, rated_i2_a=self.config.rated_i2_a)
+
+    # ------------------------------------------------------------------ episodes
+    def _start(self, idx: np.ndarray):
+        """(Re)start the sub-environments ``idx``: draw with their generators, build plans batched.
+        The scenario is the one given to the last ``reset`` (``options["scenario"]``) or the env's."""
+        c = self.config
+        scns = [self._cur_scenario] * len(idx)
+        draws = [draw_episode(self._rngs[i], s, c.n_steps, c.n_slow) for i, s in zip(idx, scns)]
+        p = build_plans(draws, scns, c)
+        for i, s in zip(idx, scns):
+            self._scn[i] = s
+        self._cmd[idx] = p.cmd_a
+        self._noise[idx] = p.noise_a
+        self._coef_all[idx] = p.coef
+        self._lm_all[idx] = p.lm_h
+        self._bat[:, idx] = p.battery.T
+        self._t_stop[idx] = p.t_stop_s
+        self._coef[:, idx] = p.coef[:, 0].T
+        self._j[idx] = 0
+        self._k[idx] = 0
+        st = self._state
+        st[0, idx], st[1, idx] = p.x0[:, 0], p.x0[:, 1]
+        st[2, idx], st[3, idx], st[4, idx], st[5, idx] = p.vl0, p.battery[:, 2], p.vrc0, p.d0
+
+    def _initial_obs_info(self):
+        i1, i2, vl, soc, vrc, d = self._state
+        g = 1.0 - np.sin(0.5 * np.pi * d)
+        il = 2.0 / np.pi * i2 * g
+        ib = il - self._bat[7]
+        cmd = self._cmd[self._ar, self._k]
+        obs = self._obs(i2, vl, ib, il, soc, cmd, d)
+        info = {"t_s": self._k * self._dt, "i2_a": i2.copy(), "i2_peak_a": i2.copy(), "i1_a": i1.copy(),
+                "d_short": d.copy(), "v2_v": 4.0 / np.pi * vl * g, "rect_current_a": il, "battery_v": vl.copy(),
+                "battery_current_a": ib, "soc": soc.copy(), "charge_cmd_a": cmd,
+                "lm_h": self._lm_all[self._ar, self._j], "energy_j": np.zeros(self.num_envs),
+                "cost": np.zeros(self.num_envs), "t_stop_s": self._t_stop.copy()}
+        return obs, info
+
+    def _obs(self, i2m, vl, ib, il, soc, cmd, d):
+        o = np.stack([i2m, vl, ib, il, soc, cmd, d])
+        o *= self._obs_scale
+        o += self._obs_offset
+        np.clip(o, -1.0, 1.0, out=o)
+        return o.T.astype(np.float32)
+
+    def reset(self, *, seed=None, options: dict | None = None):
+        super().reset(seed=seed)
+        n = self.num_envs
+        if seed is None:
+            seeds = [None] * n
+        elif np.ndim(seed) == 0:
+            seeds = [int(seed) + i for i in range(n)]
+        else:
+            seeds = [int(s) for s in seed]
+            if len(seeds) != n:
+                raise ValueError(f"seed has {len(seeds)} entries; valid: one int or num_envs={n} ints")
+        if seed is not None or not self._started:
+            self._rngs = [seeding.np_random(s)[0] for s in seeds]
+        self._cur_scenario = scenario_from_options(options, self.scenario)
+        self._start(self._ar)
+        self._prev_done[:] = False
+        self._started = True
+        return self._initial_obs_info()
+
+    def step(self, actions):
+        if not self._started:
+            raise RuntimeError("step() called before reset(); call reset()")
+        d = self._duty(actions)
+        done = self._prev_done
+        any_done = bool(done.any())
+        k = self._k
+        if any_done:
+            k[done] = 0   # these rows are stepped for nothing and restarted below
+        j = k // self._M
+        moved = j != self._j
+        if moved.any():
+            self._coef[:, moved] = self._coef_all[self._ar[moved], j[moved]].T
+            self._j = j
+        i1, i2, vl_old, soc, vrc, _ = self._state
+        i1, i2, i2m, il, ib, soc, vrc, vl, v2 = advance(i1, i2, vl_old, soc, vrc, d, self._coef, self._bat, NUMPY_OPS)
+        cmd = self._cmd[self._ar, k]
+        peak = np.maximum(i2m, i2)
+        reward, cost = reward_cost(il, cmd, peak, self._inv_rated, self.config.reward, NUMPY_OPS)
+        energy = vl_old * il * self._dt
+        st = self._state
+        st[0], st[1], st[2], st[3], st[4], st[5] = i1, i2, vl, soc, vrc, d
+        k += 1
+        obs = self._obs(i2 + self._noise[self._ar, k - 1], vl, ib, il, soc, self._cmd[self._ar, k], d)
+        truncated = k >= self._T
+        terminated = np.zeros(self.num_envs, dtype=bool)
+        info = {"t_s": k * self._dt, "i2_a": i2, "i2_peak_a": peak, "i1_a": i1, "d_short": d, "v2_v": v2,
+                "rect_current_a": il, "battery_v": vl, "battery_current_a": ib, "soc": soc, "charge_cmd_a": cmd,
+                "lm_h": self._lm_all[self._ar, self._j], "energy_j": energy, "cost": cost}
+        if any_done:
+            idx = np.flatnonzero(done)
+            self._start(idx)
+            obs0, info0 = self._initial_obs_info()
+            obs[idx] = obs0[idx]
+            reward[idx] = 0.0
+            truncated[idx] = False
+            for key, v in info.items():
+                v[idx] = info0[key][idx]
+        self._prev_done = truncated.copy()
+        return obs, reward, terminated, truncated, info
+
+
+class SbarChargingDiscreteVectorEnv(SbarChargingVectorEnv):
+    """Batched :class:`envs.charging.SbarChargingDiscreteEnv`: actions in {0: RM, 1: SM}."""
+
+    def _make_action_space(self):
+        return spaces.Discrete(2)
+
+    def _duty(self, actions) -> np.ndarray:
+        a = np.asarray(actions).reshape(self.num_envs)
+        if np.any((a != 0) & (a != 1)):
+            raise ValueError(f"actions={a[(a != 0) & (a != 1)][0]!r} is invalid; valid values: 0 (RM), 1 (SM)")
+        return a.astype(float)

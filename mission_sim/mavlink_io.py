@@ -1,0 +1,377 @@
+"""Reading MAVLink telemetry logs (.tlog) and ArduPilot DataFlash logs (.bin) into pandas tables.
+
+:func:`read_log` never raises on bad *content*: corrupt frames are counted (``bad_frames``) and
+skipped, and a parser failure ends the read with what was decoded so far (``errors``). Only a
+missing file raises (``FileNotFoundError``).
+
+Tables of a :class:`FlightLog` (time ``t_s`` in seconds since the first record of the log, taken
+from the log's own timestamps ``msg._timestamp`` -- ground-station clock in a .tlog, GPS-aligned
+in a .bin -- so vehicle reboots and ``time_boot_ms`` resets do not disturb the timeline; position
+and attitude samples of a .tlog are spaced by the vehicle's clock within each boot, see
+:func:`_vehicle_time`):
+
+==========  =================================================================================
+table       columns (SI units; converted once, in :data:`_CONVERT`)
+==========  =================================================================================
+position    t_s, lat_deg, lon_deg, alt_m (AMSL) -- GPS fix type >= 3 only
+attitude    t_s, roll_rad, pitch_rad
+armed       t_s, armed (bool) -- every armed-state report of the vehicle
+battery     t_s, voltage_v, current_a (+ = discharging), power_w = voltage_v * current_a
+==========  =================================================================================
+
+pymavlink must be imported with ``MAVLINK20=1`` (shared/notes/mavlink.md): :func:`mavutil`
+sets it and checks it took effect.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["mavutil", "FlightLog", "read_log", "armed_periods", "POSITION_COLUMNS", "BATTERY_COLUMNS"]
+
+POSITION_COLUMNS = ("t_s", "lat_deg", "lon_deg", "alt_m")
+ATTITUDE_COLUMNS = ("t_s", "roll_rad", "pitch_rad")
+ARMED_COLUMNS = ("t_s", "armed")
+BATTERY_COLUMNS = ("t_s", "voltage_v", "current_a", "power_w")
+
+_MAV_AUTOPILOT_INVALID = 8          # ground stations and companions send heartbeats with this
+_MAV_MODE_FLAG_SAFETY_ARMED = 128
+_UINT16_MAX = 65535
+_T_MIN_S, _T_MAX_S = 0.0, 4102444800.0  # plausible record times: boot-relative .. year 2100 (Unix s)
+_TIME_SPIKE_S = 60.0                 # a record this far off its neighbours' median time is corrupt
+_REBOOT_DROP_S = 10.0                 # a time_boot_ms drop this large is a reboot, not jitter
+_DF_ARMED_EVENTS = {10: True, 11: False}  # DataFlash EV Id: ARMED, DISARMED
+_DF_INT_CHARS = set("bBhHiIqQ")           # DataFlash format chars stored as plain integers
+
+
+def mavutil():
+    """``pymavlink.mavutil`` with the MAVLink 2 dialect loaded (MAVLINK20=1 set before the import)."""
+    os.environ["MAVLINK20"] = "1"
+    from pymavlink import mavutil as mu
+    if mu.mavlink.WIRE_PROTOCOL_VERSION != "2.0":
+        raise RuntimeError("pymavlink.mavutil was imported before MAVLINK20=1 was set; MAVLink 2 "
+                           "messages cannot be encoded. Import mission_sim.mavlink_io first.")
+    return mu
+
+
+# ----------------------------------------------------------------------------- unit conversion
+def _nan_if(value, *invalid):
+    return float("nan") if value in invalid else float(value)
+
+
+def _battery_status_voltage_v(msg) -> float:
+    """BATTERY_STATUS: cell voltages in mV, 65535 = unused; some vehicles put the pack in cell 0."""
+    cells = [v for v in list(msg.voltages) + list(getattr(msg, "voltages_ext", []) or []) if 0 < v < _UINT16_MAX]
+    return sum(cells) * 1e-3 if cells else float("nan")
+
+
+def _df_scale(msg, column: str, int_scale: float) -> float:
+    """DataFlash: integer columns (old CURR: cV, cA) get ``int_scale``; float columns are in SI already."""
+    fmt = msg.fmt
+    char = fmt.format[fmt.colhash[column]] if column in fmt.colhash else "f"
+    return int_scale if char in _DF_INT_CHARS else 1.0
+
+
+#: The ONE place where raw log fields become SI values: message type -> (table, row function).
+#: DFReader already applies the DataFlash format multipliers (L: 1e-7 deg, c/e: 0.01), except on
+#: plain integer columns such as the old CURR Volt/Curr in cV/cA.
+_CONVERT = {
+    "GLOBAL_POSITION_INT": ("position", lambda m: {
+        "lat_deg": m.lat * 1e-7, "lon_deg": m.lon * 1e-7, "alt_m": m.alt * 1e-3,
+        "time_boot_s": m.time_boot_ms * 1e-3}),
+    "GPS_RAW_INT": ("fix", lambda m: {"fix_type": int(m.fix_type)}),
+    "GPS": ("df_gps", lambda m: {
+        "fix_type": int(m.Status), "lat_deg": float(m.Lat), "lon_deg": float(m.Lng), "alt_m": float(m.Alt),
+        "gps_id": int(getattr(m, "I", getattr(m, "Instance", 0)))}),
+    "ATTITUDE": ("attitude", lambda m: {"roll_rad": float(m.roll), "pitch_rad": float(m.pitch),
+                                        "time_boot_s": m.time_boot_ms * 1e-3}),
+    "ATT": ("attitude", lambda m: {"roll_rad": math.radians(m.Roll), "pitch_rad": math.radians(m.Pitch)}),
+    "HEARTBEAT": ("heartbeat", lambda m: {
+        "armed": bool(m.base_mode & _MAV_MODE_FLAG_SAFETY_ARMED), "autopilot": int(m.autopilot),
+        "mav_type": int(m.type)}),
+    "EV": ("armed", lambda m: {"armed": _DF_ARMED_EVENTS.get(int(m.Id))}),
+    "ARM": ("armed", lambda m: {"armed": bool(m.ArmState)}),
+    "SYS_STATUS": ("sys_status", lambda m: {
+        "voltage_v": _nan_if(m.voltage_battery, 0, _UINT16_MAX) * 1e-3,
+        "current_a": _nan_if(m.current_battery, -1) * 1e-2}),
+    "BATTERY_STATUS": ("battery_status", lambda m: {
+        "voltage_v": _battery_status_voltage_v(m),
+        "current_a": _nan_if(m.current_battery, -1) * 1e-2, "battery_id": int(m.id)}),
+    "CURR": ("df_curr", lambda m: {
+        "voltage_v": m.Volt * _df_scale(m, "Volt", 1e-2), "current_a": m.Curr * _df_scale(m, "Curr", 1e-2)}),
+    "BAT": ("df_bat", lambda m: {
+        "voltage_v": float(m.Volt), "current_a": float(m.Curr),
+        "battery_id": int(getattr(m, "Inst", getattr(m, "Instance", 0)))}),
+}
+
+
+# ----------------------------------------------------------------------------- result
+@dataclass
+class FlightLog:
+    """What :func:`read_log` found in one log (tables described in the module docstring)."""
+
+    path: Path
+    kind: str                      # "tlog" or "dataflash"
+    t0_epoch_s: float              # timestamp of the first record (Unix s); nan if none
+    duration_s: float              # last minus first record timestamp
+    position: pd.DataFrame
+    attitude: pd.DataFrame
+    armed: pd.DataFrame
+    battery: pd.DataFrame
+    battery_source: str | None     # SYS_STATUS, BATTERY_STATUS, CURR or BAT
+    bad_frames: int                # corrupt frames counted and skipped
+    n_records: int                 # records decoded (bad frames included)
+    mavlink_frames: dict[int, int] = field(default_factory=dict)  # protocol version -> frames (.tlog)
+    reboots: int = 0               # time_boot_ms drops seen in GLOBAL_POSITION_INT
+    fix_checked: bool = True       # False: the log had no GPS fix information at all
+    vehicle: dict = field(default_factory=dict)
+    errors: list[str] = field(default_factory=list)
+
+    @property
+    def armed_periods(self) -> list[tuple[float, float]]:
+        return armed_periods(self.armed, self.duration_s)
+
+    @property
+    def armed_time_s(self) -> float:
+        return float(sum(b - a for a, b in self.armed_periods))
+
+
+def armed_periods(armed: pd.DataFrame, end_s: float) -> list[tuple[float, float]]:
+    """(start_s, end_s) of each armed period from armed-state reports; an open period ends at ``end_s``."""
+    periods, start = [], None
+    for t, a in zip(armed["t_s"].to_numpy(float), armed["armed"].to_numpy(bool)):
+        if a and start is None:
+            start = t
+        elif not a and start is not None:
+            periods.append((start, t))
+            start = None
+    if start is not None:
+        periods.append((start, max(float(end_s), start)))
+    return periods
+
+
+# ----------------------------------------------------------------------------- reading
+def _open(path: Path, mu):
+    """(reader, kind). DataFlash by magic bytes or suffix; everything else is read as a .tlog.
+
+    The readers are built directly: ``mavlink_connection`` would execute a path containing /bin/.
+    """
+    from pymavlink import DFReader
+    with open(path, "rb") as fh:
+        head = fh.read(2)
+    if head == b"\xa3\x95" or path.suffix.lower() == ".bin":
+        # the Python indexer: the compiled one reports corrupt bytes on the C stderr, uncapturable
+        old = os.environ.get("PYMAVLINK_FAST_INDEX")
+        os.environ["PYMAVLINK_FAST_INDEX"] = "0"
+        try:
+            return DFReader.DFReader_binary(str(path)), "dataflash"
+        finally:
+            if old is None:
+                os.environ.pop("PYMAVLINK_FAST_INDEX")
+            else:
+                os.environ["PYMAVLINK_FAST_INDEX"] = old
+    if path.suffix.lower() == ".log" and DFReader.DFReader_is_text_log(str(path)):
+        return DFReader.DFReader_text(str(path)), "dataflash"
+    return mu.mavmmaplog(str(path)), "tlog"
+
+
+def _collect(reader, kind: str, raw: dict, stats: dict) -> None:
+    """Decode every record into ``raw[table]`` rows (with t and source); BAD_DATA only counted.
+
+    Records are read unfiltered: with a type filter pymavlink skips .tlog frames without checking
+    them (corrupt frames would go uncounted), and the duration is over all records.
+    """
+    while True:
+        msg = reader.recv_match(blocking=False)
+        if msg is None:
+            return
+        t = getattr(msg, "_timestamp", None)
+        t = float(t) if isinstance(t, (int, float)) and _T_MIN_S <= t <= _T_MAX_S else float("nan")
+        rec = len(stats["ts"])
+        stats["ts"].append(t)
+        mtype = msg.get_type()
+        stats["bad_rec"].append(mtype == "BAD_DATA")
+        if mtype == "BAD_DATA" or t != t:
+            continue
+        if kind == "tlog":
+            buf = msg.get_msgbuf()
+            ver = 2 if buf[:1] == b"\xfd" else 1
+            stats["versions"][ver] = stats["versions"].get(ver, 0) + 1
+        conv = _CONVERT.get(mtype)
+        if conv is None:
+            continue
+        table, fn = conv
+        try:
+            row = fn(msg)
+        except (AttributeError, TypeError, ValueError, KeyError, OverflowError):
+            stats["bad_rec"][rec] = True
+            continue
+        row["t"] = t
+        row["rec"] = rec
+        row["src"] = (msg.get_srcSystem(), msg.get_srcComponent()) if kind == "tlog" else (0, 0)
+        raw.setdefault(table, []).append(row)
+
+
+def read_log(path) -> FlightLog:
+    """Read a .tlog or DataFlash log into a :class:`FlightLog`; never raises on bad content.
+
+    Raises ``FileNotFoundError`` if ``path`` does not exist or is not a file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"log {str(path)!r} does not exist or is not a file")
+    mu = mavutil()
+    raw: dict[str, list[dict]] = {}
+    stats = {"ts": [], "bad_rec": [], "bad": 0, "versions": {}}
+    errors: list[str] = []
+    kind = "dataflash" if path.suffix.lower() == ".bin" else "tlog"
+    captured = io.StringIO()
+    if path.stat().st_size > 0:
+        # DFReader reports skipped corrupt bytes with print(); count those reports as bad frames.
+        with contextlib.redirect_stderr(captured), contextlib.redirect_stdout(captured):
+            try:
+                reader, kind = _open(path, mu)
+                _collect(reader, kind, raw, stats)
+            except Exception as exc:  # noqa: BLE001 -- untrusted bytes: keep what was decoded, report
+                errors.append(f"{type(exc).__name__}: {exc}")
+    text = captured.getvalue()
+    stats["bad"] += text.count("Skipped ") + text.count("Failed to parse")
+    return _assemble(path, kind, raw, stats, errors)
+
+
+def _good_timestamps(ts: np.ndarray) -> np.ndarray:
+    """Records whose timestamp is within :data:`_TIME_SPIKE_S` of the centred rolling median of 9.
+
+    A corrupt byte in a .tlog record's 8-byte timestamp (or in a DataFlash TimeUS) makes an
+    isolated spike of hours or years; steps (logging paused) and any spacing of a monotonic
+    clock pass, since the centred median of a sorted window is its middle element.
+    """
+    if len(ts) == 0:
+        return np.zeros(0, dtype=bool)
+    med = pd.Series(ts).rolling(9, center=True, min_periods=1).median().to_numpy()
+    return np.abs(ts - med) <= _TIME_SPIKE_S  # False for nan (implausible timestamps)
+
+
+def _assemble(path: Path, kind: str, raw: dict, stats: dict, errors: list[str]) -> FlightLog:
+    ts = np.asarray(stats["ts"], dtype=float)
+    good = _good_timestamps(ts)
+    stats["bad"] += int(np.sum(~good | np.asarray(stats["bad_rec"], dtype=bool)))
+    t0 = float(ts[good][0]) if good.any() else float("nan")
+    duration = max(float(ts[good].max()) - t0, 0.0) if good.any() else 0.0
+
+    def table(name):
+        df = pd.DataFrame(raw.get(name, []))
+        if len(df):
+            df = df[good[df["rec"].to_numpy()]]
+            df.insert(0, "t_s", df.pop("t") - t0)
+        return df
+
+    vehicle: dict = {}
+    hb = table("heartbeat")
+    if kind == "tlog":
+        veh = hb[hb["autopilot"] != _MAV_AUTOPILOT_INVALID] if len(hb) else hb
+        if len(veh):
+            src = veh["src"].iloc[0]
+            vehicle = {"sysid": int(src[0]), "compid": int(src[1]), "mav_type": int(veh["mav_type"].iloc[0])}
+
+    def from_vehicle(df):
+        if not len(df) or kind != "tlog":
+            return df
+        if vehicle:
+            return df[df["src"] == (vehicle["sysid"], vehicle["compid"])]
+        return df[df["src"].map(lambda s: s[0]) != 255]  # no autopilot heartbeat: drop the usual GCS id
+
+    # position: GPS fix >= 3 and a non-zero lat/lon
+    fix_checked = True
+    if kind == "tlog":
+        pos = from_vehicle(table("position"))
+        fix = table("fix")
+        fix = fix[fix["src"].map(lambda s: s[0]) == vehicle["sysid"]] if vehicle and len(fix) else fix
+        reboots = int(np.sum(np.diff(pos["time_boot_s"].to_numpy(float)) < -_REBOOT_DROP_S)) if len(pos) else 0
+        pos = _vehicle_time(pos)
+        if len(pos) and len(fix):
+            # the last fix report before each position *in the log's record order*
+            pos = pd.merge_asof(pos.sort_values("rec"), fix[["rec", "fix_type"]].sort_values("rec"),
+                                on="rec", direction="backward")
+            pos = pos[pos["fix_type"].fillna(0) >= 3]
+        elif len(pos):
+            fix_checked = False
+    else:
+        pos = table("df_gps")
+        reboots = 0
+        if len(pos):
+            pos = pos[(pos["fix_type"] >= 3) & (pos["gps_id"] == pos["gps_id"].min())]  # first receiver
+    if len(pos):
+        ok = (pos["lat_deg"] != 0) & (pos["lon_deg"] != 0) & pos["lat_deg"].between(-90, 90) \
+            & pos["lon_deg"].between(-180, 180) & np.isfinite(pos["alt_m"])
+        pos = pos[ok]
+    position = _clean_time(pos, POSITION_COLUMNS)
+
+    attitude = _clean_time(_vehicle_time(from_vehicle(table("attitude"))), ATTITUDE_COLUMNS)
+    armed_df = from_vehicle(hb)[["t_s", "armed"]] if kind == "tlog" and len(hb) else table("armed")
+    if len(armed_df):
+        armed_df = armed_df[armed_df["armed"].notna()]
+    armed = _clean_time(armed_df, ARMED_COLUMNS, dedupe=False)
+    if len(armed):
+        armed["armed"] = armed["armed"].astype(bool)
+
+    battery, source = pd.DataFrame(columns=list(BATTERY_COLUMNS)), None
+    for name, label in (("battery_status", "BATTERY_STATUS"), ("sys_status", "SYS_STATUS"),
+                        ("df_bat", "BAT"), ("df_curr", "CURR")):
+        df = from_vehicle(table(name))
+        if "battery_id" in df and len(df):
+            df = df[df["battery_id"] == df["battery_id"].min()]
+        if len(df):
+            df = df[np.isfinite(df["voltage_v"]) & np.isfinite(df["current_a"])]
+        if len(df):
+            df = df.assign(power_w=df["voltage_v"] * df["current_a"])
+            battery, source = _clean_time(df, BATTERY_COLUMNS), label
+            break
+
+    return FlightLog(path=path, kind=kind, t0_epoch_s=float(t0), duration_s=float(duration),
+                     position=position, attitude=attitude, armed=armed, battery=battery,
+                     battery_source=source, bad_frames=int(stats["bad"]), n_records=int(len(ts)),
+                     mavlink_frames=dict(stats["versions"]), reboots=reboots, fix_checked=fix_checked,
+                     vehicle=vehicle, errors=errors)
+
+
+def _vehicle_time(df: pd.DataFrame) -> pd.DataFrame:
+    """Sample times from the vehicle's clock, placed on the log's timeline.
+
+    A ground station stamps frames when they arrive, in bursts (the SITL log here has a median
+    spacing of 7 ms between position frames sent every 240 ms). The vehicle's ``time_boot_s``
+    spaces samples exactly but restarts on reboot. So: split at every ``time_boot`` drop larger
+    than :data:`_REBOOT_DROP_S` (a reboot), and within each boot segment use ``time_boot_s`` plus
+    the segment's median offset to the log clock. A sample that lands more than
+    :data:`_TIME_SPIKE_S` from its own log timestamp (corrupt time_boot_ms) keeps the log timestamp.
+    """
+    if not len(df) or "time_boot_s" not in df:
+        return df
+    tb = df["time_boot_s"].to_numpy(float)
+    t = df["t_s"].to_numpy(float)
+    seg = np.concatenate([[0], np.cumsum(np.diff(tb) < -_REBOOT_DROP_S)])
+    out = t.copy()
+    for k in np.unique(seg):
+        m = seg == k
+        out[m] = tb[m] + np.median(t[m] - tb[m])
+    bad = ~np.isfinite(out) | (np.abs(out - t) > _TIME_SPIKE_S)
+    out[bad] = t[bad]
+    return df.assign(t_s=out)
+
+
+def _clean_time(df: pd.DataFrame, columns, dedupe: bool = True) -> pd.DataFrame:
+    """Keep ``columns``, sort by time (stable), drop repeated timestamps (the last report wins)."""
+    if not len(df):
+        return pd.DataFrame({c: pd.Series(dtype=bool if c == "armed" else float) for c in columns})
+    out = df[list(columns)].sort_values("t_s", kind="stable")
+    if dedupe:
+        out = out.drop_duplicates("t_s", keep="last")
+    return out.reset_index(drop=True)

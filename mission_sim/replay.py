@@ -1,0 +1,363 @@
+"""Replay a real flight log through the mission world: log -> flown track about a pad -> run_mission.
+
+Pipeline (each step a small function):
+
+1. :func:`mission_sim.mavlink_io.read_log` -- position (GPS fix >= 3), attitude, armed state and
+   battery tables on the log's own timeline.
+2. :func:`track_from_log` -- local ENU metres about the pad (default pad: the first armed
+   position, :func:`default_pad`), tilt from roll and pitch, time from 0 at the first fix.
+   Heights below the pad (GPS/baro noise on the ground) are clipped to 0; ``ground_gap_m`` is
+   added so that z is the receiver coil's height above the pad coil (the gap when landed).
+3. :func:`resample_track` onto ``sim.traj_dt_s``, then ``run_mission(cfg, policy,
+   trajectory=replay_trajectory(...))`` -- Lm(t), SBAR, battery. Phases: "ground" while
+   disarmed (the pad stays off and the drone draws its avionics power only), "hover" below
+   0.3 m/s (the pad may energise), else "flight".
+4. :func:`compare_power` -- the logged electrical power (V I of the flight battery) against the
+   simulator's propulsion-power model while airborne, with the error; :func:`fit_mass_kg` --
+   the drone mass at which the model's energy matches the log's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from .geodesy import GeoPoint, geodetic_to_enu
+from .mavlink_io import FlightLog, read_log
+
+__all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "flight_stats",
+           "logged_energy_j", "compare_power", "fit_mass_kg", "resample_track", "replay_trajectory", "ReplayResult", "replay_log", "parse_window"]
+
+
+MAX_TILT_RAD = np.radians(85.0)   # the mission world takes |tilt| < 90 deg; beyond is upside down
+HOVER_SPEED_M_S = 0.3             # slower than this counts as hovering (pads may energise)
+AIRBORNE_M = 1.0                  # armed and this high above the pad counts as airborne (GPS height noise ~1 m)
+MIN_DT_S = 0.05                   # closer position samples are dropped (velocity by differences)
+_MAX_GAP_S = 10.0                 # samples further apart are not integrated across
+
+
+class NoPositionError(ValueError):
+    """The log holds fewer than two usable (GPS fix >= 3) positions."""
+
+
+@dataclass(frozen=True)
+class FlightTrack:
+    """The flown track: ``t_s`` (N,) from 0, ``pos_m`` (N, 3) ENU about the pad, ``tilt_rad`` (N,).
+
+    ``t_offset_s`` is the log time of ``t_s = 0``; ``height_m`` the height above the pad before
+    the ground gap was added (>= 0).
+    """
+
+    t_s: np.ndarray
+    pos_m: np.ndarray
+    tilt_rad: np.ndarray
+    height_m: np.ndarray
+    t_offset_s: float
+    pad: GeoPoint
+    ground_gap_m: float
+    armed: np.ndarray           # (N,) bool, inside an armed period of the log
+    n_tilt_clipped: int = 0     # samples whose tilt exceeded MAX_TILT_RAD (flips, crashes)
+
+    def phase(self, hover_speed_m_s: float = HOVER_SPEED_M_S) -> np.ndarray:
+        """Mission phases: "ground" while disarmed, else "hover" below ``hover_speed_m_s``, else "flight"."""
+        speed = np.linalg.norm(np.gradient(self.pos_m, self.t_s, axis=0), axis=1)
+        return np.where(~self.armed, "ground", np.where(speed < hover_speed_m_s, "hover", "flight")).astype(object)
+
+
+def parse_window(text: str | None) -> tuple[float, float] | None:
+    """``"T0,T1"`` (seconds of log time, T0 < T1) -> (t0, t1); ``ValueError`` naming the format."""
+    if text is None:
+        return None
+    fmt = "T0,T1 in seconds from the start of the log with 0 <= T0 < T1, e.g. 450,600"
+    try:
+        t0, t1 = (float(p) for p in str(text).split(","))
+    except ValueError:
+        raise ValueError(f"--window {text!r} is invalid; valid format: {fmt}") from None
+    if not (np.isfinite(t0) and np.isfinite(t1) and 0 <= t0 < t1):
+        raise ValueError(f"--window {text!r} is invalid; valid format: {fmt}")
+    return t0, t1
+
+
+def default_pad(log: FlightLog) -> GeoPoint:
+    """The first position at or after the first arming (the take-off spot), else the first position."""
+    pos = log.position
+    if len(pos) == 0:
+        raise NoPositionError(f"{log.path.name}: no usable position (GPS fix >= 3) in the log")
+    i = 0
+    periods = log.armed_periods
+    if periods:
+        after = np.flatnonzero(pos["t_s"].to_numpy() >= periods[0][0])
+        i = int(after[0]) if len(after) else len(pos) - 1
+    row = pos.iloc[i]
+    return GeoPoint(float(row.lat_deg), float(row.lon_deg), float(row.alt_m))
+
+
+def track_from_log(log: FlightLog, pad: GeoPoint | None = None, ground_gap_m: float = 0.0,
+                   window: tuple[float, float] | None = None) -> FlightTrack:
+    """The flown track about ``pad`` (None: :func:`default_pad`; a pad without altitude takes the
+    default pad's altitude), optionally cut to ``window`` = (t0, t1) seconds of log time."""
+    if not np.isfinite(ground_gap_m) or ground_gap_m < 0:
+        raise ValueError(f"ground_gap_m={ground_gap_m!r} is invalid; valid range: [0, inf) m")
+    pos = log.position
+    if window is not None:
+        pos = pos[(pos["t_s"] >= window[0]) & (pos["t_s"] <= window[1])]
+    if len(pos) < 2:
+        where = f" in the window {window[0]:g}..{window[1]:g} s" if window else ""
+        raise NoPositionError(f"{log.path.name}: no usable position (GPS fix >= 3){where}: "
+                              f"{len(pos)} sample(s), need at least 2")
+    if pad is None or pad.alt_m is None:
+        d = default_pad(log)
+        pad = d if pad is None else GeoPoint(pad.lat_deg, pad.lon_deg, d.alt_m)
+    t_log = pos["t_s"].to_numpy(float)
+    keep = _min_spacing(t_log, MIN_DT_S)
+    pos, t_log = pos[keep], t_log[keep]
+    e, n, u = geodetic_to_enu(pos["lat_deg"].to_numpy(), pos["lon_deg"].to_numpy(), pos["alt_m"].to_numpy(), pad)
+    height = np.maximum(u, 0.0)
+    tilt = np.zeros_like(t_log)
+    att = log.attitude
+    if len(att) >= 2:
+        tilt_att = np.arccos(np.clip(np.cos(att["roll_rad"].to_numpy()) * np.cos(att["pitch_rad"].to_numpy()), -1, 1))
+        tilt = np.interp(t_log, att["t_s"].to_numpy(float), tilt_att)
+    clipped = int(np.sum(tilt > MAX_TILT_RAD))
+    return FlightTrack(t_s=t_log - t_log[0], pos_m=np.column_stack([e, n, height + ground_gap_m]),
+                       tilt_rad=np.minimum(tilt, MAX_TILT_RAD), height_m=height, t_offset_s=float(t_log[0]),
+                       pad=pad, ground_gap_m=float(ground_gap_m), armed=_in_periods(t_log, log.armed_periods),
+                       n_tilt_clipped=clipped)
+
+
+def resample_track(track: FlightTrack, dt_s: float) -> FlightTrack:
+    """The track on a uniform grid of ``dt_s`` (linear interpolation; armed state held).
+
+    Logged fixes come every 0.2-0.4 s with gaps of seconds (radio drop-outs, reboots); the
+    mission runner holds Lm and the propulsion power over each trajectory sample, so a uniform
+    grid at the simulator's ``sim.traj_dt_s`` keeps every held interval short.
+    """
+    if not (np.isfinite(dt_s) and dt_s > 0):
+        raise ValueError(f"dt_s={dt_s!r} is invalid; valid range: (0, inf) s")
+    t = np.arange(0.0, float(track.t_s[-1]), dt_s)
+    t = np.append(t[t < track.t_s[-1] - 1e-9], track.t_s[-1])
+    pos = np.column_stack([np.interp(t, track.t_s, track.pos_m[:, i]) for i in range(3)])
+    held = np.clip(np.searchsorted(track.t_s, t, side="right") - 1, 0, len(track.t_s) - 1)
+    return FlightTrack(t_s=t, pos_m=pos, tilt_rad=np.interp(t, track.t_s, track.tilt_rad),
+                       height_m=np.interp(t, track.t_s, track.height_m), t_offset_s=track.t_offset_s,
+                       pad=track.pad, ground_gap_m=track.ground_gap_m, armed=track.armed[held],
+                       n_tilt_clipped=track.n_tilt_clipped)
+
+
+def _min_spacing(t, min_dt) -> np.ndarray:
+    """Mask keeping samples at least ``min_dt`` after the previously kept one (t sorted)."""
+    keep = np.zeros(len(t), dtype=bool)
+    last = -np.inf
+    for i, ti in enumerate(t):
+        if ti - last >= min_dt:
+            keep[i] = True
+            last = ti
+    return keep
+
+
+def flight_stats(log: FlightLog, track: FlightTrack) -> dict:
+    """Log and track facts for the summary (times in s, lengths in m; armed time within the track)."""
+    seg = np.diff(track.pos_m, axis=0)
+    t0, t1 = track.t_offset_s, track.t_offset_s + float(track.t_s[-1])
+    periods = [(max(a, t0), min(b, t1)) for a, b in log.armed_periods if b > t0 and a < t1]
+    return {
+        "duration_s": float(log.duration_s),
+        "position_span_s": float(track.t_s[-1]),
+        "distance_m": float(np.sum(np.linalg.norm(seg, axis=1))),
+        "horizontal_distance_m": float(np.sum(np.linalg.norm(seg[:, :2], axis=1))),
+        "max_alt_m": float(np.max(track.height_m)),
+        "max_range_m": float(np.max(np.linalg.norm(track.pos_m[:, :2], axis=1))),
+        "armed_time_s": float(sum(b - a for a, b in periods)),
+        "armed_periods_s": [[round(a, 3), round(b, 3)] for a, b in periods],
+        "n_position_samples": int(len(track.t_s)),
+        "bad_frames": int(log.bad_frames),
+        "reboots": int(log.reboots),
+        "tilt_clipped_samples": int(track.n_tilt_clipped),
+        "pad": {"lat_deg": track.pad.lat_deg, "lon_deg": track.pad.lon_deg, "alt_m": track.pad.alt_m},
+    }
+
+
+def _in_periods(t, periods) -> np.ndarray:
+    t = np.asarray(t, dtype=float)
+    mask = np.zeros(t.shape, dtype=bool)
+    for a, b in periods:
+        mask |= (t >= a) & (t <= b)
+    return mask
+
+
+def logged_energy_j(battery: pd.DataFrame, t0: float = -np.inf, t1: float = np.inf, periods=None) -> float:
+    """Trapezoid integral of the logged V I [J] over [t0, t1] (and only inside ``periods`` if given)."""
+    b = battery[(battery["t_s"] >= t0) & (battery["t_s"] <= t1)]
+    if len(b) < 2:
+        return float("nan")
+    t = b["t_s"].to_numpy(float)
+    p = b["power_w"].to_numpy(float)
+    dt = np.diff(t)
+    seg = 0.5 * (p[1:] + p[:-1]) * dt
+    if periods is not None:
+        seg = seg[_in_periods(t[:-1], periods) & _in_periods(t[1:], periods)]
+    return float(np.sum(seg))
+
+
+def compare_power(log: FlightLog, track: FlightTrack, sim_t_s, propulsion_w) -> tuple[pd.DataFrame, dict]:
+    """Logged electrical power vs the modelled propulsion power on the log's battery samples.
+
+    The model is sampled at each battery record's time (linear interpolation of the simulator's
+    time series, mapped back to log time with ``track.t_offset_s``). Compared while *airborne*:
+    armed and more than :data:`AIRBORNE_M` above the pad (armed on the ground the motors idle,
+    while the model, which knows no ground contact, gives hover power; disarmed the logged
+    power is the avionics alone). Returns the per-sample table and a summary:
+
+    logged / model mean power [W], mean error (model - logged) [W], RMS error [W], energies [J]
+    and their relative error, the correlation, the best-fit scale ``k`` (least squares,
+    k * model ~ logged) and the RMS error left after it (how well the *shape* is modelled).
+    """
+    bat = log.battery
+    sim_t = np.asarray(sim_t_s, dtype=float) + track.t_offset_s
+    model_w = np.asarray(propulsion_w, dtype=float)
+    b = bat[(bat["t_s"] >= sim_t[0]) & (bat["t_s"] <= sim_t[-1])]
+    t = b["t_s"].to_numpy(float)
+    height = np.interp(t, track.t_s + track.t_offset_s, track.height_m) if len(t) else np.zeros(0)
+    armed = _in_periods(t, log.armed_periods)
+    table = pd.DataFrame({"t_s": t, "logged_w": b["power_w"].to_numpy(float),
+                          "voltage_v": b["voltage_v"].to_numpy(float), "current_a": b["current_a"].to_numpy(float),
+                          "model_w": np.interp(t, sim_t, model_w) if len(t) else np.zeros(0),
+                          "height_m": height, "armed": armed, "airborne": armed & (height > AIRBORNE_M)})
+    table["error_w"] = table["model_w"] - table["logged_w"]
+    a = table[table["airborne"]]
+    out: dict = {"battery_source": log.battery_source, "n_samples_airborne": int(len(a)),
+                 "airborne_time_s": _mask_time(t, table["airborne"].to_numpy())}
+    if len(a) >= 2:
+        ta, lw, mw = a["t_s"].to_numpy(), a["logged_w"].to_numpy(), a["model_w"].to_numpy()
+        dt = np.diff(ta)
+        inside = dt < _MAX_GAP_S  # do not bridge a landing between two airborne stretches
+        e_log = float(np.sum((0.5 * (lw[1:] + lw[:-1]) * dt)[inside]))
+        e_mod = float(np.sum((0.5 * (mw[1:] + mw[:-1]) * dt)[inside]))
+        k = float(np.dot(mw, lw) / np.dot(mw, mw)) if np.dot(mw, mw) > 0 else float("nan")
+        out.update({
+            "logged_mean_w": float(lw.mean()), "model_mean_w": float(mw.mean()),
+            "mean_error_w": float((mw - lw).mean()), "rms_error_w": float(np.sqrt(np.mean((mw - lw) ** 2))),
+            "logged_energy_airborne_j": e_log, "model_energy_airborne_j": e_mod,
+            "energy_error_rel": (e_mod - e_log) / e_log if e_log > 0 else float("nan"),
+            "correlation": float(np.corrcoef(mw, lw)[0, 1]) if mw.std() > 0 and lw.std() > 0 else float("nan"),
+            "best_fit_scale": k,
+            "rms_error_after_scale_w": float(np.sqrt(np.mean((k * mw - lw) ** 2))) if np.isfinite(k) else float("nan"),
+        })
+    return table, out
+
+
+def _mask_time(t, mask) -> float:
+    """Seconds covered by consecutive samples that are both inside ``mask`` (gaps < _MAX_GAP_S)."""
+    if len(t) < 2:
+        return 0.0
+    dt = np.diff(t)
+    return float(np.sum(dt[mask[1:] & mask[:-1] & (dt < _MAX_GAP_S)]))
+
+
+def fit_mass_kg(traj, drone, target_energy_j: float, t_s, mask, runner_energy_j: float | None = None) -> float:
+    """Drone mass [kg] that makes the model's propulsion energy over ``mask`` equal ``target_energy_j``.
+
+    ``traj`` is the replayed :class:`~mission_sim.trajectory.Trajectory`; ``t_s``, ``mask`` the
+    comparison samples (trajectory time). Bisection on [0.05, 50] kg (energy rises with mass);
+    nan if the target is outside that range. ``runner_energy_j``: the runner's modelled energy
+    over the same samples at ``drone.mass_kg``; the target is scaled by the ratio of the
+    trajectory's to the runner's energy there (the runner holds the power over its steps), so
+    that a rerun at the fitted mass closes the energy. One number that says which drone the
+    log's power would correspond to under the model.
+    """
+    from dataclasses import replace
+
+    t_s = np.asarray(t_s, dtype=float)
+    mask = np.asarray(mask, dtype=bool)
+    if not np.isfinite(target_energy_j) or target_energy_j <= 0 or mask.sum() < 2:
+        return float("nan")
+    dt = np.diff(t_s)
+    seg = mask[1:] & mask[:-1] & (dt < _MAX_GAP_S)
+
+    def energy(m):
+        p = np.interp(t_s, traj.t_s, traj.propulsion_w(replace(drone, mass_kg=m)))
+        return float(np.sum((0.5 * (p[1:] + p[:-1]) * dt)[seg]))
+
+    if runner_energy_j is not None and np.isfinite(runner_energy_j) and runner_energy_j > 0:
+        target_energy_j *= energy(drone.mass_kg) / runner_energy_j
+    lo, hi = 0.05, 50.0
+    if not energy(lo) <= target_energy_j <= energy(hi):
+        return float("nan")
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if energy(mid) < target_energy_j else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+def replay_trajectory(track: FlightTrack):
+    """A :class:`~mission_sim.trajectory.Trajectory` of the track whose propulsion power is the
+    avionics alone while disarmed ("ground": the motors are off), momentum theory otherwise."""
+    from .trajectory import Trajectory
+
+    class ReplayTrajectory(Trajectory):
+        def propulsion_w(self, drone):
+            p = np.array(super().propulsion_w(drone), dtype=float)
+            p[self.phase == "ground"] = drone.avionics_w
+            return p
+
+    return ReplayTrajectory.from_samples(track.t_s, track.pos_m, tilt_rad=track.tilt_rad, phase=track.phase())
+
+
+@dataclass
+class ReplayResult:
+    """A replayed log: the log, its track, the mission result and the summary (JSON-ready)."""
+
+    log: FlightLog
+    track: FlightTrack
+    mission: object                 # mission_sim.results.MissionResult
+    summary: dict
+    power_table: pd.DataFrame | None = None
+    files: list[str] = field(default_factory=list)
+
+
+def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: float | None = None,
+               window: tuple[float, float] | None = None, progress: bool = False) -> ReplayResult:
+    """Build the track of ``log`` (a :class:`FlightLog` or a path), run the mission world along it,
+    compare the power.
+
+    ``ground_gap_m`` None: ``cfg.mission.hover_gap_m`` (the nominal gap), i.e. landed on the pad
+    the receiver coil sits at its nominal height above the pad coil.
+    Raises :class:`NoPositionError` (a ``ValueError``) if the log has no usable position.
+    """
+    from .runner import run_mission
+
+    if not isinstance(log, FlightLog):
+        log = read_log(log)
+    if ground_gap_m is None:
+        ground_gap_m = cfg.mission.hover_gap_m
+    track = track_from_log(log, pad=pad, ground_gap_m=ground_gap_m, window=window)
+    grid = resample_track(track, cfg.sim.traj_dt_s)
+    traj = replay_trajectory(grid)
+    mission = run_mission(cfg, policy, trajectory=traj, progress=progress)
+    ts = mission.timeseries
+    summary = flight_stats(log, track)
+    ms = mission.summary
+    summary.update({
+        "energy_to_battery_j": float(ms["energy_to_battery_j"]),
+        "propulsion_energy_j": float(ms["propulsion_energy_j"]),
+        "energy_from_source_j": float(ms["energy_from_source_j"]),
+        "final_soc": float(ms["final_soc"]),
+        "peak_i2_a": float(ms["peak_i2_a"]),
+        "sim_time_s": float(ms["sim_time_s"]),
+        "window_s": list(window) if window else None,
+        "battery_source": log.battery_source,
+    })
+    table = None
+    if len(log.battery):
+        t0, t1 = track.t_offset_s, track.t_offset_s + float(track.t_s[-1])
+        summary["logged_energy_j"] = logged_energy_j(log.battery, t0, t1)
+        table, cmp = compare_power(log, track, ts["t_s"].to_numpy(), ts["propulsion_w"].to_numpy())
+        air = table["airborne"].to_numpy()
+        cmp["drone_mass_kg"] = float(cfg.drone.mass_kg)
+        cmp["equivalent_mass_kg"] = fit_mass_kg(traj, cfg.drone, cmp.get("logged_energy_airborne_j", np.nan),
+                                                table["t_s"].to_numpy() - track.t_offset_s, air,
+                                                cmp.get("model_energy_airborne_j"))
+        summary["power_comparison"] = cmp
+    return ReplayResult(log=log, track=track, mission=mission, summary=summary, power_table=table)

@@ -1,0 +1,1 @@
+"""Pre-trained policies shipped with dronewpt (package data: model zip + metadata JSON)."""

@@ -1,0 +1,86 @@
+"""Reinforcement-learning policies: a stable-baselines3 model file behind the Policy protocol.
+
+A trained policy is two files side by side (written by ``dronewpt train``):
+
+* ``<name>.zip`` - the SB3 model (PPO, SAC or DQN),
+* ``<name>.json`` - metadata: algorithm, environment id, control period, scenario, seed,
+  timesteps and the observation normalisation statistics of ``VecNormalize`` (mean, var, clip,
+  epsilon) as plain JSON (no pickle).
+
+The wrapper takes contract observations (already in [-1, 1]), applies the stored normalisation,
+asks the model for its deterministic action and maps it to ``d_short`` exactly like the env:
+``(a + 1) / 2`` for continuous models, ``{0: RM, 1: SM}`` for DQN.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from mission_sim.contract import PolicyContext, action_to_duty
+
+__all__ = ["RLPolicy", "PRETRAINED", "load_meta", "ALGOS"]
+
+PRETRAINED = Path(__file__).parent / "pretrained" / "ppo_sbar.zip"
+ALGOS = ("ppo", "sac", "dqn")
+
+
+def load_meta(path) -> dict:
+    """The metadata JSON next to a model zip (``model.zip`` -> ``model.json``)."""
+    path = Path(path)
+    meta_path = path.with_suffix(".json")
+    if not path.is_file():
+        raise FileNotFoundError(f"RL model {str(path)!r} not found (train one with `dronewpt train`)")
+    if not meta_path.is_file():
+        raise FileNotFoundError(f"RL model metadata {str(meta_path)!r} not found (written by `dronewpt train`)")
+    meta = json.loads(meta_path.read_text())
+    if meta.get("algo") not in ALGOS:
+        raise ValueError(f"algo={meta.get('algo')!r} in {meta_path} is invalid; valid values: {', '.join(ALGOS)}")
+    return meta
+
+
+class RLPolicy:
+    """A stable-baselines3 policy (``path``: model zip; default the shipped pre-trained PPO)."""
+
+    name = "rl"
+
+    def __init__(self, ctx: PolicyContext = PolicyContext(), path=None, deterministic: bool = True):
+        self.ctx = ctx
+        self.path = Path(PRETRAINED if path is None else path)
+        self.meta = load_meta(self.path)
+        dt = float(self.meta["control_period_s"])
+        if abs(ctx.control_period_s - dt) > 1e-9 * dt:
+            raise ValueError(f"control_period_s={ctx.control_period_s!r} is invalid for {self.path.name}; "
+                             f"valid value: {dt!r} (the period it was trained at)")
+        import stable_baselines3 as sb3
+        cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "dqn": sb3.DQN}[self.meta["algo"]]
+        self.model = cls.load(str(self.path), device="cpu")
+        self.discrete = bool(self.meta.get("discrete", self.meta["algo"] == "dqn"))
+        norm = self.meta.get("obs_norm")
+        if norm:
+            self._mean = np.asarray(norm["mean"], dtype=np.float32)
+            self._scale = (1.0 / np.sqrt(np.asarray(norm["var"], dtype=np.float64) + norm["epsilon"])).astype(np.float32)
+            self._clip = float(norm["clip"])
+        else:
+            self._mean = None
+        self.deterministic = bool(deterministic)
+        self.name = f"rl_{self.meta['algo']}" if path is not None else "rl"
+
+    def reset(self, n: int = 1) -> None:
+        self.n = int(n)
+
+    def normalise(self, obs) -> np.ndarray:
+        o = np.atleast_2d(np.asarray(obs, dtype=np.float32))
+        if self._mean is None:
+            return o
+        return np.clip((o - self._mean) * self._scale, -self._clip, self._clip)
+
+    def act(self, obs):
+        o = self.normalise(obs)
+        a, _ = self.model.predict(o, deterministic=self.deterministic)
+        a = np.asarray(a).reshape(len(o), -1)[:, 0]
+        if self.discrete:
+            return a.astype(float)
+        return action_to_duty(a)

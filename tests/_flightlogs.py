@@ -1,0 +1,92 @@
+"""Where the real flight logs are (shared/flightlogs beside the repository), and pymavlink references.
+
+Resolution order: <repo>/../shared/flightlogs (CI clones the repo with shared/ beside it), the
+DRONEWPT_FLIGHTLOGS environment variable, /work/shared/flightlogs.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+LOG_NAMES = ("dronekit-python_flight.tlog", "dronekit-la-testdata_log171.bin",
+             "uavlogviewer_vtol_sitl.tlog", "ardusub_log_tools_small_rov.tlog")
+
+
+def flightlogs_dir() -> Path:
+    candidates = [Path(__file__).resolve().parents[1].parent / "shared" / "flightlogs"]
+    if os.environ.get("DRONEWPT_FLIGHTLOGS"):
+        candidates.append(Path(os.environ["DRONEWPT_FLIGHTLOGS"]))
+    candidates.append(Path("/work/shared/flightlogs"))
+    for c in candidates:
+        if (c / "SOURCES.md").is_file():
+            return c
+    pytest.fail("flight logs not found; looked in " + ", ".join(map(str, candidates))
+                + " (set DRONEWPT_FLIGHTLOGS)")
+
+
+def log_path(name: str) -> Path:
+    return flightlogs_dir() / name
+
+
+def pymavlink_reference(path: Path) -> dict:
+    """Facts computed with pymavlink directly (plain loops, independent of mission_sim.mavlink_io).
+
+    duration (last - first record timestamp), armed periods (vehicle HEARTBEAT base_mode bit 7 in a
+    .tlog, EV 10/11 in a .bin), positions with a 3D fix (lat/lon/alt extents and count), battery
+    voltage range and sample count, (t, V I) of SYS_STATUS / CURR.
+    """
+    os.environ["MAVLINK20"] = "1"
+    from pymavlink import mavutil
+
+    m = mavutil.mavlink_connection(str(path))
+    first = last = None
+    armed_state, armed_start, periods = False, None, []
+    fix = 0
+    lats, lons, alts, volts, volts_bs, power = [], [], [], [], [], []
+    bad = 0
+    while True:
+        msg = m.recv_match(blocking=False)
+        if msg is None:
+            break
+        t = msg._timestamp
+        first = t if first is None else first
+        last = t
+        typ = msg.get_type()
+        if typ == "BAD_DATA":
+            bad += 1
+            continue
+        rel = t - first
+        new_armed = None
+        if typ == "HEARTBEAT" and msg.autopilot != 8 and msg.get_srcComponent() == 1:
+            new_armed = bool(msg.base_mode & 128)
+        elif typ == "EV" and msg.Id in (10, 11):
+            new_armed = msg.Id == 10
+        if new_armed is not None and new_armed != armed_state:
+            if new_armed:
+                armed_start = rel
+            else:
+                periods.append((armed_start, rel))
+            armed_state = new_armed
+        if typ == "GPS_RAW_INT" and msg.get_srcComponent() == 1:
+            fix = msg.fix_type
+        if typ == "GLOBAL_POSITION_INT" and msg.get_srcComponent() == 1 and fix >= 3 and msg.lat != 0:
+            lats.append(msg.lat / 1e7), lons.append(msg.lon / 1e7), alts.append(msg.alt / 1e3)
+        if typ == "GPS" and msg.Status >= 3:
+            lats.append(msg.Lat), lons.append(msg.Lng), alts.append(msg.Alt)
+        if typ == "SYS_STATUS" and msg.voltage_battery not in (0, 65535) and msg.current_battery != -1:
+            volts.append(msg.voltage_battery / 1000)
+            power.append((rel, msg.voltage_battery / 1000 * msg.current_battery / 100))
+        if typ == "CURR":
+            volts.append(msg.Volt / 100)
+            power.append((rel, msg.Volt / 100 * msg.Curr / 100))
+        if typ == "BATTERY_STATUS" and msg.id == 0:
+            volts_bs.append(sum(v for v in msg.voltages if v != 65535) / 1000)
+    if armed_state:
+        periods.append((armed_start, last - first))
+    return {"duration_s": last - first, "armed_periods": periods, "n_pos": len(lats),
+            "lat": (min(lats), max(lats)), "lon": (min(lons), max(lons)), "alt": (min(alts), max(alts)),
+            "volt": (min(volts), max(volts)) if volts else None, "n_volt": len(volts), "bad": bad, "power": power,
+            "volt_bs": (min(volts_bs), max(volts_bs)) if volts_bs else None, "n_volt_bs": len(volts_bs)}

@@ -1,0 +1,61 @@
+"""`dronewpt replay` / `telemetry` bad input: one-line errors, exit status 2, no traceback."""
+
+import numpy as np
+import pytest
+
+from _flightlogs import log_path
+from mission_sim.cli import main
+
+
+def _one_line_error(capsys, argv, *needles):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    for n in needles:
+        assert n in err[0], err[0]
+    return err[0]
+
+
+def test_missing_log(capsys, tmp_path):
+    _one_line_error(capsys, ["replay", str(tmp_path / "nope.tlog")], "nope.tlog", "does not exist")
+
+
+@pytest.mark.parametrize("suffix", [".tlog", ".bin"])
+def test_empty_log(capsys, tmp_path, suffix):
+    p = tmp_path / f"empty{suffix}"
+    p.write_bytes(b"")
+    _one_line_error(capsys, ["replay", str(p)], "no usable position")
+
+
+def test_truncated_log_without_position(capsys, tmp_path):
+    p = tmp_path / "head.tlog"
+    p.write_bytes(log_path("dronekit-python_flight.tlog").read_bytes()[:20_000])  # before any 3D fix
+    _one_line_error(capsys, ["replay", str(p)], "no usable position", "GPS fix >= 3")
+
+
+def test_garbage_log(capsys, tmp_path):
+    p = tmp_path / "junk.bin"
+    p.write_bytes(np.random.default_rng(1).integers(0, 256, 50_000, dtype=np.uint8).tobytes())
+    _one_line_error(capsys, ["replay", str(p)], "no usable position")
+
+
+@pytest.mark.parametrize("pad", ["1,2,3,4", "north,east", "95,10", "-35,149,nan"])
+def test_bad_pad(capsys, pad):
+    _one_line_error(capsys, ["replay", str(log_path("uavlogviewer_vtol_sitl.tlog")), f"--pad={pad}"], "--pad")
+
+
+def test_bad_window(capsys):
+    _one_line_error(capsys, ["replay", str(log_path("uavlogviewer_vtol_sitl.tlog")), "--window", "9,3"],
+                    "--window", "T0,T1")
+    _one_line_error(capsys, ["replay", str(log_path("uavlogviewer_vtol_sitl.tlog")), "--window", "500,600"],
+                    "no usable position", "window")
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["--connect", "udpout:localhost"], "udpout:HOST:PORT"),
+    (["--connect", "none"], "--tlog"),
+    (["--home=-35,149"], "altitude"),
+    (["--follow", "serial:/dev/x"], "--follow"),
+])
+def test_telemetry_bad_input(capsys, argv, needle):
+    _one_line_error(capsys, ["telemetry", *argv], needle)

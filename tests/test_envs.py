@@ -1,0 +1,200 @@
+"""The charging environments: API checkers, seeding, truncation, batched == looped, physics."""
+
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode
+
+import envs
+from envs import EnvConfig, SbarChargingDiscreteEnv, SbarChargingEnv, SbarChargingVectorEnv
+from mission_sim.contract import normalise_obs
+from wpt_receiver import TABLE_I, EnvelopeLink, steady_state
+
+SHORT = EnvConfig(n_steps=40)
+INFO_KEYS = ("i2_a", "i2_peak_a", "i1_a", "d_short", "v2_v", "rect_current_a", "battery_v", "battery_current_a",
+             "soc", "charge_cmd_a", "lm_h", "energy_j", "cost")
+
+
+def _phys(info):
+    return np.array([info["i2_a"], info["battery_v"], info["battery_current_a"], info["rect_current_a"], info["soc"],
+                     info["charge_cmd_a"], info["d_short"]])
+
+
+@pytest.mark.parametrize("env_id,cls", [(envs.ENV_ID, SbarChargingEnv), (envs.DISCRETE_ENV_ID, SbarChargingDiscreteEnv)])
+def test_checkers_pass_without_warnings(env_id, cls):
+    from gymnasium.utils.env_checker import check_env
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_env(gym.make(env_id, render_mode="rgb_array").unwrapped)
+        sb3_check_env(cls(), warn=True)
+
+
+def test_registration_make_and_make_vec():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for env_id in (envs.ENV_ID, envs.DISCRETE_ENV_ID):
+            env = gym.make(env_id, scenario="windy")
+            obs, _ = env.reset(seed=0)
+            assert env.observation_space.contains(obs)
+            venv = gym.make_vec(env_id, num_envs=5, vectorization_mode="vector_entry_point")
+            assert isinstance(venv.metadata["autoreset_mode"], AutoresetMode)
+            obs, _ = venv.reset(seed=0)
+            assert obs.shape == (5, 7) and obs.dtype == np.float32
+            obs, r, term, trunc, info = venv.step(venv.action_space.sample())
+            assert r.shape == (5,) and info["cost"].shape == (5,)
+
+
+def test_seeding_is_deterministic_and_seeds_differ():
+    def roll(seed):
+        env = SbarChargingEnv(scenario="random", config=SHORT)
+        env.action_space.seed(seed)
+        out = [env.reset(seed=seed)[0]]
+        for _ in range(SHORT.n_steps):
+            o, r, *_ = env.step(env.action_space.sample())
+            out.append(np.append(o, r))
+        return np.concatenate(out)
+    np.testing.assert_array_equal(roll(3), roll(3))
+    assert not np.allclose(roll(3), roll(4))
+
+
+def test_time_limit_is_truncation_never_termination():
+    env = SbarChargingEnv(config=SHORT)
+    env.reset(seed=0)
+    flags = [env.step(np.array([0.0], np.float32))[2:4] for _ in range(SHORT.n_steps)]
+    assert not any(t for t, _ in flags)
+    assert [tr for _, tr in flags] == [False] * (SHORT.n_steps - 1) + [True]
+    with pytest.raises(RuntimeError, match="reset"):
+        env.step(np.array([0.0], np.float32))
+
+
+def test_vector_env_equals_looped_single_envs_including_autoreset():
+    n, seed, steps = 3, 11, 2 * SHORT.n_steps + 5
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, (steps, n, 1)).astype(np.float32)
+    venv = SbarChargingVectorEnv(num_envs=n, scenario="random", config=SHORT)
+    vobs, vinfo = venv.reset(seed=seed)
+    singles = [SbarChargingEnv(scenario="random", config=SHORT) for _ in range(n)]
+    sobs = [e.reset(seed=seed + i) for i, e in enumerate(singles)]
+    np.testing.assert_allclose(vobs, np.stack([o for o, _ in sobs]), atol=1e-6)
+    done = [False] * n
+    for k in range(steps):
+        vobs, vr, vterm, vtrunc, vinfo = venv.step(actions[k])
+        for i, e in enumerate(singles):
+            if done[i]:   # NEXT_STEP autoreset: this step restarts env i, reward 0
+                o, info = e.reset()
+                r, trunc, done[i] = 0.0, False, False
+            else:
+                o, r, _, trunc, info = e.step(actions[k, i])
+                done[i] = trunc
+            np.testing.assert_allclose(vobs[i], o, atol=1e-6)
+            assert vr[i] == pytest.approx(r, rel=1e-9, abs=1e-12)
+            assert vtrunc[i] == trunc and not vterm[i]
+            for key in INFO_KEYS:
+                assert vinfo[key][i] == pytest.approx(info[key], rel=1e-9, abs=1e-12), key
+
+
+def test_link_matches_envelope_link_and_rm_steady_state():
+    """The env's precomputed ZOH stepping equals wpt_receiver.EnvelopeLink with the same V2 and Lm,
+    and full rectification settles at the closed-form RM current."""
+    cfg = EnvConfig(n_steps=400)
+    env = SbarChargingEnv(scenario="nominal", config=cfg)
+    _, info = env.reset(seed=5)
+    link = EnvelopeLink(TABLE_I, 1)
+    link.x = [[info["i1_a"], info["i2_a"]]]
+    for _ in range(cfg.n_steps):
+        _, _, _, _, info = env.step(np.array([-1.0], np.float32))   # RM
+        link.step(info["v2_v"], cfg.dt_s, lm_h=info["lm_h"])
+        assert info["i2_a"] == pytest.approx(link.i2[0], rel=1e-10)
+        assert info["i1_a"] == pytest.approx(link.i1[0], rel=1e-10)
+    i2_rm = steady_state(TABLE_I, info["v2_v"])[1]
+    assert info["i2_a"] == pytest.approx(i2_rm, rel=1e-3)
+    assert i2_rm == pytest.approx(11.07, abs=0.15)   # Table I RM current at VL ~ 30 V
+
+
+def test_start_is_steady_and_power_balance_closes():
+    env = SbarChargingEnv(scenario="battery", config=EnvConfig(n_steps=60))
+    obs, info = env.reset(seed=2)
+    d0 = info["d_short"]
+    cmd0 = info["charge_cmd_a"]
+    i2_0 = info["i2_a"]
+    for _ in range(20):
+        _, _, _, _, info = env.step(np.array([2 * d0 - 1], np.float32))
+    assert info["charge_cmd_a"] == cmd0
+    assert info["i2_a"] == pytest.approx(i2_0, rel=2e-3)   # only the battery voltage drifts a little
+    assert info["rect_current_a"] == pytest.approx(cmd0, rel=5e-3)
+    # lossless rectifier: DC power VL I_L equals the fundamental power V2 I2 / 2 (steady state)
+    assert info["rect_current_a"] * info["battery_v"] == pytest.approx(0.5 * info["v2_v"] * info["i2_a"], rel=5e-3)
+    assert info["energy_j"] == pytest.approx(info["rect_current_a"] * info["battery_v"] * env.config.dt_s, rel=5e-3)
+
+
+def test_observation_is_the_contract_of_the_physical_values_and_reward_formula():
+    env = SbarChargingEnv(scenario="windy", config=SHORT)
+    obs, info = env.reset(seed=9)
+    np.testing.assert_allclose(obs, normalise_obs(_phys(info)), atol=1e-6)
+    w = env.config.reward
+    rng = np.random.default_rng(1)
+    for _ in range(SHORT.n_steps):
+        cmd = info["charge_cmd_a"]  # the command shown is the one the step is scored against
+        obs, r, _, _, info = env.step(rng.uniform(-1, 1, 1).astype(np.float32))
+        phys = _phys(info)
+        phys[5] = env._cmd[env._k]
+        np.testing.assert_allclose(obs[1:], normalise_obs(phys)[1:], atol=1e-6)
+        assert abs(obs[0] - normalise_obs(phys)[0]) < 5 * 0.1 * 2 / 60 + 1e-6   # I2 sensor noise, 0.1 A
+        il = info["rect_current_a"]
+        cost = max(info["i2_peak_a"] / 15.0 - 1.0, 0.0)
+        assert info["cost"] == pytest.approx(cost, abs=1e-12)
+        assert r == pytest.approx((min(il, cmd) - abs(il - cmd)) / w.i_ref_a - w.overcurrent * cost, rel=1e-9, abs=1e-12)
+
+
+def test_rm_to_sm_step_overshoots_and_costs():
+    env = SbarChargingEnv(scenario="nominal", config=EnvConfig(n_steps=400))
+    env.reset(seed=0)
+    for _ in range(200):   # settle in full rectification mode, then step to short mode
+        _, _, _, _, info = env.step(np.array([-1.0], np.float32))
+    assert info["cost"] == 0.0
+    peaks, costs = [], []
+    for _ in range(200):
+        _, _, _, _, info = env.step(np.array([1.0], np.float32))   # short mode at once (a step)
+        peaks.append(info["i2_peak_a"])
+        costs.append(info["cost"])
+    assert max(peaks) > 40.0            # the paper's ~50 A step overshoot (sampled at 50 us)
+    assert sum(costs) > 1.0
+    assert peaks[-1] == pytest.approx(steady_state(TABLE_I, 0.0)[1], rel=2e-3)   # SM steady 11.44 A
+
+
+def test_scenarios_and_errors():
+    lms = [SbarChargingEnv(scenario="lm_mismatch").reset(seed=s)[1]["lm_h"] for s in range(30)]
+    assert min(lms) < 0.9 * TABLE_I.lm_h and max(lms) > 1.1 * TABLE_I.lm_h
+    nominal = {SbarChargingEnv(scenario="nominal").reset(seed=s)[1]["lm_h"] for s in range(5)}
+    assert all(abs(x / TABLE_I.lm_h - 1) < 1e-6 for x in nominal)
+    vls = [SbarChargingEnv(scenario="battery").reset(seed=s)[1]["battery_v"] for s in range(30)]
+    assert max(vls) - min(vls) > 2.0
+    env = SbarChargingEnv()
+    _, info = env.reset(seed=0, options={"scenario": {"base": "nominal", "lm_scale": (0.8, 0.8)}})
+    assert info["lm_h"] == pytest.approx(0.8 * TABLE_I.lm_h, rel=1e-6)
+    with pytest.raises(ValueError, match="nominal"):
+        SbarChargingEnv(scenario="stormy")
+    with pytest.raises(ValueError, match="valid keys"):
+        env.reset(seed=0, options={"scenaro": "windy"})
+    with pytest.raises(ValueError, match="soc"):
+        envs.Scenario(soc=(0.5, 1.5))
+    with pytest.raises(ValueError, match="valid values: 0"):
+        d = SbarChargingDiscreteEnv()
+        d.reset(seed=0)
+        d.step(2)
+
+
+def test_discrete_env_maps_actions_to_modes_and_render():
+    env = SbarChargingDiscreteEnv(render_mode="rgb_array", config=SHORT)
+    env.reset(seed=0)
+    img0 = env.render()
+    assert env.step(0)[4]["d_short"] == 0.0
+    assert env.step(1)[4]["d_short"] == 1.0
+    for _ in range(10):
+        env.step(1)
+    img = env.render()
+    assert img.shape == (400, 600, 3) and img.dtype == np.uint8
+    assert (img != img0).any()

@@ -1,0 +1,176 @@
+"""Telemetry sender: loopback to a separate receiving process, and the .tlog writer read back."""
+
+import json
+import math
+import os
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from mission_sim.geodesy import GeoPoint, geodetic_to_enu
+from mission_sim.mavlink_io import mavutil, read_log
+from mission_sim.telemetry import DEFAULT_HOME, check_connect, mavlink_table, stream
+
+RECEIVER = Path(__file__).with_name("_mavlink_receiver.py")
+
+
+def _series(duration_s=2.5, dt=0.01):
+    """A mission-shaped time series: circle at 3 m, then hover over the pad charging, then climb."""
+    t = np.arange(0.0, duration_s + 1e-9, dt)
+    x = 3.0 * np.cos(t)
+    y = 3.0 * np.sin(t)
+    z = 0.2 + 0.4 * t
+    charging = (t > 0.8) & (t < 1.6)
+    i_batt = np.where(charging, 4.0, -6.0)                  # + = charging
+    soc = 0.5 + np.cumsum(i_batt * dt) / (5.0 * 3600)
+    return pd.DataFrame({"t_s": t, "x_m": x, "y_m": y, "z_m": z, "lm_h": 6.25e-6 * np.exp(-t),
+                         "i2_amp_a": np.where(charging, 11.0, 0.0) + t, "d_short": np.clip(t / 2.5, 0, 1),
+                         "battery_v": 29.6 + 0.1 * np.sin(t), "battery_current_a": i_batt, "soc": soc})
+
+
+def _free_port():
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_loopback_contents_and_rates():
+    ts = _series()
+    port = _free_port()
+    rx = subprocess.Popen([sys.executable, str(RECEIVER), str(port), "5"], stdout=subprocess.PIPE, text=True,
+                          env={**os.environ, "PYTHONPATH": ""})
+    try:
+        assert rx.stdout.readline().strip() == "READY"
+        st = stream(ts, connect=f"udpout:127.0.0.1:{port}", rate_hz=10.0, speed=1.0, duration_s=2.0)
+        out, _ = rx.communicate(timeout=10)
+    finally:
+        if rx.poll() is None:
+            rx.kill()
+    msgs = json.loads(out.strip().splitlines()[-1])
+    assert st.ticks == 21 and 1.9 < st.wall_s < 4.0
+    by = {}
+    for m in msgs:
+        by.setdefault(m["msg"], []).append(m)
+    assert {"HEARTBEAT", "SYS_STATUS", "BATTERY_STATUS", "GLOBAL_POSITION_INT", "NAMED_VALUE_FLOAT",
+            "GPS_RAW_INT"} <= set(by)
+    assert all(m["version"] == 2 and m["sys"] == 1 for m in msgs)
+    # every tick arrived (loopback), and at the requested rate
+    gp = by["GLOBAL_POSITION_INT"]
+    assert len(gp) == st.ticks and len(by["NAMED_VALUE_FLOAT"]) == 3 * st.ticks
+    arrival = np.array([m["t"] for m in gp])
+    rate = (len(arrival) - 1) / (arrival[-1] - arrival[0])
+    assert rate == pytest.approx(10.0, rel=0.1)
+    hb = by["HEARTBEAT"]
+    assert 2 <= len(hb) <= 4                        # 1 Hz of wall time over ~2 s
+    assert all(m["type"] == 2 and m["autopilot"] == 0 for m in hb)  # quadrotor, generic autopilot
+    assert np.all(np.diff([m["time_boot_ms"] for m in gp]) == 100)
+    # contents: the sample at each tick, in wire units
+    tick_t = np.array([m["time_boot_ms"] for m in gp]) / 1e3
+    k = np.searchsorted(ts["t_s"], tick_t + 1e-9, side="right") - 1
+    ref = ts.iloc[k].reset_index(drop=True)
+    e, n, u = geodetic_to_enu(np.array([m["lat"] for m in gp]) / 1e7, np.array([m["lon"] for m in gp]) / 1e7,
+                              np.array([m["alt"] for m in gp]) / 1e3, DEFAULT_HOME)
+    np.testing.assert_allclose(e, ref["x_m"], atol=0.02)
+    np.testing.assert_allclose(n, ref["y_m"], atol=0.02)
+    np.testing.assert_allclose(u, ref["z_m"], atol=2e-3)
+    np.testing.assert_allclose([m["relative_alt"] / 1e3 for m in gp], ref["z_m"], atol=1e-3)
+    # velocity on the circle: 3 rad/s * ... = 3 m/s tangential; NED north = d(y)/dt
+    np.testing.assert_allclose([m["vx"] / 100 for m in gp[1:-1]], 3.0 * np.cos(ref["t_s"][1:-1]), atol=0.02)
+    nvf = {name: np.array([m["value"] for m in by["NAMED_VALUE_FLOAT"] if m["name"] == name])
+           for name in ("I2", "d_short", "Lm")}
+    np.testing.assert_allclose(nvf["I2"], ref["i2_amp_a"], rtol=1e-6)
+    np.testing.assert_allclose(nvf["d_short"], ref["d_short"], rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(nvf["Lm"], ref["lm_h"] * 1e6, rtol=1e-6)
+    assert np.all(np.isfinite(nvf["I2"])) and np.all((nvf["d_short"] >= 0) & (nvf["d_short"] <= 1))
+    # battery: charging state while the battery current is a net charge, current sign per MAVLink
+    bs = by["BATTERY_STATUS"]
+    charging = ref["battery_current_a"].to_numpy() > 0
+    assert [m["charge_state"] for m in bs] == [7 if c else 1 for c in charging]
+    assert [m["current_battery"] for m in bs] == list(np.round(-ref["battery_current_a"] * 100).astype(int))
+    assert [m["voltages"][0] for m in bs] == list(np.round(ref["battery_v"] * 1000).astype(int))
+    assert all(v == 65535 for m in bs for v in m["voltages"][1:])
+    assert [m["battery_remaining"] for m in bs] == list(np.round(ref["soc"] * 100).astype(int))
+    ss = by["SYS_STATUS"]
+    assert [m["voltage_battery"] for m in ss] == [m["voltages"][0] for m in bs]
+
+
+def test_tlog_written_reads_back_with_pymavlink(tmp_path):
+    ts = _series(duration_s=20.0, dt=0.05)
+    path = tmp_path / "sim.tlog"
+    epoch = 1.7e9
+    st = stream(ts, tlog=path, rate_hz=5.0, speed=math.inf, start_epoch_s=epoch)
+    assert st.ticks == 101
+    # pymavlink directly: every frame MAVLink 2, timestamps on the simulated clock, no bad data
+    m = mavutil().mavlink_connection(str(path))
+    n, types, stamps = 0, set(), []
+    while (msg := m.recv_match(blocking=False)) is not None:
+        assert msg.get_type() != "BAD_DATA" and msg.get_msgbuf()[:1] == b"\xfd"
+        n += 1
+        types.add(msg.get_type())
+        if msg.get_type() == "GLOBAL_POSITION_INT":
+            stamps.append(msg._timestamp - epoch)
+    assert n == st.frames and {"BATTERY_STATUS", "NAMED_VALUE_FLOAT", "HEARTBEAT"} <= types
+    np.testing.assert_allclose(stamps, np.arange(101) / 5.0, atol=1e-6)
+    # and through our own reader: the flight comes back about the same home
+    log = read_log(path)
+    assert log.bad_frames == 0 and set(log.mavlink_frames) == {2} and log.battery_source == "BATTERY_STATUS"
+    assert len(log.position) == 101 and log.duration_s == pytest.approx(20.0, abs=1e-6)
+    e, n_, u = geodetic_to_enu(log.position["lat_deg"], log.position["lon_deg"], log.position["alt_m"], DEFAULT_HOME)
+    k = np.searchsorted(ts["t_s"], log.position["t_s"].to_numpy() + 1e-4, side="right") - 1  # float epoch: ~0.2 us
+    np.testing.assert_allclose(e, ts["x_m"].to_numpy()[k], atol=0.02)
+    np.testing.assert_allclose(u, ts["z_m"].to_numpy()[k], atol=2e-3)
+    np.testing.assert_allclose(log.battery["voltage_v"], ts["battery_v"].to_numpy()[k], atol=1e-3)
+    np.testing.assert_allclose(log.battery["current_a"], -ts["battery_current_a"].to_numpy()[k], atol=1e-2)
+
+
+def test_bad_inputs():
+    with pytest.raises(ValueError, match="udpout:HOST:PORT"):
+        check_connect("udpout:127.0.0.1")
+    with pytest.raises(ValueError, match="udpout:HOST:PORT"):
+        check_connect("serial:/dev/ttyS0:57600")
+    assert check_connect("udpout:127.0.0.1:14550") == "udpout:127.0.0.1:14550"
+    with pytest.raises(ValueError, match="rate"):
+        stream(_series(), tlog="x.tlog", rate_hz=0)
+    with pytest.raises(ValueError, match="columns"):
+        mavlink_table(_series().drop(columns=["soc"]))
+    with pytest.raises(ValueError, match="nothing to do"):
+        stream(_series())
+    assert GeoPoint(0, 0, 0).alt_m == 0
+
+
+def test_mixed_mavlink1_and_2_tlog(tmp_path):
+    """A MAVLink 1 log continued by MAVLink 2 frames (as after a firmware update) reads as one log."""
+    from _flightlogs import log_path
+    data = log_path("uavlogviewer_vtol_sitl.tlog").read_bytes()
+    cut = 0
+    while cut < 60_000:  # whole records: 8-byte time + MAVLink 1 frame (6 + payload + 2 bytes)
+        assert data[cut + 8] == 0xFE
+        cut += 16 + data[cut + 9]
+    v1 = data[:cut]
+    head = tmp_path / "v1.tlog"
+    head.write_bytes(v1)
+    first = read_log(head)
+    assert set(first.mavlink_frames) == {1} and len(first.position) > 10
+    tail = tmp_path / "v2.tlog"
+    stream(_series(duration_s=5.0, dt=0.05), tlog=tail, rate_hz=5.0, speed=math.inf,
+           start_epoch_s=first.t0_epoch_s + first.duration_s + 10.0)
+    mixed = tmp_path / "mixed.tlog"
+    mixed.write_bytes(v1 + tail.read_bytes())
+    log = read_log(mixed)
+    assert log.bad_frames == first.bad_frames == 0
+    assert log.mavlink_frames[1] == first.mavlink_frames[1] and log.mavlink_frames[2] == stream_frames(tail)
+    assert len(log.position) == len(first.position) + 26
+    assert log.duration_s == pytest.approx(first.duration_s + 15.0, abs=1e-3)
+
+
+def stream_frames(path):
+    m = mavutil().mavlink_connection(str(path))
+    n = 0
+    while m.recv_match(blocking=False) is not None:
+        n += 1
+    return n
