@@ -1,0 +1,39 @@
+"""``dronewpt sweep`` with the mission runner: bad studies fail before anything runs (one line).
+(The end-to-end run of real missions on two Dask workers is in test_sweep_dask.py.)"""
+
+import pytest
+
+from mission_sim.cli import main
+
+
+@pytest.mark.parametrize("line, words", [
+    ('"mission.hover_tme_s" = [1.0]', ["mission.hover_tme_s", "hover_time_s"]),
+    ('policy = ["step", "bang_bang"]', ["bang_bang", "model_based"]),
+])
+def test_cli_bad_study_for_the_mission_runner_is_one_line_error(tmp_path, capsys, line, words):
+    (tmp_path / "s.toml").write_text(f"[grid]\n{line}\n")
+    assert main(["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(w in err[0] for w in words), err
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_documented_study_schema_and_the_example_study_are_valid_for_the_mission_runner(tmp_path):
+    import inspect
+    import textwrap
+    import tomllib
+    from pathlib import Path
+
+    import policies
+    from mission_sim import study as study_mod
+    from mission_sim.study import load_study, parse_study
+    from mission_sim.sweep import prepare_study
+
+    doc = inspect.getdoc(study_mod)
+    block = textwrap.dedent(doc.split("::\n", 1)[1].split("\n\nKeys may be")[0])
+    st = parse_study(tomllib.loads(block.replace('base = "mission.toml"', "")), name="doc")
+    _, cases, _ = prepare_study(st, policies.make, policies.available())
+    assert len(cases) == 3 * 3 * 2 * 8
+    example = Path(__file__).resolve().parents[1] / "examples" / "study_small.toml"
+    _, cases, _ = prepare_study(load_study(example), policies.make, policies.available())
+    assert len(cases) == 48

@@ -1,0 +1,150 @@
+"""Sweep store and serial engine: atomic parts, exactly-once rows, resume, error capture (no Dask)."""
+
+import pathlib
+
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+from sweep_toy import toy_case
+
+from mission_sim.study import Case, case_id
+from mission_sim.sweep import CaseStore, run_case_safe, run_sweep
+
+
+def cases_for(hovers, fail=()):
+    out = []
+    for h in hovers:
+        p = {"policy": "step", "mission.hover_time_s": h, "fail": h in fail}
+        out.append(Case(case_id(p), p))
+    return out
+
+
+def raw_ids(out_dir):
+    """case_ids in every Parquet file on disk (no reader-side filtering or deduplication)."""
+    files = sorted((pathlib.Path(out_dir) / "cases").glob("*.parquet"))
+    return [cid for f in files for cid in pq.read_table(f, columns=["case_id"]).column("case_id").to_pylist()]
+
+
+class Counting:
+    def __init__(self):
+        self.calls = []
+
+    def __call__(self, params):
+        self.calls.append(params["mission.hover_time_s"])
+        return toy_case(params)
+
+
+def test_serial_sweep_rows_are_the_runner_results_and_resume_skips(tmp_path):
+    cases = cases_for([5.0, 10.0, 20.0])
+    run = Counting()
+    res = run_sweep(cases, run, tmp_path, progress=False)
+    assert (res.n_cases, res.n_skipped, res.n_run, res.n_ok, res.n_error) == (3, 0, 3, 3, 0)
+    df = res.results.set_index("case_id")
+    for c in cases:  # each row carries its parameters and exactly the runner's metrics
+        row = df.loc[c.case_id]
+        assert row["mission.hover_time_s"] == c.params["mission.hover_time_s"] and row["policy"] == "step"
+        assert row["flight_time_gain_s"] == toy_case(c.params)["flight_time_gain_s"]
+    # resume with two more cases: only the new ones run; every case on disk exactly once
+    more = cases + cases_for([40.0, 80.0])
+    res2 = run_sweep(more, run, tmp_path, progress=False)
+    assert (res2.n_skipped, res2.n_run) == (3, 2)
+    assert run.calls == [5.0, 10.0, 20.0, 40.0, 80.0]
+    ids = raw_ids(tmp_path)
+    assert sorted(ids) == sorted(c.case_id for c in more)
+    assert len(list((tmp_path / "cases").glob("*.parquet"))) == 1  # compacted
+    # a third run does nothing
+    res3 = run_sweep(more, run, tmp_path, progress=False)
+    assert res3.n_run == 0 and len(run.calls) == 5
+
+
+def test_failing_case_is_stored_with_its_error_and_the_others_complete(tmp_path):
+    cases = cases_for([5.0, 10.0, 20.0], fail={10.0})
+    res = run_sweep(cases, toy_case, tmp_path, progress=False)
+    assert (res.n_ok, res.n_error) == (2, 1)
+    bad = res.results[res.results["status"] == "error"].iloc[0]
+    assert bad["mission.hover_time_s"] == 10.0
+    assert bad["error"].startswith("ValueError: fail=True") and "Traceback" in bad["traceback"]
+    assert pd.isna(bad["flight_time_gain_s"])
+    ok = res.results[res.results["status"] == "ok"]
+    assert ok["flight_time_gain_s"].notna().all() and ok["error"].isna().all()
+    # the failed case counts as done: a rerun does not retry it
+    assert run_sweep(cases, toy_case, tmp_path, progress=False).n_run == 0
+
+
+def test_runner_returning_a_non_dict_is_an_error_row():
+    r = run_case_safe(lambda p: [1, 2], "x", {})
+    assert r["status"] == "error" and "TypeError" in r["error"] and "dict" in r["error"]
+
+
+def test_kill_during_compaction_or_write_never_duplicates(tmp_path, monkeypatch):
+    store = CaseStore(tmp_path)
+    rows = [{"case_id": f"c{i}", "status": "ok", "v": float(i)} for i in range(6)]
+    store.write(rows[:2])
+    store.write(rows[2:4])
+    # a writer killed mid-write leaves only a temporary, which no reader counts
+    (store.dir / ".part-x.parquet.1.tmp").write_bytes(b"PAR1 half a file")
+    assert sorted(store.done_ids()) == ["c0", "c1", "c2", "c3"]
+    real_unlink = pathlib.Path.unlink
+
+    def killed(self, missing_ok=False):
+        if self.suffix == ".parquet":
+            raise KeyboardInterrupt("killed between writing the compact file and deleting the parts")
+        real_unlink(self, missing_ok=missing_ok)
+
+    monkeypatch.setattr(pathlib.Path, "unlink", killed)
+    with pytest.raises(KeyboardInterrupt):
+        store.compact()
+    monkeypatch.undo()
+    assert len(raw_ids(tmp_path)) == 8  # 2 parts + a compact file holding their 4 rows ...
+    assert sorted(store.done_ids()) == ["c0", "c1", "c2", "c3"]  # ... but the parts are absorbed
+    assert list(store.read()["case_id"]) == ["c0", "c1", "c2", "c3"]
+    store.write(rows[4:])
+    # second compaction killed too: it absorbs the first compact file and the still-present parts
+    monkeypatch.setattr(pathlib.Path, "unlink", killed)
+    with pytest.raises(KeyboardInterrupt):
+        store.compact()
+    monkeypatch.undo()
+    assert sorted(store.done_ids()) == [f"c{i}" for i in range(6)]
+    store.compact()
+    assert sorted(raw_ids(tmp_path)) == [f"c{i}" for i in range(6)]
+    assert [p.name for p in store.dir.iterdir()][0].startswith("compact-") and len(list(store.dir.iterdir())) == 1
+    assert list(store.read().sort_values("case_id")["v"]) == [0.0, 1.0, 2.0, 3.0, 4.0, 5.0]
+
+
+def test_one_writer_at_a_time(tmp_path):
+    cases = cases_for([5.0])
+    with CaseStore(tmp_path).lock():
+        with pytest.raises(ValueError, match="another sweep is writing"):
+            run_sweep(cases, toy_case, tmp_path, progress=False)
+    assert run_sweep(cases, toy_case, tmp_path, progress=False).n_run == 1
+
+
+def test_cli_serial_json_summary_plots_and_exit_status(tmp_path, capsys):
+    import json
+
+    from mission_sim.cli import main
+
+    study = tmp_path / "s.toml"
+    study.write_text('[study]\nname = "toy"\nrunner = "sweep_toy:factory"\n'
+                     '[grid]\n"mission.hover_time_s" = [5.0, 10.0]\n"pads.1.x_m" = [0.0, 50.0]\n'
+                     'policy = ["step", "model_based"]\nfail = [false, true]\n')
+    rc = main(["sweep", str(study), "--out", str(tmp_path / "o"), "--workers", "0", "--format", "json"])
+    cap = capsys.readouterr()
+    out = json.loads(cap.out)
+    assert rc == 1 and "8 of 16 cases failed" in cap.err.strip().splitlines()[-1]
+    assert (out["cases"], out["run"], out["ok"], out["errors"]) == (16, 16, 8, 8)
+    assert len(out["failed"]) == 8 and all("meant to fail" in f["error"] for f in out["failed"])
+    rows = {r["group"]: r for r in out["summary"]}
+    assert set(rows) == {"all", "step", "model_based"}
+    assert rows["step"]["cases"] == 8 and rows["step"]["errors"] == 4
+    # closed forms of the toy runner: gain = hover * 8 / (1 + spacing / 50), peak by policy (+-0.01 noise)
+    assert abs(rows["step"]["peak_i2_a mean"] - 50.5) < 0.05
+    assert abs(rows["model_based"]["peak_i2_a mean"] - 11.44) < 0.05
+    assert abs(rows["all"]["flight_time_gain_s max"] - 80.0) < 0.05
+    names = sorted(pathlib.Path(f).name for f in out["figures"])
+    assert names == ["peak_i2_by_policy.png", "tradeoff_flight_time_gain_s.png"]
+    assert all(pathlib.Path(f).stat().st_size > 10_000 for f in out["figures"])
+    # the same command again: nothing to run, same outcome
+    rc = main(["sweep", str(study), "--out", str(tmp_path / "o"), "--workers", "0", "--format", "json", "--no-plot"])
+    again = json.loads(capsys.readouterr().out)
+    assert rc == 1 and (again["skipped"], again["run"]) == (16, 0)
