@@ -124,16 +124,11 @@ def _mav_config(args, overrides=None, single_pad=False):
 
 
 def _mav_policy(cfg, name):
-    """Policy ``name`` for the mission's link: the coupling at the nominal hover gap, the sim's control
-    period and the rated secondary current (what run_mission expects)."""
+    """Policy ``name`` for the mission's link (see :func:`mission_sim.config.policy_context`)."""
     from policies import make
 
-    from .contract import PolicyContext
-    model = cfg.coupling.model()
-    lm = float(model.lm_h(0.0, 0.0, cfg.mission.hover_gap_m))
-    link = cfg.link.link_params(model.l1_h, model.l2_h, lm)
-    return make(name, PolicyContext(link=link, control_period_s=cfg.sim.control_period_s,
-                                    rated_i2_a=cfg.link.rated_i2_a))
+    from .config import policy_context
+    return make(name, policy_context(cfg))
 
 
 def _mav_json_safe(obj):
@@ -382,7 +377,6 @@ def _cmd_mission(args) -> int:
     import tomllib
 
     from . import config as mconfig
-    from .contract import PolicyContext
     from .runner import run_mission
     try:
         import policies
@@ -399,10 +393,7 @@ def _cmd_mission(args) -> int:
     cfg = mconfig.config_from_dict(mconfig.apply_overrides(d, overrides) if overrides else d)
     if args.policy not in policies.available():
         raise CliError(f"--policy {args.policy!r} is invalid; valid values: {', '.join(policies.available())}")
-    model = cfg.coupling.model()
-    assumed = cfg.link.link_params(model.l1_h, model.l2_h, float(model.lm_h(0.0, 0.0, cfg.mission.hover_gap_m)))
-    ctx = PolicyContext(link=assumed, control_period_s=cfg.sim.control_period_s, rated_i2_a=cfg.link.rated_i2_a)
-    pol = policies.make(args.policy, ctx)
+    pol = policies.make(args.policy, mconfig.policy_context(cfg))
     progress = args.format != "json" and sys.stderr.isatty()
     res = run_mission(cfg, pol, charge=not args.no_charge, progress=progress)
     files = [str(f) for f in res.write(args.out, figures=not args.no_plot)]

@@ -293,3 +293,18 @@ def apply_overrides(d: dict, overrides: dict) -> dict:
             raise ValueError(f"override key {key!r} is invalid; valid keys of [{parts[0]}]: {', '.join(sorted(names))}")
         out.setdefault(parts[0], {})[parts[1]] = value
     return out
+
+
+def policy_context(cfg: MissionConfig):
+    """The :class:`~mission_sim.contract.PolicyContext` that ``run_mission`` expects for ``cfg``.
+
+    The receiver's assumed link is the Table I-like model at the nominal hover pose (coil
+    inductances of the coupling model, Lm at ``(0, 0, mission.hover_gap_m)``),
+    ``control_period_s = sim.control_period_s`` and ``rated_i2_a = link.rated_i2_a``.
+    """
+    from .contract import PolicyContext
+
+    model = cfg.coupling.model()
+    lm_h = float(model.lm_h(0.0, 0.0, cfg.mission.hover_gap_m))
+    return PolicyContext(link=cfg.link.link_params(model.l1_h, model.l2_h, lm_h),
+                         control_period_s=cfg.sim.control_period_s, rated_i2_a=cfg.link.rated_i2_a)

@@ -401,24 +401,12 @@ class MissionCaseRunner:
         apply_overrides(self.base, {k: example[k] for k in keys if k != POLICY_KEY})
 
     def __call__(self, params: dict) -> dict:
+        from .config import policy_context
         from .runner import run_mission
 
         cfg = self.config(params)
-        policy = self.make_policy(params.get(POLICY_KEY, "model_based"), _policy_context(cfg))
+        policy = self.make_policy(params.get(POLICY_KEY, "model_based"), policy_context(cfg))
         return dict(run_mission(cfg, policy).summary)
-
-
-def _policy_context(cfg):
-    """The PolicyContext ``run_mission`` expects for ``cfg``: the receiver's assumed link is the
-    Table I-like model at the nominal hover pose (coil inductances of the coupling model, Lm at
-    ``(0, 0, mission.hover_gap_m)``), ``control_period_s = sim.control_period_s``,
-    ``rated_i2_a = link.rated_i2_a``."""
-    from .contract import PolicyContext
-
-    model = cfg.coupling.model()
-    lm_h = float(model.lm_h(0.0, 0.0, cfg.mission.hover_gap_m))
-    return PolicyContext(link=cfg.link.link_params(model.l1_h, model.l2_h, lm_h),
-                         control_period_s=cfg.sim.control_period_s, rated_i2_a=cfg.link.rated_i2_a)
 
 
 def _import_factory(spec: str):
