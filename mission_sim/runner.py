@@ -178,11 +178,16 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
 
     def do_step(t0, dt, lm, p_prop, row_k, fine):
         nonlocal x, last_vl, last_ib, last_il, peak_i2, above, soc, vrc
-        # SBAR fundamental (eq. 9); with I2 <= 0 the diodes block (no power flows back from the battery),
-        # and with the pad off they block too: nothing drives current through them against the battery,
-        # the coil currents ring down in R1, R2 (the envelope model has no diode to stop I2 at zero, so
-        # holding V2 over a long step would drive I2 towards -V2/R2)
-        c = _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * d)) if (x[1] > 0.0 and v1 > 0.0) else 0.0
+        # SBAR fundamental (eq. 9). The diodes conduct with the instantaneous i2, so v2 is in phase with
+        # i2 whatever the sign of its envelope: a negative amplitude is i2 shifted by pi (one rectifier
+        # period, so the clocked short window still sits on a half-cycle peak) and V2 = f(d) sign(I2):
+        # the rectifier always absorbs power. With the pad off the diodes block: nothing drives current
+        # through them against the battery and the coil currents ring down in R1, R2 (the envelope model
+        # has no diode to stop I2 at zero, so holding V2 over a long step would drive I2 to -V2/R2).
+        if v1 > 0.0 and x[1] != 0.0:
+            c = _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * d)) * (1.0 if x[1] > 0.0 else -1.0)
+        else:
+            c = 0.0
         # battery: mean terminal voltage = A0 + G * i_mean (held-current RC solution); solve VL
         # implicitly with the link so V2, the battery and the propulsion power agree exactly
         frac = tau1 * (1.0 - math.exp(-dt / tau1)) / dt
@@ -221,6 +226,30 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
         last_vl, last_ib, last_il = vl, i_b, i_l
         rows.append((t0 + dt, dt, row_k, lm, v1, x[0], x[1], d, v2, i_l, vl, i_b, soc, cmd, fine,
                      e_src, e_coil, e_rect, e_chem, e_r0, e_r1, e_c1, vl * i_p * dt))
+
+    t_rect = 0.5 / base.f_hz
+
+    def fine_step(t0, dt, lm, p_prop, row_k):
+        """A fine step; split into rectifier-period sub-steps when I2 changes sign inside it.
+
+        V2 = f(d) VL sign(I2) switches with the sign of the envelope; holding the sign of the step's
+        start over a step that is a sizeable part of the envelope's ringing period (2 pi / wd ~ 250 us)
+        would feed the ringing instead of damping it. The envelope model resolves one rectifier period
+        T = 1/(2f) anyway, so the crossing is resolved to T (the duty is held: the policy is not called).
+        """
+        if v1 > 0.0 and d < 1.0 and dt > 1.5 * t_rect and x[1] != 0.0:
+            lm_eff = lm if lm > 0 else 1e-12
+            v2p = _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * d)) * last_vl * (1.0 if x[1] > 0.0 else -1.0)
+            samples = st.i2_samples(lm_eff, dt, x, v1, v2p, m=8)
+            (_, _, d10, d11), (_, _, bd10, bd11), _, _ = st.disc(lm_eff, dt)
+            samples.append(d10 * x[0] + d11 * x[1] + bd10 * v1 + bd11 * v2p)
+            if any(s * x[1] <= 0.0 for s in samples):
+                k_sub = math.ceil(dt / t_rect - 1e-9)
+                h = dt / k_sub
+                for j in range(k_sub):
+                    do_step(t0 + j * h, h, lm, p_prop, row_k, True)
+                return
+        do_step(t0, dt, lm, p_prop, row_k, True)
 
     def settled(lm):
         if abs(v1 - (v1_nom if tx_on else 0.0)) > 0.0:
@@ -344,7 +373,7 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
                 else:
                     d = act()
                 t_last_act = t
-                do_step(t, dt, lm_s, p_k, k, True)
+                fine_step(t, dt, lm_s, p_k, k)
                 n_fine += 1
                 t += dt
                 if fast_lm and v1 > 0.0:
