@@ -14,16 +14,19 @@ class CliError(Exception):
     """A user error: printed as one line, exit status 2."""
 
 
-def _float_arg(name, positive=False):
-    """argparse type: a finite float (and > 0 if ``positive``), errors naming the value and the range."""
-    valid = "(0, inf)" if positive else "finite"
+def _float_arg(name, positive=False, lo=0.0, hi=float("inf")):
+    """argparse type: a finite float (in ``[lo, hi]`` and > 0 if ``positive``), errors naming the value and range."""
+    if positive:
+        valid = f"[{lo:g}, {hi:g}]" if lo > 0 else (f"(0, {hi:g}]" if hi < float("inf") else "(0, inf)")
+    else:
+        valid = "finite"
 
     def conv(text):
         try:
             v = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name}={text!r} is not a number") from None
-        if v != v or abs(v) == float("inf") or (positive and not v > 0):
+        if v != v or abs(v) == float("inf") or (positive and not (0 < v <= hi and v >= lo)):
             raise argparse.ArgumentTypeError(f"{name}={text!r} is invalid; valid range: {valid}")
         return v
     return conv
@@ -45,8 +48,8 @@ def _add_paper(sub):
     p.add_argument("--model", default="envelope", help="plant model: envelope (default) or switching")
     p.add_argument("--out", type=Path, default=Path("out/paper"), help="folder for the figures (default out/paper)")
     p.add_argument("--format", choices=("table", "json"), default="table")
-    p.add_argument("--control-period", type=_positive_float("control-period"), default=None,
-                   help="controller update period in s (default: rectifier period 1/(2f))")
+    p.add_argument("--control-period", type=_float_arg("control-period", positive=True, lo=1e-7, hi=1e-3), default=None,
+                   help="controller update period in s, 1e-7 .. 1e-3 (default: rectifier period 1/(2f))")
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
     p.set_defaults(func=_cmd_paper)
 
@@ -389,10 +392,13 @@ def _cmd_mission(args) -> int:
         d = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise CliError(f"{args.config or 'default mission'}: not valid TOML: {exc}") from None
+    if args.config is not None:
+        d = mconfig.layer_on_default(d)
     overrides = _parse_set(args.set)
     cfg = mconfig.config_from_dict(mconfig.apply_overrides(d, overrides) if overrides else d)
-    if args.policy not in policies.available():
-        raise CliError(f"--policy {args.policy!r} is invalid; valid values: {', '.join(policies.available())}")
+    if args.policy.partition(":")[0] not in policies.available():
+        raise CliError(f"--policy {args.policy!r} is invalid; valid values: "
+                       f"{', '.join(policies.available())} (or rl:PATH)")
     pol = policies.make(args.policy, mconfig.policy_context(cfg))
     progress = args.format != "json" and sys.stderr.isatty()
     res = run_mission(cfg, pol, charge=not args.no_charge, progress=progress)
@@ -447,6 +453,8 @@ def _cmd_train(args) -> int:
         raise CliError(f"--timesteps {args.timesteps} is invalid; valid range: >= 1")
     if not 1 <= args.n_envs <= 256:
         raise CliError(f"--n-envs {args.n_envs} is invalid; valid range: 1..256")
+    from policies import require_sb3
+    require_sb3()
     from policies.train import train
     res = train(args.algo, args.timesteps, args.out, seed=args.seed, n_envs=args.n_envs, scenario=args.scenario,
                 progress=not args.no_progress)
@@ -485,6 +493,9 @@ def _cmd_compare(args) -> int:
     for p_ in pols:
         if p_.split(":", 1)[0] not in available():
             raise CliError(f"--policies {p_!r} is invalid; valid values: {', '.join(available())} (or rl:PATH)")
+    if any(p_.split(":", 1)[0] == "rl" for p_ in pols):
+        from policies import require_sb3
+        require_sb3()
     for s_ in scns:
         if s_ not in SCENARIOS:
             raise CliError(f"--scenarios {s_!r} is invalid; valid values: {', '.join(SCENARIOS)}")

@@ -259,7 +259,18 @@ def load_config(path=None) -> MissionConfig:
         d = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{name}: not valid TOML: {exc}") from None
-    return config_from_dict(d)
+    return config_from_dict(d if path is None else layer_on_default(d))
+
+
+def layer_on_default(d: dict) -> dict:
+    """A user's mission dict laid over the embedded default mission: tables merge key by key, anything
+    else (values, the ``[[pads]]`` list) replaces the default. An empty file is the default mission."""
+    def merge(base, top):
+        out = dict(base)
+        for k, v in top.items():
+            out[k] = merge(base[k], v) if isinstance(v, dict) and isinstance(base.get(k), dict) else v
+        return out
+    return merge(tomllib.loads(DEFAULT_MISSION_TOML), d)
 
 
 def apply_overrides(d: dict, overrides: dict) -> dict:

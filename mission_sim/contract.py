@@ -87,12 +87,13 @@ class PolicyContext:
     """What a policy may know besides the observation.
 
     link : the receiver's *assumed* link model (the truth may differ: Lm mismatch scenarios)
-    control_period_s : how often ``act`` is called
+    control_period_s : how often ``act`` is called [s]; default 100 us, the control period of the
+        environments and of the default mission (a 10 kHz DSP loop)
     rated_i2_a : rated secondary coil current amplitude [A]
     """
 
     link: LinkParams = TABLE_I
-    control_period_s: float = TABLE_I.rectifier_period_s
+    control_period_s: float = 1e-4
     rated_i2_a: float = 15.0
 
     def __post_init__(self):

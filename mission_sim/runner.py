@@ -171,10 +171,14 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
     pos_all = traj.pos_m
 
     def act():
-        i2m = x[1] + (sim.i2_noise_a * rng.standard_normal() if sim.i2_noise_a > 0 else 0.0)
+        # the receiver's sensor measures the magnitude of the coil current envelope
+        i2m = abs(x[1]) + (sim.i2_noise_a * rng.standard_normal() if sim.i2_noise_a > 0 else 0.0)
         obs = normalise_obs(np.array([[i2m, last_vl, last_ib, last_il, soc, cmd, d]]))
         out = float(np.asarray(policy.act(obs)).reshape(-1)[0])
-        return min(max(out, 0.0), 1.0) if math.isfinite(out) else 1.0
+        if not math.isfinite(out):
+            raise ValueError(f"policy {getattr(policy, 'name', policy)!r} returned d_short={out!r}; "
+                             f"valid range: [0, 1]")
+        return min(max(out, 0.0), 1.0)
 
     def do_step(t0, dt, lm, p_prop, row_k, fine):
         nonlocal x, last_vl, last_ib, last_il, peak_i2, above, soc, vrc
@@ -209,6 +213,7 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
         v2 = c * vl
         if fine:
             for i2s in st.i2_samples(lm_eff, dt, x, v1, v2):
+                i2s = abs(i2s)  # a negative envelope is a current of that size shifted by pi
                 if i2s > peak_i2:
                     peak_i2 = i2s
                 if i2s > rated:
@@ -219,9 +224,9 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
         i_b = i_l - i_p
         soc, vrc, e_chem, e_r0, e_r1, e_c1, _ = bat_step(soc, vrc, i_b, dt)
         x = x1
-        if x1[1] > peak_i2:
-            peak_i2 = x[1]
-        if x[1] > rated:
+        if abs(x1[1]) > peak_i2:
+            peak_i2 = abs(x[1])
+        if abs(x[1]) > rated:
             above += dt / 4 if fine else dt
         last_vl, last_ib, last_il = vl, i_b, i_l
         rows.append((t0 + dt, dt, row_k, lm, v1, x[0], x[1], d, v2, i_l, vl, i_b, soc, cmd, fine,

@@ -16,12 +16,22 @@ from .online import OnlineLmModelBasedPolicy
 from .random_policy import RandomPolicy
 
 
+def require_sb3() -> None:
+    """Raise a one-line ``ValueError`` when stable-baselines3 (the ``rl`` extra) is not installed."""
+    import importlib.util
+
+    if importlib.util.find_spec("stable_baselines3") is None:
+        raise ValueError("RL policies and training need stable-baselines3 (with torch): "
+                         "pip install 'dronewpt[rl]'")
+
+
 def _rl(ctx, **kwargs):
+    require_sb3()
     from .rl import RLPolicy   # imports stable-baselines3 (torch): only when asked for
     return RLPolicy(ctx, **kwargs)
 
 
-__all__ = ["make", "available", "register", "Policy", "PolicyContext"]
+__all__ = ["make", "available", "register", "require_sb3", "Policy", "PolicyContext"]
 
 _REGISTRY: dict[str, Callable[..., Policy]] = {
     "step": StepPolicy,
@@ -44,7 +54,14 @@ def available() -> list[str]:
 
 
 def make(name: str, ctx: PolicyContext | None = None, **kwargs) -> Policy:
-    """A fresh policy by name; raises ``ValueError`` naming the valid names."""
-    if name not in _REGISTRY:
-        raise ValueError(f"policy={name!r} is invalid; valid values: {', '.join(available())}")
-    return _REGISTRY[name](ctx or PolicyContext(), **kwargs)
+    """A fresh policy by name (``"rl:PATH"`` loads an SB3 model file); ``ValueError`` naming the valid names."""
+    base, _, arg = name.partition(":")
+    if base not in _REGISTRY or (arg and base != "rl"):
+        raise ValueError(f"policy={name!r} is invalid; valid values: {', '.join(available())} (or rl:PATH)")
+    if arg:
+        from pathlib import Path
+
+        if not Path(arg).is_file():
+            raise FileNotFoundError(f"RL model file {arg!r} does not exist")
+        kwargs = {**kwargs, "path": arg}
+    return _REGISTRY[base](ctx or PolicyContext(), **kwargs)

@@ -140,3 +140,19 @@ def test_set_state_with_mask_only_touches_masked_links():
     after = link.x
     np.testing.assert_array_equal(after[[0, 2]], before[[0, 2]])
     np.testing.assert_allclose(after[1], steady_state(P, 0.0), rtol=1e-12)
+
+
+def test_zoh_long_steps_with_real_poles_do_not_overflow():
+    a, b = state_matrices(P, np.array([1e-9, 0.0]))
+    for dt in (3.0, 10.0):
+        ad, bd = zoh_discretise(a, b, dt)
+        assert np.all(np.isfinite(ad)) and np.all(np.isfinite(bd))
+        np.testing.assert_allclose(ad[0], scipy.linalg.expm(a[0] * dt), atol=1e-300)
+        # long enough to reach the steady state: Bd -> -A^-1 B
+        np.testing.assert_allclose(bd[0], -np.linalg.solve(a[0], b), rtol=1e-9)
+
+
+def test_steady_state_is_regular_at_zero_coupling():
+    i1, i2 = steady_state(P, 10.0, lm_h=0.0)
+    assert i1 == pytest.approx(P.v1_amp_v / P.r1_ohm)
+    assert i2 == pytest.approx(-10.0 / P.r2_ohm)

@@ -250,3 +250,18 @@ def test_step_policy_transients_do_not_depend_on_the_control_period():
     from wpt_receiver.paper import run_paper
     full_step = run_paper(trajectories=("step",))[0].metrics.max_current_a
     assert out[2e-4]["peak_i2_a"] < full_step
+
+
+def test_a_policy_returning_nan_is_an_error_not_silent_short_mode():
+    class Broken:
+        name = "broken"
+
+        def reset(self, n=1):
+            pass
+
+        def act(self, obs):
+            return np.array([np.nan])
+
+    cfg = load_config()
+    with pytest.raises(ValueError, match="broken.*nan.*valid range"):
+        run_mission(cfg, Broken())

@@ -10,7 +10,7 @@ from wpt_receiver import TABLE_I, EnvelopeLink, steady_state, v2_from_duty
 
 
 def closed_loop(name, n_steps=6000, k_switch=170):
-    ctx = PolicyContext()
+    ctx = PolicyContext(control_period_s=TABLE_I.rectifier_period_s)  # one duty per half cycle
     pol = make(name, ctx)
     pol.reset(1)
     link = EnvelopeLink(TABLE_I, 1)

@@ -85,3 +85,8 @@ def test_table2_proposed_has_no_overshoot_and_ordering_holds(table2):
     assert table2["step"].overshoot_pct > table2["ramp"].overshoot_pct > table2["proposed"].overshoot_pct
     # the proposed transfers more energy to the battery during the transition than the step
     assert table2["proposed"].energy_to_battery_j > table2["ramp"].energy_to_battery_j > table2["step"].energy_to_battery_j
+
+
+def test_duty_from_v2_scalar_in_scalar_out():
+    d = duty_from_v2(v2_from_duty(0.5, 30.0), 30.0)
+    assert isinstance(d, float) and d == pytest.approx(0.5)

@@ -91,7 +91,8 @@ def steady_state(p: LinkParams, v2_v, lm_h=None, v1_v=None):
     """Closed-form steady amplitudes ``(I1, I2)`` [A] for constant V1 and V2 (phasor solution).
 
     ``R1 I1 + w Lm I2 = V1`` and ``-w Lm I1 + R2 I2 = -V2`` give
-    ``I2 = (w Lm V1 - R1 V2) / (R1 R2 + (w Lm)^2)`` and ``I1 = (R2 I2 + V2) / (w Lm)``.
+    ``I2 = (w Lm V1 - R1 V2) / det`` and ``I1 = (R2 V1 + w Lm V2) / det`` with
+    ``det = R1 R2 + (w Lm)^2`` (regular at Lm = 0: I1 = V1/R1, I2 = -V2/R2).
     RM is ``v2_v = (4/pi) VL``; SM is ``v2_v = 0``. Broadcasts over arrays.
     """
     lm = p.lm_h if lm_h is None else np.asarray(lm_h, dtype=float)
@@ -100,7 +101,7 @@ def steady_state(p: LinkParams, v2_v, lm_h=None, v1_v=None):
     wlm = p.omega_rad_s * lm
     det = p.r1_ohm * p.r2_ohm + wlm**2
     i2 = (wlm * v1 - p.r1_ohm * v2) / det
-    i1 = (p.r2_ohm * i2 + v2) / wlm
+    i1 = (p.r2_ohm * v1 + wlm * v2) / det
     return i1, i2
 
 
@@ -121,12 +122,14 @@ def zoh_discretise(a, b, dt_s: float):
     qt = qa * dt_s
     osc = q2 < 0
     small = qt < 1e-8
-    with np.errstate(invalid="ignore", divide="ignore"):
-        c = np.where(osc, np.cos(qt), np.cosh(qt))
-        sq = np.where(small, dt_s, np.where(osc, np.sin(qt), np.sinh(qt)) / np.where(small, 1.0, qa))
     e = np.exp(s * dt_s)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        # real poles s -/+ q: e^{st} cosh(qt) = (e^{(s+q)t} + e^{(s-q)t})/2, no overflow for long steps
+        ep, em = np.exp((s + qa) * dt_s), np.exp((s - qa) * dt_s)
+        c = np.where(osc, e * np.cos(qt), 0.5 * (ep + em))
+        sq = np.where(small, e * dt_s, np.where(osc, e * np.sin(qt), 0.5 * (ep - em)) / np.where(small, 1.0, qa))
     eye = np.eye(2)
-    ad = e[..., None, None] * (c[..., None, None] * eye + sq[..., None, None] * (a - s[..., None, None] * eye))
+    ad = c[..., None, None] * eye + sq[..., None, None] * (a - s[..., None, None] * eye)
     # A^{-1} for 2x2
     ainv = np.empty_like(a)
     ainv[..., 0, 0] = a[..., 1, 1]

@@ -34,6 +34,9 @@ def ramp_duration_s(params: LinkParams) -> float:
 def _grid(t_switch_s: float, t_end_s: float, period_s: float) -> np.ndarray:
     if not (0 <= t_switch_s < t_end_s):
         raise ValueError(f"t_switch_s={t_switch_s!r} is invalid; valid range: [0, t_end_s={t_end_s!r})")
+    if not (np.isfinite(period_s) and t_end_s / 1e7 <= period_s <= (t_end_s - t_switch_s) / 10):
+        raise ValueError(f"control_period_s={period_s!r} is invalid; valid range: "
+                         f"[{t_end_s / 1e7:g}, {(t_end_s - t_switch_s) / 10:g}] s for this window")
     return np.arange(int(round(t_end_s / period_s))) * period_s
 
 

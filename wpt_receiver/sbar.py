@@ -48,8 +48,7 @@ def duty_from_v2(v2_v, vl_v: float):
     bad = ~np.isfinite(v) | (v < 0.0) | (v > vmax * (1 + 1e-12))
     if np.any(bad):
         raise ValueError(f"v2_v={v[bad].flat[0]!r} is out of range; valid range: [0, {vmax:.6g}] V")
-    out = duty_from_v2_clipped(v, vl_v)
-    return out if out.ndim else float(out)
+    return duty_from_v2_clipped(v, vl_v)
 
 
 def duty_from_v2_clipped(v2_v, vl_v: float):
