@@ -24,9 +24,11 @@ def plot_paper_fig6(runs, path, t_switch_s: float, title: str = "") -> str:
         ax = axes[1, j]
         ax.plot((r.t_s - t_switch_s) * 1e3, r.i2_a, color="tab:red", label="I2 envelope")
         if "i2_inst_a" in r.extra:
-            ax.plot((r.extra["t_inst_s"] - t_switch_s) * 1e3, r.extra["i2_inst_a"], color="0.6", lw=0.3, zorder=0, label="i2")
+            ax.plot((r.extra["t_inst_s"] - t_switch_s) * 1e3, r.extra["i2_inst_a"], color="0.6", lw=0.3, zorder=0,
+                    label="i2 (instantaneous)")
         m = r.metrics
-        ax.axhline(m.final_current_a, color="k", ls=":", lw=0.8)
+        ax.axhline(m.final_current_a, color="k", ls=":", lw=0.8, label=f"final {m.final_current_a:.2f} A")
+        ax.legend(fontsize=7, loc="center right")
         ax.set_title(f"({'def'[j]}) max {m.max_current_a:.1f} A, overshoot {m.overshoot_pct:.1f} %")
         ax.set_xlabel("time after switch [ms]")
         ax.set_ylabel("I2 [A]")

@@ -6,6 +6,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 
 __all__ = ["plot_lm_map", "plot_mission"]
@@ -64,6 +65,10 @@ def plot_mission(result, out_dir) -> list[str]:
     az.set_xlabel("t [s]")
     az.set_ylabel("z [m]")
     az.set_yscale("symlog", linthresh=0.5)
+    ticks = [0.0, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0]
+    zmax = float(np.max(tr.pos_m[:, 2])) if len(tr.pos_m) else 1.0
+    az.set_yticks([v for v in ticks if v <= 1.5 * zmax])
+    az.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
     az.set_title("height of the receiver coil")
     az.grid(alpha=0.3)
     fig.tight_layout()
@@ -82,7 +87,7 @@ def plot_mission(result, out_dir) -> list[str]:
                     label="pad energised")
     ax.set_xlabel("t [s]")
     ax.set_ylabel("Lm [uH]")
-    ax.legend(fontsize=8, loc="upper right")
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=3)  # below: off the data
     ax.grid(alpha=0.3)
     ax.set_title("mutual inductance along the mission")
     fig.tight_layout()
@@ -103,14 +108,18 @@ def plot_mission(result, out_dir) -> list[str]:
     if np.any(fine):
         kpk = int(np.flatnonzero(fine)[np.argmax(i2[fine])])  # largest value inside a fine window
         w = (t > t[kpk] - 0.01) & (t < t[kpk] + 0.04)
-        az.plot((t[w] - t[kpk]) * 1e3, i2[w], ".-", ms=2, color="tab:red", lw=0.8, label="I2")
+        lines = az.plot((t[w] - t[kpk]) * 1e3, i2[w], ".-", ms=2, color="tab:red", lw=0.8, label="I2 envelope")
         az2 = az.twinx()
-        az2.plot((t[w] - t[kpk]) * 1e3, ts["d_short"].to_numpy()[w], color="tab:blue", lw=0.8, label="d_short")
-        az2.set_ylabel("d_short", color="tab:blue")
-        az.axhline(rated, color="k", ls="--", lw=0.8)
-        az.set_xlabel(f"time after the peak at t = {t[kpk]:.3f} s [ms]")
+        lines += az2.plot((t[w] - t[kpk]) * 1e3, ts["d_short"].to_numpy()[w], color="tab:blue", lw=0.8,
+                          label="d_short (right axis)")
+        az2.set_ylim(-0.02, 1.02)  # the whole duty range, so small duty moves look small
+        az2.set_ylabel("d_short [-]", color="tab:blue")
+        if np.max(np.abs(i2[w])) > 0.8 * rated:  # the rating only where the current comes near it
+            lines.append(az.axhline(rated, color="k", ls="--", lw=0.8, label=f"rated {rated:g} A"))
+        az.legend(handles=lines, fontsize=8, loc="lower right")
+        az.set_xlabel(f"time after t = {t[kpk]:.2f} s [ms]")
         az.set_ylabel("I2 [A]")
-        az.set_title("largest transient (fine steps)")
+        az.set_title(f"largest transient inside a fine window ({i2[kpk]:.1f} A at t = {t[kpk]:.1f} s)")
         az.grid(alpha=0.3)
     fig.tight_layout()
     paths.append(_save(fig, out / "i2_envelope.png"))
@@ -138,7 +147,7 @@ def plot_mission(result, out_dir) -> list[str]:
     ax.plot(t, ts["p_coil_loss_w"], lw=0.8, label="coil losses")
     ax.set_xlabel("t [s]")
     ax.set_ylabel("power [W]")
-    ax.legend(fontsize=8, ncol=3)
+    ax.legend(fontsize=8, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.15))  # below: off the data
     ax.grid(alpha=0.3)
     s = result.summary
     ax.set_title(f"power flows (energy balance error {s['energy_balance_error_rel']:.1e} relative)")
