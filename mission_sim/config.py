@@ -16,6 +16,7 @@ from importlib import resources
 from pathlib import Path
 
 from wpt_receiver import LinkParams
+from wpt_receiver.coupling import NOMINAL_GAP_M
 
 from .battery import BatteryParams, CcCvParams
 from .power import DroneParams
@@ -108,7 +109,7 @@ class MissionPlan:
     max_accel_m_s2: float = 2.5
     climb_rate_m_s: float = 2.0
     descent_rate_m_s: float = 1.0
-    hover_gap_m: float = 0.1748209350881188
+    hover_gap_m: float = NOMINAL_GAP_M
     hover_time_s: float = 60.0
 
     def __post_init__(self):

@@ -119,7 +119,7 @@ def flight_time_gain_s(cfg, final_soc_charged: float, final_soc_uncharged: float
 def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_all=None) -> MissionResult:
     sim, lk = cfg.sim, cfg.link
     model = cfg.coupling.model()
-    base = lk.link_params(model.l1_h, model.l2_h, 6.25e-6)
+    base = lk.link_params(model.l1_h, model.l2_h, float(model.lm_h(0.0, 0.0, cfg.mission.hover_gap_m)))
     st = LinkStepper(model.l1_h, model.l2_h, lk.r1_ohm, lk.r2_ohm, base.omega_rad_s)
     v1_nom = base.v1_amp_v
     bp = cfg.battery
