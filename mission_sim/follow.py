@@ -16,7 +16,7 @@ import numpy as np
 
 from .geodesy import GeoPoint, geodetic_to_enu
 from .mavlink_io import mavutil
-from .telemetry import TlogWriter, check_connect, encode_tick, mavlink_table
+from .telemetry import TlogWriter, check_connect, mavlink_table, send_tick
 
 __all__ = ["FollowStats", "open_follow", "follow"]
 
@@ -109,14 +109,7 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
             t_wall = time.monotonic()
             hb = t_wall - last_hb >= 1.0
             last_hb = t_wall if hb else last_hb
-            for m in encode_tick(mav, row, hb):
-                frame = m.pack(mav)
-                mav.seq = (mav.seq + 1) % 256
-                if out is not None:
-                    out.write(frame)
-                if writer is not None:
-                    writer.write(frame, epoch0 + float(row.t_s))
-                frames += 1
+            frames += len(send_tick(mav, row, hb, out, writer, epoch0 + float(row.t_s)))
 
     try:
         while n_msgs < max_messages:

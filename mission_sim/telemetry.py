@@ -172,6 +172,20 @@ def _cells_mv(voltage_mv: int) -> list[int]:
     return cells + [_UINT16_MAX] * (10 - len(cells))
 
 
+def send_tick(mav, row, heartbeat: bool, conn, writer, t_log_s: float) -> list:
+    """Encode one tick (:func:`encode_tick`), send each frame on ``conn`` and log it to ``writer``
+    (either may be None) with timestamp ``t_log_s`` [s since the epoch]; returns the messages."""
+    msgs = encode_tick(mav, row, heartbeat)
+    for msg in msgs:
+        frame = msg.pack(mav)
+        mav.seq = (mav.seq + 1) % 256
+        if conn is not None:
+            conn.write(frame)
+        if writer is not None:
+            writer.write(frame, t_log_s)
+    return msgs
+
+
 def encode_tick(mav, row, heartbeat: bool) -> list:
     """The messages of one telemetry tick from one :func:`mavlink_table` row (MAVLink 2 objects)."""
     m = mavutil().mavlink
@@ -258,13 +272,7 @@ def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.
             if hb:
                 last_hb = now
             row = table.iloc[k]
-            for msg in encode_tick(mav, row, hb):
-                frame = msg.pack(mav)
-                mav.seq = (mav.seq + 1) % 256
-                if conn is not None:
-                    conn.write(frame)
-                if writer is not None:
-                    writer.write(frame, epoch0 + sim_k)
+            for msg in send_tick(mav, row, hb, conn, writer, epoch0 + sim_k):
                 name = msg.get_type()
                 counts[name] = counts.get(name, 0) + 1
                 frames += 1
