@@ -8,7 +8,14 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-__all__ = ["plot_paper_fig6"]
+__all__ = ["plot_paper_fig6", "save_figure"]
+
+
+def save_figure(fig, path, dpi: int = 110) -> str:
+    """Write ``fig`` as PNG to ``path``, close it, return the path as a string."""
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return str(path)
 
 
 def plot_paper_fig6(runs, path, t_switch_s: float, title: str = "") -> str:
@@ -36,6 +43,4 @@ def plot_paper_fig6(runs, path, t_switch_s: float, title: str = "") -> str:
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return str(path)
+    return save_figure(fig, path, dpi=120)

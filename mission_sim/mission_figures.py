@@ -9,6 +9,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .figures import save_figure  # noqa: E402
+
 __all__ = ["plot_lm_map", "plot_mission"]
 
 
@@ -72,7 +74,7 @@ def plot_mission(result, out_dir) -> list[str]:
     az.set_title("height of the receiver coil")
     az.grid(alpha=0.3)
     fig.tight_layout()
-    paths.append(_save(fig, out / "trajectory.png"))
+    paths.append(save_figure(fig, out / "trajectory.png"))
 
     # Lm(t)
     fig, ax = plt.subplots(figsize=(10, 3.8))
@@ -91,7 +93,7 @@ def plot_mission(result, out_dir) -> list[str]:
     ax.grid(alpha=0.3)
     ax.set_title("mutual inductance along the mission")
     fig.tight_layout()
-    paths.append(_save(fig, out / "lm.png"))
+    paths.append(save_figure(fig, out / "lm.png"))
 
     # I2 envelope with rated current: whole mission and a zoom on the largest transient
     fig, (ax, az) = plt.subplots(1, 2, figsize=(12, 4))
@@ -122,7 +124,7 @@ def plot_mission(result, out_dir) -> list[str]:
         az.set_title(f"largest transient inside a fine window ({i2[kpk]:.1f} A at t = {t[kpk]:.1f} s)")
         az.grid(alpha=0.3)
     fig.tight_layout()
-    paths.append(_save(fig, out / "i2_envelope.png"))
+    paths.append(save_figure(fig, out / "i2_envelope.png"))
 
     # SoC
     fig, ax = plt.subplots(figsize=(10, 3.5))
@@ -136,7 +138,7 @@ def plot_mission(result, out_dir) -> list[str]:
                  f"{result.summary.get('final_soc_without_charging', float('nan')):.4f})")
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    paths.append(_save(fig, out / "soc.png"))
+    paths.append(save_figure(fig, out / "soc.png"))
 
     # power flows
     fig, ax = plt.subplots(figsize=(10, 4))
@@ -152,11 +154,5 @@ def plot_mission(result, out_dir) -> list[str]:
     s = result.summary
     ax.set_title(f"power flows (energy balance error {s['energy_balance_error_rel']:.1e} relative)")
     fig.tight_layout()
-    paths.append(_save(fig, out / "power.png"))
+    paths.append(save_figure(fig, out / "power.png"))
     return paths
-
-
-def _save(fig, path) -> str:
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return str(path)

@@ -9,6 +9,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+from .figures import save_figure  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from .study import POLICY_KEY, Study  # noqa: E402
@@ -144,9 +146,7 @@ def _plot_tradeoff(df, study, x, hue, metric, path) -> str:
         ax.set_title(f"mean {metric} over ({x}, {hue})", fontsize=9)
     fig.suptitle(f"{study.name}: {metric}")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return str(path)
+    return save_figure(fig, path)
 
 
 def _plot_by_policy(df, path) -> str:
@@ -171,6 +171,4 @@ def _plot_by_policy(df, path) -> str:
     if extra:
         axes[0, 1].set_title("time with I2 above rated per mission", fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return str(path)
+    return save_figure(fig, path)
