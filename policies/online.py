@@ -68,20 +68,30 @@ class OnlineLmModelBasedPolicy:
 
     def reset(self, n: int = 1) -> None:
         self.n = int(n)
-        self._ctl = None
+        self._x = None
 
     @property
     def lm_estimate_h(self) -> np.ndarray:
         """Current Lm estimate per receiver [H]."""
         return self._lm.copy()
 
-    def _build(self, i, lm, v2_now):
-        link = self.ctx.link.with_(lm_h=float(lm))
-        ctl = InverseModelController(link, self.ctx.control_period_s, self.lpf, n=1)
-        ctl.reset(steady_state(link, v2_now)[1])   # bumpless: the V2* it was giving
-        self._ctl[i] = ctl
-        self._lm_ctl[i] = lm
-        self.rebuilds += 1
+    def _build(self, idx, v2_now):
+        """(Re)build the controllers of receivers ``idx`` for their current Lm estimate, each starting
+        in the steady state whose output is ``v2_now[i]`` (bumpless). One scipy discretisation per
+        rebuilt receiver; the stepping itself is batched over all receivers."""
+        for i, v2 in zip(idx, v2_now):
+            link = self.ctx.link.with_(lm_h=float(self._lm[i]))
+            ctl = InverseModelController(link, self.ctx.control_period_s, self.lpf, n=1)
+            ctl.reset(steady_state(link, v2)[1])
+            ad, bd, cd, dd = ctl.discrete_ss
+            if self._x is None:  # first build: allocate the stacked state space (k from the filter order)
+                k, n = len(bd), self.n
+                self._a, self._b, self._c = np.zeros((n, k, k)), np.zeros((n, k)), np.zeros((n, k))
+                self._d, self._i2sm, self._x = np.zeros(n), np.zeros(n), np.zeros((n, k))
+            self._a[i], self._b[i], self._c[i], self._d[i] = ad, bd, cd, dd
+            self._x[i], self._i2sm[i] = ctl.x[0], ctl.i2_sm_a
+            self._lm_ctl[i] = self._lm[i]
+            self.rebuilds += 1
 
     def act(self, obs):
         phys = denormalise_obs(np.atleast_2d(obs))
@@ -91,8 +101,10 @@ class OnlineLmModelBasedPolicy:
         v2 = 4.0 / np.pi * vl * (1.0 - np.sin(0.5 * np.pi * phys[:, OBS_INDEX["last_d_short"]]))
         n = len(i2)
         link = self.ctx.link
-        if self._ctl is None or len(self._ctl) != n:
-            self._ctl = [None] * n
+        fresh = self._x is None or len(self._x) != n
+        if fresh:
+            self.n = n
+            self._x = None
             self._lm = np.full(n, link.lm_h)
             self._lm_ctl = np.full(n, np.nan)
             self._i2f, self._v2f = i2.copy(), v2.copy()
@@ -103,16 +115,18 @@ class OnlineLmModelBasedPolicy:
         lm_inst = lm_from_steady_state(link, self._i2f, self._v2f)
         ok = steady & np.isfinite(lm_inst) & (lm_inst > 0.2 * link.lm_h) & (lm_inst < 5.0 * link.lm_h)
         self._lm = np.where(ok, self._lm + self.a_est * (lm_inst - self._lm), self._lm)
-        # controllers: (re)build where the estimate moved by more than rediscretise_rel
-        for i in range(n):
-            if self._ctl[i] is None:
-                self._build(i, self._lm[i], float(target_v2(self.ctx, cmd[i], vl[i], lm_h=self._lm[i])))
-            elif abs(self._lm[i] / self._lm_ctl[i] - 1.0) > self.rediscretise_rel:
-                self._build(i, self._lm[i], self._ctl[i].v2_cmd_v[0])
+        # controllers: build on the first call, rebuild where the estimate moved by > rediscretise_rel
+        if fresh:
+            self._out = np.asarray(target_v2(self.ctx, cmd, vl, lm_h=self._lm), dtype=float)
+            self._build(range(n), self._out)
+            moved = ()
+        else:
+            moved = np.flatnonzero(np.abs(self._lm / self._lm_ctl - 1.0) > self.rediscretise_rel)
+        if len(moved):
+            self._build(moved, self._out[moved])  # start where they were: at the V2* they last gave
         v2_target = target_v2(self.ctx, cmd, vl, lm_h=self._lm_ctl)
         ref = steady_state(link, v2_target, lm_h=self._lm_ctl)[1]
-        out = np.empty(n)
-        for i in range(n):
-            self._ctl[i].step(ref[i])
-            out[i] = self._ctl[i].v2_cmd_v[0]
-        return duty_from_v2_clipped(out, vl)
+        u = ref - self._i2sm
+        self._out = np.einsum("nk,nk->n", self._c, self._x) + self._d * u
+        self._x = np.einsum("nij,nj->ni", self._a, self._x) + self._b * u[:, None]
+        return duty_from_v2_clipped(self._out, vl)

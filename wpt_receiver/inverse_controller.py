@@ -93,6 +93,12 @@ class InverseModelController:
 
     # ------------------------------------------------------------------
     @property
+    def discrete_ss(self):
+        """``(Ad, Bd, Cd, Dd)`` of H at the control period: ``x+ = Ad x + Bd u``, ``V2* = Cd.x + Dd u``
+        with ``u = I2ref - I2_sm`` (shapes (k, k), (k,), (k,), scalar)."""
+        return self._ad, self._bd, self._cd, self._dd
+
+    @property
     def i2_sm_a(self) -> float:
         """Short-mode current of the assumed model at the current V1 [A]."""
         return self._i2_sm
