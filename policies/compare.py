@@ -126,9 +126,9 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
 
 def plot_transitions(traces: dict, scenario: str, out_png, episode: int = 0, window_s=(-2e-3, 12e-3),
                      rated_i2_a: float = 15.0):
-    """Figure of representative RM -> SM transitions: I2 envelope and d_short of every policy (but
-    ``random``, whose 150 A noise would hide the rest) on one episode of ``scenario``, time relative
-    to the stop command."""
+    """Figure of representative RM -> SM transitions: step peak |I2| and d_short of every policy
+    (but ``random``, whose duty noise rings the link and would hide the rest) on one episode of
+    ``scenario``, time relative to the stop command."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
