@@ -8,6 +8,8 @@ from gymnasium import spaces
 
 from mission_sim.contract import OBS_DIM, PolicyContext
 
+from wpt_receiver.sbar import rectifier_current, rectifier_v2
+
 from .core import (OBS_OFFSET, OBS_SCALE, SCALAR_OPS, EnvConfig, advance, build_plans, reward_cost)
 from .render import draw_envelope
 from .scenario import draw_episode, get_scenario, scenario_from_options
@@ -32,9 +34,12 @@ class SbarChargingEnv(gym.Env):
 
     ## Description
     The series-series link of the paper (Table I, envelope model eq. 4, exact ZOH) is stepped every
-    control period (100 us = 17 rectifier periods). Wind moves the drone around its hover pose, so
+    control period (100 us = 17 rectifier periods; split into rectifier periods when the I2
+    envelope changes sign within it). Wind moves the drone around its hover pose, so
     the true mutual inductance Lm follows the pose error (updated every 1 ms). The agent sets the
-    short duty ``d_short`` of the SBAR (eq. 9) for the next control period. The SBAR output feeds
+    short duty ``d_short`` of the SBAR (eq. 9) for the next control period; the SBAR's V2 takes the
+    sign of the I2 envelope (the diodes conduct with the instantaneous i2), so it always absorbs
+    power and its output current ``I_L = (2/pi) (1 - sin(pi/2 d)) |I2| >= 0``. The SBAR output feeds
     the battery (equivalent circuit), which also supplies the hover power.
 
     ## Action Space
@@ -59,8 +64,10 @@ class SbarChargingEnv(gym.Env):
     Physical values (true I2, the step's peak I2, I1, V2, Lm, energy, ...) are in ``info``.
 
     ## Rewards
-    Per step, with ``I_L`` the SBAR output current, ``I*`` the command, ``I2_pk`` the largest of
-    the envelope at mid-step and at the end of the step:
+    Per step, with ``I_L`` the SBAR output current, ``I*`` the command, ``I2_pk`` the largest
+    magnitude |I2| of the envelope at mid-step and at the end of the step (of every rectifier-period
+    sub-step when the envelope changes sign within the step; a negative amplitude is a real current
+    of that size):
 
     | Term        | Value                                              | Default weight |
     |-------------|----------------------------------------------------|----------------|
@@ -102,6 +109,7 @@ class SbarChargingEnv(gym.Env):
         c = self.config
         self._T, self._M, self._dt = c.n_steps, c.slow_every, c.dt_s
         self._inv_rated = 1.0 / c.rated_i2_a
+        self._n_sub = c.n_sub
         self._w = c.reward
         self._k = None
         self._hist = None
@@ -135,10 +143,10 @@ class SbarChargingEnv(gym.Env):
         self._vl, self._vrc, self._d = float(p.vl0[0]), float(p.vrc0[0]), float(p.d0[0])
         self._soc = self._b[2]
         self._k = 0
-        il = 2.0 / np.pi * self._i2 * (1.0 - np.sin(0.5 * np.pi * self._d))
+        il = float(rectifier_current(self._d, abs(self._i2)))
         ib = il - self._b[7]
-        info = {"t_s": 0.0, "i2_a": self._i2, "i2_peak_a": self._i2, "i1_a": self._i1, "d_short": self._d,
-                "v2_v": 4.0 / np.pi * self._vl * (1.0 - np.sin(0.5 * np.pi * self._d)), "rect_current_a": il,
+        info = {"t_s": 0.0, "i2_a": self._i2, "i2_peak_a": abs(self._i2), "i1_a": self._i1, "d_short": self._d,
+                "v2_v": float(rectifier_v2(self._d, self._vl, self._i2)), "rect_current_a": il,
                 "battery_v": self._vl, "battery_current_a": ib, "soc": self._soc, "charge_cmd_a": self._cmd[0],
                 "lm_h": self._lm[0], "energy_j": 0.0, "cost": 0.0, "scenario": scn.name,
                 "t_stop_s": float(p.t_stop_s[0])}
@@ -154,10 +162,9 @@ class SbarChargingEnv(gym.Env):
             raise RuntimeError("step() called before reset() or after the episode was truncated; call reset()")
         d = self._duty(action)
         vl_old = self._vl
-        i1, i2, i2m, il, ib, soc, vrc, vl, v2 = advance(self._i1, self._i2, vl_old, self._soc, self._vrc, d,
-                                                        self._coef[k // self._M], self._b, SCALAR_OPS)
+        i1, i2, peak, il, ib, soc, vrc, vl, v2 = advance(self._i1, self._i2, vl_old, self._soc, self._vrc, d,
+                                                         self._coef[k // self._M], self._b, SCALAR_OPS, self._n_sub)
         cmd = self._cmd[k]
-        peak = i2m if i2m > i2 else i2
         reward, cost = reward_cost(il, cmd, peak, self._inv_rated, self._w, SCALAR_OPS)
         energy = vl_old * il * self._dt
         self._i1, self._i2, self._soc, self._vrc, self._vl, self._d = i1, i2, soc, vrc, vl, d

@@ -5,14 +5,16 @@ Composition (gym-electric-motor style):
 
 * physical system: the envelope link (paper eq. 4) stepped by exact ZOH
   (:func:`wpt_receiver.zoh_discretise`, the closed form :class:`wpt_receiver.EnvelopeLink` uses)
-  with a true Lm that follows the hover pose error (:mod:`envs.plant`), the SBAR (eq. 9) and the
-  battery equivalent circuit;
+  with a true Lm that follows the hover pose error (:mod:`envs.plant`), the SBAR (eq. 9 with the
+  sign of the I2 envelope, :func:`wpt_receiver.sbar.rectifier_v2`: it always absorbs power) and
+  the battery equivalent circuit;
 * reference generator: the seeded charge command (:mod:`envs.scenario`);
 * reward and cost: :func:`reward_cost`;
 * visualisation: :mod:`envs.render`.
 
 Multi-rate: the link is stepped every control period ``dt_s`` (default 100 us = 17 rectifier
-periods); the hover pose (hence Lm) is sampled every ``slow_every`` steps (default 1 ms) and held;
+periods; a step in which the I2 envelope changes sign is split into rectifier-period sub-steps,
+see :func:`advance`); the hover pose (hence Lm) is sampled every ``slow_every`` steps (default 1 ms) and held;
 the battery is the equivalent circuit linearised around the episode's initial SoC (its open-circuit
 voltage moves by < 1 mV over a 30 ms window, the RC branch is integrated exactly).
 
@@ -32,6 +34,7 @@ import numpy as np
 
 from mission_sim.contract import OBS_FIELDS
 from wpt_receiver import TABLE_I, LinkParams, duty_from_v2_clipped, state_matrices, steady_state, zoh_discretise
+from wpt_receiver.sbar import rectifier_current, rectifier_v2
 
 from .plant import battery_operating_point, lm_window_h
 from .scenario import Scenario, command_profile
@@ -41,8 +44,7 @@ __all__ = ["EnvConfig", "RewardWeights", "Plans", "build_plans", "advance", "rew
 
 HALF_PI = 0.5 * math.pi
 FOUR_OVER_PI = 4.0 / math.pi
-TWO_OVER_PI_6 = 2.0 / math.pi / 6.0  # (2/pi) times the 1/6 of Simpson's rule
-N_COEF = 12
+N_COEF = 20
 N_BAT = 9
 
 #: affine map physical -> [-1, 1] of :data:`mission_sim.contract.OBS_FIELDS` (same as normalise_obs)
@@ -98,6 +100,11 @@ class EnvConfig:
     def n_slow(self) -> int:
         return -(-self.n_steps // self.slow_every)
 
+    @property
+    def n_sub(self) -> int:
+        """Rectifier-period sub-steps of a step in which I2 changes sign (17 at the default)."""
+        return max(1, math.ceil(self.dt_s / self.link.rectifier_period_s - 1e-9))
+
 
 @dataclass
 class Plans:
@@ -133,9 +140,12 @@ def build_plans(draws, scenarios: list[Scenario], cfg: EnvConfig) -> Plans:
     a, b = state_matrices(link, lm.ravel())
     ad, bd = zoh_discretise(a, b, cfg.dt_s)
     am, bm = zoh_discretise(a, b, 0.5 * cfg.dt_s)
+    ah, bh = zoh_discretise(a, b, cfg.dt_s / cfg.n_sub)
     v1 = link.v1_amp_v
     coef = np.stack([ad[:, 0, 0], ad[:, 0, 1], ad[:, 1, 0], ad[:, 1, 1], bd[:, 0, 0] * v1, bd[:, 1, 0] * v1,
-                     bd[:, 0, 1], bd[:, 1, 1], am[:, 1, 0], am[:, 1, 1], bm[:, 1, 0] * v1, bm[:, 1, 1]], axis=-1)
+                     bd[:, 0, 1], bd[:, 1, 1], am[:, 1, 0], am[:, 1, 1], bm[:, 1, 0] * v1, bm[:, 1, 1],
+                     ah[:, 0, 0], ah[:, 0, 1], ah[:, 1, 0], ah[:, 1, 1], bh[:, 0, 0] * v1, bh[:, 1, 0] * v1,
+                     bh[:, 0, 1], bh[:, 1, 1]], axis=-1)
     coef = coef.reshape(n, S, N_COEF)
 
     soc0 = np.array([d.soc0 for d in draws])
@@ -152,8 +162,8 @@ def build_plans(draws, scenarios: list[Scenario], cfg: EnvConfig) -> Plans:
         vl = ocv + (r0 + r1) * (il - i_load)
     d0 = duty_from_v2_clipped(v2, vl)
     v2 = FOUR_OVER_PI * vl * (1.0 - np.sin(HALF_PI * d0))
-    i1, i2 = steady_state(link, v2, lm0)
-    ib0 = 2.0 / np.pi * i2 * (1.0 - np.sin(HALF_PI * d0)) - i_load
+    i1, i2 = steady_state(link, v2, lm0)   # i2 > 0 (V2 <= RM's, which is below w Lm V1 / R1)
+    ib0 = rectifier_current(d0, np.abs(i2)) - i_load
     vrc0 = r1 * ib0
     vl0 = ocv + r0 * ib0 + vrc0
     decay = np.exp(-cfg.dt_s / tau1)
@@ -165,14 +175,27 @@ def build_plans(draws, scenarios: list[Scenario], cfg: EnvConfig) -> Plans:
                  np.array([d.t_stop_s for d in draws]))
 
 
+def _sign_float(x):
+    return 1.0 if x > 0.0 else (-1.0 if x < 0.0 else 0.0)
+
+
+def _abs_mean_float(a, b):
+    """Mean of |x| over a linear segment from ``a`` to ``b``."""
+    if a * b >= 0.0:
+        return 0.5 * abs(a + b)
+    return 0.5 * (a * a + b * b) / (abs(a) + abs(b))
+
+
 class _ScalarOps:
     sin = staticmethod(math.sin)
+    sign = staticmethod(_sign_float)
     minimum = staticmethod(min)
     maximum = staticmethod(max)
 
 
 class _NumpyOps:
     sin = staticmethod(np.sin)
+    sign = staticmethod(np.sign)
     minimum = staticmethod(np.minimum)
     maximum = staticmethod(np.maximum)
 
@@ -181,38 +204,81 @@ SCALAR_OPS = _ScalarOps()
 NUMPY_OPS = _NumpyOps()
 
 
-def advance(i1, i2, vl, soc, vrc, d, c, b, ops):
+def advance(i1, i2, vl, soc, vrc, d, c, b, ops, n_sub: int = 1):
     """One control period with duty ``d`` held (floats, or arrays of shape (n,) with ``NUMPY_OPS``).
 
-    ``c`` = (Ad00, Ad01, Ad10, Ad11, Bd00 V1, Bd10 V1, Bd01, Bd11, Ad10', Ad11', Bd10' V1, Bd11') with
-    ' the half-step discretisation; ``b`` = battery row of :class:`Plans`. ``vl`` is the battery
-    voltage of the previous step (sets V2 = (4/pi) VL (1 - sin(pi/2 d)), eq. 9). The SBAR's DC bus
-    is the battery terminal with its smoothing capacitor: VL follows ``OCV + R0 i_batt + v_rc`` with
-    the time constant R0 C_bus (without the capacitor the one-step VL -> V2 -> I2 -> I_L loop
+    ``c`` = (Ad00, Ad01, Ad10, Ad11, Bd00 V1, Bd10 V1, Bd01, Bd11, Ad10', Ad11', Bd10' V1, Bd11', and
+    the same 8 as the first for the sub-step ``dt / n_sub``) with ' the half-step discretisation;
+    ``b`` = battery row of :class:`Plans`. ``vl`` is the battery voltage of the previous step. The
+    SBAR applies ``V2 = (4/pi) VL (1 - sin(pi/2 d)) sign(I2)`` (eq. 9 with the sign of the
+    envelope, :func:`wpt_receiver.sbar.rectifier_v2`: the diodes conduct with the instantaneous
+    i2, so the rectifier always absorbs power). The sign is that of I2 at the start of the step;
+    if the envelope changes sign within the step (at mid-step or at its end, V2 held) the step is
+    recomputed in ``n_sub`` sub-steps (the rectifier period ``T = 1/(2f)``, 17 at 100 us), each
+    with the sign of I2 at its start: holding the sign over a step that is a sizeable part of the
+    envelope's ~250 us ringing period would pump the ringing instead of damping it. The SBAR's DC
+    bus is the battery terminal with its smoothing capacitor: VL follows ``OCV + R0 i_batt + v_rc``
+    with the time constant R0 C_bus (without the capacitor the one-step VL -> V2 -> I2 -> I_L loop
     through R0 would be unstable at the link's ~4 kHz resonance, where |G22| ~ 24 A/V).
 
-    Returns ``(i1, i2, i2_mid, i_l, i_batt, soc, vrc, vl, v2)``: ``i2_mid`` the exact envelope at
-    half the step, ``i_l = (2/pi) I2 (1 - sin(pi/2 d))`` the SBAR output current averaged over the
-    step (lossless rectifier, V2 I2 / 2 = VL I_L; Simpson's rule on I2), ``i_batt = i_l - i_load``.
+    Returns ``(i1, i2, i2_peak, i_l, i_batt, soc, vrc, vl, v2)``: ``i2_peak`` the largest |I2| of
+    the envelope at mid-step and at the end (of every sub-step end when split), ``i_l = V2 I2 /
+    (2 VL) = (2/pi) (1 - sin(pi/2 d)) |I2| >= 0`` the SBAR output current averaged over the step
+    (lossless rectifier; Simpson's rule on I2, the mean of |I2| on each sub-step when split),
+    ``i_batt = i_l - i_load``, ``v2`` the V2 applied at the start of the step.
     """
-    a00, a01, a10, a11, e0, e1, b01, b11, m10, m11, me1, mb11 = c
+    a00, a01, a10, a11, e0, e1, b01, b11, m10, m11, me1, mb11 = c[:12]
     ocv0, docv, soc0, r0, rc_decay, rc_gain, dsoc, i_load, bus_decay = b
-    g = 1.0 - ops.sin(HALF_PI * d)
-    v2 = FOUR_OVER_PI * vl * g
+    v2 = rectifier_v2(d, vl, i2, sin=ops.sin, sign=ops.sign)
     i2m = m10 * i1 + m11 * i2 + me1 + mb11 * v2
     i1n = a00 * i1 + a01 * i2 + e0 + b01 * v2
     i2n = a10 * i1 + a11 * i2 + e1 + b11 * v2
-    il = TWO_OVER_PI_6 * g * (i2 + 4.0 * i2m + i2n)
+    il = v2 * (i2 + 4.0 * i2m + i2n) / (12.0 * vl)
+    pk = ops.maximum(abs(i2m), abs(i2n))
+    if n_sub > 1:
+        if ops is NUMPY_OPS:
+            idx = np.flatnonzero((i2m * v2 < 0.0) | (i2n * v2 < 0.0))
+            if len(idx):
+                r = _substeps(i1[idx], i2[idx], np.abs(v2[idx]), vl[idx], c[12:, idx], n_sub, ops)
+                i1n[idx], i2n[idx], pk[idx], il[idx] = r
+        elif i2m * v2 < 0.0 or i2n * v2 < 0.0:
+            i1n, i2n, pk, il = _substeps(i1, i2, abs(v2), vl, c[12:], n_sub, ops)
     ib = il - i_load
     soc = soc + dsoc * ib
     vrc = rc_decay * vrc + rc_gain * ib
     vl = bus_decay * vl + (1.0 - bus_decay) * (ocv0 + docv * (soc - soc0) + r0 * ib + vrc)
-    return i1n, i2n, i2m, il, ib, soc, vrc, vl, v2
+    return i1n, i2n, pk, il, ib, soc, vrc, vl, v2
+
+
+def _substeps(i1, i2, v2_mag, vl, c, n_sub, ops):
+    """``n_sub`` rectifier-period sub-steps, V2 = |f(d)| sign(I2) re-evaluated at each: returns
+    ``(i1, i2, peak |I2|, mean I_L)`` (I_L from the mean |I2| of each sub-step, linear in it)."""
+    h00, h01, h10, h11, f0, f1, g01, g11 = c
+    sign = ops.sign
+    path = [i2]
+    for _ in range(n_sub):
+        v2 = v2_mag * sign(i2)
+        i1, i2 = h00 * i1 + h01 * i2 + f0 + g01 * v2, h10 * i1 + h11 * i2 + f1 + g11 * v2
+        path.append(i2)
+    if ops is NUMPY_OPS:
+        p = np.abs(np.stack(path))
+        pk = p[1:].max(axis=0)
+        s = p[1:] + p[:-1]
+        # mean |I2| on a linear sub-step: (|a| + |b|)/2, less |a||b|/(|a| + |b|) when it crosses zero
+        cross = (np.stack(path[1:]) * np.stack(path[:-1])) < 0.0
+        tot = 0.5 * s.sum(axis=0)
+        if cross.any():
+            tot -= np.where(cross, p[1:] * p[:-1] / np.where(cross, s, 1.0), 0.0).sum(axis=0)
+    else:
+        pk = max(abs(x) for x in path[1:])
+        tot = sum(_abs_mean_float(a, b) for a, b in zip(path[:-1], path[1:]))
+    return i1, i2, pk, v2_mag * tot / (2.0 * n_sub * vl)
 
 
 def reward_cost(il, cmd, i2_peak, inv_rated, w: RewardWeights, ops):
-    """``(reward, cost)`` of one step; ``cost = max(0, I2_peak / I2_rated - 1)`` (relative excess of
-    the step's peak coil current over the rated value, 0 when within rating)."""
-    cost = ops.maximum(i2_peak * inv_rated - 1.0, 0.0)
+    """``(reward, cost)`` of one step; ``cost = max(0, |I2|_peak / I2_rated - 1)`` (relative excess of
+    the step's peak coil current magnitude over the rated value, 0 when within rating: a negative
+    envelope amplitude is a real current of that size). ``i2_peak`` is taken by magnitude."""
+    cost = ops.maximum(abs(i2_peak) * inv_rated - 1.0, 0.0)
     r = (ops.minimum(il, cmd) - w.tracking * abs(il - cmd)) / w.i_ref_a - w.overcurrent * cost
     return r, cost

@@ -17,6 +17,8 @@ from gymnasium.vector.utils import batch_space
 
 from mission_sim.contract import OBS_DIM, PolicyContext
 
+from wpt_receiver.sbar import rectifier_current, rectifier_v2
+
 from .core import (N_BAT, N_COEF, NUMPY_OPS, OBS_OFFSET, OBS_SCALE, EnvConfig, advance, build_plans, reward_cost)
 from .scenario import draw_episode, get_scenario, scenario_from_options
 
@@ -46,6 +48,7 @@ class SbarChargingVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         n, T, S = self.num_envs, c.n_steps, c.n_slow
         self._T, self._M, self._dt, self._inv_rated = T, c.slow_every, c.dt_s, 1.0 / c.rated_i2_a
+        self._n_sub = c.n_sub
         self._ar = np.arange(n)
         self._cmd = np.zeros((n, T + 1))
         self._noise = np.zeros((n, T))
@@ -101,13 +104,12 @@ class SbarChargingVectorEnv(VectorEnv):
 
     def _initial_obs_info(self):
         i1, i2, vl, soc, vrc, d = self._state
-        g = 1.0 - np.sin(0.5 * np.pi * d)
-        il = 2.0 / np.pi * i2 * g
+        il = rectifier_current(d, np.abs(i2))
         ib = il - self._bat[7]
         cmd = self._cmd[self._ar, self._k]
         obs = self._obs(i2, vl, ib, il, soc, cmd, d)
-        info = {"t_s": self._k * self._dt, "i2_a": i2.copy(), "i2_peak_a": i2.copy(), "i1_a": i1.copy(),
-                "d_short": d.copy(), "v2_v": 4.0 / np.pi * vl * g, "rect_current_a": il, "battery_v": vl.copy(),
+        info = {"t_s": self._k * self._dt, "i2_a": i2.copy(), "i2_peak_a": np.abs(i2), "i1_a": i1.copy(),
+                "d_short": d.copy(), "v2_v": rectifier_v2(d, vl, i2), "rect_current_a": il, "battery_v": vl.copy(),
                 "battery_current_a": ib, "soc": soc.copy(), "charge_cmd_a": cmd,
                 "lm_h": self._lm_all[self._ar, self._j], "energy_j": np.zeros(self.num_envs),
                 "cost": np.zeros(self.num_envs), "t_stop_s": self._t_stop.copy()}
@@ -154,9 +156,9 @@ class SbarChargingVectorEnv(VectorEnv):
             self._coef[:, moved] = self._coef_all[self._ar[moved], j[moved]].T
             self._j = j
         i1, i2, vl_old, soc, vrc, _ = self._state
-        i1, i2, i2m, il, ib, soc, vrc, vl, v2 = advance(i1, i2, vl_old, soc, vrc, d, self._coef, self._bat, NUMPY_OPS)
+        i1, i2, peak, il, ib, soc, vrc, vl, v2 = advance(i1, i2, vl_old, soc, vrc, d, self._coef, self._bat, NUMPY_OPS,
+                                                         self._n_sub)
         cmd = self._cmd[self._ar, k]
-        peak = np.maximum(i2m, i2)
         reward, cost = reward_cost(il, cmd, peak, self._inv_rated, self.config.reward, NUMPY_OPS)
         energy = vl_old * il * self._dt
         st = self._state

@@ -5,10 +5,12 @@ seeded ``seed + i``, the same for every policy), the policy acting on the whole 
 observations every control period. Metrics per episode (from the physical values in ``info``):
 
 ==================  =======================================================================
-peak_i2_a           largest I2 envelope sample (mid- and end-of-step) in the window [A]
-overshoot_pct       (max I2 after the stop command - final I2) / final I2, final = mean of
-                    the last 10 steps (the SM steady state) [%]
-time_above_rated_s  time with the step's peak I2 above the rated value [s]
+peak_i2_a           largest |I2| envelope sample (mid- and end-of-step) in the window [A] (a
+                    negative envelope amplitude is a real coil current of that size)
+overshoot_pct       (max |I2| after the stop command - |final I2|) / |final I2|, final = mean
+                    of the last 10 steps (the SM steady state) [%]; NaN when |final I2| <
+                    0.1 A (no steady current to overshoot)
+time_above_rated_s  time with the step's peak |I2| above the rated value [s]
 energy_j            energy delivered to the battery node, sum of VL I_L dt [J]
 energy_after_stop_j the part of it delivered after the stop command (unwanted) [J]
 tracking_rmse_a     RMS of (I_L - command) over the window [A]
@@ -30,6 +32,7 @@ METRICS = ("peak_i2_a", "overshoot_pct", "time_above_rated_s", "energy_j", "ener
            "cost", "return")
 DEFAULT_POLICIES = ("step", "ramp", "hysteresis", "model_based", "model_based_online", "rl", "random")
 DEFAULT_SCENARIOS = ("nominal", "lm_mismatch", "windy", "battery")
+FINAL_I2_MIN_A = 0.1   # below this final |I2| the overshoot ratio is undefined (NaN)
 
 
 @dataclass
@@ -79,12 +82,15 @@ def run_policy(name: str, scenario: str, episodes: int, seed: int, config=None) 
     dt = venv.config.dt_s
     t = (np.arange(T) + 1) * dt
     after = t[:, None] >= t_stop[None, :]
-    final = rec["i2_a"][-10:].mean(axis=0)
-    peak_after = np.where(after, rec["i2_peak_a"], -np.inf).max(axis=0)
+    pk = np.abs(rec["i2_peak_a"])   # the env reports it by magnitude already; abs keeps this self-evident
+    final = np.abs(rec["i2_a"][-10:].mean(axis=0))
+    peak_after = np.where(after, pk, -np.inf).max(axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        over = np.where(final >= FINAL_I2_MIN_A, 100.0 * (peak_after - final) / final, np.nan)
     m = {
-        "peak_i2_a": rec["i2_peak_a"].max(axis=0),
-        "overshoot_pct": 100.0 * (peak_after - final) / final,
-        "time_above_rated_s": (rec["i2_peak_a"] > venv.config.rated_i2_a).sum(axis=0) * dt,
+        "peak_i2_a": pk.max(axis=0),
+        "overshoot_pct": over,
+        "time_above_rated_s": (pk > venv.config.rated_i2_a).sum(axis=0) * dt,
         "energy_j": rec["energy_j"].sum(axis=0),
         "energy_after_stop_j": np.where(after, rec["energy_j"], 0.0).sum(axis=0),
         "tracking_rmse_a": np.sqrt(np.mean((rec["rect_current_a"] - rec["charge_cmd_a"]) ** 2, axis=0)),
@@ -99,8 +105,8 @@ def run_policy(name: str, scenario: str, episodes: int, seed: int, config=None) 
 def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: int = 20, seed: int = 1000,
             progress: bool = False, config=None):
     """Run every policy on every scenario (same seeds); returns ``(rows, traces)``: rows are dicts
-    (policy, scenario, episodes, mean of each metric, and ``peak_i2_max_a``), traces maps
-    (policy, scenario) -> :class:`EpisodeTraces`."""
+    (policy, scenario, episodes, mean of each metric (overshoot_pct over the episodes where it is
+    defined), and ``peak_i2_max_a``), traces maps (policy, scenario) -> :class:`EpisodeTraces`."""
     from tqdm import tqdm
 
     if int(episodes) != episodes or not 1 <= episodes <= 100_000:
@@ -111,7 +117,8 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
         tr = run_policy(p, s, int(episodes), int(seed), config)
         traces[(p, s)] = tr
         row = {"policy": p, "scenario": s, "episodes": int(episodes)}
-        row.update({k: float(np.mean(v)) for k, v in tr.metrics.items()})
+        # nanmean: overshoot_pct is NaN for an episode without a steady final current
+        row.update({k: float(np.nanmean(v)) if np.isfinite(v).any() else float("nan") for k, v in tr.metrics.items()})
         row["peak_i2_max_a"] = float(np.max(tr.metrics["peak_i2_a"]))
         rows.append(row)
     return rows, traces
@@ -119,9 +126,9 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
 
 def plot_transitions(traces: dict, scenario: str, out_png, episode: int = 0, window_s=(-2e-3, 12e-3),
                      rated_i2_a: float = 15.0):
-    """Figure of representative RM -> SM transitions: I2 envelope and d_short of every policy (but
-    ``random``, whose 150 A noise would hide the rest) on one episode of ``scenario``, time relative
-    to the stop command."""
+    """Figure of representative RM -> SM transitions: step peak |I2| and d_short of every policy
+    (but ``random``, whose duty noise rings the link and would hide the rest) on one episode of
+    ``scenario``, time relative to the stop command."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -137,7 +144,7 @@ def plot_transitions(traces: dict, scenario: str, out_png, episode: int = 0, win
         a2.plot(t[sel], tr.d_short[sel, episode], lw=1.0, label=p)
     a1.axhline(rated_i2_a, color="r", lw=0.8, ls="--", label="rated")
     a1.axvline(0, color="k", lw=0.8, ls=":")
-    a1.set_ylabel("I2 envelope [A]")
+    a1.set_ylabel("|I2| envelope, step peak [A]")
     a1.set_title(f"RM -> SM at the stop command ({scenario}, episode {episode})")
     a1.grid(alpha=0.3)
     a1.legend(fontsize=8, ncol=2)

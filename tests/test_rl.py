@@ -24,7 +24,7 @@ def brief_ppo(tmp_path_factory):
 
 def test_brief_training_beats_random_by_a_stated_margin(brief_ppo):
     """Margin: the trained policy's mean return on the fixed seeds must exceed the random policy's
-    by at least half of |random's return| (random ~ -6000: its duty noise rings the link to ~150 A),
+    by at least half of |random's return| (random ~ -1400: its duty noise rings the link to ~50 A),
     and its mean overcurrent cost must be below a tenth of random's."""
     trained = run_policy(f"rl:{brief_ppo['model']}", "nominal", EVAL_EPISODES, EVAL_SEEDS).metrics
     rnd = run_policy("random", "nominal", EVAL_EPISODES, EVAL_SEEDS).metrics

@@ -60,3 +60,31 @@ def duty_from_v2_clipped(v2_v, vl_v: float):
     s = np.minimum(np.maximum(1.0 - v / (_FOUR_OVER_PI * vl_v), 0.0), 1.0)  # np.clip is slow on tiny arrays
     out = (2.0 / np.pi) * np.arcsin(s)
     return out if out.ndim else float(out)
+
+
+def rectifier_v2(d_short, vl_v, i2_amp_a, *, sin=np.sin, sign=np.sign):
+    """Fundamental amplitude of v2 [V] the SBAR presents to an I2 envelope of either sign (eq. 9).
+
+    ``V2 = (4/pi) VL (1 - sin(pi/2 d_short)) sign(I2)``. The diodes (and the synchronous switches)
+    conduct with the *instantaneous* i2, so the rectifier's square wave is always in phase with
+    i2: a negative envelope amplitude is i2 shifted by pi, i.e. by one rectifier period
+    ``T = 1/(2f)``, so the clocked short window still sits on a half-cycle peak and only the sign
+    of the fundamental follows I2. The rectifier therefore always absorbs power (V2 I2 >= 0, the
+    battery never drives the coil), unlike the paper's linear envelope with ``V2 = f(d)`` held
+    positive. ``I2 = 0`` gives ``V2 = 0``.
+
+    Vectorised over any broadcastable inputs, no range checks (hot loops; see :func:`v2_from_duty`
+    for the checked mapping). ``sin`` and ``sign`` are the elementwise functions to use: the
+    numpy ones by default, ``math.sin`` and a float sign for Python floats in a scalar loop.
+    """
+    return _FOUR_OVER_PI * vl_v * (1.0 - sin(0.5 * np.pi * d_short)) * sign(i2_amp_a)
+
+
+def rectifier_current(d_short, i2_abs_mean_a, *, sin=np.sin):
+    """Mean DC output current I_L [A] of the lossless SBAR, ``(2/pi) (1 - sin(pi/2 d_short)) |I2|``.
+
+    From ``V2 I2 / 2 = VL I_L`` with :func:`rectifier_v2`: ``I_L >= 0`` whatever the sign of the
+    envelope. ``i2_abs_mean_a`` is the mean of ``|I2|`` over the interval of interest (pass
+    ``abs(i2)`` for an instantaneous value). Vectorised, no range checks.
+    """
+    return (2.0 / np.pi) * (1.0 - sin(0.5 * np.pi * d_short)) * i2_abs_mean_a
