@@ -48,6 +48,8 @@ import time
 
 import numpy as np
 
+from wpt_receiver.sbar import rectifier_v2
+
 from .battery import Battery, CcCvCharger, _ocv_cell_scalar, scalar_stepper
 from .contract import normalise_obs
 from .linkstep import LinkStepper
@@ -59,6 +61,10 @@ __all__ = ["run_mission", "ENERGISE_PHASES"]
 
 ENERGISE_PHASES = ("charge", "hover")
 _FOUR_PI = 4.0 / math.pi
+
+
+def _sign(v: float) -> float:
+    return (v > 0.0) - (v < 0.0)
 
 
 def _pad_offsets(cfg, traj: Trajectory):
@@ -188,10 +194,7 @@ def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_al
         # the rectifier always absorbs power. With the pad off the diodes block: nothing drives current
         # through them against the battery and the coil currents ring down in R1, R2 (the envelope model
         # has no diode to stop I2 at zero, so holding V2 over a long step would drive I2 to -V2/R2).
-        if v1 > 0.0 and x[1] != 0.0:
-            c = _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * d)) * (1.0 if x[1] > 0.0 else -1.0)
-        else:
-            c = 0.0
+        c = rectifier_v2(d, 1.0, x[1], sin=math.sin, sign=_sign) if v1 > 0.0 else 0.0  # V2 per volt of VL
         # battery: mean terminal voltage = A0 + G * i_mean (held-current RC solution); solve VL
         # implicitly with the link so V2, the battery and the propulsion power agree exactly
         frac = tau1 * (1.0 - math.exp(-dt / tau1)) / dt
