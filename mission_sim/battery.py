@@ -34,6 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .validation import check_positive
+
 __all__ = ["BatteryParams", "ocv_cell_v", "ocv_cell_energy_v", "held_current_step", "scalar_stepper", "Battery", "StepEnergies", "CcCvParams",
            "CcCvCharger"]
 
@@ -49,13 +51,6 @@ def ocv_cell_energy_v(soc):
     s = np.clip(np.asarray(soc, dtype=float), 0.0, 1.0)
     return (-1.031 / 35.0 * (1.0 - np.exp(-35.0 * s)) + 3.685 * s + 0.2156 / 2 * s**2 - 0.1178 / 3 * s**3
             + 0.3201 / 4 * s**4)
-
-
-def _check_positive(obj, names):
-    for name in names:
-        v = float(getattr(obj, name))
-        if not np.isfinite(v) or v <= 0:
-            raise ValueError(f"{name}={v!r} is invalid; valid range: (0, inf)")
 
 
 @dataclass(frozen=True)
@@ -76,7 +71,7 @@ class BatteryParams:
     def __post_init__(self):
         if int(self.n_series) != self.n_series or not 1 <= self.n_series <= 32:
             raise ValueError(f"n_series={self.n_series!r} is invalid; valid range: integer 1..32")
-        _check_positive(self, ("capacity_ah", "r0_ohm_cell", "r1_ohm_cell", "c1_f_cell"))
+        check_positive(self, "capacity_ah", "r0_ohm_cell", "r1_ohm_cell", "c1_f_cell")
         if not 0.0 <= self.initial_soc <= 1.0:
             raise ValueError(f"initial_soc={self.initial_soc!r} is invalid; valid range: [0, 1]")
 
@@ -225,7 +220,7 @@ class CcCvParams:
     cutoff_current_a: float = 0.13
 
     def __post_init__(self):
-        _check_positive(self, ("cc_current_a", "cv_cell_v", "cutoff_current_a"))
+        check_positive(self, "cc_current_a", "cv_cell_v", "cutoff_current_a")
         if self.cutoff_current_a >= self.cc_current_a:
             raise ValueError(f"cutoff_current_a={self.cutoff_current_a!r} is invalid; valid range: "
                              f"(0, cc_current_a={self.cc_current_a!r})")

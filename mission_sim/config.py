@@ -20,20 +20,13 @@ from wpt_receiver.coupling import NOMINAL_GAP_M
 
 from .battery import BatteryParams, CcCvParams
 from .power import DroneParams
+from .validation import check_positive
 from .wind import WindParams
 
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
            "MissionConfig", "load_config", "config_from_dict", "config_to_dict", "apply_overrides"]
 
 DEFAULT_MISSION_TOML: str = resources.files("mission_sim").joinpath("default_mission.toml").read_text("utf-8")
-
-
-def _positive(obj, *names, allow_zero=False):
-    for name in names:
-        v = getattr(obj, name)
-        ok = math.isfinite(v) and (v >= 0 if allow_zero else v > 0)
-        if not ok:
-            raise ValueError(f"{name}={v!r} is invalid; valid range: {'[0' if allow_zero else '(0'}, inf)")
 
 
 @dataclass(frozen=True)
@@ -48,8 +41,8 @@ class LinkConfig:
     tx_ramp_s: float = 0.005
 
     def __post_init__(self):
-        _positive(self, "r1_ohm", "r2_ohm", "vdc_v", "f_hz", "rated_i2_a")
-        _positive(self, "tx_ramp_s", allow_zero=True)
+        check_positive(self, "r1_ohm", "r2_ohm", "vdc_v", "f_hz", "rated_i2_a")
+        check_positive(self, "tx_ramp_s", allow_zero=True)
 
     def link_params(self, l1_h: float, l2_h: float, lm_h: float, vl_v: float = 30.0) -> LinkParams:
         return LinkParams(l1_h=l1_h, l2_h=l2_h, lm_h=lm_h, r1_ohm=self.r1_ohm, r2_ohm=self.r2_ohm,
@@ -117,8 +110,8 @@ class MissionPlan:
             v = getattr(self, name)
             if not math.isfinite(v) or abs(v) > 1e5:
                 raise ValueError(f"{name}={v!r} is invalid; valid range: [-1e5, 1e5] m")
-        _positive(self, "cruise_speed_m_s", "max_accel_m_s2", "climb_rate_m_s", "descent_rate_m_s")
-        _positive(self, "hover_time_s", allow_zero=True)
+        check_positive(self, "cruise_speed_m_s", "max_accel_m_s2", "climb_rate_m_s", "descent_rate_m_s")
+        check_positive(self, "hover_time_s", allow_zero=True)
         if not 0.03 <= self.hover_gap_m <= 1.0:
             raise ValueError(f"hover_gap_m={self.hover_gap_m!r} is invalid; valid range: [0.03, 1.0] m")
         if not self.hover_gap_m < self.cruise_altitude_m <= 500:
@@ -146,9 +139,9 @@ class SimConfig:
     tx_off_delay_s: float = 0.025
 
     def __post_init__(self):
-        _positive(self, "control_period_s", "traj_dt_s", "flight_dt_s", "min_fine_s", "max_fine_s",
+        check_positive(self, "control_period_s", "traj_dt_s", "flight_dt_s", "min_fine_s", "max_fine_s",
                   "settle_duty_tol", "duty_event_tol", "lm_rel_tol", "coarse_policy_period_s", "settle_i2_tol_a", "bms_period_s")
-        _positive(self, "i2_noise_a", "cmd_deadband_a", "tx_off_delay_s", allow_zero=True)
+        check_positive(self, "i2_noise_a", "cmd_deadband_a", "tx_off_delay_s", allow_zero=True)
         if not 1e-7 <= self.control_period_s <= 1e-3:
             raise ValueError(f"control_period_s={self.control_period_s!r} is invalid; valid range: [1e-7, 1e-3] s")
         if not self.control_period_s * 10 <= self.traj_dt_s <= 1.0:

@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .validation import check_positive
+
 __all__ = ["DroneParams", "propulsion_power_w", "hover_power_w", "G_M_S2"]
 
 G_M_S2 = 9.80665
@@ -48,14 +50,8 @@ class DroneParams:
     air_density_kg_m3: float = 1.225
 
     def __post_init__(self):
-        for name in ("mass_kg", "rotor_radius_m", "flat_plate_area_m2", "air_density_kg_m3"):
-            v = float(getattr(self, name))
-            if not math.isfinite(v) or v <= 0:
-                raise ValueError(f"{name}={v!r} is invalid; valid range: (0, inf)")
-        for name in ("payload_kg", "avionics_w"):
-            v = float(getattr(self, name))
-            if not math.isfinite(v) or v < 0:
-                raise ValueError(f"{name}={v!r} is invalid; valid range: [0, inf)")
+        check_positive(self, "mass_kg", "rotor_radius_m", "flat_plate_area_m2", "air_density_kg_m3")
+        check_positive(self, "payload_kg", "avionics_w", allow_zero=True)
         for name in ("figure_of_merit", "drive_efficiency"):
             v = float(getattr(self, name))
             if not 0 < v <= 1:
