@@ -20,7 +20,7 @@ import time
 
 from mission_sim.config import apply_overrides, config_from_dict, config_to_dict, load_config
 from mission_sim.contract import PolicyContext
-from mission_sim.runner import run_mission
+from mission_sim.world.runner import run_mission
 from policies import make
 
 

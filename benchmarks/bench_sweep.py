@@ -23,8 +23,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import policies  # noqa: E402
-from mission_sim.study import load_study  # noqa: E402
-from mission_sim.sweep import dask_client, prepare_study, run_sweep  # noqa: E402
+from mission_sim.studies.study import load_study  # noqa: E402
+from mission_sim.studies.sweep import dask_client, prepare_study, run_sweep  # noqa: E402
 
 
 def run(study_path: Path, workers: int) -> dict:

@@ -1,11 +1,11 @@
 """The world around the link as the environment needs it: hover pose error -> true Lm, the battery,
 the hover power. Thin views on the mission world, no second model:
 
-* pose error and tilt: :mod:`mission_sim.wind` (Dryden-type gusts, drag, position-hold loop,
-  thrust tilt) for a drone of :class:`mission_sim.power.DroneParams`;
+* pose error and tilt: :mod:`mission_sim.world.wind` (Dryden-type gusts, drag, position-hold loop,
+  thrust tilt) for a drone of :class:`mission_sim.world.power.DroneParams`;
 * Lm of a pose: :func:`wpt_receiver.coupling.default_coupling` (Neumann integrals, tabulated);
-* battery: :class:`mission_sim.battery.BatteryParams` (8S LiPo ECM: OCV(SoC), R0, R1-C1);
-* hover power: :func:`mission_sim.power.hover_power_w`.
+* battery: :class:`mission_sim.world.battery.BatteryParams` (8S LiPo ECM: OCV(SoC), R0, R1-C1);
+* hover power: :func:`mission_sim.world.power.hover_power_w`.
 
 Time scales. Gusts have a 2 s correlation time and the position-hold loop 2 rad/s, so over a
 30 ms charging window the pose (and Lm) hardly moves; it differs a lot *between* windows. The
@@ -16,7 +16,7 @@ the record and interpolates Lm along it in time. A window only starts where the 
 adequate coupling (Lm within :data:`LM_WINDOW_RANGE` of the nominal value over the whole window,
 as a transmitter that checks coupling before it powers up would). The hold loop is driven by the
 drag *fluctuation* (total drag minus the drag of the mean wind, which its integral action absorbs;
-as :func:`mission_sim.trajectory.plan_mission` does), while the tilt sees the total drag. Measured
+as :func:`mission_sim.world.trajectory.plan_mission` does), while the tilt sees the total drag. Measured
 horizontal hover error along the records (RMS / max): 1 m/s 0.2 / 0.5 cm, 2 m/s 1.3 / 2.9 cm,
 3 m/s 2.0 / 5.1 cm, 4 m/s 4.0 / 13.5 cm (Lm 0.62-1.10 x nominal, 97 % of the record within range),
 6 m/s 7.8 / 24 cm (79 %), 8 m/s 13 / 30 cm (49 %): only strong winds with this hold loop
@@ -29,9 +29,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from mission_sim.battery import BatteryParams
-from mission_sim.power import DroneParams, hover_power_w
-from mission_sim.wind import WindParams, drag_force_n, hover_error_m, tilt_from_force, wind_series
+from mission_sim.world.battery import BatteryParams
+from mission_sim.world.power import DroneParams, hover_power_w
+from mission_sim.world.wind import WindParams, drag_force_n, hover_error_m, tilt_from_force, wind_series
 from wpt_receiver.coupling import NOMINAL_GAP_M, default_coupling
 
 __all__ = ["RECORD_DT_S", "RECORD_S", "GUST_INTENSITY", "lm_record", "lm_window_h", "LM_WINDOW_RANGE", "battery_operating_point",
@@ -116,5 +116,5 @@ def battery_operating_point(soc, params: BatteryParams = _BATTERY):
 
 @lru_cache(maxsize=1)
 def default_hover_power_w() -> float:
-    """Electrical hover power [W] of the default drone (momentum theory, :mod:`mission_sim.power`)."""
+    """Electrical hover power [W] of the default drone (momentum theory, :mod:`mission_sim.world.power`)."""
     return float(hover_power_w(_DRONE))

@@ -1,1 +1,19 @@
-"""mission_sim: the world around the link (trajectories, drone power, battery, mission runner, CLI)."""
+"""mission_sim: the world around the link. Subpackages by concern, in the order data flows:
+
+==================  ============================================================================
+``contract``        the observation/action contract and the :class:`Policy` protocol, shared by
+                    the mission loop, the envs and every policy
+``validation``      one-line checks of physical parameters
+``config``          the mission configuration (TOML, ``default_mission.toml``), ``--set`` overrides
+``world/``          the physical world: trajectory, wind, drone power, battery, the link step,
+                    the mission loop and its results
+``mavlink/``        MAVLink: reading flight logs, replaying them, live telemetry, follow mode,
+                    geodesy
+``studies/``        parameter studies: study files, the Dask sweep, its report
+``figures/``        every figure (matplotlib); imported only by the CLI
+``cli/``            the ``dronewpt`` command line: parse, call, print
+==================  ============================================================================
+
+Dependencies point one way: ``wpt_receiver`` <- ``mission_sim`` <- ``envs`` <- ``policies``;
+only the CLI reaches ``envs`` and ``policies``, lazily.
+"""

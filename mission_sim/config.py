@@ -18,10 +18,10 @@ from pathlib import Path
 from wpt_receiver import LinkParams
 from wpt_receiver.coupling import NOMINAL_GAP_M
 
-from .battery import BatteryParams, CcCvParams
-from .power import DroneParams
+from .world.battery import BatteryParams, CcCvParams
+from .world.power import DroneParams
 from .validation import check_positive
-from .wind import WindParams
+from .world.wind import WindParams
 
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
            "MissionConfig", "load_config", "config_from_dict", "config_to_dict", "apply_overrides"]

@@ -32,7 +32,7 @@ def log_path(name: str) -> Path:
 
 
 def pymavlink_reference(path: Path) -> dict:
-    """Facts computed with pymavlink directly (plain loops, independent of mission_sim.mavlink_io).
+    """Facts computed with pymavlink directly (plain loops, independent of mission_sim.mavlink.logs).
 
     duration (last - first record timestamp), armed periods (vehicle HEARTBEAT base_mode bit 7 in a
     .tlog, EV 10/11 in a .bin), positions with a 3D fix (lat/lon/alt extents and count), battery

@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from mission_sim.battery import Battery, BatteryParams, CcCvCharger, CcCvParams, ocv_cell_v
-from mission_sim.power import G_M_S2, DroneParams, hover_power_w, propulsion_power_w
-from mission_sim.wind import WindParams, gust_series, hover_error_m, tilt_from_force
+from mission_sim.world.battery import Battery, BatteryParams, CcCvCharger, CcCvParams, ocv_cell_v
+from mission_sim.world.power import G_M_S2, DroneParams, hover_power_w, propulsion_power_w
+from mission_sim.world.wind import WindParams, gust_series, hover_error_m, tilt_from_force
 
 
 def test_battery_step_energy_identity_and_substep_consistency():
@@ -104,7 +104,7 @@ def test_gusts_are_stationary_markov_and_hover_error_is_seeded():
 
 
 def test_scalar_stepper_equals_batched_step():
-    from mission_sim.battery import scalar_stepper
+    from mission_sim.world.battery import scalar_stepper
     p = BatteryParams()
     b = Battery(p, n=1, soc=0.4)
     b.v1_v[:] = 0.03

@@ -9,8 +9,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from _flightlogs import LOG_NAMES, log_path
-from mission_sim.mavlink_io import read_log
-from mission_sim.replay import NoPositionError, track_from_log
+from mission_sim.mavlink.logs import read_log
+from mission_sim.mavlink.replay import NoPositionError, track_from_log
 
 PREFIX = 48_000  # bytes of each log: holds the DataFlash FMT header and hundreds of MAVLink frames
 _prefixes: dict[str, bytes] = {}

@@ -1,12 +1,12 @@
-"""mission_sim.mavlink_io and the log-only parts of mission_sim.replay against pymavlink directly."""
+"""mission_sim.mavlink.logs and the log-only parts of mission_sim.mavlink.replay against pymavlink directly."""
 
 import numpy as np
 import pytest
 
 from _flightlogs import LOG_NAMES, log_path, pymavlink_reference
-from mission_sim.geodesy import GeoPoint, enu_to_geodetic, geodetic_to_enu, parse_geo_point
-from mission_sim.mavlink_io import read_log
-from mission_sim.replay import NoPositionError, default_pad, logged_energy_j, track_from_log
+from mission_sim.mavlink.geodesy import GeoPoint, enu_to_geodetic, geodetic_to_enu, parse_geo_point
+from mission_sim.mavlink.logs import read_log
+from mission_sim.mavlink.replay import NoPositionError, default_pad, logged_energy_j, track_from_log
 
 _cache: dict = {}
 
@@ -122,7 +122,7 @@ def test_compare_power_arithmetic():
     """Known inputs: logged 200 W, model 100 W -> error -100 W, energy -50 %, best-fit scale 2."""
     from dataclasses import replace
 
-    from mission_sim.replay import compare_power
+    from mission_sim.mavlink.replay import compare_power
     log, _ = _both("dronekit-python_flight.tlog")
     tr = track_from_log(log, ground_gap_m=0.1)
     log2 = replace(log, battery=log.battery.assign(power_w=200.0))

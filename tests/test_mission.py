@@ -3,17 +3,24 @@
 import json
 import math
 import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from mission_sim.config import (DEFAULT_MISSION_TOML, MissionConfig, apply_overrides, config_from_dict,
-                                config_to_dict, load_config)
+from mission_sim.config import (
+    DEFAULT_MISSION_TOML,
+    MissionConfig,
+    apply_overrides,
+    config_from_dict,
+    config_to_dict,
+    load_config,
+)
 from mission_sim.contract import PolicyContext
-from mission_sim.linkstep import LinkStepper
-from mission_sim.power import hover_power_w
-from mission_sim.runner import run_mission
-from mission_sim.trajectory import Trajectory, plan_mission
+from mission_sim.world.linkstep import LinkStepper
+from mission_sim.world.power import hover_power_w
+from mission_sim.world.runner import run_mission
+from mission_sim.world.trajectory import Trajectory, plan_mission
 from policies import make
 from wpt_receiver import TABLE_I, state_matrices, steady_state, zoh_discretise
 
@@ -144,7 +151,8 @@ def test_default_mission_energy_closes_and_summary_is_complete(default_runs, tmp
         # something substantial happened: pads delivered energy, propulsion dominated, battery charged to full
         assert s["energy_from_source_j"] > 1e4 and s["propulsion_energy_j"] > 1e4
         assert s["battery_full"] and s["final_soc"] > s["final_soc_without_charging"]
-    files = runs["model_based"].write(tmp_path)
+    from mission_sim.figures.mission import plot_mission
+    files = runs["model_based"].write(tmp_path) + [Path(f) for f in plot_mission(runs["model_based"], tmp_path)]
     names = {f.name for f in files}
     assert {"timeseries.parquet", "timeseries.csv", "summary.json", "i2_envelope.png", "lm.png", "soc.png",
             "power.png", "trajectory.png"} <= names
@@ -233,7 +241,7 @@ def test_step_policy_transients_do_not_depend_on_the_control_period():
     period, so a coarser policy loop must not pump the ringing (it did: 79.6 A at 100 us vs 30.9 A
     at 50 us when the sign was held over whole steps)."""
     from mission_sim.config import config_to_dict, load_config, policy_context
-    from mission_sim.runner import run_mission
+    from mission_sim.world.runner import run_mission
     from policies import make
 
     out = {}

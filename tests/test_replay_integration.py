@@ -1,6 +1,6 @@
 """Replay of the real logs through the mission runner, telemetry round trips, --follow with a live vehicle.
 
-These need the mission world of issue 4 (mission_sim.runner.run_mission); windows keep each
+These need the mission world of issue 4 (mission_sim.world.runner.run_mission); windows keep each
 replay short.
 """
 
@@ -16,7 +16,7 @@ import pytest
 
 from _flightlogs import log_path, pymavlink_reference
 from mission_sim.cli import main
-from mission_sim.mavlink_io import read_log
+from mission_sim.mavlink.logs import read_log
 
 WINDOWS = {  # log seconds: arming on the pad, take-off, some flying
     "dronekit-python_flight.tlog": (455.0, 505.0),
@@ -176,8 +176,9 @@ def test_follow_live_vehicle(tmp_path):
     """--follow: a separate process plays the vehicle; the simulation follows its positions."""
     import argparse
 
-    from mission_sim import cli, follow
-    from mission_sim.runner import run_mission
+    from mission_sim.cli import mavlink as cli
+    from mission_sim.mavlink import follow
+    from mission_sim.world.runner import run_mission
     port = _free_port()
     tlog = tmp_path / "follow.tlog"
     vin = follow.open_follow(f"udpin:127.0.0.1:{port}")  # bound before the vehicle starts

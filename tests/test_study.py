@@ -5,7 +5,7 @@ import tomllib
 import numpy as np
 import pytest
 
-from mission_sim.study import case_id, expand_cases, load_study, monte_carlo_draw, parse_study
+from mission_sim.studies.study import case_id, expand_cases, load_study, monte_carlo_draw, parse_study
 
 DOC = """
 [study]

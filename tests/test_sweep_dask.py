@@ -18,8 +18,8 @@ from sweep_toy import ToyRunner, toy_case
 import policies
 
 from mission_sim.cli import main
-from mission_sim.study import expand_cases, load_study
-from mission_sim.sweep import CaseStore, dask_client, prepare_study, read_results, run_sweep
+from mission_sim.studies.study import expand_cases, load_study
+from mission_sim.studies.sweep import CaseStore, dask_client, prepare_study, read_results, run_sweep
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 TESTS = ROOT / "tests"

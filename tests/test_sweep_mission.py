@@ -25,9 +25,9 @@ def test_the_documented_study_schema_and_the_example_study_are_valid_for_the_mis
     from pathlib import Path
 
     import policies
-    from mission_sim import study as study_mod
-    from mission_sim.study import load_study, parse_study
-    from mission_sim.sweep import prepare_study
+    from mission_sim.studies import study as study_mod
+    from mission_sim.studies.study import load_study, parse_study
+    from mission_sim.studies.sweep import prepare_study
 
     doc = inspect.getdoc(study_mod)
     block = textwrap.dedent(doc.split("::\n", 1)[1].split("\n\nKeys may be")[0])

@@ -7,8 +7,8 @@ import pyarrow.parquet as pq
 import pytest
 from sweep_toy import toy_case
 
-from mission_sim.study import Case, case_id
-from mission_sim.sweep import CaseStore, run_case_safe, run_sweep
+from mission_sim.studies.study import Case, case_id
+from mission_sim.studies.sweep import CaseStore, run_case_safe, run_sweep
 
 
 def cases_for(hovers, fail=()):

@@ -12,9 +12,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mission_sim.geodesy import GeoPoint, geodetic_to_enu
-from mission_sim.mavlink_io import mavutil, read_log
-from mission_sim.telemetry import DEFAULT_HOME, check_connect, mavlink_table, stream
+from mission_sim.mavlink.geodesy import GeoPoint, geodetic_to_enu
+from mission_sim.mavlink.logs import mavutil, read_log
+from mission_sim.mavlink.telemetry import DEFAULT_HOME, check_connect, mavlink_table, stream
 
 RECEIVER = Path(__file__).with_name("_mavlink_receiver.py")
 

@@ -1,14 +1,18 @@
 """wpt_receiver: the WPT link with an SBAR receiver, as modelled in the paper.
 
-Depends on nothing else of dronewpt. Main entry points:
+Depends on nothing else of dronewpt. Modules, in the order data flows:
 
-* :class:`LinkParams` / :data:`TABLE_I` - parameters (Table I)
-* :mod:`.envelope` - envelope model (eq. 3-8), exact ZOH stepping, steady states, G22
-* :mod:`.sbar` - duty mapping f(d_short) (eq. 9) and its inverse
-* :mod:`.inverse_controller` - the proposed controller (Fig. 5)
-* :mod:`.references`, :mod:`.metrics`, :mod:`.paper` - Table II / Fig. 6 reproduction
-* :mod:`.switching` - switching-level (instantaneous, event-exact) model of eq. 1 and the SBAR;
-  importing it registers ``paper.MODELS["switching"]``
+======================  =====================================================================
+``params``              :class:`LinkParams`, :data:`TABLE_I` (Table I)
+``coupling``            Lm(pose) of two circular coils (Maxwell / Neumann), lookup tables
+``envelope``            envelope model (eq. 3-8): exact ZOH stepping, steady states, G22
+``sbar``                SBAR duty mapping f(d_short) (eq. 9), its inverse, the rectifier rule
+``inverse_controller``  the proposed controller (Fig. 5): low-pass, G22^-1, f^-1
+``references``          step, ramp and proposed V2* trajectories
+``metrics``             peak, final value and overshoot of a transition (Table II)
+``paper``               Table II / Fig. 6 as a reusable scenario on either plant model
+``switching/``          switching-level (instantaneous, event-exact) model of eq. 1 and the SBAR
+======================  =====================================================================
 """
 
 from .envelope import EnvelopeLink, coefficients, g22, simulate, state_matrices, steady_state, zoh_discretise

@@ -2,8 +2,8 @@
 
 The link starts at its RM steady state, the transition starts at ``t_switch_s`` and the window
 runs to ``t_end_s``. Each trajectory gives a duty sequence on the controller's grid; a *plant
-model* turns duties into current envelopes. Models register in :data:`MODELS`; the envelope
-model is built in, the switching-level model adds itself when its module is imported.
+model* turns duties into current envelopes. :data:`MODELS` names them: the envelope model
+(built in) and the switching-level model (:mod:`.switching`, imported on first use).
 """
 
 from __future__ import annotations
@@ -52,8 +52,14 @@ def envelope_plant(params: LinkParams, d_short: np.ndarray, control_period_s: fl
     return {"t_s": t, "i1_a": i1, "i2_a": i2, "v2_v": np.append(v2, v2[-1])}
 
 
+def _switching_plant(params: LinkParams, d_short: np.ndarray, control_period_s: float):
+    """The switching-level model (:func:`wpt_receiver.switching.switching_plant`), imported on first use."""
+    from .switching.plant import switching_plant
+    return switching_plant(params, d_short, control_period_s)
+
+
 #: plant models: name -> callable(params, d_short, control_period_s) -> dict(t_s, i1_a, i2_a, v2_v, ...)
-MODELS: dict[str, Callable] = {"envelope": envelope_plant}
+MODELS: dict[str, Callable] = {"envelope": envelope_plant, "switching": _switching_plant}
 
 
 def run_paper(params: LinkParams = TABLE_I, model: str = "envelope", t_switch_s: float = 1e-3,

@@ -10,7 +10,7 @@ Loop (one drone, one receiver):
    phase ends. On and off are linear V1 ramps over ``link.tx_ramp_s`` (soft start), always
    simulated in fine steps. Before a planned switch-off the charge command drops to 0 first and
    the pad stays on ``sim.tx_off_delay_s`` so the receiver reaches short mode under power.
-3. **Battery management** (:class:`~mission_sim.battery.CcCvCharger`) sets the charge command
+3. **Battery management** (:class:`~mission_sim.world.battery.CcCvCharger`) sets the charge command
    ``I_L*`` every ``sim.bms_period_s`` (propulsion current + CC/CV battery current, 0 when full);
    changes below ``sim.cmd_deadband_a`` are not applied.
 4. **Policy** (:class:`mission_sim.contract.Policy`): observation built exactly per the contract
@@ -18,7 +18,7 @@ Loop (one drone, one receiver):
    output ``d_short``; the SBAR applies ``V2 = (4/pi) VL (1 - sin(pi d / 2))`` (eq. 9) with VL the
    battery terminal voltage.
 5. **Link** (paper eq. 4): exact ZOH steps with exact energy integrals
-   (:class:`~mission_sim.linkstep.LinkStepper`).
+   (:class:`~mission_sim.world.linkstep.LinkStepper`).
 6. **Battery node**: rectifier current ``I_L = V2 I2 / (2 VL)``, battery current ``I_L - P_prop / VL``.
    The battery sees the step-mean current (the SBAR's smoothing capacitor), and VL of a step is
    solved *implicitly* (a quadratic) so that the link's V2, the battery's mean terminal voltage
@@ -51,7 +51,7 @@ import numpy as np
 from wpt_receiver.sbar import rectifier_v2
 
 from .battery import Battery, CcCvCharger, _ocv_cell_scalar, scalar_stepper
-from .contract import normalise_obs
+from ..contract import normalise_obs
 from .linkstep import LinkStepper
 from .power import hover_power_w
 from .results import MissionResult
@@ -88,7 +88,7 @@ def _lm_along(cfg, model, traj: Trajectory):
 
 def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bool = True,
                 progress: bool = False) -> MissionResult:
-    """Run one mission; returns a :class:`~mission_sim.results.MissionResult`.
+    """Run one mission; returns a :class:`~mission_sim.world.results.MissionResult`.
 
     ``policy`` is a :class:`mission_sim.contract.Policy` made for ``control_period_s =
     cfg.sim.control_period_s`` and ``rated_i2_a = cfg.link.rated_i2_a``. ``charge=False`` runs the

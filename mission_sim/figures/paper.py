@@ -1,4 +1,4 @@
-"""Figures (matplotlib, Agg backend; nothing is shown on screen)."""
+"""Paper Fig. 6 (V2* references and I2 envelopes of the three trajectories)."""
 
 from __future__ import annotations
 
@@ -6,16 +6,10 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
 
-__all__ = ["plot_paper_fig6", "save_figure"]
+from .common import save_figure  # noqa: E402
 
-
-def save_figure(fig, path, dpi: int = 110) -> str:
-    """Write ``fig`` as PNG to ``path``, close it, return the path as a string."""
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
-    return str(path)
+__all__ = ["plot_paper_fig6"]
 
 
 def plot_paper_fig6(runs, path, t_switch_s: float, title: str = "") -> str:

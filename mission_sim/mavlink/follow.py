@@ -2,7 +2,7 @@
 
 A vehicle (e.g. an autopilot in software-in-the-loop) sends GLOBAL_POSITION_INT to a UDP port;
 :func:`follow` turns its positions into the pad frame, runs the mission world on them chunk by
-chunk and streams the simulated telemetry (:mod:`mission_sim.telemetry`) about one chunk behind.
+chunk and streams the simulated telemetry (:mod:`mission_sim.mavlink.telemetry`) about one chunk behind.
 Every loop is bounded in message count and wall time.
 """
 
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geodesy import GeoPoint, geodetic_to_enu
-from .mavlink_io import mavutil
+from .logs import mavutil
 from .telemetry import TlogWriter, check_connect, mavlink_table, send_tick
 
 __all__ = ["FollowStats", "open_follow", "follow"]
@@ -37,7 +37,7 @@ class FollowStats:
 
 def _chunk_config(cfg, soc):
     """``cfg`` with the battery starting at ``soc`` (the previous chunk's final state of charge)."""
-    from .config import apply_overrides, config_from_dict, config_to_dict
+    from ..config import apply_overrides, config_from_dict, config_to_dict
     return config_from_dict(apply_overrides(config_to_dict(cfg), {"battery.initial_soc": float(soc)}))
 
 
@@ -64,7 +64,7 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
     connection from :func:`open_follow` opened earlier (bind before slow set-up work, or the
     vehicle's first messages are lost).
     """
-    from .trajectory import Trajectory
+    from ..world.trajectory import Trajectory
 
     mu = mavutil()
     vin = in_conn if in_conn is not None else open_follow(follow_connect)

@@ -8,7 +8,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .figures import save_figure  # noqa: E402
+from .common import save_figure  # noqa: E402
 
 __all__ = ["plot_replay", "plot_power_comparison"]
 

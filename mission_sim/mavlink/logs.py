@@ -58,7 +58,7 @@ def mavutil():
     from pymavlink import mavutil as mu
     if mu.mavlink.WIRE_PROTOCOL_VERSION != "2.0":
         raise RuntimeError("pymavlink.mavutil was imported before MAVLINK20=1 was set; MAVLink 2 "
-                           "messages cannot be encoded. Import mission_sim.mavlink_io first.")
+                           "messages cannot be encoded. Import mission_sim.mavlink.logs first.")
     return mu
 
 

@@ -8,7 +8,7 @@ one acceleration limit). A planned mission is
 ``takeoff -> (transit -> approach -> charge -> depart) per pad -> transit -> land``
 
 sampled on a uniform grid. On top of the nominal path the seeded wind model
-(:mod:`mission_sim.wind`) adds the position-hold error and sets the tilt, so Lm(t) fluctuates
+(:mod:`mission_sim.world.wind`) adds the position-hold error and sets the tilt, so Lm(t) fluctuates
 while the drone hovers over a pad.
 """
 

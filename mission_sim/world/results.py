@@ -1,4 +1,4 @@
-"""Mission results: the time series, the summary, and writing them (Parquet, CSV, JSON, PNG)."""
+"""Mission results: the time series, the summary, and writing them (Parquet, CSV, JSON)."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ TIMESERIES_COLUMNS = ("t_s", "x_m", "y_m", "z_m", "lm_h", "tx_on", "i1_amp_a", "
 
 @dataclass
 class MissionResult:
-    """Result of :func:`mission_sim.runner.run_mission`.
+    """Result of :func:`mission_sim.world.runner.run_mission`.
 
     timeseries : one row per simulation step (fine and coarse; ``dt_s`` is the step length, values
         are at the step's end, currents ``rect_current_a``/``battery_current_a`` and powers are step means)
@@ -32,8 +32,9 @@ class MissionResult:
     trajectory: object = None
     extra: dict = field(default_factory=dict)
 
-    def write(self, out_dir, figures: bool = True) -> list[Path]:
-        """Write ``timeseries.parquet``, ``timeseries.csv``, ``summary.json`` and the PNG figures."""
+    def write(self, out_dir) -> list[Path]:
+        """Write ``timeseries.parquet``, ``timeseries.csv`` and ``summary.json`` (figures:
+        :func:`mission_sim.figures.mission.plot_mission`)."""
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         paths = []
@@ -48,7 +49,4 @@ class MissionResult:
         p = out / "summary.json"
         p.write_text(json.dumps(self.summary, indent=2))
         paths.append(p)
-        if figures:
-            from .mission_figures import plot_mission
-            paths.extend(Path(f) for f in plot_mission(self, out))
         return paths

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .validation import check_positive
+from ..validation import check_positive
 
 __all__ = ["DroneParams", "propulsion_power_w", "hover_power_w", "G_M_S2"]
 

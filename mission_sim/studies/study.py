@@ -8,7 +8,7 @@ keys of :func:`mission_sim.config.apply_overrides` (``"pads.1.hover_time_s"``, `
     [study]
     name = "small"            # optional (default: the file's stem)
     base = "mission.toml"     # optional, relative to this file; omitted = the built-in default mission
-    # runner = "pkg.mod:factory"   # optional; default: the mission runner (see mission_sim.sweep)
+    # runner = "pkg.mod:factory"   # optional; default: the mission runner (see mission_sim.studies.sweep)
 
     [fixed]                   # applied to every case
     "pads.0.hover_time_s" = 30.0

@@ -2,7 +2,7 @@
 
 Pipeline (each step a small function):
 
-1. :func:`mission_sim.mavlink_io.read_log` -- position (GPS fix >= 3), attitude, armed state and
+1. :func:`mission_sim.mavlink.logs.read_log` -- position (GPS fix >= 3), attitude, armed state and
    battery tables on the log's own timeline.
 2. :func:`track_from_log` -- local ENU metres about the pad (default pad: the first armed
    position, :func:`default_pad`), tilt from roll and pitch, time from 0 at the first fix.
@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 
 from .geodesy import GeoPoint, geodetic_to_enu
-from .mavlink_io import FlightLog, read_log
+from .logs import FlightLog, read_log
 
 __all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "flight_stats",
            "logged_energy_j", "compare_power", "fit_mass_kg", "resample_track", "replay_trajectory", "ReplayResult", "replay_log", "parse_window"]
@@ -259,7 +259,7 @@ def _mask_time(t, mask) -> float:
 def fit_mass_kg(traj, drone, target_energy_j: float, t_s, mask, runner_energy_j: float | None = None) -> float:
     """Drone mass [kg] that makes the model's propulsion energy over ``mask`` equal ``target_energy_j``.
 
-    ``traj`` is the replayed :class:`~mission_sim.trajectory.Trajectory`; ``t_s``, ``mask`` the
+    ``traj`` is the replayed :class:`~mission_sim.world.trajectory.Trajectory`; ``t_s``, ``mask`` the
     comparison samples (trajectory time). Bisection on [0.05, 50] kg (energy rises with mass);
     nan if the target is outside that range. ``runner_energy_j``: the runner's modelled energy
     over the same samples at ``drone.mass_kg``; the target is scaled by the ratio of the
@@ -292,9 +292,9 @@ def fit_mass_kg(traj, drone, target_energy_j: float, t_s, mask, runner_energy_j:
 
 
 def replay_trajectory(track: FlightTrack):
-    """A :class:`~mission_sim.trajectory.Trajectory` of the track whose propulsion power is the
+    """A :class:`~mission_sim.world.trajectory.Trajectory` of the track whose propulsion power is the
     avionics alone while disarmed ("ground": the motors are off), momentum theory otherwise."""
-    from .trajectory import Trajectory
+    from ..world.trajectory import Trajectory
 
     class ReplayTrajectory(Trajectory):
         def propulsion_w(self, drone):
@@ -311,7 +311,7 @@ class ReplayResult:
 
     log: FlightLog
     track: FlightTrack
-    mission: object                 # mission_sim.results.MissionResult
+    mission: object                 # mission_sim.world.results.MissionResult
     summary: dict
     power_table: pd.DataFrame | None = None
     files: list[str] = field(default_factory=list)
@@ -326,7 +326,7 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
     the receiver coil sits at its nominal height above the pad coil.
     Raises :class:`NoPositionError` (a ``ValueError``) if the log has no usable position.
     """
-    from .runner import run_mission
+    from ..world.runner import run_mission
 
     if not isinstance(log, FlightLog):
         log = read_log(log)

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .params import LinkParams
+from ..params import LinkParams
 
 __all__ = ["SwitchingConfig", "Circuit", "P_OPEN", "S_SHORT", "S_OPEN", "I1", "VC1", "I2", "VC2"]
 

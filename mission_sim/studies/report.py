@@ -10,7 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .figures import save_figure  # noqa: E402
+from ..figures.common import save_figure  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from .study import POLICY_KEY, Study  # noqa: E402

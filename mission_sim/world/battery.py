@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .validation import check_positive
+from ..validation import check_positive
 
 __all__ = ["BatteryParams", "ocv_cell_v", "ocv_cell_energy_v", "held_current_step", "scalar_stepper", "Battery", "StepEnergies", "CcCvParams",
            "CcCvCharger"]

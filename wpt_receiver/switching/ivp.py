@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .params import LinkParams
-from .switching_circuit import I1, I2, P_OPEN, S_OPEN, S_SHORT, Circuit, SwitchingConfig
-from .switching_schedule import Schedule
+from ..params import LinkParams
+from .circuit import I1, I2, P_OPEN, S_OPEN, S_SHORT, Circuit, SwitchingConfig
+from .schedule import Schedule
 
 __all__ = ["simulate_ivp"]
 
@@ -21,7 +21,7 @@ def simulate_ivp(params: LinkParams, cfg: SwitchingConfig, schedule: Schedule, x
     (``r_bat_ohm * c_out_f < T / 10``): an explicit method then loses accuracy on the fast mode."""
     from scipy.integrate import solve_ivp
 
-    from .switching import SwitchingLink  # mode decisions (diode / freewheel rules) are shared
+    from .link import SwitchingLink  # mode decisions (diode / freewheel rules) are shared
     cir = Circuit(params, cfg)
     if method is None:
         stiff = cir.has_cap and cfg.r_bat_ohm * cfg.c_out_f < cir.T / 10

@@ -1,6 +1,6 @@
 """Raw-waveform figure of the switching-level model (matplotlib, Agg; like the paper's Figs. 8-11).
 
-Kept apart from :mod:`.switching` so the simulator does not import matplotlib.
+Kept apart from :mod:`wpt_receiver.switching` so the simulator never imports matplotlib.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ def plot_switching_waveforms(runs, out_dir, t_switch_s: float | None = None, shi
 
     ``runs`` are :class:`wpt_receiver.paper.PaperRun` from the switching model. Returns the path.
     """
-    from .metrics import transition_metrics
-    from .switching import switching_plant
+    from wpt_receiver.metrics import transition_metrics
+    from wpt_receiver.switching import switching_plant
 
     runs = list(runs)
     if t_switch_s is None:

@@ -1,7 +1,7 @@
 """Parameter sweeps: run many cases on Dask (or serially) into a resumable Parquet store.
 
 The engine knows nothing about missions: it runs a *case runner* ``run_case(params: dict) -> dict``
-(flat metrics) on every :class:`~mission_sim.study.Case` and stores one row per case. The mission
+(flat metrics) on every :class:`~mission_sim.studies.study.Case` and stores one row per case. The mission
 runner is :class:`MissionCaseRunner`; tests and other studies can pass any picklable callable.
 
 Store (``OUT/cases/``)
@@ -389,20 +389,20 @@ class MissionCaseRunner:
         self.make_policy = make_policy
 
     def config(self, params: dict):
-        from .config import apply_overrides, config_from_dict
+        from ..config import apply_overrides, config_from_dict
 
         overrides = {k: v for k, v in params.items() if k != POLICY_KEY}
         return config_from_dict(apply_overrides(self.base, overrides))
 
     def validate_keys(self, keys: Iterable[str], example: dict) -> None:
         """Unknown keys raise ``ValueError`` naming the key (apply_overrides' validation)."""
-        from .config import apply_overrides
+        from ..config import apply_overrides
 
         apply_overrides(self.base, {k: example[k] for k in keys if k != POLICY_KEY})
 
     def __call__(self, params: dict) -> dict:
-        from .config import policy_context
-        from .runner import run_mission
+        from ..config import policy_context
+        from ..world.runner import run_mission
 
         cfg = self.config(params)
         policy = self.make_policy(params.get(POLICY_KEY, "model_based"), policy_context(cfg))
@@ -434,7 +434,7 @@ def prepare_study(study: Study, make_policy: Callable | None = None, policy_name
         base_text = study.base_path.read_text() if study.base_path else ""
         fingerprint = hashlib.sha256(f"{study.runner}\n{base_text}".encode()).hexdigest()[:16]
     else:
-        from .config import config_to_dict, load_config
+        from ..config import config_to_dict, load_config
 
         if make_policy is None:
             raise ValueError("the mission runner needs a policy factory (make_policy=policies.make)")

@@ -38,7 +38,7 @@ import numpy as np
 import pandas as pd
 
 from .geodesy import GeoPoint, enu_to_geodetic
-from .mavlink_io import mavutil
+from .logs import mavutil
 
 __all__ = ["DEFAULT_HOME", "TlogWriter", "mavlink_table", "encode_tick", "stream", "StreamStats",
            "check_connect", "CONNECT_FORMAT"]

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from .switching_circuit import I1, I2, VC1, VC2, Circuit
-from .switching_schedule import Schedule
+from .circuit import I1, I2, VC1, VC2, Circuit
+from .schedule import Schedule
 
 __all__ = ["SwitchingResult", "fundamental"]
 

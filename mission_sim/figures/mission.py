@@ -9,7 +9,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .figures import save_figure  # noqa: E402
+from .common import save_figure  # noqa: E402
 
 __all__ = ["plot_lm_map", "plot_mission"]
 

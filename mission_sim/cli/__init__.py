@@ -1,0 +1,52 @@
+"""The ``dronewpt`` command line: parse, call, print. The one place that reaches every package;
+subcommands import what they need lazily, inside the function that runs them.
+
+============  ==================================================================
+``common``    :class:`CliError` (one line, exit 2) and the argument converters
+``paper``     ``paper``: Table II and Fig. 6
+``mission``   ``mission`` (the main job) and ``coupling``
+``mavlink``   ``replay`` (flight logs) and ``telemetry`` (live MAVLink, follow mode)
+``learning``  ``train`` and ``compare`` (envs and policies, imported lazily)
+``sweep``     ``sweep`` (parameter studies on Dask)
+============  ==================================================================
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from . import learning, mavlink, mission, paper, sweep
+from .common import CliError
+
+__all__ = ["main", "build_parser"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="dronewpt", description="Flight-mission energy simulator for drones "
+                                     "that charge wirelessly in flight (WPT link with an SBAR receiver).")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for add in (paper._add_paper, mission._add_coupling, mission._add_mission, mavlink._add_replay, mavlink._add_telemetry,
+                learning._add_train, learning._add_compare, sweep._add_sweep):
+        add(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except BrokenPipeError:  # output piped into head & co.: not an error of ours
+        import os
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+    except (CliError, ValueError, FileNotFoundError, OSError) as exc:
+        print(f"dronewpt {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"dronewpt {args.command}: interrupted", file=sys.stderr)
+        return 130

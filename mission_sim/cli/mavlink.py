@@ -1,0 +1,203 @@
+"""``dronewpt replay`` and ``dronewpt telemetry``: flight logs in, MAVLink telemetry out."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from .common import CliError, parse_set, positive_float, write_mission
+
+
+def _mav_common(p):
+    p.add_argument("--policy", default="model_based", help="receiver policy (default model_based)")
+    p.add_argument("--config", type=Path, default=None, help="mission TOML (default: the embedded mission)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a config value by dotted key, e.g. --set drone.mass_kg=1.5 (repeatable)")
+
+
+def _mav_speed(text):
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"speed={text!r} is not a number") from None
+    if not v > 0:  # also rejects nan
+        raise argparse.ArgumentTypeError(f"speed={text!r} is invalid; valid range: (0, inf] (inf = as fast as possible)")
+    return v
+
+
+def _mav_config(args, overrides=None, single_pad=False):
+    """Mission config from --config, --set and ``overrides``; ``single_pad``: one pad at the origin."""
+    from ..config import apply_overrides, config_from_dict, config_to_dict, load_config
+    d = config_to_dict(load_config(args.config))
+    if single_pad:
+        d["pads"] = [{"x_m": 0.0, "y_m": 0.0, "z_m": 0.0}]
+    return config_from_dict(apply_overrides(d, {**(overrides or {}), **parse_set(args.set)}))
+
+
+def _mav_policy(cfg, name):
+    """Policy ``name`` for the mission's link (see :func:`mission_sim.config.policy_context`)."""
+    from policies import make
+
+    from ..config import policy_context
+    return make(name, policy_context(cfg))
+
+
+def _mav_json_safe(obj):
+    """Plain JSON: numpy scalars to Python, nan / inf to null (not measurable, e.g. no battery data)."""
+    if isinstance(obj, dict):
+        return {k: _mav_json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_mav_json_safe(v) for v in obj]
+    if hasattr(obj, "item") and not isinstance(obj, (str, bytes)):
+        obj = obj.item()
+    if isinstance(obj, float) and obj != obj or obj in (float("inf"), float("-inf")):
+        return None
+    return obj
+
+
+def _add_replay(sub):
+    p = sub.add_parser("replay", help="replay a real flight log (.tlog / DataFlash .bin) through the simulator",
+                       description="Read a MAVLink telemetry log or an ArduPilot DataFlash log, build the flown "
+                                   "track (3D GPS fix only) about a pad, run the mission world along it (Lm(t), "
+                                   "SBAR, battery) and compare the logged electrical power with the propulsion "
+                                   "power model.")
+    p.add_argument("log", type=Path, help="flight log: .tlog or .bin")
+    p.add_argument("--pad", default=None, metavar="LAT,LON[,ALT]",
+                   help="pad position (degrees, degrees, m AMSL); default: the first armed position. "
+                        "Write --pad=-35.36,149.16 when the latitude is negative")
+    p.add_argument("--out", type=Path, default=Path("out/replay"), help="output folder (default out/replay)")
+    p.add_argument("--format", choices=("table", "json"), default="table")
+    p.add_argument("--window", default=None, metavar="T0,T1", help="replay only log seconds T0..T1")
+    p.add_argument("--ground-gap", type=float, default=None, metavar="M",
+                   help="receiver coil height above the pad coil when landed (default: the nominal hover gap)")
+    p.add_argument("--mass", type=positive_float("mass"), default=None, metavar="KG",
+                   help="drone mass for the propulsion model (same as --set drone.mass_kg=KG)")
+    p.add_argument("--no-plot", action="store_true", help="skip the figures")
+    p.add_argument("--progress", action="store_true", help="show a progress bar")
+    _mav_common(p)
+    p.set_defaults(func=_cmd_replay)
+
+
+def _cmd_replay(args) -> int:
+    from ..mavlink.geodesy import parse_geo_point
+    from ..mavlink.logs import read_log
+    from ..mavlink.replay import parse_window, replay_log, track_from_log
+    if not args.log.is_file():
+        raise CliError(f"log {str(args.log)!r} does not exist or is not a file")
+    pad = parse_geo_point(args.pad) if args.pad is not None else None
+    window = parse_window(args.window)
+    if args.ground_gap is not None and not (0 <= args.ground_gap <= 1.0):
+        raise CliError(f"--ground-gap {args.ground_gap!r} is invalid; valid range: [0, 1] m")
+    log = read_log(args.log)
+    track_from_log(log, pad=pad, window=window)  # no usable position: one-line error before any simulation
+    cfg = _mav_config(args, {"drone.mass_kg": args.mass} if args.mass else None, single_pad=True)
+    policy = _mav_policy(cfg, args.policy)
+    res = replay_log(log, cfg, policy, pad=pad, ground_gap_m=args.ground_gap, window=window,
+                     progress=args.progress)
+    s = res.summary
+    s["log"] = str(args.log)
+    s["policy"] = args.policy
+    s["drone_mass_kg"] = cfg.drone.mass_kg
+    args.out.mkdir(parents=True, exist_ok=True)
+    files = write_mission(res.mission, args.out / "mission", plots=not args.no_plot)
+    if res.power_table is not None:
+        res.power_table.to_csv(args.out / "power_comparison.csv", index=False)
+        files.append(str(args.out / "power_comparison.csv"))
+    if not args.no_plot:
+        from ..figures import replay as replay_figures
+        title = f"{args.log.name}: replay, policy {args.policy}"
+        files.append(replay_figures.plot_replay(res, args.out / "replay.png", title))
+        if res.power_table is not None and len(res.power_table):
+            files.append(replay_figures.plot_power_comparison(res, args.out / "power.png", title))
+    s["files"] = files
+    s = _mav_json_safe(s)
+    (args.out / "replay_summary.json").write_text(json.dumps(s, indent=2, allow_nan=False))
+    if args.format == "json":
+        print(json.dumps(s, allow_nan=False))
+        return 0
+    print(f"{args.log.name}: {s['duration_s']:.1f} s logged, {s['n_position_samples']} positions "
+          f"({s['bad_frames']} bad frames skipped), {s['distance_m']:.0f} m flown, max {s['max_alt_m']:.1f} m "
+          f"above the pad, armed {s['armed_time_s']:.1f} s in {len(s['armed_periods_s'])} period(s)")
+    print(f"mission world: {s['energy_to_battery_j']:.0f} J to the battery, propulsion {s['propulsion_energy_j']:.0f} J "
+          f"(model, {cfg.drone.mass_kg:g} kg drone), final SoC {s['final_soc']:.3f}")
+    c = s.get("power_comparison")
+    if c and "logged_mean_w" in c:
+        def f(key, spec, scale=1.0):
+            return "n/a" if c.get(key) is None else format(scale * c[key], spec)
+        print(f"power while airborne, {f('airborne_time_s', '.0f')} s ({c['battery_source']}): logged "
+              f"{f('logged_mean_w', '.0f')} W, model {f('model_mean_w', '.0f')} W, RMS error {f('rms_error_w', '.0f')} W, "
+              f"energy error {f('energy_error_rel', '+.1f', 100)} %, correlation {f('correlation', '.2f')}; "
+              f"best-fit scale {f('best_fit_scale', '.2f')} leaves {f('rms_error_after_scale_w', '.0f')} W RMS; "
+              f"the model matches the logged energy at a drone mass of {f('equivalent_mass_kg', '.2f')} kg")
+    elif c:
+        print(f"no airborne battery samples to compare ({c['battery_source']})")
+    elif not s.get("battery_source"):
+        print("the log has no battery data (no SYS_STATUS / BATTERY_STATUS / CURR / BAT values)")
+    for f in files:
+        print(f"wrote {f}")
+    return 0
+
+
+def _add_telemetry(sub):
+    p = sub.add_parser("telemetry", help="run a mission and stream it as live MAVLink 2 telemetry",
+                       description="Run a mission and send HEARTBEAT, SYS_STATUS, BATTERY_STATUS (charge state), "
+                                   "GLOBAL_POSITION_INT, GPS_RAW_INT and NAMED_VALUE_FLOAT (I2, d_short, Lm [uH]) "
+                                   "so a ground station shows the drone charging.")
+    p.add_argument("--connect", default="udpout:127.0.0.1:14550",
+                   help="where to send (default udpout:127.0.0.1:14550; 'none' = only --tlog)")
+    p.add_argument("--rate", type=positive_float("rate"), default=10.0, help="telemetry rate in Hz (default 10)")
+    p.add_argument("--speed", type=_mav_speed, default=1.0,
+                   help="simulated seconds per wall second (default 1 = real time; inf = as fast as possible)")
+    p.add_argument("--tlog", type=Path, default=None, help="also write the telemetry to this .tlog")
+    p.add_argument("--home", default=None, metavar="LAT,LON,ALT",
+                   help="where the first pad is (default ArduPilot SITL home, CMAC: --home=-35.363261,149.165230,584)")
+    p.add_argument("--duration", type=positive_float("duration"), default=None, metavar="S",
+                   help="stream at most S simulated seconds (default: the whole mission)")
+    p.add_argument("--follow", default=None, metavar="udpin:HOST:PORT",
+                   help="drive the simulation from a live vehicle's GLOBAL_POSITION_INT instead of the plan")
+    p.add_argument("--follow-time", type=positive_float("follow-time"), default=60.0, metavar="S",
+                   help="with --follow: stop after S wall seconds (default 60)")
+    p.add_argument("--follow-idle", type=positive_float("follow-idle"), default=10.0, metavar="S",
+                   help="with --follow: stop after S seconds without a position (default 10)")
+    p.add_argument("--progress", action="store_true", help="show a progress bar")
+    _mav_common(p)
+    p.set_defaults(func=_cmd_telemetry)
+
+
+def _cmd_telemetry(args) -> int:
+    from ..mavlink import telemetry
+    from ..mavlink.geodesy import parse_geo_point
+    connect = None if str(args.connect).lower() == "none" else telemetry.check_connect(args.connect)
+    if connect is None and args.tlog is None:
+        raise CliError("--connect none needs --tlog FILE (nothing to send to)")
+    home = parse_geo_point(args.home, "--home") if args.home else telemetry.DEFAULT_HOME
+    if home.alt_m is None:
+        raise CliError(f"--home {args.home!r} needs an altitude; valid format: LAT,LON,ALT")
+    if args.follow is not None:
+        return _cmd_telemetry_follow(args, connect, home)
+    cfg = _mav_config(args)
+    from ..world.runner import run_mission
+    from ..world.trajectory import plan_mission
+    traj = plan_mission(cfg)
+    res = run_mission(cfg, _mav_policy(cfg, args.policy), trajectory=traj, progress=args.progress)
+    st = telemetry.stream(res.timeseries, connect=connect, rate_hz=args.rate, speed=args.speed, home=home,
+                          tlog=args.tlog, duration_s=args.duration, ground_gap_m=cfg.mission.hover_gap_m,
+                          track=(traj.t_s, traj.pos_m), progress=args.progress)
+    print(f"sent {st.frames} MAVLink 2 frames in {st.ticks} ticks at {args.rate:g} Hz: {st.sim_s:.1f} s of the "
+          f"mission in {st.wall_s:.1f} s wall to {connect or 'no link'}"
+          + (f"; wrote {args.tlog}" if args.tlog else ""))
+    return 0
+
+
+def _cmd_telemetry_follow(args, connect, home) -> int:
+    from ..mavlink import follow
+    vin = follow.open_follow(args.follow)  # listen first: the set-up below takes a while
+    cfg = _mav_config(args)
+    from ..world.runner import run_mission
+    st = follow.follow(args.follow, cfg, _mav_policy(cfg, args.policy), run_mission, connect=connect,
+                          rate_hz=args.rate, home=home if args.home else None, tlog=args.tlog,
+                          max_wall_s=args.follow_time, idle_timeout_s=args.follow_idle, in_conn=vin)
+    print(f"followed {st.positions} live positions over {st.wall_s:.1f} s in {st.chunks} chunk(s); sent "
+          f"{st.frames} frames to {connect or 'no link'}" + (f"; wrote {args.tlog}" if args.tlog else ""))
+    return 0

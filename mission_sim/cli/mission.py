@@ -1,0 +1,131 @@
+"""``dronewpt mission`` (the main job) and ``dronewpt coupling`` (Lm at a pose)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from .common import CliError, finite_float, parse_set, write_mission
+
+
+def _add_coupling(sub):
+    p = sub.add_parser("coupling", help="inductances of the default pad/drone coils at a pose",
+                       description="L1, L2 and Lm(dx, dy, dz, tilt) of the default coils by Neumann integrals "
+                                   "(pad frame, z up; dz = height of the drone coil above the pad coil).")
+    p.add_argument("--dx", type=finite_float("dx"), default=0.0, help="lateral offset x [m] (default 0)")
+    p.add_argument("--dy", type=finite_float("dy"), default=0.0, help="lateral offset y [m] (default 0)")
+    p.add_argument("--dz", type=finite_float("dz"), default=None, help="height above the pad coil [m] "
+                   "(default: the nominal hover gap)")
+    p.add_argument("--tilt-deg", type=finite_float("tilt-deg"), default=0.0,
+                   help="tilt of the drone coil about the y axis [deg] (default 0)")
+    p.add_argument("--exact", action="store_true", help="direct Neumann integral instead of the lookup table")
+    p.add_argument("--format", choices=("table", "json"), default="table")
+    p.add_argument("--map", type=Path, default=None, metavar="PNG",
+                   help="also write a PNG map of Lm over dx, dy at this dz and tilt")
+    p.set_defaults(func=_cmd_coupling)
+
+
+def _cmd_coupling(args) -> int:
+    import math
+
+    from wpt_receiver.coupling import NOMINAL_GAP_M, default_coupling
+    m = default_coupling()
+    dz = NOMINAL_GAP_M if args.dz is None else args.dz
+    min_dz = m.tx.wire_radius_m + m.rx.wire_radius_m + max(m.rx.radius_m) * abs(math.sin(math.radians(args.tilt_deg)))
+    if dz <= min_dz:
+        raise CliError(f"--dz {dz!r} is invalid; valid range: > {min_dz:.4g} m (the coils would touch)")
+    if abs(args.tilt_deg) >= 90:
+        raise CliError(f"--tilt-deg {args.tilt_deg!r} is invalid; valid range: (-90, 90)")
+    tilt = math.radians(args.tilt_deg)
+    lm = float((m.lm_exact_h if args.exact else m.lm_h)(args.dx, args.dy, dz, tilt))
+    tx, rx = m.turn_positions(args.dx, args.dy, dz, tilt)
+    out = {"dx_m": args.dx, "dy_m": args.dy, "dz_m": dz, "tilt_rad": tilt, "lm_h": lm, "l1_h": m.l1_h,
+           "l2_h": m.l2_h, "k": float(m.k(lm)), "tx_turns": tx, "rx_turns": rx}
+    if args.map is not None:
+        from ..figures import mission as mission_figures
+        args.map.parent.mkdir(parents=True, exist_ok=True)
+        out["map_png"] = mission_figures.plot_lm_map(m, dz, tilt, args.map)
+    if args.format == "json":
+        print(json.dumps(out))
+        return 0
+    print(f"pose: dx={args.dx:g} m dy={args.dy:g} m dz={dz:.4f} m tilt={args.tilt_deg:g} deg")
+    print(f"L1 = {m.l1_h * 1e6:.3f} uH ({m.tx.n_turns} turns), L2 = {m.l2_h * 1e6:.3f} uH ({m.rx.n_turns} turns)")
+    print(f"Lm = {lm * 1e6:.4f} uH, k = {out['k']:.4f}")
+    if "map_png" in out:
+        print(f"figure: {out['map_png']}")
+    return 0
+
+
+def _add_mission(sub):
+    p = sub.add_parser("mission", help="run a flight mission with in-flight charging (the main job)",
+                       description="Simulate a drone mission over charging pads: coupling from the pose, the "
+                                   "WPT link, the SBAR policy, battery and propulsion. Without CONFIG the embedded "
+                                   "default mission runs. Writes the time series (Parquet, CSV), summary.json and "
+                                   "PNG figures to --out.")
+    p.add_argument("config", nargs="?", type=Path, default=None, help="mission TOML (default: embedded default)")
+    p.add_argument("--policy", default="model_based", help="receiver policy (default model_based)")
+    p.add_argument("--out", type=Path, default=Path("out/mission"), help="output folder (default out/mission)")
+    p.add_argument("--format", choices=("table", "json"), default="table")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a config value by dotted key, e.g. --set wind.speed_m_s=6 (repeatable)")
+    p.add_argument("--no-charge", action="store_true", help="never energise the pads (baseline mission)")
+    p.add_argument("--no-plot", action="store_true", help="skip the figures")
+    p.set_defaults(func=_cmd_mission)
+
+
+def _cmd_mission(args) -> int:
+    import tomllib
+
+    from .. import config as mconfig
+    from ..world.runner import run_mission
+    try:
+        import policies
+    except ImportError as exc:  # pragma: no cover - policies ships with dronewpt
+        raise CliError(f"the policies package is not importable: {exc}") from None
+    if args.config is not None and not args.config.is_file():
+        raise CliError(f"config file {str(args.config)!r} does not exist")
+    text = mconfig.DEFAULT_MISSION_TOML if args.config is None else args.config.read_text("utf-8")
+    try:
+        d = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise CliError(f"{args.config or 'default mission'}: not valid TOML: {exc}") from None
+    if args.config is not None:
+        d = mconfig.layer_on_default(d)
+    overrides = parse_set(args.set)
+    cfg = mconfig.config_from_dict(mconfig.apply_overrides(d, overrides) if overrides else d)
+    if args.policy.partition(":")[0] not in policies.available():
+        raise CliError(f"--policy {args.policy!r} is invalid; valid values: "
+                       f"{', '.join(policies.available())} (or rl:PATH)")
+    pol = policies.make(args.policy, mconfig.policy_context(cfg))
+    progress = args.format != "json" and sys.stderr.isatty()
+    res = run_mission(cfg, pol, charge=not args.no_charge, progress=progress)
+    files = write_mission(res, args.out, plots=not args.no_plot)
+    s = res.summary
+    if args.format == "json":
+        print(json.dumps({**s, "files": files}))
+        return 0
+    rows = [
+        ("policy", s["policy"], ""),
+        ("simulated time", f"{s['sim_time_s']:.1f}", "s"),
+        ("wall time", f"{s['wall_s']:.3f}", f"s ({s['realtime_factor']:.0f}x real time)"),
+        ("energy from the pads", f"{s['energy_from_source_j']:.1f}", "J"),
+        ("energy to the battery node", f"{s['energy_to_battery_j']:.1f}", "J"),
+        ("losses (coils + battery)", f"{s['losses_j']:.1f}", f"J ({s['coil_losses_j']:.1f} + {s['battery_losses_j']:.1f})"),
+        ("propulsion energy", f"{s['propulsion_energy_j']:.1f}", "J"),
+        ("energy balance error", f"{s['energy_balance_error_rel']:.2e}", "relative"),
+        ("SoC start -> end", f"{s['initial_soc']:.4f} -> {s['final_soc']:.4f}",
+         f"(without charging {s['final_soc_without_charging']:.4f}; full: {s['battery_full']})"),
+        ("peak I2", f"{s['peak_i2_a']:.2f}", f"A (rated {s['rated_i2_a']:g} A)"),
+        ("time above rated", f"{s['time_above_rated_s'] * 1e3:.2f}", "ms"),
+        ("pad on", f"{s['charge_time_s']:.1f}", "s"),
+        ("flight time gain", f"{s['flight_time_gain_s']:.1f}", "s of hover"),
+        ("steps fine / coarse", f"{s['fine_steps']} / {s['coarse_steps']}", f"({s['fine_windows']} fine windows)"),
+    ]
+    if s.get("battery_depleted"):
+        rows.append(("WARNING", "battery depleted", f"(min SoC {s['min_soc']:.3f}; OCV held at its SoC = 0 value)"))
+    w = max(len(r[0]) for r in rows)
+    for name, val, unit in rows:
+        print(f"{name:<{w}}  {val:>24}  {unit}")
+    for f in files:
+        print(f"wrote: {f}")

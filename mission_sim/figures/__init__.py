@@ -1,0 +1,11 @@
+"""Figures (matplotlib, Agg backend; nothing is shown on screen). Only the CLI imports these;
+no physics, world or study module does.
+
+=============  ==============================================================
+``common``     the Agg backend and :func:`save_figure`
+``paper``      Fig. 6: V2* references and I2 envelopes (``dronewpt paper``)
+``switching``  raw switching-level waveforms (``dronewpt paper --model switching``)
+``mission``    trajectory, Lm(t), I2 envelope, SoC, power; the Lm(x, y) map
+``replay``     logged against modelled power of a replayed flight log
+=============  ==============================================================
+"""

@@ -1,0 +1,10 @@
+"""MAVLink: flight logs in, telemetry out (pymavlink).
+
+=============  ==============================================================================
+``logs``       read .tlog and DataFlash .bin logs into pandas tables (never raises on content)
+``geodesy``    geodetic <-> local ENU about a pad, the ``--pad`` text format
+``replay``     a real flight log through the mission world: track about a pad, logged vs model
+``telemetry``  live MAVLink 2 telemetry of a simulated mission, .tlog writer
+``follow``     drive the mission world from a live vehicle's positions (``--follow``)
+=============  ==============================================================================
+"""
