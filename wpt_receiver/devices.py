@@ -153,3 +153,13 @@ def preset(name: str) -> DeviceSet:
     if row is None:
         raise ValueError(f"device preset {name!r} is unknown; valid: {', '.join(preset_names())}")
     return device_set(row["rect_diode"], row["rect_switch"], row["inv_switch"], name)
+
+
+def envelope_params(params, devices: DeviceSet):
+    """Link parameters for the envelope model with the devices' constant resistances folded in:
+    ``R1 + 2 Ron`` (driven inverter channels) and ``R2 + Rd`` (rectifying path). The forward
+    drops and the short-window resistance enter through
+    :func:`wpt_receiver.sbar.rectifier_v2_folded` (V2 without the folded ``Rd I2``)."""
+    if devices.is_ideal:
+        return params
+    return params.with_(r1_ohm=params.r1_ohm + devices.inv_r_ohm, r2_ohm=params.r2_ohm + devices.rect_rd_ohm)
