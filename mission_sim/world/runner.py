@@ -1,28 +1,35 @@
 """The mission runner: trajectory -> Lm -> link -> policy -> battery, closed loop, multi-rate.
 
-Loop (one drone, one receiver):
+:func:`run_mission` plans the trajectory, computes Lm along it (:func:`_lm_along`) and runs the
+loop, :class:`~mission_sim.world.loop.MissionLoop` (state as documented fields, one method per
+step), twice: charged and uncharged (for :func:`flight_time_gain_s`).
+
+Loop (one drone, one receiver; the method doing each step in brackets):
 
 1. **Trajectory samples** (``sim.traj_dt_s``): pose -> Lm(pose) of the nearest pad (lookup table,
-   held over the sample), propulsion power (momentum theory, held over the sample), phase.
+   held over the sample), propulsion power (momentum theory, held over the sample), phase
+   [``_lm_along`` for all samples at once; ``MissionLoop.run`` -> ``MissionLoop.sample`` per sample].
 2. **Pad gating** (transmitter side): the pad energises only in a "charge"/"hover" phase (the
    drone asks for power) and while ``k >= tx_min_k + tx_k_hysteresis``; it switches off as soon
    as ``k < tx_min_k`` (the steady secondary current ~ V1/(w Lm) would exceed the rating) or the
    phase ends. On and off are linear V1 ramps over ``link.tx_ramp_s`` (soft start), always
    simulated in fine steps. Before a planned switch-off the charge command drops to 0 first and
-   the pad stays on ``sim.tx_off_delay_s`` so the receiver reaches short mode under power.
+   the pad stays on ``sim.tx_off_delay_s`` so the receiver reaches short mode under power
+   [``MissionLoop.gate_pad``; per fine step inside ``MissionLoop.fine_tick``].
 3. **Battery management** (:class:`~mission_sim.world.battery.CcCvCharger`) sets the charge command
    ``I_L*`` every ``sim.bms_period_s`` (propulsion current + CC/CV battery current, 0 when full);
-   changes below ``sim.cmd_deadband_a`` are not applied.
+   changes below ``sim.cmd_deadband_a`` are not applied [``MissionLoop.bms_command``].
 4. **Policy** (:class:`mission_sim.contract.Policy`): observation built exactly per the contract
    (``normalise_obs`` of i2, battery V and current, rectifier current, SoC, command, last duty),
    output ``d_short``; the SBAR applies ``V2 = (4/pi) VL (1 - sin(pi d / 2))`` (eq. 9) with VL the
-   battery terminal voltage.
+   battery terminal voltage [``MissionLoop.act``].
 5. **Link** (paper eq. 4): exact ZOH steps with exact energy integrals
-   (:class:`~mission_sim.world.linkstep.LinkStepper`).
+   (:class:`~mission_sim.world.linkstep.LinkStepper`) [``MissionLoop.step``, with the battery node;
+   ``MissionLoop.fine_step`` splits a fine step where I2 changes sign].
 6. **Battery node**: rectifier current ``I_L = V2 I2 / (2 VL)``, battery current ``I_L - P_prop / VL``.
    The battery sees the step-mean current (the SBAR's smoothing capacitor), and VL of a step is
    solved *implicitly* (a quadratic) so that the link's V2, the battery's mean terminal voltage
-   and the propulsion power agree exactly; every energy then closes to rounding.
+   and the propulsion power agree exactly; every energy then closes to rounding [``MissionLoop.step``].
 
 **Multi-rate.** *Fine* steps of ``sim.control_period_s`` (the policy's ``control_period_s``: it is
 called once per step) run around every event: pad ramps, command changes, a duty change returned
@@ -35,6 +42,9 @@ for any length) with the policy called at most every ``coarse_policy_period_s`` 
 in between; if that duty moves by more than ``duty_event_tol`` a fine window starts.
 With the pad off and nothing pending, samples are merged into steps of up to ``sim.flight_dt_s``
 and the policy is not called (the SBAR has nothing to do; its duty is held).
+[``MissionLoop.interval`` (fine steps ``fine_tick``, coarse steps, policy ``coarse_policy``),
+``open_window`` / ``window_done`` / ``settled``, ``quiet_flight``; ``MissionLoop.result`` assembles
+the time series and the summary.]
 
 Sensor noise: ``sim.i2_noise_a`` (default 0: none) adds seeded Gaussian noise to the i2
 observation only. Peak I2 and time above rated are taken on 4 points per fine step and on the
