@@ -1,7 +1,7 @@
-"""Where the real flight logs are (shared/flightlogs beside the repository), and pymavlink references.
+"""The real flight logs the tests use (tests/data/flightlogs, in the repository), and pymavlink references.
 
-Resolution order: <repo>/../shared/flightlogs (CI clones the repo with shared/ beside it), the
-DRONEWPT_FLIGHTLOGS environment variable, /work/shared/flightlogs.
+The logs are trimmed copies of public real logs, with their licences and attribution in
+tests/data/flightlogs/SOURCES.md; no test reads data from outside the repository.
 """
 
 from __future__ import annotations
@@ -13,18 +13,14 @@ import pytest
 
 LOG_NAMES = ("dronekit-python_flight.tlog", "dronekit-la-testdata_log171.bin",
              "uavlogviewer_vtol_sitl.tlog", "ardusub_log_tools_small_rov.tlog")
+ULOG_NAME = "pyulog_sample_log_small.ulg"
+DATA_DIR = Path(__file__).resolve().parent / "data" / "flightlogs"
 
 
 def flightlogs_dir() -> Path:
-    candidates = [Path(__file__).resolve().parents[1].parent / "shared" / "flightlogs"]
-    if os.environ.get("DRONEWPT_FLIGHTLOGS"):
-        candidates.append(Path(os.environ["DRONEWPT_FLIGHTLOGS"]))
-    candidates.append(Path("/work/shared/flightlogs"))
-    for c in candidates:
-        if (c / "SOURCES.md").is_file():
-            return c
-    pytest.fail("flight logs not found; looked in " + ", ".join(map(str, candidates))
-                + " (set DRONEWPT_FLIGHTLOGS)")
+    if not (DATA_DIR / "SOURCES.md").is_file():
+        pytest.fail(f"flight logs not found in the repository at {DATA_DIR}")
+    return DATA_DIR
 
 
 def log_path(name: str) -> Path:
