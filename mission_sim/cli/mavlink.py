@@ -116,9 +116,7 @@ def _cmd_replay(args) -> int:
     if args.format == "json":
         print(json.dumps(s, allow_nan=False))
         return 0
-    print(f"{args.log.name}: {s['duration_s']:.1f} s logged, {s['n_position_samples']} positions "
-          f"({s['bad_frames']} bad frames skipped), {s['distance_m']:.0f} m flown, max {s['max_alt_m']:.1f} m "
-          f"above the pad, armed {s['armed_time_s']:.1f} s in {len(s['armed_periods_s'])} period(s)")
+    _print_log_facts(args.log.name, s)
     print(f"mission world: {s['energy_to_battery_j']:.0f} J to the battery, propulsion {s['propulsion_energy_j']:.0f} J "
           f"(model, {cfg.drone.mass_kg:g} kg drone), final SoC {s['final_soc']:.3f}")
     c = s.get("power_comparison")
@@ -137,6 +135,22 @@ def _cmd_replay(args) -> int:
     for f in files:
         print(f"wrote {f}")
     return 0
+
+
+def _print_log_facts(name: str, s: dict) -> None:
+    """The replay's first lines: what the log holds, where the armed state came from, what was dropped."""
+    rejected = s.get("gps_rejected") or {}
+    n_rej = sum(rejected.values())
+    detail = f" ({', '.join(f'{k} {v}' for k, v in rejected.items() if v)})" if n_rej else ""
+    source = s.get("armed_source") or "no armed-state record and no motor output: never armed"
+    print(f"{name}: {s['duration_s']:.1f} s logged, {s['n_position_samples']} positions "
+          f"({s['bad_frames']} bad frames skipped, {n_rej} implausible GPS fixes rejected{detail}), "
+          f"{s['distance_m']:.0f} m flown, max {s['max_alt_m']:.1f} m above the pad")
+    print(f"armed {s['armed_time_s']:.1f} s in {len(s['armed_periods_s'])} period(s), from {source}"
+          + (" (armed from the start of the log: its first armed-state record is a disarm)"
+             if s.get("starts_armed") else ""))
+    for err in s.get("parse_errors") or []:
+        print(f"warning: the log could not be parsed to its end: {err}; replayed what was decoded before it")
 
 
 def _add_telemetry(sub):

@@ -23,6 +23,8 @@ import sys
 from pathlib import Path
 
 os.environ["MAVLINK20"] = "1"
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # tests/: the DataFlash record walker
+from _flightlogs import dataflash_records  # noqa: E402
 
 TLOG_KEEP = {"HEARTBEAT", "GLOBAL_POSITION_INT", "GPS_RAW_INT", "ATTITUDE", "SYS_STATUS", "BATTERY_STATUS",
              "SERVO_OUTPUT_RAW", "VFR_HUD", "STATUSTEXT", "BAD_DATA"}
@@ -42,23 +44,6 @@ def trim_tlog(src: Path, dst: Path, keep=TLOG_KEEP) -> int:
     out = [r for i, (typ, r) in enumerate(recs) if typ in keep or i in (0, len(recs) - 1)]
     dst.write_bytes(b"".join(out))
     return len(out)
-
-
-def dataflash_records(data: bytes):
-    """(offset, type name, length) of each record of a DataFlash log, from its FMT records.
-
-    Stops at the first byte that does not start a known record (a truncated tail)."""
-    lengths, names = {128: 89}, {128: "FMT"}
-    off = 0
-    while off + 3 <= len(data) and data[off:off + 2] == b"\xa3\x95":
-        typ = data[off + 2]
-        if typ not in lengths or off + lengths[typ] > len(data):
-            return
-        if typ == 128:
-            t, length, name = struct.unpack("<BB4s", data[off + 3:off + 9])
-            lengths[t], names[t] = length, name.rstrip(b"\0").decode("ascii", "replace")
-        yield off, names[typ], lengths[typ]
-        off += lengths[typ]
 
 
 def trim_dataflash(src: Path, dst: Path, keep=DF_KEEP) -> int:
