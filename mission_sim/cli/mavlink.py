@@ -57,12 +57,12 @@ def _mav_json_safe(obj):
 
 
 def _add_replay(sub):
-    p = sub.add_parser("replay", help="replay a real flight log (.tlog / DataFlash .bin) through the simulator",
-                       description="Read a MAVLink telemetry log or an ArduPilot DataFlash log, build the flown "
+    p = sub.add_parser("replay", help="replay a real flight log (.tlog / DataFlash .bin / PX4 .ulg) through the simulator",
+                       description="Read a MAVLink telemetry log, an ArduPilot DataFlash log or a PX4 ULog, build the flown "
                                    "track (3D GPS fix only) about a pad, run the mission world along it (Lm(t), "
                                    "SBAR, battery) and compare the logged electrical power with the propulsion "
                                    "power model.")
-    p.add_argument("log", type=Path, help="flight log: .tlog or .bin")
+    p.add_argument("log", type=Path, help="flight log: .tlog, .bin or .ulg")
     p.add_argument("--pad", default=None, metavar="LAT,LON[,ALT]",
                    help="pad position (degrees, degrees, m AMSL); default: the first armed position. "
                         "Write --pad=-35.36,149.16 when the latitude is negative")

@@ -29,21 +29,18 @@ import contextlib
 import io
 import math
 import os
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from .armed import armed_periods, infer_armed
+from .flightlog import (ARMED_COLUMNS, ATTITUDE_COLUMNS, BATTERY_COLUMNS, POSITION_COLUMNS, FlightLog,
+                        clean_time as _clean_time)
 from .gpsclean import reject_outliers
 
 __all__ = ["mavutil", "FlightLog", "read_log", "armed_periods", "POSITION_COLUMNS", "BATTERY_COLUMNS"]
 
-POSITION_COLUMNS = ("t_s", "lat_deg", "lon_deg", "alt_m")
-ATTITUDE_COLUMNS = ("t_s", "roll_rad", "pitch_rad")
-ARMED_COLUMNS = ("t_s", "armed")
-BATTERY_COLUMNS = ("t_s", "voltage_v", "current_a", "power_w")
 
 _MAV_AUTOPILOT_INVALID = 8          # ground stations and companions send heartbeats with this
 _MAV_MODE_FLAG_SAFETY_ARMED = 128
@@ -124,40 +121,6 @@ _CONVERT = {
 }
 
 
-# ----------------------------------------------------------------------------- result
-@dataclass
-class FlightLog:
-    """What :func:`read_log` found in one log (tables described in the module docstring)."""
-
-    path: Path
-    kind: str                      # "tlog" or "dataflash"
-    t0_epoch_s: float              # timestamp of the first record (Unix s); nan if none
-    duration_s: float              # last minus first record timestamp
-    position: pd.DataFrame
-    attitude: pd.DataFrame
-    armed: pd.DataFrame
-    battery: pd.DataFrame
-    battery_source: str | None     # SYS_STATUS, BATTERY_STATUS, CURR or BAT
-    bad_frames: int                # corrupt frames counted and skipped
-    n_records: int                 # records decoded (bad frames included)
-    mavlink_frames: dict[int, int] = field(default_factory=dict)  # protocol version -> frames (.tlog)
-    reboots: int = 0               # time_boot_ms drops seen in GLOBAL_POSITION_INT
-    fix_checked: bool = True       # False: the log had no GPS fix information at all
-    vehicle: dict = field(default_factory=dict)
-    errors: list[str] = field(default_factory=list)
-    armed_source: str | None = None  # the records the armed state comes from (see armed.py)
-    starts_armed: bool = False     # armed at the first record (first armed-state event a disarm)
-    gps_rejected: dict = field(default_factory=dict)  # implausible fixes rejected, by reason (gpsclean.py)
-
-    @property
-    def armed_periods(self) -> list[tuple[float, float]]:
-        return armed_periods(self.armed, self.duration_s, self.starts_armed)
-
-    @property
-    def armed_time_s(self) -> float:
-        return float(sum(b - a for a, b in self.armed_periods))
-
-
 # ----------------------------------------------------------------------------- reading
 def _open(path: Path, mu):
     """(reader, kind). DataFlash by magic bytes or suffix; everything else is read as a .tlog.
@@ -220,14 +183,23 @@ def _collect(reader, kind: str, raw: dict, stats: dict) -> None:
         raw.setdefault(table, []).append(row)
 
 
+def _is_ulog(path: Path) -> bool:
+    """PX4 ULog by its magic bytes ("ULog" 01 12 35) or the .ulg suffix."""
+    with open(path, "rb") as fh:
+        return fh.read(7) == b"ULog\x01\x12\x35" or path.suffix.lower() == ".ulg"
+
+
 def read_log(path) -> FlightLog:
-    """Read a .tlog or DataFlash log into a :class:`FlightLog`; never raises on bad content.
+    """Read a .tlog, DataFlash or PX4 ULog (ulog.py) log into a :class:`FlightLog`; never raises on bad content.
 
     Raises ``FileNotFoundError`` if ``path`` does not exist or is not a file.
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"log {str(path)!r} does not exist or is not a file")
+    if _is_ulog(path):
+        from .ulog import read_ulog
+        return read_ulog(path)
     mu = mavutil()
     raw: dict[str, list[dict]] = {}
     stats = {"ts": [], "bad_rec": [], "bad": 0, "versions": {}}
@@ -410,13 +382,3 @@ def _vehicle_time(df: pd.DataFrame) -> pd.DataFrame:
     bad = ~np.isfinite(out) | (np.abs(out - t) > _TIME_SPIKE_S)
     out[bad] = t[bad]
     return df.assign(t_s=out)
-
-
-def _clean_time(df: pd.DataFrame, columns, dedupe: bool = True) -> pd.DataFrame:
-    """Keep ``columns``, sort by time (stable), drop repeated timestamps (the last report wins)."""
-    if not len(df):
-        return pd.DataFrame({c: pd.Series(dtype=bool if c == "armed" else float) for c in columns})
-    out = df[list(columns)].sort_values("t_s", kind="stable")
-    if dedupe:
-        out = out.drop_duplicates("t_s", keep="last")
-    return out.reset_index(drop=True)
