@@ -155,9 +155,11 @@ def _print_log_facts(name: str, s: dict) -> None:
 
 def _add_telemetry(sub):
     p = sub.add_parser("telemetry", help="run a mission and stream it as live MAVLink 2 telemetry",
-                       description="Run a mission and send HEARTBEAT, SYS_STATUS, BATTERY_STATUS (charge state), "
-                                   "GLOBAL_POSITION_INT, GPS_RAW_INT and NAMED_VALUE_FLOAT (I2, d_short, Lm [uH]) "
-                                   "so a ground station shows the drone charging.")
+                       description="Run a mission and send it as an ArduCopter would: HEARTBEAT (1 Hz of simulated "
+                                   "time, LOITER over a pad, AUTO in transit), SYS_STATUS, BATTERY_STATUS (charge "
+                                   "state), GPS_RAW_INT, GLOBAL_POSITION_INT, ATTITUDE, VFR_HUD and NAMED_VALUE_FLOAT "
+                                   "(I2, I1, DUTY, LM_UH, SBAR_MODE, PAD_ON, CHG_CMD, I_RECT; see docs/mavlink.md) so a "
+                                   "ground station shows the drone charging.")
     p.add_argument("--connect", default="udpout:127.0.0.1:14550",
                    help="where to send (default udpout:127.0.0.1:14550; 'none' = only --tlog)")
     p.add_argument("--rate", type=positive_float("rate"), default=10.0, help="telemetry rate in Hz (default 10)")
@@ -174,6 +176,10 @@ def _add_telemetry(sub):
                    help="with --follow: stop after S wall seconds (default 60)")
     p.add_argument("--follow-idle", type=positive_float("follow-idle"), default=10.0, metavar="S",
                    help="with --follow: stop after S seconds without a position (default 10)")
+    p.add_argument("--sysid", type=int, default=1, metavar="ID",
+                   help="MAVLink system id of the simulated vehicle, 1..255 (default 1; use another beside a SITL vehicle)")
+    p.add_argument("--compid", type=int, default=1, metavar="ID",
+                   help="MAVLink component id of the simulated vehicle, 1..255 (default 1, the autopilot)")
     p.add_argument("--progress", action="store_true", help="show a progress bar")
     _mav_common(p)
     p.set_defaults(func=_cmd_telemetry)
@@ -185,6 +191,7 @@ def _cmd_telemetry(args) -> int:
     connect = None if str(args.connect).lower() == "none" else telemetry.check_connect(args.connect)
     if connect is None and args.tlog is None:
         raise CliError("--connect none needs --tlog FILE (nothing to send to)")
+    telemetry.check_ids(args.sysid, args.compid)
     home = parse_geo_point(args.home, "--home") if args.home else telemetry.DEFAULT_HOME
     if home.alt_m is None:
         raise CliError(f"--home {args.home!r} needs an altitude; valid format: LAT,LON,ALT")
@@ -197,7 +204,8 @@ def _cmd_telemetry(args) -> int:
     res = run_mission(cfg, _mav_policy(cfg, args.policy), trajectory=traj, progress=args.progress)
     st = telemetry.stream(res.timeseries, connect=connect, rate_hz=args.rate, speed=args.speed, home=home,
                           tlog=args.tlog, duration_s=args.duration, ground_gap_m=cfg.mission.hover_gap_m,
-                          track=(traj.t_s, traj.pos_m), progress=args.progress)
+                          track=(traj.t_s, traj.pos_m, traj.tilt_rad), progress=args.progress, sysid=args.sysid,
+                          compid=args.compid)
     print(f"sent {st.frames} MAVLink 2 frames in {st.ticks} ticks at {args.rate:g} Hz: {st.sim_s:.1f} s of the "
           f"mission in {st.wall_s:.1f} s wall to {connect or 'no link'}"
           + (f"; wrote {args.tlog}" if args.tlog else ""))
@@ -211,7 +219,8 @@ def _cmd_telemetry_follow(args, connect, home) -> int:
     from ..world.runner import run_mission
     st = follow.follow(args.follow, cfg, _mav_policy(cfg, args.policy), run_mission, connect=connect,
                           rate_hz=args.rate, home=home if args.home else None, tlog=args.tlog,
-                          max_wall_s=args.follow_time, idle_timeout_s=args.follow_idle, in_conn=vin)
+                          max_wall_s=args.follow_time, idle_timeout_s=args.follow_idle, in_conn=vin,
+                          sysid=args.sysid, compid=args.compid)
     print(f"followed {st.positions} live positions over {st.wall_s:.1f} s in {st.chunks} chunk(s); sent "
           f"{st.frames} frames to {connect or 'no link'}" + (f"; wrote {args.tlog}" if args.tlog else ""))
     return 0
