@@ -13,7 +13,7 @@ HEARTBEAT            at every whole second of simulated time (1 Hz, also in foll
                      (CUSTOM_MODE_ENABLED | STABILIZE_ENABLED | GUIDED_ENABLED |
                      MANUAL_INPUT_ENABLED | SAFETY_ARMED), system status ACTIVE
 every tick at ``rate_hz``:
-SYS_STATUS           sensors present = enabled: gyro, accelerometer, GPS, battery; health: those
+SYS_STATUS           sensors present = enabled: gyro, accelerometer, GPS, battery, pre-arm check; health: those
                      (battery bit cleared below 5 % charge) plus the geofence bit (no fence, so no
                      breach); battery voltage [mV], current [cA, + = discharging], remaining [%]
 BATTERY_STATUS       pack voltage in cell 0 [mV], current [cA], consumed [mAh, hJ], remaining [%],
@@ -298,7 +298,7 @@ def encode_tick(mav, row) -> list:
     r = row
     ms = int(r.time_boot_ms)
     sensors = m.MAV_SYS_STATUS_SENSOR_3D_GYRO | m.MAV_SYS_STATUS_SENSOR_3D_ACCEL | m.MAV_SYS_STATUS_SENSOR_GPS \
-        | m.MAV_SYS_STATUS_SENSOR_BATTERY
+        | m.MAV_SYS_STATUS_SENSOR_BATTERY | m.MAV_SYS_STATUS_PREARM_CHECK
     health = (sensors if r.remaining_pct >= 5 else sensors & ~m.MAV_SYS_STATUS_SENSOR_BATTERY) \
         | m.MAV_SYS_STATUS_GEOFENCE                          # no fence: healthy (no breach), as ArduPilot
     msgs = [mav.sys_status_encode(sensors, sensors, health, 0, min(int(r.voltage_mv), _UINT16_MAX - 1),
