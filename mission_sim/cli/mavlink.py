@@ -57,12 +57,12 @@ def _mav_json_safe(obj):
 
 
 def _add_replay(sub):
-    p = sub.add_parser("replay", help="replay a real flight log (.tlog / DataFlash .bin) through the simulator",
-                       description="Read a MAVLink telemetry log or an ArduPilot DataFlash log, build the flown "
+    p = sub.add_parser("replay", help="replay a real flight log (.tlog / DataFlash .bin / PX4 .ulg) through the simulator",
+                       description="Read a MAVLink telemetry log, an ArduPilot DataFlash log or a PX4 ULog, build the flown "
                                    "track (3D GPS fix only) about a pad, run the mission world along it (Lm(t), "
                                    "SBAR, battery) and compare the logged electrical power with the propulsion "
                                    "power model.")
-    p.add_argument("log", type=Path, help="flight log: .tlog or .bin")
+    p.add_argument("log", type=Path, help="flight log: .tlog, .bin or .ulg")
     p.add_argument("--pad", default=None, metavar="LAT,LON[,ALT]",
                    help="pad position (degrees, degrees, m AMSL); default: the first armed position. "
                         "Write --pad=-35.36,149.16 when the latitude is negative")
@@ -116,9 +116,7 @@ def _cmd_replay(args) -> int:
     if args.format == "json":
         print(json.dumps(s, allow_nan=False))
         return 0
-    print(f"{args.log.name}: {s['duration_s']:.1f} s logged, {s['n_position_samples']} positions "
-          f"({s['bad_frames']} bad frames skipped), {s['distance_m']:.0f} m flown, max {s['max_alt_m']:.1f} m "
-          f"above the pad, armed {s['armed_time_s']:.1f} s in {len(s['armed_periods_s'])} period(s)")
+    _print_log_facts(args.log.name, s)
     print(f"mission world: {s['energy_to_battery_j']:.0f} J to the battery, propulsion {s['propulsion_energy_j']:.0f} J "
           f"(model, {cfg.drone.mass_kg:g} kg drone), final SoC {s['final_soc']:.3f}")
     c = s.get("power_comparison")
@@ -139,11 +137,29 @@ def _cmd_replay(args) -> int:
     return 0
 
 
+def _print_log_facts(name: str, s: dict) -> None:
+    """The replay's first lines: what the log holds, where the armed state came from, what was dropped."""
+    rejected = s.get("gps_rejected") or {}
+    n_rej = sum(rejected.values())
+    detail = f" ({', '.join(f'{k} {v}' for k, v in rejected.items() if v)})" if n_rej else ""
+    source = s.get("armed_source") or "no armed-state record and no motor output: never armed"
+    print(f"{name}: {s['duration_s']:.1f} s logged, {s['n_position_samples']} positions "
+          f"({s['bad_frames']} bad frames skipped, {n_rej} implausible GPS fixes rejected{detail}), "
+          f"{s['distance_m']:.0f} m flown, max {s['max_alt_m']:.1f} m above the pad")
+    print(f"armed {s['armed_time_s']:.1f} s in {len(s['armed_periods_s'])} period(s), from {source}"
+          + (" (armed from the start of the log: its first armed-state record is a disarm)"
+             if s.get("starts_armed") else ""))
+    for err in s.get("parse_errors") or []:
+        print(f"warning: the log could not be parsed to its end: {err}; replayed what was decoded before it")
+
+
 def _add_telemetry(sub):
     p = sub.add_parser("telemetry", help="run a mission and stream it as live MAVLink 2 telemetry",
-                       description="Run a mission and send HEARTBEAT, SYS_STATUS, BATTERY_STATUS (charge state), "
-                                   "GLOBAL_POSITION_INT, GPS_RAW_INT and NAMED_VALUE_FLOAT (I2, d_short, Lm [uH]) "
-                                   "so a ground station shows the drone charging.")
+                       description="Run a mission and send it as an ArduCopter would: HEARTBEAT (1 Hz of simulated "
+                                   "time, LOITER over a pad, AUTO in transit), SYS_STATUS, BATTERY_STATUS (charge "
+                                   "state), GPS_RAW_INT, GLOBAL_POSITION_INT, ATTITUDE, VFR_HUD and NAMED_VALUE_FLOAT "
+                                   "(I2, I1, DUTY, LM_UH, SBAR_MODE, PAD_ON, CHG_CMD, I_RECT; see docs/mavlink.md) so a "
+                                   "ground station shows the drone charging.")
     p.add_argument("--connect", default="udpout:127.0.0.1:14550",
                    help="where to send (default udpout:127.0.0.1:14550; 'none' = only --tlog)")
     p.add_argument("--rate", type=positive_float("rate"), default=10.0, help="telemetry rate in Hz (default 10)")
@@ -160,6 +176,10 @@ def _add_telemetry(sub):
                    help="with --follow: stop after S wall seconds (default 60)")
     p.add_argument("--follow-idle", type=positive_float("follow-idle"), default=10.0, metavar="S",
                    help="with --follow: stop after S seconds without a position (default 10)")
+    p.add_argument("--sysid", type=int, default=1, metavar="ID",
+                   help="MAVLink system id of the simulated vehicle, 1..255 (default 1; use another beside a SITL vehicle)")
+    p.add_argument("--compid", type=int, default=1, metavar="ID",
+                   help="MAVLink component id of the simulated vehicle, 1..255 (default 1, the autopilot)")
     p.add_argument("--progress", action="store_true", help="show a progress bar")
     _mav_common(p)
     p.set_defaults(func=_cmd_telemetry)
@@ -171,6 +191,7 @@ def _cmd_telemetry(args) -> int:
     connect = None if str(args.connect).lower() == "none" else telemetry.check_connect(args.connect)
     if connect is None and args.tlog is None:
         raise CliError("--connect none needs --tlog FILE (nothing to send to)")
+    telemetry.check_ids(args.sysid, args.compid)
     home = parse_geo_point(args.home, "--home") if args.home else telemetry.DEFAULT_HOME
     if home.alt_m is None:
         raise CliError(f"--home {args.home!r} needs an altitude; valid format: LAT,LON,ALT")
@@ -183,7 +204,8 @@ def _cmd_telemetry(args) -> int:
     res = run_mission(cfg, _mav_policy(cfg, args.policy), trajectory=traj, progress=args.progress)
     st = telemetry.stream(res.timeseries, connect=connect, rate_hz=args.rate, speed=args.speed, home=home,
                           tlog=args.tlog, duration_s=args.duration, ground_gap_m=cfg.mission.hover_gap_m,
-                          track=(traj.t_s, traj.pos_m), progress=args.progress)
+                          track=(traj.t_s, traj.pos_m, traj.tilt_rad), progress=args.progress, sysid=args.sysid,
+                          compid=args.compid)
     print(f"sent {st.frames} MAVLink 2 frames in {st.ticks} ticks at {args.rate:g} Hz: {st.sim_s:.1f} s of the "
           f"mission in {st.wall_s:.1f} s wall to {connect or 'no link'}"
           + (f"; wrote {args.tlog}" if args.tlog else ""))
@@ -197,7 +219,8 @@ def _cmd_telemetry_follow(args, connect, home) -> int:
     from ..world.runner import run_mission
     st = follow.follow(args.follow, cfg, _mav_policy(cfg, args.policy), run_mission, connect=connect,
                           rate_hz=args.rate, home=home if args.home else None, tlog=args.tlog,
-                          max_wall_s=args.follow_time, idle_timeout_s=args.follow_idle, in_conn=vin)
+                          max_wall_s=args.follow_time, idle_timeout_s=args.follow_idle, in_conn=vin,
+                          sysid=args.sysid, compid=args.compid)
     print(f"followed {st.positions} live positions over {st.wall_s:.1f} s in {st.chunks} chunk(s); sent "
           f"{st.frames} frames to {connect or 'no link'}" + (f"; wrote {args.tlog}" if args.tlog else ""))
     return 0
