@@ -8,6 +8,7 @@ subcommands import what they need lazily, inside the function that runs them.
 ``mavlink``   ``replay`` (flight logs) and ``telemetry`` (live MAVLink, follow mode)
 ``learning``  ``train`` and ``compare`` (envs and policies, imported lazily)
 ``sweep``     ``sweep`` (parameter studies on Dask)
+``sizing``    ``sizing`` (rectifier rating, parts and mass per policy)
 ============  ==================================================================
 """
 
@@ -16,7 +17,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from . import learning, mavlink, mission, paper, sweep
+from . import learning, mavlink, mission, paper, sizing, sweep
 from .common import CliError
 
 __all__ = ["main", "build_parser"]
@@ -27,7 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      "that charge wirelessly in flight (WPT link with an SBAR receiver).")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for add in (paper._add_paper, mission._add_coupling, mission._add_mission, mavlink._add_replay, mavlink._add_telemetry,
-                learning._add_train, learning._add_compare, sweep._add_sweep):
+                learning._add_train, learning._add_compare, sweep._add_sweep, sizing._add_sizing):
         add(sub)
     return parser
 
