@@ -13,7 +13,6 @@ import math
 import tomllib
 from dataclasses import asdict, dataclass, field, fields
 from importlib import resources
-from pathlib import Path
 
 from wpt_receiver import LinkParams
 from wpt_receiver.coupling import NOMINAL_GAP_M
