@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from .common import (
@@ -109,6 +110,8 @@ def _cmd_replay(args) -> int:
     res = replay_log(log, cfg, policy, pad=pad, ground_gap_m=args.ground_gap, window=window,
                      progress=show_progress(args))
     s = res.summary
+    for w in s.get("warnings", ()):
+        print(f"dronewpt replay: warning: {w}", file=sys.stderr)
     s["log"] = str(args.log)
     s["policy"] = args.policy
     s["drone_mass_kg"] = cfg.drone.mass_kg
