@@ -96,6 +96,8 @@ def _cmd_replay(args) -> int:
     from ..files import atomic_output
     from ..mavlink.logs import read_log
     from ..mavlink.replay import parse_window, replay_log, track_from_log
+    if args.log.is_dir():
+        raise CliError(f"log {str(args.log)!r} is a folder; valid: a .tlog or .bin file")
     if not args.log.is_file():
         raise CliError(f"log {str(args.log)!r} does not exist or is not a file")
     pad = parse_geo_point(args.pad) if args.pad is not None else None
