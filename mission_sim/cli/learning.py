@@ -84,8 +84,7 @@ def _rl_or_skip(pols: tuple, explicit: bool) -> tuple:
     if not any(p_.split(":", 1)[0] == "rl" for p_ in pols) or sb3_installed():
         return pols
     if explicit:
-        from policies import require_sb3
-        require_sb3()
+        raise CliError("--policies rl needs stable-baselines3 (with torch): pip install 'dronewpt[rl]'")
     print("dronewpt compare: note: skipping the rl row: stable-baselines3 is not installed "
           "(pip install 'dronewpt[rl]')", file=sys.stderr)
     return tuple(p_ for p_ in pols if p_.split(":", 1)[0] != "rl")
