@@ -4,13 +4,25 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
-from .common import CliError, parse_set, positive_float, write_mission
+from .common import (
+    CliError,
+    add_progress_flag,
+    lazy_names_help,
+    parse_set,
+    policy_names,
+    positive_float,
+    prepare_out_dir,
+    show_progress,
+    write_mission,
+)
 
 
 def _mav_common(p):
-    p.add_argument("--policy", default="model_based", help="receiver policy (default model_based)")
+    lazy_names_help(p.add_argument("--policy", default="model_based"), "receiver policy (default model_based)",
+                    policy_names)
     p.add_argument("--config", type=Path, default=None, help="mission TOML (default: the embedded mission)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value by dotted key, e.g. --set drone.mass_kg=1.5 (repeatable)")
@@ -74,15 +86,18 @@ def _add_replay(sub):
     p.add_argument("--mass", type=positive_float("mass"), default=None, metavar="KG",
                    help="drone mass for the propulsion model (same as --set drone.mass_kg=KG)")
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
-    p.add_argument("--progress", action="store_true", help="show a progress bar")
+    add_progress_flag(p)
     _mav_common(p)
     p.set_defaults(func=_cmd_replay)
 
 
 def _cmd_replay(args) -> int:
     from ..mavlink.geodesy import parse_geo_point
+    from ..files import atomic_output
     from ..mavlink.logs import read_log
     from ..mavlink.replay import parse_window, replay_log, track_from_log
+    if args.log.is_dir():
+        raise CliError(f"log {str(args.log)!r} is a folder; valid: a .tlog or .bin file")
     if not args.log.is_file():
         raise CliError(f"log {str(args.log)!r} does not exist or is not a file")
     pad = parse_geo_point(args.pad) if args.pad is not None else None
@@ -93,16 +108,20 @@ def _cmd_replay(args) -> int:
     track_from_log(log, pad=pad, window=window)  # no usable position: one-line error before any simulation
     cfg = _mav_config(args, {"drone.mass_kg": args.mass} if args.mass else None, single_pad=True)
     policy = _mav_policy(cfg, args.policy)
+    prepare_out_dir(args.out)
     res = replay_log(log, cfg, policy, pad=pad, ground_gap_m=args.ground_gap, window=window,
-                     progress=args.progress)
+                     progress=show_progress(args))
     s = res.summary
+    for w in s.get("warnings", ()):
+        print(f"dronewpt replay: warning: {w}", file=sys.stderr)
     s["log"] = str(args.log)
     s["policy"] = args.policy
     s["drone_mass_kg"] = cfg.drone.mass_kg
-    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "replay_summary.json").unlink(missing_ok=True)  # written last: present = complete
     files = write_mission(res.mission, args.out / "mission", plots=not args.no_plot)
     if res.power_table is not None:
-        res.power_table.to_csv(args.out / "power_comparison.csv", index=False)
+        with atomic_output(args.out / "power_comparison.csv") as tmp:
+            res.power_table.to_csv(tmp, index=False)
         files.append(str(args.out / "power_comparison.csv"))
     if not args.no_plot:
         from ..figures import replay as replay_figures
@@ -112,7 +131,8 @@ def _cmd_replay(args) -> int:
             files.append(replay_figures.plot_power_comparison(res, args.out / "power.png", title))
     s["files"] = files
     s = _mav_json_safe(s)
-    (args.out / "replay_summary.json").write_text(json.dumps(s, indent=2, allow_nan=False))
+    with atomic_output(args.out / "replay_summary.json") as tmp:
+        tmp.write_text(json.dumps(s, indent=2, allow_nan=False))
     if args.format == "json":
         print(json.dumps(s, allow_nan=False))
         return 0
@@ -153,6 +173,40 @@ def _print_log_facts(name: str, s: dict) -> None:
         print(f"warning: the log could not be parsed to its end: {err}; replayed what was decoded before it")
 
 
+def _resolve_connect(text: str, timeout_s: float = 5.0) -> str:
+    """Check that the host of a ``kind:HOST:PORT`` connection string is a valid IP address or resolves
+    (within ``timeout_s``) before anything is simulated; ``CliError`` naming the host otherwise."""
+    import ipaddress
+    import socket
+    import threading
+
+    kind, _, rest = text.partition(":")
+    host, _, port = rest.rpartition(":")
+    if host.replace(".", "").isdigit():
+        try:
+            ipaddress.IPv4Address(host)
+        except ValueError:
+            raise CliError(f"--connect {text!r}: {host!r} is not a valid IPv4 address "
+                           "(four numbers 0..255)") from None
+        return text
+    found: list = []
+
+    def look_up():
+        try:
+            found.append(socket.getaddrinfo(host, int(port), type=socket.SOCK_DGRAM if "udp" in kind else 0))
+        except (OSError, UnicodeError) as exc:
+            found.append(exc)
+    th = threading.Thread(target=look_up, daemon=True)
+    th.start()
+    th.join(timeout_s)
+    if not found:
+        raise CliError(f"--connect {text!r}: host {host!r} did not resolve within {timeout_s:g} s")
+    if isinstance(found[0], Exception):
+        reason = getattr(found[0], "strerror", None) or found[0]
+        raise CliError(f"--connect {text!r}: host {host!r} cannot be resolved ({reason})")
+    return text
+
+
 def _add_telemetry(sub):
     p = sub.add_parser("telemetry", help="run a mission and stream it as live MAVLink 2 telemetry",
                        description="Run a mission and send it as an ArduCopter would: HEARTBEAT (1 Hz of simulated "
@@ -180,7 +234,9 @@ def _add_telemetry(sub):
                    help="MAVLink system id of the simulated vehicle, 1..255 (default 1; use another beside a SITL vehicle)")
     p.add_argument("--compid", type=int, default=1, metavar="ID",
                    help="MAVLink component id of the simulated vehicle, 1..255 (default 1, the autopilot)")
-    p.add_argument("--progress", action="store_true", help="show a progress bar")
+    p.add_argument("--force", action="store_true", help="run even when the estimated mission size exceeds "
+                   "the limit (see dronewpt mission --help)")
+    add_progress_flag(p)
     _mav_common(p)
     p.set_defaults(func=_cmd_telemetry)
 
@@ -188,7 +244,7 @@ def _add_telemetry(sub):
 def _cmd_telemetry(args) -> int:
     from ..mavlink import telemetry
     from ..mavlink.geodesy import parse_geo_point
-    connect = None if str(args.connect).lower() == "none" else telemetry.check_connect(args.connect)
+    connect = None if str(args.connect).lower() == "none" else _resolve_connect(telemetry.check_connect(args.connect))
     if connect is None and args.tlog is None:
         raise CliError("--connect none needs --tlog FILE (nothing to send to)")
     telemetry.check_ids(args.sysid, args.compid)
@@ -198,13 +254,17 @@ def _cmd_telemetry(args) -> int:
     if args.follow is not None:
         return _cmd_telemetry_follow(args, connect, home)
     cfg = _mav_config(args)
+    from ..world.budget import check_run_size
     from ..world.runner import run_mission
     from ..world.trajectory import plan_mission
+    check_run_size(cfg, force=args.force)
+    if args.tlog is not None:
+        prepare_out_dir(args.tlog.parent, "--tlog folder")
     traj = plan_mission(cfg)
-    res = run_mission(cfg, _mav_policy(cfg, args.policy), trajectory=traj, progress=args.progress)
+    res = run_mission(cfg, _mav_policy(cfg, args.policy), trajectory=traj, progress=show_progress(args))
     st = telemetry.stream(res.timeseries, connect=connect, rate_hz=args.rate, speed=args.speed, home=home,
                           tlog=args.tlog, duration_s=args.duration, ground_gap_m=cfg.mission.hover_gap_m,
-                          track=(traj.t_s, traj.pos_m, traj.tilt_rad), progress=args.progress, sysid=args.sysid,
+                          track=(traj.t_s, traj.pos_m, traj.tilt_rad), progress=show_progress(args), sysid=args.sysid,
                           compid=args.compid)
     print(f"sent {st.frames} MAVLink 2 frames in {st.ticks} ticks at {args.rate:g} Hz: {st.sim_s:.1f} s of the "
           f"mission in {st.wall_s:.1f} s wall to {connect or 'no link'}"

@@ -32,9 +32,7 @@ def plot_lm_map(model, dz_m: float, tilt_rad: float, path, half_width_m: float =
     ax.set_ylabel("dy [m]")
     ax.set_title(f"Lm over the pad at dz = {dz_m:.3f} m, tilt = {np.degrees(tilt_rad):.1f} deg (pad coil dashed)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return str(path)
+    return save_figure(fig, path)
 
 
 def plot_mission(result, out_dir) -> list[str]:

@@ -338,6 +338,26 @@ class ReplayResult:
     files: list[str] = field(default_factory=list)
 
 
+FAR_PAD_M = 10_000.0  # a pad farther than this from the whole track is almost surely a wrong --pad
+
+
+def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
+    """One-line warnings about a replay that runs but may not mean what the user thinks: a log that
+    ends while the vehicle is still armed (a truncated log, or a crash), and a pad far from the
+    whole track (a wrong ``--pad``, e.g. latitude and longitude swapped)."""
+    out = []
+    if len(log.armed) and bool(log.armed["armed"].to_numpy(bool)[-1]):
+        out.append(f"{log.path.name}: the log ends while the vehicle is armed (at {log.duration_s:.1f} s): "
+                   "truncated log? the replay covers only what was recorded")
+    if log.errors:
+        out.append(f"{log.path.name}: reading stopped early: {log.errors[0]}")
+    dist = float(np.min(np.hypot(track.pos_m[:, 0], track.pos_m[:, 1])))
+    if dist > FAR_PAD_M:
+        out.append(f"the pad ({track.pad.lat_deg:.6f}, {track.pad.lon_deg:.6f}) is {dist / 1e3:.0f} km from the "
+                   "nearest point of the track: the drone never comes near it (no charging); check --pad")
+    return out
+
+
 def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: float | None = None,
                window: tuple[float, float] | None = None, progress: bool = False) -> ReplayResult:
     """Build the track of ``log`` (a :class:`FlightLog` or a path), run the mission world along it,
@@ -369,6 +389,7 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
         "sim_time_s": float(ms["sim_time_s"]),
         "window_s": list(window) if window else None,
         "battery_source": log.battery_source,
+        "warnings": replay_warnings(log, track),
     })
     table = None
     if len(log.battery):
