@@ -129,6 +129,13 @@ class InverseModelController:
         self.x = self.x @ self._ad.T + u[:, None] * self._bd
         return self.v2_cmd_v
 
+    def update1(self, i2_ref_a: float) -> float:
+        """:meth:`update` for ``n = 1`` with a float in and out (same arithmetic, less overhead)."""
+        u = float(i2_ref_a) - self._i2_sm
+        self.v2_cmd_v = self.x @ self._cd + self._dd * u
+        self.x = self.x @ self._ad.T + u * self._bd
+        return float(self.v2_cmd_v[0])
+
     def step(self, i2_ref_a):
         """One control period: new reference in, short duty ``d_short*`` out (shape (n,)).
 
