@@ -18,7 +18,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 from .params import LinkParams
 
@@ -81,9 +80,11 @@ def state_matrices(p: LinkParams, lm_h=None):
     return a, b
 
 
-def g22(p: LinkParams) -> signal.TransferFunction:
+def g22(p: LinkParams):
     """Transfer function G22 = I2/V2 = -(alpha2 s + beta2)/(s^2 + 2 zeta omega_n s + omega_n^2) (eq. 10)."""
     c = coefficients(p)
+    from scipy import signal   # 1.2 s import: only here
+
     return signal.TransferFunction([-c.alpha2, -c.beta2], [1.0, 2 * c.zeta * c.omega_n, c.omega_n**2])
 
 

@@ -6,7 +6,7 @@ import json
 import sys
 from pathlib import Path
 
-from .common import CliError, float_arg
+from .common import CliError, add_progress_flag, float_arg, prepare_out_dir, show_progress
 
 _COLUMNS = ("peak_i2_a", "diode_rms_a", "diode_avg_a", "switch_rms_a", "required_rating_a", "part", "mass_g",
             "device_mass_g", "sink_mass_g", "conduction_loss_w")
@@ -29,7 +29,7 @@ def _add_sizing(sub):
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--out", type=Path, default=Path("out/sizing"), help="folder for the figure (default out/sizing)")
     p.add_argument("--no-plot", action="store_true", help="skip the figure")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_progress_flag(p)
     p.set_defaults(func=_cmd_sizing)
 
 
@@ -45,7 +45,7 @@ def _rows(args):
     if bad or not names:
         raise CliError(f"--policies {args.policies!r} is invalid; valid values: {', '.join(TRAJECTORIES)}")
     base = preset(args.devices)
-    bar = tqdm(total=len(names), desc="sizing", disable=args.no_progress or not sys.stderr.isatty(), file=sys.stderr)
+    bar = tqdm(total=len(names), desc="sizing", disable=not show_progress(args), file=sys.stderr)
     with bar:
         rows = size_policies(names, TABLE_I, base, SizingRules(margin=args.margin), t_end_s=args.t_end,
                              progress=lambda: bar.update(1))
@@ -53,11 +53,12 @@ def _rows(args):
 
 
 def _cmd_sizing(args) -> int:
+    if not args.no_plot:
+        prepare_out_dir(args.out)  # before the simulation: a bad folder costs nothing
     rows = _rows(args)
     figs = []
     if not args.no_plot:
         from ..figures.sizing import plot_sizing
-        args.out.mkdir(parents=True, exist_ok=True)
         figs.append(plot_sizing(rows, args.out / "sizing.png",
                                 f"SBAR sizing, Table I link, devices {args.devices}, margin {args.margin:g}"))
     if args.format == "json":
