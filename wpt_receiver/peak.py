@@ -57,6 +57,11 @@ class SbarHarmonics:
         self.clamp_v = p.vl_v + devices.rect_vf_v
         self.theta = np.linspace(-np.pi, np.pi, n_theta, endpoint=False)
 
+    def ripple_bound_a(self) -> float:
+        """Upper bound of the harmonic ripple's amplitude [A] over all duties and commutation
+        angles (``|V2n| <= 8 Vc / (n pi)``)."""
+        return float(np.sum(np.abs(self.i2_from_v1) + np.abs(self.y2) * 8 * self.clamp_v / (self.n * np.pi)))
+
     # ------------------------------------------------------------------ v2 of the SBAR
     def v2_harmonics(self, d_short, edge_rad, n):
         """Phasors ``V2n`` [V] of the SBAR voltage for orders ``n`` (odd), shape (N, len(n))."""
