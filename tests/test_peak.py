@@ -70,3 +70,15 @@ def test_ramp_peak_within_1pct(link, kind):
     if kind == "v2":   # eq. 4 with eq. 9 misses the quadrature of v2 that collapses at d -> 1
         _, _, i2e = simulate(P, v2_from_duty(d, P.vl_v), T)
         assert np.abs(i2e).max() < 0.97 * sw.max()
+
+
+def test_peak_table_matches_direct_evaluation():
+    from wpt_receiver.peak import PeakTable
+    sh = SbarHarmonics(P)
+    pt = PeakTable(sh, i2_max_a=60.0)
+    rng = np.random.default_rng(3)
+    d, i2 = rng.uniform(0, 1, 500), rng.uniform(3, 60, 500) * rng.choice([-1, 1], 500)
+    assert np.allclose(pt(d, i2), sh.peak(d, i2), rtol=2e-3)
+    assert isinstance(pt(0.2, 11.0), float)
+    with pytest.raises(ValueError, match="i2_max_a"):
+        PeakTable(sh, i2_max_a=0.0)

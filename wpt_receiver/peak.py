@@ -28,7 +28,7 @@ import numpy as np
 from .devices import IDEAL, DeviceSet
 from .params import LinkParams
 
-__all__ = ["SbarHarmonics"]
+__all__ = ["SbarHarmonics", "PeakTable"]
 
 
 class SbarHarmonics:
@@ -150,3 +150,38 @@ def _grid_max(y):
     with np.errstate(invalid="ignore", divide="ignore"):
         u = np.where(den < 0, np.clip(0.5 * (ym - yp) / den, -0.5, 0.5), 0.0)
     return np.maximum(y0 - 0.25 * (ym - yp) * u, y0)
+
+
+class PeakTable:
+    """Fast lookup of the instantaneous peak |i2| [A] for a real (in-phase) envelope amplitude:
+    :meth:`SbarHarmonics.peak` tabulated once on a grid of duty x |I2| and interpolated
+    bilinearly (``peak = |I2| + excess(d, |I2|)``; the excess, the ripple's contribution, is
+    smooth in both away from |I2| -> 0). For hot loops (an env's cost, a mission's running peak):
+    about 10 us per scalar call; within 0.2 % of the direct evaluation for |I2| >= 3 A (the |I2|
+    grid is quadratic, dense near 0, where the ripple is comparable to the fundamental).
+
+    ``i2_max_a`` is the top of the |I2| grid (beyond it the excess of the last column is used: the
+    ripple is independent of |I2| there to first order); ``n_d``, ``n_i`` the grid sizes."""
+
+    def __init__(self, harmonics: SbarHarmonics, i2_max_a: float = 80.0, n_d: int = 51, n_i: int = 81):
+        if not (np.isfinite(i2_max_a) and i2_max_a > 0):
+            raise ValueError(f"i2_max_a={i2_max_a!r} is invalid; valid range: (0, inf)")
+        self.d = np.linspace(0.0, 1.0, n_d)
+        self.i2 = float(i2_max_a) * np.linspace(0.0, 1.0, n_i) ** 2
+        dd, ii = np.meshgrid(self.d, self.i2, indexing="ij")
+        self.excess = harmonics.peak(dd, ii) - ii                  # (n_d, n_i) [A]
+        self._hd, self._imax = 1.0 / (n_d - 1), float(i2_max_a)
+
+    def __call__(self, d_short, i2_amp_a):
+        """Peak |i2| [A] for duties in [0, 1] and envelope amplitudes (either sign; broadcast)."""
+        i2 = np.abs(np.asarray(i2_amp_a, dtype=float))
+        x = np.clip(np.asarray(d_short, dtype=float), 0.0, 1.0) / self._hd
+        y = np.sqrt(np.minimum(i2 / self._imax, 1.0)) * (len(self.i2) - 1)
+        j = np.minimum(x.astype(int), len(self.d) - 2)
+        k = np.minimum(y.astype(int), len(self.i2) - 2)
+        fx, fy = x - j, y - k
+        e = self.excess
+        ex = (e[j, k] * (1 - fx) * (1 - fy) + e[j + 1, k] * fx * (1 - fy) + e[j, k + 1] * (1 - fx) * fy
+              + e[j + 1, k + 1] * fx * fy)
+        out = i2 + ex
+        return out if np.ndim(out) else float(out)
