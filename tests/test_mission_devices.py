@@ -5,7 +5,7 @@ and the split of the rectifier output into battery charging and propulsion."""
 import numpy as np
 import pytest
 
-from mission_sim.config import MissionConfig, apply_overrides, config_from_dict, config_to_dict, policy_context
+from mission_sim.config import MissionConfig, apply_overrides, config_from_dict, config_to_dict, load_config, policy_context
 from mission_sim.world.runner import run_mission
 from policies import make
 from wpt_receiver import TABLE_I
@@ -15,7 +15,7 @@ GROUPS = ("inverter_switches", "rectifier_diodes", "rectifier_switches")
 
 
 def _run(devices):
-    cfg = config_from_dict(apply_overrides(config_to_dict(MissionConfig()), {"link.devices": devices}))
+    cfg = config_from_dict(apply_overrides(config_to_dict(load_config()), {"link.devices": devices}))
     pol = make("model_based", policy_context(cfg))
     return cfg, run_mission(cfg, pol)
 
@@ -26,8 +26,8 @@ def runs():
 
 
 def test_default_mission_uses_real_parts():
-    assert MissionConfig().link.devices != "ideal"
-    assert not MissionConfig().link.device_set().is_ideal
+    for cfg in (load_config(), MissionConfig()):
+        assert cfg.link.devices != "ideal" and not cfg.link.device_set().is_ideal
 
 
 def test_device_losses_and_balance(runs):
@@ -86,4 +86,4 @@ def test_peak_is_instantaneous(runs):
 
 def test_unknown_preset_is_a_clear_error():
     with pytest.raises(ValueError, match="devices='nope' is invalid; valid values: ideal"):
-        config_from_dict(apply_overrides(config_to_dict(MissionConfig()), {"link.devices": "nope"}))
+        config_from_dict(apply_overrides(config_to_dict(load_config()), {"link.devices": "nope"}))
