@@ -22,6 +22,10 @@ model with real devices gives the instantaneous secondary current; from it:
   sink-to-air temperature rise ``dt_sink_k`` with a convection coefficient ``h_w_m2k`` (forced
   air in the rotor downwash): fin area ``A = P / (h dT)``, fins of thickness ``fin_m`` cooled on
   both sides, mass ``rho t A / 2``. A stated first-order method, not a thermal design.
+
+From a mission (an envelope run) instead, :func:`envelope_currents` gives the same quantities from
+the averaged device model and the run's instantaneous peak estimate; :func:`select_parts` is the
+part choice both use.
 """
 
 from __future__ import annotations
