@@ -542,14 +542,20 @@ class MissionLoop:
         """Instantaneous peak |i2| [A]: the envelope's peak plus the harmonic ripple of the SBAR at
         that duty (:class:`wpt_receiver.peak.SbarHarmonics`, at the hover-gap Lm and the highest
         battery voltage seen with the pad on), over the envelope's peak and every step whose |I2|
-        is within the ripple bound of it (the ripple depends on the duty)."""
+        is within the ripple bound of it (the ripple depends on the duty): screened with the
+        tabulated :class:`wpt_receiver.peak.PeakTable`, evaluated exactly where the table is within
+        1 % of its maximum."""
         if self.peak_env == 0.0:
             return 0.0
-        from wpt_receiver.peak import SbarHarmonics
+        from wpt_receiver.peak import PeakTable, SbarHarmonics
         on = df["tx_on"].to_numpy()
         vl = float(df["battery_v"].to_numpy()[on].max()) if on.any() else float(self.last_vl)
         harm = SbarHarmonics(self.base.with_(vl_v=vl), self.dev)
         i2 = np.abs(df["i2_amp_a"].to_numpy())
         cand = on & (i2 >= self.peak_env - 2.0 * harm.ripple_bound_a())
-        d = np.r_[self.peak_d, df["d_short"].to_numpy()[cand]]
-        return float(np.max(harm.peak(d, np.r_[self.peak_env, i2[cand]])))
+        d, i2c = np.r_[self.peak_d, df["d_short"].to_numpy()[cand]], np.r_[self.peak_env, i2[cand]]
+        if len(d) > 64:
+            approx = PeakTable(harm, i2_max_a=1.05 * self.peak_env, n_d=26, n_i=21)(d, i2c)
+            keep = approx >= 0.99 * approx.max()
+            d, i2c = d[keep], i2c[keep]
+        return float(np.max(harm.peak(d, i2c)))
