@@ -78,7 +78,7 @@ class SbarHarmonics:
     def _value(theta, i1h, ih, n):
         """i2 and di2/dtheta at ``theta`` (N,) from the fundamental ``i1h`` and harmonics ``ih``."""
         e1 = np.exp(1j * theta)
-        en = np.exp(1j * np.outer(theta, np.ones(1)) * n[None, :])
+        en = np.exp(1j * np.outer(theta, n))
         g = (i1h * e1).real + (ih * en).sum(axis=1).real
         dg = (1j * i1h * e1).real + (1j * n[None, :] * ih * en).sum(axis=1).real
         return g, dg
