@@ -31,7 +31,8 @@ DEFAULT_MISSION_TOML: str = resources.files("mission_sim").joinpath("default_mis
 
 @dataclass(frozen=True)
 class LinkConfig:
-    """Link parameters besides the inductances (Table I) and the transmitter's soft start."""
+    """Link parameters besides the inductances (Table I), the transmitter's soft start and the
+    semiconductor preset ``devices`` (``wpt_receiver/parts.toml``; "ideal" = the paper's circuit)."""
 
     r1_ohm: float = 0.108
     r2_ohm: float = 0.0325
@@ -39,10 +40,19 @@ class LinkConfig:
     f_hz: float = 85e3
     rated_i2_a: float = 15.0
     tx_ramp_s: float = 0.005
+    devices: str = "schottky"
 
     def __post_init__(self):
         check_positive(self, "r1_ohm", "r2_ohm", "vdc_v", "f_hz", "rated_i2_a")
         check_positive(self, "tx_ramp_s", allow_zero=True)
+        from wpt_receiver.devices import preset_names
+        if self.devices not in preset_names():
+            raise ValueError(f"devices={self.devices!r} is invalid; valid values: {', '.join(preset_names())}")
+
+    def device_set(self):
+        """The :class:`wpt_receiver.devices.DeviceSet` of the ``devices`` preset (``parts.toml``)."""
+        from wpt_receiver.devices import preset
+        return preset(self.devices)
 
     def link_params(self, l1_h: float, l2_h: float, lm_h: float, vl_v: float = 30.0) -> LinkParams:
         return LinkParams(l1_h=l1_h, l2_h=l2_h, lm_h=lm_h, r1_ohm=self.r1_ohm, r2_ohm=self.r2_ohm,

@@ -58,7 +58,7 @@ def test_replay_real_log(capsys, tmp_path, name):
     s = _replay(capsys, name, tmp_path)
     ref = _reference(name)
     for key in ("duration_s", "distance_m", "max_alt_m", "armed_time_s", "n_position_samples", "bad_frames",
-                "energy_to_battery_j", "propulsion_energy_j"):
+                "rectifier_output_j", "battery_charge_in_j", "propulsion_energy_j"):
         assert isinstance(s[key], (int, float)) and math.isfinite(s[key]), key
     assert s["duration_s"] == pytest.approx(ref["duration_s"], abs=1e-6)
     assert s["bad_frames"] == ref["bad"]
@@ -77,7 +77,7 @@ def test_replay_real_log(capsys, tmp_path, name):
     assert s["horizontal_distance_m"] == pytest.approx(horiz, rel=0.03)
     assert s["distance_m"] >= s["horizontal_distance_m"]
     # energy: nothing from nowhere
-    assert 0 <= s["energy_to_battery_j"] <= s["energy_from_source_j"] + 1e-9
+    assert 0 <= s["rectifier_output_j"] <= s["energy_from_source_j"] + 1e-9
     assert s["propulsion_energy_j"] > 0
     # the timeseries written closes the propulsion energy
     ts = __import__("pandas").read_parquet(Path(s["_out"]) / "mission" / "timeseries.parquet")
@@ -116,8 +116,8 @@ def test_pad_far_away_gets_no_power(capsys, tmp_path):
     near = _replay(capsys, name, tmp_path)
     lat, lon = near["pad"]["lat_deg"], near["pad"]["lon_deg"]
     far = _replay(capsys, name, tmp_path, f"--pad={lat},{lon + 300 / _series_m_per_deg(lat)[1]}")
-    assert near["energy_to_battery_j"] > 0
-    assert far["energy_to_battery_j"] == 0 and far["energy_from_source_j"] == 0
+    assert near["rectifier_output_j"] > 0
+    assert far["rectifier_output_j"] == 0 and far["energy_from_source_j"] == 0
     assert far["propulsion_energy_j"] == pytest.approx(near["propulsion_energy_j"], rel=1e-6)
 
 
@@ -164,7 +164,7 @@ def test_telemetry_cli_shows_charging_and_replays(capsys, tmp_path):
     log = read_log(tlog)
     assert log.bad_frames == 0 and s["battery_source"] == "BATTERY_STATUS"
     assert s["n_position_samples"] == len(log.position) > 50
-    assert s["energy_to_battery_j"] > 0
+    assert s["rectifier_output_j"] > 0
     # closed loop: the "logged" power is the simulator's own (V I of its battery, no charging while
     # airborne), so the comparison must find the model and the default 1 kg drone again
     c = s["power_comparison"]

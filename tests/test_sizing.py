@@ -79,3 +79,34 @@ def test_cli_sizing_json(capsys, tmp_path):
     assert rows["step"]["mass_g"] > rows["proposed"]["mass_g"]
     assert (tmp_path / "sizing.png").stat().st_size > 10_000
     assert main(["sizing", "--policies", "nope"]) == 2
+
+
+@pytest.mark.parametrize("d", [0.0, 0.5])
+def test_envelope_currents_match_the_switching_model(d):
+    """Averaged device currents and loss from the envelope (what mission sizing uses) against the
+    exact switching waveform at a constant duty (devices: schottky)."""
+    from wpt_receiver.devices import envelope_params
+    from wpt_receiver.envelope import steady_state
+    from wpt_receiver.sbar import rectifier_v2_folded
+    from wpt_receiver.sizing import envelope_currents
+    link = SwitchingLink(P, SwitchingConfig(devices=DV))
+    res = link.run(link.schedule(0.0, 40 * T, d), link.periodic_steady_state(d))
+    exact = rectifier_currents(res, window_s=20 * T, per_half_cycle=256)
+    pe = envelope_params(P, DV)
+    i2 = float(steady_state(pe, rectifier_v2_folded(d, P.vl_v, 11.0, DV))[1])
+    i1 = float(steady_state(pe, rectifier_v2_folded(d, P.vl_v, i2, DV))[0])
+    n = 400
+    env = envelope_currents(np.arange(1, n + 1) * T / 4, np.full(n, T / 4), np.full(n, d), np.full(n, i1),
+                            np.full(n, i2), exact["peak_i2_a"], DV, window_s=20 * T)
+    for key in ("diode_rms_a", "diode_avg_a", "switch_rms_a", "conduction_loss_w"):
+        assert env[key] == pytest.approx(exact[key], rel=0.03), key
+
+
+def test_cli_sizing_from_missions(capsys):
+    from mission_sim.cli import main
+    assert main(["sizing", "--source", "mission", "--policies", "step,model_based", "--no-plot", "--no-progress",
+                 "--format", "json"]) == 0
+    rows = {r["policy"]: r for r in json.loads(capsys.readouterr().out)["rows"]}
+    step, mb = rows["step"], rows["model_based"]
+    assert step["peak_i2_a"] > 2 * mb["peak_i2_a"] and step["mass_g"] > mb["mass_g"]
+    assert step["required_rating_a"] == pytest.approx(1.25 * step["peak_i2_a"])

@@ -22,6 +22,10 @@ model with real devices gives the instantaneous secondary current; from it:
   sink-to-air temperature rise ``dt_sink_k`` with a convection coefficient ``h_w_m2k`` (forced
   air in the rotor downwash): fin area ``A = P / (h dT)``, fins of thickness ``fin_m`` cooled on
   both sides, mass ``rho t A / 2``. A stated first-order method, not a thermal design.
+
+From a mission (an envelope run) instead, :func:`envelope_currents` gives the same quantities from
+the averaged device model and the run's instantaneous peak estimate; :func:`select_parts` is the
+part choice both use.
 """
 
 from __future__ import annotations
@@ -34,7 +38,8 @@ import numpy as np
 from .devices import DeviceSet, Diode, Switch, parts
 from .params import LinkParams
 
-__all__ = ["SizingRules", "rectifier_currents", "candidates", "size_policy", "paper_policy", "size_policies"]
+__all__ = ["SizingRules", "rectifier_currents", "envelope_currents", "candidates", "size_policy", "select_parts",
+           "paper_policy", "size_policies"]
 
 
 @dataclass(frozen=True)
@@ -85,7 +90,8 @@ def rectifier_currents(res, window_s: float = 1e-3, per_half_cycle: int = 64) ->
     body, dd = dv.rect_switch.body, dv.rect_diode
     loss = ((dd.vf0_v + body.vf0_v) * (d1 + d2) + (dd.rd_ohm + body.rd_ohm) * (d1 * d1 + d2 * d2)
             + dv.short_r_ohm * sh * sh)
-    return {"peak_i2_a": float(res.envelope()["i2_env_a"].max()),
+    # the refined half-cycle peaks, or the dense samples where the peak sits on a gate-edge kink
+    return {"peak_i2_a": float(max(res.envelope()["i2_env_a"].max(), np.abs(i2).max())),
             "diode_rms_a": math.sqrt(max(_window_max(d1 * d1, n), _window_max(d2 * d2, n))),
             "diode_avg_a": max(_window_max(d1, n), _window_max(d2, n)),
             "switch_rms_a": math.sqrt(max(_window_max(sh * sh + d2 * d2, n), _window_max(sh * sh + d1 * d1, n))),
@@ -116,7 +122,14 @@ def _paralleled(base: DeviceSet, diode: dict, switch: dict) -> DeviceSet:
 def size_policy(run, params: LinkParams, base: DeviceSet, rules: SizingRules = SizingRules()) -> dict:
     """Size the rectifier for one policy. ``run(devices) -> SwitchingResult`` simulates the
     policy's duty sequence with a device set. Returns the row of the sizing table."""
-    first = rectifier_currents(run(base), rules.window_s)
+    return select_parts(lambda dv: rectifier_currents(run(dv), rules.window_s), params, base, rules)
+
+
+def select_parts(measure, params: LinkParams, base: DeviceSet, rules: SizingRules = SizingRules()) -> dict:
+    """The lightest rectifier for ``measure(devices) -> currents`` (the keys of
+    :func:`rectifier_currents`): rating = margin x the peak measured with ``base``, every
+    combination of shipped parts meeting it, mass = devices + heat sink for the measured loss."""
+    first = measure(base)
     required = rules.margin * first["peak_i2_a"]
     v_min = rules.v_margin * params.vl_v
     best = None
@@ -126,12 +139,45 @@ def size_policy(run, params: LinkParams, base: DeviceSet, rules: SizingRules = S
             if best is not None and dev_mass >= best["mass_g"]:
                 continue  # the sink only adds: cannot beat the best
             dv = _paralleled(base, dio, sw)
-            cur = rectifier_currents(run(dv), rules.window_s)
+            cur = measure(dv)
             mass = dev_mass + rules.sink_mass_g(cur["conduction_loss_w"])
             if best is None or mass < best["mass_g"]:
                 best = {**cur, "required_rating_a": required, "part": dv.name, "mass_g": mass,
                         "device_mass_g": dev_mass, "sink_mass_g": mass - dev_mass, "devices": dv}
     return best
+
+
+def _window_mean_max(t_end_s, dt_s, y, window_s: float) -> float:
+    """Largest mean of the step-wise constant ``y`` (value ``y[i]`` over ``(t_end - dt, t_end]``)
+    over any window of ``window_s`` ending at a step end (exact for piecewise-constant data; the
+    whole run when it is shorter)."""
+    t_end, y = np.asarray(t_end_s, dtype=float), np.asarray(y, dtype=float)
+    t = np.r_[t_end[0] - dt_s[0], t_end]
+    c = np.r_[0.0, np.cumsum(y * np.asarray(dt_s, dtype=float))]
+    w = min(window_s, t[-1] - t[0])
+    ends = t[t >= t[0] + w - 1e-12]
+    return float(np.max((np.interp(ends, t, c) - np.interp(ends - w, t, c)) / w))
+
+
+def envelope_currents(t_end_s, dt_s, d_short, i1_amp_a, i2_amp_a, peak_i2_a: float, devices: DeviceSet,
+                      window_s: float = 1e-3) -> dict:
+    """:func:`rectifier_currents` from an envelope run (a mission's time series: one row per step,
+    values at the step's end held over the step): with ``w`` = the short window's share of
+    ``<i2^2>`` (:func:`wpt_receiver.sbar.short_weight`), an upper diode carries ``<i^2> =
+    (I2^2/2)(1 - w)/2`` and ``<i> = I_L/2``, a lower switch the short, ``(I2^2/2) w``, plus its body
+    diode's half; the loss is :func:`wpt_receiver.sbar.conduction_losses` (rectifier groups).
+    ``peak_i2_a`` is the run's instantaneous peak (e.g. the mission's ``peak_i2_a``)."""
+    from .sbar import conduction_losses, rectifier_current, short_weight
+    d, i2 = np.asarray(d_short, dtype=float), np.asarray(i2_amp_a, dtype=float)
+    w, sq = short_weight(d), 0.5 * i2 * i2
+    loss = conduction_losses(d, np.asarray(i1_amp_a, dtype=float), i2, devices)
+    args = (t_end_s, dt_s)
+    return {"peak_i2_a": float(peak_i2_a),
+            "diode_rms_a": math.sqrt(_window_mean_max(*args, 0.5 * sq * (1 - w), window_s)),
+            "diode_avg_a": _window_mean_max(*args, 0.5 * rectifier_current(d, np.abs(i2)), window_s),
+            "switch_rms_a": math.sqrt(_window_mean_max(*args, sq * w + 0.5 * sq * (1 - w), window_s)),
+            "conduction_loss_w": _window_mean_max(*args, loss["rectifier_diodes"] + loss["rectifier_switches"],
+                                                  window_s)}
 
 
 def paper_policy(name: str, params: LinkParams, t_switch_s: float = 1e-3, t_end_s: float = 10e-3):

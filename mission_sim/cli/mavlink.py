@@ -137,7 +137,8 @@ def _cmd_replay(args) -> int:
         print(json.dumps(s, allow_nan=False))
         return 0
     _print_log_facts(args.log.name, s)
-    print(f"mission world: {s['energy_to_battery_j']:.0f} J to the battery, propulsion {s['propulsion_energy_j']:.0f} J "
+    print(f"mission world: rectifier output {s['rectifier_output_j']:.0f} J ({s['battery_charge_in_j']:.0f} J into "
+          f"the battery while charging), propulsion {s['propulsion_energy_j']:.0f} J "
           f"(model, {cfg.drone.mass_kg:g} kg drone), final SoC {s['final_soc']:.3f}")
     c = s.get("power_comparison")
     if c and "logged_mean_w" in c:

@@ -18,8 +18,15 @@ def _add_sizing(sub):
                                    "real devices; size the SBAR: worst-case instantaneous |i2|, device RMS currents, "
                                    "required rating (margin x peak), smallest-mass combination of shipped parts, "
                                    "conduction losses and rectifier mass (devices + plate-fin heat sink).")
-    p.add_argument("--policies", default="step,ramp,proposed",
-                   help="comma-separated transitions: step, ramp, proposed (default: all three)")
+    p.add_argument("--source", choices=("paper", "mission"), default="paper",
+                   help="paper: the RM -> SM transition on the switching model (default); mission: whole missions "
+                        "per policy (envelope currents, instantaneous peak estimate)")
+    p.add_argument("--policies", default=None,
+                   help="comma-separated: transitions step, ramp, proposed (paper; default all three) or mission "
+                        "policies (mission; default step,ramp,model_based)")
+    p.add_argument("--config", type=Path, default=None, help="mission TOML for --source mission (default: embedded)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="mission config override for --source mission (repeatable)")
     p.add_argument("--devices", default="schottky", help="device preset for the first run and the inverter "
                    "(default schottky; see wpt_receiver/parts.toml)")
     p.add_argument("--margin", type=float_arg("margin", positive=True, lo=1.0, hi=10.0), default=1.25,
@@ -33,6 +40,14 @@ def _add_sizing(sub):
     p.set_defaults(func=_cmd_sizing)
 
 
+def _names(args, valid, default):
+    text = default if args.policies is None else args.policies
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    if not names or any(n.partition(":")[0] not in valid for n in names):
+        raise CliError(f"--policies {text!r} is invalid; valid values: {', '.join(valid)}")
+    return names
+
+
 def _rows(args):
     from tqdm import tqdm
 
@@ -40,16 +55,42 @@ def _rows(args):
     from wpt_receiver.devices import preset
     from wpt_receiver.references import TRAJECTORIES
     from wpt_receiver.sizing import SizingRules, size_policies
-    names = [n.strip() for n in args.policies.split(",") if n.strip()]
-    bad = [n for n in names if n not in TRAJECTORIES]
-    if bad or not names:
-        raise CliError(f"--policies {args.policies!r} is invalid; valid values: {', '.join(TRAJECTORIES)}")
-    base = preset(args.devices)
+    try:
+        base = preset(args.devices)
+    except ValueError as e:
+        raise CliError(f"--devices: {e}") from None
+    if args.source == "mission":
+        return _mission_rows(args, base)
+    names = _names(args, TRAJECTORIES, "step,ramp,proposed")
     bar = tqdm(total=len(names), desc="sizing", disable=not show_progress(args), file=sys.stderr)
     with bar:
         rows = size_policies(names, TABLE_I, base, SizingRules(margin=args.margin), t_end_s=args.t_end,
                              progress=lambda: bar.update(1))
     return [{"policy": r["policy"], **{c: r[c] for c in _COLUMNS}} for r in rows]
+
+
+def _mission_rows(args, base):
+    """Sizing rows from whole missions (one per policy) with the link's devices = ``--devices``."""
+    from tqdm import tqdm
+
+    import policies
+    from wpt_receiver.sizing import SizingRules, envelope_currents, select_parts
+
+    from ..world.runner import run_mission
+    from .mission import make_policy, mission_config
+    names = _names(args, policies.available(), "step,ramp,model_based")
+    args.set = [*args.set, f"link.devices={base.name}"]
+    cfg = mission_config(args)
+    rows = []
+    for name in tqdm(names, desc="sizing missions", disable=not show_progress(args), file=sys.stderr):
+        res = run_mission(cfg, make_policy(name, cfg))
+        ts, peak = res.timeseries, res.summary["peak_i2_a"]
+        cols = [ts[c].to_numpy() for c in ("t_s", "dt_s", "d_short", "i1_amp_a", "i2_amp_a")]
+        params = res.config.link.link_params(1.0, 1.0, 0.1)          # VL = 30 V: the voltage rule
+        row = select_parts(lambda dv: envelope_currents(*cols, peak, dv), params, base,
+                           SizingRules(margin=args.margin))
+        rows.append({"policy": name, **{c: row[c] for c in _COLUMNS}})
+    return rows
 
 
 def _cmd_sizing(args) -> int:
@@ -59,17 +100,20 @@ def _cmd_sizing(args) -> int:
     figs = []
     if not args.no_plot:
         from ..figures.sizing import plot_sizing
+        what = "Table I link" if args.source == "paper" else "missions"
         figs.append(plot_sizing(rows, args.out / "sizing.png",
-                                f"SBAR sizing, Table I link, devices {args.devices}, margin {args.margin:g}"))
+                                f"SBAR sizing, {what}, devices {args.devices}, margin {args.margin:g}"))
     if args.format == "json":
-        print(json.dumps({"devices": args.devices, "margin": args.margin, "rows": rows, "figures": figs}))
+        print(json.dumps({"source": args.source, "devices": args.devices, "margin": args.margin, "rows": rows,
+                          "figures": figs}))
         return 0
-    print(f"SBAR sizing (switching model, devices {args.devices}, rating = {args.margin:g} x peak |i2|; "
+    model = "switching model, RM -> SM" if args.source == "paper" else "missions, envelope + ripple peak"
+    print(f"SBAR sizing ({model}, devices {args.devices}, rating = {args.margin:g} x peak |i2|; "
           "RMS and loss over the worst 1 ms)")
-    print(f"{'policy':<9} {'peak i2':>8} {'diode rms':>9} {'switch rms':>10} {'rating':>8} {'loss':>7} "
+    print(f"{'policy':<11} {'peak i2':>8} {'diode rms':>9} {'switch rms':>10} {'rating':>8} {'loss':>7} "
           f"{'mass':>7}  part")
     for r in rows:
-        print(f"{r['policy']:<9} {r['peak_i2_a']:>6.2f} A {r['diode_rms_a']:>7.2f} A {r['switch_rms_a']:>8.2f} A "
+        print(f"{r['policy']:<11} {r['peak_i2_a']:>6.2f} A {r['diode_rms_a']:>7.2f} A {r['switch_rms_a']:>8.2f} A "
               f"{r['required_rating_a']:>6.1f} A {r['conduction_loss_w']:>5.2f} W {r['mass_g']:>5.1f} g  {r['part']}")
     for f in figs:
         print(f"figure: {f}")

@@ -47,7 +47,7 @@ def plot_replay(result, path, title: str = "") -> str:
     a.plot(ts["t_s"], ts["soc"], lw=0.8)
     _shade_armed(a, periods, tr.t_offset_s)
     a.set_xlabel("time [s]"), a.set_ylabel("state of charge"), a.grid(alpha=0.3)
-    a.set_title(f"to battery {result.summary['energy_to_battery_j'] / 1e3:.2f} kJ, "
+    a.set_title(f"rectifier out {result.summary['rectifier_output_j'] / 1e3:.2f} kJ, "
                 f"propulsion {result.summary['propulsion_energy_j'] / 1e3:.1f} kJ")
     if title:
         fig.suptitle(title)

@@ -381,7 +381,8 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
     summary = flight_stats(log, track)
     ms = mission.summary
     summary.update({
-        "energy_to_battery_j": float(ms["energy_to_battery_j"]),
+        "rectifier_output_j": float(ms["rectifier_output_j"]),
+        "battery_charge_in_j": float(ms["battery_charge_in_j"]),
         "propulsion_energy_j": float(ms["propulsion_energy_j"]),
         "energy_from_source_j": float(ms["energy_from_source_j"]),
         "final_soc": float(ms["final_soc"]),

@@ -18,7 +18,8 @@ from .study import POLICY_KEY, Study  # noqa: E402
 __all__ = ["SUMMARY_METRICS", "summary_table", "error_table", "plot_sweep"]
 
 #: metrics shown in the summary table when the runner reports them (mission summary keys)
-SUMMARY_METRICS = ("flight_time_gain_s", "peak_i2_a", "time_above_rated_s", "energy_to_battery_j",
+SUMMARY_METRICS = ("flight_time_gain_s", "peak_i2_a", "time_above_rated_s", "rectifier_output_j",
+                   "battery_charge_in_j", "device_losses_j",
                    "energy_from_source_j", "final_soc", "energy_balance_error_rel")
 
 

@@ -29,6 +29,7 @@ class LinkStepper:
         self.b1 = -1.0 / (2 * l2_h)
         self._cache = {}
         self._lyap = {}
+        self.last_p = (0.0, 0.0)
 
     def matrices(self, lm_h):
         wlm = self.w * lm_h
@@ -121,6 +122,7 @@ class LinkStepper:
         l = self._lyap_inv(lm_h)
         p11 = l[0] * q11 + l[1] * q12 + l[2] * q22
         p22 = l[6] * q11 + l[7] * q12 + l[8] * q22
+        self.last_p = (p11, p22)  # int I1^2 dt, int I2^2 dt of this step (device-loss split)
         e_src = 0.5 * v1 * s0
         e_coil = 0.5 * (self.r1 * p11 + self.r2 * p22)
         e_rect = 0.5 * v2 * s1

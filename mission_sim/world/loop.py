@@ -40,7 +40,8 @@ _FOUR_PI = 4.0 / math.pi
 _COLUMNS = ("t_s", "dt_s", "_row", "lm_h", "v1_v", "i1_amp_a", "i2_amp_a", "d_short", "v2_v", "rect_current_a",
             "battery_v", "battery_current_a", "soc", "charge_cmd_a", "fine", "e_source_j", "e_coil_loss_j",
             "e_rectifier_j", "e_battery_chem_j", "e_battery_r0_j", "e_battery_r1_j", "e_battery_c1_j",
-            "e_propulsion_j")
+            "e_propulsion_j", "e_inverter_switches_j", "e_rectifier_diodes_j", "e_rectifier_switches_j")
+DEVICE_GROUPS = ("inverter_switches", "rectifier_diodes", "rectifier_switches")
 
 
 def _sign(v: float) -> float:
@@ -63,6 +64,9 @@ class MissionLoop:
         "inv_sqrt_l1l2": "1/sqrt(L1 L2) [1/H] (k = Lm / sqrt(L1 L2))", "t_rect": "rectifier period 1/(2f) [s]",
         "r0": "battery R0 [ohm]", "r1b": "battery R1 [ohm]", "n_cells": "cells in series",
         "tau1": "battery R1-C1 time constant [s]", "bat_step": "scalar battery stepper",
+        "dev": "DeviceSet (cfg.link.devices)", "vf": "forward drop of the rectifying path [V]",
+        "dr_short": "shorted-SBAR resistance minus the folded Rd [ohm]",
+        "peak_env": "peak |I2| of the envelope [A]", "peak_d": "duty at that peak [-]",
         # --- per-sample arrays (pose -> Lm, propulsion, gating eligibility)
         "lm_all": "Lm per sample [H]", "k_all": "coupling per sample [-]", "p_all": "propulsion power [W]",
         "t_all": "sample times [s]", "eligible": "sample in an energising phase (and charge)",
@@ -86,7 +90,13 @@ class MissionLoop:
         self.sim, self.lk = sim, lk = cfg.sim, cfg.link
         model = cfg.coupling.model()
         self.base = base = lk.link_params(model.l1_h, model.l2_h, float(model.lm_h(0.0, 0.0, cfg.mission.hover_gap_m)))
-        self.st = LinkStepper(model.l1_h, model.l2_h, lk.r1_ohm, lk.r2_ohm, base.omega_rad_s)
+        # devices, averaged (wpt_receiver.sbar.rectifier_v2_devices): the inverter's 2 Ron and the
+        # rectifying path's Rd are folded into R1 / R2 of the stepper; the forward drops add to the
+        # clamp VL; the shorted channels' excess over Rd enters V2 as (2 Ron - Rd) w(d) I2
+        self.dev = dev = lk.device_set()
+        self.vf, self.dr_short = dev.rect_vf_v, dev.short_r_ohm - dev.rect_rd_ohm
+        self.st = LinkStepper(model.l1_h, model.l2_h, lk.r1_ohm + dev.inv_r_ohm, lk.r2_ohm + dev.rect_rd_ohm,
+                              base.omega_rad_s)
         self.v1_nom = base.v1_amp_v
         self.bp = bp = cfg.battery
         self.bat = Battery(bp, 1)
@@ -124,6 +134,7 @@ class MissionLoop:
         self.policy.reset(1)
         self.w0 = self.st.stored_j(self.x)
         self.peak_i2 = self.above = 0.0
+        self.peak_env, self.peak_d = 0.0, 1.0
         self.n_fine = self.n_coarse = self.n_windows = self.n_cut = 0
         self.rows = []
 
@@ -311,11 +322,12 @@ class MissionLoop:
             return False
         if v1 == 0.0:  # pad off: the duty no longer matters once the coil currents have died out
             return abs(x[0]) < tol and abs(x[1]) < tol
-        lk = self.lk
+        st = self.st
         c = _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * self.d))
         wlm = self.base.omega_rad_s * lm
-        det = lk.r1_ohm * lk.r2_ohm + wlm * wlm
-        i2ss = (wlm * v1 - lk.r1_ohm * c * self.last_vl) / det if lm > 0 else 0.0
+        r2 = st.r2 + self.dr_short * (self.d + math.sin(math.pi * self.d) / math.pi)
+        det = st.r1 * r2 + wlm * wlm
+        i2ss = (wlm * v1 - st.r1 * c * (self.last_vl + self.vf)) / det if lm > 0 else 0.0
         return abs(x[1] - i2ss) < tol
 
     # ------------------------------------------------------------------ policy
@@ -344,7 +356,8 @@ class MissionLoop:
         if v1 > 0.0 and d < 1.0 and dt > 1.5 * t_rect and x[1] != 0.0:
             st = self.st
             lm_eff = lm if lm > 0 else 1e-12
-            v2p = _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * d)) * self.last_vl * (1.0 if x[1] > 0.0 else -1.0)
+            v2p = (_FOUR_PI * (1.0 - math.sin(0.5 * math.pi * d)) * (self.last_vl + self.vf) * (1.0 if x[1] > 0.0 else -1.0)
+                   + self.dr_short * (d + math.sin(math.pi * d) / math.pi) * x[1])
             samples = st.i2_samples(lm_eff, dt, x, v1, v2p, m=8)
             (_, _, d10, d11), (_, _, bd10, bd11), _, _ = st.disc(lm_eff, dt)
             samples.append(d10 * x[0] + d11 * x[1] + bd10 * v1 + bd11 * v2p)
@@ -368,6 +381,9 @@ class MissionLoop:
         # through them against the battery and the coil currents ring down in R1, R2 (the envelope model
         # has no diode to stop I2 at zero, so holding V2 over a long step would drive I2 to -V2/R2).
         c = rectifier_v2(d, 1.0, x[1], sin=math.sin, sign=_sign) if v1 > 0.0 else 0.0  # V2 per volt of VL
+        # devices: V2 = c (VL + Vf) + (2 Ron - Rd) w(d) I2 (the last held at the step's start)
+        w_short = d + math.sin(math.pi * d) / math.pi
+        v2x = c * self.vf + (self.dr_short * w_short * x[1] if v1 > 0.0 else 0.0)
         # battery: mean terminal voltage = A0 + G * i_mean (held-current RC solution); solve VL
         # implicitly with the link so V2, the battery and the propulsion power agree exactly
         frac = tau1 * (1.0 - math.exp(-dt / tau1)) / dt
@@ -376,7 +392,7 @@ class MissionLoop:
         lm_eff = lm if lm > 0 else 1e-12
         dsc = st.disc(lm_eff, dt)
         m10, m11, g1, s1 = dsc[3]
-        s0 = m10 * x[0] + m11 * x[1] + g1 * v1
+        s0 = m10 * x[0] + m11 * x[1] + g1 * v1 + s1 * v2x
         alpha = 1.0 - g * c * c * s1 / (2 * dt)
         beta = a0 + g * c * s0 / (2 * dt)
         disc = beta * beta - 4 * alpha * g * p_prop
@@ -386,28 +402,46 @@ class MissionLoop:
                              f"{beta * beta / (4 * alpha * g):.1f} W; lighten the drone (drone.mass_kg, "
                              f"drone.payload_kg) or use a bigger battery (battery.n_series, battery.capacity_ah)")
         vl = (beta + math.sqrt(disc)) / (2 * alpha)
-        v2 = c * vl
-        peak_i2, above, rated = self.peak_i2, self.above, self.rated
+        v2 = c * vl + v2x
         if fine:
-            for i2s in st.i2_samples(lm_eff, dt, x, v1, v2):
-                i2s = abs(i2s)  # a negative envelope is a current of that size shifted by pi
-                if i2s > peak_i2:
-                    peak_i2 = i2s
-                if i2s > rated:
-                    above += dt / 4
+            self.track_peak(st.i2_samples(lm_eff, dt, x, v1, v2), d, dt / 4)
         x1, e_src, e_coil, e_rect, int_i2 = st.step(lm_eff, dt, x, v1, v2, dsc)
         i_l = 0.5 * c * int_i2 / dt
         i_p = p_prop / vl
         i_b = i_l - i_p
         soc, vrc, e_chem, e_r0, e_r1, e_c1, _ = self.bat_step(soc, vrc, i_b, dt)
-        if abs(x1[1]) > peak_i2:
-            peak_i2 = abs(x1[1])
-        if abs(x1[1]) > rated:
-            above += dt / 4 if fine else dt
-        self.x, self.soc, self.vrc, self.peak_i2, self.above = x1, soc, vrc, peak_i2, above
+        self.track_peak((x1[1],), d, dt / 4 if fine else dt)
+        self.x, self.soc, self.vrc = x1, soc, vrc
         self.last_vl, self.last_ib, self.last_il = vl, i_b, i_l
+        e_out = vl * i_l * dt
         self.rows.append((t0 + dt, dt, row_k, lm, v1, x1[0], x1[1], d, v2, i_l, vl, i_b, soc, self.cmd, fine,
-                          e_src, e_coil, e_rect, e_chem, e_r0, e_r1, e_c1, vl * i_p * dt))
+                          e_src, *self.device_split(e_coil + e_rect - e_out, i_l * dt, w_short, e_out, e_chem, e_r0,
+                                                    e_r1, e_c1, vl * i_p * dt)))
+
+    def track_peak(self, i2_values, d: float, dt_each: float):
+        """Running peak of |I2| (a negative envelope is a current of that size shifted by pi), the duty
+        there, and the time above rated (``dt_each`` per value)."""
+        for i2s in i2_values:
+            i2s = abs(i2s)
+            if i2s > self.peak_env:
+                self.peak_env, self.peak_d = i2s, d
+            if i2s > self.rated:
+                self.above += dt_each
+
+    def device_split(self, e_loss: float, charge_c: float, w_short: float, *rest):
+        """``(coils, *rest, inverter switches, rectifier diodes, rectifier switches)`` [J] (the row's
+        order) of a step whose link losses (coils + devices) are ``e_loss``: the coils take
+        ``(R1 int I1^2 + R2 int I2^2) / 2``, the devices the folded resistances' share of
+        the stepper's ``int I^2`` (:attr:`LinkStepper.last_p`), the forward drops ``Vf0 * charge``
+        (``charge_c`` = int I_L dt) and the short-window excess; the rectifier switches take what
+        is left, so the three plus the coils add up to ``e_loss`` exactly."""
+        p11, p22 = self.st.last_p
+        dev, lk = self.dev, self.lk
+        e_inv = 0.5 * dev.inv_r_ohm * p11
+        e_dio = dev.rect_diode.vf0_v * charge_c + 0.5 * dev.rect_diode.rd_ohm * p22 * (1.0 - w_short)
+        e_coil = 0.5 * (lk.r1_ohm * p11 + lk.r2_ohm * p22)
+        e_sw = 0.0 if dev.is_ideal else e_loss - e_coil - e_inv - e_dio
+        return (e_loss if dev.is_ideal else e_coil), *rest, e_inv, e_dio, e_sw
 
     # ------------------------------------------------------------------ result assembly
     def result(self) -> MissionResult:
@@ -439,39 +473,21 @@ class MissionLoop:
 
     def summary(self, arr, df) -> dict:
         """Summary dict: energies (exact sums), balance errors, SoC, I2 peak, step counts."""
-        col = {name: j for j, name in enumerate(_COLUMNS)}
-        acc = {key: math.fsum(arr[:, col[c]].tolist()) for key, c in (
-            ("src", "e_source_j"), ("coil", "e_coil_loss_j"), ("rect", "e_rectifier_j"), ("chem", "e_battery_chem_j"),
-            ("r0", "e_battery_r0_j"), ("r1", "e_battery_r1_j"), ("c1", "e_battery_c1_j"), ("prop", "e_propulsion_j"))}
-        dw = self.st.stored_j(self.x) - self.w0
-        losses = acc["coil"] + acc["r0"] + acc["r1"]
-        rhs = math.fsum([acc["chem"], acc["c1"], dw, losses, acc["prop"]])
-        scale = abs(acc["src"]) + abs(acc["chem"]) + abs(acc["prop"])
-        link_res = math.fsum([acc["src"], -dw, -acc["coil"], -acc["rect"]])
         bp, t_all = self.bp, self.t_all
+        self.peak_i2 = self.instantaneous_peak(df)
         return {
             "policy": getattr(self.policy, "name", type(self.policy).__name__),
             "charge": bool(self.charge),
             "sim_time_s": float(t_all[-1] - t_all[0]),
             "wall_s": 0.0,
-            "energy_from_source_j": acc["src"],
-            "energy_to_battery_j": acc["rect"],
-            "battery_chem_delta_j": acc["chem"],
-            "losses_j": losses,
-            "coil_losses_j": acc["coil"],
-            "battery_losses_j": acc["r0"] + acc["r1"],
-            "device_losses_j": 0.0,
-            "link_stored_delta_j": dw,
-            "battery_c1_delta_j": acc["c1"],
-            "propulsion_energy_j": acc["prop"],
-            "energy_balance_error_rel": abs(acc["src"] - rhs) / scale if scale > 0 else 0.0,
-            "link_balance_error_rel": abs(link_res) / abs(acc["src"]) if acc["src"] else 0.0,
+            **self.energy_summary(arr),
             "initial_soc": float(bp.initial_soc),
             "final_soc": float(self.soc),
             "battery_full": bool(self.charger.full[0]),
             "min_soc": float(min(df["soc"].min(), bp.initial_soc)) if len(df) else float(bp.initial_soc),
             "battery_depleted": bool(len(df) and df["soc"].min() < 0.0),
             "peak_i2_a": self.peak_i2,
+            "peak_i2_envelope_a": self.peak_env,
             "rated_i2_a": self.rated,
             "time_above_rated_s": self.above,
             "flight_time_gain_s": 0.0,
@@ -481,3 +497,65 @@ class MissionLoop:
             "fine_windows_cut": self.n_cut,
             "charge_time_s": float(np.sum(df["dt_s"].to_numpy()[df["tx_on"].to_numpy()])),
         }
+
+    def energy_summary(self, arr) -> dict:
+        """Energies [J] (exact sums), per device group, efficiency and the two balances.
+
+        ``rectifier_output_j`` is the SBAR's DC output into the battery node (sum VL I_L dt; most of
+        it feeds the motors while hovering over a pad), ``battery_charge_in_j`` the gross energy into
+        the battery terminals while it charges (sum VL I_batt dt over I_batt > 0), and
+        ``propulsion_energy_j`` what the motors drew. ``dc_to_battery_efficiency`` = rectifier
+        output / inverter DC input (``energy_from_source_j``)."""
+        col = {name: j for j, name in enumerate(_COLUMNS)}
+        acc = {key: math.fsum(arr[:, col[c]].tolist()) for key, c in (
+            ("src", "e_source_j"), ("coil", "e_coil_loss_j"), ("rect", "e_rectifier_j"), ("chem", "e_battery_chem_j"),
+            ("r0", "e_battery_r0_j"), ("r1", "e_battery_r1_j"), ("c1", "e_battery_c1_j"), ("prop", "e_propulsion_j"))}
+        groups = {f"{g}_loss_j": math.fsum(arr[:, col[f"e_{g}_j"]].tolist()) for g in DEVICE_GROUPS}
+        dev = math.fsum(groups.values())
+        ib = arr[:, col["battery_current_a"]]
+        charge_in = math.fsum((arr[:, col["battery_v"]] * np.maximum(ib, 0.0) * arr[:, col["dt_s"]]).tolist())
+        dw = self.st.stored_j(self.x) - self.w0
+        losses = math.fsum([acc["coil"], dev, acc["r0"], acc["r1"]])
+        rhs = math.fsum([acc["chem"], acc["c1"], dw, losses, acc["prop"]])
+        scale = abs(acc["src"]) + abs(acc["chem"]) + abs(acc["prop"])
+        link_res = math.fsum([acc["src"], -dw, -acc["coil"], -dev, -acc["rect"]])
+        return {
+            "energy_from_source_j": acc["src"],
+            "rectifier_output_j": acc["rect"],
+            "battery_charge_in_j": charge_in,
+            "propulsion_energy_j": acc["prop"],
+            "dc_to_battery_efficiency": acc["rect"] / acc["src"] if acc["src"] > 0 else 0.0,
+            "battery_chem_delta_j": acc["chem"],
+            "losses_j": losses,
+            "coil_losses_j": acc["coil"],
+            "battery_losses_j": acc["r0"] + acc["r1"],
+            "device_losses_j": dev,
+            **groups,
+            "devices": self.dev.name,
+            "link_stored_delta_j": dw,
+            "battery_c1_delta_j": acc["c1"],
+            "energy_balance_error_rel": abs(acc["src"] - rhs) / scale if scale > 0 else 0.0,
+            "link_balance_error_rel": abs(link_res) / abs(acc["src"]) if acc["src"] else 0.0,
+        }
+
+    def instantaneous_peak(self, df) -> float:
+        """Instantaneous peak |i2| [A]: the envelope's peak plus the harmonic ripple of the SBAR at
+        that duty (:class:`wpt_receiver.peak.SbarHarmonics`, at the hover-gap Lm and the highest
+        battery voltage seen with the pad on), over the envelope's peak and every step whose |I2|
+        is within the ripple bound of it (the ripple depends on the duty): screened with the
+        tabulated :class:`wpt_receiver.peak.PeakTable`, evaluated exactly where the table is within
+        1 % of its maximum."""
+        if self.peak_env == 0.0:
+            return 0.0
+        from wpt_receiver.peak import PeakTable, SbarHarmonics
+        on = df["tx_on"].to_numpy()
+        vl = float(df["battery_v"].to_numpy()[on].max()) if on.any() else float(self.last_vl)
+        harm = SbarHarmonics(self.base.with_(vl_v=vl), self.dev)
+        i2 = np.abs(df["i2_amp_a"].to_numpy())
+        cand = on & (i2 >= self.peak_env - 2.0 * harm.ripple_bound_a())
+        d, i2c = np.r_[self.peak_d, df["d_short"].to_numpy()[cand]], np.r_[self.peak_env, i2[cand]]
+        if len(d) > 64:
+            approx = PeakTable(harm, i2_max_a=1.05 * self.peak_env, n_d=26, n_i=21)(d, i2c)
+            keep = approx >= 0.99 * approx.max()
+            d, i2c = d[keep], i2c[keep]
+        return float(np.max(harm.peak(d, i2c)))

@@ -12,9 +12,9 @@ from ..files import atomic_output
 
 __all__ = ["MissionResult", "SUMMARY_KEYS", "TIMESERIES_COLUMNS"]
 
-SUMMARY_KEYS = ("sim_time_s", "wall_s", "energy_from_source_j", "energy_to_battery_j", "losses_j",
-                "propulsion_energy_j", "energy_balance_error_rel", "final_soc", "peak_i2_a", "time_above_rated_s",
-                "flight_time_gain_s")
+SUMMARY_KEYS = ("sim_time_s", "wall_s", "energy_from_source_j", "rectifier_output_j", "battery_charge_in_j",
+                "propulsion_energy_j", "losses_j", "device_losses_j", "dc_to_battery_efficiency",
+                "energy_balance_error_rel", "final_soc", "peak_i2_a", "time_above_rated_s", "flight_time_gain_s")
 TIMESERIES_COLUMNS = ("t_s", "x_m", "y_m", "z_m", "lm_h", "tx_on", "i1_amp_a", "i2_amp_a", "d_short", "v2_v",
                       "rect_current_a", "battery_v", "battery_current_a", "soc", "propulsion_w")
 
