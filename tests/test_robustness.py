@@ -272,3 +272,17 @@ def test_replay_warns_on_a_log_ending_armed_and_a_far_pad(tmp_path):
     far = GeoPoint(35.363261, -149.16523, None)  # signs swapped: the other side of the Earth
     (w,) = replay_warnings(whole, track_from_log(whole, pad=far))
     assert re.search(r"is \d{4,5} km from the nearest point of the track", w)
+
+
+def test_replay_warns_when_the_battery_runs_out(tmp_path, capsys):
+    _write_tlog(tmp_path / "whole.tlog", 20.0, armed_at_end=False)
+    out = tmp_path / "r"
+    argv = ["replay", str(tmp_path / "whole.tlog"), "--out", str(out), "--no-plot", "--no-progress"]
+    assert _run([*argv, "--set", "battery.initial_soc=0.0005"]) == 0
+    err = capsys.readouterr().err
+    assert re.search(r"warning: battery depleted at t = \d+\.\d s, \d+ m from the nearest pad", err)
+    s = json.loads((out / "replay_summary.json").read_text())
+    mission = json.loads((out / "mission" / "summary.json").read_text())
+    assert mission["battery_depleted"] and mission["final_soc"] <= 1e-9
+    assert any("battery depleted" in w for w in s["warnings"])
+    assert _run(argv) == 0 and "depleted" not in capsys.readouterr().err

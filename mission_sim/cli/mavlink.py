@@ -112,6 +112,10 @@ def _cmd_replay(args) -> int:
     res = replay_log(log, cfg, policy, pad=pad, ground_gap_m=args.ground_gap, window=window,
                      progress=show_progress(args))
     s = res.summary
+    if res.mission.summary.get("battery_depleted"):
+        from .mission import depletion_text
+        s["warnings"] = [*s.get("warnings", ()), f"{depletion_text(res.mission.summary)} (the power comparison "
+                         "covers the flight up to that point)"]
     for w in s.get("warnings", ()):
         print(f"dronewpt replay: warning: {w}", file=sys.stderr)
     s["log"] = str(args.log)
