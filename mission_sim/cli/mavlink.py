@@ -273,6 +273,9 @@ def _cmd_telemetry(args) -> int:
     print(f"sent {st.frames} MAVLink 2 frames in {st.ticks} ticks at {args.rate:g} Hz: {st.sim_s:.1f} s of the "
           f"mission in {st.wall_s:.1f} s wall to {connect or 'no link'}"
           + (f"; wrote {args.tlog}" if args.tlog else ""))
+    if res.summary.get("battery_depleted"):
+        from .mission import depletion_text
+        print(f"dronewpt telemetry: warning: {depletion_text(res.summary)} (the stream ends there)", file=sys.stderr)
     return 0
 
 
