@@ -109,24 +109,105 @@ def test_summary_is_written_last(tmp_path):
 
 
 # ----------------------------------------------------------------------------- run size
+def _config(overrides: dict):
+    """The default mission with dotted-key overrides."""
+    from mission_sim.config import apply_overrides, config_from_dict, config_to_dict, load_config
+    return config_from_dict(apply_overrides(config_to_dict(load_config()), overrides))
+
+
+def _mission(overrides: dict, charge: bool = True):
+    """(config, result) of the default mission with ``overrides``, model-based policy."""
+    import policies
+    from mission_sim.config import policy_context
+    from mission_sim.world.runner import run_mission
+    cfg = _config(overrides)
+    return cfg, run_mission(cfg, policies.make("model_based", policy_context(cfg)), charge=charge)
+
+
 def test_size_estimate_brackets_a_real_run():
     """The estimate is within a factor 2 of the rows a real run produces, for a short and a long hover."""
-    import policies
-    from mission_sim.config import apply_overrides, config_from_dict, config_to_dict, load_config, policy_context
     from mission_sim.world.budget import check_run_size, estimate_run
-    from mission_sim.world.runner import run_mission
 
     for hover_s in (60.0, 1000.0):
-        cfg = config_from_dict(apply_overrides(config_to_dict(load_config()), {"pads.1.hover_time_s": hover_s}))
+        cfg, res = _mission({"pads.1.hover_time_s": hover_s})
         est = estimate_run(cfg)
-        rows = len(run_mission(cfg, policies.make("model_based", policy_context(cfg))).timeseries)
+        rows = len(res.timeseries)
         assert 0.5 * rows < est.rows < 2.0 * rows, (hover_s, est.rows, rows)
         assert est.key == ("sim.control_period_s" if hover_s < 100 else "pads.1.hover_time_s")
         assert check_run_size(cfg) == est
-    big = config_from_dict(apply_overrides(config_to_dict(load_config()), {"pads.1.hover_time_s": 1e9}))
+    big = _config({"pads.1.hover_time_s": 1e9})
     assert check_run_size(big, force=True).rows > 1e9
     with pytest.raises(ValueError, match=r"pads\.1\.hover_time_s=1000000000\.0 makes the run too large"):
         check_run_size(big)
+
+
+# ----------------------------------------------------------------------------- SoC in [0, 1], depletion
+SOC_CASES = {
+    "default mission": {},
+    "docs/mission.md example": {"wind.gust_sigma_m_s": 3.0, "pads.0.hover_time_s": 30.0},
+    "examples/study_small.toml, longest and farthest, strongest wind": {
+        "pads.0.hover_time_s": 30.0, "pads.1.y_m": 0.0, "pads.1.hover_time_s": 240.0, "pads.1.x_m": 80.0,
+        "wind.speed_m_s": 6.0},
+    "full battery, 10 min hover over an energised pad": {"battery.initial_soc": 1.0, "pads.1.hover_time_s": 600.0},
+    "nearly empty battery, charged at the first pad": {"battery.initial_soc": 0.02},
+}
+
+
+@pytest.mark.parametrize("overrides", SOC_CASES.values(), ids=SOC_CASES.keys())
+def test_soc_stays_in_0_1_and_these_missions_complete(overrides):
+    cfg, res = _mission(overrides)
+    soc, s = res.timeseries["soc"].to_numpy(), res.summary
+    assert 0.0 <= soc.min() and soc.max() <= 1.0
+    for key in ("final_soc", "min_soc", "final_soc_without_charging"):
+        assert 0.0 <= s[key] <= 1.0, key
+    assert not s["battery_depleted"]
+    assert s["sim_time_s"] == pytest.approx(res.trajectory.t_s[-1] - res.trajectory.t_s[0])
+    assert s["energy_balance_error_rel"] < 1e-9
+
+
+def _check_depleted_run(cfg, res):
+    """The run ended at SoC 0: last row, summary keys, the chemistry's energy and the pad distance."""
+    ts, s = res.timeseries, res.summary
+    soc = ts["soc"].to_numpy()
+    assert soc.min() >= 0.0 and soc.max() <= 1.0
+    assert s["battery_depleted"] and s["final_soc"] == soc[-1] and abs(soc[-1]) <= 1e-9
+    assert s["depleted_at_s"] == pytest.approx(ts["t_s"].iloc[-1], abs=1e-9) == pytest.approx(s["sim_time_s"])
+    assert s["depleted_at_s"] < res.trajectory.t_s[-1]  # the planned mission was longer
+    # the chemistry gave exactly what the OCV curve holds between the initial SoC and 0 (OCV held per step)
+    usable = cfg.battery.usable_energy_j
+    assert s["battery_chem_delta_j"] == pytest.approx(usable(0.0) - usable(cfg.battery.initial_soc), rel=1e-3)
+    assert s["energy_balance_error_rel"] < 1e-9
+    last = ts[["x_m", "y_m", "z_m"]].iloc[-1].to_numpy()
+    pads = np.array([[p.x_m, p.y_m, p.z_m] for p in cfg.pads])
+    assert s["depleted_pad_distance_m"] == pytest.approx(np.linalg.norm(pads - last, axis=1).min())
+
+
+def test_a_far_pad_ends_the_mission_at_depletion():
+    """Pad 1 at 10 km: the battery runs out on the way; charging at pad 0 only postpones it."""
+    cfg, res = _mission({"pads.1.x_m": 10_000.0})
+    _check_depleted_run(cfg, res)
+    s = res.summary
+    assert 500.0 < s["depleted_pad_distance_m"] < 9_500.0  # in the open, between the pads
+    assert s["battery_depleted_without_charging"]
+    assert s["depleted_at_s_without_charging"] < s["depleted_at_s"]
+    assert s["flight_time_gain_s"] == pytest.approx(s["depleted_at_s"] - s["depleted_at_s_without_charging"])
+
+
+def test_a_long_hover_without_charging_ends_over_the_pad():
+    cfg, res = _mission({"pads.1.hover_time_s": 3000.0}, charge=False)
+    _check_depleted_run(cfg, res)
+    assert res.summary["depleted_pad_distance_m"] < 1.0
+    assert res.timeseries["phase"].iloc[-1] == "charge"
+
+
+def test_depletion_exit_status_and_message(tmp_path, capsys):
+    assert _run(["mission", "--set", "pads.1.x_m=10000", "--no-plot", "--no-progress", "--out", str(tmp_path)]) == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert re.fullmatch(r"dronewpt mission: battery depleted at t = \d+\.\d s, \d+ m from the nearest pad; "
+                        r"the mission ended there", err[0])
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["battery_depleted"] and summary["final_soc"] <= 1e-9
 
 
 # ----------------------------------------------------------------------------- learning, envs
@@ -191,3 +272,17 @@ def test_replay_warns_on_a_log_ending_armed_and_a_far_pad(tmp_path):
     far = GeoPoint(35.363261, -149.16523, None)  # signs swapped: the other side of the Earth
     (w,) = replay_warnings(whole, track_from_log(whole, pad=far))
     assert re.search(r"is \d{4,5} km from the nearest point of the track", w)
+
+
+def test_replay_warns_when_the_battery_runs_out(tmp_path, capsys):
+    _write_tlog(tmp_path / "whole.tlog", 20.0, armed_at_end=False)
+    out = tmp_path / "r"
+    argv = ["replay", str(tmp_path / "whole.tlog"), "--out", str(out), "--no-plot", "--no-progress"]
+    assert _run([*argv, "--set", "battery.initial_soc=0.0005"]) == 0
+    err = capsys.readouterr().err
+    assert re.search(r"warning: battery depleted at t = \d+\.\d s, \d+ m from the nearest pad", err)
+    s = json.loads((out / "replay_summary.json").read_text())
+    mission = json.loads((out / "mission" / "summary.json").read_text())
+    assert mission["battery_depleted"] and mission["final_soc"] <= 1e-9
+    assert any("battery depleted" in w for w in s["warnings"])
+    assert _run(argv) == 0 and "depleted" not in capsys.readouterr().err

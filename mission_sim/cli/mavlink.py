@@ -112,6 +112,10 @@ def _cmd_replay(args) -> int:
     res = replay_log(log, cfg, policy, pad=pad, ground_gap_m=args.ground_gap, window=window,
                      progress=show_progress(args))
     s = res.summary
+    if res.mission.summary.get("battery_depleted"):
+        from .mission import depletion_text
+        s["warnings"] = [*s.get("warnings", ()), f"{depletion_text(res.mission.summary)} (the power comparison "
+                         "covers the flight up to that point)"]
     for w in s.get("warnings", ()):
         print(f"dronewpt replay: warning: {w}", file=sys.stderr)
     s["log"] = str(args.log)
@@ -270,6 +274,9 @@ def _cmd_telemetry(args) -> int:
     print(f"sent {st.frames} MAVLink 2 frames in {st.ticks} ticks at {args.rate:g} Hz: {st.sim_s:.1f} s of the "
           f"mission in {st.wall_s:.1f} s wall to {connect or 'no link'}"
           + (f"; wrote {args.tlog}" if args.tlog else ""))
+    if res.summary.get("battery_depleted"):
+        from .mission import depletion_text
+        print(f"dronewpt telemetry: warning: {depletion_text(res.summary)} (the stream ends there)", file=sys.stderr)
     return 0
 
 

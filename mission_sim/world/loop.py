@@ -44,6 +44,15 @@ _COLUMNS = ("t_s", "dt_s", "_row", "lm_h", "v1_v", "i1_amp_a", "i2_amp_a", "d_sh
 DEVICE_GROUPS = ("inverter_switches", "rectifier_diodes", "rectifier_switches")
 
 
+_STEP_STATE = ("x", "soc", "vrc", "peak_env", "peak_d", "above", "last_vl", "last_ib", "last_il")  # what step() writes
+_SOC_COL = _COLUMNS.index("soc")
+_SOC_TOL = 1e-9  # SoC undershoot at a depletion cut set to 0 (rounding of the fixed point)
+
+
+class _Depleted(Exception):
+    """Raised by :meth:`MissionLoop.deplete` to end the run where the battery reached SoC 0."""
+
+
 def _sign(v: float) -> float:
     return (v > 0.0) - (v < 0.0)
 
@@ -83,6 +92,8 @@ class MissionLoop:
         "peak_i2": "peak |I2| [A]", "above": "time with |I2| above rated [s]",
         "n_fine": "fine steps", "n_coarse": "coarse steps", "n_windows": "fine windows",
         "n_cut": "fine windows cut at max_fine_s", "rows": "one tuple per step (_COLUMNS)",
+        "depleted_at": "time the battery reached SoC 0 (the mission ended there) [s], else None",
+        "depleted_k": "trajectory sample where it did, else None",
     }
 
     def __init__(self, cfg, policy, traj: Trajectory, charge: bool, lm_all):
@@ -137,6 +148,7 @@ class MissionLoop:
         self.peak_env, self.peak_d = 0.0, 1.0
         self.n_fine = self.n_coarse = self.n_windows = self.n_cut = 0
         self.rows = []
+        self.depleted_at = self.depleted_k = None
 
     # ------------------------------------------------------------------ the outer loop
     def run(self, progress: bool = False) -> MissionResult:
@@ -148,11 +160,14 @@ class MissionLoop:
             bar = tqdm(total=float(t_all[-1] - t_all[0]), unit="sim s", desc="mission", leave=False,
                        bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
         k = 0
-        while k < self.n - 1:
-            j = self.sample(k)
-            if bar is not None:
-                bar.update(float(t_all[j]) - float(t_all[k]))
-            k = j
+        try:
+            while k < self.n - 1:
+                j = self.sample(k)
+                if bar is not None:
+                    bar.update(float(t_all[j]) - float(t_all[k]))
+                k = j
+        except _Depleted:
+            pass  # the mission ends where the battery ran out (see deplete)
         if bar is not None:
             bar.close()
         return self.result()
@@ -410,6 +425,8 @@ class MissionLoop:
         i_p = p_prop / vl
         i_b = i_l - i_p
         soc, vrc, e_chem, e_r0, e_r1, e_c1, _ = self.bat_step(soc, vrc, i_b, dt)
+        if soc < 0.0:
+            soc = self.deplete(t0, dt, lm, p_prop, row_k, fine, i_b, soc)
         self.track_peak((x1[1],), d, dt / 4 if fine else dt)
         self.x, self.soc, self.vrc = x1, soc, vrc
         self.last_vl, self.last_ib, self.last_il = vl, i_b, i_l
@@ -442,6 +459,49 @@ class MissionLoop:
         e_coil = 0.5 * (lk.r1_ohm * p11 + lk.r2_ohm * p22)
         e_sw = 0.0 if dev.is_ideal else e_loss - e_coil - e_inv - e_dio
         return (e_loss if dev.is_ideal else e_coil), *rest, e_inv, e_dio, e_sw
+
+    def deplete(self, t0: float, dt: float, lm: float, p_prop: float, row_k: int, fine: bool, i_b: float,
+                soc_end: float) -> float:
+        """The battery reaches SoC 0 inside this step (``soc_end < 0``): cut the step there and end the mission.
+
+        SoC is linear in time for the step's held current, so it crosses 0 after ``h = SoC0 Q / -I_b``;
+        I_b depends a little on the step length (VL is solved with the battery), so ``h`` is refined by
+        re-running the step (fixed point; the state before it is restored between tries). The cut step
+        is the run's last row, with SoC 0 to rounding (``_SOC_TOL``); ``depleted_at`` / ``depleted_k``
+        record where, and ``_Depleted`` ends :meth:`run`. Called inside such a re-run, it returns
+        ``soc_end`` unchanged."""
+        if self.depleted_at is not None:
+            return soc_end
+        soc0, cap = self.soc, self.bp.capacity_c
+        saved = tuple(getattr(self, name) for name in _STEP_STATE)
+        self.depleted_at, h = t0, dt
+        for _ in range(20):
+            h = min(dt, soc0 * cap / -i_b) if i_b < 0.0 else dt
+            if h <= 1e-12:  # already empty at t0
+                h = 0.0
+                break
+            self.step(t0, h, lm, p_prop, row_k, fine)
+            if abs(self.soc) <= _SOC_TOL:
+                break
+            i_b = self.last_ib
+            self.rows.pop()
+            for name, value in zip(_STEP_STATE, saved):
+                setattr(self, name, value)
+        if h > 0.0 and self.soc < 0.0:
+            self.soc = 0.0
+            self.rows[-1] = self.rows[-1][:_SOC_COL] + (0.0,) + self.rows[-1][_SOC_COL + 1:]
+        self.depleted_at, self.depleted_k = t0 + h, row_k
+        raise _Depleted
+
+    def depletion_summary(self) -> dict:
+        """Summary keys on where the battery ran out: ``battery_depleted``, ``depleted_at_s`` and
+        ``depleted_pad_distance_m`` (drone to the nearest pad centre; both None if it did not)."""
+        if self.depleted_at is None:
+            return {"battery_depleted": False, "depleted_at_s": None, "depleted_pad_distance_m": None}
+        pads = np.array([[p.x_m, p.y_m, p.z_m] for p in self.cfg.pads])
+        dist = np.linalg.norm(pads - self.traj.pos_m[self.depleted_k], axis=1)
+        return {"battery_depleted": True, "depleted_at_s": float(self.depleted_at),
+                "depleted_pad_distance_m": float(dist.min())}
 
     # ------------------------------------------------------------------ result assembly
     def result(self) -> MissionResult:
@@ -478,14 +538,14 @@ class MissionLoop:
         return {
             "policy": getattr(self.policy, "name", type(self.policy).__name__),
             "charge": bool(self.charge),
-            "sim_time_s": float(t_all[-1] - t_all[0]),
+            "sim_time_s": float((t_all[-1] if self.depleted_at is None else self.depleted_at) - t_all[0]),
             "wall_s": 0.0,
             **self.energy_summary(arr),
             "initial_soc": float(bp.initial_soc),
             "final_soc": float(self.soc),
             "battery_full": bool(self.charger.full[0]),
             "min_soc": float(min(df["soc"].min(), bp.initial_soc)) if len(df) else float(bp.initial_soc),
-            "battery_depleted": bool(len(df) and df["soc"].min() < 0.0),
+            **self.depletion_summary(),
             "peak_i2_a": self.peak_i2,
             "peak_i2_envelope_a": self.peak_env,
             "rated_i2_a": self.rated,

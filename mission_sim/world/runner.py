@@ -100,13 +100,14 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     if charge:
         base = _simulate(cfg, policy, traj, False, False, lm_all)
         res.summary["flight_time_gain_s"] = flight_time_gain_s(cfg, res.summary["final_soc"],
-                                                               base.summary["final_soc"])
-        res.summary["final_soc_without_charging"] = base.summary["final_soc"]
-        res.summary["battery_depleted_without_charging"] = base.summary["battery_depleted"]
+                                                               base.summary["final_soc"]) \
+            + res.summary["sim_time_s"] - base.summary["sim_time_s"]  # a depleted run ends early
     else:
         res.summary["flight_time_gain_s"] = 0.0
-        res.summary["final_soc_without_charging"] = res.summary["final_soc"]
-        res.summary["battery_depleted_without_charging"] = res.summary["battery_depleted"]
+        base = res
+    res.summary["final_soc_without_charging"] = base.summary["final_soc"]
+    res.summary["battery_depleted_without_charging"] = base.summary["battery_depleted"]
+    res.summary["depleted_at_s_without_charging"] = base.summary["depleted_at_s"]
     res.summary["wall_s"] = time.perf_counter() - wall0
     res.summary["realtime_factor"] = res.summary["sim_time_s"] / max(res.summary["wall_s"], 1e-12)
     return res
@@ -114,8 +115,8 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
 
 def flight_time_gain_s(cfg, final_soc_charged: float, final_soc_uncharged: float) -> float:
     """Extra hover time [s] the charged mission ends with: the difference of the usable chemical
-    energy left (``n Q int_0^SoC OCV``, SoC clipped into [0, 1]: a depleted baseline counts as 0)
-    divided by the electrical hover power."""
+    energy left (``n Q int_0^SoC OCV``) divided by the electrical hover power. (A run that depletes
+    its battery ends there at SoC 0; :func:`run_mission` adds the difference of the two runs' ends.)"""
     e = cfg.battery.usable_energy_j
     return float((e(final_soc_charged) - e(final_soc_uncharged)) / hover_power_w(cfg.drone))
 

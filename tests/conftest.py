@@ -1,0 +1,27 @@
+"""A check every test gets: no mission run in the test's process leaves SoC in [0, 1] (issue #16).
+
+Every in-process mission (the CLI, replay, telemetry, studies run in-process, the tests' own calls)
+ends in ``MissionLoop.result``; wrapped here, it fails the test if any row of the time series has
+SoC outside [0, 1]. Missions run in other processes (CLI subprocesses, Dask workers) are not seen.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+
+@pytest.fixture(autouse=True)
+def _soc_stays_in_0_1(monkeypatch):
+    from mission_sim.world import loop
+
+    result = loop.MissionLoop.result
+
+    def checked(self):
+        res = result(self)
+        soc = res.timeseries["soc"].to_numpy()
+        if len(soc):
+            assert 0.0 <= soc.min() and soc.max() <= 1.0, \
+                f"SoC left [0, 1] in a mission run: min {soc.min()!r}, max {soc.max()!r}"
+        return res
+
+    monkeypatch.setattr(loop.MissionLoop, "result", checked)
