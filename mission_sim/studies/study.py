@@ -63,6 +63,8 @@ from typing import Any
 
 import numpy as np
 
+from . import DEFAULT_MAX_CASES
+
 __all__ = ["Study", "Case", "CaseSpace", "Linspace", "load_study", "parse_study", "expand_cases", "case_space",
            "size_bound", "check_size", "case_id", "canonical_json", "DISTRIBUTIONS", "POLICY_KEY", "DEFAULT_POLICY",
            "DEFAULT_MAX_CASES"]
@@ -73,7 +75,6 @@ DISTRIBUTIONS = ("uniform", "loguniform", "normal", "integers", "choice")
 _SPECS = DISTRIBUTIONS + ("linspace",)
 _SECTIONS = ("study", "fixed", "grid", "monte_carlo", "report")
 _STUDY_KEYS = ("name", "base", "runner", "allow_single")
-DEFAULT_MAX_CASES = 1_000_000
 _CONTINUOUS = ("uniform", "loguniform", "normal")
 _DRAW_CACHE = 10_000  # Monte Carlo draws kept in memory while iterating (more are recomputed per grid point)
 
@@ -126,6 +127,7 @@ class Study:
     runner : "module:factory" import path of a case-runner factory, or None for the mission runner
     report : plot axes, e.g. {"x": "mission.hover_time_s", "hue": "pads.1.x_m"}
     allow_single : a study that varies nothing (the base mission once) is allowed
+    source : the TOML document it was parsed from (``dronewpt sweep --status`` re-reads it)
     """
 
     name: str
@@ -138,6 +140,7 @@ class Study:
     runner: str | None = None
     report: dict = field(default_factory=dict)
     allow_single: bool = False
+    source: dict = field(default_factory=dict, repr=False, compare=False)  # the TOML document parsed
 
     @property
     def varied_keys(self) -> list[str]:
@@ -309,7 +312,8 @@ def parse_study(doc: dict, name: str = "study", base_dir=None) -> Study:
             raise ValueError(f"[report] {k} = {v!r} is not a varied parameter; valid: {', '.join(varied) or '(none)'}")
 
     study = Study(name=str(head.get("name", name)), base_path=base_path, fixed=fixed, grid=grid, mc_n=mc_n,
-                  mc_seed=mc_seed, mc_params=mc_params, runner=runner, report=report, allow_single=allow_single)
+                  mc_seed=mc_seed, mc_params=mc_params, runner=runner, report=report, allow_single=allow_single,
+                  source=doc)
     for k in (POLICY_KEY,):
         if k in mc_params and mc_params[k][0] != "choice":
             raise ValueError(f"[monte_carlo.params] {k!r} must use {{choice = [...]}}")

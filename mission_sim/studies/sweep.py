@@ -26,10 +26,7 @@ by reference and imported on the workers.
 
 from __future__ import annotations
 
-import contextlib
-import importlib
 import itertools
-import logging
 import math
 import os
 import socket
@@ -43,11 +40,16 @@ from pathlib import Path
 
 import pandas as pd
 
+from .cluster import dask_client
+from .mission_cases import MissionCaseRunner
+from .prepare import check_cases, prepare_study
+from .status import SweepStatus, sweep_status, write_manifest
 from .store import BOOKKEEPING_COLUMNS, CaseStore, PartWriter, StoreState, _to_scalar, read_results
-from .study import DEFAULT_MAX_CASES, POLICY_KEY, Case, Study, canonical_json, case_space, check_size
+from .study import Case, canonical_json
 
 __all__ = ["CaseStore", "SweepResult", "MissionCaseRunner", "run_sweep", "run_case_safe", "run_chunk",
-           "dask_client", "prepare_study", "read_results", "sweep_status", "BOOKKEEPING_COLUMNS"]
+           "dask_client", "prepare_study", "check_cases", "read_results", "sweep_status", "SweepStatus",
+           "write_manifest", "BOOKKEEPING_COLUMNS"]
 
 RunCase = Callable[[dict], Mapping]
 _MAX_CHUNK = 512
@@ -163,7 +165,7 @@ class SweepResult:
 def run_sweep(cases: Iterable[Case], run_case: RunCase, out_dir, *, client=None, client_factory=None,
               progress: bool = True, progress_desc: str = "sweep", retry_errors: bool = False,
               part_rows: int = 1000, part_age_s: float = 2.0, chunk_target_s: float = 0.2,
-              max_in_flight: int | None = None) -> SweepResult:
+              max_in_flight: int | None = None, before_run: Callable[[], object] | None = None) -> SweepResult:
     """Run the cases not yet in ``out_dir`` and store one row per case.
 
     cases : the study's cases (a lazy :class:`~.study.CaseSpace`, or any iterable of unique cases)
@@ -176,6 +178,7 @@ def run_sweep(cases: Iterable[Case], run_case: RunCase, out_dir, *, client=None,
     part_rows, part_age_s : a part file every that many rows or seconds.
     chunk_target_s, max_in_flight : wall time aimed at per Dask task; tasks in flight (default
         3 per worker thread).
+    before_run : called once the store is locked, before anything runs (the CLI writes the manifest).
 
     A case whose runner raises is stored with ``status = "error"``; the others go on. Interrupting
     (KeyboardInterrupt) stores the rows already received and leaves the rest for a re-run.
@@ -186,6 +189,8 @@ def run_sweep(cases: Iterable[Case], run_case: RunCase, out_dir, *, client=None,
     n_total = len(cases) if hasattr(cases, "__len__") else None
     with store.lock():
         store.cleanup()  # leftovers of a killed run (absorbed files, temporaries)
+        if before_run is not None:
+            before_run()
         bar = tqdm(total=n_total, unit="case", desc=progress_desc, disable=not progress, dynamic_ncols=True)
         pending = _Pending(cases, store.state(), retry_errors, bar)
         writer = PartWriter(store, part_rows, part_age_s)
@@ -296,6 +301,14 @@ def _run_dask(client, pending, run_case: RunCase, writer: PartWriter, bar, *, ch
     # loop=client.loop: as_completed would otherwise use the *default* client's loop, which a
     # failed Client(...) elsewhere in the process can leave pointing at a dead loop (hang)
     ac = as_completed([], loop=client.loop, with_results=True, raise_errors=False)
+    try:
+        return _drain(ac, sub, writer, bar)
+    finally:
+        ac.clear()  # interrupted: the futures still in flight are released (the scheduler forgets them)
+
+
+def _drain(ac, sub: _Submitter, writer: PartWriter, bar) -> int:
+    """Keep ``sub``'s window full and store what comes back until nothing is pending or in flight."""
     sub.fill(ac)
     n = n_err = 0
     while not ac.is_empty():
