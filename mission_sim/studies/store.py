@@ -175,12 +175,15 @@ class CaseStore:
             if on_read is not None:
                 on_read()
         table = _dedupe(_concat(tables))
-        meta = {**(table.schema.metadata or {}), _ABSORBS_KEY: json.dumps([p.name for p in inputs]).encode()}
+        # the files the inputs absorbed are named too while they exist (a killed merge leaves them until
+        # cleanup), so they cannot come back to life when their absorbing input is deleted
+        names = sorted({p.name for p in inputs} | {n for n in self._absorbed(inputs) if (self.dir / n).exists()})
+        meta = {**(table.schema.metadata or {}), _ABSORBS_KEY: json.dumps(names).encode()}
         tag = f"L{level:02d}-" if level < _TOP_LEVEL else ""
         out = self._write_table(table.replace_schema_metadata(meta),
                                 f"compact-{tag}{time.time_ns():020d}-{uuid.uuid4().hex[:8]}.parquet")
-        for p in inputs:
-            p.unlink(missing_ok=True)
+        for name in names:
+            (self.dir / name).unlink(missing_ok=True)
         return out
 
     def merge_levels(self) -> int:
