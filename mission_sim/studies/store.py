@@ -44,10 +44,11 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-__all__ = ["CaseStore", "PartWriter", "StoreState", "read_results", "BOOKKEEPING_COLUMNS", "FANOUT"]
+__all__ = ["CaseStore", "PartWriter", "StoreState", "read_results", "BOOKKEEPING_COLUMNS", "FANOUT", "BATCH_ROWS"]
 
 BOOKKEEPING_COLUMNS = ("case_id", "attempt", "status", "error", "traceback", "case_wall_s", "worker", "params_json")
 FANOUT = 8
+BATCH_ROWS = 8192  # rows per batch of a streamed merge (its memory bound)
 _ABSORBS_KEY = b"dronewpt.absorbs"
 _TOP_LEVEL = 99
 
@@ -139,15 +140,19 @@ class CaseStore:
         return _latest(_with_attempt(_concat(tables).to_pandas()))
 
     # -- write
-    def _write_table(self, table: pa.Table, name: str) -> Path:
+    def _publish(self, name: str, write: Callable[[Path], None]) -> Path:
+        """``write(tmp)`` a file under a temporary name, fsync it, rename it to ``name`` (atomic)."""
         self.dir.mkdir(parents=True, exist_ok=True)
         final = self.dir / name
         tmp = self.dir / f".{name}.{os.getpid()}.tmp"
-        pq.write_table(table, tmp)
+        write(tmp)
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, final)
         return final
+
+    def _write_table(self, table: pa.Table, name: str) -> Path:
+        return self._publish(name, lambda tmp: pq.write_table(table, tmp))
 
     def write(self, rows: Sequence[dict]) -> Path | None:
         """Write finished cases as one new part file (atomically). Returns its path."""
@@ -167,23 +172,28 @@ class CaseStore:
                 if p.name.startswith(".") and p.name.endswith(".tmp"):
                     p.unlink(missing_ok=True)
 
-    def merge(self, inputs: Sequence[Path], level: int, on_read: Callable[[], None] | None = None) -> Path:
-        """Merge ``inputs`` into one file of ``level`` (superseded attempts dropped); inputs deleted after."""
-        tables = []
-        for p in inputs:
-            tables.append(pq.read_table(p))
-            if on_read is not None:
-                on_read()
-        table = _dedupe(_concat(tables))
+    def merge(self, inputs: Sequence[Path], level: int, on_read: Callable[[int], None] | None = None) -> Path:
+        """Merge ``inputs`` into one file of ``level`` (superseded attempts dropped); inputs deleted after.
+
+        Streamed batch by batch (memory bounded by :data:`BATCH_ROWS`, whatever the files' sizes); in
+        memory only if the files' column types cannot be unified (text in one, numbers in another).
+        ``on_read(n_rows)`` is called as rows are read (progress).
+        """
         # the files the inputs absorbed are named too while they exist (a killed merge leaves them until
         # cleanup), so they cannot come back to life when their absorbing input is deleted
         names = sorted({p.name for p in inputs} | {n for n in self._absorbed(inputs) if (self.dir / n).exists()})
-        meta = {**(table.schema.metadata or {}), _ABSORBS_KEY: json.dumps(names).encode()}
+        meta = {_ABSORBS_KEY: json.dumps(names).encode()}
         tag = f"L{level:02d}-" if level < _TOP_LEVEL else ""
-        out = self._write_table(table.replace_schema_metadata(meta),
-                                f"compact-{tag}{time.time_ns():020d}-{uuid.uuid4().hex[:8]}.parquet")
-        for name in names:
-            (self.dir / name).unlink(missing_ok=True)
+        name = f"compact-{tag}{time.time_ns():020d}-{uuid.uuid4().hex[:8]}.parquet"
+        on_read = on_read or (lambda n: None)
+        try:
+            out = self._publish(name, lambda tmp: _stream_merge(inputs, tmp, meta, on_read))
+        except (pa.ArrowInvalid, pa.ArrowTypeError, pa.ArrowNotImplementedError):
+            tables = [pq.read_table(p) for p in inputs]
+            table = _dedupe(_concat(tables))
+            out = self._write_table(table.replace_schema_metadata({**(table.schema.metadata or {}), **meta}), name)
+        for n in names:
+            (self.dir / n).unlink(missing_ok=True)
         return out
 
     def merge_levels(self) -> int:
@@ -200,16 +210,17 @@ class CaseStore:
             n += 1
 
     def compact(self, progress: bool = False) -> Path | None:
-        """Merge all live files into one (safe to kill at any point); a tqdm bar over the files read."""
+        """Merge all live files into one (safe to kill at any point); a tqdm bar over the rows read."""
         from tqdm.auto import tqdm
 
         self.cleanup()
         live = self.files()
         if len(live) <= 1:
             return live[0] if live else None
-        with tqdm(total=len(live), unit="file", desc="compact", disable=not progress, dynamic_ncols=True,
+        total = sum(pq.ParquetFile(p).metadata.num_rows for p in live)
+        with tqdm(total=total, unit="row", desc="compact", disable=not progress, dynamic_ncols=True,
                   leave=False) as bar:
-            return self.merge(live, _TOP_LEVEL, on_read=lambda: bar.update(1))
+            return self.merge(live, _TOP_LEVEL, on_read=bar.update)
 
     @contextlib.contextmanager
     def lock(self):
@@ -235,12 +246,15 @@ class PartWriter:
         self.store, self.max_rows, self.max_age_s = store, max_rows, max_age_s
         self.rows: list[dict] = []
         self.t_first = 0.0
-        self.n_parts = 0
+        self.n_parts = self.n_rows = self.n_error_rows = 0
 
     def add(self, rows: Iterable[dict]) -> None:
         if not self.rows:
             self.t_first = time.monotonic()
+        n = len(self.rows)
         self.rows.extend(rows)
+        self.n_rows += len(self.rows) - n
+        self.n_error_rows += sum(r.get("status") == "error" for r in self.rows[n:])
         self.maybe_flush()
 
     def maybe_flush(self) -> None:
@@ -254,6 +268,50 @@ class PartWriter:
         self.store.write(rows)
         self.n_parts += 1
         self.store.merge_levels()
+
+
+# ----------------------------------------------------------------------------- streamed merge
+def _keep_masks(files: Sequence[pq.ParquetFile]) -> list | None:
+    """Per file, the rows to keep (latest attempt per case_id), or None if every case_id is distinct."""
+    ids = [f.read(columns=["case_id"]).column(0) for f in files]
+    total = sum(len(c) for c in ids)
+    if total == 0 or pc.count_distinct(pa.chunked_array([c for col in ids for c in col.chunks],
+                                                        type=pa.string())).as_py() == total:
+        return None
+    frames = []
+    for i, (f, col) in enumerate(zip(files, ids)):
+        att = f.read(columns=["attempt"]).column(0).to_numpy() if "attempt" in f.schema_arrow.names \
+            else np.ones(len(col), dtype=np.int64)
+        frames.append(pd.DataFrame({"file": i, "row": np.arange(len(col)), "case_id": col.to_pandas(),
+                                    "attempt": pd.Series(att).fillna(1).astype(np.int64)}))
+    df = pd.concat(frames, ignore_index=True)
+    kept = _latest(df)
+    return [np.isin(np.arange(len(col)), kept.loc[kept["file"] == i, "row"].to_numpy()) for i, col in enumerate(ids)]
+
+
+def _conform(table: pa.Table, schema: pa.Schema) -> pa.Table:
+    """``table`` with exactly ``schema``'s columns (missing ones null) and types (cast)."""
+    cols = [table.column(f.name).cast(f.type) if f.name in table.column_names else pa.nulls(table.num_rows, f.type)
+            for f in schema]
+    return pa.Table.from_arrays(cols, schema=schema)
+
+
+def _stream_merge(inputs: Sequence[Path], out: Path, meta: dict, on_read: Callable[[int], None]) -> None:
+    """Write the rows of ``inputs`` (superseded attempts dropped) to ``out``, batch by batch."""
+    files = [pq.ParquetFile(p) for p in inputs]
+    schema = pa.unify_schemas([f.schema_arrow.remove_metadata() for f in files], promote_options="permissive")
+    schema = schema.with_metadata(meta)
+    keep = _keep_masks(files)
+    with pq.ParquetWriter(out, schema) as writer:
+        for i, f in enumerate(files):
+            start = 0
+            for batch in f.iter_batches(batch_size=BATCH_ROWS):
+                table = _conform(pa.Table.from_batches([batch]), schema)
+                if keep is not None:
+                    table = table.filter(pa.array(keep[i][start:start + batch.num_rows]))
+                start += batch.num_rows
+                writer.write_table(table)
+                on_read(batch.num_rows)
 
 
 # ----------------------------------------------------------------------------- tables
@@ -316,7 +374,21 @@ def _frame_to_table(df: pd.DataFrame) -> pa.Table:
 
 
 def _rows_to_table(rows: Sequence[dict]) -> pa.Table:
-    return _frame_to_table(pd.DataFrame([{k: _to_scalar(v) for k, v in r.items()} for r in rows]))
+    """Rows (dicts of scalars; keys may differ between rows) -> Arrow table, column by column; a column
+    mixing strings and other values is stored as JSON text, a missing value as null."""
+    keys = list(dict.fromkeys(k for r in rows for k in r))
+    arrays = []
+    for k in keys:
+        col = [r.get(k) for r in rows]
+        try:
+            arrays.append(pa.array(col, from_pandas=True))
+        except (pa.ArrowInvalid, pa.ArrowTypeError):
+            col = [_to_scalar(v) for v in col]
+            kinds = {type(v) for v in col if not _is_missing(v)}
+            if str in kinds and len(kinds) > 1:
+                col = [None if _is_missing(v) else (v if isinstance(v, str) else json.dumps(v)) for v in col]
+            arrays.append(pa.array(col, from_pandas=True))
+    return pa.Table.from_arrays(arrays, names=[str(k) for k in keys])
 
 
 def read_results(out_dir) -> pd.DataFrame:

@@ -113,6 +113,12 @@ class Case:
 
     case_id: str
     params: dict
+    params_json: str | None = field(default=None, compare=False, repr=False)  # canonical_json(params), if known
+
+    @property
+    def canonical_params(self) -> str:
+        """``canonical_json(params)`` (computed once when the case comes from a :class:`CaseSpace`)."""
+        return self.params_json if self.params_json is not None else canonical_json(self.params)
 
 
 @dataclass(frozen=True)
@@ -326,6 +332,11 @@ def parse_study(doc: dict, name: str = "study", base_dir=None) -> Study:
 
 # ----------------------------------------------------------------------------- identity
 def _canonical(v):
+    t = type(v)  # fast path: the scalars every case is made of
+    if t is str or t is int or t is bool:
+        return v
+    if t is float:
+        return int(v) if v.is_integer() and abs(v) < 2**53 else v
     if isinstance(v, dict):
         return {str(k): _canonical(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
@@ -345,9 +356,13 @@ def canonical_json(obj) -> str:
     return json.dumps(_canonical(obj), sort_keys=True, separators=(",", ":"), allow_nan=False)
 
 
-def case_id(params: dict, base_fingerprint: str = "") -> str:
-    """Stable identity of a case: first 16 hex digits of sha256 over its canonical parameters."""
-    text = canonical_json({"base": base_fingerprint, "params": params})
+def case_id(params: dict, base_fingerprint: str = "", params_json: str | None = None) -> str:
+    """Stable identity of a case: first 16 hex digits of sha256 over its canonical parameters
+    (``canonical_json({"base": base_fingerprint, "params": params})``; pass ``params_json`` =
+    ``canonical_json(params)`` if already known: the text is assembled from it, byte for byte the same)."""
+    if params_json is None:
+        params_json = canonical_json(params)
+    text = f'{{"base":{json.dumps(base_fingerprint)},"params":{params_json}}}'
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -444,7 +459,9 @@ class CaseSpace:
                 yield {**head, **draw}
 
     def __iter__(self):
-        return (Case(case_id(p, self.fingerprint), p) for p in self.params())
+        for p in self.params():
+            text = canonical_json(p)
+            yield Case(case_id(p, self.fingerprint, text), p, text)
 
 
 def case_space(study: Study, base_fingerprint: str = "") -> CaseSpace:

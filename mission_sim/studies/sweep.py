@@ -45,7 +45,7 @@ from .mission_cases import MissionCaseRunner
 from .prepare import check_cases, prepare_study
 from .status import SweepStatus, sweep_status, write_manifest
 from .store import BOOKKEEPING_COLUMNS, CaseStore, PartWriter, StoreState, _to_scalar, read_results
-from .study import Case, canonical_json
+from .study import Case, CaseSpace
 
 __all__ = ["CaseStore", "SweepResult", "MissionCaseRunner", "run_sweep", "run_case_safe", "run_chunk",
            "dask_client", "prepare_study", "check_cases", "read_results", "sweep_status", "SweepStatus",
@@ -83,7 +83,7 @@ def _row(case: Case, result: dict, attempt: int = 1) -> dict:
     row = {k: result.get(k) for k in BOOKKEEPING_COLUMNS if k not in ("params_json", "attempt")}
     row["case_id"] = case.case_id
     row["attempt"] = int(attempt)
-    row["params_json"] = canonical_json(case.params)
+    row["params_json"] = case.canonical_params
     row.update(case.params)
     for k, v in result.get("metrics", {}).items():
         row[f"metric.{k}" if k in row else k] = v
@@ -100,33 +100,49 @@ def _infrastructure_error(case: Case, exc: BaseException) -> dict:
 # ----------------------------------------------------------------------------- pending cases
 class _Pending:
     """The study's cases not yet stored (or stored as errors, with ``retry_errors``), lazily, as
-    ``(case, attempt)``; counts what it skips and remembers the study's case_ids."""
+    ``(case, attempt)``; counts the cases it skips (ok / error). Case ids are remembered only for a
+    one-shot iterator (to check they are unique and to find this study's rows afterwards)."""
 
     def __init__(self, cases: Iterable[Case], state: StoreState, retry_errors: bool, bar=None):
         self.cases, self.state, self.retry, self.bar = cases, state, retry_errors, bar
-        self.ids: set[str] = set()
-        self.n_skipped = self.n_seen = 0
+        self.ids: set[str] | None = None if isinstance(cases, (CaseSpace, list, tuple)) else set()
+        self.n_skipped = self.n_skipped_error = self.n_seen = 0
+        if isinstance(cases, (list, tuple)) and len({c.case_id for c in cases}) != len(cases):
+            raise ValueError("duplicate case_ids in the case list; use case_space()")
+
+    def _skip(self, case: Case) -> bool:
+        if case.case_id not in self.state.done:
+            return False
+        is_error = case.case_id in self.state.errors
+        if is_error and self.retry:
+            return False
+        self.n_skipped += 1
+        self.n_skipped_error += is_error
+        return True
 
     def __iter__(self):
-        done, errors, skipped_since = self.state.done, self.state.errors, 0
+        skipped_since = 0
         for c in self.cases:
-            if c.case_id in self.ids:
-                raise ValueError(f"duplicate case_id {c.case_id} in the case list; expand the study with case_space()")
-            self.ids.add(c.case_id)
+            if self.ids is not None:
+                if c.case_id in self.ids:
+                    raise ValueError(f"duplicate case_id {c.case_id} in the case list; use case_space()")
+                self.ids.add(c.case_id)
             self.n_seen += 1
-            if c.case_id in done and not (self.retry and c.case_id in errors):
-                self.n_skipped += 1
+            if self._skip(c):
                 skipped_since += 1
-                if self.bar is not None and skipped_since >= 1000:
+                if skipped_since >= 1000:
                     self.bar.update(skipped_since)
                     skipped_since = 0
                 continue
-            if self.bar is not None and skipped_since:
+            if skipped_since:
                 self.bar.update(skipped_since)
                 skipped_since = 0
-            yield c, errors.get(c.case_id, 0) + 1
-        if self.bar is not None and skipped_since:
-            self.bar.update(skipped_since)
+            yield c, self.state.errors.get(c.case_id, 0) + 1
+        self.bar.update(skipped_since)
+
+    def case_ids(self) -> frozenset:
+        """The ids of the study's cases (recomputed from a re-iterable case collection)."""
+        return frozenset(self.ids if self.ids is not None else (c.case_id for c in self.cases))
 
 
 # ----------------------------------------------------------------------------- engine
@@ -142,14 +158,16 @@ class SweepResult:
     n_error: int
     wall_s: float  # the whole call (includes the cluster start-up when ``client_factory`` is used)
     compact_s: float = math.nan  # the end-of-run compaction alone
-    ids: frozenset = field(default=frozenset(), repr=False)
+    case_ids: Callable[[], frozenset] | None = field(default=None, repr=False)
     _results: pd.DataFrame | None = field(default=None, repr=False)
 
     @property
     def results(self) -> pd.DataFrame:
+        """The stored rows of this study's cases (read on first use)."""
         if self._results is None:
             df = CaseStore(self.out_dir).read()
-            self._results = df[df["case_id"].isin(self.ids)].reset_index(drop=True)
+            ids = self.case_ids() if self.case_ids is not None else frozenset(df["case_id"])
+            self._results = df[df["case_id"].isin(ids)].reset_index(drop=True)
         return self._results
 
     @property
@@ -203,13 +221,10 @@ def run_sweep(cases: Iterable[Case], run_case: RunCase, out_dir, *, client=None,
         t_c = time.perf_counter()
         store.compact(progress=progress)
         compact_s = time.perf_counter() - t_c
-        state = store.state()
-    ids = frozenset(pending.ids)
-    n_err = len(ids & state.errors.keys())
-    n_in = len(ids & state.done)
+    n_error = pending.n_skipped_error + writer.n_error_rows
     return SweepResult(out_dir=Path(out_dir), n_cases=pending.n_seen, n_skipped=pending.n_skipped, n_run=n_run,
-                       n_ok=n_in - n_err, n_error=n_err, wall_s=time.perf_counter() - t0, compact_s=compact_s,
-                       ids=ids)
+                       n_ok=pending.n_skipped + writer.n_rows - n_error, n_error=n_error,
+                       wall_s=time.perf_counter() - t0, compact_s=compact_s, case_ids=pending.case_ids)
 
 
 def _dispatch(pending: _Pending, run_case, writer: PartWriter, bar, client, client_factory, opts) -> int:
