@@ -74,9 +74,25 @@ def run_case_safe(run_case: RunCase, case_id: str, params: dict) -> dict:
             "metrics": metrics}
 
 
-def run_chunk(run_case: RunCase, items: list) -> list[dict]:
+class Chunk:
+    """The ``(case_id, params)`` pairs of one Dask task, in a box: Dask walks lists, tuples and dicts
+    given to ``submit`` looking for other tasks (~50 us a case), but not other objects."""
+
+    __slots__ = ("items",)
+
+    def __init__(self, items: list):
+        self.items = items
+
+    def __getstate__(self):
+        return self.items
+
+    def __setstate__(self, items):
+        self.items = items
+
+
+def run_chunk(run_case: RunCase, chunk: Chunk) -> list[dict]:
     """One Dask task: several ``(case_id, params)`` run one after the other (:func:`run_case_safe`)."""
-    return [run_case_safe(run_case, cid, params) for cid, params in items]
+    return [run_case_safe(run_case, cid, params) for cid, params in chunk.items]
 
 
 def _row(case: Case, result: dict, attempt: int = 1) -> dict:
@@ -269,7 +285,7 @@ class _Submitter:
             if not items:
                 return
             key = f"cases-{items[0][0].case_id}-{len(items)}-{uuid.uuid4().hex[:6]}"
-            fut = self.client.submit(run_chunk, self.run_case, [(c.case_id, c.params) for c, _ in items],
+            fut = self.client.submit(run_chunk, self.run_case, Chunk([(c.case_id, c.params) for c, _ in items]),
                                      key=key, pure=False, retries=0)
             self.in_flight[key] = items
             ac.add(fut)
