@@ -24,7 +24,7 @@ from .world.wind import WindParams
 
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
            "MissionConfig", "load_config", "config_from_dict", "config_to_dict", "apply_overrides",
-           "load_config_dict", "check_cross_fields"]
+           "load_config_dict", "check_cross_fields", "section_from_dict", "check_seed"]
 
 DEFAULT_MISSION_TOML: str = resources.files("mission_sim").joinpath("default_mission.toml").read_text("utf-8")
 
@@ -244,10 +244,7 @@ def config_from_dict(d: dict) -> MissionConfig:
             raise ValueError(f"{k} is not a valid key; valid keys: {', '.join(sorted(valid))}")
     kw = {}
     if "seed" in d:
-        s = d["seed"]
-        if isinstance(s, bool) or not isinstance(s, int) or not 0 <= s < 2**63:
-            raise ValueError(f"seed={s!r} is invalid; valid range: integer in [0, 2^63)")
-        kw["seed"] = int(s)
+        kw["seed"] = check_seed(d["seed"])
     for name, cls in _SECTIONS.items():
         if name in d:
             kw[name] = _build(name, cls, d[name])
@@ -257,6 +254,21 @@ def config_from_dict(d: dict) -> MissionConfig:
             raise ValueError(f"pads={pads!r} is invalid; valid: a list of 1..100 [[pads]] tables")
         kw["pads"] = tuple(_build(f"pads.{i}", PadConfig, p) for i, p in enumerate(pads))
     return MissionConfig(**kw)
+
+
+def check_seed(s) -> int:
+    """The mission ``seed`` (an integer in [0, 2^63)); ``ValueError`` naming the value otherwise."""
+    if isinstance(s, bool) or not isinstance(s, int) or not 0 <= s < 2**63:
+        raise ValueError(f"seed={s!r} is invalid; valid range: integer in [0, 2^63)")
+    return int(s)
+
+
+def section_from_dict(section: str, d: dict):
+    """One validated section (``"battery"``, ``"pads.1"``, ...) from its complete dict, as
+    :func:`config_from_dict` builds it (sweeps check many cases' values without rebuilding the rest)."""
+    if section.startswith("pads."):
+        return _build(section, PadConfig, d)
+    return _build(section, _SECTIONS[section], d)
 
 
 def config_to_dict(cfg: MissionConfig) -> dict:

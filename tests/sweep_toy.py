@@ -6,7 +6,8 @@ Used where the point of the test is the engine (kill-and-resume, error capture, 
 Metrics are closed forms of the parameters, so a case's result is known exactly:
 ``flight_time_gain_s = hover_time_s * 8 / (1 + spacing_m / 50)``, ``peak_i2_a`` by policy.
 Parameters: ``mission.hover_time_s``, ``pads.1.x_m``, ``policy``, ``seed``, ``delay_s`` (sleep,
-to make cases take time), ``fail`` (raise ``ValueError`` when true).
+to make cases take time), ``fail`` (raise ``ValueError`` when true). Environment variable
+``SWEEP_TOY_FAIL_ABOVE``: cases with a larger hover time raise (a flaky setup, fixed by unsetting it).
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ def toy_case(params: dict) -> dict:
     if params.get("fail"):
         raise ValueError(f"fail={params['fail']!r}: this case is meant to fail")
     hover = float(params.get("mission.hover_time_s", 10.0))
+    if hover > float(os.environ.get("SWEEP_TOY_FAIL_ABOVE", "inf")):  # a flaky environment, for --retry-errors
+        raise RuntimeError(f"hover {hover} > SWEEP_TOY_FAIL_ABOVE")
     spacing = float(params.get("pads.1.x_m", 50.0))
     rng = np.random.default_rng(int(params.get("seed", 0)))
     noise = float(rng.normal(0.0, 0.01))
@@ -40,6 +43,13 @@ class ToyRunner:
 
     def __call__(self, params: dict) -> dict:
         return toy_case(params)
+
+    def check_params(self, params):
+        """Like the mission runner's check: a message naming the key and value, or None."""
+        hover = params.get("mission.hover_time_s", 10.0)
+        if isinstance(hover, bool) or not isinstance(hover, (int, float)) or not hover >= 0:
+            return f"mission.hover_time_s={hover!r} is invalid; valid range: [0, inf)"
+        return None
 
     def validate_keys(self, keys, example):
         for k in keys:

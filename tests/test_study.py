@@ -72,8 +72,11 @@ def test_duplicate_grid_values_give_one_case_and_default_policy():
                                           {"policy": "model_based", "mission.hover_time_s": 10}]
 
 
-def test_no_grid_no_monte_carlo_is_the_base_case():
-    cases = expand_cases(study("[study]\nname = 'one'\n"))
+def test_a_study_that_varies_nothing_is_an_error_unless_allowed():
+    for text in ("[study]\nname = 'one'\n", "", "[grid]\n[fixed]\n'a.b' = 1\n"):
+        with pytest.raises(ValueError, match="varies nothing.*allow_single = true"):
+            study(text)
+    cases = expand_cases(study("[study]\nname = 'one'\nallow_single = true\n"))
     assert len(cases) == 1 and cases[0].params == {"policy": "model_based"}
 
 
@@ -102,7 +105,7 @@ def test_bad_study_names_the_bad_entry(text, words):
 
 def test_load_study_resolves_base_relative_to_file(tmp_path):
     (tmp_path / "m.toml").write_text("")
-    (tmp_path / "s.toml").write_text('[study]\nbase = "m.toml"\n')
+    (tmp_path / "s.toml").write_text("[study]\nbase = \"m.toml\"\n[grid]\nseed = [1, 2]\n")
     assert load_study(tmp_path / "s.toml").base_path == tmp_path / "m.toml"
     (tmp_path / "bad.toml").write_text('[study]\nbase = "missing.toml"\n')
     with pytest.raises(FileNotFoundError, match="missing.toml"):

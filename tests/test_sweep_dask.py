@@ -18,6 +18,7 @@ from sweep_toy import ToyRunner, toy_case
 import policies
 
 from mission_sim.cli import main
+from mission_sim.studies.study import case_space as case_space_of
 from mission_sim.studies.study import expand_cases, load_study
 from mission_sim.studies.sweep import CaseStore, dask_client, prepare_study, read_results, run_sweep
 
@@ -105,12 +106,16 @@ KILL = """
 name = "kill"
 runner = "sweep_toy:factory"
 [fixed]
-delay_s = 0.12
+delay_s = 0.1
 [grid]
 "mission.hover_time_s" = [5.0, 10.0, 20.0, 40.0, 80.0]
 "pads.1.x_m" = [20.0, 40.0, 60.0, 80.0]
 policy = ["step", "model_based"]
+seed = [1, 2, 3]
 """
+
+
+N_KILL = 120  # 6 s of work on two workers: parts come every 2 s, so both kills land mid-run
 
 
 def _run_until(cmd, out_dir, n_done, sig):
@@ -154,25 +159,65 @@ def test_kill_and_resume_every_case_exactly_once_and_equal_to_serial(tmp_path):
     cmd = [sys.executable, "-m", "mission_sim.cli", "sweep", str(study_path), "--out", str(out),
            "--workers", "2", "--no-plot", "--no-progress", "--format", "json"]
     cases = prepare_study(load_study(study_path))[1]  # the case ids the CLI uses
-    assert len(cases) == 40
+    assert len(cases) == N_KILL
 
     t0 = time.monotonic()
     rc, n1, err = _run_until(cmd, out, 6, signal.SIGTERM)  # polite: pending cancelled, cluster closed
-    assert rc == 130 and "interrupted" in err and 6 <= n1 < 40
+    assert rc == 130 and err.strip() == "dronewpt sweep: interrupted" and 6 <= n1 < N_KILL
     print(f"SIGTERM run {time.monotonic() - t0:.1f} s")
     rc, n2, _ = _run_until(cmd, out, n1 + 6, signal.SIGKILL)  # brutal: no cleanup at all
     print(f"SIGKILL run {time.monotonic() - t0:.1f} s")
-    assert rc == -signal.SIGKILL and n1 + 6 <= n2 < 40
+    assert rc == -signal.SIGKILL and n1 + 6 <= n2 < N_KILL
     done = subprocess.run(cmd, cwd=ROOT, env=env(), capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
+    assert done.returncode == 0 and done.stderr == "", done.stderr  # no Dask tracebacks on a normal run
     print(f"final run {time.monotonic() - t0:.1f} s")
     summary = json.loads(done.stdout)
-    assert summary["skipped"] == n2 and summary["run"] == 40 - n2 and summary["ok"] == 40
+    assert summary["skipped"] == n2 and summary["run"] == N_KILL - n2 and summary["ok"] == N_KILL
 
     # every case exactly once, counting rows in the Parquet files themselves
     assert Counter(raw_case_ids(out)) == Counter({c.case_id: 1 for c in cases})
     serial = run_sweep(cases, lambda p: toy_case({**p, "delay_s": 0.0}), tmp_path / "serial", progress=False)
     pd.testing.assert_frame_equal(stable(read_results(out)), stable(serial.results), check_exact=True)
+
+
+def test_ctrl_c_during_cluster_start_is_one_line_and_the_workers_end(tmp_path):
+    """SIGINT to the whole process group (a terminal's Ctrl-C) just after the manifest is written, that is
+    while the local cluster starts: one line, no worker traceback, nothing left running."""
+    study_path = write_study(tmp_path / "kill.toml", KILL)
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "mission_sim.cli", "sweep", str(study_path), "--out", str(out), "--workers", "2",
+           "--no-plot", "--no-progress"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not (out / "sweep.json").exists() and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.01)
+        time.sleep(0.3)  # workers being spawned
+        t0 = time.monotonic()
+        os.killpg(proc.pid, signal.SIGINT)
+        rc = proc.wait(timeout=30)
+        print(f"exit {time.monotonic() - t0:.2f} s after Ctrl-C")
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline and _group_alive(proc.pid):
+            time.sleep(0.1)
+        assert not _group_alive(proc.pid)
+    finally:
+        if _group_alive(proc.pid):
+            os.killpg(proc.pid, signal.SIGKILL)
+    err = proc.stderr.read().decode()
+    assert rc == 130 and err == "dronewpt sweep: interrupted\n", err
+
+
+def test_futures_are_released_once_stored(client, tmp_path):
+    st = load_study(write_study(tmp_path / "toy.toml", TOY.replace("delay_s = 0.01", "delay_s = 0.0")))
+    res = run_sweep(case_space_of(st), ToyRunner(), tmp_path / "o", client=client, progress=False, max_in_flight=2)
+    assert res.n_ok + res.n_error == 48
+    assert not client.futures  # nothing held by this client ...
+    deadline = time.monotonic() + 10  # the scheduler handles the releases asynchronously
+    while client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.tasks)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.tasks)) == 0  # nor kept there
 
 
 def test_cli_runs_on_an_existing_cluster_given_its_scheduler_address(client, tmp_path, capsys):
@@ -187,7 +232,7 @@ def test_cli_runs_on_an_existing_cluster_given_its_scheduler_address(client, tmp
 
 
 def test_cli_bad_scheduler_is_one_line_error(tmp_path, capsys):
-    study_path = write_study(tmp_path / "s.toml", '[study]\nrunner = "sweep_toy:factory"\n')
+    study_path = write_study(tmp_path / "s.toml", '[study]\nrunner = "sweep_toy:factory"\n[grid]\nseed = [1, 2]\n')
     for addr in ("tcp://127.0.0.1:9", "not an address"):
         rc = main(["sweep", str(study_path), "--out", str(tmp_path / "o"), "--scheduler", addr,
                    "--connect-timeout", "1"])
@@ -221,7 +266,11 @@ policy = ["step", "model_based"]
 
 def test_real_missions_on_two_workers_equal_serial_with_physics_orderings(client, tmp_path):
     (tmp_path / "tiny.toml").write_text(TINY)
-    runner, cases, _ = prepare_study(load_study(tmp_path / "tiny.toml"), policies.make, policies.available())
+    st = load_study(tmp_path / "tiny.toml")
+    with pytest.raises(ValueError, match=r"^2 of 6 cases .*pads\.1\.hover_time_s=-1\.0 .*\[2 cases: \w{16}, \w{16}\]$"):
+        prepare_study(st, policies.make, policies.available())  # refused before anything runs ...
+    # ... and, unchecked, the same values fail on the workers (recorded as error rows)
+    runner, cases, _ = prepare_study(st, policies.make, policies.available(), check_values=False)
     assert len(cases) == 6
     res = run_sweep(cases, runner, tmp_path / "dask", client=client, progress=False)
     serial = run_sweep(cases, runner, tmp_path / "serial", progress=False)

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import argparse
+import dataclasses
+import functools
 import json
 import sys
 from pathlib import Path
 
+from ..studies import DEFAULT_MAX_CASES
 from .common import CliError, add_progress_flag, nonneg_int, positive_float, show_progress
 
 
@@ -15,9 +19,17 @@ def _add_sweep(sub):
                                    "on a Dask cluster and store one Parquet row per mission under DIR/cases. "
                                    "Re-running the same command skips the cases already stored. Prints a "
                                    "summary table and writes trade-off plots to DIR/plots. Exit status 1 if "
-                                   "some cases failed (stored with their error) or did not finish.")
-    p.add_argument("study", type=Path, metavar="STUDY.toml", help="study TOML file (see examples/study_small.toml)")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder (created; reused to resume)")
+                                   "some cases failed (stored with their error) or did not finish. "
+                                   "`dronewpt sweep --status DIR` prints how many cases are done, failed, pending.")
+    p.add_argument("study", type=Path, nargs="?", metavar="STUDY.toml",
+                   help="study TOML file (see examples/study_small.toml)")
+    p.add_argument("--out", type=Path, metavar="DIR", help="output folder (created; reused to resume)")
+    p.add_argument("--status", type=Path, metavar="DIR", default=None,
+                   help="print the counts of done, failed and pending cases of the sweep in DIR and exit")
+    p.add_argument("--max-cases", type=positive_int("max-cases"), default=DEFAULT_MAX_CASES, metavar="N",
+                   help=f"refuse a study of more than N cases before any work (default {DEFAULT_MAX_CASES:,})")
+    p.add_argument("--retry-errors", action="store_true",
+                   help="also re-run the cases stored with status 'error' (their new row replaces the old one)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS", help="address of an existing Dask scheduler "
                                                       "(e.g. tcp://10.0.0.5:8786); default: a local cluster")
     p.add_argument("--connect-timeout", type=positive_float("connect-timeout"), default=10.0, metavar="S",
@@ -29,6 +41,18 @@ def _add_sweep(sub):
     p.add_argument("--no-plot", action="store_true", help="skip the PNG plots")
     add_progress_flag(p)
     p.set_defaults(func=_cmd_sweep)
+
+
+def positive_int(name):
+    """argparse type: an integer >= 1 (underscores allowed: 1_000_000)."""
+    conv = nonneg_int(name)
+
+    def pos(text):
+        v = conv(text)
+        if v < 1:
+            raise argparse.ArgumentTypeError(f"{name}={text!r} is invalid; valid range: integer >= 1")
+        return v
+    return pos
 
 
 def _check_scheduler_address(address: str) -> None:
@@ -48,44 +72,101 @@ def _check_scheduler_address(address: str) -> None:
         raise CliError(f"--scheduler {address!r} is invalid ({exc}); valid format: tcp://HOST:PORT") from None
 
 
-def _cmd_sweep(args) -> int:
-    import signal
+def _cmd_status(args) -> int:
+    from ..studies.status import sweep_status
 
-    import pandas as pd
+    st = sweep_status(args.status)
+    if args.format == "json":
+        print(json.dumps(dataclasses.asdict(st)))
+    else:
+        print(st.line())
+    return 0
 
-    from ..studies import report as sweep_report
-    from ..studies import study as study_mod
-    from ..studies import sweep
 
+def _check_args(args) -> None:
+    if args.study is None or args.out is None:
+        raise CliError("give STUDY.toml and --out DIR (or --status DIR to see how far a sweep is)")
     if args.scheduler is not None:
         _check_scheduler_address(args.scheduler)
     if args.scheduler is not None and args.workers is not None:
         raise CliError("--scheduler and --workers exclude each other "
                        "(the cluster at --scheduler has its own workers)")
+
+
+def _prepare(args):
+    """Study, runner, lazy cases and fingerprint: size and every case's values checked, nothing run yet."""
+    from ..studies import study as study_mod
+    from ..studies.prepare import prepare_study
+
     st = study_mod.load_study(args.study)
+    study_mod.check_size(st, args.max_cases)  # before policies are imported: a 10^8 grid is refused at once
     make_policy = policy_names = None
     if not st.runner:
         import policies  # lazy: mission_sim never imports policies at module level
 
         make_policy, policy_names = policies.make, policies.available()
-    runner, cases, _ = sweep.prepare_study(st, make_policy, policy_names)
+    runner, cases, fingerprint = prepare_study(st, make_policy, policy_names, max_cases=args.max_cases,
+                                               progress=show_progress(args))
+    return st, runner, cases, fingerprint
 
-    def _term(signum, frame):  # SIGTERM -> KeyboardInterrupt: pending cases cancelled, cluster closed
-        raise KeyboardInterrupt
 
-    factory = None  # --workers 0: serially in this process
-    if args.scheduler is not None or args.workers != 0:
-        def factory():
-            return sweep.dask_client(args.scheduler, args.workers, connect_timeout_s=args.connect_timeout)
+def _client_factory(args):
+    from ..studies.cluster import dask_client
+
+    if args.scheduler is None and args.workers == 0:
+        return None  # serially in this process
+    factory = functools.partial(dask_client, args.scheduler, args.workers, connect_timeout_s=args.connect_timeout)
     if args.scheduler is not None:
         with factory():  # a bad address fails now, before the store is touched
             pass
+    return factory
+
+
+def _run(args, st, runner, cases, fingerprint):
+    from ..studies import sweep
+    from ..studies.status import write_manifest
+
+    return sweep.run_sweep(cases, runner, args.out, client_factory=_client_factory(args),
+                           progress=show_progress(args), progress_desc=st.name, retry_errors=args.retry_errors,
+                           before_run=lambda: write_manifest(args.out, st, fingerprint, len(cases)))
+
+
+def _term(signum, frame):  # SIGTERM -> KeyboardInterrupt: rows received are stored, cluster closed, one line
+    raise KeyboardInterrupt
+
+
+def _cmd_sweep(args) -> int:
+    import signal
+
+    if args.status is not None:
+        return _cmd_status(args)
     old = signal.signal(signal.SIGTERM, _term)
     try:
-        res = sweep.run_sweep(cases, runner, args.out, client_factory=factory, progress=show_progress(args),
-                              progress_desc=st.name)
+        return _sweep(args)
     finally:
         signal.signal(signal.SIGTERM, old)
+
+
+def _sweep(args) -> int:
+    _check_args(args)
+    st, runner, cases, fingerprint = _prepare(args)
+    res = _run(args, st, runner, cases, fingerprint)
+    _report(args, st, res)
+    if res.n_missing:
+        print(f"dronewpt sweep: {res.n_missing} of {res.n_cases} cases did not finish (tasks lost); "
+              "run the same command again to resume", file=sys.stderr)
+        return 1
+    if res.n_error:
+        print(f"dronewpt sweep: {res.n_error} of {res.n_cases} cases failed (stored with status 'error'; "
+              "--retry-errors runs them again)", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _report(args, st, res) -> None:
+    import pandas as pd
+
+    from ..studies import report as sweep_report
 
     table = sweep_report.summary_table(res.results, st)
     errors = sweep_report.error_table(res.results)
@@ -94,31 +175,22 @@ def _cmd_sweep(args) -> int:
         table.to_csv(args.out / "summary.csv")
     counts = {"study": st.name, "out": str(args.out), "cases": res.n_cases, "skipped": res.n_skipped,
               "run": res.n_run, "ok": res.n_ok, "errors": res.n_error, "missing": res.n_missing,
-              "wall_s": round(res.wall_s, 3),
+              "wall_s": round(res.wall_s, 3), "compact_s": round(res.compact_s, 3),
               "cases_per_s": None if res.n_run == 0 else round(res.cases_per_s, 3)}
     if args.format == "json":
         summary = json.loads(table.reset_index().to_json(orient="records")) if not table.empty else []
         print(json.dumps({**counts, "summary": summary, "failed": errors.to_dict(orient="records"),
                           "figures": figs}))
-    else:
-        rate = f" in {res.wall_s:.1f} s ({res.cases_per_s:.2f} cases/s)" if res.n_run else ""
-        print(f"study {st.name}: {res.n_cases} cases, {res.n_skipped} already done, {res.n_run} run{rate}, "
-              f"{res.n_ok} ok, {res.n_error} failed; results in {args.out / 'cases'}")
-        if not table.empty:
-            with pd.option_context("display.width", 200, "display.max_columns", 40,
-                                   "display.float_format", "{:.4g}".format):
-                print(table.T.to_string())
-        if len(errors):
-            print("failed cases (first 10):")
-            print(errors.to_string(index=False, max_colwidth=120))
-        for f in figs:
-            print(f"figure: {f}")
-    if res.n_missing:
-        print(f"dronewpt sweep: {res.n_missing} of {res.n_cases} cases did not finish (tasks lost); "
-              "run the same command again to resume", file=sys.stderr)
-        return 1
-    if res.n_error:
-        print(f"dronewpt sweep: {res.n_error} of {res.n_cases} cases failed (stored with status 'error')",
-              file=sys.stderr)
-        return 1
-    return 0
+        return
+    rate = f" in {res.wall_s:.1f} s ({res.cases_per_s:.2f} cases/s)" if res.n_run else ""
+    print(f"study {st.name}: {res.n_cases} cases, {res.n_skipped} already done, {res.n_run} run{rate}, "
+          f"{res.n_ok} ok, {res.n_error} failed; results in {args.out / 'cases'}")
+    if not table.empty:
+        with pd.option_context("display.width", 200, "display.max_columns", 40,
+                               "display.float_format", "{:.4g}".format):
+            print(table.T.to_string())
+    if len(errors):
+        print("failed cases (first 10):")
+        print(errors.to_string(index=False, max_colwidth=120))
+    for f in figs:
+        print(f"figure: {f}")

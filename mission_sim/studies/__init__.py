@@ -1,8 +1,16 @@
 """Parameter studies: many missions, on Dask or serially.
 
-==========  ==================================================================================
-``study``   study files (TOML): base mission, grid and Monte Carlo parameters, case identity
-``sweep``   the resumable sweep engine (Parquet store, Dask client) and the mission case runner
-``report``  summary and error tables, trade-off plots of a sweep's results
-==========  ==================================================================================
+=================  ===========================================================================
+``study``          study files (TOML): base mission, grid and Monte Carlo parameters, lazy case
+                   space, size check, case identity
+``prepare``        a study made ready to run: size, runner, keys and every case's values checked
+``mission_cases``  the mission case runner and the fast check of a case's values
+``sweep``          the engine: lazy cases in chunks with back-pressure, results into the store
+``store``          the Parquet store: parts by count or age, incremental merges, compaction
+``cluster``        a Dask client that starts and stops quietly and fast
+``status``         the sweep's manifest and ``--status`` (done, failed, pending)
+``report``         summary and error tables, trade-off plots of a sweep's results
+=================  ===========================================================================
 """
+
+DEFAULT_MAX_CASES = 1_000_000  # a study larger than this is refused unless --max-cases says otherwise

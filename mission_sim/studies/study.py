@@ -9,6 +9,7 @@ keys of :func:`mission_sim.config.apply_overrides` (``"pads.1.hover_time_s"``, `
     name = "small"            # optional (default: the file's stem)
     base = "mission.toml"     # optional, relative to this file; omitted = the built-in default mission
     # runner = "pkg.mod:factory"   # optional; default: the mission runner (see mission_sim.studies.sweep)
+    # allow_single = true     # optional: a study that varies nothing (one case, the base) is then allowed
 
     [fixed]                   # applied to every case
     "pads.0.hover_time_s" = 30.0
@@ -40,6 +41,12 @@ the parameters in sorted key order, so draw ``j`` is the same whatever ``n`` is:
 adds cases and keeps the old ones (which a resumed sweep then skips). Every grid point sees the same
 ``n`` draws (common random numbers: differences between grid points are not sampling noise).
 
+Cases are generated lazily (:class:`CaseSpace`: grid points outer, Monte Carlo draws inner; a
+``linspace`` axis is never materialised) and the study's size is computed arithmetically
+(:func:`size_bound`), so :func:`check_size` refuses a 10^8-case study before anything is built.
+Grid values are deduplicated per axis (``5`` and ``5.0`` are one value); Monte Carlo draws that
+coincide (discrete distributions) are kept once.
+
 Case identity: ``case_id = sha256(canonical JSON of {"base": sha256(base mission), "params": params})``
 (first 16 hex digits). Canonical JSON sorts keys and writes integral floats as integers, so
 ``10`` and ``10.0`` are the same case. Changing the base mission changes every case_id.
@@ -48,7 +55,6 @@ Case identity: ``case_id = sha256(canonical JSON of {"base": sha256(base mission
 from __future__ import annotations
 
 import hashlib
-import itertools
 import json
 import math
 from dataclasses import dataclass, field
@@ -57,14 +63,48 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Study", "Case", "load_study", "parse_study", "expand_cases", "case_id", "canonical_json",
-           "DISTRIBUTIONS", "POLICY_KEY", "DEFAULT_POLICY"]
+from . import DEFAULT_MAX_CASES
+
+__all__ = ["Study", "Case", "CaseSpace", "Linspace", "load_study", "parse_study", "expand_cases", "case_space",
+           "size_bound", "check_size", "case_id", "canonical_json", "DISTRIBUTIONS", "POLICY_KEY", "DEFAULT_POLICY",
+           "DEFAULT_MAX_CASES"]
 
 POLICY_KEY = "policy"
 DEFAULT_POLICY = "model_based"
 DISTRIBUTIONS = ("uniform", "loguniform", "normal", "integers", "choice")
 _SPECS = DISTRIBUTIONS + ("linspace",)
 _SECTIONS = ("study", "fixed", "grid", "monte_carlo", "report")
+_STUDY_KEYS = ("name", "base", "runner", "allow_single")
+_CONTINUOUS = ("uniform", "loguniform", "normal")
+_DRAW_CACHE = 10_000  # Monte Carlo draws kept in memory while iterating (more are recomputed per grid point)
+
+
+@dataclass(frozen=True)
+class Linspace:
+    """A lazy grid axis: ``num`` evenly spaced floats from ``start`` to ``stop`` (both included).
+
+    Value ``i`` is ``i * step + start`` and the last one is ``stop``, exactly as ``numpy.linspace``
+    computes them, but nothing is materialised (a 10^8-point axis costs three numbers).
+    """
+
+    start: float
+    stop: float
+    num: int
+
+    def __len__(self) -> int:
+        return self.num
+
+    def __getitem__(self, i: int) -> float:
+        if not -self.num <= i < self.num:
+            raise IndexError(f"linspace index {i} out of range 0..{self.num - 1}")
+        i %= self.num
+        if i == self.num - 1 and self.num > 1:
+            return float(self.stop)
+        step = (self.stop - self.start) / (self.num - 1) if self.num > 1 else 0.0
+        return float(i * step + self.start)
+
+    def __iter__(self):
+        return (self[i] for i in range(self.num))
 
 
 @dataclass(frozen=True)
@@ -73,6 +113,12 @@ class Case:
 
     case_id: str
     params: dict
+    params_json: str | None = field(default=None, compare=False, repr=False)  # canonical_json(params), if known
+
+    @property
+    def canonical_params(self) -> str:
+        """``canonical_json(params)`` (computed once when the case comes from a :class:`CaseSpace`)."""
+        return self.params_json if self.params_json is not None else canonical_json(self.params)
 
 
 @dataclass(frozen=True)
@@ -81,11 +127,13 @@ class Study:
 
     base_path : path of the base mission TOML, or None for the built-in default mission
     fixed : parameters applied to every case
-    grid : key -> list of values (Cartesian product, in file order)
+    grid : key -> list of values or a lazy :class:`Linspace` (Cartesian product, in file order)
     mc_n, mc_seed : number of Monte Carlo draws (0 = none) and their seed
     mc_params : key -> (distribution name, arguments)
     runner : "module:factory" import path of a case-runner factory, or None for the mission runner
     report : plot axes, e.g. {"x": "mission.hover_time_s", "hue": "pads.1.x_m"}
+    allow_single : a study that varies nothing (the base mission once) is allowed
+    source : the TOML document it was parsed from (``dronewpt sweep --status`` re-reads it)
     """
 
     name: str
@@ -97,6 +145,8 @@ class Study:
     mc_params: dict = field(default_factory=dict)
     runner: str | None = None
     report: dict = field(default_factory=dict)
+    allow_single: bool = False
+    source: dict = field(default_factory=dict, repr=False, compare=False)  # the TOML document parsed
 
     @property
     def varied_keys(self) -> list[str]:
@@ -116,8 +166,8 @@ class Study:
 
     @property
     def n_cases(self) -> int:
-        n_grid = math.prod(len(v) for v in self.grid.values())
-        return n_grid * max(self.mc_n, 1)
+        """Grid points x Monte Carlo draws, arithmetically (coinciding discrete draws counted apart)."""
+        return size_bound(self)
 
 
 # ----------------------------------------------------------------------------- parsing
@@ -163,13 +213,19 @@ def _grid_values(key: str, v) -> list:
                 or not isinstance(args[2], int) or args[2] < 1):
             raise ValueError(f"[grid] {key!r} = {{linspace = {args!r}}} is invalid; valid: [start, stop, num] "
                              f"with num an integer >= 1")
+        if not all(isinstance(a, (int, float)) and not isinstance(a, bool) for a in args[:2]):
+            raise ValueError(f"[grid] {key!r} = {{linspace = {args!r}}} is invalid; valid: [start, stop, num] "
+                             f"with start and stop numbers")
         start, stop = (_check_scalar("grid", key, float(a)) for a in args[:2])
-        return [float(x) for x in np.linspace(start, stop, args[2])]
+        return Linspace(start, stop, args[2] if start != stop else 1)
     if not isinstance(v, list):
         v = [v]
     if not v:
         raise ValueError(f"[grid] {key!r} is an empty list; valid: at least one value")
-    return [_check_scalar("grid", key, x) for x in v]
+    unique = {}
+    for x in v:  # 5 and 5.0 are the same case: keep the first
+        unique.setdefault(canonical_json(_check_scalar("grid", key, x)), x)
+    return list(unique.values())
 
 
 def _distribution(key: str, v) -> tuple[str, tuple]:
@@ -199,16 +255,14 @@ def _distribution(key: str, v) -> tuple[str, tuple]:
     return dist, (a, b)
 
 
-def parse_study(doc: dict, name: str = "study", base_dir=None) -> Study:
-    """A study from its TOML document (a dict). ``base_dir`` resolves a relative ``[study] base``."""
-    unknown = sorted(set(doc) - set(_SECTIONS))
-    if unknown:
-        raise ValueError(f"study section [{unknown[0]}] is unknown; valid sections: "
-                         + ", ".join(f"[{s}]" for s in _SECTIONS))
-    head = doc.get("study", {})
-    bad = sorted(set(head) - {"name", "base", "runner"})
+def _parse_head(head: dict, base_dir):
+    """The ``[study]`` table: (table, base mission path or None, runner spec or None, allow_single)."""
+    bad = sorted(set(head) - set(_STUDY_KEYS))
     if bad:
-        raise ValueError(f"[study] key {bad[0]!r} is unknown; valid keys: name, base, runner")
+        raise ValueError(f"[study] key {bad[0]!r} is unknown; valid keys: {', '.join(_STUDY_KEYS)}")
+    allow_single = head.get("allow_single", False)
+    if not isinstance(allow_single, bool):
+        raise ValueError(f"[study] allow_single = {allow_single!r} is invalid; valid: true or false")
     base_path = None
     if head.get("base") not in (None, "", "default"):
         base_path = Path(head["base"])
@@ -219,6 +273,17 @@ def parse_study(doc: dict, name: str = "study", base_dir=None) -> Study:
     runner = head.get("runner")
     if runner is not None and (not isinstance(runner, str) or runner.count(":") != 1):
         raise ValueError(f"[study] runner = {runner!r} is invalid; valid: 'package.module:factory'")
+
+    return head, base_path, runner, allow_single
+
+
+def parse_study(doc: dict, name: str = "study", base_dir=None) -> Study:
+    """A study from its TOML document (a dict). ``base_dir`` resolves a relative ``[study] base``."""
+    unknown = sorted(set(doc) - set(_SECTIONS))
+    if unknown:
+        raise ValueError(f"study section [{unknown[0]}] is unknown; valid sections: "
+                         + ", ".join(f"[{s}]" for s in _SECTIONS))
+    head, base_path, runner, allow_single = _parse_head(doc.get("study", {}), base_dir)
 
     fixed = {k: _check_scalar("fixed", k, v) for k, v in _flatten(doc.get("fixed", {}), "", "fixed").items()}
     grid = {k: _grid_values(k, v) for k, v in _flatten(doc.get("grid", {}), "", "grid").items()}
@@ -253,15 +318,25 @@ def parse_study(doc: dict, name: str = "study", base_dir=None) -> Study:
             raise ValueError(f"[report] {k} = {v!r} is not a varied parameter; valid: {', '.join(varied) or '(none)'}")
 
     study = Study(name=str(head.get("name", name)), base_path=base_path, fixed=fixed, grid=grid, mc_n=mc_n,
-                  mc_seed=mc_seed, mc_params=mc_params, runner=runner, report=report)
+                  mc_seed=mc_seed, mc_params=mc_params, runner=runner, report=report, allow_single=allow_single,
+                  source=doc)
     for k in (POLICY_KEY,):
         if k in mc_params and mc_params[k][0] != "choice":
             raise ValueError(f"[monte_carlo.params] {k!r} must use {{choice = [...]}}")
+    if not grid and not mc_params and not allow_single:
+        raise ValueError(f"study {study.name!r} varies nothing (no [grid] or [monte_carlo.params] entries), so it "
+                         "would run the base mission once; add parameters to vary, or set "
+                         "[study] allow_single = true")
     return study
 
 
 # ----------------------------------------------------------------------------- identity
 def _canonical(v):
+    t = type(v)  # fast path: the scalars every case is made of
+    if t is str or t is int or t is bool:
+        return v
+    if t is float:
+        return int(v) if v.is_integer() and abs(v) < 2**53 else v
     if isinstance(v, dict):
         return {str(k): _canonical(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
@@ -281,9 +356,13 @@ def canonical_json(obj) -> str:
     return json.dumps(_canonical(obj), sort_keys=True, separators=(",", ":"), allow_nan=False)
 
 
-def case_id(params: dict, base_fingerprint: str = "") -> str:
-    """Stable identity of a case: first 16 hex digits of sha256 over its canonical parameters."""
-    text = canonical_json({"base": base_fingerprint, "params": params})
+def case_id(params: dict, base_fingerprint: str = "", params_json: str | None = None) -> str:
+    """Stable identity of a case: first 16 hex digits of sha256 over its canonical parameters
+    (``canonical_json({"base": base_fingerprint, "params": params})``; pass ``params_json`` =
+    ``canonical_json(params)`` if already known: the text is assembled from it, byte for byte the same)."""
+    if params_json is None:
+        params_json = canonical_json(params)
+    text = f'{{"base":{json.dumps(base_fingerprint)},"params":{params_json}}}'
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -309,21 +388,87 @@ def monte_carlo_draw(study: Study, j: int) -> dict:
     return {k: _draw(rng, *study.mc_params[k]) for k in sorted(study.mc_params)}
 
 
-def expand_cases(study: Study, base_fingerprint: str = "") -> list[Case]:
-    """All cases of a study, in a deterministic order (grid points outer, Monte Carlo draws inner).
+def size_bound(study: Study) -> int:
+    """Grid points x Monte Carlo draws, from the axis lengths alone (nothing is generated)."""
+    return math.prod(len(v) for v in study.grid.values()) * max(study.mc_n, 1)
+
+
+def check_size(study: Study, max_cases: int = DEFAULT_MAX_CASES) -> int:
+    """The study's size; ``ValueError`` (one line, with the size) if it exceeds ``max_cases``."""
+    n = size_bound(study)
+    if n > max_cases:
+        parts = [f"{len(v):,} ({k})" for k, v in study.grid.items()] + \
+                ([f"{study.mc_n:,} Monte Carlo draws"] if study.mc_n else [])
+        raise ValueError(f"study {study.name!r} has {n:,} cases ({' x '.join(parts)}), more than the limit of "
+                         f"{max_cases:,} (--max-cases); shrink the study or raise the limit")
+    return n
+
+
+def _draw_indices(study: Study):
+    """Indices ``j`` of the Monte Carlo draws kept: all of them, or the first of coinciding draws."""
+    if not study.mc_n:
+        return range(0)
+    if all(d in _CONTINUOUS and not (d == "normal" and a[1] == 0) for d, a in study.mc_params.values()):
+        return range(study.mc_n)
+    seen, keep = set(), []
+    for j in range(study.mc_n):
+        key = canonical_json(monte_carlo_draw(study, j))
+        if key not in seen:
+            seen.add(key)
+            keep.append(j)
+    return range(study.mc_n) if len(keep) == study.mc_n else np.asarray(keep, dtype=np.int64)
+
+
+def _lazy_product(axes: list):
+    """Cartesian product (last axis fastest) without materialising the axes (itertools.product does)."""
+    if not axes:
+        yield ()
+        return
+    for head in axes[0]:
+        for rest in _lazy_product(axes[1:]):
+            yield (head, *rest)
+
+
+@dataclass(frozen=True)
+class CaseSpace:
+    """Every case of a study, generated lazily in a deterministic order (grid points outer, Monte
+    Carlo draws inner). ``len()`` is arithmetic; iterating yields :class:`Case` objects one by one.
 
     Each case's parameters are ``policy`` (default :data:`DEFAULT_POLICY`), then the fixed
-    parameters, the grid point and the Monte Carlo draw. Duplicate cases (same case_id, e.g. a
-    value listed twice in the grid) are kept once.
+    parameters, the grid point and the Monte Carlo draw.
     """
-    draws = [monte_carlo_draw(study, j) for j in range(study.mc_n)] or [{}]
-    keys = list(study.grid)
-    cases, seen = [], set()
-    for point in itertools.product(*(study.grid[k] for k in keys)):
-        for draw in draws:
-            params = {POLICY_KEY: DEFAULT_POLICY, **study.fixed, **dict(zip(keys, point)), **draw}
-            cid = case_id(params, base_fingerprint)
-            if cid not in seen:
-                seen.add(cid)
-                cases.append(Case(cid, params))
-    return cases
+
+    study: Study
+    fingerprint: str = ""
+    draws: Any = range(0)
+
+    def __len__(self) -> int:
+        n_grid = math.prod(len(v) for v in self.study.grid.values())
+        return n_grid * (len(self.draws) if self.study.mc_n else 1)
+
+    def params(self):
+        """The cases' parameter dicts, lazily (no case ids computed)."""
+        st = self.study
+        keys = list(st.grid)
+        draws = self.draws if st.mc_n else [None]
+        cached = [monte_carlo_draw(st, j) for j in draws] if st.mc_n and len(draws) <= _DRAW_CACHE else None
+        for point in _lazy_product([st.grid[k] for k in keys]):
+            head = {POLICY_KEY: DEFAULT_POLICY, **st.fixed, **dict(zip(keys, point))}
+            for i, j in enumerate(draws):
+                draw = {} if j is None else (cached[i] if cached is not None else monte_carlo_draw(st, int(j)))
+                yield {**head, **draw}
+
+    def __iter__(self):
+        for p in self.params():
+            text = canonical_json(p)
+            yield Case(case_id(p, self.fingerprint, text), p, text)
+
+
+def case_space(study: Study, base_fingerprint: str = "") -> CaseSpace:
+    """The lazy :class:`CaseSpace` of a study (one pass over the draws if a distribution is discrete)."""
+    return CaseSpace(study, base_fingerprint, _draw_indices(study))
+
+
+def expand_cases(study: Study, base_fingerprint: str = "") -> list[Case]:
+    """All cases of a study as a list (small studies and tests; sweeps iterate :func:`case_space`)."""
+    return list(case_space(study, base_fingerprint))

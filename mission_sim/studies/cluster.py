@@ -1,0 +1,129 @@
+"""A Dask client for sweeps that starts and stops quietly and fast.
+
+What Dask does by default and why this module changes it:
+
+- Ctrl-C in a terminal sends SIGINT to the whole process group, worker processes included: each
+  prints a ``KeyboardInterrupt`` traceback (30-50 lines). The worker processes are spawned here
+  with SIGINT *ignored* (inherited across ``exec``), so only the driver sees Ctrl-C; workers end
+  with their nanny when the driver closes the cluster or dies (they watch their parent).
+- Closing a ``LocalCluster`` logs ``CommClosedError`` tracebacks from connections torn down in
+  flight and waits for graceful worker shutdown (6-9 s). Here the loggers of ``distributed``,
+  ``tornado`` and ``asyncio`` are raised to CRITICAL in the driver while the cluster lives
+  (``silence_logs`` does the same in the workers), and an interrupted sweep closes the client and
+  cluster with a short timeout.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import signal
+import threading
+
+__all__ = ["dask_client", "quiet_logs", "CLOSE_TIMEOUT_S", "INTERRUPT_CLOSE_TIMEOUT_S"]
+
+CLOSE_TIMEOUT_S = 10.0
+INTERRUPT_CLOSE_TIMEOUT_S = 1.0
+_NOISY = ("distributed", "tornado", "asyncio", "bokeh")
+
+
+@contextlib.contextmanager
+def quiet_logs(level: int = logging.CRITICAL):
+    """Raise the level of the Dask-related loggers (and their handlers) while inside."""
+    saved = []
+    for name in _NOISY:
+        lg = logging.getLogger(name)
+        saved.append((lg, lg.level, [(h, h.level) for h in lg.handlers]))
+        lg.setLevel(level)
+        for h in lg.handlers:
+            h.setLevel(level)
+    try:
+        yield
+    finally:
+        for lg, lvl, handlers in saved:
+            lg.setLevel(lvl)
+            for h, hl in handlers:
+                h.setLevel(hl)
+
+
+@contextlib.contextmanager
+def _sigint_shielded():
+    """While child processes are spawned: SIGINT ignored (the disposition survives ``exec``, so the
+    workers never see Ctrl-C, and Python and asyncio then install no KeyboardInterrupt handler in
+    them) and blocked in this thread (a Ctrl-C meanwhile stays pending: Linux never discards a
+    blocked signal) - on leaving, the handler is restored and a pending Ctrl-C raised here."""
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    old_handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old_handler)
+        signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+
+
+def _connect(scheduler: str, timeout_s: float):
+    from distributed import Client
+
+    try:
+        return Client(scheduler, timeout=timeout_s, set_as_default=False)
+    except Exception as exc:  # noqa: BLE001 - address errors come as OSError, TimeoutError, ValueError, ...
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ValueError(f"--scheduler {scheduler!r}: cannot connect to a Dask scheduler ({msg})") from None
+
+
+def _local_cluster(workers: int | None):
+    from distributed import LocalCluster
+
+    n = workers if workers is not None else (os.cpu_count() or 1)
+    if n < 1:
+        raise ValueError(f"workers={n!r} is invalid; valid range: integer >= 1")
+    return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                        silence_logs=logging.CRITICAL)
+
+
+def _close(client, cluster, interrupted: bool) -> None:
+    """Close the client, then the cluster. A Ctrl-C / SIGTERM while closing does not leave the cluster
+    open (Dask's exit hook would then wait 10 s for it): the rest closes with the short timeout and
+    the interrupt is raised afterwards."""
+    timeout = INTERRUPT_CLOSE_TIMEOUT_S if interrupted else CLOSE_TIMEOUT_S
+    caught = None
+    for obj in (client, cluster):
+        while obj is not None:
+            try:
+                obj.close(timeout=timeout)
+                break
+            except KeyboardInterrupt as exc:  # once more, quickly (a second Ctrl-C gives up on this one)
+                if caught is not None:
+                    break
+                caught, timeout = exc, INTERRUPT_CLOSE_TIMEOUT_S
+            except Exception:  # noqa: BLE001 - already closed, connection gone: nothing left to close
+                break
+    if caught is not None:
+        raise caught
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str | None = None, workers: int | None = None, *, connect_timeout_s: float = 10.0):
+    """A ``distributed.Client``: to ``scheduler`` if given, else to a new local cluster of ``workers``
+    single-threaded worker processes (default: one per CPU). Closed on exit, quietly; after an
+    exception (Ctrl-C, SIGTERM turned into KeyboardInterrupt) with a 1 s timeout."""
+    cluster = client = None
+    interrupted = True
+    with quiet_logs():
+        try:
+            if scheduler is not None:
+                client = _connect(scheduler, connect_timeout_s)
+            else:
+                from distributed import Client
+
+                with _sigint_shielded():  # a Ctrl-C meanwhile is raised on leaving, with both assigned
+                    cluster = _local_cluster(workers)
+                    client = Client(cluster, set_as_default=False)
+            yield client
+            interrupted = False
+        finally:
+            _close(client, cluster, interrupted)

@@ -1,0 +1,138 @@
+"""The mission case runner of sweeps and the check of every case's values before a sweep starts.
+
+:class:`MissionCaseRunner` turns a case's parameters (dotted overrides + ``policy``) into a
+:class:`~mission_sim.config.MissionConfig`, a policy and ``run_mission(...).summary``.
+
+:class:`MissionParamChecker` validates a case's values exactly as the runner would (the mission
+config's own checks: types, ranges, cross-field limits, and the run-size estimate of
+:mod:`mission_sim.world.budget`), but fast enough for 10^5-10^6 cases: only the sections a case
+changes are rebuilt, each distinct section value set is checked once (cached), and the rest of the
+config is the base's. About 5-15 us per case instead of ~200 us for a full rebuild.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Iterable
+
+from .study import POLICY_KEY
+
+__all__ = ["MissionCaseRunner", "MissionParamChecker"]
+
+_CACHE_MAX = 200_000  # section value sets remembered (continuous Monte Carlo draws are all distinct)
+
+
+class MissionParamChecker:
+    """``checker(overrides) -> None | error message`` for a base mission dict (``config_to_dict``)."""
+
+    def __init__(self, base: dict):
+        from ..config import config_from_dict
+
+        self.base = base
+        self.cfg = config_from_dict(base)
+        self._sections: dict[tuple, object] = {}
+        self._sizes: dict[tuple, str | None] = {}
+
+    def _section(self, sec: str, values: dict):
+        from ..config import check_seed, section_from_dict
+
+        if sec == "seed":
+            return check_seed(values["seed"])
+        if sec.startswith("pads."):
+            return section_from_dict(sec, {**self.base["pads"][int(sec[5:])], **values})
+        return section_from_dict(sec, {**self.base.get(sec, {}), **values})
+
+    def _cached_section(self, sec: str, values: dict):
+        key = (sec, tuple((n, type(v).__name__, v) for n, v in values.items()))
+        obj = self._sections.get(key)
+        if obj is None:
+            if len(self._sections) > _CACHE_MAX:
+                self._sections.clear()
+            try:
+                obj = self._section(sec, values)
+            except ValueError as exc:
+                obj = ValueError(str(exc))
+            self._sections[key] = obj
+        if isinstance(obj, ValueError):
+            raise obj
+        return obj
+
+    def _size_error(self, cfg) -> str | None:
+        from ..world.budget import check_run_size
+
+        key = (cfg.mission, cfg.pads, cfg.sim)
+        if key not in self._sizes:
+            if len(self._sizes) > _CACHE_MAX:
+                self._sizes.clear()
+            try:
+                check_run_size(cfg)
+                self._sizes[key] = None
+            except ValueError as exc:
+                self._sizes[key] = str(exc).replace("; use --force to run it anyway", "")
+        return self._sizes[key]
+
+    def __call__(self, overrides: dict) -> str | None:
+        groups: dict[str, dict] = {}
+        for k, v in overrides.items():
+            sec, _, name = str(k).rpartition(".")
+            groups.setdefault(sec or "seed", {})[name] = v
+        kw, pads = {}, list(self.cfg.pads)
+        try:
+            for sec, values in groups.items():
+                obj = self._cached_section(sec, values)
+                if sec.startswith("pads."):
+                    pads[int(sec[5:])] = obj
+                else:
+                    kw[sec] = obj
+            cfg = dataclasses.replace(self.cfg, pads=tuple(pads), **kw)  # cross-field checks
+        except ValueError as exc:
+            return str(exc)
+        return self._size_error(cfg)
+
+
+class MissionCaseRunner:
+    """``run_case`` for missions: overrides -> MissionConfig -> policy -> ``run_mission(...).summary``.
+
+    base : the base mission as a plain dict (``config_to_dict``)
+    make_policy : ``make_policy(name, PolicyContext) -> Policy`` (the CLI passes ``policies.make``;
+        picklable by reference, so workers import ``policies`` themselves)
+    policy_names : the valid policy names (checked before a sweep starts), or None
+    """
+
+    def __init__(self, base: dict, make_policy: Callable, policy_names: Iterable[str] | None = None):
+        self.base = base
+        self.make_policy = make_policy
+        self.policy_names = None if policy_names is None else tuple(policy_names)
+        self._checker = None
+
+    def __getstate__(self):  # the checker's caches stay on the driver
+        return {**self.__dict__, "_checker": None}
+
+    def config(self, params: dict):
+        from ..config import apply_overrides, config_from_dict
+
+        overrides = {k: v for k, v in params.items() if k != POLICY_KEY}
+        return config_from_dict(apply_overrides(self.base, overrides))
+
+    def validate_keys(self, keys: Iterable[str], example: dict) -> None:
+        """Unknown keys raise ``ValueError`` naming the key (apply_overrides' validation)."""
+        from ..config import apply_overrides
+
+        apply_overrides(self.base, {k: example[k] for k in keys if k != POLICY_KEY})
+
+    def check_params(self, params: dict) -> str | None:
+        """None if the case would build its mission, else the error (naming the key and value)."""
+        policy = params.get(POLICY_KEY, "model_based")
+        if self.policy_names is not None and policy not in self.policy_names:
+            return f"policy={policy!r} is invalid; valid values: {', '.join(sorted(self.policy_names))}"
+        if self._checker is None:
+            self._checker = MissionParamChecker(self.base)
+        return self._checker({k: v for k, v in params.items() if k != POLICY_KEY})
+
+    def __call__(self, params: dict) -> dict:
+        from ..config import policy_context
+        from ..world.runner import run_mission
+
+        cfg = self.config(params)
+        policy = self.make_policy(params.get(POLICY_KEY, "model_based"), policy_context(cfg))
+        return dict(run_mission(cfg, policy).summary)

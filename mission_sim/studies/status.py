@@ -1,0 +1,83 @@
+"""How far a sweep is: ``dronewpt sweep --status DIR`` (done, failed, pending), without a lock.
+
+A sweep writes ``DIR/sweep.json`` (the manifest) before it runs anything: the study's name, its
+number of cases, the base fingerprint and the study's TOML document. The status re-creates the
+study's case ids from it (lazily, ~1 s per 10^5 cases) and counts them in the store, so rows of
+an earlier, different study in the same folder are not counted as this study's.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from .store import CaseStore
+from .study import Study, case_space, parse_study
+
+__all__ = ["SweepStatus", "write_manifest", "read_manifest", "sweep_status", "MANIFEST"]
+
+MANIFEST = "sweep.json"
+
+
+@dataclass(frozen=True)
+class SweepStatus:
+    """Counts of a sweep folder: this study's cases ``ok`` / ``failed`` (stored as errors) /
+    ``pending`` (not stored yet), and rows of other studies (``other``)."""
+
+    study: str
+    n_cases: int
+    ok: int
+    failed: int
+    pending: int
+    other: int
+
+    def line(self) -> str:
+        done = self.ok + self.failed
+        pct = 100.0 * done / self.n_cases if self.n_cases else 100.0
+        other = f", {self.other:,} rows of other studies" if self.other else ""
+        return (f"study {self.study}: {self.n_cases:,} cases, {done:,} done ({pct:.1f} %): {self.ok:,} ok, "
+                f"{self.failed:,} failed, {self.pending:,} pending{other}")
+
+
+def write_manifest(out_dir, study: Study, fingerprint: str, n_cases: int) -> Path:
+    """Write ``out_dir/sweep.json`` atomically (the base mission is named by its fingerprint only)."""
+    doc = json.loads(json.dumps(study.source, default=str))
+    doc.get("study", {}).pop("base", None)  # the fingerprint stands for it; the path may not resolve later
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = out / f".{MANIFEST}.{os.getpid()}.tmp"
+    tmp.write_text(json.dumps({"study": study.name, "n_cases": n_cases, "fingerprint": fingerprint,
+                               "doc": doc}, indent=1))
+    os.replace(tmp, out / MANIFEST)
+    return out / MANIFEST
+
+
+def read_manifest(out_dir) -> dict:
+    path = Path(out_dir) / MANIFEST
+    if not Path(out_dir).is_dir():
+        raise FileNotFoundError(f"--status {str(out_dir)!r}: no such folder")
+    if not path.is_file():
+        raise FileNotFoundError(f"--status {str(out_dir)!r} is not a sweep folder (no {MANIFEST}); "
+                                "valid: the --out folder of a sweep")
+    try:
+        return json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{str(path)!r} is not a valid sweep manifest ({exc})") from None
+
+
+def sweep_status(out_dir) -> SweepStatus:
+    """Counts of the study recorded in ``out_dir/sweep.json`` against the rows stored in ``out_dir``."""
+    man = read_manifest(out_dir)
+    study = parse_study(man["doc"], name=man["study"])
+    state = CaseStore(out_dir).state()
+    ok = failed = n = 0
+    for case in case_space(study, man["fingerprint"]):
+        n += 1
+        if case.case_id in state.errors:
+            failed += 1
+        elif case.case_id in state.done:
+            ok += 1
+    return SweepStatus(study=man["study"], n_cases=n, ok=ok, failed=failed, pending=n - ok - failed,
+                       other=state.n_done - ok - failed)
