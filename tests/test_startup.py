@@ -45,6 +45,15 @@ def test_mission_path_skips_signal_plotting_and_torch(module):
     assert got == []
 
 
+def test_switching_model_imports_numba_only_when_it_runs():
+    """numba (~0.3 s import, compile or cache load) is paid by the first switching run, not by
+    importing the model or by the CLI's paper command path."""
+    assert "numba" not in _imported("import wpt_receiver.switching, wpt_receiver.paper")
+    code = ("from wpt_receiver import TABLE_I\nfrom wpt_receiver.switching import SwitchingLink\n"
+            "l = SwitchingLink(TABLE_I)\nl.run(l.schedule(0.0, 4 * l.T, 0.0), l.periodic_steady_state(0.0))")
+    assert "numba" in _imported(code)
+
+
 def test_model_based_policy_built_without_scipy_signal():
     code = ("import policies\nfrom mission_sim.contract import PolicyContext\n"
             "p = policies.make('model_based', PolicyContext())")
