@@ -197,13 +197,6 @@ def _sign_float(x):
     return 1.0 if x > 0.0 else (-1.0 if x < 0.0 else 0.0)
 
 
-def _abs_mean_float(a, b):
-    """Mean of |x| over a linear segment from ``a`` to ``b``."""
-    if a * b >= 0.0:
-        return 0.5 * abs(a + b)
-    return 0.5 * (a * a + b * b) / (abs(a) + abs(b))
-
-
 class _ScalarOps:
     sin = staticmethod(math.sin)
     sign = staticmethod(_sign_float)
@@ -260,7 +253,7 @@ def advance(i1, i2, vl, soc, vrc, d, c, b, ops, n_sub: int = 1):
                 r = _substeps(i1[idx], i2[idx], np.abs(v2[idx]), vl[idx], c[12:, idx], n_sub, ops)
                 i1n[idx], i2n[idx], pk[idx], il[idx] = r
         elif i2m * v2 < 0.0 or i2n * v2 < 0.0:
-            i1n, i2n, pk, il = _substeps(i1, i2, abs(v2), vl, c[12:], n_sub, ops)
+            i1n, i2n, pk, il = _substeps_float(i1, i2, abs(v2), vl, c[12:], n_sub)
     ib = il - i_load
     soc = soc + dsoc * ib
     vrc = rc_decay * vrc + rc_gain * ib
@@ -269,8 +262,9 @@ def advance(i1, i2, vl, soc, vrc, d, c, b, ops, n_sub: int = 1):
 
 
 def _substeps(i1, i2, v2_mag, vl, c, n_sub, ops):
-    """``n_sub`` rectifier-period sub-steps, V2 = |f(d)| sign(I2) re-evaluated at each: returns
-    ``(i1, i2, peak |I2|, mean I_L)`` (I_L from the mean |I2| of each sub-step, linear in it)."""
+    """``n_sub`` rectifier-period sub-steps on arrays, V2 = |f(d)| sign(I2) re-evaluated at each:
+    returns ``(i1, i2, peak |I2|, mean I_L)`` (I_L from the mean |I2| of each sub-step, linear in
+    it). Python floats: :func:`_substeps_float`."""
     h00, h01, h10, h11, f0, f1, g01, g11 = c
     sign = ops.sign
     path = [i2]
@@ -278,18 +272,33 @@ def _substeps(i1, i2, v2_mag, vl, c, n_sub, ops):
         v2 = v2_mag * sign(i2)
         i1, i2 = h00 * i1 + h01 * i2 + f0 + g01 * v2, h10 * i1 + h11 * i2 + f1 + g11 * v2
         path.append(i2)
-    if ops is NUMPY_OPS:
-        p = np.abs(np.stack(path))
-        pk = p[1:].max(axis=0)
-        s = p[1:] + p[:-1]
-        # mean |I2| on a linear sub-step: (|a| + |b|)/2, less |a||b|/(|a| + |b|) when it crosses zero
-        cross = (np.stack(path[1:]) * np.stack(path[:-1])) < 0.0
-        tot = 0.5 * s.sum(axis=0)
-        if cross.any():
-            tot -= np.where(cross, p[1:] * p[:-1] / np.where(cross, s, 1.0), 0.0).sum(axis=0)
-    else:
-        pk = max(abs(x) for x in path[1:])
-        tot = sum(_abs_mean_float(a, b) for a, b in zip(path[:-1], path[1:]))
+    p = np.abs(np.stack(path))
+    pk = p[1:].max(axis=0)
+    s = p[1:] + p[:-1]
+    # mean |I2| on a linear sub-step: (|a| + |b|)/2, less |a||b|/(|a| + |b|) when it crosses zero
+    cross = (np.stack(path[1:]) * np.stack(path[:-1])) < 0.0
+    tot = 0.5 * s.sum(axis=0)
+    if cross.any():
+        tot -= np.where(cross, p[1:] * p[:-1] / np.where(cross, s, 1.0), 0.0).sum(axis=0)
+    return i1, i2, pk, v2_mag * tot / (2.0 * n_sub * vl)
+
+
+def _substeps_float(i1, i2, v2_mag, vl, c, n_sub):
+    """:func:`_substeps` on Python floats (the single env), one pass: the same sums in the same
+    order (peak = first largest |I2|, mean |I2| summed from 0 over the sub-steps)."""
+    h00, h01, h10, h11, f0, f1, g01, g11 = c
+    pk, tot = -1.0, 0
+    for _ in range(n_sub):
+        a = i2
+        v2 = v2_mag if i2 > 0.0 else (-v2_mag if i2 < 0.0 else 0.0 * v2_mag)
+        i1, i2 = h00 * i1 + h01 * i2 + f0 + g01 * v2, h10 * i1 + h11 * i2 + f1 + g11 * v2
+        m = abs(i2)
+        if m > pk:
+            pk = m
+        if a * i2 >= 0.0:  # mean |x| on the linear sub-step from a to i2
+            tot += 0.5 * abs(a + i2)
+        else:
+            tot += 0.5 * (a * a + i2 * i2) / (abs(a) + abs(i2))
     return i1, i2, pk, v2_mag * tot / (2.0 * n_sub * vl)
 
 
