@@ -31,6 +31,8 @@ def mirror_index(i, n: int):
     """Indices reflected about the edge samples (``d c b | a b c d | c b a``) into ``[0, n)``."""
     if n <= 1:
         return np.zeros_like(i)
+    if i.size and i.min() >= 0 and i.max() < n:  # nothing to reflect (points away from the edges)
+        return i
     period = 2 * n - 2
     i = np.abs(i) % period
     return np.where(i >= n, period - i, i)
@@ -42,10 +44,17 @@ def map_cubic_mirror(coef, u, v):
     i0, wu = cubic_weights(np.asarray(u, dtype=float))
     j0, wv = cubic_weights(np.asarray(v, dtype=float))
     n0, n1 = coef.shape
+    flat = coef.ravel()
     cols = [mirror_index(j0 + b, n1) for b in range(4)]
     out = np.zeros(i0.shape)
+    tmp = np.empty(i0.shape)
+    idx = np.empty(i0.shape, dtype=np.intp)
     for a in range(4):
-        row = mirror_index(i0 + a, n0)
+        row = mirror_index(i0 + a, n0) * n1
         for b in range(4):
-            out += coef[row, cols[b]] * wu[a] * wv[b]
+            np.add(row, cols[b], out=idx)
+            flat.take(idx, out=tmp)
+            tmp *= wu[a]   # (coef * w_a) * w_b, summed in C order: scipy's operations
+            tmp *= wv[b]
+            out += tmp
     return out
