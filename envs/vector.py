@@ -69,7 +69,6 @@ class SbarChargingVectorEnv(VectorEnv):
         self._state = np.zeros((6, n))   # i1, i2, vl, soc, vrc, d
         self._prev_done = np.zeros(n, dtype=bool)
         self._rngs = [None] * n
-        self._scn = [self.scenario] * n
         self._cur_scenario = self.scenario
         self._started = False
         self._obs_scale = OBS_SCALE[:, None]
@@ -97,9 +96,10 @@ class SbarChargingVectorEnv(VectorEnv):
         """(Re)start the sub-environments ``idx``: draw with their generators, build plans batched.
         The scenario is the one given to the last ``reset`` (``options["scenario"]``) or the env's."""
         c, scn = self.config, self._cur_scenario
-        p = build_plans(draw_episodes([self._rngs[i] for i in idx], scn, c.n_steps), scn, c)
-        for i in idx:
-            self._scn[i] = scn
+        rngs = self._rngs if len(idx) == self.num_envs else [self._rngs[i] for i in idx]
+        p = build_plans(draw_episodes(rngs, scn, c.n_steps), scn, c)
+        if len(idx) == self.num_envs:  # all at once (the usual autoreset): plain slices, no scatter
+            idx = slice(None)
         self._cmd[:, idx] = p.cmd_a.T
         self._noise[:, idx] = p.noise_a.T
         self._coef_all[idx] = p.coef
