@@ -37,7 +37,7 @@ from wpt_receiver import TABLE_I, LinkParams, duty_from_v2_clipped, state_matric
 from wpt_receiver.sbar import rectifier_current, rectifier_v2
 
 from .plant import battery_operating_point, lm_window_h
-from .scenario import Scenario, command_profile
+from .scenario import Scenario, command_profile, stack_draws
 
 __all__ = ["EnvConfig", "RewardWeights", "Plans", "build_plans", "advance", "reward_cost", "OBS_SCALE",
            "OBS_OFFSET", "SCALAR_OPS", "NUMPY_OPS", "N_COEF"]
@@ -131,32 +131,52 @@ def _steady_v2(link: LinkParams, lm, il, vl):
     return np.clip((x * link.v1_amp_v - np.sqrt(disc)) / (2.0 * link.r1_ohm), 0.0, FOUR_OVER_PI * vl)
 
 
-def build_plans(draws, scenarios: list[Scenario], cfg: EnvConfig) -> Plans:
-    """Turn the episodes' random draws into what the step needs (batched over the episodes)."""
-    n, T, S, link = len(draws), cfg.n_steps, cfg.n_slow, cfg.link
+def build_plans(draws, scenarios, cfg: EnvConfig) -> Plans:
+    """Turn the episodes' random draws (a list of :class:`~envs.scenario.EpisodeDraw` or a batched
+    one) into what the step needs, on arrays over the episodes. ``scenarios``: one per episode,
+    or one :class:`Scenario` for all."""
+    if isinstance(draws, (list, tuple)):
+        draws = stack_draws(draws)
+    n, T, S, link = draws.n, cfg.n_steps, cfg.n_slow, cfg.link
+    if isinstance(scenarios, Scenario):
+        load_w, noise_sd = np.full(n, scenarios.load_power_w), np.full(n, scenarios.i2_noise_a)
+    else:
+        load_w = np.array([s.load_power_w for s in scenarios])
+        noise_sd = np.array([s.i2_noise_a for s in scenarios])
     t_slow = np.arange(S) * (cfg.slow_every * cfg.dt_s)
-    lm = lm_window_h([d.wind_speed_m_s for d in draws], [d.record_u for d in draws], t_slow)
-    lm *= np.array([d.lm_scale for d in draws])[:, None]
+    lm = lm_window_h(draws.wind_speed_m_s, draws.record_u, t_slow)
+    lm *= np.asarray(draws.lm_scale)[:, None]
+    # windows without wind share one Lm: discretise each distinct value once (same numbers)
+    lm_u, back = np.unique(lm.ravel(), return_inverse=True)
+    coef = _zoh_coefficients(link, lm_u, cfg)[back.ravel()].reshape(n, S, N_COEF)
+    cmd = command_profile(draws, T, cfg.dt_s)
+    battery, x0, vl0, vrc0, d0 = _initial_state(link, lm[:, 0], np.asarray(draws.soc0, dtype=float), load_w,
+                                                cmd[:, 0], cfg)
+    return Plans(cmd, draws.noise * noise_sd[:, None], coef, lm, battery, x0, vl0, vrc0, d0,
+                 np.asarray(draws.t_stop_s, dtype=float))
+
+
+def _zoh_coefficients(link: LinkParams, lm, cfg: EnvConfig) -> np.ndarray:
+    """The 20 ZOH coefficients of :func:`advance` for every Lm in ``lm`` (flattened, (n*S, 20))."""
     a, b = state_matrices(link, lm.ravel())
     ad, bd = zoh_discretise(a, b, cfg.dt_s)
     am, bm = zoh_discretise(a, b, 0.5 * cfg.dt_s)
     ah, bh = zoh_discretise(a, b, cfg.dt_s / cfg.n_sub)
     v1 = link.v1_amp_v
-    coef = np.stack([ad[:, 0, 0], ad[:, 0, 1], ad[:, 1, 0], ad[:, 1, 1], bd[:, 0, 0] * v1, bd[:, 1, 0] * v1,
+    return np.stack([ad[:, 0, 0], ad[:, 0, 1], ad[:, 1, 0], ad[:, 1, 1], bd[:, 0, 0] * v1, bd[:, 1, 0] * v1,
                      bd[:, 0, 1], bd[:, 1, 1], am[:, 1, 0], am[:, 1, 1], bm[:, 1, 0] * v1, bm[:, 1, 1],
                      ah[:, 0, 0], ah[:, 0, 1], ah[:, 1, 0], ah[:, 1, 1], bh[:, 0, 0] * v1, bh[:, 1, 0] * v1,
                      bh[:, 0, 1], bh[:, 1, 1]], axis=-1)
-    coef = coef.reshape(n, S, N_COEF)
 
-    soc0 = np.array([d.soc0 for d in draws])
+
+def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig):
+    """Battery rows of :class:`Plans` and the steady state delivering the first command ``cmd0``
+    (fixed point through the battery voltage): ``(battery, x0, vl0, vrc0, d0)``."""
     ocv, docv, r0, r1, tau1, cap = battery_operating_point(soc0)
-    i_load = np.array([s.load_power_w for s in scenarios]) / ocv   # hover draw, constant over 30 ms
-    cmd = command_profile(draws, T, cfg.dt_s)
-    # initial steady state delivering cmd[0] (fixed point through the battery voltage)
-    lm0 = lm[:, 0]
-    vl = ocv + (r0 + r1) * (cmd[:, 0] - i_load)
+    i_load = load_w / ocv   # hover draw, constant over 30 ms
+    vl = ocv + (r0 + r1) * (cmd0 - i_load)
     for _ in range(2):
-        v2 = _steady_v2(link, lm0, cmd[:, 0], vl)
+        v2 = _steady_v2(link, lm0, cmd0, vl)
         i1, i2 = steady_state(link, v2, lm0)
         il = v2 * i2 / (2.0 * vl)
         vl = ocv + (r0 + r1) * (il - i_load)
@@ -170,20 +190,11 @@ def build_plans(draws, scenarios: list[Scenario], cfg: EnvConfig) -> Plans:
     bus_decay = np.exp(-cfg.dt_s / (r0 * cfg.bus_c_f))
     battery = np.stack([ocv, docv, soc0, r0, decay, r1 * (1.0 - decay), cfg.dt_s / (3600.0 * cap), i_load,
                         bus_decay], axis=-1)
-    noise = np.stack([d.noise for d in draws]) * np.array([s.i2_noise_a for s in scenarios])[:, None]
-    return Plans(cmd, noise, coef, lm, battery, np.stack([i1, i2], axis=-1), vl0, vrc0, d0,
-                 np.array([d.t_stop_s for d in draws]))
+    return battery, np.stack([i1, i2], axis=-1), vl0, vrc0, d0
 
 
 def _sign_float(x):
     return 1.0 if x > 0.0 else (-1.0 if x < 0.0 else 0.0)
-
-
-def _abs_mean_float(a, b):
-    """Mean of |x| over a linear segment from ``a`` to ``b``."""
-    if a * b >= 0.0:
-        return 0.5 * abs(a + b)
-    return 0.5 * (a * a + b * b) / (abs(a) + abs(b))
 
 
 class _ScalarOps:
@@ -242,7 +253,7 @@ def advance(i1, i2, vl, soc, vrc, d, c, b, ops, n_sub: int = 1):
                 r = _substeps(i1[idx], i2[idx], np.abs(v2[idx]), vl[idx], c[12:, idx], n_sub, ops)
                 i1n[idx], i2n[idx], pk[idx], il[idx] = r
         elif i2m * v2 < 0.0 or i2n * v2 < 0.0:
-            i1n, i2n, pk, il = _substeps(i1, i2, abs(v2), vl, c[12:], n_sub, ops)
+            i1n, i2n, pk, il = _substeps_float(i1, i2, abs(v2), vl, c[12:], n_sub)
     ib = il - i_load
     soc = soc + dsoc * ib
     vrc = rc_decay * vrc + rc_gain * ib
@@ -251,8 +262,9 @@ def advance(i1, i2, vl, soc, vrc, d, c, b, ops, n_sub: int = 1):
 
 
 def _substeps(i1, i2, v2_mag, vl, c, n_sub, ops):
-    """``n_sub`` rectifier-period sub-steps, V2 = |f(d)| sign(I2) re-evaluated at each: returns
-    ``(i1, i2, peak |I2|, mean I_L)`` (I_L from the mean |I2| of each sub-step, linear in it)."""
+    """``n_sub`` rectifier-period sub-steps on arrays, V2 = |f(d)| sign(I2) re-evaluated at each:
+    returns ``(i1, i2, peak |I2|, mean I_L)`` (I_L from the mean |I2| of each sub-step, linear in
+    it). Python floats: :func:`_substeps_float`."""
     h00, h01, h10, h11, f0, f1, g01, g11 = c
     sign = ops.sign
     path = [i2]
@@ -260,18 +272,33 @@ def _substeps(i1, i2, v2_mag, vl, c, n_sub, ops):
         v2 = v2_mag * sign(i2)
         i1, i2 = h00 * i1 + h01 * i2 + f0 + g01 * v2, h10 * i1 + h11 * i2 + f1 + g11 * v2
         path.append(i2)
-    if ops is NUMPY_OPS:
-        p = np.abs(np.stack(path))
-        pk = p[1:].max(axis=0)
-        s = p[1:] + p[:-1]
-        # mean |I2| on a linear sub-step: (|a| + |b|)/2, less |a||b|/(|a| + |b|) when it crosses zero
-        cross = (np.stack(path[1:]) * np.stack(path[:-1])) < 0.0
-        tot = 0.5 * s.sum(axis=0)
-        if cross.any():
-            tot -= np.where(cross, p[1:] * p[:-1] / np.where(cross, s, 1.0), 0.0).sum(axis=0)
-    else:
-        pk = max(abs(x) for x in path[1:])
-        tot = sum(_abs_mean_float(a, b) for a, b in zip(path[:-1], path[1:]))
+    p = np.abs(np.stack(path))
+    pk = p[1:].max(axis=0)
+    s = p[1:] + p[:-1]
+    # mean |I2| on a linear sub-step: (|a| + |b|)/2, less |a||b|/(|a| + |b|) when it crosses zero
+    cross = (np.stack(path[1:]) * np.stack(path[:-1])) < 0.0
+    tot = 0.5 * s.sum(axis=0)
+    if cross.any():
+        tot -= np.where(cross, p[1:] * p[:-1] / np.where(cross, s, 1.0), 0.0).sum(axis=0)
+    return i1, i2, pk, v2_mag * tot / (2.0 * n_sub * vl)
+
+
+def _substeps_float(i1, i2, v2_mag, vl, c, n_sub):
+    """:func:`_substeps` on Python floats (the single env), one pass: the same sums in the same
+    order (peak = first largest |I2|, mean |I2| summed from 0 over the sub-steps)."""
+    h00, h01, h10, h11, f0, f1, g01, g11 = c
+    pk, tot = -1.0, 0
+    for _ in range(n_sub):
+        a = i2
+        v2 = v2_mag if i2 > 0.0 else (-v2_mag if i2 < 0.0 else 0.0 * v2_mag)
+        i1, i2 = h00 * i1 + h01 * i2 + f0 + g01 * v2, h10 * i1 + h11 * i2 + f1 + g11 * v2
+        m = abs(i2)
+        if m > pk:
+            pk = m
+        if a * i2 >= 0.0:  # mean |x| on the linear sub-step from a to i2
+            tot += 0.5 * abs(a + i2)
+        else:
+            tot += 0.5 * (a * a + i2 * i2) / (abs(a) + abs(i2))
     return i1, i2, pk, v2_mag * tot / (2.0 * n_sub * vl)
 
 

@@ -87,18 +87,32 @@ def _valid_starts(wind_level_m_s: int, n_span: int):
 def lm_window_h(wind_speed_m_s, start_frac, t_s):
     """True Lm [H] (n, len(t_s)) for n windows: wind speed (rounded to the 1 m/s record levels),
     start at fraction ``start_frac`` in [0, 1) of the record's valid starts, sampled at times
-    ``t_s`` after the start (linear interpolation between the 20 ms record samples)."""
+    ``t_s`` after the start (linear interpolation between the 20 ms record samples: the arithmetic
+    of ``np.interp``, on all windows of a wind level at once)."""
     t_s = np.asarray(t_s, dtype=float)
     n_span = int(np.ceil(t_s[-1] / RECORD_DT_S)) + 1
-    out = np.empty((len(start_frac), len(t_s)))
-    for i, (w, u) in enumerate(zip(wind_speed_m_s, start_frac)):
-        level = int(round(w))
-        lm, _ = lm_record(level)
-        starts = _valid_starts(level, n_span)
-        i0 = starts[min(int(u * len(starts)), len(starts) - 1)]
-        seg = lm[i0:i0 + n_span + 1]
-        out[i] = np.interp(t_s, np.arange(len(seg)) * RECORD_DT_S, seg)
+    level = np.rint(np.asarray(wind_speed_m_s, dtype=float)).astype(int)  # round half to even, as round()
+    u = np.asarray(start_frac, dtype=float)
+    xp = np.arange(n_span + 1) * RECORD_DT_S
+    j = np.clip(np.searchsorted(xp, t_s, side="right") - 1, 0, n_span - 1)
+    out = np.empty((len(u), len(t_s)))
+    for lv in np.unique(level):  # a handful of wind levels, not one pass per window
+        rows = np.flatnonzero(level == lv)
+        lm, _ = lm_record(int(lv))
+        starts = _valid_starts(int(lv), n_span)
+        i0 = starts[np.minimum((u[rows] * len(starts)).astype(int), len(starts) - 1)]
+        seg = lm[i0[:, None] + np.arange(n_span + 1)]
+        out[rows] = _interp_rows(xp, seg, t_s, j)
     return out
+
+
+def _interp_rows(xp, fp, x, j):
+    """``np.interp(x, xp, fp[r])`` for every row r of ``fp`` (x inside [xp[0], xp[-1]], ``j`` the
+    left sample of each x): numpy's formula ``slope (x - xp[j]) + fp[j]``, exact at the samples."""
+    slope = (fp[:, j + 1] - fp[:, j]) / (xp[j + 1] - xp[j])
+    val = slope * (x - xp[j]) + fp[:, j]
+    val = np.where(x == xp[j], fp[:, j], val)
+    return np.where(x >= xp[-1], fp[:, -1:], val)
 
 
 def battery_operating_point(soc, params: BatteryParams = _BATTERY):

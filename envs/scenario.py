@@ -22,7 +22,8 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-__all__ = ["Scenario", "SCENARIOS", "get_scenario", "EpisodeDraw", "draw_episode", "command_profile", "scenario_from_options"]
+__all__ = ["Scenario", "SCENARIOS", "get_scenario", "EpisodeDraw", "draw_episode", "draw_episodes", "stack_draws",
+           "command_profile", "scenario_from_options"]
 
 
 @dataclass(frozen=True)
@@ -115,7 +116,8 @@ def get_scenario(scenario) -> Scenario:
 
 @dataclass(frozen=True)
 class EpisodeDraw:
-    """The random numbers of one episode (drawn in this order from the env's ``np_random``)."""
+    """The random numbers of one episode (drawn in this order from the env's ``np_random``), or of
+    a batch of episodes (every field an array with the episodes along axis 0: :func:`draw_episodes`)."""
 
     soc0: float
     lm_scale: float
@@ -126,6 +128,15 @@ class EpisodeDraw:
     t_change_s: float
     t_stop_s: float
     noise: np.ndarray        # (n_steps,) standard normals for the I2 sensor
+
+    @property
+    def n(self) -> int:
+        """Episodes in a batched draw (1 for a single one)."""
+        return int(np.size(self.soc0))
+
+
+#: the uniformly drawn fields, in drawing order (record_u is always drawn, on [0, 1))
+_RANGED = ("soc", "lm_scale", "wind_speed_m_s", None, "cmd_a", "cmd_a", "t_change_s", "t_stop_s")
 
 
 def _u(rng, lohi):
@@ -145,11 +156,38 @@ def draw_episode(rng: np.random.Generator, scn: Scenario, n_steps: int, n_slow: 
     )
 
 
+def draw_episodes(rngs, scn: Scenario, n_steps: int) -> EpisodeDraw:
+    """A batched :class:`EpisodeDraw`, episode ``i`` from generator ``rngs[i]``: the same numbers as
+    :func:`draw_episode` with each generator (``uniform(lo, hi)`` is ``lo + (hi - lo) u`` of the
+    generator's next double, so one ``random(k)`` call gives the k scalar draws), two generator
+    calls per episode and the rest on arrays."""
+    ranges = [(0.0, 1.0) if f is None else getattr(scn, f) for f in _RANGED]
+    drawn = [i for i, (lo, hi) in enumerate(ranges) if hi > lo]
+    n = len(rngs)
+    u = np.empty((n, len(drawn)))
+    noise = np.empty((n, n_steps))
+    for i, rng in enumerate(rngs):  # each sub-environment owns its generator: one call per array
+        rng.random(out=u[i])
+        rng.standard_normal(out=noise[i])
+    cols = []
+    for i, (lo, hi) in enumerate(ranges):
+        cols.append(lo + (hi - lo) * u[:, drawn.index(i)] if i in drawn else np.full(n, float(lo)))
+    return EpisodeDraw(*cols, noise=noise)
+
+
+def stack_draws(draws) -> EpisodeDraw:
+    """One batched :class:`EpisodeDraw` from a list of single ones."""
+    names = ("soc0", "lm_scale", "wind_speed_m_s", "record_u", "cmd0_a", "cmd1_a", "t_change_s", "t_stop_s")
+    cols = {k: np.array([getattr(d, k) for d in draws], dtype=float) for k in names}
+    return EpisodeDraw(**cols, noise=np.stack([d.noise for d in draws]))
+
+
 def command_profile(draws, n_steps: int, dt_s: float) -> np.ndarray:
-    """Charge command [A] per step, shape (len(draws), n_steps + 1): cmd0 until t_change, cmd1 until
-    t_stop, then 0 (stop charging -> short mode) to the end of the window."""
+    """Charge command [A] per step, shape (n, n_steps + 1) for a batched draw (or a list of
+    draws): cmd0 until t_change, cmd1 until t_stop, then 0 (stop charging -> short mode) to the
+    end of the window."""
+    b = stack_draws(draws) if isinstance(draws, (list, tuple)) else draws
     t = np.arange(n_steps + 1) * dt_s
-    out = np.empty((len(draws), n_steps + 1))
-    for i, d in enumerate(draws):
-        out[i] = np.where(t < d.t_change_s, d.cmd0_a, np.where(t < d.t_stop_s, d.cmd1_a, 0.0))
-    return out
+    tc, ts = np.reshape(b.t_change_s, (-1, 1)), np.reshape(b.t_stop_s, (-1, 1))
+    c0, c1 = np.reshape(b.cmd0_a, (-1, 1)), np.reshape(b.cmd1_a, (-1, 1))
+    return np.where(t < tc, c0, np.where(t < ts, c1, 0.0))

@@ -5,6 +5,11 @@ generator (seeded ``seed + i`` like :class:`gymnasium.vector.SyncVectorEnv`), so
 reproduces ``num_envs`` single environments seeded the same way. Autoreset: ``NEXT_STEP`` (the
 step after an episode ended resets that sub-environment, returns its first observation, reward 0,
 and ignores its action).
+
+Speed: the step runs in one compiled loop over the sub-environments (:mod:`envs.vector_kernel`,
+numba, the default when numba is installed; ``compiled=False`` keeps the numpy path of
+:func:`envs.core.advance`, the reference); episodes are drawn with two generator calls per
+restarted sub-environment (:func:`envs.scenario.draw_episodes`) and planned on arrays.
 """
 
 from __future__ import annotations
@@ -20,7 +25,7 @@ from mission_sim.contract import OBS_DIM, PolicyContext
 from wpt_receiver.sbar import rectifier_current, rectifier_v2
 
 from .core import (N_BAT, N_COEF, NUMPY_OPS, OBS_OFFSET, OBS_SCALE, EnvConfig, advance, build_plans, reward_cost)
-from .scenario import draw_episode, get_scenario, scenario_from_options
+from .scenario import draw_episodes, get_scenario, scenario_from_options
 
 __all__ = ["SbarChargingVectorEnv", "SbarChargingDiscreteVectorEnv"]
 
@@ -32,7 +37,7 @@ class SbarChargingVectorEnv(VectorEnv):
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, num_envs: int = 1, scenario="nominal", config: EnvConfig | None = None,
-                 render_mode: str | None = None):
+                 render_mode: str | None = None, compiled: bool | None = None):
         if int(num_envs) != num_envs or num_envs < 1:
             raise ValueError(f"num_envs={num_envs!r} is invalid; valid range: integer >= 1")
         if render_mode is not None:
@@ -50,23 +55,27 @@ class SbarChargingVectorEnv(VectorEnv):
         self._T, self._M, self._dt, self._inv_rated = T, c.slow_every, c.dt_s, 1.0 / c.rated_i2_a
         self._n_sub = c.n_sub
         self._ar = np.arange(n)
-        self._cmd = np.zeros((n, T + 1))
-        self._noise = np.zeros((n, T))
+        # per-step data stored step-major (T, n): a step reads one contiguous row across the envs
+        self._cmd = np.zeros((T + 1, n))
+        self._noise = np.zeros((T, n))
         self._coef_all = np.zeros((n, S, N_COEF))
-        self._lm_all = np.zeros((n, S))
+        self._lm_all = np.zeros((S, n))
         self._bat = np.zeros((N_BAT, n))
         self._t_stop = np.zeros(n)
-        self._coef = np.zeros((N_COEF, n))
+        self._coef = np.zeros((N_COEF, n))     # numpy path: the current coefficients, one row per coefficient
+        self._coef_cur = np.zeros((n, N_COEF))  # compiled path: the same, one row per env (updated in place)
         self._j = np.zeros(n, dtype=np.int64)
         self._k = np.zeros(n, dtype=np.int64)
         self._state = np.zeros((6, n))   # i1, i2, vl, soc, vrc, d
         self._prev_done = np.zeros(n, dtype=bool)
         self._rngs = [None] * n
-        self._scn = [self.scenario] * n
         self._cur_scenario = self.scenario
         self._started = False
         self._obs_scale = OBS_SCALE[:, None]
         self._obs_offset = OBS_OFFSET[:, None]
+        self._kernel = _load_kernel() if compiled is None or compiled else None
+        if compiled and self._kernel is None:
+            raise ValueError("compiled=True needs numba; install it or pass compiled=None/False")
 
     def _make_action_space(self):
         return spaces.Box(-1.0, 1.0, (1,), np.float32)
@@ -86,19 +95,19 @@ class SbarChargingVectorEnv(VectorEnv):
     def _start(self, idx: np.ndarray):
         """(Re)start the sub-environments ``idx``: draw with their generators, build plans batched.
         The scenario is the one given to the last ``reset`` (``options["scenario"]``) or the env's."""
-        c = self.config
-        scns = [self._cur_scenario] * len(idx)
-        draws = [draw_episode(self._rngs[i], s, c.n_steps, c.n_slow) for i, s in zip(idx, scns)]
-        p = build_plans(draws, scns, c)
-        for i, s in zip(idx, scns):
-            self._scn[i] = s
-        self._cmd[idx] = p.cmd_a
-        self._noise[idx] = p.noise_a
+        c, scn = self.config, self._cur_scenario
+        rngs = self._rngs if len(idx) == self.num_envs else [self._rngs[i] for i in idx]
+        p = build_plans(draw_episodes(rngs, scn, c.n_steps), scn, c)
+        if len(idx) == self.num_envs:  # all at once (the usual autoreset): plain slices, no scatter
+            idx = slice(None)
+        self._cmd[:, idx] = p.cmd_a.T
+        self._noise[:, idx] = p.noise_a.T
         self._coef_all[idx] = p.coef
-        self._lm_all[idx] = p.lm_h
+        self._lm_all[:, idx] = p.lm_h.T
         self._bat[:, idx] = p.battery.T
         self._t_stop[idx] = p.t_stop_s
         self._coef[:, idx] = p.coef[:, 0].T
+        self._coef_cur[idx] = p.coef[:, 0]
         self._j[idx] = 0
         self._k[idx] = 0
         st = self._state
@@ -109,12 +118,12 @@ class SbarChargingVectorEnv(VectorEnv):
         i1, i2, vl, soc, vrc, d = self._state
         il = rectifier_current(d, np.abs(i2))
         ib = il - self._bat[7]
-        cmd = self._cmd[self._ar, self._k]
+        cmd = self._cmd[self._k, self._ar]
         obs = self._obs(i2, vl, ib, il, soc, cmd, d)
         info = {"t_s": self._k * self._dt, "i2_a": i2.copy(), "i2_peak_a": np.abs(i2), "i1_a": i1.copy(),
                 "d_short": d.copy(), "v2_v": rectifier_v2(d, vl, i2), "rect_current_a": il, "battery_v": vl.copy(),
                 "battery_current_a": ib, "soc": soc.copy(), "charge_cmd_a": cmd,
-                "lm_h": self._lm_all[self._ar, self._j], "energy_j": np.zeros(self.num_envs),
+                "lm_h": self._lm_all[self._j, self._ar], "energy_j": np.zeros(self.num_envs),
                 "cost": np.zeros(self.num_envs), "t_stop_s": self._t_stop.copy()}
         return obs, info
 
@@ -150,29 +159,13 @@ class SbarChargingVectorEnv(VectorEnv):
         d = self._duty(actions)
         done = self._prev_done
         any_done = bool(done.any())
-        k = self._k
         if any_done:
-            k[done] = 0   # these rows are stepped for nothing and restarted below
-        j = k // self._M
-        moved = j != self._j
-        if moved.any():
-            self._coef[:, moved] = self._coef_all[self._ar[moved], j[moved]].T
-            self._j = j
-        i1, i2, vl_old, soc, vrc, _ = self._state
-        i1, i2, peak, il, ib, soc, vrc, vl, v2 = advance(i1, i2, vl_old, soc, vrc, d, self._coef, self._bat, NUMPY_OPS,
-                                                         self._n_sub)
-        cmd = self._cmd[self._ar, k]
-        reward, cost = reward_cost(il, cmd, peak, self._inv_rated, self.config.reward, NUMPY_OPS)
-        energy = vl_old * il * self._dt
-        st = self._state
-        st[0], st[1], st[2], st[3], st[4], st[5] = i1, i2, vl, soc, vrc, d
-        k += 1
-        obs = self._obs(i2 + self._noise[self._ar, k - 1], vl, ib, il, soc, self._cmd[self._ar, k], d)
-        truncated = k >= self._T
+            self._k[done] = 0   # these rows are stepped for nothing and restarted below
+        if self._kernel is not None:
+            obs, reward, truncated, info = self._step_compiled(d)
+        else:
+            obs, reward, truncated, info = self._step_numpy(d)
         terminated = np.zeros(self.num_envs, dtype=bool)
-        info = {"t_s": k * self._dt, "i2_a": i2, "i2_peak_a": peak, "i1_a": i1, "d_short": d, "v2_v": v2,
-                "rect_current_a": il, "battery_v": vl, "battery_current_a": ib, "soc": soc, "charge_cmd_a": cmd,
-                "lm_h": self._lm_all[self._ar, self._j], "energy_j": energy, "cost": cost}
         if any_done:
             idx = np.flatnonzero(done)
             self._start(idx)
@@ -184,6 +177,53 @@ class SbarChargingVectorEnv(VectorEnv):
                 v[idx] = info0[key][idx]
         self._prev_done = truncated.copy()
         return obs, reward, terminated, truncated, info
+
+    def _step_compiled(self, d):
+        """One step of every sub-environment in the compiled loop (:func:`envs.vector_kernel.step_kernel`)."""
+        kern, rows = self._kernel
+        n, c = self.num_envs, self.config
+        obs = np.empty((n, OBS_DIM), np.float32)
+        reward = np.empty(n)
+        truncated = np.empty(n, dtype=bool)
+        block = np.empty((len(rows), n))
+        w = c.reward
+        kern(d, self._state, self._k, self._j, self._coef_all, self._coef_cur, self._bat, self._cmd, self._noise, self._lm_all,
+             self._M, self._n_sub, self._T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a,
+             OBS_SCALE, OBS_OFFSET, obs, reward, truncated, block)
+        return obs, reward, truncated, dict(zip(rows, block))
+
+    def _step_numpy(self, d):
+        """The same step on numpy arrays (:func:`envs.core.advance` with ``NUMPY_OPS``): the reference."""
+        k = self._k
+        j = k // self._M
+        moved = j != self._j
+        if moved.any():
+            self._coef[:, moved] = self._coef_all[self._ar[moved], j[moved]].T
+            self._j = j
+        i1, i2, vl_old, soc, vrc, _ = self._state
+        i1, i2, peak, il, ib, soc, vrc, vl, v2 = advance(i1, i2, vl_old, soc, vrc, d, self._coef, self._bat, NUMPY_OPS,
+                                                         self._n_sub)
+        cmd = self._cmd[k, self._ar]
+        reward, cost = reward_cost(il, cmd, peak, self._inv_rated, self.config.reward, NUMPY_OPS)
+        energy = vl_old * il * self._dt
+        st = self._state
+        st[0], st[1], st[2], st[3], st[4], st[5] = i1, i2, vl, soc, vrc, d
+        k += 1
+        obs = self._obs(i2 + self._noise[k - 1, self._ar], vl, ib, il, soc, self._cmd[k, self._ar], d)
+        info = {"t_s": k * self._dt, "i2_a": i2, "i2_peak_a": peak, "i1_a": i1, "d_short": d, "v2_v": v2,
+                "rect_current_a": il, "battery_v": vl, "battery_current_a": ib, "soc": soc, "charge_cmd_a": cmd,
+                "lm_h": self._lm_all[self._j, self._ar], "energy_j": energy, "cost": cost}
+        return obs, reward, k >= self._T, info
+
+
+def _load_kernel():
+    """``(step_kernel, INFO_ROWS)`` of :mod:`envs.vector_kernel`, or None without numba (imported
+    here, when a vector env is built, so ``import envs`` does not load numba)."""
+    import importlib.util
+    if importlib.util.find_spec("numba") is None:
+        return None
+    from .vector_kernel import INFO_ROWS, step_kernel
+    return step_kernel, INFO_ROWS
 
 
 class SbarChargingDiscreteVectorEnv(SbarChargingVectorEnv):

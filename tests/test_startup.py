@@ -45,6 +45,31 @@ def test_mission_path_skips_signal_plotting_and_torch(module):
     assert got == []
 
 
+def test_mission_with_cached_coupling_table_skips_scipy_ndimage_and_special(tmp_path):
+    """With the coupling table and coil inductances in the disk cache, a mission run loads neither
+    scipy.ndimage nor scipy.special (~0.5 s of imports together): the table is evaluated by
+    wpt_receiver.bspline. The first process fills the cache (a fresh cache dir: self-contained)."""
+    code = ("import os\nfrom mission_sim.cli import main\n"
+            f"main(['mission', '--out', {str(tmp_path / 'm')!r}, '--no-plot'])")
+    os.environ["DRONEWPT_CACHE_DIR"] = str(tmp_path / "cache")
+    try:
+        first = _imported(code, ("scipy.ndimage", "scipy.special"))
+        again = _imported(code, ("scipy.ndimage", "scipy.special"))
+    finally:
+        del os.environ["DRONEWPT_CACHE_DIR"]
+    assert first == ["scipy.ndimage", "scipy.special"]  # built: the exact field needs both
+    assert again == []
+
+
+def test_switching_model_imports_numba_only_when_it_runs():
+    """numba (~0.3 s import, compile or cache load) is paid by the first switching run, not by
+    importing the model or by the CLI's paper command path."""
+    assert "numba" not in _imported("import wpt_receiver.switching, wpt_receiver.paper")
+    code = ("from wpt_receiver import TABLE_I\nfrom wpt_receiver.switching import SwitchingLink\n"
+            "l = SwitchingLink(TABLE_I)\nl.run(l.schedule(0.0, 4 * l.T, 0.0), l.periodic_steady_state(0.0))")
+    assert "numba" in _imported(code)
+
+
 def test_model_based_policy_built_without_scipy_signal():
     code = ("import policies\nfrom mission_sim.contract import PolicyContext\n"
             "p = policies.make('model_based', PolicyContext())")

@@ -15,8 +15,8 @@ turn: radius, height in the coil's own frame) made of round (litz) wire of radiu
   loop, ``M = (1/I) oint A . dl``, by the trapezoid rule in the loop angle (spectrally
   convergent for this smooth periodic integrand).
 * Fast path (:meth:`CouplingModel.lm_h`): the whole pad coil's ``A_phi / rho`` tabulated once on
-  a (rho, z) grid, interpolated by cubic B-splines (scipy.ndimage), then the same loop
-  quadrature over the receiver turns, vectorised over any number of poses. The table (0.2-0.5 s
+  a (rho, z) grid, interpolated by cubic B-splines (scipy.ndimage's coefficients, evaluated by
+  :mod:`.bspline` without importing scipy.ndimage), then the same loop quadrature over the receiver turns, vectorised over any number of poses. The table (0.2-0.5 s
   to build) is cached on disk per pad geometry and grid (:mod:`wpt_receiver.diskcache`; key:
   geometry, grid, this module's source, numpy/scipy versions), so only the first run builds it.
 
@@ -35,10 +35,8 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
-from scipy import ndimage
-from scipy.special import ellipe, ellipk
-
 from . import diskcache
+from .bspline import map_cubic_mirror
 from .params import LinkParams
 
 __all__ = [
@@ -63,6 +61,7 @@ def _g(m):
     out = np.empty_like(m)
     small = m < _M_SERIES
     if np.any(~small):
+        from scipy.special import ellipe, ellipk  # only for the exact field (table build, below-table points)
         mb = m[~small]
         out[~small] = (1.0 - 0.5 * mb) * ellipk(mb) - ellipe(mb)
     if np.any(small):
@@ -166,6 +165,26 @@ def coil_self_h(coil: CoilGeometry) -> float:
     return total
 
 
+def _code_key() -> str:
+    """This module's source hash and the numpy/scipy versions (part of every disk-cache key)."""
+    import scipy  # the top-level package only (cheap); its submodules load lazily
+
+    src = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
+    return f"src={src} numpy={np.__version__} scipy={scipy.__version__}"
+
+
+def _coil_self_h_cached(coil: CoilGeometry) -> float:
+    """:func:`coil_self_h` through the disk cache: the elliptic integrals need ``scipy.special``
+    (~0.2 s to import), which a mission with a cached coupling table otherwise never loads."""
+    key = f"coil-self-h v1 coil={coil!r} {_code_key()}"
+    got = diskcache.load("coil_self_h", key, (1,))
+    if got is not None:
+        return float(got[0])
+    val = coil_self_h(coil)
+    diskcache.store("coil_self_h", key, np.array([val]))
+    return val
+
+
 def vector_potential_loop(a_m, rho_m, z_m):
     """``A_phi / rho`` [H/m^2 per A] of a unit-current loop of radius ``a`` at the origin (z = 0 plane).
 
@@ -246,8 +265,8 @@ class CouplingModel:
                              f"(> 0), z_min_m={z_min_m!r} < z_max_m={z_max_m!r}")
         self.tx, self.rx = tx, rx
         self.n_theta = int(n_theta)
-        self.l1_h = coil_self_h(tx)
-        self.l2_h = coil_self_h(rx)
+        self.l1_h = _coil_self_h_cached(tx)
+        self.l2_h = _coil_self_h_cached(rx)
         self._grid = (float(grid_step_m), float(rho_max_m), float(z_min_m), float(z_max_m))
         self._table = None
         self._pts, self._tan, self._w = _loop_points(rx, self.n_theta)
@@ -301,11 +320,7 @@ class CouplingModel:
     # ----------------------------------------------------------------- table
     def table_key(self) -> str:
         """Text that identifies the tabulated field: pad geometry, grid, code and library versions."""
-        import scipy
-
-        src = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
-        return (f"coupling-table v1 tx={self.tx!r} grid={self._grid!r} src={src} "
-                f"numpy={np.__version__} scipy={scipy.__version__}")
+        return f"coupling-table v1 tx={self.tx!r} grid={self._grid!r} {_code_key()}"
 
     def _build_table(self):
         """Spline coefficients of the pad's ``A_phi / rho`` on the grid: from the disk cache or computed."""
@@ -315,6 +330,7 @@ class CouplingModel:
         key = self.table_key()
         coef = diskcache.load("coupling", key, (len(rho), len(z)))
         if coef is None:
+            from scipy import ndimage  # 0.3 s import: only when the table is built
             rr, zz = np.meshgrid(rho, z, indexing="ij")
             coef = ndimage.spline_filter(self._a_exact(rr, zz), order=3, mode="mirror")
             diskcache.store("coupling", key, coef)
@@ -326,8 +342,7 @@ class CouplingModel:
         inside = (rho <= rho_g[-1]) & (z >= z_g[0]) & (z <= z_g[-1])
         below = z < z_g[0]
         if np.any(inside):
-            ci = np.stack([rho[inside] / h, (z[inside] - z_g[0]) / h])
-            out[inside] = ndimage.map_coordinates(coef, ci, order=3, prefilter=False, mode="mirror")
+            out[inside] = map_cubic_mirror(coef, rho[inside] / h, (z[inside] - z_g[0]) / h)
         if np.any(below):
             out[below] = self._a_exact(rho[below], z[below])
         return out

@@ -12,11 +12,12 @@ from ..files import atomic_output  # noqa: E402
 __all__ = ["save_figure"]
 
 
-def save_figure(fig, path, dpi: int = 110) -> str:
-    """Write ``fig`` as PNG to ``path``, close it, return the path as a string."""
+def save_figure(fig, path, dpi: int = 110, compress_level: int = 6) -> str:
+    """Write ``fig`` as PNG to ``path``, close it, return the path as a string. ``compress_level``
+    (zlib, 0-9): 1 encodes several times faster for ~20 % larger files (the mission's figures)."""
     try:
         with atomic_output(path) as tmp:  # a temporary name, renamed when complete
-            fig.savefig(tmp, dpi=dpi)
+            fig.savefig(tmp, dpi=dpi, pil_kwargs={"compress_level": int(compress_level)})
     finally:
         plt.close(fig)
     return str(path)

@@ -13,6 +13,8 @@ from .common import save_figure  # noqa: E402
 
 __all__ = ["plot_lm_map", "plot_mission"]
 
+_FAST_PNG = 1  # zlib level of the mission figures: written on every `dronewpt mission`, so fast
+
 
 def plot_lm_map(model, dz_m: float, tilt_rad: float, path, half_width_m: float = 0.4, n: int = 81) -> str:
     """Map of Lm [uH] over a (dx, dy) grid at height ``dz_m`` and tilt ``tilt_rad``, coil outlines on top."""
@@ -73,7 +75,7 @@ def _plot_trajectory(result, out) -> str:
     az.set_title("height of the receiver coil")
     az.grid(alpha=0.3)
     fig.tight_layout()
-    return save_figure(fig, out / "trajectory.png")
+    return save_figure(fig, out / "trajectory.png", compress_level=_FAST_PNG)
 
 
 def _plot_lm(result, out) -> str:
@@ -98,7 +100,7 @@ def _plot_lm(result, out) -> str:
     ax.grid(alpha=0.3)
     ax.set_title("mutual inductance along the mission")
     fig.tight_layout()
-    return save_figure(fig, out / "lm.png")
+    return save_figure(fig, out / "lm.png", compress_level=_FAST_PNG)
 
 
 def _plot_i2(result, out) -> str:
@@ -133,7 +135,7 @@ def _plot_i2(result, out) -> str:
         az.set_title(f"largest transient inside a fine window ({i2[kpk]:.1f} A at t = {t[kpk]:.1f} s)")
         az.grid(alpha=0.3)
     fig.tight_layout()
-    return save_figure(fig, out / "i2_envelope.png")
+    return save_figure(fig, out / "i2_envelope.png", compress_level=_FAST_PNG)
 
 
 def _plot_soc(result, out) -> str:
@@ -151,7 +153,7 @@ def _plot_soc(result, out) -> str:
                  f"{result.summary.get('final_soc_without_charging', float('nan')):.4f})")
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    return save_figure(fig, out / "soc.png")
+    return save_figure(fig, out / "soc.png", compress_level=_FAST_PNG)
 
 
 def _plot_power(result, out) -> str:
@@ -171,4 +173,4 @@ def _plot_power(result, out) -> str:
     s = result.summary
     ax.set_title(f"power flows (energy balance error {s['energy_balance_error_rel']:.1e} relative)")
     fig.tight_layout()
-    return save_figure(fig, out / "power.png")
+    return save_figure(fig, out / "power.png", compress_level=_FAST_PNG)

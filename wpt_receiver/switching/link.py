@@ -51,10 +51,17 @@ class SwitchingLink:
         Table I values by default.
     cfg : SwitchingConfig
         Capacitors, dead time, battery model, gate phase, dense-output resolution, devices.
+    compiled : bool or None
+        Run the event loop compiled with numba (:mod:`.compiled`, the default when numba is
+        installed) or in pure Python/numpy (``False``: the reference the compiled loop is tested
+        against). numba is imported, and the loop compiled or loaded from numba's disk cache, on
+        the first :meth:`run`, never on import.
     """
 
-    def __init__(self, params: LinkParams, cfg: SwitchingConfig = SwitchingConfig()):
+    def __init__(self, params: LinkParams, cfg: SwitchingConfig = SwitchingConfig(), compiled: bool | None = None):
         self.params, self.cfg = params, cfg
+        self.compiled = _numba_available() if compiled is None else bool(compiled)
+        self._packed = None
         self.cir = cir = Circuit(params, cfg)
         self.T = cir.T
         self._h = self.T / _GRID
@@ -154,7 +161,37 @@ class SwitchingLink:
 
     # ------------------------------------------------------------------ core loop
     def run(self, schedule: Schedule, x0: np.ndarray) -> SwitchingResult:
-        """Integrate exactly over the schedule from augmented state ``x0`` (m,)."""
+        """Integrate exactly over the schedule from augmented state ``x0`` (m,): compiled when
+        :attr:`compiled`, else the pure-Python reference :meth:`run_reference`."""
+        if self.compiled:
+            return self._run_compiled(schedule, x0)
+        return self.run_reference(schedule, x0)
+
+    def _run_compiled(self, schedule: Schedule, x0: np.ndarray) -> SwitchingResult:
+        """The same loop compiled with numba (:func:`.compiled.run_kernel`); when the model gets
+        stuck on zero-length events the reference path re-runs to raise its error."""
+        from .compiled import FULL, STUCK, pack, run_kernel  # numba: imported on the first compiled run only
+        if self._packed is None:
+            self._packed = pack(self)
+        a = self._packed
+        ts = np.ascontiguousarray(schedule.t, dtype=float)
+        cmds = np.ascontiguousarray(schedule.cmd, dtype=np.int64)
+        gates = np.ascontiguousarray(schedule.gate, dtype=np.int64)
+        x = np.array(x0, dtype=float)
+        cap = 4 * len(cmds) + 16
+        while True:
+            status, n, seg_t, seg_k, seg_z = run_kernel(
+                ts, cmds, gates, x, a["lam"], a["vec"], a["inv"], a["trans"], a["grid"], a["grows"], a["gnum"],
+                a["gsec"], a["v2open"], a["v1open"], a["sec_th"], a["pri_th"], a["h"], a["T"], cap, _MAX_ZERO_EVENTS)
+            if status != FULL:
+                break
+            cap *= 4
+        if status == STUCK:
+            return self.run_reference(schedule, x0)
+        return SwitchingResult(self.cir, schedule, seg_t[:n + 1].copy(), seg_k[:n].copy(), seg_z[:n].copy())
+
+    def run_reference(self, schedule: Schedule, x0: np.ndarray) -> SwitchingResult:
+        """The event loop in pure Python/numpy (the reference of the compiled loop)."""
         cir = self.cir
         ts, cmds, gates = schedule.t, schedule.cmd, schedule.gate
         x = np.array(x0, dtype=float)
@@ -282,6 +319,12 @@ class SwitchingLink:
         if x0 is None:
             x0 = self.periodic_steady_state(d[0], phase_rad)
         return self.run(self.schedule(0.0, t_end, d, cp, phase_rad), x0)
+
+
+def _numba_available() -> bool:
+    """numba installed? (found without importing it: the import costs ~0.3 s)."""
+    import importlib.util
+    return importlib.util.find_spec("numba") is not None
 
 
 def _zero_open(x, p, s):

@@ -1,0 +1,345 @@
+"""The event loop of :class:`~.link.SwitchingLink` compiled with numba (``cache=True``).
+
+The same algorithm as the pure-Python/numpy reference in :mod:`.link` (which the tests compare
+it against to 1e-9): exact modal stepping between events, guard bracketing on the precomputed
+grid of exponentials, safeguarded Newton on the exact solution (:func:`refine`), the diode and
+freewheel rules after an event and at a drive change. All devices of the switching link are
+covered because they only change the topology matrices, guard rows and threshold rows, which
+are packed here as arrays.
+
+This module imports numba at import time, so nothing imports it at module level:
+:meth:`~.link.SwitchingLink.run` imports it on the first compiled run (the compiled code is
+cached on disk by numba; the first process compiles, ~10 s, later ones load it).
+
+Packed arrays (``nk`` topologies in the order of :attr:`.circuit.Circuit.keys`, ``m`` states):
+
+* ``lam`` (nk, m), ``vec``/``inv`` (nk, m, m), ``trans`` (nk, nk, m, m): modal decompositions;
+* ``grid`` (nk, G + 2, m): ``exp(lam j h)``; ``grows`` (nk, 2, 3, 4, m) modal guard rows per
+  (topology, gate, command index 1/-1/0), ``gnum``/``gsec`` (nk, 2, 3): number of rows and of
+  secondary rows;
+* ``v2open`` (5, m) per primary index, ``v1open`` (4, m) per secondary index, ``sec_th`` (m,).
+"""
+
+from __future__ import annotations
+
+import cmath
+
+import numpy as np
+from numba import njit
+
+from .circuit import I1, I2, P_OPEN, PRIMARY, S_OPEN, S_SHORT, SECONDARY
+
+__all__ = ["pack", "run_kernel", "refine", "OK", "FULL", "STUCK"]
+
+OK, FULL, STUCK = 0, 1, 2
+_NONE = 99  # "not decided yet" for a primary mode
+
+
+def pack(link) -> dict:
+    """The arrays of a :class:`~.link.SwitchingLink` the kernel needs (see the module docstring)."""
+    cir = link.cir
+    nk, m = len(cir.keys), cir.m
+    for k, (p, s) in enumerate(cir.keys):  # the kernel computes k from (p, s) by this rule
+        assert k == PRIMARY.index(p) * len(SECONDARY) + SECONDARY.index(s)
+    grows = np.zeros((nk, 2, 3, 4, m), dtype=complex)
+    gnum = np.zeros((nk, 2, 3), dtype=np.int64)
+    gsec = np.zeros((nk, 2, 3), dtype=np.int64)
+    for (k, gate, cmd), (rows, ns, _) in link._guard_table.items():
+        c = (1, -1, 0).index(cmd)
+        if rows is not None:
+            grows[k, gate, c, :len(rows)] = rows
+            gnum[k, gate, c] = len(rows)
+        gsec[k, gate, c] = ns
+    return {"lam": np.array(cir.lam), "vec": np.array(cir.vec), "inv": np.array(cir.inv),
+            "trans": np.array([[t for t in row] for row in cir.trans]), "grid": np.array(link._grid),
+            "grows": grows, "gnum": gnum, "gsec": gsec,
+            "v2open": np.array([link._v2open[p] for p in PRIMARY]),
+            "v1open": np.array([link._v1open[s] for s in SECONDARY]),
+            "sec_th": np.asarray(link._sec_th, dtype=float), "pri_th": float(link._pri_th),
+            "h": float(link._h), "T": float(link.T)}
+
+
+# ---------------------------------------------------------------------------- indices
+@njit(cache=True)
+def _pidx(p):
+    """Index of primary mode ``p`` in PRIMARY = (1, -1, 2, -2, P_OPEN)."""
+    if p == 1:
+        return 0
+    if p == -1:
+        return 1
+    if p == 2:
+        return 2
+    if p == -2:
+        return 3
+    return 4
+
+
+@njit(cache=True)
+def _sidx(s):
+    """Index of secondary mode ``s`` in SECONDARY = (1, -1, S_SHORT, S_OPEN)."""
+    if s == 1:
+        return 0
+    if s == -1:
+        return 1
+    if s == S_SHORT:
+        return 2
+    return 3
+
+
+@njit(cache=True)
+def _kidx(p, s):
+    return _pidx(p) * 4 + _sidx(s)
+
+
+@njit(cache=True)
+def _cidx(cmd):
+    return 0 if cmd == 1 else (1 if cmd == -1 else 2)
+
+
+# ---------------------------------------------------------------------------- linear algebra
+@njit(cache=True)
+def _dot(x, row):
+    acc = 0.0
+    for i in range(x.shape[0]):
+        acc += x[i] * row[i]
+    return acc
+
+
+@njit(cache=True)
+def _to_state(vk, z):
+    """x = Re(V z)."""
+    m = z.shape[0]
+    x = np.empty(m)
+    for i in range(m):
+        acc = 0j
+        for j in range(m):
+            acc += vk[i, j] * z[j]
+        x[i] = acc.real
+    return x
+
+
+@njit(cache=True)
+def _matvec(a, v):
+    """a @ v (complex a, real or complex v)."""
+    m = a.shape[0]
+    out = np.empty(m, dtype=np.complex128)
+    for i in range(m):
+        acc = 0j
+        for j in range(a.shape[1]):
+            acc += a[i, j] * v[j]
+        out[i] = acc
+    return out
+
+
+# ---------------------------------------------------------------------------- mode rules
+@njit(cache=True)
+def _secondary_at_zero(x, p, v2open, sec_th):
+    v, th = _dot(x, v2open[_pidx(p)]), _dot(x, sec_th)
+    return 1 if v > th else (-1 if v < -th else S_OPEN)
+
+
+@njit(cache=True)
+def _primary_at_zero(x, s, v1open, pri_th):
+    v = _dot(x, v1open[_sidx(s)])
+    return 2 if v > pri_th else (-2 if v < -pri_th else P_OPEN)
+
+
+@njit(cache=True)
+def _modes(x, cmd, gate, v2open, v1open, sec_th, pri_th):
+    """Modes after a drive change (the rule of ``SwitchingLink._modes``)."""
+    if cmd != 0:
+        p = cmd
+    else:
+        p = -2 if x[I1] > 0 else (2 if x[I1] < 0 else _NONE)
+    if gate:
+        s = S_SHORT
+    elif x[I2] > 0:
+        s = 1
+    elif x[I2] < 0:
+        s = -1
+    else:
+        s = _secondary_at_zero(x, p if p != _NONE else P_OPEN, v2open, sec_th)
+    if p == _NONE:
+        p = _primary_at_zero(x, s, v1open, pri_th)
+    return p, s
+
+
+@njit(cache=True)
+def _after_event(x, secondary, p, s, chatter, v2open, v1open, sec_th, pri_th):
+    """New modes after a guard event (the rule of ``SwitchingLink._after_event``; ``x`` in place)."""
+    if secondary:
+        if s == 1 or s == -1 or chatter:
+            x[I2] = 0.0
+            s = S_OPEN if chatter else _secondary_at_zero(x, p, v2open, sec_th)
+        else:
+            s = 1 if _dot(x, v2open[_pidx(p)]) > 0 else -1
+        if s == S_OPEN:
+            x[I2] = 0.0
+    else:
+        if p == 2 or p == -2 or chatter:
+            x[I1] = 0.0
+            p = P_OPEN if chatter else _primary_at_zero(x, s, v1open, pri_th)
+        else:
+            p = 2 if _dot(x, v1open[_sidx(s)]) > 0 else -2
+        if p == P_OPEN:
+            x[I1] = 0.0
+    return p, s
+
+
+# ---------------------------------------------------------------------------- events
+@njit(cache=True)
+def refine(c, lam, a, ga, b, gb, tol):
+    """Root of ``g(t) = Re(sum c exp(lam t))`` in ``[a, b]`` with ``g(a) > 0 >= g(b)`` (the
+    safeguarded Newton iteration of ``link._refine``)."""
+    if ga <= 0.0:
+        return a
+    t = a + (b - a) * ga / (ga - gb)
+    for _ in range(60):
+        g = 0j
+        dg = 0j
+        for i in range(c.shape[0]):
+            e = cmath.exp(lam[i] * t)
+            g += c[i] * e
+            dg += (c[i] * lam[i]) * e
+        gr, dgr = g.real, dg.real
+        if gr > 0:
+            a = t
+        else:
+            b = t
+        tn = t - gr / dgr if dgr != 0 else 0.5 * (a + b)
+        if not (a < tn < b):
+            tn = 0.5 * (a + b)
+        if abs(tn - t) <= tol or b - a <= tol:
+            return t
+        t = tn
+    return b
+
+
+@njit(cache=True)
+def _guard_at(rows, g, gk, j, z):
+    """Guard ``g`` at grid point ``j``: Re(sum (exp(lam j h) rows[g]) z)."""
+    acc = 0j
+    for i in range(z.shape[0]):
+        acc += (gk[j, i] * rows[g, i]) * z[i]
+    return acc.real
+
+
+@njit(cache=True)
+def _first_event(z, z_end, rows, ng, gk, lam, h, tau, tol):
+    """First guard crossing in ``(0, tau]``: ``(dt, guard index)``, guard index -1 = none
+    (the bracketing of ``link._first_event``)."""
+    nj = int(tau / h)
+    jh = nj
+    for j in range(min(nj, gk.shape[0] - 1)):
+        for g in range(ng):
+            if _guard_at(rows, g, gk, j + 1, z) <= 0.0:
+                jh = j
+                break
+        if jh != nj:
+            break
+    vb = np.empty(ng)
+    if jh == nj:
+        any_bad = False
+        for g in range(ng):
+            acc = 0j
+            for i in range(z.shape[0]):
+                acc += rows[g, i] * z_end[i]
+            vb[g] = acc.real
+            any_bad = any_bad or vb[g] <= 0.0
+        if not any_bad:
+            return 0.0, -1
+        b = tau
+    else:
+        for g in range(ng):
+            vb[g] = _guard_at(rows, g, gk, jh + 1, z)
+        b = (jh + 1) * h
+    a = jh * h
+    best, which = b, -1
+    for g in range(ng):
+        if vb[g] <= 0.0:
+            c = rows[g] * z
+            va = 0j
+            for i in range(z.shape[0]):
+                va += c[i] * gk[jh, i]
+            r = refine(c, lam, a, va.real, b, vb[g], tol)
+            if r < best or which < 0:
+                best, which = r, g
+    return best, which
+
+
+# ---------------------------------------------------------------------------- loop
+@njit(cache=True)
+def _drive_change(k, z, p, s, cmd, gate, vec, inv, trans, v2open, v1open, sec_th, pri_th):
+    x = _to_state(vec[k], z)
+    p2, s2 = _modes(x, cmd, gate, v2open, v1open, sec_th, pri_th)
+    if p2 == p and s2 == s:
+        return k, z, p, s
+    k2 = _kidx(p2, s2)
+    if p2 == P_OPEN or s2 == S_OPEN:
+        if p2 == P_OPEN:
+            x[I1] = 0.0
+        if s2 == S_OPEN:
+            x[I2] = 0.0
+        return k2, _matvec(inv[k2], x), p2, s2
+    return k2, _matvec(trans[k, k2], z), p2, s2
+
+
+@njit(cache=True)
+def run_kernel(ts, cmds, gates, x0, lam, vec, inv, trans, grid, grows, gnum, gsec, v2open, v1open, sec_th, pri_th,
+               h, T, cap, max_zero):
+    """Integrate the schedule exactly from ``x0``. Returns ``(status, n, seg_t, seg_k, seg_z)``:
+    ``status`` OK, FULL (more than ``cap`` segments: call again with more) or STUCK (more than
+    ``max_zero`` zero-length events in a row; the reference path then raises its error)."""
+    m = x0.shape[0]
+    seg_t = np.empty(cap + 1)
+    seg_k = np.empty(cap, dtype=np.int64)
+    seg_z = np.empty((cap, m), dtype=np.complex128)
+    x = x0.copy()
+    x[m - 1] = 1.0
+    p, s = _modes(x, cmds[0], gates[0], v2open, v1open, sec_th, pri_th)
+    if p == P_OPEN:
+        x[I1] = 0.0
+    if s == S_OPEN:
+        x[I2] = 0.0
+    k = _kidx(p, s)
+    z = _matvec(inv[k], x)
+    t = ts[0]
+    n = 0
+    for j in range(cmds.shape[0]):
+        cmd, gate = cmds[j], gates[j]
+        if j > 0 and (cmd != cmds[j - 1] or gate != gates[j - 1]):
+            k, z, p, s = _drive_change(k, z, p, s, cmd, gate, vec, inv, trans, v2open, v1open, sec_th, pri_th)
+        t_b = ts[j + 1]
+        c = _cidx(cmd)
+        n_zero = 0
+        while True:
+            if n >= cap:
+                return FULL, n, seg_t, seg_k, seg_z
+            seg_t[n] = t
+            seg_k[n] = k
+            seg_z[n] = z
+            n += 1
+            tau = t_b - t
+            ez = np.exp(lam[k] * tau)
+            ng = gnum[k, gate, c]
+            which = -1
+            dt = 0.0
+            if ng > 0:
+                dt, which = _first_event(z, z * ez, grows[k, gate, c], ng, grid[k], lam[k], h, tau, 1e-12 * T)
+            if which < 0:
+                z = z * ez
+                break
+            n_zero = n_zero + 1 if dt <= 1e-13 * T else 0
+            if n_zero > max_zero:
+                return STUCK, n, seg_t, seg_k, seg_z
+            z = z * np.exp(lam[k] * dt)
+            t += dt
+            x = _to_state(vec[k], z)
+            p, s = _after_event(x, which < gsec[k, gate, c], p, s, n_zero > 4, v2open, v1open, sec_th, pri_th)
+            k = _kidx(p, s)
+            z = _matvec(inv[k], x)
+            if t >= t_b:
+                break
+        t = t_b
+    seg_t[n] = t
+    return OK, n, seg_t, seg_k, seg_z
