@@ -20,6 +20,7 @@ from mission_sim.contract import OBS_DIM, PolicyContext
 from wpt_receiver.sbar import rectifier_current, rectifier_v2
 
 from .core import (N_BAT, N_COEF, NUMPY_OPS, OBS_OFFSET, OBS_SCALE, EnvConfig, advance, build_plans, reward_cost)
+from .objective import overshoot_update, short_mode_i2_a, short_mode_update, stop_step, t_since_stop_s
 from .scenario import draw_episode, get_scenario, scenario_from_options
 
 __all__ = ["SbarChargingVectorEnv", "SbarChargingDiscreteVectorEnv"]
@@ -56,6 +57,11 @@ class SbarChargingVectorEnv(VectorEnv):
         self._lm_all = np.zeros((n, S))
         self._bat = np.zeros((N_BAT, n))
         self._t_stop = np.zeros(n)
+        self._i2sm_all = np.ones((n, S))
+        self._stop_k = np.zeros(n, dtype=np.int64)
+        self._run_max = np.full(n, -np.inf)
+        self._sm_ok = np.ones(n, dtype=bool)
+        self._sm_checked = np.zeros(n, dtype=bool)
         self._coef = np.zeros((N_COEF, n))
         self._j = np.zeros(n, dtype=np.int64)
         self._k = np.zeros(n, dtype=np.int64)
@@ -95,6 +101,11 @@ class SbarChargingVectorEnv(VectorEnv):
         self._lm_all[idx] = p.lm_h
         self._bat[:, idx] = p.battery.T
         self._t_stop[idx] = p.t_stop_s
+        self._i2sm_all[idx] = short_mode_i2_a(c.link, p.lm_h)
+        self._stop_k[idx] = stop_step(p.t_stop_s, c.dt_s, c.n_steps)
+        self._run_max[idx] = -np.inf
+        self._sm_ok[idx] = True
+        self._sm_checked[idx] = False
         self._coef[:, idx] = p.coef[:, 0].T
         self._j[idx] = 0
         self._k[idx] = 0
@@ -107,16 +118,29 @@ class SbarChargingVectorEnv(VectorEnv):
         il = rectifier_current(d, np.abs(i2))
         ib = il - self._bat[7]
         cmd = self._cmd[self._ar, self._k]
-        obs = self._obs(i2, vl, ib, il, soc, cmd, d)
+        obs = self._obs(i2, vl, ib, il, soc, cmd, d, self._t_since(self._k))
         info = {"t_s": self._k * self._dt, "i2_a": i2.copy(), "i2_peak_a": np.abs(i2), "i1_a": i1.copy(),
                 "d_short": d.copy(), "v2_v": rectifier_v2(d, vl, i2), "rect_current_a": il, "battery_v": vl.copy(),
                 "battery_current_a": ib, "soc": soc.copy(), "charge_cmd_a": cmd,
                 "lm_h": self._lm_all[self._ar, self._j], "energy_j": np.zeros(self.num_envs),
-                "cost": np.zeros(self.num_envs), "t_stop_s": self._t_stop.copy()}
+                "cost": np.zeros(self.num_envs), "overcurrent": np.zeros(self.num_envs),
+                "overshoot": self._run_max.copy(), "episode_cost": np.maximum(self._run_max, 0.0),
+                "reached_short_mode": self._sm_ok & self._sm_checked, "t_stop_s": self._t_stop.copy()}
         return obs, info
 
-    def _obs(self, i2m, vl, ib, il, soc, cmd, d):
-        o = np.stack([i2m, vl, ib, il, soc, cmd, d])
+    def _t_since(self, k):
+        return np.where(k >= self._stop_k, t_since_stop_s(k, self._t_stop, self._dt), 0.0)
+
+    def _objective(self, k, peak, il):
+        """Running overshoot, short-mode flag and the step cost after step ``k`` (:mod:`envs.objective`)."""
+        after = k >= self._stop_k
+        self._run_max, cost = overshoot_update(self._run_max, peak, self._i2sm_all[self._ar, k // self._M], after)
+        self._sm_ok, self._sm_checked = short_mode_update(self._sm_ok, self._sm_checked, il, k + 1, self._stop_k,
+                                                          self._dt)
+        return cost
+
+    def _obs(self, i2m, vl, ib, il, soc, cmd, d, t_since):
+        o = np.stack([i2m, vl, ib, il, soc, cmd, d, t_since])
         o *= self._obs_scale
         o += self._obs_offset
         np.clip(o, -1.0, 1.0, out=o)
@@ -159,17 +183,20 @@ class SbarChargingVectorEnv(VectorEnv):
         i1, i2, peak, il, ib, soc, vrc, vl, v2 = advance(i1, i2, vl_old, soc, vrc, d, self._coef, self._bat, NUMPY_OPS,
                                                          self._n_sub)
         cmd = self._cmd[self._ar, k]
-        reward, cost = reward_cost(il, cmd, peak, self._inv_rated, self.config.reward, NUMPY_OPS)
+        reward, overcurrent = reward_cost(il, cmd, peak, self._inv_rated, self.config.reward, NUMPY_OPS)
+        cost = self._objective(k, peak, il)
         energy = vl_old * il * self._dt
         st = self._state
         st[0], st[1], st[2], st[3], st[4], st[5] = i1, i2, vl, soc, vrc, d
         k += 1
-        obs = self._obs(i2 + self._noise[self._ar, k - 1], vl, ib, il, soc, self._cmd[self._ar, k], d)
+        obs = self._obs(i2 + self._noise[self._ar, k - 1], vl, ib, il, soc, self._cmd[self._ar, k], d, self._t_since(k))
         truncated = k >= self._T
         terminated = np.zeros(self.num_envs, dtype=bool)
         info = {"t_s": k * self._dt, "i2_a": i2, "i2_peak_a": peak, "i1_a": i1, "d_short": d, "v2_v": v2,
                 "rect_current_a": il, "battery_v": vl, "battery_current_a": ib, "soc": soc, "charge_cmd_a": cmd,
-                "lm_h": self._lm_all[self._ar, self._j], "energy_j": energy, "cost": cost}
+                "lm_h": self._lm_all[self._ar, self._j], "energy_j": energy, "cost": cost, "overcurrent": overcurrent,
+                "overshoot": self._run_max.copy(), "episode_cost": np.maximum(self._run_max, 0.0),
+                "reached_short_mode": self._sm_ok & self._sm_checked}
         if any_done:
             idx = np.flatnonzero(done)
             self._start(idx)
