@@ -146,8 +146,17 @@ class SbarChargingVectorEnv(VectorEnv):
         np.clip(o, -1.0, 1.0, out=o)
         return o.T.astype(np.float32)
 
+    def restart(self, idx) -> np.ndarray:
+        """Start new episodes in the sub-environments ``idx`` now (same-step autoreset, as
+        stable-baselines3 wants it); returns their first observations, shape (len(idx), OBS_DIM)."""
+        idx = np.asarray(idx, dtype=np.int64)
+        self._start(idx)
+        self._prev_done[idx] = False
+        obs, _ = self._initial_obs_info()
+        return obs[idx]
+
     def reset(self, *, seed=None, options: dict | None = None):
-        super().reset(seed=seed)
+        super().reset(seed=seed if seed is None or np.ndim(seed) == 0 else int(seed[0]))
         n = self.num_envs
         if seed is None:
             seeds = [None] * n

@@ -115,10 +115,16 @@ class ModelBasedPolicy(_CommandPolicy):
         wlm_v1, det, r1 = self._consts
         return (wlm_v1 - r1 * _target_v2(self._consts, cmd, vl)) / det
 
-    def act(self, obs):
+    def act(self, obs, restart=None):
+        """Duties for ``obs``; ``restart`` (row indices) starts those receivers' controllers afresh in
+        the steady state of their current reference (a new charging window in a batched env)."""
         cmd, vl = self._measure(obs)
         ref = self.i2_ref(cmd, vl)
         if self._ctl is None or self._ctl.n != len(ref):
             self._ctl = InverseModelController(self.ctx.link, self.ctx.control_period_s, self.lpf, n=len(ref))
             self._ctl.reset(ref)
+        elif restart is not None and len(restart):
+            ad, bd, _, _ = self._ctl.discrete_ss
+            xss = np.linalg.solve(np.eye(len(ad)) - ad, bd)
+            self._ctl.x[restart] = (ref[restart] - self._ctl.i2_sm_a)[:, None] * xss[None, :]
         return duty_from_v2_clipped(self._ctl.update(ref), vl)
