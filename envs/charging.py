@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import gymnasium as gym
 from gymnasium import spaces
@@ -120,7 +122,10 @@ class SbarChargingEnv(gym.Env):
         return spaces.Box(-1.0, 1.0, (1,), np.float32)
 
     def _duty(self, action) -> float:
-        d = (float(action[0]) + 1.0) * 0.5
+        a = float(np.asarray(action, dtype=float).reshape(-1)[0])
+        if not math.isfinite(a):  # NaN would poison the link state and every reward after it
+            raise ValueError(f"action={a!r} is invalid; valid range: [-1, 1] (finite)")
+        d = (a + 1.0) * 0.5
         return 0.0 if d < 0.0 else (1.0 if d > 1.0 else d)
 
     @property

@@ -79,6 +79,9 @@ class SbarChargingVectorEnv(VectorEnv):
 
     def _duty(self, actions) -> np.ndarray:
         a = np.asarray(actions, dtype=float).reshape(self.num_envs)
+        if not np.all(np.isfinite(a)):  # NaN would poison the link state and every reward after it
+            k = int(np.flatnonzero(~np.isfinite(a))[0])
+            raise ValueError(f"actions[{k}]={float(a[k])!r} is invalid; valid range: [-1, 1] (finite)")
         return np.clip((a + 1.0) * 0.5, 0.0, 1.0)
 
     @property

@@ -13,18 +13,18 @@ import math
 import tomllib
 from dataclasses import asdict, dataclass, field, fields
 from importlib import resources
-from pathlib import Path
 
 from wpt_receiver import LinkParams
 from wpt_receiver.coupling import NOMINAL_GAP_M
 
 from .world.battery import BatteryParams, CcCvParams
 from .world.power import DroneParams
-from .validation import check_positive
+from .validation import check_positive, read_toml_file
 from .world.wind import WindParams
 
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
-           "MissionConfig", "load_config", "config_from_dict", "config_to_dict", "apply_overrides"]
+           "MissionConfig", "load_config", "config_from_dict", "config_to_dict", "apply_overrides",
+           "load_config_dict", "check_cross_fields"]
 
 DEFAULT_MISSION_TOML: str = resources.files("mission_sim").joinpath("default_mission.toml").read_text("utf-8")
 
@@ -170,6 +170,22 @@ class MissionConfig:
     mission: MissionPlan = field(default_factory=MissionPlan)
     sim: SimConfig = field(default_factory=SimConfig)
 
+    def __post_init__(self):
+        check_cross_fields(self)
+
+
+def check_cross_fields(cfg: MissionConfig) -> None:
+    """Limits between sections (each section checks its own keys): the drone must be able to fly above
+    every pad at the cruise altitude, and the pad ground level must be below that altitude. Raises
+    ``ValueError`` naming the dotted key, its value and the valid range."""
+    m = cfg.mission
+    for i, pad in enumerate(cfg.pads):
+        top = pad.z_m + m.hover_gap_m
+        if not top < m.cruise_altitude_m:
+            raise ValueError(f"mission.cruise_altitude_m={m.cruise_altitude_m!r} is invalid; valid range: "
+                             f"> pads.{i}.z_m + mission.hover_gap_m = {top:.4g} m (the drone would fly "
+                             "through the pad)")
+
 
 _SECTIONS = {"link": LinkConfig, "coupling": CouplingConfig, "drone": DroneParams, "battery": BatteryParams,
              "charger": CcCvParams, "wind": WindParams, "mission": MissionPlan, "sim": SimConfig}
@@ -242,18 +258,16 @@ def config_to_dict(cfg: MissionConfig) -> dict:
 
 def load_config(path=None) -> MissionConfig:
     """Read a mission TOML file (``None`` = the embedded default)."""
+    return config_from_dict(load_config_dict(path))
+
+
+def load_config_dict(path=None) -> dict:
+    """The mission dict of TOML file ``path`` laid over the embedded default (:func:`layer_on_default`;
+    ``None`` = the default itself), not yet validated: apply ``--set`` overrides, then
+    :func:`config_from_dict`. File errors name the file (see :func:`~mission_sim.validation.read_toml_file`)."""
     if path is None:
-        text, name = DEFAULT_MISSION_TOML, "<default mission>"
-    else:
-        path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"config file {str(path)!r} does not exist")
-        text, name = path.read_text("utf-8"), str(path)
-    try:
-        d = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"{name}: not valid TOML: {exc}") from None
-    return config_from_dict(d if path is None else layer_on_default(d))
+        return tomllib.loads(DEFAULT_MISSION_TOML)
+    return layer_on_default(read_toml_file(path, "config file"))
 
 
 def layer_on_default(d: dict) -> dict:

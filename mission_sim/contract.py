@@ -39,8 +39,8 @@ import numpy as np
 
 from wpt_receiver import TABLE_I, LinkParams
 
-__all__ = ["ObsField", "OBS_FIELDS", "OBS_DIM", "OBS_INDEX", "normalise_obs", "denormalise_obs",
-           "action_to_duty", "duty_to_action", "PolicyContext", "Policy"]
+__all__ = ["ObsField", "OBS_FIELDS", "OBS_DIM", "OBS_INDEX", "normalise_obs", "normalise_obs_row", "denormalise_obs",
+           "denormalise_obs_field", "action_to_duty", "duty_to_action", "PolicyContext", "Policy"]
 
 
 @dataclass(frozen=True)
@@ -69,10 +69,31 @@ _HI = np.array([f.hi for f in OBS_FIELDS])
 _INV_SPAN = 1.0 / (_HI - _LO)
 
 
+_LO_INV = tuple(zip(_LO.tolist(), _INV_SPAN.tolist()))
+_LO_HALF = tuple(zip(_LO.tolist(), (0.5 * (_HI - _LO)).tolist()))   # denormalise: lo + (o + 1) * half span
+
+
 def normalise_obs(physical) -> np.ndarray:
     """Physical values, shape (..., OBS_DIM) in the order of :data:`OBS_FIELDS` -> [-1, 1] (clipped)."""
     x = np.asarray(physical, dtype=float)
+    if x.shape == (1, OBS_DIM):
+        return normalise_obs_row(x[0].tolist())
     return np.minimum(np.maximum(2.0 * (x - _LO) * _INV_SPAN - 1.0, -1.0), 1.0)
+
+
+def normalise_obs_row(values) -> np.ndarray:
+    """:func:`normalise_obs` of one receiver given as OBS_DIM floats -> shape (1, OBS_DIM).
+
+    The same arithmetic on Python floats (bit-identical), for the n = 1 loops where numpy's
+    per-call overhead would dominate.
+    """
+    return np.array([[min(max(2.0 * (v - lo) * inv - 1.0, -1.0), 1.0) for v, (lo, inv) in zip(values, _LO_INV)]])
+
+
+def denormalise_obs_field(obs, index: int) -> float:
+    """Physical value of field ``index`` of the first observation row (float; :func:`denormalise_obs`'s arithmetic)."""
+    lo, half = _LO_HALF[index]
+    return lo + (float(obs[0, index] if np.ndim(obs) == 2 else obs[index]) + 1.0) * half
 
 
 def denormalise_obs(obs) -> np.ndarray:
@@ -83,7 +104,7 @@ def denormalise_obs(obs) -> np.ndarray:
 
 def action_to_duty(action) -> np.ndarray:
     """Environment action in [-1, 1] -> d_short in [0, 1] (clipped)."""
-    return np.clip((np.asarray(action, dtype=float) + 1.0) * 0.5, 0.0, 1.0)
+    return np.minimum(np.maximum((np.asarray(action, dtype=float) + 1.0) * 0.5, 0.0), 1.0)  # np.clip: slow at n=1
 
 
 def duty_to_action(d_short) -> np.ndarray:

@@ -1,30 +1,27 @@
-"""Where the real flight logs are (shared/flightlogs beside the repository), and pymavlink references.
+"""The real flight logs the tests use (tests/data/flightlogs, in the repository), and pymavlink references.
 
-Resolution order: <repo>/../shared/flightlogs (CI clones the repo with shared/ beside it), the
-DRONEWPT_FLIGHTLOGS environment variable, /work/shared/flightlogs.
+The logs are trimmed copies of public real logs, with their licences and attribution in
+tests/data/flightlogs/SOURCES.md; no test reads data from outside the repository.
 """
 
 from __future__ import annotations
 
 import os
+import struct
 from pathlib import Path
 
 import pytest
 
 LOG_NAMES = ("dronekit-python_flight.tlog", "dronekit-la-testdata_log171.bin",
              "uavlogviewer_vtol_sitl.tlog", "ardusub_log_tools_small_rov.tlog")
+ULOG_NAME = "pyulog_sample_log_small.ulg"
+DATA_DIR = Path(__file__).resolve().parent / "data" / "flightlogs"
 
 
 def flightlogs_dir() -> Path:
-    candidates = [Path(__file__).resolve().parents[1].parent / "shared" / "flightlogs"]
-    if os.environ.get("DRONEWPT_FLIGHTLOGS"):
-        candidates.append(Path(os.environ["DRONEWPT_FLIGHTLOGS"]))
-    candidates.append(Path("/work/shared/flightlogs"))
-    for c in candidates:
-        if (c / "SOURCES.md").is_file():
-            return c
-    pytest.fail("flight logs not found; looked in " + ", ".join(map(str, candidates))
-                + " (set DRONEWPT_FLIGHTLOGS)")
+    if not (DATA_DIR / "SOURCES.md").is_file():
+        pytest.fail(f"flight logs not found in the repository at {DATA_DIR}")
+    return DATA_DIR
 
 
 def log_path(name: str) -> Path:
@@ -35,7 +32,7 @@ def pymavlink_reference(path: Path) -> dict:
     """Facts computed with pymavlink directly (plain loops, independent of mission_sim.mavlink.logs).
 
     duration (last - first record timestamp), armed periods (vehicle HEARTBEAT base_mode bit 7 in a
-    .tlog, EV 10/11 in a .bin), positions with a 3D fix (lat/lon/alt extents and count), battery
+    .tlog, EV 10/11 in a .bin), positions with a 3D fix, HDOP <= 10 and >= 4 satellites (lat/lon/alt extents and count), battery
     voltage range and sample count, (t, V I) of SYS_STATUS / CURR.
     """
     os.environ["MAVLINK20"] = "1"
@@ -71,10 +68,11 @@ def pymavlink_reference(path: Path) -> dict:
                 periods.append((armed_start, rel))
             armed_state = new_armed
         if typ == "GPS_RAW_INT" and msg.get_srcComponent() == 1:
-            fix = msg.fix_type
+            poor = (msg.eph != 65535 and msg.eph > 1000) or msg.satellites_visible < 4  # HDOP > 10, < 4 sats
+            fix = 0 if poor else msg.fix_type
         if typ == "GLOBAL_POSITION_INT" and msg.get_srcComponent() == 1 and fix >= 3 and msg.lat != 0:
             lats.append(msg.lat / 1e7), lons.append(msg.lon / 1e7), alts.append(msg.alt / 1e3)
-        if typ == "GPS" and msg.Status >= 3:
+        if typ == "GPS" and msg.Status >= 3 and msg.HDop <= 10 and msg.NSats >= 4:
             lats.append(msg.Lat), lons.append(msg.Lng), alts.append(msg.Alt)
         if typ == "SYS_STATUS" and msg.voltage_battery not in (0, 65535) and msg.current_battery != -1:
             volts.append(msg.voltage_battery / 1000)
@@ -90,3 +88,20 @@ def pymavlink_reference(path: Path) -> dict:
             "lat": (min(lats), max(lats)), "lon": (min(lons), max(lons)), "alt": (min(alts), max(alts)),
             "volt": (min(volts), max(volts)) if volts else None, "n_volt": len(volts), "bad": bad, "power": power,
             "volt_bs": (min(volts_bs), max(volts_bs)) if volts_bs else None, "n_volt_bs": len(volts_bs)}
+
+
+def dataflash_records(data: bytes):
+    """(offset, type name, length) of each record of a DataFlash log, from its FMT records.
+
+    Stops at the first byte that does not start a known record (a truncated tail)."""
+    lengths, names = {128: 89}, {128: "FMT"}
+    off = 0
+    while off + 3 <= len(data) and data[off:off + 2] == b"\xa3\x95":
+        typ = data[off + 2]
+        if typ not in lengths or off + lengths[typ] > len(data):
+            return
+        if typ == 128:
+            t, length, name = struct.unpack("<BB4s", data[off + 3:off + 9])
+            lengths[t], names[t] = length, name.rstrip(b"\0").decode("ascii", "replace")
+        yield off, names[typ], lengths[typ]
+        off += lengths[typ]

@@ -14,8 +14,11 @@ os.environ["MAVLINK20"] = "1"
 from pymavlink import mavutil  # noqa: E402
 
 FIELDS = {
-    "HEARTBEAT": ("type", "autopilot", "base_mode", "system_status"),
-    "SYS_STATUS": ("voltage_battery", "current_battery", "battery_remaining"),
+    "HEARTBEAT": ("type", "autopilot", "base_mode", "custom_mode", "system_status"),
+    "SYS_STATUS": ("voltage_battery", "current_battery", "battery_remaining", "onboard_control_sensors_present",
+                   "onboard_control_sensors_enabled", "onboard_control_sensors_health"),
+    "ATTITUDE": ("time_boot_ms", "roll", "pitch", "yaw"),
+    "VFR_HUD": ("groundspeed", "heading", "throttle", "alt", "climb"),
     "BATTERY_STATUS": ("voltages", "current_battery", "current_consumed", "energy_consumed",
                        "battery_remaining", "charge_state"),
     "GLOBAL_POSITION_INT": ("time_boot_ms", "lat", "lon", "alt", "relative_alt", "vx", "vy", "vz"),
@@ -40,7 +43,7 @@ def main():
         last = time.monotonic()
         typ = msg.get_type()
         rec = {"msg": typ, "t": last - t0, "version": 2 if msg.get_msgbuf()[:1] == b"\xfd" else 1,
-               "sys": msg.get_srcSystem()}
+               "sys": msg.get_srcSystem(), "comp": msg.get_srcComponent()}
         for f in FIELDS.get(typ, ()):
             v = getattr(msg, f)
             rec[f] = list(v) if isinstance(v, (list, tuple)) else v

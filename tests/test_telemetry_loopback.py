@@ -3,6 +3,7 @@
 import json
 import math
 import os
+import re
 import socket
 import subprocess
 import sys
@@ -14,7 +15,8 @@ import pytest
 
 from mission_sim.mavlink.geodesy import GeoPoint, geodetic_to_enu
 from mission_sim.mavlink.logs import mavutil, read_log
-from mission_sim.mavlink.telemetry import DEFAULT_HOME, check_connect, mavlink_table, stream
+from mission_sim.mavlink.telemetry import (COPTER_MODES, DEFAULT_HOME, NVF_NAMES, check_connect, check_ids,
+                                          mavlink_table, stream)
 
 RECEIVER = Path(__file__).with_name("_mavlink_receiver.py")
 
@@ -30,7 +32,11 @@ def _series(duration_s=2.5, dt=0.01):
     soc = 0.5 + np.cumsum(i_batt * dt) / (5.0 * 3600)
     return pd.DataFrame({"t_s": t, "x_m": x, "y_m": y, "z_m": z, "lm_h": 6.25e-6 * np.exp(-t),
                          "i2_amp_a": np.where(charging, 11.0, 0.0) + t, "d_short": np.clip(t / 2.5, 0, 1),
-                         "battery_v": 29.6 + 0.1 * np.sin(t), "battery_current_a": i_batt, "soc": soc})
+                         "battery_v": 29.6 + 0.1 * np.sin(t), "battery_current_a": i_batt, "soc": soc,
+                         "i1_amp_a": np.where(charging, 20.0, 0.0), "rect_current_a": np.where(charging, 4.5, 0.0),
+                         "charge_cmd_a": np.where(charging, 5.0, 0.0), "tx_on": charging,
+                         "propulsion_w": np.full(len(t), 100.0),
+                         "phase": np.where(charging, "charge", "transit")})
 
 
 def _free_port():
@@ -39,38 +45,46 @@ def _free_port():
         return s.getsockname()[1]
 
 
-def test_loopback_contents_and_rates():
-    ts = _series()
+def _loopback(ts, duration_s, **kw):
+    """Stream ``ts`` to a separate receiving process over loopback UDP; (stats, messages by type)."""
     port = _free_port()
-    rx = subprocess.Popen([sys.executable, str(RECEIVER), str(port), "5"], stdout=subprocess.PIPE, text=True,
+    rx = subprocess.Popen([sys.executable, str(RECEIVER), str(port), "8"], stdout=subprocess.PIPE, text=True,
                           env={**os.environ, "PYTHONPATH": ""})
     try:
         assert rx.stdout.readline().strip() == "READY"
-        st = stream(ts, connect=f"udpout:127.0.0.1:{port}", rate_hz=10.0, speed=1.0, duration_s=2.0)
-        out, _ = rx.communicate(timeout=10)
+        st = stream(ts, connect=f"udpout:127.0.0.1:{port}", duration_s=duration_s, **kw)
+        out, _ = rx.communicate(timeout=15)
     finally:
         if rx.poll() is None:
             rx.kill()
-    msgs = json.loads(out.strip().splitlines()[-1])
+    by = {}
+    for m in json.loads(out.strip().splitlines()[-1]):
+        by.setdefault(m["msg"], []).append(m)
+    return st, by
+
+
+def test_loopback_contents_and_rates():
+    ts = _series()
+    st, by = _loopback(ts, 2.0, rate_hz=10.0, speed=1.0, sysid=42, compid=7)
     # real-time pacing at speed 1: 2 s of mission cannot be sent faster than in 2 s of wall time (a
     # loaded machine can only make it slower, so no upper bound on wall time is asserted)
     assert st.ticks == 21 and st.wall_s >= 1.9
-    by = {}
-    for m in msgs:
-        by.setdefault(m["msg"], []).append(m)
     assert {"HEARTBEAT", "SYS_STATUS", "BATTERY_STATUS", "GLOBAL_POSITION_INT", "NAMED_VALUE_FLOAT",
-            "GPS_RAW_INT"} <= set(by)
-    assert all(m["version"] == 2 and m["sys"] == 1 for m in msgs)
-    # every tick arrived (loopback), and at the requested rate
+            "GPS_RAW_INT", "ATTITUDE", "VFR_HUD"} <= set(by)
+    assert all(m["version"] == 2 and (m["sys"], m["comp"]) == (42, 7) for ms in by.values() for m in ms)
+    # every tick arrived (loopback), and at the requested rate: ATTITUDE and VFR_HUD too
     gp = by["GLOBAL_POSITION_INT"]
-    assert len(gp) == st.ticks and len(by["NAMED_VALUE_FLOAT"]) == 3 * st.ticks
+    assert len(gp) == len(by["ATTITUDE"]) == len(by["VFR_HUD"]) == st.ticks
+    assert len(by["NAMED_VALUE_FLOAT"]) == len(NVF_NAMES) * st.ticks
     arrival = np.array([m["t"] for m in gp])
     rate = (len(arrival) - 1) / (arrival[-1] - arrival[0])
     assert rate <= 10.0 * 1.1                       # never faster than the requested 10 Hz
-    hb = by["HEARTBEAT"]
-    assert abs(len(hb) - st.wall_s) <= 1.5          # 1 Hz of the sender's own wall time
-    assert all(m["type"] == 2 and m["autopilot"] == 0 for m in hb)  # quadrotor, generic autopilot
     assert np.all(np.diff([m["time_boot_ms"] for m in gp]) == 100)
+    assert np.all(np.diff([m["time_boot_ms"] for m in by["ATTITUDE"]]) == 100)
+    # HEARTBEAT at 0, 1 and 2 s of simulated time (= wall time at speed 1), an ArduCopter quad
+    hb = by["HEARTBEAT"]
+    assert len(hb) == 3 and all(m["type"] == 2 and m["autopilot"] == 3 for m in hb)
+    assert np.all(np.abs(np.diff([m["t"] for m in hb]) - 1.0) < 0.3)
     # contents: the sample at each tick, in wire units
     tick_t = np.array([m["time_boot_ms"] for m in gp]) / 1e3
     k = np.searchsorted(ts["t_s"], tick_t + 1e-9, side="right") - 1
@@ -83,12 +97,16 @@ def test_loopback_contents_and_rates():
     np.testing.assert_allclose([m["relative_alt"] / 1e3 for m in gp], ref["z_m"], atol=1e-3)
     # velocity on the circle: 3 rad/s * ... = 3 m/s tangential; NED north = d(y)/dt
     np.testing.assert_allclose([m["vx"] / 100 for m in gp[1:-1]], 3.0 * np.cos(ref["t_s"][1:-1]), atol=0.02)
-    nvf = {name: np.array([m["value"] for m in by["NAMED_VALUE_FLOAT"] if m["name"] == name])
-           for name in ("I2", "d_short", "Lm")}
-    np.testing.assert_allclose(nvf["I2"], ref["i2_amp_a"], rtol=1e-6)
-    np.testing.assert_allclose(nvf["d_short"], ref["d_short"], rtol=1e-6, atol=1e-7)
-    np.testing.assert_allclose(nvf["Lm"], ref["lm_h"] * 1e6, rtol=1e-6)
-    assert np.all(np.isfinite(nvf["I2"])) and np.all((nvf["d_short"] >= 0) & (nvf["d_short"] <= 1))
+    # ATTITUDE yaw = course over ground: on the circle x = 3 cos t, y = 3 sin t the velocity points
+    # along (-sin t, cos t) (east, north), i.e. yaw = atan2(-sin t, cos t) = -t (wrapped)
+    yaw = np.array([m["yaw"] for m in by["ATTITUDE"]])[1:-1]
+    np.testing.assert_allclose(np.angle(np.exp(1j * (yaw + ref["t_s"][1:-1]))), 0.0, atol=0.02)
+    hud = by["VFR_HUD"]
+    np.testing.assert_allclose([m["groundspeed"] for m in hud[1:-1]], 3.0, atol=0.05)
+    np.testing.assert_allclose([m["climb"] for m in hud[1:-1]], 0.4, atol=0.01)
+    np.testing.assert_allclose([m["alt"] for m in hud], DEFAULT_HOME.alt_m + ref["z_m"], atol=2e-3)
+    assert {m["throttle"] for m in hud} == {50}        # constant power = the hover reference: 50 %
+    _check_named_values(by["NAMED_VALUE_FLOAT"], ref)
     # battery: charging state while the battery current is a net charge, current sign per MAVLink
     bs = by["BATTERY_STATUS"]
     charging = ref["battery_current_a"].to_numpy() > 0
@@ -99,6 +117,72 @@ def test_loopback_contents_and_rates():
     assert [m["battery_remaining"] for m in bs] == list(np.round(ref["soc"] * 100).astype(int))
     ss = by["SYS_STATUS"]
     assert [m["voltage_battery"] for m in ss] == [m["voltages"][0] for m in bs]
+    _check_sys_status_and_mode(ss, hb, ts)
+
+
+def _check_named_values(nvf_msgs, ref):
+    """Names a ground station can graph, values the series' own at each tick."""
+    assert all(re.fullmatch(r"[0-9A-Z_]{1,10}", m["name"]) for m in nvf_msgs)
+    nvf = {name: np.array([m["value"] for m in nvf_msgs if m["name"] == name]) for name in NVF_NAMES}
+    np.testing.assert_allclose(nvf["I2"], ref["i2_amp_a"], rtol=1e-6)
+    np.testing.assert_allclose(nvf["I1"], ref["i1_amp_a"], rtol=1e-6)
+    np.testing.assert_allclose(nvf["DUTY"], ref["d_short"], rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(nvf["LM_UH"], ref["lm_h"] * 1e6, rtol=1e-6)
+    np.testing.assert_allclose(nvf["PAD_ON"], ref["tx_on"].astype(float))
+    np.testing.assert_allclose(nvf["CHG_CMD"], ref["charge_cmd_a"], rtol=1e-6)
+    np.testing.assert_allclose(nvf["I_RECT"], ref["rect_current_a"], rtol=1e-6)
+    d = ref["d_short"].to_numpy()
+    np.testing.assert_allclose(nvf["SBAR_MODE"], np.where(d <= 0, 0, np.where(d >= 1, 2, 1)))
+
+
+def _check_sys_status_and_mode(ss, hb, ts):
+    """SYS_STATUS bits consistent (what is present is enabled and healthy, the geofence healthy so no
+    breach), and the ArduCopter mode: LOITER (5) while hover-charging, AUTO (3) in transit."""
+    m = mavutil().mavlink
+    for s in ss:
+        assert s["onboard_control_sensors_present"] == s["onboard_control_sensors_enabled"]
+        assert s["onboard_control_sensors_health"] & s["onboard_control_sensors_present"] \
+            == s["onboard_control_sensors_present"]
+        assert s["onboard_control_sensors_health"] & m.MAV_SYS_STATUS_GEOFENCE
+        assert not s["onboard_control_sensors_present"] & m.MAV_SYS_STATUS_GEOFENCE
+    base = m.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | m.MAV_MODE_FLAG_SAFETY_ARMED | m.MAV_MODE_FLAG_STABILIZE_ENABLED
+    assert all(h["base_mode"] & base == base for h in hb)
+    t_hb = np.arange(len(hb), dtype=float)
+    k = np.searchsorted(ts["t_s"], t_hb + 1e-9, side="right") - 1
+    want = np.where(ts["phase"].to_numpy()[k] == "charge", COPTER_MODES["LOITER"], COPTER_MODES["AUTO"])
+    assert [h["custom_mode"] for h in hb] == list(want) and COPTER_MODES["LOITER"] in want
+
+
+@pytest.mark.parametrize("rate_hz", [10.0, 4.0, 3.0, 2.5, 0.7])
+def test_heartbeat_every_second_of_simulated_time(tmp_path, rate_hz):
+    """Whatever the stream rate, HEARTBEATs are 1.0 s apart on the simulated clock (.tlog stamps)."""
+    path = tmp_path / "hb.tlog"
+    stream(_series(duration_s=12.0, dt=0.05), tlog=path, rate_hz=rate_hz, speed=math.inf, start_epoch_s=1.7e9)
+    conn = mavutil().mavlink_connection(str(path))
+    hb, att = [], []
+    while (msg := conn.recv_match(blocking=False)) is not None:
+        if msg.get_type() == "HEARTBEAT":
+            hb.append(msg._timestamp - 1.7e9)
+        elif msg.get_type() == "ATTITUDE":
+            att.append(msg._timestamp - 1.7e9)
+    n_ticks = math.floor(12.0 * rate_hz + 1e-9) + 1
+    last_tick = (n_ticks - 1) / rate_hz                  # the stream ends at its last tick
+    np.testing.assert_allclose(hb, np.arange(math.floor(last_tick + 1e-9) + 1.0), atol=1e-6)
+    assert len(att) == n_ticks
+    np.testing.assert_allclose(np.diff(att), 1.0 / rate_hz, atol=1e-6)
+
+
+def test_consumed_is_net_and_accumulates():
+    """current_consumed / energy_consumed: the net integral of the discharge (falls while charging)."""
+    ts = _series(duration_s=20.0, dt=0.05)
+    tab = mavlink_table(ts)
+    t = ts["t_s"].to_numpy()
+    i = ts["battery_current_a"].to_numpy()
+    net_c = np.cumsum(-i * np.diff(t, prepend=t[0]))
+    np.testing.assert_array_equal(tab["consumed_mah"], np.round(net_c / 3.6).astype(int))
+    charging = ts["battery_current_a"].to_numpy() > 0
+    dc = np.diff(net_c)
+    assert np.all(dc[charging[1:]] < 0) and np.all(dc[~charging[1:]] > 0)
 
 
 def test_tlog_written_reads_back_with_pymavlink(tmp_path):
@@ -143,6 +227,11 @@ def test_bad_inputs():
     with pytest.raises(ValueError, match="nothing to do"):
         stream(_series())
     assert GeoPoint(0, 0, 0).alt_m == 0
+    for bad in [(0, 1), (1, 256), (-1, 1), (1.5, 1)]:
+        with pytest.raises(ValueError, match="valid range: 1..255"):
+            check_ids(*bad)
+        with pytest.raises(ValueError, match="1..255"):
+            stream(_series(), tlog="x.tlog", sysid=bad[0], compid=bad[1])
 
 
 def test_mixed_mavlink1_and_2_tlog(tmp_path):

@@ -16,7 +16,9 @@ turn: radius, height in the coil's own frame) made of round (litz) wire of radiu
   convergent for this smooth periodic integrand).
 * Fast path (:meth:`CouplingModel.lm_h`): the whole pad coil's ``A_phi / rho`` tabulated once on
   a (rho, z) grid, interpolated by cubic B-splines (scipy.ndimage), then the same loop
-  quadrature over the receiver turns, vectorised over any number of poses.
+  quadrature over the receiver turns, vectorised over any number of poses. The table (0.2-0.5 s
+  to build) is cached on disk per pad geometry and grid (:mod:`wpt_receiver.diskcache`; key:
+  geometry, grid, this module's source, numpy/scipy versions), so only the first run builds it.
 
 Pose convention: ``(dx, dy, dz)`` is the receiver coil frame's origin in the pad frame (z up,
 ``dz`` = height of the receiver coil above the pad coil); ``tilt_rad`` rotates the receiver
@@ -26,14 +28,17 @@ axis, so a positive tilt turns the receiver's normal towards +x).
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass, replace
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
-from scipy import ndimage, optimize
+from scipy import ndimage
 from scipy.special import ellipe, ellipk
 
+from . import diskcache
 from .params import LinkParams
 
 __all__ = [
@@ -294,13 +299,25 @@ class CouplingModel:
         return out.reshape(shape) if shape else float(out[0])
 
     # ----------------------------------------------------------------- table
+    def table_key(self) -> str:
+        """Text that identifies the tabulated field: pad geometry, grid, code and library versions."""
+        import scipy
+
+        src = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
+        return (f"coupling-table v1 tx={self.tx!r} grid={self._grid!r} src={src} "
+                f"numpy={np.__version__} scipy={scipy.__version__}")
+
     def _build_table(self):
+        """Spline coefficients of the pad's ``A_phi / rho`` on the grid: from the disk cache or computed."""
         h, rho_max, z_min, z_max = self._grid
         rho = np.arange(0.0, rho_max + 0.5 * h, h)
         z = np.arange(z_min, z_max + 0.5 * h, h)
-        rr, zz = np.meshgrid(rho, z, indexing="ij")
-        vals = self._a_exact(rr, zz)
-        coef = ndimage.spline_filter(vals, order=3, mode="mirror")
+        key = self.table_key()
+        coef = diskcache.load("coupling", key, (len(rho), len(z)))
+        if coef is None:
+            rr, zz = np.meshgrid(rho, z, indexing="ij")
+            coef = ndimage.spline_filter(self._a_exact(rr, zz), order=3, mode="mirror")
+            diskcache.store("coupling", key, coef)
         self._table = (coef, rho, z, h)
 
     def _a_table(self, rho, z):
@@ -380,6 +397,8 @@ def calibrate_default(l1_h=236e-6, l2_h=18.9e-6, lm_h=6.25e-6):
     def res(x):
         tx, rx = _default_coils(x[0], x[1])
         return [coil_self_h(tx) / l1_h - 1, coil_self_h(rx) / l2_h - 1, _lm_coaxial(tx, rx, x[2]) / lm_h - 1]
+    from scipy import optimize
+
     sol = optimize.least_squares(res, [8e-3, 6e-3, 0.1], bounds=([4.5e-3, 2.5e-3, 0.01], [1.2e-2, 1.4e-2, 0.5]),
                                  xtol=1e-15, ftol=1e-15, gtol=1e-15)
     return tuple(float(v) for v in sol.x)

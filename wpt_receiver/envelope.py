@@ -18,7 +18,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 from .params import LinkParams
 
@@ -81,9 +80,11 @@ def state_matrices(p: LinkParams, lm_h=None):
     return a, b
 
 
-def g22(p: LinkParams) -> signal.TransferFunction:
+def g22(p: LinkParams):
     """Transfer function G22 = I2/V2 = -(alpha2 s + beta2)/(s^2 + 2 zeta omega_n s + omega_n^2) (eq. 10)."""
     c = coefficients(p)
+    from scipy import signal   # 1.2 s import: only here
+
     return signal.TransferFunction([-c.alpha2, -c.beta2], [1.0, 2 * c.zeta * c.omega_n, c.omega_n**2])
 
 
@@ -332,3 +333,66 @@ def simulate(params: LinkParams, v2_v, dt_s: float, x0=None, lm_h=None, v1_v=Non
         x[k + 1] = xk
     t = np.arange(len(v2) + 1) * dt_s
     return t, x[:, 0], x[:, 1]
+
+
+# ============================================================================ complex envelope (detuning)
+def complex_envelope_matrices(p: LinkParams, c1_f: float | None = None, c2_f: float | None = None,
+                              cross: bool = True):
+    """Complex envelope model with detuned series capacitors: ``dX/dt = A X + B [V1, -V2c]``.
+
+    ``X = [J1, J2]`` with ``i1 = Im(J1 e^{jwt})`` and ``i2 = Im(J2 e^{jwt})``: ``Re J1`` is eq. 4's
+    I1 (the sin component), ``Im J2`` its I2 (the cos component); the other parts are the
+    quadrature components a detuned link develops. From eq. 1 with ``d/dt -> D + jw`` and the
+    capacitor ``1/(C (D + jw)) ~ (1/(jwC))(1 - D/(jw))``::
+
+        (L1 + 1/(w^2 C1)) D J1 + (R1 + j X1) J1 - Lm (D + jw) J2 = V1
+        -Lm (D + jw) J1 + (L2 + 1/(w^2 C2)) D J2 + (R2 + j X2) J2 = -V2c
+
+    with ``Xk = w Lk - 1/(w Ck)``. At resonance and with ``cross=False`` (no ``Lm D`` terms) this
+    is eq. 4 exactly; ``cross=True`` keeps them, which moves the two coupled modes to
+    ``+-j w k / (2 -+ k)`` from the drive (the exact ones sit at ``w/sqrt(1 -+ k)``: the same to
+    first order in k, much closer than eq. 4's symmetric ``+-w k / 2``). ``V2c`` is the complex
+    fundamental of v2 (``j f(d)`` when in phase with a cos-phased i2). Returns complex (A, B)."""
+    w = p.omega_rad_s
+    c1 = 1.0 / (w * w * p.l1_h) if c1_f is None else float(c1_f)
+    c2 = 1.0 / (w * w * p.l2_h) if c2_f is None else float(c2_f)
+    lm_d = p.lm_h if cross else 0.0
+    m = np.array([[p.l1_h + 1.0 / (w * w * c1), -lm_d], [-lm_d, p.l2_h + 1.0 / (w * w * c2)]], dtype=complex)
+    z = np.array([[p.r1_ohm + 1j * (w * p.l1_h - 1.0 / (w * c1)), -1j * w * p.lm_h],
+                  [-1j * w * p.lm_h, p.r2_ohm + 1j * (w * p.l2_h - 1.0 / (w * c2))]])
+    minv = np.linalg.inv(m)
+    return -minv @ z, minv
+
+
+def _complex_steady(a, b, v1, v2_amp):
+    """Steady X with V2c in phase with i2 (fixed point on the phase of J2)."""
+    x = np.zeros(2, dtype=complex)
+    ph = 1j
+    for _ in range(50):
+        x = np.linalg.solve(-a, b @ np.array([v1, -v2_amp * ph]))
+        new = x[1] / abs(x[1]) if abs(x[1]) > 0 else 1j
+        if abs(new - ph) < 1e-14:
+            break
+        ph = new
+    return x
+
+
+def simulate_complex(p: LinkParams, v2_amp_v, dt_s: float, c1_f=None, c2_f=None, cross: bool = True, x0=None):
+    """Complex envelope run for a V2 magnitude sequence held over steps of ``dt_s`` (the SBAR's V2
+    stays in phase with the instantaneous i2, so its phase follows J2 from step to step).
+
+    Returns ``(t_s, j1, j2)`` complex amplitudes (``|j2|`` is the I2 envelope). ``x0`` defaults to
+    the steady state of the first V2."""
+    from scipy.linalg import expm
+    v2 = np.asarray(v2_amp_v, dtype=float)
+    a, b = complex_envelope_matrices(p, c1_f, c2_f, cross)
+    ad = expm(a * dt_s)
+    bd = np.linalg.solve(a, (ad - np.eye(2)) @ b)
+    x = _complex_steady(a, b, p.v1_amp_v, v2[0]) if x0 is None else np.asarray(x0, dtype=complex)
+    out = np.empty((len(v2) + 1, 2), dtype=complex)
+    out[0] = x
+    for k in range(len(v2)):
+        ph = x[1] / abs(x[1]) if abs(x[1]) > 0 else 1j
+        x = ad @ x + bd @ np.array([p.v1_amp_v, -v2[k] * ph])
+        out[k + 1] = x
+    return np.arange(len(v2) + 1) * dt_s, out[:, 0], out[:, 1]

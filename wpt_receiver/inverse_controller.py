@@ -23,9 +23,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 from .envelope import coefficients, steady_state
+from .lti import tf2ss, zoh_ss
 from .params import LinkParams
 from .sbar import duty_from_v2_clipped
 
@@ -80,8 +80,8 @@ class InverseModelController:
         if not np.isfinite(self.control_period_s) or self.control_period_s <= 0:
             raise ValueError(f"control_period_s={control_period_s!r} is invalid; valid range: (0, inf)")
         num, den = inverse_tf(params, lpf)
-        a, b, c, d = signal.tf2ss(num, den)
-        ad, bd, cd, dd, _ = signal.cont2discrete((a, b, c, d), self.control_period_s, method="zoh")
+        a, b, cd, dd = tf2ss(num, den)   # scipy.signal's algorithms without its 1.2 s import
+        ad, bd = zoh_ss(a, b, self.control_period_s)
         self._ad, self._bd = ad, bd[:, 0]
         self._cd, self._dd = cd[0], float(dd[0, 0])
         # steady-state map x_ss = (I - Ad)^-1 Bd u
@@ -129,6 +129,13 @@ class InverseModelController:
         self.x = self.x @ self._ad.T + u[:, None] * self._bd
         return self.v2_cmd_v
 
+    def update1(self, i2_ref_a: float) -> float:
+        """:meth:`update` for ``n = 1`` with a float in and out (same arithmetic, less overhead)."""
+        u = float(i2_ref_a) - self._i2_sm
+        self.v2_cmd_v = self.x @ self._cd + self._dd * u
+        self.x = self.x @ self._ad.T + u * self._bd
+        return float(self.v2_cmd_v[0])
+
     def step(self, i2_ref_a):
         """One control period: new reference in, short duty ``d_short*`` out (shape (n,)).
 
@@ -144,6 +151,8 @@ class InverseModelController:
         ref = np.asarray(i2_ref_a, dtype=float)
         u = ref - self.i2_sm_a
         x0 = u[0] * self._xss
+        from scipy import signal
+
         ss = signal.dlti(self._ad, self._bd[:, None], self._cd[None, :], [[self._dd]], dt=self.control_period_s)
         _, y, _ = signal.dlsim(ss, u, x0=x0)
         v2 = y[:, 0]

@@ -54,8 +54,12 @@ def duty_from_v2(v2_v, vl_v: float):
 def duty_from_v2_clipped(v2_v, vl_v: float):
     """Like :func:`duty_from_v2` but saturates ``v2_v`` into ``[0, (4/pi) VL]`` (no errors).
 
-    This is what a controller does with a command outside the actuator's range.
+    This is what a controller does with a command outside the actuator's range. Python floats in
+    give a float out by the same arithmetic without numpy's per-call overhead (n = 1 loops).
     """
+    if type(v2_v) is float and type(vl_v) is float:
+        s = min(max(1.0 - v2_v / (_FOUR_OVER_PI * vl_v), 0.0), 1.0)
+        return float((2.0 / np.pi) * np.arcsin(s))
     v = np.asarray(v2_v, dtype=float)
     s = np.minimum(np.maximum(1.0 - v / (_FOUR_OVER_PI * vl_v), 0.0), 1.0)  # np.clip is slow on tiny arrays
     out = (2.0 / np.pi) * np.arcsin(s)
@@ -88,3 +92,52 @@ def rectifier_current(d_short, i2_abs_mean_a, *, sin=np.sin):
     ``abs(i2)`` for an instantaneous value). Vectorised, no range checks.
     """
     return (2.0 / np.pi) * (1.0 - sin(0.5 * np.pi * d_short)) * i2_abs_mean_a
+
+
+# ============================================================================ devices, averaged
+def short_weight(d_short, *, sin=np.sin):
+    """Share of ``int i2^2`` that flows in the short window, ``d + sin(pi d)/pi`` [-].
+
+    With ``i2 = I2 cos(wt)`` and the window of width ``d pi`` centred on the peak (eq. 9's
+    placement), ``<i2^2>`` splits into ``(I2^2/2) w`` in the short and ``(I2^2/2)(1 - w)`` in
+    diode conduction."""
+    return d_short + sin(np.pi * d_short) / np.pi
+
+
+def rectifier_v2_devices(d_short, vl_v, i2_amp_a, devices, *, sin=np.sin, sign=np.sign):
+    """Fundamental of v2 [V] with real devices, the averaged counterpart of the switching model.
+
+    Outside the short window the diode path clamps ``v2 = sign(i2)(VL + Vf0) + Rd i2``, inside it
+    ``v2 = 2 Ron i2``; the fundamental is ``(4/pi)(VL + Vf0)(1 - sin(pi/2 d)) sign(I2) +
+    (Rd (1 - w) + 2 Ron w) I2`` with ``w`` = :func:`short_weight`. ``devices`` is a
+    :class:`wpt_receiver.devices.DeviceSet` (IDEAL gives :func:`rectifier_v2`)."""
+    w = short_weight(d_short, sin=sin)
+    r_eff = devices.rect_rd_ohm * (1.0 - w) + devices.short_r_ohm * w
+    return (_FOUR_OVER_PI * (vl_v + devices.rect_vf_v) * (1.0 - sin(0.5 * np.pi * d_short)) * sign(i2_amp_a)
+            + r_eff * i2_amp_a)
+
+
+def rectifier_v2_folded(d_short, vl_v, i2_amp_a, devices, *, sin=np.sin, sign=np.sign):
+    """:func:`rectifier_v2_devices` minus ``Rd I2``: the V2 input of an envelope model whose R2
+    already holds the rectifying path's ``Rd`` (:func:`wpt_receiver.devices.envelope_params`).
+    What is left besides the clamp is ``(2 Ron - Rd) w I2``, small for real parts."""
+    w = short_weight(d_short, sin=sin)
+    return (_FOUR_OVER_PI * (vl_v + devices.rect_vf_v) * (1.0 - sin(0.5 * np.pi * d_short)) * sign(i2_amp_a)
+            + (devices.short_r_ohm - devices.rect_rd_ohm) * w * i2_amp_a)
+
+
+def conduction_losses(d_short, i1_amp_a, i2_amp_a, devices, *, sin=np.sin) -> dict:
+    """Averaged conduction loss of each device group [W] for fundamental amplitudes I1, I2 [A].
+
+    Rectifier: the diode path carries ``<|i2|> = I_L`` (:func:`rectifier_current`) and
+    ``<i2^2> = (I2^2/2)(1 - w)``; the shorted channels ``(I2^2/2) w`` (``w`` =
+    :func:`short_weight`). Inverter: the two driven channels carry ``I1^2/2`` (dead time
+    neglected). Keys as :data:`wpt_receiver.switching.circuit.LOSS_GROUPS`. Vectorised."""
+    w = short_weight(d_short, sin=sin)
+    i_avg = rectifier_current(d_short, abs(i2_amp_a), sin=sin)
+    i2sq = 0.5 * i2_amp_a * i2_amp_a
+    dd, body = devices.rect_diode, devices.rect_switch.body
+    return {"inverter_switches": devices.inv_r_ohm * 0.5 * i1_amp_a * i1_amp_a,
+            "inverter_diodes": 0.0 * i1_amp_a,
+            "rectifier_diodes": dd.vf0_v * i_avg + dd.rd_ohm * i2sq * (1.0 - w),
+            "rectifier_switches": body.vf0_v * i_avg + body.rd_ohm * i2sq * (1.0 - w) + devices.short_r_ohm * i2sq * w}

@@ -8,6 +8,7 @@ subcommands import what they need lazily, inside the function that runs them.
 ``mavlink``   ``replay`` (flight logs) and ``telemetry`` (live MAVLink, follow mode)
 ``learning``  ``train`` and ``compare`` (envs and policies, imported lazily)
 ``sweep``     ``sweep`` (parameter studies on Dask)
+``sizing``    ``sizing`` (rectifier rating, parts and mass per policy)
 ============  ==================================================================
 """
 
@@ -16,18 +17,29 @@ from __future__ import annotations
 import argparse
 import sys
 
-from . import learning, mavlink, mission, paper, sweep
-from .common import CliError
+from . import learning, mavlink, mission, paper, sizing, sweep
+from .common import CliError, OneLineParser
 
 __all__ = ["main", "build_parser"]
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        return version("dronewpt")
+    except PackageNotFoundError:  # run from a source tree without installing
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="dronewpt", description="Flight-mission energy simulator for drones "
-                                     "that charge wirelessly in flight (WPT link with an SBAR receiver).")
+    parser = OneLineParser(prog="dronewpt", description="Flight-mission energy simulator for drones "
+                           "that charge wirelessly in flight (WPT link with an SBAR receiver).",
+                           epilog="Exit status: 0 done, 1 some sweep cases failed, 2 bad input (one line on "
+                           "stderr), 3 mission ended by a depleted battery, 130 interrupted.")
+    parser.add_argument("--version", action="version", version=f"dronewpt {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for add in (paper._add_paper, mission._add_coupling, mission._add_mission, mavlink._add_replay, mavlink._add_telemetry,
-                learning._add_train, learning._add_compare, sweep._add_sweep):
+                learning._add_train, learning._add_compare, sweep._add_sweep, sizing._add_sizing):
         add(sub)
     return parser
 
@@ -45,8 +57,16 @@ def main(argv=None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except (CliError, ValueError, FileNotFoundError, OSError) as exc:
-        print(f"dronewpt {args.command}: error: {exc}", file=sys.stderr)
+        print(f"dronewpt {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
+    except MemoryError as exc:  # numpy names the size: "Unable to allocate 37.3 GiB for an array ..."
+        print(f"dronewpt {args.command}: error: out of memory: {_one_line(exc) or 'allocation failed'} "
+              "(make the run smaller; see docs/robustness.md)", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"dronewpt {args.command}: interrupted", file=sys.stderr)
         return 130
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())

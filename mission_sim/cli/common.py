@@ -3,12 +3,48 @@
 from __future__ import annotations
 
 import argparse
+import os
+import sys
+from pathlib import Path
 
-__all__ = ["CliError", "float_arg", "positive_float", "finite_float", "nonneg_int", "parse_set", "write_mission"]
+__all__ = ["CliError", "OneLineParser", "float_arg", "positive_float", "finite_float", "nonneg_int", "seed_int",
+           "parse_set", "write_mission", "prepare_out_dir", "add_progress_flag", "show_progress", "names_help",
+           "lazy_names_help", "policy_names", "scenario_names"]
 
 
 class CliError(Exception):
     """A user error: printed as one line, exit status 2."""
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """argparse with its usage errors on one line (``dronewpt mission: error: ... (see --help)``), exit 2."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+    def format_help(self):
+        for action in self._actions:  # help texts listing names that need a slow import: only for --help
+            fill = getattr(action, "lazy_help", None)
+            if fill is not None:
+                action.help, action.lazy_help = fill(), None
+        return super().format_help()
+
+
+def lazy_names_help(action, text: str, names) -> None:
+    """Give ``action`` (from ``add_argument``) the help ``text; one of: <names()>``, computed only when
+    the help is shown (``names`` imports policies / envs, which takes a second or two)."""
+    action.help = text
+    action.lazy_help = lambda: names_help(text, names())
+
+
+def policy_names() -> list[str]:
+    import policies
+    return [*policies.available(), "rl:PATH (a model trained with `dronewpt train`)"]
+
+
+def scenario_names() -> list[str]:
+    from envs import SCENARIOS
+    return list(SCENARIOS)
 
 
 def float_arg(name, positive=False, lo=0.0, hi=float("inf")):
@@ -52,22 +88,68 @@ def parse_set(items):
     return out
 
 
-def nonneg_int(name):
+def nonneg_int(name, hi: int | None = None):
+    """argparse type: an integer >= 0 (and <= ``hi``), errors naming the value and the range."""
+    valid = "integer >= 0" if hi is None else f"integer 0..{hi}"
+
     def conv(text):
         try:
             v = int(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name}={text!r} is not an integer") from None
-        if v < 0:
-            raise argparse.ArgumentTypeError(f"{name}={text!r} is invalid; valid range: integer >= 0")
+        if v < 0 or (hi is not None and v > hi):
+            raise argparse.ArgumentTypeError(f"{name}={text!r} is invalid; valid range: {valid}")
         return v
     return conv
 
 
+def seed_int(name="seed"):
+    """argparse type for a random seed: integer 0 .. 2^32 - 1 (what numpy's legacy seeding accepts)."""
+    return nonneg_int(name, hi=2**32 - 1)
+
+
+def names_help(text: str, names) -> str:
+    """``text`` followed by the valid names, for ``--policy`` / ``--scenario`` help."""
+    return f"{text}; one of: {', '.join(names)}"
+
+
+def prepare_out_dir(path, flag: str = "--out") -> Path:
+    """Create the output folder ``path`` now, before any simulation, and check that files can be
+    written there; ``CliError`` naming the flag and the path otherwise (a file in its place, no
+    permission, a read-only file system)."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise CliError(f"{flag} {str(path)!r} is an existing file; valid: a folder (created if missing)")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / f".dronewpt-write-test.{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise CliError(f"{flag} {str(path)!r} is not a writable folder: {exc.strerror or exc}") from None
+    return path
+
+
+def add_progress_flag(p) -> None:
+    """``--no-progress`` (progress bars are on when stderr is a terminal); ``--progress`` forces them on."""
+    p.add_argument("--no-progress", action="store_true",
+                   help="no progress bar (default: shown when stderr is a terminal)")
+    p.add_argument("--progress", action="store_true", help=argparse.SUPPRESS)
+
+
+def show_progress(args) -> bool:
+    """Progress bars: off with ``--no-progress`` or ``--format json``, on with ``--progress``, else on a terminal."""
+    if getattr(args, "no_progress", False):
+        return False
+    if getattr(args, "progress", False):
+        return True
+    return getattr(args, "format", "table") != "json" and sys.stderr.isatty()
+
+
 def write_mission(result, out_dir, plots: bool) -> list[str]:
-    """Write a mission's data files and, unless ``plots`` is false, its figures; returns the paths."""
-    files = [str(f) for f in result.write(out_dir)]
+    """Write a mission's data files, unless ``plots`` is false its figures, and ``summary.json`` last
+    (see :meth:`mission_sim.world.results.MissionResult.write`); returns the paths."""
+    figures = None
     if plots:
-        from ..figures.mission import plot_mission
-        files.extend(str(f) for f in plot_mission(result, out_dir))
-    return files
+        from ..figures.mission import plot_mission as figures
+    return [str(f) for f in result.write(out_dir, figures=figures)]

@@ -3,9 +3,19 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
-from .common import CliError
+from .common import (
+    CliError,
+    add_progress_flag,
+    lazy_names_help,
+    policy_names,
+    prepare_out_dir,
+    scenario_names,
+    seed_int,
+    show_progress,
+)
 
 
 def _add_train(sub):
@@ -16,10 +26,11 @@ def _add_train(sub):
     p.add_argument("--algo", choices=("ppo", "sac", "dqn"), required=True)
     p.add_argument("--timesteps", type=int, required=True, help="environment steps to train for")
     p.add_argument("--out", type=Path, required=True, help="output folder")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_int(), default=0, help="seed, 0 .. 2^32-1 (default 0)")
     p.add_argument("--n-envs", type=int, default=1, help="parallel environments (default 1)")
-    p.add_argument("--scenario", default="random", help="training scenario (default random: domain randomisation)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    lazy_names_help(p.add_argument("--scenario", default="random"),
+                    "training scenario (default random: domain randomisation)", scenario_names)
+    add_progress_flag(p)
     p.set_defaults(func=_cmd_train)
 
 
@@ -28,11 +39,14 @@ def _cmd_train(args) -> int:
         raise CliError(f"--timesteps {args.timesteps} is invalid; valid range: >= 1")
     if not 1 <= args.n_envs <= 256:
         raise CliError(f"--n-envs {args.n_envs} is invalid; valid range: 1..256")
+    if args.scenario not in scenario_names():
+        raise CliError(f"--scenario {args.scenario!r} is invalid; valid values: {', '.join(scenario_names())}")
     from policies import require_sb3
     require_sb3()
+    prepare_out_dir(args.out)
     from policies.train import train
     res = train(args.algo, args.timesteps, args.out, seed=args.seed, n_envs=args.n_envs, scenario=args.scenario,
-                progress=not args.no_progress)
+                progress=show_progress(args))
     for key, path in res.items():
         print(f"{key}: {path}")
     return 0
@@ -44,17 +58,36 @@ def _add_compare(sub):
                                    "windows (batched env) and print peak I2, overshoot, time above rated, "
                                    "energy, tracking error, cost and return; writes a figure of the "
                                    "RM -> SM transitions.")
-    p.add_argument("--policies", default=None,
-                   help="comma-separated policy names (default: step,ramp,hysteresis,model_based,"
-                        "model_based_online,rl,random); rl:PATH loads a model trained with `dronewpt train`")
-    p.add_argument("--scenarios", default=None, help="comma-separated scenarios (default: nominal,lm_mismatch,"
-                   "windy,battery)")
+    lazy_names_help(p.add_argument("--policies", default=None),
+                    "comma-separated policy names (default: step,ramp,hysteresis,model_based,model_based_online,"
+                    "rl,random; rl is skipped with a note when stable-baselines3 is not installed)", policy_names)
+    lazy_names_help(p.add_argument("--scenarios", default=None),
+                    "comma-separated scenarios (default: nominal,lm_mismatch,windy,battery)", scenario_names)
     p.add_argument("--episodes", type=int, default=20, help="episodes per scenario (default 20)")
-    p.add_argument("--seed", type=int, default=1000, help="seed of episode 0 (episode i uses seed + i)")
+    p.add_argument("--seed", type=seed_int(), default=1000,
+                   help="seed of episode 0 (episode i uses seed + i), 0 .. 2^32-1 (default 1000)")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--out", type=Path, default=Path("out/compare"), help="folder for the figure")
     p.add_argument("--no-plot", action="store_true", help="skip the figure")
+    add_progress_flag(p)
     p.set_defaults(func=_cmd_compare)
+
+
+def sb3_installed() -> bool:
+    import importlib.util
+    return importlib.util.find_spec("stable_baselines3") is not None
+
+
+def _rl_or_skip(pols: tuple, explicit: bool) -> tuple:
+    """Without stable-baselines3 the default ``rl`` row is skipped with a note on stderr; an ``rl``
+    the user asked for with ``--policies`` is an error naming the extra to install."""
+    if not any(p_.split(":", 1)[0] == "rl" for p_ in pols) or sb3_installed():
+        return pols
+    if explicit:
+        raise CliError("--policies rl needs stable-baselines3 (with torch): pip install 'dronewpt[rl]'")
+    print("dronewpt compare: note: skipping the rl row: stable-baselines3 is not installed "
+          "(pip install 'dronewpt[rl]')", file=sys.stderr)
+    return tuple(p_ for p_ in pols if p_.split(":", 1)[0] != "rl")
 
 
 def _cmd_compare(args) -> int:
@@ -72,18 +105,20 @@ def _cmd_compare(args) -> int:
     for p_ in pols:
         if p_.split(":", 1)[0] not in available():
             raise CliError(f"--policies {p_!r} is invalid; valid values: {', '.join(available())} (or rl:PATH)")
-    if any(p_.split(":", 1)[0] == "rl" for p_ in pols):
-        from policies import require_sb3
-        require_sb3()
+    pols = _rl_or_skip(pols, explicit=bool(args.policies))
     for s_ in scns:
         if s_ not in SCENARIOS:
             raise CliError(f"--scenarios {s_!r} is invalid; valid values: {', '.join(SCENARIOS)}")
     if not 1 <= args.episodes <= 100_000:
         raise CliError(f"--episodes {args.episodes} is invalid; valid range: 1..100000")
-    rows, traces = compare(pols, scns, args.episodes, args.seed, progress=args.format == "table")
+    if args.seed + args.episodes - 1 > 2**32 - 1:
+        raise CliError(f"--seed {args.seed} is invalid with --episodes {args.episodes}; valid range: "
+                       f"0 .. {2**32 - args.episodes} (episode seeds go up to seed + episodes - 1)")
+    if not args.no_plot:
+        prepare_out_dir(args.out)
+    rows, traces = compare(pols, scns, args.episodes, args.seed, progress=show_progress(args))
     figs = []
     if not args.no_plot:
-        args.out.mkdir(parents=True, exist_ok=True)
         figs.append(str(plot_transitions(traces, scns[0], args.out / f"transitions_{scns[0]}.png")))
     if args.format == "json":
         print(json.dumps({"episodes": args.episodes, "seed": args.seed, "rows": rows, "figures": figs}))

@@ -4,13 +4,25 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
-from .common import CliError, parse_set, positive_float, write_mission
+from .common import (
+    CliError,
+    add_progress_flag,
+    lazy_names_help,
+    parse_set,
+    policy_names,
+    positive_float,
+    prepare_out_dir,
+    show_progress,
+    write_mission,
+)
 
 
 def _mav_common(p):
-    p.add_argument("--policy", default="model_based", help="receiver policy (default model_based)")
+    lazy_names_help(p.add_argument("--policy", default="model_based"), "receiver policy (default model_based)",
+                    policy_names)
     p.add_argument("--config", type=Path, default=None, help="mission TOML (default: the embedded mission)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value by dotted key, e.g. --set drone.mass_kg=1.5 (repeatable)")
@@ -57,12 +69,12 @@ def _mav_json_safe(obj):
 
 
 def _add_replay(sub):
-    p = sub.add_parser("replay", help="replay a real flight log (.tlog / DataFlash .bin) through the simulator",
-                       description="Read a MAVLink telemetry log or an ArduPilot DataFlash log, build the flown "
+    p = sub.add_parser("replay", help="replay a real flight log (.tlog / DataFlash .bin / PX4 .ulg) through the simulator",
+                       description="Read a MAVLink telemetry log, an ArduPilot DataFlash log or a PX4 ULog, build the flown "
                                    "track (3D GPS fix only) about a pad, run the mission world along it (Lm(t), "
                                    "SBAR, battery) and compare the logged electrical power with the propulsion "
                                    "power model.")
-    p.add_argument("log", type=Path, help="flight log: .tlog or .bin")
+    p.add_argument("log", type=Path, help="flight log: .tlog, .bin or .ulg")
     p.add_argument("--pad", default=None, metavar="LAT,LON[,ALT]",
                    help="pad position (degrees, degrees, m AMSL); default: the first armed position. "
                         "Write --pad=-35.36,149.16 when the latitude is negative")
@@ -74,15 +86,18 @@ def _add_replay(sub):
     p.add_argument("--mass", type=positive_float("mass"), default=None, metavar="KG",
                    help="drone mass for the propulsion model (same as --set drone.mass_kg=KG)")
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
-    p.add_argument("--progress", action="store_true", help="show a progress bar")
+    add_progress_flag(p)
     _mav_common(p)
     p.set_defaults(func=_cmd_replay)
 
 
 def _cmd_replay(args) -> int:
     from ..mavlink.geodesy import parse_geo_point
+    from ..files import atomic_output
     from ..mavlink.logs import read_log
     from ..mavlink.replay import parse_window, replay_log, track_from_log
+    if args.log.is_dir():
+        raise CliError(f"log {str(args.log)!r} is a folder; valid: a .tlog or .bin file")
     if not args.log.is_file():
         raise CliError(f"log {str(args.log)!r} does not exist or is not a file")
     pad = parse_geo_point(args.pad) if args.pad is not None else None
@@ -93,16 +108,20 @@ def _cmd_replay(args) -> int:
     track_from_log(log, pad=pad, window=window)  # no usable position: one-line error before any simulation
     cfg = _mav_config(args, {"drone.mass_kg": args.mass} if args.mass else None, single_pad=True)
     policy = _mav_policy(cfg, args.policy)
+    prepare_out_dir(args.out)
     res = replay_log(log, cfg, policy, pad=pad, ground_gap_m=args.ground_gap, window=window,
-                     progress=args.progress)
+                     progress=show_progress(args))
     s = res.summary
+    for w in s.get("warnings", ()):
+        print(f"dronewpt replay: warning: {w}", file=sys.stderr)
     s["log"] = str(args.log)
     s["policy"] = args.policy
     s["drone_mass_kg"] = cfg.drone.mass_kg
-    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "replay_summary.json").unlink(missing_ok=True)  # written last: present = complete
     files = write_mission(res.mission, args.out / "mission", plots=not args.no_plot)
     if res.power_table is not None:
-        res.power_table.to_csv(args.out / "power_comparison.csv", index=False)
+        with atomic_output(args.out / "power_comparison.csv") as tmp:
+            res.power_table.to_csv(tmp, index=False)
         files.append(str(args.out / "power_comparison.csv"))
     if not args.no_plot:
         from ..figures import replay as replay_figures
@@ -112,13 +131,12 @@ def _cmd_replay(args) -> int:
             files.append(replay_figures.plot_power_comparison(res, args.out / "power.png", title))
     s["files"] = files
     s = _mav_json_safe(s)
-    (args.out / "replay_summary.json").write_text(json.dumps(s, indent=2, allow_nan=False))
+    with atomic_output(args.out / "replay_summary.json") as tmp:
+        tmp.write_text(json.dumps(s, indent=2, allow_nan=False))
     if args.format == "json":
         print(json.dumps(s, allow_nan=False))
         return 0
-    print(f"{args.log.name}: {s['duration_s']:.1f} s logged, {s['n_position_samples']} positions "
-          f"({s['bad_frames']} bad frames skipped), {s['distance_m']:.0f} m flown, max {s['max_alt_m']:.1f} m "
-          f"above the pad, armed {s['armed_time_s']:.1f} s in {len(s['armed_periods_s'])} period(s)")
+    _print_log_facts(args.log.name, s)
     print(f"mission world: {s['energy_to_battery_j']:.0f} J to the battery, propulsion {s['propulsion_energy_j']:.0f} J "
           f"(model, {cfg.drone.mass_kg:g} kg drone), final SoC {s['final_soc']:.3f}")
     c = s.get("power_comparison")
@@ -139,11 +157,63 @@ def _cmd_replay(args) -> int:
     return 0
 
 
+def _print_log_facts(name: str, s: dict) -> None:
+    """The replay's first lines: what the log holds, where the armed state came from, what was dropped."""
+    rejected = s.get("gps_rejected") or {}
+    n_rej = sum(rejected.values())
+    detail = f" ({', '.join(f'{k} {v}' for k, v in rejected.items() if v)})" if n_rej else ""
+    source = s.get("armed_source") or "no armed-state record and no motor output: never armed"
+    print(f"{name}: {s['duration_s']:.1f} s logged, {s['n_position_samples']} positions "
+          f"({s['bad_frames']} bad frames skipped, {n_rej} implausible GPS fixes rejected{detail}), "
+          f"{s['distance_m']:.0f} m flown, max {s['max_alt_m']:.1f} m above the pad")
+    print(f"armed {s['armed_time_s']:.1f} s in {len(s['armed_periods_s'])} period(s), from {source}"
+          + (" (armed from the start of the log: its first armed-state record is a disarm)"
+             if s.get("starts_armed") else ""))
+    for err in s.get("parse_errors") or []:
+        print(f"warning: the log could not be parsed to its end: {err}; replayed what was decoded before it")
+
+
+def _resolve_connect(text: str, timeout_s: float = 5.0) -> str:
+    """Check that the host of a ``kind:HOST:PORT`` connection string is a valid IP address or resolves
+    (within ``timeout_s``) before anything is simulated; ``CliError`` naming the host otherwise."""
+    import ipaddress
+    import socket
+    import threading
+
+    kind, _, rest = text.partition(":")
+    host, _, port = rest.rpartition(":")
+    if host.replace(".", "").isdigit():
+        try:
+            ipaddress.IPv4Address(host)
+        except ValueError:
+            raise CliError(f"--connect {text!r}: {host!r} is not a valid IPv4 address "
+                           "(four numbers 0..255)") from None
+        return text
+    found: list = []
+
+    def look_up():
+        try:
+            found.append(socket.getaddrinfo(host, int(port), type=socket.SOCK_DGRAM if "udp" in kind else 0))
+        except (OSError, UnicodeError) as exc:
+            found.append(exc)
+    th = threading.Thread(target=look_up, daemon=True)
+    th.start()
+    th.join(timeout_s)
+    if not found:
+        raise CliError(f"--connect {text!r}: host {host!r} did not resolve within {timeout_s:g} s")
+    if isinstance(found[0], Exception):
+        reason = getattr(found[0], "strerror", None) or found[0]
+        raise CliError(f"--connect {text!r}: host {host!r} cannot be resolved ({reason})")
+    return text
+
+
 def _add_telemetry(sub):
     p = sub.add_parser("telemetry", help="run a mission and stream it as live MAVLink 2 telemetry",
-                       description="Run a mission and send HEARTBEAT, SYS_STATUS, BATTERY_STATUS (charge state), "
-                                   "GLOBAL_POSITION_INT, GPS_RAW_INT and NAMED_VALUE_FLOAT (I2, d_short, Lm [uH]) "
-                                   "so a ground station shows the drone charging.")
+                       description="Run a mission and send it as an ArduCopter would: HEARTBEAT (1 Hz of simulated "
+                                   "time, LOITER over a pad, AUTO in transit), SYS_STATUS, BATTERY_STATUS (charge "
+                                   "state), GPS_RAW_INT, GLOBAL_POSITION_INT, ATTITUDE, VFR_HUD and NAMED_VALUE_FLOAT "
+                                   "(I2, I1, DUTY, LM_UH, SBAR_MODE, PAD_ON, CHG_CMD, I_RECT; see docs/mavlink.md) so a "
+                                   "ground station shows the drone charging.")
     p.add_argument("--connect", default="udpout:127.0.0.1:14550",
                    help="where to send (default udpout:127.0.0.1:14550; 'none' = only --tlog)")
     p.add_argument("--rate", type=positive_float("rate"), default=10.0, help="telemetry rate in Hz (default 10)")
@@ -160,7 +230,13 @@ def _add_telemetry(sub):
                    help="with --follow: stop after S wall seconds (default 60)")
     p.add_argument("--follow-idle", type=positive_float("follow-idle"), default=10.0, metavar="S",
                    help="with --follow: stop after S seconds without a position (default 10)")
-    p.add_argument("--progress", action="store_true", help="show a progress bar")
+    p.add_argument("--sysid", type=int, default=1, metavar="ID",
+                   help="MAVLink system id of the simulated vehicle, 1..255 (default 1; use another beside a SITL vehicle)")
+    p.add_argument("--compid", type=int, default=1, metavar="ID",
+                   help="MAVLink component id of the simulated vehicle, 1..255 (default 1, the autopilot)")
+    p.add_argument("--force", action="store_true", help="run even when the estimated mission size exceeds "
+                   "the limit (see dronewpt mission --help)")
+    add_progress_flag(p)
     _mav_common(p)
     p.set_defaults(func=_cmd_telemetry)
 
@@ -168,22 +244,28 @@ def _add_telemetry(sub):
 def _cmd_telemetry(args) -> int:
     from ..mavlink import telemetry
     from ..mavlink.geodesy import parse_geo_point
-    connect = None if str(args.connect).lower() == "none" else telemetry.check_connect(args.connect)
+    connect = None if str(args.connect).lower() == "none" else _resolve_connect(telemetry.check_connect(args.connect))
     if connect is None and args.tlog is None:
         raise CliError("--connect none needs --tlog FILE (nothing to send to)")
+    telemetry.check_ids(args.sysid, args.compid)
     home = parse_geo_point(args.home, "--home") if args.home else telemetry.DEFAULT_HOME
     if home.alt_m is None:
         raise CliError(f"--home {args.home!r} needs an altitude; valid format: LAT,LON,ALT")
     if args.follow is not None:
         return _cmd_telemetry_follow(args, connect, home)
     cfg = _mav_config(args)
+    from ..world.budget import check_run_size
     from ..world.runner import run_mission
     from ..world.trajectory import plan_mission
+    check_run_size(cfg, force=args.force)
+    if args.tlog is not None:
+        prepare_out_dir(args.tlog.parent, "--tlog folder")
     traj = plan_mission(cfg)
-    res = run_mission(cfg, _mav_policy(cfg, args.policy), trajectory=traj, progress=args.progress)
+    res = run_mission(cfg, _mav_policy(cfg, args.policy), trajectory=traj, progress=show_progress(args))
     st = telemetry.stream(res.timeseries, connect=connect, rate_hz=args.rate, speed=args.speed, home=home,
                           tlog=args.tlog, duration_s=args.duration, ground_gap_m=cfg.mission.hover_gap_m,
-                          track=(traj.t_s, traj.pos_m), progress=args.progress)
+                          track=(traj.t_s, traj.pos_m, traj.tilt_rad), progress=show_progress(args), sysid=args.sysid,
+                          compid=args.compid)
     print(f"sent {st.frames} MAVLink 2 frames in {st.ticks} ticks at {args.rate:g} Hz: {st.sim_s:.1f} s of the "
           f"mission in {st.wall_s:.1f} s wall to {connect or 'no link'}"
           + (f"; wrote {args.tlog}" if args.tlog else ""))
@@ -197,7 +279,8 @@ def _cmd_telemetry_follow(args, connect, home) -> int:
     from ..world.runner import run_mission
     st = follow.follow(args.follow, cfg, _mav_policy(cfg, args.policy), run_mission, connect=connect,
                           rate_hz=args.rate, home=home if args.home else None, tlog=args.tlog,
-                          max_wall_s=args.follow_time, idle_timeout_s=args.follow_idle, in_conn=vin)
+                          max_wall_s=args.follow_time, idle_timeout_s=args.follow_idle, in_conn=vin,
+                          sysid=args.sysid, compid=args.compid)
     print(f"followed {st.positions} live positions over {st.wall_s:.1f} s in {st.chunks} chunk(s); sent "
           f"{st.frames} frames to {connect or 'no link'}" + (f"; wrote {args.tlog}" if args.tlog else ""))
     return 0

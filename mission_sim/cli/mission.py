@@ -6,7 +6,17 @@ import json
 import sys
 from pathlib import Path
 
-from .common import CliError, finite_float, parse_set, write_mission
+from .common import (
+    CliError,
+    add_progress_flag,
+    finite_float,
+    lazy_names_help,
+    parse_set,
+    policy_names,
+    prepare_out_dir,
+    show_progress,
+    write_mission,
+)
 
 
 def _add_coupling(sub):
@@ -44,7 +54,7 @@ def _cmd_coupling(args) -> int:
            "l2_h": m.l2_h, "k": float(m.k(lm)), "tx_turns": tx, "rx_turns": rx}
     if args.map is not None:
         from ..figures import mission as mission_figures
-        args.map.parent.mkdir(parents=True, exist_ok=True)
+        _check_map_path(args.map)
         out["map_png"] = mission_figures.plot_lm_map(m, dz, tilt, args.map)
     if args.format == "json":
         print(json.dumps(out))
@@ -57,54 +67,87 @@ def _cmd_coupling(args) -> int:
     return 0
 
 
+def _check_map_path(path: Path) -> None:
+    """``--map`` must name a PNG file in a writable folder."""
+    if path.is_dir():
+        raise CliError(f"--map {str(path)!r} is a folder; valid: a PNG file path, e.g. {str(path / 'lm_map.png')!r}")
+    if path.suffix.lower() != ".png":
+        raise CliError(f"--map {str(path)!r} is invalid; valid: a file name ending in .png")
+    prepare_out_dir(path.parent, "--map folder")
+
+
 def _add_mission(sub):
     p = sub.add_parser("mission", help="run a flight mission with in-flight charging (the main job)",
                        description="Simulate a drone mission over charging pads: coupling from the pose, the "
                                    "WPT link, the SBAR policy, battery and propulsion. Without CONFIG the embedded "
-                                   "default mission runs. Writes the time series (Parquet, CSV), summary.json and "
-                                   "PNG figures to --out.")
+                                   "default mission runs. Writes the time series (Parquet, CSV), PNG figures and "
+                                   "summary.json (last: its presence means the set is complete) to --out. Exit "
+                                   "status 0: done; 2: bad input (one line on stderr); 3: the battery was "
+                                   "depleted, the mission ended there (results written).")
     p.add_argument("config", nargs="?", type=Path, default=None, help="mission TOML (default: embedded default)")
-    p.add_argument("--policy", default="model_based", help="receiver policy (default model_based)")
+    lazy_names_help(p.add_argument("--policy", default="model_based"), "receiver policy (default model_based)",
+                    policy_names)
     p.add_argument("--out", type=Path, default=Path("out/mission"), help="output folder (default out/mission)")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a config value by dotted key, e.g. --set wind.speed_m_s=6 (repeatable)")
     p.add_argument("--no-charge", action="store_true", help="never energise the pads (baseline mission)")
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
+    p.add_argument("--force", action="store_true", help="run even when the estimated memory or output size "
+                   "exceeds the limit (1 GiB each; see docs/robustness.md)")
+    add_progress_flag(p)
     p.set_defaults(func=_cmd_mission)
 
 
-def _cmd_mission(args) -> int:
-    import tomllib
-
+def mission_config(args):
+    """Validated MissionConfig from ``args.config`` (None: the embedded default) and ``--set``; the run
+    size is checked against the limits unless ``--force`` (see :mod:`mission_sim.world.budget`)."""
     from .. import config as mconfig
-    from ..world.runner import run_mission
-    try:
-        import policies
-    except ImportError as exc:  # pragma: no cover - policies ships with dronewpt
-        raise CliError(f"the policies package is not importable: {exc}") from None
-    if args.config is not None and not args.config.is_file():
-        raise CliError(f"config file {str(args.config)!r} does not exist")
-    text = mconfig.DEFAULT_MISSION_TOML if args.config is None else args.config.read_text("utf-8")
-    try:
-        d = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise CliError(f"{args.config or 'default mission'}: not valid TOML: {exc}") from None
-    if args.config is not None:
-        d = mconfig.layer_on_default(d)
+    from ..world.budget import check_run_size
+    d = mconfig.load_config_dict(args.config)
     overrides = parse_set(args.set)
     cfg = mconfig.config_from_dict(mconfig.apply_overrides(d, overrides) if overrides else d)
-    if args.policy.partition(":")[0] not in policies.available():
-        raise CliError(f"--policy {args.policy!r} is invalid; valid values: "
-                       f"{', '.join(policies.available())} (or rl:PATH)")
-    pol = policies.make(args.policy, mconfig.policy_context(cfg))
-    progress = args.format != "json" and sys.stderr.isatty()
-    res = run_mission(cfg, pol, charge=not args.no_charge, progress=progress)
+    check_run_size(cfg, force=getattr(args, "force", False))
+    return cfg
+
+
+def make_policy(name: str, cfg):
+    """Policy ``name`` for the mission's link; ``CliError`` naming the valid names."""
+    import policies
+
+    from ..config import policy_context
+    if name.partition(":")[0] not in policies.available():
+        raise CliError(f"--policy {name!r} is invalid; valid values: {', '.join(policies.available())} (or rl:PATH)")
+    return policies.make(name, policy_context(cfg))
+
+
+def _cmd_mission(args) -> int:
+    from ..world.runner import run_mission
+    cfg = mission_config(args)
+    pol = make_policy(args.policy, cfg)
+    prepare_out_dir(args.out)
+    res = run_mission(cfg, pol, charge=not args.no_charge, progress=show_progress(args))
     files = write_mission(res, args.out, plots=not args.no_plot)
     s = res.summary
     if args.format == "json":
         print(json.dumps({**s, "files": files}))
-        return 0
+    else:
+        _print_mission(s, files)
+    if s.get("battery_depleted"):
+        print(f"dronewpt mission: {depletion_text(s)}", file=sys.stderr)
+        return 3
+    return 0
+
+
+def depletion_text(s: dict) -> str:
+    """One line on where the battery ran out (summary keys ``depleted_at_s``, ``depleted_pad_distance_m``)."""
+    if s.get("depleted_at_s") is None:
+        return f"battery depleted (min SoC {s['min_soc']:.3f})"
+    return (f"battery depleted at t = {s['depleted_at_s']:.1f} s, {s['depleted_pad_distance_m']:.0f} m from the "
+            f"nearest pad; the mission ended there")
+
+
+def _print_mission(s: dict, files) -> None:
     rows = [
         ("policy", s["policy"], ""),
         ("simulated time", f"{s['sim_time_s']:.1f}", "s"),
@@ -123,7 +166,7 @@ def _cmd_mission(args) -> int:
         ("steps fine / coarse", f"{s['fine_steps']} / {s['coarse_steps']}", f"({s['fine_windows']} fine windows)"),
     ]
     if s.get("battery_depleted"):
-        rows.append(("WARNING", "battery depleted", f"(min SoC {s['min_soc']:.3f}; OCV held at its SoC = 0 value)"))
+        rows.append(("BATTERY DEPLETED", depletion_text(s), ""))
     w = max(len(r[0]) for r in rows)
     for name, val, unit in rows:
         print(f"{name:<{w}}  {val:>24}  {unit}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .common import CliError, float_arg
+from .common import CliError, float_arg, prepare_out_dir
 
 
 def _add_paper(sub):
@@ -26,11 +26,12 @@ def _cmd_paper(args) -> int:
     if args.model not in paper.MODELS:
         raise CliError(f"--model {args.model!r} is invalid; valid values: {', '.join(sorted(paper.MODELS))}")
     t_switch = 1e-3
+    if not args.no_plot:
+        prepare_out_dir(args.out)
     runs = paper.run_paper(model=args.model, t_switch_s=t_switch, control_period_s=args.control_period)
     figs = []
     if not args.no_plot:
         from ..figures import paper as figures
-        args.out.mkdir(parents=True, exist_ok=True)
         figs.append(figures.plot_paper_fig6(runs, args.out / f"fig6_{args.model}.png", t_switch,
                                             f"RM -> SM transition, {args.model} model, Table I"))
         if args.model == "switching":

@@ -6,7 +6,7 @@ import json
 import sys
 from pathlib import Path
 
-from .common import CliError, nonneg_int, positive_float
+from .common import CliError, add_progress_flag, nonneg_int, positive_float, show_progress
 
 
 def _add_sweep(sub):
@@ -27,8 +27,25 @@ def _add_sweep(sub):
                         "in this process without Dask)")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--no-plot", action="store_true", help="skip the PNG plots")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_progress_flag(p)
     p.set_defaults(func=_cmd_sweep)
+
+
+def _check_scheduler_address(address: str) -> None:
+    """A malformed ``--scheduler`` fails here with one line: once a ``distributed.Client`` is half built
+    its ``__del__`` prints "Exception ignored ..." and a traceback after our error."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+    from distributed.comm.registry import backends
+    try:
+        scheme, loc = parse_address(address)
+        if scheme not in backends:
+            raise ValueError(f"unknown scheme {scheme!r}; known: {', '.join(sorted(backends))}")
+        if scheme in ("tcp", "tls", "ws", "wss"):
+            port = parse_host_port(loc)[1]
+            if not 0 < int(port) < 65536:
+                raise ValueError(f"port {port} is not in 1..65535")
+    except (ValueError, TypeError) as exc:
+        raise CliError(f"--scheduler {address!r} is invalid ({exc}); valid format: tcp://HOST:PORT") from None
 
 
 def _cmd_sweep(args) -> int:
@@ -40,6 +57,8 @@ def _cmd_sweep(args) -> int:
     from ..studies import study as study_mod
     from ..studies import sweep
 
+    if args.scheduler is not None:
+        _check_scheduler_address(args.scheduler)
     if args.scheduler is not None and args.workers is not None:
         raise CliError("--scheduler and --workers exclude each other "
                        "(the cluster at --scheduler has its own workers)")
@@ -63,7 +82,7 @@ def _cmd_sweep(args) -> int:
             pass
     old = signal.signal(signal.SIGTERM, _term)
     try:
-        res = sweep.run_sweep(cases, runner, args.out, client_factory=factory, progress=not args.no_progress,
+        res = sweep.run_sweep(cases, runner, args.out, client_factory=factory, progress=show_progress(args),
                               progress_desc=st.name)
     finally:
         signal.signal(signal.SIGTERM, old)

@@ -32,21 +32,20 @@ def plot_lm_map(model, dz_m: float, tilt_rad: float, path, half_width_m: float =
     ax.set_ylabel("dy [m]")
     ax.set_title(f"Lm over the pad at dz = {dz_m:.3f} m, tilt = {np.degrees(tilt_rad):.1f} deg (pad coil dashed)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return str(path)
+    return save_figure(fig, path)
 
 
 def plot_mission(result, out_dir) -> list[str]:
     """The mission figures: trajectory over the pads, Lm(t), I2 envelope vs rated, SoC, power flows."""
     from pathlib import Path
     out = Path(out_dir)
+    return [plot(result, out) for plot in (_plot_trajectory, _plot_lm, _plot_i2, _plot_soc, _plot_power)]
+
+
+def _plot_trajectory(result, out) -> str:
+    """Trajectory over the pads (plan view) and the height of the receiver coil."""
     ts = result.timeseries
     cfg = result.config
-    t = ts["t_s"].to_numpy()
-    paths = []
-
-    # trajectory over pads
     fig, (ax, az) = plt.subplots(1, 2, figsize=(11, 4.5), gridspec_kw={"width_ratios": [1.2, 1]})
     tr = result.trajectory
     ax.plot(tr.pos_m[:, 0], tr.pos_m[:, 1], color="0.4", lw=1, label="path")
@@ -74,9 +73,15 @@ def plot_mission(result, out_dir) -> list[str]:
     az.set_title("height of the receiver coil")
     az.grid(alpha=0.3)
     fig.tight_layout()
-    paths.append(save_figure(fig, out / "trajectory.png"))
+    return save_figure(fig, out / "trajectory.png")
 
-    # Lm(t)
+
+def _plot_lm(result, out) -> str:
+    """Lm(t) along the mission with the pad switch-off threshold and the pad-energised spans."""
+    ts = result.timeseries
+    cfg = result.config
+    t = ts["t_s"].to_numpy()
+    on = ts["tx_on"].to_numpy(bool)
     fig, ax = plt.subplots(figsize=(10, 3.8))
     ax.plot(t, ts["lm_h"] * 1e6, color="tab:blue", lw=0.8)
     if cfg is not None:
@@ -93,9 +98,13 @@ def plot_mission(result, out_dir) -> list[str]:
     ax.grid(alpha=0.3)
     ax.set_title("mutual inductance along the mission")
     fig.tight_layout()
-    paths.append(save_figure(fig, out / "lm.png"))
+    return save_figure(fig, out / "lm.png")
 
-    # I2 envelope with rated current: whole mission and a zoom on the largest transient
+
+def _plot_i2(result, out) -> str:
+    """I2 envelope against the rated current: whole mission and a zoom on the largest transient."""
+    ts = result.timeseries
+    t = ts["t_s"].to_numpy()
     fig, (ax, az) = plt.subplots(1, 2, figsize=(12, 4))
     i2 = ts["i2_amp_a"].to_numpy()
     rated = result.summary.get("rated_i2_a", 15.0)
@@ -124,9 +133,13 @@ def plot_mission(result, out_dir) -> list[str]:
         az.set_title(f"largest transient inside a fine window ({i2[kpk]:.1f} A at t = {t[kpk]:.1f} s)")
         az.grid(alpha=0.3)
     fig.tight_layout()
-    paths.append(save_figure(fig, out / "i2_envelope.png"))
+    return save_figure(fig, out / "i2_envelope.png")
 
-    # SoC
+
+def _plot_soc(result, out) -> str:
+    """State of charge and battery terminal voltage."""
+    ts = result.timeseries
+    t = ts["t_s"].to_numpy()
     fig, ax = plt.subplots(figsize=(10, 3.5))
     ax.plot(t, ts["soc"], color="tab:green")
     ax.set_xlabel("t [s]")
@@ -138,9 +151,13 @@ def plot_mission(result, out_dir) -> list[str]:
                  f"{result.summary.get('final_soc_without_charging', float('nan')):.4f})")
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    paths.append(save_figure(fig, out / "soc.png"))
+    return save_figure(fig, out / "soc.png")
 
-    # power flows
+
+def _plot_power(result, out) -> str:
+    """Power flows: pad source, rectifier, propulsion, battery terminal, coil losses."""
+    ts = result.timeseries
+    t = ts["t_s"].to_numpy()
     fig, ax = plt.subplots(figsize=(10, 4))
     ax.plot(t, ts["p_source_w"], lw=0.8, label="pad source")
     ax.plot(t, ts["rect_current_a"] * ts["battery_v"], lw=0.8, label="rectifier -> battery node")
@@ -154,5 +171,4 @@ def plot_mission(result, out_dir) -> list[str]:
     s = result.summary
     ax.set_title(f"power flows (energy balance error {s['energy_balance_error_rel']:.1e} relative)")
     fig.tight_layout()
-    paths.append(save_figure(fig, out / "power.png"))
-    return paths
+    return save_figure(fig, out / "power.png")

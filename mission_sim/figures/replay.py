@@ -34,7 +34,8 @@ def plot_replay(result, path, title: str = "") -> str:
     a.plot(tr.t_s, tr.height_m, lw=0.8)
     _shade_armed(a, periods, tr.t_offset_s)
     a.set_xlabel("time [s]"), a.set_ylabel("height above pad [m]"), a.grid(alpha=0.3), a.legend()
-    a.set_title(f"max {result.summary['max_alt_m']:.1f} m, armed {result.summary['armed_time_s']:.0f} s")
+    a.set_title(f"max {result.summary['max_alt_m']:.1f} m, armed {result.summary['armed_time_s']:.0f} s "
+                f"({result.log.armed_source or 'no armed record'})", fontsize=9)
     a = ax[1, 0]
     a.plot(ts["t_s"], ts["lm_h"] * 1e6, color="tab:blue", lw=0.8)
     a.set_xlabel("time [s]"), a.set_ylabel("Lm [uH]", color="tab:blue"), a.grid(alpha=0.3)

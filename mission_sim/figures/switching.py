@@ -14,6 +14,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .common import save_figure  # noqa: E402
+
 __all__ = ["plot_switching_waveforms"]
 
 
@@ -59,9 +61,7 @@ def plot_switching_waveforms(runs, out_dir, t_switch_s: float | None = None, shi
     fig.suptitle("Switching-level model: secondary and battery current (RM -> SM)")
     fig.tight_layout()
     path = Path(out_dir) / "waveforms_switching.png"
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return [str(path)]
+    return [save_figure(fig, path, dpi=120)]
 
 
 def _env_t(runs, j):

@@ -2,6 +2,10 @@
 
 =============  ==============================================================================
 ``logs``       read .tlog and DataFlash .bin logs into pandas tables (never raises on content)
+``ulog``       read PX4 ULog (.ulg) files into the same tables (pyulog)
+``flightlog``  the :class:`FlightLog` tables shared by both readers
+``armed``      armed periods: from armed-state records, else inferred from motor outputs / throttle
+``gpsclean``   rejection of implausible GPS fixes (quality, altitude, jumps), counted
 ``geodesy``    geodetic <-> local ENU about a pad, the ``--pad`` text format
 ``replay``     a real flight log through the mission world: track about a pad, logged vs model
 ``telemetry``  live MAVLink 2 telemetry of a simulated mission, .tlog writer

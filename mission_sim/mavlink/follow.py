@@ -2,12 +2,23 @@
 
 A vehicle (e.g. an autopilot in software-in-the-loop) sends GLOBAL_POSITION_INT to a UDP port;
 :func:`follow` turns its positions into the pad frame, runs the mission world on them chunk by
-chunk and streams the simulated telemetry (:mod:`mission_sim.mavlink.telemetry`) about one chunk behind.
-Every loop is bounded in message count and wall time.
+chunk (:class:`ChunkedMission`) and streams the simulated telemetry
+(:mod:`mission_sim.mavlink.telemetry`) one chunk behind. Every loop is bounded in message count
+and wall time.
+
+Continuity across chunks: each chunk is simulated from :data:`WARM_S` seconds *before* its start
+(the battery at that time's state of charge from the previous chunk), and only its own stretch is
+reported, so the link's electrical state (coil currents, SBAR duty, the policy's memory) at the
+chunk boundary is the one a continuous run reaches (the link settles in ~0.2 s, far inside the
+warm-up). Not carried exactly: the battery's RC polarisation (tau 15 s) restarts at the warm-up
+(the runner has no initial-state hook); over an 8 s test track the state of charge differs from a
+continuous run by 1e-4 and the consumed charge by 0.7 %. Net charge and energy drawn accumulate over the whole run; HEARTBEATs come at every
+whole second of the vehicle's clock; the last, partial chunk is simulated and sent at the end.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 import time
 from dataclasses import dataclass
@@ -16,11 +27,13 @@ import numpy as np
 
 from .geodesy import GeoPoint, geodetic_to_enu
 from .logs import mavutil
-from .telemetry import TlogWriter, check_connect, mavlink_table, send_tick
+from .telemetry import (TlogWriter, check_connect, check_ids, drawn_totals, encode_heartbeat, encode_tick,
+                        mavlink_table, schedule, send_msgs)
 
-__all__ = ["FollowStats", "open_follow", "follow"]
+__all__ = ["FollowStats", "open_follow", "follow", "ChunkedMission", "WARM_S"]
 
 _REANCHOR_S = 5.0           # vehicle clock this far off ours -> re-anchor (reboot, stall)
+WARM_S = 2.0                # each chunk is simulated from this long before its start
 
 
 @dataclass
@@ -36,9 +49,84 @@ class FollowStats:
 
 
 def _chunk_config(cfg, soc):
-    """``cfg`` with the battery starting at ``soc`` (the previous chunk's final state of charge)."""
+    """``cfg`` with the battery starting at ``soc`` (the state of charge where the chunk starts)."""
     from ..config import apply_overrides, config_from_dict, config_to_dict
     return config_from_dict(apply_overrides(config_to_dict(cfg), {"battery.initial_soc": float(soc)}))
+
+
+class ChunkedMission:
+    """The mission world run along a growing track, chunk by chunk, as one continuous mission.
+
+    :meth:`add` appends a position (time [s], ENU [m] coil position); :meth:`simulate` runs the
+    new stretch and returns the send events ``(t [s], mavlink_table row, is_heartbeat)``.
+    """
+
+    def __init__(self, cfg, policy, run_mission, home: GeoPoint, rate_hz: float, warm_s: float = WARM_S):
+        from ..world.trajectory import Trajectory
+        self.cfg, self.policy, self.run_mission, self.home, self.rate_hz = cfg, policy, run_mission, home, rate_hz
+        self.warm_s, self.gap = float(warm_s), float(cfg.mission.hover_gap_m)
+        self.t: list[float] = []
+        self.pos: list[tuple[float, float, float]] = []
+        self.start = 0                                   # first sample not yet reported
+        self.soc_t, self.soc = [], []                    # state of charge along the reported stretches
+        self.drawn = (0.0, 0.0)                          # net charge [C] and energy [J] reported so far
+        self.last_tick = self.last_hb = -math.inf
+        self.chunks = 0
+        self.final_soc = None
+        still = Trajectory.from_samples([0.0, 1.0], [[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
+        self.hover_w = float(still.propulsion_w(cfg.drone)[0])   # 50 % throttle
+
+    def add(self, t_s: float, pos_m) -> None:
+        if not self.t or t_s > self.t[-1] + 1e-3:
+            self.t.append(float(t_s))
+            self.pos.append(tuple(float(v) for v in pos_m))
+
+    def pending_s(self) -> float:
+        """Seconds of track received after the last reported sample (0 if nothing new)."""
+        if len(self.t) <= self.start or len(self.t) < 2:
+            return 0.0
+        return self.t[-1] - self.t[max(self.start - 1, 0)]
+
+    def _soc_at(self, t: float) -> float:
+        if not self.soc_t:
+            return float(self.cfg.battery.initial_soc)
+        return float(np.interp(t, self.soc_t, self.soc))
+
+    def simulate(self) -> list:
+        """Simulate from the last reported sample to the newest one; the send events of the stretch."""
+        from ..world.trajectory import Trajectory
+        t_from = self.t[max(self.start - 1, 0)]              # the stretch joins the previous one
+        lo = bisect.bisect_left(self.t, t_from - self.warm_s - 1e-9)
+        t_seg, pos = np.array(self.t[lo:]), np.array(self.pos[lo:])
+        res = self.run_mission(_chunk_config(self.cfg, self._soc_at(t_seg[0])), self.policy,
+                               trajectory=Trajectory.from_samples(t_seg - t_seg[0], pos))
+        ts = res.timeseries.copy()
+        ts["t_s"] = ts["t_s"] + t_seg[0]
+        c, j = drawn_totals(ts)
+        # drawn up to t_from (reported by the previous chunk): the totals are linear within a step
+        # (a row closes its step at t_s), so interpolate; the first chunk reports from its start
+        rows_t = ts["t_s"].to_numpy()
+        c0, j0 = (0.0, 0.0) if self.start == 0 else (np.interp(t_from, rows_t, c), np.interp(t_from, rows_t, j))
+        mine = ts["t_s"].to_numpy() > t_from + 1e-9
+        if self.start == 0:
+            self.soc_t, self.soc = [float(t_seg[0])], [float(self.cfg.battery.initial_soc)]
+        self.soc_t += list(ts["t_s"].to_numpy()[mine])
+        self.soc += list(ts["soc"].to_numpy()[mine])
+        first = self.last_tick + 1e-9 if self.chunks else t_seg[0] - 1e-9
+        tick_t = np.arange(math.ceil(first * self.rate_hz), math.floor(t_seg[-1] * self.rate_hz + 1e-9) + 1) / self.rate_hz
+        tick_t = tick_t[tick_t > first]
+        events = []
+        if len(tick_t):
+            tab = mavlink_table(ts, self.home, self.gap, t_out=tick_t, track=(t_seg, pos),
+                                drawn0=(self.drawn[0] - c0, self.drawn[1] - j0), hover_w=self.hover_w)
+            events = [(t, tab.iloc[k], hb) for t, k, hb in schedule(tick_t, self.last_hb)]
+            self.last_tick = float(tick_t[-1])
+            self.last_hb = max([t for t, _, hb in events if hb], default=self.last_hb)
+        self.drawn = (self.drawn[0] + c[-1] - c0, self.drawn[1] + j[-1] - j0)
+        self.final_soc = float(res.summary["final_soc"])
+        self.start = len(self.t)
+        self.chunks += 1
+        return events
 
 
 def open_follow(follow_connect: str):
@@ -47,99 +135,77 @@ def open_follow(follow_connect: str):
                                         source_component=190)
 
 
+class _Clock:
+    """The vehicle's ``time_boot_ms`` anchored to our clock at the first frame and again after a
+    reboot or a jump (frames may arrive in bursts; the vehicle's clock spaces the samples)."""
+
+    def __init__(self):
+        self.offset = None
+
+    def __call__(self, time_boot_ms: int, arrival_s: float) -> float:
+        tb = time_boot_ms * 1e-3
+        if self.offset is None or abs(tb + self.offset - arrival_s) > _REANCHOR_S:
+            self.offset = arrival_s - tb
+        return tb + self.offset
+
+
 def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None = None, rate_hz: float = 10.0,
            home: GeoPoint | None = None, tlog=None, max_wall_s: float = 60.0, chunk_s: float = 1.0,
-           max_messages: int = 1_000_000, idle_timeout_s: float = 10.0, out_conn=None, in_conn=None) -> FollowStats:
+           max_messages: int = 1_000_000, idle_timeout_s: float = 10.0, out_conn=None, in_conn=None,
+           sysid: int = 1, compid: int = 1) -> FollowStats:
     """Drive the mission world from a live vehicle's GLOBAL_POSITION_INT and stream the result.
 
     Positions from ``follow_connect`` (e.g. ``udpin:127.0.0.1:14551``; lat = lon = 0, i.e. no fix,
-    skipped) are timed by the vehicle's ``time_boot_ms`` anchored to the receiver's clock, and converted to the pad frame about ``home``
-    (None: the first position received is the pad). Every ``chunk_s`` seconds the new stretch
-    of track runs through ``run_mission(cfg, policy, trajectory=...)``, the battery carried
-    over from chunk to chunk by its state of charge, and its telemetry is sent at ``rate_hz``,
-    scheduled ``chunk_s`` behind the vehicle (the latency of this chunked scheme; the link's
-    electrical state restarts each chunk). The loop ends after ``max_wall_s`` seconds,
-    ``max_messages`` received messages or ``idle_timeout_s`` without a position; then the last
-    partial chunk is simulated and everything still queued is sent at once. ``in_conn``: a
-    connection from :func:`open_follow` opened earlier (bind before slow set-up work, or the
-    vehicle's first messages are lost).
+    skipped) are timed by the vehicle's clock (:class:`_Clock`) and converted to the pad frame
+    about ``home`` (None: the first position received is the pad). Every ``chunk_s`` seconds the
+    new stretch runs through :class:`ChunkedMission` and its telemetry is sent at ``rate_hz``,
+    ``chunk_s`` behind the vehicle. The loop ends after ``max_wall_s`` seconds, ``max_messages``
+    received messages or ``idle_timeout_s`` without a position; then the last partial chunk is
+    simulated and everything still queued is sent at once. ``in_conn``: a connection from
+    :func:`open_follow` opened earlier (bind before slow set-up work, or the vehicle's first
+    messages are lost). ``sysid`` / ``compid``: the simulated vehicle's MAVLink ids.
     """
-    from ..world.trajectory import Trajectory
-
+    sysid, compid = check_ids(sysid, compid)
     mu = mavutil()
     vin = in_conn if in_conn is not None else open_follow(follow_connect)
     own_out = out_conn is None and connect is not None
-    out = mu.mavlink_connection(check_connect(connect), source_system=1, source_component=1) if own_out else out_conn
-    mav = mu.mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    out = mu.mavlink_connection(check_connect(connect), source_system=sysid, source_component=compid) \
+        if own_out else out_conn
+    mav = mu.mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
     writer = TlogWriter(tlog) if tlog is not None else None
-    gap = float(cfg.mission.hover_gap_m)
-    wall0 = time.monotonic()
-    epoch0 = time.time()
-    deadline = wall0 + float(max_wall_s)
-    t_rx, pos = [], []
-    chunk_start = 0                         # index of the first sample of the next chunk
-    queue: list[tuple[float, object]] = []  # (send at wall offset, mavlink_table row)
-    soc = None
-    tb_offset = None
-    frames = chunks = n_msgs = 0
-    last_hb = -math.inf
+    wall0, epoch0 = time.monotonic(), time.time()
+    clock, sim, queue = _Clock(), None, []        # queue: (send at wall offset, row, is_heartbeat)
+    frames = n_msgs = 0
     last_rx = wall0
-    def simulate_chunk():
-        nonlocal chunk_start, chunks, soc
-        lo = max(chunk_start - 1, 0)            # overlap one sample: chunks join without a gap
-        t_seg = np.array(t_rx[lo:])
-        traj = Trajectory.from_samples(t_seg - t_seg[0], np.array(pos[lo:]))
-        res = run_mission(cfg if soc is None else _chunk_config(cfg, soc), policy, trajectory=traj)
-        soc = float(res.summary["final_soc"])
-        ts = res.timeseries.copy()
-        ts["t_s"] = ts["t_s"] + t_seg[0]
-        tick_t = np.arange(math.ceil(t_seg[0] * rate_hz), math.floor(t_seg[-1] * rate_hz) + 1) / rate_hz
-        if chunks:
-            tick_t = tick_t[tick_t > t_seg[0]]
-        if len(tick_t):
-            tab = mavlink_table(ts, home, gap, t_out=tick_t, track=(t_seg, np.array(pos[lo:])))
-            queue.extend((tk + chunk_s, tab.iloc[i]) for i, tk in enumerate(tick_t))
-        chunk_start = len(t_rx)
-        chunks += 1
 
     def send_due(now):
-        nonlocal last_hb, frames
+        nonlocal frames
         while queue and wall0 + queue[0][0] <= now:
-            _, row = queue.pop(0)
-            t_wall = time.monotonic()
-            hb = t_wall - last_hb >= 1.0
-            last_hb = t_wall if hb else last_hb
-            frames += len(send_tick(mav, row, hb, out, writer, epoch0 + float(row.t_s)))
+            t_send, row, hb = queue.pop(0)
+            msgs = [encode_heartbeat(mav, row)] if hb else encode_tick(mav, row)
+            frames += send_msgs(mav, msgs, out, writer, epoch0 + t_send - chunk_s)
 
     try:
-        while n_msgs < max_messages:
-            now = time.monotonic()
-            if now >= deadline or now - last_rx > idle_timeout_s:
-                break
-            wait = 0.05 if not queue else max(0.0, min(0.05, wall0 + queue[0][0] - now))
+        while n_msgs < max_messages and time.monotonic() < wall0 + max_wall_s \
+                and time.monotonic() - last_rx <= idle_timeout_s:
+            wait = 0.05 if not queue else max(0.0, min(0.05, wall0 + queue[0][0] - time.monotonic()))
             msg = vin.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=wait)
             n_msgs += 1
             if msg is not None and not (msg.lat == 0 and msg.lon == 0):
                 last_rx = time.monotonic()
-                if home is None or home.alt_m is None:
-                    home = GeoPoint(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3 if home is None or
-                                    home.alt_m is None else home.alt_m)
+                if home is None:
+                    home = GeoPoint(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3)
+                elif home.alt_m is None:
+                    home = GeoPoint(home.lat_deg, home.lon_deg, msg.alt * 1e-3)
+                if sim is None:
+                    sim = ChunkedMission(cfg, policy, run_mission, home, rate_hz)
                 e, n, u = geodetic_to_enu(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, home)
-                # the vehicle's clock spaces the samples (frames may arrive in bursts); anchored to
-                # our clock at the first frame and again after a reboot or a jump
-                tb = msg.time_boot_ms * 1e-3
-                arrival = last_rx - wall0
-                if tb_offset is None or abs(tb + tb_offset - arrival) > _REANCHOR_S:
-                    tb_offset = arrival - tb
-                t_new = tb + tb_offset
-                if not t_rx or t_new > t_rx[-1] + 1e-3:
-                    t_rx.append(t_new)
-                    pos.append((float(e), float(n), max(float(u), 0.0) + gap))
-            if len(t_rx) - chunk_start >= 2 and t_rx[-1] - t_rx[chunk_start] >= chunk_s:
-                simulate_chunk()
+                sim.add(clock(msg.time_boot_ms, last_rx - wall0), (e, n, max(float(u), 0.0) + sim.gap))
+            if sim is not None and sim.pending_s() >= chunk_s:
+                queue.extend((t + chunk_s, row, hb) for t, row, hb in sim.simulate())
             send_due(time.monotonic())
-        if len(t_rx) - max(chunk_start - 1, 0) >= 2 and len(t_rx) > chunk_start:
-            simulate_chunk()                    # the last, partial chunk
+        if sim is not None and sim.pending_s() > 0:
+            queue.extend((t + chunk_s, row, hb) for t, row, hb in sim.simulate())   # the last, partial chunk
         send_due(math.inf)                      # and everything still queued, without waiting
     finally:
         vin.close()
@@ -147,5 +213,5 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
             out.close()
         if writer is not None:
             writer.close()
-    return FollowStats(positions=len(t_rx), chunks=chunks, frames=frames, wall_s=time.monotonic() - wall0,
-                       final_soc=soc, home=home)
+    return FollowStats(positions=len(sim.t) if sim else 0, chunks=sim.chunks if sim else 0, frames=frames,
+                       wall_s=time.monotonic() - wall0, final_soc=sim.final_soc if sim else None, home=home)

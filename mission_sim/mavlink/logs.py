@@ -29,18 +29,18 @@ import contextlib
 import io
 import math
 import os
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from .armed import armed_periods, infer_armed
+from .flightlog import (ARMED_COLUMNS, ATTITUDE_COLUMNS, BATTERY_COLUMNS, POSITION_COLUMNS, FlightLog,
+                        clean_time as _clean_time)
+from .gpsclean import reject_outliers
+
 __all__ = ["mavutil", "FlightLog", "read_log", "armed_periods", "POSITION_COLUMNS", "BATTERY_COLUMNS"]
 
-POSITION_COLUMNS = ("t_s", "lat_deg", "lon_deg", "alt_m")
-ATTITUDE_COLUMNS = ("t_s", "roll_rad", "pitch_rad")
-ARMED_COLUMNS = ("t_s", "armed")
-BATTERY_COLUMNS = ("t_s", "voltage_v", "current_a", "power_w")
 
 _MAV_AUTOPILOT_INVALID = 8          # ground stations and companions send heartbeats with this
 _MAV_MODE_FLAG_SAFETY_ARMED = 128
@@ -87,10 +87,12 @@ _CONVERT = {
     "GLOBAL_POSITION_INT": ("position", lambda m: {
         "lat_deg": m.lat * 1e-7, "lon_deg": m.lon * 1e-7, "alt_m": m.alt * 1e-3,
         "time_boot_s": m.time_boot_ms * 1e-3}),
-    "GPS_RAW_INT": ("fix", lambda m: {"fix_type": int(m.fix_type)}),
+    "GPS_RAW_INT": ("fix", lambda m: {"fix_type": int(m.fix_type), "hdop": _nan_if(m.eph, _UINT16_MAX) * 1e-2,
+                                      "sats": _nan_if(m.satellites_visible, 255)}),
     "GPS": ("df_gps", lambda m: {
         "fix_type": int(m.Status), "lat_deg": float(m.Lat), "lon_deg": float(m.Lng), "alt_m": float(m.Alt),
-        "gps_id": int(getattr(m, "I", getattr(m, "Instance", 0)))}),
+        "gps_id": int(getattr(m, "I", getattr(m, "Instance", 0))),
+        "hdop": float(getattr(m, "HDop", float("nan"))), "sats": float(getattr(m, "NSats", float("nan")))}),
     "ATTITUDE": ("attitude", lambda m: {"roll_rad": float(m.roll), "pitch_rad": float(m.pitch),
                                         "time_boot_s": m.time_boot_ms * 1e-3}),
     "ATT": ("attitude", lambda m: {"roll_rad": math.radians(m.Roll), "pitch_rad": math.radians(m.Pitch)}),
@@ -99,6 +101,12 @@ _CONVERT = {
         "mav_type": int(m.type)}),
     "EV": ("armed", lambda m: {"armed": _DF_ARMED_EVENTS.get(int(m.Id))}),
     "ARM": ("armed", lambda m: {"armed": bool(m.ArmState)}),
+    "SERVO_OUTPUT_RAW": ("pwm", lambda m: {f"ch{k}": float(getattr(m, f"servo{k}_raw")) for k in range(1, 9)}),
+    "RCOU": ("pwm", lambda m: {f"ch{c.lstrip('Ch')}": float(getattr(m, c)) for c in m.fmt.columns
+                               if c.lstrip("Ch").isdigit()}),
+    "ESC": ("esc", lambda m: {"rpm": float(m.RPM)}),
+    "VFR_HUD": ("throttle", lambda m: {"throttle": float(m.throttle)}),
+    "CTUN": ("throttle", lambda m: {"throttle": float(getattr(m, "ThO", getattr(m, "ThrOut", float("nan"))))}),
     "SYS_STATUS": ("sys_status", lambda m: {
         "voltage_v": _nan_if(m.voltage_battery, 0, _UINT16_MAX) * 1e-3,
         "current_a": _nan_if(m.current_battery, -1) * 1e-2}),
@@ -111,51 +119,6 @@ _CONVERT = {
         "voltage_v": float(m.Volt), "current_a": float(m.Curr),
         "battery_id": int(getattr(m, "Inst", getattr(m, "Instance", 0)))}),
 }
-
-
-# ----------------------------------------------------------------------------- result
-@dataclass
-class FlightLog:
-    """What :func:`read_log` found in one log (tables described in the module docstring)."""
-
-    path: Path
-    kind: str                      # "tlog" or "dataflash"
-    t0_epoch_s: float              # timestamp of the first record (Unix s); nan if none
-    duration_s: float              # last minus first record timestamp
-    position: pd.DataFrame
-    attitude: pd.DataFrame
-    armed: pd.DataFrame
-    battery: pd.DataFrame
-    battery_source: str | None     # SYS_STATUS, BATTERY_STATUS, CURR or BAT
-    bad_frames: int                # corrupt frames counted and skipped
-    n_records: int                 # records decoded (bad frames included)
-    mavlink_frames: dict[int, int] = field(default_factory=dict)  # protocol version -> frames (.tlog)
-    reboots: int = 0               # time_boot_ms drops seen in GLOBAL_POSITION_INT
-    fix_checked: bool = True       # False: the log had no GPS fix information at all
-    vehicle: dict = field(default_factory=dict)
-    errors: list[str] = field(default_factory=list)
-
-    @property
-    def armed_periods(self) -> list[tuple[float, float]]:
-        return armed_periods(self.armed, self.duration_s)
-
-    @property
-    def armed_time_s(self) -> float:
-        return float(sum(b - a for a, b in self.armed_periods))
-
-
-def armed_periods(armed: pd.DataFrame, end_s: float) -> list[tuple[float, float]]:
-    """(start_s, end_s) of each armed period from armed-state reports; an open period ends at ``end_s``."""
-    periods, start = [], None
-    for t, a in zip(armed["t_s"].to_numpy(float), armed["armed"].to_numpy(bool)):
-        if a and start is None:
-            start = t
-        elif not a and start is not None:
-            periods.append((start, t))
-            start = None
-    if start is not None:
-        periods.append((start, max(float(end_s), start)))
-    return periods
 
 
 # ----------------------------------------------------------------------------- reading
@@ -220,14 +183,23 @@ def _collect(reader, kind: str, raw: dict, stats: dict) -> None:
         raw.setdefault(table, []).append(row)
 
 
+def _is_ulog(path: Path) -> bool:
+    """PX4 ULog by its magic bytes ("ULog" 01 12 35) or the .ulg suffix."""
+    with open(path, "rb") as fh:
+        return fh.read(7) == b"ULog\x01\x12\x35" or path.suffix.lower() == ".ulg"
+
+
 def read_log(path) -> FlightLog:
-    """Read a .tlog or DataFlash log into a :class:`FlightLog`; never raises on bad content.
+    """Read a .tlog, DataFlash or PX4 ULog (ulog.py) log into a :class:`FlightLog`; never raises on bad content.
 
     Raises ``FileNotFoundError`` if ``path`` does not exist or is not a file.
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"log {str(path)!r} does not exist or is not a file")
+    if _is_ulog(path):
+        from .ulog import read_ulog
+        return read_ulog(path)
     mu = mavutil()
     raw: dict[str, list[dict]] = {}
     stats = {"ts": [], "bad_rec": [], "bad": 0, "versions": {}}
@@ -248,16 +220,125 @@ def read_log(path) -> FlightLog:
 
 
 def _good_timestamps(ts: np.ndarray) -> np.ndarray:
-    """Records whose timestamp is within :data:`_TIME_SPIKE_S` of the centred rolling median of 9.
+    """Records whose timestamp is plausible: within :data:`_TIME_SPIKE_S` of the centred rolling
+    median of 9, or continuing the timeline (0 .. _TIME_SPIKE_S after the previous good record).
 
     A corrupt byte in a .tlog record's 8-byte timestamp (or in a DataFlash TimeUS) makes an
     isolated spike of hours or years; steps (logging paused) and any spacing of a monotonic
-    clock pass, since the centred median of a sorted window is its middle element.
+    clock pass, since the centred median of a sorted window is its middle element. At the end of
+    a log the window is one-sided: a few sparse records (a parameter write 31 s after the
+    previous record) would be judged against older ones; the continuation rule keeps them.
     """
     if len(ts) == 0:
         return np.zeros(0, dtype=bool)
     med = pd.Series(ts).rolling(9, center=True, min_periods=1).median().to_numpy()
-    return np.abs(ts - med) <= _TIME_SPIKE_S  # False for nan (implausible timestamps)
+    good = np.abs(ts - med) <= _TIME_SPIKE_S  # False for nan (implausible timestamps)
+    for i in np.flatnonzero(~good & np.isfinite(ts)):
+        prev = np.flatnonzero(good[:i])
+        last = ts[prev[-1]] if len(prev) else np.nan
+        if 0.0 <= ts[i] - last <= _TIME_SPIKE_S:
+            good[i] = True
+    return good
+
+
+class _Tables:
+    """``raw`` rows as DataFrames: records with a good timestamp only, time ``t_s`` from ``t0``;
+    for a .tlog, :meth:`vehicle` keeps the vehicle's own messages (by the first autopilot
+    heartbeat's system and component id)."""
+
+    def __init__(self, raw: dict, good: np.ndarray, t0: float, kind: str):
+        self.raw, self.good, self.t0, self.kind = raw, good, t0, kind
+        hb = self("heartbeat")
+        veh = hb[hb["autopilot"] != _MAV_AUTOPILOT_INVALID] if len(hb) else hb
+        self.ids = {}
+        if kind == "tlog" and len(veh):
+            src = veh["src"].iloc[0]
+            self.ids = {"sysid": int(src[0]), "compid": int(src[1]), "mav_type": int(veh["mav_type"].iloc[0])}
+
+    def __call__(self, name: str) -> pd.DataFrame:
+        df = pd.DataFrame(self.raw.get(name, []))
+        if len(df):
+            df = df[self.good[df["rec"].to_numpy()]]
+            df.insert(0, "t_s", df.pop("t") - self.t0)
+        return df
+
+    def vehicle(self, name: str) -> pd.DataFrame:
+        df = self(name)
+        if not len(df) or self.kind != "tlog":
+            return df
+        if self.ids:
+            return df[df["src"] == (self.ids["sysid"], self.ids["compid"])]
+        return df[df["src"].map(lambda s: s[0]) != 255]  # no autopilot heartbeat: drop the usual GCS id
+
+
+def _tlog_position(tab: _Tables):
+    """GLOBAL_POSITION_INT of the vehicle with the last GPS_RAW_INT fix report before it (record
+    order): (positions with fix >= 3, reboots, fix_checked)."""
+    pos = tab.vehicle("position")
+    fix = tab("fix")
+    if tab.ids and len(fix):
+        fix = fix[fix["src"].map(lambda s: s[0]) == tab.ids["sysid"]]
+    reboots = int(np.sum(np.diff(pos["time_boot_s"].to_numpy(float)) < -_REBOOT_DROP_S)) if len(pos) else 0
+    pos = _vehicle_time(pos)
+    if len(pos) and len(fix):
+        pos = pd.merge_asof(pos.sort_values("rec"), fix[["rec", "fix_type", "hdop", "sats"]].sort_values("rec"),
+                            on="rec", direction="backward")
+        return pos[pos["fix_type"].fillna(0) >= 3], reboots, True
+    return pos, reboots, not len(pos)
+
+
+def _position(tab: _Tables):
+    """(position table, reboots, fix_checked, rejected counts): fix >= 3, plausible, sorted."""
+    if tab.kind == "tlog":
+        pos, reboots, fix_checked = _tlog_position(tab)
+    else:
+        pos, reboots, fix_checked = tab("df_gps"), 0, True
+        if len(pos):
+            pos = pos[(pos["fix_type"] >= 3) & (pos["gps_id"] == pos["gps_id"].min())]  # first receiver
+    if len(pos):
+        ok = (pos["lat_deg"] != 0) & (pos["lon_deg"] != 0) & pos["lat_deg"].between(-90, 90) \
+            & pos["lon_deg"].between(-180, 180) & np.isfinite(pos["alt_m"])
+        pos = pos[ok]
+    extra = [c for c in ("hdop", "sats") if c in pos]
+    pos, rejected = reject_outliers(_clean_time(pos, (*POSITION_COLUMNS, *extra)))
+    return pos[list(POSITION_COLUMNS)].reset_index(drop=True), reboots, fix_checked, rejected
+
+
+def _armed(tab: _Tables):
+    """(armed table, source, starts_armed): records of the log, else inferred (armed.py)."""
+    if tab.kind == "tlog":
+        hb = tab.vehicle("heartbeat")
+        df = hb[hb["autopilot"] != _MAV_AUTOPILOT_INVALID][["t_s", "armed"]] if len(hb) else hb
+        source, events = "HEARTBEAT", False
+    else:
+        df = tab("armed")
+        df = df[df["armed"].notna()] if len(df) else df
+        source, events = "EV / ARM events", True
+    armed = _clean_time(df, ARMED_COLUMNS, dedupe=False)
+    if len(armed):
+        armed["armed"] = armed["armed"].astype(bool)
+        return armed, source, bool(events and not armed["armed"].iloc[0])
+    names = {"pwm": "SERVO_OUTPUT_RAW" if tab.kind == "tlog" else "RCOU", "esc": "ESC",
+             "throttle": "VFR_HUD" if tab.kind == "tlog" else "CTUN"}
+    tables = {k: (_clean_time(tab.vehicle(k), ["t_s", *[c for c in tab.vehicle(k) if c.startswith(("ch", "rpm", "thr"))]]),
+                  names[k]) for k in names if len(tab.vehicle(k))}
+    inferred, source = infer_armed(tables)
+    return inferred, source, False
+
+
+def _battery(tab: _Tables):
+    """(battery table, source) from the first of BATTERY_STATUS, SYS_STATUS, BAT, CURR with values."""
+    for name, label in (("battery_status", "BATTERY_STATUS"), ("sys_status", "SYS_STATUS"),
+                        ("df_bat", "BAT"), ("df_curr", "CURR")):
+        df = tab.vehicle(name)
+        if "battery_id" in df and len(df):
+            df = df[df["battery_id"] == df["battery_id"].min()]
+        if len(df):
+            df = df[np.isfinite(df["voltage_v"]) & np.isfinite(df["current_a"])]
+        if len(df):
+            df = df.assign(power_w=df["voltage_v"] * df["current_a"])
+            return _clean_time(df, BATTERY_COLUMNS), label
+    return pd.DataFrame(columns=list(BATTERY_COLUMNS)), None
 
 
 def _assemble(path: Path, kind: str, raw: dict, stats: dict, errors: list[str]) -> FlightLog:
@@ -266,81 +347,17 @@ def _assemble(path: Path, kind: str, raw: dict, stats: dict, errors: list[str]) 
     stats["bad"] += int(np.sum(~good | np.asarray(stats["bad_rec"], dtype=bool)))
     t0 = float(ts[good][0]) if good.any() else float("nan")
     duration = max(float(ts[good].max()) - t0, 0.0) if good.any() else 0.0
-
-    def table(name):
-        df = pd.DataFrame(raw.get(name, []))
-        if len(df):
-            df = df[good[df["rec"].to_numpy()]]
-            df.insert(0, "t_s", df.pop("t") - t0)
-        return df
-
-    vehicle: dict = {}
-    hb = table("heartbeat")
-    if kind == "tlog":
-        veh = hb[hb["autopilot"] != _MAV_AUTOPILOT_INVALID] if len(hb) else hb
-        if len(veh):
-            src = veh["src"].iloc[0]
-            vehicle = {"sysid": int(src[0]), "compid": int(src[1]), "mav_type": int(veh["mav_type"].iloc[0])}
-
-    def from_vehicle(df):
-        if not len(df) or kind != "tlog":
-            return df
-        if vehicle:
-            return df[df["src"] == (vehicle["sysid"], vehicle["compid"])]
-        return df[df["src"].map(lambda s: s[0]) != 255]  # no autopilot heartbeat: drop the usual GCS id
-
-    # position: GPS fix >= 3 and a non-zero lat/lon
-    fix_checked = True
-    if kind == "tlog":
-        pos = from_vehicle(table("position"))
-        fix = table("fix")
-        fix = fix[fix["src"].map(lambda s: s[0]) == vehicle["sysid"]] if vehicle and len(fix) else fix
-        reboots = int(np.sum(np.diff(pos["time_boot_s"].to_numpy(float)) < -_REBOOT_DROP_S)) if len(pos) else 0
-        pos = _vehicle_time(pos)
-        if len(pos) and len(fix):
-            # the last fix report before each position *in the log's record order*
-            pos = pd.merge_asof(pos.sort_values("rec"), fix[["rec", "fix_type"]].sort_values("rec"),
-                                on="rec", direction="backward")
-            pos = pos[pos["fix_type"].fillna(0) >= 3]
-        elif len(pos):
-            fix_checked = False
-    else:
-        pos = table("df_gps")
-        reboots = 0
-        if len(pos):
-            pos = pos[(pos["fix_type"] >= 3) & (pos["gps_id"] == pos["gps_id"].min())]  # first receiver
-    if len(pos):
-        ok = (pos["lat_deg"] != 0) & (pos["lon_deg"] != 0) & pos["lat_deg"].between(-90, 90) \
-            & pos["lon_deg"].between(-180, 180) & np.isfinite(pos["alt_m"])
-        pos = pos[ok]
-    position = _clean_time(pos, POSITION_COLUMNS)
-
-    attitude = _clean_time(_vehicle_time(from_vehicle(table("attitude"))), ATTITUDE_COLUMNS)
-    armed_df = from_vehicle(hb)[["t_s", "armed"]] if kind == "tlog" and len(hb) else table("armed")
-    if len(armed_df):
-        armed_df = armed_df[armed_df["armed"].notna()]
-    armed = _clean_time(armed_df, ARMED_COLUMNS, dedupe=False)
-    if len(armed):
-        armed["armed"] = armed["armed"].astype(bool)
-
-    battery, source = pd.DataFrame(columns=list(BATTERY_COLUMNS)), None
-    for name, label in (("battery_status", "BATTERY_STATUS"), ("sys_status", "SYS_STATUS"),
-                        ("df_bat", "BAT"), ("df_curr", "CURR")):
-        df = from_vehicle(table(name))
-        if "battery_id" in df and len(df):
-            df = df[df["battery_id"] == df["battery_id"].min()]
-        if len(df):
-            df = df[np.isfinite(df["voltage_v"]) & np.isfinite(df["current_a"])]
-        if len(df):
-            df = df.assign(power_w=df["voltage_v"] * df["current_a"])
-            battery, source = _clean_time(df, BATTERY_COLUMNS), label
-            break
-
+    tab = _Tables(raw, good, t0, kind)
+    position, reboots, fix_checked, rejected = _position(tab)
+    attitude = _clean_time(_vehicle_time(tab.vehicle("attitude")), ATTITUDE_COLUMNS)
+    armed, armed_source, starts_armed = _armed(tab)
+    battery, source = _battery(tab)
     return FlightLog(path=path, kind=kind, t0_epoch_s=float(t0), duration_s=float(duration),
                      position=position, attitude=attitude, armed=armed, battery=battery,
                      battery_source=source, bad_frames=int(stats["bad"]), n_records=int(len(ts)),
                      mavlink_frames=dict(stats["versions"]), reboots=reboots, fix_checked=fix_checked,
-                     vehicle=vehicle, errors=errors)
+                     vehicle=tab.ids, errors=errors, armed_source=armed_source, starts_armed=starts_armed,
+                     gps_rejected=rejected)
 
 
 def _vehicle_time(df: pd.DataFrame) -> pd.DataFrame:
@@ -365,13 +382,3 @@ def _vehicle_time(df: pd.DataFrame) -> pd.DataFrame:
     bad = ~np.isfinite(out) | (np.abs(out - t) > _TIME_SPIKE_S)
     out[bad] = t[bad]
     return df.assign(t_s=out)
-
-
-def _clean_time(df: pd.DataFrame, columns, dedupe: bool = True) -> pd.DataFrame:
-    """Keep ``columns``, sort by time (stable), drop repeated timestamps (the last report wins)."""
-    if not len(df):
-        return pd.DataFrame({c: pd.Series(dtype=bool if c == "armed" else float) for c in columns})
-    out = df[list(columns)].sort_values("t_s", kind="stable")
-    if dedupe:
-        out = out.drop_duplicates("t_s", keep="last")
-    return out.reset_index(drop=True)

@@ -42,6 +42,24 @@ class NoPositionError(ValueError):
     """The log holds fewer than two usable (GPS fix >= 3) positions."""
 
 
+class LogParseError(NoPositionError):
+    """pymavlink (or pyulog) failed on the log before any usable position: says what failed."""
+
+
+def _no_position(log: FlightLog, detail: str) -> NoPositionError:
+    """The error for a log without enough positions: the parser's own error first if it failed."""
+    if log.errors:
+        return LogParseError(f"{log.path.name}: the log could not be parsed: {log.errors[0]} "
+                             f"({log.n_records} records decoded before it{detail})")
+    rejected = sum(log.gps_rejected.values())
+    why = f"; {rejected} implausible fixes rejected ({_fmt_counts(log.gps_rejected)})" if rejected else ""
+    return NoPositionError(f"{log.path.name}: no usable position (GPS fix >= 3){detail}{why}")
+
+
+def _fmt_counts(counts: dict) -> str:
+    return ", ".join(f"{k} {v}" for k, v in counts.items() if v)
+
+
 @dataclass(frozen=True)
 class FlightTrack:
     """The flown track: ``t_s`` (N,) from 0, ``pos_m`` (N, 3) ENU about the pad, ``tilt_rad`` (N,).
@@ -84,7 +102,7 @@ def default_pad(log: FlightLog) -> GeoPoint:
     """The first position at or after the first arming (the take-off spot), else the first position."""
     pos = log.position
     if len(pos) == 0:
-        raise NoPositionError(f"{log.path.name}: no usable position (GPS fix >= 3) in the log")
+        raise _no_position(log, " in the log" if not log.errors else "")
     i = 0
     periods = log.armed_periods
     if periods:
@@ -105,8 +123,7 @@ def track_from_log(log: FlightLog, pad: GeoPoint | None = None, ground_gap_m: fl
         pos = pos[(pos["t_s"] >= window[0]) & (pos["t_s"] <= window[1])]
     if len(pos) < 2:
         where = f" in the window {window[0]:g}..{window[1]:g} s" if window else ""
-        raise NoPositionError(f"{log.path.name}: no usable position (GPS fix >= 3){where}: "
-                              f"{len(pos)} sample(s), need at least 2")
+        raise _no_position(log, f"{where}: {len(pos)} usable position sample(s), need at least 2")
     if pad is None or pad.alt_m is None:
         d = default_pad(log)
         pad = d if pad is None else GeoPoint(pad.lat_deg, pad.lon_deg, d.alt_m)
@@ -171,6 +188,10 @@ def flight_stats(log: FlightLog, track: FlightTrack) -> dict:
         "max_range_m": float(np.max(np.linalg.norm(track.pos_m[:, :2], axis=1))),
         "armed_time_s": float(sum(b - a for a, b in periods)),
         "armed_periods_s": [[round(a, 3), round(b, 3)] for a, b in periods],
+        "armed_source": log.armed_source,
+        "starts_armed": bool(log.starts_armed),
+        "gps_rejected": {k: int(v) for k, v in log.gps_rejected.items()},
+        "parse_errors": list(log.errors),
         "n_position_samples": int(len(track.t_s)),
         "bad_frames": int(log.bad_frames),
         "reboots": int(log.reboots),
@@ -317,6 +338,26 @@ class ReplayResult:
     files: list[str] = field(default_factory=list)
 
 
+FAR_PAD_M = 10_000.0  # a pad farther than this from the whole track is almost surely a wrong --pad
+
+
+def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
+    """One-line warnings about a replay that runs but may not mean what the user thinks: a log that
+    ends while the vehicle is still armed (a truncated log, or a crash), and a pad far from the
+    whole track (a wrong ``--pad``, e.g. latitude and longitude swapped)."""
+    out = []
+    if len(log.armed) and bool(log.armed["armed"].to_numpy(bool)[-1]):
+        out.append(f"{log.path.name}: the log ends while the vehicle is armed (at {log.duration_s:.1f} s): "
+                   "truncated log? the replay covers only what was recorded")
+    if log.errors:
+        out.append(f"{log.path.name}: reading stopped early: {log.errors[0]}")
+    dist = float(np.min(np.hypot(track.pos_m[:, 0], track.pos_m[:, 1])))
+    if dist > FAR_PAD_M:
+        out.append(f"the pad ({track.pad.lat_deg:.6f}, {track.pad.lon_deg:.6f}) is {dist / 1e3:.0f} km from the "
+                   "nearest point of the track: the drone never comes near it (no charging); check --pad")
+    return out
+
+
 def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: float | None = None,
                window: tuple[float, float] | None = None, progress: bool = False) -> ReplayResult:
     """Build the track of ``log`` (a :class:`FlightLog` or a path), run the mission world along it,
@@ -348,6 +389,7 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
         "sim_time_s": float(ms["sim_time_s"]),
         "window_s": list(window) if window else None,
         "battery_source": log.battery_source,
+        "warnings": replay_warnings(log, track),
     })
     table = None
     if len(log.battery):

@@ -1,22 +1,37 @@
 """Live MAVLink 2 telemetry of a simulated mission and a .tlog writer (``--follow``: follow.py).
 
-:func:`stream` sends, for each tick of ``rate_hz`` on the simulation clock, paced at ``speed``
-times real time:
+The simulated drone appears to a ground station as an ArduCopter quadrotor (autopilot
+ARDUPILOTMEGA, so MAVProxy and QGroundControl decode its custom mode). :func:`stream` sends, on
+the simulation clock, paced at ``speed`` times real time:
 
 ===================  ============================================================================
 message              content (from the mission time series; units as the MAVLink spec)
 ===================  ============================================================================
-HEARTBEAT            quadrotor, generic autopilot, armed (the mission is flown throughout); 1 Hz of
-                     wall time
-SYS_STATUS           battery voltage [mV], current [cA, + = discharging], remaining [%]
+HEARTBEAT            at every whole second of simulated time (1 Hz, also in follow mode):
+                     quadrotor, ArduCopter custom mode LOITER (5) while hovering (over a pad,
+                     charging) and AUTO (3) in transit; base_mode as ArduCopter sets it
+                     (CUSTOM_MODE_ENABLED | STABILIZE_ENABLED | GUIDED_ENABLED |
+                     MANUAL_INPUT_ENABLED | SAFETY_ARMED), system status ACTIVE
+every tick at ``rate_hz``:
+SYS_STATUS           sensors present = enabled: gyro, accelerometer, GPS, battery, pre-arm check; health: those
+                     (battery bit cleared below 5 % charge) plus the geofence bit (no fence, so no
+                     breach); battery voltage [mV], current [cA, + = discharging], remaining [%]
 BATTERY_STATUS       pack voltage in cell 0 [mV], current [cA], consumed [mAh, hJ], remaining [%],
                      charge_state CHARGING (7) while the battery current is a net charge, else
-                     OK / LOW / CRITICAL / EMERGENCY by state of charge (20 / 10 / 5 %)
+                     OK / LOW / CRITICAL / EMERGENCY by state of charge (20 / 10 / 5 %).
+                     ``current_consumed`` / ``energy_consumed`` are **net**: the integral of the
+                     battery's discharge current / power since the start, so they *fall* while the
+                     pad charges the battery (they may go negative after a net charge; -1, "not
+                     measured", is sent as -2)
+GPS_RAW_INT          3D fix at the position (ground stations read the fix from it)
 GLOBAL_POSITION_INT  position about ``home`` [1e-7 deg, mm], relative_alt [mm] (coil height less the
                      ground gap: 0 when landed), velocity NED [cm/s]
-GPS_RAW_INT          3D fix at the same position (ground stations read the fix from it)
-NAMED_VALUE_FLOAT    I2 (secondary current envelope amplitude, A), d_short (short duty, 0..1),
-                     Lm (mutual inductance, uH)
+ATTITUDE             roll 0, pitch = -tilt (nose down in forward flight), yaw = course over ground
+                     (held while hovering) [rad], and their rates [rad/s]
+VFR_HUD              airspeed = groundspeed [m/s] (no wind in the link model), heading [deg], throttle
+                     [%] = propulsion power / the series' peak propulsion power, alt [m AMSL], climb [m/s]
+NAMED_VALUE_FLOAT    :data:`NVF_NAMES` (upper case, <= 10 characters, as MAVProxy's graph and
+                     MAVExplorer need)
 ===================  ============================================================================
 
 A ``.tlog`` is written as pymavlink reads it: for each frame an 8-byte big-endian timestamp in
@@ -40,17 +55,32 @@ import pandas as pd
 from .geodesy import GeoPoint, enu_to_geodetic
 from .logs import mavutil
 
-__all__ = ["DEFAULT_HOME", "TlogWriter", "mavlink_table", "encode_tick", "stream", "StreamStats",
-           "check_connect", "CONNECT_FORMAT"]
+__all__ = ["DEFAULT_HOME", "TlogWriter", "mavlink_table", "encode_tick", "encode_heartbeat", "stream", "StreamStats",
+           "check_connect", "check_ids", "CONNECT_FORMAT", "NVF_NAMES", "COPTER_MODES", "schedule", "drawn_totals"]
 
 #: ArduPilot SITL's default home (CMAC, Canberra), where two of the real logs were flown.
 DEFAULT_HOME = GeoPoint(-35.363261, 149.165230, 584.0)
 CONNECT_FORMAT = "udpout:HOST:PORT, udpin:HOST:PORT, udp:HOST:PORT, tcp:HOST:PORT or tcpin:HOST:PORT"
+#: ArduCopter custom modes sent in HEARTBEAT.custom_mode (ArduCopter's Mode::Number)
+COPTER_MODES = {"AUTO": 3, "LOITER": 5}
+#: NAMED_VALUE_FLOAT name -> (mavlink_table column, meaning and unit); names match [0-9A-Z_]{1,10}
+NVF_NAMES = {
+    "I2": ("i2_a", "secondary coil current envelope amplitude [A]"),
+    "I1": ("i1_a", "primary (pad) coil current envelope amplitude [A]"),
+    "DUTY": ("d_short", "SBAR short-mode duty d [0..1] (0 = rectification mode all the time)"),
+    "LM_UH": ("lm_uh", "mutual inductance Lm [uH]"),
+    "SBAR_MODE": ("sbar_mode", "0 = RM (rectifying), 1 = switching between RM and SM, 2 = SM (shorted)"),
+    "PAD_ON": ("pad_on", "1 = the pad (primary inverter) is energised, 0 = off"),
+    "CHG_CMD": ("charge_cmd_a", "charge current command of the CC-CV charger [A]"),
+    "I_RECT": ("rect_a", "rectifier output current into the battery side [A]"),
+}
 _CHARGING_A = 0.05          # net battery current above this [A] reports CHARGING
 _INT16 = 32767
 _UINT16_MAX = 65535
-_MOTION = ("x_m", "y_m", "z_m", "vx", "vy", "vz")
+_MOTION = ("x_m", "y_m", "z_m", "vx", "vy", "vz", "tilt")
 _REQUIRED = ("t_s", "x_m", "y_m", "z_m", "lm_h", "i2_amp_a", "d_short", "battery_v", "battery_current_a", "soc")
+_OPTIONAL = ("i1_amp_a", "rect_current_a", "charge_cmd_a", "tx_on", "propulsion_w")   # 0 when absent
+_HOVER_PHASES = ("charge", "hover")
 
 
 def check_connect(text: str, name: str = "--connect") -> str:
@@ -61,6 +91,14 @@ def check_connect(text: str, name: str = "--connect") -> str:
             or not 0 < int(port) < 65536:
         raise ValueError(f"{name} {text!r} is invalid; valid format: {CONNECT_FORMAT}")
     return text
+
+
+def check_ids(sysid: int, compid: int) -> tuple[int, int]:
+    """MAVLink system and component ids: integers in [1, 255] (0 is the broadcast address)."""
+    for name, v in (("--sysid", sysid), ("--compid", compid)):
+        if not isinstance(v, (int, np.integer)) or not 1 <= int(v) <= 255:
+            raise ValueError(f"{name} {v!r} is invalid; valid range: 1..255 (integer)")
+    return int(sysid), int(compid)
 
 
 class TlogWriter:
@@ -86,20 +124,84 @@ class TlogWriter:
         self.close()
 
 
+def drawn_totals(ts: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+    """Net charge [C] and energy [J] drawn from the battery since the series' first sample (fall
+    while charging): cumulative sums of -I dt and -V I dt (battery_current_a + = charging)."""
+    t = ts["t_s"].to_numpy(float)
+    i_a, v = ts["battery_current_a"].to_numpy(float), ts["battery_v"].to_numpy(float)
+    dt = np.diff(t, prepend=t[0])
+    return np.cumsum(-i_a * dt), np.cumsum(-v * i_a * dt)
+
+
+def _columns(ts: pd.DataFrame, track) -> dict:
+    """Series columns on the series' own time grid: positions, velocities and tilt from ``track``
+    (``(t_s, pos_m[, tilt_rad])``) if given, net drawn charge and energy, the hover flag."""
+    t = ts["t_s"].to_numpy(float)
+    col = {c: ts[c].to_numpy(float) for c in _REQUIRED}
+    col.update({c: (ts[c].to_numpy(float) if c in ts else np.zeros(len(t))) for c in _OPTIONAL})
+    col["drawn_c"], col["drawn_j"] = drawn_totals(ts)
+    phase = ts["phase"].astype(str).to_numpy() if "phase" in ts else None
+    col["hover"] = np.isin(phase, _HOVER_PHASES).astype(float) if phase is not None else (col["tx_on"] > 0) * 1.0
+    tp, pos = t, np.column_stack([col["x_m"], col["y_m"], col["z_m"]])
+    tilt = np.zeros(len(t))
+    if track is not None:
+        tp, pos = np.asarray(track[0], dtype=float), np.asarray(track[1], dtype=float)
+        tilt = np.asarray(track[2], dtype=float) if len(track) > 2 else np.zeros(len(tp))
+    vel = [np.gradient(pos[:, i], tp) if len(tp) > 1 else np.zeros(len(tp)) for i in range(3)]
+    col["_track"] = (tp, pos, vel, tilt)
+    return col
+
+
+def _at(col: dict, t: np.ndarray, t_out: np.ndarray) -> dict:
+    """Columns at ``t_out``: motion interpolated on the track, everything else the latest series
+    sample at or before (never a value the simulation did not produce)."""
+    tp, pos, vel, tilt = col.pop("_track")
+    held = np.clip(np.searchsorted(t, t_out + 1e-9, side="right") - 1, 0, len(t) - 1)
+    out = {k: v[held] for k, v in col.items() if k not in _MOTION}
+    for i, c in enumerate(("x_m", "y_m", "z_m")):
+        out[c] = np.interp(t_out, tp, pos[:, i])
+        out["v" + c[0]] = np.interp(t_out, tp, vel[i])
+    out["tilt"] = np.interp(t_out, tp, tilt)
+    return out
+
+
+def _attitude(col: dict, t: np.ndarray) -> dict:
+    """ATTITUDE / VFR_HUD angles: yaw = course over ground (held below 0.3 m/s), pitch = -tilt, rates."""
+    speed = np.hypot(col["vx"], col["vy"])
+    course = np.arctan2(col["vx"], col["vy"])                   # from north, clockwise (east = +pi/2)
+    moving = speed > 0.3
+    idx = np.maximum.accumulate(np.where(moving, np.arange(len(t)), -1)) if len(t) else np.zeros(0, dtype=int)
+    yaw = np.where(idx >= 0, course[np.maximum(idx, 0)], 0.0)
+    pitch = -np.asarray(col["tilt"], dtype=float)
+    rate = (lambda a: np.gradient(a, t)) if len(t) > 1 else (lambda a: np.zeros_like(a))
+    yaw_rate = rate(np.unwrap(yaw))
+    return {"roll_rad": np.zeros(len(t)), "pitch_rad": pitch, "yaw_rad": yaw, "rollspeed": np.zeros(len(t)),
+            "pitchspeed": rate(pitch), "yawspeed": yaw_rate, "heading_deg": np.round(np.degrees(yaw)).astype(int) % 360,
+            "groundspeed_m_s": speed}
+
+
+def _hover_reference_w(col: dict) -> float:
+    """Propulsion power shown as 50 % throttle: the median while hovering, else over the series."""
+    p = col["propulsion_w"]
+    ref = np.median(p[col["hover"] > 0]) if np.any(col["hover"] > 0) else np.median(p) if len(p) else 0.0
+    return float(ref) if np.isfinite(ref) and ref > 0 else 1.0
+
+
 def mavlink_table(ts: pd.DataFrame, home: GeoPoint = DEFAULT_HOME, ground_gap_m: float = 0.0,
-                  t_out=None, track=None) -> pd.DataFrame:
+                  t_out=None, track=None, drawn0: tuple[float, float] = (0.0, 0.0),
+                  hover_w: float | None = None) -> pd.DataFrame:
     """Mission time series -> rows in MAVLink wire units (integers where the spec has them).
 
     ``ts`` needs the columns t_s, x_m, y_m, z_m (receiver coil in the pad frame, pad = ``home``),
-    lm_h, i2_amp_a, d_short, battery_v, battery_current_a (+ = charging), soc. ``t_out``: the
-    times to report (default the series' own samples): positions and velocities are interpolated,
-    the electrical state is the latest sample at or before (never a value the simulation did not
-    produce). The drone's
-    altitude is the coil height less ``ground_gap_m`` (the coil's height when landed), so a
-    replay of the telemetry (which adds the gap back) sees the same coil height. ``track``:
-    ``(t_s, pos_m)`` of the trajectory the mission flew, for positions and velocities (the
-    runner's time series holds them only at its coarse steps in transit). This is the one place
-    where the sender converts units.
+    lm_h, i2_amp_a, d_short, battery_v, battery_current_a (+ = charging), soc; i1_amp_a,
+    rect_current_a, charge_cmd_a, tx_on, propulsion_w and phase are used when present. ``t_out``:
+    the times to report (default the series' own samples). The drone's altitude is the coil height
+    less ``ground_gap_m`` (the coil's height when landed), so a replay of the telemetry (which adds
+    the gap back) sees the same coil height. ``track``: ``(t_s, pos_m[, tilt_rad])`` of the
+    trajectory the mission flew, for positions, velocities and attitude (the runner's series holds
+    them only at its coarse steps in transit). ``drawn0``: net charge [C] and energy [J] drawn
+    before this series (follow mode's earlier chunks). ``hover_w``: the propulsion power shown as
+    50 % throttle (default :func:`_hover_reference_w`). The one place where the sender converts units.
     """
     missing = [c for c in _REQUIRED if c not in ts]
     if missing:
@@ -107,31 +209,18 @@ def mavlink_table(ts: pd.DataFrame, home: GeoPoint = DEFAULT_HOME, ground_gap_m:
     t = ts["t_s"].to_numpy(float)
     if len(t) < 1 or not np.all(np.diff(t) > 0):
         raise ValueError("time series t_s must be non-empty and strictly increasing")
-    col = {c: ts[c].to_numpy(float) for c in _REQUIRED}
-    tp = t
-    if track is not None:
-        tp, pos = np.asarray(track[0], dtype=float), np.asarray(track[1], dtype=float)
-        for i, c in enumerate(("x_m", "y_m", "z_m")):
-            col[c] = np.interp(t, tp, pos[:, i])
-    for i, c in enumerate(("x_m", "y_m", "z_m")):
-        src = col[c] if track is None else pos[:, i]
-        v = np.gradient(src, tp) if len(tp) > 1 else np.zeros_like(tp)
-        col["v" + c[0]] = v if track is None else np.interp(t, tp, v)
-    if track is not None and t_out is not None:   # positions straight from the track at the ticks
-        t_out = np.asarray(t_out, dtype=float)
-        exact = {c: np.interp(t_out, tp, pos[:, i]) for i, c in enumerate(("x_m", "y_m", "z_m"))}
-        exact.update({"v" + c[0]: np.interp(t_out, tp, np.gradient(pos[:, i], tp)) for i, c in enumerate("xyz")})
-    else:
-        exact = {}
-    dt = np.diff(t, prepend=t[0])
-    col["drawn_c"] = np.cumsum(-col["battery_current_a"] * dt)                       # net charge drawn [C]
-    col["drawn_j"] = np.cumsum(-col["battery_v"] * col["battery_current_a"] * dt)    # net energy drawn [J]
-    if t_out is not None:
-        t_out = np.asarray(t_out, dtype=float)
-        held = np.clip(np.searchsorted(t, t_out + 1e-9, side="right") - 1, 0, len(t) - 1)
-        col = {k: (np.interp(t_out, t, v) if k in _MOTION else v[held]) for k, v in col.items()}
-        col.update(exact)
-        t = t_out
+    col = _columns(ts, track)
+    ref_w = _hover_reference_w(col) if hover_w is None else float(hover_w)
+    t_out = t if t_out is None else np.asarray(t_out, dtype=float)
+    col = _at(col, t, t_out)
+    col.update(_attitude(col, t_out))
+    col["drawn_c"] = col["drawn_c"] + drawn0[0]
+    col["drawn_j"] = col["drawn_j"] + drawn0[1]
+    return _wire(col, t_out, home, ground_gap_m, ref_w)
+
+
+def _wire(col: dict, t: np.ndarray, home: GeoPoint, ground_gap_m: float, hover_w: float) -> pd.DataFrame:
+    """Columns at the report times -> the MAVLink wire table (see :func:`mavlink_table`)."""
     height = np.maximum(col["z_m"] - ground_gap_m, 0.0)
     lat, lon, alt = enu_to_geodetic(col["x_m"], col["y_m"], height, home)
     i_a = col["battery_current_a"]
@@ -143,23 +232,31 @@ def mavlink_table(ts: pd.DataFrame, home: GeoPoint = DEFAULT_HOME, ground_gap_m:
                       [m.MAV_BATTERY_CHARGE_STATE_CHARGING, m.MAV_BATTERY_CHARGE_STATE_EMERGENCY,
                        m.MAV_BATTERY_CHARGE_STATE_CRITICAL, m.MAV_BATTERY_CHARGE_STATE_LOW],
                       m.MAV_BATTERY_CHARGE_STATE_OK)
+    consumed = [np.clip(np.round(v), -2**31 + 1, 2**31 - 1).astype(np.int64)
+                for v in (col["drawn_c"] / 3.6, col["drawn_j"] / 100.0)]
+    for c in consumed:
+        c[c == -1] = -2                                       # -1 means "not provided"
+    d = col["d_short"]
     return pd.DataFrame({
-        "t_s": t,
-        "time_boot_ms": np.round(t * 1e3).astype(np.int64) % 2**32,
+        "t_s": t, "time_boot_ms": np.round(t * 1e3).astype(np.int64) % 2**32,
         "lat_e7": np.round(lat * 1e7).astype(np.int64), "lon_e7": np.round(lon * 1e7).astype(np.int64),
         "alt_mm": np.round(alt * 1e3).astype(np.int64), "relative_alt_mm": np.round(height * 1e3).astype(np.int64),
+        "alt_m": alt, "climb_m_s": col["vz"],
         "vn_cm_s": np.clip(np.round(col["vy"] * 100), -_INT16, _INT16).astype(int),
         "ve_cm_s": np.clip(np.round(col["vx"] * 100), -_INT16, _INT16).astype(int),
         "vd_cm_s": np.clip(np.round(-col["vz"] * 100), -_INT16, _INT16).astype(int),
-        "ground_speed_cm_s": np.clip(np.round(np.hypot(col["vx"], col["vy"]) * 100), 0, _UINT16_MAX - 1).astype(int),
+        "ground_speed_cm_s": np.clip(np.round(col["groundspeed_m_s"] * 100), 0, _UINT16_MAX - 1).astype(int),
+        **{k: col[k] for k in ("roll_rad", "pitch_rad", "yaw_rad", "rollspeed", "pitchspeed", "yawspeed",
+                               "heading_deg", "groundspeed_m_s")},
+        "throttle_pct": np.clip(np.round(50.0 * col["propulsion_w"] / hover_w), 0, 100).astype(int),
         "voltage_mv": np.clip(np.round(col["battery_v"] * 1e3), 1, 10 * (_UINT16_MAX - 1)).astype(int),
-        "current_ca": cur_ca,
-        "consumed_mah": np.clip(np.round(col["drawn_c"] / 3.6), 0, 2**31 - 1).astype(np.int64),
-        "consumed_hj": np.clip(np.round(col["drawn_j"] / 100.0), 0, 2**31 - 1).astype(np.int64),
-        "remaining_pct": np.round(soc * 100).astype(int),
-        "charge_state": state.astype(int),
+        "current_ca": cur_ca, "consumed_mah": consumed[0], "consumed_hj": consumed[1],
+        "remaining_pct": np.round(soc * 100).astype(int), "charge_state": state.astype(int),
         "armed": np.ones(len(t), dtype=bool),  # the simulated drone flies the whole mission
-        "i2_a": col["i2_amp_a"], "d_short": col["d_short"], "lm_uh": col["lm_h"] * 1e6,
+        "custom_mode": np.where(col["hover"] > 0, COPTER_MODES["LOITER"], COPTER_MODES["AUTO"]).astype(int),
+        "i2_a": col["i2_amp_a"], "i1_a": col["i1_amp_a"], "d_short": d, "lm_uh": col["lm_h"] * 1e6,
+        "sbar_mode": np.where(d <= 0.0, 0.0, np.where(d >= 1.0, 2.0, 1.0)), "pad_on": (col["tx_on"] > 0) * 1.0,
+        "charge_cmd_a": col["charge_cmd_a"], "rect_a": col["rect_current_a"],
     })
 
 
@@ -172,10 +269,9 @@ def _cells_mv(voltage_mv: int) -> list[int]:
     return cells + [_UINT16_MAX] * (10 - len(cells))
 
 
-def send_tick(mav, row, heartbeat: bool, conn, writer, t_log_s: float) -> list:
-    """Encode one tick (:func:`encode_tick`), send each frame on ``conn`` and log it to ``writer``
-    (either may be None) with timestamp ``t_log_s`` [s since the epoch]; returns the messages."""
-    msgs = encode_tick(mav, row, heartbeat)
+def send_msgs(mav, msgs, conn, writer, t_log_s: float) -> int:
+    """Pack and send each message on ``conn`` and log it to ``writer`` (either may be None) with
+    timestamp ``t_log_s`` [s since the epoch]; returns the number of frames."""
     for msg in msgs:
         frame = msg.pack(mav)
         mav.seq = (mav.seq + 1) % 256
@@ -183,34 +279,61 @@ def send_tick(mav, row, heartbeat: bool, conn, writer, t_log_s: float) -> list:
             conn.write(frame)
         if writer is not None:
             writer.write(frame, t_log_s)
-    return msgs
+    return len(msgs)
 
 
-def encode_tick(mav, row, heartbeat: bool) -> list:
+def encode_heartbeat(mav, row):
+    """HEARTBEAT as ArduCopter sends it (see the module docstring) for one :func:`mavlink_table` row."""
+    m = mavutil().mavlink
+    base = m.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | m.MAV_MODE_FLAG_STABILIZE_ENABLED \
+        | m.MAV_MODE_FLAG_GUIDED_ENABLED | m.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED \
+        | (m.MAV_MODE_FLAG_SAFETY_ARMED if row.armed else 0)
+    return mav.heartbeat_encode(m.MAV_TYPE_QUADROTOR, m.MAV_AUTOPILOT_ARDUPILOTMEGA, base, int(row.custom_mode),
+                                m.MAV_STATE_ACTIVE if row.armed else m.MAV_STATE_STANDBY)
+
+
+def encode_tick(mav, row) -> list:
     """The messages of one telemetry tick from one :func:`mavlink_table` row (MAVLink 2 objects)."""
     m = mavutil().mavlink
     r = row
-    msgs = []
-    if heartbeat:
-        base = m.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (m.MAV_MODE_FLAG_SAFETY_ARMED if r.armed else 0)
-        msgs.append(mav.heartbeat_encode(m.MAV_TYPE_QUADROTOR, m.MAV_AUTOPILOT_GENERIC, base, 0,
-                                         m.MAV_STATE_ACTIVE if r.armed else m.MAV_STATE_STANDBY))
-    sensors = m.MAV_SYS_STATUS_SENSOR_BATTERY | m.MAV_SYS_STATUS_SENSOR_GPS
-    msgs.append(mav.sys_status_encode(sensors, sensors, sensors, 0, min(int(r.voltage_mv), _UINT16_MAX - 1),
-                                      int(r.current_ca), int(r.remaining_pct), 0, 0, 0, 0, 0, 0))
-    msgs.append(mav.battery_status_encode(0, m.MAV_BATTERY_FUNCTION_ALL, m.MAV_BATTERY_TYPE_LIPO, _INT16,
-                                          _cells_mv(r.voltage_mv), int(r.current_ca), int(r.consumed_mah),
-                                          int(r.consumed_hj), int(r.remaining_pct), 0, int(r.charge_state)))
-    # the fix first: a reader checks each position against the last fix report
-    msgs.append(mav.gps_raw_int_encode(int(r.time_boot_ms) * 1000, m.GPS_FIX_TYPE_3D_FIX, int(r.lat_e7),
-                                       int(r.lon_e7), int(r.alt_mm), _UINT16_MAX, _UINT16_MAX,
-                                       int(r.ground_speed_cm_s), _UINT16_MAX, 255))
-    msgs.append(mav.global_position_int_encode(int(r.time_boot_ms), int(r.lat_e7), int(r.lon_e7), int(r.alt_mm),
-                                               int(r.relative_alt_mm), int(r.vn_cm_s), int(r.ve_cm_s),
-                                               int(r.vd_cm_s), _UINT16_MAX))
-    for name, value in ((b"I2", r.i2_a), (b"d_short", r.d_short), (b"Lm", r.lm_uh)):
-        msgs.append(mav.named_value_float_encode(int(r.time_boot_ms), name, float(value)))
+    ms = int(r.time_boot_ms)
+    sensors = m.MAV_SYS_STATUS_SENSOR_3D_GYRO | m.MAV_SYS_STATUS_SENSOR_3D_ACCEL | m.MAV_SYS_STATUS_SENSOR_GPS \
+        | m.MAV_SYS_STATUS_SENSOR_BATTERY | m.MAV_SYS_STATUS_PREARM_CHECK
+    health = (sensors if r.remaining_pct >= 5 else sensors & ~m.MAV_SYS_STATUS_SENSOR_BATTERY) \
+        | m.MAV_SYS_STATUS_GEOFENCE                          # no fence: healthy (no breach), as ArduPilot
+    msgs = [mav.sys_status_encode(sensors, sensors, health, 0, min(int(r.voltage_mv), _UINT16_MAX - 1),
+                                  int(r.current_ca), int(r.remaining_pct), 0, 0, 0, 0, 0, 0),
+            mav.battery_status_encode(0, m.MAV_BATTERY_FUNCTION_ALL, m.MAV_BATTERY_TYPE_LIPO, _INT16,
+                                      _cells_mv(r.voltage_mv), int(r.current_ca), int(r.consumed_mah),
+                                      int(r.consumed_hj), int(r.remaining_pct), 0, int(r.charge_state)),
+            # the fix first: a reader checks each position against the last fix report
+            mav.gps_raw_int_encode(ms * 1000, m.GPS_FIX_TYPE_3D_FIX, int(r.lat_e7), int(r.lon_e7), int(r.alt_mm),
+                                   _UINT16_MAX, _UINT16_MAX, int(r.ground_speed_cm_s), _UINT16_MAX, 255),
+            mav.global_position_int_encode(ms, int(r.lat_e7), int(r.lon_e7), int(r.alt_mm), int(r.relative_alt_mm),
+                                           int(r.vn_cm_s), int(r.ve_cm_s), int(r.vd_cm_s),
+                                           int(r.heading_deg) * 100),
+            mav.attitude_encode(ms, float(r.roll_rad), float(r.pitch_rad), float(r.yaw_rad), float(r.rollspeed),
+                                float(r.pitchspeed), float(r.yawspeed)),
+            mav.vfr_hud_encode(float(r.groundspeed_m_s), float(r.groundspeed_m_s), int(r.heading_deg),
+                               int(r.throttle_pct), float(r.alt_m), float(r.climb_m_s))]
+    for name, (column, _) in NVF_NAMES.items():
+        msgs.append(mav.named_value_float_encode(ms, name.encode(), float(getattr(r, column))))
     return msgs
+
+
+def schedule(tick_t: np.ndarray, hb_after: float = -np.inf) -> list[tuple[float, int, bool]]:
+    """Send events (time [s], tick index, is_heartbeat) in time order: every tick, and a
+    HEARTBEAT at each whole second ``n`` of simulated time with ``hb_after < n <= tick_t[-1]``
+    (``hb_after`` -inf: from ``tick_t[0]`` on), carrying the state of the latest tick at or before
+    it (or the first tick, for a second just before it)."""
+    tick_t = np.asarray(tick_t, dtype=float)
+    if not len(tick_t):
+        return []
+    lo = math.ceil(tick_t[0] - 1e-9) if not math.isfinite(hb_after) else math.floor(hb_after) + 1
+    hb = np.arange(lo, math.floor(tick_t[-1] + 1e-9) + 1, dtype=float)
+    k = np.clip(np.searchsorted(tick_t, hb + 1e-9, side="right") - 1, 0, len(tick_t) - 1)
+    events = [(float(tk), i, False) for i, tk in enumerate(tick_t)] + [(float(n), int(i), True) for n, i in zip(hb, k)]
+    return sorted(events, key=lambda e: (e[0], not e[2]))
 
 
 @dataclass
@@ -224,59 +347,61 @@ class StreamStats:
     counts: dict
 
 
-def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.0, speed: float = 1.0,
-           home: GeoPoint = DEFAULT_HOME, tlog: str | Path | None = None, ground_gap_m: float = 0.0,
-           duration_s: float | None = None, start_epoch_s: float | None = None, conn=None,
-           track=None, progress: bool = False) -> StreamStats:
-    """Send the mission time series ``ts`` as MAVLink 2 telemetry (and/or write it to ``tlog``).
-
-    Ticks are at ``t_k = t_0 + k / rate_hz`` of simulation time (the series interpolated there),
-    paced at ``t_k / speed`` of wall time (``speed = inf``: as fast as possible). The
-    loop runs at most ``duration_s * rate_hz + 1`` ticks (default: the whole series).
-    ``conn``: an open pymavlink connection to use instead of opening ``connect``; ``track``:
-    ``(t_s, pos_m)`` of the flown trajectory for the positions (see :func:`mavlink_table`).
-    """
+def _check_stream(rate_hz, speed, connect, tlog, conn):
     if not (math.isfinite(rate_hz) and 0 < rate_hz <= 1000):
         raise ValueError(f"rate={rate_hz!r} is invalid; valid range: (0, 1000] Hz")
     if not (speed > 0):
         raise ValueError(f"speed={speed!r} is invalid; valid range: (0, inf] (inf = as fast as possible)")
     if connect is None and tlog is None and conn is None:
         raise ValueError("nothing to do: give a connection (--connect) and/or a --tlog file")
+
+
+def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.0, speed: float = 1.0,
+           home: GeoPoint = DEFAULT_HOME, tlog: str | Path | None = None, ground_gap_m: float = 0.0,
+           duration_s: float | None = None, start_epoch_s: float | None = None, conn=None,
+           track=None, progress: bool = False, sysid: int = 1, compid: int = 1) -> StreamStats:
+    """Send the mission time series ``ts`` as MAVLink 2 telemetry (and/or write it to ``tlog``).
+
+    Ticks are at ``t_k = t_0 + k / rate_hz`` of simulation time, HEARTBEATs at every whole second
+    of it (:func:`schedule`), each paced at its simulated time / ``speed`` of wall time (``speed =
+    inf``: as fast as possible). At most ``duration_s * rate_hz + 1`` ticks (default: the whole
+    series). ``conn``: an open pymavlink connection to use instead of opening ``connect``;
+    ``track``: ``(t_s, pos_m[, tilt_rad])`` of the flown trajectory (see :func:`mavlink_table`);
+    ``sysid`` / ``compid``: the vehicle's MAVLink ids.
+    """
+    _check_stream(rate_hz, speed, connect, tlog, conn)
+    sysid, compid = check_ids(sysid, compid)
     mu = mavutil()
     t = ts["t_s"].to_numpy(float)
     span = float(t[-1] - t[0]) if duration_s is None else min(float(duration_s), float(t[-1] - t[0]))
     n_ticks = int(math.floor(span * rate_hz + 1e-9)) + 1
-    table = mavlink_table(ts, home, ground_gap_m, t_out=t[0] + np.arange(n_ticks) / rate_hz, track=track)
+    sim_t = np.arange(n_ticks) / rate_hz
+    table = mavlink_table(ts, home, ground_gap_m, t_out=t[0] + sim_t, track=track)
     own = conn is None and connect is not None
     if own:
-        conn = mu.mavlink_connection(check_connect(connect), source_system=1, source_component=1)
-    mav = mu.mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+        conn = mu.mavlink_connection(check_connect(connect), source_system=sysid, source_component=compid)
+    mav = mu.mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
     writer = TlogWriter(tlog) if tlog is not None else None
     epoch0 = time.time() if start_epoch_s is None else float(start_epoch_s)
     counts: dict[str, int] = {}
-    frames, last_hb = 0, -math.inf
+    frames = 0
     wall0 = time.monotonic()
     bar = None
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=n_ticks, unit="tick", desc="telemetry")
     try:
-        for k in range(n_ticks):
-            sim_k = k / rate_hz
+        for sim_s, k, hb in schedule(sim_t):
             if math.isfinite(speed):
-                delay = wall0 + sim_k / speed - time.monotonic()
+                delay = wall0 + sim_s / speed - time.monotonic()
                 if delay > 0:
-                    time.sleep(min(delay, 1.0 / rate_hz / speed + 1.0))
-            now = time.monotonic()
-            hb = now - last_hb >= 1.0 or (not math.isfinite(speed) and k % max(int(round(rate_hz)), 1) == 0)
-            if hb:
-                last_hb = now
+                    time.sleep(min(delay, 1.0 / speed + 1.0))
             row = table.iloc[k]
-            for msg in send_tick(mav, row, hb, conn, writer, epoch0 + sim_k):
-                name = msg.get_type()
-                counts[name] = counts.get(name, 0) + 1
-                frames += 1
-            if bar is not None:
+            msgs = [encode_heartbeat(mav, row)] if hb else encode_tick(mav, row)
+            frames += send_msgs(mav, msgs, conn, writer, epoch0 + sim_s)
+            for msg in msgs:
+                counts[msg.get_type()] = counts.get(msg.get_type(), 0) + 1
+            if bar is not None and not hb:
                 bar.update(1)
     finally:
         if writer is not None:
@@ -285,5 +410,5 @@ def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.
             conn.close()
         if bar is not None:
             bar.close()
-    return StreamStats(ticks=n_ticks, frames=frames, sim_s=(n_ticks - 1) / rate_hz, wall_s=time.monotonic() - wall0,
+    return StreamStats(ticks=n_ticks, frames=frames, sim_s=float(sim_t[-1]), wall_s=time.monotonic() - wall0,
                        counts=counts)

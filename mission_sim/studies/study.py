@@ -51,7 +51,6 @@ import hashlib
 import itertools
 import json
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -124,13 +123,9 @@ class Study:
 # ----------------------------------------------------------------------------- parsing
 def load_study(path) -> Study:
     """Read and validate a study TOML file (``ValueError`` naming the bad entry)."""
+    from ..validation import read_toml_file
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"study file {str(path)!r} does not exist")
-    try:
-        doc = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"study file {str(path)!r} is not valid TOML: {exc}") from None
+    doc = read_toml_file(path, "study file")  # a folder, a binary file, bad TOML: one line naming the file
     return parse_study(doc, name=path.stem, base_dir=path.parent)
 
 

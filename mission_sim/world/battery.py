@@ -221,6 +221,10 @@ class CcCvParams:
 
     def __post_init__(self):
         check_positive(self, "cc_current_a", "cv_cell_v", "cutoff_current_a")
+        lo, hi = float(ocv_cell_v(0.0)), float(ocv_cell_v(1.0))
+        if not lo <= self.cv_cell_v <= hi:  # above the OCV at SoC 1 the CV phase never ends: SoC > 1
+            raise ValueError(f"cv_cell_v={self.cv_cell_v!r} is invalid; valid range: [{lo:.4f}, "
+                             f"{math.floor(hi * 1e4) / 1e4:.4f}] V (the cell's open-circuit voltage from SoC 0 to 1)")
         if self.cutoff_current_a >= self.cc_current_a:
             raise ValueError(f"cutoff_current_a={self.cutoff_current_a!r} is invalid; valid range: "
                              f"(0, cc_current_a={self.cc_current_a!r})")

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from ..files import atomic_output
+
 __all__ = ["MissionResult", "SUMMARY_KEYS", "TIMESERIES_COLUMNS"]
 
 SUMMARY_KEYS = ("sim_time_s", "wall_s", "energy_from_source_j", "energy_to_battery_j", "losses_j",
@@ -32,21 +34,27 @@ class MissionResult:
     trajectory: object = None
     extra: dict = field(default_factory=dict)
 
-    def write(self, out_dir) -> list[Path]:
-        """Write ``timeseries.parquet``, ``timeseries.csv`` and ``summary.json`` (figures:
-        :func:`mission_sim.figures.mission.plot_mission`)."""
+    def write(self, out_dir, figures=None) -> list[Path]:
+        """Write ``timeseries.parquet``, ``timeseries.csv``, the figures of ``figures(result, out_dir)``
+        (if given, e.g. :func:`mission_sim.figures.mission.plot_mission`) and ``summary.json`` last.
+
+        Every file is written under a temporary name and renamed when complete, and a
+        ``summary.json`` left by an earlier run is removed first, so ``summary.json`` is present
+        exactly when the whole set of this run is complete. Returns the paths.
+        """
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        paths = []
+        (out / "summary.json").unlink(missing_ok=True)
         ts = self.timeseries.copy()
         ts["phase"] = ts["phase"].astype(str)
-        p = out / "timeseries.parquet"
-        ts.to_parquet(p, index=False)
-        paths.append(p)
-        p = out / "timeseries.csv"
-        ts.to_csv(p, index=False)
-        paths.append(p)
-        p = out / "summary.json"
-        p.write_text(json.dumps(self.summary, indent=2))
-        paths.append(p)
+        paths = [out / "timeseries.parquet", out / "timeseries.csv"]
+        with atomic_output(paths[0]) as tmp:
+            ts.to_parquet(tmp, index=False)
+        with atomic_output(paths[1]) as tmp:
+            ts.to_csv(tmp, index=False)
+        if figures is not None:
+            paths.extend(Path(f) for f in figures(self, out))
+        paths.append(out / "summary.json")
+        with atomic_output(paths[-1]) as tmp:
+            tmp.write_text(json.dumps(self.summary, indent=2))
         return paths

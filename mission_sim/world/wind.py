@@ -23,7 +23,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
+
+from wpt_receiver.lti import lfilter, zoh_tf
 
 from .power import G_M_S2
 
@@ -67,7 +68,7 @@ def gust_series(n: int, dt_s: float, sigma: float, tau_s: float, rng: np.random.
     xi = rng.standard_normal(n)
     xi[0] *= sigma
     xi[1:] *= sigma * math.sqrt(1.0 - a * a)
-    return signal.lfilter([1.0], [1.0, -a], xi)
+    return lfilter([1.0], [1.0, -a], xi)
 
 
 def wind_series(p: WindParams, n: int, dt_s: float, rng: np.random.Generator) -> np.ndarray:
@@ -97,8 +98,8 @@ def hover_error_m(p: WindParams, force_n: np.ndarray, mass_kg: float, dt_s: floa
         return np.zeros((0, 3))
     dev = f / mass_kg
     w, z = p.hold_omega_rad_s, p.hold_zeta
-    num, den, _ = signal.cont2discrete(([1.0], [1.0, 2 * z * w, w * w]), dt_s, method="zoh")
-    return signal.lfilter(np.ravel(num), den, dev, axis=0)
+    num, den = zoh_tf([1.0], [1.0, 2 * z * w, w * w], dt_s)
+    return lfilter(np.ravel(num), den, dev, axis=0)
 
 
 def tilt_from_force(mass_kg: float, accel_m_s2: np.ndarray, force_n: np.ndarray):

@@ -12,10 +12,16 @@ Circuit (eq. 1 with the series capacitors written as states)::
 ``v1`` is the inverter output, ``v2`` the SBAR input voltage with ``i2`` flowing into the SBAR
 (``v2 i2`` is the power into the rectifier). A topology is a pair ``(p, s)``:
 
-* primary ``p``: ``+1`` / ``-1``: v1 = p Vdc (driven, or freewheeling through the antiparallel
-  diodes during dead time); ``0`` (``P_OPEN``): all four inverter devices off, i1 = 0.
-* secondary ``s``: ``+1`` / ``-1``: a diode pair conducts, v2 = s vout (i2 has the sign s);
-  ``0`` (``S_SHORT``): lower switches on, v2 = 0; ``2`` (``S_OPEN``): diodes blocked, i2 = 0.
+* primary ``p``: ``+1`` / ``-1``: driven, v1 = p Vdc - 2 Ron i1; ``+2`` / ``-2``: freewheeling
+  through the antiparallel (body) diodes during dead time, v1 = (p/2) (Vdc + 2 Vf0) - 2 Rd i1;
+  ``0`` (``P_OPEN``): all four inverter devices off, i1 = 0.
+* secondary ``s``: ``+1`` / ``-1``: a diode pair conducts (upper diode + lower body diode),
+  v2 = s (vout + Vf0) + Rd i2 (i2 has the sign s); ``0`` (``S_SHORT``): lower switches on,
+  v2 = 2 Ron i2; ``2`` (``S_OPEN``): diodes blocked, i2 = 0.
+
+The devices (:class:`wpt_receiver.devices.DeviceSet`, ideal by default) are piecewise linear, so
+every topology stays linear in the augmented state: a forward drop is a constant source term in
+the column of the constant 1.
 
 The battery is a DC voltage ``VL`` behind ``r_bat_ohm``. Without an output capacitor the diode
 topologies see ``v2 = s VL + r_bat i2`` (stiff battery); with ``c_out_f`` the rectifier charges the
@@ -33,14 +39,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..devices import IDEAL, DeviceSet
 from ..params import LinkParams
 
-__all__ = ["SwitchingConfig", "Circuit", "P_OPEN", "S_SHORT", "S_OPEN", "I1", "VC1", "I2", "VC2"]
+__all__ = ["SwitchingConfig", "Circuit", "P_OPEN", "S_SHORT", "S_OPEN", "I1", "VC1", "I2", "VC2", "LOSS_GROUPS"]
 
 P_OPEN = 0
 S_SHORT = 0
 S_OPEN = 2
 I1, VC1, I2, VC2, VO = 0, 1, 2, 3, 4
+PRIMARY = (1, -1, 2, -2, P_OPEN)
+SECONDARY = (1, -1, S_SHORT, S_OPEN)
+LOSS_GROUPS = ("inverter_switches", "inverter_diodes", "rectifier_diodes", "rectifier_switches")
 
 
 @dataclass(frozen=True)
@@ -57,6 +67,7 @@ class SwitchingConfig:
         85 kHz fundamental. 0 = short window centred on the peak of each i2 half-cycle (eq. 9
         assumption); pi/2 = centred on the i2 zero crossing (the paper's Fig. 10 case).
     samples_per_half_cycle : dense output samples per rectifier period T (even, >= 8).
+    devices : the semiconductor devices (:data:`wpt_receiver.devices.IDEAL` = the paper's circuit).
     """
 
     c1_f: float | None = None
@@ -66,6 +77,7 @@ class SwitchingConfig:
     c_out_f: float | None = None
     gate_phase_rad: float = 0.0
     samples_per_half_cycle: int = 16
+    devices: DeviceSet = IDEAL
 
     def __post_init__(self):
         for name in ("c1_f", "c2_f", "c_out_f"):
@@ -103,7 +115,7 @@ class Circuit:
         self.has_cap = cfg.c_out_f is not None
         self.n = 5 if self.has_cap else 4
         self.m = self.n + 1
-        self.keys = [(p, s) for p in (1, -1, P_OPEN) for s in (1, -1, S_SHORT, S_OPEN)]
+        self.keys = [(p, s) for p in PRIMARY for s in SECONDARY]
         self.index = {key: k for k, key in enumerate(self.keys)}
         self.mat, self.lam, self.vec, self.inv = [], [], [], []
         for key in self.keys:
@@ -131,18 +143,29 @@ class Circuit:
 
     # ------------------------------------------------------------------ equations
     def _emf(self, p: int, s: int):
-        """Rows (over the augmented state) of e1 = v1 - R1 i1 - vC1 and e2 = -v2 - R2 i2 - vC2."""
-        m, P, cfg = self.m, self.p, self.cfg
+        """Rows (over the augmented state) of e1 = v1 - R1 i1 - vC1 and e2 = -v2 - R2 i2 - vC2,
+        devices included (forward drops in the constant column)."""
+        m, P, cfg, dv = self.m, self.p, self.cfg, self.cfg.devices
         e1 = np.zeros(m)
-        e1[I1], e1[VC1], e1[-1] = -P.r1_ohm, -1.0, (p * P.vdc_v if p != P_OPEN else 0.0)
+        e1[I1], e1[VC1] = -P.r1_ohm, -1.0
+        if p in (1, -1):
+            e1[-1] = p * P.vdc_v
+            e1[I1] -= dv.inv_r_ohm
+        elif p in (2, -2):
+            e1[-1] = 0.5 * p * (P.vdc_v + dv.fw_vf_v)
+            e1[I1] -= dv.fw_rd_ohm
         e2 = np.zeros(m)
         e2[I2], e2[VC2] = -P.r2_ohm, -1.0
         if s in (1, -1):
+            e2[I2] -= dv.rect_rd_ohm
             if self.has_cap:
                 e2[VO] = -s
+                e2[-1] = -s * dv.rect_vf_v
             else:
-                e2[-1] = -s * P.vl_v
+                e2[-1] = -s * (P.vl_v + dv.rect_vf_v)
                 e2[I2] -= cfg.r_bat_ohm
+        elif s == S_SHORT:
+            e2[I2] -= dv.short_r_ohm
         return e1, e2
 
     def matrix(self, p: int, s: int) -> np.ndarray:
@@ -186,6 +209,16 @@ class Circuit:
             r[-1] = self.p.vl_v
         return r
 
+    def rect_threshold_row(self) -> np.ndarray:
+        """Row of the voltage the blocked SBAR input must exceed for a diode pair to conduct:
+        the rectifier output plus the forward drops of the rectifying path."""
+        return self.vout_row() + np.eye(self.m)[-1] * self.cfg.devices.rect_vf_v
+
+    @property
+    def inverter_threshold_v(self) -> float:
+        """Voltage the blocked inverter output must exceed to freewheel: Vdc + 2 Vf0 [V]."""
+        return self.p.vdc_v + self.cfg.devices.fw_vf_v
+
     def v2_open_row(self, p: int) -> np.ndarray:
         """Voltage across the blocked SBAR input (i2 = 0, di2/dt = 0): v2 = -vC2 + Lm di1/dt."""
         e1, _ = self._emf(p, S_OPEN)
@@ -205,23 +238,42 @@ class Circuit:
         return r
 
     def _output_rows(self, p: int, s: int) -> dict:
-        """Rows for v1, v2 and the battery current i_load of topology (p, s) (dense output)."""
+        """Rows for v1, v2, the battery current i_load and the DC source current i_src of
+        topology (p, s) (dense output): v1 = e1 + R1 i1 + vC1, v2 = -(e2 + R2 i2 + vC2)."""
         m, P, cfg = self.m, self.p, self.cfg
-        v1 = self.v1_open_row(s) if p == P_OPEN else np.eye(m)[-1] * p * P.vdc_v
-        if s == S_OPEN:
-            v2 = self.v2_open_row(p)
-        elif s == S_SHORT:
-            v2 = np.zeros(m)
-        else:
-            v2 = s * self.vout_row()
-            if not self.has_cap:
-                v2[I2] += cfg.r_bat_ohm
+        e = np.eye(m)
+        e1, e2 = self._emf(p, s)
+        v1 = self.v1_open_row(s) if p == P_OPEN else e1 + P.r1_ohm * e[I1] + e[VC1]
+        v2 = self.v2_open_row(p) if s == S_OPEN else -(e2 + P.r2_ohm * e[I2] + e[VC2])
         il = np.zeros(m)
         if self.has_cap:
             il[VO], il[-1] = 1.0 / cfg.r_bat_ohm, -P.vl_v / cfg.r_bat_ohm
         elif s in (1, -1):
             il[I2] = s
-        return {"v1": v1, "v2": v2, "i_load": il}
+        isrc = e[I1] * (p if p in (1, -1) else 0.5 * p)  # P_OPEN: 0
+        return {"v1": v1, "v2": v2, "i_load": il, "i_src": isrc}
+
+    def loss_forms(self, k: int) -> dict:
+        """Conduction loss of each device group in topology ``k`` as a product of two rows:
+        ``loss = (r . x)(q . x)`` [W] with ``r . x = |i|`` and ``q . x = n Vf0 + n Rd |i|``."""
+        p, s = self.keys[k]
+        dv, m = self.cfg.devices, self.m
+        e, one = np.eye(m), np.eye(m)[-1]
+        z = (np.zeros(m), np.zeros(m))
+        out = dict.fromkeys(LOSS_GROUPS, z)
+        if p in (1, -1):
+            out["inverter_switches"] = (e[I1], dv.inv_r_ohm * e[I1])
+        elif p in (2, -2):
+            a = -0.5 * p * e[I1]  # |i1|: the current flows against the clamped polarity
+            out["inverter_diodes"] = (a, dv.fw_vf_v * one + dv.fw_rd_ohm * a)
+        if s in (1, -1):
+            a = s * e[I2]
+            out["rectifier_diodes"] = (a, dv.rect_diode.vf0_v * one + dv.rect_diode.rd_ohm * a)
+            body = dv.rect_switch.body
+            out["rectifier_switches"] = (a, body.vf0_v * one + body.rd_ohm * a)
+        elif s == S_SHORT:
+            out["rectifier_switches"] = (e[I2], dv.short_r_ohm * e[I2])
+        return out
 
     # ------------------------------------------------------------------ energies
     def stored_energy(self, x: np.ndarray) -> np.ndarray:

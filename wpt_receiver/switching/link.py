@@ -30,81 +30,87 @@ import numpy as np
 from ..envelope import steady_state
 from ..params import LinkParams
 from ..sbar import v2_from_duty
-from .circuit import I1, I2, P_OPEN, S_OPEN, S_SHORT, Circuit, SwitchingConfig
+from .circuit import I1, I2, P_OPEN, PRIMARY, S_OPEN, S_SHORT, SECONDARY, Circuit, SwitchingConfig
 from .result import SwitchingResult
 from .schedule import Schedule, duty_windows, make_schedule
 
 __all__ = ["SwitchingLink"]
 
 _GRID = 16           # guard sampling points per rectifier period T (root bracketing)
+_ITOL_A = 1e-9       # current guards: a current within 1 nA of zero does not end its mode
+_VTOL_V = 1e-9       # voltage guards: a blocked voltage within 1 nV of its threshold stays blocked
+_MAX_ZERO_EVENTS = 50  # consecutive zero-length events before the model gives up (never hangs)
 
 
 class SwitchingLink:
-    """Event-exact simulator of one link (paper eq. 1) with the SBAR.
+    """Event-exact simulator of one link (paper eq. 1) with the SBAR and its devices.
 
     Parameters
     ----------
     params : LinkParams
         Table I values by default.
     cfg : SwitchingConfig
-        Capacitors, dead time, battery model, gate phase, dense-output resolution.
+        Capacitors, dead time, battery model, gate phase, dense-output resolution, devices.
     """
 
     def __init__(self, params: LinkParams, cfg: SwitchingConfig = SwitchingConfig()):
         self.params, self.cfg = params, cfg
         self.cir = cir = Circuit(params, cfg)
         self.T = cir.T
-        h = self.T / _GRID
-        self._h = h
-        self._grid = [np.exp(np.outer(np.arange(_GRID + 2) * h, lam)) for lam in cir.lam]
-        m = cir.m
-        e = np.eye(m)
-        # guard rows (positive while the mode is valid), in modal coordinates per topology
-        self._guards = {}
+        self._h = self.T / _GRID
+        self._grid = [np.exp(np.outer(np.arange(_GRID + 2) * self._h, lam)) for lam in cir.lam]
+        self._guard_table = self._build_guards()
+        self._v2open = {p: cir.v2_open_row(p) for p in PRIMARY}
+        self._v1open = {s: cir.v1_open_row(s) for s in SECONDARY}
+        self._sec_th = cir.rect_threshold_row()
+        self._pri_th = cir.inverter_threshold_v
+
+    def _guard_rows(self, p, s):
+        """Guard rows over the augmented state (positive while the mode is valid), shifted by a
+        tolerance so that a guard sitting at exactly zero (a current that stays 0, a blocked
+        voltage exactly at its threshold) is a valid mode, not an event at every instant."""
+        cir, e = self.cir, np.eye(self.cir.m)
+        sec, pri = [], []
+        if s in (1, -1):
+            sec = [s * e[I2] + _ITOL_A * e[-1]]
+        elif s == S_OPEN:
+            th, vop = cir.rect_threshold_row(), cir.v2_open_row(p)
+            sec = [th - vop + _VTOL_V * e[-1], th + vop + _VTOL_V * e[-1]]
+        if p in (2, -2):
+            pri = [-0.5 * p * e[I1] + _ITOL_A * e[-1]]
+        elif p == P_OPEN:
+            vd, v1o = e[-1] * (cir.inverter_threshold_v + _VTOL_V), cir.v1_open_row(s)
+            pri = [vd - v1o, vd + v1o]
+        return sec, pri
+
+    def _build_guards(self):
+        """(topology, gate, inverter command) -> (modal guard rows or None, number of secondary
+        rows, guard rows times the bracketing grid's exponentials)."""
+        cir, table = self.cir, {}
         for k, (p, s) in enumerate(cir.keys):
-            sec = []
-            if s in (1, -1):
-                sec = [s * e[I2]]
-            elif s == S_OPEN:
-                vo, vop = cir.vout_row(), cir.v2_open_row(p)
-                sec = [vo - vop, vo + vop]
-            pri = []
-            if p in (1, -1):
-                pri = [-p * e[I1]]
-            elif p == P_OPEN:
-                vd, v1o = e[-1] * params.vdc_v, cir.v1_open_row(s)
-                pri = [vd - v1o, vd + v1o]
-            vec = cir.vec[k]
-            self._guards[k] = ({"sec": np.array([g @ vec for g in sec]).reshape(-1, m) if sec else None,
-                                "pri": np.array([g @ vec for g in pri]).reshape(-1, m) if pri else None})
-        # (topology, gate, inverter command) -> (stacked guard rows or None, number of secondary rows)
-        self._guard_table = {}
-        for k in range(len(cir.keys)):
+            sec, pri = self._guard_rows(p, s)
             for gate in (0, 1):
                 for cmd in (1, -1, 0):
-                    gs = self._guards[k]["sec"] if not gate else None
-                    gp = self._guards[k]["pri"] if cmd == 0 else None
-                    parts = [r for r in (gs, gp) if r is not None]
-                    rows = np.vstack(parts) if parts else None
+                    parts = (sec if not gate else []) + (pri if cmd == 0 else [])
+                    rows = np.array([g @ cir.vec[k] for g in parts]) if parts else None
                     # guard values on the bracketing grid: (ge[j] @ z).real = guards at (j+1) h
                     ge = None if rows is None else self._grid[k][1:, None, :] * rows[None, :, :]
-                    self._guard_table[(k, gate, cmd)] = (rows, len(gs) if gs is not None else 0, ge)
-        self._v2open = {p: cir.v2_open_row(p) for p in (1, -1, P_OPEN)}
-        self._v1open = {s: cir.v1_open_row(s) for s in (1, -1, S_SHORT, S_OPEN)}
-        self._vout = cir.vout_row()
+                    table[(k, gate, cmd)] = (rows, len(sec) if not gate else 0, ge)
+        return table
 
     # ------------------------------------------------------------------ mode rules
     def _secondary_at_zero(self, x, p):
-        """Diode state when i2 = 0 and the gate is off: by the open-circuit voltage."""
-        v, vo = x @ self._v2open[p], x @ self._vout
-        return 1 if v > vo else (-1 if v < -vo else S_OPEN)
+        """Diode state when i2 = 0 and the gate is off: by the open-circuit voltage against the
+        output voltage plus the forward drops."""
+        v, th = x @ self._v2open[p], x @ self._sec_th
+        return 1 if v > th else (-1 if v < -th else S_OPEN)
 
     def _primary_at_zero(self, x, s):
-        """Inverter freewheel state when i1 = 0 during dead time."""
-        v, vd = x @ self._v1open[s], self.params.vdc_v
-        return 1 if v > vd else (-1 if v < -vd else P_OPEN)
+        """Inverter freewheel state when i1 = 0 during dead time (+-2 = freewheeling)."""
+        v, th = x @ self._v1open[s], self._pri_th
+        return 2 if v > th else (-2 if v < -th else P_OPEN)
 
-    def _modes(self, x, cmd, gate, p, s):
+    def _modes(self, x, cmd, gate, p=None, s=None):
         """Modes after a drive change: the inverter follows its command (in dead time the current
         freewheels through the diodes opposite to its sign), the SBAR shorts while the gate is on,
         else the diode pair of the current's sign conducts; a zero current is decided by the
@@ -112,7 +118,7 @@ class SwitchingLink:
         if cmd != 0:
             p = cmd
         else:
-            p = -1 if x[I1] > 0 else (1 if x[I1] < 0 else None)
+            p = -2 if x[I1] > 0 else (2 if x[I1] < 0 else None)
         if gate:
             s = S_SHORT
         elif x[I2] > 0:
@@ -125,131 +131,95 @@ class SwitchingLink:
             p = self._primary_at_zero(x, s)
         return p, s
 
+    def _after_event(self, x, secondary: bool, p, s, chatter: bool):
+        """New modes after a guard event (``x`` is modified: a current that stops is set to 0).
+        ``chatter``: several zero-length events in a row; take the blocked state."""
+        if secondary:
+            if s in (1, -1) or chatter:
+                x[I2] = 0.0
+                s = S_OPEN if chatter else self._secondary_at_zero(x, p)
+            else:  # blocked interval ends
+                s = 1 if (x @ self._v2open[p]) > 0 else -1
+            if s == S_OPEN:
+                x[I2] = 0.0
+        else:
+            if p in (2, -2) or chatter:
+                x[I1] = 0.0
+                p = P_OPEN if chatter else self._primary_at_zero(x, s)
+            else:
+                p = 2 if (x @ self._v1open[s]) > 0 else -2
+            if p == P_OPEN:
+                x[I1] = 0.0
+        return p, s
+
     # ------------------------------------------------------------------ core loop
     def run(self, schedule: Schedule, x0: np.ndarray) -> SwitchingResult:
         """Integrate exactly over the schedule from augmented state ``x0`` (m,)."""
         cir = self.cir
-        lam, vec, inv, trans, grid = cir.lam, cir.vec, cir.inv, cir.trans, self._grid
-        guards, h = self._guard_table, self._h
-        ecache = {}
-        tol = 1e-12 * self.T
         ts, cmds, gates = schedule.t, schedule.cmd, schedule.gate
         x = np.array(x0, dtype=float)
         x[-1] = 1.0
-        p = s = None
-        # initial modes
-        p = int(cmds[0]) if cmds[0] != 0 else (-1 if x[I1] > 0 else (1 if x[I1] < 0 else P_OPEN))
-        if gates[0]:
-            s = S_SHORT
-        else:
-            s = 1 if x[I2] > 0 else (-1 if x[I2] < 0 else self._secondary_at_zero(x, p))
-        if p == P_OPEN:
-            x[I1] = 0.0
-        if s == S_OPEN:
-            x[I2] = 0.0
+        p, s = self._modes(x, int(cmds[0]), int(gates[0]))
+        _zero_open(x, p, s)
         k = cir.index[(p, s)]
-        z = inv[k] @ x
-        seg_t, seg_k, seg_z = [], [], []
+        z = cir.inv[k] @ x
+        seg = ([], [], [])
+        ecache = {}
         t = float(ts[0])
-        n_int = len(cmds)
-        for j in range(n_int):
-            t_b = float(ts[j + 1])
+        for j in range(len(cmds)):
             cmd, gate = int(cmds[j]), int(gates[j])
             if j > 0 and (cmd != cmds[j - 1] or gate != gates[j - 1]):
-                x = (vec[k] @ z).real
-                p2, s2 = self._modes(x, cmd, gate, p, s)
-                if (p2, s2) != (p, s):
-                    if p2 == P_OPEN or s2 == S_OPEN:
-                        if p2 == P_OPEN:
-                            x[I1] = 0.0
-                        if s2 == S_OPEN:
-                            x[I2] = 0.0
-                        p, s = p2, s2
-                        k = cir.index[(p, s)]
-                        z = inv[k] @ x
-                    else:
-                        p, s = p2, s2
-                        k2 = cir.index[(p, s)]
-                        z = trans[k][k2] @ z
-                        k = k2
-            n_same = 0
-            t_int = t
-            while True:
-                seg_t.append(t)
-                seg_k.append(k)
-                seg_z.append(z)
-                tau = t_b - t
-                rows, ns, ge = guards[(k, gate, cmd)]
-                if n_same == 0 and t == t_int:  # full interval: its exponential repeats, cache it
-                    key = (k, round(tau * 1e18))
-                    ez = ecache.get(key)
-                    if ez is None:
-                        ez = ecache[key] = np.exp(lam[k] * tau)
-                else:
-                    ez = np.exp(lam[k] * tau)
-                z_end = z * ez
-                if rows is None:
-                    z = z_end
-                    break
-                ng = len(rows)
-                nj = int(tau / h)
-                jh = nj
-                if nj > 0:
-                    bad = ((ge[:nj] @ z).real <= 0.0).ravel()
-                    i = int(bad.argmax())
-                    if bad[i]:
-                        jh = i // ng
-                if jh == nj:
-                    vb = (rows @ z_end).real
-                    if not (vb <= 0.0).any():
-                        z = z_end
-                        break
-                    b = tau
-                else:
-                    vb = (ge[jh] @ z).real
-                    b = (jh + 1) * h
-                a = jh * h
-                c = rows * z
-                va = (c @ grid[k][jh]).real
-                best, which = b, -1
-                lk = lam[k].tolist()
-                for gi in range(len(c)):
-                    if vb[gi] <= 0.0:
-                        r = _refine(c[gi].tolist(), lk, a, float(va[gi]), b, float(vb[gi]), tol)
-                        if r < best or which < 0:
-                            best, which = r, gi
-                if best <= 1e-13 * self.T:
-                    n_same += 1
-                    if n_same > 4:  # a mode chatters at one instant: take the open state
-                        best = 0.0
-                else:
-                    n_same = 0
-                z = z * np.exp(lam[k] * best)
-                t += best
-                x = (vec[k] @ z).real
-                if which < ns:  # secondary event
-                    if s in (1, -1) or n_same > 4:
-                        x[I2] = 0.0
-                        s = self._secondary_at_zero(x, p) if n_same <= 4 else S_OPEN
-                    else:  # blocked interval ends
-                        s = 1 if (x @ self._v2open[p]) > 0 else -1
-                    if s == S_OPEN:
-                        x[I2] = 0.0
-                else:
-                    if p in (1, -1) or n_same > 4:
-                        x[I1] = 0.0
-                        p = self._primary_at_zero(x, s) if n_same <= 4 else P_OPEN
-                    else:
-                        p = 1 if (x @ self._v1open[s]) > 0 else -1
-                    if p == P_OPEN:
-                        x[I1] = 0.0
-                k = cir.index[(p, s)]
-                z = inv[k] @ x
-                if t >= t_b:
-                    break
-            t = t_b
-        seg_t.append(t)
-        return SwitchingResult(cir, schedule, np.array(seg_t), np.array(seg_k, dtype=int), np.array(seg_z))
+                k, z, p, s = self._drive_change(k, z, p, s, cmd, gate)
+            k, z, p, s = self._interval(t, float(ts[j + 1]), k, z, p, s, cmd, gate, seg, ecache)
+            t = float(ts[j + 1])
+        seg[0].append(t)
+        return SwitchingResult(cir, schedule, np.array(seg[0]), np.array(seg[1], dtype=int), np.array(seg[2]))
+
+    def _drive_change(self, k, z, p, s, cmd, gate):
+        """Modes at a scheduled drive change; the state carries over (a blocked current is 0)."""
+        cir = self.cir
+        x = (cir.vec[k] @ z).real
+        p2, s2 = self._modes(x, cmd, gate, p, s)
+        if (p2, s2) == (p, s):
+            return k, z, p, s
+        k2 = cir.index[(p2, s2)]
+        if p2 == P_OPEN or s2 == S_OPEN:
+            _zero_open(x, p2, s2)
+            return k2, cir.inv[k2] @ x, p2, s2
+        return k2, cir.trans[k][k2] @ z, p2, s2
+
+    def _interval(self, t, t_b, k, z, p, s, cmd, gate, seg, ecache):
+        """Advance from ``t`` to the next scheduled edge ``t_b`` through the state events (diode
+        commutations, end of blocked intervals); appends the segments to ``seg``. Raises
+        ``ArithmeticError`` rather than looping on zero-length events."""
+        cir, lam, T = self.cir, self.cir.lam, self.T
+        n_zero, first = 0, True
+        while True:
+            seg[0].append(t)
+            seg[1].append(k)
+            seg[2].append(z)
+            tau = t_b - t
+            ez = _exp_cached(ecache, k, lam[k], tau) if first else np.exp(lam[k] * tau)
+            first = False
+            rows, ns, ge = self._guard_table[(k, gate, cmd)]
+            hit = None if rows is None else _first_event(z, z * ez, rows, ge, self._grid[k], lam[k], self._h, tau,
+                                                         1e-12 * T)
+            if hit is None:
+                return k, z * ez, p, s
+            dt, which = hit
+            n_zero = n_zero + 1 if dt <= 1e-13 * T else 0
+            if n_zero > _MAX_ZERO_EVENTS:
+                raise ArithmeticError(
+                    f"switching model stuck: {n_zero} zero-length events at t={t!r} s in topology {cir.keys[k]} "
+                    f"(cmd={cmd}, gate={gate}); state {(cir.vec[k] @ z).real.tolist()}")
+            z = z * np.exp(lam[k] * dt)
+            t += dt
+            x = (cir.vec[k] @ z).real
+            p, s = self._after_event(x, which < ns, p, s, n_zero > 4)
+            k = cir.index[(p, s)]
+            z = cir.inv[k] @ x
+            if t >= t_b:
+                return k, z, p, s
 
     # ------------------------------------------------------------------ convenience
     def final_state(self, res: SwitchingResult) -> np.ndarray:
@@ -312,6 +282,59 @@ class SwitchingLink:
         if x0 is None:
             x0 = self.periodic_steady_state(d[0], phase_rad)
         return self.run(self.schedule(0.0, t_end, d, cp, phase_rad), x0)
+
+
+def _zero_open(x, p, s):
+    """Blocked inverter / SBAR carry no current: zero it in the state ``x`` (in place)."""
+    if p == P_OPEN:
+        x[I1] = 0.0
+    if s == S_OPEN:
+        x[I2] = 0.0
+
+
+def _exp_cached(cache, k, lam, tau):
+    """``exp(lam tau)`` for a whole drive interval: the same durations repeat every period."""
+    key = (k, round(tau * 1e18))
+    ez = cache.get(key)
+    if ez is None:
+        ez = cache[key] = np.exp(lam * tau)
+    return ez
+
+
+def _first_event(z, z_end, rows, ge, grid, lam, h, tau, tol):
+    """First guard crossing in ``(0, tau]`` for modal state ``z``: ``(dt, guard index)`` or None.
+
+    ``rows`` (ng, m) modal guard rows, ``ge`` (G, ng, m) the rows times the grid exponentials
+    (guard values at ``(j+1) h``), ``grid`` (G+1, m) the exponentials at ``j h``. The first grid
+    step where a guard is <= 0 brackets the root, refined by :func:`_refine`. Pure function of
+    arrays (no state)."""
+    ng = len(rows)
+    nj = int(tau / h)
+    jh = nj
+    if nj > 0:
+        bad = ((ge[:nj] @ z).real <= 0.0).ravel()
+        i = int(bad.argmax())
+        if bad[i]:
+            jh = i // ng
+    if jh == nj:
+        vb = (rows @ z_end).real
+        if not (vb <= 0.0).any():
+            return None
+        b = tau
+    else:
+        vb = (ge[jh] @ z).real
+        b = (jh + 1) * h
+    a = jh * h
+    c = rows * z
+    va = (c @ grid[jh]).real
+    best, which = b, -1
+    lk = lam.tolist()
+    for gi in range(ng):
+        if vb[gi] <= 0.0:
+            r = _refine(c[gi].tolist(), lk, a, float(va[gi]), b, float(vb[gi]), tol)
+            if r < best or which < 0:
+                best, which = r, gi
+    return best, which
 
 
 def _refine(c, lam, a, ga, b, gb, tol):

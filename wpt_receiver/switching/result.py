@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from .circuit import I1, I2, VC1, VC2, Circuit
+from .circuit import I1, I2, LOSS_GROUPS, VC1, VC2, Circuit
 from .schedule import Schedule
 
 __all__ = ["SwitchingResult", "fundamental"]
@@ -68,8 +68,8 @@ class SwitchingResult:
         return x, k
 
     def outputs(self, x, k) -> dict:
-        """v1, v2 and battery current for states ``x`` in topologies ``k``."""
-        out = {name: np.empty(len(k)) for name in ("v1", "v2", "i_load")}
+        """v1, v2, battery current and DC source current for states ``x`` in topologies ``k``."""
+        out = {name: np.empty(len(k)) for name in ("v1", "v2", "i_load", "i_src")}
         for kk, sel in _groups(k, len(self.circuit.keys)):
             for name, row in self.circuit.rows[kk].items():
                 out[name][sel] = np.einsum("nm,m->n", x[sel], row)
@@ -162,25 +162,36 @@ class SwitchingResult:
         return out
 
     def energy_balance(self, t_a: float, t_b: float) -> dict:
-        """Energies over ``[t_a, t_b]`` [J], integrated in closed form: source (int v1 i1),
-        resistive losses (R1 i1^2 + R2 i2^2 + r_bat i_load^2), battery (int VL i_load), energy into
-        the rectifier (int v2 i2) and the change of stored energy; ``residual`` = source - losses -
-        battery - stored change (zero for an exact, lossless-switch simulation)."""
+        """Energies over ``[t_a, t_b]`` [J], integrated in closed form.
+
+        ``source_j`` (int Vdc i_dc, the DC source), ``inverter_out_j`` (int v1 i1), ``losses_j``
+        (coil and battery resistances R1 i1^2 + R2 i2^2 + r_bat i_load^2), ``device_losses_j``
+        (all conduction losses of the devices) and one ``<group>_loss_j`` per device group
+        (:data:`~.circuit.LOSS_GROUPS`), ``battery_j`` (int VL i_load), ``rectifier_in_j``
+        (int v2 i2), ``charge_c`` and ``stored_change_j``; ``residual_j`` = source - losses -
+        device losses - battery - stored change (zero up to rounding for an exact simulation)."""
         cir, P = self.circuit, self.circuit.p
         e = np.eye(cir.m)
         one = e[-1]
         rows = cir.rows
-        forms = [lambda k: (rows[k]["v1"], e[I1]), lambda k: (e[I1], e[I1] * P.r1_ohm),
-                 lambda k: (e[I2], e[I2] * P.r2_ohm), lambda k: (rows[k]["i_load"], rows[k]["i_load"] * cir.cfg.r_bat_ohm),
+        forms = [lambda k: (rows[k]["i_src"], one * P.vdc_v), lambda k: (rows[k]["v1"], e[I1]),
+                 lambda k: (e[I1], e[I1] * P.r1_ohm), lambda k: (e[I2], e[I2] * P.r2_ohm),
+                 lambda k: (rows[k]["i_load"], rows[k]["i_load"] * cir.cfg.r_bat_ohm),
                  lambda k: (rows[k]["i_load"], one * P.vl_v), lambda k: (rows[k]["v2"], e[I2]),
                  lambda k: (rows[k]["i_load"], one)]
-        src, l1, l2, lb, bat, rect, charge = self.quadratic_integrals(t_a, t_b, forms)
+        forms += [lambda k, g=g: cir.loss_forms(k)[g] for g in LOSS_GROUPS]
+        vals = self.quadratic_integrals(t_a, t_b, forms)
+        src, inv_out, l1, l2, lb, bat, rect, charge = vals[:8]
+        groups = dict(zip(LOSS_GROUPS, vals[8:]))
         xs, _ = self.states([t_a, t_b])
         es = cir.stored_energy(xs)
         d_stored = float(es[1] - es[0])
-        loss = l1 + l2 + lb
-        return {"source_j": src, "losses_j": loss, "battery_j": bat, "stored_change_j": d_stored,
-                "rectifier_in_j": rect, "charge_c": charge, "residual_j": src - loss - bat - d_stored}
+        loss, dev = l1 + l2 + lb, float(sum(groups.values()))
+        out = {"source_j": src, "inverter_out_j": inv_out, "losses_j": loss, "device_losses_j": dev,
+               "battery_j": bat, "stored_change_j": d_stored, "rectifier_in_j": rect, "charge_c": charge,
+               "residual_j": src - loss - dev - bat - d_stored}
+        out.update({f"{g}_loss_j": v for g, v in groups.items()})
+        return out
 
     def envelope(self, t_a: float | None = None, t_b: float | None = None) -> pd.DataFrame:
         """Per-half-cycle envelope: peak |i2| in each window ``[(n-1/2)T, (n+1/2)T)`` around the

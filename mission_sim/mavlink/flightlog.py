@@ -1,0 +1,61 @@
+"""The tables read from one flight log (:class:`FlightLog`), whatever the format: MAVLink .tlog and
+DataFlash .bin (logs.py), PX4 ULog (ulog.py). Column sets and units: see logs.py."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+from .armed import armed_periods
+
+__all__ = ["FlightLog", "clean_time", "POSITION_COLUMNS", "ATTITUDE_COLUMNS", "ARMED_COLUMNS", "BATTERY_COLUMNS"]
+
+POSITION_COLUMNS = ("t_s", "lat_deg", "lon_deg", "alt_m")
+ATTITUDE_COLUMNS = ("t_s", "roll_rad", "pitch_rad")
+ARMED_COLUMNS = ("t_s", "armed")
+BATTERY_COLUMNS = ("t_s", "voltage_v", "current_a", "power_w")
+
+
+@dataclass
+class FlightLog:
+    """What :func:`~mission_sim.mavlink.logs.read_log` found in one log (tables: see logs.py)."""
+
+    path: Path
+    kind: str                      # "tlog", "dataflash" or "ulog"
+    t0_epoch_s: float              # timestamp of the first record (Unix s); nan if none
+    duration_s: float              # last minus first record timestamp
+    position: pd.DataFrame
+    attitude: pd.DataFrame
+    armed: pd.DataFrame
+    battery: pd.DataFrame
+    battery_source: str | None     # SYS_STATUS, BATTERY_STATUS, CURR, BAT or battery_status (ULog)
+    bad_frames: int                # corrupt frames counted and skipped
+    n_records: int                 # records decoded (bad frames included)
+    mavlink_frames: dict[int, int] = field(default_factory=dict)  # protocol version -> frames (.tlog)
+    reboots: int = 0               # time_boot_ms drops seen in GLOBAL_POSITION_INT
+    fix_checked: bool = True       # False: the log had no GPS fix information at all
+    vehicle: dict = field(default_factory=dict)
+    errors: list[str] = field(default_factory=list)
+    armed_source: str | None = None  # the records the armed state comes from (see armed.py)
+    starts_armed: bool = False     # armed at the first record (first armed-state event a disarm)
+    gps_rejected: dict = field(default_factory=dict)  # implausible fixes rejected, by reason (gpsclean.py)
+
+    @property
+    def armed_periods(self) -> list[tuple[float, float]]:
+        return armed_periods(self.armed, self.duration_s, self.starts_armed)
+
+    @property
+    def armed_time_s(self) -> float:
+        return float(sum(b - a for a, b in self.armed_periods))
+
+
+def clean_time(df: pd.DataFrame, columns, dedupe: bool = True) -> pd.DataFrame:
+    """Keep ``columns``, sort by time (stable), drop repeated timestamps (the last report wins)."""
+    if not len(df):
+        return pd.DataFrame({c: pd.Series(dtype=bool if c == "armed" else float) for c in columns})
+    out = df[list(columns)].sort_values("t_s", kind="stable")
+    if dedupe:
+        out = out.drop_duplicates("t_s", keep="last")
+    return out.reset_index(drop=True)

@@ -1,0 +1,483 @@
+"""The mission loop as a class: one method per step, the carried state as documented slots.
+
+:class:`MissionLoop` runs one mission (one drone, one receiver) over the trajectory samples; the
+physics of each step is described in :mod:`mission_sim.world.runner`. Per trajectory interval
+``[t_k, t_k+1)`` (:meth:`MissionLoop.run` -> :meth:`MissionLoop.sample`):
+
+1. pose -> Lm: precomputed for all samples (``lm_all``, ``k_all``, ``p_all``: held over a sample);
+2. pad gating: :meth:`MissionLoop.gate_pad`;
+3. BMS command: :meth:`MissionLoop.bms_command`;
+4. then either :meth:`MissionLoop.quiet_flight` (pad off, nothing pending: merged samples, no
+   policy) or :meth:`MissionLoop.interval` (multi-rate: fine window steps :meth:`MissionLoop.fine_tick`
+   / coarse steps, the window opened by :meth:`MissionLoop.open_window` and closed by
+   :meth:`MissionLoop.window_done`), each step calling
+5. policy: :meth:`MissionLoop.act` (observation per the contract, duty ``d_short``),
+6. link + 7. battery node: :meth:`MissionLoop.step` (one exact ZOH link step with VL solved
+   implicitly against the battery; :meth:`MissionLoop.fine_step` splits a fine step at I2 sign
+   changes).
+
+:meth:`MissionLoop.result` assembles the time series and the summary.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from wpt_receiver.sbar import rectifier_v2
+
+from ..contract import normalise_obs
+from .battery import Battery, CcCvCharger, _ocv_cell_scalar, scalar_stepper
+from .linkstep import LinkStepper
+from .results import MissionResult
+from .trajectory import Trajectory
+
+__all__ = ["MissionLoop", "ENERGISE_PHASES"]
+
+ENERGISE_PHASES = ("charge", "hover")
+_FOUR_PI = 4.0 / math.pi
+_COLUMNS = ("t_s", "dt_s", "_row", "lm_h", "v1_v", "i1_amp_a", "i2_amp_a", "d_short", "v2_v", "rect_current_a",
+            "battery_v", "battery_current_a", "soc", "charge_cmd_a", "fine", "e_source_j", "e_coil_loss_j",
+            "e_rectifier_j", "e_battery_chem_j", "e_battery_r0_j", "e_battery_r1_j", "e_battery_c1_j",
+            "e_propulsion_j")
+
+
+def _sign(v: float) -> float:
+    return (v > 0.0) - (v < 0.0)
+
+
+class MissionLoop:
+    """One mission run: constants from the config, per-sample arrays, and the state the loop carries."""
+
+    __slots__ = {
+        # --- constants (set once)
+        "cfg": "mission config", "policy": "the Policy (contract)", "traj": "the Trajectory",
+        "charge": "False: pads never energised", "sim": "cfg.sim", "lk": "cfg.link",
+        "base": "link parameters at the hover gap", "st": "LinkStepper (exact ZOH link steps)",
+        "v1_nom": "nominal pad voltage amplitude [V]", "bp": "battery parameters",
+        "bat": "Battery (vector of 1; synced for the charger)", "charger": "CcCvCharger (BMS)",
+        "rng": "noise generator (seed, 1)", "dtc": "control period = fine step [s]",
+        "k_on": "coupling to switch the pad on [-]", "k_off": "coupling to switch it off [-]",
+        "ramp_rate": "pad V1 ramp rate [V/s]", "rated": "rated I2 [A]",
+        "inv_sqrt_l1l2": "1/sqrt(L1 L2) [1/H] (k = Lm / sqrt(L1 L2))", "t_rect": "rectifier period 1/(2f) [s]",
+        "r0": "battery R0 [ohm]", "r1b": "battery R1 [ohm]", "n_cells": "cells in series",
+        "tau1": "battery R1-C1 time constant [s]", "bat_step": "scalar battery stepper",
+        # --- per-sample arrays (pose -> Lm, propulsion, gating eligibility)
+        "lm_all": "Lm per sample [H]", "k_all": "coupling per sample [-]", "p_all": "propulsion power [W]",
+        "t_all": "sample times [s]", "eligible": "sample in an energising phase (and charge)",
+        "n": "number of samples",
+        # --- loop state
+        "x": "link envelope state (I1, I2) [A]", "v1": "pad voltage amplitude [V]",
+        "tx_on": "pad wants to be on (V1 ramps to v1_nom) / off (to 0)", "cmd": "charge command I_L* [A]",
+        "d": "SBAR duty d_short [-] (1: short mode)", "soc": "battery SoC [-]", "vrc": "battery R1-C1 voltage [V]",
+        "last_vl": "last battery terminal voltage [V]", "last_ib": "last battery current [A]",
+        "last_il": "last rectifier current [A]", "in_fine": "inside a fine window",
+        "fine_until_min": "earliest end of the fine window [s]", "fine_deadline": "forced end of it [s]",
+        "t_cmd_zero": "time the command went to 0 [s]", "t_last_bms": "last BMS update [s]",
+        "t_last_act": "last policy call [s]", "w0": "initial stored link energy [J]",
+        "peak_i2": "peak |I2| [A]", "above": "time with |I2| above rated [s]",
+        "n_fine": "fine steps", "n_coarse": "coarse steps", "n_windows": "fine windows",
+        "n_cut": "fine windows cut at max_fine_s", "rows": "one tuple per step (_COLUMNS)",
+    }
+
+    def __init__(self, cfg, policy, traj: Trajectory, charge: bool, lm_all):
+        self.cfg, self.policy, self.traj, self.charge = cfg, policy, traj, charge
+        self.sim, self.lk = sim, lk = cfg.sim, cfg.link
+        model = cfg.coupling.model()
+        self.base = base = lk.link_params(model.l1_h, model.l2_h, float(model.lm_h(0.0, 0.0, cfg.mission.hover_gap_m)))
+        self.st = LinkStepper(model.l1_h, model.l2_h, lk.r1_ohm, lk.r2_ohm, base.omega_rad_s)
+        self.v1_nom = base.v1_amp_v
+        self.bp = bp = cfg.battery
+        self.bat = Battery(bp, 1)
+        self.charger = CcCvCharger(cfg.charger, self.bat)
+        self.rng = np.random.default_rng([cfg.seed, 1])
+        self.dtc = sim.control_period_s
+        self.k_on = cfg.coupling.tx_min_k + cfg.coupling.tx_k_hysteresis
+        self.k_off = cfg.coupling.tx_min_k
+        self.ramp_rate = self.v1_nom / lk.tx_ramp_s if lk.tx_ramp_s > 0 else math.inf
+        self.rated = lk.rated_i2_a
+        self.t_rect = 0.5 / base.f_hz
+        self.r0, self.r1b, self.n_cells, self.tau1 = bp.r0_ohm, bp.r1_ohm, bp.n_series, bp.tau1_s
+        self.bat_step = scalar_stepper(bp)
+        self.inv_sqrt_l1l2 = 1.0 / math.sqrt(model.l1_h * model.l2_h)
+        self.lm_all = lm_all
+        self.k_all = lm_all * self.inv_sqrt_l1l2
+        self.p_all = traj.propulsion_w(cfg.drone)
+        self.t_all = traj.t_s
+        self.eligible = np.isin(traj.phase, ENERGISE_PHASES) & charge
+        self.n = len(self.t_all)
+        self._reset_state()
+
+    def _reset_state(self):
+        self.x = (0.0, 0.0)
+        self.v1 = 0.0
+        self.tx_on = False
+        self.cmd = 0.0
+        self.d = 1.0  # short mode until told otherwise
+        self.soc, self.vrc = float(self.bat.soc[0]), float(self.bat.v1_v[0])
+        self.last_vl = float(self.bat.terminal_v(0.0)[0])
+        self.last_ib = self.last_il = 0.0
+        self.fine_until_min = self.fine_deadline = -1.0
+        self.in_fine = False
+        self.t_cmd_zero = self.t_last_bms = self.t_last_act = -math.inf
+        self.policy.reset(1)
+        self.w0 = self.st.stored_j(self.x)
+        self.peak_i2 = self.above = 0.0
+        self.n_fine = self.n_coarse = self.n_windows = self.n_cut = 0
+        self.rows = []
+
+    # ------------------------------------------------------------------ the outer loop
+    def run(self, progress: bool = False) -> MissionResult:
+        """Step through all trajectory intervals; returns the assembled result."""
+        t_all = self.t_all
+        bar = None
+        if progress:
+            from tqdm import tqdm
+            bar = tqdm(total=float(t_all[-1] - t_all[0]), unit="sim s", desc="mission", leave=False,
+                       bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
+        k = 0
+        while k < self.n - 1:
+            j = self.sample(k)
+            if bar is not None:
+                bar.update(float(t_all[j]) - float(t_all[k]))
+            k = j
+        if bar is not None:
+            bar.close()
+        return self.result()
+
+    def sample(self, k: int) -> int:
+        """One trajectory sample k: gating, BMS, then quiet merged steps or the interval; next k."""
+        t_k = float(self.t_all[k])
+        # "ending" = the energising phase ends at the next sample, so charging stops (command 0,
+        # then the pad ramps down) while the drone still hovers
+        ending = self.eligible[k] and not self.eligible[k + 1]
+        event = self.gate_pad(k, t_k, ending)
+        event = self.bms_command(k, t_k, ending) or event
+        if event:
+            self.open_window(t_k)
+        if not self.in_fine and not self.tx_on and self.v1 == 0.0 and self.cmd == 0.0:
+            return self.quiet_flight(k, t_k)
+        self.interval(k, t_k, ending)
+        return k + 1
+
+    # ------------------------------------------------------------------ pad gating, BMS
+    def gate_pad(self, k: int, t_k: float, ending: bool) -> bool:
+        """Pad gating (transmitter side) at sample k; True if it is an event (opens a fine window)."""
+        kk = float(self.k_all[k])
+        if self.tx_on:
+            if kk < self.k_off:
+                self.tx_on = False      # safety: switch off at once (ramp down)
+                self.cmd = 0.0
+            elif not self.eligible[k] or ending:
+                if self.cmd != 0.0:
+                    self.cmd = 0.0
+                    self.t_cmd_zero = t_k
+                elif t_k - self.t_cmd_zero >= self.sim.tx_off_delay_s:
+                    self.tx_on = False
+                # else: the switch-off happens inside this interval
+            else:
+                return False
+            return True
+        if self.eligible[k] and not ending and kk >= self.k_on and self.v1 == 0.0:
+            self.tx_on = True
+            return True
+        return False
+
+    def bms_command(self, k: int, t_k: float, ending: bool) -> bool:
+        """Battery management: new charge command every ``bms_period_s`` (deadband); True if changed."""
+        sim = self.sim
+        if not (self.tx_on and self.v1 == self.v1_nom and self.eligible[k] and not ending
+                and t_k - self.t_last_bms >= sim.bms_period_s - 1e-12):
+            return False
+        self.t_last_bms = t_k
+        self.bat.soc[0], self.bat.v1_v[0] = self.soc, self.vrc
+        i_prop = self.p_all[k] / self.last_vl
+        new = float(self.charger.command_a(i_prop)[0])
+        if abs(new - self.cmd) > sim.cmd_deadband_a or (new == 0.0) != (self.cmd == 0.0):
+            if new == 0.0:
+                self.t_cmd_zero = t_k
+            self.cmd = new
+            return True
+        return False
+
+    # ------------------------------------------------------------------ multi-rate windowing
+    def open_window(self, t: float):
+        """Start a fine window at t (lasts at least ``min_fine_s``, at most ``max_fine_s``)."""
+        self.in_fine = True
+        self.n_windows += 1
+        self.fine_until_min = t + self.sim.min_fine_s
+        self.fine_deadline = t + self.sim.max_fine_s
+
+    def quiet_flight(self, k: int, t_k: float) -> int:
+        """Pad off, nothing pending: merge samples into one step of up to ``flight_dt_s``; next k.
+
+        The SBAR has nothing to do: the policy is not called (its duty is held)."""
+        t_all, eligible, n = self.t_all, self.eligible, self.n
+        j = k + 1
+        while j < n - 1 and not eligible[j] and t_all[j + 1] - t_k <= self.sim.flight_dt_s + 1e-9:
+            j += 1
+        dt = float(t_all[j] - t_k)
+        p_mean = float(np.dot(self.p_all[k:j], np.diff(t_all[k:j + 1]))) / dt
+        self.step(t_k, dt, float(self.lm_all[k]), p_mean, k, False)
+        self.n_coarse += 1
+        return j
+
+    def interval(self, k: int, t_k: float, ending: bool):
+        """One trajectory interval: fine steps while needed, then one coarse step to t_k+1.
+
+        With the pad on and Lm changing fast within the interval (or k crossing the switch-off
+        threshold), fine steps use Lm interpolated linearly in time and gating is checked per step.
+        """
+        sim = self.sim
+        t_next = float(self.t_all[k + 1])
+        p_k = float(self.p_all[k])
+        lm = float(self.lm_all[k])
+        lm_n = float(self.lm_all[k + 1])
+        fast_lm = abs(lm_n - lm) > sim.lm_rel_tol * max(abs(lm), 1e-9) or float(self.k_all[k + 1]) < self.k_off
+        off_due = not self.eligible[k] or ending
+        t = t_k
+        fresh = False
+        while t < t_next - 1e-12:
+            if fast_lm and self.v1 > 0.0 and not self.in_fine:
+                self.open_window(t)
+            if not self.in_fine and t - self.t_last_act >= sim.coarse_policy_period_s - 1e-12:
+                fresh = self.coarse_policy(t)
+            if self.in_fine:
+                dt = min(self.dtc, t_next - t)
+                lm_s = lm
+                if fast_lm:
+                    lm_s = lm + (lm_n - lm) * (t + 0.5 * dt - t_k) / (t_next - t_k)
+                self.fine_tick(t, dt, lm_s, p_k, k, fast_lm, off_due, fresh)
+                fresh = False
+                t += dt
+            else:
+                self.step(t, t_next - t, lm, p_k, k, False)
+                self.n_coarse += 1
+                t = t_next
+
+    def coarse_policy(self, t: float) -> bool:
+        """Policy call outside a fine window; a duty move above ``duty_event_tol`` opens one.
+
+        Returns True if it did (that call's duty is then applied in the first fine step)."""
+        d_new = self.act()
+        self.t_last_act = t
+        moved = abs(d_new - self.d) > self.sim.duty_event_tol
+        self.d = d_new
+        if moved:
+            self.open_window(t)
+        return moved
+
+    def fine_tick(self, t: float, dt: float, lm_s: float, p_k: float, k: int, fast_lm: bool, off_due: bool,
+                  fresh: bool):
+        """One fine step at t: per-step gating and V1 ramp, policy call, link step, window end check."""
+        if fast_lm and self.tx_on and lm_s * self.inv_sqrt_l1l2 < self.k_off:
+            self.tx_on = False
+            self.cmd = 0.0
+        if self.tx_on and self.cmd == 0.0 and off_due and t - self.t_cmd_zero >= self.sim.tx_off_delay_s:
+            self.tx_on = False
+        v1 = self.v1
+        target = self.v1_nom if self.tx_on else 0.0
+        if v1 != target:
+            step_v = self.ramp_rate * dt
+            self.v1 = v1 = min(target, v1 + step_v) if target > v1 else max(target, v1 - step_v)
+        d_prev = self.d
+        if not fresh:
+            self.d = self.act()
+        self.t_last_act = t
+        self.fine_step(t, dt, lm_s, p_k, k)
+        self.n_fine += 1
+        if fast_lm and v1 > 0.0:
+            return
+        self.window_done(t + dt, d_prev, lm_s)
+
+    def window_done(self, t: float, d_prev: float, lm: float):
+        """Close the fine window once the SBAR output and I2 have settled (or at its deadline).
+
+        Settles on the SBAR's output (V2 / ((4/pi) VL) = 1 - sin(pi d / 2)), not on the duty: near
+        short mode the duty is ill-conditioned (arcsin) while V2 has settled."""
+        sim = self.sim
+        dv = abs(math.sin(0.5 * math.pi * self.d) - math.sin(0.5 * math.pi * d_prev))
+        if t >= self.fine_until_min and (dv < sim.settle_duty_tol or self.v1 == 0.0) and self.settled(lm):
+            self.in_fine = False
+        elif t >= self.fine_deadline and self.v1 == (self.v1_nom if self.tx_on else 0.0):
+            self.in_fine = False
+            self.n_cut += 1
+
+    def settled(self, lm: float) -> bool:
+        """V1 at its target and I2 within ``settle_i2_tol_a`` of the steady state for the held inputs."""
+        v1, x, tol = self.v1, self.x, self.sim.settle_i2_tol_a
+        if abs(v1 - (self.v1_nom if self.tx_on else 0.0)) > 0.0:
+            return False
+        if v1 == 0.0:  # pad off: the duty no longer matters once the coil currents have died out
+            return abs(x[0]) < tol and abs(x[1]) < tol
+        lk = self.lk
+        c = _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * self.d))
+        wlm = self.base.omega_rad_s * lm
+        det = lk.r1_ohm * lk.r2_ohm + wlm * wlm
+        i2ss = (wlm * v1 - lk.r1_ohm * c * self.last_vl) / det if lm > 0 else 0.0
+        return abs(x[1] - i2ss) < tol
+
+    # ------------------------------------------------------------------ policy
+    def act(self) -> float:
+        """Policy step: observation per the contract (measured |I2| + optional noise), duty in [0, 1]."""
+        sim = self.sim
+        # the receiver's sensor measures the magnitude of the coil current envelope
+        i2m = abs(self.x[1]) + (sim.i2_noise_a * self.rng.standard_normal() if sim.i2_noise_a > 0 else 0.0)
+        obs = normalise_obs(np.array([[i2m, self.last_vl, self.last_ib, self.last_il, self.soc, self.cmd, self.d]]))
+        out = float(np.asarray(self.policy.act(obs)).reshape(-1)[0])
+        if not math.isfinite(out):
+            raise ValueError(f"policy {getattr(self.policy, 'name', self.policy)!r} returned d_short={out!r}; "
+                             f"valid range: [0, 1]")
+        return min(max(out, 0.0), 1.0)
+
+    # ------------------------------------------------------------------ link + battery node
+    def fine_step(self, t0: float, dt: float, lm: float, p_prop: float, row_k: int):
+        """A fine step; split into rectifier-period sub-steps when I2 changes sign inside it.
+
+        V2 = f(d) VL sign(I2) switches with the sign of the envelope; holding the sign of the step's
+        start over a step that is a sizeable part of the envelope's ringing period (2 pi / wd ~ 250 us)
+        would feed the ringing instead of damping it. The envelope model resolves one rectifier period
+        T = 1/(2f) anyway, so the crossing is resolved to T (the duty is held: the policy is not called).
+        """
+        x, d, v1, t_rect = self.x, self.d, self.v1, self.t_rect
+        if v1 > 0.0 and d < 1.0 and dt > 1.5 * t_rect and x[1] != 0.0:
+            st = self.st
+            lm_eff = lm if lm > 0 else 1e-12
+            v2p = _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * d)) * self.last_vl * (1.0 if x[1] > 0.0 else -1.0)
+            samples = st.i2_samples(lm_eff, dt, x, v1, v2p, m=8)
+            (_, _, d10, d11), (_, _, bd10, bd11), _, _ = st.disc(lm_eff, dt)
+            samples.append(d10 * x[0] + d11 * x[1] + bd10 * v1 + bd11 * v2p)
+            if any(s * x[1] <= 0.0 for s in samples):
+                k_sub = math.ceil(dt / t_rect - 1e-9)
+                h = dt / k_sub
+                for j in range(k_sub):
+                    self.step(t0 + j * h, h, lm, p_prop, row_k, True)
+                return
+        self.step(t0, dt, lm, p_prop, row_k, True)
+
+    def step(self, t0: float, dt: float, lm: float, p_prop: float, row_k: int, fine: bool):
+        """Link (eq. 4, exact ZOH) and battery node over one step, VL solved implicitly; appends a row.
+
+        Hot path: fields are bound to locals at the top and written back at the end."""
+        x, v1, d, soc, vrc, st, tau1 = self.x, self.v1, self.d, self.soc, self.vrc, self.st, self.tau1
+        # SBAR fundamental (eq. 9). The diodes conduct with the instantaneous i2, so v2 is in phase with
+        # i2 whatever the sign of its envelope: a negative amplitude is i2 shifted by pi (one rectifier
+        # period, so the clocked short window still sits on a half-cycle peak) and V2 = f(d) sign(I2):
+        # the rectifier always absorbs power. With the pad off the diodes block: nothing drives current
+        # through them against the battery and the coil currents ring down in R1, R2 (the envelope model
+        # has no diode to stop I2 at zero, so holding V2 over a long step would drive I2 to -V2/R2).
+        c = rectifier_v2(d, 1.0, x[1], sin=math.sin, sign=_sign) if v1 > 0.0 else 0.0  # V2 per volt of VL
+        # battery: mean terminal voltage = A0 + G * i_mean (held-current RC solution); solve VL
+        # implicitly with the link so V2, the battery and the propulsion power agree exactly
+        frac = tau1 * (1.0 - math.exp(-dt / tau1)) / dt
+        a0 = self.n_cells * _ocv_cell_scalar(soc) + vrc * frac
+        g = self.r0 + self.r1b * (1.0 - frac)
+        lm_eff = lm if lm > 0 else 1e-12
+        dsc = st.disc(lm_eff, dt)
+        m10, m11, g1, s1 = dsc[3]
+        s0 = m10 * x[0] + m11 * x[1] + g1 * v1
+        alpha = 1.0 - g * c * c * s1 / (2 * dt)
+        beta = a0 + g * c * s0 / (2 * dt)
+        disc = beta * beta - 4 * alpha * g * p_prop
+        if disc < 0:
+            raise ValueError(f"the battery cannot supply the propulsion power {p_prop:.1f} W at t={t0:.2f} s "
+                             f"(SoC {soc:.3f}, phase {self.traj.phase[row_k]}): valid range: below its maximum "
+                             f"{beta * beta / (4 * alpha * g):.1f} W; lighten the drone (drone.mass_kg, "
+                             f"drone.payload_kg) or use a bigger battery (battery.n_series, battery.capacity_ah)")
+        vl = (beta + math.sqrt(disc)) / (2 * alpha)
+        v2 = c * vl
+        peak_i2, above, rated = self.peak_i2, self.above, self.rated
+        if fine:
+            for i2s in st.i2_samples(lm_eff, dt, x, v1, v2):
+                i2s = abs(i2s)  # a negative envelope is a current of that size shifted by pi
+                if i2s > peak_i2:
+                    peak_i2 = i2s
+                if i2s > rated:
+                    above += dt / 4
+        x1, e_src, e_coil, e_rect, int_i2 = st.step(lm_eff, dt, x, v1, v2, dsc)
+        i_l = 0.5 * c * int_i2 / dt
+        i_p = p_prop / vl
+        i_b = i_l - i_p
+        soc, vrc, e_chem, e_r0, e_r1, e_c1, _ = self.bat_step(soc, vrc, i_b, dt)
+        if abs(x1[1]) > peak_i2:
+            peak_i2 = abs(x1[1])
+        if abs(x1[1]) > rated:
+            above += dt / 4 if fine else dt
+        self.x, self.soc, self.vrc, self.peak_i2, self.above = x1, soc, vrc, peak_i2, above
+        self.last_vl, self.last_ib, self.last_il = vl, i_b, i_l
+        self.rows.append((t0 + dt, dt, row_k, lm, v1, x1[0], x1[1], d, v2, i_l, vl, i_b, soc, self.cmd, fine,
+                          e_src, e_coil, e_rect, e_chem, e_r0, e_r1, e_c1, vl * i_p * dt))
+
+    # ------------------------------------------------------------------ result assembly
+    def result(self) -> MissionResult:
+        """The time series (one row per step) and the summary with the energy balances."""
+        arr = np.array(self.rows, dtype=float).reshape(-1, len(_COLUMNS))
+        df = self.timeseries(arr)
+        return MissionResult(timeseries=df, summary=self.summary(arr, df), config=self.cfg, trajectory=self.traj)
+
+    def timeseries(self, arr):
+        """DataFrame of the steps: the raw columns plus pose, k, tx_on, powers and phase."""
+        import pandas as pd
+        df = pd.DataFrame({name: arr[:, j] for j, name in enumerate(_COLUMNS)})
+        df["fine"] = df["fine"].astype(bool)
+        df["_row"] = df["_row"].astype(np.int64)
+        ri = df.pop("_row").to_numpy()
+        pos = self.traj.pos_m[ri]
+        df.insert(2, "x_m", pos[:, 0])
+        df.insert(3, "y_m", pos[:, 1])
+        df.insert(4, "z_m", pos[:, 2])
+        df.insert(6, "k", df["lm_h"].to_numpy() * self.inv_sqrt_l1l2)
+        df.insert(7, "tx_on", df["v1_v"].to_numpy() > 0)
+        dts = df["dt_s"].to_numpy()
+        df["propulsion_w"] = df["e_propulsion_j"] / dts
+        df["p_source_w"] = df["e_source_j"] / dts
+        df["p_coil_loss_w"] = df["e_coil_loss_j"] / dts
+        df["p_battery_loss_w"] = (df["e_battery_r0_j"] + df["e_battery_r1_j"]) / dts
+        df["phase"] = pd.Categorical(self.traj.phase[ri])
+        return df
+
+    def summary(self, arr, df) -> dict:
+        """Summary dict: energies (exact sums), balance errors, SoC, I2 peak, step counts."""
+        col = {name: j for j, name in enumerate(_COLUMNS)}
+        acc = {key: math.fsum(arr[:, col[c]].tolist()) for key, c in (
+            ("src", "e_source_j"), ("coil", "e_coil_loss_j"), ("rect", "e_rectifier_j"), ("chem", "e_battery_chem_j"),
+            ("r0", "e_battery_r0_j"), ("r1", "e_battery_r1_j"), ("c1", "e_battery_c1_j"), ("prop", "e_propulsion_j"))}
+        dw = self.st.stored_j(self.x) - self.w0
+        losses = acc["coil"] + acc["r0"] + acc["r1"]
+        rhs = math.fsum([acc["chem"], acc["c1"], dw, losses, acc["prop"]])
+        scale = abs(acc["src"]) + abs(acc["chem"]) + abs(acc["prop"])
+        link_res = math.fsum([acc["src"], -dw, -acc["coil"], -acc["rect"]])
+        bp, t_all = self.bp, self.t_all
+        return {
+            "policy": getattr(self.policy, "name", type(self.policy).__name__),
+            "charge": bool(self.charge),
+            "sim_time_s": float(t_all[-1] - t_all[0]),
+            "wall_s": 0.0,
+            "energy_from_source_j": acc["src"],
+            "energy_to_battery_j": acc["rect"],
+            "battery_chem_delta_j": acc["chem"],
+            "losses_j": losses,
+            "coil_losses_j": acc["coil"],
+            "battery_losses_j": acc["r0"] + acc["r1"],
+            "device_losses_j": 0.0,
+            "link_stored_delta_j": dw,
+            "battery_c1_delta_j": acc["c1"],
+            "propulsion_energy_j": acc["prop"],
+            "energy_balance_error_rel": abs(acc["src"] - rhs) / scale if scale > 0 else 0.0,
+            "link_balance_error_rel": abs(link_res) / abs(acc["src"]) if acc["src"] else 0.0,
+            "initial_soc": float(bp.initial_soc),
+            "final_soc": float(self.soc),
+            "battery_full": bool(self.charger.full[0]),
+            "min_soc": float(min(df["soc"].min(), bp.initial_soc)) if len(df) else float(bp.initial_soc),
+            "battery_depleted": bool(len(df) and df["soc"].min() < 0.0),
+            "peak_i2_a": self.peak_i2,
+            "rated_i2_a": self.rated,
+            "time_above_rated_s": self.above,
+            "flight_time_gain_s": 0.0,
+            "fine_steps": self.n_fine,
+            "coarse_steps": self.n_coarse,
+            "fine_windows": self.n_windows,
+            "fine_windows_cut": self.n_cut,
+            "charge_time_s": float(np.sum(df["dt_s"].to_numpy()[df["tx_on"].to_numpy()])),
+        }

@@ -1,0 +1,176 @@
+"""Independent SPICE check of the switching-level model with devices (ngspice netlists).
+
+The scenario (model time; SPICE time is model time - T/2): the link starts at the fundamental (phasor) solution of eq. 4 with the devices
+folded in (closed form, not from the switching model), runs in RM for ``T_STEP_S``, then the
+SBAR shorts (SM) until ``T_END_S``. Both simulators start from the same state, so the numbers
+compare the same transient. Measured: peak |i2| over the last 4 rectifier periods before the step
+(``rm_i2_a``) and before the end (``sm_i2_a``), the step peak after the switch (``step_peak_a``)
+and peak |i1| before the step and at the end (``rm_i1_a``, ``sm_i1_a``).
+
+Device models in the netlist are the ones of :mod:`wpt_receiver.devices`: every diode is a
+near-ideal junction (``IS = 1 uA``, ``N = 0.01``: 4 mV at 10 A, 1 uA leakage) in series with a DC source
+``vf0_v`` and a resistor ``rd_ohm``; every MOSFET channel a voltage-controlled switch with
+``RON = ron_ohm``; the inverter (no dead time) a square-wave source with the two driven channels'
+resistance in series.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+
+from wpt_receiver import TABLE_I, steady_state
+from wpt_receiver.devices import DeviceSet
+
+HERE = Path(__file__).parent / "spice"
+T_STEP_S = 3e-3
+T_END_S = 9e-3
+KEYS = ("rm_i2_a", "step_peak_a", "sm_i2_a", "rm_i1_a", "sm_i1_a")
+
+
+def initial_state(p, dv: DeviceSet):
+    """(i1, vC1, i2, vC2) at t = T/2 (a quarter inverter period) of the phasor solution
+    i1 = I1 sin wt, i2 = I2 cos wt: i2 = 0 there, so SPICE starts with the diodes off."""
+    pd = p.with_(r1_ohm=p.r1_ohm + dv.inv_r_ohm, r2_ohm=p.r2_ohm + dv.rect_rd_ohm)
+    i1, i2 = steady_state(pd, 4 / math.pi * (p.vl_v + dv.rect_vf_v))
+    w = p.omega_rad_s
+    c2 = 1 / (w * w * p.l2_h)
+    return float(i1), 0.0, 0.0, float(i2) / (w * c2)
+
+
+def _diode(name, anode, cathode, vf, rd):
+    """Near-ideal junction + forward drop source + slope resistance."""
+    return (f"D{name} {anode} x{name} DI\nVF{name} x{name} y{name} DC {vf!r}\n"
+            f"RD{name} y{name} {cathode} {max(rd, 1e-6)!r}\n")
+
+
+def netlist(p=TABLE_I, dv: DeviceSet = DeviceSet(), label: str = "ideal") -> str:
+    """ngspice netlist of the scenario (see the module docstring)."""
+    w, T = p.omega_rad_s, p.rectifier_period_s
+    c1, c2 = 1 / (w * w * p.l1_h), 1 / (w * w * p.l2_h)
+    i10, vc10, i20, vc20 = initial_state(p, dv)
+    k = p.lm_h / math.sqrt(p.l1_h * p.l2_h)
+    ron, body = dv.rect_switch.ron_ohm, dv.rect_switch.body
+    tr = 1e-9
+    return "".join([
+        f"* dronewpt SPICE check, devices: {label}\n",
+        "* primary: square wave +-Vdc (no dead time), 2 Ron + R1, C1, L1; secondary: L2 (i2 = -I(L2)), R2, C2, SBAR\n",
+        f"VINV p 0 PULSE({p.vdc_v!r} {-p.vdc_v!r} {T / 2 - tr / 2!r} {tr!r} {tr!r} {T - tr!r} {2 * T!r})\n",
+        f"C1 p c1 {c1!r} IC={vc10!r}\n",
+        f"R1 c1 c {p.r1_ohm + dv.inv_r_ohm!r}\n",
+        f"L1 c 0 {p.l1_h!r} IC={i10!r}\n",
+        f"L2 a b {p.l2_h!r} IC={-i20!r}\n",
+        f"K12 L1 L2 {k!r}\n",
+        f"R2 bb b {p.r2_ohm!r}\n",
+        f"C2 bq bb {c2!r} IC={vc20!r}\n",
+        "VSENSE bq bn DC 0\n",
+        # SBAR: A = a, B = bn, battery between bat and ground (SPICE node names are case-insensitive)
+        _diode("U1", "a", "bat", dv.rect_diode.vf0_v, dv.rect_diode.rd_ohm),
+        _diode("U2", "bn", "bat", dv.rect_diode.vf0_v, dv.rect_diode.rd_ohm),
+        _diode("B1", "0", "a", body.vf0_v, body.rd_ohm),
+        _diode("B2", "0", "bn", body.vf0_v, body.rd_ohm),
+        "S1 a 0 g 0 SWM\nS2 bn 0 g 0 SWM\n",
+        f"VG g 0 PWL(0 0 {T_STEP_S - T / 2!r} 0 {T_STEP_S - T / 2 + tr!r} 1)\n",
+        f"VL bat 0 DC {p.vl_v!r}\n",
+        ".model DI D(IS=1e-6 N=0.01)\n",
+        f".model SWM SW(VT=0.5 VH=0.1 RON={max(ron, 1e-6)!r} ROFF=1e7)\n",
+        ".options reltol=1e-6 abstol=1e-9 vntol=1e-7 method=gear maxord=2 itl4=200\n",
+        f".tran {T / 1000!r} {T_END_S - T / 2!r} 0 {T / 1000!r} uic\n",
+        _measures(T),
+        ".end\n"])
+
+
+def _measures(T):
+    w, o = 4 * T, T / 2  # o: SPICE time origin in model time
+    spans = {"rm": (T_STEP_S - w - o, T_STEP_S - o), "step": (T_STEP_S - o, T_END_S - o),
+             "sm": (T_END_S - w - o, T_END_S - o)}
+    out = []
+    for name, (a, b) in spans.items():
+        for sig, expr in (("i2", "I(VSENSE)"), ("i1", "I(L1)")):
+            out.append(f".meas tran {name}_{sig}_max MAX {expr} from={a!r} to={b!r}\n")
+            out.append(f".meas tran {name}_{sig}_min MIN {expr} from={a!r} to={b!r}\n")
+    return "".join(out)
+
+
+def run_ngspice(text: str, workdir: Path) -> dict:
+    """Run ngspice in batch mode and return the measurements (``KEYS``)."""
+    exe = shutil.which("ngspice")
+    if exe is None:
+        raise FileNotFoundError("ngspice is not installed")
+    cir = Path(workdir) / "check.cir"
+    cir.write_text(text)
+    out = subprocess.run([exe, "-b", str(cir)], capture_output=True, text=True, timeout=900).stdout
+    vals = {m.group(1).lower(): float(m.group(2))
+            for m in re.finditer(r"^\s*(\w+)\s*=\s*([-+0-9.eE]+)", out, re.M)}
+    # I(VSENSE) flows from C2 into the SBAR's B node: i2 of the model flows out of A, i.e. -I(VSENSE)
+    peak = lambda n, s: max(abs(vals[f"{n}_{s}_max"]), abs(vals[f"{n}_{s}_min"]))  # noqa: E731
+    return {"rm_i2_a": peak("rm", "i2"), "step_peak_a": peak("step", "i2"), "sm_i2_a": peak("sm", "i2"),
+            "rm_i1_a": peak("rm", "i1"), "sm_i1_a": peak("sm", "i1")}
+
+
+def switching_measure(p=TABLE_I, dv: DeviceSet = DeviceSet()) -> dict:
+    """The same numbers from the event-exact switching model (dense peaks on a fine grid)."""
+    from wpt_receiver.switching import SwitchingConfig, SwitchingLink
+    link = SwitchingLink(p, SwitchingConfig(devices=dv))
+    T = link.T
+    x0 = np.zeros(link.cir.m)
+    x0[:4] = initial_state(p, dv)
+    x0[-1] = 1.0
+    res = _run_step(link, x0)
+    ts = np.union1d(np.arange(T / 2, T_END_S, T / 400), res.seg_t)
+    x, _ = res.states(ts, cols=[0, 2])
+    w = 4 * T
+
+    def peak(col, a, b):
+        sel = (ts >= a) & (ts <= b)
+        return float(np.max(np.abs(x[sel, col])))
+    return {"rm_i2_a": peak(1, T_STEP_S - w, T_STEP_S), "step_peak_a": peak(1, T_STEP_S, T_END_S),
+            "sm_i2_a": peak(1, T_END_S - w, T_END_S), "rm_i1_a": peak(0, T_STEP_S - w, T_STEP_S),
+            "sm_i1_a": peak(0, T_END_S - w, T_END_S)}
+
+
+def _run_step(link, x0):
+    """Gate off until T_STEP_S, on after (both lower switches), inverter +Vdc on [0, T), from T/2."""
+    from wpt_receiver.switching import Schedule
+    T = link.T
+    edges = np.union1d(np.arange(T, T_END_S + 0.5 * T, T), [T / 2, T_STEP_S])
+    edges = edges[edges <= T_END_S + 1e-15]
+    edges[-1] = T_END_S
+    mid = 0.5 * (edges[:-1] + edges[1:])
+    cmd = np.where(np.floor(mid / T) % 2 == 0, 1, -1)
+    gate = (mid >= T_STEP_S).astype(int)
+    return link.run(Schedule(edges, cmd, gate), x0)
+
+
+PRESETS = ("ideal", "schottky", "sic")
+
+
+def netlist_path(name: str) -> Path:
+    return HERE / f"link_{name}.cir"
+
+
+def main() -> None:
+    """Regenerate the netlists and, with ngspice, the reference numbers: ``python tests/_spice.py``."""
+    import json
+    import tempfile
+
+    from wpt_receiver.devices import preset
+    ref = {"scenario": {"t_step_s": T_STEP_S, "t_end_s": T_END_S, "keys": list(KEYS)},
+           "ngspice": subprocess.run(["ngspice", "-v"], capture_output=True, text=True).stdout.strip().splitlines()[-1],
+           "results": {}}
+    for name in PRESETS:
+        text = netlist(dv=preset(name), label=name)
+        netlist_path(name).write_text(text)
+        with tempfile.TemporaryDirectory() as tmp:
+            ref["results"][name] = run_ngspice(text, Path(tmp))
+        print(name, ref["results"][name])
+    (HERE / "reference.json").write_text(json.dumps(ref, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,66 @@
+"""The flight-log tests need nothing outside the repository (issue 16).
+
+A copy of the repository's packages and tests is made in a temporary folder (so there is no
+``../shared`` beside it) and the log tests run there in a separate process, with an audit hook
+that makes every attempt to open a file named like a flight log outside the copy fail. They pass:
+the logs come from ``tests/data/flightlogs``.
+"""
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+from _flightlogs import DATA_DIR, LOG_NAMES, ULOG_NAME
+
+ROOT = Path(__file__).resolve().parents[1]
+GUARD = '''
+import sys
+import tempfile
+from pathlib import Path
+_CLONE = str(Path(__file__).resolve().parents[1])
+_REPO = {repo!r}
+_TMP = str(Path(tempfile.gettempdir()).resolve())
+_LOGS = (".tlog", ".bin", ".ulg", "SOURCES.md")
+
+
+def _hook(event, args):
+    if event == "open" and args and isinstance(args[0], (str, bytes, Path)):
+        p = str(Path(str(args[0] if not isinstance(args[0], bytes) else args[0].decode())).resolve())
+        outside = not p.startswith(_CLONE) and (p.startswith(_REPO + "/") or not p.startswith(_TMP))
+        if p.endswith(_LOGS) and outside:  # temporary copies made by the tests are allowed
+            raise PermissionError(f"test opened a flight log outside the repository: {p}")
+
+
+sys.addaudithook(_hook)
+'''
+
+
+def test_logs_are_in_the_repository():
+    for name in (*LOG_NAMES, ULOG_NAME, "SOURCES.md"):
+        assert (DATA_DIR / name).is_file(), name
+        assert DATA_DIR in (DATA_DIR / name).resolve().parents
+    assert "../shared" not in (ROOT / "tests" / "_flightlogs.py").read_text()
+    sizes = sum((DATA_DIR / n).stat().st_size for n in (*LOG_NAMES, ULOG_NAME))
+    assert sizes < 4e6                     # a few MB in the repository, not the 9 MB originals
+
+
+def test_log_tests_pass_in_a_copy_without_shared(tmp_path):
+    clone = tmp_path / "clone"
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", ".hypothesis")
+    for pkg in ("wpt_receiver", "mission_sim", "envs", "policies", "tests"):
+        shutil.copytree(ROOT / pkg, clone / pkg, ignore=ignore)
+    (clone / "tests" / "_no_shared.py").write_text(GUARD.replace("{repo!r}", repr(str(ROOT))))
+    assert not (tmp_path / "shared").exists()
+    env = {**os.environ, "PYTHONPATH": f"{clone}{os.pathsep}{clone / 'tests'}", "OMP_NUM_THREADS": "1"}
+    env.pop("DRONEWPT_FLIGHTLOGS", None)
+    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", "-p", "_no_shared",
+                        "tests/test_mavlink_io.py", "tests/test_cli_replay_errors.py"],
+                       cwd=clone, env=env, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-2000:]
+    assert " passed" in r.stdout and "failed" not in r.stdout
+    # the guard works: the same hook refuses the repository's own copy (outside the clone)
+    probe = subprocess.run([sys.executable, "-c", f"import _no_shared; open({str(DATA_DIR / 'SOURCES.md')!r})"],
+                           cwd=clone, env=env, capture_output=True, text=True, timeout=60)
+    assert probe.returncode != 0 and "outside the repository" in probe.stderr

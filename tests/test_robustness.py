@@ -1,0 +1,193 @@
+"""Robustness for a newcomer (issue #16): the bad-input table of docs/robustness.md, run row by row
+in-process, plus atomic outputs, the run-size estimate against real runs, and NaN actions in the envs."""
+
+from __future__ import annotations
+
+import json
+import re
+import shlex
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from mission_sim.cli import main
+
+DOC = Path(__file__).resolve().parents[1] / "docs" / "robustness.md"
+_ROW = re.compile(r"^\|\s*`(?P<cmd>[^`]+)`\s*\|\s*(?P<rc>\d+)\s*\|\s*`(?P<text>[^`]+)`\s*\|\s*$")
+
+
+def _table_rows():
+    """(command, exit status, expected text) of every row of the "Bad inputs tried" table."""
+    text = DOC.read_text("utf-8")
+    section = text.split("## Bad inputs tried", 1)[1]
+    rows = [m.groups() for line in section.splitlines() if (m := _ROW.match(line))]
+    return [(cmd, int(rc), expect) for cmd, rc, expect in rows]
+
+
+ROWS = _table_rows()
+
+
+def _run(argv) -> int:
+    try:
+        return int(main(argv))
+    except SystemExit as exc:  # argparse usage errors and --version
+        return int(exc.code or 0)
+
+
+@pytest.fixture
+def bad_inputs_dir(tmp_path, monkeypatch):
+    """The folder the table's commands run in (see docs/robustness.md)."""
+    (tmp_path / "binary.toml").write_bytes(bytes(range(256))[::-1] + b"\x00\xd0\xff" * 15)
+    (tmp_path / "bad.toml").write_text("x = = 1\n")
+    (tmp_path / "a_file").write_text("")
+    (tmp_path / "a_folder").mkdir()
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def test_the_table_has_the_rows():
+    assert len(ROWS) >= 50
+    assert all(rc in (0, 2, 3) for _, rc, _ in ROWS)
+
+
+@pytest.mark.parametrize("cmd,rc,expect", ROWS, ids=[r[0] for r in ROWS])
+def test_bad_input_row(cmd, rc, expect, bad_inputs_dir, capsys):
+    before = set(bad_inputs_dir.rglob("*"))
+    got = _run(shlex.split(cmd))
+    out, err = capsys.readouterr()
+    assert got == rc, (out, err)
+    if rc == 2:
+        lines = err.strip().splitlines()
+        assert len(lines) == 1, err
+        assert expect in lines[0]
+        assert lines[0].startswith("dronewpt")
+        assert "Traceback" not in err
+        # refused before anything was written (the output folder check may create an empty folder)
+        assert all(p.is_dir() for p in set(bad_inputs_dir.rglob("*")) - before)
+    else:
+        assert expect in out + err
+
+
+# ----------------------------------------------------------------------------- atomic outputs
+def _small_result():
+    from mission_sim.world.results import MissionResult
+    ts = pd.DataFrame({"t_s": np.arange(5.0), "soc": np.linspace(0.9, 0.8, 5), "phase": pd.Categorical(["charge"] * 5)})
+    return MissionResult(timeseries=ts, summary={"final_soc": 0.8})
+
+
+def test_interrupted_write_leaves_no_partial_file_and_no_stale_summary(tmp_path, monkeypatch):
+    (tmp_path / "summary.json").write_text('{"stale": true}')
+    (tmp_path / "timeseries.csv").write_text("old,complete\n1,2\n")
+
+    def interrupted(self, path, *a, **k):
+        Path(path).write_text("t_s,so")  # half a line, then Ctrl-C
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pd.DataFrame, "to_csv", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        _small_result().write(tmp_path)
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ["timeseries.csv", "timeseries.parquet"]  # no summary.json, no temporary file
+    assert (tmp_path / "timeseries.csv").read_text() == "old,complete\n1,2\n"  # the old file, untouched
+    assert len(pd.read_parquet(tmp_path / "timeseries.parquet")) == 5  # complete
+
+
+def test_summary_is_written_last(tmp_path):
+    seen = []
+
+    def figures(result, out):
+        seen.append((out / "summary.json").exists())
+        return []
+
+    paths = _small_result().write(tmp_path, figures=figures)
+    assert seen == [False]
+    assert paths[-1].name == "summary.json"
+    assert json.loads(paths[-1].read_text()) == {"final_soc": 0.8}
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+# ----------------------------------------------------------------------------- run size
+def test_size_estimate_brackets_a_real_run():
+    """The estimate is within a factor 2 of the rows a real run produces, for a short and a long hover."""
+    import policies
+    from mission_sim.config import apply_overrides, config_from_dict, config_to_dict, load_config, policy_context
+    from mission_sim.world.budget import check_run_size, estimate_run
+    from mission_sim.world.runner import run_mission
+
+    for hover_s in (60.0, 1000.0):
+        cfg = config_from_dict(apply_overrides(config_to_dict(load_config()), {"pads.1.hover_time_s": hover_s}))
+        est = estimate_run(cfg)
+        rows = len(run_mission(cfg, policies.make("model_based", policy_context(cfg))).timeseries)
+        assert 0.5 * rows < est.rows < 2.0 * rows, (hover_s, est.rows, rows)
+        assert est.key == ("sim.control_period_s" if hover_s < 100 else "pads.1.hover_time_s")
+        assert check_run_size(cfg) == est
+    big = config_from_dict(apply_overrides(config_to_dict(load_config()), {"pads.1.hover_time_s": 1e9}))
+    assert check_run_size(big, force=True).rows > 1e9
+    with pytest.raises(ValueError, match=r"pads\.1\.hover_time_s=1000000000\.0 makes the run too large"):
+        check_run_size(big)
+
+
+# ----------------------------------------------------------------------------- learning, envs
+def test_compare_without_sb3_skips_the_rl_row(monkeypatch, capsys, tmp_path):
+    from mission_sim.cli import learning
+    monkeypatch.setattr(learning, "sb3_installed", lambda: False)
+    assert _run(["compare", "--policies", "step,rl", "--no-plot"]) == 2
+    assert "stable-baselines3" in capsys.readouterr().err
+    monkeypatch.setattr("policies.compare.DEFAULT_POLICIES", ("step", "rl"))
+    assert _run(["compare", "--episodes", "1", "--scenarios", "nominal", "--no-plot", "--format", "json"]) == 0
+    out, err = capsys.readouterr()
+    assert "skipping the rl row" in err
+    assert [r["policy"] for r in json.loads(out)["rows"]] == ["step"]
+
+
+def test_nan_action_is_refused_by_name():
+    from envs import SbarChargingVectorEnv
+    from envs.charging import SbarChargingEnv
+    env = SbarChargingEnv()
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"action=nan is invalid; valid range: \[-1, 1\]"):
+        env.step(np.array([np.nan], dtype=np.float32))
+    venv = SbarChargingVectorEnv(num_envs=3)
+    venv.reset(seed=0)
+    with pytest.raises(ValueError, match=r"actions\[1\]=inf is invalid"):
+        venv.step(np.array([[0.0], [np.inf], [0.0]]))
+
+
+# ----------------------------------------------------------------------------- replay warnings
+def _write_tlog(path: Path, seconds: float, armed_at_end: bool) -> None:
+    """A synthetic .tlog: 5 Hz GPS fix 3 moving east, armed from t = 2 s (to the end, or until 3 s before)."""
+    import os
+    import struct
+    os.environ["MAVLINK20"] = "1"
+    from pymavlink.dialects.v20 import ardupilotmega as mav
+    m = mav.MAVLink(None, srcSystem=1, srcComponent=1)
+    out = bytearray()
+    for k in range(int(seconds * 5)):
+        t = k / 5
+        armed = t >= 2 and (armed_at_end or t < seconds - 3)
+        lon = int(149.16523e7 + t * 100)
+        msgs = [m.gps_raw_int_encode(int(t * 1e6), 3, int(-35.363261e7), lon, 584000, 100, 100, 0, 0, 10),
+                m.global_position_int_encode(int(t * 1e3), int(-35.363261e7), lon, 584000, 0, 0, 0, 0, 0)]
+        if k % 5 == 0:
+            msgs.append(m.heartbeat_encode(2, 3, 128 * armed | 1, 4, 4))
+        for msg in msgs:
+            out += struct.pack(">Q", int((1.7e9 + t) * 1e6)) + msg.pack(m)
+    path.write_bytes(bytes(out))
+
+
+def test_replay_warns_on_a_log_ending_armed_and_a_far_pad(tmp_path):
+    from mission_sim.mavlink.geodesy import GeoPoint
+    from mission_sim.mavlink.logs import read_log
+    from mission_sim.mavlink.replay import replay_warnings, track_from_log
+    _write_tlog(tmp_path / "cut.tlog", 20.0, armed_at_end=True)
+    _write_tlog(tmp_path / "whole.tlog", 20.0, armed_at_end=False)
+    cut, whole = read_log(tmp_path / "cut.tlog"), read_log(tmp_path / "whole.tlog")
+    assert len(whole.position) == 100
+    assert replay_warnings(whole, track_from_log(whole)) == []
+    (w,) = replay_warnings(cut, track_from_log(cut))
+    assert "ends while the vehicle is armed" in w
+    far = GeoPoint(35.363261, -149.16523, None)  # signs swapped: the other side of the Earth
+    (w,) = replay_warnings(whole, track_from_log(whole, pad=far))
+    assert re.search(r"is \d{4,5} km from the nearest point of the track", w)

@@ -1,0 +1,81 @@
+"""Rectifier sizing (wpt_receiver.sizing, ``dronewpt sizing``): currents from the exact switching
+model, ratings, part choice and the mass model."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from wpt_receiver import TABLE_I as P
+from wpt_receiver.devices import parts, preset
+from wpt_receiver.sizing import SizingRules, candidates, rectifier_currents, size_policies
+from wpt_receiver.switching import SwitchingConfig, SwitchingLink
+
+T = P.rectifier_period_s
+DV = preset("schottky")
+
+
+def test_rm_currents_are_the_half_wave_split():
+    """In RM steady state each upper diode carries every other half-cycle: twice its average
+    is the battery current (exact charge integral), and the two diodes' mean squares add up to
+    the mean i2^2 (exact); a lower switch carries its body-diode half the same."""
+    link = SwitchingLink(P, SwitchingConfig(devices=DV))
+    res = link.run(link.schedule(0.0, 40 * T, 0.0), link.periodic_steady_state(0.0))
+    c = rectifier_currents(res, window_s=20 * T, per_half_cycle=256)
+    e = res.energy_balance(0.0, 40 * T)
+    assert 2 * c["diode_avg_a"] == pytest.approx(e["charge_c"] / (40 * T), rel=2e-3)
+    r2 = res.quadratic_integrals(0.0, 40 * T, [lambda k: (np.eye(link.cir.m)[2], np.eye(link.cir.m)[2])])[0] / (40 * T)
+    assert 2 * c["diode_rms_a"] ** 2 == pytest.approx(r2, rel=2e-3)
+    assert c["switch_rms_a"] == pytest.approx(c["diode_rms_a"], rel=1e-6)  # no short in RM
+    assert c["peak_i2_a"] > math.sqrt(2) * c["diode_rms_a"]  # i2 peak vs its RMS sqrt(2) * diode RMS
+    # the worst-window loss is the average loss in a steady state: exact integral of the groups
+    loss = (e["rectifier_diodes_loss_j"] + e["rectifier_switches_loss_j"]) / (40 * T)
+    assert c["conduction_loss_w"] == pytest.approx(loss, rel=2e-3)
+
+
+@pytest.fixture(scope="module")
+def rows():
+    return {r["policy"]: r for r in size_policies(["step", "proposed"], P, DV, t_end_s=4e-3)}
+
+
+def test_step_needs_a_heavier_rectifier_than_the_proposed_controller(rows):
+    step, prop = rows["step"], rows["proposed"]
+    assert step["peak_i2_a"] > 4 * prop["peak_i2_a"]
+    assert step["required_rating_a"] == pytest.approx(1.25 * step["peak_i2_a"], rel=0.02)
+    assert step["mass_g"] > 1.5 * prop["mass_g"]
+    table = parts()
+    for r in rows.values():
+        dio, sw = [p.split("x") for p in r["part"].split("/")]
+        for (name, n), kind in ((dio, "diode"), (sw, "switch")):
+            row = table[kind][name]
+            assert int(n) * row["rating_a"] >= r["required_rating_a"]  # rated for the peak
+            assert row["v_rating_v"] >= 1.5 * P.vl_v
+        assert r["mass_g"] == pytest.approx(r["device_mass_g"] + r["sink_mass_g"])
+        assert r["conduction_loss_w"] > 0 and r["sink_mass_g"] == pytest.approx(SizingRules().sink_mass_g(
+            r["conduction_loss_w"]))
+
+
+def test_candidates_and_sink_model():
+    c = {r["name"]: r["n"] for r in candidates(40.0, 45.0, "diode")}
+    assert c["30CTT045"] == 3 and c["C5D50065D"] == 1
+    assert "BSC150N03LD" not in {r["name"] for r in candidates(10.0, 45.0, "switch")}  # 30 V part
+    with pytest.raises(ValueError, match="no switch"):
+        candidates(10.0, 1e4, "switch")
+    r = SizingRules()
+    assert r.sink_mass_g(2.0) == pytest.approx(2 * r.sink_mass_g(1.0)) and r.sink_mass_g(0.0) == 0.0
+    with pytest.raises(ValueError, match="margin"):
+        SizingRules(margin=0.9)
+
+
+def test_cli_sizing_json(capsys, tmp_path):
+    from mission_sim.cli import main
+    assert main(["sizing", "--policies", "step,proposed", "--t-end", "0.004", "--format", "json",
+                 "--out", str(tmp_path), "--no-progress"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    rows = {r["policy"]: r for r in out["rows"]}
+    for key in ("peak_i2_a", "diode_rms_a", "switch_rms_a", "required_rating_a", "part", "mass_g", "conduction_loss_w"):
+        assert key in rows["step"]
+    assert rows["step"]["mass_g"] > rows["proposed"]["mass_g"]
+    assert (tmp_path / "sizing.png").stat().st_size > 10_000
+    assert main(["sizing", "--policies", "nope"]) == 2

@@ -1,0 +1,51 @@
+"""Start-up structure: the CLI and the mission path import only what they use (issue 14).
+
+Each check runs in a fresh interpreter (``sys.modules`` of this test process is polluted by
+other tests). No timings are asserted, only which modules got imported.
+"""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+HEAVY = ("pandas", "scipy", "scipy.signal", "matplotlib", "torch", "stable_baselines3", "dask", "pymavlink",
+         "gymnasium", "numba")
+
+
+def _imported(code: str, names=HEAVY) -> list[str]:
+    """The subset of ``names`` in ``sys.modules`` after running ``code`` in a fresh interpreter."""
+    probe = f"{code}\nimport json, sys\nprint(json.dumps([m for m in {list(names)!r} if m in sys.modules]))"
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env, cwd=ROOT,
+                         timeout=120, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_cli_import_is_argparse_level():
+    assert _imported("import mission_sim.cli") == []
+
+
+def test_cli_help_imports_nothing_heavy():
+    code = ("import contextlib, io, mission_sim.cli as c\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            "    try:\n        c.main(['--help'])\n    except SystemExit:\n        pass")
+    assert _imported(code) == []
+
+
+@pytest.mark.parametrize("module", ["mission_sim.config", "mission_sim.world.runner", "policies", "envs"])
+def test_mission_path_skips_signal_plotting_and_torch(module):
+    # scipy.signal alone costs ~1.2 s to import; the mission needs none of it (wpt_receiver.lti)
+    got = _imported(f"import {module}", ("scipy.signal", "matplotlib", "torch", "stable_baselines3", "dask",
+                                          "pymavlink", "numba"))
+    assert got == []
+
+
+def test_model_based_policy_built_without_scipy_signal():
+    code = ("import policies\nfrom mission_sim.contract import PolicyContext\n"
+            "p = policies.make('model_based', PolicyContext())")
+    assert "scipy.signal" not in _imported(code)
