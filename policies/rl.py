@@ -72,6 +72,8 @@ class RLPolicy:
             self._clip = float(norm["clip"])
         else:
             self._mean = None
+        # models trained on the 7-field contract (before t_since_stop_s) see the first obs_dim fields
+        self.obs_dim = int(self.meta.get("obs_dim", self.model.observation_space.shape[0]))
         self.deterministic = bool(deterministic)
         # predict() costs 0.15-1 ms a call; the actor exported to numpy ~10 us, same actions to float32
         # round-off (1 ulp). fast=False keeps predict() (bit-identical to SB3).
@@ -82,7 +84,7 @@ class RLPolicy:
         self.n = int(n)
 
     def normalise(self, obs) -> np.ndarray:
-        o = np.atleast_2d(np.asarray(obs, dtype=np.float32))
+        o = np.atleast_2d(np.asarray(obs, dtype=np.float32))[:, :self.obs_dim]
         if self._mean is None:
             return o
         return np.minimum(np.maximum((o - self._mean) * self._scale, -self._clip), self._clip)  # np.clip: slow at n=1

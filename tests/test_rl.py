@@ -51,7 +51,7 @@ def test_brief_training_improves_on_its_own_initialisation(brief_ppo, tmp_path):
 def test_training_writes_everything_and_is_reproducible(brief_ppo, tmp_path):
     assert brief_ppo["model"].stat().st_size < 1_000_000
     meta = json.loads(brief_ppo["meta"].read_text())
-    assert meta["seed"] == 0 and meta["timesteps"] == 24_576 and len(meta["obs_norm"]["mean"]) == 7
+    assert meta["seed"] == 0 and meta["timesteps"] == 24_576 and len(meta["obs_norm"]["mean"]) == 8
     assert brief_ppo["learning_curve"].stat().st_size > 1000
     assert len(list(brief_ppo["monitor_dir"].glob("*.monitor.csv"))) == 4
     from policies.train import train
