@@ -193,7 +193,7 @@ class SbarChargingEnv(gym.Env):
                         -1.0 if o2 < -1.0 else (1.0 if o2 > 1.0 else o2),
                         -1.0 if o3 < -1.0 else (1.0 if o3 > 1.0 else o3),
                         -1.0 if o4 < -1.0 else (1.0 if o4 > 1.0 else o4),
-                        cmd_next * _S5 + _O5, d * _S6 + _O6, self._t_since(k) * _S7 + _O7], dtype=np.float32)
+                        cmd_next * _S5 + _O5, d * _S6 + _O6, _n(self._t_since(k), 7)], dtype=np.float32)
         info = {"t_s": k * self._dt, "i2_a": i2, "i2_peak_a": peak, "i1_a": i1, "d_short": d, "v2_v": v2,
                 "rect_current_a": il, "battery_v": vl, "battery_current_a": ib, "soc": soc,
                 "charge_cmd_a": cmd, "lm_h": self._lm[(k - 1) // self._M], "energy_j": energy, "cost": cost,
