@@ -16,7 +16,13 @@ envs and wrappers. SB3 semantics:
   ``overshoot``, ``reached_short_mode``, ``overcurrent_cost`` (sum of the per-step overcurrent
   term), ``energy_after_stop_j``, for ``VecMonitor(..., info_keywords=EPISODE_KEYS)``;
 * the per-step cost of the last step is the array attribute ``step_cost`` (the constraint
-  wrappers read it without going through ``infos``).
+  wrappers read it without going through ``infos``);
+* **cost definition** ``cost=``: ``"overshoot"`` (default; the env's ``info["cost"]``, the rise of
+  the running overshoot after the stop, summing to ``max(0, overshoot)`` per window,
+  :mod:`envs.objective`) or ``"overcurrent"`` (``max(0, |I2|_pk / I2_rated - 1)`` per step);
+  ``episode_cost`` is the window's sum of the chosen per-step cost;
+* **fixed seeds** ``reset_seed=s``: every ``reset()`` re-seeds sub-env ``i`` with ``s + i`` (an
+  evaluation set that is the same windows at every evaluation, for ``EvalCallback``).
 """
 
 from __future__ import annotations
@@ -30,13 +36,18 @@ from .vector import SbarChargingDiscreteVectorEnv, SbarChargingVectorEnv
 __all__ = ["SbarSB3VecEnv", "EPISODE_KEYS"]
 
 EPISODE_KEYS = ("episode_cost", "overshoot", "reached_short_mode", "overcurrent_cost", "energy_after_stop_j")
+COSTS = ("overshoot", "overcurrent")
 
 
 class SbarSB3VecEnv(VecEnv):
     """``num_envs`` charging windows as one SB3 ``VecEnv`` (continuous, or ``discrete=True`` ON-OFF)."""
 
     def __init__(self, num_envs: int = 64, scenario="random", config: EnvConfig | None = None,
-                 discrete: bool = False):
+                 discrete: bool = False, cost: str = "overshoot", reset_seed: int | None = None):
+        if cost not in COSTS:
+            raise ValueError(f"cost={cost!r} is invalid; valid values: {', '.join(COSTS)}")
+        self.cost = cost
+        self.reset_seed = None if reset_seed is None else int(reset_seed)
         cls = SbarChargingDiscreteVectorEnv if discrete else SbarChargingVectorEnv
         self.venv = cls(num_envs=num_envs, scenario=scenario, config=config)
         self.render_mode = None
@@ -44,7 +55,7 @@ class SbarSB3VecEnv(VecEnv):
         n = self.num_envs
         self._actions = None
         self.step_cost = np.zeros(n)
-        self._acc = np.zeros((2, n))   # overcurrent cost, energy after the stop, of the running windows
+        self._acc = np.zeros((3, n))   # overcurrent cost, energy after the stop, chosen cost, of the running windows
 
     @property
     def config(self) -> EnvConfig:
@@ -55,6 +66,8 @@ class SbarSB3VecEnv(VecEnv):
         return self.venv.policy_context
 
     def reset(self):
+        if self.reset_seed is not None:
+            self.seed(self.reset_seed)
         seeds = None if all(s is None for s in self._seeds) else [0 if s is None else int(s) for s in self._seeds]
         opts = self._options[0] or None
         obs, _ = self.venv.reset(seed=seeds, options=opts)
@@ -70,15 +83,16 @@ class SbarSB3VecEnv(VecEnv):
 
     def step_wait(self):
         obs, reward, term, trunc, info = self.venv.step(self._actions)
-        self.step_cost = info["cost"]
+        self.step_cost = info["cost"] if self.cost == "overshoot" else info["overcurrent"]
         after = info["charge_cmd_a"] == 0.0
         self._acc[0] += info["overcurrent"]
         self._acc[1] += np.where(after, info["energy_j"], 0.0)
+        self._acc[2] += self.step_cost
         done = term | trunc
         infos = [{} for _ in range(self.num_envs)]
         if done.any():
             idx = np.flatnonzero(done)
-            summary = {"episode_cost": info["episode_cost"], "overshoot": info["overshoot"],
+            summary = {"episode_cost": self._acc[2], "overshoot": info["overshoot"],
                        "reached_short_mode": info["reached_short_mode"], "overcurrent_cost": self._acc[0],
                        "energy_after_stop_j": self._acc[1]}
             for i in idx.tolist():

@@ -33,7 +33,10 @@ from mission_sim.contract import OBS_DIM, PolicyContext, duty_to_action
 
 from .classical import ModelBasedPolicy
 
-__all__ = ["CostPenaltyVecEnv", "LagrangeCallback", "ResidualVecEnv", "residual_obs", "residual_duty", "RESIDUAL_SCALE"]
+__all__ = ["CostPenaltyVecEnv", "LagrangeCallback", "ResidualVecEnv", "residual_obs", "residual_duty", "RESIDUAL_SCALE",
+           "ramp_budget", "BUDGET_EPISODES", "BUDGET_SEED"]
+
+BUDGET_EPISODES, BUDGET_SEED = 256, 700_000   # windows and seeds the default budget is measured on
 
 RESIDUAL_SCALE = 0.25   # largest duty correction the residual agent may add [-]
 
@@ -147,3 +150,22 @@ def residual_duty(d_base, action, scale: float) -> np.ndarray:
     """``clip(d_base + scale a, 0, 1)``: the duty a residual agent's action ``a`` gives."""
     return np.clip(np.asarray(d_base, dtype=float) + scale * np.asarray(action, dtype=float).reshape(-1), 0.0, 1.0)
 
+
+
+def ramp_budget(scenario="random", config=None, cost: str = "overshoot") -> float:
+    """Default cost budget: the ramp policy's mean episode cost on ``scenario`` (BUDGET_EPISODES
+    windows, seeds BUDGET_SEED + i): "no more overshoot than the ramp" (the paper's ramp slope)."""
+    from envs.sb3_vec import SbarSB3VecEnv
+
+    from .classical import RampPolicy
+
+    venv = SbarSB3VecEnv(BUDGET_EPISODES, scenario, config, cost=cost, reset_seed=BUDGET_SEED)
+    pol = RampPolicy(venv.policy_context)
+    pol.reset(BUDGET_EPISODES)
+    obs, costs = venv.reset(), np.zeros(BUDGET_EPISODES)
+    for _ in range(venv.config.n_steps):
+        obs, _, done, infos = venv.step(duty_to_action(pol.act(obs))[:, None].astype(np.float32))
+    costs = np.array([inf["episode_cost"] for inf in infos])
+    if not done.all():
+        raise RuntimeError("ramp_budget: windows did not end together")
+    return float(costs.mean())

@@ -24,9 +24,10 @@ from mission_sim.contract import PolicyContext, action_to_duty
 
 from .inference import export_actor
 
-__all__ = ["RLPolicy", "PRETRAINED", "load_meta", "ALGOS"]
+__all__ = ["RLPolicy", "PRETRAINED", "PRETRAINED_LAGRANGIAN", "load_meta", "ALGOS"]
 
 PRETRAINED = Path(__file__).parent / "pretrained" / "ppo_sbar.zip"
+PRETRAINED_LAGRANGIAN = Path(__file__).parent / "pretrained" / "ppo_lagrangian.zip"
 ALGOS = ("ppo", "sac", "dqn")
 
 
@@ -53,10 +54,14 @@ class RLPolicy:
 
     name = "rl"
 
-    def __init__(self, ctx: PolicyContext = PolicyContext(), path=None, deterministic: bool = True, fast: bool = True):
+    def __init__(self, ctx: PolicyContext = PolicyContext(), path=None, deterministic: bool = True, fast: bool = True,
+                 residual: bool = False):
         self.ctx = ctx
         self.path = Path(PRETRAINED if path is None else path)
         self.meta = load_meta(self.path)
+        if self.meta.get("residual") and not residual:
+            raise ValueError(f"{self.path.name} is a residual model: run it as residual:{self.path} "
+                             "(it corrects the model-based duty)")
         dt = float(self.meta["control_period_s"])
         if abs(ctx.control_period_s - dt) > 1e-9 * dt:
             raise ValueError(f"control_period_s={ctx.control_period_s!r} is invalid for {self.path.name}; "

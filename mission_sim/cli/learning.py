@@ -9,6 +9,7 @@ from pathlib import Path
 from .common import (
     CliError,
     add_progress_flag,
+    float_arg,
     lazy_names_help,
     policy_names,
     prepare_out_dir,
@@ -21,32 +22,88 @@ from .common import (
 def _add_train(sub):
     p = sub.add_parser("train", help="train an RL mode-switching policy (stable-baselines3)",
                        description="Train PPO or SAC on dronewpt/SbarCharging-v0 or DQN on the discrete "
-                                   "(ON-OFF) variant; writes the model zip, its metadata JSON with the "
-                                   "observation normalisation statistics, Monitor CSVs and a learning curve PNG.")
+                                   "(ON-OFF) variant on the batched env adapter; optionally Lagrangian "
+                                   "(episode cost against a budget) and / or residual on the model-based "
+                                   "controller. Writes the model zip, its metadata JSON, vecnormalize.pkl, "
+                                   "the Monitor CSV (return and cost), evaluation on held-out seeds "
+                                   "(best model, curve), checkpoints, TensorBoard logs when installed and a "
+                                   "learning curve PNG.")
     p.add_argument("--algo", choices=("ppo", "sac", "dqn"), required=True)
     p.add_argument("--timesteps", type=int, required=True, help="environment steps to train for")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--seed", type=seed_int(), default=0, help="seed, 0 .. 2^32-1 (default 0)")
-    p.add_argument("--n-envs", type=int, default=1, help="parallel environments (default 1)")
+    p.add_argument("--n-envs", type=int, default=64, help="parallel windows of the batched env (default 64)")
     lazy_names_help(p.add_argument("--scenario", default="random"),
                     "training scenario (default random: domain randomisation)", scenario_names)
+    p.add_argument("--hyperparams", type=Path, default=None, metavar="FILE",
+                   help="YAML or JSON model arguments, rl-baselines3-zoo style (policy_kwargs as a dict or "
+                        "'dict(...)'); override the defaults")
+    p.add_argument("--env", action="append", default=[], metavar="KEY=VALUE",
+                   help="env config / reward weight override, repeatable: n_steps, slow_every, rated_i2_a, "
+                        "bus_c_f, dt_s, tracking, overcurrent, i_ref_a")
+    p.add_argument("--cost", choices=("overshoot", "overcurrent"), default="overshoot",
+                   help="episode cost: overshoot = max(0, peak |I2| after the stop / true short-mode I2 - 1) "
+                        "(default); overcurrent = sum of max(0, |I2|/rated - 1) per step")
+    p.add_argument("--lagrangian", action="store_true", help="learn a multiplier of the episode cost against --budget")
+    p.add_argument("--budget", type=float_arg("--budget", positive=True), default=None,
+                   help="mean episode cost allowed (default: the ramp policy's on the training scenario)")
+    p.add_argument("--lambda-lr", type=float_arg("--lambda-lr", positive=True), default=50.0,
+                   help="multiplier step per rollout at a cost 100 %% over budget (default 50)")
+    p.add_argument("--residual", action="store_true", help="learn a bounded correction of the model-based duty")
+    p.add_argument("--residual-scale", type=float_arg("--residual-scale", positive=True, hi=1.0), default=0.25,
+                   help="largest duty correction (default 0.25)")
+    p.add_argument("--eval-every", type=int, default=50_000, help="env steps between evaluations (default 50000)")
+    p.add_argument("--eval-episodes", type=int, default=32, help="held-out evaluation windows (default 32)")
+    p.add_argument("--checkpoint-every", type=int, default=100_000, help="env steps between checkpoints")
+    p.add_argument("--resume", type=Path, default=None, metavar="CHECKPOINT.zip",
+                   help="continue from a checkpoint of checkpoints/ (its VecNormalize statistics next to it)")
     add_progress_flag(p)
     p.set_defaults(func=_cmd_train)
 
 
-def _cmd_train(args) -> int:
+def _env_overrides(items) -> dict:
+    from .common import parse_set
+    out = {}
+    for k, v in parse_set(items).items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise CliError(f"--env {k}={v!r} is invalid; valid: KEY=NUMBER")
+        out[k] = v
+    return out
+
+
+def _check_train(args):
     if args.timesteps < 1:
         raise CliError(f"--timesteps {args.timesteps} is invalid; valid range: >= 1")
-    if not 1 <= args.n_envs <= 256:
-        raise CliError(f"--n-envs {args.n_envs} is invalid; valid range: 1..256")
+    if not 1 <= args.n_envs <= 1024:
+        raise CliError(f"--n-envs {args.n_envs} is invalid; valid range: 1..1024")
+    for flag, v in (("--eval-every", args.eval_every), ("--eval-episodes", args.eval_episodes),
+                    ("--checkpoint-every", args.checkpoint_every)):
+        if v < 1:
+            raise CliError(f"{flag} {v} is invalid; valid range: >= 1")
     if args.scenario not in scenario_names():
         raise CliError(f"--scenario {args.scenario!r} is invalid; valid values: {', '.join(scenario_names())}")
+    for flag, path in (("--hyperparams", args.hyperparams), ("--resume", args.resume)):
+        if path is not None and not path.is_file():
+            raise CliError(f"{flag} {str(path)!r} does not exist")
+    if args.budget is not None and not args.lagrangian:
+        raise CliError("--budget is only used with --lagrangian; add --lagrangian or drop --budget")
+
+
+def _cmd_train(args) -> int:
+    _check_train(args)
+    env = _env_overrides(args.env)
     from policies import require_sb3
     require_sb3()
     prepare_out_dir(args.out)
     from policies.train import train
-    res = train(args.algo, args.timesteps, args.out, seed=args.seed, n_envs=args.n_envs, scenario=args.scenario,
-                progress=show_progress(args))
+    try:
+        res = train(args.algo, args.timesteps, args.out, seed=args.seed, n_envs=args.n_envs, scenario=args.scenario,
+                    progress=show_progress(args), hyperparams_file=args.hyperparams, env=env, cost=args.cost,
+                    lagrangian=args.lagrangian, budget=args.budget, lambda_lr=args.lambda_lr, residual=args.residual,
+                    residual_scale=args.residual_scale, eval_every=args.eval_every,
+                    eval_episodes=args.eval_episodes, checkpoint_every=args.checkpoint_every, resume=args.resume)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
     for key, path in res.items():
         print(f"{key}: {path}")
     return 0
