@@ -63,6 +63,7 @@ _REGISTRY: dict[str, Callable[..., Policy]] = {
     "rl": _rl,
     "ppo_lagrangian": _ppo_lagrangian,
     "residual": _residual,
+    "model_based_budget": _budgeted,
 }
 #: names that take a model file as ``name:PATH``
 _WITH_PATH = ("rl", "ppo_lagrangian", "residual")
@@ -80,6 +81,11 @@ def available() -> list[str]:
 def make(name: str, ctx: PolicyContext | None = None, **kwargs) -> Policy:
     """A fresh policy by name (``"rl:PATH"`` loads an SB3 model file); ``ValueError`` naming the valid names."""
     base, _, arg = name.partition(":")
+    if arg and base == "model_based_budget":   # model_based_budget:0.02 = overshoot budget 2 %
+        try:
+            return _REGISTRY[base](ctx or PolicyContext(), **{**kwargs, "budget": float(arg)})
+        except ValueError as exc:
+            raise ValueError(f"policy={name!r} is invalid: {exc}") from None
     if base not in _REGISTRY or (arg and base not in _WITH_PATH):
         raise ValueError(f"policy={name!r} is invalid; valid values: {', '.join(available())} "
                          f"(or {':PATH, '.join(_WITH_PATH)}:PATH)")

@@ -144,6 +144,9 @@ class ModelBasedPolicy(_CommandPolicy):
     def _act1(self, obs):
         """:meth:`act` for one receiver on Python floats (numpy's per-call overhead was 30 us at n = 1)."""
         cmd, vl = denormalise_obs_field(obs, _I_CMD), denormalise_obs_field(obs, _I_VL)
+        return np.array([duty_from_v2_clipped(self._ctl.update1(self._i2_ref1(cmd, vl)), vl)])
+
+    def _i2_ref1(self, cmd: float, vl: float) -> float:
+        """:meth:`i2_ref` for one receiver on floats."""
         wlm_v1, det, r1 = self._consts
-        ref = (wlm_v1 - r1 * _target_v2_scalar(self._consts, cmd, vl)) / det
-        return np.array([duty_from_v2_clipped(self._ctl.update1(ref), vl)])
+        return (wlm_v1 - r1 * _target_v2_scalar(self._consts, cmd, vl)) / det
