@@ -65,22 +65,43 @@ class CostPenaltyVecEnv(VecEnvWrapper):
 
 
 class LagrangeCallback(BaseCallback):
-    """Dual ascent on the multiplier after every rollout; history in ``history`` and ``path`` (JSON)."""
+    """Dual ascent on the multiplier after every rollout; history in ``history`` and ``path`` (JSON).
+
+    ``J_c`` is the mean episode cost of the windows that ended in the rollout (``probe=None``), or
+    of a batch of windows run with the *deterministic* policy on ``probe`` (a VecEnv with the
+    training stack below VecNormalize; fresh windows every time). The probe is the default of
+    ``train``: at 10 kHz the Gaussian exploration dithers the duty next to the link's 4 kHz resonance
+    and the stochastic rollouts overshoot by 10-30 % whatever the mean action, so a budget of a few
+    % on them is infeasible and the multiplier only grows; the constraint is meant for the policy
+    that is deployed (its mean action)."""
 
     def __init__(self, penalty: CostPenaltyVecEnv, budget: float, lr: float = 50.0, lam_max: float = 5000.0,
-                 path=None):
+                 path=None, probe=None):
         super().__init__()
         if not (np.isfinite(budget) and budget > 0):
             raise ValueError(f"budget={budget!r} is invalid; valid range: (0, inf) (an overshoot fraction)")
         self.penalty, self.budget, self.lr, self.lam_max = penalty, float(budget), float(lr), float(lam_max)
         self.path = None if path is None else Path(path)
+        self.probe = probe
         self.history: list[tuple[int, float, float]] = []
 
     def _on_step(self) -> bool:
         return True
 
+    def _probe_costs(self) -> list[float]:
+        """Episode costs of one batch of deterministic windows on the probe env."""
+        norm = self.model.get_vec_normalize_env()
+        obs = self.probe.reset()
+        while True:
+            o = norm.normalize_obs(obs) if norm is not None else obs
+            obs, _, done, infos = self.probe.step(self.model.predict(o, deterministic=True)[0])
+            if done.all():
+                return [inf["episode_cost"] for inf in infos]
+
     def _on_rollout_end(self) -> None:
         costs = self.penalty.pop_episode_costs()
+        if self.probe is not None:
+            costs = self._probe_costs()
         if not costs:
             return
         jc = float(np.mean(costs))
@@ -91,7 +112,7 @@ class LagrangeCallback(BaseCallback):
         self.logger.record("lagrange/episode_cost", jc)
         if self.path is not None:
             self.path.write_text(json.dumps({"budget": self.budget, "lr": self.lr, "lambda": self.penalty.lam,
-                                             "history": self.history}))
+                                             "probe": self.probe is not None, "history": self.history}))
 
 
 def residual_obs(obs: np.ndarray, d_base: np.ndarray) -> np.ndarray:

@@ -91,7 +91,10 @@ def plot_learning_curve(monitor_csv, out_png, title: str, eval_curve=None) -> Pa
         y = df[col].to_numpy(dtype=float)
         ax.plot(steps, y, ".", ms=2, alpha=0.3, label=f"training {lab}")
         w = max(1, len(y) // 20)
-        ax.plot(steps[w - 1:], np.convolve(y, np.ones(w) / w, mode="valid"), lw=2, label=f"mean of {w}")
+        if len(y):
+            ax.plot(steps[w - 1:], np.convolve(y, np.ones(w) / w, mode="valid"), lw=2, label=f"mean of {w}")
+        else:
+            ax.text(0.5, 0.5, "no window finished yet", transform=ax.transAxes, ha="center")
         ax.set_ylabel(lab)
         ax.grid(alpha=0.3)
     if eval_curve:
@@ -151,6 +154,20 @@ def _base_env(spec: dict, n_envs: int, monitor_path, reset_seed=None):
     return VecMonitor(venv, None if monitor_path is None else str(monitor_path), info_keywords=EPISODE_KEYS)
 
 
+def _checkpoint_pkl(zip_path: Path) -> Path:
+    """The VecNormalize statistics saved with a model: ``<p>_vecnormalize_<n>_steps.pkl`` next to a
+    ``CheckpointCallback`` file ``<p>_<n>_steps.zip``, else ``vecnormalize.pkl`` in its folder."""
+    import re
+
+    m = re.fullmatch(r"(.*)_(\d+)_steps\.zip", zip_path.name)
+    pkl = zip_path.with_name(f"{m.group(1)}_vecnormalize_{m.group(2)}_steps.pkl") if m else None
+    if pkl is None or not pkl.is_file():
+        pkl = zip_path.with_name("vecnormalize.pkl")
+    if not pkl.is_file():
+        raise FileNotFoundError(f"resume={str(zip_path)!r}: no VecNormalize statistics next to it ({pkl.name})")
+    return pkl
+
+
 def _build(spec: dict, out: Path, resume):
     """Training env stack, evaluation env stack, model (new or resumed), Lagrange penalty or None."""
     import stable_baselines3 as sb3
@@ -169,10 +186,7 @@ def _build(spec: dict, out: Path, resume):
                             norm_obs=True, norm_reward=False, clip_obs=10.0, gamma=spec["hp"].get("gamma", 0.99))
     cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "dqn": sb3.DQN}[spec["algo"]]
     if resume is not None:
-        resume = Path(resume)
-        pkl = resume.with_name(resume.name.replace("_steps.zip", ".pkl").replace(
-            f"{spec['name']}_", f"{spec['name']}_vecnormalize_"))
-        venv = VecNormalize.load(str(pkl if pkl.is_file() else resume.with_name("vecnormalize.pkl")), venv)
+        venv = VecNormalize.load(str(_checkpoint_pkl(Path(resume))), venv)
         model = cls.load(str(resume), env=venv, device="cpu")
     else:
         venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=spec["hp"].get("gamma", 0.99))
@@ -195,7 +209,8 @@ def _callbacks(spec: dict, out: Path, eval_env, penalty, progress: bool):
                             log_path=str(out / "eval"), best_model_save_path=str(out / "eval"), verbose=0, warn=False)]
     lag = None
     if penalty is not None:
-        lag = LagrangeCallback(penalty, spec["budget"], lr=spec["lambda_lr"], path=out / "lagrange.json")
+        probe = _base_env(spec, spec["probe_episodes"], None) if spec["probe_episodes"] else None
+        lag = LagrangeCallback(penalty, spec["budget"], lr=spec["lambda_lr"], path=out / "lagrange.json", probe=probe)
         cbs.append(lag)
     return CallbackList(cbs), lag, cbs[2]
 
@@ -204,7 +219,8 @@ def _reproduce(spec: dict) -> str:
     cmd = (f"dronewpt train --algo {spec['algo']} --timesteps {spec['timesteps']} --seed {spec['seed']} "
            f"--n-envs {spec['n_envs']} --scenario {spec['scenario']} --cost {spec['cost']}")
     if spec["lagrangian"]:
-        cmd += f" --lagrangian --budget {spec['budget']:.6g} --lambda-lr {spec['lambda_lr']:g}"
+        cmd += (f" --lagrangian --budget {spec['budget']:.6g} --lambda-lr {spec['lambda_lr']:g}"
+                f" --probe-episodes {spec['probe_episodes']}")
     if spec["residual"]:
         cmd += f" --residual --residual-scale {spec['residual_scale']:g}"
     if spec["env_overrides"]:
@@ -224,7 +240,9 @@ def _meta(spec: dict, venv, lag, probe_dt: float) -> dict:
         "hyperparams_file": spec["hyperparams_file"], "env_config": config_dict(spec["config"]),
         "env_overrides": spec["env_overrides"], "cost": spec["cost"],
         "budget": spec["budget"], "budget_source": spec["budget_source"],
-        "lagrangian": None if lag is None else {"lr": lag.lr, "lambda": lag.penalty.lam, "history": lag.history},
+        "lagrangian": None if lag is None else {"lr": lag.lr, "lambda": lag.penalty.lam, "history": lag.history,
+                                                "cost_from": f"{spec['probe_episodes']} deterministic windows per rollout"
+                                                if spec["probe_episodes"] else "the stochastic rollouts"},
         "residual": {"scale": spec["residual_scale"], "base": "model_based"} if spec["residual"] else None,
         "obs_norm": {"mean": venv.obs_rms.mean.tolist(), "var": venv.obs_rms.var.tolist(),
                      "clip": float(venv.clip_obs), "epsilon": float(venv.epsilon)},
@@ -234,9 +252,8 @@ def _meta(spec: dict, venv, lag, probe_dt: float) -> dict:
 
 
 def _spec(algo, timesteps, seed, n_envs, scenario, hyperparams, hyperparams_file, env_overrides, cost, lagrangian,
-          budget, lambda_lr, residual, residual_scale, vec, name, eval_episodes, eval_every, checkpoint_every):
-    import importlib.util
-
+          budget, lambda_lr, residual, residual_scale, vec, name, eval_episodes, eval_every, checkpoint_every,
+          probe_episodes):
     import envs
 
     hp = dict(DEFAULT_HYPERPARAMS[algo])
@@ -251,7 +268,8 @@ def _spec(algo, timesteps, seed, n_envs, scenario, hyperparams, hyperparams_file
                 lambda_lr=float(lambda_lr), lambda0=0.0, residual=bool(residual), residual_scale=float(residual_scale),
                 vec=vec, name=name or f"{algo}_sbar", eval_episodes=int(eval_episodes), eval_every=int(eval_every),
                 checkpoint_every=int(checkpoint_every), env_id=envs.DISCRETE_ENV_ID if algo == "dqn" else envs.ENV_ID,
-                tb=None, budget=None if budget is None else float(budget), budget_source="given")
+                tb=None, budget=None if budget is None else float(budget), budget_source="given",
+                probe_episodes=int(probe_episodes))
     if lagrangian and budget is None:
         from .constrained import ramp_budget
         spec["budget"], spec["budget_source"] = ramp_budget(scenario, cfg, cost), "ramp policy's mean episode cost"
@@ -264,13 +282,16 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
           progress: bool = True, hyperparams: dict | None = None, hyperparams_file=None, env: dict | None = None,
           cost: str = "overshoot", lagrangian: bool = False, budget: float | None = None, lambda_lr: float = 50.0,
           residual: bool = False, residual_scale: float = 0.25, vec: str = "batched", name: str | None = None,
-          eval_episodes: int = 32, eval_every: int = 50_000, checkpoint_every: int = 100_000, resume=None) -> dict:
+          eval_episodes: int = 32, eval_every: int = 50_000, checkpoint_every: int = 100_000, resume=None,
+          probe_episodes: int = 32) -> dict:
     """Train ``algo`` for ``timesteps`` environment steps; returns a dict of the written paths.
 
     ``env``: EnvConfig / reward-weight overrides (:func:`env_config`); ``cost``: ``overshoot`` or
     ``overcurrent`` (:mod:`envs.sb3_vec`); ``lagrangian``: penalise the cost with a multiplier
     learned against ``budget`` (default: the ramp policy's mean episode cost on ``scenario``);
-    ``residual``: learn a bounded correction ``residual_scale * a`` of the model-based duty.
+    ``residual``: learn a bounded correction ``residual_scale * a`` of the model-based duty;
+    ``probe_episodes``: the multiplier's cost is measured on this many deterministic windows after
+    every rollout (0: on the stochastic rollouts themselves, see :class:`policies.constrained.LagrangeCallback`).
     Deterministic for a given seed on one thread (torch threads set to 1)."""
     import importlib.util
 
@@ -278,7 +299,8 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
 
     _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario)
     spec = _spec(algo, timesteps, seed, n_envs, scenario, hyperparams, hyperparams_file, env, cost, lagrangian,
-                 budget, lambda_lr, residual, residual_scale, vec, name, eval_episodes, eval_every, checkpoint_every)
+                 budget, lambda_lr, residual, residual_scale, vec, name, eval_episodes, eval_every, checkpoint_every,
+                 probe_episodes)
     torch.set_num_threads(1)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
