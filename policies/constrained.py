@@ -11,7 +11,8 @@ the Monitor (which logs the unpenalised return and the episode cost) and ``VecNo
 update is a callback (:class:`LagrangeCallback`). PPO itself is SB3's, untouched.
 
 **Residual policy** (Johannink et al. 2019, "Residual reinforcement learning for robot control"):
-the agent's action ``a in [-1, 1]`` corrects the paper's model-based controller,
+the agent's action ``a in [-1, 1]`` corrects the paper's model-based controller (optionally its
+budgeted variant, :mod:`policies.budgeted`, ``base_budget``),
 ``d_short = clip(d_base + scale a, 0, 1)`` (:class:`ResidualVecEnv`); the agent also sees the base
 duty (observation field 8, as an action in [-1, 1]). With ``a = 0`` it *is* the model-based
 controller, so training starts from the paper's zero-overshoot point and learns where stopping
@@ -31,7 +32,7 @@ from gymnasium import spaces
 
 from mission_sim.contract import OBS_DIM, PolicyContext, duty_to_action
 
-from .classical import ModelBasedPolicy
+from .budgeted import BudgetedModelBasedPolicy
 
 __all__ = ["CostPenaltyVecEnv", "LagrangeCallback", "ResidualVecEnv", "residual_obs", "residual_duty", "RESIDUAL_SCALE",
            "ramp_budget", "BUDGET_EPISODES", "BUDGET_SEED"]
@@ -123,8 +124,8 @@ def residual_obs(obs: np.ndarray, d_base: np.ndarray) -> np.ndarray:
 class _BaseDuty:
     """The model-based controller for a batch, with per-row restarts (new windows)."""
 
-    def __init__(self, ctx: PolicyContext, n: int):
-        self.pol = ModelBasedPolicy(ctx)
+    def __init__(self, ctx: PolicyContext, n: int, budget: float = 0.0):
+        self.pol = BudgetedModelBasedPolicy(ctx, budget=budget)   # budget 0: the paper's controller
         self.pol.reset(n)
         self.fresh = None
 
@@ -135,13 +136,14 @@ class _BaseDuty:
 class ResidualVecEnv(VecEnvWrapper):
     """Action ``a`` -> duty ``clip(d_base + scale a, 0, 1)`` on the wrapped adapter; obs + base duty."""
 
-    def __init__(self, venv, scale: float = RESIDUAL_SCALE):
+    def __init__(self, venv, scale: float = RESIDUAL_SCALE, base_budget: float = 0.0):
         if not (np.isfinite(scale) and 0 < scale <= 1):
             raise ValueError(f"residual scale={scale!r} is invalid; valid range: (0, 1]")
         obs_space = spaces.Box(-1.0, 1.0, (OBS_DIM + 1,), np.float32)
         super().__init__(venv, observation_space=obs_space, action_space=spaces.Box(-1.0, 1.0, (1,), np.float32))
         self.scale = float(scale)
-        self.base = _BaseDuty(venv.get_attr("policy_context")[0], venv.num_envs)
+        self.base_budget = float(base_budget)
+        self.base = _BaseDuty(venv.get_attr("policy_context")[0], venv.num_envs, self.base_budget)
         self._d_base = None
 
     def _augment(self, obs, restart):

@@ -2,7 +2,8 @@
 learned correction, ``d = clip(d_base + scale a, 0, 1)`` with ``a in [-1, 1]`` from an SB3 model
 trained by ``dronewpt train --residual`` (:class:`policies.constrained.ResidualVecEnv`). The model
 sees the contract observation plus the base duty (as an action in [-1, 1]); with ``a = 0`` this is
-exactly :class:`policies.classical.ModelBasedPolicy`.
+exactly :class:`policies.classical.ModelBasedPolicy` (or its budgeted variant when the model was
+trained with ``--residual-base-budget``).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import numpy as np
 
 from mission_sim.contract import PolicyContext
 
-from .classical import ModelBasedPolicy
+from .budgeted import BudgetedModelBasedPolicy
 from .constrained import residual_duty, residual_obs
 from .rl import RLPolicy
 
@@ -34,7 +35,8 @@ class ResidualPolicy:
         if not res:
             raise ValueError(f"{self.rl.path.name} is not a residual model (train it with `dronewpt train --residual`)")
         self.scale = float(res["scale"])
-        self.base = ModelBasedPolicy(ctx)
+        self.base_budget = float(res.get("base_budget", 0.0))
+        self.base = BudgetedModelBasedPolicy(ctx, budget=self.base_budget)
         self.n = 1
 
     def reset(self, n: int = 1) -> None:

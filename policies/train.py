@@ -150,7 +150,7 @@ def _base_env(spec: dict, n_envs: int, monitor_path, reset_seed=None):
     if reset_seed is None:
         venv.seed(spec["seed"])
     if spec["residual"]:
-        venv = ResidualVecEnv(venv, spec["residual_scale"])
+        venv = ResidualVecEnv(venv, spec["residual_scale"], spec["residual_base_budget"])
     return VecMonitor(venv, None if monitor_path is None else str(monitor_path), info_keywords=EPISODE_KEYS)
 
 
@@ -222,7 +222,8 @@ def _reproduce(spec: dict) -> str:
         cmd += (f" --lagrangian --budget {spec['budget']:.6g} --lambda-lr {spec['lambda_lr']:g}"
                 f" --probe-episodes {spec['probe_episodes']}")
     if spec["residual"]:
-        cmd += f" --residual --residual-scale {spec['residual_scale']:g}"
+        cmd += (f" --residual --residual-scale {spec['residual_scale']:g}"
+                f" --residual-base-budget {spec['residual_base_budget']:g}")
     if spec["env_overrides"]:
         cmd += " " + " ".join(f"--env {k}={v}" for k, v in spec["env_overrides"].items())
     if spec["hyperparams_file"]:
@@ -243,7 +244,8 @@ def _meta(spec: dict, venv, lag, probe_dt: float) -> dict:
         "lagrangian": None if lag is None else {"lr": lag.lr, "lambda": lag.penalty.lam, "history": lag.history,
                                                 "cost_from": f"{spec['probe_episodes']} deterministic windows per rollout"
                                                 if spec["probe_episodes"] else "the stochastic rollouts"},
-        "residual": {"scale": spec["residual_scale"], "base": "model_based"} if spec["residual"] else None,
+        "residual": {"scale": spec["residual_scale"], "base_budget": spec["residual_base_budget"],
+                     "base": f"model_based_budget:{spec['residual_base_budget']:g}"} if spec["residual"] else None,
         "obs_norm": {"mean": venv.obs_rms.mean.tolist(), "var": venv.obs_rms.var.tolist(),
                      "clip": float(venv.clip_obs), "epsilon": float(venv.epsilon)},
         "eval": {"seed": EVAL_SEED, "episodes": spec["eval_episodes"], "every_steps": spec["eval_every"]},
@@ -251,29 +253,33 @@ def _meta(spec: dict, venv, lag, probe_dt: float) -> dict:
     }
 
 
-def _spec(algo, timesteps, seed, n_envs, scenario, hyperparams, hyperparams_file, env_overrides, cost, lagrangian,
-          budget, lambda_lr, residual, residual_scale, vec, name, eval_episodes, eval_every, checkpoint_every,
-          probe_episodes):
+def _spec(algo, timesteps, o: dict) -> dict:
+    """Everything a run is made of (``o``: train's keyword arguments), hyperparameters merged
+    (defaults < file < ``hyperparams``), the default budget measured when asked for."""
     import envs
 
     hp = dict(DEFAULT_HYPERPARAMS[algo])
-    if hyperparams_file is not None:
+    if o["hyperparams_file"] is not None:
         from .hyperparams import load_hyperparams
-        hp.update(load_hyperparams(hyperparams_file)[0])
-    hp.update(hyperparams or {})
-    cfg = env_config(env_overrides)
-    spec = dict(algo=algo, timesteps=int(timesteps), seed=int(seed), n_envs=int(n_envs), scenario=scenario, hp=hp,
-                hyperparams_file=None if hyperparams_file is None else str(hyperparams_file), config=cfg,
-                env_overrides=dict(env_overrides or {}), cost=cost, lagrangian=bool(lagrangian),
-                lambda_lr=float(lambda_lr), lambda0=0.0, residual=bool(residual), residual_scale=float(residual_scale),
-                vec=vec, name=name or f"{algo}_sbar", eval_episodes=int(eval_episodes), eval_every=int(eval_every),
-                checkpoint_every=int(checkpoint_every), env_id=envs.DISCRETE_ENV_ID if algo == "dqn" else envs.ENV_ID,
-                tb=None, budget=None if budget is None else float(budget), budget_source="given",
-                probe_episodes=int(probe_episodes))
-    if lagrangian and budget is None:
+        hp.update(load_hyperparams(o["hyperparams_file"])[0])
+    hp.update(o["hyperparams"] or {})
+    cfg = env_config(o["env"])
+    spec = dict(algo=algo, timesteps=int(timesteps), seed=int(o["seed"]), n_envs=int(o["n_envs"]),
+                scenario=o["scenario"], hp=hp, config=cfg, env_overrides=dict(o["env"] or {}), cost=o["cost"],
+                hyperparams_file=None if o["hyperparams_file"] is None else str(o["hyperparams_file"]),
+                lagrangian=bool(o["lagrangian"]), lambda_lr=float(o["lambda_lr"]), lambda0=0.0,
+                residual=bool(o["residual"]), residual_scale=float(o["residual_scale"]),
+                residual_base_budget=float(o["residual_base_budget"]), vec=o["vec"],
+                name=o["name"] or f"{algo}_sbar", eval_episodes=int(o["eval_episodes"]),
+                eval_every=int(o["eval_every"]), checkpoint_every=int(o["checkpoint_every"]),
+                probe_episodes=int(o["probe_episodes"]), tb=None,
+                env_id=envs.DISCRETE_ENV_ID if algo == "dqn" else envs.ENV_ID,
+                budget=None if o["budget"] is None else float(o["budget"]), budget_source="given")
+    if spec["lagrangian"] and spec["budget"] is None:
         from .constrained import ramp_budget
-        spec["budget"], spec["budget_source"] = ramp_budget(scenario, cfg, cost), "ramp policy's mean episode cost"
-    if not lagrangian:
+        spec["budget"] = ramp_budget(spec["scenario"], cfg, spec["cost"])
+        spec["budget_source"] = "ramp policy's mean episode cost"
+    if not spec["lagrangian"]:
         spec["budget_source"] = None
     return spec
 
@@ -283,13 +289,14 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
           cost: str = "overshoot", lagrangian: bool = False, budget: float | None = None, lambda_lr: float = 50.0,
           residual: bool = False, residual_scale: float = 0.25, vec: str = "batched", name: str | None = None,
           eval_episodes: int = 32, eval_every: int = 50_000, checkpoint_every: int = 100_000, resume=None,
-          probe_episodes: int = 32) -> dict:
+          probe_episodes: int = 32, residual_base_budget: float = 0.0) -> dict:
     """Train ``algo`` for ``timesteps`` environment steps; returns a dict of the written paths.
 
     ``env``: EnvConfig / reward-weight overrides (:func:`env_config`); ``cost``: ``overshoot`` or
     ``overcurrent`` (:mod:`envs.sb3_vec`); ``lagrangian``: penalise the cost with a multiplier
     learned against ``budget`` (default: the ramp policy's mean episode cost on ``scenario``);
-    ``residual``: learn a bounded correction ``residual_scale * a`` of the model-based duty;
+    ``residual``: learn a bounded correction ``residual_scale * a`` of the model-based duty (of the
+    budgeted model-based controller with ``residual_base_budget`` > 0);
     ``probe_episodes``: the multiplier's cost is measured on this many deterministic windows after
     every rollout (0: on the stochastic rollouts themselves, see :class:`policies.constrained.LagrangeCallback`).
     Deterministic for a given seed on one thread (torch threads set to 1)."""
@@ -298,9 +305,12 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     import torch
 
     _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario)
-    spec = _spec(algo, timesteps, seed, n_envs, scenario, hyperparams, hyperparams_file, env, cost, lagrangian,
-                 budget, lambda_lr, residual, residual_scale, vec, name, eval_episodes, eval_every, checkpoint_every,
-                 probe_episodes)
+    opts = dict(seed=seed, n_envs=n_envs, scenario=scenario, hyperparams=hyperparams,
+                hyperparams_file=hyperparams_file, env=env, cost=cost, lagrangian=lagrangian, budget=budget,
+                lambda_lr=lambda_lr, residual=residual, residual_scale=residual_scale,
+                residual_base_budget=residual_base_budget, vec=vec, name=name, eval_episodes=eval_episodes,
+                eval_every=eval_every, checkpoint_every=checkpoint_every, probe_episodes=probe_episodes)
+    spec = _spec(algo, timesteps, opts)
     torch.set_num_threads(1)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -55,6 +55,9 @@ def _add_train(sub):
     p.add_argument("--residual", action="store_true", help="learn a bounded correction of the model-based duty")
     p.add_argument("--residual-scale", type=float_arg("--residual-scale", positive=True, hi=1.0), default=0.25,
                    help="largest duty correction (default 0.25)")
+    p.add_argument("--residual-base-budget", type=float_arg("--residual-base-budget"), default=0.0,
+                   help="overshoot budget of the model-based controller the residual corrects (default 0: the "
+                        "paper's controller)")
     p.add_argument("--eval-every", type=int, default=50_000, help="env steps between evaluations (default 50000)")
     p.add_argument("--eval-episodes", type=int, default=32, help="held-out evaluation windows (default 32)")
     p.add_argument("--checkpoint-every", type=int, default=100_000, help="env steps between checkpoints")
@@ -107,7 +110,7 @@ def _cmd_train(args) -> int:
                     lagrangian=args.lagrangian, budget=args.budget, lambda_lr=args.lambda_lr, residual=args.residual,
                     residual_scale=args.residual_scale, eval_every=args.eval_every,
                     eval_episodes=args.eval_episodes, checkpoint_every=args.checkpoint_every, resume=args.resume,
-                    probe_episodes=args.probe_episodes)
+                    probe_episodes=args.probe_episodes, residual_base_budget=args.residual_base_budget)
     except ValueError as exc:
         raise CliError(str(exc)) from None
     for key, path in res.items():
