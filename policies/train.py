@@ -329,6 +329,9 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     meta["final_eval"] = ev.curve[-1] if ev.curve else None
     meta_path = zip_path.with_suffix(".json")
     meta_path.write_text(json.dumps(meta, indent=2))
+    if (out / "eval" / "best_model.zip").is_file():   # usable as rl:/residual: too (normalisation: the final one)
+        (out / "eval" / "best_model.json").write_text(json.dumps({**meta, "note": "best evaluation return; obs_norm "
+                                                                  "is the end of training's"}, indent=2))
     venv.close()
     mon = out / "monitor.monitor.csv"
     res = {"model": zip_path, "meta": meta_path, "vecnormalize": out / "vecnormalize.pkl", "monitor": mon,

@@ -172,16 +172,20 @@ def sb3_installed() -> bool:
     return importlib.util.find_spec("stable_baselines3") is not None
 
 
+_SB3_POLICIES = ("rl", "ppo_lagrangian", "residual")
+
+
 def _rl_or_skip(pols: tuple, explicit: bool) -> tuple:
-    """Without stable-baselines3 the default ``rl`` row is skipped with a note on stderr; an ``rl``
-    the user asked for with ``--policies`` is an error naming the extra to install."""
-    if not any(p_.split(":", 1)[0] == "rl" for p_ in pols) or sb3_installed():
+    """Without stable-baselines3 the default SB3 rows (rl, ppo_lagrangian, residual) are skipped with
+    a note on stderr; one the user asked for with ``--policies`` is an error naming the extra to install."""
+    sb3_rows = [p_ for p_ in pols if p_.split(":", 1)[0] in _SB3_POLICIES]
+    if not sb3_rows or sb3_installed():
         return pols
     if explicit:
-        raise CliError("--policies rl needs stable-baselines3 (with torch): pip install 'dronewpt[rl]'")
-    print("dronewpt compare: note: skipping the rl row: stable-baselines3 is not installed "
+        raise CliError(f"--policies {sb3_rows[0]} needs stable-baselines3 (with torch): pip install 'dronewpt[rl]'")
+    print(f"dronewpt compare: note: skipping the {', '.join(sb3_rows)} rows: stable-baselines3 is not installed "
           "(pip install 'dronewpt[rl]')", file=sys.stderr)
-    return tuple(p_ for p_ in pols if p_.split(":", 1)[0] != "rl")
+    return tuple(p_ for p_ in pols if p_ not in sb3_rows)
 
 
 def _check_compare(args, pols, scns, groups):
