@@ -13,6 +13,7 @@ from mission_sim.contract import OBS_DIM, PolicyContext
 from wpt_receiver.sbar import rectifier_current, rectifier_v2
 
 from .core import (OBS_OFFSET, OBS_SCALE, SCALAR_OPS, EnvConfig, advance, build_plans, reward_cost)
+from .objective import SHORT_MODE_IL_A, SHORT_MODE_WITHIN_S, short_mode_i2_a, stop_step
 from .render import draw_envelope
 from .scenario import draw_episode, get_scenario, scenario_from_options
 
@@ -20,8 +21,8 @@ __all__ = ["SbarChargingEnv", "SbarChargingDiscreteEnv"]
 
 _SC = OBS_SCALE.tolist()
 _OF = OBS_OFFSET.tolist()
-_S0, _S1, _S2, _S3, _S4, _S5, _S6 = _SC
-_O0, _O1, _O2, _O3, _O4, _O5, _O6 = _OF
+_S0, _S1, _S2, _S3, _S4, _S5, _S6, _S7 = _SC
+_O0, _O1, _O2, _O3, _O4, _O5, _O6, _O7 = _OF
 
 
 def _n(v, i):
@@ -148,17 +149,21 @@ class SbarChargingEnv(gym.Env):
         self._vl, self._vrc, self._d = float(p.vl0[0]), float(p.vrc0[0]), float(p.d0[0])
         self._soc = self._b[2]
         self._k = 0
+        self._i2_sm = short_mode_i2_a(self.config.link, p.lm_h[0]).tolist()
+        self._t_stop = float(p.t_stop_s[0])
+        self._stop_k = int(stop_step(p.t_stop_s, self._dt, self._T)[0])
+        self._run_max, self._sm_ok, self._sm_checked = -np.inf, True, False
         il = float(rectifier_current(self._d, abs(self._i2)))
         ib = il - self._b[7]
         info = {"t_s": 0.0, "i2_a": self._i2, "i2_peak_a": abs(self._i2), "i1_a": self._i1, "d_short": self._d,
                 "v2_v": float(rectifier_v2(self._d, self._vl, self._i2)), "rect_current_a": il,
                 "battery_v": self._vl, "battery_current_a": ib, "soc": self._soc, "charge_cmd_a": self._cmd[0],
-                "lm_h": self._lm[0], "energy_j": 0.0, "cost": 0.0, "scenario": scn.name,
-                "t_stop_s": float(p.t_stop_s[0])}
+                "lm_h": self._lm[0], "energy_j": 0.0, "cost": 0.0, "overcurrent": 0.0, "overshoot": -np.inf,
+                "episode_cost": 0.0, "reached_short_mode": False, "scenario": scn.name, "t_stop_s": self._t_stop}
         if self.render_mode is not None:
             self._hist = [[0.0], [self._i2], [il], [self._cmd[0]], [self._d]]
         obs = np.array([_n(self._i2, 0), _n(self._vl, 1), _n(ib, 2), _n(il, 3), _n(self._soc, 4),
-                        _n(self._cmd[0], 5), _n(self._d, 6)], dtype=np.float32)
+                        _n(self._cmd[0], 5), _n(self._d, 6), _n(self._t_since(0), 7)], dtype=np.float32)
         return obs, info
 
     def step(self, action):
@@ -170,7 +175,8 @@ class SbarChargingEnv(gym.Env):
         i1, i2, peak, il, ib, soc, vrc, vl, v2 = advance(self._i1, self._i2, vl_old, self._soc, self._vrc, d,
                                                          self._coef[k // self._M], self._b, SCALAR_OPS, self._n_sub)
         cmd = self._cmd[k]
-        reward, cost = reward_cost(il, cmd, peak, self._inv_rated, self._w, SCALAR_OPS)
+        reward, overcurrent = reward_cost(il, cmd, peak, self._inv_rated, self._w, SCALAR_OPS)
+        cost = self._objective(k, peak, il)
         energy = vl_old * il * self._dt
         self._i1, self._i2, self._soc, self._vrc, self._vl, self._d = i1, i2, soc, vrc, vl, d
         k += 1
@@ -187,14 +193,35 @@ class SbarChargingEnv(gym.Env):
                         -1.0 if o2 < -1.0 else (1.0 if o2 > 1.0 else o2),
                         -1.0 if o3 < -1.0 else (1.0 if o3 > 1.0 else o3),
                         -1.0 if o4 < -1.0 else (1.0 if o4 > 1.0 else o4),
-                        cmd_next * _S5 + _O5, d * _S6 + _O6], dtype=np.float32)
+                        cmd_next * _S5 + _O5, d * _S6 + _O6, _n(self._t_since(k), 7)], dtype=np.float32)
         info = {"t_s": k * self._dt, "i2_a": i2, "i2_peak_a": peak, "i1_a": i1, "d_short": d, "v2_v": v2,
                 "rect_current_a": il, "battery_v": vl, "battery_current_a": ib, "soc": soc,
-                "charge_cmd_a": cmd, "lm_h": self._lm[(k - 1) // self._M], "energy_j": energy, "cost": cost}
+                "charge_cmd_a": cmd, "lm_h": self._lm[(k - 1) // self._M], "energy_j": energy, "cost": cost,
+                "overcurrent": overcurrent, "overshoot": self._run_max, "episode_cost": max(self._run_max, 0.0),
+                "reached_short_mode": self._sm_ok and self._sm_checked}
         if self._hist is not None:
             for lst, v in zip(self._hist, (k * self._dt, i2, il, cmd_next, d)):
                 lst.append(v)
         return obs, reward, False, k >= self._T, info
+
+    def _t_since(self, k: int) -> float:
+        t = k * self._dt - self._t_stop
+        return t if (k >= self._stop_k and t > 0.0) else 0.0
+
+    def _objective(self, k: int, peak: float, il: float) -> float:
+        """Update the running overshoot and the short-mode flag after step ``k`` (:mod:`envs.objective`);
+        returns the step's cost (the rise of max(0, running overshoot))."""
+        if k < self._stop_k:
+            return 0.0
+        old = self._run_max
+        ratio = (peak if peak >= 0.0 else -peak) / self._i2_sm[k // self._M] - 1.0
+        if ratio > old:
+            self._run_max = ratio
+        if (k + 1 - self._stop_k) * self._dt >= SHORT_MODE_WITHIN_S - 1e-12:
+            self._sm_checked = True
+            if il >= SHORT_MODE_IL_A:
+                self._sm_ok = False
+        return max(self._run_max, 0.0) - max(old, 0.0)
 
     def render(self):
         if self.render_mode is None:

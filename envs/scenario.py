@@ -13,6 +13,7 @@ lm_mismatch    true Lm scaled by 0.8..1.25 against the Table I value every polic
 windy          2..4 m/s wind with gusts: hover pose error and tilt (hence Lm) vary between windows
 battery        battery SoC 0.1..0.95 (battery voltage ~ 25..33 V instead of ~30 V)
 random         all of the above at once (the training distribution)
+lm_high        true Lm 1.3..1.5 x: outside the training range (held out in ``compare``)
 =============  ============================================================================
 """
 
@@ -83,6 +84,7 @@ SCENARIOS: dict[str, Scenario] = {
     "windy": Scenario("windy", wind_speed_m_s=(2.0, 4.0)),
     "battery": Scenario("battery", soc=(0.1, 0.95)),
     "random": Scenario("random", lm_scale=(0.8, 1.25), wind_speed_m_s=(0.0, 4.0), soc=(0.1, 0.95)),
+    "lm_high": Scenario("lm_high", lm_scale=(1.3, 1.5)),
 }
 
 

@@ -25,6 +25,7 @@ from mission_sim.contract import OBS_DIM, PolicyContext
 from wpt_receiver.sbar import rectifier_current, rectifier_v2
 
 from .core import (N_BAT, N_COEF, NUMPY_OPS, OBS_OFFSET, OBS_SCALE, EnvConfig, advance, build_plans, reward_cost)
+from .objective import overshoot_update, short_mode_i2_a, short_mode_update, stop_step, t_since_stop_s
 from .scenario import draw_episodes, get_scenario, scenario_from_options
 
 __all__ = ["SbarChargingVectorEnv", "SbarChargingDiscreteVectorEnv"]
@@ -62,6 +63,11 @@ class SbarChargingVectorEnv(VectorEnv):
         self._lm_all = np.zeros((S, n))
         self._bat = np.zeros((N_BAT, n))
         self._t_stop = np.zeros(n)
+        self._i2sm_all = np.ones((n, S))   # objective (envs.objective): short-mode I2 of the true link
+        self._stop_k = np.zeros(n, dtype=np.int64)
+        self._run_max = np.full(n, -np.inf)
+        self._sm_ok = np.ones(n, dtype=bool)
+        self._sm_checked = np.zeros(n, dtype=bool)
         self._coef = np.zeros((N_COEF, n))     # numpy path: the current coefficients, one row per coefficient
         self._coef_cur = np.zeros((n, N_COEF))  # compiled path: the same, one row per env (updated in place)
         self._j = np.zeros(n, dtype=np.int64)
@@ -106,6 +112,11 @@ class SbarChargingVectorEnv(VectorEnv):
         self._lm_all[:, idx] = p.lm_h.T
         self._bat[:, idx] = p.battery.T
         self._t_stop[idx] = p.t_stop_s
+        self._i2sm_all[idx] = short_mode_i2_a(c.link, p.lm_h)
+        self._stop_k[idx] = stop_step(p.t_stop_s, c.dt_s, c.n_steps)
+        self._run_max[idx] = -np.inf
+        self._sm_ok[idx] = True
+        self._sm_checked[idx] = False
         self._coef[:, idx] = p.coef[:, 0].T
         self._coef_cur[idx] = p.coef[:, 0]
         self._j[idx] = 0
@@ -119,23 +130,54 @@ class SbarChargingVectorEnv(VectorEnv):
         il = rectifier_current(d, np.abs(i2))
         ib = il - self._bat[7]
         cmd = self._cmd[self._k, self._ar]
-        obs = self._obs(i2, vl, ib, il, soc, cmd, d)
+        obs = self._obs(i2, vl, ib, il, soc, cmd, d, self._t_since(self._k))
         info = {"t_s": self._k * self._dt, "i2_a": i2.copy(), "i2_peak_a": np.abs(i2), "i1_a": i1.copy(),
                 "d_short": d.copy(), "v2_v": rectifier_v2(d, vl, i2), "rect_current_a": il, "battery_v": vl.copy(),
                 "battery_current_a": ib, "soc": soc.copy(), "charge_cmd_a": cmd,
                 "lm_h": self._lm_all[self._j, self._ar], "energy_j": np.zeros(self.num_envs),
-                "cost": np.zeros(self.num_envs), "t_stop_s": self._t_stop.copy()}
+                "cost": np.zeros(self.num_envs), "overcurrent": np.zeros(self.num_envs),
+                "overshoot": self._run_max.copy(), "episode_cost": np.maximum(self._run_max, 0.0),
+                "reached_short_mode": self._sm_ok & self._sm_checked, "t_stop_s": self._t_stop.copy()}
         return obs, info
 
-    def _obs(self, i2m, vl, ib, il, soc, cmd, d):
-        o = np.stack([i2m, vl, ib, il, soc, cmd, d])
+    def _t_since(self, k):
+        return np.where(k >= self._stop_k, t_since_stop_s(k, self._t_stop, self._dt), 0.0)
+
+    def _objective(self, k, peak, il):
+        """Running overshoot, short-mode flag and the step cost after step ``k`` (:mod:`envs.objective`)."""
+        after = k >= self._stop_k
+        self._run_max, cost = overshoot_update(self._run_max, peak, self._i2sm_all[self._ar, k // self._M], after)
+        self._sm_ok, self._sm_checked = short_mode_update(self._sm_ok, self._sm_checked, il, k + 1, self._stop_k,
+                                                          self._dt)
+        return cost
+
+    def _objective_info(self, info: dict, k_prev) -> dict:
+        """Add the objective to a step's ``info`` (``info["cost"]`` is the episode-cost increment;
+        the old peak-over-rated penalty is ``info["overcurrent"]``)."""
+        info["cost"] = self._objective(k_prev, info["i2_peak_a"], info["rect_current_a"])
+        info["overshoot"] = self._run_max.copy()
+        info["episode_cost"] = np.maximum(self._run_max, 0.0)
+        info["reached_short_mode"] = self._sm_ok & self._sm_checked
+        return info
+
+    def _obs(self, i2m, vl, ib, il, soc, cmd, d, t_since):
+        o = np.stack([i2m, vl, ib, il, soc, cmd, d, t_since])
         o *= self._obs_scale
         o += self._obs_offset
         np.clip(o, -1.0, 1.0, out=o)
         return o.T.astype(np.float32)
 
+    def restart(self, idx) -> np.ndarray:
+        """Start new episodes in the sub-environments ``idx`` now (same-step autoreset, as
+        stable-baselines3 wants it); returns their first observations, shape (len(idx), OBS_DIM)."""
+        idx = np.asarray(idx, dtype=np.int64)
+        self._start(idx)
+        self._prev_done[idx] = False
+        obs, _ = self._initial_obs_info()
+        return obs[idx]
+
     def reset(self, *, seed=None, options: dict | None = None):
-        super().reset(seed=seed)
+        super().reset(seed=seed if seed is None or np.ndim(seed) == 0 else int(seed[0]))
         n = self.num_envs
         if seed is None:
             seeds = [None] * n
@@ -190,7 +232,9 @@ class SbarChargingVectorEnv(VectorEnv):
         kern(d, self._state, self._k, self._j, self._coef_all, self._coef_cur, self._bat, self._cmd, self._noise, self._lm_all,
              self._M, self._n_sub, self._T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a,
              OBS_SCALE, OBS_OFFSET, obs, reward, truncated, block)
-        return obs, reward, truncated, dict(zip(rows, block))
+        k = self._k
+        obs[:, 7] = np.clip(self._t_since(k) * OBS_SCALE[7] + OBS_OFFSET[7], -1.0, 1.0)
+        return obs, reward, truncated, self._objective_info(dict(zip(rows, block)), k - 1)
 
     def _step_numpy(self, d):
         """The same step on numpy arrays (:func:`envs.core.advance` with ``NUMPY_OPS``): the reference."""
@@ -204,16 +248,16 @@ class SbarChargingVectorEnv(VectorEnv):
         i1, i2, peak, il, ib, soc, vrc, vl, v2 = advance(i1, i2, vl_old, soc, vrc, d, self._coef, self._bat, NUMPY_OPS,
                                                          self._n_sub)
         cmd = self._cmd[k, self._ar]
-        reward, cost = reward_cost(il, cmd, peak, self._inv_rated, self.config.reward, NUMPY_OPS)
+        reward, overcurrent = reward_cost(il, cmd, peak, self._inv_rated, self.config.reward, NUMPY_OPS)
         energy = vl_old * il * self._dt
         st = self._state
         st[0], st[1], st[2], st[3], st[4], st[5] = i1, i2, vl, soc, vrc, d
         k += 1
-        obs = self._obs(i2 + self._noise[k - 1, self._ar], vl, ib, il, soc, self._cmd[k, self._ar], d)
+        obs = self._obs(i2 + self._noise[k - 1, self._ar], vl, ib, il, soc, self._cmd[k, self._ar], d, self._t_since(k))
         info = {"t_s": k * self._dt, "i2_a": i2, "i2_peak_a": peak, "i1_a": i1, "d_short": d, "v2_v": v2,
                 "rect_current_a": il, "battery_v": vl, "battery_current_a": ib, "soc": soc, "charge_cmd_a": cmd,
-                "lm_h": self._lm_all[self._j, self._ar], "energy_j": energy, "cost": cost}
-        return obs, reward, k >= self._T, info
+                "lm_h": self._lm_all[self._j, self._ar], "energy_j": energy, "overcurrent": overcurrent}
+        return obs, reward, k >= self._T, self._objective_info(info, k - 1)
 
 
 def _load_kernel():

@@ -22,7 +22,7 @@ __all__ = ["step_kernel", "INFO_ROWS"]
 
 #: rows of the info block the kernel fills, in order
 INFO_ROWS = ("t_s", "i2_a", "i2_peak_a", "i1_a", "d_short", "v2_v", "rect_current_a", "battery_v",
-             "battery_current_a", "soc", "charge_cmd_a", "lm_h", "energy_j", "cost")
+             "battery_current_a", "soc", "charge_cmd_a", "lm_h", "energy_j", "overcurrent")
 _FOUR_OVER_PI = 4.0 / np.pi
 _HALF_PI = 0.5 * np.pi
 
@@ -88,7 +88,7 @@ def step_kernel(d, state, k, j, coef_all, coef_cur, bat, cmd_all, noise_all, lm_
     the step index ``k`` / slow index ``j`` are updated in place, and so are the current ZOH
     coefficients ``coef_cur`` (n, 20) when a sub-environment enters a new slow segment (copied from
     ``coef_all`` (n, S, 20)); ``cmd_all`` (T + 1, n), ``noise_all`` (T, n), ``lm_all`` (S, n) are
-    step-major. ``obs`` (n, 7) float32, ``reward``, ``trunc`` and ``info`` (len(INFO_ROWS), n) are filled."""
+    step-major. ``obs`` (n, OBS_DIM) float32 (fields 0-6; field 7 is filled by the caller), ``reward``, ``trunc`` and ``info`` (len(INFO_ROWS), n) are filled."""
     for e in range(d.shape[0]):
         kk = k[e]
         jj = kk // slow_every

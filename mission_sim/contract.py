@@ -15,7 +15,15 @@ index  name                  range        unit   meaning (what the receiver can 
 4      soc                   0 .. 1       -      state of charge (battery management estimate)
 5      charge_cmd_a          0 .. 20      A      commanded I_L; 0 = stop charging (short mode)
 6      last_d_short          0 .. 1       -      the duty applied in the previous control period
+7      t_since_stop_s        0 .. 0.01    s      time since the charge command dropped to 0 (the
+                                                 stop); 0 while charging; saturates at 10 ms
 =====  ====================  ===========  =====  ==================================================
+
+Why field 7: the RM -> SM transition is a timed manoeuvre (the coil current answers the *rate* of
+change of V2, G22 ~ -alpha2 s / (s^2 + ...)), and fields 0-6 do not say how far into it the receiver
+is (the command is 0 throughout). The mission runner fills it from the time its command last went
+to 0; the environments from the episode's stop time. Models trained on the 7-field contract keep
+working: :class:`policies.rl.RLPolicy` gives them the first ``obs_dim`` fields of their metadata.
 
 Action: the short duty ``d_short`` in [0, 1] (0 = rectification mode, 1 = short mode), applied
 for one control period. Environments expose it as ``a in [-1, 1]`` with ``d = (a + 1) / 2``
@@ -52,6 +60,7 @@ OBS_FIELDS: tuple[ObsField, ...] = (
     ObsField("soc", 0.0, 1.0, "-", "state of charge"),
     ObsField("charge_cmd_a", 0.0, 20.0, "A", "commanded I_L; 0 = stop charging (short mode)"),
     ObsField("last_d_short", 0.0, 1.0, "-", "duty applied in the previous control period"),
+    ObsField("t_since_stop_s", 0.0, 0.01, "s", "time since the charge command dropped to 0; 0 while charging"),
 )
 OBS_DIM = len(OBS_FIELDS)
 OBS_INDEX = {f.name: i for i, f in enumerate(OBS_FIELDS)}

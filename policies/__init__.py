@@ -31,6 +31,26 @@ def _rl(ctx, **kwargs):
     return RLPolicy(ctx, **kwargs)
 
 
+def _ppo_lagrangian(ctx, **kwargs):
+    """The shipped Lagrangian PPO (a plain SB3 PPO file; constrained only in how it was trained)."""
+    require_sb3()
+    from .rl import PRETRAINED_LAGRANGIAN, RLPolicy
+    pol = RLPolicy(ctx, **{"path": PRETRAINED_LAGRANGIAN, **kwargs})
+    pol.name = "ppo_lagrangian"
+    return pol
+
+
+def _residual(ctx, **kwargs):
+    require_sb3()
+    from .residual import ResidualPolicy
+    return ResidualPolicy(ctx, **kwargs)
+
+
+def _budgeted(ctx, **kwargs):
+    from .budgeted import BudgetedModelBasedPolicy
+    return BudgetedModelBasedPolicy(ctx, **kwargs)
+
+
 __all__ = ["make", "available", "register", "require_sb3", "Policy", "PolicyContext"]
 
 _REGISTRY: dict[str, Callable[..., Policy]] = {
@@ -41,7 +61,12 @@ _REGISTRY: dict[str, Callable[..., Policy]] = {
     "hysteresis": HysteresisPolicy,
     "random": RandomPolicy,
     "rl": _rl,
+    "ppo_lagrangian": _ppo_lagrangian,
+    "residual": _residual,
+    "model_based_budget": _budgeted,
 }
+#: names that take a model file as ``name:PATH``
+_WITH_PATH = ("rl", "ppo_lagrangian", "residual")
 
 
 def register(name: str, factory: Callable[..., Policy]) -> None:
@@ -56,8 +81,14 @@ def available() -> list[str]:
 def make(name: str, ctx: PolicyContext | None = None, **kwargs) -> Policy:
     """A fresh policy by name (``"rl:PATH"`` loads an SB3 model file); ``ValueError`` naming the valid names."""
     base, _, arg = name.partition(":")
-    if base not in _REGISTRY or (arg and base != "rl"):
-        raise ValueError(f"policy={name!r} is invalid; valid values: {', '.join(available())} (or rl:PATH)")
+    if arg and base == "model_based_budget":   # model_based_budget:0.02 = overshoot budget 2 %
+        try:
+            return _REGISTRY[base](ctx or PolicyContext(), **{**kwargs, "budget": float(arg)})
+        except ValueError as exc:
+            raise ValueError(f"policy={name!r} is invalid: {exc}") from None
+    if base not in _REGISTRY or (arg and base not in _WITH_PATH):
+        raise ValueError(f"policy={name!r} is invalid; valid values: {', '.join(available())} "
+                         f"(or {':PATH, '.join(_WITH_PATH)}:PATH)")
     if arg:
         from pathlib import Path
 

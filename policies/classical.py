@@ -125,19 +125,28 @@ class ModelBasedPolicy(_CommandPolicy):
         wlm_v1, det, r1 = self._consts
         return (wlm_v1 - r1 * _target_v2(self._consts, cmd, vl)) / det
 
-    def act(self, obs):
-        if self._ctl is not None and self._ctl.n == 1 and np.shape(obs) in ((1, OBS_DIM), (OBS_DIM,)):
+    def act(self, obs, restart=None):
+        """Duties for ``obs``; ``restart`` (row indices) starts those receivers' controllers afresh in
+        the steady state of their current reference (a new charging window in a batched env)."""
+        if restart is None and self._ctl is not None and self._ctl.n == 1 and np.shape(obs) in ((1, OBS_DIM), (OBS_DIM,)):
             return self._act1(obs)
         cmd, vl = self._measure(obs)
         ref = self.i2_ref(cmd, vl)
         if self._ctl is None or self._ctl.n != len(ref):
             self._ctl = InverseModelController(self.ctx.link, self.ctx.control_period_s, self.lpf, n=len(ref))
             self._ctl.reset(ref)
+        elif restart is not None and len(restart):
+            ad, bd, _, _ = self._ctl.discrete_ss
+            xss = np.linalg.solve(np.eye(len(ad)) - ad, bd)
+            self._ctl.x[restart] = (ref[restart] - self._ctl.i2_sm_a)[:, None] * xss[None, :]
         return duty_from_v2_clipped(self._ctl.update(ref), vl)
 
     def _act1(self, obs):
         """:meth:`act` for one receiver on Python floats (numpy's per-call overhead was 30 us at n = 1)."""
         cmd, vl = denormalise_obs_field(obs, _I_CMD), denormalise_obs_field(obs, _I_VL)
+        return np.array([duty_from_v2_clipped(self._ctl.update1(self._i2_ref1(cmd, vl)), vl)])
+
+    def _i2_ref1(self, cmd: float, vl: float) -> float:
+        """:meth:`i2_ref` for one receiver on floats."""
         wlm_v1, det, r1 = self._consts
-        ref = (wlm_v1 - r1 * _target_v2_scalar(self._consts, cmd, vl)) / det
-        return np.array([duty_from_v2_clipped(self._ctl.update1(ref), vl)])
+        return (wlm_v1 - r1 * _target_v2_scalar(self._consts, cmd, vl)) / det

@@ -1,22 +1,27 @@
-"""Head-to-head comparison: every policy through the same closed loop on the same seeded episodes.
+"""Head-to-head comparison: every policy through the same closed loop on the same seeded episodes,
+with statistics.
 
 Each scenario runs ``episodes`` charging windows at once in the batched vector env (sub-env ``i``
-seeded ``seed + i``, the same for every policy), the policy acting on the whole batch of contract
-observations every control period. Metrics per episode (from the physical values in ``info``):
+seeded ``seed + i``, the same windows for every policy), the policy acting on the whole batch of
+contract observations every control period. Metrics per episode (the objective of
+:mod:`envs.objective` and the physical values in ``info``):
 
-==================  =======================================================================
-peak_i2_a           largest |I2| envelope sample (mid- and end-of-step) in the window [A] (a
-                    negative envelope amplitude is a real coil current of that size)
-overshoot_pct       (max |I2| after the stop command - |final I2|) / |final I2|, final = mean
-                    of the last 10 steps (the SM steady state) [%]; NaN when |final I2| <
-                    0.1 A (no steady current to overshoot)
-time_above_rated_s  time with the step's peak |I2| above the rated value [s]
-energy_j            energy delivered to the battery node, sum of VL I_L dt [J]
-energy_after_stop_j the part of it delivered after the stop command (unwanted) [J]
-tracking_rmse_a     RMS of (I_L - command) over the window [A]
-cost                sum of the env's cost (relative excess over the rated I2)
-return              sum of the env's reward
-==================  =======================================================================
+====================  =====================================================================
+overshoot_pct         100 x (peak |I2| after the stop / short-mode I2 of the true link - 1) [%]
+                      (negative when the current never reaches the short-mode level)
+reached_short_mode    1 if I_L < 0.5 A from 14 ms after the stop on, else 0 (mean = fraction)
+peak_i2_a             largest |I2| envelope sample (mid- and end-of-step) in the window [A]
+energy_before_stop_j  energy into the battery node before the stop command, sum VL I_L dt [J]
+energy_after_stop_j   the energy delivered after the stop command (unwanted) [J]
+tracking_rmse_a       RMS of (I_L - command) over the window [A]
+cost                  the episode cost: max(0, overshoot) (a fraction)
+return                sum of the env's reward
+time_above_rated_s    time with the step's peak |I2| above the rated value [s]
+====================  =====================================================================
+
+Statistics (:mod:`policies.stats`): mean and 95 % bootstrap interval over the episodes, the paired
+difference against ``model_based`` on the same episodes (``d_<metric>``), and for a policy trained
+with several seeds (``train_seeds``) the mean over seeds with a t interval over the seed means.
 """
 
 from __future__ import annotations
@@ -25,19 +30,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["METRICS", "EpisodeTraces", "run_policy", "compare", "DEFAULT_POLICIES", "DEFAULT_SCENARIOS",
-           "plot_transitions"]
+from .stats import mean_ci, seed_ci
 
-METRICS = ("peak_i2_a", "overshoot_pct", "time_above_rated_s", "energy_j", "energy_after_stop_j", "tracking_rmse_a",
-           "cost", "return")
-DEFAULT_POLICIES = ("step", "ramp", "hysteresis", "model_based", "model_based_online", "rl", "random")
-DEFAULT_SCENARIOS = ("nominal", "lm_mismatch", "windy", "battery")
-FINAL_I2_MIN_A = 0.1   # below this final |I2| the overshoot ratio is undefined (NaN)
+__all__ = ["METRICS", "EpisodeTraces", "run_policy", "compare", "frontier", "DEFAULT_POLICIES", "DEFAULT_SCENARIOS",
+           "REFERENCE", "plot_transitions", "plot_frontier"]
+
+METRICS = ("overshoot_pct", "reached_short_mode", "peak_i2_a", "energy_before_stop_j", "energy_after_stop_j",
+           "tracking_rmse_a", "cost", "return", "time_above_rated_s")
+DEFAULT_POLICIES = ("step", "ramp", "hysteresis", "model_based", "model_based_online", "model_based_budget:0.01",
+                    "model_based_budget:0.02", "rl", "ppo_lagrangian", "residual", "random")
+#: lm_high is held out: its Lm (1.3-1.5 x) is outside the training range of the random scenario (0.8-1.25 x)
+DEFAULT_SCENARIOS = ("nominal", "lm_mismatch", "windy", "battery", "lm_high")
+REFERENCE = "model_based"
+DEFAULT_EPISODES = 100
 
 
 @dataclass
 class EpisodeTraces:
-    """Time series (n_steps, episodes) of one policy on one scenario."""
+    """Time series (n_steps, episodes) of one policy on one scenario, and its per-episode metrics."""
 
     t_s: np.ndarray
     i2_peak_a: np.ndarray
@@ -49,79 +59,111 @@ class EpisodeTraces:
     metrics: dict
 
 
-def _spec(name: str):
-    """'rl:path/to/model.zip' -> ('rl', {'path': ...}); other names unchanged."""
-    if ":" in name:
-        base, path = name.split(":", 1)
-        return base, {"path": path}
-    return name, {}
+def _rollout(pol, venv, episodes: int, seed: int):
+    obs, info = venv.reset(seed=seed)
+    T = venv.config.n_steps
+    keys = ("i2_peak_a", "i2_a", "d_short", "rect_current_a", "charge_cmd_a", "energy_j")
+    rec = {k: np.empty((T, episodes)) for k in keys}
+    rew = np.empty((T, episodes))
+    for k in range(T):
+        d = np.asarray(pol.act(obs), dtype=float).reshape(episodes)
+        obs, r, term, trunc, last = venv.step((2.0 * np.clip(d, 0.0, 1.0) - 1.0)[:, None].astype(np.float32))
+        rew[k] = r
+        for key in keys:
+            rec[key][k] = last[key]
+    return rec, rew, info["t_stop_s"], last
 
 
 def run_policy(name: str, scenario: str, episodes: int, seed: int, config=None) -> EpisodeTraces:
-    """Run policy ``name`` (a :func:`policies.make` name, or ``rl:PATH``) on ``episodes`` windows."""
+    """Run policy ``name`` (a :func:`policies.make` name, e.g. ``rl:PATH`` or ``model_based_budget:0.02``)
+    on ``episodes`` windows seeded ``seed + i``."""
     from envs import SbarChargingVectorEnv
 
     from . import make
 
     venv = SbarChargingVectorEnv(num_envs=episodes, scenario=scenario, config=config)
-    base, kwargs = _spec(name)
-    pol = make(base, venv.policy_context, **kwargs)
+    pol = make(name, venv.policy_context)
     pol.reset(episodes)
-    obs, info = venv.reset(seed=seed)
-    t_stop = info["t_stop_s"]
-    T = venv.config.n_steps
-    keys = ("i2_peak_a", "i2_a", "d_short", "rect_current_a", "charge_cmd_a", "cost", "energy_j")
-    rec = {k: np.empty((T, episodes)) for k in keys}
-    rew = np.empty((T, episodes))
-    for k in range(T):
-        d = np.asarray(pol.act(obs), dtype=float).reshape(episodes)
-        obs, r, term, trunc, info = venv.step((2.0 * np.clip(d, 0.0, 1.0) - 1.0)[:, None].astype(np.float32))
-        rew[k] = r
-        for key in keys:
-            rec[key][k] = info[key]
-    dt = venv.config.dt_s
+    rec, rew, t_stop, last = _rollout(pol, venv, episodes, seed)
+    dt, T = venv.config.dt_s, venv.config.n_steps
     t = (np.arange(T) + 1) * dt
-    after = t[:, None] >= t_stop[None, :]
-    pk = np.abs(rec["i2_peak_a"])   # the env reports it by magnitude already; abs keeps this self-evident
-    final = np.abs(rec["i2_a"][-10:].mean(axis=0))
-    peak_after = np.where(after, pk, -np.inf).max(axis=0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        over = np.where(final >= FINAL_I2_MIN_A, 100.0 * (peak_after - final) / final, np.nan)
+    after = (t - dt)[:, None] >= t_stop[None, :] - 1e-12   # steps scored against the stop (envs.objective)
+    pk = np.abs(rec["i2_peak_a"])
     m = {
+        "overshoot_pct": 100.0 * last["overshoot"],
+        "reached_short_mode": last["reached_short_mode"].astype(float),
         "peak_i2_a": pk.max(axis=0),
-        "overshoot_pct": over,
-        "time_above_rated_s": (pk > venv.config.rated_i2_a).sum(axis=0) * dt,
-        "energy_j": rec["energy_j"].sum(axis=0),
+        "energy_before_stop_j": np.where(after, 0.0, rec["energy_j"]).sum(axis=0),
         "energy_after_stop_j": np.where(after, rec["energy_j"], 0.0).sum(axis=0),
         "tracking_rmse_a": np.sqrt(np.mean((rec["rect_current_a"] - rec["charge_cmd_a"]) ** 2, axis=0)),
-        "cost": rec["cost"].sum(axis=0),
+        "cost": last["episode_cost"].copy(),
         "return": rew.sum(axis=0),
+        "time_above_rated_s": (pk > venv.config.rated_i2_a).sum(axis=0) * dt,
     }
     venv.close()
     return EpisodeTraces(t, rec["i2_peak_a"], rec["i2_a"], rec["d_short"], rec["rect_current_a"],
                          rec["charge_cmd_a"], t_stop, m)
 
 
-def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: int = 20, seed: int = 1000,
-            progress: bool = False, config=None):
-    """Run every policy on every scenario (same seeds); returns ``(rows, traces)``: rows are dicts
-    (policy, scenario, episodes, mean of each metric (overshoot_pct over the episodes where it is
-    defined), and ``peak_i2_max_a``), traces maps (policy, scenario) -> :class:`EpisodeTraces`."""
+def _row_one(label, scenario, metrics, ref):
+    """Row of one model: mean and bootstrap interval per metric, paired difference against ``ref``."""
+    row = {"policy": label, "scenario": scenario, "episodes": len(metrics["return"]), "train_seeds": 1}
+    for k in METRICS:
+        row[k], row[f"{k}_lo"], row[f"{k}_hi"] = mean_ci(metrics[k])
+        if ref is not None:
+            row[f"d_{k}"], row[f"d_{k}_lo"], row[f"d_{k}_hi"] = mean_ci(metrics[k] - ref[k])
+    return row
+
+
+def _row_seeds(label, scenario, per_seed, ref):
+    """Row of one kind trained with several seeds: t interval over the seed means."""
+    row = {"policy": label, "scenario": scenario, "episodes": len(per_seed[0]["return"]), "train_seeds": len(per_seed)}
+    for k in METRICS:
+        row[k], row[f"{k}_lo"], row[f"{k}_hi"] = seed_ci([np.nanmean(m[k]) for m in per_seed])
+        if ref is not None:
+            row[f"d_{k}"], row[f"d_{k}_lo"], row[f"d_{k}_hi"] = seed_ci([np.nanmean(m[k] - ref[k]) for m in per_seed])
+    return row
+
+
+def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: int = DEFAULT_EPISODES,
+            seed: int = 1000, progress: bool = False, config=None, train_seeds: dict | None = None,
+            reference: str = REFERENCE):
+    """Run every policy on every scenario (same seeds); returns ``(rows, traces)``.
+
+    ``train_seeds`` maps a label to several model specs of one kind (e.g. ``rl:run_s0/ppo_sbar.zip``,
+    ...): one row each, aggregated over the seeds. Rows hold ``<metric>``, ``<metric>_lo/_hi`` (95 %)
+    and the paired differences ``d_<metric>...`` against ``reference`` (run even when not listed)."""
     from tqdm import tqdm
 
     if int(episodes) != episodes or not 1 <= episodes <= 100_000:
         raise ValueError(f"episodes={episodes!r} is invalid; valid range: integer 1..100000")
+    groups = [(p, [p]) for p in policies] + list((train_seeds or {}).items())
     rows, traces = [], {}
-    jobs = [(p, s) for s in scenarios for p in policies]
-    for p, s in tqdm(jobs, desc="compare", unit="run", disable=not progress):
-        tr = run_policy(p, s, int(episodes), int(seed), config)
-        traces[(p, s)] = tr
-        row = {"policy": p, "scenario": s, "episodes": int(episodes)}
-        # nanmean: overshoot_pct is NaN for an episode without a steady final current
-        row.update({k: float(np.nanmean(v)) if np.isfinite(v).any() else float("nan") for k, v in tr.metrics.items()})
-        row["peak_i2_max_a"] = float(np.max(tr.metrics["peak_i2_a"]))
-        rows.append(row)
+    jobs = [(s, g) for s in scenarios for g in groups]
+    bar = tqdm(total=len(jobs), desc="compare", unit="run", disable=not progress)
+    for s in scenarios:
+        ref_tr = run_policy(reference, s, int(episodes), int(seed), config)
+        for label, specs in groups:
+            trs = [ref_tr if sp == reference else run_policy(sp, s, int(episodes), int(seed), config) for sp in specs]
+            traces[(label, s)] = trs[0]
+            ref = None if label == reference else ref_tr.metrics
+            rows.append(_row_one(label, s, trs[0].metrics, ref) if len(trs) == 1
+                        else _row_seeds(label, s, [t.metrics for t in trs], ref))
+            bar.update(1)
+    bar.close()
     return rows, traces
+
+
+def frontier(scenario: str = "nominal", budgets=None, episodes: int = DEFAULT_EPISODES, seed: int = 1000, config=None):
+    """The budgeted model-based curve: one row per overshoot budget (:mod:`policies.budgeted`)."""
+    from .budgeted import BUDGET_SWEEP
+
+    out = []
+    for b in (BUDGET_SWEEP if budgets is None else budgets):
+        row = _row_one(f"model_based_budget:{b:g}", scenario, run_policy(f"model_based_budget:{b:g}", scenario,
+                                                                          episodes, seed, config).metrics, None)
+        out.append({"budget": float(b), **row})
+    return out
 
 
 def plot_transitions(traces: dict, scenario: str, out_png, episode: int = 0, window_s=(-2e-3, 12e-3),
@@ -151,6 +193,40 @@ def plot_transitions(traces: dict, scenario: str, out_png, episode: int = 0, win
     a2.set_ylabel("d_short")
     a2.set_xlabel("time after the stop command [ms]")
     a2.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out_png, dpi=110)
+    plt.close(fig)
+    return out_png
+
+
+def plot_frontier(rows, sweep, scenario: str, out_png, x: str = "overshoot_pct"):
+    """Return and energy after the stop against the overshoot on ``scenario``: one point per policy
+    with its 95 % intervals, the Pareto front of the policies (higher return / less energy after the
+    stop, less overshoot) and the budgeted model-based curve."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .stats import pareto_front
+
+    pts = [r for r in rows if r["scenario"] == scenario and r["policy"] not in ("random", "step", "hysteresis")]
+    fig, axes = plt.subplots(1, 2, figsize=(12, 5))
+    for ax, y, sign in ((axes[0], "return", 1.0), (axes[1], "energy_after_stop_j", -1.0)):
+        for r in pts:
+            ax.errorbar(r[x], r[y], xerr=[[r[x] - r[f"{x}_lo"]], [r[f"{x}_hi"] - r[x]]],
+                        yerr=[[r[y] - r[f"{y}_lo"]], [r[f"{y}_hi"] - r[y]]], fmt="o", ms=4, capsize=2,
+                        label=f"{r['policy']}" + (f" ({r['train_seeds']} seeds)" if r["train_seeds"] > 1 else ""))
+        if pts:
+            front = pareto_front([r[x] for r in pts], [sign * r[y] for r in pts])
+            ax.plot([pts[i][x] for i in front], [pts[i][y] for i in front], "k--", lw=1, label="Pareto front")
+        if sweep:
+            ax.plot([r[x] for r in sweep], [r[y] for r in sweep], "-s", color="0.5", ms=3,
+                    label="model_based with overshoot budget")
+        ax.set_xlabel("overshoot after the stop over the true short-mode I2 [%]")
+        ax.set_ylabel({"return": "episode return", "energy_after_stop_j": "energy after the stop [J]"}[y])
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"{scenario}: means with 95 % intervals")
     fig.tight_layout()
     fig.savefig(out_png, dpi=110)
     plt.close(fig)

@@ -24,9 +24,10 @@ from mission_sim.contract import PolicyContext, action_to_duty
 
 from .inference import export_actor
 
-__all__ = ["RLPolicy", "PRETRAINED", "load_meta", "ALGOS"]
+__all__ = ["RLPolicy", "PRETRAINED", "PRETRAINED_LAGRANGIAN", "load_meta", "ALGOS"]
 
 PRETRAINED = Path(__file__).parent / "pretrained" / "ppo_sbar.zip"
+PRETRAINED_LAGRANGIAN = Path(__file__).parent / "pretrained" / "ppo_lagrangian.zip"
 ALGOS = ("ppo", "sac", "dqn")
 
 
@@ -53,10 +54,14 @@ class RLPolicy:
 
     name = "rl"
 
-    def __init__(self, ctx: PolicyContext = PolicyContext(), path=None, deterministic: bool = True, fast: bool = True):
+    def __init__(self, ctx: PolicyContext = PolicyContext(), path=None, deterministic: bool = True, fast: bool = True,
+                 residual: bool = False):
         self.ctx = ctx
         self.path = Path(PRETRAINED if path is None else path)
         self.meta = load_meta(self.path)
+        if self.meta.get("residual") and not residual:
+            raise ValueError(f"{self.path.name} is a residual model: run it as residual:{self.path} "
+                             "(it corrects the model-based duty)")
         dt = float(self.meta["control_period_s"])
         if abs(ctx.control_period_s - dt) > 1e-9 * dt:
             raise ValueError(f"control_period_s={ctx.control_period_s!r} is invalid for {self.path.name}; "
@@ -72,6 +77,8 @@ class RLPolicy:
             self._clip = float(norm["clip"])
         else:
             self._mean = None
+        # models trained on the 7-field contract (before t_since_stop_s) see the first obs_dim fields
+        self.obs_dim = int(self.meta.get("obs_dim", self.model.observation_space.shape[0]))
         self.deterministic = bool(deterministic)
         # predict() costs 0.15-1 ms a call; the actor exported to numpy ~10 us, same actions to float32
         # round-off (1 ulp). fast=False keeps predict() (bit-identical to SB3).
@@ -82,7 +89,7 @@ class RLPolicy:
         self.n = int(n)
 
     def normalise(self, obs) -> np.ndarray:
-        o = np.atleast_2d(np.asarray(obs, dtype=np.float32))
+        o = np.atleast_2d(np.asarray(obs, dtype=np.float32))[:, :self.obs_dim]
         if self._mean is None:
             return o
         return np.minimum(np.maximum((o - self._mean) * self._scale, -self._clip), self._clip)  # np.clip: slow at n=1

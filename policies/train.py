@@ -1,80 +1,110 @@
-"""Train an SB3 policy on the charging environment: PPO / SAC (continuous) or DQN (discrete ON-OFF).
+"""Train an SB3 policy on the charging environment: PPO / SAC (continuous) or DQN (discrete ON-OFF),
+optionally constrained (Lagrangian, :mod:`policies.constrained`) and / or residual on the paper's
+model-based controller.
+
+Environments: by default the batched adapter :class:`envs.sb3_vec.SbarSB3VecEnv` (all ``n_envs``
+windows in one numpy step), ``vec="make_vec_env"`` the baseline path (SB3's ``DummyVecEnv`` loop
+over single envs with a ``Monitor`` each, kept for the benchmark). The stack is
+``adapter -> [ResidualVecEnv] -> VecMonitor (return, episode cost) -> [CostPenaltyVecEnv] -> VecNormalize``.
 
 Writes into ``out_dir``:
 
-* ``<algo>_sbar.zip`` + ``<algo>_sbar.json`` (model + metadata with the VecNormalize observation
-  statistics as JSON; loadable with :class:`policies.rl.RLPolicy`),
-* ``monitor/*.monitor.csv`` (SB3 Monitor: episode return, length, time),
+* ``<name>.zip`` + ``<name>.json`` (model + metadata: algorithm, seed, timesteps, reward weights,
+  cost definition, budget, env config, hyperparameters, the VecNormalize observation statistics as
+  JSON, the Lagrange multiplier history, the reproduce command; loadable with
+  :class:`policies.rl.RLPolicy` or :class:`policies.residual.ResidualPolicy`),
+* ``vecnormalize.pkl`` (``VecNormalize.load(path, venv)``: the SB3 way to use the model),
+* ``monitor.monitor.csv`` (VecMonitor: r, l, t, episode_cost, overshoot, reached_short_mode, ...),
+* ``eval/`` (``EvalCallback`` on fixed held-out seeds: ``evaluations.npz``, ``eval_curve.json``
+  with cost, ``best_model.zip``), ``checkpoints/`` (``CheckpointCallback`` with the VecNormalize
+  statistics; ``resume=`` continues from one), ``tb/`` when tensorboard is installed,
 * ``learning_curve.png``.
 """
 
 from __future__ import annotations
 
 import json
+from dataclasses import asdict, fields
 from pathlib import Path
 
 import numpy as np
 
 from .rl import ALGOS
 
-__all__ = ["train", "plot_learning_curve", "DEFAULT_HYPERPARAMS"]
+__all__ = ["train", "plot_learning_curve", "DEFAULT_HYPERPARAMS", "env_config", "EVAL_SEED", "VEC_PATHS"]
+
+#: fixed held-out evaluation seeds ``EVAL_SEED + i`` (training seeds are small integers)
+EVAL_SEED = 900_000
+VEC_PATHS = ("batched", "make_vec_env")
 
 DEFAULT_HYPERPARAMS = {
     # log_std_init -1.5 (std 0.22 in action units): a wide Gaussian (std 1) dithers the duty at
     # 10 kHz next to the link's 4 kHz resonance and the early rollouts are all overcurrent penalty
-    "ppo": dict(n_steps=512, batch_size=256, n_epochs=10, learning_rate=3e-4, gamma=0.98, gae_lambda=0.95,
+    "ppo": dict(n_steps=128, batch_size=1024, n_epochs=5, learning_rate=3e-4, gamma=0.98, gae_lambda=0.95,
                 ent_coef=0.0, policy_kwargs=dict(net_arch=[64, 64], log_std_init=-1.5)),
     "sac": dict(learning_rate=3e-4, buffer_size=100_000, batch_size=256, gamma=0.98, learning_starts=1000,
-                policy_kwargs=dict(net_arch=[64, 64])),
+                train_freq=1, gradient_steps=4, policy_kwargs=dict(net_arch=[64, 64])),
     "dqn": dict(learning_rate=5e-4, buffer_size=100_000, batch_size=128, gamma=0.98, learning_starts=1000,
-                exploration_fraction=0.3, target_update_interval=1000, policy_kwargs=dict(net_arch=[64, 64])),
+                exploration_fraction=0.3, target_update_interval=1000, train_freq=1, gradient_steps=4,
+                policy_kwargs=dict(net_arch=[64, 64])),
 }
 
 
-def _progress_callback(total: int, enabled: bool):
-    from stable_baselines3.common.callbacks import BaseCallback
-    from tqdm import tqdm
+def env_config(overrides: dict | None = None):
+    """:class:`envs.EnvConfig` with ``overrides``: its fields (n_steps, slow_every, rated_i2_a, bus_c_f,
+    dt_s) and the reward weights (tracking, overcurrent, i_ref_a) by name."""
+    from envs import EnvConfig, RewardWeights
 
-    class _Tqdm(BaseCallback):
-        def _on_training_start(self):
-            self.bar = tqdm(total=total, unit="step", desc="train", disable=not enabled)
+    ov = dict(overrides or {})
+    rw_keys = {f.name for f in fields(RewardWeights)}
+    cfg_keys = {f.name for f in fields(EnvConfig)} - {"link", "reward"}
+    bad = set(ov) - rw_keys - cfg_keys
+    if bad:
+        raise ValueError(f"env config key {sorted(bad)[0]!r} is invalid; valid keys: {', '.join(sorted(rw_keys | cfg_keys))}")
+    for k, v in ov.items():
+        if not np.isfinite(float(v)):
+            raise ValueError(f"{k}={v!r} is invalid; valid range: a finite number")
+    rw = RewardWeights(**{k: float(v) for k, v in ov.items() if k in rw_keys})
+    return EnvConfig(reward=rw, **{k: (int(v) if k in ("n_steps", "slow_every") else float(v))
+                                   for k, v in ov.items() if k in cfg_keys})
 
-        def _on_step(self):
-            self.bar.update(self.training_env.num_envs)
-            return True
 
-        def _on_training_end(self):
-            self.bar.close()
-
-    return _Tqdm()
+def config_dict(cfg) -> dict:
+    """The metadata form of an EnvConfig (without the link, which is Table I)."""
+    d = {f.name: getattr(cfg, f.name) for f in fields(cfg) if f.name not in ("link", "reward")}
+    return {**d, "reward": asdict(cfg.reward)}
 
 
-def plot_learning_curve(monitor_dir, out_png, title: str) -> Path:
-    """Episode return against environment steps from SB3 Monitor CSVs (all sub-envs pooled)."""
+def plot_learning_curve(monitor_csv, out_png, title: str, eval_curve=None) -> Path:
+    """Episode return and episode cost against environment steps (Monitor CSV; evaluation points)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import pandas as pd
 
-    frames = []
-    for f in sorted(Path(monitor_dir).glob("*.monitor.csv")):
-        df = pd.read_csv(f, skiprows=1)
-        frames.append(df)
-    if not frames:
-        raise FileNotFoundError(f"no *.monitor.csv in {monitor_dir}")
-    df = pd.concat(frames).sort_values("t")
+    df = pd.read_csv(monitor_csv, skiprows=1).sort_values("t")
     steps = np.cumsum(df["l"].to_numpy())
-    ret = df["r"].to_numpy()
-    fig, ax = plt.subplots(figsize=(7, 4))
-    ax.plot(steps, ret, ".", ms=2, alpha=0.4, label="episode return")
-    w = max(1, len(ret) // 20)
-    if len(ret) >= w:
-        ax.plot(steps[w - 1:], np.convolve(ret, np.ones(w) / w, mode="valid"), lw=2, label=f"mean of {w}")
-    ax.set_xlabel("environment steps")
-    ax.set_ylabel("episode return")
-    ax.set_title(title)
-    ax.grid(alpha=0.3)
-    ax.legend()
+    fig, axes = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+    for ax, col, lab in zip(axes, ("r", "episode_cost"), ("episode return", "episode cost")):
+        if col not in df:
+            continue
+        y = df[col].to_numpy(dtype=float)
+        ax.plot(steps, y, ".", ms=2, alpha=0.3, label=f"training {lab}")
+        w = max(1, len(y) // 20)
+        if len(y):
+            ax.plot(steps[w - 1:], np.convolve(y, np.ones(w) / w, mode="valid"), lw=2, label=f"mean of {w}")
+        else:
+            ax.text(0.5, 0.5, "no window finished yet", transform=ax.transAxes, ha="center")
+        ax.set_ylabel(lab)
+        ax.grid(alpha=0.3)
+    if eval_curve:
+        ts = [e["timesteps"] for e in eval_curve]
+        axes[0].plot(ts, [e["return_mean"] for e in eval_curve], "k-o", ms=3, label="evaluation (held-out seeds)")
+        axes[1].plot(ts, [e["cost"] for e in eval_curve], "k-o", ms=3, label="evaluation")
+    for ax in axes:
+        ax.legend(fontsize=8)
+    axes[0].set_title(title)
+    axes[1].set_xlabel("environment steps")
     fig.tight_layout()
     out_png = Path(out_png)
     fig.savefig(out_png, dpi=110)
@@ -82,55 +112,231 @@ def plot_learning_curve(monitor_dir, out_png, title: str) -> Path:
     return out_png
 
 
-def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 1, scenario: str = "random",
-          progress: bool = True, hyperparams: dict | None = None, name: str | None = None) -> dict:
-    """Train ``algo`` for ``timesteps`` environment steps; returns a dict of the written paths and the
-    final mean episode return. Deterministic for a given seed on one thread (torch threads set to 1)."""
-    import gymnasium as gym
-    import stable_baselines3 as sb3
-    import torch
-    from stable_baselines3.common.env_util import make_vec_env
-    from stable_baselines3.common.vec_env import VecNormalize
-
+def _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario):
     import envs
 
     if algo not in ALGOS:
         raise ValueError(f"algo={algo!r} is invalid; valid values: {', '.join(ALGOS)}")
     if int(timesteps) != timesteps or timesteps < 1:
         raise ValueError(f"timesteps={timesteps!r} is invalid; valid range: integer >= 1")
-    if int(n_envs) != n_envs or not 1 <= n_envs <= 256:
-        raise ValueError(f"n_envs={n_envs!r} is invalid; valid range: integer 1..256")
+    if int(n_envs) != n_envs or not 1 <= n_envs <= 1024:
+        raise ValueError(f"n_envs={n_envs!r} is invalid; valid range: integer 1..1024")
+    if vec not in VEC_PATHS:
+        raise ValueError(f"vec={vec!r} is invalid; valid values: {', '.join(VEC_PATHS)}")
+    if (lagrangian or residual) and vec != "batched":
+        raise ValueError(f"vec={vec!r} is invalid with the Lagrangian or residual option; valid value: batched")
+    if residual and algo == "dqn":
+        raise ValueError("algo='dqn' is invalid with residual=True; valid values: ppo, sac (a continuous correction)")
     envs.get_scenario(scenario)
-    torch.set_num_threads(1)
-    out = Path(out_dir)
-    (out / "monitor").mkdir(parents=True, exist_ok=True)
-    for f in (out / "monitor").glob("*.monitor.csv"):
-        f.unlink()
-    env_id = envs.DISCRETE_ENV_ID if algo == "dqn" else envs.ENV_ID
-    venv = make_vec_env(env_id, n_envs=n_envs, seed=seed, monitor_dir=str(out / "monitor"),
-                        env_kwargs={"scenario": scenario})
-    venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=0.98)
-    hp = dict(DEFAULT_HYPERPARAMS[algo])
-    hp.update(hyperparams or {})
-    cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "dqn": sb3.DQN}[algo]
-    model = cls("MlpPolicy", venv, seed=seed, verbose=0, device="cpu", **hp)
-    model.learn(total_timesteps=int(timesteps), callback=_progress_callback(int(timesteps), progress))
-    stem = name or f"{algo}_sbar"
-    zip_path = out / f"{stem}.zip"
-    model.save(str(zip_path))
-    probe = gym.make(env_id).unwrapped
-    meta = {
-        "algo": algo, "env_id": env_id, "discrete": algo == "dqn", "scenario": scenario, "seed": int(seed),
-        "timesteps": int(timesteps), "n_envs": int(n_envs), "control_period_s": probe.config.dt_s,
-        "hyperparams": {k: v for k, v in hp.items() if k != "policy_kwargs"},
-        "policy_kwargs": hp.get("policy_kwargs", {}),
+
+
+def _base_env(spec: dict, n_envs: int, monitor_path, reset_seed=None):
+    """adapter -> [residual] -> VecMonitor (the batched path), or make_vec_env's loop."""
+    import envs
+    from envs.sb3_vec import EPISODE_KEYS, SbarSB3VecEnv
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from .constrained import ResidualVecEnv
+
+    discrete = spec["algo"] == "dqn"
+    if spec["vec"] == "make_vec_env":
+        from stable_baselines3.common.env_util import make_vec_env
+        return make_vec_env(envs.DISCRETE_ENV_ID if discrete else envs.ENV_ID, n_envs=n_envs, seed=spec["seed"],
+                            monitor_dir=None if monitor_path is None else str(monitor_path) + "_mve",
+                            env_kwargs={"scenario": spec["scenario"], "config": spec["config"]},
+                            monitor_kwargs={"info_keywords": ("episode_cost", "overshoot", "reached_short_mode")})
+    venv = SbarSB3VecEnv(n_envs, spec["scenario"], spec["config"], discrete=discrete, cost=spec["cost"],
+                         reset_seed=reset_seed)
+    if reset_seed is None:
+        venv.seed(spec["seed"])
+    if spec["residual"]:
+        venv = ResidualVecEnv(venv, spec["residual_scale"], spec["residual_base_budget"])
+    return VecMonitor(venv, None if monitor_path is None else str(monitor_path), info_keywords=EPISODE_KEYS)
+
+
+def _checkpoint_pkl(zip_path: Path) -> Path:
+    """The VecNormalize statistics saved with a model: ``<p>_vecnormalize_<n>_steps.pkl`` next to a
+    ``CheckpointCallback`` file ``<p>_<n>_steps.zip``, else ``vecnormalize.pkl`` in its folder."""
+    import re
+
+    m = re.fullmatch(r"(.*)_(\d+)_steps\.zip", zip_path.name)
+    pkl = zip_path.with_name(f"{m.group(1)}_vecnormalize_{m.group(2)}_steps.pkl") if m else None
+    if pkl is None or not pkl.is_file():
+        pkl = zip_path.with_name("vecnormalize.pkl")
+    if not pkl.is_file():
+        raise FileNotFoundError(f"resume={str(zip_path)!r}: no VecNormalize statistics next to it ({pkl.name})")
+    return pkl
+
+
+def _build(spec: dict, out: Path, resume):
+    """Training env stack, evaluation env stack, model (new or resumed), Lagrange penalty or None."""
+    import stable_baselines3 as sb3
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from .constrained import CostPenaltyVecEnv
+
+    venv = _base_env(spec, spec["n_envs"], out / "monitor")
+    penalty = None
+    if spec["lagrangian"]:
+        venv = penalty = CostPenaltyVecEnv(venv, spec["lambda0"])
+    eval_env = _base_env(spec, spec["eval_episodes"], None, reset_seed=EVAL_SEED)
+    if penalty is not None:   # same wrapper chain as training (sync_envs_normalization walks both); the
+        eval_env = CostPenaltyVecEnv(eval_env, 0.0)   # evaluation return is VecMonitor's, unpenalised
+    eval_env = VecNormalize(eval_env, training=False,
+                            norm_obs=True, norm_reward=False, clip_obs=10.0, gamma=spec["hp"].get("gamma", 0.99))
+    cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "dqn": sb3.DQN}[spec["algo"]]
+    if resume is not None:
+        venv = VecNormalize.load(str(_checkpoint_pkl(Path(resume))), venv)
+        model = cls.load(str(resume), env=venv, device="cpu")
+    else:
+        venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=spec["hp"].get("gamma", 0.99))
+        model = cls("MlpPolicy", venv, seed=spec["seed"], verbose=0, device="cpu", tensorboard_log=spec["tb"],
+                    **spec["hp"])
+    return venv, eval_env, model, penalty
+
+
+def _callbacks(spec: dict, out: Path, eval_env, penalty, progress: bool):
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+
+    from .callbacks import CostEvalCallback, ProgressCallback
+    from .constrained import LagrangeCallback
+
+    n = spec["n_envs"]
+    cbs = [ProgressCallback(spec["timesteps"], progress),
+           CheckpointCallback(max(1, spec["checkpoint_every"] // n), str(out / "checkpoints"), name_prefix=spec["name"],
+                              save_vecnormalize=True),
+           CostEvalCallback(eval_env, n_eval_episodes=spec["eval_episodes"], eval_freq=max(1, spec["eval_every"] // n),
+                            log_path=str(out / "eval"), best_model_save_path=str(out / "eval"), verbose=0, warn=False)]
+    lag = None
+    if penalty is not None:
+        probe = _base_env(spec, spec["probe_episodes"], None) if spec["probe_episodes"] else None
+        lag = LagrangeCallback(penalty, spec["budget"], lr=spec["lambda_lr"], path=out / "lagrange.json", probe=probe)
+        cbs.append(lag)
+    return CallbackList(cbs), lag, cbs[2]
+
+
+def _reproduce(spec: dict) -> str:
+    cmd = (f"dronewpt train --algo {spec['algo']} --timesteps {spec['timesteps']} --seed {spec['seed']} "
+           f"--n-envs {spec['n_envs']} --scenario {spec['scenario']} --cost {spec['cost']}")
+    if spec["lagrangian"]:
+        cmd += (f" --lagrangian --budget {spec['budget']:.6g} --lambda-lr {spec['lambda_lr']:g}"
+                f" --probe-episodes {spec['probe_episodes']}")
+    if spec["residual"]:
+        cmd += (f" --residual --residual-scale {spec['residual_scale']:g}"
+                f" --residual-base-budget {spec['residual_base_budget']:g}")
+    if spec["env_overrides"]:
+        cmd += " " + " ".join(f"--env {k}={v}" for k, v in spec["env_overrides"].items())
+    if spec["hyperparams_file"]:
+        cmd += f" --hyperparams {spec['hyperparams_file']}"
+    return cmd + " --out DIR"
+
+
+def _meta(spec: dict, venv, lag, probe_dt: float) -> dict:
+    hp = spec["hp"]
+    return {
+        "algo": spec["algo"], "env_id": spec["env_id"], "discrete": spec["algo"] == "dqn", "scenario": spec["scenario"],
+        "seed": spec["seed"], "timesteps": spec["timesteps"], "n_envs": spec["n_envs"], "vec": spec["vec"],
+        "control_period_s": probe_dt, "obs_dim": int(venv.observation_space.shape[0]),
+        "hyperparams": {k: v for k, v in hp.items() if k != "policy_kwargs"}, "policy_kwargs": hp.get("policy_kwargs", {}),
+        "hyperparams_file": spec["hyperparams_file"], "env_config": config_dict(spec["config"]),
+        "env_overrides": spec["env_overrides"], "cost": spec["cost"],
+        "budget": spec["budget"], "budget_source": spec["budget_source"],
+        "lagrangian": None if lag is None else {"lr": lag.lr, "lambda": lag.penalty.lam, "history": lag.history,
+                                                "cost_from": f"{spec['probe_episodes']} deterministic windows per rollout"
+                                                if spec["probe_episodes"] else "the stochastic rollouts"},
+        "residual": {"scale": spec["residual_scale"], "base_budget": spec["residual_base_budget"],
+                     "base": f"model_based_budget:{spec['residual_base_budget']:g}"} if spec["residual"] else None,
         "obs_norm": {"mean": venv.obs_rms.mean.tolist(), "var": venv.obs_rms.var.tolist(),
                      "clip": float(venv.clip_obs), "epsilon": float(venv.epsilon)},
-        "reproduce": f"dronewpt train --algo {algo} --timesteps {int(timesteps)} --seed {int(seed)} "
-                     f"--n-envs {int(n_envs)} --scenario {scenario} --out DIR",
+        "eval": {"seed": EVAL_SEED, "episodes": spec["eval_episodes"], "every_steps": spec["eval_every"]},
+        "reproduce": _reproduce(spec),
     }
+
+
+def _spec(algo, timesteps, o: dict) -> dict:
+    """Everything a run is made of (``o``: train's keyword arguments), hyperparameters merged
+    (defaults < file < ``hyperparams``), the default budget measured when asked for."""
+    import envs
+
+    hp = dict(DEFAULT_HYPERPARAMS[algo])
+    if o["hyperparams_file"] is not None:
+        from .hyperparams import load_hyperparams
+        hp.update(load_hyperparams(o["hyperparams_file"])[0])
+    hp.update(o["hyperparams"] or {})
+    cfg = env_config(o["env"])
+    spec = dict(algo=algo, timesteps=int(timesteps), seed=int(o["seed"]), n_envs=int(o["n_envs"]),
+                scenario=o["scenario"], hp=hp, config=cfg, env_overrides=dict(o["env"] or {}), cost=o["cost"],
+                hyperparams_file=None if o["hyperparams_file"] is None else str(o["hyperparams_file"]),
+                lagrangian=bool(o["lagrangian"]), lambda_lr=float(o["lambda_lr"]), lambda0=0.0,
+                residual=bool(o["residual"]), residual_scale=float(o["residual_scale"]),
+                residual_base_budget=float(o["residual_base_budget"]), vec=o["vec"],
+                name=o["name"] or f"{algo}_sbar", eval_episodes=int(o["eval_episodes"]),
+                eval_every=int(o["eval_every"]), checkpoint_every=int(o["checkpoint_every"]),
+                probe_episodes=int(o["probe_episodes"]), tb=None,
+                env_id=envs.DISCRETE_ENV_ID if algo == "dqn" else envs.ENV_ID,
+                budget=None if o["budget"] is None else float(o["budget"]), budget_source="given")
+    if spec["lagrangian"] and spec["budget"] is None:
+        from .constrained import ramp_budget
+        spec["budget"] = ramp_budget(spec["scenario"], cfg, spec["cost"])
+        spec["budget_source"] = "ramp policy's mean episode cost"
+    if not spec["lagrangian"]:
+        spec["budget_source"] = None
+    return spec
+
+
+def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64, scenario: str = "random",
+          progress: bool = True, hyperparams: dict | None = None, hyperparams_file=None, env: dict | None = None,
+          cost: str = "overshoot", lagrangian: bool = False, budget: float | None = None, lambda_lr: float = 50.0,
+          residual: bool = False, residual_scale: float = 0.25, vec: str = "batched", name: str | None = None,
+          eval_episodes: int = 32, eval_every: int = 50_000, checkpoint_every: int = 100_000, resume=None,
+          probe_episodes: int = 32, residual_base_budget: float = 0.0) -> dict:
+    """Train ``algo`` for ``timesteps`` environment steps; returns a dict of the written paths.
+
+    ``env``: EnvConfig / reward-weight overrides (:func:`env_config`); ``cost``: ``overshoot`` or
+    ``overcurrent`` (:mod:`envs.sb3_vec`); ``lagrangian``: penalise the cost with a multiplier
+    learned against ``budget`` (default: the ramp policy's mean episode cost on ``scenario``);
+    ``residual``: learn a bounded correction ``residual_scale * a`` of the model-based duty (of the
+    budgeted model-based controller with ``residual_base_budget`` > 0);
+    ``probe_episodes``: the multiplier's cost is measured on this many deterministic windows after
+    every rollout (0: on the stochastic rollouts themselves, see :class:`policies.constrained.LagrangeCallback`).
+    Deterministic for a given seed on one thread (torch threads set to 1)."""
+    import importlib.util
+
+    import torch
+
+    _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario)
+    opts = dict(seed=seed, n_envs=n_envs, scenario=scenario, hyperparams=hyperparams,
+                hyperparams_file=hyperparams_file, env=env, cost=cost, lagrangian=lagrangian, budget=budget,
+                lambda_lr=lambda_lr, residual=residual, residual_scale=residual_scale,
+                residual_base_budget=residual_base_budget, vec=vec, name=name, eval_episodes=eval_episodes,
+                eval_every=eval_every, checkpoint_every=checkpoint_every, probe_episodes=probe_episodes)
+    spec = _spec(algo, timesteps, opts)
+    torch.set_num_threads(1)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if importlib.util.find_spec("tensorboard") is not None:
+        spec["tb"] = str(out / "tb")
+    if resume is not None and (out / "lagrange.json").is_file():
+        spec["lambda0"] = float(json.loads((out / "lagrange.json").read_text())["lambda"])
+    venv, eval_env, model, penalty = _build(spec, out, resume)
+    cbs, lag, ev = _callbacks(spec, out, eval_env, penalty, progress)
+    todo = spec["timesteps"] - (model.num_timesteps if resume is not None else 0)   # SB3 adds num_timesteps on resume
+    model.learn(total_timesteps=max(todo, 1), callback=cbs, reset_num_timesteps=resume is None)
+    zip_path = out / f"{spec['name']}.zip"
+    model.save(str(zip_path))
+    venv.save(str(out / "vecnormalize.pkl"))
+    meta = _meta(spec, venv, lag, float(spec["config"].dt_s))
+    meta["final_eval"] = ev.curve[-1] if ev.curve else None
     meta_path = zip_path.with_suffix(".json")
     meta_path.write_text(json.dumps(meta, indent=2))
+    if (out / "eval" / "best_model.zip").is_file():   # usable as rl:/residual: too (normalisation: the final one)
+        (out / "eval" / "best_model.json").write_text(json.dumps({**meta, "note": "best evaluation return; obs_norm "
+                                                                  "is the end of training's"}, indent=2))
     venv.close()
-    png = plot_learning_curve(out / "monitor", out / "learning_curve.png", f"{algo.upper()} on {env_id} ({scenario})")
-    return {"model": zip_path, "meta": meta_path, "monitor_dir": out / "monitor", "learning_curve": png}
+    mon = out / "monitor.monitor.csv"
+    res = {"model": zip_path, "meta": meta_path, "vecnormalize": out / "vecnormalize.pkl", "monitor": mon,
+           "eval_dir": out / "eval", "checkpoints": out / "checkpoints"}
+    if mon.is_file():
+        res["learning_curve"] = plot_learning_curve(mon, out / "learning_curve.png",
+                                                    f"{algo.upper()} on {spec['env_id']} ({scenario})", ev.curve)
+    return res

@@ -111,7 +111,7 @@ def test_online_lm_policy_batched_equals_one_receiver_at_a_time():
             cmd = np.full(n, 6.0 if k < 120 else 0.0)
             i2 = link.i2
             il = 2 / np.pi * i2 * (1 - np.sin(np.pi / 2 * d))
-            obs = normalise_obs(np.column_stack([i2, np.full(n, 30.0), il, il, np.full(n, 0.5), cmd, d]))
+            obs = normalise_obs(np.column_stack([i2, np.full(n, 30.0), il, il, np.full(n, 0.5), cmd, d, np.full(n, max(k - 120, 0) * 1e-4)]))
             d = np.concatenate([p.act(obs[j::len(pols)] if len(pols) > 1 else obs) for j, p in enumerate(pols)])
             outs.append(d)
             link.step(v2_from_duty(d, 30.0), ctx.control_period_s, lm_h=lms)

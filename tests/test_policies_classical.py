@@ -19,7 +19,7 @@ def closed_loop(name, n_steps=6000, k_switch=170):
     for k in range(n_steps):
         cmd = 20.0 if k < k_switch else 0.0
         il = 2 / np.pi * link.i2[0] * (1 - np.sin(np.pi / 2 * d))
-        d = float(pol.act(normalise_obs([[link.i2[0], 30, il, il, 0.5, cmd, d]]))[0])
+        d = float(pol.act(normalise_obs([[link.i2[0], 30, il, il, 0.5, cmd, d, 0.0 if k < k_switch else (k - k_switch) * ctx.control_period_s]]))[0])
         link.step(v2_from_duty(d, 30.0), ctx.control_period_s)
         if k >= k_switch:
             peak = max(peak, link.i2[0])
@@ -45,7 +45,7 @@ def test_target_v2_power_balance():
 
 
 def test_contract_round_trips_and_registry_errors():
-    phys = np.array([[11.0, 30.0, -5.0, 7.0, 0.4, 6.0, 0.3]])
+    phys = np.array([[11.0, 30.0, -5.0, 7.0, 0.4, 6.0, 0.3, 2e-3]])
     assert phys.shape[1] == OBS_DIM
     np.testing.assert_allclose(denormalise_obs(normalise_obs(phys)), phys)
     np.testing.assert_allclose(action_to_duty(duty_to_action([0, 0.25, 1])), [0, 0.25, 1])

@@ -17,8 +17,9 @@ def brief_ppo(tmp_path_factory):
     """PPO, 24 576 steps on the nominal scenario (seed 0): a few seconds on one core."""
     from policies.train import train
     out = tmp_path_factory.mktemp("ppo")
-    res = train("ppo", 24_576, out, seed=0, n_envs=4, scenario="nominal", progress=False,
-                hyperparams=dict(n_steps=512, policy_kwargs=dict(net_arch=[32, 32], log_std_init=-1.5)))
+    res = train("ppo", 24_576, out, seed=0, n_envs=4, scenario="nominal", progress=False, eval_every=8192,
+                eval_episodes=8, hyperparams=dict(n_steps=512, batch_size=256,
+                                                  policy_kwargs=dict(net_arch=[32, 32], log_std_init=-1.5)))
     return res
 
 
@@ -51,13 +52,16 @@ def test_brief_training_improves_on_its_own_initialisation(brief_ppo, tmp_path):
 def test_training_writes_everything_and_is_reproducible(brief_ppo, tmp_path):
     assert brief_ppo["model"].stat().st_size < 1_000_000
     meta = json.loads(brief_ppo["meta"].read_text())
-    assert meta["seed"] == 0 and meta["timesteps"] == 24_576 and len(meta["obs_norm"]["mean"]) == 7
+    assert meta["seed"] == 0 and meta["timesteps"] == 24_576 and len(meta["obs_norm"]["mean"]) == 8
     assert brief_ppo["learning_curve"].stat().st_size > 1000
-    assert len(list(brief_ppo["monitor_dir"].glob("*.monitor.csv"))) == 4
+    import pandas as pd
+    mon = pd.read_csv(brief_ppo["monitor"], skiprows=1)
+    assert len(mon) == 4 * (24_576 // 4 // 300) and {"episode_cost", "overshoot", "reached_short_mode"} <= set(mon)
+    assert meta["cost"] == "overshoot" and meta["env_config"]["reward"]["overcurrent"] == 10.0
     from policies.train import train
-    hp = dict(n_steps=256, n_epochs=2, policy_kwargs=dict(net_arch=[16]))
-    a = train("ppo", 512, tmp_path / "a", seed=3, scenario="nominal", progress=False, hyperparams=hp)
-    b = train("ppo", 512, tmp_path / "b", seed=3, scenario="nominal", progress=False, hyperparams=hp)
+    hp = dict(n_steps=256, batch_size=256, n_epochs=2, policy_kwargs=dict(net_arch=[16]))
+    a = train("ppo", 512, tmp_path / "a", seed=3, n_envs=2, scenario="nominal", progress=False, hyperparams=hp)
+    b = train("ppo", 512, tmp_path / "b", seed=3, n_envs=2, scenario="nominal", progress=False, hyperparams=hp)
     import stable_baselines3 as sb3
     pa = sb3.PPO.load(str(a["model"]), device="cpu").policy.state_dict()
     pb = sb3.PPO.load(str(b["model"]), device="cpu").policy.state_dict()

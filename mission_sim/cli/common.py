@@ -39,7 +39,8 @@ def lazy_names_help(action, text: str, names) -> None:
 
 def policy_names() -> list[str]:
     import policies
-    return [*policies.available(), "rl:PATH (a model trained with `dronewpt train`)"]
+    return [*policies.available(), "rl:PATH / residual:PATH (a model trained with `dronewpt train`)",
+            "model_based_budget:B (overshoot budget B, e.g. 0.02)"]
 
 
 def scenario_names() -> list[str]:

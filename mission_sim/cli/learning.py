@@ -9,6 +9,7 @@ from pathlib import Path
 from .common import (
     CliError,
     add_progress_flag,
+    float_arg,
     lazy_names_help,
     policy_names,
     prepare_out_dir,
@@ -21,56 +22,149 @@ from .common import (
 def _add_train(sub):
     p = sub.add_parser("train", help="train an RL mode-switching policy (stable-baselines3)",
                        description="Train PPO or SAC on dronewpt/SbarCharging-v0 or DQN on the discrete "
-                                   "(ON-OFF) variant; writes the model zip, its metadata JSON with the "
-                                   "observation normalisation statistics, Monitor CSVs and a learning curve PNG.")
+                                   "(ON-OFF) variant on the batched env adapter; optionally Lagrangian "
+                                   "(episode cost against a budget) and / or residual on the model-based "
+                                   "controller. Writes the model zip, its metadata JSON, vecnormalize.pkl, "
+                                   "the Monitor CSV (return and cost), evaluation on held-out seeds "
+                                   "(best model, curve), checkpoints, TensorBoard logs when installed and a "
+                                   "learning curve PNG.")
     p.add_argument("--algo", choices=("ppo", "sac", "dqn"), required=True)
     p.add_argument("--timesteps", type=int, required=True, help="environment steps to train for")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--seed", type=seed_int(), default=0, help="seed, 0 .. 2^32-1 (default 0)")
-    p.add_argument("--n-envs", type=int, default=1, help="parallel environments (default 1)")
+    p.add_argument("--n-envs", type=int, default=64, help="parallel windows of the batched env (default 64)")
     lazy_names_help(p.add_argument("--scenario", default="random"),
                     "training scenario (default random: domain randomisation)", scenario_names)
+    p.add_argument("--hyperparams", type=Path, default=None, metavar="FILE",
+                   help="YAML or JSON model arguments, rl-baselines3-zoo style (policy_kwargs as a dict or "
+                        "'dict(...)'); override the defaults")
+    p.add_argument("--env", action="append", default=[], metavar="KEY=VALUE",
+                   help="env config / reward weight override, repeatable: n_steps, slow_every, rated_i2_a, "
+                        "bus_c_f, dt_s, tracking, overcurrent, i_ref_a")
+    p.add_argument("--cost", choices=("overshoot", "overcurrent"), default="overshoot",
+                   help="episode cost: overshoot = max(0, peak |I2| after the stop / true short-mode I2 - 1) "
+                        "(default); overcurrent = sum of max(0, |I2|/rated - 1) per step")
+    p.add_argument("--lagrangian", action="store_true", help="learn a multiplier of the episode cost against --budget")
+    p.add_argument("--budget", type=float_arg("--budget", positive=True), default=None,
+                   help="mean episode cost allowed (default: the ramp policy's on the training scenario)")
+    p.add_argument("--lambda-lr", type=float_arg("--lambda-lr", positive=True), default=50.0,
+                   help="multiplier step per rollout at a cost 100 %% over budget (default 50)")
+    p.add_argument("--probe-episodes", type=int, default=32,
+                   help="deterministic windows the multiplier's cost is measured on after every rollout "
+                        "(default 32; 0 = the stochastic rollouts themselves)")
+    p.add_argument("--residual", action="store_true", help="learn a bounded correction of the model-based duty")
+    p.add_argument("--residual-scale", type=float_arg("--residual-scale", positive=True, hi=1.0), default=0.25,
+                   help="largest duty correction (default 0.25)")
+    p.add_argument("--residual-base-budget", type=float_arg("--residual-base-budget"), default=0.0,
+                   help="overshoot budget of the model-based controller the residual corrects (default 0: the "
+                        "paper's controller)")
+    p.add_argument("--eval-every", type=int, default=50_000, help="env steps between evaluations (default 50000)")
+    p.add_argument("--eval-episodes", type=int, default=32, help="held-out evaluation windows (default 32)")
+    p.add_argument("--checkpoint-every", type=int, default=100_000, help="env steps between checkpoints")
+    p.add_argument("--resume", type=Path, default=None, metavar="CHECKPOINT.zip",
+                   help="continue from a checkpoint of checkpoints/ (its VecNormalize statistics next to it)")
     add_progress_flag(p)
     p.set_defaults(func=_cmd_train)
 
 
-def _cmd_train(args) -> int:
+def _env_overrides(items) -> dict:
+    from .common import parse_set
+    out = {}
+    for k, v in parse_set(items).items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise CliError(f"--env {k}={v!r} is invalid; valid: KEY=NUMBER")
+        out[k] = v
+    return out
+
+
+def _check_train(args):
     if args.timesteps < 1:
         raise CliError(f"--timesteps {args.timesteps} is invalid; valid range: >= 1")
-    if not 1 <= args.n_envs <= 256:
-        raise CliError(f"--n-envs {args.n_envs} is invalid; valid range: 1..256")
+    if not 1 <= args.n_envs <= 1024:
+        raise CliError(f"--n-envs {args.n_envs} is invalid; valid range: 1..1024")
+    for flag, v in (("--eval-every", args.eval_every), ("--eval-episodes", args.eval_episodes),
+                    ("--checkpoint-every", args.checkpoint_every)):
+        if v < 1:
+            raise CliError(f"{flag} {v} is invalid; valid range: >= 1")
     if args.scenario not in scenario_names():
         raise CliError(f"--scenario {args.scenario!r} is invalid; valid values: {', '.join(scenario_names())}")
+    for flag, path in (("--hyperparams", args.hyperparams), ("--resume", args.resume)):
+        if path is not None and not path.is_file():
+            raise CliError(f"{flag} {str(path)!r} does not exist")
+    if not 0 <= args.probe_episodes <= 1024:
+        raise CliError(f"--probe-episodes {args.probe_episodes} is invalid; valid range: 0..1024")
+    if args.budget is not None and not args.lagrangian:
+        raise CliError("--budget is only used with --lagrangian; add --lagrangian or drop --budget")
+
+
+def _cmd_train(args) -> int:
+    _check_train(args)
+    env = _env_overrides(args.env)
     from policies import require_sb3
     require_sb3()
     prepare_out_dir(args.out)
     from policies.train import train
-    res = train(args.algo, args.timesteps, args.out, seed=args.seed, n_envs=args.n_envs, scenario=args.scenario,
-                progress=show_progress(args))
+    try:
+        res = train(args.algo, args.timesteps, args.out, seed=args.seed, n_envs=args.n_envs, scenario=args.scenario,
+                    progress=show_progress(args), hyperparams_file=args.hyperparams, env=env, cost=args.cost,
+                    lagrangian=args.lagrangian, budget=args.budget, lambda_lr=args.lambda_lr, residual=args.residual,
+                    residual_scale=args.residual_scale, eval_every=args.eval_every,
+                    eval_episodes=args.eval_episodes, checkpoint_every=args.checkpoint_every, resume=args.resume,
+                    probe_episodes=args.probe_episodes, residual_base_budget=args.residual_base_budget)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
     for key, path in res.items():
         print(f"{key}: {path}")
     return 0
 
 
 def _add_compare(sub):
-    p = sub.add_parser("compare", help="compare mode-switching policies head to head",
+    p = sub.add_parser("compare", help="compare mode-switching policies head to head, with statistics",
                        description="Run every policy through the same closed loop on the same seeded charging "
-                                   "windows (batched env) and print peak I2, overshoot, time above rated, "
-                                   "energy, tracking error, cost and return; writes a figure of the "
-                                   "RM -> SM transitions.")
+                                   "windows (batched env); print per policy and scenario the mean with a 95 %% "
+                                   "bootstrap interval of overshoot, fraction reaching short mode, peak I2, "
+                                   "energy before / after the stop, tracking, cost and return, and the paired "
+                                   "difference against model_based; write the RM -> SM transitions and the "
+                                   "return / energy-after-stop versus overshoot figure with the Pareto front and "
+                                   "the budgeted model-based curve.")
     lazy_names_help(p.add_argument("--policies", default=None),
                     "comma-separated policy names (default: step,ramp,hysteresis,model_based,model_based_online,"
-                    "rl,random; rl is skipped with a note when stable-baselines3 is not installed)", policy_names)
+                    "model_based_budget:0.01,model_based_budget:0.02,rl,ppo_lagrangian,residual,random; the "
+                    "SB3 ones are skipped with a note when stable-baselines3 is not installed)", policy_names)
     lazy_names_help(p.add_argument("--scenarios", default=None),
-                    "comma-separated scenarios (default: nominal,lm_mismatch,windy,battery)", scenario_names)
-    p.add_argument("--episodes", type=int, default=20, help="episodes per scenario (default 20)")
+                    "comma-separated scenarios (default: nominal,lm_mismatch,windy,battery,lm_high; lm_high is "
+                    "outside the training range)", scenario_names)
+    p.add_argument("--episodes", type=int, default=100, help="episodes per scenario (default 100)")
     p.add_argument("--seed", type=seed_int(), default=1000,
                    help="seed of episode 0 (episode i uses seed + i), 0 .. 2^32-1 (default 1000)")
+    p.add_argument("--train-seeds", action="append", default=[], metavar="LABEL=SPEC,SPEC,...",
+                   help="one row aggregated over models of one kind trained with different seeds, e.g. "
+                        "ppo_lag=rl:a/ppo_sbar.zip,rl:b/ppo_sbar.zip (a glob in a path is expanded); repeatable")
+    p.add_argument("--no-frontier", action="store_true", help="skip the budgeted model-based sweep")
     p.add_argument("--format", choices=("table", "json"), default="table")
-    p.add_argument("--out", type=Path, default=Path("out/compare"), help="folder for the figure")
-    p.add_argument("--no-plot", action="store_true", help="skip the figure")
+    p.add_argument("--out", type=Path, default=Path("out/compare"), help="folder for the figures")
+    p.add_argument("--no-plot", action="store_true", help="skip the figures")
     add_progress_flag(p)
     p.set_defaults(func=_cmd_compare)
+
+
+def _train_seed_groups(items) -> dict:
+    """``LABEL=SPEC,SPEC`` -> {label: [spec, ...]} (globs in paths expanded, sorted)."""
+    import glob
+    out = {}
+    for item in items:
+        label, sep, rest = item.partition("=")
+        if not sep or not label.strip() or not rest.strip():
+            raise CliError(f"--train-seeds {item!r} is invalid; valid form: LABEL=SPEC,SPEC,... (SPEC e.g. rl:PATH)")
+        specs = []
+        for sp in (x.strip() for x in rest.split(",") if x.strip()):
+            base, colon, path = sp.partition(":")
+            hits = sorted(glob.glob(path)) if colon and any(c in path for c in "*?[") else [path] if colon else []
+            if colon and not hits:
+                raise CliError(f"--train-seeds {sp!r} is invalid: no file matches {path!r}")
+            specs += [f"{base}:{h}" for h in hits] if colon else [sp]
+        out[label.strip()] = specs
+    return out
 
 
 def sb3_installed() -> bool:
@@ -78,34 +172,28 @@ def sb3_installed() -> bool:
     return importlib.util.find_spec("stable_baselines3") is not None
 
 
+_SB3_POLICIES = ("rl", "ppo_lagrangian", "residual")
+
+
 def _rl_or_skip(pols: tuple, explicit: bool) -> tuple:
-    """Without stable-baselines3 the default ``rl`` row is skipped with a note on stderr; an ``rl``
-    the user asked for with ``--policies`` is an error naming the extra to install."""
-    if not any(p_.split(":", 1)[0] == "rl" for p_ in pols) or sb3_installed():
+    """Without stable-baselines3 the default SB3 rows (rl, ppo_lagrangian, residual) are skipped with
+    a note on stderr; one the user asked for with ``--policies`` is an error naming the extra to install."""
+    sb3_rows = [p_ for p_ in pols if p_.split(":", 1)[0] in _SB3_POLICIES]
+    if not sb3_rows or sb3_installed():
         return pols
     if explicit:
-        raise CliError("--policies rl needs stable-baselines3 (with torch): pip install 'dronewpt[rl]'")
-    print("dronewpt compare: note: skipping the rl row: stable-baselines3 is not installed "
+        raise CliError(f"--policies {sb3_rows[0]} needs stable-baselines3 (with torch): pip install 'dronewpt[rl]'")
+    print(f"dronewpt compare: note: skipping the {', '.join(sb3_rows)} rows: stable-baselines3 is not installed "
           "(pip install 'dronewpt[rl]')", file=sys.stderr)
-    return tuple(p_ for p_ in pols if p_.split(":", 1)[0] != "rl")
+    return tuple(p_ for p_ in pols if p_ not in sb3_rows)
 
 
-def _cmd_compare(args) -> int:
+def _check_compare(args, pols, scns, groups):
     from envs import SCENARIOS
     from policies import available
-    from policies.compare import (
-        DEFAULT_POLICIES,
-        DEFAULT_SCENARIOS,
-        compare,
-        plot_transitions,
-    )
-
-    pols = tuple(x.strip() for x in args.policies.split(",") if x.strip()) if args.policies else DEFAULT_POLICIES
-    scns = tuple(x.strip() for x in args.scenarios.split(",") if x.strip()) if args.scenarios else DEFAULT_SCENARIOS
-    for p_ in pols:
+    for p_ in pols + tuple(sp for specs in groups.values() for sp in specs):
         if p_.split(":", 1)[0] not in available():
             raise CliError(f"--policies {p_!r} is invalid; valid values: {', '.join(available())} (or rl:PATH)")
-    pols = _rl_or_skip(pols, explicit=bool(args.policies))
     for s_ in scns:
         if s_ not in SCENARIOS:
             raise CliError(f"--scenarios {s_!r} is invalid; valid values: {', '.join(SCENARIOS)}")
@@ -114,29 +202,60 @@ def _cmd_compare(args) -> int:
     if args.seed + args.episodes - 1 > 2**32 - 1:
         raise CliError(f"--seed {args.seed} is invalid with --episodes {args.episodes}; valid range: "
                        f"0 .. {2**32 - args.episodes} (episode seeds go up to seed + episodes - 1)")
+
+
+def _cmd_compare(args) -> int:
+    from policies.compare import DEFAULT_POLICIES, DEFAULT_SCENARIOS, compare, frontier
+
+    pols = tuple(x.strip() for x in args.policies.split(",") if x.strip()) if args.policies else DEFAULT_POLICIES
+    scns = tuple(x.strip() for x in args.scenarios.split(",") if x.strip()) if args.scenarios else DEFAULT_SCENARIOS
+    groups = _train_seed_groups(args.train_seeds)
+    _check_compare(args, pols, scns, groups)
+    pols = _rl_or_skip(pols, explicit=bool(args.policies))
     if not args.no_plot:
         prepare_out_dir(args.out)
-    rows, traces = compare(pols, scns, args.episodes, args.seed, progress=show_progress(args))
-    figs = []
-    if not args.no_plot:
-        figs.append(str(plot_transitions(traces, scns[0], args.out / f"transitions_{scns[0]}.png")))
+    try:
+        rows, traces = compare(pols, scns, args.episodes, args.seed, progress=show_progress(args), train_seeds=groups)
+        sweep = [] if args.no_frontier else frontier(scns[0], episodes=args.episodes, seed=args.seed)
+    except (ValueError, FileNotFoundError) as exc:
+        raise CliError(str(exc)) from None
+    figs = [] if args.no_plot else _compare_figures(traces, rows, sweep, scns[0], args.out)
     if args.format == "json":
-        print(json.dumps({"episodes": args.episodes, "seed": args.seed, "rows": rows, "figures": figs}))
+        print(json.dumps({"episodes": args.episodes, "seed": args.seed, "rows": rows, "frontier": sweep,
+                          "figures": figs}))
         return 0
-    print(f"{args.episodes} episodes per scenario, seeds {args.seed}..{args.seed + args.episodes - 1}, "
-          "means over episodes (peak max = worst episode)")
-    hdr = (f"{'scenario':<12} {'policy':<20} {'peak I2':>8} {'peak max':>8} {'overshoot':>9} {'>rated':>8} "
-           f"{'energy':>7} {'after':>7} {'track':>6} {'cost':>7} {'return':>8}")
-    print(hdr)
-    print("-" * len(hdr))
-    for r in rows:
-        print(f"{r['scenario']:<12} {r['policy'][:20]:<20} {r['peak_i2_a']:>6.2f} A {r['peak_i2_max_a']:>6.2f} A "
-              f"{r['overshoot_pct']:>7.1f} % {r['time_above_rated_s'] * 1e3:>5.2f} ms {r['energy_j']:>5.2f} J "
-              f"{r['energy_after_stop_j']:>5.2f} J "
-              f"{r['tracking_rmse_a']:>4.2f} A {r['cost']:>7.2f} {r['return']:>8.1f}")
-    print("overshoot = (max I2 after the stop - final I2) / final I2; >rated = time with I2 above the rated 15 A; "
-          "energy into the battery node (after = of it, after the stop command); track = RMS(I_L - command); "
-          "cost = sum of the env's overcurrent cost")
+    _print_compare(rows, sweep, args)
     for f in figs:
         print(f"figure: {f}")
     return 0
+
+
+def _compare_figures(traces, rows, sweep, scenario, out) -> list[str]:
+    from policies.compare import plot_frontier, plot_transitions
+    return [str(plot_transitions(traces, scenario, out / f"transitions_{scenario}.png")),
+            str(plot_frontier(rows, sweep, scenario, out / f"frontier_{scenario}.png"))]
+
+
+def _ci(r, k, scale=1.0, fmt="{:.2f}"):
+    return f"{fmt.format(r[k] * scale)} [{fmt.format(r[k + '_lo'] * scale)}, {fmt.format(r[k + '_hi'] * scale)}]"
+
+
+def _print_compare(rows, sweep, args):
+    print(f"{args.episodes} episodes per scenario, seeds {args.seed}..{args.seed + args.episodes - 1}; mean "
+          "[95 % interval]: bootstrap over episodes, or t over training seeds when seeds > 1")
+    hdr = (f"{'scenario':<12} {'policy':<24} {'seeds':>5} {'overshoot %':>20} {'in SM':>5} {'peak I2 A':>8} "
+           f"{'E before J':>10} {'E after J':>20} {'track A':>6} {'return':>22} {'d return vs model_based':>24}")
+    print(hdr)
+    print("-" * len(hdr))
+    for r in rows:
+        d = _ci(r, "d_return", fmt="{:.1f}") if "d_return" in r else "(reference)"
+        print(f"{r['scenario']:<12} {r['policy'][:24]:<24} {r['train_seeds']:>5} {_ci(r, 'overshoot_pct'):>20} "
+              f"{r['reached_short_mode']:>5.2f} {r['peak_i2_a']:>8.2f} {r['energy_before_stop_j']:>10.3f} "
+              f"{_ci(r, 'energy_after_stop_j', fmt='{:.3f}'):>20} {r['tracking_rmse_a']:>6.2f} "
+              f"{_ci(r, 'return', fmt='{:.1f}'):>22} {d:>24}")
+    print("overshoot = peak |I2| after the stop over the true link's short-mode I2, minus 1; in SM = fraction of "
+          "episodes with I_L < 0.5 A from 14 ms after the stop on; E after = energy delivered after the stop")
+    if sweep:
+        print(f"budgeted model-based curve ({sweep[0]['scenario']}): " + "; ".join(
+            f"b={r['budget']:g}: {r['overshoot_pct']:.2f} %, {r['energy_after_stop_j']:.3f} J, return {r['return']:.1f}"
+            for r in sweep))

@@ -194,6 +194,8 @@ class MissionLoop:
         if self.tx_on:
             if kk < self.k_off:
                 self.tx_on = False      # safety: switch off at once (ramp down)
+                if self.cmd != 0.0:
+                    self.t_cmd_zero = t_k
                 self.cmd = 0.0
             elif not self.eligible[k] or ending:
                 if self.cmd != 0.0:
@@ -286,7 +288,7 @@ class MissionLoop:
         """Policy call outside a fine window; a duty move above ``duty_event_tol`` opens one.
 
         Returns True if it did (that call's duty is then applied in the first fine step)."""
-        d_new = self.act()
+        d_new = self.act(t)
         self.t_last_act = t
         moved = abs(d_new - self.d) > self.sim.duty_event_tol
         self.d = d_new
@@ -309,7 +311,7 @@ class MissionLoop:
             self.v1 = v1 = min(target, v1 + step_v) if target > v1 else max(target, v1 - step_v)
         d_prev = self.d
         if not fresh:
-            self.d = self.act()
+            self.d = self.act(t)
         self.t_last_act = t
         self.fine_step(t, dt, lm_s, p_k, k)
         self.n_fine += 1
@@ -346,12 +348,14 @@ class MissionLoop:
         return abs(x[1] - i2ss) < tol
 
     # ------------------------------------------------------------------ policy
-    def act(self) -> float:
-        """Policy step: observation per the contract (measured |I2| + optional noise), duty in [0, 1]."""
+    def act(self, t: float) -> float:
+        """Policy step at time ``t`` [s]: observation per the contract (measured |I2| + optional noise,
+        time since the command went to 0, saturating at 1 s here and at 10 ms in the contract), duty in [0, 1]."""
         sim = self.sim
+        t_since = min(t - self.t_cmd_zero, 1.0) if self.cmd == 0.0 else 0.0
         # the receiver's sensor measures the magnitude of the coil current envelope
         i2m = abs(self.x[1]) + (sim.i2_noise_a * self.rng.standard_normal() if sim.i2_noise_a > 0 else 0.0)
-        obs = normalise_obs(np.array([[i2m, self.last_vl, self.last_ib, self.last_il, self.soc, self.cmd, self.d]]))
+        obs = normalise_obs(np.array([[i2m, self.last_vl, self.last_ib, self.last_il, self.soc, self.cmd, self.d, t_since]]))
         out = float(np.asarray(self.policy.act(obs)).reshape(-1)[0])
         if not math.isfinite(out):
             raise ValueError(f"policy {getattr(self.policy, 'name', self.policy)!r} returned d_short={out!r}; "

@@ -1,0 +1,61 @@
+"""The paper's model-based controller with an overshoot budget: the classical end of the
+overshoot / energy-after-stop frontier.
+
+The inverse controller (paper Fig. 5, :class:`wpt_receiver.InverseModelController`) makes the
+coil current follow the filtered reference, ``I2 = Q I2ref`` (exactly, on the assumed model, at
+the control period's zero-order hold: the cascade ``Q G22^-1`` is discretised with the hold the
+SBAR applies). At the stop the paper sets ``I2ref = I2_sm`` (the short-mode current): V2* then
+decays with the slow pole of ``G22^-1`` (the zero of G22 at ``-R1 / (2 L1)``, 4.4 ms) and reaches 0
+only asymptotically; the current keeps charging the battery meanwhile (0.66 J after the stop on
+the nominal scenario).
+
+**Relaxed reference.** With a budget ``b`` the reference after the stop is ``(1 + b) I2_sm``: the
+current may exceed its final value by at most the budget. The same controller then drives V2*
+towards the *negative* V2 that would hold ``(1 + b) I2_sm`` in steady state,
+``V2_b = -b I2_sm / |G22(0)|``; V2* crosses 0 (duty 1, short mode) after the finite time
+``tau ln(1 + V2_0 / |V2_b|)`` with ``tau = 2 L1 / R1``, and I2 rises towards ``(1 + b) I2_sm``
+(Q is a real-pole filter) before it settles at I2_sm in short mode. ``b = 0`` is the paper's
+controller. The bound is the assumed model's while V2* > 0: when V2* reaches 0 the SBAR cannot
+follow it below (duty 1 is the end of the range), V2 stops falling abruptly and the link rings a
+little beyond; on the nominal scenario the measured overshoot is about ``b + 0.6 % + 0.2 b``
+(``tests/test_budgeted.py``), so the budget is a design knob of the frontier, not a guarantee.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mission_sim.contract import PolicyContext
+from wpt_receiver import LowPassFilter
+
+from .classical import ModelBasedPolicy
+
+__all__ = ["BudgetedModelBasedPolicy", "BUDGET_SWEEP"]
+
+#: budgets of the frontier sweep in ``compare`` (overshoot fractions)
+BUDGET_SWEEP = (0.0, 0.005, 0.01, 0.02, 0.05, 0.1)
+
+
+class BudgetedModelBasedPolicy(ModelBasedPolicy):
+    """Model-based controller whose reference after the stop is ``(1 + budget) I2_sm``."""
+
+    name = "model_based_budget"
+
+    def __init__(self, ctx: PolicyContext = PolicyContext(), lpf: LowPassFilter = LowPassFilter(),
+                 budget: float = 0.02):
+        budget = float(budget)
+        if not (np.isfinite(budget) and 0.0 <= budget <= 1.0):
+            raise ValueError(f"budget={budget!r} is invalid; valid range: [0, 1] (an overshoot fraction)")
+        super().__init__(ctx, lpf)
+        self.budget = budget
+        wlm_v1, det, _ = self._consts
+        self._i2_sm = wlm_v1 / det   # assumed short-mode current (V2 = 0)
+        self.name = f"model_based_budget:{budget:g}"
+
+    def i2_ref(self, cmd, vl):
+        ref = super().i2_ref(cmd, vl)
+        return np.where(np.asarray(cmd) <= 0.0, ref + self.budget * self._i2_sm, ref)
+
+    def _i2_ref1(self, cmd: float, vl: float) -> float:
+        ref = super()._i2_ref1(cmd, vl)
+        return ref + self.budget * self._i2_sm if cmd <= 0.0 else ref

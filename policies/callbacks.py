@@ -1,0 +1,79 @@
+"""stable-baselines3 callbacks of ``train``: a progress bar with return and cost, and an
+``EvalCallback`` that also records the episode cost of its fixed evaluation windows."""
+
+from __future__ import annotations
+
+import json
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
+
+__all__ = ["ProgressCallback", "CostEvalCallback"]
+
+
+class ProgressCallback(BaseCallback):
+    """tqdm over environment steps; the postfix shows the mean return and cost of the last 100
+    episodes (from ``VecMonitor``'s ``info["episode"]`` and the adapter's ``episode_cost``)."""
+
+    def __init__(self, total: int, enabled: bool):
+        super().__init__()
+        self.total, self.enabled = int(total), bool(enabled)
+        self.returns: deque = deque(maxlen=100)
+        self.costs: deque = deque(maxlen=100)
+        self.reached: deque = deque(maxlen=100)
+
+    def _on_training_start(self):
+        from tqdm import tqdm
+        self.bar = tqdm(total=self.total, unit="step", desc="train", disable=not self.enabled,
+                        initial=min(self.num_timesteps, self.total))
+
+    def _on_step(self) -> bool:
+        for info in self.locals.get("infos", ()):
+            if "episode" in info:
+                self.returns.append(info["episode"]["r"])
+                self.costs.append(info.get("episode_cost", np.nan))
+                self.reached.append(info.get("reached_short_mode", np.nan))
+        self.bar.update(self.training_env.num_envs)
+        if self.returns and self.n_calls % 50 == 0:
+            self.bar.set_postfix(ret=f"{np.mean(self.returns):.1f}", cost=f"{np.mean(self.costs):.4f}",
+                                 sm=f"{np.mean(self.reached):.2f}", refresh=False)
+        return True
+
+    def _on_training_end(self):
+        self.bar.close()
+
+
+class CostEvalCallback(EvalCallback):
+    """``EvalCallback`` that also averages ``episode_cost`` / ``overshoot`` / ``reached_short_mode`` of
+    the evaluation episodes, logs them (``eval/mean_cost`` ...) and writes the curve to
+    ``<log_path>/eval_curve.json`` (timesteps, return mean/std, cost, overshoot, fraction in SM)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._ep: list[tuple[float, float, float]] = []
+        self.curve: list[dict] = []
+
+    def _log_success_callback(self, locals_, globals_) -> None:
+        super()._log_success_callback(locals_, globals_)
+        if locals_["done"]:
+            info = locals_["info"]
+            self._ep.append((info.get("episode_cost", np.nan), info.get("overshoot", np.nan),
+                             float(info.get("reached_short_mode", np.nan))))
+
+    def _on_step(self) -> bool:
+        self._ep = [] if self.eval_freq > 0 and self.n_calls % self.eval_freq == 0 else self._ep
+        go_on = super()._on_step()
+        if self.eval_freq > 0 and self.n_calls % self.eval_freq == 0 and self._ep:
+            c, o, s = (float(np.mean(x)) for x in zip(*self._ep))
+            self.logger.record("eval/mean_cost", c)
+            self.logger.record("eval/mean_overshoot", o)
+            self.logger.record("eval/reached_short_mode", s)
+            self.curve.append({"timesteps": int(self.num_timesteps), "return_mean": float(self.last_mean_reward),
+                               "return_std": float(np.std(self.evaluations_results[-1])), "cost": c,
+                               "overshoot": o, "reached_short_mode": s})
+            if self.log_path is not None:
+                Path(self.log_path).parent.mkdir(parents=True, exist_ok=True)
+                (Path(self.log_path).parent / "eval_curve.json").write_text(json.dumps(self.curve, indent=1))
+        return go_on

@@ -1,0 +1,65 @@
+"""Statistics of a comparison: means with 95 % bootstrap intervals, paired differences on the same
+episodes, and aggregation over training seeds.
+
+* **episode level**: the percentile bootstrap of the mean (``B`` resamples of the episodes,
+  seeded: the same intervals on every run);
+* **paired**: every policy runs the same seeded windows, so a difference against a reference
+  policy is taken episode by episode and bootstrapped the same way;
+* **training seeds**: a learned policy of one kind trained with ``k`` seeds is summarised by the
+  mean over seeds of its per-seed means, with a t interval over the ``k`` seed means (the
+  variation between trainings, which the episode bootstrap of one model does not see).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["bootstrap_ci", "mean_ci", "seed_ci", "pareto_front", "N_BOOT"]
+
+N_BOOT = 2000
+
+
+def bootstrap_ci(x, n_boot: int = N_BOOT, level: float = 0.95, seed: int = 0) -> tuple[float, float]:
+    """Percentile bootstrap interval of the mean of ``x`` (NaNs dropped; (nan, nan) when empty)."""
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    if len(x) == 0:
+        return float("nan"), float("nan")
+    if len(x) == 1 or np.all(x == x[0]):
+        return float(x[0]), float(x[0])
+    rng = np.random.default_rng(seed)
+    means = x[rng.integers(0, len(x), (n_boot, len(x)))].mean(axis=1)
+    a = 0.5 * (1.0 - level)
+    lo, hi = np.quantile(means, [a, 1.0 - a])
+    return float(lo), float(hi)
+
+
+def mean_ci(x, **kw) -> tuple[float, float, float]:
+    """``(mean, lo, hi)`` of ``x`` over its finite values with the bootstrap interval."""
+    x = np.asarray(x, dtype=float)
+    fin = x[np.isfinite(x)]
+    m = float(fin.mean()) if len(fin) else float("nan")
+    return (m, *bootstrap_ci(fin, **kw))
+
+
+def seed_ci(seed_means, level: float = 0.95) -> tuple[float, float, float]:
+    """``(mean, lo, hi)`` over training seeds: Student t interval of the mean of the seed means."""
+    from scipy import stats
+
+    x = np.asarray(seed_means, dtype=float)
+    x = x[np.isfinite(x)]
+    if len(x) == 0:
+        return float("nan"), float("nan"), float("nan")
+    m = float(x.mean())
+    if len(x) == 1:
+        return m, m, m
+    h = float(stats.t.ppf(0.5 + 0.5 * level, len(x) - 1) * x.std(ddof=1) / np.sqrt(len(x)))
+    return m, m - h, m + h
+
+
+def pareto_front(cost, value) -> np.ndarray:
+    """Indices of the points not dominated (lower ``cost`` and higher ``value`` are better), sorted by cost."""
+    cost, value = np.asarray(cost, dtype=float), np.asarray(value, dtype=float)
+    idx = [i for i in range(len(cost))
+           if not np.any((cost <= cost[i]) & (value >= value[i]) & ((cost < cost[i]) | (value > value[i])))]
+    return np.array(sorted(idx, key=lambda i: cost[i]), dtype=int)

@@ -1,0 +1,60 @@
+"""compare's statistics: bootstrap intervals cover, paired differences are per episode, seeds
+aggregate with a t interval, the Pareto front is the non-dominated set."""
+
+import json
+
+import numpy as np
+import pytest
+
+from policies.compare import compare
+from policies.stats import bootstrap_ci, pareto_front, seed_ci
+
+
+def test_bootstrap_interval_covers_the_true_mean_about_95_percent():
+    rng = np.random.default_rng(1)
+    hits = 0
+    for i in range(200):
+        lo, hi = bootstrap_ci(rng.exponential(2.0, 60), n_boot=1000, seed=i)
+        hits += lo <= 2.0 <= hi
+    assert 0.88 <= hits / 200 <= 0.99
+
+
+def test_seed_interval_is_students_t():
+    from scipy import stats
+    x = np.array([1.0, 1.4, 0.7, 1.2, 0.9])
+    m, lo, hi = seed_ci(x)
+    elo, ehi = stats.t.interval(0.95, len(x) - 1, loc=x.mean(), scale=stats.sem(x))
+    assert m == pytest.approx(x.mean()) and lo == pytest.approx(elo) and hi == pytest.approx(ehi)
+
+
+def test_pareto_front():
+    cost = [0.5, 1.0, 2.0, 1.5, 3.0]
+    value = [10, 30, 40, 20, 39]
+    assert pareto_front(cost, value).tolist() == [0, 1, 2]
+
+
+def test_paired_differences_and_train_seed_rows():
+    rows, _ = compare(("ramp", "model_based"), ("nominal",), episodes=12, seed=50,
+                      train_seeds={"twice_ramp": ["ramp", "ramp"]})
+    r = {row["policy"]: row for row in rows}
+    assert "d_return" not in r["model_based"]
+    for k in ("return", "energy_after_stop_j", "overshoot_pct"):
+        assert r["ramp"][f"d_{k}"] == pytest.approx(r["ramp"][k] - r["model_based"][k])
+        assert r["ramp"][f"{k}_lo"] <= r["ramp"][k] <= r["ramp"][f"{k}_hi"]
+    # the paired interval is narrower than the unpaired spread: same windows, the window-to-window
+    # variation of the return (command levels) cancels
+    assert (r["ramp"]["d_return_hi"] - r["ramp"]["d_return_lo"]) < (r["ramp"]["return_hi"] - r["ramp"]["return_lo"])
+    tw = r["twice_ramp"]
+    assert tw["train_seeds"] == 2 and tw["return"] == pytest.approx(r["ramp"]["return"])
+    assert tw["return_lo"] == pytest.approx(tw["return_hi"])    # identical "seeds": no spread
+
+
+def test_cli_compare_json_has_intervals_frontier_and_figures(tmp_path, capsys):
+    from mission_sim.cli import main
+    assert main(["compare", "--policies", "ramp,model_based_budget:0.02", "--scenarios", "nominal", "--episodes",
+                 "8", "--format", "json", "--out", str(tmp_path), "--train-seeds", "mb=model_based,model_based"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert {r["policy"] for r in res["rows"]} == {"ramp", "model_based_budget:0.02", "mb"}
+    assert [f["budget"] for f in res["frontier"]] == [0.0, 0.005, 0.01, 0.02, 0.05, 0.1]
+    assert all((tmp_path / p).is_file() for p in ("transitions_nominal.png", "frontier_nominal.png"))
+    assert main(["compare", "--train-seeds", "broken", "--no-plot"]) == 2

@@ -1,0 +1,141 @@
+"""train's outputs follow SB3 habits (vecnormalize.pkl, eval, checkpoints, hyperparameter files) and
+the constrained / residual machinery does what it says."""
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+from envs.sb3_vec import EPISODE_KEYS, SbarSB3VecEnv   # noqa: E402
+from policies.compare import run_policy                 # noqa: E402
+from policies.train import train                        # noqa: E402
+
+SEED0, N = 4242, 8
+SMALL = dict(n_steps=64, batch_size=256, n_epochs=2, policy_kwargs=dict(net_arch=[16, 16], log_std_init=-2.0))
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    out = tmp_path_factory.mktemp("train")
+    kw = dict(n_envs=16, scenario="nominal", progress=False, hyperparams=SMALL, eval_every=4096, eval_episodes=4,
+              checkpoint_every=2048)
+    return {"ppo": train("ppo", 8192, out / "ppo", seed=1, **kw),
+            "res": train("ppo", 8192, out / "res", seed=1, residual=True, lagrangian=True, budget=0.02, **kw)}
+
+
+def _sb3_returns(res, residual: bool):
+    """Episode returns of the model through the SB3 way: PPO.load + VecNormalize.load on the adapter."""
+    import stable_baselines3 as sb3
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    from policies.constrained import ResidualVecEnv
+
+    venv = SbarSB3VecEnv(N, "nominal", reset_seed=SEED0)
+    venv = VecMonitor(ResidualVecEnv(venv) if residual else venv, info_keywords=EPISODE_KEYS)
+    venv = VecNormalize.load(str(res["vecnormalize"]), venv)
+    venv.training, venv.norm_reward = False, False
+    model = sb3.PPO.load(str(res["model"]), device="cpu")
+    obs, out = venv.reset(), {}
+    for _ in range(300):
+        obs, _, done, infos = venv.step(model.predict(obs, deterministic=True)[0])
+    out = {k: np.array([i[k] for i in infos]) for k in ("episode_cost",)}
+    out["return"] = np.array([i["episode"]["r"] for i in infos])
+    return out
+
+
+@pytest.mark.parametrize("kind", ["ppo", "res"])
+def test_ppo_load_and_vecnormalize_load_reproduce_compare(runs, kind):
+    res = runs[kind]
+    name = f"residual:{res['model']}" if kind == "res" else f"rl:{res['model']}"
+    m = run_policy(name, "nominal", N, SEED0).metrics
+    sb = _sb3_returns(res, kind == "res")
+    # the numpy actor of compare vs torch predict: float32 round-off only
+    np.testing.assert_allclose(m["return"], sb["return"], rtol=1e-4, atol=1e-3)
+    np.testing.assert_allclose(m["cost"], sb["episode_cost"], atol=1e-4)
+
+
+def test_outputs_metadata_eval_and_checkpoints(runs):
+    res = runs["res"]
+    meta = json.loads(res["meta"].read_text())
+    assert meta["residual"]["scale"] == 0.25 and meta["lagrangian"]["history"] and meta["budget"] == 0.02
+    assert meta["obs_dim"] == 9 and "--residual" in meta["reproduce"] and "--lagrangian" in meta["reproduce"]
+    curve = json.loads((res["eval_dir"] / "eval_curve.json").read_text())
+    assert len(curve) == 2 and all({"cost", "overshoot", "reached_short_mode"} <= set(e) for e in curve)
+    assert (res["eval_dir"] / "best_model.zip").is_file() and (res["eval_dir"] / "evaluations.npz").is_file()
+    ck = sorted(res["checkpoints"].glob("*_steps.zip"))
+    assert len(ck) == 4 and len(list(res["checkpoints"].glob("*vecnormalize*.pkl"))) == 4
+
+
+def test_a_killed_run_resumes_from_its_last_checkpoint(runs, tmp_path):
+    import stable_baselines3 as sb3
+    ck = sorted(runs["ppo"]["checkpoints"].glob("*_steps.zip"), key=lambda p: int(p.stem.split("_")[-2]))
+    assert ck[-2].name == "ppo_sbar_6144_steps.zip"
+    res = train("ppo", 10_240, tmp_path, seed=1, n_envs=16, scenario="nominal", progress=False, hyperparams=SMALL,
+                eval_every=10**6, resume=ck[-2])
+    assert sb3.PPO.load(str(res["model"]), device="cpu").num_timesteps == 10_240
+
+
+def test_lagrange_penalty_and_multiplier_update():
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from policies.constrained import CostPenaltyVecEnv, LagrangeCallback
+
+    inner = SbarSB3VecEnv(4, "nominal", reset_seed=3)
+    pen = CostPenaltyVecEnv(VecMonitor(inner, info_keywords=EPISODE_KEYS), lam=7.0)
+    ref = VecMonitor(SbarSB3VecEnv(4, "nominal", reset_seed=3), info_keywords=EPISODE_KEYS)
+    pen.reset(), ref.reset()
+    a = np.ones((4, 1), np.float32)
+    a[:, 0] = -1.0
+    for k in range(300):   # RM until 2 ms after the stop, then SM at once: a step overshoot
+        act = a if k < 180 else -a
+        _, r_pen, _, _ = pen.step(act)
+        _, r_ref, _, _ = ref.step(act)
+        np.testing.assert_allclose(r_pen, r_ref - 7.0 * inner.step_cost, rtol=1e-6, atol=1e-6)
+    costs = pen.pop_episode_costs()
+    assert len(costs) == 4 and min(costs) > 0.1
+    cb = LagrangeCallback(pen, budget=0.05, lr=10.0)
+    cb.penalty.episode_costs = [0.1] * 4            # 100 % over budget: lambda += lr
+    cb.model = SimpleNamespace(logger=SimpleNamespace(record=lambda *a, **k: None))
+    cb._on_rollout_end()
+    assert pen.lam == pytest.approx(17.0)
+    for _ in range(2):                              # under budget: lambda -= lr, clipped at 0
+        cb.penalty.episode_costs = [0.0] * 4
+        cb._on_rollout_end()
+    assert pen.lam == 0.0
+
+
+def test_short_constrained_run_ends_below_budget_and_beats_random(runs):
+    """The residual Lagrangian run (8192 steps, budget 2 %): on fixed held-out windows its mean cost
+    is below the budget, it reaches short mode, and its return beats random by at least |random| / 2."""
+    m = run_policy(f"residual:{runs['res']['model']}", "nominal", 32, 77_000).metrics
+    rnd = run_policy("random", "nominal", 32, 77_000).metrics
+    assert np.mean(m["cost"]) < 0.02 and np.mean(m["reached_short_mode"]) == 1.0
+    assert np.mean(m["return"]) > np.mean(rnd["return"]) + 0.5 * abs(np.mean(rnd["return"]))
+
+
+def test_hyperparams_files_zoo_yaml_and_json(tmp_path):
+    from policies.hyperparams import load_hyperparams
+
+    (tmp_path / "a.yml").write_text("dronewpt/SbarCharging-v0:\n  n_timesteps: !!float 1e6\n  policy: MlpPolicy\n"
+                                    "  n_steps: 64\n  policy_kwargs: \"dict(net_arch=[8, 8], log_std_init=-2)\"\n")
+    hp, extra = load_hyperparams(tmp_path / "a.yml")
+    assert hp == {"n_steps": 64, "policy_kwargs": {"net_arch": [8, 8], "log_std_init": -2}}
+    assert extra == {"n_timesteps": 1_000_000}
+    (tmp_path / "b.json").write_text(json.dumps({"learning_rate": "lin_3e-4"}))
+    with pytest.raises(ValueError, match="schedules"):
+        load_hyperparams(tmp_path / "b.json")
+    (tmp_path / "c.yml").write_text("policy_kwargs: \"dict(activation_fn=nn.ReLU)\"\n")
+    with pytest.raises(ValueError, match="literal"):
+        load_hyperparams(tmp_path / "c.yml")
+
+
+def test_cli_train_errors(capsys):
+    from mission_sim.cli import main
+    assert main(["train", "--algo", "ppo", "--timesteps", "10", "--out", "x", "--budget", "0.1"]) == 2
+    assert main(["train", "--algo", "ppo", "--timesteps", "10", "--out", "x", "--env", "bogus=1"]) == 2
+    assert main(["train", "--algo", "dqn", "--timesteps", "10", "--out", "x", "--residual"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 3 and all("valid" in line or "only used" in line for line in err)
