@@ -4,6 +4,7 @@ controller with shifted gate phases)."""
 
 import json
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -50,12 +51,10 @@ def step25():
 
 
 # --------------------------------------------------------------------------- exactness
-@pytest.mark.parametrize("name", list(CONFIGS))
-def test_exact_stepper_matches_solve_ivp(name):
-    """Exact stepper vs solve_ivp (DOP853 rtol=atol=1e-11, Radau 1e-9) of eq. 1 written out independently,
-    over RM -> phase shift (d=0.55) -> SM, 38 half-cycles. Tolerance: 1e-7 of each state's scale
-    (currents ~10 A, vC1 ~1.5 kV)."""
-    cfg = CONFIGS[name]
+def _stepper_vs_ivp(cfg):
+    """Run RM -> phase shift (d=0.55) -> SM, 38 half-cycles, with the exact stepper and with solve_ivp
+    of the equations written out independently: the link, schedule, result, sample times, stepper
+    states and topology indices there, and ``err`` (max error per state / its scale)."""
     link = SwitchingLink(P, cfg)
     d = _transition(0.55, 6, 20, 12)
     x0 = link.periodic_steady_state(0.0)
@@ -64,10 +63,19 @@ def test_exact_stepper_matches_solve_ivp(name):
     ts = np.linspace(0.0, len(d) * T, 761)
     x, kk = res.states(ts)
     _, xi = simulate_ivp(P, cfg, sch, x0, rtol=_IVP_TOL(cfg), atol=_IVP_TOL(cfg), t_eval=ts)
-    n = link.cir.n
-    scale = np.max(np.abs(xi), axis=0)
-    err = np.max(np.abs(x[:, :n] - xi), axis=0) / scale
-    assert np.all(err < 1e-7), err
+    err = np.max(np.abs(x[:, :link.cir.n] - xi), axis=0) / np.max(np.abs(xi), axis=0)
+    return SimpleNamespace(link=link, sch=sch, res=res, ts=ts, x=x, kk=kk, err=err)
+
+
+@pytest.mark.parametrize("name", list(CONFIGS))
+def test_exact_stepper_matches_solve_ivp(name):
+    """Exact stepper vs solve_ivp (DOP853 rtol=atol=1e-11, Radau 1e-9) of eq. 1 written out independently,
+    over RM -> phase shift (d=0.55) -> SM, 38 half-cycles. Tolerance: 1e-7 of each state's scale
+    (currents ~10 A, vC1 ~1.5 kV)."""
+    cfg = CONFIGS[name]
+    r = _stepper_vs_ivp(cfg)
+    link, sch, res, ts, x, kk = r.link, r.sch, r.res, r.ts, r.x, r.kk
+    assert np.all(r.err < 1e-7), r.err
     # the scenario really switches: diode and short topologies both occur, i2 changes sign
     kinds = {link.cir.keys[k][1] for k in res.seg_k}
     assert {1, -1, 0} <= kinds
@@ -364,16 +372,9 @@ def test_devices_exact_stepper_matches_solve_ivp_and_balance_closes(name):
     solve_ivp of the device equations written out (1e-7 of scale), and the energy balance, device
     losses included, closes to 1e-9 of the source energy."""
     cfg = DEVICE_CONFIGS[name]
-    link = SwitchingLink(P, cfg)
-    d = _transition(0.55, 6, 20, 12)
-    x0 = link.periodic_steady_state(0.0)
-    sch = link.schedule(0.0, len(d) * T, d)
-    res = link.run(sch, x0)
-    ts = np.linspace(0.0, len(d) * T, 761)
-    x, _ = res.states(ts)
-    _, xi = simulate_ivp(P, cfg, sch, x0, rtol=_IVP_TOL(cfg), atol=_IVP_TOL(cfg), t_eval=ts)
-    err = np.max(np.abs(x[:, :link.cir.n] - xi), axis=0) / np.max(np.abs(xi), axis=0)
-    assert np.all(err < 1e-7), err
+    r = _stepper_vs_ivp(cfg)
+    res = r.res
+    assert np.all(r.err < 1e-7), r.err
     e = res.energy_balance(3.3 * T, res.t_end - 2.7 * T)
     assert abs(e["residual_j"]) < 1e-9 * e["source_j"], e
     groups = {g: e[f"{g}_loss_j"] for g in LOSS_GROUPS}
