@@ -110,3 +110,40 @@ def test_cli_sizing_from_missions(capsys):
     step, mb = rows["step"], rows["model_based"]
     assert step["peak_i2_a"] > 2 * mb["peak_i2_a"] and step["mass_g"] > mb["mass_g"]
     assert step["required_rating_a"] == pytest.approx(1.25 * step["peak_i2_a"])
+
+
+def test_cli_sizing_from_a_sweep_sizes_each_policys_worst_case(capsys, tmp_path):
+    """A real (serial) mission sweep; ``sizing --source sweep`` picks per policy the stored case with
+    the largest peak |i2|, re-runs it with the same devices (deterministic: the same peak) and sizes
+    it; the step's worst case needs the heavier rectifier. A sweep run on another base mission is
+    refused (fingerprint), and so is a missing --sweep."""
+    import policies
+    from mission_sim.cli import main
+    from mission_sim.studies.study import load_study
+    from mission_sim.studies.sweep import prepare_study, read_results, run_sweep
+    from mission_sim.studies.status import write_manifest
+
+    (tmp_path / "s.toml").write_text('[study]\nname = "sz"\n[fixed]\n"mission.hover_time_s" = 5.0\n'
+                                     '[grid]\npolicy = ["step", "model_based"]\n"pads.1.x_m" = [20.0, 60.0]\n')
+    st = load_study(tmp_path / "s.toml")
+    runner, cases, fp = prepare_study(st, policies.make, policies.available())
+    out = tmp_path / "sweep"
+    run_sweep(cases, runner, out, progress=False, before_run=lambda: write_manifest(out, st, fp, len(cases)))
+    df = read_results(out)
+    assert main(["sizing", "--source", "sweep", "--sweep", str(out), "--no-plot", "--no-progress",
+                 "--format", "json"]) == 0
+    rows = {r["policy"]: r for r in json.loads(capsys.readouterr().out)["rows"]}
+    for pol, r in rows.items():
+        mine = df[df["policy"] == pol]
+        assert r["cases"] == 2 and r["sweep_peak_i2_a"] == pytest.approx(mine["peak_i2_a"].max(), rel=1e-12)
+        assert r["case_id"] == mine.loc[mine["peak_i2_a"].idxmax(), "case_id"]
+        assert r["peak_i2_a"] == pytest.approx(r["sweep_peak_i2_a"], rel=1e-9)  # the re-run is the same mission
+        assert r["required_rating_a"] == pytest.approx(1.25 * r["peak_i2_a"])
+    assert rows["step"]["peak_i2_a"] > 2 * rows["model_based"]["peak_i2_a"]
+    assert rows["step"]["mass_g"] > rows["model_based"]["mass_g"]
+    other = tmp_path / "other.toml"
+    other.write_text("[mission]\ncruise_speed_m_s = 7.0\n")
+    for argv, word in ((["--sweep", str(out), "--config", str(other)], "base mission"), ([], "--sweep DIR")):
+        assert main(["sizing", "--source", "sweep", "--no-plot", "--no-progress", *argv]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and word in err[0], err

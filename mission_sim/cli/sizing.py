@@ -18,9 +18,13 @@ def _add_sizing(sub):
                                    "real devices; size the SBAR: worst-case instantaneous |i2|, device RMS currents, "
                                    "required rating (margin x peak), smallest-mass combination of shipped parts, "
                                    "conduction losses and rectifier mass (devices + plate-fin heat sink).")
-    p.add_argument("--source", choices=("paper", "mission"), default="paper",
+    p.add_argument("--source", choices=("paper", "mission", "sweep"), default="paper",
                    help="paper: the RM -> SM transition on the switching model (default); mission: whole missions "
-                        "per policy (envelope currents, instantaneous peak estimate)")
+                        "per policy (envelope currents, instantaneous peak estimate); sweep: per policy, the "
+                        "case of a sweep's results (--sweep DIR) with the largest peak |i2|, re-run and sized")
+    p.add_argument("--sweep", type=Path, default=None, metavar="DIR",
+                   help="for --source sweep: the --out folder of a finished `dronewpt sweep` (its base mission "
+                        "is --config, default embedded; the fingerprint is checked)")
     p.add_argument("--policies", default=None,
                    help="comma-separated: transitions step, ramp, proposed (paper; default all three) or mission "
                         "policies (mission; default step,ramp,model_based)")
@@ -61,6 +65,8 @@ def _rows(args):
         raise CliError(f"--devices: {e}") from None
     if args.source == "mission":
         return _mission_rows(args, base)
+    if args.source == "sweep":
+        return _sweep_rows(args, base)
     names = _names(args, TRAJECTORIES, "step,ramp,proposed")
     bar = tqdm(total=len(names), desc="sizing", disable=not show_progress(args), file=sys.stderr)
     with bar:
@@ -74,22 +80,48 @@ def _mission_rows(args, base):
     from tqdm import tqdm
 
     import policies
-    from wpt_receiver.sizing import SizingRules, envelope_currents, select_parts
 
-    from ..world.runner import run_mission
-    from .mission import make_policy, mission_config
+    from .mission import mission_config
     names = _names(args, policies.available(), "step,ramp,model_based")
     args.set = [*args.set, f"link.devices={base.name}"]
     cfg = mission_config(args)
+    return [_size_mission(name, cfg, base, args)
+            for name in tqdm(names, desc="sizing missions", disable=not show_progress(args), file=sys.stderr)]
+
+
+def _size_mission(name, cfg, base, args) -> dict:
+    """Run mission ``cfg`` with policy ``name`` and size its rectifier from the time series."""
+    from wpt_receiver.sizing import SizingRules, envelope_currents, select_parts
+
+    from ..world.runner import run_mission
+    from .mission import make_policy
+    res = run_mission(cfg, make_policy(name, cfg))
+    ts, peak = res.timeseries, res.summary["peak_i2_a"]
+    cols = [ts[c].to_numpy() for c in ("t_s", "dt_s", "d_short", "i1_amp_a", "i2_amp_a")]
+    params = res.config.link.link_params(1.0, 1.0, 0.1)          # VL = 30 V: the voltage rule
+    row = select_parts(lambda dv: envelope_currents(*cols, peak, dv), params, base, SizingRules(margin=args.margin))
+    return {"policy": name, **{c: row[c] for c in _COLUMNS}}
+
+
+def _sweep_rows(args, base):
+    """Sizing rows from a sweep: per policy, its stored case with the largest peak |i2| re-run with
+    the link's devices = ``--devices`` (the sweep stores summaries, the sizing needs the time series)."""
+    from tqdm import tqdm
+
+    from ..config import config_to_dict, load_config
+    from ..studies.worst_cases import case_config, worst_cases
+    if args.sweep is None:
+        raise CliError("--source sweep needs --sweep DIR (the --out folder of a finished sweep)")
+    if args.set:
+        raise CliError("--set is invalid with --source sweep (the cases' own parameters are used); valid: "
+                       "--config for the sweep's base mission")
+    base_dict = config_to_dict(load_config(args.config))
     rows = []
-    for name in tqdm(names, desc="sizing missions", disable=not show_progress(args), file=sys.stderr):
-        res = run_mission(cfg, make_policy(name, cfg))
-        ts, peak = res.timeseries, res.summary["peak_i2_a"]
-        cols = [ts[c].to_numpy() for c in ("t_s", "dt_s", "d_short", "i1_amp_a", "i2_amp_a")]
-        params = res.config.link.link_params(1.0, 1.0, 0.1)          # VL = 30 V: the voltage rule
-        row = select_parts(lambda dv: envelope_currents(*cols, peak, dv), params, base,
-                           SizingRules(margin=args.margin))
-        rows.append({"policy": name, **{c: row[c] for c in _COLUMNS}})
+    for wc in tqdm(worst_cases(args.sweep, "peak_i2_a", base_dict), desc="sizing worst cases",
+                   disable=not show_progress(args), file=sys.stderr):
+        cfg = case_config(base_dict, wc.params, {"link.devices": base.name})
+        rows.append({**_size_mission(wc.policy, cfg, base, args), "case_id": wc.case_id, "cases": wc.n_cases,
+                     "sweep_peak_i2_a": wc.value})
     return rows
 
 
@@ -100,14 +132,15 @@ def _cmd_sizing(args) -> int:
     figs = []
     if not args.no_plot:
         from ..figures.sizing import plot_sizing
-        what = "Table I link" if args.source == "paper" else "missions"
+        what = {"paper": "Table I link", "mission": "missions", "sweep": f"worst cases of sweep {args.sweep}"}[args.source]
         figs.append(plot_sizing(rows, args.out / "sizing.png",
                                 f"SBAR sizing, {what}, devices {args.devices}, margin {args.margin:g}"))
     if args.format == "json":
         print(json.dumps({"source": args.source, "devices": args.devices, "margin": args.margin, "rows": rows,
                           "figures": figs}))
         return 0
-    model = "switching model, RM -> SM" if args.source == "paper" else "missions, envelope + ripple peak"
+    model = {"paper": "switching model, RM -> SM", "mission": "missions, envelope + ripple peak",
+             "sweep": f"worst case per policy of sweep {args.sweep}, re-run, envelope + ripple peak"}[args.source]
     print(f"SBAR sizing ({model}, devices {args.devices}, rating = {args.margin:g} x peak |i2|; "
           "RMS and loss over the worst 1 ms)")
     print(f"{'policy':<11} {'peak i2':>8} {'diode rms':>9} {'switch rms':>10} {'rating':>8} {'loss':>7} "
@@ -115,6 +148,10 @@ def _cmd_sizing(args) -> int:
     for r in rows:
         print(f"{r['policy']:<11} {r['peak_i2_a']:>6.2f} A {r['diode_rms_a']:>7.2f} A {r['switch_rms_a']:>8.2f} A "
               f"{r['required_rating_a']:>6.1f} A {r['conduction_loss_w']:>5.2f} W {r['mass_g']:>5.1f} g  {r['part']}")
+    for r in rows:
+        if "case_id" in r:
+            print(f"{r['policy']}: worst of {r['cases']} ok cases is case {r['case_id']} "
+                  f"(sweep peak {r['sweep_peak_i2_a']:.2f} A)")
     for f in figs:
         print(f"figure: {f}")
     return 0
