@@ -10,6 +10,7 @@
 ``cluster``        a Dask client that starts and stops quietly and fast
 ``status``         the sweep's manifest and ``--status`` (done, failed, pending)
 ``report``         summary and error tables, trade-off plots of a sweep's results
+``worst_cases``    per policy the stored case with the largest peak, rebuilt for re-running (sizing)
 =================  ===========================================================================
 """
 
