@@ -3,9 +3,15 @@
 What Dask does by default and why this module changes it:
 
 - Ctrl-C in a terminal sends SIGINT to the whole process group, worker processes included: each
-  prints a ``KeyboardInterrupt`` traceback (30-50 lines). The worker processes are spawned here
-  with SIGINT *ignored* (inherited across ``exec``), so only the driver sees Ctrl-C; workers end
-  with their nanny when the driver closes the cluster or dies (they watch their parent).
+  prints a ``KeyboardInterrupt`` traceback (30-50 lines). The worker processes are forked here by
+  a multiprocessing *forkserver* (``distributed.worker.multiprocessing-method``) that is started
+  with SIGINT *ignored*: the disposition survives its ``exec`` and CPython's forkserver restores
+  the inherited disposition in every child it forks, so workers never see Ctrl-C; they end with
+  their nanny when the driver closes the cluster or dies (they watch a pipe to it). Only the
+  forkserver's start (a few ms) runs with SIGINT ignored in the driver: ignoring it for the whole
+  cluster start lost a Ctrl-C, because a process-directed SIGINT goes to any thread that does not
+  block it (OpenBLAS's native threads, say), which then discards it. During the rest of the start
+  a Ctrl-C is recorded and raised once the cluster exists, which is then closed quickly.
 - Closing a ``LocalCluster`` logs ``CommClosedError`` tracebacks from connections torn down in
   flight and waits for graceful worker shutdown (6-9 s). Here the loggers of ``distributed``,
   ``tornado`` and ``asyncio`` are raised to CRITICAL in the driver while the cluster lives
@@ -48,11 +54,47 @@ def quiet_logs(level: int = logging.CRITICAL):
 
 
 @contextlib.contextmanager
+def _sigint_deferred():
+    """While the local cluster starts: a Ctrl-C is recorded and raised as ``KeyboardInterrupt`` on
+    leaving (after the body has assigned the cluster and client, so they get closed), never in the
+    middle of Dask's start (a half-built cluster makes Dask's exit hook and the half-started workers
+    print tracebacks). Python runs the handler in the main thread whichever thread took the signal,
+    so none is lost."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught = []
+    old_handler = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old_handler)
+    if caught:
+        raise KeyboardInterrupt
+
+
+def _start_forkserver() -> None:
+    """Start the multiprocessing forkserver the Dask nannies fork workers from, with SIGINT ignored
+    (inherited by every worker). Dask's preload list is set first (``get_mp_context``), so the
+    server imports ``distributed`` and numpy once instead of in every worker."""
+    import multiprocessing.forkserver
+    from multiprocessing import resource_tracker
+
+    from distributed.utils import get_mp_context
+
+    get_mp_context()
+    resource_tracker.ensure_running()  # spawned by the forkserver's start otherwise: not in the shield
+    with _sigint_shielded():  # a Ctrl-C meanwhile is raised on leaving
+        multiprocessing.forkserver.ensure_running()
+
+
+@contextlib.contextmanager
 def _sigint_shielded():
-    """While child processes are spawned: SIGINT ignored (the disposition survives ``exec``, so the
+    """While the forkserver is spawned: SIGINT ignored (the disposition survives ``exec``, so the
     workers never see Ctrl-C, and Python and asyncio then install no KeyboardInterrupt handler in
-    them) and blocked in this thread (a Ctrl-C meanwhile stays pending: Linux never discards a
-    blocked signal) - on leaving, the handler is restored and a pending Ctrl-C raised here."""
+    them) and blocked in this thread (a Ctrl-C sent to this thread stays pending) - on leaving, the
+    handler is restored and a pending Ctrl-C raised here. Keep it short: a Ctrl-C sent to the
+    process meanwhile may be taken by another thread that does not block it and is then lost."""
     if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
         yield
         return
@@ -83,6 +125,22 @@ def _local_cluster(workers: int | None):
         raise ValueError(f"workers={n!r} is invalid; valid range: integer >= 1")
     return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                         silence_logs=logging.CRITICAL)
+
+
+def _start_local(workers: int | None):
+    """A local cluster whose workers ignore SIGINT (forked by a forkserver that ignores it) and a
+    client to it."""
+    import dask
+    from distributed import Client
+
+    dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"})
+    _start_forkserver()
+    cluster = _local_cluster(workers)
+    try:
+        return cluster, Client(cluster, set_as_default=False)
+    except BaseException:
+        cluster.close(timeout=INTERRUPT_CLOSE_TIMEOUT_S)
+        raise
 
 
 def _close(client, cluster, interrupted: bool) -> None:
@@ -118,11 +176,8 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, *, con
             if scheduler is not None:
                 client = _connect(scheduler, connect_timeout_s)
             else:
-                from distributed import Client
-
-                with _sigint_shielded():  # a Ctrl-C meanwhile is raised on leaving, with both assigned
-                    cluster = _local_cluster(workers)
-                    client = Client(cluster, set_as_default=False)
+                with _sigint_deferred():
+                    cluster, client = _start_local(workers)
             yield client
             interrupted = False
         finally:
