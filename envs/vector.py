@@ -221,20 +221,21 @@ class SbarChargingVectorEnv(VectorEnv):
         return obs, reward, terminated, truncated, info
 
     def _step_compiled(self, d):
-        """One step of every sub-environment in the compiled loop (:func:`envs.vector_kernel.step_kernel`)."""
+        """One step of every sub-environment in the compiled loop (:func:`envs.vector_kernel.step_kernel`),
+        the objective included."""
         kern, rows = self._kernel
-        n, c = self.num_envs, self.config
+        n, c, w = self.num_envs, self.config, self.config.reward
         obs = np.empty((n, OBS_DIM), np.float32)
         reward = np.empty(n)
         truncated = np.empty(n, dtype=bool)
         block = np.empty((len(rows), n))
-        w = c.reward
-        kern(d, self._state, self._k, self._j, self._coef_all, self._coef_cur, self._bat, self._cmd, self._noise, self._lm_all,
-             self._M, self._n_sub, self._T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a,
-             OBS_SCALE, OBS_OFFSET, obs, reward, truncated, block)
-        k = self._k
-        obs[:, 7] = np.clip(self._t_since(k) * OBS_SCALE[7] + OBS_OFFSET[7], -1.0, 1.0)
-        return obs, reward, truncated, self._objective_info(dict(zip(rows, block)), k - 1)
+        ep = (self._i2sm_all, self._stop_k, self._t_stop, self._run_max, self._sm_ok, self._sm_checked)
+        par = (self._T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a)
+        kern(d, self._state, self._k, self._j, self._coef_all, self._coef_cur, self._bat, self._cmd, self._noise,
+             self._lm_all, ep, self._M, self._n_sub, par, OBS_SCALE, OBS_OFFSET, obs, reward, truncated, block)
+        info = dict(zip(rows, block))
+        info["reached_short_mode"] = self._sm_ok & self._sm_checked
+        return obs, reward, truncated, info
 
     def _step_numpy(self, d):
         """The same step on numpy arrays (:func:`envs.core.advance` with ``NUMPY_OPS``): the reference."""
