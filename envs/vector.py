@@ -228,12 +228,12 @@ class SbarChargingVectorEnv(VectorEnv):
         obs = np.empty((n, OBS_DIM), np.float32)
         reward = np.empty(n)
         truncated = np.empty(n, dtype=bool)
-        block = np.empty((len(rows), n))
+        block = np.empty((n, len(rows)))
         ep = (self._i2sm_all, self._stop_k, self._t_stop, self._run_max, self._sm_ok, self._sm_checked)
         par = (self._T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a)
         kern(d, self._state, self._k, self._j, self._coef_all, self._coef_cur, self._bat, self._cmd, self._noise,
              self._lm_all, ep, self._M, self._n_sub, par, OBS_SCALE, OBS_OFFSET, obs, reward, truncated, block)
-        info = dict(zip(rows, block))
+        info = dict(zip(rows, block.T))   # (n,) views, one per key
         info["reached_short_mode"] = self._sm_ok & self._sm_checked
         return obs, reward, truncated, info
 
