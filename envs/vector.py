@@ -87,6 +87,11 @@ class SbarChargingVectorEnv(VectorEnv):
         return spaces.Box(-1.0, 1.0, (1,), np.float32)
 
     def _duty(self, actions) -> np.ndarray:
+        if self._kernel is not None and isinstance(actions, np.ndarray) and actions.dtype.kind == "f":
+            d = np.empty(self.num_envs)
+            k = self._kernel[2](actions.reshape(self.num_envs), d)   # compiled: the same arithmetic
+            if k < 0:
+                return d
         a = np.asarray(actions, dtype=float).reshape(self.num_envs)
         if not np.all(np.isfinite(a)):  # NaN would poison the link state and every reward after it
             k = int(np.flatnonzero(~np.isfinite(a))[0])
@@ -223,7 +228,7 @@ class SbarChargingVectorEnv(VectorEnv):
     def _step_compiled(self, d):
         """One step of every sub-environment in the compiled loop (:func:`envs.vector_kernel.step_kernel`),
         the objective included."""
-        kern, rows = self._kernel
+        kern, rows, _ = self._kernel
         n, c, w = self.num_envs, self.config, self.config.reward
         obs = np.empty((n, OBS_DIM), np.float32)
         reward = np.empty(n)
@@ -262,13 +267,13 @@ class SbarChargingVectorEnv(VectorEnv):
 
 
 def _load_kernel():
-    """``(step_kernel, INFO_ROWS)`` of :mod:`envs.vector_kernel`, or None without numba (imported
+    """``(step_kernel, INFO_ROWS, duty_kernel)`` of :mod:`envs.vector_kernel`, or None without numba (imported
     here, when a vector env is built, so ``import envs`` does not load numba)."""
     import importlib.util
     if importlib.util.find_spec("numba") is None:
         return None
-    from .vector_kernel import INFO_ROWS, step_kernel
-    return step_kernel, INFO_ROWS
+    from .vector_kernel import INFO_ROWS, duty_kernel, step_kernel
+    return step_kernel, INFO_ROWS, duty_kernel
 
 
 class SbarChargingDiscreteVectorEnv(SbarChargingVectorEnv):

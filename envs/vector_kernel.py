@@ -25,7 +25,7 @@ from numba import njit
 
 from .objective import SHORT_MODE_IL_A, SHORT_MODE_WITHIN_S
 
-__all__ = ["step_kernel", "INFO_ROWS"]
+__all__ = ["step_kernel", "duty_kernel", "INFO_ROWS"]
 
 #: rows of the info block the kernel fills, in order
 INFO_ROWS = ("t_s", "i2_a", "i2_peak_a", "i1_a", "d_short", "v2_v", "rect_current_a", "battery_v",
@@ -46,6 +46,20 @@ def _sign(x):
 @njit(cache=True)
 def _clip1(x):
     return -1.0 if x < -1.0 else (1.0 if x > 1.0 else x)
+
+
+@njit(cache=True)
+def duty_kernel(a, d):
+    """``d = clip((a + 1) / 2, 0, 1)`` (:meth:`envs.vector.SbarChargingVectorEnv._duty`, same arithmetic
+    in float64) for actions ``a`` (n,) of any float type; returns the index of the first non-finite
+    action (``d`` then unusable) or -1."""
+    for e in range(a.shape[0]):
+        x = np.float64(a[e])
+        if not np.isfinite(x):
+            return e
+        x = (x + 1.0) * 0.5
+        d[e] = 0.0 if x < 0.0 else (1.0 if x > 1.0 else x)
+    return -1
 
 
 @njit(cache=True)
