@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import diskcache
+from .diskcache import load as _cache_load, store as _cache_store
 
 __all__ = ["normalize_tf", "tf2ss", "zoh_ss", "zoh_tf", "ss2tf", "lfilter"]
 
@@ -56,13 +56,13 @@ def zoh_ss(a, b, dt_s: float):
     key = _zoh_key(a, b, dt_s)
     ms = _ZOH_MEMO.get(key)
     if ms is None:
-        ms = diskcache.load("zoh", key, (n, n + m))
+        ms = _cache_load("zoh", key, (n, n + m))
     if ms is None:
         from scipy.linalg import expm
 
         em = np.vstack((np.hstack((a, b)), np.hstack((np.zeros((m, n)), np.zeros((m, m))))))
         ms = expm(dt_s * em)[:n, :]
-        diskcache.store("zoh", key, ms)
+        _cache_store("zoh", key, ms)
     _ZOH_MEMO[key] = ms
     return ms[:, :n].copy(), ms[:, n:].copy()
 
