@@ -2,7 +2,8 @@
 end, each a fresh process, against the bare interpreter (``python -c pass``) in the same run.
 
 Each command runs ``--repeat`` times, the three interleaved so load changes hit them alike;
-median and range of the wall time, and ``os.getloadavg()`` before and after. The mission writes
+median and range of the wall time (the goal's measure) and of the process's CPU time (user +
+system, less sensitive to a shared machine), and ``os.getloadavg()`` before and after. The mission writes
 to a temporary folder; the coupling table and coil inductances come from the disk cache (one
 untimed warm-up run fills it, as any earlier run on the machine would have).
 
@@ -14,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -24,11 +26,20 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _wall(args, env) -> float:
-    t0 = time.perf_counter()
+def _cpu_children() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def _wall(args, env, cpu: list | None = None) -> float:
+    """Wall time of one run of ``python ARGS``; its CPU time (user + system) appended to ``cpu``."""
+    c0, t0 = _cpu_children(), time.perf_counter()
     subprocess.run([sys.executable, *args], cwd=ROOT, env=env, check=True, stdout=subprocess.DEVNULL,
                    stderr=subprocess.DEVNULL)
-    return time.perf_counter() - t0
+    wall = time.perf_counter() - t0
+    if cpu is not None:
+        cpu.append(_cpu_children() - c0)
+    return wall
 
 
 def run(repeat: int = 7) -> dict:
@@ -40,13 +51,16 @@ def run(repeat: int = 7) -> dict:
         _wall(cmds["dronewpt mission"], env)  # warm-up: disk caches (coupling table, .pyc)
         load0 = os.getloadavg()
         times = {k: [] for k in cmds}
+        cpus = {k: [] for k in cmds}
         for _ in range(repeat):
             for name, args in cmds.items():
-                times[name].append(_wall(args, env))
+                times[name].append(_wall(args, env, cpus[name]))
         load1 = os.getloadavg()
     out = {"load_before": load0, "load_after": load1}
     for name, ts in times.items():
-        out[name] = {"median_s": statistics.median(ts), "min_s": min(ts), "max_s": max(ts), "n": len(ts)}
+        c = cpus[name]
+        out[name] = {"median_s": statistics.median(ts), "min_s": min(ts), "max_s": max(ts), "n": len(ts),
+                     "cpu_median_s": statistics.median(c), "cpu_min_s": min(c), "cpu_max_s": max(c)}
     return out
 
 
@@ -65,7 +79,8 @@ def main(argv=None):
                        ("dronewpt mission", "goal <= 2.0 s")):
         s = r[name]
         print(f"{name:<17} median {s['median_s']:.3f} s (range {s['min_s']:.3f}-{s['max_s']:.3f}, n={s['n']}); "
-              f"{s['median_s'] / base:.1f}x the bare interpreter  {goal}")
+              f"{s['median_s'] / base:.1f}x the bare interpreter; CPU {s['cpu_median_s']:.3f} s "
+              f"(range {s['cpu_min_s']:.3f}-{s['cpu_max_s']:.3f})  {goal}")
 
 
 if __name__ == "__main__":

@@ -122,7 +122,10 @@ class SbarChargingEnv(gym.Env):
         return spaces.Box(-1.0, 1.0, (1,), np.float32)
 
     def _duty(self, action) -> float:
-        a = float(np.asarray(action, dtype=float).reshape(-1)[0])
+        if type(action) is np.ndarray and action.shape == (1,):   # the usual case, without array conversions
+            a = float(action[0])
+        else:
+            a = float(np.asarray(action, dtype=float).reshape(-1)[0])
         if not math.isfinite(a):  # NaN would poison the link state and every reward after it
             raise ValueError(f"action={a!r} is invalid; valid range: [-1, 1] (finite)")
         d = (a + 1.0) * 0.5

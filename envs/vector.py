@@ -87,6 +87,11 @@ class SbarChargingVectorEnv(VectorEnv):
         return spaces.Box(-1.0, 1.0, (1,), np.float32)
 
     def _duty(self, actions) -> np.ndarray:
+        if self._kernel is not None and isinstance(actions, np.ndarray) and actions.dtype.kind == "f":
+            d = np.empty(self.num_envs)
+            k = self._kernel[2](actions.reshape(self.num_envs), d)   # compiled: the same arithmetic
+            if k < 0:
+                return d
         a = np.asarray(actions, dtype=float).reshape(self.num_envs)
         if not np.all(np.isfinite(a)):  # NaN would poison the link state and every reward after it
             k = int(np.flatnonzero(~np.isfinite(a))[0])
@@ -221,20 +226,21 @@ class SbarChargingVectorEnv(VectorEnv):
         return obs, reward, terminated, truncated, info
 
     def _step_compiled(self, d):
-        """One step of every sub-environment in the compiled loop (:func:`envs.vector_kernel.step_kernel`)."""
-        kern, rows = self._kernel
-        n, c = self.num_envs, self.config
+        """One step of every sub-environment in the compiled loop (:func:`envs.vector_kernel.step_kernel`),
+        the objective included."""
+        kern, rows, _ = self._kernel
+        n, c, w = self.num_envs, self.config, self.config.reward
         obs = np.empty((n, OBS_DIM), np.float32)
         reward = np.empty(n)
         truncated = np.empty(n, dtype=bool)
-        block = np.empty((len(rows), n))
-        w = c.reward
-        kern(d, self._state, self._k, self._j, self._coef_all, self._coef_cur, self._bat, self._cmd, self._noise, self._lm_all,
-             self._M, self._n_sub, self._T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a,
-             OBS_SCALE, OBS_OFFSET, obs, reward, truncated, block)
-        k = self._k
-        obs[:, 7] = np.clip(self._t_since(k) * OBS_SCALE[7] + OBS_OFFSET[7], -1.0, 1.0)
-        return obs, reward, truncated, self._objective_info(dict(zip(rows, block)), k - 1)
+        block = np.empty((n, len(rows)))
+        ep = (self._i2sm_all, self._stop_k, self._t_stop, self._run_max, self._sm_ok, self._sm_checked)
+        par = (self._T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a)
+        kern(d, self._state, self._k, self._j, self._coef_all, self._coef_cur, self._bat, self._cmd, self._noise,
+             self._lm_all, ep, self._M, self._n_sub, par, OBS_SCALE, OBS_OFFSET, obs, reward, truncated, block)
+        info = dict(zip(rows, block.T))   # (n,) views, one per key
+        info["reached_short_mode"] = self._sm_ok & self._sm_checked
+        return obs, reward, truncated, info
 
     def _step_numpy(self, d):
         """The same step on numpy arrays (:func:`envs.core.advance` with ``NUMPY_OPS``): the reference."""
@@ -261,13 +267,13 @@ class SbarChargingVectorEnv(VectorEnv):
 
 
 def _load_kernel():
-    """``(step_kernel, INFO_ROWS)`` of :mod:`envs.vector_kernel`, or None without numba (imported
+    """``(step_kernel, INFO_ROWS, duty_kernel)`` of :mod:`envs.vector_kernel`, or None without numba (imported
     here, when a vector env is built, so ``import envs`` does not load numba)."""
     import importlib.util
     if importlib.util.find_spec("numba") is None:
         return None
-    from .vector_kernel import INFO_ROWS, step_kernel
-    return step_kernel, INFO_ROWS
+    from .vector_kernel import INFO_ROWS, duty_kernel, step_kernel
+    return step_kernel, INFO_ROWS, duty_kernel
 
 
 class SbarChargingDiscreteVectorEnv(SbarChargingVectorEnv):

@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 import tomllib
 from dataclasses import dataclass, fields
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from importlib import resources
 
 __all__ = ["Diode", "Switch", "DeviceSet", "IDEAL", "parts", "preset", "preset_names", "device_set"]
@@ -102,7 +102,7 @@ class DeviceSet:
         """Slope resistance of the freewheeling path [ohm]."""
         return 2.0 * self.inv_switch.body.rd_ohm
 
-    @property
+    @cached_property   # asked every mission step; the set is frozen
     def is_ideal(self) -> bool:
         return all(v == 0.0 for v in (self.rect_vf_v, self.rect_rd_ohm, self.short_r_ohm, self.inv_r_ohm,
                                       self.fw_vf_v, self.fw_rd_ohm))

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .diskcache import load as _cache_load, store as _cache_store
+
 __all__ = ["normalize_tf", "tf2ss", "zoh_ss", "zoh_tf", "ss2tf", "lfilter"]
 
 
@@ -43,14 +45,36 @@ def tf2ss(num, den):
 
 
 def zoh_ss(a, b, dt_s: float):
-    """``(Ad, Bd)`` of ``x' = A x + B u`` under a zero-order hold of ``dt_s`` [s] (block expm)."""
-    from scipy.linalg import expm
+    """``(Ad, Bd)`` of ``x' = A x + B u`` under a zero-order hold of ``dt_s`` [s] (block expm).
 
+    The result goes through the disk cache (:mod:`wpt_receiver.diskcache`, keyed by the exact bits of
+    ``A``, ``B``, ``dt_s`` and the scipy version): ``import scipy.linalg`` costs 0.2-0.3 s, more
+    than the mission it would serve, and the controller and the wind hold loop ask for the same few
+    matrices every run. A cached result is the same array scipy computed."""
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     n, m = a.shape[0], b.shape[1]
-    em = np.vstack((np.hstack((a, b)), np.hstack((np.zeros((m, n)), np.zeros((m, m))))))
-    ms = expm(dt_s * em)[:n, :]
-    return ms[:, :n], ms[:, n:]
+    key = _zoh_key(a, b, dt_s)
+    ms = _ZOH_MEMO.get(key)
+    if ms is None:
+        ms = _cache_load("zoh", key, (n, n + m))
+    if ms is None:
+        from scipy.linalg import expm
+
+        em = np.vstack((np.hstack((a, b)), np.hstack((np.zeros((m, n)), np.zeros((m, m))))))
+        ms = expm(dt_s * em)[:n, :]
+        _cache_store("zoh", key, ms)
+    _ZOH_MEMO[key] = ms
+    return ms[:, :n].copy(), ms[:, n:].copy()
+
+
+_ZOH_MEMO: dict = {}
+
+
+def _zoh_key(a: np.ndarray, b: np.ndarray, dt_s: float) -> str:
+    import scipy  # the top-level package only (cheap)
+
+    return (f"zoh v1 a{a.shape}={a.tobytes().hex()} b{b.shape}={b.tobytes().hex()} dt={float(dt_s).hex()} "
+            f"scipy={scipy.__version__}")
 
 
 def ss2tf(a, b, c, d):
