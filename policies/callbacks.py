@@ -48,12 +48,38 @@ class ProgressCallback(BaseCallback):
 class CostEvalCallback(EvalCallback):
     """``EvalCallback`` that also averages ``episode_cost`` / ``overshoot`` / ``reached_short_mode`` of
     the evaluation episodes, logs them (``eval/mean_cost`` ...) and writes the curve to
-    ``<log_path>/eval_curve.json`` (timesteps, return mean/std, cost, overshoot, fraction in SM)."""
+    ``<log_path>/eval_curve.json`` (timesteps, return mean/std, cost, overshoot, fraction in SM).
 
-    def __init__(self, *args, **kwargs):
+    With a cost ``budget`` (constrained runs) it also keeps the **best feasible model**: the
+    evaluation with the highest mean return among those whose mean cost is within the budget and
+    whose every window reached short mode is saved as ``best_feasible_model.zip`` next to
+    ``best_model.zip``, with the training VecNormalize statistics of that moment
+    (``best_feasible_vecnormalize.pkl``, and ``feasible["obs_norm"]`` for the metadata JSON)."""
+
+    def __init__(self, *args, budget: float | None = None, **kwargs):
         super().__init__(*args, **kwargs)
         self._ep: list[tuple[float, float, float]] = []
         self.curve: list[dict] = []
+        self.budget = budget
+        self.feasible: dict | None = None
+
+    def _keep_if_feasible(self, point: dict) -> None:
+        """Save the model when ``point`` (an eval_curve entry) is feasible and the best so far."""
+        if self.budget is None or self.best_model_save_path is None:
+            return
+        if point["cost"] > self.budget or point["reached_short_mode"] < 1.0:
+            return
+        if self.feasible is not None and point["return_mean"] <= self.feasible["return_mean"]:
+            return
+        folder = Path(self.best_model_save_path)
+        self.model.save(str(folder / "best_feasible_model.zip"))
+        norm = self.model.get_vec_normalize_env()
+        obs_norm = None
+        if norm is not None:
+            norm.save(str(folder / "best_feasible_vecnormalize.pkl"))
+            obs_norm = {"mean": norm.obs_rms.mean.tolist(), "var": norm.obs_rms.var.tolist(),
+                        "clip": float(norm.clip_obs), "epsilon": float(norm.epsilon)}
+        self.feasible = {**point, "obs_norm": obs_norm}
 
     def _log_success_callback(self, locals_, globals_) -> None:
         super()._log_success_callback(locals_, globals_)
@@ -73,6 +99,7 @@ class CostEvalCallback(EvalCallback):
             self.curve.append({"timesteps": int(self.num_timesteps), "return_mean": float(self.last_mean_reward),
                                "return_std": float(np.std(self.evaluations_results[-1])), "cost": c,
                                "overshoot": o, "reached_short_mode": s})
+            self._keep_if_feasible(self.curve[-1])
             if self.log_path is not None:
                 Path(self.log_path).parent.mkdir(parents=True, exist_ok=True)
                 (Path(self.log_path).parent / "eval_curve.json").write_text(json.dumps(self.curve, indent=1))

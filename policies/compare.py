@@ -33,7 +33,7 @@ import numpy as np
 from .stats import mean_ci, seed_ci
 
 __all__ = ["METRICS", "EpisodeTraces", "run_policy", "compare", "frontier", "DEFAULT_POLICIES", "DEFAULT_SCENARIOS",
-           "REFERENCE", "plot_transitions", "plot_frontier"]
+           "REFERENCE", "plot_transitions", "plot_frontier", "shipped_seed_groups"]
 
 METRICS = ("overshoot_pct", "reached_short_mode", "peak_i2_a", "energy_before_stop_j", "energy_after_stop_j",
            "tracking_rmse_a", "cost", "return", "time_above_rated_s")
@@ -43,6 +43,22 @@ DEFAULT_POLICIES = ("step", "ramp", "hysteresis", "model_based", "model_based_on
 DEFAULT_SCENARIOS = ("nominal", "lm_mismatch", "windy", "battery", "lm_high")
 REFERENCE = "model_based"
 DEFAULT_EPISODES = 100
+#: learned kinds shipped with several training seeds (``policies/pretrained/<prefix>_s<k>.zip``)
+SHIPPED_SEEDS = {"ppo_lagrangian": "ppo_lagrangian_s", "residual": "residual_s"}
+
+
+def shipped_seed_groups() -> dict:
+    """``{kind: ["kind:PATH_s0", ...]}`` for the learned kinds shipped with several training seeds
+    (the rows ``compare`` aggregates over seeds by default); kinds with fewer than two files are left out."""
+    from pathlib import Path
+
+    folder = Path(__file__).parent / "pretrained"
+    out = {}
+    for kind, prefix in SHIPPED_SEEDS.items():
+        files = sorted(folder.glob(f"{prefix}[0-9]*.zip"))
+        if len(files) >= 2:
+            out[kind] = [f"{kind}:{f}" for f in files]
+    return out
 
 
 @dataclass

@@ -20,7 +20,7 @@ from .rl import RLPolicy
 
 __all__ = ["ResidualPolicy", "PRETRAINED_RESIDUAL"]
 
-PRETRAINED_RESIDUAL = Path(__file__).parent / "pretrained" / "residual_sbar.zip"
+PRETRAINED_RESIDUAL = Path(__file__).parent / "pretrained" / "residual_s0.zip"   # seeds _s0.._s4 shipped
 
 
 class ResidualPolicy:

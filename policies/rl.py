@@ -27,7 +27,7 @@ from .inference import export_actor
 __all__ = ["RLPolicy", "PRETRAINED", "PRETRAINED_LAGRANGIAN", "load_meta", "ALGOS"]
 
 PRETRAINED = Path(__file__).parent / "pretrained" / "ppo_sbar.zip"
-PRETRAINED_LAGRANGIAN = Path(__file__).parent / "pretrained" / "ppo_lagrangian.zip"
+PRETRAINED_LAGRANGIAN = Path(__file__).parent / "pretrained" / "ppo_lagrangian_s0.zip"   # seeds _s0.._s4 shipped
 ALGOS = ("ppo", "sac", "dqn")
 
 

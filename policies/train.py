@@ -206,7 +206,8 @@ def _callbacks(spec: dict, out: Path, eval_env, penalty, progress: bool):
            CheckpointCallback(max(1, spec["checkpoint_every"] // n), str(out / "checkpoints"), name_prefix=spec["name"],
                               save_vecnormalize=True),
            CostEvalCallback(eval_env, n_eval_episodes=spec["eval_episodes"], eval_freq=max(1, spec["eval_every"] // n),
-                            log_path=str(out / "eval"), best_model_save_path=str(out / "eval"), verbose=0, warn=False)]
+                            log_path=str(out / "eval"), best_model_save_path=str(out / "eval"), verbose=0, warn=False,
+                            budget=spec["budget"] if spec["lagrangian"] else None)]
     lag = None
     if penalty is not None:
         probe = _base_env(spec, spec["probe_episodes"], None) if spec["probe_episodes"] else None
@@ -332,6 +333,12 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     if (out / "eval" / "best_model.zip").is_file():   # usable as rl:/residual: too (normalisation: the final one)
         (out / "eval" / "best_model.json").write_text(json.dumps({**meta, "note": "best evaluation return; obs_norm "
                                                                   "is the end of training's"}, indent=2))
+    if ev.feasible is not None:   # best evaluation within the budget, with its own normalisation
+        feas = {k: v for k, v in ev.feasible.items() if k != "obs_norm"}
+        (out / "eval" / "best_feasible_model.json").write_text(json.dumps(
+            {**meta, "obs_norm": ev.feasible["obs_norm"] or meta["obs_norm"], "selected_at": feas,
+             "note": "best evaluation return among evaluations with mean cost <= budget and every window in short mode"},
+            indent=2))
     venv.close()
     mon = out / "monitor.monitor.csv"
     res = {"model": zip_path, "meta": meta_path, "vecnormalize": out / "vecnormalize.pkl", "monitor": mon,

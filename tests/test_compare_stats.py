@@ -58,3 +58,22 @@ def test_cli_compare_json_has_intervals_frontier_and_figures(tmp_path, capsys):
     assert [f["budget"] for f in res["frontier"]] == [0.0, 0.005, 0.01, 0.02, 0.05, 0.1]
     assert all((tmp_path / p).is_file() for p in ("transitions_nominal.png", "frontier_nominal.png"))
     assert main(["compare", "--train-seeds", "broken", "--no-plot"]) == 2
+
+
+def test_shipped_learned_policies_have_five_seeds_small_files_and_their_commands():
+    """Each learned kind is shipped with >= 5 training seeds (distinct), small files, and the exact
+    command in its metadata; compare's default rows aggregate them."""
+    from pathlib import Path
+
+    from policies.compare import shipped_seed_groups
+
+    groups = shipped_seed_groups()
+    assert set(groups) == {"ppo_lagrangian", "residual"}
+    for kind, specs in groups.items():
+        paths = [Path(s.split(":", 1)[1]) for s in specs]
+        metas = [json.loads(p.with_suffix(".json").read_text()) for p in paths]
+        assert len(paths) >= 5 and len({m["seed"] for m in metas}) == len(paths)
+        assert all(p.stat().st_size < 300_000 for p in paths)
+        for m in metas:
+            assert m["lagrangian"] and m["reproduce"].startswith("dronewpt train --algo ppo")
+            assert f"--seed {m['seed']} " in m["reproduce"] and ("--residual" in m["reproduce"]) == (kind == "residual")

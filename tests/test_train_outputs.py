@@ -67,6 +67,14 @@ def test_outputs_metadata_eval_and_checkpoints(runs):
     assert (res["eval_dir"] / "best_model.zip").is_file() and (res["eval_dir"] / "evaluations.npz").is_file()
     ck = sorted(res["checkpoints"].glob("*_steps.zip"))
     assert len(ck) == 4 and len(list(res["checkpoints"].glob("*vecnormalize*.pkl"))) == 4
+    # best feasible model: the highest evaluation return among evaluations within the budget, all in SM
+    feas = [e for e in curve if e["cost"] <= meta["budget"] and e["reached_short_mode"] == 1.0]
+    path = res["eval_dir"] / "best_feasible_model.json"
+    assert path.is_file() == bool(feas) == (res["eval_dir"] / "best_feasible_model.zip").is_file()
+    if feas:
+        sel = json.loads(path.read_text())["selected_at"]
+        assert sel == max(feas, key=lambda e: e["return_mean"])
+    assert not (runs["ppo"]["eval_dir"] / "best_feasible_model.zip").exists()   # unconstrained: no budget
 
 
 def test_a_killed_run_resumes_from_its_last_checkpoint(runs, tmp_path):

@@ -139,7 +139,8 @@ def _add_compare(sub):
                    help="seed of episode 0 (episode i uses seed + i), 0 .. 2^32-1 (default 1000)")
     p.add_argument("--train-seeds", action="append", default=[], metavar="LABEL=SPEC,SPEC,...",
                    help="one row aggregated over models of one kind trained with different seeds, e.g. "
-                        "ppo_lag=rl:a/ppo_sbar.zip,rl:b/ppo_sbar.zip (a glob in a path is expanded); repeatable")
+                        "ppo_lag=rl:a/ppo_sbar.zip,rl:b/ppo_sbar.zip (a glob in a path is expanded); repeatable "
+                        "(default with the default --policies: the shipped ppo_lagrangian and residual seeds)")
     p.add_argument("--no-frontier", action="store_true", help="skip the budgeted model-based sweep")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--out", type=Path, default=Path("out/compare"), help="folder for the figures")
@@ -188,6 +189,14 @@ def _rl_or_skip(pols: tuple, explicit: bool) -> tuple:
     return tuple(p_ for p_ in pols if p_ not in sb3_rows)
 
 
+def _shipped_seed_rows(pols: tuple):
+    """At the defaults the shipped learned kinds with several training seeds are one row each,
+    aggregated over their seeds (instead of the seed-0 row)."""
+    from policies.compare import shipped_seed_groups
+    groups = shipped_seed_groups()
+    return tuple(p_ for p_ in pols if p_ not in groups), groups
+
+
 def _check_compare(args, pols, scns, groups):
     from envs import SCENARIOS
     from policies import available
@@ -210,6 +219,8 @@ def _cmd_compare(args) -> int:
     pols = tuple(x.strip() for x in args.policies.split(",") if x.strip()) if args.policies else DEFAULT_POLICIES
     scns = tuple(x.strip() for x in args.scenarios.split(",") if x.strip()) if args.scenarios else DEFAULT_SCENARIOS
     groups = _train_seed_groups(args.train_seeds)
+    if not args.policies and not args.train_seeds and sb3_installed():
+        pols, groups = _shipped_seed_rows(pols)
     _check_compare(args, pols, scns, groups)
     pols = _rl_or_skip(pols, explicit=bool(args.policies))
     if not args.no_plot:
