@@ -10,7 +10,16 @@ replaces: ``VecEnv.step`` of the same wrapped stacks (VecNormalize included) wit
 network. Rounds alternate between the two paths after one unmeasured warm-up round (numba and torch
 first-call costs); the report gives the median with the range of each, their ratio and the load average.
 
-    OMP_NUM_THREADS=1 python benchmarks/bench_train.py [--steps 65536] [--rounds 5] [--n-envs 64] [--json]
+A third path, ``as_filed``, is the ``make_vec_env`` path of the code that issue 11 was filed against
+(``--as-filed REV``, default ``AS_FILED_REV``: its single env, its wrappers), unpacked from git into a
+temporary folder and trained in a subprocess with the same PPO and hyperparameters, in the same
+rounds: the training speed a user had then, measured now on the same machine; ``as_filed_train_defaults``
+is that code's ``dronewpt train`` at its own defaults (1 env; PPO n_steps 512, batch 256, 10 epochs:
+the ~1,800 env-steps/s the issue reports), on a quarter of the steps. Skipped with a note
+when the repository's git history is not there (e.g. an sdist).
+
+    OMP_NUM_THREADS=1 python benchmarks/bench_train.py [--steps 65536] [--rounds 5] [--n-envs 64]
+        [--as-filed REV | --no-as-filed] [--json]
 """
 
 from __future__ import annotations
@@ -19,11 +28,43 @@ import argparse
 import json
 import os
 import statistics
+import subprocess
 import sys
+import tarfile
+import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+#: the commit issue 11 was filed against (train used make_vec_env over the single env then)
+AS_FILED_REV = "322d391"
+
+_AS_FILED_SCRIPT = """
+import json, sys, time
+import torch
+torch.set_num_threads(1)
+import stable_baselines3 as sb3
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import VecNormalize
+import envs
+assert envs.__file__.startswith(sys.argv[1]), envs.__file__
+n_envs, steps = int(sys.argv[2]), int(sys.argv[3])
+if sys.argv[4] == "own":  # that code's own train defaults
+    from policies.train import DEFAULT_HYPERPARAMS
+    hp = dict(DEFAULT_HYPERPARAMS["ppo"])
+else:
+    hp = json.loads(sys.argv[4])
+def rate(n):
+    venv = VecNormalize(make_vec_env(envs.ENV_ID, n_envs=n_envs, seed=0, env_kwargs={"scenario": "random"}), gamma=0.98)
+    model = sb3.PPO("MlpPolicy", venv, seed=0, device="cpu", verbose=0, **hp)
+    t0 = time.perf_counter()
+    model.learn(total_timesteps=n)
+    return model.num_timesteps / (time.perf_counter() - t0)
+rate(2 * n_envs * hp["n_steps"])  # warm-up, not measured
+print(rate(steps))
+"""
 
 
 def _env(path: str, n_envs: int):
@@ -73,10 +114,40 @@ def _step_rate(path: str, n_envs: int, steps: int) -> float:
     return n_calls * n_envs / dt
 
 
+def _unpack_rev(rev: str, dest: Path) -> bool:
+    """The tree of ``rev`` unpacked into ``dest`` (``git archive``); False without git history."""
+    try:
+        tar = subprocess.run(["git", "-C", str(ROOT), "archive", rev], capture_output=True, check=True).stdout
+    except (OSError, subprocess.CalledProcessError):
+        return False
+    tmp_tar = dest / "tree.tar"
+    tmp_tar.write_bytes(tar)
+    with tarfile.open(tmp_tar) as tf:
+        tf.extractall(dest / "tree", filter="data")
+    return True
+
+
+def _as_filed_rate(tree: Path, n_envs: int, steps: int, own: bool = False) -> float:
+    """PPO env-steps/s on the ``make_vec_env`` path of the code in ``tree`` (a subprocess), with
+    today's PPO hyperparameters or (``own``) that code's ``train`` defaults."""
+    from policies.train import DEFAULT_HYPERPARAMS
+
+    hp = "own" if own else json.dumps(DEFAULT_HYPERPARAMS["ppo"])
+    env = dict(os.environ, PYTHONPATH=str(tree), OMP_NUM_THREADS="1")
+    out = subprocess.run([sys.executable, "-c", _AS_FILED_SCRIPT, str(tree), str(n_envs), str(steps), hp],
+                         env=env, cwd=str(tree),
+                         capture_output=True, text=True, check=True)
+    return float(out.stdout.strip().splitlines()[-1])
+
+
 def _summary(rates: dict) -> dict:
-    med = {p: statistics.median(v) for p, v in rates.items()}
-    return {"median_env_steps_per_s": med, "range": {p: [min(v), max(v)] for p, v in rates.items()},
-            "ratio_batched_over_make_vec_env": med["batched"] / med["make_vec_env"]}
+    med = {p: statistics.median(v) for p, v in rates.items() if v}
+    res = {"median_env_steps_per_s": med, "range": {p: [min(v), max(v)] for p, v in rates.items() if v},
+           "ratio_batched_over_make_vec_env": med["batched"] / med["make_vec_env"]}
+    for p in ("as_filed", "as_filed_train_defaults"):
+        if p in med:
+            res[f"ratio_batched_over_{p}"] = med["batched"] / med[p]
+    return res
 
 
 def _print(label: str, res: dict, rounds: int) -> None:
@@ -85,6 +156,12 @@ def _print(label: str, res: dict, rounds: int) -> None:
         lo, hi = res["range"][p]
         print(f"  {p:>13}: median {med:,.0f} env-steps/s (range {lo:,.0f} .. {hi:,.0f}) over {rounds} rounds")
     print(f"  ratio batched / make_vec_env: {res['ratio_batched_over_make_vec_env']:.1f}x")
+    if "ratio_batched_over_as_filed" in res:
+        print(f"  ratio batched / as_filed (make_vec_env of {AS_FILED_REV}, issue 11 as filed, same PPO): "
+              f"{res['ratio_batched_over_as_filed']:.1f}x")
+    if "ratio_batched_over_as_filed_train_defaults" in res:
+        print(f"  ratio batched / as_filed_train_defaults (`dronewpt train` of {AS_FILED_REV} at its defaults: "
+              f"1 env, n_steps 512, batch 256, 10 epochs): {res['ratio_batched_over_as_filed_train_defaults']:.1f}x")
 
 
 def main(argv=None) -> int:
@@ -94,28 +171,47 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=65_536)
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--n-envs", type=int, default=64)
+    ap.add_argument("--as-filed", default=AS_FILED_REV, metavar="REV",
+                    help=f"git revision of the as-filed make_vec_env path (default {AS_FILED_REV})")
+    ap.add_argument("--no-as-filed", action="store_true", help="skip the as-filed path")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
-    for path in ("batched", "make_vec_env"):   # warm-up, not measured
-        _rate(path, args.n_envs, 4 * args.n_envs * 128)
-    load0 = os.getloadavg()
-    rates = {"batched": [], "make_vec_env": []}
-    steps_only = {"batched": [], "make_vec_env": []}
-    for _ in range(args.rounds):
-        for path in rates:
-            rates[path].append(_rate(path, args.n_envs, args.steps))
-            steps_only[path].append(_step_rate(path, args.n_envs, args.steps))
-    res = {"steps_per_round": args.steps, "n_envs": args.n_envs, "rounds": args.rounds,
-           "ppo_learn": _summary(rates), "vecenv_step_only": _summary(steps_only),
-           "loadavg_before": load0, "loadavg_after": os.getloadavg()}
+    with tempfile.TemporaryDirectory(prefix="bench_train_") as tmp:
+        tree = None
+        if not args.no_as_filed:
+            if _unpack_rev(args.as_filed, Path(tmp)):
+                tree = Path(tmp) / "tree"
+            else:
+                print(f"note: as-filed path skipped (no git history with {args.as_filed} at {ROOT})")
+        res = _measure(args, tree)
     if args.json:
         print(json.dumps(res, indent=1))
         return 0
     _print("PPO model.learn (rollouts + updates):", res["ppo_learn"], args.rounds)
     _print("VecEnv.step alone (random actions, same wrappers):", res["vecenv_step_only"], args.rounds)
-    print(f"load average before {load0[0]:.2f}, after {res['loadavg_after'][0]:.2f} (2 cores)")
+    print(f"load average before {res['loadavg_before'][0]:.2f}, after {res['loadavg_after'][0]:.2f} (2 cores)")
     return 0
+
+
+def _measure(args, tree) -> dict:
+    """All rounds, the paths alternating; ``tree``: the as-filed code (or None)."""
+    for path in ("batched", "make_vec_env"):   # warm-up, not measured
+        _rate(path, args.n_envs, 4 * args.n_envs * 128)
+    load0 = os.getloadavg()
+    rates = {"batched": [], "make_vec_env": [], "as_filed": [], "as_filed_train_defaults": []}
+    steps_only = {"batched": [], "make_vec_env": []}
+    for _ in range(args.rounds):
+        for path in steps_only:
+            rates[path].append(_rate(path, args.n_envs, args.steps))
+            steps_only[path].append(_step_rate(path, args.n_envs, args.steps))
+        if tree is not None:
+            rates["as_filed"].append(_as_filed_rate(tree, args.n_envs, args.steps))
+            rates["as_filed_train_defaults"].append(_as_filed_rate(tree, 1, args.steps // 4, own=True))
+    return {"steps_per_round": args.steps, "n_envs": args.n_envs, "rounds": args.rounds,
+            "as_filed_rev": None if tree is None else args.as_filed,
+            "ppo_learn": _summary(rates), "vecenv_step_only": _summary(steps_only),
+            "loadavg_before": load0, "loadavg_after": os.getloadavg()}
 
 
 if __name__ == "__main__":
