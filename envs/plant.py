@@ -122,9 +122,12 @@ def battery_operating_point(soc, params: BatteryParams = _BATTERY):
     # dOCV/dSoC: central difference inside, one-sided at the ends (OCV(SoC) is clipped to [0, 1], so
     # a central difference across an end would halve the slope)
     h = 1e-4
-    lo, hi = np.clip(s - h, 0.0, 1.0), np.clip(s + h, 0.0, 1.0)
+    lo, hi = np.minimum(np.maximum(s - h, 0.0), 1.0), np.minimum(np.maximum(s + h, 0.0), 1.0)  # np.clip: slow on tiny arrays
+    n = s.size
+    ocv = params.ocv_v(np.concatenate([s.ravel(), hi.ravel(), lo.ravel()]))   # one call, elementwise: same numbers
+    ocv_s, ocv_hi, ocv_lo = (ocv[i * n:(i + 1) * n].reshape(s.shape) for i in range(3))
     one = np.ones_like(s)
-    return (params.ocv_v(s), (params.ocv_v(hi) - params.ocv_v(lo)) / (hi - lo), params.r0_ohm * one,
+    return (ocv_s, (ocv_hi - ocv_lo) / (hi - lo), params.r0_ohm * one,
             params.r1_ohm * one, params.tau1_s * one, params.capacity_ah * one)
 
 
