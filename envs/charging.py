@@ -15,7 +15,7 @@ from wpt_receiver.sbar import rectifier_current, rectifier_v2
 from .core import (OBS_OFFSET, OBS_SCALE, SCALAR_OPS, EnvConfig, advance, build_plans, reward_cost)
 from .objective import SHORT_MODE_IL_A, SHORT_MODE_WITHIN_S, short_mode_i2_a, stop_step
 from .render import draw_envelope
-from .scenario import draw_episode, get_scenario, scenario_from_options
+from .scenario import draw_episodes, get_scenario, scenario_from_options
 
 __all__ = ["SbarChargingEnv", "SbarChargingDiscreteEnv"]
 
@@ -133,9 +133,9 @@ class SbarChargingEnv(gym.Env):
         return spaces.Box(-1.0, 1.0, (1,), np.float32)
 
     def _duty(self, action) -> float:
-        if type(action) is np.ndarray and action.shape == (1,):   # the usual case, without array conversions
-            a = float(action[0])
-        else:
+        try:   # the usual case (an array of one value or a numpy scalar), without array conversions
+            a = float(action.item())
+        except (AttributeError, ValueError, TypeError):
             a = float(np.asarray(action, dtype=float).reshape(-1)[0])
         if not math.isfinite(a):  # NaN would poison the link state and every reward after it
             raise ValueError(f"action={a!r} is invalid; valid range: [-1, 1] (finite)")
@@ -151,8 +151,7 @@ class SbarChargingEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         scn = scenario_from_options(options, self.scenario)
-        draw = draw_episode(self.np_random, scn, self._T, self.config.n_slow)
-        p = build_plans([draw], [scn], self.config)
+        p = build_plans(draw_episodes([self.np_random], scn, self._T), scn, self.config)
         self._plan = p
         self._t_stop = float(p.t_stop_s[0])
         self._stop_k = int(stop_step(p.t_stop_s, self._dt, self._T)[0])

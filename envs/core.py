@@ -128,7 +128,7 @@ def _steady_v2(link: LinkParams, lm, il, vl):
     x = link.omega_rad_s * lm
     det = link.r1_ohm * link.r2_ohm + x * x
     disc = np.maximum((x * link.v1_amp_v) ** 2 - 8.0 * link.r1_ohm * vl * il * det, 0.0)
-    return np.clip((x * link.v1_amp_v - np.sqrt(disc)) / (2.0 * link.r1_ohm), 0.0, FOUR_OVER_PI * vl)
+    return np.minimum(np.maximum((x * link.v1_amp_v - np.sqrt(disc)) / (2.0 * link.r1_ohm), 0.0), FOUR_OVER_PI * vl)
 
 
 def build_plans(draws, scenarios, cfg: EnvConfig) -> Plans:
@@ -166,10 +166,9 @@ def _zoh_coefficients(link: LinkParams, lm, cfg: EnvConfig) -> np.ndarray:
     ad, am, ah = ad3[:n], ad3[n:2 * n], ad3[2 * n:]
     bd, bm, bh = bd3[:n], bd3[n:2 * n], bd3[2 * n:]
     v1 = link.v1_amp_v
-    return np.stack([ad[:, 0, 0], ad[:, 0, 1], ad[:, 1, 0], ad[:, 1, 1], bd[:, 0, 0] * v1, bd[:, 1, 0] * v1,
-                     bd[:, 0, 1], bd[:, 1, 1], am[:, 1, 0], am[:, 1, 1], bm[:, 1, 0] * v1, bm[:, 1, 1],
-                     ah[:, 0, 0], ah[:, 0, 1], ah[:, 1, 0], ah[:, 1, 1], bh[:, 0, 0] * v1, bh[:, 1, 0] * v1,
-                     bh[:, 0, 1], bh[:, 1, 1]], axis=-1)
+    # columns: Ad00 Ad01 Ad10 Ad11, Bd00 V1, Bd10 V1, Bd01, Bd11, Am10 Am11, Bm10 V1, Bm11, the same 8 for Ah, Bh
+    return np.concatenate([ad.reshape(n, 4), bd[:, :, 0] * v1, bd[:, :, 1], am[:, 1, :], bm[:, 1, :1] * v1,
+                           bm[:, 1, 1:], ah.reshape(n, 4), bh[:, :, 0] * v1, bh[:, :, 1]], axis=1)
 
 
 def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig):

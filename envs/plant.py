@@ -94,9 +94,9 @@ def lm_window_h(wind_speed_m_s, start_frac, t_s):
     level = np.rint(np.asarray(wind_speed_m_s, dtype=float)).astype(int)  # round half to even, as round()
     u = np.asarray(start_frac, dtype=float)
     xp = np.arange(n_span + 1) * RECORD_DT_S
-    j = np.clip(np.searchsorted(xp, t_s, side="right") - 1, 0, n_span - 1)
+    j = np.minimum(np.maximum(np.searchsorted(xp, t_s, side="right") - 1, 0), n_span - 1)
     out = np.empty((len(u), len(t_s)))
-    for lv in np.unique(level):  # a handful of wind levels, not one pass per window
+    for lv in sorted(set(level.tolist())):  # a handful of wind levels, not one pass per window
         rows = np.flatnonzero(level == lv)
         lm, _ = lm_record(int(lv))
         starts = _valid_starts(int(lv), n_span)
