@@ -21,8 +21,10 @@ voltage moves by < 1 mV over a 30 ms window, the RC branch is integrated exactly
 Everything exogenous (command, sensor noise, pose -> Lm -> ZOH coefficients) is computed once per
 episode in :func:`build_plans` (batched over the episodes that start), so a step is only
 arithmetic. The step functions :func:`advance` and :func:`reward_cost` are written once and run on
-either numpy arrays (vector env, n rows) or Python floats (single env: the n = 1 fast path);
-``tests/test_envs.py`` checks that both give the same trajectories.
+either numpy arrays (vector env, n rows) or Python floats (single env); they are the references of
+the compiled steps of both envs (:mod:`envs.vector_kernel`, the default with numba, the same
+expressions). ``tests/test_envs.py`` and ``tests/test_vector_fast.py`` check that all give the same
+trajectories.
 """
 
 from __future__ import annotations

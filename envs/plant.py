@@ -122,7 +122,8 @@ def battery_operating_point(soc, params: BatteryParams = _BATTERY):
     # dOCV/dSoC: central difference inside, one-sided at the ends (OCV(SoC) is clipped to [0, 1], so
     # a central difference across an end would halve the slope)
     h = 1e-4
-    lo, hi = np.minimum(np.maximum(s - h, 0.0), 1.0), np.minimum(np.maximum(s + h, 0.0), 1.0)  # np.clip: slow on tiny arrays
+    # np.minimum/np.maximum: np.clip is slow on tiny arrays
+    lo, hi = np.minimum(np.maximum(s - h, 0.0), 1.0), np.minimum(np.maximum(s + h, 0.0), 1.0)
     n = s.size
     ocv = params.ocv_v(np.concatenate([s.ravel(), hi.ravel(), lo.ravel()]))   # one call, elementwise: same numbers
     ocv_s, ocv_hi, ocv_lo = (ocv[i * n:(i + 1) * n].reshape(s.shape) for i in range(3))
