@@ -15,7 +15,7 @@ from wpt_receiver.sbar import rectifier_current, rectifier_v2
 from .core import (OBS_OFFSET, OBS_SCALE, SCALAR_OPS, EnvConfig, advance, build_plans, reward_cost)
 from .objective import SHORT_MODE_IL_A, SHORT_MODE_WITHIN_S, short_mode_i2_a, stop_step
 from .render import draw_envelope
-from .scenario import draw_episode, get_scenario, scenario_from_options
+from .scenario import draw_episodes, get_scenario, scenario_from_options
 
 __all__ = ["SbarChargingEnv", "SbarChargingDiscreteEnv"]
 
@@ -97,11 +97,14 @@ class SbarChargingEnv(gym.Env):
     ``scenario`` is a name of :data:`envs.scenario.SCENARIOS` (nominal, lm_mismatch, windy, battery,
     random), a :class:`~envs.scenario.Scenario` or a dict of its fields; ``reset(options={"scenario":
     ...})`` overrides it for one episode. ``config`` is an :class:`~envs.core.EnvConfig`.
+    ``compiled``: step in one numba-compiled call (:func:`envs.vector_kernel.single_step`, the
+    default when numba is installed) or on Python floats (``False``: the reference, same numbers).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
 
-    def __init__(self, scenario="nominal", render_mode: str | None = None, config: EnvConfig | None = None):
+    def __init__(self, scenario="nominal", render_mode: str | None = None, config: EnvConfig | None = None,
+                 compiled: bool | None = None):
         self.scenario = get_scenario(scenario)
         self.config = config or EnvConfig()
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -116,15 +119,23 @@ class SbarChargingEnv(gym.Env):
         self._w = c.reward
         self._k = None
         self._hist = None
+        self._kern = _load_single_kernel() if compiled is None or compiled else None
+        if compiled and self._kern is None:
+            raise ValueError("compiled=True needs numba; install it or pass compiled=None/False")
+        if self._kern is not None:
+            w = self._w
+            self._par = np.concatenate([[self._T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a,
+                                         self._M, self._n_sub], OBS_SCALE, OBS_OFFSET]).astype(float)
+            self._out = np.empty(18)
 
     # ------------------------------------------------------------------ interface
     def _make_action_space(self):
         return spaces.Box(-1.0, 1.0, (1,), np.float32)
 
     def _duty(self, action) -> float:
-        if type(action) is np.ndarray and action.shape == (1,):   # the usual case, without array conversions
-            a = float(action[0])
-        else:
+        try:   # the usual case (an array of one value or a numpy scalar), without array conversions
+            a = float(action.item())
+        except (AttributeError, ValueError, TypeError):
             a = float(np.asarray(action, dtype=float).reshape(-1)[0])
         if not math.isfinite(a):  # NaN would poison the link state and every reward after it
             raise ValueError(f"action={a!r} is invalid; valid range: [-1, 1] (finite)")
@@ -140,9 +151,33 @@ class SbarChargingEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         scn = scenario_from_options(options, self.scenario)
-        draw = draw_episode(self.np_random, scn, self._T, self.config.n_slow)
-        p = build_plans([draw], [scn], self.config)
+        p = build_plans(draw_episodes([self.np_random], scn, self._T), scn, self.config)
         self._plan = p
+        self._t_stop = float(p.t_stop_s[0])
+        self._stop_k = int(stop_step(p.t_stop_s, self._dt, self._T)[0])
+        i2_sm = short_mode_i2_a(self.config.link, p.lm_h[0])
+        if self._kern is None:
+            self._start_float(p, i2_sm)
+        else:
+            self._start_compiled(p, i2_sm)
+        self._k = 0
+        i1, i2 = (float(v) for v in p.x0[0])
+        vl, d, soc, cmd0 = float(p.vl0[0]), float(p.d0[0]), float(p.battery[0, 2]), float(p.cmd_a[0, 0])
+        il = float(rectifier_current(d, abs(i2)))
+        ib = il - float(p.battery[0, 7])
+        info = {"t_s": 0.0, "i2_a": i2, "i2_peak_a": abs(i2), "i1_a": i1, "d_short": d,
+                "v2_v": float(rectifier_v2(d, vl, i2)), "rect_current_a": il,
+                "battery_v": vl, "battery_current_a": ib, "soc": soc, "charge_cmd_a": cmd0,
+                "lm_h": float(p.lm_h[0, 0]), "energy_j": 0.0, "cost": 0.0, "overcurrent": 0.0, "overshoot": -np.inf,
+                "episode_cost": 0.0, "reached_short_mode": False, "scenario": scn.name, "t_stop_s": self._t_stop}
+        if self.render_mode is not None:
+            self._hist = [[0.0], [i2], [il], [cmd0], [d]]
+        obs = np.array([_n(i2, 0), _n(vl, 1), _n(ib, 2), _n(il, 3), _n(soc, 4),
+                        _n(cmd0, 5), _n(d, 6), _n(self._t_since(0), 7)], dtype=np.float32)
+        return obs, info
+
+    def _start_float(self, p, i2_sm):
+        """The episode's plan as Python floats for :meth:`_step_float`."""
         self._cmd = p.cmd_a[0].tolist()
         self._noise = p.noise_a[0].tolist()
         self._coef = [tuple(r) for r in p.coef[0].tolist()]
@@ -151,29 +186,50 @@ class SbarChargingEnv(gym.Env):
         self._i1, self._i2 = (float(v) for v in p.x0[0])
         self._vl, self._vrc, self._d = float(p.vl0[0]), float(p.vrc0[0]), float(p.d0[0])
         self._soc = self._b[2]
-        self._k = 0
-        self._i2_sm = short_mode_i2_a(self.config.link, p.lm_h[0]).tolist()
-        self._t_stop = float(p.t_stop_s[0])
-        self._stop_k = int(stop_step(p.t_stop_s, self._dt, self._T)[0])
+        self._i2_sm = i2_sm.tolist()
         self._run_max, self._sm_ok, self._sm_checked = -np.inf, True, False
-        il = float(rectifier_current(self._d, abs(self._i2)))
-        ib = il - self._b[7]
-        info = {"t_s": 0.0, "i2_a": self._i2, "i2_peak_a": abs(self._i2), "i1_a": self._i1, "d_short": self._d,
-                "v2_v": float(rectifier_v2(self._d, self._vl, self._i2)), "rect_current_a": il,
-                "battery_v": self._vl, "battery_current_a": ib, "soc": self._soc, "charge_cmd_a": self._cmd[0],
-                "lm_h": self._lm[0], "energy_j": 0.0, "cost": 0.0, "overcurrent": 0.0, "overshoot": -np.inf,
-                "episode_cost": 0.0, "reached_short_mode": False, "scenario": scn.name, "t_stop_s": self._t_stop}
-        if self.render_mode is not None:
-            self._hist = [[0.0], [self._i2], [il], [self._cmd[0]], [self._d]]
-        obs = np.array([_n(self._i2, 0), _n(self._vl, 1), _n(ib, 2), _n(il, 3), _n(self._soc, 4),
-                        _n(self._cmd[0], 5), _n(self._d, 6), _n(self._t_since(0), 7)], dtype=np.float32)
-        return obs, info
+
+    def _start_compiled(self, p, i2_sm):
+        """The episode's plan as the arrays of :func:`envs.vector_kernel.single_step`."""
+        T = self._T
+        st = np.empty(20)
+        st[0:2] = p.x0[0]
+        st[2], st[3], st[4], st[5] = p.vl0[0], p.battery[0, 2], p.vrc0[0], p.d0[0]
+        st[6], st[7], st[8], st[9], st[10] = -np.inf, 1.0, 0.0, self._stop_k, self._t_stop
+        st[11:] = p.battery[0]
+        steps = np.zeros((T + 1, 2))
+        steps[:, 0] = p.cmd_a[0]
+        steps[:T, 1] = p.noise_a[0]
+        slow = np.empty((p.coef.shape[1], 22))
+        slow[:, :20] = p.coef[0]
+        slow[:, 20] = p.lm_h[0]
+        slow[:, 21] = i2_sm
+        self._st, self._steps, self._slow = st, steps, slow
+        self._cmd = steps[:, 0]
 
     def step(self, action):
         k = self._k
         if k is None or k >= self._T:
             raise RuntimeError("step() called before reset() or after the episode was truncated; call reset()")
         d = self._duty(action)
+        if self._kern is None:
+            return self._step_float(k, d)
+        obs = np.empty(OBS_DIM, np.float32)
+        reward = self._kern(k, d, self._st, self._steps, self._slow, self._par, obs, self._out)
+        t, i2, pk, i1, _, v2, il, vl, ib, soc, cmd, lm, energy, over, cost, rm, ec, sm = self._out.tolist()
+        k += 1
+        self._k = k
+        info = {"t_s": t, "i2_a": i2, "i2_peak_a": pk, "i1_a": i1, "d_short": d, "v2_v": v2, "rect_current_a": il,
+                "battery_v": vl, "battery_current_a": ib, "soc": soc, "charge_cmd_a": cmd, "lm_h": lm,
+                "energy_j": energy, "cost": cost, "overcurrent": over, "overshoot": rm, "episode_cost": ec,
+                "reached_short_mode": sm != 0.0}
+        if self._hist is not None:
+            for lst, v in zip(self._hist, (t, i2, il, float(self._steps[k, 0]), d)):
+                lst.append(v)
+        return obs, reward, False, k >= self._T, info
+
+    def _step_float(self, k: int, d: float):
+        """:meth:`step` on Python floats (:func:`envs.core.advance` with ``SCALAR_OPS``): the reference."""
         vl_old = self._vl
         i1, i2, peak, il, ib, soc, vrc, vl, v2 = advance(self._i1, self._i2, vl_old, self._soc, self._vrc, d,
                                                          self._coef[k // self._M], self._b, SCALAR_OPS, self._n_sub)
@@ -234,6 +290,16 @@ class SbarChargingEnv(gym.Env):
             raise RuntimeError("render() called before reset()")
         t, i2, il, cmd, d = self._hist
         return draw_envelope(t, i2, il, cmd, d, self.config.rated_i2_a, self._T * self._dt)
+
+
+def _load_single_kernel():
+    """:func:`envs.vector_kernel.single_step`, or None without numba (imported here, when an env is
+    built, so ``import envs`` does not load numba)."""
+    import importlib.util
+    if importlib.util.find_spec("numba") is None:
+        return None
+    from .vector_kernel import single_step
+    return single_step
 
 
 class SbarChargingDiscreteEnv(SbarChargingEnv):

@@ -94,9 +94,9 @@ def lm_window_h(wind_speed_m_s, start_frac, t_s):
     level = np.rint(np.asarray(wind_speed_m_s, dtype=float)).astype(int)  # round half to even, as round()
     u = np.asarray(start_frac, dtype=float)
     xp = np.arange(n_span + 1) * RECORD_DT_S
-    j = np.clip(np.searchsorted(xp, t_s, side="right") - 1, 0, n_span - 1)
+    j = np.minimum(np.maximum(np.searchsorted(xp, t_s, side="right") - 1, 0), n_span - 1)
     out = np.empty((len(u), len(t_s)))
-    for lv in np.unique(level):  # a handful of wind levels, not one pass per window
+    for lv in sorted(set(level.tolist())):  # a handful of wind levels, not one pass per window
         rows = np.flatnonzero(level == lv)
         lm, _ = lm_record(int(lv))
         starts = _valid_starts(int(lv), n_span)
@@ -122,9 +122,13 @@ def battery_operating_point(soc, params: BatteryParams = _BATTERY):
     # dOCV/dSoC: central difference inside, one-sided at the ends (OCV(SoC) is clipped to [0, 1], so
     # a central difference across an end would halve the slope)
     h = 1e-4
-    lo, hi = np.clip(s - h, 0.0, 1.0), np.clip(s + h, 0.0, 1.0)
+    # np.minimum/np.maximum: np.clip is slow on tiny arrays
+    lo, hi = np.minimum(np.maximum(s - h, 0.0), 1.0), np.minimum(np.maximum(s + h, 0.0), 1.0)
+    n = s.size
+    ocv = params.ocv_v(np.concatenate([s.ravel(), hi.ravel(), lo.ravel()]))   # one call, elementwise: same numbers
+    ocv_s, ocv_hi, ocv_lo = (ocv[i * n:(i + 1) * n].reshape(s.shape) for i in range(3))
     one = np.ones_like(s)
-    return (params.ocv_v(s), (params.ocv_v(hi) - params.ocv_v(lo)) / (hi - lo), params.r0_ohm * one,
+    return (ocv_s, (ocv_hi - ocv_lo) / (hi - lo), params.r0_ohm * one,
             params.r1_ohm * one, params.tau1_s * one, params.capacity_ah * one)
 
 

@@ -1,4 +1,5 @@
-"""The step of :class:`envs.vector.SbarChargingVectorEnv` compiled with numba (``cache=True``).
+"""The steps of :class:`envs.vector.SbarChargingVectorEnv` and :class:`envs.charging.SbarChargingEnv`
+compiled with numba (``cache=True``): one arithmetic, the scalar helpers below, for both.
 
 The step of every sub-environment in three passes over the sub-environments: (1) the link step
 (:func:`envs.core.advance` with the scalar operations of the single env), noting the steps where
@@ -13,7 +14,12 @@ operation for operation, so the batched env reproduces single envs and the numpy
 :class:`envs.vector.SbarChargingVectorEnv` (``compiled=False``, the reference) to the bit
 (``tests/test_envs.py``, ``tests/test_vector_fast.py``).
 
-Imported only when a vector env is built (numba is not imported by ``import envs``).
+The single env's step (:func:`single_step`) is the same helpers on one sub-environment: link step,
+sub-steps, battery, reward, objective, observation and info values in one call, reading the
+episode's plan arrays (:func:`pack_plan`). It reproduces the single env's pure float path
+(``compiled=False``, the reference) to the bit (``tests/test_envs.py``).
+
+Imported only when an env is built (numba is not imported by ``import envs``).
 """
 
 from __future__ import annotations
@@ -25,7 +31,7 @@ from numba import njit
 
 from .objective import SHORT_MODE_IL_A, SHORT_MODE_WITHIN_S
 
-__all__ = ["step_kernel", "duty_kernel", "INFO_ROWS"]
+__all__ = ["step_kernel", "duty_kernel", "single_step", "INFO_ROWS", "SINGLE_OUT", "PAR_ROWS"]
 
 #: rows of the info block the kernel fills, in order
 INFO_ROWS = ("t_s", "i2_a", "i2_peak_a", "i1_a", "d_short", "v2_v", "rect_current_a", "battery_v",
@@ -96,26 +102,44 @@ def _link_pass(d, state, k, j, coef_all, coef_cur, slow_every, n_sub, sc, idx):
 
 
 @njit(cache=True, error_model="numpy")
+def _substep(i1, a, vm, pk, tot, h00, h01, f0, g01, h10, h11, f1, g11):
+    """One rectifier-period sub-step of ``envs.core._substeps_float`` (V2 = |V2| sign(I2) at its
+    start): ``(i1, i2, peak |I2|, sum of |I2| means)`` after it."""
+    v2 = vm * _sign(a)
+    b = h10 * i1 + h11 * a + f1 + g11 * v2
+    i1 = h00 * i1 + h01 * a + f0 + g01 * v2
+    mb = abs(b)
+    if mb > pk:
+        pk = mb
+    if a * b >= 0.0:
+        tot += 0.5 * abs(a + b)
+    else:
+        tot += 0.5 * (a * a + b * b) / (abs(a) + abs(b))
+    return i1, b, pk, tot
+
+
+@njit(cache=True, error_model="numpy")
 def _substeps_batch(w, h, n_sub):
     """``envs.core._substeps`` on floats for m steps at once: ``w`` (5, m) rows i1, i2, |V2|, peak
     |I2| (start -1), sum of |I2| means (start 0), updated in place; ``h`` (8, m) the sub-step
-    coefficients (:data:`_SUB_COLS`). The arithmetic of each step is unchanged."""
+    coefficients (:data:`_SUB_COLS`). The arithmetic of each step is :func:`_substep`."""
     m = w.shape[1]
     i1, i2, vm, pk, tot = w[0], w[1], w[2], w[3], w[4]
     for _ in range(n_sub):
         for q in range(m):
-            a = i2[q]
-            v2 = vm[q] * _sign(a)
-            b = h[4, q] * i1[q] + h[5, q] * a + h[6, q] + h[7, q] * v2
-            i1[q] = h[0, q] * i1[q] + h[1, q] * a + h[2, q] + h[3, q] * v2
-            i2[q] = b
-            mb = abs(b)
-            if mb > pk[q]:
-                pk[q] = mb
-            if a * b >= 0.0:
-                tot[q] += 0.5 * abs(a + b)
-            else:
-                tot[q] += 0.5 * (a * a + b * b) / (abs(a) + abs(b))
+            i1[q], i2[q], pk[q], tot[q] = _substep(i1[q], i2[q], vm[q], pk[q], tot[q], h[0, q], h[1, q], h[2, q],
+                                                   h[3, q], h[4, q], h[5, q], h[6, q], h[7, q])
+
+
+@njit(cache=True, error_model="numpy")
+def _substeps_one(i1, i2, vm, vl, c, n_sub):
+    """One split step re-done in ``n_sub`` sub-steps (coefficients ``c[12:20]`` of the ZOH row):
+    ``(i1, i2, peak |I2|, mean I_L)``, the numbers of :func:`_substep_pass` for one sub-environment."""
+    pk, tot = -1.0, 0.0
+    h00, h01, h10, h11, f0, f1, g01, g11 = c[12], c[13], c[14], c[15], c[16], c[17], c[18], c[19]
+    for _ in range(n_sub):
+        i1, i2, pk, tot = _substep(i1, i2, vm, pk, tot, h00, h01, f0, g01, h10, h11, f1, g11)
+    return i1, i2, pk, vm * tot / (2.0 * n_sub * vl)
 
 
 @njit(cache=True)
@@ -136,31 +160,52 @@ def _substep_pass(idx, m, state, coef_cur, n_sub, sc):
 
 
 @njit(cache=True)
-def _battery(il, soc, vrc, vl, b, e):
-    """The battery part of ``envs.core.advance``: ``(ib, soc, vrc, vl)`` (battery rows ``b[:, e]``)."""
-    ib = il - b[7, e]
-    soc = soc + b[6, e] * ib
-    vrc = b[4, e] * vrc + b[5, e] * ib
-    vl = b[8, e] * vl + (1.0 - b[8, e]) * (b[0, e] + b[1, e] * (soc - b[2, e]) + b[3, e] * ib + vrc)
+def _battery(il, soc, vrc, vl, ocv0, docv, soc0, r0, rc_decay, rc_gain, dsoc, i_load, bus_decay):
+    """The battery part of ``envs.core.advance``: ``(ib, soc, vrc, vl)`` (the battery row of the episode)."""
+    ib = il - i_load
+    soc = soc + dsoc * ib
+    vrc = rc_decay * vrc + rc_gain * ib
+    vl = bus_decay * vl + (1.0 - bus_decay) * (ocv0 + docv * (soc - soc0) + r0 * ib + vrc)
     return ib, soc, vrc, vl
 
 
 @njit(cache=True)
-def _objective(e, kk, pk, il, i2_sm, dt, run_max, stop_k, ok, checked):
-    """:mod:`envs.objective` after step ``kk`` of sub-environment ``e`` (``i2_sm`` the short-mode I2 of
-    its slow segment): running overshoot ``run_max[e]`` and the short-mode flags updated in place;
-    returns the step cost (the rise of max(0, running overshoot))."""
-    old = run_max[e]
-    new = old
-    if kk >= stop_k[e]:
+def _reward(il, cmd, pk, inv_rated, w_track, w_over, i_ref):
+    """``envs.core.reward_cost``: ``(reward, overcurrent)``."""
+    over = abs(pk) * inv_rated - 1.0
+    over = 0.0 if 0.0 > over else over   # max(x, 0.0)
+    mn = cmd if cmd < il else il         # min(il, cmd)
+    return (mn - w_track * abs(il - cmd)) / i_ref - w_over * over, over
+
+
+@njit(cache=True)
+def _objective(kk, pk, il, i2_sm, dt, run_max, stop_k, ok, checked):
+    """:mod:`envs.objective` after step ``kk`` (``i2_sm`` the short-mode I2 of its slow segment):
+    ``(running overshoot, ok, checked, step cost)``, the cost the rise of max(0, running overshoot)."""
+    new = run_max
+    if kk >= stop_k:
         ratio = abs(pk) / i2_sm - 1.0
-        new = ratio if ratio > old else old
-        run_max[e] = new
-    if (kk + 1 - stop_k[e]) * dt >= _SM_LATE_S:
-        checked[e] = True
+        new = ratio if ratio > run_max else run_max
+    if (kk + 1 - stop_k) * dt >= _SM_LATE_S:
+        checked = True
         if il >= SHORT_MODE_IL_A:
-            ok[e] = False
-    return (new if new > 0.0 else 0.0) - (old if old > 0.0 else 0.0)
+            ok = False
+    return new, ok, checked, (new if new > 0.0 else 0.0) - (run_max if run_max > 0.0 else 0.0)
+
+
+@njit(cache=True)
+def _t_since(kk, dt, t_stop, stop_k):
+    """Observation field ``t_since_stop_s`` before step ``kk``."""
+    t = kk * dt - t_stop
+    return (t if t > 0.0 else 0.0) if kk >= stop_k else 0.0
+
+
+@njit(cache=True)
+def _put_obs(o, i2m, vl, ib, il, soc, cmd, d, t_since, scale, offset):
+    """One observation row: the fields mapped to [-1, 1] and clipped, as float32."""
+    vals = (i2m, vl, ib, il, soc, cmd, d, t_since)
+    for f in range(8):
+        o[f] = np.float32(_clip1(vals[f] * scale[f] + offset[f]))
 
 
 @njit(cache=True)
@@ -185,24 +230,21 @@ def _finish_pass(d, state, k, j, bat, cmd_all, noise_all, lm_all, ep, par, scale
         kk, jj = k[e], j[e]
         i1, i2, pk, il, v2 = sc[0, e], sc[1, e], sc[2, e], sc[3, e], sc[4, e]
         vl_old = state[2, e]
-        ib, soc, vrc, vl = _battery(il, state[3, e], state[4, e], vl_old, bat, e)
+        ib, soc, vrc, vl = _battery(il, state[3, e], state[4, e], vl_old, bat[0, e], bat[1, e], bat[2, e], bat[3, e],
+                                    bat[4, e], bat[5, e], bat[6, e], bat[7, e], bat[8, e])
         cmd = cmd_all[kk, e]
-        over = abs(pk) * inv_rated - 1.0
-        over = 0.0 if 0.0 > over else over   # max(x, 0.0)
-        mn = cmd if cmd < il else il         # min(il, cmd)
-        reward[e] = (mn - w_track * abs(il - cmd)) / i_ref - w_over * over
-        cost = _objective(e, kk, pk, il, i2sm_all[e, jj], dt, run_max, stop_k, ok, checked)
+        reward[e], over = _reward(il, cmd, pk, inv_rated, w_track, w_over, i_ref)
+        rm, ok[e], checked[e], cost = _objective(kk, pk, il, i2sm_all[e, jj], dt, run_max[e], stop_k[e], ok[e],
+                                                 checked[e])
+        run_max[e] = rm
         state[0, e], state[1, e], state[2, e], state[3, e], state[4, e], state[5, e] = i1, i2, vl, soc, vrc, d[e]
         kk += 1
         k[e] = kk
-        t_since = kk * dt - t_stop[e]
-        t_since = (t_since if t_since > 0.0 else 0.0) if kk >= stop_k[e] else 0.0
-        vals = (i2 + noise_all[kk - 1, e], vl, ib, il, soc, cmd_all[kk, e], d[e], t_since)
-        for f in range(8):
-            obs[e, f] = np.float32(_clip1(vals[f] * scale[f] + offset[f]))
+        _put_obs(obs[e], i2 + noise_all[kk - 1, e], vl, ib, il, soc, cmd_all[kk, e], d[e],
+                 _t_since(kk, dt, t_stop[e], stop_k[e]), scale, offset)
         trunc[e] = kk >= n_steps
         _put_info(info[e], kk * dt, i2, pk, i1, d[e], v2, il, vl, ib, soc, cmd, lm_all[jj, e], vl_old * il * dt, over,
-                  cost, run_max[e])
+                  cost, rm)
 
 
 @njit(cache=True)
@@ -222,3 +264,42 @@ def step_kernel(d, state, k, j, coef_all, coef_cur, bat, cmd_all, noise_all, lm_
     if m:
         _substep_pass(idx, m, state, coef_cur, n_sub, sc)
     _finish_pass(d, state, k, j, bat, cmd_all, noise_all, lm_all, ep, par, scale, offset, sc, obs, reward, trunc, info)
+
+
+#: layout of the single env's ``st`` array: link state, objective, battery row (:func:`single_step`)
+ST_ROWS = ("i1", "i2", "vl", "soc", "vrc", "d", "run_max", "sm_ok", "sm_checked", "stop_k", "t_stop", "ocv0", "docv",
+           "soc0", "r0", "rc_decay", "rc_gain", "dsoc", "i_load", "bus_decay")
+#: layout of the single env's ``par`` array (constants of the env), then OBS_SCALE (8) and OBS_OFFSET (8)
+PAR_ROWS = ("n_steps", "dt", "inv_rated", "w_track", "w_over", "i_ref", "slow_every", "n_sub")
+#: the values :func:`single_step` writes to ``out``: :data:`INFO_ROWS`, then reached short mode (1.0 / 0.0)
+SINGLE_OUT = INFO_ROWS + ("reached_short_mode",)
+
+
+@njit(cache=True)
+def single_step(k, d, st, steps, slow, par, obs, out):
+    """Step ``k`` of one env with duty ``d``: the helpers of :func:`step_kernel` on one episode.
+    ``st`` (:data:`ST_ROWS`) is updated in place; ``steps`` (T + 1, 2) = command, sensor noise per
+    step; ``slow`` (S, 22) = the 20 ZOH coefficients, true Lm, short-mode I2 per slow segment;
+    ``par`` = :data:`PAR_ROWS`, OBS_SCALE, OBS_OFFSET. Fills ``obs`` (8,) float32 and ``out``
+    (:data:`SINGLE_OUT`); returns the reward."""
+    dt, n_sub = par[1], int(par[7])
+    j = k // int(par[6])
+    c = slow[j]
+    vl_old = st[2]
+    i1, i2, pk, il, v2, split = _link_step(st[0], st[1], vl_old, d, c)
+    if n_sub > 1 and split:
+        i1, i2, pk, il = _substeps_one(st[0], st[1], abs(v2), vl_old, c, n_sub)
+    ib, soc, vrc, vl = _battery(il, st[3], st[4], vl_old, st[11], st[12], st[13], st[14], st[15], st[16], st[17],
+                                st[18], st[19])
+    cmd = steps[k, 0]
+    reward, over = _reward(il, cmd, pk, par[2], par[3], par[4], par[5])
+    stop_k = int(st[9])
+    rm, ok, checked, cost = _objective(k, pk, il, c[21], dt, st[6], stop_k, st[7] != 0.0, st[8] != 0.0)
+    st[0], st[1], st[2], st[3], st[4], st[5] = i1, i2, vl, soc, vrc, d
+    st[6], st[7], st[8] = rm, 1.0 if ok else 0.0, 1.0 if checked else 0.0
+    kk = k + 1
+    _put_obs(obs, i2 + steps[kk - 1, 1], vl, ib, il, soc, steps[kk, 0], d, _t_since(kk, dt, st[10], stop_k),
+             par[8:16], par[16:24])
+    _put_info(out, kk * dt, i2, pk, i1, d, v2, il, vl, ib, soc, cmd, c[20], vl_old * il * dt, over, cost, rm)
+    out[17] = 1.0 if (ok and checked) else 0.0
+    return reward

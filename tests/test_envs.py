@@ -261,3 +261,36 @@ def test_cost_counts_a_negative_swing_beyond_rated():
     for info in neg:
         assert info["i2_peak_a"] >= -info["i2_a"]
         assert info["overcurrent"] == pytest.approx(info["i2_peak_a"] / 15.0 - 1.0) and info["overcurrent"] > 0.0
+
+
+@pytest.mark.parametrize("cls", [SbarChargingEnv, SbarChargingDiscreteEnv])
+def test_compiled_step_equals_float_step_bitwise(cls):
+    """The compiled single step (envs.vector_kernel.single_step) against the Python-float step, the
+    reference: random actions over whole episodes (steps split into sub-steps after the stop),
+    truncation, plain and seeded resets, a reset mid-episode with another scenario."""
+    pytest.importorskip("numba")
+    fast, ref = cls(scenario="random", compiled=True), cls(scenario="random", compiled=False)
+    assert fast._kern is not None and ref._kern is None
+    rng = np.random.default_rng(7)
+    sign_changes, T = 0, fast.config.n_steps
+    for ep, (seed, options, n) in enumerate([(5, None, T), (None, None, T), (None, {"scenario": "windy"}, T // 2),
+                                             (9, None, T)]):
+        (of, info_f), (orf, info_r) = fast.reset(seed=seed, options=options), ref.reset(seed=seed, options=options)
+        assert np.array_equal(of, orf) and info_f == info_r
+        prev = info_r["i2_a"]
+        for _ in range(n):
+            a = int(rng.integers(0, 2)) if cls is SbarChargingDiscreteEnv else rng.uniform(-1, 1, 1).astype(np.float32)
+            f, r = fast.step(a), ref.step(a)
+            assert f[0].dtype == np.float32 and np.array_equal(f[0], r[0])
+            assert f[1:4] == r[1:4] and type(f[1]) is type(r[1]) is float
+            assert f[4] == r[4] and list(f[4]) == list(r[4])
+            assert all(type(f[4][k]) is type(r[4][k]) for k in r[4])
+            sign_changes += r[4]["i2_a"] * prev < 0.0
+            prev = r[4]["i2_a"]
+        assert f[3] == (n == T)
+    assert sign_changes > 10   # the envelope rings through zero: split steps were compared
+    if cls is SbarChargingEnv:
+        for env in (fast, ref):
+            env.reset(seed=0)
+            with pytest.raises(ValueError, match="finite"):
+                env.step(np.array([np.nan], np.float32))
