@@ -134,3 +134,19 @@ def test_parser_failure_is_reported_as_such(capsys, tmp_path):
     assert main(["replay", str(p), "--no-plot", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "could not be parsed" in err[0] and "Unsupported format char" in err[0], err
+
+
+def test_starts_armed_reports_and_events():
+    """A first armed *report* starts the first period at that report (not earlier); a first *event*
+    that is a disarm means armed from 0. Both flag the log as starting armed."""
+    import pandas as pd
+
+    from mission_sim.mavlink.armed import armed_periods, starts_armed
+    reports = pd.DataFrame({"t_s": [0.5, 1.0, 9.0], "armed": [True, True, False]})
+    events = pd.DataFrame({"t_s": [9.0], "armed": [False]})
+    assert starts_armed(reports) and not starts_armed(events)
+    assert armed_periods(reports, 20.0, starts_armed(reports)) == [(0.5, 9.0)]
+    assert armed_periods(events, 20.0, True) == [(0.0, 9.0)]
+    assert armed_periods(events, 20.0, False) == []
+    vtol = read_log(log_path("uavlogviewer_vtol_sitl.tlog"))
+    assert vtol.starts_armed and vtol.armed_source == "HEARTBEAT"

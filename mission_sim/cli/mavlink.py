@@ -171,9 +171,9 @@ def _print_log_facts(name: str, s: dict) -> None:
     print(f"{name}: {s['duration_s']:.1f} s logged, {s['n_position_samples']} positions "
           f"({s['bad_frames']} bad frames skipped, {n_rej} implausible GPS fixes rejected{detail}), "
           f"{s['distance_m']:.0f} m flown, max {s['max_alt_m']:.1f} m above the pad")
-    print(f"armed {s['armed_time_s']:.1f} s in {len(s['armed_periods_s'])} period(s), from {source}"
-          + (" (armed from the start of the log: its first armed-state record is a disarm)"
-             if s.get("starts_armed") else ""))
+    print(f"armed {s['log_armed_time_s']:.1f} s in the log, {s['armed_time_s']:.1f} s in "
+          f"{len(s['armed_periods_s'])} period(s) of the replayed track, from {source}"
+          + (" (armed from the start of the log)" if s.get("starts_armed") else ""))
     for err in s.get("parse_errors") or []:
         print(f"warning: the log could not be parsed to its end: {err}; replayed what was decoded before it")
 

@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-__all__ = ["armed_periods", "infer_armed", "transitions", "DISARMED_PWM_MAX_US", "MOTOR_ON_US", "MIN_OFF_S"]
+__all__ = ["armed_periods", "infer_armed", "starts_armed", "transitions", "DISARMED_PWM_MAX_US", "MOTOR_ON_US", "MIN_OFF_S"]
 
 DISARMED_PWM_MAX_US = 1050.0   # a channel that never goes below this is a servo, not a motor
 MOTOR_ON_US = 20.0             # this far above the disarmed level counts as spinning
@@ -38,9 +38,11 @@ _ESC_BIN_S = 0.1               # ESC instances report one after another: combine
 def armed_periods(armed: pd.DataFrame, end_s: float, starts_armed: bool = False) -> list[tuple[float, float]]:
     """(start_s, end_s) of each armed period from the ``armed`` table (t_s, armed).
 
-    An open period ends at ``end_s``. ``starts_armed``: the vehicle was armed at t = 0 (a log of
-    events whose first event is a disarm), so the first period starts at 0."""
-    periods, start = [], (0.0 if starts_armed else None)
+    An open period ends at ``end_s``. ``starts_armed``: the vehicle was armed when the log began;
+    if the first record is then a disarm (a log of events), the first period starts at 0; a first
+    armed report starts it at that report, as any other."""
+    first_off = len(armed) > 0 and not bool(armed["armed"].iloc[0])
+    periods, start = [], (0.0 if starts_armed and first_off else None)
     for t, a in zip(armed["t_s"].to_numpy(float), armed["armed"].to_numpy(bool)):
         if a and start is None:
             start = t
@@ -50,6 +52,12 @@ def armed_periods(armed: pd.DataFrame, end_s: float, starts_armed: bool = False)
     if start is not None:
         periods.append((start, max(float(end_s), start)))
     return periods
+
+
+def starts_armed(armed: pd.DataFrame) -> bool:
+    """A log of armed-state *reports* (or inferred states) starts armed when its first report says
+    armed: the vehicle was armed when the log began, so the first period starts at 0."""
+    return bool(len(armed) and armed["armed"].iloc[0])
 
 
 def transitions(t, on, min_off_s: float = MIN_OFF_S) -> pd.DataFrame:

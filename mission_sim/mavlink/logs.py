@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .armed import armed_periods, infer_armed
+from .armed import armed_periods, infer_armed, starts_armed
 from .flightlog import (ARMED_COLUMNS, ATTITUDE_COLUMNS, BATTERY_COLUMNS, POSITION_COLUMNS, FlightLog,
                         clean_time as _clean_time)
 from .gpsclean import reject_outliers
@@ -317,13 +317,14 @@ def _armed(tab: _Tables):
     armed = _clean_time(df, ARMED_COLUMNS, dedupe=False)
     if len(armed):
         armed["armed"] = armed["armed"].astype(bool)
-        return armed, source, bool(events and not armed["armed"].iloc[0])
+        # events: a first event that is a disarm means armed from the start; reports: a first armed report
+        return armed, source, (not armed["armed"].iloc[0]) if events else starts_armed(armed)
     names = {"pwm": "SERVO_OUTPUT_RAW" if tab.kind == "tlog" else "RCOU", "esc": "ESC",
              "throttle": "VFR_HUD" if tab.kind == "tlog" else "CTUN"}
     tables = {k: (_clean_time(tab.vehicle(k), ["t_s", *[c for c in tab.vehicle(k) if c.startswith(("ch", "rpm", "thr"))]]),
                   names[k]) for k in names if len(tab.vehicle(k))}
     inferred, source = infer_armed(tables)
-    return inferred, source, False
+    return inferred, source, starts_armed(inferred)
 
 
 def _battery(tab: _Tables):

@@ -175,7 +175,9 @@ def _min_spacing(t, min_dt) -> np.ndarray:
 
 
 def flight_stats(log: FlightLog, track: FlightTrack) -> dict:
-    """Log and track facts for the summary (times in s, lengths in m; armed time within the track)."""
+    """Log and track facts for the summary (times in s, lengths in m). ``armed_time_s`` is the armed
+    time within the replayed track (it starts and ends at a GPS fix), ``log_armed_time_s`` the
+    whole log's (what the log says)."""
     seg = np.diff(track.pos_m, axis=0)
     t0, t1 = track.t_offset_s, track.t_offset_s + float(track.t_s[-1])
     periods = [(max(a, t0), min(b, t1)) for a, b in log.armed_periods if b > t0 and a < t1]
@@ -188,6 +190,7 @@ def flight_stats(log: FlightLog, track: FlightTrack) -> dict:
         "max_range_m": float(np.max(np.linalg.norm(track.pos_m[:, :2], axis=1))),
         "armed_time_s": float(sum(b - a for a, b in periods)),
         "armed_periods_s": [[round(a, 3), round(b, 3)] for a, b in periods],
+        "log_armed_time_s": float(log.armed_time_s),
         "armed_source": log.armed_source,
         "starts_armed": bool(log.starts_armed),
         "gps_rejected": {k: int(v) for k, v in log.gps_rejected.items()},

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .armed import infer_armed
+from .armed import infer_armed, starts_armed
 from .flightlog import (ARMED_COLUMNS, ATTITUDE_COLUMNS, BATTERY_COLUMNS, POSITION_COLUMNS, FlightLog,
                         clean_time)
 from .geodesy import GeoPoint, enu_to_geodetic
@@ -39,22 +39,40 @@ __all__ = ["read_ulog"]
 _ARMING_STATE_ARMED = 2
 
 
+def timeline_end_s(t_s: np.ndarray, gap_s: float) -> float:
+    """End [s] of the timeline of the sample times ``t_s`` (from the log start): sorted, it ends
+    before the first gap longer than ``gap_s`` after the start (0 for no samples)."""
+    t = np.sort(np.maximum(np.asarray(t_s, dtype=float), 0.0))
+    if not len(t):
+        return 0.0
+    jumps = np.flatnonzero(np.diff(t) > gap_s)
+    return float(t[jumps[0]] if len(jumps) else t[-1])
+
+
 class _Topics:
-    """Topic data of one ULog as DataFrames with ``t_s`` from the log start (instance 0)."""
+    """Topic data of one ULog as DataFrames with ``t_s`` from the log start (instance 0); samples
+    beyond the timeline's end (stray timestamps, see the module docstring) are left out."""
 
     def __init__(self, ulog):
+        from .logs import _TIME_SPIKE_S
         self.start = int(ulog.start_timestamp)
         self.data = {d.name: d.data for d in sorted(ulog.data_list, key=lambda d: d.multi_id, reverse=True)}
-        stamps = [int(np.max(d["timestamp"])) for d in self.data.values() if len(d["timestamp"])]
-        self.duration_s = max((max(stamps) - self.start) * 1e-6, 0.0) if stamps else 0.0
-        self.n_records = int(sum(len(d["timestamp"]) for d in self.data.values()))
+        every = [(d.data["timestamp"].astype(np.int64) - self.start) * 1e-6 for d in ulog.data_list]
+        every = np.concatenate(every) if every else np.zeros(0)
+        self.duration_s = timeline_end_s(every, _TIME_SPIKE_S)
+        self.n_records = int(len(every))
+        self.n_stray = int(np.sum(every > self.duration_s))
 
     def __call__(self, name: str, *fields: str) -> pd.DataFrame | None:
         d = self.data.get(name)
         if d is None or not len(d["timestamp"]) or any(f not in d for f in fields):
             return None
         t = (d["timestamp"].astype(np.int64) - self.start) * 1e-6
-        return pd.DataFrame({"t_s": np.maximum(t, 0.0), **{f: np.asarray(d[f], dtype=float) for f in fields}})
+        keep = t <= self.duration_s
+        if not keep.any():
+            return None
+        return pd.DataFrame({"t_s": np.maximum(t[keep], 0.0),
+                             **{f: np.asarray(d[f], dtype=float)[keep] for f in fields}})
 
 
 def _global_position(top: _Topics) -> pd.DataFrame | None:
@@ -160,4 +178,5 @@ def read_ulog(path) -> FlightLog:
     battery, source = _battery(top)
     return FlightLog(path=path, kind="ulog", t0_epoch_s=_t0_epoch_s(top), duration_s=top.duration_s,
                      position=position, attitude=_attitude(top), armed=armed, battery=battery, battery_source=source,
-                     bad_frames=0, n_records=top.n_records, armed_source=armed_source, gps_rejected=rejected)
+                     bad_frames=top.n_stray, n_records=top.n_records, armed_source=armed_source,
+                     starts_armed=starts_armed(armed), gps_rejected=rejected)
