@@ -9,6 +9,21 @@ both with a batched ``vector_entry_point``::
 
     env = gymnasium.make("dronewpt/SbarCharging-v0", scenario="nominal")
     venv = gymnasium.make_vec("dronewpt/SbarCharging-v0", num_envs=1024, vectorization_mode="vector_entry_point")
+
+Modules, in the order data flows (gym-electric-motor style: the parts composed into an env):
+
+=================  ==========================================================================
+``scenario``       scenarios and the seeded charge-command generator (the reference)
+``plant``          the world as the env needs it: hover pose error -> true Lm, battery, power
+``core``           the physical system, reward and observation: per-episode plans, the step
+                   arithmetic (reference path on floats or numpy arrays)
+``objective``      the domain's objective: overshoot at the stop, short-mode flag, episode cost
+``vector_kernel``  the compiled (numba) steps of both envs, the same arithmetic as ``core``
+``charging``       the single envs (:class:`SbarChargingEnv`, discrete ON-OFF variant)
+``vector``         the batched vector envs (numpy, autoreset ``NEXT_STEP``)
+``sb3_vec``        a stable-baselines3 ``VecEnv`` over the batched env (``rl`` extra)
+``render``         the picture: the episode's current envelope as an RGB array
+=================  ==========================================================================
 """
 
 import gymnasium

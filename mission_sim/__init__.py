@@ -4,6 +4,7 @@
 ``contract``        the observation/action contract and the :class:`Policy` protocol, shared by
                     the mission loop, the envs and every policy
 ``validation``      one-line checks of physical parameters
+``files``           atomic output files (temporary name, then rename)
 ``config``          the mission configuration (TOML, ``default_mission.toml``), ``--set`` overrides
 ``world/``          the physical world: trajectory, wind, drone power, battery, the link step,
                     the mission loop and its results

@@ -2,6 +2,26 @@
 
 >>> from policies import make
 >>> pol = make("model_based")
+
+Modules, from the classical controllers to learning and comparing:
+
+=================  ==========================================================================
+``classical``      step, ramp and the paper's model-based inverse controller (Fig. 5)
+``budgeted``       the model-based controller with an overshoot budget (the classical frontier)
+``online``         the model-based controller with an online Lm estimate
+``onoff``          hysteresis ON-OFF (the classic unsynchronised mode switching)
+``random_policy``  uniformly random duties (the floor)
+``rl``             a stable-baselines3 model file behind the protocol (``rl`` extra)
+``inference``      the SB3 actor exported to numpy for fast deterministic inference
+``residual``       model-based duty plus a bounded learned correction
+``constrained``    Lagrangian cost penalty and residual action space on SB3
+``callbacks``      SB3 callbacks of ``train``: progress bar with return and cost, evaluation
+``hyperparams``    rl-baselines3-zoo style hyperparameter files (YAML / JSON)
+``train``          ``dronewpt train``: PPO / SAC / DQN on the batched env, outputs and metadata
+``stats``          bootstrap and Student's t intervals, paired differences
+``compare``        ``dronewpt compare``: every policy on the same seeded windows, with statistics
+``pretrained/``    shipped models (``.zip`` + metadata ``.json``); ``hyperparams/`` their settings
+=================  ==========================================================================
 """
 
 from __future__ import annotations

@@ -6,7 +6,8 @@
   ``mission_sim.cli`` reaches ``envs``/``policies`` (lazily, inside its subcommands), and the sweep's
   mission runner may build a policy by name (lazily);
 * plotting (matplotlib, ``mission_sim.figures``) is imported only by :data:`PLOTTING_ALLOWED`;
-* no function longer than 80 lines outside tests and benchmarks.
+* no function longer than 80 lines outside tests and benchmarks;
+* every package's ``__init__.py`` docstring is a map: it names each of its modules and subpackages.
 """
 
 from __future__ import annotations
@@ -153,6 +154,20 @@ def test_no_function_longer_than_80_lines(pkg):
                 if n > MAX_FUNCTION_LINES:
                     long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name} ({n} lines)")
     assert not long, "functions over 80 lines:\n" + "\n".join(long)
+
+
+def _package_dirs():
+    return [d for pkg in PACKAGES for d in [ROOT / pkg, *(ROOT / pkg).rglob("*")]
+            if d.is_dir() and (d / "__init__.py").is_file()]
+
+
+@pytest.mark.parametrize("pkg_dir", _package_dirs(), ids=lambda d: str(d.relative_to(ROOT)))
+def test_each_package_docstring_is_a_map(pkg_dir):
+    doc = ast.get_docstring(ast.parse((pkg_dir / "__init__.py").read_text())) or ""
+    names = [p.stem for p in pkg_dir.glob("*.py") if p.stem != "__init__"]
+    names += [d.name + "/" for d in pkg_dir.iterdir() if (d / "__init__.py").is_file()]
+    missing = [n for n in sorted(names) if f"``{n}``" not in doc and f"``{n.rstrip('/')}``" not in doc]
+    assert not missing, f"{pkg_dir.relative_to(ROOT)}/__init__.py docstring does not name {missing}"
 
 
 def test_the_checker_sees_a_circle(tmp_path):

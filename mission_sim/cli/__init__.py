@@ -2,6 +2,7 @@
 subcommands import what they need lazily, inside the function that runs them.
 
 ============  ==================================================================
+``__main__``  ``python -m mission_sim.cli``
 ``common``    :class:`CliError` (one line, exit 2) and the argument converters
 ``paper``     ``paper``: Table II and Fig. 6
 ``mission``   ``mission`` (the main job) and ``coupling``

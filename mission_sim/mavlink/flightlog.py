@@ -16,6 +16,7 @@ POSITION_COLUMNS = ("t_s", "lat_deg", "lon_deg", "alt_m")
 ATTITUDE_COLUMNS = ("t_s", "roll_rad", "pitch_rad")
 ARMED_COLUMNS = ("t_s", "armed")
 BATTERY_COLUMNS = ("t_s", "voltage_v", "current_a", "power_w")
+_TIME_SPIKE_S = 60.0   # a record this far off its neighbours' time is corrupt (logs.py, ulog.py)
 
 
 @dataclass

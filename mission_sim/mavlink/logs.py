@@ -35,7 +35,7 @@ import numpy as np
 import pandas as pd
 
 from .armed import armed_periods, infer_armed, starts_armed
-from .flightlog import (ARMED_COLUMNS, ATTITUDE_COLUMNS, BATTERY_COLUMNS, POSITION_COLUMNS, FlightLog,
+from .flightlog import (_TIME_SPIKE_S, ARMED_COLUMNS, ATTITUDE_COLUMNS, BATTERY_COLUMNS, POSITION_COLUMNS, FlightLog,
                         clean_time as _clean_time)
 from .gpsclean import reject_outliers
 
@@ -46,7 +46,6 @@ _MAV_AUTOPILOT_INVALID = 8          # ground stations and companions send heartb
 _MAV_MODE_FLAG_SAFETY_ARMED = 128
 _UINT16_MAX = 65535
 _T_MIN_S, _T_MAX_S = 0.0, 4102444800.0  # plausible record times: boot-relative .. year 2100 (Unix s)
-_TIME_SPIKE_S = 60.0                 # a record this far off its neighbours' median time is corrupt
 _REBOOT_DROP_S = 10.0                 # a time_boot_ms drop this large is a reboot, not jitter
 _DF_ARMED_EVENTS = {10: True, 11: False}  # DataFlash EV Id: ARMED, DISARMED
 _DF_INT_CHARS = set("bBhHiIqQ")           # DataFlash format chars stored as plain integers

@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 
 from .armed import infer_armed, starts_armed
-from .flightlog import (ARMED_COLUMNS, ATTITUDE_COLUMNS, BATTERY_COLUMNS, POSITION_COLUMNS, FlightLog,
+from .flightlog import (_TIME_SPIKE_S, ARMED_COLUMNS, ATTITUDE_COLUMNS, BATTERY_COLUMNS, POSITION_COLUMNS, FlightLog,
                         clean_time)
 from .geodesy import GeoPoint, enu_to_geodetic
 from .gpsclean import reject_outliers
@@ -54,7 +54,6 @@ class _Topics:
     beyond the timeline's end (stray timestamps, see the module docstring) are left out."""
 
     def __init__(self, ulog):
-        from .logs import _TIME_SPIKE_S
         self.start = int(ulog.start_timestamp)
         self.data = {d.name: d.data for d in sorted(ulog.data_list, key=lambda d: d.multi_id, reverse=True)}
         every = [(d.data["timestamp"].astype(np.int64) - self.start) * 1e-6 for d in ulog.data_list]

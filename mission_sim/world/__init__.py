@@ -6,6 +6,7 @@
 ``power``       electrical propulsion power from momentum theory
 ``battery``     equivalent-circuit battery (OCV, R0, R1-C1) and the CC-CV charge manager
 ``linkstep``    one exact ZOH step of the envelope link with its energy integrals
+``budget``      the size of a run (samples, memory, output bytes) estimated before it starts
 ``runner``      ``run_mission``: Lm along the trajectory, charged + uncharged runs, flight-time gain
 ``loop``        ``MissionLoop``: the loop (pose -> Lm -> pad gating -> BMS -> policy -> link -> battery)
 ``results``     :class:`MissionResult`: time series, summary, files
