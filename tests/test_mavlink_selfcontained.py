@@ -15,6 +15,9 @@ from pathlib import Path
 from _flightlogs import DATA_DIR, LOG_NAMES, ULOG_NAME
 
 ROOT = Path(__file__).resolve().parents[1]
+#: every test file that reads a flight log (the hypothesis fuzz tests aside: they read the same files)
+LOG_TESTS = ("test_mavlink_io.py", "test_cli_replay_errors.py", "test_replay_integration.py",
+             "test_mavlink_armed.py", "test_mavlink_ulog.py", "test_telemetry_loopback.py")
 GUARD = '''
 import sys
 import tempfile
@@ -37,6 +40,12 @@ sys.addaudithook(_hook)
 '''
 
 
+def test_every_log_test_is_run_without_shared():
+    readers = {p.name for p in (ROOT / "tests").glob("test_*.py")
+               if "_flightlogs" in p.read_text() and "fuzz" not in p.name and p.name != Path(__file__).name}
+    assert readers <= set(LOG_TESTS), sorted(readers - set(LOG_TESTS))
+
+
 def test_logs_are_in_the_repository():
     for name in (*LOG_NAMES, ULOG_NAME, "SOURCES.md"):
         assert (DATA_DIR / name).is_file(), name
@@ -56,8 +65,8 @@ def test_log_tests_pass_in_a_copy_without_shared(tmp_path):
     env = {**os.environ, "PYTHONPATH": f"{clone}{os.pathsep}{clone / 'tests'}", "OMP_NUM_THREADS": "1"}
     env.pop("DRONEWPT_FLIGHTLOGS", None)
     r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", "-p", "_no_shared",
-                        "tests/test_mavlink_io.py", "tests/test_cli_replay_errors.py"],
-                       cwd=clone, env=env, capture_output=True, text=True, timeout=300)
+                        *(f"tests/{name}" for name in LOG_TESTS)],
+                       cwd=clone, env=env, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-2000:]
     assert " passed" in r.stdout and "failed" not in r.stdout
     # the guard works: the same hook refuses the repository's own copy (outside the clone)
