@@ -10,8 +10,12 @@ and peak |i1| before the step and at the end (``rm_i1_a``, ``sm_i1_a``).
 Device models in the netlist are the ones of :mod:`wpt_receiver.devices`: every diode is a
 near-ideal junction (``IS = 1 uA``, ``N = 0.01``: 4 mV at 10 A, 1 uA leakage) in series with a DC source
 ``vf0_v`` and a resistor ``rd_ohm``; every MOSFET channel a voltage-controlled switch with
-``RON = ron_ohm``; the inverter (no dead time) a square-wave source with the two driven channels'
-resistance in series.
+``RON = ron_ohm``. The inverter is either (``link_<preset>.cir``) a square-wave source with the two
+driven channels' resistance in series (no dead time), or (``link_bridge_<preset>.cir``) a real full
+bridge: a DC source, four switches with ``RON`` of the inverter switch, each with its body diode,
+and one gate source per diagonal with the dead time ``BRIDGE_DEAD_TIME_S`` after every
+commutation (both diagonals off; the current freewheels through the body diodes or the bridge
+blocks). The switching model then runs with the same dead time (its own ``make_schedule``).
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ HERE = Path(__file__).parent / "spice"
 T_STEP_S = 3e-3
 T_END_S = 9e-3
 KEYS = ("rm_i2_a", "step_peak_a", "sm_i2_a", "rm_i1_a", "sm_i1_a")
+BRIDGE_DEAD_TIME_S = 200e-9  # a realistic dead time for a 30-60 V MOSFET bridge at 85 kHz (3.4 % of T)
 
 
 def initial_state(p, dv: DeviceSet):
@@ -49,21 +54,30 @@ def _diode(name, anode, cathode, vf, rd):
             f"RD{name} y{name} {cathode} {max(rd, 1e-6)!r}\n")
 
 
-def netlist(p=TABLE_I, dv: DeviceSet = DeviceSet(), label: str = "ideal") -> str:
-    """ngspice netlist of the scenario (see the module docstring)."""
+def netlist(p=TABLE_I, dv: DeviceSet = DeviceSet(), label: str = "ideal", dead_time_s: float | None = None) -> str:
+    """ngspice netlist of the scenario (see the module docstring): ``dead_time_s=None`` models the
+    inverter as a square-wave source, a number as a full bridge with that dead time."""
     w, T = p.omega_rad_s, p.rectifier_period_s
     c1, c2 = 1 / (w * w * p.l1_h), 1 / (w * w * p.l2_h)
     i10, vc10, i20, vc20 = initial_state(p, dv)
     k = p.lm_h / math.sqrt(p.l1_h * p.l2_h)
     ron, body = dv.rect_switch.ron_ohm, dv.rect_switch.body
     tr = 1e-9
+    if dead_time_s is None:
+        primary = [
+            "* primary: square wave +-Vdc (no dead time), 2 Ron + R1, C1, L1; secondary: L2 (i2 = -I(L2)), R2, C2, SBAR\n",
+            f"VINV p 0 PULSE({p.vdc_v!r} {-p.vdc_v!r} {T / 2 - tr / 2!r} {tr!r} {tr!r} {T - tr!r} {2 * T!r})\n",
+            f"C1 p c1 {c1!r} IC={vc10!r}\n",
+            f"R1 c1 c {p.r1_ohm + dv.inv_r_ohm!r}\n",
+            f"L1 c 0 {p.l1_h!r} IC={i10!r}\n"]
+    else:
+        primary = _bridge(p, dv, dead_time_s, tr) + [
+            f"C1 ma c1 {c1!r} IC={vc10!r}\n",
+            f"R1 c1 c {p.r1_ohm!r}\n",
+            f"L1 c mb {p.l1_h!r} IC={i10!r}\n"]
     return "".join([
         f"* dronewpt SPICE check, devices: {label}\n",
-        "* primary: square wave +-Vdc (no dead time), 2 Ron + R1, C1, L1; secondary: L2 (i2 = -I(L2)), R2, C2, SBAR\n",
-        f"VINV p 0 PULSE({p.vdc_v!r} {-p.vdc_v!r} {T / 2 - tr / 2!r} {tr!r} {tr!r} {T - tr!r} {2 * T!r})\n",
-        f"C1 p c1 {c1!r} IC={vc10!r}\n",
-        f"R1 c1 c {p.r1_ohm + dv.inv_r_ohm!r}\n",
-        f"L1 c 0 {p.l1_h!r} IC={i10!r}\n",
+        *primary,
         f"L2 a b {p.l2_h!r} IC={-i20!r}\n",
         f"K12 L1 L2 {k!r}\n",
         f"R2 bb b {p.r2_ohm!r}\n",
@@ -83,6 +97,27 @@ def netlist(p=TABLE_I, dv: DeviceSet = DeviceSet(), label: str = "ideal") -> str
         f".tran {T / 1000!r} {T_END_S - T / 2!r} 0 {T / 1000!r} uic\n",
         _measures(T),
         ".end\n"])
+
+
+def _bridge(p, dv: DeviceSet, td: float, tr: float) -> list:
+    """Full bridge between the leg midpoints ``ma`` (v1 = v(ma) - v(mb)) and ``mb``: switches with
+    the inverter switch's ``RON``, each with its body diode. Model time ``[k T, (k+1) T)`` drives
+    +Vdc for even k, -Vdc for odd k, after a dead time ``td`` from ``k T`` (both diagonals off);
+    SPICE time 0 is model time T/2 (diagonal P = A high + B low on). The gates switch at the
+    midpoints of their ``tr`` edges."""
+    T, sw = p.rectifier_period_s, dv.inv_switch
+    return [
+        f"* primary: full bridge from Vdc, switches Ron, body diodes, dead time {td!r} s; C1, R1, L1 from ma to mb;\n",
+        "* secondary: L2 (i2 = -I(L2)), R2, C2, SBAR\n",
+        f"VDC vdc 0 DC {p.vdc_v!r}\n",
+        f"VGP gp 0 PULSE(1 0 {T / 2 - tr / 2!r} {tr!r} {tr!r} {T + td - tr!r} {2 * T!r})\n",
+        f"VGN gn 0 PULSE(0 1 {T / 2 + td - tr / 2!r} {tr!r} {tr!r} {T - td - tr!r} {2 * T!r})\n",
+        "SAH vdc ma gp 0 SWI\nSBL mb 0 gp 0 SWI\nSAL ma 0 gn 0 SWI\nSBH vdc mb gn 0 SWI\n",
+        _diode("AH", "ma", "vdc", sw.body.vf0_v, sw.body.rd_ohm),
+        _diode("AL", "0", "ma", sw.body.vf0_v, sw.body.rd_ohm),
+        _diode("BH", "mb", "vdc", sw.body.vf0_v, sw.body.rd_ohm),
+        _diode("BL", "0", "mb", sw.body.vf0_v, sw.body.rd_ohm),
+        f".model SWI SW(VT=0.5 VH=0.1 RON={max(sw.ron_ohm, 1e-6)!r} ROFF=1e7)\n"]
 
 
 def _measures(T):
@@ -113,10 +148,10 @@ def run_ngspice(text: str, workdir: Path) -> dict:
             "rm_i1_a": peak("rm", "i1"), "sm_i1_a": peak("sm", "i1")}
 
 
-def switching_measure(p=TABLE_I, dv: DeviceSet = DeviceSet()) -> dict:
+def switching_measure(p=TABLE_I, dv: DeviceSet = DeviceSet(), dead_time_s: float = 0.0) -> dict:
     """The same numbers from the event-exact switching model (dense peaks on a fine grid)."""
     from wpt_receiver.switching import SwitchingConfig, SwitchingLink
-    link = SwitchingLink(p, SwitchingConfig(devices=dv))
+    link = SwitchingLink(p, SwitchingConfig(devices=dv, dead_time_s=dead_time_s))
     T = link.T
     x0 = np.zeros(link.cir.m)
     x0[:4] = initial_state(p, dv)
@@ -135,23 +170,29 @@ def switching_measure(p=TABLE_I, dv: DeviceSet = DeviceSet()) -> dict:
 
 
 def _run_step(link, x0):
-    """Gate off until T_STEP_S, on after (both lower switches), inverter +Vdc on [0, T), from T/2."""
-    from wpt_receiver.switching import Schedule
+    """Gate off until T_STEP_S, on after (both lower switches); inverter +Vdc on [0, T), -Vdc on
+    [T, 2T), ..., each commutation followed by the link's dead time; from T/2. The model's own
+    schedule: one gate window per period centred at (n + 1/2) T (phase pi/2), duty 0 before the
+    step and 1 (the whole period) from it."""
+    from wpt_receiver.switching.schedule import make_schedule
     T = link.T
-    edges = np.union1d(np.arange(T, T_END_S + 0.5 * T, T), [T / 2, T_STEP_S])
-    edges = edges[edges <= T_END_S + 1e-15]
-    edges[-1] = T_END_S
-    mid = 0.5 * (edges[:-1] + edges[1:])
-    cmd = np.where(np.floor(mid / T) % 2 == 0, 1, -1)
-    gate = (mid >= T_STEP_S).astype(int)
-    return link.run(Schedule(edges, cmd, gate), x0)
+    n_step = round(T_STEP_S / T)
+    windows = lambda n: (np.asarray(n) >= n_step).astype(float)  # noqa: E731
+    return link.run(make_schedule(T / 2, T_END_S, T, windows, math.pi / 2, link.cfg.dead_time_s), x0)
 
 
 PRESETS = ("ideal", "schottky", "sic")
+BRIDGE_PRESETS = ("ideal", "schottky")
 
 
-def netlist_path(name: str) -> Path:
-    return HERE / f"link_{name}.cir"
+def netlist_path(name: str, bridge: bool = False) -> Path:
+    return HERE / (f"link_bridge_{name}.cir" if bridge else f"link_{name}.cir")
+
+
+def bridge_netlist(name: str) -> str:
+    """Full-bridge netlist of a preset with ``BRIDGE_DEAD_TIME_S``."""
+    from wpt_receiver.devices import preset
+    return netlist(dv=preset(name), label=f"{name}, full bridge", dead_time_s=BRIDGE_DEAD_TIME_S)
 
 
 def main() -> None:
@@ -169,6 +210,13 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as tmp:
             ref["results"][name] = run_ngspice(text, Path(tmp))
         print(name, ref["results"][name])
+    ref["bridge"] = {"dead_time_s": BRIDGE_DEAD_TIME_S, "results": {}}
+    for name in BRIDGE_PRESETS:
+        text = bridge_netlist(name)
+        netlist_path(name, bridge=True).write_text(text)
+        with tempfile.TemporaryDirectory() as tmp:
+            ref["bridge"]["results"][name] = run_ngspice(text, Path(tmp))
+        print("bridge", name, ref["bridge"]["results"][name])
     (HERE / "reference.json").write_text(json.dumps(ref, indent=1) + "\n")
 
 
