@@ -202,7 +202,8 @@ def main() -> None:
 
     from wpt_receiver.devices import preset
     ref = {"scenario": {"t_step_s": T_STEP_S, "t_end_s": T_END_S, "keys": list(KEYS)},
-           "ngspice": subprocess.run(["ngspice", "-v"], capture_output=True, text=True).stdout.strip().splitlines()[-1],
+           "ngspice": next((ln.strip("* ").strip() for ln in subprocess.run(
+               ["ngspice", "-v"], capture_output=True, text=True).stdout.splitlines() if "ngspice-" in ln), "?"),
            "results": {}}
     for name in PRESETS:
         text = netlist(dv=preset(name), label=name)
