@@ -94,10 +94,12 @@ class MissionLoop:
         "n_cut": "fine windows cut at max_fine_s", "rows": "one tuple per step (_COLUMNS)",
         "depleted_at": "time the battery reached SoC 0 (the mission ended there) [s], else None",
         "depleted_k": "trajectory sample where it did, else None",
+        "compiled": "run the compiled fast path (mission_sim.world.fastpath) when it applies",
     }
 
-    def __init__(self, cfg, policy, traj: Trajectory, charge: bool, lm_all):
+    def __init__(self, cfg, policy, traj: Trajectory, charge: bool, lm_all, compiled: bool | None = None):
         self.cfg, self.policy, self.traj, self.charge = cfg, policy, traj, charge
+        self.compiled = compiled
         self.sim, self.lk = sim, lk = cfg.sim, cfg.link
         model = cfg.coupling.model()
         self.base = base = lk.link_params(model.l1_h, model.l2_h, float(model.lm_h(0.0, 0.0, cfg.mission.hover_gap_m)))
@@ -152,13 +154,28 @@ class MissionLoop:
 
     # ------------------------------------------------------------------ the outer loop
     def run(self, progress: bool = False) -> MissionResult:
-        """Step through all trajectory intervals; returns the assembled result."""
+        """Step through all trajectory intervals; returns the assembled result.
+
+        ``compiled`` (None: when it applies, see :func:`.fastpath.usable`) runs the same loop compiled
+        (:mod:`.loop_kernel`); the Python methods below are the reference it is tested against."""
         t_all = self.t_all
         bar = None
         if progress:
             from tqdm import tqdm
             bar = tqdm(total=float(t_all[-1] - t_all[0]), unit="sim s", desc="mission", leave=False,
                        bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
+        if self.compiled is not False:
+            from . import fastpath
+            if self.compiled and not fastpath.usable(self):
+                raise ValueError("compiled=True needs numba, a policy with the kernel hook (mission_sim.contract."
+                                 "Policy) and sim.i2_noise_a = 0; pass compiled=None or False")
+            if fastpath.usable(self) and fastpath.run_compiled(self, bar):
+                if bar is not None:
+                    bar.close()
+                return self.result()
+            self._reset_state()   # an error status (or an interval too long): the reference path from the start
+            if bar is not None:
+                bar.reset()
         k = 0
         try:
             while k < self.n - 1:
