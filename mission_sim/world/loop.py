@@ -636,7 +636,7 @@ class MissionLoop:
         cand = on & (i2 >= self.peak_env - 2.0 * harm.ripple_bound_a())
         d, i2c = np.r_[self.peak_d, df["d_short"].to_numpy()[cand]], np.r_[self.peak_env, i2[cand]]
         if len(d) > 64:
-            approx = PeakTable(harm, i2_max_a=1.05 * self.peak_env, n_d=26, n_i=21)(d, i2c)
+            approx = PeakTable(harm, i2_max_a=1.05 * self.peak_env, n_d=26, n_i=21, i2_min_a=float(i2c.min()))(d, i2c)
             keep = approx >= 0.99 * approx.max()
             d, i2c = d[keep], i2c[keep]
         return float(np.max(harm.peak(d, i2c)))

@@ -53,6 +53,7 @@ ends of coarse steps.
 
 from __future__ import annotations
 
+import importlib.util
 import time
 
 import numpy as np
@@ -73,14 +74,16 @@ def _pad_offsets(cfg, traj: Trajectory):
     return traj.pos_m - pads[idx], idx
 
 
-def _lm_along(cfg, model, traj: Trajectory):
+def _lm_along(cfg, model, traj: Trajectory, compiled: bool = False):
+    """Lm [H] per trajectory sample (0 away from the pads) and the nearest pad's index; ``compiled``
+    evaluates the coupling table with numba (the same values, :mod:`wpt_receiver.coupling_kernel`)."""
     off, idx = _pad_offsets(cfg, traj)
     lm = np.zeros(len(traj))
     rho_max, z_min, z_max = model.table_range_m
     near = (np.hypot(off[:, 0], off[:, 1]) < rho_max) & (off[:, 2] < z_max) & (off[:, 2] > 0.5 * z_min)
     if np.any(near):
         lm[near] = model.lm_h(off[near, 0], off[near, 1], off[near, 2], traj.tilt_rad[near],
-                              tilt_axis_rad=traj.tilt_axis_rad[near])
+                              tilt_axis_rad=traj.tilt_axis_rad[near], compiled=compiled)
     return lm, idx
 
 
@@ -98,7 +101,8 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     """
     wall0 = time.perf_counter()
     traj = plan_mission(cfg) if trajectory is None else trajectory
-    lm_all = _lm_along(cfg, cfg.coupling.model(), traj)[0]
+    fast = compiled if compiled is not None else importlib.util.find_spec("numba") is not None
+    lm_all = _lm_along(cfg, cfg.coupling.model(), traj, fast)[0]
     res = _simulate(cfg, policy, traj, charge, progress, lm_all, compiled)
     if charge:
         base = _simulate(cfg, policy, traj, False, False, lm_all, compiled)
