@@ -78,10 +78,10 @@ class _CommandPolicy:
         (:mod:`policies.kernels`), or None for a subclass that changes what ``act`` computes."""
         if type(self) not in _KERNEL_CLASSES or self.n != 1:
             return None
-        from . import kernels  # numba: imported on the first compiled mission only
+        from .kernels import KERNELS  # numba: imported on the first compiled mission only
         wlm_v1, det, r1 = self._consts
         head = [float(wlm_v1), float(det), float(r1), float(wlm_v1**2)]
-        return getattr(kernels, f"{self.name}_kernel"), np.array(head + self._kernel_params()), \
+        return KERNELS[self.name], np.array(head + self._kernel_params()), \
             np.zeros(1 + self._kernel_state_size())
 
     def _kernel_params(self) -> list:

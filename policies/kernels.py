@@ -23,7 +23,7 @@ from numba import njit
 
 from mission_sim.contract import _LO_HALF, OBS_INDEX, POLICY_KERNEL_SIGNATURE
 
-__all__ = ["step_kernel", "ramp_kernel", "model_based_kernel"]
+__all__ = ["step_kernel", "ramp_kernel", "model_based_kernel", "KERNELS"]
 
 _I_CMD, _I_VL = OBS_INDEX["charge_cmd_a"], OBS_INDEX["battery_v"]
 _CMD_LO, _CMD_HALF = _LO_HALF[_I_CMD]
@@ -100,3 +100,7 @@ def model_based_kernel(obs, params, state):
         xn[i] = acc + u * bd[i]
     x[:] = xn
     return _duty(v2, vl)
+
+
+#: the kernel of each classical policy by its ``name``
+KERNELS = {"step": step_kernel, "ramp": ramp_kernel, "model_based": model_based_kernel}

@@ -37,7 +37,8 @@ def test_cli_help_imports_nothing_heavy():
     assert _imported(code) == []
 
 
-@pytest.mark.parametrize("module", ["mission_sim.config", "mission_sim.world.runner", "policies", "envs"])
+@pytest.mark.parametrize("module", ["mission_sim.config", "mission_sim.world.runner", "mission_sim.world.fastpath",
+                                    "wpt_receiver.coupling", "policies", "envs"])
 def test_mission_path_skips_signal_plotting_and_torch(module):
     # scipy.signal alone costs ~1.2 s to import; the mission needs none of it (wpt_receiver.lti)
     got = _imported(f"import {module}", ("scipy.signal", "matplotlib", "torch", "stable_baselines3", "dask",

@@ -5,6 +5,7 @@ Depends on nothing else of dronewpt. Modules, in the order data flows:
 ======================  =====================================================================
 ``params``              :class:`LinkParams`, :data:`TABLE_I` (Table I)
 ``coupling``            Lm(pose) of two circular coils (Maxwell / Neumann), lookup tables
+``coupling_kernel``     the lookup-table Lm compiled with numba (same numbers; imported on demand)
 ``envelope``            envelope model (eq. 3-8): exact ZOH stepping, steady states, G22
 ``sbar``                SBAR duty mapping f(d_short) (eq. 9), its inverse, the rectifier rule
 ``inverse_controller``  the proposed controller (Fig. 5): low-pass, G22^-1, f^-1
