@@ -14,6 +14,11 @@ shared machine than wall time), goal >= 3000x for model_based and >= 1000x for t
 policy (``rl``: the pre-trained PPO, actor evaluated in numpy). Medians and ranges over the
 repeats; ``os.getloadavg()`` before and after.
 
+Reference path, same run: each policy is also run with ``compiled=False`` (the pure-Python loop
+and the numpy Lm table, i.e. the code before the compiled fast path; ``rl`` has no compiled
+policy kernel, so only its Lm evaluation differs), alternating with the default runs, and the
+ratio of the median CPU times is printed (``ref cpu/cpu``).
+
     python benchmarks/bench_mission.py [--policies model_based rl step ramp] [--repeat 3] [--no-single-rate]
 """
 
@@ -49,14 +54,20 @@ def single_rate_wall_per_sim_s(name: str) -> float:
 
 
 def _measure(cfg, name, repeat):
-    walls, cpus = [], []
+    """Default (compiled when it applies) and reference (``compiled=False``) runs, alternating."""
+    walls, cpus, ref_cpus = [], [], []
+    run_mission(cfg, _policy(cfg, name), compiled=False)  # warm-up of the reference path too
     for _ in range(repeat):
         pol = _policy(cfg, name)
         c0 = time.process_time()
         res = run_mission(cfg, pol)
         cpus.append(time.process_time() - c0)
         walls.append(res.summary["wall_s"])
-    return res.summary, walls, cpus
+        pol = _policy(cfg, name)
+        c0 = time.process_time()
+        run_mission(cfg, pol, compiled=False)
+        ref_cpus.append(time.process_time() - c0)
+    return res.summary, walls, cpus, ref_cpus
 
 
 def main(argv=None):
@@ -73,15 +84,18 @@ def main(argv=None):
     print(f"default mission: {cold.summary['sim_time_s']:.1f} s simulated, control period "
           f"{cfg.sim.control_period_s * 1e6:.0f} us; cold first run {cold_wall:.3f} s "
           f"({cold.summary['sim_time_s'] / cold_wall:.0f}x)")
-    print(f"{'policy':<12} {'wall [s]':>9} {'sim/wall':>9} {'sim/cpu (range)':>22} {'fine':>6} {'coarse':>7} "
-          f"{'single-rate est. [s]':>21} {'speed-up':>9} {'balance err':>11}")
+    print(f"{'policy':<12} {'wall [s]':>9} {'sim/wall':>9} {'sim/cpu (range)':>22} {'ref sim/cpu (range)':>22} "
+          f"{'ref cpu/cpu':>11} {'fine':>6} {'coarse':>7} {'single-rate est. [s]':>21} {'speed-up':>9} "
+          f"{'balance err':>11}")
     for name in args.policies:
-        s, walls, cpus = _measure(cfg, name, args.repeat)
+        s, walls, cpus, ref_cpus = _measure(cfg, name, args.repeat)
         w, cpu, sim = statistics.median(walls), statistics.median(cpus), s["sim_time_s"]
+        ref = statistics.median(ref_cpus)
         rng = f"{sim / cpu:.0f}x ({sim / max(cpus):.0f}-{sim / min(cpus):.0f})"
+        ref_rng = f"{sim / ref:.0f}x ({sim / max(ref_cpus):.0f}-{sim / min(ref_cpus):.0f})"
         single = float("nan") if args.no_single_rate else single_rate_wall_per_sim_s(name) * sim
-        print(f"{name:<12} {w:>9.3f} {sim / w:>8.0f}x {rng:>22} {s['fine_steps']:>6} {s['coarse_steps']:>7} "
-              f"{single:>21.1f} {single / w:>8.0f}x {s['energy_balance_error_rel']:>11.1e}")
+        print(f"{name:<12} {w:>9.3f} {sim / w:>8.0f}x {rng:>22} {ref_rng:>22} {ref / cpu:>10.1f}x {s['fine_steps']:>6} "
+              f"{s['coarse_steps']:>7} {single:>21.1f} {single / w:>8.0f}x {s['energy_balance_error_rel']:>11.1e}")
     print(f"load average {os.getloadavg()[0]:.2f} (1 min) after")
     print("goals (issue 14): sim/cpu >= 3000x model_based, >= 1000x rl (wall includes the uncharged baseline run "
           "for flight_time_gain_s)")

@@ -28,6 +28,13 @@ working: :class:`policies.rl.RLPolicy` gives them the first ``obs_dim`` fields o
 Action: the short duty ``d_short`` in [0, 1] (0 = rectification mode, 1 = short mode), applied
 for one control period. Environments expose it as ``a in [-1, 1]`` with ``d = (a + 1) / 2``
 (:func:`action_to_duty`); discrete environments as {0: RM, 1: SM}.
+
+Optional fast path: a policy may also offer ``kernel()`` returning ``(fn, params, state)`` (or None):
+``fn`` a numba-compiled function of the signature :data:`POLICY_KERNEL_SIGNATURE`, ``d = fn(obs,
+params, state)``, doing what ``act`` does for one receiver (``obs`` one normalised row, shape
+(OBS_DIM,); ``state`` float64, updated in place, as after ``reset(1)``). The mission loop then runs
+compiled (:mod:`mission_sim.world.fastpath`); after such a run the policy object itself stays as
+reset. Policies without it run the Python loop.
 """
 
 from __future__ import annotations
@@ -40,7 +47,11 @@ import numpy as np
 from wpt_receiver import TABLE_I, LinkParams
 
 __all__ = ["ObsField", "OBS_FIELDS", "OBS_DIM", "OBS_INDEX", "normalise_obs", "normalise_obs_row", "denormalise_obs",
-           "denormalise_obs_field", "action_to_duty", "duty_to_action", "PolicyContext", "Policy"]
+           "denormalise_obs_field", "action_to_duty", "duty_to_action", "PolicyContext", "Policy",
+           "POLICY_KERNEL_SIGNATURE"]
+
+#: numba signature of a policy's optional compiled step ``d = fn(obs, params, state)`` (module notes)
+POLICY_KERNEL_SIGNATURE = "float64(float64[::1], float64[::1], float64[::1])"
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,10 @@
 """Policies behind one protocol (:class:`mission_sim.contract.Policy`), made by name.
 
+Modules: ``classical`` (step, ramp, model_based), ``kernels`` (their compiled per-step functions for
+the mission's fast path; numba, imported on demand), ``onoff``, ``online``, ``budgeted``,
+``random_policy``, ``rl`` / ``residual`` / ``constrained`` / ``train`` / ``callbacks`` /
+``hyperparams`` (RL, needs stable-baselines3), ``inference``, ``compare``, ``stats``.
+
 >>> from policies import make
 >>> pol = make("model_based")
 

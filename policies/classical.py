@@ -73,6 +73,23 @@ class _CommandPolicy:
         self.n = int(n)
         self._v2 = None
 
+    def kernel(self):
+        """The optional fast-path hook of :class:`mission_sim.contract.Policy`: ``(fn, params, state)``
+        (:mod:`policies.kernels`), or None for a subclass that changes what ``act`` computes."""
+        if type(self) not in _KERNEL_CLASSES or self.n != 1:
+            return None
+        from .kernels import KERNELS  # numba: imported on the first compiled mission only
+        wlm_v1, det, r1 = self._consts
+        head = [float(wlm_v1), float(det), float(r1), float(wlm_v1**2)]
+        return KERNELS[self.name], np.array(head + self._kernel_params()), \
+            np.zeros(1 + self._kernel_state_size())
+
+    def _kernel_params(self) -> list:
+        return []
+
+    def _kernel_state_size(self) -> int:
+        return 0
+
     def _measure(self, obs):
         phys = denormalise_obs(obs)
         if phys.ndim == 1:
@@ -103,6 +120,12 @@ class RampPolicy(_CommandPolicy):
         rate = 4.0 / np.pi * vl / ramp_duration_s(self.ctx.link) * self.ctx.control_period_s
         self._v2 = self._v2 + np.clip(tgt - self._v2, -rate, rate)
         return duty_from_v2_clipped(self._v2, vl)
+
+    def _kernel_params(self) -> list:
+        return [float(ramp_duration_s(self.ctx.link)), float(self.ctx.control_period_s)]
+
+    def _kernel_state_size(self) -> int:
+        return 1
 
 
 class ModelBasedPolicy(_CommandPolicy):
@@ -150,3 +173,19 @@ class ModelBasedPolicy(_CommandPolicy):
         """:meth:`i2_ref` for one receiver on floats."""
         wlm_v1, det, r1 = self._consts
         return (wlm_v1 - r1 * _target_v2_scalar(self._consts, cmd, vl)) / det
+
+    def _controller(self) -> InverseModelController:
+        return InverseModelController(self.ctx.link, self.ctx.control_period_s, self.lpf, n=1)
+
+    def _kernel_params(self) -> list:
+        ctl = self._controller()
+        ad, bd, cd, dd = ctl.discrete_ss
+        return [float(ctl.i2_sm_a), float(dd), float(len(bd)), *np.ravel(ad).tolist(), *bd.tolist(), *cd.tolist(),
+                *ctl._xss.tolist()]
+
+    def _kernel_state_size(self) -> int:
+        return int(self.lpf.order) + 1
+
+
+#: the classes whose ``act`` the compiled kernels reproduce (subclasses get no kernel)
+_KERNEL_CLASSES = (StepPolicy, RampPolicy, ModelBasedPolicy)

@@ -37,7 +37,8 @@ def test_cli_help_imports_nothing_heavy():
     assert _imported(code) == []
 
 
-@pytest.mark.parametrize("module", ["mission_sim.config", "mission_sim.world.runner", "policies", "envs"])
+@pytest.mark.parametrize("module", ["mission_sim.config", "mission_sim.world.runner", "mission_sim.world.fastpath",
+                                    "wpt_receiver.coupling", "policies", "envs"])
 def test_mission_path_skips_signal_plotting_and_torch(module):
     # scipy.signal alone costs ~1.2 s to import; the mission needs none of it (wpt_receiver.lti)
     got = _imported(f"import {module}", ("scipy.signal", "matplotlib", "torch", "stable_baselines3", "dask",
@@ -74,3 +75,13 @@ def test_model_based_policy_built_without_scipy_signal():
     code = ("import policies\nfrom mission_sim.contract import PolicyContext\n"
             "p = policies.make('model_based', PolicyContext())")
     assert "scipy.signal" not in _imported(code)
+
+
+def test_cli_mission_runs_small_missions_without_numba(tmp_path):
+    """``dronewpt mission`` compiles the loop only for long missions (mission_sim.cli.mission.COMPILE_FROM_ROWS):
+    for the default one numba's start-up in a fresh process would cost more than the compiled loop saves."""
+    code = ("from mission_sim.cli import main\n"
+            f"main(['mission', '--out', {str(tmp_path / 'm')!r}, '--no-plot', '--no-progress'])")
+    assert "numba" not in _imported(code, ("numba",))
+    long = code.replace("'--no-progress'", "'--no-progress', '--set', 'pads.1.hover_time_s=4000'")
+    assert "numba" in _imported(long, ("numba",))

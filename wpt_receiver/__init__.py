@@ -8,6 +8,7 @@ Depends on nothing else of dronewpt. Modules, in the order data flows:
 ``bspline``             cubic B-spline evaluation of the coupling table (numpy, no scipy.ndimage)
 ``diskcache``           on-disk cache of arrays by content hash (coupling table, ZOH results)
 ``lti``                 SISO transfer functions and their ZOH without importing scipy.signal
+``coupling_kernel``     the lookup-table Lm compiled with numba (same numbers; imported on demand)
 ``envelope``            envelope model (eq. 3-8): exact ZOH stepping, steady states, G22
 ``sbar``                SBAR duty mapping f(d_short) (eq. 9), its inverse, the rectifier rule
 ``inverse_controller``  the proposed controller (Fig. 5): low-pass, G22^-1, f^-1

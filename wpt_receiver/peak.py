@@ -161,15 +161,22 @@ class PeakTable:
     grid is quadratic, dense near 0, where the ripple is comparable to the fundamental).
 
     ``i2_max_a`` is the top of the |I2| grid (beyond it the excess of the last column is used: the
-    ripple is independent of |I2| there to first order); ``n_d``, ``n_i`` the grid sizes."""
+    ripple is independent of |I2| there to first order); ``n_d``, ``n_i`` the grid sizes;
+    ``i2_min_a`` > 0 evaluates only the grid columns that lookups with ``|I2| >= i2_min_a`` use
+    (the others are NaN; the evaluated ones are the same numbers as with the full grid)."""
 
-    def __init__(self, harmonics: SbarHarmonics, i2_max_a: float = 80.0, n_d: int = 51, n_i: int = 81):
+    def __init__(self, harmonics: SbarHarmonics, i2_max_a: float = 80.0, n_d: int = 51, n_i: int = 81,
+                 i2_min_a: float = 0.0):
         if not (np.isfinite(i2_max_a) and i2_max_a > 0):
             raise ValueError(f"i2_max_a={i2_max_a!r} is invalid; valid range: (0, inf)")
         self.d = np.linspace(0.0, 1.0, n_d)
         self.i2 = float(i2_max_a) * np.linspace(0.0, 1.0, n_i) ** 2
-        dd, ii = np.meshgrid(self.d, self.i2, indexing="ij")
-        self.excess = harmonics.peak(dd, ii) - ii                  # (n_d, n_i) [A]
+        # first column a lookup at |I2| >= i2_min_a reads (the same index arithmetic as __call__)
+        y_min = np.sqrt(np.minimum(max(float(i2_min_a), 0.0) / float(i2_max_a), 1.0)) * (n_i - 1)
+        k0 = int(min(int(y_min), n_i - 2))
+        dd, ii = np.meshgrid(self.d, self.i2[k0:], indexing="ij")
+        self.excess = np.full((n_d, n_i), np.nan)
+        self.excess[:, k0:] = harmonics.peak(dd, ii) - ii          # (n_d, n_i) [A]
         self._hd, self._imax = 1.0 / (n_d - 1), float(i2_max_a)
 
     def __call__(self, d_short, i2_amp_a):

@@ -94,10 +94,14 @@ class MissionLoop:
         "n_cut": "fine windows cut at max_fine_s", "rows": "one tuple per step (_COLUMNS)",
         "depleted_at": "time the battery reached SoC 0 (the mission ended there) [s], else None",
         "depleted_k": "trajectory sample where it did, else None",
+        "compiled": "run the compiled fast path (mission_sim.world.fastpath) when it applies",
+        "frame": "build the time-series DataFrame (False: the summary only, timeseries None)",
     }
 
-    def __init__(self, cfg, policy, traj: Trajectory, charge: bool, lm_all):
+    def __init__(self, cfg, policy, traj: Trajectory, charge: bool, lm_all, compiled: bool | None = None,
+                 frame: bool = True):
         self.cfg, self.policy, self.traj, self.charge = cfg, policy, traj, charge
+        self.compiled, self.frame = compiled, frame
         self.sim, self.lk = sim, lk = cfg.sim, cfg.link
         model = cfg.coupling.model()
         self.base = base = lk.link_params(model.l1_h, model.l2_h, float(model.lm_h(0.0, 0.0, cfg.mission.hover_gap_m)))
@@ -152,13 +156,28 @@ class MissionLoop:
 
     # ------------------------------------------------------------------ the outer loop
     def run(self, progress: bool = False) -> MissionResult:
-        """Step through all trajectory intervals; returns the assembled result."""
+        """Step through all trajectory intervals; returns the assembled result.
+
+        ``compiled`` (None: when it applies, see :func:`.fastpath.usable`) runs the same loop compiled
+        (:mod:`.loop_kernel`); the Python methods below are the reference it is tested against."""
         t_all = self.t_all
         bar = None
         if progress:
             from tqdm import tqdm
             bar = tqdm(total=float(t_all[-1] - t_all[0]), unit="sim s", desc="mission", leave=False,
                        bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
+        if self.compiled is not False:
+            from . import fastpath
+            if self.compiled and not fastpath.usable(self):
+                raise ValueError("compiled=True needs numba, a policy with the kernel hook (mission_sim.contract."
+                                 "Policy) and sim.i2_noise_a = 0; pass compiled=None or False")
+            if fastpath.usable(self) and fastpath.run_compiled(self, bar):
+                if bar is not None:
+                    bar.close()
+                return self.result()
+            self._reset_state()   # an error status (or an interval too long): the reference path from the start
+            if bar is not None:
+                bar.reset()
         k = 0
         try:
             while k < self.n - 1:
@@ -509,10 +528,10 @@ class MissionLoop:
 
     # ------------------------------------------------------------------ result assembly
     def result(self) -> MissionResult:
-        """The time series (one row per step) and the summary with the energy balances."""
+        """The time series (one row per step; None with ``frame`` False) and the summary with the energy balances."""
         arr = np.array(self.rows, dtype=float).reshape(-1, len(_COLUMNS))
-        df = self.timeseries(arr)
-        return MissionResult(timeseries=df, summary=self.summary(arr, df), config=self.cfg, trajectory=self.traj)
+        df = self.timeseries(arr) if self.frame else None
+        return MissionResult(timeseries=df, summary=self.summary(arr), config=self.cfg, trajectory=self.traj)
 
     def timeseries(self, arr):
         """DataFrame of the steps: the raw columns plus pose, k, tx_on, powers and phase."""
@@ -535,10 +554,12 @@ class MissionLoop:
         df["phase"] = pd.Categorical(self.traj.phase[ri])
         return df
 
-    def summary(self, arr, df) -> dict:
+    def summary(self, arr) -> dict:
         """Summary dict: energies (exact sums), balance errors, SoC, I2 peak, step counts."""
         bp, t_all = self.bp, self.t_all
-        self.peak_i2 = self.instantaneous_peak(df)
+        self.peak_i2 = self.instantaneous_peak(arr)
+        col = {name: j for j, name in enumerate(_COLUMNS)}
+        tx_on = arr[:, col["v1_v"]] > 0
         return {
             "policy": getattr(self.policy, "name", type(self.policy).__name__),
             "charge": bool(self.charge),
@@ -548,7 +569,7 @@ class MissionLoop:
             "initial_soc": float(bp.initial_soc),
             "final_soc": float(self.soc),
             "battery_full": bool(self.charger.full[0]),
-            "min_soc": float(min(df["soc"].min(), bp.initial_soc)) if len(df) else float(bp.initial_soc),
+            "min_soc": float(min(arr[:, _SOC_COL].min(), bp.initial_soc)) if len(arr) else float(bp.initial_soc),
             **self.depletion_summary(),
             "peak_i2_a": self.peak_i2,
             "peak_i2_envelope_a": self.peak_env,
@@ -559,7 +580,7 @@ class MissionLoop:
             "coarse_steps": self.n_coarse,
             "fine_windows": self.n_windows,
             "fine_windows_cut": self.n_cut,
-            "charge_time_s": float(np.sum(df["dt_s"].to_numpy()[df["tx_on"].to_numpy()])),
+            "charge_time_s": float(np.sum(arr[:, col["dt_s"]][tx_on])),
         }
 
     def energy_summary(self, arr) -> dict:
@@ -602,7 +623,7 @@ class MissionLoop:
             "link_balance_error_rel": abs(link_res) / abs(acc["src"]) if acc["src"] else 0.0,
         }
 
-    def instantaneous_peak(self, df) -> float:
+    def instantaneous_peak(self, arr) -> float:
         """Instantaneous peak |i2| [A]: the envelope's peak plus the harmonic ripple of the SBAR at
         that duty (:class:`wpt_receiver.peak.SbarHarmonics`, at the hover-gap Lm and the highest
         battery voltage seen with the pad on), over the envelope's peak and every step whose |I2|
@@ -612,14 +633,15 @@ class MissionLoop:
         if self.peak_env == 0.0:
             return 0.0
         from wpt_receiver.peak import PeakTable, SbarHarmonics
-        on = df["tx_on"].to_numpy()
-        vl = float(df["battery_v"].to_numpy()[on].max()) if on.any() else float(self.last_vl)
+        col = {name: j for j, name in enumerate(_COLUMNS)}
+        on = arr[:, col["v1_v"]] > 0
+        vl = float(arr[:, col["battery_v"]][on].max()) if on.any() else float(self.last_vl)
         harm = SbarHarmonics(self.base.with_(vl_v=vl), self.dev)
-        i2 = np.abs(df["i2_amp_a"].to_numpy())
+        i2 = np.abs(arr[:, col["i2_amp_a"]])
         cand = on & (i2 >= self.peak_env - 2.0 * harm.ripple_bound_a())
-        d, i2c = np.r_[self.peak_d, df["d_short"].to_numpy()[cand]], np.r_[self.peak_env, i2[cand]]
+        d, i2c = np.r_[self.peak_d, arr[:, col["d_short"]][cand]], np.r_[self.peak_env, i2[cand]]
         if len(d) > 64:
-            approx = PeakTable(harm, i2_max_a=1.05 * self.peak_env, n_d=26, n_i=21)(d, i2c)
+            approx = PeakTable(harm, i2_max_a=1.05 * self.peak_env, n_d=26, n_i=21, i2_min_a=float(i2c.min()))(d, i2c)
             keep = approx >= 0.99 * approx.max()
             d, i2c = d[keep], i2c[keep]
         return float(np.max(harm.peak(d, i2c)))

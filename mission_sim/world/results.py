@@ -24,7 +24,8 @@ class MissionResult:
     """Result of :func:`mission_sim.world.runner.run_mission`.
 
     timeseries : one row per simulation step (fine and coarse; ``dt_s`` is the step length, values
-        are at the step's end, currents ``rect_current_a``/``battery_current_a`` and powers are step means)
+        are at the step's end, currents ``rect_current_a``/``battery_current_a`` and powers are step means;
+        None only for the uncharged baseline run that ``run_mission`` keeps internally)
     summary : energies [J], SoC, peak I2, time above rated, flight-time gain, step counts, wall time
     """
 

@@ -53,6 +53,7 @@ ends of coarse steps.
 
 from __future__ import annotations
 
+import importlib.util
 import time
 
 import numpy as np
@@ -73,32 +74,38 @@ def _pad_offsets(cfg, traj: Trajectory):
     return traj.pos_m - pads[idx], idx
 
 
-def _lm_along(cfg, model, traj: Trajectory):
+def _lm_along(cfg, model, traj: Trajectory, compiled: bool = False):
+    """Lm [H] per trajectory sample (0 away from the pads) and the nearest pad's index; ``compiled``
+    evaluates the coupling table with numba (the same values, :mod:`wpt_receiver.coupling_kernel`)."""
     off, idx = _pad_offsets(cfg, traj)
     lm = np.zeros(len(traj))
     rho_max, z_min, z_max = model.table_range_m
     near = (np.hypot(off[:, 0], off[:, 1]) < rho_max) & (off[:, 2] < z_max) & (off[:, 2] > 0.5 * z_min)
     if np.any(near):
         lm[near] = model.lm_h(off[near, 0], off[near, 1], off[near, 2], traj.tilt_rad[near],
-                              tilt_axis_rad=traj.tilt_axis_rad[near])
+                              tilt_axis_rad=traj.tilt_axis_rad[near], compiled=compiled)
     return lm, idx
 
 
 def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bool = True,
-                progress: bool = False) -> MissionResult:
+                progress: bool = False, compiled: bool | None = None) -> MissionResult:
     """Run one mission; returns a :class:`~mission_sim.world.results.MissionResult`.
 
     ``policy`` is a :class:`mission_sim.contract.Policy` made for ``control_period_s =
     cfg.sim.control_period_s`` and ``rated_i2_a = cfg.link.rated_i2_a``. ``charge=False`` runs the
     same mission with the pads never energised. With ``charge=True`` the summary's
     ``flight_time_gain_s`` compares against that run (see :func:`flight_time_gain_s`).
+    ``compiled``: None runs the loop compiled when it applies (numba installed, the policy has the
+    ``kernel`` hook, no sensor noise: :mod:`.fastpath`), False the pure-Python reference loop, True
+    requires the compiled loop (``ValueError`` if it does not apply).
     """
     wall0 = time.perf_counter()
     traj = plan_mission(cfg) if trajectory is None else trajectory
-    lm_all = _lm_along(cfg, cfg.coupling.model(), traj)[0]
-    res = _simulate(cfg, policy, traj, charge, progress, lm_all)
+    fast = compiled if compiled is not None else importlib.util.find_spec("numba") is not None
+    lm_all = _lm_along(cfg, cfg.coupling.model(), traj, fast)[0]
+    res = _simulate(cfg, policy, traj, charge, progress, lm_all, compiled)
     if charge:
-        base = _simulate(cfg, policy, traj, False, False, lm_all)
+        base = _simulate(cfg, policy, traj, False, False, lm_all, compiled, frame=False)  # its summary only
         res.summary["flight_time_gain_s"] = flight_time_gain_s(cfg, res.summary["final_soc"],
                                                                base.summary["final_soc"]) \
             + res.summary["sim_time_s"] - base.summary["sim_time_s"]  # a depleted run ends early
@@ -121,7 +128,8 @@ def flight_time_gain_s(cfg, final_soc_charged: float, final_soc_uncharged: float
     return float((e(final_soc_charged) - e(final_soc_uncharged)) / hover_power_w(cfg.drone))
 
 
-def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_all=None) -> MissionResult:
+def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_all=None,
+              compiled: bool | None = None, frame: bool = True) -> MissionResult:
     if lm_all is None:
         lm_all = _lm_along(cfg, cfg.coupling.model(), traj)[0]
-    return MissionLoop(cfg, policy, traj, charge, lm_all).run(progress)
+    return MissionLoop(cfg, policy, traj, charge, lm_all, compiled, frame).run(progress)
