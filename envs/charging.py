@@ -10,10 +10,11 @@ from gymnasium import spaces
 
 from mission_sim.contract import OBS_DIM, PolicyContext
 
-from wpt_receiver.sbar import rectifier_current, rectifier_v2
+from wpt_receiver.sbar import rectifier_current
 
-from .core import (OBS_OFFSET, OBS_SCALE, SCALAR_OPS, EnvConfig, advance, build_plans, reward_cost)
+from .core import (OBS_OFFSET, OBS_SCALE, SCALAR_OPS, EnvConfig, advance, build_plans, reward_cost, sbar_v2)
 from .objective import SHORT_MODE_IL_A, SHORT_MODE_WITHIN_S, short_mode_i2_a, stop_step
+from .peaks import LOOKUP_SCALARS, PeakLookup
 from .render import draw_envelope
 from .scenario import draw_episodes, get_scenario, scenario_from_options
 
@@ -117,6 +118,8 @@ class SbarChargingEnv(gym.Env):
         self._inv_rated = 1.0 / c.rated_i2_a
         self._n_sub = c.n_sub
         self._w = c.reward
+        self._devices, self._dev = c.device_set(), c.device_terms
+        self._peak = PeakLookup(c.link, self._devices)
         self._k = None
         self._hist = None
         self._kern = _load_single_kernel() if compiled is None or compiled else None
@@ -125,8 +128,9 @@ class SbarChargingEnv(gym.Env):
         if self._kern is not None:
             w = self._w
             self._par = np.concatenate([[self._T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a,
-                                         self._M, self._n_sub], OBS_SCALE, OBS_OFFSET]).astype(float)
-            self._out = np.empty(18)
+                                         self._M, self._n_sub], OBS_SCALE, OBS_OFFSET, self._dev,
+                                        LOOKUP_SCALARS]).astype(float)
+            self._out = np.empty(19)
 
     # ------------------------------------------------------------------ interface
     def _make_action_space(self):
@@ -155,7 +159,7 @@ class SbarChargingEnv(gym.Env):
         self._plan = p
         self._t_stop = float(p.t_stop_s[0])
         self._stop_k = int(stop_step(p.t_stop_s, self._dt, self._T)[0])
-        i2_sm = short_mode_i2_a(self.config.link, p.lm_h[0])
+        i2_sm = short_mode_i2_a(self.config.link, p.lm_h[0], self._devices)
         if self._kern is None:
             self._start_float(p, i2_sm)
         else:
@@ -165,11 +169,12 @@ class SbarChargingEnv(gym.Env):
         vl, d, soc, cmd0 = float(p.vl0[0]), float(p.d0[0]), float(p.battery[0, 2]), float(p.cmd_a[0, 0])
         il = float(rectifier_current(d, abs(i2)))
         ib = il - float(p.battery[0, 7])
-        info = {"t_s": 0.0, "i2_a": i2, "i2_peak_a": abs(i2), "i1_a": i1, "d_short": d,
-                "v2_v": float(rectifier_v2(d, vl, i2)), "rect_current_a": il,
+        info = {"t_s": 0.0, "i2_a": i2, "i2_peak_a": self._peak.scalar(abs(i2), d, vl), "i1_a": i1, "d_short": d,
+                "v2_v": sbar_v2(d, vl, i2, self._dev, SCALAR_OPS), "rect_current_a": il,
                 "battery_v": vl, "battery_current_a": ib, "soc": soc, "charge_cmd_a": cmd0,
                 "lm_h": float(p.lm_h[0, 0]), "energy_j": 0.0, "cost": 0.0, "overcurrent": 0.0, "overshoot": -np.inf,
-                "episode_cost": 0.0, "reached_short_mode": False, "scenario": scn.name, "t_stop_s": self._t_stop}
+                "episode_cost": 0.0, "reached_short_mode": False, "scenario": scn.name, "t_stop_s": self._t_stop,
+                "i2_peak_envelope_a": abs(i2)}
         if self.render_mode is not None:
             self._hist = [[0.0], [i2], [il], [cmd0], [d]]
         obs = np.array([_n(i2, 0), _n(vl, 1), _n(ib, 2), _n(il, 3), _n(soc, 4),
@@ -215,14 +220,14 @@ class SbarChargingEnv(gym.Env):
         if self._kern is None:
             return self._step_float(k, d)
         obs = np.empty(OBS_DIM, np.float32)
-        reward = self._kern(k, d, self._st, self._steps, self._slow, self._par, obs, self._out)
-        t, i2, pk, i1, _, v2, il, vl, ib, soc, cmd, lm, energy, over, cost, rm, ec, sm = self._out.tolist()
+        reward = self._kern(k, d, self._st, self._steps, self._slow, self._par, self._peak.table, obs, self._out)
+        t, i2, pk, i1, _, v2, il, vl, ib, soc, cmd, lm, energy, over, cost, rm, ec, pk_env, sm = self._out.tolist()
         k += 1
         self._k = k
         info = {"t_s": t, "i2_a": i2, "i2_peak_a": pk, "i1_a": i1, "d_short": d, "v2_v": v2, "rect_current_a": il,
                 "battery_v": vl, "battery_current_a": ib, "soc": soc, "charge_cmd_a": cmd, "lm_h": lm,
                 "energy_j": energy, "cost": cost, "overcurrent": over, "overshoot": rm, "episode_cost": ec,
-                "reached_short_mode": sm != 0.0}
+                "reached_short_mode": sm != 0.0, "i2_peak_envelope_a": pk_env}
         if self._hist is not None:
             for lst, v in zip(self._hist, (t, i2, il, float(self._steps[k, 0]), d)):
                 lst.append(v)
@@ -231,8 +236,10 @@ class SbarChargingEnv(gym.Env):
     def _step_float(self, k: int, d: float):
         """:meth:`step` on Python floats (:func:`envs.core.advance` with ``SCALAR_OPS``): the reference."""
         vl_old = self._vl
-        i1, i2, peak, il, ib, soc, vrc, vl, v2 = advance(self._i1, self._i2, vl_old, self._soc, self._vrc, d,
-                                                         self._coef[k // self._M], self._b, SCALAR_OPS, self._n_sub)
+        i1, i2, pk_env, il, ib, soc, vrc, vl, v2 = advance(self._i1, self._i2, vl_old, self._soc, self._vrc, d,
+                                                           self._coef[k // self._M], self._b, SCALAR_OPS, self._n_sub,
+                                                           self._dev)
+        peak = self._peak.scalar(pk_env, d, vl_old)
         cmd = self._cmd[k]
         reward, overcurrent = reward_cost(il, cmd, peak, self._inv_rated, self._w, SCALAR_OPS)
         cost = self._objective(k, peak, il)
@@ -257,7 +264,7 @@ class SbarChargingEnv(gym.Env):
                 "rect_current_a": il, "battery_v": vl, "battery_current_a": ib, "soc": soc,
                 "charge_cmd_a": cmd, "lm_h": self._lm[(k - 1) // self._M], "energy_j": energy, "cost": cost,
                 "overcurrent": overcurrent, "overshoot": self._run_max, "episode_cost": max(self._run_max, 0.0),
-                "reached_short_mode": self._sm_ok and self._sm_checked}
+                "reached_short_mode": self._sm_ok and self._sm_checked, "i2_peak_envelope_a": pk_env}
         if self._hist is not None:
             for lst, v in zip(self._hist, (k * self._dt, i2, il, cmd_next, d)):
                 lst.append(v)
