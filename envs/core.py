@@ -247,6 +247,7 @@ def _sign_float(x):
 
 class _ScalarOps:
     sin = staticmethod(math.sin)
+    sqrt = staticmethod(math.sqrt)
     sign = staticmethod(_sign_float)
     minimum = staticmethod(min)
     maximum = staticmethod(max)
@@ -254,6 +255,7 @@ class _ScalarOps:
 
 class _NumpyOps:
     sin = staticmethod(np.sin)
+    sqrt = staticmethod(np.sqrt)
     sign = staticmethod(np.sign)
     minimum = staticmethod(np.minimum)
     maximum = staticmethod(np.maximum)
@@ -295,8 +297,9 @@ def advance(i1, i2, vl, soc, vrc, d, c, b, ops, n_sub: int = 1, dev=(0.0, 0.0)):
     ocv0, docv, soc0, r0, rc_decay, rc_gain, dsoc, i_load, bus_decay = b
     vf, dr = dev
     vc = vl + vf
-    v2c = rectifier_v2(d, vc, i2, sin=ops.sin, sign=ops.sign)   # the clamp's part
-    rx = dr * (d + ops.sin(math.pi * d) / math.pi)
+    s = ops.sin(HALF_PI * d)
+    v2c = FOUR_OVER_PI * vc * (1.0 - s) * ops.sign(i2)   # the clamp's part (rectifier_v2's arithmetic)
+    rx = dr * (d + 2.0 * s * ops.sqrt(1.0 - s * s) / math.pi)   # sin(pi d) = 2 s cos(pi d/2), d in [0, 1]
     v2 = v2c + rx * i2
     i2m = m10 * i1 + m11 * i2 + me1 + mb11 * v2
     i1n = a00 * i1 + a01 * i2 + e0 + b01 * v2

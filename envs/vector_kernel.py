@@ -74,8 +74,9 @@ def _link_step(i1, i2, vl, d, c, vf, dr):
     v2, split, |V2c|, rx)``; ``split``: the I2 envelope changes sign within the step (re-done in
     sub-steps with the clamp's |V2c| and the short-window excess ``rx I2``)."""
     vc = vl + vf
-    v2c = _FOUR_OVER_PI * vc * (1.0 - math.sin(_HALF_PI * d)) * _sign(i2)
-    rx = dr * (d + math.sin(math.pi * d) / math.pi)
+    s = math.sin(_HALF_PI * d)
+    v2c = _FOUR_OVER_PI * vc * (1.0 - s) * _sign(i2)
+    rx = dr * (d + 2.0 * s * math.sqrt(1.0 - s * s) / math.pi)
     v2 = v2c + rx * i2
     i2m = c[8] * i1 + c[9] * i2 + c[10] + c[11] * v2
     i1n = c[0] * i1 + c[1] * i2 + c[4] + c[6] * v2
