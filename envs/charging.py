@@ -44,7 +44,11 @@ class SbarChargingEnv(gym.Env):
     short duty ``d_short`` of the SBAR (eq. 9) for the next control period; the SBAR's V2 takes the
     sign of the I2 envelope (the diodes conduct with the instantaneous i2), so it always absorbs
     power and its output current ``I_L = (2/pi) (1 - sin(pi/2 d)) |I2| >= 0``. The SBAR output feeds
-    the battery (equivalent circuit), which also supplies the hover power.
+    the battery (equivalent circuit), which also supplies the hover power. The semiconductors are
+    real parts (``EnvConfig.devices``, default ``"schottky"`` as the mission; ``"ideal"`` = the
+    paper's circuit): the inverter's and the rectifier's on-resistances in R1 / R2, the diodes'
+    forward drop on the clamp ``VL + Vf`` and the shorted channels' excess in V2
+    (:func:`envs.core.advance`).
 
     ## Action Space
     ``Box(-1, 1, (1,), float32)``: ``d_short = (a + 1) / 2`` (:func:`mission_sim.contract.action_to_duty`);
@@ -52,7 +56,7 @@ class SbarChargingEnv(gym.Env):
     takes ``Discrete(2)``: 0 = RM, 1 = SM (the classic unsynchronised ON-OFF method).
 
     ## Observation Space
-    ``Box(-1, 1, (7,), float32)``, the contract of :mod:`mission_sim.contract`, each field mapped
+    ``Box(-1, 1, (8,), float32)``, the contract of :mod:`mission_sim.contract`, each field mapped
     linearly from its physical range to [-1, 1] and clipped:
 
     | Num | Observation         | Physical range | Unit | Meaning                                        |
@@ -64,14 +68,18 @@ class SbarChargingEnv(gym.Env):
     | 4   | soc                 | 0 .. 1         | -    | state of charge                                 |
     | 5   | charge_cmd_a        | 0 .. 20        | A    | command for the next step; 0 = stop charging    |
     | 6   | last_d_short        | 0 .. 1         | -    | duty applied in the previous step               |
+    | 7   | t_since_stop_s      | 0 .. 0.01      | s    | time since the stop command (0 before it)       |
 
-    Physical values (true I2, the step's peak I2, I1, V2, Lm, energy, ...) are in ``info``.
+    Physical values (true I2, the step's instantaneous and envelope peaks, I1, V2, Lm, energy, ...)
+    are in ``info``.
 
     ## Rewards
-    Per step, with ``I_L`` the SBAR output current, ``I*`` the command, ``I2_pk`` the largest
-    magnitude |I2| of the envelope at mid-step and at the end of the step (of every rectifier-period
-    sub-step when the envelope changes sign within the step; a negative amplitude is a real current
-    of that size):
+    Per step, with ``I_L`` the SBAR output current, ``I*`` the command, ``I2_pk`` the instantaneous
+    peak |i2| of the step (``info["i2_peak_a"]``): the largest magnitude |I2| of the envelope at
+    mid-step and at the end of the step (of every rectifier-period sub-step when the envelope changes
+    sign within the step; a negative amplitude is a real current of that size;
+    ``info["i2_peak_envelope_a"]``) plus the SBAR's harmonic ripple at the step's duty
+    (:mod:`envs.peaks`):
 
     | Term        | Value                                              | Default weight |
     |-------------|----------------------------------------------------|----------------|

@@ -6,8 +6,10 @@ Composition (gym-electric-motor style):
 * physical system: the envelope link (paper eq. 4) stepped by exact ZOH
   (:func:`wpt_receiver.zoh_discretise`, the closed form :class:`wpt_receiver.EnvelopeLink` uses)
   with a true Lm that follows the hover pose error (:mod:`envs.plant`), the SBAR (eq. 9 with the
-  sign of the I2 envelope, :func:`wpt_receiver.sbar.rectifier_v2`: it always absorbs power) and
-  the battery equivalent circuit;
+  sign of the I2 envelope, :func:`wpt_receiver.sbar.rectifier_v2`: it always absorbs power), the
+  semiconductor devices averaged as in the mission (:attr:`EnvConfig.devices`: on-resistances folded
+  into R1 / R2, forward drop on the clamp, short-window excess in V2) and the battery equivalent
+  circuit; the step's peak is turned into the instantaneous peak (harmonic ripple) by :mod:`envs.peaks`;
 * reference generator: the seeded charge command (:mod:`envs.scenario`);
 * reward and cost: :func:`reward_cost`;
 * visualisation: :mod:`envs.render`.
