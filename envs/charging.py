@@ -137,7 +137,8 @@ class SbarChargingEnv(gym.Env):
             w = self._w
             self._par = np.concatenate([[self._T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a,
                                          self._M, self._n_sub], OBS_SCALE, OBS_OFFSET, self._dev,
-                                        LOOKUP_SCALARS]).astype(float)
+                                        LOOKUP_SCALARS, self._peak.kernel_table.shape,
+                                        self._peak.kernel_table.ravel()]).astype(float)
             self._out = np.empty(19)
 
     # ------------------------------------------------------------------ interface
@@ -167,7 +168,7 @@ class SbarChargingEnv(gym.Env):
         self._plan = p
         self._t_stop = float(p.t_stop_s[0])
         self._stop_k = int(stop_step(p.t_stop_s, self._dt, self._T)[0])
-        i2_sm = short_mode_i2_a(self.config.link, p.lm_h[0], self._devices)
+        i2_sm = short_mode_i2_a(self.config.link_short_mode, p.lm_h[0])
         if self._kern is None:
             self._start_float(p, i2_sm)
         else:
@@ -228,7 +229,7 @@ class SbarChargingEnv(gym.Env):
         if self._kern is None:
             return self._step_float(k, d)
         obs = np.empty(OBS_DIM, np.float32)
-        reward = self._kern(k, d, self._st, self._steps, self._slow, self._par, self._peak.table, obs, self._out)
+        reward = self._kern(k, d, self._st, self._steps, self._slow, self._par, obs, self._out)
         t, i2, pk, i1, _, v2, il, vl, ib, soc, cmd, lm, energy, over, cost, rm, ec, pk_env, sm = self._out.tolist()
         k += 1
         self._k = k

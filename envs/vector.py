@@ -121,7 +121,7 @@ class SbarChargingVectorEnv(VectorEnv):
         self._lm_all[:, idx] = p.lm_h.T
         self._bat[:, idx] = p.battery.T
         self._t_stop[idx] = p.t_stop_s
-        self._i2sm_all[idx] = short_mode_i2_a(c.link, p.lm_h, self._devices)
+        self._i2sm_all[idx] = short_mode_i2_a(c.link_short_mode, p.lm_h)
         self._stop_k[idx] = stop_step(p.t_stop_s, c.dt_s, c.n_steps)
         self._run_max[idx] = -np.inf
         self._sm_ok[idx] = True
@@ -243,7 +243,7 @@ class SbarChargingVectorEnv(VectorEnv):
         ep = (self._i2sm_all, self._stop_k, self._t_stop, self._run_max, self._sm_ok, self._sm_checked)
         par = (self._T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a, *self._dev, *LOOKUP_SCALARS)
         kern(d, self._state, self._k, self._j, self._coef_all, self._coef_cur, self._bat, self._cmd, self._noise,
-             self._lm_all, ep, self._M, self._n_sub, par, OBS_SCALE, OBS_OFFSET, self._peak.table, obs, reward,
+             self._lm_all, ep, self._M, self._n_sub, par, OBS_SCALE, OBS_OFFSET, self._peak.kernel_table, obs, reward,
              truncated, block)
         info = dict(zip(rows, block.T))   # (n,) views, one per key
         info["reached_short_mode"] = self._sm_ok & self._sm_checked

@@ -87,31 +87,27 @@ def _link_step(i1, i2, vl, d, c, vf, dr):
 
 
 @njit(cache=True)
-def _inst_peak(pk, d, vl, tab, vl0, inv_dv, inv_imax):
-    """Instantaneous peak: :func:`envs.peaks.inst_peak`, operation for operation (``tab`` the
-    (n_vl, n_d, n_i) excess table; ``vl0``, ``inv_dv``, ``inv_imax`` :data:`envs.peaks.LOOKUP_SCALARS`)."""
-    nv, nd, ni = tab.shape
+def _inst_peak(pk, d, vl, tab, vlc, inv_imax):
+    """Instantaneous peak: :func:`envs.peaks.inst_peak`, operation for operation (``tab`` the (n_d,
+    n_i, 2) table of :func:`envs.peaks.fold_vl`; ``vlc``, ``inv_imax`` :data:`envs.peaks.LOOKUP_SCALARS`)."""
+    nd, ni = tab.shape[0], tab.shape[1]
     x = d * (nd - 1)
     y = math.sqrt(min(pk * inv_imax, 1.0)) * (ni - 1)
     j = min(int(x), nd - 2)
     k = min(int(y), ni - 2)
     fx, fy = x - j, y - k
-    v = (vl - vl0) * inv_dv
-    v = 0.0 if v < 0.0 else (nv - 1.0 if v > nv - 1.0 else v)
-    m = min(int(v), nv - 2)
-    fv = v - m
-    e0 = ((tab[m, j, k] * (1.0 - fx) + tab[m, j + 1, k] * fx) * (1.0 - fy)
-          + (tab[m, j, k + 1] * (1.0 - fx) + tab[m, j + 1, k + 1] * fx) * fy)
-    e1 = ((tab[m + 1, j, k] * (1.0 - fx) + tab[m + 1, j + 1, k] * fx) * (1.0 - fy)
-          + (tab[m + 1, j, k + 1] * (1.0 - fx) + tab[m + 1, j + 1, k + 1] * fx) * fy)
-    return pk + (e0 + fv * (e1 - e0))
+    ea = ((tab[j, k, 0] * (1.0 - fx) + tab[j + 1, k, 0] * fx) * (1.0 - fy)
+          + (tab[j, k + 1, 0] * (1.0 - fx) + tab[j + 1, k + 1, 0] * fx) * fy)
+    eb = ((tab[j, k, 1] * (1.0 - fx) + tab[j + 1, k, 1] * fx) * (1.0 - fy)
+          + (tab[j, k + 1, 1] * (1.0 - fx) + tab[j + 1, k + 1, 1] * fx) * fy)
+    return pk + (ea + eb * (vl - vlc))
 
 
 @njit(cache=True)
 def _link_pass(d, state, k, j, coef_all, coef_cur, slow_every, n_sub, vf, dr, sc, idx):
-    """Pass 1: the link step of every sub-environment into ``sc`` (rows i1n, i2n, pk, il, v2, |V2c|,
-    rx), the current coefficients moved to the step's slow segment; returns how many steps are split
-    (their indices in ``idx[:m]``)."""
+    """Pass 1: the link step of every sub-environment into ``sc`` (rows i1n, i2n, pk, il, v2), the
+    current coefficients moved to the step's slow segment; returns how many steps are split (their
+    indices in ``idx[:m]``)."""
     m = 0
     for e in range(d.shape[0]):
         kk = k[e]
@@ -119,9 +115,9 @@ def _link_pass(d, state, k, j, coef_all, coef_cur, slow_every, n_sub, vf, dr, sc
         if jj != j[e] or kk == 0:
             coef_cur[e] = coef_all[e, jj]
             j[e] = jj
-        i1n, i2n, pk, il, v2, split, vm, rx = _link_step(state[0, e], state[1, e], state[2, e], d[e], coef_cur[e],
-                                                         vf, dr)
-        sc[0, e], sc[1, e], sc[2, e], sc[3, e], sc[4, e], sc[5, e], sc[6, e] = i1n, i2n, pk, il, v2, vm, rx
+        i1n, i2n, pk, il, v2, split, _, _ = _link_step(state[0, e], state[1, e], state[2, e], d[e], coef_cur[e], vf,
+                                                       dr)
+        sc[0, e], sc[1, e], sc[2, e], sc[3, e], sc[4, e] = i1n, i2n, pk, il, v2
         if n_sub > 1 and split:
             idx[m] = e
             m += 1
@@ -171,14 +167,17 @@ def _substeps_one(i1, i2, vm, rx, vc, c, n_sub):
 
 
 @njit(cache=True)
-def _substep_pass(idx, m, state, coef_cur, n_sub, vf, sc):
-    """Pass 2: the split steps ``idx[:m]`` re-done in ``n_sub`` sub-steps, batched; results into ``sc``."""
+def _substep_pass(idx, m, state, d, coef_cur, n_sub, vf, dr, sc):
+    """Pass 2: the split steps ``idx[:m]`` re-done in ``n_sub`` sub-steps, batched; results into ``sc``
+    (the clamp's |V2c| and the excess rx recomputed as in :func:`_link_step`, the same numbers)."""
     w = np.empty((6, m))
     h = np.empty((8, m))
     for q in range(m):
         e = idx[q]
-        w[0, q], w[1, q], w[2, q], w[3, q], w[4, q] = state[0, e], state[1, e], sc[5, e], -1.0, 0.0
-        w[5, q] = sc[6, e]
+        s = math.sin(_HALF_PI * d[e])
+        w[0, q], w[1, q], w[3, q], w[4, q] = state[0, e], state[1, e], -1.0, 0.0
+        w[2, q] = _FOUR_OVER_PI * (state[2, e] + vf) * (1.0 - s)
+        w[5, q] = dr * (d[e] + 2.0 * s * math.sqrt(1.0 - s * s) / math.pi)
         for r in range(8):
             h[r, q] = coef_cur[e, _SUB_COLS[r]]
     _substeps_batch(w, h, n_sub)
@@ -253,16 +252,16 @@ def _finish_pass(d, state, k, j, bat, cmd_all, noise_all, lm_all, ep, par, scale
                  trunc, info):
     """Pass 3: instantaneous peak, battery, reward, objective, state, observation and info of every
     sub-environment. ``ep`` = (i2sm_all (n, S), stop_k, t_stop, run_max, sm_ok, sm_checked) of the
-    episodes; ``par`` = (n_steps, dt, inv_rated, w_track, w_over, i_ref, vf, dr, vl0, inv_dv,
-    inv_imax) as floats; ``ptab`` the peak table (:mod:`envs.peaks`)."""
+    episodes; ``par`` = (n_steps, dt, inv_rated, w_track, w_over, i_ref, vf, dr, vlc, inv_imax) as
+    floats; ``ptab`` the peak table (:mod:`envs.peaks`)."""
     i2sm_all, stop_k, t_stop, run_max, ok, checked = ep
     n_steps, dt, inv_rated, w_track, w_over, i_ref = par[0], par[1], par[2], par[3], par[4], par[5]
-    vl0, inv_dv, inv_imax = par[8], par[9], par[10]
+    vlc, inv_imax = par[8], par[9]
     for e in range(d.shape[0]):
         kk, jj = k[e], j[e]
         vl_old = state[2, e]
         i1, i2, pk_env, il, v2 = sc[0, e], sc[1, e], sc[2, e], sc[3, e], sc[4, e]
-        pk = _inst_peak(pk_env, d[e], vl_old, ptab, vl0, inv_dv, inv_imax)
+        pk = _inst_peak(pk_env, d[e], vl_old, ptab, vlc, inv_imax)
         ib, soc, vrc, vl = _battery(il, state[3, e], state[4, e], vl_old, bat[0, e], bat[1, e], bat[2, e], bat[3, e],
                                     bat[4, e], bat[5, e], bat[6, e], bat[7, e], bat[8, e])
         cmd = cmd_all[kk, e]
@@ -292,12 +291,12 @@ def step_kernel(d, state, k, j, coef_all, coef_cur, bat, cmd_all, noise_all, lm_
     float32, ``reward``, ``trunc`` and ``info`` (n, len(INFO_ROWS)) are filled (one row per
     sub-environment: the writes go to one place in memory, not to 17 rows)."""
     n = d.shape[0]
-    sc = np.empty((7, n))
+    sc = np.empty((5, n))
     idx = np.empty(n, dtype=np.int64)
     vf, dr = par[6], par[7]
     m = _link_pass(d, state, k, j, coef_all, coef_cur, slow_every, n_sub, vf, dr, sc, idx)
     if m:
-        _substep_pass(idx, m, state, coef_cur, n_sub, vf, sc)
+        _substep_pass(idx, m, state, d, coef_cur, n_sub, vf, dr, sc)
     _finish_pass(d, state, k, j, bat, cmd_all, noise_all, lm_all, ep, par, scale, offset, sc, ptab, obs, reward, trunc,
                  info)
 
@@ -310,17 +309,18 @@ ST_ROWS = ("i1", "i2", "vl", "soc", "vrc", "d", "run_max", "sm_ok", "sm_checked"
 PAR_ROWS = ("n_steps", "dt", "inv_rated", "w_track", "w_over", "i_ref", "slow_every", "n_sub")
 #: the last rows of the single env's ``par``: the devices (:attr:`envs.core.EnvConfig.device_terms`) and
 #: :data:`envs.peaks.LOOKUP_SCALARS`
-PAR_TAIL = ("vf", "dr", "vl0", "inv_dv", "inv_imax")
+PAR_TAIL = ("vf", "dr", "vlc", "inv_imax")
 #: the values :func:`single_step` writes to ``out``: :data:`INFO_ROWS`, then reached short mode (1.0 / 0.0)
 SINGLE_OUT = INFO_ROWS + ("reached_short_mode",)
 
 
 @njit(cache=True)
-def single_step(k, d, st, steps, slow, par, ptab, obs, out):
+def single_step(k, d, st, steps, slow, par, obs, out):
     """Step ``k`` of one env with duty ``d``: the helpers of :func:`step_kernel` on one episode.
     ``st`` (:data:`ST_ROWS`) is updated in place; ``steps`` (T + 1, 2) = command, sensor noise per
     step; ``slow`` (S, 22) = the 20 ZOH coefficients, true Lm, short-mode I2 per slow segment;
-    ``par`` = :data:`PAR_ROWS`, OBS_SCALE, OBS_OFFSET, :data:`PAR_TAIL`; ``ptab`` the peak table.
+    ``par`` = :data:`PAR_ROWS`, OBS_SCALE, OBS_OFFSET, :data:`PAR_TAIL`, the peak table's shape (3 values)
+    and the table (:attr:`envs.peaks.PeakLookup.kernel_table`, flattened; one argument less to dispatch).
     Fills ``obs`` (8,) float32 and ``out`` (:data:`SINGLE_OUT`); returns the reward."""
     dt, n_sub, vf = par[1], int(par[7]), par[24]
     j = k // int(par[6])
@@ -330,7 +330,8 @@ def single_step(k, d, st, steps, slow, par, ptab, obs, out):
     if n_sub > 1 and split:
         i1, i2, pk, il = _substeps_one(st[0], st[1], vm, rx, vl_old + vf, c, n_sub)
     pk_env = pk
-    pk = _inst_peak(pk_env, d, vl_old, ptab, par[26], par[27], par[28])
+    ptab = par[31:].reshape((int(par[28]), int(par[29]), int(par[30])))
+    pk = _inst_peak(pk_env, d, vl_old, ptab, par[26], par[27])
     ib, soc, vrc, vl = _battery(il, st[3], st[4], vl_old, st[11], st[12], st[13], st[14], st[15], st[16], st[17],
                                 st[18], st[19])
     cmd = steps[k, 0]
