@@ -10,10 +10,11 @@ from gymnasium import spaces
 
 from mission_sim.contract import OBS_DIM, PolicyContext
 
-from wpt_receiver.sbar import rectifier_current, rectifier_v2
+from wpt_receiver.sbar import rectifier_current
 
-from .core import (OBS_OFFSET, OBS_SCALE, SCALAR_OPS, EnvConfig, advance, build_plans, reward_cost)
+from .core import (OBS_OFFSET, OBS_SCALE, SCALAR_OPS, EnvConfig, advance, build_plans, reward_cost, sbar_v2)
 from .objective import SHORT_MODE_IL_A, SHORT_MODE_WITHIN_S, short_mode_i2_a, stop_step
+from .peaks import LOOKUP_SCALARS, PeakLookup
 from .render import draw_envelope
 from .scenario import draw_episodes, get_scenario, scenario_from_options
 
@@ -43,7 +44,11 @@ class SbarChargingEnv(gym.Env):
     short duty ``d_short`` of the SBAR (eq. 9) for the next control period; the SBAR's V2 takes the
     sign of the I2 envelope (the diodes conduct with the instantaneous i2), so it always absorbs
     power and its output current ``I_L = (2/pi) (1 - sin(pi/2 d)) |I2| >= 0``. The SBAR output feeds
-    the battery (equivalent circuit), which also supplies the hover power.
+    the battery (equivalent circuit), which also supplies the hover power. The semiconductors are
+    real parts (``EnvConfig.devices``, default ``"schottky"`` as the mission; ``"ideal"`` = the
+    paper's circuit): the inverter's and the rectifier's on-resistances in R1 / R2, the diodes'
+    forward drop on the clamp ``VL + Vf`` and the shorted channels' excess in V2
+    (:func:`envs.core.advance`).
 
     ## Action Space
     ``Box(-1, 1, (1,), float32)``: ``d_short = (a + 1) / 2`` (:func:`mission_sim.contract.action_to_duty`);
@@ -51,7 +56,7 @@ class SbarChargingEnv(gym.Env):
     takes ``Discrete(2)``: 0 = RM, 1 = SM (the classic unsynchronised ON-OFF method).
 
     ## Observation Space
-    ``Box(-1, 1, (7,), float32)``, the contract of :mod:`mission_sim.contract`, each field mapped
+    ``Box(-1, 1, (8,), float32)``, the contract of :mod:`mission_sim.contract`, each field mapped
     linearly from its physical range to [-1, 1] and clipped:
 
     | Num | Observation         | Physical range | Unit | Meaning                                        |
@@ -63,14 +68,18 @@ class SbarChargingEnv(gym.Env):
     | 4   | soc                 | 0 .. 1         | -    | state of charge                                 |
     | 5   | charge_cmd_a        | 0 .. 20        | A    | command for the next step; 0 = stop charging    |
     | 6   | last_d_short        | 0 .. 1         | -    | duty applied in the previous step               |
+    | 7   | t_since_stop_s      | 0 .. 0.01      | s    | time since the stop command (0 before it)       |
 
-    Physical values (true I2, the step's peak I2, I1, V2, Lm, energy, ...) are in ``info``.
+    Physical values (true I2, the step's instantaneous and envelope peaks, I1, V2, Lm, energy, ...)
+    are in ``info``.
 
     ## Rewards
-    Per step, with ``I_L`` the SBAR output current, ``I*`` the command, ``I2_pk`` the largest
-    magnitude |I2| of the envelope at mid-step and at the end of the step (of every rectifier-period
-    sub-step when the envelope changes sign within the step; a negative amplitude is a real current
-    of that size):
+    Per step, with ``I_L`` the SBAR output current, ``I*`` the command, ``I2_pk`` the instantaneous
+    peak |i2| of the step (``info["i2_peak_a"]``): the largest magnitude |I2| of the envelope at
+    mid-step and at the end of the step (of every rectifier-period sub-step when the envelope changes
+    sign within the step; a negative amplitude is a real current of that size;
+    ``info["i2_peak_envelope_a"]``) plus the SBAR's harmonic ripple at the step's duty
+    (:mod:`envs.peaks`):
 
     | Term        | Value                                              | Default weight |
     |-------------|----------------------------------------------------|----------------|
@@ -117,6 +126,8 @@ class SbarChargingEnv(gym.Env):
         self._inv_rated = 1.0 / c.rated_i2_a
         self._n_sub = c.n_sub
         self._w = c.reward
+        self._devices, self._dev = c.device_set(), c.device_terms
+        self._peak = PeakLookup(c.link, self._devices)
         self._k = None
         self._hist = None
         self._kern = _load_single_kernel() if compiled is None or compiled else None
@@ -125,8 +136,10 @@ class SbarChargingEnv(gym.Env):
         if self._kern is not None:
             w = self._w
             self._par = np.concatenate([[self._T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a,
-                                         self._M, self._n_sub], OBS_SCALE, OBS_OFFSET]).astype(float)
-            self._out = np.empty(18)
+                                         self._M, self._n_sub], OBS_SCALE, OBS_OFFSET, self._dev,
+                                        LOOKUP_SCALARS, self._peak.kernel_table.shape,
+                                        self._peak.kernel_table.ravel()]).astype(float)
+            self._out = np.empty(19)
 
     # ------------------------------------------------------------------ interface
     def _make_action_space(self):
@@ -155,7 +168,7 @@ class SbarChargingEnv(gym.Env):
         self._plan = p
         self._t_stop = float(p.t_stop_s[0])
         self._stop_k = int(stop_step(p.t_stop_s, self._dt, self._T)[0])
-        i2_sm = short_mode_i2_a(self.config.link, p.lm_h[0])
+        i2_sm = short_mode_i2_a(self.config.link_short_mode, p.lm_h[0])
         if self._kern is None:
             self._start_float(p, i2_sm)
         else:
@@ -165,11 +178,12 @@ class SbarChargingEnv(gym.Env):
         vl, d, soc, cmd0 = float(p.vl0[0]), float(p.d0[0]), float(p.battery[0, 2]), float(p.cmd_a[0, 0])
         il = float(rectifier_current(d, abs(i2)))
         ib = il - float(p.battery[0, 7])
-        info = {"t_s": 0.0, "i2_a": i2, "i2_peak_a": abs(i2), "i1_a": i1, "d_short": d,
-                "v2_v": float(rectifier_v2(d, vl, i2)), "rect_current_a": il,
+        info = {"t_s": 0.0, "i2_a": i2, "i2_peak_a": self._peak.scalar(abs(i2), d, vl), "i1_a": i1, "d_short": d,
+                "v2_v": sbar_v2(d, vl, i2, self._dev, SCALAR_OPS), "rect_current_a": il,
                 "battery_v": vl, "battery_current_a": ib, "soc": soc, "charge_cmd_a": cmd0,
                 "lm_h": float(p.lm_h[0, 0]), "energy_j": 0.0, "cost": 0.0, "overcurrent": 0.0, "overshoot": -np.inf,
-                "episode_cost": 0.0, "reached_short_mode": False, "scenario": scn.name, "t_stop_s": self._t_stop}
+                "episode_cost": 0.0, "reached_short_mode": False, "scenario": scn.name, "t_stop_s": self._t_stop,
+                "i2_peak_envelope_a": abs(i2)}
         if self.render_mode is not None:
             self._hist = [[0.0], [i2], [il], [cmd0], [d]]
         obs = np.array([_n(i2, 0), _n(vl, 1), _n(ib, 2), _n(il, 3), _n(soc, 4),
@@ -216,13 +230,13 @@ class SbarChargingEnv(gym.Env):
             return self._step_float(k, d)
         obs = np.empty(OBS_DIM, np.float32)
         reward = self._kern(k, d, self._st, self._steps, self._slow, self._par, obs, self._out)
-        t, i2, pk, i1, _, v2, il, vl, ib, soc, cmd, lm, energy, over, cost, rm, ec, sm = self._out.tolist()
+        t, i2, pk, i1, _, v2, il, vl, ib, soc, cmd, lm, energy, over, cost, rm, ec, pk_env, sm = self._out.tolist()
         k += 1
         self._k = k
         info = {"t_s": t, "i2_a": i2, "i2_peak_a": pk, "i1_a": i1, "d_short": d, "v2_v": v2, "rect_current_a": il,
                 "battery_v": vl, "battery_current_a": ib, "soc": soc, "charge_cmd_a": cmd, "lm_h": lm,
                 "energy_j": energy, "cost": cost, "overcurrent": over, "overshoot": rm, "episode_cost": ec,
-                "reached_short_mode": sm != 0.0}
+                "reached_short_mode": sm != 0.0, "i2_peak_envelope_a": pk_env}
         if self._hist is not None:
             for lst, v in zip(self._hist, (t, i2, il, float(self._steps[k, 0]), d)):
                 lst.append(v)
@@ -231,8 +245,10 @@ class SbarChargingEnv(gym.Env):
     def _step_float(self, k: int, d: float):
         """:meth:`step` on Python floats (:func:`envs.core.advance` with ``SCALAR_OPS``): the reference."""
         vl_old = self._vl
-        i1, i2, peak, il, ib, soc, vrc, vl, v2 = advance(self._i1, self._i2, vl_old, self._soc, self._vrc, d,
-                                                         self._coef[k // self._M], self._b, SCALAR_OPS, self._n_sub)
+        i1, i2, pk_env, il, ib, soc, vrc, vl, v2 = advance(self._i1, self._i2, vl_old, self._soc, self._vrc, d,
+                                                           self._coef[k // self._M], self._b, SCALAR_OPS, self._n_sub,
+                                                           self._dev)
+        peak = self._peak.scalar(pk_env, d, vl_old)
         cmd = self._cmd[k]
         reward, overcurrent = reward_cost(il, cmd, peak, self._inv_rated, self._w, SCALAR_OPS)
         cost = self._objective(k, peak, il)
@@ -257,7 +273,7 @@ class SbarChargingEnv(gym.Env):
                 "rect_current_a": il, "battery_v": vl, "battery_current_a": ib, "soc": soc,
                 "charge_cmd_a": cmd, "lm_h": self._lm[(k - 1) // self._M], "energy_j": energy, "cost": cost,
                 "overcurrent": overcurrent, "overshoot": self._run_max, "episode_cost": max(self._run_max, 0.0),
-                "reached_short_mode": self._sm_ok and self._sm_checked}
+                "reached_short_mode": self._sm_ok and self._sm_checked, "i2_peak_envelope_a": pk_env}
         if self._hist is not None:
             for lst, v in zip(self._hist, (k * self._dt, i2, il, cmd_next, d)):
                 lst.append(v)

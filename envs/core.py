@@ -6,8 +6,10 @@ Composition (gym-electric-motor style):
 * physical system: the envelope link (paper eq. 4) stepped by exact ZOH
   (:func:`wpt_receiver.zoh_discretise`, the closed form :class:`wpt_receiver.EnvelopeLink` uses)
   with a true Lm that follows the hover pose error (:mod:`envs.plant`), the SBAR (eq. 9 with the
-  sign of the I2 envelope, :func:`wpt_receiver.sbar.rectifier_v2`: it always absorbs power) and
-  the battery equivalent circuit;
+  sign of the I2 envelope, :func:`wpt_receiver.sbar.rectifier_v2`: it always absorbs power), the
+  semiconductor devices averaged as in the mission (:attr:`EnvConfig.devices`: on-resistances folded
+  into R1 / R2, forward drop on the clamp, short-window excess in V2) and the battery equivalent
+  circuit; the step's peak is turned into the instantaneous peak (harmonic ripple) by :mod:`envs.peaks`;
 * reference generator: the seeded charge command (:mod:`envs.scenario`);
 * reward and cost: :func:`reward_cost`;
 * visualisation: :mod:`envs.render`.
@@ -31,6 +33,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -41,7 +44,7 @@ from wpt_receiver.sbar import rectifier_current, rectifier_v2
 from .plant import battery_operating_point, lm_window_h
 from .scenario import Scenario, command_profile, stack_draws
 
-__all__ = ["EnvConfig", "RewardWeights", "Plans", "build_plans", "advance", "reward_cost", "OBS_SCALE",
+__all__ = ["EnvConfig", "RewardWeights", "Plans", "build_plans", "advance", "reward_cost", "sbar_v2", "OBS_SCALE",
            "OBS_OFFSET", "SCALAR_OPS", "NUMPY_OPS", "N_COEF"]
 
 HALF_PI = 0.5 * math.pi
@@ -76,6 +79,11 @@ class EnvConfig:
     slow_every : pose / Lm update every this many steps
     rated_i2_a : rated secondary coil current amplitude [A] (cost above it)
     bus_c_f : smoothing capacitor on the SBAR's DC side [F] (assumption: 4.7 mF, tau = R0 C ~ 0.45 ms)
+    devices : semiconductor preset of the link (``wpt_receiver/parts.toml``), the mission's default
+        ``"schottky"``; ``"ideal"`` is the paper's circuit. Applied as in the mission
+        (:class:`mission_sim.world.loop.MissionLoop`): the inverter's 2 Ron folded into R1, the
+        rectifying path's Rd into R2, the forward drop added to the clamp ``VL + Vf``, the shorted
+        channels' excess ``(2 Ron - Rd) w(d) I2`` added to V2 (see :func:`advance`).
     """
 
     link: LinkParams = TABLE_I
@@ -85,8 +93,12 @@ class EnvConfig:
     rated_i2_a: float = 15.0
     bus_c_f: float = 4.7e-3
     reward: RewardWeights = RewardWeights()
+    devices: str = "schottky"
 
     def __post_init__(self):
+        from wpt_receiver.devices import preset_names
+        if not isinstance(self.devices, str) or self.devices not in preset_names():
+            raise ValueError(f"devices={self.devices!r} is invalid; valid values: {', '.join(preset_names())}")
         if not (np.isfinite(self.dt_s) and 1e-7 <= self.dt_s <= 1e-2):
             raise ValueError(f"dt_s={self.dt_s!r} is invalid; valid range: [1e-7, 1e-2] s")
         if int(self.n_steps) != self.n_steps or not 2 <= self.n_steps <= 10**6:
@@ -97,6 +109,36 @@ class EnvConfig:
             raise ValueError(f"bus_c_f={self.bus_c_f!r} is invalid; valid range: (0, inf)")
         if not (np.isfinite(self.rated_i2_a) and self.rated_i2_a > 0):
             raise ValueError(f"rated_i2_a={self.rated_i2_a!r} is invalid; valid range: (0, inf)")
+
+    def device_set(self):
+        """The :class:`wpt_receiver.devices.DeviceSet` of ``devices``."""
+        return self._derived[0]
+
+    @property
+    def link_folded(self) -> LinkParams:
+        """The link with the devices' constant resistances folded in (R1 + 2 Ron, R2 + Rd): what the
+        envelope is stepped with (:func:`wpt_receiver.devices.envelope_params`)."""
+        return self._derived[1]
+
+    @property
+    def link_short_mode(self) -> LinkParams:
+        """The link in short mode: R1 + 2 Ron (inverter), R2 + 2 Ron (the shorted SBAR channels), for
+        :func:`envs.objective.short_mode_i2_a`."""
+        return self._derived[2]
+
+    @property
+    def device_terms(self) -> tuple:
+        """``(Vf, dR)`` of :func:`advance`: the rectifying path's forward drop [V] and the shorted
+        channels' resistance minus the folded Rd [ohm] (both 0 for ``"ideal"``)."""
+        return self._derived[3]
+
+    @cached_property   # every episode start asks (the config is frozen)
+    def _derived(self):
+        from wpt_receiver.devices import envelope_params, preset
+        dev = preset(self.devices)
+        short = self.link if dev.is_ideal else self.link.with_(r1_ohm=self.link.r1_ohm + dev.inv_r_ohm,
+                                                               r2_ohm=self.link.r2_ohm + dev.short_r_ohm)
+        return dev, envelope_params(self.link, dev), short, (dev.rect_vf_v, dev.short_r_ohm - dev.rect_rd_ohm)
 
     @property
     def n_slow(self) -> int:
@@ -139,7 +181,7 @@ def build_plans(draws, scenarios, cfg: EnvConfig) -> Plans:
     or one :class:`Scenario` for all."""
     if isinstance(draws, (list, tuple)):
         draws = stack_draws(draws)
-    n, T, S, link = draws.n, cfg.n_steps, cfg.n_slow, cfg.link
+    n, T, S, link = draws.n, cfg.n_steps, cfg.n_slow, cfg.link_folded
     if isinstance(scenarios, Scenario):
         load_w, noise_sd = np.full(n, scenarios.load_power_w), np.full(n, scenarios.i2_noise_a)
     else:
@@ -153,7 +195,7 @@ def build_plans(draws, scenarios, cfg: EnvConfig) -> Plans:
     coef = _zoh_coefficients(link, lm_u, cfg)[back.ravel()].reshape(n, S, N_COEF)
     cmd = command_profile(draws, T, cfg.dt_s)
     battery, x0, vl0, vrc0, d0 = _initial_state(link, lm[:, 0], np.asarray(draws.soc0, dtype=float), load_w,
-                                                cmd[:, 0], cfg)
+                                                cmd[:, 0], cfg, *cfg.device_terms)
     return Plans(cmd, draws.noise * noise_sd[:, None], coef, lm, battery, x0, vl0, vrc0, d0,
                  np.asarray(draws.t_stop_s, dtype=float))
 
@@ -173,20 +215,27 @@ def _zoh_coefficients(link: LinkParams, lm, cfg: EnvConfig) -> np.ndarray:
                            bm[:, 1, 1:], ah.reshape(n, 4), bh[:, :, 0] * v1, bh[:, :, 1]], axis=1)
 
 
-def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig):
+def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig, vf: float = 0.0, dr: float = 0.0):
     """Battery rows of :class:`Plans` and the steady state delivering the first command ``cmd0``
-    (fixed point through the battery voltage): ``(battery, x0, vl0, vrc0, d0)``."""
+    (fixed point through the battery voltage): ``(battery, x0, vl0, vrc0, d0)``. ``link`` has the
+    devices' resistances folded in; ``vf``, ``dr`` as in :func:`advance` (the clamp is ``VL + vf``,
+    the short-window excess ``dr w(d) I2`` acts as a resistance in series with R2)."""
     ocv, docv, r0, r1, tau1, cap = battery_operating_point(soc0)
     i_load = load_w / ocv   # hover draw, constant over 30 ms
     vl = ocv + (r0 + r1) * (cmd0 - i_load)
     for _ in range(2):
-        v2 = _steady_v2(link, lm0, cmd0, vl)
+        v2 = _steady_v2(link, lm0, cmd0, vl + vf)
         i1, i2 = steady_state(link, v2, lm0)
-        il = v2 * i2 / (2.0 * vl)
+        il = v2 * i2 / (2.0 * (vl + vf))
         vl = ocv + (r0 + r1) * (il - i_load)
-    d0 = duty_from_v2_clipped(v2, vl)
-    v2 = FOUR_OVER_PI * vl * (1.0 - np.sin(HALF_PI * d0))
-    i1, i2 = steady_state(link, v2, lm0)   # i2 > 0 (V2 <= RM's, which is below w Lm V1 / R1)
+    d0 = duty_from_v2_clipped(v2, vl + vf)
+    v2 = FOUR_OVER_PI * (vl + vf) * (1.0 - np.sin(HALF_PI * d0))
+    # steady state with V2 = v2 + dr w(d0) I2 (eq. 4; i2 > 0: V2 <= RM's, below w Lm V1 / R1)
+    r2e = link.r2_ohm + dr * (d0 + np.sin(math.pi * d0) / math.pi)
+    wlm = link.omega_rad_s * np.asarray(lm0, dtype=float)
+    det = link.r1_ohm * r2e + wlm**2
+    i2 = (wlm * link.v1_amp_v - link.r1_ohm * v2) / det
+    i1 = (r2e * link.v1_amp_v + wlm * v2) / det
     ib0 = rectifier_current(d0, np.abs(i2)) - i_load
     vrc0 = r1 * ib0
     vl0 = ocv + r0 * ib0 + vrc0
@@ -197,12 +246,22 @@ def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig):
     return battery, np.stack([i1, i2], axis=-1), vl0, vrc0, d0
 
 
+def sbar_v2(d, vl, i2, dev, ops=None):
+    """The SBAR's V2 [V] of :func:`advance` for duties, battery voltages and I2 envelopes (floats with
+    ``SCALAR_OPS``, arrays with ``NUMPY_OPS``, the default); ``dev = (Vf, dR)``."""
+    ops = NUMPY_OPS if ops is None else ops
+    vf, dr = dev
+    return (rectifier_v2(d, vl + vf, i2, sin=ops.sin, sign=ops.sign)
+            + dr * (d + ops.sin(math.pi * d) / math.pi) * i2)
+
+
 def _sign_float(x):
     return 1.0 if x > 0.0 else (-1.0 if x < 0.0 else 0.0)
 
 
 class _ScalarOps:
     sin = staticmethod(math.sin)
+    sqrt = staticmethod(math.sqrt)
     sign = staticmethod(_sign_float)
     minimum = staticmethod(min)
     maximum = staticmethod(max)
@@ -210,6 +269,7 @@ class _ScalarOps:
 
 class _NumpyOps:
     sin = staticmethod(np.sin)
+    sqrt = staticmethod(np.sqrt)
     sign = staticmethod(np.sign)
     minimum = staticmethod(np.minimum)
     maximum = staticmethod(np.maximum)
@@ -219,45 +279,55 @@ SCALAR_OPS = _ScalarOps()
 NUMPY_OPS = _NumpyOps()
 
 
-def advance(i1, i2, vl, soc, vrc, d, c, b, ops, n_sub: int = 1):
+def advance(i1, i2, vl, soc, vrc, d, c, b, ops, n_sub: int = 1, dev=(0.0, 0.0)):
     """One control period with duty ``d`` held (floats, or arrays of shape (n,) with ``NUMPY_OPS``).
 
     ``c`` = (Ad00, Ad01, Ad10, Ad11, Bd00 V1, Bd10 V1, Bd01, Bd11, Ad10', Ad11', Bd10' V1, Bd11', and
-    the same 8 as the first for the sub-step ``dt / n_sub``) with ' the half-step discretisation;
+    the same 8 as the first for the sub-step ``dt / n_sub``) with ' the half-step discretisation
+    (of the link with the devices' resistances folded in, :attr:`EnvConfig.link_folded`);
     ``b`` = battery row of :class:`Plans`. ``vl`` is the battery voltage of the previous step. The
-    SBAR applies ``V2 = (4/pi) VL (1 - sin(pi/2 d)) sign(I2)`` (eq. 9 with the sign of the
-    envelope, :func:`wpt_receiver.sbar.rectifier_v2`: the diodes conduct with the instantaneous
-    i2, so the rectifier always absorbs power). The sign is that of I2 at the start of the step;
+    SBAR applies ``V2 = (4/pi) (VL + Vf) (1 - sin(pi/2 d)) sign(I2) + dR w(d) I2`` with ``dev = (Vf,
+    dR)`` (:attr:`EnvConfig.device_terms`, zero for ideal devices: eq. 9 with the sign of the
+    envelope, :func:`wpt_receiver.sbar.rectifier_v2`; the diodes conduct with the instantaneous
+    i2, so the rectifier always absorbs power) and ``w(d) = d + sin(pi d)/pi`` the short window's
+    share of ``<i2^2>`` (:func:`wpt_receiver.sbar.rectifier_v2_folded`, as the mission). The sign
+    and the ``I2`` of the excess term are those at the start of the step;
     if the envelope changes sign within the step (at mid-step or at its end, V2 held) the step is
     recomputed in ``n_sub`` sub-steps (the rectifier period ``T = 1/(2f)``, 17 at 100 us), each
-    with the sign of I2 at its start: holding the sign over a step that is a sizeable part of the
+    with the sign (and ``I2``) at its start: holding the sign over a step that is a sizeable part of the
     envelope's ~250 us ringing period would pump the ringing instead of damping it. The SBAR's DC
     bus is the battery terminal with its smoothing capacitor: VL follows ``OCV + R0 i_batt + v_rc``
     with the time constant R0 C_bus (without the capacitor the one-step VL -> V2 -> I2 -> I_L loop
     through R0 would be unstable at the link's ~4 kHz resonance, where |G22| ~ 24 A/V).
 
     Returns ``(i1, i2, i2_peak, i_l, i_batt, soc, vrc, vl, v2)``: ``i2_peak`` the largest |I2| of
-    the envelope at mid-step and at the end (of every sub-step end when split), ``i_l = V2 I2 /
-    (2 VL) = (2/pi) (1 - sin(pi/2 d)) |I2| >= 0`` the SBAR output current averaged over the step
-    (lossless rectifier; Simpson's rule on I2, the mean of |I2| on each sub-step when split),
+    the envelope at mid-step and at the end (of every sub-step end when split; the envs turn it
+    into the instantaneous peak with :mod:`envs.peaks` at the duty and the VL of the step), ``i_l = (2/pi)
+    (1 - sin(pi/2 d)) |I2| >= 0`` the SBAR output current averaged over the step (the clamp's
+    ``V2c I2 / (2 (VL + Vf))``; Simpson's rule on I2, the mean of |I2| on each sub-step when split),
     ``i_batt = i_l - i_load``, ``v2`` the V2 applied at the start of the step.
     """
     a00, a01, a10, a11, e0, e1, b01, b11, m10, m11, me1, mb11 = c[:12]
     ocv0, docv, soc0, r0, rc_decay, rc_gain, dsoc, i_load, bus_decay = b
-    v2 = rectifier_v2(d, vl, i2, sin=ops.sin, sign=ops.sign)
+    vf, dr = dev
+    vc = vl + vf
+    s = ops.sin(HALF_PI * d)
+    v2c = FOUR_OVER_PI * vc * (1.0 - s) * ops.sign(i2)   # the clamp's part (rectifier_v2's arithmetic)
+    rx = dr * (d + 2.0 * s * ops.sqrt(1.0 - s * s) / math.pi)   # sin(pi d) = 2 s cos(pi d/2), d in [0, 1]
+    v2 = v2c + rx * i2
     i2m = m10 * i1 + m11 * i2 + me1 + mb11 * v2
     i1n = a00 * i1 + a01 * i2 + e0 + b01 * v2
     i2n = a10 * i1 + a11 * i2 + e1 + b11 * v2
-    il = v2 * (i2 + 4.0 * i2m + i2n) / (12.0 * vl)
+    il = v2c * (i2 + 4.0 * i2m + i2n) / (12.0 * vc)
     pk = ops.maximum(abs(i2m), abs(i2n))
     if n_sub > 1:
         if ops is NUMPY_OPS:
-            idx = np.flatnonzero((i2m * v2 < 0.0) | (i2n * v2 < 0.0))
+            idx = np.flatnonzero((i2m * v2c < 0.0) | (i2n * v2c < 0.0))
             if len(idx):
-                r = _substeps(i1[idx], i2[idx], np.abs(v2[idx]), vl[idx], c[12:, idx], n_sub, ops)
+                r = _substeps(i1[idx], i2[idx], np.abs(v2c[idx]), vc[idx], c[12:, idx], n_sub, ops, rx[idx])
                 i1n[idx], i2n[idx], pk[idx], il[idx] = r
-        elif i2m * v2 < 0.0 or i2n * v2 < 0.0:
-            i1n, i2n, pk, il = _substeps_float(i1, i2, abs(v2), vl, c[12:], n_sub)
+        elif i2m * v2c < 0.0 or i2n * v2c < 0.0:
+            i1n, i2n, pk, il = _substeps_float(i1, i2, abs(v2c), vc, c[12:], n_sub, rx)
     ib = il - i_load
     soc = soc + dsoc * ib
     vrc = rc_decay * vrc + rc_gain * ib
@@ -265,15 +335,16 @@ def advance(i1, i2, vl, soc, vrc, d, c, b, ops, n_sub: int = 1):
     return i1n, i2n, pk, il, ib, soc, vrc, vl, v2
 
 
-def _substeps(i1, i2, v2_mag, vl, c, n_sub, ops):
-    """``n_sub`` rectifier-period sub-steps on arrays, V2 = |f(d)| sign(I2) re-evaluated at each:
+def _substeps(i1, i2, v2_mag, vl, c, n_sub, ops, rx=0.0):
+    """``n_sub`` rectifier-period sub-steps on arrays, V2 = |f(d)| sign(I2) + rx I2 re-evaluated at each
+    (``vl`` the clamp voltage VL + Vf):
     returns ``(i1, i2, peak |I2|, mean I_L)`` (I_L from the mean |I2| of each sub-step, linear in
     it). Python floats: :func:`_substeps_float`."""
     h00, h01, h10, h11, f0, f1, g01, g11 = c
     sign = ops.sign
     path = [i2]
     for _ in range(n_sub):
-        v2 = v2_mag * sign(i2)
+        v2 = v2_mag * sign(i2) + rx * i2
         i1, i2 = h00 * i1 + h01 * i2 + f0 + g01 * v2, h10 * i1 + h11 * i2 + f1 + g11 * v2
         path.append(i2)
     p = np.abs(np.stack(path))
@@ -287,14 +358,14 @@ def _substeps(i1, i2, v2_mag, vl, c, n_sub, ops):
     return i1, i2, pk, v2_mag * tot / (2.0 * n_sub * vl)
 
 
-def _substeps_float(i1, i2, v2_mag, vl, c, n_sub):
+def _substeps_float(i1, i2, v2_mag, vl, c, n_sub, rx=0.0):
     """:func:`_substeps` on Python floats (the single env), one pass: the same sums in the same
     order (peak = first largest |I2|, mean |I2| summed from 0 over the sub-steps)."""
     h00, h01, h10, h11, f0, f1, g01, g11 = c
     pk, tot = -1.0, 0
     for _ in range(n_sub):
         a = i2
-        v2 = v2_mag if i2 > 0.0 else (-v2_mag if i2 < 0.0 else 0.0 * v2_mag)
+        v2 = (v2_mag if i2 > 0.0 else (-v2_mag if i2 < 0.0 else 0.0 * v2_mag)) + rx * i2
         i1, i2 = h00 * i1 + h01 * i2 + f0 + g01 * v2, h10 * i1 + h11 * i2 + f1 + g11 * v2
         m = abs(i2)
         if m > pk:

@@ -8,9 +8,12 @@ in the observation that chose the step's duty):
 * **short-mode current of the true link** ``I2_sm(Lm) = w Lm V1 / (R1 R2 + (w Lm)^2)``: the steady
   ``I2`` for ``V2 = 0`` (paper eq. 4 in steady state, :func:`wpt_receiver.steady_state`), the
   largest steady ``|I2|`` any duty can give (``I2 = (w Lm V1 - R1 V2)/det`` falls with ``V2 >= 0``);
-  evaluated with the true Lm of the step (it moves with the hover pose).
+  evaluated with the true Lm of the step (it moves with the hover pose). With real devices R1 holds
+  the inverter's two channels (``+ 2 Ron``) and R2 the two shorted SBAR channels (``+ 2 Ron``): the
+  short mode's resistances. An envelope (fundamental) value: no ripple.
 * **overshoot** ``= max over the steps after the stop of |I2|_pk,k / I2_sm(Lm_k) - 1`` (a fraction;
-  ``|I2|_pk`` the step's peak envelope magnitude, see :func:`envs.core.advance`). Negative when
+  ``|I2|_pk`` the step's instantaneous peak, the envelope's peak magnitude plus the SBAR's harmonic
+  ripple, see :func:`envs.core.advance` and :mod:`envs.peaks`). Negative when
   the current never reaches the short-mode level after the stop (e.g. a policy that stays in RM).
 * **episode cost** ``= max(0, overshoot)``. It is handed out per step as the increase of the
   running maximum, ``cost_k = max(0, m_k) - max(0, m_{k-1})`` with ``m_k`` the running maximum of
@@ -33,6 +36,7 @@ from __future__ import annotations
 import numpy as np
 
 from wpt_receiver import LinkParams, steady_state
+from wpt_receiver.devices import IDEAL
 
 __all__ = ["SHORT_MODE_IL_A", "SHORT_MODE_WITHIN_S", "short_mode_i2_a", "stop_step", "overshoot_update",
            "short_mode_update", "t_since_stop_s"]
@@ -41,8 +45,12 @@ SHORT_MODE_IL_A = 0.5
 SHORT_MODE_WITHIN_S = 14e-3
 
 
-def short_mode_i2_a(link: LinkParams, lm_h) -> np.ndarray:
-    """Steady short-mode ``I2`` [A] of the true link (``V2 = 0``) for each true Lm [H] (any shape)."""
+def short_mode_i2_a(link: LinkParams, lm_h, devices=IDEAL) -> np.ndarray:
+    """Steady short-mode ``I2`` [A] of the true link (``V2 = 0`` with ideal devices) for each true Lm
+    [H] (any shape); ``devices`` (a :class:`wpt_receiver.devices.DeviceSet`) adds the driven
+    inverter channels to R1 and the shorted SBAR channels to R2."""
+    if not devices.is_ideal:
+        link = link.with_(r1_ohm=link.r1_ohm + devices.inv_r_ohm, r2_ohm=link.r2_ohm + devices.short_r_ohm)
     return steady_state(link, 0.0, lm_h=np.asarray(lm_h, dtype=float))[1]
 
 

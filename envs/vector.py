@@ -22,10 +22,12 @@ from gymnasium.vector.utils import batch_space
 
 from mission_sim.contract import OBS_DIM, PolicyContext
 
-from wpt_receiver.sbar import rectifier_current, rectifier_v2
+from wpt_receiver.sbar import rectifier_current
 
-from .core import (N_BAT, N_COEF, NUMPY_OPS, OBS_OFFSET, OBS_SCALE, EnvConfig, advance, build_plans, reward_cost)
+from .core import (N_BAT, N_COEF, NUMPY_OPS, OBS_OFFSET, OBS_SCALE, EnvConfig, advance, build_plans, reward_cost,
+                   sbar_v2)
 from .objective import overshoot_update, short_mode_i2_a, short_mode_update, stop_step, t_since_stop_s
+from .peaks import LOOKUP_SCALARS, PeakLookup
 from .scenario import draw_episodes, get_scenario, scenario_from_options
 
 __all__ = ["SbarChargingVectorEnv", "SbarChargingDiscreteVectorEnv"]
@@ -55,6 +57,8 @@ class SbarChargingVectorEnv(VectorEnv):
         n, T, S = self.num_envs, c.n_steps, c.n_slow
         self._T, self._M, self._dt, self._inv_rated = T, c.slow_every, c.dt_s, 1.0 / c.rated_i2_a
         self._n_sub = c.n_sub
+        self._devices, self._dev = c.device_set(), c.device_terms
+        self._peak = PeakLookup(c.link, self._devices)
         self._ar = np.arange(n)
         # per-step data stored step-major (T, n): a step reads one contiguous row across the envs
         self._cmd = np.zeros((T + 1, n))
@@ -117,7 +121,7 @@ class SbarChargingVectorEnv(VectorEnv):
         self._lm_all[:, idx] = p.lm_h.T
         self._bat[:, idx] = p.battery.T
         self._t_stop[idx] = p.t_stop_s
-        self._i2sm_all[idx] = short_mode_i2_a(c.link, p.lm_h)
+        self._i2sm_all[idx] = short_mode_i2_a(c.link_short_mode, p.lm_h)
         self._stop_k[idx] = stop_step(p.t_stop_s, c.dt_s, c.n_steps)
         self._run_max[idx] = -np.inf
         self._sm_ok[idx] = True
@@ -136,13 +140,15 @@ class SbarChargingVectorEnv(VectorEnv):
         ib = il - self._bat[7]
         cmd = self._cmd[self._k, self._ar]
         obs = self._obs(i2, vl, ib, il, soc, cmd, d, self._t_since(self._k))
-        info = {"t_s": self._k * self._dt, "i2_a": i2.copy(), "i2_peak_a": np.abs(i2), "i1_a": i1.copy(),
-                "d_short": d.copy(), "v2_v": rectifier_v2(d, vl, i2), "rect_current_a": il, "battery_v": vl.copy(),
+        info = {"t_s": self._k * self._dt, "i2_a": i2.copy(), "i2_peak_a": self._peak.array(np.abs(i2), d, vl),
+                "i1_a": i1.copy(), "d_short": d.copy(), "v2_v": sbar_v2(d, vl, i2, self._dev), "rect_current_a": il,
+                "battery_v": vl.copy(),
                 "battery_current_a": ib, "soc": soc.copy(), "charge_cmd_a": cmd,
                 "lm_h": self._lm_all[self._j, self._ar], "energy_j": np.zeros(self.num_envs),
                 "cost": np.zeros(self.num_envs), "overcurrent": np.zeros(self.num_envs),
                 "overshoot": self._run_max.copy(), "episode_cost": np.maximum(self._run_max, 0.0),
-                "reached_short_mode": self._sm_ok & self._sm_checked, "t_stop_s": self._t_stop.copy()}
+                "reached_short_mode": self._sm_ok & self._sm_checked, "t_stop_s": self._t_stop.copy(),
+                "i2_peak_envelope_a": np.abs(i2)}
         return obs, info
 
     def _t_since(self, k):
@@ -235,11 +241,13 @@ class SbarChargingVectorEnv(VectorEnv):
         truncated = np.empty(n, dtype=bool)
         block = np.empty((n, len(rows)))
         ep = (self._i2sm_all, self._stop_k, self._t_stop, self._run_max, self._sm_ok, self._sm_checked)
-        par = (self._T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a)
+        par = (self._T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a, *self._dev, *LOOKUP_SCALARS)
         kern(d, self._state, self._k, self._j, self._coef_all, self._coef_cur, self._bat, self._cmd, self._noise,
-             self._lm_all, ep, self._M, self._n_sub, par, OBS_SCALE, OBS_OFFSET, obs, reward, truncated, block)
+             self._lm_all, ep, self._M, self._n_sub, par, OBS_SCALE, OBS_OFFSET, self._peak.kernel_table, obs, reward,
+             truncated, block)
         info = dict(zip(rows, block.T))   # (n,) views, one per key
         info["reached_short_mode"] = self._sm_ok & self._sm_checked
+        info["i2_peak_envelope_a"] = info.pop("i2_peak_envelope_a")   # last, as in the single env
         return obs, reward, truncated, info
 
     def _step_numpy(self, d):
@@ -251,8 +259,9 @@ class SbarChargingVectorEnv(VectorEnv):
             self._coef[:, moved] = self._coef_all[self._ar[moved], j[moved]].T
             self._j = j
         i1, i2, vl_old, soc, vrc, _ = self._state
-        i1, i2, peak, il, ib, soc, vrc, vl, v2 = advance(i1, i2, vl_old, soc, vrc, d, self._coef, self._bat, NUMPY_OPS,
-                                                         self._n_sub)
+        i1, i2, pk_env, il, ib, soc, vrc, vl, v2 = advance(i1, i2, vl_old, soc, vrc, d, self._coef, self._bat,
+                                                           NUMPY_OPS, self._n_sub, self._dev)
+        peak = self._peak.array(pk_env, d, vl_old)
         cmd = self._cmd[k, self._ar]
         reward, overcurrent = reward_cost(il, cmd, peak, self._inv_rated, self.config.reward, NUMPY_OPS)
         energy = vl_old * il * self._dt
@@ -263,7 +272,9 @@ class SbarChargingVectorEnv(VectorEnv):
         info = {"t_s": k * self._dt, "i2_a": i2, "i2_peak_a": peak, "i1_a": i1, "d_short": d, "v2_v": v2,
                 "rect_current_a": il, "battery_v": vl, "battery_current_a": ib, "soc": soc, "charge_cmd_a": cmd,
                 "lm_h": self._lm_all[self._j, self._ar], "energy_j": energy, "overcurrent": overcurrent}
-        return obs, reward, k >= self._T, self._objective_info(info, k - 1)
+        info = self._objective_info(info, k - 1)
+        info["i2_peak_envelope_a"] = pk_env
+        return obs, reward, k >= self._T, info
 
 
 def _load_kernel():

@@ -52,7 +52,7 @@ DEFAULT_HYPERPARAMS = {
 
 def env_config(overrides: dict | None = None):
     """:class:`envs.EnvConfig` with ``overrides``: its fields (n_steps, slow_every, rated_i2_a, bus_c_f,
-    dt_s) and the reward weights (tracking, overcurrent, i_ref_a) by name."""
+    dt_s, devices - a preset name) and the reward weights (tracking, overcurrent, i_ref_a) by name."""
     from envs import EnvConfig, RewardWeights
 
     ov = dict(overrides or {})
@@ -61,12 +61,13 @@ def env_config(overrides: dict | None = None):
     bad = set(ov) - rw_keys - cfg_keys
     if bad:
         raise ValueError(f"env config key {sorted(bad)[0]!r} is invalid; valid keys: {', '.join(sorted(rw_keys | cfg_keys))}")
+    devices = ov.pop("devices", EnvConfig.devices)
     for k, v in ov.items():
         if not np.isfinite(float(v)):
             raise ValueError(f"{k}={v!r} is invalid; valid range: a finite number")
     rw = RewardWeights(**{k: float(v) for k, v in ov.items() if k in rw_keys})
-    return EnvConfig(reward=rw, **{k: (int(v) if k in ("n_steps", "slow_every") else float(v))
-                                   for k, v in ov.items() if k in cfg_keys})
+    return EnvConfig(reward=rw, devices=devices, **{k: (int(v) if k in ("n_steps", "slow_every") else float(v))
+                                                    for k, v in ov.items() if k in cfg_keys})
 
 
 def config_dict(cfg) -> dict:

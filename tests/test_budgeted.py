@@ -24,10 +24,13 @@ def test_budget_trades_overshoot_for_energy_after_stop_and_respects_it():
         m = run_policy(f"model_based_budget:{bud}", "nominal", N, SEED).metrics
         env_over.append(np.mean(m["overshoot_pct"]) / 100)
         after.append(np.mean(m["energy_after_stop_j"]))
-        # the relaxed reference aims I2 at (1 + b) I2_sm; V2* saturating at 0 stops its slope
-        # abruptly and the link rings a little further (~0.6 % + 0.2 b measured): near the budget
-        ov = m["overshoot_pct"] / 100
+        # the relaxed reference aims the envelope I2 at (1 + b) I2_sm; V2* saturating at 0 stops its
+        # slope abruptly and the link rings a little further (~0.6 % + 0.2 b measured): near the budget
+        ov = m["envelope_overshoot_pct"] / 100
         assert bud <= np.mean(ov) and np.max(ov) < 1.3 * bud + 0.012
+        # the instantaneous peak (the env's objective) adds the SBAR's ripple at the crest's duty, which
+        # the budget (a reference for the fundamental) does not see: < 4.5 points (envs/peaks.py)
+        assert np.all(m["overshoot_pct"] / 100 < ov + 0.045) and np.mean(m["overshoot_pct"] / 100) > np.mean(ov)
     assert np.all(np.diff(env_over) > 0) and np.all(np.diff(after) < 0)
     assert after[2] < 0.6 * after[0]      # 2 % budget: well under the paper's energy after the stop
     assert all(m for m in run_policy("model_based_budget:0.05", "nominal", N, SEED).metrics["reached_short_mode"])

@@ -4,38 +4,41 @@ the episode cost (per-step costs sum to it), and the reached-short-mode flag."""
 import numpy as np
 import pytest
 
-from envs import SbarChargingEnv, SbarChargingVectorEnv
+from envs import EnvConfig, SbarChargingEnv, SbarChargingVectorEnv
 from envs.objective import short_mode_i2_a
 from mission_sim.contract import duty_to_action
 from policies import make
-from wpt_receiver import TABLE_I
+from wpt_receiver import TABLE_I, steady_state
+from wpt_receiver.devices import envelope_params, preset
+from wpt_receiver.peak import SbarHarmonics
 
 N, SEED = 16, 2024
 
 
-def _run(policy, scenario="nominal", n=N, seed=SEED):
+def _run(policy, scenario="nominal", n=N, seed=SEED, devices="schottky"):
     """Run a policy (name, or callable obs -> duty) on ``n`` windows; returns per-step info arrays."""
-    venv = SbarChargingVectorEnv(num_envs=n, scenario=scenario)
+    venv = SbarChargingVectorEnv(num_envs=n, scenario=scenario, config=EnvConfig(devices=devices))
     pol = make(policy, venv.policy_context) if isinstance(policy, str) else None
     if pol is not None:
         pol.reset(n)
     obs, info0 = venv.reset(seed=seed)
-    rec = {k: [] for k in ("i2_peak_a", "lm_h", "cost", "rect_current_a", "t_s")}
+    rec = {k: [] for k in ("i2_peak_a", "i2_peak_envelope_a", "lm_h", "cost", "rect_current_a", "t_s")}
     for _ in range(venv.config.n_steps):
         d = pol.act(obs) if pol is not None else policy(obs)
         obs, _, _, _, info = venv.step(duty_to_action(d)[:, None].astype(np.float32))
         for k in rec:
             rec[k].append(info[k])
     out = {k: np.array(v) for k, v in rec.items()}
-    out.update(t_stop_s=info0["t_stop_s"], final=info, dt=venv.config.dt_s)
+    out.update(t_stop_s=info0["t_stop_s"], final=info, dt=venv.config.dt_s, devices=venv.config.device_set())
     return out
 
 
-def _overshoot_from_traces(r):
-    """Independent recomputation: steps whose start time is at or after the stop command."""
+def _overshoot_from_traces(r, key="i2_peak_a"):
+    """Independent recomputation: steps whose start time is at or after the stop command; ``key`` the
+    instantaneous peak (the env's objective) or ``"i2_peak_envelope_a"`` (the fundamental's)."""
     t_start = r["t_s"] - r["dt"]
     after = t_start >= r["t_stop_s"][None, :] - 1e-12
-    ratio = np.abs(r["i2_peak_a"]) / short_mode_i2_a(TABLE_I, r["lm_h"]) - 1.0
+    ratio = np.abs(r[key]) / short_mode_i2_a(TABLE_I, r["lm_h"], r["devices"]) - 1.0
     return np.where(after, ratio, -np.inf).max(axis=0)
 
 
@@ -49,11 +52,20 @@ def test_overshoot_is_peak_over_true_short_mode_current_and_costs_sum_to_it(name
     assert r["final"]["reached_short_mode"].all()   # all three end in SM within 14 ms
 
 
-def test_overshoot_orders_step_ramp_model_based():
-    """The paper's ordering: step rings to ~2x the SM current, the ramp a few %, the inverse ~0."""
-    means = {p: float(np.mean(_run(p)["final"]["overshoot"])) for p in ("step", "ramp", "model_based")}
-    assert means["step"] > 0.8 > 0.02 < means["ramp"] < 0.15
-    assert abs(means["model_based"]) < 0.015
+@pytest.mark.parametrize("devices", ["ideal", "schottky"])
+def test_overshoot_orders_step_ramp_model_based(devices):
+    """The paper's ordering: step rings to ~2x the SM current, the ramp a few %, the inverse ~0 on the
+    envelope (the fundamental, the paper's claim). The instantaneous peak (the env's objective) adds
+    the SBAR's harmonic ripple at the duty of the peak: up to 0.49 A at 11.5 A (4.3 %) at small
+    duties, which the model-based transition passes through near its crest."""
+    runs = {p: _run(p, devices=devices) for p in ("step", "ramp", "model_based")}
+    inst = {p: float(np.mean(r["final"]["overshoot"])) for p, r in runs.items()}
+    env = {p: float(np.mean(_overshoot_from_traces(r, "i2_peak_envelope_a"))) for p, r in runs.items()}
+    assert inst["step"] > 0.8 > 0.02 < inst["ramp"] < 0.15
+    assert env["step"] > 0.8 > 0.02 < env["ramp"] < 0.15
+    assert abs(env["model_based"]) < 0.015
+    assert env["model_based"] < inst["model_based"] < env["model_based"] + 0.045
+    assert inst["model_based"] < inst["ramp"]
 
 
 def test_a_policy_that_stays_in_rm_is_flagged_and_has_negative_overshoot():
@@ -62,9 +74,16 @@ def test_a_policy_that_stays_in_rm_is_flagged_and_has_negative_overshoot():
     flag catches it."""
     r = _run(lambda obs: np.zeros(len(obs)))
     assert not r["final"]["reached_short_mode"].any()
-    p = TABLE_I
-    expect = -p.r1_ohm * p.v2_rm_amp_v / (p.omega_rad_s * p.lm_h * p.v1_amp_v)   # at Table I's VL
-    np.testing.assert_allclose(r["final"]["overshoot"], expect, atol=0.006)
+    p, dev = TABLE_I, r["devices"]
+    # at Table I's VL: the RM envelope with the devices (clamp VL + Vf, R folded in), its instantaneous
+    # peak (d = 0: + 0.1 A), over the short-mode current with the devices
+    i2_rm = steady_state(envelope_params(p, dev), 4 / np.pi * (p.vl_v + dev.rect_vf_v))[1]
+    expect = SbarHarmonics(p, dev).peak(0.0, i2_rm) / short_mode_i2_a(p, p.lm_h, dev) - 1.0
+    np.testing.assert_allclose(r["final"]["overshoot"], expect, atol=0.002)   # VL is not exactly 30 V
+    env_ratio = r["i2_peak_envelope_a"][-1] / short_mode_i2_a(p, r["lm_h"][-1], dev) - 1.0   # the fundamental
+    np.testing.assert_allclose(env_ratio, i2_rm / short_mode_i2_a(p, p.lm_h, dev) - 1.0, atol=0.002)
+    ideal = -p.r1_ohm * p.v2_rm_amp_v / (p.omega_rad_s * p.lm_h * p.v1_amp_v)   # the paper's circuit
+    assert (env_ratio < ideal - 0.006).all()   # the drops and resistances lower RM's I2 by ~0.7 %
     assert (r["final"]["episode_cost"] == 0).all()
 
 

@@ -21,17 +21,25 @@ def test_registry_and_protocol():
         assert d.shape == (3,) and np.all((d >= 0) & (d <= 1))
 
 
-def test_model_based_in_env_reproduces_no_overshoot():
+@pytest.mark.parametrize("devices", ["ideal", "schottky"])
+def test_model_based_in_env_reproduces_no_overshoot(devices):
     """The core result in the env's closed loop (100 us control period, Lm from the coupling model,
     battery voltage from the ECM): the step overshoots by ~200 %, the ramp by ~6 %, the model-based
-    controller by < 1 % (0.5 % is inter-sample ripple of V2 held for 100 us, seen at mid-step)."""
-    res = {p: run_policy(p, "nominal", 6, 100).metrics for p in ("step", "ramp", "model_based")}
+    controller's envelope (the paper's fundamental) by < 1 % (0.5 % is inter-sample ripple of V2
+    held for 100 us, seen at mid-step), with the paper's ideal devices and with real ones. Its
+    instantaneous peak (the env's objective) adds the SBAR's harmonic ripple at the duty of the
+    crest: at most 0.49 A at 11.5 A (4.3 %, small duties; envs/peaks.py)."""
+    cfg = EnvConfig(devices=devices)
+    res = {p: run_policy(p, "nominal", 6, 100, cfg).metrics for p in ("step", "ramp", "model_based")}
     os_ = {p: float(np.mean(m["overshoot_pct"])) for p, m in res.items()}
     assert os_["step"] > 150.0
     assert 2.0 < os_["ramp"] < 10.0
-    assert np.all(res["model_based"]["overshoot_pct"] < 1.0)
-    assert np.all(res["model_based"]["time_above_rated_s"] == 0.0)
-    assert np.all(res["model_based"]["peak_i2_a"] < 1.01 * steady_state(TABLE_I, 0.0)[1])
+    mb = res["model_based"]
+    assert np.all(mb["envelope_overshoot_pct"] < 1.0)
+    assert np.all(mb["envelope_overshoot_pct"] < mb["overshoot_pct"])
+    assert np.all(mb["overshoot_pct"] < mb["envelope_overshoot_pct"] + 4.5)
+    assert np.all(mb["time_above_rated_s"] == 0.0)
+    assert np.all(mb["peak_i2_a"] < 1.055 * steady_state(TABLE_I, 0.0)[1])
     assert np.mean(res["step"]["peak_i2_a"]) > np.mean(res["ramp"]["peak_i2_a"]) > np.mean(res["model_based"]["peak_i2_a"])
 
 

@@ -81,7 +81,9 @@ def test_cli_train_dqn_then_compare_json(tmp_path, capsys):
     res = json.loads(capsys.readouterr().out)
     rows = {r["policy"]: r for r in res["rows"]}
     assert set(rows) == {"model_based", f"rl:{out / 'dqn_sbar.zip'}"}
-    assert rows["model_based"]["overshoot_pct"] < 1.0
+    # instantaneous overshoot: the envelope's < 1 % (tests/test_policies.py) plus the SBAR's ripple at
+    # the crest's duty, < 4.5 points (envs/peaks.py)
+    assert rows["model_based"]["overshoot_pct"] < 1.0 + 4.5
     assert (tmp_path / "cmp" / "transitions_nominal.png").is_file()
 
 

@@ -40,7 +40,8 @@ def _add_train(sub):
                         "'dict(...)'); override the defaults")
     p.add_argument("--env", action="append", default=[], metavar="KEY=VALUE",
                    help="env config / reward weight override, repeatable: n_steps, slow_every, rated_i2_a, "
-                        "bus_c_f, dt_s, tracking, overcurrent, i_ref_a")
+                        "bus_c_f, dt_s, tracking, overcurrent, i_ref_a; devices=PRESET (ideal, schottky, sic; "
+                        "default schottky)")
     p.add_argument("--cost", choices=("overshoot", "overcurrent"), default="overshoot",
                    help="episode cost: overshoot = max(0, peak |I2| after the stop / true short-mode I2 - 1) "
                         "(default); overcurrent = sum of max(0, |I2|/rated - 1) per step")
@@ -71,6 +72,9 @@ def _env_overrides(items) -> dict:
     from .common import parse_set
     out = {}
     for k, v in parse_set(items).items():
+        if k == "devices" and isinstance(v, str):
+            out[k] = v
+            continue
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise CliError(f"--env {k}={v!r} is invalid; valid: KEY=NUMBER")
         out[k] = v
