@@ -18,6 +18,7 @@ Modules, in the order data flows (gym-electric-motor style: the parts composed i
 ``core``           the physical system, reward and observation: per-episode plans, the step
                    arithmetic (reference path on floats or numpy arrays)
 ``objective``      the domain's objective: overshoot at the stop, short-mode flag, episode cost
+``peaks``          the instantaneous peak |i2|: the envelope peak plus the SBAR's harmonic excess (table)
 ``vector_kernel``  the compiled (numba) steps of both envs, the same arithmetic as ``core``
 ``charging``       the single envs (:class:`SbarChargingEnv`, discrete ON-OFF variant)
 ``vector``         the batched vector envs (numpy, autoreset ``NEXT_STEP``)

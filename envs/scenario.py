@@ -192,4 +192,8 @@ def command_profile(draws, n_steps: int, dt_s: float) -> np.ndarray:
     t = np.arange(n_steps + 1) * dt_s
     tc, ts = np.reshape(b.t_change_s, (-1, 1)), np.reshape(b.t_stop_s, (-1, 1))
     c0, c1 = np.reshape(b.cmd0_a, (-1, 1)), np.reshape(b.cmd1_a, (-1, 1))
-    return np.where(t < tc, c0, np.where(t < ts, c1, 0.0))
+    # np.where(t < tc, c0, np.where(t < ts, c1, 0.0)) without the two full-size temporaries: the same numbers
+    out = np.zeros(np.broadcast_shapes(t.shape, tc.shape, ts.shape, c0.shape, c1.shape))
+    np.copyto(out, c1, where=t < ts)
+    np.copyto(out, c0, where=t < tc)
+    return out
