@@ -59,6 +59,9 @@ class SbarChargingVectorEnv(VectorEnv):
         self._n_sub = c.n_sub
         self._devices, self._dev = c.device_set(), c.device_terms
         self._peak = PeakLookup(c.link, self._devices)
+        w = c.reward   # the kernel's constants (envs.vector_kernel._finish_pass), one float array: a cheap dispatch
+        self._par = np.array([T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a, *self._dev,
+                              *LOOKUP_SCALARS], dtype=float)
         self._ar = np.arange(n)
         # per-step data stored step-major (T, n): a step reads one contiguous row across the envs
         self._cmd = np.zeros((T + 1, n))
@@ -235,16 +238,15 @@ class SbarChargingVectorEnv(VectorEnv):
         """One step of every sub-environment in the compiled loop (:func:`envs.vector_kernel.step_kernel`),
         the objective included."""
         kern, rows, _ = self._kernel
-        n, c, w = self.num_envs, self.config, self.config.reward
+        n = self.num_envs
         obs = np.empty((n, OBS_DIM), np.float32)
         reward = np.empty(n)
         truncated = np.empty(n, dtype=bool)
         block = np.empty((n, len(rows)))
         ep = (self._i2sm_all, self._stop_k, self._t_stop, self._run_max, self._sm_ok, self._sm_checked)
-        par = (self._T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a, *self._dev, *LOOKUP_SCALARS)
         kern(d, self._state, self._k, self._j, self._coef_all, self._coef_cur, self._bat, self._cmd, self._noise,
-             self._lm_all, ep, self._M, self._n_sub, par, OBS_SCALE, OBS_OFFSET, self._peak.kernel_table, obs, reward,
-             truncated, block)
+             self._lm_all, ep, self._M, self._n_sub, self._par, OBS_SCALE, OBS_OFFSET, self._peak.kernel_table, obs,
+             reward, truncated, block)
         info = dict(zip(rows, block.T))   # (n,) views, one per key
         info["reached_short_mode"] = self._sm_ok & self._sm_checked
         info["i2_peak_envelope_a"] = info.pop("i2_peak_envelope_a")   # last, as in the single env

@@ -109,6 +109,7 @@ def _link_pass(d, state, k, j, coef_all, coef_cur, slow_every, n_sub, vf, dr, sc
     current coefficients moved to the step's slow segment; returns how many steps are split (their
     indices in ``idx[:m]``, their clamp |V2c| and excess rx in ``sc[5:7, :m]``)."""
     m = 0
+    sub = n_sub > 1
     for e in range(d.shape[0]):
         kk = k[e]
         jj = kk // slow_every
@@ -118,10 +119,11 @@ def _link_pass(d, state, k, j, coef_all, coef_cur, slow_every, n_sub, vf, dr, sc
         i1n, i2n, pk, il, v2, split, vm, rx = _link_step(state[0, e], state[1, e], state[2, e], d[e], coef_cur[e], vf,
                                                          dr)
         sc[0, e], sc[1, e], sc[2, e], sc[3, e], sc[4, e] = i1n, i2n, pk, il, v2
-        if n_sub > 1 and split:
-            idx[m] = e
-            sc[5, m], sc[6, m] = vm, rx
-            m += 1
+        # noted without a branch (about half the steps split, at random): the slot m is written
+        # every time and kept when the step splits
+        idx[m] = e
+        sc[5, m], sc[6, m] = vm, rx
+        m += split & sub
     return m
 
 
@@ -253,7 +255,7 @@ def _finish_pass(d, state, k, j, bat, cmd_all, noise_all, lm_all, ep, par, scale
     """Pass 3: instantaneous peak, battery, reward, objective, state, observation and info of every
     sub-environment. ``ep`` = (i2sm_all (n, S), stop_k, t_stop, run_max, sm_ok, sm_checked) of the
     episodes; ``par`` = (n_steps, dt, inv_rated, w_track, w_over, i_ref, vf, dr, vlc, inv_imax) as
-    floats; ``ptab`` the peak table (:mod:`envs.peaks`)."""
+    floats (a float64 array); ``ptab`` the peak table (:mod:`envs.peaks`)."""
     i2sm_all, stop_k, t_stop, run_max, ok, checked = ep
     n_steps, dt, inv_rated, w_track, w_over, i_ref = par[0], par[1], par[2], par[3], par[4], par[5]
     vlc, inv_imax = par[8], par[9]
