@@ -116,15 +116,15 @@ class SbarChargingVectorEnv(VectorEnv):
         c, scn = self.config, self._cur_scenario
         rngs = self._rngs if len(idx) == self.num_envs else [self._rngs[i] for i in idx]
         full = len(idx) == self.num_envs
-        # all at once (the usual autoreset): noise and coefficients written in place, plain slices, no scatter
-        out = (self._noise, self._coef_all) if full else None
+        # all at once (the usual autoreset): command, noise and coefficients written in place, plain slices
+        out = (self._cmd, self._noise, self._coef_all) if full else None
         p = build_plans(draw_episodes(rngs, scn, c.n_steps), scn, c, out=out)
         if full:
             idx = slice(None)
         else:
+            self._cmd[:, idx] = p.cmd_a.T
             self._noise[:, idx] = p.noise_a.T
             self._coef_all[idx] = p.coef
-        self._cmd[:, idx] = p.cmd_a.T
         self._lm_all[:, idx] = p.lm_h.T
         self._bat[:, idx] = p.battery.T
         self._t_stop[idx] = p.t_stop_s
