@@ -175,10 +175,13 @@ def _steady_v2(link: LinkParams, lm, il, vl):
     return np.minimum(np.maximum((x * link.v1_amp_v - np.sqrt(disc)) / (2.0 * link.r1_ohm), 0.0), FOUR_OVER_PI * vl)
 
 
-def build_plans(draws, scenarios, cfg: EnvConfig) -> Plans:
+def build_plans(draws, scenarios, cfg: EnvConfig, out=None) -> Plans:
     """Turn the episodes' random draws (a list of :class:`~envs.scenario.EpisodeDraw` or a batched
     one) into what the step needs, on arrays over the episodes. ``scenarios``: one per episode,
-    or one :class:`Scenario` for all."""
+    or one :class:`Scenario` for all. ``out``: None or float arrays ``(cmd (T + 1, n), noise (T, n), coef
+    (n, S, 20))`` (C-contiguous) the command and sensor noise (step-major) and the coefficients are written
+    into, the Plans then holding views of them (the vector env's stores: no temporaries, no copies; the
+    same numbers)."""
     if isinstance(draws, (list, tuple)):
         draws = stack_draws(draws)
     n, T, S, link = draws.n, cfg.n_steps, cfg.n_slow, cfg.link_folded
@@ -192,11 +195,17 @@ def build_plans(draws, scenarios, cfg: EnvConfig) -> Plans:
     lm *= np.asarray(draws.lm_scale)[:, None]
     # windows without wind share one Lm: discretise each distinct value once (same numbers)
     lm_u, back = np.unique(lm.ravel(), return_inverse=True)
-    coef = _zoh_coefficients(link, lm_u, cfg)[back.ravel()].reshape(n, S, N_COEF)
-    cmd = command_profile(draws, T, cfg.dt_s)
+    zoh = _zoh_coefficients(link, lm_u, cfg)
+    if out is None:
+        coef, noise = zoh[back.ravel()].reshape(n, S, N_COEF), draws.noise * noise_sd[:, None]
+    else:
+        _, noise, coef = out
+        np.take(zoh, back.ravel(), axis=0, out=coef.reshape(n * S, N_COEF), mode="clip")   # indices all valid
+        noise = np.multiply(draws.noise.T, noise_sd, out=noise).T
+    cmd = command_profile(draws, T, cfg.dt_s, out=None if out is None else out[0])
     battery, x0, vl0, vrc0, d0 = _initial_state(link, lm[:, 0], np.asarray(draws.soc0, dtype=float), load_w,
                                                 cmd[:, 0], cfg, *cfg.device_terms)
-    return Plans(cmd, draws.noise * noise_sd[:, None], coef, lm, battery, x0, vl0, vrc0, d0,
+    return Plans(cmd, noise, coef, lm, battery, x0, vl0, vrc0, d0,
                  np.asarray(draws.t_stop_s, dtype=float))
 
 

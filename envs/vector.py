@@ -59,6 +59,9 @@ class SbarChargingVectorEnv(VectorEnv):
         self._n_sub = c.n_sub
         self._devices, self._dev = c.device_set(), c.device_terms
         self._peak = PeakLookup(c.link, self._devices)
+        w = c.reward   # the kernel's constants (envs.vector_kernel._finish_pass), one float array: a cheap dispatch
+        self._par = np.array([T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a, *self._dev,
+                              *LOOKUP_SCALARS], dtype=float)
         self._ar = np.arange(n)
         # per-step data stored step-major (T, n): a step reads one contiguous row across the envs
         self._cmd = np.zeros((T + 1, n))
@@ -112,12 +115,16 @@ class SbarChargingVectorEnv(VectorEnv):
         The scenario is the one given to the last ``reset`` (``options["scenario"]``) or the env's."""
         c, scn = self.config, self._cur_scenario
         rngs = self._rngs if len(idx) == self.num_envs else [self._rngs[i] for i in idx]
-        p = build_plans(draw_episodes(rngs, scn, c.n_steps), scn, c)
-        if len(idx) == self.num_envs:  # all at once (the usual autoreset): plain slices, no scatter
+        full = len(idx) == self.num_envs
+        # all at once (the usual autoreset): command, noise and coefficients written in place, plain slices
+        out = (self._cmd, self._noise, self._coef_all) if full else None
+        p = build_plans(draw_episodes(rngs, scn, c.n_steps), scn, c, out=out)
+        if full:
             idx = slice(None)
-        self._cmd[:, idx] = p.cmd_a.T
-        self._noise[:, idx] = p.noise_a.T
-        self._coef_all[idx] = p.coef
+        else:
+            self._cmd[:, idx] = p.cmd_a.T
+            self._noise[:, idx] = p.noise_a.T
+            self._coef_all[idx] = p.coef
         self._lm_all[:, idx] = p.lm_h.T
         self._bat[:, idx] = p.battery.T
         self._t_stop[idx] = p.t_stop_s
@@ -235,16 +242,15 @@ class SbarChargingVectorEnv(VectorEnv):
         """One step of every sub-environment in the compiled loop (:func:`envs.vector_kernel.step_kernel`),
         the objective included."""
         kern, rows, _ = self._kernel
-        n, c, w = self.num_envs, self.config, self.config.reward
+        n = self.num_envs
         obs = np.empty((n, OBS_DIM), np.float32)
         reward = np.empty(n)
         truncated = np.empty(n, dtype=bool)
         block = np.empty((n, len(rows)))
         ep = (self._i2sm_all, self._stop_k, self._t_stop, self._run_max, self._sm_ok, self._sm_checked)
-        par = (self._T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a, *self._dev, *LOOKUP_SCALARS)
         kern(d, self._state, self._k, self._j, self._coef_all, self._coef_cur, self._bat, self._cmd, self._noise,
-             self._lm_all, ep, self._M, self._n_sub, par, OBS_SCALE, OBS_OFFSET, self._peak.kernel_table, obs, reward,
-             truncated, block)
+             self._lm_all, ep, self._M, self._n_sub, self._par, OBS_SCALE, OBS_OFFSET, self._peak.kernel_table, obs,
+             reward, truncated, block)
         info = dict(zip(rows, block.T))   # (n,) views, one per key
         info["reached_short_mode"] = self._sm_ok & self._sm_checked
         info["i2_peak_envelope_a"] = info.pop("i2_peak_envelope_a")   # last, as in the single env

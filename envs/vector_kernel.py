@@ -107,20 +107,23 @@ def _inst_peak(pk, d, vl, tab, vlc, inv_imax):
 def _link_pass(d, state, k, j, coef_all, coef_cur, slow_every, n_sub, vf, dr, sc, idx):
     """Pass 1: the link step of every sub-environment into ``sc`` (rows i1n, i2n, pk, il, v2), the
     current coefficients moved to the step's slow segment; returns how many steps are split (their
-    indices in ``idx[:m]``)."""
+    indices in ``idx[:m]``, their clamp |V2c| and excess rx in ``sc[5:7, :m]``)."""
     m = 0
+    sub = n_sub > 1
     for e in range(d.shape[0]):
         kk = k[e]
         jj = kk // slow_every
         if jj != j[e] or kk == 0:
             coef_cur[e] = coef_all[e, jj]
             j[e] = jj
-        i1n, i2n, pk, il, v2, split, _, _ = _link_step(state[0, e], state[1, e], state[2, e], d[e], coef_cur[e], vf,
-                                                       dr)
+        i1n, i2n, pk, il, v2, split, vm, rx = _link_step(state[0, e], state[1, e], state[2, e], d[e], coef_cur[e], vf,
+                                                         dr)
         sc[0, e], sc[1, e], sc[2, e], sc[3, e], sc[4, e] = i1n, i2n, pk, il, v2
-        if n_sub > 1 and split:
-            idx[m] = e
-            m += 1
+        # noted without a branch (about half the steps split, at random): the slot m is written
+        # every time and kept when the step splits
+        idx[m] = e
+        sc[5, m], sc[6, m] = vm, rx
+        m += split & sub
     return m
 
 
@@ -167,17 +170,16 @@ def _substeps_one(i1, i2, vm, rx, vc, c, n_sub):
 
 
 @njit(cache=True)
-def _substep_pass(idx, m, state, d, coef_cur, n_sub, vf, dr, sc):
+def _substep_pass(idx, m, state, coef_cur, n_sub, vf, sc):
     """Pass 2: the split steps ``idx[:m]`` re-done in ``n_sub`` sub-steps, batched; results into ``sc``
-    (the clamp's |V2c| and the excess rx recomputed as in :func:`_link_step`, the same numbers)."""
+    (the clamp's |V2c| and the excess rx those of pass 1, ``sc[5:7, :m]``: a split step has
+    sign(I2) = +-1, so |V2c| is the sub-steps' magnitude to the bit; no second sine)."""
     w = np.empty((6, m))
     h = np.empty((8, m))
     for q in range(m):
         e = idx[q]
-        s = math.sin(_HALF_PI * d[e])
         w[0, q], w[1, q], w[3, q], w[4, q] = state[0, e], state[1, e], -1.0, 0.0
-        w[2, q] = _FOUR_OVER_PI * (state[2, e] + vf) * (1.0 - s)
-        w[5, q] = dr * (d[e] + 2.0 * s * math.sqrt(1.0 - s * s) / math.pi)
+        w[2, q], w[5, q] = sc[5, q], sc[6, q]
         for r in range(8):
             h[r, q] = coef_cur[e, _SUB_COLS[r]]
     _substeps_batch(w, h, n_sub)
@@ -253,7 +255,7 @@ def _finish_pass(d, state, k, j, bat, cmd_all, noise_all, lm_all, ep, par, scale
     """Pass 3: instantaneous peak, battery, reward, objective, state, observation and info of every
     sub-environment. ``ep`` = (i2sm_all (n, S), stop_k, t_stop, run_max, sm_ok, sm_checked) of the
     episodes; ``par`` = (n_steps, dt, inv_rated, w_track, w_over, i_ref, vf, dr, vlc, inv_imax) as
-    floats; ``ptab`` the peak table (:mod:`envs.peaks`)."""
+    floats (a float64 array); ``ptab`` the peak table (:mod:`envs.peaks`)."""
     i2sm_all, stop_k, t_stop, run_max, ok, checked = ep
     n_steps, dt, inv_rated, w_track, w_over, i_ref = par[0], par[1], par[2], par[3], par[4], par[5]
     vlc, inv_imax = par[8], par[9]
@@ -291,12 +293,12 @@ def step_kernel(d, state, k, j, coef_all, coef_cur, bat, cmd_all, noise_all, lm_
     float32, ``reward``, ``trunc`` and ``info`` (n, len(INFO_ROWS)) are filled (one row per
     sub-environment: the writes go to one place in memory, not to 17 rows)."""
     n = d.shape[0]
-    sc = np.empty((5, n))
+    sc = np.empty((7, n))
     idx = np.empty(n, dtype=np.int64)
     vf, dr = par[6], par[7]
     m = _link_pass(d, state, k, j, coef_all, coef_cur, slow_every, n_sub, vf, dr, sc, idx)
     if m:
-        _substep_pass(idx, m, state, d, coef_cur, n_sub, vf, dr, sc)
+        _substep_pass(idx, m, state, coef_cur, n_sub, vf, sc)
     _finish_pass(d, state, k, j, bat, cmd_all, noise_all, lm_all, ep, par, scale, offset, sc, ptab, obs, reward, trunc,
                  info)
 
