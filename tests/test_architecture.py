@@ -170,6 +170,13 @@ def test_each_package_docstring_is_a_map(pkg_dir):
     assert not missing, f"{pkg_dir.relative_to(ROOT)}/__init__.py docstring does not name {missing}"
 
 
+def test_no_merge_conflict_leftovers():
+    texts = {p: p.read_text() for p in [*MODULES.values(), *ROOT.glob("*.md"), *(ROOT / "docs").glob("*.md")]}
+    bad = [str(p.relative_to(ROOT)) for p, t in texts.items()
+           if any(ln.startswith(("<<<<<<< ", ">>>>>>> ")) or ln == "=======" for ln in t.splitlines())]
+    assert not bad, bad
+
+
 def test_the_checker_sees_a_circle(tmp_path):
     """The circle check can fail: two modules that import each other form a component."""
     global GRAPH
