@@ -114,7 +114,9 @@ def _plot_i2(result, out) -> str:
     ax.axhline(rated, color="k", ls="--", lw=0.8, label=f"rated {rated:g} A")
     ax.set_xlabel("t [s]")
     ax.set_ylabel("I2 [A]")
-    ax.set_title(f"secondary current envelope (peak {result.summary['peak_i2_a']:.1f} A)")
+    sm = result.summary
+    ax.set_title(f"secondary current envelope (peak {sm.get('peak_i2_envelope_a', sm['peak_i2_a']):.1f} A; "
+                 f"instantaneous {sm['peak_i2_a']:.1f} A)")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fine = ts["fine"].to_numpy(bool) if "fine" in ts else np.ones(len(i2), bool)
