@@ -56,7 +56,8 @@ def armed_periods(armed: pd.DataFrame, end_s: float, starts_armed: bool = False)
 
 def starts_armed(armed: pd.DataFrame) -> bool:
     """A log of armed-state *reports* (or inferred states) starts armed when its first report says
-    armed: the vehicle was armed when the log began, so the first period starts at 0."""
+    armed: the vehicle was armed when the log began (:func:`armed_periods` starts the first period
+    at that report)."""
     return bool(len(armed) and armed["armed"].iloc[0])
 
 

@@ -6,17 +6,18 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from .armed import armed_periods
 
-__all__ = ["FlightLog", "clean_time", "POSITION_COLUMNS", "ATTITUDE_COLUMNS", "ARMED_COLUMNS", "BATTERY_COLUMNS"]
+__all__ = ["FlightLog", "clean_time", "good_timestamps", "TIME_SPIKE_S", "POSITION_COLUMNS", "ATTITUDE_COLUMNS", "ARMED_COLUMNS", "BATTERY_COLUMNS"]
 
 POSITION_COLUMNS = ("t_s", "lat_deg", "lon_deg", "alt_m")
 ATTITUDE_COLUMNS = ("t_s", "roll_rad", "pitch_rad")
 ARMED_COLUMNS = ("t_s", "armed")
 BATTERY_COLUMNS = ("t_s", "voltage_v", "current_a", "power_w")
-_TIME_SPIKE_S = 60.0   # a record this far off its neighbours' time is corrupt (logs.py, ulog.py)
+TIME_SPIKE_S = 60.0   # a record this far off its neighbours' time is corrupt (logs.py, ulog.py)
 
 
 @dataclass
@@ -60,3 +61,25 @@ def clean_time(df: pd.DataFrame, columns, dedupe: bool = True) -> pd.DataFrame:
     if dedupe:
         out = out.drop_duplicates("t_s", keep="last")
     return out.reset_index(drop=True)
+
+
+def good_timestamps(ts: np.ndarray) -> np.ndarray:
+    """Records whose timestamp is plausible: within :data:`TIME_SPIKE_S` of the centred rolling
+    median of 9, or continuing the timeline (0 .. TIME_SPIKE_S after the previous good record).
+
+    A corrupt byte in a .tlog record's 8-byte timestamp (or in a DataFlash TimeUS) makes an
+    isolated spike of hours or years; steps (logging paused) and any spacing of a monotonic
+    clock pass, since the centred median of a sorted window is its middle element. At the end of
+    a log the window is one-sided: a few sparse records (a parameter write 31 s after the
+    previous record) would be judged against older ones; the continuation rule keeps them.
+    """
+    if len(ts) == 0:
+        return np.zeros(0, dtype=bool)
+    med = pd.Series(ts).rolling(9, center=True, min_periods=1).median().to_numpy()
+    good = np.abs(ts - med) <= TIME_SPIKE_S  # False for nan (implausible timestamps)
+    for i in np.flatnonzero(~good & np.isfinite(ts)):
+        prev = np.flatnonzero(good[:i])
+        last = ts[prev[-1]] if len(prev) else np.nan
+        if 0.0 <= ts[i] - last <= TIME_SPIKE_S:
+            good[i] = True
+    return good

@@ -35,8 +35,8 @@ import numpy as np
 import pandas as pd
 
 from .armed import armed_periods, infer_armed, starts_armed
-from .flightlog import (_TIME_SPIKE_S, ARMED_COLUMNS, ATTITUDE_COLUMNS, BATTERY_COLUMNS, POSITION_COLUMNS, FlightLog,
-                        clean_time as _clean_time)
+from .flightlog import (TIME_SPIKE_S as _TIME_SPIKE_S, ARMED_COLUMNS, ATTITUDE_COLUMNS, BATTERY_COLUMNS, POSITION_COLUMNS, FlightLog,
+                        clean_time as _clean_time, good_timestamps as _good_timestamps)
 from .gpsclean import reject_outliers
 
 __all__ = ["mavutil", "FlightLog", "read_log", "armed_periods", "POSITION_COLUMNS", "BATTERY_COLUMNS"]
@@ -216,28 +216,6 @@ def read_log(path) -> FlightLog:
     text = captured.getvalue()
     stats["bad"] += text.count("Skipped ") + text.count("Failed to parse")
     return _assemble(path, kind, raw, stats, errors)
-
-
-def _good_timestamps(ts: np.ndarray) -> np.ndarray:
-    """Records whose timestamp is plausible: within :data:`_TIME_SPIKE_S` of the centred rolling
-    median of 9, or continuing the timeline (0 .. _TIME_SPIKE_S after the previous good record).
-
-    A corrupt byte in a .tlog record's 8-byte timestamp (or in a DataFlash TimeUS) makes an
-    isolated spike of hours or years; steps (logging paused) and any spacing of a monotonic
-    clock pass, since the centred median of a sorted window is its middle element. At the end of
-    a log the window is one-sided: a few sparse records (a parameter write 31 s after the
-    previous record) would be judged against older ones; the continuation rule keeps them.
-    """
-    if len(ts) == 0:
-        return np.zeros(0, dtype=bool)
-    med = pd.Series(ts).rolling(9, center=True, min_periods=1).median().to_numpy()
-    good = np.abs(ts - med) <= _TIME_SPIKE_S  # False for nan (implausible timestamps)
-    for i in np.flatnonzero(~good & np.isfinite(ts)):
-        prev = np.flatnonzero(good[:i])
-        last = ts[prev[-1]] if len(prev) else np.nan
-        if 0.0 <= ts[i] - last <= _TIME_SPIKE_S:
-            good[i] = True
-    return good
 
 
 class _Tables:

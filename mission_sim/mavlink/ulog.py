@@ -17,8 +17,11 @@ battery      battery_status voltage_v [V], current_a [A, + = discharging]
 
 Time: ``t_s`` = (timestamp - the log's start timestamp) [s]. The logger writes the current
 value of each topic when logging starts, with the time it was published; such samples (before the
-start) are placed at 0, so a log that starts armed is armed from 0. The duration is the last
-sample of any topic minus the start. Epoch time comes from the GPS (time_utc_usec) when present.
+start) are placed at 0, so a log that starts armed is armed from 0. The duration is the last good
+sample minus the start, judged on the time-sorted samples by the rule of the MAVLink logs
+(:func:`~mission_sim.mavlink.flightlog.good_timestamps`): a stray timestamp, e.g. the sample
+log's one ``mission`` sample at 1174 s while everything else ends at 6.5 s, is left out of every
+table and counted in ``bad_frames``. Epoch time comes from the GPS (time_utc_usec) when present.
 """
 
 from __future__ import annotations
@@ -29,24 +32,14 @@ import numpy as np
 import pandas as pd
 
 from .armed import infer_armed, starts_armed
-from .flightlog import (_TIME_SPIKE_S, ARMED_COLUMNS, ATTITUDE_COLUMNS, BATTERY_COLUMNS, POSITION_COLUMNS, FlightLog,
-                        clean_time)
+from .flightlog import (ARMED_COLUMNS, ATTITUDE_COLUMNS, BATTERY_COLUMNS, POSITION_COLUMNS, FlightLog,
+                        clean_time, good_timestamps)
 from .geodesy import GeoPoint, enu_to_geodetic
 from .gpsclean import reject_outliers
 
 __all__ = ["read_ulog"]
 
 _ARMING_STATE_ARMED = 2
-
-
-def timeline_end_s(t_s: np.ndarray, gap_s: float) -> float:
-    """End [s] of the timeline of the sample times ``t_s`` (from the log start): sorted, it ends
-    before the first gap longer than ``gap_s`` after the start (0 for no samples)."""
-    t = np.sort(np.maximum(np.asarray(t_s, dtype=float), 0.0))
-    if not len(t):
-        return 0.0
-    jumps = np.flatnonzero(np.diff(t) > gap_s)
-    return float(t[jumps[0]] if len(jumps) else t[-1])
 
 
 class _Topics:
@@ -57,10 +50,11 @@ class _Topics:
         self.start = int(ulog.start_timestamp)
         self.data = {d.name: d.data for d in sorted(ulog.data_list, key=lambda d: d.multi_id, reverse=True)}
         every = [(d.data["timestamp"].astype(np.int64) - self.start) * 1e-6 for d in ulog.data_list]
-        every = np.concatenate(every) if every else np.zeros(0)
-        self.duration_s = timeline_end_s(every, _TIME_SPIKE_S)
+        every = np.sort(np.maximum(np.concatenate(every), 0.0)) if every else np.zeros(0)
+        good = good_timestamps(every)  # the rule of the MAVLink logs, on the time-sorted samples
+        self.duration_s = float(every[good].max()) if good.any() else 0.0
         self.n_records = int(len(every))
-        self.n_stray = int(np.sum(every > self.duration_s))
+        self.n_stray = int(np.sum(~good))
 
     def __call__(self, name: str, *fields: str) -> pd.DataFrame | None:
         d = self.data.get(name)
