@@ -54,6 +54,11 @@ def _diode(name, anode, cathode, vf, rd):
             f"RD{name} y{name} {cathode} {max(rd, 1e-6)!r}\n")
 
 
+def _diodes(diode, places) -> str:
+    """:func:`_diode` of one device model at each ``(name, anode, cathode)``."""
+    return "".join(_diode(name, a, k, diode.vf0_v, diode.rd_ohm) for name, a, k in places)
+
+
 def netlist(p=TABLE_I, dv: DeviceSet = DeviceSet(), label: str = "ideal", dead_time_s: float | None = None) -> str:
     """ngspice netlist of the scenario (see the module docstring): ``dead_time_s=None`` models the
     inverter as a square-wave source, a number as a full bridge with that dead time."""
@@ -84,10 +89,8 @@ def netlist(p=TABLE_I, dv: DeviceSet = DeviceSet(), label: str = "ideal", dead_t
         f"C2 bq bb {c2!r} IC={vc20!r}\n",
         "VSENSE bq bn DC 0\n",
         # SBAR: A = a, B = bn, battery between bat and ground (SPICE node names are case-insensitive)
-        _diode("U1", "a", "bat", dv.rect_diode.vf0_v, dv.rect_diode.rd_ohm),
-        _diode("U2", "bn", "bat", dv.rect_diode.vf0_v, dv.rect_diode.rd_ohm),
-        _diode("B1", "0", "a", body.vf0_v, body.rd_ohm),
-        _diode("B2", "0", "bn", body.vf0_v, body.rd_ohm),
+        _diodes(dv.rect_diode, (("U1", "a", "bat"), ("U2", "bn", "bat"))),
+        _diodes(body, (("B1", "0", "a"), ("B2", "0", "bn"))),
         "S1 a 0 g 0 SWM\nS2 bn 0 g 0 SWM\n",
         f"VG g 0 PWL(0 0 {T_STEP_S - T / 2!r} 0 {T_STEP_S - T / 2 + tr!r} 1)\n",
         f"VL bat 0 DC {p.vl_v!r}\n",
@@ -113,10 +116,7 @@ def _bridge(p, dv: DeviceSet, td: float, tr: float) -> list:
         f"VGP gp 0 PULSE(1 0 {T / 2 - tr / 2!r} {tr!r} {tr!r} {T + td - tr!r} {2 * T!r})\n",
         f"VGN gn 0 PULSE(0 1 {T / 2 + td - tr / 2!r} {tr!r} {tr!r} {T - td - tr!r} {2 * T!r})\n",
         "SAH vdc ma gp 0 SWI\nSBL mb 0 gp 0 SWI\nSAL ma 0 gn 0 SWI\nSBH vdc mb gn 0 SWI\n",
-        _diode("AH", "ma", "vdc", sw.body.vf0_v, sw.body.rd_ohm),
-        _diode("AL", "0", "ma", sw.body.vf0_v, sw.body.rd_ohm),
-        _diode("BH", "mb", "vdc", sw.body.vf0_v, sw.body.rd_ohm),
-        _diode("BL", "0", "mb", sw.body.vf0_v, sw.body.rd_ohm),
+        _diodes(sw.body, (("AH", "ma", "vdc"), ("AL", "0", "ma"), ("BH", "mb", "vdc"), ("BL", "0", "mb"))),
         f".model SWI SW(VT=0.5 VH=0.1 RON={max(sw.ron_ohm, 1e-6)!r} ROFF=1e7)\n"]
 
 
