@@ -25,6 +25,7 @@ when the repository's git history is not there (e.g. an sdist).
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import os
 import statistics
@@ -120,9 +121,7 @@ def _unpack_rev(rev: str, dest: Path) -> bool:
         tar = subprocess.run(["git", "-C", str(ROOT), "archive", rev], capture_output=True, check=True).stdout
     except (OSError, subprocess.CalledProcessError):
         return False
-    tmp_tar = dest / "tree.tar"
-    tmp_tar.write_bytes(tar)
-    with tarfile.open(tmp_tar) as tf:
+    with tarfile.open(fileobj=io.BytesIO(tar)) as tf:
         tf.extractall(dest / "tree", filter="data")
     return True
 
