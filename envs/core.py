@@ -44,7 +44,7 @@ from wpt_receiver.sbar import rectifier_current, rectifier_v2
 from .plant import battery_operating_point, lm_window_h
 from .scenario import Scenario, command_profile, stack_draws
 
-__all__ = ["EnvConfig", "RewardWeights", "Plans", "build_plans", "advance", "reward_cost", "sbar_v2", "OBS_SCALE",
+__all__ = ["EnvConfig", "RewardWeights", "Plans", "build_plans", "advance", "reward_cost", "OBS_SCALE",
            "OBS_OFFSET", "SCALAR_OPS", "NUMPY_OPS", "N_COEF"]
 
 HALF_PI = 0.5 * math.pi
@@ -253,15 +253,6 @@ def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig, vf
     battery = np.stack([ocv, docv, soc0, r0, decay, r1 * (1.0 - decay), cfg.dt_s / (3600.0 * cap), i_load,
                         bus_decay], axis=-1)
     return battery, np.stack([i1, i2], axis=-1), vl0, vrc0, d0
-
-
-def sbar_v2(d, vl, i2, dev, ops=None):
-    """The SBAR's V2 [V] of :func:`advance` for duties, battery voltages and I2 envelopes (floats with
-    ``SCALAR_OPS``, arrays with ``NUMPY_OPS``, the default); ``dev = (Vf, dR)``."""
-    ops = NUMPY_OPS if ops is None else ops
-    vf, dr = dev
-    return (rectifier_v2(d, vl + vf, i2, sin=ops.sin, sign=ops.sign)
-            + dr * (d + ops.sin(math.pi * d) / math.pi) * i2)
 
 
 def _sign_float(x):
