@@ -168,7 +168,7 @@ class SbarChargingEnv(gym.Env):
         self._plan = p
         self._t_stop = float(p.t_stop_s[0])
         self._stop_k = int(stop_step(p.t_stop_s, self._dt, self._T)[0])
-        i2_sm = short_mode_i2_a(self.config.link_short_mode, p.lm_h[0])
+        i2_sm = short_mode_i2_a(self.config.link, p.lm_h[0], self._devices)
         if self._kern is None:
             self._start_float(p, i2_sm)
         else:

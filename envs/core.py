@@ -121,24 +121,16 @@ class EnvConfig:
         return self._derived[1]
 
     @property
-    def link_short_mode(self) -> LinkParams:
-        """The link in short mode: R1 + 2 Ron (inverter), R2 + 2 Ron (the shorted SBAR channels), for
-        :func:`envs.objective.short_mode_i2_a`."""
-        return self._derived[2]
-
-    @property
     def device_terms(self) -> tuple:
         """``(Vf, dR)`` of :func:`advance`: the rectifying path's forward drop [V] and the shorted
         channels' resistance minus the folded Rd [ohm] (both 0 for ``"ideal"``)."""
-        return self._derived[3]
+        return self._derived[2]
 
     @cached_property   # every episode start asks (the config is frozen)
     def _derived(self):
         from wpt_receiver.devices import envelope_params, preset
         dev = preset(self.devices)
-        short = self.link if dev.is_ideal else self.link.with_(r1_ohm=self.link.r1_ohm + dev.inv_r_ohm,
-                                                               r2_ohm=self.link.r2_ohm + dev.short_r_ohm)
-        return dev, envelope_params(self.link, dev), short, (dev.rect_vf_v, dev.short_r_ohm - dev.rect_rd_ohm)
+        return dev, envelope_params(self.link, dev), (dev.rect_vf_v, dev.short_r_ohm - dev.rect_rd_ohm)
 
     @property
     def n_slow(self) -> int:

@@ -127,7 +127,7 @@ class SbarChargingVectorEnv(VectorEnv):
         self._lm_all[:, idx] = p.lm_h.T
         self._bat[:, idx] = p.battery.T
         self._t_stop[idx] = p.t_stop_s
-        self._i2sm_all[idx] = short_mode_i2_a(c.link_short_mode, p.lm_h)
+        self._i2sm_all[idx] = short_mode_i2_a(c.link, p.lm_h, self._devices)
         self._stop_k[idx] = stop_step(p.t_stop_s, c.dt_s, c.n_steps)
         self._run_max[idx] = -np.inf
         self._sm_ok[idx] = True
