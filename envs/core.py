@@ -170,10 +170,10 @@ def _steady_v2(link: LinkParams, lm, il, vl):
 def build_plans(draws, scenarios, cfg: EnvConfig, out=None) -> Plans:
     """Turn the episodes' random draws (a list of :class:`~envs.scenario.EpisodeDraw` or a batched
     one) into what the step needs, on arrays over the episodes. ``scenarios``: one per episode,
-    or one :class:`Scenario` for all. ``out``: None or float arrays ``(cmd (T + 1, n), noise (T, n), coef
-    (n, S, 20))`` (C-contiguous) the command and sensor noise (step-major) and the coefficients are written
-    into, the Plans then holding views of them (the vector env's stores: no temporaries, no copies; the
-    same numbers)."""
+    or one :class:`Scenario` for all. The command and the sensor noise are built step-major, the Plans
+    holding their transposed views; ``out``: None (new arrays) or float arrays ``(cmd (T + 1, n), noise
+    (T, n), coef (n, S, 20))`` (C-contiguous) to write them and the coefficients into (the vector env's
+    stores: no temporaries, no copies; the same numbers)."""
     if isinstance(draws, (list, tuple)):
         draws = stack_draws(draws)
     n, T, S, link = draws.n, cfg.n_steps, cfg.n_slow, cfg.link_folded
@@ -188,13 +188,10 @@ def build_plans(draws, scenarios, cfg: EnvConfig, out=None) -> Plans:
     # windows without wind share one Lm: discretise each distinct value once (same numbers)
     lm_u, back = np.unique(lm.ravel(), return_inverse=True)
     zoh = _zoh_coefficients(link, lm_u, cfg)
-    if out is None:
-        coef, noise = zoh[back.ravel()].reshape(n, S, N_COEF), draws.noise * noise_sd[:, None]
-    else:
-        _, noise, coef = out
-        np.take(zoh, back.ravel(), axis=0, out=coef.reshape(n * S, N_COEF), mode="clip")   # indices all valid
-        noise = np.multiply(draws.noise.T, noise_sd, out=noise).T
-    cmd = command_profile(draws, T, cfg.dt_s, out=None if out is None else out[0])
+    cmd, noise, coef = out if out is not None else (np.empty((T + 1, n)), np.empty((T, n)), np.empty((n, S, N_COEF)))
+    np.take(zoh, back.ravel(), axis=0, out=coef.reshape(n * S, N_COEF), mode="clip")   # indices all valid
+    noise = np.multiply(draws.noise.T, noise_sd, out=noise).T
+    cmd = command_profile(draws, T, cfg.dt_s, out=cmd)
     battery, x0, vl0, vrc0, d0 = _initial_state(link, lm[:, 0], np.asarray(draws.soc0, dtype=float), load_w,
                                                 cmd[:, 0], cfg, *cfg.device_terms)
     return Plans(cmd, noise, coef, lm, battery, x0, vl0, vrc0, d0,
