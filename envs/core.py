@@ -39,7 +39,7 @@ import numpy as np
 
 from mission_sim.contract import OBS_FIELDS
 from wpt_receiver import TABLE_I, LinkParams, duty_from_v2_clipped, state_matrices, steady_state, zoh_discretise
-from wpt_receiver.sbar import rectifier_current, rectifier_v2
+from wpt_receiver.sbar import rectifier_current, short_weight
 
 from .plant import battery_operating_point, lm_window_h
 from .scenario import Scenario, command_profile, stack_draws
@@ -193,7 +193,7 @@ def build_plans(draws, scenarios, cfg: EnvConfig, out=None) -> Plans:
     noise = np.multiply(draws.noise.T, noise_sd, out=noise).T
     cmd = command_profile(draws, T, cfg.dt_s, out=cmd)
     battery, x0, vl0, vrc0, d0 = _initial_state(link, lm[:, 0], np.asarray(draws.soc0, dtype=float), load_w,
-                                                cmd[:, 0], cfg, *cfg.device_terms)
+                                                cmd[:, 0], cfg)
     return Plans(cmd, noise, coef, lm, battery, x0, vl0, vrc0, d0,
                  np.asarray(draws.t_stop_s, dtype=float))
 
@@ -213,11 +213,12 @@ def _zoh_coefficients(link: LinkParams, lm, cfg: EnvConfig) -> np.ndarray:
                            bm[:, 1, 1:], ah.reshape(n, 4), bh[:, :, 0] * v1, bh[:, :, 1]], axis=1)
 
 
-def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig, vf: float = 0.0, dr: float = 0.0):
+def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig):
     """Battery rows of :class:`Plans` and the steady state delivering the first command ``cmd0``
     (fixed point through the battery voltage): ``(battery, x0, vl0, vrc0, d0)``. ``link`` has the
-    devices' resistances folded in; ``vf``, ``dr`` as in :func:`advance` (the clamp is ``VL + vf``,
-    the short-window excess ``dr w(d) I2`` acts as a resistance in series with R2)."""
+    devices' resistances folded in; ``(vf, dr)`` = :attr:`EnvConfig.device_terms` as in :func:`advance`
+    (the clamp is ``VL + vf``, the short-window excess ``dr w(d) I2`` acts as a resistance in series with R2)."""
+    vf, dr = cfg.device_terms
     ocv, docv, r0, r1, tau1, cap = battery_operating_point(soc0)
     i_load = load_w / ocv   # hover draw, constant over 30 ms
     vl = ocv + (r0 + r1) * (cmd0 - i_load)
@@ -229,7 +230,7 @@ def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig, vf
     d0 = duty_from_v2_clipped(v2, vl + vf)
     v2 = FOUR_OVER_PI * (vl + vf) * (1.0 - np.sin(HALF_PI * d0))
     # steady state with V2 = v2 + dr w(d0) I2 (eq. 4; i2 > 0: V2 <= RM's, below w Lm V1 / R1)
-    r2e = link.r2_ohm + dr * (d0 + np.sin(math.pi * d0) / math.pi)
+    r2e = link.r2_ohm + dr * short_weight(d0)
     wlm = link.omega_rad_s * np.asarray(lm0, dtype=float)
     det = link.r1_ohm * r2e + wlm**2
     i2 = (wlm * link.v1_amp_v - link.r1_ohm * v2) / det
