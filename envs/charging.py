@@ -10,9 +10,9 @@ from gymnasium import spaces
 
 from mission_sim.contract import OBS_DIM, PolicyContext
 
-from wpt_receiver.sbar import rectifier_current
+from wpt_receiver.sbar import rectifier_current, rectifier_v2_folded
 
-from .core import (OBS_OFFSET, OBS_SCALE, SCALAR_OPS, EnvConfig, advance, build_plans, reward_cost, sbar_v2)
+from .core import (OBS_OFFSET, OBS_SCALE, SCALAR_OPS, EnvConfig, advance, build_plans, reward_cost)
 from .objective import SHORT_MODE_IL_A, SHORT_MODE_WITHIN_S, short_mode_i2_a, stop_step
 from .peaks import LOOKUP_SCALARS, PeakLookup
 from .render import draw_envelope
@@ -168,7 +168,7 @@ class SbarChargingEnv(gym.Env):
         self._plan = p
         self._t_stop = float(p.t_stop_s[0])
         self._stop_k = int(stop_step(p.t_stop_s, self._dt, self._T)[0])
-        i2_sm = short_mode_i2_a(self.config.link_short_mode, p.lm_h[0])
+        i2_sm = short_mode_i2_a(self.config.link, p.lm_h[0], self._devices)
         if self._kern is None:
             self._start_float(p, i2_sm)
         else:
@@ -178,12 +178,12 @@ class SbarChargingEnv(gym.Env):
         vl, d, soc, cmd0 = float(p.vl0[0]), float(p.d0[0]), float(p.battery[0, 2]), float(p.cmd_a[0, 0])
         il = float(rectifier_current(d, abs(i2)))
         ib = il - float(p.battery[0, 7])
+        v2 = rectifier_v2_folded(d, vl, i2, self._devices, sin=math.sin, sign=SCALAR_OPS.sign)
         info = {"t_s": 0.0, "i2_a": i2, "i2_peak_a": self._peak.scalar(abs(i2), d, vl), "i1_a": i1, "d_short": d,
-                "v2_v": sbar_v2(d, vl, i2, self._dev, SCALAR_OPS), "rect_current_a": il,
-                "battery_v": vl, "battery_current_a": ib, "soc": soc, "charge_cmd_a": cmd0,
-                "lm_h": float(p.lm_h[0, 0]), "energy_j": 0.0, "cost": 0.0, "overcurrent": 0.0, "overshoot": -np.inf,
-                "episode_cost": 0.0, "reached_short_mode": False, "scenario": scn.name, "t_stop_s": self._t_stop,
-                "i2_peak_envelope_a": abs(i2)}
+                "v2_v": v2, "rect_current_a": il, "battery_v": vl, "battery_current_a": ib, "soc": soc,
+                "charge_cmd_a": cmd0, "lm_h": float(p.lm_h[0, 0]), "energy_j": 0.0, "cost": 0.0, "overcurrent": 0.0,
+                "overshoot": -np.inf, "episode_cost": 0.0, "reached_short_mode": False, "scenario": scn.name,
+                "t_stop_s": self._t_stop, "i2_peak_envelope_a": abs(i2)}
         if self.render_mode is not None:
             self._hist = [[0.0], [i2], [il], [cmd0], [d]]
         obs = np.array([_n(i2, 0), _n(vl, 1), _n(ib, 2), _n(il, 3), _n(soc, 4),

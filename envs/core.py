@@ -39,12 +39,12 @@ import numpy as np
 
 from mission_sim.contract import OBS_FIELDS
 from wpt_receiver import TABLE_I, LinkParams, duty_from_v2_clipped, state_matrices, steady_state, zoh_discretise
-from wpt_receiver.sbar import rectifier_current, rectifier_v2
+from wpt_receiver.sbar import rectifier_current, short_weight
 
 from .plant import battery_operating_point, lm_window_h
 from .scenario import Scenario, command_profile, stack_draws
 
-__all__ = ["EnvConfig", "RewardWeights", "Plans", "build_plans", "advance", "reward_cost", "sbar_v2", "OBS_SCALE",
+__all__ = ["EnvConfig", "RewardWeights", "Plans", "build_plans", "advance", "reward_cost", "OBS_SCALE",
            "OBS_OFFSET", "SCALAR_OPS", "NUMPY_OPS", "N_COEF"]
 
 HALF_PI = 0.5 * math.pi
@@ -121,24 +121,16 @@ class EnvConfig:
         return self._derived[1]
 
     @property
-    def link_short_mode(self) -> LinkParams:
-        """The link in short mode: R1 + 2 Ron (inverter), R2 + 2 Ron (the shorted SBAR channels), for
-        :func:`envs.objective.short_mode_i2_a`."""
-        return self._derived[2]
-
-    @property
     def device_terms(self) -> tuple:
         """``(Vf, dR)`` of :func:`advance`: the rectifying path's forward drop [V] and the shorted
         channels' resistance minus the folded Rd [ohm] (both 0 for ``"ideal"``)."""
-        return self._derived[3]
+        return self._derived[2]
 
     @cached_property   # every episode start asks (the config is frozen)
     def _derived(self):
         from wpt_receiver.devices import envelope_params, preset
         dev = preset(self.devices)
-        short = self.link if dev.is_ideal else self.link.with_(r1_ohm=self.link.r1_ohm + dev.inv_r_ohm,
-                                                               r2_ohm=self.link.r2_ohm + dev.short_r_ohm)
-        return dev, envelope_params(self.link, dev), short, (dev.rect_vf_v, dev.short_r_ohm - dev.rect_rd_ohm)
+        return dev, envelope_params(self.link, dev), (dev.rect_vf_v, dev.short_r_ohm - dev.rect_rd_ohm)
 
     @property
     def n_slow(self) -> int:
@@ -178,10 +170,10 @@ def _steady_v2(link: LinkParams, lm, il, vl):
 def build_plans(draws, scenarios, cfg: EnvConfig, out=None) -> Plans:
     """Turn the episodes' random draws (a list of :class:`~envs.scenario.EpisodeDraw` or a batched
     one) into what the step needs, on arrays over the episodes. ``scenarios``: one per episode,
-    or one :class:`Scenario` for all. ``out``: None or float arrays ``(cmd (T + 1, n), noise (T, n), coef
-    (n, S, 20))`` (C-contiguous) the command and sensor noise (step-major) and the coefficients are written
-    into, the Plans then holding views of them (the vector env's stores: no temporaries, no copies; the
-    same numbers)."""
+    or one :class:`Scenario` for all. The command and the sensor noise are built step-major, the Plans
+    holding their transposed views; ``out``: None (new arrays) or float arrays ``(cmd (T + 1, n), noise
+    (T, n), coef (n, S, 20))`` (C-contiguous) to write them and the coefficients into (the vector env's
+    stores: no temporaries, no copies; the same numbers)."""
     if isinstance(draws, (list, tuple)):
         draws = stack_draws(draws)
     n, T, S, link = draws.n, cfg.n_steps, cfg.n_slow, cfg.link_folded
@@ -196,15 +188,12 @@ def build_plans(draws, scenarios, cfg: EnvConfig, out=None) -> Plans:
     # windows without wind share one Lm: discretise each distinct value once (same numbers)
     lm_u, back = np.unique(lm.ravel(), return_inverse=True)
     zoh = _zoh_coefficients(link, lm_u, cfg)
-    if out is None:
-        coef, noise = zoh[back.ravel()].reshape(n, S, N_COEF), draws.noise * noise_sd[:, None]
-    else:
-        _, noise, coef = out
-        np.take(zoh, back.ravel(), axis=0, out=coef.reshape(n * S, N_COEF), mode="clip")   # indices all valid
-        noise = np.multiply(draws.noise.T, noise_sd, out=noise).T
-    cmd = command_profile(draws, T, cfg.dt_s, out=None if out is None else out[0])
+    cmd, noise, coef = out if out is not None else (np.empty((T + 1, n)), np.empty((T, n)), np.empty((n, S, N_COEF)))
+    np.take(zoh, back.ravel(), axis=0, out=coef.reshape(n * S, N_COEF), mode="clip")   # indices all valid
+    noise = np.multiply(draws.noise.T, noise_sd, out=noise).T
+    cmd = command_profile(draws, T, cfg.dt_s, out=cmd)
     battery, x0, vl0, vrc0, d0 = _initial_state(link, lm[:, 0], np.asarray(draws.soc0, dtype=float), load_w,
-                                                cmd[:, 0], cfg, *cfg.device_terms)
+                                                cmd[:, 0], cfg)
     return Plans(cmd, noise, coef, lm, battery, x0, vl0, vrc0, d0,
                  np.asarray(draws.t_stop_s, dtype=float))
 
@@ -224,11 +213,12 @@ def _zoh_coefficients(link: LinkParams, lm, cfg: EnvConfig) -> np.ndarray:
                            bm[:, 1, 1:], ah.reshape(n, 4), bh[:, :, 0] * v1, bh[:, :, 1]], axis=1)
 
 
-def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig, vf: float = 0.0, dr: float = 0.0):
+def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig):
     """Battery rows of :class:`Plans` and the steady state delivering the first command ``cmd0``
     (fixed point through the battery voltage): ``(battery, x0, vl0, vrc0, d0)``. ``link`` has the
-    devices' resistances folded in; ``vf``, ``dr`` as in :func:`advance` (the clamp is ``VL + vf``,
-    the short-window excess ``dr w(d) I2`` acts as a resistance in series with R2)."""
+    devices' resistances folded in; ``(vf, dr)`` = :attr:`EnvConfig.device_terms` as in :func:`advance`
+    (the clamp is ``VL + vf``, the short-window excess ``dr w(d) I2`` acts as a resistance in series with R2)."""
+    vf, dr = cfg.device_terms
     ocv, docv, r0, r1, tau1, cap = battery_operating_point(soc0)
     i_load = load_w / ocv   # hover draw, constant over 30 ms
     vl = ocv + (r0 + r1) * (cmd0 - i_load)
@@ -240,7 +230,7 @@ def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig, vf
     d0 = duty_from_v2_clipped(v2, vl + vf)
     v2 = FOUR_OVER_PI * (vl + vf) * (1.0 - np.sin(HALF_PI * d0))
     # steady state with V2 = v2 + dr w(d0) I2 (eq. 4; i2 > 0: V2 <= RM's, below w Lm V1 / R1)
-    r2e = link.r2_ohm + dr * (d0 + np.sin(math.pi * d0) / math.pi)
+    r2e = link.r2_ohm + dr * short_weight(d0)
     wlm = link.omega_rad_s * np.asarray(lm0, dtype=float)
     det = link.r1_ohm * r2e + wlm**2
     i2 = (wlm * link.v1_amp_v - link.r1_ohm * v2) / det
@@ -253,15 +243,6 @@ def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig, vf
     battery = np.stack([ocv, docv, soc0, r0, decay, r1 * (1.0 - decay), cfg.dt_s / (3600.0 * cap), i_load,
                         bus_decay], axis=-1)
     return battery, np.stack([i1, i2], axis=-1), vl0, vrc0, d0
-
-
-def sbar_v2(d, vl, i2, dev, ops=None):
-    """The SBAR's V2 [V] of :func:`advance` for duties, battery voltages and I2 envelopes (floats with
-    ``SCALAR_OPS``, arrays with ``NUMPY_OPS``, the default); ``dev = (Vf, dR)``."""
-    ops = NUMPY_OPS if ops is None else ops
-    vf, dr = dev
-    return (rectifier_v2(d, vl + vf, i2, sin=ops.sin, sign=ops.sign)
-            + dr * (d + ops.sin(math.pi * d) / math.pi) * i2)
 
 
 def _sign_float(x):

@@ -187,20 +187,16 @@ def stack_draws(draws) -> EpisodeDraw:
 def command_profile(draws, n_steps: int, dt_s: float, out=None) -> np.ndarray:
     """Charge command [A] per step, shape (n, n_steps + 1) for a batched draw (or a list of
     draws): cmd0 until t_change, cmd1 until t_stop, then 0 (stop charging -> short mode) to the
-    end of the window. ``out``: None or a C-contiguous float array (n_steps + 1, n) to fill step-major (the
-    vector env's store; the result is then its transposed view)."""
+    end of the window; the transposed view of a step-major (n_steps + 1, n) array: ``out`` if given (a
+    C-contiguous float array, the vector env's store), else a new one."""
     b = stack_draws(draws) if isinstance(draws, (list, tuple)) else draws
-    t = np.arange(n_steps + 1) * dt_s
-    tc, ts = np.reshape(b.t_change_s, (-1, 1)), np.reshape(b.t_stop_s, (-1, 1))
-    c0, c1 = np.reshape(b.cmd0_a, (-1, 1)), np.reshape(b.cmd1_a, (-1, 1))
-    # np.where(t < tc, c0, np.where(t < ts, c1, 0.0)) without the two full-size temporaries: the same numbers
+    t = (np.arange(n_steps + 1) * dt_s)[:, None]
+    tc, ts = np.reshape(b.t_change_s, (1, -1)), np.reshape(b.t_stop_s, (1, -1))
+    c0, c1 = np.reshape(b.cmd0_a, (1, -1)), np.reshape(b.cmd1_a, (1, -1))
     if out is None:
-        out = np.zeros(np.broadcast_shapes(t.shape, tc.shape, ts.shape, c0.shape, c1.shape))
-        np.copyto(out, c1, where=t < ts)
-        np.copyto(out, c0, where=t < tc)
-        return out
-    t = t[:, None]   # step-major: the same comparisons and picks, element for element
+        out = np.empty((n_steps + 1, tc.shape[1]))
+    # np.where(t < tc, c0, np.where(t < ts, c1, 0.0)) without the two full-size temporaries: the same numbers
     out[...] = 0.0
-    np.copyto(out, c1.T, where=t < ts.T)
-    np.copyto(out, c0.T, where=t < tc.T)
+    np.copyto(out, c1, where=t < ts)
+    np.copyto(out, c0, where=t < tc)
     return out.T

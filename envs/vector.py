@@ -22,10 +22,9 @@ from gymnasium.vector.utils import batch_space
 
 from mission_sim.contract import OBS_DIM, PolicyContext
 
-from wpt_receiver.sbar import rectifier_current
+from wpt_receiver.sbar import rectifier_current, rectifier_v2_folded
 
-from .core import (N_BAT, N_COEF, NUMPY_OPS, OBS_OFFSET, OBS_SCALE, EnvConfig, advance, build_plans, reward_cost,
-                   sbar_v2)
+from .core import (N_BAT, N_COEF, NUMPY_OPS, OBS_OFFSET, OBS_SCALE, EnvConfig, advance, build_plans, reward_cost)
 from .objective import overshoot_update, short_mode_i2_a, short_mode_update, stop_step, t_since_stop_s
 from .peaks import LOOKUP_SCALARS, PeakLookup
 from .scenario import draw_episodes, get_scenario, scenario_from_options
@@ -128,7 +127,7 @@ class SbarChargingVectorEnv(VectorEnv):
         self._lm_all[:, idx] = p.lm_h.T
         self._bat[:, idx] = p.battery.T
         self._t_stop[idx] = p.t_stop_s
-        self._i2sm_all[idx] = short_mode_i2_a(c.link_short_mode, p.lm_h)
+        self._i2sm_all[idx] = short_mode_i2_a(c.link, p.lm_h, self._devices)
         self._stop_k[idx] = stop_step(p.t_stop_s, c.dt_s, c.n_steps)
         self._run_max[idx] = -np.inf
         self._sm_ok[idx] = True
@@ -148,10 +147,9 @@ class SbarChargingVectorEnv(VectorEnv):
         cmd = self._cmd[self._k, self._ar]
         obs = self._obs(i2, vl, ib, il, soc, cmd, d, self._t_since(self._k))
         info = {"t_s": self._k * self._dt, "i2_a": i2.copy(), "i2_peak_a": self._peak.array(np.abs(i2), d, vl),
-                "i1_a": i1.copy(), "d_short": d.copy(), "v2_v": sbar_v2(d, vl, i2, self._dev), "rect_current_a": il,
-                "battery_v": vl.copy(),
-                "battery_current_a": ib, "soc": soc.copy(), "charge_cmd_a": cmd,
-                "lm_h": self._lm_all[self._j, self._ar], "energy_j": np.zeros(self.num_envs),
+                "i1_a": i1.copy(), "d_short": d.copy(), "v2_v": rectifier_v2_folded(d, vl, i2, self._devices),
+                "rect_current_a": il, "battery_v": vl.copy(), "battery_current_a": ib, "soc": soc.copy(),
+                "charge_cmd_a": cmd, "lm_h": self._lm_all[self._j, self._ar], "energy_j": np.zeros(self.num_envs),
                 "cost": np.zeros(self.num_envs), "overcurrent": np.zeros(self.num_envs),
                 "overshoot": self._run_max.copy(), "episode_cost": np.maximum(self._run_max, 0.0),
                 "reached_short_mode": self._sm_ok & self._sm_checked, "t_stop_s": self._t_stop.copy(),

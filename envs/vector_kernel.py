@@ -16,8 +16,8 @@ operation for operation, so the batched env reproduces single envs and the numpy
 
 The single env's step (:func:`single_step`) is the same helpers on one sub-environment: link step,
 sub-steps, battery, reward, objective, observation and info values in one call, reading the
-episode's plan arrays (:func:`pack_plan`). It reproduces the single env's pure float path
-(``compiled=False``, the reference) to the bit (``tests/test_envs.py``).
+episode's plan arrays (packed by ``SbarChargingEnv._start_compiled``). It reproduces the single
+env's pure float path (``compiled=False``, the reference) to the bit (``tests/test_envs.py``).
 
 Imported only when an env is built (numba is not imported by ``import envs``).
 """
