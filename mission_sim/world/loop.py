@@ -167,18 +167,10 @@ class MissionLoop:
             from tqdm import tqdm
             bar = tqdm(total=float(t_all[-1] - t_all[0]), unit="sim s", desc="mission", leave=False,
                        bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
-        if self.compiled is not False:
-            from . import fastpath
-            if self.compiled and not fastpath.usable(self):
-                raise ValueError("compiled=True needs numba, a policy with the kernel hook (mission_sim.contract."
-                                 "Policy) and sim.i2_noise_a = 0; pass compiled=None or False")
-            if fastpath.usable(self) and fastpath.run_compiled(self, bar):
-                if bar is not None:
-                    bar.close()
-                return self.result()
-            self._reset_state()   # an error status (or an interval too long): the reference path from the start
+        if self.compiled is not False and self._run_fast(bar):
             if bar is not None:
-                bar.reset()
+                bar.close()
+            return self.result()
         k = 0
         try:
             while k < self.n - 1:
@@ -191,6 +183,22 @@ class MissionLoop:
         if bar is not None:
             bar.close()
         return self.result()
+
+    def _run_fast(self, bar) -> bool:
+        """The compiled run (:mod:`.fastpath`) if it applies; True when done. On an error status (or an
+        interval too long) the state is reset for the reference path, which runs from the start."""
+        from . import fastpath
+        if not fastpath.usable(self):
+            if self.compiled:
+                raise ValueError("compiled=True needs numba, a policy with the kernel hook (mission_sim.contract."
+                                 "Policy) and sim.i2_noise_a = 0; pass compiled=None or False")
+            return False
+        if fastpath.run_compiled(self, bar):
+            return True
+        self._reset_state()
+        if bar is not None:
+            bar.reset()
+        return False
 
     def sample(self, k: int) -> int:
         """One trajectory sample k: gating, BMS, then quiet merged steps or the interval; next k."""
