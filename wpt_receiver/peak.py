@@ -171,19 +171,21 @@ class PeakTable:
             raise ValueError(f"i2_max_a={i2_max_a!r} is invalid; valid range: (0, inf)")
         self.d = np.linspace(0.0, 1.0, n_d)
         self.i2 = float(i2_max_a) * np.linspace(0.0, 1.0, n_i) ** 2
-        # first column a lookup at |I2| >= i2_min_a reads (the same index arithmetic as __call__)
-        y_min = np.sqrt(np.minimum(max(float(i2_min_a), 0.0) / float(i2_max_a), 1.0)) * (n_i - 1)
-        k0 = int(min(int(y_min), n_i - 2))
+        self._hd, self._imax = 1.0 / (n_d - 1), float(i2_max_a)
+        k0 = min(int(self._column(max(float(i2_min_a), 0.0))), n_i - 2)  # first column a lookup >= i2_min_a reads
         dd, ii = np.meshgrid(self.d, self.i2[k0:], indexing="ij")
         self.excess = np.full((n_d, n_i), np.nan)
         self.excess[:, k0:] = harmonics.peak(dd, ii) - ii          # (n_d, n_i) [A]
-        self._hd, self._imax = 1.0 / (n_d - 1), float(i2_max_a)
+
+    def _column(self, i2):
+        """Fractional |I2| grid index of ``i2`` (>= 0) [A] (the grid is quadratic; clipped at the top)."""
+        return np.sqrt(np.minimum(i2 / self._imax, 1.0)) * (len(self.i2) - 1)
 
     def __call__(self, d_short, i2_amp_a):
         """Peak |i2| [A] for duties in [0, 1] and envelope amplitudes (either sign; broadcast)."""
         i2 = np.abs(np.asarray(i2_amp_a, dtype=float))
         x = np.clip(np.asarray(d_short, dtype=float), 0.0, 1.0) / self._hd
-        y = np.sqrt(np.minimum(i2 / self._imax, 1.0)) * (len(self.i2) - 1)
+        y = self._column(i2)
         j = np.minimum(x.astype(int), len(self.d) - 2)
         k = np.minimum(y.astype(int), len(self.i2) - 2)
         fx, fy = x - j, y - k

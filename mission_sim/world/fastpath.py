@@ -100,11 +100,13 @@ def run_compiled(loop, bar=None) -> bool:
     vals = _state_values(loop)
     s = np.array([float(vals[name]) for name in kern.S_NAMES])
     t_all = np.ascontiguousarray(loop.t_all, dtype=float)
+    if len(t_all) < 2:
+        return False
+    need = kern._rows_needed.py_func(cst, float(np.max(np.diff(t_all))))  # the kernel's bound, in Python
+    if need > _MAX_ROWS:
+        return False
     arrays = (t_all, np.ascontiguousarray(loop.lm_all, dtype=float), np.ascontiguousarray(loop.k_all, dtype=float),
               np.ascontiguousarray(loop.p_all, dtype=float), loop.eligible.astype(float))
-    need = (math.ceil(float(np.max(np.diff(t_all))) / loop.dtc) + 2) * (math.ceil(loop.dtc / loop.t_rect) + 1) + 4
-    if len(t_all) < 2 or need > _MAX_ROWS:
-        return False
     rows = np.empty((max(2 * need, 1 << 14), N_COLUMNS))
     k, params, state = 0, np.ascontiguousarray(params, dtype=float), np.ascontiguousarray(state, dtype=float)
     lo, inv = np.ascontiguousarray(_LO, dtype=float), np.ascontiguousarray(_INV_SPAN, dtype=float)

@@ -45,7 +45,8 @@ DEVICE_GROUPS = ("inverter_switches", "rectifier_diodes", "rectifier_switches")
 
 
 _STEP_STATE = ("x", "soc", "vrc", "peak_env", "peak_d", "above", "last_vl", "last_ib", "last_il")  # what step() writes
-_SOC_COL = _COLUMNS.index("soc")
+_COL = {name: j for j, name in enumerate(_COLUMNS)}  # column index by name
+_SOC_COL = _COL["soc"]
 _SOC_TOL = 1e-9  # SoC undershoot at a depletion cut set to 0 (rounding of the fixed point)
 
 
@@ -166,18 +167,10 @@ class MissionLoop:
             from tqdm import tqdm
             bar = tqdm(total=float(t_all[-1] - t_all[0]), unit="sim s", desc="mission", leave=False,
                        bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
-        if self.compiled is not False:
-            from . import fastpath
-            if self.compiled and not fastpath.usable(self):
-                raise ValueError("compiled=True needs numba, a policy with the kernel hook (mission_sim.contract."
-                                 "Policy) and sim.i2_noise_a = 0; pass compiled=None or False")
-            if fastpath.usable(self) and fastpath.run_compiled(self, bar):
-                if bar is not None:
-                    bar.close()
-                return self.result()
-            self._reset_state()   # an error status (or an interval too long): the reference path from the start
+        if self.compiled is not False and self._run_fast(bar):
             if bar is not None:
-                bar.reset()
+                bar.close()
+            return self.result()
         k = 0
         try:
             while k < self.n - 1:
@@ -190,6 +183,22 @@ class MissionLoop:
         if bar is not None:
             bar.close()
         return self.result()
+
+    def _run_fast(self, bar) -> bool:
+        """The compiled run (:mod:`.fastpath`) if it applies; True when done. On an error status (or an
+        interval too long) the state is reset for the reference path, which runs from the start."""
+        from . import fastpath
+        if not fastpath.usable(self):
+            if self.compiled:
+                raise ValueError("compiled=True needs numba, a policy with the kernel hook (mission_sim.contract."
+                                 "Policy) and sim.i2_noise_a = 0; pass compiled=None or False")
+            return False
+        if fastpath.run_compiled(self, bar):
+            return True
+        self._reset_state()
+        if bar is not None:
+            bar.reset()
+        return False
 
     def sample(self, k: int) -> int:
         """One trajectory sample k: gating, BMS, then quiet merged steps or the interval; next k."""
@@ -558,8 +567,7 @@ class MissionLoop:
         """Summary dict: energies (exact sums), balance errors, SoC, I2 peak, step counts."""
         bp, t_all = self.bp, self.t_all
         self.peak_i2 = self.instantaneous_peak(arr)
-        col = {name: j for j, name in enumerate(_COLUMNS)}
-        tx_on = arr[:, col["v1_v"]] > 0
+        tx_on = arr[:, _COL["v1_v"]] > 0
         return {
             "policy": getattr(self.policy, "name", type(self.policy).__name__),
             "charge": bool(self.charge),
@@ -580,7 +588,7 @@ class MissionLoop:
             "coarse_steps": self.n_coarse,
             "fine_windows": self.n_windows,
             "fine_windows_cut": self.n_cut,
-            "charge_time_s": float(np.sum(arr[:, col["dt_s"]][tx_on])),
+            "charge_time_s": float(np.sum(arr[:, _COL["dt_s"]][tx_on])),
         }
 
     def energy_summary(self, arr) -> dict:
@@ -591,14 +599,13 @@ class MissionLoop:
         the battery terminals while it charges (sum VL I_batt dt over I_batt > 0), and
         ``propulsion_energy_j`` what the motors drew. ``dc_to_battery_efficiency`` = rectifier
         output / inverter DC input (``energy_from_source_j``)."""
-        col = {name: j for j, name in enumerate(_COLUMNS)}
-        acc = {key: math.fsum(arr[:, col[c]].tolist()) for key, c in (
+        acc = {key: math.fsum(arr[:, _COL[c]].tolist()) for key, c in (
             ("src", "e_source_j"), ("coil", "e_coil_loss_j"), ("rect", "e_rectifier_j"), ("chem", "e_battery_chem_j"),
             ("r0", "e_battery_r0_j"), ("r1", "e_battery_r1_j"), ("c1", "e_battery_c1_j"), ("prop", "e_propulsion_j"))}
-        groups = {f"{g}_loss_j": math.fsum(arr[:, col[f"e_{g}_j"]].tolist()) for g in DEVICE_GROUPS}
+        groups = {f"{g}_loss_j": math.fsum(arr[:, _COL[f"e_{g}_j"]].tolist()) for g in DEVICE_GROUPS}
         dev = math.fsum(groups.values())
-        ib = arr[:, col["battery_current_a"]]
-        charge_in = math.fsum((arr[:, col["battery_v"]] * np.maximum(ib, 0.0) * arr[:, col["dt_s"]]).tolist())
+        ib = arr[:, _COL["battery_current_a"]]
+        charge_in = math.fsum((arr[:, _COL["battery_v"]] * np.maximum(ib, 0.0) * arr[:, _COL["dt_s"]]).tolist())
         dw = self.st.stored_j(self.x) - self.w0
         losses = math.fsum([acc["coil"], dev, acc["r0"], acc["r1"]])
         rhs = math.fsum([acc["chem"], acc["c1"], dw, losses, acc["prop"]])
@@ -633,13 +640,12 @@ class MissionLoop:
         if self.peak_env == 0.0:
             return 0.0
         from wpt_receiver.peak import PeakTable, SbarHarmonics
-        col = {name: j for j, name in enumerate(_COLUMNS)}
-        on = arr[:, col["v1_v"]] > 0
-        vl = float(arr[:, col["battery_v"]][on].max()) if on.any() else float(self.last_vl)
+        on = arr[:, _COL["v1_v"]] > 0
+        vl = float(arr[:, _COL["battery_v"]][on].max()) if on.any() else float(self.last_vl)
         harm = SbarHarmonics(self.base.with_(vl_v=vl), self.dev)
-        i2 = np.abs(arr[:, col["i2_amp_a"]])
+        i2 = np.abs(arr[:, _COL["i2_amp_a"]])
         cand = on & (i2 >= self.peak_env - 2.0 * harm.ripple_bound_a())
-        d, i2c = np.r_[self.peak_d, arr[:, col["d_short"]][cand]], np.r_[self.peak_env, i2[cand]]
+        d, i2c = np.r_[self.peak_d, arr[:, _COL["d_short"]][cand]], np.r_[self.peak_env, i2[cand]]
         if len(d) > 64:
             approx = PeakTable(harm, i2_max_a=1.05 * self.peak_env, n_d=26, n_i=21, i2_min_a=float(i2c.min()))(d, i2c)
             keep = approx >= 0.99 * approx.max()
