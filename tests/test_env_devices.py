@@ -20,7 +20,7 @@ GOLDEN = Path(__file__).parent / "data" / "env_ideal_golden.npz"
 
 
 @pytest.mark.parametrize("compiled", [False, True])
-def test_ideal_devices_reproduce_the_env_before_devices_bit_for_bit(compiled):
+def test_ideal_devices_reproduce_the_env_before_devices(compiled):
     """Trajectories recorded at ffada78 (before devices and the instantaneous peak; its ``i2_peak_a``
     was the envelope's step peak): random duties on ``random`` and ``battery`` windows."""
     if compiled:
@@ -39,7 +39,9 @@ def test_ideal_devices_reproduce_the_env_before_devices_bit_for_bit(compiled):
                 _, _, _, _, info = env.step(rng.uniform(-1, 1, 1).astype(np.float32))
                 inst.append(info["i2_peak_a"] == inst_peak(info["i2_peak_envelope_a"], info["d_short"], vl, rows))
             got.append([info["i2_peak_envelope_a"] if key == "i2_peak_a" else info[key] for key in keys])
-        np.testing.assert_array_equal(np.array(got), g[scn])
+        # stored numbers from another code version and numpy release: equal to round-off, not bit
+        # for bit (numpy's vectorised transcendentals change between releases and CPUs; issue 25)
+        np.testing.assert_allclose(np.array(got), g[scn], rtol=1e-11, atol=1e-12)
         assert all(inst)   # the instantaneous peak is the table's at the step's duty and starting VL
 
 
