@@ -1,161 +1,204 @@
-"""Switching-level model speed against ngspice and solve_ivp on the same circuit, in the same run.
+"""Switching-level model speed against ngspice at equal accuracy, on the same transient, in one run.
 
-Scenarios (ideal devices, Table I):
+The transient (ideal devices, Table I; ``tests/_spice.py``'s scenario stretched to 25 ms): the
+link starts at the closed-form fundamental solution, runs in RM until ``T_STEP_S = 10 ms``, then
+the SBAR shorts (SM) until ``T_END_S = 25 ms``. ngspice simulates the repository's netlist of
+it; the switching model simulates the same schedule from the same initial state (the tests'
+``_run_step``), so both give the same five numbers (``KEYS``: RM and SM peaks of i2 and i1, the
+step's peak of i2).
 
-* ``step25``: the 25 ms step scenario (RM steady state, SM from 10 ms). The switching model runs
-  ``link.simulate`` (periodic steady state + event-exact run). ngspice runs the repository's
-  netlist generator (``tests/_spice.py``, the circuit of ``tests/spice/link_ideal.cir``) with the
-  step at 10 ms and the end at 25 ms; ``solve_ivp`` (DOP853, rtol = atol = 1e-10) integrates eq. 1
-  written out directly with the same events from the same initial state.
-* ``netlist9``: the stored netlist ``tests/spice/link_ideal.cir`` itself (step at 3 ms, end 9 ms)
-  against the switching model on the same schedule from the same initial state.
+**Accuracy ladder.** ngspice's answer depends on its step limit ``tmax`` and its integration
+method. Each rung of ``LADDER`` is run (``--spice-repeat`` times, median and range) and its five
+numbers are compared with a converged run of the same netlist (``CONVERGED``: gear, ``tmax =
+T/4000``, ``reltol = 1e-7``). The rung the ratio is quoted at is the cheapest one whose numbers are
+*all* within ``--tol`` (0.1 %) of converged: equal accuracy, since the switching model is an exact
+solution between events (its own distance from converged ngspice is printed beside it). A peer at
+an over-tight tolerance would inflate the ratio; a peer at a loose one would flatter SPICE.
 
-The switching model is timed with its compiled event loop (numba; compiled or loaded from the
-disk cache in a warm-up run) and with the pure-Python reference loop. Times: median and range of
-``--repeat`` runs for the switching model, one run each for ngspice (subprocess wall time, batch
-mode, netlist parsing included) and solve_ivp. ``os.getloadavg()`` is printed before and after:
-the machine is shared, only ratios of the same run count.
+The switching model is timed (after a warm-up that compiles or loads numba's cache) including the
+dense sampling that its peaks need, ``--repeat`` times. ``os.getloadavg()`` is printed before
+and after: the machine is shared, only ratios of the same run count.
 
-    python benchmarks/bench_switching.py [--repeat 7] [--no-ivp] [--no-spice] [--json]
+    python benchmarks/bench_switching.py [--repeat 7] [--spice-repeat 3] [--tol 1e-3] [--json]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import shutil
 import statistics
 import sys
 import tempfile
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
-import _spice  # noqa: E402  (the repository's netlist generator and ngspice runner)
+import _spice  # noqa: E402  (the repository's netlist generator, ngspice runner and model measure)
 
 from wpt_receiver import TABLE_I  # noqa: E402
-from wpt_receiver.switching import SwitchingConfig, SwitchingLink, simulate_ivp  # noqa: E402
+from wpt_receiver.switching import SwitchingConfig, SwitchingLink  # noqa: E402
+from wpt_receiver.switching.circuit import I1, I2  # noqa: E402
+
+T_STEP_S, T_END_S = 10e-3, 25e-3
+T = TABLE_I.rectifier_period_s
+#: (label, method, tmax as a fraction of T, reltol); cheapest first
+LADDER = (("trap T/50", "trap", 50, 1e-3), ("trap T/100", "trap", 100, 1e-3), ("trap T/200", "trap", 200, 1e-3),
+          ("gear T/200", "gear", 200, 1e-6), ("gear T/500", "gear", 500, 1e-6),
+          ("gear T/1000 (the stored netlists')", "gear", 1000, 1e-6))
+CONVERGED = ("converged: gear T/4000, reltol 1e-7", "gear", 4000, 1e-7)
 
 
-def step25_duty(link: SwitchingLink, t_end_s: float = 25e-3, t_switch_s: float = 10e-3):
-    n = int(round(t_end_s / link.T))
-    return (np.arange(n) * link.T >= t_switch_s - 1e-12).astype(float)
+@contextmanager
+def _scenario():
+    """``tests/_spice``'s scenario with the 25 ms times (module constants, restored after)."""
+    old = _spice.T_STEP_S, _spice.T_END_S
+    _spice.T_STEP_S, _spice.T_END_S = T_STEP_S, T_END_S
+    try:
+        yield
+    finally:
+        _spice.T_STEP_S, _spice.T_END_S = old
+
+
+def _netlist(method: str, div: int, reltol: float) -> str:
+    """The generator's netlist with another integration method, step limit and reltol."""
+    with _scenario():
+        text = _spice.netlist(label=f"ideal, 25 ms step, {method} T/{div}")
+    tmax = T / div
+    lines = []
+    for ln in text.splitlines(keepends=True):
+        if ln.startswith(".options"):
+            order = " maxord=2" if method == "gear" else ""
+            ln = f".options reltol={reltol!r} abstol=1e-9 vntol=1e-7 method={method}{order} itl4=200\n"
+        elif ln.startswith(".tran"):
+            ln = f".tran {tmax!r} {T_END_S - T / 2!r} 0 {tmax!r} uic\n"
+        lines.append(ln)
+    return "".join(lines)
 
 
 def _stats(xs):
     return {"median_s": statistics.median(xs), "min_s": min(xs), "max_s": max(xs), "n": len(xs)}
 
 
-def _timed(fn, repeat):
-    out, times = None, []
+def _spice_rung(rung, repeat: int) -> dict:
+    label, method, div, reltol = rung
+    text, times, vals = _netlist(method, div, reltol), [], None
     for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return out, _stats(times)
+        with tempfile.TemporaryDirectory() as tmp:
+            t0 = time.perf_counter()
+            vals = _spice.run_ngspice(text, Path(tmp))
+            times.append(time.perf_counter() - t0)
+    return {"label": label, "values": vals, "time": _stats(times)}
 
 
-def _ngspice(text: str) -> float:
-    with tempfile.TemporaryDirectory() as tmp:
-        t0 = time.perf_counter()
-        _spice.run_ngspice(text, Path(tmp))
-        return time.perf_counter() - t0
+def _errors(vals: dict, ref: dict) -> dict:
+    return {k: abs(vals[k] / ref[k] - 1.0) for k in _spice.KEYS}
 
 
-def _netlist(t_step_s: float, t_end_s: float) -> str:
-    """The generator's netlist with another step/end time (module constants of ``tests/_spice``)."""
-    old = _spice.T_STEP_S, _spice.T_END_S
-    _spice.T_STEP_S, _spice.T_END_S = t_step_s, t_end_s
-    try:
-        return _spice.netlist(label="ideal, 25 ms step scenario")
-    finally:
-        _spice.T_STEP_S, _spice.T_END_S = old
+def _refined(res, col: int, lo: float, hi: float, y0: float) -> float:
+    """max |x_col| on the exact solution over [lo, hi] (bounded scalar search, xatol 1e-12 s)."""
+    f = lambda t: -abs(float(res.states(np.array([t]), cols=[col])[0][0, 0]))  # noqa: E731
+    return float(max(-minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12}).fun, y0))
 
 
-def bench_step25(repeat: int, spice: bool, ivp: bool) -> dict:
-    fast, ref = SwitchingLink(TABLE_I, compiled=True), SwitchingLink(TABLE_I, compiled=False)
-    d = step25_duty(fast)
-    fast.simulate(d)  # warm-up: numba compile or cache load
-    res_f, t_fast = _timed(lambda: fast.simulate(d), repeat)
-    res_r, t_ref = _timed(lambda: ref.simulate(d), max(1, repeat // 2))
-    ts = res_f.sample_times()
-    xf, _ = res_f.states(ts, cols=[2])
-    xr, _ = res_r.states(ts, cols=[2])
-    out = {"segments": len(res_f.seg_k), "compiled": t_fast, "reference_loop": t_ref,
-           "compiled_vs_reference_max_i2_diff_a": float(np.max(np.abs(xf - xr))),
-           "peak_i2_a": float(np.max(np.abs(xf)))}
-    if spice:
-        out["ngspice_s"] = _ngspice(_netlist(10e-3, 25e-3))
-    if ivp:
-        x0 = fast.periodic_steady_state(0.0)
-        sch = fast.schedule(0.0, len(d) * fast.T, d)
-        t0 = time.perf_counter()
-        _, xi = simulate_ivp(TABLE_I, SwitchingConfig(), sch, x0, rtol=1e-10, atol=1e-10, t_eval=ts)
-        out["solve_ivp_s"] = time.perf_counter() - t0
-        out["solve_ivp_max_i2_diff_a"] = float(np.max(np.abs(xi[:, 2] - xf[:, 0])))
+def _model_measure(link, x0) -> dict:
+    """The five numbers from one run, as a user of the model gets a peak: the largest of the dense
+    samples (``samples_per_half_cycle`` per period) in each window, then the maximum of |i| on the
+    exact solution around each sampled local maximum that could hold it (:func:`_refined`)."""
+    with _scenario():
+        res = _spice._run_step(link, x0)
+    ts = res.sample_times()
+    x, _ = res.states(ts, cols=[I1, I2])
+    w, out = 4 * T, {}
+    for key, col, j, (a, b) in (("rm_i2_a", I2, 1, (T_STEP_S - w, T_STEP_S)), ("step_peak_a", I2, 1, (T_STEP_S, T_END_S)),
+                                ("sm_i2_a", I2, 1, (T_END_S - w, T_END_S)), ("rm_i1_a", I1, 0, (T_STEP_S - w, T_STEP_S)),
+                                ("sm_i1_a", I1, 0, (T_END_S - w, T_END_S))):
+        sel = np.flatnonzero((ts >= a) & (ts <= b))
+        y = np.abs(x[:, j])
+        # candidates: local maxima of the samples within cos(pi/N) of the largest (a peak between
+        # two samples is at most that much above them); each refined on the exact solution
+        loc = sel[(y[sel] >= y[np.maximum(sel - 1, 0)]) & (y[sel] >= y[np.minimum(sel + 1, len(y) - 1)])]
+        cand = loc[y[loc] >= math.cos(math.pi / link.cfg.samples_per_half_cycle) * y[sel].max()]
+        n = len(ts) - 1
+        out[key] = max(_refined(res, col, max(ts[max(k - 1, 0)], a), min(ts[min(k + 1, n)], b), y[k]) for k in cand)
     return out
 
 
-def bench_netlist9(repeat: int, spice: bool) -> dict:
-    link = SwitchingLink(TABLE_I, compiled=True)
+def bench_model(repeat: int) -> dict:
+    """The switching model (compiled) on the same transient from the same state: run + peaks."""
+    link = SwitchingLink(TABLE_I, SwitchingConfig(), compiled=True)
     x0 = np.zeros(link.cir.m)
     x0[:4] = _spice.initial_state(TABLE_I, link.cfg.devices)
     x0[-1] = 1.0
-    _spice._run_step(link, x0)
-    _, t_fast = _timed(lambda: _spice._run_step(link, x0), repeat)
-    out = {"compiled": t_fast}
-    if spice:
-        out["ngspice_s"] = _ngspice(_spice.netlist_path("ideal").read_text())
-    return out
+    _model_measure(link, x0)                              # warm-up: numba compile or cache load
+    times, vals = [], None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        vals = _model_measure(link, x0)
+        times.append(time.perf_counter() - t0)
+    return {"values": vals, "time": _stats(times)}
 
 
-def run(repeat: int = 7, spice: bool = True, ivp: bool = True) -> dict:
-    spice = spice and shutil.which("ngspice") is not None
+def run(repeat: int = 7, spice_repeat: int = 3, tol: float = 1e-3) -> dict:
     load0 = os.getloadavg()
-    out = {"load_before": load0, "step25": bench_step25(repeat, spice, ivp), "netlist9": bench_netlist9(repeat, spice)}
+    out = {"load_before": load0, "tol": tol, "model": bench_model(repeat)}
+    if shutil.which("ngspice") is not None:
+        conv = _spice_rung(CONVERGED, 1)
+        out["converged"] = conv
+        out["model"]["errors"] = _errors(out["model"]["values"], conv["values"])
+        rungs = []
+        for rung in LADDER:
+            r = _spice_rung(rung, spice_repeat)
+            r["errors"] = _errors(r["values"], conv["values"])
+            r["max_error"] = max(r["errors"].values())
+            rungs.append(r)
+        out["ladder"] = rungs
+        ok = [r for r in rungs if r["max_error"] <= tol]
+        out["equal_accuracy"] = min(ok, key=lambda r: r["time"]["median_s"])["label"] if ok else None
     out["load_after"] = os.getloadavg()
     return out
 
 
 def _report(r: dict) -> None:
-    s, n9 = r["step25"], r["netlist9"]
-    f, ref = s["compiled"], s["reference_loop"]
+    m = r["model"]["time"]
     print(f"load average before {r['load_before'][0]:.2f}, after {r['load_after'][0]:.2f} (1 min)")
-    print(f"25 ms step scenario, {s['segments']} exact segments, peak i2 {s['peak_i2_a']:.2f} A")
-    print(f"  switching, compiled loop : {f['median_s'] * 1e3:8.2f} ms (range {f['min_s'] * 1e3:.2f}-{f['max_s'] * 1e3:.2f}, "
-          f"n={f['n']})")
-    print(f"  switching, Python loop   : {ref['median_s'] * 1e3:8.2f} ms (range {ref['min_s'] * 1e3:.2f}-"
-          f"{ref['max_s'] * 1e3:.2f})  compiled {ref['median_s'] / f['median_s']:.1f}x faster; "
-          f"max |i2 diff| {s['compiled_vs_reference_max_i2_diff_a']:.1e} A")
-    if "ngspice_s" in s:
-        print(f"  ngspice (same circuit)   : {s['ngspice_s'] * 1e3:8.0f} ms  -> switching model "
-              f"{s['ngspice_s'] / f['median_s']:.0f}x faster (range {s['ngspice_s'] / f['max_s']:.0f}-"
-              f"{s['ngspice_s'] / f['min_s']:.0f}x)")
-    if "solve_ivp_s" in s:
-        print(f"  solve_ivp DOP853 1e-10   : {s['solve_ivp_s'] * 1e3:8.0f} ms  -> switching model "
-              f"{s['solve_ivp_s'] / f['median_s']:.0f}x faster; max |i2 diff| {s['solve_ivp_max_i2_diff_a']:.1e} A")
-    g = n9["compiled"]
-    print(f"stored netlist tests/spice/link_ideal.cir (9 ms): switching {g['median_s'] * 1e3:.2f} ms "
-          f"(range {g['min_s'] * 1e3:.2f}-{g['max_s'] * 1e3:.2f})", end="")
-    if "ngspice_s" in n9:
-        print(f", ngspice {n9['ngspice_s'] * 1e3:.0f} ms -> {n9['ngspice_s'] / g['median_s']:.0f}x")
-    else:
-        print(" (ngspice not installed)")
+    print(f"25 ms RM -> SM transient (step at 10 ms), Table I, ideal devices")
+    print(f"  switching model (compiled, run + dense peaks): {m['median_s'] * 1e3:.2f} ms "
+          f"(range {m['min_s'] * 1e3:.2f}-{m['max_s'] * 1e3:.2f}, n={m['n']})", end="")
+    if "converged" not in r:
+        print("\n  ngspice not installed: no ladder")
+        return
+    err = max(r["model"]["errors"].values())
+    print(f"; max error vs converged ngspice {err * 100:.3f} %")
+    print(f"  {r['converged']['label']}: {r['converged']['time']['median_s']:.1f} s")
+    print(f"  {'ngspice setting':36s} {'median s':>9s} {'range s':>13s} {'max err %':>9s} {'model x (range)':>20s}")
+    for g in r["ladder"]:
+        t = g["time"]
+        ratio = t["median_s"] / m["median_s"]
+        lo, hi = t["min_s"] / m["max_s"], t["max_s"] / m["min_s"]
+        mark = "  <- equal accuracy" if g["label"] == r["equal_accuracy"] else ""
+        print(f"  {g['label']:36s} {t['median_s']:9.3f} {t['min_s']:6.3f}-{t['max_s']:<6.3f} "
+              f"{g['max_error'] * 100:9.3f} {ratio:8.0f}x ({lo:.0f}-{hi:.0f}x){mark}")
+    if r["equal_accuracy"] is None:
+        print(f"  no rung is within {r['tol'] * 100:g} % of converged on every quantity")
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeat", type=int, default=7)
-    ap.add_argument("--no-ivp", action="store_true")
-    ap.add_argument("--no-spice", action="store_true")
+    ap.add_argument("--repeat", type=int, default=7, help="switching-model runs (after one warm-up)")
+    ap.add_argument("--spice-repeat", type=int, default=3, help="ngspice runs per rung of the ladder")
+    ap.add_argument("--tol", type=float, default=1e-3, help="equal accuracy: every quantity within this of converged")
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
-    r = run(a.repeat, not a.no_spice, not a.no_ivp)
+    r = run(a.repeat, a.spice_repeat, a.tol)
     if a.json:
         print(json.dumps(r, indent=1))
     else:
@@ -163,7 +206,7 @@ def main(argv=None):
 
 
 def test_bench_switching(benchmark):  # pytest-benchmark entry: pytest benchmarks/
-    res = benchmark.pedantic(run, kwargs={"repeat": 1, "spice": False, "ivp": False}, rounds=1, iterations=1)
+    res = benchmark.pedantic(bench_model, kwargs={"repeat": 1}, rounds=1, iterations=1)
     print(res)
 
 
