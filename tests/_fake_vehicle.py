@@ -2,8 +2,9 @@
 
 usage: python _fake_vehicle.py PORT SECONDS [DELAY]
 After DELAY seconds (default 0) sends HEARTBEAT (1 Hz) and GLOBAL_POSITION_INT (10 Hz) to udpout:127.0.0.1:PORT for SECONDS:
-standing on the home point for 1.5 s, then flying east at 2 m/s, 3 m up. Prints the number of
-positions sent.
+standing on the home point for 1.5 s, then flying east at 2 m/s, 3 m up. Prints "ready" once
+its connection is open (a loaded machine can take seconds to import pymavlink) and, at the end,
+the number of positions sent.
 """
 
 import math
@@ -23,6 +24,7 @@ def main():
     port, seconds = int(sys.argv[1]), float(sys.argv[2])
     time.sleep(float(sys.argv[3]) if len(sys.argv) > 3 else 0.0)  # let the follower bind its port
     conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1)
+    print("ready", flush=True)
     t0 = time.monotonic()
     sent = 0
     for k in range(int(seconds * 10) + 1):  # bounded in count, paced at 10 Hz

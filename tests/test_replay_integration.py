@@ -186,14 +186,15 @@ def test_follow_live_vehicle(tmp_path):
     veh = subprocess.Popen([sys.executable, str(Path(__file__).with_name("_fake_vehicle.py")), str(port), "3.5"],
                            stdout=subprocess.PIPE, text=True)
     try:
+        assert veh.stdout.readline().strip() == "ready"   # its connection is open: it sends from now on
         st = follow.follow(f"udpin:127.0.0.1:{port}", cfg, cli._mav_policy(cfg, "model_based"), run_mission,
-                              rate_hz=5.0, tlog=tlog, max_wall_s=8.0, idle_timeout_s=1.0, in_conn=vin)
-        sent = int(veh.communicate(timeout=10)[0].strip())
+                              rate_hz=5.0, tlog=tlog, max_wall_s=30.0, idle_timeout_s=1.0, in_conn=vin)
+        sent = int(veh.communicate(timeout=10)[0].split()[-1])
     finally:
         if veh.poll() is None:
             veh.kill()
     rc = 0 if st.positions == sent else 1
-    assert rc == 0 and sent == 36 and st.chunks >= 3      # every position arrived, ~1 s chunks
+    assert rc == 0 and sent == 36 and st.chunks >= 3, (st, sent)   # every position arrived, ~1 s chunks
     log = read_log(tlog)
     assert len(log.position) >= 8 and log.battery_source == "BATTERY_STATUS"
     # the simulated drone is where the vehicle was: standing on the home point (the pad, charging),
@@ -222,7 +223,7 @@ def test_follow_through_the_cli(capsys, tmp_path):
     veh = subprocess.Popen([sys.executable, str(Path(__file__).with_name("_fake_vehicle.py")), str(port), "4.0"],
                            stdout=subprocess.PIPE, text=True)
     try:
-        rc = main(["telemetry", "--follow", f"udpin:127.0.0.1:{port}", "--follow-time", "8", "--follow-idle", "1",
+        rc = main(["telemetry", "--follow", f"udpin:127.0.0.1:{port}", "--follow-time", "30", "--follow-idle", "1",
                    "--connect", "none", "--tlog", str(tlog), "--rate", "5"])
         veh.communicate(timeout=10)
     finally:

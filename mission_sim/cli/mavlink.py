@@ -234,7 +234,8 @@ def _add_telemetry(sub):
     p.add_argument("--follow-time", type=positive_float("follow-time"), default=60.0, metavar="S",
                    help="with --follow: stop after S wall seconds (default 60)")
     p.add_argument("--follow-idle", type=positive_float("follow-idle"), default=10.0, metavar="S",
-                   help="with --follow: stop after S seconds without a position (default 10)")
+                   help="with --follow: stop after S seconds without a position, once positions have come "
+                        "(before the first, it waits up to --follow-time; default 10)")
     p.add_argument("--sysid", type=int, default=1, metavar="ID",
                    help="MAVLink system id of the simulated vehicle, 1..255 (default 1; use another beside a SITL vehicle)")
     p.add_argument("--compid", type=int, default=1, metavar="ID",

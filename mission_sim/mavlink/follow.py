@@ -160,7 +160,8 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
     about ``home`` (None: the first position received is the pad). Every ``chunk_s`` seconds the
     new stretch runs through :class:`ChunkedMission` and its telemetry is sent at ``rate_hz``,
     ``chunk_s`` behind the vehicle. The loop ends after ``max_wall_s`` seconds, ``max_messages``
-    received messages or ``idle_timeout_s`` without a position; then the last partial chunk is
+    received messages or ``idle_timeout_s`` without a position once positions have come (before the
+    first one it waits up to ``max_wall_s``: a vehicle may boot after the follower); then the last partial chunk is
     simulated and everything still queued is sent at once. ``in_conn``: a connection from
     :func:`open_follow` opened earlier (bind before slow set-up work, or the vehicle's first
     messages are lost). ``sysid`` / ``compid``: the simulated vehicle's MAVLink ids.
@@ -176,7 +177,7 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
     wall0, epoch0 = time.monotonic(), time.time()
     clock, sim, queue = _Clock(), None, []        # queue: (send at wall offset, row, is_heartbeat)
     frames = n_msgs = 0
-    last_rx = wall0
+    last_rx, idle = wall0, False
 
     def send_due(now):
         nonlocal frames
@@ -187,10 +188,12 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
 
     try:
         while n_msgs < max_messages and time.monotonic() < wall0 + max_wall_s \
-                and time.monotonic() - last_rx <= idle_timeout_s:
+                and not idle:
             wait = 0.05 if not queue else max(0.0, min(0.05, wall0 + queue[0][0] - time.monotonic()))
             msg = vin.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=wait)
             n_msgs += 1
+            # idle only when nothing is waiting (a slow chunk must not drop the positions queued meanwhile)
+            idle = msg is None and sim is not None and time.monotonic() - last_rx > idle_timeout_s
             if msg is not None and not (msg.lat == 0 and msg.lon == 0):
                 last_rx = time.monotonic()
                 if home is None:
