@@ -159,7 +159,7 @@ def refly_log(log, cfg, policy, *, pad=None, ground_gap_m=None, window=None, rea
         "log": str(log.path), "pad_frame_origin": {"lat_deg": track.pad.lat_deg, "lon_deg": track.pad.lon_deg,
                                                    "alt_m": track.pad.alt_m},
         "pads": [{"x_m": float(p[0]), "y_m": float(p[1]), "z_m": float(p[2])} for p in pads_xyz],
-        "detours": [{"pad": d.pad, "from_t_s": float(track.t_s[d.sample]), "distance_m": d.distance_m,
+        "detours": [{"pad": d.pad, "from_log_t_s": float(track.t_s[d.sample] + track.t_offset_s), "distance_m": d.distance_m,
                      "hover_s": d.hover_s} for d in detours],
         "skipped_pads": [{"pad": k, "distance_m": d} for k, d in skipped],
         "logged_flight_time_s": float(o["sim_time_s"]), "refly_time_s": float(s["sim_time_s"]),
