@@ -222,8 +222,8 @@ def uploaded_mission(path) -> RawMission:
     path = Path(path)
     conn = mavutil().mavlink_connection(str(path))
     found: dict[int, tuple] = {}
-    home, ardupilot = None, path.suffix.lower() == ".bin"
-    types = ["MISSION_ITEM_INT", "MISSION_ITEM", "CMD", "HOME_POSITION", "HEARTBEAT"]
+    home, ardupilot, count = None, path.suffix.lower() == ".bin", None
+    types = ["MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_COUNT", "CMD", "HOME_POSITION", "HEARTBEAT"]
     while True:
         try:
             msg = conn.recv_match(type=types, blocking=False)
@@ -234,6 +234,8 @@ def uploaded_mission(path) -> RawMission:
         t = msg.get_type()
         if t == "HEARTBEAT" and msg.autopilot == 3:   # MAV_AUTOPILOT_ARDUPILOTMEGA: item 0 is home
             ardupilot = True
+        elif t == "MISSION_COUNT" and getattr(msg, "mission_type", 0) == 0:
+            count = int(msg.count)   # the last upload / download: its items are seq 0 .. count - 1
         elif t == "HOME_POSITION":
             home = (msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
         elif t == "CMD":
@@ -243,7 +245,7 @@ def uploaded_mission(path) -> RawMission:
             scale = 1e-7 if t == "MISSION_ITEM_INT" else 1.0
             found[int(msg.seq)] = (int(msg.command), int(msg.frame), (msg.param1, msg.param2, msg.param3, msg.param4),
                                    msg.x * scale, msg.y * scale, float(msg.z))
-    seqs = sorted(found)
+    seqs = sorted(s for s in found if count is None or s < count)
     if ardupilot and 0 in found:
         _, _, _, lat, lon, alt = found.pop(0)
         home = (lat, lon, alt)
