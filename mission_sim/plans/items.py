@@ -232,8 +232,8 @@ def uploaded_mission(path) -> RawMission:
         if msg is None:
             break
         t = msg.get_type()
-        if t == "HEARTBEAT" and msg.autopilot == 3:   # MAV_AUTOPILOT_ARDUPILOTMEGA: item 0 is home
-            ardupilot = True
+        if t == "HEARTBEAT":
+            ardupilot |= msg.autopilot == 3   # MAV_AUTOPILOT_ARDUPILOTMEGA: item 0 is home
         elif t == "MISSION_COUNT" and getattr(msg, "mission_type", 0) == 0:
             count = int(msg.count)   # the last upload / download: its items are seq 0 .. count - 1
         elif t == "HOME_POSITION":

@@ -54,8 +54,9 @@ def command_name(cmd: int) -> str:
 class _Builder:
     """Walks the items keeping the current position (pad frame) and the speed set by DO_CHANGE_SPEED."""
 
-    def __init__(self, raw: RawMission):
+    def __init__(self, raw: RawMission, pads_xyz=(), pad_radius_m: float = 5.0):
         self.raw, self.name = raw, raw.source
+        self.pads, self.radius = list(pads_xyz), pad_radius_m
         self.x = self.y = self.z = 0.0
         self.speed = None
         self.out: list[dict] = []
@@ -90,6 +91,12 @@ class _Builder:
 
     def add(self, action, x, y, z, hold_s=0.0):
         wp = {"action": action, "x_m": x, "y_m": y, "z_m": z, "hold_s": float(hold_s)}
+        if action == "loiter" and self.pads:   # a loiter at a pad: charge there (and leave from there)
+            d = [math.hypot(x - p[0], y - p[1]) for p in self.pads]
+            k = min(range(len(d)), key=d.__getitem__)
+            if d[k] <= self.radius:
+                x, y = float(self.pads[k][0]), float(self.pads[k][1])
+                wp.update(action="charge", pad=k, x_m=x, y_m=y)
         if self.speed is not None:
             wp["speed_m_s"], self.speed = self.speed, None
         self.out.append(wp)
@@ -133,19 +140,12 @@ def route_from_items(raw: RawMission, pads_xyz=(), pad_radius_m: float = 5.0) ->
     if raw.home is None:
         raise ValueError(f"{raw.source}: missing home position (a .plan's plannedHomePosition, row 0 of a "
                          ".waypoints file, a log's HOME_POSITION); the pad frame is about home")
-    b = _Builder(raw)
+    b = _Builder(raw, pads_xyz, pad_radius_m)
     for it in raw.items:
         b.item(it)
     if not b.out:
         raise ValueError(f"{raw.source}: no waypoints: {len(raw.items)} item(s), none that moves the vehicle "
                          f"(supported: {_SUPPORTED})")
-    for wp in b.out:
-        if wp["action"] != "loiter" or not pads_xyz:
-            continue
-        d = [math.hypot(wp["x_m"] - p[0], wp["y_m"] - p[1]) for p in pads_xyz]
-        k = min(range(len(d)), key=d.__getitem__)
-        if d[k] <= pad_radius_m:
-            wp.update(action="charge", pad=k, x_m=float(pads_xyz[k][0]), y_m=float(pads_xyz[k][1]))
     return b.out
 
 
