@@ -35,7 +35,7 @@ def cmd_refly(args) -> int:
     from ..mavlink.geodesy import parse_geo_point
     from ..mavlink.logs import read_log
     from ..mavlink.replay import parse_window, track_from_log
-    from ..plans.refly import refly_log
+    from ..plans.refly import plan_refly, refly_log
     from .mission import make_policy
     if not args.log.is_file():
         raise CliError(f"log {str(args.log)!r} does not exist or is not a file")
@@ -49,6 +49,7 @@ def cmd_refly(args) -> int:
     track = track_from_log(log, pad=pad, window=window)
     cfg = _config(args, track)
     policy = make_policy(args.policy, cfg)
+    plan_refly(log, cfg, pad=track.pad, ground_gap_m=args.ground_gap, window=window, reach_m=args.reach)  # errors first
     prepare_out_dir(args.out)
     res = refly_log(log, cfg, policy, pad=track.pad, ground_gap_m=args.ground_gap, window=window,
                     reach_m=args.reach, progress=show_progress(args))

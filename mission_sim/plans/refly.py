@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["Detour", "plan_detours", "refly_track", "ReflyResult", "refly_log", "DEFAULT_REACH_M"]
+__all__ = ["Detour", "plan_detours", "refly_track", "ReflyResult", "plan_refly", "refly_log", "DEFAULT_REACH_M"]
 
 DEFAULT_REACH_M = 500.0   # a pad farther than this (horizontally) from the airborne track is not visited
 AIRBORNE_M = 1.0          # height above the take-off spot that counts as airborne (as the replay's)
@@ -135,13 +135,10 @@ def _trajectory(track, phase=None):
     return traj
 
 
-def refly_log(log, cfg, policy, *, pad=None, ground_gap_m=None, window=None, reach_m: float = DEFAULT_REACH_M,
-              progress: bool = False) -> ReflyResult:
-    """Re-fly ``log`` (a FlightLog) with the pads of ``cfg`` (pad frame = ENU about ``pad``, default
-    the take-off spot, as in :func:`~mission_sim.mavlink.replay.replay_log`) and compare; see the
-    module docstring. ``ValueError`` if no pad is within ``reach_m`` of the airborne track."""
+def plan_refly(log, cfg, *, pad=None, ground_gap_m=None, window=None, reach_m: float = DEFAULT_REACH_M):
+    """The logged track (resampled), the pads (K, 3) of ``cfg``, the detours and the skipped pads;
+    ``ValueError`` (one line) if no pad is within ``reach_m`` of the airborne track."""
     from ..mavlink.replay import resample_track, track_from_log
-    from ..world.runner import run_mission
     gap = cfg.mission.hover_gap_m if ground_gap_m is None else ground_gap_m
     track = resample_track(track_from_log(log, pad=pad, ground_gap_m=gap, window=window), cfg.sim.traj_dt_s)
     pads_xyz = np.array([[p.x_m, p.y_m, p.z_m] for p in cfg.pads])
@@ -151,6 +148,17 @@ def refly_log(log, cfg, policy, *, pad=None, ground_gap_m=None, window=None, rea
         far = ", ".join(f"pad {k} at {d:.0f} m" for k, d in skipped)
         raise ValueError(f"{log.path.name}: no pad within --reach {reach_m:g} m of the airborne track ({far}); "
                          "valid: pads near where the vehicle flew (pad frame: ENU about the take-off spot)")
+    return track, pads_xyz, detours, skipped
+
+
+def refly_log(log, cfg, policy, *, pad=None, ground_gap_m=None, window=None, reach_m: float = DEFAULT_REACH_M,
+              progress: bool = False) -> ReflyResult:
+    """Re-fly ``log`` (a FlightLog) with the pads of ``cfg`` (pad frame = ENU about ``pad``, default
+    the take-off spot, as in :func:`~mission_sim.mavlink.replay.replay_log`) and compare; see the
+    module docstring and :func:`plan_refly` (its errors)."""
+    from ..world.runner import run_mission
+    track, pads_xyz, detours, skipped = plan_refly(log, cfg, pad=pad, ground_gap_m=ground_gap_m, window=window,
+                                                   reach_m=reach_m)
     new, phase = refly_track(track, pads_xyz, detours, cfg.mission, cfg.sim.traj_dt_s)
     original = run_mission(cfg, policy, trajectory=_trajectory(track), charge=False, progress=progress)
     refly = run_mission(cfg, policy, trajectory=_trajectory(new, phase), progress=progress)
