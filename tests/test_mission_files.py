@@ -229,6 +229,11 @@ def test_flown_track_route_stays_within_tolerance():
     path = FLIGHTLOGS / "dronekit-python_flight.tlog"
     raw = read_mission(path, from_log="auto")          # this log holds no mission: its track
     assert "flown track" in raw.source and raw.items[-1].command == 21
+    from mission_sim.plans.route import route_from_items
+    route = route_from_items(raw)
+    # it landed and took off again several times (7 armed periods): landings, never a leg along the ground
+    assert sum(w["action"] == "land" for w in route) >= 3
+    assert all(w["z_m"] >= 1.0 for w in route if w["action"] != "land")
     log = read_log(path)
     pos = log.position
     e, n, u = geodetic_to_enu(pos.lat_deg.to_numpy(), pos.lon_deg.to_numpy(), pos.alt_m.to_numpy(), raw.home)

@@ -39,6 +39,7 @@ NAV_WAYPOINT, NAV_LOITER_TIME, NAV_RTL, NAV_LAND, NAV_TAKEOFF = 16, 19, 20, 21, 
 FLOWN_TOLERANCE_M = 3.0        # decimation: the flown route stays within this of the GPS track
 FLOWN_HOLD_S = 5.0             # slower than HOVER_M_S for this long: a loiter item in the flown route
 HOVER_M_S = 0.5
+FLOWN_GROUND_M = 1.0           # a decimated track point lower than this above home is on the ground (a landing)
 
 
 @dataclass(frozen=True)
@@ -281,7 +282,9 @@ def _decimate(p: np.ndarray, tol: float) -> np.ndarray:
 def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
     """The route a log flew: its GPS track (fix >= 3, implausible fixes rejected) over the armed time,
     decimated to waypoints within ``tolerance_m`` of the track (Ramer-Douglas-Peucker), stops of at
-    least :data:`FLOWN_HOLD_S` as loiter items, a landing at the end; home = the first armed position."""
+    least :data:`FLOWN_HOLD_S` as loiter items, points on the ground as landings (the route takes off
+    again at the next airborne point; time spent on the ground is not kept), a landing at the end;
+    home = the first armed position."""
     from ..mavlink.geodesy import geodetic_to_enu
     from ..mavlink.logs import read_log
     log = read_log(path)
@@ -300,10 +303,15 @@ def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
     keep = _decimate(p, tolerance_m)
     items = []
     for a, b in zip(keep[:-1], keep[1:]):
+        if p[b, 2] < FLOWN_GROUND_M:   # on the ground: a landing (the next airborne point takes off again)
+            if not items or items[-1].command != NAV_LAND:
+                items.append(MissionItem(f"track point {b}", NAV_LAND, 0, (0.0,) * 4, lat[b], lon[b], home.alt_m))
+            continue
         hold = _stop_time(p[a:b + 1], t[a:b + 1])
         cmd, p1 = (NAV_LOITER_TIME, hold) if hold >= FLOWN_HOLD_S else (NAV_WAYPOINT, 0.0)
-        items.append(MissionItem(f"track point {b}", cmd, 0, (p1, 0.0, 0.0, 0.0), lat[b], lon[b], max(alt[b], home.alt_m)))
-    items.append(MissionItem("track end", NAV_LAND, 0, (0.0,) * 4, lat[-1], lon[-1], home.alt_m))
+        items.append(MissionItem(f"track point {b}", cmd, 0, (p1, 0.0, 0.0, 0.0), lat[b], lon[b], home.alt_m + p[b, 2]))
+    if not items or items[-1].command != NAV_LAND:
+        items.append(MissionItem("track end", NAV_LAND, 0, (0.0,) * 4, lat[-1], lon[-1], home.alt_m))
     return RawMission(f"{Path(path).name} (flown track)", home, tuple(items))
 
 

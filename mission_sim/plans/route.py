@@ -12,8 +12,9 @@ seconds), NAV_RETURN_TO_LAUNCH (20: climb to at least :data:`RTL_ALT_M`, fly hom
 NAV_LAND (21), NAV_TAKEOFF (22, vertical), DO_CHANGE_SPEED (178, param2 m/s: the speed of the
 following legs). Commands that do not move the vehicle (camera, gimbal, servo, relay, ROI, yaw:
 :data:`IGNORED_COMMANDS`) are skipped; any other command is an error naming it and its item.
-A loiter within ``mission.pad_radius_m`` of a pad (horizontally) becomes a charging hover over
-that pad (waypoint action "charge").
+A loiter within ``mission.pad_radius_m`` of a pad (horizontally) and at least
+:data:`CHARGE_CLEARANCE_M` above it becomes a charging hover over that pad (waypoint action
+"charge": descend to the pad, charge, climb back).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ __all__ = ["apply_mission_files", "route_from_items", "pads_to_local", "command_
            "IGNORED_COMMANDS"]
 
 DO_CHANGE_SPEED = 178
+CHARGE_CLEARANCE_M = 1.0   # a loiter becomes a charging hover only this far above the pad (it descends to it)
 RTL_ALT_M = 15.0   # ArduCopter's RTL_ALT default (1500 cm): RTL climbs to at least this height
 #: commands that do not move the vehicle: CONDITION_YAW, DO_SET_RELAY, DO_REPEAT_RELAY, DO_SET_SERVO,
 #: DO_REPEAT_SERVO, DO_SET_ROI_LOCATION, DO_SET_ROI_NONE, DO_CONTROL_VIDEO, DO_SET_ROI,
@@ -94,7 +96,7 @@ class _Builder:
         if action == "loiter" and self.pads:   # a loiter at a pad: charge there (and leave from there)
             d = [math.hypot(x - p[0], y - p[1]) for p in self.pads]
             k = min(range(len(d)), key=d.__getitem__)
-            if d[k] <= self.radius:
+            if d[k] <= self.radius and z > self.pads[k][2] + CHARGE_CLEARANCE_M:
                 x, y = float(self.pads[k][0]), float(self.pads[k][1])
                 wp.update(action="charge", pad=k, x_m=x, y_m=y)
         if self.speed is not None:
