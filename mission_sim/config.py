@@ -346,18 +346,21 @@ def load_config(path=None) -> MissionConfig:
     return config_from_dict(load_config_dict(path))
 
 
-def load_config_dict(path=None, mission_file=None, pads_file=None) -> dict:
+def load_config_dict(path=None, mission_file=None, pads_file=None, mission_keys=None) -> dict:
     """The mission dict of TOML file ``path`` laid over the embedded default (:func:`layer_on_default`;
     ``None`` = the default itself), not yet validated: apply ``--set`` overrides, then
     :func:`config_from_dict`. File errors name the file (see :func:`~mission_sim.validation.read_toml_file`).
     A ``[mission] file`` / ``pads_file`` (paths relative to the TOML file), or ``mission_file`` /
     ``pads_file`` given here (``--plan``, ``--pads``; they win), is read into ``[[waypoints]]`` /
-    ``[[pads]]`` now (:func:`mission_sim.plans.route.apply_mission_files`)."""
+    ``[[pads]]`` now (:func:`mission_sim.plans.route.apply_mission_files`); ``mission_keys`` (``--set
+    mission.from_log=...`` and the like) are laid over ``[mission]`` before that."""
     from .plans.route import apply_mission_files
     if path is None:
         d = tomllib.loads(DEFAULT_MISSION_TOML)
     else:
         d = layer_on_default(read_toml_file(path, "config file"))
+    if mission_keys and isinstance(d.get("mission"), dict):
+        d["mission"] = {**d["mission"], **mission_keys}
     return apply_mission_files(d, None if path is None else Path(path).parent, mission_file, pads_file)
 
 

@@ -111,8 +111,10 @@ def mission_config(args):
     size is checked against the limits unless ``--force`` (see :mod:`mission_sim.world.budget`)."""
     from .. import config as mconfig
     from ..world.budget import check_run_size
-    d = mconfig.load_config_dict(args.config, getattr(args, "plan", None), getattr(args, "pads", None))
     overrides = parse_set(args.set)
+    files = {k.split(".", 1)[1]: v for k, v in overrides.items()   # read with the mission file, not after
+             if k in ("mission.file", "mission.pads_file", "mission.from_log", "mission.pad_radius_m")}
+    d = mconfig.load_config_dict(args.config, getattr(args, "plan", None), getattr(args, "pads", None), files)
     cfg = mconfig.config_from_dict(mconfig.apply_overrides(d, overrides) if overrides else d)
     check_run_size(cfg, force=getattr(args, "force", False))
     return cfg

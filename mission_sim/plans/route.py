@@ -202,6 +202,11 @@ def apply_mission_files(d: dict, base_dir=None, mission_file=None, pads_file=Non
             first = geo[0].point
             ref = GeoPoint(first.lat_deg, first.lon_deg, 0.0 if first.alt_m is None else first.alt_m)
         out["pads"] = pads_to_local(geo, ref)
+        for i, q in enumerate(out["pads"]):
+            dist = math.hypot(q["x_m"], q["y_m"])
+            if dist > 1e5:
+                raise ValueError(f"{pf.name}: pad {i} is {dist / 1e3:.0f} km from the mission's home "
+                                 f"({ref.lat_deg:.6f}, {ref.lon_deg:.6f}); valid: within 100 km (lat, lon swapped?)")
         out["mission"]["pads_file"] = str(pf)
     if raw is not None:
         pads = [(p.get("x_m", 0.0), p.get("y_m", 0.0), p.get("z_m", 0.0)) for p in out.get("pads") or []
