@@ -325,3 +325,42 @@ def test_missing_files_and_conflicting_route(capsys, tmp_path):
     _bad(capsys, tmp_path, [str(cfg)], "mission.file", "[[waypoints]]")
     cfg.write_text('[[waypoints]]\naction = "charge"\npad = 7\nz_m = 5.0\n')
     _bad(capsys, tmp_path, [str(cfg)], "waypoints.0.pad=7", "valid range")
+
+
+def test_altitude_frames_and_here():
+    """Frame 0 (AMSL) and 3 (relative) give the same height; lat = lon = 0 is "here", alt 0 the
+    current height (ArduCopter's rules); a waypoint param1 > 0 is a hold (a loiter)."""
+    from mission_sim.plans.items import RawMission, read_plan
+    from mission_sim.plans.route import route_from_items
+    home = (47.0, 8.0, 500.0)
+    doc = _plan([_item(22, 0.0, 0.0, 10.0), _item(16, 47.001, 8.0, 530.0, frame=0),
+                 _item(16, 47.001, 8.001, 30.0, frame=3, p1=4.0), _item(16, 0.0, 0.0, 0.0), _item(21)], home)
+    import tempfile
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / "f.plan"
+        p.write_text(json.dumps(doc))
+        raw = read_plan(p)
+    assert isinstance(raw, RawMission)
+    r = route_from_items(raw)
+    assert [w["action"] for w in r] == ["takeoff", "waypoint", "loiter", "waypoint", "land"]
+    assert [w["z_m"] for w in r] == [10.0, 30.0, 30.0, 30.0, 0.0]
+    assert r[2]["hold_s"] == 4.0 and (r[3]["x_m"], r[3]["y_m"]) == (r[2]["x_m"], r[2]["y_m"])
+    assert (r[4]["x_m"], r[4]["y_m"]) == (r[2]["x_m"], r[2]["y_m"])
+    e, n = enu_xy(47.001, 8.001, home)
+    assert abs(r[2]["x_m"] - e) < 5e-3 and abs(r[2]["y_m"] - n) < 5e-3
+
+
+def test_mission_planner_file_without_takeoff(capsys, tmp_path):
+    """QGC's MissionPlanner.waypoints: no take-off item and no landing: the route climbs at home to
+    the first waypoint's 100 m, flies the five legs and lands where it ends: at least the climb at
+    climb_rate, the descent at descent_rate and the legs at cruise speed."""
+    from mission_sim.config import MissionPlan
+    home = (47.660459, -122.103167, 5.21)
+    pts = [(47.661298, -122.103274), (47.661030, -122.101858), (47.659961, -122.101525),
+           (47.659195, -122.103370), (47.660459, -122.105538)]
+    xy = [(0.0, 0.0)] + [enu_xy(lat, lon, home) for lat, lon in pts]
+    length = sum(math.dist(a, b) for a, b in zip(xy[:-1], xy[1:]))
+    s = _run(capsys, tmp_path, "mp", "--plan", str(DATA / "qgc_missionplanner.waypoints"))
+    m = MissionPlan()
+    assert s["sim_time_s"] > 100 / m.climb_rate_m_s + 100 / m.descent_rate_m_s + length / m.cruise_speed_m_s
+    assert s["sim_time_s"] < 100 / m.climb_rate_m_s + 100 / m.descent_rate_m_s + length / m.cruise_speed_m_s + 60
