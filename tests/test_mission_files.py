@@ -364,3 +364,33 @@ def test_mission_planner_file_without_takeoff(capsys, tmp_path):
     m = MissionPlan()
     assert s["sim_time_s"] > 100 / m.climb_rate_m_s + 100 / m.descent_rate_m_s + length / m.cruise_speed_m_s
     assert s["sim_time_s"] < 100 / m.climb_rate_m_s + 100 / m.descent_rate_m_s + length / m.cruise_speed_m_s + 60
+
+
+def test_px4_style_tlog_mission(tmp_path):
+    """A non-ArduPilot vehicle (PX4: item 0 is a real item) with HOME_POSITION; an older, longer
+    upload leaves a stale item 3 that the last MISSION_COUNT (3) excludes."""
+    import struct
+
+    from mission_sim.mavlink.logs import mavutil
+    from mission_sim.plans.items import uploaded_mission
+    from mission_sim.plans.route import route_from_items
+    mav = mavutil().mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    home = (47.0, 8.0, 500.0)
+
+    def item(seq, cmd, lat, lon, alt):
+        return mav.mission_item_int_encode(255, 0, seq, 3, cmd, 0, 1, 0, 0, 0, 0, int(lat * 1e7), int(lon * 1e7), alt)
+    msgs = [mav.heartbeat_encode(2, 12, 0, 0, 0),   # quadrotor, MAV_AUTOPILOT_PX4
+            mav.mission_count_encode(255, 0, 4), item(3, 16, 47.01, 8.0, 50.0),
+            mav.home_position_encode(int(home[0] * 1e7), int(home[1] * 1e7), int(home[2] * 1e3), 0, 0, 0,
+                                     [1, 0, 0, 0], 0, 0, 0),
+            mav.mission_count_encode(255, 0, 3), item(0, 22, 47.0, 8.0, 25.0), item(1, 16, 47.001, 8.0, 25.0),
+            item(2, 21, 47.001, 8.0, 0.0)]
+    p = tmp_path / "px4.tlog"
+    p.write_bytes(b"".join(struct.pack(">Q", 1_700_000_000_000_000 + i * 100_000) + m.pack(mav)
+                           for i, m in enumerate(msgs)))
+    raw = uploaded_mission(p)
+    assert raw.home.alt_m == pytest.approx(500.0) and [it.command for it in raw.items] == [22, 16, 21]
+    r = route_from_items(raw)
+    e, n = enu_xy(47.001, 8.0, home)
+    assert [w["action"] for w in r] == ["takeoff", "waypoint", "land"]
+    assert abs(r[1]["y_m"] - n) < 0.02 and abs(r[1]["x_m"]) < 0.02 and r[1]["z_m"] == 25.0
