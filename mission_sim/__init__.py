@@ -10,6 +10,8 @@
                     the mission loop and its results
 ``mavlink/``        MAVLink: reading flight logs, replaying them, live telemetry, follow mode,
                     geodesy
+``plans/``          a user's own mission and pads: QGC .plan / .waypoints / flight-log missions
+                    into the route, pads files, what-if re-flights of a log with pads
 ``studies/``        parameter studies: study files, the Dask sweep, its report
 ``figures/``        every figure (matplotlib); imported only by the CLI
 ``cli/``            the ``dronewpt`` command line: parse, call, print

@@ -2,7 +2,8 @@
 
 Sections (see ``default_mission.toml``, the embedded default, for every key and its unit):
 ``seed``, ``[link]``, ``[coupling]``, ``[[pads]]``, ``[drone]``, ``[battery]``, ``[charger]``,
-``[wind]``, ``[mission]``, ``[sim]``. Unknown keys, wrong types and out-of-range values raise
+``[wind]``, ``[mission]``, ``[[waypoints]]`` (a route instead of the built-in pattern; also read from a
+mission file, ``[mission] file``, by :mod:`mission_sim.plans`), ``[sim]``. Unknown keys, wrong types and out-of-range values raise
 ``ValueError`` naming the dotted key (``battery.capacity_ah``), the value and the valid range.
 """
 
@@ -13,6 +14,7 @@ import math
 import tomllib
 from dataclasses import asdict, dataclass, field, fields
 from importlib import resources
+from pathlib import Path
 
 from wpt_receiver import LinkParams
 from wpt_receiver.coupling import NOMINAL_GAP_M
@@ -23,7 +25,7 @@ from .validation import check_positive, read_toml_file
 from .world.wind import WindParams
 
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
-           "MissionConfig", "load_config", "config_from_dict", "config_to_dict", "apply_overrides",
+           "MissionConfig", "WaypointConfig", "load_config", "config_from_dict", "config_to_dict", "apply_overrides",
            "load_config_dict", "check_cross_fields", "section_from_dict", "check_seed"]
 
 DEFAULT_MISSION_TOML: str = resources.files("mission_sim").joinpath("default_mission.toml").read_text("utf-8")
@@ -114,8 +116,15 @@ class MissionPlan:
     descent_rate_m_s: float = 1.0
     hover_gap_m: float = NOMINAL_GAP_M
     hover_time_s: float = 60.0
+    file: str = ""                 # mission file (.plan, .waypoints, a flight log) -> [[waypoints]]
+    pads_file: str = ""            # pads file (CSV lat,lon[,alt] or GeoJSON Points) -> [[pads]]
+    pad_radius_m: float = 5.0      # a loiter item this close to a pad (horizontally) charges there
+    from_log: str = "auto"         # a log as mission file: "uploaded" items, "flown" track, "auto"
 
     def __post_init__(self):
+        check_positive(self, "pad_radius_m")
+        if self.from_log not in ("auto", "uploaded", "flown"):
+            raise ValueError(f"from_log={self.from_log!r} is invalid; valid values: auto, uploaded, flown")
         for name in ("start_x_m", "start_y_m", "land_x_m", "land_y_m"):
             v = getattr(self, name)
             if not math.isfinite(v) or abs(v) > 1e5:
@@ -127,6 +136,44 @@ class MissionPlan:
         if not self.hover_gap_m < self.cruise_altitude_m <= 500:
             raise ValueError(f"cruise_altitude_m={self.cruise_altitude_m!r} is invalid; valid range: "
                              f"(hover_gap_m={self.hover_gap_m!r}, 500] m")
+
+
+WAYPOINT_ACTIONS = ("takeoff", "waypoint", "loiter", "charge", "land")
+
+
+@dataclass(frozen=True)
+class WaypointConfig:
+    """One route point in the pad frame (local ENU metres about the mission's home, z up).
+
+    ``action``: "takeoff" climbs vertically to ``z_m``; "waypoint" flies straight to (x, y, z);
+    "loiter" flies there and hovers ``hold_s``; "charge" flies above pad ``pad`` (its x, y) at
+    ``z_m``, descends to the pad, charges ``hold_s`` (the pad's ``hover_time_s`` if set) and climbs
+    back; "land" flies to (x, y) at the current height and descends to the ground (z = 0).
+    ``speed_m_s``: the horizontal speed limit from here on (None: ``mission.cruise_speed_m_s``).
+    """
+
+    action: str = "waypoint"
+    x_m: float = 0.0
+    y_m: float = 0.0
+    z_m: float = 0.0
+    hold_s: float = 0.0
+    speed_m_s: float | None = None
+    pad: int = -1
+
+    def __post_init__(self):
+        if self.action not in WAYPOINT_ACTIONS:
+            raise ValueError(f"action={self.action!r} is invalid; valid values: {', '.join(WAYPOINT_ACTIONS)}")
+        for name in ("x_m", "y_m"):
+            v = getattr(self, name)
+            if not math.isfinite(v) or abs(v) > 1e5:
+                raise ValueError(f"{name}={v!r} is invalid; valid range: [-1e5, 1e5] m")
+        if not (math.isfinite(self.z_m) and 0 <= self.z_m <= 5000):
+            raise ValueError(f"z_m={self.z_m!r} is invalid; valid range: [0, 5000] m above home")
+        check_positive(self, "hold_s", allow_zero=True)
+        if self.speed_m_s is not None:
+            check_positive(self, "speed_m_s")
+        if (self.pad >= 0) != (self.action == "charge"):
+            raise ValueError(f"pad={self.pad!r} is invalid; valid: a pad index >= 0 for action 'charge' only")
 
 
 @dataclass(frozen=True)
@@ -179,6 +226,7 @@ class MissionConfig:
     wind: WindParams = field(default_factory=WindParams)
     mission: MissionPlan = field(default_factory=MissionPlan)
     sim: SimConfig = field(default_factory=SimConfig)
+    waypoints: tuple = ()          # WaypointConfig route; () = the built-in pattern (start, pads, land)
 
     def __post_init__(self):
         check_cross_fields(self)
@@ -195,6 +243,15 @@ def check_cross_fields(cfg: MissionConfig) -> None:
             raise ValueError(f"mission.cruise_altitude_m={m.cruise_altitude_m!r} is invalid; valid range: "
                              f"> pads.{i}.z_m + mission.hover_gap_m = {top:.4g} m (the drone would fly "
                              "through the pad)")
+    for i, wp in enumerate(cfg.waypoints):
+        if wp.action == "charge" and wp.pad >= len(cfg.pads):
+            raise ValueError(f"waypoints.{i}.pad={wp.pad!r} is invalid; valid range: 0..{len(cfg.pads) - 1}")
+        if wp.action == "charge" and not wp.z_m > cfg.pads[wp.pad].z_m + m.hover_gap_m:
+            raise ValueError(f"waypoints.{i}.z_m={wp.z_m!r} is invalid; valid range: > pads.{wp.pad}.z_m + "
+                             f"mission.hover_gap_m = {cfg.pads[wp.pad].z_m + m.hover_gap_m:.4g} m")
+    if m.file and not cfg.waypoints:
+        raise ValueError(f"mission.file={m.file!r} was not read into a route; valid: set it in the config "
+                         "file or with --plan (mission files are read when the config is loaded)")
 
 
 _SECTIONS = {"link": LinkConfig, "coupling": CouplingConfig, "drone": DroneParams, "battery": BatteryParams,
@@ -238,7 +295,7 @@ def config_from_dict(d: dict) -> MissionConfig:
     """Validated :class:`MissionConfig` from a plain dict (as parsed from TOML)."""
     if not isinstance(d, dict):
         raise ValueError(f"config={d!r} is invalid; valid type: table")
-    valid = {"seed", "pads", *_SECTIONS}
+    valid = {"seed", "pads", "waypoints", *_SECTIONS}
     for k in d:
         if k not in valid:
             raise ValueError(f"{k} is not a valid key; valid keys: {', '.join(sorted(valid))}")
@@ -248,6 +305,11 @@ def config_from_dict(d: dict) -> MissionConfig:
     for name, cls in _SECTIONS.items():
         if name in d:
             kw[name] = _build(name, cls, d[name])
+    if "waypoints" in d:
+        wps = d["waypoints"]
+        if not isinstance(wps, list) or len(wps) > 100_000:
+            raise ValueError(f"waypoints={wps!r} is invalid; valid: a list of up to 100000 [[waypoints]] tables")
+        kw["waypoints"] = tuple(_build(f"waypoints.{i}", WaypointConfig, w) for i, w in enumerate(wps))
     if "pads" in d:
         pads = d["pads"]
         if not isinstance(pads, list) or not 1 <= len(pads) <= 100:
@@ -275,6 +337,7 @@ def config_to_dict(cfg: MissionConfig) -> dict:
     """Plain dict (TOML-ready: no None values) of a :class:`MissionConfig`."""
     out = asdict(cfg)
     out["pads"] = [{k: v for k, v in p.items() if v is not None} for p in out["pads"]]
+    out["waypoints"] = [{k: v for k, v in w.items() if v is not None} for w in out["waypoints"]]
     return out
 
 
@@ -283,13 +346,22 @@ def load_config(path=None) -> MissionConfig:
     return config_from_dict(load_config_dict(path))
 
 
-def load_config_dict(path=None) -> dict:
+def load_config_dict(path=None, mission_file=None, pads_file=None, mission_keys=None) -> dict:
     """The mission dict of TOML file ``path`` laid over the embedded default (:func:`layer_on_default`;
     ``None`` = the default itself), not yet validated: apply ``--set`` overrides, then
-    :func:`config_from_dict`. File errors name the file (see :func:`~mission_sim.validation.read_toml_file`)."""
+    :func:`config_from_dict`. File errors name the file (see :func:`~mission_sim.validation.read_toml_file`).
+    A ``[mission] file`` / ``pads_file`` (paths relative to the TOML file), or ``mission_file`` /
+    ``pads_file`` given here (``--plan``, ``--pads``; they win), is read into ``[[waypoints]]`` /
+    ``[[pads]]`` now (:func:`mission_sim.plans.route.apply_mission_files`); ``mission_keys`` (``--set
+    mission.from_log=...`` and the like) are laid over ``[mission]`` before that."""
+    from .plans.route import apply_mission_files
     if path is None:
-        return tomllib.loads(DEFAULT_MISSION_TOML)
-    return layer_on_default(read_toml_file(path, "config file"))
+        d = tomllib.loads(DEFAULT_MISSION_TOML)
+    else:
+        d = layer_on_default(read_toml_file(path, "config file"))
+    if mission_keys and isinstance(d.get("mission"), dict):
+        d["mission"] = {**d["mission"], **mission_keys}
+    return apply_mission_files(d, None if path is None else Path(path).parent, mission_file, pads_file)
 
 
 def layer_on_default(d: dict) -> dict:

@@ -7,6 +7,7 @@ subcommands import what they need lazily, inside the function that runs them.
 ``paper``     ``paper``: Table II and Fig. 6
 ``mission``   ``mission`` (the main job) and ``coupling``
 ``mavlink``   ``replay`` (flight logs) and ``telemetry`` (live MAVLink, follow mode)
+``refly``     ``replay LOG --pads FILE``: the what-if re-flight with charging pads
 ``learning``  ``train`` and ``compare`` (envs and policies, imported lazily)
 ``sweep``     ``sweep`` (parameter studies on Dask)
 ``sizing``    ``sizing`` (rectifier rating, parts and mass per policy)

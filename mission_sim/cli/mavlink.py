@@ -86,6 +86,11 @@ def _add_replay(sub):
     p.add_argument("--mass", type=positive_float("mass"), default=None, metavar="KG",
                    help="drone mass for the propulsion model (same as --set drone.mass_kg=KG)")
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
+    p.add_argument("--pads", type=Path, default=None, metavar="FILE",
+                   help="what-if: re-fly the log with charging pads from this CSV (lat,lon[,alt][,hover_time_s]) "
+                        "or GeoJSON file, a detour to each, and report the flight time gained (see cli/refly.py)")
+    p.add_argument("--reach", type=float, default=500.0, metavar="M",
+                   help="with --pads: visit only pads within M metres of the airborne track (default 500)")
     add_progress_flag(p)
     _mav_common(p)
     p.set_defaults(func=_cmd_replay)
@@ -96,6 +101,9 @@ def _cmd_replay(args) -> int:
     from ..files import atomic_output
     from ..mavlink.logs import read_log
     from ..mavlink.replay import parse_window, replay_log, track_from_log
+    if getattr(args, "pads", None) is not None:  # what-if re-flight with pads: its own module
+        from .refly import cmd_refly
+        return cmd_refly(args)
     if args.log.is_dir():
         raise CliError(f"log {str(args.log)!r} is a folder; valid: a .tlog or .bin file")
     if not args.log.is_file():

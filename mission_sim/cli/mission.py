@@ -85,6 +85,13 @@ def _add_mission(sub):
                                    "status 0: done; 2: bad input (one line on stderr); 3: the battery was "
                                    "depleted, the mission ended there (results written).")
     p.add_argument("config", nargs="?", type=Path, default=None, help="mission TOML (default: embedded default)")
+    p.add_argument("--plan", type=Path, default=None, metavar="FILE",
+                   help="fly this mission file instead of the config's route: QGroundControl .plan, .waypoints "
+                        "(QGC WPL 110), or a flight log (.tlog / .bin: the mission it uploaded, else the track it "
+                        "flew); pad frame = ENU about its home (same as [mission] file)")
+    p.add_argument("--pads", type=Path, default=None, metavar="FILE",
+                   help="charging pads from a CSV (lat,lon[,alt][,hover_time_s]) or GeoJSON Points file "
+                        "(same as [mission] pads_file); a loiter item within mission.pad_radius_m of a pad charges there")
     lazy_names_help(p.add_argument("--policy", default="model_based"), "receiver policy (default model_based)",
                     policy_names)
     p.add_argument("--out", type=Path, default=Path("out/mission"), help="output folder (default out/mission)")
@@ -104,8 +111,10 @@ def mission_config(args):
     size is checked against the limits unless ``--force`` (see :mod:`mission_sim.world.budget`)."""
     from .. import config as mconfig
     from ..world.budget import check_run_size
-    d = mconfig.load_config_dict(args.config)
     overrides = parse_set(args.set)
+    files = {k.split(".", 1)[1]: v for k, v in overrides.items()   # read with the mission file, not after
+             if k in ("mission.file", "mission.pads_file", "mission.from_log", "mission.pad_radius_m")}
+    d = mconfig.load_config_dict(args.config, getattr(args, "plan", None), getattr(args, "pads", None), files)
     cfg = mconfig.config_from_dict(mconfig.apply_overrides(d, overrides) if overrides else d)
     check_run_size(cfg, force=getattr(args, "force", False))
     return cfg

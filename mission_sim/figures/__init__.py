@@ -7,6 +7,7 @@ no physics, world or study module does.
 ``switching``  raw switching-level waveforms (``dronewpt paper --model switching``)
 ``mission``    trajectory, Lm(t), I2 envelope, SoC, power; the Lm(x, y) map
 ``replay``     logged against modelled power of a replayed flight log
+``refly``      a logged flight re-flown with charging pads (``replay LOG --pads FILE``)
 ``sizing``     worst-case |i2|, required rating and rectifier mass per policy
 =============  ==============================================================
 """

@@ -48,6 +48,8 @@ def _segment_key(cfg, seg, pad_index: int) -> tuple[str, float]:
     phase, _, u, _, _ = seg
     m = cfg.mission
     if u is None:
+        if cfg.waypoints and phase in ("charge", "hover"):  # a route: the hold of a loiter / charge waypoint
+            return "waypoints.hold_s", seg[3]
         if phase != "charge":
             return "mission.hover_time_s", m.hover_time_s
         pad = cfg.pads[pad_index]

@@ -125,41 +125,92 @@ def _profile(dist: float, vmax: float, amax: float):
     return dur, ev
 
 
-def _segments(cfg):
-    m = cfg.mission
-    alt = m.cruise_altitude_m
-    segs = []  # (kind, phase, p0, p1 or None, duration, evaluator)
-    pos = np.array([m.start_x_m, m.start_y_m, 0.0])
+def _move_limit(m, d, speed_m_s: float) -> float:
+    """Speed limit [m/s] of a straight move ``d`` (3-vector): the horizontal ``speed_m_s`` and the
+    climb / descent rate on the vertical component (a pure vertical move at the climb or descent rate)."""
+    dist = float(np.linalg.norm(d))
+    rate = m.climb_rate_m_s if d[2] > 0 else m.descent_rate_m_s
+    if abs(d[2]) > 1e-9 and np.hypot(d[0], d[1]) < 1e-9:
+        return rate
+    return min(speed_m_s, rate * dist / abs(d[2])) if abs(d[2]) > 1e-9 else speed_m_s
 
-    def move(p1, phase):
-        nonlocal pos
+
+class _Path:
+    """Builds the segment list: ``move`` (straight, rest to rest, trapezoidal) and ``hold``."""
+
+    def __init__(self, m, start):
+        self.m, self.pos, self.segs = m, np.asarray(start, dtype=float), []
+
+    def move(self, p1, phase, speed_m_s=None):
         p1 = np.asarray(p1, dtype=float)
-        d = p1 - pos
+        d = p1 - self.pos
         dist = float(np.linalg.norm(d))
         if dist < 1e-12:
             return
-        if abs(d[2]) > 1e-9 and np.hypot(d[0], d[1]) < 1e-9:
-            vmax = m.climb_rate_m_s if d[2] > 0 else m.descent_rate_m_s
-        else:
-            vmax = m.cruise_speed_m_s
-        dur, ev = _profile(dist, vmax, m.max_accel_m_s2)
-        segs.append((phase, pos.copy(), d / dist, dur, ev))
-        pos = p1
+        vmax = _move_limit(self.m, d, self.m.cruise_speed_m_s if speed_m_s is None else speed_m_s)
+        dur, ev = _profile(dist, vmax, self.m.max_accel_m_s2)
+        self.segs.append((phase, self.pos.copy(), d / dist, dur, ev))
+        self.pos = p1
 
-    def hold(dur, phase):
+    def hold(self, dur, phase):
         if dur > 0:
-            segs.append((phase, pos.copy(), None, float(dur), None))
+            self.segs.append((phase, self.pos.copy(), None, float(dur), None))
 
-    move([pos[0], pos[1], alt], "takeoff")
+
+def _segments(cfg):
+    """Segments (phase, p0, unit direction or None, duration, evaluator) of the mission: the route of
+    ``cfg.waypoints`` if any (:func:`_route_segments`), else the built-in pattern start -> pads -> land."""
+    if cfg.waypoints:
+        return _route_segments(cfg)
+    m = cfg.mission
+    alt = m.cruise_altitude_m
+    path = _Path(m, [m.start_x_m, m.start_y_m, 0.0])
+    path.move([m.start_x_m, m.start_y_m, alt], "takeoff")
     for pad in cfg.pads:
-        move([pad.x_m, pad.y_m, alt], "transit")
-        move([pad.x_m, pad.y_m, pad.z_m + m.hover_gap_m], "approach")
-        hold(m.hover_time_s if pad.hover_time_s is None else pad.hover_time_s, "charge")
-        move([pad.x_m, pad.y_m, alt], "depart")
-    move([m.land_x_m, m.land_y_m, alt], "transit")
-    move([m.land_x_m, m.land_y_m, 0.0], "land")
-    hold(1.0, "ground")
-    return segs
+        path.move([pad.x_m, pad.y_m, alt], "transit")
+        path.move([pad.x_m, pad.y_m, pad.z_m + m.hover_gap_m], "approach")
+        path.hold(m.hover_time_s if pad.hover_time_s is None else pad.hover_time_s, "charge")
+        path.move([pad.x_m, pad.y_m, alt], "depart")
+    path.move([m.land_x_m, m.land_y_m, alt], "transit")
+    path.move([m.land_x_m, m.land_y_m, 0.0], "land")
+    path.hold(1.0, "ground")
+    return path.segs
+
+
+def _route_segments(cfg):
+    """Segments of the ``cfg.waypoints`` route, from the ground at (start_x_m, start_y_m). A waypoint
+    reached from the ground first climbs vertically to its height; the route ends on the ground (a
+    vertical landing where the last waypoint left the drone, if it did not land)."""
+    m = cfg.mission
+    path = _Path(m, [m.start_x_m, m.start_y_m, 0.0])
+    speed = None
+    for wp in cfg.waypoints:
+        speed = wp.speed_m_s if wp.speed_m_s is not None else speed
+        x, y, z = wp.x_m, wp.y_m, wp.z_m
+        if wp.action == "charge":
+            pad = cfg.pads[wp.pad]
+            x, y = pad.x_m, pad.y_m
+        if wp.action == "takeoff":
+            path.move([path.pos[0], path.pos[1], z], "takeoff")
+            continue
+        if wp.action == "land":
+            path.move([x, y, path.pos[2]], "transit", speed)
+            path.move([x, y, 0.0], "land")
+            continue
+        if path.pos[2] <= 0.0 and z > 0.0:
+            path.move([path.pos[0], path.pos[1], z], "takeoff")
+        path.move([x, y, z], "transit", speed)
+        if wp.action == "loiter":
+            path.hold(wp.hold_s, "hover")
+        elif wp.action == "charge":
+            pad = cfg.pads[wp.pad]
+            path.move([x, y, pad.z_m + m.hover_gap_m], "approach")
+            path.hold(wp.hold_s if pad.hover_time_s is None else pad.hover_time_s, "charge")
+            path.move([x, y, z], "depart")
+    if path.pos[2] > 0.0:
+        path.move([path.pos[0], path.pos[1], 0.0], "land")
+    path.hold(1.0, "ground")
+    return path.segs
 
 
 def plan_mission(cfg, rng: np.random.Generator | None = None) -> Trajectory:

@@ -1,0 +1,16 @@
+"""Missions and pads from files: a user's own mission instead of the built-in waypoint pattern.
+
+==========  ==================================================================================
+``items``   mission items from QGC ``.plan`` (JSON), ``.waypoints`` (QGC WPL 110), the mission a
+            MAVLink log uploaded (MISSION_ITEM(_INT) in a .tlog, CMD in a DataFlash .bin) or the
+            track it flew (decimated); one-line errors naming the file and the item
+``pads``    charging pads from a CSV (lat, lon[, alt][, hover_time_s]) or GeoJSON Points file
+``route``   items -> the config's ``[[waypoints]]`` in the pad frame (ENU about home, with
+            :mod:`mission_sim.mavlink.geodesy`), pads -> ``[[pads]]``, loiters at a pad ->
+            charging hovers; :func:`~mission_sim.plans.route.apply_mission_files` (config loading)
+``refly``   what-if re-flight of a logged flight with pads added (``replay LOG --pads FILE``)
+==========  ==================================================================================
+
+Nothing here imports :mod:`mission_sim.config`: the readers produce plain dicts that the config
+validates (config -> plans, never back).
+"""

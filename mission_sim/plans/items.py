@@ -1,0 +1,324 @@
+"""Mission items from files: QGC ``.plan``, ``.waypoints`` (QGC WPL 110) and MAVLink logs.
+
+Every reader returns a :class:`RawMission`: the home position (a
+:class:`~mission_sim.mavlink.geodesy.GeoPoint` with its altitude in m AMSL, or None when the file
+has none) and the items in file order as :class:`MissionItem` (MAVLink ``MISSION_ITEM`` fields:
+command, frame, param1..4, latitude, longitude, altitude). Bad content raises ``ValueError`` with
+one line naming the file and, where it applies, the item (its index as the ground station shows
+it: the position in ``mission.items`` of a .plan, the sequence number of a .waypoints row).
+
+Formats (checked against QGroundControl's and ArduPilot's own files in tests/data/missions):
+
+* ``.plan``: JSON, ``fileType`` "Plan", ``mission.items`` of ``SimpleItem`` (``command``,
+  ``frame``, ``params`` = [p1, p2, p3, p4, lat, lon, alt]) and ``ComplexItem`` (survey /
+  corridor / structure scan: their generated ``TransectStyleComplexItem.Items`` when present,
+  else the ``VisualTransectPoints`` at the camera's ``DistanceToSurface``),
+  ``mission.plannedHomePosition`` = [lat, lon, alt AMSL].
+* ``.waypoints`` / ``.txt``: first line ``QGC WPL 110``, then one row per item: index, current,
+  frame, command, p1, p2, p3, p4, lat, lon, alt, autocontinue (tabs); row 0 is home (AMSL).
+* a ``.tlog``: the last MISSION_ITEM_INT / MISSION_ITEM of each sequence number (a mission is
+  read back many times); ArduPilot's item 0 is home, else HOME_POSITION. A DataFlash ``.bin``:
+  CMD records (CNum 0 = home). :func:`flown_mission` takes the GPS track instead.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..mavlink.geodesy import GeoPoint
+
+__all__ = ["MissionItem", "RawMission", "read_mission", "read_plan", "read_wpl", "uploaded_mission",
+           "flown_mission", "LOG_SUFFIXES"]
+
+LOG_SUFFIXES = (".tlog", ".bin", ".log", ".ulg")
+NAV_WAYPOINT, NAV_LOITER_TIME, NAV_RTL, NAV_LAND, NAV_TAKEOFF = 16, 19, 20, 21, 22
+FLOWN_TOLERANCE_M = 3.0        # decimation: the flown route stays within this of the GPS track
+FLOWN_HOLD_S = 5.0             # slower than HOVER_M_S for this long: a loiter item in the flown route
+HOVER_M_S = 0.5
+FLOWN_GROUND_M = 1.0           # a decimated track point lower than this above home is on the ground (a landing)
+
+
+@dataclass(frozen=True)
+class MissionItem:
+    """One mission item (MAVLink MISSION_ITEM fields; lat/lon in degrees, alt in m in ``frame``).
+
+    ``where`` names it in errors ("item 3", "item 5 (survey), generated item 12", "row 7").
+    """
+
+    where: str
+    command: int
+    frame: int
+    params: tuple            # (p1, p2, p3, p4), nan where unset
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+
+
+@dataclass(frozen=True)
+class RawMission:
+    """Items of one mission file and its home (None: the file has none)."""
+
+    source: str
+    home: GeoPoint | None
+    items: tuple
+
+
+def _num(v) -> float:
+    """A JSON / text number (None -> nan); ``TypeError`` / ``ValueError`` for anything else."""
+    if v is None:
+        return float("nan")
+    if isinstance(v, bool) or not isinstance(v, (int, float, str)):
+        raise TypeError(f"{v!r} is not a number")
+    return float(v)
+
+
+def _home(lat, lon, alt, name: str, what: str) -> GeoPoint:
+    try:
+        return GeoPoint(float(lat), float(lon), float(alt))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name}: {what} is invalid: {exc}") from None
+
+
+def read_mission(path, from_log: str = "auto") -> RawMission:
+    """The mission of ``path`` by its kind: .plan (JSON), QGC WPL text, or a flight log
+    (``from_log``: "uploaded" items, "flown" track, "auto" = uploaded if the log holds a mission)."""
+    path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"mission file {str(path)!r} is a folder; valid: a .plan, .waypoints or log file")
+    if not path.is_file():
+        raise FileNotFoundError(f"mission file {str(path)!r} does not exist")
+    if path.suffix.lower() in LOG_SUFFIXES:
+        if from_log != "flown":
+            up = uploaded_mission(path)
+            if up.items or from_log == "uploaded":
+                if not up.items:
+                    raise ValueError(f"{path.name}: the log holds no uploaded mission (no MISSION_ITEM / CMD "
+                                     "records); valid: from_log = \"flown\" for its GPS track")
+                return up
+        return flown_mission(path)
+    head = path.read_bytes()[:64].lstrip()
+    if head.startswith(b"QGC WPL"):
+        return read_wpl(path)
+    if head.startswith(b"{") or path.suffix.lower() == ".plan":
+        return read_plan(path)
+    raise ValueError(f"{path.name}: not a mission file; valid: a QGC .plan (JSON), a .waypoints file starting "
+                     f"'QGC WPL 110', or a flight log ({', '.join(LOG_SUFFIXES)})")
+
+
+# ----------------------------------------------------------------------------------- .plan
+def read_plan(path) -> RawMission:
+    """A QGroundControl ``.plan`` file (JSON); see the module docstring for the fields used."""
+    path = Path(path)
+    name = path.name
+    try:
+        doc = json.loads(path.read_bytes().decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{name}: not a UTF-8 text (JSON) file: byte {exc.object[exc.start]:#04x} at offset "
+                         f"{exc.start}") from None
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{name}: malformed JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
+    if not isinstance(doc, dict) or doc.get("fileType") != "Plan":
+        raise ValueError(f"{name}: not a QGroundControl plan; valid: a JSON object with \"fileType\": \"Plan\"")
+    mission = doc.get("mission")
+    if not isinstance(mission, dict) or not isinstance(mission.get("items"), list):
+        raise ValueError(f"{name}: no mission items; valid: \"mission\": {{\"items\": [...]}}")
+    hp = mission.get("plannedHomePosition")
+    home = None
+    if hp is not None:
+        if not (isinstance(hp, list) and len(hp) == 3 and all(isinstance(v, (int, float)) for v in hp)):
+            raise ValueError(f"{name}: plannedHomePosition={hp!r} is invalid; valid: [lat, lon, alt AMSL]")
+        home = _home(*hp, name, "plannedHomePosition")
+    items = []
+    for i, it in enumerate(mission["items"]):
+        items += _plan_item(it, f"item {i}", name)
+    return RawMission(name, home, tuple(items))
+
+
+def _simple(it, where: str, name: str) -> MissionItem:
+    if not isinstance(it, dict):
+        raise ValueError(f"{name}: {where} is not a JSON object")
+    params = it.get("params")
+    if not isinstance(params, list) or len(params) != 7:
+        raise ValueError(f"{name}: {where}: params={params!r} is invalid; valid: 7 numbers (p1..p4, lat, lon, alt)")
+    try:
+        p = [_num(v) for v in params]
+        cmd, frame = it["command"], it.get("frame", 0)
+        if isinstance(cmd, bool) or not isinstance(cmd, int) or isinstance(frame, bool) or not isinstance(frame, int):
+            raise TypeError("command and frame must be integers")
+    except KeyError:
+        raise ValueError(f"{name}: {where} has no \"command\"") from None
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name}: {where}: {exc}") from None
+    return MissionItem(where, cmd, frame, tuple(p[:4]), p[4], p[5], p[6])
+
+
+def _plan_item(it, where: str, name: str) -> list[MissionItem]:
+    kind = it.get("type") if isinstance(it, dict) else None
+    if kind == "SimpleItem":
+        return [_simple(it, where, name)]
+    if kind != "ComplexItem":
+        raise ValueError(f"{name}: {where}: type={kind!r} is invalid; valid: SimpleItem, ComplexItem")
+    ctype = it.get("complexItemType", "?")
+    tsc = it.get("TransectStyleComplexItem") or {}
+    sub = tsc.get("Items") or it.get("Items") or it.get("items")
+    if isinstance(sub, list) and sub:
+        return [_simple(s, f"{where} ({ctype}), generated item {j}", name) for j, s in enumerate(sub)]
+    pts = tsc.get("VisualTransectPoints")
+    cam = tsc.get("CameraCalc") or {}
+    alt = cam.get("DistanceToSurface", tsc.get("Altitude"))
+    if isinstance(pts, list) and pts and isinstance(alt, (int, float)):
+        frame = 3 if cam.get("DistanceToSurfaceRelative", True) else 0
+        try:
+            return [MissionItem(f"{where} ({ctype}), transect point {j}", NAV_WAYPOINT, frame, (0.0,) * 4,
+                                _num(p[0]), _num(p[1]), float(alt)) for j, p in enumerate(pts)]
+        except (TypeError, ValueError, IndexError, KeyError) as exc:
+            raise ValueError(f"{name}: {where} ({ctype}): VisualTransectPoints are invalid: {exc}") from None
+    raise ValueError(f"{name}: {where}: complex item {ctype!r} has no generated waypoints (TransectStyleComplexItem "
+                     "Items or VisualTransectPoints with a CameraCalc DistanceToSurface); valid: save the plan "
+                     "from QGroundControl after the survey was generated")
+
+
+# -------------------------------------------------------------------------------- .waypoints
+def read_wpl(path) -> RawMission:
+    """A ``QGC WPL 110`` text file (ArduPilot, Mission Planner, QGC); row 0 is home."""
+    path = Path(path)
+    name = path.name
+    try:
+        lines = path.read_bytes().decode("utf-8").splitlines()
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{name}: not a text file: byte {exc.object[exc.start]:#04x} at offset {exc.start}") from None
+    if not lines or not lines[0].strip().startswith("QGC WPL 110"):
+        raise ValueError(f"{name}: line 1 is {lines[0][:40]!r}; valid: 'QGC WPL 110'" if lines else f"{name}: empty file")
+    rows = []
+    for ln, text in enumerate(lines[1:], start=2):
+        if not text.strip():
+            continue
+        f = text.split()
+        if len(f) != 12:
+            raise ValueError(f"{name}: line {ln} has {len(f)} fields; valid: 12 (index, current, frame, command, "
+                             "p1..p4, lat, lon, alt, autocontinue)")
+        try:
+            v = [float(x) for x in f]
+        except ValueError:
+            raise ValueError(f"{name}: line {ln}: a field is not a number: {text.strip()[:80]!r}") from None
+        rows.append((int(v[0]), int(v[3]), int(v[2]), tuple(v[4:8]), v[8], v[9], v[10]))
+    if not rows or rows[0][0] != 0:
+        raise ValueError(f"{name}: missing home: row 0 (the home position, AMSL) is not the first row")
+    seq0, _, _, _, lat, lon, alt = rows[0]
+    home = _home(lat, lon, alt, name, "home (row 0)")
+    items = tuple(MissionItem(f"row {r[0]}", r[1], r[2], r[3], r[4], r[5], r[6]) for r in rows[1:])
+    return RawMission(name, home, items)
+
+
+# ------------------------------------------------------------------------------------- logs
+def uploaded_mission(path) -> RawMission:
+    """The mission a log uploaded or read back: a .tlog's MISSION_ITEM_INT / MISSION_ITEM (the last
+    of each sequence number), a DataFlash log's CMD records; home from ArduPilot's item 0 or
+    HOME_POSITION. No items: a RawMission with none."""
+    from ..mavlink.logs import mavutil
+    path = Path(path)
+    conn = mavutil().mavlink_connection(str(path))
+    found: dict[int, tuple] = {}
+    home, ardupilot, count = None, path.suffix.lower() == ".bin", None
+    types = ["MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_COUNT", "CMD", "HOME_POSITION", "HEARTBEAT"]
+    while True:
+        try:
+            msg = conn.recv_match(type=types, blocking=False)
+        except Exception as exc:  # noqa: BLE001 -- untrusted bytes: stop where the parser failed
+            raise ValueError(f"{path.name}: the log could not be parsed: {type(exc).__name__}: {exc}") from None
+        if msg is None:
+            break
+        t = msg.get_type()
+        if t == "HEARTBEAT":
+            ardupilot |= msg.autopilot == 3   # MAV_AUTOPILOT_ARDUPILOTMEGA: item 0 is home
+        elif t == "MISSION_COUNT" and getattr(msg, "mission_type", 0) == 0:
+            count = int(msg.count)   # the last upload / download: its items are seq 0 .. count - 1
+        elif t == "HOME_POSITION":
+            home = (msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
+        elif t == "CMD":
+            found[int(msg.CNum)] = (int(msg.CId), int(getattr(msg, "Frame", 0 if msg.CNum == 0 else 3)),
+                                    (msg.Prm1, msg.Prm2, msg.Prm3, msg.Prm4), msg.Lat, msg.Lng, msg.Alt)
+        elif getattr(msg, "mission_type", 0) == 0:
+            scale = 1e-7 if t == "MISSION_ITEM_INT" else 1.0
+            found[int(msg.seq)] = (int(msg.command), int(msg.frame), (msg.param1, msg.param2, msg.param3, msg.param4),
+                                   msg.x * scale, msg.y * scale, float(msg.z))
+    seqs = sorted(s for s in found if count is None or s < count)
+    if ardupilot and 0 in found:
+        _, _, _, lat, lon, alt = found.pop(0)
+        home = (lat, lon, alt)
+        seqs = seqs[1:]
+    items = tuple(MissionItem(f"item {s}", *found[s][:3], *found[s][3:]) for s in seqs)
+    return RawMission(path.name, None if home is None else _home(*home, path.name, "home"), items)
+
+
+def _decimate(p: np.ndarray, tol: float) -> np.ndarray:
+    """Indices of the Ramer-Douglas-Peucker simplification of the polyline ``p`` (N, 3): every
+    dropped point lies within ``tol`` metres of the kept polyline."""
+    keep = np.zeros(len(p), dtype=bool)
+    keep[[0, -1]] = True
+    stack = [(0, len(p) - 1)]
+    while stack:
+        a, b = stack.pop()
+        if b - a < 2:
+            continue
+        seg = p[b] - p[a]
+        rel = p[a + 1:b] - p[a]
+        L = float(np.linalg.norm(seg))
+        if L < 1e-9:
+            d = np.linalg.norm(rel, axis=1)
+        else:
+            d = np.linalg.norm(np.cross(rel, seg / L), axis=1)
+        k = int(np.argmax(d))
+        if d[k] > tol:
+            keep[a + 1 + k] = True
+            stack += [(a, a + 1 + k), (a + 1 + k, b)]
+    return np.flatnonzero(keep)
+
+
+def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
+    """The route a log flew: its GPS track (fix >= 3, implausible fixes rejected) over the armed time,
+    decimated to waypoints within ``tolerance_m`` of the track (Ramer-Douglas-Peucker), stops of at
+    least :data:`FLOWN_HOLD_S` as loiter items, points on the ground as landings (the route takes off
+    again at the next airborne point; time spent on the ground is not kept), a landing at the end;
+    home = the first armed position."""
+    from ..mavlink.geodesy import geodetic_to_enu
+    from ..mavlink.logs import read_log
+    log = read_log(path)
+    pos = log.position
+    periods = log.armed_periods
+    if periods:
+        t = pos["t_s"].to_numpy(float)
+        pos = pos[(t >= periods[0][0]) & (t <= periods[-1][1])]
+    if len(pos) < 2:
+        raise ValueError(f"{Path(path).name}: no flown track: {len(pos)} usable position(s) (GPS fix >= 3) while armed")
+    lat, lon, alt = (pos[c].to_numpy(float) for c in ("lat_deg", "lon_deg", "alt_m"))
+    home = GeoPoint(float(lat[0]), float(lon[0]), float(alt[0]))
+    e, n, u = geodetic_to_enu(lat, lon, alt, home)
+    p = np.column_stack([e, n, np.maximum(u, 0.0)])
+    t = pos["t_s"].to_numpy(float)
+    keep = _decimate(p, tolerance_m)
+    items = []
+    for a, b in zip(keep[:-1], keep[1:]):
+        if p[b, 2] < FLOWN_GROUND_M:   # on the ground: a landing (the next airborne point takes off again)
+            if not items or items[-1].command != NAV_LAND:
+                items.append(MissionItem(f"track point {b}", NAV_LAND, 0, (0.0,) * 4, lat[b], lon[b], home.alt_m))
+            continue
+        hold = _stop_time(p[a:b + 1], t[a:b + 1])
+        cmd, p1 = (NAV_LOITER_TIME, hold) if hold >= FLOWN_HOLD_S else (NAV_WAYPOINT, 0.0)
+        items.append(MissionItem(f"track point {b}", cmd, 0, (p1, 0.0, 0.0, 0.0), lat[b], lon[b], home.alt_m + p[b, 2]))
+    if not items or items[-1].command != NAV_LAND:
+        items.append(MissionItem("track end", NAV_LAND, 0, (0.0,) * 4, lat[-1], lon[-1], home.alt_m))
+    return RawMission(f"{Path(path).name} (flown track)", home, tuple(items))
+
+
+def _stop_time(p: np.ndarray, t: np.ndarray) -> float:
+    """Seconds spent slower than :data:`HOVER_M_S` on one decimated leg (its hovering)."""
+    if len(t) < 2:
+        return 0.0
+    dt = np.diff(t)
+    v = np.linalg.norm(np.diff(p, axis=0), axis=1) / np.maximum(dt, 1e-9)
+    return float(np.sum(dt[(v < HOVER_M_S) & (dt < 10.0)]))

@@ -1,0 +1,106 @@
+"""Charging pads from a file: CSV with a header (``lat``, ``lon``, optional ``alt`` in m AMSL and
+``hover_time_s``; also ``latitude``/``longitude``/``lng``/``altitude``) or GeoJSON (Point /
+MultiPoint geometries, coordinates [lon, lat(, alt)], optional property ``hover_time_s``).
+
+Returns :class:`GeoPad` records; :mod:`.route` puts them into the pad frame. Errors are one line
+naming the file and the row / feature.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..mavlink.geodesy import GeoPoint
+
+__all__ = ["GeoPad", "read_pads", "MAX_PADS"]
+
+MAX_PADS = 100
+_ALIASES = {"lat": ("lat", "lat_deg", "latitude"), "lon": ("lon", "lon_deg", "lng", "long", "longitude"),
+            "alt": ("alt", "alt_m", "altitude", "amsl_m"), "hover_time_s": ("hover_time_s", "hover_s")}
+
+
+@dataclass(frozen=True)
+class GeoPad:
+    """A pad: its coil centre (altitude m AMSL, None = on the home's ground) and hover time (None = default)."""
+
+    point: GeoPoint
+    hover_time_s: float | None = None
+
+
+def read_pads(path) -> tuple[GeoPad, ...]:
+    """Pads of a CSV or GeoJSON file (by content: a JSON object, else CSV)."""
+    path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"pads file {str(path)!r} is a folder; valid: a CSV or GeoJSON file")
+    if not path.is_file():
+        raise FileNotFoundError(f"pads file {str(path)!r} does not exist")
+    try:
+        text = path.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path.name}: not a UTF-8 text file: byte {exc.object[exc.start]:#04x} at offset {exc.start}") from None
+    pads = _geojson(text, path.name) if text.lstrip().startswith("{") else _csv(text, path.name)
+    if not 1 <= len(pads) <= MAX_PADS:
+        raise ValueError(f"{path.name}: {len(pads)} pads; valid: 1..{MAX_PADS}")
+    return pads
+
+
+def _pad(lat, lon, alt, hover, where: str) -> GeoPad:
+    try:
+        vals = [None if v is None else float(v) for v in (lat, lon, alt, hover)]
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: lat={lat!r}, lon={lon!r}, alt={alt!r}, hover_time_s={hover!r}: not numbers") from None
+    if vals[3] is not None and not (math.isfinite(vals[3]) and vals[3] >= 0):
+        raise ValueError(f"{where}: hover_time_s={hover!r} is invalid; valid range: [0, inf) s")
+    try:
+        return GeoPad(GeoPoint(vals[0], vals[1], vals[2]), vals[3])
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
+def _csv(text: str, name: str) -> tuple[GeoPad, ...]:
+    rows = list(csv.reader(io.StringIO(text)))
+    rows = [r for r in rows if any(c.strip() for c in r)]
+    if not rows:
+        raise ValueError(f"{name}: empty pads file; valid: a CSV header lat,lon[,alt][,hover_time_s] and rows")
+    head = [c.strip().lower() for c in rows[0]]
+    col = {k: next((head.index(a) for a in al if a in head), None) for k, al in _ALIASES.items()}
+    if col["lat"] is None or col["lon"] is None:
+        raise ValueError(f"{name}: header {','.join(head)!r} has no lat / lon column; valid: a CSV header "
+                         "lat,lon[,alt][,hover_time_s] (or a GeoJSON FeatureCollection of Points)")
+    out = []
+    for i, r in enumerate(rows[1:], start=2):
+        def get(k):
+            j = col[k]
+            return r[j].strip() if j is not None and j < len(r) and r[j].strip() else None
+        out.append(_pad(get("lat"), get("lon"), get("alt"), get("hover_time_s"), f"{name}: line {i}"))
+    return tuple(out)
+
+
+def _geojson(text: str, name: str) -> tuple[GeoPad, ...]:
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{name}: malformed JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
+    feats = doc.get("features") if doc.get("type") == "FeatureCollection" else [doc]
+    if not isinstance(feats, list):
+        raise ValueError(f"{name}: \"features\" is not a list")
+    out = []
+    for i, f in enumerate(feats):
+        geom = f.get("geometry", f) if isinstance(f, dict) else None
+        props = (f.get("properties") or {}) if isinstance(f, dict) else {}
+        kind = geom.get("type") if isinstance(geom, dict) else None
+        coords = geom.get("coordinates") if isinstance(geom, dict) else None
+        if kind == "Point":
+            coords = [coords]
+        elif kind != "MultiPoint":
+            raise ValueError(f"{name}: feature {i}: geometry type {kind!r} is not supported; valid: Point, MultiPoint")
+        for c in coords or []:
+            if not isinstance(c, list) or len(c) not in (2, 3):
+                raise ValueError(f"{name}: feature {i}: coordinates {c!r} are invalid; valid: [lon, lat] or [lon, lat, alt]")
+            out.append(_pad(c[1], c[0], c[2] if len(c) == 3 else None, props.get("hover_time_s"), f"{name}: feature {i}"))
+    return tuple(out)

@@ -1,0 +1,218 @@
+"""Mission items -> the config's ``[[waypoints]]`` route in the pad frame; pads files -> ``[[pads]]``.
+
+The pad frame of a mission file is local ENU metres about the mission's home (its ground is z = 0),
+by :func:`mission_sim.mavlink.geodesy.geodetic_to_enu` (WGS84 radii of curvature at home; the
+flat-plane error is ~8 cm of height at 1 km). Altitude frames: 0 / 5 (global, m AMSL: z = alt -
+home altitude) and 3 / 6 (relative to home: z = alt); terrain frames (10, 11) are refused (no
+terrain model). As ArduCopter does (``ModeAuto::loc_from_cmd``), latitude = longitude = 0 means
+"here" and altitude 0 "at the current height".
+
+Commands: NAV_WAYPOINT (16; param1 > 0 = hold seconds: a loiter), NAV_LOITER_TIME (19, param1
+seconds), NAV_RETURN_TO_LAUNCH (20: climb to at least :data:`RTL_ALT_M`, fly home, land),
+NAV_LAND (21), NAV_TAKEOFF (22, vertical), DO_CHANGE_SPEED (178, param2 m/s: the speed of the
+following legs). Commands that do not move the vehicle (camera, gimbal, servo, relay, ROI, yaw:
+:data:`IGNORED_COMMANDS`) are skipped; any other command is an error naming it and its item.
+A loiter within ``mission.pad_radius_m`` of a pad (horizontally) and at least
+:data:`CHARGE_CLEARANCE_M` above it becomes a charging hover over that pad (waypoint action
+"charge": descend to the pad, charge, climb back).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from ..mavlink.geodesy import GeoPoint, geodetic_to_enu
+from .items import NAV_LAND, NAV_LOITER_TIME, NAV_RTL, NAV_TAKEOFF, NAV_WAYPOINT, RawMission, read_mission
+from .pads import read_pads
+
+__all__ = ["apply_mission_files", "route_from_items", "pads_to_local", "command_name", "RTL_ALT_M",
+           "IGNORED_COMMANDS"]
+
+DO_CHANGE_SPEED = 178
+CHARGE_CLEARANCE_M = 1.0   # a loiter becomes a charging hover only this far above the pad (it descends to it)
+RTL_ALT_M = 15.0   # ArduCopter's RTL_ALT default (1500 cm): RTL climbs to at least this height
+#: commands that do not move the vehicle: CONDITION_YAW, DO_SET_RELAY, DO_REPEAT_RELAY, DO_SET_SERVO,
+#: DO_REPEAT_SERVO, DO_SET_ROI_LOCATION, DO_SET_ROI_NONE, DO_CONTROL_VIDEO, DO_SET_ROI,
+#: DO_DIGICAM_CONFIGURE, DO_DIGICAM_CONTROL, DO_MOUNT_CONFIGURE, DO_MOUNT_CONTROL,
+#: DO_SET_CAM_TRIGG_DIST, DO_SET_CAM_TRIGG_INTERVAL, SET_CAMERA_MODE, DO_GIMBAL_MANAGER_PITCHYAW,
+#: IMAGE_START_CAPTURE, IMAGE_STOP_CAPTURE, VIDEO_START_CAPTURE, VIDEO_STOP_CAPTURE
+IGNORED_COMMANDS = frozenset({115, 181, 182, 183, 184, 195, 197, 200, 201, 202, 203, 204, 205, 206, 214, 530, 1000,
+                              2000, 2001, 2500, 2501})
+_NAV = {NAV_WAYPOINT: "waypoint", NAV_LOITER_TIME: "loiter", NAV_RTL: "rtl", NAV_LAND: "land", NAV_TAKEOFF: "takeoff"}
+_AMSL_FRAMES, _RELATIVE_FRAMES = (0, 5), (3, 6)
+_SUPPORTED = ("NAV_WAYPOINT (16), NAV_LOITER_TIME (19), NAV_RETURN_TO_LAUNCH (20), NAV_LAND (21), NAV_TAKEOFF (22), "
+              "DO_CHANGE_SPEED (178) and commands that do not move the vehicle (camera, gimbal, servo, ROI, yaw)")
+
+
+def command_name(cmd: int) -> str:
+    """``MAV_CMD_NAV_LOITER_TURNS`` -> ``NAV_LOITER_TURNS`` (pymavlink's MAV_CMD enum), else ``MAV_CMD <n>``."""
+    from ..mavlink.logs import mavutil
+    entry = mavutil().mavlink.enums.get("MAV_CMD", {}).get(int(cmd))
+    name = getattr(entry, "name", "") or ""
+    return name.removeprefix("MAV_CMD_") if name and not name.endswith("ENUM_END") else f"MAV_CMD {cmd}"
+
+
+class _Builder:
+    """Walks the items keeping the current position (pad frame) and the speed set by DO_CHANGE_SPEED."""
+
+    def __init__(self, raw: RawMission, pads_xyz=(), pad_radius_m: float = 5.0):
+        self.raw, self.name = raw, raw.source
+        self.pads, self.radius = list(pads_xyz), pad_radius_m
+        self.x = self.y = self.z = 0.0
+        self.speed = None
+        self.out: list[dict] = []
+
+    def fail(self, it, text: str):
+        raise ValueError(f"{self.name}: {it.where}: {text}")
+
+    def where_to(self, it):
+        """(x, y, z) of a nav item in the pad frame; "here" for lat = lon = 0 and for alt 0 / unset."""
+        home = self.raw.home
+        if it.frame not in _AMSL_FRAMES + _RELATIVE_FRAMES:
+            kind = "terrain-relative altitude" if it.frame in (10, 11) else "not a global frame"
+            self.fail(it, f"frame {it.frame} ({kind}) is not supported; valid frames: 0 / 5 (AMSL), 3 / 6 "
+                          "(relative to home)")
+        here = (it.lat_deg == 0 and it.lon_deg == 0) or math.isnan(it.lat_deg) or math.isnan(it.lon_deg)
+        if here:
+            x, y = self.x, self.y
+        else:
+            try:
+                e, n, _ = geodetic_to_enu(it.lat_deg, it.lon_deg, home.alt_m, home)
+                GeoPoint(it.lat_deg, it.lon_deg)
+            except ValueError as exc:
+                self.fail(it, str(exc))
+            x, y = float(e), float(n)
+        if math.isnan(it.alt_m) or it.alt_m == 0:
+            return x, y, self.z
+        z = it.alt_m - home.alt_m if it.frame in _AMSL_FRAMES else it.alt_m
+        if not 0 <= z <= 5000:
+            self.fail(it, f"altitude {it.alt_m:g} m ({'AMSL' if it.frame in _AMSL_FRAMES else 'above home'}) is "
+                          f"{z:.1f} m above home; valid range: [0, 5000] m above home")
+        return x, y, z
+
+    def add(self, action, x, y, z, hold_s=0.0):
+        wp = {"action": action, "x_m": x, "y_m": y, "z_m": z, "hold_s": float(hold_s)}
+        if action == "loiter" and self.pads:   # a loiter at a pad: charge there (and leave from there)
+            d = [math.hypot(x - p[0], y - p[1]) for p in self.pads]
+            k = min(range(len(d)), key=d.__getitem__)
+            if d[k] <= self.radius and z > self.pads[k][2] + CHARGE_CLEARANCE_M:
+                x, y = float(self.pads[k][0]), float(self.pads[k][1])
+                wp.update(action="charge", pad=k, x_m=x, y_m=y)
+        if self.speed is not None:
+            wp["speed_m_s"], self.speed = self.speed, None
+        self.out.append(wp)
+        self.x, self.y, self.z = x, y, (0.0 if action == "land" else z)
+
+    def item(self, it):
+        if it.command == DO_CHANGE_SPEED:
+            v = it.params[1]
+            if math.isfinite(v) and v > 0:
+                self.speed = float(v)
+            return
+        if it.command in IGNORED_COMMANDS:
+            return
+        kind = _NAV.get(it.command)
+        if kind is None:
+            self.fail(it, f"command {command_name(it.command)} ({it.command}) is not supported; supported: {_SUPPORTED}")
+        if kind == "rtl":
+            z = max(self.z, RTL_ALT_M)
+            if z > self.z:
+                self.add("waypoint", self.x, self.y, z)
+            self.add("waypoint", 0.0, 0.0, z)
+            self.add("land", 0.0, 0.0, 0.0)
+            return
+        x, y, z = self.where_to(it)
+        if kind == "takeoff":
+            if z <= 0:
+                self.fail(it, "take-off altitude 0; valid: a height above home > 0 m")
+            self.add("takeoff", self.x, self.y, z)
+        elif kind == "land":
+            self.add("land", x, y, 0.0)
+        else:
+            hold = it.params[0] if math.isfinite(it.params[0]) else 0.0
+            if hold < 0:
+                self.fail(it, f"hold time param1={hold:g} is invalid; valid range: [0, inf) s")
+            self.add("loiter" if kind == "loiter" or hold > 0 else "waypoint", x, y, z, hold)
+
+
+def route_from_items(raw: RawMission, pads_xyz=(), pad_radius_m: float = 5.0) -> list[dict]:
+    """The ``[[waypoints]]`` dicts of ``raw`` (pad frame about ``raw.home``); loiters within
+    ``pad_radius_m`` of a pad in ``pads_xyz`` ((x, y, z) in the pad frame) become "charge"."""
+    if raw.home is None:
+        raise ValueError(f"{raw.source}: missing home position (a .plan's plannedHomePosition, row 0 of a "
+                         ".waypoints file, a log's HOME_POSITION); the pad frame is about home")
+    b = _Builder(raw, pads_xyz, pad_radius_m)
+    for it in raw.items:
+        b.item(it)
+    if not b.out:
+        raise ValueError(f"{raw.source}: no waypoints: {len(raw.items)} item(s), none that moves the vehicle "
+                         f"(supported: {_SUPPORTED})")
+    return b.out
+
+
+def pads_to_local(pads, ref: GeoPoint) -> list[dict]:
+    """``[[pads]]`` dicts of :class:`~mission_sim.plans.pads.GeoPad` records about ``ref`` (a pad
+    without altitude sits on the ground of ``ref``: z = 0)."""
+    out = []
+    for p in pads:
+        e, n, u = geodetic_to_enu(p.point.lat_deg, p.point.lon_deg,
+                                  ref.alt_m if p.point.alt_m is None else p.point.alt_m, ref)
+        d = {"x_m": float(e), "y_m": float(n), "z_m": float(u)}
+        if p.hover_time_s is not None:
+            d["hover_time_s"] = p.hover_time_s
+        out.append(d)
+    return out
+
+
+def _path(value, base_dir, key: str):
+    if value in (None, ""):
+        return None
+    if not isinstance(value, str):
+        raise ValueError(f"mission.{key}={value!r} is invalid; valid type: string (a file path)")
+    p = Path(value).expanduser()
+    return p if p.is_absolute() or base_dir is None else Path(base_dir) / p
+
+
+def apply_mission_files(d: dict, base_dir=None, mission_file=None, pads_file=None) -> dict:
+    """Config dict ``d`` with its ``[mission] file`` read into ``[[waypoints]]`` (start at home) and
+    its ``[mission] pads_file`` into ``[[pads]]``; ``mission_file`` / ``pads_file`` (command line)
+    replace the config's. Relative paths of the config are relative to ``base_dir``. Returns ``d``
+    itself when there is nothing to read."""
+    m = d.get("mission")
+    if not isinstance(m, dict):
+        return d
+    mf = Path(mission_file) if mission_file is not None else _path(m.get("file"), base_dir, "file")
+    pf = Path(pads_file) if pads_file is not None else _path(m.get("pads_file"), base_dir, "pads_file")
+    if mf is None and pf is None:
+        return d
+    if mf is not None and mission_file is None and d.get("waypoints"):
+        raise ValueError(f"mission.file={m.get('file')!r} and [[waypoints]] are both given; valid: one route")
+    radius = m.get("pad_radius_m", 5.0)
+    if isinstance(radius, bool) or not isinstance(radius, (int, float)) or not radius > 0:
+        raise ValueError(f"mission.pad_radius_m={radius!r} is invalid; valid range: (0, inf) m")
+    out = {**d, "mission": dict(m)}
+    raw = read_mission(mf, m.get("from_log", "auto")) if mf is not None else None
+    ref = raw.home if raw is not None else None
+    if raw is not None and ref is None:
+        route_from_items(raw)  # raises: missing home
+    if pf is not None:
+        geo = read_pads(pf)
+        if ref is None:
+            first = geo[0].point
+            ref = GeoPoint(first.lat_deg, first.lon_deg, 0.0 if first.alt_m is None else first.alt_m)
+        out["pads"] = pads_to_local(geo, ref)
+        for i, q in enumerate(out["pads"]):
+            dist = math.hypot(q["x_m"], q["y_m"])
+            if dist > 1e5:
+                raise ValueError(f"{pf.name}: pad {i} is {dist / 1e3:.0f} km from the mission's home "
+                                 f"({ref.lat_deg:.6f}, {ref.lon_deg:.6f}); valid: within 100 km (lat, lon swapped?)")
+        out["mission"]["pads_file"] = str(pf)
+    if raw is not None:
+        pads = [(p.get("x_m", 0.0), p.get("y_m", 0.0), p.get("z_m", 0.0)) for p in out.get("pads") or []
+                if isinstance(p, dict)]
+        out["waypoints"] = route_from_items(raw, pads, float(radius))
+        out["mission"].update(file=str(mf), start_x_m=0.0, start_y_m=0.0)
+        last = out["waypoints"][-1]
+        out["mission"].update(land_x_m=last["x_m"], land_y_m=last["y_m"])
+    return out
