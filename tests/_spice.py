@@ -221,8 +221,24 @@ def main() -> None:
     (HERE / "reference.json").write_text(json.dumps(ref, indent=1) + "\n")
 
 
+def main_efficiency() -> None:
+    """Regenerate ``eff_schottky.cir`` and ``efficiency.json``: ``python tests/_spice.py efficiency``."""
+    import json
+    import tempfile
+
+    from wpt_receiver.devices import preset
+    text = efficiency_netlist(dv=preset("schottky"))
+    (HERE / "eff_schottky.cir").write_text(text)
+    with tempfile.TemporaryDirectory() as tmp:
+        got = run_ngspice_energies(text, Path(tmp))
+    ref = {"d_short": EFF_DUTY, "t_end_s": EFF_T_END_S, "t_meas_s": EFF_T_MEAS_S, "ngspice": got}
+    (HERE / "efficiency.json").write_text(json.dumps(ref, indent=1) + "\n")
+    print(got)
+
+
 if __name__ == "__main__":
-    main()
+    import sys
+    main_efficiency() if sys.argv[1:] == ["efficiency"] else main()
 
 
 # ============================================================ efficiency with edge losses (issue 23)

@@ -9,7 +9,8 @@ from pathlib import Path
 from .common import CliError, add_progress_flag, float_arg, prepare_out_dir, show_progress
 
 _COLUMNS = ("peak_i2_a", "diode_rms_a", "diode_avg_a", "switch_rms_a", "required_rating_a", "part", "mass_g",
-            "device_mass_g", "sink_mass_g", "conduction_loss_w")
+            "device_mass_g", "sink_mass_g", "conduction_loss_w", "switching_loss_w", "loss_w", "tj_diode_c",
+            "tj_switch_c", "v_worst_v", "required_v_rating_v")
 
 
 def _add_sizing(sub):
@@ -72,7 +73,8 @@ def _rows(args):
     with bar:
         rows = size_policies(names, TABLE_I, base, SizingRules(margin=args.margin), t_end_s=args.t_end,
                              progress=lambda: bar.update(1))
-    return [{"policy": r["policy"], **{c: r[c] for c in _COLUMNS}} for r in rows]
+    return [{"policy": r["policy"], **{c: r.get(c) for c in _COLUMNS}, "v_case": r.get("v_case"),
+             "edge_ring_v": r.get("edge_ring_v")} for r in rows]
 
 
 def _mission_rows(args, base):
@@ -100,7 +102,7 @@ def _size_mission(name, cfg, base, args) -> dict:
     cols = [ts[c].to_numpy() for c in ("t_s", "dt_s", "d_short", "i1_amp_a", "i2_amp_a")]
     params = res.config.link.link_params(1.0, 1.0, 0.1)          # VL = 30 V: the voltage rule
     row = select_parts(lambda dv: envelope_currents(*cols, peak, dv), params, base, SizingRules(margin=args.margin))
-    return {"policy": name, **{c: row[c] for c in _COLUMNS}}
+    return {"policy": name, **{c: row.get(c) for c in _COLUMNS}}
 
 
 def _sweep_rows(args, base):
@@ -143,11 +145,19 @@ def _cmd_sizing(args) -> int:
              "sweep": f"worst case per policy of sweep {args.sweep}, re-run, envelope + ripple peak"}[args.source]
     print(f"SBAR sizing ({model}, devices {args.devices}, rating = {args.margin:g} x peak |i2|; "
           "RMS and loss over the worst 1 ms)")
-    print(f"{'policy':<11} {'peak i2':>8} {'diode rms':>9} {'switch rms':>10} {'rating':>8} {'loss':>7} "
-          f"{'mass':>7}  part")
+    print(f"{'policy':<11} {'peak i2':>8} {'diode rms':>9} {'switch rms':>10} {'rating':>8} {'cond.':>7} {'switch.':>7} "
+          f"{'Tj diode':>8} {'Tj sw':>6} {'V rating':>8} {'mass':>7}  part")
     for r in rows:
         print(f"{r['policy']:<11} {r['peak_i2_a']:>6.2f} A {r['diode_rms_a']:>7.2f} A {r['switch_rms_a']:>8.2f} A "
-              f"{r['required_rating_a']:>6.1f} A {r['conduction_loss_w']:>5.2f} W {r['mass_g']:>5.1f} g  {r['part']}")
+              f"{r['required_rating_a']:>6.1f} A {r['conduction_loss_w']:>5.2f} W {r['switching_loss_w']:>5.2f} W "
+              f"{r['tj_diode_c']:>6.1f} C {r['tj_switch_c']:>4.1f} C {r['required_v_rating_v']:>6.1f} V "
+              f"{r['mass_g']:>5.1f} g  {r['part']}")
+    r0 = rows[0]
+    print(f"losses at the settled junction temperatures (ambient 40 C, sink +50 K); V rating = 1.1 x the simulated "
+          f"worst blocking voltage {r0['v_worst_v']:.2f} V" + (f" ({r0['v_case']})" if r0.get("v_case") else ""))
+    if r0.get("edge_ring_v") is not None:
+        print("edge ring at the peak current with 8 nH stray loop inductance (analytic, not rated: needs a snubber "
+              "or layout): " + ", ".join(f"{r['policy']} +{r['edge_ring_v']:.0f} V" for r in rows))
     for r in rows:
         if "case_id" in r:
             print(f"{r['policy']}: worst of {r['cases']} ok cases is case {r['case_id']} "
