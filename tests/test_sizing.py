@@ -181,13 +181,15 @@ def test_thermal_loop_converges_and_detects_runaway():
 
 
 def test_open_load_voltage_rises_at_the_current_source_rate():
-    """Battery opened in RM: the output capacitor charges at (2/pi) I2 / C (the series-series link
-    is a current source), within 5 %; a smaller capacitor rises proportionally faster."""
+    """Battery opened in RM: over the first rectifier period the output capacitor charges at
+    (2/pi) I2 / C (the rectified RM current), within 5 %; later slower (the link's beat lowers I2
+    while V2 rises) but the voltage keeps rising until the short."""
     from wpt_receiver.switching.stress import open_load_run
     link = SwitchingLink(P, SwitchingConfig(devices=DV))
     i2 = link.simulate([0.0] * 40).envelope()["i2_fund_a"].iloc[-10:].mean()
     r = open_load_run(P, DV, c_out_f=1e-5, t_max_s=2e-4)
-    assert r["dv_dt_v_s"] == pytest.approx(2 / math.pi * i2 / 1e-5, rel=0.05)
+    assert r["dv_dt0_v_s"] == pytest.approx(2 / math.pi * i2 / 1e-5, rel=0.05)
+    assert 0 < r["dv_dt_v_s"] < r["dv_dt0_v_s"]
     assert r["peak_v"][1e-4] > r["peak_v"][1e-5] > r["v0_v"]
 
 

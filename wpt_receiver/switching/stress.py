@@ -3,7 +3,8 @@
 **Open load.** A series-series link drives its secondary like a current source: at resonance
 ``I2 = Vdc (4/pi) / (omega Lm)`` whatever the load voltage, so when the battery disconnects (BMS
 contactor, connector bounce) while the diodes rectify, ``i2`` keeps charging the rectifier's output
-capacitor ``c_out_f`` and its voltage rises (about ``(2/pi) I2 / C_out`` per second) until a device
+capacitor ``c_out_f`` and its voltage rises (at first ``(2/pi) I2 / C_out`` per second, then slower
+while the tanks' beat lowers I2 for ~ms; the steady state is a current source again) until a device
 breaks down (avalanche) or a protection shorts the SBAR (both lower switches on: the diodes stop,
 the output holds its voltage). :func:`open_load_run` simulates it on the event-exact switching
 model: the link runs at its periodic steady state with the battery behind ``r_bat_ohm``, the
@@ -49,7 +50,10 @@ def open_load_run(params, devices, c_out_f: float = 4.7e-3, r_bat_ohm: float = 0
                   t_max_s: float = 2e-3, times_to_short_s=(1e-6, 1e-5, 1e-4, 1e-3)) -> dict:
     """Open-load fault on the switching model (module docstring). Returns ``v_out_v`` at
     ``t_s`` (dense, from the opening), ``peak_v`` per time to short (``times_to_short_s``, the
-    largest blocked voltage up to that time), the initial output voltage and ``dv_dt_v_s``."""
+    largest blocked voltage up to that time), the initial output voltage, ``dv_dt0_v_s`` (over the
+    first rectifier period: ``(2/pi) I2 / C``) and ``dv_dt_v_s`` (fit over the second half of the run:
+    slower, the link's current falls back while V2 rises, for the ~ms of its beat, before the
+    current-source steady state returns)."""
     from .circuit import VO, SwitchingConfig
     from .link import SwitchingLink
     for name, v in (("c_out_f", c_out_f), ("r_bat_ohm", r_bat_ohm), ("t_max_s", t_max_s)):
@@ -68,7 +72,8 @@ def open_load_run(params, devices, c_out_f: float = 4.7e-3, r_bat_ohm: float = 0
     vmax = np.maximum.accumulate(v)
     peaks = {float(t): float(np.interp(t, ts, vmax)) for t in times_to_short_s if t <= ts[-1]}
     slope = float(np.polyfit(ts[len(ts) // 2:], x[len(ts) // 2:, 0], 1)[0])
-    return {"t_s": ts, "v_block_v": v, "peak_v": peaks, "v0_v": float(v[0]), "dv_dt_v_s": slope,
+    slope0 = float((np.interp(ts[0] + T, ts, x[:, 0]) - x[0, 0]) / T)
+    return {"t_s": ts, "v_block_v": v, "peak_v": peaks, "v0_v": float(v[0]), "dv_dt_v_s": slope, "dv_dt0_v_s": slope0,
             "c_out_f": c_out_f, "d_short": float(d_short)}
 
 
