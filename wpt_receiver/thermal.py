@@ -54,3 +54,44 @@ def settle_junctions(losses_w, rth_k_w: dict, tj_max_c: dict, t_amb_c: float = 4
                                  "the loss rises faster with temperature than the sink removes it")
         step_prev = step
     raise ThermalRunaway(f"junction temperatures did not settle within {max_iter} iterations")
+
+
+def steady_junctions(name: str, params, d_short: float, t_amb_c: float = 40.0, dt_sink_k: float | None = 50.0,
+                     rth_sa_k_w: float | None = None) -> dict:
+    """Junction temperatures [C] of a preset's devices at a steady operating point (duty
+    ``d_short`` on link ``params``), with the averaged models: the fundamental currents of eq. 4 with
+    the devices folded in at the current temperatures, :func:`wpt_receiver.sbar.conduction_losses`
+    and :func:`wpt_receiver.edge_losses.averaged_edge_losses`, per device (two rectifier diodes, two
+    rectifier switches, four inverter switches on one sink). The result's ``tj_c`` can be given to
+    the mission (``link.device_tj_c``) or an env (``EnvConfig.device_tj_c``). Returns
+    :func:`settle_junctions`' dict plus ``i1_a``, ``i2_a``."""
+    import numpy as np
+
+    from .devices import DeviceSet, diode_from_row, envelope_params, parts, switch_from_row
+    from .edge_losses import averaged_edge_losses
+    from .envelope import steady_state
+    from .sbar import conduction_losses
+    pr = parts()["preset"].get(name)
+    if pr is None:
+        raise ValueError(f"device preset {name!r} has no parts (valid: {', '.join(parts()['preset'])})")
+    rows = {"rect_diode": parts()["diode"][pr["rect_diode"]], "rect_switch": parts()["switch"][pr["rect_switch"]],
+            "inv_switch": parts()["switch"][pr["inv_switch"]]}
+    state = {}
+
+    def losses(tj):
+        dv = DeviceSet(diode_from_row(rows["rect_diode"], 1, tj["rect_diode"]),
+                       switch_from_row(rows["rect_switch"], 1, tj["rect_switch"]),
+                       switch_from_row(rows["inv_switch"], 1, tj["inv_switch"]), name)
+        v2 = 4 / np.pi * (params.vl_v + dv.rect_vf_v) * (1 - np.sin(0.5 * np.pi * d_short))
+        i1, i2 = (float(abs(v)) for v in steady_state(envelope_params(params, dv), v2))
+        c = conduction_losses(d_short, i1, i2, dv)
+        e = averaged_edge_losses(d_short, i2, params.vl_v, dv, params.rectifier_period_s, params.omega_rad_s,
+                                 vdc_v=params.vdc_v)
+        state.update(i1_a=i1, i2_a=i2)
+        return {"rect_diode": (float(c["rectifier_diodes"]) / 2, 2),
+                "rect_switch": ((float(c["rectifier_switches"]) + e["rectifier_w"]) / 2, 2),
+                "inv_switch": ((float(c["inverter_switches"]) + e["inverter_w"]) / 4, 4)}
+    out = settle_junctions(losses, {k: r["rth_jc_k_w"] + r["rth_cs_k_w"] for k, r in rows.items()},
+                           {k: r["tj_max_c"] for k, r in rows.items()}, t_amb_c, dt_sink_k=dt_sink_k,
+                           rth_sa_k_w=rth_sa_k_w)
+    return {**out, **state}
