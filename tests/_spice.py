@@ -236,10 +236,6 @@ def main_efficiency() -> None:
     print(got)
 
 
-if __name__ == "__main__":
-    import sys
-    main_efficiency() if sys.argv[1:] == ["efficiency"] else main()
-
 
 # ============================================================ efficiency with edge losses (issue 23)
 EFF_DUTY = 0.37          # short duty of the efficiency check (window centred on the i2 peak)
@@ -358,3 +354,63 @@ def efficiency_model(p=TABLE_I, dv: DeviceSet = DeviceSet(), d: float = EFF_DUTY
     src, bat = eb["source_j"], eb["battery_j"]
     return {"source_j": src, "battery_j": bat, "efficiency_conduction": bat / src,
             "efficiency": bat / (src + ee["rect_j"]), **{k: v for k, v in ee.items()}}
+
+
+# ============================================================ ringing of a hard turn-off edge (issue 23)
+RING_CASES = ((4.0, 8e-9), (12.0, 8e-9), (12.0, 20e-9))   # (current A, stray loop inductance H)
+RING_V_V, RING_R_OHM, RING_T_F_S = 30.8, 0.05, 10e-9
+
+
+def ring_netlist(i_a: float, l_h: float, c_f: float, v_v: float = RING_V_V, r_ohm: float = RING_R_OHM,
+                 t_f_s: float = RING_T_F_S) -> str:
+    """One hard turn-off: a constant current ``i_a`` into node n, the channel's current falling
+    linearly to 0 in ``t_f_s`` from t = 10 ns, node capacitance ``c_f``, clamp diode (near-ideal
+    junction) in series with ``l_h`` and ``r_ohm`` to ``v_v``; measured: the peak of v(n)."""
+    t0 = 10e-9
+    return "".join([
+        f"* dronewpt SPICE check of the edge ring: I = {i_a!r} A, Ls = {l_h!r} H, C = {c_f!r} F\n",
+        f"IS 0 n DC {i_a!r}\n",
+        f"BCH n 0 I={i_a!r}*max(0, min(1, 1 - (time - {t0!r})/{t_f_s!r}))\n",
+        f"C n 0 {c_f!r} IC=0\n",
+        "D n x DI\n", f"LS x y {l_h!r} IC=0\n", f"RS y z {r_ohm!r}\n", f"V z 0 DC {v_v!r}\n",
+        ".model DI D(IS=1e-6 N=0.01)\n",
+        ".options reltol=1e-7 abstol=1e-10 vntol=1e-8 method=gear\n",
+        f".tran 1e-12 {t0 + t_f_s + 60e-9!r} 0 2e-12 uic\n",
+        ".meas tran vpeak MAX V(n)\n", ".end\n"])
+
+
+def ring_cases():
+    """The ring netlists for the schottky preset's node capacitance (Coss + Cj)."""
+    from wpt_receiver.devices import preset
+    dv = preset("schottky")
+    c = dv.rect_switch.coss_f + dv.rect_diode.c_f
+    return [(i, l, c, ring_netlist(i, l, c)) for i, l in RING_CASES]
+
+
+def run_ngspice_ring(text: str, workdir: Path) -> float:
+    exe = shutil.which("ngspice")
+    if exe is None:
+        raise FileNotFoundError("ngspice is not installed")
+    cir = Path(workdir) / "ring.cir"
+    cir.write_text(text)
+    out = subprocess.run([exe, "-b", str(cir)], capture_output=True, text=True, timeout=600).stdout
+    return float(re.search(r"^\s*vpeak\s*=\s*([-+0-9.eE]+)", out, re.M).group(1))
+
+
+def main_ring() -> None:
+    """Regenerate ``edge_ring_<k>.cir`` and ``edge_ring.json``: ``python tests/_spice.py ring``."""
+    import json
+    import tempfile
+    res = []
+    for k, (i, l_h, c, text) in enumerate(ring_cases()):
+        (HERE / f"edge_ring_{k}.cir").write_text(text)
+        with tempfile.TemporaryDirectory() as tmp:
+            res.append({"i_a": i, "l_stray_h": l_h, "c_f": c, "peak_v": run_ngspice_ring(text, Path(tmp))})
+    (HERE / "edge_ring.json").write_text(json.dumps({"v_v": RING_V_V, "r_ohm": RING_R_OHM, "t_f_s": RING_T_F_S,
+                                                     "cases": res}, indent=1) + "\n")
+    print(res)
+
+
+if __name__ == "__main__":
+    import sys
+    {"efficiency": main_efficiency, "ring": main_ring}.get(sys.argv[1] if len(sys.argv) > 1 else "", main)()

@@ -108,12 +108,15 @@ def rectifier_currents(res, window_s: float = 1e-3, per_half_cycle: int = 64) ->
     w = min(window_s, res.t_end - res.t0)
     starts = np.arange(res.t0, res.t_end - w + 1e-12, w / 4) if res.t_end - res.t0 > w else np.array([res.t0])
     sw_loss = max(edge_energies(res, a, a + w)["rect_j"] for a in starts) / w
+    g = np.asarray(res.schedule.gate)
+    t_off = np.asarray(res.schedule.t)[np.nonzero(np.diff(g) < 0)[0] + 1]
+    i_off = float(np.max(np.abs(res.states(t_off - 1e-12 * cir.T, cols=[2])[0]))) if len(t_off) else 0.0
     # the refined half-cycle peaks, or the dense samples where the peak sits on a gate-edge kink
     return {"peak_i2_a": float(max(res.envelope()["i2_env_a"].max(), np.abs(i2).max())),
             "diode_rms_a": math.sqrt(max(_window_max(d1 * d1, n), _window_max(d2 * d2, n))),
             "diode_avg_a": max(_window_max(d1, n), _window_max(d2, n)),
             "switch_rms_a": math.sqrt(max(_window_max(sh * sh + d2 * d2, n), _window_max(sh * sh + d1 * d1, n))),
-            "short_rms_a": math.sqrt(_window_max(sh * sh, n)), "switching_loss_w": sw_loss,
+            "short_rms_a": math.sqrt(_window_max(sh * sh, n)), "switching_loss_w": sw_loss, "turn_off_peak_a": i_off,
             "conduction_loss_w": _window_max(loss, n)}
 
 
@@ -178,7 +181,8 @@ def select_parts(measure, params: LinkParams, base: DeviceSet, rules: SizingRule
     """The lightest rectifier for ``measure(devices) -> currents`` (the keys of
     :func:`rectifier_currents`): rating = margin x the peak measured with ``base``, voltage rating
     >= ``v_margin`` x the simulated worst blocking voltage (``v_worst_v``; default: the open-load
-    study of :func:`wpt_receiver.switching.stress.voltage_stress`), every combination of shipped
+    study of :func:`wpt_receiver.switching.stress.voltage_stress`; the ring of the largest hard
+    turn-off with ``l_stray_h`` is reported as ``edge_ring_peak_v``, not rated: see the docs), every combination of shipped
     parts meeting both, losses settled at the junction temperatures (:func:`settle_losses`), mass =
     devices + heat sink for conduction + switching loss. A combination whose junctions run away is
     skipped (``thermal_rejected`` counts them)."""
@@ -214,7 +218,8 @@ def select_parts(measure, params: LinkParams, base: DeviceSet, rules: SizingRule
     best["thermal_rejected"] = rejected
     if stress is not None:
         best["v_case"] = stress["case"]
-        best["edge_ring_v"] = stress["ring"]["overshoot_v"]
+        best["edge_ring_peak_v"] = stress["ring"]["peak_v"]
+        best["turn_off_peak_a"] = first.get("turn_off_peak_a", 0.0)
     return best
 
 
@@ -226,9 +231,11 @@ def _stress(params: LinkParams, base: DeviceSet, rules: SizingRules, cur: dict) 
         from .switching.stress import voltage_stress
         _STRESS[key] = voltage_stress(params, base, rules.t_protect_s, rules.c_out_f, rules.l_stray_h, 0.0)
     out = dict(_STRESS[key])
-    from .switching.stress import edge_ring
-    out["ring"] = edge_ring(cur["peak_i2_a"], rules.l_stray_h, base.rect_switch.coss_f + base.rect_diode.c_f,
-                            base.rect_diode.rd_ohm + base.rect_switch.body.rd_ohm)
+    from .switching.stress import edge_turn_off_transient
+    sw, dio = base.rect_switch, base.rect_diode
+    out["ring"] = edge_turn_off_transient(cur.get("turn_off_peak_a", 0.0), params.vl_v + base.rect_vf_v,
+                                          sw.coss_f + dio.c_f, rules.l_stray_h, dio.rd_ohm + sw.body.rd_ohm,
+                                          2 * sw.eoff_j_va)
     out["cases"] = {k: v for k, v in out["cases"].items() if k != "edge ring"}
     out["case"] = max(out["cases"], key=out["cases"].get)
     out["v_worst_v"] = out["cases"][out["case"]]

@@ -74,7 +74,7 @@ def _rows(args):
         rows = size_policies(names, TABLE_I, base, SizingRules(margin=args.margin), t_end_s=args.t_end,
                              progress=lambda: bar.update(1))
     return [{"policy": r["policy"], **{c: r.get(c) for c in _COLUMNS}, "v_case": r.get("v_case"),
-             "edge_ring_v": r.get("edge_ring_v")} for r in rows]
+             "edge_ring_peak_v": r.get("edge_ring_peak_v"), "turn_off_peak_a": r.get("turn_off_peak_a")} for r in rows]
 
 
 def _mission_rows(args, base):
@@ -155,9 +155,10 @@ def _cmd_sizing(args) -> int:
     r0 = rows[0]
     print(f"losses at the settled junction temperatures (ambient 40 C, sink +50 K); V rating = 1.1 x the simulated "
           f"worst blocking voltage {r0['v_worst_v']:.2f} V" + (f" ({r0['v_case']})" if r0.get("v_case") else ""))
-    if r0.get("edge_ring_v") is not None:
-        print("edge ring at the peak current with 8 nH stray loop inductance (analytic, not rated: needs a snubber "
-              "or layout): " + ", ".join(f"{r['policy']} +{r['edge_ring_v']:.0f} V" for r in rows))
+    if r0.get("edge_ring_peak_v") is not None:
+        print("ring of the largest hard turn-off with 8 nH stray loop inductance (edge model checked against ngspice; "
+              "reported, not rated: snubber / layout / Schottky avalanche): " + ", ".join(
+                  f"{r['policy']} {r['edge_ring_peak_v']:.1f} V at {r['turn_off_peak_a']:.1f} A" for r in rows))
     for r in rows:
         if "case_id" in r:
             print(f"{r['policy']}: worst of {r['cases']} ok cases is case {r['case_id']} "
