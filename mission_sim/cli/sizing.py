@@ -100,7 +100,9 @@ def _size_mission(name, cfg, base, args) -> dict:
     res = run_mission(cfg, make_policy(name, cfg))
     ts, peak = res.timeseries, res.summary["peak_i2_a"]
     cols = [ts[c].to_numpy() for c in ("t_s", "dt_s", "d_short", "i1_amp_a", "i2_amp_a")]
-    params = res.config.link.link_params(1.0, 1.0, 0.1)          # VL = 30 V: the voltage rule
+    from wpt_receiver import TABLE_I
+    # the open-load voltage study on Table I's coils (the design point) with the mission's link settings
+    params = res.config.link.link_params(TABLE_I.l1_h, TABLE_I.l2_h, TABLE_I.lm_h)
     row = select_parts(lambda dv: envelope_currents(*cols, peak, dv), params, base, SizingRules(margin=args.margin))
     return {"policy": name, **{c: row.get(c) for c in _COLUMNS}}
 
