@@ -38,6 +38,11 @@ def _add_sizing(sub):
                    help="required rating = margin x worst-case |i2|, 1 .. 10 (default 1.25)")
     p.add_argument("--t-end", type=float_arg("t-end", positive=True, lo=3e-3, hi=0.1), default=10e-3,
                    help="end of the run in s, switch at 1 ms, 0.003 .. 0.1 (default 0.01)")
+    p.add_argument("--t-protect", type=float_arg("t-protect", positive=True, lo=1e-7, hi=0.1), default=1e-4,
+                   help="open-load study: time from the battery disconnect to the protective short, s "
+                        "(1e-7 .. 0.1, default 1e-4); the voltage rating is 1.1 x the simulated peak")
+    p.add_argument("--c-out", type=float_arg("c-out", positive=True, lo=1e-7, hi=1.0), default=4.7e-3,
+                   help="open-load study: rectifier output capacitor, F (1e-7 .. 1, default 4.7e-3)")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--out", type=Path, default=Path("out/sizing"), help="folder for the figure (default out/sizing)")
     p.add_argument("--no-plot", action="store_true", help="skip the figure")
@@ -53,13 +58,18 @@ def _names(args, valid, default):
     return names
 
 
+def _rules(args):
+    from wpt_receiver.sizing import SizingRules
+    return SizingRules(margin=args.margin, t_protect_s=args.t_protect, c_out_f=args.c_out)
+
+
 def _rows(args):
     from tqdm import tqdm
 
     from wpt_receiver import TABLE_I
     from wpt_receiver.devices import preset
     from wpt_receiver.references import TRAJECTORIES
-    from wpt_receiver.sizing import SizingRules, size_policies
+    from wpt_receiver.sizing import size_policies
     try:
         base = preset(args.devices)
     except ValueError as e:
@@ -71,7 +81,7 @@ def _rows(args):
     names = _names(args, TRAJECTORIES, "step,ramp,proposed")
     bar = tqdm(total=len(names), desc="sizing", disable=not show_progress(args), file=sys.stderr)
     with bar:
-        rows = size_policies(names, TABLE_I, base, SizingRules(margin=args.margin), t_end_s=args.t_end,
+        rows = size_policies(names, TABLE_I, base, _rules(args), t_end_s=args.t_end,
                              progress=lambda: bar.update(1))
     return [{"policy": r["policy"], **{c: r.get(c) for c in _COLUMNS}, "v_case": r.get("v_case"),
              "edge_ring_peak_v": r.get("edge_ring_peak_v"), "turn_off_peak_a": r.get("turn_off_peak_a")} for r in rows]
@@ -93,7 +103,7 @@ def _mission_rows(args, base):
 
 def _size_mission(name, cfg, base, args) -> dict:
     """Run mission ``cfg`` with policy ``name`` and size its rectifier from the time series."""
-    from wpt_receiver.sizing import SizingRules, envelope_currents, select_parts
+    from wpt_receiver.sizing import envelope_currents, select_parts
 
     from ..world.runner import run_mission
     from .mission import make_policy
@@ -103,7 +113,7 @@ def _size_mission(name, cfg, base, args) -> dict:
     from wpt_receiver import TABLE_I
     # the open-load voltage study on Table I's coils (the design point) with the mission's link settings
     params = res.config.link.link_params(TABLE_I.l1_h, TABLE_I.l2_h, TABLE_I.lm_h)
-    row = select_parts(lambda dv: envelope_currents(*cols, peak, dv), params, base, SizingRules(margin=args.margin))
+    row = select_parts(lambda dv: envelope_currents(*cols, peak, dv), params, base, _rules(args))
     return {"policy": name, **{c: row.get(c) for c in _COLUMNS}}
 
 
