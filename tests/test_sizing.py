@@ -79,6 +79,8 @@ def test_cli_sizing_json(capsys, tmp_path):
         assert key in rows["step"]
     assert rows["step"]["mass_g"] > rows["proposed"]["mass_g"]
     assert (tmp_path / "sizing.png").stat().st_size > 10_000
+    assert (tmp_path / "open_load.png").stat().st_size > 10_000
+    assert rows["step"]["required_v_rating_v"] == pytest.approx(1.1 * rows["step"]["v_worst_v"])
     assert main(["sizing", "--policies", "nope"]) == 2
 
 

@@ -47,7 +47,7 @@ import numpy as np
 from .devices import DeviceSet, diode_from_row, parts, switch_from_row
 from .params import LinkParams
 
-__all__ = ["SizingRules", "rectifier_currents", "envelope_currents", "candidates", "size_policy", "select_parts",
+__all__ = ["SizingRules", "open_load_study", "rectifier_currents", "envelope_currents", "candidates", "size_policy", "select_parts",
            "paper_policy", "size_policies"]
 
 
@@ -221,6 +221,12 @@ def select_parts(measure, params: LinkParams, base: DeviceSet, rules: SizingRule
         best["edge_ring_peak_v"] = stress["ring"]["peak_v"]
         best["turn_off_peak_a"] = first.get("turn_off_peak_a", 0.0)
     return best
+
+
+def open_load_study(params: LinkParams, base: DeviceSet, rules: SizingRules = SizingRules()) -> dict:
+    """The open-load voltage study the sizing rates against (cached per link, devices and rules):
+    :func:`wpt_receiver.switching.stress.voltage_stress` without the edge ring."""
+    return _stress(params, base, rules, {})
 
 
 def _stress(params: LinkParams, base: DeviceSet, rules: SizingRules, cur: dict) -> dict:

@@ -149,6 +149,14 @@ def _cmd_sizing(args) -> int:
         what = {"paper": "Table I link", "mission": "missions", "sweep": f"worst cases of sweep {args.sweep}"}[args.source]
         figs.append(plot_sizing(rows, args.out / "sizing.png",
                                 f"SBAR sizing, {what}, devices {args.devices}, margin {args.margin:g}"))
+        if args.source == "paper":
+            from wpt_receiver import TABLE_I
+            from wpt_receiver.devices import preset
+            from wpt_receiver.sizing import open_load_study
+
+            from ..figures.sizing import plot_open_load
+            figs.append(plot_open_load(open_load_study(TABLE_I, preset(args.devices), _rules(args)),
+                                       args.out / "open_load.png", rows[0]["required_v_rating_v"]))
     if args.format == "json":
         print(json.dumps({"source": args.source, "devices": args.devices, "margin": args.margin, "rows": rows,
                           "figures": figs}))
