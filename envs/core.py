@@ -84,6 +84,8 @@ class EnvConfig:
         (:class:`mission_sim.world.loop.MissionLoop`): the inverter's 2 Ron folded into R1, the
         rectifying path's Rd into R2, the forward drop added to the clamp ``VL + Vf``, the shorted
         channels' excess ``(2 Ron - Rd) w(d) I2`` added to V2 (see :func:`advance`).
+    device_tj_c : junction temperature of the devices' conduction values [C] (0 = the table's, as
+        the mission's ``link.device_tj_c``); ``device_terms`` keeps its ``(Vf, dR)`` interface.
     """
 
     link: LinkParams = TABLE_I
@@ -94,9 +96,13 @@ class EnvConfig:
     bus_c_f: float = 4.7e-3
     reward: RewardWeights = RewardWeights()
     devices: str = "schottky"
+    device_tj_c: float = 0.0
 
     def __post_init__(self):
         from wpt_receiver.devices import preset_names
+        if not (self.device_tj_c == 0.0 or 25.0 <= self.device_tj_c <= 175.0):
+            raise ValueError(f"device_tj_c={self.device_tj_c!r} is invalid; valid range: 0 (table values) or "
+                             "[25, 175] C")
         if not isinstance(self.devices, str) or self.devices not in preset_names():
             raise ValueError(f"devices={self.devices!r} is invalid; valid values: {', '.join(preset_names())}")
         if not (np.isfinite(self.dt_s) and 1e-7 <= self.dt_s <= 1e-2):
@@ -129,7 +135,7 @@ class EnvConfig:
     @cached_property   # every episode start asks (the config is frozen)
     def _derived(self):
         from wpt_receiver.devices import envelope_params, preset
-        dev = preset(self.devices)
+        dev = preset(self.devices, tj_c=self.device_tj_c or None)
         return dev, envelope_params(self.link, dev), (dev.rect_vf_v, dev.short_r_ohm - dev.rect_rd_ohm)
 
     @property

@@ -34,7 +34,9 @@ DEFAULT_MISSION_TOML: str = resources.files("mission_sim").joinpath("default_mis
 @dataclass(frozen=True)
 class LinkConfig:
     """Link parameters besides the inductances (Table I), the transmitter's soft start and the
-    semiconductor preset ``devices`` (``wpt_receiver/parts.toml``; "ideal" = the paper's circuit)."""
+    semiconductor preset ``devices`` (``wpt_receiver/parts.toml``; "ideal" = the paper's circuit);
+    ``device_tj_c`` the devices' junction temperature [C] for their conduction values (0 = the
+    table's: 125 C Schottky, 25 C MOSFET data; e.g. from :func:`wpt_receiver.thermal.steady_junctions`)."""
 
     r1_ohm: float = 0.108
     r2_ohm: float = 0.0325
@@ -43,9 +45,13 @@ class LinkConfig:
     rated_i2_a: float = 15.0
     tx_ramp_s: float = 0.005
     devices: str = "schottky"
+    device_tj_c: float = 0.0
 
     def __post_init__(self):
         check_positive(self, "r1_ohm", "r2_ohm", "vdc_v", "f_hz", "rated_i2_a")
+        if not (self.device_tj_c == 0.0 or 25.0 <= self.device_tj_c <= 175.0):
+            raise ValueError(f"device_tj_c={self.device_tj_c!r} is invalid; valid range: 0 (table values) or "
+                             "[25, 175] C")
         check_positive(self, "tx_ramp_s", allow_zero=True)
         from wpt_receiver.devices import preset_names
         if self.devices not in preset_names():
@@ -54,7 +60,7 @@ class LinkConfig:
     def device_set(self):
         """The :class:`wpt_receiver.devices.DeviceSet` of the ``devices`` preset (``parts.toml``)."""
         from wpt_receiver.devices import preset
-        return preset(self.devices)
+        return preset(self.devices, tj_c=self.device_tj_c or None)
 
     def link_params(self, l1_h: float, l2_h: float, lm_h: float, vl_v: float = 30.0) -> LinkParams:
         return LinkParams(l1_h=l1_h, l2_h=l2_h, lm_h=lm_h, r1_ohm=self.r1_ohm, r2_ohm=self.r2_ohm,

@@ -221,5 +221,196 @@ def main() -> None:
     (HERE / "reference.json").write_text(json.dumps(ref, indent=1) + "\n")
 
 
+def main_efficiency() -> None:
+    """Regenerate ``eff_schottky.cir`` and ``efficiency.json``: ``python tests/_spice.py efficiency``."""
+    import json
+    import tempfile
+
+    from wpt_receiver.devices import preset
+    text = efficiency_netlist(dv=preset("schottky"))
+    (HERE / "eff_schottky.cir").write_text(text)
+    with tempfile.TemporaryDirectory() as tmp:
+        got = run_ngspice_energies(text, Path(tmp))
+    ref = {"d_short": EFF_DUTY, "t_end_s": EFF_T_END_S, "t_meas_s": EFF_T_MEAS_S, "ngspice": got}
+    (HERE / "efficiency.json").write_text(json.dumps(ref, indent=1) + "\n")
+    print(got)
+
+
+
+# ============================================================ efficiency with edge losses (issue 23)
+EFF_DUTY = 0.37          # short duty of the efficiency check (window centred on the i2 peak)
+EFF_T_END_S = 1.2e-3     # SPICE run length from the model's periodic steady state
+EFF_T_MEAS_S = 0.6e-3    # energies integrated over [EFF_T_END_S - EFF_T_MEAS_S, EFF_T_END_S]
+
+
+def efficiency_start_state(p, dv: DeviceSet, d: float = EFF_DUTY):
+    """(i1, vC1, i2, vC2) at model time T/2 of the switching model's periodic steady state at
+    duty ``d`` (stiff battery, no dead time): where both simulators start."""
+    from wpt_receiver.switching import SwitchingConfig, SwitchingLink
+    link = SwitchingLink(p, SwitchingConfig(devices=dv))
+    x0 = link.periodic_steady_state(d)
+    res = link.simulate([d], t_end_s=link.T / 2, x0=x0)
+    return tuple(float(v) for v in link.final_state(res)[:4])
+
+
+def efficiency_netlist(p=TABLE_I, dv: DeviceSet = DeviceSet(), d: float = EFF_DUTY, label: str = "schottky",
+                       x0=None) -> str:
+    """ngspice netlist of the SBAR at a constant short duty with the devices' edge data: Schottky
+    junction capacitance ``Cj`` (linear, charge-equivalent) across each upper diode, ``Coss``
+    across each lower switch (each with a 0.05 ohm ESR), and each
+    lower channel as a behavioural current ``min(v / Ron, limit)``: the limit ramps over
+    ``t_r = 2 eon_j_va`` from 0 to the |i2| sampled at the gate-on edge (a track-and-hold) and
+    falls over ``t_f = 2 eoff_j_va`` from the |i2| sampled at the gate-off edge (linear current
+    rise / fall, the datasheet's ``E = V I t / 2``). The inverter is the square-wave source with
+    ``2 Ron`` of ``link_<preset>.cir``. SPICE time 0 = model time T/2; windows centred on the
+    model's ``n T``.
+
+    Not in the netlist: the body diodes' reverse recovery. A charge-control junction (``TT``) on the
+    near-ideal junction (``N = 0.01 .. 0.1``) of these diode models stops ngspice at the first hard
+    turn-on ("timestep too small"); in the SBAR the body diodes only commutate naturally (at
+    ``omega I2`` ~ 6 A/us), where the model's recovery term is ~0.01 W (reported separately)."""
+    w, T = p.omega_rad_s, p.rectifier_period_s
+    c1, c2 = 1 / (w * w * p.l1_h), 1 / (w * w * p.l2_h)
+    i10, vc10, i20, vc20 = efficiency_start_state(p, dv, d) if x0 is None else x0
+    k = p.lm_h / math.sqrt(p.l1_h * p.l2_h)
+    sw, dio, body = dv.rect_switch, dv.rect_diode, dv.rect_switch.body
+    tr, t_on, t_off = 1e-10, 2 * sw.eon_j_va, 2 * sw.eoff_j_va
+    ts_on = (1 - d) * T / 2
+    ts_off = ts_on + d * T
+    ch = "V({n}) > 0 ? min(V({n})/{r!r}, V(lim)) : V({n})/{r!r}*V(gate)"
+    lines = [
+        f"* dronewpt SPICE efficiency check with edge losses, devices: {label}, d_short = {d!r}\n",
+        f"VINV p 0 PULSE({p.vdc_v!r} {-p.vdc_v!r} {T / 2 - tr / 2!r} {tr!r} {tr!r} {T - tr!r} {2 * T!r})\n",
+        f"C1 p c1 {c1!r} IC={vc10!r}\n", f"R1 c1 c {p.r1_ohm + dv.inv_r_ohm!r}\n", f"L1 c 0 {p.l1_h!r} IC={i10!r}\n",
+        f"L2 a b {p.l2_h!r} IC={-i20!r}\n", f"K12 L1 L2 {k!r}\n", f"R2 bb b {p.r2_ohm!r}\n",
+        f"C2 bq bb {c2!r} IC={vc20!r}\n", "VSENSE bq bn DC 0\n",
+        _diodes(dio, (("U1", "a", "bat"), ("U2", "bn", "bat"))),
+        _diodes(body, (("B1", "0", "a"), ("B2", "0", "bn"))),
+        # the capacitances with a 0.05 ohm ESR: a shorted node discharges in ~0.1 ns, not in Ron C = 16 ps
+        "".join(f"C{n} {a} e{n} {c!r}\nRE{n} e{n} {b} 0.05\n" for n, a, b, c in (
+            ("J1", "a", "bat", dio.c_f), ("J2", "bn", "bat", dio.c_f), ("O1", "a", "0", sw.coss_f),
+            ("O2", "bn", "0", sw.coss_f))),
+        # periodic drive (PWL, repeated every T): the ideal gate, the channel's current-limit shape w
+        # (0 off; 0 -> 1 in t_r at gate-on, then 1 -> 1000 in 1 ns; 1000 -> 1 at gate-off, 1 -> 0 in
+        # t_f) and the track signal of the sample-and-hold (holds |i2| from 1 ns before each edge)
+        _pwl("gate", T, [(0, 0), (ts_on, 0), (ts_on + tr, 1), (ts_off, 1), (ts_off + tr, 0), (T, 0)]),
+        _pwl("w", T, [(0, 0), (ts_on, 0), (ts_on + t_on, 1), (ts_on + t_on + 1e-9, 1000), (ts_off - 1e-11, 1000),
+                      (ts_off, 1), (ts_off + t_off, 0), (T, 0)]),
+        _pwl("trk", T, [(0, 1), (ts_on - 1.1e-9, 1), (ts_on - 1e-9, 0), (ts_on + 3 * t_on, 0),
+                        (ts_on + 3 * t_on + tr, 1), (ts_off - 1.1e-9, 1), (ts_off - 1e-9, 0), (ts_off + 3 * t_off, 0),
+                        (ts_off + 3 * t_off + tr, 1), (T, 1)]),
+        "BABS habs 0 V=abs(i(VSENSE))\n",
+        "SH habs h trk 0 SWT\nCH h 0 1e-12\n",
+        "BLIM lim 0 V=V(h)*V(w)\n",
+        f"BCH1 a 0 I={ch.format(n='a', r=max(sw.ron_ohm, 1e-6))}\n",
+        f"BCH2 bn 0 I={ch.format(n='bn', r=max(sw.ron_ohm, 1e-6))}\n",
+        f"VL bat 0 DC {p.vl_v!r}\n",
+        ".model DI D(IS=1e-6 N=0.01)\n",
+        ".model SWT SW(VT=0.5 VH=0.1 RON=1000 ROFF=1e12)\n",
+        ".options reltol=1e-6 abstol=1e-9 vntol=1e-7 method=gear maxord=2 itl4=200\n",
+        f".tran {T / 1000!r} {EFF_T_END_S!r} 0 {T / 1000!r} uic\n",
+        f".meas tran esrc INTEG par('-v(p)*i(vinv)') from={EFF_T_END_S - EFF_T_MEAS_S!r} to={EFF_T_END_S!r}\n",
+        f".meas tran ebat INTEG par('v(bat)*i(vl)') from={EFF_T_END_S - EFF_T_MEAS_S!r} to={EFF_T_END_S!r}\n",
+        ".end\n"]
+    return "".join(lines)
+
+
+def _pwl(node: str, period: float, pts) -> str:
+    """A PWL voltage source on ``node`` repeating ``pts`` (time, value) every ``period``."""
+    body = " ".join(f"{t!r} {v!r}" for t, v in pts)
+    return f"V{node.upper()} {node} 0 PWL({body}) r=0\n"
+
+
+def run_ngspice_energies(text: str, workdir: Path) -> dict:
+    """Run an :func:`efficiency_netlist` and return ``{"source_j", "battery_j", "efficiency"}``."""
+    exe = shutil.which("ngspice")
+    if exe is None:
+        raise FileNotFoundError("ngspice is not installed")
+    cir = Path(workdir) / "eff.cir"
+    cir.write_text(text)
+    out = subprocess.run([exe, "-b", str(cir)], capture_output=True, text=True, timeout=1800).stdout
+    vals = {m.group(1).lower(): float(m.group(2)) for m in re.finditer(r"^\s*(\w+)\s*=\s*([-+0-9.eE]+)", out, re.M)}
+    src, bat = vals["esrc"], abs(vals["ebat"])
+    return {"source_j": src, "battery_j": bat, "efficiency": bat / src}
+
+
+def efficiency_model(p=TABLE_I, dv: DeviceSet = DeviceSet(), d: float = EFF_DUTY) -> dict:
+    """The same efficiency from the event-exact switching model: conduction in the state equations,
+    the SBAR's edge energies (:func:`wpt_receiver.edge_losses.edge_energies`) added to the losses
+    (the secondary is a current source: the edge losses are drawn from the DC source), over the
+    same window of the same run (model time = SPICE time + T/2, same start state)."""
+    from wpt_receiver.edge_losses import edge_energies
+    from wpt_receiver.switching import SwitchingConfig, SwitchingLink
+    from wpt_receiver.switching.schedule import make_schedule
+    link = SwitchingLink(p, SwitchingConfig(devices=dv))
+    T = link.T
+    x0 = np.zeros(link.cir.m)
+    x0[:4] = efficiency_start_state(p, dv, d)
+    x0[-1] = 1.0
+    res = link.run(make_schedule(T / 2, T / 2 + EFF_T_END_S, T, lambda n: np.full(np.shape(n), d), 0.0, 0.0,
+                                 p.omega_rad_s), x0)
+    ta, tb = T / 2 + EFF_T_END_S - EFF_T_MEAS_S, T / 2 + EFF_T_END_S
+    eb, ee = res.energy_balance(ta, tb), edge_energies(res, ta, tb)
+    src, bat = eb["source_j"], eb["battery_j"]
+    return {"source_j": src, "battery_j": bat, "efficiency_conduction": bat / src,
+            "efficiency": bat / (src + ee["rect_j"]), **{k: v for k, v in ee.items()}}
+
+
+# ============================================================ ringing of a hard turn-off edge (issue 23)
+RING_CASES = ((4.0, 8e-9), (12.0, 8e-9), (12.0, 20e-9))   # (current A, stray loop inductance H)
+RING_V_V, RING_R_OHM, RING_T_F_S = 30.8, 0.05, 10e-9
+
+
+def ring_netlist(i_a: float, l_h: float, c_f: float, v_v: float = RING_V_V, r_ohm: float = RING_R_OHM,
+                 t_f_s: float = RING_T_F_S) -> str:
+    """One hard turn-off: a constant current ``i_a`` into node n, the channel's current falling
+    linearly to 0 in ``t_f_s`` from t = 10 ns, node capacitance ``c_f``, clamp diode (near-ideal
+    junction) in series with ``l_h`` and ``r_ohm`` to ``v_v``; measured: the peak of v(n)."""
+    t0 = 10e-9
+    return "".join([
+        f"* dronewpt SPICE check of the edge ring: I = {i_a!r} A, Ls = {l_h!r} H, C = {c_f!r} F\n",
+        f"IS 0 n DC {i_a!r}\n",
+        f"BCH n 0 I={i_a!r}*max(0, min(1, 1 - (time - {t0!r})/{t_f_s!r}))\n",
+        f"C n 0 {c_f!r} IC=0\n",
+        "D n x DI\n", f"LS x y {l_h!r} IC=0\n", f"RS y z {r_ohm!r}\n", f"V z 0 DC {v_v!r}\n",
+        ".model DI D(IS=1e-6 N=0.01)\n",
+        ".options reltol=1e-7 abstol=1e-10 vntol=1e-8 method=gear\n",
+        f".tran 1e-12 {t0 + t_f_s + 60e-9!r} 0 2e-12 uic\n",
+        ".meas tran vpeak MAX V(n)\n", ".end\n"])
+
+
+def ring_cases():
+    """The ring netlists for the schottky preset's node capacitance (Coss + Cj)."""
+    from wpt_receiver.devices import preset
+    dv = preset("schottky")
+    c = dv.rect_switch.coss_f + dv.rect_diode.c_f
+    return [(i, l, c, ring_netlist(i, l, c)) for i, l in RING_CASES]
+
+
+def run_ngspice_ring(text: str, workdir: Path) -> float:
+    exe = shutil.which("ngspice")
+    if exe is None:
+        raise FileNotFoundError("ngspice is not installed")
+    cir = Path(workdir) / "ring.cir"
+    cir.write_text(text)
+    out = subprocess.run([exe, "-b", str(cir)], capture_output=True, text=True, timeout=600).stdout
+    return float(re.search(r"^\s*vpeak\s*=\s*([-+0-9.eE]+)", out, re.M).group(1))
+
+
+def main_ring() -> None:
+    """Regenerate ``edge_ring_<k>.cir`` and ``edge_ring.json``: ``python tests/_spice.py ring``."""
+    import json
+    import tempfile
+    res = []
+    for k, (i, l_h, c, text) in enumerate(ring_cases()):
+        (HERE / f"edge_ring_{k}.cir").write_text(text)
+        with tempfile.TemporaryDirectory() as tmp:
+            res.append({"i_a": i, "l_stray_h": l_h, "c_f": c, "peak_v": run_ngspice_ring(text, Path(tmp))})
+    (HERE / "edge_ring.json").write_text(json.dumps({"v_v": RING_V_V, "r_ohm": RING_R_OHM, "t_f_s": RING_T_F_S,
+                                                     "cases": res}, indent=1) + "\n")
+    print(res)
+
+
 if __name__ == "__main__":
-    main()
+    import sys
+    {"efficiency": main_efficiency, "ring": main_ring}.get(sys.argv[1] if len(sys.argv) > 1 else "", main)()

@@ -17,6 +17,8 @@ Depends on nothing else of dronewpt. Modules, in the order data flows:
 ``paper``               Table II / Fig. 6 as a reusable scenario on either plant model
 ``switching/``          switching-level (instantaneous, event-exact) model of eq. 1 and the SBAR
 ``devices``             diodes / switches (piecewise linear), the shipped parts table, presets
+``edge_losses``         energy per switching edge (Coss, Cj, overlap, recovery) from datasheet data
+``thermal``             junction-temperature fixed point (Rth jc / cs / sink), thermal runaway
 ``peak``                SBAR harmonic balance: v2 with its quadrature, instantaneous peak of i2
 ``modal``               envelope on the exact coupled modes w/sqrt(1 -+ k), SBAR v2 balanced
 ``sizing``              rectifier rating, parts and mass per policy (switching or envelope runs)

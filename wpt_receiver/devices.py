@@ -1,9 +1,17 @@
 """Semiconductor devices of the link: piecewise-linear conduction models and the shipped parts.
 
-Every device is modelled in conduction only (switching losses and capacitances are left out):
+Conduction is piecewise linear:
 
 * a diode conducts forward as ``v = vf0_v + rd_ohm * i`` (``i > 0``) and blocks otherwise;
 * a MOSFET channel conducts either way as ``v = ron_ohm * i``; its body diode is a diode.
+
+Beyond conduction (issue 23) each device carries the datasheet data of its edges: a diode's
+charge-equivalent junction capacitance ``c_f`` and carrier transit time ``tt_s`` (reverse recovery,
+``Qrr = tt^2 di/dt``), a switch's output capacitance ``coss_f`` and its overlap energies per volt-ampere
+``eon_j_va`` / ``eoff_j_va`` (``E = k V I``, the datasheet's ``E_ref / (V_ref I_ref)``). They are
+used by :mod:`wpt_receiver.edge_losses` (energy per switching edge) and :mod:`wpt_receiver.thermal`
+(junction temperature); the conduction models ignore them. :func:`preset` with ``tj_c`` gives the
+conduction values at a junction temperature (linear between the table's 25 and 125 C data).
 
 Where they sit (paper Fig. 2, SBAR = semi-bridgeless active rectifier):
 
@@ -27,7 +35,10 @@ from dataclasses import dataclass, fields
 from functools import cached_property, lru_cache
 from importlib import resources
 
-__all__ = ["Diode", "Switch", "DeviceSet", "IDEAL", "parts", "preset", "preset_names", "device_set"]
+__all__ = ["Diode", "Switch", "DeviceSet", "IDEAL", "parts", "preset", "preset_names", "device_set",
+           "charge_equivalent_f", "diode_from_row", "switch_from_row", "V_BLOCK_V"]
+
+V_BLOCK_V = 30.0   # default blocking voltage for the charge-equivalent capacitances: Table I's VL [V]
 
 
 def _check_nonneg(obj) -> None:
@@ -39,10 +50,14 @@ def _check_nonneg(obj) -> None:
 
 @dataclass(frozen=True)
 class Diode:
-    """Forward drop ``vf0_v`` [V] plus slope resistance ``rd_ohm`` [ohm] of one conducting diode."""
+    """Forward drop ``vf0_v`` [V] plus slope resistance ``rd_ohm`` [ohm] of one conducting diode;
+    ``c_f`` junction capacitance (charge-equivalent at the blocking voltage) [F], ``tt_s`` carrier
+    transit time [s] (0 for a Schottky: no reverse recovery)."""
 
     vf0_v: float = 0.0
     rd_ohm: float = 0.0
+    c_f: float = 0.0
+    tt_s: float = 0.0
 
     def __post_init__(self):
         _check_nonneg(self)
@@ -50,10 +65,15 @@ class Diode:
 
 @dataclass(frozen=True)
 class Switch:
-    """MOSFET: channel on-resistance ``ron_ohm`` [ohm] and its body diode."""
+    """MOSFET: channel on-resistance ``ron_ohm`` [ohm] and its body diode; ``coss_f`` output
+    capacitance (charge-equivalent at the blocking voltage) [F]; ``eon_j_va`` / ``eoff_j_va``
+    overlap energy of a hard turn-on / turn-off per volt and ampere switched [J/(V A)]."""
 
     ron_ohm: float = 0.0
     body: Diode = Diode()
+    coss_f: float = 0.0
+    eon_j_va: float = 0.0
+    eoff_j_va: float = 0.0
 
     def __post_init__(self):
         _check_nonneg(self)
@@ -125,34 +145,82 @@ def preset_names() -> list[str]:
     return ["ideal", *parts()["preset"]]
 
 
-def _diode(name: str) -> Diode:
-    row = parts()["diode"].get(name)
+def charge_equivalent_f(c_ref_f: float, v_ref_v: float, v_v: float, phi_v: float = 0.5) -> float:
+    """Charge-equivalent capacitance [F] over ``0 .. v_v`` of a junction capacitance given as
+    ``c_ref_f`` at ``v_ref_v``, with the abrupt-junction law ``C(v) = C0 / sqrt(1 + v / phi)``:
+    ``Q(V) = 2 C0 phi (sqrt(1 + V/phi) - 1)``, returned as ``Q / V``."""
+    if c_ref_f <= 0.0:
+        return 0.0
+    c0 = c_ref_f * math.sqrt(1.0 + v_ref_v / phi_v)
+    return 2.0 * c0 * phi_v * (math.sqrt(1.0 + v_v / phi_v) - 1.0) / v_v
+
+
+def _tt_s(qrr_c: float, didt_a_s: float) -> float:
+    """Transit time of the charge-control diode model that recovers ``qrr_c`` at ``didt_a_s``:
+    with a linear current fall the charge left at the zero crossing is ``tt^2 di/dt``."""
+    return math.sqrt(qrr_c / didt_a_s) if qrr_c > 0 and didt_a_s > 0 else 0.0
+
+
+def _at(row: dict, key: str, tc_key: str, tj_c, relative: bool = False) -> float:
+    """Row value ``key`` at ``t_ref_c`` moved linearly to ``tj_c`` by its coefficient ``tc_key``."""
+    v = row[key]
+    if tj_c is None:
+        return v
+    dt = float(tj_c) - row.get("t_ref_c", 25.0)
+    tc = row.get(tc_key, 0.0)
+    return max(v * (1.0 + tc * dt), 0.0) if relative else max(v + tc * dt, 0.0)
+
+
+def diode_from_row(row: dict, n: int = 1, tj_c=None, v_block_v: float = V_BLOCK_V) -> Diode:
+    """A rectifier :class:`Diode` of ``n`` paralleled legs of a ``parts.toml`` diode row at junction
+    temperature ``tj_c`` [C] (``None``: the row's ``t_ref_c`` values) blocking ``v_block_v``."""
+    return Diode(_at(row, "vf0_v", "vf0_tc_v_k", tj_c), _at(row, "rd_ohm", "rd_tc_per_k", tj_c, True) / n,
+                 n * charge_equivalent_f(row.get("cj_ref_f", 0.0), row.get("cj_ref_v", 1.0), v_block_v), 0.0)
+
+
+def switch_from_row(row: dict, n: int = 1, tj_c=None, v_block_v: float = V_BLOCK_V) -> Switch:
+    """A :class:`Switch` of ``n`` paralleled dies of a ``parts.toml`` switch row at ``tj_c`` [C]
+    (``None``: 25 C, the row's ``ron_ohm``): R_DS(on) linear between 25 and 125 C, body knee by its
+    coefficient, Coss charge-equivalent at ``v_block_v``, overlap energies per V A (n dies share the
+    current: the total stays ``k V I``), recovery transit time from ``qrr_c`` at ``qrr_didt_a_s``."""
+    ron = row["ron_ohm"]
+    if tj_c is not None and "ron_125_ohm" in row:
+        ron = max(ron + (row["ron_125_ohm"] - ron) * (float(tj_c) - 25.0) / 100.0, 0.0)
+    vf = row["body_vf0_v"] + (0.0 if tj_c is None else row.get("body_vf0_tc_v_k", 0.0) * (float(tj_c) - 25.0))
+    body = Diode(max(vf, 0.0), row["body_rd_ohm"] / n, 0.0, _tt_s(row.get("qrr_c", 0.0), row.get("qrr_didt_a_s", 0.0)))
+    va = row.get("e_ref_v", 1.0) * row.get("e_ref_a", 1.0)
+    return Switch(ron / n, body, n * charge_equivalent_f(row.get("coss_ref_f", 0.0), row.get("coss_ref_v", 1.0), v_block_v),
+                  row.get("eon_ref_j", 0.0) / va, row.get("eoff_ref_j", 0.0) / va)
+
+
+def _row(kind: str, name: str) -> dict:
+    row = parts()[kind].get(name)
     if row is None:
-        raise ValueError(f"diode part {name!r} is unknown; valid: {', '.join(parts()['diode'])}")
-    return Diode(row["vf0_v"], row["rd_ohm"])
+        raise ValueError(f"{kind} part {name!r} is unknown; valid: {', '.join(parts()[kind])}")
+    return row
 
 
-def _switch(name: str) -> Switch:
-    row = parts()["switch"].get(name)
-    if row is None:
-        raise ValueError(f"switch part {name!r} is unknown; valid: {', '.join(parts()['switch'])}")
-    return Switch(row["ron_ohm"], Diode(row["body_vf0_v"], row["body_rd_ohm"]))
-
-
-def device_set(rect_diode: str, rect_switch: str, inv_switch: str, name: str | None = None) -> DeviceSet:
-    """A :class:`DeviceSet` from part names of the shipped table."""
-    return DeviceSet(_diode(rect_diode), _switch(rect_switch), _switch(inv_switch),
+def device_set(rect_diode: str, rect_switch: str, inv_switch: str, name: str | None = None, tj_c=None,
+               v_block_v: float = V_BLOCK_V) -> DeviceSet:
+    """A :class:`DeviceSet` from part names of the shipped table (at junction temperature ``tj_c``)."""
+    return DeviceSet(diode_from_row(_row("diode", rect_diode), 1, tj_c, v_block_v),
+                     switch_from_row(_row("switch", rect_switch), 1, tj_c, v_block_v),
+                     switch_from_row(_row("switch", inv_switch), 1, tj_c, v_block_v),
                      name or f"{rect_diode}/{rect_switch}/{inv_switch}")
 
 
-def preset(name: str) -> DeviceSet:
-    """Named device set: ``"ideal"`` (the paper's circuit) or a preset of ``parts.toml``."""
+def preset(name: str, tj_c=None, v_block_v: float = V_BLOCK_V) -> DeviceSet:
+    """Named device set: ``"ideal"`` (the paper's circuit) or a preset of ``parts.toml``; ``tj_c``
+    [C] moves the conduction values to that junction temperature (``None``: the table's values,
+    125 C Schottky data and 25 C MOSFET data); ``v_block_v`` sets the charge-equivalent capacitances."""
     if name == "ideal":
         return IDEAL
     row = parts()["preset"].get(name)
     if row is None:
         raise ValueError(f"device preset {name!r} is unknown; valid: {', '.join(preset_names())}")
-    return device_set(row["rect_diode"], row["rect_switch"], row["inv_switch"], name)
+    if tj_c is not None and not (math.isfinite(tj_c) and -55.0 <= tj_c <= 200.0):
+        raise ValueError(f"tj_c={tj_c!r} is invalid; valid range: [-55, 200] C")
+    return device_set(row["rect_diode"], row["rect_switch"], row["inv_switch"], name, tj_c, v_block_v)
 
 
 def envelope_params(params, devices: DeviceSet):

@@ -23,6 +23,15 @@ model with real devices gives the instantaneous secondary current; from it:
   air in the rotor downwash): fin area ``A = P / (h dT)``, fins of thickness ``fin_m`` cooled on
   both sides, mass ``rho t A / 2``. A stated first-order method, not a thermal design.
 
+Issue 23 additions: the losses are settled at the junction temperatures
+(:func:`wpt_receiver.thermal.settle_junctions`: sink at ``t_amb_c + dt_sink_k``, Rth junction-case
+and case-sink from ``parts.toml``, R_DS(on) / Vf at Tj), the switching-edge energies of the run
+(:func:`wpt_receiver.edge_losses.edge_energies`, worst ``window_s``) are added to the lower
+switches, the sink is sized for conduction + switching, and the voltage rating is ``v_margin``
+(1.1) times the simulated worst blocking voltage of the open-load fault
+(:func:`wpt_receiver.switching.stress.voltage_stress`: battery opened in RM and at d = 0.5, shorted
+after ``t_protect_s`` with ``c_out_f`` on the DC side) instead of a 1.5 x VL rule.
+
 From a mission (an envelope run) instead, :func:`envelope_currents` gives the same quantities from
 the averaged device model and the run's instantaneous peak estimate; :func:`select_parts` is the
 part choice both use.
@@ -35,10 +44,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .devices import DeviceSet, Diode, Switch, parts
+from .devices import DeviceSet, diode_from_row, parts, switch_from_row
 from .params import LinkParams
 
-__all__ = ["SizingRules", "rectifier_currents", "envelope_currents", "candidates", "size_policy", "select_parts",
+__all__ = ["SizingRules", "open_load_study", "rectifier_currents", "envelope_currents", "candidates", "size_policy", "select_parts",
            "paper_policy", "size_policies"]
 
 
@@ -47,15 +56,20 @@ class SizingRules:
     """Margins and the heat-sink model (see the module docstring)."""
 
     margin: float = 1.25
-    v_margin: float = 1.5
+    v_margin: float = 1.1
     window_s: float = 1e-3
     h_w_m2k: float = 40.0
     dt_sink_k: float = 50.0
     fin_m: float = 1e-3
     rho_kg_m3: float = 2700.0
+    t_amb_c: float = 40.0
+    t_protect_s: float = 1e-4
+    c_out_f: float = 4.7e-3
+    l_stray_h: float = 8e-9
 
     def __post_init__(self):
-        for name in ("margin", "v_margin", "window_s", "h_w_m2k", "dt_sink_k", "fin_m", "rho_kg_m3"):
+        for name in ("margin", "v_margin", "window_s", "h_w_m2k", "dt_sink_k", "fin_m", "rho_kg_m3", "t_protect_s",
+                     "c_out_f", "l_stray_h"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name}={v!r} is invalid; valid range: (0, inf)")
@@ -90,11 +104,19 @@ def rectifier_currents(res, window_s: float = 1e-3, per_half_cycle: int = 64) ->
     body, dd = dv.rect_switch.body, dv.rect_diode
     loss = ((dd.vf0_v + body.vf0_v) * (d1 + d2) + (dd.rd_ohm + body.rd_ohm) * (d1 * d1 + d2 * d2)
             + dv.short_r_ohm * sh * sh)
+    from .edge_losses import edge_energies
+    w = min(window_s, res.t_end - res.t0)
+    starts = np.arange(res.t0, res.t_end - w + 1e-12, w / 4) if res.t_end - res.t0 > w else np.array([res.t0])
+    sw_loss = max(edge_energies(res, a, a + w)["rect_j"] for a in starts) / w
+    g = np.asarray(res.schedule.gate)
+    t_off = np.asarray(res.schedule.t)[np.nonzero(np.diff(g) < 0)[0] + 1]
+    i_off = float(np.max(np.abs(res.states(t_off - 1e-12 * cir.T, cols=[2])[0]))) if len(t_off) else 0.0
     # the refined half-cycle peaks, or the dense samples where the peak sits on a gate-edge kink
     return {"peak_i2_a": float(max(res.envelope()["i2_env_a"].max(), np.abs(i2).max())),
             "diode_rms_a": math.sqrt(max(_window_max(d1 * d1, n), _window_max(d2 * d2, n))),
             "diode_avg_a": max(_window_max(d1, n), _window_max(d2, n)),
             "switch_rms_a": math.sqrt(max(_window_max(sh * sh + d2 * d2, n), _window_max(sh * sh + d1 * d1, n))),
+            "short_rms_a": math.sqrt(_window_max(sh * sh, n)), "switching_loss_w": sw_loss, "turn_off_peak_a": i_off,
             "conduction_loss_w": _window_max(loss, n)}
 
 
@@ -111,12 +133,41 @@ def candidates(required_a: float, v_min_v: float, kind: str) -> list[dict]:
     return out
 
 
-def _paralleled(base: DeviceSet, diode: dict, switch: dict) -> DeviceSet:
-    """The rectifier built from ``n`` paralleled dies of each part (inverter kept from ``base``)."""
+def _paralleled(base: DeviceSet, diode: dict, switch: dict, tj=None) -> DeviceSet:
+    """The rectifier built from ``n`` paralleled dies of each part (inverter kept from ``base``),
+    at junction temperatures ``tj = (diode C, switch C)`` (``None``: the table's values)."""
     nd, ns = diode["n"], switch["n"]
-    return DeviceSet(Diode(diode["vf0_v"], diode["rd_ohm"] / nd),
-                     Switch(switch["ron_ohm"] / ns, Diode(switch["body_vf0_v"], switch["body_rd_ohm"] / ns)),
+    td, ts = (None, None) if tj is None else tj
+    return DeviceSet(diode_from_row(diode, nd, td), switch_from_row(switch, ns, ts),
                      base.inv_switch, f"{diode['name']}x{nd}/{switch['name']}x{ns}")
+
+
+def settle_losses(cur: dict, diode: dict, switch: dict, base: DeviceSet, rules: "SizingRules") -> dict:
+    """Junction temperatures and losses of one rectifier (two diode positions of ``diode["n"]``
+    legs, two switch positions of ``switch["n"]`` dies) for the currents ``cur``
+    (:func:`rectifier_currents` keys): per position ``P_d = Vf0(Tj) I_avg + Rd(Tj) I_rms^2`` and
+    ``P_s = Vf0_body(Tj) I_avg + Rd_body I_rms^2 + Ron(Tj) I_short^2 + switching / 2``, settled by
+    :func:`wpt_receiver.thermal.settle_junctions` on a sink at ``t_amb_c + dt_sink_k``."""
+    from .thermal import settle_junctions
+    nd, ns = diode["n"], switch["n"]
+    ia, ir2 = cur["diode_avg_a"], cur["diode_rms_a"] ** 2
+    sh2 = cur.get("short_rms_a", 0.0) ** 2
+    p_sw = 0.5 * cur.get("switching_loss_w", 0.0)
+
+    def losses(tj):
+        dv = _paralleled(base, diode, switch, (tj["diode"], tj["switch"]))
+        d, s = dv.rect_diode, dv.rect_switch
+        pd = d.vf0_v * ia + d.rd_ohm * ir2
+        ps = s.body.vf0_v * ia + s.body.rd_ohm * ir2 + s.ron_ohm * sh2 + p_sw
+        return {"diode": (pd / nd, 2 * nd), "switch": (ps / ns, 2 * ns)}
+    out = settle_junctions(losses, {"diode": diode["rth_jc_k_w"] + diode["rth_cs_k_w"],
+                                    "switch": switch["rth_jc_k_w"] + switch["rth_cs_k_w"]},
+                           {"diode": diode["tj_max_c"], "switch": switch["tj_max_c"]}, rules.t_amb_c,
+                           dt_sink_k=rules.dt_sink_k)
+    total = out["total_w"]
+    return {"tj_diode_c": out["tj_c"]["diode"], "tj_switch_c": out["tj_c"]["switch"],
+            "conduction_loss_w": total - 2 * p_sw, "switching_loss_w": 2 * p_sw, "loss_w": total,
+            "thermal_iterations": out["iterations"]}
 
 
 def size_policy(run, params: LinkParams, base: DeviceSet, rules: SizingRules = SizingRules()) -> dict:
@@ -125,14 +176,25 @@ def size_policy(run, params: LinkParams, base: DeviceSet, rules: SizingRules = S
     return select_parts(lambda dv: rectifier_currents(run(dv), rules.window_s), params, base, rules)
 
 
-def select_parts(measure, params: LinkParams, base: DeviceSet, rules: SizingRules = SizingRules()) -> dict:
+def select_parts(measure, params: LinkParams, base: DeviceSet, rules: SizingRules = SizingRules(),
+                 v_worst_v: float | None = None) -> dict:
     """The lightest rectifier for ``measure(devices) -> currents`` (the keys of
-    :func:`rectifier_currents`): rating = margin x the peak measured with ``base``, every
-    combination of shipped parts meeting it, mass = devices + heat sink for the measured loss."""
+    :func:`rectifier_currents`): rating = margin x the peak measured with ``base``, voltage rating
+    >= ``v_margin`` x the simulated worst blocking voltage (``v_worst_v``; default: the open-load
+    study of :func:`wpt_receiver.switching.stress.voltage_stress`; the ring of the largest hard
+    turn-off with ``l_stray_h`` is reported as ``edge_ring_peak_v``, not rated: see the docs), every combination of shipped
+    parts meeting both, losses settled at the junction temperatures (:func:`settle_losses`), mass =
+    devices + heat sink for conduction + switching loss. A combination whose junctions run away is
+    skipped (``thermal_rejected`` counts them)."""
+    from .thermal import ThermalRunaway
     first = measure(base)
     required = rules.margin * first["peak_i2_a"]
-    v_min = rules.v_margin * params.vl_v
-    best = None
+    stress = None
+    if v_worst_v is None:
+        stress = _stress(params, base, rules, first)
+        v_worst_v = stress["v_worst_v"]
+    v_min = rules.v_margin * v_worst_v
+    best, rejected = None, 0
     for dio in candidates(required, v_min, "diode"):
         for sw in candidates(required, v_min, "switch"):
             dev_mass = 2 * dio["n"] * dio["mass_g"] / dio["legs"] + 2 * sw["n"] * sw["mass_g"] / sw["legs"]
@@ -140,11 +202,53 @@ def select_parts(measure, params: LinkParams, base: DeviceSet, rules: SizingRule
                 continue  # the sink only adds: cannot beat the best
             dv = _paralleled(base, dio, sw)
             cur = measure(dv)
-            mass = dev_mass + rules.sink_mass_g(cur["conduction_loss_w"])
+            try:
+                th = settle_losses(cur, dio, sw, base, rules)
+            except ThermalRunaway:
+                rejected += 1
+                continue
+            mass = dev_mass + rules.sink_mass_g(th["loss_w"])
             if best is None or mass < best["mass_g"]:
-                best = {**cur, "required_rating_a": required, "part": dv.name, "mass_g": mass,
-                        "device_mass_g": dev_mass, "sink_mass_g": mass - dev_mass, "devices": dv}
+                best = {**cur, **th, "conduction_loss_table_w": cur["conduction_loss_w"], "required_rating_a": required,
+                        "part": dv.name, "mass_g": mass, "device_mass_g": dev_mass, "sink_mass_g": mass - dev_mass,
+                        "devices": dv, "v_worst_v": v_worst_v, "required_v_rating_v": v_min}
+    if best is None:
+        raise ValueError(f"no combination of shipped parts carries {required:.3g} A at {v_min:.3g} V without "
+                         f"thermal runaway ({rejected} rejected)")
+    best["thermal_rejected"] = rejected
+    if stress is not None:
+        best["v_case"] = stress["case"]
+        best["edge_ring_peak_v"] = stress["ring"]["peak_v"]
+        best["turn_off_peak_a"] = first.get("turn_off_peak_a", 0.0)
     return best
+
+
+def open_load_study(params: LinkParams, base: DeviceSet, rules: SizingRules = SizingRules()) -> dict:
+    """The open-load voltage study the sizing rates against (cached per link, devices and rules):
+    :func:`wpt_receiver.switching.stress.voltage_stress` without the edge ring."""
+    return _stress(params, base, rules, {})
+
+
+def _stress(params: LinkParams, base: DeviceSet, rules: SizingRules, cur: dict) -> dict:
+    """Open-load voltage study of ``base`` (cached per link, devices and rules: it is the same for
+    every policy). The edge ring at the peak current is reported, not rated (see the docs)."""
+    key = (params, base, rules.t_protect_s, rules.c_out_f, rules.l_stray_h)
+    if key not in _STRESS:
+        from .switching.stress import voltage_stress
+        _STRESS[key] = voltage_stress(params, base, rules.t_protect_s, rules.c_out_f, rules.l_stray_h, 0.0)
+    out = dict(_STRESS[key])
+    from .switching.stress import edge_turn_off_transient
+    sw, dio = base.rect_switch, base.rect_diode
+    out["ring"] = edge_turn_off_transient(cur.get("turn_off_peak_a", 0.0), params.vl_v + base.rect_vf_v,
+                                          sw.coss_f + dio.c_f, rules.l_stray_h, dio.rd_ohm + sw.body.rd_ohm,
+                                          2 * sw.eoff_j_va)
+    out["cases"] = {k: v for k, v in out["cases"].items() if k != "edge ring"}
+    out["case"] = max(out["cases"], key=out["cases"].get)
+    out["v_worst_v"] = out["cases"][out["case"]]
+    return out
+
+
+_STRESS: dict = {}
 
 
 def _window_mean_max(t_end_s, dt_s, y, window_s: float) -> float:
@@ -176,8 +280,19 @@ def envelope_currents(t_end_s, dt_s, d_short, i1_amp_a, i2_amp_a, peak_i2_a: flo
             "diode_rms_a": math.sqrt(_window_mean_max(*args, 0.5 * sq * (1 - w), window_s)),
             "diode_avg_a": _window_mean_max(*args, 0.5 * rectifier_current(d, np.abs(i2)), window_s),
             "switch_rms_a": math.sqrt(_window_mean_max(*args, sq * w + 0.5 * sq * (1 - w), window_s)),
+            "short_rms_a": math.sqrt(_window_mean_max(*args, sq * w, window_s)),
+            "switching_loss_w": _window_mean_max(*args, _edge_w(d, i2, devices), window_s),
             "conduction_loss_w": _window_mean_max(*args, loss["rectifier_diodes"] + loss["rectifier_switches"],
                                                   window_s)}
+
+
+def _edge_w(d, i2, devices):
+    """Averaged SBAR edge power [W] (:func:`wpt_receiver.edge_losses.averaged_edge_losses`, Table I
+    frequency and VL = 30 V) along an envelope run."""
+    from .edge_losses import averaged_edge_losses
+    from .params import TABLE_I
+    return averaged_edge_losses(d, i2, TABLE_I.vl_v, devices, TABLE_I.rectifier_period_s,
+                                TABLE_I.omega_rad_s)["rectifier_w"]
 
 
 def paper_policy(name: str, params: LinkParams, t_switch_s: float = 1e-3, t_end_s: float = 10e-3):

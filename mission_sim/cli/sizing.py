@@ -9,7 +9,8 @@ from pathlib import Path
 from .common import CliError, add_progress_flag, float_arg, prepare_out_dir, show_progress
 
 _COLUMNS = ("peak_i2_a", "diode_rms_a", "diode_avg_a", "switch_rms_a", "required_rating_a", "part", "mass_g",
-            "device_mass_g", "sink_mass_g", "conduction_loss_w")
+            "device_mass_g", "sink_mass_g", "conduction_loss_w", "switching_loss_w", "loss_w", "tj_diode_c",
+            "tj_switch_c", "v_worst_v", "required_v_rating_v")
 
 
 def _add_sizing(sub):
@@ -37,6 +38,11 @@ def _add_sizing(sub):
                    help="required rating = margin x worst-case |i2|, 1 .. 10 (default 1.25)")
     p.add_argument("--t-end", type=float_arg("t-end", positive=True, lo=3e-3, hi=0.1), default=10e-3,
                    help="end of the run in s, switch at 1 ms, 0.003 .. 0.1 (default 0.01)")
+    p.add_argument("--t-protect", type=float_arg("t-protect", positive=True, lo=1e-7, hi=0.1), default=1e-4,
+                   help="open-load study: time from the battery disconnect to the protective short, s "
+                        "(1e-7 .. 0.1, default 1e-4); the voltage rating is 1.1 x the simulated peak")
+    p.add_argument("--c-out", type=float_arg("c-out", positive=True, lo=1e-7, hi=1.0), default=4.7e-3,
+                   help="open-load study: rectifier output capacitor, F (1e-7 .. 1, default 4.7e-3)")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--out", type=Path, default=Path("out/sizing"), help="folder for the figure (default out/sizing)")
     p.add_argument("--no-plot", action="store_true", help="skip the figure")
@@ -52,13 +58,18 @@ def _names(args, valid, default):
     return names
 
 
+def _rules(args):
+    from wpt_receiver.sizing import SizingRules
+    return SizingRules(margin=args.margin, t_protect_s=args.t_protect, c_out_f=args.c_out)
+
+
 def _rows(args):
     from tqdm import tqdm
 
     from wpt_receiver import TABLE_I
     from wpt_receiver.devices import preset
     from wpt_receiver.references import TRAJECTORIES
-    from wpt_receiver.sizing import SizingRules, size_policies
+    from wpt_receiver.sizing import size_policies
     try:
         base = preset(args.devices)
     except ValueError as e:
@@ -70,9 +81,10 @@ def _rows(args):
     names = _names(args, TRAJECTORIES, "step,ramp,proposed")
     bar = tqdm(total=len(names), desc="sizing", disable=not show_progress(args), file=sys.stderr)
     with bar:
-        rows = size_policies(names, TABLE_I, base, SizingRules(margin=args.margin), t_end_s=args.t_end,
+        rows = size_policies(names, TABLE_I, base, _rules(args), t_end_s=args.t_end,
                              progress=lambda: bar.update(1))
-    return [{"policy": r["policy"], **{c: r[c] for c in _COLUMNS}} for r in rows]
+    return [{"policy": r["policy"], **{c: r.get(c) for c in _COLUMNS}, "v_case": r.get("v_case"),
+             "edge_ring_peak_v": r.get("edge_ring_peak_v"), "turn_off_peak_a": r.get("turn_off_peak_a")} for r in rows]
 
 
 def _mission_rows(args, base):
@@ -91,16 +103,18 @@ def _mission_rows(args, base):
 
 def _size_mission(name, cfg, base, args) -> dict:
     """Run mission ``cfg`` with policy ``name`` and size its rectifier from the time series."""
-    from wpt_receiver.sizing import SizingRules, envelope_currents, select_parts
+    from wpt_receiver.sizing import envelope_currents, select_parts
 
     from ..world.runner import run_mission
     from .mission import make_policy
     res = run_mission(cfg, make_policy(name, cfg))
     ts, peak = res.timeseries, res.summary["peak_i2_a"]
     cols = [ts[c].to_numpy() for c in ("t_s", "dt_s", "d_short", "i1_amp_a", "i2_amp_a")]
-    params = res.config.link.link_params(1.0, 1.0, 0.1)          # VL = 30 V: the voltage rule
-    row = select_parts(lambda dv: envelope_currents(*cols, peak, dv), params, base, SizingRules(margin=args.margin))
-    return {"policy": name, **{c: row[c] for c in _COLUMNS}}
+    from wpt_receiver import TABLE_I
+    # the open-load voltage study on Table I's coils (the design point) with the mission's link settings
+    params = res.config.link.link_params(TABLE_I.l1_h, TABLE_I.l2_h, TABLE_I.lm_h)
+    row = select_parts(lambda dv: envelope_currents(*cols, peak, dv), params, base, _rules(args))
+    return {"policy": name, **{c: row.get(c) for c in _COLUMNS}}
 
 
 def _sweep_rows(args, base):
@@ -135,6 +149,14 @@ def _cmd_sizing(args) -> int:
         what = {"paper": "Table I link", "mission": "missions", "sweep": f"worst cases of sweep {args.sweep}"}[args.source]
         figs.append(plot_sizing(rows, args.out / "sizing.png",
                                 f"SBAR sizing, {what}, devices {args.devices}, margin {args.margin:g}"))
+        if args.source == "paper":
+            from wpt_receiver import TABLE_I
+            from wpt_receiver.devices import preset
+            from wpt_receiver.sizing import open_load_study
+
+            from ..figures.sizing import plot_open_load
+            figs.append(plot_open_load(open_load_study(TABLE_I, preset(args.devices), _rules(args)),
+                                       args.out / "open_load.png", rows[0]["required_v_rating_v"]))
     if args.format == "json":
         print(json.dumps({"source": args.source, "devices": args.devices, "margin": args.margin, "rows": rows,
                           "figures": figs}))
@@ -143,11 +165,20 @@ def _cmd_sizing(args) -> int:
              "sweep": f"worst case per policy of sweep {args.sweep}, re-run, envelope + ripple peak"}[args.source]
     print(f"SBAR sizing ({model}, devices {args.devices}, rating = {args.margin:g} x peak |i2|; "
           "RMS and loss over the worst 1 ms)")
-    print(f"{'policy':<11} {'peak i2':>8} {'diode rms':>9} {'switch rms':>10} {'rating':>8} {'loss':>7} "
-          f"{'mass':>7}  part")
+    print(f"{'policy':<11} {'peak i2':>8} {'diode rms':>9} {'switch rms':>10} {'rating':>8} {'cond.':>7} {'switch.':>7} "
+          f"{'Tj diode':>8} {'Tj sw':>6} {'V rating':>8} {'mass':>7}  part")
     for r in rows:
         print(f"{r['policy']:<11} {r['peak_i2_a']:>6.2f} A {r['diode_rms_a']:>7.2f} A {r['switch_rms_a']:>8.2f} A "
-              f"{r['required_rating_a']:>6.1f} A {r['conduction_loss_w']:>5.2f} W {r['mass_g']:>5.1f} g  {r['part']}")
+              f"{r['required_rating_a']:>6.1f} A {r['conduction_loss_w']:>5.2f} W {r['switching_loss_w']:>5.2f} W "
+              f"{r['tj_diode_c']:>6.1f} C {r['tj_switch_c']:>4.1f} C {r['required_v_rating_v']:>6.1f} V "
+              f"{r['mass_g']:>5.1f} g  {r['part']}")
+    r0 = rows[0]
+    print(f"losses at the settled junction temperatures (ambient 40 C, sink +50 K); V rating = 1.1 x the simulated "
+          f"worst blocking voltage {r0['v_worst_v']:.2f} V" + (f" ({r0['v_case']})" if r0.get("v_case") else ""))
+    if r0.get("edge_ring_peak_v") is not None:
+        print("ring of the largest hard turn-off with 8 nH stray loop inductance (edge model checked against ngspice; "
+              "reported, not rated: snubber / layout / Schottky avalanche): " + ", ".join(
+                  f"{r['policy']} {r['edge_ring_peak_v']:.1f} V at {r['turn_off_peak_a']:.1f} A" for r in rows))
     for r in rows:
         if "case_id" in r:
             print(f"{r['policy']}: worst of {r['cases']} ok cases is case {r['case_id']} "

@@ -9,7 +9,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from .common import save_figure  # noqa: E402
 
-__all__ = ["plot_sizing"]
+__all__ = ["plot_sizing", "plot_open_load"]
 
 
 def plot_sizing(rows, path, title: str = "") -> str:
@@ -36,5 +36,24 @@ def plot_sizing(rows, path, title: str = "") -> str:
     b.grid(alpha=0.3, axis="y")
     if title:
         fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def plot_open_load(stress: dict, path, v_rating_v: float | None = None) -> str:
+    """Blocked voltage of the SBAR's devices after a battery disconnect (open-load study of
+    :func:`wpt_receiver.switching.stress.voltage_stress`): one line per case (RM, while switching
+    to SM), the protection's short and the chosen parts' voltage rating."""
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    for d, run in stress["runs"].items():
+        ax.plot(run["t_s"] * 1e6, run["v_block_v"], label=f"battery opened at d = {d:g}")
+    ax.axvline(stress["t_protect_s"] * 1e6, color="k", ls="--", lw=1, label="protective short")
+    if v_rating_v is not None:
+        ax.axhline(v_rating_v, color="r", ls=":", lw=1, label=f"required rating {v_rating_v:.1f} V")
+    ax.set_xlabel("time after the disconnect [us]")
+    ax.set_ylabel("blocked voltage [V]")
+    ax.set_title(f"open load, C_out = {stress['c_out_f'] * 1e6:g} uF", fontsize=10)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
     fig.tight_layout()
     return save_figure(fig, path)

@@ -628,7 +628,25 @@ class MissionLoop:
             "battery_c1_delta_j": acc["c1"],
             "energy_balance_error_rel": abs(acc["src"] - rhs) / scale if scale > 0 else 0.0,
             "link_balance_error_rel": abs(link_res) / abs(acc["src"]) if acc["src"] else 0.0,
+            **self.edge_summary(arr, acc["src"], acc["rect"]),
         }
+
+    def edge_summary(self, arr, src_j: float, rect_j: float) -> dict:
+        """Switching-edge energies [J] of the run, estimated after it (not in the balances above):
+        :func:`wpt_receiver.edge_losses.averaged_edge_losses` at each step's duty, |I2| and battery
+        voltage while the pad is on (SBAR: hard gate edges, recovery; inverter: hard-switched
+        Coss, an upper bound), and the efficiency with them drawn from the source."""
+        from wpt_receiver.edge_losses import averaged_edge_losses
+        on = arr[:, _COL["v1_v"]] > 0
+        dt = arr[:, _COL["dt_s"]] * on
+        f = self.lk.f_hz
+        e = averaged_edge_losses(arr[:, _COL["d_short"]], arr[:, _COL["i2_amp_a"]], arr[:, _COL["battery_v"]], self.dev,
+                                 0.5 / f, 2 * math.pi * f, vdc_v=self.lk.vdc_v)
+        e_rect = math.fsum((np.asarray(e["rectifier_w"]) * dt).tolist())
+        e_inv = math.fsum((np.broadcast_to(e["inverter_w"], dt.shape) * dt).tolist())
+        den = src_j + e_rect + e_inv
+        return {"edge_losses_rectifier_j": e_rect, "edge_losses_inverter_j": e_inv,
+                "dc_to_battery_efficiency_with_edges": rect_j / den if den > 0 else 0.0}
 
     def instantaneous_peak(self, arr) -> float:
         """Instantaneous peak |i2| [A]: the envelope's peak plus the harmonic ripple of the SBAR at

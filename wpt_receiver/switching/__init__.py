@@ -10,6 +10,7 @@ Modules, in the order data flows:
 ``result``     :class:`SwitchingResult`: dense samples, per-half-cycle envelope, energies
 ``ivp``        :func:`simulate_ivp`: the same circuit through ``solve_ivp`` (slow reference)
 ``plant``      :func:`switching_plant` for :func:`wpt_receiver.paper.run_paper`; eq. 9 check
+``stress``     voltage stress: open-load (BMS disconnect) fault, ringing of an edge (stray L, Coss)
 =============  ==========================================================================
 
 Figures of the waveforms live outside the physics, in :mod:`mission_sim.figures.switching`.
