@@ -19,12 +19,13 @@ from wpt_receiver.coupling import NOMINAL_GAP_M
 
 from .world.battery import BatteryParams, CcCvParams
 from .world.power import DroneParams
-from .validation import check_positive, read_toml_file
+from .validation import Range, check_positive, check_range, read_toml_file
 from .world.wind import WindParams
 
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
            "MissionConfig", "load_config", "config_from_dict", "config_to_dict", "apply_overrides",
-           "load_config_dict", "check_cross_fields", "section_from_dict", "check_seed"]
+           "load_config_dict", "check_cross_fields", "section_from_dict", "check_seed", "PLAUSIBLE",
+           "plausible_range"]
 
 DEFAULT_MISSION_TOML: str = resources.files("mission_sim").joinpath("default_mission.toml").read_text("utf-8")
 
@@ -197,6 +198,63 @@ def check_cross_fields(cfg: MissionConfig) -> None:
                              "through the pad)")
 
 
+def _cv_range() -> Range:
+    """``charger.cv_cell_v``: the cell's open-circuit voltage from SoC 0 to 1 (above it the CV phase never ends)."""
+    from .world.battery import ocv_cell_v
+    return Range(float(ocv_cell_v(0.0)), math.floor(float(ocv_cell_v(1.0)) * 1e4) / 1e4, "V")
+
+
+_M = Range(-1e5, 1e5, "m")
+_FRACTION = Range(0.0, 1.0, lo_open=True)
+#: Every numeric config key and the values a real system can have (pads keys as ``pads.<key>``).
+#: Checked by :func:`config_from_dict` / :func:`section_from_dict` before the section is built, so the
+#: message names the dotted key; limits between keys (``charger.cutoff_current_a < cc_current_a``,
+#: ``mission.cruise_altitude_m`` above the pads, ``sim.traj_dt_s`` >= 10 control periods, ...) are
+#: checked after, by the sections and :func:`check_cross_fields`. The sim tolerances are numerical knobs:
+#: their ranges only keep the arithmetic finite (``sim.max_fine_s = 1e9``: fine steps throughout).
+PLAUSIBLE: dict[str, Range] = {
+    "link.r1_ohm": Range(1e-6, 100.0, "ohm"), "link.r2_ohm": Range(1e-6, 100.0, "ohm"),
+    "link.vdc_v": Range(0.0, 1000.0, "V", lo_open=True), "link.f_hz": Range(1e4, 1e7, "Hz"),
+    "link.rated_i2_a": Range(0.0, 1000.0, "A", lo_open=True), "link.tx_ramp_s": Range(0.0, 10.0, "s"),
+    "coupling.tx_min_k": Range(0.0, 1.0, lo_open=True, hi_open=True),
+    "coupling.tx_k_hysteresis": Range(0.0, 1.0, hi_open=True),
+    "pads.x_m": _M, "pads.y_m": _M, "pads.z_m": _M, "pads.hover_time_s": Range(0.0, 1e6, "s"),
+    "drone.mass_kg": Range(0.01, 1000.0, "kg"), "drone.payload_kg": Range(0.0, 1000.0, "kg"),
+    "drone.n_rotors": Range(1, 32, integer=True), "drone.rotor_radius_m": Range(0.01, 10.0, "m"),
+    "drone.figure_of_merit": Range(0.05, 1.0), "drone.drive_efficiency": Range(0.05, 1.0),
+    "drone.flat_plate_area_m2": Range(0.0, 100.0, "m^2", lo_open=True), "drone.avionics_w": Range(0.0, 1e4, "W"),
+    "drone.air_density_kg_m3": Range(0.05, 2.0, "kg/m^3"),
+    "battery.n_series": Range(1, 32, integer=True), "battery.capacity_ah": Range(0.01, 1000.0, "A h"),
+    "battery.r0_ohm_cell": Range(1e-6, 1.0, "ohm"), "battery.r1_ohm_cell": Range(1e-6, 1.0, "ohm"),
+    "battery.c1_f_cell": Range(1e-3, 1e6, "F"), "battery.initial_soc": Range(0.0, 1.0),
+    "charger.cc_current_a": Range(0.0, 1000.0, "A", lo_open=True), "charger.cv_cell_v": _cv_range(),
+    "charger.cutoff_current_a": Range(0.0, 1000.0, "A", lo_open=True),
+    "wind.speed_m_s": Range(0.0, 30.0, "m/s"), "wind.direction_deg": Range(-360.0, 360.0, "deg"),
+    "wind.gust_sigma_m_s": Range(0.0, 30.0, "m/s"), "wind.gust_tau_s": Range(0.01, 3600.0, "s"),
+    "wind.hold_omega_rad_s": Range(0.01, 100.0, "rad/s"), "wind.hold_zeta": Range(0.01, 10.0),
+    "wind.drag_area_m2": Range(0.0, 100.0, "m^2", lo_open=True), "wind.air_density_kg_m3": Range(0.05, 2.0, "kg/m^3"),
+    "mission.start_x_m": _M, "mission.start_y_m": _M, "mission.land_x_m": _M, "mission.land_y_m": _M,
+    "mission.cruise_altitude_m": Range(0.0, 500.0, "m", lo_open=True),
+    "mission.cruise_speed_m_s": Range(0.0, 100.0, "m/s", lo_open=True),
+    "mission.max_accel_m_s2": Range(0.0, 100.0, "m/s^2", lo_open=True),
+    "mission.climb_rate_m_s": Range(0.0, 50.0, "m/s", lo_open=True),
+    "mission.descent_rate_m_s": Range(0.0, 50.0, "m/s", lo_open=True),
+    "mission.hover_gap_m": Range(0.03, 1.0, "m"), "mission.hover_time_s": Range(0.0, 1e6, "s"),
+    "sim.control_period_s": Range(1e-7, 1e-3, "s"), "sim.traj_dt_s": Range(0.0, 1.0, "s", lo_open=True),
+    "sim.flight_dt_s": Range(0.0, 3600.0, "s", lo_open=True), "sim.i2_noise_a": Range(0.0, 1000.0, "A"),
+    "sim.min_fine_s": Range(0.0, 10.0, "s", lo_open=True), "sim.max_fine_s": Range(0.0, 1e9, "s", lo_open=True),
+    "sim.settle_duty_tol": _FRACTION, "sim.duty_event_tol": _FRACTION, "sim.lm_rel_tol": Range(0.0, 10.0, lo_open=True),
+    "sim.coarse_policy_period_s": Range(0.0, 3600.0, "s", lo_open=True),
+    "sim.settle_i2_tol_a": Range(0.0, 1000.0, "A", lo_open=True), "sim.cmd_deadband_a": Range(0.0, 1000.0, "A"),
+    "sim.bms_period_s": Range(0.0, 3600.0, "s", lo_open=True), "sim.tx_off_delay_s": Range(0.0, 60.0, "s"),
+}
+
+
+def plausible_range(section: str, name: str) -> Range | None:
+    """The :data:`PLAUSIBLE` range of key ``name`` of ``section`` (``"battery"``, ``"pads.1"``), None for strings."""
+    return PLAUSIBLE.get(f"{'pads' if section.startswith('pads') else section}.{name}")
+
+
 _SECTIONS = {"link": LinkConfig, "coupling": CouplingConfig, "drone": DroneParams, "battery": BatteryParams,
              "charger": CcCvParams, "wind": WindParams, "mission": MissionPlan, "sim": SimConfig}
 
@@ -228,6 +286,10 @@ def _build(section: str, cls, d):
         if k not in names:
             raise ValueError(f"{section}.{k} is not a valid key; valid keys: {', '.join(sorted(names))}")
     kwargs = {k: _coerce(section, cls, k, v) for k, v in d.items()}
+    for k, v in kwargs.items():
+        rng = plausible_range(section, k)
+        if rng is not None and v is not None:
+            check_range(f"{section}.{k}", v, rng)
     try:
         return cls(**kwargs)
     except ValueError as exc:

@@ -6,6 +6,7 @@ import json
 import sys
 from pathlib import Path
 
+from ..validation import check_regular_file
 from .common import (
     CliError,
     add_progress_flag,
@@ -93,8 +94,8 @@ def _check_train(args):
     if args.scenario not in scenario_names():
         raise CliError(f"--scenario {args.scenario!r} is invalid; valid values: {', '.join(scenario_names())}")
     for flag, path in (("--hyperparams", args.hyperparams), ("--resume", args.resume)):
-        if path is not None and not path.is_file():
-            raise CliError(f"{flag} {str(path)!r} does not exist")
+        if path is not None:
+            check_regular_file(path, flag)  # a FIFO is refused without opening it
     if not 0 <= args.probe_episodes <= 1024:
         raise CliError(f"--probe-episodes {args.probe_episodes} is invalid; valid range: 0..1024")
     if args.budget is not None and not args.lagrangian:
@@ -106,6 +107,11 @@ def _cmd_train(args) -> int:
     env = _env_overrides(args.env)
     from policies import require_sb3
     require_sb3()
+    if args.hyperparams is not None:  # malformed, unknown keys, wrong types: refused before --out is created
+        import stable_baselines3 as sb3
+
+        from policies.hyperparams import load_hyperparams
+        load_hyperparams(args.hyperparams, {"ppo": sb3.PPO, "sac": sb3.SAC, "dqn": sb3.DQN}[args.algo])
     prepare_out_dir(args.out)
     from policies.train import train
     try:
@@ -125,7 +131,7 @@ def _cmd_train(args) -> int:
 def _add_compare(sub):
     p = sub.add_parser("compare", help="compare mode-switching policies head to head, with statistics",
                        description="Run every policy through the same closed loop on the same seeded charging "
-                                   "windows (batched env); print per policy and scenario the mean with a 95 %% "
+                                   "windows (batched env); print per policy and scenario the mean with a 95 % "
                                    "bootstrap interval of overshoot, fraction reaching short mode, peak I2, "
                                    "energy before / after the stop, tracking, cost and return, and the paired "
                                    "difference against model_based; write the RM -> SM transitions and the "
