@@ -351,7 +351,21 @@ def load_config_dict(path=None) -> dict:
     :func:`config_from_dict`. File errors name the file (see :func:`~mission_sim.validation.read_toml_file`)."""
     if path is None:
         return tomllib.loads(DEFAULT_MISSION_TOML)
-    return layer_on_default(read_toml_file(path, "config file"))
+    d = read_toml_file(path, "config file")
+    check_no_empty_table(d, f"config file {str(path)!r}")
+    return layer_on_default(d)
+
+
+def check_no_empty_table(d: dict, what: str) -> None:
+    """``ValueError`` naming the first table of ``d`` without a key (``[battery]`` or a ``[[pads]]``
+    entry followed by nothing): a file cut at a table boundary would otherwise take the defaults."""
+    tables = [(k, v) for k, v in d.items() if isinstance(v, dict)]
+    tables += [(f"pads.{i}", p) for i, p in enumerate(d.get("pads", [])) if isinstance(p, dict)]
+    for name, table in tables:
+        if not table:
+            header = f"[[pads]] entry {name}" if name.startswith("pads.") else f"[{name}]"
+            raise ValueError(f"{what}: {header} is empty (a file cut short?); valid: a table with at least one "
+                             "key, or no header (the default values)")
 
 
 def layer_on_default(d: dict) -> dict:

@@ -51,11 +51,12 @@ def check_range(key: str, value, rng: Range) -> None:
         raise ValueError(f"{key}={value!r} is invalid; valid range: {rng.text()}")
 
 
-def check_regular_file(path, what: str) -> Path:
+def check_regular_file(path, what: str, valid: str = "a regular file") -> Path:
     """``path`` as a :class:`~pathlib.Path` if it is an existing regular file (or a link to one); checked with
     ``os.stat`` only, so a FIFO, a socket or a device is refused without being opened (opening a FIFO
     blocks until a writer appears). ``FileNotFoundError`` when missing, ``ValueError`` for a folder or any
-    other non-regular file, ``OSError`` when it cannot be examined; each one line naming ``what`` and the path."""
+    other non-regular file, ``OSError`` when it cannot be examined; each one line naming ``what``, the path and
+    ``valid`` (what is expected, e.g. "a TOML file")."""
     path = Path(path)
     try:
         mode = os.stat(path).st_mode
@@ -64,10 +65,10 @@ def check_regular_file(path, what: str) -> Path:
     except OSError as exc:
         raise OSError(f"{what} {str(path)!r} cannot be read: {exc.strerror or exc}") from None
     if stat.S_ISDIR(mode):
-        raise ValueError(f"{what} {str(path)!r} is a folder; valid: a file")
+        raise ValueError(f"{what} {str(path)!r} is a folder; valid: {valid}")
     if not stat.S_ISREG(mode):
         kind = "a FIFO (named pipe)" if stat.S_ISFIFO(mode) else "not a regular file"
-        raise ValueError(f"{what} {str(path)!r} is {kind}; valid: a regular file")
+        raise ValueError(f"{what} {str(path)!r} is {kind}; valid: {valid}")
     return path
 
 
@@ -84,10 +85,7 @@ def read_toml_file(path, what: str = "config file") -> dict:
     """Parse the TOML file ``path``; every failure is a one-line error naming ``what`` and the path:
     ``FileNotFoundError`` when missing, ``ValueError`` for a folder, a non-text (binary) file or bad
     TOML (with the parser's line and column), ``OSError`` when it cannot be read."""
-    path = Path(path)
-    if path.is_dir():
-        raise ValueError(f"{what} {str(path)!r} is a folder; valid: a TOML file")
-    check_regular_file(path, what)
+    path = check_regular_file(path, what, "a TOML file")
     try:
         text = path.read_bytes().decode("utf-8")
     except UnicodeDecodeError as exc:

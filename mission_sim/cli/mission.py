@@ -9,9 +9,11 @@ from pathlib import Path
 from .common import (
     CliError,
     add_progress_flag,
+    check_out_file,
     finite_float,
     lazy_names_help,
     parse_set,
+    path_arg,
     policy_names,
     prepare_out_dir,
     show_progress,
@@ -31,7 +33,7 @@ def _add_coupling(sub):
                    help="tilt of the drone coil about the y axis [deg] (default 0)")
     p.add_argument("--exact", action="store_true", help="direct Neumann integral instead of the lookup table")
     p.add_argument("--format", choices=("table", "json"), default="table")
-    p.add_argument("--map", type=Path, default=None, metavar="PNG",
+    p.add_argument("--map", type=path_arg("--map"), default=None, metavar="PNG",
                    help="also write a PNG map of Lm over dx, dy at this dz and tilt")
     p.set_defaults(func=_cmd_coupling)
 
@@ -69,11 +71,7 @@ def _cmd_coupling(args) -> int:
 
 def _check_map_path(path: Path) -> None:
     """``--map`` must name a PNG file in a writable folder."""
-    if path.is_dir():
-        raise CliError(f"--map {str(path)!r} is a folder; valid: a PNG file path, e.g. {str(path / 'lm_map.png')!r}")
-    if path.suffix.lower() != ".png":
-        raise CliError(f"--map {str(path)!r} is invalid; valid: a file name ending in .png")
-    prepare_out_dir(path.parent, "--map folder")
+    check_out_file(path, "--map", ".png")
 
 
 def _add_mission(sub):
@@ -84,10 +82,10 @@ def _add_mission(sub):
                                    "summary.json (last: its presence means the set is complete) to --out. Exit "
                                    "status 0: done; 2: bad input (one line on stderr); 3: the battery was "
                                    "depleted, the mission ended there (results written).")
-    p.add_argument("config", nargs="?", type=Path, default=None, help="mission TOML (default: embedded default)")
+    p.add_argument("config", nargs="?", type=path_arg("config file"), default=None, help="mission TOML (default: embedded default)")
     lazy_names_help(p.add_argument("--policy", default="model_based"), "receiver policy (default model_based)",
                     policy_names)
-    p.add_argument("--out", type=Path, default=Path("out/mission"), help="output folder (default out/mission)")
+    p.add_argument("--out", type=path_arg("--out"), default=Path("out/mission"), help="output folder (default out/mission)")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a config value by dotted key, e.g. --set wind.speed_m_s=6 (repeatable)")
