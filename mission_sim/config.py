@@ -25,7 +25,7 @@ from .world.wind import WindParams
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
            "MissionConfig", "load_config", "config_from_dict", "config_to_dict", "apply_overrides",
            "load_config_dict", "check_cross_fields", "section_from_dict", "check_seed", "PLAUSIBLE",
-           "plausible_range"]
+           "plausible_range", "differing_keys"]
 
 DEFAULT_MISSION_TOML: str = resources.files("mission_sim").joinpath("default_mission.toml").read_text("utf-8")
 
@@ -425,3 +425,35 @@ def policy_context(cfg: MissionConfig):
     lm_h = float(model.lm_h(0.0, 0.0, cfg.mission.hover_gap_m))
     return PolicyContext(link=cfg.link.link_params(model.l1_h, model.l2_h, lm_h),
                          control_period_s=cfg.sim.control_period_s, rated_i2_a=cfg.link.rated_i2_a)
+
+
+def _flat(d: dict) -> dict:
+    """``{"battery.capacity_ah": 1.3, "pads.0.x_m": 0.0, "seed": 7, ...}`` of a config dict."""
+    out = {}
+    for k, v in d.items():
+        if k == "pads":
+            out.update({f"pads.{i}.{n}": x for i, p in enumerate(v) for n, x in p.items()})
+        elif isinstance(v, dict):
+            out.update({f"{k}.{n}": x for n, x in v.items()})
+        else:
+            out[k] = v
+    return out
+
+
+def differing_keys(cfg: MissionConfig, limit: int = 5) -> list[str]:
+    """``key=value`` of at most ``limit`` keys of ``cfg`` that differ from the default mission, the farthest
+    first (by decades from the default value; a key the default lacks or a string counts as farthest):
+    the inputs that may have produced a NaN or an infinity in a run."""
+    default, mine = _flat(config_to_dict(load_config())), _flat(config_to_dict(cfg))
+
+    def distance(k, v):
+        d = default.get(k)
+        if d is None or isinstance(v, str) or isinstance(d, str):
+            return math.inf
+        if v and d:
+            return abs(math.log10(abs(v) / abs(d))) + (0.0 if (v > 0) == (d > 0) else 1.0)
+        return 1.0 + abs(v - d)
+
+    diff = sorted(((distance(k, v), k, v) for k, v in mine.items() if default.get(k, object()) != v),
+                  key=lambda t: -t[0])
+    return [f"{k}={v!r}" for _, k, v in diff[:limit]]
