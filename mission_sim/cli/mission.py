@@ -93,6 +93,8 @@ def _add_mission(sub):
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
     p.add_argument("--force", action="store_true", help="run even when the estimated memory or output size "
                    "exceeds the limit (1 GiB each; see docs/robustness.md)")
+    p.add_argument("--dry-run", action="store_true", help="check the config, the policy and the run size, print "
+                   "the size estimate and stop: nothing simulated or written")
     add_progress_flag(p)
     p.set_defaults(func=_cmd_mission)
 
@@ -130,6 +132,8 @@ def _cmd_mission(args) -> int:
     from ..world.runner import run_mission
     cfg = mission_config(args)
     pol = make_policy(args.policy, cfg)
+    if args.dry_run:
+        return _print_estimate(estimate_run(cfg), args)
     prepare_out_dir(args.out)
     compiled = None if estimate_run(cfg).rows >= COMPILE_FROM_ROWS else False
     res = run_mission(cfg, pol, charge=not args.no_charge, progress=show_progress(args), compiled=compiled)
@@ -142,6 +146,19 @@ def _cmd_mission(args) -> int:
     if s.get("battery_depleted"):
         print(f"dronewpt mission: {depletion_text(s)}", file=sys.stderr)
         return 3
+    return 0
+
+
+def _print_estimate(est, args) -> int:
+    """``--dry-run``: the run-size estimate of the checked mission (table or JSON); exit status 0."""
+    out = {"valid": True, "duration_s": est.duration_s, "trajectory_samples": est.samples, "rows": est.rows,
+           "memory_bytes": est.memory_bytes, "output_bytes": est.output_bytes, "dominant_key": est.key}
+    if args.format == "json":
+        print(json.dumps(out))
+    else:
+        print(f"config valid: {est.duration_s:.1f} s simulated, about {est.rows:.3g} time-series rows, "
+              f"~{est.memory_bytes / 1e6:.3g} MB in memory, ~{est.output_bytes / 1e6:.3g} MB of output "
+              f"(largest contribution: {est.key}); nothing simulated (--dry-run)")
     return 0
 
 
