@@ -268,7 +268,8 @@ def _coerce(section: str, cls, name: str, value):
             raise ValueError(f"{key}={value!r} is invalid; valid type: string")
         return value
     if ftype == "int":
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or int(value) != value:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or (
+                isinstance(value, float) and not math.isfinite(value)) or int(value) != value:
             raise ValueError(f"{key}={value!r} is invalid; valid type: integer")
         return int(value)
     if value is None and "None" in ftype:
@@ -289,7 +290,7 @@ def _build(section: str, cls, d):
     for k, v in kwargs.items():
         rng = plausible_range(section, k)
         if rng is not None and v is not None:
-            check_range(f"{section}.{k}", v, rng)
+            check_range(f"{section}.{k}", d[k], rng)  # the value as given (1e308, not its 309-digit integer)
     try:
         return cls(**kwargs)
     except ValueError as exc:
@@ -395,6 +396,8 @@ def apply_overrides(d: dict, overrides: dict) -> dict:
                 raise ValueError(f"override key {key!r} is invalid; valid form: pads.<index>.<key>")
             i = int(parts[1])
             pads = out.setdefault("pads", [asdict(PadConfig())])
+            if not isinstance(pads, list) or not all(isinstance(p, dict) for p in pads):
+                raise ValueError(f"pads={pads!r} is invalid; valid: a list of 1..100 [[pads]] tables")
             if not 0 <= i < len(pads):
                 raise ValueError(f"override key {key!r} is invalid; valid pad indices: 0..{len(pads) - 1}")
             if parts[2] not in {f.name for f in fields(PadConfig)}:
@@ -408,7 +411,10 @@ def apply_overrides(d: dict, overrides: dict) -> dict:
         names = {f.name for f in fields(_SECTIONS[parts[0]])}
         if parts[1] not in names:
             raise ValueError(f"override key {key!r} is invalid; valid keys of [{parts[0]}]: {', '.join(sorted(names))}")
-        out.setdefault(parts[0], {})[parts[1]] = value
+        section = out.setdefault(parts[0], {})
+        if not isinstance(section, dict):  # the config file gave a value where the table belongs
+            raise ValueError(f"{parts[0]}={section!r} is invalid; valid type: table")
+        section[parts[1]] = value
     return out
 
 
