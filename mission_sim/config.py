@@ -290,7 +290,8 @@ def _build(section: str, cls, d):
     for k, v in kwargs.items():
         rng = plausible_range(section, k)
         if rng is not None and v is not None:
-            check_range(f"{section}.{k}", d[k], rng)  # the value as given (1e308, not its 309-digit integer)
+            # integer keys: the value as given (1e308, not its 309-digit integer)
+            check_range(f"{section}.{k}", d[k] if rng.integer else v, rng)
     try:
         return cls(**kwargs)
     except ValueError as exc:

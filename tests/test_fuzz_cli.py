@@ -6,7 +6,7 @@ every argument checked (the expensive functions are replaced by a stub that stop
 status 2 with exactly one line on stderr that names a key or an option. Never a traceback, never a
 hang (an alarm stops a draw after 30 s), never a temporary file left behind.
 
-Draws per run: 350 config files + 250 argument lists + 12 short missions run to the end, in-process;
+Draws per run: 300 config files + 200 argument lists + 12 short missions run to the end, in-process;
 3 more missions as subprocesses (a traceback there would reach stderr unfiltered).
 """
 
@@ -219,7 +219,7 @@ cruise_altitude_m = 1.0
 
 
 # ----------------------------------------------------------------------------- 1. config files
-@settings(FUZZ, max_examples=350)
+@settings(FUZZ, max_examples=300)
 @given(doc=config_docs(), sets=st.lists(st.tuples(SET_KEY, SET_TEXT), max_size=2))
 def test_fuzzed_config_files_are_checked_in_one_line(folder, doc, sets):
     """``mission CONFIG --dry-run``: a drawn config file and --set overrides are either valid (every
@@ -301,7 +301,7 @@ def argvs(draw):
     return argv
 
 
-@settings(FUZZ, max_examples=250)
+@settings(FUZZ, max_examples=200)
 @given(argv=argvs())
 def test_fuzzed_arguments_are_checked_before_any_work(folder, argv, monkeypatch):
     """Every subcommand with drawn options: refused in one line naming the option, or every check passed
