@@ -294,6 +294,8 @@ def argvs(draw):
             argv += flag
         elif a.choices:
             argv += [*flag, draw(st.one_of(st.sampled_from(list(a.choices)), st.sampled_from(ARG_VALUES)))]
+        elif a.default is not None and not isinstance(a.default, (bool, list)) and draw(st.booleans()):
+            argv += [*flag, str(a.default)]  # its default written out: more draws get past the checks
         else:
             argv += [*flag, draw(st.sampled_from(ARG_VALUES))]
     if name in ("mission", "sizing", "compare", "replay", "paper", "coupling"):
