@@ -11,6 +11,7 @@ from .common import (
     CliError,
     add_progress_flag,
     check_out_file,
+    float_arg,
     lazy_names_help,
     parse_set,
     path_arg,
@@ -231,10 +232,10 @@ def _add_telemetry(sub):
                    help="stream at most S simulated seconds (default: the whole mission)")
     p.add_argument("--follow", default=None, metavar="udpin:HOST:PORT",
                    help="drive the simulation from a live vehicle's GLOBAL_POSITION_INT instead of the plan")
-    p.add_argument("--follow-time", type=positive_float("follow-time"), default=60.0, metavar="S",
-                   help="with --follow: stop after S wall seconds (default 60)")
-    p.add_argument("--follow-idle", type=positive_float("follow-idle"), default=10.0, metavar="S",
-                   help="with --follow: stop after S seconds without a position (default 10)")
+    p.add_argument("--follow-time", type=float_arg("follow-time", positive=True, hi=7 * 86400), default=60.0,
+                   metavar="S", help="with --follow: stop after S wall seconds, at most 7 days (default 60)")
+    p.add_argument("--follow-idle", type=float_arg("follow-idle", positive=True, hi=86400), default=10.0, metavar="S",
+                   help="with --follow: stop after S seconds without a position, at most a day (default 10)")
     p.add_argument("--sysid", type=int, default=1, metavar="ID",
                    help="MAVLink system id of the simulated vehicle, 1..255 (default 1; use another beside a SITL vehicle)")
     p.add_argument("--compid", type=int, default=1, metavar="ID",

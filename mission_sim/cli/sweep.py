@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from ..studies import DEFAULT_MAX_CASES
-from .common import CliError, add_progress_flag, int_in, max_workers, path_arg, positive_float, show_progress
+from .common import CliError, add_progress_flag, float_arg, int_in, max_workers, path_arg, show_progress
 
 
 def _add_sweep(sub):
@@ -31,8 +31,8 @@ def _add_sweep(sub):
                    help="also re-run the cases stored with status 'error' (their new row replaces the old one)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS", help="address of an existing Dask scheduler "
                                                       "(e.g. tcp://10.0.0.5:8786); default: a local cluster")
-    p.add_argument("--connect-timeout", type=positive_float("connect-timeout"), default=10.0, metavar="S",
-                   help="seconds to wait for --scheduler (default 10)")
+    p.add_argument("--connect-timeout", type=float_arg("connect-timeout", positive=True, hi=3600), default=10.0,
+                   metavar="S", help="seconds to wait for --scheduler, at most 3600 (default 10)")
     p.add_argument("--workers", type=int_in("workers", 0, max_workers(), " (4 per CPU)"), default=None, metavar="N",
                    help="worker processes of the local cluster, 0 .. 4 per CPU (default: one per CPU; 0 = run "
                         "serially in this process without Dask)")
