@@ -6,7 +6,8 @@ every argument checked (the expensive functions are replaced by a stub that stop
 status 2 with exactly one line on stderr that names a key or an option. Never a traceback, never a
 hang (an alarm stops a draw after 30 s), never a temporary file left behind.
 
-Draws per run: 300 config files + 200 argument lists + 12 short missions run to the end, in-process;
+Draws per run: 300 config files + 200 argument lists + 100 study grids + 12 short missions run to the
+end, in-process;
 3 more missions as subprocesses (a traceback there would reach stderr unfiltered).
 """
 
@@ -321,6 +322,42 @@ def test_fuzzed_arguments_are_checked_before_any_work(folder, argv, monkeypatch)
 
 def _stub(*args, **kwargs):
     raise _Reached
+
+
+# ----------------------------------------------------------------------------- 2b. study files
+@st.composite
+def study_docs(draw):
+    """A study varying one or two drawn keys over 1-3 drawn values each, and the policy."""
+    grid = {}
+    for sec, name, rng in draw(st.lists(st.sampled_from(SCHEMA), min_size=1, max_size=2, unique=True)):
+        key = f"pads.0.{name}" if sec == "pads" else f"{sec}.{name}"
+        grid[key] = draw(st.lists(_value(rng), min_size=1, max_size=3))
+    grid["policy"] = draw(st.sampled_from([["step"], ["model_based", "ramp"], ["bogus"]]))
+    return grid
+
+
+@settings(FUZZ, max_examples=100)
+@given(grid=study_docs())
+def test_fuzzed_studies_are_checked_case_by_case_before_the_sweep(folder, grid, monkeypatch):
+    """``sweep STUDY --workers 0`` with a drawn grid: refused in one line naming a key, or, when the sweep
+    would start (a stub stops it there), every value of the grid lies in its plausible range."""
+    import mission_sim.studies.sweep as sweep_mod
+
+    monkeypatch.setattr(sweep_mod, "run_sweep", _stub)
+    path = folder / "fuzz_study.toml"
+    path.write_text("[grid]\n" + "".join(f"{json.dumps(k)} = {_toml_value(v)}\n" for k, v in grid.items()))
+    argv = ["sweep", str(path), "--out", "fuzz_sweep", "--workers", "0", "--no-plot", "--no-progress"]
+    rc, out, err = _run(argv, folder)
+    event(f"sweep: {rc}")
+    _check_outcome(argv, rc, out, err, allowed=(2, "reached"))
+    if rc == "reached":
+        for key, values in grid.items():
+            if key == "policy":
+                continue
+            sec, _, name = key.rpartition(".")
+            rng = mconfig.plausible_range(sec, name)
+            assert all(rng is None or rng.contains(v) for v in values), (key, values)
+    assert not _temporaries(folder)
 
 
 # ----------------------------------------------------------------------------- 3. short missions run to the end
