@@ -3,7 +3,8 @@
 Sections (see ``default_mission.toml``, the embedded default, for every key and its unit):
 ``seed``, ``[link]``, ``[coupling]``, ``[[pads]]``, ``[drone]``, ``[battery]``, ``[charger]``,
 ``[wind]``, ``[mission]``, ``[sim]``. Unknown keys, wrong types and out-of-range values raise
-``ValueError`` naming the dotted key (``battery.capacity_ah``), the value and the valid range.
+``ValueError`` naming the dotted key (``battery.capacity_ah``), the value and the valid range: every
+numeric key has a physically plausible range (:data:`PLAUSIBLE`), checked before its section is built.
 """
 
 from __future__ import annotations
