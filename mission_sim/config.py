@@ -4,7 +4,8 @@ Sections (see ``default_mission.toml``, the embedded default, for every key and 
 ``seed``, ``[link]``, ``[coupling]``, ``[[pads]]``, ``[drone]``, ``[battery]``, ``[charger]``,
 ``[wind]``, ``[mission]``, ``[[waypoints]]`` (a route instead of the built-in pattern; also read from a
 mission file, ``[mission] file``, by :mod:`mission_sim.plans`), ``[sim]``. Unknown keys, wrong types and out-of-range values raise
-``ValueError`` naming the dotted key (``battery.capacity_ah``), the value and the valid range.
+``ValueError`` naming the dotted key (``battery.capacity_ah``), the value and the valid range: every
+numeric key has a physically plausible range (:data:`PLAUSIBLE`), checked before its section is built.
 """
 
 from __future__ import annotations
@@ -21,12 +22,13 @@ from wpt_receiver.coupling import NOMINAL_GAP_M
 
 from .world.battery import BatteryParams, CcCvParams
 from .world.power import DroneParams
-from .validation import check_positive, read_toml_file
+from .validation import Range, check_positive, check_range, read_toml_file
 from .world.wind import WindParams
 
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
            "MissionConfig", "WaypointConfig", "load_config", "config_from_dict", "config_to_dict", "apply_overrides",
-           "load_config_dict", "check_cross_fields", "section_from_dict", "check_seed"]
+           "load_config_dict", "check_cross_fields", "section_from_dict", "check_seed", "PLAUSIBLE",
+           "plausible_range", "differing_keys"]
 
 DEFAULT_MISSION_TOML: str = resources.files("mission_sim").joinpath("default_mission.toml").read_text("utf-8")
 
@@ -260,6 +262,63 @@ def check_cross_fields(cfg: MissionConfig) -> None:
                          "file or with --plan (mission files are read when the config is loaded)")
 
 
+def _cv_range() -> Range:
+    """``charger.cv_cell_v``: the cell's open-circuit voltage from SoC 0 to 1 (above it the CV phase never ends)."""
+    from .world.battery import ocv_cell_v
+    return Range(float(ocv_cell_v(0.0)), math.floor(float(ocv_cell_v(1.0)) * 1e4) / 1e4, "V")
+
+
+_M = Range(-1e5, 1e5, "m")
+_FRACTION = Range(0.0, 1.0, lo_open=True)
+#: Every numeric config key and the values a real system can have (pads keys as ``pads.<key>``).
+#: Checked by :func:`config_from_dict` / :func:`section_from_dict` before the section is built, so the
+#: message names the dotted key; limits between keys (``charger.cutoff_current_a < cc_current_a``,
+#: ``mission.cruise_altitude_m`` above the pads, ``sim.traj_dt_s`` >= 10 control periods, ...) are
+#: checked after, by the sections and :func:`check_cross_fields`. The sim tolerances are numerical knobs:
+#: their ranges only keep the arithmetic finite (``sim.max_fine_s = 1e9``: fine steps throughout).
+PLAUSIBLE: dict[str, Range] = {
+    "link.r1_ohm": Range(1e-6, 100.0, "ohm"), "link.r2_ohm": Range(1e-6, 100.0, "ohm"),
+    "link.vdc_v": Range(0.0, 1000.0, "V", lo_open=True), "link.f_hz": Range(1e4, 1e7, "Hz"),
+    "link.rated_i2_a": Range(0.0, 1000.0, "A", lo_open=True), "link.tx_ramp_s": Range(0.0, 10.0, "s"),
+    "coupling.tx_min_k": Range(0.0, 1.0, lo_open=True, hi_open=True),
+    "coupling.tx_k_hysteresis": Range(0.0, 1.0, hi_open=True),
+    "pads.x_m": _M, "pads.y_m": _M, "pads.z_m": _M, "pads.hover_time_s": Range(0.0, 1e6, "s"),
+    "drone.mass_kg": Range(0.01, 1000.0, "kg"), "drone.payload_kg": Range(0.0, 1000.0, "kg"),
+    "drone.n_rotors": Range(1, 32, integer=True), "drone.rotor_radius_m": Range(0.01, 10.0, "m"),
+    "drone.figure_of_merit": Range(0.05, 1.0), "drone.drive_efficiency": Range(0.05, 1.0),
+    "drone.flat_plate_area_m2": Range(0.0, 100.0, "m^2", lo_open=True), "drone.avionics_w": Range(0.0, 1e4, "W"),
+    "drone.air_density_kg_m3": Range(0.05, 2.0, "kg/m^3"),
+    "battery.n_series": Range(1, 32, integer=True), "battery.capacity_ah": Range(0.01, 1000.0, "A h"),
+    "battery.r0_ohm_cell": Range(1e-6, 1.0, "ohm"), "battery.r1_ohm_cell": Range(1e-6, 1.0, "ohm"),
+    "battery.c1_f_cell": Range(1e-3, 1e6, "F"), "battery.initial_soc": Range(0.0, 1.0),
+    "charger.cc_current_a": Range(0.0, 1000.0, "A", lo_open=True), "charger.cv_cell_v": _cv_range(),
+    "charger.cutoff_current_a": Range(0.0, 1000.0, "A", lo_open=True),
+    "wind.speed_m_s": Range(0.0, 30.0, "m/s"), "wind.direction_deg": Range(-360.0, 360.0, "deg"),
+    "wind.gust_sigma_m_s": Range(0.0, 30.0, "m/s"), "wind.gust_tau_s": Range(0.01, 3600.0, "s"),
+    "wind.hold_omega_rad_s": Range(0.01, 100.0, "rad/s"), "wind.hold_zeta": Range(0.01, 10.0),
+    "wind.drag_area_m2": Range(0.0, 100.0, "m^2", lo_open=True), "wind.air_density_kg_m3": Range(0.05, 2.0, "kg/m^3"),
+    "mission.start_x_m": _M, "mission.start_y_m": _M, "mission.land_x_m": _M, "mission.land_y_m": _M,
+    "mission.cruise_altitude_m": Range(0.0, 500.0, "m", lo_open=True),
+    "mission.cruise_speed_m_s": Range(0.0, 100.0, "m/s", lo_open=True),
+    "mission.max_accel_m_s2": Range(0.0, 100.0, "m/s^2", lo_open=True),
+    "mission.climb_rate_m_s": Range(0.0, 50.0, "m/s", lo_open=True),
+    "mission.descent_rate_m_s": Range(0.0, 50.0, "m/s", lo_open=True),
+    "mission.hover_gap_m": Range(0.03, 1.0, "m"), "mission.hover_time_s": Range(0.0, 1e6, "s"),
+    "sim.control_period_s": Range(1e-7, 1e-3, "s"), "sim.traj_dt_s": Range(0.0, 1.0, "s", lo_open=True),
+    "sim.flight_dt_s": Range(0.0, 3600.0, "s", lo_open=True), "sim.i2_noise_a": Range(0.0, 1000.0, "A"),
+    "sim.min_fine_s": Range(0.0, 10.0, "s", lo_open=True), "sim.max_fine_s": Range(0.0, 1e9, "s", lo_open=True),
+    "sim.settle_duty_tol": _FRACTION, "sim.duty_event_tol": _FRACTION, "sim.lm_rel_tol": Range(0.0, 10.0, lo_open=True),
+    "sim.coarse_policy_period_s": Range(0.0, 3600.0, "s", lo_open=True),
+    "sim.settle_i2_tol_a": Range(0.0, 1000.0, "A", lo_open=True), "sim.cmd_deadband_a": Range(0.0, 1000.0, "A"),
+    "sim.bms_period_s": Range(0.0, 3600.0, "s", lo_open=True), "sim.tx_off_delay_s": Range(0.0, 60.0, "s"),
+}
+
+
+def plausible_range(section: str, name: str) -> Range | None:
+    """The :data:`PLAUSIBLE` range of key ``name`` of ``section`` (``"battery"``, ``"pads.1"``), None for strings."""
+    return PLAUSIBLE.get(f"{'pads' if section.startswith('pads') else section}.{name}")
+
+
 _SECTIONS = {"link": LinkConfig, "coupling": CouplingConfig, "drone": DroneParams, "battery": BatteryParams,
              "charger": CcCvParams, "wind": WindParams, "mission": MissionPlan, "sim": SimConfig}
 
@@ -273,7 +332,8 @@ def _coerce(section: str, cls, name: str, value):
             raise ValueError(f"{key}={value!r} is invalid; valid type: string")
         return value
     if ftype == "int":
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or int(value) != value:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or (
+                isinstance(value, float) and not math.isfinite(value)) or int(value) != value:
             raise ValueError(f"{key}={value!r} is invalid; valid type: integer")
         return int(value)
     if value is None and "None" in ftype:
@@ -291,6 +351,11 @@ def _build(section: str, cls, d):
         if k not in names:
             raise ValueError(f"{section}.{k} is not a valid key; valid keys: {', '.join(sorted(names))}")
     kwargs = {k: _coerce(section, cls, k, v) for k, v in d.items()}
+    for k, v in kwargs.items():
+        rng = plausible_range(section, k)
+        if rng is not None and v is not None:
+            # integer keys: the value as given (1e308, not its 309-digit integer)
+            check_range(f"{section}.{k}", d[k] if rng.integer else v, rng)
     try:
         return cls(**kwargs)
     except ValueError as exc:
@@ -364,10 +429,24 @@ def load_config_dict(path=None, mission_file=None, pads_file=None, mission_keys=
     if path is None:
         d = tomllib.loads(DEFAULT_MISSION_TOML)
     else:
-        d = layer_on_default(read_toml_file(path, "config file"))
+        raw = read_toml_file(path, "config file")
+        check_no_empty_table(raw, f"config file {str(path)!r}")
+        d = layer_on_default(raw)
     if mission_keys and isinstance(d.get("mission"), dict):
         d["mission"] = {**d["mission"], **mission_keys}
     return apply_mission_files(d, None if path is None else Path(path).parent, mission_file, pads_file)
+
+
+def check_no_empty_table(d: dict, what: str) -> None:
+    """``ValueError`` naming the first table of ``d`` without a key (``[battery]`` or a ``[[pads]]``
+    entry followed by nothing): a file cut at a table boundary would otherwise take the defaults."""
+    tables = [(k, v) for k, v in d.items() if isinstance(v, dict)]
+    tables += [(f"pads.{i}", p) for i, p in enumerate(d.get("pads", [])) if isinstance(p, dict)]
+    for name, table in tables:
+        if not table:
+            header = f"[[pads]] entry {name}" if name.startswith("pads.") else f"[{name}]"
+            raise ValueError(f"{what}: {header} is empty (a file cut short?); valid: a table with at least one "
+                             "key, or no header (the default values)")
 
 
 def layer_on_default(d: dict) -> dict:
@@ -397,6 +476,8 @@ def apply_overrides(d: dict, overrides: dict) -> dict:
                 raise ValueError(f"override key {key!r} is invalid; valid form: pads.<index>.<key>")
             i = int(parts[1])
             pads = out.setdefault("pads", [asdict(PadConfig())])
+            if not isinstance(pads, list) or not all(isinstance(p, dict) for p in pads):
+                raise ValueError(f"pads={pads!r} is invalid; valid: a list of 1..100 [[pads]] tables")
             if not 0 <= i < len(pads):
                 raise ValueError(f"override key {key!r} is invalid; valid pad indices: 0..{len(pads) - 1}")
             if parts[2] not in {f.name for f in fields(PadConfig)}:
@@ -410,7 +491,10 @@ def apply_overrides(d: dict, overrides: dict) -> dict:
         names = {f.name for f in fields(_SECTIONS[parts[0]])}
         if parts[1] not in names:
             raise ValueError(f"override key {key!r} is invalid; valid keys of [{parts[0]}]: {', '.join(sorted(names))}")
-        out.setdefault(parts[0], {})[parts[1]] = value
+        section = out.setdefault(parts[0], {})
+        if not isinstance(section, dict):  # the config file gave a value where the table belongs
+            raise ValueError(f"{parts[0]}={section!r} is invalid; valid type: table")
+        section[parts[1]] = value
     return out
 
 
@@ -427,3 +511,35 @@ def policy_context(cfg: MissionConfig):
     lm_h = float(model.lm_h(0.0, 0.0, cfg.mission.hover_gap_m))
     return PolicyContext(link=cfg.link.link_params(model.l1_h, model.l2_h, lm_h),
                          control_period_s=cfg.sim.control_period_s, rated_i2_a=cfg.link.rated_i2_a)
+
+
+def _flat(d: dict) -> dict:
+    """``{"battery.capacity_ah": 1.3, "pads.0.x_m": 0.0, "seed": 7, ...}`` of a config dict."""
+    out = {}
+    for k, v in d.items():
+        if k == "pads":
+            out.update({f"pads.{i}.{n}": x for i, p in enumerate(v) for n, x in p.items()})
+        elif isinstance(v, dict):
+            out.update({f"{k}.{n}": x for n, x in v.items()})
+        else:
+            out[k] = v
+    return out
+
+
+def differing_keys(cfg: MissionConfig, limit: int = 5) -> list[str]:
+    """``key=value`` of at most ``limit`` keys of ``cfg`` that differ from the default mission, the farthest
+    first (by decades from the default value; a key the default lacks or a string counts as farthest):
+    the inputs that may have produced a NaN or an infinity in a run."""
+    default, mine = _flat(config_to_dict(load_config())), _flat(config_to_dict(cfg))
+
+    def distance(k, v):
+        d = default.get(k)
+        if d is None or isinstance(v, str) or isinstance(d, str):
+            return math.inf
+        if v and d:
+            return abs(math.log10(abs(v) / abs(d))) + (0.0 if (v > 0) == (d > 0) else 1.0)
+        return 1.0 + abs(v - d)
+
+    diff = sorted(((distance(k, v), k, v) for k, v in mine.items() if default.get(k, object()) != v),
+                  key=lambda t: -t[0])
+    return [f"{k}={v!r}" for _, k, v in diff[:limit]]

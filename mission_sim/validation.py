@@ -3,10 +3,73 @@
 from __future__ import annotations
 
 import math
+import os
+import stat
 import tomllib
+from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["check_positive", "read_toml_file"]
+__all__ = ["check_positive", "read_toml_file", "Range", "check_range", "check_regular_file"]
+
+
+@dataclass(frozen=True)
+class Range:
+    """The values a real system can have for one parameter: ``[lo, hi]`` (``lo_open`` / ``hi_open``
+    exclude an end; ``integer``: whole numbers only), ``unit`` as written after the range."""
+
+    lo: float
+    hi: float
+    unit: str = ""
+    lo_open: bool = False
+    hi_open: bool = False
+    integer: bool = False
+
+    def contains(self, v) -> bool:
+        """True for a finite number (an integer if ``integer``) inside the range; never raises."""
+        try:
+            v = float(v)
+        except (TypeError, ValueError, OverflowError):
+            return False
+        if not math.isfinite(v) or (self.integer and v != int(v)):
+            return False
+        above = v > self.lo if self.lo_open else v >= self.lo
+        below = v < self.hi if self.hi_open else v <= self.hi
+        return above and below
+
+    def text(self) -> str:
+        """``(0, 100] m/s``, ``integer 1..32``: the text after "valid range:" in every message."""
+        if self.integer:
+            body = f"integer {int(self.lo)}..{int(self.hi)}"
+        else:
+            body = f"{'(' if self.lo_open else '['}{self.lo:.6g}, {self.hi:.6g}{')' if self.hi_open else ']'}"
+        return f"{body} {self.unit}".rstrip()
+
+
+def check_range(key: str, value, rng: Range) -> None:
+    """``ValueError("key=value is invalid; valid range: <rng.text()>")`` unless ``rng`` contains ``value``."""
+    if not rng.contains(value):
+        raise ValueError(f"{key}={value!r} is invalid; valid range: {rng.text()}")
+
+
+def check_regular_file(path, what: str, valid: str = "a regular file") -> Path:
+    """``path`` as a :class:`~pathlib.Path` if it is an existing regular file (or a link to one); checked with
+    ``os.stat`` only, so a FIFO, a socket or a device is refused without being opened (opening a FIFO
+    blocks until a writer appears). ``FileNotFoundError`` when missing, ``ValueError`` for a folder or any
+    other non-regular file, ``OSError`` when it cannot be examined; each one line naming ``what``, the path and
+    ``valid`` (what is expected, e.g. "a TOML file")."""
+    path = Path(path)
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{what} {str(path)!r} does not exist") from None
+    except OSError as exc:
+        raise OSError(f"{what} {str(path)!r} cannot be read: {exc.strerror or exc}") from None
+    if stat.S_ISDIR(mode):
+        raise ValueError(f"{what} {str(path)!r} is a folder; valid: {valid}")
+    if not stat.S_ISREG(mode):
+        kind = "a FIFO (named pipe)" if stat.S_ISFIFO(mode) else "not a regular file"
+        raise ValueError(f"{what} {str(path)!r} is {kind}; valid: {valid}")
+    return path
 
 
 def check_positive(obj, *names: str, allow_zero: bool = False) -> None:
@@ -22,11 +85,7 @@ def read_toml_file(path, what: str = "config file") -> dict:
     """Parse the TOML file ``path``; every failure is a one-line error naming ``what`` and the path:
     ``FileNotFoundError`` when missing, ``ValueError`` for a folder, a non-text (binary) file or bad
     TOML (with the parser's line and column), ``OSError`` when it cannot be read."""
-    path = Path(path)
-    if path.is_dir():
-        raise ValueError(f"{what} {str(path)!r} is a folder; valid: a TOML file")
-    if not path.exists():
-        raise FileNotFoundError(f"{what} {str(path)!r} does not exist")
+    path = check_regular_file(path, what, "a TOML file")
     try:
         text = path.read_bytes().decode("utf-8")
     except UnicodeDecodeError as exc:

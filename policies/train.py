@@ -265,6 +265,10 @@ def _spec(algo, timesteps, o: dict) -> dict:
         from .hyperparams import load_hyperparams
         hp.update(load_hyperparams(o["hyperparams_file"])[0])
     hp.update(o["hyperparams"] or {})
+    import stable_baselines3 as sb3
+
+    from .hyperparams import check_hyperparams
+    check_hyperparams(hp, {"ppo": sb3.PPO, "sac": sb3.SAC, "dqn": sb3.DQN}[algo])  # before anything is created
     cfg = env_config(o["env"])
     spec = dict(algo=algo, timesteps=int(timesteps), seed=int(o["seed"]), n_envs=int(o["n_envs"]),
                 scenario=o["scenario"], hp=hp, config=cfg, env_overrides=dict(o["env"] or {}), cost=o["cost"],

@@ -135,9 +135,9 @@ def test_size_estimate_brackets_a_real_run():
         assert 0.5 * rows < est.rows < 2.0 * rows, (hover_s, est.rows, rows)
         assert est.key == ("sim.control_period_s" if hover_s < 100 else "pads.1.hover_time_s")
         assert check_run_size(cfg) == est
-    big = _config({"pads.1.hover_time_s": 1e9})
-    assert check_run_size(big, force=True).rows > 1e9
-    with pytest.raises(ValueError, match=r"pads\.1\.hover_time_s=1000000000\.0 makes the run too large"):
+    big = _config({"pads.1.hover_time_s": 1e6})  # the longest plausible hover (config.PLAUSIBLE)
+    assert check_run_size(big, force=True).rows > 1e6 / big.sim.traj_dt_s
+    with pytest.raises(ValueError, match=r"pads\.1\.hover_time_s=1000000\.0 makes the run too large"):
         check_run_size(big)
 
 

@@ -9,7 +9,8 @@ from pathlib import Path
 
 __all__ = ["CliError", "OneLineParser", "float_arg", "positive_float", "finite_float", "nonneg_int", "seed_int",
            "parse_set", "write_mission", "prepare_out_dir", "add_progress_flag", "show_progress", "names_help",
-           "lazy_names_help", "policy_names", "scenario_names"]
+           "lazy_names_help", "policy_names", "scenario_names", "int_in", "max_workers", "path_arg", "name_list",
+           "check_out_file"]
 
 
 class CliError(Exception):
@@ -89,19 +90,69 @@ def parse_set(items):
     return out
 
 
-def nonneg_int(name, hi: int | None = None):
-    """argparse type: an integer >= 0 (and <= ``hi``), errors naming the value and the range."""
-    valid = "integer >= 0" if hi is None else f"integer 0..{hi}"
+def int_in(name, lo: int, hi: int | None = None, why: str = ""):
+    """argparse type: an integer in ``lo..hi`` (``hi`` None: no upper end; underscores allowed: 1_000),
+    every error naming the value and the one range text (``why`` follows it, e.g. " (4 per CPU)")."""
+    valid = (f"integer >= {lo}" if hi is None else f"integer {lo}..{hi}") + why
 
     def conv(text):
         try:
             v = int(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name}={text!r} is not an integer") from None
-        if v < 0 or (hi is not None and v > hi):
+        if v < lo or (hi is not None and v > hi):
             raise argparse.ArgumentTypeError(f"{name}={text!r} is invalid; valid range: {valid}")
         return v
     return conv
+
+
+def nonneg_int(name, hi: int | None = None):
+    """argparse type: an integer >= 0 (and <= ``hi``), errors naming the value and the range."""
+    return int_in(name, 0, hi)
+
+
+def max_workers() -> int:
+    """The most worker processes a local cluster may start: 4 per CPU this process may use."""
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cpus = os.cpu_count() or 1
+    return 4 * cpus
+
+
+def path_arg(flag: str):
+    """argparse type: a non-empty path (``Path('')`` would silently be the current folder)."""
+    def conv(text):
+        if not text.strip():
+            raise argparse.ArgumentTypeError(f"{text!r} is empty; valid: a path (for {flag})")
+        return Path(text)
+    return conv
+
+
+def name_list(text: str, flag: str, valid) -> list[str]:
+    """The names of a comma-separated option (``--policies a,b``); ``CliError`` naming ``flag`` when the
+    list is empty (``''``, ``','``) or a name's part before ':' is not in ``valid``."""
+    names = [n.strip() for n in str(text).split(",") if n.strip()]
+    if not names:
+        raise CliError(f"{flag} {text!r} is empty; valid: comma-separated names out of {', '.join(valid)}")
+    for n in names:
+        if n.partition(":")[0] not in valid:
+            raise CliError(f"{flag} {n!r} is invalid; valid values: {', '.join(valid)}")
+    return names
+
+
+def check_out_file(path, flag: str, suffix: str | None = None) -> Path:
+    """An output file path, checked before any work: not a folder, ending in ``suffix`` when given, its
+    folder created and writable (:func:`prepare_out_dir`); ``CliError`` naming ``flag`` otherwise."""
+    path = Path(path)
+    if path.is_dir():
+        example = f" e.g. {str(path / ('out' + (suffix or '')))!r}"
+        raise CliError(f"{flag} {str(path)!r} is a folder; valid: a {suffix.lstrip('.').upper() + ' ' if suffix else ''}"
+                       f"file path,{example}")
+    if suffix is not None and path.suffix.lower() != suffix:
+        raise CliError(f"{flag} {str(path)!r} is invalid; valid: a file name ending in {suffix}")
+    prepare_out_dir(path.parent, f"{flag} folder")
+    return path
 
 
 def seed_int(name="seed"):

@@ -6,11 +6,14 @@ import json
 import sys
 from pathlib import Path
 
+from ..validation import check_regular_file
 from .common import (
     CliError,
     add_progress_flag,
     float_arg,
     lazy_names_help,
+    name_list,
+    path_arg,
     policy_names,
     prepare_out_dir,
     scenario_names,
@@ -30,12 +33,12 @@ def _add_train(sub):
                                    "learning curve PNG.")
     p.add_argument("--algo", choices=("ppo", "sac", "dqn"), required=True)
     p.add_argument("--timesteps", type=int, required=True, help="environment steps to train for")
-    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--out", type=path_arg("--out"), required=True, help="output folder")
     p.add_argument("--seed", type=seed_int(), default=0, help="seed, 0 .. 2^32-1 (default 0)")
     p.add_argument("--n-envs", type=int, default=64, help="parallel windows of the batched env (default 64)")
     lazy_names_help(p.add_argument("--scenario", default="random"),
                     "training scenario (default random: domain randomisation)", scenario_names)
-    p.add_argument("--hyperparams", type=Path, default=None, metavar="FILE",
+    p.add_argument("--hyperparams", type=path_arg("--hyperparams"), default=None, metavar="FILE",
                    help="YAML or JSON model arguments, rl-baselines3-zoo style (policy_kwargs as a dict or "
                         "'dict(...)'); override the defaults")
     p.add_argument("--env", action="append", default=[], metavar="KEY=VALUE",
@@ -62,7 +65,7 @@ def _add_train(sub):
     p.add_argument("--eval-every", type=int, default=50_000, help="env steps between evaluations (default 50000)")
     p.add_argument("--eval-episodes", type=int, default=32, help="held-out evaluation windows (default 32)")
     p.add_argument("--checkpoint-every", type=int, default=100_000, help="env steps between checkpoints")
-    p.add_argument("--resume", type=Path, default=None, metavar="CHECKPOINT.zip",
+    p.add_argument("--resume", type=path_arg("--resume"), default=None, metavar="CHECKPOINT.zip",
                    help="continue from a checkpoint of checkpoints/ (its VecNormalize statistics next to it)")
     add_progress_flag(p)
     p.set_defaults(func=_cmd_train)
@@ -93,8 +96,8 @@ def _check_train(args):
     if args.scenario not in scenario_names():
         raise CliError(f"--scenario {args.scenario!r} is invalid; valid values: {', '.join(scenario_names())}")
     for flag, path in (("--hyperparams", args.hyperparams), ("--resume", args.resume)):
-        if path is not None and not path.is_file():
-            raise CliError(f"{flag} {str(path)!r} does not exist")
+        if path is not None:
+            check_regular_file(path, flag)  # a FIFO is refused without opening it
     if not 0 <= args.probe_episodes <= 1024:
         raise CliError(f"--probe-episodes {args.probe_episodes} is invalid; valid range: 0..1024")
     if args.budget is not None and not args.lagrangian:
@@ -106,6 +109,11 @@ def _cmd_train(args) -> int:
     env = _env_overrides(args.env)
     from policies import require_sb3
     require_sb3()
+    if args.hyperparams is not None:  # malformed, unknown keys, wrong types: refused before --out is created
+        import stable_baselines3 as sb3
+
+        from policies.hyperparams import load_hyperparams
+        load_hyperparams(args.hyperparams, {"ppo": sb3.PPO, "sac": sb3.SAC, "dqn": sb3.DQN}[args.algo])
     prepare_out_dir(args.out)
     from policies.train import train
     try:
@@ -125,7 +133,7 @@ def _cmd_train(args) -> int:
 def _add_compare(sub):
     p = sub.add_parser("compare", help="compare mode-switching policies head to head, with statistics",
                        description="Run every policy through the same closed loop on the same seeded charging "
-                                   "windows (batched env); print per policy and scenario the mean with a 95 %% "
+                                   "windows (batched env); print per policy and scenario the mean with a 95 % "
                                    "bootstrap interval of overshoot, fraction reaching short mode, peak I2, "
                                    "energy before / after the stop, tracking, cost and return, and the paired "
                                    "difference against model_based; write the RM -> SM transitions and the "
@@ -147,7 +155,7 @@ def _add_compare(sub):
                         "(default with the default --policies: the shipped ppo_lagrangian and residual seeds)")
     p.add_argument("--no-frontier", action="store_true", help="skip the budgeted model-based sweep")
     p.add_argument("--format", choices=("table", "json"), default="table")
-    p.add_argument("--out", type=Path, default=Path("out/compare"), help="folder for the figures")
+    p.add_argument("--out", type=path_arg("--out"), default=Path("out/compare"), help="folder for the figures")
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
     add_progress_flag(p)
     p.set_defaults(func=_cmd_compare)
@@ -217,11 +225,19 @@ def _check_compare(args, pols, scns, groups):
                        f"0 .. {2**32 - args.episodes} (episode seeds go up to seed + episodes - 1)")
 
 
+def _listed(text: str, flag: str) -> tuple:
+    """The names of ``--policies`` / ``--scenarios`` (an empty list, ``''`` or ``','``, is refused)."""
+    from envs import SCENARIOS
+    from policies import available
+    valid = [*available()] if flag == "--policies" else list(SCENARIOS)
+    return tuple(name_list(text, flag, valid))
+
+
 def _cmd_compare(args) -> int:
     from policies.compare import DEFAULT_POLICIES, DEFAULT_SCENARIOS, compare, frontier
 
-    pols = tuple(x.strip() for x in args.policies.split(",") if x.strip()) if args.policies else DEFAULT_POLICIES
-    scns = tuple(x.strip() for x in args.scenarios.split(",") if x.strip()) if args.scenarios else DEFAULT_SCENARIOS
+    pols = DEFAULT_POLICIES if args.policies is None else _listed(args.policies, "--policies")
+    scns = DEFAULT_SCENARIOS if args.scenarios is None else _listed(args.scenarios, "--scenarios")
     groups = _train_seed_groups(args.train_seeds)
     if not args.policies and not args.train_seeds and sb3_installed():
         pols, groups = _shipped_seed_rows(pols)

@@ -10,8 +10,11 @@ from pathlib import Path
 from .common import (
     CliError,
     add_progress_flag,
+    check_out_file,
+    float_arg,
     lazy_names_help,
     parse_set,
+    path_arg,
     policy_names,
     positive_float,
     prepare_out_dir,
@@ -23,7 +26,7 @@ from .common import (
 def _mav_common(p):
     lazy_names_help(p.add_argument("--policy", default="model_based"), "receiver policy (default model_based)",
                     policy_names)
-    p.add_argument("--config", type=Path, default=None, help="mission TOML (default: the embedded mission)")
+    p.add_argument("--config", type=path_arg("--config"), default=None, help="mission TOML (default: the embedded mission)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value by dotted key, e.g. --set drone.mass_kg=1.5 (repeatable)")
 
@@ -74,11 +77,11 @@ def _add_replay(sub):
                                    "track (3D GPS fix only) about a pad, run the mission world along it (Lm(t), "
                                    "SBAR, battery) and compare the logged electrical power with the propulsion "
                                    "power model.")
-    p.add_argument("log", type=Path, help="flight log: .tlog, .bin or .ulg")
+    p.add_argument("log", type=path_arg("log"), help="flight log: .tlog, .bin or .ulg")
     p.add_argument("--pad", default=None, metavar="LAT,LON[,ALT]",
                    help="pad position (degrees, degrees, m AMSL); default: the first armed position. "
                         "Write --pad=-35.36,149.16 when the latitude is negative")
-    p.add_argument("--out", type=Path, default=Path("out/replay"), help="output folder (default out/replay)")
+    p.add_argument("--out", type=path_arg("--out"), default=Path("out/replay"), help="output folder (default out/replay)")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--window", default=None, metavar="T0,T1", help="replay only log seconds T0..T1")
     p.add_argument("--ground-gap", type=float, default=None, metavar="M",
@@ -104,10 +107,8 @@ def _cmd_replay(args) -> int:
     if getattr(args, "pads", None) is not None:  # what-if re-flight with pads: its own module
         from .refly import cmd_refly
         return cmd_refly(args)
-    if args.log.is_dir():
-        raise CliError(f"log {str(args.log)!r} is a folder; valid: a .tlog or .bin file")
-    if not args.log.is_file():
-        raise CliError(f"log {str(args.log)!r} does not exist or is not a file")
+    from ..validation import check_regular_file
+    check_regular_file(args.log, "log", "a .tlog, .bin or .ulg file")  # a FIFO: refused without opening it
     pad = parse_geo_point(args.pad) if args.pad is not None else None
     window = parse_window(args.window)
     if args.ground_gap is not None and not (0 <= args.ground_gap <= 1.0):
@@ -232,18 +233,18 @@ def _add_telemetry(sub):
     p.add_argument("--rate", type=positive_float("rate"), default=10.0, help="telemetry rate in Hz (default 10)")
     p.add_argument("--speed", type=_mav_speed, default=1.0,
                    help="simulated seconds per wall second (default 1 = real time; inf = as fast as possible)")
-    p.add_argument("--tlog", type=Path, default=None, help="also write the telemetry to this .tlog")
+    p.add_argument("--tlog", type=path_arg("--tlog"), default=None, help="also write the telemetry to this .tlog")
     p.add_argument("--home", default=None, metavar="LAT,LON,ALT",
                    help="where the first pad is (default ArduPilot SITL home, CMAC: --home=-35.363261,149.165230,584)")
     p.add_argument("--duration", type=positive_float("duration"), default=None, metavar="S",
                    help="stream at most S simulated seconds (default: the whole mission)")
     p.add_argument("--follow", default=None, metavar="udpin:HOST:PORT",
                    help="drive the simulation from a live vehicle's GLOBAL_POSITION_INT instead of the plan")
-    p.add_argument("--follow-time", type=positive_float("follow-time"), default=60.0, metavar="S",
-                   help="with --follow: stop after S wall seconds (default 60)")
-    p.add_argument("--follow-idle", type=positive_float("follow-idle"), default=10.0, metavar="S",
-                   help="with --follow: stop after S seconds without a position, once positions have come "
-                        "(before the first, it waits up to --follow-time; default 10)")
+    p.add_argument("--follow-time", type=float_arg("follow-time", positive=True, hi=7 * 86400), default=60.0,
+                   metavar="S", help="with --follow: stop after S wall seconds, at most 7 days (default 60)")
+    p.add_argument("--follow-idle", type=float_arg("follow-idle", positive=True, hi=86400), default=10.0, metavar="S",
+                   help="with --follow: stop after S seconds without a position once positions have come (before "
+                        "the first, it waits up to --follow-time), at most a day (default 10)")
     p.add_argument("--sysid", type=int, default=1, metavar="ID",
                    help="MAVLink system id of the simulated vehicle, 1..255 (default 1; use another beside a SITL vehicle)")
     p.add_argument("--compid", type=int, default=1, metavar="ID",
@@ -261,6 +262,8 @@ def _cmd_telemetry(args) -> int:
     connect = None if str(args.connect).lower() == "none" else _resolve_connect(telemetry.check_connect(args.connect))
     if connect is None and args.tlog is None:
         raise CliError("--connect none needs --tlog FILE (nothing to send to)")
+    if args.tlog is not None:
+        check_out_file(args.tlog, "--tlog")  # a folder, an unwritable place: refused before the simulation
     telemetry.check_ids(args.sysid, args.compid)
     home = parse_geo_point(args.home, "--home") if args.home else telemetry.DEFAULT_HOME
     if home.alt_m is None:
@@ -272,8 +275,6 @@ def _cmd_telemetry(args) -> int:
     from ..world.runner import run_mission
     from ..world.trajectory import plan_mission
     check_run_size(cfg, force=args.force)
-    if args.tlog is not None:
-        prepare_out_dir(args.tlog.parent, "--tlog folder")
     traj = plan_mission(cfg)
     res = run_mission(cfg, _mav_policy(cfg, args.policy), trajectory=traj, progress=show_progress(args))
     st = telemetry.stream(res.timeseries, connect=connect, rate_hz=args.rate, speed=args.speed, home=home,

@@ -9,9 +9,11 @@ from pathlib import Path
 from .common import (
     CliError,
     add_progress_flag,
+    check_out_file,
     finite_float,
     lazy_names_help,
     parse_set,
+    path_arg,
     policy_names,
     prepare_out_dir,
     show_progress,
@@ -31,7 +33,7 @@ def _add_coupling(sub):
                    help="tilt of the drone coil about the y axis [deg] (default 0)")
     p.add_argument("--exact", action="store_true", help="direct Neumann integral instead of the lookup table")
     p.add_argument("--format", choices=("table", "json"), default="table")
-    p.add_argument("--map", type=Path, default=None, metavar="PNG",
+    p.add_argument("--map", type=path_arg("--map"), default=None, metavar="PNG",
                    help="also write a PNG map of Lm over dx, dy at this dz and tilt")
     p.set_defaults(func=_cmd_coupling)
 
@@ -69,11 +71,7 @@ def _cmd_coupling(args) -> int:
 
 def _check_map_path(path: Path) -> None:
     """``--map`` must name a PNG file in a writable folder."""
-    if path.is_dir():
-        raise CliError(f"--map {str(path)!r} is a folder; valid: a PNG file path, e.g. {str(path / 'lm_map.png')!r}")
-    if path.suffix.lower() != ".png":
-        raise CliError(f"--map {str(path)!r} is invalid; valid: a file name ending in .png")
-    prepare_out_dir(path.parent, "--map folder")
+    check_out_file(path, "--map", ".png")
 
 
 def _add_mission(sub):
@@ -84,17 +82,17 @@ def _add_mission(sub):
                                    "summary.json (last: its presence means the set is complete) to --out. Exit "
                                    "status 0: done; 2: bad input (one line on stderr); 3: the battery was "
                                    "depleted, the mission ended there (results written).")
-    p.add_argument("config", nargs="?", type=Path, default=None, help="mission TOML (default: embedded default)")
-    p.add_argument("--plan", type=Path, default=None, metavar="FILE",
+    p.add_argument("config", nargs="?", type=path_arg("config file"), default=None, help="mission TOML (default: embedded default)")
+    p.add_argument("--plan", type=path_arg("--plan"), default=None, metavar="FILE",
                    help="fly this mission file instead of the config's route: QGroundControl .plan, .waypoints "
                         "(QGC WPL 110), or a flight log (.tlog / .bin: the mission it uploaded, else the track it "
                         "flew); pad frame = ENU about its home (same as [mission] file)")
-    p.add_argument("--pads", type=Path, default=None, metavar="FILE",
+    p.add_argument("--pads", type=path_arg("--pads"), default=None, metavar="FILE",
                    help="charging pads from a CSV (lat,lon[,alt][,hover_time_s]) or GeoJSON Points file "
                         "(same as [mission] pads_file); a loiter item within mission.pad_radius_m of a pad charges there")
     lazy_names_help(p.add_argument("--policy", default="model_based"), "receiver policy (default model_based)",
                     policy_names)
-    p.add_argument("--out", type=Path, default=Path("out/mission"), help="output folder (default out/mission)")
+    p.add_argument("--out", type=path_arg("--out"), default=Path("out/mission"), help="output folder (default out/mission)")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a config value by dotted key, e.g. --set wind.speed_m_s=6 (repeatable)")
@@ -102,6 +100,8 @@ def _add_mission(sub):
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
     p.add_argument("--force", action="store_true", help="run even when the estimated memory or output size "
                    "exceeds the limit (1 GiB each; see docs/robustness.md)")
+    p.add_argument("--dry-run", action="store_true", help="check the config, the policy and the run size, print "
+                   "the size estimate and stop: nothing simulated or written")
     add_progress_flag(p)
     p.set_defaults(func=_cmd_mission)
 
@@ -141,6 +141,8 @@ def _cmd_mission(args) -> int:
     from ..world.runner import run_mission
     cfg = mission_config(args)
     pol = make_policy(args.policy, cfg)
+    if args.dry_run:
+        return _print_estimate(estimate_run(cfg), args)
     prepare_out_dir(args.out)
     compiled = None if estimate_run(cfg).rows >= COMPILE_FROM_ROWS else False
     res = run_mission(cfg, pol, charge=not args.no_charge, progress=show_progress(args), compiled=compiled)
@@ -153,6 +155,19 @@ def _cmd_mission(args) -> int:
     if s.get("battery_depleted"):
         print(f"dronewpt mission: {depletion_text(s)}", file=sys.stderr)
         return 3
+    return 0
+
+
+def _print_estimate(est, args) -> int:
+    """``--dry-run``: the run-size estimate of the checked mission (table or JSON); exit status 0."""
+    out = {"valid": True, "duration_s": est.duration_s, "trajectory_samples": est.samples, "rows": est.rows,
+           "memory_bytes": est.memory_bytes, "output_bytes": est.output_bytes, "dominant_key": est.key}
+    if args.format == "json":
+        print(json.dumps(out))
+    else:
+        print(f"config valid: {est.duration_s:.1f} s simulated, about {est.rows:.3g} time-series rows, "
+              f"~{est.memory_bytes / 1e6:.3g} MB in memory, ~{est.output_bytes / 1e6:.3g} MB of output "
+              f"(largest contribution: {est.key}); nothing simulated (--dry-run)")
     return 0
 
 

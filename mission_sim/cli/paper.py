@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .common import CliError, float_arg, prepare_out_dir
+from .common import CliError, float_arg, path_arg, prepare_out_dir
 
 
 def _add_paper(sub):
@@ -13,7 +13,7 @@ def _add_paper(sub):
                        description="Run the step, ramp and proposed V2* trajectories (RM -> SM) on the "
                                    "Table I link, print Table II beside the paper's, write Fig. 6 as PNG.")
     p.add_argument("--model", default="envelope", help="plant model: envelope (default) or switching")
-    p.add_argument("--out", type=Path, default=Path("out/paper"), help="folder for the figures (default out/paper)")
+    p.add_argument("--out", type=path_arg("--out"), default=Path("out/paper"), help="folder for the figures (default out/paper)")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--control-period", type=float_arg("control-period", positive=True, lo=1e-7, hi=1e-3), default=None,
                    help="controller update period in s, 1e-7 .. 1e-3 (default: rectifier period 1/(2f))")

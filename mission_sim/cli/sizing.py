@@ -6,7 +6,7 @@ import json
 import sys
 from pathlib import Path
 
-from .common import CliError, add_progress_flag, float_arg, prepare_out_dir, show_progress
+from .common import CliError, add_progress_flag, float_arg, name_list, path_arg, prepare_out_dir, show_progress
 
 _COLUMNS = ("peak_i2_a", "diode_rms_a", "diode_avg_a", "switch_rms_a", "required_rating_a", "part", "mass_g",
             "device_mass_g", "sink_mass_g", "conduction_loss_w", "switching_loss_w", "loss_w", "tj_diode_c",
@@ -23,13 +23,13 @@ def _add_sizing(sub):
                    help="paper: the RM -> SM transition on the switching model (default); mission: whole missions "
                         "per policy (envelope currents, instantaneous peak estimate); sweep: per policy, the "
                         "case of a sweep's results (--sweep DIR) with the largest peak |i2|, re-run and sized")
-    p.add_argument("--sweep", type=Path, default=None, metavar="DIR",
+    p.add_argument("--sweep", type=path_arg("--sweep"), default=None, metavar="DIR",
                    help="for --source sweep: the --out folder of a finished `dronewpt sweep` (its base mission "
                         "is --config, default embedded; the fingerprint is checked)")
     p.add_argument("--policies", default=None,
                    help="comma-separated: transitions step, ramp, proposed (paper; default all three) or mission "
                         "policies (mission; default step,ramp,model_based)")
-    p.add_argument("--config", type=Path, default=None, help="mission TOML for --source mission (default: embedded)")
+    p.add_argument("--config", type=path_arg("--config"), default=None, help="mission TOML for --source mission (default: embedded)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="mission config override for --source mission (repeatable)")
     p.add_argument("--devices", default="schottky", help="device preset for the first run and the inverter "
@@ -44,18 +44,14 @@ def _add_sizing(sub):
     p.add_argument("--c-out", type=float_arg("c-out", positive=True, lo=1e-7, hi=1.0), default=4.7e-3,
                    help="open-load study: rectifier output capacitor, F (1e-7 .. 1, default 4.7e-3)")
     p.add_argument("--format", choices=("table", "json"), default="table")
-    p.add_argument("--out", type=Path, default=Path("out/sizing"), help="folder for the figure (default out/sizing)")
+    p.add_argument("--out", type=path_arg("--out"), default=Path("out/sizing"), help="folder for the figure (default out/sizing)")
     p.add_argument("--no-plot", action="store_true", help="skip the figure")
     add_progress_flag(p)
     p.set_defaults(func=_cmd_sizing)
 
 
 def _names(args, valid, default):
-    text = default if args.policies is None else args.policies
-    names = [n.strip() for n in text.split(",") if n.strip()]
-    if not names or any(n.partition(":")[0] not in valid for n in names):
-        raise CliError(f"--policies {text!r} is invalid; valid values: {', '.join(valid)}")
-    return names
+    return name_list(default if args.policies is None else args.policies, "--policies", valid)
 
 
 def _rules(args):

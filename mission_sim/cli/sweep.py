@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import functools
 import json
@@ -10,7 +9,7 @@ import sys
 from pathlib import Path
 
 from ..studies import DEFAULT_MAX_CASES
-from .common import CliError, add_progress_flag, nonneg_int, positive_float, show_progress
+from .common import CliError, add_progress_flag, float_arg, int_in, max_workers, path_arg, show_progress
 
 
 def _add_sweep(sub):
@@ -21,38 +20,28 @@ def _add_sweep(sub):
                                    "summary table and writes trade-off plots to DIR/plots. Exit status 1 if "
                                    "some cases failed (stored with their error) or did not finish. "
                                    "`dronewpt sweep --status DIR` prints how many cases are done, failed, pending.")
-    p.add_argument("study", type=Path, nargs="?", metavar="STUDY.toml",
+    p.add_argument("study", type=path_arg("study file"), nargs="?", metavar="STUDY.toml",
                    help="study TOML file (see examples/study_small.toml)")
-    p.add_argument("--out", type=Path, metavar="DIR", help="output folder (created; reused to resume)")
-    p.add_argument("--status", type=Path, metavar="DIR", default=None,
+    p.add_argument("--out", type=path_arg("--out"), metavar="DIR", help="output folder (created; reused to resume)")
+    p.add_argument("--status", type=path_arg("--status"), metavar="DIR", default=None,
                    help="print the counts of done, failed and pending cases of the sweep in DIR and exit")
-    p.add_argument("--max-cases", type=positive_int("max-cases"), default=DEFAULT_MAX_CASES, metavar="N",
+    p.add_argument("--max-cases", type=int_in("max-cases", 1), default=DEFAULT_MAX_CASES, metavar="N",
                    help=f"refuse a study of more than N cases before any work (default {DEFAULT_MAX_CASES:,})")
     p.add_argument("--retry-errors", action="store_true",
                    help="also re-run the cases stored with status 'error' (their new row replaces the old one)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS", help="address of an existing Dask scheduler "
                                                       "(e.g. tcp://10.0.0.5:8786); default: a local cluster")
-    p.add_argument("--connect-timeout", type=positive_float("connect-timeout"), default=10.0, metavar="S",
-                   help="seconds to wait for --scheduler (default 10)")
-    p.add_argument("--workers", type=nonneg_int("workers"), default=None, metavar="N",
-                   help="worker processes of the local cluster (default: one per CPU; 0 = run serially "
-                        "in this process without Dask)")
+    p.add_argument("--connect-timeout", type=float_arg("connect-timeout", positive=True, hi=3600), default=10.0,
+                   metavar="S", help="seconds to wait for --scheduler, at most 3600 (default 10)")
+    p.add_argument("--workers", type=int_in("workers", 0, max_workers(), " (4 per CPU)"), default=None, metavar="N",
+                   help="worker processes of the local cluster, 0 .. 4 per CPU (default: one per CPU; 0 = run "
+                        "serially in this process without Dask)")
+    p.add_argument("--force", action="store_true", help="add this study's cases to an --out folder that holds "
+                   "another study (default: refused; the same study resumes)")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--no-plot", action="store_true", help="skip the PNG plots")
     add_progress_flag(p)
     p.set_defaults(func=_cmd_sweep)
-
-
-def positive_int(name):
-    """argparse type: an integer >= 1 (underscores allowed: 1_000_000)."""
-    conv = nonneg_int(name)
-
-    def pos(text):
-        v = conv(text)
-        if v < 1:
-            raise argparse.ArgumentTypeError(f"{name}={text!r} is invalid; valid range: integer >= 1")
-        return v
-    return pos
 
 
 def _check_scheduler_address(address: str) -> None:
@@ -124,11 +113,15 @@ def _client_factory(args):
 
 def _run(args, st, runner, cases, fingerprint):
     from ..studies import sweep
-    from ..studies.status import write_manifest
+    from ..studies.status import check_same_study, write_manifest
 
+    def before_run():  # under the store's lock: another study in --out is refused unless --force
+        if not args.force:
+            check_same_study(args.out, st, fingerprint, len(cases))
+        write_manifest(args.out, st, fingerprint, len(cases))
     return sweep.run_sweep(cases, runner, args.out, client_factory=_client_factory(args),
                            progress=show_progress(args), progress_desc=st.name, retry_errors=args.retry_errors,
-                           before_run=lambda: write_manifest(args.out, st, fingerprint, len(cases)))
+                           before_run=before_run)
 
 
 def _term(signum, frame):  # SIGTERM -> KeyboardInterrupt: rows received are stored, cluster closed, one line

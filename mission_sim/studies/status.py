@@ -16,7 +16,7 @@ from pathlib import Path
 from .store import CaseStore
 from .study import Study, case_space, parse_study
 
-__all__ = ["SweepStatus", "write_manifest", "read_manifest", "sweep_status", "MANIFEST"]
+__all__ = ["SweepStatus", "write_manifest", "read_manifest", "sweep_status", "MANIFEST", "check_same_study"]
 
 MANIFEST = "sweep.json"
 
@@ -41,25 +41,46 @@ class SweepStatus:
                 f"{self.failed:,} failed, {self.pending:,} pending{other}")
 
 
-def write_manifest(out_dir, study: Study, fingerprint: str, n_cases: int) -> Path:
-    """Write ``out_dir/sweep.json`` atomically (the base mission is named by its fingerprint only)."""
+def _manifest(study: Study, fingerprint: str, n_cases: int) -> dict:
+    """The manifest's content (the base mission is named by its fingerprint only)."""
     doc = json.loads(json.dumps(study.source, default=str))
     doc.get("study", {}).pop("base", None)  # the fingerprint stands for it; the path may not resolve later
+    return {"study": study.name, "n_cases": n_cases, "fingerprint": fingerprint, "doc": doc}
+
+
+def check_same_study(out_dir, study: Study, fingerprint: str, n_cases: int) -> None:
+    """``ValueError`` (one line naming ``--out``) when ``out_dir`` already holds the manifest of another
+    study (other parameters or another base mission); the same study (a resume) and a new folder pass."""
+    if not (Path(out_dir) / MANIFEST).is_file():
+        return
+    old, new = read_manifest(out_dir, "--out"), _manifest(study, fingerprint, n_cases)
+    if old.get("doc") == new["doc"] and old.get("fingerprint") == new["fingerprint"]:
+        return
+    what = "another base mission" if old.get("doc") == new["doc"] else "other parameters"
+    raise ValueError(f"--out {str(out_dir)!r} holds another study ({old.get('study')!r}, {old.get('n_cases')} "
+                     f"cases, {what}); valid: a new --out folder, the same study to resume it, or --force to add "
+                     "this study's cases to it (its sweep.json then describes this study)")
+
+
+def write_manifest(out_dir, study: Study, fingerprint: str, n_cases: int) -> Path:
+    """Write ``out_dir/sweep.json`` atomically (:func:`_manifest`)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     tmp = out / f".{MANIFEST}.{os.getpid()}.tmp"
-    tmp.write_text(json.dumps({"study": study.name, "n_cases": n_cases, "fingerprint": fingerprint,
-                               "doc": doc}, indent=1))
+    tmp.write_text(json.dumps(_manifest(study, fingerprint, n_cases), indent=1))
     os.replace(tmp, out / MANIFEST)
     return out / MANIFEST
 
 
-def read_manifest(out_dir) -> dict:
+def read_manifest(out_dir, flag: str = "--status") -> dict:
+    """The manifest of sweep folder ``out_dir``; errors name ``flag`` (the option that gave the folder)."""
     path = Path(out_dir) / MANIFEST
+    if Path(out_dir).exists() and not Path(out_dir).is_dir():
+        raise ValueError(f"{flag} {str(out_dir)!r} is a file; valid: the --out folder of a sweep")
     if not Path(out_dir).is_dir():
-        raise FileNotFoundError(f"--status {str(out_dir)!r}: no such folder")
+        raise FileNotFoundError(f"{flag} {str(out_dir)!r}: no such folder")
     if not path.is_file():
-        raise FileNotFoundError(f"--status {str(out_dir)!r} is not a sweep folder (no {MANIFEST}); "
+        raise FileNotFoundError(f"{flag} {str(out_dir)!r} is not a sweep folder (no {MANIFEST}); "
                                 "valid: the --out folder of a sweep")
     try:
         return json.loads(path.read_text())

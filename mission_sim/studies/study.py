@@ -268,8 +268,8 @@ def _parse_head(head: dict, base_dir):
         base_path = Path(head["base"])
         if not base_path.is_absolute() and base_dir is not None:
             base_path = Path(base_dir) / base_path
-        if not base_path.is_file():
-            raise FileNotFoundError(f"[study] base = {head['base']!r}: mission file {str(base_path)!r} does not exist")
+        from ..validation import check_regular_file
+        check_regular_file(base_path, f"[study] base = {head['base']!r}: mission file", "a TOML file")
     runner = head.get("runner")
     if runner is not None and (not isinstance(runner, str) or runner.count(":") != 1):
         raise ValueError(f"[study] runner = {runner!r} is invalid; valid: 'package.module:factory'")

@@ -43,7 +43,7 @@ def worst_cases(out_dir, metric: str = "peak_i2_a", base: dict | None = None) ->
     ``base`` (the base mission dict, ``config_to_dict``) is checked against the manifest's
     fingerprint when given. ``ValueError`` naming the folder when it holds no sweep, no ok rows, no
     ``metric`` column, or was run on another base mission or with a custom case runner."""
-    man = read_manifest(out_dir)
+    man = read_manifest(out_dir, "--sweep")
     if man.get("doc", {}).get("study", {}).get("runner"):
         raise ValueError(f"sweep {str(out_dir)!r} ran a custom case runner ({man['doc']['study']['runner']}); "
                          "valid: a sweep of missions")

@@ -33,7 +33,12 @@ from .linkstep import LinkStepper
 from .results import MissionResult
 from .trajectory import Trajectory
 
-__all__ = ["MissionLoop", "ENERGISE_PHASES"]
+__all__ = ["MissionLoop", "ENERGISE_PHASES", "NonFiniteError"]
+
+
+class NonFiniteError(ValueError):
+    """A NaN or an infinity inside a run; :func:`mission_sim.world.runner.run_mission` adds the inputs
+    that may have produced it (the config keys farthest from the default mission)."""
 
 ENERGISE_PHASES = ("charge", "hover")
 _FOUR_PI = 4.0 / math.pi
@@ -386,7 +391,7 @@ class MissionLoop:
         obs = normalise_obs(np.array([[i2m, self.last_vl, self.last_ib, self.last_il, self.soc, self.cmd, self.d, t_since]]))
         out = float(np.asarray(self.policy.act(obs)).reshape(-1)[0])
         if not math.isfinite(out):
-            raise ValueError(f"policy {getattr(self.policy, 'name', self.policy)!r} returned d_short={out!r}; "
+            raise NonFiniteError(f"policy {getattr(self.policy, 'name', self.policy)!r} returned d_short={out!r}; "
                              f"valid range: [0, 1]")
         return min(max(out, 0.0), 1.0)
 

@@ -58,7 +58,7 @@ import time
 
 import numpy as np
 
-from .loop import ENERGISE_PHASES, MissionLoop
+from .loop import ENERGISE_PHASES, MissionLoop, NonFiniteError
 from .power import hover_power_w
 from .results import MissionResult
 from .trajectory import Trajectory, plan_mission
@@ -99,6 +99,22 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     ``kernel`` hook, no sensor noise: :mod:`.fastpath`), False the pure-Python reference loop, True
     requires the compiled loop (``ValueError`` if it does not apply).
     """
+    try:
+        res = _run_mission(cfg, policy, trajectory, charge, progress, compiled)
+        bad = [k for k, v in res.summary.items() if isinstance(v, float) and not np.isfinite(v)]
+        if bad:
+            raise NonFiniteError(f"the run's {bad[0]} is {res.summary[bad[0]]!r}")
+    except NonFiniteError as exc:
+        from ..config import differing_keys
+        keys = differing_keys(cfg)
+        raise NonFiniteError(f"{exc} (a non-finite value in the run; " + (
+            f"the inputs that differ from the default mission, farthest first: {', '.join(keys)})" if keys else
+            "with the default mission's inputs)")) from None
+    return res
+
+
+def _run_mission(cfg, policy, trajectory, charge, progress, compiled) -> MissionResult:
+    """:func:`run_mission` without the check for non-finite results."""
     wall0 = time.perf_counter()
     traj = plan_mission(cfg) if trajectory is None else trajectory
     fast = compiled if compiled is not None else importlib.util.find_spec("numba") is not None
