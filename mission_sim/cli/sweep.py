@@ -131,23 +131,11 @@ def _run(args, st, runner, cases, fingerprint):
                            before_run=lambda: write_manifest(args.out, st, fingerprint, len(cases)))
 
 
-def _term(signum, frame):  # SIGTERM -> KeyboardInterrupt: rows received are stored, cluster closed, one line
-    raise KeyboardInterrupt
-
-
 def _cmd_sweep(args) -> int:
-    import signal
-
+    # SIGTERM, like Ctrl-C, raises mission_sim.signals.Interrupted (installed by main for every command):
+    # the rows received are stored, the cluster closed, one line
     if args.status is not None:
         return _cmd_status(args)
-    old = signal.signal(signal.SIGTERM, _term)
-    try:
-        return _sweep(args)
-    finally:
-        signal.signal(signal.SIGTERM, old)
-
-
-def _sweep(args) -> int:
     _check_args(args)
     st, runner, cases, fingerprint = _prepare(args)
     res = _run(args, st, runner, cases, fingerprint)

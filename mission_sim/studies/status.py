@@ -13,6 +13,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..files import atomic_output
 from .store import CaseStore
 from .study import Study, case_space, parse_study
 
@@ -47,10 +48,9 @@ def write_manifest(out_dir, study: Study, fingerprint: str, n_cases: int) -> Pat
     doc.get("study", {}).pop("base", None)  # the fingerprint stands for it; the path may not resolve later
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    tmp = out / f".{MANIFEST}.{os.getpid()}.tmp"
-    tmp.write_text(json.dumps({"study": study.name, "n_cases": n_cases, "fingerprint": fingerprint,
-                               "doc": doc}, indent=1))
-    os.replace(tmp, out / MANIFEST)
+    with atomic_output(out / MANIFEST, tmp_name=f".{MANIFEST}.{os.getpid()}.tmp") as tmp:
+        tmp.write_text(json.dumps({"study": study.name, "n_cases": n_cases, "fingerprint": fingerprint,
+                                   "doc": doc}, indent=1))
     return out / MANIFEST
 
 
