@@ -160,7 +160,7 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
     groups = [(p, [p]) for p in policies] + list((train_seeds or {}).items())
     rows, traces = [], {}
     jobs = [(s, g) for s in scenarios for g in groups]
-    bar = tqdm(total=len(jobs), desc="compare", unit="run", disable=not progress)
+    bar = tqdm(total=len(jobs), desc="compare", unit="run", disable=not progress, dynamic_ncols=True)
     for s in scenarios:
         ref_tr = run_policy(reference, s, int(episodes), int(seed), config)
         for label, specs in groups:
@@ -174,12 +174,17 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
     return rows, traces
 
 
-def frontier(scenario: str = "nominal", budgets=None, episodes: int = DEFAULT_EPISODES, seed: int = 1000, config=None):
-    """The budgeted model-based curve: one row per overshoot budget (:mod:`policies.budgeted`)."""
+def frontier(scenario: str = "nominal", budgets=None, episodes: int = DEFAULT_EPISODES, seed: int = 1000, config=None,
+             progress: bool = False):
+    """The budgeted model-based curve: one row per overshoot budget (:mod:`policies.budgeted`);
+    ``progress``: a tqdm bar over the budgets."""
+    from tqdm import tqdm
+
     from .budgeted import BUDGET_SWEEP
 
     out = []
-    for b in (BUDGET_SWEEP if budgets is None else budgets):
+    budgets = BUDGET_SWEEP if budgets is None else budgets
+    for b in tqdm(budgets, desc="frontier", unit="budget", disable=not progress, leave=False):
         row = _row_one(f"model_based_budget:{b:g}", scenario, run_policy(f"model_based_budget:{b:g}", scenario,
                                                                           episodes, seed, config).metrics, None)
         out.append({"budget": float(b), **row})

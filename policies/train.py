@@ -286,6 +286,18 @@ def _spec(algo, timesteps, o: dict) -> dict:
     return spec
 
 
+def _written_dirs(dirs: dict) -> dict:
+    """The folders of ``dirs`` that hold files; empty ones (no evaluation or checkpoint was due within
+    ``--timesteps``: SB3 creates them up front) are removed and left out."""
+    out = {}
+    for key, d in dirs.items():
+        if d.is_dir() and any(d.iterdir()):
+            out[key] = d
+        elif d.is_dir():
+            d.rmdir()
+    return out
+
+
 def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64, scenario: str = "random",
           progress: bool = True, hyperparams: dict | None = None, hyperparams_file=None, env: dict | None = None,
           cost: str = "overshoot", lagrangian: bool = False, budget: float | None = None, lambda_lr: float = 50.0,
@@ -343,7 +355,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     venv.close()
     mon = out / "monitor.monitor.csv"
     res = {"model": zip_path, "meta": meta_path, "vecnormalize": out / "vecnormalize.pkl", "monitor": mon,
-           "eval_dir": out / "eval", "checkpoints": out / "checkpoints"}
+           **_written_dirs({"eval_dir": out / "eval", "checkpoints": out / "checkpoints"})}
     if mon.is_file():
         res["learning_curve"] = plot_learning_curve(mon, out / "learning_curve.png",
                                                     f"{algo.upper()} on {spec['env_id']} ({scenario})", ev.curve)

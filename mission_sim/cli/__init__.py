@@ -10,6 +10,7 @@ subcommands import what they need lazily, inside the function that runs them.
 ``learning``  ``train`` and ``compare`` (envs and policies, imported lazily)
 ``sweep``     ``sweep`` (parameter studies on Dask)
 ``sizing``    ``sizing`` (rectifier rating, parts and mass per policy)
+``notices``   the one-line notice when numba compiles kernels (first run on a machine)
 ============  ==================================================================
 """
 
@@ -20,7 +21,7 @@ import sys
 
 from ..files import OutputError
 from . import learning, mavlink, mission, paper, sizing, sweep
-from .common import CliError, OneLineParser
+from .common import CliError, OneLineParser, show_progress
 
 __all__ = ["main", "build_parser"]
 
@@ -59,6 +60,9 @@ def _main(argv=None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    if show_progress(args):  # a terminal: say so when numba compiles (the first run's silent half-minute)
+        from .notices import announce_compilation
+        announce_compilation()
     try:
         return int(args.func(args) or 0)
     except BrokenPipeError:  # output piped into head & co.: not an error of ours

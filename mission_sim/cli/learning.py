@@ -125,7 +125,7 @@ def _cmd_train(args) -> int:
 def _add_compare(sub):
     p = sub.add_parser("compare", help="compare mode-switching policies head to head, with statistics",
                        description="Run every policy through the same closed loop on the same seeded charging "
-                                   "windows (batched env); print per policy and scenario the mean with a 95 %% "
+                                   "windows (batched env); print per policy and scenario the mean with a 95 % "
                                    "bootstrap interval of overshoot, fraction reaching short mode, peak I2, "
                                    "energy before / after the stop, tracking, cost and return, and the paired "
                                    "difference against model_based; write the RM -> SM transitions and the "
@@ -231,7 +231,8 @@ def _cmd_compare(args) -> int:
         prepare_out_dir(args.out)
     try:
         rows, traces = compare(pols, scns, args.episodes, args.seed, progress=show_progress(args), train_seeds=groups)
-        sweep = [] if args.no_frontier else frontier(scns[0], episodes=args.episodes, seed=args.seed)
+        sweep = [] if args.no_frontier else frontier(scns[0], episodes=args.episodes, seed=args.seed,
+                                                          progress=show_progress(args))
     except (ValueError, FileNotFoundError) as exc:
         raise CliError(str(exc)) from None
     figs = [] if args.no_plot else _compare_figures(traces, rows, sweep, scns[0], args.out)

@@ -54,15 +54,15 @@ class MissionResult:
         paths = [out / "timeseries.parquet", out / "timeseries.csv"]
         steps = 3 + (figures is not None)
         with _files_bar(steps, progress) as bar:
-            bar.set_postfix_str(paths[0].name)
+            bar.set_description_str(f"writing {paths[0].name}")
             with atomic_output(paths[0]) as tmp:
                 ts.to_parquet(tmp, index=False)
             bar.update(1)
-            bar.set_postfix_str(paths[1].name)
+            bar.set_description_str(f"writing {paths[1].name}")
             with atomic_output(paths[1]) as tmp:
                 _write_csv(ts, tmp, bar.update)
             if figures is not None:
-                bar.set_postfix_str("figures")
+                bar.set_description_str("writing figures")
                 paths.extend(Path(f) for f in figures(self, out))
                 bar.update(1)
             paths.append(out / "summary.json")
@@ -79,7 +79,7 @@ class _NoBar(contextlib.nullcontext):
     def update(self, n=1):
         pass
 
-    def set_postfix_str(self, s=""):
+    def set_description_str(self, s=""):
         pass
 
 
@@ -89,7 +89,7 @@ def _files_bar(steps: int, progress: bool):
         return _NoBar()
     from tqdm import tqdm
     return tqdm(total=steps, unit="file", desc="writing", leave=False, dynamic_ncols=True,
-                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total} files {postfix} [{elapsed}<{remaining}]")
+                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total} files [{elapsed}<{remaining}]")
 
 
 #: rows per chunk of the CSV write (progress between chunks; the text is the same as one ``to_csv``)
