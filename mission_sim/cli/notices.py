@@ -45,13 +45,20 @@ def _register() -> None:
 
 
 class _AfterNumbaImport:
-    """Meta-path finder: lets numba import as usual, then registers the listener."""
+    """Meta-path finder: lets numba import as usual, then registers the listener and leaves
+    ``sys.meta_path``. (A mere ``importlib.util.find_spec("numba")``, which asks the finders without
+    importing, leaves it in place.)"""
+
+    busy = False
 
     def find_spec(self, name, path=None, target=None):
-        if name != "numba":
+        if name != "numba" or self.busy:
             return None
-        sys.meta_path.remove(self)
-        spec = importlib.util.find_spec("numba")
+        self.busy = True
+        try:
+            spec = importlib.util.find_spec("numba")  # the finders after this one
+        finally:
+            self.busy = False
         if spec is None or spec.loader is None or not hasattr(spec.loader, "exec_module"):
             return spec
         exec_module = spec.loader.exec_module
@@ -59,6 +66,8 @@ class _AfterNumbaImport:
         def exec_then_register(module):
             exec_module(module)
             _register()
+            if self in sys.meta_path:
+                sys.meta_path.remove(self)
         spec.loader.exec_module = exec_then_register
         return spec
 
