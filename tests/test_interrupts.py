@@ -289,3 +289,16 @@ def test_train_lists_only_the_folders_it_wrote(tmp_path):
     (tmp_path / "checkpoints" / "a_100_steps.zip").write_bytes(b"z")
     got = _written_dirs({"eval_dir": tmp_path / "eval", "checkpoints": tmp_path / "checkpoints"})
     assert got == {"checkpoints": tmp_path / "checkpoints"} and not (tmp_path / "eval").exists()
+
+
+def test_after_warmup_every_kernel_loads_from_the_cache():
+    """``dronewpt warmup`` compiles (or loads) every stage; run again in a new process, no stage compiles
+    anything: numba fires its compile event only on a cache miss, so every kernel the commands use was
+    written to the cache by the first run."""
+    import json
+    runs = [subprocess.run(_cli("warmup", "--format", "json"), cwd=ROOT, env=_env(), capture_output=True, text=True,
+                           timeout=900) for _ in range(2)]
+    assert all(r.returncode == 0 for r in runs), runs[-1].stderr
+    first, second = (json.loads(r.stdout) for r in runs)
+    assert [s["stage"] for s in first["stages"]] == [s["stage"] for s in second["stages"]] and len(first["stages"]) == 3
+    assert [s["kernels_compiled"] for s in second["stages"]] == [0, 0, 0]

@@ -10,6 +10,7 @@ subcommands import what they need lazily, inside the function that runs them.
 ``learning``  ``train`` and ``compare`` (envs and policies, imported lazily)
 ``sweep``     ``sweep`` (parameter studies on Dask)
 ``sizing``    ``sizing`` (rectifier rating, parts and mass per policy)
+``warmup``    ``warmup`` (compile the numba kernels ahead, once per machine)
 ``notices``   the one-line notice when numba compiles kernels (first run on a machine)
 ============  ==================================================================
 """
@@ -20,7 +21,7 @@ import argparse
 import sys
 
 from ..files import OutputError
-from . import learning, mavlink, mission, paper, sizing, sweep
+from . import learning, mavlink, mission, paper, sizing, sweep, warmup
 from .common import CliError, OneLineParser, show_progress
 
 __all__ = ["main", "build_parser"]
@@ -43,7 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"dronewpt {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for add in (paper._add_paper, mission._add_coupling, mission._add_mission, mavlink._add_replay, mavlink._add_telemetry,
-                learning._add_train, learning._add_compare, sweep._add_sweep, sizing._add_sizing):
+                learning._add_train, learning._add_compare, sweep._add_sweep, sizing._add_sizing,
+                warmup._add_warmup):
         add(sub)
     return parser
 
