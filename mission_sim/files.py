@@ -16,7 +16,7 @@ import os
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["atomic_output", "OutputError", "folder_lock", "FolderBusy"]
+__all__ = ["atomic_output", "OutputError", "storage_error", "folder_lock", "FolderBusy"]
 
 #: errors of the storage, not of the data: reported as :class:`OutputError` naming the file
 _STORAGE_ERRNOS = {errno.ENOSPC: "no space left on the device", errno.EFBIG: "file too large (the file-size "
@@ -36,7 +36,8 @@ class OutputError(OSError):
         return f"cannot write {str(self.path)!r}: {self.reason}; nothing partial was left"
 
 
-def _storage_error(exc: OSError, path) -> OutputError | None:
+def storage_error(exc: OSError, path) -> OutputError | None:
+    """``exc`` as an :class:`OutputError` naming ``path`` if it is a storage error, else None."""
     reason = _STORAGE_ERRNOS.get(getattr(exc, "errno", None))
     return None if reason is None else OutputError(path, exc.errno, reason)
 
@@ -59,7 +60,7 @@ def atomic_output(path, tmp_name: str | None = None, fsync: bool = False):
     except OutputError:
         raise
     except OSError as exc:
-        named = _storage_error(exc, path)
+        named = storage_error(exc, path)
         if named is None:
             raise
         raise named from None

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mission_sim.files import atomic_output
+
 from .stats import mean_ci, seed_ci
 
 __all__ = ["METRICS", "EpisodeTraces", "run_policy", "compare", "frontier", "DEFAULT_POLICIES", "DEFAULT_SCENARIOS",
@@ -219,7 +221,8 @@ def plot_transitions(traces: dict, scenario: str, out_png, episode: int = 0, win
     a2.set_xlabel("time after the stop command [ms]")
     a2.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(out_png, dpi=110)
+    with atomic_output(out_png) as tmp:  # removed on failure (a full disk: the file named)
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
     return out_png
 
@@ -253,6 +256,7 @@ def plot_frontier(rows, sweep, scenario: str, out_png, x: str = "overshoot_pct")
     axes[0].legend(fontsize=7)
     fig.suptitle(f"{scenario}: means with 95 % intervals")
     fig.tight_layout()
-    fig.savefig(out_png, dpi=110)
+    with atomic_output(out_png) as tmp:  # removed on failure (a full disk: the file named)
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
     return out_png

@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mission_sim.files import atomic_output
+
 from .rl import ALGOS
 
 __all__ = ["train", "plot_learning_curve", "DEFAULT_HYPERPARAMS", "env_config", "EVAL_SEED", "VEC_PATHS"]
@@ -108,7 +110,8 @@ def plot_learning_curve(monitor_csv, out_png, title: str, eval_curve=None) -> Pa
     axes[1].set_xlabel("environment steps")
     fig.tight_layout()
     out_png = Path(out_png)
-    fig.savefig(out_png, dpi=110)
+    with atomic_output(out_png) as tmp:  # removed on failure (a full disk: the file named)
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
     return out_png
 

@@ -160,7 +160,9 @@ def _report(args, st, res) -> None:
     errors = sweep_report.error_table(res.results)
     figs = [] if args.no_plot else sweep_report.plot_sweep(res.results, st, args.out / "plots")
     if not table.empty:
-        table.to_csv(args.out / "summary.csv")
+        from ..files import atomic_output
+        with atomic_output(args.out / "summary.csv") as tmp:  # a full disk: named, nothing partial
+            table.to_csv(tmp)
     counts = {"study": st.name, "out": str(args.out), "cases": res.n_cases, "skipped": res.n_skipped,
               "run": res.n_run, "ok": res.n_ok, "errors": res.n_error, "missing": res.n_missing,
               "wall_s": round(res.wall_s, 3), "compact_s": round(res.compact_s, 3),
