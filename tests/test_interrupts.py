@@ -133,6 +133,39 @@ def test_file_size_limit_names_the_file_and_leaves_no_temporary_file(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == []  # no temporary file, no lock, no summary
 
 
+def test_sweep_under_a_file_size_limit_names_the_file_and_leaves_no_temporary_file(tmp_path):
+    """Case 18 of issue 25, ``sweep`` under ``ulimit -f``: was "[Errno 27] File too large" naming no file
+    and a ``.compact-*.parquet.*.tmp`` left; now one line naming the Parquet file, exit 4, no
+    temporary file, no lock."""
+    study = tmp_path / "s.toml"
+    study.write_text('[study]\nrunner = "sweep_toy:factory"\n[grid]\n"mission.hover_time_s" = '
+                     f"{[float(h) for h in range(1, 201)]}\n")
+    out = tmp_path / "o"
+    proc = subprocess.run(_cli("sweep", str(study), "--out", str(out), "--workers", "0", "--no-plot"), cwd=ROOT,
+                          env=_env(), capture_output=True, text=True, timeout=300, preexec_fn=_fsize_limit(8192))
+    lines = proc.stderr.splitlines()
+    assert proc.returncode == 4 and len(lines) == 1, proc.stderr
+    assert f"dronewpt sweep: error: cannot write {str(out / 'cases')!r}"[:-1] in lines[0] and ".parquet'" in lines[0]
+    assert "file too large" in lines[0] and _hidden(out) == []
+
+
+def test_tlog_writer_names_its_file_on_a_full_disk(tmp_path):
+    from mission_sim.mavlink.telemetry import TlogWriter
+
+    class FullDisk:
+        def write(self, data):
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+        def close(self):
+            pass
+    w = TlogWriter(tmp_path / "t.tlog")
+    w._fh.close()
+    w._fh = FullDisk()
+    with pytest.raises(OutputError, match="no space left on the device") as info:
+        w.write(b"frame", 0.0)
+    assert info.value.path == tmp_path / "t.tlog"
+
+
 def test_full_disk_in_a_sweep_names_the_file_and_leaves_no_temporary_file(tmp_path, monkeypatch):
     """ENOSPC in the middle of writing a part of the sweep store: OutputError naming the part under
     ``cases/``, its temporary file removed, no ``.sweep.lock``, the parts written before intact."""
