@@ -4,7 +4,9 @@
 ``contract``        the observation/action contract and the :class:`Policy` protocol, shared by
                     the mission loop, the envs and every policy
 ``validation``      one-line checks of physical parameters
-``files``           atomic output files (temporary name, then rename)
+``files``           atomic output files (temporary name, then rename; storage errors name the
+                    file) and the writer lock of an output folder
+``signals``         SIGTERM handled like Ctrl-C (:class:`Interrupted`, exit 130 / 143)
 ``config``          the mission configuration (TOML, ``default_mission.toml``), ``--set`` overrides
 ``world/``          the physical world: trajectory, wind, drone power, battery, the link step,
                     the mission loop and its results

@@ -1,23 +1,107 @@
-"""Writing output files so that an interrupted run never leaves a truncated file under its final name."""
+"""Writing output files so that a failed or interrupted run never leaves a truncated file under its
+final name nor a temporary file beside it, and one writer per output folder.
+
+:func:`atomic_output` is the one place where temporary files are made, renamed and removed (the
+mission's files, figures, the sweep's Parquet parts and merges, replay outputs); a full disk or a
+file-size limit there becomes :class:`OutputError`, one line naming the file. :func:`folder_lock`
+is the writer lock of ``mission --out`` and of a sweep's folder.
+"""
 
 from __future__ import annotations
 
+import contextlib
+import errno
+import fcntl
 import os
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["atomic_output"]
+__all__ = ["atomic_output", "OutputError", "storage_error", "folder_lock", "FolderBusy"]
+
+#: errors of the storage, not of the data: reported as :class:`OutputError` naming the file
+_STORAGE_ERRNOS = {errno.ENOSPC: "no space left on the device", errno.EFBIG: "file too large (the file-size "
+                   "limit, ulimit -f, or the file system's)", errno.EDQUOT: "disk quota exceeded",
+                   errno.EIO: "input/output error", errno.EROFS: "read-only file system"}
+
+
+class OutputError(OSError):
+    """An output file could not be written (disk full, file-size limit, quota, I/O error): one line
+    naming the file; its temporary file has been removed."""
+
+    def __init__(self, path, err: int, reason: str):
+        super().__init__(err, reason, str(path))
+        self.path, self.reason = Path(path), reason
+
+    def __str__(self) -> str:
+        return f"cannot write {str(self.path)!r}: {self.reason}; nothing partial was left"
+
+
+def storage_error(exc: OSError, path) -> OutputError | None:
+    """``exc`` as an :class:`OutputError` naming ``path`` if it is a storage error, else None."""
+    reason = _STORAGE_ERRNOS.get(getattr(exc, "errno", None))
+    return None if reason is None else OutputError(path, exc.errno, reason)
 
 
 @contextmanager
-def atomic_output(path):
+def atomic_output(path, tmp_name: str | None = None, fsync: bool = False):
     """Yield a temporary path beside ``path`` (same folder, same suffix, so writers that go by the
-    extension still work); on success rename it to ``path`` (``os.replace``: atomic on one file
-    system), on any exception (Ctrl-C included) remove it and re-raise."""
+    extension still work; or ``tmp_name`` in that folder); on success (``fsync`` it first if asked)
+    rename it to ``path`` (``os.replace``: atomic on one file system). On any exception (Ctrl-C,
+    SIGTERM, a full disk) the temporary file is removed and the exception re-raised - a storage error
+    (ENOSPC, EFBIG, EDQUOT, EIO, EROFS) as :class:`OutputError` naming ``path``."""
     path = Path(path)
-    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
+    tmp = path.with_name(tmp_name or f".{path.stem}.tmp{os.getpid()}{path.suffix}")
     try:
         yield tmp
+        if fsync:
+            with open(tmp, "rb+") as fh:
+                os.fsync(fh.fileno())
         os.replace(tmp, path)
+    except OutputError:
+        raise
+    except OSError as exc:
+        named = storage_error(exc, path)
+        if named is None:
+            raise
+        raise named from None
     finally:
-        tmp.unlink(missing_ok=True)
+        with contextlib.suppress(OSError):
+            tmp.unlink(missing_ok=True)
+
+
+class FolderBusy(ValueError):
+    """Another process holds the folder's writer lock (a bad-input error: exit status 2)."""
+
+
+@contextmanager
+def folder_lock(folder, name: str, busy: str):
+    """Exclusive writer lock ``folder/name`` (``flock``; released by the kernel when the process ends,
+    even if killed). Raises :class:`FolderBusy` with the text ``busy`` at once if another process
+    holds it. The lock file is removed on leaving (while still locked; a process that opened the old
+    file meanwhile sees that it was replaced and takes the new one), so a finished run leaves no
+    0-byte lock file behind."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / name
+    for _ in range(20):
+        fh = open(path, "a+")
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            fh.close()
+            raise FolderBusy(busy) from None
+        try:
+            same = os.fstat(fh.fileno()).st_ino == os.stat(path).st_ino
+        except FileNotFoundError:  # removed by the previous holder between our open and our lock
+            same = False
+        if same:
+            break
+        fh.close()
+    else:
+        raise FolderBusy(busy)
+    try:
+        yield path
+    finally:
+        with contextlib.suppress(OSError):
+            path.unlink()
+        fh.close()

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mission_sim.files import atomic_output
+
 from .stats import mean_ci, seed_ci
 
 __all__ = ["METRICS", "EpisodeTraces", "run_policy", "compare", "frontier", "DEFAULT_POLICIES", "DEFAULT_SCENARIOS",
@@ -160,7 +162,7 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
     groups = [(p, [p]) for p in policies] + list((train_seeds or {}).items())
     rows, traces = [], {}
     jobs = [(s, g) for s in scenarios for g in groups]
-    bar = tqdm(total=len(jobs), desc="compare", unit="run", disable=not progress)
+    bar = tqdm(total=len(jobs), desc="compare", unit="run", disable=not progress, dynamic_ncols=True)
     for s in scenarios:
         ref_tr = run_policy(reference, s, int(episodes), int(seed), config)
         for label, specs in groups:
@@ -174,12 +176,17 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
     return rows, traces
 
 
-def frontier(scenario: str = "nominal", budgets=None, episodes: int = DEFAULT_EPISODES, seed: int = 1000, config=None):
-    """The budgeted model-based curve: one row per overshoot budget (:mod:`policies.budgeted`)."""
+def frontier(scenario: str = "nominal", budgets=None, episodes: int = DEFAULT_EPISODES, seed: int = 1000, config=None,
+             progress: bool = False):
+    """The budgeted model-based curve: one row per overshoot budget (:mod:`policies.budgeted`);
+    ``progress``: a tqdm bar over the budgets."""
+    from tqdm import tqdm
+
     from .budgeted import BUDGET_SWEEP
 
     out = []
-    for b in (BUDGET_SWEEP if budgets is None else budgets):
+    budgets = BUDGET_SWEEP if budgets is None else budgets
+    for b in tqdm(budgets, desc="frontier", unit="budget", disable=not progress, leave=False):
         row = _row_one(f"model_based_budget:{b:g}", scenario, run_policy(f"model_based_budget:{b:g}", scenario,
                                                                           episodes, seed, config).metrics, None)
         out.append({"budget": float(b), **row})
@@ -214,7 +221,8 @@ def plot_transitions(traces: dict, scenario: str, out_png, episode: int = 0, win
     a2.set_xlabel("time after the stop command [ms]")
     a2.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(out_png, dpi=110)
+    with atomic_output(out_png) as tmp:  # removed on failure (a full disk: the file named)
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
     return out_png
 
@@ -248,6 +256,7 @@ def plot_frontier(rows, sweep, scenario: str, out_png, x: str = "overshoot_pct")
     axes[0].legend(fontsize=7)
     fig.suptitle(f"{scenario}: means with 95 % intervals")
     fig.tight_layout()
-    fig.savefig(out_png, dpi=110)
+    with atomic_output(out_png) as tmp:  # removed on failure (a full disk: the file named)
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
     return out_png

@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mission_sim.files import atomic_output
+
 from .rl import ALGOS
 
 __all__ = ["train", "plot_learning_curve", "DEFAULT_HYPERPARAMS", "env_config", "EVAL_SEED", "VEC_PATHS"]
@@ -108,7 +110,8 @@ def plot_learning_curve(monitor_csv, out_png, title: str, eval_curve=None) -> Pa
     axes[1].set_xlabel("environment steps")
     fig.tight_layout()
     out_png = Path(out_png)
-    fig.savefig(out_png, dpi=110)
+    with atomic_output(out_png) as tmp:  # removed on failure (a full disk: the file named)
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
     return out_png
 
@@ -290,6 +293,18 @@ def _spec(algo, timesteps, o: dict) -> dict:
     return spec
 
 
+def _written_dirs(dirs: dict) -> dict:
+    """The folders of ``dirs`` that hold files; empty ones (no evaluation or checkpoint was due within
+    ``--timesteps``: SB3 creates them up front) are removed and left out."""
+    out = {}
+    for key, d in dirs.items():
+        if d.is_dir() and any(d.iterdir()):
+            out[key] = d
+        elif d.is_dir():
+            d.rmdir()
+    return out
+
+
 def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64, scenario: str = "random",
           progress: bool = True, hyperparams: dict | None = None, hyperparams_file=None, env: dict | None = None,
           cost: str = "overshoot", lagrangian: bool = False, budget: float | None = None, lambda_lr: float = 50.0,
@@ -347,7 +362,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     venv.close()
     mon = out / "monitor.monitor.csv"
     res = {"model": zip_path, "meta": meta_path, "vecnormalize": out / "vecnormalize.pkl", "monitor": mon,
-           "eval_dir": out / "eval", "checkpoints": out / "checkpoints"}
+           **_written_dirs({"eval_dir": out / "eval", "checkpoints": out / "checkpoints"})}
     if mon.is_file():
         res["learning_curve"] = plot_learning_curve(mon, out / "learning_curve.png",
                                                     f"{algo.upper()} on {spec['env_id']} ({scenario})", ev.curve)

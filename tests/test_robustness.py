@@ -82,7 +82,10 @@ def test_interrupted_write_leaves_no_partial_file_and_no_stale_summary(tmp_path,
     (tmp_path / "timeseries.csv").write_text("old,complete\n1,2\n")
 
     def interrupted(self, path, *a, **k):
-        Path(path).write_text("t_s,so")  # half a line, then Ctrl-C
+        if hasattr(path, "write"):  # the CSV is written in row chunks to an open file
+            path.write("t_s,so")
+        else:
+            Path(path).write_text("t_s,so")  # half a line, then Ctrl-C
         raise KeyboardInterrupt
 
     monkeypatch.setattr(pd.DataFrame, "to_csv", interrupted)

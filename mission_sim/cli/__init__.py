@@ -11,6 +11,8 @@ subcommands import what they need lazily, inside the function that runs them.
 ``learning``  ``train`` and ``compare`` (envs and policies, imported lazily)
 ``sweep``     ``sweep`` (parameter studies on Dask)
 ``sizing``    ``sizing`` (rectifier rating, parts and mass per policy)
+``warmup``    ``warmup`` (compile the numba kernels ahead, once per machine)
+``notices``   the one-line notice when numba compiles kernels (first run on a machine)
 ============  ==================================================================
 """
 
@@ -19,8 +21,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from . import learning, mavlink, mission, paper, sizing, sweep
-from .common import CliError, OneLineParser
+from ..files import OutputError
+from . import learning, mavlink, mission, paper, sizing, sweep, warmup
+from .common import CliError, OneLineParser, show_progress
 
 __all__ = ["main", "build_parser"]
 
@@ -37,27 +40,41 @@ def build_parser() -> argparse.ArgumentParser:
     parser = OneLineParser(prog="dronewpt", description="Flight-mission energy simulator for drones "
                            "that charge wirelessly in flight (WPT link with an SBAR receiver).",
                            epilog="Exit status: 0 done, 1 some sweep cases failed, 2 bad input (one line on "
-                           "stderr), 3 mission ended by a depleted battery, 130 interrupted.")
+                           "stderr), 3 mission ended by a depleted battery, 4 an output could not be written (disk full, file-size "
+                           "limit; the file named), 130 interrupted by Ctrl-C (SIGINT), 143 terminated (SIGTERM).")
     parser.add_argument("--version", action="version", version=f"dronewpt {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for add in (paper._add_paper, mission._add_coupling, mission._add_mission, mavlink._add_replay, mavlink._add_telemetry,
-                learning._add_train, learning._add_compare, sweep._add_sweep, sizing._add_sizing):
+                learning._add_train, learning._add_compare, sweep._add_sweep, sizing._add_sizing,
+                warmup._add_warmup):
         add(sub)
     return parser
 
 
 def main(argv=None) -> int:
+    from ..signals import interrupts_raised
+    with interrupts_raised():  # SIGTERM like Ctrl-C: temporary files removed, one line, 143 (130 for SIGINT)
+        return _main(argv)
+
+
+def _main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    if show_progress(args):  # a terminal: say so when numba compiles (the first run's silent half-minute)
+        from .notices import announce_compilation
+        announce_compilation()
     try:
         return int(args.func(args) or 0)
     except BrokenPipeError:  # output piped into head & co.: not an error of ours
         import os
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except OutputError as exc:  # disk full, file-size limit: the file named, its temporary file removed
+        print(f"dronewpt {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+        return 4
     except (CliError, ValueError, FileNotFoundError, OSError) as exc:
         print(f"dronewpt {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
@@ -65,9 +82,10 @@ def main(argv=None) -> int:
         print(f"dronewpt {args.command}: error: out of memory: {_one_line(exc) or 'allocation failed'} "
               "(make the run smaller; see docs/robustness.md)", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"dronewpt {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM (mission_sim.signals.Interrupted)
+        from ..signals import exit_status, signal_name
+        print(f"dronewpt {args.command}: interrupted ({signal_name(exc)})", file=sys.stderr)
+        return exit_status(exc)
 
 
 def _one_line(exc: BaseException) -> str:

@@ -247,7 +247,8 @@ def _cmd_compare(args) -> int:
         prepare_out_dir(args.out)
     try:
         rows, traces = compare(pols, scns, args.episodes, args.seed, progress=show_progress(args), train_seeds=groups)
-        sweep = [] if args.no_frontier else frontier(scns[0], episodes=args.episodes, seed=args.seed)
+        sweep = [] if args.no_frontier else frontier(scns[0], episodes=args.episodes, seed=args.seed,
+                                                          progress=show_progress(args))
     except (ValueError, FileNotFoundError) as exc:
         raise CliError(str(exc)) from None
     figs = [] if args.no_plot else _compare_figures(traces, rows, sweep, scns[0], args.out)

@@ -131,7 +131,7 @@ def _cmd_replay(args) -> int:
     s["policy"] = args.policy
     s["drone_mass_kg"] = cfg.drone.mass_kg
     (args.out / "replay_summary.json").unlink(missing_ok=True)  # written last: present = complete
-    files = write_mission(res.mission, args.out / "mission", plots=not args.no_plot)
+    files = write_mission(res.mission, args.out / "mission", plots=not args.no_plot, progress=show_progress(args))
     if res.power_table is not None:
         with atomic_output(args.out / "power_comparison.csv") as tmp:
             res.power_table.to_csv(tmp, index=False)

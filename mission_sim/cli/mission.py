@@ -6,6 +6,7 @@ import json
 import sys
 from pathlib import Path
 
+from ..files import folder_lock
 from .common import (
     CliError,
     add_progress_flag,
@@ -134,6 +135,8 @@ def make_policy(name: str, cfg):
 #: start-up in a fresh process (~0.5 s: import, registries, cache load) costs more than it saves
 #: (the default mission, ~5,000 rows, takes ~0.2 s in the Python loop)
 COMPILE_FROM_ROWS = 20_000
+#: the writer lock of ``mission --out`` (``flock``; the file exists only while a mission runs there)
+MISSION_LOCK = ".mission.lock"
 
 
 def _cmd_mission(args) -> int:
@@ -145,8 +148,10 @@ def _cmd_mission(args) -> int:
         return _print_estimate(estimate_run(cfg), args)
     prepare_out_dir(args.out)
     compiled = None if estimate_run(cfg).rows >= COMPILE_FROM_ROWS else False
-    res = run_mission(cfg, pol, charge=not args.no_charge, progress=show_progress(args), compiled=compiled)
-    files = write_mission(res, args.out, plots=not args.no_plot)
+    with folder_lock(args.out, MISSION_LOCK, f"--out {str(args.out)!r}: another mission is writing there; "
+                     "wait for it or use another --out"):  # before any simulation; removed at the end
+        res = run_mission(cfg, pol, charge=not args.no_charge, progress=show_progress(args), compiled=compiled)
+        files = write_mission(res, args.out, plots=not args.no_plot, progress=show_progress(args))
     s = res.summary
     if args.format == "json":
         print(json.dumps({**s, "files": files}))

@@ -124,23 +124,11 @@ def _run(args, st, runner, cases, fingerprint):
                            before_run=before_run)
 
 
-def _term(signum, frame):  # SIGTERM -> KeyboardInterrupt: rows received are stored, cluster closed, one line
-    raise KeyboardInterrupt
-
-
 def _cmd_sweep(args) -> int:
-    import signal
-
+    # SIGTERM, like Ctrl-C, raises mission_sim.signals.Interrupted (installed by main for every command):
+    # the rows received are stored, the cluster closed, one line
     if args.status is not None:
         return _cmd_status(args)
-    old = signal.signal(signal.SIGTERM, _term)
-    try:
-        return _sweep(args)
-    finally:
-        signal.signal(signal.SIGTERM, old)
-
-
-def _sweep(args) -> int:
     _check_args(args)
     st, runner, cases, fingerprint = _prepare(args)
     res = _run(args, st, runner, cases, fingerprint)
@@ -165,7 +153,9 @@ def _report(args, st, res) -> None:
     errors = sweep_report.error_table(res.results)
     figs = [] if args.no_plot else sweep_report.plot_sweep(res.results, st, args.out / "plots")
     if not table.empty:
-        table.to_csv(args.out / "summary.csv")
+        from ..files import atomic_output
+        with atomic_output(args.out / "summary.csv") as tmp:  # a full disk: named, nothing partial
+            table.to_csv(tmp)
     counts = {"study": st.name, "out": str(args.out), "cases": res.n_cases, "skipped": res.n_skipped,
               "run": res.n_run, "ok": res.n_ok, "errors": res.n_error, "missing": res.n_missing,
               "wall_s": round(res.wall_s, 3), "compact_s": round(res.compact_s, 3),

@@ -52,6 +52,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..files import storage_error
 from .geodesy import GeoPoint, enu_to_geodetic
 from .logs import mavutil
 
@@ -111,11 +112,17 @@ class TlogWriter:
         self.n_frames = 0
 
     def write(self, frame: bytes, t_epoch_s: float) -> None:
-        self._fh.write(struct.pack(">Q", int(round(t_epoch_s * 1e6))) + frame)
+        try:
+            self._fh.write(struct.pack(">Q", int(round(t_epoch_s * 1e6))) + frame)
+        except OSError as exc:  # a full disk: the file named (the frames written so far stay a valid log)
+            raise storage_error(exc, self.path) or exc from None
         self.n_frames += 1
 
     def close(self) -> None:
-        self._fh.close()
+        try:
+            self._fh.close()  # flushes the buffer: a full disk may show here
+        except OSError as exc:
+            raise storage_error(exc, self.path) or exc from None
 
     def __enter__(self):
         return self

@@ -11,7 +11,10 @@ What Dask does by default and why this module changes it:
   forkserver's start (a few ms) runs with SIGINT ignored in the driver: ignoring it for the whole
   cluster start lost a Ctrl-C, because a process-directed SIGINT goes to any thread that does not
   block it (OpenBLAS's native threads, say), which then discards it. During the rest of the start
-  a Ctrl-C is recorded and raised once the cluster exists, which is then closed quickly.
+  a Ctrl-C or a SIGTERM is recorded (:func:`mission_sim.signals.interrupts_deferred`) and raised
+  once the cluster exists, which is then closed quickly: raised in the middle of Dask's start it
+  left a half-built cluster whose exit hooks printed tracebacks (``Status.init`` assertion,
+  forkserver ``SemLock`` FileNotFoundError).
 - Closing a ``LocalCluster`` logs ``CommClosedError`` tracebacks from connections torn down in
   flight and waits for graceful worker shutdown (6-9 s). Here the loggers of ``distributed``,
   ``tornado`` and ``asyncio`` are raised to CRITICAL in the driver while the cluster lives
@@ -26,6 +29,8 @@ import logging
 import os
 import signal
 import threading
+
+from ..signals import interrupts_deferred
 
 __all__ = ["dask_client", "quiet_logs", "CLOSE_TIMEOUT_S", "INTERRUPT_CLOSE_TIMEOUT_S"]
 
@@ -51,26 +56,6 @@ def quiet_logs(level: int = logging.CRITICAL):
             lg.setLevel(lvl)
             for h, hl in handlers:
                 h.setLevel(hl)
-
-
-@contextlib.contextmanager
-def _sigint_deferred():
-    """While the local cluster starts: a Ctrl-C is recorded and raised as ``KeyboardInterrupt`` on
-    leaving (after the body has assigned the cluster and client, so they get closed), never in the
-    middle of Dask's start (a half-built cluster makes Dask's exit hook and the half-started workers
-    print tracebacks). Python runs the handler in the main thread whichever thread took the signal,
-    so none is lost."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    caught = []
-    old_handler = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, old_handler)
-    if caught:
-        raise KeyboardInterrupt
 
 
 def _start_forkserver() -> None:
@@ -176,7 +161,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, *, con
             if scheduler is not None:
                 client = _connect(scheduler, connect_timeout_s)
             else:
-                with _sigint_deferred():
+                with interrupts_deferred():  # Ctrl-C or SIGTERM: raised once the cluster exists
                     cluster, client = _start_local(workers)
             yield client
             interrupted = False

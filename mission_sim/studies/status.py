@@ -13,6 +13,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..files import atomic_output
 from .store import CaseStore
 from .study import Study, case_space, parse_study
 
@@ -66,9 +67,8 @@ def write_manifest(out_dir, study: Study, fingerprint: str, n_cases: int) -> Pat
     """Write ``out_dir/sweep.json`` atomically (:func:`_manifest`)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    tmp = out / f".{MANIFEST}.{os.getpid()}.tmp"
-    tmp.write_text(json.dumps(_manifest(study, fingerprint, n_cases), indent=1))
-    os.replace(tmp, out / MANIFEST)
+    with atomic_output(out / MANIFEST, tmp_name=f".{MANIFEST}.{os.getpid()}.tmp") as tmp:
+        tmp.write_text(json.dumps(_manifest(study, fingerprint, n_cases), indent=1))
     return out / MANIFEST
 
 

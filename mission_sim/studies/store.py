@@ -29,7 +29,6 @@ Only one sweep writes a store at a time (an ``flock`` on ``OUT/.sweep.lock``); r
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import json
 import math
 import os
@@ -43,6 +42,8 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
+
+from ..files import atomic_output, folder_lock
 
 __all__ = ["CaseStore", "PartWriter", "StoreState", "read_results", "BOOKKEEPING_COLUMNS", "FANOUT", "BATCH_ROWS"]
 
@@ -144,11 +145,8 @@ class CaseStore:
         """``write(tmp)`` a file under a temporary name, fsync it, rename it to ``name`` (atomic)."""
         self.dir.mkdir(parents=True, exist_ok=True)
         final = self.dir / name
-        tmp = self.dir / f".{name}.{os.getpid()}.tmp"
-        write(tmp)
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, final)
+        with atomic_output(final, tmp_name=f".{name}.{os.getpid()}.tmp", fsync=True) as tmp:  # removed on failure
+            write(tmp)
         return final
 
     def _write_table(self, table: pa.Table, name: str) -> Path:
@@ -224,18 +222,11 @@ class CaseStore:
 
     @contextlib.contextmanager
     def lock(self):
-        """Exclusive writer lock for this store (released when the process ends, even if killed)."""
-        self.out_dir.mkdir(parents=True, exist_ok=True)
-        fh = open(self.out_dir / ".sweep.lock", "a+")
-        try:
-            try:
-                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:
-                raise ValueError(f"another sweep is writing to {str(self.out_dir)!r}; "
-                                 "wait for it or use another --out") from None
+        """Exclusive writer lock for this store (released when the process ends, even if killed; the
+        lock file ``.sweep.lock`` is removed when the sweep ends)."""
+        with folder_lock(self.out_dir, ".sweep.lock", f"another sweep is writing to {str(self.out_dir)!r}; "
+                         "wait for it or use another --out"):
             yield self
-        finally:
-            fh.close()
 
 
 class PartWriter:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,13 +36,15 @@ class MissionResult:
     trajectory: object = None
     extra: dict = field(default_factory=dict)
 
-    def write(self, out_dir, figures=None) -> list[Path]:
+    def write(self, out_dir, figures=None, progress: bool = False) -> list[Path]:
         """Write ``timeseries.parquet``, ``timeseries.csv``, the figures of ``figures(result, out_dir)``
         (if given, e.g. :func:`mission_sim.figures.mission.plot_mission`) and ``summary.json`` last.
 
-        Every file is written under a temporary name and renamed when complete, and a
-        ``summary.json`` left by an earlier run is removed first, so ``summary.json`` is present
-        exactly when the whole set of this run is complete. Returns the paths.
+        Every file is written under a temporary name and renamed when complete (removed on any failure:
+        an exception, Ctrl-C, SIGTERM, a full disk), and a ``summary.json`` left by an earlier run is
+        removed first, so ``summary.json`` is present exactly when the whole set of this run is
+        complete. ``progress``: a tqdm bar over the files (the CSV, the long one, in row chunks).
+        Returns the paths.
         """
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
@@ -49,13 +52,60 @@ class MissionResult:
         ts = self.timeseries.copy()
         ts["phase"] = ts["phase"].astype(str)
         paths = [out / "timeseries.parquet", out / "timeseries.csv"]
-        with atomic_output(paths[0]) as tmp:
-            ts.to_parquet(tmp, index=False)
-        with atomic_output(paths[1]) as tmp:
-            ts.to_csv(tmp, index=False)
-        if figures is not None:
-            paths.extend(Path(f) for f in figures(self, out))
-        paths.append(out / "summary.json")
-        with atomic_output(paths[-1]) as tmp:
-            tmp.write_text(json.dumps(self.summary, indent=2))
+        steps = 3 + (figures is not None)
+        with _files_bar(steps, progress) as bar:
+            bar.set_description_str(f"writing {paths[0].name}")
+            with atomic_output(paths[0]) as tmp:
+                ts.to_parquet(tmp, index=False)
+            bar.update(1)
+            bar.set_description_str(f"writing {paths[1].name}")
+            with atomic_output(paths[1]) as tmp:
+                _write_csv(ts, tmp, bar.update)
+            if figures is not None:
+                bar.set_description_str("writing figures")
+                paths.extend(Path(f) for f in figures(self, out))
+                bar.update(1)
+            paths.append(out / "summary.json")
+            with atomic_output(paths[-1]) as tmp:
+                tmp.write_text(json.dumps(self.summary, indent=2))
+            bar.update(1)
         return paths
+
+
+class _NoBar(contextlib.nullcontext):
+    def __enter__(self):
+        return self
+
+    def update(self, n=1):
+        pass
+
+    def set_description_str(self, s=""):
+        pass
+
+
+def _files_bar(steps: int, progress: bool):
+    """A tqdm bar over ``steps`` files (fractions allowed), or a no-op one (tqdm not even imported)."""
+    if not progress:
+        return _NoBar()
+    from tqdm import tqdm
+    return tqdm(total=steps, unit="file", desc="writing", leave=False, dynamic_ncols=True,
+                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total} files [{elapsed}<{remaining}]")
+
+
+#: rows per chunk of the CSV write (progress between chunks; the text is the same as one ``to_csv``)
+CSV_CHUNK_ROWS = 50_000
+
+
+def _write_csv(ts: pd.DataFrame, path, advance) -> None:
+    """``ts.to_csv(path, index=False)`` in row chunks, calling ``advance(fraction)`` after each (the
+    fractions add up to 1)."""
+    n = len(ts)
+    with open(path, "w", newline="") as fh:
+        if n == 0:
+            ts.to_csv(fh, index=False)
+        for i in range(0, n, CSV_CHUNK_ROWS):
+            part = ts.iloc[i:i + CSV_CHUNK_ROWS]
+            part.to_csv(fh, index=False, header=i == 0)
+            advance(len(part) / n)
+    if n == 0:
+        advance(1.0)

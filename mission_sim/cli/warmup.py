@@ -1,0 +1,98 @@
+"""``dronewpt warmup``: compile numba's kernels ahead (once per machine), so that the first
+``mission``, ``compare``, ``replay`` or ``sizing`` does not spend a silent half-minute compiling.
+
+Each stage runs a small real job through the same code path the commands use (kernels are compiled
+per policy and per argument type, so running them is the only sure way to hit every signature) and
+counts numba's ``numba:compile`` events, which fire only on a cache miss: a second warmup reports
+every stage as loaded from the cache.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+
+from .common import CliError
+
+KERNEL_POLICIES = ("step", "ramp", "model_based")
+
+
+def _add_warmup(sub):
+    p = sub.add_parser("warmup", help="compile the numba kernels ahead (once per machine, ~1-3 min)",
+                       description="Compile (or load from numba's disk cache) every numba kernel the commands "
+                                   "use: the compiled mission loop with the step, ramp and model_based policy "
+                                   "kernels (mission, replay, sweep, sizing --source mission), the batched env "
+                                   "and its policy kernels (compare, train) and the switching model (paper "
+                                   "--model switching, sizing). Prints each stage, how many kernels it compiled "
+                                   "and how long it took.")
+    p.add_argument("--format", choices=("table", "json"), default="table")
+    p.set_defaults(func=_cmd_warmup)
+
+
+def _missions() -> None:
+    from .. import config as mconfig
+    from ..world.runner import run_mission
+    from .mission import make_policy
+    cfg = mconfig.config_from_dict(mconfig.load_config_dict(None))
+    for name in KERNEL_POLICIES:
+        run_mission(cfg, make_policy(name, cfg), compiled=True)
+
+
+def _envs() -> None:
+    from policies.compare import run_policy
+    for name in KERNEL_POLICIES:
+        run_policy(name, "nominal", 2, 1000)
+
+
+def _switching() -> None:
+    from wpt_receiver import TABLE_I
+    from wpt_receiver.devices import preset
+    from wpt_receiver.sizing import SizingRules, size_policies
+    size_policies(["step"], TABLE_I, preset("schottky"), SizingRules(), t_end_s=3e-3)
+
+
+STAGES = (("mission loop and policy kernels (mission, replay, sweep)", _missions),
+          ("batched env and policy kernels (compare, train)", _envs),
+          ("switching model (paper --model switching, sizing)", _switching))
+
+
+def _counter():
+    """A listener counting numba's compile events (cache misses), registered for the whole run."""
+    from numba.core import event
+
+    class Count(event.Listener):
+        n = 0
+
+        def on_start(self, ev):
+            self.n += 1
+
+        def on_end(self, ev):
+            pass
+
+    c = Count()
+    event.register("numba:compile", c)
+    return c
+
+
+def _cmd_warmup(args) -> int:
+    try:
+        counter = _counter()
+    except ImportError:
+        raise CliError("numba is not installed (pip install numba); nothing to compile") from None
+    rows = []
+    for name, run in STAGES:
+        n0, t0 = counter.n, time.perf_counter()
+        run()
+        row = {"stage": name, "kernels_compiled": counter.n - n0, "wall_s": round(time.perf_counter() - t0, 2)}
+        rows.append(row)
+        if args.format == "table":
+            what = (f"{row['kernels_compiled']} kernels compiled" if row["kernels_compiled"]
+                    else "loaded from numba's cache")
+            print(f"{name}: {what} in {row['wall_s']:.1f} s", flush=True)
+    total = sum(r["wall_s"] for r in rows)
+    if args.format == "json":
+        print(json.dumps({"stages": rows, "wall_s": round(total, 2)}))
+    else:
+        print(f"warmup done in {total:.1f} s; later runs load the kernels from the cache", file=sys.stdout)
+    return 0

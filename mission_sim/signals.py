@@ -1,0 +1,81 @@
+"""SIGTERM handled like Ctrl-C: both raise :class:`Interrupted` (a ``KeyboardInterrupt``) in the main
+thread, so every ``finally`` runs (temporary files removed, sweep rows stored, clusters closed) and
+the CLI ends with one line and the conventional status 128 + signal number (130 for SIGINT, 143
+for SIGTERM).
+
+:func:`interrupts_raised` installs the handlers (``dronewpt``'s ``main`` does, for every command);
+:func:`interrupts_deferred` holds a signal back over a section that must not be cut in the
+middle (Dask's cluster start) and raises it on leaving.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+
+__all__ = ["Interrupted", "interrupts_raised", "interrupts_deferred", "HANDLED", "exit_status", "signal_name"]
+
+#: the signals turned into :class:`Interrupted`
+HANDLED = (signal.SIGINT, signal.SIGTERM)
+
+
+class Interrupted(KeyboardInterrupt):
+    """Raised by SIGINT or SIGTERM; ``signum`` says which."""
+
+    def __init__(self, signum: int = signal.SIGINT):
+        super().__init__(signum)
+        self.signum = int(signum)
+
+
+def signal_name(exc: BaseException) -> str:
+    """``SIGINT`` / ``SIGTERM`` for an interrupt (a plain ``KeyboardInterrupt`` is a Ctrl-C)."""
+    return signal.Signals(getattr(exc, "signum", signal.SIGINT)).name
+
+
+def exit_status(exc: BaseException) -> int:
+    """128 + the signal number, the shell's convention: 130 for SIGINT, 143 for SIGTERM."""
+    return 128 + int(getattr(exc, "signum", signal.SIGINT))
+
+
+def _raise(signum, frame):
+    raise Interrupted(signum)
+
+
+def _in_main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
+@contextlib.contextmanager
+def interrupts_raised():
+    """While inside, SIGINT and SIGTERM raise :class:`Interrupted` (the previous handlers are restored
+    on leaving). Outside the main thread (where handlers cannot be set) it does nothing."""
+    if not _in_main_thread():
+        yield
+        return
+    old = {s: signal.signal(s, _raise) for s in HANDLED}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+@contextlib.contextmanager
+def interrupts_deferred():
+    """While inside, SIGINT and SIGTERM are recorded, not raised; on leaving (after the body has
+    finished, e.g. assigned the cluster it started so that it can be closed) the first one is raised
+    as :class:`Interrupted`. Python runs handlers in the main thread whichever thread took the
+    signal, so none is lost."""
+    if not _in_main_thread():
+        yield
+        return
+    caught: list[int] = []
+    old = {s: signal.signal(s, lambda signum, frame: caught.append(signum)) for s in HANDLED}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    if caught:
+        raise Interrupted(caught[0])
