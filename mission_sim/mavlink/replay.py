@@ -28,7 +28,8 @@ from .geodesy import GeoPoint, geodetic_to_enu
 from .logs import FlightLog, read_log
 
 __all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "flight_stats",
-           "logged_energy_j", "compare_power", "fit_mass_kg", "resample_track", "replay_trajectory", "ReplayResult", "replay_log", "parse_window"]
+           "logged_energy_j", "compare_power", "fit_mass_kg", "resample_track", "replay_trajectory", "ReplayResult", "replay_log", "parse_window",
+           "choose_segment", "replay_span"]
 
 
 MAX_TILT_RAD = np.radians(85.0)   # the mission world takes |tilt| < 90 deg; beyond is upside down
@@ -96,6 +97,39 @@ def parse_window(text: str | None) -> tuple[float, float] | None:
     if not (np.isfinite(t0) and np.isfinite(t1) and 0 <= t0 < t1):
         raise ValueError(f"--window {text!r} is invalid; valid format: {fmt}")
     return t0, t1
+
+
+def choose_segment(log: FlightLog) -> int:
+    """The boot segment (0-based) a replay flies when the log has several (reboots): the one with
+    the most armed time, ties broken by the number of positions (a never-armed log: the segment
+    with the most positions)."""
+    def score(span):
+        a, b = span
+        armed = sum(max(0.0, min(e, b) - max(s, a)) for s, e in log.armed_periods)
+        t = log.position["t_s"].to_numpy(float)
+        return armed, int(np.sum((t >= a) & (t <= b)))
+    spans = log.segments
+    return max(range(len(spans)), key=lambda k: score(spans[k]))
+
+
+def replay_span(log: FlightLog, window: tuple[float, float] | None = None,
+                segment: int | None = None) -> tuple[tuple[float, float] | None, dict]:
+    """The part of ``log`` a replay flies and what to report about it: ``window`` (log seconds) if
+    given, else boot segment ``segment`` (1-based; None: :func:`choose_segment` when the log has
+    more than one). Returns (window or None for the whole log, facts for the summary)."""
+    spans = log.segments
+    n = len(spans)
+    info = {"segments": n, "clock": log.clock.source if log.clock is not None else "the log's own (vehicle) clock",
+            "segment_clock": log.clock.describe() if log.clock is not None else []}
+    if segment is not None and not 1 <= segment <= n:
+        raise ValueError(f"--segment {segment!r} is invalid; valid range: 1..{n} (the log has {n} boot segment(s))")
+    if window is not None:
+        return window, {**info, "replayed_segment": None}
+    if segment is None and n == 1:
+        return None, {**info, "replayed_segment": 1}
+    k = choose_segment(log) if segment is None else segment - 1
+    a, b = spans[k]
+    return (float(a), float(b)), {**info, "replayed_segment": k + 1, "segment_span_s": [round(a, 3), round(b, 3)]}
 
 
 def default_pad(log: FlightLog) -> GeoPoint:
@@ -198,6 +232,7 @@ def flight_stats(log: FlightLog, track: FlightTrack) -> dict:
         "n_position_samples": int(len(track.t_s)),
         "bad_frames": int(log.bad_frames),
         "reboots": int(log.reboots),
+        "flown": bool(sum(b - a for a, b in periods) > 0),
         "tilt_clipped_samples": int(track.n_tilt_clipped),
         "pad": {"lat_deg": track.pad.lat_deg, "lon_deg": track.pad.lon_deg, "alt_m": track.pad.alt_m},
     }
@@ -354,6 +389,9 @@ def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
                    "truncated log? the replay covers only what was recorded")
     if log.errors:
         out.append(f"{log.path.name}: reading stopped early: {log.errors[0]}")
+    if not np.any(track.armed):
+        out.append(f"{log.path.name}: the vehicle never armed in the replayed part: the track is marked NOT FLOWN "
+                   "(its distance and height are GPS drift on the ground; nothing here was a flight)")
     dist = float(np.min(np.hypot(track.pos_m[:, 0], track.pos_m[:, 1])))
     if dist > FAR_PAD_M:
         out.append(f"the pad ({track.pad.lat_deg:.6f}, {track.pad.lon_deg:.6f}) is {dist / 1e3:.0f} km from the "
@@ -362,12 +400,15 @@ def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
 
 
 def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: float | None = None,
-               window: tuple[float, float] | None = None, progress: bool = False) -> ReplayResult:
+               window: tuple[float, float] | None = None, progress: bool = False,
+               segment: int | None = None) -> ReplayResult:
     """Build the track of ``log`` (a :class:`FlightLog` or a path), run the mission world along it,
     compare the power.
 
     ``ground_gap_m`` None: ``cfg.mission.hover_gap_m`` (the nominal gap), i.e. landed on the pad
-    the receiver coil sits at its nominal height above the pad coil.
+    the receiver coil sits at its nominal height above the pad coil. A log with reboots replays one
+    boot segment (:func:`replay_span`; ``segment`` 1-based, None: the one with the most armed
+    time) unless ``window`` is given; the summary names it (``replayed_segment``).
     Raises :class:`NoPositionError` (a ``ValueError``) if the log has no usable position.
     """
     from ..world.runner import run_mission
@@ -376,12 +417,14 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
         log = read_log(log)
     if ground_gap_m is None:
         ground_gap_m = cfg.mission.hover_gap_m
+    window, span_info = replay_span(log, window, segment)
     track = track_from_log(log, pad=pad, ground_gap_m=ground_gap_m, window=window)
     grid = resample_track(track, cfg.sim.traj_dt_s)
     traj = replay_trajectory(grid)
     mission = run_mission(cfg, policy, trajectory=traj, progress=progress)
     ts = mission.timeseries
     summary = flight_stats(log, track)
+    summary.update(span_info)
     ms = mission.summary
     summary.update({
         "rectifier_output_j": float(ms["rectifier_output_j"]),
