@@ -8,8 +8,8 @@ different rates when the vehicle is simulated faster than real time (SITL ``--sp
 every reboot. Timing positions by one clock and battery samples by the other made the replayed
 energy wrong by +16 % at a 1.1x vehicle clock (issue 24).
 
-So, per boot segment ``k`` (a segment ends where ``time_boot`` drops by more than
-:data:`REBOOT_DROP_S`): a robust linear fit of receive time on boot time (Theil-Sen, the
+So, per boot segment ``k`` (a segment ends where ``time_boot``, smoothed by a rolling median
+of 5 so that one corrupt value is no reboot, drops by more than :data:`REBOOT_DROP_S`): a robust linear fit of receive time on boot time (Theil-Sen, the
 median of pairwise slopes, so radio bursts and a few corrupt ``time_boot_ms`` values do not bend
 it), ``recv = a_k + b_k * boot``; when 1 lies inside the fit's 99 % confidence interval of ``b_k``
 (a real radio link: crystal drift of ppm hidden under the latency jitter) ``b_k = 1`` and ``a_k``
@@ -18,11 +18,19 @@ a 240-390 ppm "drift" that is latency growing in the radio's buffers; the fitted
 ``fit_slope`` and reported). The log's time base ``t`` runs at the **vehicle's** rate: in
 segment ``k``
 
-    t(recv) = t_k + (recv - r_k) / b_k        (records without a boot time: battery, heartbeats)
-    t(boot) = t(a_k + b_k * boot)             (records with one: positions, attitude)
+    t(boot) = t_k + (a_k + b_k * boot - r_k) / b_k    (records with a boot time: positions, attitude)
+    t(recv) = t(boot interpolated at recv)            (records without one: battery, heartbeats)
+    t(recv) = t(boot of the first / last node + (recv - its recv) / b_k)   (before / after them)
 
 with ``r_k`` the receive time of the segment's first boot-stamped record and ``t_k`` chosen so
-that ``t`` is continuous across segments and ``t(0) = 0`` at the start of the log. At 1x (a real
+that ``t`` is continuous across segments and ``t(0) = 0`` at the start of the log. Within a
+segment ``t`` is the boot clock plus one offset. A record without a boot time takes the boot time
+of its receive time interpolated between the boot-stamped records around it (receive order; boot
+times smoothed by a rolling median of 5 and made non-decreasing), not the fitted line: a sender
+that stalls for a few seconds (a loaded machine pacing ``telemetry --speed 3``, a radio fade)
+bends the receive clock against the boot clock, and a battery sample is then still placed at the
+vehicle time it was sent at (the MAVProxy recording in tests/data/telemetry fits 2.78x, not 3x,
+because of such a stall). At 1x (a real
 radio link: ``b`` = 1 within crystal drift) ``t`` is the receive clock; at a vehicle clock ``s``
 times faster, ``b = 1 / s`` and every sample -- battery too -- is on the vehicle's seconds, in
 which its power was drawn. DataFlash and ULog logs are stamped by the vehicle alone and need
@@ -79,6 +87,8 @@ class ClockMap:
 
     segments: tuple
     source: str
+    anchors: tuple = ()    # per segment: (receive times, boot times) of its boot-stamped records, sorted
+
 
     def segment_of(self, rec) -> np.ndarray:
         """Segment index of each record number ``rec`` (records before the first segment: 0)."""
@@ -95,6 +105,11 @@ class ClockMap:
         for k, s in enumerate(self.segments):
             m = seg == k
             out[m] = s.recv_to_t(recv[m])
+            if k < len(self.anchors) and len(self.anchors[k][0]) >= 1:
+                x, y = self.anchors[k]
+                r = recv[m]     # between nodes: interpolated; beyond them: the fitted rate from the end node
+                est = np.interp(r, x, y) + np.minimum(r - x[0], 0.0) / s.slope + np.maximum(r - x[-1], 0.0) / s.slope
+                out[m] = s.boot_to_t(est)
             if boot is not None:
                 tb = s.boot_to_t(np.asarray(boot, dtype=float)[m])
                 ok = np.isfinite(tb) & (np.abs(tb - out[m]) <= spike_s)
@@ -137,6 +152,17 @@ def _theil_sen(boot: np.ndarray, recv: np.ndarray) -> tuple[float, float, float]
     return float(a), float(b), float(b)
 
 
+def _anchors(recv: np.ndarray, boot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(receive, boot) interpolation nodes of one segment: receive times non-decreasing, boot times
+    smoothed (rolling median of 5: one corrupt time_boot_ms does not move its neighbours) and
+    non-decreasing."""
+    import pandas as pd
+
+    y = pd.Series(boot).rolling(5, center=True).median().to_numpy()   # nan at the 2 + 2 edge nodes
+    y = np.where(np.isfinite(y), y, boot)
+    return np.maximum.accumulate(recv), np.maximum.accumulate(y)
+
+
 def fit_clock(rec, recv, boot) -> ClockMap:
     """The :class:`ClockMap` of a .tlog from its boot-stamped records: record numbers ``rec``,
     receive times ``recv`` [s from the log start] and boot times ``boot`` [s] (any order; sorted
@@ -147,10 +173,13 @@ def fit_clock(rec, recv, boot) -> ClockMap:
     rec, recv, boot = rec[ok][order], recv[ok][order].astype(float), boot[ok][order].astype(float)
     if not len(rec):
         return identity_clock("log clock (no time_boot_ms in the log)")
-    cuts = np.flatnonzero(np.diff(boot) < -REBOOT_DROP_S) + 1
+    import pandas as pd
+    smooth = pd.Series(boot).rolling(5, center=True, min_periods=1).median().to_numpy()  # a corrupt value is no reboot
+    cuts = np.flatnonzero(np.diff(smooth) < -REBOOT_DROP_S) + 1
     bounds = [0, *cuts.tolist(), len(rec)]
-    segments, t_start = [], 0.0
+    segments, anchors, t_start = [], [], 0.0
     for k, (i, j) in enumerate(zip(bounds[:-1], bounds[1:])):
+        anchors.append(_anchors(recv[i:j], boot[i:j]))
         a, b, b_fit = _theil_sen(boot[i:j], recv[i:j])
         r_k = float(recv[i])
         if k == 0:
@@ -160,5 +189,5 @@ def fit_clock(rec, recv, boot) -> ClockMap:
             t_start = float(prev.recv_to_t(r_k))
         segments.append(BootSegment(k, int(rec[i]), r_k, t_start, b, a, float(boot[i]), float(boot[j - 1]), j - i, b_fit))
     rates = sorted({round(s.rate, 3) for s in segments})
-    return ClockMap(tuple(segments), f"vehicle boot clock (time_boot_ms; rate {', '.join(f'{r:g}' for r in rates)} "
+    return ClockMap(tuple(segments), anchors=tuple(anchors), source=f"vehicle boot clock (time_boot_ms; rate {', '.join(f'{r:g}' for r in rates)} "
                                      "x the receive clock, Theil-Sen fit)")
