@@ -26,6 +26,8 @@ def _mav_common(p):
     p.add_argument("--config", type=Path, default=None, help="mission TOML (default: the embedded mission)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value by dotted key, e.g. --set drone.mass_kg=1.5 (repeatable)")
+    p.add_argument("--drone", type=Path, default=None, metavar="FILE",
+                   help="a [drone] TOML (from `dronewpt calibrate`) laid over the config's drone; --set still wins")
 
 
 def _mav_speed(text):
@@ -44,7 +46,11 @@ def _mav_config(args, overrides=None, single_pad=False):
     d = config_to_dict(load_config(args.config))
     if single_pad:
         d["pads"] = [{"x_m": 0.0, "y_m": 0.0, "z_m": 0.0}]
-    return config_from_dict(apply_overrides(d, {**(overrides or {}), **parse_set(args.set)}))
+    drone = {}
+    if getattr(args, "drone", None) is not None:
+        from ..mavlink.calibrate import read_drone_toml
+        drone = read_drone_toml(args.drone)
+    return config_from_dict(apply_overrides(d, {**drone, **(overrides or {}), **parse_set(args.set)}))
 
 
 def _mav_policy(cfg, name):

@@ -91,6 +91,8 @@ def _add_mission(sub):
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a config value by dotted key, e.g. --set wind.speed_m_s=6 (repeatable)")
+    p.add_argument("--drone", type=Path, default=None, metavar="FILE",
+                   help="a [drone] TOML (from `dronewpt calibrate`) laid over the config's drone; --set still wins")
     p.add_argument("--no-charge", action="store_true", help="never energise the pads (baseline mission)")
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
     p.add_argument("--force", action="store_true", help="run even when the estimated memory or output size "
@@ -106,6 +108,9 @@ def mission_config(args):
     from ..world.budget import check_run_size
     d = mconfig.load_config_dict(args.config)
     overrides = parse_set(args.set)
+    if getattr(args, "drone", None) is not None:
+        from ..mavlink.calibrate import read_drone_toml
+        overrides = {**read_drone_toml(args.drone), **overrides}
     cfg = mconfig.config_from_dict(mconfig.apply_overrides(d, overrides) if overrides else d)
     check_run_size(cfg, force=getattr(args, "force", False))
     return cfg

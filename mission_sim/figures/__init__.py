@@ -8,5 +8,6 @@ no physics, world or study module does.
 ``mission``    trajectory, Lm(t), I2 envelope, SoC, power; the Lm(x, y) map
 ``replay``     logged against modelled power of a replayed flight log
 ``sizing``     worst-case |i2|, required rating and rectifier mass per policy
+``calibrate``  logged against calibrated / default modelled power, vs time and speed, residuals
 =============  ==============================================================
 """
