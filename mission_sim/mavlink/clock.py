@@ -19,12 +19,16 @@ a 240-390 ppm "drift" that is latency growing in the radio's buffers; the fitted
 segment ``k``
 
     t(boot) = t_k + (a_k + b_k * boot - r_k) / b_k    (records with a boot time: positions, attitude)
-    t(recv) = t(boot interpolated at recv)            (records without one: battery, heartbeats)
-    t(recv) = t(boot of the first / last node + (recv - its recv) / b_k)   (before / after them)
+    t(recv) = t_k + (recv - r_k) / b_k                (records without one at b_k = 1: battery, heartbeats)
+    t(recv) = t(boot interpolated at recv)            (... at b_k != 1, a faster vehicle clock)
+    t(recv) = t(boot of the first / last node + (recv - its recv) / b_k)   (... before / after the nodes)
 
 with ``r_k`` the receive time of the segment's first boot-stamped record and ``t_k`` chosen so
 that ``t`` is continuous across segments and ``t(0) = 0`` at the start of the log. Within a
-segment ``t`` is the boot clock plus one offset. A record without a boot time takes the boot time
+segment ``t`` is the boot clock plus one offset. On a real link (``b_k = 1``) a record without a
+boot time keeps its receive time (latency jitter of ~0.1 s; the log's duration and armed edges are
+the receive clock's, as a ground station shows them). With a faster vehicle clock (``b_k != 1``,
+a simulated vehicle) a record without a boot time takes the boot time
 of its receive time interpolated between the boot-stamped records around it (receive order; boot
 times smoothed by a rolling median of 5 and made non-decreasing), not the fitted line: a sender
 that stalls for a few seconds (a loaded machine pacing ``telemetry --speed 3``, a radio fade)
@@ -105,7 +109,7 @@ class ClockMap:
         for k, s in enumerate(self.segments):
             m = seg == k
             out[m] = s.recv_to_t(recv[m])
-            if k < len(self.anchors) and len(self.anchors[k][0]) >= 1:
+            if k < len(self.anchors) and len(self.anchors[k][0]) >= 1 and s.slope != 1.0:
                 x, y = self.anchors[k]
                 r = recv[m]     # between nodes: interpolated; beyond them: the fitted rate from the end node
                 est = np.interp(r, x, y) + np.minimum(r - x[0], 0.0) / s.slope + np.maximum(r - x[-1], 0.0) / s.slope
