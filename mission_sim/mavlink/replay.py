@@ -37,6 +37,7 @@ HOVER_SPEED_M_S = 0.3             # slower than this counts as hovering (pads ma
 AIRBORNE_M = 1.0                  # armed and this high above the pad counts as airborne (GPS height noise ~1 m)
 MIN_DT_S = 0.05                   # closer position samples are dropped (velocity by differences)
 _MAX_GAP_S = 10.0                 # samples further apart are not integrated across
+_EDGE_S = 1e-3                    # a battery sample this close outside the track's ends is in it (float rounding)
 
 
 class NoPositionError(ValueError):
@@ -276,7 +277,7 @@ def compare_power(log: FlightLog, track: FlightTrack, sim_t_s, propulsion_w) -> 
     bat = log.battery
     sim_t = np.asarray(sim_t_s, dtype=float) + track.t_offset_s
     model_w = np.asarray(propulsion_w, dtype=float)
-    b = bat[(bat["t_s"] >= sim_t[0]) & (bat["t_s"] <= sim_t[-1])]
+    b = bat[(bat["t_s"] >= sim_t[0] - _EDGE_S) & (bat["t_s"] <= sim_t[-1] + _EDGE_S)]
     t = b["t_s"].to_numpy(float)
     height = np.interp(t, track.t_s + track.t_offset_s, track.height_m) if len(t) else np.zeros(0)
     armed = _in_periods(t, log.armed_periods)
@@ -441,7 +442,7 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
     table = None
     if len(log.battery):
         t0, t1 = track.t_offset_s, track.t_offset_s + float(track.t_s[-1])
-        summary["logged_energy_j"] = logged_energy_j(log.battery, t0, t1)
+        summary["logged_energy_j"] = logged_energy_j(log.battery, t0 - _EDGE_S, t1 + _EDGE_S)
         table, cmp = compare_power(log, track, ts["t_s"].to_numpy(), ts["propulsion_w"].to_numpy())
         air = table["airborne"].to_numpy()
         cmp["drone_mass_kg"] = float(cfg.drone.mass_kg)
