@@ -132,3 +132,20 @@ def test_cli_log_without_battery_is_one_line_exit_2(tmp_path, capsys):
     assert len(err.splitlines()) == 1 and "--drone" in err and "only a [drone] table" in err
     assert main(["calibrate", str(log_path("uavlogviewer_vtol_sitl.tlog")), "--out", str(tmp_path / "x.txt")]) == 2
     assert "ending in .toml" in capsys.readouterr().err
+
+
+def test_airspeed_where_logged():
+    """The calibration's speed is a sensor's airspeed where the vehicle has one: the SITL QuadPlane
+    reports a differential-pressure sensor (SYS_STATUS) and its VFR_HUD airspeed follows the GPS
+    ground speed in the fixed-wing cruise (SITL: no wind); the copters report none (GPS speed used)."""
+    from mission_sim.mavlink.calibrate import _velocities
+    from mission_sim.mavlink.replay import track_from_log
+    vtol = read_log(log_path("uavlogviewer_vtol_sitl.tlog"))
+    a = vtol.airspeed
+    cruise = (a["t_s"] > 90) & (a["t_s"] < 120)
+    tg, speed, _, _ = _velocities(track_from_log(vtol))
+    gps = np.interp(a.loc[cruise, "t_s"] - track_from_log(vtol).t_offset_s, tg, speed)
+    assert a.loc[cruise, "airspeed_m_s"].median() > 15.0
+    assert abs(np.median(a.loc[cruise, "airspeed_m_s"] - gps)) < 2.0
+    assert len(read_log(log_path("dronekit-python_flight.tlog")).airspeed) == 0
+    assert _cal("dronekit-la-testdata_log171.bin").report["speed_source"] == "GPS ground speed"

@@ -5,8 +5,9 @@ BATTERY_STATUS / PX4 battery_status: V I [W]) on the log's one time base (clock.
 segment a replay would fly (:func:`~mission_sim.mavlink.replay.replay_span`). At each battery
 sample the flown track gives the horizontal speed and the climb rate: GPS positions on a uniform
 grid of :data:`GRID_DT_S`, differentiated by a Savitzky-Golay filter (:data:`SMOOTH_S` window,
-quadratic: GPS noise of ~0.1 m at 5 Hz would otherwise give metres per second). The speed is
-the GPS ground speed taken as airspeed (the shipped logs have no airspeed sensor; wind unknown).
+quadratic: GPS noise of ~0.1 m at 5 Hz would otherwise give metres per second). The speed is the
+logged airspeed where the vehicle has an airspeed sensor (``FlightLog.airspeed``), else the GPS
+ground speed taken as airspeed (the shipped logs with a battery have no sensor; wind unknown).
 Samples are *airborne* (armed and more than ``AIRBORNE_M`` above the pad) or *disarmed* (the
 motors off: the logged power is the avionics alone).
 
@@ -121,8 +122,13 @@ def calibration_samples(log: FlightLog, window=None, segment=None) -> Calibratio
     t = bat["t_s"].to_numpy(float)
     armed = _in_periods(t, log.armed_periods)
     h = np.interp(t - t0, tg, height)
+    speed_at, source = np.interp(t - t0, tg, speed), "GPS ground speed"
+    arsp = log.airspeed
+    if arsp is not None and len(arsp) >= 2:
+        speed_at, source = np.interp(t, arsp["t_s"].to_numpy(float), arsp["airspeed_m_s"].to_numpy(float)), "airspeed sensor"
+    info = {**info, "speed_source": source}
     tab = pd.DataFrame({"t_s": t, "power_w": bat["power_w"].to_numpy(float),
-                        "speed_m_s": np.interp(t - t0, tg, speed), "climb_m_s": np.interp(t - t0, tg, climb),
+                        "speed_m_s": speed_at, "climb_m_s": np.interp(t - t0, tg, climb),
                         "height_m": h, "airborne": armed & (h > AIRBORNE_M), "disarmed": ~armed})
     air = tab[tab["airborne"]]
     if len(air) < 20:
@@ -204,6 +210,7 @@ def calibrate_log(log: FlightLog, base: DroneParams, mass_kg: float | None = Non
     held = tab["airborne"].to_numpy() & ~tab["train"].to_numpy()
     train = tab["airborne"].to_numpy() & tab["train"].to_numpy()
     out = {"log": log.path.name, "battery_source": log.battery_source, "clock": samples.span_info.get("clock"),
+           "speed_source": samples.span_info.get("speed_source"),
            "replayed_segment": samples.span_info.get("replayed_segment"), "segments": samples.span_info.get("segments"),
            "split_t_s": samples.split_t_s, "n_train_airborne": int(train.sum()), "n_heldout": int(held.sum()),
            "n_disarmed": int((tab["disarmed"] & tab["train"]).sum()), "mass_fixed": mass_kg is not None,

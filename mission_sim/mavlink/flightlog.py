@@ -44,6 +44,7 @@ class FlightLog:
     starts_armed: bool = False     # armed at the first record (first armed-state event a disarm)
     gps_rejected: dict = field(default_factory=dict)  # implausible fixes rejected, by reason (gpsclean.py)
     clock: object = None           # the log's time base (clock.ClockMap); None: the log's own clock, one segment
+    airspeed: pd.DataFrame | None = None   # t_s, airspeed_m_s from an airspeed sensor (logs.py); None / empty: none
 
     @property
     def segments(self) -> list[tuple[float, float]]:

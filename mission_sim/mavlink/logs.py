@@ -19,6 +19,8 @@ position    t_s, lat_deg, lon_deg, alt_m (AMSL) -- GPS fix type >= 3 only; in a 
 attitude    t_s, roll_rad, pitch_rad
 armed       t_s, armed (bool) -- every armed-state report of the vehicle
 battery     t_s, voltage_v, current_a (+ = discharging), power_w = voltage_v * current_a
+airspeed    t_s, airspeed_m_s -- only from an airspeed sensor (VFR_HUD with SYS_STATUS's
+            differential-pressure bit, DataFlash ARSP); empty without one
 ==========  =================================================================================
 
 pymavlink must be imported with ``MAVLINK20=1`` (shared/notes/mavlink.md): :func:`mavutil`
@@ -47,6 +49,7 @@ __all__ = ["mavutil", "FlightLog", "read_log", "armed_periods", "POSITION_COLUMN
 
 _MAV_AUTOPILOT_INVALID = 8          # ground stations and companions send heartbeats with this
 _MAV_MODE_FLAG_SAFETY_ARMED = 128
+_SENSOR_DIFFERENTIAL_PRESSURE = 0x10  # MAV_SYS_STATUS_SENSOR_DIFFERENTIAL_PRESSURE: an airspeed sensor
 _UINT16_MAX = 65535
 _T_MIN_S, _T_MAX_S = 0.0, 4102444800.0  # plausible record times: boot-relative .. year 2100 (Unix s)
 _DF_ARMED_EVENTS = {10: True, 11: False}  # DataFlash EV Id: ARMED, DISARMED
@@ -106,9 +109,13 @@ _CONVERT = {
     "RCOU": ("pwm", lambda m: {f"ch{c.lstrip('Ch')}": float(getattr(m, c)) for c in m.fmt.columns
                                if c.lstrip("Ch").isdigit()}),
     "ESC": ("esc", lambda m: {"rpm": float(m.RPM)}),
-    "VFR_HUD": ("throttle", lambda m: {"throttle": float(m.throttle)}),
+    "VFR_HUD": ("throttle", lambda m: {"throttle": float(m.throttle), "airspeed_m_s": float(m.airspeed)}),
+    "ARSP": ("df_airspeed", lambda m: {"airspeed_m_s": float(m.Airspeed),
+                                       "sensor_id": int(getattr(m, "I", getattr(m, "Instance", 0)))}),
     "CTUN": ("throttle", lambda m: {"throttle": float(getattr(m, "ThO", getattr(m, "ThrOut", float("nan"))))}),
     "SYS_STATUS": ("sys_status", lambda m: {
+        "airspeed_sensor": bool(m.onboard_control_sensors_present & m.onboard_control_sensors_enabled
+                                & _SENSOR_DIFFERENTIAL_PRESSURE),
         "voltage_v": _nan_if(m.voltage_battery, 0, _UINT16_MAX) * 1e-3,
         "current_a": _nan_if(m.current_battery, -1) * 1e-2}),
     "BATTERY_STATUS": ("battery_status", lambda m: {
@@ -336,6 +343,23 @@ def _battery(tab: _Tables):
     return pd.DataFrame(columns=list(BATTERY_COLUMNS)), None
 
 
+def _airspeed(tab: _Tables) -> pd.DataFrame:
+    """(t_s, airspeed_m_s) where the vehicle measures airspeed: a .tlog's VFR_HUD.airspeed only when
+    SYS_STATUS reports a differential-pressure sensor present and enabled (without one ArduPilot
+    reports an estimate); a DataFlash log's ARSP (first sensor). Empty otherwise."""
+    cols = ("t_s", "airspeed_m_s")
+    if tab.kind == "tlog":
+        ss = tab.vehicle("sys_status")
+        df = tab.vehicle("throttle") if len(ss) and ss["airspeed_sensor"].any() else pd.DataFrame()
+    else:
+        df = tab("df_airspeed")
+        if len(df):
+            df = df[df["sensor_id"] == df["sensor_id"].min()]
+    if len(df):
+        df = df[np.isfinite(df["airspeed_m_s"]) & (df["airspeed_m_s"] >= 0)]
+    return _clean_time(df, cols) if len(df) else pd.DataFrame({c: pd.Series(dtype=float) for c in cols})
+
+
 def _assemble(path: Path, kind: str, raw: dict, stats: dict, errors: list[str]) -> FlightLog:
     ts = np.asarray(stats["ts"], dtype=float)
     good = _good_timestamps(ts)
@@ -355,5 +379,6 @@ def _assemble(path: Path, kind: str, raw: dict, stats: dict, errors: list[str]) 
                      battery_source=source, bad_frames=int(stats["bad"]), n_records=int(len(ts)),
                      mavlink_frames=dict(stats["versions"]), reboots=reboots, fix_checked=fix_checked,
                      vehicle=tab.ids, errors=errors, armed_source=armed_source, starts_armed=starts_armed,
-                     gps_rejected=rejected, clock=tab.clock if kind == "tlog" else None)
+                     gps_rejected=rejected, clock=tab.clock if kind == "tlog" else None,
+                     airspeed=_airspeed(tab))
 
