@@ -32,7 +32,8 @@ def pymavlink_reference(path: Path) -> dict:
     """Facts computed with pymavlink directly (plain loops, independent of mission_sim.mavlink.logs).
 
     duration (last - first record timestamp), armed periods (vehicle HEARTBEAT base_mode bit 7 in a
-    .tlog, EV 10/11 in a .bin), positions with a 3D fix, HDOP <= 10 and >= 4 satellites (lat/lon/alt extents and count), battery
+    .tlog, EV 10/11 in a .bin), positions with a 3D fix, HDOP <= 10 and >= 4 satellites and an
+    altitude within 100 m of the last GPS_RAW_INT's (``origin``: the positions that were not; lat/lon/alt extents and count), battery
     voltage range and sample count, (t, V I) of SYS_STATUS / CURR.
     """
     os.environ["MAVLINK20"] = "1"
@@ -41,7 +42,7 @@ def pymavlink_reference(path: Path) -> dict:
     m = mavutil.mavlink_connection(str(path))
     first = last = None
     armed_state, armed_start, periods = False, None, []
-    fix = 0
+    fix, gps_alt, origin = 0, float("nan"), 0
     lats, lons, alts, volts, volts_bs, power = [], [], [], [], [], []
     bad = 0
     while True:
@@ -70,7 +71,11 @@ def pymavlink_reference(path: Path) -> dict:
         if typ == "GPS_RAW_INT" and msg.get_srcComponent() == 1:
             poor = (msg.eph != 65535 and msg.eph > 1000) or msg.satellites_visible < 4  # HDOP > 10, < 4 sats
             fix = 0 if poor else msg.fix_type
+            gps_alt = msg.alt / 1e3
         if typ == "GLOBAL_POSITION_INT" and msg.get_srcComponent() == 1 and fix >= 3 and msg.lat != 0:
+            if abs(msg.alt / 1e3 - gps_alt) > 100:   # estimator altitude without a GPS origin
+                origin += 1
+                continue
             lats.append(msg.lat / 1e7), lons.append(msg.lon / 1e7), alts.append(msg.alt / 1e3)
         if typ == "GPS" and msg.Status >= 3 and msg.HDop <= 10 and msg.NSats >= 4:
             lats.append(msg.Lat), lons.append(msg.Lng), alts.append(msg.Alt)
@@ -87,7 +92,8 @@ def pymavlink_reference(path: Path) -> dict:
     return {"duration_s": last - first, "armed_periods": periods, "n_pos": len(lats),
             "lat": (min(lats), max(lats)), "lon": (min(lons), max(lons)), "alt": (min(alts), max(alts)),
             "volt": (min(volts), max(volts)) if volts else None, "n_volt": len(volts), "bad": bad, "power": power,
-            "volt_bs": (min(volts_bs), max(volts_bs)) if volts_bs else None, "n_volt_bs": len(volts_bs)}
+            "volt_bs": (min(volts_bs), max(volts_bs)) if volts_bs else None, "n_volt_bs": len(volts_bs),
+            "origin": origin}
 
 
 def dataflash_records(data: bytes):

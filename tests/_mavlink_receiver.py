@@ -22,7 +22,8 @@ FIELDS = {
     "BATTERY_STATUS": ("voltages", "current_battery", "current_consumed", "energy_consumed",
                        "battery_remaining", "charge_state"),
     "GLOBAL_POSITION_INT": ("time_boot_ms", "lat", "lon", "alt", "relative_alt", "vx", "vy", "vz"),
-    "GPS_RAW_INT": ("fix_type", "lat", "lon"),
+    "GPS_RAW_INT": ("fix_type", "lat", "lon", "eph", "epv", "satellites_visible", "cog"),
+    "EXTENDED_SYS_STATE": ("landed_state",),
     "NAMED_VALUE_FLOAT": ("time_boot_ms", "name", "value"),
 }
 

@@ -88,6 +88,6 @@ def test_the_issue_example_is_rejected_and_counted():
     struct.pack_into("<i", data, off2 + 25, 118_000_00)             # Alt 118 km (cm)
     log = _read(bytes(data))
     assert len(log.position) == len(_CLEAN.position) - 2
-    assert log.gps_rejected == {"quality": 0, "altitude": 1, "jump": 1}
+    assert log.gps_rejected == {"quality": 0, "origin": 0, "altitude": 1, "jump": 1}
     enu = _enu(log.position)
     assert np.all(enu >= _LO - 1e-6) and np.all(enu <= _HI + 1e-6)

@@ -30,7 +30,8 @@ def test_log_facts_agree_with_pymavlink(name):
     # positions with a 3D fix: same extents; duplicate timestamps may be dropped, nothing else
     pos = log.position
     n_rejected = sum(log.gps_rejected.values())
-    assert n_rejected == (12 if name.startswith("ardusub") else 0)   # the ROV's 12 fixes with HDOP 99.99
+    assert n_rejected == (12 if name.startswith("ardusub") else 0) + ref["origin"]  # the ROV's 12 fixes with HDOP 99.99
+    assert log.gps_rejected.get("origin", 0) == ref["origin"]        # the dronekit tlog's estimator without a GPS origin
     assert ref["n_pos"] - 5 <= len(pos) <= ref["n_pos"]       # the reference skips HDOP > 10 fixes too
     assert (pos["lat_deg"].min(), pos["lat_deg"].max()) == pytest.approx(ref["lat"], abs=1e-9)
     assert (pos["lon_deg"].min(), pos["lon_deg"].max()) == pytest.approx(ref["lon"], abs=1e-9)

@@ -17,7 +17,8 @@ from _flightlogs import DATA_DIR, LOG_NAMES, ULOG_NAME
 ROOT = Path(__file__).resolve().parents[1]
 #: every test file that reads a flight log (the hypothesis fuzz tests aside: they read the same files)
 LOG_TESTS = ("test_mavlink_io.py", "test_cli_replay_errors.py", "test_replay_integration.py",
-             "test_mavlink_armed.py", "test_mavlink_ulog.py", "test_telemetry_loopback.py")
+             "test_mavlink_armed.py", "test_mavlink_ulog.py", "test_telemetry_loopback.py", "test_mavlink_clock.py",
+             "test_calibrate.py")
 GUARD = '''
 import sys
 import tempfile

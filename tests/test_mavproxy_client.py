@@ -93,6 +93,10 @@ def test_mavproxy_sees_one_charging_arducopter(tmp_path):
     assert "STABILIZE" not in console and "fence breach" not in console.lower(), console
     # the stream as MAVProxy relays it
     hb = [m for m in by["HEARTBEAT"] if m["type"] != 6]           # 6 = GCS (MAVProxy's own, if relayed)
+    # the stream ends as a flight does: LAND, then disarmed; MAVProxy says so before the link goes quiet
+    hb, land = hb[:-2], hb[-2:]
+    assert [m["custom_mode"] for m in land] == [COPTER_MODES["LAND"]] * 2 and not land[-1]["base_mode"] & 128
+    assert re.search(r"LAND> DISARMED", console), console          # the LAND prompt, then the disarm
     assert {m["sys"] for m in hb} == {SYSID} and all(m["autopilot"] == 3 and m["type"] == 2 for m in hb)
     modes = [m["custom_mode"] for m in hb]
     assert modes[0] == COPTER_MODES["AUTO"] and COPTER_MODES["LOITER"] in modes

@@ -81,9 +81,16 @@ def test_loopback_contents_and_rates():
     assert rate <= 10.0 * 1.1                       # never faster than the requested 10 Hz
     assert np.all(np.diff([m["time_boot_ms"] for m in gp]) == 100)
     assert np.all(np.diff([m["time_boot_ms"] for m in by["ATTITUDE"]]) == 100)
-    # HEARTBEAT at 0, 1 and 2 s of simulated time (= wall time at speed 1), an ArduCopter quad
-    hb = by["HEARTBEAT"]
-    assert len(hb) == 3 and all(m["type"] == 2 and m["autopilot"] == 3 for m in hb)
+    # HEARTBEAT at 0, 1 and 2 s of simulated time (= wall time at speed 1), an ArduCopter quad; then
+    # the landing (the series ends in the air: LAND, armed) and the disarm
+    hb_all = by["HEARTBEAT"]
+    assert all(m["type"] == 2 and m["autopilot"] == 3 for m in hb_all)
+    hb, land = hb_all[:-2], hb_all[-2:]
+    assert len(hb) == 3 and [m["custom_mode"] for m in land] == [COPTER_MODES["LAND"]] * 2
+    assert land[0]["base_mode"] & 128 and land[0]["system_status"] == 4      # armed, ACTIVE, landing
+    assert not land[1]["base_mode"] & 128 and land[1]["system_status"] == 3  # disarmed, STANDBY
+    assert [m["landed_state"] for m in by["EXTENDED_SYS_STATE"]] == [2, 2, 2, 4, 1]  # in air .. landing, on ground
+    _check_gps_quality(by["GPS_RAW_INT"])
     assert np.all(np.abs(np.diff([m["t"] for m in hb]) - 1.0) < 0.3)
     # contents: the sample at each tick, in wire units
     tick_t = np.array([m["time_boot_ms"] for m in gp]) / 1e3
@@ -118,6 +125,13 @@ def test_loopback_contents_and_rates():
     ss = by["SYS_STATUS"]
     assert [m["voltage_battery"] for m in ss] == [m["voltages"][0] for m in bs]
     _check_sys_status_and_mode(ss, hb, ts)
+
+
+def _check_gps_quality(gps):
+    """What a pre-flight checker reads: a 3D fix, 10..14 satellites (>= 6), HDOP 0.8..1.2 (eph in cm)."""
+    assert all(m["fix_type"] == 3 for m in gps)
+    assert all(10 <= m["satellites_visible"] <= 14 for m in gps)
+    assert all(80 <= m["eph"] <= 120 and 120 <= m["epv"] <= 160 for m in gps)
 
 
 def _check_named_values(nvf_msgs, ref):
@@ -161,7 +175,7 @@ def test_heartbeat_every_second_of_simulated_time(tmp_path, rate_hz):
     conn = mavutil().mavlink_connection(str(path))
     hb, att = [], []
     while (msg := conn.recv_match(blocking=False)) is not None:
-        if msg.get_type() == "HEARTBEAT":
+        if msg.get_type() == "HEARTBEAT" and msg.custom_mode != COPTER_MODES["LAND"]:  # not the landing at the end
             hb.append(msg._timestamp - 1.7e9)
         elif msg.get_type() == "ATTITUDE":
             att.append(msg._timestamp - 1.7e9)
@@ -205,7 +219,8 @@ def test_tlog_written_reads_back_with_pymavlink(tmp_path):
     # and through our own reader: the flight comes back about the same home
     log = read_log(path)
     assert log.bad_frames == 0 and set(log.mavlink_frames) == {2} and log.battery_source == "BATTERY_STATUS"
-    assert len(log.position) == 101 and log.duration_s == pytest.approx(20.0, abs=1e-6)
+    assert len(log.position) == 101 and log.duration_s == pytest.approx(21.0, abs=1e-6)  # + 1 s: land, disarm
+    assert log.armed_periods == [pytest.approx((0.0, 21.0), abs=1e-6)]       # the disarm ends the armed period
     e, n_, u = geodetic_to_enu(log.position["lat_deg"], log.position["lon_deg"], log.position["alt_m"], DEFAULT_HOME)
     k = np.searchsorted(ts["t_s"], log.position["t_s"].to_numpy() + 1e-4, side="right") - 1  # float epoch: ~0.2 us
     np.testing.assert_allclose(e, ts["x_m"].to_numpy()[k], atol=0.02)
@@ -256,7 +271,7 @@ def test_mixed_mavlink1_and_2_tlog(tmp_path):
     assert log.bad_frames == first.bad_frames == 0
     assert log.mavlink_frames[1] == first.mavlink_frames[1] and log.mavlink_frames[2] == stream_frames(tail)
     assert len(log.position) == len(first.position) + 26
-    assert log.duration_s == pytest.approx(first.duration_s + 15.0, abs=1e-3)
+    assert log.duration_s == pytest.approx(first.duration_s + 16.0, abs=1e-3)  # + 1 s: landing and disarm
 
 
 def stream_frames(path):

@@ -13,6 +13,7 @@ subcommands import what they need lazily, inside the function that runs them.
 ``sizing``    ``sizing`` (rectifier rating, parts and mass per policy)
 ``warmup``    ``warmup`` (compile the numba kernels ahead, once per machine)
 ``notices``   the one-line notice when numba compiles kernels (first run on a machine)
+``calibrate`` ``calibrate`` (the drone power model fitted to a flight log's battery power)
 ============  ==================================================================
 """
 
@@ -22,7 +23,7 @@ import argparse
 import sys
 
 from ..files import OutputError
-from . import learning, mavlink, mission, paper, sizing, sweep, warmup
+from . import calibrate, learning, mavlink, mission, paper, sizing, sweep, warmup
 from .common import CliError, OneLineParser, show_progress
 
 __all__ = ["main", "build_parser"]
@@ -46,7 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for add in (paper._add_paper, mission._add_coupling, mission._add_mission, mavlink._add_replay, mavlink._add_telemetry,
                 learning._add_train, learning._add_compare, sweep._add_sweep, sizing._add_sizing,
-                warmup._add_warmup):
+                warmup._add_warmup, calibrate._add_calibrate):
         add(sub)
     return parser
 

@@ -29,6 +29,8 @@ def _mav_common(p):
     p.add_argument("--config", type=path_arg("--config"), default=None, help="mission TOML (default: the embedded mission)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value by dotted key, e.g. --set drone.mass_kg=1.5 (repeatable)")
+    p.add_argument("--drone", type=path_arg("--drone"), default=None, metavar="FILE",
+                   help="a [drone] TOML (from `dronewpt calibrate`) laid over the config's drone; --set still wins")
 
 
 def _mav_speed(text):
@@ -47,7 +49,11 @@ def _mav_config(args, overrides=None, single_pad=False):
     d = config_to_dict(load_config(args.config))
     if single_pad:
         d["pads"] = [{"x_m": 0.0, "y_m": 0.0, "z_m": 0.0}]
-    return config_from_dict(apply_overrides(d, {**(overrides or {}), **parse_set(args.set)}))
+    drone = {}
+    if getattr(args, "drone", None) is not None:
+        from ..mavlink.calibrate import read_drone_toml
+        drone = read_drone_toml(args.drone)
+    return config_from_dict(apply_overrides(d, {**drone, **(overrides or {}), **parse_set(args.set)}))
 
 
 def _mav_policy(cfg, name):
@@ -84,6 +90,8 @@ def _add_replay(sub):
     p.add_argument("--out", type=path_arg("--out"), default=Path("out/replay"), help="output folder (default out/replay)")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--window", default=None, metavar="T0,T1", help="replay only log seconds T0..T1")
+    p.add_argument("--segment", type=int, default=None, metavar="N",
+                   help="a log with reboots: replay boot segment N (1-based; default: the one with the most armed time)")
     p.add_argument("--ground-gap", type=float, default=None, metavar="M",
                    help="receiver coil height above the pad coil when landed (default: the nominal hover gap)")
     p.add_argument("--mass", type=positive_float("mass"), default=None, metavar="KG",
@@ -103,7 +111,7 @@ def _cmd_replay(args) -> int:
     from ..mavlink.geodesy import parse_geo_point
     from ..files import atomic_output
     from ..mavlink.logs import read_log
-    from ..mavlink.replay import parse_window, replay_log, track_from_log
+    from ..mavlink.replay import parse_window, replay_log, replay_span, track_from_log
     if getattr(args, "pads", None) is not None:  # what-if re-flight with pads: its own module
         from .refly import cmd_refly
         return cmd_refly(args)
@@ -114,12 +122,13 @@ def _cmd_replay(args) -> int:
     if args.ground_gap is not None and not (0 <= args.ground_gap <= 1.0):
         raise CliError(f"--ground-gap {args.ground_gap!r} is invalid; valid range: [0, 1] m")
     log = read_log(args.log)
-    track_from_log(log, pad=pad, window=window)  # no usable position: one-line error before any simulation
+    span, _ = replay_span(log, window, args.segment)
+    track_from_log(log, pad=pad, window=span)  # no usable position: one-line error before any simulation
     cfg = _mav_config(args, {"drone.mass_kg": args.mass} if args.mass else None, single_pad=True)
     policy = _mav_policy(cfg, args.policy)
     prepare_out_dir(args.out)
     res = replay_log(log, cfg, policy, pad=pad, ground_gap_m=args.ground_gap, window=window,
-                     progress=show_progress(args))
+                     progress=show_progress(args), segment=args.segment)
     s = res.summary
     if res.mission.summary.get("battery_depleted"):
         from .mission import depletion_text
@@ -183,6 +192,16 @@ def _print_log_facts(name: str, s: dict) -> None:
     print(f"armed {s['log_armed_time_s']:.1f} s in the log, {s['armed_time_s']:.1f} s in "
           f"{len(s['armed_periods_s'])} period(s) of the replayed track, from {source}"
           + (" (armed from the start of the log)" if s.get("starts_armed") else ""))
+    if s.get("segments", 1) > 1:
+        seg = s.get("replayed_segment")
+        what = f"boot segment {seg} of {s['segments']} replayed" if seg else f"--window within {s['segments']} boot segments"
+        print(f"the vehicle rebooted {s['segments'] - 1} time(s): {what}"
+              + (f" (log {s['segment_span_s'][0]:.1f}..{s['segment_span_s'][1]:.1f} s)" if seg else ""))
+    rates = [c["clock_rate"] for c in s.get("segment_clock", [])]
+    if any(abs(r - 1.0) > 1e-3 for r in rates):
+        print(f"time base: {s['clock']}; times are the vehicle's seconds")
+    if not s.get("flown", True):
+        print("NOT FLOWN: the vehicle never armed in the replayed part (distance and height are GPS drift on the ground)")
     for err in s.get("parse_errors") or []:
         print(f"warning: the log could not be parsed to its end: {err}; replayed what was decoded before it")
 

@@ -97,6 +97,8 @@ def _add_mission(sub):
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a config value by dotted key, e.g. --set wind.speed_m_s=6 (repeatable)")
+    p.add_argument("--drone", type=path_arg("--drone"), default=None, metavar="FILE",
+                   help="a [drone] TOML (from `dronewpt calibrate`) laid over the config's drone; --set still wins")
     p.add_argument("--no-charge", action="store_true", help="never energise the pads (baseline mission)")
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
     p.add_argument("--force", action="store_true", help="run even when the estimated memory or output size "
@@ -113,6 +115,9 @@ def mission_config(args):
     from .. import config as mconfig
     from ..world.budget import check_run_size
     overrides = parse_set(args.set)
+    if getattr(args, "drone", None) is not None:
+        from ..mavlink.calibrate import read_drone_toml
+        overrides = {**read_drone_toml(args.drone), **overrides}
     files = {k.split(".", 1)[1]: v for k, v in overrides.items()   # read with the mission file, not after
              if k in ("mission.file", "mission.pads_file", "mission.from_log", "mission.pad_radius_m")}
     d = mconfig.load_config_dict(args.config, getattr(args, "plan", None), getattr(args, "pads", None), files)

@@ -9,5 +9,6 @@ no physics, world or study module does.
 ``replay``     logged against modelled power of a replayed flight log
 ``refly``      a logged flight re-flown with charging pads (``replay LOG --pads FILE``)
 ``sizing``     worst-case |i2|, required rating and rectifier mass per policy
+``calibrate``  logged against calibrated / default modelled power, vs time and speed, residuals
 =============  ==============================================================
 """

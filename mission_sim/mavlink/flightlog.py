@@ -43,6 +43,16 @@ class FlightLog:
     armed_source: str | None = None  # the records the armed state comes from (see armed.py)
     starts_armed: bool = False     # armed at the first record (first armed-state event a disarm)
     gps_rejected: dict = field(default_factory=dict)  # implausible fixes rejected, by reason (gpsclean.py)
+    clock: object = None           # the log's time base (clock.ClockMap); None: the log's own clock, one segment
+    airspeed: pd.DataFrame | None = None   # t_s, airspeed_m_s from an airspeed sensor (logs.py); None / empty: none
+
+    @property
+    def segments(self) -> list[tuple[float, float]]:
+        """(start_s, end_s) of each boot segment (a reboot starts a new one); one for the whole log
+        when the log has no boot clock or no reboot."""
+        if self.clock is None:
+            return [(0.0, float(self.duration_s))]
+        return self.clock.spans(self.duration_s)
 
     @property
     def armed_periods(self) -> list[tuple[float, float]]:

@@ -5,6 +5,10 @@ A DataFlash record has no checksum: one flipped byte in a GPS record gives a fix
 ones are counted by reason in ``FlightLog.gps_rejected``:
 
 ``quality``   HDOP above :data:`MAX_HDOP` or fewer than :data:`MIN_SATS` satellites, where logged
+``origin``    (a .tlog) GLOBAL_POSITION_INT's altitude farther than :data:`ORIGIN_TOL_M` from the GPS
+              receiver's own altitude (GPS_RAW_INT.alt) reported with it: the autopilot's estimator
+              had no GPS origin yet and reported its height above the boot spot as AMSL (the
+              dronekit tlog shows 0.22 m AMSL before, 590 m after, the origin was set at a reboot)
 ``altitude``  outside [-500, 10000] m AMSL (the range :class:`~mission_sim.mavlink.geodesy.GeoPoint` takes)
 ``jump``      farther from the median of its neighbours (centred window of :data:`WINDOW` fixes)
               than a vehicle at :data:`MAX_SPEED_M_S` horizontally / :data:`MAX_VSPEED_M_S`
@@ -24,7 +28,7 @@ import pandas as pd
 from .geodesy import GeoPoint, geodetic_to_enu
 
 __all__ = ["reject_outliers", "max_excursion_m", "MAX_SPEED_M_S", "MAX_VSPEED_M_S", "SLACK_M", "MAX_HDOP",
-           "MIN_SATS", "WINDOW", "MAX_DT_S"]
+           "MIN_SATS", "WINDOW", "MAX_DT_S", "ORIGIN_TOL_M"]
 
 MAX_SPEED_M_S = 60.0     # horizontal: racing quads and a quadplane's cruise (27.8 m/s in the VTOL log) stay below
 MAX_VSPEED_M_S = 30.0    # vertical
@@ -34,6 +38,7 @@ MIN_SATS = 4             # a 3D fix needs four satellites
 WINDOW = 9               # neighbours for the median: up to 4 corrupt fixes in a row are outvoted
 MAX_DT_S = 5.0           # a gap longer than this (drop-out) allows no more motion than 5 s would
 ALT_RANGE_M = (-500.0, 10000.0)
+ORIGIN_TOL_M = 100.0     # estimator vs GPS altitude: baro drift and GPS vertical error stay well below
 
 
 def max_excursion_m() -> tuple[float, float]:
@@ -59,9 +64,9 @@ def _jumps(t, e, n, u) -> np.ndarray:
 
 
 def reject_outliers(pos: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, int]]:
-    """``pos`` (t_s, lat_deg, lon_deg, alt_m, optional hdop, sats; sorted by t_s) without the
-    implausible fixes, and the number rejected per reason."""
-    counts = {"quality": 0, "altitude": 0, "jump": 0}
+    """``pos`` (t_s, lat_deg, lon_deg, alt_m, optional hdop, sats, gps_alt_m; sorted by t_s) without
+    the implausible fixes, and the number rejected per reason."""
+    counts = {"quality": 0, "origin": 0, "altitude": 0, "jump": 0}
     if not len(pos):
         return pos, counts
     bad = np.zeros(len(pos), dtype=bool)
@@ -71,6 +76,10 @@ def reject_outliers(pos: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, int]]:
         bad |= pos["sats"].to_numpy(float) < MIN_SATS
     counts["quality"] = int(bad.sum())
     alt = pos["alt_m"].to_numpy(float)
+    if "gps_alt_m" in pos:
+        origin = ~bad & (np.abs(alt - pos["gps_alt_m"].to_numpy(float)) > ORIGIN_TOL_M)   # nan passes
+        counts["origin"] = int(origin.sum())
+        bad |= origin
     off = ~bad & ~((alt >= ALT_RANGE_M[0]) & (alt <= ALT_RANGE_M[1]))
     counts["altitude"] = int(off.sum())
     keep = pos[~(bad | off)]

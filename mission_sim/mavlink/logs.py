@@ -6,17 +6,21 @@ missing file raises (``FileNotFoundError``).
 
 Tables of a :class:`FlightLog` (time ``t_s`` in seconds since the first record of the log, taken
 from the log's own timestamps ``msg._timestamp`` -- ground-station clock in a .tlog, GPS-aligned
-in a .bin -- so vehicle reboots and ``time_boot_ms`` resets do not disturb the timeline; position
-and attitude samples of a .tlog are spaced by the vehicle's clock within each boot, see
-:func:`_vehicle_time`):
+in a .bin. A .tlog's tables are all put on ONE time base, the vehicle's boot clock mapped onto
+the receive clock per boot segment (clock.py): positions and attitude by their ``time_boot_ms``,
+battery and armed-state records by their receive time through the same fitted map; reboots split
+the log into segments, ``FlightLog.segments``):
 
 ==========  =================================================================================
 table       columns (SI units; converted once, in :data:`_CONVERT`)
 ==========  =================================================================================
-position    t_s, lat_deg, lon_deg, alt_m (AMSL) -- GPS fix type >= 3 only
+position    t_s, lat_deg, lon_deg, alt_m (AMSL) -- GPS fix type >= 3 only; in a .tlog also checked
+            against GPS_RAW_INT's own altitude (gpsclean.py: an EKF without a GPS origin)
 attitude    t_s, roll_rad, pitch_rad
 armed       t_s, armed (bool) -- every armed-state report of the vehicle
 battery     t_s, voltage_v, current_a (+ = discharging), power_w = voltage_v * current_a
+airspeed    t_s, airspeed_m_s -- only from an airspeed sensor (VFR_HUD with SYS_STATUS's
+            differential-pressure bit, DataFlash ARSP); empty without one
 ==========  =================================================================================
 
 pymavlink must be imported with ``MAVLINK20=1`` (shared/notes/mavlink.md): :func:`mavutil`
@@ -37,6 +41,7 @@ import pandas as pd
 from .armed import armed_periods, infer_armed, starts_armed
 from .flightlog import (TIME_SPIKE_S as _TIME_SPIKE_S, ARMED_COLUMNS, ATTITUDE_COLUMNS, BATTERY_COLUMNS, POSITION_COLUMNS, FlightLog,
                         clean_time as _clean_time, good_timestamps as _good_timestamps)
+from .clock import ClockMap, fit_clock, identity_clock
 from .gpsclean import reject_outliers
 
 __all__ = ["mavutil", "FlightLog", "read_log", "armed_periods", "POSITION_COLUMNS", "BATTERY_COLUMNS"]
@@ -44,9 +49,9 @@ __all__ = ["mavutil", "FlightLog", "read_log", "armed_periods", "POSITION_COLUMN
 
 _MAV_AUTOPILOT_INVALID = 8          # ground stations and companions send heartbeats with this
 _MAV_MODE_FLAG_SAFETY_ARMED = 128
+_SENSOR_DIFFERENTIAL_PRESSURE = 0x10  # MAV_SYS_STATUS_SENSOR_DIFFERENTIAL_PRESSURE: an airspeed sensor
 _UINT16_MAX = 65535
 _T_MIN_S, _T_MAX_S = 0.0, 4102444800.0  # plausible record times: boot-relative .. year 2100 (Unix s)
-_REBOOT_DROP_S = 10.0                 # a time_boot_ms drop this large is a reboot, not jitter
 _DF_ARMED_EVENTS = {10: True, 11: False}  # DataFlash EV Id: ARMED, DISARMED
 _DF_INT_CHARS = set("bBhHiIqQ")           # DataFlash format chars stored as plain integers
 
@@ -87,7 +92,7 @@ _CONVERT = {
         "lat_deg": m.lat * 1e-7, "lon_deg": m.lon * 1e-7, "alt_m": m.alt * 1e-3,
         "time_boot_s": m.time_boot_ms * 1e-3}),
     "GPS_RAW_INT": ("fix", lambda m: {"fix_type": int(m.fix_type), "hdop": _nan_if(m.eph, _UINT16_MAX) * 1e-2,
-                                      "sats": _nan_if(m.satellites_visible, 255)}),
+                                      "sats": _nan_if(m.satellites_visible, 255), "gps_alt_m": m.alt * 1e-3}),
     "GPS": ("df_gps", lambda m: {
         "fix_type": int(m.Status), "lat_deg": float(m.Lat), "lon_deg": float(m.Lng), "alt_m": float(m.Alt),
         "gps_id": int(getattr(m, "I", getattr(m, "Instance", 0))),
@@ -104,9 +109,13 @@ _CONVERT = {
     "RCOU": ("pwm", lambda m: {f"ch{c.lstrip('Ch')}": float(getattr(m, c)) for c in m.fmt.columns
                                if c.lstrip("Ch").isdigit()}),
     "ESC": ("esc", lambda m: {"rpm": float(m.RPM)}),
-    "VFR_HUD": ("throttle", lambda m: {"throttle": float(m.throttle)}),
+    "VFR_HUD": ("throttle", lambda m: {"throttle": float(m.throttle), "airspeed_m_s": float(m.airspeed)}),
+    "ARSP": ("df_airspeed", lambda m: {"airspeed_m_s": float(m.Airspeed),
+                                       "sensor_id": int(getattr(m, "I", getattr(m, "Instance", 0)))}),
     "CTUN": ("throttle", lambda m: {"throttle": float(getattr(m, "ThO", getattr(m, "ThrOut", float("nan"))))}),
     "SYS_STATUS": ("sys_status", lambda m: {
+        "airspeed_sensor": bool(m.onboard_control_sensors_present & m.onboard_control_sensors_enabled
+                                & _SENSOR_DIFFERENTIAL_PRESSURE),
         "voltage_v": _nan_if(m.voltage_battery, 0, _UINT16_MAX) * 1e-3,
         "current_a": _nan_if(m.current_battery, -1) * 1e-2}),
     "BATTERY_STATUS": ("battery_status", lambda m: {
@@ -219,24 +228,40 @@ def read_log(path) -> FlightLog:
 
 
 class _Tables:
-    """``raw`` rows as DataFrames: records with a good timestamp only, time ``t_s`` from ``t0``;
-    for a .tlog, :meth:`vehicle` keeps the vehicle's own messages (by the first autopilot
-    heartbeat's system and component id)."""
+    """``raw`` rows as DataFrames: records with a good timestamp only, time ``t_s`` on the log's one
+    time base (a .tlog: :attr:`clock`, fitted here from the vehicle's boot-stamped records; other
+    logs: their own clock from ``t0``); for a .tlog, :meth:`vehicle` keeps the vehicle's own
+    messages (by the first autopilot heartbeat's system and component id)."""
 
     def __init__(self, raw: dict, good: np.ndarray, t0: float, kind: str):
         self.raw, self.good, self.t0, self.kind = raw, good, t0, kind
+        self.clock: ClockMap | None = None
         hb = self("heartbeat")
         veh = hb[hb["autopilot"] != _MAV_AUTOPILOT_INVALID] if len(hb) else hb
         self.ids = {}
         if kind == "tlog" and len(veh):
             src = veh["src"].iloc[0]
             self.ids = {"sysid": int(src[0]), "compid": int(src[1]), "mav_type": int(veh["mav_type"].iloc[0])}
+        self.clock = self._fit_clock() if kind == "tlog" else identity_clock("the log's own (vehicle) clock")
+
+    def _fit_clock(self) -> ClockMap:
+        """The boot clock of the vehicle's position and attitude records, fitted to their receive times."""
+        parts = [df[["rec", "t_s", "time_boot_s"]] for df in (self.vehicle("position"), self.vehicle("attitude"))
+                 if len(df) and "time_boot_s" in df]
+        if not parts:
+            return identity_clock("log clock (no time_boot_ms in the log)")
+        both = pd.concat(parts)
+        return fit_clock(both["rec"].to_numpy(), both["t_s"].to_numpy(float), both["time_boot_s"].to_numpy(float))
 
     def __call__(self, name: str) -> pd.DataFrame:
         df = pd.DataFrame(self.raw.get(name, []))
         if len(df):
             df = df[self.good[df["rec"].to_numpy()]]
-            df.insert(0, "t_s", df.pop("t") - self.t0)
+            t = df.pop("t").to_numpy(float) - self.t0
+            if self.clock is not None and self.kind == "tlog":
+                boot = df["time_boot_s"].to_numpy(float) if "time_boot_s" in df else None
+                t = self.clock.map(df["rec"].to_numpy(), t, boot, spike_s=_TIME_SPIKE_S)
+            df.insert(0, "t_s", t)
         return df
 
     def vehicle(self, name: str) -> pd.DataFrame:
@@ -255,10 +280,9 @@ def _tlog_position(tab: _Tables):
     fix = tab("fix")
     if tab.ids and len(fix):
         fix = fix[fix["src"].map(lambda s: s[0]) == tab.ids["sysid"]]
-    reboots = int(np.sum(np.diff(pos["time_boot_s"].to_numpy(float)) < -_REBOOT_DROP_S)) if len(pos) else 0
-    pos = _vehicle_time(pos)
+    reboots = len(tab.clock.segments) - 1
     if len(pos) and len(fix):
-        pos = pd.merge_asof(pos.sort_values("rec"), fix[["rec", "fix_type", "hdop", "sats"]].sort_values("rec"),
+        pos = pd.merge_asof(pos.sort_values("rec"), fix[["rec", "fix_type", "hdop", "sats", "gps_alt_m"]].sort_values("rec"),
                             on="rec", direction="backward")
         return pos[pos["fix_type"].fillna(0) >= 3], reboots, True
     return pos, reboots, not len(pos)
@@ -276,7 +300,7 @@ def _position(tab: _Tables):
         ok = (pos["lat_deg"] != 0) & (pos["lon_deg"] != 0) & pos["lat_deg"].between(-90, 90) \
             & pos["lon_deg"].between(-180, 180) & np.isfinite(pos["alt_m"])
         pos = pos[ok]
-    extra = [c for c in ("hdop", "sats") if c in pos]
+    extra = [c for c in ("hdop", "sats", "gps_alt_m") if c in pos]
     pos, rejected = reject_outliers(_clean_time(pos, (*POSITION_COLUMNS, *extra)))
     return pos[list(POSITION_COLUMNS)].reset_index(drop=True), reboots, fix_checked, rejected
 
@@ -319,15 +343,35 @@ def _battery(tab: _Tables):
     return pd.DataFrame(columns=list(BATTERY_COLUMNS)), None
 
 
+def _airspeed(tab: _Tables) -> pd.DataFrame:
+    """(t_s, airspeed_m_s) where the vehicle measures airspeed: a .tlog's VFR_HUD.airspeed only when
+    SYS_STATUS reports a differential-pressure sensor present and enabled (without one ArduPilot
+    reports an estimate); a DataFlash log's ARSP (first sensor). Empty otherwise."""
+    cols = ("t_s", "airspeed_m_s")
+    if tab.kind == "tlog":
+        ss = tab.vehicle("sys_status")
+        df = tab.vehicle("throttle") if len(ss) and ss["airspeed_sensor"].any() else pd.DataFrame()
+    else:
+        df = tab("df_airspeed")
+        if len(df):
+            df = df[df["sensor_id"] == df["sensor_id"].min()]
+    if len(df):
+        df = df[np.isfinite(df["airspeed_m_s"]) & (df["airspeed_m_s"] >= 0)]
+    return _clean_time(df, cols) if len(df) else pd.DataFrame({c: pd.Series(dtype=float) for c in cols})
+
+
 def _assemble(path: Path, kind: str, raw: dict, stats: dict, errors: list[str]) -> FlightLog:
     ts = np.asarray(stats["ts"], dtype=float)
     good = _good_timestamps(ts)
     stats["bad"] += int(np.sum(~good | np.asarray(stats["bad_rec"], dtype=bool)))
     t0 = float(ts[good][0]) if good.any() else float("nan")
-    duration = max(float(ts[good].max()) - t0, 0.0) if good.any() else 0.0
     tab = _Tables(raw, good, t0, kind)
+    duration = 0.0
+    if good.any():
+        last = int(np.flatnonzero(good)[np.argmax(ts[good])])
+        duration = max(float(tab.clock.map([last], [ts[last] - t0])[0]), 0.0)
     position, reboots, fix_checked, rejected = _position(tab)
-    attitude = _clean_time(_vehicle_time(tab.vehicle("attitude")), ATTITUDE_COLUMNS)
+    attitude = _clean_time(tab.vehicle("attitude"), ATTITUDE_COLUMNS)
     armed, armed_source, starts_armed = _armed(tab)
     battery, source = _battery(tab)
     return FlightLog(path=path, kind=kind, t0_epoch_s=float(t0), duration_s=float(duration),
@@ -335,28 +379,6 @@ def _assemble(path: Path, kind: str, raw: dict, stats: dict, errors: list[str]) 
                      battery_source=source, bad_frames=int(stats["bad"]), n_records=int(len(ts)),
                      mavlink_frames=dict(stats["versions"]), reboots=reboots, fix_checked=fix_checked,
                      vehicle=tab.ids, errors=errors, armed_source=armed_source, starts_armed=starts_armed,
-                     gps_rejected=rejected)
+                     gps_rejected=rejected, clock=tab.clock if kind == "tlog" else None,
+                     airspeed=_airspeed(tab))
 
-
-def _vehicle_time(df: pd.DataFrame) -> pd.DataFrame:
-    """Sample times from the vehicle's clock, placed on the log's timeline.
-
-    A ground station stamps frames when they arrive, in bursts (the SITL log here has a median
-    spacing of 7 ms between position frames sent every 240 ms). The vehicle's ``time_boot_s``
-    spaces samples exactly but restarts on reboot. So: split at every ``time_boot`` drop larger
-    than :data:`_REBOOT_DROP_S` (a reboot), and within each boot segment use ``time_boot_s`` plus
-    the segment's median offset to the log clock. A sample that lands more than
-    :data:`_TIME_SPIKE_S` from its own log timestamp (corrupt time_boot_ms) keeps the log timestamp.
-    """
-    if not len(df) or "time_boot_s" not in df:
-        return df
-    tb = df["time_boot_s"].to_numpy(float)
-    t = df["t_s"].to_numpy(float)
-    seg = np.concatenate([[0], np.cumsum(np.diff(tb) < -_REBOOT_DROP_S)])
-    out = t.copy()
-    for k in np.unique(seg):
-        m = seg == k
-        out[m] = tb[m] + np.median(t[m] - tb[m])
-    bad = ~np.isfinite(out) | (np.abs(out - t) > _TIME_SPIKE_S)
-    out[bad] = t[bad]
-    return df.assign(t_s=out)

@@ -28,7 +28,8 @@ from .geodesy import GeoPoint, geodetic_to_enu
 from .logs import FlightLog, read_log
 
 __all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "flight_stats",
-           "logged_energy_j", "compare_power", "fit_mass_kg", "resample_track", "replay_trajectory", "ReplayResult", "replay_log", "parse_window"]
+           "logged_energy_j", "compare_power", "fit_mass_kg", "resample_track", "replay_trajectory", "ReplayResult", "replay_log", "parse_window",
+           "choose_segment", "replay_span"]
 
 
 MAX_TILT_RAD = np.radians(85.0)   # the mission world takes |tilt| < 90 deg; beyond is upside down
@@ -36,6 +37,7 @@ HOVER_SPEED_M_S = 0.3             # slower than this counts as hovering (pads ma
 AIRBORNE_M = 1.0                  # armed and this high above the pad counts as airborne (GPS height noise ~1 m)
 MIN_DT_S = 0.05                   # closer position samples are dropped (velocity by differences)
 _MAX_GAP_S = 10.0                 # samples further apart are not integrated across
+_EDGE_S = 1e-3                    # a battery sample this close outside the track's ends is in it (float rounding)
 
 
 class NoPositionError(ValueError):
@@ -96,6 +98,39 @@ def parse_window(text: str | None) -> tuple[float, float] | None:
     if not (np.isfinite(t0) and np.isfinite(t1) and 0 <= t0 < t1):
         raise ValueError(f"--window {text!r} is invalid; valid format: {fmt}")
     return t0, t1
+
+
+def choose_segment(log: FlightLog) -> int:
+    """The boot segment (0-based) a replay flies when the log has several (reboots): the one with
+    the most armed time, ties broken by the number of positions (a never-armed log: the segment
+    with the most positions)."""
+    def score(span):
+        a, b = span
+        armed = sum(max(0.0, min(e, b) - max(s, a)) for s, e in log.armed_periods)
+        t = log.position["t_s"].to_numpy(float)
+        return armed, int(np.sum((t >= a) & (t <= b)))
+    spans = log.segments
+    return max(range(len(spans)), key=lambda k: score(spans[k]))
+
+
+def replay_span(log: FlightLog, window: tuple[float, float] | None = None,
+                segment: int | None = None) -> tuple[tuple[float, float] | None, dict]:
+    """The part of ``log`` a replay flies and what to report about it: ``window`` (log seconds) if
+    given, else boot segment ``segment`` (1-based; None: :func:`choose_segment` when the log has
+    more than one). Returns (window or None for the whole log, facts for the summary)."""
+    spans = log.segments
+    n = len(spans)
+    info = {"segments": n, "clock": log.clock.source if log.clock is not None else "the log's own (vehicle) clock",
+            "segment_clock": log.clock.describe() if log.clock is not None else []}
+    if segment is not None and not 1 <= segment <= n:
+        raise ValueError(f"--segment {segment!r} is invalid; valid range: 1..{n} (the log has {n} boot segment(s))")
+    if window is not None:
+        return window, {**info, "replayed_segment": None}
+    if segment is None and n == 1:
+        return None, {**info, "replayed_segment": 1}
+    k = choose_segment(log) if segment is None else segment - 1
+    a, b = spans[k]
+    return (float(a), float(b)), {**info, "replayed_segment": k + 1, "segment_span_s": [round(a, 3), round(b, 3)]}
 
 
 def default_pad(log: FlightLog) -> GeoPoint:
@@ -198,6 +233,7 @@ def flight_stats(log: FlightLog, track: FlightTrack) -> dict:
         "n_position_samples": int(len(track.t_s)),
         "bad_frames": int(log.bad_frames),
         "reboots": int(log.reboots),
+        "flown": bool(sum(b - a for a, b in periods) > 0),
         "tilt_clipped_samples": int(track.n_tilt_clipped),
         "pad": {"lat_deg": track.pad.lat_deg, "lon_deg": track.pad.lon_deg, "alt_m": track.pad.alt_m},
     }
@@ -241,7 +277,7 @@ def compare_power(log: FlightLog, track: FlightTrack, sim_t_s, propulsion_w) -> 
     bat = log.battery
     sim_t = np.asarray(sim_t_s, dtype=float) + track.t_offset_s
     model_w = np.asarray(propulsion_w, dtype=float)
-    b = bat[(bat["t_s"] >= sim_t[0]) & (bat["t_s"] <= sim_t[-1])]
+    b = bat[(bat["t_s"] >= sim_t[0] - _EDGE_S) & (bat["t_s"] <= sim_t[-1] + _EDGE_S)]
     t = b["t_s"].to_numpy(float)
     height = np.interp(t, track.t_s + track.t_offset_s, track.height_m) if len(t) else np.zeros(0)
     armed = _in_periods(t, log.armed_periods)
@@ -354,6 +390,9 @@ def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
                    "truncated log? the replay covers only what was recorded")
     if log.errors:
         out.append(f"{log.path.name}: reading stopped early: {log.errors[0]}")
+    if not np.any(track.armed):
+        out.append(f"{log.path.name}: the vehicle never armed in the replayed part: the track is marked NOT FLOWN "
+                   "(its distance and height are GPS drift on the ground; nothing here was a flight)")
     dist = float(np.min(np.hypot(track.pos_m[:, 0], track.pos_m[:, 1])))
     if dist > FAR_PAD_M:
         out.append(f"the pad ({track.pad.lat_deg:.6f}, {track.pad.lon_deg:.6f}) is {dist / 1e3:.0f} km from the "
@@ -362,12 +401,15 @@ def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
 
 
 def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: float | None = None,
-               window: tuple[float, float] | None = None, progress: bool = False) -> ReplayResult:
+               window: tuple[float, float] | None = None, progress: bool = False,
+               segment: int | None = None) -> ReplayResult:
     """Build the track of ``log`` (a :class:`FlightLog` or a path), run the mission world along it,
     compare the power.
 
     ``ground_gap_m`` None: ``cfg.mission.hover_gap_m`` (the nominal gap), i.e. landed on the pad
-    the receiver coil sits at its nominal height above the pad coil.
+    the receiver coil sits at its nominal height above the pad coil. A log with reboots replays one
+    boot segment (:func:`replay_span`; ``segment`` 1-based, None: the one with the most armed
+    time) unless ``window`` is given; the summary names it (``replayed_segment``).
     Raises :class:`NoPositionError` (a ``ValueError``) if the log has no usable position.
     """
     from ..world.runner import run_mission
@@ -376,12 +418,14 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
         log = read_log(log)
     if ground_gap_m is None:
         ground_gap_m = cfg.mission.hover_gap_m
+    window, span_info = replay_span(log, window, segment)
     track = track_from_log(log, pad=pad, ground_gap_m=ground_gap_m, window=window)
     grid = resample_track(track, cfg.sim.traj_dt_s)
     traj = replay_trajectory(grid)
     mission = run_mission(cfg, policy, trajectory=traj, progress=progress)
     ts = mission.timeseries
     summary = flight_stats(log, track)
+    summary.update(span_info)
     ms = mission.summary
     summary.update({
         "rectifier_output_j": float(ms["rectifier_output_j"]),
@@ -398,7 +442,7 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
     table = None
     if len(log.battery):
         t0, t1 = track.t_offset_s, track.t_offset_s + float(track.t_s[-1])
-        summary["logged_energy_j"] = logged_energy_j(log.battery, t0, t1)
+        summary["logged_energy_j"] = logged_energy_j(log.battery, t0 - _EDGE_S, t1 + _EDGE_S)
         table, cmp = compare_power(log, track, ts["t_s"].to_numpy(), ts["propulsion_w"].to_numpy())
         air = table["airborne"].to_numpy()
         cmp["drone_mass_kg"] = float(cfg.drone.mass_kg)

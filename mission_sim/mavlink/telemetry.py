@@ -9,9 +9,16 @@ message              content (from the mission time series; units as the MAVLink
 ===================  ============================================================================
 HEARTBEAT            at every whole second of simulated time (1 Hz, also in follow mode):
                      quadrotor, ArduCopter custom mode LOITER (5) while hovering (over a pad,
-                     charging) and AUTO (3) in transit; base_mode as ArduCopter sets it
+                     charging), LAND (9) in the final descent and on the ground after it, AUTO (3)
+                     in transit; base_mode as ArduCopter sets it
                      (CUSTOM_MODE_ENABLED | STABILIZE_ENABLED | GUIDED_ENABLED |
                      MANUAL_INPUT_ENABLED | SAFETY_ARMED), system status ACTIVE
+EXTENDED_SYS_STATE  with every HEARTBEAT: landed state TAKEOFF / IN_AIR / LANDING / ON_GROUND by phase
+end of stream        the vehicle lands and disarms, as ArduCopter does after a LAND: 0.5 s after the
+                     last tick (if it was still in the air) a HEARTBEAT in LAND with landed state
+                     LANDING, 1 s after it a HEARTBEAT without the armed flag (system status
+                     STANDBY) and landed state ON_GROUND. So a ground station sees DISARMED before
+                     the link goes quiet (a stream cut by ``duration_s`` ends the same way)
 every tick at ``rate_hz``:
 SYS_STATUS           sensors present = enabled: gyro, accelerometer, GPS, battery, pre-arm check; health: those
                      (battery bit cleared below 5 % charge) plus the geofence bit (no fence, so no
@@ -23,7 +30,9 @@ BATTERY_STATUS       pack voltage in cell 0 [mV], current [cA], consumed [mAh, h
                      battery's discharge current / power since the start, so they *fall* while the
                      pad charges the battery (they may go negative after a net charge; -1, "not
                      measured", is sent as -2)
-GPS_RAW_INT          3D fix at the position (ground stations read the fix from it)
+GPS_RAW_INT          3D fix at the position (ground stations read the fix from it), with what a
+                     receiver reports: 10-14 satellites, HDOP 0.8-1.2 and VDOP 1.2-1.6 (eph / epv in
+                     cm units), varying slowly with time (:func:`gps_quality`), course over ground
 GLOBAL_POSITION_INT  position about ``home`` [1e-7 deg, mm], relative_alt [mm] (coil height less the
                      ground gap: 0 when landed), velocity NED [cm/s]
 ATTITUDE             roll 0, pitch = -tilt (nose down in forward flight), yaw = course over ground
@@ -57,13 +66,17 @@ from .geodesy import GeoPoint, enu_to_geodetic
 from .logs import mavutil
 
 __all__ = ["DEFAULT_HOME", "TlogWriter", "mavlink_table", "encode_tick", "encode_heartbeat", "stream", "StreamStats",
-           "check_connect", "check_ids", "CONNECT_FORMAT", "NVF_NAMES", "COPTER_MODES", "schedule", "drawn_totals"]
+           "check_connect", "check_ids", "CONNECT_FORMAT", "NVF_NAMES", "COPTER_MODES", "schedule", "drawn_totals",
+           "gps_quality", "heartbeat_msgs", "landing_rows"]
 
 #: ArduPilot SITL's default home (CMAC, Canberra), where two of the real logs were flown.
 DEFAULT_HOME = GeoPoint(-35.363261, 149.165230, 584.0)
 CONNECT_FORMAT = "udpout:HOST:PORT, udpin:HOST:PORT, udp:HOST:PORT, tcp:HOST:PORT or tcpin:HOST:PORT"
 #: ArduCopter custom modes sent in HEARTBEAT.custom_mode (ArduCopter's Mode::Number)
-COPTER_MODES = {"AUTO": 3, "LOITER": 5}
+COPTER_MODES = {"AUTO": 3, "LOITER": 5, "LAND": 9}
+#: MAV_LANDED_STATE of EXTENDED_SYS_STATE by mission phase (anything else: IN_AIR = 2)
+_LANDED_STATE = {"ground": 1, "takeoff": 3, "land": 4}
+_LAND_PHASES = ("land", "ground")
 #: NAMED_VALUE_FLOAT name -> (mavlink_table column, meaning and unit); names match [0-9A-Z_]{1,10}
 NVF_NAMES = {
     "I2": ("i2_a", "secondary coil current envelope amplitude [A]"),
@@ -149,6 +162,9 @@ def _columns(ts: pd.DataFrame, track) -> dict:
     col["drawn_c"], col["drawn_j"] = drawn_totals(ts)
     phase = ts["phase"].astype(str).to_numpy() if "phase" in ts else None
     col["hover"] = np.isin(phase, _HOVER_PHASES).astype(float) if phase is not None else (col["tx_on"] > 0) * 1.0
+    col["landing"] = np.isin(phase, _LAND_PHASES).astype(float) if phase is not None else np.zeros(len(t))
+    col["landed_state"] = (np.array([_LANDED_STATE.get(p, 2) for p in phase], dtype=float) if phase is not None
+                           else np.full(len(t), 2.0))
     tp, pos = t, np.column_stack([col["x_m"], col["y_m"], col["z_m"]])
     tilt = np.zeros(len(t))
     if track is not None:
@@ -260,11 +276,25 @@ def _wire(col: dict, t: np.ndarray, home: GeoPoint, ground_gap_m: float, hover_w
         "current_ca": cur_ca, "consumed_mah": consumed[0], "consumed_hj": consumed[1],
         "remaining_pct": np.round(soc * 100).astype(int), "charge_state": state.astype(int),
         "armed": np.ones(len(t), dtype=bool),  # the simulated drone flies the whole mission
-        "custom_mode": np.where(col["hover"] > 0, COPTER_MODES["LOITER"], COPTER_MODES["AUTO"]).astype(int),
+        "custom_mode": np.select([col["landing"] > 0, col["hover"] > 0], [COPTER_MODES["LAND"], COPTER_MODES["LOITER"]],
+                                 COPTER_MODES["AUTO"]).astype(int),
+        "landed_state": col["landed_state"].astype(int),
+        **gps_quality(t),
         "i2_a": col["i2_amp_a"], "i1_a": col["i1_amp_a"], "d_short": d, "lm_uh": col["lm_h"] * 1e6,
         "sbar_mode": np.where(d <= 0.0, 0.0, np.where(d >= 1.0, 2.0, 1.0)), "pad_on": (col["tx_on"] > 0) * 1.0,
         "charge_cmd_a": col["charge_cmd_a"], "rect_a": col["rect_current_a"],
     })
+
+
+def gps_quality(t_s) -> dict:
+    """GPS_RAW_INT quality fields at times ``t_s`` [s] as a receiver with a good sky view reports them:
+    satellites 10..14, HDOP 0.8..1.2 and VDOP 1.2..1.6 (eph / epv in cm units, i.e. 80..120 and
+    120..160), drifting slowly (periods of minutes, as constellations move; deterministic)."""
+    t = np.asarray(t_s, dtype=float)
+    wave = np.sin(2 * np.pi * t / 300.0)
+    return {"sats": np.round(12 + 2 * wave).astype(int),
+            "eph_cm": np.round(100 - 20 * np.sin(2 * np.pi * t / 240.0 + 1.0)).astype(int),
+            "epv_cm": np.round(140 - 20 * np.sin(2 * np.pi * t / 200.0 + 2.0)).astype(int)}
 
 
 def _cells_mv(voltage_mv: int) -> list[int]:
@@ -290,7 +320,8 @@ def send_msgs(mav, msgs, conn, writer, t_log_s: float) -> int:
 
 
 def encode_heartbeat(mav, row):
-    """HEARTBEAT as ArduCopter sends it (see the module docstring) for one :func:`mavlink_table` row."""
+    """HEARTBEAT as ArduCopter sends it (see the module docstring) for one :func:`mavlink_table` row;
+    ``row.armed`` False: disarmed (no SAFETY_ARMED flag, system status STANDBY)."""
     m = mavutil().mavlink
     base = m.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | m.MAV_MODE_FLAG_STABILIZE_ENABLED \
         | m.MAV_MODE_FLAG_GUIDED_ENABLED | m.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED \
@@ -315,7 +346,8 @@ def encode_tick(mav, row) -> list:
                                       int(r.consumed_hj), int(r.remaining_pct), 0, int(r.charge_state)),
             # the fix first: a reader checks each position against the last fix report
             mav.gps_raw_int_encode(ms * 1000, m.GPS_FIX_TYPE_3D_FIX, int(r.lat_e7), int(r.lon_e7), int(r.alt_mm),
-                                   _UINT16_MAX, _UINT16_MAX, int(r.ground_speed_cm_s), _UINT16_MAX, 255),
+                                   int(r.eph_cm), int(r.epv_cm), int(r.ground_speed_cm_s), int(r.heading_deg) * 100,
+                                   int(r.sats)),
             mav.global_position_int_encode(ms, int(r.lat_e7), int(r.lon_e7), int(r.alt_mm), int(r.relative_alt_mm),
                                            int(r.vn_cm_s), int(r.ve_cm_s), int(r.vd_cm_s),
                                            int(r.heading_deg) * 100),
@@ -326,6 +358,24 @@ def encode_tick(mav, row) -> list:
     for name, (column, _) in NVF_NAMES.items():
         msgs.append(mav.named_value_float_encode(ms, name.encode(), float(getattr(r, column))))
     return msgs
+
+
+def heartbeat_msgs(mav, row) -> list:
+    """HEARTBEAT and EXTENDED_SYS_STATE (landed state) for one :func:`mavlink_table` row."""
+    m = mavutil().mavlink
+    return [encode_heartbeat(mav, row),
+            mav.extended_sys_state_encode(m.MAV_VTOL_STATE_UNDEFINED, int(getattr(row, "landed_state", 2)))]
+
+
+def landing_rows(last) -> list[tuple[float, object]]:
+    """The end of a stream (module docstring): (seconds after the last tick, row) of the landing
+    HEARTBEAT (only if ``last`` was not on the ground) and of the disarm."""
+    out = []
+    if int(getattr(last, "landed_state", 2)) != _LANDED_STATE["ground"]:
+        out.append((0.5, last._replace(custom_mode=COPTER_MODES["LAND"], landed_state=_LANDED_STATE["land"])))
+    out.append((1.0, last._replace(custom_mode=COPTER_MODES["LAND"], landed_state=_LANDED_STATE["ground"],
+                                   armed=False)))
+    return out
 
 
 def schedule(tick_t: np.ndarray, hb_after: float = -np.inf) -> list[tuple[float, int, bool]]:
@@ -374,7 +424,8 @@ def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.
     inf``: as fast as possible). At most ``duration_s * rate_hz + 1`` ticks (default: the whole
     series). ``conn``: an open pymavlink connection to use instead of opening ``connect``;
     ``track``: ``(t_s, pos_m[, tilt_rad])`` of the flown trajectory (see :func:`mavlink_table`);
-    ``sysid`` / ``compid``: the vehicle's MAVLink ids.
+    ``sysid`` / ``compid``: the vehicle's MAVLink ids. The stream ends with the vehicle landing and
+    disarming (:func:`landing_rows`, up to 1 s of simulated time after the last tick).
     """
     _check_stream(rate_hz, speed, connect, tlog, conn)
     sysid, compid = check_ids(sysid, compid)
@@ -384,6 +435,9 @@ def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.
     n_ticks = int(math.floor(span * rate_hz + 1e-9)) + 1
     sim_t = np.arange(n_ticks) / rate_hz
     table = mavlink_table(ts, home, ground_gap_m, t_out=t[0] + sim_t, track=track)
+    rows = list(table.itertuples(index=False))
+    events = [(sim_s, rows[k], hb) for sim_s, k, hb in schedule(sim_t)]
+    events += [(float(sim_t[-1]) + dt, row, True) for dt, row in landing_rows(rows[-1])]
     own = conn is None and connect is not None
     if own:
         conn = mu.mavlink_connection(check_connect(connect), source_system=sysid, source_component=compid)
@@ -398,13 +452,12 @@ def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.
         from tqdm import tqdm
         bar = tqdm(total=n_ticks, unit="tick", desc="telemetry")
     try:
-        for sim_s, k, hb in schedule(sim_t):
+        for sim_s, row, hb in events:
             if math.isfinite(speed):
                 delay = wall0 + sim_s / speed - time.monotonic()
                 if delay > 0:
                     time.sleep(min(delay, 1.0 / speed + 1.0))
-            row = table.iloc[k]
-            msgs = [encode_heartbeat(mav, row)] if hb else encode_tick(mav, row)
+            msgs = heartbeat_msgs(mav, row) if hb else encode_tick(mav, row)
             frames += send_msgs(mav, msgs, conn, writer, epoch0 + sim_s)
             for msg in msgs:
                 counts[msg.get_type()] = counts.get(msg.get_type(), 0) + 1
