@@ -331,11 +331,11 @@ def float32_duty_bound(spec: ControllerSpec, kind: str, inputs, vl_v) -> np.ndar
 
 
 # ============================================================================ test vectors and files
-def test_vectors(spec: ControllerSpec, t_switch_s: float = 1e-3, t_end_s: float = 16e-3, extra=()):
+def test_vectors(spec: ControllerSpec, t_switch_s: float = 1e-3, t_end_s: float = 16e-3, extra=(), paper: bool = True):
     """Test vectors: the paper's three trajectories on the spec's control period, each as f^-1
     alone (``<name>_finv``: V2* in) and as the whole controller (``<name>_ctl``: I2ref in, the
     steady I2 of the trajectory's V2*; for ``proposed`` the paper's I2ref step), plus ``extra``
-    cases ``(name, kind, inputs, vl_v)``. A DataFrame: ``case, kind, k, input, vl_v, duty`` (Python,
+    cases ``(name, kind, inputs, vl_v)`` (``paper=False``: those alone). A DataFrame: ``case, kind, k, input, vl_v, duty`` (Python,
     float64) and ``duty_tol_f32`` (:func:`float32_duty_bound`)."""
     import pandas as pd
 
@@ -343,7 +343,7 @@ def test_vectors(spec: ControllerSpec, t_switch_s: float = 1e-3, t_end_s: float 
 
     p = spec.params
     cases = []
-    for name in ("step", "ramp", "proposed"):
+    for name in ("step", "ramp", "proposed") if paper else ():
         t, _, v2 = reference_duty(name, p, t_switch_s, t_end_s, spec.control_period_s, spec.lpf)
         cases.append((f"{name}_finv", "finv", np.asarray(v2, float), p.vl_v))
         if name == "proposed":
@@ -460,3 +460,59 @@ def write_export(out_dir, spec: ControllerSpec, precisions=("f32", "f64"), vecto
     _write_text(out / "dwpt_vectors.csv", vectors.to_csv(index=False, float_format="%.17g"))
     files += [out / "dwpt_vectors.h", out / "dwpt_vectors.csv"]
     return {"files": files, "ops": ops}
+
+
+#: compiler flags of :func:`build_selftest` (the issue's, plus warnings a DSP port cares about)
+CFLAGS = ("-Wall", "-Wextra", "-Wpedantic", "-Wdouble-promotion", "-Wfloat-conversion", "-Werror", "-std=c99", "-O2")
+
+
+def build_selftest(out_dir, precision: str, cc: str = "cc", cflags=CFLAGS) -> Path:
+    """Compile ``selftest_<precision>.c`` + the controller in ``out_dir`` with the system C compiler
+    (``cc cflags -o selftest_<p> ... -lm``); returns the executable. ``subprocess.CalledProcessError``
+    (with the compiler's output) when it does not compile warning-free."""
+    import shutil
+    import subprocess
+
+    out = Path(out_dir)
+    exe = shutil.which(cc)
+    if exe is None:
+        raise FileNotFoundError(f"C compiler {cc!r} not found; install one (e.g. gcc) or pass another --cc")
+    prog = out / f"selftest_{precision}"
+    subprocess.run([exe, *cflags, "-o", str(prog), str(out / f"selftest_{precision}.c"),
+                    str(out / f"dwpt_ctl_{precision}.c"), "-lm"], check=True, capture_output=True, text=True)
+    return prog
+
+
+def run_selftest(prog) -> tuple[int, np.ndarray, str]:
+    """Run a built self-test with printing on: ``(exit status, duties, its summary line)``."""
+    import subprocess
+
+    r = subprocess.run([str(prog), "print"], capture_output=True, text=True, timeout=120)
+    return r.returncode, np.array([float(x) for x in r.stdout.split()]), r.stderr.strip()
+
+
+#: assumed cycle costs on a 200 MHz single-precision DSP core (C2000 FPU32 class): pipelined add,
+#: multiply and compare 1, divide 10 (reciprocal estimate + Newton steps), sqrt 10, asin 60 (a
+#: libm-style polynomial); an estimate for the budget, not a measurement on a DSP
+ASSUMED_DSP_HZ = 200e6
+ASSUMED_CYCLES = {"add": 1, "mul": 1, "cmp": 1, "div": 10, "sqrt": 10, "asin": 60}
+
+
+def budget(spec: ControllerSpec, step_ops: dict) -> dict:
+    """Operations of one control step against the time one control period gives: the paper updates
+    ``d_short`` once per rectifier period ``T = 1/(2f)`` (5.88 us at 85 kHz, its per-half-cycle
+    budget; the paper names no DSP model or clock, so the cycles are at :data:`ASSUMED_DSP_HZ` with
+    :data:`ASSUMED_CYCLES`)."""
+    n = sum(step_ops.values())
+    cycles = sum(ASSUMED_CYCLES[k] * v for k, v in step_ops.items())
+    avail = spec.control_period_s * ASSUMED_DSP_HZ
+    half = spec.params.rectifier_period_s
+    text = (f"{n} operations per step ({_plain(step_ops)}); control period {spec.control_period_s * 1e6:.3g} us "
+            f"(half cycle T = {half * 1e6:.3g} us); at an assumed {ASSUMED_DSP_HZ / 1e6:.0f} MHz DSP "
+            f"{avail:.0f} cycles per period, the step ~{cycles} cycles ({100 * cycles / avail:.1f} %)")
+    return {"ops": n, "cycles_estimate": cycles, "cycles_available": avail, "fraction": cycles / avail,
+            "control_period_s": spec.control_period_s, "half_cycle_s": half, "text": text}
+
+
+def _plain(ops: dict) -> str:
+    return ", ".join(f"{v} {k}" for k, v in ops.items() if v)

@@ -10,6 +10,7 @@ subcommands import what they need lazily, inside the function that runs them.
 ``learning``  ``train`` and ``compare`` (envs and policies, imported lazily)
 ``sweep``     ``sweep`` (parameter studies on Dask)
 ``sizing``    ``sizing`` (rectifier rating, parts and mass per policy)
+``controller``  ``export-controller`` (the paper's controller as C99 for a DSP)
 ============  ==================================================================
 """
 
@@ -19,6 +20,7 @@ import argparse
 import sys
 
 from . import learning, mavlink, mission, paper, sizing, sweep
+from . import controller
 from .common import CliError, OneLineParser
 
 __all__ = ["main", "build_parser"]
@@ -40,7 +42,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"dronewpt {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for add in (paper._add_paper, mission._add_coupling, mission._add_mission, mavlink._add_replay, mavlink._add_telemetry,
-                learning._add_train, learning._add_compare, sweep._add_sweep, sizing._add_sizing):
+                learning._add_train, learning._add_compare, sweep._add_sweep, sizing._add_sizing,
+                controller._add_export_controller):
         add(sub)
     return parser
 
