@@ -11,6 +11,7 @@ subcommands import what they need lazily, inside the function that runs them.
 ``sweep``     ``sweep`` (parameter studies on Dask)
 ``sizing``    ``sizing`` (rectifier rating, parts and mass per policy)
 ``controller``  ``export-controller`` (the paper's controller as C99 for a DSP)
+``netlist``   ``netlist`` (SPICE netlist of the switching model's circuit and devices)
 ============  ==================================================================
 """
 
@@ -20,7 +21,7 @@ import argparse
 import sys
 
 from . import learning, mavlink, mission, paper, sizing, sweep
-from . import controller
+from . import controller, netlist
 from .common import CliError, OneLineParser
 
 __all__ = ["main", "build_parser"]
@@ -43,7 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for add in (paper._add_paper, mission._add_coupling, mission._add_mission, mavlink._add_replay, mavlink._add_telemetry,
                 learning._add_train, learning._add_compare, sweep._add_sweep, sizing._add_sizing,
-                controller._add_export_controller):
+                controller._add_export_controller, netlist._add_netlist):
         add(sub)
     return parser
 

@@ -10,6 +10,7 @@ Modules, in the order data flows:
 ``result``     :class:`SwitchingResult`: dense samples, per-half-cycle envelope, energies
 ``ivp``        :func:`simulate_ivp`: the same circuit through ``solve_ivp`` (slow reference)
 ``plant``      :func:`switching_plant` for :func:`wpt_receiver.paper.run_paper`; eq. 9 check
+``netlist``    the same circuit and devices as a SPICE netlist (ngspice / LTspice; ``dronewpt netlist``)
 =============  ==========================================================================
 
 Figures of the waveforms live outside the physics, in :mod:`mission_sim.figures.switching`.
