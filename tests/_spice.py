@@ -56,7 +56,8 @@ def run_ngspice(text: str, workdir: Path) -> dict:
             "rm_i1_a": peak("rm", "i1"), "sm_i1_a": peak("sm", "i1")}
 
 
-def switching_measure(p=TABLE_I, dv: DeviceSet = DeviceSet(), dead_time_s: float = 0.0) -> dict:
+def switching_measure(p=TABLE_I, dv: DeviceSet = DeviceSet(), dead_time_s: float = 0.0, t_step_s: float = T_STEP_S,
+                      t_end_s: float = T_END_S, d_short: float = 1.0) -> dict:
     """The same numbers from the event-exact switching model (dense peaks on a fine grid)."""
     from wpt_receiver.switching import SwitchingConfig, SwitchingLink
     link = SwitchingLink(p, SwitchingConfig(devices=dv, dead_time_s=dead_time_s))
@@ -64,29 +65,29 @@ def switching_measure(p=TABLE_I, dv: DeviceSet = DeviceSet(), dead_time_s: float
     x0 = np.zeros(link.cir.m)
     x0[:4] = initial_state(p, dv)
     x0[-1] = 1.0
-    res = _run_step(link, x0)
-    ts = np.union1d(np.arange(T / 2, T_END_S, T / 400), res.seg_t)
+    res = _run_step(link, x0, t_step_s, t_end_s, d_short)
+    ts = np.union1d(np.arange(T / 2, t_end_s, T / 400), res.seg_t)
     x, _ = res.states(ts, cols=[0, 2])
     w = 4 * T
 
     def peak(col, a, b):
         sel = (ts >= a) & (ts <= b)
         return float(np.max(np.abs(x[sel, col])))
-    return {"rm_i2_a": peak(1, T_STEP_S - w, T_STEP_S), "step_peak_a": peak(1, T_STEP_S, T_END_S),
-            "sm_i2_a": peak(1, T_END_S - w, T_END_S), "rm_i1_a": peak(0, T_STEP_S - w, T_STEP_S),
-            "sm_i1_a": peak(0, T_END_S - w, T_END_S)}
+    return {"rm_i2_a": peak(1, t_step_s - w, t_step_s), "step_peak_a": peak(1, t_step_s, t_end_s),
+            "sm_i2_a": peak(1, t_end_s - w, t_end_s), "rm_i1_a": peak(0, t_step_s - w, t_step_s),
+            "sm_i1_a": peak(0, t_end_s - w, t_end_s)}
 
 
-def _run_step(link, x0):
-    """Gate off until T_STEP_S, on after (both lower switches); inverter +Vdc on [0, T), -Vdc on
+def _run_step(link, x0, t_step_s=T_STEP_S, t_end_s=T_END_S, d_short=1.0):
+    """Gate off until t_step_s, duty ``d_short`` after (both lower switches); inverter +Vdc on [0, T), -Vdc on
     [T, 2T), ..., each commutation followed by the link's dead time; from T/2. The model's own
     schedule: one gate window per period centred at (n + 1/2) T (phase pi/2), duty 0 before the
-    step and 1 (the whole period) from it."""
+    step and ``d_short`` (1: the whole period) from it."""
     from wpt_receiver.switching.schedule import make_schedule
     T = link.T
-    n_step = round(T_STEP_S / T)
-    windows = lambda n: (np.asarray(n) >= n_step).astype(float)  # noqa: E731
-    return link.run(make_schedule(T / 2, T_END_S, T, windows, math.pi / 2, link.cfg.dead_time_s), x0)
+    n_step = round(t_step_s / T)
+    windows = lambda n: d_short * (np.asarray(n) >= n_step).astype(float)  # noqa: E731
+    return link.run(make_schedule(T / 2, t_end_s, T, windows, math.pi / 2, link.cfg.dead_time_s), x0)
 
 
 PRESETS = ("ideal", "schottky", "sic")
