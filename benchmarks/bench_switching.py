@@ -68,13 +68,9 @@ def _ngspice(text: str) -> float:
 
 
 def _netlist(t_step_s: float, t_end_s: float) -> str:
-    """The generator's netlist with another step/end time (module constants of ``tests/_spice``)."""
-    old = _spice.T_STEP_S, _spice.T_END_S
-    _spice.T_STEP_S, _spice.T_END_S = t_step_s, t_end_s
-    try:
-        return _spice.netlist(label="ideal, 25 ms step scenario")
-    finally:
-        _spice.T_STEP_S, _spice.T_END_S = old
+    """The generator's netlist (:mod:`wpt_receiver.switching.netlist`) with another step/end time."""
+    from wpt_receiver.switching.netlist import netlist
+    return netlist(label="ideal, 25 ms step scenario", t_step_s=t_step_s, t_end_s=t_end_s)
 
 
 def bench_step25(repeat: int, spice: bool, ivp: bool) -> dict:
