@@ -12,6 +12,7 @@ subcommands import what they need lazily, inside the function that runs them.
 ``sizing``    ``sizing`` (rectifier rating, parts and mass per policy)
 ``controller``  ``export-controller`` (the paper's controller as C99 for a DSP)
 ``netlist``   ``netlist`` (SPICE netlist of the switching model's circuit and devices)
+``tolerance``  ``tolerance`` (component-tolerance Monte Carlo on the sweep engine: yield)
 ============  ==================================================================
 """
 
@@ -21,7 +22,7 @@ import argparse
 import sys
 
 from . import learning, mavlink, mission, paper, sizing, sweep
-from . import controller, netlist
+from . import controller, netlist, tolerance
 from .common import CliError, OneLineParser
 
 __all__ = ["main", "build_parser"]
@@ -44,7 +45,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for add in (paper._add_paper, mission._add_coupling, mission._add_mission, mavlink._add_replay, mavlink._add_telemetry,
                 learning._add_train, learning._add_compare, sweep._add_sweep, sizing._add_sizing,
-                controller._add_export_controller, netlist._add_netlist):
+                controller._add_export_controller, netlist._add_netlist,
+                tolerance._add_tolerance):
         add(sub)
     return parser
 
