@@ -14,7 +14,8 @@ phase with i2; devices folded as :func:`wpt_receiver.devices.envelope_params`):
 * RM steady state in closed form. With ``X = -A^-1 B [V1, -V2 ph]``, ``ph = J2/|J2|``:
   ``J2 = G21 V1 - G22 V2 ph`` gives ``|a + G22 V2| = |E|`` (``a = |J2|``, ``E = G21 V1``), so
   ``a = -V2 Re G22 + sqrt(|E|^2 - V2^2 (Im G22)^2)`` when ``|E| > V2 |G22|``; otherwise the
-  diodes never conduct (the induced emf stays below the clamp) and ``a = 0``.
+  diodes never conduct (the induced emf stays below the clamp), ``a = 0`` and v2 is the open-circuit
+  voltage ``E / G22`` (the transient blocks the same way whenever it can, :mod:`.tolerance_kernel`).
   Battery power ``(2/pi) VL a`` (lossless rectifier, plus the folded devices), input power
   ``Re(V1 conj J1) / 2``, efficiency their ratio.
 * The RM -> SM transient of each controller's nominal duty sequence, exact ZOH of the 2x2
@@ -38,7 +39,7 @@ from .params import TABLE_I, LinkParams
 from .references import reference_duty
 from .sbar import v2_from_duty
 
-__all__ = ["Spreads", "SCALES", "draw_scales", "draw_link", "rm_steady", "TransitionSet", "draw_metrics"]
+__all__ = ["Spreads", "SCALES", "MIN_CONDUCTION_A", "draw_scales", "draw_link", "rm_steady", "TransitionSet", "draw_metrics"]
 
 #: the scaled quantities of a draw, in the order of :func:`draw_scales`' columns
 SCALES = ("l1", "l2", "c1", "c2", "lm", "r1", "r2")
@@ -99,10 +100,12 @@ def rm_steady(p: LinkParams, c1_f: float, c2_f: float, devices: DeviceSet = IDEA
     if amp > 0:
         ph = e / (amp + g[1, 1] * v2)
         ph /= abs(ph)
-    else:
-        amp, ph = 0.0, 1j
-    x = g @ np.array([v1, -v2 * ph])
-    x[1] = amp * ph
+        x = g @ np.array([v1, -v2 * ph])
+        x[1] = amp * ph
+    else:   # blocked: the SBAR's v2 is the open-circuit voltage that keeps J2 = 0
+        amp = 0.0
+        x = g @ np.array([v1, -e / g[1, 1]])
+        x[1] = 0.0
     p_batt = 2.0 / math.pi * p.vl_v * amp
     p_in = 0.5 * (v1 * np.conj(x[0])).real
     return {"x": x, "i2_a": amp, "p_batt_w": p_batt, "p_in_w": p_in,
@@ -141,12 +144,22 @@ class TransitionSet:
         return cls(out, int(round(t_switch_s / T)) * substeps, T / substeps, devices)
 
 
+MIN_CONDUCTION_A = 0.1
+"""Below this RM |J2| [A] the draw transfers nothing in RM (as :mod:`wpt_receiver.detuning`): its
+peaks are NaN. A rectifier that starts to conduct from blocking during the transition does so in
+discontinuous conduction, which the envelope's in-phase clamp does not describe (it overestimates
+the model-based peak there by an order of magnitude against the switching model)."""
+
+
 def draw_metrics(p: LinkParams, c1_f: float, c2_f: float, ts: TransitionSet) -> dict:
-    """RM power, efficiency and the peak/final |J2| of each controller for one draw."""
+    """RM power, efficiency and the peak/final |J2| of each controller for one draw (peaks NaN when
+    RM does not conduct, :data:`MIN_CONDUCTION_A`)."""
     from .tolerance_kernel import transient_peak
 
     rm = rm_steady(p, c1_f, c2_f, ts.devices)
     out = {"rm_i2_a": rm["i2_a"], "rm_power_w": rm["p_batt_w"], "efficiency": rm["efficiency"]}
+    if rm["i2_a"] < MIN_CONDUCTION_A:   # no RM transfer: the transition's envelope is not modelled
+        return out | {f"{n}_{q}_a": float("nan") for n in ts.v2_v for q in ("peak", "final")}
     a_m, b_m = complex_envelope_matrices(_folded(p, ts.devices), c1_f, c2_f)
     ad, bd = _zoh(a_m, b_m, ts.h_s)
     for name, v2 in ts.v2_v.items():

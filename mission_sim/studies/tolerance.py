@@ -70,15 +70,17 @@ def summarise(df: pd.DataFrame, nominal: dict, margin: float = 1.25, min_power_f
     """Distributions (percentiles) of :data:`METRICS` and the yields: a draw passes for a controller
     when its RM power is at least ``min_power_frac`` of the nominal and its peak |J2| is within the
     rating ``margin`` x the nominal peak of that controller (the receiver sized for the nominal
-    link, as ``sizing`` does). Yields with 95 % Wilson intervals."""
+    link, as ``sizing`` does). Yields with 95 % Wilson intervals. Peak percentiles are over the draws
+    that transfer power in RM (the others have NaN peaks)."""
     ok = df[df["status"] == "ok"]
-    dist = {m: {q: float(np.percentile(ok[m], q)) for q in (1, 5, 25, 50, 75, 95, 99)} | {"mean": float(ok[m].mean())}
+    dist = {m: {q: float(np.nanpercentile(ok[m].to_numpy(float), q)) for q in (1, 5, 25, 50, 75, 95, 99)}
+            | {"mean": float(np.nanmean(ok[m].to_numpy(float))), "n": int(np.isfinite(ok[m].to_numpy(float)).sum())}
             for m in METRICS}
     power_ok = ok["rm_power_w"].to_numpy() >= min_power_frac * nominal["rm_power_w"]
     yields = {"power": (float(power_ok.mean()), *_interval(power_ok))}
     for pol in ("step", "proposed"):
         rating = margin * nominal[f"{pol}_peak_a"]
-        peak_ok = ok[f"{pol}_peak_a"].to_numpy() <= rating
+        peak_ok = ok[f"{pol}_peak_a"].to_numpy(float) <= rating   # NaN (no RM transfer): not within
         both = power_ok & peak_ok
         yields[f"{pol}_rating"] = (float(peak_ok.mean()), *_interval(peak_ok))
         yields[pol] = (float(both.mean()), *_interval(both))
