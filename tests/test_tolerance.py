@@ -98,7 +98,7 @@ def test_cli_on_the_sweep_engine_resumes(tmp_path, capsys):
     for key, (y, lo, hi) in s["yields"].items():
         assert 0 <= lo <= y <= hi <= 1, key
     d = s["distributions"]
-    assert d["proposed_peak_a"][95] < 0.5 * d["step_peak_a"][5]
+    assert d["proposed_peak_a"]["95"] < 0.5 * d["step_peak_a"]["5"]
     assert s["yields"]["step"][0] <= s["yields"]["power"][0]
     assert (tmp_path / "summary.json").exists()
     assert main(args) == 0
