@@ -95,6 +95,6 @@ def _print(s: dict, args) -> None:
     for pol, label in (("step", "step"), ("proposed", "model-based")):
         r = s["distributions"][f"{pol}_rating_a"]
         print(f"yield, {label:<11} (power and peak <= {r:.2f} A = {args.margin:g} x nominal): "
-              f"{100 * y[pol][0]:.1f} % [{100 * y[pol][1]:.1f}, {100 * y[pol][2]:.1f}] (peak alone "
-              f"{100 * y[pol + '_rating'][0]:.1f} %)")
+              f"{100 * y[pol][0]:.1f} % [{100 * y[pol][1]:.1f}, {100 * y[pol][2]:.1f}] (peak alone, of the draws "
+              f"that transfer power: {100 * y[pol + '_rating'][0]:.1f} %)")
     print(f"results: {args.out} (summary.json, sweep store)")

@@ -80,9 +80,11 @@ def summarise(df: pd.DataFrame, nominal: dict, margin: float = 1.25, min_power_f
     yields = {"power": (float(power_ok.mean()), *_interval(power_ok))}
     for pol in ("step", "proposed"):
         rating = margin * nominal[f"{pol}_peak_a"]
-        peak_ok = ok[f"{pol}_peak_a"].to_numpy(float) <= rating   # NaN (no RM transfer): not within
+        peak = ok[f"{pol}_peak_a"].to_numpy(float)
+        peak_ok = peak <= rating   # NaN (no RM transfer): not within
         both = power_ok & peak_ok
-        yields[f"{pol}_rating"] = (float(peak_ok.mean()), *_interval(peak_ok))
+        conducting = peak_ok[np.isfinite(peak)]   # the rating alone, among the draws that transfer power
+        yields[f"{pol}_rating"] = (float(conducting.mean()) if len(conducting) else float("nan"), *_interval(conducting))
         yields[pol] = (float(both.mean()), *_interval(both))
         dist[f"{pol}_rating_a"] = rating
     return {"n": int(len(ok)), "n_error": int(len(df) - len(ok)), "distributions": dist, "yields": yields,
