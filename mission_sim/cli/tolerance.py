@@ -39,7 +39,7 @@ def _add_tolerance(sub):
 def _cmd_tolerance(args) -> int:
     import functools
 
-    from wpt_receiver.devices import preset, preset_names
+    from wpt_receiver.devices import preset_names
     from wpt_receiver.tolerance import Spreads
 
     from ..files import atomic_output
@@ -62,8 +62,7 @@ def _cmd_tolerance(args) -> int:
     res = sweep.run_sweep(tolerance_cases(spreads, args.draws, args.seed, args.devices), runner, args.out,
                           client_factory=factory, progress=show_progress(args), progress_desc="tolerance")
     summary = summarise(res.results, nominal, args.margin, args.min_power)
-    summary.update(spreads=vars(spreads), seed=args.seed, devices=preset(args.devices).name if hasattr(
-        preset(args.devices), "name") else args.devices, wall_s=res.wall_s, n_run=res.n_run)
+    summary.update(spreads=vars(spreads), seed=args.seed, devices=args.devices, wall_s=res.wall_s, n_run=res.n_run)
     with atomic_output(args.out / "summary.json") as tmp:
         tmp.write_text(json.dumps(summary, indent=1, default=float) + "\n")
     if args.format == "json":

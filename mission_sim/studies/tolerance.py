@@ -63,7 +63,7 @@ def _interval(x: np.ndarray) -> tuple[float, float]:
     z, ph = 1.96, k / n
     c = (ph + z * z / (2 * n)) / (1 + z * z / n)
     h = z * np.sqrt(ph * (1 - ph) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return float(c - h), float(c + h)
+    return max(0.0, float(c - h)), min(1.0, float(c + h))
 
 
 def summarise(df: pd.DataFrame, nominal: dict, margin: float = 1.25, min_power_frac: float = 0.9) -> dict:
