@@ -33,7 +33,6 @@ import statistics
 import sys
 import tempfile
 import time
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -57,21 +56,9 @@ LADDER = (("trap T/50", "trap", 50, 1e-3), ("trap T/100", "trap", 100, 1e-3), ("
 CONVERGED = ("converged: gear T/4000, reltol 1e-7", "gear", 4000, 1e-7)
 
 
-@contextmanager
-def _scenario():
-    """``tests/_spice``'s scenario with the 25 ms times (module constants, restored after)."""
-    old = _spice.T_STEP_S, _spice.T_END_S
-    _spice.T_STEP_S, _spice.T_END_S = T_STEP_S, T_END_S
-    try:
-        yield
-    finally:
-        _spice.T_STEP_S, _spice.T_END_S = old
-
-
 def _netlist(method: str, div: int, reltol: float) -> str:
     """The generator's netlist with another integration method, step limit and reltol."""
-    with _scenario():
-        text = _spice.netlist(label=f"ideal, 25 ms step, {method} T/{div}")
+    text = _spice.netlist(label=f"ideal, 25 ms step, {method} T/{div}", t_step_s=T_STEP_S, t_end_s=T_END_S)
     tmax = T / div
     lines = []
     for ln in text.splitlines(keepends=True):
@@ -113,8 +100,7 @@ def _model_measure(link, x0) -> dict:
     """The five numbers from one run, as a user of the model gets a peak: the largest of the dense
     samples (``samples_per_half_cycle`` per period) in each window, then the maximum of |i| on the
     exact solution around each sampled local maximum that could hold it (:func:`_refined`)."""
-    with _scenario():
-        res = _spice._run_step(link, x0)
+    res = _spice._run_step(link, x0, t_step_s=T_STEP_S, t_end_s=T_END_S)
     ts = res.sample_times()
     x, _ = res.states(ts, cols=[I1, I2])
     w, out = 4 * T, {}

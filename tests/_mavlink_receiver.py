@@ -1,8 +1,9 @@
 """Separate receiving process for the loopback test: plain pymavlink, no mission_sim imports.
 
-usage: python _mavlink_receiver.py PORT MAX_SECONDS
-Binds udpin:127.0.0.1:PORT, prints READY, receives until MAX_SECONDS have passed or 1 s after the
-last message, then prints one JSON line: every message as {msg, t (arrival, s), fields...}.
+usage: python _mavlink_receiver.py PORT MAX_SECONDS [IDLE_SECONDS]
+Binds udpin:127.0.0.1:PORT, prints READY, receives until MAX_SECONDS have passed or IDLE_SECONDS
+(default 1) after the last message, then prints one JSON line: every message as {msg, t (arrival,
+s), fields...}.
 """
 
 import json
@@ -30,13 +31,14 @@ FIELDS = {
 
 def main():
     port, max_s = int(sys.argv[1]), float(sys.argv[2])
+    idle_s = float(sys.argv[3]) if len(sys.argv) > 3 else 1.0
     conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}")
     print("READY", flush=True)
     t0 = time.monotonic()
     out, last = [], None
     for _ in range(100_000):  # bounded in count and in time
         now = time.monotonic()
-        if now - t0 > max_s or (last is not None and now - last > 1.0):
+        if now - t0 > max_s or (last is not None and now - last > idle_s):
             break
         msg = conn.recv_match(blocking=True, timeout=0.1)
         if msg is None:

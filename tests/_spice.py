@@ -1,5 +1,8 @@
 """Independent SPICE check of the switching-level model with devices (ngspice netlists).
 
+The netlist writer is public: :mod:`wpt_receiver.switching.netlist` (also ``dronewpt netlist``);
+this module keeps the scenario's constants, the ngspice runner and the model's side of the check.
+
 The scenario (model time; SPICE time is model time - T/2): the link starts at the fundamental (phasor) solution of eq. 4 with the devices
 folded in (closed form, not from the switching model), runs in RM for ``T_STEP_S``, then the
 SBAR shorts (SM) until ``T_END_S``. Both simulators start from the same state, so the numbers
@@ -28,108 +31,13 @@ from pathlib import Path
 
 import numpy as np
 
-from wpt_receiver import TABLE_I, steady_state
+from wpt_receiver import TABLE_I
 from wpt_receiver.devices import DeviceSet
+from wpt_receiver.switching.netlist import T_END_S, T_STEP_S, _diodes, initial_state, netlist  # noqa: F401 (re-exported)
 
 HERE = Path(__file__).parent / "spice"
-T_STEP_S = 3e-3
-T_END_S = 9e-3
 KEYS = ("rm_i2_a", "step_peak_a", "sm_i2_a", "rm_i1_a", "sm_i1_a")
 BRIDGE_DEAD_TIME_S = 200e-9  # a realistic dead time for a 30-60 V MOSFET bridge at 85 kHz (3.4 % of T)
-
-
-def initial_state(p, dv: DeviceSet):
-    """(i1, vC1, i2, vC2) at t = T/2 (a quarter inverter period) of the phasor solution
-    i1 = I1 sin wt, i2 = I2 cos wt: i2 = 0 there, so SPICE starts with the diodes off."""
-    pd = p.with_(r1_ohm=p.r1_ohm + dv.inv_r_ohm, r2_ohm=p.r2_ohm + dv.rect_rd_ohm)
-    i1, i2 = steady_state(pd, 4 / math.pi * (p.vl_v + dv.rect_vf_v))
-    w = p.omega_rad_s
-    c2 = 1 / (w * w * p.l2_h)
-    return float(i1), 0.0, 0.0, float(i2) / (w * c2)
-
-
-def _diode(name, anode, cathode, vf, rd):
-    """Near-ideal junction + forward drop source + slope resistance."""
-    return (f"D{name} {anode} x{name} DI\nVF{name} x{name} y{name} DC {vf!r}\n"
-            f"RD{name} y{name} {cathode} {max(rd, 1e-6)!r}\n")
-
-
-def _diodes(diode, places) -> str:
-    """:func:`_diode` of one device model at each ``(name, anode, cathode)``."""
-    return "".join(_diode(name, a, k, diode.vf0_v, diode.rd_ohm) for name, a, k in places)
-
-
-def netlist(p=TABLE_I, dv: DeviceSet = DeviceSet(), label: str = "ideal", dead_time_s: float | None = None) -> str:
-    """ngspice netlist of the scenario (see the module docstring): ``dead_time_s=None`` models the
-    inverter as a square-wave source, a number as a full bridge with that dead time."""
-    w, T = p.omega_rad_s, p.rectifier_period_s
-    c1, c2 = 1 / (w * w * p.l1_h), 1 / (w * w * p.l2_h)
-    i10, vc10, i20, vc20 = initial_state(p, dv)
-    k = p.lm_h / math.sqrt(p.l1_h * p.l2_h)
-    ron, body = dv.rect_switch.ron_ohm, dv.rect_switch.body
-    tr = 1e-9
-    if dead_time_s is None:
-        primary = [
-            "* primary: square wave +-Vdc (no dead time), 2 Ron + R1, C1, L1; secondary: L2 (i2 = -I(L2)), R2, C2, SBAR\n",
-            f"VINV p 0 PULSE({p.vdc_v!r} {-p.vdc_v!r} {T / 2 - tr / 2!r} {tr!r} {tr!r} {T - tr!r} {2 * T!r})\n",
-            f"C1 p c1 {c1!r} IC={vc10!r}\n",
-            f"R1 c1 c {p.r1_ohm + dv.inv_r_ohm!r}\n",
-            f"L1 c 0 {p.l1_h!r} IC={i10!r}\n"]
-    else:
-        primary = _bridge(p, dv, dead_time_s, tr) + [
-            f"C1 ma c1 {c1!r} IC={vc10!r}\n",
-            f"R1 c1 c {p.r1_ohm!r}\n",
-            f"L1 c mb {p.l1_h!r} IC={i10!r}\n"]
-    return "".join([
-        f"* dronewpt SPICE check, devices: {label}\n",
-        *primary,
-        f"L2 a b {p.l2_h!r} IC={-i20!r}\n",
-        f"K12 L1 L2 {k!r}\n",
-        f"R2 bb b {p.r2_ohm!r}\n",
-        f"C2 bq bb {c2!r} IC={vc20!r}\n",
-        "VSENSE bq bn DC 0\n",
-        # SBAR: A = a, B = bn, battery between bat and ground (SPICE node names are case-insensitive)
-        _diodes(dv.rect_diode, (("U1", "a", "bat"), ("U2", "bn", "bat"))),
-        _diodes(body, (("B1", "0", "a"), ("B2", "0", "bn"))),
-        "S1 a 0 g 0 SWM\nS2 bn 0 g 0 SWM\n",
-        f"VG g 0 PWL(0 0 {T_STEP_S - T / 2!r} 0 {T_STEP_S - T / 2 + tr!r} 1)\n",
-        f"VL bat 0 DC {p.vl_v!r}\n",
-        ".model DI D(IS=1e-6 N=0.01)\n",
-        f".model SWM SW(VT=0.5 VH=0.1 RON={max(ron, 1e-6)!r} ROFF=1e7)\n",
-        ".options reltol=1e-6 abstol=1e-9 vntol=1e-7 method=gear maxord=2 itl4=200\n",
-        f".tran {T / 1000!r} {T_END_S - T / 2!r} 0 {T / 1000!r} uic\n",
-        _measures(T),
-        ".end\n"])
-
-
-def _bridge(p, dv: DeviceSet, td: float, tr: float) -> list:
-    """Full bridge between the leg midpoints ``ma`` (v1 = v(ma) - v(mb)) and ``mb``: switches with
-    the inverter switch's ``RON``, each with its body diode. Model time ``[k T, (k+1) T)`` drives
-    +Vdc for even k, -Vdc for odd k, after a dead time ``td`` from ``k T`` (both diagonals off);
-    SPICE time 0 is model time T/2 (diagonal P = A high + B low on). The gates switch at the
-    midpoints of their ``tr`` edges."""
-    T, sw = p.rectifier_period_s, dv.inv_switch
-    return [
-        f"* primary: full bridge from Vdc, switches Ron, body diodes, dead time {td!r} s; C1, R1, L1 from ma to mb;\n",
-        "* secondary: L2 (i2 = -I(L2)), R2, C2, SBAR\n",
-        f"VDC vdc 0 DC {p.vdc_v!r}\n",
-        f"VGP gp 0 PULSE(1 0 {T / 2 - tr / 2!r} {tr!r} {tr!r} {T + td - tr!r} {2 * T!r})\n",
-        f"VGN gn 0 PULSE(0 1 {T / 2 + td - tr / 2!r} {tr!r} {tr!r} {T - td - tr!r} {2 * T!r})\n",
-        "SAH vdc ma gp 0 SWI\nSBL mb 0 gp 0 SWI\nSAL ma 0 gn 0 SWI\nSBH vdc mb gn 0 SWI\n",
-        _diodes(sw.body, (("AH", "ma", "vdc"), ("AL", "0", "ma"), ("BH", "mb", "vdc"), ("BL", "0", "mb"))),
-        f".model SWI SW(VT=0.5 VH=0.1 RON={max(sw.ron_ohm, 1e-6)!r} ROFF=1e7)\n"]
-
-
-def _measures(T):
-    w, o = 4 * T, T / 2  # o: SPICE time origin in model time
-    spans = {"rm": (T_STEP_S - w - o, T_STEP_S - o), "step": (T_STEP_S - o, T_END_S - o),
-             "sm": (T_END_S - w - o, T_END_S - o)}
-    out = []
-    for name, (a, b) in spans.items():
-        for sig, expr in (("i2", "I(VSENSE)"), ("i1", "I(L1)")):
-            out.append(f".meas tran {name}_{sig}_max MAX {expr} from={a!r} to={b!r}\n")
-            out.append(f".meas tran {name}_{sig}_min MIN {expr} from={a!r} to={b!r}\n")
-    return "".join(out)
 
 
 def run_ngspice(text: str, workdir: Path) -> dict:
@@ -148,7 +56,8 @@ def run_ngspice(text: str, workdir: Path) -> dict:
             "rm_i1_a": peak("rm", "i1"), "sm_i1_a": peak("sm", "i1")}
 
 
-def switching_measure(p=TABLE_I, dv: DeviceSet = DeviceSet(), dead_time_s: float = 0.0) -> dict:
+def switching_measure(p=TABLE_I, dv: DeviceSet = DeviceSet(), dead_time_s: float = 0.0, t_step_s: float = T_STEP_S,
+                      t_end_s: float = T_END_S, d_short: float = 1.0) -> dict:
     """The same numbers from the event-exact switching model (dense peaks on a fine grid)."""
     from wpt_receiver.switching import SwitchingConfig, SwitchingLink
     link = SwitchingLink(p, SwitchingConfig(devices=dv, dead_time_s=dead_time_s))
@@ -156,29 +65,29 @@ def switching_measure(p=TABLE_I, dv: DeviceSet = DeviceSet(), dead_time_s: float
     x0 = np.zeros(link.cir.m)
     x0[:4] = initial_state(p, dv)
     x0[-1] = 1.0
-    res = _run_step(link, x0)
-    ts = np.union1d(np.arange(T / 2, T_END_S, T / 400), res.seg_t)
+    res = _run_step(link, x0, t_step_s, t_end_s, d_short)
+    ts = np.union1d(np.arange(T / 2, t_end_s, T / 400), res.seg_t)
     x, _ = res.states(ts, cols=[0, 2])
     w = 4 * T
 
     def peak(col, a, b):
         sel = (ts >= a) & (ts <= b)
         return float(np.max(np.abs(x[sel, col])))
-    return {"rm_i2_a": peak(1, T_STEP_S - w, T_STEP_S), "step_peak_a": peak(1, T_STEP_S, T_END_S),
-            "sm_i2_a": peak(1, T_END_S - w, T_END_S), "rm_i1_a": peak(0, T_STEP_S - w, T_STEP_S),
-            "sm_i1_a": peak(0, T_END_S - w, T_END_S)}
+    return {"rm_i2_a": peak(1, t_step_s - w, t_step_s), "step_peak_a": peak(1, t_step_s, t_end_s),
+            "sm_i2_a": peak(1, t_end_s - w, t_end_s), "rm_i1_a": peak(0, t_step_s - w, t_step_s),
+            "sm_i1_a": peak(0, t_end_s - w, t_end_s)}
 
 
-def _run_step(link, x0):
-    """Gate off until T_STEP_S, on after (both lower switches); inverter +Vdc on [0, T), -Vdc on
+def _run_step(link, x0, t_step_s=T_STEP_S, t_end_s=T_END_S, d_short=1.0):
+    """Gate off until t_step_s, duty ``d_short`` after (both lower switches); inverter +Vdc on [0, T), -Vdc on
     [T, 2T), ..., each commutation followed by the link's dead time; from T/2. The model's own
     schedule: one gate window per period centred at (n + 1/2) T (phase pi/2), duty 0 before the
-    step and 1 (the whole period) from it."""
+    step and ``d_short`` (1: the whole period) from it."""
     from wpt_receiver.switching.schedule import make_schedule
     T = link.T
-    n_step = round(T_STEP_S / T)
-    windows = lambda n: (np.asarray(n) >= n_step).astype(float)  # noqa: E731
-    return link.run(make_schedule(T / 2, T_END_S, T, windows, math.pi / 2, link.cfg.dead_time_s), x0)
+    n_step = round(t_step_s / T)
+    windows = lambda n: d_short * (np.asarray(n) >= n_step).astype(float)  # noqa: E731
+    return link.run(make_schedule(T / 2, t_end_s, T, windows, math.pi / 2, link.cfg.dead_time_s), x0)
 
 
 PRESETS = ("ideal", "schottky", "sic")

@@ -23,6 +23,9 @@ Depends on nothing else of dronewpt. Modules, in the order data flows:
 ``modal``               envelope on the exact coupled modes w/sqrt(1 -+ k), SBAR v2 balanced
 ``sizing``              rectifier rating, parts and mass per policy (switching or envelope runs)
 ``detuning``            C1 / C2 off resonance: overshoot table of the controllers
+``c_export``            the controller (Fig. 5) as generated C99 for a DSP, test vectors, op count
+``tolerance``           component-tolerance draws: RM steady state and transient peaks (complex envelope)
+``tolerance_kernel``    the tolerance transient compiled with numba (imported on demand)
 ======================  =====================================================================
 """
 

@@ -14,6 +14,9 @@ subcommands import what they need lazily, inside the function that runs them.
 ``warmup``    ``warmup`` (compile the numba kernels ahead, once per machine)
 ``notices``   the one-line notice when numba compiles kernels (first run on a machine)
 ``calibrate`` ``calibrate`` (the drone power model fitted to a flight log's battery power)
+``controller``  ``export-controller`` (the paper's controller as C99 for a DSP)
+``netlist``   ``netlist`` (SPICE netlist of the switching model's circuit and devices)
+``tolerance``  ``tolerance`` (component-tolerance Monte Carlo on the sweep engine: yield)
 ============  ==================================================================
 """
 
@@ -23,7 +26,7 @@ import argparse
 import sys
 
 from ..files import OutputError
-from . import calibrate, learning, mavlink, mission, paper, sizing, sweep, warmup
+from . import calibrate, controller, learning, mavlink, mission, netlist, paper, sizing, sweep, tolerance, warmup
 from .common import CliError, OneLineParser, show_progress
 
 __all__ = ["main", "build_parser"]
@@ -47,7 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for add in (paper._add_paper, mission._add_coupling, mission._add_mission, mavlink._add_replay, mavlink._add_telemetry,
                 learning._add_train, learning._add_compare, sweep._add_sweep, sizing._add_sizing,
-                warmup._add_warmup, calibrate._add_calibrate):
+                warmup._add_warmup, calibrate._add_calibrate, controller._add_export_controller, netlist._add_netlist,
+                tolerance._add_tolerance):
         add(sub)
     return parser
 

@@ -18,6 +18,9 @@ def _add_paper(sub):
     p.add_argument("--control-period", type=float_arg("control-period", positive=True, lo=1e-7, hi=1e-3), default=None,
                    help="controller update period in s, 1e-7 .. 1e-3 (default: rectifier period 1/(2f))")
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
+    p.add_argument("--waveforms", type=Path, default=None, metavar="FILE.csv|FILE.parquet",
+                   help="with --model switching: write the instantaneous waveforms of the three runs (t_s, i1_a, "
+                        "vc1_v, i2_a, vc2_v, v1_v, v2_v, i_load_a, sbar_gate, inverter_cmd, trajectory)")
     p.set_defaults(func=_cmd_paper)
 
 
@@ -25,6 +28,7 @@ def _cmd_paper(args) -> int:
     from wpt_receiver import paper
     if args.model not in paper.MODELS:
         raise CliError(f"--model {args.model!r} is invalid; valid values: {', '.join(sorted(paper.MODELS))}")
+    _check_waveforms(args)
     t_switch = 1e-3
     if not args.no_plot:
         prepare_out_dir(args.out)
@@ -37,27 +41,83 @@ def _cmd_paper(args) -> int:
         if args.model == "switching":
             from ..figures.switching import plot_switching_waveforms
             figs.extend(plot_switching_waveforms(runs, args.out))
-    rows = []
-    for r in runs:
-        m = r.metrics
-        row = {"trajectory": r.trajectory, "rm_current_a": m.rm_current_a, "final_current_a": m.final_current_a,
-               "max_current_a": m.max_current_a, "overshoot_pct": m.overshoot_pct,
-               "settling_time_s": m.settling_time_s, "peak_i1_a": m.peak_i1_a,
-               "energy_to_battery_j": m.energy_to_battery_j}
-        if args.model != "envelope":
-            row["sim_wall_s"] = r.sim_wall_s
-        rows.append(row)
+    rows = [_row(r, t_switch, args.model) for r in runs]
+    if args.waveforms is not None:
+        figs.append(_write_waveforms(runs, args.waveforms))
     if args.format == "json":
         print(json.dumps({"model": args.model, "rows": rows, "figures": figs}))
         return 0
-    print(f"Table II, {args.model} model (Table I parameters; RM steady state -> SM at t = 0)")
-    print(f"{'trajectory':<10} {'paper max':>10} {'paper OS':>9} | {'RM':>7} {'final':>7} {'max':>7} {'OS':>8} {'settle':>8}")
+    _print_table(runs, rows, args.model)
+    for f in figs:
+        print(f"{'waveforms' if str(f).endswith(('.csv', '.parquet')) else 'figure'}: {f}")
+    return 0
+
+
+def _row(r, t_switch: float, model: str) -> dict:
+    """One Table II row; ``max_current_a`` is the model's own I2 (envelope: the fundamental amplitude,
+    switching: the instantaneous peak |i2| per half cycle), ``max_fundamental_a`` the fundamental."""
+    import numpy as np
+    m = r.metrics
+    row = {"trajectory": r.trajectory, "rm_current_a": m.rm_current_a, "final_current_a": m.final_current_a,
+           "max_current_a": m.max_current_a, "overshoot_pct": m.overshoot_pct,
+           "settling_time_s": m.settling_time_s, "peak_i1_a": m.peak_i1_a,
+           "energy_to_battery_j": m.energy_to_battery_j}
+    if model == "envelope":
+        row["max_fundamental_a"] = m.max_current_a
+    else:
+        row["max_instantaneous_a"] = m.max_current_a
+        fund = r.extra.get("i2_fund_a")
+        if fund is not None:
+            row["max_fundamental_a"] = float(np.max(np.asarray(fund)[np.asarray(r.t_s) >= t_switch]))
+        row["sim_wall_s"] = r.sim_wall_s
+    return row
+
+
+def _print_table(runs, rows, model: str) -> None:
+    from wpt_receiver import paper
+    inst = model != "envelope"
+    print(f"Table II, {model} model (Table I parameters; RM steady state -> SM at t = 0)")
+    head = f"{'max inst.':>9} {'max fund.':>9}" if inst else f"{'max fund.':>9}"
+    print(f"{'trajectory':<10} {'paper max':>10} {'paper OS':>9} | {'RM':>7} {'final':>7} {head} {'OS':>8} {'settle':>8}")
     for r, row in zip(runs, rows):
         pm, po = paper.PAPER_TABLE_II[r.trajectory]
+        mx = (f"{row['max_instantaneous_a']:>7.2f} A {row.get('max_fundamental_a', float('nan')):>7.2f} A" if inst
+              else f"{row['max_fundamental_a']:>7.2f} A")
         print(f"{r.trajectory:<10} {pm:>8.1f} A {po:>7.1f} % | {row['rm_current_a']:>5.2f} A {row['final_current_a']:>5.2f} A "
-              f"{row['max_current_a']:>5.2f} A {row['overshoot_pct']:>6.2f} % {row['settling_time_s'] * 1e3:>5.2f} ms")
-    final_src = "the closed-form SM current" if args.model == "envelope" else f"the {args.model} model's final amplitude"
+              f"{mx} {row['overshoot_pct']:>6.2f} % {row['settling_time_s'] * 1e3:>5.2f} ms")
+    if inst:
+        print("max inst. = largest instantaneous |i2| (RM, final, OS on the per-half-cycle peaks); max fund. = largest "
+              "amplitude of the i2 fundamental per half cycle (what eq. 4 and the paper's Table II give)")
+    else:
+        print("max fund. = largest amplitude of the i2 fundamental (the envelope model, eq. 4; the instantaneous "
+              "peak |i2| with the SBAR's ripple is higher: --model switching)")
+    final_src = "the closed-form SM current" if model == "envelope" else f"the {model} model's final amplitude"
     print(f"overshoot = (max - final) / final; the paper's final value is 10.5 A, ours is {final_src}")
-    for f in figs:
-        print(f"figure: {f}")
-    return 0
+
+
+def _check_waveforms(args) -> None:
+    """``--waveforms`` only with the switching model and a .csv / .parquet name (checked before simulating)."""
+    if args.waveforms is None:
+        return
+    if args.model != "switching":
+        raise CliError(f"--waveforms needs --model switching (got --model {args.model}): only the switching model "
+                       "has instantaneous waveforms")
+    if args.waveforms.suffix.lower() not in (".csv", ".parquet"):
+        raise CliError(f"--waveforms {str(args.waveforms)!r} is invalid; valid: a file name ending .csv or .parquet")
+    if args.waveforms.is_dir():
+        raise CliError(f"--waveforms {str(args.waveforms)!r} is a folder; valid: a file name")
+
+
+def _write_waveforms(runs, path: Path) -> str:
+    """All runs' instantaneous waveforms in one long table (``trajectory`` column), written atomically."""
+    import pandas as pd
+
+    from ..files import atomic_output
+    df = pd.concat([r.extra["waveforms"].assign(trajectory=r.trajectory) for r in runs], ignore_index=True)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_output(path) as tmp:
+        if path.suffix.lower() == ".parquet":
+            df.to_parquet(tmp, index=False)
+        else:
+            df.to_csv(tmp, index=False, float_format="%.9g")
+    return str(path)

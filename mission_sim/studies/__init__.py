@@ -11,6 +11,7 @@
 ``status``         the sweep's manifest and ``--status`` (done, failed, pending)
 ``report``         summary and error tables, trade-off plots of a sweep's results
 ``worst_cases``    per policy the stored case with the largest peak, rebuilt for re-running (sizing)
+``tolerance``      component-tolerance Monte Carlo: draws as cases, the runner, yields
 =================  ===========================================================================
 """
 

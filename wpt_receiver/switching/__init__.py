@@ -11,6 +11,7 @@ Modules, in the order data flows:
 ``ivp``        :func:`simulate_ivp`: the same circuit through ``solve_ivp`` (slow reference)
 ``plant``      :func:`switching_plant` for :func:`wpt_receiver.paper.run_paper`; eq. 9 check
 ``stress``     voltage stress: open-load (BMS disconnect) fault, ringing of an edge (stray L, Coss)
+``netlist``    the same circuit and devices as a SPICE netlist (ngspice / LTspice; ``dronewpt netlist``)
 =============  ==========================================================================
 
 Figures of the waveforms live outside the physics, in :mod:`mission_sim.figures.switching`.

@@ -14,7 +14,16 @@ from .circuit import SwitchingConfig
 from .link import SwitchingLink
 from .result import fundamental
 
-__all__ = ["switching_plant", "sbar_relation"]
+__all__ = ["switching_plant", "sbar_relation", "waveform_frame"]
+
+
+def waveform_frame(res, df: pd.DataFrame) -> pd.DataFrame:
+    """The instantaneous waveforms of a run, units in the column names: ``t_s, i1_a, vc1_v, i2_a,
+    vc2_v, v1_v, v2_v, i_load_a`` (:meth:`SwitchingResult.frame`), ``sbar_gate`` (1 = lower switches
+    on) and ``inverter_cmd`` (+1 / -1 driven, 0 dead time) at the same instants ``df["t_s"]``."""
+    sch = res.schedule
+    j = np.clip(np.searchsorted(sch.t, df["t_s"].to_numpy(), side="right") - 1, 0, len(sch.cmd) - 1)
+    return df.rename(columns={"gate": "sbar_gate"}).assign(inverter_cmd=sch.cmd[j])
 
 
 @lru_cache(maxsize=16)
@@ -30,7 +39,8 @@ def switching_plant(params: LinkParams, d_short, control_period_s: float, cfg: S
     per-half-cycle envelope ``t_s, i1_a, i2_a`` (peaks), ``v2_v`` (in-phase fundamental of v2 per
     half cycle), ``i2_fund_a`` (fundamental amplitude of i2 per half cycle), ``i_load_avg_a``
     (battery current averaged per half cycle) and the raw waveforms ``t_inst_s, i2_inst_a,
-    i1_inst_a, i_load_a, gate`` (``samples_per_half_cycle`` per T plus every switching instant).
+    i1_inst_a, i_load_a, gate`` (``samples_per_half_cycle`` per T plus every switching instant) and
+    all of them as one table ``waveforms`` (:func:`waveform_frame`).
     """
     link = _link(params, cfg)
     res = link.simulate(d_short, control_period_s, phase_rad=phase_rad)
@@ -44,7 +54,7 @@ def switching_plant(params: LinkParams, d_short, control_period_s: float, cfg: S
     return {"t_s": t, "i1_a": i1, "i2_a": env["i2_env_a"].to_numpy(), "v2_v": env["v2_fund_v"].to_numpy(),
             "i2_fund_a": env["i2_fund_a"].to_numpy(),
             "t_inst_s": df["t_s"].to_numpy(), "i2_inst_a": df["i2_a"].to_numpy(), "i1_inst_a": df["i1_a"].to_numpy(),
-            "i_load_a": il, "gate": df["gate"].to_numpy(), "i_load_avg_a": il_avg,
+            "i_load_a": il, "gate": df["gate"].to_numpy(), "i_load_avg_a": il_avg, "waveforms": waveform_frame(res, df),
             "link_params": params, "switching_config": cfg, "gate_phase_rad": link.cfg.gate_phase_rad if phase_rad is None else phase_rad}
 
 

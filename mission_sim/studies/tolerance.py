@@ -1,0 +1,91 @@
+"""Tolerance Monte Carlo of the receiver (``dronewpt tolerance``) on the sweep engine.
+
+Each draw of :func:`wpt_receiver.tolerance.draw_scales` is one case of :func:`.sweep.run_sweep`
+(params: the draw index and its seven scale factors; a case id from them, the spreads, the seed and
+the devices), run by :class:`ToleranceRunner` (:func:`wpt_receiver.tolerance.draw_metrics`), so
+10^4 draws are chunked onto Dask workers, stored in the resumable Parquet store and survive an
+interruption like any sweep. :func:`summarise` turns the rows into distributions and yields.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from .study import Case, canonical_json, case_id
+
+__all__ = ["ToleranceRunner", "tolerance_cases", "summarise", "METRICS"]
+
+METRICS = ("rm_power_w", "efficiency", "rm_i2_a", "step_peak_a", "proposed_peak_a")
+
+
+@dataclass
+class ToleranceRunner:
+    """Case runner: params ``{"draw": j, "l1": .., "c1": .., ...}`` -> the draw's metrics. Picklable
+    (Dask); the nominal duty sequences are built once per process, on first use."""
+
+    devices_name: str = "ideal"
+    _ts: object = field(default=None, repr=False, compare=False)
+
+    def __getstate__(self):
+        return {"devices_name": self.devices_name, "_ts": None}
+
+    def __call__(self, params: dict) -> dict:
+        from wpt_receiver.devices import preset
+        from wpt_receiver.tolerance import SCALES, TransitionSet, draw_link, draw_metrics
+        if self._ts is None:
+            self._ts = TransitionSet.build(devices=preset(self.devices_name))
+        p, c1, c2 = draw_link([params[k] for k in SCALES])
+        return draw_metrics(p, c1, c2, self._ts)
+
+
+def tolerance_cases(spreads, n: int, seed: int, devices_name: str) -> list[Case]:
+    """The draws as sweep cases (scale factors rounded to 12 digits in the params: stable ids)."""
+    from wpt_receiver.tolerance import SCALES, draw_scales
+    scales = np.round(draw_scales(spreads, n, seed), 12)
+    base = canonical_json({"spreads": [spreads.c, spreads.l, spreads.lm, spreads.r], "seed": int(seed),
+                           "devices": devices_name, "study": "tolerance v1"})
+    cases = []
+    for j, row in enumerate(scales):
+        params = {"draw": j, **{k: float(v) for k, v in zip(SCALES, row)}}
+        pj = canonical_json(params)
+        cases.append(Case(case_id(params, base, pj), params, pj))
+    return cases
+
+
+def _interval(x: np.ndarray) -> tuple[float, float]:
+    """95 % Wilson interval of a proportion."""
+    n, k = len(x), float(np.sum(x))
+    if n == 0:
+        return float("nan"), float("nan")
+    z, ph = 1.96, k / n
+    c = (ph + z * z / (2 * n)) / (1 + z * z / n)
+    h = z * np.sqrt(ph * (1 - ph) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(0.0, float(c - h)), min(1.0, float(c + h))
+
+
+def summarise(df: pd.DataFrame, nominal: dict, margin: float = 1.25, min_power_frac: float = 0.9) -> dict:
+    """Distributions (percentiles) of :data:`METRICS` and the yields: a draw passes for a controller
+    when its RM power is at least ``min_power_frac`` of the nominal and its peak |J2| is within the
+    rating ``margin`` x the nominal peak of that controller (the receiver sized for the nominal
+    link, as ``sizing`` does). Yields with 95 % Wilson intervals. Peak percentiles are over the draws
+    that transfer power in RM (the others have NaN peaks)."""
+    ok = df[df["status"] == "ok"]
+    dist = {m: {q: float(np.nanpercentile(ok[m].to_numpy(float), q)) for q in (1, 5, 25, 50, 75, 95, 99)}
+            | {"mean": float(np.nanmean(ok[m].to_numpy(float))), "n": int(np.isfinite(ok[m].to_numpy(float)).sum())}
+            for m in METRICS}
+    power_ok = ok["rm_power_w"].to_numpy() >= min_power_frac * nominal["rm_power_w"]
+    yields = {"power": (float(power_ok.mean()), *_interval(power_ok))}
+    for pol in ("step", "proposed"):
+        rating = margin * nominal[f"{pol}_peak_a"]
+        peak = ok[f"{pol}_peak_a"].to_numpy(float)
+        peak_ok = peak <= rating   # NaN (no RM transfer): not within
+        both = power_ok & peak_ok
+        conducting = peak_ok[np.isfinite(peak)]   # the rating alone, among the draws that transfer power
+        yields[f"{pol}_rating"] = (float(conducting.mean()) if len(conducting) else float("nan"), *_interval(conducting))
+        yields[pol] = (float(both.mean()), *_interval(both))
+        dist[f"{pol}_rating_a"] = rating
+    return {"n": int(len(ok)), "n_error": int(len(df) - len(ok)), "distributions": dist, "yields": yields,
+            "nominal": nominal, "margin": margin, "min_power_frac": min_power_frac}
