@@ -8,6 +8,7 @@ s), fields...}.
 
 import json
 import os
+import socket
 import sys
 import time
 
@@ -33,6 +34,9 @@ def main():
     port, max_s = int(sys.argv[1]), float(sys.argv[2])
     idle_s = float(sys.argv[3]) if len(sys.argv) > 3 else 1.0
     conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}")
+    # a 4 MB receive buffer: on a loaded machine a fast sender (--speed 100) must not overflow the
+    # default one while this process waits for the CPU (loopback UDP drops only on a full buffer)
+    conn.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
     print("READY", flush=True)
     t0 = time.monotonic()
     out, last = [], None
