@@ -40,16 +40,21 @@ KEYS = ("rm_i2_a", "step_peak_a", "sm_i2_a", "rm_i1_a", "sm_i1_a")
 BRIDGE_DEAD_TIME_S = 200e-9  # a realistic dead time for a 30-60 V MOSFET bridge at 85 kHz (3.4 % of T)
 
 
-def run_ngspice(text: str, workdir: Path) -> dict:
-    """Run ngspice in batch mode and return the measurements (``KEYS``)."""
+def _ngspice_values(text: str, workdir: Path, name: str, timeout_s: float) -> dict:
+    """Run netlist ``text`` (written to ``workdir/name``) in ngspice batch mode: its ``.meas`` values
+    by lower-case name."""
     exe = shutil.which("ngspice")
     if exe is None:
         raise FileNotFoundError("ngspice is not installed")
-    cir = Path(workdir) / "check.cir"
+    cir = Path(workdir) / name
     cir.write_text(text)
-    out = subprocess.run([exe, "-b", str(cir)], capture_output=True, text=True, timeout=900).stdout
-    vals = {m.group(1).lower(): float(m.group(2))
-            for m in re.finditer(r"^\s*(\w+)\s*=\s*([-+0-9.eE]+)", out, re.M)}
+    out = subprocess.run([exe, "-b", str(cir)], capture_output=True, text=True, timeout=timeout_s).stdout
+    return {m.group(1).lower(): float(m.group(2)) for m in re.finditer(r"^\s*(\w+)\s*=\s*([-+0-9.eE]+)", out, re.M)}
+
+
+def run_ngspice(text: str, workdir: Path) -> dict:
+    """Run ngspice in batch mode and return the measurements (``KEYS``)."""
+    vals = _ngspice_values(text, workdir, "check.cir", 900)
     # I(VSENSE) flows from C2 into the SBAR's B node: i2 of the model flows out of A, i.e. -I(VSENSE)
     peak = lambda n, s: max(abs(vals[f"{n}_{s}_max"]), abs(vals[f"{n}_{s}_min"]))  # noqa: E731
     return {"rm_i2_a": peak("rm", "i2"), "step_peak_a": peak("step", "i2"), "sm_i2_a": peak("sm", "i2"),
@@ -232,13 +237,7 @@ def _pwl(node: str, period: float, pts) -> str:
 
 def run_ngspice_energies(text: str, workdir: Path) -> dict:
     """Run an :func:`efficiency_netlist` and return ``{"source_j", "battery_j", "efficiency"}``."""
-    exe = shutil.which("ngspice")
-    if exe is None:
-        raise FileNotFoundError("ngspice is not installed")
-    cir = Path(workdir) / "eff.cir"
-    cir.write_text(text)
-    out = subprocess.run([exe, "-b", str(cir)], capture_output=True, text=True, timeout=1800).stdout
-    vals = {m.group(1).lower(): float(m.group(2)) for m in re.finditer(r"^\s*(\w+)\s*=\s*([-+0-9.eE]+)", out, re.M)}
+    vals = _ngspice_values(text, workdir, "eff.cir", 1800)
     src, bat = vals["esrc"], abs(vals["ebat"])
     return {"source_j": src, "battery_j": bat, "efficiency": bat / src}
 
