@@ -156,6 +156,7 @@ class Plans:
     vrc0: np.ndarray         # (n,) initial RC-branch voltage
     d0: np.ndarray           # (n,) initial duty (steady state for cmd0)
     t_stop_s: np.ndarray     # (n,) time of the stop command
+    delay_steps: np.ndarray | None = None   # (n,) int: age of the current measurements [control periods]
 
 
 def _steady_v2(link: LinkParams, lm, il, vl):
@@ -185,6 +186,9 @@ def build_plans(draws, scenarios, cfg: EnvConfig, out=None) -> Plans:
     t_slow = np.arange(S) * (cfg.slow_every * cfg.dt_s)
     lm = lm_window_h(draws.wind_speed_m_s, draws.record_u, t_slow)
     lm *= np.asarray(draws.lm_scale)[:, None]
+    drift = np.asarray(draws.lm_drift, dtype=float)
+    if np.any(drift != 0.0):   # Lm moving within the window (scenario lm_drift): linear in time
+        lm *= 1.0 + drift[:, None] * (t_slow / (T * cfg.dt_s))[None, :]
     # windows without wind share one Lm: discretise each distinct value once (same numbers)
     lm_u, back = np.unique(lm.ravel(), return_inverse=True)
     zoh = _zoh_coefficients(link, lm_u, cfg)
@@ -195,7 +199,7 @@ def build_plans(draws, scenarios, cfg: EnvConfig, out=None) -> Plans:
     battery, x0, vl0, vrc0, d0 = _initial_state(link, lm[:, 0], np.asarray(draws.soc0, dtype=float), load_w,
                                                 cmd[:, 0], cfg)
     return Plans(cmd, noise, coef, lm, battery, x0, vl0, vrc0, d0,
-                 np.asarray(draws.t_stop_s, dtype=float))
+                 np.asarray(draws.t_stop_s, dtype=float), np.asarray(draws.sense_delay).astype(np.int64).reshape(n))
 
 
 def _zoh_coefficients(link: LinkParams, lm, cfg: EnvConfig) -> np.ndarray:

@@ -69,6 +69,8 @@ class SbarChargingVectorEnv(VectorEnv):
         self._lm_all = np.zeros((S, n))
         self._bat = np.zeros((N_BAT, n))
         self._t_stop = np.zeros(n)
+        self._delay = np.zeros(n, dtype=np.int64)   # sensing delay [steps] (envs.sensing), None line when never used
+        self._line = None
         self._i2sm_all = np.ones((n, S))   # objective (envs.objective): short-mode I2 of the true link
         self._stop_k = np.zeros(n, dtype=np.int64)
         self._run_max = np.full(n, -np.inf)
@@ -127,6 +129,10 @@ class SbarChargingVectorEnv(VectorEnv):
         self._lm_all[:, idx] = p.lm_h.T
         self._bat[:, idx] = p.battery.T
         self._t_stop[idx] = p.t_stop_s
+        self._delay[idx] = p.delay_steps
+        if self._line is None and self._delay.any():
+            from .sensing import DelayLine
+            self._line = DelayLine(self.num_envs)
         self._i2sm_all[idx] = short_mode_i2_a(c.link, p.lm_h, self._devices)
         self._stop_k[idx] = stop_step(p.t_stop_s, c.dt_s, c.n_steps)
         self._run_max[idx] = -np.inf
@@ -190,6 +196,8 @@ class SbarChargingVectorEnv(VectorEnv):
         self._start(idx)
         self._prev_done[idx] = False
         obs, _ = self._initial_obs_info()
+        if self._line is not None:
+            self._line.start(idx, obs[idx], self._delay[idx])
         return obs[idx]
 
     def reset(self, *, seed=None, options: dict | None = None):
@@ -209,7 +217,10 @@ class SbarChargingVectorEnv(VectorEnv):
         self._start(self._ar)
         self._prev_done[:] = False
         self._started = True
-        return self._initial_obs_info()
+        obs, info = self._initial_obs_info()
+        if self._line is not None:
+            self._line.start(self._ar, obs, self._delay)
+        return obs, info
 
     def step(self, actions):
         if not self._started:
@@ -224,11 +235,15 @@ class SbarChargingVectorEnv(VectorEnv):
         else:
             obs, reward, truncated, info = self._step_numpy(d)
         terminated = np.zeros(self.num_envs, dtype=bool)
+        if self._line is not None:
+            self._line.push(obs)
         if any_done:
             idx = np.flatnonzero(done)
             self._start(idx)
             obs0, info0 = self._initial_obs_info()
             obs[idx] = obs0[idx]
+            if self._line is not None:
+                self._line.start(idx, obs0[idx], self._delay[idx])
             reward[idx] = 0.0
             truncated[idx] = False
             for key, v in info.items():
