@@ -136,6 +136,11 @@ class MPCPolicy:
         from .classical import ModelBasedPolicy
         self._ref = ModelBasedPolicy(PolicyContext(link=self._link, control_period_s=ctx.control_period_s))
         self.n = 0
+        nb = len(BLOCKS)
+        D = np.eye(nb) - np.eye(nb, k=-1)
+        Ge = self._model.G[self._model.ends]
+        self._track_inv = np.linalg.inv(2.0 * (Ge.T @ Ge + _LAMBDA * D.T @ D) + 1e-9 * np.eye(nb))
+        self._ex0 = float(self._peak.array(np.array([self._i2_sm]), np.array([1.0]), np.array([31.0]))[0] - self._i2_sm)
 
     def reset(self, n: int = 1) -> None:
         self.n = int(n)
@@ -227,8 +232,14 @@ class MPCPolicy:
         if not stop:
             Ge = m.G[m.ends]
             q = 2.0 * (Ge.T @ (free[m.ends] - ref) - _LAMBDA * e0 * u_prev)
+            v = -self._track_inv @ q   # the unconstrained optimum: the QP's solution when the box is inactive
+            if np.all(v >= 0.0) and np.all(v <= vmax):
+                self._plan[e] = m.M @ v
+                return float(self._plan[e, 0])
             prob.update(q=q, l=np.zeros(nb), u=np.full(nb, vmax))
         else:
+            if self._plan[e, :BLOCKS[-1]].max() < 0.05 and self._settled(z, self._relax[e]):
+                return 0.0   # in short mode with the free response inside the bound: nothing to plan
             # ripple excess: its tangent in V2 at the previous plan (shifted), an upper bound of the
             # concave excess (sequential convex approximation, exact at the previous plan)
             v_bar = np.r_[self._plan[e, 1:], self._plan[e, -1]]
@@ -256,6 +267,14 @@ class MPCPolicy:
             self._relax[e] += res.x[nb]
         self._plan[e] = np.clip(m.M @ v, 0.0, vmax)
         return float(self._plan[e, 0])
+
+    def _settled(self, z, relax: float) -> bool:
+        """The free response (V2 = 0) from ``z`` stays within the budget's bound with the short-mode
+        ripple (:meth:`_excess` at V2 = 0)."""
+        m = self._model
+        free = m.F @ z + m.h
+        sm = max(self._i2_sm, float(np.linalg.solve(np.eye(2) - m.ad, m.e + m.b2 * z[2])[1]))
+        return bool(np.all(free + self._ex0 <= (1.0 + self.budget - _MARGIN) * sm + relax))
 
     def _excess(self, v2, vl):
         """Ripple excess [A] at V2 ``v2`` (n,) [V] and its slope dexcess/dV2 [A/V] (central difference,
