@@ -48,6 +48,7 @@ _LAMBDA = 0.1        # move penalty [A^2/V^2] of the tracking QP (smooth V2: no 
 _SLACK_W = 1e4
 _LAMBDA_STOP = 2e-4  # move penalty [1/V] of the after-stop QP (energy term in V per step)
 _RHO_Q = 0.01      # quadratic share of the after-stop energy term [1/V] (keeps the QP strongly convex)
+_RELAX_STEPS = 3    # after-stop steps in which the bound may be raised to the floor
 _MARGIN = 0.002      # constraint back-off, fraction of I2_sm (model error)
 _F = {k: OBS_INDEX[k] for k in ("i2_amp_a", "battery_v", "charge_cmd_a", "last_d_short")}
 
@@ -148,6 +149,7 @@ class MPCPolicy:
         self._solvers = [None] * self.n
         self._plan = np.zeros((self.n, N_PRED))
         self._relax = np.zeros(self.n)   # [A] the bound raised to what the window allows (its floor)
+        self._n_stop = np.zeros(self.n, dtype=int)   # after-stop solves so far
 
     def _v2_of(self, d, vl):
         return 4.0 / np.pi * (vl + self._vf) * (1.0 - np.sin(0.5 * np.pi * d))
@@ -258,12 +260,16 @@ class MPCPolicy:
             hi[-1] = 0.0   # terminal move: short mode (V2 = 0) from step BLOCKS[-1] of the horizon on
             prob.update(q=q, l=np.r_[np.zeros(nb), np.full(len(ub), -np.inf), 0.0],
                         u=np.r_[hi, ub, np.inf], Ax=_csc_data(A))
-        res = prob.solve()
+        res = prob.solve(raise_error=False)
         ok = res.x is not None and np.all(np.isfinite(res.x))
         v = res.x[:nb] if ok else np.full(nb, u_prev)
-        if stop and ok and res.x[nb] > 1e-4:
+        if stop:
+            self._n_stop[e] += 1
+        if stop and ok and res.x[nb] > 1e-4 and self._n_stop[e] <= _RELAX_STEPS:
             # below the window's floor (the state at the stop allows no less): the bound is raised by the
-            # least violation for the rest of the window, so the energy term drives the descent again
+            # least violation for the rest of the window, so the energy term drives the descent again; only in
+            # the first steps after the stop (the floor is set there; later violations are model error and
+            # must not accumulate into the bound)
             self._relax[e] += res.x[nb]
         self._plan[e] = np.clip(m.M @ v, 0.0, vmax)
         return float(self._plan[e, 0])
