@@ -166,6 +166,9 @@ class SbarChargingEnv(gym.Env):
         super().reset(seed=seed)
         scn = scenario_from_options(options, self.scenario)
         p = build_plans(draw_episodes([self.np_random], scn, self._T), scn, self.config)
+        if p.cplx is not None:
+            raise ValueError(f"scenario {scn.name!r} (detuned tanks, complex envelope) runs in the vector env only: "
+                             "envs.SbarChargingVectorEnv (or gymnasium.make_vec); valid here: c_detune=(0, 0)")
         self._plan = p
         self._t_stop = float(p.t_stop_s[0])
         self._stop_k = int(stop_step(p.t_stop_s, self._dt, self._T)[0])

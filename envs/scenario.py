@@ -21,6 +21,8 @@ sense_delay    the current measurements (I2, battery and SBAR output current) re
 sense_delay_long  held out: 3..4 control periods late
 battery_low    battery far from nominal: SoC 0.02..0.06 (VL ~ 25.4..28.1 V)
 battery_empty  held out: SoC 0..0.02 (VL ~ 21..25 V; the ripple table extrapolated below 27 V)
+detuned        C1 and C2 each off resonance by -5..+5 % (drawn per window; complex envelope, envs.detuned)
+detuned_wide   held out: C1 and C2 each off by -8..+8 %
 =============  ============================================================================
 
 The model-is-wrong scenarios (``lm_drift``, ``sense_delay``, ``battery_low``; each with a held-out
@@ -55,6 +57,7 @@ class Scenario:
         negative: the coupling falls, a drone leaving the pad)
     sense_delay_steps : the current measurements of the observation (I2, battery current, SBAR output
         current) are this many control periods old (integer, drawn uniformly per window)
+    c_detune : relative error of C1 and of C2 (each drawn) against the resonant value 1/(w^2 L)
     """
 
     name: str = "custom"
@@ -68,11 +71,12 @@ class Scenario:
     hover_power_w: float | None = None
     lm_drift: tuple[float, float] = (0.0, 0.0)
     sense_delay_steps: tuple[int, int] = (0, 0)
+    c_detune: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self):
         limits = {"lm_scale": (0.3, 2.0), "wind_speed_m_s": (0.0, 30.0), "soc": (0.0, 1.0),
                   "cmd_a": (0.0, 20.0), "t_change_s": (0.0, 1.0), "t_stop_s": (0.0, 1.0), "lm_drift": (-0.6, 0.6),
-                  "sense_delay_steps": (0, 20)}
+                  "sense_delay_steps": (0, 20), "c_detune": (-0.3, 0.3)}
         for f in fields(self):
             if f.name not in limits:
                 continue
@@ -113,9 +117,12 @@ SCENARIOS: dict[str, Scenario] = {
     "sense_delay_long": Scenario("sense_delay_long", sense_delay_steps=(3, 4)),
     "battery_low": Scenario("battery_low", soc=(0.02, 0.06)),
     "battery_empty": Scenario("battery_empty", soc=(0.0, 0.02)),
+    "detuned": Scenario("detuned", c_detune=(-0.05, 0.05)),
+    "detuned_wide": Scenario("detuned_wide", c_detune=(-0.08, 0.08)),
 }
 #: held-out variant of each model-is-wrong scenario (not in the range of its default one)
-HELD_OUT = {"lm_drift": "lm_drift_fast", "sense_delay": "sense_delay_long", "battery_low": "battery_empty"}
+HELD_OUT = {"lm_drift": "lm_drift_fast", "sense_delay": "sense_delay_long", "battery_low": "battery_empty",
+            "detuned": "detuned_wide"}
 
 
 def scenario_from_options(options, default: Scenario) -> Scenario:
@@ -162,6 +169,8 @@ class EpisodeDraw:
     noise: np.ndarray        # (n_steps,) standard normals for the I2 sensor
     lm_drift: float = 0.0    # relative Lm change over the window
     sense_delay: float = 0.0  # measurement delay [control periods] (integer valued)
+    c1_detune: float = 0.0   # relative C1 error
+    c2_detune: float = 0.0   # relative C2 error
 
     @property
     def n(self) -> int:
@@ -172,7 +181,7 @@ class EpisodeDraw:
 #: the uniformly drawn fields, in drawing order (record_u is always drawn, on [0, 1)); the new fields
 #: come last and are only drawn when their range is not a point, so the older scenarios' windows are unchanged
 _RANGED = ("soc", "lm_scale", "wind_speed_m_s", None, "cmd_a", "cmd_a", "t_change_s", "t_stop_s", "lm_drift",
-           "sense_delay_steps")
+           "sense_delay_steps", "c_detune", "c_detune")
 
 
 def _range(scn: Scenario, f):
@@ -202,6 +211,7 @@ def draw_episode(rng: np.random.Generator, scn: Scenario, n_steps: int, n_slow: 
         cmd0_a=_u(rng, scn.cmd_a), cmd1_a=_u(rng, scn.cmd_a),
         t_change_s=_u(rng, scn.t_change_s), t_stop_s=_u(rng, scn.t_stop_s),
         lm_drift=_u(rng, scn.lm_drift), sense_delay=float(_delay(_u(rng, _range(scn, "sense_delay_steps")), scn)),
+        c1_detune=_u(rng, scn.c_detune), c2_detune=_u(rng, scn.c_detune),
         noise=rng.standard_normal(n_steps),
     )
 
@@ -222,14 +232,15 @@ def draw_episodes(rngs, scn: Scenario, n_steps: int) -> EpisodeDraw:
     cols = []
     for i, (lo, hi) in enumerate(ranges):
         cols.append(lo + (hi - lo) * u[:, drawn.index(i)] if i in drawn else np.full(n, float(lo)))
-    cols[-1] = _delay(cols[-1], scn)
-    return EpisodeDraw(*cols[:8], noise=noise, lm_drift=cols[8], sense_delay=cols[9])
+    cols[9] = _delay(cols[9], scn)
+    return EpisodeDraw(*cols[:8], noise=noise, lm_drift=cols[8], sense_delay=cols[9], c1_detune=cols[10],
+                       c2_detune=cols[11])
 
 
 def stack_draws(draws) -> EpisodeDraw:
     """One batched :class:`EpisodeDraw` from a list of single ones."""
     names = ("soc0", "lm_scale", "wind_speed_m_s", "record_u", "cmd0_a", "cmd1_a", "t_change_s", "t_stop_s",
-             "lm_drift", "sense_delay")
+             "lm_drift", "sense_delay", "c1_detune", "c2_detune")
     cols = {k: np.array([getattr(d, k) for d in draws], dtype=float) for k in names}
     return EpisodeDraw(**cols, noise=np.stack([d.noise for d in draws]))
 

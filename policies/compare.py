@@ -42,7 +42,7 @@ DEFAULT_POLICIES = ("step", "ramp", "hysteresis", "model_based", "model_based_on
 #: lm_high is held out: its Lm (1.3-1.5 x) is outside the training range of the random scenario (0.8-1.25 x);
 #: the model-is-wrong scenarios each with its held-out variant (:data:`envs.scenario.HELD_OUT`)
 DEFAULT_SCENARIOS = ("nominal", "lm_mismatch", "windy", "battery", "lm_high", "lm_drift", "lm_drift_fast",
-                     "sense_delay", "sense_delay_long", "battery_low", "battery_empty")
+                     "sense_delay", "sense_delay_long", "battery_low", "battery_empty", "detuned", "detuned_wide")
 #: policies without an oracle gap (far from short mode without overshoot: the gap says nothing)
 NO_GAP = ("step", "hysteresis", "random", "rl")
 REFERENCE = "model_based"

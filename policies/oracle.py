@@ -79,9 +79,24 @@ def _basis(n_after: int) -> np.ndarray:
 
 @lru_cache(maxsize=256)
 def _policy_traces(name: str, scenario, seed: int, episodes: int, config):
-    from .compare import run_policy
-    tr = run_policy(name, scenario, episodes, seed, config)
-    return tr.d_short.T.copy(), {k: v.copy() for k, v in tr.metrics.items()}
+    """``(duties (episodes, n_steps), {"overshoot_pct", "energy_after_stop_j"})`` of a policy in closed loop
+    on the windows ``seed + i`` (the loop of :func:`policies.compare.run_policy`, the same float32 actions)."""
+    from envs import SbarChargingVectorEnv
+
+    from . import make
+    venv = SbarChargingVectorEnv(num_envs=episodes, scenario=scenario, config=config)
+    pol = make(name, venv.policy_context)
+    pol.reset(episodes)
+    obs, _ = venv.reset(seed=seed)
+    T = venv.config.n_steps
+    duties, energy = np.empty((episodes, T)), np.empty((episodes, T))
+    for k in range(T):
+        d = np.asarray(pol.act(obs), dtype=float).reshape(episodes)
+        obs, _, _, _, info = venv.step((2.0 * np.clip(d, 0.0, 1.0) - 1.0)[:, None].astype(np.float32))
+        duties[:, k], energy[:, k] = info["d_short"], info["energy_j"]
+    k0 = venv._stop_k
+    after = np.arange(T)[None, :] >= k0[:, None]
+    return duties, {"overshoot_pct": 100.0 * info["overshoot"], "energy_after_stop_j": (energy * after).sum(axis=1)}
 
 
 def policy_duties(name: str, scenario, seed: int, config=None, episodes: int = 1) -> np.ndarray:

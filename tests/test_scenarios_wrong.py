@@ -84,3 +84,49 @@ def test_compare_defaults_hold_each_held_out_variant():
     from policies.compare import DEFAULT_SCENARIOS
     for base, held in HELD_OUT.items():
         assert base in DEFAULT_SCENARIOS and held in DEFAULT_SCENARIOS and held in SCENARIOS
+
+
+def test_detuned_rm_steady_current_is_the_closed_form():
+    """detuned: held in RM (d = 0) the I2 envelope |J2| settles at the closed-form steady state of the
+    detuned tank, which equals wpt_receiver's fixed point of the complex envelope (an independent
+    implementation), and differs from the tuned link's; at zero detuning the complex path is eq. 4."""
+    from wpt_receiver.envelope import _complex_steady, complex_envelope_matrices
+
+    from envs.detuned import complex_steady
+    v = SbarChargingVectorEnv(num_envs=3, scenario={"base": "nominal", "c_detune": (-0.02, 0.02)})
+    v.reset(seed=11)
+    for _ in range(300):
+        _, _, _, _, info = v.step(np.full((3, 1), -1.0, np.float32))
+    link = v.config.link_folded
+    vf, _ = v.config.device_terms
+    v2 = 4.0 / np.pi * (info["battery_v"] + vf)
+    w = link.omega_rad_s
+    cc1 = 1.0 / (w * w * link.l1_h) * (1.0 + v._c_rel[0])
+    cc2 = 1.0 / (w * w * link.l2_h) * (1.0 + v._c_rel[1])
+    _, j2 = complex_steady(link, v._lm_all[-1], cc1, cc2, v2)
+    assert np.allclose(info["i2_a"], np.abs(j2), rtol=5e-3)
+    for e in range(3):
+        a, b = complex_envelope_matrices(link.with_(lm_h=float(v._lm_all[-1, e])), cc1[e], cc2[e])
+        ref = _complex_steady(a, b, link.v1_amp_v, float(v2[e]))
+        assert abs(j2[e]) == pytest.approx(abs(ref[1]), rel=1e-9)
+    tuned = SbarChargingVectorEnv(num_envs=3, scenario="nominal")
+    tuned.reset(seed=11)
+    for _ in range(300):
+        _, _, _, _, ti = tuned.step(np.full((3, 1), -1.0, np.float32))
+    assert np.all(np.abs(info["i2_a"] / ti["i2_a"] - 1.0) > 0.05)   # 2 % of C moves the RM current by > 5 %
+
+
+def test_complex_path_at_zero_detuning_is_eq4():
+    """A batch on the complex envelope with (numerically) zero detuning scores the paper's controller
+    as the two-state env: overshoot within 0.02 points, energy after the stop within 0.1 % (the complex
+    path re-evaluates V2 every rectifier period, the two-state one per step unless I2 changes sign)."""
+    from policies.compare import run_policy
+    a = run_policy("model_based", "nominal", 4, 1000).metrics
+    b = run_policy("model_based", {"base": "nominal", "c_detune": (0.0, 1e-300)}, 4, 1000).metrics
+    assert np.all(np.abs(a["overshoot_pct"] - b["overshoot_pct"]) < 0.02)
+    assert np.allclose(a["energy_after_stop_j"], b["energy_after_stop_j"], rtol=1e-3)
+
+
+def test_single_env_refuses_detuned():
+    with pytest.raises(ValueError, match="vector env"):
+        SbarChargingEnv(scenario="detuned").reset(seed=0)
