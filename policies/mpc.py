@@ -56,7 +56,7 @@ _F = {k: OBS_INDEX[k] for k in ("i2_amp_a", "battery_v", "charge_cmd_a", "last_d
 def _require_osqp():
     import importlib.util
     if importlib.util.find_spec("osqp") is None:
-        raise ValueError("policy 'mpc' needs the QP solver osqp: pip install osqp")
+        raise ValueError("policy 'mpc' needs the QP solver osqp: pip install 'dronewpt[mpc]' (or osqp)")
 
 
 class _Model:

@@ -198,6 +198,19 @@ def _rl_or_skip(pols: tuple, explicit: bool) -> tuple:
     return tuple(p_ for p_ in pols if p_ not in sb3_rows)
 
 
+def _mpc_or_skip(pols: tuple, explicit: bool) -> tuple:
+    """Without osqp the default ``mpc`` row is skipped with a note; asked for with ``--policies`` it is an error."""
+    import importlib.util
+    rows = [p_ for p_ in pols if p_.split(":", 1)[0] == "mpc"]
+    if not rows or importlib.util.find_spec("osqp") is not None:
+        return pols
+    if explicit:
+        raise CliError(f"--policies {rows[0]} needs the QP solver osqp: pip install 'dronewpt[mpc]'")
+    print("dronewpt compare: note: skipping the mpc row: osqp is not installed (pip install 'dronewpt[mpc]')",
+          file=sys.stderr)
+    return tuple(p_ for p_ in pols if p_ not in rows)
+
+
 def _shipped_seed_rows(pols: tuple):
     """At the defaults the shipped learned kinds with several training seeds are one row each,
     aggregated over their seeds (instead of the seed-0 row)."""
@@ -234,6 +247,7 @@ def _cmd_compare(args) -> int:
         pols, groups = _shipped_seed_rows(pols)
     _check_compare(args, pols, scns, groups)
     pols = _rl_or_skip(pols, explicit=bool(args.policies))
+    pols = _mpc_or_skip(pols, explicit=bool(args.policies))
     if not args.no_plot:
         prepare_out_dir(args.out)
     try:
