@@ -130,6 +130,7 @@ class SbarChargingEnv(gym.Env):
         self._peak = PeakLookup(c.link, self._devices)
         self._k = None
         self._hist = None
+        self._line = None
         self._kern = _load_single_kernel() if compiled is None or compiled else None
         if compiled and self._kern is None:
             raise ValueError("compiled=True needs numba; install it or pass compiled=None/False")
@@ -165,6 +166,9 @@ class SbarChargingEnv(gym.Env):
         super().reset(seed=seed)
         scn = scenario_from_options(options, self.scenario)
         p = build_plans(draw_episodes([self.np_random], scn, self._T), scn, self.config)
+        if p.cplx is not None:
+            raise ValueError(f"scenario {scn.name!r} (detuned tanks, complex envelope) runs in the vector env only: "
+                             "envs.SbarChargingVectorEnv (or gymnasium.make_vec); valid here: c_detune=(0, 0)")
         self._plan = p
         self._t_stop = float(p.t_stop_s[0])
         self._stop_k = int(stop_step(p.t_stop_s, self._dt, self._T)[0])
@@ -188,6 +192,11 @@ class SbarChargingEnv(gym.Env):
             self._hist = [[0.0], [i2], [il], [cmd0], [d]]
         obs = np.array([_n(i2, 0), _n(vl, 1), _n(ib, 2), _n(il, 3), _n(soc, 4),
                         _n(cmd0, 5), _n(d, 6), _n(self._t_since(0), 7)], dtype=np.float32)
+        self._line = None
+        if p.delay_steps[0] > 0:   # sensing delay (envs.sensing)
+            from .sensing import DelayLine
+            self._line = DelayLine(1)
+            self._line.start([0], obs[None], p.delay_steps[:1])
         return obs, info
 
     def _start_float(self, p, i2_sm):
@@ -222,6 +231,12 @@ class SbarChargingEnv(gym.Env):
         self._cmd = steps[:, 0]
 
     def step(self, action):
+        out = self._step(action)
+        if self._line is not None:
+            self._line.push(out[0][None])
+        return out
+
+    def _step(self, action):
         k = self._k
         if k is None or k >= self._T:
             raise RuntimeError("step() called before reset() or after the episode was truncated; call reset()")

@@ -162,6 +162,8 @@ class Plans:
     vrc0: np.ndarray         # (n,) initial RC-branch voltage
     d0: np.ndarray           # (n,) initial duty (steady state for cmd0)
     t_stop_s: np.ndarray     # (n,) time of the stop command
+    delay_steps: np.ndarray | None = None   # (n,) int: age of the current measurements [control periods]
+    cplx: tuple | None = None   # detuned windows (envs.detuned): (coef (n, S, 32), x0 (n, 4), C1 (n,), C2 (n,) [F])
 
 
 def _steady_v2(link: LinkParams, lm, il, vl):
@@ -191,6 +193,9 @@ def build_plans(draws, scenarios, cfg: EnvConfig, out=None) -> Plans:
     t_slow = np.arange(S) * (cfg.slow_every * cfg.dt_s)
     lm = lm_window_h(draws.wind_speed_m_s, draws.record_u, t_slow)
     lm *= np.asarray(draws.lm_scale)[:, None]
+    drift = np.asarray(draws.lm_drift, dtype=float)
+    if np.any(drift != 0.0):   # Lm moving within the window (scenario lm_drift): linear in time
+        lm *= 1.0 + drift[:, None] * (t_slow / (T * cfg.dt_s))[None, :]
     # windows without wind share one Lm: discretise each distinct value once (same numbers)
     lm_u, back = np.unique(lm.ravel(), return_inverse=True)
     zoh = _zoh_coefficients(link, lm_u, cfg)
@@ -200,8 +205,29 @@ def build_plans(draws, scenarios, cfg: EnvConfig, out=None) -> Plans:
     cmd = command_profile(draws, T, cfg.dt_s, out=cmd)
     battery, x0, vl0, vrc0, d0 = _initial_state(link, lm[:, 0], np.asarray(draws.soc0, dtype=float), load_w,
                                                 cmd[:, 0], cfg)
+    c1 = np.asarray(draws.c1_detune, dtype=float).reshape(n)
+    c2 = np.asarray(draws.c2_detune, dtype=float).reshape(n)
+    cplx = _detuned_plans(link, lm, c1, c2, vl0, d0, cfg) if np.any(c1 != 0.0) or np.any(c2 != 0.0) else None
     return Plans(cmd, noise, coef, lm, battery, x0, vl0, vrc0, d0,
-                 np.asarray(draws.t_stop_s, dtype=float))
+                 np.asarray(draws.t_stop_s, dtype=float), np.asarray(draws.sense_delay).astype(np.int64).reshape(n),
+                 cplx)
+
+
+def _detuned_plans(link, lm, c1_rel, c2_rel, vl0, d0, cfg: EnvConfig):
+    """ZOH coefficients of the complex envelope per window and slow segment and the steady state at
+    the first duty (:mod:`envs.detuned`; ``c*_rel`` the relative capacitor errors)."""
+    from .detuned import complex_steady, zoh_complex
+    w = link.omega_rad_s
+    c1 = (1.0 + c1_rel) / (w * w * link.l1_h)
+    c2 = (1.0 + c2_rel) / (w * w * link.l2_h)
+    n, S = lm.shape
+    keys = np.stack([lm.ravel(), np.repeat(c1, S), np.repeat(c2, S)], axis=1)
+    uk, back = np.unique(keys, axis=0, return_inverse=True)
+    coef = zoh_complex(link, uk[:, 0], uk[:, 1], uk[:, 2], cfg.dt_s / cfg.n_sub)[back.ravel()].reshape(n, S, 32)
+    vf, dr = cfg.device_terms
+    v2 = FOUR_OVER_PI * (vl0 + vf) * (1.0 - np.sin(HALF_PI * d0))
+    j1, j2 = complex_steady(link, lm[:, 0], c1, c2, v2, dr * short_weight(d0))
+    return coef, np.stack([j1.real, j2.real, j1.imag, j2.imag], axis=1), c1, c2
 
 
 def _zoh_coefficients(link: LinkParams, lm, cfg: EnvConfig) -> np.ndarray:

@@ -14,7 +14,20 @@ windy          2..4 m/s wind with gusts: hover pose error and tilt (hence Lm) va
 battery        battery SoC 0.1..0.95 (battery voltage ~ 25..33 V instead of ~30 V)
 random         all of the above at once (the training distribution)
 lm_high        true Lm 1.3..1.5 x: outside the training range (held out in ``compare``)
+lm_drift       Lm falling over the window by 5..20 % (a drone leaving the pad), linear in time
+lm_drift_fast  held out: Lm falling by 20..35 % over the window
+sense_delay    the current measurements (I2, battery and SBAR output current) reach the
+               policy 1..2 control periods late (drawn per window)
+sense_delay_long  held out: 3..4 control periods late
+battery_low    battery far from nominal: SoC 0.02..0.06 (VL ~ 25.4..28.1 V)
+battery_empty  held out: SoC 0..0.02 (VL ~ 21..25 V; the ripple table extrapolated below 27 V)
+detuned        C1 and C2 each off resonance by -5..+5 % (drawn per window; complex envelope, envs.detuned)
+detuned_wide   held out: C1 and C2 each off by -8..+8 %
 =============  ============================================================================
+
+The model-is-wrong scenarios (``lm_drift``, ``sense_delay``, ``battery_low``; each with a held-out
+variant) break what the model-based policies assume (a constant Table I Lm, a measurement of the
+present, a battery near 30 V) inside a window, where an adaptive or learned policy could win.
 """
 
 from __future__ import annotations
@@ -23,7 +36,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-__all__ = ["Scenario", "SCENARIOS", "get_scenario", "EpisodeDraw", "draw_episode", "draw_episodes", "stack_draws",
+__all__ = ["Scenario", "SCENARIOS", "HELD_OUT", "get_scenario", "EpisodeDraw", "draw_episode", "draw_episodes", "stack_draws",
            "command_profile", "scenario_from_options"]
 
 
@@ -40,6 +53,11 @@ class Scenario:
     i2_noise_a : standard deviation of the I2 envelope sensor noise [A]
     hover_power_w : propulsion power drawn from the battery while hovering [W]; None = the default
         drone's momentum-theory hover power (:func:`envs.plant.default_hover_power_w`, ~99 W)
+    lm_drift : relative change of the true Lm over the window (``Lm(t) = Lm_0(t) (1 + drift t / T_window)``;
+        negative: the coupling falls, a drone leaving the pad)
+    sense_delay_steps : the current measurements of the observation (I2, battery current, SBAR output
+        current) are this many control periods old (integer, drawn uniformly per window)
+    c_detune : relative error of C1 and of C2 (each drawn) against the resonant value 1/(w^2 L)
     """
 
     name: str = "custom"
@@ -51,10 +69,14 @@ class Scenario:
     t_stop_s: tuple[float, float] = (10e-3, 16e-3)
     i2_noise_a: float = 0.1
     hover_power_w: float | None = None
+    lm_drift: tuple[float, float] = (0.0, 0.0)
+    sense_delay_steps: tuple[int, int] = (0, 0)
+    c_detune: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self):
         limits = {"lm_scale": (0.3, 2.0), "wind_speed_m_s": (0.0, 30.0), "soc": (0.0, 1.0),
-                  "cmd_a": (0.0, 20.0), "t_change_s": (0.0, 1.0), "t_stop_s": (0.0, 1.0)}
+                  "cmd_a": (0.0, 20.0), "t_change_s": (0.0, 1.0), "t_stop_s": (0.0, 1.0), "lm_drift": (-0.6, 0.6),
+                  "sense_delay_steps": (0, 20), "c_detune": (-0.3, 0.3)}
         for f in fields(self):
             if f.name not in limits:
                 continue
@@ -63,6 +85,10 @@ class Scenario:
             if not (vlo <= lo <= hi <= vhi):
                 raise ValueError(f"scenario {f.name}=({lo}, {hi}) is invalid; valid range: "
                                  f"{vlo} <= low <= high <= {vhi}")
+            if f.name == "sense_delay_steps":
+                if lo != int(lo) or hi != int(hi):
+                    raise ValueError(f"scenario sense_delay_steps=({lo}, {hi}) is invalid; valid: integers 0..20")
+                lo, hi = int(lo), int(hi)
             object.__setattr__(self, f.name, (lo, hi))
         if not (np.isfinite(self.i2_noise_a) and self.i2_noise_a >= 0):
             raise ValueError(f"i2_noise_a={self.i2_noise_a!r} is invalid; valid range: [0, inf)")
@@ -85,7 +111,18 @@ SCENARIOS: dict[str, Scenario] = {
     "battery": Scenario("battery", soc=(0.1, 0.95)),
     "random": Scenario("random", lm_scale=(0.8, 1.25), wind_speed_m_s=(0.0, 4.0), soc=(0.1, 0.95)),
     "lm_high": Scenario("lm_high", lm_scale=(1.3, 1.5)),
+    "lm_drift": Scenario("lm_drift", lm_drift=(-0.2, -0.05)),
+    "lm_drift_fast": Scenario("lm_drift_fast", lm_drift=(-0.35, -0.2)),
+    "sense_delay": Scenario("sense_delay", sense_delay_steps=(1, 2)),
+    "sense_delay_long": Scenario("sense_delay_long", sense_delay_steps=(3, 4)),
+    "battery_low": Scenario("battery_low", soc=(0.02, 0.06)),
+    "battery_empty": Scenario("battery_empty", soc=(0.0, 0.02)),
+    "detuned": Scenario("detuned", c_detune=(-0.05, 0.05)),
+    "detuned_wide": Scenario("detuned_wide", c_detune=(-0.08, 0.08)),
 }
+#: held-out variant of each model-is-wrong scenario (not in the range of its default one)
+HELD_OUT = {"lm_drift": "lm_drift_fast", "sense_delay": "sense_delay_long", "battery_low": "battery_empty",
+            "detuned": "detuned_wide"}
 
 
 def scenario_from_options(options, default: Scenario) -> Scenario:
@@ -130,6 +167,10 @@ class EpisodeDraw:
     t_change_s: float
     t_stop_s: float
     noise: np.ndarray        # (n_steps,) standard normals for the I2 sensor
+    lm_drift: float = 0.0    # relative Lm change over the window
+    sense_delay: float = 0.0  # measurement delay [control periods] (integer valued)
+    c1_detune: float = 0.0   # relative C1 error
+    c2_detune: float = 0.0   # relative C2 error
 
     @property
     def n(self) -> int:
@@ -137,8 +178,23 @@ class EpisodeDraw:
         return int(np.size(self.soc0))
 
 
-#: the uniformly drawn fields, in drawing order (record_u is always drawn, on [0, 1))
-_RANGED = ("soc", "lm_scale", "wind_speed_m_s", None, "cmd_a", "cmd_a", "t_change_s", "t_stop_s")
+#: the uniformly drawn fields, in drawing order (record_u is always drawn, on [0, 1)); the new fields
+#: come last and are only drawn when their range is not a point, so the older scenarios' windows are unchanged
+_RANGED = ("soc", "lm_scale", "wind_speed_m_s", None, "cmd_a", "cmd_a", "t_change_s", "t_stop_s", "lm_drift",
+           "sense_delay_steps", "c_detune", "c_detune")
+
+
+def _range(scn: Scenario, f):
+    """The uniform range of a field of :data:`_RANGED` (an integer range lo..hi is drawn on [lo, hi + 1) and floored)."""
+    if f is None:
+        return (0.0, 1.0)
+    lo, hi = getattr(scn, f)
+    return (float(lo), float(hi) + 1.0) if f == "sense_delay_steps" and hi > lo else (float(lo), float(hi))
+
+
+def _delay(x, scn: Scenario):
+    lo, hi = scn.sense_delay_steps
+    return np.minimum(np.floor(x), hi) if hi > lo else x
 
 
 def _u(rng, lohi):
@@ -154,6 +210,8 @@ def draw_episode(rng: np.random.Generator, scn: Scenario, n_steps: int, n_slow: 
         record_u=float(rng.uniform()),
         cmd0_a=_u(rng, scn.cmd_a), cmd1_a=_u(rng, scn.cmd_a),
         t_change_s=_u(rng, scn.t_change_s), t_stop_s=_u(rng, scn.t_stop_s),
+        lm_drift=_u(rng, scn.lm_drift), sense_delay=float(_delay(_u(rng, _range(scn, "sense_delay_steps")), scn)),
+        c1_detune=_u(rng, scn.c_detune), c2_detune=_u(rng, scn.c_detune),
         noise=rng.standard_normal(n_steps),
     )
 
@@ -163,7 +221,7 @@ def draw_episodes(rngs, scn: Scenario, n_steps: int) -> EpisodeDraw:
     :func:`draw_episode` with each generator (``uniform(lo, hi)`` is ``lo + (hi - lo) u`` of the
     generator's next double, so one ``random(k)`` call gives the k scalar draws), two generator
     calls per episode and the rest on arrays."""
-    ranges = [(0.0, 1.0) if f is None else getattr(scn, f) for f in _RANGED]
+    ranges = [_range(scn, f) for f in _RANGED]
     drawn = [i for i, (lo, hi) in enumerate(ranges) if hi > lo]
     n = len(rngs)
     u = np.empty((n, len(drawn)))
@@ -174,12 +232,15 @@ def draw_episodes(rngs, scn: Scenario, n_steps: int) -> EpisodeDraw:
     cols = []
     for i, (lo, hi) in enumerate(ranges):
         cols.append(lo + (hi - lo) * u[:, drawn.index(i)] if i in drawn else np.full(n, float(lo)))
-    return EpisodeDraw(*cols, noise=noise)
+    cols[9] = _delay(cols[9], scn)
+    return EpisodeDraw(*cols[:8], noise=noise, lm_drift=cols[8], sense_delay=cols[9], c1_detune=cols[10],
+                       c2_detune=cols[11])
 
 
 def stack_draws(draws) -> EpisodeDraw:
     """One batched :class:`EpisodeDraw` from a list of single ones."""
-    names = ("soc0", "lm_scale", "wind_speed_m_s", "record_u", "cmd0_a", "cmd1_a", "t_change_s", "t_stop_s")
+    names = ("soc0", "lm_scale", "wind_speed_m_s", "record_u", "cmd0_a", "cmd1_a", "t_change_s", "t_stop_s",
+             "lm_drift", "sense_delay", "c1_detune", "c2_detune")
     cols = {k: np.array([getattr(d, k) for d in draws], dtype=float) for k in names}
     return EpisodeDraw(**cols, noise=np.stack([d.noise for d in draws]))
 

@@ -69,6 +69,9 @@ class SbarChargingVectorEnv(VectorEnv):
         self._lm_all = np.zeros((S, n))
         self._bat = np.zeros((N_BAT, n))
         self._t_stop = np.zeros(n)
+        self._delay = np.zeros(n, dtype=np.int64)   # sensing delay [steps] (envs.sensing), None line when never used
+        self._line = None
+        self._ccoef = None   # complex-envelope coefficients when a window is detuned (envs.detuned)
         self._i2sm_all = np.ones((n, S))   # objective (envs.objective): short-mode I2 of the true link
         self._stop_k = np.zeros(n, dtype=np.int64)
         self._run_max = np.full(n, -np.inf)
@@ -127,6 +130,10 @@ class SbarChargingVectorEnv(VectorEnv):
         self._lm_all[:, idx] = p.lm_h.T
         self._bat[:, idx] = p.battery.T
         self._t_stop[idx] = p.t_stop_s
+        self._delay[idx] = p.delay_steps
+        if self._line is None and self._delay.any():
+            from .sensing import DelayLine
+            self._line = DelayLine(self.num_envs)
         self._i2sm_all[idx] = short_mode_i2_a(c.link, p.lm_h, self._devices)
         self._stop_k[idx] = stop_step(p.t_stop_s, c.dt_s, c.n_steps)
         self._run_max[idx] = -np.inf
@@ -139,6 +146,36 @@ class SbarChargingVectorEnv(VectorEnv):
         st = self._state
         st[0, idx], st[1, idx] = p.x0[:, 0], p.x0[:, 1]
         st[2, idx], st[3, idx], st[4, idx], st[5, idx] = p.vl0, p.battery[:, 2], p.vrc0, p.d0
+        self._start_detuned(idx, p, full)
+
+    def _start_detuned(self, idx, p, full):
+        """Detuned windows (:mod:`envs.detuned`): their complex-envelope coefficients and state; a batch
+        with any of them steps every window on the complex envelope (the tuned ones with zero detuning)."""
+        cplx = p.cplx
+        if cplx is None and (full or self._ccoef is None):
+            self._ccoef = None
+            return
+        if cplx is None:
+            from .core import _detuned_plans
+            z = np.zeros(len(p.d0))
+            cplx = _detuned_plans(self.config.link_folded, p.lm_h, z, z, p.vl0, p.d0, self.config)
+        if self._ccoef is None:
+            self._ccoef = np.zeros((self.num_envs, self.config.n_slow, 32))
+            self._xc = np.zeros((self.num_envs, 4))
+            self._c_rel = np.zeros((2, self.num_envs))
+        self._ccoef[idx], self._xc[idx] = cplx[0], cplx[1]
+        w, lk = self.config.link.omega_rad_s, self.config.link_folded
+        self._c_rel[0, idx] = cplx[2] * w * w * lk.l1_h - 1.0   # relative C errors (tests, info)
+        self._c_rel[1, idx] = cplx[3] * w * w * lk.l2_h - 1.0
+        # the objective's short-mode current is the detuned link's (V2 = 0, the short mode's resistances)
+        from .detuned import complex_steady
+        dev, base = self._devices, self.config.link
+        sm = base.with_(r1_ohm=base.r1_ohm + dev.inv_r_ohm, r2_ohm=base.r2_ohm + dev.short_r_ohm)
+        S = p.lm_h.shape[1]
+        _, j2 = complex_steady(sm, p.lm_h.ravel(), np.repeat(cplx[2], S), np.repeat(cplx[3], S), 0.0)
+        self._i2sm_all[idx] = np.abs(j2).reshape(-1, S)
+        self._state[0, idx] = np.hypot(cplx[1][:, 0], cplx[1][:, 2])
+        self._state[1, idx] = np.hypot(cplx[1][:, 1], cplx[1][:, 3])
 
     def _initial_obs_info(self):
         i1, i2, vl, soc, vrc, d = self._state
@@ -190,6 +227,8 @@ class SbarChargingVectorEnv(VectorEnv):
         self._start(idx)
         self._prev_done[idx] = False
         obs, _ = self._initial_obs_info()
+        if self._line is not None:
+            self._line.start(idx, obs[idx], self._delay[idx])
         return obs[idx]
 
     def reset(self, *, seed=None, options: dict | None = None):
@@ -209,7 +248,10 @@ class SbarChargingVectorEnv(VectorEnv):
         self._start(self._ar)
         self._prev_done[:] = False
         self._started = True
-        return self._initial_obs_info()
+        obs, info = self._initial_obs_info()
+        if self._line is not None:
+            self._line.start(self._ar, obs, self._delay)
+        return obs, info
 
     def step(self, actions):
         if not self._started:
@@ -219,16 +261,22 @@ class SbarChargingVectorEnv(VectorEnv):
         any_done = bool(done.any())
         if any_done:
             self._k[done] = 0   # these rows are stepped for nothing and restarted below
-        if self._kernel is not None:
+        if self._ccoef is not None:
+            obs, reward, truncated, info = self._step_detuned(d)
+        elif self._kernel is not None:
             obs, reward, truncated, info = self._step_compiled(d)
         else:
             obs, reward, truncated, info = self._step_numpy(d)
         terminated = np.zeros(self.num_envs, dtype=bool)
+        if self._line is not None:
+            self._line.push(obs)
         if any_done:
             idx = np.flatnonzero(done)
             self._start(idx)
             obs0, info0 = self._initial_obs_info()
             obs[idx] = obs0[idx]
+            if self._line is not None:
+                self._line.start(idx, obs0[idx], self._delay[idx])
             reward[idx] = 0.0
             truncated[idx] = False
             for key, v in info.items():
@@ -279,6 +327,36 @@ class SbarChargingVectorEnv(VectorEnv):
         info = self._objective_info(info, k - 1)
         info["i2_peak_envelope_a"] = pk_env
         return obs, reward, k >= self._T, info
+
+
+def _step_detuned(self, d):
+    """The step on the complex envelope (:func:`envs.detuned.advance_complex`): as :meth:`_step_numpy`
+    with ``|J1|``, ``|J2|`` for I1, I2 and ``|V2|`` for V2."""
+    from .detuned import advance_complex
+    k = self._k
+    j = k // self._M
+    i1, i2, vl_old, soc, vrc, _ = self._state
+    self._xc, i1, i2, pk_env, il, ib, soc, vrc, vl, v2 = advance_complex(
+        self._xc, vl_old, soc, vrc, d, self._ccoef[self._ar, j], self._bat, self._dev, self.config.link.v1_amp_v,
+        self._n_sub)
+    peak = self._peak.array(pk_env, d, vl_old)
+    cmd = self._cmd[k, self._ar]
+    reward, overcurrent = reward_cost(il, cmd, peak, self._inv_rated, self.config.reward, NUMPY_OPS)
+    energy = vl_old * il * self._dt
+    st = self._state
+    st[0], st[1], st[2], st[3], st[4], st[5] = i1, i2, vl, soc, vrc, d
+    self._j = j
+    k += 1
+    obs = self._obs(i2 + self._noise[k - 1, self._ar], vl, ib, il, soc, self._cmd[k, self._ar], d, self._t_since(k))
+    info = {"t_s": k * self._dt, "i2_a": i2, "i2_peak_a": peak, "i1_a": i1, "d_short": d, "v2_v": v2,
+            "rect_current_a": il, "battery_v": vl, "battery_current_a": ib, "soc": soc, "charge_cmd_a": cmd,
+            "lm_h": self._lm_all[j, self._ar], "energy_j": energy, "overcurrent": overcurrent}
+    info = self._objective_info(info, k - 1)
+    info["i2_peak_envelope_a"] = pk_env
+    return obs, reward, k >= self._T, info
+
+
+SbarChargingVectorEnv._step_detuned = _step_detuned
 
 
 def _load_kernel():

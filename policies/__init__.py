@@ -2,7 +2,7 @@
 
 Modules: ``classical`` (step, ramp, model_based), ``kernels`` (their compiled per-step functions for
 the mission's fast path; numba, imported on demand), ``onoff``, ``online``, ``budgeted``,
-``random_policy``, ``rl`` / ``residual`` / ``constrained`` / ``train`` / ``callbacks`` /
+``random_policy``, ``mpc``, ``oracle``, ``rl`` / ``residual`` / ``constrained`` / ``train`` / ``callbacks`` /
 ``hyperparams`` (RL, needs stable-baselines3), ``inference``, ``compare``, ``stats``.
 
 >>> from policies import make
@@ -12,6 +12,8 @@ Modules, from the classical controllers to learning and comparing:
 
 =================  ==========================================================================
 ``classical``      step, ramp and the paper's model-based inverse controller (Fig. 5)
+``mpc``            model-predictive control: receding-horizon QP in V2 on the nominal model (OSQP)
+``oracle``         the per-window limit: best open-loop duty sequence after the stop (SLSQP)
 ``budgeted``       the model-based controller with an overshoot budget (the classical frontier)
 ``online``         the model-based controller with an online Lm estimate
 ``onoff``          hysteresis ON-OFF (the classic unsynchronised mode switching)
@@ -71,6 +73,11 @@ def _residual(ctx, **kwargs):
     return ResidualPolicy(ctx, **kwargs)
 
 
+def _mpc(ctx, **kwargs):
+    from .mpc import MPCPolicy
+    return MPCPolicy(ctx, **kwargs)
+
+
 def _budgeted(ctx, **kwargs):
     from .budgeted import BudgetedModelBasedPolicy
     return BudgetedModelBasedPolicy(ctx, **kwargs)
@@ -89,6 +96,7 @@ _REGISTRY: dict[str, Callable[..., Policy]] = {
     "ppo_lagrangian": _ppo_lagrangian,
     "residual": _residual,
     "model_based_budget": _budgeted,
+    "mpc": _mpc,
 }
 #: names that take a model file as ``name:PATH``
 _WITH_PATH = ("rl", "ppo_lagrangian", "residual")
@@ -106,7 +114,7 @@ def available() -> list[str]:
 def make(name: str, ctx: PolicyContext | None = None, **kwargs) -> Policy:
     """A fresh policy by name (``"rl:PATH"`` loads an SB3 model file); ``ValueError`` naming the valid names."""
     base, _, arg = name.partition(":")
-    if arg and base == "model_based_budget":   # model_based_budget:0.02 = overshoot budget 2 %
+    if arg and base in ("model_based_budget", "mpc"):   # model_based_budget:0.02 = overshoot budget 2 %
         try:
             return _REGISTRY[base](ctx or PolicyContext(), **{**kwargs, "budget": float(arg)})
         except ValueError as exc:

@@ -34,15 +34,19 @@ from mission_sim.files import atomic_output
 
 from .stats import mean_ci, seed_ci
 
-__all__ = ["METRICS", "EpisodeTraces", "run_policy", "compare", "frontier", "DEFAULT_POLICIES", "DEFAULT_SCENARIOS",
+__all__ = ["METRICS", "EpisodeTraces", "run_policy", "compare", "frontier", "oracle_gaps", "oracle_curve", "DEFAULT_POLICIES", "DEFAULT_SCENARIOS",
            "REFERENCE", "plot_transitions", "plot_frontier", "shipped_seed_groups"]
 
 METRICS = ("overshoot_pct", "reached_short_mode", "peak_i2_a", "energy_before_stop_j", "energy_after_stop_j",
            "tracking_rmse_a", "cost", "return", "time_above_rated_s")
 DEFAULT_POLICIES = ("step", "ramp", "hysteresis", "model_based", "model_based_online", "model_based_budget:0.01",
-                    "model_based_budget:0.02", "rl", "ppo_lagrangian", "residual", "random")
-#: lm_high is held out: its Lm (1.3-1.5 x) is outside the training range of the random scenario (0.8-1.25 x)
-DEFAULT_SCENARIOS = ("nominal", "lm_mismatch", "windy", "battery", "lm_high")
+                    "model_based_budget:0.02", "mpc", "rl", "ppo_lagrangian", "residual", "random")
+#: lm_high is held out: its Lm (1.3-1.5 x) is outside the training range of the random scenario (0.8-1.25 x);
+#: the model-is-wrong scenarios each with its held-out variant (:data:`envs.scenario.HELD_OUT`)
+DEFAULT_SCENARIOS = ("nominal", "lm_mismatch", "windy", "battery", "lm_high", "lm_drift", "lm_drift_fast",
+                     "sense_delay", "sense_delay_long", "battery_low", "battery_empty", "detuned", "detuned_wide")
+#: policies without an oracle gap (far from short mode without overshoot: the gap says nothing)
+NO_GAP = ("step", "hysteresis", "random", "rl")
 REFERENCE = "model_based"
 DEFAULT_EPISODES = 100
 #: learned kinds shipped with several training seeds (``policies/pretrained/<prefix>_s<k>.zip``)
@@ -193,6 +197,46 @@ def frontier(scenario: str = "nominal", budgets=None, episodes: int = DEFAULT_EP
     return out
 
 
+def oracle_gaps(rows, traces, scenario: str, windows: int, seed: int = 1000, config=None, progress: bool = False):
+    """Add to the rows of ``scenario`` the gap to the oracle (:mod:`policies.oracle`) on its first ``windows``
+    windows: per window the best open-loop sequence after the stop within *that policy's own measured
+    overshoot* (started from the policy's own sequence and the budgeted controller's), and
+    ``oracle_gap_pct`` = 100 (E_policy - E_oracle) / E_policy of the energy after the stop (mean and
+    bootstrap interval over the windows that reached short mode), ``oracle_energy_after_stop_j``.
+    Policies of :data:`NO_GAP` and windows not in short mode are left out. Returns the rows."""
+    from tqdm import tqdm
+
+    from .oracle import oracle_window
+    todo = [r for r in rows if r["scenario"] == scenario and r["policy"] not in NO_GAP
+            and (r["policy"], scenario) in traces]
+    bar = tqdm(total=len(todo) * windows, desc="oracle gap", unit="window", disable=not progress)
+    for r in todo:
+        tr = traces[(r["policy"], scenario)]
+        n = min(int(windows), tr.d_short.shape[1])
+        m = tr.metrics
+        gap, eo = [], []
+        for i in range(n):
+            bar.update(1)
+            if not m["reached_short_mode"][i]:
+                continue
+            o = oracle_window(scenario, seed + i, max(m["overshoot_pct"][i], 0.0) / 100.0,
+                              starts=("model_based_budget:0.01",), config=config, extra_starts=(tr.d_short[:, i],))
+            e_pol = m["energy_after_stop_j"][i]
+            gap.append(100.0 * (e_pol - o.energy_after_stop_j) / e_pol)
+            eo.append(o.energy_after_stop_j)
+        r["oracle_windows"] = len(gap)
+        r["oracle_gap_pct"], r["oracle_gap_pct_lo"], r["oracle_gap_pct_hi"] = mean_ci(gap)
+        r["oracle_energy_after_stop_j"] = float(np.mean(eo)) if eo else float("nan")
+    bar.close()
+    return rows
+
+
+def oracle_curve(scenario: str = "nominal", windows: int = 20, seed: int = 1000, config=None, progress=False):
+    """The oracle frontier (:func:`policies.oracle.oracle_frontier`) on the first ``windows`` windows."""
+    from .oracle import oracle_frontier
+    return oracle_frontier(scenario, range(seed, seed + int(windows)), config=config, progress=progress)
+
+
 def plot_transitions(traces: dict, scenario: str, out_png, episode: int = 0, window_s=(-2e-3, 12e-3),
                      rated_i2_a: float = 15.0):
     """Figure of representative RM -> SM transitions: step peak |I2| and d_short of every policy
@@ -227,10 +271,11 @@ def plot_transitions(traces: dict, scenario: str, out_png, episode: int = 0, win
     return out_png
 
 
-def plot_frontier(rows, sweep, scenario: str, out_png, x: str = "overshoot_pct"):
+def plot_frontier(rows, sweep, scenario: str, out_png, x: str = "overshoot_pct", oracle=None):
     """Return and energy after the stop against the overshoot on ``scenario``: one point per policy
     with its 95 % intervals, the Pareto front of the policies (higher return / less energy after the
-    stop, less overshoot) and the budgeted model-based curve."""
+    stop, less overshoot), the budgeted model-based curve and (``oracle``: rows of :func:`oracle_curve`)
+    the oracle curve in the energy panel (means over its windows at each budget above the windows' floors)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -250,6 +295,11 @@ def plot_frontier(rows, sweep, scenario: str, out_png, x: str = "overshoot_pct")
         if sweep:
             ax.plot([r[x] for r in sweep], [r[y] for r in sweep], "-s", color="0.5", ms=3,
                     label="model_based with overshoot budget")
+        if oracle and y == "energy_after_stop_j":
+            n = len(oracle[0]["per_window"]["seed"])
+            ax.plot([r["overshoot_pct"] for r in oracle], [r["energy_after_stop_j"] for r in oracle], "-^", color="C3",
+                    ms=4, label=f"oracle: best open-loop sequence ({n} windows, from each window's floor)")
+            ax.legend(fontsize=7)
         ax.set_xlabel("overshoot after the stop over the true short-mode I2 [%]")
         ax.set_ylabel({"return": "episode return", "energy_after_stop_j": "energy after the stop [J]"}[y])
         ax.grid(alpha=0.3)

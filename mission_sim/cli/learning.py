@@ -154,6 +154,11 @@ def _add_compare(sub):
                         "ppo_lag=rl:a/ppo_sbar.zip,rl:b/ppo_sbar.zip (a glob in a path is expanded); repeatable "
                         "(default with the default --policies: the shipped ppo_lagrangian and residual seeds)")
     p.add_argument("--no-frontier", action="store_true", help="skip the budgeted model-based sweep")
+    p.add_argument("--oracle-windows", type=int, default=0, metavar="N",
+                   help="on the first scenario's first N windows: the oracle (best open-loop duty sequence after "
+                        "the stop, policies.oracle; cached on disk) curve in the frontier figure and every policy's "
+                        "gap to it at its own overshoot (default 0: off; ~2-5 s CPU per window and policy the "
+                        "first time)")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--out", type=path_arg("--out"), default=Path("out/compare"), help="folder for the figures")
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
@@ -201,6 +206,19 @@ def _rl_or_skip(pols: tuple, explicit: bool) -> tuple:
     return tuple(p_ for p_ in pols if p_ not in sb3_rows)
 
 
+def _mpc_or_skip(pols: tuple, explicit: bool) -> tuple:
+    """Without osqp the default ``mpc`` row is skipped with a note; asked for with ``--policies`` it is an error."""
+    import importlib.util
+    rows = [p_ for p_ in pols if p_.split(":", 1)[0] == "mpc"]
+    if not rows or importlib.util.find_spec("osqp") is not None:
+        return pols
+    if explicit:
+        raise CliError(f"--policies {rows[0]} needs the QP solver osqp: pip install 'dronewpt[mpc]'")
+    print("dronewpt compare: note: skipping the mpc row: osqp is not installed (pip install 'dronewpt[mpc]')",
+          file=sys.stderr)
+    return tuple(p_ for p_ in pols if p_ not in rows)
+
+
 def _shipped_seed_rows(pols: tuple):
     """At the defaults the shipped learned kinds with several training seeds are one row each,
     aggregated over their seeds (instead of the seed-0 row)."""
@@ -220,6 +238,8 @@ def _check_compare(args, pols, scns, groups):
             raise CliError(f"--scenarios {s_!r} is invalid; valid values: {', '.join(SCENARIOS)}")
     if not 1 <= args.episodes <= 100_000:
         raise CliError(f"--episodes {args.episodes} is invalid; valid range: 1..100000")
+    if not 0 <= args.oracle_windows <= args.episodes:
+        raise CliError(f"--oracle-windows {args.oracle_windows} is invalid; valid range: 0..{args.episodes} (--episodes)")
     if args.seed + args.episodes - 1 > 2**32 - 1:
         raise CliError(f"--seed {args.seed} is invalid with --episodes {args.episodes}; valid range: "
                        f"0 .. {2**32 - args.episodes} (episode seeds go up to seed + episodes - 1)")
@@ -243,17 +263,20 @@ def _cmd_compare(args) -> int:
         pols, groups = _shipped_seed_rows(pols)
     _check_compare(args, pols, scns, groups)
     pols = _rl_or_skip(pols, explicit=bool(args.policies))
+    pols = _mpc_or_skip(pols, explicit=bool(args.policies))
     if not args.no_plot:
         prepare_out_dir(args.out)
     try:
         rows, traces = compare(pols, scns, args.episodes, args.seed, progress=show_progress(args), train_seeds=groups)
         sweep = [] if args.no_frontier else frontier(scns[0], episodes=args.episodes, seed=args.seed,
                                                           progress=show_progress(args))
+        curve = _oracle(args, rows, traces, scns[0])
     except (ValueError, FileNotFoundError) as exc:
         raise CliError(str(exc)) from None
-    figs = [] if args.no_plot else _compare_figures(traces, rows, sweep, scns[0], args.out)
+    figs = [] if args.no_plot else _compare_figures(traces, rows, sweep, scns[0], args.out, curve)
     if args.format == "json":
         print(json.dumps({"episodes": args.episodes, "seed": args.seed, "rows": rows, "frontier": sweep,
+                          "oracle": [{k: v for k, v in r.items() if k != "per_window"} for r in curve],
                           "figures": figs}))
         return 0
     _print_compare(rows, sweep, args)
@@ -262,10 +285,19 @@ def _cmd_compare(args) -> int:
     return 0
 
 
-def _compare_figures(traces, rows, sweep, scenario, out) -> list[str]:
+def _oracle(args, rows, traces, scenario) -> list:
+    """The oracle curve and gaps of ``--oracle-windows`` (rows updated in place); [] when off."""
+    if not args.oracle_windows:
+        return []
+    from policies.compare import oracle_curve, oracle_gaps
+    oracle_gaps(rows, traces, scenario, args.oracle_windows, args.seed, progress=show_progress(args))
+    return oracle_curve(scenario, args.oracle_windows, args.seed, progress=show_progress(args))
+
+
+def _compare_figures(traces, rows, sweep, scenario, out, curve=()) -> list[str]:
     from policies.compare import plot_frontier, plot_transitions
     return [str(plot_transitions(traces, scenario, out / f"transitions_{scenario}.png")),
-            str(plot_frontier(rows, sweep, scenario, out / f"frontier_{scenario}.png"))]
+            str(plot_frontier(rows, sweep, scenario, out / f"frontier_{scenario}.png", oracle=list(curve)))]
 
 
 def _ci(r, k, scale=1.0, fmt="{:.2f}"):
@@ -287,6 +319,11 @@ def _print_compare(rows, sweep, args):
               f"{_ci(r, 'return', fmt='{:.1f}'):>22} {d:>24}")
     print("overshoot = peak |I2| after the stop over the true link's short-mode I2, minus 1; in SM = fraction of "
           "episodes with I_L < 0.5 A from 14 ms after the stop on; E after = energy delivered after the stop")
+    gaps = [r for r in rows if "oracle_gap_pct" in r]
+    if gaps:
+        print(f"gap to the oracle ({gaps[0]['scenario']}, first {args.oracle_windows} windows; energy after the stop "
+              "above the best open-loop sequence at the policy's own overshoot, windows in short mode): " + "; ".join(
+                  f"{r['policy']} {_ci(r, 'oracle_gap_pct', fmt='{:.1f}')} % ({r['oracle_windows']} w)" for r in gaps))
     if sweep:
         print(f"budgeted model-based curve ({sweep[0]['scenario']}): " + "; ".join(
             f"b={r['budget']:g}: {r['overshoot_pct']:.2f} %, {r['energy_after_stop_j']:.3f} J, return {r['return']:.1f}"

@@ -1,0 +1,306 @@
+"""Model-predictive control of the SBAR: a receding-horizon QP in V2 on the nominal envelope model.
+
+Model (what the controller assumes, like every model-based policy: Table I from the
+:class:`~mission_sim.contract.PolicyContext`, nominal Lm, perfect resonance): the envelope link of
+paper eq. 4 with the known semiconductors' constant resistances folded in (R1 + 2 Ron, R2 + Rd,
+:func:`wpt_receiver.devices.envelope_params`), discretised at the control period with the exact ZOH
+(:func:`wpt_receiver.zoh_discretise`; half-step too, for the mid-step samples the env's peak takes),
+state ``x = [I1, I2]``, input the fundamental ``V2`` (linear: eq. 5's duty comes after, from
+``f^-1``, :func:`wpt_receiver.duty_from_v2_clipped` at the measured clamp voltage ``VL + Vf``), plus an
+input disturbance ``w`` on V2 (offset-free MPC: it absorbs the forward drop, the short window's
+resistance and a wrong Lm in the steady state). A steady-state Kalman filter estimates ``[I1, I2,
+w]`` from the measured (noisy) I2 envelope and the V2 the previous duty applied.
+
+Every control period, over a prediction horizon of :data:`N_PRED` steps (6 ms, beyond the 4.4 ms
+slow pole) with the input blocked into :data:`BLOCKS` moves (fine near now, coarse later):
+
+* charging (command > 0): track the model-based reference ``I2ref`` (the steady I2 of the target
+  V2, :meth:`policies.classical.ModelBasedPolicy.i2_ref`), ``min sum (I2_k - I2ref)^2 + lam sum dV2^2``,
+  ``0 <= V2 <= (4/pi)(VL + Vf)``;
+* after the stop (command 0): minimise the energy after the stop, linear in V2 at the short-mode
+  current (``sum V2_k``, ~ ``sum V2 I2 / 2 dt``), ``+ lam sum dV2^2``, subject to the measured
+  overshoot budget on every predicted sample (mid-step and end): ``I2_k + e_k <= (1 + b) I2_sm``,
+  with ``e_k`` the SBAR's ripple excess (:mod:`envs.peaks`, the same table the env's objective uses)
+  at the duty of the previous plan, and the same box on V2. The I2 constraints are soft (one slack,
+  weight 1e4 per A): the first steps after the stop start from the pre-stop state and may be
+  infeasible (the window's floor).
+
+So the budget ``b`` is in the metric's units: the allowed measured (instantaneous-peak) overshoot
+over the short-mode current, not a reference relaxation (:mod:`policies.budgeted`).
+
+Solver: OSQP (``pip install osqp``; a sparse ADMM QP solver in C, warm-started from the previous
+step's solution), one small condensed QP per receiver and step (13 variables, ~140 constraints,
+~0.1 ms). Without osqp the policy raises a one-line ``ValueError`` naming the package.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mission_sim.contract import OBS_INDEX, PolicyContext, denormalise_obs
+
+__all__ = ["MPCPolicy", "N_PRED", "BLOCKS"]
+
+N_PRED = 150
+#: knots of the V2 plan [steps from now] (linear in between, held after the last)
+BLOCKS = (0, 1, 2, 3, 4, 5, 6, 8, 10, 13, 16, 20, 25, 31, 38, 46, 56, 68, 82, 100, 120)
+_LAMBDA = 0.1        # move penalty [A^2/V^2] of the tracking QP (smooth V2: no ringing of the 4 kHz resonance)
+_SLACK_W = 1e4
+_LAMBDA_STOP = 2e-4  # move penalty [1/V] of the after-stop QP (energy term in V per step)
+_RHO_Q = 0.01      # quadratic share of the after-stop energy term [1/V] (keeps the QP strongly convex)
+_RELAX_STEPS = 3    # after-stop steps in which the bound may be raised to the floor
+_MARGIN = 0.002      # constraint back-off, fraction of I2_sm (model error)
+_F = {k: OBS_INDEX[k] for k in ("i2_amp_a", "battery_v", "charge_cmd_a", "last_d_short")}
+
+
+def _require_osqp():
+    import importlib.util
+    if importlib.util.find_spec("osqp") is None:
+        raise ValueError("policy 'mpc' needs the QP solver osqp: pip install 'dronewpt[mpc]' (or osqp)")
+
+
+class _Model:
+    """Condensed predictions of the nominal model over the horizon: the I2 samples (mid-step and end
+    of every step, 2 N_PRED rows) = ``F z + G v + h`` with ``z = [I1, I2, w]``, ``v`` the blocked moves."""
+
+    def __init__(self, link, dt_s):
+        from wpt_receiver import state_matrices, zoh_discretise
+        a, b = state_matrices(link)
+        ad, bd = zoh_discretise(a, b, dt_s)
+        am, bm = zoh_discretise(a, b, 0.5 * dt_s)
+        v1 = link.v1_amp_v
+        n = N_PRED
+        self.ad, self.b2, self.e = ad, bd[:, 1], bd[:, 0] * v1
+        # V2 piecewise linear between the knots BLOCKS (a staircase of held moves would ring the
+        # 4 kHz resonance at every step of it), held after the last knot
+        M = np.stack([np.interp(np.arange(n), BLOCKS, np.eye(len(BLOCKS))[i]) for i in range(len(BLOCKS))], axis=1)
+        # state response: x_k = Phi_k x0 + sum_j Psi_{k-1-j} (u_j + w) + c_k
+        F = np.zeros((2 * n, 3))
+        Gu = np.zeros((2 * n, n))
+        h = np.zeros(2 * n)
+        Phi, c = np.eye(2), np.zeros(2)
+        powers = [np.eye(2)]
+        for _ in range(n):
+            powers.append(ad @ powers[-1])
+        for k in range(n):
+            # mid-step sample of step k from x_k: row 2k; end of step k (x_{k+1}): row 2k + 1
+            for r, (A_, B_, E_, P_) in enumerate(((am, bm[:, 1], bm[:, 0] * v1, None), (ad, bd[:, 1], bd[:, 0] * v1, None))):
+                row = 2 * k + r
+                F[row, :2] = (A_ @ Phi)[1]
+                h[row] = (A_ @ c + E_)[1]
+                for j in range(k):
+                    Gu[row, j] = (A_ @ powers[k - 1 - j] @ self.b2)[1]
+                Gu[row, k] = B_[1]
+            Phi, c = ad @ Phi, ad @ c + self.e
+        F[:, 2] = Gu.sum(axis=1)   # the disturbance acts on every step like an input
+        self.F, self.G, self.h, self.M = F, Gu @ M, h, M
+        self.ends = np.arange(1, 2 * n, 2)
+        self.kalman = self._kalman(ad, bd[:, 1])
+
+    @staticmethod
+    def _kalman(ad, b2, meas_sd_a=0.1, q_i=1e-3, q_w=0.05):
+        """Steady-state gain of the filter on z = [I1, I2, w] (w a random walk on V2) from I2."""
+        from scipy.linalg import solve_discrete_are
+        A = np.zeros((3, 3))
+        A[:2, :2], A[:2, 2], A[2, 2] = ad, b2, 1.0
+        C = np.array([[0.0, 1.0, 0.0]])
+        Q = np.diag([q_i ** 2, q_i ** 2, q_w ** 2])
+        P = solve_discrete_are(A.T, C.T, Q, np.array([[meas_sd_a ** 2]]))
+        return P @ C.T @ np.linalg.inv(C @ P @ C.T + meas_sd_a ** 2)
+
+
+class MPCPolicy:
+    """Receding-horizon QP controller (see the module docstring); ``budget`` the measured overshoot
+    allowed after the stop (fraction), ``link`` the model (default the context's, i.e. Table I),
+    ``devices`` the semiconductor preset it knows (the env's default ``schottky``)."""
+
+    name = "mpc"
+
+    def __init__(self, ctx: PolicyContext = PolicyContext(), budget: float = 0.0, link=None,
+                 devices: str = "schottky"):
+        _require_osqp()
+        budget = float(budget)
+        if not (np.isfinite(budget) and 0.0 <= budget <= 1.0):
+            raise ValueError(f"budget={budget!r} is invalid; valid range: [0, 1] (a measured overshoot fraction)")
+        from envs.objective import short_mode_i2_a
+        from envs.peaks import PeakLookup
+        from wpt_receiver.devices import envelope_params, preset
+        self.ctx, self.budget = ctx, budget
+        self.name = "mpc" if budget == 0.0 else f"mpc:{budget:g}"
+        base = ctx.link if link is None else link
+        dev = preset(devices)
+        self._vf = dev.rect_vf_v
+        self._link = envelope_params(base, dev)
+        self._model = _Model(self._link, ctx.control_period_s)
+        self._i2_sm = float(short_mode_i2_a(base, base.lm_h, dev))
+        self._peak = PeakLookup(base, dev)
+        from .classical import ModelBasedPolicy
+        self._ref = ModelBasedPolicy(PolicyContext(link=self._link, control_period_s=ctx.control_period_s))
+        self.n = 0
+        nb = len(BLOCKS)
+        D = np.eye(nb) - np.eye(nb, k=-1)
+        Ge = self._model.G[self._model.ends]
+        self._track_inv = np.linalg.inv(2.0 * (Ge.T @ Ge + _LAMBDA * D.T @ D) + 1e-9 * np.eye(nb))
+        self._ex0 = float(self._peak.array(np.array([self._i2_sm]), np.array([1.0]), np.array([31.0]))[0] - self._i2_sm)
+
+    def reset(self, n: int = 1) -> None:
+        self.n = int(n)
+        self._z = None
+        self._solvers = [None] * self.n
+        self._plan = np.zeros((self.n, N_PRED))
+        self._relax = np.zeros(self.n)   # [A] the bound raised to what the window allows (its floor)
+        self._n_stop = np.zeros(self.n, dtype=int)   # after-stop solves so far
+
+    def _v2_of(self, d, vl):
+        return 4.0 / np.pi * (vl + self._vf) * (1.0 - np.sin(0.5 * np.pi * d))
+
+    def _estimate(self, i2m, vl, d_last, ref0):
+        m = self._model
+        if self._z is None or len(self._z) != len(i2m):
+            # start in the steady state the measured I2 implies (w explains the offset)
+            lk = self._link
+            x = lk.omega_rad_s * lk.lm_h
+            det = lk.r1_ohm * lk.r2_ohm + x * x
+            v2 = self._v2_of(d_last, vl)
+            w = (x * lk.v1_amp_v - det * i2m) / lk.r1_ohm - v2
+            i1 = (lk.r2_ohm * lk.v1_amp_v + x * (v2 + w)) / det
+            self._z = np.stack([i1, i2m, w], axis=1)
+            return self._z
+        z = self._z
+        u = self._v2_of(d_last, vl) + z[:, 2]
+        x = z[:, :2] @ m.ad.T + u[:, None] * m.b2[None, :] + m.e[None, :]
+        innov = i2m - x[:, 1]
+        self._z = np.column_stack([x, z[:, 2]]) + innov[:, None] * m.kalman[:, 0][None, :]
+        return self._z
+
+    def act(self, obs):
+        from wpt_receiver import duty_from_v2_clipped
+        o = denormalise_obs(np.atleast_2d(obs))
+        i2m, vl, cmd, d_last = (o[:, _F[k]] for k in ("i2_amp_a", "battery_v", "charge_cmd_a", "last_d_short"))
+        if self._solvers is None or len(self._solvers) != len(i2m):
+            self.reset(len(i2m))
+        ref = self._ref.i2_ref(cmd, vl + self._vf)
+        z = self._estimate(i2m, vl, d_last, ref)
+        v2 = np.empty(len(i2m))
+        for e in range(len(i2m)):
+            v2[e] = self._solve(e, z[e], vl[e], cmd[e] <= 0.0, ref[e], d_last[e])
+        return duty_from_v2_clipped(v2, vl + self._vf)
+
+    def _qp(self, stop: bool):
+        """A new OSQP problem of the tracking (``stop`` False) or the after-stop kind, data to be updated."""
+        import osqp
+        from scipy import sparse
+        m = self._model
+        nb = m.M.shape[1]
+        D = np.eye(nb) - np.eye(nb, k=-1)
+        Ge = m.G[m.ends]
+        if not stop:
+            P = 2.0 * (Ge.T @ Ge + _LAMBDA * D.T @ D) + 1e-9 * np.eye(nb)
+            A = np.eye(nb)
+            q, lo, hi = np.zeros(nb), np.zeros(nb), np.ones(nb)
+        else:
+            P = np.zeros((nb + 1, nb + 1))
+            P[:nb, :nb] = 2.0 * (_LAMBDA_STOP * D.T @ D + _RHO_Q * np.diag(m.M.sum(axis=0)))
+            P[nb, nb] = 2.0 * _SLACK_W
+            rows = len(m.G)
+            A = np.zeros((nb + rows + 1, nb + 1))
+            A[:nb, :nb] = np.eye(nb)
+            # dense pattern (values updated every step, Ax); set up with typical values (the solver's
+            # scaling is computed here): the model plus a ripple slope of 0.02 A/V
+            A[nb:nb + rows, :nb] = m.G + 0.02 * m.M.repeat(2, axis=0) + 1e-30
+            A[nb:nb + rows, nb] = -1.0
+            A[-1, nb] = 1.0
+            q, lo, hi = np.zeros(nb + 1), np.r_[np.zeros(nb), np.full(rows, -np.inf), 0.0], np.r_[np.ones(nb + rows), np.inf]
+        prob = osqp.OSQP()
+        prob.setup(sparse.csc_matrix(np.triu(P)), q, sparse.csc_matrix(A), lo, hi, verbose=False, warm_starting=True,
+                   polishing=False, eps_abs=1e-3, eps_rel=1e-3, max_iter=2000, rho=0.1)
+        return prob
+
+    def _solve(self, e, z, vl, stop, ref, d_last):
+        """V2 [V] of receiver ``e`` now: the first move of the QP's solution."""
+        m = self._model
+        nb = m.M.shape[1]
+        key = int(stop)
+        if self._solvers[e] is None:
+            self._solvers[e] = [None, None]
+        if self._solvers[e][key] is None:
+            self._solvers[e][key] = self._qp(stop)
+        prob = self._solvers[e][key]
+        vmax = 4.0 / np.pi * (vl + self._vf)
+        u_prev = float(self._v2_of(d_last, vl))
+        free = m.F @ z + m.h
+        e0 = np.zeros(nb)
+        e0[0] = 1.0
+        if not stop:
+            Ge = m.G[m.ends]
+            q = 2.0 * (Ge.T @ (free[m.ends] - ref) - _LAMBDA * e0 * u_prev)
+            v = -self._track_inv @ q   # the unconstrained optimum: the QP's solution when the box is inactive
+            if np.all(v >= 0.0) and np.all(v <= vmax):
+                self._plan[e] = m.M @ v
+                return float(self._plan[e, 0])
+            prob.update(q=q, l=np.zeros(nb), u=np.full(nb, vmax))
+        else:
+            if self._plan[e, :BLOCKS[-1]].max() < 0.05 and self._settled(z, self._relax[e]):
+                return 0.0   # in short mode with the free response inside the bound: nothing to plan
+            # ripple excess: its tangent in V2 at the previous plan (shifted), an upper bound of the
+            # concave excess (sequential convex approximation, exact at the previous plan)
+            v_bar = np.r_[self._plan[e, 1:], self._plan[e, -1]]
+            ex, slope = self._excess(v_bar, vl)
+            # the bound never below the model's own short-mode current (its steady state with V2 = 0 and
+            # the estimated disturbance): the target must be feasible in the model
+            sm = max(self._i2_sm, float(np.linalg.solve(np.eye(2) - m.ad, m.e + m.b2 * z[2])[1]))
+            ub = (1.0 + self.budget - _MARGIN) * sm + self._relax[e] - (ex - slope * v_bar).repeat(2) - free
+            A = np.zeros((len(ub) + nb + 1, nb + 1))
+            A[:nb, :nb] = np.eye(nb)
+            A[nb:nb + len(ub), :nb] = m.G + slope.repeat(2)[:, None] * m.M.repeat(2, axis=0)
+            A[nb:nb + len(ub), nb] = -1.0
+            A[-1, nb] = 1.0
+            q = np.r_[m.M.sum(axis=0) - 2.0 * _LAMBDA_STOP * e0 * u_prev, _SLACK_W]
+            hi = np.full(nb, vmax)
+            hi[-1] = 0.0   # terminal move: short mode (V2 = 0) from step BLOCKS[-1] of the horizon on
+            prob.update(q=q, l=np.r_[np.zeros(nb), np.full(len(ub), -np.inf), 0.0],
+                        u=np.r_[hi, ub, np.inf], Ax=_csc_data(A))
+        res = prob.solve(raise_error=False)
+        ok = res.x is not None and np.all(np.isfinite(res.x))
+        v = res.x[:nb] if ok else np.full(nb, u_prev)
+        if stop:
+            self._n_stop[e] += 1
+        if stop and ok and res.x[nb] > 1e-4 and self._n_stop[e] <= _RELAX_STEPS:
+            # below the window's floor (the state at the stop allows no less): the bound is raised by the
+            # least violation for the rest of the window, so the energy term drives the descent again; only in
+            # the first steps after the stop (the floor is set there; later violations are model error and
+            # must not accumulate into the bound)
+            self._relax[e] += res.x[nb]
+        self._plan[e] = np.clip(m.M @ v, 0.0, vmax)
+        return float(self._plan[e, 0])
+
+    def _settled(self, z, relax: float) -> bool:
+        """The free response (V2 = 0) from ``z`` stays within the budget's bound with the short-mode
+        ripple (:meth:`_excess` at V2 = 0)."""
+        m = self._model
+        free = m.F @ z + m.h
+        sm = max(self._i2_sm, float(np.linalg.solve(np.eye(2) - m.ad, m.e + m.b2 * z[2])[1]))
+        return bool(np.all(free + self._ex0 <= (1.0 + self.budget - _MARGIN) * sm + relax))
+
+    def _excess(self, v2, vl):
+        """Ripple excess [A] at V2 ``v2`` (n,) [V] and its slope dexcess/dV2 [A/V] (central difference,
+        0.5 V) at the short-mode current and battery voltage ``vl`` (:mod:`envs.peaks`)."""
+        from wpt_receiver import duty_from_v2_clipped
+        vc = vl + self._vf
+        h = 0.5
+        v = np.concatenate([v2, np.minimum(v2 + h, 4.0 / np.pi * vc), np.maximum(v2 - h, 0.0)])
+        pk = np.full(len(v), self._i2_sm)
+        ex = self._peak.array(pk, duty_from_v2_clipped(v, vc), np.full(len(v), vl)) - pk
+        n = len(v2)
+        slope = (ex[n:2 * n] - ex[2 * n:]) / np.maximum(v[n:2 * n] - v[2 * n:], 1e-9)
+        return ex[:n], np.maximum(slope, 0.0)
+
+
+
+def _csc_data(A):
+    """The values of the stop QP's constraint matrix in the CSC order of its fixed pattern (identity,
+    dense block, slack column): column-major over the nonzero pattern of :meth:`MPCPolicy._qp`."""
+    nb = A.shape[1] - 1
+    cols = [np.r_[A[c, c], A[nb:-1, c]] for c in range(nb)]
+    cols.append(A[nb:, nb])
+    return np.concatenate(cols)
