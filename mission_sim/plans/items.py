@@ -86,11 +86,8 @@ def _home(lat, lon, alt, name: str, what: str) -> GeoPoint:
 def read_mission(path, from_log: str = "auto") -> RawMission:
     """The mission of ``path`` by its kind: .plan (JSON), QGC WPL text, or a flight log
     (``from_log``: "uploaded" items, "flown" track, "auto" = uploaded if the log holds a mission)."""
-    path = Path(path)
-    if path.is_dir():
-        raise ValueError(f"mission file {str(path)!r} is a folder; valid: a .plan, .waypoints or log file")
-    if not path.is_file():
-        raise FileNotFoundError(f"mission file {str(path)!r} does not exist")
+    from ..validation import check_regular_file
+    path = check_regular_file(path, "mission file (--plan / mission.file)", "a .plan, .waypoints or log file")
     if path.suffix.lower() in LOG_SUFFIXES:
         if from_log != "flown":
             up = uploaded_mission(path)

@@ -13,7 +13,6 @@ import io
 import json
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 from ..mavlink.geodesy import GeoPoint
 
@@ -34,11 +33,8 @@ class GeoPad:
 
 def read_pads(path) -> tuple[GeoPad, ...]:
     """Pads of a CSV or GeoJSON file (by content: a JSON object, else CSV)."""
-    path = Path(path)
-    if path.is_dir():
-        raise ValueError(f"pads file {str(path)!r} is a folder; valid: a CSV or GeoJSON file")
-    if not path.is_file():
-        raise FileNotFoundError(f"pads file {str(path)!r} does not exist")
+    from ..validation import check_regular_file
+    path = check_regular_file(path, "pads file (--pads / mission.pads_file)", "a CSV or GeoJSON file")
     try:
         text = path.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError as exc:
