@@ -51,6 +51,7 @@ def pack_constants(loop) -> np.ndarray:
         "v_cv": ch.cv_cell_v * loop.bp.n_series, "cutoff_a": ch.cutoff_current_a, "inv_r": dev.inv_r_ohm,
         "vf0": dev.rect_diode.vf0_v, "rd": dev.rect_diode.rd_ohm, "is_ideal": float(dev.is_ideal),
         "coil_r1": loop.lk.r1_ohm, "coil_r2": loop.lk.r2_ohm,
+        "v_recharge": (ch.cv_cell_v - ch.recharge_drop_cell_v) * loop.bp.n_series,
     }
     return np.array([float(val[name]) for name in C_NAMES])
 
