@@ -35,8 +35,8 @@ class MissionResult:
     trajectory: object = None
     extra: dict = field(default_factory=dict)
 
-    def write(self, out_dir, figures=None) -> list[Path]:
-        """Write ``timeseries.parquet``, ``timeseries.csv``, the figures of ``figures(result, out_dir)``
+    def write(self, out_dir, figures=None, csv: bool = True) -> list[Path]:
+        """Write ``timeseries.parquet``, ``timeseries.csv`` (unless ``csv`` is False), the figures of ``figures(result, out_dir)``
         (if given, e.g. :func:`mission_sim.figures.mission.plot_mission`) and ``summary.json`` last.
 
         Every file is written under a temporary name and renamed when complete, and a
@@ -48,11 +48,12 @@ class MissionResult:
         (out / "summary.json").unlink(missing_ok=True)
         ts = self.timeseries.copy()
         ts["phase"] = ts["phase"].astype(str)
-        paths = [out / "timeseries.parquet", out / "timeseries.csv"]
+        paths = [out / "timeseries.parquet"] + ([out / "timeseries.csv"] if csv else [])
         with atomic_output(paths[0]) as tmp:
             ts.to_parquet(tmp, index=False)
-        with atomic_output(paths[1]) as tmp:
-            ts.to_csv(tmp, index=False)
+        if csv:
+            with atomic_output(paths[1]) as tmp:
+                ts.to_csv(tmp, index=False)
         if figures is not None:
             paths.extend(Path(f) for f in figures(self, out))
         paths.append(out / "summary.json")

@@ -88,7 +88,8 @@ def _lm_along(cfg, model, traj: Trajectory, compiled: bool = False):
 
 
 def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bool = True,
-                progress: bool = False, compiled: bool | None = None) -> MissionResult:
+                progress: bool = False, compiled: bool | None = None, frame: bool = True,
+                sink=None) -> MissionResult:
     """Run one mission; returns a :class:`~mission_sim.world.results.MissionResult`.
 
     ``policy`` is a :class:`mission_sim.contract.Policy` made for ``control_period_s =
@@ -98,12 +99,15 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     ``compiled``: None runs the loop compiled when it applies (numba installed, the policy has the
     ``kernel`` hook, no sensor noise: :mod:`.fastpath`), False the pure-Python reference loop, True
     requires the compiled loop (``ValueError`` if it does not apply).
+    ``frame=False`` keeps no time series in memory (``timeseries`` is None; the summary is computed on
+    the fly, memory bounded whatever the mission's length); ``sink`` (e.g.
+    :class:`~.stream.SeriesWriter`) receives the charged run's rows in blocks as they are produced.
     """
     wall0 = time.perf_counter()
     traj = plan_mission(cfg) if trajectory is None else trajectory
     fast = compiled if compiled is not None else importlib.util.find_spec("numba") is not None
     lm_all = _lm_along(cfg, cfg.coupling.model(), traj, fast)[0]
-    res = _simulate(cfg, policy, traj, charge, progress, lm_all, compiled)
+    res = _simulate(cfg, policy, traj, charge, progress, lm_all, compiled, frame, sink)
     if charge:
         base = _simulate(cfg, policy, traj, False, False, lm_all, compiled, frame=False)  # its summary only
         res.summary["flight_time_gain_s"] = flight_time_gain_s(cfg, res.summary["final_soc"],
@@ -129,7 +133,7 @@ def flight_time_gain_s(cfg, final_soc_charged: float, final_soc_uncharged: float
 
 
 def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_all=None,
-              compiled: bool | None = None, frame: bool = True) -> MissionResult:
+              compiled: bool | None = None, frame: bool = True, sink=None) -> MissionResult:
     if lm_all is None:
         lm_all = _lm_along(cfg, cfg.coupling.model(), traj)[0]
-    return MissionLoop(cfg, policy, traj, charge, lm_all, compiled, frame).run(progress)
+    return MissionLoop(cfg, policy, traj, charge, lm_all, compiled, frame, sink).run(progress)
