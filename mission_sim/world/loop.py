@@ -65,6 +65,8 @@ def _sign(v: float) -> float:
 class MissionLoop:
     """One mission run: constants from the config, per-sample arrays, and the state the loop carries."""
 
+    columns = _COLUMNS  # the layout of a row (and of the blocks handed to the sink)
+
     __slots__ = {
         # --- constants (set once)
         "cfg": "mission config", "policy": "the Policy (contract)", "traj": "the Trajectory",

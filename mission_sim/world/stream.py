@@ -76,13 +76,13 @@ class RowStats:
 
 def _derived(loop, arr: np.ndarray) -> dict:
     """The time-series columns of one block (:meth:`~.loop.MissionLoop.timeseries`'s layout) as numpy arrays."""
-    from .loop import _COLUMNS
-    col = {name: arr[:, j] for j, name in enumerate(_COLUMNS)}
+    columns = loop.columns
+    col = {name: arr[:, j] for j, name in enumerate(columns)}
     ri = col.pop("_row").astype(np.int64)
     pos = loop.traj.pos_m[ri]
     out = {"t_s": col["t_s"], "dt_s": col["dt_s"], "x_m": pos[:, 0], "y_m": pos[:, 1], "z_m": pos[:, 2],
            "lm_h": col["lm_h"], "k": col["lm_h"] * loop.inv_sqrt_l1l2, "tx_on": col["v1_v"] > 0}
-    for name in _COLUMNS[4:]:
+    for name in columns[4:]:
         out[name] = col[name].astype(bool) if name == "fine" else col[name]
     dts = col["dt_s"]
     out["propulsion_w"] = col["e_propulsion_j"] / dts
