@@ -182,7 +182,7 @@ def stored_every_s(every, est) -> float:
 
 
 #: most time-series points the figures read back from the Parquet file (evenly strided beyond)
-FIGURE_POINTS = 200_000
+FIGURE_POINTS = 20_000
 
 
 def _figures_and_summary(res, out: Path, plots: bool) -> list[str]:

@@ -6,8 +6,6 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import pandas as pd
-
 from ..files import atomic_output
 
 __all__ = ["MissionResult", "SUMMARY_KEYS", "TIMESERIES_COLUMNS"]
@@ -29,7 +27,7 @@ class MissionResult:
     summary : energies [J], SoC, peak I2, time above rated, flight-time gain, step counts, wall time
     """
 
-    timeseries: pd.DataFrame
+    timeseries: "pandas.DataFrame | None"
     summary: dict
     config: object = None
     trajectory: object = None

@@ -171,13 +171,40 @@ class SeriesWriter:
             tmp.unlink(missing_ok=True)
 
 
-def read_series(path, columns=None, max_points: int | None = None):
-    """A DataFrame of ``columns`` from a ``timeseries.parquet`` (read column-wise); with ``max_points``
-    thinned to about that many rows by an even stride (for figures: a plot needs no 10^7 points)."""
+def read_series(path, columns=None, max_points: int | None = None, keep_peak_of: str | None = "i2_amp_a"):
+    """A DataFrame of ``columns`` from a ``timeseries.parquet``, read one row group at a time.
+
+    With ``max_points`` the rows are thinned to about that many by an even stride (figures need no
+    10^7 points), except the ``+-2,000`` rows around the largest ``|keep_peak_of|`` (the transient a
+    zoomed figure shows), which are kept whole. Memory: one row group plus the kept rows."""
+    import pyarrow as pa
     import pyarrow.parquet as pq
-    table = pq.read_table(path, columns=columns)
-    if max_points is not None and table.num_rows > max_points:
-        table = table.take(np.arange(0, table.num_rows, math.ceil(table.num_rows / max_points)))
+    f = pq.ParquetFile(path)
+    n = f.metadata.num_rows
+    stride = 1 if max_points is None or n <= max_points else math.ceil(n / max_points)
+    if stride == 1:
+        table = f.read(columns=columns)
+    else:
+        parts, best, offset = [], (-math.inf, None), 0
+        for batch in f.iter_batches(batch_size=BLOCK_ROWS, columns=columns):
+            idx = np.arange((-offset) % stride, batch.num_rows, stride)
+            parts.append(batch.take(pa.array(idx)))
+            if keep_peak_of is not None and keep_peak_of in batch.schema.names:
+                y = np.abs(batch.column(keep_peak_of).to_numpy(zero_copy_only=False))
+                j = int(np.argmax(y)) if len(y) else 0
+                if len(y) and y[j] > best[0]:
+                    lo, hi = max(j - 2000, 0), min(j + 2000, batch.num_rows)
+                    best = (float(y[j]), batch.slice(lo, hi - lo), offset + lo)
+            offset += batch.num_rows
+        table = pa.Table.from_batches(parts)
+        if best[1] is not None:   # the peak's window replaces the strided rows there
+            t = table.column("t_s").to_numpy() if "t_s" in table.column_names else None
+            if t is not None:
+                win = best[1]
+                tw = win.column(win.schema.get_field_index("t_s")).to_numpy()
+                keep = (t < tw[0]) | (t > tw[-1])
+                table = pa.concat_tables([table.filter(pa.array(keep)), pa.Table.from_batches([win])])
+                table = table.sort_by("t_s")
     df = table.to_pandas()
     if "phase" in df:
         df["phase"] = df["phase"].astype("category")
