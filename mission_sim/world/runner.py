@@ -67,11 +67,20 @@ __all__ = ["run_mission", "ENERGISE_PHASES"]
 
 
 def _pad_offsets(cfg, traj: Trajectory):
-    """Offsets (N, 3) of the receiver from the nearest pad (horizontally) and that pad's index."""
+    """Offsets (N, 3) of the receiver from the nearest pad (horizontally) and that pad's index (the
+    first of equally near ones). Pads at the same place (a route flown again) are searched once, and
+    the samples in chunks, so memory stays ~32 MB whatever the number of samples and pads."""
     pads = np.array([[p.x_m, p.y_m, p.z_m] for p in cfg.pads])
-    d = traj.pos_m[:, None, :2] - pads[None, :, :2]
-    idx = np.argmin(np.einsum("nkj,nkj->nk", d, d), axis=1)
-    return traj.pos_m - pads[idx], idx
+    _, first = np.unique(pads[:, :2], axis=0, return_index=True)
+    first.sort()  # distinct places in the order of their first pad: argmin's tie-break is unchanged
+    cand = pads[first, :2]
+    step = max(1, (1 << 21) // len(cand))
+    pos = traj.pos_m
+    idx = np.empty(len(pos), dtype=np.int64)
+    for a in range(0, len(pos), step):
+        d = pos[a:a + step, None, :2] - cand[None, :, :]
+        idx[a:a + step] = first[np.argmin(np.einsum("nkj,nkj->nk", d, d), axis=1)]
+    return pos - pads[idx], idx
 
 
 def _lm_along(cfg, model, traj: Trajectory, compiled: bool = False):
