@@ -11,7 +11,9 @@ weights into float32 numpy arrays once and :class:`NumpyActor` evaluates
 * SAC (``SACPolicy``): ``tanh(mu(latent_pi(obs)))`` rescaled to the action box,
 * DQN (``DQNPolicy``): the arg-max of ``q_net(obs)``,
 
-with the same layers and activations (float32, like torch). Results agree with
+with the same layers and activations (float32, like torch). :func:`load_ppo_actor` builds the same
+actor for a plain PPO model straight from the zip's ``policy.pth`` state dict (torch only to read
+it): no stable-baselines3 import, no model, no optimiser. Results agree with
 ``predict(deterministic=True)`` to float32 round-off (tests/test_rl_inference.py). Anything else
 (image or dict observations, custom feature extractors, gSDE, unknown activations) is not
 exported: :func:`export_actor` returns ``None`` and the caller keeps ``predict``.
@@ -21,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["NumpyActor", "export_actor"]
+__all__ = ["NumpyActor", "export_actor", "load_ppo_actor"]
 
 _ACTIVATIONS = {
     "Tanh": np.tanh,
@@ -143,3 +145,43 @@ def export_actor(model) -> NumpyActor | None:
     if hasattr(policy, "q_net") and hasattr(policy.q_net, "q_net"):
         return _export_dqn(policy)
     return None
+
+
+def _space_bounds(space: dict):
+    """``(low, high)`` float32 arrays of a Box serialised in an SB3 zip's ``data`` JSON (``'[-1.]'``)."""
+    def parse(text):
+        return np.array(str(text).strip("[]").split(), dtype=np.float32)
+    return parse(space["low"]), parse(space["high"])
+
+
+def load_ppo_actor(path, meta: dict) -> NumpyActor | None:
+    """The deterministic actor of a PPO model zip written by ``dronewpt train`` (MLP ``net_arch`` of
+    SB3's default Tanh, continuous flat Box spaces, no gSDE: the shipped models), read from the
+    zip's ``policy.pth`` state dict (``torch.load(weights_only=True)``); the same numbers as
+    :func:`export_actor` of ``PPO.load`` (tests). ``None`` for anything else (the caller loads the
+    model with SB3)."""
+    import io
+    import json
+    import zipfile
+
+    kwargs = meta.get("policy_kwargs") or {}
+    arch = kwargs.get("net_arch", [64, 64])
+    if meta.get("algo") != "ppo" or meta.get("discrete") or set(kwargs) - {"net_arch", "log_std_init"} \
+            or not (isinstance(arch, list) and all(isinstance(n, int) for n in arch)):
+        return None
+    with zipfile.ZipFile(path) as z:
+        data = json.loads(z.read("data"))
+        if data.get("use_sde") or "Box" not in str(data.get("action_space", {}).get(":type:")):
+            return None
+        import torch
+        state = torch.load(io.BytesIO(z.read("policy.pth")), map_location="cpu", weights_only=True)
+    layers = []
+    for i in range(len(arch)):
+        w, b = state.get(f"mlp_extractor.policy_net.{2 * i}.weight"), state.get(f"mlp_extractor.policy_net.{2 * i}.bias")
+        if w is None or b is None:
+            return None
+        layers += [(w.numpy(), b.numpy()), _ACTIVATIONS["Tanh"]]
+    if f"mlp_extractor.policy_net.{2 * len(arch)}.weight" in state or "action_net.weight" not in state:
+        return None
+    layers.append((state["action_net.weight"].numpy(), state["action_net.bias"].numpy()))
+    return NumpyActor(layers, "clip", *_space_bounds(data["action_space"]))

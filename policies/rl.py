@@ -22,7 +22,7 @@ import numpy as np
 
 from mission_sim.contract import PolicyContext, action_to_duty
 
-from .inference import export_actor
+from .inference import export_actor, load_ppo_actor
 
 __all__ = ["RLPolicy", "PRETRAINED", "PRETRAINED_LAGRANGIAN", "load_meta", "ALGOS"]
 
@@ -66,9 +66,14 @@ class RLPolicy:
         if abs(ctx.control_period_s - dt) > 1e-9 * dt:
             raise ValueError(f"control_period_s={ctx.control_period_s!r} is invalid for {self.path.name}; "
                              f"valid value: {dt!r} (the period it was trained at)")
-        import stable_baselines3 as sb3
-        cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "dqn": sb3.DQN}[self.meta["algo"]]
-        self.model = cls.load(str(self.path), device="cpu")
+        self._model = None
+        self.deterministic = bool(deterministic)
+        # the shipped PPO models load their actor from the state dict (no SB3, no optimiser); others load
+        # the SB3 model (predict() costs 0.15-1 ms a call; the actor exported to numpy ~10 us, same
+        # actions to float32 round-off (1 ulp); fast=False keeps predict(), bit-identical to SB3)
+        fast_actor = load_ppo_actor(self.path, self.meta) if self.deterministic and fast else None
+        self._actor = fast_actor if fast_actor is not None else \
+            (export_actor(self.model) if self.deterministic and fast else None)
         self.discrete = bool(self.meta.get("discrete", self.meta["algo"] == "dqn"))
         norm = self.meta.get("obs_norm")
         if norm:
@@ -78,12 +83,18 @@ class RLPolicy:
         else:
             self._mean = None
         # models trained on the 7-field contract (before t_since_stop_s) see the first obs_dim fields
-        self.obs_dim = int(self.meta.get("obs_dim", self.model.observation_space.shape[0]))
-        self.deterministic = bool(deterministic)
-        # predict() costs 0.15-1 ms a call; the actor exported to numpy ~10 us, same actions to float32
-        # round-off (1 ulp). fast=False keeps predict() (bit-identical to SB3).
-        self._actor = export_actor(self.model) if self.deterministic and fast else None
+        self.obs_dim = int(self.meta.get("obs_dim") or (self._actor.layers[0][0].shape[0] if fast_actor is not None
+                                                        else self.model.observation_space.shape[0]))
         self.name = f"rl_{self.meta['algo']}" if path is not None else "rl"
+
+    @property
+    def model(self):
+        """The stable-baselines3 model (loaded on first use: ``predict``, or an actor not exportable)."""
+        if self._model is None:
+            import stable_baselines3 as sb3
+            cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "dqn": sb3.DQN}[self.meta["algo"]]
+            self._model = cls.load(str(self.path), device="cpu")
+        return self._model
 
     def reset(self, n: int = 1) -> None:
         self.n = int(n)

@@ -21,8 +21,8 @@ def _soc_stays_in_0_1(monkeypatch):
         res = result(self)
         if res.timeseries is not None:
             soc = res.timeseries["soc"].to_numpy()
-        else:   # run_mission's uncharged baseline keeps no DataFrame: the loop's rows
-            soc = np.array(self.rows, dtype=float).reshape(-1, len(loop._COLUMNS))[:, loop._COLUMNS.index("soc")]
+        else:   # no DataFrame (summary-only runs, streamed output): the extremes kept over every row
+            soc = np.array([self.stats.min_soc, self.stats.max_soc]) if self.stats.n_rows else np.empty(0)
         if len(soc):
             assert 0.0 <= soc.min() and soc.max() <= 1.0, \
                 f"SoC left [0, 1] in a mission run: min {soc.min()!r}, max {soc.max()!r}"

@@ -61,6 +61,36 @@ def test_cccv_charges_to_full_without_exceeding_cv_and_then_stops():
     assert ch.command_a(5.0)[0] == 0.0  # full -> short mode whatever the propulsion draw
 
 
+def test_full_battery_recharges_below_the_recharge_threshold_and_not_above():
+    """A full battery under load: the command stays 0 while (OCV + v1)/n >= cv_cell_v - recharge_drop_cell_v
+    and a new CC cycle (cv flag cleared, command = propulsion + CC current) starts at the first BMS call below."""
+    p, cc = BatteryParams(initial_soc=0.93), CcCvParams(recharge_drop_cell_v=0.1)
+    b = Battery(p)
+    ch = CcCvCharger(cc, b)
+    while not ch.full[0]:
+        b.step(ch.battery_target_a()[0], 1.0)
+    threshold = (cc.cv_cell_v - cc.recharge_drop_cell_v) * p.n_series
+    i_prop = 5.0
+    for _ in range(100_000):
+        v_rest = float(b.ocv_v()[0] + b.v1_v[0])
+        cmd = ch.command_a(i_prop)[0]
+        if v_rest >= threshold:
+            assert cmd == 0.0 and ch.full[0]
+        else:
+            assert not ch.full[0] and not ch.cv[0]        # a new cycle, in CC (far below CV)
+            assert cmd == pytest.approx(i_prop + cc.cc_current_a)
+            break
+        b.step(-i_prop, 1.0)
+    else:
+        raise AssertionError("never recharged")
+    # it took a real discharge: OCV below the threshold plus the RC pair's drop at 5 A (R1 i / n = 30 mV)
+    assert ocv_cell_v(b.soc[0]) < cc.cv_cell_v - cc.recharge_drop_cell_v + p.r1_ohm_cell * i_prop + 1e-3
+    assert b.soc[0] < 0.95
+    for bad in (0.0, 0.6, math.nan):
+        with pytest.raises(ValueError, match="recharge_drop_cell_v"):
+            CcCvParams(recharge_drop_cell_v=bad)
+
+
 def test_momentum_theory_hover_and_forward_flight():
     p = DroneParams()
     w = p.total_mass_kg * G_M_S2

@@ -18,7 +18,6 @@ from .common import (
     policy_names,
     prepare_out_dir,
     show_progress,
-    write_mission,
 )
 
 
@@ -79,7 +78,8 @@ def _add_mission(sub):
     p = sub.add_parser("mission", help="run a flight mission with in-flight charging (the main job)",
                        description="Simulate a drone mission over charging pads: coupling from the pose, the "
                                    "WPT link, the SBAR policy, battery and propulsion. Without CONFIG the embedded "
-                                   "default mission runs. Writes the time series (Parquet, CSV), PNG figures and "
+                                   "default mission runs. Streams the time series to Parquet as it is produced "
+                                   "(CSV with --csv; thinned with --every), writes PNG figures and "
                                    "summary.json (last: its presence means the set is complete) to --out. Exit "
                                    "status 0: done; 2: bad input (one line on stderr); 3: the battery was "
                                    "depleted, the mission ended there (results written).")
@@ -101,6 +101,11 @@ def _add_mission(sub):
                    help="a [drone] TOML (from `dronewpt calibrate`) laid over the config's drone; --set still wins")
     p.add_argument("--no-charge", action="store_true", help="never energise the pads (baseline mission)")
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
+    p.add_argument("--csv", action="store_true", help="also write timeseries.csv (Parquet is always written)")
+    p.add_argument("--every", type=finite_float("every"), default=None, metavar="DT",
+                   help="store one time-series row per DT seconds of simulated time (0: every step; default: "
+                        f"every step unless the run would store more than {MAX_STORED_ROWS:,} rows, then "
+                        "thinned to about that many; the summary always uses every step)")
     p.add_argument("--force", action="store_true", help="run even when the estimated memory or output size "
                    "exceeds the limit (1 GiB each; see docs/robustness.md)")
     p.add_argument("--dry-run", action="store_true", help="check the config, the policy and the run size, print "
@@ -136,6 +141,9 @@ def make_policy(name: str, cfg):
     return policies.make(name, policy_context(cfg))
 
 
+#: stored time-series rows above which the default ``--every`` thins the series (~70 MB of Parquet)
+MAX_STORED_ROWS = 500_000
+
 #: estimated time-series rows from which ``dronewpt mission`` runs the compiled loop: below, numba's
 #: start-up in a fresh process (~0.5 s: import, registries, cache load) costs more than it saves
 #: (the default mission, ~5,000 rows, takes ~0.2 s in the Python loop)
@@ -147,16 +155,27 @@ MISSION_LOCK = ".mission.lock"
 def _cmd_mission(args) -> int:
     from ..world.budget import estimate_run
     from ..world.runner import run_mission
+    from ..world.stream import SeriesWriter
     cfg = mission_config(args)
     pol = make_policy(args.policy, cfg)
     if args.dry_run:
         return _print_estimate(estimate_run(cfg), args)
     prepare_out_dir(args.out)
-    compiled = None if estimate_run(cfg).rows >= COMPILE_FROM_ROWS else False
+    est = estimate_run(cfg)
+    every = stored_every_s(args.every, est)
+    compiled = None if est.rows >= COMPILE_FROM_ROWS else False
     with folder_lock(args.out, MISSION_LOCK, f"--out {str(args.out)!r}: another mission is writing there; "
                      "wait for it or use another --out"):  # before any simulation; removed at the end
-        res = run_mission(cfg, pol, charge=not args.no_charge, progress=show_progress(args), compiled=compiled)
-        files = write_mission(res, args.out, plots=not args.no_plot, progress=show_progress(args))
+        (args.out / "summary.json").unlink(missing_ok=True)  # present again only when this run's set is complete
+        writer = SeriesWriter(args.out, csv=args.csv, every_s=every)
+        try:
+            res = run_mission(cfg, pol, charge=not args.no_charge, progress=show_progress(args), compiled=compiled,
+                              frame=False, sink=writer)
+            files = [str(f) for f in writer.close()]
+        except BaseException:
+            writer.abort()
+            raise
+        files += _figures_and_summary(res, args.out, plots=not args.no_plot)
     s = res.summary
     if args.format == "json":
         print(json.dumps({**s, "files": files}))
@@ -179,6 +198,41 @@ def _print_estimate(est, args) -> int:
               f"~{est.memory_bytes / 1e6:.3g} MB in memory, ~{est.output_bytes / 1e6:.3g} MB of output "
               f"(largest contribution: {est.key}); nothing simulated (--dry-run)")
     return 0
+
+
+def stored_every_s(every, est) -> float:
+    """``--every`` checked (>= 0), or by default 0 (every row) unless the run's estimated rows exceed
+    :data:`MAX_STORED_ROWS`: then the interval that stores about that many (said on stderr)."""
+    if every is not None:
+        if every < 0:
+            raise CliError(f"--every {every!r} is invalid; valid range: >= 0 s (0: every step)")
+        return float(every)
+    if est.rows <= MAX_STORED_ROWS:
+        return 0.0
+    dt = float(f"{est.duration_s / MAX_STORED_ROWS:.2g}")
+    print(f"dronewpt mission: ~{est.rows:,.0f} time-series rows; storing one per {dt:g} s of simulated time "
+          "(--every 0 stores every step; the summary uses every step)", file=sys.stderr)
+    return dt
+
+
+#: most time-series points the figures read back from the Parquet file (evenly strided beyond)
+FIGURE_POINTS = 20_000
+
+
+def _figures_and_summary(res, out: Path, plots: bool) -> list[str]:
+    """The figures (from the stored series, read back in columns and thinned to :data:`FIGURE_POINTS`)
+    and ``summary.json`` last (atomically); their paths."""
+    from ..files import atomic_output
+    files = []
+    if plots and (out / "timeseries.parquet").exists():
+        from ..figures.mission import plot_mission
+        from ..world.stream import read_series
+        res.timeseries = read_series(out / "timeseries.parquet", max_points=FIGURE_POINTS)
+        files = [str(f) for f in plot_mission(res, out)]
+        res.timeseries = None
+    with atomic_output(out / "summary.json") as tmp:
+        tmp.write_text(json.dumps(res.summary, indent=2))
+    return files + [str(out / "summary.json")]
 
 
 def depletion_text(s: dict) -> str:

@@ -130,9 +130,15 @@ class MissionCaseRunner:
         return self._checker({k: v for k, v in params.items() if k != POLICY_KEY})
 
     def __call__(self, params: dict) -> dict:
+        """The case's summary; summary-only (``run_mission(frame=False)``: no DataFrame, no figure)."""
         from ..config import policy_context
         from ..world.runner import run_mission
 
         cfg = self.config(params)
         policy = self.make_policy(params.get(POLICY_KEY, "model_based"), policy_context(cfg))
-        return dict(run_mission(cfg, policy).summary)
+        return dict(run_mission(cfg, policy, frame=False).summary)
+
+    def warm(self) -> None:
+        """Run the base mission once (summary only): imports, the numba cache and the coupling table are
+        loaded before the first case (the sweep engine calls this once on every worker)."""
+        self({})

@@ -8,10 +8,13 @@ other studies can pass any picklable callable.
 Scale (10^5 cases and more)
     Cases come from a lazy iterator (:class:`~mission_sim.studies.study.CaseSpace`) and are
     submitted in *chunks* (several cases per Dask task, sized so a task lasts about
-    ``chunk_target_s``, measured from the cases' own run times) with a bounded number of tasks in
+    ``chunk_target_s`` and at least ``TASK_OVERHEAD_S / 2 %``, measured from the cases' own run
+    times, so the per-task overhead stays under 2 % of the work) with a bounded number of tasks in
     flight: a new chunk is submitted only when one has come back (back-pressure), and each future
     is dropped as soon as its rows are buffered, so the scheduler never holds stored results and
-    a lost worker never makes it recompute them. Results go to a :class:`~.store.PartWriter`
+    a lost worker never makes it recompute them. A runner with a ``warm()`` method (the mission
+    runner: imports, numba cache, coupling table) is warmed once on every worker before the first
+    chunk (``client.run``), and mission cases run summary-only. Results go to a :class:`~.store.PartWriter`
     (a part every 1,000 rows or 2 s, merged incrementally), and the end of a run compacts a
     handful of files.
 
@@ -53,6 +56,10 @@ __all__ = ["CaseStore", "SweepResult", "MissionCaseRunner", "run_sweep", "run_ca
 
 RunCase = Callable[[dict], Mapping]
 _MAX_CHUNK = 512
+#: per-task cost of Dask on a local cluster (scheduling, (de)serialising a chunk and its rows, the driver's
+#: bookkeeping) assumed when sizing chunks: a task lasts at least 50x this, so the overhead stays < 2 %
+TASK_OVERHEAD_S = 0.01
+_OVERHEAD_SHARE = 0.02
 
 
 # ----------------------------------------------------------------------------- one case
@@ -269,7 +276,7 @@ class _Submitter:
 
     def __init__(self, client, pending, run_case, target_s: float, window: int):
         self.client, self.pending, self.run_case = client, pending, run_case
-        self.target_s, self.window = target_s, window
+        self.target_s, self.window = max(target_s, TASK_OVERHEAD_S / _OVERHEAD_SHARE), window
         self.in_flight: dict[str, list] = {}
         self.requeued: deque = deque()  # cases of a chunk that killed a worker: re-run one by one
         self.chunk = 1
@@ -328,6 +335,7 @@ def _run_dask(client, pending, run_case: RunCase, writer: PartWriter, bar, *, ch
     from distributed import as_completed
 
     window = max_in_flight or max(4, 3 * sum(client.nthreads().values()))
+    _warm_workers(client, run_case)
     sub = _Submitter(client, pending, run_case, chunk_target_s, window)
     # loop=client.loop: as_completed would otherwise use the *default* client's loop, which a
     # failed Client(...) elsewhere in the process can leave pointing at a dead loop (hang)
@@ -336,6 +344,21 @@ def _run_dask(client, pending, run_case: RunCase, writer: PartWriter, bar, *, ch
         return _drain(ac, sub, writer, bar)
     finally:
         ac.clear()  # interrupted: the futures still in flight are released (the scheduler forgets them)
+
+
+def _warm_workers(client, run_case) -> None:
+    """``run_case.warm()`` once on every worker (if the runner has one); a failure is only a missed warm-up."""
+    warm = getattr(run_case, "warm", None)
+    if not callable(warm):
+        return
+    try:
+        client.run(_call, warm)
+    except Exception:  # noqa: BLE001 - the cases warm their worker themselves then
+        pass
+
+
+def _call(fn):
+    fn()
 
 
 def _drain(ac, sub: _Submitter, writer: PartWriter, bar) -> int:

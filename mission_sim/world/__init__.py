@@ -12,5 +12,6 @@
 ``fastpath``     when and how the loop runs compiled (policies with a ``kernel()``), packing the state
 ``loop_kernel``  the loop compiled with numba (imported on the first compiled run; ``loop`` is the reference)
 ``results``      :class:`MissionResult`: time series, summary, files
+``stream``       rows in blocks: the summary on the fly, the time series to Parquet row groups (CSV on request)
 ===============  ==============================================================================
 """

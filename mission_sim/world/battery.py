@@ -25,6 +25,12 @@ of 1.3 Ah, sized for a ~1 kg drone.
   hobby chargers report for high-rate 1-2 Ah LiPo packs (3-15 mOhm/cell internal resistance); not
   from a datasheet. The RC pair gives the slow relaxation seen after load steps.
 * CC at 1 C (1.3 A), cut-off at C/10: the usual LiPo charging rule.
+* Recharge: a full battery starts a new charge cycle when its voltage falls ``recharge_drop_cell_v``
+  (default 100 mV) per cell below the CV voltage: the recharge threshold of charger ICs (e.g. TI
+  BQ25601D, register bit VRECHG: "recharge threshold 100 mV (default) or 200 mV" below VREG; TI's
+  other single-cell chargers use the same convention). The voltage compared is the charger's own
+  estimate without the ohmic drop, ``(OCV(SoC) + v1) / n`` (the quantity its CV law regulates), so
+  the propulsion load's ``R0 i`` does not trigger it; 100 mV/cell is SoC ~0.87 on this OCV curve.
 """
 
 from __future__ import annotations
@@ -213,11 +219,15 @@ class CcCvParams:
     cc_current_a : charge current in CC (default 1 C = 1.3 A)
     cv_cell_v : terminal voltage per cell held in CV (default 4.10 V: the OCV curve's top)
     cutoff_current_a : CV current below which the battery counts as full (default C/10)
+    recharge_drop_cell_v : a full battery is charged again once ``(OCV + v1) / n`` falls this far
+        below ``cv_cell_v`` [V per cell] (default 0.1 V: the recharge threshold of charger ICs, see
+        the module notes); valid range [0.005, 0.5] V
     """
 
     cc_current_a: float = 1.3
     cv_cell_v: float = 4.10
     cutoff_current_a: float = 0.13
+    recharge_drop_cell_v: float = 0.1
 
     def __post_init__(self):
         check_positive(self, "cc_current_a", "cv_cell_v", "cutoff_current_a")
@@ -225,6 +235,9 @@ class CcCvParams:
         if not lo <= self.cv_cell_v <= hi:  # above the OCV at SoC 1 the CV phase never ends: SoC > 1
             raise ValueError(f"cv_cell_v={self.cv_cell_v!r} is invalid; valid range: [{lo:.4f}, "
                              f"{math.floor(hi * 1e4) / 1e4:.4f}] V (the cell's open-circuit voltage from SoC 0 to 1)")
+        if not 0.005 <= self.recharge_drop_cell_v <= 0.5:
+            raise ValueError(f"recharge_drop_cell_v={self.recharge_drop_cell_v!r} is invalid; valid range: "
+                             "[0.005, 0.5] V per cell below cv_cell_v")
         if self.cutoff_current_a >= self.cc_current_a:
             raise ValueError(f"cutoff_current_a={self.cutoff_current_a!r} is invalid; valid range: "
                              f"(0, cc_current_a={self.cc_current_a!r})")
@@ -236,8 +249,10 @@ class CcCvCharger:
     The command is the DC current the rectifier should deliver: the propulsion current plus the
     battery charge current, which is ``cc_current_a`` in CC and, in CV, the model-based current
     that puts the terminal voltage at the CV limit, ``(V_cv - OCV - v1) / R0``. When that drops
-    below the cut-off the battery is *full*: the command becomes 0 (short mode) and stays 0
-    (latched) until :meth:`reset`. Batched like :class:`Battery`.
+    below the cut-off the battery is *full*: the command becomes 0 (short mode) and stays 0 until
+    the battery's voltage without its ohmic drop, ``OCV + v1``, falls ``recharge_drop_cell_v`` per
+    cell below the CV voltage (the recharge threshold of a real charger; module notes): then
+    *full* and *cv* clear and a new CC-CV cycle starts. Batched like :class:`Battery`.
     """
 
     def __init__(self, params: CcCvParams, battery: Battery):
@@ -254,7 +269,11 @@ class CcCvCharger:
         """Charge current wanted by the battery now [A] (0 when full)."""
         b = self.bat
         v_cv = self.p.cv_cell_v * b.p.n_series
-        i_cv = (v_cv - b.ocv_v() - b.v1_v) / b.p.r0_ohm
+        v_rest = b.ocv_v() + b.v1_v
+        recharge = self.full & (v_rest < (self.p.cv_cell_v - self.p.recharge_drop_cell_v) * b.p.n_series)
+        self.full &= ~recharge
+        self.cv &= ~recharge
+        i_cv = (v_cv - v_rest) / b.p.r0_ohm
         self.cv |= i_cv < self.p.cc_current_a
         tgt = np.minimum(self.p.cc_current_a, i_cv)
         self.full |= self.cv & (tgt < self.p.cutoff_current_a)

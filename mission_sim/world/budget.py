@@ -1,17 +1,18 @@
 """Size of a mission run, estimated from its config before anything is allocated.
 
-The mission loop holds the whole trajectory (one sample per ``sim.traj_dt_s``) and every time-series
-row (coarse and fine steps) in memory, then writes them as Parquet and CSV. Long hovers, a crawling
-cruise speed or a tiny control period make that unbounded; :func:`estimate_run` predicts the sizes
-from the planned segment durations (no sampling) and :func:`check_run_size` refuses a run beyond
+The mission loop holds the whole trajectory (one sample per ``sim.traj_dt_s``) in memory; its
+time-series rows are streamed in blocks (:mod:`.stream`: the summary on the fly, Parquet row groups)
+and cost a bounded amount of memory whatever their number, unless a DataFrame of them is asked for
+(``run_mission(frame=True)``, the API default). :func:`estimate_run` predicts the sizes from the
+planned segment durations (no sampling) and :func:`check_run_size` refuses a run beyond
 :data:`MAX_MEMORY_BYTES` / :data:`MAX_OUTPUT_BYTES`, naming the config key that dominates.
 
-Per-unit costs were measured on the default mission and on 1000 s / 5000 s hovers (peak RSS and
-file sizes, CPython 3.12, pandas 2): a trajectory sample ~200 B, a time-series row ~1.5 KB at peak
-(the row tuples, the DataFrame, the writers' copies), ~510 B of CSV plus ~210 B of Parquet.
-Row counts: one coarse row per trajectory sample while charging, one per ``sim.flight_dt_s`` in
-flight (and in the uncharged baseline run), and about ``6 n_pads + 2`` fine windows of half
-``sim.max_fine_s`` each (the default mission has 13 windows and 2720 fine rows; estimate 4200).
+Per-unit costs (peak RSS and file sizes, CPython 3.12, pandas 2, pyarrow): a trajectory sample
+~200 B, a streamed block of rows ~:data:`STREAM_BYTES` in all, ~145 B of Parquet per stored row
+(zstd, byte-stream-split floats; ~510 B more with ``--csv``). Row counts: one coarse row per
+trajectory sample while charging, one per ``sim.flight_dt_s`` in flight (and in the uncharged
+baseline run, summary only), and about ``6 n_pads + 2`` fine windows of half ``sim.max_fine_s``
+each (the default mission has 13 windows and 2720 fine rows; estimate 4200).
 """
 
 from __future__ import annotations
@@ -26,8 +27,8 @@ __all__ = ["RunEstimate", "estimate_run", "check_run_size", "MAX_MEMORY_BYTES", 
 MAX_MEMORY_BYTES = 1 << 30  # 1 GiB
 MAX_OUTPUT_BYTES = 1 << 30  # 1 GiB
 SAMPLE_BYTES = 200.0
-ROW_MEMORY_BYTES = 1500.0
-ROW_OUTPUT_BYTES = 720.0
+STREAM_BYTES = 64e6       # blocks of rows in flight (loop buffer, the Parquet writer's row group, candidates)
+ROW_OUTPUT_BYTES = 145.0  # Parquet per stored row
 
 
 @dataclass(frozen=True)
@@ -37,8 +38,8 @@ class RunEstimate:
     duration_s: float
     samples: float  # trajectory samples
     rows: float  # time-series rows of the charged run
-    memory_bytes: float  # peak, both runs
-    output_bytes: float  # timeseries.parquet + timeseries.csv
+    memory_bytes: float  # peak, both runs (rows streamed)
+    output_bytes: float  # timeseries.parquet with every row stored
     key: str  # the dotted config key that contributes most
     value: float
 
@@ -83,10 +84,9 @@ def estimate_run(cfg) -> RunEstimate:
     per_key[("sim.control_period_s", sim.control_period_s)] = fine
     rows = sum(per_key.values())
     samples = duration / sim.traj_dt_s + 1
-    baseline_rows = duration / sim.flight_dt_s + fine
-    memory = SAMPLE_BYTES * samples + ROW_MEMORY_BYTES * (rows + baseline_rows)
+    memory = SAMPLE_BYTES * samples + STREAM_BYTES
     (key, value), _ = max(per_key.items(), key=lambda kv: kv[1])
-    if samples * SAMPLE_BYTES > ROW_MEMORY_BYTES * rows:  # the trajectory itself dominates
+    if samples * SAMPLE_BYTES > ROW_OUTPUT_BYTES * rows:  # the trajectory itself dominates
         key, value = ("sim.traj_dt_s", sim.traj_dt_s) if sim.traj_dt_s < 0.05 else (key, value)
     return RunEstimate(duration_s=duration, samples=samples, rows=rows, memory_bytes=memory,
                        output_bytes=ROW_OUTPUT_BYTES * rows, key=key, value=value)

@@ -6,7 +6,8 @@ installed, the policy offers the optional ``kernel`` hook of :class:`mission_sim
 (``sim.i2_noise_a = 0``; the reference draws it from numpy's generator). Any other policy runs the
 pure-Python reference loop. :func:`run_compiled` packs the loop's constants and state into arrays
 (names in :mod:`.loop_kernel`), runs :func:`.loop_kernel.run_kernel` in chunks of trajectory
-samples (progress bar, growing the row buffer) and writes the state back to the loop, so
+samples (progress bar; handing full blocks of rows to :meth:`~.loop.MissionLoop.flush` and reusing
+the buffer, which grows only when one interval needs more) and writes the state back to the loop, so
 :meth:`MissionLoop.result <.loop.MissionLoop.result>` assembles the result as for the reference.
 On an error status (a propulsion power the battery cannot supply, a non-finite duty) it returns
 False and the loop reruns the reference path, which raises the error with its message.
@@ -20,6 +21,8 @@ import importlib.util
 import math
 
 import numpy as np
+
+from .stream import BLOCK_ROWS
 
 __all__ = ["usable", "run_compiled", "N_COLUMNS"]
 
@@ -51,6 +54,7 @@ def pack_constants(loop) -> np.ndarray:
         "v_cv": ch.cv_cell_v * loop.bp.n_series, "cutoff_a": ch.cutoff_current_a, "inv_r": dev.inv_r_ohm,
         "vf0": dev.rect_diode.vf0_v, "rd": dev.rect_diode.rd_ohm, "is_ideal": float(dev.is_ideal),
         "coil_r1": loop.lk.r1_ohm, "coil_r2": loop.lk.r2_ohm,
+        "v_recharge": (ch.cv_cell_v - ch.recharge_drop_cell_v) * loop.bp.n_series,
     }
     return np.array([float(val[name]) for name in C_NAMES])
 
@@ -107,20 +111,31 @@ def run_compiled(loop, bar=None) -> bool:
         return False
     arrays = (t_all, np.ascontiguousarray(loop.lm_all, dtype=float), np.ascontiguousarray(loop.k_all, dtype=float),
               np.ascontiguousarray(loop.p_all, dtype=float), loop.eligible.astype(float))
-    rows = np.empty((max(2 * need, 1 << 14), N_COLUMNS))
+    rows = np.empty((max(2 * need, BLOCK_ROWS + need), N_COLUMNS))  # pages are touched only as rows are written
     k, params, state = 0, np.ascontiguousarray(params, dtype=float), np.ascontiguousarray(state, dtype=float)
     lo, inv = np.ascontiguousarray(_LO, dtype=float), np.ascontiguousarray(_INV_SPAN, dtype=float)
+    i_rows, i_peak = kern.S_NAMES.index("n_rows"), kern.S_NAMES.index("peak_env")
     while k < len(t_all) - 1:
         k_new, status = kern.run_kernel(k, k + _CHUNK, s, cst, *arrays, rows, fn, params, state, lo, inv)
         if bar is not None:
             bar.update(float(t_all[k_new]) - float(t_all[k]))
         k = k_new
-        if status == kern.FULL:
+        if status == kern.FULL and s[i_rows] == 0:
             rows = np.concatenate([rows, np.empty_like(rows)])
         elif status == kern.DEPLETED:
             break
-        elif status != kern.OK:
+        elif status not in (kern.OK, kern.FULL):
             return False
-    loop.rows = rows[:int(s[kern.S_NAMES.index("n_rows")])]
+        if s[i_rows] >= BLOCK_ROWS or status == kern.FULL:
+            _hand_over(loop, rows, s, i_rows, i_peak)   # the block is final: the buffer is reused
+    loop.rows = rows[:int(s[i_rows])]
     _unpack_state(loop, s)
     return True
+
+
+def _hand_over(loop, rows, s, i_rows, i_peak):
+    """Give the rows written so far to the loop (:meth:`~.loop.MissionLoop.flush`, which copies them) and
+    empty the kernel's buffer."""
+    loop.rows, loop.peak_env = rows[:int(s[i_rows])], float(s[i_peak])
+    loop.flush()
+    s[i_rows] = 0.0

@@ -16,7 +16,10 @@ physics of each step is described in :mod:`mission_sim.world.runner`. Per trajec
    implicitly against the battery; :meth:`MissionLoop.fine_step` splits a fine step at I2 sign
    changes).
 
-:meth:`MissionLoop.result` assembles the time series and the summary.
+:meth:`MissionLoop.result` assembles the time series and the summary. Rows are handed over in
+blocks as they are produced (:meth:`MissionLoop.flush`): to the summary's running quantities
+(:class:`.stream.RowStats`), to an optional ``sink`` (e.g. :class:`.stream.SeriesWriter`, Parquet
+row groups) and, with ``frame``, to the blocks of the DataFrame; memory stays bounded without it.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from ..contract import normalise_obs
 from .battery import Battery, CcCvCharger, _ocv_cell_scalar, scalar_stepper
 from .linkstep import LinkStepper
 from .results import MissionResult
+from .stream import BLOCK_ROWS, RowStats
 from .trajectory import Trajectory
 
 __all__ = ["MissionLoop", "ENERGISE_PHASES", "NonFiniteError"]
@@ -65,6 +69,8 @@ def _sign(v: float) -> float:
 
 class MissionLoop:
     """One mission run: constants from the config, per-sample arrays, and the state the loop carries."""
+
+    columns = _COLUMNS  # the layout of a row (and of the blocks handed to the sink)
 
     __slots__ = {
         # --- constants (set once)
@@ -102,12 +108,14 @@ class MissionLoop:
         "depleted_k": "trajectory sample where it did, else None",
         "compiled": "run the compiled fast path (mission_sim.world.fastpath) when it applies",
         "frame": "build the time-series DataFrame (False: the summary only, timeseries None)",
+        "sink": "callable(loop, block) taking each block of rows (e.g. stream.SeriesWriter), or None",
+        "stats": "stream.RowStats: the summary's running quantities", "blocks": "row blocks kept for the frame",
     }
 
     def __init__(self, cfg, policy, traj: Trajectory, charge: bool, lm_all, compiled: bool | None = None,
-                 frame: bool = True):
+                 frame: bool = True, sink=None):
         self.cfg, self.policy, self.traj, self.charge = cfg, policy, traj, charge
-        self.compiled, self.frame = compiled, frame
+        self.compiled, self.frame, self.sink = compiled, frame, sink
         self.sim, self.lk = sim, lk = cfg.sim, cfg.link
         model = cfg.coupling.model()
         self.base = base = lk.link_params(model.l1_h, model.l2_h, float(model.lm_h(0.0, 0.0, cfg.mission.hover_gap_m)))
@@ -158,6 +166,10 @@ class MissionLoop:
         self.peak_env, self.peak_d = 0.0, 1.0
         self.n_fine = self.n_coarse = self.n_windows = self.n_cut = 0
         self.rows = []
+        self.blocks = []
+        self.stats = RowStats(_COLUMNS, 2.0 * self.harmonics(2.0 * self.n_cells * 4.2).ripple_bound_a(),
+                              self.bp.initial_soc)
+        self.edge_j = (0.0, 0.0)      # switching-edge energies [J], rectifier and inverter (add_edges)
         self.depleted_at = self.depleted_k = None
 
     # ------------------------------------------------------------------ the outer loop
@@ -183,6 +195,8 @@ class MissionLoop:
                 if bar is not None:
                     bar.update(float(t_all[j]) - float(t_all[k]))
                 k = j
+                if len(self.rows) >= BLOCK_ROWS:
+                    self.flush()
         except _Depleted:
             pass  # the mission ends where the battery ran out (see deplete)
         if bar is not None:
@@ -200,6 +214,8 @@ class MissionLoop:
             return False
         if fastpath.run_compiled(self, bar):
             return True
+        if self.sink is not None and hasattr(self.sink, "restart"):
+            self.sink.restart()  # rows of the abandoned compiled attempt
         self._reset_state()
         if bar is not None:
             bar.reset()
@@ -541,11 +557,34 @@ class MissionLoop:
                 "depleted_pad_distance_m": float(dist.min())}
 
     # ------------------------------------------------------------------ result assembly
+    def flush(self):
+        """Hand the rows produced so far (``rows``: tuples, or an array view from the compiled path) over
+        as one block: to :attr:`stats`, the ``sink`` and (``frame``) the kept blocks; ``rows`` empties."""
+        arr = np.array(self.rows, dtype=float).reshape(-1, len(_COLUMNS))
+        self.rows = []
+        if not len(arr):
+            return
+        self.stats.add(arr, self.peak_env)
+        self.add_edges(arr)
+        if self.sink is not None:
+            self.sink(self, arr)
+        if self.frame:
+            self.blocks.append(arr)
+
     def result(self) -> MissionResult:
         """The time series (one row per step; None with ``frame`` False) and the summary with the energy balances."""
-        arr = np.array(self.rows, dtype=float).reshape(-1, len(_COLUMNS))
-        df = self.timeseries(arr) if self.frame else None
-        return MissionResult(timeseries=df, summary=self.summary(arr), config=self.cfg, trajectory=self.traj)
+        self.flush()
+        df = None
+        if self.frame:
+            arr = np.concatenate(self.blocks) if self.blocks else np.empty((0, len(_COLUMNS)))
+            self.blocks = []
+            df = self.timeseries(arr)
+        return MissionResult(timeseries=df, summary=self.summary(), config=self.cfg, trajectory=self.traj)
+
+    def harmonics(self, vl_v: float):
+        """:class:`wpt_receiver.peak.SbarHarmonics` at the hover-gap Lm and battery voltage ``vl_v`` [V]."""
+        from wpt_receiver.peak import SbarHarmonics
+        return SbarHarmonics(self.base.with_(vl_v=vl_v), self.dev)
 
     def timeseries(self, arr):
         """DataFrame of the steps: the raw columns plus pose, k, tx_on, powers and phase."""
@@ -568,21 +607,20 @@ class MissionLoop:
         df["phase"] = pd.Categorical(self.traj.phase[ri])
         return df
 
-    def summary(self, arr) -> dict:
-        """Summary dict: energies (exact sums), balance errors, SoC, I2 peak, step counts."""
-        bp, t_all = self.bp, self.t_all
-        self.peak_i2 = self.instantaneous_peak(arr)
-        tx_on = arr[:, _COL["v1_v"]] > 0
+    def summary(self) -> dict:
+        """Summary dict: energies (exact sums), balance errors, SoC, I2 peak, step counts (from :attr:`stats`)."""
+        bp, t_all, st = self.bp, self.t_all, self.stats
+        self.peak_i2 = self.instantaneous_peak()
         return {
             "policy": getattr(self.policy, "name", type(self.policy).__name__),
             "charge": bool(self.charge),
             "sim_time_s": float((t_all[-1] if self.depleted_at is None else self.depleted_at) - t_all[0]),
             "wall_s": 0.0,
-            **self.energy_summary(arr),
+            **self.energy_summary(),
             "initial_soc": float(bp.initial_soc),
             "final_soc": float(self.soc),
             "battery_full": bool(self.charger.full[0]),
-            "min_soc": float(min(arr[:, _SOC_COL].min(), bp.initial_soc)) if len(arr) else float(bp.initial_soc),
+            "min_soc": float(min(st.min_soc, bp.initial_soc)),
             **self.depletion_summary(),
             "peak_i2_a": self.peak_i2,
             "peak_i2_envelope_a": self.peak_env,
@@ -593,10 +631,10 @@ class MissionLoop:
             "coarse_steps": self.n_coarse,
             "fine_windows": self.n_windows,
             "fine_windows_cut": self.n_cut,
-            "charge_time_s": float(np.sum(arr[:, _COL["dt_s"]][tx_on])),
+            "charge_time_s": st.sums["charge_time_s"],
         }
 
-    def energy_summary(self, arr) -> dict:
+    def energy_summary(self) -> dict:
         """Energies [J] (exact sums), per device group, efficiency and the two balances.
 
         ``rectifier_output_j`` is the SBAR's DC output into the battery node (sum VL I_L dt; most of
@@ -604,13 +642,13 @@ class MissionLoop:
         the battery terminals while it charges (sum VL I_batt dt over I_batt > 0), and
         ``propulsion_energy_j`` what the motors drew. ``dc_to_battery_efficiency`` = rectifier
         output / inverter DC input (``energy_from_source_j``)."""
-        acc = {key: math.fsum(arr[:, _COL[c]].tolist()) for key, c in (
+        sums = self.stats.sums
+        acc = {key: sums[c] for key, c in (
             ("src", "e_source_j"), ("coil", "e_coil_loss_j"), ("rect", "e_rectifier_j"), ("chem", "e_battery_chem_j"),
             ("r0", "e_battery_r0_j"), ("r1", "e_battery_r1_j"), ("c1", "e_battery_c1_j"), ("prop", "e_propulsion_j"))}
-        groups = {f"{g}_loss_j": math.fsum(arr[:, _COL[f"e_{g}_j"]].tolist()) for g in DEVICE_GROUPS}
+        groups = {f"{g}_loss_j": sums[f"e_{g}_j"] for g in DEVICE_GROUPS}
         dev = math.fsum(groups.values())
-        ib = arr[:, _COL["battery_current_a"]]
-        charge_in = math.fsum((arr[:, _COL["battery_v"]] * np.maximum(ib, 0.0) * arr[:, _COL["dt_s"]]).tolist())
+        charge_in = sums["charge_in_j"]
         dw = self.st.stored_j(self.x) - self.w0
         losses = math.fsum([acc["coil"], dev, acc["r0"], acc["r1"]])
         rhs = math.fsum([acc["chem"], acc["c1"], dw, losses, acc["prop"]])
@@ -633,42 +671,48 @@ class MissionLoop:
             "battery_c1_delta_j": acc["c1"],
             "energy_balance_error_rel": abs(acc["src"] - rhs) / scale if scale > 0 else 0.0,
             "link_balance_error_rel": abs(link_res) / abs(acc["src"]) if acc["src"] else 0.0,
-            **self.edge_summary(arr, acc["src"], acc["rect"]),
+            **self.edge_summary(acc["src"], acc["rect"]),
         }
 
-    def edge_summary(self, arr, src_j: float, rect_j: float) -> dict:
-        """Switching-edge energies [J] of the run, estimated after it (not in the balances above):
-        :func:`wpt_receiver.edge_losses.averaged_edge_losses` at each step's duty, |I2| and battery
-        voltage while the pad is on (SBAR: hard gate edges, recovery; inverter: hard-switched
-        Coss, an upper bound), and the efficiency with them drawn from the source."""
+    def add_edges(self, arr) -> None:
+        """Accumulate the switching-edge energies [J] of a block of rows into :attr:`edge_j`
+        (rectifier, inverter): :func:`wpt_receiver.edge_losses.averaged_edge_losses` at each step's
+        duty, |I2| and battery voltage while the pad is on (SBAR: hard gate edges, recovery;
+        inverter: hard-switched Coss, an upper bound)."""
         from wpt_receiver.edge_losses import averaged_edge_losses
         on = arr[:, _COL["v1_v"]] > 0
+        if not on.any():
+            return
         dt = arr[:, _COL["dt_s"]] * on
         f = self.lk.f_hz
         e = averaged_edge_losses(arr[:, _COL["d_short"]], arr[:, _COL["i2_amp_a"]], arr[:, _COL["battery_v"]], self.dev,
                                  0.5 / f, 2 * math.pi * f, vdc_v=self.lk.vdc_v)
-        e_rect = math.fsum((np.asarray(e["rectifier_w"]) * dt).tolist())
-        e_inv = math.fsum((np.broadcast_to(e["inverter_w"], dt.shape) * dt).tolist())
+        self.edge_j = (math.fsum([self.edge_j[0], *(np.asarray(e["rectifier_w"]) * dt).tolist()]),
+                       math.fsum([self.edge_j[1], *(np.broadcast_to(e["inverter_w"], dt.shape) * dt).tolist()]))
+
+    def edge_summary(self, src_j: float, rect_j: float) -> dict:
+        """Switching-edge energies [J] of the run (:meth:`add_edges`; estimated beside the run, not in
+        the balances above), and the efficiency with them drawn from the source."""
+        e_rect, e_inv = self.edge_j
         den = src_j + e_rect + e_inv
         return {"edge_losses_rectifier_j": e_rect, "edge_losses_inverter_j": e_inv,
                 "dc_to_battery_efficiency_with_edges": rect_j / den if den > 0 else 0.0}
 
-    def instantaneous_peak(self, arr) -> float:
+    def instantaneous_peak(self) -> float:
         """Instantaneous peak |i2| [A]: the envelope's peak plus the harmonic ripple of the SBAR at
         that duty (:class:`wpt_receiver.peak.SbarHarmonics`, at the hover-gap Lm and the highest
         battery voltage seen with the pad on), over the envelope's peak and every step whose |I2|
-        is within the ripple bound of it (the ripple depends on the duty): screened with the
-        tabulated :class:`wpt_receiver.peak.PeakTable`, evaluated exactly where the table is within
-        1 % of its maximum."""
+        is within the ripple bound of it (the ripple depends on the duty; the steps are the
+        candidates :class:`.stream.RowStats` kept): screened with the tabulated
+        :class:`wpt_receiver.peak.PeakTable`, evaluated exactly where the table is within 1 % of its maximum."""
         if self.peak_env == 0.0:
             return 0.0
-        from wpt_receiver.peak import PeakTable, SbarHarmonics
-        on = arr[:, _COL["v1_v"]] > 0
-        vl = float(arr[:, _COL["battery_v"]][on].max()) if on.any() else float(self.last_vl)
-        harm = SbarHarmonics(self.base.with_(vl_v=vl), self.dev)
-        i2 = np.abs(arr[:, _COL["i2_amp_a"]])
-        cand = on & (i2 >= self.peak_env - 2.0 * harm.ripple_bound_a())
-        d, i2c = np.r_[self.peak_d, arr[:, _COL["d_short"]][cand]], np.r_[self.peak_env, i2[cand]]
+        from wpt_receiver.peak import PeakTable
+        st = self.stats
+        vl = st.vl_on_max if st.vl_on_max > -math.inf else float(self.last_vl)
+        harm = self.harmonics(vl)
+        cand = st.cand_i2 >= self.peak_env - 2.0 * harm.ripple_bound_a()
+        d, i2c = np.r_[self.peak_d, st.cand_d[cand]], np.r_[self.peak_env, st.cand_i2[cand]]
         if len(d) > 64:
             approx = PeakTable(harm, i2_max_a=1.05 * self.peak_env, n_d=26, n_i=21, i2_min_a=float(i2c.min()))(d, i2c)
             keep = approx >= 0.99 * approx.max()

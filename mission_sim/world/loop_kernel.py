@@ -47,12 +47,12 @@ C_NAMES = ("dtc", "k_on", "k_off", "ramp_rate", "rated", "inv_sqrt_l1l2", "t_rec
            "vf", "dr_short", "v1_nom", "l1", "l2", "st_r1", "st_r2", "omega", "b0", "b1", "bat_c1", "capacity_c",
            "tx_off_delay", "bms_period", "cmd_deadband", "min_fine", "max_fine", "flight_dt", "lm_rel_tol",
            "coarse_period", "duty_event_tol", "settle_duty_tol", "settle_i2_tol", "cc_a", "v_cv", "cutoff_a",
-           "inv_r", "vf0", "rd", "is_ideal", "coil_r1", "coil_r2")
+           "inv_r", "vf0", "rd", "is_ideal", "coil_r1", "coil_r2", "v_recharge")
 (C_DTC, C_K_ON, C_K_OFF, C_RAMP, C_RATED, C_INV_SQRT, C_T_RECT, C_R0, C_R1B, C_NCELLS, C_TAU1, C_VF, C_DR_SHORT,
  C_V1NOM, C_L1, C_L2, C_ST_R1, C_ST_R2, C_OMEGA, C_B0, C_B1, C_BAT_C1, C_CAP, C_TX_OFF_DELAY, C_BMS_PERIOD,
  C_CMD_DEADBAND, C_MIN_FINE, C_MAX_FINE, C_FLIGHT_DT, C_LM_REL_TOL, C_COARSE_PERIOD, C_DUTY_EVENT_TOL,
  C_SETTLE_DUTY_TOL, C_SETTLE_I2_TOL, C_CC, C_V_CV, C_CUTOFF, C_INV_R, C_VF0, C_RD, C_IS_IDEAL, C_COIL_R1,
- C_COIL_R2) = range(len(C_NAMES))
+ C_COIL_R2, C_V_RECHARGE) = range(len(C_NAMES))
 N_CONST = len(C_NAMES)
 _SOC_COL = 12
 _FOUR_PI = 4.0 / math.pi
@@ -175,11 +175,15 @@ def _bat_step(cst, soc, v1_v, i, dt_s):
 
 @njit(cache=True)
 def _charger_command(s, cst, i_prop):
-    """``CcCvCharger.command_a`` for one battery (its cv / full latches in the state)."""
+    """``CcCvCharger.command_a`` for one battery (its cv / full flags in the state; both clear below
+    the recharge threshold)."""
     sc = min(max(s[S_SOC], 0.0), 1.0)
     ocv = cst[C_NCELLS] * (-1.031 * math.exp(-35.0 * sc) + 3.685 + 0.2156 * sc - 0.1178 * sc ** 2
                            + 0.3201 * math.pow(sc, 3.0))
-    i_cv = (cst[C_V_CV] - ocv - s[S_VRC]) / cst[C_R0]
+    v_rest = ocv + s[S_VRC]
+    if s[S_FULL] != 0.0 and v_rest < cst[C_V_RECHARGE]:
+        s[S_FULL], s[S_CV] = 0.0, 0.0
+    i_cv = (cst[C_V_CV] - v_rest) / cst[C_R0]
     if i_cv < cst[C_CC]:
         s[S_CV] = 1.0
     tgt = min(cst[C_CC], i_cv)

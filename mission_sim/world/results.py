@@ -7,8 +7,6 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import pandas as pd
-
 from ..files import atomic_output
 
 __all__ = ["MissionResult", "SUMMARY_KEYS", "TIMESERIES_COLUMNS"]
@@ -30,14 +28,14 @@ class MissionResult:
     summary : energies [J], SoC, peak I2, time above rated, flight-time gain, step counts, wall time
     """
 
-    timeseries: pd.DataFrame
+    timeseries: "pandas.DataFrame | None"
     summary: dict
     config: object = None
     trajectory: object = None
     extra: dict = field(default_factory=dict)
 
-    def write(self, out_dir, figures=None, progress: bool = False) -> list[Path]:
-        """Write ``timeseries.parquet``, ``timeseries.csv``, the figures of ``figures(result, out_dir)``
+    def write(self, out_dir, figures=None, progress: bool = False, csv: bool = True) -> list[Path]:
+        """Write ``timeseries.parquet``, ``timeseries.csv`` (unless ``csv`` is False), the figures of ``figures(result, out_dir)``
         (if given, e.g. :func:`mission_sim.figures.mission.plot_mission`) and ``summary.json`` last.
 
         Every file is written under a temporary name and renamed when complete (removed on any failure:
@@ -51,16 +49,17 @@ class MissionResult:
         (out / "summary.json").unlink(missing_ok=True)
         ts = self.timeseries.copy()
         ts["phase"] = ts["phase"].astype(str)
-        paths = [out / "timeseries.parquet", out / "timeseries.csv"]
-        steps = 3 + (figures is not None)
+        paths = [out / "timeseries.parquet"] + ([out / "timeseries.csv"] if csv else [])
+        steps = 1 + csv + (figures is not None) + 1
         with _files_bar(steps, progress) as bar:
             bar.set_description_str(f"writing {paths[0].name}")
             with atomic_output(paths[0]) as tmp:
                 ts.to_parquet(tmp, index=False)
             bar.update(1)
-            bar.set_description_str(f"writing {paths[1].name}")
-            with atomic_output(paths[1]) as tmp:
-                _write_csv(ts, tmp, bar.update)
+            if csv:
+                bar.set_description_str(f"writing {paths[1].name}")
+                with atomic_output(paths[1]) as tmp:
+                    _write_csv(ts, tmp, bar.update)
             if figures is not None:
                 bar.set_description_str("writing figures")
                 paths.extend(Path(f) for f in figures(self, out))

@@ -67,11 +67,20 @@ __all__ = ["run_mission", "ENERGISE_PHASES"]
 
 
 def _pad_offsets(cfg, traj: Trajectory):
-    """Offsets (N, 3) of the receiver from the nearest pad (horizontally) and that pad's index."""
+    """Offsets (N, 3) of the receiver from the nearest pad (horizontally) and that pad's index (the
+    first of equally near ones). Pads at the same place (a route flown again) are searched once, and
+    the samples in chunks, so memory stays ~32 MB whatever the number of samples and pads."""
     pads = np.array([[p.x_m, p.y_m, p.z_m] for p in cfg.pads])
-    d = traj.pos_m[:, None, :2] - pads[None, :, :2]
-    idx = np.argmin(np.einsum("nkj,nkj->nk", d, d), axis=1)
-    return traj.pos_m - pads[idx], idx
+    _, first = np.unique(pads[:, :2], axis=0, return_index=True)
+    first.sort()  # distinct places in the order of their first pad: argmin's tie-break is unchanged
+    cand = pads[first, :2]
+    step = max(1, (1 << 21) // len(cand))
+    pos = traj.pos_m
+    idx = np.empty(len(pos), dtype=np.int64)
+    for a in range(0, len(pos), step):
+        d = pos[a:a + step, None, :2] - cand[None, :, :]
+        idx[a:a + step] = first[np.argmin(np.einsum("nkj,nkj->nk", d, d), axis=1)]
+    return pos - pads[idx], idx
 
 
 def _lm_along(cfg, model, traj: Trajectory, compiled: bool = False):
@@ -88,7 +97,8 @@ def _lm_along(cfg, model, traj: Trajectory, compiled: bool = False):
 
 
 def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bool = True,
-                progress: bool = False, compiled: bool | None = None) -> MissionResult:
+                progress: bool = False, compiled: bool | None = None, frame: bool = True,
+                sink=None) -> MissionResult:
     """Run one mission; returns a :class:`~mission_sim.world.results.MissionResult`.
 
     ``policy`` is a :class:`mission_sim.contract.Policy` made for ``control_period_s =
@@ -98,6 +108,9 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     ``compiled``: None runs the loop compiled when it applies (numba installed, the policy has the
     ``kernel`` hook, no sensor noise: :mod:`.fastpath`), False the pure-Python reference loop, True
     requires the compiled loop (``ValueError`` if it does not apply).
+    ``frame=False`` keeps no time series in memory (``timeseries`` is None; the summary is computed on
+    the fly, memory bounded whatever the mission's length); ``sink`` (e.g.
+    :class:`~.stream.SeriesWriter`) receives the charged run's rows in blocks as they are produced.
     """
     try:
         res = _run_mission(cfg, policy, trajectory, charge, progress, compiled)
@@ -119,7 +132,7 @@ def _run_mission(cfg, policy, trajectory, charge, progress, compiled) -> Mission
     traj = plan_mission(cfg) if trajectory is None else trajectory
     fast = compiled if compiled is not None else importlib.util.find_spec("numba") is not None
     lm_all = _lm_along(cfg, cfg.coupling.model(), traj, fast)[0]
-    res = _simulate(cfg, policy, traj, charge, progress, lm_all, compiled)
+    res = _simulate(cfg, policy, traj, charge, progress, lm_all, compiled, frame, sink)
     if charge:
         base = _simulate(cfg, policy, traj, False, False, lm_all, compiled, frame=False)  # its summary only
         res.summary["flight_time_gain_s"] = flight_time_gain_s(cfg, res.summary["final_soc"],
@@ -145,7 +158,7 @@ def flight_time_gain_s(cfg, final_soc_charged: float, final_soc_uncharged: float
 
 
 def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_all=None,
-              compiled: bool | None = None, frame: bool = True) -> MissionResult:
+              compiled: bool | None = None, frame: bool = True, sink=None) -> MissionResult:
     if lm_all is None:
         lm_all = _lm_along(cfg, cfg.coupling.model(), traj)[0]
-    return MissionLoop(cfg, policy, traj, charge, lm_all, compiled, frame).run(progress)
+    return MissionLoop(cfg, policy, traj, charge, lm_all, compiled, frame, sink).run(progress)

@@ -231,7 +231,9 @@ def plan_mission(cfg, rng: np.random.Generator | None = None) -> Trajectory:
     t0 = 0.0
     for k, (ph, p0, u, dur, ev) in enumerate(segs):
         last = k == len(segs) - 1
-        mask = (t >= t0) & ((t < t0 + dur) | last)
+        # the samples t0 <= t < t0 + dur (to the end for the last), as an index range: t is sorted
+        # (a boolean mask over all samples per segment made planning quadratic in the mission length)
+        mask = slice(int(np.searchsorted(t, t0, "left")), len(t) if last else int(np.searchsorted(t, t0 + dur, "left")))
         tau = t[mask] - t0
         if ev is None:
             pos[mask] = p0

@@ -1,0 +1,235 @@
+"""Streaming a mission's rows: the summary on the fly and the time series to Parquet in row groups.
+
+The mission loop (:class:`~.loop.MissionLoop`, Python or compiled) hands its rows over in blocks
+(``(n, 26)`` arrays in :data:`.loop._COLUMNS` order, at most :data:`BLOCK_ROWS` rows each) as it
+produces them, so memory stays bounded whatever the mission's length:
+
+* :class:`RowStats` keeps what the summary needs (exact energy sums, SoC extremes, the charge
+  time, the highest battery voltage with the pad on and the instantaneous-peak candidates);
+* :class:`SeriesWriter` converts each block to the time-series columns and appends it as a row
+  group to ``timeseries.parquet`` (:class:`pyarrow.parquet.ParquetWriter`, zstd with byte-stream
+  split floats) and, when asked, to ``timeseries.csv`` (:class:`pyarrow.csv.CSVWriter`); with
+  ``every_s`` only the first row of every ``every_s`` seconds (and the last row) is stored. Files
+  are written under temporary names and renamed by :meth:`SeriesWriter.close` (nothing half-written
+  under a final name; :meth:`SeriesWriter.abort` removes them).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["RowStats", "SeriesWriter", "BLOCK_ROWS", "read_series"]
+
+#: rows per block handed over by the loop (and per Parquet row group): ~13 MB of float64 rows
+BLOCK_ROWS = 1 << 16
+_ENERGY_COLS = ("e_source_j", "e_coil_loss_j", "e_rectifier_j", "e_battery_chem_j", "e_battery_r0_j",
+                "e_battery_r1_j", "e_battery_c1_j", "e_propulsion_j", "e_inverter_switches_j",
+                "e_rectifier_diodes_j", "e_rectifier_switches_j")
+
+
+class RowStats:
+    """The summary's running quantities over the blocks of rows (``columns`` = the loop's column names).
+
+    Sums are exact to rounding: each is carried as ``math.fsum`` of the previous sum and the block.
+    Peak candidates: rows with the pad on whose ``|I2|`` is within ``margin_a`` of the running envelope
+    peak (``margin_a`` >= twice the SBAR ripple bound at any battery voltage the run can reach, so the
+    final screen of :meth:`~.loop.MissionLoop.instantaneous_peak` sees every row it would have seen in
+    the full series); earlier candidates are dropped as the peak grows."""
+
+    def __init__(self, columns, margin_a: float, initial_soc: float):
+        self.col = {name: j for j, name in enumerate(columns)}
+        self.margin_a = margin_a
+        self.sums = dict.fromkeys((*_ENERGY_COLS, "charge_in_j", "charge_time_s"), 0.0)
+        self.min_soc = self.max_soc = float(initial_soc)
+        self.vl_on_max = -math.inf
+        self.n_rows = 0
+        self.cand_d = np.empty(0)
+        self.cand_i2 = np.empty(0)
+
+    def add(self, arr: np.ndarray, peak_env: float) -> None:
+        """Take one block ``arr`` (n, 26); ``peak_env`` is the running envelope peak after it [A]."""
+        if not len(arr):
+            return
+        c, s = self.col, self.sums
+        for name in _ENERGY_COLS:
+            s[name] = math.fsum([s[name], *arr[:, c[name]].tolist()])
+        dt, vl, ib = arr[:, c["dt_s"]], arr[:, c["battery_v"]], arr[:, c["battery_current_a"]]
+        s["charge_in_j"] = math.fsum([s["charge_in_j"], *(vl * np.maximum(ib, 0.0) * dt).tolist()])
+        on = arr[:, c["v1_v"]] > 0
+        s["charge_time_s"] = math.fsum([s["charge_time_s"], float(np.sum(dt[on]))])
+        soc = arr[:, c["soc"]]
+        self.min_soc, self.max_soc = min(self.min_soc, float(soc.min())), max(self.max_soc, float(soc.max()))
+        self.n_rows += len(arr)
+        if on.any():
+            self.vl_on_max = max(self.vl_on_max, float(vl[on].max()))
+            i2 = np.abs(arr[:, c["i2_amp_a"]])
+            floor = peak_env - self.margin_a
+            keep = self.cand_i2 >= floor
+            new = on & (i2 >= floor)
+            self.cand_d = np.concatenate([self.cand_d[keep], arr[new, c["d_short"]]])
+            self.cand_i2 = np.concatenate([self.cand_i2[keep], i2[new]])
+
+
+def _derived(loop, arr: np.ndarray) -> dict:
+    """The time-series columns of one block (:meth:`~.loop.MissionLoop.timeseries`'s layout) as numpy arrays."""
+    columns = loop.columns
+    col = {name: arr[:, j] for j, name in enumerate(columns)}
+    ri = col.pop("_row").astype(np.int64)
+    pos = loop.traj.pos_m[ri]
+    out = {"t_s": col["t_s"], "dt_s": col["dt_s"], "x_m": pos[:, 0], "y_m": pos[:, 1], "z_m": pos[:, 2],
+           "lm_h": col["lm_h"], "k": col["lm_h"] * loop.inv_sqrt_l1l2, "tx_on": col["v1_v"] > 0}
+    for name in columns[4:]:
+        out[name] = col[name].astype(bool) if name == "fine" else col[name]
+    dts = col["dt_s"]
+    out["propulsion_w"] = col["e_propulsion_j"] / dts
+    out["p_source_w"] = col["e_source_j"] / dts
+    out["p_coil_loss_w"] = col["e_coil_loss_j"] / dts
+    out["p_battery_loss_w"] = (col["e_battery_r0_j"] + col["e_battery_r1_j"]) / dts
+    out["phase"] = (np.asarray(loop.traj.phase), ri)   # names per sample and the rows' samples (see _arrow)
+    return out
+
+
+def _arrow(columns: dict):
+    """A ``pyarrow.Table`` of the block's columns, built from the numpy buffers directly (``pa.array``
+    of a numpy array imports pandas, ~70 MB and ~0.5 s, for nothing here)."""
+    import pyarrow as pa
+    arrays = []
+    for name, x in columns.items():
+        if name == "phase":
+            phases, ri = x
+            names, codes = np.unique(phases[ri].astype(str), return_inverse=True)
+            enc = [str(v).encode() for v in names]
+            offsets = np.zeros(len(codes) + 1, dtype=np.int32)
+            np.cumsum(np.array([len(e) for e in enc], dtype=np.int32)[codes], out=offsets[1:])
+            data = b"".join(enc[c] for c in codes.tolist())
+            arrays.append(pa.Array.from_buffers(pa.string(), len(codes), [None, pa.py_buffer(offsets),
+                                                                           pa.py_buffer(data)]))
+        elif x.dtype == bool:
+            arrays.append(pa.Array.from_buffers(pa.bool_(), len(x), [None, pa.py_buffer(
+                np.packbits(x, bitorder="little"))]))
+        else:
+            arrays.append(pa.Array.from_buffers(pa.float64(), len(x), [None, pa.py_buffer(
+                np.ascontiguousarray(x, dtype=np.float64))]))
+    return pa.Table.from_arrays(arrays, names=list(columns))
+
+
+class SeriesWriter:
+    """Appends blocks of rows to ``out_dir/timeseries.parquet`` (and ``timeseries.csv`` with ``csv``).
+
+    ``every_s`` > 0 thins the stored series: a row is kept when it is the first to end in a new
+    ``every_s`` interval of simulated time (plus the run's last row, kept by :meth:`close`); the
+    summary is computed from every row regardless. Call :meth:`close` (renames the files into place;
+    returns their paths) or :meth:`abort` (removes them)."""
+
+    def __init__(self, out_dir, csv: bool = False, every_s: float = 0.0):
+        self.out = Path(out_dir)
+        self.csv, self.every_s = bool(csv), float(every_s)
+        self.paths = [self.out / "timeseries.parquet"] + ([self.out / "timeseries.csv"] if csv else [])
+        self.tmps = [p.with_name(f".{p.stem}.tmp{os.getpid()}{p.suffix}") for p in self.paths]
+        self._pq = self._csv = None
+        self._last_bin = -math.inf
+        self._held = None  # the last row not kept by the thinning (written at close if it is the run's last)
+        self.rows_written = 0
+
+    def __call__(self, loop, arr: np.ndarray) -> None:
+        if not len(arr):
+            return
+        if self.every_s > 0:
+            t = arr[:, 0]
+            bins = np.floor(t / self.every_s)
+            keep = np.r_[bins[0] > self._last_bin, bins[1:] > bins[:-1]]
+            self._last_bin = max(self._last_bin, float(bins[-1]))
+            self._held = None if keep[-1] else (loop, arr[-1:].copy())
+            arr = arr[keep]
+        if len(arr):
+            self._write(loop, arr)
+
+    def _write(self, loop, arr) -> None:
+        import pyarrow as pa
+        table = _arrow(_derived(loop, arr))
+        if self._pq is None:
+            import pyarrow.parquet as pq
+            self.out.mkdir(parents=True, exist_ok=True)
+            floats = [f.name for f in table.schema if pa.types.is_floating(f.type)]
+            self._pq = pq.ParquetWriter(self.tmps[0], table.schema, compression="zstd",
+                                        use_dictionary=["phase"], use_byte_stream_split=floats)
+            if self.csv:
+                from pyarrow import csv as pacsv
+                self._csv = pacsv.CSVWriter(str(self.tmps[1]), table.schema)
+        self._pq.write_table(table, row_group_size=BLOCK_ROWS)
+        if self._csv is not None:
+            self._csv.write_table(table)
+        self.rows_written += len(arr)
+
+    def close(self) -> list[Path]:
+        """Write the held last row, close the writers and rename the files into place; their paths."""
+        if self._held is not None:
+            self._write(*self._held)
+        for w in (self._pq, self._csv):
+            if w is not None:
+                w.close()
+        if self._pq is None:
+            return []
+        for tmp, path in zip(self.tmps, self.paths):
+            os.replace(tmp, path)
+        return list(self.paths)
+
+    def restart(self) -> None:
+        """Discard what was written and start again (the loop reruns the reference path from the start)."""
+        self.abort()
+        self.__init__(self.out, self.csv, self.every_s)
+
+    def abort(self) -> None:
+        """Close and remove the temporary files (an interrupted or failed run)."""
+        for w in (self._pq, self._csv):
+            if w is not None:
+                try:
+                    w.close()
+                except Exception:  # noqa: BLE001 - the files are removed anyway
+                    pass
+        for tmp in self.tmps:
+            tmp.unlink(missing_ok=True)
+
+
+def read_series(path, columns=None, max_points: int | None = None, keep_peak_of: str | None = "i2_amp_a"):
+    """A DataFrame of ``columns`` from a ``timeseries.parquet``, read one row group at a time.
+
+    With ``max_points`` the rows are thinned to about that many by an even stride (figures need no
+    10^7 points), except the ``+-2,000`` rows around the largest ``|keep_peak_of|`` (the transient a
+    zoomed figure shows), which are kept whole. Memory: one row group plus the kept rows."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    f = pq.ParquetFile(path)
+    n = f.metadata.num_rows
+    stride = 1 if max_points is None or n <= max_points else math.ceil(n / max_points)
+    if stride == 1:
+        table = f.read(columns=columns)
+    else:
+        parts, best, offset = [], (-math.inf, None), 0
+        for batch in f.iter_batches(batch_size=BLOCK_ROWS, columns=columns):
+            idx = np.arange((-offset) % stride, batch.num_rows, stride)
+            parts.append(batch.take(pa.array(idx)))
+            if keep_peak_of is not None and keep_peak_of in batch.schema.names:
+                y = np.abs(batch.column(keep_peak_of).to_numpy(zero_copy_only=False))
+                j = int(np.argmax(y)) if len(y) else 0
+                if len(y) and y[j] > best[0]:
+                    lo, hi = max(j - 2000, 0), min(j + 2000, batch.num_rows)
+                    best = (float(y[j]), batch.slice(lo, hi - lo), offset + lo)
+            offset += batch.num_rows
+        table = pa.Table.from_batches(parts)
+        if best[1] is not None:   # the peak's window replaces the strided rows there
+            t = table.column("t_s").to_numpy() if "t_s" in table.column_names else None
+            if t is not None:
+                win = best[1]
+                tw = win.column(win.schema.get_field_index("t_s")).to_numpy()
+                keep = (t < tw[0]) | (t > tw[-1])
+                table = pa.concat_tables([table.filter(pa.array(keep)), pa.Table.from_batches([win])])
+                table = table.sort_by("t_s")
+    df = table.to_pandas()
+    if "phase" in df:
+        df["phase"] = df["phase"].astype("category")
+    return df
