@@ -110,6 +110,7 @@ class MissionLoop:
         "frame": "build the time-series DataFrame (False: the summary only, timeseries None)",
         "sink": "callable(loop, block) taking each block of rows (e.g. stream.SeriesWriter), or None",
         "stats": "stream.RowStats: the summary's running quantities", "blocks": "row blocks kept for the frame",
+        "edge_j": "switching-edge energies so far (rectifier, inverter) [J] (add_edges)",
     }
 
     def __init__(self, cfg, policy, traj: Trajectory, charge: bool, lm_all, compiled: bool | None = None,

@@ -113,7 +113,7 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     :class:`~.stream.SeriesWriter`) receives the charged run's rows in blocks as they are produced.
     """
     try:
-        res = _run_mission(cfg, policy, trajectory, charge, progress, compiled)
+        res = _run_mission(cfg, policy, trajectory, charge, progress, compiled, frame, sink)
         bad = [k for k, v in res.summary.items() if isinstance(v, float) and not np.isfinite(v)]
         if bad:
             raise NonFiniteError(f"the run's {bad[0]} is {res.summary[bad[0]]!r}")
@@ -126,7 +126,7 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     return res
 
 
-def _run_mission(cfg, policy, trajectory, charge, progress, compiled) -> MissionResult:
+def _run_mission(cfg, policy, trajectory, charge, progress, compiled, frame=True, sink=None) -> MissionResult:
     """:func:`run_mission` without the check for non-finite results."""
     wall0 = time.perf_counter()
     traj = plan_mission(cfg) if trajectory is None else trajectory

@@ -155,23 +155,23 @@ class SeriesWriter:
             import pyarrow.parquet as pq
             self.out.mkdir(parents=True, exist_ok=True)
             floats = [f.name for f in table.schema if pa.types.is_floating(f.type)]
-            self._pq = pq.ParquetWriter(self.tmps[0], table.schema, compression="zstd",
-                                        use_dictionary=["phase"], use_byte_stream_split=floats)
+            self._pq = _named(self.paths[0], pq.ParquetWriter, self.tmps[0], table.schema, compression="zstd",
+                              use_dictionary=["phase"], use_byte_stream_split=floats)
             if self.csv:
                 from pyarrow import csv as pacsv
-                self._csv = pacsv.CSVWriter(str(self.tmps[1]), table.schema)
-        self._pq.write_table(table, row_group_size=BLOCK_ROWS)
+                self._csv = _named(self.paths[1], pacsv.CSVWriter, str(self.tmps[1]), table.schema)
+        _named(self.paths[0], self._pq.write_table, table, row_group_size=BLOCK_ROWS)
         if self._csv is not None:
-            self._csv.write_table(table)
+            _named(self.paths[1], self._csv.write_table, table)
         self.rows_written += len(arr)
 
     def close(self) -> list[Path]:
         """Write the held last row, close the writers and rename the files into place; their paths."""
         if self._held is not None:
             self._write(*self._held)
-        for w in (self._pq, self._csv):
+        for w, path in zip((self._pq, self._csv), self.paths + [None]):
             if w is not None:
-                w.close()
+                _named(path, w.close)
         if self._pq is None:
             return []
         for tmp, path in zip(self.tmps, self.paths):
@@ -193,6 +193,19 @@ class SeriesWriter:
                     pass
         for tmp in self.tmps:
             tmp.unlink(missing_ok=True)
+
+
+def _named(path, fn, *args, **kwargs):
+    """``fn(*args, **kwargs)``; a storage error (disk full, file-size limit, ...) becomes an
+    :class:`~mission_sim.files.OutputError` naming the output ``path`` (exit status 4 in the CLI)."""
+    try:
+        return fn(*args, **kwargs)
+    except OSError as exc:
+        from ..files import storage_error
+        named = storage_error(exc, path)
+        if named is None:
+            raise
+        raise named from None
 
 
 def read_series(path, columns=None, max_points: int | None = None, keep_peak_of: str | None = "i2_amp_a"):
