@@ -115,9 +115,10 @@ def flux_table(coef, h, z0, rho_last, z_last, rot, org, pts, tan, w):
     out = np.empty(n)
     below = np.zeros(n, np.bool_)
     for p in range(n):
+        r, o = rot[p], org[p]
         acc = 0.0
         for q in range(m):
-            x, y, z, tx, ty = _point(rot[p], org[p], pts, tan, q)
+            x, y, z, tx, ty = _point(r, o, pts, tan, q)
             if z < z0:
                 below[p] = True
                 break
@@ -132,8 +133,9 @@ def receiver_points(rot, org, pts, tan):
     n, m = org.shape[0], pts.shape[0]
     x, y, z, tx, ty = np.empty((n, m)), np.empty((n, m)), np.empty((n, m)), np.empty((n, m)), np.empty((n, m))
     for p in range(n):
+        r, o = rot[p], org[p]
         for q in range(m):
-            x[p, q], y[p, q], z[p, q], tx[p, q], ty[p, q] = _point(rot[p], org[p], pts, tan, q)
+            x[p, q], y[p, q], z[p, q], tx[p, q], ty[p, q] = _point(r, o, pts, tan, q)
     return x, y, z, tx, ty
 
 
