@@ -14,9 +14,9 @@ shared machine than wall time), goal >= 3000x for model_based and >= 1000x for t
 policy (``rl``: the pre-trained PPO, actor evaluated in numpy). Medians and ranges over the
 repeats; ``os.getloadavg()`` before and after.
 
-Reference path, same run: each policy is also run with ``compiled=False`` (the pure-Python loop
-and the numpy Lm table, i.e. the code before the compiled fast path; ``rl`` has no compiled
-policy kernel, so only its Lm evaluation differs), alternating with the default runs, and the
+Reference path, same run: each policy is also run with ``compiled=False`` (the pure-Python loop;
+the Lm table is compiled on both paths since issue 22, so ``rl``, which has no compiled policy
+kernel, runs the same code on both), alternating with the default runs, and the
 ratio of the median CPU times is printed (``ref cpu/cpu``).
 
     python benchmarks/bench_mission.py [--policies model_based rl step ramp] [--repeat 3] [--no-single-rate]

@@ -8,8 +8,6 @@ residuals, rounding noise of ~1e-16 themselves, to 1e-13 absolute), counts and f
 No timings are asserted.
 """
 
-import math
-
 import numpy as np
 import pytest
 
@@ -143,30 +141,6 @@ def test_kernel_row_layout_matches_the_columns():
     from mission_sim.world.loop_kernel import S_NAMES
     loop = _loop(load_config(), "step")
     assert set(fastpath._state_values(loop)) == set(S_NAMES)
-
-
-def test_compiled_lm_table_equals_numpy():
-    model = load_config().coupling.model()
-    rng = np.random.default_rng(0)
-    n = 2000
-    dx, dy = rng.uniform(-1.7, 1.7, n), rng.uniform(-1.7, 1.7, n)
-    dz, tilt, axis = rng.uniform(0.021, 1.7, n), rng.uniform(-0.4, 0.4, n), rng.uniform(0, 2 * math.pi, n)
-    want = model.lm_h(dx, dy, dz, tilt, tilt_axis_rad=axis)
-    got = model.lm_h(dx, dy, dz, tilt, tilt_axis_rad=axis, compiled=True)
-    # numba's scalar libm calls against numpy's SIMD transcendentals: equal to round-off (issue 25)
-    np.testing.assert_allclose(got, want, rtol=1e-12, atol=0.0)
-    assert np.count_nonzero(want) > n // 4
-    # a receiver point below the table: the exact field (numpy path) answers
-    low = model.lm_h(0.0, 0.0, 0.01, 0.3, compiled=True)
-    assert low == pytest.approx(model.lm_h(0.0, 0.0, 0.01, 0.3), rel=1e-12)
-
-
-def test_pairwise_sum_is_numpys():
-    from wpt_receiver.coupling_kernel import pairwise_sum
-    rng = np.random.default_rng(1)
-    for m in (3, 8, 100, 129, 192, 300, 4097):
-        a = rng.standard_normal(m) * np.exp(rng.uniform(-8, 8, m))
-        assert pairwise_sum(a, 0, m) == pytest.approx(np.sum(a), rel=1e-12, abs=1e-12 * np.sum(np.abs(a)))
 
 
 def test_partial_peak_table_has_the_full_tables_values():

@@ -5,10 +5,9 @@ Depends on nothing else of dronewpt. Modules, in the order data flows:
 ======================  =====================================================================
 ``params``              :class:`LinkParams`, :data:`TABLE_I` (Table I)
 ``coupling``            Lm(pose) of two circular coils (Maxwell / Neumann), lookup tables
-``bspline``             cubic B-spline evaluation of the coupling table (numpy, no scipy.ndimage)
 ``diskcache``           on-disk cache of arrays by content hash (coupling table, ZOH results)
 ``lti``                 SISO transfer functions and their ZOH without importing scipy.signal
-``coupling_kernel``     the lookup-table Lm compiled with numba (same numbers; imported on demand)
+``coupling_kernel``     the coupling table's lookup (B-spline, loop integral), numba: the one copy
 ``envelope``            envelope model (eq. 3-8): exact ZOH stepping, steady states, G22
 ``sbar``                SBAR duty mapping f(d_short) (eq. 9), its inverse, the rectifier rule
 ``inverse_controller``  the proposed controller (Fig. 5): low-pass, G22^-1, f^-1

@@ -15,9 +15,11 @@ turn: radius, height in the coil's own frame) made of round (litz) wire of radiu
   loop, ``M = (1/I) oint A . dl``, by the trapezoid rule in the loop angle (spectrally
   convergent for this smooth periodic integrand).
 * Fast path (:meth:`CouplingModel.lm_h`): the whole pad coil's ``A_phi / rho`` tabulated once on
-  a (rho, z) grid, interpolated by cubic B-splines (scipy.ndimage's coefficients, evaluated by
-  :mod:`.bspline` without importing scipy.ndimage), then the same loop quadrature over the receiver turns, vectorised over any number of poses. The table (0.2-0.5 s
-  to build) is cached on disk per pad geometry and grid (:mod:`wpt_receiver.diskcache`; key:
+  a (rho, z) grid (cubic B-spline coefficients by ``scipy.ndimage.spline_filter``), then the same
+  loop quadrature over the receiver turns, vectorised over any number of poses. The lookup (spline,
+  receiver geometry, integrand) exists once, compiled, in :mod:`.coupling_kernel`; this module keeps
+  the orchestration (shapes, broadcasting, the exact field below the table, the disk cache).
+  The table (0.2-0.5 s to build) is cached on disk per pad geometry and grid (:mod:`wpt_receiver.diskcache`; key:
   geometry, grid, this module's source, numpy/scipy versions), so only the first run builds it.
 
 Pose convention: ``(dx, dy, dz)`` is the receiver coil frame's origin in the pad frame (z up,
@@ -36,7 +38,6 @@ from pathlib import Path
 
 import numpy as np
 from . import diskcache
-from .bspline import map_cubic_mirror
 from .params import LinkParams
 
 __all__ = [
@@ -270,6 +271,8 @@ class CouplingModel:
         self._grid = (float(grid_step_m), float(rho_max_m), float(z_min_m), float(z_max_m))
         self._table = None
         self._pts, self._tan, self._w = _loop_points(rx, self.n_theta)
+        self._flat_pts = np.ascontiguousarray(self._pts.reshape(-1, 3))
+        self._flat_tan = np.ascontiguousarray(self._tan.reshape(-1, 3))
 
     @property
     def table_range_m(self):
@@ -294,28 +297,26 @@ class CouplingModel:
         return out
 
     def _flux(self, dx, dy, dz, tilt, tilt_axis, pts, tan, w, a_over_rho):
+        """Lm [H] of the (broadcast) poses by :meth:`_flux_poses`, shaped like the poses."""
         rot, org = _rx_frame(dx, dy, dz, tilt, tilt_axis)
         shape = org.shape[:-1]
-        rot = rot.reshape(-1, 3, 3)
-        org = org.reshape(-1, 3)
-        out = np.empty(len(org))
-        flat_p = pts.reshape(-1, 3)
-        flat_t = tan.reshape(-1, 3)
-        chunk = max(1, 200_000 // len(flat_p))
-        px, py, pz = flat_p.T
-        tx_, ty_ = flat_t[:, 0], flat_t[:, 1]
-        for s in range(0, len(org), chunk):
-            r = rot[s:s + chunk, :, :, None]
-            o = org[s:s + chunk, :, None]
-            x = r[:, 0, 0] * px + r[:, 0, 1] * py + r[:, 0, 2] * pz + o[:, 0]
-            y = r[:, 1, 0] * px + r[:, 1, 1] * py + r[:, 1, 2] * pz + o[:, 1]
-            z = r[:, 2, 0] * px + r[:, 2, 1] * py + r[:, 2, 2] * pz + o[:, 2]
-            tx = r[:, 0, 0] * tx_ + r[:, 0, 1] * ty_  # tangents have no local z component
-            ty = r[:, 1, 0] * tx_ + r[:, 1, 1] * ty_
-            f = a_over_rho(np.hypot(x, y), z)
-            # A . dl = (A_phi / rho) (x t_y - y t_x) dtheta
-            out[s:s + chunk] = w * np.sum(f * (x * ty - y * tx), axis=-1)
+        out = self._flux_poses(rot.reshape(-1, 3, 3), org.reshape(-1, 3), pts, tan, w, a_over_rho)
         return out.reshape(shape) if shape else float(out[0])
+
+    @staticmethod
+    def _flux_poses(rot, org, pts, tan, w, a_over_rho):
+        """Loop integral of the field ``a_over_rho(rho, z)`` (numpy: exact, or table-and-exact) over the
+        receiver points of each pose (N, 3, 3), (N, 3), chunked; the receiver geometry and the integrand
+        are :mod:`.coupling_kernel`'s (``receiver_points``, ``loop_sum``)."""
+        from .coupling_kernel import loop_sum, receiver_points
+        rot, org = np.ascontiguousarray(rot, dtype=float), np.ascontiguousarray(org, dtype=float)
+        flat_p, flat_t = np.ascontiguousarray(pts.reshape(-1, 3)), np.ascontiguousarray(tan.reshape(-1, 3))
+        out = np.empty(len(org))
+        chunk = max(1, 200_000 // len(flat_p))
+        for s in range(0, len(org), chunk):
+            x, y, z, tx, ty = receiver_points(rot[s:s + chunk], org[s:s + chunk], flat_p, flat_t)
+            out[s:s + chunk] = loop_sum(a_over_rho(np.hypot(x, y), z), x, y, tx, ty, float(w))
+        return out
 
     # ----------------------------------------------------------------- table
     def table_key(self) -> str:
@@ -336,13 +337,16 @@ class CouplingModel:
             diskcache.store("coupling", key, coef)
         self._table = (coef, rho, z, h)
 
-    def _a_table(self, rho, z):
+    def _table_args(self):
+        """The table as :mod:`.coupling_kernel` takes it: ``(coef, h, z0, rho_last, z_last)``."""
         coef, rho_g, z_g, h = self._table
-        out = np.zeros(rho.shape)
-        inside = (rho <= rho_g[-1]) & (z >= z_g[0]) & (z <= z_g[-1])
-        below = z < z_g[0]
-        if np.any(inside):
-            out[inside] = map_cubic_mirror(coef, rho[inside] / h, (z[inside] - z_g[0]) / h)
+        return coef, float(h), float(z_g[0]), float(rho_g[-1]), float(z_g[-1])
+
+    def _a_table(self, rho, z):
+        """``A_phi / rho`` from the table (:func:`.coupling_kernel.table_field`), exact below the table."""
+        from .coupling_kernel import table_field
+        out = table_field(*self._table_args(), np.ravel(rho), np.ravel(z)).reshape(np.shape(rho))
+        below = z < self._table[2][0]
         if np.any(below):
             out[below] = self._a_exact(rho[below], z[below])
         return out
@@ -351,30 +355,21 @@ class CouplingModel:
         """Lm [H] from the tabulated pad-coil field; vectorised over (broadcast) arrays of poses.
 
         Agrees with :meth:`lm_exact_h` to ~1e-6 relative near the hover pose (see tests).
-        Receiver points beyond the table (rho > rho_max_m or z > z_max_m) contribute nothing.
-        ``compiled=True`` evaluates it with numba (:mod:`.coupling_kernel`, the same operations; about
-        10x faster for many poses; imports numba) unless a point lies below the table.
+        Receiver points beyond the table (rho > rho_max_m or z > z_max_m) contribute nothing;
+        poses with a receiver point below it (z < z_min_m) use the exact field at those points.
+        The lookup is :func:`.coupling_kernel.flux_table` (numba, the only implementation; imported
+        here on first use). ``compiled`` is accepted for callers and ignored: there is no second
+        (numpy) path any more; ``flux_table.py_func`` runs the same source uncompiled (tests).
         """
+        from .coupling_kernel import flux_table
         if self._table is None:
             self._build_table()
-        if compiled:
-            out = self._lm_compiled(dx_m, dy_m, dz_m, tilt_rad, tilt_axis_rad)
-            if out is not None:
-                return out
-        return self._flux(dx_m, dy_m, dz_m, tilt_rad, tilt_axis_rad, self._pts, self._tan, self._w, self._a_table)
-
-    def _lm_compiled(self, dx, dy, dz, tilt, tilt_axis):
-        """:meth:`lm_h` by :func:`.coupling_kernel.flux_table`; None if a point is below the table."""
-        from .coupling_kernel import flux_table
-        coef, rho_g, z_g, h = self._table
-        rot, org = _rx_frame(dx, dy, dz, tilt, tilt_axis)
+        rot, org = _rx_frame(dx_m, dy_m, dz_m, tilt_rad, tilt_axis_rad)
         shape = org.shape[:-1]
-        out, below = flux_table(coef, float(h), float(z_g[0]), float(rho_g[-1]), float(z_g[-1]),
-                                np.ascontiguousarray(rot.reshape(-1, 3, 3)), np.ascontiguousarray(org.reshape(-1, 3)),
-                                np.ascontiguousarray(self._pts.reshape(-1, 3)),
-                                np.ascontiguousarray(self._tan.reshape(-1, 3)), float(self._w))
-        if below:
-            return None
+        rot, org = np.ascontiguousarray(rot.reshape(-1, 3, 3)), np.ascontiguousarray(org.reshape(-1, 3))
+        out, below = flux_table(*self._table_args(), rot, org, self._flat_pts, self._flat_tan, float(self._w))
+        if np.any(below):  # the exact field at the points below the table, the table elsewhere
+            out[below] = self._flux_poses(rot[below], org[below], self._pts, self._tan, self._w, self._a_table)
         return out.reshape(shape) if shape else float(out[0])
 
     def k(self, lm_h):

@@ -1,16 +1,26 @@
-""":meth:`CouplingModel.lm_h <.coupling.CouplingModel.lm_h>` from the tabulated field, compiled with numba (``cache=True``).
+"""The coupling table's lookup, Lm(pose) from the tabulated pad field: the one implementation (numba, ``cache=True``).
 
-The same operations as the numpy path of :mod:`.coupling` (``_flux`` with ``_a_table``) and
-:mod:`.bspline` (``map_cubic_mirror``), point by point: receiver points in the pad frame, the
-cubic B-spline of ``A_phi / rho`` (16 products summed in scipy's order, mirrored edges), the
-loop integrand, and the sum over the receiver's points in numpy's pairwise order (``np.sum`` of
-a row), so the result is the numpy path's
-to the last bit up to libm's ``hypot`` (the tests compare the two). Points below the table
-(``z < z_min``, the exact field) are not handled here: :func:`flux_table` reports them and the
-caller uses the numpy path.
+:meth:`CouplingModel.lm_h <.coupling.CouplingModel.lm_h>` keeps the orchestration (poses to rotation
+matrices, shapes, the table's disk cache, the exact field below the table); every formula of the
+lookup is written once, here:
 
-This module imports numba at import time; :meth:`CouplingModel.lm_h` imports it only when asked
-for the compiled path (``compiled=True``, e.g. by the mission runner's fast path).
+* :func:`_point`: a receiver quadrature point and its tangent ``dl/dtheta`` in the pad frame
+  (``x = R p + o``, ``t = R t_local``; the local tangents have no z component);
+* :func:`_weights` / :func:`_mirror` / :func:`_spline`: the cubic B-spline of ``A_phi / rho`` with
+  coefficients from ``scipy.ndimage.spline_filter(order=3, mode="mirror")``, evaluated as
+  ``scipy.ndimage.map_coordinates(..., order=3, prefilter=False, mode="mirror")`` does (scipy's
+  ``get_spline_interpolation_weights``, whole-sample mirror indices at the edges), so no
+  ``scipy.ndimage`` import (~0.3 s) is needed at run time;
+* :func:`_field`: the table's value at ``(rho, z)``: 0 beyond ``rho_max``/``z_max`` (uncoupled);
+* :func:`_integrand`: the loop integrand ``A . dl / dtheta = (A_phi / rho) (x t_y - y t_x)``;
+
+composed by :func:`flux_table` (the fast path, one pose per outer iteration) and exposed point-wise
+(:func:`receiver_points`, :func:`table_field`, :func:`loop_sum`) for the poses whose receiver dips
+below the table, where the caller puts the exact (elliptic-integral) field at those points, and for
+:meth:`~.coupling.CouplingModel.lm_exact_h`. Each public kernel's ``.py_func`` runs the same source
+in the interpreter (slow; the tests use it on a few points).
+
+Imported lazily by :mod:`.coupling` (numba's import costs ~0.3 s), on the first ``lm_h``.
 """
 
 from __future__ import annotations
@@ -20,68 +30,12 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["flux_table", "pairwise_sum"]
-
-
-@njit(cache=True)
-def _block_sum(a, lo, n):
-    """numpy's ``pairwise_sum_DOUBLE`` for ``n <= 128``: 8 accumulators, then the rest in order."""
-    if n < 8:
-        res = 0.0
-        for i in range(n):
-            res += a[lo + i]
-        return res
-    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
-    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
-    i = 8
-    while i < n - n % 8:
-        r0 += a[lo + i]
-        r1 += a[lo + i + 1]
-        r2 += a[lo + i + 2]
-        r3 += a[lo + i + 3]
-        r4 += a[lo + i + 4]
-        r5 += a[lo + i + 5]
-        r6 += a[lo + i + 6]
-        r7 += a[lo + i + 7]
-        i += 8
-    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    while i < n:
-        res += a[lo + i]
-        i += 1
-    return res
-
-
-@njit(cache=True)
-def pairwise_sum(a, lo, n):
-    """numpy's pairwise summation of ``a[lo:lo + n]`` (blocks of <= 128 split at ``n // 2`` rounded down to
-    a multiple of 8), with an explicit stack (numba's cache mishandles recursive functions)."""
-    if n <= 128:
-        return _block_sum(a, lo, n)
-    los, ns, stage = np.empty(128, np.int64), np.empty(128, np.int64), np.empty(128, np.int64)
-    vals = np.empty(128)
-    los[0], ns[0], stage[0] = lo, n, 0
-    sp, vp = 1, 0
-    while sp > 0:
-        sp -= 1
-        l, m, st = los[sp], ns[sp], stage[sp]
-        if m <= 128:
-            vals[vp] = _block_sum(a, l, m)
-            vp += 1
-        elif st == 0:
-            h = m // 2
-            h -= h % 8
-            los[sp], ns[sp], stage[sp] = l, m, 1          # combine after both halves
-            los[sp + 1], ns[sp + 1], stage[sp + 1] = l + h, m - h, 0
-            los[sp + 2], ns[sp + 2], stage[sp + 2] = l, h, 0
-            sp += 3
-        else:
-            vals[vp - 2] = vals[vp - 2] + vals[vp - 1]   # left + right (whichever finished first: + commutes)
-            vp -= 1
-    return vals[0]
+__all__ = ["flux_table", "receiver_points", "table_field", "loop_sum"]
 
 
 @njit(cache=True)
 def _mirror(i, n):
+    """Index ``i`` reflected about the edge samples (``d c b | a b c d | c b a``) into ``[0, n)``."""
     if n <= 1:
         return 0
     if 0 <= i < n:
@@ -93,6 +47,7 @@ def _mirror(i, n):
 
 @njit(cache=True)
 def _weights(x):
+    """First tap ``floor(x) - 1`` and the four cubic B-spline weights at ``x`` (the last one makes the sum 1)."""
     f = math.floor(x)
     y = x - f
     z = 1.0 - y
@@ -104,7 +59,7 @@ def _weights(x):
 
 @njit(cache=True)
 def _spline(coef, u, v):
-    """``bspline.map_cubic_mirror`` at one point."""
+    """The cubic B-spline with coefficients ``coef`` (n0, n1) at fractional indices ``(u, v)``."""
     n0, n1 = coef.shape
     i0, wu = _weights(u)
     j0, wv = _weights(v)
@@ -121,29 +76,86 @@ def _spline(coef, u, v):
 
 
 @njit(cache=True)
+def _field(coef, h, z0, rho_last, z_last, rho, z):
+    """Tabulated ``A_phi / rho`` [H/m^2 per A] at ``(rho, z)`` (pad frame, ``z >= z0``); 0 beyond the table."""
+    if rho <= rho_last and z <= z_last:
+        return _spline(coef, rho / h, (z - z0) / h)
+    return 0.0
+
+
+@njit(cache=True)
+def _point(r, o, pts, tan, q):
+    """Receiver point ``q`` and its tangent in the pad frame: ``(x, y, z, t_x, t_y)`` [m, m/rad]."""
+    px, py, pz = pts[q, 0], pts[q, 1], pts[q, 2]
+    x = r[0, 0] * px + r[0, 1] * py + r[0, 2] * pz + o[0]
+    y = r[1, 0] * px + r[1, 1] * py + r[1, 2] * pz + o[1]
+    z = r[2, 0] * px + r[2, 1] * py + r[2, 2] * pz + o[2]
+    tx = r[0, 0] * tan[q, 0] + r[0, 1] * tan[q, 1]
+    ty = r[1, 0] * tan[q, 0] + r[1, 1] * tan[q, 1]
+    return x, y, z, tx, ty
+
+
+@njit(cache=True)
+def _integrand(f, x, y, tx, ty):
+    """``A . dl/dtheta = (A_phi / rho) (x t_y - y t_x)`` for the field value ``f = A_phi / rho``."""
+    return f * (x * ty - y * tx)
+
+
+@njit(cache=True)
 def flux_table(coef, h, z0, rho_last, z_last, rot, org, pts, tan, w):
-    """Lm [H] of each pose (``rot`` (N, 3, 3), ``org`` (N, 3)) over the receiver points ``pts``,
-    tangents ``tan`` (P, 3) with weight ``w``; returns ``(lm, n_below)`` (``n_below`` > 0: some
-    points were below the table and ``lm`` is not valid)."""
+    """Lm [H] of each pose (``rot`` (N, 3, 3), ``org`` (N, 3)) from the table: the trapezoid rule
+    ``w sum_q A . dl/dtheta`` over the receiver points ``pts``, tangents ``tan`` (P, 3).
+
+    ``coef`` are the spline coefficients on the grid ``rho = i h``, ``z = z0 + j h`` (last
+    samples ``rho_last``, ``z_last``). Returns ``(lm, below)``: ``below[p]`` is True where a
+    point of pose ``p`` lies below the table (``z < z0``); ``lm[p]`` is NaN there (the caller
+    evaluates those poses with the exact field, :func:`receiver_points` .. :func:`loop_sum`).
+    """
     n, m = org.shape[0], pts.shape[0]
     out = np.empty(n)
-    prod = np.empty(m)
+    below = np.zeros(n, np.bool_)
     for p in range(n):
-        r = rot[p]
-        o = org[p]
+        r, o = rot[p], org[p]
+        acc = 0.0
         for q in range(m):
-            px, py, pz = pts[q, 0], pts[q, 1], pts[q, 2]
-            x = r[0, 0] * px + r[0, 1] * py + r[0, 2] * pz + o[0]
-            y = r[1, 0] * px + r[1, 1] * py + r[1, 2] * pz + o[1]
-            z = r[2, 0] * px + r[2, 1] * py + r[2, 2] * pz + o[2]
-            tx = r[0, 0] * tan[q, 0] + r[0, 1] * tan[q, 1]
-            ty = r[1, 0] * tan[q, 0] + r[1, 1] * tan[q, 1]
-            rho = math.hypot(x, y)
+            x, y, z, tx, ty = _point(r, o, pts, tan, q)
             if z < z0:
-                return out, 1
-            f = 0.0
-            if rho <= rho_last and z <= z_last:
-                f = _spline(coef, rho / h, (z - z0) / h)
-            prod[q] = f * (x * ty - y * tx)
-        out[p] = w * pairwise_sum(prod, 0, m)
-    return out, 0
+                below[p] = True
+                break
+            acc += _integrand(_field(coef, h, z0, rho_last, z_last, math.hypot(x, y), z), x, y, tx, ty)
+        out[p] = np.nan if below[p] else w * acc
+    return out, below
+
+
+@njit(cache=True)
+def receiver_points(rot, org, pts, tan):
+    """``(x, y, z, t_x, t_y)``, each (N, P): the receiver points and tangents of each pose in the pad frame."""
+    n, m = org.shape[0], pts.shape[0]
+    x, y, z, tx, ty = np.empty((n, m)), np.empty((n, m)), np.empty((n, m)), np.empty((n, m)), np.empty((n, m))
+    for p in range(n):
+        r, o = rot[p], org[p]
+        for q in range(m):
+            x[p, q], y[p, q], z[p, q], tx[p, q], ty[p, q] = _point(r, o, pts, tan, q)
+    return x, y, z, tx, ty
+
+
+@njit(cache=True)
+def table_field(coef, h, z0, rho_last, z_last, rho, z):
+    """:func:`_field` at the points ``(rho, z)`` (1-D); NaN below the table (``z < z0``: no table there)."""
+    out = np.empty(rho.shape[0])
+    for i in range(rho.shape[0]):
+        out[i] = np.nan if z[i] < z0 else _field(coef, h, z0, rho_last, z_last, rho[i], z[i])
+    return out
+
+
+@njit(cache=True)
+def loop_sum(f, x, y, tx, ty, w):
+    """Lm [H] per pose: ``w sum_q A . dl/dtheta`` from the field ``f = A_phi / rho`` at the points (all (N, P))."""
+    n, m = f.shape
+    out = np.empty(n)
+    for p in range(n):
+        acc = 0.0
+        for q in range(m):
+            acc += _integrand(f[p, q], x[p, q], y[p, q], tx[p, q], ty[p, q])
+        out[p] = w * acc
+    return out

@@ -84,8 +84,9 @@ def _pad_offsets(cfg, traj: Trajectory):
 
 
 def _lm_along(cfg, model, traj: Trajectory, compiled: bool = False):
-    """Lm [H] per trajectory sample (0 away from the pads) and the nearest pad's index; ``compiled``
-    evaluates the coupling table with numba (the same values, :mod:`wpt_receiver.coupling_kernel`)."""
+    """Lm [H] per trajectory sample (0 away from the pads) and the nearest pad's index; the coupling
+    table is always evaluated compiled (:mod:`wpt_receiver.coupling_kernel`, its one implementation;
+    ``compiled`` is passed on and ignored)."""
     off, idx = _pad_offsets(cfg, traj)
     lm = np.zeros(len(traj))
     rho_max, z_min, z_max = model.table_range_m
