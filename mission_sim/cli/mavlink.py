@@ -293,7 +293,7 @@ def _cmd_telemetry(args) -> int:
     from ..world.budget import check_run_size
     from ..world.runner import run_mission
     from ..world.trajectory import plan_mission
-    check_run_size(cfg, force=args.force)
+    check_run_size(cfg, force=args.force, frame=True)   # the stream needs the whole series in memory
     traj = plan_mission(cfg)
     res = run_mission(cfg, _mav_policy(cfg, args.policy), trajectory=traj, progress=show_progress(args))
     st = telemetry.stream(res.timeseries, connect=connect, rate_hz=args.rate, speed=args.speed, home=home,

@@ -29,6 +29,7 @@ MAX_OUTPUT_BYTES = 1 << 30  # 1 GiB
 SAMPLE_BYTES = 200.0
 STREAM_BYTES = 64e6       # blocks of rows in flight (loop buffer, the Parquet writer's row group, candidates)
 ROW_OUTPUT_BYTES = 145.0  # Parquet per stored row
+ROW_MEMORY_BYTES = 1500.0  # a row held in a DataFrame at peak (row tuples, the frame, its copies): frame=True
 
 
 @dataclass(frozen=True)
@@ -63,8 +64,10 @@ def _segment_key(cfg, seg, pad_index: int) -> tuple[str, float]:
     return "mission.cruise_speed_m_s", m.cruise_speed_m_s
 
 
-def estimate_run(cfg) -> RunEstimate:
-    """:class:`RunEstimate` of ``cfg`` (a MissionConfig) from its planned segment durations."""
+def estimate_run(cfg, frame: bool = False) -> RunEstimate:
+    """:class:`RunEstimate` of ``cfg`` (a MissionConfig) from its planned segment durations;
+    ``frame``: the caller holds the time series as a DataFrame (``run_mission(frame=True)``, e.g.
+    ``telemetry``), so every row costs memory, not only a streamed block."""
     sim = cfg.sim
     per_key: dict[tuple[str, float], float] = {}
     duration = charge_s = 0.0
@@ -84,7 +87,7 @@ def estimate_run(cfg) -> RunEstimate:
     per_key[("sim.control_period_s", sim.control_period_s)] = fine
     rows = sum(per_key.values())
     samples = duration / sim.traj_dt_s + 1
-    memory = SAMPLE_BYTES * samples + STREAM_BYTES
+    memory = SAMPLE_BYTES * samples + STREAM_BYTES + (ROW_MEMORY_BYTES * rows if frame else 0.0)
     (key, value), _ = max(per_key.items(), key=lambda kv: kv[1])
     if samples * SAMPLE_BYTES > ROW_OUTPUT_BYTES * rows:  # the trajectory itself dominates
         key, value = ("sim.traj_dt_s", sim.traj_dt_s) if sim.traj_dt_s < 0.05 else (key, value)
@@ -99,10 +102,10 @@ def _size(n_bytes: float) -> str:
     return f"{n_bytes / 1e3:.3g} kB"
 
 
-def check_run_size(cfg, force: bool = False) -> RunEstimate:
-    """The run's :class:`RunEstimate`; ``ValueError`` (one line naming the dominant key and the
-    estimate) when it exceeds the memory or output limit, unless ``force``."""
-    est = estimate_run(cfg)
+def check_run_size(cfg, force: bool = False, frame: bool = False) -> RunEstimate:
+    """The run's :class:`RunEstimate` (``frame`` as in :func:`estimate_run`); ``ValueError`` (one line
+    naming the dominant key and the estimate) when it exceeds the memory or output limit, unless ``force``."""
+    est = estimate_run(cfg, frame)
     too_big = est.memory_bytes > MAX_MEMORY_BYTES or est.output_bytes > MAX_OUTPUT_BYTES
     if too_big and not force and math.isfinite(est.memory_bytes):
         raise ValueError(
