@@ -313,6 +313,7 @@ PLAUSIBLE: dict[str, Range] = {
     "sim.bms_period_s": Range(0.0, 3600.0, "s", lo_open=True), "sim.tx_off_delay_s": Range(0.0, 60.0, "s"),
     "link.device_tj_c": Range(0.0, 175.0, "C (0 = the parts table's values; else >= 25)"),
     "mission.pad_radius_m": Range(0.0, 1000.0, "m", lo_open=True),
+    "charger.recharge_drop_cell_v": Range(0.005, 0.5, "V per cell"),
 }
 
 

@@ -396,6 +396,10 @@ def test_fuzzed_short_missions_run_or_fail_in_one_line(folder, values, policy):
 def test_subprocess_runs_show_no_traceback(folder, argv, rc, text):
     """End to end, as a user runs it: the exit status, one line on stderr naming the key, no traceback."""
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    fifo = folder / "fifo"   # a FIFO again, whatever the fuzzed draws before did with the name
+    if not fifo.is_fifo():
+        fifo.unlink(missing_ok=True)
+        os.mkfifo(fifo)
     p = subprocess.run([sys.executable, "-m", "mission_sim.cli", *argv, "--out", "sub", "--no-progress"],
                        cwd=folder, env=env, capture_output=True, text=True, timeout=120)
     assert "Traceback" not in p.stderr

@@ -145,6 +145,8 @@ def check_out_file(path, flag: str, suffix: str | None = None) -> Path:
     """An output file path, checked before any work: not a folder, ending in ``suffix`` when given, its
     folder created and writable (:func:`prepare_out_dir`); ``CliError`` naming ``flag`` otherwise."""
     path = Path(path)
+    if path.exists() and not path.is_dir() and not path.is_file():   # a FIFO, socket or device: never replaced
+        raise CliError(f"{flag} {str(path)!r} exists and is not a regular file (a FIFO or device); valid: a file path")
     if path.is_dir():
         example = f" e.g. {str(path / ('out' + (suffix or '')))!r}"
         raise CliError(f"{flag} {str(path)!r} is a folder; valid: a {suffix.lstrip('.').upper() + ' ' if suffix else ''}"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .common import CliError, float_arg
+from .common import CliError, float_arg, path_arg
 
 _PRECISIONS = {"float32": ("f32",), "float64": ("f64",), "both": ("f32", "f64")}
 
@@ -17,7 +17,7 @@ def _add_export_controller(sub):
                                    "the parameters as a struct of defaults baked from the link (Table I), in float "
                                    "and/or double, the Python controller's duties as test vectors (CSV and C header) "
                                    "and a self-test program per precision.")
-    p.add_argument("--out", type=Path, default=Path("out/controller"), help="folder (default out/controller)")
+    p.add_argument("--out", type=path_arg("--out"), default=Path("out/controller"), help="folder (default out/controller)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--precision", choices=tuple(_PRECISIONS), default="both", help="float32, float64 or both (default)")
     g.add_argument("--float32", dest="precision", action="store_const", const="float32", help="= --precision float32")

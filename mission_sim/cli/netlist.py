@@ -37,6 +37,9 @@ def _cmd_netlist(args) -> int:
 
     from ..files import atomic_output
     from .controller import _link_params
+    if args.out is not None:
+        from .common import check_out_file
+        check_out_file(args.out, "--out")
     if args.devices not in preset_names():
         raise CliError(f"--devices {args.devices!r} is invalid; valid values: {', '.join(preset_names())}")
     params = _link_params(args.link)

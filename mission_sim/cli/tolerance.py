@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .common import CliError, add_progress_flag, float_arg, nonneg_int, show_progress
+from .common import CliError, add_progress_flag, float_arg, nonneg_int, path_arg, show_progress
 
 
 def _add_tolerance(sub):
@@ -30,7 +30,7 @@ def _add_tolerance(sub):
                    help="a draw must deliver at least this fraction of the nominal RM power (default 0.9)")
     p.add_argument("--workers", type=nonneg_int("workers"), default=0,
                    help="local Dask workers (default 0: in this process, ~3 ms a draw; N > 0 scales out)")
-    p.add_argument("--out", type=Path, default=Path("out/tolerance"), help="result store (default out/tolerance)")
+    p.add_argument("--out", type=path_arg("--out"), default=Path("out/tolerance"), help="result store (default out/tolerance)")
     p.add_argument("--format", choices=("table", "json"), default="table")
     add_progress_flag(p)
     p.set_defaults(func=_cmd_tolerance)
