@@ -311,8 +311,14 @@ class SbarChargingVectorEnv(VectorEnv):
             self._coef[:, moved] = self._coef_all[self._ar[moved], j[moved]].T
             self._j = j
         i1, i2, vl_old, soc, vrc, _ = self._state
-        i1, i2, pk_env, il, ib, soc, vrc, vl, v2 = advance(i1, i2, vl_old, soc, vrc, d, self._coef, self._bat,
-                                                           NUMPY_OPS, self._n_sub, self._dev)
+        out = advance(i1, i2, vl_old, soc, vrc, d, self._coef, self._bat, NUMPY_OPS, self._n_sub, self._dev)
+        return self._finish_numpy(k, d, vl_old, out)
+
+    def _finish_numpy(self, k, d, vl_old, out):
+        """The rest of a numpy step from the link and battery's ``out`` = (i1, i2, peak envelope, I_L,
+        I_batt, soc, vrc, VL, V2): peak, reward, state, observation, info (the tuned and the detuned
+        step alike)."""
+        i1, i2, pk_env, il, ib, soc, vrc, vl, v2 = out
         peak = self._peak.array(pk_env, d, vl_old)
         cmd = self._cmd[k, self._ar]
         reward, overcurrent = reward_cost(il, cmd, peak, self._inv_rated, self.config.reward, NUMPY_OPS)
@@ -335,25 +341,11 @@ def _step_detuned(self, d):
     from .detuned import advance_complex
     k = self._k
     j = k // self._M
-    i1, i2, vl_old, soc, vrc, _ = self._state
-    self._xc, i1, i2, pk_env, il, ib, soc, vrc, vl, v2 = advance_complex(
-        self._xc, vl_old, soc, vrc, d, self._ccoef[self._ar, j], self._bat, self._dev, self.config.link.v1_amp_v,
-        self._n_sub)
-    peak = self._peak.array(pk_env, d, vl_old)
-    cmd = self._cmd[k, self._ar]
-    reward, overcurrent = reward_cost(il, cmd, peak, self._inv_rated, self.config.reward, NUMPY_OPS)
-    energy = vl_old * il * self._dt
-    st = self._state
-    st[0], st[1], st[2], st[3], st[4], st[5] = i1, i2, vl, soc, vrc, d
+    _, _, vl_old, soc, vrc, _ = self._state
+    self._xc, *out = advance_complex(self._xc, vl_old, soc, vrc, d, self._ccoef[self._ar, j], self._bat, self._dev,
+                                     self.config.link.v1_amp_v, self._n_sub)
     self._j = j
-    k += 1
-    obs = self._obs(i2 + self._noise[k - 1, self._ar], vl, ib, il, soc, self._cmd[k, self._ar], d, self._t_since(k))
-    info = {"t_s": k * self._dt, "i2_a": i2, "i2_peak_a": peak, "i1_a": i1, "d_short": d, "v2_v": v2,
-            "rect_current_a": il, "battery_v": vl, "battery_current_a": ib, "soc": soc, "charge_cmd_a": cmd,
-            "lm_h": self._lm_all[j, self._ar], "energy_j": energy, "overcurrent": overcurrent}
-    info = self._objective_info(info, k - 1)
-    info["i2_peak_envelope_a"] = pk_env
-    return obs, reward, k >= self._T, info
+    return self._finish_numpy(k, d, vl_old, out)
 
 
 SbarChargingVectorEnv._step_detuned = _step_detuned
