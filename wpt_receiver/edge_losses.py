@@ -69,19 +69,24 @@ def _rect_block_v(cir, x) -> np.ndarray:
     return x @ cir.rect_threshold_row()
 
 
+def _changes(values, times, t_a: float, t_b: float):
+    """``(values, j, t)``: the schedule's ``values`` as an array, and the indices ``j`` and times ``t``
+    of its entries that change the value, in ``[t_a, t_b)``."""
+    v = np.asarray(values)
+    j = np.nonzero(np.diff(v) != 0)[0] + 1
+    t = np.asarray(times)[j]
+    sel = (t >= t_a) & (t < t_b)
+    return v, j[sel], t[sel]
+
+
 def _sbar_edges(res, t_a, t_b, dv):
     """SBAR gate edges in ``[t_a, t_b)``: hard turn-on and turn-off energies [J]."""
     from .switching.circuit import I2
-    sch, cir = res.schedule, res.circuit
-    g = np.asarray(sch.gate)
-    j = np.nonzero(np.diff(g) != 0)[0] + 1
-    t = np.asarray(sch.t)[j]
-    sel = (t >= t_a) & (t < t_b)
-    j, t = j[sel], t[sel]
+    cir = res.circuit
+    g, j, t = _changes(res.schedule.gate, res.schedule.t, t_a, t_b)
     if not len(t):
         return 0.0, 0.0
-    eps = 1e-12 * cir.T
-    x, k = res.states(t - eps)
+    x, k = res.states(t - 1e-12 * cir.T)
     keys = np.array(cir.keys)[k]
     on = g[j] == 1
     rect = np.isin(keys[:, 1], (1, -1))        # a diode pair conducted before the edge
@@ -116,16 +121,11 @@ def _sbar_recovery(res, t_a, t_b, dv):
 def _inverter_edges(res, t_a, t_b, dv):
     """Inverter commutations: ``(turn-on, turn-off, recovery)`` energies [J] (module docstring)."""
     from .switching.circuit import I1
-    sch, cir = res.schedule, res.circuit
-    cmd = np.asarray(sch.cmd)
-    j = np.nonzero(np.diff(cmd) != 0)[0] + 1
-    t = np.asarray(sch.t)[j]
-    sel = (t >= t_a) & (t < t_b)
-    j, t = j[sel], t[sel]
+    cir = res.circuit
+    cmd, j, t = _changes(res.schedule.cmd, res.schedule.t, t_a, t_b)
     if not len(t):
         return 0.0, 0.0, 0.0
-    eps = 1e-12 * cir.T
-    x, k = res.states(t - eps)
+    x, k = res.states(t - 1e-12 * cir.T)
     p_before = np.array(cir.keys)[k][:, 0]
     new, old = cmd[j], cmd[j - 1]
     i1 = x[:, I1]
