@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _nan_policy import NanPolicy
 
 from mission_sim.config import (
     DEFAULT_MISSION_TOML,
@@ -262,15 +263,6 @@ def test_step_policy_transients_do_not_depend_on_the_control_period():
 
 
 def test_a_policy_returning_nan_is_an_error_not_silent_short_mode():
-    class Broken:
-        name = "broken"
-
-        def reset(self, n=1):
-            pass
-
-        def act(self, obs):
-            return np.array([np.nan])
-
     cfg = load_config()
     with pytest.raises(ValueError, match="broken.*nan.*valid range"):
-        run_mission(cfg, Broken())
+        run_mission(cfg, NanPolicy())

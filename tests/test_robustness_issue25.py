@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _nan_policy import NanPolicy
 
 from mission_sim import config as mconfig
 from mission_sim.cli import main
@@ -130,19 +131,10 @@ def test_a_nan_in_a_run_names_the_inputs_that_differ_from_the_default():
     from mission_sim.world.loop import NonFiniteError
     from mission_sim.world.runner import run_mission
 
-    class Broken:
-        name = "broken"
-
-        def reset(self, n=1):
-            pass
-
-        def act(self, obs):
-            return np.array([np.nan])
-
     cfg = mconfig.config_from_dict(mconfig.apply_overrides(mconfig.load_config_dict(), {
         "link.vdc_v": 900.0, "drone.mass_kg": 2.0, "wind.speed_m_s": 3.0}))  # wind: the default's value
     with pytest.raises(NonFiniteError) as exc:
-        run_mission(cfg, Broken())
+        run_mission(cfg, NanPolicy())
     msg = str(exc.value)
     assert msg.startswith("policy 'broken' returned d_short=nan")
     # farthest first: 900 V is 1.48 decades from 30 V, 2 kg 0.30 decades from 1 kg; wind unchanged
