@@ -219,8 +219,8 @@ def test_follow_live_vehicle(tmp_path):
 
 
 def _heartbeats(tlog):
-    from pymavlink import mavutil
-    conn = mavutil.mavlink_connection(str(tlog))
+    from mission_sim.mavlink.logs import mavutil
+    conn = mavutil().mavlink_connection(str(tlog))
     out = []
     while (m := conn.recv_match(type="HEARTBEAT")) is not None:
         out.append(m)
