@@ -29,7 +29,8 @@ import numpy as np
 
 from .stream import BLOCK_ROWS
 
-__all__ = ["usable", "run", "pack_constants", "initial_state", "samples", "N_COLUMNS", "NOISE_BLOCK"]
+__all__ = ["usable", "run", "pack_constants", "link_values", "battery_values", "constants", "initial_state",
+           "samples", "N_COLUMNS", "NOISE_BLOCK"]
 
 N_COLUMNS = 26        # len(loop._COLUMNS): the kernel writes rows in that order (checked by the tests)
 _CHUNK = 256          # trajectory samples per kernel call (progress bar updates between calls)
@@ -41,23 +42,41 @@ def usable(loop) -> bool:
     return loop.compiled is not False and callable(getattr(loop.policy, "kernel", None))
 
 
+def link_values(l1_h, l2_h, r1_ohm, r2_ohm, omega_rad_s) -> dict:
+    """The link's constants of :data:`.loop_kernel.CONST_DTYPE` (paper eq. 4; R1, R2 with the folded devices)."""
+    return {"l1": l1_h, "l2": l2_h, "st_r1": r1_ohm, "st_r2": r2_ohm, "omega": omega_rad_s,
+            "b0": 1.0 / (2 * l1_h), "b1": -1.0 / (2 * l2_h)}
+
+
+def battery_values(bp, ch) -> dict:
+    """The battery's (:class:`.battery.BatteryParams` ``bp``) and the charger's (:class:`.battery.CcCvParams`
+    ``ch``) constants of :data:`.loop_kernel.CONST_DTYPE`."""
+    return {"r0": bp.r0_ohm, "r1b": bp.r1_ohm, "tau1": bp.tau1_s, "bat_c1": bp.c1_f, "n_cells": bp.n_series,
+            "capacity_c": bp.capacity_c, "cc_a": ch.cc_current_a, "v_cv": ch.cv_cell_v * bp.n_series,
+            "cutoff_a": ch.cutoff_current_a, "v_recharge": (ch.cv_cell_v - ch.recharge_drop_cell_v) * bp.n_series}
+
+
+def constants(values: dict) -> np.ndarray:
+    """A 1-element :data:`.loop_kernel.CONST_DTYPE` array with ``values`` by name (the others 0)."""
+    from .loop_kernel import CONST_DTYPE
+    c = np.zeros(1, CONST_DTYPE)
+    for name, v in values.items():
+        c[name] = v
+    return c
+
+
 def pack_constants(loop, use_fn: bool) -> np.ndarray:
-    """The loop's constants as a 1-element :data:`.loop_kernel.CONST_DTYPE` array."""
+    """The loop's constants as a 1-element :data:`.loop_kernel.CONST_DTYPE` array (every field set)."""
     from ..contract import _INV_SPAN, _LO
     from .loop_kernel import CONST_DTYPE
-    sim, dev, ch, bp, lk = loop.sim, loop.dev, loop.cfg.charger, loop.bp, loop.lk
-    c = np.zeros(1, CONST_DTYPE)
+    sim, dev, lk = loop.sim, loop.dev, loop.lk
     val = {
         "dtc": loop.dtc, "k_on": loop.k_on, "k_off": loop.k_off, "ramp_rate": loop.ramp_rate, "rated": loop.rated,
         "inv_sqrt_l1l2": loop.inv_sqrt_l1l2, "t_rect": loop.t_rect, "v1_nom": loop.v1_nom,
-        "l1": loop.l1, "l2": loop.l2, "st_r1": lk.r1_ohm + dev.inv_r_ohm, "st_r2": lk.r2_ohm + dev.rect_rd_ohm,
-        "omega": loop.base.omega_rad_s, "b0": 1.0 / (2 * loop.l1), "b1": -1.0 / (2 * loop.l2),
+        **link_values(loop.l1, loop.l2, lk.r1_ohm + dev.inv_r_ohm, lk.r2_ohm + dev.rect_rd_ohm, loop.base.omega_rad_s),
         "vf": dev.rect_vf_v, "dr_short": dev.short_r_ohm - dev.rect_rd_ohm, "inv_r": dev.inv_r_ohm,
         "vf0": dev.rect_diode.vf0_v, "rd": dev.rect_diode.rd_ohm, "is_ideal": dev.is_ideal,
-        "coil_r1": lk.r1_ohm, "coil_r2": lk.r2_ohm,
-        "r0": bp.r0_ohm, "r1b": bp.r1_ohm, "tau1": bp.tau1_s, "bat_c1": bp.c1_f, "n_cells": bp.n_series,
-        "capacity_c": bp.capacity_c, "cc_a": ch.cc_current_a, "v_cv": ch.cv_cell_v * bp.n_series,
-        "cutoff_a": ch.cutoff_current_a, "v_recharge": (ch.cv_cell_v - ch.recharge_drop_cell_v) * bp.n_series,
+        "coil_r1": lk.r1_ohm, "coil_r2": lk.r2_ohm, **battery_values(loop.bp, loop.cfg.charger),
         "tx_off_delay": sim.tx_off_delay_s, "bms_period": sim.bms_period_s, "cmd_deadband": sim.cmd_deadband_a,
         "min_fine": sim.min_fine_s, "max_fine": sim.max_fine_s, "flight_dt": sim.flight_dt_s,
         "lm_rel_tol": sim.lm_rel_tol, "coarse_period": sim.coarse_policy_period_s,
@@ -66,9 +85,7 @@ def pack_constants(loop, use_fn: bool) -> np.ndarray:
         "obs_lo": _LO, "obs_inv": _INV_SPAN, "row_margin": math.ceil(loop.dtc / loop.t_rect) + 3,
     }
     assert set(val) == set(CONST_DTYPE.names)
-    for name, v in val.items():
-        c[name] = v
-    return c
+    return constants(val)
 
 
 def initial_state(loop) -> np.ndarray:

@@ -264,7 +264,7 @@ def _bat_step(c, soc, v1_v, i, dt_s):
 
 @njit(cache=True)
 def _charger_command(st, c, i_prop):
-    """CC-CV charge manager (:class:`.battery.CcCvCharger`): the SBAR command ``I_L*`` [A], propulsion
+    """CC-CV charge manager (:mod:`.battery`, :class:`.battery.CcCvParams`): the SBAR command ``I_L*`` [A], propulsion
     current ``i_prop`` plus the battery's CC/CV current, 0 when full; ``full`` and ``cv`` clear once
     ``OCV + v1`` falls below the recharge threshold."""
     v_rest = c.n_cells * _ocv_cell(st.soc) + st.vrc
