@@ -12,7 +12,8 @@ has something to do, by status:
   :meth:`~.loop.MissionLoop.act` on the observation the kernel wrote; the duty goes back in the state;
 * ``NEED_NOISE``: the next :data:`NOISE_BLOCK` standard normals of the loop's generator (sensor noise,
   ``sim.i2_noise_a``; drawn in blocks, the same sequence as one draw per policy call);
-* ``ERR_POWER`` / ``ERR_POLICY``: the error, worded with the numbers the kernel left in the state.
+* ``ERR_POWER`` / ``ERR_POLICY``: :meth:`~.loop.MissionLoop.fail` words the error with the numbers the
+  kernel left in the state.
 
 A policy with the ``kernel()`` hook (:class:`mission_sim.contract.Policy`) is called inside the kernel
 (``compiled`` None or True); any other (``compiled=False``, RL, arbitrary Python) is called here at
@@ -129,7 +130,7 @@ def run(loop, bar=None):
         c, s, smp = c.view(np.recarray), s.view(np.recarray), smp.view(np.recarray)
     if len(smp) < 2:
         return
-    rows = np.empty((BLOCK_ROWS + int(c[0]["row_margin"]), N_COLUMNS))  # pages touched only as rows are written
+    rows = np.empty((max(BLOCK_ROWS, 2 * int(c[0]["row_margin"])), N_COLUMNS))  # blocks of at most BLOCK_ROWS rows
     noise, obs = np.empty(NOISE_BLOCK if loop.sim.i2_noise_a > 0 else 0), np.empty(len(c[0]["obs_lo"]))
     duty_in, duty_ready, n_rows = s["duty_in"], s["duty_ready"], s["n_rows"]  # views into the state
     k_stop, t_done = _CHUNK, float(smp["t"][0])
@@ -151,7 +152,7 @@ def run(loop, bar=None):
         elif status in (kern.DONE, kern.DEPLETED):
             break
         else:
-            _raise(loop, status, s[0])
+            loop.fail(kern.STATUS_NAMES[status], s[0])
     if bar is not None:
         bar.update(float(smp["t"][-1]) - t_done)
     loop.rows = rows[:int(n_rows[0])]
@@ -164,18 +165,3 @@ def _hand_over(loop, rows, s):
     loop.rows, loop.peak_env = rows[:int(s[0]["n_rows"])], float(s[0]["peak_env"])
     loop.flush()
     s[0]["n_rows"] = 0
-
-
-def _raise(loop, status, st):
-    """The error of an ``ERR_*`` status, worded with the numbers the kernel left in the state ``st``."""
-    from . import loop_kernel as kern
-    from .loop import NonFiniteError
-    if status == kern.ERR_POWER:
-        raise ValueError(f"the battery cannot supply the propulsion power {st['err_p']:.1f} W at t={st['err_t']:.2f} s "
-                         f"(SoC {st['err_soc']:.3f}, phase {loop.traj.phase[st['err_k']]}): valid range: below its "
-                         f"maximum {st['err_pmax']:.1f} W; lighten the drone (drone.mass_kg, drone.payload_kg) or "
-                         "use a bigger battery (battery.n_series, battery.capacity_ah)")
-    if status == kern.ERR_POLICY:
-        raise NonFiniteError(f"policy {getattr(loop.policy, 'name', loop.policy)!r} returned "
-                             f"d_short={float(st['duty_in'])!r}; valid range: [0, 1]")
-    raise RuntimeError(f"mission kernel status {kern.STATUS_NAMES[status]}")  # not reached

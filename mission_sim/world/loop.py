@@ -24,7 +24,7 @@ import math
 import numpy as np
 
 from .results import MissionResult
-from .stream import BLOCK_ROWS, RowStats  # noqa: F401 (BLOCK_ROWS: the block size, re-exported for the driver's tests)
+from .stream import RowStats
 from .trajectory import Trajectory
 
 __all__ = ["MissionLoop", "ENERGISE_PHASES", "NonFiniteError"]
@@ -131,6 +131,19 @@ class MissionLoop:
         by the kernel: measured |I2| with the sensor noise, battery, command, last duty, time since the
         stop); the kernel checks it is finite and clips it into [0, 1]."""
         return float(np.asarray(self.policy.act(obs.reshape(1, -1).copy())).reshape(-1)[0])
+
+    def fail(self, status: str, st):
+        """Raise the error of the kernel's status ``status`` (``ERR_POWER``, ``ERR_POLICY``), worded with the
+        numbers it left in the state record ``st``."""
+        if status == "ERR_POWER":
+            raise ValueError(f"the battery cannot supply the propulsion power {st['err_p']:.1f} W at t={st['err_t']:.2f} s "
+                             f"(SoC {st['err_soc']:.3f}, phase {self.traj.phase[st['err_k']]}): valid range: below its "
+                             f"maximum {st['err_pmax']:.1f} W; lighten the drone (drone.mass_kg, drone.payload_kg) or "
+                             "use a bigger battery (battery.n_series, battery.capacity_ah)")
+        if status == "ERR_POLICY":
+            raise NonFiniteError(f"policy {getattr(self.policy, 'name', self.policy)!r} returned "
+                                 f"d_short={float(st['duty_in'])!r}; valid range: [0, 1]")
+        raise RuntimeError(f"mission kernel status {status}")  # not reached
 
     @property
     def st(self):
