@@ -181,9 +181,9 @@ def test_records_name_every_slot():
     cfg = load_config()
     traj = plan_mission(cfg)
     lp = MissionLoop(cfg, _policy(cfg, "step"), traj, True, _lm_along(cfg, cfg.coupling.model(), traj)[0])
-    c, s = fastpath.pack_constants(lp, True).view(np.recarray)[0], fastpath.initial_state(lp).view(np.recarray)[0]
+    c, s = fastpath.pack_constants(lp).view(np.recarray)[0], fastpath.initial_state(lp).view(np.recarray)[0]
     assert c.n_cells == cfg.battery.n_series and c.capacity_c == 3600.0 * cfg.battery.capacity_ah
-    assert c.l1 == lp.l1 and c.b0 == 1.0 / (2 * lp.l1) and c.use_fn
+    assert c.l1 == lp.l1 and c.b0 == 1.0 / (2 * lp.l1)
     assert s.soc == cfg.battery.initial_soc and s.x0 == s.x1 == s.v1 == 0.0 and not s.tx_on and s.d == 1.0
     assert np.isnan(s.depleted_at) and s.depleted_k == -1
 
@@ -194,8 +194,8 @@ def test_a_kernel_constant_moves_both_paths_alike(monkeypatch):
     base = run_mission(cfg, _policy(cfg, "model_based"))
     pack = fastpath.pack_constants
 
-    def patched(loop, use_fn):
-        c = pack(loop, use_fn)
+    def patched(loop):
+        c = pack(loop)
         c["r0"] *= 1.5
         return c
     monkeypatch.setattr(fastpath, "pack_constants", patched)

@@ -66,7 +66,7 @@ def constants(values: dict) -> np.ndarray:
     return c
 
 
-def pack_constants(loop, use_fn: bool) -> np.ndarray:
+def pack_constants(loop) -> np.ndarray:
     """The loop's constants as a 1-element :data:`.loop_kernel.CONST_DTYPE` array (every field set)."""
     from ..contract import _INV_SPAN, _LO
     from .loop_kernel import CONST_DTYPE
@@ -82,7 +82,7 @@ def pack_constants(loop, use_fn: bool) -> np.ndarray:
         "min_fine": sim.min_fine_s, "max_fine": sim.max_fine_s, "flight_dt": sim.flight_dt_s,
         "lm_rel_tol": sim.lm_rel_tol, "coarse_period": sim.coarse_policy_period_s,
         "duty_event_tol": sim.duty_event_tol, "settle_duty_tol": sim.settle_duty_tol,
-        "settle_i2_tol": sim.settle_i2_tol_a, "noise_a": sim.i2_noise_a, "use_fn": use_fn,
+        "settle_i2_tol": sim.settle_i2_tol_a, "noise_a": sim.i2_noise_a,
         "obs_lo": _LO, "obs_inv": _INV_SPAN, "row_margin": math.ceil(loop.dtc / loop.t_rect) + 3,
     }
     assert set(val) == set(CONST_DTYPE.names)
@@ -122,9 +122,9 @@ def run(loop, bar=None):
     if loop.compiled and hook is None:
         raise ValueError("compiled=True needs a policy with the kernel hook (mission_sim.contract.Policy); "
                          "pass compiled=None or False")
-    fn, params, pstate = hook if hook is not None else (kern.no_policy, np.empty(0), np.empty(0))
+    fn, params, pstate = hook if hook is not None else (None, (), ())   # None: NEED_ACT for each duty
     params, pstate = np.ascontiguousarray(params, dtype=float), np.ascontiguousarray(pstate, dtype=float)
-    c, s, smp = pack_constants(loop, hook is not None), initial_state(loop), samples(loop)
+    c, s, smp = pack_constants(loop), initial_state(loop), samples(loop)
     loop.consts, loop.state = c, s
     if not hasattr(kern.advance, "py_func"):   # NUMBA_DISABLE_JIT=1: the kernel runs as Python on record views
         c, s, smp = c.view(np.recarray), s.view(np.recarray), smp.view(np.recarray)

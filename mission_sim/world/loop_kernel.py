@@ -29,8 +29,8 @@ trajectory samples (:data:`SAMPLE_DTYPE`: time, Lm, k, propulsion power, energis
 ============  ========================================================================================
 
 A compiled policy (``Policy.kernel()``, :data:`mission_sim.contract.POLICY_KERNEL_SIGNATURE`) is
-called in place (``c.use_fn``); otherwise the kernel returns ``NEED_ACT`` at the same point. Both
-run this same code; they differ only in who computes the duty. The per-sample arrays may be a
+passed as ``fn`` and called in place; with ``fn=None`` (a Python policy) the kernel returns
+``NEED_ACT`` at the same point. Both run this same code; they differ only in who computes the duty. The per-sample arrays may be a
 chunk of the trajectory starting at sample ``k0`` (state field); quiet flight looks ahead at most
 ``sim.flight_dt_s``, so a chunk should reach that far beyond ``k_stop`` for the same merging.
 
@@ -49,9 +49,9 @@ import numpy as np
 from numba import from_dtype, njit, types
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
-from ..contract import OBS_DIM, POLICY_KERNEL_SIGNATURE
+from ..contract import OBS_DIM
 
-__all__ = ["advance", "no_policy", "link_disc", "link_step", "link_stored_j", "STATE_DTYPE", "CONST_DTYPE",
+__all__ = ["advance", "link_disc", "link_step", "link_stored_j", "STATE_DTYPE", "CONST_DTYPE",
            "SAMPLE_DTYPE", "OK", "DONE", "PAUSED", "FULL", "NEED_ACT", "NEED_NOISE", "DEPLETED", "ERR_POWER",
            "ERR_POLICY", "STATUS_NAMES"]
 
@@ -100,8 +100,8 @@ CONST_DTYPE = np.dtype([
     ("tx_off_delay", "f8"), ("bms_period", "f8"), ("cmd_deadband", "f8"), ("min_fine", "f8"), ("max_fine", "f8"),
     ("flight_dt", "f8"), ("lm_rel_tol", "f8"), ("coarse_period", "f8"), ("duty_event_tol", "f8"),
     ("settle_duty_tol", "f8"), ("settle_i2_tol", "f8"), ("noise_a", "f8"),
-    # the policy: compiled (True) or Python (NEED_ACT); the contract's normalisation (lo, 1 / span)
-    ("use_fn", "?"), ("obs_lo", "f8", (OBS_DIM,)), ("obs_inv", "f8", (OBS_DIM,)),
+    # the contract's normalisation of the observation (lo, 1 / span)
+    ("obs_lo", "f8", (OBS_DIM,)), ("obs_inv", "f8", (OBS_DIM,)),
     # most rows one iteration can write (a fine step split into rectifier periods)
     ("row_margin", "i8"),
 ])
@@ -441,8 +441,8 @@ def _fine_step(s, c, rows, t0, dt, lm, p_prop, row_k):
 def _duty(st, c, t, noise, obs, fn, params, pstate):
     """The policy's duty at ``t``: ``(status, d)``. The observation per the contract (measured |I2| plus
     the sensor noise ``noise_a * noise[noise_i]``, time since the command went to 0 saturating at 1 s here,
-    10 ms in the contract), normalised into ``obs``; then the compiled policy, or NEED_ACT for a
-    Python one (its output comes back in ``duty_in``). d is clipped into [0, 1]; not finite: ERR_POLICY."""
+    10 ms in the contract), normalised into ``obs``; then the compiled policy ``fn``, or NEED_ACT for a
+    Python one (``fn`` None; its output comes back in ``duty_in``). d is clipped into [0, 1]; not finite: ERR_POLICY."""
     if st.duty_ready:
         st.duty_ready = False
         out = st.duty_in
@@ -459,7 +459,7 @@ def _duty(st, c, t, noise, obs, fn, params, pstate):
         vals = (i2m, st.last_vl, st.last_ib, st.last_il, st.soc, st.cmd, st.d, t_since)
         for j in range(OBS_DIM):
             obs[j] = min(max(2.0 * (vals[j] - c.obs_lo[j]) * c.obs_inv[j] - 1.0, -1.0), 1.0)
-        if not c.use_fn:
+        if fn is None:      # a Python policy (this branch is resolved at compile time)
             return NEED_ACT, 0.0
         out = fn(obs, params, pstate)
     if not math.isfinite(out):
@@ -712,17 +712,16 @@ def _advance(k_stop, s, c, smp, rows, noise, obs, fn, params, pstate):
             return r
 
 
-@njit(POLICY_KERNEL_SIGNATURE, cache=True)
-def no_policy(obs, params, state):
-    """The policy argument of :func:`advance` for a Python policy (``c.use_fn`` False: never called)."""
-    return math.nan
-
-
 def _array_of(dtype):
     return types.Array(from_dtype(dtype), 1, "C")
 
 
+_ARGS = (types.int64, _array_of(STATE_DTYPE), _array_of(CONST_DTYPE), _array_of(SAMPLE_DTYPE), types.float64[:, ::1],
+         _F8, _F8)
 with warnings.catch_warnings():  # compiled (or loaded from the cache) here; the policy is a first-class function
     warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
-    advance = njit(types.int64(types.int64, _array_of(STATE_DTYPE), _array_of(CONST_DTYPE), _array_of(SAMPLE_DTYPE),
-                               types.float64[:, ::1], _F8, _F8, POLICY_FN, _F8, _F8), cache=True)(_advance)
+    # two overloads of the one loop: a compiled policy (first-class function), or none (a Python policy:
+    # NEED_ACT; ``fn is None`` prunes the call at compile time, and the call from Python skips the
+    # conversion of a function argument, ~0.1 ms, which would dominate a round trip per policy call)
+    advance = njit([types.int64(*_ARGS, POLICY_FN, _F8, _F8), types.int64(*_ARGS, types.none, _F8, _F8)],
+                   cache=True)(_advance)
