@@ -223,6 +223,7 @@ class SbarChargingEnv(gym.Env):
         slow[:, SLOW.lm_h] = p.lm_h[0]
         slow[:, SLOW.i2_sm_a] = i2_sm
         self._st, self._steps, self._slow = st, steps, slow
+        self._cmd = steps[:, 0]   # the command per step [A] (a view)
 
     def step(self, action):
         out = self._step(action)
