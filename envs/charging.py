@@ -12,7 +12,7 @@ from mission_sim.contract import OBS_DIM, PolicyContext
 
 from wpt_receiver.sbar import rectifier_current, rectifier_v2_folded
 
-from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, build_plans
+from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, build_plans, kernel_function
 from .layout import BAT, INFO, SINGLE, SINGLE_PAR, SLOW, XC
 from .objective import short_mode_i2_a, stop_step
 from .peaks import LOOKUP_SCALARS, PeakLookup
@@ -129,7 +129,6 @@ class SbarChargingEnv(gym.Env):
         self._hist = None
         self._line = None
         self._compiled = compiled is None or bool(compiled)
-        from .vector import kernel_function
         self._kern = kernel_function("single_step", self._compiled)   # also: numba imported here
         w, tab = self._w, self._peak.kernel_table
         vals = dict(n_steps=self._T, dt=self._dt, inv_rated=self._inv_rated, w_track=w.tracking,
@@ -193,7 +192,6 @@ class SbarChargingEnv(gym.Env):
         return obs[0], info
 
     def _fn(self, name):
-        from .vector import kernel_function
         return kernel_function(name, self._compiled)
 
     def _start(self, p):

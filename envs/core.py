@@ -43,7 +43,7 @@ from .layout import BAT, COEF
 from .plant import battery_operating_point, lm_window_h
 from .scenario import Scenario, command_profile, stack_draws
 
-__all__ = ["EnvConfig", "RewardWeights", "Plans", "build_plans", "OBS_SCALE", "OBS_OFFSET", "N_COEF", "N_BAT"]
+__all__ = ["EnvConfig", "RewardWeights", "Plans", "build_plans", "OBS_SCALE", "OBS_OFFSET", "N_COEF", "N_BAT", "kernel_function"]
 
 HALF_PI = 0.5 * math.pi
 FOUR_OVER_PI = 4.0 / math.pi
@@ -162,6 +162,13 @@ class Plans:
     t_stop_s: np.ndarray     # (n,) time of the stop command
     delay_steps: np.ndarray | None = None   # (n,) int: age of the current measurements [control periods]
     cplx: tuple | None = None   # detuned windows (envs.detuned): (coef (n, S, 32), x0 (n, 4), C1 (n,), C2 (n,) [F])
+
+
+def kernel_function(name: str, compiled: bool = True):
+    """:func:`envs.vector_kernel.kernel_function` (imported here, when an env is built, so ``import envs``
+    does not load numba)."""
+    from .vector_kernel import kernel_function as get
+    return get(name, compiled)
 
 
 def _steady_v2(link: LinkParams, lm, il, vl):

@@ -29,22 +29,13 @@ from mission_sim.contract import OBS_DIM, PolicyContext
 
 from wpt_receiver.sbar import rectifier_current, rectifier_v2_folded
 
-from .core import N_BAT, N_COEF, OBS_OFFSET, OBS_SCALE, EnvConfig, build_plans
+from .core import N_BAT, N_COEF, OBS_OFFSET, OBS_SCALE, EnvConfig, build_plans, kernel_function
 from .layout import BAT, CCOEF_N, INFO, PAR, STATE, XC
 from .objective import short_mode_i2_a, stop_step
 from .peaks import LOOKUP_SCALARS, PeakLookup
 from .scenario import draw_episodes, get_scenario, scenario_from_options
 
-__all__ = ["SbarChargingVectorEnv", "SbarChargingDiscreteVectorEnv", "kernel_function"]
-
-
-def kernel_function(name: str, compiled: bool = True):
-    """The function ``name`` of :mod:`envs.vector_kernel` (imported here, when an env is built, so
-    ``import envs`` does not load numba): compiled, or with ``compiled=False`` the same source run by
-    the interpreter (its ``py_func``; looked up at each call, so a test may swap the module's functions)."""
-    from . import vector_kernel as vk
-    f = getattr(vk, name)
-    return f if compiled else getattr(f, "py_func", f)
+__all__ = ["SbarChargingVectorEnv", "SbarChargingDiscreteVectorEnv"]
 
 
 class SbarChargingVectorEnv(VectorEnv):

@@ -36,7 +36,8 @@ from numba import njit, prange
 from .layout import BAT, COEF, INFO, PAR, SINGLE, SINGLE_PAR, SLOW, STATE, XC
 from .objective import SHORT_MODE_IL_A, SHORT_MODE_WITHIN_S
 
-__all__ = ["env_step", "step_kernel", "duty_kernel", "single_step", "inst_peak_rows", "obs_rows", "INFO_ROWS"]
+__all__ = ["env_step", "step_kernel", "duty_kernel", "single_step", "inst_peak_rows", "obs_rows", "INFO_ROWS",
+           "kernel_function"]
 
 #: rows of the info block the kernel fills, in order
 INFO_ROWS = INFO._fields
@@ -45,6 +46,14 @@ _HALF_PI = 0.5 * np.pi
 _SM_LATE_S = SHORT_MODE_WITHIN_S - 1e-12
 #: columns of the ZOH coefficients used by the sub-steps, in the order of :func:`_substep`'s arguments
 _SUB_COLS = np.array([COEF.h00, COEF.h01, COEF.f0, COEF.g01, COEF.h10, COEF.h11, COEF.f1, COEF.g11], dtype=np.int64)
+
+
+def kernel_function(name: str, compiled: bool = True):
+    """The function ``name`` of this module: compiled, or with ``compiled=False`` the same source run
+    by the interpreter (its ``py_func``; looked up in the module at each call, so a test may swap the
+    module's functions and constants)."""
+    f = globals()[name]
+    return f if compiled else getattr(f, "py_func", f)
 
 
 @njit(cache=True)
