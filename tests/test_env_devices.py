@@ -30,7 +30,7 @@ def test_ideal_devices_reproduce_the_env_before_devices(compiled):
     keys = [str(k) for k in g["keys"]]
     for scn, seed in (("random", 5), ("battery", 8)):
         env = SbarChargingEnv(scenario=scn, compiled=compiled, config=EnvConfig(devices="ideal"))
-        rows = env._peak._rows
+        tab = env._peak.kernel_table
         rng = np.random.default_rng(seed)
         _, info = env.reset(seed=seed)
         got, inst = [], []
@@ -38,7 +38,7 @@ def test_ideal_devices_reproduce_the_env_before_devices(compiled):
             if k:
                 vl = info["battery_v"]   # the VL at the start of the step
                 _, _, _, _, info = env.step(rng.uniform(-1, 1, 1).astype(np.float32))
-                inst.append(info["i2_peak_a"] == inst_peak(info["i2_peak_envelope_a"], info["d_short"], vl, rows))
+                inst.append(info["i2_peak_a"] == inst_peak(info["i2_peak_envelope_a"], info["d_short"], vl, tab))
             got.append([info["i2_peak_envelope_a"] if key == "i2_peak_a" else info[key] for key in keys])
         # stored numbers from another code version and numpy release: equal to round-off, not bit
         # for bit (numpy's vectorised transcendentals change between releases and CPUs; issue 25)
