@@ -93,49 +93,94 @@ def _unpack_state(loop, s):
 
 def run_compiled(loop, bar=None) -> bool:
     """Run ``loop`` (freshly reset) compiled; True when done (rows, state written back to ``loop``),
-    False when the reference path has to run instead (error status, or an interval too long)."""
+    False when the reference path has to run instead (error status, or an interval too long).
+
+    The per-sample arrays come chunk by chunk (:meth:`.samples.MissionSamples.chunk`, samples
+    ``[k, k + SAMPLE_CHUNK)`` plus the look-ahead the quiet-flight merge may use); the kernel runs on
+    a chunk with local sample indices and the rows' sample column is shifted back to global ones."""
     from . import loop_kernel as kern
     from ..contract import _INV_SPAN, _LO
     hook = loop.policy.kernel()
-    if hook is None:
+    if hook is None or loop.n < 2:
         return False
     fn, params, state = hook
     cst = pack_constants(loop)
     vals = _state_values(loop)
     s = np.array([float(vals[name]) for name in kern.S_NAMES])
-    t_all = np.ascontiguousarray(loop.t_all, dtype=float)
-    if len(t_all) < 2:
-        return False
-    need = kern._rows_needed.py_func(cst, float(np.max(np.diff(t_all))))  # the kernel's bound, in Python
-    if need > _MAX_ROWS:
-        return False
-    arrays = (t_all, np.ascontiguousarray(loop.lm_all, dtype=float), np.ascontiguousarray(loop.k_all, dtype=float),
-              np.ascontiguousarray(loop.p_all, dtype=float), loop.eligible.astype(float))
-    rows = np.empty((max(2 * need, BLOCK_ROWS + need), N_COLUMNS))  # pages are touched only as rows are written
-    k, params, state = 0, np.ascontiguousarray(params, dtype=float), np.ascontiguousarray(state, dtype=float)
-    lo, inv = np.ascontiguousarray(_LO, dtype=float), np.ascontiguousarray(_INV_SPAN, dtype=float)
-    i_rows, i_peak = kern.S_NAMES.index("n_rows"), kern.S_NAMES.index("peak_env")
-    while k < len(t_all) - 1:
-        k_new, status = kern.run_kernel(k, k + _CHUNK, s, cst, *arrays, rows, fn, params, state, lo, inv)
-        if bar is not None:
-            bar.update(float(t_all[k_new]) - float(t_all[k]))
-        k = k_new
-        if status == kern.FULL and s[i_rows] == 0:
-            rows = np.concatenate([rows, np.empty_like(rows)])
-        elif status == kern.DEPLETED:
-            break
-        elif status not in (kern.OK, kern.FULL):
+    pol = (fn, np.ascontiguousarray(params, dtype=float), np.ascontiguousarray(state, dtype=float),
+           np.ascontiguousarray(_LO, dtype=float), np.ascontiguousarray(_INV_SPAN, dtype=float))
+    idx = {name: kern.S_NAMES.index(name) for name in ("n_rows", "peak_env", "depleted_k")}
+    k, rows = 0, np.empty((0, N_COLUMNS))
+    while k < loop.n - 1:
+        got = _chunk(loop, cst, k)
+        if got is None:
             return False
-        if s[i_rows] >= BLOCK_ROWS or status == kern.FULL:
-            _hand_over(loop, rows, s, i_rows, i_peak)   # the block is final: the buffer is reused
-    loop.rows = rows[:int(s[i_rows])]
+        ch, k_end, need = got
+        if rows.shape[0] < max(2 * need, BLOCK_ROWS + need):
+            if s[idx["n_rows"]] > 0:
+                _hand_over(loop, rows, s, idx)
+            rows = np.empty((max(2 * need, BLOCK_ROWS + need), N_COLUMNS))  # pages touched only as rows are written
+        k, status = _run_chunk(kern, loop, ch, k, k_end, s, cst, rows, pol, idx, bar)
+        if status is None:
+            return False
+        if s[idx["n_rows"]] > 0 and (k < loop.n - 1 and status != kern.DEPLETED):
+            _hand_over(loop, rows, s, idx)   # the rows of this chunk, while its poses are at hand
+        if status == kern.DEPLETED:
+            break
+    loop.rows = rows[:int(s[idx["n_rows"]])]
     _unpack_state(loop, s)
     return True
 
 
-def _hand_over(loop, rows, s, i_rows, i_peak):
+def _chunk(loop, cst, k):
+    """The sample chunk from ``k``: ``(chunk, k_end, rows_needed)`` with the kernel to stop at ``k_end``
+    (global) and enough samples after it for the quiet-flight merge (``sim.flight_dt_s``) to see what
+    it would see in the whole series; None if one interval needs more than :data:`_MAX_ROWS` rows."""
+    from . import loop_kernel as kern
+    from .samples import SAMPLE_CHUNK
+    n = loop.n
+    k_end = min(k + SAMPLE_CHUNK, n - 1)
+    extra = 64
+    while True:
+        ch = loop.samples.chunk(k, min(k_end + extra, n))
+        t = ch.t_s
+        if ch.k0 + len(ch) == n or t[-1] - t[k_end - 1 - k] > loop.sim.flight_dt_s + 1e-6:
+            break
+        extra *= 4
+    need = kern._rows_needed.py_func(cst, float(np.max(np.diff(t))))  # the kernel's bound, in Python
+    return None if need > _MAX_ROWS else (ch, k_end, need)
+
+
+def _run_chunk(kern, loop, ch, k, k_end, s, cst, rows, pol, idx, bar):
+    """Run the kernel over ``[k, k_end)`` of chunk ``ch`` in calls of :data:`_CHUNK` samples (progress
+    between them, full row blocks handed over); ``(next k (global), status)``, status None when the
+    reference path has to run."""
+    arrays, k0 = ch.arrays, ch.k0
+    i_rows = idx["n_rows"]
+    kl, stop = k - k0, k_end - k0
+    status = kern.OK
+    while kl < stop:
+        r0 = int(s[i_rows])
+        kl_new, status = kern.run_kernel(kl, min(kl + _CHUNK, stop), s, cst, *arrays, rows, *pol)
+        rows[r0:int(s[i_rows]), 2] += k0   # the rows' sample index, local -> global
+        if bar is not None:
+            bar.update(float(arrays[0][kl_new]) - float(arrays[0][kl]))
+        kl = kl_new
+        if status == kern.FULL and s[i_rows] == 0:
+            return k0 + kl, None     # cannot happen: the buffer holds 2x an interval's bound
+        if status == kern.DEPLETED:
+            s[idx["depleted_k"]] += k0
+            return k0 + kl, status
+        if status not in (kern.OK, kern.FULL):
+            return k0 + kl, None
+        if s[i_rows] >= BLOCK_ROWS or status == kern.FULL:
+            _hand_over(loop, rows, s, idx)   # the block is final: the buffer is reused
+    return k0 + kl, status
+
+
+def _hand_over(loop, rows, s, idx):
     """Give the rows written so far to the loop (:meth:`~.loop.MissionLoop.flush`, which copies them) and
     empty the kernel's buffer."""
-    loop.rows, loop.peak_env = rows[:int(s[i_rows])], float(s[i_peak])
+    loop.rows, loop.peak_env = rows[:int(s[idx["n_rows"]])], float(s[idx["peak_env"]])
     loop.flush()
-    s[i_rows] = 0.0
+    s[idx["n_rows"]] = 0.0

@@ -34,6 +34,7 @@ from ..contract import normalise_obs
 from .battery import Battery, CcCvCharger, _ocv_cell_scalar, scalar_stepper
 from .linkstep import LinkStepper
 from .results import MissionResult
+from .samples import ENERGISE_PHASES, MissionSamples
 from .stream import BLOCK_ROWS, RowStats
 from .trajectory import Trajectory
 
@@ -44,7 +45,6 @@ class NonFiniteError(ValueError):
     """A NaN or an infinity inside a run; :func:`mission_sim.world.runner.run_mission` adds the inputs
     that may have produced it (the config keys farthest from the default mission)."""
 
-ENERGISE_PHASES = ("charge", "hover")
 _FOUR_PI = 4.0 / math.pi
 _COLUMNS = ("t_s", "dt_s", "_row", "lm_h", "v1_v", "i1_amp_a", "i2_amp_a", "d_short", "v2_v", "rect_current_a",
             "battery_v", "battery_current_a", "soc", "charge_cmd_a", "fine", "e_source_j", "e_coil_loss_j",
@@ -91,7 +91,7 @@ class MissionLoop:
         # --- per-sample arrays (pose -> Lm, propulsion, gating eligibility)
         "lm_all": "Lm per sample [H]", "k_all": "coupling per sample [-]", "p_all": "propulsion power [W]",
         "t_all": "sample times [s]", "eligible": "sample in an energising phase (and charge)",
-        "n": "number of samples",
+        "n": "number of samples", "samples": "samples.MissionSamples: the per-sample arrays, chunk by chunk",
         # --- loop state
         "x": "link envelope state (I1, I2) [A]", "v1": "pad voltage amplitude [V]",
         "tx_on": "pad wants to be on (V1 ramps to v1_nom) / off (to 0)", "cmd": "charge command I_L* [A]",
@@ -141,12 +141,10 @@ class MissionLoop:
         self.r0, self.r1b, self.n_cells, self.tau1 = bp.r0_ohm, bp.r1_ohm, bp.n_series, bp.tau1_s
         self.bat_step = scalar_stepper(bp)
         self.inv_sqrt_l1l2 = 1.0 / math.sqrt(model.l1_h * model.l2_h)
-        self.lm_all = lm_all
-        self.k_all = lm_all * self.inv_sqrt_l1l2
-        self.p_all = traj.propulsion_w(cfg.drone)
-        self.t_all = traj.t_s
-        self.eligible = np.isin(traj.phase, ENERGISE_PHASES) & charge
-        self.n = len(self.t_all)
+        # the per-sample arrays come in chunks (the compiled path); materialise() makes all at once
+        self.samples = MissionSamples(cfg, traj, charge, lm_all)
+        self.n = self.samples.n
+        self.lm_all = self.k_all = self.p_all = self.t_all = self.eligible = None
         self._reset_state()
 
     def _reset_state(self):
@@ -179,17 +177,17 @@ class MissionLoop:
 
         ``compiled`` (None: when it applies, see :func:`.fastpath.usable`) runs the same loop compiled
         (:mod:`.loop_kernel`); the Python methods below are the reference it is tested against."""
-        t_all = self.t_all
         bar = None
         if progress:
             from tqdm import tqdm
-            bar = tqdm(total=float(t_all[-1] - t_all[0]), unit="sim s", desc="mission", leave=False,
+            bar = tqdm(total=self.samples.t_last_s - self.samples.t_first_s, unit="sim s", desc="mission", leave=False,
                        bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
         if self.compiled is not False and self._run_fast(bar):
             if bar is not None:
                 bar.close()
             return self.result()
-        k = 0
+        self.materialise()
+        t_all, k = self.t_all, 0
         try:
             while k < self.n - 1:
                 j = self.sample(k)
@@ -203,6 +201,12 @@ class MissionLoop:
         if bar is not None:
             bar.close()
         return self.result()
+
+    def materialise(self):
+        """The per-sample arrays of all samples at once (the reference path; the compiled one takes chunks)."""
+        c = self.samples.chunk(0, self.n)
+        self.t_all, self.lm_all, self.k_all, self.p_all = c.t_s, c.lm_h, c.k, c.p_w
+        self.eligible = c.elig != 0.0
 
     def _run_fast(self, bar) -> bool:
         """The compiled run (:mod:`.fastpath`) if it applies; True when done. On an error status (or an
@@ -553,7 +557,7 @@ class MissionLoop:
         if self.depleted_at is None:
             return {"battery_depleted": False, "depleted_at_s": None, "depleted_pad_distance_m": None}
         pads = np.array([[p.x_m, p.y_m, p.z_m] for p in self.cfg.pads])
-        dist = np.linalg.norm(pads - self.traj.pos_m[self.depleted_k], axis=1)
+        dist = np.linalg.norm(pads - self.samples.pose([self.depleted_k])[0][0], axis=1)
         return {"battery_depleted": True, "depleted_at_s": float(self.depleted_at),
                 "depleted_pad_distance_m": float(dist.min())}
 
@@ -594,7 +598,7 @@ class MissionLoop:
         df["fine"] = df["fine"].astype(bool)
         df["_row"] = df["_row"].astype(np.int64)
         ri = df.pop("_row").to_numpy()
-        pos = self.traj.pos_m[ri]
+        pos, phase = self.samples.pose(ri)
         df.insert(2, "x_m", pos[:, 0])
         df.insert(3, "y_m", pos[:, 1])
         df.insert(4, "z_m", pos[:, 2])
@@ -605,17 +609,17 @@ class MissionLoop:
         df["p_source_w"] = df["e_source_j"] / dts
         df["p_coil_loss_w"] = df["e_coil_loss_j"] / dts
         df["p_battery_loss_w"] = (df["e_battery_r0_j"] + df["e_battery_r1_j"]) / dts
-        df["phase"] = pd.Categorical(self.traj.phase[ri])
+        df["phase"] = pd.Categorical(phase)
         return df
 
     def summary(self) -> dict:
         """Summary dict: energies (exact sums), balance errors, SoC, I2 peak, step counts (from :attr:`stats`)."""
-        bp, t_all, st = self.bp, self.t_all, self.stats
+        bp, st, smp = self.bp, self.stats, self.samples
         self.peak_i2 = self.instantaneous_peak()
         return {
             "policy": getattr(self.policy, "name", type(self.policy).__name__),
             "charge": bool(self.charge),
-            "sim_time_s": float((t_all[-1] if self.depleted_at is None else self.depleted_at) - t_all[0]),
+            "sim_time_s": float((smp.t_last_s if self.depleted_at is None else self.depleted_at) - smp.t_first_s),
             "wall_s": 0.0,
             **self.energy_summary(),
             "initial_soc": float(bp.initial_soc),

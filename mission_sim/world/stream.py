@@ -79,7 +79,7 @@ def _derived(loop, arr: np.ndarray) -> dict:
     columns = loop.columns
     col = {name: arr[:, j] for j, name in enumerate(columns)}
     ri = col.pop("_row").astype(np.int64)
-    pos = loop.traj.pos_m[ri]
+    pos, phase = loop.samples.pose(ri)
     out = {"t_s": col["t_s"], "dt_s": col["dt_s"], "x_m": pos[:, 0], "y_m": pos[:, 1], "z_m": pos[:, 2],
            "lm_h": col["lm_h"], "k": col["lm_h"] * loop.inv_sqrt_l1l2, "tx_on": col["v1_v"] > 0}
     for name in columns[4:]:
@@ -89,7 +89,7 @@ def _derived(loop, arr: np.ndarray) -> dict:
     out["p_source_w"] = col["e_source_j"] / dts
     out["p_coil_loss_w"] = col["e_coil_loss_j"] / dts
     out["p_battery_loss_w"] = (col["e_battery_r0_j"] + col["e_battery_r1_j"]) / dts
-    out["phase"] = (np.asarray(loop.traj.phase), ri)   # names per sample and the rows' samples (see _arrow)
+    out["phase"] = (phase, slice(None))   # names per row (see _arrow)
     return out
 
 

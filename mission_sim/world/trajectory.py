@@ -108,9 +108,14 @@ class Trajectory:
 
     def propulsion_w(self, drone) -> np.ndarray:
         """Electrical propulsion power (N,) [W] from momentum theory (airspeed = |v_xy - wind_xy|)."""
-        v = self.velocity_m_s()
-        air = np.hypot(v[:, 0] - self.wind_m_s[:, 0], v[:, 1] - self.wind_m_s[:, 1])
-        return propulsion_power_w(drone, air, v[:, 2])
+        return propulsion_from(drone, self.velocity_m_s(), self.wind_m_s)
+
+
+def propulsion_from(drone, vel_m_s, wind_m_s) -> np.ndarray:
+    """Electrical propulsion power (N,) [W] at velocities (N, 3) [m/s] in winds (N, 3) [m/s]
+    (momentum theory, :func:`.power.propulsion_power_w`; airspeed = |v_xy - wind_xy|)."""
+    air = np.hypot(vel_m_s[:, 0] - wind_m_s[:, 0], vel_m_s[:, 1] - wind_m_s[:, 1])
+    return propulsion_power_w(drone, air, vel_m_s[:, 2])
 
 
 # --------------------------------------------------------------------------- planning
@@ -283,6 +288,7 @@ class PlannedTrajectory:
         wp = self.cfg.wind
         d = math.radians(wp.direction_deg)
         self._mean_wind = np.array([wp.speed_m_s * math.cos(d), wp.speed_m_s * math.sin(d), 0.0])
+        self.uniform_spacing = _uniform_grid(self.n, self.dt)
         self._full = None
         self._restart()
 
@@ -386,6 +392,17 @@ class PlannedTrajectory:
     def _wind(self, k0: int, k1: int) -> np.ndarray:
         """Wind (k1 - k0, 3) [m/s] of samples ``[k0, k1)``: :func:`.wind.wind_series` continued."""
         return wind_series(self.cfg.wind, k1 - k0, self.dt, self._gens, self._gust_z, first=k0 == 0)
+
+
+def _uniform_grid(n: int, dt: float) -> bool:
+    """True if the steps of ``arange(n) * dt`` are all bitwise equal (``numpy.gradient``'s test)."""
+    d0 = None
+    for a in range(0, n - 1, PLAN_BLOCK):
+        d = np.diff(np.arange(a, min(a + PLAN_BLOCK + 1, n)) * dt)
+        d0 = d[0] if d0 is None else d0
+        if not (d == d0).all():
+            return False
+    return True
 
 
 def _parts(tr: Trajectory) -> tuple:
