@@ -716,10 +716,12 @@ class MissionLoop:
         st = self.stats
         vl = st.vl_on_max if st.vl_on_max > -math.inf else float(self.last_vl)
         harm = self.harmonics(vl)
-        cand = st.cand_i2 >= self.peak_env - 2.0 * harm.ripple_bound_a()
-        d, i2c = np.r_[self.peak_d, st.cand_d[cand]], np.r_[self.peak_env, st.cand_i2[cand]]
+        cand_d, cand_i2 = st.candidates(self.peak_env - 2.0 * harm.ripple_bound_a())
+        d, i2c = np.r_[self.peak_d, cand_d], np.r_[self.peak_env, cand_i2]
         if len(d) > 64:
-            approx = PeakTable(harm, i2_max_a=1.05 * self.peak_env, n_d=26, n_i=21, i2_min_a=float(i2c.min()))(d, i2c)
+            table = PeakTable(harm, i2_max_a=1.05 * self.peak_env, n_d=26, n_i=21, i2_min_a=float(i2c.min()))
+            approx = np.concatenate([np.atleast_1d(table(d[a:a + 65536], i2c[a:a + 65536]))   # bounded temporaries
+                                     for a in range(0, len(d), 65536)])
             keep = approx >= 0.99 * approx.max()
             d, i2c = d[keep], i2c[keep]
         return float(np.max(harm.peak(d, i2c)))

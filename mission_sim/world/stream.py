@@ -47,8 +47,7 @@ class RowStats:
         self.min_soc = self.max_soc = float(initial_soc)
         self.vl_on_max = -math.inf
         self.n_rows = 0
-        self.cand_d = np.empty(0)
-        self.cand_i2 = np.empty(0)
+        self._cand = []   # pieces [d, |I2|, min |I2|] of candidates in row order, pruned in place
 
     def add(self, arr: np.ndarray, peak_env: float) -> None:
         """Take one block ``arr`` (n, 26); ``peak_env`` is the running envelope peak after it [A]."""
@@ -68,10 +67,37 @@ class RowStats:
             self.vl_on_max = max(self.vl_on_max, float(vl[on].max()))
             i2 = np.abs(arr[:, c["i2_amp_a"]])
             floor = peak_env - self.margin_a
-            keep = self.cand_i2 >= floor
+            self._prune(floor)
             new = on & (i2 >= floor)
-            self.cand_d = np.concatenate([self.cand_d[keep], arr[new, c["d_short"]]])
-            self.cand_i2 = np.concatenate([self.cand_i2[keep], i2[new]])
+            if new.any():
+                self._cand.append([arr[new, c["d_short"]], i2[new], float(i2[new].min())])
+
+    def _prune(self, floor: float) -> None:
+        """Drop the candidates below ``floor`` [A] piece by piece (no copy of the whole list)."""
+        for piece in self._cand:
+            if piece[2] < floor:
+                keep = piece[1] >= floor
+                piece[0], piece[1] = piece[0][keep], piece[1][keep]
+                piece[2] = float(piece[1].min()) if len(piece[1]) else math.inf
+        self._cand = [p for p in self._cand if len(p[1])]
+
+    @property
+    def n_candidates(self) -> int:
+        return sum(len(p[1]) for p in self._cand)
+
+    def candidates(self, floor: float = -math.inf):
+        """Duties and |I2| [A] of the candidates with |I2| >= ``floor``, in row order."""
+        parts = [(p[0][p[1] >= floor], p[1][p[1] >= floor]) for p in self._cand]
+        return (np.concatenate([p[0] for p in parts] or [np.empty(0)]),
+                np.concatenate([p[1] for p in parts] or [np.empty(0)]))
+
+    @property
+    def cand_d(self) -> np.ndarray:
+        return self.candidates()[0]
+
+    @property
+    def cand_i2(self) -> np.ndarray:
+        return self.candidates()[1]
 
 
 def _derived(loop, arr: np.ndarray) -> dict:
