@@ -716,12 +716,7 @@ class MissionLoop:
         st = self.stats
         vl = st.vl_on_max if st.vl_on_max > -math.inf else float(self.last_vl)
         harm = self.harmonics(vl)
-        cand_d, cand_i2 = st.candidates(self.peak_env - 2.0 * harm.ripple_bound_a())
-        d, i2c = np.r_[self.peak_d, cand_d], np.r_[self.peak_env, cand_i2]
-        if len(d) > 64:
-            table = PeakTable(harm, i2_max_a=1.05 * self.peak_env, n_d=26, n_i=21, i2_min_a=float(i2c.min()))
-            approx = np.concatenate([np.atleast_1d(table(d[a:a + 65536], i2c[a:a + 65536]))   # bounded temporaries
-                                     for a in range(0, len(d), 65536)])
-            keep = approx >= 0.99 * approx.max()
-            d, i2c = d[keep], i2c[keep]
+        d, i2c = st.screened(self.peak_env - 2.0 * harm.ripple_bound_a(), (self.peak_d, self.peak_env),
+                             lambda i2_min: PeakTable(harm, i2_max_a=1.05 * self.peak_env, n_d=26, n_i=21,
+                                                      i2_min_a=i2_min))
         return float(np.max(harm.peak(d, i2c)))

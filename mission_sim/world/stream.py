@@ -91,6 +91,30 @@ class RowStats:
         return (np.concatenate([p[0] for p in parts] or [np.empty(0)]),
                 np.concatenate([p[1] for p in parts] or [np.empty(0)]))
 
+    def _filtered(self, floor: float, first):
+        """The pair ``first`` (duty, |I2|), then the candidates with |I2| >= ``floor`` in slices of
+        :data:`BLOCK_ROWS` (bounded temporaries)."""
+        yield np.array([first[0]], dtype=float), np.array([first[1]], dtype=float)
+        for d, i2, _ in self._cand:
+            for a in range(0, len(i2), BLOCK_ROWS):
+                m = i2[a:a + BLOCK_ROWS] >= floor
+                if m.any():
+                    yield d[a:a + BLOCK_ROWS][m], i2[a:a + BLOCK_ROWS][m]
+
+    def screened(self, floor: float, first, table_of, few: int = 64):
+        """Duties and |I2| [A] of ``first`` and the candidates >= ``floor``: all of them if at most ``few``,
+        else those whose approximate peak (``table_of(lowest |I2|)``, a callable ``(d, i2) -> peak``, e.g.
+        a :class:`wpt_receiver.peak.PeakTable`) is within 1 % of the largest. Slice by slice (two passes
+        of the table), so the whole candidate list is never copied."""
+        if sum(len(i2) for _, i2 in self._filtered(floor, first)) <= few:
+            d, i2 = zip(*self._filtered(floor, first))
+            return np.concatenate(d), np.concatenate(i2)
+        table = table_of(min(float(i2.min()) for _, i2 in self._filtered(floor, first)))
+        top = max(float(np.max(table(d, i2))) for d, i2 in self._filtered(floor, first))
+        kept = [(d[m], i2[m]) for d, i2 in self._filtered(floor, first)
+                for m in [np.atleast_1d(table(d, i2)) >= 0.99 * top]]
+        return np.concatenate([k[0] for k in kept]), np.concatenate([k[1] for k in kept])
+
     @property
     def cand_d(self) -> np.ndarray:
         return self.candidates()[0]
