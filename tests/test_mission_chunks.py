@@ -158,3 +158,25 @@ def test_peak_python_memory_does_not_grow_with_the_mission(tmp_path, monkeypatch
     long_, n_long = _peak_bytes(32, tmp_path)
     assert n_long > 7 * n_short
     assert long_ < 1.25 * short, (short, long_)
+
+
+def test_thinned_copy_for_figures_is_bounded_and_keeps_the_peak_transient(tmp_path):
+    """The writer's :class:`ThinnedSeries` (what ``dronewpt mission`` draws its figures from): rows of the
+    stored file unchanged, between ``max_points`` and twice that many plus the peak window, in time
+    order, and the 2,000 stored rows either side of the largest |I2| all there."""
+    from mission_sim.world.stream import FIGURE_COLUMNS
+    cfg = _cfg(3)
+    w = SeriesWriter(tmp_path / "t", figure_points=500)
+    run_mission(cfg, _policy(cfg), compiled=True, frame=False, sink=w)
+    w.close()
+    stored = pd.read_parquet(tmp_path / "t" / "timeseries.parquet", columns=list(FIGURE_COLUMNS))
+    thin = w.thinned.frame()
+    assert len(stored) > 8 * 500 and 500 <= len(thin) <= 2 * 500 + 4001 and w.thinned.stride >= 4
+    assert np.all(np.diff(thin["t_s"].to_numpy()) > 0)
+    merged = thin.merge(stored, on="t_s", suffixes=("", "_file"))
+    assert len(merged) == len(thin)                       # every kept row is a stored row ...
+    for c in FIGURE_COLUMNS[1:]:
+        assert np.array_equal(merged[c].to_numpy(), merged[c + "_file"].to_numpy()), c   # ... unchanged
+    j = int(np.argmax(np.abs(stored["i2_amp_a"].to_numpy())))
+    window = stored["t_s"].to_numpy()[max(j - 2000, 0):j + 2000]
+    assert np.isin(window, thin["t_s"].to_numpy()).all()

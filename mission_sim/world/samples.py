@@ -26,8 +26,8 @@ from .trajectory import propulsion_from
 __all__ = ["MissionSamples", "SampleChunk", "SAMPLE_CHUNK", "ENERGISE_PHASES", "gradient_rows", "pad_offsets",
            "lm_along"]
 
-#: trajectory samples per chunk of per-sample arrays (~9 MB of them, the trajectory's block included)
-SAMPLE_CHUNK = 1 << 17
+#: trajectory samples per chunk of per-sample arrays (~5 MB of them; the planning temporaries of a block, ~300 B a sample, dominate)
+SAMPLE_CHUNK = 1 << 16
 ENERGISE_PHASES = ("charge", "hover")
 
 

@@ -241,7 +241,7 @@ def plan_mission(cfg, rng: np.random.Generator | None = None) -> Trajectory:
 
 
 #: samples per block a :class:`PlannedTrajectory` generates (and keeps the last few of)
-PLAN_BLOCK = 1 << 16
+PLAN_BLOCK = 1 << 15
 _PHASE_NAMES = np.array(PHASES, dtype=object)
 
 
