@@ -24,8 +24,9 @@ import numpy as np
 
 __all__ = ["RowStats", "SeriesWriter", "ThinnedSeries", "BLOCK_ROWS", "FIGURE_COLUMNS", "read_series"]
 
-#: rows per block handed over by the loop (and per Parquet row group): ~13 MB of float64 rows
-BLOCK_ROWS = 1 << 16
+#: rows per block handed over by the loop (and per Parquet row group): ~3.4 MB of float64 rows (the
+#: block-sized temporaries of the summary, edge losses and the writer are part of a run's fixed peak)
+BLOCK_ROWS = 1 << 14
 _ENERGY_COLS = ("e_source_j", "e_coil_loss_j", "e_rectifier_j", "e_battery_chem_j", "e_battery_r0_j",
                 "e_battery_r1_j", "e_battery_c1_j", "e_propulsion_j", "e_inverter_switches_j",
                 "e_rectifier_diodes_j", "e_rectifier_switches_j")
