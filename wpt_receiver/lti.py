@@ -91,12 +91,15 @@ def zoh_tf(num, den, dt_s: float):
     return ss2tf(ad, bd, c, d)
 
 
-def lfilter(b, a, x, axis: int = 0) -> np.ndarray:
+def lfilter(b, a, x, axis: int = 0, state: list | None = None) -> np.ndarray:
     """``y`` of the IIR filter ``b(z)/a(z)`` from rest along ``axis`` (direct form II transposed).
 
     The same recursion and operation order as ``scipy.signal.lfilter`` (b and a padded to one
     length and divided by ``a[0]``). A Python loop over samples: meant for the few thousand
-    samples of a trajectory grid, not for audio-length signals.
+    samples of a trajectory grid, not for audio-length signals. ``state`` (one list of
+    ``max(len(a), len(b)) - 1`` floats per column, zeros to start from rest) continues the filter
+    from where an earlier call left it and is updated in place, so a signal filtered in chunks
+    gives the numbers of one call (``scipy``'s ``zi``/``zf``).
     """
     b = np.atleast_1d(np.asarray(b, dtype=float))
     a = np.atleast_1d(np.asarray(a, dtype=float))
@@ -106,16 +109,18 @@ def lfilter(b, a, x, axis: int = 0) -> np.ndarray:
         b, a = b / a[0], a / a[0]
     x = np.moveaxis(np.asarray(x, dtype=float), axis, 0)
     cols = x.reshape(len(x), -1)
-    y = np.column_stack([_df2t(b.tolist(), a.tolist(), cols[:, j].tolist()) for j in range(cols.shape[1])])
+    zs = state if state is not None else [None] * cols.shape[1]
+    y = np.column_stack([_df2t(b.tolist(), a.tolist(), cols[:, j].tolist(), zs[j]) for j in range(cols.shape[1])])
     return np.moveaxis(y.reshape(x.shape), 0, axis)
 
 
-def _df2t(b: list, a: list, xs: list) -> list:
-    """One column of :func:`lfilter` on Python floats (``scipy.signal``'s inner loop)."""
+def _df2t(b: list, a: list, xs: list, z: list | None = None) -> list:
+    """One column of :func:`lfilter` on Python floats (``scipy.signal``'s inner loop); ``z`` the
+    filter state (updated in place; None: from rest)."""
     k = len(b)
     if k == 1:
         return [b[0] * xv for xv in xs]
-    z = [0.0] * (k - 1)
+    z = [0.0] * (k - 1) if z is None else z
     out = []
     for xv in xs:
         yv = z[0] + b[0] * xv

@@ -162,7 +162,7 @@ def _cmd_mission(args) -> int:
     with folder_lock(args.out, MISSION_LOCK, f"--out {str(args.out)!r}: another mission is writing there; "
                      "wait for it or use another --out"):  # before any simulation; removed at the end
         (args.out / "summary.json").unlink(missing_ok=True)  # present again only when this run's set is complete
-        writer = SeriesWriter(args.out, csv=args.csv, every_s=every)
+        writer = SeriesWriter(args.out, csv=args.csv, every_s=every, figure_points=None if args.no_plot else FIGURE_POINTS)
         try:
             res = run_mission(cfg, pol, charge=not args.no_charge, progress=show_progress(args),
                               frame=False, sink=writer)
@@ -170,7 +170,7 @@ def _cmd_mission(args) -> int:
         except BaseException:
             writer.abort()
             raise
-        files += _figures_and_summary(res, args.out, plots=not args.no_plot)
+        files += _figures_and_summary(res, args.out, plots=not args.no_plot, thinned=writer.thinned)
     s = res.summary
     if args.format == "json":
         print(json.dumps({**s, "files": files}))
@@ -214,15 +214,16 @@ def stored_every_s(every, est) -> float:
 FIGURE_POINTS = 20_000
 
 
-def _figures_and_summary(res, out: Path, plots: bool) -> list[str]:
-    """The figures (from the stored series, read back in columns and thinned to :data:`FIGURE_POINTS`)
-    and ``summary.json`` last (atomically); their paths."""
+def _figures_and_summary(res, out: Path, plots: bool, thinned=None) -> list[str]:
+    """The figures (from ``thinned``, the writer's bounded copy of the stored series, or else the stored
+    series read back and thinned to :data:`FIGURE_POINTS`) and ``summary.json`` last (atomically); their paths."""
     from ..files import atomic_output
     files = []
     if plots and (out / "timeseries.parquet").exists():
         from ..figures.mission import plot_mission
         from ..world.stream import read_series
-        res.timeseries = read_series(out / "timeseries.parquet", max_points=FIGURE_POINTS)
+        res.timeseries = thinned.frame() if thinned is not None else \
+            read_series(out / "timeseries.parquet", max_points=FIGURE_POINTS)
         files = [str(f) for f in plot_mission(res, out)]
         res.timeseries = None
     with atomic_output(out / "summary.json") as tmp:

@@ -49,14 +49,14 @@ def _plot_trajectory(result, out) -> str:
     ts = result.timeseries
     cfg = result.config
     fig, (ax, az) = plt.subplots(1, 2, figsize=(11, 4.5), gridspec_kw={"width_ratios": [1.2, 1]})
-    tr = result.trajectory
-    ax.plot(tr.pos_m[:, 0], tr.pos_m[:, 1], color="0.4", lw=1, label="path")
+    t_path, p_path = _path(result.trajectory, ts)
+    ax.plot(p_path[:, 0], p_path[:, 1], color="0.4", lw=1, label="path")
     on = ts["tx_on"].to_numpy(bool)
     ax.plot(ts["x_m"][on], ts["y_m"][on], ".", ms=2, color="tab:orange", label="pad energised")
     r = 0.25
     if cfg is not None:
         r = max(cfg.coupling.model().tx.radius_m)
-        for i, p in enumerate(cfg.pads):
+        for i, p in _distinct_pads(cfg.pads):
             ax.add_patch(plt.Circle((p.x_m, p.y_m), r, color="tab:red", alpha=0.4))
             ax.annotate(f"pad {i}", (p.x_m, p.y_m), textcoords="offset points", xytext=(6, 6))
     ax.set_aspect("equal", adjustable="datalim")
@@ -64,18 +64,39 @@ def _plot_trajectory(result, out) -> str:
     ax.set_ylabel("y [m]")
     ax.legend(loc="best", fontsize=8)
     ax.set_title("trajectory over the pads (pad frame)")
-    az.plot(tr.t_s, tr.pos_m[:, 2], color="0.3")
+    az.plot(t_path, p_path[:, 2], color="0.3")
     az.set_xlabel("t [s]")
     az.set_ylabel("z [m]")
     az.set_yscale("symlog", linthresh=0.5)
     ticks = [0.0, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0]
-    zmax = float(np.max(tr.pos_m[:, 2])) if len(tr.pos_m) else 1.0
+    zmax = float(np.max(p_path[:, 2])) if len(p_path) else 1.0
     az.set_yticks([v for v in ticks if v <= 1.5 * zmax])
     az.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
     az.set_title("height of the receiver coil")
     az.grid(alpha=0.3)
     fig.tight_layout()
     return save_figure(fig, out / "trajectory.png", compress_level=_FAST_PNG)
+
+
+#: trajectory samples beyond which the path is drawn from the stored (thinned) time series
+_PATH_SAMPLES = 50_000
+
+
+def _path(tr, ts):
+    """Times [s] and positions (n, 3) [m] of the path to draw: the trajectory's samples, or for a long
+    mission (whose planned trajectory is not held in memory) the stored, thinned time series."""
+    if len(tr) <= _PATH_SAMPLES:
+        return tr.t_s, tr.pos_m
+    return ts["t_s"].to_numpy(), ts[["x_m", "y_m", "z_m"]].to_numpy()
+
+
+def _distinct_pads(pads):
+    """``(index, pad)`` of the first pad at each place (a route flown again repeats its pads)."""
+    seen = set()
+    for i, p in enumerate(pads):
+        if (p.x_m, p.y_m) not in seen:
+            seen.add((p.x_m, p.y_m))
+            yield i, p
 
 
 def _plot_lm(result, out) -> str:

@@ -105,18 +105,33 @@ def initial_state(loop) -> np.ndarray:
 
 
 def samples(loop, a: int = 0, b: int | None = None) -> np.ndarray:
-    """Trajectory samples ``a:b`` as a :data:`.loop_kernel.SAMPLE_DTYPE` array (the state's ``k0`` = ``a``)."""
+    """Trajectory samples ``[a, b)`` (from :class:`.samples.MissionSamples`) as a
+    :data:`.loop_kernel.SAMPLE_DTYPE` array (the state's ``k0`` = ``a``)."""
     from .loop_kernel import SAMPLE_DTYPE
-    sl = slice(a, b)
-    smp = np.empty(len(loop.t_all[sl]), SAMPLE_DTYPE)
-    smp["t"], smp["lm"], smp["k"], smp["p"], smp["elig"] = (loop.t_all[sl], loop.lm_all[sl], loop.k_all[sl],
-                                                           loop.p_all[sl], loop.eligible[sl])
+    ch = loop.samples.chunk(a, loop.samples.n if b is None else b)
+    smp = np.empty(len(ch), SAMPLE_DTYPE)
+    smp["t"], smp["lm"], smp["k"], smp["p"], smp["elig"] = ch.t_s, ch.lm_h, ch.k, ch.p_w, ch.elig
     return smp
 
 
+def window(loop, a: int):
+    """The samples the kernel runs from sample ``a``: ``(smp, k_end)``, to stop at ``k_end`` (at most
+    :data:`.samples.SAMPLE_CHUNK` samples on) with enough samples after it for quiet flight's look-ahead
+    (``sim.flight_dt_s``) to merge exactly as over the whole series."""
+    from .samples import SAMPLE_CHUNK
+    n = loop.samples.n
+    k_end, extra = min(a + SAMPLE_CHUNK, n - 1), 64
+    while True:
+        smp = samples(loop, a, min(k_end + extra, n))
+        if a + len(smp) == n or smp["t"][-1] - smp["t"][k_end - a] > loop.sim.flight_dt_s + 1e-6:
+            return smp, k_end
+        extra *= 4
+
+
 def run(loop, bar=None):
-    """Run ``loop`` (a fresh MissionLoop): the kernel until done, Python's part at each status; leaves the
-    final state in ``loop.state`` and the last rows in ``loop.rows``."""
+    """Run ``loop`` (a fresh MissionLoop): the kernel until done, window by window of samples (memory
+    bounded in the mission's length), Python's part at each status; leaves the final state in
+    ``loop.state`` and the last rows in ``loop.rows``."""
     from . import loop_kernel as kern
     hook = loop.policy.kernel() if usable(loop) else None
     if loop.compiled and hook is None:
@@ -124,26 +139,34 @@ def run(loop, bar=None):
                          "pass compiled=None or False")
     fn, params, pstate = hook if hook is not None else (None, (), ())   # None: NEED_ACT for each duty
     params, pstate = np.ascontiguousarray(params, dtype=float), np.ascontiguousarray(pstate, dtype=float)
-    c, s, smp = pack_constants(loop), initial_state(loop), samples(loop)
+    c, s = pack_constants(loop), initial_state(loop)
     loop.consts, loop.state = c, s
-    if not hasattr(kern.advance, "py_func"):   # NUMBA_DISABLE_JIT=1: the kernel runs as Python on record views
-        c, s, smp = c.view(np.recarray), s.view(np.recarray), smp.view(np.recarray)
-    if len(smp) < 2:
+    rec = not hasattr(kern.advance, "py_func")   # NUMBA_DISABLE_JIT=1: the kernel runs as Python on record views
+    if rec:
+        c, s = c.view(np.recarray), s.view(np.recarray)
+    n = loop.samples.n
+    if n < 2:
         return
     rows = np.empty((max(BLOCK_ROWS, 2 * int(c[0]["row_margin"])), N_COLUMNS))  # blocks of at most BLOCK_ROWS rows
     noise, obs = np.empty(NOISE_BLOCK if loop.sim.i2_noise_a > 0 else 0), np.empty(len(c[0]["obs_lo"]))
     duty_in, duty_ready, n_rows = s["duty_in"], s["duty_ready"], s["n_rows"]  # views into the state
-    k_stop, t_done = _CHUNK, float(smp["t"][0])
+    smp, k_end = window(loop, 0)
+    smp = smp.view(np.recarray) if rec else smp
+    k_stop, t_done = min(_CHUNK, k_end), float(smp["t"][0])
     while True:
         status = kern.advance(k_stop, s, c, smp, rows, noise, obs, fn, params, pstate)
         if status == kern.NEED_ACT:
             duty_in[0], duty_ready[0] = loop.act(obs), True
-        elif status == kern.PAUSED:
-            k_stop += _CHUNK
-            if bar is not None:
-                t_now = float(smp["t"][s[0]["k"]])
-                bar.update(t_now - t_done)
-                t_done = t_now
+        elif status == kern.PAUSED or (status == kern.DONE and s[0]["k"] < n - 1):
+            k = int(s[0]["k"])
+            t_done = _progress(bar, float(smp["t"][k - s[0]["k0"]]), t_done)
+            if k >= k_end or status == kern.DONE:     # the window is done: the next one from sample k
+                if n_rows[0] > 0:
+                    _hand_over(loop, rows, s)         # while the window's poses are at hand
+                smp, k_end = window(loop, k)
+                smp = smp.view(np.recarray) if rec else smp
+                s[0]["k0"] = k
+            k_stop = min(k + _CHUNK, k_end)
         elif status == kern.FULL:
             _hand_over(loop, rows, s)
         elif status == kern.NEED_NOISE:
@@ -153,10 +176,15 @@ def run(loop, bar=None):
             break
         else:
             loop.fail(kern.STATUS_NAMES[status], s[0])
-    if bar is not None:
-        bar.update(float(smp["t"][-1]) - t_done)
+    _progress(bar, loop.samples.t_last_s, t_done)
     loop.rows = rows[:int(n_rows[0])]
     loop.peak_env = float(s[0]["peak_env"])
+
+
+def _progress(bar, t_now: float, t_done: float) -> float:
+    if bar is not None:
+        bar.update(t_now - t_done)
+    return t_now
 
 
 def _hand_over(loop, rows, s):

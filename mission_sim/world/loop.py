@@ -24,6 +24,7 @@ import math
 import numpy as np
 
 from .results import MissionResult
+from .samples import ENERGISE_PHASES, MissionSamples
 from .stream import RowStats
 from .trajectory import Trajectory
 
@@ -34,7 +35,6 @@ class NonFiniteError(ValueError):
     """A NaN or an infinity inside a run; :func:`mission_sim.world.runner.run_mission` adds the inputs
     that may have produced it (the config keys farthest from the default mission)."""
 
-ENERGISE_PHASES = ("charge", "hover")
 _COLUMNS = ("t_s", "dt_s", "_row", "lm_h", "v1_v", "i1_amp_a", "i2_amp_a", "d_short", "v2_v", "rect_current_a",
             "battery_v", "battery_current_a", "soc", "charge_cmd_a", "fine", "e_source_j", "e_coil_loss_j",
             "e_rectifier_j", "e_battery_chem_j", "e_battery_r0_j", "e_battery_r1_j", "e_battery_c1_j",
@@ -59,9 +59,8 @@ class MissionLoop:
         "ramp_rate": "pad V1 ramp rate [V/s]", "rated": "rated I2 [A]",
         "inv_sqrt_l1l2": "1/sqrt(L1 L2) [1/H] (k = Lm / sqrt(L1 L2))", "t_rect": "rectifier period 1/(2f) [s]",
         "dev": "DeviceSet (cfg.link.devices)",
-        # --- per-sample arrays (pose -> Lm, propulsion, gating eligibility)
-        "lm_all": "Lm per sample [H]", "k_all": "coupling per sample [-]", "p_all": "propulsion power [W]",
-        "t_all": "sample times [s]", "eligible": "sample in an energising phase (and charge)",
+        # --- per-sample arrays (pose -> Lm, propulsion, gating eligibility), chunk by chunk
+        "samples": "samples.MissionSamples: the per-sample arrays, chunk by chunk as the loop advances",
         # --- the kernel's records (loop_kernel.CONST_DTYPE / STATE_DTYPE, 1 element each) and the output
         "consts": "the constants record", "state": "the state record (the final state after run)",
         "peak_env": "peak |I2| of the envelope so far [A] (for the blocks' peak candidates)",
@@ -96,11 +95,7 @@ class MissionLoop:
         self.rated = lk.rated_i2_a
         self.t_rect = 0.5 / base.f_hz
         self.inv_sqrt_l1l2 = 1.0 / math.sqrt(model.l1_h * model.l2_h)
-        self.lm_all = lm_all
-        self.k_all = lm_all * self.inv_sqrt_l1l2
-        self.p_all = traj.propulsion_w(cfg.drone)
-        self.t_all = traj.t_s
-        self.eligible = np.isin(traj.phase, ENERGISE_PHASES) & charge
+        self.samples = MissionSamples(cfg, traj, charge, lm_all)   # lm_all: per sample, a constant or None
         self.consts = self.state = None
         self.peak_env = 0.0
         self.rows = []
@@ -116,7 +111,7 @@ class MissionLoop:
         bar = None
         if progress:
             from tqdm import tqdm
-            bar = tqdm(total=float(self.t_all[-1] - self.t_all[0]), unit="sim s", desc="mission", leave=False,
+            bar = tqdm(total=self.samples.t_last_s - self.samples.t_first_s, unit="sim s", desc="mission", leave=False,
                        bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
         self.policy.reset(1)
         try:
@@ -137,7 +132,7 @@ class MissionLoop:
         numbers it left in the state record ``st``."""
         if status == "ERR_POWER":
             raise ValueError(f"the battery cannot supply the propulsion power {st['err_p']:.1f} W at t={st['err_t']:.2f} s "
-                             f"(SoC {st['err_soc']:.3f}, phase {self.traj.phase[st['err_k']]}): valid range: below its "
+                             f"(SoC {st['err_soc']:.3f}, phase {self.samples.pose([st['err_k']])[1][0]}): valid range: below its "
                              f"maximum {st['err_pmax']:.1f} W; lighten the drone (drone.mass_kg, drone.payload_kg) or "
                              "use a bigger battery (battery.n_series, battery.capacity_ah)")
         if status == "ERR_POLICY":
@@ -157,7 +152,7 @@ class MissionLoop:
         if math.isnan(st.depleted_at):
             return {"battery_depleted": False, "depleted_at_s": None, "depleted_pad_distance_m": None}
         pads = np.array([[p.x_m, p.y_m, p.z_m] for p in self.cfg.pads])
-        dist = np.linalg.norm(pads - self.traj.pos_m[st.depleted_k], axis=1)
+        dist = np.linalg.norm(pads - self.samples.pose([st.depleted_k])[0][0], axis=1)
         return {"battery_depleted": True, "depleted_at_s": float(st.depleted_at),
                 "depleted_pad_distance_m": float(dist.min())}
 
@@ -198,7 +193,7 @@ class MissionLoop:
         df["fine"] = df["fine"].astype(bool)
         df["_row"] = df["_row"].astype(np.int64)
         ri = df.pop("_row").to_numpy()
-        pos = self.traj.pos_m[ri]
+        pos, phase = self.samples.pose(ri)
         df.insert(2, "x_m", pos[:, 0])
         df.insert(3, "y_m", pos[:, 1])
         df.insert(4, "z_m", pos[:, 2])
@@ -209,17 +204,17 @@ class MissionLoop:
         df["p_source_w"] = df["e_source_j"] / dts
         df["p_coil_loss_w"] = df["e_coil_loss_j"] / dts
         df["p_battery_loss_w"] = (df["e_battery_r0_j"] + df["e_battery_r1_j"]) / dts
-        df["phase"] = pd.Categorical(self.traj.phase[ri])
+        df["phase"] = pd.Categorical(phase)
         return df
 
     def summary(self) -> dict:
         """Summary dict: energies (exact sums), balance errors, SoC, I2 peak, step counts (from :attr:`stats`)."""
-        bp, t_all, st, ks = self.bp, self.t_all, self.stats, self.st
-        end = t_all[-1] if math.isnan(ks.depleted_at) else ks.depleted_at
+        bp, st, ks, smp = self.bp, self.stats, self.st, self.samples
+        end = smp.t_last_s if math.isnan(ks.depleted_at) else ks.depleted_at
         return {
             "policy": getattr(self.policy, "name", type(self.policy).__name__),
             "charge": bool(self.charge),
-            "sim_time_s": float(end - t_all[0]),
+            "sim_time_s": float(end - smp.t_first_s),
             "wall_s": 0.0,
             **self.energy_summary(),
             "initial_soc": float(bp.initial_soc),
@@ -321,10 +316,7 @@ class MissionLoop:
         st = self.stats
         vl = st.vl_on_max if st.vl_on_max > -math.inf else float(ks.last_vl)
         harm = self.harmonics(vl)
-        cand = st.cand_i2 >= peak_env - 2.0 * harm.ripple_bound_a()
-        d, i2c = np.r_[ks.peak_d, st.cand_d[cand]], np.r_[peak_env, st.cand_i2[cand]]
-        if len(d) > 64:
-            approx = PeakTable(harm, i2_max_a=1.05 * peak_env, n_d=26, n_i=21, i2_min_a=float(i2c.min()))(d, i2c)
-            keep = approx >= 0.99 * approx.max()
-            d, i2c = d[keep], i2c[keep]
+        d, i2c = st.screened(peak_env - 2.0 * harm.ripple_bound_a(), (float(ks.peak_d), peak_env),
+                             lambda i2_min: PeakTable(harm, i2_max_a=1.05 * peak_env, n_d=26, n_i=21,
+                                                      i2_min_a=i2_min))
         return float(np.max(harm.peak(d, i2c)))

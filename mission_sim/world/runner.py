@@ -1,6 +1,6 @@
 """The mission runner: trajectory -> Lm -> link -> policy -> battery, closed loop, multi-rate.
 
-:func:`run_mission` plans the trajectory, computes Lm along it (:func:`_lm_along`) and runs the
+:func:`run_mission` plans the trajectory (in blocks, :class:`~.trajectory.PlannedTrajectory`) and runs the
 loop, :class:`~mission_sim.world.loop.MissionLoop`, twice: charged and uncharged (for
 :func:`flight_time_gain_s`). Every formula of a loop step exists once, compiled, in
 :mod:`~mission_sim.world.loop_kernel` (the function doing each step in brackets); the Python side
@@ -10,7 +10,8 @@ Loop (one drone, one receiver):
 
 1. **Trajectory samples** (``sim.traj_dt_s``): pose -> Lm(pose) of the nearest pad (lookup table,
    held over the sample), propulsion power (momentum theory, held over the sample), phase
-   [``_lm_along`` for all samples at once; ``loop_kernel.advance`` -> ``_begin_sample`` per sample].
+   [:class:`~.samples.MissionSamples`, chunk by chunk as the loop advances (:func:`.fastpath.window`);
+   ``loop_kernel.advance`` -> ``_begin_sample`` per sample].
 2. **Pad gating** (transmitter side): the pad energises only in a "charge"/"hover" phase (the
    drone asks for power) and while ``k >= tx_min_k + tx_k_hysteresis``; it switches off as soon
    as ``k < tx_min_k`` (the steady secondary current ~ V1/(w Lm) would exceed the rating) or the
@@ -57,7 +58,6 @@ coarse steps.
 
 from __future__ import annotations
 
-import importlib.util
 import time
 
 import numpy as np
@@ -65,40 +65,10 @@ import numpy as np
 from .loop import ENERGISE_PHASES, MissionLoop, NonFiniteError
 from .power import hover_power_w
 from .results import MissionResult
-from .trajectory import Trajectory, plan_mission
+from .samples import lm_along as _lm_along
+from .trajectory import PlannedTrajectory, Trajectory
 
-__all__ = ["run_mission", "ENERGISE_PHASES"]
-
-
-def _pad_offsets(cfg, traj: Trajectory):
-    """Offsets (N, 3) of the receiver from the nearest pad (horizontally) and that pad's index (the
-    first of equally near ones). Pads at the same place (a route flown again) are searched once, and
-    the samples in chunks, so memory stays ~32 MB whatever the number of samples and pads."""
-    pads = np.array([[p.x_m, p.y_m, p.z_m] for p in cfg.pads])
-    _, first = np.unique(pads[:, :2], axis=0, return_index=True)
-    first.sort()  # distinct places in the order of their first pad: argmin's tie-break is unchanged
-    cand = pads[first, :2]
-    step = max(1, (1 << 21) // len(cand))
-    pos = traj.pos_m
-    idx = np.empty(len(pos), dtype=np.int64)
-    for a in range(0, len(pos), step):
-        d = pos[a:a + step, None, :2] - cand[None, :, :]
-        idx[a:a + step] = first[np.argmin(np.einsum("nkj,nkj->nk", d, d), axis=1)]
-    return pos - pads[idx], idx
-
-
-def _lm_along(cfg, model, traj: Trajectory, compiled: bool = False):
-    """Lm [H] per trajectory sample (0 away from the pads) and the nearest pad's index; the coupling
-    table is always evaluated compiled (:mod:`wpt_receiver.coupling_kernel`, its one implementation;
-    ``compiled`` is passed on and ignored)."""
-    off, idx = _pad_offsets(cfg, traj)
-    lm = np.zeros(len(traj))
-    rho_max, z_min, z_max = model.table_range_m
-    near = (np.hypot(off[:, 0], off[:, 1]) < rho_max) & (off[:, 2] < z_max) & (off[:, 2] > 0.5 * z_min)
-    if np.any(near):
-        lm[near] = model.lm_h(off[near, 0], off[near, 1], off[near, 2], traj.tilt_rad[near],
-                              tilt_axis_rad=traj.tilt_axis_rad[near], compiled=compiled)
-    return lm, idx
+__all__ = ["run_mission", "ENERGISE_PHASES", "_lm_along"]
 
 
 def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bool = True,
@@ -135,12 +105,10 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
 def _run_mission(cfg, policy, trajectory, charge, progress, compiled, frame=True, sink=None) -> MissionResult:
     """:func:`run_mission` without the check for non-finite results."""
     wall0 = time.perf_counter()
-    traj = plan_mission(cfg) if trajectory is None else trajectory
-    fast = compiled if compiled is not None else importlib.util.find_spec("numba") is not None
-    lm_all = _lm_along(cfg, cfg.coupling.model(), traj, fast)[0]
-    res = _simulate(cfg, policy, traj, charge, progress, lm_all, compiled, frame, sink)
-    if charge:
-        base = _simulate(cfg, policy, traj, False, False, lm_all, compiled, frame=False)  # its summary only
+    traj = PlannedTrajectory(cfg) if trajectory is None else trajectory   # planned in blocks as the loop needs them
+    res = _simulate(cfg, policy, traj, charge, progress, None, compiled, frame, sink)
+    if charge:  # its summary only; its pads never energise, so Lm does not enter it (0: no coupling table)
+        base = _simulate(cfg, policy, traj, False, False, 0.0, compiled, frame=False)
         res.summary["flight_time_gain_s"] = flight_time_gain_s(cfg, res.summary["final_soc"],
                                                                base.summary["final_soc"]) \
             + res.summary["sim_time_s"] - base.summary["sim_time_s"]  # a depleted run ends early
@@ -165,6 +133,5 @@ def flight_time_gain_s(cfg, final_soc_charged: float, final_soc_uncharged: float
 
 def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_all=None,
               compiled: bool | None = None, frame: bool = True, sink=None) -> MissionResult:
-    if lm_all is None:
-        lm_all = _lm_along(cfg, cfg.coupling.model(), traj)[0]
+    """One run; ``lm_all``: Lm per sample [H], a constant, or None (computed chunk by chunk)."""
     return MissionLoop(cfg, policy, traj, charge, lm_all, compiled, frame, sink).run(progress)

@@ -22,10 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["RowStats", "SeriesWriter", "BLOCK_ROWS", "read_series"]
+__all__ = ["RowStats", "SeriesWriter", "ThinnedSeries", "BLOCK_ROWS", "FIGURE_COLUMNS", "read_series"]
 
-#: rows per block handed over by the loop (and per Parquet row group): ~13 MB of float64 rows
-BLOCK_ROWS = 1 << 16
+#: rows per block handed over by the loop (and per Parquet row group): ~3.4 MB of float64 rows (the
+#: block-sized temporaries of the summary, edge losses and the writer are part of a run's fixed peak)
+BLOCK_ROWS = 1 << 14
 _ENERGY_COLS = ("e_source_j", "e_coil_loss_j", "e_rectifier_j", "e_battery_chem_j", "e_battery_r0_j",
                 "e_battery_r1_j", "e_battery_c1_j", "e_propulsion_j", "e_inverter_switches_j",
                 "e_rectifier_diodes_j", "e_rectifier_switches_j")
@@ -47,8 +48,7 @@ class RowStats:
         self.min_soc = self.max_soc = float(initial_soc)
         self.vl_on_max = -math.inf
         self.n_rows = 0
-        self.cand_d = np.empty(0)
-        self.cand_i2 = np.empty(0)
+        self._cand = []   # pieces [d, |I2|, min |I2|] of candidates in row order, pruned in place
 
     def add(self, arr: np.ndarray, peak_env: float) -> None:
         """Take one block ``arr`` (n, 26); ``peak_env`` is the running envelope peak after it [A]."""
@@ -68,10 +68,61 @@ class RowStats:
             self.vl_on_max = max(self.vl_on_max, float(vl[on].max()))
             i2 = np.abs(arr[:, c["i2_amp_a"]])
             floor = peak_env - self.margin_a
-            keep = self.cand_i2 >= floor
+            self._prune(floor)
             new = on & (i2 >= floor)
-            self.cand_d = np.concatenate([self.cand_d[keep], arr[new, c["d_short"]]])
-            self.cand_i2 = np.concatenate([self.cand_i2[keep], i2[new]])
+            if new.any():
+                self._cand.append([arr[new, c["d_short"]], i2[new], float(i2[new].min())])
+
+    def _prune(self, floor: float) -> None:
+        """Drop the candidates below ``floor`` [A] piece by piece (no copy of the whole list)."""
+        for piece in self._cand:
+            if piece[2] < floor:
+                keep = piece[1] >= floor
+                piece[0], piece[1] = piece[0][keep], piece[1][keep]
+                piece[2] = float(piece[1].min()) if len(piece[1]) else math.inf
+        self._cand = [p for p in self._cand if len(p[1])]
+
+    @property
+    def n_candidates(self) -> int:
+        return sum(len(p[1]) for p in self._cand)
+
+    def candidates(self, floor: float = -math.inf):
+        """Duties and |I2| [A] of the candidates with |I2| >= ``floor``, in row order."""
+        parts = [(p[0][p[1] >= floor], p[1][p[1] >= floor]) for p in self._cand]
+        return (np.concatenate([p[0] for p in parts] or [np.empty(0)]),
+                np.concatenate([p[1] for p in parts] or [np.empty(0)]))
+
+    def _filtered(self, floor: float, first):
+        """The pair ``first`` (duty, |I2|), then the candidates with |I2| >= ``floor`` in slices of
+        :data:`BLOCK_ROWS` (bounded temporaries)."""
+        yield np.array([first[0]], dtype=float), np.array([first[1]], dtype=float)
+        for d, i2, _ in self._cand:
+            for a in range(0, len(i2), BLOCK_ROWS):
+                m = i2[a:a + BLOCK_ROWS] >= floor
+                if m.any():
+                    yield d[a:a + BLOCK_ROWS][m], i2[a:a + BLOCK_ROWS][m]
+
+    def screened(self, floor: float, first, table_of, few: int = 64):
+        """Duties and |I2| [A] of ``first`` and the candidates >= ``floor``: all of them if at most ``few``,
+        else those whose approximate peak (``table_of(lowest |I2|)``, a callable ``(d, i2) -> peak``, e.g.
+        a :class:`wpt_receiver.peak.PeakTable`) is within 1 % of the largest. Slice by slice (two passes
+        of the table), so the whole candidate list is never copied."""
+        if sum(len(i2) for _, i2 in self._filtered(floor, first)) <= few:
+            d, i2 = zip(*self._filtered(floor, first))
+            return np.concatenate(d), np.concatenate(i2)
+        table = table_of(min(float(i2.min()) for _, i2 in self._filtered(floor, first)))
+        top = max(float(np.max(table(d, i2))) for d, i2 in self._filtered(floor, first))
+        kept = [(d[m], i2[m]) for d, i2 in self._filtered(floor, first)
+                for m in [np.atleast_1d(table(d, i2)) >= 0.99 * top]]
+        return np.concatenate([k[0] for k in kept]), np.concatenate([k[1] for k in kept])
+
+    @property
+    def cand_d(self) -> np.ndarray:
+        return self.candidates()[0]
+
+    @property
+    def cand_i2(self) -> np.ndarray:
+        return self.candidates()[1]
 
 
 def _derived(loop, arr: np.ndarray) -> dict:
@@ -79,7 +130,7 @@ def _derived(loop, arr: np.ndarray) -> dict:
     columns = loop.columns
     col = {name: arr[:, j] for j, name in enumerate(columns)}
     ri = col.pop("_row").astype(np.int64)
-    pos = loop.traj.pos_m[ri]
+    pos, phase = loop.samples.pose(ri)
     out = {"t_s": col["t_s"], "dt_s": col["dt_s"], "x_m": pos[:, 0], "y_m": pos[:, 1], "z_m": pos[:, 2],
            "lm_h": col["lm_h"], "k": col["lm_h"] * loop.inv_sqrt_l1l2, "tx_on": col["v1_v"] > 0}
     for name in columns[4:]:
@@ -89,7 +140,7 @@ def _derived(loop, arr: np.ndarray) -> dict:
     out["p_source_w"] = col["e_source_j"] / dts
     out["p_coil_loss_w"] = col["e_coil_loss_j"] / dts
     out["p_battery_loss_w"] = (col["e_battery_r0_j"] + col["e_battery_r1_j"]) / dts
-    out["phase"] = (np.asarray(loop.traj.phase), ri)   # names per sample and the rows' samples (see _arrow)
+    out["phase"] = (phase, slice(None))   # names per row (see _arrow)
     return out
 
 
@@ -117,17 +168,92 @@ def _arrow(columns: dict):
     return pa.Table.from_arrays(arrays, names=list(columns))
 
 
+#: the time-series columns the mission figures draw (:mod:`mission_sim.figures.mission`)
+FIGURE_COLUMNS = ("t_s", "x_m", "y_m", "z_m", "lm_h", "tx_on", "i2_amp_a", "fine", "d_short", "soc", "battery_v",
+                  "battery_current_a", "rect_current_a", "propulsion_w", "p_source_w", "p_coil_loss_w")
+
+
+def _cat(parts: list, n: int | None = None) -> dict:
+    """Column-wise concatenation of column dicts (the last ``n`` rows with ``n``)."""
+    out = {c: np.concatenate([p[c] for p in parts]) for c in parts[0]}
+    return out if n is None else {c: v[max(len(v) - n, 0):] for c, v in out.items()}
+
+
+class ThinnedSeries:
+    """A bounded copy of the stored series for figures, kept as the rows are written: the rows at an
+    even stride (doubled whenever more than ``2 max_points`` are kept, so between ``max_points`` and
+    twice that many) and the ``half_window`` rows either side of the largest ``|I2|`` whole (the
+    zoomed transient), as :func:`read_series` thins the file with ``max_points``, without reading
+    it back (:class:`SeriesWriter` with ``figure_points``). Memory: ~``2 max_points + 4 half_window`` rows of :data:`FIGURE_COLUMNS`."""
+
+    def __init__(self, max_points: int = 20_000, half_window: int = 2000):
+        self.max_points, self.half = int(max_points), int(half_window)
+        self.stride, self.n_seen = 1, 0
+        self.kept = []                  # column dicts of strided rows
+        self.recent = None              # the last ``half`` rows
+        self.best, self.window, self.need_after = -math.inf, None, 0
+
+    def add(self, cols: dict) -> None:
+        """Take the columns (numpy arrays) of one block of stored rows."""
+        block = {c: np.asarray(cols[c]) for c in FIGURE_COLUMNS}
+        n = len(block["t_s"])
+        if not n:
+            return
+        idx = np.arange(self.n_seen, self.n_seen + n)
+        self.kept.append({c: v[idx % self.stride == 0] for c, v in block.items()})
+        self.n_seen += n
+        while sum(len(k["t_s"]) for k in self.kept) > 2 * self.max_points:
+            self._halve()
+        self._track_peak(block)
+
+    def _halve(self) -> None:
+        kept = _cat(self.kept)
+        keep = np.arange(len(kept["t_s"])) % 2 == 0   # stride 2s: every other row kept so far (a multiple of s)
+        self.kept, self.stride = [{c: v[keep] for c, v in kept.items()}], 2 * self.stride
+
+    def _track_peak(self, block: dict) -> None:
+        """The rows around the largest |I2| seen: taken from the last rows and this block, completed
+        from the next blocks while fewer than ``half`` rows follow it."""
+        if self.window is not None and self.need_after > 0:
+            take = {c: v[:self.need_after] for c, v in block.items()}
+            self.window = _cat([self.window, take])
+            self.need_after -= len(take["t_s"])
+        ext = _cat([self.recent, block]) if self.recent is not None else block
+        i2 = np.abs(block["i2_amp_a"])
+        j = int(np.argmax(i2))
+        if i2[j] > self.best:
+            jj = len(ext["t_s"]) - len(i2) + j
+            lo, hi = max(jj - self.half, 0), min(jj + self.half, len(ext["t_s"]))
+            self.best, self.window = float(i2[j]), {c: v[lo:hi] for c, v in ext.items()}
+            self.need_after = jj + self.half - hi
+        self.recent = _cat([ext], self.half)
+
+    def frame(self):
+        """A DataFrame of the kept rows in time order (``phase`` not included)."""
+        import pandas as pd
+        rows = _cat(self.kept) if self.kept else {c: np.empty(0) for c in FIGURE_COLUMNS}
+        if self.stride > 1 and self.window is not None and len(self.window["t_s"]):
+            tw = self.window["t_s"]
+            keep = (rows["t_s"] < tw[0]) | (rows["t_s"] > tw[-1])
+            rows = _cat([{c: v[keep] for c, v in rows.items()}, self.window])
+            order = np.argsort(rows["t_s"], kind="stable")
+            rows = {c: v[order] for c, v in rows.items()}
+        return pd.DataFrame(rows)
+
+
 class SeriesWriter:
     """Appends blocks of rows to ``out_dir/timeseries.parquet`` (and ``timeseries.csv`` with ``csv``).
 
     ``every_s`` > 0 thins the stored series: a row is kept when it is the first to end in a new
     ``every_s`` interval of simulated time (plus the run's last row, kept by :meth:`close`); the
-    summary is computed from every row regardless. Call :meth:`close` (renames the files into place;
+    summary is computed from every row regardless. ``figure_points``: also keep a
+    :class:`ThinnedSeries` of about that many stored rows (:attr:`thinned`) for figures. Call :meth:`close` (renames the files into place;
     returns their paths) or :meth:`abort` (removes them)."""
 
-    def __init__(self, out_dir, csv: bool = False, every_s: float = 0.0):
+    def __init__(self, out_dir, csv: bool = False, every_s: float = 0.0, figure_points: int | None = None):
         self.out = Path(out_dir)
-        self.csv, self.every_s = bool(csv), float(every_s)
+        self.csv, self.every_s, self.figure_points = bool(csv), float(every_s), figure_points
+        self.thinned = None if figure_points is None else ThinnedSeries(figure_points)
         self.paths = [self.out / "timeseries.parquet"] + ([self.out / "timeseries.csv"] if csv else [])
         self.tmps = [p.with_name(f".{p.stem}.tmp{os.getpid()}{p.suffix}") for p in self.paths]
         self._pq = self._csv = None
@@ -150,7 +276,10 @@ class SeriesWriter:
 
     def _write(self, loop, arr) -> None:
         import pyarrow as pa
-        table = _arrow(_derived(loop, arr))
+        cols = _derived(loop, arr)
+        if self.thinned is not None:
+            self.thinned.add(cols)
+        table = _arrow(cols)
         if self._pq is None:
             import pyarrow.parquet as pq
             self.out.mkdir(parents=True, exist_ok=True)
@@ -181,7 +310,7 @@ class SeriesWriter:
     def restart(self) -> None:
         """Discard what was written and start again (the loop reruns the reference path from the start)."""
         self.abort()
-        self.__init__(self.out, self.csv, self.every_s)
+        self.__init__(self.out, self.csv, self.every_s, self.figure_points)
 
     def abort(self) -> None:
         """Close and remove the temporary files (an interrupted or failed run)."""

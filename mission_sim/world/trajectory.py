@@ -22,7 +22,7 @@ import numpy as np
 from .power import propulsion_power_w
 from .wind import drag_force_n, hover_error_m, tilt_from_force, wind_series
 
-__all__ = ["Trajectory", "plan_mission", "PHASES"]
+__all__ = ["Trajectory", "PlannedTrajectory", "plan_mission", "PHASES", "PLAN_BLOCK"]
 
 PHASES = ("ground", "takeoff", "transit", "approach", "charge", "depart", "land", "hover", "flight")
 
@@ -72,6 +72,18 @@ class Trajectory:
     def __len__(self) -> int:
         return len(self.t_s)
 
+    @property
+    def t_start_s(self) -> float:
+        return float(self.t_s[0])
+
+    @property
+    def t_end_s(self) -> float:
+        return float(self.t_s[-1])
+
+    def chunk(self, a: int, b: int) -> "Trajectory":
+        """Samples ``[a, b)`` (views; as :meth:`PlannedTrajectory.chunk`)."""
+        return _view(*(x[max(int(a), 0):int(b)] for x in _parts(self)))
+
     @classmethod
     def from_samples(cls, t_s, pos_m, tilt_rad=None, phase=None, hover_speed_m_s: float = 0.3) -> "Trajectory":
         """A trajectory from logged samples (e.g. a real flight log converted to the pad frame).
@@ -96,9 +108,14 @@ class Trajectory:
 
     def propulsion_w(self, drone) -> np.ndarray:
         """Electrical propulsion power (N,) [W] from momentum theory (airspeed = |v_xy - wind_xy|)."""
-        v = self.velocity_m_s()
-        air = np.hypot(v[:, 0] - self.wind_m_s[:, 0], v[:, 1] - self.wind_m_s[:, 1])
-        return propulsion_power_w(drone, air, v[:, 2])
+        return propulsion_from(drone, self.velocity_m_s(), self.wind_m_s)
+
+
+def propulsion_from(drone, vel_m_s, wind_m_s) -> np.ndarray:
+    """Electrical propulsion power (N,) [W] at velocities (N, 3) [m/s] in winds (N, 3) [m/s]
+    (momentum theory, :func:`.power.propulsion_power_w`; airspeed = |v_xy - wind_xy|)."""
+    air = np.hypot(vel_m_s[:, 0] - wind_m_s[:, 0], vel_m_s[:, 1] - wind_m_s[:, 1])
+    return propulsion_power_w(drone, air, vel_m_s[:, 2])
 
 
 # --------------------------------------------------------------------------- planning
@@ -217,49 +234,184 @@ def plan_mission(cfg, rng: np.random.Generator | None = None) -> Trajectory:
     """Plan the waypoint mission of ``cfg`` (a MissionConfig) on a grid of ``cfg.sim.traj_dt_s``.
 
     The wind is drawn from ``rng`` (default: ``np.random.default_rng(cfg.seed)``), so the same
-    config gives the same trajectory.
+    config gives the same trajectory. All samples at once: :class:`PlannedTrajectory`
+    materialised (its chunks are the same numbers; it leaves ``rng`` where this did).
     """
-    rng = np.random.default_rng(cfg.seed) if rng is None else rng
-    dt = cfg.sim.traj_dt_s
-    segs = _segments(cfg)
-    total = sum(s[3] for s in segs)
-    t = np.arange(int(math.floor(total / dt)) + 1) * dt
-    pos = np.empty((len(t), 3))
-    vel = np.zeros((len(t), 3))
-    acc = np.zeros((len(t), 3))
-    phase = np.empty(len(t), dtype=object)
-    t0 = 0.0
-    for k, (ph, p0, u, dur, ev) in enumerate(segs):
-        last = k == len(segs) - 1
-        # the samples t0 <= t < t0 + dur (to the end for the last), as an index range: t is sorted
-        # (a boolean mask over all samples per segment made planning quadratic in the mission length)
-        mask = slice(int(np.searchsorted(t, t0, "left")), len(t) if last else int(np.searchsorted(t, t0 + dur, "left")))
-        tau = t[mask] - t0
-        if ev is None:
-            pos[mask] = p0
-        else:
-            s, v, a = ev(tau)
-            pos[mask] = p0 + s[:, None] * u
-            vel[mask] = v[:, None] * u
-            acc[mask] = a[:, None] * u
-        phase[mask] = ph
-        t0 += dur
-    wp = cfg.wind
-    wind = wind_series(wp, len(t), dt, rng)
-    d = math.radians(wp.direction_deg)
-    mean_wind = np.array([wp.speed_m_s * math.cos(d), wp.speed_m_s * math.sin(d), 0.0])
-    force = drag_force_n(wp, wind, vel)
-    force_mean = drag_force_n(wp, mean_wind[None, :], vel)
-    mass = cfg.drone.total_mass_kg
-    err = hover_error_m(wp, force - force_mean, mass, dt)
-    on_ground = phase == "ground"
-    err[on_ground] = 0.0
-    pos = pos + err
-    pos[:, 2] = np.maximum(pos[:, 2], 0.0)
-    # never let the coil touch a pad while charging
-    chg = phase == "charge"
-    floor = min(0.03, cfg.mission.hover_gap_m)
-    pos[chg, 2] = np.maximum(pos[chg, 2], floor + min(p.z_m for p in cfg.pads))
-    tilt, axis = tilt_from_force(mass, acc, force)
-    tilt[on_ground] = 0.0
-    return Trajectory(t, pos, tilt, phase, axis, wind)
+    return PlannedTrajectory(cfg, rng).materialise()
+
+
+#: samples per block a :class:`PlannedTrajectory` generates (and keeps the last few of)
+PLAN_BLOCK = 1 << 15
+_PHASE_NAMES = np.array(PHASES, dtype=object)
+
+
+def _clone(rng: np.random.Generator) -> np.random.Generator:
+    """A generator in ``rng``'s state (drawing from it leaves ``rng`` where it is)."""
+    bg = type(rng.bit_generator)()
+    bg.state = rng.bit_generator.state
+    return np.random.Generator(bg)
+
+
+def _skip_normals(rng: np.random.Generator, n: int) -> None:
+    """Advance ``rng`` past ``n`` standard normals (drawn in blocks; the same stream as one draw)."""
+    for a in range(0, n, PLAN_BLOCK):
+        rng.standard_normal(min(PLAN_BLOCK, n - a))
+
+
+class PlannedTrajectory:
+    """The planned mission of ``cfg`` generated in blocks of :data:`PLAN_BLOCK` samples on demand, so
+    a long mission never holds all its samples (:meth:`chunk`: samples ``[a, b)`` as a
+    :class:`Trajectory`, the same numbers as :func:`plan_mission`'s; blocks are generated forward,
+    the wind's gust and position-hold filters and the three gust streams of the generator carried
+    from block to block; a request behind the kept blocks starts again from sample 0).
+
+    ``len()`` and :attr:`t_start_s` / :attr:`t_end_s` cost nothing; the array attributes of a
+    :class:`Trajectory` (``t_s``, ``pos_m``, ...) materialise the whole trajectory on first use
+    (cached): for short missions and error messages, not for long runs.
+    """
+
+    def __init__(self, cfg, rng: np.random.Generator | None = None):
+        rng = np.random.default_rng(cfg.seed) if rng is None else rng
+        self.cfg, self.dt = cfg, cfg.sim.traj_dt_s
+        self.segs = _segments(cfg)
+        total = sum(s[3] for s in self.segs)
+        self.n = int(math.floor(total / self.dt)) + 1
+        starts, t0 = [], 0.0
+        for seg in self.segs:
+            starts.append(t0)
+            t0 += seg[3]
+        self._starts = np.array(starts)  # accumulated as plan_mission always did (the masks' bounds)
+        self._gens0 = []
+        for _ in range(3):   # the x, y and z gust streams, drawn one after the other from rng
+            self._gens0.append(_clone(rng))
+            _skip_normals(rng, self.n)
+        wp = self.cfg.wind
+        d = math.radians(wp.direction_deg)
+        self._mean_wind = np.array([wp.speed_m_s * math.cos(d), wp.speed_m_s * math.sin(d), 0.0])
+        self.uniform_spacing = _uniform_grid(self.n, self.dt)
+        self._full = None
+        self._restart()
+
+    def _restart(self):
+        self._gens = [_clone(g) for g in self._gens0]
+        self._gust_z = [[[0.0]] for _ in range(3)]
+        self._hold_z = [[0.0, 0.0] for _ in range(3)]
+        self._next, self._blocks = 0, {}
+
+    def __len__(self) -> int:
+        return self.n
+
+    @property
+    def t_start_s(self) -> float:
+        return 0.0
+
+    @property
+    def t_end_s(self) -> float:
+        return float(np.arange(self.n - 1, self.n)[0] * self.dt)
+
+    def __getattr__(self, name):
+        if name in ("t_s", "pos_m", "tilt_rad", "phase", "tilt_axis_rad", "wind_m_s", "velocity_m_s",
+                    "propulsion_w"):
+            if self._full is None:
+                self._full = self.materialise()
+            return getattr(self._full, name)
+        raise AttributeError(name)
+
+    def materialise(self) -> Trajectory:
+        """All samples as one :class:`Trajectory`."""
+        full = Trajectory(*_parts(self.chunk(0, self.n)))
+        self._restart()   # the blocks are in ``full`` now
+        return full
+
+    def chunk(self, a: int, b: int) -> Trajectory:
+        """Samples ``[a, b)`` (clipped to the mission) as a :class:`Trajectory` (not validated again)."""
+        a, b = max(int(a), 0), min(int(b), self.n)
+        if b <= a:
+            raise ValueError(f"samples [{a}, {b}) are invalid; valid: 0 <= a < b <= {self.n}")
+        first, last = a // PLAN_BLOCK, (b - 1) // PLAN_BLOCK
+        if first < min(self._blocks, default=self._next):
+            self._restart()
+        for j in [j for j in self._blocks if j < first]:
+            del self._blocks[j]
+        while self._next <= last:
+            self._blocks[self._next] = self._block(self._next)
+            self._next += 1
+        cols = [np.concatenate([self._blocks[j][c] for j in range(first, last + 1)]) for c in range(6)]
+        lo = a - first * PLAN_BLOCK
+        return _view(*(c[lo:lo + b - a] for c in cols))
+
+    def _block(self, j: int):
+        """Block ``j``: (t, pos, tilt, phase, tilt axis, wind) of samples ``[j B, (j + 1) B)``."""
+        k0, k1 = j * PLAN_BLOCK, min((j + 1) * PLAN_BLOCK, self.n)
+        t = np.arange(k0, k1) * self.dt
+        pos, vel, acc, code = self._nominal(t)
+        wind = self._wind(k0, k1)
+        phase = _PHASE_NAMES[code]
+        wp, cfg = self.cfg.wind, self.cfg
+        force = drag_force_n(wp, wind, vel)
+        force_mean = drag_force_n(wp, self._mean_wind[None, :], vel)
+        mass = cfg.drone.total_mass_kg
+        err = hover_error_m(wp, force - force_mean, mass, self.dt, state=self._hold_z)
+        on_ground = code == PHASES.index("ground")
+        err[on_ground] = 0.0
+        pos = pos + err
+        pos[:, 2] = np.maximum(pos[:, 2], 0.0)
+        # never let the coil touch a pad while charging
+        chg = code == PHASES.index("charge")
+        floor = min(0.03, cfg.mission.hover_gap_m)
+        pos[chg, 2] = np.maximum(pos[chg, 2], floor + min(p.z_m for p in cfg.pads))
+        tilt, axis = tilt_from_force(mass, acc, force)
+        tilt[on_ground] = 0.0
+        return t, pos, tilt, phase, axis, wind
+
+    def _nominal(self, t):
+        """Nominal position, velocity, acceleration (n, 3) and phase codes at the times ``t`` (sorted)."""
+        pos = np.empty((len(t), 3))
+        vel = np.zeros((len(t), 3))
+        acc = np.zeros((len(t), 3))
+        code = np.zeros(len(t), dtype=np.int8)
+        n_seg = len(self.segs)
+        j0 = max(int(np.searchsorted(self._starts, t[0], "right")) - 1, 0)
+        j1 = int(np.searchsorted(self._starts, t[-1], "right"))
+        for j in range(j0, j1):
+            ph, p0, u, dur, ev = self.segs[j]
+            # the samples starts[j] <= t < starts[j + 1] (to the end for the last) as an index range
+            hi = len(t) if j == n_seg - 1 else int(np.searchsorted(t, self._starts[j + 1], "left"))
+            mask = slice(int(np.searchsorted(t, self._starts[j], "left")), hi)
+            tau = t[mask] - self._starts[j]
+            if ev is None:
+                pos[mask] = p0
+            else:
+                s, v, a = ev(tau)
+                pos[mask] = p0 + s[:, None] * u
+                vel[mask] = v[:, None] * u
+                acc[mask] = a[:, None] * u
+            code[mask] = PHASES.index(ph)
+        return pos, vel, acc, code
+
+    def _wind(self, k0: int, k1: int) -> np.ndarray:
+        """Wind (k1 - k0, 3) [m/s] of samples ``[k0, k1)``: :func:`.wind.wind_series` continued."""
+        return wind_series(self.cfg.wind, k1 - k0, self.dt, self._gens, self._gust_z, first=k0 == 0)
+
+
+def _uniform_grid(n: int, dt: float) -> bool:
+    """True if the steps of ``arange(n) * dt`` are all bitwise equal (``numpy.gradient``'s test)."""
+    d0 = None
+    for a in range(0, n - 1, PLAN_BLOCK):
+        d = np.diff(np.arange(a, min(a + PLAN_BLOCK + 1, n)) * dt)
+        d0 = d[0] if d0 is None else d0
+        if not (d == d0).all():
+            return False
+    return True
+
+
+def _parts(tr: Trajectory) -> tuple:
+    return tr.t_s, tr.pos_m, tr.tilt_rad, tr.phase, tr.tilt_axis_rad, tr.wind_m_s
+
+
+def _view(t_s, pos_m, tilt_rad, phase, tilt_axis_rad, wind_m_s) -> Trajectory:
+    """A :class:`Trajectory` of these arrays as they are (no validation, no copies)."""
+    tr = object.__new__(Trajectory)
+    tr.t_s, tr.pos_m, tr.tilt_rad, tr.phase, tr.tilt_axis_rad, tr.wind_m_s = \
+        t_s, pos_m, tilt_rad, phase, tilt_axis_rad, wind_m_s
+    return tr

@@ -28,7 +28,7 @@ from wpt_receiver.lti import lfilter, zoh_tf
 
 from .power import G_M_S2
 
-__all__ = ["WindParams", "gust_series", "wind_series", "drag_force_n", "hover_error_m", "tilt_from_force"]
+__all__ = ["WindParams", "gust_series", "wind_series", "drag_force_n", "hold_filter", "hover_error_m", "tilt_from_force"]
 
 
 @dataclass(frozen=True)
@@ -62,22 +62,34 @@ class WindParams:
             raise ValueError(f"direction_deg={self.direction_deg!r} is invalid; valid range: finite")
 
 
-def gust_series(n: int, dt_s: float, sigma: float, tau_s: float, rng: np.random.Generator) -> np.ndarray:
-    """Stationary first-order Gauss-Markov samples (n,) with std ``sigma`` and correlation time ``tau_s``."""
+def gust_series(n: int, dt_s: float, sigma: float, tau_s: float, rng: np.random.Generator, state: list | None = None,
+                first: bool = True) -> np.ndarray:
+    """Stationary first-order Gauss-Markov samples (n,) with std ``sigma`` and correlation time ``tau_s``.
+
+    In chunks: ``state`` (``[[0.0]]`` to start) carries the filter from one call to the next and
+    ``first`` is True for the first chunk only (its first sample is the stationary start)."""
     a = math.exp(-dt_s / tau_s)
     xi = rng.standard_normal(n)
-    xi[0] *= sigma
-    xi[1:] *= sigma * math.sqrt(1.0 - a * a)
-    return lfilter([1.0], [1.0, -a], xi)
+    if first:
+        xi[0] *= sigma
+        xi[1:] *= sigma * math.sqrt(1.0 - a * a)
+    else:
+        xi *= sigma * math.sqrt(1.0 - a * a)
+    return lfilter([1.0], [1.0, -a], xi, state=state)
 
 
-def wind_series(p: WindParams, n: int, dt_s: float, rng: np.random.Generator) -> np.ndarray:
-    """Wind velocity (n, 3) [m/s] on a uniform grid of step ``dt_s``."""
+def wind_series(p: WindParams, n: int, dt_s: float, rng, states: list | None = None, first: bool = True) -> np.ndarray:
+    """Wind velocity (n, 3) [m/s] on a uniform grid of step ``dt_s``: the x, y and z gusts drawn one
+    after the other from ``rng``, or, in chunks, from ``rng`` = three generators (one per axis,
+    each where its stream is) with ``states`` / ``first`` as for :func:`gust_series`."""
     d = math.radians(p.direction_deg)
+    gens = (rng, rng, rng) if isinstance(rng, np.random.Generator) else rng
+    states = states if states is not None else [None] * 3
+    sig = p.gust_sigma_m_s
     w = np.empty((n, 3))
-    w[:, 0] = p.speed_m_s * math.cos(d) + gust_series(n, dt_s, p.gust_sigma_m_s, p.gust_tau_s, rng)
-    w[:, 1] = p.speed_m_s * math.sin(d) + gust_series(n, dt_s, p.gust_sigma_m_s, p.gust_tau_s, rng)
-    w[:, 2] = gust_series(n, dt_s, 0.5 * p.gust_sigma_m_s, p.gust_tau_s, rng)
+    w[:, 0] = p.speed_m_s * math.cos(d) + gust_series(n, dt_s, sig, p.gust_tau_s, gens[0], states[0], first)
+    w[:, 1] = p.speed_m_s * math.sin(d) + gust_series(n, dt_s, sig, p.gust_tau_s, gens[1], states[1], first)
+    w[:, 2] = gust_series(n, dt_s, 0.5 * sig, p.gust_tau_s, gens[2], states[2], first)
     return w
 
 
@@ -87,19 +99,27 @@ def drag_force_n(p: WindParams, wind_m_s, vel_m_s) -> np.ndarray:
     return 0.5 * p.air_density_kg_m3 * p.drag_area_m2 * np.linalg.norm(rel, axis=-1, keepdims=True) * rel
 
 
-def hover_error_m(p: WindParams, force_n: np.ndarray, mass_kg: float, dt_s: float) -> np.ndarray:
+def hold_filter(p: WindParams, dt_s: float):
+    """``(num, den)`` of the position-hold loop (force / mass -> error) discretised with a ZOH."""
+    w, z = p.hold_omega_rad_s, p.hold_zeta
+    num, den = zoh_tf([1.0], [1.0, 2 * z * w, w * w], dt_s)
+    return np.ravel(num), den
+
+
+def hover_error_m(p: WindParams, force_n: np.ndarray, mass_kg: float, dt_s: float,
+                  state: list | None = None) -> np.ndarray:
     """Position error (n, 3) [m] of the hold loop driven by a force disturbance (n, 3) [N].
 
     Pass the force *fluctuation* (total drag minus the drag of the mean wind, which the loop's
-    integral action absorbs).
+    integral action absorbs). ``state`` (three ``[0.0, 0.0]``, one per axis) continues the filter
+    across chunks (see :func:`wpt_receiver.lti.lfilter`).
     """
     f = np.asarray(force_n, dtype=float)
     if len(f) == 0:
         return np.zeros((0, 3))
     dev = f / mass_kg
-    w, z = p.hold_omega_rad_s, p.hold_zeta
-    num, den = zoh_tf([1.0], [1.0, 2 * z * w, w * w], dt_s)
-    return lfilter(np.ravel(num), den, dev, axis=0)
+    num, den = hold_filter(p, dt_s)
+    return lfilter(num, den, dev, axis=0, state=state)
 
 
 def tilt_from_force(mass_kg: float, accel_m_s2: np.ndarray, force_n: np.ndarray):
