@@ -137,7 +137,7 @@ def test_small_row_buffer_and_progress_chunks_give_the_same_run(monkeypatch):
     monkeypatch.setattr(fastpath, "_CHUNK", 3)
     monkeypatch.setattr(fastpath, "BLOCK_ROWS", 50)
     blocks = []
-    res = run_mission(cfg, _policy(cfg, "model_based"), sink=lambda lp, arr: blocks.append(len(arr)))
+    res = run_mission(cfg, _policy(cfg, "model_based"), sink=lambda lp, arr: blocks.append(len(arr)), progress=True)
     assert len(blocks) > 50 and max(blocks) <= 50 and sum(blocks) == len(ref.timeseries)
     assert_summaries_agree(res.summary, ref.summary)
     assert_timeseries_agree(res.timeseries, ref.timeseries)

@@ -6,7 +6,7 @@
 :data:`~.loop_kernel.SAMPLE_DTYPE`), then :func:`.loop_kernel.advance` runs the physics until Python
 has something to do, by status:
 
-* ``PAUSED`` every :data:`_CHUNK` trajectory samples: the progress bar;
+* ``PAUSED`` every :data:`_CHUNK` trajectory samples (with a progress bar only): the bar;
 * ``FULL``: the rows written so far go to :meth:`~.loop.MissionLoop.flush` (the buffer is reused);
 * ``NEED_ACT``: a Python policy's turn (no ``kernel()`` hook, or ``compiled=False``):
   :meth:`~.loop.MissionLoop.act` on the observation the kernel wrote; the duty goes back in the state;
@@ -133,7 +133,8 @@ def run(loop, bar=None):
     rows = np.empty((max(BLOCK_ROWS, 2 * int(c[0]["row_margin"])), N_COLUMNS))  # blocks of at most BLOCK_ROWS rows
     noise, obs = np.empty(NOISE_BLOCK if loop.sim.i2_noise_a > 0 else 0), np.empty(len(c[0]["obs_lo"]))
     duty_in, duty_ready, n_rows = s["duty_in"], s["duty_ready"], s["n_rows"]  # views into the state
-    k_stop, t_done = _CHUNK, float(smp["t"][0])
+    # pauses for the progress bar only (a call with a compiled policy converts its function argument, ~0.1 ms)
+    k_stop, t_done = (_CHUNK if bar is not None else len(smp)), float(smp["t"][0])
     while True:
         status = kern.advance(k_stop, s, c, smp, rows, noise, obs, fn, params, pstate)
         if status == kern.NEED_ACT:
