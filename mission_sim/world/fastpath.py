@@ -142,7 +142,7 @@ def run(loop, bar=None):
         elif status == kern.PAUSED:
             k_stop += _CHUNK
             if bar is not None:
-                t_now = float(smp["t"][s[0]["k"]])
+                t_now = float(smp["t"][s[0]["k"] - s[0]["k0"]])
                 bar.update(t_now - t_done)
                 t_done = t_now
         elif status == kern.FULL:
