@@ -137,7 +137,7 @@ def test_small_row_buffer_and_progress_chunks_give_the_same_run(monkeypatch):
     monkeypatch.setattr(fastpath, "_CHUNK", 3)
     monkeypatch.setattr(fastpath, "BLOCK_ROWS", 50)
     blocks = []
-    res = run_mission(cfg, _policy(cfg, "model_based"), sink=lambda lp, arr: blocks.append(len(arr)))
+    res = run_mission(cfg, _policy(cfg, "model_based"), sink=lambda lp, arr: blocks.append(len(arr)), progress=True)
     assert len(blocks) > 50 and max(blocks) <= 50 and sum(blocks) == len(ref.timeseries)
     assert_summaries_agree(res.summary, ref.summary)
     assert_timeseries_agree(res.timeseries, ref.timeseries)
@@ -257,3 +257,40 @@ def test_partial_peak_table_has_the_full_tables_values():
     assert 2 <= done.sum() < 9 and np.array_equal(part.excess[:, done], full.excess[:, done])
     d, i2 = np.linspace(0, 1, 7), np.linspace(9.0, 14.0, 7)
     assert np.array_equal(part(d, i2), full(d, i2))
+
+
+def test_kernel_runs_over_chunks_of_the_samples():
+    """The kernel fed the trajectory in chunks (sample offset ``k0`` in the state; each chunk reaching one
+    quiet-flight merge beyond where the call stops) writes exactly the rows of one call over all samples:
+    the interface a bounded-memory run feeds."""
+    import math
+    from mission_sim.world.loop import MissionLoop
+    from mission_sim.world.runner import _lm_along
+    from mission_sim.world.trajectory import plan_mission
+    cfg = load_config()
+    traj = plan_mission(cfg)
+    lm = _lm_along(cfg, cfg.coupling.model(), traj)[0]
+
+    def run(chunk):
+        lp = MissionLoop(cfg, _policy(cfg, "step"), traj, True, lm)
+        lp.policy.reset(1)
+        fn, params, pstate = lp.policy.kernel()
+        c, s, n = fastpath.pack_constants(lp), fastpath.initial_state(lp), lp.samples.n
+        rows, none = np.empty((100_000, len(_COLUMNS))), np.empty(0)
+        ahead = math.ceil(cfg.sim.flight_dt_s / float(np.min(np.diff(traj.t_s)))) + 2
+        a, calls = 0, 0
+        while True:
+            b = min(n, a + chunk)
+            s[0]["k0"] = a
+            status = loop_kernel.advance(b - ahead if b < n else n, s, c, fastpath.samples(lp, a, b), rows, none,
+                                         np.empty(OBS_DIM), fn, params, pstate)
+            calls += 1
+            if status == loop_kernel.DONE:
+                return rows[:s[0]["n_rows"]].copy(), calls
+            assert status == loop_kernel.PAUSED
+            a = int(s[0]["k"])
+
+    whole, one = run(10**9)
+    parts, many = run(100)
+    assert one == 1 and many > 8 and len(whole) > 1000
+    np.testing.assert_array_equal(parts, whole)

@@ -16,23 +16,27 @@ trajectory samples (:data:`SAMPLE_DTYPE`: time, Lm, k, propulsion power, energis
 **Resumable.** :func:`advance` runs from the state's cursor (sample ``k``; inside an interval: time
 ``t`` and ``sub``, the point of the iteration) and returns a status when Python has to act:
 
-============  ========================================================================================
-``DONE``      sample ``k0 + len(smp) - 1`` reached (the end of the trajectory, or of a chunk of it)
-``PAUSED``    sample ``k_stop`` reached (progress bar; call again with a larger ``k_stop``)
-``FULL``      ``rows`` has no room for one more iteration: hand the rows over, set ``n_rows = 0``
-``NEED_ACT``  a duty is due and the policy is Python: ``obs`` holds the normalised observation;
-              write the policy's output to ``duty_in``, set ``duty_ready`` and call again
+==============  ======================================================================================
+``DONE``        sample ``k0 + len(smp) - 1`` reached (the end of the trajectory, or of a chunk of it)
+``PAUSED``      sample ``k_stop`` reached (progress bar; call again with a larger ``k_stop``)
+``FULL``        ``rows`` has no room for one more iteration: hand the rows over, set ``n_rows = 0``
+``NEED_ACT``    a duty is due and the policy is Python: ``obs`` holds the normalised observation;
+                write the policy's output to ``duty_in``, set ``duty_ready`` and call again
 ``NEED_NOISE``  the sensor-noise buffer is used up: refill ``noise`` (standard normals), ``noise_i = 0``
-``DEPLETED``  the battery reached SoC 0 (the run ends there: ``depleted_at``, ``depleted_k``)
-``ERR_POWER``  the battery cannot supply the propulsion power (``err_*`` hold the numbers)
+``DEPLETED``    the battery reached SoC 0 (the run ends there: ``depleted_at``, ``depleted_k``)
+``ERR_POWER``   the battery cannot supply the propulsion power (``err_*`` hold the numbers)
 ``ERR_POLICY``  the policy's duty is not finite (``duty_in`` holds it)
-============  ========================================================================================
+==============  ======================================================================================
 
 A compiled policy (``Policy.kernel()``, :data:`mission_sim.contract.POLICY_KERNEL_SIGNATURE`) is
 passed as ``fn`` and called in place; with ``fn=None`` (a Python policy) the kernel returns
-``NEED_ACT`` at the same point. Both run this same code; they differ only in who computes the duty. The per-sample arrays may be a
-chunk of the trajectory starting at sample ``k0`` (state field); quiet flight looks ahead at most
-``sim.flight_dt_s``, so a chunk should reach that far beyond ``k_stop`` for the same merging.
+``NEED_ACT`` at the same point (:func:`advance` has both overloads). Both run this same code; they
+differ only in who computes the duty. The per-sample arrays may be a chunk of the trajectory
+starting at sample ``k0`` (state field); quiet flight looks ahead at most ``sim.flight_dt_s``, so a
+chunk should reach that far beyond ``k_stop`` for the same merging. The link model (eq. 4) and its
+discretisation are the section "the link": :func:`_link_a`, :func:`link_disc`, :func:`link_step`
+(a different link model replaces these; the one other place the model enters is :func:`_settled`'s
+closed-form steady state from R1, R2 and omega Lm).
 
 This module imports numba: nothing imports it at module level (:mod:`.fastpath` loads it on the
 first run; compiled once per machine, then loaded from numba's disk cache). Tests may run the
