@@ -301,9 +301,13 @@ def _num_threads(num_threads) -> int:
 
 
 def _set_threads(k: int) -> None:
+    """``k`` threads for the parallel step, its chunks handed out one at a time (dynamic schedule:
+    a thread the OS holds back leaves its chunks to the others instead of stalling the step)."""
     import numba
     if numba.get_num_threads() != k:
         numba.set_num_threads(k)
+    if numba.get_parallel_chunksize() != 1:
+        numba.set_parallel_chunksize(1)
 
 
 class SbarChargingDiscreteVectorEnv(SbarChargingVectorEnv):
