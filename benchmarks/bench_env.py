@@ -6,11 +6,15 @@
   (long episodes), ours holds a duty; both are reset when an episode ends (reset cost included).
 * single env with a fresh uniform random action every step (both envs), the issue-14 measure
   (goal: ratio >= 1.5).
-* vector env: env-steps/s of ``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``
-  at N = 64, 1024, 4096, 16384 (``--n``), beside gymnasium's own batched CartPoleVectorEnv at the same N;
+* vector env: ns per env-step of ``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``
+  at N = 64, 256, 1024, 4096, 16384 (``--n``), beside gymnasium's own batched CartPoleVectorEnv at the
+  same N in the same run: all numba threads (parallel over sub-envs from
+  ``SbarChargingVectorEnv.PARALLEL_MIN_ENVS`` on), one thread (``num_threads=1``) and the default
+  (``num_threads=None``: one or all threads chosen by measured step times);
   with a held duty and with uniform random actions each step for both envs, autoresets included
   (the worst case for ours: the I2 envelope changes sign in many windows every step, and those
   steps are re-stepped in 17 rectifier-period sub-steps; issue 22's goal: ratio >= 1.0 at N >= 4096).
+  ``--vector-only`` skips the single-env rows; the N table is printed last.
 
 Every measurement is warmed up once (discarded), then alternates between the two envs in
 rounds and reports the median round (and the
@@ -82,25 +86,42 @@ def _pair(rate_a, rate_b, rounds):
 
 
 def _vector(n_vec, rng, seconds, rounds):
-    """Ours (``make_vec``, vector entry point) against CartPoleVectorEnv at the same N."""
+    """Ours (``make_vec``, vector entry point; default threads and one thread) against CartPoleVectorEnv
+    at the same N."""
     from gymnasium.envs.classic_control.cartpole import CartPoleVectorEnv
 
-    venv = gym.make_vec(envs.ENV_ID, num_envs=n_vec, vectorization_mode="vector_entry_point")
+    out = {"n_envs": n_vec}
     cpv = CartPoleVectorEnv(num_envs=n_vec)
     acts = np.zeros((n_vec, 1), np.float32)
     acts_cp = np.ones(n_vec, dtype=np.int64)
     acts_rand = [rng.uniform(-1, 1, (n_vec, 1)).astype(np.float32) for _ in range(20)]
     acts_cp_rand = [rng.integers(0, 2, n_vec) for _ in range(20)]
-    held = _pair(lambda: _vector_rate(cpv, acts_cp, seconds), lambda: _vector_rate(venv, acts, seconds), rounds)
-    rand = _pair(lambda: _vector_rate(cpv, acts_cp_rand, seconds), lambda: _vector_rate(venv, acts_rand, seconds),
-                 rounds)
-    return {"n_envs": n_vec, "held": held, "random": rand}
+    import numba
+    top = numba.config.NUMBA_NUM_THREADS
+    for mode, kw in (("", {"num_threads": top}), ("_1thread", {"num_threads": 1}), ("_auto", {})):
+        venv = gym.make_vec(envs.ENV_ID, num_envs=n_vec, vectorization_mode="vector_entry_point", **kw)
+        out["threads" + mode] = venv.unwrapped.num_threads if venv.unwrapped._n_chunks > 1 else 1
+        out["held" + mode] = _pair(lambda: _vector_rate(cpv, acts_cp, seconds), lambda: _vector_rate(venv, acts, seconds),
+                                   rounds)
+        out["random" + mode] = _pair(lambda: _vector_rate(cpv, acts_cp_rand, seconds),
+                                     lambda: _vector_rate(venv, acts_rand, seconds), rounds)
+    return out
 
 
-def run(seconds=1.0, rounds=5, n_vec=(64, 1024, 4096, 16384)):
+def run(seconds=1.0, rounds=5, n_vec=(64, 256, 1024, 4096, 16384), vector_only=False):
+    out = {"load_before": os.getloadavg()}
+    if not vector_only:
+        out.update(_singles(seconds, rounds))
+    rng = np.random.default_rng(1)
+    out["vector"] = [_vector(n, rng, seconds, rounds) for n in n_vec]
+    out["load_after"] = os.getloadavg()
+    return out
+
+
+def _singles(seconds, rounds):
     from gymnasium.envs.classic_control.cartpole import CartPoleEnv
 
-    out = {"load_before": os.getloadavg()}
+    out = {}
     pairs = {
         "raw": (CartPoleEnv(), envs.SbarChargingEnv()),
         "make": (gym.make("CartPole-v1"), gym.make(envs.ENV_ID)),
@@ -116,35 +137,53 @@ def run(seconds=1.0, rounds=5, n_vec=(64, 1024, 4096, 16384)):
     cp, ours = pairs["make"]
     out["single_make_random"] = _pair(lambda: _single_rate(cp, r_cp, seconds),
                                       lambda: _single_rate(ours, r_ours, seconds), rounds)
-    out["vector"] = [_vector(n, rng, seconds, rounds) for n in n_vec]
-    out["load_after"] = os.getloadavg()
     return out
+
+
+def _print_table(res):
+    """The N table: ns per env-step (medians), ratio CartPoleVectorEnv / ours with the per-round range."""
+    print("\nvector env, random actions (autoresets), ns per env-step, medians; ratio = CartPole ns / ours ns")
+    print("| N | CartPoleVectorEnv ns | ours, all threads: ns, ratio (range) | 1 thread | default (auto) |")
+    print("|---|---|---|---|---|")
+    for v in res["vector"]:
+        cells = []
+        for mode in ("", "_1thread", "_auto"):
+            r = v["random" + mode]
+            cells.append(f"{1e9 / r['sbar_steps_s']:.1f} ns, {r['ratio']:.2f}x ({r['ratio_min']:.2f}-{r['ratio_max']:.2f})")
+        print(f"| {v['n_envs']} ({v['threads']} threads) | {1e9 / v['random']['cartpole_steps_s']:.1f} | " + " | ".join(cells)
+              + " |")
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=1.0, help="time per measurement (default 1 s)")
     ap.add_argument("--rounds", type=int, default=5)
-    ap.add_argument("--n", type=int, nargs="+", default=[64, 1024, 4096, 16384],
-                    help="vector env widths (default 64 1024 4096 16384)")
+    ap.add_argument("--n", type=int, nargs="+", default=[64, 256, 1024, 4096, 16384],
+                    help="vector env widths (default 64 256 1024 4096 16384)")
+    ap.add_argument("--vector-only", action="store_true", help="skip the single-env measurements")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
-    res = run(args.seconds, args.rounds, args.n)
+    res = run(args.seconds, args.rounds, args.n, args.vector_only)
     if args.json:
         print(json.dumps(res, indent=2))
         return 0
     print(f"load average before {res['load_before'][0]:.2f}, after {res['load_after'][0]:.2f} (1 min)")
     for label, goal in (("single_raw", 1.0), ("single_make", 1.0), ("single_make_random", 1.5)):
+        if label not in res:
+            continue
         r = res[label]
         print(f"{label:<19} CartPole-v1 {r['cartpole_steps_s']:>10,.0f} steps/s   SbarCharging-v0 "
               f"{r['sbar_steps_s']:>10,.0f} steps/s   ratio {r['ratio']:.2f} (range {r['ratio_min']:.2f}-"
               f"{r['ratio_max']:.2f}; goal >= {goal})")
     for v in res["vector"]:
-        for label, goal in (("held", "-"), ("random", ">= 1.0")):
+        for label, goal in (("held", "-"), ("random", ">= 1.0"), ("held_1thread", "-"), ("random_1thread", "-"),
+                            ("held_auto", "-"), ("random_auto", ">= 1.0")):
             r = v[label]
             print(f"vector N={v['n_envs']:<6} {label:<6} CartPoleVectorEnv {r['cartpole_steps_s']:>13,.0f}   SbarCharging-v0 "
                   f"{r['sbar_steps_s']:>13,.0f} env-steps/s   ratio {r['ratio']:.2f} (range {r['ratio_min']:.2f}-"
                   f"{r['ratio_max']:.2f}; goal {goal})")
+    _print_table(res)
+    print(f"load average (1 min) before {res['load_before'][0]:.2f}, after {res['load_after'][0]:.2f}")
     return 0
 
 

@@ -10,14 +10,19 @@ env step, shared with the single env); this module keeps the orchestration: epis
 two generator calls per restarted sub-environment (:func:`envs.scenario.draw_episodes`) and planned
 on arrays (:func:`envs.core.build_plans`), autoresets, the sensing delay, the info dict.
 
-Threads: ``num_threads`` (default: numba's, all cores) sets how many threads step the sub-environments
-(``numba.set_num_threads`` before each parallel step); below :attr:`SbarChargingVectorEnv.PARALLEL_MIN_ENVS`
-sub-environments, or with ``num_threads=1``, the step runs on the calling thread (waking a thread pool
-costs more than it saves there). The results do not depend on the threads (each sub-environment's
-arithmetic is the same in any chunk): parallel == serial to the bit.
+Threads: ``num_threads=k`` steps the sub-environments on ``k`` threads (``numba.set_num_threads``
+before each parallel step, chunks handed out dynamically); ``num_threads=1`` on the calling thread;
+the default (``None``) chooses between one thread and all of numba's by measured step times
+(:class:`_AutoThreads`: on a machine whose cores are busy with other work, a parallel step waits for
+descheduled threads). Below :attr:`SbarChargingVectorEnv.PARALLEL_MIN_ENVS` sub-environments the step
+always runs on the calling thread (waking a thread pool costs more than it saves there). The
+results do not depend on the threads (each sub-environment's arithmetic is the same in any chunk):
+parallel == serial to the bit.
 """
 
 from __future__ import annotations
+
+import time
 
 import numpy as np
 from gymnasium import spaces
@@ -43,7 +48,8 @@ class SbarChargingVectorEnv(VectorEnv):
     the spaces, reward and episode definition. ``info`` holds arrays of shape (num_envs,).
 
     ``compiled=False`` runs the compiled step's own source uncompiled (``py_func``: slow, for tests);
-    ``num_threads``: threads of the parallel step (1..numba's thread count; default all)."""
+    ``num_threads``: threads of the parallel step (1..numba's thread count; default: one or all,
+    chosen by measured step times)."""
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
     #: fewer sub-environments than this step on the calling thread
@@ -67,6 +73,7 @@ class SbarChargingVectorEnv(VectorEnv):
         self.single_action_space = self._make_action_space()
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.num_threads = _num_threads(num_threads)
+        self._threads_auto = num_threads is None
         self._compiled = compiled is None or bool(compiled)
         self._kernel = kernel_function("env_step", self._compiled)   # also: numba imported here
         self._alloc(c)
@@ -113,6 +120,8 @@ class SbarChargingVectorEnv(VectorEnv):
         self._obs_offset = OBS_OFFSET[:, None]
         serial = n < self.PARALLEL_MIN_ENVS or self.num_threads == 1
         self._n_chunks = 1 if serial else min(self.num_threads * self.CHUNKS_PER_THREAD, max(1, n // 256))
+        # auto (num_threads=None, parallel possible): the step times decide between one thread and all
+        self._auto = _AutoThreads() if self._threads_auto and self._n_chunks > 1 else None
 
     def _make_action_space(self):
         return spaces.Box(-1.0, 1.0, (1,), np.float32)
@@ -277,16 +286,50 @@ class SbarChargingVectorEnv(VectorEnv):
         block = np.empty((n, len(INFO)))
         ep = (self._i2sm_all, self._stop_k, self._t_stop, self._run_max, self._sm_ok, self._sm_checked)
         cx = (self._detuned, self._xc, self._ccoef, self.config.link.v1_amp_v)
-        if self._n_chunks > 1:
+        chunks = self._n_chunks if self._auto is None else self._auto.chunks(self._n_chunks)
+        if chunks > 1:
             _set_threads(self.num_threads)
         kern = self._kernel if self._compiled else kernel_function("env_step", False)
+        t0 = time.perf_counter()
         kern(d, self._state, self._k, self._j, self._coef_all, self._coef_cur, self._bat, self._cmd, self._noise,
              self._lm_all, ep, self._M, self._n_sub, self._par, OBS_SCALE, OBS_OFFSET, self._peak.kernel_table, obs,
-             reward, truncated, block, cx, self._n_chunks)
+             reward, truncated, block, cx, chunks)
+        if self._auto is not None:
+            self._auto.record(chunks, time.perf_counter() - t0)
         info = dict(zip(INFO._fields, block.T))   # (n,) views, one per key
         info["reached_short_mode"] = self._sm_ok & self._sm_checked
         info["i2_peak_envelope_a"] = info.pop("i2_peak_envelope_a")   # last, as in the single env
         return obs, reward, truncated, info
+
+
+class _AutoThreads:
+    """Chooses between the serial and the parallel step by their measured times: every
+    :attr:`PERIOD` steps, :attr:`PROBE` steps alternate the two, then the faster (least time of its
+    probes) runs until the next probe. On an idle machine the parallel step wins from ~2k sub-envs;
+    on a machine whose cores are busy with other work a parallel step waits for a descheduled
+    thread (measured 5-10x slower than serial at a load of 9 on 2 cores). The results are the same
+    either way (bit-identical steps), only the time differs."""
+
+    PERIOD, PROBE = 2000, 16
+
+    def __init__(self):
+        self.step, self.best, self.t = 0, None, {}
+
+    def chunks(self, par: int) -> int:
+        s = self.step % self.PERIOD
+        if s < self.PROBE:
+            return 1 if s % 2 == 0 else par
+        return self.best
+
+    def record(self, chunks: int, dt: float) -> None:
+        s = self.step % self.PERIOD
+        if s < self.PROBE:
+            if s == 0:
+                self.t = {}
+            self.t[chunks] = min(self.t.get(chunks, dt), dt)
+            if s == self.PROBE - 1:
+                self.best = min(self.t, key=self.t.get)
+        self.step += 1
 
 
 def _num_threads(num_threads) -> int:
@@ -301,9 +344,13 @@ def _num_threads(num_threads) -> int:
 
 
 def _set_threads(k: int) -> None:
+    """``k`` threads for the parallel step, its chunks handed out one at a time (dynamic schedule:
+    a thread the OS holds back leaves its chunks to the others instead of stalling the step)."""
     import numba
     if numba.get_num_threads() != k:
         numba.set_num_threads(k)
+    if numba.get_parallel_chunksize() != 1:
+        numba.set_parallel_chunksize(1)
 
 
 class SbarChargingDiscreteVectorEnv(SbarChargingVectorEnv):

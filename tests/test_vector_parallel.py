@@ -51,3 +51,18 @@ def test_num_threads_is_checked():
     assert SbarChargingVectorEnv(4).num_threads == top
     small = SbarChargingVectorEnv(SbarChargingVectorEnv.PARALLEL_MIN_ENVS - 1)
     assert small._n_chunks == 1   # below the threshold: one chunk on the calling thread
+
+
+def test_auto_threads_follow_the_measured_times():
+    """The default (num_threads=None) probes one thread against all and keeps the faster; re-probed
+    every PERIOD steps (a busier machine later flips it)."""
+    from envs.vector import _AutoThreads
+    a = _AutoThreads()
+    for t_serial, t_par, want in ((1.0, 0.4, 8), (0.3, 2.0, 1)):
+        for _ in range(a.PERIOD):
+            c = a.chunks(8)
+            a.record(c, t_serial if c == 1 else t_par)
+            if a.step % a.PERIOD >= a.PROBE:
+                assert a.chunks(8) == want
+    big = SbarChargingVectorEnv(SbarChargingVectorEnv.PARALLEL_MIN_ENVS, config=SHORT)
+    assert big._auto is not None and SbarChargingVectorEnv(4096, num_threads=1, config=SHORT)._auto is None
