@@ -11,7 +11,9 @@ arrays in chunks, and a run's peak Python-allocated memory that does not grow wi
   the rows exactly, float summary values to 1e-12 relative (the exact sums are carried block by
   block, ``math.fsum`` of the previous sum and the block, and the chunks move the block edges);
 * tracemalloc's peak of a streamed compiled run at 8x the length is within 1.25x of the short
-  run's (no wall-clock asserts).
+  run's (no wall-clock asserts);
+* the writer's thinned copy for figures is bounded and keeps the peak transient; peak candidates
+  spilled to a file give the same instantaneous peak.
 """
 
 import dataclasses
@@ -150,7 +152,7 @@ def test_peak_python_memory_does_not_grow_with_the_mission(tmp_path, monkeypatch
     and 32 times (~36,000). Holding the per-sample arrays and the trajectory (~300 B a sample at
     the planning peak) would add ~10 MB to a ~20 MB peak (the kernel's row buffer); chunked, the
     peak grows by less than 25 % for 8x the length (what does grow: the instantaneous-peak
-    candidates, 16 B per row with the pad on)."""
+    candidates, 16 B per row with the pad on, in memory up to 2^20 and then in a temporary file)."""
     monkeypatch.setattr(samples_mod, "SAMPLE_CHUNK", 2048)
     monkeypatch.setattr(traj_mod, "PLAN_BLOCK", 1024)
     _peak_bytes(1, tmp_path)   # warm: imports, numba, the coupling table, caches

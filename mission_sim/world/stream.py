@@ -11,7 +11,9 @@ produces them, so memory stays bounded whatever the mission's length:
   split floats) and, when asked, to ``timeseries.csv`` (:class:`pyarrow.csv.CSVWriter`); with
   ``every_s`` only the first row of every ``every_s`` seconds (and the last row) is stored. Files
   are written under temporary names and renamed by :meth:`SeriesWriter.close` (nothing half-written
-  under a final name; :meth:`SeriesWriter.abort` removes them).
+  under a final name; :meth:`SeriesWriter.abort` removes them);
+* :class:`ThinnedSeries` keeps a bounded, thinned copy of the stored rows for figures (strided rows
+  and the rows around the largest ``|I2|``), so nothing reads the file back.
 """
 
 from __future__ import annotations
