@@ -11,7 +11,9 @@ produces them, so memory stays bounded whatever the mission's length:
   split floats) and, when asked, to ``timeseries.csv`` (:class:`pyarrow.csv.CSVWriter`); with
   ``every_s`` only the first row of every ``every_s`` seconds (and the last row) is stored. Files
   are written under temporary names and renamed by :meth:`SeriesWriter.close` (nothing half-written
-  under a final name; :meth:`SeriesWriter.abort` removes them).
+  under a final name; :meth:`SeriesWriter.abort` removes them);
+* :class:`ThinnedSeries` keeps a bounded, thinned copy of the stored rows for figures (strided rows
+  and the rows around the largest ``|I2|``), so nothing reads the file back.
 """
 
 from __future__ import annotations
@@ -27,6 +29,8 @@ __all__ = ["RowStats", "SeriesWriter", "ThinnedSeries", "BLOCK_ROWS", "FIGURE_CO
 #: rows per block handed over by the loop (and per Parquet row group): ~3.4 MB of float64 rows (the
 #: block-sized temporaries of the summary, edge losses and the writer are part of a run's fixed peak)
 BLOCK_ROWS = 1 << 14
+#: peak candidates kept in memory before they move to a temporary file (16 B each: 16 MB)
+SPILL_CANDIDATES = 1 << 20
 _ENERGY_COLS = ("e_source_j", "e_coil_loss_j", "e_rectifier_j", "e_battery_chem_j", "e_battery_r0_j",
                 "e_battery_r1_j", "e_battery_c1_j", "e_propulsion_j", "e_inverter_switches_j",
                 "e_rectifier_diodes_j", "e_rectifier_switches_j")
@@ -39,7 +43,10 @@ class RowStats:
     Peak candidates: rows with the pad on whose ``|I2|`` is within ``margin_a`` of the running envelope
     peak (``margin_a`` >= twice the SBAR ripple bound at any battery voltage the run can reach, so the
     final screen of :meth:`~.loop.MissionLoop.instantaneous_peak` sees every row it would have seen in
-    the full series); earlier candidates are dropped as the peak grows."""
+    the full series); earlier candidates are dropped as the peak grows. Beyond :data:`SPILL_CANDIDATES`
+    in memory they are moved to an anonymous temporary file (16 B each; read back slice by slice by
+    :meth:`screened`; the final screen's floor is at least the one any later pruning would apply), so
+    memory stays bounded however many charging rows a mission has."""
 
     def __init__(self, columns, margin_a: float, initial_soc: float):
         self.col = {name: j for j, name in enumerate(columns)}
@@ -49,6 +56,7 @@ class RowStats:
         self.vl_on_max = -math.inf
         self.n_rows = 0
         self._cand = []   # pieces [d, |I2|, min |I2|] of candidates in row order, pruned in place
+        self._spill, self._spilled = None, []   # temporary file and the lengths of the pieces in it
 
     def add(self, arr: np.ndarray, peak_env: float) -> None:
         """Take one block ``arr`` (n, 26); ``peak_env`` is the running envelope peak after it [A]."""
@@ -72,6 +80,19 @@ class RowStats:
             new = on & (i2 >= floor)
             if new.any():
                 self._cand.append([arr[new, c["d_short"]], i2[new], float(i2[new].min())])
+            if sum(len(p[1]) for p in self._cand) > SPILL_CANDIDATES:
+                self._spill_pieces()
+
+    def _spill_pieces(self) -> None:
+        """Move the candidates in memory to the end of the temporary file (rows of (d, |I2|) float64)."""
+        if self._spill is None:
+            import tempfile
+            self._spill = tempfile.TemporaryFile()
+        self._spill.seek(0, 2)
+        for d, i2, _ in self._cand:
+            np.column_stack([d, i2]).tofile(self._spill)
+            self._spilled.append(len(i2))
+        self._cand = []
 
     def _prune(self, floor: float) -> None:
         """Drop the candidates below ``floor`` [A] piece by piece (no copy of the whole list)."""
@@ -84,11 +105,25 @@ class RowStats:
 
     @property
     def n_candidates(self) -> int:
-        return sum(len(p[1]) for p in self._cand)
+        """Candidates in memory and in the temporary file."""
+        return sum(len(p[1]) for p in self._cand) + sum(self._spilled)
+
+    def _pieces(self):
+        """``(d, |I2|)`` of every candidate piece in row order, the spilled ones read back slice by slice."""
+        offset = 0
+        for n in self._spilled:
+            for a in range(0, n, BLOCK_ROWS):
+                m = min(BLOCK_ROWS, n - a)
+                self._spill.seek(16 * (offset + a))
+                x = np.fromfile(self._spill, dtype=np.float64, count=2 * m).reshape(m, 2)
+                yield x[:, 0], x[:, 1]
+            offset += n
+        for d, i2, _ in self._cand:
+            yield d, i2
 
     def candidates(self, floor: float = -math.inf):
         """Duties and |I2| [A] of the candidates with |I2| >= ``floor``, in row order."""
-        parts = [(p[0][p[1] >= floor], p[1][p[1] >= floor]) for p in self._cand]
+        parts = [(d[i2 >= floor], i2[i2 >= floor]) for d, i2 in self._pieces()]
         return (np.concatenate([p[0] for p in parts] or [np.empty(0)]),
                 np.concatenate([p[1] for p in parts] or [np.empty(0)]))
 
@@ -96,7 +131,7 @@ class RowStats:
         """The pair ``first`` (duty, |I2|), then the candidates with |I2| >= ``floor`` in slices of
         :data:`BLOCK_ROWS` (bounded temporaries)."""
         yield np.array([first[0]], dtype=float), np.array([first[1]], dtype=float)
-        for d, i2, _ in self._cand:
+        for d, i2 in self._pieces():
             for a in range(0, len(i2), BLOCK_ROWS):
                 m = i2[a:a + BLOCK_ROWS] >= floor
                 if m.any():
