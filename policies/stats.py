@@ -43,8 +43,10 @@ def mean_ci(x, **kw) -> tuple[float, float, float]:
 
 
 def seed_ci(seed_means, level: float = 0.95) -> tuple[float, float, float]:
-    """``(mean, lo, hi)`` over training seeds: Student t interval of the mean of the seed means."""
-    from scipy import stats
+    """``(mean, lo, hi)`` over training seeds: Student t interval of the mean of the seed means (the t
+    quantile from ``scipy.special.stdtrit``, which ``scipy.stats.t.ppf`` calls: the same numbers without
+    importing scipy.stats, ~0.5 s)."""
+    from scipy.special import stdtrit
 
     x = np.asarray(seed_means, dtype=float)
     x = x[np.isfinite(x)]
@@ -53,7 +55,7 @@ def seed_ci(seed_means, level: float = 0.95) -> tuple[float, float, float]:
     m = float(x.mean())
     if len(x) == 1:
         return m, m, m
-    h = float(stats.t.ppf(0.5 + 0.5 * level, len(x) - 1) * x.std(ddof=1) / np.sqrt(len(x)))
+    h = float(stdtrit(len(x) - 1, 0.5 + 0.5 * level) * x.std(ddof=1) / np.sqrt(len(x)))
     return m, m - h, m + h
 
 
