@@ -77,13 +77,36 @@ def test_model_based_policy_built_without_scipy_signal():
     assert "scipy.signal" not in _imported(code)
 
 
-def test_cli_mission_runs_small_missions_in_the_python_loop(tmp_path):
+def test_cli_mission_runs_small_missions_in_the_python_loop(tmp_path, monkeypatch):
     """``dronewpt mission`` compiles the loop only for long missions (mission_sim.cli.mission.COMPILE_FROM_ROWS).
-    (numba itself is imported by every mission since issue 22: the coupling table's lookup exists only
-    compiled, wpt_receiver.coupling_kernel.)"""
+    (numba itself is imported by every mission on a new path since issue 22: the coupling table's lookup
+    exists only compiled, wpt_receiver.coupling_kernel; a fresh cache dir, so no stored Lm of the path.)"""
+    monkeypatch.setenv("DRONEWPT_CACHE_DIR", str(tmp_path / "cache"))
     code = ("from mission_sim.cli import main\n"
             f"main(['mission', '--out', {str(tmp_path / 'm')!r}, '--no-plot', '--no-progress'])")
     names = ("mission_sim.world.loop_kernel", "wpt_receiver.coupling_kernel")
     assert _imported(code, names) == ["wpt_receiver.coupling_kernel"]
     long = code.replace("'--no-progress'", "'--no-progress', '--set', 'pads.1.hover_time_s=4000'")
     assert _imported(long, names) == list(names)
+
+
+def _summary(path: Path) -> dict:
+    return {k: v for k, v in json.loads((path / "summary.json").read_text()).items()
+            if k not in ("wall_s", "realtime_factor")}
+
+
+def test_mission_on_a_known_path_needs_no_numba_and_gives_the_same_results(tmp_path, monkeypatch):
+    """Lm along a path is kept in the disk cache keyed by the poses (wpt_receiver.coupling.MEMO_MAX_POSES):
+    a second mission on the same path, here with another policy, loads neither the table kernel nor numba
+    (with scipy.linalg, ~0.5 s of start-up) and gives the summary and series of a run without any cache."""
+    monkeypatch.setenv("DRONEWPT_CACHE_DIR", str(tmp_path / "cache"))
+    run = ("from mission_sim.cli import main\n"
+           "main(['mission', '--out', {out!r}, '--no-plot', '--no-progress', '--policy', {pol!r}])")
+    names = ("numba", "scipy.linalg", "wpt_receiver.coupling_kernel")
+    assert _imported(run.format(out=str(tmp_path / "a"), pol="model_based"), names) == list(names)
+    assert _imported(run.format(out=str(tmp_path / "b"), pol="ramp"), names) == []
+    assert len(list((tmp_path / "cache").glob("lm_poses-*.npy"))) >= 1
+    monkeypatch.setenv("DRONEWPT_CACHE_DIR", "")   # no disk cache at all: computed by the kernel
+    _imported(run.format(out=str(tmp_path / "c"), pol="ramp"), names)
+    assert _summary(tmp_path / "b") == _summary(tmp_path / "c")
+    assert (tmp_path / "b" / "timeseries.parquet").read_bytes() == (tmp_path / "c" / "timeseries.parquet").read_bytes()
