@@ -110,3 +110,15 @@ def test_mission_on_a_known_path_needs_no_numba_and_gives_the_same_results(tmp_p
     _imported(run.format(out=str(tmp_path / "c"), pol="ramp"), names)
     assert _summary(tmp_path / "b") == _summary(tmp_path / "c")
     assert (tmp_path / "b" / "timeseries.parquet").read_bytes() == (tmp_path / "c" / "timeseries.parquet").read_bytes()
+
+
+def test_compare_defaults_import_no_torch_sb3_scipy_stats_or_plotting():
+    """``dronewpt compare --no-plot`` at its default policies (the shipped learned ones included, their
+    training-seed rows with t intervals): the PPO actors come from the zips' state dicts read with numpy
+    (policies.inference.read_state_dict), the t quantile from scipy.special; nothing plots."""
+    pytest.importorskip("stable_baselines3")
+    code = ("import contextlib, io\nfrom mission_sim.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+            "    main(['compare', '--episodes', '3', '--scenarios', 'nominal', '--no-plot', '--no-progress'])\n"
+            "assert 'residual' in out.getvalue() and 'ppo_lagrangian' in out.getvalue()")
+    assert _imported(code, ("torch", "stable_baselines3", "scipy.stats", "matplotlib", "pandas")) == []
