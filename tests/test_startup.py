@@ -122,3 +122,12 @@ def test_compare_defaults_import_no_torch_sb3_scipy_stats_or_plotting():
             "    main(['compare', '--episodes', '3', '--scenarios', 'nominal', '--no-plot', '--no-progress'])\n"
             "assert 'residual' in out.getvalue() and 'ppo_lagrangian' in out.getvalue()")
     assert _imported(code, ("torch", "stable_baselines3", "scipy.stats", "matplotlib", "pandas")) == []
+
+
+def test_mission_figures_read_the_series_without_pandas(tmp_path):
+    """The figures read the stored series back as numpy columns (world.stream.read_series(frame=False)):
+    a default ``dronewpt mission`` with its five figures never imports pandas (~0.2-0.5 s)."""
+    code = ("from mission_sim.cli import main\n"
+            f"main(['mission', '--out', {str(tmp_path / 'm')!r}, '--no-progress'])")
+    assert _imported(code, ("pandas", "matplotlib", "scipy.stats", "torch")) == ["matplotlib"]
+    assert len(list((tmp_path / "m").glob("*.png"))) == 5

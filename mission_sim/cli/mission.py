@@ -227,7 +227,7 @@ def _figures_and_summary(res, out: Path, plots: bool) -> list[str]:
     if plots and (out / "timeseries.parquet").exists():
         from ..figures.mission import plot_mission
         from ..world.stream import read_series
-        res.timeseries = read_series(out / "timeseries.parquet", max_points=FIGURE_POINTS)
+        res.timeseries = read_series(out / "timeseries.parquet", max_points=FIGURE_POINTS, frame=False)
         files = [str(f) for f in plot_mission(res, out)]
         res.timeseries = None
     with atomic_output(out / "summary.json") as tmp:
