@@ -19,7 +19,7 @@ In process (``--phases``): the mission's and the compare's phases timed with ``t
 one fresh interpreter each (imports, config, policy, simulation, Parquet, figures; each policy's
 rollout, statistics, frontier).
 
-    python benchmarks/bench_startup.py [--repeat 5] [--compare no-mpc|default|none] [--phases] [--json]
+    python benchmarks/bench_startup.py [--repeat 5] [--compare no-mpc|default|none] [--phases] [--json] [--root DIR]
 """
 
 from __future__ import annotations
@@ -136,7 +136,7 @@ res = run_mission(cfg, pol, charge=True, progress=False, compiled=False, frame=F
 w.close(); lap("Parquet close")
 import matplotlib; matplotlib.use("Agg"); import matplotlib.pyplot; lap("import matplotlib")
 from mission_sim.figures.mission import plot_mission
-res.timeseries = read_series(out / "timeseries.parquet", max_points=20000); lap("read the series back (pandas)")
+res.timeseries = read_series(out / "timeseries.parquet", max_points=20000, frame=False); lap("read the series back (numpy columns)")
 plot_mission(res, out); lap("five figures: layout, draw, PNG")
 print(json.dumps(ph))
 '''
@@ -196,7 +196,12 @@ def main(argv=None):
     ap.add_argument("--compare", choices=("no-mpc", "default", "none"), default="no-mpc")
     ap.add_argument("--phases", action="store_true", help="also the in-process phase table")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--root", type=Path, default=None, help="measure the code tree in this folder (e.g. an older "
+                    "commit's `git archive`; default this repository)")
     a = ap.parse_args(argv)
+    if a.root is not None:
+        global ROOT
+        ROOT = a.root.resolve()
     r = {"end_to_end": end_to_end(a.repeat, a.compare)}
     if a.phases:
         r["in_process"] = phases()
