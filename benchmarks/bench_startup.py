@@ -1,13 +1,25 @@
-"""Start-up: ``dronewpt --help`` and ``dronewpt mission`` (default mission, figures included) end to
-end, each a fresh process, against the bare interpreter (``python -c pass``) in the same run.
+"""Start-up and the two user commands of issue 22, end to end as a user runs them: the ``dronewpt``
+console script in a fresh process (numba's cache and the disk cache warm), against the bare
+interpreter in the same run; beside them, labelled as such, where the time goes *in one process*.
 
-Each command runs ``--repeat`` times, the three interleaved so load changes hit them alike;
-median and range of the wall time (the goal's measure) and of the process's CPU time (user +
-system, less sensitive to a shared machine), and ``os.getloadavg()`` before and after. The mission writes
-to a temporary folder; the coupling table and coil inductances come from the disk cache (one
-untimed warm-up run fills it, as any earlier run on the machine would have).
+End to end (wall and CPU = user + system of the child), each command ``--repeat`` times, interleaved
+so a change of load hits all alike, after one untimed warm-up round; median and range, and
+``os.getloadavg()`` before and after:
 
-    python benchmarks/bench_startup.py [--repeat 7] [--json]
+* ``python -c pass``, ``dronewpt --help``;
+* ``dronewpt mission`` (default mission, five figures; goal <= 1.0 s) and ``--no-plot``: the path is
+  one flown before, so Lm along it comes from the disk cache (:meth:`wpt_receiver.coupling.CouplingModel.lm_h`);
+* ``dronewpt mission --no-plot --set seed=K`` with a new K every run: a path never flown, so numba
+  starts and the table kernel loads from its cache (what a changed route or wind costs);
+* ``dronewpt compare --episodes 100 --scenarios nominal --no-plot`` (goal <= 2.5 s): ``--compare
+  default`` (every default policy, MPC included: slow, see docs/performance.md) or ``no-mpc`` (the
+  default policies and seed rows without ``mpc``; the default of this script) or ``none``.
+
+In process (``--phases``): the mission's and the compare's phases timed with ``time.process_time`` in
+one fresh interpreter each (imports, config, policy, simulation, Parquet, figures; each policy's
+rollout, statistics, frontier).
+
+    python benchmarks/bench_startup.py [--repeat 5] [--compare no-mpc|default|none] [--phases] [--json] [--root DIR]
 """
 
 from __future__ import annotations
@@ -16,6 +28,7 @@ import argparse
 import json
 import os
 import resource
+import shutil
 import statistics
 import subprocess
 import sys
@@ -24,6 +37,17 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+NO_MPC = ("step,ramp,hysteresis,model_based,model_based_online,model_based_budget:0.01,model_based_budget:0.02,"
+          "rl,random")
+
+
+def _console_script() -> list[str]:
+    """The ``dronewpt`` script of this interpreter (what ``pip install`` put beside it), else ``-m``."""
+    script = Path(sys.executable).with_name("dronewpt")
+    if script.is_file():
+        return [str(script)]
+    found = shutil.which("dronewpt")
+    return [found] if found else [sys.executable, "-m", "mission_sim.cli"]
 
 
 def _cpu_children() -> float:
@@ -31,56 +55,165 @@ def _cpu_children() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def _wall(args, env, cpu: list | None = None) -> float:
-    """Wall time of one run of ``python ARGS``; its CPU time (user + system) appended to ``cpu``."""
+def _run(argv, env) -> tuple[float, float]:
+    """Wall and CPU time [s] of one fresh process."""
     c0, t0 = _cpu_children(), time.perf_counter()
-    subprocess.run([sys.executable, *args], cwd=ROOT, env=env, check=True, stdout=subprocess.DEVNULL,
-                   stderr=subprocess.DEVNULL)
-    wall = time.perf_counter() - t0
-    if cpu is not None:
-        cpu.append(_cpu_children() - c0)
-    return wall
+    r = subprocess.run(argv, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    wall, cpu = time.perf_counter() - t0, _cpu_children() - c0
+    if r.returncode != 0:
+        raise SystemExit(f"{' '.join(argv)} failed ({r.returncode}): {r.stderr.strip()[-400:]}")
+    return wall, cpu
 
 
-def run(repeat: int = 7) -> dict:
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+def _commands(tmp: str, compare: str) -> dict:
+    cli = _console_script()
+    cmds = {"python -c pass": [sys.executable, "-c", "pass"],
+            "dronewpt --help": [*cli, "--help"],
+            "dronewpt mission": [*cli, "mission", "--no-progress", "--out", f"{tmp}/m"],
+            "dronewpt mission --no-plot": [*cli, "mission", "--no-plot", "--no-progress", "--out", f"{tmp}/n"],
+            "dronewpt mission --no-plot, new path": [*cli, "mission", "--no-plot", "--no-progress", "--out",
+                                                     f"{tmp}/s", "--set", "seed={seed}"]}
+    if compare != "none":
+        extra = ["--policies", NO_MPC, *_seed_rows()] if compare == "no-mpc" else []
+        cmds[f"dronewpt compare ({compare})"] = [*cli, "compare", "--episodes", "100", "--scenarios", "nominal",
+                                                 "--no-plot", "--no-progress", "--out", f"{tmp}/c", *extra]
+    return cmds
+
+
+def _seed_rows() -> list[str]:
+    """``--train-seeds`` of the default rows (the shipped ppo_lagrangian and residual seeds), which an
+    explicit ``--policies`` otherwise drops."""
+    sys.path.insert(0, str(ROOT))
+    from policies.compare import shipped_seed_groups
+    return [x for k, v in shipped_seed_groups().items() for x in ("--train-seeds", f"{k}={','.join(v)}")]
+
+
+def _expand(argv: list[str], seed: int) -> list[str]:
+    return [a.replace("{seed}", str(seed)) for a in argv]
+
+
+def end_to_end(repeat: int = 5, compare: str = "no-mpc") -> dict:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
     with tempfile.TemporaryDirectory() as tmp:
-        cmds = {"python -c pass": ["-c", "pass"],
-                "dronewpt --help": ["-m", "mission_sim.cli", "--help"],
-                "dronewpt mission": ["-m", "mission_sim.cli", "mission", "--out", str(Path(tmp) / "m")]}
-        _wall(cmds["dronewpt mission"], env)  # warm-up: disk caches (coupling table, .pyc)
+        cmds = _commands(tmp, compare)
+        seed = 1000 + int(time.time()) % 100_000 * 100   # new paths: seeds not flown before
+        for argv in cmds.values():   # warm-up: .pyc, numba's cache, coupling table, Lm of the default path
+            _run(_expand(argv, seed), env)
         load0 = os.getloadavg()
-        times = {k: [] for k in cmds}
-        cpus = {k: [] for k in cmds}
-        for _ in range(repeat):
-            for name, args in cmds.items():
-                times[name].append(_wall(args, env, cpus[name]))
+        res = {k: ([], []) for k in cmds}
+        for i in range(repeat):
+            for name, argv in cmds.items():
+                w, c = _run(_expand(argv, seed + 1 + i), env)
+                res[name][0].append(w)
+                res[name][1].append(c)
         load1 = os.getloadavg()
-    out = {"load_before": load0, "load_after": load1}
-    for name, ts in times.items():
-        c = cpus[name]
-        out[name] = {"median_s": statistics.median(ts), "min_s": min(ts), "max_s": max(ts), "n": len(ts),
+    out = {"load_before": load0, "load_after": load1, "console_script": _console_script()[0]}
+    for name, (w, c) in res.items():
+        out[name] = {"median_s": statistics.median(w), "min_s": min(w), "max_s": max(w), "n": len(w),
                      "cpu_median_s": statistics.median(c), "cpu_min_s": min(c), "cpu_max_s": max(c)}
     return out
 
 
+_MISSION_PHASES = r'''
+import json, sys, time
+c = time.process_time
+t = [c()]
+ph = {}
+def lap(k):
+    now = c(); ph[k] = now - t[0]; t[0] = now
+import numpy; lap("import numpy")
+import argparse
+from mission_sim.cli.mission import mission_config, make_policy; lap("import the CLI")
+cfg = mission_config(argparse.Namespace(config=None, set=None, plan=None, pads=None, force=False, drone=None))
+lap("config: TOML, validation")
+pol = make_policy("model_based", cfg); lap("policy + Lm at the hover pose (" + ("numba" if "numba" in sys.modules else "disk cache") + ")")
+from pathlib import Path
+from mission_sim.world.runner import run_mission
+from mission_sim.world.stream import SeriesWriter, read_series
+out = Path(sys.argv[1]); out.mkdir(exist_ok=True)
+w = SeriesWriter(out, csv=False, every_s=0.0); lap("import runner, stream, pyarrow")
+res = run_mission(cfg, pol, charge=True, progress=False, compiled=False, frame=False, sink=w); lap("simulation (+ uncharged baseline)")
+w.close(); lap("Parquet close")
+import matplotlib; matplotlib.use("Agg"); import matplotlib.pyplot; lap("import matplotlib")
+from mission_sim.figures.mission import plot_mission
+res.timeseries = read_series(out / "timeseries.parquet", max_points=20000, frame=False); lap("read the series back (numpy columns)")
+plot_mission(res, out); lap("five figures: layout, draw, PNG")
+print(json.dumps(ph))
+'''
+
+_COMPARE_PHASES = r'''
+import json, sys, time
+c = time.process_time
+t = [c()]
+ph = {}
+def lap(k):
+    now = c(); ph[k] = ph.get(k, 0.0) + now - t[0]; t[0] = now
+import numpy; lap("import numpy")
+import envs, envs.vector_kernel, policies.compare as pc; lap("import envs (gymnasium, numba), policies")
+orig = pc.run_policy
+def timed(name, *a, **k):
+    lap("(between rollouts)")
+    r = orig(name, *a, **k); lap("rollout " + name.split(":/")[0].split("/")[-1]); return r
+pc.run_policy = timed
+pols = sys.argv[1].split(",")
+groups = pc.shipped_seed_groups()
+rows, traces = pc.compare(tuple(p for p in pols if p not in groups), ("nominal",), 100, 1000, train_seeds=groups)
+lap("statistics")
+pc.frontier("nominal", episodes=100, seed=1000)
+lap("frontier statistics")
+print(json.dumps(ph))
+'''
+
+
+def phases(policies: str = NO_MPC + ",ppo_lagrangian,residual") -> dict:
+    """In-process CPU time per phase of one mission and one compare, each in a fresh interpreter."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    with tempfile.TemporaryDirectory() as tmp:
+        m = subprocess.run([sys.executable, "-c", _MISSION_PHASES, f"{tmp}/m"], env=env, cwd=ROOT, check=True,
+                           capture_output=True, text=True)
+        c = subprocess.run([sys.executable, "-c", _COMPARE_PHASES, policies], env=env, cwd=ROOT, check=True,
+                           capture_output=True, text=True)
+    return {"mission": json.loads(m.stdout.splitlines()[-1]), "compare": json.loads(c.stdout.splitlines()[-1])}
+
+
+def _print(r: dict) -> None:
+    print(f"end to end ({r['console_script']}); load average (1 min) before {r['load_before'][0]:.2f}, "
+          f"after {r['load_after'][0]:.2f}")
+    base = r["python -c pass"]["median_s"]
+    goals = {"dronewpt mission": "goal <= 1.0 s", "dronewpt compare (default)": "goal <= 2.5 s",
+             "dronewpt compare (no-mpc)": "goal <= 2.5 s (without mpc)"}
+    for name, s in r.items():
+        if not isinstance(s, dict):
+            continue
+        print(f"  {name:<38} wall median {s['median_s']:.3f} s (range {s['min_s']:.3f}-{s['max_s']:.3f}, "
+              f"n={s['n']}; {s['median_s'] / base:.1f}x python -c pass); CPU {s['cpu_median_s']:.3f} s "
+              f"({s['cpu_min_s']:.3f}-{s['cpu_max_s']:.3f})  {goals.get(name, '')}")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeat", type=int, default=7)
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--compare", choices=("no-mpc", "default", "none"), default="no-mpc")
+    ap.add_argument("--phases", action="store_true", help="also the in-process phase table")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--root", type=Path, default=None, help="measure the code tree in this folder (e.g. an older "
+                    "commit's `git archive`; default this repository)")
     a = ap.parse_args(argv)
-    r = run(a.repeat)
+    if a.root is not None:
+        global ROOT
+        ROOT = a.root.resolve()
+    r = {"end_to_end": end_to_end(a.repeat, a.compare)}
+    if a.phases:
+        r["in_process"] = phases()
+        r["in_process_load"] = os.getloadavg()
     if a.json:
         print(json.dumps(r, indent=1))
         return
-    print(f"load average before {r['load_before'][0]:.2f}, after {r['load_after'][0]:.2f} (1 min)")
-    base = r["python -c pass"]["median_s"]
-    for name, goal in (("python -c pass", ""), ("dronewpt --help", "goal <= 0.3 s"),
-                       ("dronewpt mission", "goal <= 2.0 s")):
-        s = r[name]
-        print(f"{name:<17} median {s['median_s']:.3f} s (range {s['min_s']:.3f}-{s['max_s']:.3f}, n={s['n']}); "
-              f"{s['median_s'] / base:.1f}x the bare interpreter; CPU {s['cpu_median_s']:.3f} s "
-              f"(range {s['cpu_min_s']:.3f}-{s['cpu_max_s']:.3f})  {goal}")
+    _print(r["end_to_end"])
+    for cmd, ph in r.get("in_process", {}).items():
+        print(f"in process, one run (CPU s, load {r['in_process_load'][0]:.2f}): {cmd}, total {sum(ph.values()):.3f}")
+        for k, v in ph.items():
+            print(f"  {k:<48} {v:7.3f}")
 
 
 if __name__ == "__main__":

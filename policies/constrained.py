@@ -33,6 +33,7 @@ from gymnasium import spaces
 from mission_sim.contract import OBS_DIM, PolicyContext, duty_to_action
 
 from .budgeted import BudgetedModelBasedPolicy
+from .residual import residual_duty, residual_obs  # noqa: F401  (defined with the inference side: no SB3 import)
 
 __all__ = ["CostPenaltyVecEnv", "LagrangeCallback", "ResidualVecEnv", "residual_obs", "residual_duty", "RESIDUAL_SCALE",
            "ramp_budget", "BUDGET_EPISODES", "BUDGET_SEED"]
@@ -116,11 +117,6 @@ class LagrangeCallback(BaseCallback):
                                              "probe": self.probe is not None, "history": self.history}))
 
 
-def residual_obs(obs: np.ndarray, d_base: np.ndarray) -> np.ndarray:
-    """Contract observation + the base duty as an action in [-1, 1] (field 8), float32."""
-    return np.concatenate([obs, duty_to_action(d_base)[:, None]], axis=1).astype(np.float32)
-
-
 class _BaseDuty:
     """The model-based controller for a batch, with per-row restarts (new windows)."""
 
@@ -167,11 +163,6 @@ class ResidualVecEnv(VecEnvWrapper):
             infos[i]["terminal_observation"] = residual_obs(infos[i]["terminal_observation"][None],
                                                             self._d_base[i:i + 1])[0]
         return self._augment(obs, idx if len(idx) else None), reward, done, infos
-
-
-def residual_duty(d_base, action, scale: float) -> np.ndarray:
-    """``clip(d_base + scale a, 0, 1)``: the duty a residual agent's action ``a`` gives."""
-    return np.clip(np.asarray(d_base, dtype=float) + scale * np.asarray(action, dtype=float).reshape(-1), 0.0, 1.0)
 
 
 

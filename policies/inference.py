@@ -13,7 +13,8 @@ weights into float32 numpy arrays once and :class:`NumpyActor` evaluates
 
 with the same layers and activations (float32, like torch). :func:`load_ppo_actor` builds the same
 actor for a plain PPO model straight from the zip's ``policy.pth`` state dict (torch only to read
-it): no stable-baselines3 import, no model, no optimiser. Results agree with
+it, and only for a layout :func:`read_state_dict` does not know): no torch, no stable-baselines3
+import, no model, no optimiser. Results agree with
 ``predict(deterministic=True)`` to float32 round-off (tests/test_rl_inference.py). Anything else
 (image or dict observations, custom feature extractors, gSDE, unknown activations) is not
 exported: :func:`export_actor` returns ``None`` and the caller keeps ``predict``.
@@ -23,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["NumpyActor", "export_actor", "load_ppo_actor"]
+__all__ = ["NumpyActor", "export_actor", "load_ppo_actor", "read_state_dict"]
 
 _ACTIVATIONS = {
     "Tanh": np.tanh,
@@ -157,7 +158,8 @@ def _space_bounds(space: dict):
 def load_ppo_actor(path, meta: dict) -> NumpyActor | None:
     """The deterministic actor of a PPO model zip written by ``dronewpt train`` (MLP ``net_arch`` of
     SB3's default Tanh, continuous flat Box spaces, no gSDE: the shipped models), read from the
-    zip's ``policy.pth`` state dict (``torch.load(weights_only=True)``); the same numbers as
+    zip's ``policy.pth`` state dict (:func:`read_state_dict`, no torch; ``torch.load(weights_only=True)``
+    for a layout it does not know); the same numbers as
     :func:`export_actor` of ``PPO.load`` (tests). ``None`` for anything else (the caller loads the
     model with SB3)."""
     import io
@@ -173,15 +175,76 @@ def load_ppo_actor(path, meta: dict) -> NumpyActor | None:
         data = json.loads(z.read("data"))
         if data.get("use_sde") or "Box" not in str(data.get("action_space", {}).get(":type:")):
             return None
+        blob = z.read("policy.pth")
+    state = read_state_dict(blob)
+    if state is None:   # a layout the numpy reader does not know: torch reads it
         import torch
-        state = torch.load(io.BytesIO(z.read("policy.pth")), map_location="cpu", weights_only=True)
+        state = {k: v.numpy() for k, v in torch.load(io.BytesIO(blob), map_location="cpu", weights_only=True).items()}
     layers = []
     for i in range(len(arch)):
         w, b = state.get(f"mlp_extractor.policy_net.{2 * i}.weight"), state.get(f"mlp_extractor.policy_net.{2 * i}.bias")
         if w is None or b is None:
             return None
-        layers += [(w.numpy(), b.numpy()), _ACTIVATIONS["Tanh"]]
+        layers += [(w, b), _ACTIVATIONS["Tanh"]]
     if f"mlp_extractor.policy_net.{2 * len(arch)}.weight" in state or "action_net.weight" not in state:
         return None
-    layers.append((state["action_net.weight"].numpy(), state["action_net.bias"].numpy()))
+    layers.append((state["action_net.weight"], state["action_net.bias"]))
     return NumpyActor(layers, "clip", *_space_bounds(data["action_space"]))
+
+
+#: torch storage classes of a state dict -> numpy dtypes (what ``read_state_dict`` accepts)
+_STORAGE_DTYPES = {"FloatStorage": np.float32, "DoubleStorage": np.float64, "HalfStorage": np.float16,
+                   "LongStorage": np.int64, "IntStorage": np.int32, "ShortStorage": np.int16,
+                   "CharStorage": np.int8, "ByteStorage": np.uint8, "BoolStorage": np.bool_}
+
+
+def _rebuild_tensor(storage, offset, size, stride, requires_grad=False, hooks=None, metadata=None):
+    """numpy copy of ``torch._utils._rebuild_tensor_v2``: ``size``/``stride`` in elements into ``storage``."""
+    item = storage.itemsize
+    view = np.lib.stride_tricks.as_strided(storage[offset:], shape=tuple(size), strides=tuple(s * item for s in stride))
+    return np.array(view)
+
+
+def read_state_dict(blob: bytes) -> dict | None:
+    """A torch state dict (``torch.save`` zip format, little-endian, tensors only) as ``{name: numpy
+    array}`` without importing torch (~1-2 s of import): a restricted unpickler of the archive's
+    ``data.pkl`` that knows ``OrderedDict``, ``torch._utils._rebuild_tensor_v2`` and the typed storages
+    of :data:`_STORAGE_DTYPES`, reading each storage from ``data/<key>``. ``None`` for anything else
+    (the caller uses ``torch.load``); same bytes as torch's tensors (tests/test_rl_lazy_load.py)."""
+    import collections
+    import io
+    import pickle
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(io.BytesIO(blob)) as z:
+            names = z.namelist()
+            pkl = next((n for n in names if n.endswith("/data.pkl")), None)
+            if pkl is None:
+                return None
+            root = pkl[:-len("data.pkl")]
+            if f"{root}byteorder" in names and z.read(f"{root}byteorder").strip() != b"little":
+                return None
+
+            class _Unpickler(pickle.Unpickler):
+                def find_class(self, module, name):
+                    if (module, name) == ("collections", "OrderedDict"):
+                        return collections.OrderedDict
+                    if (module, name) == ("torch._utils", "_rebuild_tensor_v2"):
+                        return _rebuild_tensor
+                    if module == "torch" and name in _STORAGE_DTYPES:
+                        return _STORAGE_DTYPES[name]
+                    raise pickle.UnpicklingError(f"{module}.{name} is not a plain tensor")
+
+                def persistent_load(self, pid):
+                    kind, dtype, key, _location, numel = pid
+                    if kind != "storage":
+                        raise pickle.UnpicklingError(f"persistent id {kind!r}")
+                    return np.frombuffer(z.read(f"{root}data/{key}"), dtype=dtype, count=int(numel))
+
+            state = _Unpickler(io.BytesIO(z.read(pkl))).load()
+    except (pickle.UnpicklingError, KeyError, ValueError, TypeError, zipfile.BadZipFile, StopIteration):
+        return None
+    if not isinstance(state, dict) or not all(isinstance(v, np.ndarray) for v in state.values()):
+        return None
+    return dict(state)

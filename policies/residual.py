@@ -12,15 +12,24 @@ from pathlib import Path
 
 import numpy as np
 
-from mission_sim.contract import PolicyContext
+from mission_sim.contract import PolicyContext, duty_to_action
 
 from .budgeted import BudgetedModelBasedPolicy
-from .constrained import residual_duty, residual_obs
 from .rl import RLPolicy
 
 __all__ = ["ResidualPolicy", "PRETRAINED_RESIDUAL"]
 
 PRETRAINED_RESIDUAL = Path(__file__).parent / "pretrained" / "residual_s0.zip"   # seeds _s0.._s4 shipped
+
+
+def residual_obs(obs: np.ndarray, d_base: np.ndarray) -> np.ndarray:
+    """Contract observation + the base duty as an action in [-1, 1] (field 8), float32."""
+    return np.concatenate([obs, duty_to_action(d_base)[:, None]], axis=1).astype(np.float32)
+
+
+def residual_duty(d_base, action, scale: float) -> np.ndarray:
+    """``clip(d_base + scale a, 0, 1)``: the duty a residual agent's action ``a`` gives."""
+    return np.clip(np.asarray(d_base, dtype=float) + scale * np.asarray(action, dtype=float).reshape(-1), 0.0, 1.0)
 
 
 class ResidualPolicy:

@@ -98,3 +98,19 @@ def test_unwritable_cache_dir_still_works(tmp_path, monkeypatch):
     blocker.write_text("x")
     monkeypatch.setenv(diskcache.ENV_VAR, str(blocker / "sub"))   # parent is a file: cannot mkdir
     assert _model().lm_h(0.0, 0.0, 0.17) > 0
+
+
+def test_lm_of_known_poses_comes_from_the_cache_bit_identical_and_old_entries_are_pruned(cache, monkeypatch):
+    from wpt_receiver import coupling
+    dx = np.linspace(-0.1, 0.1, 7)
+    fresh = _model().lm_h(dx, 0.01, 0.17, 0.02)           # computed, stored under the poses' key
+    assert len(list(cache.glob("lm_poses-*.npy"))) == 1
+    monkeypatch.setattr(CouplingModel, "_lm_poses", lambda self, rot, org: pytest.fail("recomputed"))
+    assert np.array_equal(_model().lm_h(dx, 0.01, 0.17, 0.02), fresh)
+    monkeypatch.undo()
+    monkeypatch.setenv(diskcache.ENV_VAR, str(cache))
+    monkeypatch.setattr(coupling, "MEMO_ENTRIES", 3)
+    for i in range(5):
+        _model().lm_h(0.01 * i, 0.0, 0.17)
+    assert len(list(cache.glob("lm_poses-*.npy"))) == 3 and len(list(cache.glob("lm_poses-*.key"))) == 3
+    assert not np.array_equal(_model().lm_h(dx + 1e-3, 0.01, 0.17, 0.02), fresh)   # other poses: other key

@@ -36,3 +36,28 @@ def test_rl_policy_acts_without_importing_stable_baselines3():
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == "[]"
+
+
+def test_numpy_state_dict_reader_is_torch_load_bit_for_bit_and_refuses_other_objects():
+    """policies.inference.read_state_dict (no torch import) gives torch.load's tensors for every shipped zip;
+    a pickle with anything but plain tensors is refused (None: the caller falls back to torch.load)."""
+    import glob
+    import io
+    import zipfile
+
+    import torch
+
+    from policies.inference import read_state_dict
+    zips = sorted(glob.glob(str(PRETRAINED.parent / "*.zip")))
+    assert len(zips) >= 3
+    for path in zips:
+        blob = zipfile.ZipFile(path).read("policy.pth")
+        ours, ref = read_state_dict(blob), torch.load(io.BytesIO(blob), map_location="cpu", weights_only=True)
+        assert ours is not None and list(ours) == list(ref)
+        for k, t in ref.items():
+            assert ours[k].dtype == t.numpy().dtype and ours[k].shape == tuple(t.shape)
+            assert np.array_equal(ours[k], t.numpy()), (path, k)
+    buf = io.BytesIO()
+    torch.save({"w": torch.ones(2), "step": torch.nn.Linear(1, 1)}, buf)   # a module: not a plain state dict
+    assert read_state_dict(buf.getvalue()) is None
+    assert read_state_dict(b"not a zip") is None

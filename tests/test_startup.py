@@ -77,11 +77,56 @@ def test_model_based_policy_built_without_scipy_signal():
     assert "scipy.signal" not in _imported(code)
 
 
-def test_cli_mission_loads_the_one_compiled_loop(tmp_path):
+def test_cli_mission_loads_the_one_compiled_loop(tmp_path, monkeypatch):
     """``dronewpt mission`` runs every mission through the compiled loop (issue 22: the loop's physics exists
     only compiled, mission_sim.world.loop_kernel; so does the coupling table's lookup,
-    wpt_receiver.coupling_kernel); the CLI's import itself stays free of numba (test above)."""
+    wpt_receiver.coupling_kernel, on a path not in the disk cache); the CLI's import itself stays free
+    of numba (test above)."""
+    monkeypatch.setenv("DRONEWPT_CACHE_DIR", str(tmp_path / "cache"))
     code = ("from mission_sim.cli import main\n"
             f"main(['mission', '--out', {str(tmp_path / 'm')!r}, '--no-plot', '--no-progress'])")
     names = ("mission_sim.world.loop_kernel", "wpt_receiver.coupling_kernel")
     assert _imported(code, names) == list(names)
+
+
+def _summary(path: Path) -> dict:
+    return {k: v for k, v in json.loads((path / "summary.json").read_text()).items()
+            if k not in ("wall_s", "realtime_factor")}
+
+
+def test_mission_on_a_known_path_needs_no_coupling_kernel_and_gives_the_same_results(tmp_path, monkeypatch):
+    """Lm along a path is kept in the disk cache keyed by the poses (wpt_receiver.coupling.MEMO_MAX_POSES):
+    a second mission on the same path, here with another policy, does not load the table kernel and gives
+    the summary and series of a run without any cache."""
+    monkeypatch.setenv("DRONEWPT_CACHE_DIR", str(tmp_path / "cache"))
+    run = ("from mission_sim.cli import main\n"
+           "main(['mission', '--out', {out!r}, '--no-plot', '--no-progress', '--policy', {pol!r}])")
+    names = ("wpt_receiver.coupling_kernel",)    # numba itself: the mission loop's kernel loads it anyway
+    assert _imported(run.format(out=str(tmp_path / "a"), pol="model_based"), names) == list(names)
+    assert _imported(run.format(out=str(tmp_path / "b"), pol="ramp"), names) == []
+    assert len(list((tmp_path / "cache").glob("lm_poses-*.npy"))) >= 1
+    monkeypatch.setenv("DRONEWPT_CACHE_DIR", "")   # no disk cache at all: computed by the kernel
+    _imported(run.format(out=str(tmp_path / "c"), pol="ramp"), names)
+    assert _summary(tmp_path / "b") == _summary(tmp_path / "c")
+    assert (tmp_path / "b" / "timeseries.parquet").read_bytes() == (tmp_path / "c" / "timeseries.parquet").read_bytes()
+
+
+def test_compare_defaults_import_no_torch_sb3_scipy_stats_or_plotting():
+    """``dronewpt compare --no-plot`` at its default policies (the shipped learned ones included, their
+    training-seed rows with t intervals): the PPO actors come from the zips' state dicts read with numpy
+    (policies.inference.read_state_dict), the t quantile from scipy.special; nothing plots."""
+    pytest.importorskip("stable_baselines3")
+    code = ("import contextlib, io\nfrom mission_sim.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+            "    main(['compare', '--episodes', '3', '--scenarios', 'nominal', '--no-plot', '--no-progress'])\n"
+            "assert 'residual' in out.getvalue() and 'ppo_lagrangian' in out.getvalue()")
+    assert _imported(code, ("torch", "stable_baselines3", "scipy.stats", "matplotlib", "pandas")) == []
+
+
+def test_mission_figures_read_the_series_without_pandas(tmp_path):
+    """The figures read the stored series back as numpy columns (world.stream.read_series(frame=False)):
+    a default ``dronewpt mission`` with its five figures never imports pandas (~0.2-0.5 s)."""
+    code = ("from mission_sim.cli import main\n"
+            f"main(['mission', '--out', {str(tmp_path / 'm')!r}, '--no-progress'])")
+    assert _imported(code, ("pandas", "matplotlib", "scipy.stats", "torch")) == ["matplotlib"]
+    assert len(list((tmp_path / "m").glob("*.png"))) == 5

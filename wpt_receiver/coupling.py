@@ -46,6 +46,12 @@ __all__ = [
     "NOMINAL_GAP_M", "calibrate_default",
 ]
 
+#: poses up to which :meth:`CouplingModel.lm_h` keeps its result in the disk cache (a mission's path:
+#: ~1,000 poses, ~9 kB); larger batches (long missions, maps) are computed every time
+MEMO_MAX_POSES = 50_000
+#: most ``lm_h`` results kept in the disk cache (the oldest removed beyond)
+MEMO_ENTRIES = 32
+
 MU0 = 4e-7 * math.pi  # vacuum permeability [H/m] (pre-2019 exact value; 2019 SI differs by 5e-10)
 
 # series of g(m) = (1 - m/2) K(m) - E(m) = (pi/2) sum_n c_n m^n for small m (avoids cancellation)
@@ -360,17 +366,37 @@ class CouplingModel:
         The lookup is :func:`.coupling_kernel.flux_table` (numba, the only implementation; imported
         here on first use). ``compiled`` is accepted for callers and ignored: there is no second
         (numpy) path any more; ``flux_table.py_func`` runs the same source uncompiled (tests).
+        Up to :data:`MEMO_MAX_POSES` poses the result is kept in the disk cache keyed by the poses'
+        bytes (a mission re-run on the same path, with any policy, battery or link, then needs
+        neither the table nor numba: ~0.5 s of start-up); the newest :data:`MEMO_ENTRIES` are kept.
         """
-        from .coupling_kernel import flux_table
-        if self._table is None:
-            self._build_table()
         rot, org = _rx_frame(dx_m, dy_m, dz_m, tilt_rad, tilt_axis_rad)
         shape = org.shape[:-1]
         rot, org = np.ascontiguousarray(rot.reshape(-1, 3, 3)), np.ascontiguousarray(org.reshape(-1, 3))
+        key = self._poses_key(rot, org) if len(org) <= MEMO_MAX_POSES else None
+        out = None if key is None else diskcache.load("lm_poses", key, (len(org),))
+        if out is None:
+            out = self._lm_poses(rot, org)
+            if key is not None and diskcache.store("lm_poses", key, out) is not None:
+                diskcache.prune("lm_poses", MEMO_ENTRIES)
+        return out.reshape(shape) if shape else float(out[0])
+
+    def _lm_poses(self, rot, org):
+        """Lm [H] of the poses ``rot`` (N, 3, 3), ``org`` (N, 3) by :func:`.coupling_kernel.flux_table`."""
+        from .coupling_kernel import flux_table
+        if self._table is None:
+            self._build_table()
         out, below = flux_table(*self._table_args(), rot, org, self._flat_pts, self._flat_tan, float(self._w))
         if np.any(below):  # the exact field at the points below the table, the table elsewhere
             out[below] = self._flux_poses(rot[below], org[below], self._pts, self._tan, self._w, self._a_table)
-        return out.reshape(shape) if shape else float(out[0])
+        return out
+
+    def _poses_key(self, rot, org) -> str:
+        """Disk-cache key of ``lm_h`` at these poses: the table's key (geometry, grid, code, versions),
+        the receiver coil, the compiled kernel's source and a hash of the pose arrays' bytes."""
+        kernel = hashlib.sha256(Path(__file__).with_name("coupling_kernel.py").read_bytes()).hexdigest()
+        poses = hashlib.sha256(rot.tobytes() + org.tobytes()).hexdigest()
+        return f"lm-poses v1 {self.table_key()} rx={self.rx!r} kernel={kernel} n={len(org)} poses={poses}"
 
     def k(self, lm_h):
         """Coupling coefficient ``Lm / sqrt(L1 L2)``."""

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["cache_dir", "key_digest", "load", "store"]
+__all__ = ["cache_dir", "key_digest", "load", "store", "prune"]
 
 ENV_VAR = "DRONEWPT_CACHE_DIR"
 
@@ -83,3 +83,28 @@ def store(name: str, key: str, arr: np.ndarray) -> Path | None:
     except OSError:
         return None
     return arr_path
+
+
+def prune(name: str, keep: int) -> int:
+    """Remove all but the ``keep`` newest entries (by modification time) named ``name``; the number
+    removed. Races with other processes only cost a rebuild (a vanished file is skipped)."""
+    d = cache_dir()
+    if d is None:
+        return 0
+    try:
+        entries = []
+        for p in d.glob(f"{name}-*.npy"):
+            try:
+                entries.append((p.stat().st_mtime, p))
+            except OSError:
+                continue
+    except OSError:
+        return 0
+    entries.sort(reverse=True)
+    for _, p in entries[keep:]:
+        try:
+            p.unlink(missing_ok=True)
+            p.with_suffix(".key").unlink(missing_ok=True)
+        except OSError:
+            pass
+    return max(0, len(entries) - keep)

@@ -222,8 +222,8 @@ def _figures_and_summary(res, out: Path, plots: bool, thinned=None) -> list[str]
     if plots and (out / "timeseries.parquet").exists():
         from ..figures.mission import plot_mission
         from ..world.stream import read_series
-        res.timeseries = thinned.frame() if thinned is not None else \
-            read_series(out / "timeseries.parquet", max_points=FIGURE_POINTS)
+        res.timeseries = thinned.frame(pandas=False) if thinned is not None else \
+            read_series(out / "timeseries.parquet", max_points=FIGURE_POINTS, frame=False)
         files = [str(f) for f in plot_mission(res, out)]
         res.timeseries = None
     with atomic_output(out / "summary.json") as tmp:

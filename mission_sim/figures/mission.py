@@ -38,7 +38,8 @@ def plot_lm_map(model, dz_m: float, tilt_rad: float, path, half_width_m: float =
 
 
 def plot_mission(result, out_dir) -> list[str]:
-    """The mission figures: trajectory over the pads, Lm(t), I2 envelope vs rated, SoC, power flows."""
+    """The mission figures: trajectory over the pads, Lm(t), I2 envelope vs rated, SoC, power flows
+    (``result.timeseries``: a DataFrame or a dict of numpy columns)."""
     from pathlib import Path
     out = Path(out_dir)
     return [plot(result, out) for plot in (_plot_trajectory, _plot_lm, _plot_i2, _plot_soc, _plot_power)]
@@ -51,7 +52,7 @@ def _plot_trajectory(result, out) -> str:
     fig, (ax, az) = plt.subplots(1, 2, figsize=(11, 4.5), gridspec_kw={"width_ratios": [1.2, 1]})
     t_path, p_path = _path(result.trajectory, ts)
     ax.plot(p_path[:, 0], p_path[:, 1], color="0.4", lw=1, label="path")
-    on = ts["tx_on"].to_numpy(bool)
+    on = np.asarray(ts["tx_on"], bool)
     ax.plot(ts["x_m"][on], ts["y_m"][on], ".", ms=2, color="tab:orange", label="pad energised")
     r = 0.25
     if cfg is not None:
@@ -87,7 +88,7 @@ def _path(tr, ts):
     mission (whose planned trajectory is not held in memory) the stored, thinned time series."""
     if len(tr) <= _PATH_SAMPLES:
         return tr.t_s, tr.pos_m
-    return ts["t_s"].to_numpy(), ts[["x_m", "y_m", "z_m"]].to_numpy()
+    return np.asarray(ts["t_s"]), np.column_stack([np.asarray(ts[c]) for c in ("x_m", "y_m", "z_m")])
 
 
 def _distinct_pads(pads):
@@ -103,8 +104,8 @@ def _plot_lm(result, out) -> str:
     """Lm(t) along the mission with the pad switch-off threshold and the pad-energised spans."""
     ts = result.timeseries
     cfg = result.config
-    t = ts["t_s"].to_numpy()
-    on = ts["tx_on"].to_numpy(bool)
+    t = np.asarray(ts["t_s"])
+    on = np.asarray(ts["tx_on"], bool)
     fig, ax = plt.subplots(figsize=(10, 3.8))
     ax.plot(t, ts["lm_h"] * 1e6, color="tab:blue", lw=0.8)
     if cfg is not None:
@@ -127,9 +128,9 @@ def _plot_lm(result, out) -> str:
 def _plot_i2(result, out) -> str:
     """I2 envelope against the rated current: whole mission and a zoom on the largest transient."""
     ts = result.timeseries
-    t = ts["t_s"].to_numpy()
+    t = np.asarray(ts["t_s"])
     fig, (ax, az) = plt.subplots(1, 2, figsize=(12, 4))
-    i2 = ts["i2_amp_a"].to_numpy()
+    i2 = np.asarray(ts["i2_amp_a"])
     rated = result.summary.get("rated_i2_a", 15.0)
     ax.plot(t, i2, color="tab:red", lw=0.7)
     ax.axhline(rated, color="k", ls="--", lw=0.8, label=f"rated {rated:g} A")
@@ -140,13 +141,13 @@ def _plot_i2(result, out) -> str:
                  f"instantaneous {sm['peak_i2_a']:.1f} A)")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
-    fine = ts["fine"].to_numpy(bool) if "fine" in ts else np.ones(len(i2), bool)
+    fine = np.asarray(ts["fine"], bool) if "fine" in ts else np.ones(len(i2), bool)
     if np.any(fine):
         kpk = int(np.flatnonzero(fine)[np.argmax(i2[fine])])  # largest value inside a fine window
         w = (t > t[kpk] - 0.01) & (t < t[kpk] + 0.04)
         lines = az.plot((t[w] - t[kpk]) * 1e3, i2[w], ".-", ms=2, color="tab:red", lw=0.8, label="I2 envelope")
         az2 = az.twinx()
-        lines += az2.plot((t[w] - t[kpk]) * 1e3, ts["d_short"].to_numpy()[w], color="tab:blue", lw=0.8,
+        lines += az2.plot((t[w] - t[kpk]) * 1e3, np.asarray(ts["d_short"])[w], color="tab:blue", lw=0.8,
                           label="d_short (right axis)")
         az2.set_ylim(-0.02, 1.02)  # the whole duty range, so small duty moves look small
         az2.set_ylabel("d_short [-]", color="tab:blue")
@@ -164,7 +165,7 @@ def _plot_i2(result, out) -> str:
 def _plot_soc(result, out) -> str:
     """State of charge and battery terminal voltage."""
     ts = result.timeseries
-    t = ts["t_s"].to_numpy()
+    t = np.asarray(ts["t_s"])
     fig, ax = plt.subplots(figsize=(10, 3.5))
     ax.plot(t, ts["soc"], color="tab:green")
     ax.set_xlabel("t [s]")
@@ -182,7 +183,7 @@ def _plot_soc(result, out) -> str:
 def _plot_power(result, out) -> str:
     """Power flows: pad source, rectifier, propulsion, battery terminal, coil losses."""
     ts = result.timeseries
-    t = ts["t_s"].to_numpy()
+    t = np.asarray(ts["t_s"])
     fig, ax = plt.subplots(figsize=(10, 4))
     ax.plot(t, ts["p_source_w"], lw=0.8, label="pad source")
     ax.plot(t, ts["rect_current_a"] * ts["battery_v"], lw=0.8, label="rectifier -> battery node")
