@@ -45,18 +45,20 @@ N_PRED = 150
 #: knots of the V2 plan [steps from now] (linear in between, held after the last)
 BLOCKS = (0, 1, 2, 3, 4, 5, 6, 8, 10, 13, 16, 20, 25, 31, 38, 46, 56, 68, 82, 100, 120)
 _LAMBDA = 0.1        # move penalty [A^2/V^2] of the tracking QP (smooth V2: no ringing of the 4 kHz resonance)
-_SLACK_W = 1e4
+_SLACK_W = 1e6      # slack penalty [1/A] of the after-stop QP (exact: above the energy term's multiplier ~1.3e4)
+_SLACK_Q = 1e3      # its quadratic part [1/A^2] (strictly convex)
 _LAMBDA_STOP = 2e-4  # move penalty [1/V] of the after-stop QP (energy term in V per step)
 _RHO_Q = 0.01      # quadratic share of the after-stop energy term [1/V] (keeps the QP strongly convex)
 _RELAX_STEPS = 3    # after-stop steps in which the bound may be raised to the floor
+_SCP_ITERS = 3      # linearisations of the ripple excess per solve in those steps
 _MARGIN = 0.002      # constraint back-off, fraction of I2_sm (model error)
 _F = {k: OBS_INDEX[k] for k in ("i2_amp_a", "battery_v", "charge_cmd_a", "last_d_short")}
 
 
-def _require_osqp():
+def _require_quadprog():
     import importlib.util
-    if importlib.util.find_spec("osqp") is None:
-        raise ValueError("policy 'mpc' needs the QP solver osqp: pip install 'dronewpt[mpc]' (or osqp)")
+    if importlib.util.find_spec("quadprog") is None:
+        raise ValueError("policy 'mpc' needs the QP solver quadprog: pip install 'dronewpt[mpc]' (or quadprog)")
 
 
 class _Model:
@@ -118,7 +120,7 @@ class MPCPolicy:
 
     def __init__(self, ctx: PolicyContext = PolicyContext(), budget: float = 0.0, link=None,
                  devices: str = "schottky"):
-        _require_osqp()
+        _require_quadprog()
         budget = float(budget)
         if not (np.isfinite(budget) and 0.0 <= budget <= 1.0):
             raise ValueError(f"budget={budget!r} is invalid; valid range: [0, 1] (a measured overshoot fraction)")
@@ -136,17 +138,13 @@ class MPCPolicy:
         self._peak = PeakLookup(base, dev)
         from .classical import ModelBasedPolicy
         self._ref = ModelBasedPolicy(PolicyContext(link=self._link, control_period_s=ctx.control_period_s))
-        self.n = 0
-        nb = len(BLOCKS)
-        D = np.eye(nb) - np.eye(nb, k=-1)
-        Ge = self._model.G[self._model.ends]
-        self._track_inv = np.linalg.inv(2.0 * (Ge.T @ Ge + _LAMBDA * D.T @ D) + 1e-9 * np.eye(nb))
+        self._setup_qp()
+        self.reset(0)
         self._ex0 = float(self._peak.array(np.array([self._i2_sm]), np.array([1.0]), np.array([31.0]))[0] - self._i2_sm)
 
     def reset(self, n: int = 1) -> None:
         self.n = int(n)
         self._z = None
-        self._solvers = [None] * self.n
         self._plan = np.zeros((self.n, N_PRED))
         self._relax = np.zeros(self.n)   # [A] the bound raised to what the window allows (its floor)
         self._n_stop = np.zeros(self.n, dtype=int)   # after-stop solves so far
@@ -177,7 +175,7 @@ class MPCPolicy:
         from wpt_receiver import duty_from_v2_clipped
         o = denormalise_obs(np.atleast_2d(obs))
         i2m, vl, cmd, d_last = (o[:, _F[k]] for k in ("i2_amp_a", "battery_v", "charge_cmd_a", "last_d_short"))
-        if self._solvers is None or len(self._solvers) != len(i2m):
+        if len(self._plan) != len(i2m):
             self.reset(len(i2m))
         ref = self._ref.i2_ref(cmd, vl + self._vf)
         z = self._estimate(i2m, vl, d_last, ref)
@@ -186,91 +184,95 @@ class MPCPolicy:
             v2[e] = self._solve(e, z[e], vl[e], cmd[e] <= 0.0, ref[e], d_last[e])
         return duty_from_v2_clipped(v2, vl + self._vf)
 
-    def _qp(self, stop: bool):
-        """A new OSQP problem of the tracking (``stop`` False) or the after-stop kind, data to be updated."""
-        import osqp
-        from scipy import sparse
+    def _setup_qp(self):
+        """The fixed matrices of the two QPs (quadprog's ``G``, passed factorised as ``R^-1``): the
+        tracking QP in the ``nb`` knots; the after-stop QP in the ``nb - 1`` free knots (the last is 0:
+        short mode) and the slack."""
         m = self._model
         nb = m.M.shape[1]
         D = np.eye(nb) - np.eye(nb, k=-1)
         Ge = m.G[m.ends]
-        if not stop:
-            P = 2.0 * (Ge.T @ Ge + _LAMBDA * D.T @ D) + 1e-9 * np.eye(nb)
-            A = np.eye(nb)
-            q, lo, hi = np.zeros(nb), np.zeros(nb), np.ones(nb)
-        else:
-            P = np.zeros((nb + 1, nb + 1))
-            P[:nb, :nb] = 2.0 * (_LAMBDA_STOP * D.T @ D + _RHO_Q * np.diag(m.M.sum(axis=0)))
-            P[nb, nb] = 2.0 * _SLACK_W
-            rows = len(m.G)
-            A = np.zeros((nb + rows + 1, nb + 1))
-            A[:nb, :nb] = np.eye(nb)
-            # dense pattern (values updated every step, Ax); set up with typical values (the solver's
-            # scaling is computed here): the model plus a ripple slope of 0.02 A/V
-            A[nb:nb + rows, :nb] = m.G + 0.02 * m.M.repeat(2, axis=0) + 1e-30
-            A[nb:nb + rows, nb] = -1.0
-            A[-1, nb] = 1.0
-            q, lo, hi = np.zeros(nb + 1), np.r_[np.zeros(nb), np.full(rows, -np.inf), 0.0], np.r_[np.ones(nb + rows), np.inf]
-        prob = osqp.OSQP()
-        prob.setup(sparse.csc_matrix(np.triu(P)), q, sparse.csc_matrix(A), lo, hi, verbose=False, warm_starting=True,
-                   polishing=False, eps_abs=1e-3, eps_rel=1e-3, max_iter=2000, rho=0.1)
-        return prob
+        P = 2.0 * (Ge.T @ Ge + _LAMBDA * D.T @ D) + 1e-9 * np.eye(nb)
+        self._track_rinv = np.linalg.inv(np.linalg.cholesky(P).T)
+        self._track_inv = np.linalg.inv(P)
+        f = nb - 1
+        Ps = np.zeros((f + 1, f + 1))
+        Ps[:f, :f] = 2.0 * (_LAMBDA_STOP * D.T @ D + _RHO_Q * np.diag(m.M.sum(axis=0)))[:f, :f]
+        Ps[f, f] = 2.0 * _SLACK_Q
+        self._stop_rinv = np.linalg.inv(np.linalg.cholesky(Ps).T)
 
-    def _solve(self, e, z, vl, stop, ref, d_last):
-        """V2 [V] of receiver ``e`` now: the first move of the QP's solution."""
+    def _solve_stop(self, e, z, vl, u_prev):
+        """V2 plan [V] after the stop of receiver ``e`` (the knots): min energy + move penalty + slack
+        penalty s.t. the predicted peak (envelope + ripple excess linearised along a plan) within the
+        bound + slack, V2 in the box. The excess is linearised along the previous plan shifted by a step
+        (at the stop: a ramp from the V2 now to 0 at the last knot; the plan before the stop holds V2 and
+        would put the rectification mode's ripple on the short-mode current); in the first
+        :data:`_RELAX_STEPS` steps the linearisation is iterated :data:`_SCP_ITERS` times along the new
+        plan (sequential convex programming), since the window's floor is read from these solves."""
         m = self._model
-        nb = m.M.shape[1]
-        key = int(stop)
-        if self._solvers[e] is None:
-            self._solvers[e] = [None, None]
-        if self._solvers[e][key] is None:
-            self._solvers[e][key] = self._qp(stop)
-        prob = self._solvers[e][key]
-        vmax = 4.0 / np.pi * (vl + self._vf)
-        u_prev = float(self._v2_of(d_last, vl))
-        free = m.F @ z + m.h
-        e0 = np.zeros(nb)
-        e0[0] = 1.0
-        if not stop:
-            Ge = m.G[m.ends]
-            q = 2.0 * (Ge.T @ (free[m.ends] - ref) - _LAMBDA * e0 * u_prev)
-            v = -self._track_inv @ q   # the unconstrained optimum: the QP's solution when the box is inactive
-            if np.all(v >= 0.0) and np.all(v <= vmax):
-                self._plan[e] = m.M @ v
-                return float(self._plan[e, 0])
-            prob.update(q=q, l=np.zeros(nb), u=np.full(nb, vmax))
-        else:
-            if self._plan[e, :BLOCKS[-1]].max() < 0.05 and self._settled(z, self._relax[e]):
-                return 0.0   # in short mode with the free response inside the bound: nothing to plan
-            # ripple excess: its tangent in V2 at the previous plan (shifted), an upper bound of the
-            # concave excess (sequential convex approximation, exact at the previous plan)
-            v_bar = np.r_[self._plan[e, 1:], self._plan[e, -1]]
-            ex, slope = self._excess(v_bar, vl)
-            # the bound never below the model's own short-mode current (its steady state with V2 = 0 and
-            # the estimated disturbance): the target must be feasible in the model
-            sm = max(self._i2_sm, float(np.linalg.solve(np.eye(2) - m.ad, m.e + m.b2 * z[2])[1]))
-            ub = (1.0 + self.budget - _MARGIN) * sm + self._relax[e] - (ex - slope * v_bar).repeat(2) - free
-            A = np.zeros((len(ub) + nb + 1, nb + 1))
-            A[:nb, :nb] = np.eye(nb)
-            A[nb:nb + len(ub), :nb] = m.G + slope.repeat(2)[:, None] * m.M.repeat(2, axis=0)
-            A[nb:nb + len(ub), nb] = -1.0
-            A[-1, nb] = 1.0
-            q = np.r_[m.M.sum(axis=0) - 2.0 * _LAMBDA_STOP * e0 * u_prev, _SLACK_W]
-            hi = np.full(nb, vmax)
-            hi[-1] = 0.0   # terminal move: short mode (V2 = 0) from step BLOCKS[-1] of the horizon on
-            prob.update(q=q, l=np.r_[np.zeros(nb), np.full(len(ub), -np.inf), 0.0],
-                        u=np.r_[hi, ub, np.inf], Ax=_csc_data(A))
-        res = prob.solve(raise_error=False)
-        ok = res.x is not None and np.all(np.isfinite(res.x))
-        v = res.x[:nb] if ok else np.full(nb, u_prev)
-        if stop:
-            self._n_stop[e] += 1
-        if stop and ok and res.x[nb] > 1e-4 and self._n_stop[e] <= _RELAX_STEPS:
+        if self._n_stop[e] == 0:
+            self._plan[e] = np.interp(np.arange(N_PRED) + 1.0, [0.0, BLOCKS[-2]], [u_prev, 0.0])
+        v_bar = np.r_[self._plan[e, 1:], self._plan[e, -1]]
+        first = self._n_stop[e] < _RELAX_STEPS
+        for _ in range(_SCP_ITERS if first else 1):
+            v, slack = self._qp_stop(e, z, vl, u_prev, v_bar)
+            v_bar = np.clip(m.M @ v, 0.0, None)
+        self._n_stop[e] += 1
+        if slack > 1e-4 and first:
             # below the window's floor (the state at the stop allows no less): the bound is raised by the
             # least violation for the rest of the window, so the energy term drives the descent again; only in
             # the first steps after the stop (the floor is set there; later violations are model error and
             # must not accumulate into the bound)
-            self._relax[e] += res.x[nb]
+            self._relax[e] += slack
+        return v
+
+    def _qp_stop(self, e, z, vl, u_prev, v_bar):
+        """One after-stop QP with the excess linearised along ``v_bar`` (N_PRED,) [V]: ``(knots, slack [A])``."""
+        import quadprog
+        m = self._model
+        f = m.M.shape[1] - 1
+        vmax = 4.0 / np.pi * (vl + self._vf)
+        free = m.F @ z + m.h
+        ex, slope = self._excess(v_bar, vl)
+        # the bound never below the model's own short-mode current (its steady state with V2 = 0 and the
+        # estimated disturbance): the target must be feasible in the model
+        sm = max(self._i2_sm, float(np.linalg.solve(np.eye(2) - m.ad, m.e + m.b2 * z[2])[1]))
+        ub = (1.0 + self.budget - _MARGIN) * sm + self._relax[e] - (ex - slope * v_bar).repeat(2) - free
+        Arow = m.G[:, :f] + slope.repeat(2)[:, None] * m.M.repeat(2, axis=0)[:, :f]
+        # quadprog: C^T x >= b; x = [v (f), s]
+        C = np.zeros((f + 1, 2 * f + len(ub) + 1))
+        C[:f, :f] = np.eye(f)
+        C[:f, f:2 * f] = -np.eye(f)
+        C[:f, 2 * f:2 * f + len(ub)] = -Arow.T
+        C[f, 2 * f:2 * f + len(ub)] = 1.0
+        C[f, -1] = 1.0
+        b = np.r_[np.zeros(f), np.full(f, -vmax), -ub, 0.0]
+        q = np.r_[m.M.sum(axis=0)[:f], _SLACK_W]
+        q[0] -= 2.0 * _LAMBDA_STOP * u_prev
+        x = quadprog.solve_qp(self._stop_rinv, -q, C, b, 0, True)[0]
+        return np.r_[x[:f], 0.0], float(x[f])
+
+    def _solve(self, e, z, vl, stop, ref, d_last):
+        """V2 [V] of receiver ``e`` now: the first move of the QP's solution."""
+        import quadprog
+        m = self._model
+        nb = m.M.shape[1]
+        vmax = 4.0 / np.pi * (vl + self._vf)
+        u_prev = float(self._v2_of(d_last, vl))
+        if not stop:
+            free = m.F @ z + m.h
+            e0 = np.zeros(nb)
+            e0[0] = 1.0
+            Ge = m.G[m.ends]
+            q = 2.0 * (Ge.T @ (free[m.ends] - ref) - _LAMBDA * e0 * u_prev)
+            v = -self._track_inv @ q   # the unconstrained optimum: the QP's solution when the box is inactive
+            if not (np.all(v >= 0.0) and np.all(v <= vmax)):
+                C = np.hstack([np.eye(nb), -np.eye(nb)])
+                v = quadprog.solve_qp(self._track_rinv, -q, C, np.r_[np.zeros(nb), np.full(nb, -vmax)], 0, True)[0]
+        else:
+            if self._plan[e, :BLOCKS[-1]].max() < 0.05 and self._settled(z, self._relax[e]):
+                return 0.0   # in short mode with the free response inside the bound: nothing to plan
+            v = self._solve_stop(e, z, vl, u_prev)
         self._plan[e] = np.clip(m.M @ v, 0.0, vmax)
         return float(self._plan[e, 0])
 
@@ -296,11 +298,3 @@ class MPCPolicy:
         return ex[:n], np.maximum(slope, 0.0)
 
 
-
-def _csc_data(A):
-    """The values of the stop QP's constraint matrix in the CSC order of its fixed pattern (identity,
-    dense block, slack column): column-major over the nonzero pattern of :meth:`MPCPolicy._qp`."""
-    nb = A.shape[1] - 1
-    cols = [np.r_[A[c, c], A[nb:-1, c]] for c in range(nb)]
-    cols.append(A[nb:, nb])
-    return np.concatenate(cols)

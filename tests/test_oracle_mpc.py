@@ -8,7 +8,7 @@ import pytest
 from envs.rollout import DutyRollout
 from policies.compare import run_policy
 
-osqp = pytest.importorskip("osqp")
+quadprog = pytest.importorskip("quadprog")
 
 
 @pytest.fixture(scope="module")
@@ -47,24 +47,55 @@ def test_oracle_bounds_fixed_policies(budgeted, tmp_path, monkeypatch):
         assert r.energy_after_stop_j[0] == pytest.approx(o.energy_after_stop_j, rel=1e-9)
 
 
-def test_mpc_true_model_budget_zero_near_floor(tmp_path, monkeypatch):
-    """Nominal windows (the MPC's model is the truth): every window reaches short mode and the measured
-    overshoot stays within 3.5 points of the window's floor (the least any open-loop sequence found,
-    policies.oracle.oracle_floor) and on average no worse than the paper's controller (measured: 0.5-3.3
-    points above the floor; the floor itself is not reached, see docs/rl.md)."""
-    monkeypatch.setenv("DRONEWPT_CACHE_DIR", str(tmp_path))
-    from policies.oracle import oracle_floor
-    m = run_policy("mpc", "nominal", 3, 1000).metrics
-    assert np.all(m["reached_short_mode"] == 1.0)
-    floors = np.array([100.0 * oracle_floor("nominal", 1000 + i).overshoot for i in range(3)])
-    assert np.all(m["overshoot_pct"] >= floors - 1e-9)   # the floor is a bound (the oracle searched from model_based)
-    assert np.all(m["overshoot_pct"] <= floors + 3.5)
-    base = run_policy("model_based", "nominal", 3, 1000).metrics
-    assert m["overshoot_pct"].mean() <= base["overshoot_pct"].mean() + 0.5
+#: tolerance [percentage points] of the MPC's measured overshoot above the floor (its Kalman estimate from the
+#: noisy I2, sd 0.1 A, and the 0.2 % back-off; measured 0.1-0.3 points on windows 1000-1005)
+FLOOR_TOL_PTS = 0.5
+MPC_WINDOWS = 4
 
 
-def test_mpc_budget_is_measured_overshoot():
-    """mpc:0.05 overshoots by the budget in the metric's units (within 1 point), not b + 3 points."""
-    m = run_policy("mpc:0.05", "nominal", 3, 1000).metrics
-    assert np.all(np.abs(m["overshoot_pct"] - 5.0) < 1.0)
+@pytest.fixture(scope="module")
+def mpc_floors(tmp_path_factory):
+    """The floor of each of the first MPC_WINDOWS nominal windows with the MPC's own duties before the stop
+    (the state at the stop is the MPC's: policies.oracle.oracle_floor(base="mpc")), and the paper's
+    controller's floor."""
+    import os
+    old = os.environ.get("DRONEWPT_CACHE_DIR")
+    os.environ["DRONEWPT_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))
+    try:
+        from policies.oracle import oracle_floor
+        own = np.array([100.0 * oracle_floor("nominal", 1000 + i, base="mpc").overshoot for i in range(MPC_WINDOWS)])
+        paper = np.array([100.0 * oracle_floor("nominal", 1000 + i).overshoot for i in range(MPC_WINDOWS)])
+    finally:
+        if old is None:
+            os.environ.pop("DRONEWPT_CACHE_DIR")
+        else:
+            os.environ["DRONEWPT_CACHE_DIR"] = old
+    return own, paper
+
+
+def test_mpc_true_model_budget_zero_within_floor(mpc_floors):
+    """Nominal windows (the MPC's model is the truth), budget 0: every window reaches short mode and the
+    measured overshoot is the window's floor (the least any post-stop sequence found from the state the MPC
+    stops in, policies.oracle.oracle_floor) within FLOOR_TOL_PTS points; the floor is a bound (its search
+    started from the MPC's own sequence). The paper's controller measures 0.8-2.0 points above its own floor."""
+    own, paper = mpc_floors
+    m = run_policy("mpc", "nominal", MPC_WINDOWS, 1000).metrics
     assert np.all(m["reached_short_mode"] == 1.0)
+    assert np.all(m["overshoot_pct"] >= own - 1e-9)
+    assert np.all(m["overshoot_pct"] <= own + FLOOR_TOL_PTS)
+    base = run_policy("model_based", "nominal", MPC_WINDOWS, 1000).metrics
+    assert np.mean(base["overshoot_pct"] - paper) > 2.0 * FLOOR_TOL_PTS   # the paper's controller is not at its floor
+    assert m["overshoot_pct"].mean() < base["overshoot_pct"].mean()
+
+
+@pytest.mark.parametrize("budget", [0.02, 0.05])
+def test_mpc_budget_is_measured_overshoot(budget, mpc_floors):
+    """mpc:b measures at most max(floor, b) + FLOOR_TOL_PTS (so at most floor + b + tolerance: the budget is in
+    the metric's units), uses it (within 1 point of b where b is above the floor) and reaches short mode."""
+    own, _ = mpc_floors
+    b = 100.0 * budget
+    m = run_policy(f"mpc:{budget:g}", "nominal", MPC_WINDOWS, 1000).metrics
+    assert np.all(m["reached_short_mode"] == 1.0)
+    assert np.all(m["overshoot_pct"] <= np.maximum(own, b) + FLOOR_TOL_PTS)
+    above = own < b - 0.5
+    assert np.all(m["overshoot_pct"][above] >= b - 1.0)
