@@ -52,6 +52,9 @@ _RHO_Q = 0.01      # quadratic share of the after-stop energy term [1/V] (keeps 
 _RELAX_STEPS = 3    # after-stop steps in which the bound may be raised to the floor
 _SCP_ITERS = 3      # linearisations of the ripple excess per solve in those steps
 _MARGIN = 0.002      # constraint back-off, fraction of I2_sm (model error)
+#: hypotheses of the sensing delay [control periods] the estimator tells apart (:class:`_DelayBank`)
+DELAYS = (0, 1, 2, 3, 4, 5)
+_DELAY_MEMORY = 50.0  # memory of the innovation scores [control periods]
 _F = {k: OBS_INDEX[k] for k in ("i2_amp_a", "battery_v", "charge_cmd_a", "last_d_short")}
 
 
@@ -111,16 +114,67 @@ class _Model:
         return P @ C.T @ np.linalg.inv(C @ P @ C.T + meas_sd_a ** 2)
 
 
+class _DelayBank:
+    """Steady-state Kalman filters of ``z = [I1, I2, w]``, one per hypothesis ``D`` of the sensing delay
+    [control periods] (multiple-model estimation): filter ``D`` reads the measured I2 as the state ``D``
+    steps ago and is stepped with the V2 applied then (kept in a history); each receiver follows the
+    hypothesis with the least exponentially weighted squared innovation (memory :data:`_DELAY_MEMORY`
+    steps), whose estimate is carried forward over its delay with the V2 applied since (a Smith
+    predictor: the plan starts from the state now, not from the state the sensor shows)."""
+
+    def __init__(self, model, z0, u0, delays):
+        self.m, self.delays, self.n = model, tuple(int(d) for d in delays), len(z0)
+        self.z = np.repeat(np.asarray(z0, dtype=float)[None], len(self.delays), axis=0)   # (H, n, 3)
+        self.u = np.repeat(np.asarray(u0, dtype=float)[None], max(self.delays) + 1, axis=0)   # u[j] = V2 of step k-1-j
+        self.score = np.zeros((len(self.delays), self.n))
+        self.best = np.zeros(self.n, dtype=int)
+
+    def _step(self, z, u):
+        m = self.m
+        x = z[:, :2] @ m.ad.T + (u + z[:, 2])[:, None] * m.b2[None, :] + m.e[None, :]
+        return np.column_stack([x, z[:, 2]])
+
+    def update(self, y, u_last):
+        """Filter the measured I2 ``y`` (n,) [A] given the V2 of the last step ``u_last`` (n,) [V]: ``z`` now."""
+        self.u = np.roll(self.u, 1, axis=0)
+        self.u[0] = u_last
+        a = 1.0 / _DELAY_MEMORY
+        for h, d in enumerate(self.delays):
+            x = self._step(self.z[h], self.u[d])
+            innov = y - x[:, 1]
+            self.z[h] = x + innov[:, None] * self.m.kalman[:, 0][None, :]
+            self.score[h] += a * (innov * innov - self.score[h])
+        # a shorter delay is preferred unless a longer one explains the measurements clearly better
+        self.best = np.argmin(self.score * (1.0 + 0.1 * np.arange(len(self.delays)))[:, None], axis=0)
+        return self.now()
+
+    def now(self):
+        """The chosen hypothesis' estimate carried forward over its delay (n, 3)."""
+        out = np.empty((self.n, 3))
+        for h, d in enumerate(self.delays):
+            idx = np.flatnonzero(self.best == h)
+            if len(idx):
+                z = self.z[h, idx]
+                for j in range(d - 1, -1, -1):
+                    z = self._step(z, self.u[j, idx])
+                out[idx] = z
+        return out
+
+
 class MPCPolicy:
     """Receding-horizon QP controller (see the module docstring); ``budget`` the measured overshoot
     allowed after the stop (fraction), ``link`` the model (default the context's, i.e. Table I),
-    ``devices`` the semiconductor preset it knows (the env's default ``schottky``)."""
+    ``devices`` the semiconductor preset it knows (the env's default ``schottky``), ``delays`` the sensing
+    delays [control periods] its estimator tells apart (``(0,)``: a plain Kalman filter)."""
 
     name = "mpc"
 
     def __init__(self, ctx: PolicyContext = PolicyContext(), budget: float = 0.0, link=None,
-                 devices: str = "schottky"):
+                 devices: str = "schottky", delays=DELAYS):
         _require_quadprog()
+        self.delays = tuple(int(d) for d in delays)
+        if not self.delays or min(self.delays) < 0 or max(self.delays) > 20:
+            raise ValueError(f"delays={delays!r} is invalid; valid: a non-empty set of integers 0..20 [control periods]")
         budget = float(budget)
         if not (np.isfinite(budget) and 0.0 <= budget <= 1.0):
             raise ValueError(f"budget={budget!r} is invalid; valid range: [0, 1] (a measured overshoot fraction)")
@@ -144,7 +198,7 @@ class MPCPolicy:
 
     def reset(self, n: int = 1) -> None:
         self.n = int(n)
-        self._z = None
+        self._bank = None
         self._plan = np.zeros((self.n, N_PRED))
         self._relax = np.zeros(self.n)   # [A] the bound raised to what the window allows (its floor)
         self._n_stop = np.zeros(self.n, dtype=int)   # after-stop solves so far
@@ -152,24 +206,19 @@ class MPCPolicy:
     def _v2_of(self, d, vl):
         return 4.0 / np.pi * (vl + self._vf) * (1.0 - np.sin(0.5 * np.pi * d))
 
-    def _estimate(self, i2m, vl, d_last, ref0):
-        m = self._model
-        if self._z is None or len(self._z) != len(i2m):
-            # start in the steady state the measured I2 implies (w explains the offset)
+    def _estimate(self, i2m, vl, d_last):
+        """The state ``z = [I1, I2, w]`` now (n, 3): from the delay bank (:class:`_DelayBank`), started in the
+        steady state the first measured I2 implies (``w`` explains the offset)."""
+        u_last = self._v2_of(d_last, vl)
+        if self._bank is None or self._bank.n != len(i2m):
             lk = self._link
             x = lk.omega_rad_s * lk.lm_h
             det = lk.r1_ohm * lk.r2_ohm + x * x
-            v2 = self._v2_of(d_last, vl)
-            w = (x * lk.v1_amp_v - det * i2m) / lk.r1_ohm - v2
-            i1 = (lk.r2_ohm * lk.v1_amp_v + x * (v2 + w)) / det
-            self._z = np.stack([i1, i2m, w], axis=1)
-            return self._z
-        z = self._z
-        u = self._v2_of(d_last, vl) + z[:, 2]
-        x = z[:, :2] @ m.ad.T + u[:, None] * m.b2[None, :] + m.e[None, :]
-        innov = i2m - x[:, 1]
-        self._z = np.column_stack([x, z[:, 2]]) + innov[:, None] * m.kalman[:, 0][None, :]
-        return self._z
+            w = (x * lk.v1_amp_v - det * i2m) / lk.r1_ohm - u_last
+            i1 = (lk.r2_ohm * lk.v1_amp_v + x * (u_last + w)) / det
+            self._bank = _DelayBank(self._model, np.stack([i1, i2m, w], axis=1), u_last, self.delays)
+            return self._bank.now()
+        return self._bank.update(i2m, u_last)
 
     def act(self, obs):
         from wpt_receiver import duty_from_v2_clipped
@@ -178,7 +227,7 @@ class MPCPolicy:
         if len(self._plan) != len(i2m):
             self.reset(len(i2m))
         ref = self._ref.i2_ref(cmd, vl + self._vf)
-        z = self._estimate(i2m, vl, d_last, ref)
+        z = self._estimate(i2m, vl, d_last)
         v2 = np.empty(len(i2m))
         for e in range(len(i2m)):
             v2[e] = self._solve(e, z[e], vl[e], cmd[e] <= 0.0, ref[e], d_last[e])
