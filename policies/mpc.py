@@ -50,18 +50,20 @@ _SLACK_Q = 1e3      # its quadratic part [1/A^2] (strictly convex)
 _LAMBDA_STOP = 2e-4  # move penalty [1/V] of the after-stop QP (energy term in V per step)
 _RHO_Q = 0.01      # quadratic share of the after-stop energy term [1/V] (keeps the QP strongly convex)
 _RELAX_STEPS = 3    # after-stop steps in which the bound may be raised to the floor
+_REPLAN_EVERY = 5   # after-stop steps a still-feasible plan is followed before it is re-solved
 _SCP_ITERS = 3      # linearisations of the ripple excess per solve in those steps
 _MARGIN = 0.002      # constraint back-off, fraction of I2_sm (model error)
 #: hypotheses of the sensing delay [control periods] the estimator tells apart (:class:`_DelayBank`)
 DELAYS = (0, 1, 2, 3, 4, 5)
 _DELAY_MEMORY = 50.0  # memory of the innovation scores [control periods]
+_BIG = 1e30         # an absent bound for daqp
 _F = {k: OBS_INDEX[k] for k in ("i2_amp_a", "battery_v", "charge_cmd_a", "last_d_short")}
 
 
-def _require_quadprog():
+def _require_daqp():
     import importlib.util
-    if importlib.util.find_spec("quadprog") is None:
-        raise ValueError("policy 'mpc' needs the QP solver quadprog: pip install 'dronewpt[mpc]' (or quadprog)")
+    if importlib.util.find_spec("daqp") is None:
+        raise ValueError("policy 'mpc' needs the QP solver daqp: pip install 'dronewpt[mpc]' (or daqp)")
 
 
 class _Model:
@@ -98,7 +100,7 @@ class _Model:
                 Gu[row, k] = B_[1]
             Phi, c = ad @ Phi, ad @ c + self.e
         F[:, 2] = Gu.sum(axis=1)   # the disturbance acts on every step like an input
-        self.F, self.G, self.h, self.M = F, Gu @ M, h, M
+        self.F, self.G, self.h, self.M, self.Gu = F, Gu @ M, h, M, Gu
         self.ends = np.arange(1, 2 * n, 2)
         self.kalman = self._kalman(ad, bd[:, 1])
 
@@ -171,7 +173,7 @@ class MPCPolicy:
 
     def __init__(self, ctx: PolicyContext = PolicyContext(), budget: float = 0.0, link=None,
                  devices: str = "schottky", delays=DELAYS):
-        _require_quadprog()
+        _require_daqp()
         self.delays = tuple(int(d) for d in delays)
         if not self.delays or min(self.delays) < 0 or max(self.delays) > 20:
             raise ValueError(f"delays={delays!r} is invalid; valid: a non-empty set of integers 0..20 [control periods]")
@@ -202,6 +204,7 @@ class MPCPolicy:
         self._plan = np.zeros((self.n, N_PRED))
         self._relax = np.zeros(self.n)   # [A] the bound raised to what the window allows (its floor)
         self._n_stop = np.zeros(self.n, dtype=int)   # after-stop solves so far
+        self._age = np.zeros(self.n, dtype=int)      # steps since the plan was solved
 
     def _v2_of(self, d, vl):
         return 4.0 / np.pi * (vl + self._vf) * (1.0 - np.sin(0.5 * np.pi * d))
@@ -226,15 +229,20 @@ class MPCPolicy:
         i2m, vl, cmd, d_last = (o[:, _F[k]] for k in ("i2_amp_a", "battery_v", "charge_cmd_a", "last_d_short"))
         if len(self._plan) != len(i2m):
             self.reset(len(i2m))
-        ref = self._ref.i2_ref(cmd, vl + self._vf)
         z = self._estimate(i2m, vl, d_last)
+        u_prev = self._v2_of(d_last, vl)
+        stop = cmd <= 0.0
         v2 = np.empty(len(i2m))
-        for e in range(len(i2m)):
-            v2[e] = self._solve(e, z[e], vl[e], cmd[e] <= 0.0, ref[e], d_last[e])
+        track = np.flatnonzero(~stop)
+        if len(track):
+            ref = self._ref.i2_ref(cmd[track], vl[track] + self._vf)
+            v2[track] = self._track(track, z[track], vl[track], ref, u_prev[track])
+        for e in np.flatnonzero(stop):
+            v2[e] = self._after_stop(e, z[e], vl[e], float(u_prev[e]))
         return duty_from_v2_clipped(v2, vl + self._vf)
 
     def _setup_qp(self):
-        """The fixed matrices of the two QPs (quadprog's ``G``, passed factorised as ``R^-1``): the
+        """The fixed Hessians of the two QPs (daqp's ``H``): the
         tracking QP in the ``nb`` knots; the after-stop QP in the ``nb - 1`` free knots (the last is 0:
         short mode) and the slack."""
         m = self._model
@@ -242,13 +250,16 @@ class MPCPolicy:
         D = np.eye(nb) - np.eye(nb, k=-1)
         Ge = m.G[m.ends]
         P = 2.0 * (Ge.T @ Ge + _LAMBDA * D.T @ D) + 1e-9 * np.eye(nb)
-        self._track_rinv = np.linalg.inv(np.linalg.cholesky(P).T)
+        self._track_P = P
         self._track_inv = np.linalg.inv(P)
         f = nb - 1
         Ps = np.zeros((f + 1, f + 1))
         Ps[:f, :f] = 2.0 * (_LAMBDA_STOP * D.T @ D + _RHO_Q * np.diag(m.M.sum(axis=0)))[:f, :f]
         Ps[f, f] = 2.0 * _SLACK_Q
-        self._stop_rinv = np.linalg.inv(np.linalg.cholesky(Ps).T)
+        self._stop_P = Ps
+        self._M2 = m.M.repeat(2, axis=0)[:, :f]
+        self._energy_w = m.M.sum(axis=0)[:f]
+        self._sense = np.zeros(f + 1 + len(m.G), dtype=np.int32)
 
     def _solve_stop(self, e, z, vl, u_prev):
         """V2 plan [V] after the stop of receiver ``e`` (the knots): min energy + move penalty + slack
@@ -277,60 +288,88 @@ class MPCPolicy:
 
     def _qp_stop(self, e, z, vl, u_prev, v_bar):
         """One after-stop QP with the excess linearised along ``v_bar`` (N_PRED,) [V]: ``(knots, slack [A])``."""
-        import quadprog
+        import daqp
         m = self._model
         f = m.M.shape[1] - 1
         vmax = 4.0 / np.pi * (vl + self._vf)
         free = m.F @ z + m.h
         ex, slope = self._excess(v_bar, vl)
-        # the bound never below the model's own short-mode current (its steady state with V2 = 0 and the
-        # estimated disturbance): the target must be feasible in the model
-        sm = max(self._i2_sm, float(np.linalg.solve(np.eye(2) - m.ad, m.e + m.b2 * z[2])[1]))
-        ub = (1.0 + self.budget - _MARGIN) * sm + self._relax[e] - (ex - slope * v_bar).repeat(2) - free
-        Arow = m.G[:, :f] + slope.repeat(2)[:, None] * m.M.repeat(2, axis=0)[:, :f]
-        # quadprog: C^T x >= b; x = [v (f), s]
-        C = np.zeros((f + 1, 2 * f + len(ub) + 1))
-        C[:f, :f] = np.eye(f)
-        C[:f, f:2 * f] = -np.eye(f)
-        C[:f, 2 * f:2 * f + len(ub)] = -Arow.T
-        C[f, 2 * f:2 * f + len(ub)] = 1.0
-        C[f, -1] = 1.0
-        b = np.r_[np.zeros(f), np.full(f, -vmax), -ub, 0.0]
-        q = np.r_[m.M.sum(axis=0)[:f], _SLACK_W]
+        ub = (1.0 + self.budget - _MARGIN) * self._bound_sm(z) + self._relax[e] - (ex - slope * v_bar).repeat(2) - free
+        # x = [v (f knots), s]: 0 <= v <= vmax, s >= 0 (simple bounds), (G + slope M) v - s <= ub
+        A = np.empty((len(ub), f + 1))
+        A[:, :f] = m.G[:, :f] + slope.repeat(2)[:, None] * self._M2
+        A[:, f] = -1.0
+        q = np.r_[self._energy_w, _SLACK_W]
         q[0] -= 2.0 * _LAMBDA_STOP * u_prev
-        x = quadprog.solve_qp(self._stop_rinv, -q, C, b, 0, True)[0]
+        bu = np.r_[np.full(f, vmax), _BIG, ub]
+        bl = np.r_[np.zeros(f), 0.0, np.full(len(ub), -_BIG)]
+        x, _, flag, _ = daqp.solve(self._stop_P, q, A, bu, bl, self._sense.copy())
+        if flag < 1:
+            return np.r_[np.minimum(v_bar[np.asarray(BLOCKS[:-1])], vmax), 0.0], 0.0   # keep the plan
         return np.r_[x[:f], 0.0], float(x[f])
 
-    def _solve(self, e, z, vl, stop, ref, d_last):
-        """V2 [V] of receiver ``e`` now: the first move of the QP's solution."""
-        import quadprog
+    def _track(self, idx, z, vl, ref, u_prev):
+        """V2 now [V] of the charging receivers ``idx`` (tracking QP; closed form, batched, where the box is
+        inactive, else daqp per receiver)."""
+        import daqp
         m = self._model
         nb = m.M.shape[1]
         vmax = 4.0 / np.pi * (vl + self._vf)
-        u_prev = float(self._v2_of(d_last, vl))
-        if not stop:
-            free = m.F @ z + m.h
-            e0 = np.zeros(nb)
-            e0[0] = 1.0
-            Ge = m.G[m.ends]
-            q = 2.0 * (Ge.T @ (free[m.ends] - ref) - _LAMBDA * e0 * u_prev)
-            v = -self._track_inv @ q   # the unconstrained optimum: the QP's solution when the box is inactive
-            if not (np.all(v >= 0.0) and np.all(v <= vmax)):
-                C = np.hstack([np.eye(nb), -np.eye(nb)])
-                v = quadprog.solve_qp(self._track_rinv, -q, C, np.r_[np.zeros(nb), np.full(nb, -vmax)], 0, True)[0]
-        else:
-            if self._plan[e, :BLOCKS[-1]].max() < 0.05 and self._settled(z, self._relax[e]):
-                return 0.0   # in short mode with the free response inside the bound: nothing to plan
-            v = self._solve_stop(e, z, vl, u_prev)
-        self._plan[e] = np.clip(m.M @ v, 0.0, vmax)
+        Ge = m.G[m.ends]
+        free = z @ m.F[m.ends].T + m.h[m.ends]
+        q = 2.0 * (free - ref[:, None]) @ Ge
+        q[:, 0] -= 2.0 * _LAMBDA * u_prev
+        v = -q @ self._track_inv.T   # the unconstrained optimum: the QP's solution when the box is inactive
+        for i in np.flatnonzero(np.any(v < 0.0, axis=1) | np.any(v > vmax[:, None], axis=1)):
+            x, _, flag, _ = daqp.solve(self._track_P, q[i], np.zeros((0, nb)), np.full(nb, vmax[i]), np.zeros(nb),
+                                       np.zeros(nb, dtype=np.int32))
+            v[i] = x if flag >= 1 else np.clip(v[i], 0.0, vmax[i])
+        self._plan[idx] = np.clip(v @ m.M.T, 0.0, vmax[:, None])
+        self._age[idx] = 0
+        return self._plan[idx, 0]
+
+    def _after_stop(self, e, z, vl, u_prev):
+        """V2 now [V] of receiver ``e`` after the stop: 0 once settled in short mode; the previous plan's next
+        move while that plan, shifted by a step, still keeps the predicted peak within the bound from the
+        state now (at most :data:`_REPLAN_EVERY` steps: the plan's tail is the optimum's continuation when the
+        model holds); else the first move of a new after-stop QP."""
+        vmax = 4.0 / np.pi * (vl + self._vf)
+        if self._plan[e, :BLOCKS[-1]].max() < 0.05 and self._settled(z, self._relax[e]):
+            self._plan[e] = 0.0
+            return 0.0   # in short mode with the free response inside the bound: nothing to plan
+        shifted = np.r_[self._plan[e, 1:], self._plan[e, -1]]
+        if self._n_stop[e] >= _RELAX_STEPS and self._age[e] < _REPLAN_EVERY and self._feasible(z, vl, shifted, e):
+            self._plan[e] = shifted
+            self._age[e] += 1
+            return float(shifted[0])
+        v = self._solve_stop(e, z, vl, u_prev)
+        self._plan[e] = np.clip(self._model.M @ v, 0.0, vmax)
+        self._age[e] = 0
         return float(self._plan[e, 0])
+
+    def _feasible(self, z, vl, plan, e) -> bool:
+        """The predicted peak (envelope + ripple excess at the plan's duties) of the V2 ``plan`` (N_PRED,)
+        from ``z`` within the bound of receiver ``e``."""
+        from wpt_receiver import duty_from_v2_clipped
+        m = self._model
+        i2 = m.F @ z + m.h + m.Gu @ plan
+        vc = vl + self._vf
+        pk = np.full(len(plan), self._i2_sm)
+        ex = self._peak.array(pk, duty_from_v2_clipped(plan, vc), np.full(len(plan), vl)) - pk
+        return bool(np.all(i2 + ex.repeat(2) <= (1.0 + self.budget - 0.5 * _MARGIN) * self._bound_sm(z) + self._relax[e]))
+
+    def _bound_sm(self, z) -> float:
+        """The short-mode current of the bound [A]: never below the model's own (its steady state with V2 = 0
+        and the estimated disturbance): the target must be feasible in the model."""
+        m = self._model
+        return max(self._i2_sm, float(np.linalg.solve(np.eye(2) - m.ad, m.e + m.b2 * z[2])[1]))
 
     def _settled(self, z, relax: float) -> bool:
         """The free response (V2 = 0) from ``z`` stays within the budget's bound with the short-mode
         ripple (:meth:`_excess` at V2 = 0)."""
         m = self._model
         free = m.F @ z + m.h
-        sm = max(self._i2_sm, float(np.linalg.solve(np.eye(2) - m.ad, m.e + m.b2 * z[2])[1]))
+        sm = self._bound_sm(z)
         return bool(np.all(free + self._ex0 <= (1.0 + self.budget - _MARGIN) * sm + relax))
 
     def _excess(self, v2, vl):

@@ -8,7 +8,7 @@ import pytest
 from envs.rollout import DutyRollout
 from policies.compare import run_policy
 
-quadprog = pytest.importorskip("quadprog")
+daqp = pytest.importorskip("daqp")
 
 
 @pytest.fixture(scope="module")
