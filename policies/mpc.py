@@ -56,6 +56,7 @@ _MARGIN = 0.002      # constraint back-off, fraction of I2_sm (model error)
 #: hypotheses of the sensing delay [control periods] the estimator tells apart (:class:`_DelayBank`)
 DELAYS = (0, 1, 2, 3, 4, 5)
 _DELAY_MEMORY = 50.0  # memory of the innovation scores [control periods]
+_VLC = 31.0         # the battery voltage of the excess fold [V] (envs.peaks.VL_GRID_V[1], checked in __init__)
 _BIG = 1e30         # an absent bound for daqp
 _F = {k: OBS_INDEX[k] for k in ("i2_amp_a", "battery_v", "charge_cmd_a", "last_d_short")}
 
@@ -196,7 +197,7 @@ class MPCPolicy:
         self._ref = ModelBasedPolicy(PolicyContext(link=self._link, control_period_s=ctx.control_period_s))
         self._setup_qp()
         self.reset(0)
-        self._ex0 = float(self._peak.array(np.array([self._i2_sm]), np.array([1.0]), np.array([31.0]))[0] - self._i2_sm)
+        self._ex0 = float(self._excess_at(np.zeros(1), _VLC)[0])
 
     def reset(self, n: int = 1) -> None:
         self.n = int(n)
@@ -260,6 +261,9 @@ class MPCPolicy:
         self._M2 = m.M.repeat(2, axis=0)[:, :f]
         self._energy_w = m.M.sum(axis=0)[:f]
         self._sense = np.zeros(f + 1 + len(m.G), dtype=np.int32)
+        ss = np.linalg.solve(np.eye(2) - m.ad, np.stack([m.e, m.b2], axis=1))   # steady [I1, I2] of (1, w)
+        self._ss_i2 = (float(ss[1, 0]), float(ss[1, 1]))
+        self._excess_curve()
 
     def _solve_stop(self, e, z, vl, u_prev):
         """V2 plan [V] after the stop of receiver ``e`` (the knots): min energy + move penalty + slack
@@ -272,7 +276,7 @@ class MPCPolicy:
         m = self._model
         if self._n_stop[e] == 0:
             self._plan[e] = np.interp(np.arange(N_PRED) + 1.0, [0.0, BLOCKS[-2]], [u_prev, 0.0])
-        v_bar = np.r_[self._plan[e, 1:], self._plan[e, -1]]
+        v_bar = np.append(self._plan[e, 1:], self._plan[e, -1])
         first = self._n_stop[e] < _RELAX_STEPS
         for _ in range(_SCP_ITERS if first else 1):
             v, slack = self._qp_stop(e, z, vl, u_prev, v_bar)
@@ -337,7 +341,7 @@ class MPCPolicy:
         if self._plan[e, :BLOCKS[-1]].max() < 0.05 and self._settled(z, self._relax[e]):
             self._plan[e] = 0.0
             return 0.0   # in short mode with the free response inside the bound: nothing to plan
-        shifted = np.r_[self._plan[e, 1:], self._plan[e, -1]]
+        shifted = np.append(self._plan[e, 1:], self._plan[e, -1])
         if self._n_stop[e] >= _RELAX_STEPS and self._age[e] < _REPLAN_EVERY and self._feasible(z, vl, shifted, e):
             self._plan[e] = shifted
             self._age[e] += 1
@@ -350,19 +354,15 @@ class MPCPolicy:
     def _feasible(self, z, vl, plan, e) -> bool:
         """The predicted peak (envelope + ripple excess at the plan's duties) of the V2 ``plan`` (N_PRED,)
         from ``z`` within the bound of receiver ``e``."""
-        from wpt_receiver import duty_from_v2_clipped
         m = self._model
         i2 = m.F @ z + m.h + m.Gu @ plan
-        vc = vl + self._vf
-        pk = np.full(len(plan), self._i2_sm)
-        ex = self._peak.array(pk, duty_from_v2_clipped(plan, vc), np.full(len(plan), vl)) - pk
+        ex = self._excess_at(plan, vl)
         return bool(np.all(i2 + ex.repeat(2) <= (1.0 + self.budget - 0.5 * _MARGIN) * self._bound_sm(z) + self._relax[e]))
 
     def _bound_sm(self, z) -> float:
         """The short-mode current of the bound [A]: never below the model's own (its steady state with V2 = 0
         and the estimated disturbance): the target must be feasible in the model."""
-        m = self._model
-        return max(self._i2_sm, float(np.linalg.solve(np.eye(2) - m.ad, m.e + m.b2 * z[2])[1]))
+        return max(self._i2_sm, self._ss_i2[0] + self._ss_i2[1] * z[2])
 
     def _settled(self, z, relax: float) -> bool:
         """The free response (V2 = 0) from ``z`` stays within the budget's bound with the short-mode
@@ -372,17 +372,36 @@ class MPCPolicy:
         sm = self._bound_sm(z)
         return bool(np.all(free + self._ex0 <= (1.0 + self.budget - _MARGIN) * sm + relax))
 
+    def _excess_at(self, v2, vl):
+        """Ripple excess [A] at V2 ``v2`` (any shape) [V], the short-mode current and battery voltage ``vl``:
+        the env's lookup (:mod:`envs.peaks`) at that current is piecewise linear in the duty between the
+        table's duty grid points (:meth:`_excess_curve`), so one ``np.interp`` gives it exactly."""
+        from wpt_receiver import duty_from_v2_clipped
+        d = duty_from_v2_clipped(v2, vl + self._vf)
+        a, b = self._ex_curve
+        return np.interp(d, self._ex_grid, a + b * (vl - _VLC))
+
+    def _excess_curve(self):
+        """The lookup's excess at the short-mode current on the duty grid: ``(A, B)`` [A], [A/V] with
+        excess = A + B (VL - 31 V) (:func:`envs.peaks.fold_vl`), bilinear in sqrt(I2) as the env."""
+        from envs.peaks import I2_MAX_A, LOOKUP_SCALARS
+        assert LOOKUP_SCALARS[0] == _VLC
+        tab = self._peak.kernel_table
+        nd, ni, _ = tab.shape
+        y = np.sqrt(min(self._i2_sm / I2_MAX_A, 1.0)) * (ni - 1)
+        k = min(int(y), ni - 2)
+        fy = y - k
+        c = tab[:, k] * (1.0 - fy) + tab[:, k + 1] * fy
+        self._ex_grid = np.linspace(0.0, 1.0, nd)
+        self._ex_curve = (c[:, 0], c[:, 1])
+
     def _excess(self, v2, vl):
         """Ripple excess [A] at V2 ``v2`` (n,) [V] and its slope dexcess/dV2 [A/V] (central difference,
         0.5 V) at the short-mode current and battery voltage ``vl`` (:mod:`envs.peaks`)."""
-        from wpt_receiver import duty_from_v2_clipped
-        vc = vl + self._vf
         h = 0.5
-        v = np.concatenate([v2, np.minimum(v2 + h, 4.0 / np.pi * vc), np.maximum(v2 - h, 0.0)])
-        pk = np.full(len(v), self._i2_sm)
-        ex = self._peak.array(pk, duty_from_v2_clipped(v, vc), np.full(len(v), vl)) - pk
+        vmax = 4.0 / np.pi * (vl + self._vf)
+        hi, lo = np.minimum(v2 + h, vmax), np.maximum(v2 - h, 0.0)
+        ex = self._excess_at(np.concatenate([v2, hi, lo]), vl)
         n = len(v2)
-        slope = (ex[n:2 * n] - ex[2 * n:]) / np.maximum(v[n:2 * n] - v[2 * n:], 1e-9)
+        slope = (ex[n:2 * n] - ex[2 * n:]) / np.maximum(hi - lo, 1e-9)
         return ex[:n], np.maximum(slope, 0.0)
-
-
