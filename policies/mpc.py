@@ -35,6 +35,8 @@ step's solution), one small condensed QP per receiver and step (13 variables, ~1
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from mission_sim.contract import OBS_INDEX, PolicyContext, denormalise_obs
@@ -67,6 +69,12 @@ def _require_daqp():
         raise ValueError("policy 'mpc' needs the QP solver daqp: pip install 'dronewpt[mpc]' (or daqp)")
 
 
+@lru_cache(maxsize=8)
+def _model(link, dt_s: float):
+    """The prediction model of a link and control period (:class:`_Model`, shared by the MPC instances)."""
+    return _Model(link, dt_s)
+
+
 class _Model:
     """Condensed predictions of the nominal model over the horizon: the I2 samples (mid-step and end
     of every step, 2 N_PRED rows) = ``F z + G v + h`` with ``z = [I1, I2, w]``, ``v`` the blocked moves."""
@@ -82,24 +90,24 @@ class _Model:
         # V2 piecewise linear between the knots BLOCKS (a staircase of held moves would ring the
         # 4 kHz resonance at every step of it), held after the last knot
         M = np.stack([np.interp(np.arange(n), BLOCKS, np.eye(len(BLOCKS))[i]) for i in range(len(BLOCKS))], axis=1)
-        # state response: x_k = Phi_k x0 + sum_j Psi_{k-1-j} (u_j + w) + c_k
+        # state response: x_k = Phi_k x0 + sum_j Psi_{k-1-j} (u_j + w) + c_k; rows 2k (mid-step of step k, from
+        # x_k) and 2k + 1 (end of step k: x_{k+1})
         F = np.zeros((2 * n, 3))
-        Gu = np.zeros((2 * n, n))
         h = np.zeros(2 * n)
         Phi, c = np.eye(2), np.zeros(2)
-        powers = [np.eye(2)]
-        for _ in range(n):
-            powers.append(ad @ powers[-1])
+        imp = np.zeros((2, n))   # I2 response of the mid / end sample of a step to the input i steps earlier
+        x = self.b2.copy()
         for k in range(n):
-            # mid-step sample of step k from x_k: row 2k; end of step k (x_{k+1}): row 2k + 1
-            for r, (A_, B_, E_, P_) in enumerate(((am, bm[:, 1], bm[:, 0] * v1, None), (ad, bd[:, 1], bd[:, 0] * v1, None))):
-                row = 2 * k + r
-                F[row, :2] = (A_ @ Phi)[1]
-                h[row] = (A_ @ c + E_)[1]
-                for j in range(k):
-                    Gu[row, j] = (A_ @ powers[k - 1 - j] @ self.b2)[1]
-                Gu[row, k] = B_[1]
+            for r, (A_, E_) in enumerate(((am, bm[:, 0] * v1), (ad, bd[:, 0] * v1))):
+                F[2 * k + r, :2] = (A_ @ Phi)[1]
+                h[2 * k + r] = (A_ @ c + E_)[1]
+            if k:
+                imp[:, k] = (am @ x)[1], (ad @ x)[1]
+                x = ad @ x
             Phi, c = ad @ Phi, ad @ c + self.e
+        imp[:, 0] = bm[1, 1], bd[1, 1]
+        lag = np.arange(n)[:, None] - np.arange(n)[None, :]   # k - j
+        Gu = np.where(lag >= 0, imp[:, np.maximum(lag, 0)], 0.0).transpose(1, 0, 2).reshape(2 * n, n)
         F[:, 2] = Gu.sum(axis=1)   # the disturbance acts on every step like an input
         self.F, self.G, self.h, self.M, self.Gu = F, Gu @ M, h, M, Gu
         self.ends = np.arange(1, 2 * n, 2)
@@ -182,7 +190,7 @@ class MPCPolicy:
         if not (np.isfinite(budget) and 0.0 <= budget <= 1.0):
             raise ValueError(f"budget={budget!r} is invalid; valid range: [0, 1] (a measured overshoot fraction)")
         from envs.objective import short_mode_i2_a
-        from envs.peaks import PeakLookup
+        from envs.peaks import fold_vl, peak_table
         from wpt_receiver.devices import envelope_params, preset
         self.ctx, self.budget = ctx, budget
         self.name = "mpc" if budget == 0.0 else f"mpc:{budget:g}"
@@ -190,9 +198,9 @@ class MPCPolicy:
         dev = preset(devices)
         self._vf = dev.rect_vf_v
         self._link = envelope_params(base, dev)
-        self._model = _Model(self._link, ctx.control_period_s)
+        self._model = _model(self._link, float(ctx.control_period_s))
         self._i2_sm = float(short_mode_i2_a(base, base.lm_h, dev))
-        self._peak = PeakLookup(base, dev)
+        self._peak_table = fold_vl(peak_table(base, dev))
         from .classical import ModelBasedPolicy
         self._ref = ModelBasedPolicy(PolicyContext(link=self._link, control_period_s=ctx.control_period_s))
         self._setup_qp()
@@ -386,7 +394,7 @@ class MPCPolicy:
         excess = A + B (VL - 31 V) (:func:`envs.peaks.fold_vl`), bilinear in sqrt(I2) as the env."""
         from envs.peaks import I2_MAX_A, LOOKUP_SCALARS
         assert LOOKUP_SCALARS[0] == _VLC
-        tab = self._peak.kernel_table
+        tab = self._peak_table
         nd, ni, _ = tab.shape
         y = np.sqrt(min(self._i2_sm / I2_MAX_A, 1.0)) * (ni - 1)
         k = min(int(y), ni - 2)
