@@ -244,7 +244,7 @@ class MPCPolicy:
         v2 = np.empty(len(i2m))
         track = np.flatnonzero(~stop)
         if len(track):
-            ref = self._ref.i2_ref(cmd[track], vl[track] + self._vf)
+            ref = self._i2_ref(cmd[track], vl[track] + self._vf, z[track, 2])
             v2[track] = self._track(track, z[track], vl[track], ref, u_prev[track])
         for e in np.flatnonzero(stop):
             v2[e] = self._after_stop(e, z[e], vl[e], float(u_prev[e]))
@@ -319,6 +319,22 @@ class MPCPolicy:
         if flag < 1:
             return np.r_[np.minimum(v_bar[np.asarray(BLOCKS[:-1])], vmax), 0.0], 0.0   # keep the plan
         return np.r_[x[:f], 0.0], float(x[f])
+
+    def _i2_ref(self, cmd, vc, w):
+        """I2 reference [A] of the charging receivers: the steady I2 of the model *with the estimated
+        disturbance* ``w`` [V] at the V2 that delivers the command ``cmd`` [A] at the clamp voltage ``vc``
+        [V] (power balance ``V2 I2 / 2 = vc I_L``, the smaller root of ``R1 V2^2 - (X V1 - R1 w) V2 +
+        2 vc I_L det = 0``, clipped into ``[0, (4/pi) vc]``; ``w = 0`` is the model-based reference). So the
+        tracking is offset-free in the charging current, not in I2: a link that cannot carry the nominal I2
+        (detuned tanks, a drifting Lm; ``w`` explains its I2) is driven to the V2 that delivers the command,
+        or to the most rectification mode gives, not to short mode."""
+        lk = self._link
+        x = lk.omega_rad_s * lk.lm_h
+        det = lk.r1_ohm * lk.r2_ohm + x * x
+        xv = x * lk.v1_amp_v - lk.r1_ohm * w
+        disc = np.maximum(xv * xv - 8.0 * lk.r1_ohm * vc * np.maximum(cmd, 0.0) * det, 0.0)
+        v2 = np.clip((xv - np.sqrt(disc)) / (2.0 * lk.r1_ohm), 0.0, 4.0 / np.pi * vc)
+        return (xv - lk.r1_ohm * v2) / det
 
     def _track(self, idx, z, vl, ref, u_prev):
         """V2 now [V] of the charging receivers ``idx`` (tracking QP; closed form, batched, where the box is
