@@ -8,29 +8,43 @@ paper eq. 4 with the known semiconductors' constant resistances folded in (R1 + 
 state ``x = [I1, I2]``, input the fundamental ``V2`` (linear: eq. 5's duty comes after, from
 ``f^-1``, :func:`wpt_receiver.duty_from_v2_clipped` at the measured clamp voltage ``VL + Vf``), plus an
 input disturbance ``w`` on V2 (offset-free MPC: it absorbs the forward drop, the short window's
-resistance and a wrong Lm in the steady state). A steady-state Kalman filter estimates ``[I1, I2,
-w]`` from the measured (noisy) I2 envelope and the V2 the previous duty applied.
+resistance and a wrong Lm in the steady state).
 
-Every control period, over a prediction horizon of :data:`N_PRED` steps (6 ms, beyond the 4.4 ms
-slow pole) with the input blocked into :data:`BLOCKS` moves (fine near now, coarse later):
+**Estimation** (:class:`_DelayBank`): steady-state Kalman filters of ``[I1, I2, w]`` from the measured
+(noisy) I2 envelope and the V2 the previous duties applied, one per hypothesis of the sensing delay
+(:data:`DELAYS`, 0-5 control periods: filter ``D`` reads the measurement as the state ``D`` steps ago);
+each receiver follows the hypothesis with the least weighted squared innovation, carried forward over
+its delay with the V2 applied since (a Smith predictor). Without a delay it is the plain filter.
 
-* charging (command > 0): track the model-based reference ``I2ref`` (the steady I2 of the target
-  V2, :meth:`policies.classical.ModelBasedPolicy.i2_ref`), ``min sum (I2_k - I2ref)^2 + lam sum dV2^2``,
-  ``0 <= V2 <= (4/pi)(VL + Vf)``;
+Every control period, over a prediction horizon of :data:`N_PRED` steps (15 ms, beyond the 4.4 ms
+slow pole), V2 piecewise linear between the knots :data:`BLOCKS` (fine near now, coarse later):
+
+* charging (command > 0): track ``I2ref``, the steady I2 of the model *with the estimated w* at the V2
+  that delivers the command (power balance ``V2 I2 / 2 = (VL + Vf) I_L``; ``w = 0`` gives the paper's
+  reference): ``min sum (I2_k - I2ref)^2 + lam sum dV2^2``, ``0 <= V2 <= (4/pi)(VL + Vf)``, in closed
+  form (batched over receivers) when the box is inactive;
 * after the stop (command 0): minimise the energy after the stop, linear in V2 at the short-mode
   current (``sum V2_k``, ~ ``sum V2 I2 / 2 dt``), ``+ lam sum dV2^2``, subject to the measured
   overshoot budget on every predicted sample (mid-step and end): ``I2_k + e_k <= (1 + b) I2_sm``,
-  with ``e_k`` the SBAR's ripple excess (:mod:`envs.peaks`, the same table the env's objective uses)
-  at the duty of the previous plan, and the same box on V2. The I2 constraints are soft (one slack,
-  weight 1e4 per A): the first steps after the stop start from the pre-stop state and may be
-  infeasible (the window's floor).
+  ``e_k`` the SBAR's ripple excess at the short-mode current (:mod:`envs.peaks`' table, the same the
+  env scores with; at a fixed current it is piecewise linear in the duty) linearised along a plan (at
+  the stop a ramp to 0, then the previous plan shifted; iterated 3 times in the first 3 steps: SCP),
+  the same box on V2, V2 = 0 from the last knot on. The I2 constraints are soft (one slack with an
+  exact penalty, 1e6 per A, above the energy term's multiplier): when the state at the stop allows no
+  plan within the budget, the bound is raised by the least violation found in the first 3 steps after
+  the stop, so the MPC holds the window's floor (:func:`policies.oracle.oracle_floor` from its own
+  state at the stop) instead of giving up. A plan still feasible from the new state is followed for
+  up to :data:`_REPLAN_EVERY` steps before it is re-solved; once settled in short mode nothing is solved.
 
-So the budget ``b`` is in the metric's units: the allowed measured (instantaneous-peak) overshoot
-over the short-mode current, not a reference relaxation (:mod:`policies.budgeted`).
+So the budget ``b`` is in the metric's units: the allowed measured (instantaneous-peak) overshoot over
+the short-mode current (or the window's floor, if that is higher), not a reference relaxation
+(:mod:`policies.budgeted`). Checked by ``tests/test_oracle_mpc.py``: budget 0 measures the floor within
+0.5 points on fixed windows, ``mpc:b`` at most ``max(floor, b) + 0.5`` points.
 
-Solver: OSQP (``pip install osqp``; a sparse ADMM QP solver in C, warm-started from the previous
-step's solution), one small condensed QP per receiver and step (13 variables, ~140 constraints,
-~0.1 ms). Without osqp the policy raises a one-line ``ValueError`` naming the package.
+Solver: DAQP (``pip install daqp``; a dual active-set solver for small dense QPs in C, exact), one
+QP of 21 variables and 300 constraints per receiver and re-plan, ~0.5-1.5 ms. Without daqp the policy
+raises a one-line ``ValueError`` naming the package. (OSQP, used before, stopped at its iteration
+limit on most after-stop QPs of this problem and returned unconverged plans.)
 """
 
 from __future__ import annotations
