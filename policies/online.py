@@ -113,7 +113,10 @@ class OnlineLmModelBasedPolicy:
         self._v2f += self.a_meas * (v2 - self._v2f)
         steady = np.abs(v2 - self._v2f) < self.steady_v2_v
         lm_inst = lm_from_steady_state(link, self._i2f, self._v2f)
-        ok = steady & np.isfinite(lm_inst) & (lm_inst > 0.2 * link.lm_h) & (lm_inst < 5.0 * link.lm_h)
+        # frozen once the command is the stop: the controller built before decays V2 to short mode, and a
+        # rebuild mid-transition (bumpless: it restarts from the V2 it was giving) would hold V2 up
+        charging = cmd > 0.0
+        ok = charging & steady & np.isfinite(lm_inst) & (lm_inst > 0.2 * link.lm_h) & (lm_inst < 5.0 * link.lm_h)
         self._lm = np.where(ok, self._lm + self.a_est * (lm_inst - self._lm), self._lm)
         # controllers: build on the first call, rebuild where the estimate moved by > rediscretise_rel
         if fresh:
@@ -121,7 +124,7 @@ class OnlineLmModelBasedPolicy:
             self._build(range(n), self._out)
             moved = ()
         else:
-            moved = np.flatnonzero(np.abs(self._lm / self._lm_ctl - 1.0) > self.rediscretise_rel)
+            moved = np.flatnonzero(charging & (np.abs(self._lm / self._lm_ctl - 1.0) > self.rediscretise_rel))
         if len(moved):
             self._build(moved, self._out[moved])  # start where they were: at the V2* they last gave
         v2_target = target_v2(self.ctx, cmd, vl, lm_h=self._lm_ctl)

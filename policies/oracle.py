@@ -247,15 +247,17 @@ def oracle_window(scenario, seed: int, budget: float, starts=DEFAULT_STARTS, con
     return _cached("window", scenario, int(seed), float(budget), tag, config, compute)
 
 
-def oracle_floor(scenario, seed: int, config=None) -> OracleResult:
-    """The smallest measured overshoot found for window ``seed`` (from the paper's controller's sequence)."""
+def oracle_floor(scenario, seed: int, config=None, base: str = "model_based") -> OracleResult:
+    """The smallest measured overshoot found for window ``seed``, the duties before the stop being those of
+    the policy ``base`` (a :func:`policies.make` name; the state at the stop, and so the floor, is that
+    policy's: the paper's controller by default, every classical policy's own for its own floor)."""
     from envs.rollout import DutyRollout
 
     def compute():
         roll = DutyRollout(scenario, seed, config)
-        return _FloorProblem(roll, policy_duties("model_based", scenario, seed, config)[0], np.inf).solve()
+        return _FloorProblem(roll, policy_duties(base, scenario, seed, config)[0], np.inf).solve()
 
-    return _cached("floor", scenario, int(seed), 0.0, ("model_based",), config, compute)
+    return _cached("floor", scenario, int(seed), 0.0, (base,), config, compute)
 
 
 def oracle_frontier(scenario, seeds, budgets_above_floor=(0.0, 0.01, 0.03, 0.08), config=None,

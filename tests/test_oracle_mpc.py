@@ -8,13 +8,14 @@ import pytest
 from envs.rollout import DutyRollout
 from policies.compare import run_policy
 
-osqp = pytest.importorskip("osqp")
+daqp = pytest.importorskip("daqp")
 
 
 @pytest.fixture(scope="module")
 def budgeted():
-    """model_based_budget:0.02 and ramp on two nominal windows (closed loop, recorded)."""
-    return {p: run_policy(p, "nominal", 2, 1000) for p in ("model_based_budget:0.02", "ramp")}
+    """The fixed policies of the oracle test on two nominal windows (closed loop, recorded): the budgeted
+    and the paper's controller, ramp, and the MPC (deterministic given the window: a fixed sequence)."""
+    return {p: run_policy(p, "nominal", 2, 1000) for p in ("model_based_budget:0.02", "ramp", "model_based", "mpc:0.05")}
 
 
 def test_replay_reproduces_the_closed_loop(budgeted):
@@ -30,7 +31,8 @@ def test_replay_reproduces_the_closed_loop(budgeted):
 
 def test_oracle_bounds_fixed_policies(budgeted, tmp_path, monkeypatch):
     """At each policy's own measured overshoot the oracle delivers no more energy after the stop, within
-    the budget and in short mode; the budgeted controller is beaten by a margin (it is not optimal)."""
+    the budget and in short mode, for every fixed policy here (the MPC included); the paper's and the budgeted
+    controller are beaten by a margin (they are not optimal)."""
     monkeypatch.setenv("DRONEWPT_CACHE_DIR", str(tmp_path))
     from policies.oracle import oracle_window
     for name, tr in budgeted.items():
@@ -40,31 +42,82 @@ def test_oracle_bounds_fixed_policies(budgeted, tmp_path, monkeypatch):
         assert o.feasible and o.reached_short_mode
         assert o.overshoot <= b + 1e-12
         assert o.energy_after_stop_j <= tr.metrics["energy_after_stop_j"][i]
-        if name.startswith("model_based_budget"):
+        if name.startswith("model_based"):
             assert o.energy_after_stop_j < 0.9 * tr.metrics["energy_after_stop_j"][i]
         # replaying the oracle's sequence gives what it claims (the cache holds the duties)
         r = DutyRollout("nominal", 1000 + i).run(o.duties)
         assert r.energy_after_stop_j[0] == pytest.approx(o.energy_after_stop_j, rel=1e-9)
 
 
-def test_mpc_true_model_budget_zero_near_floor(tmp_path, monkeypatch):
-    """Nominal windows (the MPC's model is the truth): every window reaches short mode and the measured
-    overshoot stays within 3.5 points of the window's floor (the least any open-loop sequence found,
-    policies.oracle.oracle_floor) and on average no worse than the paper's controller (measured: 0.5-3.3
-    points above the floor; the floor itself is not reached, see docs/rl.md)."""
-    monkeypatch.setenv("DRONEWPT_CACHE_DIR", str(tmp_path))
-    from policies.oracle import oracle_floor
-    m = run_policy("mpc", "nominal", 3, 1000).metrics
-    assert np.all(m["reached_short_mode"] == 1.0)
-    floors = np.array([100.0 * oracle_floor("nominal", 1000 + i).overshoot for i in range(3)])
-    assert np.all(m["overshoot_pct"] >= floors - 1e-9)   # the floor is a bound (the oracle searched from model_based)
-    assert np.all(m["overshoot_pct"] <= floors + 3.5)
-    base = run_policy("model_based", "nominal", 3, 1000).metrics
-    assert m["overshoot_pct"].mean() <= base["overshoot_pct"].mean() + 0.5
+#: tolerance [percentage points] of the MPC's measured overshoot above the floor (its Kalman estimate from the
+#: noisy I2, sd 0.1 A, and the 0.2 % back-off; measured 0.1-0.3 points on windows 1000-1005)
+FLOOR_TOL_PTS = 0.5
+MPC_WINDOWS = 4
 
 
-def test_mpc_budget_is_measured_overshoot():
-    """mpc:0.05 overshoots by the budget in the metric's units (within 1 point), not b + 3 points."""
-    m = run_policy("mpc:0.05", "nominal", 3, 1000).metrics
-    assert np.all(np.abs(m["overshoot_pct"] - 5.0) < 1.0)
+@pytest.fixture(scope="module")
+def mpc_floors(tmp_path_factory):
+    """The floor of each of the first MPC_WINDOWS nominal windows with the MPC's own duties before the stop
+    (the state at the stop is the MPC's: policies.oracle.oracle_floor(base="mpc")), and the paper's
+    controller's floor."""
+    import os
+    old = os.environ.get("DRONEWPT_CACHE_DIR")
+    os.environ["DRONEWPT_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))
+    try:
+        from policies.oracle import oracle_floor
+        own = np.array([100.0 * oracle_floor("nominal", 1000 + i, base="mpc").overshoot for i in range(MPC_WINDOWS)])
+        paper = np.array([100.0 * oracle_floor("nominal", 1000 + i).overshoot for i in range(MPC_WINDOWS)])
+    finally:
+        if old is None:
+            os.environ.pop("DRONEWPT_CACHE_DIR")
+        else:
+            os.environ["DRONEWPT_CACHE_DIR"] = old
+    return own, paper
+
+
+def test_mpc_true_model_budget_zero_within_floor(mpc_floors):
+    """Nominal windows (the MPC's model is the truth), budget 0: every window reaches short mode and the
+    measured overshoot is the window's floor (the least any post-stop sequence found from the state the MPC
+    stops in, policies.oracle.oracle_floor) within FLOOR_TOL_PTS points; the floor is a bound (its search
+    started from the MPC's own sequence). The paper's controller measures 0.8-2.0 points above its own floor."""
+    own, paper = mpc_floors
+    m = run_policy("mpc", "nominal", MPC_WINDOWS, 1000).metrics
     assert np.all(m["reached_short_mode"] == 1.0)
+    assert np.all(m["overshoot_pct"] >= own - 1e-9)
+    assert np.all(m["overshoot_pct"] <= own + FLOOR_TOL_PTS)
+    base = run_policy("model_based", "nominal", MPC_WINDOWS, 1000).metrics
+    assert np.mean(base["overshoot_pct"] - paper) > 2.0 * FLOOR_TOL_PTS   # the paper's controller is not at its floor
+    assert m["overshoot_pct"].mean() < base["overshoot_pct"].mean()
+
+
+@pytest.mark.parametrize("budget", [0.02, 0.05])
+def test_mpc_budget_is_measured_overshoot(budget, mpc_floors):
+    """mpc:b measures at most max(floor, b) + FLOOR_TOL_PTS (so at most floor + b + tolerance: the budget is in
+    the metric's units), uses it (within 1 point of b where b is above the floor) and reaches short mode."""
+    own, _ = mpc_floors
+    b = 100.0 * budget
+    m = run_policy(f"mpc:{budget:g}", "nominal", MPC_WINDOWS, 1000).metrics
+    assert np.all(m["reached_short_mode"] == 1.0)
+    assert np.all(m["overshoot_pct"] <= np.maximum(own, b) + FLOOR_TOL_PTS)
+    above = own < b - 0.5
+    assert np.all(m["overshoot_pct"][above] >= b - 1.0)
+
+
+def test_mpc_delay_bank_stabilises_sense_delay():
+    """sense_delay (I2 measured 1-2 control periods late): the MPC with the bank of delayed Kalman filters
+    (policies.mpc._DelayBank, Smith prediction over the chosen delay) reaches short mode in every window with
+    an overshoot like nominal's (< 5 %), while the same MPC with a delay-blind filter (delays=(0,)) rings
+    the link (overshoot > 10 % in some window: the plan starts from a state 1-2 steps old)."""
+    from envs import SbarChargingVectorEnv
+    from policies.compare import _rollout
+    from policies.mpc import MPCPolicy
+    out = {}
+    for delays in ((0,), (0, 1, 2, 3, 4, 5)):
+        venv = SbarChargingVectorEnv(num_envs=3, scenario="sense_delay")
+        pol = MPCPolicy(venv.policy_context, delays=delays)
+        pol.reset(3)
+        _, _, _, last = _rollout(pol, venv, 3, 1000)
+        out[delays] = (100.0 * last["overshoot"], last["reached_short_mode"])
+    over, sm = out[(0, 1, 2, 3, 4, 5)]
+    assert np.all(sm) and np.all(over < 5.0)
+    assert out[(0,)][0].max() > 10.0

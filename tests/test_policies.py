@@ -131,3 +131,28 @@ def test_online_lm_policy_batched_equals_one_receiver_at_a_time():
     singles = [OnlineLmModelBasedPolicy(ctx) for _ in range(n)]
     np.testing.assert_allclose(run([batched]), run(singles), atol=1e-12)
     assert batched.rebuilds == sum(p.rebuilds for p in singles) > n  # Lm off nominal: estimates moved
+
+
+def test_online_lm_policy_frozen_after_the_stop_reaches_short_mode_on_detuned_tanks():
+    """Detuned tanks (C1, C2 off resonance): the steady-state inversion explains the collapsed RM current
+    with an Lm several times nominal. After the stop the estimate and controller are frozen (no rebuild:
+    a bumpless rebuild restarts the decay of V2), so V2 decays from the stop on and every window reaches
+    short mode (window 1000 did not while rebuilds went on after the stop)."""
+    from envs import SbarChargingVectorEnv
+    from mission_sim.contract import OBS_INDEX, denormalise_obs
+    from policies.online import OnlineLmModelBasedPolicy
+
+    venv = SbarChargingVectorEnv(num_envs=2, scenario="detuned")
+    pol = OnlineLmModelBasedPolicy(venv.policy_context)
+    obs, _ = venv.reset(seed=1000)
+    at_stop = None
+    for _ in range(venv.config.n_steps):
+        if at_stop is None and np.all(denormalise_obs(obs)[:, OBS_INDEX["charge_cmd_a"]] <= 0.0):
+            at_stop = (pol.rebuilds, pol.lm_estimate_h)
+        d = np.asarray(pol.act(obs), dtype=float)
+        obs, _, _, _, info = venv.step((2.0 * np.clip(d, 0.0, 1.0) - 1.0)[:, None].astype(np.float32))
+    assert at_stop is not None
+    assert np.all(info["reached_short_mode"])
+    assert pol.rebuilds == at_stop[0]
+    np.testing.assert_array_equal(pol.lm_estimate_h, at_stop[1])
+    assert np.any(at_stop[1] > 1.5 * venv.policy_context.link.lm_h)   # the estimate ran off (the model is wrong)

@@ -207,14 +207,14 @@ def _rl_or_skip(pols: tuple, explicit: bool) -> tuple:
 
 
 def _mpc_or_skip(pols: tuple, explicit: bool) -> tuple:
-    """Without osqp the default ``mpc`` row is skipped with a note; asked for with ``--policies`` it is an error."""
+    """Without daqp the default ``mpc`` row is skipped with a note; asked for with ``--policies`` it is an error."""
     import importlib.util
     rows = [p_ for p_ in pols if p_.split(":", 1)[0] == "mpc"]
-    if not rows or importlib.util.find_spec("osqp") is not None:
+    if not rows or importlib.util.find_spec("daqp") is not None:
         return pols
     if explicit:
-        raise CliError(f"--policies {rows[0]} needs the QP solver osqp: pip install 'dronewpt[mpc]'")
-    print("dronewpt compare: note: skipping the mpc row: osqp is not installed (pip install 'dronewpt[mpc]')",
+        raise CliError(f"--policies {rows[0]} needs the QP solver daqp: pip install 'dronewpt[mpc]'")
+    print("dronewpt compare: note: skipping the mpc row: daqp is not installed (pip install 'dronewpt[mpc]')",
           file=sys.stderr)
     return tuple(p_ for p_ in pols if p_ not in rows)
 
