@@ -56,7 +56,7 @@ __all__ = ["CaseStore", "SweepResult", "MissionCaseRunner", "run_sweep", "run_ca
            "write_manifest", "BOOKKEEPING_COLUMNS"]
 
 RunCase = Callable[[dict], Mapping]
-_MAX_CHUNK = 512
+_MAX_CHUNK = 4096
 #: CPU cost of one Dask task on a local cluster (scheduling, (de)serialising a chunk and its rows, the
 #: driver's bookkeeping): measured 8.6 ms in the driver + 6.5 ms in the worker per one-case task of a
 #: no-op runner (2 cores, load ~10, benchmarks/bench_sweep_missions.py --overhead); a task computes at
@@ -70,26 +70,38 @@ _IN_FLIGHT_PER_THREAD = 2
 # ----------------------------------------------------------------------------- one case
 def run_case_safe(run_case: RunCase, case_id: str, params: dict) -> dict:
     """Run one case on a worker; any exception becomes an ``error`` result instead of propagating."""
-    t0, q0 = time.perf_counter(), _run_queue_wait_s()
+    t0 = time.perf_counter()
     try:
         metrics = run_case(dict(params))
         if not isinstance(metrics, Mapping):
             raise TypeError(f"case runner returned {type(metrics).__name__}; valid: a dict of metrics")
-        metrics = {str(k): _to_scalar(v) for k, v in metrics.items()}
+        metrics = {str(k): v if type(v) in _PLAIN else _to_scalar(v) for k, v in metrics.items()}
         status, error, tb = "ok", None, None
     except Exception as exc:  # noqa: BLE001 - recorded with the case, the sweep goes on
         metrics, status = {}, "error"
         error = f"{type(exc).__name__}: {exc}".splitlines()[0] if str(exc) else type(exc).__name__
         tb = traceback.format_exc()
     return {"case_id": case_id, "status": status, "error": error, "traceback": tb,
-            "case_wall_s": (wall := time.perf_counter() - t0), "case_busy_s": wall - (_run_queue_wait_s() - q0),
-            "worker": f"{socket.gethostname()}:{os.getpid()}", "metrics": metrics}
+            "case_wall_s": time.perf_counter() - t0, "worker": _worker_name(), "metrics": metrics}
+
+
+_PLAIN = (float, int, str, bool, type(None))
+
+
+_WORKER_NAME = [0, ""]  # (pid, "host:pid"): computed once per process (a forked child recomputes it)
+
+
+def _worker_name() -> str:
+    pid = os.getpid()
+    if _WORKER_NAME[0] != pid:
+        _WORKER_NAME[:] = [pid, f"{socket.gethostname()}:{pid}"]
+    return _WORKER_NAME[1]
 
 
 def _run_queue_wait_s() -> float:
     """Seconds this thread has spent runnable but waiting for a core (Linux ``schedstat``; 0 elsewhere).
-    A case's wall time minus this is what it would take on an idle machine: its CPU time plus its own
-    waits (I/O, sleeps), so a loaded machine does not make the chunks smaller."""
+    A chunk's wall time minus this is what it would take on an idle machine: its CPU time plus its
+    own waits (I/O, sleeps), so a loaded machine does not make the chunks smaller."""
     try:
         with open("/proc/thread-self/schedstat", "rb") as f:
             return int(f.read().split()[1]) * 1e-9
@@ -114,8 +126,15 @@ class Chunk:
 
 
 def run_chunk(run_case: RunCase, chunk: Chunk) -> list[dict]:
-    """One Dask task: several ``(case_id, params)`` run one after the other (:func:`run_case_safe`)."""
-    return [run_case_safe(run_case, cid, params) for cid, params in chunk.items]
+    """One Dask task: several ``(case_id, params)`` run one after the other (:func:`run_case_safe`);
+    each result also gets ``case_busy_s``, its wall time less its share of the chunk's wait for a core."""
+    t0, q0 = time.perf_counter(), _run_queue_wait_s()
+    out = [run_case_safe(run_case, cid, params) for cid, params in chunk.items]
+    wall, wait = time.perf_counter() - t0, _run_queue_wait_s() - q0
+    busy_share = max(0.0, 1.0 - wait / wall) if wall > 0 else 1.0
+    for r in out:
+        r["case_busy_s"] = r["case_wall_s"] * busy_share
+    return out
 
 
 def _row(case: Case, result: dict, attempt: int = 1) -> dict:

@@ -9,7 +9,7 @@ interruption like any sweep. :func:`summarise` turns the rows into distributions
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
@@ -21,24 +21,39 @@ __all__ = ["ToleranceRunner", "tolerance_cases", "summarise", "METRICS"]
 METRICS = ("rm_power_w", "efficiency", "rm_i2_a", "step_peak_a", "proposed_peak_a")
 
 
-@dataclass
+_TRANSITIONS: dict = {}  # devices name -> TransitionSet, built once per process (driver or worker)
+
+
+def _transitions(devices_name: str):
+    """The nominal duty sequences for ``devices_name``, built on first use in this process (~1.6 s of
+    CPU with the scipy.signal import): a Dask task unpickles a fresh runner, so the cache lives here,
+    not on the runner."""
+    ts = _TRANSITIONS.get(devices_name)
+    if ts is None:
+        from wpt_receiver.devices import preset
+        from wpt_receiver.tolerance import TransitionSet
+        ts = _TRANSITIONS[devices_name] = TransitionSet.build(devices=preset(devices_name))
+    return ts
+
+
+@dataclass(frozen=True)
 class ToleranceRunner:
     """Case runner: params ``{"draw": j, "l1": .., "c1": .., ...}`` -> the draw's metrics. Picklable
-    (Dask); the nominal duty sequences are built once per process, on first use."""
+    (Dask: a name only); the nominal duty sequences are built once per process (:func:`_transitions`),
+    and :meth:`warm` (called once on every worker by the sweep engine) builds them and loads the
+    compiled transient before the first chunk."""
 
     devices_name: str = "ideal"
-    _ts: object = field(default=None, repr=False, compare=False)
-
-    def __getstate__(self):
-        return {"devices_name": self.devices_name, "_ts": None}
 
     def __call__(self, params: dict) -> dict:
-        from wpt_receiver.devices import preset
-        from wpt_receiver.tolerance import SCALES, TransitionSet, draw_link, draw_metrics
-        if self._ts is None:
-            self._ts = TransitionSet.build(devices=preset(self.devices_name))
+        from wpt_receiver.tolerance import SCALES, draw_link, draw_metrics
         p, c1, c2 = draw_link([params[k] for k in SCALES])
-        return draw_metrics(p, c1, c2, self._ts)
+        return draw_metrics(p, c1, c2, _transitions(self.devices_name))
+
+    def warm(self) -> None:
+        """The nominal draw once: imports, the duty sequences, numba's cache of the transient."""
+        from wpt_receiver.tolerance import SCALES
+        self({"draw": -1, **dict.fromkeys(SCALES, 1.0)})
 
 
 def tolerance_cases(spreads, n: int, seed: int, devices_name: str) -> list[Case]:
