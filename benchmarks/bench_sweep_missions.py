@@ -15,7 +15,11 @@ prints where the CPU goes, which is what a loaded machine does not distort: CPU 
 loop, of the workers (summed) and of the driver (the process that also hosts Dask's scheduler and
 nannies), the driver's share of all the sweep's CPU, and the *CPU-bound ratio*
 ``workers x loop CPU / (workers' + driver CPU)``: what the sweep / loop ratio would be on an idle
-machine with one core per worker, if CPU were all that limits it. Also the driver's peak RSS
+machine with one core per worker, if CPU were all that limits it (measured under load it is
+pessimistic: Dask's housekeeping costs CPU per second of wall time, and a loaded machine stretches
+the wall time per case). Under load the cases/s ratio itself says little: with the kernel's
+autogroup scheduling (``/proc/sys/kernel/sched_autogroup_enabled``) the benchmark's process tree
+gets one share of the CPU however many processes it runs. Also the driver's peak RSS
 (``ru_maxrss`` of the sweep process; the workers are other processes) and the 1-minute load
 average before every measurement and at the end.
 
@@ -85,10 +89,12 @@ def _sweep(n: int, workers: int, overhead: bool) -> dict:
             res = run_sweep(cases, runner, tmp, client=client, progress=False)
             w1, d1 = [_cpu_s(p) for p in procs], _cpu_s(me)
         e2e = time.perf_counter() - t0
+        task_cpu = float(res.results["case_cpu_s"].sum())
     wcpu, dcpu = sum(w1) - sum(w0), d1 - d0
     return {"cases_per_s": res.n_run / res.wall_s, "wall_s": res.wall_s, "e2e_cases_per_s": n / e2e,
             "n_ok": res.n_ok, "driver_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
             "workers_cpu_ms_per_case": 1e3 * wcpu / n, "driver_cpu_ms_per_case": 1e3 * dcpu / n,
+            "task_cpu_ms_per_case": 1e3 * task_cpu / n,
             "driver_cpu_share": dcpu / (wcpu + dcpu), "driver_core_pct": 100 * dcpu / res.wall_s}
 
 
@@ -130,7 +136,11 @@ def _report(args, loops, sweeps, loads) -> None:
     print(f"CPU per case: loop {_fmt(lcpu)} ms; sweep workers {_fmt(wcpu)} ms, driver {_fmt(dcpu, 2)} ms "
           f"(driver share of the sweep's CPU {_fmt([100 * r['driver_cpu_share'] for r in sweeps])} %, "
           f"{_fmt([r['driver_core_pct'] for r in sweeps])} % of a core)")
-    print(f"CPU-bound ratio (idle machine, {args.workers} cores): {_fmt(bound, 2)}x")
+    tcpu = [r["task_cpu_ms_per_case"] for r in sweeps]
+    print(f"  of the workers' CPU: the cases themselves {_fmt(tcpu)} ms, the rest (worker warm-up, Dask's housekeeping, which grows "
+          f"with wall time, and per-task work) {_fmt([w - t for w, t in zip(wcpu, tcpu)])} ms")
+    print(f"CPU-bound ratio ({args.workers} cores, CPU all that limits): {_fmt(bound, 2)}x; with the cases' CPU "
+          f"alone (no overhead at all): {_fmt([args.workers * statistics.median(lcpu) / t for t in tcpu], 2)}x")
     print(f"driver peak RSS {_fmt([r['driver_rss_mb'] for r in sweeps], 0)} MB")
     print(f"load average (1 min) before each measurement and at the end: {_fmt(loads, 2)} "
           f"({', '.join(f'{x:.1f}' for x in loads)}; {os.cpu_count()} cores)")

@@ -70,7 +70,7 @@ _IN_FLIGHT_PER_THREAD = 2
 # ----------------------------------------------------------------------------- one case
 def run_case_safe(run_case: RunCase, case_id: str, params: dict) -> dict:
     """Run one case on a worker; any exception becomes an ``error`` result instead of propagating."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.thread_time()
     try:
         metrics = run_case(dict(params))
         if not isinstance(metrics, Mapping):
@@ -82,7 +82,8 @@ def run_case_safe(run_case: RunCase, case_id: str, params: dict) -> dict:
         error = f"{type(exc).__name__}: {exc}".splitlines()[0] if str(exc) else type(exc).__name__
         tb = traceback.format_exc()
     return {"case_id": case_id, "status": status, "error": error, "traceback": tb,
-            "case_wall_s": time.perf_counter() - t0, "worker": _worker_name(), "metrics": metrics}
+            "case_wall_s": time.perf_counter() - t0, "case_cpu_s": time.thread_time() - c0, "worker": _worker_name(),
+            "metrics": metrics}
 
 
 _PLAIN = (float, int, str, bool, type(None))
