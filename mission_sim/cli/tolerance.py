@@ -56,7 +56,7 @@ def _cmd_tolerance(args) -> int:
         raise CliError(str(exc).replace("spread ", "--spread-").replace("=", " ")) from None
     if args.out.exists() and not args.out.is_dir():
         raise CliError(f"--out {str(args.out)!r} is a file; valid: a folder")
-    runner = ToleranceRunner(args.devices)
+    runner = ToleranceRunner(args.devices).with_transitions()  # shipped to the workers, built once here
     nominal = _nominal(runner)
     factory = None if args.workers == 0 else functools.partial(dask_client, None, args.workers)
     res = sweep.run_sweep(tolerance_cases(spreads, args.draws, args.seed, args.devices), runner, args.out,

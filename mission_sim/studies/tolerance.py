@@ -9,7 +9,7 @@ interruption like any sweep. :func:`summarise` turns the rows into distributions
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -38,17 +38,25 @@ def _transitions(devices_name: str):
 
 @dataclass(frozen=True)
 class ToleranceRunner:
-    """Case runner: params ``{"draw": j, "l1": .., "c1": .., ...}`` -> the draw's metrics. Picklable
-    (Dask: a name only); the nominal duty sequences are built once per process (:func:`_transitions`),
-    and :meth:`warm` (called once on every worker by the sweep engine) builds them and loads the
-    compiled transient before the first chunk."""
+    """Case runner: params ``{"draw": j, "l1": .., "c1": .., ...}`` -> the draw's metrics. Picklable.
+
+    ``transitions``: the nominal duty sequences (:class:`~wpt_receiver.tolerance.TransitionSet`,
+    ~60 kB) when the caller has built them (:meth:`with_transitions`): they travel with the runner,
+    so a Dask worker never imports scipy.signal nor re-runs the controllers (~1.6 s of CPU each);
+    otherwise built once per process on first use (:func:`_transitions`). :meth:`warm` (called once
+    on every worker by the sweep engine) runs the nominal draw: imports and numba's cache."""
 
     devices_name: str = "ideal"
+    transitions: object = field(default=None, repr=False, compare=False)
+
+    def with_transitions(self) -> "ToleranceRunner":
+        """This runner carrying its duty sequences (built here, once)."""
+        return ToleranceRunner(self.devices_name, _transitions(self.devices_name))
 
     def __call__(self, params: dict) -> dict:
         from wpt_receiver.tolerance import SCALES, draw_link, draw_metrics
         p, c1, c2 = draw_link([params[k] for k in SCALES])
-        return draw_metrics(p, c1, c2, _transitions(self.devices_name))
+        return draw_metrics(p, c1, c2, self.transitions or _transitions(self.devices_name))
 
     def warm(self) -> None:
         """The nominal draw once: imports, the duty sequences, numba's cache of the transient."""
