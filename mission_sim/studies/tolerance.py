@@ -111,4 +111,21 @@ def summarise(df: pd.DataFrame, nominal: dict, margin: float = 1.25, min_power_f
         yields[pol] = (float(both.mean()), *_interval(both))
         dist[f"{pol}_rating_a"] = rating
     return {"n": int(len(ok)), "n_error": int(len(df) - len(ok)), "distributions": dist, "yields": yields,
-            "nominal": nominal, "margin": margin, "min_power_frac": min_power_frac}
+            "nominal": nominal, "margin": margin, "min_power_frac": min_power_frac,
+            "estimator": _estimator_flags(ok, nominal, min_power_frac)}
+
+
+def _estimator_flags(ok: pd.DataFrame, nominal: dict, min_power_frac: float) -> dict:
+    """How many draws the envelope estimator is not validated for: conducting in RM but below
+    ``TRUSTED_POWER_FRAC`` of the nominal power (discontinuous conduction; RM |i2| off by up to
+    -97/+123 % against the switching model), and how many sit within +-15 % of the power threshold
+    (the estimator's RM error at 0.7-0.9 x nominal), whose pass / fail is uncertain."""
+    from wpt_receiver.tolerance import MIN_CONDUCTION_A, TRUSTED_POWER_FRAC
+    frac = ok["rm_power_w"].to_numpy(float) / nominal["rm_power_w"]
+    conducting = ok["rm_i2_a"].to_numpy(float) >= MIN_CONDUCTION_A
+    flagged = conducting & (frac < TRUSTED_POWER_FRAC)
+    near = np.abs(frac / min_power_frac - 1.0) <= 0.15
+    n = max(len(ok), 1)
+    return {"trusted_power_frac": TRUSTED_POWER_FRAC, "flagged": int(flagged.sum()), "flagged_frac": float(flagged.sum() / n),
+            "near_threshold": int(near.sum()), "near_threshold_frac": float(near.sum() / n),
+            "blocked": int((~conducting).sum())}
