@@ -1,11 +1,17 @@
-"""``dronewpt tolerance`` at scale: 10,000 draws on the sweep engine, 2 local Dask workers, end to end.
+"""``dronewpt tolerance`` at scale: in-process against 2 local Dask workers, end to end, in the same run.
 
-Runs the CLI in a subprocess (cluster start-up, numba cache load on the workers, the store and
-the summary included) into a fresh folder, ``--repeat`` times, and prints the wall times (median
-and range) with ``os.getloadavg()`` before and after (the machine is shared: the target is 10^4
-draws in under 2 minutes on 2 cores), plus the in-process serial time per draw for comparison.
+Each repeat runs the CLI twice in fresh subprocesses into fresh folders, alternating: ``--workers 0``
+(in-process on the sweep engine's serial path) and ``--workers N`` (a local Dask cluster: its
+start-up, the workers' warm-up - imports, the nominal duty sequences, numba's cache - the chunks,
+the store and the summary included), after ``--warmup`` untimed rounds of 200 draws each way
+(numba's and the OS's caches warm). Prints per mode the end-to-end wall time (median [min, max]),
+the sweep's own time as the CLI reports it (``wall_s``: cases, store, cluster start for Dask; not
+the imports), the Dask / in-process ratio of the medians and pairwise, the in-process time per
+draw of the estimator alone, and the 1-minute load average before each run (the machine is
+shared; the target is 10^4 draws in under 2 minutes on 2 cores).
 
-    python benchmarks/bench_tolerance.py [--draws 10000] [--workers 2] [--repeat 3] [--json]
+    PYTHONPATH=$PWD python benchmarks/bench_tolerance.py [--draws 10000] [--workers 2] [--repeat 3] [--json]
+    PYTHONPATH=$PWD python benchmarks/bench_tolerance.py --draws 2000 --repeat 1      # a quick look
 """
 
 from __future__ import annotations
@@ -31,30 +37,55 @@ def _serial_per_draw(n: int = 500) -> float:
     return (time.perf_counter() - t0) / n
 
 
+def _run(draws: int, workers: int) -> dict:
+    """One CLI run in a fresh folder: end-to-end wall [s], the CLI's own sweep wall [s], the load before."""
+    load = os.getloadavg()[0]
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        r = subprocess.run([sys.executable, "-m", "mission_sim.cli", "tolerance", "--draws", str(draws),
+                            "--workers", str(workers), "--out", tmp, "--no-progress", "--format", "json"],
+                           check=True, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+    s = json.loads(r.stdout)
+    return {"wall_s": wall, "sweep_s": s["wall_s"], "n": s["n"], "load": load}
+
+
+def _fmt(vals, nd=1):
+    return f"{statistics.median(vals):.{nd}f} [{min(vals):.{nd}f}, {max(vals):.{nd}f}]"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=10_000)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--warmup", type=int, default=1, help="untimed rounds of 200 draws each way (default 1)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
-    load0 = os.getloadavg()
-    walls = []
+    for _ in range(args.warmup):
+        _run(200, 0)
+        _run(200, args.workers)
+    inproc, dask = [], []
     for _ in range(args.repeat):
-        with tempfile.TemporaryDirectory() as tmp:
-            t0 = time.perf_counter()
-            subprocess.run([sys.executable, "-m", "mission_sim.cli", "tolerance", "--draws", str(args.draws),
-                            "--workers", str(args.workers), "--out", tmp, "--no-progress", "--format", "json"],
-                           check=True, capture_output=True)
-            walls.append(time.perf_counter() - t0)
-    out = {"draws": args.draws, "workers": args.workers, "wall_s": walls, "median_s": statistics.median(walls),
-           "serial_ms_per_draw": 1e3 * _serial_per_draw(), "load": [load0, os.getloadavg()]}
+        inproc.append(_run(args.draws, 0))
+        dask.append(_run(args.draws, args.workers))
+    loads = [r["load"] for pair in zip(inproc, dask) for r in pair] + [os.getloadavg()[0]]
+    out = {"draws": args.draws, "workers": args.workers, "in_process": inproc, "dask": dask,
+           "serial_ms_per_draw": 1e3 * _serial_per_draw(), "loads": loads}
     if args.json:
         print(json.dumps(out))
         return
-    print(f"{args.draws} draws, {args.workers} workers, end to end: median {out['median_s']:.1f} s "
-          f"(range {min(walls):.1f}-{max(walls):.1f}); in-process serial {out['serial_ms_per_draw']:.2f} ms per draw; "
-          f"load {load0} -> {os.getloadavg()}")
+    wi, wd = [r["wall_s"] for r in inproc], [r["wall_s"] for r in dask]
+    print(f"{args.draws} draws, end to end (fresh process, imports included), {args.repeat} repeats after "
+          f"{args.warmup} warm-up round(s), all stored: {all(r['n'] == args.draws for r in inproc + dask)}")
+    print(f"in-process (--workers 0)       {_fmt(wi)} s   (sweep part {_fmt([r['sweep_s'] for r in inproc])} s)")
+    print(f"Dask (--workers {args.workers})              {_fmt(wd)} s   (sweep part, cluster start included "
+          f"{_fmt([r['sweep_s'] for r in dask])} s)")
+    print(f"in-process / Dask wall: {statistics.median(wi) / statistics.median(wd):.2f}x "
+          f"(pairwise {_fmt([a / b for a, b in zip(wi, wd)], 2)}); the estimator alone in-process: "
+          f"{out['serial_ms_per_draw']:.2f} ms per draw")
+    print(f"load average (1 min) before each run and at the end: {_fmt(loads, 2)} "
+          f"({', '.join(f'{x:.1f}' for x in loads)}; {os.cpu_count()} cores)")
 
 
 if __name__ == "__main__":

@@ -24,7 +24,7 @@ from mission_sim.studies.sweep import CaseStore, dask_client, prepare_study, rea
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 TESTS = ROOT / "tests"
-VOLATILE = ["case_wall_s", "worker", "traceback", "worker_pid", "wall_s"]
+VOLATILE = ["case_wall_s", "case_cpu_s", "worker", "traceback", "worker_pid", "wall_s"]
 
 
 def env():
@@ -283,7 +283,7 @@ def test_real_missions_on_two_workers_equal_serial_with_physics_orderings(client
     serial = run_sweep(cases, runner, tmp_path / "serial", progress=False)
 
     def stable_mission(df):
-        drop = [c for c in df.columns if "wall" in c or c in ("worker", "traceback", "realtime_factor")]
+        drop = [c for c in df.columns if "wall" in c or c in ("case_cpu_s", "worker", "traceback", "realtime_factor")]
         return df.drop(columns=drop).sort_values("case_id").reset_index(drop=True)
 
     pd.testing.assert_frame_equal(stable_mission(res.results), stable_mission(serial.results), check_exact=True)

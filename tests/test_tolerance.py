@@ -43,6 +43,18 @@ def test_nominal_draw_is_the_paper(ts):
     assert m["rm_power_w"] == pytest.approx(2 / np.pi * TABLE_I.vl_v * m["rm_i2_a"], rel=1e-12)
 
 
+def test_clamp_margin_above_one_is_conduction(ts):
+    """The rectifier conducts in RM exactly when the induced emf beats the clamp seen through G22
+    (|E| > V2 |G22|, the closed form's condition with Re G22 > 0), on 300 seeded draws that include
+    blocked, barely conducting and near-tuned receivers."""
+    seen = set()
+    for s in tol.draw_scales(tol.Spreads(), 300, 3):
+        m = tol.draw_metrics(*tol.draw_link(s), ts)
+        assert (m["clamp_margin"] > 1.0) == (m["rm_i2_a"] > 0.0), m
+        seen.add((m["clamp_margin"] > 1.0, m["rm_power_w"] >= tol.TRUSTED_POWER_FRAC * 211.0))
+    assert seen == {(False, False), (True, False), (True, True)}
+
+
 def _switching(p, c1, c2, duties):
     from wpt_receiver.detuning import _settled_rm
     from wpt_receiver.switching import SwitchingConfig, SwitchingLink
@@ -101,6 +113,13 @@ def test_cli_on_the_sweep_engine_resumes(tmp_path, capsys):
     assert d["proposed_peak_a"]["95"] < 0.5 * d["step_peak_a"]["5"]
     assert s["yields"]["step"][0] <= s["yields"]["power"][0]
     assert (tmp_path / "summary.json").exists()
+    e = s["estimator"]   # draws outside the estimator's validated range are counted, not hidden
+    nominal = s["nominal"]["rm_power_w"]
+    from mission_sim.studies.sweep import read_results
+    df = read_results(tmp_path)
+    low = (df["rm_i2_a"] >= tol.MIN_CONDUCTION_A) & (df["rm_power_w"] < tol.TRUSTED_POWER_FRAC * nominal)
+    assert e["flagged"] == int(low.sum()) > 0 and e["blocked"] == int((df["rm_i2_a"] < tol.MIN_CONDUCTION_A).sum())
+    assert e["flagged"] + e["blocked"] <= 200
     assert main(args) == 0
     assert json.loads(capsys.readouterr().out)["n_run"] == 0
 

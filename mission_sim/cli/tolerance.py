@@ -56,7 +56,7 @@ def _cmd_tolerance(args) -> int:
         raise CliError(str(exc).replace("spread ", "--spread-").replace("=", " ")) from None
     if args.out.exists() and not args.out.is_dir():
         raise CliError(f"--out {str(args.out)!r} is a file; valid: a folder")
-    runner = ToleranceRunner(args.devices)
+    runner = ToleranceRunner(args.devices).with_transitions()  # shipped to the workers, built once here
     nominal = _nominal(runner)
     factory = None if args.workers == 0 else functools.partial(dask_client, None, args.workers)
     res = sweep.run_sweep(tolerance_cases(spreads, args.draws, args.seed, args.devices), runner, args.out,
@@ -96,4 +96,10 @@ def _print(s: dict, args) -> None:
         print(f"yield, {label:<11} (power and peak <= {r:.2f} A = {args.margin:g} x nominal): "
               f"{100 * y[pol][0]:.1f} % [{100 * y[pol][1]:.1f}, {100 * y[pol][2]:.1f}] (peak alone, of the draws "
               f"that transfer power: {100 * y[pol + '_rating'][0]:.1f} %)")
+    e = s["estimator"]
+    print(f"estimator: {e['flagged']} draws ({100 * e['flagged_frac']:.1f} %) conduct below "
+          f"{e['trusted_power_frac']:g} x nominal power, outside its validated range (RM |i2| off by up to ~2x against "
+          f"the switching model there); {e['near_threshold']} ({100 * e['near_threshold_frac']:.1f} %) are within "
+          f"+-15 % of the power threshold (pass / fail uncertain); {e['blocked']} block in RM (agrees with the "
+          f"switching model)")
     print(f"results: {args.out} (summary.json, sweep store)")

@@ -18,9 +18,10 @@ Merges (incremental compaction)
 
 Rows and retries
     One row per case: ``case_id, attempt, status ("ok" | "error"), error, traceback, case_wall_s,
-    worker, params_json``, the parameters and the metrics. ``attempt`` counts runs of the case
-    (``--retry-errors`` re-runs an error row with ``attempt + 1``); readers keep the row with the
-    highest attempt per case_id, merges drop the superseded ones.
+    case_cpu_s`` (the case's CPU time on its worker thread), ``worker, params_json``, the
+    parameters and the metrics. ``attempt`` counts runs of the case (``--retry-errors`` re-runs an
+    error row with ``attempt + 1``); readers keep the row with the highest attempt per case_id,
+    merges drop the superseded ones.
 
 Only one sweep writes a store at a time (an ``flock`` on ``OUT/.sweep.lock``); readers
 (``--status``) need no lock.
@@ -47,7 +48,8 @@ from ..files import atomic_output, folder_lock
 
 __all__ = ["CaseStore", "PartWriter", "StoreState", "read_results", "BOOKKEEPING_COLUMNS", "FANOUT", "BATCH_ROWS"]
 
-BOOKKEEPING_COLUMNS = ("case_id", "attempt", "status", "error", "traceback", "case_wall_s", "worker", "params_json")
+BOOKKEEPING_COLUMNS = ("case_id", "attempt", "status", "error", "traceback", "case_wall_s", "case_cpu_s", "worker",
+                       "params_json")
 FANOUT = 8
 BATCH_ROWS = 8192  # rows per batch of a streamed merge (its memory bound)
 _ABSORBS_KEY = b"dronewpt.absorbs"

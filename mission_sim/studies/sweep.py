@@ -7,9 +7,10 @@ other studies can pass any picklable callable.
 
 Scale (10^5 cases and more)
     Cases come from a lazy iterator (:class:`~mission_sim.studies.study.CaseSpace`) and are
-    submitted in *chunks* (several cases per Dask task, sized so a task lasts about
-    ``chunk_target_s`` and at least ``TASK_OVERHEAD_S / 2 %``, measured from the cases' own run
-    times, so the per-task overhead stays under 2 % of the work) with a bounded number of tasks in
+    submitted in *chunks* (several cases per Dask task, sized from the cases' measured busy time on
+    the workers so a task lasts about ``chunk_target_s`` and at least ``TASK_OVERHEAD_S / 2 %``:
+    the per-task overhead stays under 2 % of the work; busy = wall minus the time spent waiting for
+    a core, so a loaded machine does not shrink the chunks) with a bounded number of tasks in
     flight: a new chunk is submitted only when one has come back (back-pressure), and each future
     is dropped as soon as its rows are buffered, so the scheduler never holds stored results and
     a lost worker never makes it recompute them. A runner with a ``warm()`` method (the mission
@@ -55,30 +56,58 @@ __all__ = ["CaseStore", "SweepResult", "MissionCaseRunner", "run_sweep", "run_ca
            "write_manifest", "BOOKKEEPING_COLUMNS"]
 
 RunCase = Callable[[dict], Mapping]
-_MAX_CHUNK = 512
-#: per-task cost of Dask on a local cluster (scheduling, (de)serialising a chunk and its rows, the driver's
-#: bookkeeping) assumed when sizing chunks: a task lasts at least 50x this, so the overhead stays < 2 %
-TASK_OVERHEAD_S = 0.01
+_MAX_CHUNK = 4096
+#: CPU cost of one Dask task on a local cluster (scheduling, (de)serialising a chunk and its rows, the
+#: driver's bookkeeping): measured 8.6 ms in the driver + 6.5 ms in the worker per one-case task of a
+#: no-op runner (2 cores, load ~10, benchmarks/bench_sweep_missions.py --overhead); a task computes at
+#: least 50x this, so the overhead stays < 2 %
+TASK_OVERHEAD_S = 0.015
 _OVERHEAD_SHARE = 0.02
+#: tasks in flight per worker thread: one running, one waiting on the worker (no idle round trip)
+_IN_FLIGHT_PER_THREAD = 2
 
 
 # ----------------------------------------------------------------------------- one case
 def run_case_safe(run_case: RunCase, case_id: str, params: dict) -> dict:
     """Run one case on a worker; any exception becomes an ``error`` result instead of propagating."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.thread_time()
     try:
         metrics = run_case(dict(params))
         if not isinstance(metrics, Mapping):
             raise TypeError(f"case runner returned {type(metrics).__name__}; valid: a dict of metrics")
-        metrics = {str(k): _to_scalar(v) for k, v in metrics.items()}
+        metrics = {str(k): v if type(v) in _PLAIN else _to_scalar(v) for k, v in metrics.items()}
         status, error, tb = "ok", None, None
     except Exception as exc:  # noqa: BLE001 - recorded with the case, the sweep goes on
         metrics, status = {}, "error"
         error = f"{type(exc).__name__}: {exc}".splitlines()[0] if str(exc) else type(exc).__name__
         tb = traceback.format_exc()
     return {"case_id": case_id, "status": status, "error": error, "traceback": tb,
-            "case_wall_s": time.perf_counter() - t0, "worker": f"{socket.gethostname()}:{os.getpid()}",
+            "case_wall_s": time.perf_counter() - t0, "case_cpu_s": time.thread_time() - c0, "worker": _worker_name(),
             "metrics": metrics}
+
+
+_PLAIN = (float, int, str, bool, type(None))
+
+
+_WORKER_NAME = [0, ""]  # (pid, "host:pid"): computed once per process (a forked child recomputes it)
+
+
+def _worker_name() -> str:
+    pid = os.getpid()
+    if _WORKER_NAME[0] != pid:
+        _WORKER_NAME[:] = [pid, f"{socket.gethostname()}:{pid}"]
+    return _WORKER_NAME[1]
+
+
+def _run_queue_wait_s() -> float:
+    """Seconds this thread has spent runnable but waiting for a core (Linux ``schedstat``; 0 elsewhere).
+    A chunk's wall time minus this is what it would take on an idle machine: its CPU time plus its
+    own waits (I/O, sleeps), so a loaded machine does not make the chunks smaller."""
+    try:
+        with open("/proc/thread-self/schedstat", "rb") as f:
+            return int(f.read().split()[1]) * 1e-9
+    except (OSError, ValueError, IndexError):
+        return 0.0
 
 
 class Chunk:
@@ -98,8 +127,15 @@ class Chunk:
 
 
 def run_chunk(run_case: RunCase, chunk: Chunk) -> list[dict]:
-    """One Dask task: several ``(case_id, params)`` run one after the other (:func:`run_case_safe`)."""
-    return [run_case_safe(run_case, cid, params) for cid, params in chunk.items]
+    """One Dask task: several ``(case_id, params)`` run one after the other (:func:`run_case_safe`);
+    each result also gets ``case_busy_s``, its wall time less its share of the chunk's wait for a core."""
+    t0, q0 = time.perf_counter(), _run_queue_wait_s()
+    out = [run_case_safe(run_case, cid, params) for cid, params in chunk.items]
+    wall, wait = time.perf_counter() - t0, _run_queue_wait_s() - q0
+    busy_share = max(0.0, 1.0 - wait / wall) if wall > 0 else 1.0
+    for r in out:
+        r["case_busy_s"] = r["case_wall_s"] * busy_share
+    return out
 
 
 def _row(case: Case, result: dict, attempt: int = 1) -> dict:
@@ -205,7 +241,7 @@ class SweepResult:
 
 def run_sweep(cases: Iterable[Case], run_case: RunCase, out_dir, *, client=None, client_factory=None,
               progress: bool = True, progress_desc: str = "sweep", retry_errors: bool = False,
-              part_rows: int = 1000, part_age_s: float = 2.0, chunk_target_s: float = 0.2,
+              part_rows: int = 1000, part_age_s: float = 2.0, chunk_target_s: float = 1.0,
               max_in_flight: int | None = None, before_run: Callable[[], object] | None = None) -> SweepResult:
     """Run the cases not yet in ``out_dir`` and store one row per case.
 
@@ -217,8 +253,8 @@ def run_sweep(cases: Iterable[Case], run_case: RunCase, out_dir, *, client=None,
     retry_errors : also re-run the cases stored with ``status = "error"`` (their new row supersedes
         the old one: ``attempt`` + 1).
     part_rows, part_age_s : a part file every that many rows or seconds.
-    chunk_target_s, max_in_flight : wall time aimed at per Dask task; tasks in flight (default
-        3 per worker thread).
+    chunk_target_s, max_in_flight : busy time aimed at per Dask task (at least 50 x ``TASK_OVERHEAD_S``);
+        tasks in flight (default 2 per worker thread, at least 4).
     before_run : called once the store is locked, before anything runs (the CLI writes the manifest).
 
     A case whose runner raises is stored with ``status = "error"``; the others go on. Interrupting
@@ -298,10 +334,11 @@ class _Submitter:
             ac.add(fut)
 
     def learn(self, results: list[dict]) -> None:
-        walls = [r["case_wall_s"] for r in results if r.get("case_wall_s") is not None]
-        if not walls:
+        """Chunk size from the cases' busy time on the worker (wall minus time spent waiting for a core)."""
+        busy = [r.get("case_busy_s", r["case_wall_s"]) for r in results if r.get("case_wall_s") is not None]
+        if not busy:
             return
-        m = sum(walls) / len(walls)
+        m = sum(busy) / len(busy)
         self.mean_case_s = m if self.mean_case_s is None else 0.7 * self.mean_case_s + 0.3 * m
         self.chunk = int(min(max(self.target_s / max(self.mean_case_s, 1e-6), 1), _MAX_CHUNK))
 
@@ -329,12 +366,12 @@ class _Submitter:
         return []
 
 
-def _run_dask(client, pending, run_case: RunCase, writer: PartWriter, bar, *, chunk_target_s: float = 0.2,
+def _run_dask(client, pending, run_case: RunCase, writer: PartWriter, bar, *, chunk_target_s: float = 1.0,
               max_in_flight: int | None = None) -> int:
     """Submit chunks with back-pressure, buffer rows as tasks complete, drop each future once stored."""
     from distributed import as_completed
 
-    window = max_in_flight or max(4, 3 * sum(client.nthreads().values()))
+    window = max_in_flight or max(4, _IN_FLIGHT_PER_THREAD * sum(client.nthreads().values()))
     _warm_workers(client, run_case)
     sub = _Submitter(client, pending, run_case, chunk_target_s, window)
     # loop=client.loop: as_completed would otherwise use the *default* client's loop, which a
@@ -367,7 +404,7 @@ def _drain(ac, sub: _Submitter, writer: PartWriter, bar) -> int:
     n = n_err = 0
     while not ac.is_empty():
         if writer.rows and not ac.has_ready():
-            time.sleep(0.02)  # rows waiting: flush them on time even if no task comes back for a while
+            time.sleep(0.1)  # rows waiting: flush them on time even if no task comes back for a while
             writer.maybe_flush()
             continue
         rows = [r for fut, res in ac.next_batch(block=True) for r in sub.collect(fut, res)]
