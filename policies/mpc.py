@@ -37,6 +37,7 @@ slow pole), V2 piecewise linear between the knots :data:`BLOCKS` (fine near now,
   the stop, so the MPC holds the window's floor (:func:`policies.oracle.oracle_floor` from its own
   state at the stop) instead of giving up. A plan still feasible from the new state is followed for
   up to :data:`_REPLAN_EVERY` steps before it is re-solved; once settled in short mode nothing is solved.
+A receiver whose command turns positive after its stop starts a new window afresh.
 
 So the budget ``b`` is in the metric's units: the allowed measured (instantaneous-peak) overshoot over
 the short-mode current (or the window's floor, if that is higher), not a reference relaxation
