@@ -37,6 +37,7 @@ slow pole), V2 piecewise linear between the knots :data:`BLOCKS` (fine near now,
   the stop, so the MPC holds the window's floor (:func:`policies.oracle.oracle_floor` from its own
   state at the stop) instead of giving up. A plan still feasible from the new state is followed for
   up to :data:`_REPLAN_EVERY` steps before it is re-solved; once settled in short mode nothing is solved.
+A receiver whose command turns positive after its stop starts a new window afresh.
 
 So the budget ``b`` is in the metric's units: the allowed measured (instantaneous-peak) overshoot over
 the short-mode current (or the window's floor, if that is higher), not a reference relaxation
@@ -236,19 +237,25 @@ class MPCPolicy:
     def _v2_of(self, d, vl):
         return 4.0 / np.pi * (vl + self._vf) * (1.0 - np.sin(0.5 * np.pi * d))
 
-    def _estimate(self, i2m, vl, d_last):
+    def _estimate(self, i2m, vl, d_last, new=None):
         """The state ``z = [I1, I2, w]`` now (n, 3): from the delay bank (:class:`_DelayBank`), started in the
-        steady state the first measured I2 implies (``w`` explains the offset)."""
+        steady state the first measured I2 implies (``w`` explains the offset); the rows ``new`` (a new
+        window in a batched env that resets its windows) are started afresh the same way."""
         u_last = self._v2_of(d_last, vl)
+        lk = self._link
+        x = lk.omega_rad_s * lk.lm_h
+        det = lk.r1_ohm * lk.r2_ohm + x * x
+        w = (x * lk.v1_amp_v - det * i2m) / lk.r1_ohm - u_last
+        z0 = np.stack([(lk.r2_ohm * lk.v1_amp_v + x * (u_last + w)) / det, i2m, w], axis=1)
         if self._bank is None or self._bank.n != len(i2m):
-            lk = self._link
-            x = lk.omega_rad_s * lk.lm_h
-            det = lk.r1_ohm * lk.r2_ohm + x * x
-            w = (x * lk.v1_amp_v - det * i2m) / lk.r1_ohm - u_last
-            i1 = (lk.r2_ohm * lk.v1_amp_v + x * (u_last + w)) / det
-            self._bank = _DelayBank(self._model, np.stack([i1, i2m, w], axis=1), u_last, self.delays)
+            self._bank = _DelayBank(self._model, z0, u_last, self.delays)
             return self._bank.now()
-        return self._bank.update(i2m, u_last)
+        out = self._bank.update(i2m, u_last)
+        if new is not None and len(new):
+            b = self._bank
+            b.z[:, new], b.u[:, new], b.score[:, new], b.best[new] = z0[new], u_last[new], 0.0, 0
+            out[new] = z0[new]
+        return out
 
     def act(self, obs):
         from wpt_receiver import duty_from_v2_clipped
@@ -256,7 +263,11 @@ class MPCPolicy:
         i2m, vl, cmd, d_last = (o[:, _F[k]] for k in ("i2_amp_a", "battery_v", "charge_cmd_a", "last_d_short"))
         if len(self._plan) != len(i2m):
             self.reset(len(i2m))
-        z = self._estimate(i2m, vl, d_last)
+        # a receiver charging again after its stop is in a new window (a batched env resetting its windows)
+        new = np.flatnonzero((cmd > 0.0) & (self._k_stop > 0))
+        if len(new):
+            self._relax[new], self._n_stop[new], self._k_stop[new], self._age[new] = 0.0, 0, 0, 0
+        z = self._estimate(i2m, vl, d_last, new)
         u_prev = self._v2_of(d_last, vl)
         stop = cmd <= 0.0
         v2 = np.empty(len(i2m))

@@ -121,3 +121,22 @@ def test_mpc_delay_bank_stabilises_sense_delay():
     over, sm = out[(0, 1, 2, 3, 4, 5)]
     assert np.all(sm) and np.all(over < 5.0)
     assert out[(0,)][0].max() > 10.0
+
+
+def test_mpc_starts_a_new_window_afresh():
+    """A receiver charging again after its stop is in a new window (a batched env that resets its windows,
+    e.g. imitation on the training env): the MPC run on window 1000 and then, without reset, on 1001 gives
+    on 1001 what a fresh MPC gives, to the bit (the floor's relaxation, counters and estimate start anew)."""
+    from envs import SbarChargingVectorEnv
+    from policies.compare import _rollout
+    from policies.mpc import MPCPolicy
+
+    def run(pol, seed):
+        venv = SbarChargingVectorEnv(num_envs=1, scenario="nominal")
+        _, _, _, last = _rollout(pol, venv, 1, seed)
+        return float(last["overshoot"][0])
+
+    ctx = SbarChargingVectorEnv(num_envs=1).policy_context
+    used, fresh = MPCPolicy(ctx), MPCPolicy(ctx)
+    run(used, 1000)
+    assert run(used, 1001) == run(fresh, 1001)
