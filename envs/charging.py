@@ -43,7 +43,7 @@ class SbarChargingEnv(gym.Env):
     real parts (``EnvConfig.devices``, default ``"schottky"`` as the mission; ``"ideal"`` = the
     paper's circuit): the inverter's and the rectifier's on-resistances in R1 / R2, the diodes'
     forward drop on the clamp ``VL + Vf`` and the shorted channels' excess in V2
-    (:func:`envs.core.advance`).
+    (``envs.vector_kernel._link_step``).
 
     ## Action Space
     ``Box(-1, 1, (1,), float32)``: ``d_short = (a + 1) / 2`` (:func:`mission_sim.contract.action_to_duty`);
