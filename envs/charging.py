@@ -14,7 +14,6 @@ from wpt_receiver.sbar import rectifier_current, rectifier_v2_folded
 
 from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, build_plans, kernel_function
 from .layout import BAT, INFO, SINGLE, SINGLE_PAR, SLOW, XC
-from .objective import short_mode_i2_a, stop_step
 from .peaks import LOOKUP_SCALARS, PeakLookup
 from .render import draw_envelope
 from .scenario import draw_episodes, get_scenario, scenario_from_options
@@ -44,7 +43,7 @@ class SbarChargingEnv(gym.Env):
     real parts (``EnvConfig.devices``, default ``"schottky"`` as the mission; ``"ideal"`` = the
     paper's circuit): the inverter's and the rectifier's on-resistances in R1 / R2, the diodes'
     forward drop on the clamp ``VL + Vf`` and the shorted channels' excess in V2
-    (:func:`envs.core.advance`).
+    (``envs.vector_kernel._link_step``).
 
     ## Action Space
     ``Box(-1, 1, (1,), float32)``: ``d_short = (a + 1) / 2`` (:func:`mission_sim.contract.action_to_duty`);
@@ -165,7 +164,7 @@ class SbarChargingEnv(gym.Env):
         p = build_plans(draw_episodes([self.np_random], scn, self._T), scn, self.config)
         self._plan = p
         self._t_stop = float(p.t_stop_s[0])
-        self._stop_k = int(stop_step(p.t_stop_s, self._dt, self._T)[0])
+        self._stop_k = int(p.stop_k[0])
         self._start(p)
         self._k = 0
         st = self._st
@@ -198,7 +197,6 @@ class SbarChargingEnv(gym.Env):
         """The episode's plan as the arrays of :func:`envs.vector_kernel.single_step` (a detuned window:
         its complex state after :data:`SINGLE` and its coefficients in ``_cc``)."""
         T = self._T
-        i2_sm = short_mode_i2_a(self.config.link, p.lm_h[0], self._devices)
         st = np.empty(len(SINGLE) + (len(XC) if p.cplx is not None else 0))
         st[SINGLE.i1], st[SINGLE.i2] = p.x0[0]
         st[SINGLE.vl], st[SINGLE.soc], st[SINGLE.vrc], st[SINGLE.d] = p.vl0[0], p.battery[0, BAT.soc0], p.vrc0[0], p.d0[0]
@@ -207,10 +205,6 @@ class SbarChargingEnv(gym.Env):
         st[SINGLE.ocv0:SINGLE.bus_decay + 1] = p.battery[0]
         self._cc = np.zeros((0, 32))
         if p.cplx is not None:
-            from .detuned import detuned_start
-            i2_sm, i1, i2, _ = detuned_start(self.config, self._devices, p)
-            i2_sm = i2_sm[0]
-            st[SINGLE.i1], st[SINGLE.i2] = i1[0], i2[0]
             st[len(SINGLE):] = p.cplx[1][0]
             self._cc = np.ascontiguousarray(p.cplx[0][0])
         steps = np.zeros((T + 1, 2))
@@ -219,7 +213,7 @@ class SbarChargingEnv(gym.Env):
         slow = np.empty((p.coef.shape[1], len(SLOW)))
         slow[:, :SLOW.lm_h] = p.coef[0]
         slow[:, SLOW.lm_h] = p.lm_h[0]
-        slow[:, SLOW.i2_sm_a] = i2_sm
+        slow[:, SLOW.i2_sm_a] = p.i2_sm_a[0]
         self._st, self._steps, self._slow = st, steps, slow
         self._cmd = steps[:, 0]   # the command per step [A] (a view)
 

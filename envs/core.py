@@ -40,6 +40,7 @@ from wpt_receiver import TABLE_I, LinkParams, duty_from_v2_clipped, state_matric
 from wpt_receiver.sbar import rectifier_current, short_weight
 
 from .layout import BAT, COEF
+from .objective import short_mode_i2_a, stop_step
 from .plant import battery_operating_point, lm_window_h
 from .scenario import Scenario, command_profile, stack_draws
 
@@ -162,6 +163,9 @@ class Plans:
     t_stop_s: np.ndarray     # (n,) time of the stop command
     delay_steps: np.ndarray | None = None   # (n,) int: age of the current measurements [control periods]
     cplx: tuple | None = None   # detuned windows (envs.detuned): (coef (n, S, 32), x0 (n, 4), C1 (n,), C2 (n,) [F])
+    i2_sm_a: np.ndarray | None = None   # (n, S) the objective's short-mode I2 of the true link [A]
+    stop_k: np.ndarray | None = None    # (n,) int: first step scored against the stop (envs.objective)
+    c_rel: np.ndarray | None = None     # (2, n) relative C1, C2 errors of detuned windows
 
 
 def kernel_function(name: str, compiled: bool = True):
@@ -182,7 +186,9 @@ def _steady_v2(link: LinkParams, lm, il, vl):
 
 def build_plans(draws, scenarios, cfg: EnvConfig, out=None) -> Plans:
     """Turn the episodes' random draws (a list of :class:`~envs.scenario.EpisodeDraw` or a batched
-    one) into what the step needs, on arrays over the episodes. ``scenarios``: one per episode,
+    one) into everything the step needs, on arrays over the episodes (the plant's Lm and battery,
+    the link's coefficients and initial state, the objective's short-mode current and stop step, a
+    detuned tank's complex plans: the envs copy it, nothing else is entered at a reset). ``scenarios``: one per episode,
     or one :class:`Scenario` for all. The command and the sensor noise are built step-major, the Plans
     holding their transposed views; ``out``: None (new arrays) or float arrays ``(cmd (T + 1, n), noise
     (T, n), coef (n, S, 20))`` (C-contiguous) to write them and the coefficients into (the vector env's
@@ -213,9 +219,15 @@ def build_plans(draws, scenarios, cfg: EnvConfig, out=None) -> Plans:
     c1 = np.asarray(draws.c1_detune, dtype=float).reshape(n)
     c2 = np.asarray(draws.c2_detune, dtype=float).reshape(n)
     cplx = _detuned_plans(link, lm, c1, c2, vl0, d0, cfg) if np.any(c1 != 0.0) or np.any(c2 != 0.0) else None
-    return Plans(cmd, noise, coef, lm, battery, x0, vl0, vrc0, d0,
-                 np.asarray(draws.t_stop_s, dtype=float), np.asarray(draws.sense_delay).astype(np.int64).reshape(n),
-                 cplx)
+    t_stop = np.asarray(draws.t_stop_s, dtype=float)
+    p = Plans(cmd, noise, coef, lm, battery, x0, vl0, vrc0, d0, t_stop,
+              np.asarray(draws.sense_delay).astype(np.int64).reshape(n), cplx,
+              short_mode_i2_a(cfg.link, lm, cfg.device_set()), stop_step(t_stop, cfg.dt_s, T))
+    if cplx is not None:   # the detuned link's short-mode current; I1, I2 = |J1|, |J2|
+        from .detuned import detuned_start
+        p.i2_sm_a, i1, i2, p.c_rel = detuned_start(cfg, cfg.device_set(), p)
+        p.x0 = np.stack([i1, i2], axis=1)
+    return p
 
 
 def _detuned_plans(link, lm, c1_rel, c2_rel, vl0, d0, cfg: EnvConfig):

@@ -13,7 +13,7 @@ in the observation that chose the step's duty):
   short mode's resistances. An envelope (fundamental) value: no ripple.
 * **overshoot** ``= max over the steps after the stop of |I2|_pk,k / I2_sm(Lm_k) - 1`` (a fraction;
   ``|I2|_pk`` the step's instantaneous peak, the envelope's peak magnitude plus the SBAR's harmonic
-  ripple, see :func:`envs.core.advance` and :mod:`envs.peaks`). Negative when
+  ripple, see ``envs.vector_kernel._link_step`` and :mod:`envs.peaks`). Negative when
   the current never reaches the short-mode level after the stop (e.g. a policy that stays in RM).
 * **episode cost** ``= max(0, overshoot)``. It is handed out per step as the increase of the
   running maximum, ``cost_k = max(0, m_k) - max(0, m_{k-1})`` with ``m_k`` the running maximum of
@@ -28,7 +28,9 @@ in the observation that chose the step's duty):
   with ``2 L1 / R1 ~ 4.4 ms`` and gets 7 A below 0.5 A in ~12 ms; the shortest window after the stop
   is 30 - 16 = 14 ms, so every episode of the built-in scenarios can reach it.
 
-All functions run on numpy arrays of shape (n,) (vector env) and on floats (single env).
+This module holds the definitions and what a reset needs (short-mode current, stop step); the
+per-step update (running overshoot, step cost, short-mode flag, ``t_since_stop_s``) is the env
+step's (``envs.vector_kernel._objective``, ``_t_since``), once for both envs.
 """
 
 from __future__ import annotations
@@ -38,8 +40,7 @@ import numpy as np
 from wpt_receiver import LinkParams, steady_state
 from wpt_receiver.devices import IDEAL
 
-__all__ = ["SHORT_MODE_IL_A", "SHORT_MODE_WITHIN_S", "short_mode_i2_a", "stop_step", "overshoot_update",
-           "short_mode_update", "t_since_stop_s"]
+__all__ = ["SHORT_MODE_IL_A", "SHORT_MODE_WITHIN_S", "short_mode_i2_a", "stop_step"]
 
 SHORT_MODE_IL_A = 0.5
 SHORT_MODE_WITHIN_S = 14e-3
@@ -59,28 +60,3 @@ def stop_step(t_stop_s, dt_s: float, n_steps: int) -> np.ndarray:
     same time grid as :func:`envs.scenario.command_profile` (``n_steps + 1`` if it never comes)."""
     t = np.arange(n_steps + 1) * dt_s
     return np.searchsorted(t, np.asarray(t_stop_s, dtype=float), side="left")
-
-
-def overshoot_update(run_max, peak_a, i2_sm_a, after):
-    """``(new running max, step cost)`` of the overshoot ratio (arrays or floats; ``after`` bool).
-    ``run_max`` starts at ``-inf``; the ratio only counts after the stop."""
-    if isinstance(after, (bool, np.bool_)):
-        new = max(run_max, abs(peak_a) / i2_sm_a - 1.0) if after else run_max
-        return new, max(new, 0.0) - max(run_max, 0.0)
-    new = np.where(after, np.maximum(run_max, np.abs(peak_a) / i2_sm_a - 1.0), run_max)
-    return new, np.maximum(new, 0.0) - np.maximum(run_max, 0.0)
-
-
-def short_mode_update(ok, checked, il_a, k_end, stop_k, dt_s: float):
-    """``(ok, checked)`` after a step that ends at index ``k_end``: from ``t_stop + SHORT_MODE_WITHIN_S``
-    on, every step must have ``I_L < SHORT_MODE_IL_A``; reached short mode = ``ok & checked``."""
-    late = (k_end - stop_k) * dt_s >= SHORT_MODE_WITHIN_S - 1e-12
-    return ok & ~(late & (il_a >= SHORT_MODE_IL_A)), checked | late
-
-
-def t_since_stop_s(k, t_stop_s, dt_s: float):
-    """Observation field ``t_since_stop_s``: ``k dt - t_stop`` once the command is the stop, else 0."""
-    t = k * dt_s - t_stop_s
-    if isinstance(t, float):
-        return t if t >= 0.0 else 0.0
-    return np.maximum(t, 0.0)

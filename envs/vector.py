@@ -36,7 +36,6 @@ from wpt_receiver.sbar import rectifier_current, rectifier_v2_folded
 
 from .core import N_BAT, N_COEF, OBS_OFFSET, OBS_SCALE, EnvConfig, build_plans, kernel_function
 from .layout import BAT, CCOEF_N, INFO, PAR, STATE, XC
-from .objective import short_mode_i2_a, stop_step
 from .peaks import LOOKUP_SCALARS, PeakLookup
 from .scenario import draw_episodes, get_scenario, scenario_from_options
 
@@ -161,8 +160,8 @@ class SbarChargingVectorEnv(VectorEnv):
         if self._line is None and self._delay.any():
             from .sensing import DelayLine
             self._line = DelayLine(self.num_envs)
-        self._i2sm_all[idx] = short_mode_i2_a(c.link, p.lm_h, self._devices)
-        self._stop_k[idx] = stop_step(p.t_stop_s, c.dt_s, c.n_steps)
+        self._i2sm_all[idx] = p.i2_sm_a
+        self._stop_k[idx] = p.stop_k
         self._run_max[idx] = -np.inf
         self._sm_ok[idx] = True
         self._sm_checked[idx] = False
@@ -190,11 +189,7 @@ class SbarChargingVectorEnv(VectorEnv):
             self._xc = np.zeros((n, len(XC)))
             self._c_rel = np.zeros((2, n))
         self._detuned[idx] = True
-        self._ccoef[idx], self._xc[idx] = cplx[0], cplx[1]
-        from .detuned import detuned_start
-        i2sm, i1, i2, self._c_rel[:, idx] = detuned_start(self.config, self._devices, p)
-        self._i2sm_all[idx] = i2sm
-        self._state[STATE.i1, idx], self._state[STATE.i2, idx] = i1, i2
+        self._ccoef[idx], self._xc[idx], self._c_rel[:, idx] = cplx[0], cplx[1], p.c_rel
 
     def _initial_obs_info(self):
         """Observation and info of the windows' first state (steady state at the first duty)."""
