@@ -149,9 +149,10 @@ def _peak_bytes(repeats: int, tmp_path) -> tuple[int, int]:
 
 def test_peak_python_memory_does_not_grow_with_the_mission(tmp_path, monkeypatch):
     """Chunks of 2,048 samples and planning blocks of 1,024: the default pads 4 times (~4,500 samples)
-    and 32 times (~36,000). Holding the per-sample arrays and the trajectory (~300 B a sample at
-    the planning peak) would add ~10 MB to a ~20 MB peak (the kernel's row buffer); chunked, the
-    peak grows by less than 25 % for 8x the length (what does grow: the instantaneous-peak
+    and 32 times (~36,000). Planning and holding all samples at once costs ~300 B a sample at the
+    planning peak (RSS by phases, docs/streaming.md): ~10 MB more at the longer run, against a peak
+    of ~20 MB (the kernel's row buffer, numpy's ``np.empty`` counted whole); chunked, the peak grows
+    by less than 25 % for 8x the length (what does grow: the instantaneous-peak
     candidates, 16 B per row with the pad on, in memory up to 2^20 and then in a temporary file)."""
     monkeypatch.setattr(samples_mod, "SAMPLE_CHUNK", 2048)
     monkeypatch.setattr(traj_mod, "PLAN_BLOCK", 1024)
