@@ -53,8 +53,8 @@ __all__ = ["link_constants", "modes", "zoh", "step", "phasors", "stored_energy_j
            "LC_NAMES"]
 
 #: ``lc`` (float64) layout: coil / capacitor values with the devices' resistances folded in, and the table scalars
-LC_NAMES = ("l1", "l2", "r1", "r2", "c1", "c2", "omega", "rho_max", "inv_hd", "dr_short")
-LC_L1, LC_L2, LC_R1, LC_R2, LC_C1, LC_C2, LC_W, LC_RHO_MAX, LC_INV_HD, LC_DR_SHORT = range(len(LC_NAMES))
+LC_NAMES = ("l1", "l2", "r1", "r2", "c1", "c2", "omega", "rho_max", "inv_hd", "dr_short", "inv_hphi")
+LC_L1, LC_L2, LC_R1, LC_R2, LC_C1, LC_C2, LC_W, LC_RHO_MAX, LC_INV_HD, LC_DR_SHORT, LC_INV_HPHI = range(len(LC_NAMES))
 # mode coefficients ``mc`` (complex128): per mode m in (0, 1): lam' [1/s], gain of V1 and V2, state shape
 # [i1, i2, vC1, vC2] per unit z; then the feedthrough D (4 states x [V1, V2])
 MC_LAM, MC_G1, MC_G2, MC_S, MC_D = 0, 2, 4, 6, 14
@@ -62,9 +62,9 @@ N_MODES_C = 22
 # ZOH coefficients ``zc`` (complex128): e^{lam' h} per mode, phi per mode, psi_00, psi_11, psi_01
 ZC_E, ZC_PHI, ZC_PSI00, ZC_PSI11, ZC_PSI01 = 0, 2, 4, 5, 6
 N_ZOH_C = 7
-N_D, N_RHO = 51, 81
+N_D, N_RHO, N_PHI = 51, 81, 17
 RHO_MAX = 3.0          # |I2| / Vc at the top of the table [A/V]; beyond: delta ~ 1/rho, excess constant
-_CACHE_VERSION = "modal-kernel-table v1"
+_CACHE_VERSION = "modal-kernel-table v3"
 
 
 def link_constants(params: LinkParams, devices: DeviceSet = IDEAL, c1_f=None, c2_f=None) -> np.ndarray:
@@ -76,7 +76,7 @@ def link_constants(params: LinkParams, devices: DeviceSet = IDEAL, c1_f=None, c2
     c1 = 1 / (w * w * p.l1_h) if c1_f is None else float(c1_f)
     c2 = 1 / (w * w * p.l2_h) if c2_f is None else float(c2_f)
     return np.array([p.l1_h, p.l2_h, p.r1_ohm + devices.inv_r_ohm, p.r2_ohm + devices.rect_rd_ohm, c1, c2, w,
-                     RHO_MAX, float(N_D - 1), devices.short_r_ohm - devices.rect_rd_ohm])
+                     RHO_MAX, float(N_D - 1), devices.short_r_ohm - devices.rect_rd_ohm, 0.5 * (N_PHI - 1)])
 
 
 # ---------------------------------------------------------------------- modes (eq. 1), per Lm
@@ -244,15 +244,24 @@ def rect_current_a(f_clamp, int_i2, dt_s):
 
 # ---------------------------------------------------------------------- SBAR (eq. 9 with its quadrature)
 @njit(cache=True)
-def _lookup(lc, tab, plane, d, rho):
-    """Bilinear lookup of table plane ``plane`` at duty ``d`` and ``rho = |I2|/Vc`` (quadratic grid)."""
+def _bilinear(tab, plane, m, j, k, fx, fy):
+    return ((tab[plane, m, j, k] * (1 - fx) + tab[plane, m, j + 1, k] * fx) * (1 - fy)
+            + (tab[plane, m, j, k + 1] * (1 - fx) + tab[plane, m, j + 1, k + 1] * fx) * fy)
+
+
+@njit(cache=True)
+def _lookup(lc, tab, plane, phi, d, rho):
+    """Trilinear lookup of table plane ``plane`` at phase ``phi`` [rad] in [-pi/2, pi/2], duty ``d``
+    and ``rho = |I2|/Vc`` (both grids quadratic, :func:`build_table`; rho clamped at its top)."""
+    u = min(abs(phi) / (0.5 * math.pi), 1.0) ** 0.5
+    z = (1.0 + (u if phi >= 0.0 else -u)) * lc[LC_INV_HPHI]
     x = min(max(d, 0.0), 1.0) * lc[LC_INV_HD]
-    y = math.sqrt(min(rho / lc[LC_RHO_MAX], 1.0)) * (tab.shape[2] - 1)
-    j = min(int(x), tab.shape[1] - 2)
-    k = min(int(y), tab.shape[2] - 2)
-    fx, fy = x - j, y - k
-    return ((tab[plane, j, k] * (1 - fx) + tab[plane, j + 1, k] * fx) * (1 - fy)
-            + (tab[plane, j, k + 1] * (1 - fx) + tab[plane, j + 1, k + 1] * fx) * fy)
+    y = math.sqrt(min(rho / lc[LC_RHO_MAX], 1.0)) * (tab.shape[3] - 1)
+    m = min(int(z), tab.shape[1] - 2)
+    j = min(int(x), tab.shape[2] - 2)
+    k = min(int(y), tab.shape[3] - 2)
+    fz, fx, fy = z - m, x - j, y - k
+    return _bilinear(tab, plane, m, j, k, fx, fy) * (1 - fz) + _bilinear(tab, plane, m + 1, j, k, fx, fy) * fz
 
 
 @njit(cache=True)
@@ -266,8 +275,9 @@ def sbar_v2(lc, tab, d_short, i2, vc_v):
     amp = abs(ih)
     rho = amp / vc_v if vc_v > 0.0 else 0.0
     rmax = lc[LC_RHO_MAX]
-    delta = _lookup(lc, tab, 0, d_short, rho) * (1.0 if rho <= rmax else rmax / rho)
-    e = 0.5 * math.pi + delta - (math.atan2(ih.imag, ih.real) if amp > 0.0 else 0.0)
+    phi = math.atan2(ih.imag, ih.real) if amp > 0.0 else 0.0
+    delta = _lookup(lc, tab, 0, phi, d_short, rho) * (1.0 if rho <= rmax else rmax / rho)
+    e = 0.5 * math.pi + delta - phi
     e = min(max(e, wd), math.pi - wd)
     f = sgn * (4.0 / math.pi) * complex(math.sin(e) - math.sin(wd), math.cos(e))   # (4/pi)(j e^{-je} - sin wd)
     w_short = d_short + math.sin(math.pi * d_short) / math.pi
@@ -275,40 +285,52 @@ def sbar_v2(lc, tab, d_short, i2, vc_v):
 
 
 @njit(cache=True)
-def inst_peak(lc, tab, d_short, i2_amp_a, vc_v):
-    """Instantaneous peak |i2| [A] at duty ``d_short`` for fundamental amplitude ``i2_amp_a`` [A]
-    and clamp ``vc_v`` [V]: ``|I2| + Vc excess(d, |I2|/Vc)`` (:meth:`SbarHarmonics.peak`, tabulated)."""
-    a = abs(i2_amp_a)
-    return a + vc_v * _lookup(lc, tab, 1, d_short, a / vc_v if vc_v > 0.0 else 0.0)
+def inst_peak(lc, tab, d_short, i2, vc_v):
+    """Instantaneous peak |i2| [A] at duty ``d_short`` for the fundamental phasor ``i2`` [A] (complex)
+    and clamp ``vc_v`` [V]: ``|I2| + Vc excess(arg I2, d, |I2|/Vc)`` (:meth:`SbarHarmonics.peak`, tabulated)."""
+    ih = -i2 if i2.real < 0.0 else i2
+    a = abs(ih)
+    phi = math.atan2(ih.imag, ih.real) if a > 0.0 else 0.0
+    return a + vc_v * _lookup(lc, tab, 1, phi, d_short, a / vc_v if vc_v > 0.0 else 0.0)
 
 
 # ---------------------------------------------------------------------- the table (built once, numpy)
-def build_table(params: LinkParams, devices: DeviceSet = IDEAL, n_d: int = N_D, n_rho: int = N_RHO, c1_f=None,
-                c2_f=None) -> np.ndarray:
-    """``(2, n_d, n_rho)`` table on duty ``linspace(0, 1, n_d)`` x ``rho = |I2|/Vc`` [A/V] on
-    ``RHO_MAX linspace(0, 1, n_rho)**2``: plane 0 the commutation shift ``delta = e - pi/2`` [rad]
-    of an in-phase fundamental (not clipped to the gate window; :func:`sbar_v2` clips after adding
-    the phase), plane 1 the peak excess ``(peak - |I2|)/Vc`` [A/V], both from
-    :class:`wpt_receiver.peak.SbarHarmonics` (harmonic balance, n <= 63) at ``params`` (its Lm,
-    VL, V1) and ``devices``. ~1.5 s."""
+def build_table(params: LinkParams, devices: DeviceSet = IDEAL, n_d: int = N_D, n_rho: int = N_RHO,
+                n_phi: int = N_PHI, c1_f=None, c2_f=None) -> np.ndarray:
+    """``(2, n_phi, n_d, n_rho)`` table on the fundamental's phase ``arg I2`` on ``(pi/2) u |u|``,
+    ``u = linspace(-1, 1, n_phi)`` [rad] (quadratic: dense near the in-phase operation; the
+    sign-folded phasor has Re >= 0) x duty ``linspace(0, 1, n_d)`` x
+    ``rho = |I2|/Vc`` [A/V] on ``RHO_MAX linspace(0, 1, n_rho)**2``: plane 0 the commutation shift
+    ``delta = e - (pi/2 - arg I2)`` [rad] (the zero crossing of fundamental + ripple against the
+    fundamental's own, not clipped to the gate window; :func:`sbar_v2` clips), plane 1 the peak
+    excess ``(peak - |I2|)/Vc`` [A/V], both from :class:`wpt_receiver.peak.SbarHarmonics` (harmonic
+    balance, n <= 63) at ``params`` (its Lm, VL, V1) and ``devices``. ~20 s (cached by :func:`modal_table`)."""
     from .peak import SbarHarmonics
     sh = SbarHarmonics(params, devices, c1_f=c1_f, c2_f=c2_f)
     vc = sh.clamp_v
-    dd, rr = np.meshgrid(np.linspace(0.0, 1.0, n_d), RHO_MAX * np.linspace(0.0, 1.0, n_rho) ** 2, indexing="ij")
-    i2 = (rr * vc).ravel()
-    _, ih, e = sh.balance(dd.ravel(), i2)
-    for _ in range(6):                 # the crossing itself where the gate window clipped it (harmonics fixed)
-        g, dg = sh._value(e, i2.astype(complex), ih, sh.n)
-        e = np.clip(e - np.clip(np.where(dg < 0, g / np.where(dg < 0, dg, -1.0), 0.0), -0.3, 0.3), 0.0, np.pi)
-    excess = (sh.peak(dd.ravel(), i2) - i2) / vc
-    return np.stack([(e - 0.5 * np.pi).reshape(dd.shape), excess.reshape(dd.shape)])
+    u = np.linspace(-1.0, 1.0, n_phi)
+    ph, dd, rr = np.meshgrid(0.5 * np.pi * u * np.abs(u), np.linspace(0.0, 1.0, n_d),
+                             RHO_MAX * np.linspace(0.0, 1.0, n_rho) ** 2, indexing="ij")
+    i2 = (rr * vc * np.exp(1j * ph)).ravel()
+    i2 = np.where(i2.real < 0.0, i2 + 1e-12, i2)      # cos(pi/2) rounding: keep the phasor's Re >= 0
+    delta, excess = np.empty(i2.shape), np.empty(i2.shape)
+    for a in range(0, len(i2), 4096):                  # chunks bound the (chunk, n_theta) temporaries
+        sl = slice(a, a + 4096)
+        d, ip = dd.ravel()[sl], i2[sl]
+        _, ih, e = sh.balance(d, ip)
+        for _ in range(6):             # the crossing itself where the gate window clipped it (harmonics fixed)
+            g, dg = sh._value(e, ip, ih, sh.n)
+            e = np.clip(e - np.clip(np.where(dg < 0, g / np.where(dg < 0, dg, -1.0), 0.0), -0.3, 0.3), 0.0, np.pi)
+        delta[sl] = e - 0.5 * np.pi + np.angle(np.where(np.abs(ip) > 0, ip, 1.0))
+        excess[sl] = (sh.peak(d, ip) - np.abs(ip)) / vc
+    return np.stack([delta.reshape(dd.shape), excess.reshape(dd.shape)])
 
 
 def modal_table(params: LinkParams, devices: DeviceSet = IDEAL) -> np.ndarray:
     """:func:`build_table` of a resonant link, from the disk cache (:mod:`wpt_receiver.diskcache`) when there."""
     from . import diskcache
-    key = f"{_CACHE_VERSION} {params!r} {devices!r} rho={RHO_MAX} n={N_D}x{N_RHO}"
-    tab = diskcache.load("modal_table", key, (2, N_D, N_RHO))
+    key = f"{_CACHE_VERSION} {params!r} {devices!r} rho={RHO_MAX} n={N_PHI}x{N_D}x{N_RHO}"
+    tab = diskcache.load("modal_table", key, (2, N_PHI, N_D, N_RHO))
     if tab is None:
         tab = build_table(params, devices)
         diskcache.store("modal_table", key, tab)
@@ -349,7 +371,7 @@ def run_duties(lc, mc, tab, d_short, control_period_s, substeps, v1, vc_v, lm_h)
     i1o, i2o, v2o = np.empty(n + 1, np.complex128), np.empty(n + 1, np.complex128), np.empty(n + 1, np.complex128)
     pk, en, out = np.empty(n + 1), np.zeros(5), np.empty(9)
     i1o[0], i2o[0] = phasors(mc, z, v1, v2)
-    v2o[0], pk[0] = v2, inst_peak(lc, tab, d_short[0], abs(i2o[0]), vc_v)
+    v2o[0], pk[0] = v2, inst_peak(lc, tab, d_short[0], i2o[0], vc_v)
     w_start = stored_energy_j(lc, mc, z, v1, v2, lm_h)
     for k in range(n):
         dk = d_short[k]
@@ -362,7 +384,7 @@ def run_duties(lc, mc, tab, d_short, control_period_s, substeps, v1, vc_v, lm_h)
             en[1] += out[7]
             en[2] += out[8]
         i1o[k + 1], i2o[k + 1] = phasors(mc, z, v1, v2)
-        v2o[k + 1], pk[k + 1] = v2, inst_peak(lc, tab, dk, abs(i2o[k + 1]), vc_v)
+        v2o[k + 1], pk[k + 1] = v2, inst_peak(lc, tab, dk, i2o[k + 1], vc_v)
     en[3] = stored_energy_j(lc, mc, z, v1, v2, lm_h) - w_start
     return i1o, i2o, v2o, pk, en
 
