@@ -170,3 +170,21 @@ def test_default_mission_range_within_half_percent(mission_lm, end, vl_v, name):
     d = _traj(name, p)
     ref = simulate_modal(p, d, T, devices=SCHOTTKY)["peak_i2_a"].max()
     assert mk.simulate(p, d, T, devices=SCHOTTKY, table=tab)["peak_i2_a"].max() == pytest.approx(ref, rel=5e-3)
+
+
+def test_rect_affine_is_the_steps_rectified_current(table):
+    """The battery node's affine I_L(VL) equals the DC current of the step taken at that VL."""
+    lc, mc = _modes(P.with_(lm_h=5.8e-6), SCHOTTKY)
+    rng = np.random.default_rng(8)
+    for dt in (T, 1e-4, 0.2):
+        z, v1, _, zc = _random_step(rng, lc, mc, dt)
+        i2 = mk.phasors(mc, z, v1, 0j)[1]
+        d = rng.uniform(0, 0.9)
+        _, f = mk.sbar_v2(lc, table, d, i2, 30.0 + lc[mk.LC_VF])
+        v2x = f * lc[mk.LC_VF] + lc[mk.LC_DR_SHORT] * (d + np.sin(np.pi * d) / np.pi) * i2
+        a0, a1 = mk.rect_affine(mc, zc, dt, z, v1, f, v2x)
+        for vl in (27.0, 33.0):
+            out = np.empty(9)
+            mk.step(lc, mc, zc, dt, z.copy(), v1, f * vl + v2x, out)
+            il = mk.rect_current_a(f, complex(out[2], out[3]), dt)
+            assert a0 + a1 * vl == pytest.approx(il, rel=1e-9, abs=1e-12)

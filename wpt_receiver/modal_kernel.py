@@ -56,12 +56,13 @@ from .devices import IDEAL, DeviceSet
 from .params import LinkParams
 
 __all__ = ["link_constants", "modes", "zoh", "step", "phasors", "stored_energy_j", "sbar_v2", "inst_peak",
-           "build_table", "modal_table", "run_duties", "steady_state", "rect_current_a", "N_MODES_C", "N_ZOH_C",
+           "build_table", "modal_table", "run_duties", "steady_state", "rect_current_a", "rect_affine", "N_MODES_C", "N_ZOH_C",
            "LC_NAMES"]
 
 #: ``lc`` (float64) layout: coil / capacitor values with the devices' resistances folded in, and the table scalars
-LC_NAMES = ("l1", "l2", "r1", "r2", "c1", "c2", "omega", "rho_max", "inv_hd", "dr_short", "inv_hphi")
-LC_L1, LC_L2, LC_R1, LC_R2, LC_C1, LC_C2, LC_W, LC_RHO_MAX, LC_INV_HD, LC_DR_SHORT, LC_INV_HPHI = range(len(LC_NAMES))
+LC_NAMES = ("l1", "l2", "r1", "r2", "c1", "c2", "omega", "rho_max", "inv_hd", "dr_short", "inv_hphi", "vf")
+(LC_L1, LC_L2, LC_R1, LC_R2, LC_C1, LC_C2, LC_W, LC_RHO_MAX, LC_INV_HD, LC_DR_SHORT, LC_INV_HPHI,
+ LC_VF) = range(len(LC_NAMES))
 # mode coefficients ``mc`` (complex128): per mode m in (0, 1): lam' [1/s], gain of V1 and V2, state shape
 # [i1, i2, vC1, vC2] per unit z; then the feedthrough D (4 states x [V1, V2])
 MC_LAM, MC_G1, MC_G2, MC_S, MC_D = 0, 2, 4, 6, 14
@@ -77,13 +78,15 @@ _CACHE_VERSION = "modal-kernel-table v3"
 def link_constants(params: LinkParams, devices: DeviceSet = IDEAL, c1_f=None, c2_f=None) -> np.ndarray:
     """``lc`` array (:data:`LC_NAMES`) of a link: L [H], R [ohm] with the inverter's ``2 Ron`` and
     the rectifying path's ``Rd`` folded in (as :func:`.modal.link_matrices`), C [F] (resonant at
-    ``f_hz`` unless given), omega [rad/s], the table's scalars and the shorted SBAR's excess
-    resistance over ``Rd`` [ohm] (enters V2 as in :func:`wpt_receiver.sbar.rectifier_v2_folded`)."""
+    ``f_hz`` unless given), omega [rad/s], the table's scalars, the shorted SBAR's excess
+    resistance over ``Rd`` [ohm] (enters V2 as in :func:`wpt_receiver.sbar.rectifier_v2_folded`)
+    and the rectifying path's forward drop Vf [V] (the clamp is ``VL + Vf``)."""
     p, w = params, params.omega_rad_s
     c1 = 1 / (w * w * p.l1_h) if c1_f is None else float(c1_f)
     c2 = 1 / (w * w * p.l2_h) if c2_f is None else float(c2_f)
     return np.array([p.l1_h, p.l2_h, p.r1_ohm + devices.inv_r_ohm, p.r2_ohm + devices.rect_rd_ohm, c1, c2, w,
-                     RHO_MAX, float(N_D - 1), devices.short_r_ohm - devices.rect_rd_ohm, 0.5 * (N_PHI - 1)])
+                     RHO_MAX, float(N_D - 1), devices.short_r_ohm - devices.rect_rd_ohm, 0.5 * (N_PHI - 1),
+                     devices.rect_vf_v])
 
 
 # ---------------------------------------------------------------------- modes (eq. 1), per Lm
@@ -250,6 +253,23 @@ def rect_current_a(f_clamp, int_i2, dt_s):
     the clamp, ``Re(Vc F conj(I2))/2``, over Vc (``f_clamp`` = V2's clamp part per volt, from
     :func:`sbar_v2`; ``int_i2`` = the step's ``int I2 dt`` [C]); eq. 4's ``(V2/VL) I2 / 2`` for F real."""
     return 0.5 * (f_clamp * int_i2.conjugate()).real / dt_s
+
+
+@njit(cache=True)
+def rect_affine(mc, zc, dt_s, z, v1, f_clamp, v2x):
+    """``(a0 [A], a1 [A/V])`` with the step's mean DC current into the clamp ``I_L = a0 + a1 VL`` when
+    ``V2 = F (VL + Vf) + excess = F VL + v2x`` is held over the step from state ``z`` (the battery
+    node's implicit VL solve: with ``VL = A0 + G (I_L - P/VL)`` a quadratic in VL, as eq. 4's loop).
+    ``int I2 dt = s0 + s1 V2`` is affine in V2; ``I_L`` = :func:`rect_current_a`."""
+    s1 = mc[MC_D + 3] * dt_s
+    s0 = mc[MC_D + 2] * v1 * dt_s
+    for m in range(2):
+        lam, phi, sh = mc[MC_LAM + m], zc[ZC_PHI + m], mc[MC_S + 4 * m + 1]
+        s0 += sh * (complex(z[2 * m], z[2 * m + 1]) * phi - mc[MC_G1 + m] * v1 / lam * (dt_s - phi))
+        s1 -= sh * mc[MC_G2 + m] / lam * (dt_s - phi)
+    a0 = 0.5 * (f_clamp * (s0 + s1 * v2x).conjugate()).real / dt_s
+    a1 = 0.5 * abs(f_clamp) ** 2 * s1.real / dt_s
+    return a0, a1
 
 
 # ---------------------------------------------------------------------- SBAR (eq. 9 with its quadrature)
