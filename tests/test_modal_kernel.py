@@ -188,3 +188,21 @@ def test_rect_affine_is_the_steps_rectified_current(table):
             mk.step(lc, mc, zc, dt, z.copy(), v1, f * vl + v2x, out)
             il = mk.rect_current_a(f, complex(out[2], out[3]), dt)
             assert a0 + a1 * vl == pytest.approx(il, rel=1e-9, abs=1e-12)
+
+
+def test_compiled_table_equals_the_numpy_harmonic_balance(table):
+    """build_table's compiled balance and peak search are SbarHarmonics' (numpy), point for point."""
+    sh = SbarHarmonics(P)
+    u = np.linspace(-1, 1, mk.N_PHI)
+    phis, ds = 0.5 * np.pi * u * np.abs(u), np.linspace(0, 1, mk.N_D)
+    rhos = mk.RHO_MAX * np.linspace(0, 1, mk.N_RHO) ** 2
+    rng = np.random.default_rng(0)
+    a, b, c = rng.integers(0, mk.N_PHI, 200), rng.integers(0, mk.N_D, 200), rng.integers(1, mk.N_RHO, 200)
+    ip = rhos[c] * sh.clamp_v * np.exp(1j * phis[a])
+    ip = np.where(ip.real < 0, ip + 1e-12, ip)
+    _, ih, e = sh.balance(ds[b], ip)
+    for _ in range(6):   # the crossing itself, harmonics held (the table's plane 0 is not clipped to the gate window)
+        g, dg = sh._value(e, ip, ih, sh.n)
+        e = np.clip(e - np.clip(np.where(dg < 0, g / np.where(dg < 0, dg, -1.0), 0.0), -0.3, 0.3), 0.0, np.pi)
+    assert table[0, a, b, c] == pytest.approx(e - 0.5 * np.pi + np.angle(ip), abs=1e-10)
+    assert table[1, a, b, c] == pytest.approx((sh.peak(ds[b], ip) - np.abs(ip)) / sh.clamp_v, abs=1e-10)

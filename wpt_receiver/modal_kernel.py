@@ -72,7 +72,7 @@ ZC_E, ZC_PHI, ZC_PSI00, ZC_PSI11, ZC_PSI01 = 0, 2, 4, 5, 6
 N_ZOH_C = 7
 N_D, N_RHO, N_PHI = 51, 81, 17
 RHO_MAX = 3.0          # |I2| / Vc at the top of the table [A/V]; beyond: delta ~ 1/rho, excess constant
-_CACHE_VERSION = "modal-kernel-table v3"
+_CACHE_VERSION = "modal-kernel-table v4"
 
 
 def link_constants(params: LinkParams, devices: DeviceSet = IDEAL, c1_f=None, c2_f=None) -> np.ndarray:
@@ -325,35 +325,106 @@ def inst_peak(lc, tab, d_short, i2, vc_v):
 
 
 # ---------------------------------------------------------------------- the table (built once, numpy)
+@njit(cache=True)
+def _ripple(hv1, y2, n, vc, d, ec, ih):
+    """Harmonic phasors of i2 (n >= 3) into ``ih``: the inverter's plus the SBAR's with its falling edge
+    at ``ec`` (:meth:`wpt_receiver.peak.SbarHarmonics.v2_harmonics`)."""
+    wd = 0.5 * math.pi * d
+    for k in range(len(n)):
+        nk = n[k]
+        v = (2.0 * vc / (1j * nk * math.pi)) * (cmath.exp(-1j * nk * wd) - 2.0 * cmath.exp(-1j * nk * ec)
+                                                  + cmath.exp(-1j * nk * (math.pi - wd)))
+        ih[k] = hv1[k] + y2[k] * v
+
+
+@njit(cache=True)
+def _wave(theta, i1h, ih):
+    """``(i2, di2/dtheta)`` at ``theta`` from the fundamental and the odd harmonics 3, 5, ... (recurrence)."""
+    e1 = cmath.exp(1j * theta)
+    e2 = e1 * e1
+    g = (i1h * e1).real
+    dg = (1j * i1h * e1).real
+    en = e1
+    for k in range(len(ih)):
+        en = en * e2
+        t = ih[k] * en
+        g += t.real
+        dg -= (2 * k + 3) * t.imag
+    return g, dg
+
+
+@njit(cache=True)
+def _newton_edge(e, i1h, ih, steps, lo, hi):
+    """Newton on the falling zero crossing of i2 (harmonics held), steps clipped to 0.3 rad, e to [lo, hi]."""
+    for _ in range(steps):
+        g, dg = _wave(e, i1h, ih)
+        step = g / dg if dg < 0.0 else 0.0
+        e = min(max(e - min(max(step, -0.3), 0.3), lo), hi)
+    return e
+
+
+@njit(cache=True)
+def _balance_point(hv1, y2, n, vc, d, i1h, ih):
+    """:meth:`SbarHarmonics.balance` for one in-phase-folded phasor (Re >= 0): harmonics at the clipped
+    edge into ``ih``; returns the zero crossing itself (not clipped to the gate window) [rad]."""
+    wd = 0.5 * math.pi * d
+    amp = abs(i1h)
+    e = 0.5 * math.pi - (math.atan2(i1h.imag, i1h.real) if amp > 0 else 0.0)
+    for _ in range(6):
+        _ripple(hv1, y2, n, vc, d, min(max(e, wd), math.pi - wd), ih)
+        e = _newton_edge(e, i1h, ih, 3, -1e300, 1e300)
+    _ripple(hv1, y2, n, vc, d, min(max(e, wd), math.pi - wd), ih)
+    return _newton_edge(min(max(e, wd), math.pi - wd), i1h, ih, 6, 0.0, math.pi)
+
+
+@njit(cache=True)
+def _peak_point(i1h, ih, n_theta):
+    """``max_theta |i2|`` on ``n_theta`` phases of a period, refined by a parabola (``peak._grid_max``).
+    Odd harmonics only: ``|i2|`` has period pi, so the first half of the grid (``n_theta`` even) holds
+    every value once (and its wrap-around the neighbours)."""
+    m = n_theta // 2
+    y = np.empty(m)
+    for i in range(m):
+        y[i] = abs(_wave(-math.pi + 2.0 * math.pi * i / n_theta, i1h, ih)[0])
+    j = int(np.argmax(y))
+    ym, y0, yp = y[j - 1], y[j], y[(j + 1) % m]
+    den = ym - 2 * y0 + yp
+    u = min(max(0.5 * (ym - yp) / den, -0.5), 0.5) if den < 0 else 0.0
+    return max(y0 - 0.25 * (ym - yp) * u, y0)
+
+
+@njit(cache=True)
+def _fill_table(hv1, y2, n, vc, phis, ds, rhos, n_theta, tab):
+    ih = np.empty(len(n), dtype=np.complex128)
+    for a in range(len(phis)):
+        for b in range(len(ds)):
+            for c in range(len(rhos)):
+                amp = rhos[c] * vc
+                i1h = complex(amp * max(math.cos(phis[a]), 0.0), amp * math.sin(phis[a]))
+                e = _balance_point(hv1, y2, n, vc, ds[b], i1h, ih)
+                tab[0, a, b, c] = e - 0.5 * math.pi + (phis[a] if amp > 0 else 0.0)
+                tab[1, a, b, c] = (_peak_point(i1h, ih, n_theta) - amp) / vc
+
+
 def build_table(params: LinkParams, devices: DeviceSet = IDEAL, n_d: int = N_D, n_rho: int = N_RHO,
                 n_phi: int = N_PHI, c1_f=None, c2_f=None) -> np.ndarray:
     """``(2, n_phi, n_d, n_rho)`` table on the fundamental's phase ``arg I2`` on ``(pi/2) u |u|``,
     ``u = linspace(-1, 1, n_phi)`` [rad] (quadratic: dense near the in-phase operation; the
-    sign-folded phasor has Re >= 0) x duty ``linspace(0, 1, n_d)`` x
-    ``rho = |I2|/Vc`` [A/V] on ``RHO_MAX linspace(0, 1, n_rho)**2``: plane 0 the commutation shift
-    ``delta = e - (pi/2 - arg I2)`` [rad] (the zero crossing of fundamental + ripple against the
-    fundamental's own, not clipped to the gate window; :func:`sbar_v2` clips), plane 1 the peak
-    excess ``(peak - |I2|)/Vc`` [A/V], both from :class:`wpt_receiver.peak.SbarHarmonics` (harmonic
-    balance, n <= 63) at ``params`` (its Lm, VL, V1) and ``devices``. ~20 s (cached by :func:`modal_table`)."""
+    sign-folded phasor has Re >= 0) x duty ``linspace(0, 1, n_d)`` x ``rho = |I2|/Vc`` [A/V] on
+    ``RHO_MAX linspace(0, 1, n_rho)**2``: plane 0 the commutation shift ``delta = e - (pi/2 - arg I2)``
+    [rad] (the zero crossing of fundamental + ripple against the fundamental's own, not clipped to
+    the gate window; :func:`sbar_v2` clips), plane 1 the peak excess ``(peak - |I2|)/Vc`` [A/V].
+    The harmonic balance and the peak search of :class:`wpt_receiver.peak.SbarHarmonics` (its
+    coefficients at ``params``: Lm, VL, V1, and ``devices``; n <= 63, 512 phases), compiled
+    (equal to the numpy class to rounding, ``tests/test_modal_kernel.py``)."""
     from .peak import SbarHarmonics
     sh = SbarHarmonics(params, devices, c1_f=c1_f, c2_f=c2_f)
-    vc = sh.clamp_v
+    assert np.array_equal(sh.n, np.arange(3, 2 * len(sh.n) + 3, 2)) and len(sh.theta) % 2 == 0   # _wave, _peak_point
     u = np.linspace(-1.0, 1.0, n_phi)
-    ph, dd, rr = np.meshgrid(0.5 * np.pi * u * np.abs(u), np.linspace(0.0, 1.0, n_d),
-                             RHO_MAX * np.linspace(0.0, 1.0, n_rho) ** 2, indexing="ij")
-    i2 = (rr * vc * np.exp(1j * ph)).ravel()
-    i2 = np.where(i2.real < 0.0, i2 + 1e-12, i2)      # cos(pi/2) rounding: keep the phasor's Re >= 0
-    delta, excess = np.empty(i2.shape), np.empty(i2.shape)
-    for a in range(0, len(i2), 4096):                  # chunks bound the (chunk, n_theta) temporaries
-        sl = slice(a, a + 4096)
-        d, ip = dd.ravel()[sl], i2[sl]
-        _, ih, e = sh.balance(d, ip)
-        for _ in range(6):             # the crossing itself where the gate window clipped it (harmonics fixed)
-            g, dg = sh._value(e, ip, ih, sh.n)
-            e = np.clip(e - np.clip(np.where(dg < 0, g / np.where(dg < 0, dg, -1.0), 0.0), -0.3, 0.3), 0.0, np.pi)
-        delta[sl] = e - 0.5 * np.pi + np.angle(np.where(np.abs(ip) > 0, ip, 1.0))
-        excess[sl] = (sh.peak(d, ip) - np.abs(ip)) / vc
-    return np.stack([delta.reshape(dd.shape), excess.reshape(dd.shape)])
+    tab = np.empty((2, n_phi, n_d, n_rho))
+    _fill_table(sh.i2_from_v1, sh.y2, sh.n.astype(np.float64), sh.clamp_v, 0.5 * np.pi * u * np.abs(u),
+                np.linspace(0.0, 1.0, n_d), RHO_MAX * np.linspace(0.0, 1.0, n_rho) ** 2, len(sh.theta), tab)
+    return tab
 
 
 def modal_table(params: LinkParams, devices: DeviceSet = IDEAL) -> np.ndarray:
