@@ -55,7 +55,7 @@ from numba import njit
 from .devices import IDEAL, DeviceSet
 from .params import LinkParams
 
-__all__ = ["link_constants", "modes", "zoh", "step", "phasors", "stored_energy_j", "sbar_v2", "inst_peak",
+__all__ = ["link_constants", "modes", "zoh", "step", "advance_z", "phasors", "stored_energy_j", "sbar_v2", "inst_peak",
            "build_table", "modal_table", "run_duties", "steady_state", "rect_current_a", "rect_affine", "N_MODES_C", "N_ZOH_C",
            "LC_NAMES"]
 
@@ -199,6 +199,15 @@ def phasors(mc, z, v1, v2):
     i1 = mc[MC_S] * z0 + mc[MC_S + 4] * z1 + mc[MC_D] * v1 + mc[MC_D + 1] * v2
     i2 = mc[MC_S + 1] * z0 + mc[MC_S + 5] * z1 + mc[MC_D + 2] * v1 + mc[MC_D + 3] * v2
     return i1, i2
+
+
+@njit(cache=True)
+def advance_z(mc, zc, z, v1, v2):
+    """The state part of :func:`step` alone: ``z`` (4 reals) advanced in place over the ``zc`` step."""
+    for m in range(2):
+        zs = -(mc[MC_G1 + m] * v1 + mc[MC_G2 + m] * v2) / mc[MC_LAM + m]
+        n = zs + zc[ZC_E + m] * (complex(z[2 * m], z[2 * m + 1]) - zs)
+        z[2 * m], z[2 * m + 1] = n.real, n.imag
 
 
 @njit(cache=True)
