@@ -12,7 +12,7 @@ def _add_paper(sub):
     p = sub.add_parser("paper", help="reproduce the paper's Table II and Fig. 6",
                        description="Run the step, ramp and proposed V2* trajectories (RM -> SM) on the "
                                    "Table I link, print Table II beside the paper's, write Fig. 6 as PNG.")
-    p.add_argument("--model", default="envelope", help="plant model: envelope (default) or switching")
+    p.add_argument("--model", default="envelope", help="plant model: envelope (default, eq. 4), switching, or modal (exact modes + SBAR ripple, compiled)")
     p.add_argument("--out", type=path_arg("--out"), default=Path("out/paper"), help="folder for the figures (default out/paper)")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--control-period", type=float_arg("control-period", positive=True, lo=1e-7, hi=1e-3), default=None,

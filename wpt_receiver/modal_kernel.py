@@ -1,0 +1,516 @@
+"""The exact-mode envelope (:mod:`.modal`) as compiled numba functions for hot loops (mission, envs).
+
+:class:`wpt_receiver.modal.ModalEnvelope` is within 0.1 % of the switching model on the paper's
+step, ramp and proposed trajectories, but steps in numpy with a harmonic balance per step. This
+module is the same model, cheap enough for a mission or an env step:
+
+* **Modes, per Lm** (:func:`modes`): the positive-frequency roots of eq. 1's characteristic
+  quartic ``P(s) = s^2 det Z(s) = (L1 s^2 + R1 s + 1/C1)(L2 s^2 + R2 s + 1/C2) - Lm^2 s^4``
+  (Newton from the lossless ``j w / sqrt(1 -+ k)``, the second pair by deflation), each with its
+  residue ``s^2 adj Z(s) / P'(s)`` (rank 1: mode shape x input gain) and the quasi-static response
+  of the two negative-frequency modes (feedthrough); closed form, no LAPACK. Equal to
+  the eigen-decomposition of :func:`.modal.link_matrices` (tested to 1e-9).
+* **ZOH, per (Lm, dt)** (:func:`zoh`): ``e^{lam' dt}``, ``(e^{lam' dt} - 1)/lam'`` per mode
+  (``lam' = lam - j w``, the frame rotating at w) and the cross integrals of the quadratic terms.
+* **Step** (:func:`step`): the two complex mode amplitudes ``z`` (4 reals, i1 or i2 units) under
+  the held inputs ``U = [V1, V2]`` (complex phasors, ``x = Re(X e^{j w t})``, ``v1 = V1amp sin wt``
+  is ``V1 = -j V1amp``): ``z+ = e z + phi g U``, exactly, with the step's integrals of I1, I2 and
+  |I1|^2, |I2|^2 and so its energies (source ``Re(V1 conj I1)/2``, coil + device resistances
+  ``(R1 |I1|^2 + R2 |I2|^2)/2``, rectifier ``Re(V2 conj I2)/2``). With ``W = X^H E X / 4``
+  (``E`` the inductance and capacitance matrix) they satisfy ``source = dW + coil + rect``
+  exactly within a step (the quasi-static negative-frequency part keeps ``dX/dt = (M - jw)X + BU``
+  exact for a held U); :func:`stored_energy_j`.
+* **SBAR, v2 with its quadrature** (:func:`sbar_v2`): eq. 9 generalised to a commutation angle
+  ``e`` off ``pi/2``: ``V2 = sign * Vc (4/pi) (j e^{-j e} - sin(pi d/2))`` (``Vc = VL + Vf``,
+  ``e`` clipped into ``[pi d/2, pi - pi d/2]``; ``e = pi/2`` is eq. 9). ``e = pi/2 - arg(I2) + delta``:
+  the phase of the fundamental exactly, the harmonics' shift ``delta`` of the zero crossing from a
+  table over (arg I2, duty, |I2| / Vc) built once from :class:`wpt_receiver.peak.SbarHarmonics`
+  (:func:`build_table`, trilinear lookup). The harmonic balance is homogeneous in (I2, V1, Vc), and
+  the inverter-driven part of the ripple is small, so ``delta`` depends on |I2|/Vc, the duty and
+  the phase alone, to 0.005 rad over Lm 5.2-6.8 uH, VL 27-33 V, V1 x0.5-1 (the default mission's
+  range): one table per link and device set, at its nominal Lm and VL.
+* **Instantaneous peak** (:func:`inst_peak`): ``|I2| + Vc * excess(arg I2, d, |I2|/Vc)``, the
+  excess of :meth:`SbarHarmonics.peak` over the fundamental from the same table (within 0.1 % of
+  the direct evaluation in phase, 0.4 % for |arg I2| <= 0.16 rad (the paper's ramp swings 9 deg),
+  |I2| >= 8 A; the phase grid is quadratic, 17 points).
+
+Cost (``benchmarks/bench_modal_step.py``, in-process, 2026-11-25 under load average ~9 on 2 cores):
+1.3-1.4 us per step (v2 lookup + step with energies + peak lookup) against 0.3-0.4 us for the
+mission kernel's eq. 4 step; 3.9 us when Lm changes every step (modes + ZOH recomputed).
+
+Validated (``tests/test_modal_kernel.py``) against :func:`wpt_receiver.modal.simulate_modal` on the
+three paper trajectories (peak within 0.5 %, in fact ~0.05 %), the switching model on the ramp
+(1 %), and across the default mission's Lm and battery range. This module imports numba at
+import time; nothing imports it at module level (``wpt_receiver/__init__.py`` does not).
+"""
+
+from __future__ import annotations
+
+import cmath
+import math
+
+import numpy as np
+from numba import njit
+
+from .devices import IDEAL, DeviceSet
+from .params import LinkParams
+
+__all__ = ["link_constants", "modes", "zoh", "step", "advance_z", "phasors", "stored_energy_j", "sbar_v2", "inst_peak",
+           "build_table", "modal_table", "run_duties", "steady_state", "rect_current_a", "rect_affine", "N_MODES_C", "N_ZOH_C",
+           "LC_NAMES"]
+
+#: ``lc`` (float64) layout: coil / capacitor values with the devices' resistances folded in, and the table scalars
+LC_NAMES = ("l1", "l2", "r1", "r2", "c1", "c2", "omega", "rho_max", "inv_hd", "dr_short", "inv_hphi", "vf")
+(LC_L1, LC_L2, LC_R1, LC_R2, LC_C1, LC_C2, LC_W, LC_RHO_MAX, LC_INV_HD, LC_DR_SHORT, LC_INV_HPHI,
+ LC_VF) = range(len(LC_NAMES))
+# mode coefficients ``mc`` (complex128): per mode m in (0, 1): lam' [1/s], gain of V1 and V2, state shape
+# [i1, i2, vC1, vC2] per unit z; then the feedthrough D (4 states x [V1, V2])
+MC_LAM, MC_G1, MC_G2, MC_S, MC_D = 0, 2, 4, 6, 14
+N_MODES_C = 22
+# ZOH coefficients ``zc`` (complex128): e^{lam' h} per mode, phi per mode, psi_00, psi_11, psi_01
+ZC_E, ZC_PHI, ZC_PSI00, ZC_PSI11, ZC_PSI01 = 0, 2, 4, 5, 6
+N_ZOH_C = 7
+N_D, N_RHO, N_PHI = 51, 81, 17
+RHO_MAX = 3.0          # |I2| / Vc at the top of the table [A/V]; beyond: delta ~ 1/rho, excess constant
+_CACHE_VERSION = "modal-kernel-table v4"
+
+
+def link_constants(params: LinkParams, devices: DeviceSet = IDEAL, c1_f=None, c2_f=None) -> np.ndarray:
+    """``lc`` array (:data:`LC_NAMES`) of a link: L [H], R [ohm] with the inverter's ``2 Ron`` and
+    the rectifying path's ``Rd`` folded in (as :func:`.modal.link_matrices`), C [F] (resonant at
+    ``f_hz`` unless given), omega [rad/s], the table's scalars, the shorted SBAR's excess
+    resistance over ``Rd`` [ohm] (enters V2 as in :func:`wpt_receiver.sbar.rectifier_v2_folded`)
+    and the rectifying path's forward drop Vf [V] (the clamp is ``VL + Vf``)."""
+    p, w = params, params.omega_rad_s
+    c1 = 1 / (w * w * p.l1_h) if c1_f is None else float(c1_f)
+    c2 = 1 / (w * w * p.l2_h) if c2_f is None else float(c2_f)
+    return np.array([p.l1_h, p.l2_h, p.r1_ohm + devices.inv_r_ohm, p.r2_ohm + devices.rect_rd_ohm, c1, c2, w,
+                     RHO_MAX, float(N_D - 1), devices.short_r_ohm - devices.rect_rd_ohm, 0.5 * (N_PHI - 1),
+                     devices.rect_vf_v])
+
+
+# ---------------------------------------------------------------------- modes (eq. 1), per Lm
+@njit(cache=True)
+def _poly(lc, lm_h):
+    """Coefficients ``a4..a0`` of the characteristic quartic P(s) (module docstring)."""
+    l1, l2, r1, r2, c1, c2 = lc[LC_L1], lc[LC_L2], lc[LC_R1], lc[LC_R2], lc[LC_C1], lc[LC_C2]
+    return (l1 * l2 - lm_h * lm_h, l1 * r2 + r1 * l2, l1 / c2 + r1 * r2 + l2 / c1, r1 / c2 + r2 / c1, 1.0 / (c1 * c2))
+
+
+@njit(cache=True)
+def _newton_root(a, s):
+    """Newton on the quartic ``a`` from ``s`` (complex) to machine precision (quadratic convergence:
+    one more step after a relative step below 1e-9)."""
+    last = False
+    for _ in range(60):
+        p = (((a[0] * s + a[1]) * s + a[2]) * s + a[3]) * s + a[4]
+        dp = ((4.0 * a[0] * s + 3.0 * a[1]) * s + 2.0 * a[2]) * s + a[3]
+        ds = p / dp
+        s = s - ds
+        if last:
+            break
+        last = abs(ds) <= 1e-9 * abs(s)
+    return s
+
+
+@njit(cache=True)
+def _roots(lc, lm_h):
+    """The two roots of P with positive imaginary part [1/s] (stationary frame)."""
+    a = _poly(lc, lm_h)
+    w = lc[LC_W]
+    k = lm_h / math.sqrt(lc[LC_L1] * lc[LC_L2])
+    damp = -0.25 * (lc[LC_R1] / lc[LC_L1] + lc[LC_R2] / lc[LC_L2])
+    s0 = _newton_root(a, complex(damp, w / math.sqrt(1.0 - k)))
+    # deflate by (s - s0)(s - conj s0) = s^2 + b s + c: the quotient a4 (s^2 + p s + q)
+    b, c = -2.0 * s0.real, abs(s0) ** 2
+    p = a[1] / a[0] - b
+    q = a[2] / a[0] - b * p - c
+    h = cmath.sqrt(complex(0.25 * p * p - q))
+    s1 = -0.5 * p + h
+    if s1.imag < 0.0:
+        s1 = -0.5 * p - h
+    return s0, _newton_root(a, s1)
+
+
+@njit(cache=True)
+def modes(lc, lm_h, mc):
+    """Fill ``mc`` (complex, :data:`N_MODES_C`) with the two modes of eq. 1 at mutual inductance
+    ``lm_h`` [H]: rotating-frame eigenvalues, input gains, state shapes and the feedthrough of the
+    negative-frequency modes (module docstring)."""
+    l1, l2, r1, r2, c1, c2, w = lc[LC_L1], lc[LC_L2], lc[LC_R1], lc[LC_R2], lc[LC_C1], lc[LC_C2], lc[LC_W]
+    a = _poly(lc, lm_h)
+    for m in range(4, N_MODES_C):
+        mc[m] = 0.0
+    roots = _roots(lc, lm_h)
+    for m in range(2):
+        s = roots[m]
+        z11 = s * l1 + r1 + 1.0 / (s * c1)
+        z22 = s * l2 + r2 + 1.0 / (s * c2)
+        dp = ((4.0 * a[0] * s + 3.0 * a[1]) * s + 2.0 * a[2]) * s + a[3]
+        if abs(z22) >= abs(z11):     # the better conditioned column of adj Z(s), normalised
+            qa, qb, ajj = 1.0 + 0j, s * lm_h / z22, z22
+        else:
+            qa, qb, ajj = s * lm_h / z11, 1.0 + 0j, z11
+        gam = s * s * ajj / dp      # residue s^2 adj Z / P' = gam q q^T; inputs [v1, -v2]
+        g1, g2 = gam * qa, -gam * qb
+        mc[MC_LAM + m] = s - 1j * w
+        mc[MC_G1 + m], mc[MC_G2 + m] = g1, g2
+        shape = (qa, qb, qa / (c1 * s), qb / (c2 * s))
+        for r in range(4):
+            mc[MC_S + 4 * m + r] = shape[r]
+            den = 1j * w - s.conjugate()        # the conjugate mode, quasi-static at +w
+            mc[MC_D + 2 * r] += shape[r].conjugate() * g1.conjugate() / den
+            mc[MC_D + 2 * r + 1] += shape[r].conjugate() * g2.conjugate() / den
+
+
+# ---------------------------------------------------------------------- ZOH, per (Lm, dt)
+@njit(cache=True)
+def _expm1_over(mu, h):
+    """``(e^{mu h} - 1) / mu`` without cancellation (complex mu; h for mu -> 0)."""
+    x = mu * h
+    if abs(x) < 1e-12:
+        return h + 0j
+    a, b = x.real, x.imag
+    em = math.expm1(a)
+    sb, hb = math.sin(b), math.sin(0.5 * b)
+    return complex(em * math.cos(b) - 2.0 * hb * hb, em * sb + sb) / mu
+
+
+@njit(cache=True)
+def zoh(mc, dt_s, zc):
+    """Fill ``zc`` (complex, :data:`N_ZOH_C`) for a held-input step of ``dt_s`` [s]: ``e^{lam' dt}``,
+    ``phi = (e^{lam' dt} - 1)/lam'`` per mode, and ``psi_ij = int_0^dt e^{(lam'_i + conj lam'_j) t} dt``."""
+    for m in range(2):
+        lam = mc[MC_LAM + m]
+        phi = _expm1_over(lam, dt_s)
+        zc[ZC_PHI + m] = phi
+        zc[ZC_E + m] = 1.0 + lam * phi
+    l0, l1 = mc[MC_LAM], mc[MC_LAM + 1]
+    zc[ZC_PSI00] = _expm1_over(complex(2.0 * l0.real, 0.0), dt_s)
+    zc[ZC_PSI11] = _expm1_over(complex(2.0 * l1.real, 0.0), dt_s)
+    zc[ZC_PSI01] = _expm1_over(l0 + l1.conjugate(), dt_s)
+
+
+# ---------------------------------------------------------------------- state -> phasors, the step
+@njit(cache=True)
+def phasors(mc, z, v1, v2):
+    """``(I1, I2)`` phasors [A] of the mode state ``z`` (4 reals) under the inputs ``v1, v2`` (complex [V])."""
+    z0, z1 = complex(z[0], z[1]), complex(z[2], z[3])
+    i1 = mc[MC_S] * z0 + mc[MC_S + 4] * z1 + mc[MC_D] * v1 + mc[MC_D + 1] * v2
+    i2 = mc[MC_S + 1] * z0 + mc[MC_S + 5] * z1 + mc[MC_D + 2] * v1 + mc[MC_D + 3] * v2
+    return i1, i2
+
+
+@njit(cache=True)
+def advance_z(mc, zc, z, v1, v2):
+    """The state part of :func:`step` alone: ``z`` (4 reals) advanced in place over the ``zc`` step."""
+    for m in range(2):
+        zs = -(mc[MC_G1 + m] * v1 + mc[MC_G2 + m] * v2) / mc[MC_LAM + m]
+        n = zs + zc[ZC_E + m] * (complex(z[2 * m], z[2 * m + 1]) - zs)
+        z[2 * m], z[2 * m + 1] = n.real, n.imag
+
+
+@njit(cache=True)
+def stored_energy_j(lc, mc, z, v1, v2, lm_h):
+    """Cycle-averaged stored energy ``W = X^H E X / 4`` [J] of the coils and capacitors."""
+    x = np.empty(4, dtype=np.complex128)
+    z0, z1 = complex(z[0], z[1]), complex(z[2], z[3])
+    for r in range(4):
+        x[r] = mc[MC_S + r] * z0 + mc[MC_S + 4 + r] * z1 + mc[MC_D + 2 * r] * v1 + mc[MC_D + 2 * r + 1] * v2
+    wl = lc[LC_L1] * abs(x[0]) ** 2 + lc[LC_L2] * abs(x[1]) ** 2 - 2.0 * lm_h * (x[0] * x[1].conjugate()).real
+    return 0.25 * (wl + lc[LC_C1] * abs(x[2]) ** 2 + lc[LC_C2] * abs(x[3]) ** 2)
+
+
+@njit(cache=True)
+def _quad(ss, c0, c1, phi0, phi1, zc, dt_s):
+    """``(int X dt, int |X|^2 dt)`` of ``X(t) = ss + c0 e^{lam'_0 t} + c1 e^{lam'_1 t}``."""
+    lin = c0 * phi0 + c1 * phi1
+    sq = (abs(ss) ** 2 * dt_s + 2.0 * (ss.conjugate() * lin).real + abs(c0) ** 2 * zc[ZC_PSI00].real
+          + abs(c1) ** 2 * zc[ZC_PSI11].real + 2.0 * (c0 * c1.conjugate() * zc[ZC_PSI01]).real)
+    return ss * dt_s + lin, sq
+
+
+@njit(cache=True)
+def step(lc, mc, zc, dt_s, z, v1, v2, out):
+    """Advance the mode state ``z`` (4 reals, in place) over ``dt_s`` [s] with ``v1, v2`` (complex
+    phasors [V]) held; ``out`` (float, 9): ``int I1 dt`` (re, im) [C], ``int I2 dt`` (re, im) [C],
+    ``int |I1|^2 dt``, ``int |I2|^2 dt`` [A^2 s], and the energies [J]: source, coil (R1, R2 with the
+    devices' resistances), rectifier (module docstring)."""
+    z0, z1 = complex(z[0], z[1]), complex(z[2], z[3])
+    u0 = mc[MC_G1] * v1 + mc[MC_G2] * v2
+    u1 = mc[MC_G1 + 1] * v1 + mc[MC_G2 + 1] * v2
+    zs0, zs1 = -u0 / mc[MC_LAM], -u1 / mc[MC_LAM + 1]
+    c0, c1 = z0 - zs0, z1 - zs1
+    e0, e1 = zc[ZC_E], zc[ZC_E + 1]
+    n0, n1 = zs0 + e0 * c0, zs1 + e1 * c1
+    z[0], z[1], z[2], z[3] = n0.real, n0.imag, n1.real, n1.imag
+    s10, s20, s11, s21 = mc[MC_S], mc[MC_S + 1], mc[MC_S + 4], mc[MC_S + 5]
+    ss1 = s10 * zs0 + s11 * zs1 + mc[MC_D] * v1 + mc[MC_D + 1] * v2
+    ss2 = s20 * zs0 + s21 * zs1 + mc[MC_D + 2] * v1 + mc[MC_D + 3] * v2
+    p0, p1 = zc[ZC_PHI], zc[ZC_PHI + 1]
+    int1, sq1 = _quad(ss1, s10 * c0, s11 * c1, p0, p1, zc, dt_s)
+    int2, sq2 = _quad(ss2, s20 * c0, s21 * c1, p0, p1, zc, dt_s)
+    out[0], out[1], out[2], out[3], out[4], out[5] = int1.real, int1.imag, int2.real, int2.imag, sq1, sq2
+    out[6] = 0.5 * (v1 * int1.conjugate()).real
+    out[7] = 0.5 * (lc[LC_R1] * sq1 + lc[LC_R2] * sq2)
+    out[8] = 0.5 * (v2 * int2.conjugate()).real
+
+
+@njit(cache=True)
+def rect_current_a(f_clamp, int_i2, dt_s):
+    """DC current [A] into the clamp (battery + diode drops) over a step: the rectifier's power on
+    the clamp, ``Re(Vc F conj(I2))/2``, over Vc (``f_clamp`` = V2's clamp part per volt, from
+    :func:`sbar_v2`; ``int_i2`` = the step's ``int I2 dt`` [C]); eq. 4's ``(V2/VL) I2 / 2`` for F real."""
+    return 0.5 * (f_clamp * int_i2.conjugate()).real / dt_s
+
+
+@njit(cache=True)
+def rect_affine(mc, zc, dt_s, z, v1, f_clamp, v2x):
+    """``(a0 [A], a1 [A/V])`` with the step's mean DC current into the clamp ``I_L = a0 + a1 VL`` when
+    ``V2 = F (VL + Vf) + excess = F VL + v2x`` is held over the step from state ``z`` (the battery
+    node's implicit VL solve: with ``VL = A0 + G (I_L - P/VL)`` a quadratic in VL, as eq. 4's loop).
+    ``int I2 dt = s0 + s1 V2`` is affine in V2; ``I_L`` = :func:`rect_current_a`."""
+    s1 = mc[MC_D + 3] * dt_s
+    s0 = mc[MC_D + 2] * v1 * dt_s
+    for m in range(2):
+        lam, phi, sh = mc[MC_LAM + m], zc[ZC_PHI + m], mc[MC_S + 4 * m + 1]
+        s0 += sh * (complex(z[2 * m], z[2 * m + 1]) * phi - mc[MC_G1 + m] * v1 / lam * (dt_s - phi))
+        s1 -= sh * mc[MC_G2 + m] / lam * (dt_s - phi)
+    a0 = 0.5 * (f_clamp * (s0 + s1 * v2x).conjugate()).real / dt_s
+    a1 = 0.5 * abs(f_clamp) ** 2 * s1.real / dt_s
+    return a0, a1
+
+
+# ---------------------------------------------------------------------- SBAR (eq. 9 with its quadrature)
+@njit(cache=True)
+def _bilinear(tab, plane, m, j, k, fx, fy):
+    return ((tab[plane, m, j, k] * (1 - fx) + tab[plane, m, j + 1, k] * fx) * (1 - fy)
+            + (tab[plane, m, j, k + 1] * (1 - fx) + tab[plane, m, j + 1, k + 1] * fx) * fy)
+
+
+@njit(cache=True)
+def _lookup(lc, tab, plane, phi, d, rho):
+    """Trilinear lookup of table plane ``plane`` at phase ``phi`` [rad] in [-pi/2, pi/2], duty ``d``
+    and ``rho = |I2|/Vc`` (both grids quadratic, :func:`build_table`; rho clamped at its top)."""
+    u = min(abs(phi) / (0.5 * math.pi), 1.0) ** 0.5
+    z = (1.0 + (u if phi >= 0.0 else -u)) * lc[LC_INV_HPHI]
+    x = min(max(d, 0.0), 1.0) * lc[LC_INV_HD]
+    y = math.sqrt(min(rho / lc[LC_RHO_MAX], 1.0)) * (tab.shape[3] - 1)
+    m = min(int(z), tab.shape[1] - 2)
+    j = min(int(x), tab.shape[2] - 2)
+    k = min(int(y), tab.shape[3] - 2)
+    fz, fx, fy = z - m, x - j, y - k
+    return _bilinear(tab, plane, m, j, k, fx, fy) * (1 - fz) + _bilinear(tab, plane, m + 1, j, k, fx, fy) * fz
+
+
+@njit(cache=True)
+def sbar_v2(lc, tab, d_short, i2, vc_v):
+    """``(V2, F)``: the SBAR's complex fundamental [V] at duty ``d_short`` and i2 phasor ``i2`` [A]
+    with clamp ``vc_v = VL + Vf`` [V], and its clamp part per volt ``F`` (``V2 = Vc F + excess``;
+    module docstring, eq. 9 for ``e = pi/2``)."""
+    wd = 0.5 * math.pi * min(max(d_short, 0.0), 1.0)
+    sgn = -1.0 if i2.real < 0.0 else 1.0
+    ih = i2 * sgn
+    amp = abs(ih)
+    rho = amp / vc_v if vc_v > 0.0 else 0.0
+    rmax = lc[LC_RHO_MAX]
+    phi = math.atan2(ih.imag, ih.real) if amp > 0.0 else 0.0
+    delta = _lookup(lc, tab, 0, phi, d_short, rho) * (1.0 if rho <= rmax else rmax / rho)
+    e = 0.5 * math.pi + delta - phi
+    e = min(max(e, wd), math.pi - wd)
+    f = sgn * (4.0 / math.pi) * complex(math.sin(e) - math.sin(wd), math.cos(e))   # (4/pi)(j e^{-je} - sin wd)
+    w_short = d_short + math.sin(math.pi * d_short) / math.pi
+    return vc_v * f + lc[LC_DR_SHORT] * w_short * i2, f
+
+
+@njit(cache=True)
+def inst_peak(lc, tab, d_short, i2, vc_v):
+    """Instantaneous peak |i2| [A] at duty ``d_short`` for the fundamental phasor ``i2`` [A] (complex)
+    and clamp ``vc_v`` [V]: ``|I2| + Vc excess(arg I2, d, |I2|/Vc)`` (:meth:`SbarHarmonics.peak`, tabulated)."""
+    ih = -i2 if i2.real < 0.0 else i2
+    a = abs(ih)
+    phi = math.atan2(ih.imag, ih.real) if a > 0.0 else 0.0
+    return a + vc_v * _lookup(lc, tab, 1, phi, d_short, a / vc_v if vc_v > 0.0 else 0.0)
+
+
+# ---------------------------------------------------------------------- the table (built once, numpy)
+@njit(cache=True)
+def _ripple(hv1, y2, n, vc, d, ec, ih):
+    """Harmonic phasors of i2 (n >= 3) into ``ih``: the inverter's plus the SBAR's with its falling edge
+    at ``ec`` (:meth:`wpt_receiver.peak.SbarHarmonics.v2_harmonics`)."""
+    wd = 0.5 * math.pi * d
+    for k in range(len(n)):
+        nk = n[k]
+        v = (2.0 * vc / (1j * nk * math.pi)) * (cmath.exp(-1j * nk * wd) - 2.0 * cmath.exp(-1j * nk * ec)
+                                                  + cmath.exp(-1j * nk * (math.pi - wd)))
+        ih[k] = hv1[k] + y2[k] * v
+
+
+@njit(cache=True)
+def _wave(theta, i1h, ih):
+    """``(i2, di2/dtheta)`` at ``theta`` from the fundamental and the odd harmonics 3, 5, ... (recurrence)."""
+    e1 = cmath.exp(1j * theta)
+    e2 = e1 * e1
+    g = (i1h * e1).real
+    dg = (1j * i1h * e1).real
+    en = e1
+    for k in range(len(ih)):
+        en = en * e2
+        t = ih[k] * en
+        g += t.real
+        dg -= (2 * k + 3) * t.imag
+    return g, dg
+
+
+@njit(cache=True)
+def _newton_edge(e, i1h, ih, steps, lo, hi):
+    """Newton on the falling zero crossing of i2 (harmonics held), steps clipped to 0.3 rad, e to [lo, hi]."""
+    for _ in range(steps):
+        g, dg = _wave(e, i1h, ih)
+        step = g / dg if dg < 0.0 else 0.0
+        e = min(max(e - min(max(step, -0.3), 0.3), lo), hi)
+    return e
+
+
+@njit(cache=True)
+def _balance_point(hv1, y2, n, vc, d, i1h, ih):
+    """:meth:`SbarHarmonics.balance` for one in-phase-folded phasor (Re >= 0): harmonics at the clipped
+    edge into ``ih``; returns the zero crossing itself (not clipped to the gate window) [rad]."""
+    wd = 0.5 * math.pi * d
+    amp = abs(i1h)
+    e = 0.5 * math.pi - (math.atan2(i1h.imag, i1h.real) if amp > 0 else 0.0)
+    for _ in range(6):
+        _ripple(hv1, y2, n, vc, d, min(max(e, wd), math.pi - wd), ih)
+        e = _newton_edge(e, i1h, ih, 3, -1e300, 1e300)
+    _ripple(hv1, y2, n, vc, d, min(max(e, wd), math.pi - wd), ih)
+    return _newton_edge(min(max(e, wd), math.pi - wd), i1h, ih, 6, 0.0, math.pi)
+
+
+@njit(cache=True)
+def _peak_point(i1h, ih, n_theta):
+    """``max_theta |i2|`` on ``n_theta`` phases of a period, refined by a parabola (``peak._grid_max``).
+    Odd harmonics only: ``|i2|`` has period pi, so the first half of the grid (``n_theta`` even) holds
+    every value once (and its wrap-around the neighbours)."""
+    m = n_theta // 2
+    y = np.empty(m)
+    for i in range(m):
+        y[i] = abs(_wave(-math.pi + 2.0 * math.pi * i / n_theta, i1h, ih)[0])
+    j = int(np.argmax(y))
+    ym, y0, yp = y[j - 1], y[j], y[(j + 1) % m]
+    den = ym - 2 * y0 + yp
+    u = min(max(0.5 * (ym - yp) / den, -0.5), 0.5) if den < 0 else 0.0
+    return max(y0 - 0.25 * (ym - yp) * u, y0)
+
+
+@njit(cache=True)
+def _fill_table(hv1, y2, n, vc, phis, ds, rhos, n_theta, tab):
+    ih = np.empty(len(n), dtype=np.complex128)
+    for a in range(len(phis)):
+        for b in range(len(ds)):
+            for c in range(len(rhos)):
+                amp = rhos[c] * vc
+                i1h = complex(amp * max(math.cos(phis[a]), 0.0), amp * math.sin(phis[a]))
+                e = _balance_point(hv1, y2, n, vc, ds[b], i1h, ih)
+                tab[0, a, b, c] = e - 0.5 * math.pi + (phis[a] if amp > 0 else 0.0)
+                tab[1, a, b, c] = (_peak_point(i1h, ih, n_theta) - amp) / vc
+
+
+def build_table(params: LinkParams, devices: DeviceSet = IDEAL, n_d: int = N_D, n_rho: int = N_RHO,
+                n_phi: int = N_PHI, c1_f=None, c2_f=None) -> np.ndarray:
+    """``(2, n_phi, n_d, n_rho)`` table on the fundamental's phase ``arg I2`` on ``(pi/2) u |u|``,
+    ``u = linspace(-1, 1, n_phi)`` [rad] (quadratic: dense near the in-phase operation; the
+    sign-folded phasor has Re >= 0) x duty ``linspace(0, 1, n_d)`` x ``rho = |I2|/Vc`` [A/V] on
+    ``RHO_MAX linspace(0, 1, n_rho)**2``: plane 0 the commutation shift ``delta = e - (pi/2 - arg I2)``
+    [rad] (the zero crossing of fundamental + ripple against the fundamental's own, not clipped to
+    the gate window; :func:`sbar_v2` clips), plane 1 the peak excess ``(peak - |I2|)/Vc`` [A/V].
+    The harmonic balance and the peak search of :class:`wpt_receiver.peak.SbarHarmonics` (its
+    coefficients at ``params``: Lm, VL, V1, and ``devices``; n <= 63, 512 phases), compiled
+    (equal to the numpy class to rounding, ``tests/test_modal_kernel.py``)."""
+    from .peak import SbarHarmonics
+    sh = SbarHarmonics(params, devices, c1_f=c1_f, c2_f=c2_f)
+    assert np.array_equal(sh.n, np.arange(3, 2 * len(sh.n) + 3, 2)) and len(sh.theta) % 2 == 0   # _wave, _peak_point
+    u = np.linspace(-1.0, 1.0, n_phi)
+    tab = np.empty((2, n_phi, n_d, n_rho))
+    _fill_table(sh.i2_from_v1, sh.y2, sh.n.astype(np.float64), sh.clamp_v, 0.5 * np.pi * u * np.abs(u),
+                np.linspace(0.0, 1.0, n_d), RHO_MAX * np.linspace(0.0, 1.0, n_rho) ** 2, len(sh.theta), tab)
+    return tab
+
+
+def modal_table(params: LinkParams, devices: DeviceSet = IDEAL) -> np.ndarray:
+    """:func:`build_table` of a resonant link, from the disk cache (:mod:`wpt_receiver.diskcache`) when there."""
+    from . import diskcache
+    key = f"{_CACHE_VERSION} {params!r} {devices!r} rho={RHO_MAX} n={N_PHI}x{N_D}x{N_RHO}"
+    tab = diskcache.load("modal_table", key, (2, N_PHI, N_D, N_RHO))
+    if tab is None:
+        tab = build_table(params, devices)
+        diskcache.store("modal_table", key, tab)
+    return tab
+
+
+# ---------------------------------------------------------------------- runs of a duty sequence
+@njit(cache=True)
+def steady_state(lc, mc, tab, d_short, v1, vc_v, z, iters=60):
+    """Periodic steady state at a constant duty into ``z`` (fixed point on V2); returns V2 [V]."""
+    v2 = (4.0 / math.pi) * vc_v * (1.0 - math.sin(0.5 * math.pi * d_short)) + 0j
+    for _ in range(iters):
+        u0 = mc[MC_G1] * v1 + mc[MC_G2] * v2
+        u1 = mc[MC_G1 + 1] * v1 + mc[MC_G2 + 1] * v2
+        zs0, zs1 = -u0 / mc[MC_LAM], -u1 / mc[MC_LAM + 1]
+        z[0], z[1], z[2], z[3] = zs0.real, zs0.imag, zs1.real, zs1.imag
+        new = sbar_v2(lc, tab, d_short, phasors(mc, z, v1, v2)[1], vc_v)[0]
+        if abs(new - v2) <= 1e-13 * (1.0 + abs(v2)):
+            return new
+        v2 = new
+    return v2
+
+
+@njit(cache=True)
+def run_duties(lc, mc, tab, d_short, control_period_s, substeps, v1, vc_v, lm_h):
+    """:meth:`wpt_receiver.modal.ModalEnvelope.run` compiled: duties held one per control period,
+    V2 updated every ``control_period_s / substeps``, from the steady state of the first duty.
+    Returns ``(i1, i2, v2, peak, energies)``: phasors per period end (plus the start), the
+    instantaneous peak there [A], and ``[source, coil, rect, W_end - W_start, jumps]`` [J] (``jumps``:
+    the stored energy of the feedthrough when V2 changes between steps; the balance is
+    ``source = dW + coil + rect - jumps``)."""
+    n = len(d_short)
+    h = control_period_s / substeps
+    zc = np.empty(N_ZOH_C, dtype=np.complex128)
+    zoh(mc, h, zc)
+    z = np.zeros(4)
+    v2 = steady_state(lc, mc, tab, d_short[0], v1, vc_v, z)
+    i1o, i2o, v2o = np.empty(n + 1, np.complex128), np.empty(n + 1, np.complex128), np.empty(n + 1, np.complex128)
+    pk, en, out = np.empty(n + 1), np.zeros(5), np.empty(9)
+    i1o[0], i2o[0] = phasors(mc, z, v1, v2)
+    v2o[0], pk[0] = v2, inst_peak(lc, tab, d_short[0], i2o[0], vc_v)
+    w_start = stored_energy_j(lc, mc, z, v1, v2, lm_h)
+    for k in range(n):
+        dk = d_short[k]
+        for _ in range(substeps):
+            new = sbar_v2(lc, tab, dk, phasors(mc, z, v1, v2)[1], vc_v)[0]
+            en[4] += stored_energy_j(lc, mc, z, v1, new, lm_h) - stored_energy_j(lc, mc, z, v1, v2, lm_h)
+            v2 = new
+            step(lc, mc, zc, h, z, v1, v2, out)
+            en[0] += out[6]
+            en[1] += out[7]
+            en[2] += out[8]
+        i1o[k + 1], i2o[k + 1] = phasors(mc, z, v1, v2)
+        v2o[k + 1], pk[k + 1] = v2, inst_peak(lc, tab, dk, i2o[k + 1], vc_v)
+    en[3] = stored_energy_j(lc, mc, z, v1, v2, lm_h) - w_start
+    return i1o, i2o, v2o, pk, en
+
+
+def simulate(params: LinkParams, d_short, control_period_s: float | None = None, devices: DeviceSet = IDEAL,
+             substeps: int = 2, table: np.ndarray | None = None) -> dict:
+    """:func:`wpt_receiver.modal.simulate_modal` on the compiled step (same keys: ``t_s``, ``i1``,
+    ``i2``, ``v2``, ``d_short``, ``peak_i2_a``; plus ``energy_j``, see :func:`run_duties`).
+    ``table`` defaults to :func:`modal_table` of ``params`` and ``devices``."""
+    cp = params.rectifier_period_s if control_period_s is None else float(control_period_s)
+    d = np.ascontiguousarray(d_short, dtype=float)
+    lc = link_constants(params, devices)
+    mc = np.empty(N_MODES_C, dtype=np.complex128)
+    modes(lc, params.lm_h, mc)
+    tab = modal_table(params, devices) if table is None else np.ascontiguousarray(table, dtype=float)
+    vc = params.vl_v + devices.rect_vf_v
+    i1, i2, v2, pk, en = run_duties(lc, mc, tab, d, cp, int(substeps), -1j * params.v1_amp_v, vc, params.lm_h)
+    return {"t_s": np.arange(len(d) + 1) * cp, "i1": i1, "i2": i2, "v2": v2, "d_short": np.r_[d[0], d],
+            "peak_i2_a": pk, "energy_j": en}
