@@ -23,6 +23,7 @@ Modules, in the order data flows (gym-electric-motor style: the parts composed i
 ``charging``       the single envs (:class:`SbarChargingEnv`, discrete ON-OFF variant)
 ``vector``         the batched vector envs (numpy, autoreset ``NEXT_STEP``)
 ``sb3_vec``        a stable-baselines3 ``VecEnv`` over the batched env (``rl`` extra)
+``history``        a short history of observations (frame stack) for learned policies, SB3 wrapper
 ``sensing``        the sensing delay of the observation's current fields (scenario sense_delay)
 ``detuned``        detuned tanks (scenario detuned): the complex envelope's step, numpy, vector env
 ``rollout``        fixed duty sequences replayed on one seeded window, many at once (the oracle's)
