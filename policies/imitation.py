@@ -28,7 +28,7 @@ Any :func:`policies.make` name is a teacher (``mpc``, ``mpc:0.05``, ``model_base
 cloned on its own trajectories; it is not a teacher here.
 
 Inputs: the stacked observations (plus the base duty of a residual student), the previous duty
-(``last_d_short``) masked by default (``mask_last_duty``: cloning a smooth teacher with its last action
+(``last_d_short``) masked by default (``masked``: cloning a smooth teacher with its last action
 in view teaches ``d_k = d_{k-1}``, the copycat problem, and the student's loop dithers the duty).
 Loss: mean squared error of the action in [-1, 1] (Adam, minibatches, ``epochs`` passes per fit).
 Input normalisation: the running mean / variance of the collected inputs, stored like
@@ -69,11 +69,14 @@ class ImitationSpec:
     log_std_init: float = -2.5
     residual_scale: float = 0.0
     residual_base_budget: float = 0.0
-    mask_last_duty: bool = True
+    masked: tuple = ("last_d_short",)
 
     def __post_init__(self):
         from mission_sim.contract import history_obs_dim
         history_obs_dim(self.history)
+        bad = [f for f in self.masked if f not in OBS_INDEX]
+        if bad:
+            raise ValueError(f"masked field {bad[0]!r} is invalid; valid values: {', '.join(OBS_INDEX)}")
         for name, lo in (("dagger", 0), ("episodes", 1), ("epochs", 1), ("batch_size", 1)):
             v = getattr(self, name)
             if int(v) != v or v < lo:
@@ -123,14 +126,13 @@ _MASKED_VAR = 1e12
 
 
 def _input_norm(X, spec: ImitationSpec) -> _Norm:
-    """Mean / variance of the inputs; with ``mask_last_duty`` the ``last_d_short`` field of every frame is
-    dropped (the "copycat" problem of cloning smooth actions with the previous action in the input: the
+    """Mean / variance of the inputs; the ``masked`` fields of every frame are dropped (by default
+    ``last_d_short`` (the "copycat" problem of cloning smooth actions with the previous action in the input: the
     student learns ``d_k = d_{k-1}`` and its closed loop dithers the duty next to the 4 kHz resonance)."""
     mean, var = X.mean(axis=0), X.var(axis=0)
-    if spec.mask_last_duty:
-        width = X.shape[1] // spec.history
-        idx = np.arange(spec.history) * width + OBS_INDEX["last_d_short"]
-        var[idx] = _MASKED_VAR
+    width = X.shape[1] // spec.history
+    for field in spec.masked:
+        var[np.arange(spec.history) * width + OBS_INDEX[field]] = _MASKED_VAR
     return _Norm(mean, var)
 
 
@@ -291,7 +293,7 @@ def _save(model, venv, spec: ImitationSpec, out: Path, name: str, log: list, bas
             **base_meta,
             "residual": {"scale": spec.residual_scale, "base_budget": spec.residual_base_budget,
                          "base": f"model_based_budget:{spec.residual_base_budget:g}"} if spec.residual_scale else None,
-            "imitation": {**asdict(spec), "net_arch": list(spec.net_arch), "iterations": log}}
+            "imitation": {**asdict(spec), "net_arch": list(spec.net_arch), "masked": list(spec.masked), "iterations": log}}
     meta_path = zip_path.with_suffix(".json")
     meta_path.write_text(json.dumps(meta, indent=2))
     (out / "imitation.json").write_text(json.dumps(log, indent=2))

@@ -100,3 +100,97 @@ def test_action_filter_and_smoothness_penalty_are_exact():
         np.testing.assert_allclose(r, r_raw - w * (d - last) ** 2, rtol=1e-5, atol=1e-5)
     with pytest.raises(ValueError, match="action_filter"):
         SmoothActionVecEnv(base, 1.0)
+
+
+FEEDFORWARD = ("last_d_short", "i2_amp_a", "battery_current_a", "rect_current_a")
+
+
+@pytest.fixture(scope="module")
+def clone(tmp_path_factory):
+    """BC (16 windows, seeds 10000+) of model_based_budget:0.02 as a residual on model_based_budget:0.01."""
+    from policies.imitation import ImitationSpec, imitate
+
+    spec = ImitationSpec(teacher="model_based_budget:0.02", scenario="nominal", episodes=16, epochs=60,
+                         batch_size=256, residual_scale=0.1, residual_base_budget=0.01, masked=FEEDFORWARD)
+    out = tmp_path_factory.mktemp("clone")
+    return spec, imitate(spec, out, progress=False)
+
+
+def test_imitation_reproduces_its_teacher(clone):
+    """Teacher-forced: the student's duty is within 0.005 RMS of the teacher's on 4 unseen windows;
+    closed loop on 16 unseen windows (seeds 1000+): every window in short mode, overshoot within 1.5
+    points of the teacher's, and energy after the stop closer to the teacher's than its base is (at
+    least halfway from the base to the teacher)."""
+    from dataclasses import replace
+
+    from policies.compare import run_policy
+    from policies.imitation import collect
+    from policies import make
+
+    spec, res = clone
+    pol = make(f"residual:{res['model']}")
+    X, Y = collect(replace(spec, episodes=4), 5000)   # teacher's own windows, not trained on
+    rows = X.reshape(300, 4, -1)
+    pol.rl.reset(4)
+    a = np.concatenate([2.0 * pol.rl.act(r) - 1.0 for r in rows])
+    duty_rms = spec.residual_scale * np.sqrt(np.mean((np.clip(a, -1, 1) - Y) ** 2))
+    assert duty_rms < 0.005
+    m = {p: run_policy(p, "nominal", 16, 1000).metrics for p in
+         (f"residual:{res['model']}", "model_based_budget:0.02", "model_based_budget:0.01")}
+    s, t, b = (m[k] for k in m)
+    assert s["reached_short_mode"].min() == 1.0
+    assert abs(s["overshoot_pct"].mean() - t["overshoot_pct"].mean()) < 1.5
+    e_s, e_t, e_b = (x["energy_after_stop_j"].mean() for x in (s, t, b))
+    assert abs(e_s - e_t) < 0.5 * abs(e_b - e_t)
+
+
+def test_clone_metadata_and_sb3_load(clone):
+    """The clone is a plain SB3 PPO zip + VecNormalize: ``PPO.load`` gives the same actions as the policy."""
+    import json
+
+    import stable_baselines3 as sb3
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from envs.sb3_vec import SbarSB3VecEnv
+    from policies.constrained import ResidualVecEnv
+
+    spec, res = clone
+    meta = json.loads(res["meta"].read_text())
+    assert meta["residual"]["scale"] == 0.1 and meta["imitation"]["teacher"] == "model_based_budget:0.02"
+    assert meta["obs_dim"] == 9 and meta["history"] == 1
+    venv = VecNormalize.load(str(res["vecnormalize"]), ResidualVecEnv(SbarSB3VecEnv(2, "nominal"), 0.1, 0.01))
+    venv.training = False
+    model = sb3.PPO.load(str(res["model"]), device="cpu")
+    obs = venv.reset()
+    a_sb3 = model.predict(obs, deterministic=True)[0][:, 0]
+    from policies.rl import RLPolicy
+    rl = RLPolicy(path=res["model"], residual=True)
+    rl.reset(2)
+    np.testing.assert_allclose(2 * rl.act(venv.unnormalize_obs(obs)) - 1, np.clip(a_sb3, -1, 1), atol=1e-5)
+
+
+def test_train_cli_imitation_dagger_history_then_compare_by_name(tmp_path):
+    """``train --imitate ... --dagger 1 --history 2 --timesteps 0`` writes a model that ``compare`` runs as
+    ``imitation:PATH`` (the frame stack kept by the policy); bad options exit 2 with one line."""
+    import json
+    import subprocess
+    import sys
+
+    out = tmp_path / "imit"
+    cmd = [sys.executable, "-m", "mission_sim.cli", "train", "--algo", "ppo", "--timesteps", "0", "--imitate",
+           "model_based", "--dagger", "1", "--history", "2", "--imitation-episodes", "2", "--imitation-epochs", "1",
+           "--scenario", "nominal", "--no-progress", "--out", str(out)]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    meta = json.loads((out / "ppo_sbar.json").read_text())
+    assert meta["history"] == 2 and meta["obs_dim"] == 16 and len(meta["imitation"]["iterations"]) == 2
+    r = subprocess.run([sys.executable, "-m", "mission_sim.cli", "compare", "--policies",
+                        f"model_based,imitation:{out / 'ppo_sbar.zip'}", "--scenarios", "nominal", "--episodes", "2",
+                        "--no-plot", "--no-frontier", "--format", "json", "--no-progress"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    rows = json.loads(r.stdout)["rows"]
+    assert len(rows) == 2 and all(np.isfinite(row["return"]) for row in rows)
+    for bad in (["--history", "0"], ["--imitate", "nonsense"], ["--action-filter", "1.5"]):
+        r = subprocess.run(cmd[:-2] + bad + ["--out", str(tmp_path / "bad")], capture_output=True, text=True)
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert not (tmp_path / "bad").exists()
