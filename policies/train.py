@@ -323,7 +323,7 @@ def _spec(algo, timesteps, o: dict) -> dict:
     return spec
 
 
-def _imitation_stage(spec: dict, out: Path, progress: bool, epochs: int) -> dict:
+def _imitation_stage(spec: dict, out: Path, progress: bool, epochs: int, masked: tuple) -> dict:
     """BC / DAgger of ``spec["imitate"]`` into ``out`` (:func:`policies.imitation.imitate`), the student a
     PPO actor with the run's hyperparameters (so ``resume`` fine-tunes it); the stage's record is
     kept in ``imitation_stage.json``."""
@@ -334,7 +334,7 @@ def _imitation_stage(spec: dict, out: Path, progress: bool, epochs: int) -> dict
                           dagger=spec["dagger"], episodes=spec["imitation_episodes"], epochs=int(epochs),
                           seed=spec["seed"], net_arch=tuple(pk.get("net_arch", (64, 64))),
                           residual_scale=spec["residual_scale"] if spec["residual"] else 0.0,
-                          residual_base_budget=spec["residual_base_budget"])
+                          residual_base_budget=spec["residual_base_budget"], masked=masked)
     base = {"env_id": spec["env_id"], "n_envs": spec["n_envs"], "vec": spec["vec"], "cost": spec["cost"],
             "env_config": config_dict(spec["config"]), "env_overrides": spec["env_overrides"],
             "hyperparams": {k: v for k, v in spec["hp"].items() if k != "policy_kwargs"}, "residual": None,
@@ -364,7 +364,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
           eval_episodes: int = 32, eval_every: int = 50_000, checkpoint_every: int = 100_000, resume=None,
           probe_episodes: int = 32, residual_base_budget: float = 0.0, history: int = 1, action_filter: float = 0.0,
           smooth_penalty: float = 0.0, imitate: str | None = None, dagger: int = 0, imitation_episodes: int = 64,
-          imitation_epochs: int = 30) -> dict:
+          imitation_epochs: int = 30, imitation_mask: tuple = ("last_d_short",)) -> dict:
     """Train ``algo`` for ``timesteps`` environment steps; returns a dict of the written paths.
 
     ``env``: EnvConfig / reward-weight overrides (:func:`env_config`); ``cost``: ``overshoot`` or
@@ -378,7 +378,8 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     ``smooth_penalty``: low-pass filtered duty / duty-change penalty (:mod:`policies.smoothing`);
     ``imitate``: first behaviour-clone (``dagger`` > 0: DAgger) the teacher policy of that name
     (``privileged:NAME``: the teacher sees the present, noise-free currents) on
-    ``imitation_episodes`` windows per iteration (:mod:`policies.imitation`), then fine-tune with
+    ``imitation_episodes`` windows per iteration, ``imitation_mask`` observation fields hidden from the
+    student (:mod:`policies.imitation`), then fine-tune with
     PPO (Lagrangian with ``lagrangian``) for ``timesteps`` steps (0: imitation only).
     Deterministic for a given seed on one thread (torch threads set to 1)."""
     import importlib.util
@@ -402,7 +403,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     if resume is not None and (out / "lagrange.json").is_file():
         spec["lambda0"] = float(json.loads((out / "lagrange.json").read_text())["lambda"])
     if imitate:
-        res = _imitation_stage(spec, out, progress, imitation_epochs)
+        res = _imitation_stage(spec, out, progress, imitation_epochs, tuple(imitation_mask))
         if not spec["timesteps"]:
             return res
         resume = res["model"]

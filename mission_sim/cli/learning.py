@@ -78,6 +78,9 @@ def _add_train(sub):
                    help="DAgger iterations after behaviour cloning (default 0)")
     p.add_argument("--imitation-episodes", type=int, default=64, help="windows per imitation iteration (default 64)")
     p.add_argument("--imitation-epochs", type=int, default=60, help="passes over the data per fit (default 60)")
+    p.add_argument("--imitation-mask", default="last_d_short", metavar="FIELD,...",
+                   help="observation fields hidden from the student (default last_d_short; add i2_amp_a,"
+                        "battery_current_a,rect_current_a for a feed-forward student; '' for none)")
     p.add_argument("--eval-every", type=int, default=50_000, help="env steps between evaluations (default 50000)")
     p.add_argument("--eval-episodes", type=int, default=32, help="held-out evaluation windows (default 32)")
     p.add_argument("--checkpoint-every", type=int, default=100_000, help="env steps between checkpoints")
@@ -115,6 +118,10 @@ def _check_train(args):
         raise CliError(f"--action-filter {args.action_filter} is invalid; valid range: [0, 1)")
     if args.smooth_penalty < 0.0:
         raise CliError(f"--smooth-penalty {args.smooth_penalty} is invalid; valid range: >= 0")
+    from mission_sim.contract import OBS_INDEX
+    for f in (f.strip() for f in args.imitation_mask.split(",") if f.strip()):
+        if f not in OBS_INDEX:
+            raise CliError(f"--imitation-mask {f!r} is invalid; valid values: {', '.join(OBS_INDEX)}")
     if args.imitate is not None:
         from policies import available
         teacher = args.imitate[len("privileged:"):] if args.imitate.startswith("privileged:") else args.imitate
@@ -159,7 +166,8 @@ def _cmd_train(args) -> int:
                     probe_episodes=args.probe_episodes, residual_base_budget=args.residual_base_budget,
                     history=args.history, action_filter=args.action_filter, smooth_penalty=args.smooth_penalty,
                     imitate=args.imitate, dagger=args.dagger, imitation_episodes=args.imitation_episodes,
-                    imitation_epochs=args.imitation_epochs)
+                    imitation_epochs=args.imitation_epochs,
+                    imitation_mask=tuple(f.strip() for f in args.imitation_mask.split(",") if f.strip()))
     except ValueError as exc:
         raise CliError(str(exc)) from None
     for key, path in res.items():
