@@ -74,8 +74,13 @@ def _imitation(ctx, **kwargs):
     require_sb3()
     from pathlib import Path
 
-    from .rl import RLPolicy
-    pol = RLPolicy(ctx, **{"path": Path(__file__).parent / "pretrained" / "imitation_s0.zip", **kwargs})
+    from .rl import RLPolicy, load_meta
+    kwargs = {"path": Path(__file__).parent / "pretrained" / "imitation_s0.zip", **kwargs}
+    if load_meta(kwargs["path"]).get("residual"):   # a residual student corrects the budgeted model-based duty
+        from .residual import ResidualPolicy
+        pol = ResidualPolicy(ctx, **kwargs)
+    else:
+        pol = RLPolicy(ctx, **kwargs)
     pol.name = "imitation"
     return pol
 

@@ -240,7 +240,7 @@ def _new_model(spec: ImitationSpec, config=None, ppo_kwargs=None):
     from envs.history import HistoryVecEnv
     from envs.sb3_vec import SbarSB3VecEnv
 
-    venv = SbarSB3VecEnv(2, spec.scenario, config)
+    venv = SbarSB3VecEnv(8, spec.scenario, config)   # 8 x n_steps 128 = one minibatch of 1024 when fine-tuned
     if spec.residual_scale:
         from .constrained import ResidualVecEnv
         venv = ResidualVecEnv(venv, spec.residual_scale, spec.residual_base_budget)

@@ -254,7 +254,9 @@ def _reproduce(spec: dict) -> str:
     if spec["action_filter"] or spec["smooth_penalty"]:
         cmd += f" --action-filter {spec['action_filter']:g} --smooth-penalty {spec['smooth_penalty']:g}"
     if spec["imitate"]:
-        cmd += f" --imitate {spec['imitate']} --dagger {spec['dagger']} --imitation-episodes {spec['imitation_episodes']}"
+        cmd += (f" --imitate {spec['imitate']} --dagger {spec['dagger']} --imitation-episodes {spec['imitation_episodes']}"
+                f" --imitation-epochs {spec.get('imitation_epochs', 30)}"
+                f" --imitation-mask {','.join(spec.get('imitation_mask', ('last_d_short',)))}")
     if spec["env_overrides"]:
         cmd += " " + " ".join(f"--env {k}={v}" for k, v in spec["env_overrides"].items())
     if spec["hyperparams_file"]:
@@ -403,6 +405,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     if resume is not None and (out / "lagrange.json").is_file():
         spec["lambda0"] = float(json.loads((out / "lagrange.json").read_text())["lambda"])
     if imitate:
+        spec.update(imitation_epochs=int(imitation_epochs), imitation_mask=tuple(imitation_mask))
         res = _imitation_stage(spec, out, progress, imitation_epochs, tuple(imitation_mask))
         if not spec["timesteps"]:
             return res

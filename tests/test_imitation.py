@@ -194,3 +194,23 @@ def test_train_cli_imitation_dagger_history_then_compare_by_name(tmp_path):
         r = subprocess.run(cmd[:-2] + bad + ["--out", str(tmp_path / "bad")], capture_output=True, text=True)
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
         assert not (tmp_path / "bad").exists()
+
+
+def test_td3_with_filtered_actions_trains_and_runs_the_same_filter(tmp_path):
+    """``train --algo td3 --action-filter 0.5``: the policy applies the filter at inference (its duty is
+    0.5 last duty + 0.5 the network's), read from the metadata."""
+    from policies.rl import RLPolicy
+    from policies.train import train
+
+    res = train("td3", 600, tmp_path, n_envs=8, scenario="nominal", progress=False, action_filter=0.5,
+                smooth_penalty=5.0, eval_every=10**9, checkpoint_every=10**9,
+                hyperparams={"learning_starts": 200, "gradient_steps": 1})
+    pol = RLPolicy(path=res["model"])
+    assert pol.action_filter == 0.5
+    obs = np.zeros((3, OBS_DIM), np.float32)
+    obs[:, OBS_INDEX["last_d_short"]] = [-1.0, 0.0, 1.0]   # last duty 0, 0.5, 1
+    pol.reset(3)
+    raw = RLPolicy(path=res["model"])
+    raw.action_filter = 0.0
+    raw.reset(3)
+    np.testing.assert_allclose(pol.act(obs), 0.5 * np.array([0.0, 0.5, 1.0]) + 0.5 * raw.act(obs), atol=1e-6)
