@@ -387,7 +387,6 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     import importlib.util
 
     import torch
-
     extra = dict(history=history, action_filter=action_filter, smooth_penalty=smooth_penalty, imitate=imitate,
                  dagger=dagger, imitation_episodes=imitation_episodes)
     _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra)

@@ -77,4 +77,4 @@ def test_shipped_learned_policies_have_five_seeds_small_files_and_their_commands
         for m in metas:
             assert (m["imitation"] if kind == "imitation" else m["lagrangian"])   # imitation: a clone, not constrained RL
             assert m["reproduce"].startswith("dronewpt train --algo ppo")
-            assert f"--seed {m['seed']} " in m["reproduce"] and ("--residual" in m["reproduce"]) == (kind == "residual")
+            assert f"--seed {m['seed']} " in m["reproduce"] and ("--residual" in m["reproduce"]) == (kind in ("residual", "imitation"))
