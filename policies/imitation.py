@@ -17,6 +17,9 @@ Gaussian's mean on (observation history, teacher action):
   budgeted model-based duty, as ``train --residual`` does (the base carries the timing of the
   RM -> SM manoeuvre to the period; the student learns where the teacher departs from it), run by
   :class:`policies.residual.ResidualPolicy`;
+* **filtered student** (``action_filter`` alpha > 0): the student's duty passes the low-pass of
+  :mod:`policies.smoothing` (at inference too); its label is the output the filter turns into the
+  teacher's duty;
 * **privileged teacher** (``privileged:NAME``; Chen et al. 2019, "Learning by cheating"): the teacher
   sees the current fields of the observation as they are *now* and without sensor noise (from the
   env's ``info``), the student the delayed, noisy observation of the scenario (``sense_delay``: the
@@ -70,6 +73,7 @@ class ImitationSpec:
     residual_scale: float = 0.0
     residual_base_budget: float = 0.0
     masked: tuple = ("last_d_short",)
+    action_filter: float = 0.0
 
     def __post_init__(self):
         from mission_sim.contract import history_obs_dim
@@ -83,6 +87,9 @@ class ImitationSpec:
                 raise ValueError(f"{name}={v!r} is invalid; valid range: integer >= {lo}")
         if not (np.isfinite(self.residual_scale) and 0.0 <= self.residual_scale <= 1.0):
             raise ValueError(f"residual_scale={self.residual_scale!r} is invalid; valid range: [0, 1] (0: no residual)")
+        if not (np.isfinite(self.action_filter) and 0.0 <= self.action_filter < 1.0) or \
+                (self.action_filter and self.residual_scale):
+            raise ValueError(f"action_filter={self.action_filter!r} is invalid; valid range: [0, 1), 0 with a residual")
         if not (np.isfinite(self.learning_rate) and self.learning_rate > 0):
             raise ValueError(f"learning_rate={self.learning_rate!r} is invalid; valid range: (0, inf)")
 
@@ -159,12 +166,28 @@ def collect(spec: ImitationSpec, seed: int, student=None, beta: float = 1.0, con
     for _ in range(venv.config.n_steps):
         d_t = np.asarray(teacher.act(privileged_obs(obs, info) if spec.privileged else obs), dtype=float).reshape(n)
         X.append(x)
-        Y.append(base.label(d_t))
-        d = d_t if student is None else np.where(by_teacher, d_t, base.duty(student(x)))
+        Y.append(base.label(_unfiltered(obs, d_t, spec.action_filter)))
+        d_s = None if student is None else _filtered(obs, base.duty(student(x)), spec.action_filter)
+        d = d_t if student is None else np.where(by_teacher, d_t, d_s)
         obs, _, _, _, info = venv.step(duty_to_action(d)[:, None].astype(np.float32))
         x = hist.push(base.row(obs))
     venv.close()
     return np.concatenate(X), np.concatenate(Y).astype(np.float32)
+
+
+def _unfiltered(obs, d_teacher, alpha: float):
+    """The network output that the low-pass ``alpha`` (:mod:`policies.smoothing`) turns into ``d_teacher``."""
+    if not alpha:
+        return d_teacher
+    from .smoothing import _last_duty
+    return np.clip((d_teacher - alpha * _last_duty(obs)) / (1.0 - alpha), 0.0, 1.0)
+
+
+def _filtered(obs, d, alpha: float):
+    if not alpha:
+        return d
+    from .smoothing import filtered_duty
+    return filtered_duty(obs, d, alpha)
 
 
 class _Base:
@@ -286,6 +309,7 @@ def _save(model, venv, spec: ImitationSpec, out: Path, name: str, log: list, bas
     venv.save(str(out / "vecnormalize.pkl"))
     meta = {"algo": "ppo", "discrete": False, "scenario": spec.scenario, "seed": spec.seed, "timesteps": 0,
             "control_period_s": float(venv.get_attr("config")[0].dt_s), "history": spec.history,
+            "action_filter": spec.action_filter,
             "obs_dim": int(venv.observation_space.shape[0]),
             "policy_kwargs": {"net_arch": list(spec.net_arch), "log_std_init": spec.log_std_init},
             "obs_norm": {"mean": venv.obs_rms.mean.tolist(), "var": venv.obs_rms.var.tolist(),

@@ -271,7 +271,8 @@ def _meta(spec: dict, venv, lag, probe_dt: float) -> dict:
         "seed": spec["seed"], "timesteps": spec["timesteps"], "n_envs": spec["n_envs"], "vec": spec["vec"],
         "control_period_s": probe_dt, "obs_dim": int(venv.observation_space.shape[0]),
         "hyperparams": {k: (v if k != "action_noise" else repr(v)) for k, v in hp.items() if k != "policy_kwargs"},
-        "history": spec["history"], "action_filter": spec["action_filter"], "smooth_penalty": spec["smooth_penalty"], "policy_kwargs": hp.get("policy_kwargs", {}),
+        "history": spec["history"], "action_filter": spec["action_filter"], "smooth_penalty": spec["smooth_penalty"],
+        "policy_kwargs": hp.get("policy_kwargs", {}),
         "hyperparams_file": spec["hyperparams_file"], "env_config": config_dict(spec["config"]),
         "env_overrides": spec["env_overrides"], "cost": spec["cost"],
         "budget": spec["budget"], "budget_source": spec["budget_source"],
@@ -336,11 +337,12 @@ def _imitation_stage(spec: dict, out: Path, progress: bool, epochs: int, masked:
                           dagger=spec["dagger"], episodes=spec["imitation_episodes"], epochs=int(epochs),
                           seed=spec["seed"], net_arch=tuple(pk.get("net_arch", (64, 64))),
                           residual_scale=spec["residual_scale"] if spec["residual"] else 0.0,
-                          residual_base_budget=spec["residual_base_budget"], masked=masked)
+                          residual_base_budget=spec["residual_base_budget"], masked=masked,
+                          action_filter=spec["action_filter"])
     base = {"env_id": spec["env_id"], "n_envs": spec["n_envs"], "vec": spec["vec"], "cost": spec["cost"],
             "env_config": config_dict(spec["config"]), "env_overrides": spec["env_overrides"],
             "hyperparams": {k: v for k, v in spec["hp"].items() if k != "policy_kwargs"}, "residual": None,
-            "lagrangian": None, "budget": None, "action_filter": 0.0, "reproduce": _reproduce({**spec, "timesteps": 0})}
+            "lagrangian": None, "budget": None, "reproduce": _reproduce({**spec, "timesteps": 0})}
     res = imitate(ispec, out, name=spec["name"], config=spec["config"], progress=progress, base_meta=base,
                   ppo_kwargs={k: v for k, v in spec["hp"].items() if k != "policy_kwargs"})
     (out / "imitation_stage.json").write_text(json.dumps(json.loads(res["meta"].read_text())["imitation"]))
