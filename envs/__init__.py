@@ -24,6 +24,7 @@ Modules, in the order data flows (gym-electric-motor style: the parts composed i
 ``charging``       the single envs (:class:`SbarChargingEnv`, discrete ON-OFF variant)
 ``vector``         the batched vector envs (autoreset ``NEXT_STEP``, ``num_threads``)
 ``sb3_vec``        a stable-baselines3 ``VecEnv`` over the batched env (``rl`` extra)
+``history``        a short history of observations (frame stack) for learned policies, SB3 wrapper
 ``sensing``        the sensing delay of the observation's current fields (scenario sense_delay)
 ``detuned``        detuned tanks (scenario detuned): complex-envelope plans and steady state
 ``rollout``        fixed duty sequences replayed on one seeded window, many at once (the oracle's)

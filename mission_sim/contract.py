@@ -29,6 +29,13 @@ Action: the short duty ``d_short`` in [0, 1] (0 = rectification mode, 1 = short 
 for one control period. Environments expose it as ``a in [-1, 1]`` with ``d = (a + 1) / 2``
 (:func:`action_to_duty`); discrete environments as {0: RM, 1: SM}.
 
+History (frame stack, issue 21): a learned policy may see the last ``history = K`` observations
+instead of one (``dronewpt train --history K``), oldest first, flattened to ``K * OBS_DIM`` values
+(:func:`history_obs_dim`); a window starts with ``K`` copies of its first observation. Nothing else
+in the contract changes: the envs keep returning one observation, the stack is a wrapper
+(:mod:`envs.history`) and the policy keeps its own (:class:`policies.rl.RLPolicy`). It lets a policy
+see the phase of the 4 kHz ringing and a sensing delay, which one frame does not show.
+
 Optional fast path: a policy may also offer ``kernel()`` returning ``(fn, params, state)`` (or None):
 ``fn`` a numba-compiled function of the signature :data:`POLICY_KERNEL_SIGNATURE`, ``d = fn(obs,
 params, state)``, doing what ``act`` does for one receiver (``obs`` one normalised row, shape
@@ -49,7 +56,7 @@ from wpt_receiver import TABLE_I, LinkParams
 
 __all__ = ["ObsField", "OBS_FIELDS", "OBS_DIM", "OBS_INDEX", "normalise_obs", "normalise_obs_row", "denormalise_obs",
            "denormalise_obs_field", "action_to_duty", "duty_to_action", "PolicyContext", "Policy",
-           "POLICY_KERNEL_SIGNATURE"]
+           "POLICY_KERNEL_SIGNATURE", "MAX_HISTORY", "history_obs_dim"]
 
 #: numba signature of a policy's optional compiled step ``d = fn(obs, params, state)`` (module notes)
 POLICY_KERNEL_SIGNATURE = "float64(float64[::1], float64[::1], float64[::1])"
@@ -79,6 +86,17 @@ OBS_INDEX = {f.name: i for i, f in enumerate(OBS_FIELDS)}
 _LO = np.array([f.lo for f in OBS_FIELDS])
 _HI = np.array([f.hi for f in OBS_FIELDS])
 _INV_SPAN = 1.0 / (_HI - _LO)
+
+
+#: the longest observation history (frame stack) a learned policy may ask for [control periods]
+MAX_HISTORY = 32
+
+
+def history_obs_dim(history: int) -> int:
+    """Width of a stacked observation of ``history`` frames (``history * OBS_DIM``); ValueError out of 1..MAX_HISTORY."""
+    if int(history) != history or not 1 <= history <= MAX_HISTORY:
+        raise ValueError(f"history={history!r} is invalid; valid range: integer 1..{MAX_HISTORY}")
+    return int(history) * OBS_DIM
 
 
 _LO_INV = tuple(zip(_LO.tolist(), _INV_SPAN.tolist()))

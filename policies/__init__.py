@@ -2,8 +2,8 @@
 
 Modules: ``classical`` (step, ramp, model_based), ``kernels`` (their compiled per-step functions for
 the mission's fast path; numba, imported on demand), ``onoff``, ``online``, ``budgeted``,
-``random_policy``, ``mpc``, ``oracle``, ``rl`` / ``residual`` / ``constrained`` / ``train`` / ``callbacks`` /
-``hyperparams`` (RL, needs stable-baselines3), ``inference``, ``compare``, ``stats``.
+``random_policy``, ``mpc``, ``oracle``, ``rl`` / ``residual`` / ``constrained`` / ``imitation`` / ``smoothing`` /
+``train`` / ``callbacks`` / ``hyperparams`` (RL, needs stable-baselines3), ``inference``, ``compare``, ``stats``.
 
 >>> from policies import make
 >>> pol = make("model_based")
@@ -22,9 +22,11 @@ Modules, from the classical controllers to learning and comparing:
 ``inference``      the SB3 actor exported to numpy for fast deterministic inference
 ``residual``       model-based duty plus a bounded learned correction
 ``constrained``    Lagrangian cost penalty and residual action space on SB3
+``imitation``      behaviour cloning / DAgger of a (privileged) teacher into an SB3 PPO actor
+``smoothing``      low-pass filtered duty and duty-change penalty (SAC / TD3 / PPO train options)
 ``callbacks``      SB3 callbacks of ``train``: progress bar with return and cost, evaluation
 ``hyperparams``    rl-baselines3-zoo style hyperparameter files (YAML / JSON)
-``train``          ``dronewpt train``: PPO / SAC / DQN on the batched env, outputs and metadata
+``train``          ``dronewpt train``: PPO / SAC / TD3 / DQN on the batched env, imitation, outputs and metadata
 ``stats``          bootstrap and Student's t intervals, paired differences
 ``compare``        ``dronewpt compare``: every policy on the same seeded windows, with statistics
 ``pretrained/``    shipped models (``.zip`` + metadata ``.json``); ``hyperparams/`` their settings
@@ -67,6 +69,22 @@ def _ppo_lagrangian(ctx, **kwargs):
     return pol
 
 
+def _imitation(ctx, **kwargs):
+    """The shipped imitation student (a PPO actor trained by ``train --imitate``, :mod:`policies.imitation`)."""
+    require_sb3()
+    from pathlib import Path
+
+    from .rl import RLPolicy, load_meta
+    kwargs = {"path": Path(__file__).parent / "pretrained" / "imitation_s0.zip", **kwargs}
+    if load_meta(kwargs["path"]).get("residual"):   # a residual student corrects the budgeted model-based duty
+        from .residual import ResidualPolicy
+        pol = ResidualPolicy(ctx, **kwargs)
+    else:
+        pol = RLPolicy(ctx, **kwargs)
+    pol.name = "imitation"
+    return pol
+
+
 def _residual(ctx, **kwargs):
     require_sb3()
     from .residual import ResidualPolicy
@@ -97,9 +115,10 @@ _REGISTRY: dict[str, Callable[..., Policy]] = {
     "residual": _residual,
     "model_based_budget": _budgeted,
     "mpc": _mpc,
+    "imitation": _imitation,
 }
 #: names that take a model file as ``name:PATH``
-_WITH_PATH = ("rl", "ppo_lagrangian", "residual")
+_WITH_PATH = ("rl", "ppo_lagrangian", "residual", "imitation")
 
 
 def register(name: str, factory: Callable[..., Policy]) -> None:

@@ -50,7 +50,7 @@ NO_GAP = ("step", "hysteresis", "random", "rl")
 REFERENCE = "model_based"
 DEFAULT_EPISODES = 100
 #: learned kinds shipped with several training seeds (``policies/pretrained/<prefix>_s<k>.zip``)
-SHIPPED_SEEDS = {"ppo_lagrangian": "ppo_lagrangian_s", "residual": "residual_s"}
+SHIPPED_SEEDS = {"ppo_lagrangian": "ppo_lagrangian_s", "residual": "residual_s", "imitation": "imitation_s"}
 
 
 def shipped_seed_groups() -> dict:

@@ -141,7 +141,7 @@ def export_actor(model) -> NumpyActor | None:
     if isinstance(policy, ActorCriticPolicy):
         extractor = getattr(policy, "pi_features_extractor", policy.features_extractor)
         return _export_actor_critic(policy) if _flat_box_obs(policy, extractor) else None
-    if hasattr(policy, "actor") and hasattr(policy.actor, "mu"):
+    if hasattr(policy, "actor") and hasattr(policy.actor, "latent_pi"):   # SAC (TD3's actor: predict)
         return _export_sac(policy)
     if hasattr(policy, "q_net") and hasattr(policy.q_net, "q_net"):
         return _export_dqn(policy)

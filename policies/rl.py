@@ -28,7 +28,8 @@ __all__ = ["RLPolicy", "PRETRAINED", "PRETRAINED_LAGRANGIAN", "load_meta", "ALGO
 
 PRETRAINED = Path(__file__).parent / "pretrained" / "ppo_sbar.zip"
 PRETRAINED_LAGRANGIAN = Path(__file__).parent / "pretrained" / "ppo_lagrangian_s0.zip"   # seeds _s0.._s4 shipped
-ALGOS = ("ppo", "sac", "dqn")
+ALGOS = ("ppo", "sac", "td3", "dqn")
+
 
 
 def load_meta(path) -> dict:
@@ -86,18 +87,24 @@ class RLPolicy:
         self.obs_dim = int(self.meta.get("obs_dim") or (self._actor.layers[0][0].shape[0] if fast_actor is not None
                                                         else self.model.observation_space.shape[0]))
         self.name = f"rl_{self.meta['algo']}" if path is not None else "rl"
+        self.history = int(self.meta.get("history") or 1)   # frame stack (envs.history): the policy keeps its own
+        self._hist = None
+        self.action_filter = float(self.meta.get("action_filter") or 0.0)   # low-pass on the duty (policies.smoothing)
 
     @property
     def model(self):
         """The stable-baselines3 model (loaded on first use: ``predict``, or an actor not exportable)."""
         if self._model is None:
             import stable_baselines3 as sb3
-            cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "dqn": sb3.DQN}[self.meta["algo"]]
+            cls = getattr(sb3, self.meta["algo"].upper())
             self._model = cls.load(str(self.path), device="cpu")
         return self._model
 
     def reset(self, n: int = 1) -> None:
         self.n = int(n)
+        if self.history > 1:
+            from envs.history import ObsHistory
+            self._hist = ObsHistory(self.history)
 
     def normalise(self, obs) -> np.ndarray:
         o = np.atleast_2d(np.asarray(obs, dtype=np.float32))[:, :self.obs_dim]
@@ -106,6 +113,11 @@ class RLPolicy:
         return np.minimum(np.maximum((o - self._mean) * self._scale, -self._clip), self._clip)  # np.clip: slow at n=1
 
     def act(self, obs):
+        raw = obs
+        if self.history > 1:
+            if self._hist is None:
+                self.reset(len(np.atleast_2d(obs)))
+            obs = self._hist.push(obs)
         o = self.normalise(obs)
         if self._actor is not None:
             a = self._actor.act(o)
@@ -114,4 +126,7 @@ class RLPolicy:
         a = np.asarray(a).reshape(len(o), -1)[:, 0]
         if self.discrete:
             return a.astype(float)
+        if self.action_filter:
+            from .smoothing import filtered_duty
+            return filtered_duty(raw, action_to_duty(a), self.action_filter)
         return action_to_duty(a)

@@ -46,6 +46,9 @@ DEFAULT_HYPERPARAMS = {
                 ent_coef=0.0, policy_kwargs=dict(net_arch=[64, 64], log_std_init=-1.5)),
     "sac": dict(learning_rate=3e-4, buffer_size=100_000, batch_size=256, gamma=0.98, learning_starts=1000,
                 train_freq=1, gradient_steps=4, policy_kwargs=dict(net_arch=[64, 64])),
+    # TD3 (Fujimoto et al. 2018): exploration noise N(0, 0.1) on the action unless the hyperparameters set one
+    "td3": dict(learning_rate=1e-3, buffer_size=100_000, batch_size=256, gamma=0.98, learning_starts=1000,
+                train_freq=1, gradient_steps=4, policy_kwargs=dict(net_arch=[64, 64])),
     "dqn": dict(learning_rate=5e-4, buffer_size=100_000, batch_size=128, gamma=0.98, learning_starts=1000,
                 exploration_fraction=0.3, target_update_interval=1000, train_freq=1, gradient_steps=4,
                 policy_kwargs=dict(net_arch=[64, 64])),
@@ -116,13 +119,21 @@ def plot_learning_curve(monitor_csv, out_png, title: str, eval_curve=None) -> Pa
     return out_png
 
 
-def _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario):
+def _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra=None):
     import envs
+    from mission_sim.contract import history_obs_dim
 
+    x = extra or {}
     if algo not in ALGOS:
         raise ValueError(f"algo={algo!r} is invalid; valid values: {', '.join(ALGOS)}")
-    if int(timesteps) != timesteps or timesteps < 1:
-        raise ValueError(f"timesteps={timesteps!r} is invalid; valid range: integer >= 1")
+    lo = 0 if x.get("imitate") else 1   # imitation alone: no RL steps
+    if int(timesteps) != timesteps or timesteps < lo:
+        raise ValueError(f"timesteps={timesteps!r} is invalid; valid range: integer >= {lo}")
+    history_obs_dim(x.get("history", 1))
+    if (x.get("history", 1) > 1 or x.get("action_filter") or x.get("smooth_penalty")) and vec != "batched":
+        raise ValueError(f"vec={vec!r} is invalid with history / action smoothing; valid value: batched")
+    if x.get("imitate") and algo != "ppo":
+        raise ValueError(f"algo={algo!r} is invalid with imitate; valid value: ppo (the student is a PPO actor)")
     if int(n_envs) != n_envs or not 1 <= n_envs <= 1024:
         raise ValueError(f"n_envs={n_envs!r} is invalid; valid range: integer 1..1024")
     if vec not in VEC_PATHS:
@@ -153,8 +164,14 @@ def _base_env(spec: dict, n_envs: int, monitor_path, reset_seed=None):
                          reset_seed=reset_seed)
     if reset_seed is None:
         venv.seed(spec["seed"])
+    if spec["action_filter"] or spec["smooth_penalty"]:
+        from .smoothing import SmoothActionVecEnv
+        venv = SmoothActionVecEnv(venv, spec["action_filter"], spec["smooth_penalty"])
     if spec["residual"]:
         venv = ResidualVecEnv(venv, spec["residual_scale"], spec["residual_base_budget"])
+    if spec["history"] > 1:
+        from envs.history import HistoryVecEnv
+        venv = HistoryVecEnv(venv, spec["history"])
     return VecMonitor(venv, None if monitor_path is None else str(monitor_path), info_keywords=EPISODE_KEYS)
 
 
@@ -188,12 +205,15 @@ def _build(spec: dict, out: Path, resume):
         eval_env = CostPenaltyVecEnv(eval_env, 0.0)   # evaluation return is VecMonitor's, unpenalised
     eval_env = VecNormalize(eval_env, training=False,
                             norm_obs=True, norm_reward=False, clip_obs=10.0, gamma=spec["hp"].get("gamma", 0.99))
-    cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "dqn": sb3.DQN}[spec["algo"]]
+    cls = getattr(sb3, spec["algo"].upper())
     if resume is not None:
         venv = VecNormalize.load(str(_checkpoint_pkl(Path(resume))), venv)
         model = cls.load(str(resume), env=venv, device="cpu")
     else:
         venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=spec["hp"].get("gamma", 0.99))
+        if spec["algo"] == "td3" and "action_noise" not in spec["hp"]:
+            from stable_baselines3.common.noise import NormalActionNoise
+            spec["hp"]["action_noise"] = NormalActionNoise(np.zeros(1), 0.1 * np.ones(1))
         model = cls("MlpPolicy", venv, seed=spec["seed"], verbose=0, device="cpu", tensorboard_log=spec["tb"],
                     **spec["hp"])
     return venv, eval_env, model, penalty
@@ -229,6 +249,14 @@ def _reproduce(spec: dict) -> str:
     if spec["residual"]:
         cmd += (f" --residual --residual-scale {spec['residual_scale']:g}"
                 f" --residual-base-budget {spec['residual_base_budget']:g}")
+    if spec["history"] > 1:
+        cmd += f" --history {spec['history']}"
+    if spec["action_filter"] or spec["smooth_penalty"]:
+        cmd += f" --action-filter {spec['action_filter']:g} --smooth-penalty {spec['smooth_penalty']:g}"
+    if spec["imitate"]:
+        cmd += (f" --imitate {spec['imitate']} --dagger {spec['dagger']} --imitation-episodes {spec['imitation_episodes']}"
+                f" --imitation-epochs {spec.get('imitation_epochs', 30)}"
+                f" --imitation-mask {','.join(spec.get('imitation_mask', ('last_d_short',)))}")
     if spec["env_overrides"]:
         cmd += " " + " ".join(f"--env {k}={v}" for k, v in spec["env_overrides"].items())
     if spec["hyperparams_file"]:
@@ -242,7 +270,9 @@ def _meta(spec: dict, venv, lag, probe_dt: float) -> dict:
         "algo": spec["algo"], "env_id": spec["env_id"], "discrete": spec["algo"] == "dqn", "scenario": spec["scenario"],
         "seed": spec["seed"], "timesteps": spec["timesteps"], "n_envs": spec["n_envs"], "vec": spec["vec"],
         "control_period_s": probe_dt, "obs_dim": int(venv.observation_space.shape[0]),
-        "hyperparams": {k: v for k, v in hp.items() if k != "policy_kwargs"}, "policy_kwargs": hp.get("policy_kwargs", {}),
+        "hyperparams": {k: (v if k != "action_noise" else repr(v)) for k, v in hp.items() if k != "policy_kwargs"},
+        "history": spec["history"], "action_filter": spec["action_filter"], "smooth_penalty": spec["smooth_penalty"],
+        "policy_kwargs": hp.get("policy_kwargs", {}),
         "hyperparams_file": spec["hyperparams_file"], "env_config": config_dict(spec["config"]),
         "env_overrides": spec["env_overrides"], "cost": spec["cost"],
         "budget": spec["budget"], "budget_source": spec["budget_source"],
@@ -271,7 +301,7 @@ def _spec(algo, timesteps, o: dict) -> dict:
     import stable_baselines3 as sb3
 
     from .hyperparams import check_hyperparams
-    check_hyperparams(hp, {"ppo": sb3.PPO, "sac": sb3.SAC, "dqn": sb3.DQN}[algo])  # before anything is created
+    check_hyperparams(hp, getattr(sb3, algo.upper()))  # before anything is created
     cfg = env_config(o["env"])
     spec = dict(algo=algo, timesteps=int(timesteps), seed=int(o["seed"]), n_envs=int(o["n_envs"]),
                 scenario=o["scenario"], hp=hp, config=cfg, env_overrides=dict(o["env"] or {}), cost=o["cost"],
@@ -283,7 +313,10 @@ def _spec(algo, timesteps, o: dict) -> dict:
                 eval_every=int(o["eval_every"]), checkpoint_every=int(o["checkpoint_every"]),
                 probe_episodes=int(o["probe_episodes"]), tb=None,
                 env_id=envs.DISCRETE_ENV_ID if algo == "dqn" else envs.ENV_ID,
-                budget=None if o["budget"] is None else float(o["budget"]), budget_source="given")
+                budget=None if o["budget"] is None else float(o["budget"]), budget_source="given",
+                history=int(o.get("history", 1)), action_filter=float(o.get("action_filter", 0.0)),
+                smooth_penalty=float(o.get("smooth_penalty", 0.0)), imitate=o.get("imitate"),
+                dagger=int(o.get("dagger", 0)), imitation_episodes=int(o.get("imitation_episodes", 64)))
     if spec["lagrangian"] and spec["budget"] is None:
         from .constrained import ramp_budget
         spec["budget"] = ramp_budget(spec["scenario"], cfg, spec["cost"])
@@ -291,6 +324,29 @@ def _spec(algo, timesteps, o: dict) -> dict:
     if not spec["lagrangian"]:
         spec["budget_source"] = None
     return spec
+
+
+def _imitation_stage(spec: dict, out: Path, progress: bool, epochs: int, masked: tuple) -> dict:
+    """BC / DAgger of ``spec["imitate"]`` into ``out`` (:func:`policies.imitation.imitate`), the student a
+    PPO actor with the run's hyperparameters (so ``resume`` fine-tunes it); the stage's record is
+    kept in ``imitation_stage.json``."""
+    from .imitation import ImitationSpec, imitate
+
+    pk = dict(spec["hp"].get("policy_kwargs") or {})
+    ispec = ImitationSpec(teacher=spec["imitate"], scenario=spec["scenario"], history=spec["history"],
+                          dagger=spec["dagger"], episodes=spec["imitation_episodes"], epochs=int(epochs),
+                          seed=spec["seed"], net_arch=tuple(pk.get("net_arch", (64, 64))),
+                          residual_scale=spec["residual_scale"] if spec["residual"] else 0.0,
+                          residual_base_budget=spec["residual_base_budget"], masked=masked,
+                          action_filter=spec["action_filter"])
+    base = {"env_id": spec["env_id"], "n_envs": spec["n_envs"], "vec": spec["vec"], "cost": spec["cost"],
+            "env_config": config_dict(spec["config"]), "env_overrides": spec["env_overrides"],
+            "hyperparams": {k: v for k, v in spec["hp"].items() if k != "policy_kwargs"}, "residual": None,
+            "lagrangian": None, "budget": None, "reproduce": _reproduce({**spec, "timesteps": 0})}
+    res = imitate(ispec, out, name=spec["name"], config=spec["config"], progress=progress, base_meta=base,
+                  ppo_kwargs={k: v for k, v in spec["hp"].items() if k != "policy_kwargs"})
+    (out / "imitation_stage.json").write_text(json.dumps(json.loads(res["meta"].read_text())["imitation"]))
+    return res
 
 
 def _written_dirs(dirs: dict) -> dict:
@@ -310,7 +366,9 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
           cost: str = "overshoot", lagrangian: bool = False, budget: float | None = None, lambda_lr: float = 50.0,
           residual: bool = False, residual_scale: float = 0.25, vec: str = "batched", name: str | None = None,
           eval_episodes: int = 32, eval_every: int = 50_000, checkpoint_every: int = 100_000, resume=None,
-          probe_episodes: int = 32, residual_base_budget: float = 0.0) -> dict:
+          probe_episodes: int = 32, residual_base_budget: float = 0.0, history: int = 1, action_filter: float = 0.0,
+          smooth_penalty: float = 0.0, imitate: str | None = None, dagger: int = 0, imitation_episodes: int = 64,
+          imitation_epochs: int = 30, imitation_mask: tuple = ("last_d_short",)) -> dict:
     """Train ``algo`` for ``timesteps`` environment steps; returns a dict of the written paths.
 
     ``env``: EnvConfig / reward-weight overrides (:func:`env_config`); ``cost``: ``overshoot`` or
@@ -320,13 +378,21 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     budgeted model-based controller with ``residual_base_budget`` > 0);
     ``probe_episodes``: the multiplier's cost is measured on this many deterministic windows after
     every rollout (0: on the stochastic rollouts themselves, see :class:`policies.constrained.LagrangeCallback`).
+    ``history``: frame stack of K observations (:mod:`envs.history`); ``action_filter`` /
+    ``smooth_penalty``: low-pass filtered duty / duty-change penalty (:mod:`policies.smoothing`);
+    ``imitate``: first behaviour-clone (``dagger`` > 0: DAgger) the teacher policy of that name
+    (``privileged:NAME``: the teacher sees the present, noise-free currents) on
+    ``imitation_episodes`` windows per iteration, ``imitation_mask`` observation fields hidden from the
+    student (:mod:`policies.imitation`), then fine-tune with
+    PPO (Lagrangian with ``lagrangian``) for ``timesteps`` steps (0: imitation only).
     Deterministic for a given seed on one thread (torch threads set to 1)."""
     import importlib.util
 
     import torch
-
-    _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario)
-    opts = dict(seed=seed, n_envs=n_envs, scenario=scenario, hyperparams=hyperparams,
+    extra = dict(history=history, action_filter=action_filter, smooth_penalty=smooth_penalty, imitate=imitate,
+                 dagger=dagger, imitation_episodes=imitation_episodes)
+    _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra)
+    opts = dict(**extra, seed=seed, n_envs=n_envs, scenario=scenario, hyperparams=hyperparams,
                 hyperparams_file=hyperparams_file, env=env, cost=cost, lagrangian=lagrangian, budget=budget,
                 lambda_lr=lambda_lr, residual=residual, residual_scale=residual_scale,
                 residual_base_budget=residual_base_budget, vec=vec, name=name, eval_episodes=eval_episodes,
@@ -339,6 +405,12 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
         spec["tb"] = str(out / "tb")
     if resume is not None and (out / "lagrange.json").is_file():
         spec["lambda0"] = float(json.loads((out / "lagrange.json").read_text())["lambda"])
+    if imitate:
+        spec.update(imitation_epochs=int(imitation_epochs), imitation_mask=tuple(imitation_mask))
+        res = _imitation_stage(spec, out, progress, imitation_epochs, tuple(imitation_mask))
+        if not spec["timesteps"]:
+            return res
+        resume = res["model"]
     venv, eval_env, model, penalty = _build(spec, out, resume)
     cbs, lag, ev = _callbacks(spec, out, eval_env, penalty, progress)
     todo = spec["timesteps"] - (model.num_timesteps if resume is not None else 0)   # SB3 adds num_timesteps on resume
@@ -348,6 +420,8 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     venv.save(str(out / "vecnormalize.pkl"))
     meta = _meta(spec, venv, lag, float(spec["config"].dt_s))
     meta["final_eval"] = ev.curve[-1] if ev.curve else None
+    if imitate:
+        meta["imitation"] = json.loads((out / "imitation_stage.json").read_text())
     meta_path = zip_path.with_suffix(".json")
     meta_path.write_text(json.dumps(meta, indent=2))
     if (out / "eval" / "best_model.zip").is_file():   # usable as rl:/residual: too (normalisation: the final one)

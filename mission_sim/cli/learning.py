@@ -31,7 +31,7 @@ def _add_train(sub):
                                    "the Monitor CSV (return and cost), evaluation on held-out seeds "
                                    "(best model, curve), checkpoints, TensorBoard logs when installed and a "
                                    "learning curve PNG.")
-    p.add_argument("--algo", choices=("ppo", "sac", "dqn"), required=True)
+    p.add_argument("--algo", choices=("ppo", "sac", "td3", "dqn"), required=True)
     p.add_argument("--timesteps", type=int, required=True, help="environment steps to train for")
     p.add_argument("--out", type=path_arg("--out"), required=True, help="output folder")
     p.add_argument("--seed", type=seed_int(), default=0, help="seed, 0 .. 2^32-1 (default 0)")
@@ -62,6 +62,25 @@ def _add_train(sub):
     p.add_argument("--residual-base-budget", type=float_arg("--residual-base-budget"), default=0.0,
                    help="overshoot budget of the model-based controller the residual corrects (default 0: the "
                         "paper's controller)")
+    p.add_argument("--history", type=int, default=1, metavar="K",
+                   help="frame stack: the policy sees the last K observations (default 1; envs.history)")
+    p.add_argument("--action-filter", type=float_arg("--action-filter"), default=0.0, metavar="ALPHA",
+                   help="low-pass the duty: d = ALPHA d_prev + (1 - ALPHA) d_new, in training and at inference "
+                        "(default 0: off; policies.smoothing)")
+    p.add_argument("--smooth-penalty", type=float_arg("--smooth-penalty"), default=0.0, metavar="W",
+                   help="reward minus W (d - d_prev)^2 per step (default 0: off)")
+    p.add_argument("--imitate", default=None, metavar="TEACHER",
+                   help="behaviour-clone the policy TEACHER first (a policy name: mpc, mpc:0.05, "
+                        "model_based_budget:0.02, ...; privileged:NAME = the teacher sees the present, noise-free "
+                        "currents); --timesteps then counts PPO fine-tuning steps (0: imitation only; "
+                        "policies.imitation)")
+    p.add_argument("--dagger", type=int, default=0, metavar="N",
+                   help="DAgger iterations after behaviour cloning (default 0)")
+    p.add_argument("--imitation-episodes", type=int, default=64, help="windows per imitation iteration (default 64)")
+    p.add_argument("--imitation-epochs", type=int, default=60, help="passes over the data per fit (default 60)")
+    p.add_argument("--imitation-mask", default="last_d_short", metavar="FIELD,...",
+                   help="observation fields hidden from the student (default last_d_short; add i2_amp_a,"
+                        "battery_current_a,rect_current_a for a feed-forward student; '' for none)")
     p.add_argument("--eval-every", type=int, default=50_000, help="env steps between evaluations (default 50000)")
     p.add_argument("--eval-episodes", type=int, default=32, help="held-out evaluation windows (default 32)")
     p.add_argument("--checkpoint-every", type=int, default=100_000, help="env steps between checkpoints")
@@ -85,8 +104,30 @@ def _env_overrides(items) -> dict:
 
 
 def _check_train(args):
-    if args.timesteps < 1:
-        raise CliError(f"--timesteps {args.timesteps} is invalid; valid range: >= 1")
+    lo = 0 if args.imitate else 1
+    if args.timesteps < lo:
+        raise CliError(f"--timesteps {args.timesteps} is invalid; valid range: >= {lo}")
+    from mission_sim.contract import MAX_HISTORY
+    if not 1 <= args.history <= MAX_HISTORY:
+        raise CliError(f"--history {args.history} is invalid; valid range: 1..{MAX_HISTORY}")
+    for flag, v in (("--dagger", args.dagger), ("--imitation-episodes", args.imitation_episodes - 1),
+                    ("--imitation-epochs", args.imitation_epochs - 1)):
+        if v < 0:
+            raise CliError(f"{flag} {v + (flag != '--dagger')} is invalid; valid range: >= {int(flag != '--dagger')}")
+    if not 0.0 <= args.action_filter < 1.0:
+        raise CliError(f"--action-filter {args.action_filter} is invalid; valid range: [0, 1)")
+    if args.smooth_penalty < 0.0:
+        raise CliError(f"--smooth-penalty {args.smooth_penalty} is invalid; valid range: >= 0")
+    from mission_sim.contract import OBS_INDEX
+    for f in (f.strip() for f in args.imitation_mask.split(",") if f.strip()):
+        if f not in OBS_INDEX:
+            raise CliError(f"--imitation-mask {f!r} is invalid; valid values: {', '.join(OBS_INDEX)}")
+    if args.imitate is not None:
+        from policies import available
+        teacher = args.imitate[len("privileged:"):] if args.imitate.startswith("privileged:") else args.imitate
+        if teacher.split(":", 1)[0] not in available():
+            raise CliError(f"--imitate {args.imitate!r} is invalid; valid values: a policy name ({', '.join(available())}"
+                           "), optionally privileged:NAME")
     if not 1 <= args.n_envs <= 1024:
         raise CliError(f"--n-envs {args.n_envs} is invalid; valid range: 1..1024")
     for flag, v in (("--eval-every", args.eval_every), ("--eval-episodes", args.eval_episodes),
@@ -113,7 +154,7 @@ def _cmd_train(args) -> int:
         import stable_baselines3 as sb3
 
         from policies.hyperparams import load_hyperparams
-        load_hyperparams(args.hyperparams, {"ppo": sb3.PPO, "sac": sb3.SAC, "dqn": sb3.DQN}[args.algo])
+        load_hyperparams(args.hyperparams, getattr(sb3, args.algo.upper()))
     prepare_out_dir(args.out)
     from policies.train import train
     try:
@@ -122,7 +163,11 @@ def _cmd_train(args) -> int:
                     lagrangian=args.lagrangian, budget=args.budget, lambda_lr=args.lambda_lr, residual=args.residual,
                     residual_scale=args.residual_scale, eval_every=args.eval_every,
                     eval_episodes=args.eval_episodes, checkpoint_every=args.checkpoint_every, resume=args.resume,
-                    probe_episodes=args.probe_episodes, residual_base_budget=args.residual_base_budget)
+                    probe_episodes=args.probe_episodes, residual_base_budget=args.residual_base_budget,
+                    history=args.history, action_filter=args.action_filter, smooth_penalty=args.smooth_penalty,
+                    imitate=args.imitate, dagger=args.dagger, imitation_episodes=args.imitation_episodes,
+                    imitation_epochs=args.imitation_epochs,
+                    imitation_mask=tuple(f.strip() for f in args.imitation_mask.split(",") if f.strip()))
     except ValueError as exc:
         raise CliError(str(exc)) from None
     for key, path in res.items():
@@ -190,7 +235,7 @@ def sb3_installed() -> bool:
     return importlib.util.find_spec("stable_baselines3") is not None
 
 
-_SB3_POLICIES = ("rl", "ppo_lagrangian", "residual")
+_SB3_POLICIES = ("rl", "ppo_lagrangian", "residual", "imitation")
 
 
 def _rl_or_skip(pols: tuple, explicit: bool) -> tuple:

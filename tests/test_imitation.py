@@ -1,0 +1,216 @@
+"""Issue 21: frame stack, privileged observation, smoothed actions, imitation of a teacher."""
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+from mission_sim.contract import OBS_DIM, OBS_INDEX, history_obs_dim  # noqa: E402
+
+
+def _cfg(n_steps=40):
+    from policies.train import env_config
+    return env_config({"n_steps": n_steps})
+
+
+def test_history_obs_dim_and_bad_values():
+    assert history_obs_dim(1) == OBS_DIM and history_obs_dim(4) == 4 * OBS_DIM
+    for bad in (0, 33, 2.5):
+        with pytest.raises(ValueError, match="history"):
+            history_obs_dim(bad)
+
+
+def test_frame_stack_equals_last_k_single_observations_across_autoreset():
+    """The stacked observation is the last K observations of the same window, oldest first (K copies
+    of the first one at a window's start), terminal observations included."""
+    from envs.history import HistoryVecEnv
+    from envs.sb3_vec import SbarSB3VecEnv
+
+    k, n, T = 3, 4, 12
+    plain = SbarSB3VecEnv(n, "random", _cfg(T))
+    stacked = HistoryVecEnv(SbarSB3VecEnv(n, "random", _cfg(T)), k)
+    plain.seed(5)
+    stacked.venv.seed(5)
+    window = [[o] for o in plain.reset()]
+    s = stacked.reset()
+    rng = np.random.default_rng(0)
+    n_done = 0
+    for _ in range(2 * T + 3):
+        past = [np.stack(([w[0]] * k + w)[-k:]) for w in window]
+        assert np.array_equal(s, np.stack([p.reshape(-1) for p in past]))
+        a = rng.uniform(-1, 1, (n, 1)).astype(np.float32)
+        o, _, done, infos = plain.step(a)
+        s, _, done2, infos2 = stacked.step(a)
+        assert np.array_equal(done, done2)
+        for i in range(n):
+            if done[i]:
+                n_done += 1
+                term = np.stack(([window[i][0]] * k + window[i] + [infos[i]["terminal_observation"]])[-k:])
+                assert np.array_equal(infos2[i]["terminal_observation"], term.reshape(-1))
+                window[i] = [o[i]]
+            else:
+                window[i].append(o[i])
+    assert n_done == 2 * n   # two autoresets of every window were checked
+    assert s.shape == (n, k * OBS_DIM)
+
+
+def test_privileged_observation_is_the_undelayed_one():
+    """With a sensing delay of D periods the privileged current fields at step k equal the observed
+    ones at step k + D (the observation's noise aside: I2 is compared within the sensor noise)."""
+    from envs import SbarChargingVectorEnv
+    from policies.imitation import privileged_obs
+
+    delay = 2
+    venv = SbarChargingVectorEnv(num_envs=3, scenario={"name": "d", "sense_delay_steps": (delay, delay)})
+    obs, info = venv.reset(seed=3)
+    priv, seen = [], []
+    for _ in range(30):
+        priv.append(privileged_obs(obs, info))
+        seen.append(obs.copy())
+        obs, _, _, _, info = venv.step(np.full((3, 1), -0.6, np.float32))
+    for f in ("battery_current_a", "rect_current_a"):
+        j = OBS_INDEX[f]
+        for k in range(5, 25):
+            np.testing.assert_allclose(priv[k][:, j], seen[k + delay][:, j], atol=2e-6)
+            assert not np.allclose(priv[k][:, j], seen[k][:, j]) or np.allclose(priv[k][:, j], priv[k - delay][:, j])
+    j = OBS_INDEX["i2_amp_a"]   # noise-free in the privileged view: within the sensor noise (0.1 A ~ 0.004 normalised)
+    assert np.max(np.abs(np.array(priv[5:25])[:, :, j] - np.array(seen[5 + delay:25 + delay])[:, :, j])) < 0.05
+
+
+def test_action_filter_and_smoothness_penalty_are_exact():
+    from envs.sb3_vec import SbarSB3VecEnv
+    from policies.smoothing import SmoothActionVecEnv, filtered_duty
+
+    alpha, w, n = 0.6, 3.0, 4
+    base = SbarSB3VecEnv(n, "nominal", _cfg())
+    raw = SbarSB3VecEnv(n, "nominal", _cfg())
+    env = SmoothActionVecEnv(base, alpha, w)
+    base.seed(1)
+    raw.seed(1)
+    obs, obs_raw = env.reset(), raw.reset()
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        a = rng.uniform(-1, 1, (n, 1)).astype(np.float32)
+        last = (obs[:, OBS_INDEX["last_d_short"]] + 1.0) / 2.0
+        d = alpha * last + (1 - alpha) * (a[:, 0] + 1.0) / 2.0
+        np.testing.assert_allclose(filtered_duty(obs, (a[:, 0] + 1) / 2, alpha), d, atol=1e-7)
+        obs, r, _, _ = env.step(a)
+        obs_raw, r_raw, _, _ = raw.step((2 * d - 1)[:, None].astype(np.float32))
+        np.testing.assert_allclose(obs[:, OBS_INDEX["last_d_short"]], obs_raw[:, OBS_INDEX["last_d_short"]], atol=1e-6)
+        np.testing.assert_allclose(r, r_raw - w * (d - last) ** 2, rtol=1e-5, atol=1e-5)
+    with pytest.raises(ValueError, match="action_filter"):
+        SmoothActionVecEnv(base, 1.0)
+
+
+FEEDFORWARD = ("last_d_short", "i2_amp_a", "battery_current_a", "rect_current_a")
+
+
+@pytest.fixture(scope="module")
+def clone(tmp_path_factory):
+    """BC (16 windows, seeds 10000+) of model_based_budget:0.02 as a residual on model_based_budget:0.01."""
+    from policies.imitation import ImitationSpec, imitate
+
+    spec = ImitationSpec(teacher="model_based_budget:0.02", scenario="nominal", episodes=16, epochs=60,
+                         batch_size=256, residual_scale=0.1, residual_base_budget=0.01, masked=FEEDFORWARD)
+    out = tmp_path_factory.mktemp("clone")
+    return spec, imitate(spec, out, progress=False)
+
+
+def test_imitation_reproduces_its_teacher(clone):
+    """Teacher-forced: the student's duty is within 0.005 RMS of the teacher's on 4 unseen windows;
+    closed loop on 16 unseen windows (seeds 1000+): every window in short mode, overshoot within 1.5
+    points of the teacher's, and energy after the stop closer to the teacher's than its base is (at
+    least halfway from the base to the teacher)."""
+    from dataclasses import replace
+
+    from policies.compare import run_policy
+    from policies.imitation import collect
+    from policies import make
+
+    spec, res = clone
+    pol = make(f"residual:{res['model']}")
+    X, Y = collect(replace(spec, episodes=4), 5000)   # teacher's own windows, not trained on
+    rows = X.reshape(300, 4, -1)
+    pol.rl.reset(4)
+    a = np.concatenate([2.0 * pol.rl.act(r) - 1.0 for r in rows])
+    duty_rms = spec.residual_scale * np.sqrt(np.mean((np.clip(a, -1, 1) - Y) ** 2))
+    assert duty_rms < 0.005
+    m = {p: run_policy(p, "nominal", 16, 1000).metrics for p in
+         (f"residual:{res['model']}", "model_based_budget:0.02", "model_based_budget:0.01")}
+    s, t, b = (m[k] for k in m)
+    assert s["reached_short_mode"].min() == 1.0
+    assert abs(s["overshoot_pct"].mean() - t["overshoot_pct"].mean()) < 1.5
+    e_s, e_t, e_b = (x["energy_after_stop_j"].mean() for x in (s, t, b))
+    assert abs(e_s - e_t) < 0.5 * abs(e_b - e_t)
+
+
+def test_clone_metadata_and_sb3_load(clone):
+    """The clone is a plain SB3 PPO zip + VecNormalize: ``PPO.load`` gives the same actions as the policy."""
+    import json
+
+    import stable_baselines3 as sb3
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from envs.sb3_vec import SbarSB3VecEnv
+    from policies.constrained import ResidualVecEnv
+
+    spec, res = clone
+    meta = json.loads(res["meta"].read_text())
+    assert meta["residual"]["scale"] == 0.1 and meta["imitation"]["teacher"] == "model_based_budget:0.02"
+    assert meta["obs_dim"] == 9 and meta["history"] == 1
+    venv = VecNormalize.load(str(res["vecnormalize"]), ResidualVecEnv(SbarSB3VecEnv(2, "nominal"), 0.1, 0.01))
+    venv.training = False
+    model = sb3.PPO.load(str(res["model"]), device="cpu")
+    obs = venv.reset()
+    a_sb3 = model.predict(obs, deterministic=True)[0][:, 0]
+    from policies.rl import RLPolicy
+    rl = RLPolicy(path=res["model"], residual=True)
+    rl.reset(2)
+    np.testing.assert_allclose(2 * rl.act(venv.unnormalize_obs(obs)) - 1, np.clip(a_sb3, -1, 1), atol=1e-5)
+
+
+def test_train_cli_imitation_dagger_history_then_compare_by_name(tmp_path):
+    """``train --imitate ... --dagger 1 --history 2 --timesteps 0`` writes a model that ``compare`` runs as
+    ``imitation:PATH`` (the frame stack kept by the policy); bad options exit 2 with one line."""
+    import json
+    import subprocess
+    import sys
+
+    out = tmp_path / "imit"
+    cmd = [sys.executable, "-m", "mission_sim.cli", "train", "--algo", "ppo", "--timesteps", "0", "--imitate",
+           "model_based", "--dagger", "1", "--history", "2", "--imitation-episodes", "2", "--imitation-epochs", "1",
+           "--scenario", "nominal", "--no-progress", "--out", str(out)]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    meta = json.loads((out / "ppo_sbar.json").read_text())
+    assert meta["history"] == 2 and meta["obs_dim"] == 16 and len(meta["imitation"]["iterations"]) == 2
+    r = subprocess.run([sys.executable, "-m", "mission_sim.cli", "compare", "--policies",
+                        f"model_based,imitation:{out / 'ppo_sbar.zip'}", "--scenarios", "nominal", "--episodes", "2",
+                        "--no-plot", "--no-frontier", "--format", "json", "--no-progress"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    rows = json.loads(r.stdout)["rows"]
+    assert len(rows) == 2 and all(np.isfinite(row["return"]) for row in rows)
+    for bad in (["--history", "0"], ["--imitate", "nonsense"], ["--action-filter", "1.5"]):
+        r = subprocess.run(cmd[:-2] + bad + ["--out", str(tmp_path / "bad")], capture_output=True, text=True)
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert not (tmp_path / "bad").exists()
+
+
+def test_td3_with_filtered_actions_trains_and_runs_the_same_filter(tmp_path):
+    """``train --algo td3 --action-filter 0.5``: the policy applies the filter at inference (its duty is
+    0.5 last duty + 0.5 the network's), read from the metadata."""
+    from policies.rl import RLPolicy
+    from policies.train import train
+
+    res = train("td3", 600, tmp_path, n_envs=8, scenario="nominal", progress=False, action_filter=0.5,
+                smooth_penalty=5.0, eval_every=10**9, checkpoint_every=10**9,
+                hyperparams={"learning_starts": 200, "gradient_steps": 1})
+    pol = RLPolicy(path=res["model"])
+    assert pol.action_filter == 0.5
+    obs = np.zeros((3, OBS_DIM), np.float32)
+    obs[:, OBS_INDEX["last_d_short"]] = [-1.0, 0.0, 1.0]   # last duty 0, 0.5, 1
+    pol.reset(3)
+    raw = RLPolicy(path=res["model"])
+    raw.action_filter = 0.0
+    raw.reset(3)
+    np.testing.assert_allclose(pol.act(obs), 0.5 * np.array([0.0, 0.5, 1.0]) + 0.5 * raw.act(obs), atol=1e-6)
