@@ -14,10 +14,11 @@ shared machine than wall time), goal >= 3000x for model_based and >= 1000x for t
 policy (``rl``: the pre-trained PPO, actor evaluated in numpy). Medians and ranges over the
 repeats; ``os.getloadavg()`` before and after.
 
-Reference path, same run: each policy is also run with ``compiled=False`` (the pure-Python loop;
-the Lm table is compiled on both paths since issue 22, so ``rl``, which has no compiled policy
-kernel, runs the same code on both), alternating with the default runs, and the
-ratio of the median CPU times is printed (``ref cpu/cpu``).
+Python-policy path, same run: each policy is also run with ``compiled=False`` (its Python ``act``
+called whenever the compiled loop asks for a duty; since issue 22 the loop's physics exists only
+compiled, so this is what RL and other Python policies get; ``rl``, which has no compiled policy
+kernel, runs the same code on both), alternating with the default runs, and the ratio of the
+median CPU times is printed (``py cpu/cpu``).
 
     python benchmarks/bench_mission.py [--policies model_based rl step ramp] [--repeat 3] [--no-single-rate]
 """
@@ -54,9 +55,9 @@ def single_rate_wall_per_sim_s(name: str) -> float:
 
 
 def _measure(cfg, name, repeat):
-    """Default (compiled when it applies) and reference (``compiled=False``) runs, alternating."""
+    """Default (the policy's kernel when it has one) and Python-policy (``compiled=False``) runs, alternating."""
     walls, cpus, ref_cpus = [], [], []
-    run_mission(cfg, _policy(cfg, name), compiled=False)  # warm-up of the reference path too
+    run_mission(cfg, _policy(cfg, name), compiled=False)  # warm-up of the Python-policy path too
     for _ in range(repeat):
         pol = _policy(cfg, name)
         c0 = time.process_time()
@@ -84,8 +85,8 @@ def main(argv=None):
     print(f"default mission: {cold.summary['sim_time_s']:.1f} s simulated, control period "
           f"{cfg.sim.control_period_s * 1e6:.0f} us; cold first run {cold_wall:.3f} s "
           f"({cold.summary['sim_time_s'] / cold_wall:.0f}x)")
-    print(f"{'policy':<12} {'wall [s]':>9} {'sim/wall':>9} {'sim/cpu (range)':>22} {'ref sim/cpu (range)':>22} "
-          f"{'ref cpu/cpu':>11} {'fine':>6} {'coarse':>7} {'single-rate est. [s]':>21} {'speed-up':>9} "
+    print(f"{'policy':<12} {'wall [s]':>9} {'sim/wall':>9} {'sim/cpu (range)':>22} {'py sim/cpu (range)':>22} "
+          f"{'py cpu/cpu':>11} {'fine':>6} {'coarse':>7} {'single-rate est. [s]':>21} {'speed-up':>9} "
           f"{'balance err':>11}")
     for name in args.policies:
         s, walls, cpus, ref_cpus = _measure(cfg, name, args.repeat)

@@ -15,19 +15,24 @@ Modules, in the order data flows (gym-electric-motor style: the parts composed i
 =================  ==========================================================================
 ``scenario``       scenarios and the seeded charge-command generator (the reference)
 ``plant``          the world as the env needs it: hover pose error -> true Lm, battery, power
-``core``           the physical system, reward and observation: per-episode plans, the step
-                   arithmetic (reference path on floats or numpy arrays)
+``layout``         the named slots of the state, battery, coefficient, info and constant arrays
+``core``           the env's settings and per-episode plans (ZOH coefficients, initial state)
 ``objective``      the domain's objective: overshoot at the stop, short-mode flag, episode cost
 ``peaks``          the instantaneous peak: envelope peak + the SBAR's harmonic excess (table)
-``vector_kernel``  the compiled (numba) steps of both envs, the same arithmetic as ``core``
+``vector_kernel``  THE env step, once, compiled (numba): link, sub-steps, detuned tank, peak,
+                   battery, reward, objective, observation, info; parallel over sub-envs
 ``charging``       the single envs (:class:`SbarChargingEnv`, discrete ON-OFF variant)
-``vector``         the batched vector envs (numpy, autoreset ``NEXT_STEP``)
+``vector``         the batched vector envs (autoreset ``NEXT_STEP``, ``num_threads``)
 ``sb3_vec``        a stable-baselines3 ``VecEnv`` over the batched env (``rl`` extra)
 ``sensing``        the sensing delay of the observation's current fields (scenario sense_delay)
-``detuned``        detuned tanks (scenario detuned): the complex envelope's step, numpy, vector env
+``detuned``        detuned tanks (scenario detuned): complex-envelope plans and steady state
 ``rollout``        fixed duty sequences replayed on one seeded window, many at once (the oracle's)
 ``render``         the picture: the episode's current envelope as an RGB array
 =================  ==========================================================================
+
+The step is :mod:`envs.vector_kernel` for both envs (the single env through a per-env entry,
+``single_step``; the vector env through ``env_step``); the other modules make plans and keep the
+orchestration (reset, seeding, autoreset, info dicts, rendering).
 """
 
 import gymnasium

@@ -12,23 +12,19 @@ from mission_sim.contract import OBS_DIM, PolicyContext
 
 from wpt_receiver.sbar import rectifier_current, rectifier_v2_folded
 
-from .core import (OBS_OFFSET, OBS_SCALE, SCALAR_OPS, EnvConfig, advance, build_plans, reward_cost)
-from .objective import SHORT_MODE_IL_A, SHORT_MODE_WITHIN_S, short_mode_i2_a, stop_step
+from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, build_plans, kernel_function
+from .layout import BAT, INFO, SINGLE, SINGLE_PAR, SLOW, XC
+from .objective import short_mode_i2_a, stop_step
 from .peaks import LOOKUP_SCALARS, PeakLookup
 from .render import draw_envelope
 from .scenario import draw_episodes, get_scenario, scenario_from_options
 
 __all__ = ["SbarChargingEnv", "SbarChargingDiscreteEnv"]
 
-_SC = OBS_SCALE.tolist()
-_OF = OBS_OFFSET.tolist()
-_S0, _S1, _S2, _S3, _S4, _S5, _S6, _S7 = _SC
-_O0, _O1, _O2, _O3, _O4, _O5, _O6, _O7 = _OF
 
 
-def _n(v, i):
-    x = v * _SC[i] + _OF[i]
-    return -1.0 if x < -1.0 else (1.0 if x > 1.0 else x)
+def _sign(x: float) -> float:
+    return 1.0 if x > 0.0 else (-1.0 if x < 0.0 else 0.0)
 
 
 class SbarChargingEnv(gym.Env):
@@ -106,8 +102,9 @@ class SbarChargingEnv(gym.Env):
     ``scenario`` is a name of :data:`envs.scenario.SCENARIOS` (nominal, lm_mismatch, windy, battery,
     random), a :class:`~envs.scenario.Scenario` or a dict of its fields; ``reset(options={"scenario":
     ...})`` overrides it for one episode. ``config`` is an :class:`~envs.core.EnvConfig`.
-    ``compiled``: step in one numba-compiled call (:func:`envs.vector_kernel.single_step`, the
-    default when numba is installed) or on Python floats (``False``: the reference, same numbers).
+    ``compiled``: the step is one numba-compiled call (:func:`envs.vector_kernel.single_step`, the
+    helpers of the vector env's step on one window); ``False`` runs the same source uncompiled
+    (``py_func``: slow, for tests). Detuned windows (scenario ``detuned``) step their complex envelope.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
@@ -131,16 +128,16 @@ class SbarChargingEnv(gym.Env):
         self._k = None
         self._hist = None
         self._line = None
-        self._kern = _load_single_kernel() if compiled is None or compiled else None
-        if compiled and self._kern is None:
-            raise ValueError("compiled=True needs numba; install it or pass compiled=None/False")
-        if self._kern is not None:
-            w = self._w
-            self._par = np.concatenate([[self._T, self._dt, self._inv_rated, w.tracking, w.overcurrent, w.i_ref_a,
-                                         self._M, self._n_sub], OBS_SCALE, OBS_OFFSET, self._dev,
-                                        LOOKUP_SCALARS, self._peak.kernel_table.shape,
-                                        self._peak.kernel_table.ravel()]).astype(float)
-            self._out = np.empty(19)
+        self._compiled = compiled is None or bool(compiled)
+        self._kern = kernel_function("single_step", self._compiled)   # also: numba imported here
+        w, tab = self._w, self._peak.kernel_table
+        vals = dict(n_steps=self._T, dt=self._dt, inv_rated=self._inv_rated, w_track=w.tracking,
+                    w_over=w.overcurrent, i_ref=w.i_ref_a, slow_every=self._M, n_sub=self._n_sub, vf=self._dev[0],
+                    dr=self._dev[1], vlc=LOOKUP_SCALARS[0], inv_imax=LOOKUP_SCALARS[1], v1=c.link.v1_amp_v,
+                    nd=tab.shape[0], ni=tab.shape[1], nq=tab.shape[2])
+        self._par = np.concatenate([[vals[f] for f in SINGLE_PAR._fields], OBS_SCALE, OBS_OFFSET,
+                                    tab.ravel()]).astype(float)
+        self._out = np.empty(len(INFO) + 1)
 
     # ------------------------------------------------------------------ interface
     def _make_action_space(self):
@@ -166,23 +163,17 @@ class SbarChargingEnv(gym.Env):
         super().reset(seed=seed)
         scn = scenario_from_options(options, self.scenario)
         p = build_plans(draw_episodes([self.np_random], scn, self._T), scn, self.config)
-        if p.cplx is not None:
-            raise ValueError(f"scenario {scn.name!r} (detuned tanks, complex envelope) runs in the vector env only: "
-                             "envs.SbarChargingVectorEnv (or gymnasium.make_vec); valid here: c_detune=(0, 0)")
         self._plan = p
         self._t_stop = float(p.t_stop_s[0])
         self._stop_k = int(stop_step(p.t_stop_s, self._dt, self._T)[0])
-        i2_sm = short_mode_i2_a(self.config.link, p.lm_h[0], self._devices)
-        if self._kern is None:
-            self._start_float(p, i2_sm)
-        else:
-            self._start_compiled(p, i2_sm)
+        self._start(p)
         self._k = 0
-        i1, i2 = (float(v) for v in p.x0[0])
-        vl, d, soc, cmd0 = float(p.vl0[0]), float(p.d0[0]), float(p.battery[0, 2]), float(p.cmd_a[0, 0])
+        st = self._st
+        i1, i2, vl, d, soc = (float(st[f]) for f in (SINGLE.i1, SINGLE.i2, SINGLE.vl, SINGLE.d, SINGLE.soc))
+        cmd0 = float(p.cmd_a[0, 0])
         il = float(rectifier_current(d, abs(i2)))
-        ib = il - float(p.battery[0, 7])
-        v2 = rectifier_v2_folded(d, vl, i2, self._devices, sin=math.sin, sign=SCALAR_OPS.sign)
+        ib = il - float(p.battery[0, BAT.i_load])
+        v2 = rectifier_v2_folded(d, vl, i2, self._devices, sin=math.sin, sign=_sign)
         info = {"t_s": 0.0, "i2_a": i2, "i2_peak_a": self._peak.scalar(abs(i2), d, vl), "i1_a": i1, "d_short": d,
                 "v2_v": v2, "rect_current_a": il, "battery_v": vl, "battery_current_a": ib, "soc": soc,
                 "charge_cmd_a": cmd0, "lm_h": float(p.lm_h[0, 0]), "energy_j": 0.0, "cost": 0.0, "overcurrent": 0.0,
@@ -190,45 +181,47 @@ class SbarChargingEnv(gym.Env):
                 "t_stop_s": self._t_stop, "i2_peak_envelope_a": abs(i2)}
         if self.render_mode is not None:
             self._hist = [[0.0], [i2], [il], [cmd0], [d]]
-        obs = np.array([_n(i2, 0), _n(vl, 1), _n(ib, 2), _n(il, 3), _n(soc, 4),
-                        _n(cmd0, 5), _n(d, 6), _n(self._t_since(0), 7)], dtype=np.float32)
+        obs = np.empty((1, OBS_DIM), np.float32)
+        vals = np.array([[i2], [vl], [ib], [il], [soc], [cmd0], [d], [self._t_since(0)]])
+        self._fn("obs_rows")(vals, OBS_SCALE, OBS_OFFSET, obs)
         self._line = None
         if p.delay_steps[0] > 0:   # sensing delay (envs.sensing)
             from .sensing import DelayLine
             self._line = DelayLine(1)
-            self._line.start([0], obs[None], p.delay_steps[:1])
-        return obs, info
+            self._line.start([0], obs, p.delay_steps[:1])
+        return obs[0], info
 
-    def _start_float(self, p, i2_sm):
-        """The episode's plan as Python floats for :meth:`_step_float`."""
-        self._cmd = p.cmd_a[0].tolist()
-        self._noise = p.noise_a[0].tolist()
-        self._coef = [tuple(r) for r in p.coef[0].tolist()]
-        self._lm = p.lm_h[0].tolist()
-        self._b = tuple(p.battery[0].tolist())
-        self._i1, self._i2 = (float(v) for v in p.x0[0])
-        self._vl, self._vrc, self._d = float(p.vl0[0]), float(p.vrc0[0]), float(p.d0[0])
-        self._soc = self._b[2]
-        self._i2_sm = i2_sm.tolist()
-        self._run_max, self._sm_ok, self._sm_checked = -np.inf, True, False
+    def _fn(self, name):
+        return kernel_function(name, self._compiled)
 
-    def _start_compiled(self, p, i2_sm):
-        """The episode's plan as the arrays of :func:`envs.vector_kernel.single_step`."""
+    def _start(self, p):
+        """The episode's plan as the arrays of :func:`envs.vector_kernel.single_step` (a detuned window:
+        its complex state after :data:`SINGLE` and its coefficients in ``_cc``)."""
         T = self._T
-        st = np.empty(20)
-        st[0:2] = p.x0[0]
-        st[2], st[3], st[4], st[5] = p.vl0[0], p.battery[0, 2], p.vrc0[0], p.d0[0]
-        st[6], st[7], st[8], st[9], st[10] = -np.inf, 1.0, 0.0, self._stop_k, self._t_stop
-        st[11:] = p.battery[0]
+        i2_sm = short_mode_i2_a(self.config.link, p.lm_h[0], self._devices)
+        st = np.empty(len(SINGLE) + (len(XC) if p.cplx is not None else 0))
+        st[SINGLE.i1], st[SINGLE.i2] = p.x0[0]
+        st[SINGLE.vl], st[SINGLE.soc], st[SINGLE.vrc], st[SINGLE.d] = p.vl0[0], p.battery[0, BAT.soc0], p.vrc0[0], p.d0[0]
+        st[SINGLE.run_max], st[SINGLE.sm_ok], st[SINGLE.sm_checked] = -np.inf, 1.0, 0.0
+        st[SINGLE.stop_k], st[SINGLE.t_stop] = self._stop_k, self._t_stop
+        st[SINGLE.ocv0:SINGLE.bus_decay + 1] = p.battery[0]
+        self._cc = np.zeros((0, 32))
+        if p.cplx is not None:
+            from .detuned import detuned_start
+            i2_sm, i1, i2, _ = detuned_start(self.config, self._devices, p)
+            i2_sm = i2_sm[0]
+            st[SINGLE.i1], st[SINGLE.i2] = i1[0], i2[0]
+            st[len(SINGLE):] = p.cplx[1][0]
+            self._cc = np.ascontiguousarray(p.cplx[0][0])
         steps = np.zeros((T + 1, 2))
         steps[:, 0] = p.cmd_a[0]
         steps[:T, 1] = p.noise_a[0]
-        slow = np.empty((p.coef.shape[1], 22))
-        slow[:, :20] = p.coef[0]
-        slow[:, 20] = p.lm_h[0]
-        slow[:, 21] = i2_sm
+        slow = np.empty((p.coef.shape[1], len(SLOW)))
+        slow[:, :SLOW.lm_h] = p.coef[0]
+        slow[:, SLOW.lm_h] = p.lm_h[0]
+        slow[:, SLOW.i2_sm_a] = i2_sm
         self._st, self._steps, self._slow = st, steps, slow
-        self._cmd = steps[:, 0]
+        self._cmd = steps[:, 0]   # the command per step [A] (a view)
 
     def step(self, action):
         out = self._step(action)
@@ -241,10 +234,9 @@ class SbarChargingEnv(gym.Env):
         if k is None or k >= self._T:
             raise RuntimeError("step() called before reset() or after the episode was truncated; call reset()")
         d = self._duty(action)
-        if self._kern is None:
-            return self._step_float(k, d)
         obs = np.empty(OBS_DIM, np.float32)
-        reward = self._kern(k, d, self._st, self._steps, self._slow, self._par, obs, self._out)
+        kern = self._kern if self._compiled else self._fn("single_step")
+        reward = kern(k, d, self._st, self._steps, self._slow, self._par, obs, self._out, self._cc)
         t, i2, pk, i1, _, v2, il, vl, ib, soc, cmd, lm, energy, over, cost, rm, ec, pk_env, sm = self._out.tolist()
         k += 1
         self._k = k
@@ -255,63 +247,11 @@ class SbarChargingEnv(gym.Env):
         if self._hist is not None:
             for lst, v in zip(self._hist, (t, i2, il, float(self._steps[k, 0]), d)):
                 lst.append(v)
-        return obs, reward, False, k >= self._T, info
-
-    def _step_float(self, k: int, d: float):
-        """:meth:`step` on Python floats (:func:`envs.core.advance` with ``SCALAR_OPS``): the reference."""
-        vl_old = self._vl
-        i1, i2, pk_env, il, ib, soc, vrc, vl, v2 = advance(self._i1, self._i2, vl_old, self._soc, self._vrc, d,
-                                                           self._coef[k // self._M], self._b, SCALAR_OPS, self._n_sub,
-                                                           self._dev)
-        peak = self._peak.scalar(pk_env, d, vl_old)
-        cmd = self._cmd[k]
-        reward, overcurrent = reward_cost(il, cmd, peak, self._inv_rated, self._w, SCALAR_OPS)
-        cost = self._objective(k, peak, il)
-        energy = vl_old * il * self._dt
-        self._i1, self._i2, self._soc, self._vrc, self._vl, self._d = i1, i2, soc, vrc, vl, d
-        k += 1
-        self._k = k
-        cmd_next = self._cmd[k]
-        # normalise (same affine map and clipping as mission_sim.contract.normalise_obs)
-        o0 = (i2 + self._noise[k - 1]) * _S0 + _O0
-        o1 = vl * _S1 + _O1
-        o2 = ib * _S2 + _O2
-        o3 = il * _S3 + _O3
-        o4 = soc * _S4 + _O4
-        obs = np.array([-1.0 if o0 < -1.0 else (1.0 if o0 > 1.0 else o0),
-                        -1.0 if o1 < -1.0 else (1.0 if o1 > 1.0 else o1),
-                        -1.0 if o2 < -1.0 else (1.0 if o2 > 1.0 else o2),
-                        -1.0 if o3 < -1.0 else (1.0 if o3 > 1.0 else o3),
-                        -1.0 if o4 < -1.0 else (1.0 if o4 > 1.0 else o4),
-                        cmd_next * _S5 + _O5, d * _S6 + _O6, _n(self._t_since(k), 7)], dtype=np.float32)
-        info = {"t_s": k * self._dt, "i2_a": i2, "i2_peak_a": peak, "i1_a": i1, "d_short": d, "v2_v": v2,
-                "rect_current_a": il, "battery_v": vl, "battery_current_a": ib, "soc": soc,
-                "charge_cmd_a": cmd, "lm_h": self._lm[(k - 1) // self._M], "energy_j": energy, "cost": cost,
-                "overcurrent": overcurrent, "overshoot": self._run_max, "episode_cost": max(self._run_max, 0.0),
-                "reached_short_mode": self._sm_ok and self._sm_checked, "i2_peak_envelope_a": pk_env}
-        if self._hist is not None:
-            for lst, v in zip(self._hist, (k * self._dt, i2, il, cmd_next, d)):
-                lst.append(v)
-        return obs, reward, False, k >= self._T, info
+        return obs, float(reward), False, k >= self._T, info
 
     def _t_since(self, k: int) -> float:
         t = k * self._dt - self._t_stop
         return t if (k >= self._stop_k and t > 0.0) else 0.0
-
-    def _objective(self, k: int, peak: float, il: float) -> float:
-        """Update the running overshoot and the short-mode flag after step ``k`` (:mod:`envs.objective`);
-        returns the step's cost (the rise of max(0, running overshoot))."""
-        if k < self._stop_k:
-            return 0.0
-        old = self._run_max
-        ratio = (peak if peak >= 0.0 else -peak) / self._i2_sm[k // self._M] - 1.0
-        if ratio > old:
-            self._run_max = ratio
-        if (k + 1 - self._stop_k) * self._dt >= SHORT_MODE_WITHIN_S - 1e-12:
-            self._sm_checked = True
-            if il >= SHORT_MODE_IL_A:
-                self._sm_ok = False
-        return max(self._run_max, 0.0) - max(old, 0.0)
 
     def render(self):
         if self.render_mode is None:
@@ -321,16 +261,6 @@ class SbarChargingEnv(gym.Env):
             raise RuntimeError("render() called before reset()")
         t, i2, il, cmd, d = self._hist
         return draw_envelope(t, i2, il, cmd, d, self.config.rated_i2_a, self._T * self._dt)
-
-
-def _load_single_kernel():
-    """:func:`envs.vector_kernel.single_step`, or None without numba (imported here, when an env is
-    built, so ``import envs`` does not load numba)."""
-    import importlib.util
-    if importlib.util.find_spec("numba") is None:
-        return None
-    from .vector_kernel import single_step
-    return single_step
 
 
 class SbarChargingDiscreteEnv(SbarChargingEnv):

@@ -8,8 +8,10 @@ exactly) as four real states ``[Re J1, Re J2, Im J1, Im J2]`` with the exact ZOH
 periods (17 per step), the SBAR's V2 in phase with J2 re-evaluated every rectifier period
 (``V2c = -|V2| J2 / |J2|``, as :func:`wpt_receiver.envelope.simulate_complex` per step), the I2 envelope
 ``|J2|`` (peak: every sub-step end), ``I_L = (2/pi)(1 - sin(pi d/2)) |J2|`` (mean of |J2|), the devices as in
-:func:`envs.core.advance`. The windows of a batch go through this numpy path when any of them is
-detuned (:class:`envs.vector.SbarChargingVectorEnv`; the compiled kernel is the two-state one).
+the two-state step. This module makes the plans (coefficients :func:`zoh_complex`, steady state
+:func:`complex_steady`); the step is the env's compiled one (``envs.vector_kernel._complex_step``, one
+function beside the two-state ``_link_step``; the rest of the step is shared), in the single and the
+vector env.
 
 The steady state (:func:`complex_steady`) has a closed form: with ``Z_k = R_k + j X_k``,
 ``X = w Lm`` and ``Zeff = Z2 + X^2 / Z1 = a + j b``, the RM / any-duty steady ``|J2| = r`` solves
@@ -22,7 +24,7 @@ import math
 
 import numpy as np
 
-__all__ = ["real_matrices", "zoh_complex", "complex_steady", "advance_complex"]
+__all__ = ["real_matrices", "zoh_complex", "complex_steady"]
 
 
 def real_matrices(link, lm_h: float, c1_f: float, c2_f: float):
@@ -71,36 +73,16 @@ def complex_steady(link, lm_h, c1_f, c2_f, v2_mag_v, r2_add_ohm=0.0):
     return j1, j2
 
 
-def advance_complex(xc, vl, soc, vrc, d, coef, b, dev, v1, n_sub: int):
-    """One control period on the complex envelope for arrays (n,): ``xc`` (n, 4) ``[Re J1, Re J2, Im J1,
-    Im J2]``, ``coef`` (n, 32) of :func:`zoh_complex` for the rectifier period ``dt / n_sub``, ``b`` the
-    battery rows (9, n), ``dev`` = (Vf, dR). The SBAR's V2 follows the phase of J2 every rectifier period
-    (held over a 100 us step, while a detuned link's phasors turn by up to ~1 rad, it would pump the
-    link). Returns ``(xc, |J1|, |J2|, peak |J2| over the sub-step ends, I_L, i_batt, soc, vrc, vl, |V2|)``."""
-    vf, dr = dev
-    vc = vl + vf
-    s = np.sin(0.5 * math.pi * d)
-    v2c = 4.0 / math.pi * vc * (1.0 - s)
-    wd = dr * (d + np.sin(math.pi * d) / math.pi)
-    ad, bd = coef[:, :16].reshape(-1, 4, 4), coef[:, 16:32].reshape(-1, 4, 4)
-    r = np.hypot(xc[:, 1], xc[:, 3])
-    v2_0 = v2c + wd * r
-    pk, tot = np.full(len(d), -1.0), np.zeros(len(d))
-    for _ in range(n_sub):
-        ok = r > 0.0
-        safe = np.where(ok, r, 1.0)
-        ph_re, ph_im = np.where(ok, xc[:, 1] / safe, 0.0), np.where(ok, xc[:, 3] / safe, 1.0)
-        v2 = v2c + wd * r
-        u = np.stack([np.full_like(d, v1), -v2 * ph_re, np.zeros_like(d), -v2 * ph_im], axis=1)
-        xc = np.einsum("nij,nj->ni", ad, xc) + np.einsum("nij,nj->ni", bd, u)
-        rn = np.hypot(xc[:, 1], xc[:, 3])
-        pk = np.maximum(pk, rn)
-        tot += 0.5 * (r + rn)
-        r = rn
-    il = v2c * tot / (2.0 * n_sub * vc)   # V2c I2 / (2 VC) with the mean of |J2|
-    ocv0, docv, soc0, rb0, rc_decay, rc_gain, dsoc, i_load, bus_decay = b
-    ib = il - i_load
-    soc = soc + dsoc * ib
-    vrc = rc_decay * vrc + rc_gain * ib
-    vl = bus_decay * vl + (1.0 - bus_decay) * (ocv0 + docv * (soc - soc0) + rb0 * ib + vrc)
-    return xc, np.hypot(xc[:, 0], xc[:, 2]), r, pk, il, ib, soc, vrc, vl, v2_0
+def detuned_start(cfg, devices, p):
+    """What a detuned window needs at its start besides its plan ``p`` (:class:`envs.core.Plans` with
+    ``cplx``): ``(i2_sm (n, S), |J1| (n,), |J2| (n,), c_rel (2, n))``: the objective's short-mode
+    current of the detuned link (V2 = 0, the short mode's resistances, per slow segment's Lm), the
+    initial envelope magnitudes and the relative capacitor errors."""
+    coef, x0, c1, c2 = p.cplx
+    base = cfg.link
+    sm = base.with_(r1_ohm=base.r1_ohm + devices.inv_r_ohm, r2_ohm=base.r2_ohm + devices.short_r_ohm)
+    S = p.lm_h.shape[1]
+    _, j2 = complex_steady(sm, p.lm_h.ravel(), np.repeat(c1, S), np.repeat(c2, S), 0.0)
+    w, lk = base.omega_rad_s, cfg.link_folded
+    c_rel = np.stack([c1 * w * w * lk.l1_h - 1.0, c2 * w * w * lk.l2_h - 1.0])
+    return np.abs(j2).reshape(-1, S), np.hypot(x0[:, 0], x0[:, 2]), np.hypot(x0[:, 1], x0[:, 3]), c_rel

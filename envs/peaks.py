@@ -28,12 +28,11 @@ anti-phase flatten the crest).
 
 from __future__ import annotations
 
-import math
 from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["VL_GRID_V", "I2_MAX_A", "LOOKUP_SCALARS", "peak_table", "fold_vl", "inst_peak", "inst_peak_numpy", "PeakLookup"]
+__all__ = ["VL_GRID_V", "I2_MAX_A", "LOOKUP_SCALARS", "peak_table", "fold_vl", "inst_peak", "inst_peak_array", "PeakLookup"]
 
 VL_GRID_V = (27.0, 31.0, 35.0)
 I2_MAX_A = 80.0
@@ -73,49 +72,33 @@ def fold_vl(tab: np.ndarray) -> np.ndarray:
 
 def inst_peak(pk, d, vl, tab) -> float:
     """Instantaneous peak [A] for an envelope peak ``pk >= 0``, duty ``d`` in [0, 1] and battery
-    voltage ``vl``, Python floats; ``tab`` the :func:`fold_vl` table as nested lists. The arithmetic
-    of :func:`envs.vector_kernel._inst_peak`, operation for operation: bilinear in (duty,
-    sqrt(pk / I2_MAX_A)) on A and B, then ``A + B (VL - 31 V)``."""
-    nd, ni = len(tab), len(tab[0])
-    x = d * (nd - 1)
-    y = math.sqrt(min(pk * _INV_IMAX, 1.0)) * (ni - 1)
-    j = min(int(x), nd - 2)
-    k = min(int(y), ni - 2)
-    fx, fy = x - j, y - k
-    c00, c10, c01, c11 = tab[j][k], tab[j + 1][k], tab[j][k + 1], tab[j + 1][k + 1]
-    ea = (c00[0] * (1.0 - fx) + c10[0] * fx) * (1.0 - fy) + (c01[0] * (1.0 - fx) + c11[0] * fx) * fy
-    eb = (c00[1] * (1.0 - fx) + c10[1] * fx) * (1.0 - fy) + (c01[1] * (1.0 - fx) + c11[1] * fx) * fy
-    return pk + (ea + eb * (vl - _VLC))
+    voltage ``vl`` (floats); ``tab`` the :func:`fold_vl` table: the envs' step's own lookup
+    (:func:`envs.vector_kernel._inst_peak`: bilinear in (duty, sqrt(pk / I2_MAX_A)) on A and B, then
+    ``A + B (VL - 31 V)``)."""
+    from .vector_kernel import _inst_peak
+    return _inst_peak(float(pk), float(d), float(vl), tab, _VLC, _INV_IMAX)
 
 
-def inst_peak_numpy(pk, d, vl, tab):
-    """:func:`inst_peak` on arrays (n,) (the vector env's numpy path); ``tab`` the :func:`fold_vl` array."""
-    nd, ni, _ = tab.shape
-    x = d * (nd - 1)
-    y = np.sqrt(np.minimum(pk * _INV_IMAX, 1.0)) * (ni - 1)
-    j = np.minimum(x.astype(np.int64), nd - 2)
-    k = np.minimum(y.astype(np.int64), ni - 2)
-    fx, fy = x - j, y - k
-
-    def bil(q):
-        return ((tab[j, k, q] * (1.0 - fx) + tab[j + 1, k, q] * fx) * (1.0 - fy)
-                + (tab[j, k + 1, q] * (1.0 - fx) + tab[j + 1, k + 1, q] * fx) * fy)
-
-    return pk + (bil(0) + bil(1) * (vl - _VLC))
+def inst_peak_array(pk, d, vl, tab) -> np.ndarray:
+    """:func:`inst_peak` of every element of the arrays (n,) ``pk``, ``d``, ``vl``."""
+    from .vector_kernel import inst_peak_rows
+    pk, d, vl = (np.ascontiguousarray(x, dtype=float) for x in np.broadcast_arrays(pk, d, vl))
+    out = np.empty(pk.shape[0])
+    inst_peak_rows(pk, d, vl, tab, _VLC, _INV_IMAX, out)
+    return out
 
 
 class PeakLookup:
     """The env's lookup for one (link, devices): ``scalar(pk, d, vl)`` on floats, ``array(pk, d, vl)``
-    on numpy arrays; ``table`` the (3, 51, 81) excesses at :data:`VL_GRID_V`, ``kernel_table`` the
+    on numpy arrays (both the compiled step's own lookup); ``table`` the (3, 51, 81) excesses at :data:`VL_GRID_V`, ``kernel_table`` the
     (51, 81, 2) :func:`fold_vl` table all lookups read."""
 
     def __init__(self, link, devices):
         self.table = peak_table(link, devices)
         self.kernel_table = fold_vl(self.table)
-        self._rows = self.kernel_table.tolist()
 
     def scalar(self, pk, d, vl):
-        return inst_peak(pk, d, vl, self._rows)
+        return inst_peak(pk, d, vl, self.kernel_table)
 
     def array(self, pk, d, vl):
-        return inst_peak_numpy(pk, d, vl, self.kernel_table)
+        return inst_peak_array(np.atleast_1d(pk), np.atleast_1d(d), np.atleast_1d(vl), self.kernel_table)

@@ -32,9 +32,10 @@ for one control period. Environments expose it as ``a in [-1, 1]`` with ``d = (a
 Optional fast path: a policy may also offer ``kernel()`` returning ``(fn, params, state)`` (or None):
 ``fn`` a numba-compiled function of the signature :data:`POLICY_KERNEL_SIGNATURE`, ``d = fn(obs,
 params, state)``, doing what ``act`` does for one receiver (``obs`` one normalised row, shape
-(OBS_DIM,); ``state`` float64, updated in place, as after ``reset(1)``). The mission loop then runs
-compiled (:mod:`mission_sim.world.fastpath`); after such a run the policy object itself stays as
-reset. Policies without it run the Python loop.
+(OBS_DIM,); ``state`` float64, updated in place, as after ``reset(1)``). The mission loop (compiled
+for every policy, :mod:`mission_sim.world.loop_kernel`) then calls it in place of ``act``; after such a
+run the policy object itself stays as reset. Policies without it are called from Python whenever the
+loop needs a duty (:mod:`mission_sim.world.fastpath`).
 """
 
 from __future__ import annotations

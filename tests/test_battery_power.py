@@ -1,91 +1,110 @@
-"""Battery, CC-CV charging, momentum-theory power and the wind model against closed forms."""
+"""Battery, CC-CV charging (the mission kernel's, mission_sim.world.loop_kernel), momentum-theory power and
+the wind model against closed forms."""
 
 import math
 
 import numpy as np
 import pytest
 
-from mission_sim.world.battery import Battery, BatteryParams, CcCvCharger, CcCvParams, ocv_cell_v
+from mission_sim.world.battery import BatteryParams, CcCvParams, ocv_cell_v
+from mission_sim.world.fastpath import battery_values, constants
+from mission_sim.world.loop_kernel import STATE_DTYPE, _bat_step, _charger_command, _ocv_cell
 from mission_sim.world.power import G_M_S2, DroneParams, hover_power_w, propulsion_power_w
 from mission_sim.world.wind import WindParams, gust_series, hover_error_m, tilt_from_force
 
 
+def _consts(p=BatteryParams(), cc=CcCvParams()):
+    """The kernel's constants record with the battery's and the charger's fields (attribute access)."""
+    return constants(battery_values(p, cc)).view(np.recarray)[0]
+
+
+def _state(soc, vrc=0.0):
+    s = np.zeros(1, STATE_DTYPE).view(np.recarray)
+    s[0].soc, s[0].vrc = soc, vrc
+    return s[0]
+
+
+def _mean_terminal_v(p, soc, v1, i, dt):
+    """Closed form of the mean terminal voltage over a held-current step: OCV + R0 i + mean(v1)."""
+    e = math.exp(-dt / p.tau1_s)
+    vinf = p.r1_ohm * i
+    return p.ocv_v(soc) + p.r0_ohm * i + (vinf * dt + (v1 - vinf) * p.tau1_s * (1.0 - e)) / dt
+
+
 def test_battery_step_energy_identity_and_substep_consistency():
+    """The mission kernel's battery step (loop_kernel._bat_step): terminal energy = chem + R0 + R1 + dC1,
+    one 7 s step == 7000 steps of 1 ms, coulomb counting."""
     p = BatteryParams()
-    big = Battery(p, n=3, soc=[0.2, 0.5, 0.9])
-    big.v1_v[:] = [0.05, -0.1, 0.0]
-    small = Battery(p, n=3, soc=[0.2, 0.5, 0.9])
-    small.v1_v[:] = big.v1_v
-    i = np.array([2.0, -10.0, 0.7])
-    e = big.step(i, 7.0)
-    np.testing.assert_allclose(e.terminal_j, e.chem_j + e.r0_loss_j + e.r1_loss_j + e.c1_delta_j, rtol=1e-12)
-    # the RC state is exact: one 7 s step == 7000 steps of 1 ms; R1 losses converge to the closed form
-    r1 = np.zeros(3)
-    for _ in range(7000):
-        r1 += small.step(i, 1e-3).r1_loss_j
-    np.testing.assert_allclose(small.v1_v, big.v1_v, rtol=1e-9)
-    np.testing.assert_allclose(r1, e.r1_loss_j, rtol=1e-9)
-    # coulomb counting
-    np.testing.assert_allclose(big.soc - [0.2, 0.5, 0.9], i * 7.0 / p.capacity_c, rtol=1e-12)
+    c = _consts(p)
+    for soc, v1, i in ((0.2, 0.05, 2.0), (0.5, -0.1, -10.0), (0.9, 0.0, 0.7)):
+        soc1, v1_1, chem, r0, r1, dc1 = _bat_step(c, soc, v1, i, 7.0)
+        assert _mean_terminal_v(p, soc, v1, i, 7.0) * i * 7.0 == pytest.approx(chem + r0 + r1 + dc1, rel=1e-12)
+        assert chem == pytest.approx(p.ocv_v(soc) * i * 7.0, rel=1e-12)
+        s, v, r1_sum = soc, v1, 0.0
+        for _ in range(7000):
+            s, v, _, _, r1_k, _ = _bat_step(c, s, v, i, 1e-3)
+            r1_sum += r1_k
+        assert v == pytest.approx(v1_1, rel=1e-9) and r1_sum == pytest.approx(r1, rel=1e-9)
+        assert soc1 - soc == pytest.approx(i * 7.0 / p.capacity_c, rel=1e-12)
 
 
 def test_battery_terminal_voltage_settles_to_ocv_plus_r_i():
     p = BatteryParams()
-    b = Battery(p)
-    b.step(-3.0, 50 * p.tau1_s)
-    v = b.terminal_v(-3.0)
-    assert v == pytest.approx(p.ocv_v(b.soc) - 3.0 * (p.r0_ohm + p.r1_ohm), rel=1e-9)
+    soc1, v1, *_ = _bat_step(_consts(p), p.initial_soc, 0.0, -3.0, 50 * p.tau1_s)
+    assert p.ocv_v(soc1) + p.r0_ohm * -3.0 + v1 == pytest.approx(p.ocv_v(soc1) - 3.0 * (p.r0_ohm + p.r1_ohm), rel=1e-9)
     # OCV curve: monotone, 8S pack from ~21 V empty to ~32.8 V full (Chen & Rincon-Mora fit, 4.103 V/cell)
     s = np.linspace(0, 1, 101)
     assert np.all(np.diff(ocv_cell_v(s)) > 0)
     assert p.ocv_v(1.0) == pytest.approx(8 * 4.1033, rel=1e-4)
+    # the kernel's curve (the mission's) and the numpy one (envs, config ranges) are the same fit
+    np.testing.assert_allclose([_ocv_cell(x) for x in (-0.1, *s, 1.2)], ocv_cell_v(np.r_[-0.1, s, 1.2]), rtol=1e-14)
+
+
+def _charge_to_full(p, cc, c, st):
+    """Charge at the kernel charger's target (no propulsion) in 1 s steps until full; True if CC was seen."""
+    v_cv, seen_cc = cc.cv_cell_v * p.n_series, False
+    for _ in range(20000):
+        tgt = _charger_command(st, c, 0.0)
+        if st.full:
+            return seen_cc
+        seen_cc |= tgt == cc.cc_current_a
+        # terminal voltage over the step never exceeds the CV limit (model-based CV)
+        assert _mean_terminal_v(p, st.soc, st.vrc, tgt, 1.0) <= v_cv + 1e-6 or tgt == cc.cc_current_a
+        st.soc, st.vrc = _bat_step(c, st.soc, st.vrc, tgt, 1.0)[:2]
+    raise AssertionError("never full")
 
 
 def test_cccv_charges_to_full_without_exceeding_cv_and_then_stops():
-    p = BatteryParams(initial_soc=0.93)
-    cc = CcCvParams()
-    b = Battery(p)
-    ch = CcCvCharger(cc, b)
-    v_cv = cc.cv_cell_v * p.n_series
-    seen_cc = False
-    for _ in range(20000):
-        tgt = ch.battery_target_a()[0]
-        if ch.full[0]:
-            break
-        seen_cc |= tgt == cc.cc_current_a
-        # terminal voltage over the step never exceeds the CV limit (model-based CV)
-        assert b.mean_terminal_v(tgt, 1.0)[0] <= v_cv + 1e-6 or tgt == cc.cc_current_a
-        b.step(tgt, 1.0)
-    assert seen_cc and ch.full[0] and ch.cv[0]
-    assert b.soc[0] > 0.98
-    assert ch.command_a(5.0)[0] == 0.0  # full -> short mode whatever the propulsion draw
+    p, cc = BatteryParams(initial_soc=0.93), CcCvParams()
+    c, st = _consts(p, cc), _state(0.93)
+    assert _charge_to_full(p, cc, c, st)
+    assert st.full and st.cv and st.soc > 0.98
+    assert _charger_command(st, c, 5.0) == 0.0  # full -> short mode whatever the propulsion draw
 
 
 def test_full_battery_recharges_below_the_recharge_threshold_and_not_above():
     """A full battery under load: the command stays 0 while (OCV + v1)/n >= cv_cell_v - recharge_drop_cell_v
     and a new CC cycle (cv flag cleared, command = propulsion + CC current) starts at the first BMS call below."""
     p, cc = BatteryParams(initial_soc=0.93), CcCvParams(recharge_drop_cell_v=0.1)
-    b = Battery(p)
-    ch = CcCvCharger(cc, b)
-    while not ch.full[0]:
-        b.step(ch.battery_target_a()[0], 1.0)
+    c, st = _consts(p, cc), _state(0.93)
+    _charge_to_full(p, cc, c, st)
     threshold = (cc.cv_cell_v - cc.recharge_drop_cell_v) * p.n_series
     i_prop = 5.0
     for _ in range(100_000):
-        v_rest = float(b.ocv_v()[0] + b.v1_v[0])
-        cmd = ch.command_a(i_prop)[0]
+        v_rest = float(p.ocv_v(st.soc) + st.vrc)
+        cmd = _charger_command(st, c, i_prop)
         if v_rest >= threshold:
-            assert cmd == 0.0 and ch.full[0]
+            assert cmd == 0.0 and st.full
         else:
-            assert not ch.full[0] and not ch.cv[0]        # a new cycle, in CC (far below CV)
+            assert not st.full and not st.cv        # a new cycle, in CC (far below CV)
             assert cmd == pytest.approx(i_prop + cc.cc_current_a)
             break
-        b.step(-i_prop, 1.0)
+        st.soc, st.vrc = _bat_step(c, st.soc, st.vrc, -i_prop, 1.0)[:2]
     else:
         raise AssertionError("never recharged")
     # it took a real discharge: OCV below the threshold plus the RC pair's drop at 5 A (R1 i / n = 30 mV)
-    assert ocv_cell_v(b.soc[0]) < cc.cv_cell_v - cc.recharge_drop_cell_v + p.r1_ohm_cell * i_prop + 1e-3
-    assert b.soc[0] < 0.95
+    assert ocv_cell_v(st.soc) < cc.cv_cell_v - cc.recharge_drop_cell_v + p.r1_ohm_cell * i_prop + 1e-3
+    assert st.soc < 0.95
     for bad in (0.0, 0.6, math.nan):
         with pytest.raises(ValueError, match="recharge_drop_cell_v"):
             CcCvParams(recharge_drop_cell_v=bad)
@@ -131,17 +150,3 @@ def test_gusts_are_stationary_markov_and_hover_error_is_seeded():
     # tilt: thrust balances a horizontal drag of m g -> 45 degrees, leaning against the force
     tilt, axis = tilt_from_force(1.0, np.zeros((1, 3)), np.array([[G_M_S2, 0.0, 0.0]]))
     assert tilt[0] == pytest.approx(math.pi / 4) and math.sin(axis[0] - math.pi / 2) == pytest.approx(0, abs=1e-12)
-
-
-def test_scalar_stepper_equals_batched_step():
-    from mission_sim.world.battery import scalar_stepper
-    p = BatteryParams()
-    b = Battery(p, n=1, soc=0.4)
-    b.v1_v[:] = 0.03
-    out = scalar_stepper(p)(0.4, 0.03, -7.5, 2.5)
-    vt = b.mean_terminal_v(-7.5, 2.5)[0]
-    e = b.step(-7.5, 2.5)
-    np.testing.assert_allclose(out[:6], [b.soc[0], b.v1_v[0], e.chem_j[0], e.r0_loss_j[0], e.r1_loss_j[0],
-                                         e.c1_delta_j[0]], rtol=1e-13)
-    assert out[6] == pytest.approx(vt, rel=1e-13)
-    assert out[6] * -7.5 * 2.5 == pytest.approx(sum(out[2:6]), rel=1e-12)

@@ -11,7 +11,8 @@ import pytest
 from envs import EnvConfig, SbarChargingEnv, SbarChargingVectorEnv
 from envs.peaks import PeakLookup, inst_peak
 from mission_sim.config import LinkConfig
-from mission_sim.world.linkstep import LinkStepper
+from mission_sim.world.fastpath import constants, link_values
+from mission_sim.world.loop_kernel import link_disc, link_step
 from wpt_receiver import TABLE_I
 from wpt_receiver.devices import preset
 from wpt_receiver.peak import SbarHarmonics
@@ -29,7 +30,7 @@ def test_ideal_devices_reproduce_the_env_before_devices(compiled):
     keys = [str(k) for k in g["keys"]]
     for scn, seed in (("random", 5), ("battery", 8)):
         env = SbarChargingEnv(scenario=scn, compiled=compiled, config=EnvConfig(devices="ideal"))
-        rows = env._peak._rows
+        tab = env._peak.kernel_table
         rng = np.random.default_rng(seed)
         _, info = env.reset(seed=seed)
         got, inst = [], []
@@ -37,7 +38,7 @@ def test_ideal_devices_reproduce_the_env_before_devices(compiled):
             if k:
                 vl = info["battery_v"]   # the VL at the start of the step
                 _, _, _, _, info = env.step(rng.uniform(-1, 1, 1).astype(np.float32))
-                inst.append(info["i2_peak_a"] == inst_peak(info["i2_peak_envelope_a"], info["d_short"], vl, rows))
+                inst.append(info["i2_peak_a"] == inst_peak(info["i2_peak_envelope_a"], info["d_short"], vl, tab))
             got.append([info["i2_peak_envelope_a"] if key == "i2_peak_a" else info[key] for key in keys])
         # stored numbers from another code version and numpy release: equal to round-off, not bit
         # for bit (numpy's vectorised transcendentals change between releases and CPUs; issue 25)
@@ -63,17 +64,18 @@ def _env_steady(devices, duty, steps=600):
 
 
 def _mission_steady(devices, duty, vl, lm):
-    """The mission's averaged link (mission_sim.world.loop.MissionLoop.step: LinkStepper with R1 + 2
-    Ron, R2 + Rd; V2 = c (VL + Vf) + (2 Ron - Rd) w(d) I2) at a held VL, stepped to steady state;
+    """The mission's averaged link (mission_sim.world.loop_kernel: link_step with R1 + 2 Ron, R2 + Rd;
+    V2 = c (VL + Vf) + (2 Ron - Rd) w(d) I2) at a held VL, stepped to steady state;
     returns I1, I2 and the DC efficiency (rectifier output VL I_L over the source's energy)."""
     dev, p = preset(devices), TABLE_I
-    st = LinkStepper(p.l1_h, p.l2_h, p.r1_ohm + dev.inv_r_ohm, p.r2_ohm + dev.rect_rd_ohm, p.omega_rad_s)
+    st = constants(link_values(p.l1_h, p.l2_h, p.r1_ohm + dev.inv_r_ohm, p.r2_ohm + dev.rect_rd_ohm, p.omega_rad_s))[0]
     c = 4 / math.pi * (1 - math.sin(math.pi / 2 * duty))
     w = duty + math.sin(math.pi * duty) / math.pi
     x, dt = (0.0, 0.0), 1e-4
     for _ in range(2000):
         v2 = c * (vl + dev.rect_vf_v) + (dev.short_r_ohm - dev.rect_rd_ohm) * w * x[1]
-        x, e_src, _, _, int_i2 = st.step(lm, dt, x, p.v1_amp_v, v2, st.disc(lm, dt))
+        y0, y1, e_src, _, _, int_i2 = link_step(st, link_disc(st, lm, dt), lm, dt, *x, p.v1_amp_v, v2)[:6]
+        x = (y0, y1)
     return x[0], x[1], vl * 0.5 * c * int_i2 / e_src
 
 

@@ -18,7 +18,8 @@ from mission_sim.config import (
     load_config,
 )
 from mission_sim.contract import PolicyContext
-from mission_sim.world.linkstep import LinkStepper
+from mission_sim.world.fastpath import constants, link_values
+from mission_sim.world.loop_kernel import link_disc, link_step, link_stored_j
 from mission_sim.world.power import hover_power_w
 from mission_sim.world.runner import run_mission
 from mission_sim.world.trajectory import Trajectory, plan_mission
@@ -102,17 +103,19 @@ def test_trajectory_limits_phases_and_seeded_wind():
 
 # ----------------------------------------------------------------------------- link step
 def test_link_stepper_matches_zoh_and_brute_force_energy_integrals():
+    """The mission kernel's link step (loop_kernel.link_disc / link_step, compiled) against scipy's ZOH and
+    brute-force energy integrals."""
     p = TABLE_I
-    st = LinkStepper(p.l1_h, p.l2_h, p.r1_ohm, p.r2_ohm, p.omega_rad_s)
+    c = constants(link_values(p.l1_h, p.l2_h, p.r1_ohm, p.r2_ohm, p.omega_rad_s))[0]
     a, b = state_matrices(p)
     for dt in (5e-5, 3e-3):
         ad, bd = zoh_discretise(a, b, dt)
-        (d00, d01, d10, d11), (b00, b01, b10, b11), _, _ = st.disc(p.lm_h, dt)
+        d00, d01, d10, d11, b00, b01, b10, b11 = link_disc(c, p.lm_h, dt)[:8]
         np.testing.assert_allclose([[d00, d01], [d10, d11]], ad, rtol=1e-12, atol=1e-15)
         np.testing.assert_allclose([[b00, b01], [b10, b11]], bd, rtol=1e-12, atol=1e-15)
     # energies of one 2 ms step from rest in RM against 20000 sub-steps (trapezoid)
     x0, v1, v2, dt = (0.0, 0.0), p.v1_amp_v, 0.6 * p.v2_rm_amp_v, 2e-3
-    x1, e_src, e_coil, e_rect, s2 = st.step(p.lm_h, dt, x0, v1, v2)
+    y0, y1, e_src, e_coil, e_rect = link_step(c, link_disc(c, p.lm_h, dt), p.lm_h, dt, *x0, v1, v2)[:5]
     n = 20000
     h = dt / n
     ad, bd = zoh_discretise(a, b, h)
@@ -122,14 +125,14 @@ def test_link_stepper_matches_zoh_and_brute_force_energy_integrals():
     for k in range(n):
         xs[k + 1] = ad @ xs[k] + bd @ u
     trap = lambda y: h * (y.sum() - 0.5 * (y[0] + y[-1]))  # noqa: E731
-    np.testing.assert_allclose(x1, xs[-1], rtol=1e-9)
+    np.testing.assert_allclose([y0, y1], xs[-1], rtol=1e-9)
     assert e_src == pytest.approx(0.5 * v1 * trap(xs[:, 0]), rel=1e-6)
     assert e_rect == pytest.approx(0.5 * v2 * trap(xs[:, 1]), rel=1e-6)
     assert e_coil == pytest.approx(0.5 * trap(p.r1_ohm * xs[:, 0] ** 2 + p.r2_ohm * xs[:, 1] ** 2), rel=1e-6)
     # the balance of the envelope model: source = dW + losses + rectifier, W = (L1 I1^2 + L2 I2^2) / 2
-    assert e_src == pytest.approx(st.stored_j(x1) + e_coil + e_rect, rel=1e-12)
+    assert e_src == pytest.approx(link_stored_j(c, y0, y1) + e_coil + e_rect, rel=1e-12)
     # long step lands on the closed-form steady state
-    x_long = st.step(p.lm_h, 1.0, x0, v1, v2)[0]
+    x_long = link_step(c, link_disc(c, p.lm_h, 1.0), p.lm_h, 1.0, *x0, v1, v2)[:2]
     np.testing.assert_allclose(x_long, steady_state(p, v2), rtol=1e-9)
 
 

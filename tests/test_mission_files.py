@@ -394,3 +394,20 @@ def test_px4_style_tlog_mission(tmp_path):
     e, n = enu_xy(47.001, 8.0, home)
     assert [w["action"] for w in r] == ["takeoff", "waypoint", "land"]
     assert abs(r[1]["y_m"] - n) < 0.02 and abs(r[1]["x_m"]) < 0.02 and r[1]["z_m"] == 25.0
+
+
+def test_telemetry_streams_about_the_mission_files_home(capsys, tmp_path):
+    """`telemetry --config` with a mission file: positions are about the file's home (no --home needed)."""
+    from mission_sim.mavlink.logs import mavutil
+    (tmp_path / "m.plan").write_bytes((DATA / "qgc_simple_square.plan").read_bytes())
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[mission]\nfile = "m.plan"\n')
+    tlog = tmp_path / "t.tlog"
+    assert main(["telemetry", "--config", str(cfg), "--connect", "none", "--tlog", str(tlog), "--speed", "inf",
+                 "--duration", "3", "--rate", "2"]) == 0
+    home = json.loads((DATA / "qgc_simple_square.plan").read_text())["mission"]["plannedHomePosition"]
+    conn = mavutil().mavlink_connection(str(tlog))
+    first = conn.recv_match(type="GLOBAL_POSITION_INT")
+    conn.close()
+    assert first.lat * 1e-7 == pytest.approx(home[0], abs=1e-6) and first.lon * 1e-7 == pytest.approx(home[1], abs=1e-6)
+    assert first.alt * 1e-3 == pytest.approx(home[2], abs=2.0)   # near the ground at home (not SITL's 584 m)

@@ -12,7 +12,7 @@ import pytest
 
 from mission_sim.config import load_config
 from mission_sim.contract import PolicyContext
-from mission_sim.world import fastpath, loop, stream
+from mission_sim.world import fastpath, stream
 from mission_sim.world.runner import run_mission
 from mission_sim.world.stream import SeriesWriter
 from policies import make
@@ -35,8 +35,7 @@ def test_small_blocks_give_the_same_summary_and_series(reference, monkeypatch, c
     if compiled:
         pytest.importorskip("numba")
     cfg, ref = reference
-    for mod in (loop, fastpath):
-        monkeypatch.setattr(mod, "BLOCK_ROWS", 257)
+    monkeypatch.setattr(fastpath, "BLOCK_ROWS", 257)
     monkeypatch.setattr(fastpath, "_CHUNK", 16)   # the compiled path hands rows over between kernel calls
     blocks = []
     res = run_mission(cfg, _policy(cfg), compiled=compiled, sink=lambda lp, arr: blocks.append(len(arr)))
@@ -58,7 +57,7 @@ def test_summary_only_run_matches_the_framed_run(reference):
 
 def test_parquet_holds_the_series_and_every_thins_it(reference, tmp_path, monkeypatch):
     cfg, ref = reference
-    monkeypatch.setattr(loop, "BLOCK_ROWS", 500)
+    monkeypatch.setattr(fastpath, "BLOCK_ROWS", 500)
     w = SeriesWriter(tmp_path / "all", csv=True)
     run_mission(cfg, _policy(cfg), compiled=False, frame=False, sink=w)
     paths = w.close()

@@ -214,6 +214,18 @@ def test_follow_live_vehicle(tmp_path):
     n = min(len(current), len(flying))
     assert np.any(current[:n][~flying[:n]] < 0)      # charging while standing on the pad
     assert np.all(current[:n][flying[:n]] > 0)       # never 3 m up
+    hb = _heartbeats(tlog)                           # the stream ends as `telemetry`'s: LAND, then disarmed
+    assert [h.custom_mode for h in hb[-2:]] == [9, 9] and hb[-2].base_mode & 128 and not hb[-1].base_mode & 128
+
+
+def _heartbeats(tlog):
+    from mission_sim.mavlink.logs import mavutil
+    conn = mavutil().mavlink_connection(str(tlog))
+    out = []
+    while (m := conn.recv_match(type="HEARTBEAT")) is not None:
+        out.append(m)
+    conn.close()
+    return out
 
 
 def test_follow_through_the_cli(capsys, tmp_path):

@@ -254,7 +254,8 @@ def _add_telemetry(sub):
                    help="simulated seconds per wall second (default 1 = real time; inf = as fast as possible)")
     p.add_argument("--tlog", type=path_arg("--tlog"), default=None, help="also write the telemetry to this .tlog")
     p.add_argument("--home", default=None, metavar="LAT,LON,ALT",
-                   help="where the first pad is (default ArduPilot SITL home, CMAC: --home=-35.363261,149.165230,584)")
+                   help="where the pad frame's origin is (default: the home of the config's mission file, else the first "
+                   "pad of its pads file, else ArduPilot SITL home, CMAC: --home=-35.363261,149.165230,584)")
     p.add_argument("--duration", type=positive_float("duration"), default=None, metavar="S",
                    help="stream at most S simulated seconds (default: the whole mission)")
     p.add_argument("--follow", default=None, metavar="udpin:HOST:PORT",
@@ -290,6 +291,9 @@ def _cmd_telemetry(args) -> int:
     if args.follow is not None:
         return _cmd_telemetry_follow(args, connect, home)
     cfg = _mav_config(args)
+    if not args.home:                                   # a mission file places the pad frame on Earth
+        from ..plans.route import mission_home
+        home = mission_home(cfg.mission) or home
     from ..world.budget import check_run_size
     from ..world.runner import run_mission
     from ..world.trajectory import plan_mission

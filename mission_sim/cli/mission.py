@@ -144,10 +144,6 @@ def make_policy(name: str, cfg):
 #: stored time-series rows above which the default ``--every`` thins the series (~70 MB of Parquet)
 MAX_STORED_ROWS = 500_000
 
-#: estimated time-series rows from which ``dronewpt mission`` runs the compiled loop: below, numba's
-#: start-up in a fresh process (~0.5 s: import, registries, cache load) costs more than it saves
-#: (the default mission, ~5,000 rows, takes ~0.2 s in the Python loop)
-COMPILE_FROM_ROWS = 20_000
 #: the writer lock of ``mission --out`` (``flock``; the file exists only while a mission runs there)
 MISSION_LOCK = ".mission.lock"
 
@@ -163,13 +159,12 @@ def _cmd_mission(args) -> int:
     prepare_out_dir(args.out)
     est = estimate_run(cfg)
     every = stored_every_s(args.every, est)
-    compiled = None if est.rows >= COMPILE_FROM_ROWS else False
     with folder_lock(args.out, MISSION_LOCK, f"--out {str(args.out)!r}: another mission is writing there; "
                      "wait for it or use another --out"):  # before any simulation; removed at the end
         (args.out / "summary.json").unlink(missing_ok=True)  # present again only when this run's set is complete
         writer = SeriesWriter(args.out, csv=args.csv, every_s=every)
         try:
-            res = run_mission(cfg, pol, charge=not args.no_charge, progress=show_progress(args), compiled=compiled,
+            res = run_mission(cfg, pol, charge=not args.no_charge, progress=show_progress(args),
                               frame=False, sink=writer)
             files = [str(f) for f in writer.close()]
         except BaseException:

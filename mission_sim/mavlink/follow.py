@@ -13,7 +13,9 @@ chunk boundary is the one a continuous run reaches (the link settles in ~0.2 s, 
 warm-up). Not carried exactly: the battery's RC polarisation (tau 15 s) restarts at the warm-up
 (the runner has no initial-state hook); over an 8 s test track the state of charge differs from a
 continuous run by 1e-4 and the consumed charge by 0.7 %. Net charge and energy drawn accumulate over the whole run; HEARTBEATs come at every
-whole second of the vehicle's clock; the last, partial chunk is simulated and sent at the end.
+whole second of the vehicle's clock (with EXTENDED_SYS_STATE, the landed state); the last, partial chunk
+is simulated and sent at the end, then the vehicle lands and disarms as in ``dronewpt telemetry``
+(:func:`mission_sim.mavlink.telemetry.landing_rows`).
 """
 
 from __future__ import annotations
@@ -27,8 +29,8 @@ import numpy as np
 
 from .geodesy import GeoPoint, geodetic_to_enu
 from .logs import mavutil
-from .telemetry import (TlogWriter, check_connect, check_ids, drawn_totals, encode_heartbeat, encode_tick,
-                        mavlink_table, schedule, send_msgs)
+from .telemetry import (TlogWriter, check_connect, check_ids, drawn_totals, encode_tick, heartbeat_msgs,
+                        landing_rows, mavlink_table, schedule, send_msgs)
 
 __all__ = ["FollowStats", "open_follow", "follow", "ChunkedMission", "WARM_S"]
 
@@ -119,7 +121,8 @@ class ChunkedMission:
         if len(tick_t):
             tab = mavlink_table(ts, self.home, self.gap, t_out=tick_t, track=(t_seg, pos),
                                 drawn0=(self.drawn[0] - c0, self.drawn[1] - j0), hover_w=self.hover_w)
-            events = [(t, tab.iloc[k], hb) for t, k, hb in schedule(tick_t, self.last_hb)]
+            rows = list(tab.itertuples(index=False))         # namedtuples, as `telemetry` sends
+            events = [(t, rows[k], hb) for t, k, hb in schedule(tick_t, self.last_hb)]
             self.last_tick = float(tick_t[-1])
             self.last_hb = max([t for t, _, hb in events if hb], default=self.last_hb)
         self.drawn = (self.drawn[0] + c[-1] - c0, self.drawn[1] + j[-1] - j0)
@@ -178,12 +181,19 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
     clock, sim, queue = _Clock(), None, []        # queue: (send at wall offset, row, is_heartbeat)
     frames = n_msgs = 0
     last_rx, idle = wall0, False
+    last_tick = []                              # (time, row) of the latest tick queued
+
+    def enqueue(events):
+        for t, row, hb in events:
+            queue.append((t + chunk_s, row, hb))
+            if not hb:
+                last_tick[:] = [(t + chunk_s, row)]
 
     def send_due(now):
         nonlocal frames
         while queue and wall0 + queue[0][0] <= now:
             t_send, row, hb = queue.pop(0)
-            msgs = [encode_heartbeat(mav, row)] if hb else encode_tick(mav, row)
+            msgs = heartbeat_msgs(mav, row) if hb else encode_tick(mav, row)
             frames += send_msgs(mav, msgs, out, writer, epoch0 + t_send - chunk_s)
 
     try:
@@ -205,10 +215,12 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
                 e, n, u = geodetic_to_enu(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, home)
                 sim.add(clock(msg.time_boot_ms, last_rx - wall0), (e, n, max(float(u), 0.0) + sim.gap))
             if sim is not None and sim.pending_s() >= chunk_s:
-                queue.extend((t + chunk_s, row, hb) for t, row, hb in sim.simulate())
+                enqueue(sim.simulate())
             send_due(time.monotonic())
         if sim is not None and sim.pending_s() > 0:
-            queue.extend((t + chunk_s, row, hb) for t, row, hb in sim.simulate())   # the last, partial chunk
+            enqueue(sim.simulate())             # the last, partial chunk
+        if last_tick:                           # then the vehicle lands and disarms, as in `telemetry`
+            queue.extend((last_tick[0][0] + dt, row, True) for dt, row in landing_rows(last_tick[0][1]))
         send_due(math.inf)                      # and everything still queued, without waiting
     finally:
         vin.close()

@@ -26,7 +26,7 @@ from ..mavlink.geodesy import GeoPoint, geodetic_to_enu
 from .items import NAV_LAND, NAV_LOITER_TIME, NAV_RTL, NAV_TAKEOFF, NAV_WAYPOINT, RawMission, read_mission
 from .pads import read_pads
 
-__all__ = ["apply_mission_files", "route_from_items", "pads_to_local", "command_name", "RTL_ALT_M",
+__all__ = ["apply_mission_files", "mission_home", "route_from_items", "pads_to_local", "command_name", "RTL_ALT_M",
            "IGNORED_COMMANDS"]
 
 DO_CHANGE_SPEED = 178
@@ -174,6 +174,22 @@ def _path(value, base_dir, key: str):
     return p if p.is_absolute() or base_dir is None else Path(base_dir) / p
 
 
+def _first_pad_ref(geo) -> GeoPoint:
+    first = geo[0].point
+    return GeoPoint(first.lat_deg, first.lon_deg, 0.0 if first.alt_m is None else first.alt_m)
+
+
+def mission_home(mission) -> GeoPoint | None:
+    """The geodetic origin of the pad frame of a config's ``[mission]`` (a :class:`mission_sim.config.MissionConfig`
+    after :func:`apply_mission_files`): the mission file's home, else the first pad of its pads file;
+    None for a hand-written route (its frame has no place on Earth)."""
+    if mission.file:
+        return read_mission(Path(mission.file), mission.from_log).home
+    if mission.pads_file:
+        return _first_pad_ref(read_pads(Path(mission.pads_file)))
+    return None
+
+
 def apply_mission_files(d: dict, base_dir=None, mission_file=None, pads_file=None) -> dict:
     """Config dict ``d`` with its ``[mission] file`` read into ``[[waypoints]]`` (start at home) and
     its ``[mission] pads_file`` into ``[[pads]]``; ``mission_file`` / ``pads_file`` (command line)
@@ -199,8 +215,7 @@ def apply_mission_files(d: dict, base_dir=None, mission_file=None, pads_file=Non
     if pf is not None:
         geo = read_pads(pf)
         if ref is None:
-            first = geo[0].point
-            ref = GeoPoint(first.lat_deg, first.lon_deg, 0.0 if first.alt_m is None else first.alt_m)
+            ref = _first_pad_ref(geo)
         out["pads"] = pads_to_local(geo, ref)
         for i, q in enumerate(out["pads"]):
             dist = math.hypot(q["x_m"], q["y_m"])

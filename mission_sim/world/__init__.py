@@ -4,13 +4,12 @@
 ``trajectory``   waypoint missions, trapezoidal speed profiles, hover phases, replayed tracks
 ``wind``         seeded wind (Dryden-type gusts), drag, position-hold error, thrust tilt
 ``power``        electrical propulsion power from momentum theory
-``battery``      equivalent-circuit battery (OCV, R0, R1-C1) and the CC-CV charge manager
-``linkstep``     one exact ZOH step of the envelope link with its energy integrals
+``battery``      equivalent-circuit battery (OCV, R0, R1-C1) and CC-CV charger: parameters, OCV curve
 ``budget``       the size of a run (samples, memory, output bytes) estimated before it starts
 ``runner``       ``run_mission``: Lm along the trajectory, charged + uncharged runs, flight-time gain
-``loop``         ``MissionLoop``: the loop (pose -> Lm -> pad gating -> BMS -> policy -> link -> battery)
-``fastpath``     when and how the loop runs compiled (policies with a ``kernel()``), packing the state
-``loop_kernel``  the loop compiled with numba (imported on the first compiled run; ``loop`` is the reference)
+``loop``         ``MissionLoop``: orchestration (constants, per-sample arrays, Python policy calls, result)
+``fastpath``     the driver: records packed, the kernel run in chunks, Python policies / noise / errors served
+``loop_kernel``  every formula of a mission step, once, compiled (numba; link, battery, BMS, gating, windows)
 ``results``      :class:`MissionResult`: time series, summary, files
 ``stream``       rows in blocks: the summary on the fly, the time series to Parquet row groups (CSV on request)
 ===============  ==============================================================================

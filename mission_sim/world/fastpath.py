@@ -1,141 +1,167 @@
-"""The compiled fast path of :class:`~.loop.MissionLoop`: when it applies, packing, running, unpacking.
+"""The driver of the compiled mission loop: records in, the kernel run in chunks, Python's part on demand.
 
-:meth:`MissionLoop.run <.loop.MissionLoop.run>` uses it when :func:`usable` says so: numba is
-installed, the policy offers the optional ``kernel`` hook of :class:`mission_sim.contract.Policy`
-(a compiled per-step function and its parameter / state arrays) and there is no sensor noise
-(``sim.i2_noise_a = 0``; the reference draws it from numpy's generator). Any other policy runs the
-pure-Python reference loop. :func:`run_compiled` packs the loop's constants and state into arrays
-(names in :mod:`.loop_kernel`), runs :func:`.loop_kernel.run_kernel` in chunks of trajectory
-samples (progress bar; handing full blocks of rows to :meth:`~.loop.MissionLoop.flush` and reusing
-the buffer, which grows only when one interval needs more) and writes the state back to the loop, so
-:meth:`MissionLoop.result <.loop.MissionLoop.result>` assembles the result as for the reference.
-On an error status (a propulsion power the battery cannot supply, a non-finite duty) it returns
-False and the loop reruns the reference path, which raises the error with its message.
+:meth:`MissionLoop.run <.loop.MissionLoop.run>` calls :func:`run`, the one way a mission runs:
+:func:`pack_constants`, :func:`initial_state` and :func:`samples` fill the records of
+:mod:`.loop_kernel` (named fields: :data:`~.loop_kernel.CONST_DTYPE`, :data:`~.loop_kernel.STATE_DTYPE`,
+:data:`~.loop_kernel.SAMPLE_DTYPE`), then :func:`.loop_kernel.advance` runs the physics until Python
+has something to do, by status:
 
-This module does not import numba; :mod:`.loop_kernel` does, on the first compiled run.
+* ``PAUSED`` every :data:`_CHUNK` trajectory samples: the progress bar;
+* ``FULL``: the rows written so far go to :meth:`~.loop.MissionLoop.flush` (the buffer is reused);
+* ``NEED_ACT``: a Python policy's turn (no ``kernel()`` hook, or ``compiled=False``):
+  :meth:`~.loop.MissionLoop.act` on the observation the kernel wrote; the duty goes back in the state;
+* ``NEED_NOISE``: the next :data:`NOISE_BLOCK` standard normals of the loop's generator (sensor noise,
+  ``sim.i2_noise_a``; drawn in blocks, the same sequence as one draw per policy call);
+* ``ERR_POWER`` / ``ERR_POLICY``: :meth:`~.loop.MissionLoop.fail` words the error with the numbers the
+  kernel left in the state.
+
+A policy with the ``kernel()`` hook (:class:`mission_sim.contract.Policy`) is called inside the kernel
+(``compiled`` None or True); any other (``compiled=False``, RL, arbitrary Python) is called here at
+``NEED_ACT``. The physics is the same compiled code either way.
+
+This module does not import numba; :mod:`.loop_kernel` does, on the first run.
 """
 
 from __future__ import annotations
 
-import importlib.util
 import math
 
 import numpy as np
 
 from .stream import BLOCK_ROWS
 
-__all__ = ["usable", "run_compiled", "N_COLUMNS"]
+__all__ = ["usable", "run", "pack_constants", "link_values", "battery_values", "constants", "initial_state",
+           "samples", "N_COLUMNS", "NOISE_BLOCK"]
 
 N_COLUMNS = 26        # len(loop._COLUMNS): the kernel writes rows in that order (checked by the tests)
 _CHUNK = 256          # trajectory samples per kernel call (progress bar updates between calls)
-_MAX_ROWS = 5_000_000  # beyond this many rows for one interval the reference path runs instead
+NOISE_BLOCK = 4096    # sensor-noise normals drawn at once
 
 
 def usable(loop) -> bool:
-    """True if ``loop`` (a MissionLoop) can run compiled: numba, the policy's kernel hook, no noise."""
-    return (callable(getattr(loop.policy, "kernel", None)) and loop.sim.i2_noise_a == 0
-            and importlib.util.find_spec("numba") is not None)
+    """True if ``loop`` (a MissionLoop) runs its policy compiled: the policy offers the ``kernel`` hook."""
+    return loop.compiled is not False and callable(getattr(loop.policy, "kernel", None))
+
+
+def link_values(l1_h, l2_h, r1_ohm, r2_ohm, omega_rad_s) -> dict:
+    """The link's constants of :data:`.loop_kernel.CONST_DTYPE` (paper eq. 4; R1, R2 with the folded devices)."""
+    return {"l1": l1_h, "l2": l2_h, "st_r1": r1_ohm, "st_r2": r2_ohm, "omega": omega_rad_s,
+            "b0": 1.0 / (2 * l1_h), "b1": -1.0 / (2 * l2_h)}
+
+
+def battery_values(bp, ch) -> dict:
+    """The battery's (:class:`.battery.BatteryParams` ``bp``) and the charger's (:class:`.battery.CcCvParams`
+    ``ch``) constants of :data:`.loop_kernel.CONST_DTYPE`."""
+    return {"r0": bp.r0_ohm, "r1b": bp.r1_ohm, "tau1": bp.tau1_s, "bat_c1": bp.c1_f, "n_cells": bp.n_series,
+            "capacity_c": bp.capacity_c, "cc_a": ch.cc_current_a, "v_cv": ch.cv_cell_v * bp.n_series,
+            "cutoff_a": ch.cutoff_current_a, "v_recharge": (ch.cv_cell_v - ch.recharge_drop_cell_v) * bp.n_series}
+
+
+def constants(values: dict) -> np.ndarray:
+    """A 1-element :data:`.loop_kernel.CONST_DTYPE` array with ``values`` by name (the others 0)."""
+    from .loop_kernel import CONST_DTYPE
+    c = np.zeros(1, CONST_DTYPE)
+    for name, v in values.items():
+        c[name] = v
+    return c
 
 
 def pack_constants(loop) -> np.ndarray:
-    """The loop's constants in :data:`.loop_kernel.C_NAMES` order."""
-    from .loop_kernel import C_NAMES
-    st, sim, dev, ch = loop.st, loop.sim, loop.dev, loop.charger.p
+    """The loop's constants as a 1-element :data:`.loop_kernel.CONST_DTYPE` array (every field set)."""
+    from ..contract import _INV_SPAN, _LO
+    from .loop_kernel import CONST_DTYPE
+    sim, dev, lk = loop.sim, loop.dev, loop.lk
     val = {
         "dtc": loop.dtc, "k_on": loop.k_on, "k_off": loop.k_off, "ramp_rate": loop.ramp_rate, "rated": loop.rated,
-        "inv_sqrt_l1l2": loop.inv_sqrt_l1l2, "t_rect": loop.t_rect, "r0": loop.r0, "r1b": loop.r1b,
-        "n_cells": float(loop.n_cells), "tau1": loop.tau1, "vf": loop.vf, "dr_short": loop.dr_short,
-        "v1_nom": loop.v1_nom, "l1": st.l1, "l2": st.l2, "st_r1": st.r1, "st_r2": st.r2, "omega": st.w, "b0": st.b0,
-        "b1": st.b1, "bat_c1": loop.bp.c1_f, "capacity_c": loop.bp.capacity_c, "tx_off_delay": sim.tx_off_delay_s,
-        "bms_period": sim.bms_period_s, "cmd_deadband": sim.cmd_deadband_a, "min_fine": sim.min_fine_s,
-        "max_fine": sim.max_fine_s, "flight_dt": sim.flight_dt_s, "lm_rel_tol": sim.lm_rel_tol,
-        "coarse_period": sim.coarse_policy_period_s, "duty_event_tol": sim.duty_event_tol,
-        "settle_duty_tol": sim.settle_duty_tol, "settle_i2_tol": sim.settle_i2_tol_a, "cc_a": ch.cc_current_a,
-        "v_cv": ch.cv_cell_v * loop.bp.n_series, "cutoff_a": ch.cutoff_current_a, "inv_r": dev.inv_r_ohm,
-        "vf0": dev.rect_diode.vf0_v, "rd": dev.rect_diode.rd_ohm, "is_ideal": float(dev.is_ideal),
-        "coil_r1": loop.lk.r1_ohm, "coil_r2": loop.lk.r2_ohm,
-        "v_recharge": (ch.cv_cell_v - ch.recharge_drop_cell_v) * loop.bp.n_series,
+        "inv_sqrt_l1l2": loop.inv_sqrt_l1l2, "t_rect": loop.t_rect, "v1_nom": loop.v1_nom,
+        **link_values(loop.l1, loop.l2, lk.r1_ohm + dev.inv_r_ohm, lk.r2_ohm + dev.rect_rd_ohm, loop.base.omega_rad_s),
+        "vf": dev.rect_vf_v, "dr_short": dev.short_r_ohm - dev.rect_rd_ohm, "inv_r": dev.inv_r_ohm,
+        "vf0": dev.rect_diode.vf0_v, "rd": dev.rect_diode.rd_ohm, "is_ideal": dev.is_ideal,
+        "coil_r1": lk.r1_ohm, "coil_r2": lk.r2_ohm, **battery_values(loop.bp, loop.cfg.charger),
+        "tx_off_delay": sim.tx_off_delay_s, "bms_period": sim.bms_period_s, "cmd_deadband": sim.cmd_deadband_a,
+        "min_fine": sim.min_fine_s, "max_fine": sim.max_fine_s, "flight_dt": sim.flight_dt_s,
+        "lm_rel_tol": sim.lm_rel_tol, "coarse_period": sim.coarse_policy_period_s,
+        "duty_event_tol": sim.duty_event_tol, "settle_duty_tol": sim.settle_duty_tol,
+        "settle_i2_tol": sim.settle_i2_tol_a, "noise_a": sim.i2_noise_a,
+        "obs_lo": _LO, "obs_inv": _INV_SPAN, "row_margin": math.ceil(loop.dtc / loop.t_rect) + 3,
     }
-    return np.array([float(val[name]) for name in C_NAMES])
+    assert set(val) == set(CONST_DTYPE.names)
+    return constants(val)
 
 
-def _state_values(loop) -> dict:
-    """The loop's state by :data:`.loop_kernel.S_NAMES` (booleans as 0/1, None as NaN)."""
-    ch = loop.charger
-    return {
-        "x0": loop.x[0], "x1": loop.x[1], "v1": loop.v1, "tx_on": loop.tx_on, "cmd": loop.cmd, "d": loop.d,
-        "soc": loop.soc, "vrc": loop.vrc, "last_vl": loop.last_vl, "last_ib": loop.last_ib, "last_il": loop.last_il,
-        "in_fine": loop.in_fine, "fine_until_min": loop.fine_until_min, "fine_deadline": loop.fine_deadline,
-        "t_cmd_zero": loop.t_cmd_zero, "t_last_bms": loop.t_last_bms, "t_last_act": loop.t_last_act,
-        "peak_env": loop.peak_env, "peak_d": loop.peak_d, "above": loop.above, "n_fine": loop.n_fine,
-        "n_coarse": loop.n_coarse, "n_windows": loop.n_windows, "n_cut": loop.n_cut, "n_rows": 0,
-        "cv": ch.cv[0], "full": ch.full[0], "depleted_at": math.nan, "depleted_k": -1, "p11": 0.0, "p22": 0.0,
-        "tmp_ib": 0.0,
-    }
+def initial_state(loop) -> np.ndarray:
+    """The state at the mission's start as a 1-element :data:`.loop_kernel.STATE_DTYPE` array (the
+    receiver in short mode, the pad off, the battery at rest at ``initial_soc``)."""
+    from .loop_kernel import STATE_DTYPE, _ocv_cell
+    s = np.zeros(1, STATE_DTYPE)
+    st = s[0]
+    soc = loop.bp.initial_soc
+    for name, v in {"d": 1.0, "soc": soc, "last_vl": loop.bp.n_series * getattr(_ocv_cell, "py_func", _ocv_cell)(soc),
+                    "t_cmd_zero": -math.inf, "t_last_bms": -math.inf, "t_last_act": -math.inf,
+                    "fine_until_min": -1.0, "fine_deadline": -1.0, "peak_d": 1.0, "depleted_at": math.nan,
+                    "depleted_k": -1, "noise_i": NOISE_BLOCK}.items():
+        st[name] = v
+    return s
 
 
-def _unpack_state(loop, s):
-    from .loop_kernel import S_NAMES
-    v = dict(zip(S_NAMES, s.tolist()))
-    loop.x = (v["x0"], v["x1"])
-    for name in ("v1", "cmd", "d", "soc", "vrc", "last_vl", "last_ib", "last_il", "fine_until_min", "fine_deadline",
-                 "t_cmd_zero", "t_last_bms", "t_last_act", "peak_env", "peak_d", "above"):
-        setattr(loop, name, v[name])
-    loop.tx_on, loop.in_fine = v["tx_on"] != 0.0, v["in_fine"] != 0.0
-    for name in ("n_fine", "n_coarse", "n_windows", "n_cut"):
-        setattr(loop, name, int(v[name]))
-    loop.charger.cv[0], loop.charger.full[0] = v["cv"] != 0.0, v["full"] != 0.0
-    loop.bat.soc[0], loop.bat.v1_v[0] = loop.soc, loop.vrc
-    loop.st.last_p = (v["p11"], v["p22"])
-    if not math.isnan(v["depleted_at"]):
-        loop.depleted_at, loop.depleted_k = v["depleted_at"], int(v["depleted_k"])
+def samples(loop, a: int = 0, b: int | None = None) -> np.ndarray:
+    """Trajectory samples ``a:b`` as a :data:`.loop_kernel.SAMPLE_DTYPE` array (the state's ``k0`` = ``a``)."""
+    from .loop_kernel import SAMPLE_DTYPE
+    sl = slice(a, b)
+    smp = np.empty(len(loop.t_all[sl]), SAMPLE_DTYPE)
+    smp["t"], smp["lm"], smp["k"], smp["p"], smp["elig"] = (loop.t_all[sl], loop.lm_all[sl], loop.k_all[sl],
+                                                           loop.p_all[sl], loop.eligible[sl])
+    return smp
 
 
-def run_compiled(loop, bar=None) -> bool:
-    """Run ``loop`` (freshly reset) compiled; True when done (rows, state written back to ``loop``),
-    False when the reference path has to run instead (error status, or an interval too long)."""
+def run(loop, bar=None):
+    """Run ``loop`` (a fresh MissionLoop): the kernel until done, Python's part at each status; leaves the
+    final state in ``loop.state`` and the last rows in ``loop.rows``."""
     from . import loop_kernel as kern
-    from ..contract import _INV_SPAN, _LO
-    hook = loop.policy.kernel()
-    if hook is None:
-        return False
-    fn, params, state = hook
-    cst = pack_constants(loop)
-    vals = _state_values(loop)
-    s = np.array([float(vals[name]) for name in kern.S_NAMES])
-    t_all = np.ascontiguousarray(loop.t_all, dtype=float)
-    if len(t_all) < 2:
-        return False
-    need = kern._rows_needed.py_func(cst, float(np.max(np.diff(t_all))))  # the kernel's bound, in Python
-    if need > _MAX_ROWS:
-        return False
-    arrays = (t_all, np.ascontiguousarray(loop.lm_all, dtype=float), np.ascontiguousarray(loop.k_all, dtype=float),
-              np.ascontiguousarray(loop.p_all, dtype=float), loop.eligible.astype(float))
-    rows = np.empty((max(2 * need, BLOCK_ROWS + need), N_COLUMNS))  # pages are touched only as rows are written
-    k, params, state = 0, np.ascontiguousarray(params, dtype=float), np.ascontiguousarray(state, dtype=float)
-    lo, inv = np.ascontiguousarray(_LO, dtype=float), np.ascontiguousarray(_INV_SPAN, dtype=float)
-    i_rows, i_peak = kern.S_NAMES.index("n_rows"), kern.S_NAMES.index("peak_env")
-    while k < len(t_all) - 1:
-        k_new, status = kern.run_kernel(k, k + _CHUNK, s, cst, *arrays, rows, fn, params, state, lo, inv)
-        if bar is not None:
-            bar.update(float(t_all[k_new]) - float(t_all[k]))
-        k = k_new
-        if status == kern.FULL and s[i_rows] == 0:
-            rows = np.concatenate([rows, np.empty_like(rows)])
-        elif status == kern.DEPLETED:
+    hook = loop.policy.kernel() if usable(loop) else None
+    if loop.compiled and hook is None:
+        raise ValueError("compiled=True needs a policy with the kernel hook (mission_sim.contract.Policy); "
+                         "pass compiled=None or False")
+    fn, params, pstate = hook if hook is not None else (None, (), ())   # None: NEED_ACT for each duty
+    params, pstate = np.ascontiguousarray(params, dtype=float), np.ascontiguousarray(pstate, dtype=float)
+    c, s, smp = pack_constants(loop), initial_state(loop), samples(loop)
+    loop.consts, loop.state = c, s
+    if not hasattr(kern.advance, "py_func"):   # NUMBA_DISABLE_JIT=1: the kernel runs as Python on record views
+        c, s, smp = c.view(np.recarray), s.view(np.recarray), smp.view(np.recarray)
+    if len(smp) < 2:
+        return
+    rows = np.empty((max(BLOCK_ROWS, 2 * int(c[0]["row_margin"])), N_COLUMNS))  # blocks of at most BLOCK_ROWS rows
+    noise, obs = np.empty(NOISE_BLOCK if loop.sim.i2_noise_a > 0 else 0), np.empty(len(c[0]["obs_lo"]))
+    duty_in, duty_ready, n_rows = s["duty_in"], s["duty_ready"], s["n_rows"]  # views into the state
+    k_stop, t_done = _CHUNK, float(smp["t"][0])
+    while True:
+        status = kern.advance(k_stop, s, c, smp, rows, noise, obs, fn, params, pstate)
+        if status == kern.NEED_ACT:
+            duty_in[0], duty_ready[0] = loop.act(obs), True
+        elif status == kern.PAUSED:
+            k_stop += _CHUNK
+            if bar is not None:
+                t_now = float(smp["t"][s[0]["k"]])
+                bar.update(t_now - t_done)
+                t_done = t_now
+        elif status == kern.FULL:
+            _hand_over(loop, rows, s)
+        elif status == kern.NEED_NOISE:
+            noise[:] = loop.rng.standard_normal(NOISE_BLOCK)
+            s[0]["noise_i"] = 0
+        elif status in (kern.DONE, kern.DEPLETED):
             break
-        elif status not in (kern.OK, kern.FULL):
-            return False
-        if s[i_rows] >= BLOCK_ROWS or status == kern.FULL:
-            _hand_over(loop, rows, s, i_rows, i_peak)   # the block is final: the buffer is reused
-    loop.rows = rows[:int(s[i_rows])]
-    _unpack_state(loop, s)
-    return True
+        else:
+            loop.fail(kern.STATUS_NAMES[status], s[0])
+    if bar is not None:
+        bar.update(float(smp["t"][-1]) - t_done)
+    loop.rows = rows[:int(n_rows[0])]
+    loop.peak_env = float(s[0]["peak_env"])
 
 
-def _hand_over(loop, rows, s, i_rows, i_peak):
+def _hand_over(loop, rows, s):
     """Give the rows written so far to the loop (:meth:`~.loop.MissionLoop.flush`, which copies them) and
     empty the kernel's buffer."""
-    loop.rows, loop.peak_env = rows[:int(s[i_rows])], float(s[i_peak])
+    loop.rows, loop.peak_env = rows[:int(s[0]["n_rows"])], float(s[0]["peak_env"])
     loop.flush()
-    s[i_rows] = 0.0
+    s[0]["n_rows"] = 0

@@ -1,21 +1,43 @@
-""":class:`~.loop.MissionLoop`'s run compiled with numba (``cache=True``): the fast path.
+"""The mission loop's physics, compiled with numba (``cache=True``): the one implementation.
 
-The same algorithm, step for step and in the same floating-point operations, as the pure-Python
-reference in :mod:`.loop` (which stays the reference; ``tests/test_mission_fast.py`` compares the
-two on the default mission to 1e-9). What differs is only where numpy and libm round differently
-in the last bit (numpy's SIMD ``exp``/``arcsin``, BLAS dot products), which the test bounds.
+Every formula of a mission step lives here once: the link's exact ZOH step and its discretisation
+(paper eq. 4, :func:`link_disc`, :func:`link_step`), the energy integrals (Lyapunov identity), the I2
+samples and the peak tracking, the SBAR's V2 (eq. 9) with the devices, the battery ECM step, the
+CC-CV charger (BMS), the implicit VL solve, the depletion cut, the row layout, pad gating and the
+fine/coarse windows. :class:`~.loop.MissionLoop` (Python) only orchestrates: it packs the
+constants and the state (:mod:`.fastpath`), calls :func:`advance`, hands rows over, calls a Python
+policy when the kernel asks for a duty, draws the sensor noise and words the errors.
 
-This module imports numba at import time, so nothing imports it at module level: it is loaded by
-:mod:`.fastpath` on the first compiled run (compiled once per machine, then loaded from numba's
-disk cache). The policy comes in as a compiled function of the signature
-:data:`mission_sim.contract.POLICY_KERNEL_SIGNATURE` (the optional ``Policy.kernel`` hook).
+**Records, not slot numbers.** ``s`` is a 1-element array of :data:`STATE_DTYPE` (the loop's state
+by name: ``st = s[0]; st.soc``), ``c`` one of :data:`CONST_DTYPE` (the constants), ``smp`` the
+trajectory samples (:data:`SAMPLE_DTYPE`: time, Lm, k, propulsion power, energising flag), ``rows``
+``(capacity, 26)`` the time series in :data:`~.loop._COLUMNS` order.
 
-Arrays: ``cst`` constants (``C_*`` indices, filled by :func:`.fastpath.pack_constants`), ``s``
-the loop state (``S_*``; :class:`~.loop.MissionLoop`'s slots of the same names), ``t_all``,
-``lm_all``, ``k_all``, ``p_all``, ``elig`` per trajectory sample, ``rows`` (capacity, 26) the time
-series in :data:`~.loop._COLUMNS` order. :func:`run_kernel` returns the next sample index and a
-status (``OK``; ``FULL``: call again from that sample with more rows; ``DEPLETED``; ``ERR_POWER``,
-``ERR_POLICY``: rerun the reference path, which raises the error with its message).
+**Resumable.** :func:`advance` runs from the state's cursor (sample ``k``; inside an interval: time
+``t`` and ``sub``, the point of the iteration) and returns a status when Python has to act:
+
+============  ========================================================================================
+``DONE``      sample ``k0 + len(smp) - 1`` reached (the end of the trajectory, or of a chunk of it)
+``PAUSED``    sample ``k_stop`` reached (progress bar; call again with a larger ``k_stop``)
+``FULL``      ``rows`` has no room for one more iteration: hand the rows over, set ``n_rows = 0``
+``NEED_ACT``  a duty is due and the policy is Python: ``obs`` holds the normalised observation;
+              write the policy's output to ``duty_in``, set ``duty_ready`` and call again
+``NEED_NOISE``  the sensor-noise buffer is used up: refill ``noise`` (standard normals), ``noise_i = 0``
+``DEPLETED``  the battery reached SoC 0 (the run ends there: ``depleted_at``, ``depleted_k``)
+``ERR_POWER``  the battery cannot supply the propulsion power (``err_*`` hold the numbers)
+``ERR_POLICY``  the policy's duty is not finite (``duty_in`` holds it)
+============  ========================================================================================
+
+A compiled policy (``Policy.kernel()``, :data:`mission_sim.contract.POLICY_KERNEL_SIGNATURE`) is
+passed as ``fn`` and called in place; with ``fn=None`` (a Python policy) the kernel returns
+``NEED_ACT`` at the same point. Both run this same code; they differ only in who computes the duty. The per-sample arrays may be a
+chunk of the trajectory starting at sample ``k0`` (state field); quiet flight looks ahead at most
+``sim.flight_dt_s``, so a chunk should reach that far beyond ``k_stop`` for the same merging.
+
+This module imports numba: nothing imports it at module level (:mod:`.fastpath` loads it on the
+first run; compiled once per machine, then loaded from numba's disk cache). Tests may run the
+functions' ``py_func`` on ``np.recarray`` views of the records (or the whole module with
+``NUMBA_DISABLE_JIT=1``): the attribute syntax works on both.
 """
 
 from __future__ import annotations
@@ -24,49 +46,89 @@ import math
 import warnings
 
 import numpy as np
-from numba import njit, types
+from numba import from_dtype, njit, types
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
-__all__ = ["run_kernel", "POLICY_FN", "OK", "FULL", "DEPLETED", "ERR_POWER", "ERR_POLICY", "N_STATE", "N_CONST",
-           "S_NAMES", "C_NAMES"]
+from ..contract import OBS_DIM
 
-OK, FULL, DEPLETED, ERR_POWER, ERR_POLICY, _NEED_DEPLETE = 0, 1, 2, 3, 4, 5
+__all__ = ["advance", "link_disc", "link_step", "link_stored_j", "STATE_DTYPE", "CONST_DTYPE",
+           "SAMPLE_DTYPE", "OK", "DONE", "PAUSED", "FULL", "NEED_ACT", "NEED_NOISE", "DEPLETED", "ERR_POWER",
+           "ERR_POLICY", "STATUS_NAMES"]
 
-S_NAMES = ("x0", "x1", "v1", "tx_on", "cmd", "d", "soc", "vrc", "last_vl", "last_ib", "last_il", "in_fine",
-           "fine_until_min", "fine_deadline", "t_cmd_zero", "t_last_bms", "t_last_act", "peak_env", "peak_d",
-           "above", "n_fine", "n_coarse", "n_windows", "n_cut", "n_rows", "cv", "full", "depleted_at", "depleted_k",
-           "p11", "p22", "tmp_ib")
-(S_X0, S_X1, S_V1, S_TX_ON, S_CMD, S_D, S_SOC, S_VRC, S_LVL, S_LIB, S_LIL, S_IN_FINE, S_FMIN, S_FDEAD, S_TCZ, S_TBMS,
- S_TACT, S_PENV, S_PD, S_ABOVE, S_NFINE, S_NCOARSE, S_NWIN, S_NCUT, S_NROWS, S_CV, S_FULL, S_DEPAT, S_DEPK, S_P11,
- S_P22, S_TMPIB) = range(len(S_NAMES))
-N_STATE = len(S_NAMES)
-#: the slots deplete() saves and restores (``_STEP_STATE`` of the reference)
-_SAVED = (S_X0, S_X1, S_SOC, S_VRC, S_PENV, S_PD, S_ABOVE, S_LVL, S_LIB, S_LIL)
+STATUS_NAMES = ("OK", "DONE", "PAUSED", "FULL", "NEED_ACT", "NEED_NOISE", "DEPLETED", "ERR_POWER", "ERR_POLICY",
+                "NEED_DEPLETE")
+OK, DONE, PAUSED, FULL, NEED_ACT, NEED_NOISE, DEPLETED, ERR_POWER, ERR_POLICY, _NEED_DEPLETE = range(10)
 
-C_NAMES = ("dtc", "k_on", "k_off", "ramp_rate", "rated", "inv_sqrt_l1l2", "t_rect", "r0", "r1b", "n_cells", "tau1",
-           "vf", "dr_short", "v1_nom", "l1", "l2", "st_r1", "st_r2", "omega", "b0", "b1", "bat_c1", "capacity_c",
-           "tx_off_delay", "bms_period", "cmd_deadband", "min_fine", "max_fine", "flight_dt", "lm_rel_tol",
-           "coarse_period", "duty_event_tol", "settle_duty_tol", "settle_i2_tol", "cc_a", "v_cv", "cutoff_a",
-           "inv_r", "vf0", "rd", "is_ideal", "coil_r1", "coil_r2", "v_recharge")
-(C_DTC, C_K_ON, C_K_OFF, C_RAMP, C_RATED, C_INV_SQRT, C_T_RECT, C_R0, C_R1B, C_NCELLS, C_TAU1, C_VF, C_DR_SHORT,
- C_V1NOM, C_L1, C_L2, C_ST_R1, C_ST_R2, C_OMEGA, C_B0, C_B1, C_BAT_C1, C_CAP, C_TX_OFF_DELAY, C_BMS_PERIOD,
- C_CMD_DEADBAND, C_MIN_FINE, C_MAX_FINE, C_FLIGHT_DT, C_LM_REL_TOL, C_COARSE_PERIOD, C_DUTY_EVENT_TOL,
- C_SETTLE_DUTY_TOL, C_SETTLE_I2_TOL, C_CC, C_V_CV, C_CUTOFF, C_INV_R, C_VF0, C_RD, C_IS_IDEAL, C_COIL_R1,
- C_COIL_R2, C_V_RECHARGE) = range(len(C_NAMES))
-N_CONST = len(C_NAMES)
+#: the loop's state, by name (units SI; flags bool; counters int64)
+STATE_DTYPE = np.dtype([
+    # cursor: sample k (global index), the per-sample arrays' first sample k0, phase 0 (start of sample k)
+    # or 1 (inside its interval at time t, iteration point sub), the fine step in progress
+    ("k", "i8"), ("k0", "i8"), ("phase", "i8"), ("sub", "i8"), ("t", "f8"), ("dt_f", "f8"), ("lm_s", "f8"),
+    ("d_prev", "f8"), ("fresh", "?"),
+    # link envelope (I1, I2) [A], pad voltage amplitude [V], int I1^2 dt, int I2^2 dt of the last step [A^2 s]
+    ("x0", "f8"), ("x1", "f8"), ("v1", "f8"), ("p11", "f8"), ("p22", "f8"),
+    # pad and BMS: transmitter wants on, charge command I_L* [A], when it went to 0 / the last BMS update [s]
+    ("tx_on", "?"), ("cmd", "f8"), ("t_cmd_zero", "f8"), ("t_last_bms", "f8"),
+    # policy: duty d_short, last call [s], a duty handed in by Python, sensor-noise buffer position
+    ("d", "f8"), ("t_last_act", "f8"), ("duty_ready", "?"), ("duty_in", "f8"), ("noise_i", "i8"),
+    # battery: SoC, R1-C1 voltage [V], last terminal voltage [V], battery / rectifier current [A], charger flags
+    ("soc", "f8"), ("vrc", "f8"), ("last_vl", "f8"), ("last_ib", "f8"), ("last_il", "f8"), ("cv", "?"), ("full", "?"),
+    # fine window: inside one, its earliest end and its deadline [s]
+    ("in_fine", "?"), ("fine_until_min", "f8"), ("fine_deadline", "f8"),
+    # peak |I2| of the envelope [A], the duty there, time above rated [s]
+    ("peak_env", "f8"), ("peak_d", "f8"), ("above", "f8"),
+    ("n_fine", "i8"), ("n_coarse", "i8"), ("n_windows", "i8"), ("n_cut", "i8"), ("n_rows", "i8"),
+    # depletion (NaN / -1: not depleted), the battery current of the step that crossed SoC 0 [A]
+    ("depleted_at", "f8"), ("depleted_k", "i8"), ("tmp_ib", "f8"),
+    # ERR_POWER: time [s], propulsion power [W], SoC, the most the battery can supply [W], sample
+    ("err_t", "f8"), ("err_p", "f8"), ("err_soc", "f8"), ("err_pmax", "f8"), ("err_k", "i8"),
+])
+
+#: the loop's constants, by name (filled by :func:`.fastpath.pack_constants`)
+CONST_DTYPE = np.dtype([
+    ("dtc", "f8"), ("k_on", "f8"), ("k_off", "f8"), ("ramp_rate", "f8"), ("rated", "f8"), ("inv_sqrt_l1l2", "f8"),
+    ("t_rect", "f8"), ("v1_nom", "f8"),
+    # link (paper eq. 4) with the devices folded in: L1, L2 [H], R1 + 2 Ron, R2 + Rd [ohm], omega, B = (1/2L1, -1/2L2)
+    ("l1", "f8"), ("l2", "f8"), ("st_r1", "f8"), ("st_r2", "f8"), ("omega", "f8"), ("b0", "f8"), ("b1", "f8"),
+    # devices: forward drop of the rectifying path [V], shorted-SBAR resistance minus Rd [ohm], the loss split
+    ("vf", "f8"), ("dr_short", "f8"), ("inv_r", "f8"), ("vf0", "f8"), ("rd", "f8"), ("is_ideal", "?"),
+    ("coil_r1", "f8"), ("coil_r2", "f8"),
+    # battery: R0, R1 [ohm], tau1 [s], C1 [F], cells in series, capacity [C]; charger: CC [A], CV [V], cut-off [A], recharge [V]
+    ("r0", "f8"), ("r1b", "f8"), ("tau1", "f8"), ("bat_c1", "f8"), ("n_cells", "f8"), ("capacity_c", "f8"),
+    ("cc_a", "f8"), ("v_cv", "f8"), ("cutoff_a", "f8"), ("v_recharge", "f8"),
+    # sim.*
+    ("tx_off_delay", "f8"), ("bms_period", "f8"), ("cmd_deadband", "f8"), ("min_fine", "f8"), ("max_fine", "f8"),
+    ("flight_dt", "f8"), ("lm_rel_tol", "f8"), ("coarse_period", "f8"), ("duty_event_tol", "f8"),
+    ("settle_duty_tol", "f8"), ("settle_i2_tol", "f8"), ("noise_a", "f8"),
+    # the contract's normalisation of the observation (lo, 1 / span)
+    ("obs_lo", "f8", (OBS_DIM,)), ("obs_inv", "f8", (OBS_DIM,)),
+    # most rows one iteration can write (a fine step split into rectifier periods)
+    ("row_margin", "i8"),
+])
+
+#: one trajectory sample: time [s], Lm of the nearest pad [H], coupling k, propulsion power [W], energising
+SAMPLE_DTYPE = np.dtype([("t", "f8"), ("lm", "f8"), ("k", "f8"), ("p", "f8"), ("elig", "?")])
+
 _SOC_COL = 12
 _FOUR_PI = 4.0 / math.pi
 _F8 = types.float64[::1]
 POLICY_FN = types.FunctionType(types.float64(_F8, _F8, _F8))
 
 
-# ---------------------------------------------------------------------- the link (LinkStepper)
+# ---------------------------------------------------------------------- the link (paper eq. 4)
 @njit(cache=True)
-def _disc(cst, lm_h, dt_s):
-    """``LinkStepper.disc``: (d00, d01, d10, d11, bd00, bd01, bd10, bd11, i00, i01, i10, i11, m10, m11, g1, g2)."""
-    l1, l2, w, b0, b1 = cst[C_L1], cst[C_L2], cst[C_OMEGA], cst[C_B0], cst[C_B1]
-    wlm = w * lm_h
-    a00, a01, a10, a11 = -cst[C_ST_R1] / (2 * l1), -wlm / (2 * l1), wlm / (2 * l2), -cst[C_ST_R2] / (2 * l2)
+def _link_a(c, lm_h):
+    """``A`` of ``dx/dt = A x + B u`` (eq. 4, x = (I1, I2), u = (V1, V2)): (a00, a01, a10, a11) [1/s]."""
+    wlm = c.omega * lm_h
+    return -c.st_r1 / (2 * c.l1), -wlm / (2 * c.l1), wlm / (2 * c.l2), -c.st_r2 / (2 * c.l2)
+
+
+@njit(cache=True)
+def link_disc(c, lm_h, dt_s):
+    """Exact ZOH discretisation of eq. 4 over ``dt_s`` (closed-form 2x2 matrix exponential):
+    ``(Ad 00, 01, 10, 11, Bd 00, 01, 10, 11, A^-1 00, 01, 10, 11, m10, m11, g1, g2)``; ``S2 = int I2 dt
+    = m10 I1 + m11 I2 + g1 V1 + g2 V2``. The one place the link model is discretised."""
+    a00, a01, a10, a11 = _link_a(c, lm_h)
     s = 0.5 * (a00 + a11)
     det = a00 * a11 - a01 * a10
     q2 = s * s - det
@@ -77,29 +139,33 @@ def _disc(cst, lm_h, dt_s):
         ec, es = e, e * dt_s
     elif q2 < 0:
         ec, es = e * math.cos(qt), e * math.sin(qt) / q
-    else:
+    else:  # real poles s -/+ q (both negative): e^{st} cosh(qt) without overflowing cosh for long steps
         ep, em = math.exp((s + q) * dt_s), math.exp((s - q) * dt_s)
         ec, es = 0.5 * (ep + em), 0.5 * (ep - em) / q
     d00, d01 = ec + es * (a00 - s), es * a01
     d10, d11 = es * a10, ec + es * (a11 - s)
     i00, i01, i10, i11 = a11 / det, -a01 / det, -a10 / det, a00 / det
-    m00 = i00 * (d00 - 1) + i01 * d10
+    m00 = i00 * (d00 - 1) + i01 * d10       # M = A^-1 (Ad - I); Bd = M B
     m01 = i00 * d01 + i01 * (d11 - 1)
     m10 = i10 * (d00 - 1) + i11 * d10
     m11 = i10 * d01 + i11 * (d11 - 1)
-    bd00, bd10 = m00 * b0, m10 * b0
-    bd01, bd11 = m01 * b1, m11 * b1
-    g1 = i10 * (bd00 - b0 * dt_s) + i11 * bd10
-    g2 = i10 * bd01 + i11 * (bd11 - b1 * dt_s)
+    bd00, bd10 = m00 * c.b0, m10 * c.b0
+    bd01, bd11 = m01 * c.b1, m11 * c.b1
+    g1 = i10 * (bd00 - c.b0 * dt_s) + i11 * bd10    # g = A^-1 (Bd - B dt)
+    g2 = i10 * bd01 + i11 * (bd11 - c.b1 * dt_s)
     return (d00, d01, d10, d11, bd00, bd01, bd10, bd11, i00, i01, i10, i11, m10, m11, g1, g2)
 
 
 @njit(cache=True)
-def _lyap_rows(cst, lm_h):
-    """Rows 1 and 3 of the inverse Lyapunov map (``LinkStepper._lyap_inv``: l0, l1, l2, l6, l7, l8)."""
-    wlm = cst[C_OMEGA] * lm_h
-    l1, l2 = cst[C_L1], cst[C_L2]
-    a00, a01, a10, a11 = -cst[C_ST_R1] / (2 * l1), -wlm / (2 * l1), wlm / (2 * l2), -cst[C_ST_R2] / (2 * l2)
+def _zoh(dd, a0, a1, v1, v2):
+    """``x1 = Ad x0 + Bd u`` with ``dd`` from :func:`link_disc`."""
+    return dd[0] * a0 + dd[1] * a1 + dd[4] * v1 + dd[5] * v2, dd[2] * a0 + dd[3] * a1 + dd[6] * v1 + dd[7] * v2
+
+
+@njit(cache=True)
+def _lyap_rows(c, lm_h):
+    """Rows 1 and 3 of the inverse of the 3x3 Lyapunov map (p11, p12, p22) -> (q11, q12, q22), by cofactors."""
+    a00, a01, a10, a11 = _link_a(c, lm_h)
     m00, m01, m02 = 2 * a00, 2 * a01, 0.0
     m10, m11, m12 = a10, a00 + a11, a01
     m20, m21, m22 = 0.0, 2 * a10, 2 * a11
@@ -112,13 +178,16 @@ def _lyap_rows(cst, lm_h):
 
 
 @njit(cache=True)
-def _link_step(s, cst, lm_h, dt_s, v1, v2, dd):
-    """``LinkStepper.step`` from state (S_X0, S_X1); p11, p22 into the state; returns
-    ``(y0, y1, e_src, e_coil, e_rect, int_i2)``."""
-    a0, a1 = s[S_X0], s[S_X1]
-    y0 = dd[0] * a0 + dd[1] * a1 + dd[4] * v1 + dd[5] * v2
-    y1 = dd[2] * a0 + dd[3] * a1 + dd[6] * v1 + dd[7] * v2
-    bu0, bu1 = cst[C_B0] * v1, cst[C_B1] * v2
+def link_step(c, dd, lm_h, dt_s, a0, a1, v1, v2):
+    """One exact ZOH step of eq. 4 from ``(a0, a1) = (I1, I2)`` with ``(V1, V2)`` held, ``dd`` =
+    :func:`link_disc` ``(c, lm_h, dt_s)``; returns ``(I1, I2, e_src_j, e_coil_j, e_rect_j, int_i2, p11, p22)``.
+
+    ``S = int x dt = A^-1 (x1 - x0 - B u dt)``; ``P = int x x^T dt`` from the Lyapunov identity
+    ``A P + P A^T = x1 x1^T - x0 x0^T - B u S^T - S u^T B^T``. Energies (envelope powers are ``V I / 2``):
+    source ``V1 S1 / 2``, coils + folded devices ``(R1 P11 + R2 P22) / 2``, rectifier ``V2 S2 / 2``; with
+    ``W`` = :func:`link_stored_j` they satisfy ``source = dW + losses + rectifier`` to rounding."""
+    y0, y1 = _zoh(dd, a0, a1, v1, v2)
+    bu0, bu1 = c.b0 * v1, c.b1 * v2
     r0 = y0 - a0 - bu0 * dt_s
     r1 = y1 - a1 - bu1 * dt_s
     s0 = dd[8] * r0 + dd[9] * r1
@@ -126,436 +195,533 @@ def _link_step(s, cst, lm_h, dt_s, v1, v2, dd):
     q11 = y0 * y0 - a0 * a0 - 2 * bu0 * s0
     q12 = y0 * y1 - a0 * a1 - (bu0 * s1 + s0 * bu1)
     q22 = y1 * y1 - a1 * a1 - 2 * bu1 * s1
-    l = _lyap_rows(cst, lm_h)
+    l = _lyap_rows(c, lm_h)
     p11 = l[0] * q11 + l[1] * q12 + l[2] * q22
     p22 = l[3] * q11 + l[4] * q12 + l[5] * q22
-    s[S_P11], s[S_P22] = p11, p22
-    e_coil = 0.5 * (cst[C_ST_R1] * p11 + cst[C_ST_R2] * p22)
-    return y0, y1, 0.5 * v1 * s0, e_coil, 0.5 * v2 * s1, s1
+    return y0, y1, 0.5 * v1 * s0, 0.5 * (c.st_r1 * p11 + c.st_r2 * p22), 0.5 * v2 * s1, s1, p11, p22
 
 
 @njit(cache=True)
-def _i2_samples(cst, lm_h, dt_s, a0, a1, v1, v2, m, out):
-    """``LinkStepper.i2_samples`` into ``out[:m - 1]``."""
-    dd = _disc(cst, lm_h, dt_s / m)
+def link_stored_j(c, a0, a1):
+    """Stored energy of the envelope model ``(L1 I1^2 + L2 I2^2) / 2`` [J]."""
+    return 0.5 * (c.l1 * a0 * a0 + c.l2 * a1 * a1)
+
+
+@njit(cache=True)
+def _i2_samples(c, lm_h, dt_s, a0, a1, v1, v2, m, out):
+    """I2 at the ``m - 1`` equally spaced interior points of the step into ``out[:m - 1]`` (peak detection)."""
+    dd = link_disc(c, lm_h, dt_s / m)
     for j in range(m - 1):
-        a0, a1 = (dd[0] * a0 + dd[1] * a1 + dd[4] * v1 + dd[5] * v2, dd[2] * a0 + dd[3] * a1 + dd[6] * v1 + dd[7] * v2)
+        a0, a1 = _zoh(dd, a0, a1, v1, v2)
         out[j] = a1
 
 
 @njit(cache=True)
-def _track_peak(s, cst, i2s, d, dt_each):
+def _track_peak(st, c, i2s, d, dt_each):
+    """Running peak of |I2| (a negative envelope is a current of that size shifted by pi), the duty
+    there, and the time above rated (``dt_each`` per value)."""
     i2s = abs(i2s)
-    if i2s > s[S_PENV]:
-        s[S_PENV], s[S_PD] = i2s, d
-    if i2s > cst[C_RATED]:
-        s[S_ABOVE] += dt_each
+    if i2s > st.peak_env:
+        st.peak_env, st.peak_d = i2s, d
+    if i2s > c.rated:
+        st.above += dt_each
 
 
-# ---------------------------------------------------------------------- battery
+# ---------------------------------------------------------------------- SBAR, battery, charger
 @njit(cache=True)
-def _ocv_cell(s):
-    s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
+def _sbar_c(d, i2):
+    """SBAR fundamental per volt of VL (eq. 9): ``(4/pi) (1 - sin(pi d / 2)) sign(I2)``."""
+    return _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * d)) * (1.0 if i2 > 0.0 else (-1.0 if i2 < 0.0 else 0.0))
+
+
+@njit(cache=True)
+def _w_short(d):
+    """Share of the short window in the conduction, ``d + sin(pi d) / pi`` (the shorted channels' excess)."""
+    return d + math.sin(math.pi * d) / math.pi
+
+
+@njit(cache=True)
+def _ocv_cell(soc):
+    """Open-circuit voltage of one cell [V] (Chen & Rincon-Mora 2006 fit, :mod:`.battery`); SoC clipped into [0, 1]."""
+    s = 0.0 if soc < 0.0 else (1.0 if soc > 1.0 else soc)
     return -1.031 * math.exp(-35.0 * s) + 3.685 + 0.2156 * s - 0.1178 * s * s + 0.3201 * s * s * s
 
 
 @njit(cache=True)
-def _bat_step(cst, soc, v1_v, i, dt_s):
-    """``battery.scalar_stepper``'s step: (soc1, v1_1, chem_j, r0_loss_j, r1_loss_j, c1_delta_j)."""
-    r0, r1, tau, c1, n_cells, cap = cst[C_R0], cst[C_R1B], cst[C_TAU1], cst[C_BAT_C1], cst[C_NCELLS], cst[C_CAP]
-    e = math.exp(-dt_s / tau)
-    vinf = r1 * i
+def _bat_step(c, soc, v1_v, i, dt_s):
+    """Battery ECM step, current ``i`` [A] held (exact; OCV held at its start-of-step value):
+    ``(soc1, v1_1, chem_j, r0_loss_j, r1_loss_j, c1_delta_j)`` (:mod:`.battery`)."""
+    e = math.exp(-dt_s / c.tau1)
+    vinf = c.r1b * i
     dv = v1_v - vinf
-    int_v2 = vinf * vinf * dt_s + 2.0 * vinf * dv * tau * (1.0 - e) + dv * dv * 0.5 * tau * (1.0 - e * e)
-    ocv = n_cells * _ocv_cell(soc)
+    int_v2 = vinf * vinf * dt_s + 2.0 * vinf * dv * c.tau1 * (1.0 - e) + dv * dv * 0.5 * c.tau1 * (1.0 - e * e)
+    ocv = c.n_cells * _ocv_cell(soc)
     dq = i * dt_s
     v1n = vinf + dv * e
-    return (soc + dq / cap, v1n, ocv * dq, r0 * i * i * dt_s, int_v2 / r1, 0.5 * c1 * (v1n * v1n - v1_v * v1_v))
+    return (soc + dq / c.capacity_c, v1n, ocv * dq, c.r0 * i * i * dt_s, int_v2 / c.r1b,
+            0.5 * c.bat_c1 * (v1n * v1n - v1_v * v1_v))
 
 
 @njit(cache=True)
-def _charger_command(s, cst, i_prop):
-    """``CcCvCharger.command_a`` for one battery (its cv / full flags in the state; both clear below
-    the recharge threshold)."""
-    sc = min(max(s[S_SOC], 0.0), 1.0)
-    ocv = cst[C_NCELLS] * (-1.031 * math.exp(-35.0 * sc) + 3.685 + 0.2156 * sc - 0.1178 * sc ** 2
-                           + 0.3201 * math.pow(sc, 3.0))
-    v_rest = ocv + s[S_VRC]
-    if s[S_FULL] != 0.0 and v_rest < cst[C_V_RECHARGE]:
-        s[S_FULL], s[S_CV] = 0.0, 0.0
-    i_cv = (cst[C_V_CV] - v_rest) / cst[C_R0]
-    if i_cv < cst[C_CC]:
-        s[S_CV] = 1.0
-    tgt = min(cst[C_CC], i_cv)
-    if s[S_CV] != 0.0 and tgt < cst[C_CUTOFF]:
-        s[S_FULL] = 1.0
-    if s[S_FULL] != 0.0:
+def _charger_command(st, c, i_prop):
+    """CC-CV charge manager (:mod:`.battery`, :class:`.battery.CcCvParams`): the SBAR command ``I_L*`` [A], propulsion
+    current ``i_prop`` plus the battery's CC/CV current, 0 when full; ``full`` and ``cv`` clear once
+    ``OCV + v1`` falls below the recharge threshold."""
+    v_rest = c.n_cells * _ocv_cell(st.soc) + st.vrc
+    if st.full and v_rest < c.v_recharge:
+        st.full, st.cv = False, False
+    i_cv = (c.v_cv - v_rest) / c.r0
+    if i_cv < c.cc_a:
+        st.cv = True
+    tgt = min(c.cc_a, i_cv)
+    if st.cv and tgt < c.cutoff_a:
+        st.full = True
+    if st.full:
         return 0.0
     return max(tgt, 0.0) + i_prop
 
 
 # ---------------------------------------------------------------------- link + battery node
 @njit(cache=True)
-def _step(s, cst, rows, t0, dt, lm, p_prop, row_k, fine):
-    """``MissionLoop.step``: OK, ERR_POWER, or _NEED_DEPLETE (SoC < 0: nothing written, I_b in S_TMPIB)."""
-    a0, a1, v1, d, soc, vrc, tau1 = s[S_X0], s[S_X1], s[S_V1], s[S_D], s[S_SOC], s[S_VRC], cst[C_TAU1]
-    sgn = (a1 > 0.0) - (a1 < 0.0)
-    c = _FOUR_PI * 1.0 * (1.0 - math.sin(0.5 * np.pi * d)) * sgn if v1 > 0.0 else 0.0
-    w_short = d + math.sin(math.pi * d) / math.pi
-    v2x = c * cst[C_VF] + (cst[C_DR_SHORT] * w_short * a1 if v1 > 0.0 else 0.0)
-    frac = tau1 * (1.0 - math.exp(-dt / tau1)) / dt
-    a0b = cst[C_NCELLS] * _ocv_cell(soc) + vrc * frac
-    g = cst[C_R0] + cst[C_R1B] * (1.0 - frac)
-    lm_eff = lm if lm > 0 else 1e-12
-    dd = _disc(cst, lm_eff, dt)
-    s0 = dd[12] * a0 + dd[13] * a1 + dd[14] * v1 + dd[15] * v2x
-    alpha = 1.0 - g * c * c * dd[15] / (2 * dt)
-    beta = a0b + g * c * s0 / (2 * dt)
+def _solve_vl(st, c, dt, dd, cc, v2x, p_prop):
+    """The battery node's VL [V] for the step (NaN if the battery cannot supply ``p_prop``; err_pmax set).
+
+    Mean terminal voltage = A0 + G i_mean (held-current RC solution) and ``i_mean = I_L - P / VL`` with
+    ``I_L = c S2 / (2 dt)``, ``V2 = c VL + v2x``: a quadratic in VL, so V2, the battery and the
+    propulsion power agree exactly and every energy closes to rounding."""
+    frac = c.tau1 * (1.0 - math.exp(-dt / c.tau1)) / dt
+    a0 = c.n_cells * _ocv_cell(st.soc) + st.vrc * frac
+    g = c.r0 + c.r1b * (1.0 - frac)
+    s0 = dd[12] * st.x0 + dd[13] * st.x1 + dd[14] * st.v1 + dd[15] * v2x
+    alpha = 1.0 - g * cc * cc * dd[15] / (2 * dt)
+    beta = a0 + g * cc * s0 / (2 * dt)
     disc = beta * beta - 4 * alpha * g * p_prop
     if disc < 0:
+        st.err_pmax = beta * beta / (4 * alpha * g)
+        return math.nan
+    return (beta + math.sqrt(disc)) / (2 * alpha)
+
+
+@njit(cache=True)
+def _step(st, c, rows, t0, dt, lm, p_prop, row_k, fine):
+    """Link (eq. 4, exact ZOH) and battery node over one step, VL solved implicitly; writes a row.
+    OK, ERR_POWER, or _NEED_DEPLETE (SoC < 0: nothing written, I_b in tmp_ib).
+
+    The diodes conduct with the instantaneous i2, so V2 is in phase with i2 whatever the sign of its
+    envelope: V2 = f(d) sign(I2) (the rectifier always absorbs power). With the pad off the diodes
+    block and the coil currents ring down in R1, R2. Devices: V2 = c (VL + Vf) + (2 Ron - Rd) w(d) I2."""
+    a0, a1, v1, d = st.x0, st.x1, st.v1, st.d
+    cc = _sbar_c(d, a1) if v1 > 0.0 else 0.0
+    w_short = _w_short(d)
+    v2x = cc * c.vf + (c.dr_short * w_short * a1 if v1 > 0.0 else 0.0)
+    lm_eff = lm if lm > 0 else 1e-12
+    dd = link_disc(c, lm_eff, dt)
+    vl = _solve_vl(st, c, dt, dd, cc, v2x, p_prop)
+    if math.isnan(vl):
+        st.err_t, st.err_p, st.err_soc, st.err_k = t0, p_prop, st.soc, row_k
         return ERR_POWER
-    vl = (beta + math.sqrt(disc)) / (2 * alpha)
-    v2 = c * vl + v2x
+    v2 = cc * vl + v2x
     if fine:
         smp = np.empty(3)
-        _i2_samples(cst, lm_eff, dt, a0, a1, v1, v2, 4, smp)
+        _i2_samples(c, lm_eff, dt, a0, a1, v1, v2, 4, smp)
         for j in range(3):
-            _track_peak(s, cst, smp[j], d, dt / 4)
-    y0, y1, e_src, e_coil, e_rect, int_i2 = _link_step(s, cst, lm_eff, dt, v1, v2, dd)
-    i_l = 0.5 * c * int_i2 / dt
+            _track_peak(st, c, smp[j], d, dt / 4)
+    y0, y1, e_src, e_coil, e_rect, int_i2, p11, p22 = link_step(c, dd, lm_eff, dt, a0, a1, v1, v2)
+    i_l = 0.5 * cc * int_i2 / dt
     i_p = p_prop / vl
     i_b = i_l - i_p
-    soc, vrc, e_chem, e_r0, e_r1, e_c1 = _bat_step(cst, soc, vrc, i_b, dt)
-    if soc < 0.0 and math.isnan(s[S_DEPAT]):
-        s[S_TMPIB] = i_b
+    soc, vrc, e_chem, e_r0, e_r1, e_c1 = _bat_step(c, st.soc, st.vrc, i_b, dt)
+    if soc < 0.0 and math.isnan(st.depleted_at):
+        st.tmp_ib = i_b
         return _NEED_DEPLETE
-    _track_peak(s, cst, y1, d, dt / 4 if fine else dt)
-    s[S_X0], s[S_X1], s[S_SOC], s[S_VRC] = y0, y1, soc, vrc
-    s[S_LVL], s[S_LIB], s[S_LIL] = vl, i_b, i_l
+    _track_peak(st, c, y1, d, dt / 4 if fine else dt)
+    st.x0, st.x1, st.soc, st.vrc, st.p11, st.p22 = y0, y1, soc, vrc, p11, p22
+    st.last_vl, st.last_ib, st.last_il = vl, i_b, i_l
     e_out = vl * i_l * dt
-    _write_row(s, cst, rows, (t0 + dt, dt, float(row_k), lm, v1, y0, y1, d, v2, i_l, vl, i_b, soc, s[S_CMD], 1.0 if fine else 0.0,
-                              e_src), e_coil + e_rect - e_out, i_l * dt, w_short, e_out, e_chem, e_r0, e_r1, e_c1,
-               vl * i_p * dt)
+    _write_row(st, c, rows, (t0 + dt, dt, float(row_k), lm, v1, y0, y1, d, v2, i_l, vl, i_b, soc, st.cmd,
+                             1.0 if fine else 0.0, e_src), e_coil + e_rect - e_out, i_l * dt, w_short, e_out,
+               e_chem, e_r0, e_r1, e_c1, vl * i_p * dt)
     return OK
 
 
 @njit(cache=True)
-def _write_row(s, cst, rows, head, e_loss, charge_c, w_short, e_out, e_chem, e_r0, e_r1, e_c1, e_prop):
-    """Append one row: ``head`` (16 values) and ``MissionLoop.device_split``'s energies."""
-    p11, p22 = s[S_P11], s[S_P22]
-    e_inv = 0.5 * cst[C_INV_R] * p11
-    e_dio = cst[C_VF0] * charge_c + 0.5 * cst[C_RD] * p22 * (1.0 - w_short)
-    e_coil = 0.5 * (cst[C_COIL_R1] * p11 + cst[C_COIL_R2] * p22)
-    ideal = cst[C_IS_IDEAL] != 0.0
-    e_sw = 0.0 if ideal else e_loss - e_coil - e_inv - e_dio
-    r = int(s[S_NROWS])
-    row = rows[r]
+def _write_row(st, c, rows, head, e_loss, charge_c, w_short, e_out, e_chem, e_r0, e_r1, e_c1, e_prop):
+    """Append one row: ``head`` (16 values), then the energies, with the link losses ``e_loss`` (coils +
+    devices) split: the coils take ``(R1 P11 + R2 P22) / 2``, the inverter its folded 2 Ron's share, the
+    rectifier diodes ``Vf0 * charge`` plus their Rd's share outside the short window, the rectifier
+    switches what is left (so the four add up to ``e_loss`` exactly)."""
+    e_inv = 0.5 * c.inv_r * st.p11
+    e_dio = c.vf0 * charge_c + 0.5 * c.rd * st.p22 * (1.0 - w_short)
+    e_coil = 0.5 * (c.coil_r1 * st.p11 + c.coil_r2 * st.p22)
+    e_sw = 0.0 if c.is_ideal else e_loss - e_coil - e_inv - e_dio
+    row = rows[st.n_rows]
     for j in range(16):
         row[j] = head[j]
-    row[16] = e_loss if ideal else e_coil
+    row[16] = e_loss if c.is_ideal else e_coil
     row[17], row[18], row[19], row[20], row[21], row[22] = e_out, e_chem, e_r0, e_r1, e_c1, e_prop
     row[23], row[24], row[25] = e_inv, e_dio, e_sw
-    s[S_NROWS] = r + 1
+    st.n_rows += 1
 
 
 @njit(cache=True)
-def _deplete(s, cst, rows, t0, dt, lm, p_prop, row_k, fine):
-    """``MissionLoop.deplete``: cut the step where SoC reaches 0 (fixed point); DEPLETED or ERR_POWER."""
-    i_b = s[S_TMPIB]
-    soc0, cap = s[S_SOC], cst[C_CAP]
-    saved = np.empty(len(_SAVED))
-    for j in range(len(_SAVED)):
-        saved[j] = s[_SAVED[j]]
-    s[S_DEPAT] = t0
+def _deplete(s, c, rows, t0, dt, lm, p_prop, row_k, fine):
+    """The battery reaches SoC 0 inside this step: cut the step there and end the mission (DEPLETED).
+
+    SoC is linear in time for the step's held current, so it crosses 0 after ``h = SoC0 Q / -I_b``;
+    I_b depends a little on the step length (VL is solved with the battery), so ``h`` is refined by
+    re-running the step (fixed point; the state before it restored between tries). The cut step is
+    the run's last row, with SoC 0 to rounding (1e-9)."""
+    st = s[0]
+    i_b, soc0 = st.tmp_ib, st.soc
+    saved = s.copy()
+    st.depleted_at = t0
     h = dt
     for _ in range(20):
-        h = min(dt, soc0 * cap / -i_b) if i_b < 0.0 else dt
-        if h <= 1e-12:
+        h = min(dt, soc0 * c.capacity_c / -i_b) if i_b < 0.0 else dt
+        if h <= 1e-12:  # already empty at t0
             h = 0.0
             break
-        if _step(s, cst, rows, t0, h, lm, p_prop, row_k, fine) == ERR_POWER:
+        if _step(st, c, rows, t0, h, lm, p_prop, row_k, fine) == ERR_POWER:
             return ERR_POWER
-        if abs(s[S_SOC]) <= 1e-9:
+        if abs(st.soc) <= 1e-9:
             break
-        i_b = s[S_LIB]
-        s[S_NROWS] -= 1
-        for j in range(len(_SAVED)):
-            s[_SAVED[j]] = saved[j]
-    if h > 0.0 and s[S_SOC] < 0.0:
-        s[S_SOC] = 0.0
-        rows[int(s[S_NROWS]) - 1, _SOC_COL] = 0.0
-    s[S_DEPAT], s[S_DEPK] = t0 + h, row_k
+        i_b = st.last_ib
+        s[0] = saved[0]          # the row is dropped with n_rows
+        st = s[0]
+        st.depleted_at = t0
+    if h > 0.0 and st.soc < 0.0:
+        st.soc = 0.0
+        rows[st.n_rows - 1, _SOC_COL] = 0.0
+    st.depleted_at, st.depleted_k = t0 + h, row_k
     return DEPLETED
 
 
 @njit(cache=True)
-def _step_d(s, cst, rows, t0, dt, lm, p_prop, row_k, fine):
+def _step_d(s, c, rows, t0, dt, lm, p_prop, row_k, fine):
     """:func:`_step`, running :func:`_deplete` when the battery runs out in it."""
-    r = _step(s, cst, rows, t0, dt, lm, p_prop, row_k, fine)
+    r = _step(s[0], c, rows, t0, dt, lm, p_prop, row_k, fine)
     if r == _NEED_DEPLETE:
-        return _deplete(s, cst, rows, t0, dt, lm, p_prop, row_k, fine)
+        return _deplete(s, c, rows, t0, dt, lm, p_prop, row_k, fine)
     return r
 
 
 @njit(cache=True)
-def _fine_step(s, cst, rows, t0, dt, lm, p_prop, row_k):
-    """``MissionLoop.fine_step``: split into rectifier-period sub-steps when I2 changes sign in it."""
-    a0, a1, d, v1, t_rect = s[S_X0], s[S_X1], s[S_D], s[S_V1], cst[C_T_RECT]
-    if v1 > 0.0 and d < 1.0 and dt > 1.5 * t_rect and a1 != 0.0:
+def _fine_step(s, c, rows, t0, dt, lm, p_prop, row_k):
+    """A fine step; split into rectifier-period sub-steps when I2 changes sign inside it.
+
+    V2 = f(d) VL sign(I2) switches with the sign of the envelope; holding the sign of the step's
+    start over a step that is a sizeable part of the envelope's ringing period would feed the ringing
+    instead of damping it. The envelope model resolves one rectifier period T = 1/(2f), so the
+    crossing is resolved to T (the duty is held: the policy is not called)."""
+    st = s[0]
+    a0, a1, d, v1 = st.x0, st.x1, st.d, st.v1
+    if v1 > 0.0 and d < 1.0 and dt > 1.5 * c.t_rect and a1 != 0.0:
         lm_eff = lm if lm > 0 else 1e-12
-        v2p = (_FOUR_PI * (1.0 - math.sin(0.5 * math.pi * d)) * (s[S_LVL] + cst[C_VF]) * (1.0 if a1 > 0.0 else -1.0)
-               + cst[C_DR_SHORT] * (d + math.sin(math.pi * d) / math.pi) * a1)
+        v2p = _sbar_c(d, a1) * (st.last_vl + c.vf) + c.dr_short * _w_short(d) * a1
         smp = np.empty(8)
-        _i2_samples(cst, lm_eff, dt, a0, a1, v1, v2p, 8, smp)
-        dd = _disc(cst, lm_eff, dt)
-        smp[7] = dd[2] * a0 + dd[3] * a1 + dd[6] * v1 + dd[7] * v2p
+        _i2_samples(c, lm_eff, dt, a0, a1, v1, v2p, 8, smp)
+        smp[7] = _zoh(link_disc(c, lm_eff, dt), a0, a1, v1, v2p)[1]
         cross = False
         for j in range(8):
             if smp[j] * a1 <= 0.0:
                 cross = True
         if cross:
-            k_sub = math.ceil(dt / t_rect - 1e-9)
+            k_sub = math.ceil(dt / c.t_rect - 1e-9)
             h = dt / k_sub
             for j in range(k_sub):
-                r = _step_d(s, cst, rows, t0 + j * h, h, lm, p_prop, row_k, True)
+                r = _step_d(s, c, rows, t0 + j * h, h, lm, p_prop, row_k, True)
                 if r != OK:
                     return r
             return OK
-    return _step_d(s, cst, rows, t0, dt, lm, p_prop, row_k, True)
+    return _step_d(s, c, rows, t0, dt, lm, p_prop, row_k, True)
 
 
 # ---------------------------------------------------------------------- policy, windows
 @njit(cache=True)
-def _act(s, pol, t):
-    """``MissionLoop.act`` (no sensor noise): the contract's observation, the policy, d in [0, 1] (NaN: not finite)."""
-    fn, params, state, lo, inv, obs = pol
-    t_since = min(t - s[S_TCZ], 1.0) if s[S_CMD] == 0.0 else 0.0
-    vals = (abs(s[S_X1]) + 0.0, s[S_LVL], s[S_LIB], s[S_LIL], s[S_SOC], s[S_CMD], s[S_D], t_since)
-    for j in range(8):
-        obs[j] = min(max(2.0 * (vals[j] - lo[j]) * inv[j] - 1.0, -1.0), 1.0)
-    out = fn(obs, params, state)
+def _duty(st, c, t, noise, obs, fn, params, pstate):
+    """The policy's duty at ``t``: ``(status, d)``. The observation per the contract (measured |I2| plus
+    the sensor noise ``noise_a * noise[noise_i]``, time since the command went to 0 saturating at 1 s here,
+    10 ms in the contract), normalised into ``obs``; then the compiled policy ``fn``, or NEED_ACT for a
+    Python one (``fn`` None; its output comes back in ``duty_in``). d is clipped into [0, 1]; not finite: ERR_POLICY."""
+    if st.duty_ready:
+        st.duty_ready = False
+        out = st.duty_in
+    else:
+        i2m = abs(st.x1)
+        if c.noise_a > 0.0:
+            if st.noise_i >= len(noise):
+                return NEED_NOISE, 0.0
+            i2m = i2m + c.noise_a * noise[st.noise_i]
+            st.noise_i += 1
+        else:
+            i2m = i2m + 0.0
+        t_since = min(t - st.t_cmd_zero, 1.0) if st.cmd == 0.0 else 0.0
+        vals = (i2m, st.last_vl, st.last_ib, st.last_il, st.soc, st.cmd, st.d, t_since)
+        for j in range(OBS_DIM):
+            obs[j] = min(max(2.0 * (vals[j] - c.obs_lo[j]) * c.obs_inv[j] - 1.0, -1.0), 1.0)
+        if fn is None:      # a Python policy (this branch is resolved at compile time)
+            return NEED_ACT, 0.0
+        out = fn(obs, params, pstate)
     if not math.isfinite(out):
-        return math.nan
-    return min(max(out, 0.0), 1.0)
+        st.duty_in = out
+        return ERR_POLICY, 0.0
+    return OK, min(max(out, 0.0), 1.0)
 
 
 @njit(cache=True)
-def _open_window(s, cst, t):
-    s[S_IN_FINE] = 1.0
-    s[S_NWIN] += 1
-    s[S_FMIN] = t + cst[C_MIN_FINE]
-    s[S_FDEAD] = t + cst[C_MAX_FINE]
+def _open_window(st, c, t):
+    """Start a fine window at t (lasts at least ``min_fine_s``, at most ``max_fine_s``)."""
+    st.in_fine = True
+    st.n_windows += 1
+    st.fine_until_min = t + c.min_fine
+    st.fine_deadline = t + c.max_fine
 
 
 @njit(cache=True)
-def _settled(s, cst, lm):
-    """``MissionLoop.settled``."""
-    v1, tol = s[S_V1], cst[C_SETTLE_I2_TOL]
-    if abs(v1 - (cst[C_V1NOM] if s[S_TX_ON] != 0.0 else 0.0)) > 0.0:
+def _settled(st, c, lm):
+    """V1 at its target and I2 within ``settle_i2_tol_a`` of the steady state for the held inputs (pad
+    off: the coil currents have died out)."""
+    v1, tol = st.v1, c.settle_i2_tol
+    if abs(v1 - (c.v1_nom if st.tx_on else 0.0)) > 0.0:
         return False
     if v1 == 0.0:
-        return abs(s[S_X0]) < tol and abs(s[S_X1]) < tol
-    d = s[S_D]
-    c = _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * d))
-    wlm = cst[C_OMEGA] * lm
-    r2 = cst[C_ST_R2] + cst[C_DR_SHORT] * (d + math.sin(math.pi * d) / math.pi)
-    det = cst[C_ST_R1] * r2 + wlm * wlm
-    i2ss = (wlm * v1 - cst[C_ST_R1] * c * (s[S_LVL] + cst[C_VF])) / det if lm > 0 else 0.0
-    return abs(s[S_X1] - i2ss) < tol
+        return abs(st.x0) < tol and abs(st.x1) < tol
+    cc = _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * st.d))
+    wlm = c.omega * lm
+    r2 = c.st_r2 + c.dr_short * _w_short(st.d)
+    det = c.st_r1 * r2 + wlm * wlm
+    i2ss = (wlm * v1 - c.st_r1 * cc * (st.last_vl + c.vf)) / det if lm > 0 else 0.0
+    return abs(st.x1 - i2ss) < tol
 
 
 @njit(cache=True)
-def _window_done(s, cst, t, d_prev, lm):
-    """``MissionLoop.window_done``."""
-    dv = abs(math.sin(0.5 * math.pi * s[S_D]) - math.sin(0.5 * math.pi * d_prev))
-    if t >= s[S_FMIN] and (dv < cst[C_SETTLE_DUTY_TOL] or s[S_V1] == 0.0) and _settled(s, cst, lm):
-        s[S_IN_FINE] = 0.0
-    elif t >= s[S_FDEAD] and s[S_V1] == (cst[C_V1NOM] if s[S_TX_ON] != 0.0 else 0.0):
-        s[S_IN_FINE] = 0.0
-        s[S_NCUT] += 1
+def _window_done(st, c, t, d_prev, lm):
+    """Close the fine window once the SBAR output ``1 - sin(pi d / 2)`` and I2 have settled (or at its
+    deadline). Settles on V2, not on the duty: near short mode the duty is ill-conditioned (arcsin)."""
+    dv = abs(math.sin(0.5 * math.pi * st.d) - math.sin(0.5 * math.pi * d_prev))
+    if t >= st.fine_until_min and (dv < c.settle_duty_tol or st.v1 == 0.0) and _settled(st, c, lm):
+        st.in_fine = False
+    elif t >= st.fine_deadline and st.v1 == (c.v1_nom if st.tx_on else 0.0):
+        st.in_fine = False
+        st.n_cut += 1
 
 
 @njit(cache=True)
-def _fine_tick(s, cst, rows, pol, t, dt, lm_s, p_k, k, fast_lm, off_due, fresh):
-    """``MissionLoop.fine_tick``: gating and V1 ramp, policy, fine step, window end check."""
-    if fast_lm and s[S_TX_ON] != 0.0 and lm_s * cst[C_INV_SQRT] < cst[C_K_OFF]:
-        s[S_TX_ON] = 0.0
-        s[S_CMD] = 0.0
-    if s[S_TX_ON] != 0.0 and s[S_CMD] == 0.0 and off_due and t - s[S_TCZ] >= cst[C_TX_OFF_DELAY]:
-        s[S_TX_ON] = 0.0
-    v1 = s[S_V1]
-    target = cst[C_V1NOM] if s[S_TX_ON] != 0.0 else 0.0
-    if v1 != target:
-        step_v = cst[C_RAMP] * dt
-        v1 = min(target, v1 + step_v) if target > v1 else max(target, v1 - step_v)
-        s[S_V1] = v1
-    d_prev = s[S_D]
-    if not fresh:
-        d = _act(s, pol, t)
-        if math.isnan(d):
-            return ERR_POLICY
-        s[S_D] = d
-    s[S_TACT] = t
-    r = _fine_step(s, cst, rows, t, dt, lm_s, p_k, k)
+def _fine_begin(st, c, t_k, t_next, lm, lm_n, fast_lm, off_due):
+    """Start of a fine step at ``st.t``: its length and Lm (interpolated in time when Lm changes fast),
+    per-step gating and the V1 ramp; the duty is asked for next (``sub`` 3) unless the coarse call's is fresh."""
+    t = st.t
+    dt = min(c.dtc, t_next - t)
+    lm_s = lm
+    if fast_lm:
+        lm_s = lm + (lm_n - lm) * (t + 0.5 * dt - t_k) / (t_next - t_k)
+    st.dt_f, st.lm_s = dt, lm_s
+    if fast_lm and st.tx_on and lm_s * c.inv_sqrt_l1l2 < c.k_off:
+        st.tx_on = False
+        st.cmd = 0.0
+    if st.tx_on and st.cmd == 0.0 and off_due and t - st.t_cmd_zero >= c.tx_off_delay:
+        st.tx_on = False
+    target = c.v1_nom if st.tx_on else 0.0
+    if st.v1 != target:
+        step_v = c.ramp_rate * dt
+        st.v1 = min(target, st.v1 + step_v) if target > st.v1 else max(target, st.v1 - step_v)
+    st.d_prev = st.d
+    st.sub = 4 if st.fresh else 3
+
+
+@njit(cache=True)
+def _fine_end(s, c, rows, p_k, k, fast_lm):
+    """The fine step with the duty applied, then the window end check; the iteration is done (``sub`` 0)."""
+    st = s[0]
+    st.t_last_act = st.t
+    r = _fine_step(s, c, rows, st.t, st.dt_f, st.lm_s, p_k, k)
     if r != OK:
         return r
-    s[S_NFINE] += 1
-    if fast_lm and v1 > 0.0:
-        return OK
-    _window_done(s, cst, t + dt, d_prev, lm_s)
+    st = s[0]
+    st.n_fine += 1
+    if not (fast_lm and st.v1 > 0.0):
+        _window_done(st, c, st.t + st.dt_f, st.d_prev, st.lm_s)
+    st.fresh = False
+    st.t += st.dt_f
+    st.sub = 0
     return OK
 
 
 @njit(cache=True)
-def _coarse_policy(s, cst, pol, t):
-    """``MissionLoop.coarse_policy``: 1 if the duty moved (a window opened), 0 if not, -1 on a policy error."""
-    d_new = _act(s, pol, t)
-    if math.isnan(d_new):
-        return -1
-    s[S_TACT] = t
-    moved = abs(d_new - s[S_D]) > cst[C_DUTY_EVENT_TOL]
-    s[S_D] = d_new
+def _coarse_duty(st, c, d_new):
+    """A policy call outside a fine window: a duty move above ``duty_event_tol`` opens one (and that
+    duty is applied in its first fine step: ``fresh``)."""
+    st.t_last_act = st.t
+    moved = abs(d_new - st.d) > c.duty_event_tol
+    st.d = d_new
     if moved:
-        _open_window(s, cst, t)
-    return 1 if moved else 0
+        _open_window(st, c, st.t)
+    st.fresh = moved
+    st.sub = 2
 
 
 @njit(cache=True)
-def _interval(s, cst, rows, pol, arrays, k, t_k, ending):
-    """``MissionLoop.interval``: fine steps while needed, then one coarse step to t_k+1."""
-    t_all, lm_all, k_all, p_all, elig = arrays
-    t_next, p_k, lm, lm_n = t_all[k + 1], p_all[k], lm_all[k], lm_all[k + 1]
-    fast_lm = abs(lm_n - lm) > cst[C_LM_REL_TOL] * max(abs(lm), 1e-9) or k_all[k + 1] < cst[C_K_OFF]
-    off_due = elig[k] == 0.0 or ending
-    t = t_k
-    fresh = False
-    while t < t_next - 1e-12:
-        if fast_lm and s[S_V1] > 0.0 and s[S_IN_FINE] == 0.0:
-            _open_window(s, cst, t)
-        if s[S_IN_FINE] == 0.0 and t - s[S_TACT] >= cst[C_COARSE_PERIOD] - 1e-12:
-            moved = _coarse_policy(s, cst, pol, t)
-            if moved < 0:
-                return ERR_POLICY
-            fresh = moved == 1
-        if s[S_IN_FINE] != 0.0:
-            dt = min(cst[C_DTC], t_next - t)
-            lm_s = lm
-            if fast_lm:
-                lm_s = lm + (lm_n - lm) * (t + 0.5 * dt - t_k) / (t_next - t_k)
-            r = _fine_tick(s, cst, rows, pol, t, dt, lm_s, p_k, k, fast_lm, off_due, fresh)
+def _interval(s, c, smp, rows, noise, obs, fn, params, pstate):
+    """Sample k's interval ``[t_k, t_k+1)`` from ``st.t``: fine steps while needed, then one coarse step
+    (the ZOH step is exact for any length). With the pad on and Lm changing fast (or k crossing the
+    switch-off threshold) fine steps use Lm interpolated in time and gating is checked per step.
+    Resumable: ``sub`` 0 iteration start, 1 coarse duty due, 2 fine or coarse, 3 fine duty due, 4 fine step."""
+    st = s[0]
+    k = st.k
+    i = k - st.k0
+    here, nxt = smp[i], smp[i + 1]
+    t_k, t_next, p_k, lm, lm_n = here.t, nxt.t, here.p, here.lm, nxt.lm
+    fast_lm = abs(lm_n - lm) > c.lm_rel_tol * max(abs(lm), 1e-9) or nxt.k < c.k_off
+    off_due = not here.elig or not nxt.elig
+    while st.t < t_next - 1e-12:
+        if st.sub == 0:
+            if st.n_rows + c.row_margin > rows.shape[0]:
+                return FULL
+            if fast_lm and st.v1 > 0.0 and not st.in_fine:
+                _open_window(st, c, st.t)
+            st.sub = 1 if not st.in_fine and st.t - st.t_last_act >= c.coarse_period - 1e-12 else 2
+        if st.sub == 1:
+            r, d = _duty(st, c, st.t, noise, obs, fn, params, pstate)
             if r != OK:
                 return r
-            fresh = False
-            t += dt
-        else:
-            r = _step_d(s, cst, rows, t, t_next - t, lm, p_k, k, False)
+            _coarse_duty(st, c, d)
+        if st.sub == 2:
+            if not st.in_fine:
+                r = _step_d(s, c, rows, st.t, t_next - st.t, lm, p_k, k, False)
+                if r != OK:
+                    return r
+                st = s[0]
+                st.n_coarse += 1
+                st.t, st.sub = t_next, 0
+                continue
+            _fine_begin(st, c, t_k, t_next, lm, lm_n, fast_lm, off_due)
+        if st.sub == 3:
+            r, d = _duty(st, c, st.t, noise, obs, fn, params, pstate)
             if r != OK:
                 return r
-            s[S_NCOARSE] += 1
-            t = t_next
+            st.d, st.sub = d, 4
+        r = _fine_end(s, c, rows, p_k, k, fast_lm)
+        if r != OK:
+            return r
+        st = s[0]
+    st.phase, st.k = 0, k + 1
     return OK
 
 
+# ---------------------------------------------------------------------- per sample: gating, BMS, quiet flight
 @njit(cache=True)
-def _quiet_flight(s, cst, rows, arrays, k, t_k):
-    """``MissionLoop.quiet_flight``: (next k, status)."""
-    t_all, lm_all, k_all, p_all, elig = arrays
-    n = len(t_all)
-    j = k + 1
-    while j < n - 1 and elig[j] == 0.0 and t_all[j + 1] - t_k <= cst[C_FLIGHT_DT] + 1e-9:
-        j += 1
-    dt = t_all[j] - t_k
-    acc = 0.0
-    for i in range(k, j):
-        acc += p_all[i] * (t_all[i + 1] - t_all[i])
-    r = _step_d(s, cst, rows, t_k, dt, lm_all[k], acc / dt, k, False)
-    if r == OK:
-        s[S_NCOARSE] += 1
-    return j, r
+def _gate_pad(st, c, here, t_k, ending):
+    """Pad gating (transmitter side) at a sample; True if it is an event (opens a fine window).
 
-
-@njit(cache=True)
-def _gate_pad(s, cst, arrays, k, t_k, ending):
-    """``MissionLoop.gate_pad``: True on an event."""
-    elig = arrays[4]
-    kk = arrays[2][k]
-    if s[S_TX_ON] != 0.0:
-        if kk < cst[C_K_OFF]:
-            s[S_TX_ON] = 0.0
-            if s[S_CMD] != 0.0:
-                s[S_TCZ] = t_k
-            s[S_CMD] = 0.0
-        elif elig[k] == 0.0 or ending:
-            if s[S_CMD] != 0.0:
-                s[S_CMD] = 0.0
-                s[S_TCZ] = t_k
-            elif t_k - s[S_TCZ] >= cst[C_TX_OFF_DELAY]:
-                s[S_TX_ON] = 0.0
+    On in an energising phase with ``k >= k_on``; off at once (ramp down) when ``k < k_off``; at the
+    phase's end the command drops to 0 first and the pad stays on ``tx_off_delay_s``."""
+    if st.tx_on:
+        if here.k < c.k_off:
+            st.tx_on = False
+            if st.cmd != 0.0:
+                st.t_cmd_zero = t_k
+            st.cmd = 0.0
+        elif not here.elig or ending:
+            if st.cmd != 0.0:
+                st.cmd = 0.0
+                st.t_cmd_zero = t_k
+            elif t_k - st.t_cmd_zero >= c.tx_off_delay:
+                st.tx_on = False
         else:
             return False
         return True
-    if elig[k] != 0.0 and not ending and kk >= cst[C_K_ON] and s[S_V1] == 0.0:
-        s[S_TX_ON] = 1.0
+    if here.elig and not ending and here.k >= c.k_on and st.v1 == 0.0:
+        st.tx_on = True
         return True
     return False
 
 
 @njit(cache=True)
-def _bms_command(s, cst, arrays, k, t_k, ending):
-    """``MissionLoop.bms_command``: True if the command changed."""
-    if not (s[S_TX_ON] != 0.0 and s[S_V1] == cst[C_V1NOM] and arrays[4][k] != 0.0 and not ending
-            and t_k - s[S_TBMS] >= cst[C_BMS_PERIOD] - 1e-12):
+def _bms_command(st, c, here, t_k, ending):
+    """Battery management: a new charge command every ``bms_period_s`` (deadband); True if it changed."""
+    if not (st.tx_on and st.v1 == c.v1_nom and here.elig and not ending and t_k - st.t_last_bms >= c.bms_period - 1e-12):
         return False
-    s[S_TBMS] = t_k
-    new = _charger_command(s, cst, arrays[3][k] / s[S_LVL])
-    cmd = s[S_CMD]
-    if abs(new - cmd) > cst[C_CMD_DEADBAND] or (new == 0.0) != (cmd == 0.0):
+    st.t_last_bms = t_k
+    new = _charger_command(st, c, here.p / st.last_vl)
+    if abs(new - st.cmd) > c.cmd_deadband or (new == 0.0) != (st.cmd == 0.0):
         if new == 0.0:
-            s[S_TCZ] = t_k
-        s[S_CMD] = new
+            st.t_cmd_zero = t_k
+        st.cmd = new
         return True
     return False
 
 
 @njit(cache=True)
-def _rows_needed(cst, dt):
-    """Most rows one trajectory interval of length ``dt`` can write (fine steps split to rectifier periods)."""
-    return (math.ceil(dt / cst[C_DTC]) + 2) * (math.ceil(cst[C_DTC] / cst[C_T_RECT]) + 1) + 4
+def _quiet_flight(s, c, smp, rows, k, t_k):
+    """Pad off, nothing pending: samples merged into one step of up to ``flight_dt_s`` with the mean
+    propulsion power; the policy is not called (its duty is held). Sets the next sample."""
+    st = s[0]
+    k0 = st.k0
+    n_end = k0 + len(smp)
+    j = k + 1
+    while j < n_end - 1 and not smp[j - k0].elig and smp[j + 1 - k0].t - t_k <= c.flight_dt + 1e-9:
+        j += 1
+    dt = smp[j - k0].t - t_k
+    acc = 0.0
+    for i in range(k - k0, j - k0):
+        acc += smp[i].p * (smp[i + 1].t - smp[i].t)
+    r = _step_d(s, c, rows, t_k, dt, smp[k - k0].lm, acc / dt, k, False)
+    if r == OK:
+        st = s[0]
+        st.n_coarse += 1
+        st.k = j
+    return r
 
 
 @njit(cache=True)
-def _sample(s, cst, rows, pol, arrays, k):
-    """``MissionLoop.sample``: (next k, status)."""
-    t_all, elig = arrays[0], arrays[4]
-    t_k = t_all[k]
-    ending = elig[k] != 0.0 and elig[k + 1] == 0.0
-    event = _gate_pad(s, cst, arrays, k, t_k, ending)
-    event = _bms_command(s, cst, arrays, k, t_k, ending) or event
+def _begin_sample(s, c, smp, rows):
+    """Sample k: gating, BMS (an event opens a fine window), then quiet flight or the interval."""
+    st = s[0]
+    k = st.k
+    here, nxt = smp[k - st.k0], smp[k + 1 - st.k0]
+    t_k = here.t
+    # "ending": the energising phase ends at the next sample, so charging stops (command 0, then the
+    # pad ramps down) while the drone still hovers
+    ending = here.elig and not nxt.elig
+    event = _gate_pad(st, c, here, t_k, ending)
+    event = _bms_command(st, c, here, t_k, ending) or event
     if event:
-        _open_window(s, cst, t_k)
-    if s[S_IN_FINE] == 0.0 and s[S_TX_ON] == 0.0 and s[S_V1] == 0.0 and s[S_CMD] == 0.0:
-        return _quiet_flight(s, cst, rows, arrays, k, t_k)
-    return k + 1, _interval(s, cst, rows, pol, arrays, k, t_k, ending)
+        _open_window(st, c, t_k)
+    if not st.in_fine and not st.tx_on and st.v1 == 0.0 and st.cmd == 0.0:
+        return _quiet_flight(s, c, smp, rows, k, t_k)
+    st.phase, st.t, st.sub, st.fresh = 1, t_k, 0, False
+    return OK
 
 
-def _run(k, k_stop, s, cst, t_all, lm_all, k_all, p_all, elig, rows, fn, params, state, lo, inv):
-    """Run the mission from trajectory sample ``k`` until ``k >= k_stop``; returns ``(k, status)``
-    (module docstring)."""
-    arrays = (t_all, lm_all, k_all, p_all, elig)
-    pol = (fn, params, state, lo, inv, np.empty(8))
-    n = min(len(t_all), k_stop + 1)
-    cap = rows.shape[0]
-    while k < n - 1:
-        if s[S_NROWS] + _rows_needed(cst, t_all[k + 1] - t_all[k]) > cap:
-            return k, FULL
-        k, r = _sample(s, cst, rows, pol, arrays, k)
+def _advance(k_stop, s, c, smp, rows, noise, obs, fn, params, pstate):
+    """Run the mission from the state's cursor until Python has to act; returns the status (module notes)."""
+    cc = c[0]
+    while True:
+        st = s[0]
+        if st.phase == 0:
+            if st.k >= st.k0 + len(smp) - 1:
+                return DONE
+            if st.k >= k_stop:
+                return PAUSED
+            if st.n_rows + cc.row_margin > rows.shape[0]:
+                return FULL
+            r = _begin_sample(s, cc, smp, rows)
+        else:
+            r = _interval(s, cc, smp, rows, noise, obs, fn, params, pstate)
         if r != OK:
-            return k, r
-    return k, OK
+            return r
 
 
+def _array_of(dtype):
+    return types.Array(from_dtype(dtype), 1, "C")
+
+
+_ARGS = (types.int64, _array_of(STATE_DTYPE), _array_of(CONST_DTYPE), _array_of(SAMPLE_DTYPE), types.float64[:, ::1],
+         _F8, _F8)
 with warnings.catch_warnings():  # compiled (or loaded from the cache) here; the policy is a first-class function
     warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
-    run_kernel = njit(types.UniTuple(types.int64, 2)(types.int64, types.int64, _F8, _F8, _F8, _F8, _F8, _F8, _F8,
-                                                     types.float64[:, ::1], POLICY_FN, _F8, _F8, _F8, _F8),
-                      cache=True)(_run)
+    # two overloads of the one loop: a compiled policy (first-class function), or none (a Python policy:
+    # NEED_ACT; ``fn is None`` prunes the call at compile time, and the call from Python skips the
+    # conversion of a function argument, ~0.1 ms, which would dominate a round trip per policy call)
+    advance = njit([types.int64(*_ARGS, POLICY_FN, _F8, _F8), types.int64(*_ARGS, types.none, _F8, _F8)],
+                   cache=True)(_advance)

@@ -1,35 +1,38 @@
 """The mission runner: trajectory -> Lm -> link -> policy -> battery, closed loop, multi-rate.
 
 :func:`run_mission` plans the trajectory, computes Lm along it (:func:`_lm_along`) and runs the
-loop, :class:`~mission_sim.world.loop.MissionLoop` (state as documented fields, one method per
-step), twice: charged and uncharged (for :func:`flight_time_gain_s`).
+loop, :class:`~mission_sim.world.loop.MissionLoop`, twice: charged and uncharged (for
+:func:`flight_time_gain_s`). Every formula of a loop step exists once, compiled, in
+:mod:`~mission_sim.world.loop_kernel` (the function doing each step in brackets); the Python side
+(:mod:`~mission_sim.world.loop`, :mod:`~mission_sim.world.fastpath`) orchestrates.
 
-Loop (one drone, one receiver; the method doing each step in brackets):
+Loop (one drone, one receiver):
 
 1. **Trajectory samples** (``sim.traj_dt_s``): pose -> Lm(pose) of the nearest pad (lookup table,
    held over the sample), propulsion power (momentum theory, held over the sample), phase
-   [``_lm_along`` for all samples at once; ``MissionLoop.run`` -> ``MissionLoop.sample`` per sample].
+   [``_lm_along`` for all samples at once; ``loop_kernel.advance`` -> ``_begin_sample`` per sample].
 2. **Pad gating** (transmitter side): the pad energises only in a "charge"/"hover" phase (the
    drone asks for power) and while ``k >= tx_min_k + tx_k_hysteresis``; it switches off as soon
    as ``k < tx_min_k`` (the steady secondary current ~ V1/(w Lm) would exceed the rating) or the
    phase ends. On and off are linear V1 ramps over ``link.tx_ramp_s`` (soft start), always
    simulated in fine steps. Before a planned switch-off the charge command drops to 0 first and
    the pad stays on ``sim.tx_off_delay_s`` so the receiver reaches short mode under power
-   [``MissionLoop.gate_pad``; per fine step inside ``MissionLoop.fine_tick``].
-3. **Battery management** (:class:`~mission_sim.world.battery.CcCvCharger`) sets the charge command
+   [``_gate_pad``; per fine step inside ``_fine_begin``].
+3. **Battery management** (CC-CV, :mod:`~mission_sim.world.battery`) sets the charge command
    ``I_L*`` every ``sim.bms_period_s`` (propulsion current + CC/CV battery current, 0 when full);
-   changes below ``sim.cmd_deadband_a`` are not applied [``MissionLoop.bms_command``].
+   changes below ``sim.cmd_deadband_a`` are not applied [``_bms_command``, ``_charger_command``].
 4. **Policy** (:class:`mission_sim.contract.Policy`): observation built exactly per the contract
-   (``normalise_obs`` of i2, battery V and current, rectifier current, SoC, command, last duty),
-   output ``d_short``; the SBAR applies ``V2 = (4/pi) VL (1 - sin(pi d / 2))`` (eq. 9) with VL the
-   battery terminal voltage [``MissionLoop.act``].
-5. **Link** (paper eq. 4): exact ZOH steps with exact energy integrals
-   (:class:`~mission_sim.world.linkstep.LinkStepper`) [``MissionLoop.step``, with the battery node;
-   ``MissionLoop.fine_step`` splits a fine step where I2 changes sign].
+   (normalised i2, battery V and current, rectifier current, SoC, command, last duty, time since
+   the stop), output ``d_short``; the SBAR applies ``V2 = (4/pi) VL (1 - sin(pi d / 2))`` (eq. 9)
+   with VL the battery terminal voltage [``_duty``: a policy's compiled ``kernel()`` is called in the
+   kernel, any other policy's ``act`` by ``MissionLoop.act`` when the kernel returns ``NEED_ACT``].
+5. **Link** (paper eq. 4): exact ZOH steps with exact energy integrals [``link_disc``, ``link_step``;
+   ``_fine_step`` splits a fine step where I2 changes sign].
 6. **Battery node**: rectifier current ``I_L = V2 I2 / (2 VL)``, battery current ``I_L - P_prop / VL``.
    The battery sees the step-mean current (the SBAR's smoothing capacitor), and VL of a step is
    solved *implicitly* (a quadratic) so that the link's V2, the battery's mean terminal voltage
-   and the propulsion power agree exactly; every energy then closes to rounding [``MissionLoop.step``].
+   and the propulsion power agree exactly; every energy then closes to rounding [``_step``,
+   ``_solve_vl``, ``_bat_step``; ``_deplete`` cuts the step where SoC reaches 0].
 
 **Multi-rate.** *Fine* steps of ``sim.control_period_s`` (the policy's ``control_period_s``: it is
 called once per step) run around every event: pad ramps, command changes, a duty change returned
@@ -42,13 +45,14 @@ for any length) with the policy called at most every ``coarse_policy_period_s`` 
 in between; if that duty moves by more than ``duty_event_tol`` a fine window starts.
 With the pad off and nothing pending, samples are merged into steps of up to ``sim.flight_dt_s``
 and the policy is not called (the SBAR has nothing to do; its duty is held).
-[``MissionLoop.interval`` (fine steps ``fine_tick``, coarse steps, policy ``coarse_policy``),
-``open_window`` / ``window_done`` / ``settled``, ``quiet_flight``; ``MissionLoop.result`` assembles
-the time series and the summary.]
+[``_interval`` (fine steps ``_fine_begin`` / ``_fine_end``, coarse steps, ``_coarse_duty``),
+``_open_window`` / ``_window_done`` / ``_settled``, ``_quiet_flight``; ``MissionLoop.result``
+assembles the time series and the summary.]
 
 Sensor noise: ``sim.i2_noise_a`` (default 0: none) adds seeded Gaussian noise to the i2
-observation only. Peak I2 and time above rated are taken on 4 points per fine step and on the
-ends of coarse steps.
+observation only (drawn by the driver in blocks from the loop's generator, one normal per policy
+call). Peak I2 and time above rated are taken on 4 points per fine step and on the ends of
+coarse steps.
 """
 
 from __future__ import annotations
@@ -106,9 +110,10 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     cfg.sim.control_period_s`` and ``rated_i2_a = cfg.link.rated_i2_a``. ``charge=False`` runs the
     same mission with the pads never energised. With ``charge=True`` the summary's
     ``flight_time_gain_s`` compares against that run (see :func:`flight_time_gain_s`).
-    ``compiled``: None runs the loop compiled when it applies (numba installed, the policy has the
-    ``kernel`` hook, no sensor noise: :mod:`.fastpath`), False the pure-Python reference loop, True
-    requires the compiled loop (``ValueError`` if it does not apply).
+    ``compiled``: the loop's physics always runs compiled (:mod:`.loop_kernel`); None calls the policy's
+    compiled ``kernel()`` hook inside it when the policy has one (else its ``act`` from Python), False
+    always its Python ``act`` (the same physics; only the duty computed elsewhere), True requires the
+    hook (``ValueError`` without it).
     ``frame=False`` keeps no time series in memory (``timeseries`` is None; the summary is computed on
     the fly, memory bounded whatever the mission's length); ``sink`` (e.g.
     :class:`~.stream.SeriesWriter`) receives the charged run's rows in blocks as they are produced.
