@@ -254,10 +254,8 @@ class MissionLoop:
         groups = {f"{g}_loss_j": sums[f"e_{g}_j"] for g in DEVICE_GROUPS}
         dev = math.fsum(groups.values())
         charge_in = sums["charge_in_j"]
-        from .loop_kernel import link_stored_j
         ks = self.st
-        stored = getattr(link_stored_j, "py_func", link_stored_j)
-        dw = float(stored(self.consts.view(np.recarray)[0], ks.x0, ks.x1))  # from rest: W0 = 0
+        dw = float(ks.w_end)  # the link's stored energy at the end (exact modes); from rest: W0 = 0
         losses = math.fsum([acc["coil"], dev, acc["r0"], acc["r1"]])
         rhs = math.fsum([acc["chem"], acc["c1"], dw, losses, acc["prop"]])
         scale = abs(acc["src"]) + abs(acc["chem"]) + abs(acc["prop"])
@@ -307,24 +305,8 @@ class MissionLoop:
                 "dc_to_battery_efficiency_with_edges": rect_j / den if den > 0 else 0.0}
 
     def instantaneous_peak(self) -> float:
-        """Instantaneous peak |i2| [A]: the envelope's peak plus the harmonic ripple of the SBAR at
-        that duty (:class:`wpt_receiver.peak.SbarHarmonics`, at the hover-gap Lm and the highest
-        battery voltage seen with the pad on), over the envelope's peak and every step whose |I2|
-        is within the ripple bound of it (the ripple depends on the duty; the steps are the
-        candidates :class:`.stream.RowStats` kept): screened with the tabulated
-        :class:`wpt_receiver.peak.PeakTable`, evaluated exactly where the table is within 1 % of its maximum."""
-        ks = self.st
-        peak_env = float(ks.peak_env)
-        if peak_env == 0.0:
-            return 0.0
-        from wpt_receiver.peak import PeakTable
-        st = self.stats
-        vl = st.vl_on_max if st.vl_on_max > -math.inf else float(ks.last_vl)
-        harm = self.harmonics(vl)
-        cand = st.cand_i2 >= peak_env - 2.0 * harm.ripple_bound_a()
-        d, i2c = np.r_[ks.peak_d, st.cand_d[cand]], np.r_[peak_env, st.cand_i2[cand]]
-        if len(d) > 64:
-            approx = PeakTable(harm, i2_max_a=1.05 * peak_env, n_d=26, n_i=21, i2_min_a=float(i2c.min()))(d, i2c)
-            keep = approx >= 0.99 * approx.max()
-            d, i2c = d[keep], i2c[keep]
-        return float(np.max(harm.peak(d, i2c)))
+        """Instantaneous peak |i2| [A], tracked by the kernel at every step and the fine steps' quarter
+        points: the exact-mode fundamental (phase included) plus the SBAR's harmonic ripple at that duty,
+        phase and clamp voltage (:func:`wpt_receiver.modal_kernel.inst_peak`, the table of
+        :class:`wpt_receiver.peak.SbarHarmonics` at the hover-gap Lm)."""
+        return float(self.st.peak_inst)
