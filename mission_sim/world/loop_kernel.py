@@ -1,10 +1,12 @@
 """The mission loop's physics, compiled with numba (``cache=True``): the one implementation.
 
-Every formula of a mission step lives here once: the link's exact ZOH step and its discretisation
-(paper eq. 4, :func:`link_disc`, :func:`link_step`), the energy integrals (Lyapunov identity), the I2
-samples and the peak tracking, the SBAR's V2 (eq. 9) with the devices, the battery ECM step, the
-CC-CV charger (BMS), the implicit VL solve, the depletion cut, the row layout, pad gating and the
-fine/coarse windows. :class:`~.loop.MissionLoop` (Python) only orchestrates: it packs the
+Every formula of a mission step lives here once: the link's step (:func:`_step`) on the exact coupled
+modes of eq. 1 with the SBAR's v2 from the harmonic balance (eq. 9 with its quadrature) and the
+instantaneous peak (:mod:`wpt_receiver.modal_kernel`: modes per Lm and ZOH per dt cached in the work
+array ``lw``, exact energy integrals), the battery ECM step, the CC-CV charger (BMS), the implicit VL
+solve, the depletion cut, the row layout, pad gating and the fine/coarse windows. Eq. 4's 2x2 ZOH
+(:func:`link_disc`, :func:`link_step`, :func:`link_stored_j`) stays as the envs' link model's
+reference (``tests/test_env_devices.py``); the mission loop does not use it. :class:`~.loop.MissionLoop` (Python) only orchestrates: it packs the
 constants and the state (:mod:`.fastpath`), calls :func:`advance`, hands rows over, calls a Python
 policy when the kernel asks for a duty, draws the sensor noise and words the errors.
 
@@ -134,7 +136,7 @@ def _link_a(c, lm_h):
 def link_disc(c, lm_h, dt_s):
     """Exact ZOH discretisation of eq. 4 over ``dt_s`` (closed-form 2x2 matrix exponential):
     ``(Ad 00, 01, 10, 11, Bd 00, 01, 10, 11, A^-1 00, 01, 10, 11, m10, m11, g1, g2)``; ``S2 = int I2 dt
-    = m10 I1 + m11 I2 + g1 V1 + g2 V2``. The one place the link model is discretised."""
+    = m10 I1 + m11 I2 + g1 V1 + g2 V2`` (eq. 4's reference, the envs' link; the mission uses :mod:`wpt_receiver.modal_kernel`)."""
     a00, a01, a10, a11 = _link_a(c, lm_h)
     s = 0.5 * (a00 + a11)
     det = a00 * a11 - a01 * a10
@@ -215,15 +217,6 @@ def link_stored_j(c, a0, a1):
 
 
 @njit(cache=True)
-def _i2_samples(c, lm_h, dt_s, a0, a1, v1, v2, m, out):
-    """I2 at the ``m - 1`` equally spaced interior points of the step into ``out[:m - 1]`` (peak detection)."""
-    dd = link_disc(c, lm_h, dt_s / m)
-    for j in range(m - 1):
-        a0, a1 = _zoh(dd, a0, a1, v1, v2)
-        out[j] = a1
-
-
-@njit(cache=True)
 def _track_peak(st, c, lk, i2c, d, dt_each, vl):
     """Running peaks: of the i2 fundamental |I2| (and the duty there), of the instantaneous |i2| (the
     SBAR's harmonic ripple added, :func:`wpt_receiver.modal_kernel.inst_peak` at the clamp ``VL + Vf``;
@@ -239,12 +232,6 @@ def _track_peak(st, c, lk, i2c, d, dt_each, vl):
 
 
 # ---------------------------------------------------------------------- SBAR, battery, charger
-@njit(cache=True)
-def _sbar_c(d, i2):
-    """SBAR fundamental per volt of VL (eq. 9): ``(4/pi) (1 - sin(pi d / 2)) sign(I2)``."""
-    return _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * d)) * (1.0 if i2 > 0.0 else (-1.0 if i2 < 0.0 else 0.0))
-
-
 @njit(cache=True)
 def _w_short(d):
     """Share of the short window in the conduction, ``d + sin(pi d) / pi`` (the shorted channels' excess)."""
