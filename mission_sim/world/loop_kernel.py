@@ -330,15 +330,27 @@ def _coefs(lk, lm_h, dt, slot):
 
 
 @njit(cache=True)
-def _sbar_v2(st, c, lk, mc, v1c):
-    """SBAR input of the step: ``(i2 phasor at its start, F, v2x)`` with ``V2 = F VL + v2x``: the clamp part
-    per volt (:func:`wpt_receiver.modal_kernel.sbar_v2`, eq. 9 with its quadrature, at the last VL) plus
-    the forward drops and the shorted switches' excess ``(2 Ron - Rd) w(d) I2``; 0 with the pad off."""
-    i2p = phasors(mc, st.z, v1c, complex(st.v2re, st.v2im))[1]
+def _sbar_v2(st, c, lk, mc, zc, v1c):
+    """SBAR input of the step: ``(F, v2x)`` with ``V2 = F VL + v2x`` held over it: the clamp part per volt
+    (:func:`wpt_receiver.modal_kernel.sbar_v2`, eq. 9 with its quadrature, at the last VL) plus the
+    forward drops and the shorted switches' excess ``(2 Ron - Rd) w(d) I2``; 0 with the pad off.
+
+    Predictor-corrector: the mean of v2 at the i2 of the step's start and at the i2 its end would have
+    with that v2 held. v2 follows i2's phase, and at small |I2| (the pad ramping down near short mode)
+    v2 taken at the start alone flips its sign from step to step (a period-2 oscillation of the
+    explicit update, which amplifies rounding by orders of magnitude)."""
     if st.v1 <= 0.0:
-        return i2p, 0j, 0j
-    f = sbar_v2(lk[0], lk[1], st.d, i2p, st.last_vl + c.vf)[1]
-    return i2p, f, f * c.vf + c.dr_short * _w_short(st.d) * i2p
+        return 0j, 0j
+    lc, tab = lk[0], lk[1]
+    vc, ws = st.last_vl + c.vf, c.dr_short * _w_short(st.d)
+    i2a = phasors(mc, st.z, v1c, complex(st.v2re, st.v2im))[1]
+    fa = sbar_v2(lc, tab, st.d, i2a, vc)[1]
+    v2a = fa * vc + ws * i2a
+    zq = st.z.copy()
+    advance_z(mc, zc, zq, v1c, v2a)
+    i2b = phasors(mc, zq, v1c, v2a)[1]
+    f = 0.5 * (fa + sbar_v2(lc, tab, st.d, i2b, vc)[1])
+    return f, f * c.vf + ws * 0.5 * (i2a + i2b)
 
 
 @njit(cache=True)
@@ -355,7 +367,7 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
     lm_eff = lm if lm > 0 else 1e-12
     mc, zc = _coefs(lk, lm_eff, dt, 0)
     v1c = complex(0.0, -v1)          # v1 = V1 sin(w t)
-    i2p, f, v2x = _sbar_v2(st, c, lk, mc, v1c)
+    f, v2x = _sbar_v2(st, c, lk, mc, zc, v1c)
     il0, il1 = rect_affine(mc, zc, dt, st.z, v1c, f, v2x)
     vl = _solve_vl(st, c, dt, il0, il1, p_prop)
     if math.isnan(vl):
