@@ -34,9 +34,9 @@ module is the same model, cheap enough for a mission or an env step:
   the direct evaluation in phase, 0.4 % for |arg I2| <= 0.16 rad (the paper's ramp swings 9 deg),
   |I2| >= 8 A; the phase grid is quadratic, 17 points).
 
-Cost (``benchmarks/bench_modal_step.py``, in-process, 2026-11-25 under load average ~9 on 2 cores):
-1.3-1.4 us per step (v2 lookup + step with energies + peak lookup) against 0.3-0.4 us for the
-mission kernel's eq. 4 step; 3.9 us when Lm changes every step (modes + ZOH recomputed).
+Cost (``benchmarks/bench_modal_step.py``, in-process, 2026-11-25, load average 3.3 on 2 cores):
+0.51 us per step (v2 lookup + step with energies + peak lookup) against 0.20 us for eq. 4's step;
+1.46 us when Lm changes every step (modes + ZOH recomputed).
 
 Validated (``tests/test_modal_kernel.py``) against :func:`wpt_receiver.modal.simulate_modal` on the
 three paper trajectories (peak within 0.5 %, in fact ~0.05 %), the switching model on the ramp
