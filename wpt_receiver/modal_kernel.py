@@ -55,7 +55,7 @@ from numba import njit
 from .devices import IDEAL, DeviceSet
 from .params import LinkParams
 
-__all__ = ["link_constants", "modes", "zoh", "step", "advance_z", "phasors", "stored_energy_j", "sbar_v2", "inst_peak",
+__all__ = ["link_constants", "modes", "zoh", "step", "advance_z", "phasors", "stored_energy_j", "sbar_v2", "sbar_edge", "sbar_clamp_f", "inst_peak",
            "build_table", "modal_table", "run_duties", "steady_state", "rect_current_a", "rect_affine", "N_MODES_C", "N_ZOH_C",
            "LC_NAMES"]
 
@@ -304,21 +304,36 @@ def _lookup(lc, tab, plane, phi, d, rho):
 
 
 @njit(cache=True)
-def sbar_v2(lc, tab, d_short, i2, vc_v):
-    """``(V2, F)``: the SBAR's complex fundamental [V] at duty ``d_short`` and i2 phasor ``i2`` [A]
-    with clamp ``vc_v = VL + Vf`` [V], and its clamp part per volt ``F`` (``V2 = Vc F + excess``;
-    module docstring, eq. 9 for ``e = pi/2``)."""
+def sbar_edge(lc, tab, d_short, ih, vc_v):
+    """Commutation angle ``e`` [rad] of the SBAR (the falling zero crossing of i2, clipped into the
+    conduction window ``[pi d/2, pi - pi d/2]``) for the sign-folded i2 phasor ``ih`` [A] (Re >= 0
+    in use; a phase beyond +-pi/2 clips to a window edge) at duty ``d_short`` and clamp ``vc_v`` [V]:
+    ``e = pi/2 - arg(ih) + delta`` with the harmonics' shift ``delta`` (module docstring)."""
     wd = 0.5 * math.pi * min(max(d_short, 0.0), 1.0)
-    sgn = -1.0 if i2.real < 0.0 else 1.0
-    ih = i2 * sgn
     amp = abs(ih)
     rho = amp / vc_v if vc_v > 0.0 else 0.0
     rmax = lc[LC_RHO_MAX]
     phi = math.atan2(ih.imag, ih.real) if amp > 0.0 else 0.0
-    delta = _lookup(lc, tab, 0, phi, d_short, rho) * (1.0 if rho <= rmax else rmax / rho)
-    e = 0.5 * math.pi + delta - phi
-    e = min(max(e, wd), math.pi - wd)
-    f = sgn * (4.0 / math.pi) * complex(math.sin(e) - math.sin(wd), math.cos(e))   # (4/pi)(j e^{-je} - sin wd)
+    pl = min(max(phi, -0.5 * math.pi), 0.5 * math.pi)
+    delta = _lookup(lc, tab, 0, pl, d_short, rho) * (1.0 if rho <= rmax else rmax / rho)
+    return min(max(0.5 * math.pi + delta - phi, wd), math.pi - wd)
+
+
+@njit(cache=True)
+def sbar_clamp_f(d_short, e, sgn):
+    """V2's clamp part per volt [1] at commutation angle ``e`` [rad] (:func:`sbar_edge`) and i2 sign
+    ``sgn``: ``sgn (4/pi) (j e^{-j e} - sin(pi d/2))`` (eq. 9 for ``e = pi/2``)."""
+    wd = 0.5 * math.pi * min(max(d_short, 0.0), 1.0)
+    return sgn * (4.0 / math.pi) * complex(math.sin(e) - math.sin(wd), math.cos(e))
+
+
+@njit(cache=True)
+def sbar_v2(lc, tab, d_short, i2, vc_v):
+    """``(V2, F)``: the SBAR's complex fundamental [V] at duty ``d_short`` and i2 phasor ``i2`` [A]
+    with clamp ``vc_v = VL + Vf`` [V], and its clamp part per volt ``F`` (``V2 = Vc F + excess``;
+    module docstring, eq. 9 for ``e = pi/2``)."""
+    sgn = -1.0 if i2.real < 0.0 else 1.0
+    f = sbar_clamp_f(d_short, sbar_edge(lc, tab, d_short, i2 * sgn, vc_v), sgn)
     w_short = d_short + math.sin(math.pi * d_short) / math.pi
     return vc_v * f + lc[LC_DR_SHORT] * w_short * i2, f
 
