@@ -72,7 +72,7 @@ ZC_E, ZC_PHI, ZC_PSI00, ZC_PSI11, ZC_PSI01 = 0, 2, 4, 5, 6
 N_ZOH_C = 7
 N_D, N_RHO, N_PHI = 51, 81, 17
 RHO_MAX = 3.0          # |I2| / Vc at the top of the table [A/V]; beyond: delta ~ 1/rho, excess constant
-_CACHE_VERSION = "modal-kernel-table v4"
+_CACHE_VERSION = "modal-kernel-table v5"
 
 
 def link_constants(params: LinkParams, devices: DeviceSet = IDEAL, c1_f=None, c2_f=None) -> np.ndarray:
@@ -426,7 +426,9 @@ def _fill_table(hv1, y2, n, vc, phis, ds, rhos, n_theta, tab):
                 amp = rhos[c] * vc
                 i1h = complex(amp * max(math.cos(phis[a]), 0.0), amp * math.sin(phis[a]))
                 e = _balance_point(hv1, y2, n, vc, ds[b], i1h, ih)
-                tab[0, a, b, c] = e - 0.5 * math.pi + (phis[a] if amp > 0 else 0.0)
+                # relative to the fundamental's own crossing pi/2 - phi also at |I2| = 0 (the ripple's
+                # crossing there, the same for every phase): sbar_edge's e is continuous as |I2| -> 0
+                tab[0, a, b, c] = e - 0.5 * math.pi + phis[a]
                 tab[1, a, b, c] = (_peak_point(i1h, ih, n_theta) - amp) / vc
 
 
