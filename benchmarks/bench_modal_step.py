@@ -2,8 +2,9 @@
 
 Each variant runs N steps in one compiled loop (in-process, per-step time in ns; compile excluded):
 
-* ``eq4``: ``loop_kernel._disc`` + ``_link_step`` (what the mission kernel does every step: the
-  2x2 ZOH from scratch, the step with its energy integrals) with V2 from eq. 9;
+* ``eq4``: ``loop_kernel.link_disc`` + ``link_step`` (eq. 4: what the mission kernel did every step
+  before the exact modes, and the envs' link: the 2x2 ZOH from scratch, the step with its energy
+  integrals) with V2 from eq. 9;
 * ``modal``: ``sbar_v2`` (table lookup, v2 with its quadrature) + ``step`` + ``inst_peak``, with
   the mode and ZOH coefficients cached (a fixed Lm and dt, as in most mission and env steps);
 * ``modal_new_lm``: the same plus ``modes`` + ``zoh`` every step (Lm changing each step, as in the
@@ -22,21 +23,21 @@ import time
 import numpy as np
 from numba import njit
 
+from mission_sim.world import fastpath
 from mission_sim.world import loop_kernel as lk
 from wpt_receiver import TABLE_I
 from wpt_receiver import modal_kernel as mk
 
 
 @njit(cache=True)
-def _eq4(cst, s, lm, dt, n):
-    acc = 0.0
+def _eq4(c, lm, dt, n):
+    acc, a0, a1 = 0.0, 0.0, 0.0
     for k in range(n):
         d = 0.5 + 0.4 * math.sin(1e-3 * k)
         v2 = 4.0 / math.pi * 30.0 * (1.0 - math.sin(0.5 * math.pi * d))
-        dd = lk._disc(cst, lm, dt)
-        y0, y1, e_src, e_coil, e_rect, int_i2 = lk._link_step(s, cst, lm, dt, 38.2, v2, dd)
-        s[lk.S_X0], s[lk.S_X1] = y0, y1
-        acc += e_src + abs(y1)
+        dd = lk.link_disc(c, lm, dt)
+        a0, a1, e_src, e_coil, e_rect, int_i2, p11, p22 = lk.link_step(c, dd, lm, dt, a0, a1, 38.2, v2)
+        acc += e_src + abs(a1)
     return acc
 
 
@@ -61,17 +62,14 @@ def _modal(lc, mc, zc, tab, lm, dt, n, new_lm):
 
 def run(steps: int = 1_000_000) -> dict:
     p, dt = TABLE_I, 1e-4
-    cst = np.zeros(lk.N_CONST)
-    cst[lk.C_L1], cst[lk.C_L2], cst[lk.C_ST_R1], cst[lk.C_ST_R2] = p.l1_h, p.l2_h, p.r1_ohm, p.r2_ohm
-    cst[lk.C_OMEGA], cst[lk.C_B0], cst[lk.C_B1] = p.omega_rad_s, 1 / (2 * p.l1_h), -1 / (2 * p.l2_h)
-    s = np.zeros(lk.N_STATE)
+    c = fastpath.constants(fastpath.link_values(p.l1_h, p.l2_h, p.r1_ohm, p.r2_ohm, p.omega_rad_s))[0]
     lc = mk.link_constants(p)
     mc, zc = np.empty(mk.N_MODES_C, complex), np.empty(mk.N_ZOH_C, complex)
     mk.modes(lc, p.lm_h, mc)
     mk.zoh(mc, dt, zc)
     tab = mk.modal_table(p)
     res = {"steps": steps, "load_avg_1min": os.getloadavg()[0]}
-    runs = {"eq4": lambda n: _eq4(cst, s, p.lm_h, dt, n),
+    runs = {"eq4": lambda n: _eq4(c, p.lm_h, dt, n),
             "modal": lambda n: _modal(lc, mc, zc, tab, p.lm_h, dt, n, False),
             "modal_new_lm": lambda n: _modal(lc, mc, zc, tab, p.lm_h, dt, n, True)}
     for name, fn in runs.items():

@@ -154,7 +154,10 @@ def test_default_mission_energy_closes_and_summary_is_complete(default_runs, tmp
         assert math.isclose(ts["dt_s"].sum(), s["sim_time_s"], rel_tol=1e-9)
         # something substantial happened: pads delivered energy, propulsion dominated, battery charged to full
         assert s["energy_from_source_j"] > 1e4 and s["propulsion_energy_j"] > 1e4
-        assert s["battery_full"] and s["final_soc"] > s["final_soc_without_charging"]
+        # charged into CV (within 1 % of full); "full" (CV current below cut-off) is no longer reached in the
+        # second hover: the exact-mode link's v2 has its quadrature part, so at a policy's eq.-9 duty the
+        # rectifier delivers 1-2 % less current than commanded and the CV taper is slower
+        assert ts["soc"].max() > 0.99 and s["final_soc"] > s["final_soc_without_charging"]
     from mission_sim.figures.mission import plot_mission
     files = runs["model_based"].write(tmp_path) + [Path(f) for f in plot_mission(runs["model_based"], tmp_path)]
     names = {f.name for f in files}

@@ -12,8 +12,7 @@ arrays in chunks, and a run's peak Python-allocated memory that does not grow wi
   block, ``math.fsum`` of the previous sum and the block, and the chunks move the block edges);
 * tracemalloc's peak of a streamed compiled run at 8x the length is within 1.25x of the short
   run's (no wall-clock asserts);
-* the writer's thinned copy for figures is bounded and keeps the peak transient; peak candidates
-  spilled to a file give the same instantaneous peak.
+* the writer's thinned copy for figures is bounded and keeps the peak transient.
 """
 
 import dataclasses
@@ -152,8 +151,8 @@ def test_peak_python_memory_does_not_grow_with_the_mission(tmp_path, monkeypatch
     and 32 times (~36,000). Planning and holding all samples at once costs ~300 B a sample at the
     planning peak (RSS by phases, docs/streaming.md): ~10 MB more at the longer run, against a peak
     of ~20 MB (the kernel's row buffer, numpy's ``np.empty`` counted whole); chunked, the peak grows
-    by less than 25 % for 8x the length (what does grow: the instantaneous-peak
-    candidates, 16 B per row with the pad on, in memory up to 2^20 and then in a temporary file)."""
+    by less than 25 % for 8x the length (the instantaneous peak is tracked in the kernel: no
+    per-row candidates are kept)."""
     monkeypatch.setattr(samples_mod, "SAMPLE_CHUNK", 2048)
     monkeypatch.setattr(traj_mod, "PLAN_BLOCK", 1024)
     _peak_bytes(1, tmp_path)   # warm: imports, numba, the coupling table, caches
@@ -184,17 +183,3 @@ def test_thinned_copy_for_figures_is_bounded_and_keeps_the_peak_transient(tmp_pa
     window = stored["t_s"].to_numpy()[max(j - 2000, 0):j + 2000]
     assert np.isin(window, thin["t_s"].to_numpy()).all()
 
-
-def test_peak_candidates_spilled_to_a_file_give_the_same_peak(monkeypatch):
-    """The instantaneous-peak candidates moved to a temporary file beyond 100 (thousands here): the same
-    peak, to the bit, as with all of them in memory."""
-    from mission_sim.world import stream
-    cfg = _cfg(3)
-    want = run_mission(cfg, _policy(cfg), compiled=True, frame=False).summary
-    monkeypatch.setattr(stream, "SPILL_CANDIDATES", 100)
-    seen = []
-    real = stream.RowStats._spill_pieces
-    monkeypatch.setattr(stream.RowStats, "_spill_pieces", lambda self: (seen.append(1), real(self)))
-    got = run_mission(cfg, _policy(cfg), compiled=True, frame=False).summary
-    assert len(seen) >= 1
-    assert got["peak_i2_a"] == want["peak_i2_a"] > got["peak_i2_envelope_a"] > 0

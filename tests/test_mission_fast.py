@@ -277,13 +277,14 @@ def test_kernel_runs_over_chunks_of_the_samples():
         fn, params, pstate = lp.policy.kernel()
         c, s, n = fastpath.pack_constants(lp), fastpath.initial_state(lp), lp.samples.n
         rows, none = np.empty((100_000, len(_COLUMNS))), np.empty(0)
+        link = fastpath.link_arrays(lp)
         ahead = math.ceil(cfg.sim.flight_dt_s / float(np.min(np.diff(traj.t_s)))) + 2
         a, calls = 0, 0
         while True:
             b = min(n, a + chunk)
             s[0]["k0"] = a
             status = loop_kernel.advance(b - ahead if b < n else n, s, c, fastpath.samples(lp, a, b), rows, none,
-                                         np.empty(OBS_DIM), fn, params, pstate)
+                                         np.empty(OBS_DIM), fn, params, pstate, *link)
             calls += 1
             if status == loop_kernel.DONE:
                 return rows[:s[0]["n_rows"]].copy(), calls

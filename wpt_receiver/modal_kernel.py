@@ -34,9 +34,9 @@ module is the same model, cheap enough for a mission or an env step:
   the direct evaluation in phase, 0.4 % for |arg I2| <= 0.16 rad (the paper's ramp swings 9 deg),
   |I2| >= 8 A; the phase grid is quadratic, 17 points).
 
-Cost (``benchmarks/bench_modal_step.py``, in-process, 2026-11-25 under load average ~9 on 2 cores):
-1.3-1.4 us per step (v2 lookup + step with energies + peak lookup) against 0.3-0.4 us for the
-mission kernel's eq. 4 step; 3.9 us when Lm changes every step (modes + ZOH recomputed).
+Cost (``benchmarks/bench_modal_step.py``, in-process, 2026-11-25, load average 3.3 on 2 cores):
+0.51 us per step (v2 lookup + step with energies + peak lookup) against 0.20 us for eq. 4's step;
+1.46 us when Lm changes every step (modes + ZOH recomputed).
 
 Validated (``tests/test_modal_kernel.py``) against :func:`wpt_receiver.modal.simulate_modal` on the
 three paper trajectories (peak within 0.5 %, in fact ~0.05 %), the switching model on the ramp
@@ -55,7 +55,7 @@ from numba import njit
 from .devices import IDEAL, DeviceSet
 from .params import LinkParams
 
-__all__ = ["link_constants", "modes", "zoh", "step", "advance_z", "phasors", "stored_energy_j", "sbar_v2", "inst_peak",
+__all__ = ["link_constants", "modes", "zoh", "step", "advance_z", "phasors", "stored_energy_j", "sbar_v2", "sbar_edge", "sbar_clamp_f", "inst_peak",
            "build_table", "modal_table", "run_duties", "steady_state", "rect_current_a", "rect_affine", "N_MODES_C", "N_ZOH_C",
            "LC_NAMES"]
 
@@ -72,7 +72,7 @@ ZC_E, ZC_PHI, ZC_PSI00, ZC_PSI11, ZC_PSI01 = 0, 2, 4, 5, 6
 N_ZOH_C = 7
 N_D, N_RHO, N_PHI = 51, 81, 17
 RHO_MAX = 3.0          # |I2| / Vc at the top of the table [A/V]; beyond: delta ~ 1/rho, excess constant
-_CACHE_VERSION = "modal-kernel-table v4"
+_CACHE_VERSION = "modal-kernel-table v5"
 
 
 def link_constants(params: LinkParams, devices: DeviceSet = IDEAL, c1_f=None, c2_f=None) -> np.ndarray:
@@ -304,21 +304,36 @@ def _lookup(lc, tab, plane, phi, d, rho):
 
 
 @njit(cache=True)
-def sbar_v2(lc, tab, d_short, i2, vc_v):
-    """``(V2, F)``: the SBAR's complex fundamental [V] at duty ``d_short`` and i2 phasor ``i2`` [A]
-    with clamp ``vc_v = VL + Vf`` [V], and its clamp part per volt ``F`` (``V2 = Vc F + excess``;
-    module docstring, eq. 9 for ``e = pi/2``)."""
+def sbar_edge(lc, tab, d_short, ih, vc_v):
+    """Commutation angle ``e`` [rad] of the SBAR (the falling zero crossing of i2, clipped into the
+    conduction window ``[pi d/2, pi - pi d/2]``) for the sign-folded i2 phasor ``ih`` [A] (Re >= 0
+    in use; a phase beyond +-pi/2 clips to a window edge) at duty ``d_short`` and clamp ``vc_v`` [V]:
+    ``e = pi/2 - arg(ih) + delta`` with the harmonics' shift ``delta`` (module docstring)."""
     wd = 0.5 * math.pi * min(max(d_short, 0.0), 1.0)
-    sgn = -1.0 if i2.real < 0.0 else 1.0
-    ih = i2 * sgn
     amp = abs(ih)
     rho = amp / vc_v if vc_v > 0.0 else 0.0
     rmax = lc[LC_RHO_MAX]
     phi = math.atan2(ih.imag, ih.real) if amp > 0.0 else 0.0
-    delta = _lookup(lc, tab, 0, phi, d_short, rho) * (1.0 if rho <= rmax else rmax / rho)
-    e = 0.5 * math.pi + delta - phi
-    e = min(max(e, wd), math.pi - wd)
-    f = sgn * (4.0 / math.pi) * complex(math.sin(e) - math.sin(wd), math.cos(e))   # (4/pi)(j e^{-je} - sin wd)
+    pl = min(max(phi, -0.5 * math.pi), 0.5 * math.pi)
+    delta = _lookup(lc, tab, 0, pl, d_short, rho) * (1.0 if rho <= rmax else rmax / rho)
+    return min(max(0.5 * math.pi + delta - phi, wd), math.pi - wd)
+
+
+@njit(cache=True)
+def sbar_clamp_f(d_short, e, sgn):
+    """V2's clamp part per volt [1] at commutation angle ``e`` [rad] (:func:`sbar_edge`) and i2 sign
+    ``sgn``: ``sgn (4/pi) (j e^{-j e} - sin(pi d/2))`` (eq. 9 for ``e = pi/2``)."""
+    wd = 0.5 * math.pi * min(max(d_short, 0.0), 1.0)
+    return sgn * (4.0 / math.pi) * complex(math.sin(e) - math.sin(wd), math.cos(e))
+
+
+@njit(cache=True)
+def sbar_v2(lc, tab, d_short, i2, vc_v):
+    """``(V2, F)``: the SBAR's complex fundamental [V] at duty ``d_short`` and i2 phasor ``i2`` [A]
+    with clamp ``vc_v = VL + Vf`` [V], and its clamp part per volt ``F`` (``V2 = Vc F + excess``;
+    module docstring, eq. 9 for ``e = pi/2``)."""
+    sgn = -1.0 if i2.real < 0.0 else 1.0
+    f = sbar_clamp_f(d_short, sbar_edge(lc, tab, d_short, i2 * sgn, vc_v), sgn)
     w_short = d_short + math.sin(math.pi * d_short) / math.pi
     return vc_v * f + lc[LC_DR_SHORT] * w_short * i2, f
 
@@ -411,7 +426,9 @@ def _fill_table(hv1, y2, n, vc, phis, ds, rhos, n_theta, tab):
                 amp = rhos[c] * vc
                 i1h = complex(amp * max(math.cos(phis[a]), 0.0), amp * math.sin(phis[a]))
                 e = _balance_point(hv1, y2, n, vc, ds[b], i1h, ih)
-                tab[0, a, b, c] = e - 0.5 * math.pi + (phis[a] if amp > 0 else 0.0)
+                # relative to the fundamental's own crossing pi/2 - phi also at |I2| = 0 (the ripple's
+                # crossing there, the same for every phase): sbar_edge's e is continuous as |I2| -> 0
+                tab[0, a, b, c] = e - 0.5 * math.pi + phis[a]
                 tab[1, a, b, c] = (_peak_point(i1h, ih, n_theta) - amp) / vc
 
 

@@ -89,6 +89,17 @@ def pack_constants(loop) -> np.ndarray:
     return constants(val)
 
 
+def link_arrays(loop):
+    """The exact-mode link's arrays for :func:`.loop_kernel.advance`: its constants
+    (:func:`wpt_receiver.modal_kernel.link_constants`, devices folded), the SBAR table
+    (:func:`wpt_receiver.modal_kernel.modal_table` at the hover-gap Lm; disk-cached) and the work array
+    (cached modes and ZOH coefficients; NaN keys: computed on first use)."""
+    from wpt_receiver.modal_kernel import link_constants, modal_table
+    from .loop_kernel import LW_SIZE
+    return (link_constants(loop.base, loop.dev), modal_table(loop.base, loop.dev),
+            np.full(LW_SIZE, np.nan, dtype=complex))
+
+
 def initial_state(loop) -> np.ndarray:
     """The state at the mission's start as a 1-element :data:`.loop_kernel.STATE_DTYPE` array (the
     receiver in short mode, the pad off, the battery at rest at ``initial_soc``)."""
@@ -148,6 +159,7 @@ def run(loop, bar=None):
     if n < 2:
         return
     rows = np.empty((max(BLOCK_ROWS, 2 * int(c[0]["row_margin"])), N_COLUMNS))  # blocks of at most BLOCK_ROWS rows
+    lc, tab, lw = link_arrays(loop)
     noise, obs = np.empty(NOISE_BLOCK if loop.sim.i2_noise_a > 0 else 0), np.empty(len(c[0]["obs_lo"]))
     duty_in, duty_ready, n_rows = s["duty_in"], s["duty_ready"], s["n_rows"]  # views into the state
     smp, k_end = window(loop, 0)
@@ -157,7 +169,7 @@ def run(loop, bar=None):
     step = _CHUNK if bar is not None else loop.samples.n
     k_stop, t_done = min(step, k_end), float(smp["t"][0])
     while True:
-        status = kern.advance(k_stop, s, c, smp, rows, noise, obs, fn, params, pstate)
+        status = kern.advance(k_stop, s, c, smp, rows, noise, obs, fn, params, pstate, lc, tab, lw)
         if status == kern.NEED_ACT:
             duty_in[0], duty_ready[0] = loop.act(obs), True
         elif status == kern.PAUSED or (status == kern.DONE and s[0]["k"] < n - 1):

@@ -63,7 +63,7 @@ class MissionLoop:
         "samples": "samples.MissionSamples: the per-sample arrays, chunk by chunk as the loop advances",
         # --- the kernel's records (loop_kernel.CONST_DTYPE / STATE_DTYPE, 1 element each) and the output
         "consts": "the constants record", "state": "the state record (the final state after run)",
-        "peak_env": "peak |I2| of the envelope so far [A] (for the blocks' peak candidates)",
+        "peak_env": "peak |I2| of the envelope so far [A]",
         "compiled": "None: the policy's kernel() hook when it has one; False: always its Python act(); "
                     "True: require the hook",
         "frame": "build the time-series DataFrame (False: the summary only, timeseries None)",
@@ -100,8 +100,7 @@ class MissionLoop:
         self.peak_env = 0.0
         self.rows = []
         self.blocks = []
-        self.stats = RowStats(_COLUMNS, 2.0 * self.harmonics(2.0 * self.bp.n_series * 4.2).ripple_bound_a(),
-                              self.bp.initial_soc)
+        self.stats = RowStats(_COLUMNS, self.bp.initial_soc)
         self.edge_j = (0.0, 0.0)      # switching-edge energies [J], rectifier and inverter (add_edges)
 
     def run(self, progress: bool = False) -> MissionResult:
@@ -164,7 +163,7 @@ class MissionLoop:
         self.rows = []
         if not len(arr):
             return
-        self.stats.add(arr, self.peak_env)
+        self.stats.add(arr)
         self.add_edges(arr)
         if self.sink is not None:
             self.sink(self, arr)
@@ -180,11 +179,6 @@ class MissionLoop:
             self.blocks = []
             df = self.timeseries(arr)
         return MissionResult(timeseries=df, summary=self.summary(), config=self.cfg, trajectory=self.traj)
-
-    def harmonics(self, vl_v: float):
-        """:class:`wpt_receiver.peak.SbarHarmonics` at the hover-gap Lm and battery voltage ``vl_v`` [V]."""
-        from wpt_receiver.peak import SbarHarmonics
-        return SbarHarmonics(self.base.with_(vl_v=vl_v), self.dev)
 
     def timeseries(self, arr):
         """DataFrame of the steps: the raw columns plus pose, k, tx_on, powers and phase."""
@@ -249,10 +243,8 @@ class MissionLoop:
         groups = {f"{g}_loss_j": sums[f"e_{g}_j"] for g in DEVICE_GROUPS}
         dev = math.fsum(groups.values())
         charge_in = sums["charge_in_j"]
-        from .loop_kernel import link_stored_j
         ks = self.st
-        stored = getattr(link_stored_j, "py_func", link_stored_j)
-        dw = float(stored(self.consts.view(np.recarray)[0], ks.x0, ks.x1))  # from rest: W0 = 0
+        dw = float(ks.w_end)  # the link's stored energy at the end (exact modes); from rest: W0 = 0
         losses = math.fsum([acc["coil"], dev, acc["r0"], acc["r1"]])
         rhs = math.fsum([acc["chem"], acc["c1"], dw, losses, acc["prop"]])
         scale = abs(acc["src"]) + abs(acc["chem"]) + abs(acc["prop"])
@@ -302,21 +294,8 @@ class MissionLoop:
                 "dc_to_battery_efficiency_with_edges": rect_j / den if den > 0 else 0.0}
 
     def instantaneous_peak(self) -> float:
-        """Instantaneous peak |i2| [A]: the envelope's peak plus the harmonic ripple of the SBAR at
-        that duty (:class:`wpt_receiver.peak.SbarHarmonics`, at the hover-gap Lm and the highest
-        battery voltage seen with the pad on), over the envelope's peak and every step whose |I2|
-        is within the ripple bound of it (the ripple depends on the duty; the steps are the
-        candidates :class:`.stream.RowStats` kept): screened with the tabulated
-        :class:`wpt_receiver.peak.PeakTable`, evaluated exactly where the table is within 1 % of its maximum."""
-        ks = self.st
-        peak_env = float(ks.peak_env)
-        if peak_env == 0.0:
-            return 0.0
-        from wpt_receiver.peak import PeakTable
-        st = self.stats
-        vl = st.vl_on_max if st.vl_on_max > -math.inf else float(ks.last_vl)
-        harm = self.harmonics(vl)
-        d, i2c = st.screened(peak_env - 2.0 * harm.ripple_bound_a(), (float(ks.peak_d), peak_env),
-                             lambda i2_min: PeakTable(harm, i2_max_a=1.05 * peak_env, n_d=26, n_i=21,
-                                                      i2_min_a=i2_min))
-        return float(np.max(harm.peak(d, i2c)))
+        """Instantaneous peak |i2| [A], tracked by the kernel at every step and the fine steps' quarter
+        points: the exact-mode fundamental (phase included) plus the SBAR's harmonic ripple at that duty,
+        phase and clamp voltage (:func:`wpt_receiver.modal_kernel.inst_peak`, the table of
+        :class:`wpt_receiver.peak.SbarHarmonics` at the hover-gap Lm)."""
+        return float(self.st.peak_inst)

@@ -1,10 +1,12 @@
 """The mission loop's physics, compiled with numba (``cache=True``): the one implementation.
 
-Every formula of a mission step lives here once: the link's exact ZOH step and its discretisation
-(paper eq. 4, :func:`link_disc`, :func:`link_step`), the energy integrals (Lyapunov identity), the I2
-samples and the peak tracking, the SBAR's V2 (eq. 9) with the devices, the battery ECM step, the
-CC-CV charger (BMS), the implicit VL solve, the depletion cut, the row layout, pad gating and the
-fine/coarse windows. :class:`~.loop.MissionLoop` (Python) only orchestrates: it packs the
+Every formula of a mission step lives here once: the link's step (:func:`_step`) on the exact coupled
+modes of eq. 1 with the SBAR's v2 from the harmonic balance (eq. 9 with its quadrature) and the
+instantaneous peak (:mod:`wpt_receiver.modal_kernel`: modes per Lm and ZOH per dt cached in the work
+array ``lw``, exact energy integrals), the battery ECM step, the CC-CV charger (BMS), the implicit VL
+solve, the depletion cut, the row layout, pad gating and the fine/coarse windows. Eq. 4's 2x2 ZOH
+(:func:`link_disc`, :func:`link_step`, :func:`link_stored_j`) stays as the envs' link model's
+reference (``tests/test_env_devices.py``); the mission loop does not use it. :class:`~.loop.MissionLoop` (Python) only orchestrates: it packs the
 constants and the state (:mod:`.fastpath`), calls :func:`advance`, hands rows over, calls a Python
 policy when the kernel asks for a duty, draws the sensor noise and words the errors.
 
@@ -53,9 +55,13 @@ import numpy as np
 from numba import from_dtype, njit, types
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
+from wpt_receiver.modal_kernel import (MC_G1, MC_G2, MC_LAM, N_MODES_C, N_ZOH_C, advance_z, inst_peak, modes, phasors,
+                                       rect_affine, rect_current_a, sbar_clamp_f, sbar_edge, stored_energy_j, zoh)
+from wpt_receiver.modal_kernel import step as modal_step
+
 from ..contract import OBS_DIM
 
-__all__ = ["advance", "link_disc", "link_step", "link_stored_j", "STATE_DTYPE", "CONST_DTYPE",
+__all__ = ["advance", "link_disc", "link_step", "link_stored_j", "LW_SIZE", "STATE_DTYPE", "CONST_DTYPE",
            "SAMPLE_DTYPE", "OK", "DONE", "PAUSED", "FULL", "NEED_ACT", "NEED_NOISE", "DEPLETED", "ERR_POWER",
            "ERR_POLICY", "STATUS_NAMES"]
 
@@ -71,6 +77,9 @@ STATE_DTYPE = np.dtype([
     ("d_prev", "f8"), ("fresh", "?"),
     # link envelope (I1, I2) [A], pad voltage amplitude [V], int I1^2 dt, int I2^2 dt of the last step [A^2 s]
     ("x0", "f8"), ("x1", "f8"), ("v1", "f8"), ("p11", "f8"), ("p22", "f8"),
+    # exact-mode link state (wpt_receiver.modal_kernel): the two mode amplitudes (re, im), the V2 phasor held
+    # over the last step [V], the link's stored energy at its end [J], the instantaneous peak |i2| so far [A]
+    ("z", "f8", (4,)), ("v2re", "f8"), ("v2im", "f8"), ("w_end", "f8"), ("peak_inst", "f8"),
     # pad and BMS: transmitter wants on, charge command I_L* [A], when it went to 0 / the last BMS update [s]
     ("tx_on", "?"), ("cmd", "f8"), ("t_cmd_zero", "f8"), ("t_last_bms", "f8"),
     # policy: duty d_short, last call [s], a duty handed in by Python, sensor-noise buffer position
@@ -131,7 +140,7 @@ def _link_a(c, lm_h):
 def link_disc(c, lm_h, dt_s):
     """Exact ZOH discretisation of eq. 4 over ``dt_s`` (closed-form 2x2 matrix exponential):
     ``(Ad 00, 01, 10, 11, Bd 00, 01, 10, 11, A^-1 00, 01, 10, 11, m10, m11, g1, g2)``; ``S2 = int I2 dt
-    = m10 I1 + m11 I2 + g1 V1 + g2 V2``. The one place the link model is discretised."""
+    = m10 I1 + m11 I2 + g1 V1 + g2 V2`` (eq. 4's reference, the envs' link; the mission uses :mod:`wpt_receiver.modal_kernel`)."""
     a00, a01, a10, a11 = _link_a(c, lm_h)
     s = 0.5 * (a00 + a11)
     det = a00 * a11 - a01 * a10
@@ -212,32 +221,21 @@ def link_stored_j(c, a0, a1):
 
 
 @njit(cache=True)
-def _i2_samples(c, lm_h, dt_s, a0, a1, v1, v2, m, out):
-    """I2 at the ``m - 1`` equally spaced interior points of the step into ``out[:m - 1]`` (peak detection)."""
-    dd = link_disc(c, lm_h, dt_s / m)
-    for j in range(m - 1):
-        a0, a1 = _zoh(dd, a0, a1, v1, v2)
-        out[j] = a1
-
-
-@njit(cache=True)
-def _track_peak(st, c, i2s, d, dt_each):
-    """Running peak of |I2| (a negative envelope is a current of that size shifted by pi), the duty
-    there, and the time above rated (``dt_each`` per value)."""
-    i2s = abs(i2s)
-    if i2s > st.peak_env:
-        st.peak_env, st.peak_d = i2s, d
-    if i2s > c.rated:
+def _track_peak(st, c, lk, i2c, d, dt_each, vl):
+    """Running peaks: of the i2 fundamental |I2| (and the duty there), of the instantaneous |i2| (the
+    SBAR's harmonic ripple added, :func:`wpt_receiver.modal_kernel.inst_peak` at the clamp ``VL + Vf``;
+    the pad off: no ripple), and the time |I2| is above rated (``dt_each`` per value)."""
+    a = abs(i2c)
+    if a > st.peak_env:
+        st.peak_env, st.peak_d = a, d
+    pk = inst_peak(lk[0], lk[1], d, i2c, vl + c.vf) if st.v1 > 0.0 else a
+    if pk > st.peak_inst:
+        st.peak_inst = pk
+    if a > c.rated:
         st.above += dt_each
 
 
 # ---------------------------------------------------------------------- SBAR, battery, charger
-@njit(cache=True)
-def _sbar_c(d, i2):
-    """SBAR fundamental per volt of VL (eq. 9): ``(4/pi) (1 - sin(pi d / 2)) sign(I2)``."""
-    return _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * d)) * (1.0 if i2 > 0.0 else (-1.0 if i2 < 0.0 else 0.0))
-
-
 @njit(cache=True)
 def _w_short(d):
     """Share of the short window in the conduction, ``d + sin(pi d) / pi`` (the shorted channels' excess)."""
@@ -287,18 +285,18 @@ def _charger_command(st, c, i_prop):
 
 # ---------------------------------------------------------------------- link + battery node
 @njit(cache=True)
-def _solve_vl(st, c, dt, dd, cc, v2x, p_prop):
+def _solve_vl(st, c, dt, il0, il1, p_prop):
     """The battery node's VL [V] for the step (NaN if the battery cannot supply ``p_prop``; err_pmax set).
 
     Mean terminal voltage = A0 + G i_mean (held-current RC solution) and ``i_mean = I_L - P / VL`` with
-    ``I_L = c S2 / (2 dt)``, ``V2 = c VL + v2x``: a quadratic in VL, so V2, the battery and the
-    propulsion power agree exactly and every energy closes to rounding."""
+    the rectified current affine in VL, ``I_L = il0 + il1 VL`` (:func:`wpt_receiver.modal_kernel.rect_affine`):
+    a quadratic in VL, so V2, the battery and the propulsion power agree exactly and every energy closes
+    to rounding."""
     frac = c.tau1 * (1.0 - math.exp(-dt / c.tau1)) / dt
     a0 = c.n_cells * _ocv_cell(st.soc) + st.vrc * frac
     g = c.r0 + c.r1b * (1.0 - frac)
-    s0 = dd[12] * st.x0 + dd[13] * st.x1 + dd[14] * st.v1 + dd[15] * v2x
-    alpha = 1.0 - g * cc * cc * dd[15] / (2 * dt)
-    beta = a0 + g * cc * s0 / (2 * dt)
+    alpha = 1.0 - g * il1
+    beta = a0 + g * il0
     disc = beta * beta - 4 * alpha * g * p_prop
     if disc < 0:
         st.err_pmax = beta * beta / (4 * alpha * g)
@@ -306,45 +304,160 @@ def _solve_vl(st, c, dt, dd, cc, v2x, p_prop):
     return (beta + math.sqrt(disc)) / (2 * alpha)
 
 
-@njit(cache=True)
-def _step(st, c, rows, t0, dt, lm, p_prop, row_k, fine):
-    """Link (eq. 4, exact ZOH) and battery node over one step, VL solved implicitly; writes a row.
-    OK, ERR_POWER, or _NEED_DEPLETE (SoC < 0: nothing written, I_b in tmp_ib).
+_LW_MODES, _LW_ZOH, _LW_KEYS = 0, N_MODES_C, N_MODES_C + 3 * N_ZOH_C
+LW_SIZE = _LW_KEYS + 4   # the link work array: modes, three ZOH slots (step, quarter, eighth), their keys, the modes' Lm
 
-    The diodes conduct with the instantaneous i2, so V2 is in phase with i2 whatever the sign of its
-    envelope: V2 = f(d) sign(I2) (the rectifier always absorbs power). With the pad off the diodes
-    block and the coil currents ring down in R1, R2. Devices: V2 = c (VL + Vf) + (2 Ron - Rd) w(d) I2."""
-    a0, a1, v1, d = st.x0, st.x1, st.v1, st.d
-    cc = _sbar_c(d, a1) if v1 > 0.0 else 0.0
-    w_short = _w_short(d)
-    v2x = cc * c.vf + (c.dr_short * w_short * a1 if v1 > 0.0 else 0.0)
+
+@njit(cache=True)
+def _modes_of(lk, lm_h):
+    """The exact modes at ``lm_h`` (:func:`wpt_receiver.modal_kernel.modes`), cached in the work array ``lw``."""
+    lc, tab, lw = lk
+    mc = lw[_LW_MODES:_LW_ZOH]
+    if lw[_LW_KEYS + 3].real != lm_h:
+        modes(lc, lm_h, mc)
+        lw[_LW_KEYS + 3] = lm_h
+        for j in range(3):
+            lw[_LW_KEYS + j] = math.nan
+    return mc
+
+
+@njit(cache=True)
+def _coefs(lk, lm_h, dt, slot):
+    """``(modes, ZOH over dt)`` at ``lm_h``; ``slot`` 0, 1, 2 keeps three step lengths cached (step, dt/4, dt/8)."""
+    lw = lk[2]
+    mc = _modes_of(lk, lm_h)
+    zc = lw[_LW_ZOH + N_ZOH_C * slot:_LW_ZOH + N_ZOH_C * (slot + 1)]
+    if lw[_LW_KEYS + slot].real != dt:
+        zoh(mc, dt, zc)
+        lw[_LW_KEYS + slot] = dt
+    return mc, zc
+
+
+@njit(cache=True)
+def _sbar_v2(st, c, lk, mc, zc, v1c):
+    """SBAR input of the step: ``(F, v2x)`` with ``V2 = F VL + v2x`` held over it: the clamp part per volt
+    (eq. 9 with its quadrature, :func:`wpt_receiver.modal_kernel.sbar_edge` / ``sbar_clamp_f``, at the
+    last VL) plus the forward drops and the shorted switches' excess ``(2 Ron - Rd) w(d) I2``; 0 with
+    the pad off.
+
+    Implicit (backward Euler in the commutation): the commutation angle ``e`` is the one the i2 at the
+    step's *end* has, with the v2 of ``e`` held over the step. The quadrature of v2 turns i2's phase
+    back towards the conduction window (negative feedback), with a gain ``(4/pi) Vc dt / (2 L2 |I2|)``
+    per step that is > 1 at small |I2| near short mode (the pad ramping down: a window of a few
+    hundredths of a rad, |I2| ~ 1 A): explicit v2 (or a predictor-corrector) then overshoots step to
+    step (period-2 chatter that amplifies rounding by orders of magnitude), where the circuit pins
+    the zero crossing in the window (sliding). ``i2_end = q0 + q1 V2`` is affine in the held V2 and
+    ``e_end(e)`` decreases in ``e``, so ``g(e) = e - e_end(e)`` has one root in the window (``g <= 0``
+    at its start, ``>= 0`` at its end): bracketed (Illinois) to 1e-13 rad, a continuous function of
+    the state. The sign of i2 is the step start's (at Re I2 = 0 both signs give the same F)."""
+    if st.v1 <= 0.0:
+        return 0j, 0j
+    lc, tab = lk[0], lk[1]
+    d = st.d
+    vc, ws = st.last_vl + c.vf, c.dr_short * _w_short(d)
+    i2a = phasors(mc, st.z, v1c, complex(st.v2re, st.v2im))[1]
+    sgn = -1.0 if i2a.real < 0.0 else 1.0
+    zq = st.z.copy()
+    advance_z(mc, zc, zq, v1c, 0j)
+    q0 = phasors(mc, zq, v1c, 0j)[1]
+    zq[:] = st.z
+    advance_z(mc, zc, zq, v1c, 1.0 + 0j)
+    q1 = phasors(mc, zq, v1c, 1.0 + 0j)[1] - q0
+    den = 1.0 - ws * q1
+    wd = 0.5 * math.pi * min(max(d, 0.0), 1.0)
+    lo, hi = wd, math.pi - wd
+    if hi - lo <= 0.0:
+        e = 0.5 * math.pi
+    else:
+        glo, ghi = _edge_gap(lc, tab, d, lo, sgn, vc, ws, q0, q1, den), _edge_gap(lc, tab, d, hi, sgn, vc, ws, q0, q1, den)
+        e, side = lo, 0
+        if glo >= 0.0:
+            e, hi = lo, lo
+        elif ghi <= 0.0:
+            e, lo = hi, hi
+        for _ in range(100):
+            if hi - lo <= 1e-13:
+                break
+            e = (lo * ghi - hi * glo) / (ghi - glo)
+            e = min(max(e, lo), hi)
+            g = _edge_gap(lc, tab, d, e, sgn, vc, ws, q0, q1, den)
+            if g == 0.0:
+                break
+            if g < 0.0:
+                lo, glo = e, g
+                if side == -1:
+                    ghi *= 0.5
+                side = -1
+            else:
+                hi, ghi = e, g
+                if side == 1:
+                    glo *= 0.5
+                side = 1
+    f = sbar_clamp_f(d, e, sgn)
+    i2e = q0 + q1 * (f * vc + ws * q0) / den
+    return f, f * c.vf + ws * i2e
+
+
+@njit(cache=True)
+def _edge_gap(lc, tab, d, e, sgn, vc, ws, q0, q1, den):
+    """``e - e_end`` [rad]: the commutation angle ``e`` against the one of the step's end i2 when the v2
+    of ``e`` is held (:func:`_sbar_v2`)."""
+    f = sbar_clamp_f(d, e, sgn)
+    i2e = q0 + q1 * (f * vc + ws * q0) / den
+    return e - sbar_edge(lc, tab, d, i2e * sgn, vc)
+
+
+@njit(cache=True)
+def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
+    """Link (exact modes, ZOH, :mod:`wpt_receiver.modal_kernel`) and battery node over one step, VL solved
+    implicitly; writes a row. OK, ERR_POWER, or _NEED_DEPLETE (SoC < 0: nothing written, I_b in tmp_ib).
+
+    The SBAR's v2 follows i2's phase (its clamp part per volt ``F``, eq. 9 with the quadrature of the
+    shifted commutation); with the pad off the diodes block and the coil currents ring down in R1, R2.
+    The link energies close per step with ``W`` at the step's inputs; the stored energy of the
+    feedthrough when the inputs change between steps (``jump``) is booked to the rectifier."""
+    lc, tab, lw = lk
+    v1, d = st.v1, st.d
     lm_eff = lm if lm > 0 else 1e-12
-    dd = link_disc(c, lm_eff, dt)
-    vl = _solve_vl(st, c, dt, dd, cc, v2x, p_prop)
+    mc, zc = _coefs(lk, lm_eff, dt, 0)
+    v1c = complex(0.0, -v1)          # v1 = V1 sin(w t)
+    f, v2x = _sbar_v2(st, c, lk, mc, zc, v1c)
+    il0, il1 = rect_affine(mc, zc, dt, st.z, v1c, f, v2x)
+    vl = _solve_vl(st, c, dt, il0, il1, p_prop)
     if math.isnan(vl):
         st.err_t, st.err_p, st.err_soc, st.err_k = t0, p_prop, st.soc, row_k
         return ERR_POWER
-    v2 = cc * vl + v2x
+    v2 = f * vl + v2x
+    z = st.z.copy()
+    jump = stored_energy_j(lc, mc, z, v1c, v2, lm_eff) - st.w_end
     if fine:
-        smp = np.empty(3)
-        _i2_samples(c, lm_eff, dt, a0, a1, v1, v2, 4, smp)
-        for j in range(3):
-            _track_peak(st, c, smp[j], d, dt / 4)
-    y0, y1, e_src, e_coil, e_rect, int_i2, p11, p22 = link_step(c, dd, lm_eff, dt, a0, a1, v1, v2)
-    i_l = 0.5 * cc * int_i2 / dt
+        zc4 = _coefs(lk, lm_eff, 0.25 * dt, 1)[1]
+        zq = z.copy()
+        for _ in range(3):
+            advance_z(mc, zc4, zq, v1c, v2)
+            _track_peak(st, c, lk, phasors(mc, zq, v1c, v2)[1], d, dt / 4, vl)
+    out = np.empty(9)
+    modal_step(lc, mc, zc, dt, z, v1c, v2, out)
+    i_l = rect_current_a(f, complex(out[2], out[3]), dt)
     i_p = p_prop / vl
     i_b = i_l - i_p
     soc, vrc, e_chem, e_r0, e_r1, e_c1 = _bat_step(c, st.soc, st.vrc, i_b, dt)
     if soc < 0.0 and math.isnan(st.depleted_at):
         st.tmp_ib = i_b
         return _NEED_DEPLETE
-    _track_peak(st, c, y1, d, dt / 4 if fine else dt)
-    st.x0, st.x1, st.soc, st.vrc, st.p11, st.p22 = y0, y1, soc, vrc, p11, p22
+    i1n, i2n = phasors(mc, z, v1c, v2)
+    _track_peak(st, c, lk, i2n, d, dt / 4 if fine else dt, vl)
+    a2 = abs(i2n)
+    y0, y1 = abs(i1n), (a2 if i2n.real >= 0.0 else -a2)
+    st.z[:] = z
+    st.v2re, st.v2im, st.w_end = v2.real, v2.imag, stored_energy_j(lc, mc, z, v1c, v2, lm_eff)
+    st.x0, st.x1, st.soc, st.vrc, st.p11, st.p22 = y0, y1, soc, vrc, out[4], out[5]
     st.last_vl, st.last_ib, st.last_il = vl, i_b, i_l
     e_out = vl * i_l * dt
-    _write_row(st, c, rows, (t0 + dt, dt, float(row_k), lm, v1, y0, y1, d, v2, i_l, vl, i_b, soc, st.cmd,
-                             1.0 if fine else 0.0, e_src), e_coil + e_rect - e_out, i_l * dt, w_short, e_out,
-               e_chem, e_r0, e_r1, e_c1, vl * i_p * dt)
+    v2_row = (v2 * i2n.conjugate()).real / a2 if a2 > 0.0 else v2.real   # v2's fundamental in phase with i2
+    _write_row(st, c, rows, (t0 + dt, dt, float(row_k), lm, v1, y0, y1, d, v2_row, i_l, vl, i_b, soc, st.cmd,
+                             1.0 if fine else 0.0, out[6]), out[7] + out[8] - jump - e_out, i_l * dt,
+               _w_short(d), e_out, e_chem, e_r0, e_r1, e_c1, vl * i_p * dt)
     return OK
 
 
@@ -368,7 +481,7 @@ def _write_row(st, c, rows, head, e_loss, charge_c, w_short, e_out, e_chem, e_r0
 
 
 @njit(cache=True)
-def _deplete(s, c, rows, t0, dt, lm, p_prop, row_k, fine):
+def _deplete(s, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
     """The battery reaches SoC 0 inside this step: cut the step there and end the mission (DEPLETED).
 
     SoC is linear in time for the step's held current, so it crosses 0 after ``h = SoC0 Q / -I_b``;
@@ -385,7 +498,7 @@ def _deplete(s, c, rows, t0, dt, lm, p_prop, row_k, fine):
         if h <= 1e-12:  # already empty at t0
             h = 0.0
             break
-        if _step(st, c, rows, t0, h, lm, p_prop, row_k, fine) == ERR_POWER:
+        if _step(st, c, lk, rows, t0, h, lm, p_prop, row_k, fine) == ERR_POWER:
             return ERR_POWER
         if abs(st.soc) <= 1e-9:
             break
@@ -401,43 +514,33 @@ def _deplete(s, c, rows, t0, dt, lm, p_prop, row_k, fine):
 
 
 @njit(cache=True)
-def _step_d(s, c, rows, t0, dt, lm, p_prop, row_k, fine):
+def _step_d(s, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
     """:func:`_step`, running :func:`_deplete` when the battery runs out in it."""
-    r = _step(s[0], c, rows, t0, dt, lm, p_prop, row_k, fine)
+    r = _step(s[0], c, lk, rows, t0, dt, lm, p_prop, row_k, fine)
     if r == _NEED_DEPLETE:
-        return _deplete(s, c, rows, t0, dt, lm, p_prop, row_k, fine)
+        return _deplete(s, c, lk, rows, t0, dt, lm, p_prop, row_k, fine)
     return r
 
 
 @njit(cache=True)
-def _fine_step(s, c, rows, t0, dt, lm, p_prop, row_k):
-    """A fine step; split into rectifier-period sub-steps when I2 changes sign inside it.
+def _fine_step(s, c, lk, rows, t0, dt, lm, p_prop, row_k):
+    """A fine step, in rectifier-period sub-steps while the SBAR rectifies (pad on, d < 1).
 
-    V2 = f(d) VL sign(I2) switches with the sign of the envelope; holding the sign of the step's
-    start over a step that is a sizeable part of the envelope's ringing period would feed the ringing
-    instead of damping it. The envelope model resolves one rectifier period T = 1/(2f), so the
-    crossing is resolved to T (the duty is held: the policy is not called)."""
+    The SBAR's v2 follows i2 (its phase and, through the commutation, its size) every half cycle;
+    holding the v2 of the step's start over a step that is a sizeable part of the envelope's beat
+    period would feed the beat instead of damping it. So v2 is updated every rectifier period
+    T = 1/(2f) (the duty is held: the policy is not called). Always, not on a test of how much v2
+    moves: a threshold would make the stepping depend on the last bit of the duty."""
     st = s[0]
-    a0, a1, d, v1 = st.x0, st.x1, st.d, st.v1
-    if v1 > 0.0 and d < 1.0 and dt > 1.5 * c.t_rect and a1 != 0.0:
-        lm_eff = lm if lm > 0 else 1e-12
-        v2p = _sbar_c(d, a1) * (st.last_vl + c.vf) + c.dr_short * _w_short(d) * a1
-        smp = np.empty(8)
-        _i2_samples(c, lm_eff, dt, a0, a1, v1, v2p, 8, smp)
-        smp[7] = _zoh(link_disc(c, lm_eff, dt), a0, a1, v1, v2p)[1]
-        cross = False
-        for j in range(8):
-            if smp[j] * a1 <= 0.0:
-                cross = True
-        if cross:
-            k_sub = math.ceil(dt / c.t_rect - 1e-9)
-            h = dt / k_sub
-            for j in range(k_sub):
-                r = _step_d(s, c, rows, t0 + j * h, h, lm, p_prop, row_k, True)
-                if r != OK:
-                    return r
-            return OK
-    return _step_d(s, c, rows, t0, dt, lm, p_prop, row_k, True)
+    if st.v1 > 0.0 and st.d < 1.0 and dt > 1.5 * c.t_rect:
+        k_sub = math.ceil(dt / c.t_rect - 1e-9)
+        h = dt / k_sub
+        for j in range(k_sub):
+            r = _step_d(s, c, lk, rows, t0 + j * h, h, lm, p_prop, row_k, True)
+            if r != OK:
+                return r
+        return OK
+    return _step_d(s, c, lk, rows, t0, dt, lm, p_prop, row_k, True)
 
 
 # ---------------------------------------------------------------------- policy, windows
@@ -482,7 +585,7 @@ def _open_window(st, c, t):
 
 
 @njit(cache=True)
-def _settled(st, c, lm):
+def _settled(st, c, lk, lm):
     """V1 at its target and I2 within ``settle_i2_tol_a`` of the steady state for the held inputs (pad
     off: the coil currents have died out)."""
     v1, tol = st.v1, c.settle_i2_tol
@@ -490,20 +593,21 @@ def _settled(st, c, lm):
         return False
     if v1 == 0.0:
         return abs(st.x0) < tol and abs(st.x1) < tol
-    cc = _FOUR_PI * (1.0 - math.sin(0.5 * math.pi * st.d))
-    wlm = c.omega * lm
-    r2 = c.st_r2 + c.dr_short * _w_short(st.d)
-    det = c.st_r1 * r2 + wlm * wlm
-    i2ss = (wlm * v1 - c.st_r1 * cc * (st.last_vl + c.vf)) / det if lm > 0 else 0.0
-    return abs(st.x1 - i2ss) < tol
+    mc = _modes_of(lk, lm if lm > 0 else 1e-12)
+    v1c, v2 = complex(0.0, -v1), complex(st.v2re, st.v2im)
+    zss = np.empty(4)
+    for m in range(2):
+        zs = -(mc[MC_G1 + m] * v1c + mc[MC_G2 + m] * v2) / mc[MC_LAM + m]
+        zss[2 * m], zss[2 * m + 1] = zs.real, zs.imag
+    return abs(phasors(mc, st.z, v1c, v2)[1] - phasors(mc, zss, v1c, v2)[1]) < tol
 
 
 @njit(cache=True)
-def _window_done(st, c, t, d_prev, lm):
+def _window_done(st, c, lk, t, d_prev, lm):
     """Close the fine window once the SBAR output ``1 - sin(pi d / 2)`` and I2 have settled (or at its
     deadline). Settles on V2, not on the duty: near short mode the duty is ill-conditioned (arcsin)."""
     dv = abs(math.sin(0.5 * math.pi * st.d) - math.sin(0.5 * math.pi * d_prev))
-    if t >= st.fine_until_min and (dv < c.settle_duty_tol or st.v1 == 0.0) and _settled(st, c, lm):
+    if t >= st.fine_until_min and (dv < c.settle_duty_tol or st.v1 == 0.0) and _settled(st, c, lk, lm):
         st.in_fine = False
     elif t >= st.fine_deadline and st.v1 == (c.v1_nom if st.tx_on else 0.0):
         st.in_fine = False
@@ -534,17 +638,17 @@ def _fine_begin(st, c, t_k, t_next, lm, lm_n, fast_lm, off_due):
 
 
 @njit(cache=True)
-def _fine_end(s, c, rows, p_k, k, fast_lm):
+def _fine_end(s, c, lk, rows, p_k, k, fast_lm):
     """The fine step with the duty applied, then the window end check; the iteration is done (``sub`` 0)."""
     st = s[0]
     st.t_last_act = st.t
-    r = _fine_step(s, c, rows, st.t, st.dt_f, st.lm_s, p_k, k)
+    r = _fine_step(s, c, lk, rows, st.t, st.dt_f, st.lm_s, p_k, k)
     if r != OK:
         return r
     st = s[0]
     st.n_fine += 1
     if not (fast_lm and st.v1 > 0.0):
-        _window_done(st, c, st.t + st.dt_f, st.d_prev, st.lm_s)
+        _window_done(st, c, lk, st.t + st.dt_f, st.d_prev, st.lm_s)
     st.fresh = False
     st.t += st.dt_f
     st.sub = 0
@@ -565,7 +669,7 @@ def _coarse_duty(st, c, d_new):
 
 
 @njit(cache=True)
-def _interval(s, c, smp, rows, noise, obs, fn, params, pstate):
+def _interval(s, c, lk, smp, rows, noise, obs, fn, params, pstate):
     """Sample k's interval ``[t_k, t_k+1)`` from ``st.t``: fine steps while needed, then one coarse step
     (the ZOH step is exact for any length). With the pad on and Lm changing fast (or k crossing the
     switch-off threshold) fine steps use Lm interpolated in time and gating is checked per step.
@@ -591,7 +695,7 @@ def _interval(s, c, smp, rows, noise, obs, fn, params, pstate):
             _coarse_duty(st, c, d)
         if st.sub == 2:
             if not st.in_fine:
-                r = _step_d(s, c, rows, st.t, t_next - st.t, lm, p_k, k, False)
+                r = _step_d(s, c, lk, rows, st.t, t_next - st.t, lm, p_k, k, False)
                 if r != OK:
                     return r
                 st = s[0]
@@ -604,7 +708,7 @@ def _interval(s, c, smp, rows, noise, obs, fn, params, pstate):
             if r != OK:
                 return r
             st.d, st.sub = d, 4
-        r = _fine_end(s, c, rows, p_k, k, fast_lm)
+        r = _fine_end(s, c, lk, rows, p_k, k, fast_lm)
         if r != OK:
             return r
         st = s[0]
@@ -656,7 +760,7 @@ def _bms_command(st, c, here, t_k, ending):
 
 
 @njit(cache=True)
-def _quiet_flight(s, c, smp, rows, k, t_k):
+def _quiet_flight(s, c, lk, smp, rows, k, t_k):
     """Pad off, nothing pending: samples merged into one step of up to ``flight_dt_s`` with the mean
     propulsion power; the policy is not called (its duty is held). Sets the next sample."""
     st = s[0]
@@ -669,7 +773,7 @@ def _quiet_flight(s, c, smp, rows, k, t_k):
     acc = 0.0
     for i in range(k - k0, j - k0):
         acc += smp[i].p * (smp[i + 1].t - smp[i].t)
-    r = _step_d(s, c, rows, t_k, dt, smp[k - k0].lm, acc / dt, k, False)
+    r = _step_d(s, c, lk, rows, t_k, dt, smp[k - k0].lm, acc / dt, k, False)
     if r == OK:
         st = s[0]
         st.n_coarse += 1
@@ -678,7 +782,7 @@ def _quiet_flight(s, c, smp, rows, k, t_k):
 
 
 @njit(cache=True)
-def _begin_sample(s, c, smp, rows):
+def _begin_sample(s, c, lk, smp, rows):
     """Sample k: gating, BMS (an event opens a fine window), then quiet flight or the interval."""
     st = s[0]
     k = st.k
@@ -692,14 +796,15 @@ def _begin_sample(s, c, smp, rows):
     if event:
         _open_window(st, c, t_k)
     if not st.in_fine and not st.tx_on and st.v1 == 0.0 and st.cmd == 0.0:
-        return _quiet_flight(s, c, smp, rows, k, t_k)
+        return _quiet_flight(s, c, lk, smp, rows, k, t_k)
     st.phase, st.t, st.sub, st.fresh = 1, t_k, 0, False
     return OK
 
 
-def _advance(k_stop, s, c, smp, rows, noise, obs, fn, params, pstate):
+def _advance(k_stop, s, c, smp, rows, noise, obs, fn, params, pstate, lc, tab, lw):
     """Run the mission from the state's cursor until Python has to act; returns the status (module notes)."""
     cc = c[0]
+    lk = (lc, tab, lw)
     while True:
         st = s[0]
         if st.phase == 0:
@@ -709,9 +814,9 @@ def _advance(k_stop, s, c, smp, rows, noise, obs, fn, params, pstate):
                 return PAUSED
             if st.n_rows + cc.row_margin > rows.shape[0]:
                 return FULL
-            r = _begin_sample(s, cc, smp, rows)
+            r = _begin_sample(s, cc, lk, smp, rows)
         else:
-            r = _interval(s, cc, smp, rows, noise, obs, fn, params, pstate)
+            r = _interval(s, cc, lk, smp, rows, noise, obs, fn, params, pstate)
         if r != OK:
             return r
 
@@ -727,5 +832,6 @@ with warnings.catch_warnings():  # compiled (or loaded from the cache) here; the
     # two overloads of the one loop: a compiled policy (first-class function), or none (a Python policy:
     # NEED_ACT; ``fn is None`` prunes the call at compile time, and the call from Python skips the
     # conversion of a function argument, ~0.1 ms, which would dominate a round trip per policy call)
-    advance = njit([types.int64(*_ARGS, POLICY_FN, _F8, _F8), types.int64(*_ARGS, types.none, _F8, _F8)],
+    _LINK = (_F8, types.float64[:, :, :, ::1], types.complex128[::1])    # lc, tab, lw (modal_kernel)
+    advance = njit([types.int64(*_ARGS, POLICY_FN, _F8, _F8, *_LINK), types.int64(*_ARGS, types.none, _F8, _F8, *_LINK)],
                    cache=True)(_advance)

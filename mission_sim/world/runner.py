@@ -24,12 +24,15 @@ Loop (one drone, one receiver):
    changes below ``sim.cmd_deadband_a`` are not applied [``_bms_command``, ``_charger_command``].
 4. **Policy** (:class:`mission_sim.contract.Policy`): observation built exactly per the contract
    (normalised i2, battery V and current, rectifier current, SoC, command, last duty, time since
-   the stop), output ``d_short``; the SBAR applies ``V2 = (4/pi) VL (1 - sin(pi d / 2))`` (eq. 9)
-   with VL the battery terminal voltage [``_duty``: a policy's compiled ``kernel()`` is called in the
-   kernel, any other policy's ``act`` by ``MissionLoop.act`` when the kernel returns ``NEED_ACT``].
-5. **Link** (paper eq. 4): exact ZOH steps with exact energy integrals [``link_disc``, ``link_step``;
-   ``_fine_step`` splits a fine step where I2 changes sign].
-6. **Battery node**: rectifier current ``I_L = V2 I2 / (2 VL)``, battery current ``I_L - P_prop / VL``.
+   the stop), output ``d_short``; the SBAR applies its v2 fundamental: eq. 9's ``(4/pi) VL (1 - sin(pi
+   d / 2))`` generalised to the commutation shifted by the harmonics (a quadrature part), in phase
+   with i2, VL the battery terminal voltage [``_duty``: a policy's compiled ``kernel()`` is called in
+   the kernel, any other policy's ``act`` by ``MissionLoop.act`` when the kernel returns ``NEED_ACT``].
+5. **Link**: the exact coupled modes of eq. 1 (:mod:`wpt_receiver.modal_kernel`), exact ZOH steps with
+   exact energy integrals, instantaneous peak = fundamental + the SBAR's ripple [``_step``;
+   ``_fine_step`` steps in rectifier periods while the SBAR rectifies: its v2 follows i2].
+6. **Battery node**: rectifier current ``I_L = Re(V2c conj I2) / (2 (VL + Vf))`` (``V2c`` the clamp part
+   of v2), battery current ``I_L - P_prop / VL``.
    The battery sees the step-mean current (the SBAR's smoothing capacitor), and VL of a step is
    solved *implicitly* (a quadratic) so that the link's V2, the battery's mean terminal voltage
    and the propulsion power agree exactly; every energy then closes to rounding [``_step``,

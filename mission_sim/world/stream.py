@@ -5,7 +5,7 @@ The mission loop (:class:`~.loop.MissionLoop`, Python or compiled) hands its row
 produces them, so memory stays bounded whatever the mission's length:
 
 * :class:`RowStats` keeps what the summary needs (exact energy sums, SoC extremes, the charge
-  time, the highest battery voltage with the pad on and the instantaneous-peak candidates);
+  time, the highest battery voltage with the pad on);
 * :class:`SeriesWriter` converts each block to the time-series columns and appends it as a row
   group to ``timeseries.parquet`` (:class:`pyarrow.parquet.ParquetWriter`, zstd with byte-stream
   split floats) and, when asked, to ``timeseries.csv`` (:class:`pyarrow.csv.CSVWriter`); with
@@ -29,8 +29,6 @@ __all__ = ["RowStats", "SeriesWriter", "ThinnedSeries", "BLOCK_ROWS", "FIGURE_CO
 #: rows per block handed over by the loop (and per Parquet row group): ~3.4 MB of float64 rows (the
 #: block-sized temporaries of the summary, edge losses and the writer are part of a run's fixed peak)
 BLOCK_ROWS = 1 << 14
-#: peak candidates kept in memory before they move to a temporary file (16 B each: 16 MB)
-SPILL_CANDIDATES = 1 << 20
 _ENERGY_COLS = ("e_source_j", "e_coil_loss_j", "e_rectifier_j", "e_battery_chem_j", "e_battery_r0_j",
                 "e_battery_r1_j", "e_battery_c1_j", "e_propulsion_j", "e_inverter_switches_j",
                 "e_rectifier_diodes_j", "e_rectifier_switches_j")
@@ -39,27 +37,19 @@ _ENERGY_COLS = ("e_source_j", "e_coil_loss_j", "e_rectifier_j", "e_battery_chem_
 class RowStats:
     """The summary's running quantities over the blocks of rows (``columns`` = the loop's column names).
 
-    Sums are exact to rounding: each is carried as ``math.fsum`` of the previous sum and the block.
-    Peak candidates: rows with the pad on whose ``|I2|`` is within ``margin_a`` of the running envelope
-    peak (``margin_a`` >= twice the SBAR ripple bound at any battery voltage the run can reach, so the
-    final screen of :meth:`~.loop.MissionLoop.instantaneous_peak` sees every row it would have seen in
-    the full series); earlier candidates are dropped as the peak grows. Beyond :data:`SPILL_CANDIDATES`
-    in memory they are moved to an anonymous temporary file (16 B each; read back slice by slice by
-    :meth:`screened`; the final screen's floor is at least the one any later pruning would apply), so
-    memory stays bounded however many charging rows a mission has."""
+    Sums are exact to rounding: each is carried as ``math.fsum`` of the previous sum and the block. (The
+    instantaneous peak is tracked by the compiled loop itself, :mod:`.loop_kernel`; nothing here grows
+    with the number of rows.)"""
 
-    def __init__(self, columns, margin_a: float, initial_soc: float):
+    def __init__(self, columns, initial_soc: float):
         self.col = {name: j for j, name in enumerate(columns)}
-        self.margin_a = margin_a
         self.sums = dict.fromkeys((*_ENERGY_COLS, "charge_in_j", "charge_time_s"), 0.0)
         self.min_soc = self.max_soc = float(initial_soc)
         self.vl_on_max = -math.inf
         self.n_rows = 0
-        self._cand = []   # pieces [d, |I2|, min |I2|] of candidates in row order, pruned in place
-        self._spill, self._spilled = None, []   # temporary file and the lengths of the pieces in it
 
-    def add(self, arr: np.ndarray, peak_env: float) -> None:
-        """Take one block ``arr`` (n, 26); ``peak_env`` is the running envelope peak after it [A]."""
+    def add(self, arr: np.ndarray) -> None:
+        """Take one block ``arr`` (n, 26)."""
         if not len(arr):
             return
         c, s = self.col, self.sums
@@ -74,91 +64,6 @@ class RowStats:
         self.n_rows += len(arr)
         if on.any():
             self.vl_on_max = max(self.vl_on_max, float(vl[on].max()))
-            i2 = np.abs(arr[:, c["i2_amp_a"]])
-            floor = peak_env - self.margin_a
-            self._prune(floor)
-            new = on & (i2 >= floor)
-            if new.any():
-                self._cand.append([arr[new, c["d_short"]], i2[new], float(i2[new].min())])
-            if sum(len(p[1]) for p in self._cand) > SPILL_CANDIDATES:
-                self._spill_pieces()
-
-    def _spill_pieces(self) -> None:
-        """Move the candidates in memory to the end of the temporary file (rows of (d, |I2|) float64)."""
-        if self._spill is None:
-            import tempfile
-            self._spill = tempfile.TemporaryFile()
-        self._spill.seek(0, 2)
-        for d, i2, _ in self._cand:
-            np.column_stack([d, i2]).tofile(self._spill)
-            self._spilled.append(len(i2))
-        self._cand = []
-
-    def _prune(self, floor: float) -> None:
-        """Drop the candidates below ``floor`` [A] piece by piece (no copy of the whole list)."""
-        for piece in self._cand:
-            if piece[2] < floor:
-                keep = piece[1] >= floor
-                piece[0], piece[1] = piece[0][keep], piece[1][keep]
-                piece[2] = float(piece[1].min()) if len(piece[1]) else math.inf
-        self._cand = [p for p in self._cand if len(p[1])]
-
-    @property
-    def n_candidates(self) -> int:
-        """Candidates in memory and in the temporary file."""
-        return sum(len(p[1]) for p in self._cand) + sum(self._spilled)
-
-    def _pieces(self):
-        """``(d, |I2|)`` of every candidate piece in row order, the spilled ones read back slice by slice."""
-        offset = 0
-        for n in self._spilled:
-            for a in range(0, n, BLOCK_ROWS):
-                m = min(BLOCK_ROWS, n - a)
-                self._spill.seek(16 * (offset + a))
-                x = np.fromfile(self._spill, dtype=np.float64, count=2 * m).reshape(m, 2)
-                yield x[:, 0], x[:, 1]
-            offset += n
-        for d, i2, _ in self._cand:
-            yield d, i2
-
-    def candidates(self, floor: float = -math.inf):
-        """Duties and |I2| [A] of the candidates with |I2| >= ``floor``, in row order."""
-        parts = [(d[i2 >= floor], i2[i2 >= floor]) for d, i2 in self._pieces()]
-        return (np.concatenate([p[0] for p in parts] or [np.empty(0)]),
-                np.concatenate([p[1] for p in parts] or [np.empty(0)]))
-
-    def _filtered(self, floor: float, first):
-        """The pair ``first`` (duty, |I2|), then the candidates with |I2| >= ``floor`` in slices of
-        :data:`BLOCK_ROWS` (bounded temporaries)."""
-        yield np.array([first[0]], dtype=float), np.array([first[1]], dtype=float)
-        for d, i2 in self._pieces():
-            for a in range(0, len(i2), BLOCK_ROWS):
-                m = i2[a:a + BLOCK_ROWS] >= floor
-                if m.any():
-                    yield d[a:a + BLOCK_ROWS][m], i2[a:a + BLOCK_ROWS][m]
-
-    def screened(self, floor: float, first, table_of, few: int = 64):
-        """Duties and |I2| [A] of ``first`` and the candidates >= ``floor``: all of them if at most ``few``,
-        else those whose approximate peak (``table_of(lowest |I2|)``, a callable ``(d, i2) -> peak``, e.g.
-        a :class:`wpt_receiver.peak.PeakTable`) is within 1 % of the largest. Slice by slice (two passes
-        of the table), so the whole candidate list is never copied."""
-        if sum(len(i2) for _, i2 in self._filtered(floor, first)) <= few:
-            d, i2 = zip(*self._filtered(floor, first))
-            return np.concatenate(d), np.concatenate(i2)
-        table = table_of(min(float(i2.min()) for _, i2 in self._filtered(floor, first)))
-        top = max(float(np.max(table(d, i2))) for d, i2 in self._filtered(floor, first))
-        kept = [(d[m], i2[m]) for d, i2 in self._filtered(floor, first)
-                for m in [np.atleast_1d(table(d, i2)) >= 0.99 * top]]
-        return np.concatenate([k[0] for k in kept]), np.concatenate([k[1] for k in kept])
-
-    @property
-    def cand_d(self) -> np.ndarray:
-        return self.candidates()[0]
-
-    @property
-    def cand_i2(self) -> np.ndarray:
-        return self.candidates()[1]
-
 
 def _derived(loop, arr: np.ndarray) -> dict:
     """The time-series columns of one block (:meth:`~.loop.MissionLoop.timeseries`'s layout) as numpy arrays."""
