@@ -12,6 +12,10 @@ shared; the target is 10^4 draws in under 2 minutes on 2 cores).
 
     PYTHONPATH=$PWD python benchmarks/bench_tolerance.py [--draws 10000] [--workers 2] [--repeat 3] [--json]
     PYTHONPATH=$PWD python benchmarks/bench_tolerance.py --draws 2000 --repeat 1      # a quick look
+
+``--accuracy SEED`` instead checks the estimator against the switching model (20 ms of RM settling,
+then each controller's transition) on 40 draws of that seed stratified over the RM power fraction,
+and prints the errors per power band (the table of docs/tolerance.md: seeds 5 and 7).
 """
 
 from __future__ import annotations
@@ -35,6 +39,65 @@ def _serial_per_draw(n: int = 500) -> float:
     for s in rows:
         tol.draw_metrics(*tol.draw_link(s), ts)
     return (time.perf_counter() - t0) / n
+
+
+def _switching(p, c1, c2, duties) -> tuple[float, dict]:
+    """RM |i2| fundamental and each controller's peak fundamental from the switching model."""
+    import numpy as np
+
+    from wpt_receiver import TABLE_I
+    from wpt_receiver.detuning import _settled_rm
+    from wpt_receiver.switching import SwitchingConfig, SwitchingLink
+    link = SwitchingLink(p, SwitchingConfig(c1_f=c1, c2_f=c2))
+    x0, i2rm = _settled_rm(link, 20e-3)
+    peaks = {}
+    for pol, d in duties.items():
+        env = link.simulate(d, TABLE_I.rectifier_period_s, x0=x0).envelope()
+        t, f = env["t_s"].to_numpy(), env["i2_fund_a"].to_numpy()
+        peaks[pol] = float(np.max(f[t >= 1e-3]))
+    return i2rm, peaks
+
+
+def _stratified(seed: int, n_bins: int, ts, nominal_w: float) -> list:
+    """One conducting draw per power-fraction bin over (0, 1.05] (the bin's median draw of 3000)."""
+    import numpy as np
+
+    from wpt_receiver import tolerance as tol
+    scales = tol.draw_scales(tol.Spreads(), 3000, seed)
+    rows = [(s, tol.draw_metrics(*tol.draw_link(s), ts)) for s in scales]
+    edges = np.linspace(0.0, 1.05, n_bins + 1)
+    out = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        c = [(s, m) for s, m in rows if lo < m["rm_power_w"] / nominal_w <= hi and m["rm_i2_a"] >= tol.MIN_CONDUCTION_A]
+        if c:
+            out.append(c[len(c) // 2])
+    return out
+
+
+def accuracy(seed: int, n_bins: int = 40) -> None:
+    """Estimator vs switching model per RM power band (module docstring)."""
+    import numpy as np
+
+    from wpt_receiver import TABLE_I
+    from wpt_receiver import tolerance as tol
+    from wpt_receiver.references import reference_duty
+    ts = tol.TransitionSet.build()
+    T = TABLE_I.rectifier_period_s
+    duties = {pol: reference_duty(pol, TABLE_I, 1e-3, 11e-3, T)[1] for pol in ("step", "proposed")}
+    nominal = tol.draw_metrics(*tol.draw_link([1.0] * len(tol.SCALES)), ts)["rm_power_w"]
+    recs = []
+    for s, m in _stratified(seed, n_bins, ts, nominal):
+        i2, pk = _switching(*tol.draw_link(s), duties)
+        recs.append((m["rm_power_w"] / nominal, m["clamp_margin"], 100 * (m["rm_i2_a"] / i2 - 1),
+                     100 * (m["step_peak_a"] / pk["step"] - 1), 100 * (m["proposed_peak_a"] / pk["proposed"] - 1)))
+    r = np.array(recs)
+    for lo, hi in ((0.9, 9), (0.7, 0.9), (0.5, 0.7), (0.25, 0.5), (0.0, 0.25)):
+        b = r[(r[:, 0] >= lo) & (r[:, 0] < hi)]
+        if len(b):
+            print(f"power {lo:.2f}-{min(hi, 1.05):.2f} x nominal: {len(b)} draws, clamp margin {b[:, 1].min():.2f}-"
+                  f"{b[:, 1].max():.2f}; error RM |i2| {b[:, 2].min():+.0f}/{b[:, 2].max():+.0f} % (median |.| "
+                  f"{np.median(np.abs(b[:, 2])):.0f} %), step peak {b[:, 3].min():+.1f}/{b[:, 3].max():+.1f} %, "
+                  f"model-based peak {b[:, 4].min():+.1f}/{b[:, 4].max():+.1f} %")
 
 
 def _run(draws: int, workers: int) -> dict:
@@ -61,7 +124,12 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--warmup", type=int, default=1, help="untimed rounds of 200 draws each way (default 1)")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--accuracy", type=int, default=None, metavar="SEED",
+                    help="check the estimator against the switching model on 40 draws of SEED instead")
     args = ap.parse_args()
+    if args.accuracy is not None:
+        accuracy(args.accuracy)
+        return
     for _ in range(args.warmup):
         _run(200, 0)
         _run(200, args.workers)

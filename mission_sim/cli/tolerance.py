@@ -100,6 +100,6 @@ def _print(s: dict, args) -> None:
     print(f"estimator: {e['flagged']} draws ({100 * e['flagged_frac']:.1f} %) conduct below "
           f"{e['trusted_power_frac']:g} x nominal power, outside its validated range (RM |i2| off by up to ~2x against "
           f"the switching model there); {e['near_threshold']} ({100 * e['near_threshold_frac']:.1f} %) are within "
-          f"+-15 % of the power threshold (pass / fail uncertain); {e['blocked']} block in RM (agrees with the "
+          f"-10/+4 % of the power threshold (pass / fail uncertain); {e['blocked']} block in RM (agrees with the "
           f"switching model)")
     print(f"results: {args.out} (summary.json, sweep store)")
