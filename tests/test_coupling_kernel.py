@@ -125,8 +125,11 @@ def test_below_the_table_uses_the_exact_field():
 def test_one_source_a_kernel_change_reaches_table_and_exact_paths(monkeypatch):
     """Changing the kernel's loop integrand (here: scaled by 1.5) changes Lm from the table and Lm from
     the exact field alike: both paths take the receiver geometry and integrand from the one kernel.
-    (Compiled numba functions freeze their globals, so the change is made on the ``py_func`` sources.)"""
+    (Compiled numba functions freeze their globals, so the change is made on the ``py_func`` sources; the
+    disk cache of Lm at known poses is off, since it keys on the kernel's file, not on a patched function.)"""
     model = default_coupling()
+    model.lm_h(0.0, 0.0, 0.2)                       # the table, from the disk cache as usual
+    monkeypatch.setenv("DRONEWPT_CACHE_DIR", "")    # then no cache of Lm at poses
     dx, dy, dz, tilt, axis = (v[:3] for v in _poses())
     _use_py_funcs(monkeypatch)
     before = model.lm_h(dx, dy, dz, tilt, tilt_axis_rad=axis), model.lm_exact_h(dx, dy, dz, tilt, tilt_axis_rad=axis)

@@ -344,7 +344,10 @@ class CouplingModel:
         self._table = (coef, rho, z, h)
 
     def _table_args(self):
-        """The table as :mod:`.coupling_kernel` takes it: ``(coef, h, z0, rho_last, z_last)``."""
+        """The table as :mod:`.coupling_kernel` takes it: ``(coef, h, z0, rho_last, z_last)`` (built on first use:
+        :meth:`lm_h` may answer from the disk cache of poses without it)."""
+        if self._table is None:
+            self._build_table()
         coef, rho_g, z_g, h = self._table
         return coef, float(h), float(z_g[0]), float(rho_g[-1]), float(z_g[-1])
 
@@ -384,8 +387,6 @@ class CouplingModel:
     def _lm_poses(self, rot, org):
         """Lm [H] of the poses ``rot`` (N, 3, 3), ``org`` (N, 3) by :func:`.coupling_kernel.flux_table`."""
         from .coupling_kernel import flux_table
-        if self._table is None:
-            self._build_table()
         out, below = flux_table(*self._table_args(), rot, org, self._flat_pts, self._flat_tan, float(self._w))
         if np.any(below):  # the exact field at the points below the table, the table elsewhere
             out[below] = self._flux_poses(rot[below], org[below], self._pts, self._tan, self._w, self._a_table)
