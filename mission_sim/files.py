@@ -80,9 +80,24 @@ def folder_lock(folder, name: str, busy: str):
     holds it. The lock file is removed on leaving (while still locked; a process that opened the old
     file meanwhile sees that it was replaced and takes the new one), so a finished run leaves no
     0-byte lock file behind."""
+    from .signals import interrupts_deferred
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / name
+    fh = None
+    try:
+        with interrupts_deferred():   # a SIGTERM while taking the lock is raised once it is held (then removed)
+            fh = _take_lock(path, busy)
+        yield path
+    finally:
+        if fh is not None:
+            with contextlib.suppress(OSError):
+                path.unlink()
+            fh.close()
+
+
+def _take_lock(path: Path, busy: str):
+    """The open, ``flock``-ed file ``path`` (see :func:`folder_lock`); :class:`FolderBusy` if held elsewhere."""
     for _ in range(20):
         fh = open(path, "a+")
         try:
@@ -95,13 +110,6 @@ def folder_lock(folder, name: str, busy: str):
         except FileNotFoundError:  # removed by the previous holder between our open and our lock
             same = False
         if same:
-            break
+            return fh
         fh.close()
-    else:
-        raise FolderBusy(busy)
-    try:
-        yield path
-    finally:
-        with contextlib.suppress(OSError):
-            path.unlink()
-        fh.close()
+    raise FolderBusy(busy)

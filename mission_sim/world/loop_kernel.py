@@ -68,6 +68,7 @@ __all__ = ["advance", "link_disc", "link_step", "link_stored_j", "LW_SIZE", "STA
 STATUS_NAMES = ("OK", "DONE", "PAUSED", "FULL", "NEED_ACT", "NEED_NOISE", "DEPLETED", "ERR_POWER", "ERR_POLICY",
                 "NEED_DEPLETE")
 OK, DONE, PAUSED, FULL, NEED_ACT, NEED_NOISE, DEPLETED, ERR_POWER, ERR_POLICY, _NEED_DEPLETE = range(10)
+_E0, _N_ENERGY = 15, 11   # the rows' energy columns (e_source_j .. e_rectifier_switches_j, loop._COLUMNS)
 
 #: the loop's state, by name (units SI; flags bool; counters int64)
 STATE_DTYPE = np.dtype([
@@ -535,12 +536,44 @@ def _fine_step(s, c, lk, rows, t0, dt, lm, p_prop, row_k):
     if st.v1 > 0.0 and st.d < 1.0 and dt > 1.5 * c.t_rect:
         k_sub = math.ceil(dt / c.t_rect - 1e-9)
         h = dt / k_sub
+        n0 = st.n_rows
         for j in range(k_sub):
             r = _step_d(s, c, lk, rows, t0 + j * h, h, lm, p_prop, row_k, True)
             if r != OK:
                 return r
+        _merge_rows(st, rows, n0)
         return OK
     return _step_d(s, c, lk, rows, t0, dt, lm, p_prop, row_k, True)
+
+
+@njit(cache=True)
+def _merge_rows(st, rows, n0):
+    """The rows ``n0..`` of one fine step's sub-steps as one row: the state at its end, ``dt`` and every
+    energy summed (exactly the sub-steps' sums), the battery current as its mean over the step and the
+    rectifier current as the one that delivers the step's rectifier energy at the stored VL (``e_rectifier_j =
+    battery_v rect_current_a dt_s`` holds row by row), so the stored series has one row per control period."""
+    n = st.n_rows - n0
+    if n <= 1:
+        return
+    last = rows[st.n_rows - 1]
+    dt = 0.0
+    q_rect = q_bat = 0.0
+    sums = np.zeros(_N_ENERGY)
+    for i in range(n0, st.n_rows):
+        r = rows[i]
+        dt += r[1]
+        q_rect += r[9] * r[1]
+        q_bat += r[11] * r[1]
+        for j in range(_N_ENERGY):
+            sums[j] += r[_E0 + j]
+    out = rows[n0]
+    for j in range(_E0):
+        out[j] = last[j]
+    for j in range(_N_ENERGY):
+        out[_E0 + j] = sums[j]
+    out[1], out[11] = dt, q_bat / dt
+    out[9] = out[17] / (out[10] * dt) if out[10] != 0.0 else q_rect / dt   # e_rectifier_j / (battery_v dt)
+    st.n_rows = n0 + 1
 
 
 # ---------------------------------------------------------------------- policy, windows
