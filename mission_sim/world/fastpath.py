@@ -193,7 +193,6 @@ def run(loop, bar=None):
             loop.fail(kern.STATUS_NAMES[status], s[0])
     _progress(bar, loop.samples.t_last_s, t_done)
     loop.rows = rows[:int(n_rows[0])]
-    loop.peak_env = float(s[0]["peak_env"])
 
 
 def _progress(bar, t_now: float, t_done: float) -> float:
@@ -205,6 +204,6 @@ def _progress(bar, t_now: float, t_done: float) -> float:
 def _hand_over(loop, rows, s):
     """Give the rows written so far to the loop (:meth:`~.loop.MissionLoop.flush`, which copies them) and
     empty the kernel's buffer."""
-    loop.rows, loop.peak_env = rows[:int(s[0]["n_rows"])], float(s[0]["peak_env"])
+    loop.rows = rows[:int(s[0]["n_rows"])]
     loop.flush()
     s[0]["n_rows"] = 0

@@ -63,7 +63,6 @@ class MissionLoop:
         "samples": "samples.MissionSamples: the per-sample arrays, chunk by chunk as the loop advances",
         # --- the kernel's records (loop_kernel.CONST_DTYPE / STATE_DTYPE, 1 element each) and the output
         "consts": "the constants record", "state": "the state record (the final state after run)",
-        "peak_env": "peak |I2| of the envelope so far [A]",
         "compiled": "None: the policy's kernel() hook when it has one; False: always its Python act(); "
                     "True: require the hook",
         "frame": "build the time-series DataFrame (False: the summary only, timeseries None)",
@@ -97,7 +96,6 @@ class MissionLoop:
         self.inv_sqrt_l1l2 = 1.0 / math.sqrt(model.l1_h * model.l2_h)
         self.samples = MissionSamples(cfg, traj, charge, lm_all)   # lm_all: per sample, a constant or None
         self.consts = self.state = None
-        self.peak_env = 0.0
         self.rows = []
         self.blocks = []
         self.stats = RowStats(_COLUMNS, self.bp.initial_soc)

@@ -552,25 +552,19 @@ def _merge_rows(st, rows, n0):
     energy summed (exactly the sub-steps' sums), the battery current as its mean over the step and the
     rectifier current as the one that delivers the step's rectifier energy at the stored VL (``e_rectifier_j =
     battery_v rect_current_a dt_s`` holds row by row), so the stored series has one row per control period."""
-    n = st.n_rows - n0
-    if n <= 1:
+    if st.n_rows - n0 <= 1:
         return
-    last = rows[st.n_rows - 1]
-    dt = 0.0
-    q_rect = q_bat = 0.0
-    sums = np.zeros(_N_ENERGY)
-    for i in range(n0, st.n_rows):
+    out, last = rows[n0], rows[st.n_rows - 1]
+    dt, q_rect, q_bat = out[1], out[9] * out[1], out[11] * out[1]
+    for i in range(n0 + 1, st.n_rows):       # energies summed into the first row, in place
         r = rows[i]
         dt += r[1]
         q_rect += r[9] * r[1]
         q_bat += r[11] * r[1]
-        for j in range(_N_ENERGY):
-            sums[j] += r[_E0 + j]
-    out = rows[n0]
+        for j in range(_E0, _E0 + _N_ENERGY):
+            out[j] += r[j]
     for j in range(_E0):
         out[j] = last[j]
-    for j in range(_N_ENERGY):
-        out[_E0 + j] = sums[j]
     out[1], out[11] = dt, q_bat / dt
     out[9] = out[17] / (out[10] * dt) if out[10] != 0.0 else q_rect / dt   # e_rectifier_j / (battery_v dt)
     st.n_rows = n0 + 1
