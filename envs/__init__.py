@@ -10,13 +10,20 @@ both with a batched ``vector_entry_point``::
     env = gymnasium.make("dronewpt/SbarCharging-v0", scenario="nominal")
     venv = gymnasium.make_vec("dronewpt/SbarCharging-v0", num_envs=1024, vectorization_mode="vector_entry_point")
 
-Modules, in the order data flows (gym-electric-motor style: the parts composed into an env):
+An env is four parts (gym-electric-motor style), each called once per ``reset`` and once per ``step``:
+the scenario part (draws and the reference, :class:`envs.scenario.ScenarioPart`), the plant, the
+objective and the observation (:mod:`envs.parts`); a new scenario is one new
+:class:`envs.scenario.Draw` (docs/envs.md).
+
+Modules, in the order data flows:
 
 =================  ==========================================================================
-``scenario``       scenarios and the seeded charge-command generator (the reference)
+``scenario``       scenarios, their draws (``Draw`` parts) and the seeded charge-command
+                   generator (the reference): the scenario part
 ``plant``          the world as the env needs it: hover pose error -> true Lm, battery, power
 ``layout``         the named slots of the state, battery, coefficient, info and constant arrays
-``core``           the env's settings and per-episode plans (ZOH coefficients, initial state)
+``core``           the env's settings and the plant's per-episode plans (ZOH coefficients, initial state)
+``parts``          the plant, objective and observation parts of the single and the vector env
 ``objective``      the domain's objective: overshoot at the stop, short-mode flag, episode cost
 ``peaks``          the instantaneous peak: envelope peak + the SBAR's harmonic excess (table)
 ``vector_kernel``  THE env step, once, compiled (numba): link, sub-steps, detuned tank, peak,

@@ -10,20 +10,15 @@ from gymnasium import spaces
 
 from mission_sim.contract import OBS_DIM, PolicyContext
 
-from wpt_receiver.sbar import rectifier_current, rectifier_v2_folded
-
-from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, build_plans, kernel_function
-from .layout import BAT, INFO, SINGLE, SINGLE_PAR, SLOW, XC
+from .core import OBS_OFFSET, OBS_SCALE, EnvConfig
+from .layout import INFO, SINGLE_PAR
+from .parts import SingleObjective, SingleObservation, SinglePlant, alias_parts
 from .peaks import LOOKUP_SCALARS, PeakLookup
 from .render import draw_envelope
-from .scenario import draw_episodes, get_scenario, scenario_from_options
+from .scenario import ScenarioPart, get_scenario
+from .vector import Parts
 
 __all__ = ["SbarChargingEnv", "SbarChargingDiscreteEnv"]
-
-
-
-def _sign(x: float) -> float:
-    return 1.0 if x > 0.0 else (-1.0 if x < 0.0 else 0.0)
 
 
 class SbarChargingEnv(gym.Env):
@@ -126,9 +121,7 @@ class SbarChargingEnv(gym.Env):
         self._peak = PeakLookup(c.link, self._devices)
         self._k = None
         self._hist = None
-        self._line = None
         self._compiled = compiled is None or bool(compiled)
-        self._kern = kernel_function("single_step", self._compiled)   # also: numba imported here
         w, tab = self._w, self._peak.kernel_table
         vals = dict(n_steps=self._T, dt=self._dt, inv_rated=self._inv_rated, w_track=w.tracking,
                     w_over=w.overcurrent, i_ref=w.i_ref_a, slow_every=self._M, n_sub=self._n_sub, vf=self._dev[0],
@@ -137,6 +130,12 @@ class SbarChargingEnv(gym.Env):
         self._par = np.concatenate([[vals[f] for f in SINGLE_PAR._fields], OBS_SCALE, OBS_OFFSET,
                                     tab.ravel()]).astype(float)
         self._out = np.empty(len(INFO) + 1)
+        # the per-step row of the single kernel (command, I2 sensor noise): the scenario part's stores
+        self._steps = np.zeros((self._T + 1, 2))
+        self._cmd = self._steps[:, 0]   # the command per step [A] (a view)
+        plant = SinglePlant(c, self._compiled)
+        self.parts = Parts(ScenarioPart(self.scenario, self._T, self._dt, self._steps[:, :1], self._steps[:-1, 1:]),
+                           plant, SingleObjective(c, plant), SingleObservation(c, self._peak, self._compiled))
 
     # ------------------------------------------------------------------ interface
     def _make_action_space(self):
@@ -157,95 +156,40 @@ class SbarChargingEnv(gym.Env):
         """What a policy may assume: Table I link (not the true Lm), the control period, the rating."""
         return PolicyContext(link=self.config.link, control_period_s=self._dt, rated_i2_a=self.config.rated_i2_a)
 
+    @property
+    def state_names(self) -> tuple:
+        """Names of the plant's link and battery state (:data:`envs.layout.STATE`)."""
+        return self.parts.plant.state_names
+
     # ------------------------------------------------------------------ gymnasium API
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        scn = scenario_from_options(options, self.scenario)
-        p = build_plans(draw_episodes([self.np_random], scn, self._T), scn, self.config)
-        self._plan = p
-        self._t_stop = float(p.t_stop_s[0])
-        self._stop_k = int(p.stop_k[0])
-        self._start(p)
+        scenario, plant, objective, observation = self.parts   # each part once, in order
+        win = scenario.reset([self.np_random], slice(None), options)
+        plan = plant.reset(slice(None), win)
+        objective.reset(slice(None), win, plan)
         self._k = 0
-        st = self._st
-        i1, i2, vl, d, soc = (float(st[f]) for f in (SINGLE.i1, SINGLE.i2, SINGLE.vl, SINGLE.d, SINGLE.soc))
-        cmd0 = float(p.cmd_a[0, 0])
-        il = float(rectifier_current(d, abs(i2)))
-        ib = il - float(p.battery[0, BAT.i_load])
-        v2 = rectifier_v2_folded(d, vl, i2, self._devices, sin=math.sin, sign=_sign)
-        info = {"t_s": 0.0, "i2_a": i2, "i2_peak_a": self._peak.scalar(abs(i2), d, vl), "i1_a": i1, "d_short": d,
-                "v2_v": v2, "rect_current_a": il, "battery_v": vl, "battery_current_a": ib, "soc": soc,
-                "charge_cmd_a": cmd0, "lm_h": float(p.lm_h[0, 0]), "energy_j": 0.0, "cost": 0.0, "overcurrent": 0.0,
-                "overshoot": -np.inf, "episode_cost": 0.0, "reached_short_mode": False, "scenario": scn.name,
-                "t_stop_s": self._t_stop, "i2_peak_envelope_a": abs(i2)}
+        obs, info = observation.reset(win, plant, objective)
         if self.render_mode is not None:
-            self._hist = [[0.0], [i2], [il], [cmd0], [d]]
-        obs = np.empty((1, OBS_DIM), np.float32)
-        vals = np.array([[i2], [vl], [ib], [il], [soc], [cmd0], [d], [self._t_since(0)]])
-        self._fn("obs_rows")(vals, OBS_SCALE, OBS_OFFSET, obs)
-        self._line = None
-        if p.delay_steps[0] > 0:   # sensing delay (envs.sensing)
-            from .sensing import DelayLine
-            self._line = DelayLine(1)
-            self._line.start([0], obs, p.delay_steps[:1])
-        return obs[0], info
-
-    def _fn(self, name):
-        return kernel_function(name, self._compiled)
-
-    def _start(self, p):
-        """The episode's plan as the arrays of :func:`envs.vector_kernel.single_step` (a detuned window:
-        its complex state after :data:`SINGLE` and its coefficients in ``_cc``)."""
-        T = self._T
-        st = np.empty(len(SINGLE) + (len(XC) if p.cplx is not None else 0))
-        st[SINGLE.i1], st[SINGLE.i2] = p.x0[0]
-        st[SINGLE.vl], st[SINGLE.soc], st[SINGLE.vrc], st[SINGLE.d] = p.vl0[0], p.battery[0, BAT.soc0], p.vrc0[0], p.d0[0]
-        st[SINGLE.run_max], st[SINGLE.sm_ok], st[SINGLE.sm_checked] = -np.inf, 1.0, 0.0
-        st[SINGLE.stop_k], st[SINGLE.t_stop] = self._stop_k, self._t_stop
-        st[SINGLE.ocv0:SINGLE.bus_decay + 1] = p.battery[0]
-        self._cc = np.zeros((0, 32))
-        if p.cplx is not None:
-            st[len(SINGLE):] = p.cplx[1][0]
-            self._cc = np.ascontiguousarray(p.cplx[0][0])
-        steps = np.zeros((T + 1, 2))
-        steps[:, 0] = p.cmd_a[0]
-        steps[:T, 1] = p.noise_a[0]
-        slow = np.empty((p.coef.shape[1], len(SLOW)))
-        slow[:, :SLOW.lm_h] = p.coef[0]
-        slow[:, SLOW.lm_h] = p.lm_h[0]
-        slow[:, SLOW.i2_sm_a] = p.i2_sm_a[0]
-        self._st, self._steps, self._slow = st, steps, slow
-        self._cmd = steps[:, 0]   # the command per step [A] (a view)
+            self._hist = [[0.0], [info["i2_a"]], [info["rect_current_a"]], [info["charge_cmd_a"]], [info["d_short"]]]
+        return obs, info
 
     def step(self, action):
-        out = self._step(action)
-        if self._line is not None:
-            self._line.push(out[0][None])
-        return out
-
-    def _step(self, action):
         k = self._k
         if k is None or k >= self._T:
             raise RuntimeError("step() called before reset() or after the episode was truncated; call reset()")
         d = self._duty(action)
         obs = np.empty(OBS_DIM, np.float32)
-        kern = self._kern if self._compiled else self._fn("single_step")
-        reward = kern(k, d, self._st, self._steps, self._slow, self._par, obs, self._out, self._cc)
-        t, i2, pk, i1, _, v2, il, vl, ib, soc, cmd, lm, energy, over, cost, rm, ec, pk_env, sm = self._out.tolist()
+        _, plant, objective, observation = self.parts
+        reward = plant.step(k, d, self._steps, self._par, obs, self._out)
+        obs, info = observation.step(obs, self._out, d, objective.step(self._out))
         k += 1
         self._k = k
-        info = {"t_s": t, "i2_a": i2, "i2_peak_a": pk, "i1_a": i1, "d_short": d, "v2_v": v2, "rect_current_a": il,
-                "battery_v": vl, "battery_current_a": ib, "soc": soc, "charge_cmd_a": cmd, "lm_h": lm,
-                "energy_j": energy, "cost": cost, "overcurrent": over, "overshoot": rm, "episode_cost": ec,
-                "reached_short_mode": sm != 0.0, "i2_peak_envelope_a": pk_env}
         if self._hist is not None:
-            for lst, v in zip(self._hist, (t, i2, il, float(self._steps[k, 0]), d)):
+            for lst, v in zip(self._hist, (info["t_s"], info["i2_a"], info["rect_current_a"],
+                                           float(self._steps[k, 0]), d)):
                 lst.append(v)
         return obs, float(reward), False, k >= self._T, info
-
-    def _t_since(self, k: int) -> float:
-        t = k * self._dt - self._t_stop
-        return t if (k >= self._stop_k and t > 0.0) else 0.0
 
     def render(self):
         if self.render_mode is None:
@@ -269,3 +213,8 @@ class SbarChargingDiscreteEnv(SbarChargingEnv):
         if a != 0 and a != 1:
             raise ValueError(f"action={action!r} is invalid; valid values: 0 (RM), 1 (SM)")
         return float(a)
+
+
+alias_parts(SbarChargingEnv, {"_st": ("plant", "st"), "_slow": ("plant", "slow"), "_cc": ("plant", "cc"),
+                              "_t_stop": ("objective", "t_stop"), "_stop_k": ("objective", "stop_k"),
+                              "_line": ("observation", "line")})

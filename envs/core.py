@@ -39,12 +39,10 @@ from mission_sim.contract import OBS_FIELDS
 from wpt_receiver import TABLE_I, LinkParams, duty_from_v2_clipped, state_matrices, steady_state, zoh_discretise
 from wpt_receiver.sbar import rectifier_current, short_weight
 
-from .layout import BAT, COEF
-from .objective import short_mode_i2_a, stop_step
+from .layout import BAT, COEF, STATE, XC
 from .plant import battery_operating_point, lm_window_h
-from .scenario import Scenario, command_profile, stack_draws
 
-__all__ = ["EnvConfig", "RewardWeights", "Plans", "build_plans", "OBS_SCALE", "OBS_OFFSET", "N_COEF", "N_BAT", "kernel_function"]
+__all__ = ["EnvConfig", "RewardWeights", "Plans", "DetunedPlan", "build_plans", "OBS_SCALE", "OBS_OFFSET", "N_COEF", "N_BAT", "kernel_function"]
 
 HALF_PI = 0.5 * math.pi
 FOUR_OVER_PI = 4.0 / math.pi
@@ -148,24 +146,26 @@ class EnvConfig:
 
 
 @dataclass
-class Plans:
-    """Per-episode exogenous data and initial state for ``n`` episodes (all arrays lead with n)."""
+class DetunedPlan:
+    """A detuned tank's plans (:mod:`envs.detuned`) for ``n`` windows."""
 
-    cmd_a: np.ndarray        # (n, T+1) charge command per step
-    noise_a: np.ndarray      # (n, T) I2 sensor noise [A]
+    coef: np.ndarray         # (n, S, 32) complex-envelope ZOH coefficients per slow segment (CCOEF_N)
+    xc0: np.ndarray          # (n, 4) initial complex state (envs.layout.XC)
+    c1_f: np.ndarray         # (n,) C1 [F]
+    c2_f: np.ndarray         # (n,) C2 [F]
+
+
+@dataclass
+class Plans:
+    """The plant's per-episode plans and initial state for ``n`` windows (all arrays lead with n; slots
+    by name: :mod:`envs.layout`). The command and the sensor noise are the scenario part's
+    (:class:`envs.scenario.Window`), the short-mode current and the stop step the objective's."""
+
     coef: np.ndarray         # (n, S, 20) ZOH coefficients per slow segment (envs.layout.COEF)
     lm_h: np.ndarray         # (n, S) true Lm per slow segment
     battery: np.ndarray      # (n, 9) battery row per episode (envs.layout.BAT)
-    x0: np.ndarray           # (n, 2) initial I1, I2
-    vl0: np.ndarray          # (n,) initial battery voltage
-    vrc0: np.ndarray         # (n,) initial RC-branch voltage
-    d0: np.ndarray           # (n,) initial duty (steady state for cmd0)
-    t_stop_s: np.ndarray     # (n,) time of the stop command
-    delay_steps: np.ndarray | None = None   # (n,) int: age of the current measurements [control periods]
-    cplx: tuple | None = None   # detuned windows (envs.detuned): (coef (n, S, 32), x0 (n, 4), C1 (n,), C2 (n,) [F])
-    i2_sm_a: np.ndarray | None = None   # (n, S) the objective's short-mode I2 of the true link [A]
-    stop_k: np.ndarray | None = None    # (n,) int: first step scored against the stop (envs.objective)
-    c_rel: np.ndarray | None = None     # (2, n) relative C1, C2 errors of detuned windows
+    state0: np.ndarray       # (n, 6) initial link and battery state (envs.layout.STATE)
+    detuned: DetunedPlan | None = None   # detuned windows (envs.detuned)
 
 
 def kernel_function(name: str, compiled: bool = True):
@@ -184,50 +184,35 @@ def _steady_v2(link: LinkParams, lm, il, vl):
     return np.minimum(np.maximum((x * link.v1_amp_v - np.sqrt(disc)) / (2.0 * link.r1_ohm), 0.0), FOUR_OVER_PI * vl)
 
 
-def build_plans(draws, scenarios, cfg: EnvConfig, out=None) -> Plans:
-    """Turn the episodes' random draws (a list of :class:`~envs.scenario.EpisodeDraw` or a batched
-    one) into everything the step needs, on arrays over the episodes (the plant's Lm and battery,
-    the link's coefficients and initial state, the objective's short-mode current and stop step, a
-    detuned tank's complex plans: the envs copy it, nothing else is entered at a reset). ``scenarios``: one per episode,
-    or one :class:`Scenario` for all. The command and the sensor noise are built step-major, the Plans
-    holding their transposed views; ``out``: None (new arrays) or float arrays ``(cmd (T + 1, n), noise
-    (T, n), coef (n, S, 20))`` (C-contiguous) to write them and the coefficients into (the vector env's
-    stores: no temporaries, no copies; the same numbers)."""
-    if isinstance(draws, (list, tuple)):
-        draws = stack_draws(draws)
-    n, T, S, link = draws.n, cfg.n_steps, cfg.n_slow, cfg.link_folded
-    if isinstance(scenarios, Scenario):
-        load_w, noise_sd = np.full(n, scenarios.load_power_w), np.full(n, scenarios.i2_noise_a)
-    else:
-        load_w = np.array([s.load_power_w for s in scenarios])
-        noise_sd = np.array([s.i2_noise_a for s in scenarios])
+def build_plans(win, cfg: EnvConfig, out=None) -> Plans:
+    """The plant's plans for the windows of ``win`` (an :class:`envs.scenario.Window`: draws, command,
+    hover draw), on arrays over the windows: the true Lm per slow segment, the link's coefficients, the
+    battery row and the initial state delivering the first command, a detuned tank's complex plans.
+    ``out``: None (a new array) or a C-contiguous float array (n, S, 20) to write the coefficients into
+    (the vector env's store: no temporaries, no copies; the same numbers)."""
+    draws = win.draw
+    n, S, link = draws.n, cfg.n_slow, cfg.link_folded
     t_slow = np.arange(S) * (cfg.slow_every * cfg.dt_s)
     lm = lm_window_h(draws.wind_speed_m_s, draws.record_u, t_slow)
     lm *= np.asarray(draws.lm_scale)[:, None]
     drift = np.asarray(draws.lm_drift, dtype=float)
     if np.any(drift != 0.0):   # Lm moving within the window (scenario lm_drift): linear in time
-        lm *= 1.0 + drift[:, None] * (t_slow / (T * cfg.dt_s))[None, :]
+        lm *= 1.0 + drift[:, None] * (t_slow / (cfg.n_steps * cfg.dt_s))[None, :]
     # windows without wind share one Lm: discretise each distinct value once (same numbers)
     lm_u, back = np.unique(lm.ravel(), return_inverse=True)
     zoh = _zoh_coefficients(link, lm_u, cfg)
-    cmd, noise, coef = out if out is not None else (np.empty((T + 1, n)), np.empty((T, n)), np.empty((n, S, N_COEF)))
+    coef = out if out is not None else np.empty((n, S, N_COEF))
     np.take(zoh, back.ravel(), axis=0, out=coef.reshape(n * S, N_COEF), mode="clip")   # indices all valid
-    noise = np.multiply(draws.noise.T, noise_sd, out=noise).T
-    cmd = command_profile(draws, T, cfg.dt_s, out=cmd)
-    battery, x0, vl0, vrc0, d0 = _initial_state(link, lm[:, 0], np.asarray(draws.soc0, dtype=float), load_w,
-                                                cmd[:, 0], cfg)
+    battery, state0 = _initial_state(link, lm[:, 0], np.asarray(draws.soc0, dtype=float), win.load_w,
+                                     win.cmd_a[:, 0], cfg)
     c1 = np.asarray(draws.c1_detune, dtype=float).reshape(n)
     c2 = np.asarray(draws.c2_detune, dtype=float).reshape(n)
-    cplx = _detuned_plans(link, lm, c1, c2, vl0, d0, cfg) if np.any(c1 != 0.0) or np.any(c2 != 0.0) else None
-    t_stop = np.asarray(draws.t_stop_s, dtype=float)
-    p = Plans(cmd, noise, coef, lm, battery, x0, vl0, vrc0, d0, t_stop,
-              np.asarray(draws.sense_delay).astype(np.int64).reshape(n), cplx,
-              short_mode_i2_a(cfg.link, lm, cfg.device_set()), stop_step(t_stop, cfg.dt_s, T))
-    if cplx is not None:   # the detuned link's short-mode current; I1, I2 = |J1|, |J2|
-        from .detuned import detuned_start
-        p.i2_sm_a, i1, i2, p.c_rel = detuned_start(cfg, cfg.device_set(), p)
-        p.x0 = np.stack([i1, i2], axis=1)
-    return p
+    detuned = None
+    if np.any(c1 != 0.0) or np.any(c2 != 0.0):   # the detuned link; its I1, I2 start at |J1|, |J2|
+        from .detuned import magnitudes
+        detuned = _detuned_plans(link, lm, c1, c2, state0[:, STATE.vl], state0[:, STATE.d], cfg)
+        state0[:, STATE.i1], state0[:, STATE.i2] = magnitudes(detuned.xc0)
+    return Plans(coef, lm, battery, state0, detuned)
 
 
 def _detuned_plans(link, lm, c1_rel, c2_rel, vl0, d0, cfg: EnvConfig):
@@ -244,7 +229,9 @@ def _detuned_plans(link, lm, c1_rel, c2_rel, vl0, d0, cfg: EnvConfig):
     vf, dr = cfg.device_terms
     v2 = FOUR_OVER_PI * (vl0 + vf) * (1.0 - np.sin(HALF_PI * d0))
     j1, j2 = complex_steady(link, lm[:, 0], c1, c2, v2, dr * short_weight(d0))
-    return coef, np.stack([j1.real, j2.real, j1.imag, j2.imag], axis=1), c1, c2
+    xc0 = np.empty((n, len(XC)))
+    xc0[:, XC.re_j1], xc0[:, XC.re_j2], xc0[:, XC.im_j1], xc0[:, XC.im_j2] = j1.real, j2.real, j1.imag, j2.imag
+    return DetunedPlan(coef, xc0, c1, c2)
 
 
 def _zoh_coefficients(link: LinkParams, lm, cfg: EnvConfig) -> np.ndarray:
@@ -264,7 +251,8 @@ def _zoh_coefficients(link: LinkParams, lm, cfg: EnvConfig) -> np.ndarray:
 
 def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig):
     """Battery rows of :class:`Plans` and the steady state delivering the first command ``cmd0``
-    (fixed point through the battery voltage): ``(battery, x0, vl0, vrc0, d0)``. ``link`` has the
+    (fixed point through the battery voltage): ``(battery (n, 9), state0 (n, 6))`` by the names of
+    :data:`envs.layout.BAT` and :data:`envs.layout.STATE`. ``link`` has the
     devices' resistances folded in; ``(vf, dr)`` = :attr:`EnvConfig.device_terms` as in the step
     (the clamp is ``VL + vf``, the short-window excess ``dr w(d) I2`` acts as a resistance in series with R2)."""
     vf, dr = cfg.device_terms
@@ -292,4 +280,5 @@ def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig):
     row = dict(ocv0=ocv, docv=docv, soc0=soc0, r0=r0, rc_decay=decay, rc_gain=r1 * (1.0 - decay),
                dsoc=cfg.dt_s / (3600.0 * cap), i_load=i_load, bus_decay=bus_decay)
     battery = np.stack([np.broadcast_to(row[f], np.shape(ocv)) for f in BAT._fields], axis=-1)
-    return battery, np.stack([i1, i2], axis=-1), vl0, vrc0, d0
+    start = dict(i1=i1, i2=i2, vl=vl0, soc=battery[:, BAT.soc0], vrc=vrc0, d=d0)
+    return battery, np.stack([np.broadcast_to(start[f], np.shape(ocv)) for f in STATE._fields], axis=-1)

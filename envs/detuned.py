@@ -24,7 +24,9 @@ import math
 
 import numpy as np
 
-__all__ = ["real_matrices", "zoh_complex", "complex_steady"]
+from .layout import XC
+
+__all__ = ["real_matrices", "zoh_complex", "complex_steady", "short_mode_i2", "magnitudes", "relative_errors"]
 
 
 def real_matrices(link, lm_h: float, c1_f: float, c2_f: float):
@@ -73,16 +75,23 @@ def complex_steady(link, lm_h, c1_f, c2_f, v2_mag_v, r2_add_ohm=0.0):
     return j1, j2
 
 
-def detuned_start(cfg, devices, p):
-    """What a detuned window needs at its start besides its plan ``p`` (:class:`envs.core.Plans` with
-    ``cplx``): ``(i2_sm (n, S), |J1| (n,), |J2| (n,), c_rel (2, n))``: the objective's short-mode
-    current of the detuned link (V2 = 0, the short mode's resistances, per slow segment's Lm), the
-    initial envelope magnitudes and the relative capacitor errors."""
-    coef, x0, c1, c2 = p.cplx
+def short_mode_i2(cfg, devices, lm_h, c1_f, c2_f) -> np.ndarray:
+    """The objective's short-mode current [A] of a detuned link, (n, S): V2 = 0, the short mode's
+    resistances (the driven inverter channels in R1, the shorted SBAR channels in R2), per slow
+    segment's true Lm ``lm_h`` (n, S) and the windows' C1, C2 [F] (n,)."""
     base = cfg.link
     sm = base.with_(r1_ohm=base.r1_ohm + devices.inv_r_ohm, r2_ohm=base.r2_ohm + devices.short_r_ohm)
-    S = p.lm_h.shape[1]
-    _, j2 = complex_steady(sm, p.lm_h.ravel(), np.repeat(c1, S), np.repeat(c2, S), 0.0)
-    w, lk = base.omega_rad_s, cfg.link_folded
-    c_rel = np.stack([c1 * w * w * lk.l1_h - 1.0, c2 * w * w * lk.l2_h - 1.0])
-    return np.abs(j2).reshape(-1, S), np.hypot(x0[:, 0], x0[:, 2]), np.hypot(x0[:, 1], x0[:, 3]), c_rel
+    S = lm_h.shape[1]
+    _, j2 = complex_steady(sm, lm_h.ravel(), np.repeat(c1_f, S), np.repeat(c2_f, S), 0.0)
+    return np.abs(j2).reshape(-1, S)
+
+
+def magnitudes(xc):
+    """``(|J1|, |J2|)`` [A] of complex states ``xc`` (n, 4) (slots :data:`envs.layout.XC`)."""
+    return np.hypot(xc[:, XC.re_j1], xc[:, XC.im_j1]), np.hypot(xc[:, XC.re_j2], xc[:, XC.im_j2])
+
+
+def relative_errors(cfg, c1_f, c2_f) -> np.ndarray:
+    """The relative C1, C2 errors (2, n) against resonance with the link's L1, L2 (what ``c_detune`` drew)."""
+    w, lk = cfg.link.omega_rad_s, cfg.link_folded
+    return np.stack([c1_f * w * w * lk.l1_h - 1.0, c2_f * w * w * lk.l2_h - 1.0])

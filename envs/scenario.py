@@ -37,7 +37,25 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 __all__ = ["Scenario", "SCENARIOS", "HELD_OUT", "get_scenario", "EpisodeDraw", "draw_episode", "draw_episodes", "stack_draws",
-           "command_profile", "scenario_from_options"]
+           "command_profile", "scenario_from_options", "Draw", "DRAWS", "register_scenario", "ScenarioPart", "Window"]
+
+
+class Draw:
+    """A scenario part: the uniform numbers it draws for every window and the named window fields it
+    sets from them (the fields of :class:`EpisodeDraw`). :data:`DRAWS` are every scenario's; a scenario's
+    ``parts`` are its own (each carries its own ranges), drawn after them. A subclass gives
+
+    * ``ranges(scn)`` - the uniform ranges ``(lo, hi)`` it draws, in order (a point ``lo == hi`` is not
+      drawn: it costs no random number, so adding a draw leaves the windows of other scenarios unchanged);
+    * ``apply(scn, cols, win)`` - sets fields of the dict ``win`` by name from ``cols`` (one array (n,)
+      per range, the draws of the n windows), after the draws before it (it may overwrite their fields).
+    """
+
+    def ranges(self, scn) -> tuple:
+        raise NotImplementedError
+
+    def apply(self, scn, cols, win: dict) -> None:
+        raise NotImplementedError
 
 
 @dataclass(frozen=True)
@@ -58,6 +76,8 @@ class Scenario:
     sense_delay_steps : the current measurements of the observation (I2, battery current, SBAR output
         current) are this many control periods old (integer, drawn uniformly per window)
     c_detune : relative error of C1 and of C2 (each drawn) against the resonant value 1/(w^2 L)
+    parts : further draws of this scenario, each a :class:`Draw` carrying its own ranges (drawn after the
+        built-in :data:`DRAWS`, in order): a new kind of scenario is one new ``Draw``, see docs/envs.md
     """
 
     name: str = "custom"
@@ -72,6 +92,7 @@ class Scenario:
     lm_drift: tuple[float, float] = (0.0, 0.0)
     sense_delay_steps: tuple[int, int] = (0, 0)
     c_detune: tuple[float, float] = (0.0, 0.0)
+    parts: tuple = ()
 
     def __post_init__(self):
         limits = {"lm_scale": (0.3, 2.0), "wind_speed_m_s": (0.0, 30.0), "soc": (0.0, 1.0),
@@ -94,6 +115,10 @@ class Scenario:
             raise ValueError(f"i2_noise_a={self.i2_noise_a!r} is invalid; valid range: [0, inf)")
         if self.hover_power_w is not None and not (np.isfinite(self.hover_power_w) and self.hover_power_w >= 0):
             raise ValueError(f"hover_power_w={self.hover_power_w!r} is invalid; valid range: [0, inf)")
+        object.__setattr__(self, "parts", tuple(self.parts))
+        for part in self.parts:
+            if not isinstance(part, Draw):
+                raise ValueError(f"scenario part {part!r} is invalid; valid: envs.scenario.Draw instances")
 
     @property
     def load_power_w(self) -> float:
@@ -178,8 +203,7 @@ class EpisodeDraw:
         return int(np.size(self.soc0))
 
 
-#: the uniformly drawn fields, in drawing order (record_u is always drawn, on [0, 1)); the new fields
-#: come last and are only drawn when their range is not a point, so the older scenarios' windows are unchanged
+#: the uniformly drawn fields of :func:`draw_episode`, in drawing order (record_u is always drawn, on [0, 1))
 _RANGED = ("soc", "lm_scale", "wind_speed_m_s", None, "cmd_a", "cmd_a", "t_change_s", "t_stop_s", "lm_drift",
            "sense_delay_steps", "c_detune", "c_detune")
 
@@ -203,8 +227,8 @@ def _u(rng, lohi):
 
 
 def draw_episode(rng: np.random.Generator, scn: Scenario, n_steps: int, n_slow: int) -> EpisodeDraw:
-    """Draw one episode's random numbers. The same generator state gives the same episode in the
-    single and in the vector environment (each sub-environment owns a generator)."""
+    """Draw one episode's random numbers of the built-in draws with scalar generator calls (the reference
+    :func:`draw_episodes` is tested against; a scenario's own ``parts`` are drawn by :func:`draw_episodes` only)."""
     return EpisodeDraw(
         soc0=_u(rng, scn.soc), lm_scale=_u(rng, scn.lm_scale), wind_speed_m_s=_u(rng, scn.wind_speed_m_s),
         record_u=float(rng.uniform()),
@@ -216,25 +240,74 @@ def draw_episode(rng: np.random.Generator, scn: Scenario, n_steps: int, n_slow: 
     )
 
 
+class _Field(Draw):
+    """One window field drawn from one range of the scenario (``scenario_field``; None: [0, 1))."""
+
+    def __init__(self, scenario_field, window_field: str):
+        self.scenario_field, self.window_field = scenario_field, window_field
+
+    def ranges(self, scn):
+        return (_range(scn, self.scenario_field),)
+
+    def apply(self, scn, cols, win):
+        win[self.window_field] = cols[0]
+
+
+class _Command(Draw):
+    """The reference: two command levels [A], the time of the change and of the stop [s]."""
+
+    def ranges(self, scn):
+        return tuple(_range(scn, f) for f in ("cmd_a", "cmd_a", "t_change_s", "t_stop_s"))
+
+    def apply(self, scn, cols, win):
+        win["cmd0_a"], win["cmd1_a"], win["t_change_s"], win["t_stop_s"] = cols
+
+
+class _SenseDelay(_Field):
+    """The sensing delay [control periods]: an integer range drawn uniformly (floored)."""
+
+    def apply(self, scn, cols, win):
+        win[self.window_field] = _delay(cols[0], scn)
+
+
+class _Detune(Draw):
+    """Relative C1 and C2 errors, each drawn from ``c_detune``."""
+
+    def ranges(self, scn):
+        return (_range(scn, "c_detune"),) * 2
+
+    def apply(self, scn, cols, win):
+        win["c1_detune"], win["c2_detune"] = cols
+
+
+#: the built-in draws of every scenario, in drawing order (the order of :func:`draw_episode`; a field whose
+#: range is a point is not drawn, so a scenario's windows do not change when a draw is added after these)
+DRAWS = (_Field("soc", "soc0"), _Field("lm_scale", "lm_scale"), _Field("wind_speed_m_s", "wind_speed_m_s"),
+         _Field(None, "record_u"), _Command(), _Field("lm_drift", "lm_drift"),
+         _SenseDelay("sense_delay_steps", "sense_delay"), _Detune())
+
+
 def draw_episodes(rngs, scn: Scenario, n_steps: int) -> EpisodeDraw:
-    """A batched :class:`EpisodeDraw`, episode ``i`` from generator ``rngs[i]``: the same numbers as
-    :func:`draw_episode` with each generator (``uniform(lo, hi)`` is ``lo + (hi - lo) u`` of the
-    generator's next double, so one ``random(k)`` call gives the k scalar draws), two generator
-    calls per episode and the rest on arrays."""
-    ranges = [_range(scn, f) for f in _RANGED]
-    drawn = [i for i, (lo, hi) in enumerate(ranges) if hi > lo]
+    """A batched :class:`EpisodeDraw`, episode ``i`` from generator ``rngs[i]``: the :data:`DRAWS` and then the
+    scenario's own ``parts``, each filling its named fields (the same numbers as :func:`draw_episode` with each
+    generator: ``uniform(lo, hi)`` is ``lo + (hi - lo) u`` of the generator's next double, so one ``random(k)``
+    call gives the k scalar draws); two generator calls per episode and the rest on arrays."""
+    parts = DRAWS + scn.parts
+    ranges = [part.ranges(scn) for part in parts]
+    flat = [r for rs in ranges for r in rs]
+    drawn = np.cumsum([hi > lo for lo, hi in flat]) - 1
     n = len(rngs)
-    u = np.empty((n, len(drawn)))
+    u = np.empty((n, int(drawn[-1]) + 1))
     noise = np.empty((n, n_steps))
     for i, rng in enumerate(rngs):  # each sub-environment owns its generator: one call per array
         rng.random(out=u[i])
         rng.standard_normal(out=noise[i])
-    cols = []
-    for i, (lo, hi) in enumerate(ranges):
-        cols.append(lo + (hi - lo) * u[:, drawn.index(i)] if i in drawn else np.full(n, float(lo)))
-    cols[9] = _delay(cols[9], scn)
-    return EpisodeDraw(*cols[:8], noise=noise, lm_drift=cols[8], sense_delay=cols[9], c1_detune=cols[10],
-                       c2_detune=cols[11])
+    cols = [lo + (hi - lo) * u[:, drawn[i]] if hi > lo else np.full(n, float(lo)) for i, (lo, hi) in enumerate(flat)]
+    win, at = {}, 0
+    for part, rs in zip(parts, ranges):
+        part.apply(scn, cols[at:at + len(rs)], win)
+        at += len(rs)
+    return EpisodeDraw(noise=noise, **win)
 
 
 def stack_draws(draws) -> EpisodeDraw:
@@ -261,3 +334,67 @@ def command_profile(draws, n_steps: int, dt_s: float, out=None) -> np.ndarray:
     np.copyto(out, c1, where=t < ts)
     np.copyto(out, c0, where=t < tc)
     return out.T
+
+
+def register_scenario(scn: Scenario, held_out: Scenario | None = None) -> Scenario:
+    """Add ``scn`` (and its held-out variant) to :data:`SCENARIOS` under its name, so ``scenario="name"``
+    and ``reset(options={"scenario": "name"})`` find it; returns it."""
+    for s in (scn, held_out):
+        if s is None:
+            continue
+        if not isinstance(s, Scenario) or not s.name or s.name == "custom":
+            raise ValueError(f"scenario={s!r} is invalid; valid: a Scenario with its own name")
+        SCENARIOS[s.name] = s
+    if held_out is not None:
+        HELD_OUT[scn.name] = held_out.name
+    return scn
+
+
+@dataclass
+class Window:
+    """What the scenario part hands the other parts at a reset, for the ``n`` windows that start (named
+    fields, arrays along the windows): the draws, the command (the reference) and the I2 sensor noise
+    (views of the part's stores), the hover draw and the scenario."""
+
+    draw: EpisodeDraw
+    cmd_a: np.ndarray       # (n, T + 1) charge command per step [A]
+    noise_a: np.ndarray     # (n, T) I2 sensor noise [A]
+    load_w: np.ndarray      # (n,) hover power drawn from the battery [W]
+    scenario: Scenario
+
+    @property
+    def n(self) -> int:
+        return self.draw.n
+
+
+class ScenarioPart:
+    """The reference generator and scenario draws (gym-electric-motor's reference generator, with the
+    episode's randomisation): at a reset, the scenario of the options, the draws of the windows that start
+    (:func:`draw_episodes`: :data:`DRAWS` and the scenario's ``parts``), the command profile and the
+    sensor noise written into the stores ``cmd`` (T + 1, n) and ``noise`` (T, n) (step-major, what the
+    compiled step reads). Stateless between resets except the current scenario (autoresets keep it)."""
+
+    KEEP = object()   # reset(options=KEEP): the current scenario (an autoreset)
+
+    def __init__(self, default: Scenario, n_steps: int, dt_s: float, cmd: np.ndarray, noise: np.ndarray):
+        self.default = self.current = get_scenario(default)
+        self.n_steps, self.dt_s = int(n_steps), float(dt_s)
+        self.cmd, self.noise = cmd, noise
+
+    def reset(self, rngs, idx, options=KEEP) -> Window:
+        """Windows ``idx`` (a slice for all, or indices of the stores' columns) start, drawn with ``rngs``
+        (one generator each); ``options``: the ``reset`` options (``{"scenario": ...}``) or :attr:`KEEP`."""
+        if options is not self.KEEP:
+            self.current = scenario_from_options(options, self.default)
+        scn, T = self.current, self.n_steps
+        draws = draw_episodes(rngs, scn, T)
+        n = draws.n
+        full = isinstance(idx, slice)
+        cmd = command_profile(draws, T, self.dt_s, out=self.cmd if full else None)
+        noise_sd = np.full(n, scn.i2_noise_a)
+        if full:   # written in place (the usual autoreset of all windows): no temporaries
+            noise = np.multiply(draws.noise.T, noise_sd, out=self.noise).T
+        else:
+            noise = np.multiply(draws.noise.T, noise_sd).T
+            self.cmd[:, idx], self.noise[:, idx] = cmd.T, noise.T
+        return Window(draws, cmd, noise, np.full(n, scn.load_power_w), scn)

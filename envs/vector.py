@@ -23,6 +23,7 @@ parallel == serial to the bit.
 from __future__ import annotations
 
 import time
+from collections import namedtuple
 
 import numpy as np
 from gymnasium import spaces
@@ -32,14 +33,16 @@ from gymnasium.vector.utils import batch_space
 
 from mission_sim.contract import OBS_DIM, PolicyContext
 
-from wpt_receiver.sbar import rectifier_current, rectifier_v2_folded
-
-from .core import N_BAT, N_COEF, OBS_OFFSET, OBS_SCALE, EnvConfig, build_plans, kernel_function
-from .layout import BAT, CCOEF_N, INFO, PAR, STATE, XC
+from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, kernel_function
+from .layout import INFO, PAR
+from .parts import ObjectivePart, ObservationPart, PlantPart, alias_parts
 from .peaks import LOOKUP_SCALARS, PeakLookup
-from .scenario import draw_episodes, get_scenario, scenario_from_options
+from .scenario import ScenarioPart, get_scenario
 
-__all__ = ["SbarChargingVectorEnv", "SbarChargingDiscreteVectorEnv"]
+__all__ = ["SbarChargingVectorEnv", "SbarChargingDiscreteVectorEnv", "Parts"]
+
+#: an env's parts, in the order a reset and a step call them (:mod:`envs.parts`)
+Parts = namedtuple("Parts", "scenario plant objective observation")
 
 
 class SbarChargingVectorEnv(VectorEnv):
@@ -74,12 +77,11 @@ class SbarChargingVectorEnv(VectorEnv):
         self.num_threads = _num_threads(num_threads)
         self._threads_auto = num_threads is None
         self._compiled = compiled is None or bool(compiled)
-        self._kernel = kernel_function("env_step", self._compiled)   # also: numba imported here
         self._alloc(c)
 
     def _alloc(self, c: EnvConfig):
-        """The arrays of the episodes and the step (named slots: :mod:`envs.layout`)."""
-        n, T, S = self.num_envs, c.n_steps, c.n_slow
+        """The parts (:mod:`envs.parts`) and the step's constants (named slots: :mod:`envs.layout`)."""
+        n, T = self.num_envs, c.n_steps
         self._T, self._M, self._dt = T, c.slow_every, c.dt_s
         self._n_sub = c.n_sub
         self._devices, self._dev = c.device_set(), c.device_terms
@@ -91,29 +93,12 @@ class SbarChargingVectorEnv(VectorEnv):
         self._par = np.array([vals[f] for f in PAR._fields], dtype=float)
         self._ar = np.arange(n)
         # per-step data stored step-major (T, n): a step reads one contiguous row across the envs
-        self._cmd = np.zeros((T + 1, n))
-        self._noise = np.zeros((T, n))
-        self._coef_all = np.zeros((n, S, N_COEF))
-        self._coef_cur = np.zeros((n, N_COEF))   # the current slow segment's coefficients (updated by the step)
-        self._lm_all = np.zeros((S, n))
-        self._bat = np.zeros((N_BAT, n))
-        self._t_stop = np.zeros(n)
-        self._delay = np.zeros(n, dtype=np.int64)   # sensing delay [steps] (envs.sensing), None line when never used
-        self._line = None
-        # detuned windows (envs.detuned): flag, complex state, coefficients; empty until one is drawn
-        self._detuned = np.zeros(0, np.bool_)
-        self._xc, self._ccoef, self._c_rel = np.zeros((0, len(XC))), np.zeros((0, 0, CCOEF_N)), None
-        self._i2sm_all = np.ones((n, S))   # objective (envs.objective): short-mode I2 of the true link
-        self._stop_k = np.zeros(n, dtype=np.int64)
-        self._run_max = np.full(n, -np.inf)
-        self._sm_ok = np.ones(n, dtype=bool)
-        self._sm_checked = np.zeros(n, dtype=bool)
-        self._j = np.zeros(n, dtype=np.int64)
+        self.parts = Parts(ScenarioPart(self.scenario, T, c.dt_s, np.zeros((T + 1, n)), np.zeros((T, n))),
+                           PlantPart(c, n, self._compiled), ObjectivePart(c, n),
+                           ObservationPart(c, n, self._peak, self._compiled))
         self._k = np.zeros(n, dtype=np.int64)
-        self._state = np.zeros((len(STATE), n))
         self._prev_done = np.zeros(n, dtype=bool)
         self._rngs = [None] * n
-        self._cur_scenario = self.scenario
         self._started = False
         self._obs_scale = OBS_SCALE[:, None]
         self._obs_offset = OBS_OFFSET[:, None]
@@ -121,6 +106,11 @@ class SbarChargingVectorEnv(VectorEnv):
         self._n_chunks = 1 if serial else min(self.num_threads * self.CHUNKS_PER_THREAD, max(1, n // 256))
         # auto (num_threads=None, parallel possible): the step times decide between one thread and all
         self._auto = _AutoThreads() if self._threads_auto and self._n_chunks > 1 else None
+
+    @property
+    def state_names(self) -> tuple:
+        """Names of the rows of the plant's state (:data:`envs.layout.STATE`)."""
+        return self.parts.plant.state_names
 
     def _make_action_space(self):
         return spaces.Box(-1.0, 1.0, (1,), np.float32)
@@ -138,89 +128,26 @@ class SbarChargingVectorEnv(VectorEnv):
         return PolicyContext(link=self.config.link, control_period_s=self._dt, rated_i2_a=self.config.rated_i2_a)
 
     # ------------------------------------------------------------------ episodes
-    def _start(self, idx: np.ndarray):
-        """(Re)start the sub-environments ``idx``: draw with their generators, build plans batched.
-        The scenario is the one given to the last ``reset`` (``options["scenario"]``) or the env's."""
-        c, scn = self.config, self._cur_scenario
-        rngs = self._rngs if len(idx) == self.num_envs else [self._rngs[i] for i in idx]
+    def _start(self, idx, options=ScenarioPart.KEEP):
+        """(Re)start the sub-environments ``idx``: each part reset once, in order (scenario draws with their
+        generators, plant, objective, observation); returns the observation and info of every row. The
+        scenario is the one of ``options`` (a ``reset``) or the last one (an autoreset)."""
         full = len(idx) == self.num_envs
-        # all at once (the usual autoreset): command, noise and coefficients written in place, plain slices
-        out = (self._cmd, self._noise, self._coef_all) if full else None
-        p = build_plans(draw_episodes(rngs, scn, c.n_steps), scn, c, out=out)
-        if full:
-            idx = slice(None)
-        else:
-            self._cmd[:, idx] = p.cmd_a.T
-            self._noise[:, idx] = p.noise_a.T
-            self._coef_all[idx] = p.coef
-        self._lm_all[:, idx] = p.lm_h.T
-        self._bat[:, idx] = p.battery.T
-        self._t_stop[idx] = p.t_stop_s
-        self._delay[idx] = p.delay_steps
-        if self._line is None and self._delay.any():
-            from .sensing import DelayLine
-            self._line = DelayLine(self.num_envs)
-        self._i2sm_all[idx] = p.i2_sm_a
-        self._stop_k[idx] = p.stop_k
-        self._run_max[idx] = -np.inf
-        self._sm_ok[idx] = True
-        self._sm_checked[idx] = False
-        self._coef_cur[idx] = p.coef[:, 0]
-        self._j[idx] = 0
-        self._k[idx] = 0
-        st = self._state
-        st[STATE.i1, idx], st[STATE.i2, idx] = p.x0[:, 0], p.x0[:, 1]
-        st[STATE.vl, idx], st[STATE.soc, idx] = p.vl0, p.battery[:, BAT.soc0]
-        st[STATE.vrc, idx], st[STATE.d, idx] = p.vrc0, p.d0
-        self._start_detuned(idx, p)
-
-    def _start_detuned(self, idx, p):
-        """Detuned windows (:mod:`envs.detuned`, ``p.cplx``): their flag, complex-envelope coefficients
-        and state (the step runs them on the complex envelope); other windows are unflagged."""
-        cplx = p.cplx
-        if cplx is None:
-            if len(self._detuned):
-                self._detuned[idx] = False
-            return
-        if not len(self._detuned):
-            n = self.num_envs
-            self._detuned = np.zeros(n, np.bool_)
-            self._ccoef = np.zeros((n, self.config.n_slow, CCOEF_N))
-            self._xc = np.zeros((n, len(XC)))
-            self._c_rel = np.zeros((2, n))
-        self._detuned[idx] = True
-        self._ccoef[idx], self._xc[idx], self._c_rel[:, idx] = cplx[0], cplx[1], p.c_rel
-
-    def _initial_obs_info(self):
-        """Observation and info of the windows' first state (steady state at the first duty)."""
-        st = self._state
-        i1, i2, vl, soc, d = st[STATE.i1], st[STATE.i2], st[STATE.vl], st[STATE.soc], st[STATE.d]
-        il = rectifier_current(d, np.abs(i2))
-        ib = il - self._bat[BAT.i_load]
-        cmd = self._cmd[self._k, self._ar]
-        t_since = np.where(self._k >= self._stop_k, np.maximum(self._k * self._dt - self._t_stop, 0.0), 0.0)
-        obs = np.empty((self.num_envs, OBS_DIM), np.float32)
-        kernel_function("obs_rows", self._compiled)(np.stack([i2, vl, ib, il, soc, cmd, d, t_since]), OBS_SCALE,
-                                                     OBS_OFFSET, obs)
-        info = {"t_s": self._k * self._dt, "i2_a": i2.copy(), "i2_peak_a": self._peak.array(np.abs(i2), d, vl),
-                "i1_a": i1.copy(), "d_short": d.copy(), "v2_v": rectifier_v2_folded(d, vl, i2, self._devices),
-                "rect_current_a": il, "battery_v": vl.copy(), "battery_current_a": ib, "soc": soc.copy(),
-                "charge_cmd_a": cmd, "lm_h": self._lm_all[self._j, self._ar], "energy_j": np.zeros(self.num_envs),
-                "cost": np.zeros(self.num_envs), "overcurrent": np.zeros(self.num_envs),
-                "overshoot": self._run_max.copy(), "episode_cost": np.maximum(self._run_max, 0.0),
-                "reached_short_mode": self._sm_ok & self._sm_checked, "t_stop_s": self._t_stop.copy(),
-                "i2_peak_envelope_a": np.abs(i2)}
-        return obs, info
+        rngs = self._rngs if full else [self._rngs[i] for i in idx]
+        sel = slice(None) if full else idx   # all at once (the usual autoreset): written in place, plain slices
+        scenario, plant, objective, observation = self.parts
+        win = scenario.reset(rngs, sel, options)
+        plan = plant.reset(sel, win)
+        objective.reset(sel, win, plan)
+        self._k[sel] = 0
+        return observation.reset(sel, win, self._k, scenario, plant, objective)
 
     def restart(self, idx) -> np.ndarray:
         """Start new episodes in the sub-environments ``idx`` now (same-step autoreset, as
         stable-baselines3 wants it); returns their first observations, shape (len(idx), OBS_DIM)."""
         idx = np.asarray(idx, dtype=np.int64)
-        self._start(idx)
+        obs, _ = self._start(idx)
         self._prev_done[idx] = False
-        obs, _ = self._initial_obs_info()
-        if self._line is not None:
-            self._line.start(idx, obs[idx], self._delay[idx])
         return obs[idx]
 
     def reset(self, *, seed=None, options: dict | None = None):
@@ -236,13 +163,9 @@ class SbarChargingVectorEnv(VectorEnv):
                 raise ValueError(f"seed has {len(seeds)} entries; valid: one int or num_envs={n} ints")
         if seed is not None or not self._started:
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
-        self._cur_scenario = scenario_from_options(options, self.scenario)
-        self._start(self._ar)
+        obs, info = self._start(self._ar, options)
         self._prev_done[:] = False
         self._started = True
-        obs, info = self._initial_obs_info()
-        if self._line is not None:
-            self._line.start(self._ar, obs, self._delay)
         return obs, info
 
     def step(self, actions):
@@ -253,17 +176,12 @@ class SbarChargingVectorEnv(VectorEnv):
         any_done = bool(done.any())
         if any_done:
             self._k[done] = 0   # these rows are stepped for nothing and restarted below
-        obs, reward, truncated, info = self._step_kernel(d)
+        obs, reward, truncated, info = self._step_parts(d)
         terminated = np.zeros(self.num_envs, dtype=bool)
-        if self._line is not None:
-            self._line.push(obs)
         if any_done:
             idx = np.flatnonzero(done)
-            self._start(idx)
-            obs0, info0 = self._initial_obs_info()
+            obs0, info0 = self._start(idx)
             obs[idx] = obs0[idx]
-            if self._line is not None:
-                self._line.start(idx, obs0[idx], self._delay[idx])
             reward[idx] = 0.0
             truncated[idx] = False
             for key, v in info.items():
@@ -271,29 +189,24 @@ class SbarChargingVectorEnv(VectorEnv):
         self._prev_done = truncated.copy()
         return obs, reward, terminated, truncated, info
 
-    def _step_kernel(self, d):
-        """One step of every sub-environment in one call of :func:`envs.vector_kernel.env_step` (the
-        objective and the detuned windows included)."""
+    def _step_parts(self, d):
+        """One step of every sub-environment: the plant's (one call of :func:`envs.vector_kernel.env_step`,
+        the objective and the detuned windows included), then the objective's and the observation's."""
         n = self.num_envs
         obs = np.empty((n, OBS_DIM), np.float32)
         reward = np.empty(n)
         truncated = np.empty(n, dtype=bool)
         block = np.empty((n, len(INFO)))
-        ep = (self._i2sm_all, self._stop_k, self._t_stop, self._run_max, self._sm_ok, self._sm_checked)
-        cx = (self._detuned, self._xc, self._ccoef, self.config.link.v1_amp_v)
         chunks = self._n_chunks if self._auto is None else self._auto.chunks(self._n_chunks)
         if chunks > 1:
             _set_threads(self.num_threads)
-        kern = self._kernel if self._compiled else kernel_function("env_step", False)
+        scenario, plant, objective, observation = self.parts
         t0 = time.perf_counter()
-        kern(d, self._state, self._k, self._j, self._coef_all, self._coef_cur, self._bat, self._cmd, self._noise,
-             self._lm_all, ep, self._M, self._n_sub, self._par, OBS_SCALE, OBS_OFFSET, self._peak.kernel_table, obs,
-             reward, truncated, block, cx, chunks)
+        plant.step(d, self._k, scenario, objective, self._par, self._peak.kernel_table, obs, reward, truncated, block,
+                   chunks)
         if self._auto is not None:
             self._auto.record(chunks, time.perf_counter() - t0)
-        info = dict(zip(INFO._fields, block.T))   # (n,) views, one per key
-        info["reached_short_mode"] = self._sm_ok & self._sm_checked
-        info["i2_peak_envelope_a"] = info.pop("i2_peak_envelope_a")   # last, as in the single env
+        obs, info = observation.step(obs, block, objective.step())
         return obs, reward, truncated, info
 
 
@@ -359,3 +272,13 @@ class SbarChargingDiscreteVectorEnv(SbarChargingVectorEnv):
         if np.any((a != 0) & (a != 1)):
             raise ValueError(f"actions={a[(a != 0) & (a != 1)][0]!r} is invalid; valid values: 0 (RM), 1 (SM)")
         return a.astype(float)
+
+
+alias_parts(SbarChargingVectorEnv, {
+    "_cmd": ("scenario", "cmd"), "_noise": ("scenario", "noise"), "_cur_scenario": ("scenario", "current"),
+    "_kernel": ("plant", "kernel"), "_state": ("plant", "state"), "_j": ("plant", "j"),
+    "_coef_all": ("plant", "coef_all"), "_coef_cur": ("plant", "coef_cur"), "_lm_all": ("plant", "lm_all"),
+    "_bat": ("plant", "bat"), "_detuned": ("plant", "detuned"), "_xc": ("plant", "xc"), "_ccoef": ("plant", "ccoef"),
+    "_c_rel": ("plant", "c_rel"), "_i2sm_all": ("objective", "i2sm_all"), "_stop_k": ("objective", "stop_k"),
+    "_t_stop": ("objective", "t_stop"), "_run_max": ("objective", "run_max"), "_sm_ok": ("objective", "sm_ok"),
+    "_sm_checked": ("objective", "sm_checked"), "_delay": ("observation", "delay"), "_line": ("observation", "line")})
