@@ -41,9 +41,13 @@ class SbarChargingEnv(gym.Env):
     (``envs.vector_kernel._link_step``).
 
     ## Action Space
-    ``Box(-1, 1, (1,), float32)``: ``d_short = (a + 1) / 2`` (:func:`mission_sim.contract.action_to_duty`);
-    -1 = rectification mode, +1 = short mode. The discrete variant (``SbarChargingDiscrete-v0``)
-    takes ``Discrete(2)``: 0 = RM, 1 = SM (the classic unsynchronised ON-OFF method).
+    ``Box(-1, 1, (1,), float32)`` (``SbarCharging-v0``) or ``Discrete(2)`` (``SbarChargingDiscrete-v0``,
+    the classic unsynchronised ON-OFF method), applied for the next control period:
+
+    | Env                      | Action | Range     | Meaning                                                       |
+    |--------------------------|--------|-----------|---------------------------------------------------------------|
+    | ``SbarCharging-v0``      | a      | -1 .. 1   | ``d_short = (a + 1) / 2`` (:func:`mission_sim.contract.action_to_duty`): -1 = RM, +1 = SM |
+    | ``SbarChargingDiscrete-v0`` | 0 / 1 | {0, 1} | 0 = rectification mode (d = 0), 1 = short mode (d = 1)       |
 
     ## Observation Space
     ``Box(-1, 1, (8,), float32)``, the contract of :mod:`mission_sim.contract`, each field mapped
@@ -81,9 +85,16 @@ class SbarChargingEnv(gym.Env):
     I2 = 15 A by default.
 
     ## Starting State
-    Steady state of the link delivering the first command (2..7 A at the nominal scenario), drawn
-    with the environment's ``np_random`` together with the pose-error path, the command profile
-    (one change at 3..8 ms, stop at 10..16 ms) and the sensor noise.
+    Drawn with the environment's ``np_random`` by the scenario part (:class:`envs.scenario.ScenarioPart`,
+    the scenario's :class:`~envs.scenario.Draw` parts in order), at the nominal scenario:
+
+    | Quantity              | Start                                                                 |
+    |-----------------------|-----------------------------------------------------------------------|
+    | I1, I2, V_L, d        | steady state of the link delivering the first command                  |
+    | charge command        | 2..7 A, one change at 3..8 ms to another 2..7 A, 0 from the stop at 10..16 ms |
+    | true Lm               | the coupling model's at the nominal hover pose, constant (no wind)     |
+    | SoC                   | 0.5 (battery equivalent circuit at that SoC)                           |
+    | I2 sensor noise       | 0.1 A standard deviation per step                                      |
 
     ## Episode End
     | Condition  | When                                                        |
@@ -94,11 +105,17 @@ class SbarChargingEnv(gym.Env):
     ## Arguments
     ``gymnasium.make("dronewpt/SbarCharging-v0", scenario="nominal", render_mode=None, config=None)``;
     ``scenario`` is a name of :data:`envs.scenario.SCENARIOS` (nominal, lm_mismatch, windy, battery,
-    random), a :class:`~envs.scenario.Scenario` or a dict of its fields; ``reset(options={"scenario":
+    random and the model-is-wrong ones, or one added with :func:`envs.scenario.register_scenario`), a
+    :class:`~envs.scenario.Scenario` or a dict of its fields; ``reset(options={"scenario":
     ...})`` overrides it for one episode. ``config`` is an :class:`~envs.core.EnvConfig`.
     ``compiled``: the step is one numba-compiled call (:func:`envs.vector_kernel.single_step`, the
     helpers of the vector env's step on one window); ``False`` runs the same source uncompiled
     (``py_func``: slow, for tests). Detuned windows (scenario ``detuned``) step their complex envelope.
+
+    ## Parts
+    ``env.parts`` = (scenario, plant, objective, observation) (:mod:`envs.parts`, docs/envs.md): ``reset``
+    calls each part's ``reset`` once, ``step`` the plant's (the compiled step), the objective's and the
+    observation's once; state by name (``env.state_names``, :mod:`envs.layout`).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 30}

@@ -22,9 +22,10 @@ periods; a step in which the I2 envelope changes sign is split into rectifier-pe
 initial SoC (its open-circuit voltage moves by < 1 mV over a 30 ms window, the RC branch is
 integrated exactly).
 
-Everything exogenous (command, sensor noise, pose -> Lm -> ZOH coefficients) is computed once per
-episode in :func:`build_plans`, so a step is only arithmetic, written once in compiled form
-(:mod:`envs.vector_kernel`) and called by the single and the vector env.
+Everything exogenous is computed once per episode (the command and the sensor noise by the scenario
+part, :class:`envs.scenario.ScenarioPart`; pose -> Lm -> ZOH coefficients and the initial state by
+:func:`build_plans`, the plant part's plans, :mod:`envs.parts`), so a step is only arithmetic, written
+once in compiled form (:mod:`envs.vector_kernel`) and called by the single and the vector env.
 """
 
 from __future__ import annotations

@@ -57,7 +57,7 @@ class PlantPart:
 
     def __init__(self, cfg: EnvConfig, n: int, compiled: bool = True):
         S = cfg.n_slow
-        self.cfg, self.compiled = cfg, compiled
+        self.cfg, self.compiled, self.n_sub = cfg, compiled, cfg.n_sub
         self.kernel = kernel_function("env_step", compiled)   # also: numba imported here
         self.state = np.zeros((len(STATE), n))
         self.j = np.zeros(n, dtype=np.int64)
@@ -107,7 +107,7 @@ class PlantPart:
         kern = self.kernel if self.compiled else kernel_function("env_step", False)
         cx = (self.detuned, self.xc, self.ccoef, c.link.v1_amp_v)
         kern(d, self.state, k, self.j, self.coef_all, self.coef_cur, self.bat, scenario.cmd, scenario.noise,
-             self.lm_all, objective.ep, c.slow_every, c.n_sub, par, OBS_SCALE, OBS_OFFSET, ptab, obs, reward,
+             self.lm_all, objective.ep, c.slow_every, self.n_sub, par, OBS_SCALE, OBS_OFFSET, ptab, obs, reward,
              truncated, block, cx, chunks)
 
 
@@ -316,8 +316,7 @@ class SingleObservation:
 
     def step(self, obs, out, d, reached):
         """The step's observation (delayed in place) and info by the names of :data:`INFO`."""
-        vals = out.tolist()
-        info = {f: vals[getattr(INFO, f)] for f in INFO._fields}
+        info = dict(zip(INFO._fields, out.tolist()))   # INFO's slots are 0, 1, ... in the order of its names
         info["d_short"] = d
         info["reached_short_mode"] = reached
         info["i2_peak_envelope_a"] = info.pop("i2_peak_envelope_a")

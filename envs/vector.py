@@ -6,9 +6,10 @@ environments seeded the same way. Autoreset: ``NEXT_STEP`` (the step after an ep
 that sub-environment, returns its first observation, reward 0, and ignores its action).
 
 The step is one compiled call (:func:`envs.vector_kernel.env_step`, the one implementation of the
-env step, shared with the single env); this module keeps the orchestration: episodes drawn with
-two generator calls per restarted sub-environment (:func:`envs.scenario.draw_episodes`) and planned
-on arrays (:func:`envs.core.build_plans`), autoresets, the sensing delay, the info dict.
+env step, shared with the single env); this module keeps the orchestration: the parts
+(:attr:`SbarChargingVectorEnv.parts`: scenario draws with two generator calls per restarted
+sub-environment, plant, objective, observation; :mod:`envs.parts`), each entered once per reset and
+step, the autoresets and the threads.
 
 Threads: ``num_threads=k`` steps the sub-environments on ``k`` threads (``numba.set_num_threads``
 before each parallel step, chunks handed out dynamically); ``num_threads=1`` on the calling thread;
