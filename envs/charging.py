@@ -140,9 +140,10 @@ class SbarChargingEnv(gym.Env):
         self._hist = None
         self._compiled = compiled is None or bool(compiled)
         w, tab = self._w, self._peak.kernel_table
+        (vf, dr), (vlc, inv_imax) = self._dev, LOOKUP_SCALARS   # the devices' (Vf, dR), the peak table's scalars
         vals = dict(n_steps=self._T, dt=self._dt, inv_rated=self._inv_rated, w_track=w.tracking,
-                    w_over=w.overcurrent, i_ref=w.i_ref_a, slow_every=self._M, n_sub=self._n_sub, vf=self._dev[0],
-                    dr=self._dev[1], vlc=LOOKUP_SCALARS[0], inv_imax=LOOKUP_SCALARS[1], v1=c.link.v1_amp_v,
+                    w_over=w.overcurrent, i_ref=w.i_ref_a, slow_every=self._M, n_sub=self._n_sub, vf=vf,
+                    dr=dr, vlc=vlc, inv_imax=inv_imax, v1=c.link.v1_amp_v,
                     nd=tab.shape[0], ni=tab.shape[1], nq=tab.shape[2])
         self._par = np.concatenate([[vals[f] for f in SINGLE_PAR._fields], OBS_SCALE, OBS_OFFSET,
                                     tab.ravel()]).astype(float)

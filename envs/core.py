@@ -282,4 +282,4 @@ def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig):
                dsoc=cfg.dt_s / (3600.0 * cap), i_load=i_load, bus_decay=bus_decay)
     battery = np.stack([np.broadcast_to(row[f], np.shape(ocv)) for f in BAT._fields], axis=-1)
     start = dict(i1=i1, i2=i2, vl=vl0, soc=battery[:, BAT.soc0], vrc=vrc0, d=d0)
-    return battery, np.stack([np.broadcast_to(start[f], np.shape(ocv)) for f in STATE._fields], axis=-1)
+    return battery, np.stack([start[f] for f in STATE._fields], axis=-1)

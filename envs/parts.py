@@ -47,6 +47,8 @@ __all__ = ["PlantPart", "ObjectivePart", "ObservationPart", "SinglePlant", "Sing
 
 #: the single kernel's short-mode flag, written after the info values (``out[SM_FLAG]``)
 SM_FLAG = len(INFO)
+#: the keys of the single env's step info: the INFO values, then the short-mode flag
+_SINGLE_KEYS = INFO._fields + ("reached_short_mode",)
 
 
 class PlantPart:
@@ -316,10 +318,9 @@ class SingleObservation:
 
     def step(self, obs, out, d, reached):
         """The step's observation (delayed in place) and info by the names of :data:`INFO`."""
-        info = dict(zip(INFO._fields, out.tolist()))   # INFO's slots are 0, 1, ... in the order of its names
+        info = dict(zip(_SINGLE_KEYS, out.tolist()))   # INFO's slots are 0, 1, ... in the order of its names
         info["d_short"] = d
-        info["reached_short_mode"] = reached
-        info["i2_peak_envelope_a"] = info.pop("i2_peak_envelope_a")
+        info["reached_short_mode"] = reached   # (the kernel's flag, out[SM_FLAG], as a bool)
         if self.line is not None:
             self.line.push(obs[None])
         return obs, info

@@ -33,6 +33,7 @@ present, a battery near 30 V) inside a window, where an adaptive or learned poli
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
+from itertools import accumulate
 
 import numpy as np
 
@@ -295,9 +296,9 @@ def draw_episodes(rngs, scn: Scenario, n_steps: int) -> EpisodeDraw:
     parts = DRAWS + scn.parts
     ranges = [part.ranges(scn) for part in parts]
     flat = [r for rs in ranges for r in rs]
-    drawn = np.cumsum([hi > lo for lo, hi in flat]) - 1
+    drawn = [i - 1 for i in accumulate(hi > lo for lo, hi in flat)]   # column in u of each drawn range
     n = len(rngs)
-    u = np.empty((n, int(drawn[-1]) + 1))
+    u = np.empty((n, drawn[-1] + 1))
     noise = np.empty((n, n_steps))
     for i, rng in enumerate(rngs):  # each sub-environment owns its generator: one call per array
         rng.random(out=u[i])

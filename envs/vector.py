@@ -88,9 +88,10 @@ class SbarChargingVectorEnv(VectorEnv):
         self._devices, self._dev = c.device_set(), c.device_terms
         self._peak = PeakLookup(c.link, self._devices)
         w = c.reward
+        (vf, dr), (vlc, inv_imax) = self._dev, LOOKUP_SCALARS   # the devices' (Vf, dR), the peak table's scalars
         vals = dict(n_steps=T, dt=self._dt, inv_rated=1.0 / c.rated_i2_a, w_track=w.tracking, w_over=w.overcurrent,
-                    i_ref=w.i_ref_a, vf=self._dev[0], dr=self._dev[1], vlc=LOOKUP_SCALARS[0],
-                    inv_imax=LOOKUP_SCALARS[1])
+                    i_ref=w.i_ref_a, vf=vf, dr=dr, vlc=vlc,
+                    inv_imax=inv_imax)
         self._par = np.array([vals[f] for f in PAR._fields], dtype=float)
         self._ar = np.arange(n)
         # per-step data stored step-major (T, n): a step reads one contiguous row across the envs
