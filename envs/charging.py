@@ -8,7 +8,7 @@ import numpy as np
 import gymnasium as gym
 from gymnasium import spaces
 
-from mission_sim.contract import OBS_DIM, PolicyContext
+from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
 
 from .core import OBS_OFFSET, OBS_SCALE, EnvConfig
 from .layout import INFO, SINGLE_PAR
@@ -64,8 +64,10 @@ class SbarChargingEnv(gym.Env):
     | 6   | last_d_short        | 0 .. 1         | -    | duty applied in the previous step               |
     | 7   | t_since_stop_s      | 0 .. 0.01      | s    | time since the stop command (0 before it)       |
 
-    Physical values (true I2, the step's instantaneous and envelope peaks, I1, V2, Lm, energy, ...)
-    are in ``info``.
+    With ``history=K`` (2..the contract's MAX_HISTORY) the observation is the last K of these rows,
+    oldest first, ``Box(-1, 1, (8 K,))`` (a window starts with K copies of its first row: the observation
+    part's frame stack, :mod:`envs.history`). Physical values (true I2, the step's instantaneous and
+    envelope peaks, I1, V2, Lm, energy, ...) are in ``info``.
 
     ## Rewards
     Per step, with ``I_L`` the SBAR output current, ``I*`` the command, ``I2_pk`` the instantaneous
@@ -121,13 +123,14 @@ class SbarChargingEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
 
     def __init__(self, scenario="nominal", render_mode: str | None = None, config: EnvConfig | None = None,
-                 compiled: bool | None = None):
+                 compiled: bool | None = None, history: int = 1):
         self.scenario = get_scenario(scenario)
         self.config = config or EnvConfig()
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode={render_mode!r} is invalid; valid values: None, 'rgb_array'")
         self.render_mode = render_mode
-        self.observation_space = spaces.Box(-1.0, 1.0, (OBS_DIM,), np.float32)
+        self.history = history
+        self.observation_space = spaces.Box(-1.0, 1.0, (history_obs_dim(history),), np.float32)
         self.action_space = self._make_action_space()
         c = self.config
         self._T, self._M, self._dt = c.n_steps, c.slow_every, c.dt_s
@@ -152,8 +155,9 @@ class SbarChargingEnv(gym.Env):
         self._steps = np.zeros((self._T + 1, 2))
         self._cmd = self._steps[:, 0]   # the command per step [A] (a view)
         plant = SinglePlant(c, self._compiled)
+        observation = SingleObservation(c, self._peak, self._compiled, self.history)
         self.parts = Parts(ScenarioPart(self.scenario, self._T, self._dt, self._steps[:, :1], self._steps[:-1, 1:]),
-                           plant, SingleObjective(c, plant), SingleObservation(c, self._peak, self._compiled))
+                           plant, SingleObjective(c, plant), observation)
 
     # ------------------------------------------------------------------ interface
     def _make_action_space(self):

@@ -160,13 +160,15 @@ class ObjectivePart:
 
 class ObservationPart:
     """What the agent and the caller see of ``n`` windows: the observation (the contract's fields,
-    normalised), the info dict by the names of :data:`INFO`, the sensing delay line (:mod:`envs.sensing`)."""
+    normalised), the info dict by the names of :data:`INFO`, the sensing delay line (:mod:`envs.sensing`)
+    and, with ``history=K > 1``, the last K observations stacked, oldest first (:mod:`envs.history`)."""
 
-    def __init__(self, cfg: EnvConfig, n: int, peak, compiled: bool = True):
+    def __init__(self, cfg: EnvConfig, n: int, peak, compiled: bool = True, history: int = 1):
         self.cfg, self.peak, self.compiled = cfg, peak, compiled
         self.n = n
         self.delay = np.zeros(n, dtype=np.int64)   # sensing delay [steps]; the line exists once one is drawn
         self.line = None
+        self.hist = _history(history)
 
     def reset(self, idx, win, k, scenario, plant, objective):
         """Observation and info of every window's current state (the windows ``idx`` just started in the
@@ -178,6 +180,8 @@ class ObservationPart:
         obs, info = self._first(k, scenario, plant, objective)
         if self.line is not None:
             self.line.start(idx, obs[idx], self.delay[idx])
+        if self.hist is not None:   # a frame stack: the windows that start hold k copies of their first frame
+            obs = self.hist.start(idx, obs[idx])
         return obs, info
 
     def _first(self, k, scenario, plant, objective):
@@ -206,10 +210,22 @@ class ObservationPart:
         """The step's observation (delayed fields replaced, in place) and info (views of ``block`` by name)."""
         if self.line is not None:
             self.line.push(obs)
+        if self.hist is not None:
+            obs = self.hist.push(obs)
         info = dict(zip(INFO._fields, block.T))   # (n,) views, one per key
         info["reached_short_mode"] = reached
         info["i2_peak_envelope_a"] = info.pop("i2_peak_envelope_a")   # last, as in the single env
         return obs, info
+
+
+def _history(k: int):
+    """The frame stack of ``k`` observations (None for one frame: the plain observation)."""
+    from mission_sim.contract import history_obs_dim
+    history_obs_dim(k)   # validates k
+    if int(k) == 1:
+        return None
+    from .history import ObsHistory
+    return ObsHistory(int(k))
 
 
 def alias_parts(cls, names: dict) -> None:
@@ -285,11 +301,13 @@ class SingleObjective(ObjectivePart):
 
 
 class SingleObservation:
-    """The single env's observation and info (scalars), the delay line of a delayed window."""
+    """The single env's observation and info (scalars), the delay line of a delayed window, the frame
+    stack with ``history=K > 1``."""
 
-    def __init__(self, cfg: EnvConfig, peak, compiled: bool = True):
+    def __init__(self, cfg: EnvConfig, peak, compiled: bool = True, history: int = 1):
         self.cfg, self.peak, self.compiled = cfg, peak, compiled
         self.line = None
+        self.hist = _history(history)
 
     def reset(self, win, plant, objective):
         st, devices = plant.st, self.cfg.device_set()
@@ -314,6 +332,8 @@ class SingleObservation:
             from .sensing import DelayLine
             self.line = DelayLine(1)
             self.line.start([0], obs, delay)
+        if self.hist is not None:
+            obs = self.hist.reset(obs)
         return obs[0], info
 
     def step(self, obs, out, d, reached):
@@ -323,4 +343,6 @@ class SingleObservation:
         info["reached_short_mode"] = reached   # (the kernel's flag, out[SM_FLAG], as a bool)
         if self.line is not None:
             self.line.push(obs[None])
+        if self.hist is not None:
+            obs = self.hist.push(obs[None])[0]
         return obs, info

@@ -32,7 +32,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from mission_sim.contract import OBS_DIM, PolicyContext
+from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
 
 from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, kernel_function
 from .layout import INFO, PAR
@@ -52,7 +52,8 @@ class SbarChargingVectorEnv(VectorEnv):
 
     ``compiled=False`` runs the compiled step's own source uncompiled (``py_func``: slow, for tests);
     ``num_threads``: threads of the parallel step (1..numba's thread count; default: one or all,
-    chosen by measured step times)."""
+    chosen by measured step times); ``history=K``: the observation is the last K frames stacked, oldest
+    first (K * 8 values; the observation part's frame stack, :mod:`envs.history`)."""
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
     #: fewer sub-environments than this step on the calling thread
@@ -61,7 +62,8 @@ class SbarChargingVectorEnv(VectorEnv):
     CHUNKS_PER_THREAD = 4
 
     def __init__(self, num_envs: int = 1, scenario="nominal", config: EnvConfig | None = None,
-                 render_mode: str | None = None, compiled: bool | None = None, num_threads: int | None = None):
+                 render_mode: str | None = None, compiled: bool | None = None, num_threads: int | None = None,
+                 history: int = 1):
         if int(num_envs) != num_envs or num_envs < 1:
             raise ValueError(f"num_envs={num_envs!r} is invalid; valid range: integer >= 1")
         if render_mode is not None:
@@ -71,7 +73,8 @@ class SbarChargingVectorEnv(VectorEnv):
         self.render_mode = None
         self.scenario = get_scenario(scenario)
         self.config = c = config or EnvConfig()
-        self.single_observation_space = spaces.Box(-1.0, 1.0, (OBS_DIM,), np.float32)
+        self.history = history
+        self.single_observation_space = spaces.Box(-1.0, 1.0, (history_obs_dim(history),), np.float32)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.single_action_space = self._make_action_space()
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -97,7 +100,7 @@ class SbarChargingVectorEnv(VectorEnv):
         # per-step data stored step-major (T, n): a step reads one contiguous row across the envs
         self.parts = Parts(ScenarioPart(self.scenario, T, c.dt_s, np.zeros((T + 1, n)), np.zeros((T, n))),
                            PlantPart(c, n, self._compiled), ObjectivePart(c, n),
-                           ObservationPart(c, n, self._peak, self._compiled))
+                           ObservationPart(c, n, self._peak, self._compiled, self.history))
         self._k = np.zeros(n, dtype=np.int64)
         self._prev_done = np.zeros(n, dtype=bool)
         self._rngs = [None] * n

@@ -132,3 +132,35 @@ def test_a_new_scenario_is_one_part(monkeypatch):
 def test_bad_scenario_part_is_refused():
     with pytest.raises(ValueError, match="scenario part"):
         Scenario("bad", parts=("not a draw",))
+
+
+def test_history_is_the_observation_part_frame_stack():
+    """history=K: each observation is the last K plain observations, oldest first; a window (and a
+    window restarted by the autoreset) starts with K copies of its first; single env = vector row 0."""
+    from envs.history import ObsHistory
+    cfg, K, n = EnvConfig(n_steps=6, slow_every=2), 3, 2
+    plain, stacked = (SbarChargingVectorEnv(n, scenario="sense_delay", config=cfg, history=h) for h in (1, K))
+    assert stacked.single_observation_space.shape == (8 * K,)
+    o1, _ = plain.reset(seed=7)
+    oK, _ = stacked.reset(seed=7)
+    frames = [o1] * K
+    np.testing.assert_array_equal(oK, np.concatenate(frames[-K:], axis=1))
+    single = SbarChargingEnv(scenario="sense_delay", config=cfg, history=K)
+    np.testing.assert_array_equal(single.reset(seed=7)[0], oK[0])
+    ref = ObsHistory(K)
+    ref.reset(o1)
+    rng = np.random.default_rng(3)
+    for t in range(9):   # the 7th step restarts both windows (NEXT_STEP autoreset)
+        a = rng.uniform(-1, 1, (n, 1)).astype(np.float32)
+        o1, _, _, tr1, _ = plain.step(a)
+        oK, _, _, trK, _ = stacked.step(a)
+        restarted = t == cfg.n_steps
+        want = ref.push(o1, starts=np.full(n, restarted))
+        np.testing.assert_array_equal(oK, want)
+        np.testing.assert_array_equal(oK[:, -8:], o1)   # the newest frame is the plain observation
+        if restarted:
+            np.testing.assert_array_equal(oK, np.tile(o1, K))
+        elif t < cfg.n_steps:
+            np.testing.assert_array_equal(single.step(a[0])[0], oK[0])
+    with pytest.raises(ValueError, match="history"):
+        SbarChargingVectorEnv(2, history=0)
