@@ -14,7 +14,8 @@ part                   at a reset (windows ``idx`` start)       at a step
 ``objective``          short-mode current of the true link,      the episode's short-mode flag
                        the stop step, running maximum reset
 ``observation``        the first observation and info, the       the info dict by name, the sensing
-                       sensing delay line                        delay line
+                       sensing delay line, the frame stack       delay line, the frame stack
+                       (``history=K``)
 =====================  =======================================================================
 
 Each env calls every part once per ``reset`` and once per ``step`` (``tests/test_env_parts.py``
