@@ -13,7 +13,7 @@ from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
 from .core import OBS_OFFSET, OBS_SCALE, EnvConfig
 from .layout import INFO, SINGLE_PAR
 from .parts import SingleObjective, SingleObservation, SinglePlant, alias_parts
-from .peaks import LOOKUP_SCALARS, PeakLookup
+from .peaks import PeakLookup
 from .render import draw_envelope
 from .scenario import ScenarioPart, get_scenario
 from .vector import Parts
@@ -142,14 +142,6 @@ class SbarChargingEnv(gym.Env):
         self._k = None
         self._hist = None
         self._compiled = compiled is None or bool(compiled)
-        w, tab = self._w, self._peak.kernel_table
-        (vf, dr), (vlc, inv_imax) = self._dev, LOOKUP_SCALARS   # the devices' (Vf, dR), the peak table's scalars
-        vals = dict(n_steps=self._T, dt=self._dt, inv_rated=self._inv_rated, w_track=w.tracking,
-                    w_over=w.overcurrent, i_ref=w.i_ref_a, slow_every=self._M, n_sub=self._n_sub, vf=vf,
-                    dr=dr, vlc=vlc, inv_imax=inv_imax, v1=c.link.v1_amp_v,
-                    nd=tab.shape[0], ni=tab.shape[1], nq=tab.shape[2])
-        self._par = np.concatenate([[vals[f] for f in SINGLE_PAR._fields], OBS_SCALE, OBS_OFFSET,
-                                    tab.ravel()]).astype(float)
         self._out = np.empty(len(INFO) + 1)
         # the per-step row of the single kernel (command, I2 sensor noise): the scenario part's stores
         self._steps = np.zeros((self._T + 1, 2))
@@ -158,6 +150,10 @@ class SbarChargingEnv(gym.Env):
         observation = SingleObservation(c, self._peak, self._compiled, self.history)
         self.parts = Parts(ScenarioPart(self.scenario, self._T, self._dt, self._steps[:, :1], self._steps[:-1, 1:]),
                            plant, SingleObjective(c, plant), observation)
+        # the compiled step's constants, each part's by name, then the observation map and the peak table
+        vals = {**plant.constants(self._peak), **self.parts.objective.constants()}
+        self._par = np.concatenate([[vals[f] for f in SINGLE_PAR._fields], OBS_SCALE, OBS_OFFSET,
+                                    self._peak.kernel_table.ravel()]).astype(float)
 
     # ------------------------------------------------------------------ interface
     def _make_action_space(self):

@@ -42,6 +42,7 @@ from wpt_receiver.sbar import rectifier_current, rectifier_v2_folded
 from .core import N_BAT, N_COEF, OBS_OFFSET, OBS_SCALE, EnvConfig, build_plans, kernel_function
 from .layout import BAT, CCOEF_N, COEF, INFO, SINGLE, SLOW, STATE, XC
 from .objective import short_mode_i2_a, stop_step
+from .peaks import LOOKUP_SCALARS
 
 __all__ = ["PlantPart", "ObjectivePart", "ObservationPart", "SinglePlant", "SingleObjective", "SingleObservation",
            "alias_parts"]
@@ -71,6 +72,16 @@ class PlantPart:
         # detuned windows (envs.detuned): flag, complex state, coefficients; empty until one is drawn
         self.detuned = np.zeros(0, np.bool_)
         self.xc, self.ccoef, self.c_rel = np.zeros((0, len(XC))), np.zeros((0, 0, CCOEF_N)), None
+
+    def constants(self, peak) -> dict:
+        """The plant's constants of the compiled step by the names of :data:`envs.layout.PAR` /
+        :data:`envs.layout.SINGLE_PAR`: window length, step, the devices' ``(Vf, dR)``, the sub-steps,
+        V1 (the detuned tank's source) and the instantaneous-peak table's scalars and shape (``peak``: the
+        :class:`envs.peaks.PeakLookup`)."""
+        c, tab = self.cfg, peak.kernel_table
+        (vf, dr), (vlc, inv_imax) = c.device_terms, LOOKUP_SCALARS
+        return dict(n_steps=c.n_steps, dt=c.dt_s, slow_every=c.slow_every, n_sub=c.n_sub, vf=vf, dr=dr, vlc=vlc,
+                    inv_imax=inv_imax, v1=c.link.v1_amp_v, nd=tab.shape[0], ni=tab.shape[1], nq=tab.shape[2])
 
     def reset(self, idx, win):
         """Plans of the windows ``idx`` (a slice for all: the coefficients written in place) from the
@@ -127,6 +138,12 @@ class ObjectivePart:
         self.run_max = np.full(n, -np.inf)
         self.sm_ok = np.ones(n, dtype=bool)
         self.sm_checked = np.zeros(n, dtype=bool)
+
+    def constants(self) -> dict:
+        """The reward's and cost's constants of the compiled step (:class:`envs.core.RewardWeights`, the
+        rated I2) by the names of :data:`envs.layout.PAR`."""
+        c, w = self.cfg, self.cfg.reward
+        return dict(inv_rated=1.0 / c.rated_i2_a, w_track=w.tracking, w_over=w.overcurrent, i_ref=w.i_ref_a)
 
     @property
     def ep(self) -> tuple:

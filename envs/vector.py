@@ -37,7 +37,7 @@ from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
 from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, kernel_function
 from .layout import INFO, PAR
 from .parts import ObjectivePart, ObservationPart, PlantPart, alias_parts
-from .peaks import LOOKUP_SCALARS, PeakLookup
+from .peaks import PeakLookup
 from .scenario import ScenarioPart, get_scenario
 
 __all__ = ["SbarChargingVectorEnv", "SbarChargingDiscreteVectorEnv", "Parts"]
@@ -90,17 +90,14 @@ class SbarChargingVectorEnv(VectorEnv):
         self._n_sub = c.n_sub
         self._devices, self._dev = c.device_set(), c.device_terms
         self._peak = PeakLookup(c.link, self._devices)
-        w = c.reward
-        (vf, dr), (vlc, inv_imax) = self._dev, LOOKUP_SCALARS   # the devices' (Vf, dR), the peak table's scalars
-        vals = dict(n_steps=T, dt=self._dt, inv_rated=1.0 / c.rated_i2_a, w_track=w.tracking, w_over=w.overcurrent,
-                    i_ref=w.i_ref_a, vf=vf, dr=dr, vlc=vlc,
-                    inv_imax=inv_imax)
-        self._par = np.array([vals[f] for f in PAR._fields], dtype=float)
         self._ar = np.arange(n)
         # per-step data stored step-major (T, n): a step reads one contiguous row across the envs
         self.parts = Parts(ScenarioPart(self.scenario, T, c.dt_s, np.zeros((T + 1, n)), np.zeros((T, n))),
                            PlantPart(c, n, self._compiled), ObjectivePart(c, n),
                            ObservationPart(c, n, self._peak, self._compiled, self.history))
+        # the compiled step's constants, each part's by name
+        vals = {**self.parts.plant.constants(self._peak), **self.parts.objective.constants()}
+        self._par = np.array([vals[f] for f in PAR._fields], dtype=float)
         self._k = np.zeros(n, dtype=np.int64)
         self._prev_done = np.zeros(n, dtype=bool)
         self._rngs = [None] * n
