@@ -192,13 +192,13 @@ def build_plans(win, cfg: EnvConfig, out=None) -> Plans:
     ``out``: None (a new array) or a C-contiguous float array (n, S, 20) to write the coefficients into
     (the vector env's store: no temporaries, no copies; the same numbers)."""
     draws = win.draw
-    n, S, link = draws.n, cfg.n_slow, cfg.link_folded
+    n, T, S, link = draws.n, cfg.n_steps, cfg.n_slow, cfg.link_folded
     t_slow = np.arange(S) * (cfg.slow_every * cfg.dt_s)
     lm = lm_window_h(draws.wind_speed_m_s, draws.record_u, t_slow)
     lm *= np.asarray(draws.lm_scale)[:, None]
     drift = np.asarray(draws.lm_drift, dtype=float)
     if np.any(drift != 0.0):   # Lm moving within the window (scenario lm_drift): linear in time
-        lm *= 1.0 + drift[:, None] * (t_slow / (cfg.n_steps * cfg.dt_s))[None, :]
+        lm *= 1.0 + drift[:, None] * (t_slow / (T * cfg.dt_s))[None, :]
     # windows without wind share one Lm: discretise each distinct value once (same numbers)
     lm_u, back = np.unique(lm.ravel(), return_inverse=True)
     zoh = _zoh_coefficients(link, lm_u, cfg)

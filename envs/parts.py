@@ -18,8 +18,8 @@ part                   at a reset (windows ``idx`` start)       at a step
                        (``history=K``)
 =====================  =======================================================================
 
-Each env calls every part once per ``reset`` and once per ``step`` (``tests/test_env_parts.py``
-counts it), in that order; every array a part owns is indexed by the names of :mod:`envs.layout`
+Each env calls every part's ``reset`` once per ``reset`` and the plant's, objective's and
+observation's ``step`` once per ``step`` (``tests/test_env_parts.py`` counts it), in that order; every array a part owns is indexed by the names of :mod:`envs.layout`
 (``plant.state[STATE.vl]``, ``plant.bat[BAT.i_load]``). The arithmetic of a step stays one compiled
 function (:mod:`envs.vector_kernel`); the plant's step is that call, with the arrays of the other
 parts, and the objective's and observation's steps read what it wrote.
