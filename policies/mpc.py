@@ -233,6 +233,8 @@ class MPCPolicy:
         self._n_stop = np.zeros(self.n, dtype=int)   # after-stop solves so far
         self._k_stop = np.zeros(self.n, dtype=int)   # steps since the stop
         self._age = np.zeros(self.n, dtype=int)      # steps since the plan was solved
+        self._lam = np.zeros((self.n, len(self._sense)))   # the last after-stop QP's multipliers (warm start)
+        self._lam_k = np.full(self.n, -1)            # the step after the stop they are from (-1: none)
 
     def _v2_of(self, d, vl):
         return 4.0 / np.pi * (vl + self._vf) * (1.0 - np.sin(0.5 * np.pi * d))
@@ -267,6 +269,7 @@ class MPCPolicy:
         new = np.flatnonzero((cmd > 0.0) & (self._k_stop > 0))
         if len(new):
             self._relax[new], self._n_stop[new], self._k_stop[new], self._age[new] = 0.0, 0, 0, 0
+            self._lam_k[new] = -1
         z = self._estimate(i2m, vl, d_last, new)
         u_prev = self._v2_of(d_last, vl)
         stop = cmd <= 0.0
@@ -275,8 +278,9 @@ class MPCPolicy:
         if len(track):
             ref = self._i2_ref(cmd[track], vl[track] + self._vf, z[track, 2])
             v2[track] = self._track(track, z[track], vl[track], ref, u_prev[track])
-        for e in np.flatnonzero(stop):
-            v2[e] = self._after_stop(e, z[e], vl[e], float(u_prev[e]))
+        stopped = np.flatnonzero(stop)
+        if len(stopped):
+            v2[stopped] = self._after_stop(stopped, z[stopped], vl[stopped], u_prev[stopped])
         return duty_from_v2_clipped(v2, vl + self._vf)
 
     def _setup_qp(self):
@@ -329,7 +333,6 @@ class MPCPolicy:
 
     def _qp_stop(self, e, z, vl, u_prev, v_bar):
         """One after-stop QP with the excess linearised along ``v_bar`` (N_PRED,) [V]: ``(knots, slack [A])``."""
-        import daqp
         m = self._model
         f = m.M.shape[1] - 1
         vmax = 4.0 / np.pi * (vl + self._vf)
@@ -347,10 +350,33 @@ class MPCPolicy:
         knots = np.asarray(BLOCKS[:f])
         bu = np.r_[np.where(knots >= _SM_DEADLINE - self._k_stop[e], 0.0, vmax), _BIG, ub]
         bl = np.r_[np.zeros(f), 0.0, np.full(len(ub), -_BIG)]
-        x, _, flag, _ = daqp.solve(self._stop_P, q, A, bu, bl, self._sense.copy())
+        x, flag = self._daqp(e, q, A, bu, bl)
         if flag < 1:
             return np.r_[np.minimum(v_bar[np.asarray(BLOCKS[:-1])], vmax), 0.0], 0.0   # keep the plan
         return np.r_[x[:f], 0.0], float(x[f])
+
+    def _daqp(self, e, q, A, bu, bl):
+        """Solve receiver ``e``'s after-stop QP with daqp, warm-started from its last solve's multipliers
+        (the constraint rows shifted by two samples per step since: the same predicted instants); a warm
+        start changes only the path to the optimum (the QP is strictly convex), and a failed one is
+        retried cold. Returns ``(x, exit flag)``."""
+        import daqp
+        lam, k = self._lam[e], self._k_stop[e]
+        f1 = A.shape[1]
+        start = None
+        if self._lam_k[e] >= 0:
+            shift = 2 * (k - self._lam_k[e])
+            start = lam.copy()
+            if shift:
+                start[f1:] = 0.0
+                if shift < len(A):
+                    start[f1:len(start) - shift] = lam[f1 + shift:]
+        x, _, flag, info = daqp.solve(self._stop_P, q, A, bu, bl, self._sense.copy(), dual_start=start)
+        if flag < 1 and start is not None:
+            x, _, flag, info = daqp.solve(self._stop_P, q, A, bu, bl, self._sense.copy())
+        if flag >= 1:
+            self._lam[e], self._lam_k[e] = info["lam"], k
+        return x, flag
 
     def _i2_ref(self, cmd, vc, w):
         """I2 reference [A] of the charging receivers: the steady I2 of the model *with the estimated
@@ -388,48 +414,57 @@ class MPCPolicy:
         self._age[idx] = 0
         return self._plan[idx, 0]
 
-    def _after_stop(self, e, z, vl, u_prev):
-        """V2 now [V] of receiver ``e`` after the stop: 0 once settled in short mode; the previous plan's next
-        move while that plan, shifted by a step, still keeps the predicted peak within the bound from the
-        state now (at most :data:`_REPLAN_EVERY` steps: the plan's tail is the optimum's continuation when the
-        model holds); else the first move of a new after-stop QP."""
+    def _after_stop(self, idx, z, vl, u_prev):
+        """V2 now [V] of the receivers ``idx`` after their stop (batched; ``z`` (n, 3), ``vl``, ``u_prev`` (n,)):
+        0 once settled in short mode; the previous plan's next move while that plan, shifted by a step, still
+        keeps the predicted peak within the bound from the state now (at most :data:`_REPLAN_EVERY` steps: the
+        plan's tail is the optimum's continuation when the model holds); else the first move of a new
+        after-stop QP (:meth:`_solve_stop`, one per receiver). Each receiver's decision is its own."""
         vmax = 4.0 / np.pi * (vl + self._vf)
-        self._k_stop[e] += 1
-        if self._plan[e, :BLOCKS[-1]].max() < 0.05 and self._settled(z, self._relax[e]):
-            self._plan[e] = 0.0
-            return 0.0   # in short mode with the free response inside the bound: nothing to plan
-        shifted = np.append(self._plan[e, 1:], self._plan[e, -1])
-        if self._n_stop[e] >= _RELAX_STEPS and self._age[e] < _REPLAN_EVERY and self._feasible(z, vl, shifted, e):
-            self._plan[e] = shifted
-            self._age[e] += 1
-            return float(shifted[0])
-        v = self._solve_stop(e, z, vl, u_prev)
-        self._plan[e] = np.clip(self._model.M @ v, 0.0, vmax)
-        self._age[e] = 0
-        return float(self._plan[e, 0])
+        self._k_stop[idx] += 1
+        out = np.zeros(len(idx))
+        plan = self._plan[idx]
+        quiet = plan[:, :BLOCKS[-1]].max(axis=1) < 0.05
+        quiet[quiet] = self._settled(z[quiet], self._relax[idx[quiet]])
+        self._plan[idx[quiet]] = 0.0   # in short mode with the free response inside the bound: nothing to plan
+        busy = np.flatnonzero(~quiet)
+        shifted = np.concatenate([plan[busy, 1:], plan[busy, -1:]], axis=1)
+        e = idx[busy]
+        follow = (self._n_stop[e] >= _RELAX_STEPS) & (self._age[e] < _REPLAN_EVERY)
+        follow[follow] = self._feasible(z[busy[follow]], vl[busy[follow]], shifted[follow], e[follow])
+        self._plan[e[follow]] = shifted[follow]
+        self._age[e[follow]] += 1
+        out[busy[follow]] = shifted[follow, 0]
+        for j in busy[~follow]:
+            v = self._solve_stop(idx[j], z[j], vl[j], float(u_prev[j]))
+            self._plan[idx[j]] = np.clip(self._model.M @ v, 0.0, vmax[j])
+            self._age[idx[j]] = 0
+            out[j] = self._plan[idx[j], 0]
+        return out
 
-    def _feasible(self, z, vl, plan, e) -> bool:
-        """The predicted peak (envelope + ripple excess at the plan's duties) of the V2 ``plan`` (N_PRED,)
-        from ``z`` within the bound of receiver ``e``."""
+    def _feasible(self, z, vl, plan, e):
+        """Per row: the predicted peak (envelope + ripple excess at the plan's duties) of the V2 ``plan``
+        (n, N_PRED) from ``z`` (n, 3) within the bound of receiver ``e`` (n,) (bool (n,))."""
         m = self._model
-        i2 = m.F @ z + m.h + m.Gu @ plan
-        ex = self._excess_at(plan, vl)
-        return bool(np.all(i2 + ex.repeat(2) <= (1.0 + self.budget - 0.5 * _MARGIN) * self._bound_sm(z) + self._relax[e]))
+        i2 = z @ m.F.T + m.h + plan @ m.Gu.T
+        ex = self._excess_at(plan, vl[:, None])
+        bound = (1.0 + self.budget - 0.5 * _MARGIN) * self._bound_sm(z) + self._relax[e]
+        return np.all(i2 + ex.repeat(2, axis=1) <= bound[:, None], axis=1)
 
-    def _bound_sm(self, z) -> float:
+    def _bound_sm(self, z):
         """The short-mode current of the bound [A]: the model's own, its steady state with V2 = 0 and the
         estimated disturbance ``w`` (on nominal windows within ~0.1 % of the nominal one; a link whose I2
         the disturbance explains - detuned tanks - has its own: with the nominal one as the bound the MPC
         overshot the detuned link's short-mode current by 35 % on 5 windows, with this 8.6 %)."""
-        return self._ss_i2[0] + self._ss_i2[1] * z[2]
+        return self._ss_i2[0] + self._ss_i2[1] * z[..., 2]
 
-    def _settled(self, z, relax: float) -> bool:
-        """The free response (V2 = 0) from ``z`` stays within the budget's bound with the short-mode
-        ripple (:meth:`_excess` at V2 = 0)."""
+    def _settled(self, z, relax):
+        """Per row of ``z`` (n, 3): the free response (V2 = 0) stays within the budget's bound with the
+        short-mode ripple (:meth:`_excess` at V2 = 0), ``relax`` (n,) [A] the raised bounds (bool (n,))."""
         m = self._model
-        free = m.F @ z + m.h
+        free = z @ m.F.T + m.h
         sm = self._bound_sm(z)
-        return bool(np.all(free + self._ex0 <= (1.0 + self.budget - _MARGIN) * sm + relax))
+        return np.all(free + self._ex0 <= ((1.0 + self.budget - _MARGIN) * sm + relax)[:, None], axis=1)
 
     def _excess_at(self, v2, vl):
         """Ripple excess [A] at V2 ``v2`` (any shape) [V], the short-mode current and battery voltage ``vl``:
@@ -438,7 +473,9 @@ class MPCPolicy:
         from wpt_receiver import duty_from_v2_clipped
         d = duty_from_v2_clipped(v2, vl + self._vf)
         a, b = self._ex_curve
-        return np.interp(d, self._ex_grid, a + b * (vl - _VLC))
+        if np.ndim(vl) == 0:
+            return np.interp(d, self._ex_grid, a + b * (vl - _VLC))
+        return np.interp(d, self._ex_grid, a) + (vl - _VLC) * np.interp(d, self._ex_grid, b)   # vl per row
 
     def _excess_curve(self):
         """The lookup's excess at the short-mode current on the duty grid: ``(A, B)`` [A], [A/V] with
