@@ -301,59 +301,81 @@ class MPCPolicy:
         self._stop_P = Ps
         self._M2 = m.M.repeat(2, axis=0)[:, :f]
         self._energy_w = m.M.sum(axis=0)[:f]
+        self._q_stop = np.concatenate([self._energy_w, [_SLACK_W]])
+        self._Gf = np.ascontiguousarray(m.G[:, :f])
+        self._knots = np.asarray(BLOCKS[:f])
+        self._bl_stop = np.concatenate([np.zeros(f + 1), np.full(len(m.G), -_BIG)])
         self._sense = np.zeros(f + 1 + len(m.G), dtype=np.int32)
         ss = np.linalg.solve(np.eye(2) - m.ad, np.stack([m.e, m.b2], axis=1))   # steady [I1, I2] of (1, w)
         self._ss_i2 = (float(ss[1, 0]), float(ss[1, 1]))
         self._excess_curve()
 
     def _solve_stop(self, e, z, vl, u_prev):
-        """V2 plan [V] after the stop of receiver ``e`` (the knots): min energy + move penalty + slack
-        penalty s.t. the predicted peak (envelope + ripple excess linearised along a plan) within the
-        bound + slack, V2 in the box. The excess is linearised along the previous plan shifted by a step
-        (at the stop: a ramp from the V2 now to 0 at the last knot; the plan before the stop holds V2 and
-        would put the rectification mode's ripple on the short-mode current); in the first
-        :data:`_RELAX_STEPS` steps the linearisation is iterated :data:`_SCP_ITERS` times along the new
-        plan (sequential convex programming), since the window's floor is read from these solves."""
+        """V2 plans [V] (the knots, (n, nb)) after the stop of the receivers ``e`` (n,) (``z`` (n, 3), ``vl``,
+        ``u_prev`` (n,)): min energy + move penalty + slack penalty s.t. the predicted peak (envelope + ripple
+        excess linearised along a plan) within the bound + slack, V2 in the box; one QP per receiver. The
+        excess is linearised along the previous plan shifted by a step (at the stop: a ramp from the V2 now
+        to 0 at the last knot; the plan before the stop holds V2 and would put the rectification mode's
+        ripple on the short-mode current); in the first :data:`_RELAX_STEPS` steps the linearisation is
+        iterated :data:`_SCP_ITERS` times along the new plan (sequential convex programming), since the
+        window's floor is read from these solves."""
         m = self._model
-        if self._n_stop[e] == 0:
-            self._plan[e] = np.interp(np.arange(N_PRED) + 1.0, [0.0, BLOCKS[-2]], [u_prev, 0.0])
-        v_bar = np.append(self._plan[e, 1:], self._plan[e, -1])
+        start = np.flatnonzero(self._n_stop[e] == 0)
+        if len(start):
+            self._plan[e[start]] = np.interp(np.arange(N_PRED) + 1.0, [0.0, BLOCKS[-2]], [0.0, 1.0])[None, :] * (
+                0.0 - u_prev[start, None]) + u_prev[start, None]
+        plan = self._plan[e]
+        v_bar = np.concatenate([plan[:, 1:], plan[:, -1:]], axis=1)
         first = self._n_stop[e] < _RELAX_STEPS
-        for _ in range(_SCP_ITERS if first else 1):
-            v, slack = self._qp_stop(e, z, vl, u_prev, v_bar)
-            v_bar = np.clip(m.M @ v, 0.0, None)
+        v, slack = np.empty((len(e), m.M.shape[1])), np.zeros(len(e))
+        rows = np.arange(len(e))
+        for it in range(_SCP_ITERS):
+            if it:
+                rows = np.flatnonzero(first)
+                if not len(rows):
+                    break
+            v[rows], slack[rows] = self._qp_stop(e[rows], z[rows], vl[rows], u_prev[rows], v_bar[rows])
+            v_bar[rows] = np.maximum(v[rows] @ m.M.T, 0.0)
         self._n_stop[e] += 1
-        if slack > 1e-4 and first:
-            # below the window's floor (the state at the stop allows no less): the bound is raised by the
-            # least violation for the rest of the window, so the energy term drives the descent again; only in
-            # the first steps after the stop (the floor is set there; later violations are model error and
-            # must not accumulate into the bound)
-            self._relax[e] += slack
+        # below the window's floor (the state at the stop allows no less): the bound is raised by the least
+        # violation for the rest of the window, so the energy term drives the descent again; only in the first
+        # steps after the stop (the floor is set there; later violations are model error and must not
+        # accumulate into the bound)
+        raise_ = first & (slack > 1e-4)
+        self._relax[e[raise_]] += slack[raise_]
         return v
 
     def _qp_stop(self, e, z, vl, u_prev, v_bar):
-        """One after-stop QP with the excess linearised along ``v_bar`` (N_PRED,) [V]: ``(knots, slack [A])``."""
+        """One after-stop QP per receiver ``e`` (n,) with the excess linearised along ``v_bar`` (n, N_PRED)
+        [V]: ``(knots (n, nb), slack (n,) [A])``. The QP data are built for all receivers at once; daqp
+        solves them one by one (:meth:`_daqp`)."""
         m = self._model
         f = m.M.shape[1] - 1
         vmax = 4.0 / np.pi * (vl + self._vf)
-        free = m.F @ z + m.h
+        free = z @ m.F.T + m.h
         ex, slope = self._excess(v_bar, vl)
-        ub = (1.0 + self.budget - _MARGIN) * self._bound_sm(z) + self._relax[e] - (ex - slope * v_bar).repeat(2) - free
+        ub = (((1.0 + self.budget - _MARGIN) * self._bound_sm(z) + self._relax[e])[:, None]
+              - (ex - slope * v_bar).repeat(2, axis=1) - free)
         # x = [v (f knots), s]: 0 <= v <= vmax, s >= 0 (simple bounds), (G + slope M) v - s <= ub
-        A = np.empty((len(ub), f + 1))
-        A[:, :f] = m.G[:, :f] + slope.repeat(2)[:, None] * self._M2
-        A[:, f] = -1.0
-        q = np.r_[self._energy_w, _SLACK_W]
-        q[0] -= 2.0 * _LAMBDA_STOP * u_prev
+        A = np.empty((len(e), ub.shape[1], f + 1))
+        A[:, :, :f] = self._Gf[None] + slope.repeat(2, axis=1)[:, :, None] * self._M2[None]
+        A[:, :, f] = -1.0
         # V2 = 0 from a fixed time after the stop on (a shrinking horizon: a receding terminal could be
         # put off forever while the bound holds V2 up), at the first knot at or after it
-        knots = np.asarray(BLOCKS[:f])
-        bu = np.r_[np.where(knots >= _SM_DEADLINE - self._k_stop[e], 0.0, vmax), _BIG, ub]
-        bl = np.r_[np.zeros(f), 0.0, np.full(len(ub), -_BIG)]
-        x, flag = self._daqp(e, q, A, bu, bl)
-        if flag < 1:
-            return np.r_[np.minimum(v_bar[np.asarray(BLOCKS[:-1])], vmax), 0.0], 0.0   # keep the plan
-        return np.r_[x[:f], 0.0], float(x[f])
+        bu = np.empty((len(e), f + 1 + ub.shape[1]))
+        bu[:, :f] = np.where(self._knots[None, :] >= (_SM_DEADLINE - self._k_stop[e])[:, None], 0.0, vmax[:, None])
+        bu[:, f], bu[:, f + 1:] = _BIG, ub
+        v, slack = np.zeros((len(e), f + 1)), np.zeros(len(e))
+        knots = np.asarray(BLOCKS[:-1])
+        for r in range(len(e)):
+            q = self._q_stop.copy()
+            q[0] -= 2.0 * _LAMBDA_STOP * u_prev[r]
+            x, flag = self._daqp(e[r], q, A[r], bu[r], self._bl_stop)
+            if flag < 1:
+                v[r, :f] = np.minimum(v_bar[r, knots], vmax[r])   # keep the plan
+            else:
+                v[r, :f], slack[r] = x[:f], x[f]
+        return v, slack
 
     def _daqp(self, e, q, A, bu, bl):
         """Solve receiver ``e``'s after-stop QP with daqp, warm-started from its last solve's multipliers
@@ -435,9 +457,10 @@ class MPCPolicy:
         self._plan[e[follow]] = shifted[follow]
         self._age[e[follow]] += 1
         out[busy[follow]] = shifted[follow, 0]
-        for j in busy[~follow]:
-            v = self._solve_stop(idx[j], z[j], vl[j], float(u_prev[j]))
-            self._plan[idx[j]] = np.clip(self._model.M @ v, 0.0, vmax[j])
+        j = busy[~follow]
+        if len(j):
+            v = self._solve_stop(idx[j], z[j], vl[j], u_prev[j])
+            self._plan[idx[j]] = np.minimum(np.maximum(v @ self._model.M.T, 0.0), vmax[j, None])
             self._age[idx[j]] = 0
             out[j] = self._plan[idx[j], 0]
         return out
@@ -492,12 +515,11 @@ class MPCPolicy:
         self._ex_curve = (c[:, 0], c[:, 1])
 
     def _excess(self, v2, vl):
-        """Ripple excess [A] at V2 ``v2`` (n,) [V] and its slope dexcess/dV2 [A/V] (central difference,
-        0.5 V) at the short-mode current and battery voltage ``vl`` (:mod:`envs.peaks`)."""
+        """Ripple excess [A] at V2 ``v2`` (n, N) [V] and its slope dexcess/dV2 [A/V] (central difference,
+        0.5 V) at the short-mode current and the battery voltages ``vl`` (n,) (:mod:`envs.peaks`)."""
         h = 0.5
-        vmax = 4.0 / np.pi * (vl + self._vf)
+        vmax = (4.0 / np.pi * (vl + self._vf))[:, None]
         hi, lo = np.minimum(v2 + h, vmax), np.maximum(v2 - h, 0.0)
-        ex = self._excess_at(np.concatenate([v2, hi, lo]), vl)
-        n = len(v2)
-        slope = (ex[n:2 * n] - ex[2 * n:]) / np.maximum(hi - lo, 1e-9)
-        return ex[:n], np.maximum(slope, 0.0)
+        ex = self._excess_at(np.stack([v2, hi, lo]), vl[:, None])
+        slope = (ex[1] - ex[2]) / np.maximum(hi - lo, 1e-9)
+        return ex[0], np.maximum(slope, 0.0)
