@@ -260,6 +260,11 @@ class MPCPolicy:
         return out
 
     def act(self, obs):
+        from .threads import single_blas_thread
+        with single_blas_thread():   # small batched products: BLAS threads cost more than they give
+            return self._act(obs)
+
+    def _act(self, obs):
         from wpt_receiver import duty_from_v2_clipped
         o = denormalise_obs(np.atleast_2d(obs))
         i2m, vl, cmd, d_last = (o[:, _F[k]] for k in ("i2_amp_a", "battery_v", "charge_cmd_a", "last_d_short"))
