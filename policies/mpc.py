@@ -159,35 +159,34 @@ class _DelayBank:
         self.best = np.zeros(self.n, dtype=int)
 
     def _step(self, z, u):
+        """One model step of the estimates ``z`` (..., 3) under the V2 ``u`` (...) [V]."""
         m = self.m
-        x = z[:, :2] @ m.ad.T + (u + z[:, 2])[:, None] * m.b2[None, :] + m.e[None, :]
-        return np.column_stack([x, z[:, 2]])
+        out = np.empty_like(z)
+        out[..., :2] = z[..., :2] @ m.ad.T + (u + z[..., 2])[..., None] * m.b2 + m.e
+        out[..., 2] = z[..., 2]
+        return out
 
     def update(self, y, u_last):
         """Filter the measured I2 ``y`` (n,) [A] given the V2 of the last step ``u_last`` (n,) [V]: ``z`` now."""
         self.u = np.roll(self.u, 1, axis=0)
         self.u[0] = u_last
-        a = 1.0 / _DELAY_MEMORY
-        for h, d in enumerate(self.delays):
-            x = self._step(self.z[h], self.u[d])
-            innov = y - x[:, 1]
-            self.z[h] = x + innov[:, None] * self.m.kalman[:, 0][None, :]
-            self.score[h] += a * (innov * innov - self.score[h])
+        x = self._step(self.z, self.u[list(self.delays)])   # every hypothesis at once (H, n, 3)
+        innov = y[None, :] - x[..., 1]
+        self.z = x + innov[..., None] * self.m.kalman[:, 0]
+        self.score += (1.0 / _DELAY_MEMORY) * (innov * innov - self.score)
         # a shorter delay is preferred unless a longer one explains the measurements clearly better
         self.best = np.argmin(self.score * (1.0 + 0.1 * np.arange(len(self.delays)))[:, None], axis=0)
         return self.now()
 
     def now(self):
         """The chosen hypothesis' estimate carried forward over its delay (n, 3)."""
-        out = np.empty((self.n, 3))
-        for h, d in enumerate(self.delays):
-            idx = np.flatnonzero(self.best == h)
-            if len(idx):
-                z = self.z[h, idx]
-                for j in range(d - 1, -1, -1):
-                    z = self._step(z, self.u[j, idx])
-                out[idx] = z
-        return out
+        cols = np.arange(self.n)
+        z = self.z[self.best, cols]
+        d = np.asarray(self.delays)[self.best]
+        for j in range(int(d.max(initial=0)) - 1, -1, -1):
+            go = np.flatnonzero(d > j)
+            z[go] = self._step(z[go], self.u[j, go])
+        return z
 
 
 class MPCPolicy:
