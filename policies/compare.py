@@ -188,9 +188,10 @@ def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, tr
 
 
 def frontier(scenario: str = "nominal", budgets=None, episodes: int = DEFAULT_EPISODES, seed: int = 1000, config=None,
-             progress: bool = False):
+             progress: bool = False, traces: dict | None = None):
     """The budgeted model-based curve: one row per overshoot budget (:mod:`policies.budgeted`);
-    ``progress``: a tqdm bar over the budgets."""
+    ``progress``: a tqdm bar over the budgets; ``traces``: :func:`compare`'s traces of the same episodes,
+    seed and config, whose ``model_based_budget:b`` runs are reused instead of run again."""
     from tqdm import tqdm
 
     from .budgeted import BUDGET_SWEEP
@@ -198,8 +199,10 @@ def frontier(scenario: str = "nominal", budgets=None, episodes: int = DEFAULT_EP
     out = []
     budgets = BUDGET_SWEEP if budgets is None else budgets
     for b in tqdm(budgets, desc="frontier", unit="budget", disable=not progress, leave=False):
-        with single_blas_thread():
-            tr = run_policy(f"model_based_budget:{b:g}", scenario, episodes, seed, config)
+        tr = (traces or {}).get((f"model_based_budget:{b:g}", scenario))
+        if tr is None or len(tr.metrics["return"]) != episodes:
+            with single_blas_thread():
+                tr = run_policy(f"model_based_budget:{b:g}", scenario, episodes, seed, config)
         out.append({"budget": float(b), **_row_one(f"model_based_budget:{b:g}", scenario, tr.metrics, None)})
     return out
 
