@@ -4,7 +4,8 @@
   window alone (each receiver's after-stop decisions, QPs and delay bank are its own);
 * warm-started daqp: the after-stop QPs solved from the last multipliers reach the same optimum as
   cold solves (the QP is strictly convex), so the closed loop is the same;
-* one BLAS thread (policies.threads) holds inside ``act`` and is released after it.
+* one BLAS thread (policies.threads) holds inside ``act`` and is released after it;
+* compare's frontier reuses the budgeted runs compare made (same rows, one rollout fewer each).
 """
 
 from __future__ import annotations
@@ -88,3 +89,26 @@ def test_act_holds_one_blas_thread_and_releases_it():
     pol.act(obs)
     assert seen == [1]
     assert [i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"] == before
+
+
+def test_frontier_reuses_compares_budgeted_runs(monkeypatch):
+    """``frontier(traces=...)`` takes the ``model_based_budget:b`` rows compare already ran on the same
+    windows (one rollout fewer each) and gives the rows a fresh run gives."""
+    from policies import compare as cmp
+
+    _, traces = cmp.compare(policies=("model_based_budget:0.01",), scenarios=("nominal",), episodes=3)
+    fresh = cmp.frontier("nominal", budgets=(0.01, 0.05), episodes=3)
+    ran = []
+    run = cmp.run_policy
+
+    def counted(name, *a, **k):
+        ran.append(name)
+        return run(name, *a, **k)
+
+    monkeypatch.setattr(cmp, "run_policy", counted)
+    reused = cmp.frontier("nominal", budgets=(0.01, 0.05), episodes=3, traces=traces)
+    assert ran == ["model_based_budget:0.05"]
+    assert [r["energy_after_stop_j"] for r in reused] == [r["energy_after_stop_j"] for r in fresh]
+    assert [r["overshoot_pct"] for r in reused] == [r["overshoot_pct"] for r in fresh]
+    other = cmp.frontier("nominal", budgets=(0.01,), episodes=2, traces=traces)   # other windows: run again
+    assert ran[-1] == "model_based_budget:0.01" and other[0]["episodes"] == 2
