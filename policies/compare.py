@@ -33,6 +33,7 @@ import numpy as np
 from mission_sim.files import atomic_output
 
 from .stats import mean_ci, seed_ci
+from .threads import single_blas_thread
 
 __all__ = ["METRICS", "EpisodeTraces", "run_policy", "compare", "frontier", "oracle_gaps", "oracle_curve", "DEFAULT_POLICIES", "DEFAULT_SCENARIOS",
            "REFERENCE", "plot_transitions", "plot_frontier", "shipped_seed_groups"]
@@ -167,6 +168,14 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
     rows, traces = [], {}
     jobs = [(s, g) for s in scenarios for g in groups]
     bar = tqdm(total=len(jobs), desc="compare", unit="run", disable=not progress, dynamic_ncols=True)
+    with single_blas_thread():   # batched small matrices (policies.threads)
+        _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar)
+    bar.close()
+    return rows, traces
+
+
+def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar):
+    """The runs of :func:`compare` (rows and traces filled in place)."""
     for s in scenarios:
         ref_tr = run_policy(reference, s, int(episodes), int(seed), config)
         for label, specs in groups:
@@ -176,14 +185,13 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
             rows.append(_row_one(label, s, trs[0].metrics, ref) if len(trs) == 1
                         else _row_seeds(label, s, [t.metrics for t in trs], ref))
             bar.update(1)
-    bar.close()
-    return rows, traces
 
 
 def frontier(scenario: str = "nominal", budgets=None, episodes: int = DEFAULT_EPISODES, seed: int = 1000, config=None,
-             progress: bool = False):
+             progress: bool = False, traces: dict | None = None):
     """The budgeted model-based curve: one row per overshoot budget (:mod:`policies.budgeted`);
-    ``progress``: a tqdm bar over the budgets."""
+    ``progress``: a tqdm bar over the budgets; ``traces``: :func:`compare`'s traces of the same episodes,
+    seed and config, whose ``model_based_budget:b`` runs are reused instead of run again."""
     from tqdm import tqdm
 
     from .budgeted import BUDGET_SWEEP
@@ -191,9 +199,11 @@ def frontier(scenario: str = "nominal", budgets=None, episodes: int = DEFAULT_EP
     out = []
     budgets = BUDGET_SWEEP if budgets is None else budgets
     for b in tqdm(budgets, desc="frontier", unit="budget", disable=not progress, leave=False):
-        row = _row_one(f"model_based_budget:{b:g}", scenario, run_policy(f"model_based_budget:{b:g}", scenario,
-                                                                          episodes, seed, config).metrics, None)
-        out.append({"budget": float(b), **row})
+        tr = (traces or {}).get((f"model_based_budget:{b:g}", scenario))
+        if tr is None or len(tr.metrics["return"]) != episodes:
+            with single_blas_thread():
+                tr = run_policy(f"model_based_budget:{b:g}", scenario, episodes, seed, config)
+        out.append({"budget": float(b), **_row_one(f"model_based_budget:{b:g}", scenario, tr.metrics, None)})
     return out
 
 

@@ -314,7 +314,7 @@ def _cmd_compare(args) -> int:
     try:
         rows, traces = compare(pols, scns, args.episodes, args.seed, progress=show_progress(args), train_seeds=groups)
         sweep = [] if args.no_frontier else frontier(scns[0], episodes=args.episodes, seed=args.seed,
-                                                          progress=show_progress(args))
+                                                          progress=show_progress(args), traces=traces)
         curve = _oracle(args, rows, traces, scns[0])
     except (ValueError, FileNotFoundError) as exc:
         raise CliError(str(exc)) from None
