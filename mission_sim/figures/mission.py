@@ -9,7 +9,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .common import save_figure  # noqa: E402
+from .common import fixed_margins, save_figure  # noqa: E402
 
 __all__ = ["plot_lm_map", "plot_mission"]
 
@@ -75,7 +75,7 @@ def _plot_trajectory(result, out) -> str:
     az.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
     az.set_title("height of the receiver coil")
     az.grid(alpha=0.3)
-    fig.tight_layout()
+    fixed_margins(fig, 0.8, 0.2, 0.6, 0.4, wspace=0.2)  # [in]: no tight_layout
     return save_figure(fig, out / "trajectory.png", compress_level=_FAST_PNG)
 
 
@@ -121,7 +121,7 @@ def _plot_lm(result, out) -> str:
     ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=3)  # below: off the data
     ax.grid(alpha=0.3)
     ax.set_title("mutual inductance along the mission")
-    fig.tight_layout()
+    fixed_margins(fig, 0.75, 0.2, 0.95, 0.4)  # [in]: no tight_layout
     return save_figure(fig, out / "lm.png", compress_level=_FAST_PNG)
 
 
@@ -158,7 +158,7 @@ def _plot_i2(result, out) -> str:
         az.set_ylabel("I2 [A]")
         az.set_title(f"largest transient inside a fine window ({i2[kpk]:.1f} A at t = {t[kpk]:.1f} s)")
         az.grid(alpha=0.3)
-    fig.tight_layout()
+    fixed_margins(fig, 0.75, 0.75, 0.6, 0.4, wspace=0.2)  # [in]: no tight_layout
     return save_figure(fig, out / "i2_envelope.png", compress_level=_FAST_PNG)
 
 
@@ -176,7 +176,7 @@ def _plot_soc(result, out) -> str:
     ax.set_title(f"state of charge (final {result.summary['final_soc']:.4f}; without charging "
                  f"{result.summary.get('final_soc_without_charging', float('nan')):.4f})")
     ax.grid(alpha=0.3)
-    fig.tight_layout()
+    fixed_margins(fig, 0.85, 0.8, 0.6, 0.4)  # [in]: no tight_layout
     return save_figure(fig, out / "soc.png", compress_level=_FAST_PNG)
 
 
@@ -196,5 +196,5 @@ def _plot_power(result, out) -> str:
     ax.grid(alpha=0.3)
     s = result.summary
     ax.set_title(f"power flows (energy balance error {s['energy_balance_error_rel']:.1e} relative)")
-    fig.tight_layout()
+    fixed_margins(fig, 0.85, 0.2, 1.05, 0.4)  # [in]: no tight_layout
     return save_figure(fig, out / "power.png", compress_level=_FAST_PNG)
