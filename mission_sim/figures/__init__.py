@@ -10,5 +10,6 @@ no physics, world or study module does.
 ``refly``      a logged flight re-flown with charging pads (``replay LOG --pads FILE``)
 ``sizing``     worst-case |i2|, required rating and rectifier mass per policy
 ``calibrate``  logged against calibrated / default modelled power, vs time and speed, residuals
+``worker``     the mission figures drawn by a forked process that imports matplotlib during the run
 =============  ==============================================================
 """

@@ -79,14 +79,13 @@ def _plot_trajectory(result, out) -> str:
     return save_figure(fig, out / "trajectory.png", compress_level=_FAST_PNG)
 
 
-#: trajectory samples beyond which the path is drawn from the stored (thinned) time series
-_PATH_SAMPLES = 50_000
+from .worker import PATH_SAMPLES as _PATH_SAMPLES  # noqa: E402 - beyond it the path comes from the series
 
 
 def _path(tr, ts):
     """Times [s] and positions (n, 3) [m] of the path to draw: the trajectory's samples, or for a long
-    mission (whose planned trajectory is not held in memory) the stored, thinned time series."""
-    if len(tr) <= _PATH_SAMPLES:
+    mission (whose planned trajectory is not held in memory; or ``tr`` None) the stored, thinned time series."""
+    if tr is not None and len(tr) <= _PATH_SAMPLES:
         return tr.t_s, tr.pos_m
     return np.asarray(ts["t_s"]), np.column_stack([np.asarray(ts[c]) for c in ("x_m", "y_m", "z_m")])
 
