@@ -68,6 +68,7 @@ def _run(argv, env) -> tuple[float, float]:
 def _commands(tmp: str, compare: str) -> dict:
     cli = _console_script()
     cmds = {"python -c pass": [sys.executable, "-c", "pass"],
+            "python -c 'import numpy'": [sys.executable, "-c", "import numpy"],
             "dronewpt --help": [*cli, "--help"],
             "dronewpt mission": [*cli, "mission", "--no-progress", "--out", f"{tmp}/m"],
             "dronewpt mission --no-plot": [*cli, "mission", "--no-plot", "--no-progress", "--out", f"{tmp}/n"],
@@ -125,19 +126,26 @@ import numpy; lap("import numpy")
 import argparse
 from mission_sim.cli.mission import mission_config, make_policy; lap("import the CLI")
 cfg = mission_config(argparse.Namespace(config=None, set=None, plan=None, pads=None, force=False, drone=None))
-lap("config: TOML, validation")
+lap("config: TOML, validation, run-size estimate")
 pol = make_policy("model_based", cfg); lap("policy + Lm at the hover pose (" + ("numba" if "numba" in sys.modules else "disk cache") + ")")
 from pathlib import Path
 from mission_sim.world.runner import run_mission
-from mission_sim.world.stream import SeriesWriter, read_series
+from mission_sim.world.stream import SeriesWriter
 out = Path(sys.argv[1]); out.mkdir(exist_ok=True)
-w = SeriesWriter(out, csv=False, every_s=0.0); lap("import runner, stream, pyarrow")
-res = run_mission(cfg, pol, charge=True, progress=False, compiled=False, frame=False, sink=w); lap("simulation (+ uncharged baseline)")
+w = SeriesWriter(out, csv=False, every_s=0.0, figure_points=20000); lap("import runner, stream, pyarrow")
+import numba; lap("import numba")
+from numba.core.registry import cpu_target
+cpu_target.target_context.refresh(); lap("numba's registries (imports scipy.linalg, cffi, ...)")
+import policies.kernels; lap("the policy's compiled kernel from numba's cache")
+from mission_sim.world import loop_kernel
+loop_kernel.advance_for(True); lap("the mission loop from numba's cache (one overload)")
+res = run_mission(cfg, pol, charge=True, progress=False, frame=False, sink=w); lap("simulation + uncharged baseline")
 w.close(); lap("Parquet close")
 import matplotlib; matplotlib.use("Agg"); import matplotlib.pyplot; lap("import matplotlib")
 from mission_sim.figures.mission import plot_mission
-res.timeseries = read_series(out / "timeseries.parquet", max_points=20000, frame=False); lap("read the series back (numpy columns)")
-plot_mission(res, out); lap("five figures: layout, draw, PNG")
+from mission_sim.figures.worker import for_figures
+res.timeseries = w.thinned.frame(pandas=False); lap("the thinned copy (numpy columns)")
+plot_mission(for_figures(res), out); lap("five figures: draw, PNG")
 print(json.dumps(ph))
 '''
 
