@@ -13,3 +13,7 @@ no physics, world or study module does.
 ``worker``     the mission figures drawn by a forked process that imports matplotlib during the run
 =============  ==============================================================
 """
+
+#: trajectory samples beyond which the mission figures draw the path from the stored (thinned) time
+#: series, not from the trajectory (which a long mission does not hold): :mod:`.mission`, :mod:`.worker`
+PATH_SAMPLES = 50_000

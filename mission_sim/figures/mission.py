@@ -82,7 +82,7 @@ def _plot_trajectory(result, out) -> str:
     return save_figure(fig, out / "trajectory.png", compress_level=_FAST_PNG)
 
 
-from .worker import PATH_SAMPLES as _PATH_SAMPLES  # noqa: E402 - beyond it the path comes from the series
+from . import PATH_SAMPLES as _PATH_SAMPLES  # noqa: E402 - beyond it the path comes from the series
 
 
 def _path(tr, ts):

@@ -21,13 +21,13 @@ from __future__ import annotations
 import os
 import sys
 
+from . import PATH_SAMPLES
+
 __all__ = ["FigureWorker", "fork_available", "for_figures", "PATH_SAMPLES", "CLOSE_WAIT_S"]
 
 #: seconds :meth:`FigureWorker.close` waits for the child to exit by itself before terminating it
 CLOSE_WAIT_S = 1.0
 
-#: trajectory samples beyond which the figures draw the path from the stored (thinned) time series
-PATH_SAMPLES = 50_000
 
 
 def fork_available() -> bool:
