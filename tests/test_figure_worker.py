@@ -10,8 +10,6 @@ import sys
 import time
 from pathlib import Path
 
-import pytest
-
 from mission_sim.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -116,12 +114,11 @@ def test_sigterm_during_the_run_ends_the_worker_too(tmp_path):
     assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
 
 
-@pytest.mark.parametrize("rows_limit", [-1])
-def test_long_missions_draw_in_process(tmp_path, monkeypatch, rows_limit):
+def test_long_missions_draw_in_process(tmp_path, monkeypatch):
     """Above FIGURE_WORKER_MAX_ROWS no worker is started (a long run's memory is not held twice)."""
     import mission_sim.cli.mission as cm
     import mission_sim.figures.worker as fw
-    monkeypatch.setattr(cm, "FIGURE_WORKER_MAX_ROWS", rows_limit)
+    monkeypatch.setattr(cm, "FIGURE_WORKER_MAX_ROWS", 3000)     # the default mission: ~4,500 rows estimated
     started = []
     monkeypatch.setattr(fw.FigureWorker, "__init__", lambda self: started.append(1))
     assert main(["mission", "--out", str(tmp_path / "m"), "--no-progress", "--format", "json"]) == 0

@@ -29,7 +29,6 @@ __all__ = ["FigureWorker", "fork_available", "for_figures", "PATH_SAMPLES", "CLO
 CLOSE_WAIT_S = 1.0
 
 
-
 def fork_available() -> bool:
     """True where a process can be forked (POSIX; not on Windows or WASI)."""
     return hasattr(os, "fork") and sys.platform != "emscripten"
