@@ -20,6 +20,7 @@ one fresh interpreter each (imports, config, policy, simulation, Parquet, figure
 rollout, statistics, frontier).
 
     python benchmarks/bench_startup.py [--repeat 5] [--compare no-mpc|default|none] [--phases] [--json] [--root DIR]
+        [--before DIR]
 """
 
 from __future__ import annotations
@@ -56,9 +57,9 @@ def _cpu_children() -> float:
 
 
 def _run(argv, env) -> tuple[float, float]:
-    """Wall and CPU time [s] of one fresh process."""
+    """Wall and CPU time [s] of one fresh process (``env``'s PYTHONPATH: the tree it runs)."""
     c0, t0 = _cpu_children(), time.perf_counter()
-    r = subprocess.run(argv, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    r = subprocess.run(argv, cwd=env["PYTHONPATH"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     wall, cpu = time.perf_counter() - t0, _cpu_children() - c0
     if r.returncode != 0:
         raise SystemExit(f"{' '.join(argv)} failed ({r.returncode}): {r.stderr.strip()[-400:]}")
@@ -68,6 +69,7 @@ def _run(argv, env) -> tuple[float, float]:
 def _commands(tmp: str, compare: str) -> dict:
     cli = _console_script()
     cmds = {"python -c pass": [sys.executable, "-c", "pass"],
+            "python -c 'import numpy'": [sys.executable, "-c", "import numpy"],
             "dronewpt --help": [*cli, "--help"],
             "dronewpt mission": [*cli, "mission", "--no-progress", "--out", f"{tmp}/m"],
             "dronewpt mission --no-plot": [*cli, "mission", "--no-plot", "--no-progress", "--out", f"{tmp}/n"],
@@ -92,18 +94,23 @@ def _expand(argv: list[str], seed: int) -> list[str]:
     return [a.replace("{seed}", str(seed)) for a in argv]
 
 
-def end_to_end(repeat: int = 5, compare: str = "no-mpc") -> dict:
+def end_to_end(repeat: int = 5, compare: str = "no-mpc", before: Path | None = None) -> dict:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    envs = {}
     with tempfile.TemporaryDirectory() as tmp:
         cmds = _commands(tmp, compare)
+        if before is not None:   # the same two mission commands on another tree, interleaved with these
+            for name in ("dronewpt mission", "dronewpt mission --no-plot"):
+                cmds[f"{name} (before: {before.name})"] = [a.replace(f"{tmp}/", f"{tmp}/before-") for a in cmds[name]]
+                envs[f"{name} (before: {before.name})"] = {**env, "PYTHONPATH": str(before.resolve())}
         seed = 1000 + int(time.time()) % 100_000 * 100   # new paths: seeds not flown before
-        for argv in cmds.values():   # warm-up: .pyc, numba's cache, coupling table, Lm of the default path
-            _run(_expand(argv, seed), env)
+        for name, argv in cmds.items():   # warm-up: .pyc, numba's cache, coupling table, Lm of the default path
+            _run(_expand(argv, seed), envs.get(name, env))
         load0 = os.getloadavg()
         res = {k: ([], []) for k in cmds}
         for i in range(repeat):
             for name, argv in cmds.items():
-                w, c = _run(_expand(argv, seed + 1 + i), env)
+                w, c = _run(_expand(argv, seed + 1 + i), envs.get(name, env))
                 res[name][0].append(w)
                 res[name][1].append(c)
         load1 = os.getloadavg()
@@ -125,19 +132,26 @@ import numpy; lap("import numpy")
 import argparse
 from mission_sim.cli.mission import mission_config, make_policy; lap("import the CLI")
 cfg = mission_config(argparse.Namespace(config=None, set=None, plan=None, pads=None, force=False, drone=None))
-lap("config: TOML, validation")
+lap("config: TOML, validation, run-size estimate")
 pol = make_policy("model_based", cfg); lap("policy + Lm at the hover pose (" + ("numba" if "numba" in sys.modules else "disk cache") + ")")
 from pathlib import Path
 from mission_sim.world.runner import run_mission
-from mission_sim.world.stream import SeriesWriter, read_series
+from mission_sim.world.stream import SeriesWriter
 out = Path(sys.argv[1]); out.mkdir(exist_ok=True)
-w = SeriesWriter(out, csv=False, every_s=0.0); lap("import runner, stream, pyarrow")
-res = run_mission(cfg, pol, charge=True, progress=False, compiled=False, frame=False, sink=w); lap("simulation (+ uncharged baseline)")
+w = SeriesWriter(out, csv=False, every_s=0.0, figure_points=20000); lap("import runner, stream, pyarrow")
+import numba; lap("import numba")
+from numba.core.registry import cpu_target
+cpu_target.target_context.refresh(); lap("numba's registries (imports scipy.linalg, cffi, ...)")
+import policies.kernels; lap("the policy's compiled kernel from numba's cache")
+from mission_sim.world import loop_kernel
+loop_kernel.advance_for(True); lap("the mission loop from numba's cache (one overload)")
+res = run_mission(cfg, pol, charge=True, progress=False, frame=False, sink=w); lap("simulation + uncharged baseline")
 w.close(); lap("Parquet close")
 import matplotlib; matplotlib.use("Agg"); import matplotlib.pyplot; lap("import matplotlib")
 from mission_sim.figures.mission import plot_mission
-res.timeseries = read_series(out / "timeseries.parquet", max_points=20000, frame=False); lap("read the series back (numpy columns)")
-plot_mission(res, out); lap("five figures: layout, draw, PNG")
+from mission_sim.figures.worker import for_figures
+res.timeseries = w.thinned.frame(pandas=False); lap("the thinned copy (numpy columns)")
+plot_mission(for_figures(res), out); lap("five figures: draw, PNG")
 print(json.dumps(ph))
 '''
 
@@ -198,11 +212,13 @@ def main(argv=None):
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--root", type=Path, default=None, help="measure the code tree in this folder (e.g. an older "
                     "commit's `git archive`; default this repository)")
+    ap.add_argument("--before", type=Path, default=None, help="also run the two mission commands on this code "
+                    "tree (e.g. `git archive` of an older commit), interleaved with this one's")
     a = ap.parse_args(argv)
     if a.root is not None:
         global ROOT
         ROOT = a.root.resolve()
-    r = {"end_to_end": end_to_end(a.repeat, a.compare)}
+    r = {"end_to_end": end_to_end(a.repeat, a.compare, a.before)}
     if a.phases:
         r["in_process"] = phases()
         r["in_process_load"] = os.getloadavg()

@@ -35,6 +35,9 @@ class OutputError(OSError):
     def __str__(self) -> str:
         return f"cannot write {str(self.path)!r}: {self.reason}; nothing partial was left"
 
+    def __reduce__(self):   # pickled as itself (from a figure worker process), not as OSError's arguments
+        return type(self), (self.path, self.errno, self.reason)
+
 
 def storage_error(exc: OSError, path) -> OutputError | None:
     """``exc`` as an :class:`OutputError` naming ``path`` if it is a storage error, else None."""

@@ -127,12 +127,6 @@ def _mission(overrides: dict, charge: bool = True):
     return cfg, run_mission(cfg, policies.make("model_based", policy_context(cfg)), charge=charge)
 
 
-def big_samples_bytes(cfg) -> float:
-    """Memory of the trajectory alone (budget.SAMPLE_BYTES per sample) plus the streamed blocks."""
-    from mission_sim.world.budget import SAMPLE_BYTES, STREAM_BYTES, estimate_run
-    return SAMPLE_BYTES * estimate_run(cfg).samples + STREAM_BYTES
-
-
 def test_size_estimate_brackets_a_real_run():
     """The estimate is within a factor 2 of the rows a real run produces, for a short and a long hover."""
     from mission_sim.world.budget import check_run_size, estimate_run
@@ -146,8 +140,9 @@ def test_size_estimate_brackets_a_real_run():
         assert check_run_size(cfg) == est
     big = _config({"pads.1.hover_time_s": 1e6})  # the longest plausible hover (config.PLAUSIBLE)
     assert check_run_size(big, force=True).rows > 1e6 / big.sim.traj_dt_s
-    # streamed (the mission command, sweeps) its rows cost no memory: only the trajectory counts
-    assert check_run_size(big).memory_bytes < 1.1 * big_samples_bytes(big)
+    # streamed (the mission command, sweeps) neither its rows nor its trajectory are held: bounded memory
+    from mission_sim.world.budget import FIXED_BYTES, HELD_SAMPLES, SAMPLE_BYTES
+    assert check_run_size(big).memory_bytes == FIXED_BYTES + SAMPLE_BYTES * HELD_SAMPLES
     with pytest.raises(ValueError, match=r"pads\.1\.hover_time_s=1000000\.0 makes the run too large"):
         check_run_size(big, frame=True)   # held as a DataFrame (telemetry): every row counts
 

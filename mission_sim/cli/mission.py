@@ -150,8 +150,6 @@ MISSION_LOCK = ".mission.lock"
 
 def _cmd_mission(args) -> int:
     from ..world.budget import estimate_run
-    from ..world.runner import run_mission
-    from ..world.stream import SeriesWriter
     cfg = mission_config(args)
     pol = make_policy(args.policy, cfg)
     if args.dry_run:
@@ -159,6 +157,28 @@ def _cmd_mission(args) -> int:
     prepare_out_dir(args.out)
     est = estimate_run(cfg)
     every = stored_every_s(args.every, est)
+    worker = _figure_worker(args, est)
+    try:
+        return _run_and_write(args, cfg, pol, every, worker)
+    finally:
+        if worker is not None:
+            worker.close()
+
+
+def _figure_worker(args, est):
+    """A :class:`~mission_sim.figures.worker.FigureWorker` (matplotlib imported in a forked process while
+    the mission runs) for a short mission with figures; None otherwise (drawn in process after the run:
+    a long run's memory is not doubled by a second process)."""
+    from ..figures.worker import FigureWorker, fork_available
+    if args.no_plot or est.rows > FIGURE_WORKER_MAX_ROWS or not fork_available():
+        return None
+    return FigureWorker()
+
+
+def _run_and_write(args, cfg, pol, every, worker) -> int:
+    """The run streamed to ``args.out``, then the figures and summary.json; prints the summary; the exit status."""
+    from ..world.runner import run_mission
+    from ..world.stream import SeriesWriter
     with folder_lock(args.out, MISSION_LOCK, f"--out {str(args.out)!r}: another mission is writing there; "
                      "wait for it or use another --out"):  # before any simulation; removed at the end
         (args.out / "summary.json").unlink(missing_ok=True)  # present again only when this run's set is complete
@@ -170,7 +190,7 @@ def _cmd_mission(args) -> int:
         except BaseException:
             writer.abort()
             raise
-        files += _figures_and_summary(res, args.out, plots=not args.no_plot, thinned=writer.thinned)
+        files += _figures_and_summary(res, args.out, plots=not args.no_plot, thinned=writer.thinned, worker=worker)
     s = res.summary
     if args.format == "json":
         print(json.dumps({**s, "files": files}))
@@ -213,18 +233,27 @@ def stored_every_s(every, est) -> float:
 #: most time-series points the figures read back from the Parquet file (evenly strided beyond)
 FIGURE_POINTS = 20_000
 
+#: estimated rows up to which the figures are drawn by a forked process that imports matplotlib during
+#: the run (:mod:`mission_sim.figures.worker`; a run of a few seconds at most)
+FIGURE_WORKER_MAX_ROWS = 100_000
 
-def _figures_and_summary(res, out: Path, plots: bool, thinned=None) -> list[str]:
+
+def _figures_and_summary(res, out: Path, plots: bool, thinned=None, worker=None) -> list[str]:
     """The figures (from ``thinned``, the writer's bounded copy of the stored series, or else the stored
-    series read back and thinned to :data:`FIGURE_POINTS`) and ``summary.json`` last (atomically); their paths."""
+    series read back and thinned to :data:`FIGURE_POINTS`; drawn by ``worker`` if given, else here) and
+    ``summary.json`` last (atomically); their paths."""
     from ..files import atomic_output
     files = []
     if plots and (out / "timeseries.parquet").exists():
-        from ..figures.mission import plot_mission
+        from ..figures.worker import for_figures
         from ..world.stream import read_series
         res.timeseries = thinned.frame(pandas=False) if thinned is not None else \
             read_series(out / "timeseries.parquet", max_points=FIGURE_POINTS, frame=False)
-        files = [str(f) for f in plot_mission(res, out)]
+        if worker is not None:
+            files = [str(f) for f in worker.draw(for_figures(res), out)]
+        else:
+            from ..figures.mission import plot_mission
+            files = [str(f) for f in plot_mission(for_figures(res), out)]
         res.timeseries = None
     with atomic_output(out / "summary.json") as tmp:
         tmp.write_text(json.dumps(res.summary, indent=2))

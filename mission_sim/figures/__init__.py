@@ -10,5 +10,10 @@ no physics, world or study module does.
 ``refly``      a logged flight re-flown with charging pads (``replay LOG --pads FILE``)
 ``sizing``     worst-case |i2|, required rating and rectifier mass per policy
 ``calibrate``  logged against calibrated / default modelled power, vs time and speed, residuals
+``worker``     the mission figures drawn by a forked process that imports matplotlib during the run
 =============  ==============================================================
 """
+
+#: trajectory samples beyond which the mission figures draw the path from the stored (thinned) time
+#: series, not from the trajectory (which a long mission does not hold): :mod:`.mission`, :mod:`.worker`
+PATH_SAMPLES = 50_000

@@ -10,7 +10,7 @@ from matplotlib.layout_engine import PlaceHolderLayoutEngine  # noqa: E402
 
 from ..files import atomic_output  # noqa: E402
 
-__all__ = ["save_figure"]
+__all__ = ["save_figure", "fixed_margins"]
 
 
 def save_figure(fig, path, dpi: int = 110, compress_level: int = 6) -> str:
@@ -26,3 +26,13 @@ def save_figure(fig, path, dpi: int = 110, compress_level: int = 6) -> str:
     finally:
         plt.close(fig)
     return str(path)
+
+
+def fixed_margins(fig, left_in: float, right_in: float, bottom_in: float, top_in: float, wspace: float = 0.2) -> None:
+    """Place ``fig``'s subplots with fixed margins [inch] from the figure's edges (``wspace``: the gap
+    between columns as a fraction of the mean axes width). ``tight_layout`` measures every text of the
+    figure once more before the real draw (about a third of a small figure's drawing time); fixed
+    margins sized for the figure's labels cost nothing."""
+    w, h = fig.get_size_inches()
+    fig.subplots_adjust(left=left_in / w, right=1 - right_in / w, bottom=bottom_in / h, top=1 - top_in / h,
+                        wspace=wspace)

@@ -1,18 +1,30 @@
 """Size of a mission run, estimated from its config before anything is allocated.
 
-The mission loop holds the whole trajectory (one sample per ``sim.traj_dt_s``) in memory; its
-time-series rows are streamed in blocks (:mod:`.stream`: the summary on the fly, Parquet row groups)
-and cost a bounded amount of memory whatever their number, unless a DataFrame of them is asked for
-(``run_mission(frame=True)``, the API default). :func:`estimate_run` predicts the sizes from the
-planned segment durations (no sampling) and :func:`check_run_size` refuses a run beyond
-:data:`MAX_MEMORY_BYTES` / :data:`MAX_OUTPUT_BYTES`, naming the config key that dominates.
+The mission loop holds neither the trajectory nor the time series whole: the trajectory is planned
+in blocks of :data:`~.trajectory.PLAN_BLOCK` samples and the per-sample arrays are computed in chunks
+of :data:`~.samples.SAMPLE_CHUNK` (:mod:`.samples`); the rows are streamed in blocks (:mod:`.stream`:
+the summary on the fly, Parquet row groups). So a streamed run's memory is bounded whatever its
+length, unless a DataFrame of the rows is asked for (``run_mission(frame=True)``, the API default).
+:func:`estimate_run` predicts the sizes from the planned segment durations (no sampling) and
+:func:`check_run_size` refuses a run beyond :data:`MAX_MEMORY_BYTES` / :data:`MAX_OUTPUT_BYTES`, naming
+the config key that dominates.
 
-Per-unit costs (peak RSS and file sizes, CPython 3.12, pandas 2, pyarrow): a trajectory sample
-~200 B, a streamed block of rows ~:data:`STREAM_BYTES` in all, ~145 B of Parquet per stored row
-(zstd, byte-stream-split floats; ~510 B more with ``--csv``). Row counts: one coarse row per
-trajectory sample while charging, one per ``sim.flight_dt_s`` in flight (and in the uncharged
-baseline run, summary only), and about ``6 n_pads + 2`` fine windows of half ``sim.max_fine_s``
-each (the default mission has 13 windows and 2720 fine rows; estimate 4200).
+Memory (peak RSS, measured with ``dronewpt mission --no-plot``, CPython 3.11, numba 0.68, pyarrow 26;
+the default pads repeated n times): 222 MB (n = 1), 235 MB (10), 243 MB (30), 270 MB (200), i.e.
+:data:`FIXED_BYTES` (interpreter, numpy, numba with the loop's compiled kernels, pyarrow and the Parquet
+writer, the row blocks) plus :data:`SAMPLE_BYTES` per trajectory sample up to :data:`HELD_SAMPLES`
+(a planned block and a chunk of per-sample arrays; the allocator's growth beyond that is within it).
+The five figures of ``dronewpt mission`` add ~50-100 MB (matplotlib, see docs/streaming.md); a row
+held in a DataFrame costs :data:`ROW_MEMORY_BYTES`.
+
+Rows (one per control period in a fine window, the rectifier-period sub-steps merged; one per
+trajectory sample while charging; one per ``sim.flight_dt_s`` in quiet flight): measured on the default
+mission 3,463 rows (2,515 fine in 11 windows, 948 coarse) and 40,334 with its pads repeated 10 times
+(30,962 fine in 132 windows, 9,372 coarse): ~6.6 fine windows per pad of ~0.39 ``sim.max_fine_s``
+each. Estimated as ``7 n_pads + 1`` windows of :data:`FINE_FRACTION` ``max_fine_s``: 4,546 and 43,196
+rows (1.31x and 1.07x the real counts; an estimate for a limit errs high). Output: ~138-146 B of
+Parquet per stored row measured (zstd, byte-stream-split floats; :data:`ROW_OUTPUT_BYTES`; ~510 B
+more with ``--csv``). ``tests/test_budget.py`` compares the estimate with real runs.
 """
 
 from __future__ import annotations
@@ -22,12 +34,16 @@ from dataclasses import dataclass
 
 from .trajectory import _segments
 
-__all__ = ["RunEstimate", "estimate_run", "check_run_size", "MAX_MEMORY_BYTES", "MAX_OUTPUT_BYTES"]
+__all__ = ["RunEstimate", "estimate_run", "check_run_size", "MAX_MEMORY_BYTES", "MAX_OUTPUT_BYTES", "FIXED_BYTES",
+           "SAMPLE_BYTES", "HELD_SAMPLES"]
 
 MAX_MEMORY_BYTES = 1 << 30  # 1 GiB
 MAX_OUTPUT_BYTES = 1 << 30  # 1 GiB
-SAMPLE_BYTES = 200.0
-STREAM_BYTES = 64e6       # blocks of rows in flight (loop buffer, the Parquet writer's row group, candidates)
+FIXED_BYTES = 225e6       # the process and its fixed buffers (see the module notes)
+SAMPLE_BYTES = 650.0      # per trajectory sample held (planning block, chunk arrays, their temporaries)
+HELD_SAMPLES = (1 << 15) + (1 << 16)   # trajectory.PLAN_BLOCK + samples.SAMPLE_CHUNK: at most this many held
+STREAM_BYTES = 0.0        # blocks of rows in flight: bounded, inside FIXED_BYTES (kept for callers)
+FINE_FRACTION = 0.4       # a fine window's mean length as a fraction of sim.max_fine_s (measured 0.39)
 ROW_OUTPUT_BYTES = 145.0  # Parquet per stored row
 ROW_MEMORY_BYTES = 1500.0  # a row held in a DataFrame at peak (row tuples, the frame, its copies): frame=True
 
@@ -83,13 +99,13 @@ def estimate_run(cfg, frame: bool = False) -> RunEstimate:
             rows = dur / sim.flight_dt_s
         per_key[key] = per_key.get(key, 0.0) + rows
         duration += dur
-    fine = (6 * len(cfg.pads) + 2) * 0.5 * sim.max_fine_s / sim.control_period_s
+    fine = (7 * len(cfg.pads) + 1) * FINE_FRACTION * sim.max_fine_s / sim.control_period_s
     per_key[("sim.control_period_s", sim.control_period_s)] = fine
     rows = sum(per_key.values())
     samples = duration / sim.traj_dt_s + 1
-    memory = SAMPLE_BYTES * samples + STREAM_BYTES + (ROW_MEMORY_BYTES * rows if frame else 0.0)
+    memory = FIXED_BYTES + SAMPLE_BYTES * min(samples, HELD_SAMPLES) + (ROW_MEMORY_BYTES * rows if frame else 0.0)
     (key, value), _ = max(per_key.items(), key=lambda kv: kv[1])
-    if samples * SAMPLE_BYTES > ROW_OUTPUT_BYTES * rows:  # the trajectory itself dominates
+    if samples > 0.5 * rows:  # the trajectory's samples set the rows (a fine sim.traj_dt_s)
         key, value = ("sim.traj_dt_s", sim.traj_dt_s) if sim.traj_dt_s < 0.05 else (key, value)
     return RunEstimate(duration_s=duration, samples=samples, rows=rows, memory_bytes=memory,
                        output_bytes=ROW_OUTPUT_BYTES * rows, key=key, value=value)

@@ -152,7 +152,8 @@ def run(loop, bar=None):
     params, pstate = np.ascontiguousarray(params, dtype=float), np.ascontiguousarray(pstate, dtype=float)
     c, s = pack_constants(loop), initial_state(loop)
     loop.consts, loop.state = c, s
-    rec = not hasattr(kern.advance, "py_func")   # NUMBA_DISABLE_JIT=1: the kernel runs as Python on record views
+    advance = kern.advance_for(fn is not None)   # only the overload this policy needs is loaded
+    rec = not hasattr(advance, "py_func")   # NUMBA_DISABLE_JIT=1: the kernel runs as Python on record views
     if rec:
         c, s = c.view(np.recarray), s.view(np.recarray)
     n = loop.samples.n
@@ -169,7 +170,7 @@ def run(loop, bar=None):
     step = _CHUNK if bar is not None else loop.samples.n
     k_stop, t_done = min(step, k_end), float(smp["t"][0])
     while True:
-        status = kern.advance(k_stop, s, c, smp, rows, noise, obs, fn, params, pstate, lc, tab, lw)
+        status = advance(k_stop, s, c, smp, rows, noise, obs, fn, params, pstate, lc, tab, lw)
         if status == kern.NEED_ACT:
             duty_in[0], duty_ready[0] = loop.act(obs), True
         elif status == kern.PAUSED or (status == kern.DONE and s[0]["k"] < n - 1):

@@ -61,9 +61,9 @@ from wpt_receiver.modal_kernel import step as modal_step
 
 from ..contract import OBS_DIM
 
-__all__ = ["advance", "link_disc", "link_step", "link_stored_j", "LW_SIZE", "STATE_DTYPE", "CONST_DTYPE",
-           "SAMPLE_DTYPE", "OK", "DONE", "PAUSED", "FULL", "NEED_ACT", "NEED_NOISE", "DEPLETED", "ERR_POWER",
-           "ERR_POLICY", "STATUS_NAMES"]
+__all__ = ["advance", "advance_for", "link_disc", "link_step", "link_stored_j", "LW_SIZE", "STATE_DTYPE",
+           "CONST_DTYPE", "SAMPLE_DTYPE", "OK", "DONE", "PAUSED", "FULL", "NEED_ACT", "NEED_NOISE", "DEPLETED",
+           "ERR_POWER", "ERR_POLICY", "STATUS_NAMES"]
 
 STATUS_NAMES = ("OK", "DONE", "PAUSED", "FULL", "NEED_ACT", "NEED_NOISE", "DEPLETED", "ERR_POWER", "ERR_POLICY",
                 "NEED_DEPLETE")
@@ -854,11 +854,36 @@ def _array_of(dtype):
 
 _ARGS = (types.int64, _array_of(STATE_DTYPE), _array_of(CONST_DTYPE), _array_of(SAMPLE_DTYPE), types.float64[:, ::1],
          _F8, _F8)
-with warnings.catch_warnings():  # compiled (or loaded from the cache) here; the policy is a first-class function
-    warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
-    # two overloads of the one loop: a compiled policy (first-class function), or none (a Python policy:
-    # NEED_ACT; ``fn is None`` prunes the call at compile time, and the call from Python skips the
-    # conversion of a function argument, ~0.1 ms, which would dominate a round trip per policy call)
-    _LINK = (_F8, types.float64[:, :, :, ::1], types.complex128[::1])    # lc, tab, lw (modal_kernel)
-    advance = njit([types.int64(*_ARGS, POLICY_FN, _F8, _F8, *_LINK), types.int64(*_ARGS, types.none, _F8, _F8, *_LINK)],
-                   cache=True)(_advance)
+_LINK = (_F8, types.float64[:, :, :, ::1], types.complex128[::1])    # lc, tab, lw (modal_kernel)
+# two overloads of the one loop: a compiled policy (first-class function), or none (a Python policy:
+# NEED_ACT; ``fn is None`` prunes the call at compile time, and the call from Python skips the
+# conversion of a function argument, ~0.1 ms, which would dominate a round trip per policy call)
+_SIGNATURES = {True: types.int64(*_ARGS, POLICY_FN, _F8, _F8, *_LINK),
+               False: types.int64(*_ARGS, types.none, _F8, _F8, *_LINK)}
+_ONE = {}
+
+
+def _compiled(sigs):
+    """:func:`_advance` compiled for ``sigs`` (loaded from numba's disk cache, shared by every dispatcher of
+    it; compiled the first time); the policy is a first-class function."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
+        return njit(sigs, cache=True)(_advance)
+
+
+def advance_for(compiled_policy: bool):
+    """The loop compiled for a compiled policy (``fn`` a :data:`POLICY_FN`) or for a Python one (``fn``
+    None): only that overload is loaded (each costs ~0.04 s of start-up, measured; the driver needs one)."""
+    d = _ONE.get(bool(compiled_policy))
+    if d is None:
+        d = _ONE[bool(compiled_policy)] = _compiled([_SIGNATURES[bool(compiled_policy)]])
+    return d
+
+
+def __getattr__(name):
+    """``advance``: both overloads in one dispatcher, made on first access (tests and callers that pass
+    either kind of policy; :mod:`.fastpath` takes the one it needs from :func:`advance_for`)."""
+    if name == "advance":
+        adv = globals()["advance"] = _compiled(list(_SIGNATURES.values()))
+        return adv
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

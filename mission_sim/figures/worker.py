@@ -1,0 +1,116 @@
+"""The mission figures drawn by a forked process that imports matplotlib while the mission runs.
+
+``dronewpt mission`` spends most of its time in two start-up costs that do not depend on each other:
+numba (import, its registries, the compiled loop loaded from the cache) before the simulation and
+matplotlib (import) before the figures. On a machine with a free core :class:`FigureWorker` overlaps
+them: it forks (POSIX ``fork``: nothing is pickled at start, the config and the coupling model are
+inherited) before the run, the child imports :mod:`.mission` and waits; after the run the parent sends
+the summary and the figures' bounded copy of the series, the child draws and writes the PNG files
+(atomically, :func:`.common.save_figure`) and sends their paths back. The figures are the same as drawn
+in process (same module, same data).
+
+Nothing outlives the command: the child is a daemon process that exits after one set of figures, when
+the parent closes the pipe (``EOFError``, also when the parent dies), or on SIGTERM/SIGINT (its
+temporary files removed, :func:`mission_sim.files.atomic_output`); :meth:`FigureWorker.close` (always
+called by the command) terminates and reaps it. An error while drawing comes back to the parent and
+is raised there. This module imports neither matplotlib nor multiprocessing until a worker starts.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+from . import PATH_SAMPLES
+
+__all__ = ["FigureWorker", "fork_available", "for_figures", "PATH_SAMPLES", "CLOSE_WAIT_S"]
+
+#: seconds :meth:`FigureWorker.close` waits for the child to exit by itself before terminating it
+CLOSE_WAIT_S = 1.0
+
+
+def fork_available() -> bool:
+    """True where a process can be forked (POSIX; not on Windows or WASI)."""
+    return hasattr(os, "fork") and sys.platform != "emscripten"
+
+
+def for_figures(result):
+    """What the figures need of a :class:`~mission_sim.world.results.MissionResult`: its summary, config and
+    (thinned) time series, and its trajectory's samples when there are at most :data:`PATH_SAMPLES` (else
+    None: the path is drawn from the time series); small to send to the worker."""
+    from ..world.results import MissionResult
+    tr = result.trajectory
+    if tr is not None and len(tr) <= PATH_SAMPLES:
+        tr = tr.materialise() if hasattr(tr, "materialise") else tr
+    else:
+        tr = None
+    return MissionResult(result.timeseries, result.summary, config=result.config, trajectory=tr)
+
+
+class FigureWorker:
+    """A forked process that draws :func:`.mission.plot_mission` once (see the module notes)."""
+
+    def __init__(self):
+        import multiprocessing as mp
+        ctx = mp.get_context("fork")
+        sys.stdout.flush()
+        sys.stderr.flush()   # nothing buffered is copied into the child (it flushes at its exit)
+        self._conn, child = ctx.Pipe()
+        self._proc = ctx.Process(target=_serve, args=(child, self._conn), daemon=True, name="dronewpt-figures")
+        self._proc.start()
+        child.close()
+
+    def draw(self, result, out_dir) -> list[str]:
+        """The figures of ``result`` (summary, config, the thinned ``timeseries``, the trajectory or None
+        for a long mission) written to ``out_dir`` by the child; their paths. Raises what the child raised."""
+        try:
+            self._conn.send((result, str(out_dir)))
+            ok, value = self._conn.recv()
+        except (EOFError, BrokenPipeError, ConnectionResetError):
+            raise RuntimeError(f"the figure process ended without drawing (exit code {self._proc.exitcode})") from None
+        if not ok:
+            raise value
+        return value
+
+    def close(self) -> None:
+        """Reap the child: it exits by itself after drawing, or at the EOF of the closed pipe once its
+        import is done; after :data:`CLOSE_WAIT_S` it is terminated (its temporary files removed). Idempotent."""
+        self._conn.close()
+        self._proc.join(timeout=CLOSE_WAIT_S)
+        if self._proc.is_alive():
+            self._proc.terminate()
+            self._proc.join()
+
+
+def _interrupted(signum, frame):
+    raise KeyboardInterrupt(f"signal {signum}")   # unwinds through atomic_output: no temporary file left
+
+
+def _serve(conn, parent_end) -> None:
+    """The child: import the figures, draw one set, send the paths (or the exception) back, exit. Quietly
+    (no traceback) when the parent went away or it was interrupted: the parent reports what matters."""
+    import signal
+    parent_end.close()   # EOF on recv once the parent's end is closed (also when the parent dies)
+    signal.signal(signal.SIGTERM, _interrupted)
+    try:
+        _draw_once(conn)
+    except BaseException:  # noqa: BLE001, S110 - interrupted or the parent is gone: no one to tell
+        pass
+    finally:
+        os._exit(0)
+
+
+def _draw_once(conn) -> None:
+    from . import mission
+    try:
+        result, out = conn.recv()
+    except EOFError:   # the parent ended before the run's end (an error, an interrupt)
+        return
+    try:
+        reply = (True, mission.plot_mission(result, out))
+    except Exception as exc:  # noqa: BLE001 - reported to the parent, which raises it
+        reply = (False, exc)
+    try:
+        conn.send(reply)
+    except (TypeError, AttributeError, ValueError) as exc:   # an exception that does not pickle
+        conn.send((False, RuntimeError(f"drawing the figures failed: {reply[1]!r} ({exc})")))

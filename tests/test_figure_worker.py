@@ -1,0 +1,125 @@
+"""``dronewpt mission``'s figures drawn by a forked process (mission_sim.figures.worker): the same PNG
+bytes as drawn in process, errors reach the command as one line, nothing outlives the command, and
+the command's own process imports neither matplotlib nor (with ``--no-plot``) multiprocessing."""
+
+import errno
+import multiprocessing
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from mission_sim.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _children_of(pid: int) -> list[int]:
+    """Live child processes of ``pid`` (Linux /proc)."""
+    kids = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                stat = (d / "stat").read_text()
+            except OSError:
+                continue
+            fields = stat.rsplit(")", 1)[1].split()
+            if int(fields[1]) == pid and fields[0] != "Z":
+                kids.append(int(d.name))
+    return kids
+
+
+def test_worker_draws_the_same_figures_as_in_process_and_leaves_no_process(tmp_path, monkeypatch, capsys):
+    import mission_sim.cli.mission as cm
+    assert main(["mission", "--out", str(tmp_path / "w"), "--no-progress"]) == 0
+    assert multiprocessing.active_children() == [] and _children_of(os.getpid()) == []
+    monkeypatch.setattr(cm, "FIGURE_WORKER_MAX_ROWS", -1)        # drawn in this process
+    assert main(["mission", "--out", str(tmp_path / "p"), "--no-progress"]) == 0
+    pngs = sorted(p.name for p in (tmp_path / "w").glob("*.png"))
+    assert pngs == ["i2_envelope.png", "lm.png", "power.png", "soc.png", "trajectory.png"]
+    for name in pngs:
+        assert (tmp_path / "w" / name).read_bytes() == (tmp_path / "p" / name).read_bytes(), name
+    assert sorted(p.name for p in (tmp_path / "w").iterdir()) == sorted(p.name for p in (tmp_path / "p").iterdir())
+    out = capsys.readouterr().out
+    assert out.count("wrote: ") == 2 * 7
+
+
+def test_a_full_disk_in_the_worker_is_one_line_naming_the_file(tmp_path, monkeypatch, capsys):
+    """The worker's storage error comes back as the command's: exit 4, the PNG named, no temporary file,
+    no summary.json (the set is incomplete)."""
+    import mission_sim.figures.common as fc
+    from mission_sim.files import OutputError
+    real = fc.atomic_output
+
+    def full(path, *a, **k):
+        if str(path).endswith("soc.png"):
+            raise OutputError(path, errno.ENOSPC, "no space left on device")
+        return real(path, *a, **k)
+    monkeypatch.setattr(fc, "atomic_output", full)               # inherited by the forked worker
+    out = tmp_path / "m"
+    assert main(["mission", "--out", str(out), "--no-progress"]) == 4
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"cannot write {str(out / 'soc.png')!r}: no space left on device" in err[0], err
+    assert not (out / "summary.json").exists()
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
+    assert _children_of(os.getpid()) == []
+
+
+def _imported(code: str, names) -> list[str]:
+    probe = f"{code}\nimport json, sys\nprint(json.dumps([m for m in {list(names)!r} if m in sys.modules]))"
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env, cwd=ROOT,
+                         timeout=300, check=True)
+    return __import__("json").loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_mission_no_plot_imports_no_plotting_and_forks_nothing(tmp_path):
+    code = ("import contextlib, io\nfrom mission_sim.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            f"    main(['mission', '--out', {str(tmp_path / 'n')!r}, '--no-plot', '--no-progress'])")
+    assert _imported(code, ("matplotlib", "mission_sim.figures.mission", "multiprocessing", "pandas",
+                            "pyarrow.csv")) == []
+
+
+def test_mission_with_figures_leaves_matplotlib_to_the_worker(tmp_path):
+    """The command's process imports no matplotlib (the forked worker does, during the run); the five
+    figures are written."""
+    code = ("import contextlib, io\nfrom mission_sim.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            f"    main(['mission', '--out', {str(tmp_path / 'm')!r}, '--no-progress'])")
+    assert _imported(code, ("matplotlib", "pandas")) == []
+    assert len(list((tmp_path / "m").glob("*.png"))) == 5
+
+
+def test_sigterm_during_the_run_ends_the_worker_too(tmp_path):
+    """A command terminated while it simulates: exit 143, one line, and its figure worker is gone with it
+    (nothing outlives the command), no temporary file."""
+    out = tmp_path / "m"
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    # a run of a few seconds that still takes the worker path (estimated rows under the worker's limit)
+    proc = subprocess.Popen([sys.executable, "-m", "mission_sim.cli", "mission", "--out", str(out), "--no-progress",
+                             "--set", "sim.traj_dt_s=0.01"], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not (out / ".mission.lock").exists() or not _children_of(proc.pid):
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.05)
+    kids = _children_of(proc.pid)
+    proc.terminate()
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143 and err == "dronewpt mission: interrupted (SIGTERM)\n", err
+    assert all(not Path(f"/proc/{k}").exists() or "Z" in Path(f"/proc/{k}/stat").read_text().rsplit(")", 1)[1][:3]
+               for k in kids)
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
+
+
+def test_long_missions_draw_in_process(tmp_path, monkeypatch):
+    """Above FIGURE_WORKER_MAX_ROWS no worker is started (a long run's memory is not held twice)."""
+    import mission_sim.cli.mission as cm
+    import mission_sim.figures.worker as fw
+    monkeypatch.setattr(cm, "FIGURE_WORKER_MAX_ROWS", 3000)     # the default mission: ~4,500 rows estimated
+    started = []
+    monkeypatch.setattr(fw.FigureWorker, "__init__", lambda self: started.append(1))
+    assert main(["mission", "--out", str(tmp_path / "m"), "--no-progress", "--format", "json"]) == 0
+    assert started == [] and len(list((tmp_path / "m").glob("*.png"))) == 5
