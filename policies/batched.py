@@ -1,0 +1,119 @@
+"""Several policies side by side in one batched env: each on its own block of rows.
+
+``compare`` runs every policy on the same ``n`` seeded windows. Instead of one vector env and one
+300-step Python loop per policy, :class:`BlockPolicy` puts ``k`` policies in one env of ``k n`` rows
+(block ``b`` = rows ``b n .. (b + 1) n - 1``, the same windows in every block) and calls each
+policy's ``act`` on its own block every step: the env is built, reset and stepped once for all of
+them, and each policy sees exactly the observations it would see alone (the env's rows are
+independent), so each block's actions and results are those of a separate run.
+
+Learned policies of one kind trained with several seeds (consecutive blocks of
+:class:`policies.rl.RLPolicy`, or :class:`policies.residual.ResidualPolicy` with the same base, whose
+actors have the same layers) are evaluated as one stacked network (:class:`StackedRL`): the seeds'
+weights stacked into ``(k, in, out)`` arrays and one ``np.matmul`` per layer over the ``(k, n, in)``
+observations, i.e. the same float32 products per block as ``NumpyActor.forward`` (numpy's stacked
+matmul calls the same BLAS product for each block) with one Python call per layer instead of ``k``.
+Separate and batched runs agree row by row (``tests/test_compare_batched.py``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mission_sim.contract import action_to_duty
+
+__all__ = ["BlockPolicy", "StackedRL", "stackable"]
+
+
+def _rl_key(p):
+    """What two RL policies must share to be stacked (None: not stackable)."""
+    a = getattr(p, "_actor", None)
+    if (a is None or a.head != "clip" or p.history != 1 or p.action_filter or p.discrete or p._mean is None
+            or p._hist is not None):
+        return None
+    shapes = tuple(layer[0].shape if isinstance(layer, tuple) else layer for layer in a.layers)
+    return ("rl", p.obs_dim, float(p._clip), shapes)
+
+
+def stackable(p):
+    """Key of a policy that :class:`StackedRL` can batch with others of the same key, else ``None``."""
+    from .residual import ResidualPolicy
+    from .rl import RLPolicy
+
+    if type(p) is RLPolicy:
+        return _rl_key(p)
+    if isinstance(p, ResidualPolicy) and type(p.rl) is RLPolicy and _rl_key(p.rl) is not None:
+        return ("residual", p.scale, p.base_budget, p.base.lpf, _rl_key(p.rl))
+    return None
+
+
+class StackedRL:
+    """``k`` deterministic numpy actors of the same layers (RL or residual policies) on ``k`` blocks of
+    ``n`` rows: the actions of each policy's own ``act`` on its block, in one pass."""
+
+    def __init__(self, pols: list):
+        self.pols = pols
+        self.residual = stackable(pols[0])[0] == "residual"
+        rls = [p.rl if self.residual else p for p in pols]
+        self.k, self.obs_dim, self.clip = len(rls), rls[0].obs_dim, rls[0]._clip
+        self.mean = np.stack([r._mean for r in rls])[:, None, :]
+        self.scale_obs = np.stack([r._scale for r in rls])[:, None, :]
+        acts = [r._actor for r in rls]
+        self.layers = [(np.stack([a.layers[i][0] for a in acts]), np.stack([a.layers[i][1] for a in acts])[:, None, :])
+                       if isinstance(layer, tuple) else layer for i, layer in enumerate(acts[0].layers)]
+        self.low = np.stack([a.low for a in acts])[:, None, :]
+        self.high = np.stack([a.high for a in acts])[:, None, :]
+
+    def reset(self, n: int) -> None:
+        for p in self.pols:
+            p.reset(n)
+
+    def _duty(self, obs32) -> np.ndarray:
+        """RLPolicy.act of each block: normalise, forward, clip, ``(a + 1) / 2``; (k n,) duties."""
+        o = obs32.reshape(self.k, -1, obs32.shape[1])[:, :, :self.obs_dim]
+        h = np.minimum(np.maximum((o - self.mean) * self.scale_obs, -self.clip), self.clip)
+        for layer in self.layers:
+            h = np.matmul(h, layer[0]) + layer[1] if isinstance(layer, tuple) else layer(h)
+        a = np.minimum(np.maximum(h, self.low), self.high)
+        return action_to_duty(a[:, :, 0].reshape(-1))
+
+    def act(self, obs) -> np.ndarray:
+        from .residual import residual_duty, residual_obs
+
+        obs = np.atleast_2d(np.asarray(obs, dtype=np.float32))
+        if not self.residual:
+            return self._duty(obs)
+        n = len(obs) // self.k
+        d_base = np.concatenate([np.asarray(p.base.act(obs[b * n:(b + 1) * n]), dtype=float).reshape(n)
+                                 for b, p in enumerate(self.pols)])
+        a = 2.0 * self._duty(residual_obs(obs, d_base)) - 1.0
+        return residual_duty(d_base, a, self.pols[0].scale)
+
+
+class BlockPolicy:
+    """Policies ``pols`` on consecutive blocks of ``n`` rows (``act`` on ``len(pols) n`` rows); runs of
+    consecutive policies with the same :func:`stackable` key act as one :class:`StackedRL`."""
+
+    def __init__(self, pols: list, n: int):
+        self.n = int(n)
+        self.units = []   # (first block, number of blocks, policy acting on those rows)
+        b = 0
+        while b < len(pols):
+            key = stackable(pols[b])
+            e = b + 1
+            while key is not None and e < len(pols) and stackable(pols[e]) == key:
+                e += 1
+            self.units.append((b, e - b, StackedRL(pols[b:e]) if e - b > 1 else pols[b]))
+            b = e
+
+    def reset(self, n_rows: int) -> None:
+        for _, _, p in self.units:
+            p.reset(self.n)
+
+    def act(self, obs) -> np.ndarray:
+        out = np.empty(len(obs))
+        n = self.n
+        for b, k, p in self.units:
+            rows = slice(b * n, (b + k) * n)
+            out[rows] = np.asarray(p.act(obs[rows].copy()), dtype=float).reshape(k * n)
+        return out
