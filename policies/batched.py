@@ -67,6 +67,9 @@ class StackedRL:
     def reset(self, n: int) -> None:
         for p in self.pols:
             p.reset(n)
+        if self.residual:   # one base controller over every block (same budget and filter: the stack's key)
+            self.base = type(self.pols[0].base)(self.pols[0].ctx, self.pols[0].base.lpf, self.pols[0].base_budget)
+            self.base.reset(self.k * n)
 
     def _duty(self, obs32) -> np.ndarray:
         """RLPolicy.act of each block: normalise, forward, clip, ``(a + 1) / 2``; (k n,) duties."""
@@ -83,9 +86,7 @@ class StackedRL:
         obs = np.atleast_2d(np.asarray(obs, dtype=np.float32))
         if not self.residual:
             return self._duty(obs)
-        n = len(obs) // self.k
-        d_base = np.concatenate([np.asarray(p.base.act(obs[b * n:(b + 1) * n]), dtype=float).reshape(n)
-                                 for b, p in enumerate(self.pols)])
+        d_base = np.asarray(self.base.act(obs), dtype=float).reshape(len(obs))
         a = 2.0 * self._duty(residual_obs(obs, d_base)) - 1.0
         return residual_duty(d_base, a, self.pols[0].scale)
 
