@@ -1,0 +1,70 @@
+"""compare's batching (policies.batched): several policies side by side in one vector env, and the
+training seeds of a learned kind as one stacked network, give each policy exactly (to the bit) the
+traces and metrics of its own separate run on the same windows."""
+
+import numpy as np
+import pytest
+
+from policies import make
+from policies.batched import BlockPolicy, StackedRL
+from policies.compare import run_policies, run_policy, shipped_seed_groups
+
+FIELDS = ("i2_peak_a", "i2_a", "d_short", "rect_current_a", "charge_cmd_a", "t_stop_s")
+
+
+def _assert_same(batched, separate):
+    for f in FIELDS:
+        np.testing.assert_array_equal(getattr(batched, f), getattr(separate, f), err_msg=f)
+    assert batched.metrics.keys() == separate.metrics.keys()
+    for k in separate.metrics:
+        np.testing.assert_array_equal(batched.metrics[k], separate.metrics[k], err_msg=k)
+
+
+def test_batched_classical_policies_equal_their_separate_runs_row_by_row():
+    names = ["step", "ramp", "model_based", "model_based_budget:0.02", "hysteresis", "model_based_online", "random"]
+    runs = run_policies(names, "lm_mismatch", episodes=5, seed=321)
+    assert list(runs) == names
+    for name in names:
+        _assert_same(runs[name], run_policy(name, "lm_mismatch", 5, 321))
+    # the blocks are the policies' own: different controllers give different duties on the same windows
+    assert not np.array_equal(runs["step"].d_short, runs["ramp"].d_short)
+    assert runs["model_based_budget:0.02"].metrics["energy_after_stop_j"].mean() < \
+        runs["model_based"].metrics["energy_after_stop_j"].mean()
+
+
+def test_duplicate_names_run_once_on_the_same_windows():
+    runs = run_policies(["ramp", "ramp", "step"], "nominal", episodes=3, seed=7)
+    assert list(runs) == ["ramp", "step"]
+    np.testing.assert_array_equal(runs["ramp"].t_stop_s, runs["step"].t_stop_s)   # paired: same windows
+
+
+@pytest.mark.parametrize("kind", ["ppo_lagrangian", "residual", "imitation"])
+def test_stacked_training_seeds_equal_separate_runs_row_by_row(kind):
+    pytest.importorskip("stable_baselines3")
+    specs = shipped_seed_groups()[kind]
+    runs = run_policies(specs, "nominal", episodes=4, seed=1000)
+    for sp in specs:
+        _assert_same(runs[sp], run_policy(sp, "nominal", 4, 1000))
+    # the seeds are different networks: their duties differ
+    assert not np.array_equal(runs[specs[0]].d_short, runs[specs[1]].d_short)
+
+
+def test_block_policy_stacks_consecutive_seeds_only():
+    pytest.importorskip("stable_baselines3")
+    groups = shipped_seed_groups()
+    pols = [make(s) for s in groups["ppo_lagrangian"]] + [make("ramp")] + [make(s) for s in groups["residual"][:2]]
+    bp = BlockPolicy(pols, 3)
+    assert [(b, k, type(p).__name__) for b, k, p in bp.units] == [
+        (0, 5, "StackedRL"), (5, 1, "RampPolicy"), (6, 2, "StackedRL")]
+
+
+def test_stacked_actor_equals_each_policys_act():
+    pytest.importorskip("stable_baselines3")
+    pols = [make(s) for s in shipped_seed_groups()["ppo_lagrangian"]]
+    obs = np.random.default_rng(3).uniform(-1.0, 1.0, (len(pols) * 7, 8)).astype(np.float32)
+    st = StackedRL(pols)
+    st.reset(7)
+    got = st.act(obs)
+    for b, p in enumerate(pols):
+        p.reset(7)
+        np.testing.assert_array_equal(got[b * 7:(b + 1) * 7], p.act(obs[b * 7:(b + 1) * 7]))
