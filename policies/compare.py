@@ -32,7 +32,7 @@ import numpy as np
 
 from mission_sim.files import atomic_output
 
-from .stats import mean_ci, mean_cis, seed_ci
+from .stats import mean_ci, seed_ci
 from .threads import single_blas_thread
 
 __all__ = ["METRICS", "EpisodeTraces", "run_policy", "run_policies", "compare", "frontier", "oracle_gaps", "oracle_curve", "DEFAULT_POLICIES", "DEFAULT_SCENARIOS",
@@ -156,10 +156,10 @@ def _traces(venv, rec, rew, t_stop, last, rows) -> EpisodeTraces:
 def _row_one(label, scenario, metrics, ref):
     """Row of one model: mean and bootstrap interval per metric, paired difference against ``ref``."""
     row = {"policy": label, "scenario": scenario, "episodes": len(metrics["return"]), "train_seeds": 1}
-    keys = [f"{p}{k}" for k in METRICS for p in ("", "d_")[:1 if ref is None else 2]]
-    cis = mean_cis([metrics[k[2:]] - ref[k[2:]] if k.startswith("d_") else metrics[k] for k in keys])
-    for k, (m, lo, hi) in zip(keys, cis):   # one batched bootstrap per row (policies.stats.mean_cis)
-        row[k], row[f"{k}_lo"], row[f"{k}_hi"] = m, lo, hi
+    for k in METRICS:
+        row[k], row[f"{k}_lo"], row[f"{k}_hi"] = mean_ci(metrics[k])
+        if ref is not None:
+            row[f"d_{k}"], row[f"d_{k}_lo"], row[f"d_{k}_hi"] = mean_ci(metrics[k] - ref[k])
     return row
 
 

@@ -16,7 +16,7 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["bootstrap_ci", "mean_ci", "mean_cis", "seed_ci", "pareto_front", "N_BOOT"]
+__all__ = ["bootstrap_ci", "mean_ci", "seed_ci", "pareto_front", "N_BOOT"]
 
 N_BOOT = 2000
 
@@ -50,28 +50,6 @@ def mean_ci(x, **kw) -> tuple[float, float, float]:
     fin = x[np.isfinite(x)]
     m = float(fin.mean()) if len(fin) else float("nan")
     return (m, *bootstrap_ci(fin, **kw))
-
-
-def mean_cis(xs, n_boot: int = N_BOOT, level: float = 0.95, seed: int = 0) -> list:
-    """:func:`mean_ci` of each array in ``xs``, the same numbers (``tests/test_compare_stats.py``): the
-    arrays without NaN or infinity and of one length share one gather of the resamples, one mean over a
-    (k n_boot, n) block (the 2-d reduction of :func:`bootstrap_ci`, bit for bit) and one quantile call; others go one by one."""
-    xs = [np.asarray(x, dtype=float) for x in xs]
-    out = [None] * len(xs)
-    batch = {}
-    for i, x in enumerate(xs):
-        if len(x) > 1 and np.all(np.isfinite(x)) and not np.all(x == x[0]):
-            batch.setdefault(len(x), []).append(i)
-        else:
-            out[i] = mean_ci(x, n_boot=n_boot, level=level, seed=seed)
-    a = 0.5 * (1.0 - level)
-    for n, rows in batch.items():
-        block = np.stack([xs[i] for i in rows])
-        means = block[:, _resamples(n, n_boot, seed)].reshape(-1, n).mean(axis=1).reshape(len(rows), n_boot)
-        q = np.quantile(means, [a, 1.0 - a], axis=1)
-        for j, i in enumerate(rows):
-            out[i] = (float(xs[i].mean()), float(q[0, j]), float(q[1, j]))
-    return out
 
 
 def seed_ci(seed_means, level: float = 0.95) -> tuple[float, float, float]:
