@@ -175,8 +175,9 @@ def _row_seeds(label, scenario, per_seed, ref):
 
 def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: int = DEFAULT_EPISODES,
             seed: int = 1000, progress: bool = False, config=None, train_seeds: dict | None = None,
-            reference: str = REFERENCE):
-    """Run every policy on every scenario (same seeds); returns ``(rows, traces)``.
+            reference: str = REFERENCE, fork: bool = True):
+    """Run every policy on every scenario (same seeds); returns ``(rows, traces)``; ``fork``: the MPC's runs
+    in a forked process beside the others where possible (:mod:`policies.forked`; the same results).
 
     ``train_seeds`` maps a label to several model specs of one kind (e.g. ``rl:run_s0/ppo_sbar.zip``,
     ...): one row each, aggregated over the seeds. Rows hold ``<metric>``, ``<metric>_lo/_hi`` (95 %)
@@ -190,23 +191,64 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
     jobs = [(s, g) for s in scenarios for g in groups]
     bar = tqdm(total=len(jobs), desc="compare", unit="run", disable=not progress, dynamic_ncols=True)
     with single_blas_thread():   # batched small matrices (policies.threads)
-        _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar)
+        _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar, fork)
     bar.close()
     return rows, traces
 
 
-def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar):
-    """The runs of :func:`compare` (rows and traces filled in place)."""
-    for s in scenarios:
-        runs = run_policies([reference] + [sp for _, specs in groups for sp in specs], s, int(episodes), int(seed), config)
-        ref_tr = runs[reference]
-        for label, specs in groups:
-            trs = [runs[sp] for sp in specs]
-            traces[(label, s)] = trs[0]
-            ref = None if label == reference else ref_tr.metrics
-            rows.append(_row_one(label, s, trs[0].metrics, ref) if len(trs) == 1
-                        else _row_seeds(label, s, [t.metrics for t in trs], ref))
-            bar.update(1)
+#: policies run in a forked process beside the others (:mod:`policies.forked`): the MPC's QPs are ~40 % of the CPU
+FORKED = ("mpc",)
+
+
+def _forked_runs(specs, scenarios, episodes, seed, config) -> dict:
+    """``{scenario: {spec: EpisodeTraces}}`` of ``specs`` (the forked child's work)."""
+    with single_blas_thread():
+        return {s: run_policies(specs, s, episodes, seed, config) for s in scenarios}
+
+
+def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar, fork=True):
+    """The runs of :func:`compare` (rows and traces filled in place); with ``fork`` the :data:`FORKED`
+    policies run in a child process (:class:`policies.forked.Forked`) on the same windows meanwhile."""
+    from .forked import Forked, available
+
+    n, seed = int(episodes), int(seed)
+    specs = list(dict.fromkeys([reference] + [sp for _, sps in groups for sp in sps]))
+    heavy = [sp for sp in specs if sp.split(":", 1)[0] in FORKED and sp != reference] \
+        if fork and len(specs) > 1 and available() else []
+    job = None
+    if heavy:   # numba's kernels loaded before the fork (the child inherits them), its thread pool not yet
+        from envs import SbarChargingVectorEnv
+        SbarChargingVectorEnv(num_envs=1, scenario=scenarios[0], config=config).reset(seed=seed)
+        job = Forked(_forked_runs, heavy, scenarios, n, seed, config)
+    placed, refs = {}, {}
+    try:
+        for s in scenarios:
+            runs = run_policies([sp for sp in specs if sp not in heavy], s, n, seed, config)
+            refs[s] = runs[reference]
+            _add_rows(s, groups, reference, runs, placed, bar)
+        for s, runs in (job.result() if job else {}).items():
+            _add_rows(s, groups, reference, {**runs, reference: refs[s]}, placed, bar)
+    except BaseException:
+        if job:
+            job.cancel()
+        raise
+    for s in scenarios:   # rows and traces in the order of the scenarios and groups
+        for label, _ in groups:
+            rows.append(placed[(s, label)][0])
+            traces[(label, s)] = placed[(s, label)][1]
+
+
+def _add_rows(s, groups, reference, runs, placed, bar):
+    """The row and trace of each group of scenario ``s`` whose runs are all in ``runs`` (not yet placed)."""
+    ref_tr = runs[reference]
+    for label, specs in groups:
+        if (s, label) in placed or not all(sp in runs for sp in specs):
+            continue
+        trs = [runs[sp] for sp in specs]
+        ref = None if label == reference else ref_tr.metrics
+        placed[(s, label)] = (_row_one(label, s, trs[0].metrics, ref) if len(trs) == 1
+                              else _row_seeds(label, s, [t.metrics for t in trs], ref), trs[0])
+        bar.update(1)
 
 
 def frontier(scenario: str = "nominal", budgets=None, episodes: int = DEFAULT_EPISODES, seed: int = 1000, config=None,

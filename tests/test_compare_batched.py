@@ -68,3 +68,33 @@ def test_stacked_actor_equals_each_policys_act():
     for b, p in enumerate(pols):
         p.reset(7)
         np.testing.assert_array_equal(got[b * 7:(b + 1) * 7], p.act(obs[b * 7:(b + 1) * 7]))
+
+
+def test_forked_mpc_runs_equal_in_process_runs():
+    """The MPC's runs in a forked child (policies.forked) give the rows and traces of the same runs
+    in-process; run in a fresh interpreter, where numba's thread pool has not started (fork allowed)."""
+    pytest.importorskip("daqp")
+    import json
+    import os
+    import subprocess
+    import sys
+    code = (
+        "import json, numpy as np, policies.forked as f\n"
+        "from policies.compare import compare\n"
+        "made = []\n"
+        "init = f.Forked.__init__\n"
+        "def rec(self, *a):\n"
+        "    init(self, *a); made.append(self.proc is not None)\n"
+        "f.Forked.__init__ = rec\n"
+        "args = (('ramp', 'mpc', 'model_based'), ('nominal', 'windy'))\n"
+        "r1, t1 = compare(*args, episodes=3, seed=77)\n"
+        "r2, t2 = compare(*args, episodes=3, seed=77, fork=False)\n"
+        "same = list(t1) == list(t2) and all(np.array_equal(t1[k].d_short, t2[k].d_short) for k in t2)\n"
+        "print(json.dumps({'made': made, 'rows': r1 == r2, 'traces': same, 'order': [r['policy'] for r in r1]}))\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    res = json.loads(out.stdout.strip().splitlines()[-1])
+    assert res["made"] == [True]    # the first compare forked (the second had fork=False)
+    assert res["rows"] and res["traces"]
+    assert res["order"] == ["ramp", "mpc", "model_based"] * 2
