@@ -98,3 +98,13 @@ def test_forked_mpc_runs_equal_in_process_runs():
     assert res["made"] == [True]    # the first compare forked (the second had fork=False)
     assert res["rows"] and res["traces"]
     assert res["order"] == ["ramp", "mpc", "model_based"] * 2
+
+
+def test_tabulated_t_quantiles_are_scipys():
+    from scipy.special import stdtrit
+
+    from policies.stats import _t_quantile
+    for df in range(1, 40):
+        assert _t_quantile(df, 0.975) == float(stdtrit(df, 0.975))
+    assert _t_quantile(4, 0.95) == float(stdtrit(4, 0.95))
+    assert _t_quantile(4, 0.975) > _t_quantile(30, 0.975) > 1.959963984540054   # wider with fewer seeds; -> normal
