@@ -119,7 +119,7 @@ def run_policies(names, scenario: str, episodes: int, seed: int, config=None) ->
     pol = BlockPolicy([make(name, venv.policy_context) for name in names], n)
     pol.reset(venv.num_envs)
     rec, rew, t_stop, last = _rollout(pol, venv, [int(seed) + i for i in range(n)] * len(names))
-    out = {name: _traces(venv, rec, rew, t_stop, last, slice(b * n, (b + 1) * n)) for b, name in enumerate(names)}
+    out = {name: _traces(venv, rec, rew, t_stop, last, slice(b * n, (b + 1) * n)) for name, b in zip(names, pol.block)}
     venv.close()
     return out
 

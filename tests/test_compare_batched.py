@@ -32,6 +32,19 @@ def test_batched_classical_policies_equal_their_separate_runs_row_by_row():
         runs["model_based"].metrics["energy_after_stop_j"].mean()
 
 
+def test_model_based_family_is_one_controller_with_a_budget_per_row():
+    pols = [make(s) for s in ("model_based", "ramp", "model_based_budget:0.02", "model_based_budget:0.1")]
+    bp = BlockPolicy(pols, 4)
+    assert [(b, k, type(p).__name__) for b, k, p in bp.units] == [(0, 3, "StackedModelBased"), (3, 1, "RampPolicy")]
+    assert bp.block == [0, 3, 1, 2]
+    np.testing.assert_array_equal(bp.units[0][2].budgets, [0.0, 0.02, 0.1])
+    assert [type(p).__name__ for _, _, p in BlockPolicy(pols, 1).units] == [   # one row: each alone (scalar path)
+        "ModelBasedPolicy", "RampPolicy", "BudgetedModelBasedPolicy", "BudgetedModelBasedPolicy"]
+    runs = run_policies(["model_based_budget:0.1", "ramp", "model_based"], "battery", episodes=3, seed=11)
+    for name in runs:
+        _assert_same(runs[name], run_policy(name, "battery", 3, 11))
+
+
 def test_duplicate_names_run_once_on_the_same_windows():
     runs = run_policies(["ramp", "ramp", "step"], "nominal", episodes=3, seed=7)
     assert list(runs) == ["ramp", "step"]
