@@ -9,7 +9,7 @@ its value (an exception in the child is raised in the parent). Nothing is lost i
 function run in-process (the same arithmetic; ``tests/test_compare_batched.py``).
 
 Only where it is safe and useful (:func:`available`): the ``fork`` start method (Linux), more than
-one CPU, and numba's thread pool not yet started in the parent (a pool's threads do not survive a
+one CPU, not inside a daemon process, and numba's thread pool not yet started in the parent (a pool's threads do not survive a
 fork; the compiled parallel step starts it on its first call, so fork before the first env step).
 """
 
@@ -27,7 +27,7 @@ def available() -> bool:
 
     if not sys.platform.startswith("linux") or "fork" not in mp.get_all_start_methods():
         return False
-    if len(os.sched_getaffinity(0)) < 2:
+    if len(os.sched_getaffinity(0)) < 2 or mp.current_process().daemon:   # a daemon may not have children
         return False
     if "numba" in sys.modules:
         try:
@@ -60,7 +60,10 @@ class Forked:
             ctx = mp.get_context("fork")
             self._recv, send = ctx.Pipe(duplex=False)
             self.proc = ctx.Process(target=_child, args=(send, fn, args), daemon=True)
-            self.proc.start()
+            try:
+                self.proc.start()
+            except OSError:   # no process to be had (limits): run it in-process at result()
+                self.proc = None
             send.close()
 
     def result(self):
