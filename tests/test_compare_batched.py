@@ -121,3 +121,29 @@ def test_tabulated_t_quantiles_are_scipys():
         assert _t_quantile(df, 0.975) == float(stdtrit(df, 0.975))
     assert _t_quantile(4, 0.95) == float(stdtrit(4, 0.95))
     assert _t_quantile(4, 0.975) > _t_quantile(30, 0.975) > 1.959963984540054   # wider with fewer seeds; -> normal
+
+
+def test_forked_child_that_dies_is_run_again_in_the_parent_and_errors_are_raised():
+    import os
+    import subprocess
+    import sys
+    code = (
+        "import os\n"
+        "from policies.forked import Forked, available\n"
+        "parent = os.getpid()\n"
+        "def work(x):\n"
+        "    if os.getpid() != parent:\n"
+        "        os._exit(3)   # the child dies without an answer\n"
+        "    return x + 1\n"
+        "def bad():\n"
+        "    raise ValueError('in the child')\n"
+        "print(available(), Forked(work, 41).result())\n"
+        "try:\n"
+        "    Forked(bad).result()\n"
+        "except ValueError as exc:\n"
+        "    print(exc)\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    lines = out.stdout.strip().splitlines()
+    assert lines[-2] == f"{len(os.sched_getaffinity(0)) > 1} 42" and lines[-1] == "in the child"
