@@ -3,8 +3,8 @@
 Modules: ``classical`` (step, ramp, model_based), ``kernels`` (their compiled per-step functions for
 the mission's fast path; numba, imported on demand), ``onoff``, ``online``, ``budgeted``,
 ``random_policy``, ``mpc``, ``oracle``, ``rl`` / ``residual`` / ``constrained`` / ``imitation`` / ``smoothing`` /
-``train`` / ``callbacks`` / ``hyperparams`` (RL, needs stable-baselines3), ``inference``, ``compare``, ``stats``,
-``threads``.
+``train`` / ``callbacks`` / ``hyperparams`` (RL, needs stable-baselines3), ``inference``, ``compare``, ``batched``,
+``forked``, ``stats``, ``threads``.
 
 >>> from policies import make
 >>> pol = make("model_based")
@@ -30,6 +30,8 @@ Modules, from the classical controllers to learning and comparing:
 ``train``          ``dronewpt train``: PPO / SAC / TD3 / DQN on the batched env, imitation, outputs and metadata
 ``stats``          bootstrap and Student's t intervals, paired differences
 ``compare``        ``dronewpt compare``: every policy on the same seeded windows, with statistics
+``batched``        compare's policies side by side in one batched env; training seeds as one stacked network
+``forked``         one piece of work (compare's MPC runs) in a forked child process beside the parent's
 ``threads``        one BLAS thread for the rollouts' batched small matrices (threadpoolctl)
 ``pretrained/``    shipped models (``.zip`` + metadata ``.json``); ``hyperparams/`` their settings
 =================  ==========================================================================

@@ -35,7 +35,7 @@ from mission_sim.files import atomic_output
 from .stats import mean_ci, seed_ci
 from .threads import single_blas_thread
 
-__all__ = ["METRICS", "EpisodeTraces", "run_policy", "compare", "frontier", "oracle_gaps", "oracle_curve", "DEFAULT_POLICIES", "DEFAULT_SCENARIOS",
+__all__ = ["METRICS", "EpisodeTraces", "run_policy", "run_policies", "compare", "frontier", "oracle_gaps", "oracle_curve", "DEFAULT_POLICIES", "DEFAULT_SCENARIOS",
            "REFERENCE", "plot_transitions", "plot_frontier", "shipped_seed_groups"]
 
 METRICS = ("overshoot_pct", "reached_short_mode", "peak_i2_a", "energy_before_stop_j", "energy_after_stop_j",
@@ -82,14 +82,14 @@ class EpisodeTraces:
     metrics: dict
 
 
-def _rollout(pol, venv, episodes: int, seed: int):
-    obs, info = venv.reset(seed=seed)
-    T = venv.config.n_steps
+def _rollout(pol, venv, seeds):
+    obs, info = venv.reset(seed=seeds)
+    T, n = venv.config.n_steps, venv.num_envs
     keys = ("i2_peak_a", "i2_a", "d_short", "rect_current_a", "charge_cmd_a", "energy_j", "i2_peak_envelope_a", "lm_h")
-    rec = {k: np.empty((T, episodes)) for k in keys}
-    rew = np.empty((T, episodes))
+    rec = {k: np.empty((T, n)) for k in keys}
+    rew = np.empty((T, n))
     for k in range(T):
-        d = np.asarray(pol.act(obs), dtype=float).reshape(episodes)
+        d = np.asarray(pol.act(obs), dtype=float).reshape(n)
         obs, r, term, trunc, last = venv.step((2.0 * np.clip(d, 0.0, 1.0) - 1.0)[:, None].astype(np.float32))
         rew[k] = r
         for key in keys:
@@ -100,15 +100,37 @@ def _rollout(pol, venv, episodes: int, seed: int):
 def run_policy(name: str, scenario: str, episodes: int, seed: int, config=None) -> EpisodeTraces:
     """Run policy ``name`` (a :func:`policies.make` name, e.g. ``rl:PATH`` or ``model_based_budget:0.02``)
     on ``episodes`` windows seeded ``seed + i``."""
+    return run_policies([name], scenario, episodes, seed, config)[name]
+
+
+def run_policies(names, scenario: str, episodes: int, seed: int, config=None) -> dict:
+    """:func:`run_policy` of every name in ``names`` (duplicates run once), side by side in one batched
+    env of ``len(names) x episodes`` rows (:class:`policies.batched.BlockPolicy`: each policy on its own
+    block of the same windows; a run of learned seeds as one stacked network); ``{name: EpisodeTraces}``,
+    each equal to its separate run."""
     from envs import SbarChargingVectorEnv
-    from envs.objective import short_mode_i2_a
 
     from . import make
+    from .batched import BlockPolicy
 
-    venv = SbarChargingVectorEnv(num_envs=episodes, scenario=scenario, config=config)
-    pol = make(name, venv.policy_context)
-    pol.reset(episodes)
-    rec, rew, t_stop, last = _rollout(pol, venv, episodes, seed)
+    names = list(dict.fromkeys(names))
+    n = int(episodes)
+    venv = SbarChargingVectorEnv(num_envs=len(names) * n, scenario=scenario, config=config)
+    pol = BlockPolicy([make(name, venv.policy_context) for name in names], n)
+    pol.reset(venv.num_envs)
+    rec, rew, t_stop, last = _rollout(pol, venv, [int(seed) + i for i in range(n)] * len(names))
+    out = {name: _traces(venv, rec, rew, t_stop, last, slice(b * n, (b + 1) * n)) for name, b in zip(names, pol.block)}
+    venv.close()
+    return out
+
+
+def _traces(venv, rec, rew, t_stop, last, rows) -> EpisodeTraces:
+    """The traces and metrics of the block ``rows`` of a :func:`_rollout`."""
+    from envs.objective import short_mode_i2_a
+
+    rec = {k: v[:, rows] for k, v in rec.items()}
+    rew, t_stop = rew[:, rows], t_stop[rows]
+    last = {k: np.asarray(v)[rows] for k, v in last.items()}
     dt, T = venv.config.dt_s, venv.config.n_steps
     t = (np.arange(T) + 1) * dt
     after = (t - dt)[:, None] >= t_stop[None, :] - 1e-12   # steps scored against the stop (envs.objective)
@@ -127,7 +149,6 @@ def run_policy(name: str, scenario: str, episodes: int, seed: int, config=None) 
         # not a table column: the overshoot of the envelope (the fundamental, the paper's quantity)
         "envelope_overshoot_pct": 100.0 * np.where(after, rec["i2_peak_envelope_a"] / i2_sm - 1.0, -np.inf).max(axis=0),
     }
-    venv.close()
     return EpisodeTraces(t, rec["i2_peak_a"], rec["i2_a"], rec["d_short"], rec["rect_current_a"],
                          rec["charge_cmd_a"], t_stop, m)
 
@@ -154,8 +175,9 @@ def _row_seeds(label, scenario, per_seed, ref):
 
 def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: int = DEFAULT_EPISODES,
             seed: int = 1000, progress: bool = False, config=None, train_seeds: dict | None = None,
-            reference: str = REFERENCE):
-    """Run every policy on every scenario (same seeds); returns ``(rows, traces)``.
+            reference: str = REFERENCE, fork: bool = True):
+    """Run every policy on every scenario (same seeds); returns ``(rows, traces)``; ``fork``: the MPC's runs
+    in a forked process beside the others where possible (:mod:`policies.forked`; the same results).
 
     ``train_seeds`` maps a label to several model specs of one kind (e.g. ``rl:run_s0/ppo_sbar.zip``,
     ...): one row each, aggregated over the seeds. Rows hold ``<metric>``, ``<metric>_lo/_hi`` (95 %)
@@ -169,22 +191,64 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
     jobs = [(s, g) for s in scenarios for g in groups]
     bar = tqdm(total=len(jobs), desc="compare", unit="run", disable=not progress, dynamic_ncols=True)
     with single_blas_thread():   # batched small matrices (policies.threads)
-        _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar)
+        _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar, fork)
     bar.close()
     return rows, traces
 
 
-def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar):
-    """The runs of :func:`compare` (rows and traces filled in place)."""
-    for s in scenarios:
-        ref_tr = run_policy(reference, s, int(episodes), int(seed), config)
-        for label, specs in groups:
-            trs = [ref_tr if sp == reference else run_policy(sp, s, int(episodes), int(seed), config) for sp in specs]
-            traces[(label, s)] = trs[0]
-            ref = None if label == reference else ref_tr.metrics
-            rows.append(_row_one(label, s, trs[0].metrics, ref) if len(trs) == 1
-                        else _row_seeds(label, s, [t.metrics for t in trs], ref))
-            bar.update(1)
+#: policies run in a forked process beside the others (:mod:`policies.forked`): the MPC's QPs are ~40 % of the CPU
+FORKED = ("mpc",)
+
+
+def _forked_runs(specs, scenarios, episodes, seed, config) -> dict:
+    """``{scenario: {spec: EpisodeTraces}}`` of ``specs`` (the forked child's work)."""
+    with single_blas_thread():
+        return {s: run_policies(specs, s, episodes, seed, config) for s in scenarios}
+
+
+def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar, fork=True):
+    """The runs of :func:`compare` (rows and traces filled in place); with ``fork`` the :data:`FORKED`
+    policies run in a child process (:class:`policies.forked.Forked`) on the same windows meanwhile."""
+    from .forked import Forked, available
+
+    n, seed = int(episodes), int(seed)
+    specs = list(dict.fromkeys([reference] + [sp for _, sps in groups for sp in sps]))
+    heavy = [sp for sp in specs if sp.split(":", 1)[0] in FORKED and sp != reference] \
+        if fork and len(specs) > 1 and available() else []
+    job = None
+    if heavy:   # numba's kernels loaded before the fork (the child inherits them), its thread pool not yet
+        from envs import SbarChargingVectorEnv
+        SbarChargingVectorEnv(num_envs=1, scenario=scenarios[0], config=config).reset(seed=seed)
+        job = Forked(_forked_runs, heavy, scenarios, n, seed, config)
+    placed, refs = {}, {}
+    try:
+        for s in scenarios:
+            runs = run_policies([sp for sp in specs if sp not in heavy], s, n, seed, config)
+            refs[s] = runs[reference]
+            _add_rows(s, groups, reference, runs, placed, bar)
+        for s, runs in (job.result() if job else {}).items():
+            _add_rows(s, groups, reference, {**runs, reference: refs[s]}, placed, bar)
+    except BaseException:
+        if job:
+            job.cancel()
+        raise
+    for s in scenarios:   # rows and traces in the order of the scenarios and groups
+        for label, _ in groups:
+            rows.append(placed[(s, label)][0])
+            traces[(label, s)] = placed[(s, label)][1]
+
+
+def _add_rows(s, groups, reference, runs, placed, bar):
+    """The row and trace of each group of scenario ``s`` whose runs are all in ``runs`` (not yet placed)."""
+    ref_tr = runs[reference]
+    for label, specs in groups:
+        if (s, label) in placed or not all(sp in runs for sp in specs):
+            continue
+        trs = [runs[sp] for sp in specs]
+        ref = None if label == reference else ref_tr.metrics
+        placed[(s, label)] = (_row_one(label, s, trs[0].metrics, ref) if len(trs) == 1
+                              else _row_seeds(label, s, [t.metrics for t in trs], ref), trs[0])
+        bar.update(1)
 
 
 def frontier(scenario: str = "nominal", budgets=None, episodes: int = DEFAULT_EPISODES, seed: int = 1000, config=None,
@@ -198,11 +262,17 @@ def frontier(scenario: str = "nominal", budgets=None, episodes: int = DEFAULT_EP
 
     out = []
     budgets = BUDGET_SWEEP if budgets is None else budgets
-    for b in tqdm(budgets, desc="frontier", unit="budget", disable=not progress, leave=False):
+    runs = {}
+    for b in budgets:
         tr = (traces or {}).get((f"model_based_budget:{b:g}", scenario))
-        if tr is None or len(tr.metrics["return"]) != episodes:
-            with single_blas_thread():
-                tr = run_policy(f"model_based_budget:{b:g}", scenario, episodes, seed, config)
+        if tr is not None and len(tr.metrics["return"]) == episodes:
+            runs[f"model_based_budget:{b:g}"] = tr
+    todo = [f"model_based_budget:{b:g}" for b in budgets if f"model_based_budget:{b:g}" not in runs]
+    if todo:   # the budgets not in compare's traces, side by side in one batched env
+        with single_blas_thread():
+            runs.update(run_policies(todo, scenario, episodes, seed, config))
+    for b in tqdm(budgets, desc="frontier", unit="budget", disable=not progress, leave=False):
+        tr = runs[f"model_based_budget:{b:g}"]
         out.append({"budget": float(b), **_row_one(f"model_based_budget:{b:g}", scenario, tr.metrics, None)})
     return out
 

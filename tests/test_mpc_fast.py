@@ -99,13 +99,13 @@ def test_frontier_reuses_compares_budgeted_runs(monkeypatch):
     _, traces = cmp.compare(policies=("model_based_budget:0.01",), scenarios=("nominal",), episodes=3)
     fresh = cmp.frontier("nominal", budgets=(0.01, 0.05), episodes=3)
     ran = []
-    run = cmp.run_policy
+    run = cmp.run_policies   # the budgets not reused run side by side in one batched env
 
-    def counted(name, *a, **k):
-        ran.append(name)
-        return run(name, *a, **k)
+    def counted(names, *a, **k):
+        ran.extend(names)
+        return run(names, *a, **k)
 
-    monkeypatch.setattr(cmp, "run_policy", counted)
+    monkeypatch.setattr(cmp, "run_policies", counted)
     reused = cmp.frontier("nominal", budgets=(0.01, 0.05), episodes=3, traces=traces)
     assert ran == ["model_based_budget:0.05"]
     assert [r["energy_after_stop_j"] for r in reused] == [r["energy_after_stop_j"] for r in fresh]

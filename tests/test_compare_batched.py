@@ -1,0 +1,149 @@
+"""compare's batching (policies.batched): several policies side by side in one vector env, and the
+training seeds of a learned kind as one stacked network, give each policy exactly (to the bit) the
+traces and metrics of its own separate run on the same windows."""
+
+import numpy as np
+import pytest
+
+from policies import make
+from policies.batched import BlockPolicy, StackedRL
+from policies.compare import run_policies, run_policy, shipped_seed_groups
+
+FIELDS = ("i2_peak_a", "i2_a", "d_short", "rect_current_a", "charge_cmd_a", "t_stop_s")
+
+
+def _assert_same(batched, separate):
+    for f in FIELDS:
+        np.testing.assert_array_equal(getattr(batched, f), getattr(separate, f), err_msg=f)
+    assert batched.metrics.keys() == separate.metrics.keys()
+    for k in separate.metrics:
+        np.testing.assert_array_equal(batched.metrics[k], separate.metrics[k], err_msg=k)
+
+
+def test_batched_classical_policies_equal_their_separate_runs_row_by_row():
+    names = ["step", "ramp", "model_based", "model_based_budget:0.02", "hysteresis", "model_based_online", "random"]
+    runs = run_policies(names, "lm_mismatch", episodes=5, seed=321)
+    assert list(runs) == names
+    for name in names:
+        _assert_same(runs[name], run_policy(name, "lm_mismatch", 5, 321))
+    # the blocks are the policies' own: different controllers give different duties on the same windows
+    assert not np.array_equal(runs["step"].d_short, runs["ramp"].d_short)
+    assert runs["model_based_budget:0.02"].metrics["energy_after_stop_j"].mean() < \
+        runs["model_based"].metrics["energy_after_stop_j"].mean()
+
+
+def test_model_based_family_is_one_controller_with_a_budget_per_row():
+    pols = [make(s) for s in ("model_based", "ramp", "model_based_budget:0.02", "model_based_budget:0.1")]
+    bp = BlockPolicy(pols, 4)
+    assert [(b, k, type(p).__name__) for b, k, p in bp.units] == [(0, 3, "StackedModelBased"), (3, 1, "RampPolicy")]
+    assert bp.block == [0, 3, 1, 2]
+    np.testing.assert_array_equal(bp.units[0][2].budgets, [0.0, 0.02, 0.1])
+    assert [type(p).__name__ for _, _, p in BlockPolicy(pols, 1).units] == [   # one row: each alone (scalar path)
+        "ModelBasedPolicy", "RampPolicy", "BudgetedModelBasedPolicy", "BudgetedModelBasedPolicy"]
+    runs = run_policies(["model_based_budget:0.1", "ramp", "model_based"], "battery", episodes=3, seed=11)
+    for name in runs:
+        _assert_same(runs[name], run_policy(name, "battery", 3, 11))
+
+
+def test_duplicate_names_run_once_on_the_same_windows():
+    runs = run_policies(["ramp", "ramp", "step"], "nominal", episodes=3, seed=7)
+    assert list(runs) == ["ramp", "step"]
+    np.testing.assert_array_equal(runs["ramp"].t_stop_s, runs["step"].t_stop_s)   # paired: same windows
+
+
+@pytest.mark.parametrize("kind", ["ppo_lagrangian", "residual", "imitation"])
+def test_stacked_training_seeds_equal_separate_runs_row_by_row(kind):
+    pytest.importorskip("stable_baselines3")
+    specs = shipped_seed_groups()[kind]
+    runs = run_policies(specs, "nominal", episodes=4, seed=1000)
+    for sp in specs:
+        _assert_same(runs[sp], run_policy(sp, "nominal", 4, 1000))
+    # the seeds are different networks: their duties differ
+    assert not np.array_equal(runs[specs[0]].d_short, runs[specs[1]].d_short)
+
+
+def test_block_policy_stacks_consecutive_seeds_only():
+    pytest.importorskip("stable_baselines3")
+    groups = shipped_seed_groups()
+    pols = [make(s) for s in groups["ppo_lagrangian"]] + [make("ramp")] + [make(s) for s in groups["residual"][:2]]
+    bp = BlockPolicy(pols, 3)
+    assert [(b, k, type(p).__name__) for b, k, p in bp.units] == [
+        (0, 5, "StackedRL"), (5, 1, "RampPolicy"), (6, 2, "StackedRL")]
+
+
+def test_stacked_actor_equals_each_policys_act():
+    pytest.importorskip("stable_baselines3")
+    pols = [make(s) for s in shipped_seed_groups()["ppo_lagrangian"]]
+    obs = np.random.default_rng(3).uniform(-1.0, 1.0, (len(pols) * 7, 8)).astype(np.float32)
+    st = StackedRL(pols)
+    st.reset(7)
+    got = st.act(obs)
+    for b, p in enumerate(pols):
+        p.reset(7)
+        np.testing.assert_array_equal(got[b * 7:(b + 1) * 7], p.act(obs[b * 7:(b + 1) * 7]))
+
+
+def test_forked_mpc_runs_equal_in_process_runs():
+    """The MPC's runs in a forked child (policies.forked) give the rows and traces of the same runs
+    in-process; run in a fresh interpreter, where numba's thread pool has not started (fork allowed)."""
+    pytest.importorskip("daqp")
+    import json
+    import os
+    import subprocess
+    import sys
+    code = (
+        "import json, numpy as np, policies.forked as f\n"
+        "from policies.compare import compare\n"
+        "made = []\n"
+        "init = f.Forked.__init__\n"
+        "def rec(self, *a):\n"
+        "    init(self, *a); made.append(self.proc is not None)\n"
+        "f.Forked.__init__ = rec\n"
+        "args = (('ramp', 'mpc', 'model_based'), ('nominal', 'windy'))\n"
+        "r1, t1 = compare(*args, episodes=3, seed=77)\n"
+        "r2, t2 = compare(*args, episodes=3, seed=77, fork=False)\n"
+        "same = list(t1) == list(t2) and all(np.array_equal(t1[k].d_short, t2[k].d_short) for k in t2)\n"
+        "print(json.dumps({'made': made, 'rows': r1 == r2, 'traces': same, 'order': [r['policy'] for r in r1]}))\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    res = json.loads(out.stdout.strip().splitlines()[-1])
+    assert res["made"] == [True]    # the first compare forked (the second had fork=False)
+    assert res["rows"] and res["traces"]
+    assert res["order"] == ["ramp", "mpc", "model_based"] * 2
+
+
+def test_tabulated_t_quantiles_are_scipys():
+    from scipy.special import stdtrit
+
+    from policies.stats import _t_quantile
+    for df in range(1, 40):
+        assert _t_quantile(df, 0.975) == float(stdtrit(df, 0.975))
+    assert _t_quantile(4, 0.95) == float(stdtrit(4, 0.95))
+    assert _t_quantile(4, 0.975) > _t_quantile(30, 0.975) > 1.959963984540054   # wider with fewer seeds; -> normal
+
+
+def test_forked_child_that_dies_is_run_again_in_the_parent_and_errors_are_raised():
+    import os
+    import subprocess
+    import sys
+    code = (
+        "import os\n"
+        "from policies.forked import Forked, available\n"
+        "parent = os.getpid()\n"
+        "def work(x):\n"
+        "    if os.getpid() != parent:\n"
+        "        os._exit(3)   # the child dies without an answer\n"
+        "    return x + 1\n"
+        "def bad():\n"
+        "    raise ValueError('in the child')\n"
+        "print(available(), Forked(work, 41).result())\n"
+        "try:\n"
+        "    Forked(bad).result()\n"
+        "except ValueError as exc:\n"
+        "    print(exc)\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    lines = out.stdout.strip().splitlines()
+    assert lines[-2] == f"{len(os.sched_getaffinity(0)) > 1} 42" and lines[-1] == "in the child"
