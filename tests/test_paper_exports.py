@@ -54,7 +54,7 @@ def test_envelope_table_labels_its_max_as_the_fundamental(switching_run, capsys)
 
 
 def test_waveforms_bad_input_exits_2_before_simulating(tmp_path, capsys):
-    assert main(["paper", "--waveforms", str(tmp_path / "w.csv"), "--no-plot"]) == 2   # envelope model
+    assert main(["paper", "--waveforms", str(tmp_path / "w.csv"), "--no-plot"]) == 2   # the default (modal) model
     assert main(["paper", "--model", "switching", "--waveforms", str(tmp_path / "w.txt"), "--no-plot"]) == 2
     err = capsys.readouterr().err
     assert "--waveforms" in err and ".parquet" in err and not list(tmp_path.iterdir())
