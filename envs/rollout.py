@@ -146,12 +146,22 @@ class DutyRollout:
 _REPLAY = []
 
 
+def _here():
+    """This file, for :func:`wpt_receiver.kernel_cache.drop_stale_cache`."""
+
+
 def _replay():
     """The compiled replay loop (built on first use: numba is imported only then)."""
     if not _REPLAY:
         from numba import njit
 
+        from wpt_receiver.kernel_cache import drop_stale_cache
+
+        from . import layout, objective, vector_kernel
         from .vector_kernel import step_kernel
+
+        # the replay's cache holds the env step's code: dropped when it changes (numba keys on this file)
+        drop_stale_cache(_here, (vector_kernel, layout, objective))
 
         @njit(cache=True)
         def replay(duty, state, k, j, coef_all, coef_cur, bat, cmd_all, noise_all, lm_all, ep, slow_every, n_sub,

@@ -22,6 +22,7 @@ Depends on nothing else of dronewpt. Modules, in the order data flows:
 ``modal``               envelope on the exact coupled modes w/sqrt(1 -+ k), SBAR v2 balanced
 ``modal_kernel``        the exact-mode link step compiled (numba, imported on demand): modes per Lm,
                         ZOH per dt, energies, v2 with quadrature and peak from a table
+``kernel_cache``        numba's cache of a kernel dropped when a module it compiles in changes
 ``sizing``              rectifier rating, parts and mass per policy (switching or envelope runs)
 ``detuning``            C1 / C2 off resonance: overshoot table of the controllers
 ``c_export``            the controller (Fig. 5) as generated C99 for a DSP, test vectors, op count

@@ -59,7 +59,20 @@ from wpt_receiver.modal_kernel import (MC_G1, MC_G2, MC_LAM, N_MODES_C, N_ZOH_C,
                                        rect_affine, rect_current_a, sbar_clamp_f, sbar_edge, stored_energy_j, zoh)
 from wpt_receiver.modal_kernel import step as modal_step
 
+from wpt_receiver import modal_kernel as _modal_kernel
+from wpt_receiver.kernel_cache import drop_stale_cache
+
+from .. import contract as _contract
 from ..contract import OBS_DIM
+
+
+def _here():
+    """This file, for :func:`wpt_receiver.kernel_cache.drop_stale_cache`."""
+
+
+# numba's cache of this module holds the link kernel's code and the contract's constants: dropped when
+# those files change (numba keys the cache on this file alone)
+drop_stale_cache(_here, (_modal_kernel, _contract))
 
 __all__ = ["advance", "advance_for", "link_disc", "link_step", "link_stored_j", "LW_SIZE", "STATE_DTYPE",
            "CONST_DTYPE", "SAMPLE_DTYPE", "OK", "DONE", "PAUSED", "FULL", "NEED_ACT", "NEED_NOISE", "DEPLETED",

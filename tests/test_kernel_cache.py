@@ -1,0 +1,68 @@
+"""numba's cache of a kernel that compiles in another module's function is dropped when that module
+changes (wpt_receiver.kernel_cache; numba alone keys the cache on the caller's file and would load the
+stale machine code). Checked on a two-module package in a temporary folder, in fresh processes."""
+
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+pytest.importorskip("numba")
+
+DEP = """
+from numba import njit
+
+@njit(cache=True)
+def increment():
+    return {value}
+"""
+
+CALLER = """
+from numba import njit
+
+import dep
+from wpt_receiver.kernel_cache import drop_stale_cache
+
+
+def _here():
+    pass
+
+
+if {guard}:
+    drop_stale_cache(_here, (dep,))
+
+
+@njit(cache=True)
+def total(x):
+    return x + dep.increment()
+"""
+
+
+@pytest.mark.parametrize("guard", [False, True], ids=["numba-alone", "drop_stale_cache"])
+def test_a_changed_dependency_reaches_the_cached_caller(tmp_path, guard):
+    from pathlib import Path
+
+    import wpt_receiver
+    root = Path(wpt_receiver.__file__).resolve().parents[1]
+    sys_path0 = str(root)
+    folder = tmp_path / "pkg"
+    folder.mkdir()
+
+    def run(value):
+        (folder / "dep.py").write_text(textwrap.dedent(DEP.format(value=value)))
+        (folder / "caller.py").write_text(textwrap.dedent(CALLER.format(guard=guard)))
+        out = subprocess.run([sys.executable, "-c", "import caller; print(caller.total(10))"], cwd=folder,
+                             capture_output=True, text=True, env={"PYTHONPATH": f"{folder}:{sys_path0}",
+                                                                  "PATH": "/usr/bin:/bin"}, check=True)
+        return int(out.stdout.strip())
+
+    assert run(1) == 11
+    assert list((folder / "__pycache__").glob("caller.*.nbi"))   # cached
+    got = run(2)
+    if guard:
+        assert got == 12                                      # recompiled with the new dependency
+        assert (folder / "__pycache__" / "caller.deps").exists()
+        assert run(2) == 12                                   # and cached again (the stamp matches)
+    else:
+        assert got == 11                                      # numba's documented limitation: stale

@@ -1,0 +1,66 @@
+"""numba's on-disk cache of a module whose compiled functions call into other modules, kept in step with them.
+
+numba keys a ``cache=True`` function's cache on its own source file: code it compiles in from another
+module (a called ``@njit`` function, a global constant such as a named slot) is frozen into the
+cached machine code, and a change to that other file does not invalidate it (numba's documentation,
+"Cache invalidation fails to recognize changes in symbols defined in a different file"; numba issues
+#1833, #9304). :func:`drop_stale_cache` closes the gap for a dependent module: called at its import,
+before any of its functions is compiled or loaded, it compares a hash of its dependencies' sources
+with a stamp kept beside numba's cache files and, when they differ, deletes the dependent module's
+``.nbi`` / ``.nbc`` files (numba then compiles afresh and caches again) and writes the new stamp.
+
+Used by :mod:`mission_sim.world.loop_kernel` (on :mod:`wpt_receiver.modal_kernel`),
+:mod:`envs.vector_kernel` and :mod:`envs.rollout`'s replay loop.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+__all__ = ["drop_stale_cache", "dependency_hash"]
+
+
+def dependency_hash(modules) -> str:
+    """sha256 over the source files of ``modules`` (module objects or file paths), in the given order."""
+    h = hashlib.sha256()
+    for m in modules:
+        path = Path(m if isinstance(m, (str, os.PathLike)) else m.__file__)
+        h.update(path.name.encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+def drop_stale_cache(here, modules) -> bool:
+    """Delete the numba cache of the module that defines the plain function ``here`` when the sources of
+    ``modules`` (what its compiled functions call or read) changed since the stamp; True if it did.
+
+    The cache folder is numba's own choice for that module (its cache locators, as for a ``cache=True``
+    function defined there: its
+    ``__pycache__``, or ``NUMBA_CACHE_DIR``); the stamp is ``<module>.deps`` there. Nothing happens when
+    numba has no usable cache folder; a folder that cannot be written leaves the cache as it is."""
+    from numba.core.caching import CompileResultCacheImpl
+    try:
+        folder = Path(CompileResultCacheImpl(here).locator.get_cache_path())
+    except RuntimeError:      # no cache locator applies (numba would not cache either)
+        return False
+    stem = Path(here.__code__.co_filename).stem
+    stamp = folder / f"{stem}.deps"
+    digest = dependency_hash(modules)
+    try:
+        if stamp.read_text() == digest:
+            return False
+    except OSError:
+        pass
+    try:
+        for f in folder.glob(f"{stem}.*"):
+            if f.suffix in (".nbi", ".nbc"):
+                f.unlink(missing_ok=True)
+        folder.mkdir(parents=True, exist_ok=True)
+        tmp = folder / f"{stem}.deps.{os.getpid()}.tmp"
+        tmp.write_text(digest)
+        os.replace(tmp, stamp)
+    except OSError:
+        return False
+    return True
