@@ -34,12 +34,15 @@ from pathlib import Path
 
 import numpy as np
 
-from mission_sim.contract import PolicyContext, duty_to_action
+from mission_sim.contract import OBS_INDEX, PolicyContext, denormalise_obs_field, duty_to_action
 
 from .mpc import MPCPolicy
 
-__all__ = ["BudgetScheduledMPC", "SlowBudgetVecEnv", "SlowBudgetPolicy", "budget_of_action", "parse_budget_range",
-           "BUDGET_RANGE", "PRETRAINED_SLOW_BUDGET"]
+__all__ = ["BudgetScheduledMPC", "BudgetLatch", "SlowBudgetVecEnv", "SlowBudgetPolicy", "budget_of_action",
+           "parse_budget_range", "BUDGET_RANGE", "PRETRAINED_SLOW_BUDGET", "EVERY"]
+
+#: how often the agent's budget is taken: every control period, or once per window at the stop and held
+EVERY = ("window", "step")
 
 #: default range of the learned budget [measured overshoot fraction]
 BUDGET_RANGE = (0.0, 0.15)
@@ -100,6 +103,40 @@ class BudgetScheduledMPC(MPCPolicy):
         return super()._after_stop(e, z, vl, u_prev)
 
 
+class BudgetLatch:
+    """The budget actually applied per receiver: with ``every="step"`` the agent's of this step; with
+    ``"window"`` the agent's action at the first control period after the stop (command 0), held for the
+    rest of the window (a contextual bandit per window: one exploration sample per window, so a
+    stochastic rollout measures the overshoot of one budget, not the peak of a noisy bound). Before
+    the stop the budget has no effect on the MPC; a receiver whose command turns positive again is in a
+    new window and is released."""
+
+    _CMD = OBS_INDEX["charge_cmd_a"]
+
+    def __init__(self, lo: float, hi: float, every: str = "window"):
+        if every not in EVERY:
+            raise ValueError(f"every={every!r} is invalid; valid values: {', '.join(EVERY)}")
+        self.lo, self.hi, self.every = float(lo), float(hi), every
+        self.held = None
+
+    def reset(self, n: int) -> None:
+        self.held = np.full(int(n), np.nan)
+
+    def __call__(self, obs, action) -> np.ndarray:
+        """Budgets (n,) for the receivers of ``obs`` given the agent's actions (n,) in [-1, 1]."""
+        b = budget_of_action(action, self.lo, self.hi)
+        if self.every == "step":
+            return b
+        o = np.atleast_2d(obs)
+        if self.held is None or len(self.held) != len(o):
+            self.reset(len(o))
+        stopped = np.array([denormalise_obs_field(row, self._CMD) <= 0.0 for row in o])
+        self.held[~stopped] = np.nan
+        take = stopped & np.isnan(self.held)
+        self.held[take] = b[take]
+        return np.where(stopped, self.held, self.lo)
+
+
 def _wrapper_base():
     from stable_baselines3.common.vec_env import VecEnvWrapper
     return VecEnvWrapper
@@ -113,23 +150,26 @@ class SlowBudgetVecEnv(_wrapper_base()):
     whose command turns positive after its stop (autoreset: a new window) and is reset with the env.
     """
 
-    def __init__(self, venv, lo: float = BUDGET_RANGE[0], hi: float = BUDGET_RANGE[1], budget0: float | None = None):
+    def __init__(self, venv, lo: float = BUDGET_RANGE[0], hi: float = BUDGET_RANGE[1], every: str = "window"):
         from gymnasium import spaces
         self.lo, self.hi = parse_budget_range((lo, hi))
+        self.latch = BudgetLatch(self.lo, self.hi, every)
         super().__init__(venv, action_space=spaces.Box(-1.0, 1.0, (1,), np.float32))
         ctx = venv.get_attr("policy_context")[0]
-        self.base = BudgetScheduledMPC(ctx, budget=self.lo if budget0 is None else float(budget0))
+        self.base = BudgetScheduledMPC(ctx, budget=self.lo)
         self.base.reset(self.num_envs)
+        self.latch.reset(self.num_envs)
         self._obs = None
         self.last_budgets = np.full(self.num_envs, self.lo)
 
     def reset(self):
         self._obs = self.venv.reset()
         self.base.reset(self.num_envs)
+        self.latch.reset(self.num_envs)
         return self._obs
 
     def step_async(self, actions):
-        self.last_budgets = budget_of_action(actions, self.lo, self.hi)
+        self.last_budgets = self.latch(self._obs, actions)
         self.base.set_budgets(self.last_budgets)
         d = np.asarray(self.base.act(self._obs), dtype=float).reshape(self.num_envs)
         self.venv.step_async(duty_to_action(d)[:, None].astype(np.float32))
@@ -155,6 +195,7 @@ class SlowBudgetPolicy:
             raise ValueError(f"{self.rl.path.name} is not a slow-budget model (train it with "
                              "`dronewpt train --slow-budget LO:HI`)")
         self.lo, self.hi = parse_budget_range((sb["lo"], sb["hi"]))
+        self.latch = BudgetLatch(self.lo, self.hi, sb.get("every", "step"))
         self.base = BudgetScheduledMPC(ctx, budget=self.lo)
         self.last_budgets = None
         self.n = 1
@@ -163,14 +204,16 @@ class SlowBudgetPolicy:
         self.n = int(n)
         self.base.reset(n)
         self.rl.reset(n)
+        self.latch.reset(n)
 
     def budgets(self, obs) -> np.ndarray:
-        """The budget the agent chooses for each receiver of ``obs`` [fraction]."""
+        """The budget the agent chooses for each receiver of ``obs`` now [fraction] (before the latch)."""
         u = np.asarray(self.rl.act(obs), dtype=float).reshape(-1)   # RLPolicy: (a + 1) / 2, clipped to [0, 1]
         return self.lo + u * (self.hi - self.lo)
 
     def act(self, obs):
         obs = np.atleast_2d(np.asarray(obs, dtype=np.float32))
-        self.last_budgets = self.budgets(obs)
+        b = self.budgets(obs)
+        self.last_budgets = self.latch(obs, 2.0 * (b - self.lo) / (self.hi - self.lo) - 1.0)
         self.base.set_budgets(self.last_budgets)
         return self.base.act(obs)

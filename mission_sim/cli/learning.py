@@ -65,6 +65,9 @@ def _add_train(sub):
     p.add_argument("--slow-budget", default=None, metavar="LO:HI",
                    help="the action is the MPC's measured-overshoot budget in [LO, HI] per control period, the duty "
                         "the MPC's (a slow variable: no dither of the duty; policies.slow_budget), e.g. 0:0.15")
+    p.add_argument("--slow-budget-every", choices=("window", "step"), default="window",
+                   help="with --slow-budget: take the agent's budget once per window at the stop and hold it "
+                        "(default) or every control period")
     p.add_argument("--history", type=int, default=1, metavar="K",
                    help="frame stack: the policy sees the last K observations (default 1; envs.history)")
     p.add_argument("--action-filter", type=float_arg("--action-filter"), default=0.0, metavar="ALPHA",
@@ -176,6 +179,7 @@ def _cmd_train(args) -> int:
                     history=args.history, action_filter=args.action_filter, smooth_penalty=args.smooth_penalty,
                     imitate=args.imitate, dagger=args.dagger, imitation_episodes=args.imitation_episodes,
                     imitation_epochs=args.imitation_epochs, slow_budget=args.slow_budget,
+                    slow_budget_every=args.slow_budget_every,
                     imitation_mask=tuple(f.strip() for f in args.imitation_mask.split(",") if f.strip()))
     except ValueError as exc:
         raise CliError(str(exc)) from None
