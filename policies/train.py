@@ -392,33 +392,29 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
           eval_episodes: int = 32, eval_every: int = 50_000, checkpoint_every: int = 100_000, resume=None,
           probe_episodes: int = 32, residual_base_budget: float = 0.0, history: int = 1, action_filter: float = 0.0,
           smooth_penalty: float = 0.0, imitate: str | None = None, dagger: int = 0, imitation_episodes: int = 64,
-          imitation_epochs: int = 30, imitation_mask: tuple = ("last_d_short",), slow_budget=None,
-          slow_budget_every: str = "window") -> dict:
+          imitation_epochs: int = 30, imitation_mask: tuple = ("last_d_short",), slow_budget=None, slow_budget_every="window") -> dict:
     """Train ``algo`` for ``timesteps`` environment steps; returns a dict of the written paths.
 
-    ``env``: EnvConfig / reward-weight overrides (:func:`env_config`); ``cost``: ``overshoot`` or
-    ``overcurrent`` (:mod:`envs.sb3_vec`); ``lagrangian``: penalise the cost with a multiplier
-    learned against ``budget`` (default: the ramp policy's mean episode cost on ``scenario``);
-    ``residual``: learn a bounded correction ``residual_scale * a`` of the model-based duty (of the
-    budgeted model-based controller with ``residual_base_budget`` > 0);
-    ``probe_episodes``: the multiplier's cost is measured on this many deterministic windows after
-    every rollout (0: on the stochastic rollouts themselves, see :class:`policies.constrained.LagrangeCallback`).
-    ``history``: frame stack of K observations (:mod:`envs.history`); ``action_filter`` /
-    ``smooth_penalty``: low-pass filtered duty / duty-change penalty (:mod:`policies.smoothing`);
-    ``imitate``: first behaviour-clone (``dagger`` > 0: DAgger) the teacher policy of that name
-    (``privileged:NAME``: the teacher sees the present, noise-free currents) on
-    ``imitation_episodes`` windows per iteration, ``imitation_mask`` observation fields hidden from the
-    student (:mod:`policies.imitation`), then fine-tune with
-    PPO (Lagrangian with ``lagrangian``) for ``timesteps`` steps (0: imitation only).
-    ``slow_budget``: ``"LO:HI"``, the action is the MPC's overshoot budget, the duty the MPC's
-    (:mod:`policies.slow_budget`); ``slow_budget_every``: ``window`` (taken at the stop, held) or ``step``.
+    ``env``: EnvConfig / reward-weight overrides (:func:`env_config`); ``cost``: ``overshoot`` or ``overcurrent``
+    (:mod:`envs.sb3_vec`); ``lagrangian``: penalise the cost with a multiplier learned against ``budget``
+    (default: the ramp policy's mean episode cost on ``scenario``); ``residual``: learn a bounded correction
+    ``residual_scale * a`` of the model-based duty (of the budgeted controller with ``residual_base_budget`` > 0);
+    ``probe_episodes``: the multiplier's cost is measured on this many deterministic windows after every rollout
+    (0: on the stochastic rollouts themselves, see :class:`policies.constrained.LagrangeCallback`).
+    ``history``: frame stack of K observations (:mod:`envs.history`); ``action_filter`` / ``smooth_penalty``:
+    low-pass filtered duty / duty-change penalty (:mod:`policies.smoothing`); ``imitate``: first behaviour-clone
+    (``dagger`` > 0: DAgger) the teacher policy of that name (``privileged:NAME``: the teacher sees the present,
+    noise-free currents) on ``imitation_episodes`` windows per iteration, ``imitation_mask`` observation fields
+    hidden from the student (:mod:`policies.imitation`), then fine-tune with PPO (Lagrangian with
+    ``lagrangian``) for ``timesteps`` steps (0: imitation only). ``slow_budget``: ``"LO:HI"``, the action is
+    the MPC's overshoot budget, the duty the MPC's (:mod:`policies.slow_budget`); ``slow_budget_every``:
+    ``window`` (taken at the stop, held) or ``step``.
     Deterministic for a given seed on one thread (torch threads set to 1)."""
     import importlib.util
 
     import torch
     extra = dict(history=history, action_filter=action_filter, smooth_penalty=smooth_penalty, imitate=imitate,
-                 dagger=dagger, imitation_episodes=imitation_episodes, slow_budget=slow_budget,
-                 slow_budget_every=slow_budget_every)
+                 dagger=dagger, imitation_episodes=imitation_episodes, slow_budget=slow_budget, slow_budget_every=slow_budget_every)
     _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra)
     opts = dict(**extra, seed=seed, n_envs=n_envs, scenario=scenario, hyperparams=hyperparams,
                 hyperparams_file=hyperparams_file, env=env, cost=cost, lagrangian=lagrangian, budget=budget,
