@@ -50,7 +50,7 @@ def oracle_gap(tr, scenario, windows, seed):
     return gaps
 
 
-def evaluate(models, refs, scenarios, episodes, seed, kind="slow_budget", extra=(), oracle_windows=0):
+def evaluate(models, refs, scenarios, episodes, seed, kind="slow_budget", extra=(), oracle_windows=0, no_gap=()):
     from tqdm import tqdm
 
     from policies.compare import run_policy
@@ -64,7 +64,7 @@ def evaluate(models, refs, scenarios, episodes, seed, kind="slow_budget", extra=
         for p in list(refs) + list(extra) + [f"{kind}:{m}" for m in models]:
             tr = run_policy(p, s, episodes, seed)
             met[p] = tr.metrics
-            if oracle_windows and s == scenarios[0] and not p.startswith(("model_based_online",)):
+            if oracle_windows and s == scenarios[0] and p not in no_gap:
                 gaps[p] = oracle_gap(tr, s, oracle_windows, seed)
             bar.update(1)
         learned = [met[f"{kind}:{m}"] for m in models]
@@ -110,7 +110,8 @@ def report(res, kind="slow_budget"):
             print(f"  {p:<26} overshoot {_fmt(v['overshoot_pct'])} %  in SM {v['reached_short_mode'][0]:.2f}  "
                   f"E after {_fmt(v['energy_after_stop_j'], '{:.3f}')} J  return {_fmt(v['return'], '{:.1f}')}")
         for p, g in row.get("oracle_gap_pct", {}).items():
-            print(f"  gap to the oracle ({row['oracle_windows']} windows) {p:<26} {g if isinstance(g, float) else _fmt(g, '{:.1f}') if len(g) == 3 else [round(x, 1) for x in g]} %")
+            txt = f"{g:.1f}" if isinstance(g, float) else _fmt(g, "{:.1f}") if len(g) == 3 else str([round(x, 1) for x in g])
+            print(f"  gap to the oracle ({row['oracle_windows']} windows) {p:<26} {txt} %")
         for p, d in row["paired"].items():
             print(f"  {kind} - {p:<20} d return {_fmt(d['d_return_seed_t'], '{:.1f}')} (t over seeds; worst seed's "
                   f"bootstrap lo {d['d_return_boot_worst_lo']:.1f})  d overshoot {_fmt(d['d_overshoot_pts_seed_t'])} pts "
@@ -128,13 +129,14 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=1000)
     ap.add_argument("--json", default=None)
     ap.add_argument("--oracle-windows", type=int, default=0, help="gap to the oracle on the first scenario's first N")
+    ap.add_argument("--no-gap", default="model_based_online", help="policies without an oracle gap")
     a = ap.parse_args(argv)
     models = sorted(glob.glob(a.models))
     if not models:
         raise SystemExit(f"--models {a.models!r}: no file matches")
     t0, c0, l0 = time.time(), time.process_time(), os.getloadavg()
     res = evaluate(models, [r for r in a.refs.split(",") if r], a.scenarios.split(","), a.episodes, a.seed, a.kind,
-                   [e for e in a.extra.split(",") if e], a.oracle_windows)
+                   [e for e in a.extra.split(",") if e], a.oracle_windows, tuple(a.no_gap.split(",")))
     report(res, a.kind)
     info = {"models": models, "episodes": a.episodes, "seed": a.seed, "wall_s": time.time() - t0,
             "cpu_s": time.process_time() - c0, "load_before": l0, "load_after": os.getloadavg()}
