@@ -128,3 +128,15 @@ def test_latch_takes_the_budget_at_the_stop_and_holds_it():
     assert np.allclose(step(obs([5.0, 0.0]), np.array([1.0, -1.0])), [0.1, 0.0])
     with pytest.raises(ValueError, match="every"):
         BudgetLatch(0.0, 0.1, "hour")
+
+
+def test_shipped_seed_does_not_lose_to_its_base(mpc_runs):
+    """The shipped seed 0 (trained on nominal windows 0.., evaluated here on 1000-1002): more return than
+    its base at the low end of its range (mpc, budget 0) on every window, its held budgets inside the
+    range, its measured overshoot within the largest budget plus the MPC's tolerance, in short mode."""
+    from policies import make
+    pol = make("slow_budget")
+    d, r, o = _run(pol)
+    assert np.all((pol.latch.held >= pol.lo) & (pol.latch.held <= pol.hi))
+    assert np.all(r > mpc_runs[0.0][1])
+    assert np.all(o <= pol.hi + 0.005)
