@@ -140,3 +140,13 @@ def test_shipped_seed_does_not_lose_to_its_base(mpc_runs):
     assert np.all((pol.latch.held >= pol.lo) & (pol.latch.held <= pol.hi))
     assert np.all(r > mpc_runs[0.0][1])
     assert np.all(o <= pol.hi + 0.005)
+
+
+def test_cli_refuses_bad_slow_budget_before_creating_anything(tmp_path, capsys):
+    from mission_sim.cli import main
+    for extra in (["--slow-budget", "0.3:0.1"], ["--slow-budget", "0:0.1", "--residual"]):
+        out = tmp_path / "x"
+        assert main(["train", "--algo", "ppo", "--timesteps", "10", "--out", str(out), *extra]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--slow-budget" in err[0] and "valid" in err[0]
+        assert not out.exists()

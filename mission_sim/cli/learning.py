@@ -153,6 +153,9 @@ def _check_train(args):
             parse_budget_range(args.slow_budget)
         except ValueError as exc:
             raise CliError(f"--slow-budget: {exc}") from None
+        if args.algo == "dqn" or args.residual or args.imitate or args.action_filter or args.smooth_penalty:
+            raise CliError("--slow-budget is invalid with --algo dqn, --residual, --imitate, --action-filter or "
+                           "--smooth-penalty; valid: --algo ppo / sac / td3 without them (the duty is the MPC's)")
     if args.budget is not None and not args.lagrangian:
         raise CliError("--budget is only used with --lagrangian; add --lagrangian or drop --budget")
 
