@@ -3,8 +3,8 @@
 Modules: ``classical`` (step, ramp, model_based), ``kernels`` (their compiled per-step functions for
 the mission's fast path; numba, imported on demand), ``onoff``, ``online``, ``budgeted``,
 ``random_policy``, ``mpc``, ``oracle``, ``rl`` / ``residual`` / ``constrained`` / ``imitation`` / ``smoothing`` /
-``train`` / ``callbacks`` / ``hyperparams`` (RL, needs stable-baselines3), ``inference``, ``compare``, ``batched``,
-``forked``, ``stats``, ``threads``.
+``train`` / ``callbacks`` / ``hyperparams`` / ``slow_budget`` (RL, needs stable-baselines3), ``inference``,
+``compare``, ``batched``, ``forked``, ``stats``, ``threads``.
 
 >>> from policies import make
 >>> pol = make("model_based")
@@ -25,6 +25,7 @@ Modules, from the classical controllers to learning and comparing:
 ``constrained``    Lagrangian cost penalty and residual action space on SB3
 ``imitation``      behaviour cloning / DAgger of a (privileged) teacher into an SB3 PPO actor
 ``smoothing``      low-pass filtered duty and duty-change penalty (SAC / TD3 / PPO train options)
+``slow_budget``    a learned policy acting in a slow variable: the MPC's overshoot budget per step
 ``callbacks``      SB3 callbacks of ``train``: progress bar with return and cost, evaluation
 ``hyperparams``    rl-baselines3-zoo style hyperparameter files (YAML / JSON)
 ``train``          ``dronewpt train``: PPO / SAC / TD3 / DQN on the batched env, imitation, outputs and metadata
@@ -95,6 +96,13 @@ def _residual(ctx, **kwargs):
     return ResidualPolicy(ctx, **kwargs)
 
 
+def _slow_budget(ctx, **kwargs):
+    """The MPC with a learned budget per control period (:mod:`policies.slow_budget`; ``slow_budget:PATH``)."""
+    require_sb3()
+    from .slow_budget import SlowBudgetPolicy
+    return SlowBudgetPolicy(ctx, **kwargs)
+
+
 def _mpc(ctx, **kwargs):
     from .mpc import MPCPolicy
     return MPCPolicy(ctx, **kwargs)
@@ -120,9 +128,10 @@ _REGISTRY: dict[str, Callable[..., Policy]] = {
     "model_based_budget": _budgeted,
     "mpc": _mpc,
     "imitation": _imitation,
+    "slow_budget": _slow_budget,
 }
 #: names that take a model file as ``name:PATH``
-_WITH_PATH = ("rl", "ppo_lagrangian", "residual", "imitation")
+_WITH_PATH = ("rl", "ppo_lagrangian", "residual", "imitation", "slow_budget")
 
 
 def register(name: str, factory: Callable[..., Policy]) -> None:

@@ -63,6 +63,9 @@ class RLPolicy:
         if self.meta.get("residual") and not residual:
             raise ValueError(f"{self.path.name} is a residual model: run it as residual:{self.path} "
                              "(it corrects the model-based duty)")
+        if self.meta.get("slow_budget") and not residual:
+            raise ValueError(f"{self.path.name} is a slow-budget model: run it as slow_budget:{self.path} "
+                             "(its action is the MPC's budget, not a duty)")
         dt = float(self.meta["control_period_s"])
         if abs(ctx.control_period_s - dt) > 1e-9 * dt:
             raise ValueError(f"control_period_s={ctx.control_period_s!r} is invalid for {self.path.name}; "

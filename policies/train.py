@@ -140,6 +140,17 @@ def _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, ex
         raise ValueError(f"vec={vec!r} is invalid; valid values: {', '.join(VEC_PATHS)}")
     if (lagrangian or residual) and vec != "batched":
         raise ValueError(f"vec={vec!r} is invalid with the Lagrangian or residual option; valid value: batched")
+    if x.get("slow_budget") is not None:
+        from .slow_budget import parse_budget_range
+        parse_budget_range(x["slow_budget"])
+        from .slow_budget import EVERY
+        if x.get("slow_budget_every", "window") not in EVERY:
+            raise ValueError(f"slow_budget_every={x.get('slow_budget_every')!r} is invalid; valid values: {', '.join(EVERY)}")
+        if vec != "batched":
+            raise ValueError(f"vec={vec!r} is invalid with slow_budget; valid value: batched")
+        if algo == "dqn" or residual or x.get("imitate") or x.get("action_filter") or x.get("smooth_penalty"):
+            raise ValueError("slow_budget is invalid with algo='dqn', residual, imitate or action smoothing; valid: "
+                             "ppo / sac / td3 alone (the duty is the MPC's)")
     if residual and algo == "dqn":
         raise ValueError("algo='dqn' is invalid with residual=True; valid values: ppo, sac (a continuous correction)")
     envs.get_scenario(scenario)
@@ -167,6 +178,9 @@ def _base_env(spec: dict, n_envs: int, monitor_path, reset_seed=None):
     if spec["action_filter"] or spec["smooth_penalty"]:
         from .smoothing import SmoothActionVecEnv
         venv = SmoothActionVecEnv(venv, spec["action_filter"], spec["smooth_penalty"])
+    if spec.get("slow_budget"):
+        from .slow_budget import SlowBudgetVecEnv
+        venv = SlowBudgetVecEnv(venv, *spec["slow_budget"], every=spec["slow_budget_every"])
     if spec["residual"]:
         venv = ResidualVecEnv(venv, spec["residual_scale"], spec["residual_base_budget"])
     if spec["history"] > 1:
@@ -251,6 +265,8 @@ def _reproduce(spec: dict) -> str:
                 f" --residual-base-budget {spec['residual_base_budget']:g}")
     if spec["history"] > 1:
         cmd += f" --history {spec['history']}"
+    if spec.get("slow_budget"):
+        cmd += f" --slow-budget {spec['slow_budget'][0]:g}:{spec['slow_budget'][1]:g} --slow-budget-every {spec['slow_budget_every']}"
     if spec["action_filter"] or spec["smooth_penalty"]:
         cmd += f" --action-filter {spec['action_filter']:g} --smooth-penalty {spec['smooth_penalty']:g}"
     if spec["imitate"]:
@@ -281,6 +297,10 @@ def _meta(spec: dict, venv, lag, probe_dt: float) -> dict:
                                                 if spec["probe_episodes"] else "the stochastic rollouts"},
         "residual": {"scale": spec["residual_scale"], "base_budget": spec["residual_base_budget"],
                      "base": f"model_based_budget:{spec['residual_base_budget']:g}"} if spec["residual"] else None,
+        "slow_budget": {"lo": spec["slow_budget"][0], "hi": spec["slow_budget"][1], "base": "mpc",
+                        "every": spec["slow_budget_every"],
+                        "action": "b = lo + (a + 1) / 2 (hi - lo): the MPC's measured-overshoot budget"}
+        if spec.get("slow_budget") else None,
         "obs_norm": {"mean": venv.obs_rms.mean.tolist(), "var": venv.obs_rms.var.tolist(),
                      "clip": float(venv.clip_obs), "epsilon": float(venv.epsilon)},
         "eval": {"seed": EVAL_SEED, "episodes": spec["eval_episodes"], "every_steps": spec["eval_every"]},
@@ -317,6 +337,10 @@ def _spec(algo, timesteps, o: dict) -> dict:
                 history=int(o.get("history", 1)), action_filter=float(o.get("action_filter", 0.0)),
                 smooth_penalty=float(o.get("smooth_penalty", 0.0)), imitate=o.get("imitate"),
                 dagger=int(o.get("dagger", 0)), imitation_episodes=int(o.get("imitation_episodes", 64)))
+    if o.get("slow_budget") is not None:
+        from .slow_budget import parse_budget_range
+        spec["slow_budget"] = parse_budget_range(o["slow_budget"])
+        spec["slow_budget_every"] = o.get("slow_budget_every", "window")
     if spec["lagrangian"] and spec["budget"] is None:
         from .constrained import ramp_budget
         spec["budget"] = ramp_budget(spec["scenario"], cfg, spec["cost"])
@@ -368,29 +392,29 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
           eval_episodes: int = 32, eval_every: int = 50_000, checkpoint_every: int = 100_000, resume=None,
           probe_episodes: int = 32, residual_base_budget: float = 0.0, history: int = 1, action_filter: float = 0.0,
           smooth_penalty: float = 0.0, imitate: str | None = None, dagger: int = 0, imitation_episodes: int = 64,
-          imitation_epochs: int = 30, imitation_mask: tuple = ("last_d_short",)) -> dict:
+          imitation_epochs: int = 30, imitation_mask: tuple = ("last_d_short",), slow_budget=None, slow_budget_every="window") -> dict:
     """Train ``algo`` for ``timesteps`` environment steps; returns a dict of the written paths.
 
-    ``env``: EnvConfig / reward-weight overrides (:func:`env_config`); ``cost``: ``overshoot`` or
-    ``overcurrent`` (:mod:`envs.sb3_vec`); ``lagrangian``: penalise the cost with a multiplier
-    learned against ``budget`` (default: the ramp policy's mean episode cost on ``scenario``);
-    ``residual``: learn a bounded correction ``residual_scale * a`` of the model-based duty (of the
-    budgeted model-based controller with ``residual_base_budget`` > 0);
-    ``probe_episodes``: the multiplier's cost is measured on this many deterministic windows after
-    every rollout (0: on the stochastic rollouts themselves, see :class:`policies.constrained.LagrangeCallback`).
-    ``history``: frame stack of K observations (:mod:`envs.history`); ``action_filter`` /
-    ``smooth_penalty``: low-pass filtered duty / duty-change penalty (:mod:`policies.smoothing`);
-    ``imitate``: first behaviour-clone (``dagger`` > 0: DAgger) the teacher policy of that name
-    (``privileged:NAME``: the teacher sees the present, noise-free currents) on
-    ``imitation_episodes`` windows per iteration, ``imitation_mask`` observation fields hidden from the
-    student (:mod:`policies.imitation`), then fine-tune with
-    PPO (Lagrangian with ``lagrangian``) for ``timesteps`` steps (0: imitation only).
+    ``env``: EnvConfig / reward-weight overrides (:func:`env_config`); ``cost``: ``overshoot`` or ``overcurrent``
+    (:mod:`envs.sb3_vec`); ``lagrangian``: penalise the cost with a multiplier learned against ``budget``
+    (default: the ramp policy's mean episode cost on ``scenario``); ``residual``: learn a bounded correction
+    ``residual_scale * a`` of the model-based duty (of the budgeted controller with ``residual_base_budget`` > 0);
+    ``probe_episodes``: the multiplier's cost is measured on this many deterministic windows after every rollout
+    (0: on the stochastic rollouts themselves, see :class:`policies.constrained.LagrangeCallback`).
+    ``history``: frame stack of K observations (:mod:`envs.history`); ``action_filter`` / ``smooth_penalty``:
+    low-pass filtered duty / duty-change penalty (:mod:`policies.smoothing`); ``imitate``: first behaviour-clone
+    (``dagger`` > 0: DAgger) the teacher policy of that name (``privileged:NAME``: the teacher sees the present,
+    noise-free currents) on ``imitation_episodes`` windows per iteration, ``imitation_mask`` observation fields
+    hidden from the student (:mod:`policies.imitation`), then fine-tune with PPO (Lagrangian with
+    ``lagrangian``) for ``timesteps`` steps (0: imitation only). ``slow_budget``: ``"LO:HI"``, the action is
+    the MPC's overshoot budget, the duty the MPC's (:mod:`policies.slow_budget`); ``slow_budget_every``:
+    ``window`` (taken at the stop, held) or ``step``.
     Deterministic for a given seed on one thread (torch threads set to 1)."""
     import importlib.util
 
     import torch
     extra = dict(history=history, action_filter=action_filter, smooth_penalty=smooth_penalty, imitate=imitate,
-                 dagger=dagger, imitation_episodes=imitation_episodes)
+                 dagger=dagger, imitation_episodes=imitation_episodes, slow_budget=slow_budget, slow_budget_every=slow_budget_every)
     _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra)
     opts = dict(**extra, seed=seed, n_envs=n_envs, scenario=scenario, hyperparams=hyperparams,
                 hyperparams_file=hyperparams_file, env=env, cost=cost, lagrangian=lagrangian, budget=budget,

@@ -68,7 +68,7 @@ def test_shipped_learned_policies_have_five_seeds_small_files_and_their_commands
     from policies.compare import shipped_seed_groups
 
     groups = shipped_seed_groups()
-    assert set(groups) == {"ppo_lagrangian", "residual", "imitation"}
+    assert set(groups) == {"ppo_lagrangian", "residual", "imitation", "slow_budget"}
     for kind, specs in groups.items():
         paths = [Path(s.split(":", 1)[1]) for s in specs]
         metas = [json.loads(p.with_suffix(".json").read_text()) for p in paths]
@@ -78,3 +78,4 @@ def test_shipped_learned_policies_have_five_seeds_small_files_and_their_commands
             assert (m["imitation"] if kind == "imitation" else m["lagrangian"])   # imitation: a clone, not constrained RL
             assert m["reproduce"].startswith("dronewpt train --algo ppo")
             assert f"--seed {m['seed']} " in m["reproduce"] and ("--residual" in m["reproduce"]) == (kind in ("residual", "imitation"))
+            assert ("--slow-budget 0:0.15" in m["reproduce"]) == (kind == "slow_budget") == bool(m.get("slow_budget"))

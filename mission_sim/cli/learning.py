@@ -62,6 +62,12 @@ def _add_train(sub):
     p.add_argument("--residual-base-budget", type=float_arg("--residual-base-budget"), default=0.0,
                    help="overshoot budget of the model-based controller the residual corrects (default 0: the "
                         "paper's controller)")
+    p.add_argument("--slow-budget", default=None, metavar="LO:HI",
+                   help="the action is the MPC's measured-overshoot budget in [LO, HI] per control period, the duty "
+                        "the MPC's (a slow variable: no dither of the duty; policies.slow_budget), e.g. 0:0.15")
+    p.add_argument("--slow-budget-every", choices=("window", "step"), default="window",
+                   help="with --slow-budget: take the agent's budget once per window at the stop and hold it "
+                        "(default) or every control period")
     p.add_argument("--history", type=int, default=1, metavar="K",
                    help="frame stack: the policy sees the last K observations (default 1; envs.history)")
     p.add_argument("--action-filter", type=float_arg("--action-filter"), default=0.0, metavar="ALPHA",
@@ -141,6 +147,15 @@ def _check_train(args):
             check_regular_file(path, flag)  # a FIFO is refused without opening it
     if not 0 <= args.probe_episodes <= 1024:
         raise CliError(f"--probe-episodes {args.probe_episodes} is invalid; valid range: 0..1024")
+    if args.slow_budget is not None:
+        from policies.slow_budget import parse_budget_range
+        try:
+            parse_budget_range(args.slow_budget)
+        except ValueError as exc:
+            raise CliError(f"--slow-budget: {exc}") from None
+        if args.algo == "dqn" or args.residual or args.imitate or args.action_filter or args.smooth_penalty:
+            raise CliError("--slow-budget is invalid with --algo dqn, --residual, --imitate, --action-filter or "
+                           "--smooth-penalty; valid: --algo ppo / sac / td3 without them (the duty is the MPC's)")
     if args.budget is not None and not args.lagrangian:
         raise CliError("--budget is only used with --lagrangian; add --lagrangian or drop --budget")
 
@@ -166,7 +181,8 @@ def _cmd_train(args) -> int:
                     probe_episodes=args.probe_episodes, residual_base_budget=args.residual_base_budget,
                     history=args.history, action_filter=args.action_filter, smooth_penalty=args.smooth_penalty,
                     imitate=args.imitate, dagger=args.dagger, imitation_episodes=args.imitation_episodes,
-                    imitation_epochs=args.imitation_epochs,
+                    imitation_epochs=args.imitation_epochs, slow_budget=args.slow_budget,
+                    slow_budget_every=args.slow_budget_every,
                     imitation_mask=tuple(f.strip() for f in args.imitation_mask.split(",") if f.strip()))
     except ValueError as exc:
         raise CliError(str(exc)) from None
@@ -235,7 +251,7 @@ def sb3_installed() -> bool:
     return importlib.util.find_spec("stable_baselines3") is not None
 
 
-_SB3_POLICIES = ("rl", "ppo_lagrangian", "residual", "imitation")
+_SB3_POLICIES = ("rl", "ppo_lagrangian", "residual", "imitation", "slow_budget")
 
 
 def _rl_or_skip(pols: tuple, explicit: bool) -> tuple:
