@@ -36,7 +36,7 @@ from .stats import mean_ci, seed_ci
 from .threads import single_blas_thread
 
 __all__ = ["METRICS", "EpisodeTraces", "run_policy", "run_policies", "compare", "frontier", "oracle_gaps", "oracle_curve", "DEFAULT_POLICIES", "DEFAULT_SCENARIOS",
-           "REFERENCE", "plot_transitions", "plot_frontier", "shipped_seed_groups"]
+           "REFERENCE", "plot_transitions", "plot_frontier", "shipped_seed_groups", "OPT_IN_SEEDS"]
 
 METRICS = ("overshoot_pct", "reached_short_mode", "peak_i2_a", "energy_before_stop_j", "energy_after_stop_j",
            "tracking_rmse_a", "cost", "return", "time_above_rated_s")
@@ -53,6 +53,9 @@ DEFAULT_EPISODES = 100
 #: learned kinds shipped with several training seeds (``policies/pretrained/<prefix>_s<k>.zip``)
 SHIPPED_SEEDS = {"ppo_lagrangian": "ppo_lagrangian_s", "residual": "residual_s", "imitation": "imitation_s",
                  "slow_budget": "slow_budget_s"}
+#: shipped kinds left out of compare's default rows (each seed is a full MPC run: ~5x the MPC's cost per
+#: scenario); ``--train-seeds 'slow_budget=slow_budget:policies/pretrained/slow_budget_s*.zip'`` adds them
+OPT_IN_SEEDS = ("slow_budget",)
 
 
 def shipped_seed_groups() -> dict:

@@ -365,7 +365,7 @@ class MPCPolicy:
         vmax = 4.0 / np.pi * (vl + self._vf)
         free = z @ m.F.T + m.h
         ex, slope = self._excess(v_bar, vl)
-        ub = (((1.0 + self.budget - _MARGIN) * self._bound_sm(z) + self._relax[e])[:, None]
+        ub = (((1.0 + self._budget_of(e) - _MARGIN) * self._bound_sm(z) + self._relax[e])[:, None]
               - (ex - slope * v_bar).repeat(2, axis=1) - free)
         # x = [v (f knots), s]: 0 <= v <= vmax, s >= 0 (simple bounds), (G + slope M) v - s <= ub; M's rows have
         # at most two non-zeros (V2 linear between knots), so the slope term is added where they are
@@ -453,7 +453,7 @@ class MPCPolicy:
         out = np.zeros(len(idx))
         plan = self._plan[idx]
         quiet = plan[:, :BLOCKS[-1]].max(axis=1) < 0.05
-        quiet[quiet] = self._settled(z[quiet], self._relax[idx[quiet]])
+        quiet[quiet] = self._settled(z[quiet], self._relax[idx[quiet]], idx[quiet])
         self._plan[idx[quiet]] = 0.0   # in short mode with the free response inside the bound: nothing to plan
         busy = np.flatnonzero(~quiet)
         shifted = np.concatenate([plan[busy, 1:], plan[busy, -1:]], axis=1)
@@ -477,8 +477,13 @@ class MPCPolicy:
         m = self._model
         i2 = z @ m.F.T + m.h + plan @ m.Gu.T
         ex = self._excess_at(plan, vl[:, None])
-        bound = (1.0 + self.budget - 0.5 * _MARGIN) * self._bound_sm(z) + self._relax[e]
+        bound = (1.0 + self._budget_of(e) - 0.5 * _MARGIN) * self._bound_sm(z) + self._relax[e]
         return np.all(i2 + ex.repeat(2, axis=1) <= bound[:, None], axis=1)
+
+    def _budget_of(self, e):
+        """The measured-overshoot budget of receivers ``e`` (n,): the policy's one ``budget`` (a subclass may
+        give each receiver its own, :class:`policies.slow_budget.BudgetScheduledMPC`)."""
+        return self.budget
 
     def _bound_sm(self, z):
         """The short-mode current of the bound [A]: the model's own, its steady state with V2 = 0 and the
@@ -487,13 +492,14 @@ class MPCPolicy:
         overshot the detuned link's short-mode current by 35 % on 5 windows, with this 8.6 %)."""
         return self._ss_i2[0] + self._ss_i2[1] * z[..., 2]
 
-    def _settled(self, z, relax):
+    def _settled(self, z, relax, e):
         """Per row of ``z`` (n, 3): the free response (V2 = 0) stays within the budget's bound with the
-        short-mode ripple (:meth:`_excess` at V2 = 0), ``relax`` (n,) [A] the raised bounds (bool (n,))."""
+        short-mode ripple (:meth:`_excess` at V2 = 0), ``relax`` (n,) [A] the raised bounds, ``e`` (n,) the
+        receivers (bool (n,))."""
         m = self._model
         free = z @ m.F.T + m.h
         sm = self._bound_sm(z)
-        return np.all(free + self._ex0 <= ((1.0 + self.budget - _MARGIN) * sm + relax)[:, None], axis=1)
+        return np.all(free + self._ex0 <= ((1.0 + self._budget_of(e) - _MARGIN) * sm + relax)[:, None], axis=1)
 
     def _excess_at(self, v2, vl):
         """Ripple excess [A] at V2 ``v2`` (any shape) [V], the short-mode current and battery voltage ``vl``:

@@ -18,9 +18,9 @@ allocation that a constant budget cannot make), from what it observes (the contr
 Parts:
 
 * :class:`BudgetScheduledMPC`: :class:`policies.mpc.MPCPolicy` with one budget per receiver, set
-  before each ``act`` (:meth:`~BudgetScheduledMPC.set_budgets`). It wraps the MPC and does not
-  edit it: the MPC reads ``self.budget`` only inside its per-receiver after-stop step
-  (``_after_stop`` and what it calls), so the override sets it per receiver there. With every
+  before each ``act`` (:meth:`~BudgetScheduledMPC.set_budgets`). The MPC reads its budget only
+  through ``_budget_of(receivers)`` in its batched after-stop step; the override gives each
+  receiver its own. With every
   budget equal to ``b`` it *is* ``mpc:b`` (bit for bit, ``tests/test_slow_budget.py``).
 * :class:`SlowBudgetVecEnv`: the SB3 ``VecEnvWrapper`` of ``dronewpt train --slow-budget LO:HI``
   (on the batched adapter; observation unchanged, action the budget).
@@ -97,10 +97,9 @@ class BudgetScheduledMPC(MPCPolicy):
             self._budgets = np.full(n, self.default_budget)
         return super().act(obs)
 
-    def _after_stop(self, e, z, vl, u_prev):
-        # the MPC reads self.budget only in its after-stop step of receiver e (and what that calls)
-        self.budget = float(self._budgets[e])
-        return super()._after_stop(e, z, vl, u_prev)
+    def _budget_of(self, e):
+        # the MPC reads its budget only through this, in its after-stop step of receivers e
+        return self._budgets[e]
 
 
 class BudgetLatch:

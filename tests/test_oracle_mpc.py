@@ -116,7 +116,7 @@ def test_mpc_delay_bank_stabilises_sense_delay():
         venv = SbarChargingVectorEnv(num_envs=3, scenario="sense_delay")
         pol = MPCPolicy(venv.policy_context, delays=delays)
         pol.reset(3)
-        _, _, _, last = _rollout(pol, venv, 3, 1000)
+        _, _, _, last = _rollout(pol, venv, [1000 + i for i in range(3)])
         out[delays] = (100.0 * last["overshoot"], last["reached_short_mode"])
     over, sm = out[(0, 1, 2, 3, 4, 5)]
     assert np.all(sm) and np.all(over < 5.0)
@@ -133,7 +133,7 @@ def test_mpc_starts_a_new_window_afresh():
 
     def run(pol, seed):
         venv = SbarChargingVectorEnv(num_envs=1, scenario="nominal")
-        _, _, _, last = _rollout(pol, venv, 1, seed)
+        _, _, _, last = _rollout(pol, venv, [seed])
         return float(last["overshoot"][0])
 
     ctx = SbarChargingVectorEnv(num_envs=1).policy_context

@@ -67,7 +67,10 @@ def test_scheduled_mpc_is_mpc_per_receiver(mpc_runs):
     mixed = np.array([0.0, 0.08, 0.0])
     d, r, o = _run(BudgetScheduledMPC(), budgets=mixed)
     for i, b in enumerate(mixed):
-        assert np.array_equal(d[:, i], mpc_runs[b][0][:, i])
+        # the batched MPC groups receivers by their decision (follow / re-plan) and warm-starts each QP from
+        # its own multipliers: a receiver in a differently composed batch agrees to the solver's tolerance
+        # (as tests/test_mpc_fast.py's batch-vs-alone), not to the bit
+        np.testing.assert_allclose(d[:, i], mpc_runs[b][0][:, i], rtol=1e-6, atol=1e-6)
     # physics of the trade-off the agent learns on: more budget, more measured overshoot and return
     (_, r0, o0), (_, r8, o8) = mpc_runs[0.0], mpc_runs[0.08]
     assert np.all(o8 > o0) and np.all(r8 > r0)

@@ -283,8 +283,8 @@ def _mpc_or_skip(pols: tuple, explicit: bool) -> tuple:
 def _shipped_seed_rows(pols: tuple):
     """At the defaults the shipped learned kinds with several training seeds are one row each,
     aggregated over their seeds (instead of the seed-0 row)."""
-    from policies.compare import shipped_seed_groups
-    groups = shipped_seed_groups()
+    from policies.compare import OPT_IN_SEEDS, shipped_seed_groups
+    groups = {k: v for k, v in shipped_seed_groups().items() if k not in OPT_IN_SEEDS}
     return tuple(p_ for p_ in pols if p_ not in groups), groups
 
 
