@@ -2,6 +2,10 @@
 training seeds of a learned kind as one stacked network, give each policy exactly (to the bit) the
 traces and metrics of its own separate run on the same windows."""
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -11,6 +15,14 @@ from policies.compare import run_policies, run_policy, shipped_seed_groups
 
 FIELDS = ("i2_peak_a", "i2_a", "d_short", "rect_current_a", "charge_cmd_a", "t_stop_s")
 
+
+
+def _child(code: str, timeout: float):
+    """Run ``code`` in a fresh interpreter with this one's import path; its completed process (exit 0)."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=timeout)
+    assert out.returncode == 0, out.stderr[-2000:]
+    return out
 
 def _assert_same(batched, separate):
     for f in FIELDS:
@@ -104,9 +116,7 @@ def test_forked_mpc_runs_equal_in_process_runs():
         "r2, t2 = compare(*args, episodes=3, seed=77, fork=False)\n"
         "same = list(t1) == list(t2) and all(np.array_equal(t1[k].d_short, t2[k].d_short) for k in t2)\n"
         "print(json.dumps({'made': made, 'rows': r1 == r2, 'traces': same, 'order': [r['policy'] for r in r1]}))\n")
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
-    assert out.returncode == 0, out.stderr[-2000:]
+    out = _child(code, timeout=600)
     res = json.loads(out.stdout.strip().splitlines()[-1])
     assert res["made"] == [True]    # the first compare forked (the second had fork=False)
     assert res["rows"] and res["traces"]
@@ -142,8 +152,6 @@ def test_forked_child_that_dies_is_run_again_in_the_parent_and_errors_are_raised
         "    Forked(bad).result()\n"
         "except ValueError as exc:\n"
         "    print(exc)\n")
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
-    assert out.returncode == 0, out.stderr[-2000:]
+    out = _child(code, timeout=120)
     lines = out.stdout.strip().splitlines()
     assert lines[-2] == f"{len(os.sched_getaffinity(0)) > 1} 42" and lines[-1] == "in the child"
