@@ -29,6 +29,7 @@ Imported only when an env is built (numba is not imported by ``import envs``).
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 from numba import njit, prange
@@ -37,8 +38,6 @@ from .layout import BAT, COEF, INFO, PAR, SINGLE, SINGLE_PAR, SLOW, STATE, XC
 
 from wpt_receiver.kernel_cache import drop_stale_cache
 
-from . import layout as _layout
-from . import objective as _objective
 from .objective import SHORT_MODE_IL_A, SHORT_MODE_WITHIN_S
 
 __all__ = ["env_step", "step_kernel", "duty_kernel", "single_step", "inst_peak_rows", "obs_rows", "INFO_ROWS",
@@ -51,7 +50,7 @@ def _here():
 
 # numba's cache of this module holds the layout's / objective's constants:
 # dropped when those files change (numba keys the cache on this file alone)
-drop_stale_cache(_here, (_layout, _objective))
+drop_stale_cache(_here, [os.path.join(os.path.dirname(__file__), f) for f in ("layout.py", "objective.py")])
 
 #: rows of the info block the kernel fills, in order
 INFO_ROWS = INFO._fields
