@@ -123,11 +123,14 @@ def run_policies(names, scenario: str, episodes: int, seed: int, config=None) ->
     names = list(dict.fromkeys(names))
     n = int(episodes)
     venv = SbarChargingVectorEnv(num_envs=len(names) * n, scenario=scenario, config=config)
-    pol = BlockPolicy([make(name, venv.policy_context) for name in names], n)
-    pol.reset(venv.num_envs)
-    rec, rew, t_stop, last = _rollout(pol, venv, [int(seed) + i for i in range(n)] * len(names))
-    out = {name: _traces(venv, rec, rew, t_stop, last, slice(b * n, (b + 1) * n)) for name, b in zip(names, pol.block)}
-    venv.close()
+    try:
+        pol = BlockPolicy([make(name, venv.policy_context) for name in names], n)
+        pol.reset(venv.num_envs)
+        rec, rew, t_stop, last = _rollout(pol, venv, [int(seed) + i for i in range(n)] * len(names))
+        out = {name: _traces(venv, rec, rew, t_stop, last, slice(b * n, (b + 1) * n))
+               for name, b in zip(names, pol.block)}
+    finally:
+        venv.close()
     return out
 
 

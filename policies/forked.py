@@ -64,6 +64,7 @@ class Forked:
                 self.proc.start()
             except OSError:   # no process to be had (limits): run it in-process at result()
                 self.proc = None
+                self._recv.close()
             send.close()
 
     def result(self):
@@ -71,7 +72,7 @@ class Forked:
             return self.fn(*self.args)
         try:
             kind, value = self._recv.recv()
-        except (EOFError, OSError):   # the child died without an answer: run it here
+        except Exception:  # noqa: BLE001 - died without an answer, or one that does not unpickle: run it here
             kind, value = "lost", None
         finally:
             self._recv.close()
@@ -85,3 +86,5 @@ class Forked:
         if self.proc is not None and self.proc.is_alive():
             self.proc.terminate()
             self.proc.join()
+        if self.proc is not None:
+            self._recv.close()

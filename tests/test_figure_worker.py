@@ -45,6 +45,27 @@ def test_worker_draws_the_same_figures_as_in_process_and_leaves_no_process(tmp_p
     assert out.count("wrote: ") == 2 * 7
 
 
+def test_a_worker_that_dies_is_replaced_by_drawing_in_process(tmp_path, monkeypatch, capsys):
+    """The figure process killed (SIGKILL: out of memory, a user's kill) before it draws: the command still
+    writes every figure, in-process, exit 0, no traceback and no process left."""
+    import signal
+
+    import mission_sim.figures.worker as fw
+    real_init = fw.FigureWorker.__init__
+
+    def killed(self):
+        real_init(self)
+        os.kill(self._proc.pid, signal.SIGKILL)
+        self._proc.join()
+    monkeypatch.setattr(fw.FigureWorker, "__init__", killed)
+    out = tmp_path / "k"
+    assert main(["mission", "--out", str(out), "--no-progress"]) == 0
+    assert sorted(p.name for p in out.glob("*.png")) == ["i2_envelope.png", "lm.png", "power.png", "soc.png",
+                                                         "trajectory.png"]
+    assert (out / "summary.json").exists() and "Traceback" not in capsys.readouterr().err
+    assert _children_of(os.getpid()) == []
+
+
 def test_a_full_disk_in_the_worker_is_one_line_naming_the_file(tmp_path, monkeypatch, capsys):
     """The worker's storage error comes back as the command's: exit 4, the PNG named, no temporary file,
     no summary.json (the set is incomplete)."""

@@ -245,13 +245,15 @@ def _figures_and_summary(res, out: Path, plots: bool, thinned=None, worker=None)
     from ..files import atomic_output
     files = []
     if plots and (out / "timeseries.parquet").exists():
-        from ..figures.worker import for_figures
+        from ..figures.worker import FigureWorkerLost, for_figures
         from ..world.stream import read_series
         res.timeseries = thinned.frame(pandas=False) if thinned is not None else \
             read_series(out / "timeseries.parquet", max_points=FIGURE_POINTS, frame=False)
-        if worker is not None:
-            files = [str(f) for f in worker.draw(for_figures(res), out)]
-        else:
+        try:
+            files = [] if worker is None else [str(f) for f in worker.draw(for_figures(res), out)]
+        except FigureWorkerLost:   # the child died (killed, out of memory): nothing is lost, draw here
+            worker = None
+        if worker is None:
             from ..figures.mission import plot_mission
             files = [str(f) for f in plot_mission(for_figures(res), out)]
         res.timeseries = None

@@ -23,7 +23,7 @@ import sys
 
 from . import PATH_SAMPLES
 
-__all__ = ["FigureWorker", "fork_available", "for_figures", "PATH_SAMPLES", "CLOSE_WAIT_S"]
+__all__ = ["FigureWorker", "FigureWorkerLost", "fork_available", "for_figures", "PATH_SAMPLES", "CLOSE_WAIT_S"]
 
 #: seconds :meth:`FigureWorker.close` waits for the child to exit by itself before terminating it
 CLOSE_WAIT_S = 1.0
@@ -47,6 +47,10 @@ def for_figures(result):
     return MissionResult(result.timeseries, result.summary, config=result.config, trajectory=tr)
 
 
+class FigureWorkerLost(RuntimeError):
+    """The figure process ended or answered unreadably without drawing: the caller draws in-process."""
+
+
 class FigureWorker:
     """A forked process that draws :func:`.mission.plot_mission` once (see the module notes)."""
 
@@ -67,7 +71,9 @@ class FigureWorker:
             self._conn.send((result, str(out_dir)))
             ok, value = self._conn.recv()
         except (EOFError, BrokenPipeError, ConnectionResetError):
-            raise RuntimeError(f"the figure process ended without drawing (exit code {self._proc.exitcode})") from None
+            raise FigureWorkerLost(f"the figure process ended without drawing (exit code {self._proc.exitcode})") from None
+        except Exception as exc:  # noqa: BLE001 - the child's reply did not unpickle here
+            raise FigureWorkerLost(f"the figure process's reply could not be read ({exc!r})") from None
         if not ok:
             raise value
         return value
@@ -112,5 +118,5 @@ def _draw_once(conn) -> None:
         reply = (False, exc)
     try:
         conn.send(reply)
-    except (TypeError, AttributeError, ValueError) as exc:   # an exception that does not pickle
+    except Exception as exc:  # noqa: BLE001 - an exception that does not pickle (PicklingError included)
         conn.send((False, RuntimeError(f"drawing the figures failed: {reply[1]!r} ({exc})")))
