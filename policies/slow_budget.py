@@ -180,8 +180,9 @@ class SlowBudgetVecEnv(_wrapper_base()):
 
 
 class SlowBudgetPolicy:
-    """The MPC with the budget a trained agent chooses every control period (``path``: a
-    ``dronewpt train --slow-budget`` output; default the shipped seed 0)."""
+    """The MPC with the budget a trained agent chooses (``path``: a ``dronewpt train --slow-budget`` output;
+    default the shipped seed 0), latched as the model was trained: at the stop and held for the window
+    (``--slow-budget-every window``, the shipped seeds) or every control period (``step``)."""
 
     name = "slow_budget"
 
