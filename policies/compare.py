@@ -36,7 +36,8 @@ from .stats import mean_ci, seed_ci
 from .threads import single_blas_thread
 
 __all__ = ["METRICS", "EpisodeTraces", "run_policy", "run_policies", "compare", "frontier", "oracle_gaps", "oracle_curve", "DEFAULT_POLICIES", "DEFAULT_SCENARIOS",
-           "REFERENCE", "plot_transitions", "plot_frontier", "shipped_seed_groups", "OPT_IN_SEEDS"]
+           "REFERENCE", "plot_transitions", "plot_frontier", "shipped_seed_groups", "OPT_IN_SEEDS",
+           "frontier_specs"]
 
 METRICS = ("overshoot_pct", "reached_short_mode", "peak_i2_a", "energy_before_stop_j", "energy_after_stop_j",
            "tracking_rmse_a", "cost", "return", "time_above_rated_s")
@@ -185,13 +186,16 @@ def _row_seeds(label, scenario, per_seed, ref):
 
 def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: int = DEFAULT_EPISODES,
             seed: int = 1000, progress: bool = False, config=None, train_seeds: dict | None = None,
-            reference: str = REFERENCE, fork: bool = True):
+            reference: str = REFERENCE, fork: bool = True, extra=(), extra_traces: dict | None = None):
     """Run every policy on every scenario (same seeds); returns ``(rows, traces)``; ``fork``: the MPC's runs
     in a forked process beside the others where possible (:mod:`policies.forked`; the same results).
 
     ``train_seeds`` maps a label to several model specs of one kind (e.g. ``rl:run_s0/ppo_sbar.zip``,
     ...): one row each, aggregated over the seeds. Rows hold ``<metric>``, ``<metric>_lo/_hi`` (95 %)
-    and the paired differences ``d_<metric>...`` against ``reference`` (run even when not listed)."""
+    and the paired differences ``d_<metric>...`` against ``reference`` (run even when not listed).
+    ``extra``: more specs run on the first scenario in the same batched env, no rows; their traces go
+    into ``extra_traces`` under ``(spec, scenario)`` (e.g. :func:`frontier_specs`, for :func:`frontier`'s
+    ``traces``: one env and one rollout instead of two)."""
     from tqdm import tqdm
 
     if int(episodes) != episodes or not 1 <= episodes <= 100_000:
@@ -201,9 +205,16 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
     jobs = [(s, g) for s in scenarios for g in groups]
     bar = tqdm(total=len(jobs), desc="compare", unit="run", disable=not progress, dynamic_ncols=True)
     with single_blas_thread():   # batched small matrices (policies.threads)
-        _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar, fork)
+        _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar, fork,
+                      (tuple(extra), {} if extra_traces is None else extra_traces))
     bar.close()
     return rows, traces
+
+
+def frontier_specs(budgets=None) -> tuple:
+    """The policy specs :func:`frontier` runs (``model_based_budget:b`` per budget; default the sweep's)."""
+    from .budgeted import BUDGET_SWEEP
+    return tuple(f"model_based_budget:{b:g}" for b in (BUDGET_SWEEP if budgets is None else budgets))
 
 
 #: policies run in a forked process beside the others (:mod:`policies.forked`): the MPC's QPs are ~40 % of the CPU
@@ -216,9 +227,11 @@ def _forked_runs(specs, scenarios, episodes, seed, config) -> dict:
         return {s: run_policies(specs, s, episodes, seed, config) for s in scenarios}
 
 
-def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar, fork=True):
+def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar, fork=True,
+                  extra=((), None)):
     """The runs of :func:`compare` (rows and traces filled in place); with ``fork`` the :data:`FORKED`
-    policies run in a child process (:class:`policies.forked.Forked`) on the same windows meanwhile."""
+    policies run in a child process (:class:`policies.forked.Forked`) on the same windows meanwhile;
+    ``extra``: ``(specs, traces)``, specs run beside the first scenario's, their traces filled in place."""
     from .forked import Forked, available
 
     n, seed = int(episodes), int(seed)
@@ -233,7 +246,9 @@ def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, tr
     placed, refs = {}, {}
     try:
         for s in scenarios:
-            runs = run_policies([sp for sp in specs if sp not in heavy], s, n, seed, config)
+            more = [sp for sp in extra[0] if sp not in specs] if s == scenarios[0] else []
+            runs = run_policies([sp for sp in specs if sp not in heavy] + more, s, n, seed, config)
+            extra[1].update({(sp, s): runs[sp] for sp in extra[0] if sp in runs})
             refs[s] = runs[reference]
             _add_rows(s, groups, reference, runs, placed, bar)
         for s, runs in (job.result() if job else {}).items():

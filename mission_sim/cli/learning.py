@@ -315,7 +315,7 @@ def _listed(text: str, flag: str) -> tuple:
 
 
 def _cmd_compare(args) -> int:
-    from policies.compare import DEFAULT_POLICIES, DEFAULT_SCENARIOS, compare, frontier
+    from policies.compare import DEFAULT_POLICIES, DEFAULT_SCENARIOS, compare, frontier, frontier_specs
 
     pols = DEFAULT_POLICIES if args.policies is None else _listed(args.policies, "--policies")
     scns = DEFAULT_SCENARIOS if args.scenarios is None else _listed(args.scenarios, "--scenarios")
@@ -328,9 +328,11 @@ def _cmd_compare(args) -> int:
     if not args.no_plot:
         prepare_out_dir(args.out)
     try:
-        rows, traces = compare(pols, scns, args.episodes, args.seed, progress=show_progress(args), train_seeds=groups)
+        more = {}   # the frontier's budgets run in compare's batched env (one rollout, not two)
+        rows, traces = compare(pols, scns, args.episodes, args.seed, progress=show_progress(args), train_seeds=groups,
+                               extra=() if args.no_frontier else frontier_specs(), extra_traces=more)
         sweep = [] if args.no_frontier else frontier(scns[0], episodes=args.episodes, seed=args.seed,
-                                                          progress=show_progress(args), traces=traces)
+                                                          progress=show_progress(args), traces={**more, **traces})
         curve = _oracle(args, rows, traces, scns[0])
     except (ValueError, FileNotFoundError) as exc:
         raise CliError(str(exc)) from None
