@@ -312,8 +312,8 @@ class MPCPolicy:
         self._Gf = np.ascontiguousarray(m.G[:, :f])
         self._m2_r, self._m2_c = np.nonzero(self._M2)
         self._m2_v = self._M2[self._m2_r, self._m2_c]
-        self._A_stop = np.empty((len(m.G), f + 1))   # the after-stop QP's rows (filled per solve)
-        self._A_stop[:, f] = -1.0
+        self._A_stop = np.empty((len(m.G), f + 1))   # the after-stop QP's rows without the excess' slope
+        self._A_stop[:, :f], self._A_stop[:, f] = self._Gf, -1.0
         self._knots = np.asarray(BLOCKS[:f])
         self._bl_stop = np.concatenate([np.zeros(f + 1), np.full(len(m.G), -_BIG)])
         self._sense = np.zeros(f + 1 + len(m.G), dtype=np.int32)
@@ -369,21 +369,21 @@ class MPCPolicy:
               - (ex - slope * v_bar).repeat(2, axis=1) - free)
         # x = [v (f knots), s]: 0 <= v <= vmax, s >= 0 (simple bounds), (G + slope M) v - s <= ub; M's rows have
         # at most two non-zeros (V2 linear between knots), so the slope term is added where they are
-        A = self._A_stop
-        sl_nz = slope[:, self._m2_r // 2] * self._m2_v
+        # every receiver's rows at once (n, rows, f + 1): the same sums as one receiver at a time
+        A = np.empty((len(e),) + self._A_stop.shape)
+        A[:] = self._A_stop
+        A[:, self._m2_r, self._m2_c] += slope[:, self._m2_r // 2] * self._m2_v
         # V2 = 0 from a fixed time after the stop on (a shrinking horizon: a receding terminal could be
         # put off forever while the bound holds V2 up), at the first knot at or after it
         bu = np.empty((len(e), f + 1 + ub.shape[1]))
         bu[:, :f] = np.where(self._knots[None, :] >= (_SM_DEADLINE - self._k_stop[e])[:, None], 0.0, vmax[:, None])
         bu[:, f], bu[:, f + 1:] = _BIG, ub
+        q = np.repeat(self._q_stop[None], len(e), axis=0)
+        q[:, 0] -= 2.0 * _LAMBDA_STOP * u_prev
         v, slack = np.zeros((len(e), f + 1)), np.zeros(len(e))
         knots = np.asarray(BLOCKS[:-1])
         for r in range(len(e)):
-            q = self._q_stop.copy()
-            q[0] -= 2.0 * _LAMBDA_STOP * u_prev[r]
-            A[:, :f] = self._Gf
-            A[self._m2_r, self._m2_c] += sl_nz[r]
-            x, flag = self._daqp(e[r], q, A, bu[r], self._bl_stop)
+            x, flag = self._daqp(e[r], q[r], A[r], bu[r], self._bl_stop)
             if flag < 1:
                 v[r, :f] = np.minimum(v_bar[r, knots], vmax[r])   # keep the plan
             else:
