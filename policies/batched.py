@@ -84,8 +84,12 @@ class StackedRL:
         """RLPolicy.act of each block: normalise, forward, clip, ``(a + 1) / 2``; (k n,) duties."""
         o = obs32.reshape(self.k, -1, obs32.shape[1])[:, :, :self.obs_dim]
         h = np.minimum(np.maximum((o - self.mean) * self.scale_obs, -self.clip), self.clip)
-        for layer in self.layers:
-            h = np.matmul(h, layer[0]) + layer[1] if isinstance(layer, tuple) else layer(h)
+        for layer in self.layers:   # in place where h is this pass's own array: the same float32 operations
+            if isinstance(layer, tuple):
+                h = np.matmul(h, layer[0])
+                h += layer[1]
+            else:
+                h = layer(h, out=h) if isinstance(layer, np.ufunc) else layer(h)
         a = np.minimum(np.maximum(h, self.low), self.high)
         return action_to_duty(a[:, :, 0].reshape(-1))
 
