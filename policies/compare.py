@@ -196,14 +196,12 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
     ``extra``: more specs run on the first scenario in the same batched env, no rows; their traces go
     into ``extra_traces`` under ``(spec, scenario)`` (e.g. :func:`frontier_specs`, for :func:`frontier`'s
     ``traces``: one env and one rollout instead of two)."""
-    from tqdm import tqdm
-
     if int(episodes) != episodes or not 1 <= episodes <= 100_000:
         raise ValueError(f"episodes={episodes!r} is invalid; valid range: integer 1..100000")
     groups = [(p, [p]) for p in policies] + list((train_seeds or {}).items())
     rows, traces = [], {}
     jobs = [(s, g) for s in scenarios for g in groups]
-    bar = tqdm(total=len(jobs), desc="compare", unit="run", disable=not progress, dynamic_ncols=True)
+    bar = _bar(progress, total=len(jobs), desc="compare", unit="run", dynamic_ncols=True)
     with single_blas_thread():   # batched small matrices (policies.threads)
         _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar, fork,
                       (tuple(extra), {} if extra_traces is None else extra_traces))
@@ -281,8 +279,6 @@ def frontier(scenario: str = "nominal", budgets=None, episodes: int = DEFAULT_EP
     """The budgeted model-based curve: one row per overshoot budget (:mod:`policies.budgeted`);
     ``progress``: a tqdm bar over the budgets; ``traces``: :func:`compare`'s traces of the same episodes,
     seed and config, whose ``model_based_budget:b`` runs are reused instead of run again."""
-    from tqdm import tqdm
-
     from .budgeted import BUDGET_SWEEP
 
     out = []
@@ -296,10 +292,32 @@ def frontier(scenario: str = "nominal", budgets=None, episodes: int = DEFAULT_EP
     if todo:   # the budgets not in compare's traces, side by side in one batched env
         with single_blas_thread():
             runs.update(run_policies(todo, scenario, episodes, seed, config))
-    for b in tqdm(budgets, desc="frontier", unit="budget", disable=not progress, leave=False):
+    bar = _bar(progress, total=len(budgets), desc="frontier", unit="budget", leave=False)
+    for b in budgets:
+        bar.update(1)
         tr = runs[f"model_based_budget:{b:g}"]
         out.append({"budget": float(b), **_row_one(f"model_based_budget:{b:g}", scenario, tr.metrics, None)})
+    bar.close()
     return out
+
+
+class _NoBar:
+    """What :func:`_bar` gives without a progress bar."""
+
+    def update(self, n=1):
+        pass
+
+    def close(self):
+        pass
+
+
+def _bar(progress: bool, **kw):
+    """A tqdm bar when ``progress``, else a stand-in (tqdm's import, ~0.05-0.09 s with importlib.metadata, only
+    when a bar is shown)."""
+    if not progress:
+        return _NoBar()
+    from tqdm import tqdm
+    return tqdm(**kw)
 
 
 def oracle_gaps(rows, traces, scenario: str, windows: int, seed: int = 1000, config=None, progress: bool = False):

@@ -40,13 +40,21 @@ def _version() -> str:
         return "unknown (not installed)"
 
 
+class _LazyVersion(argparse._VersionAction):
+    """``--version``: the version looked up only when asked (importing importlib.metadata costs every command ~30 ms)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        self.version = f"dronewpt {_version()}"
+        super().__call__(parser, namespace, values, option_string)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = OneLineParser(prog="dronewpt", description="Flight-mission energy simulator for drones "
                            "that charge wirelessly in flight (WPT link with an SBAR receiver).",
                            epilog="Exit status: 0 done, 1 some sweep cases failed, 2 bad input (one line on "
                            "stderr), 3 mission ended by a depleted battery, 4 an output could not be written (disk full, file-size "
                            "limit; the file named), 130 interrupted by Ctrl-C (SIGINT), 143 terminated (SIGTERM).")
-    parser.add_argument("--version", action="version", version=f"dronewpt {_version()}")
+    parser.add_argument("--version", action=_LazyVersion)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for add in (paper._add_paper, mission._add_coupling, mission._add_mission, mavlink._add_replay, mavlink._add_telemetry,
                 learning._add_train, learning._add_compare, sweep._add_sweep, sizing._add_sizing,
