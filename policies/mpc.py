@@ -314,6 +314,8 @@ class MPCPolicy:
         self._m2_v = self._M2[self._m2_r, self._m2_c]
         self._A_stop = np.empty((len(m.G), f + 1))   # the after-stop QP's rows without the excess' slope
         self._A_stop[:, :f], self._A_stop[:, f] = self._Gf, -1.0
+        self._m2_flat = np.ravel_multi_index((self._m2_r, self._m2_c), self._A_stop.shape)
+        self._A_m2 = self._A_stop.flat[self._m2_flat].copy()   # G's entries where the excess slope is added
         self._knots = np.asarray(BLOCKS[:f])
         self._bl_stop = np.concatenate([np.zeros(f + 1), np.full(len(m.G), -_BIG)])
         self._sense = np.zeros(f + 1 + len(m.G), dtype=np.int32)
@@ -369,10 +371,9 @@ class MPCPolicy:
               - (ex - slope * v_bar).repeat(2, axis=1) - free)
         # x = [v (f knots), s]: 0 <= v <= vmax, s >= 0 (simple bounds), (G + slope M) v - s <= ub; M's rows have
         # at most two non-zeros (V2 linear between knots), so the slope term is added where they are
-        # every receiver's rows at once (n, rows, f + 1): the same sums as one receiver at a time
-        A = np.empty((len(e),) + self._A_stop.shape)
-        A[:] = self._A_stop
-        A[:, self._m2_r, self._m2_c] += slope[:, self._m2_r // 2] * self._m2_v
+        # the entries the slope changes, for every receiver at once (n, nnz): the same sums as one at a time;
+        # the other entries of A are fixed (self._A_stop, which daqp only reads)
+        A, vals = self._A_stop, self._A_m2 + slope[:, self._m2_r // 2] * self._m2_v
         # V2 = 0 from a fixed time after the stop on (a shrinking horizon: a receding terminal could be
         # put off forever while the bound holds V2 up), at the first knot at or after it
         bu = np.empty((len(e), f + 1 + ub.shape[1]))
@@ -383,7 +384,8 @@ class MPCPolicy:
         v, slack = np.zeros((len(e), f + 1)), np.zeros(len(e))
         knots = np.asarray(BLOCKS[:-1])
         for r in range(len(e)):
-            x, flag = self._daqp(e[r], q[r], A[r], bu[r], self._bl_stop)
+            A.flat[self._m2_flat] = vals[r]
+            x, flag = self._daqp(e[r], q[r], A, bu[r], self._bl_stop)
             if flag < 1:
                 v[r, :f] = np.minimum(v_bar[r, knots], vmax[r])   # keep the plan
             else:
