@@ -244,9 +244,10 @@ def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, tr
     placed, refs = {}, {}
     try:
         for s in scenarios:
-            more = [sp for sp in extra[0] if sp not in specs] if s == scenarios[0] else []
+            first = s == scenarios[0]
+            more = [sp for sp in extra[0] if sp not in specs] if first else []
             runs = run_policies([sp for sp in specs if sp not in heavy] + more, s, n, seed, config)
-            extra[1].update({(sp, s): runs[sp] for sp in extra[0] if sp in runs})
+            extra[1].update({(sp, s): runs[sp] for sp in extra[0] if first and sp in runs})
             refs[s] = runs[reference]
             _add_rows(s, groups, reference, runs, placed, bar)
         for s, runs in (job.result() if job else {}).items():

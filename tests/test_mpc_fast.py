@@ -112,3 +112,26 @@ def test_frontier_reuses_compares_budgeted_runs(monkeypatch):
     assert [r["overshoot_pct"] for r in reused] == [r["overshoot_pct"] for r in fresh]
     other = cmp.frontier("nominal", budgets=(0.01,), episodes=2, traces=traces)   # other windows: run again
     assert ran[-1] == "model_based_budget:0.01" and other[0]["episodes"] == 2
+
+
+def test_compare_runs_the_frontiers_budgets_in_its_batch(monkeypatch):
+    """``compare(extra=frontier_specs(...))`` runs the frontier's budgets in its own batched env (one
+    rollout: ``frontier`` then runs nothing) and gives the frontier rows of separate runs, to the bit; the
+    extra runs are not compare rows or traces."""
+    from policies import compare as cmp
+
+    budgets = (0.0, 0.01, 0.05)
+    fresh = cmp.frontier("nominal", budgets=budgets, episodes=3)
+    more = {}
+    rows, traces = cmp.compare(policies=("ramp", "model_based_budget:0.01"), scenarios=("nominal", "windy"), episodes=3,
+                               extra=cmp.frontier_specs(budgets), extra_traces=more)
+    assert sorted(more) == sorted((sp, "nominal") for sp in cmp.frontier_specs(budgets))
+    assert sorted(traces) == sorted((p, s) for p in ("ramp", "model_based_budget:0.01") for s in ("nominal", "windy"))
+    assert [r["policy"] for r in rows] == ["ramp", "model_based_budget:0.01"] * 2
+    ran = []
+    monkeypatch.setattr(cmp, "run_policies", lambda names, *a, **k: ran.extend(names))
+    reused = cmp.frontier("nominal", budgets=budgets, episodes=3, traces={**more, **traces})
+    assert ran == []
+    for key in ("overshoot_pct", "energy_after_stop_j", "return", "return_lo", "return_hi"):
+        assert [r[key] for r in reused] == [r[key] for r in fresh], key
+    assert [r["budget"] for r in reused] == list(budgets)
