@@ -48,8 +48,10 @@ Solver: DAQP (``pip install daqp``; a dual active-set solver for small dense QPs
 QP of 21 variables and 300 constraints per receiver and re-plan, warm-started from the receiver's last
 multipliers (~7 active-set iterations instead of ~70, ~0.1 ms); the decisions, the excess
 linearisation and the QP data are batched over the receivers, and ``act`` runs with one BLAS thread
-(:mod:`policies.threads`). ~18 ms of CPU per nominal window (``benchmarks/bench_mpc.py``; 52 ms before
-these, the same results). Without daqp the policy raises a one-line ``ValueError`` naming the package. (OSQP, used before, stopped at its iteration
+(:mod:`policies.threads`); the constraint rows' fixed part stays in one buffer and only the entries the
+excess slope changes are rewritten per QP (daqp only reads it). ~14 ms of CPU per nominal window at load ~7
+(``benchmarks/bench_mpc.py``; 52 ms before the batching and warm starts, 23 ms before the one buffer, the
+same results). Without daqp the policy raises a one-line ``ValueError`` naming the package. (OSQP, used before, stopped at its iteration
 limit on most after-stop QPs of this problem and returned unconverged plans.)
 """
 
