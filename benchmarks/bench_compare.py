@@ -108,9 +108,8 @@ def _result(self):
     mark("parent done, waits for the child"); r = result(self); mark("child's result received"); return r
 pf.Forked.__init__, pf.Forked.result = _init, _result
 from mission_sim.cli import main
-sys.argv = ["dronewpt", *sys.argv[1:]]
 with contextlib.redirect_stdout(io.StringIO()):
-    main()
+    main(sys.argv[1:])   # with argv: returns (the command line's main() ends the process)
 mark("end")
 r = resource.getrusage(resource.RUSAGE_CHILDREN)
 print(json.dumps({"marks": marks, "child_cpu_s": r.ru_utime + r.ru_stime, "load": os.getloadavg()}))

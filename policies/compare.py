@@ -26,6 +26,7 @@ with several seeds (``train_seeds``) the mean over seeds with a t interval over 
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -111,11 +112,12 @@ def run_policy(name: str, scenario: str, episodes: int, seed: int, config=None) 
     return run_policies([name], scenario, episodes, seed, config)[name]
 
 
-def run_policies(names, scenario: str, episodes: int, seed: int, config=None) -> dict:
+def run_policies(names, scenario: str, episodes: int, seed: int, config=None, num_threads=None) -> dict:
     """:func:`run_policy` of every name in ``names`` (duplicates run once), side by side in one batched
     env of ``len(names) x episodes`` rows (:class:`policies.batched.BlockPolicy`: each policy on its own
     block of the same windows; a run of learned seeds as one stacked network); ``{name: EpisodeTraces}``,
-    each equal to its separate run."""
+    each equal to its separate run. ``num_threads``: the env's (:class:`envs.SbarChargingVectorEnv`; the
+    same results whatever the threads)."""
     from envs import SbarChargingVectorEnv
 
     from . import make
@@ -123,7 +125,7 @@ def run_policies(names, scenario: str, episodes: int, seed: int, config=None) ->
 
     names = list(dict.fromkeys(names))
     n = int(episodes)
-    venv = SbarChargingVectorEnv(num_envs=len(names) * n, scenario=scenario, config=config)
+    venv = SbarChargingVectorEnv(num_envs=len(names) * n, scenario=scenario, config=config, num_threads=num_threads)
     try:
         pol = BlockPolicy([make(name, venv.policy_context) for name in names], n)
         pol.reset(venv.num_envs)
@@ -220,9 +222,24 @@ FORKED = ("mpc",)
 
 
 def _forked_runs(specs, scenarios, episodes, seed, config) -> dict:
-    """``{scenario: {spec: EpisodeTraces}}`` of ``specs`` (the forked child's work)."""
-    with single_blas_thread():
-        return {s: run_policies(specs, s, episodes, seed, config) for s in scenarios}
+    """``{scenario: {spec: EpisodeTraces}}`` of ``specs`` (the forked child's work, on one core)."""
+    with single_blas_thread(), _one_numba_thread():
+        return {s: run_policies(specs, s, episodes, seed, config, num_threads=1) for s in scenarios}
+
+
+@contextlib.contextmanager
+def _one_numba_thread():
+    """numba's parallel regions on the calling thread only while inside (the env step is a ``prange`` kernel:
+    even its one-chunk steps wake numba's other thread, and the auto choice of the batched env can pick the
+    parallel step): with a forked child on the other core, each process keeps to one. The same results
+    (the parallel step is bit-identical to the serial one)."""
+    import numba
+    old = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(old)
 
 
 def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar, fork=True,
@@ -243,13 +260,15 @@ def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, tr
         job = Forked(_forked_runs, heavy, scenarios, n, seed, config)
     placed, refs = {}, {}
     try:
-        for s in scenarios:
-            first = s == scenarios[0]
-            more = [sp for sp in extra[0] if sp not in specs] if first else []
-            runs = run_policies([sp for sp in specs if sp not in heavy] + more, s, n, seed, config)
-            extra[1].update({(sp, s): runs[sp] for sp in extra[0] if first and sp in runs})
-            refs[s] = runs[reference]
-            _add_rows(s, groups, reference, runs, placed, bar)
+        with _one_numba_thread() if job else contextlib.nullcontext():   # the child has the other core
+            for s in scenarios:
+                first = s == scenarios[0]
+                more = [sp for sp in extra[0] if sp not in specs] if first else []
+                runs = run_policies([sp for sp in specs if sp not in heavy] + more, s, n, seed, config,
+                                    num_threads=1 if job else None)
+                extra[1].update({(sp, s): runs[sp] for sp in extra[0] if first and sp in runs})
+                refs[s] = runs[reference]
+                _add_rows(s, groups, reference, runs, placed, bar)
         for s, runs in (job.result() if job else {}).items():
             _add_rows(s, groups, reference, {**runs, reference: refs[s]}, placed, bar)
     except BaseException:
