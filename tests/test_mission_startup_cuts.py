@@ -1,0 +1,128 @@
+"""The start-up cuts of ``dronewpt mission`` (issue 22): numba's BLAS probe answered without importing the
+``scipy.linalg`` package (:mod:`wpt_receiver.numba_start`), and the figure worker's forked helper
+(:func:`mission_sim.figures.worker._draw_split`): every figure drawn once, in order, also when the
+helper dies or fails."""
+
+import json
+import os
+import subprocess
+import sys
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mission_sim.figures import worker as fw
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _run(code: str) -> dict:
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT,
+                         timeout=300, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_numba_finds_blas_without_the_scipy_linalg_package_and_dot_is_blas():
+    """After prepare(): numba's registries load with BLAS available (np.dot compiles to the BLAS call,
+    equal to numpy's product), the package scipy.linalg is not imported; importing it later gives the
+    package with its cython_blas attribute (the same module) and working functions."""
+    code = """
+import json, sys
+import numpy as np
+from wpt_receiver.numba_start import prepare
+first, again = prepare(), prepare()
+from numba import njit
+@njit
+def dot(a, b):
+    return np.dot(a, b)
+rng = np.random.default_rng(3)
+a, b = rng.random((40, 30)), rng.random((30, 20))
+err = float(np.max(np.abs(dot(a, b) - a @ b)))
+import numba.np.arraymath as am
+before = "scipy.linalg" in sys.modules
+import scipy.linalg
+same = scipy.linalg.cython_blas is sys.modules["scipy.linalg.cython_blas"]
+from scipy.linalg import cython_blas
+e = float(scipy.linalg.expm(np.array([[0.0, 1.0], [-1.0, 0.0]]))[0, 1])
+print(json.dumps([first, again, am._HAVE_BLAS, err, before, same, cython_blas is scipy.linalg.cython_blas, e]))
+"""
+    first, again, have_blas, err, before, same, same2, e = _run(code)
+    assert first is True and again is False
+    assert have_blas is True and err < 1e-12
+    assert before is False and same and same2
+    assert e == pytest.approx(np.sin(1.0), rel=1e-12)
+
+
+
+
+
+def test_prepare_does_nothing_once_scipy_linalg_is_imported():
+    assert _run("import json, scipy.linalg\nfrom wpt_receiver.numba_start import prepare\n"
+                "print(json.dumps(prepare()))") is False
+
+
+def _fake_mission(tmp_path, plot):
+    names = ("trajectory", "lm", "i2", "soc", "power")
+    return types.SimpleNamespace(FIGURES=names, plot_mission=plot), names
+
+
+class _Conn:
+    def close(self):
+        pass
+
+
+def _writer(tmp_path, log):
+    parent = os.getpid()
+
+    def plot(result, out, which=None):
+        paths = []
+        for n in which:
+            p = Path(out) / f"{n}.txt"
+            p.write_text(f"{n} {result}")
+            paths.append(str(p))
+            with open(log, "a") as f:
+                f.write(f"{n} {'worker' if os.getpid() == parent else 'helper'}\n")
+        return paths
+    return plot
+
+
+def test_split_draws_every_figure_once_in_order_half_in_the_helper(tmp_path):
+    log = tmp_path / "log"
+    mission, names = _fake_mission(tmp_path, _writer(tmp_path, log))
+    files = fw._draw_split(mission, "R", tmp_path, _Conn())
+    assert files == [str(tmp_path / f"{n}.txt") for n in names]
+    who = dict(line.split() for line in log.read_text().splitlines())
+    assert sorted(who) == sorted(names)   # each once
+    assert {n for n, w in who.items() if w == "helper"} == set(fw.HELPER_FIGURES)
+    assert all((tmp_path / f"{n}.txt").read_text() == f"{n} R" for n in names)
+
+
+def test_a_helper_that_dies_is_replaced_by_the_worker(tmp_path):
+    log = tmp_path / "log"
+    parent = os.getpid()
+    write = _writer(tmp_path, log)
+
+    def plot(result, out, which=None):
+        if os.getpid() != parent:
+            os._exit(9)          # the helper killed before it answers
+        return write(result, out, which)
+    mission, names = _fake_mission(tmp_path, plot)
+    files = fw._draw_split(mission, "R", tmp_path, _Conn())
+    assert files == [str(tmp_path / f"{n}.txt") for n in names]
+    assert sorted(line.split()[1] for line in log.read_text().splitlines()) == ["worker"] * len(names)
+
+
+def test_an_error_in_the_helper_is_raised_by_the_worker(tmp_path):
+    parent = os.getpid()
+    write = _writer(tmp_path, tmp_path / "log")
+
+    def plot(result, out, which=None):
+        if os.getpid() != parent:
+            raise OSError(28, "no space left on device", str(Path(out) / "soc.png"))
+        return write(result, out, which)
+    mission, _ = _fake_mission(tmp_path, plot)
+    with pytest.raises(OSError, match="no space left"):
+        fw._draw_split(mission, "R", tmp_path, _Conn())
