@@ -126,3 +126,31 @@ def test_an_error_in_the_helper_is_raised_by_the_worker(tmp_path):
     mission, _ = _fake_mission(tmp_path, plot)
     with pytest.raises(OSError, match="no space left"):
         fw._draw_split(mission, "R", tmp_path, _Conn())
+
+
+def test_mission_command_line_ends_without_teardown_but_with_its_output_status_and_atexit(tmp_path):
+    """``dronewpt mission`` from the command line ends with os._exit after the command (no module teardown),
+    yet its piped output is complete, the atexit handlers ran, the status is the command's (3: a depleted
+    battery) and every file is in place; a caller's main(argv) returns as before (the other tests)."""
+    marker = tmp_path / "atexit_ran"
+    out = tmp_path / "m"
+    code = (f"import atexit, sys\natexit.register(lambda: open({str(marker)!r}, 'w').write('yes'))\n"
+            f"sys.argv = ['dronewpt', 'mission', '--out', {str(out)!r}, '--no-plot', '--no-progress', "
+            "'--set', 'battery.capacity_ah=0.01']\n"
+            "import mission_sim.cli as cli\n"
+            "real = cli._quick_exit\n"
+            "def spy(status):\n"
+            "    print('quick exit', status, flush=True)\n"
+            "    real(status)\n"
+            "    print('not reached', flush=True)\n"
+            "cli._quick_exit = spy\n"
+            "sys.exit(cli.main())")
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT, timeout=300)
+    assert r.returncode == 3, r.stderr
+    lines = r.stdout.splitlines()
+    assert lines[-1] == "quick exit 3" and "not reached" not in r.stdout
+    assert lines[-2] == f"wrote: {out / 'summary.json'}"
+    assert marker.read_text() == "yes"
+    assert json.loads((out / "summary.json").read_text())["battery_depleted"] is True
+    assert "battery depleted" in r.stderr
