@@ -154,3 +154,20 @@ def test_mission_command_line_ends_without_teardown_but_with_its_output_status_a
     assert marker.read_text() == "yes"
     assert json.loads((out / "summary.json").read_text())["battery_depleted"] is True
     assert "battery depleted" in r.stderr
+
+
+def test_without_a_free_core_no_helper_is_forked(tmp_path, monkeypatch):
+    log = tmp_path / "log"
+    mission, names = _fake_mission(tmp_path, _writer(tmp_path, log))
+    monkeypatch.setattr(os, "fork", lambda: pytest.fail("forked"))
+    files = fw._draw_split(mission, "R", tmp_path, _Conn(), ())
+    assert files == [str(tmp_path / f"{n}.txt") for n in names]
+    assert [line.split()[1] for line in log.read_text().splitlines()] == ["worker"] * len(names)
+
+
+def test_core_free_follows_the_load_average(monkeypatch):
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    monkeypatch.setattr(os, "getloadavg", lambda: (1.2, 1.0, 1.0))
+    assert fw.core_free() is True
+    monkeypatch.setattr(os, "getloadavg", lambda: (1.6, 1.0, 1.0))
+    assert fw.core_free() is False
