@@ -76,14 +76,16 @@ def _quick_exit(status: int) -> None:
     import atexit
     import os
     import threading
-    if any(t.is_alive() and not t.daemon for t in threading.enumerate() if t is not threading.main_thread()):
+    run_exitfuncs = getattr(atexit, "_run_exitfuncs", None)   # CPython's; elsewhere the normal exit
+    if run_exitfuncs is None or any(t.is_alive() and not t.daemon for t in threading.enumerate()
+                                    if t is not threading.main_thread()):
         return
     try:
         sys.stdout.flush()
         sys.stderr.flush()
     except (OSError, ValueError):
         return
-    atexit._run_exitfuncs()
+    run_exitfuncs()
     try:
         sys.stdout.flush()
         sys.stderr.flush()
