@@ -20,7 +20,7 @@ one fresh interpreter each (imports, config, policy, simulation, Parquet, figure
 rollout, statistics, frontier).
 
     python benchmarks/bench_startup.py [--repeat 5] [--compare no-mpc|default|none] [--phases] [--json] [--root DIR]
-        [--before DIR]
+        [--before DIR] [--pyc DIR|inherit] [--mission-only]
 """
 
 from __future__ import annotations
@@ -94,11 +94,28 @@ def _expand(argv: list[str], seed: int) -> list[str]:
     return [a.replace("{seed}", str(seed)) for a in argv]
 
 
-def end_to_end(repeat: int = 5, compare: str = "no-mpc", before: Path | None = None) -> dict:
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+def _bytecode_env(env: dict, pyc: str | None) -> dict:
+    """``env`` with Python's bytecode cache on in ``pyc`` (``PYTHONPYCACHEPREFIX``; None: as inherited).
+
+    A user's installed package has its ``.pyc`` files; an environment with ``PYTHONDONTWRITEBYTECODE=1``
+    (as the helpers' sessions on this machine have) compiles every module of the tree from source in
+    every run (~0.15-0.3 s of CPU for ``dronewpt mission``). The prefix keeps the measured trees
+    untouched (no ``__pycache__`` written into them); its first run compiles everything once (warm-up)."""
+    if pyc is None:
+        return env
+    env = {k: v for k, v in env.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    return {**env, "PYTHONPYCACHEPREFIX": pyc}
+
+
+def end_to_end(repeat: int = 5, compare: str = "no-mpc", before: Path | None = None, pyc: str | None = None,
+               mission_only: bool = False) -> dict:
+    env = _bytecode_env({**os.environ, "PYTHONPATH": str(ROOT)}, pyc)
     envs = {}
     with tempfile.TemporaryDirectory() as tmp:
         cmds = _commands(tmp, compare)
+        if mission_only:
+            cmds = {k: v for k, v in cmds.items() if k in ("python -c pass", "dronewpt mission",
+                                                           "dronewpt mission --no-plot")}
         if before is not None:   # the same two mission commands on another tree, interleaved with these
             for name in ("dronewpt mission", "dronewpt mission --no-plot"):
                 cmds[f"{name} (before: {before.name})"] = [a.replace(f"{tmp}/", f"{tmp}/before-") for a in cmds[name]]
@@ -114,7 +131,7 @@ def end_to_end(repeat: int = 5, compare: str = "no-mpc", before: Path | None = N
                 res[name][0].append(w)
                 res[name][1].append(c)
         load1 = os.getloadavg()
-    out = {"load_before": load0, "load_after": load1, "console_script": _console_script()[0]}
+    out = {"load_before": load0, "load_after": load1, "console_script": _console_script()[0], "pyc": pyc}
     for name, (w, c) in res.items():
         out[name] = {"median_s": statistics.median(w), "min_s": min(w), "max_s": max(w), "n": len(w),
                      "cpu_median_s": statistics.median(c), "cpu_min_s": min(c), "cpu_max_s": max(c)}
@@ -139,9 +156,11 @@ from mission_sim.world.runner import run_mission
 from mission_sim.world.stream import SeriesWriter
 out = Path(sys.argv[1]); out.mkdir(exist_ok=True)
 w = SeriesWriter(out, csv=False, every_s=0.0, figure_points=20000); lap("import runner, stream, pyarrow")
+from wpt_receiver.numba_start import prepare
+prepare(); lap("numba_start.prepare (scipy's cython_blas alone)")
 import numba; lap("import numba")
 from numba.core.registry import cpu_target
-cpu_target.target_context.refresh(); lap("numba's registries (imports scipy.linalg, cffi, ...)")
+cpu_target.target_context.refresh(); lap("numba's registries")
 import policies.kernels; lap("the policy's compiled kernel from numba's cache")
 from mission_sim.world import loop_kernel
 loop_kernel.advance_for(True); lap("the mission loop from numba's cache (one overload)")
@@ -192,7 +211,7 @@ def phases(policies: str = NO_MPC + ",ppo_lagrangian,residual") -> dict:
 
 def _print(r: dict) -> None:
     print(f"end to end ({r['console_script']}); load average (1 min) before {r['load_before'][0]:.2f}, "
-          f"after {r['load_after'][0]:.2f}")
+          f"after {r['load_after'][0]:.2f}; bytecode cache: {r.get('pyc') or 'as inherited'}")
     base = r["python -c pass"]["median_s"]
     goals = {"dronewpt mission": "goal <= 1.0 s", "dronewpt compare (default)": "goal <= 2.5 s",
              "dronewpt compare (no-mpc)": "goal <= 2.5 s (without mpc)"}
@@ -214,11 +233,16 @@ def main(argv=None):
                     "commit's `git archive`; default this repository)")
     ap.add_argument("--before", type=Path, default=None, help="also run the two mission commands on this code "
                     "tree (e.g. `git archive` of an older commit), interleaved with this one's")
+    ap.add_argument("--pyc", default=os.path.join(tempfile.gettempdir(), "dronewpt-bench-pyc"), metavar="DIR",
+                    help="bytecode cache of the measured processes (PYTHONPYCACHEPREFIX; a user's install has its "
+                         ".pyc files): default %(default)s; 'inherit' leaves the environment as it is")
+    ap.add_argument("--mission-only", action="store_true", help="only python -c pass and the two mission commands")
     a = ap.parse_args(argv)
     if a.root is not None:
         global ROOT
         ROOT = a.root.resolve()
-    r = {"end_to_end": end_to_end(a.repeat, a.compare, a.before)}
+    r = {"end_to_end": end_to_end(a.repeat, a.compare, a.before, None if a.pyc == "inherit" else a.pyc,
+                                  a.mission_only)}
     if a.phases:
         r["in_process"] = phases()
         r["in_process_load"] = os.getloadavg()

@@ -77,23 +77,29 @@ def main(argv=None) -> int:
 
 def _exit_now(rc: int) -> None:
     """End the process with status ``rc`` once the command is done: stdout and stderr flushed, the atexit
-    handlers run (logging, multiprocessing), but not the interpreter's teardown of every module and object
-    (numba's and LLVM's, scipy's: 0.3-0.8 s of wall time after ``compare`` or ``mission`` had finished,
-    measured under load). Only when no other Python thread runs and the streams flush; else it returns
-    and Python exits as usual."""
+    handlers run (logging, multiprocessing, ``weakref.finalize``), but not the interpreter's teardown of every
+    module and object (numba's and LLVM's, scipy's: 0.3-0.8 s of wall time after ``compare`` or ``mission`` had
+    finished, measured under load). Only on CPython (``atexit._run_exitfuncs``), when no non-daemon thread
+    runs and the streams flush; else it returns and Python exits as usual. The command's files are closed and
+    renamed into place before it returns."""
     import atexit
     import os
     import threading
-    if threading.active_count() > 1:
+    run_exitfuncs = getattr(atexit, "_run_exitfuncs", None)   # CPython's; elsewhere the normal exit
+    if run_exitfuncs is None or any(t.is_alive() and not t.daemon for t in threading.enumerate()
+                                    if t is not threading.main_thread()):
         return
     try:
         sys.stdout.flush()
         sys.stderr.flush()
-        atexit._run_exitfuncs()
+    except (OSError, ValueError):   # a closed pipe and the like: Python's own exit reports it as before
+        return
+    run_exitfuncs()
+    try:
         sys.stdout.flush()
         sys.stderr.flush()
-    except Exception:  # noqa: BLE001 - a closed pipe and the like: Python's own exit reports it as before
-        return
+    except (OSError, ValueError):
+        pass
     os._exit(rc)
 
 

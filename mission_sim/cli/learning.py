@@ -315,6 +315,8 @@ def _listed(text: str, flag: str) -> tuple:
 
 
 def _cmd_compare(args) -> int:
+    from wpt_receiver.numba_start import prepare
+    prepare()   # numba's start-up without importing the scipy.linalg package (~0.3 s of CPU)
     from policies.compare import DEFAULT_POLICIES, DEFAULT_SCENARIOS, compare, frontier, frontier_specs
 
     pols = DEFAULT_POLICIES if args.policies is None else _listed(args.policies, "--policies")

@@ -149,7 +149,10 @@ MISSION_LOCK = ".mission.lock"
 
 
 def _cmd_mission(args) -> int:
+    from wpt_receiver.numba_start import prepare
+
     from ..world.budget import estimate_run
+    prepare()   # numba's start-up without importing the scipy.linalg package (~0.3 s)
     cfg = mission_config(args)
     pol = make_policy(args.policy, cfg)
     if args.dry_run:

@@ -11,7 +11,7 @@ import numpy as np  # noqa: E402
 
 from .common import fixed_margins, save_figure  # noqa: E402
 
-__all__ = ["plot_lm_map", "plot_mission"]
+__all__ = ["plot_lm_map", "plot_mission", "warm_up", "FIGURES"]
 
 _FAST_PNG = 1  # zlib level of the mission figures: written on every `dronewpt mission`, so fast
 #: titles at the axes' top (+ the usual pad): matplotlib's automatic placement measures every tick
@@ -40,23 +40,47 @@ def plot_lm_map(model, dz_m: float, tilt_rad: float, path, half_width_m: float =
     return save_figure(fig, path)
 
 
-def plot_mission(result, out_dir) -> list[str]:
+#: the mission figures by name, in the order :func:`plot_mission` draws them
+FIGURES = ("trajectory", "lm", "i2", "soc", "power")
+
+
+def plot_mission(result, out_dir, which=None) -> list[str]:
     """The mission figures: trajectory over the pads, Lm(t), I2 envelope vs rated, SoC, power flows
-    (``result.timeseries``: a DataFrame or a dict of numpy columns)."""
+    (``result.timeseries``: a DataFrame or a dict of numpy columns); ``which``: the names of
+    :data:`FIGURES` to draw (None: all), drawn in that tuple's order. The paths written."""
     import gc
     from pathlib import Path
     out = Path(out_dir)
+    plots = {"trajectory": _plot_trajectory, "lm": _plot_lm, "i2": _plot_i2, "soc": _plot_soc, "power": _plot_power}
     files = []
     gc.freeze()   # what exists now is not scanned again: collecting a figure's cycles costs ~3 ms, not ~100 ms
     try:
-        for plot in (_plot_trajectory, _plot_lm, _plot_i2, _plot_soc, _plot_power):
-            files.append(plot(result, out))
+        for name in FIGURES:
+            if which is not None and name not in which:
+                continue
+            files.append(plots[name](result, out))
             # a closed figure is a web of reference cycles that only the cyclic collector frees; left to
             # it, the five figures of a 50 h mission's thinned series (~20,000 points) held ~170 MB at once
             gc.collect()
     finally:
         gc.unfreeze()
     return files
+
+
+def warm_up() -> None:
+    """Pay matplotlib's first-drawing costs (the font files, the Agg renderer, Pillow's PNG writer) on a
+    small figure written to memory: a process that waits for data (:mod:`.worker`) does it while it
+    waits. Only caches are filled: the figures drawn afterwards are the same bytes."""
+    import io
+    fig, ax = plt.subplots(figsize=(1.5, 1.2))
+    ax.plot([0.0, 1.0], [0.0, 1.0], ".-", lw=0.8)
+    ax.set_xlabel("t [s]")
+    ax.set_title("warm-up", y=_TITLE_Y)
+    ax.legend(["x"], fontsize=8)
+    try:
+        fig.savefig(io.BytesIO(), format="png", dpi=110, pil_kwargs={"compress_level": _FAST_PNG})
+    finally:
+        plt.close(fig)
 
 
 def _plot_trajectory(result, out) -> str:

@@ -1,0 +1,94 @@
+"""numba's start-up without the ``scipy.linalg`` package: its BLAS probe answered by the one module it asks for.
+
+When numba loads its typing and lowering registries (the first compile or cache load of a process),
+``numba.np.arraymath`` checks that a BLAS is available for ``np.dot`` (``numba.np.linalg.ensure_blas``):
+it imports ``scipy.linalg.cython_blas``, and Python imports the parent package ``scipy.linalg`` first.
+That package's ``__init__`` imports most of scipy.linalg, ``scipy._lib._array_api`` and its array-API
+shim, which clones numpy's namespace and so imports ``numpy.f2py`` and ``numpy.testing``: about a third
+of numba's start-up (0.3-0.35 s of CPU at load ~5, measured), for one extension module whose C function
+pointers numba reads (its helper library imports the same module by name at run time).
+
+:func:`prepare` loads that extension module alone, under its own name, so the probe finds it in
+``sys.modules``; the numbers are the same (the same BLAS, found the same way: ``_HAVE_BLAS`` stays True).
+A later ``import scipy.linalg`` in the same process runs the package's ``__init__`` as usual; a one-shot
+import hook (:class:`_Attach`) then sets the package's ``cython_blas`` attribute to the loaded module, as
+importing it after the package would have. Nothing happens when numba's registries are loaded already, when
+``scipy.linalg`` (or the module) is imported already, or when the extension is not where scipy's
+layout puts it (then numba imports it as before).
+"""
+
+from __future__ import annotations
+
+import importlib.machinery
+import importlib.util
+import os
+import sys
+
+__all__ = ["prepare", "BLAS_MODULE"]
+
+#: the module numba's BLAS probe imports
+BLAS_MODULE = "scipy.linalg.cython_blas"
+
+
+def prepare() -> bool:
+    """Load :data:`BLAS_MODULE` without its package (module notes) unless numba's registries or
+    ``scipy.linalg`` are loaded already; True if it loaded it now. Idempotent, never raises."""
+    if BLAS_MODULE in sys.modules or "scipy.linalg" in sys.modules or "numba.np.arraymath" in sys.modules:
+        return False
+    try:
+        spec = importlib.util.find_spec("scipy")   # finds the package without importing it
+        if spec is None or not spec.submodule_search_locations:
+            return False
+        folder = os.path.join(next(iter(spec.submodule_search_locations)), "linalg")
+        for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+            path = os.path.join(folder, "cython_blas" + suffix)
+            if os.path.isfile(path):
+                break
+        else:
+            return False
+        mod_spec = importlib.util.spec_from_file_location(BLAS_MODULE, path)
+        module = importlib.util.module_from_spec(mod_spec)
+        sys.modules[BLAS_MODULE] = module
+        try:
+            mod_spec.loader.exec_module(module)
+        except BaseException:
+            sys.modules.pop(BLAS_MODULE, None)
+            raise
+    except Exception:  # noqa: BLE001 - any surprise: numba imports the package itself, as before
+        return False
+    sys.meta_path.insert(0, _Attach())
+    return True
+
+
+class _Attach:
+    """Import hook, used once: when ``scipy.linalg`` is imported, its module gets the attribute
+    ``cython_blas`` (the module :func:`prepare` loaded) after its ``__init__`` ran; then the hook removes
+    itself. It finds nothing itself: the real finders find and load the package."""
+
+    def find_spec(self, name, path=None, target=None):
+        if name != "scipy.linalg":
+            return None
+        sys.meta_path.remove(self)
+        spec = importlib.util.find_spec(name)
+        if spec is not None and spec.loader is not None:
+            spec.loader = _AttachLoader(spec.loader)
+        return spec
+
+
+class _AttachLoader:
+    """``loader`` that sets ``module.cython_blas`` after executing the package (see :class:`_Attach`)."""
+
+    def __init__(self, loader):
+        self._loader = loader
+
+    def create_module(self, spec):
+        return self._loader.create_module(spec)
+
+    def exec_module(self, module):
+        self._loader.exec_module(module)
+        blas = sys.modules.get(BLAS_MODULE)
+        if blas is not None and not hasattr(module, "cython_blas"):
+            module.cython_blas = blas
+
+    def __getattr__(self, name):   # get_filename, get_code, is_package, ... of the real loader
+        return getattr(self._loader, name)
