@@ -1,0 +1,273 @@
+"""Amortised imitation of the per-window oracle: a learned map from what a receiver sees at the stop
+to the oracle's open-loop duty sequence after it (issue 21, "imitation of the oracle").
+
+The oracle (:mod:`policies.oracle`) finds, for one seeded window with the true parameters known, the
+least-energy duty sequence after the stop within a measured-overshoot budget. Its sequences are
+smooth ramps from the duty at the stop to short mode (duty 1), whose shape depends on the state at
+the stop (charge command, battery voltage, coil current, Lm). This module learns that dependence from
+solved training windows and replays it, so a realisable policy (observations only, no true
+parameter) can act near the oracle's curve below the MPC's:
+
+* **Before the stop** the policy is the paper's controller (:class:`policies.classical.ModelBasedPolicy`,
+  feed-forward: command and battery voltage to duty; a sensing delay does not touch it). The oracle's
+  duties before the stop are the same, so the state at the stop is the one it was solved from.
+* **At the stop** (the first observation with charge command 0) it computes :func:`stop_features` from
+  its own frame history (the last :data:`HISTORY` observations, causal) and predicts the sequence
+  ``d_k0+j = d_pre + sum_m z_m u_m[j]`` for ``j < HORIZON`` (``u_m`` the principal components of the
+  training targets, ``z`` the output of a small MLP), duty 1 after the horizon; it holds that open-loop
+  sequence for the rest of the window (a window whose command turns positive again is released).
+
+Training data (:func:`build_dataset`): for training windows (seeds disjoint from the evaluation's
+1000-1099) of several scenarios, the oracle's floor ``f`` and the oracle at budgets ``f + delta`` for a
+few ``delta``; per window one of them is chosen by a Lagrangian trade (least ``E + lam * overshoot``,
+``lam`` in J per point: the same multiplier for every window, so the overshoot is spent where it
+buys most energy), which sets the mean overshoot of the teacher. The fit (:func:`fit`) is ridge-free
+least squares on the principal components + an MLP in torch (Adam, MSE), one per training seed
+(different initialisation and bootstrap draw of the windows). Stored as ``.npz`` (a few kB): the
+feature normalisation, the components, the MLP's weights; inference is numpy.
+
+Policy: :class:`OracleImitationPolicy` (``oracle_imitation:PATH``; ``oracle_imitation`` = shipped seed 0).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from mission_sim.contract import OBS_DIM, OBS_INDEX, PolicyContext, denormalise_obs
+
+__all__ = ["HISTORY", "HORIZON", "stop_features", "collect_stop_observations", "oracle_targets", "target_sequences",
+           "predict", "sequences_from", "SearchWindows", "save_model", "load_model",
+           "choose_targets", "fit", "OracleImitationPolicy", "PRETRAINED_ORACLE_IMITATION", "FEATURE_NAMES"]
+
+#: frames of observation history the policy keeps (the features use the last few before the stop)
+HISTORY = 8
+#: steps after the stop whose duties are predicted (20 ms: the longest window after its stop)
+HORIZON = 200
+PRETRAINED_ORACLE_IMITATION = Path(__file__).parent / "pretrained" / "oracle_imitation_s0.npz"
+
+_I2, _VL, _IB, _IL, _SOC, _CMD, _D, _T = (OBS_INDEX[k] for k in (
+    "i2_amp_a", "battery_v", "battery_current_a", "rect_current_a", "soc", "charge_cmd_a", "last_d_short",
+    "t_since_stop_s"))
+FEATURE_NAMES = ("d_pre", "cmd_before_a", "vl_v", "soc", "i2_mean_a", "il_mean_a", "ib_mean_a", "d_slope",
+                 "i2_per_duty")
+
+
+def stop_features(frames) -> np.ndarray:
+    """Features (n, F) of the physical observation history ``frames`` (n, HISTORY, OBS_DIM) whose last
+    frame is the first one with charge command 0 (the stop): the duty applied before the stop, the
+    command before it, battery voltage and SoC, the means of the last four pre-stop frames of I2, I_L
+    and the battery current (a sensing delay shifts them by a few frames; before the stop they are near
+    steady), the duty's slope over those frames and I2 over the rectification-mode current scale
+    ``(1 - d)`` (tells a weaker coupling, e.g. a falling Lm, from a stronger one)."""
+    f = np.asarray(frames, dtype=float)
+    last, pre = f[:, -1, :], f[:, -5:-1, :]
+    d_pre = last[:, _D]
+    i2 = pre[:, :, _I2].mean(axis=1)
+    return np.column_stack([
+        d_pre, f[:, -2, _CMD], last[:, _VL], last[:, _SOC], i2, pre[:, :, _IL].mean(axis=1),
+        pre[:, :, _IB].mean(axis=1), d_pre - pre[:, 0, _D], i2 / np.maximum(1.0 - d_pre, 0.05)])
+
+
+def collect_stop_observations(scenario, seed: int, episodes: int, config=None, base: str = "model_based"):
+    """Run ``base`` in closed loop on windows ``seed .. seed + episodes - 1`` and return
+    ``(frames (n, HISTORY, OBS_DIM) physical, stop step k0 (n,))``: the policy's history at its first
+    observation with command 0 (the one that chooses the duty of step k0)."""
+    from envs import SbarChargingVectorEnv
+
+    from . import make
+    venv = SbarChargingVectorEnv(num_envs=episodes, scenario=scenario, config=config)
+    pol = make(base, venv.policy_context)
+    pol.reset(episodes)
+    obs, _ = venv.reset(seed=seed)
+    hist = np.repeat(denormalise_obs(obs)[:, None, :], HISTORY, axis=1)
+    frames = np.full((episodes, HISTORY, OBS_DIM), np.nan)
+    k_seen = np.full(episodes, -1)
+    for k in range(venv.config.n_steps):
+        phys = denormalise_obs(obs)
+        hist = np.concatenate([hist[:, 1:], phys[:, None, :]], axis=1)
+        new = (phys[:, _CMD] <= 0.0) & (k_seen < 0)
+        frames[new], k_seen[new] = hist[new], k
+        d = np.asarray(pol.act(obs), dtype=float).reshape(episodes)
+        obs, *_ = venv.step((2.0 * np.clip(d, 0.0, 1.0) - 1.0)[:, None].astype(np.float32))
+    k0 = np.asarray(venv._stop_k, dtype=int).copy()
+    if not np.array_equal(k0, k_seen):
+        raise RuntimeError(f"stop seen at {k_seen.tolist()} but scored from {k0.tolist()}")
+    return frames, k0
+
+
+def oracle_targets(scenario, seeds, deltas, config=None, progress: bool = False) -> dict:
+    """The oracle on windows ``seeds`` of ``scenario``: the floor ``f`` (from the paper's controller's
+    duties before the stop) and the best sequences within budgets ``f + delta`` (fractions) for every
+    ``delta``; ``{"floor" (n,), "overshoot" (n, D), "energy_j" (n, D), "feasible" (n, D), "duties" (n, D, T)}``
+    (cached on disk by :mod:`policies.oracle`)."""
+    from tqdm import tqdm
+
+    from .oracle import oracle_floor, oracle_window
+    seeds = [int(s) for s in seeds]
+    out = {"floor": [], "overshoot": [], "energy_j": [], "feasible": [], "duties": []}
+    for s in tqdm(seeds, desc=f"oracle {scenario}", disable=not progress):
+        f = oracle_floor(scenario, s, config)
+        res = [oracle_window(scenario, s, f.overshoot + float(dl), config=config, extra_starts=(f.duties,))
+               for dl in deltas]
+        out["floor"].append(f.overshoot)
+        out["overshoot"].append([r.overshoot for r in res])
+        out["energy_j"].append([r.energy_after_stop_j for r in res])
+        out["feasible"].append([r.feasible for r in res])
+        out["duties"].append([r.duties for r in res])
+    return {k: np.asarray(v) for k, v in out.items()}
+
+
+def choose_targets(energy_j, overshoot, lam_j_per_pt: float) -> np.ndarray:
+    """Per window the index of the budget with the least ``E + lam * overshoot [points]`` (n,): one
+    multiplier for all windows, so overshoot is spent where it buys the most energy (a larger ``lam``
+    gives a lower mean overshoot)."""
+    return np.argmin(np.asarray(energy_j) + lam_j_per_pt * 100.0 * np.asarray(overshoot), axis=1)
+
+
+def target_sequences(duties, k0) -> np.ndarray:
+    """The oracle's duties after the stop relative to the duty before it, ``d[k0 + j] - d[k0 - 1]`` for
+    ``j < HORIZON`` (n, HORIZON); a window shorter than that is padded with its last value."""
+    out = np.empty((len(k0), HORIZON))
+    for i, (d, k) in enumerate(zip(duties, k0)):
+        seg = d[k:k + HORIZON]
+        out[i] = np.r_[seg, np.full(HORIZON - len(seg), seg[-1])] - d[k - 1]
+    return out
+
+
+def _design(model, features) -> np.ndarray:
+    """``[1, standardised features]`` (n, 1 + F) of the model's feature columns."""
+    f = np.atleast_2d(np.asarray(features, dtype=float))[:, model["cols"]]
+    return np.column_stack([np.ones(len(f)), (f - model["feat_mean"]) / model["feat_std"]])
+
+
+def fit(features, targets, cols=(0, 1), ridge: float = 1e-2, seed=None) -> dict:
+    """Behaviour cloning of the oracle: ridge regression of the target sequences (n, HORIZON) on the
+    standardised feature columns ``cols`` of :func:`stop_features` (linear: on the training windows the
+    map's cross-validated error was no better with quadratic terms, k nearest neighbours or an MLP, see
+    docs/rl.md); ``seed`` (int) fits on a bootstrap draw of the windows (the training seeds)."""
+    X = np.asarray(features, dtype=float)[:, list(cols)]
+    Y = np.asarray(targets, dtype=float)
+    if seed is not None:
+        idx = np.random.default_rng(int(seed)).integers(0, len(X), len(X))
+        X, Y = X[idx], Y[idx]
+    fm, fs = X.mean(axis=0), X.std(axis=0)
+    fs = np.where(fs > 1e-6, fs, np.inf)     # a feature constant in training is ignored (weight 0)
+    model = {"cols": np.asarray(cols, dtype=int), "feat_mean": fm, "feat_std": fs}
+    D = np.column_stack([np.ones(len(X)), (X - fm) / fs])
+    model["W"] = np.linalg.solve(D.T @ D + ridge * np.eye(D.shape[1]), D.T @ Y)
+    return model
+
+
+def predict(model, features) -> np.ndarray:
+    """The model's target sequences (n, HORIZON) (duty after the stop minus the duty before it) for
+    features (n, F)."""
+    return _design(model, features) @ model["W"]
+
+
+def sequences_from(model, features, d_pre) -> np.ndarray:
+    """Absolute duties after the stop (n, HORIZON) in [0, 1]: ``d_pre + predict``."""
+    return np.clip(np.asarray(d_pre, dtype=float)[:, None] + predict(model, features), 0.0, 1.0)
+
+
+class SearchWindows:
+    """Windows to score a model on open loop (fast, no policy loop): the stop features seen in ``obs_scenario`` and, on the plant
+    of ``plant_scenario`` (the same windows without the sensing delay, or the scenario itself), the
+    paper's controller's duties before the stop and a :class:`envs.rollout.DutyRollout` per window."""
+
+    def __init__(self, obs_scenario, plant_scenario, seeds, config=None):
+        from envs.rollout import DutyRollout
+
+        from .oracle import policy_duties
+        seeds = [int(s) for s in seeds]
+        frames, self.k0 = collect_stop_observations(obs_scenario, seeds[0], len(seeds), config)
+        if seeds != list(range(seeds[0], seeds[0] + len(seeds))):
+            raise ValueError("search windows must be consecutive seeds")
+        self.features = stop_features(frames)
+        self.d_pre = frames[:, -1, _D]
+        self.base = policy_duties("model_based", plant_scenario, seeds[0], config, episodes=len(seeds))
+        self.rolls = [DutyRollout(plant_scenario, s, config) for s in seeds]
+
+    def run(self, models):
+        """Energy after the stop (W, m), overshoot (W, m), largest I_L from 14 ms after the stop (W, m) of
+        each of the ``m`` models on every window (the paper's controller before the stop, the model's
+        sequence after it: what :class:`OracleImitationPolicy` does in closed loop)."""
+        W, m = len(self.rolls), len(models)
+        e, ov, il = np.empty((W, m)), np.empty((W, m)), np.empty((W, m))
+        for w, roll in enumerate(self.rolls):
+            y = np.vstack([predict(model, self.features[w:w + 1]) for model in models])
+            d = np.repeat(self.base[w][None, :], m, axis=0)
+            k0, T = self.k0[w], d.shape[1]
+            n = min(HORIZON, T - k0)
+            d[:, k0:k0 + n] = np.clip(self.d_pre[w] + y[:, :n], 0.0, 1.0)
+            d[:, k0 + n:] = 1.0
+            r = roll.run(d)
+            late = np.arange(T) >= min(k0 + int(round(14e-3 / roll.config.dt_s)), T - 1)
+            e[w], ov[w], il[w] = r.energy_after_stop_j, r.overshoot, r.rect_current_a[:, late].max(axis=1)
+        return e, ov, il
+
+
+def save_model(model: dict, path, meta: dict) -> None:
+    """Write ``model`` (+ ``meta`` as JSON) to ``path`` (.npz) under a temporary name, then rename."""
+    import json
+    import os
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez(tmp, meta=np.array(json.dumps(meta)), **model)
+    os.replace(tmp, path)
+
+
+def load_model(path) -> dict:
+    with np.load(path) as z:
+        return {k: z[k] for k in z.files}
+
+
+class OracleImitationPolicy:
+    """The paper's controller before the stop, the learned oracle sequence from the stop on (module notes).
+
+    Causal: the duty at step k depends on the observations up to k only (the frame history and the
+    sequence latched at the stop). Reset per batch; a receiver whose command turns positive after its
+    stop is in a new window: its latch is released and its base controller restarted."""
+
+    name = "oracle_imitation"
+
+    def __init__(self, ctx: PolicyContext = PolicyContext(), path=PRETRAINED_ORACLE_IMITATION):
+        from .classical import ModelBasedPolicy
+        self.ctx = ctx
+        self.model = load_model(path)
+        if self.model["W"].shape[1] != HORIZON:
+            raise ValueError(f"oracle imitation model {str(path)!r} predicts {self.model['W'].shape[1]} steps; "
+                             f"this code expects {HORIZON}")
+        self.base = ModelBasedPolicy(ctx)
+        self.reset(1)
+
+    def reset(self, n: int = 1) -> None:
+        self.n = int(n)
+        self.base.reset(self.n)
+        self._hist = None
+        self._seq = np.zeros((self.n, HORIZON))
+        self._j = np.full(self.n, -1)      # steps since the stop (-1: charging)
+
+    def act(self, obs):
+        o = np.atleast_2d(np.asarray(obs, dtype=float))
+        if len(o) != self.n:
+            self.reset(len(o))
+        phys = denormalise_obs(o)
+        if self._hist is None:
+            self._hist = np.repeat(phys[:, None, :], HISTORY, axis=1)
+        else:
+            self._hist = np.concatenate([self._hist[:, 1:], phys[:, None, :]], axis=1)
+        charging = phys[:, _CMD] > 0.0
+        new_window = np.flatnonzero(charging & (self._j >= 0))
+        self._j[charging] = -1
+        d = np.asarray(self.base.act(o, restart=new_window if len(new_window) else None), dtype=float).reshape(-1)
+        stop = np.flatnonzero(~charging & (self._j < 0))
+        if len(stop):
+            self._seq[stop] = sequences_from(self.model, stop_features(self._hist[stop]), phys[stop, _D])
+            self._j[stop] = 0
+        after = np.flatnonzero(self._j >= 0)
+        j = self._j[after]
+        d[after] = np.where(j < HORIZON, self._seq[after, np.minimum(j, HORIZON - 1)], 1.0)
+        self._j[after] += 1
+        return d
