@@ -41,7 +41,10 @@ def parse(argv):
     ap.add_argument("--deltas", default="0.003,0.006,0.01", help="budgets above each window's floor (fractions)")
     ap.add_argument("--lam", type=float, default=0.3, help="multiplier, J per point of overshoot (> 0)")
     ap.add_argument("--train-seeds", default="0,1,2,3,4")
-    ap.add_argument("--maxiter", type=int, default=3000, help="L-BFGS iterations of each fit")
+    ap.add_argument("--slow", type=float, default=1.0, help="play the learned sequence this many times slower "
+                    "(>= 1; less overshoot for more energy, chosen on validation windows)")
+    ap.add_argument("--features", default="d_pre,cmd_before_a", help="stop features the clone reads "
+                    "(policies.oracle_imitation.FEATURE_NAMES)")
     ap.add_argument("--out", default="out/oracle_imitation")
     a = ap.parse_args(argv)
     from envs import get_scenario
@@ -52,13 +55,16 @@ def parse(argv):
         lo, hi = (int(x) for x in a.windows.split(":"))
         a.deltas = [float(x) for x in a.deltas.split(",")]
         a.train_seeds = [int(x) for x in a.train_seeds.split(",")]
+        from policies.oracle_imitation import FEATURE_NAMES
+        a.cols = [FEATURE_NAMES.index(x) for x in a.features.split(",")]
     except ValueError as exc:
-        ap.exit(2, f"train_oracle_imitation: invalid option: {str(exc).splitlines()[0]}\n")
+        ap.exit(2, f"train_oracle_imitation: invalid option ({str(exc).splitlines()[0]}); valid: --windows LO:HI, "
+                   f"--deltas/--train-seeds comma-separated numbers, --features names from FEATURE_NAMES\n")
     if not (0 <= lo < hi and (hi <= 1000 or lo >= 1100)):
         ap.exit(2, f"--windows {a.windows!r} is invalid; valid: LO:HI with 0 <= LO < HI, disjoint from 1000-1099\n")
     if not a.deltas or not all(0.0 < d <= 0.2 for d in a.deltas) or not (a.lam > 0 and np.isfinite(a.lam)) \
-            or a.maxiter < 1 or not a.scenarios:
-        ap.exit(2, "train_oracle_imitation: --deltas must be in (0, 0.2], --lam > 0, --maxiter >= 1, --scenarios non-empty\n")
+            or not a.scenarios or not (1.0 <= a.slow <= 3.0):
+        ap.exit(2, "train_oracle_imitation: --deltas must be in (0, 0.2], --lam > 0, --slow in [1, 3], --scenarios non-empty\n")
     a.seeds = list(range(lo, hi))
     return a
 
@@ -92,11 +98,12 @@ def main(argv=None):
           f"{100 * info['floor'].mean():.3f} %), energy after the stop {info['energy_j'].mean():.4f} J")
     os.makedirs(os.path.dirname(a.out) or ".", exist_ok=True)
     for k in a.train_seeds:
-        model = fit(X, Y, seed=k, maxiter=a.maxiter)
-        rms = float(np.sqrt(((predict(model, X) - Y) ** 2).mean()))
+        model = fit(X, Y, cols=a.cols, seed=k)
+        rms = float(np.sqrt(((predict(model, X) - Y) ** 2).mean()))   # the clone's error (before the slow-down)
+        model["slow"] = np.array(a.slow)
         meta = {"command": " ".join(["python", "benchmarks/train_oracle_imitation.py"] + list(sys.argv[1:] if argv is None else argv)),
-                "scenarios": a.scenarios, "windows": [a.seeds[0], a.seeds[-1] + 1], "deltas": a.deltas, "lam": a.lam,
-                "seed": k, "teacher_overshoot_pct": 100 * float(info["overshoot"].mean()),
+                "scenarios": a.scenarios, "windows": [a.seeds[0], a.seeds[-1] + 1], "deltas": a.deltas, "lam": a.lam, "slow": a.slow,
+                "seed": k, "features": a.features.split(","), "teacher_overshoot_pct": 100 * float(info["overshoot"].mean()),
                 "teacher_energy_j": float(info["energy_j"].mean()), "fit_rms_duty": rms}
         save_model(model, f"{a.out}_s{k}.npz", meta)
         print(f"seed {k}: fit RMS {rms:.4f} (duty) -> {a.out}_s{k}.npz")
