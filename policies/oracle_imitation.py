@@ -38,7 +38,7 @@ import numpy as np
 from mission_sim.contract import OBS_DIM, OBS_INDEX, PolicyContext, denormalise_obs
 
 __all__ = ["HISTORY", "HORIZON", "stop_features", "collect_stop_observations", "oracle_targets", "target_sequences",
-           "predict", "sequences_from", "SearchWindows", "finetune", "save_model", "load_model",
+           "predict", "sequences_from", "SearchWindows", "save_model", "load_model",
            "choose_targets", "fit", "OracleImitationPolicy", "PRETRAINED_ORACLE_IMITATION", "FEATURE_NAMES"]
 
 #: frames of observation history the policy keeps (the features use the last few before the stop)
@@ -162,12 +162,9 @@ def fit(features, targets, cols=(0, 1), ridge: float = 1e-2, seed=None) -> dict:
 
 def predict(model, features) -> np.ndarray:
     """The model's target sequences (n, HORIZON) (duty after the stop minus the duty before it) for
-    features (n, F): the clone ``phi W`` plus the fine-tuned correction ``B A^T phi`` if any (``B`` the
-    cubic B-spline basis of :func:`policies.oracle._basis` over the horizon, dense at the stop)."""
+    features (n, F): the clone ``phi W``, played ``slow`` times slower if the model says so."""
     D = _design(model, features)
     y = D @ model["W"]
-    if "A" in model:
-        y = y + (D @ model["A"]) @ model["basis"].T
     s = float(model.get("slow", 1.0))
     if s != 1.0:   # the sequence played ``s`` times slower: y(j / s), the last value held
         j = np.arange(HORIZON) / s
@@ -215,44 +212,6 @@ class SearchWindows:
             late = np.arange(T) >= min(k0 + int(round(14e-3 / roll.config.dt_s)), T - 1)
             e[w], ov[w], il[w] = r.energy_after_stop_j, r.overshoot, r.rect_current_a[:, late].max(axis=1)
         return e, ov, il
-
-
-def finetune(model, windows: "SearchWindows", target_overshoot: float, generations: int = 120, sigma0: float = 0.01,
-             seed: int = 0, progress: bool = False) -> dict:
-    """Constrained fine-tuning of the clone by direct policy search on training windows (CMA-ES, the
-    ``cma`` package): a correction ``A`` (1 + F, N_BASIS) of the cloned sequence, ``B A^T phi``, minimising
-    the mean energy after the stop plus 1 J per point of mean measured overshoot above
-    ``target_overshoot`` (a fraction) plus 10 J times the fraction of windows not in short mode; every
-    candidate scored in closed form on :meth:`SearchWindows.run` (the paper's controller before the stop,
-    exact replay). ``sigma0`` in duty units. Returns the model with the best candidate met whose mean
-    overshoot is within the target and every window in short mode (the clone, ``A = 0``, if none) and
-    ``history`` (per generation: best penalised value, its mean overshoot %, mean energy J)."""
-    import cma
-
-    from .oracle import _basis
-    base = {**model, "basis": _basis(HORIZON)}
-    shape = (len(model["W"]), base["basis"].shape[1])
-    best, hist = {"x": np.zeros(int(np.prod(shape))), "e": np.inf}, []
-
-    def score(xs):
-        e, ov, il = windows.run([{**base, "A": x.reshape(shape)} for x in xs])
-        e_m, ov_m, sm = e.mean(axis=0), ov.mean(axis=0), (il < 0.5).mean(axis=0)
-        f = e_m + 100.0 * np.maximum(0.0, ov_m - target_overshoot) + 10.0 * (1.0 - sm)
-        for i, x in enumerate(xs):
-            if ov_m[i] <= target_overshoot and sm[i] == 1.0 and e_m[i] < best["e"]:
-                best.update(x=np.array(x, dtype=float), e=float(e_m[i]))
-        i = int(np.argmin(f))
-        hist.append((float(f[i]), 100.0 * float(ov_m[i]), float(e_m[i])))
-        return f
-
-    es = cma.CMAEvolutionStrategy(np.zeros(int(np.prod(shape))), sigma0,
-                                  {"seed": int(seed) + 1, "verbose": -9, "maxiter": int(generations)})
-    from tqdm import tqdm
-    for _ in tqdm(range(int(generations)), desc="fine-tune (CMA-ES)", disable=not progress):
-        xs = es.ask()
-        es.tell(xs, list(score(np.asarray(xs))))
-    out = {**base, "A": best["x"].reshape(shape), "history": np.asarray(hist)}
-    return out
 
 
 def save_model(model: dict, path, meta: dict) -> None:
