@@ -72,8 +72,8 @@ def parse(argv):
 def dataset(scenarios, seeds, deltas, lam):
     """``(features, targets, info)`` of every (scenario, window): the stop features of the paper's
     controller's run and the chosen oracle sequence."""
-    from policies.oracle_imitation import choose_targets, collect_stop_observations, oracle_targets, stop_features, \
-        target_sequences
+    from policies.oracle_imitation import choose_targets, stop_features, target_sequences
+    from policies.oracle_imitation_train import collect_stop_observations, oracle_targets
     X, Y, ov, en, fl = [], [], [], [], []
     for s in scenarios:
         frames, k0 = collect_stop_observations(s, seeds[0], len(seeds))

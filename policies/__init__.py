@@ -3,7 +3,7 @@
 Modules: ``classical`` (step, ramp, model_based), ``kernels`` (their compiled per-step functions for
 the mission's fast path; numba, imported on demand), ``onoff``, ``online``, ``budgeted``,
 ``random_policy``, ``mpc``, ``oracle``, ``rl`` / ``residual`` / ``constrained`` / ``imitation`` / ``smoothing`` /
-``train`` / ``callbacks`` / ``hyperparams`` / ``slow_budget`` (RL, needs stable-baselines3), ``oracle_imitation``, ``inference``,
+``train`` / ``callbacks`` / ``hyperparams`` / ``slow_budget`` (RL, needs stable-baselines3), ``oracle_imitation`` / ``oracle_imitation_train``, ``inference``,
 ``compare``, ``batched``, ``forked``, ``stats``, ``threads``.
 
 >>> from policies import make
@@ -27,6 +27,7 @@ Modules, from the classical controllers to learning and comparing:
 ``smoothing``      low-pass filtered duty and duty-change penalty (SAC / TD3 / PPO train options)
 ``slow_budget``    a learned policy acting in a slow variable: the MPC's overshoot budget per step
 ``oracle_imitation``  the oracle's after-stop sequence learned from the stop observation (amortised imitation)
+``oracle_imitation_train``  its training side: stop observations, the oracle's sequences, open-loop scoring
 ``callbacks``      SB3 callbacks of ``train``: progress bar with return and cost, evaluation
 ``hyperparams``    rl-baselines3-zoo style hyperparameter files (YAML / JSON)
 ``train``          ``dronewpt train``: PPO / SAC / TD3 / DQN on the batched env, imitation, outputs and metadata

@@ -17,7 +17,7 @@ parameter) can act near the oracle's curve below the MPC's:
   training targets, ``z`` the output of a small MLP), duty 1 after the horizon; it holds that open-loop
   sequence for the rest of the window (a window whose command turns positive again is released).
 
-Training data (:func:`build_dataset`): for training windows (seeds disjoint from the evaluation's
+Training data (:mod:`policies.oracle_imitation_train`): for training windows (seeds disjoint from the evaluation's
 1000-1099) of several scenarios, the oracle's floor ``f`` and the oracle at budgets ``f + delta`` for a
 few ``delta``; per window one of them is chosen by a Lagrangian trade (least ``E + lam * overshoot``,
 ``lam`` in J per point: the same multiplier for every window, so the overshoot is spent where it
@@ -35,10 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
-from mission_sim.contract import OBS_DIM, OBS_INDEX, PolicyContext, denormalise_obs
+from mission_sim.contract import OBS_INDEX, PolicyContext, denormalise_obs
 
-__all__ = ["HISTORY", "HORIZON", "stop_features", "collect_stop_observations", "oracle_targets", "target_sequences",
-           "predict", "sequences_from", "SearchWindows", "save_model", "load_model",
+__all__ = ["HISTORY", "HORIZON", "stop_features", "target_sequences", "predict", "sequences_from", "save_model", "load_model",
            "choose_targets", "fit", "OracleImitationPolicy", "PRETRAINED_ORACLE_IMITATION", "FEATURE_NAMES"]
 
 #: frames of observation history the policy keeps (the features use the last few before the stop)
@@ -68,55 +67,6 @@ def stop_features(frames) -> np.ndarray:
     return np.column_stack([
         d_pre, f[:, -2, _CMD], last[:, _VL], last[:, _SOC], i2, pre[:, :, _IL].mean(axis=1),
         pre[:, :, _IB].mean(axis=1), d_pre - pre[:, 0, _D], i2 / np.maximum(1.0 - d_pre, 0.05)])
-
-
-def collect_stop_observations(scenario, seed: int, episodes: int, config=None, base: str = "model_based"):
-    """Run ``base`` in closed loop on windows ``seed .. seed + episodes - 1`` and return
-    ``(frames (n, HISTORY, OBS_DIM) physical, stop step k0 (n,))``: the policy's history at its first
-    observation with command 0 (the one that chooses the duty of step k0)."""
-    from envs import SbarChargingVectorEnv
-
-    from . import make
-    venv = SbarChargingVectorEnv(num_envs=episodes, scenario=scenario, config=config)
-    pol = make(base, venv.policy_context)
-    pol.reset(episodes)
-    obs, _ = venv.reset(seed=seed)
-    hist = np.repeat(denormalise_obs(obs)[:, None, :], HISTORY, axis=1)
-    frames = np.full((episodes, HISTORY, OBS_DIM), np.nan)
-    k_seen = np.full(episodes, -1)
-    for k in range(venv.config.n_steps):
-        phys = denormalise_obs(obs)
-        hist = np.concatenate([hist[:, 1:], phys[:, None, :]], axis=1)
-        new = (phys[:, _CMD] <= 0.0) & (k_seen < 0)
-        frames[new], k_seen[new] = hist[new], k
-        d = np.asarray(pol.act(obs), dtype=float).reshape(episodes)
-        obs, *_ = venv.step((2.0 * np.clip(d, 0.0, 1.0) - 1.0)[:, None].astype(np.float32))
-    k0 = np.asarray(venv._stop_k, dtype=int).copy()
-    if not np.array_equal(k0, k_seen):
-        raise RuntimeError(f"stop seen at {k_seen.tolist()} but scored from {k0.tolist()}")
-    return frames, k0
-
-
-def oracle_targets(scenario, seeds, deltas, config=None, progress: bool = False) -> dict:
-    """The oracle on windows ``seeds`` of ``scenario``: the floor ``f`` (from the paper's controller's
-    duties before the stop) and the best sequences within budgets ``f + delta`` (fractions) for every
-    ``delta``; ``{"floor" (n,), "overshoot" (n, D), "energy_j" (n, D), "feasible" (n, D), "duties" (n, D, T)}``
-    (cached on disk by :mod:`policies.oracle`)."""
-    from tqdm import tqdm
-
-    from .oracle import oracle_floor, oracle_window
-    seeds = [int(s) for s in seeds]
-    out = {"floor": [], "overshoot": [], "energy_j": [], "feasible": [], "duties": []}
-    for s in tqdm(seeds, desc=f"oracle {scenario}", disable=not progress):
-        f = oracle_floor(scenario, s, config)
-        res = [oracle_window(scenario, s, f.overshoot + float(dl), config=config, extra_starts=(f.duties,))
-               for dl in deltas]
-        out["floor"].append(f.overshoot)
-        out["overshoot"].append([r.overshoot for r in res])
-        out["energy_j"].append([r.energy_after_stop_j for r in res])
-        out["feasible"].append([r.feasible for r in res])
-        out["duties"].append([r.duties for r in res])
-    return {k: np.asarray(v) for k, v in out.items()}
 
 
 def choose_targets(energy_j, overshoot, lam_j_per_pt: float) -> np.ndarray:
@@ -175,43 +125,6 @@ def predict(model, features) -> np.ndarray:
 def sequences_from(model, features, d_pre) -> np.ndarray:
     """Absolute duties after the stop (n, HORIZON) in [0, 1]: ``d_pre + predict``."""
     return np.clip(np.asarray(d_pre, dtype=float)[:, None] + predict(model, features), 0.0, 1.0)
-
-
-class SearchWindows:
-    """Windows to score a model on open loop (fast, no policy loop): the stop features seen in ``obs_scenario`` and, on the plant
-    of ``plant_scenario`` (the same windows without the sensing delay, or the scenario itself), the
-    paper's controller's duties before the stop and a :class:`envs.rollout.DutyRollout` per window."""
-
-    def __init__(self, obs_scenario, plant_scenario, seeds, config=None):
-        from envs.rollout import DutyRollout
-
-        from .oracle import policy_duties
-        seeds = [int(s) for s in seeds]
-        frames, self.k0 = collect_stop_observations(obs_scenario, seeds[0], len(seeds), config)
-        if seeds != list(range(seeds[0], seeds[0] + len(seeds))):
-            raise ValueError("search windows must be consecutive seeds")
-        self.features = stop_features(frames)
-        self.d_pre = frames[:, -1, _D]
-        self.base = policy_duties("model_based", plant_scenario, seeds[0], config, episodes=len(seeds))
-        self.rolls = [DutyRollout(plant_scenario, s, config) for s in seeds]
-
-    def run(self, models):
-        """Energy after the stop (W, m), overshoot (W, m), largest I_L from 14 ms after the stop (W, m) of
-        each of the ``m`` models on every window (the paper's controller before the stop, the model's
-        sequence after it: what :class:`OracleImitationPolicy` does in closed loop)."""
-        W, m = len(self.rolls), len(models)
-        e, ov, il = np.empty((W, m)), np.empty((W, m)), np.empty((W, m))
-        for w, roll in enumerate(self.rolls):
-            y = np.vstack([predict(model, self.features[w:w + 1]) for model in models])
-            d = np.repeat(self.base[w][None, :], m, axis=0)
-            k0, T = self.k0[w], d.shape[1]
-            n = min(HORIZON, T - k0)
-            d[:, k0:k0 + n] = np.clip(self.d_pre[w] + y[:, :n], 0.0, 1.0)
-            d[:, k0 + n:] = 1.0
-            r = roll.run(d)
-            late = np.arange(T) >= min(k0 + int(round(14e-3 / roll.config.dt_s)), T - 1)
-            e[w], ov[w], il[w] = r.energy_after_stop_j, r.overshoot, r.rect_current_a[:, late].max(axis=1)
-        return e, ov, il
 
 
 def save_model(model: dict, path, meta: dict) -> None:

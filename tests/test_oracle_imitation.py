@@ -33,7 +33,8 @@ def test_clone_reproduces_its_teacher_on_training_windows():
     five seeds, worst window +0.95 points, 0.23 J), and every window reaches short mode."""
     import json
 
-    from policies.oracle_imitation import SearchWindows, choose_targets, oracle_targets
+    from policies.oracle_imitation import choose_targets
+    from policies.oracle_imitation_train import SearchWindows, oracle_targets
     meta = json.loads(str(np.load(SHIPPED)["meta"]))
     tg = oracle_targets("nominal", [0, 1], meta["deltas"])
     pick = choose_targets(tg["energy_j"], tg["overshoot"], meta["lam"])
@@ -53,7 +54,7 @@ def test_closed_loop_equals_the_replay_of_its_sequence_and_ignores_the_sensing_d
     same windows without the delay gives the same overshoot and energy (the duty goes through float32
     actions in the loop: to 1e-3 points and 1e-5 J), and so does the closed loop on nominal."""
     from policies.compare import run_policy
-    from policies.oracle_imitation import SearchWindows
+    from policies.oracle_imitation_train import SearchWindows
     name = f"oracle_imitation:{SHIPPED}"
     loop = run_policy(name, "sense_delay", 4, 1000).metrics
     nom = run_policy(name, "nominal", 4, 1000).metrics
