@@ -150,8 +150,11 @@ class OracleImitationPolicy:
     """The paper's controller before the stop, the learned oracle sequence from the stop on (module notes).
 
     Causal: the duty at step k depends on the observations up to k only (the frame history and the
-    sequence latched at the stop). Reset per batch; a receiver whose command turns positive after its
-    stop is in a new window: its latch is released and its base controller restarted."""
+    sequence latched at the stop). The base controller is stepped every period (so before every stop
+    the duty is exactly ``model_based``'s, whose state follows the zero command after a stop as its own
+    would). A stop is a command of 0 after a positive one: a receiver that starts with command 0 (a
+    mission before its first pad) has the base's duty; one whose command turns positive after its stop
+    is in a new window and is released."""
 
     name = "oracle_imitation"
 
@@ -170,7 +173,8 @@ class OracleImitationPolicy:
         self.base.reset(self.n)
         self._hist = None
         self._seq = np.zeros((self.n, HORIZON))
-        self._j = np.full(self.n, -1)      # steps since the stop (-1: charging)
+        self._j = np.full(self.n, -1)      # steps since the stop (-1: no sequence latched)
+        self._armed = np.zeros(self.n, dtype=bool)   # a positive command seen since the last stop
 
     def act(self, obs):
         o = np.atleast_2d(np.asarray(obs, dtype=float))
@@ -182,13 +186,14 @@ class OracleImitationPolicy:
         else:
             self._hist = np.concatenate([self._hist[:, 1:], phys[:, None, :]], axis=1)
         charging = phys[:, _CMD] > 0.0
-        new_window = np.flatnonzero(charging & (self._j >= 0))
         self._j[charging] = -1
-        d = np.asarray(self.base.act(o, restart=new_window if len(new_window) else None), dtype=float).reshape(-1)
-        stop = np.flatnonzero(~charging & (self._j < 0))
+        self._armed |= charging
+        d = np.asarray(self.base.act(o), dtype=float).reshape(-1)
+        stop = np.flatnonzero(~charging & self._armed)
         if len(stop):
             self._seq[stop] = sequences_from(self.model, stop_features(self._hist[stop]), phys[stop, _D])
             self._j[stop] = 0
+            self._armed[stop] = False
         after = np.flatnonzero(self._j >= 0)
         j = self._j[after]
         d[after] = np.where(j < HORIZON, self._seq[after, np.minimum(j, HORIZON - 1)], 1.0)

@@ -67,7 +67,8 @@ def test_closed_loop_equals_the_replay_of_its_sequence_and_ignores_the_sensing_d
 
 def test_policy_is_causal_and_releases_a_new_window():
     """Two receivers see the same observations up to step k, different ones after: their duties agree up
-    to k. A receiver whose command turns positive after its stop gets the base controller again."""
+    to k. A receiver whose command turns positive after its stop gets the base controller again, and one
+    that starts with command 0 (a mission before its first pad) has the base's duty (no stop yet)."""
     from envs import SbarChargingVectorEnv
     from policies import make
     venv = SbarChargingVectorEnv(num_envs=1, scenario="nominal")
@@ -98,6 +99,12 @@ def test_policy_is_causal_and_releases_a_new_window():
     assert pol._j[0] > 0
     pol.act(seq[5][None, :])
     assert pol._j[0] == -1
+    idle = seq[k_stop + 20].copy()
+    pol, base = make("oracle_imitation"), make("model_based")
+    pol.reset(1)
+    base.reset(1)
+    for row in [idle] * 5 + list(seq[:40]):
+        assert float(np.asarray(pol.act(row[None, :])).ravel()[0]) == float(np.asarray(base.act(row[None, :])).ravel()[0])
 
 
 @pytest.mark.parametrize("args", [["--windows", "990:1010"], ["--lam", "0"], ["--features", "bogus"],
