@@ -3,7 +3,7 @@
 Modules: ``classical`` (step, ramp, model_based), ``kernels`` (their compiled per-step functions for
 the mission's fast path; numba, imported on demand), ``onoff``, ``online``, ``budgeted``,
 ``random_policy``, ``mpc``, ``oracle``, ``rl`` / ``residual`` / ``constrained`` / ``imitation`` / ``smoothing`` /
-``train`` / ``callbacks`` / ``hyperparams`` / ``slow_budget`` (RL, needs stable-baselines3), ``inference``,
+``train`` / ``callbacks`` / ``hyperparams`` / ``slow_budget`` (RL, needs stable-baselines3), ``oracle_imitation`` / ``oracle_imitation_train``, ``inference``,
 ``compare``, ``batched``, ``forked``, ``stats``, ``threads``.
 
 >>> from policies import make
@@ -26,6 +26,8 @@ Modules, from the classical controllers to learning and comparing:
 ``imitation``      behaviour cloning / DAgger of a (privileged) teacher into an SB3 PPO actor
 ``smoothing``      low-pass filtered duty and duty-change penalty (SAC / TD3 / PPO train options)
 ``slow_budget``    a learned policy acting in a slow variable: the MPC's overshoot budget per step
+``oracle_imitation``  the oracle's after-stop sequence learned from the stop observation (amortised imitation)
+``oracle_imitation_train``  its training side: stop observations, the oracle's sequences, open-loop scoring
 ``callbacks``      SB3 callbacks of ``train``: progress bar with return and cost, evaluation
 ``hyperparams``    rl-baselines3-zoo style hyperparameter files (YAML / JSON)
 ``train``          ``dronewpt train``: PPO / SAC / TD3 / DQN on the batched env, imitation, outputs and metadata
@@ -103,6 +105,12 @@ def _slow_budget(ctx, **kwargs):
     return SlowBudgetPolicy(ctx, **kwargs)
 
 
+def _oracle_imitation(ctx, **kwargs):
+    """The learned oracle sequence after the stop (:mod:`policies.oracle_imitation`; ``oracle_imitation:PATH``)."""
+    from .oracle_imitation import OracleImitationPolicy
+    return OracleImitationPolicy(ctx, **kwargs)
+
+
 def _mpc(ctx, **kwargs):
     from .mpc import MPCPolicy
     return MPCPolicy(ctx, **kwargs)
@@ -129,9 +137,10 @@ _REGISTRY: dict[str, Callable[..., Policy]] = {
     "mpc": _mpc,
     "imitation": _imitation,
     "slow_budget": _slow_budget,
+    "oracle_imitation": _oracle_imitation,
 }
 #: names that take a model file as ``name:PATH``
-_WITH_PATH = ("rl", "ppo_lagrangian", "residual", "imitation", "slow_budget")
+_WITH_PATH = ("rl", "ppo_lagrangian", "residual", "imitation", "slow_budget", "oracle_imitation")
 
 
 def register(name: str, factory: Callable[..., Policy]) -> None:

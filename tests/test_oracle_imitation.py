@@ -1,0 +1,119 @@
+"""The amortised imitation of the oracle (policies/oracle_imitation.py): the clone reproduces its
+teacher on its training windows, the policy's closed loop is the open-loop replay of its sequence, it
+is causal, and the training script refuses bad options."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SHIPPED = ROOT / "policies" / "pretrained" / "oracle_imitation_s0.npz"
+
+
+def _clone(slow=None):
+    from policies.oracle_imitation import load_model
+    m = load_model(SHIPPED)
+    m.pop("meta")
+    if slow is not None:
+        m["slow"] = np.array(float(slow))
+    return m
+
+
+def test_clone_reproduces_its_teacher_on_training_windows():
+    """Windows 0 and 1 of nominal are training windows of the shipped seeds: the teacher is the oracle at
+    the budget (floor + delta) picked by lam = 0.4 J / point. The clone (its sequence as learned, not
+    slowed) lands within 1 point of the teacher's measured overshoot and 0.25 J of its energy after the
+    stop in each (measured over all 80 training windows: mean +0.10..+0.23 points, -0.02..+0.01 J over the
+    five seeds, worst window +0.95 points, 0.23 J), and every window reaches short mode."""
+    import json
+
+    from policies.oracle_imitation import choose_targets
+    from policies.oracle_imitation_train import SearchWindows, oracle_targets
+    meta = json.loads(str(np.load(SHIPPED)["meta"]))
+    tg = oracle_targets("nominal", [0, 1], meta["deltas"])
+    pick = choose_targets(tg["energy_j"], tg["overshoot"], meta["lam"])
+    t_ov = 100.0 * tg["overshoot"][[0, 1], pick]
+    t_e = tg["energy_j"][[0, 1], pick]
+    e, ov, il = SearchWindows("nominal", "nominal", [0, 1]).run([_clone(slow=1.0)])
+    assert np.all(np.abs(100.0 * ov[:, 0] - t_ov) < 1.0), (100.0 * ov[:, 0], t_ov)
+    assert np.all(np.abs(e[:, 0] - t_e) < 0.25), (e[:, 0], t_e)
+    assert np.all(il[:, 0] < 0.5)
+    # the teacher itself is within its budget above the window's floor
+    assert np.all(tg["overshoot"][[0, 1], pick] <= tg["floor"] + np.asarray(meta["deltas"])[pick] + 1e-12)
+
+
+def test_closed_loop_equals_the_replay_of_its_sequence_and_ignores_the_sensing_delay():
+    """In closed loop (compare's loop, sense_delay windows 1000-1003) the policy is the paper's controller
+    before the stop and its latched sequence after it: the open-loop replay of that sequence on the
+    same windows without the delay gives the same overshoot and energy (the duty goes through float32
+    actions in the loop: to 1e-3 points and 1e-5 J), and so does the closed loop on nominal."""
+    from policies.compare import run_policy
+    from policies.oracle_imitation_train import SearchWindows
+    name = f"oracle_imitation:{SHIPPED}"
+    loop = run_policy(name, "sense_delay", 4, 1000).metrics
+    nom = run_policy(name, "nominal", 4, 1000).metrics
+    e, ov, _ = SearchWindows("sense_delay", "nominal", range(1000, 1004)).run([_clone()])
+    np.testing.assert_allclose(loop["overshoot_pct"], 100.0 * ov[:, 0], atol=1e-3)
+    np.testing.assert_allclose(loop["energy_after_stop_j"], e[:, 0], atol=1e-5)
+    np.testing.assert_allclose(loop["overshoot_pct"], nom["overshoot_pct"], atol=1e-9)
+    assert np.all(loop["reached_short_mode"])
+
+
+def test_policy_is_causal_and_releases_a_new_window():
+    """Two receivers see the same observations up to step k, different ones after: their duties agree up
+    to k. A receiver whose command turns positive after its stop gets the base controller again, and one
+    that starts with command 0 (a mission before its first pad) has the base's duty (no stop yet)."""
+    from envs import SbarChargingVectorEnv
+    from policies import make
+    venv = SbarChargingVectorEnv(num_envs=1, scenario="nominal")
+    obs, _ = venv.reset(seed=1000)
+    pol0 = make("model_based", venv.policy_context)
+    pol0.reset(1)
+    seq = []
+    for _ in range(venv.config.n_steps):
+        seq.append(obs[0].astype(float))
+        d = pol0.act(obs)
+        obs, *_ = venv.step((2.0 * np.clip(np.asarray(d, dtype=float), 0, 1) - 1.0).reshape(1, 1).astype(np.float32))
+    seq = np.array(seq)
+    k_stop = int(venv._stop_k[0])
+    rng = np.random.default_rng(0)
+    for k in (k_stop - 3, k_stop, k_stop + 5):
+        other = seq.copy()
+        other[k + 1:] = np.clip(other[k + 1:] + rng.normal(0.0, 0.3, other[k + 1:].shape), -1.0, 1.0)
+        pol = make(f"oracle_imitation:{SHIPPED}")
+        pol.reset(2)
+        acts = np.array([pol.act(np.vstack([a, b])) for a, b in zip(seq, other)])
+        np.testing.assert_array_equal(acts[:k + 1, 0], acts[:k + 1, 1])
+        assert not np.array_equal(acts[:, 0], acts[:, 1])
+    # a new window after the stop: the base controller's duty again (not the latched sequence)
+    pol = make("oracle_imitation")
+    pol.reset(1)
+    for row in seq[:k_stop + 10]:
+        pol.act(row[None, :])
+    assert pol._j[0] > 0
+    pol.act(seq[5][None, :])
+    assert pol._j[0] == -1
+    idle = seq[k_stop + 20].copy()
+    pol, base = make("oracle_imitation"), make("model_based")
+    pol.reset(1)
+    base.reset(1)
+    for row in [idle] * 5 + list(seq[:40]):
+        assert float(np.asarray(pol.act(row[None, :])).ravel()[0]) == float(np.asarray(base.act(row[None, :])).ravel()[0])
+
+
+@pytest.mark.parametrize("args", [["--windows", "990:1010"], ["--lam", "0"], ["--features", "bogus"],
+                                  ["--deltas", "0.5"], ["--slow", "0.5"], ["--scenarios", "nowhere"]])
+def test_train_script_bad_options_exit_2_with_one_line(args, tmp_path):
+    out = tmp_path / "m"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "train_oracle_imitation.py"), *args,
+                        "--out", str(out)], capture_output=True, text=True, env=env, timeout=120)
+    assert r.returncode == 2, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+    assert not list(tmp_path.iterdir())
