@@ -444,12 +444,15 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
     v2 = f * vl + v2x
     z = st.z.copy()
     jump = stored_energy_j(lc, mc, z, v1c, v2, lm_eff) - st.w_end
+    nq = 4   # peak samples of a fine step: its quarter points, and at least one per rectifier period (a
+    # fine step in short mode is not divided: its ringing's crest would fall between quarter points)
     if fine:
-        zc4 = _coefs(lk, lm_eff, 0.25 * dt, 1)[1]
+        nq = max(4, math.ceil(dt / c.t_rect - 1e-9)) if c.t_rect > 0.0 else 4
+        zc4 = _coefs(lk, lm_eff, dt / nq, 1)[1]
         zq = z.copy()
-        for _ in range(3):
+        for _ in range(nq - 1):
             advance_z(mc, zc4, zq, v1c, v2)
-            _track_peak(st, c, lk, phasors(mc, zq, v1c, v2)[1], d, dt / 4, vl)
+            _track_peak(st, c, lk, phasors(mc, zq, v1c, v2)[1], d, dt / nq, vl)
     out = np.empty(9)
     modal_step(lc, mc, zc, dt, z, v1c, v2, out)
     i_l = rect_current_a(f, complex(out[2], out[3]), dt)
@@ -460,7 +463,7 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
         st.tmp_ib = i_b
         return _NEED_DEPLETE
     i1n, i2n = phasors(mc, z, v1c, v2)
-    _track_peak(st, c, lk, i2n, d, dt / 4 if fine else dt, vl)
+    _track_peak(st, c, lk, i2n, d, dt / nq if fine else dt, vl)
     a2 = abs(i2n)
     y0, y1 = abs(i1n), (a2 if i2n.real >= 0.0 else -a2)
     st.z[:] = z
