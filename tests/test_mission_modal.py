@@ -27,9 +27,10 @@ def _ocv_soc(v_cell):
     return 0.5 * (lo + hi)
 
 
-def _kernel_run(d_seq):
-    """The kernel's fine step over ``d_seq`` (one duty per rectifier period) from the RM steady state;
-    returns the instantaneous and the fundamental's peak [A] the kernel tracked."""
+def _kernel_run(d_seq, dt=T):
+    """The kernel's fine step over ``d_seq`` (one duty per control period ``dt``, the rectifier period by
+    default) from the steady state of the first duty; returns the instantaneous and the fundamental's
+    peak [A] the kernel tracked."""
     vals = {**fastpath.link_values(P.l1_h, P.l2_h, P.r1_ohm, P.r2_ohm, P.omega_rad_s), "t_rect": T, "rated": 1e9,
             "v1_nom": P.v1_amp_v, "is_ideal": True, "coil_r1": P.r1_ohm, "coil_r2": P.r2_ohm, "n_cells": 8.0,
             "r0": 1e-7, "r1b": 1e-7, "tau1": 1.0, "bat_c1": 1e7, "capacity_c": 1e15}
@@ -41,17 +42,17 @@ def _kernel_run(d_seq):
     mk.modes(lc, P.lm_h, mc)
     z = np.zeros(4)
     v1c = -1j * P.v1_amp_v
-    v2 = mk.steady_state(lc, mc, tab, 0.0, v1c, P.vl_v, z)
+    v2 = mk.steady_state(lc, mc, tab, float(d_seq[0]), v1c, P.vl_v, z)
     st = s[0]
-    for name, v in {"soc": _ocv_soc(P.vl_v / 8), "last_vl": P.vl_v, "v1": P.v1_amp_v, "tx_on": True, "d": 0.0,
+    for name, v in {"soc": _ocv_soc(P.vl_v / 8), "last_vl": P.vl_v, "v1": P.v1_amp_v, "tx_on": True, "d": d_seq[0],
                     "depleted_at": math.nan, "v2re": v2.real, "v2im": v2.imag,
                     "w_end": mk.stored_energy_j(lc, mc, z, v1c, v2, P.lm_h)}.items():
         st[name] = v
     s[0]["z"] = z
-    rows = np.empty((64, fastpath.N_COLUMNS))
+    rows = np.empty((64 + 2 * int(round(dt / T)), fastpath.N_COLUMNS))
     for k, d in enumerate(d_seq):
         s[0]["d"], s[0]["n_rows"] = d, 0
-        assert kern._fine_step(s, c[0], lk, rows, k * T, T, P.lm_h, 0.0, 0) == kern.OK
+        assert kern._fine_step(s, c[0], lk, rows, k * dt, dt, P.lm_h, 0.0, 0) == kern.OK
     assert abs(s[0]["last_vl"] - P.vl_v) < 1e-3
     return float(s[0]["peak_inst"]), float(s[0]["peak_env"])
 
