@@ -144,7 +144,7 @@ def test_mission_command_line_ends_without_teardown_but_with_its_output_status_a
             "    real(status)\n"
             "    print('not reached', flush=True)\n"
             "cli._exit_now = spy\n"
-            "sys.exit(cli.main())")
+            "sys.exit(cli.console_main())")
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT, timeout=300)
     assert r.returncode == 3, r.stderr
@@ -186,3 +186,20 @@ def test_figures_split_over_worker_and_helper_are_the_bytes_drawn_in_process(tmp
     assert pngs == ["i2_envelope.png", "lm.png", "power.png", "soc.png", "trajectory.png"]
     for name in pngs:
         assert (tmp_path / "w" / name).read_bytes() == (tmp_path / "p" / name).read_bytes(), name
+
+
+def test_numba_start_survives_a_find_spec_probe_and_fails_safe_without_the_extension():
+    """A ``find_spec('scipy.linalg')`` probe before the import leaves the hook in place (the package still gets
+    its ``cython_blas``), and with the extension missing ``prepare`` does nothing (numba imports as before)."""
+    code = ("import importlib.util, sys\nfrom wpt_receiver import numba_start\n"
+            "assert numba_start.prepare()\nimportlib.util.find_spec('scipy.linalg')\n"
+            "import scipy.linalg\nassert scipy.linalg.cython_blas is sys.modules['scipy.linalg.cython_blas']\n"
+            "print('ok')\n")
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert r.stdout.strip() == "ok", r.stderr
+    code = ("import importlib.machinery, sys\nimportlib.machinery.EXTENSION_SUFFIXES[:] = ['.nonexistent']\n"
+            "from wpt_receiver import numba_start\nassert numba_start.prepare() is False\n"
+            "assert 'scipy.linalg.cython_blas' not in sys.modules\nprint('ok')\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert r.stdout.strip() == "ok", r.stderr

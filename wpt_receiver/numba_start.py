@@ -61,30 +61,37 @@ def prepare() -> bool:
 
 
 class _Attach:
-    """Import hook, used once: when ``scipy.linalg`` is imported, its module gets the attribute
-    ``cython_blas`` (the module :func:`prepare` loaded) after its ``__init__`` ran; then the hook removes
-    itself. It finds nothing itself: the real finders find and load the package."""
+    """Import hook: when ``scipy.linalg`` is imported, its module gets the attribute ``cython_blas`` (the
+    module :func:`prepare` loaded) after its ``__init__`` ran; the hook removes itself when that import
+    executes the package (a mere ``find_spec`` probe leaves it in place). It finds nothing itself: the real
+    finders find and load the package."""
 
     def find_spec(self, name, path=None, target=None):
-        if name != "scipy.linalg":
+        if name != "scipy.linalg" or self not in sys.meta_path:
             return None
-        sys.meta_path.remove(self)
-        spec = importlib.util.find_spec(name)
+        at = sys.meta_path.index(self)
+        sys.meta_path.remove(self)   # the real finders only, for the inner lookup
+        try:
+            spec = importlib.util.find_spec(name)
+        finally:
+            sys.meta_path.insert(at, self)
         if spec is not None and spec.loader is not None:
-            spec.loader = _AttachLoader(spec.loader)
+            spec.loader = _AttachLoader(spec.loader, self)
         return spec
 
 
 class _AttachLoader:
     """``loader`` that sets ``module.cython_blas`` after executing the package (see :class:`_Attach`)."""
 
-    def __init__(self, loader):
-        self._loader = loader
+    def __init__(self, loader, hook):
+        self._loader, self._hook = loader, hook
 
     def create_module(self, spec):
         return self._loader.create_module(spec)
 
     def exec_module(self, module):
+        if self._hook in sys.meta_path:
+            sys.meta_path.remove(self._hook)
         self._loader.exec_module(module)
         blas = sys.modules.get(BLAS_MODULE)
         if blas is not None and not hasattr(module, "cython_blas"):

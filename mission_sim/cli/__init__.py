@@ -65,40 +65,58 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    """Run one command; ``argv=None`` (the command line: the console script, ``python -m mission_sim.cli``)
-    also ends the process when the command is done (:func:`_exit_now`)."""
+    """Run one command (``argv``: the arguments, None for ``sys.argv[1:]``) and return its exit status."""
     from ..signals import interrupts_raised
     with interrupts_raised():  # SIGTERM like Ctrl-C: temporary files removed, one line, 143 (130 for SIGINT)
-        rc = _main(argv)
-    if argv is None:
-        _exit_now(rc)
+        return _main(argv)
+
+
+def console_main() -> int:
+    """The command line's entry point (the ``dronewpt`` console script, ``python -m mission_sim.cli``): runs
+    :func:`main` and then ends the process at once (:func:`_exit_now`). Code that calls :func:`main` keeps its
+    process."""
+    rc = main(sys.argv[1:])
+    _exit_now(rc)
     return rc
 
 
+def _flush_all() -> None:
+    """Flush Python's standard streams (a closed one is None) and C's stdio buffers (extensions' printf)."""
+    for stream in (sys.stdout, sys.stderr):
+        if stream is not None:
+            stream.flush()
+    try:
+        import ctypes
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError, TypeError):   # no C library to ask: nothing buffered there by us
+        pass
+
+
 def _exit_now(rc: int) -> None:
-    """End the process with status ``rc`` once the command is done: stdout and stderr flushed, the atexit
-    handlers run (logging, multiprocessing, ``weakref.finalize``), but not the interpreter's teardown of every
-    module and object (numba's and LLVM's, scipy's: 0.3-0.8 s of wall time after ``compare`` or ``mission`` had
-    finished, measured under load). Only on CPython (``atexit._run_exitfuncs``), when no non-daemon thread
-    runs and the streams flush; else it returns and Python exits as usual. The command's files are closed and
-    renamed into place before it returns."""
+    """End the process with status ``rc`` once the command is done: stdout and stderr flushed (and C's stdio),
+    the atexit handlers run (logging, multiprocessing, ``weakref.finalize``), but not the interpreter's teardown
+    of every module and object (numba's and LLVM's, scipy's: 0.3-0.8 s of wall time after ``compare`` or
+    ``mission`` had finished, measured under load). Not taken, so that Python exits as usual: off CPython
+    (no ``atexit._run_exitfuncs``), while a non-daemon thread runs, under a tracer or profiler (``python -m
+    cProfile``, coverage: they write their results at the normal exit), with ``DRONEWPT_NO_FAST_EXIT`` set, or
+    when a stream cannot be flushed. The command's files are closed and renamed into place before this runs."""
     import atexit
     import os
     import threading
     run_exitfuncs = getattr(atexit, "_run_exitfuncs", None)   # CPython's; elsewhere the normal exit
-    if run_exitfuncs is None or any(t.is_alive() and not t.daemon for t in threading.enumerate()
-                                    if t is not threading.main_thread()):
+    if (run_exitfuncs is None or os.environ.get("DRONEWPT_NO_FAST_EXIT") or sys.gettrace() is not None
+            or sys.getprofile() is not None or "cProfile" in sys.modules or "profile" in sys.modules):
+        return
+    if any(t.is_alive() and not t.daemon for t in threading.enumerate() if t is not threading.main_thread()):
         return
     try:
-        sys.stdout.flush()
-        sys.stderr.flush()
-    except (OSError, ValueError):   # a closed pipe and the like: Python's own exit reports it as before
+        _flush_all()
+    except (OSError, ValueError, AttributeError):   # a closed pipe and the like: Python's own exit reports it
         return
     run_exitfuncs()
     try:
-        sys.stdout.flush()
-        sys.stderr.flush()
-    except (OSError, ValueError):
+        _flush_all()
+    except (OSError, ValueError, AttributeError):
         pass
     os._exit(rc)
 
