@@ -157,8 +157,8 @@ def _cmd_sizing(args) -> int:
         print(json.dumps({"source": args.source, "devices": args.devices, "margin": args.margin, "rows": rows,
                           "figures": figs}))
         return 0
-    model = {"paper": "switching model, RM -> SM", "mission": "missions, envelope + ripple peak",
-             "sweep": f"worst case per policy of sweep {args.sweep}, re-run, envelope + ripple peak"}[args.source]
+    model = {"paper": "switching model, RM -> SM", "mission": "missions, exact-mode link + ripple peak",
+             "sweep": f"worst case per policy of sweep {args.sweep}, re-run, exact-mode link + ripple peak"}[args.source]
     print(f"SBAR sizing ({model}, devices {args.devices}, rating = {args.margin:g} x peak |i2|; "
           "RMS and loss over the worst 1 ms)")
     print(f"{'policy':<11} {'peak i2':>8} {'diode rms':>9} {'switch rms':>10} {'rating':>8} {'cond.':>7} {'switch.':>7} "
