@@ -91,6 +91,7 @@ def dataset(scenarios, seeds, deltas, lam):
 
 def main(argv=None):
     a = parse(argv)
+    from envs.core import EnvConfig
     from policies.oracle_imitation import fit, predict, save_model
     t0, c0 = time.time(), time.process_time()
     X, Y, info = dataset(a.scenarios, a.seeds, a.deltas, a.lam)
@@ -104,7 +105,8 @@ def main(argv=None):
         meta = {"command": " ".join(["python", "benchmarks/train_oracle_imitation.py"] + list(sys.argv[1:] if argv is None else argv)),
                 "scenarios": a.scenarios, "windows": [a.seeds[0], a.seeds[-1] + 1], "deltas": a.deltas, "lam": a.lam, "slow": a.slow,
                 "seed": k, "features": a.features.split(","), "teacher_overshoot_pct": 100 * float(info["overshoot"].mean()),
-                "teacher_energy_j": float(info["energy_j"].mean()), "fit_rms_duty": rms}
+                "teacher_energy_j": float(info["energy_j"].mean()), "fit_rms_duty": rms,
+                "control_period_s": EnvConfig().dt_s}   # the windows' env (config None): the period it learned at
         save_model(model, f"{a.out}_s{k}.npz", meta)
         print(f"seed {k}: fit RMS {rms:.4f} (duty) -> {a.out}_s{k}.npz")
     print(f"{time.time() - t0:.0f} s wall, {time.process_time() - c0:.0f} s CPU, load {os.getloadavg()[0]:.1f}")

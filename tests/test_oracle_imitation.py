@@ -117,3 +117,82 @@ def test_train_script_bad_options_exit_2_with_one_line(args, tmp_path):
     assert r.returncode == 2, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
     assert not list(tmp_path.iterdir())
+
+
+def _mission_cli(args, capsys):
+    """``dronewpt mission`` in process: (exit status, stderr)."""
+    from mission_sim.cli import main
+    try:
+        code = main(["mission", *args])
+    except SystemExit as exc:
+        code = exc.code
+    return code, capsys.readouterr().err
+
+
+def test_model_refuses_another_control_period(capsys):
+    """The model's HORIZON steps are learned at the period in its meta (the shipped ones: 100 us): any
+    other period is refused (one ValueError line; the CLI exits 2 with one line, nothing simulated);
+    the period it was trained at is accepted."""
+    import json
+
+    from mission_sim.contract import PolicyContext
+    from policies import make
+    meta = json.loads(str(np.load(SHIPPED)["meta"]))
+    assert meta["control_period_s"] == pytest.approx(1e-4, rel=1e-12)
+    make("oracle_imitation", PolicyContext(control_period_s=1e-4))
+    with pytest.raises(ValueError, match=r"control_period_s=0.0002 is invalid .*valid value: 0.0001"):
+        make("oracle_imitation", PolicyContext(control_period_s=2e-4))
+    code, err = _mission_cli(["--policy", "oracle_imitation", "--set", "sim.control_period_s=2e-4"], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "control_period_s" in err, err
+
+
+def _write(path, **arrays):
+    np.savez(path, **arrays)
+    return path
+
+
+@pytest.mark.parametrize("case", ["no_W", "W_shape", "cols_range", "slow", "no_period", "text", "zip"])
+def test_load_model_refuses_a_wrong_file_naming_it(case, tmp_path, capsys):
+    """A file that is not such a model (keys, shapes, cols outside FEATURE_NAMES, slow < 1, no period in
+    its meta, not an npz, a zip without arrays): one ValueError naming the file and what was expected;
+    the CLI exits 2 with one line, no traceback."""
+    import json
+    import zipfile
+
+    from policies.oracle_imitation import FEATURE_NAMES, HORIZON, load_model
+    good = dict(np.load(SHIPPED))
+    p = tmp_path / f"{case}.npz"
+    if case == "text":
+        p.write_text("not a model\n")
+    elif case == "zip":
+        with zipfile.ZipFile(p, "w") as z:
+            z.writestr("notes.txt", "hello")
+    else:
+        bad = {"no_W": {k: v for k, v in good.items() if k != "W"},
+               "W_shape": {**good, "W": np.zeros((3, HORIZON - 1))},
+               "cols_range": {**good, "cols": np.array([0, len(FEATURE_NAMES)])},
+               "slow": {**good, "slow": np.array(0.5)},
+               "no_period": {**good, "meta": np.array(json.dumps({"seed": 0}))}}[case]
+        _write(p, **bad)
+    with pytest.raises(ValueError, match=r"oracle imitation model .*" + case + r"\.npz.*valid: an oracle imitation model"):
+        load_model(p)
+    code, err = _mission_cli(["--policy", f"oracle_imitation:{p}"], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and str(p) in err and "Traceback" not in err, err
+
+
+def test_save_model_leaves_no_temporary_file_on_failure(tmp_path, monkeypatch):
+    """A failed write leaves neither the model nor its temporary file; a good one leaves only the model."""
+    from policies import oracle_imitation as oi
+    model = {k: v for k, v in oi.load_model(SHIPPED).items() if k != "meta"}
+
+    def broken(path, **kw):
+        Path(path).write_bytes(b"partial")
+        raise OSError(28, "No space left on device")
+    monkeypatch.setattr(oi.np, "savez", broken)
+    with pytest.raises(OSError):
+        oi.save_model(model, tmp_path / "m.npz", {"control_period_s": 1e-4})
+    assert not list(tmp_path.iterdir())
+    monkeypatch.undo()
+    oi.save_model(model, tmp_path / "m.npz", {"control_period_s": 1e-4})
+    assert [f.name for f in tmp_path.iterdir()] == ["m.npz"]
+    np.testing.assert_array_equal(oi.load_model(tmp_path / "m.npz")["W"], model["W"])
