@@ -10,12 +10,15 @@ realisable policy (observations only, no true parameter) acts below the MPC's cu
 * **Before the stop** the policy is the paper's controller (:class:`policies.classical.ModelBasedPolicy`,
   feed-forward: command and battery voltage to duty; a sensing delay does not touch it). The oracle's
   duties before the stop are the same, so the state at the stop is the one it was solved from.
-* **At the stop** (the first observation with charge command 0) it computes :func:`stop_features` from
-  its own frame history (the last :data:`HISTORY` observations, causal), predicts the sequence
-  ``d_k0+j = d_pre + y_j`` for ``j < HORIZON`` (``y = [1, standardised features] W``, duty 1 after the
-  horizon, clipped to [0, 1]), optionally played ``slow`` times slower (``y(j / slow)``), and holds that
-  open-loop sequence for the rest of the window (a window whose command turns positive again is
-  released and the base controller restarted).
+* **At the stop** (a charge command of 0 after a positive one; a receiver that starts with command 0,
+  a mission before its first pad, has no stop yet and keeps the base's duty) it computes
+  :func:`stop_features` from its own frame history (the last :data:`HISTORY` observations, causal),
+  predicts the sequence ``d_k0+j = d_pre + y_j`` for ``j < HORIZON`` (``y = [1, standardised
+  features] W``, duty 1 after the horizon, clipped to [0, 1]), optionally played ``slow`` times slower
+  (``y(j / slow)``), and holds that open-loop sequence until the command turns positive again. The base
+  controller is stepped every period and never restarted (its state follows the zero command as its
+  own would), so in a new window the duty is the base's again; ``HORIZON`` steps are learned at the
+  control period in the model's meta (``control_period_s``; another period is refused).
 
 Teacher and fit (:mod:`policies.oracle_imitation_train`, ``benchmarks/train_oracle_imitation.py``): for
 training windows (seeds disjoint from the evaluation's 1000-1099) the oracle's floor ``f`` and its best
