@@ -107,16 +107,47 @@ def test_policy_is_causal_and_releases_a_new_window():
         assert float(np.asarray(pol.act(row[None, :])).ravel()[0]) == float(np.asarray(base.act(row[None, :])).ravel()[0])
 
 
-@pytest.mark.parametrize("args", [["--windows", "990:1010"], ["--lam", "0"], ["--features", "bogus"],
-                                  ["--deltas", "0.5"], ["--slow", "0.5"], ["--scenarios", "nowhere"]])
-def test_train_script_bad_options_exit_2_with_one_line(args, tmp_path):
-    out = tmp_path / "m"
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "train_oracle_imitation.py"), *args,
-                        "--out", str(out)], capture_output=True, text=True, env=env, timeout=120)
+@pytest.mark.parametrize("args, names", [
+    (["--windows", "990:1010"], ["--windows", "990:1010", "1000-1099"]), (["--lam", "0"], ["--lam", "> 0"]),
+    (["--lam", "abc"], ["--lam", "abc", "> 0"]), (["--slow", "x"], ["--slow", "'x'", "[1, 3]"]),
+    (["--slow", "0.5"], ["--slow", "0.5", "[1, 3]"]), (["--features", "d_pre,zzz"], ["--features", "zzz", "cmd_before_a"]),
+    (["--features", "bogus"], ["--features", "bogus", "d_pre"]), (["--deltas", "0.5"], ["--deltas", "0.5", "(0, 0.2]"]),
+    (["--scenarios", "nowhere"], ["--scenarios", "nowhere", "nominal"]),
+    (["--train-seeds", "-1"], ["--train-seeds", "-1", "0..2^32-1"]), (["--train-seeds", "0,x"], ["--train-seeds", "0,x"]),
+    (["--out", "FILE/m"], ["--out", "FILE"])])
+def test_train_script_bad_options_exit_2_with_one_line(args, names, tmp_path):
+    """Each bad option: exit 2, one line naming the option, the value and what is valid, before any oracle
+    solve (the oracle's disk cache stays empty) and with nothing written."""
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / "FILE").write_text("a file where --out needs a folder\n")
+    args = [str(work / x) if x.startswith("FILE") else x for x in args]
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "DRONEWPT_CACHE_DIR": str(tmp_path / "cache")}
+    r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "train_oracle_imitation.py"),
+                        "--out", str(work / "m"), *args], capture_output=True, text=True, env=env, timeout=120)
     assert r.returncode == 2, r.stderr
-    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
-    assert not list(tmp_path.iterdir())
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert "usage:" not in r.stderr and all(n in r.stderr for n in names), r.stderr
+    assert [f.name for f in work.iterdir()] == ["FILE"] and not (tmp_path / "cache").exists()
+
+
+def test_train_script_defaults_are_the_shipped_models_command(tmp_path, monkeypatch):
+    """The defaults are the shipped models' training options (their meta's command) but for --out, which
+    is under out/ (never the shipped files)."""
+    import json
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    monkeypatch.chdir(tmp_path)
+    from train_oracle_imitation import parse
+    meta = json.loads(str(np.load(SHIPPED)["meta"]))
+    cmd = meta["command"].split()[2:]
+    out_at = cmd.index("--out")
+    assert Path(cmd[out_at + 1]).parent == Path("policies/pretrained")
+    shipped = vars(parse(cmd[:out_at] + cmd[out_at + 2:]))
+    default = vars(parse([]))
+    assert shipped == default
+    assert default["seeds"] == list(range(*meta["windows"])) and default["lam"] == meta["lam"]
+    assert default["slow"] == meta["slow"] and default["deltas"] == meta["deltas"]
+    assert Path(default["out"]).parts[0] == "out" and "pretrained" not in default["out"]
 
 
 def _mission_cli(args, capsys):
