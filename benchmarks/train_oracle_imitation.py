@@ -1,15 +1,20 @@
 """Train the amortised imitation of the oracle (:mod:`policies.oracle_imitation`): solve the oracle on
 training windows, choose each window's budget by one Lagrangian multiplier, fit one model per seed.
 
-    python benchmarks/train_oracle_imitation.py --scenarios nominal,sense_delay,lm_drift --windows 0:160 \
-        --deltas 0.003,0.006,0.01 --lam 0.3 --train-seeds 0,1,2,3,4 --out policies/pretrained/oracle_imitation
+    python benchmarks/train_oracle_imitation.py --scenarios nominal --windows 0:80 \
+        --deltas 0.003,0.006,0.01,0.016 --lam 0.4 --slow 1.1 --out policies/pretrained/oracle_imitation
 
-writes ``OUT_s<k>.npz`` per training seed ``k`` (a few kB each; the command, the scenarios, windows,
-budgets and the teacher's mean overshoot / energy in its ``meta``). The oracle is solved on each
+(the shipped models' command, in their ``meta``; the defaults are these options but ``--out``, which
+is ``out/oracle_imitation/oracle_imitation`` so a run never overwrites the shipped models; with the
+oracle's cache warm it reproduces them bit for bit, ~20 s) writes ``OUT_s<k>.npz`` per training seed
+``k`` (a few kB each; the command, the scenarios, windows, budgets, the control period and the
+teacher's mean overshoot / energy in its ``meta``). The oracle is solved on each
 scenario's *plant* (a scenario that differs from another only in its sensing delay shares its
 windows' oracle: the delay changes what the policy sees, not the link), cached on disk
 (``$DRONEWPT_CACHE_DIR``), ~1-5 s of CPU per (window, budget) the first time. Training windows must
-be disjoint from the evaluation's (``compare``'s seeds 1000-1099). Bad options: one line, exit 2.
+be disjoint from the evaluation's (``compare``'s seeds 1000-1099). Bad options (values, names, an
+``--out`` that cannot be written): one line naming the option, value and valid range, exit 2, before
+any oracle solve.
 """
 
 from __future__ import annotations
@@ -34,38 +39,92 @@ def plant_scenario(name: str) -> str:
     return "nominal" if plain == SCENARIOS["nominal"] else name
 
 
+def _conv(flag: str, valid: str, convert):
+    """argparse type: ``convert(text)`` or one error line naming ``flag``, the value and ``valid``."""
+    def conv(text):
+        try:
+            v = convert(text)
+        except (ValueError, TypeError, IndexError):
+            v = None
+        if v is None:
+            raise argparse.ArgumentTypeError(f"{flag}={text!r} is invalid; valid: {valid}")
+        return v
+    return conv
+
+
+def _in(lo, hi, lo_open=False):
+    """``float(text)`` if it is in ``[lo, hi]`` (``(lo, hi]`` if ``lo_open``), else None."""
+    def conv(text):
+        v = float(text)
+        return v if np.isfinite(v) and (v > lo if lo_open else v >= lo) and v <= hi else None
+    return conv
+
+
+def _windows(text):
+    lo, hi = (int(x) for x in text.split(":"))
+    return (lo, hi) if 0 <= lo < hi and (hi <= 1000 or lo >= 1100) else None
+
+
+def _list(item):
+    def conv(text):
+        vals = [item(x) for x in text.split(",") if x.strip()]
+        return vals if vals and all(v is not None for v in vals) else None
+    return conv
+
+
+def _features(text):
+    from policies.oracle_imitation import FEATURE_NAMES
+    names = [x.strip() for x in text.split(",") if x.strip()]
+    bad = [x for x in names if x not in FEATURE_NAMES]
+    if not names or bad:
+        raise argparse.ArgumentTypeError(f"--features {', '.join(map(repr, bad)) or repr(text)} is invalid; valid: "
+                                         f"comma-separated names out of {', '.join(FEATURE_NAMES)}")
+    return [FEATURE_NAMES.index(x) for x in names]
+
+
+def _seed(text):
+    v = int(text)
+    return v if 0 <= v < 2**32 else None
+
+
 def parse(argv):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--scenarios", default="nominal,sense_delay,lm_drift")
-    ap.add_argument("--windows", default="0:160", help="training window seeds LO:HI (disjoint from 1000-1099)")
-    ap.add_argument("--deltas", default="0.003,0.006,0.01", help="budgets above each window's floor (fractions)")
-    ap.add_argument("--lam", type=float, default=0.3, help="multiplier, J per point of overshoot (> 0)")
-    ap.add_argument("--train-seeds", default="0,1,2,3,4")
-    ap.add_argument("--slow", type=float, default=1.0, help="play the learned sequence this many times slower "
-                    "(>= 1; less overshoot for more energy, chosen on validation windows)")
+    """The options, every bad one refused with one line (exit 2) before any oracle solve: values and
+    their ranges, the scenarios, and the output files (their folder created and writable now)."""
+    from mission_sim.cli.common import CliError, OneLineParser, check_out_file
+    ap = OneLineParser(prog="train_oracle_imitation.py", description=__doc__.split("\n")[0])
+    ap.add_argument("--scenarios", default="nominal", help="comma-separated scenarios (envs.SCENARIOS)")
+    ap.add_argument("--windows", default=(0, 80), help="training window seeds LO:HI (disjoint from 1000-1099)",
+                    type=_conv("--windows", "LO:HI, 0 <= LO < HI, disjoint from 1000-1099", _windows))
+    ap.add_argument("--deltas", default=[0.003, 0.006, 0.01, 0.016], help="budgets above each window's floor "
+                    "(fractions)", type=_conv("--deltas", "comma-separated numbers in (0, 0.2]", _list(_in(0.0, 0.2, True))))
+    ap.add_argument("--lam", default=0.4, help="multiplier, J per point of overshoot (> 0)",
+                    type=_conv("--lam", "a number > 0 (J per point)", _in(0.0, np.inf, True)))
+    ap.add_argument("--train-seeds", default=[0, 1, 2, 3, 4], help="bootstrap seeds, one model each",
+                    type=_conv("--train-seeds", "comma-separated integers 0..2^32-1", _list(_seed)))
+    ap.add_argument("--slow", default=1.1, help="play the learned sequence this many times slower "
+                    "(>= 1; less overshoot for more energy, chosen on validation windows)",
+                    type=_conv("--slow", "a number in [1, 3]", _in(1.0, 3.0)))
     ap.add_argument("--features", default="d_pre,cmd_before_a", help="stop features the clone reads "
                     "(policies.oracle_imitation.FEATURE_NAMES)")
-    ap.add_argument("--out", default="out/oracle_imitation")
+    ap.add_argument("--out", default="out/oracle_imitation/oracle_imitation",
+                    help="output prefix: writes OUT_s<k>.npz (default under out/, not the shipped models)")
     a = ap.parse_args(argv)
-    from envs import get_scenario
     try:
-        a.scenarios = [s for s in a.scenarios.split(",") if s]
-        for s in a.scenarios:
-            get_scenario(s)
-        lo, hi = (int(x) for x in a.windows.split(":"))
-        a.deltas = [float(x) for x in a.deltas.split(",")]
-        a.train_seeds = [int(x) for x in a.train_seeds.split(",")]
-        from policies.oracle_imitation import FEATURE_NAMES
-        a.cols = [FEATURE_NAMES.index(x) for x in a.features.split(",")]
-    except ValueError as exc:
-        ap.exit(2, f"train_oracle_imitation: invalid option ({str(exc).splitlines()[0]}); valid: --windows LO:HI, "
-                   f"--deltas/--train-seeds comma-separated numbers, --features names from FEATURE_NAMES\n")
-    if not (0 <= lo < hi and (hi <= 1000 or lo >= 1100)):
-        ap.exit(2, f"--windows {a.windows!r} is invalid; valid: LO:HI with 0 <= LO < HI, disjoint from 1000-1099\n")
-    if not a.deltas or not all(0.0 < d <= 0.2 for d in a.deltas) or not (a.lam > 0 and np.isfinite(a.lam)) \
-            or not a.scenarios or not (1.0 <= a.slow <= 3.0):
-        ap.exit(2, "train_oracle_imitation: --deltas must be in (0, 0.2], --lam > 0, --slow in [1, 3], --scenarios non-empty\n")
-    a.seeds = list(range(lo, hi))
+        a.cols = _features(a.features)
+    except argparse.ArgumentTypeError as exc:
+        ap.error(str(exc))
+    from envs import SCENARIOS
+    a.scenarios = [s.strip() for s in a.scenarios.split(",") if s.strip()]
+    bad = [s for s in a.scenarios if s not in SCENARIOS]
+    if not a.scenarios or bad:
+        ap.error(f"--scenarios {', '.join(map(repr, bad)) or repr('')} is invalid; valid: comma-separated names out of "
+                 f"{', '.join(SCENARIOS)}")
+    try:
+        for k in a.train_seeds:
+            check_out_file(f"{a.out}_s{k}.npz", "--out", ".npz")
+    except CliError as exc:
+        ap.error(str(exc))
+    a.seeds = list(range(*a.windows))
     return a
 
 
@@ -91,6 +150,7 @@ def dataset(scenarios, seeds, deltas, lam):
 
 def main(argv=None):
     a = parse(argv)
+    from envs.core import EnvConfig
     from policies.oracle_imitation import fit, predict, save_model
     t0, c0 = time.time(), time.process_time()
     X, Y, info = dataset(a.scenarios, a.seeds, a.deltas, a.lam)
@@ -104,7 +164,8 @@ def main(argv=None):
         meta = {"command": " ".join(["python", "benchmarks/train_oracle_imitation.py"] + list(sys.argv[1:] if argv is None else argv)),
                 "scenarios": a.scenarios, "windows": [a.seeds[0], a.seeds[-1] + 1], "deltas": a.deltas, "lam": a.lam, "slow": a.slow,
                 "seed": k, "features": a.features.split(","), "teacher_overshoot_pct": 100 * float(info["overshoot"].mean()),
-                "teacher_energy_j": float(info["energy_j"].mean()), "fit_rms_duty": rms}
+                "teacher_energy_j": float(info["energy_j"].mean()), "fit_rms_duty": rms,
+                "control_period_s": EnvConfig().dt_s}   # the windows' env (config None): the period it learned at
         save_model(model, f"{a.out}_s{k}.npz", meta)
         print(f"seed {k}: fit RMS {rms:.4f} (duty) -> {a.out}_s{k}.npz")
     print(f"{time.time() - t0:.0f} s wall, {time.process_time() - c0:.0f} s CPU, load {os.getloadavg()[0]:.1f}")

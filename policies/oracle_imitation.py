@@ -10,12 +10,15 @@ realisable policy (observations only, no true parameter) acts below the MPC's cu
 * **Before the stop** the policy is the paper's controller (:class:`policies.classical.ModelBasedPolicy`,
   feed-forward: command and battery voltage to duty; a sensing delay does not touch it). The oracle's
   duties before the stop are the same, so the state at the stop is the one it was solved from.
-* **At the stop** (the first observation with charge command 0) it computes :func:`stop_features` from
-  its own frame history (the last :data:`HISTORY` observations, causal), predicts the sequence
-  ``d_k0+j = d_pre + y_j`` for ``j < HORIZON`` (``y = [1, standardised features] W``, duty 1 after the
-  horizon, clipped to [0, 1]), optionally played ``slow`` times slower (``y(j / slow)``), and holds that
-  open-loop sequence for the rest of the window (a window whose command turns positive again is
-  released and the base controller restarted).
+* **At the stop** (a charge command of 0 after a positive one; a receiver that starts with command 0,
+  a mission before its first pad, has no stop yet and keeps the base's duty) it computes
+  :func:`stop_features` from its own frame history (the last :data:`HISTORY` observations, causal),
+  predicts the sequence ``d_k0+j = d_pre + y_j`` for ``j < HORIZON`` (``y = [1, standardised
+  features] W``, duty 1 after the horizon, clipped to [0, 1]), optionally played ``slow`` times slower
+  (``y(j / slow)``), and holds that open-loop sequence until the command turns positive again. The base
+  controller is stepped every period and never restarted (its state follows the zero command as its
+  own would), so in a new window the duty is the base's again; ``HORIZON`` steps are learned at the
+  control period in the model's meta (``control_period_s``; another period is refused).
 
 Teacher and fit (:mod:`policies.oracle_imitation_train`, ``benchmarks/train_oracle_imitation.py``): for
 training windows (seeds disjoint from the evaluation's 1000-1099) the oracle's floor ``f`` and its best
@@ -132,18 +135,68 @@ def sequences_from(model, features, d_pre) -> np.ndarray:
 
 
 def save_model(model: dict, path, meta: dict) -> None:
-    """Write ``model`` (+ ``meta`` as JSON) to ``path`` (.npz) under a temporary name, then rename."""
+    """Write ``model`` (+ ``meta`` as JSON) to ``path`` (.npz) under a temporary name, then rename (the
+    temporary file is removed if writing fails)."""
     import json
     import os
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, meta=np.array(json.dumps(meta)), **model)
-    os.replace(tmp, path)
+    try:
+        np.savez(tmp, meta=np.array(json.dumps(meta)), **model)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def _check_model(z: dict) -> str:
+    """What is wrong with the arrays ``z`` of a model file ('' if nothing): keys W, cols, feat_mean,
+    feat_std (and meta with control_period_s), W (1 + len(cols), HORIZON), cols in FEATURE_NAMES, slow >= 1."""
+    import json
+    missing = [k for k in ("W", "cols", "feat_mean", "feat_std", "meta") if k not in z]
+    if missing:
+        return f"no {', '.join(missing)}"
+    cols, W = z["cols"], z["W"]
+    if cols.ndim != 1 or not np.issubdtype(cols.dtype, np.integer) or len(cols) == 0 \
+            or not np.all((cols >= 0) & (cols < len(FEATURE_NAMES))):
+        return f"cols {cols.tolist()!r} not indices into FEATURE_NAMES (0..{len(FEATURE_NAMES) - 1})"
+    if W.shape != (1 + len(cols), HORIZON):
+        return f"W of shape {W.shape}, not {(1 + len(cols), HORIZON)}"
+    if z["feat_mean"].shape != cols.shape or z["feat_std"].shape != cols.shape:
+        return f"feat_mean/feat_std of shapes {z['feat_mean'].shape}/{z['feat_std'].shape}, not {cols.shape}"
+    slow = z.get("slow", np.array(1.0))
+    if slow.shape != () or not float(slow) >= 1.0:
+        return f"slow={slow.tolist()!r}, not a number >= 1"
+    try:
+        dt = float(json.loads(str(z["meta"]))["control_period_s"])
+    except (ValueError, KeyError, TypeError):
+        return "no control_period_s in its meta"
+    if not (np.isfinite(dt) and dt > 0):
+        return f"control_period_s={dt!r} in its meta, not > 0"
+    return ""
 
 
 def load_model(path) -> dict:
-    with np.load(path) as z:
-        return {k: z[k] for k in z.files}
+    """The model's arrays (``W``, ``cols``, ``feat_mean``, ``feat_std``, ``slow``) and its parsed ``meta``
+    (dict, with the ``control_period_s`` it was trained at); ``ValueError`` naming the file and what
+    was expected when it is not such a model (not an npz, keys or shapes wrong)."""
+    import json
+    import zipfile
+    expected = (f"an oracle imitation model (.npz with W (1 + len(cols), {HORIZON}), cols in FEATURE_NAMES, "
+                "feat_mean, feat_std, slow >= 1, meta with control_period_s)")
+    try:
+        if not zipfile.is_zipfile(path):
+            raise ValueError("not an .npz (zip) archive")
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        raise ValueError(f"oracle imitation model {str(path)!r} is unreadable ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__}); "
+                         f"valid: {expected}") from None
+    wrong = _check_model(arrays)
+    if wrong:
+        raise ValueError(f"oracle imitation model {str(path)!r} is invalid: {wrong}; valid: {expected}")
+    arrays["meta"] = json.loads(str(arrays["meta"]))
+    return arrays
 
 
 class OracleImitationPolicy:
@@ -162,9 +215,10 @@ class OracleImitationPolicy:
         from .classical import ModelBasedPolicy
         self.ctx = ctx
         self.model = load_model(path)
-        if self.model["W"].shape[1] != HORIZON:
-            raise ValueError(f"oracle imitation model {str(path)!r} predicts {self.model['W'].shape[1]} steps; "
-                             f"this code expects {HORIZON}")
+        dt = float(self.model["meta"]["control_period_s"])
+        if abs(ctx.control_period_s - dt) > 1e-9 * dt:    # its HORIZON steps are learned at this period
+            raise ValueError(f"control_period_s={ctx.control_period_s!r} is invalid for {Path(path).name}; "
+                             f"valid value: {dt!r} (the period it was trained at)")
         self.base = ModelBasedPolicy(ctx)
         self.reset(1)
 

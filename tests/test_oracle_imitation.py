@@ -107,13 +107,123 @@ def test_policy_is_causal_and_releases_a_new_window():
         assert float(np.asarray(pol.act(row[None, :])).ravel()[0]) == float(np.asarray(base.act(row[None, :])).ravel()[0])
 
 
-@pytest.mark.parametrize("args", [["--windows", "990:1010"], ["--lam", "0"], ["--features", "bogus"],
-                                  ["--deltas", "0.5"], ["--slow", "0.5"], ["--scenarios", "nowhere"]])
-def test_train_script_bad_options_exit_2_with_one_line(args, tmp_path):
-    out = tmp_path / "m"
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "train_oracle_imitation.py"), *args,
-                        "--out", str(out)], capture_output=True, text=True, env=env, timeout=120)
+@pytest.mark.parametrize("args, names", [
+    (["--windows", "990:1010"], ["--windows", "990:1010", "1000-1099"]), (["--lam", "0"], ["--lam", "> 0"]),
+    (["--lam", "abc"], ["--lam", "abc", "> 0"]), (["--slow", "x"], ["--slow", "'x'", "[1, 3]"]),
+    (["--slow", "0.5"], ["--slow", "0.5", "[1, 3]"]), (["--features", "d_pre,zzz"], ["--features", "zzz", "cmd_before_a"]),
+    (["--features", "bogus"], ["--features", "bogus", "d_pre"]), (["--deltas", "0.5"], ["--deltas", "0.5", "(0, 0.2]"]),
+    (["--scenarios", "nowhere"], ["--scenarios", "nowhere", "nominal"]),
+    (["--train-seeds", "-1"], ["--train-seeds", "-1", "0..2^32-1"]), (["--train-seeds", "0,x"], ["--train-seeds", "0,x"]),
+    (["--out", "FILE/m"], ["--out", "FILE"])])
+def test_train_script_bad_options_exit_2_with_one_line(args, names, tmp_path):
+    """Each bad option: exit 2, one line naming the option, the value and what is valid, before any oracle
+    solve (the oracle's disk cache stays empty) and with nothing written."""
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / "FILE").write_text("a file where --out needs a folder\n")
+    args = [str(work / x) if x.startswith("FILE") else x for x in args]
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "DRONEWPT_CACHE_DIR": str(tmp_path / "cache")}
+    r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "train_oracle_imitation.py"),
+                        "--out", str(work / "m"), *args], capture_output=True, text=True, env=env, timeout=120)
     assert r.returncode == 2, r.stderr
-    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert "usage:" not in r.stderr and all(n in r.stderr for n in names), r.stderr
+    assert [f.name for f in work.iterdir()] == ["FILE"] and not (tmp_path / "cache").exists()
+
+
+def test_train_script_defaults_are_the_shipped_models_command(tmp_path, monkeypatch):
+    """The defaults are the shipped models' training options (their meta's command) but for --out, which
+    is under out/ (never the shipped files)."""
+    import json
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    monkeypatch.chdir(tmp_path)
+    from train_oracle_imitation import parse
+    meta = json.loads(str(np.load(SHIPPED)["meta"]))
+    cmd = meta["command"].split()[2:]
+    out_at = cmd.index("--out")
+    assert Path(cmd[out_at + 1]).parent == Path("policies/pretrained")
+    shipped = vars(parse(cmd[:out_at] + cmd[out_at + 2:]))
+    default = vars(parse([]))
+    assert shipped == default
+    assert default["seeds"] == list(range(*meta["windows"])) and default["lam"] == meta["lam"]
+    assert default["slow"] == meta["slow"] and default["deltas"] == meta["deltas"]
+    assert Path(default["out"]).parts[0] == "out" and "pretrained" not in default["out"]
+
+
+def _mission_cli(args, capsys):
+    """``dronewpt mission`` in process: (exit status, stderr)."""
+    from mission_sim.cli import main
+    try:
+        code = main(["mission", *args])
+    except SystemExit as exc:
+        code = exc.code
+    return code, capsys.readouterr().err
+
+
+def test_model_refuses_another_control_period(capsys):
+    """The model's HORIZON steps are learned at the period in its meta (the shipped ones: 100 us): any
+    other period is refused (one ValueError line; the CLI exits 2 with one line, nothing simulated);
+    the period it was trained at is accepted."""
+    import json
+
+    from mission_sim.contract import PolicyContext
+    from policies import make
+    meta = json.loads(str(np.load(SHIPPED)["meta"]))
+    assert meta["control_period_s"] == pytest.approx(1e-4, rel=1e-12)
+    make("oracle_imitation", PolicyContext(control_period_s=1e-4))
+    with pytest.raises(ValueError, match=r"control_period_s=0.0002 is invalid .*valid value: 0.0001"):
+        make("oracle_imitation", PolicyContext(control_period_s=2e-4))
+    code, err = _mission_cli(["--policy", "oracle_imitation", "--set", "sim.control_period_s=2e-4"], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "control_period_s" in err, err
+
+
+def _write(path, **arrays):
+    np.savez(path, **arrays)
+    return path
+
+
+@pytest.mark.parametrize("case", ["no_W", "W_shape", "cols_range", "slow", "no_period", "text", "zip"])
+def test_load_model_refuses_a_wrong_file_naming_it(case, tmp_path, capsys):
+    """A file that is not such a model (keys, shapes, cols outside FEATURE_NAMES, slow < 1, no period in
+    its meta, not an npz, a zip without arrays): one ValueError naming the file and what was expected;
+    the CLI exits 2 with one line, no traceback."""
+    import json
+    import zipfile
+
+    from policies.oracle_imitation import FEATURE_NAMES, HORIZON, load_model
+    good = dict(np.load(SHIPPED))
+    p = tmp_path / f"{case}.npz"
+    if case == "text":
+        p.write_text("not a model\n")
+    elif case == "zip":
+        with zipfile.ZipFile(p, "w") as z:
+            z.writestr("notes.txt", "hello")
+    else:
+        bad = {"no_W": {k: v for k, v in good.items() if k != "W"},
+               "W_shape": {**good, "W": np.zeros((3, HORIZON - 1))},
+               "cols_range": {**good, "cols": np.array([0, len(FEATURE_NAMES)])},
+               "slow": {**good, "slow": np.array(0.5)},
+               "no_period": {**good, "meta": np.array(json.dumps({"seed": 0}))}}[case]
+        _write(p, **bad)
+    with pytest.raises(ValueError, match=r"oracle imitation model .*" + case + r"\.npz.*valid: an oracle imitation model"):
+        load_model(p)
+    code, err = _mission_cli(["--policy", f"oracle_imitation:{p}"], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and str(p) in err and "Traceback" not in err, err
+
+
+def test_save_model_leaves_no_temporary_file_on_failure(tmp_path, monkeypatch):
+    """A failed write leaves neither the model nor its temporary file; a good one leaves only the model."""
+    from policies import oracle_imitation as oi
+    model = {k: v for k, v in oi.load_model(SHIPPED).items() if k != "meta"}
+
+    def broken(path, **kw):
+        Path(path).write_bytes(b"partial")
+        raise OSError(28, "No space left on device")
+    monkeypatch.setattr(oi.np, "savez", broken)
+    with pytest.raises(OSError):
+        oi.save_model(model, tmp_path / "m.npz", {"control_period_s": 1e-4})
     assert not list(tmp_path.iterdir())
+    monkeypatch.undo()
+    oi.save_model(model, tmp_path / "m.npz", {"control_period_s": 1e-4})
+    assert [f.name for f in tmp_path.iterdir()] == ["m.npz"]
+    np.testing.assert_array_equal(oi.load_model(tmp_path / "m.npz")["W"], model["W"])
