@@ -148,3 +148,27 @@ def test_cli_serial_json_summary_plots_and_exit_status(tmp_path, capsys):
     rc = main(["sweep", str(study), "--out", str(tmp_path / "o"), "--workers", "0", "--format", "json", "--no-plot"])
     again = json.loads(capsys.readouterr().out)
     assert rc == 1 and (again["skipped"], again["run"]) == (16, 0)
+
+
+def test_a_resume_by_other_physics_code_is_refused(tmp_path):
+    """A sweep folder records the hash of the physics sources; resuming the same study with another version of
+    that code (or from a folder written before the hash was recorded) is refused with one line, since old and
+    new rows would mix; the same code resumes."""
+    import json as _json
+
+    from mission_sim.studies.status import MANIFEST, check_same_study, physics_code_hash, write_manifest
+    from mission_sim.studies.study import load_study
+    st = load_study(pathlib.Path(__file__).resolve().parents[1] / "examples" / "study_small.toml")
+    write_manifest(tmp_path, st, "f" * 16, 4)
+    check_same_study(tmp_path, st, "f" * 16, 4)   # the same study and code: a resume
+    man = _json.loads((tmp_path / MANIFEST).read_text())
+    assert man["physics_code"] == physics_code_hash() and len(man["physics_code"]) == 16
+    for old in ("0" * 16, None):
+        if old is None:
+            del man["physics_code"]
+        else:
+            man["physics_code"] = old
+        (tmp_path / MANIFEST).write_text(_json.dumps(man))
+        with pytest.raises(ValueError, match="another version of dronewpt's physics code") as e:
+            check_same_study(tmp_path, st, "f" * 16, 4)
+        assert "\n" not in str(e.value) and "--force" in str(e.value)

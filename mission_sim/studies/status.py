@@ -17,7 +17,7 @@ from ..files import atomic_output
 from .store import CaseStore
 from .study import Study, case_space, parse_study
 
-__all__ = ["SweepStatus", "write_manifest", "read_manifest", "sweep_status", "MANIFEST", "check_same_study"]
+__all__ = ["SweepStatus", "write_manifest", "read_manifest", "sweep_status", "MANIFEST", "check_same_study", "physics_code_hash"]
 
 MANIFEST = "sweep.json"
 
@@ -42,11 +42,23 @@ class SweepStatus:
                 f"{self.failed:,} failed, {self.pending:,} pending{other}")
 
 
+def physics_code_hash() -> str:
+    """sha256 (16 hex digits) of the sources that compute a mission's numbers: :mod:`wpt_receiver` and
+    :mod:`mission_sim.world` (link, devices, battery, the compiled loop). A sweep folder records it, so a
+    resume by another version of that code is refused instead of mixing old and new results."""
+    from wpt_receiver.kernel_cache import dependency_hash
+    import wpt_receiver
+    roots = (Path(wpt_receiver.__file__).parent, Path(__file__).resolve().parents[1] / "world")
+    files = sorted((f for root in roots for f in root.rglob("*.py")), key=lambda f: (f.parent.name, f.name))
+    return dependency_hash(files)[:16]
+
+
 def _manifest(study: Study, fingerprint: str, n_cases: int) -> dict:
     """The manifest's content (the base mission is named by its fingerprint only)."""
     doc = json.loads(json.dumps(study.source, default=str))
     doc.get("study", {}).pop("base", None)  # the fingerprint stands for it; the path may not resolve later
-    return {"study": study.name, "n_cases": n_cases, "fingerprint": fingerprint, "doc": doc}
+    return {"study": study.name, "n_cases": n_cases, "fingerprint": fingerprint, "doc": doc,
+            "physics_code": physics_code_hash()}
 
 
 def check_same_study(out_dir, study: Study, fingerprint: str, n_cases: int) -> None:
@@ -56,7 +68,12 @@ def check_same_study(out_dir, study: Study, fingerprint: str, n_cases: int) -> N
         return
     old, new = read_manifest(out_dir, "--out"), _manifest(study, fingerprint, n_cases)
     if old.get("doc") == new["doc"] and old.get("fingerprint") == new["fingerprint"]:
-        return
+        if old.get("physics_code") == new["physics_code"]:
+            return
+        raise ValueError(f"--out {str(out_dir)!r} holds this study's results computed by another version of "
+                         f"dronewpt's physics code ({old.get('physics_code') or 'unrecorded'}, now "
+                         f"{new['physics_code']}); valid: a new --out folder, or --force to resume it anyway "
+                         "(old and new results then mix)")
     what = "another base mission" if old.get("doc") == new["doc"] else "other parameters"
     raise ValueError(f"--out {str(out_dir)!r} holds another study ({old.get('study')!r}, {old.get('n_cases')} "
                      f"cases, {what}); valid: a new --out folder, the same study to resume it, or --force to add "
