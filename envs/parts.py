@@ -152,7 +152,7 @@ class ObjectivePart:
 
     def __init__(self, cfg: EnvConfig, n: int):
         self.cfg = cfg
-        self.i2sm_all = np.ones((n, cfg.n_slow))
+        self.i2sm_all = np.ones((cfg.n_slow, n))   # step-major: a step reads one contiguous row
         self.stop_k = np.zeros(n, dtype=np.int64)
         self.t_stop = np.zeros(n)
         self.run_max = np.full(n, -np.inf)
@@ -183,7 +183,8 @@ class ObjectivePart:
         return i2_sm, stop_step(t_stop, c.dt_s, c.n_steps), t_stop
 
     def reset(self, idx, win, plan):
-        self.i2sm_all[idx], self.stop_k[idx], self.t_stop[idx] = self.plan(win, plan)
+        i2sm, self.stop_k[idx], self.t_stop[idx] = self.plan(win, plan)
+        self.i2sm_all[:, idx] = i2sm.T
         self.run_max[idx] = -np.inf
         self.sm_ok[idx] = True
         self.sm_checked[idx] = False

@@ -62,7 +62,7 @@ class DutyRollout:
         probe = self._env(1)
         probe.reset(seed=[self.seed])
         self.stop_k = int(probe._stop_k[0])
-        self.i2_sm_a = probe._i2sm_all[0, np.arange(self.n_steps) // self.config.slow_every].copy()
+        self.i2_sm_a = probe._i2sm_all[np.arange(self.n_steps) // self.config.slow_every, 0].copy()
 
     def _env(self, m: int):
         from .vector import SbarChargingVectorEnv

@@ -346,7 +346,7 @@ def _substep_pass(lo, idx, m, state, j, coef_tab, coef_ix, n_sub, vf, sc, w, h):
 def _finish_pass(lo, hi, d, state, k, j, bat, cmd_all, noise_all, lm_all, ep, par, scale, offset, sc, ptab, obs,
                  reward, trunc, info):
     """Pass 3 on ``[lo, hi)``: instantaneous peak, battery, reward, objective, state, observation and
-    info of each sub-environment. ``ep`` = (i2sm_all (n, S), stop_k, t_stop, run_max, sm_ok,
+    info of each sub-environment. ``ep`` = (i2sm_all (S, n) step-major, stop_k, t_stop, run_max, sm_ok,
     sm_checked) of the episodes; ``par`` (:data:`PAR`) the env's constants; ``ptab`` the peak table."""
     i2sm_all, stop_k, t_stop, run_max, ok, checked = ep
     dt = par[PAR.dt]
@@ -360,7 +360,7 @@ def _finish_pass(lo, hi, d, state, k, j, bat, cmd_all, noise_all, lm_all, ep, pa
         cmd = cmd_all[kk, e]
         reward[e], over = _reward(il, cmd, pk, par[PAR.inv_rated], par[PAR.w_track], par[PAR.w_over],
                                   par[PAR.i_ref])
-        rm, ok[e], checked[e], cost = _objective(kk, pk, il, i2sm_all[e, jj], dt, run_max[e], stop_k[e], ok[e],
+        rm, ok[e], checked[e], cost = _objective(kk, pk, il, i2sm_all[jj, e], dt, run_max[e], stop_k[e], ok[e],
                                                  checked[e])
         run_max[e] = rm
         state[STATE.i1, e], state[STATE.i2, e], state[STATE.vl, e] = i1, i2, vl
