@@ -203,7 +203,11 @@ def build_plans(win, cfg: EnvConfig, table: bool = False) -> Plans:
     if np.any(drift != 0.0):   # Lm moving within the window (scenario lm_drift): linear in time
         lm *= 1.0 + drift[:, None] * (t_slow / (T * cfg.dt_s))[None, :]
     # windows without wind share one Lm: discretise each distinct value once (same numbers)
-    lm_u, back = np.unique(lm.ravel(), return_inverse=True)
+    flat = lm.ravel()
+    if np.all(flat == flat[0]):   # one Lm for all (no wind, no drift): no sort
+        lm_u, back = flat[:1], np.zeros(flat.size, dtype=np.intp)
+    else:
+        lm_u, back = np.unique(flat, return_inverse=True)
     zoh = _zoh_coefficients(link, lm_u, cfg)
     coef_ix = back.reshape(n, S)
     coef = None if table else zoh[coef_ix]
