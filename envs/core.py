@@ -162,11 +162,13 @@ class Plans:
     by name: :mod:`envs.layout`). The command and the sensor noise are the scenario part's
     (:class:`envs.scenario.Window`), the short-mode current and the stop step the objective's."""
 
-    coef: np.ndarray         # (n, S, 20) ZOH coefficients per slow segment (envs.layout.COEF)
+    coef: np.ndarray | None  # (n, S, 20) ZOH coefficients per slow segment (envs.layout.COEF); None: table only
     lm_h: np.ndarray         # (n, S) true Lm per slow segment
     battery: np.ndarray      # (n, 9) battery row per episode (envs.layout.BAT)
     state0: np.ndarray       # (n, 6) initial link and battery state (envs.layout.STATE)
     detuned: DetunedPlan | None = None   # detuned windows (envs.detuned)
+    zoh: np.ndarray | None = None        # (U, 20) the coefficients of each distinct Lm: coef = zoh[coef_ix]
+    coef_ix: np.ndarray | None = None    # (n, S) row of ``zoh`` per window and slow segment
 
 
 def kernel_function(name: str, compiled: bool = True):
@@ -185,12 +187,13 @@ def _steady_v2(link: LinkParams, lm, il, vl):
     return np.minimum(np.maximum((x * link.v1_amp_v - np.sqrt(disc)) / (2.0 * link.r1_ohm), 0.0), FOUR_OVER_PI * vl)
 
 
-def build_plans(win, cfg: EnvConfig, out=None) -> Plans:
+def build_plans(win, cfg: EnvConfig, table: bool = False) -> Plans:
     """The plant's plans for the windows of ``win`` (an :class:`envs.scenario.Window`: draws, command,
     hover draw), on arrays over the windows: the true Lm per slow segment, the link's coefficients, the
     battery row and the initial state delivering the first command, a detuned tank's complex plans.
-    ``out``: None (a new array) or a C-contiguous float array (n, S, 20) to write the coefficients into
-    (the vector env's store: no temporaries, no copies; the same numbers)."""
+    The coefficients of each distinct Lm are made once (``zoh``, indexed per window and slow segment by
+    ``coef_ix``); ``table=True`` keeps only that table (the vector env's store: windows sharing an Lm share
+    one row, no per-window copies), else ``coef`` holds them per window (the same numbers)."""
     draws = win.draw
     n, T, S, link = draws.n, cfg.n_steps, cfg.n_slow, cfg.link_folded
     t_slow = np.arange(S) * (cfg.slow_every * cfg.dt_s)
@@ -200,10 +203,14 @@ def build_plans(win, cfg: EnvConfig, out=None) -> Plans:
     if np.any(drift != 0.0):   # Lm moving within the window (scenario lm_drift): linear in time
         lm *= 1.0 + drift[:, None] * (t_slow / (T * cfg.dt_s))[None, :]
     # windows without wind share one Lm: discretise each distinct value once (same numbers)
-    lm_u, back = np.unique(lm.ravel(), return_inverse=True)
+    flat = lm.ravel()
+    if np.all(flat == flat[0]):   # one Lm for all (no wind, no drift): no sort
+        lm_u, back = flat[:1], np.zeros(flat.size, dtype=np.intp)
+    else:
+        lm_u, back = np.unique(flat, return_inverse=True)
     zoh = _zoh_coefficients(link, lm_u, cfg)
-    coef = out if out is not None else np.empty((n, S, N_COEF))
-    np.take(zoh, back.ravel(), axis=0, out=coef.reshape(n * S, N_COEF), mode="clip")   # indices all valid
+    coef_ix = back.reshape(n, S)
+    coef = None if table else zoh[coef_ix]
     battery, state0 = _initial_state(link, lm[:, 0], np.asarray(draws.soc0, dtype=float), win.load_w,
                                      win.cmd_a[:, 0], cfg)
     c1 = np.asarray(draws.c1_detune, dtype=float).reshape(n)
@@ -213,7 +220,7 @@ def build_plans(win, cfg: EnvConfig, out=None) -> Plans:
         from .detuned import magnitudes
         detuned = _detuned_plans(link, lm, c1, c2, state0[:, STATE.vl], state0[:, STATE.d], cfg)
         state0[:, STATE.i1], state0[:, STATE.i2] = magnitudes(detuned.xc0)
-    return Plans(coef, lm, battery, state0, detuned)
+    return Plans(coef, lm, battery, state0, detuned, zoh, coef_ix)
 
 
 def _detuned_plans(link, lm, c1_rel, c2_rel, vl0, d0, cfg: EnvConfig):

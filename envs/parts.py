@@ -65,8 +65,11 @@ class PlantPart:
         self.kernel = kernel_function("env_step", compiled)   # also: numba imported here
         self.state = np.zeros((len(STATE), n))
         self.j = np.zeros(n, dtype=np.int64)
-        self.coef_all = np.zeros((n, S, N_COEF))
-        self.coef_cur = np.zeros((n, N_COEF))   # the current slow segment's coefficients (updated by the step)
+        # ZOH coefficients: one row per distinct Lm (rows [0, tab_used) live), row of window e's slow
+        # segment j at coef_ix[j, e] (step-major: a step reads one contiguous row of indices)
+        self.coef_tab = np.zeros((1, N_COEF))
+        self.coef_ix = np.zeros((S, n), dtype=np.int64)
+        self.tab_used = 0
         self.lm_all = np.zeros((S, n))
         self.bat = np.zeros((N_BAT, n))
         # detuned windows (envs.detuned): flag, complex state, coefficients; empty until one is drawn
@@ -86,17 +89,34 @@ class PlantPart:
     def reset(self, idx, win):
         """Plans of the windows ``idx`` (a slice for all: the coefficients written in place) from the
         scenario's window ``win``; returns the :class:`envs.core.Plans`."""
-        full = isinstance(idx, slice)
-        p = build_plans(win, self.cfg, out=self.coef_all if full else None)
-        if not full:
-            self.coef_all[idx] = p.coef
+        p = build_plans(win, self.cfg, table=True)
+        self._put_table(idx, p.zoh, p.coef_ix)
         self.lm_all[:, idx] = p.lm_h.T
         self.bat[:, idx] = p.battery.T
-        self.coef_cur[idx] = p.coef[:, 0]
         self.j[idx] = 0
         self.state[:, idx] = p.state0.T   # the columns of state0 are the STATE slots
         self._reset_detuned(idx, p.detuned)
         return p
+
+    def _put_table(self, idx, zoh, ix):
+        """The windows ``idx`` read the coefficient rows ``zoh`` (U, 20) by ``ix`` (len(idx), S): all windows
+        (a slice) replace the table; some append to it, the rows no window reads dropped when it is full."""
+        if isinstance(idx, slice):
+            self.coef_tab, self.tab_used = zoh, len(zoh)
+            self.coef_ix[:, idx] = ix.T
+            return
+        self.coef_ix[:, idx] = -1   # these windows' old rows are no longer read
+        if self.tab_used + len(zoh) > len(self.coef_tab):
+            live = np.unique(self.coef_ix)
+            live = live[live >= 0]
+            tab = np.empty((2 * (len(live) + len(zoh)), N_COEF))
+            tab[:len(live)] = self.coef_tab[live]
+            keep = self.coef_ix >= 0
+            self.coef_ix[keep] = np.searchsorted(live, self.coef_ix[keep])
+            self.coef_tab, self.tab_used = tab, len(live)
+        self.coef_tab[self.tab_used:self.tab_used + len(zoh)] = zoh
+        self.coef_ix[:, idx] = ix.T + self.tab_used
+        self.tab_used += len(zoh)
 
     def _reset_detuned(self, idx, det):
         if det is None:
@@ -120,7 +140,7 @@ class PlantPart:
         c = self.cfg
         kern = self.kernel if self.compiled else kernel_function("env_step", False)
         cx = (self.detuned, self.xc, self.ccoef, c.link.v1_amp_v)
-        kern(d, self.state, k, self.j, self.coef_all, self.coef_cur, self.bat, scenario.cmd, scenario.noise,
+        kern(d, self.state, k, self.j, self.coef_tab, self.coef_ix, self.bat, scenario.cmd, scenario.noise,
              self.lm_all, objective.ep, c.slow_every, self.n_sub, par, OBS_SCALE, OBS_OFFSET, ptab, obs, reward,
              truncated, block, cx, chunks)
 
@@ -132,7 +152,7 @@ class ObjectivePart:
 
     def __init__(self, cfg: EnvConfig, n: int):
         self.cfg = cfg
-        self.i2sm_all = np.ones((n, cfg.n_slow))
+        self.i2sm_all = np.ones((cfg.n_slow, n))   # step-major: a step reads one contiguous row
         self.stop_k = np.zeros(n, dtype=np.int64)
         self.t_stop = np.zeros(n)
         self.run_max = np.full(n, -np.inf)
@@ -163,7 +183,8 @@ class ObjectivePart:
         return i2_sm, stop_step(t_stop, c.dt_s, c.n_steps), t_stop
 
     def reset(self, idx, win, plan):
-        self.i2sm_all[idx], self.stop_k[idx], self.t_stop[idx] = self.plan(win, plan)
+        i2sm, self.stop_k[idx], self.t_stop[idx] = self.plan(win, plan)
+        self.i2sm_all[:, idx] = i2sm.T
         self.run_max[idx] = -np.inf
         self.sm_ok[idx] = True
         self.sm_checked[idx] = False

@@ -62,7 +62,7 @@ class DutyRollout:
         probe = self._env(1)
         probe.reset(seed=[self.seed])
         self.stop_k = int(probe._stop_k[0])
-        self.i2_sm_a = probe._i2sm_all[0, np.arange(self.n_steps) // self.config.slow_every].copy()
+        self.i2_sm_a = probe._i2sm_all[np.arange(self.n_steps) // self.config.slow_every, 0].copy()
 
     def _env(self, m: int):
         from .vector import SbarChargingVectorEnv
@@ -95,7 +95,7 @@ class DutyRollout:
         return RolloutResult(out[0].T.copy(), out[1].T.copy(), self.i2_sm_a, out[2].T.copy(), self.stop_k,
                              env._run_max.copy(), env._sm_ok & env._sm_checked)
 
-    _MUTABLE = ("_state", "_k", "_j", "_coef_cur", "_run_max", "_sm_ok", "_sm_checked")
+    _MUTABLE = ("_state", "_k", "_j", "_run_max", "_sm_ok", "_sm_checked")
 
     def _restore(self, env, m, prefix):
         """Put env (m rows) at the window's start, or after the duty ``prefix`` shared by every row
@@ -126,7 +126,7 @@ class DutyRollout:
         from .vector_kernel import INFO_ROWS
         cols = np.array([INFO_ROWS.index(k) for k in ("energy_j", "i2_peak_a", "rect_current_a")], dtype=np.int64)
         ep = (env._i2sm_all, env._stop_k, env._t_stop, env._run_max, env._sm_ok, env._sm_checked)
-        _replay()(duty, env._state, env._k, env._j, env._coef_all, env._coef_cur, env._bat, env._cmd, env._noise,
+        _replay()(duty, env._state, env._k, env._j, env._coef_tab, env._coef_ix, env._bat, env._cmd, env._noise,
                   env._lm_all, ep, env._M, env._n_sub, env._par, env._obs_scale[:, 0].copy(),
                   env._obs_offset[:, 0].copy(), env._peak.kernel_table, len(INFO_ROWS), cols, out)
         env._started = False   # the env's own bookkeeping (autoreset flags) was bypassed: reset before reuse
@@ -164,7 +164,7 @@ def _replay():
         drop_stale_cache(_here, (vector_kernel, layout, objective))
 
         @njit(cache=True)
-        def replay(duty, state, k, j, coef_all, coef_cur, bat, cmd_all, noise_all, lm_all, ep, slow_every, n_sub,
+        def replay(duty, state, k, j, coef_tab, coef_ix, bat, cmd_all, noise_all, lm_all, ep, slow_every, n_sub,
                    par, scale, offset, ptab, n_info, cols, out):
             T, n = duty.shape
             obs = np.empty((n, 8), np.float32)
@@ -172,7 +172,7 @@ def _replay():
             trunc = np.empty(n, np.bool_)
             info = np.empty((n, n_info))
             for s in range(T):
-                step_kernel(duty[s], state, k, j, coef_all, coef_cur, bat, cmd_all, noise_all, lm_all, ep,
+                step_kernel(duty[s], state, k, j, coef_tab, coef_ix, bat, cmd_all, noise_all, lm_all, ep,
                             slow_every, n_sub, par, scale, offset, ptab, obs, reward, trunc, info)
                 for c in range(cols.shape[0]):
                     for e in range(n):

@@ -279,7 +279,7 @@ class SbarChargingDiscreteVectorEnv(SbarChargingVectorEnv):
 alias_parts(SbarChargingVectorEnv, {
     "_cmd": ("scenario", "cmd"), "_noise": ("scenario", "noise"), "_cur_scenario": ("scenario", "current"),
     "_kernel": ("plant", "kernel"), "_state": ("plant", "state"), "_j": ("plant", "j"),
-    "_coef_all": ("plant", "coef_all"), "_coef_cur": ("plant", "coef_cur"), "_lm_all": ("plant", "lm_all"),
+    "_coef_tab": ("plant", "coef_tab"), "_coef_ix": ("plant", "coef_ix"), "_lm_all": ("plant", "lm_all"),
     "_bat": ("plant", "bat"), "_detuned": ("plant", "detuned"), "_xc": ("plant", "xc"), "_ccoef": ("plant", "ccoef"),
     "_c_rel": ("plant", "c_rel"), "_i2sm_all": ("objective", "i2sm_all"), "_stop_k": ("objective", "stop_k"),
     "_t_stop": ("objective", "t_stop"), "_run_max": ("objective", "run_max"), "_sm_ok": ("objective", "sm_ok"),

@@ -285,9 +285,10 @@ def _put_info(row, t, i2, pk, i1, d, v2, il, vl, ib, soc, cmd, lm, energy, over,
 
 
 @njit(cache=True)
-def _link_pass(lo, hi, d, state, k, j, coef_all, coef_cur, slow_every, n_sub, vf, dr, cx, sc, idx):
+def _link_pass(lo, hi, d, state, k, j, coef_tab, coef_ix, slow_every, n_sub, vf, dr, cx, sc, idx):
     """Pass 1 on sub-environments ``[lo, hi)``: the link step of each into ``sc[:, e - lo]`` (rows i1n,
-    i2n, pk, il, v2), the current coefficients moved to the step's slow segment; returns how many
+    i2n, pk, il, v2), ``j`` moved to the step's slow segment (coefficients ``coef_tab[coef_ix[j, e]]``,
+    the table's row of the segment's Lm: windows sharing an Lm read one row); returns how many
     steps are split (their indices in ``idx[:m]``, their clamp |V2c| and excess rx in ``sc[5:7, :m]``).
     ``cx`` = (detuned (n,) bool, complex state (n, 4), coefficients (n, S, 32), V1 [V]): a detuned
     window steps its complex envelope (:func:`_complex_step`, never split)."""
@@ -299,15 +300,13 @@ def _link_pass(lo, hi, d, state, k, j, coef_all, coef_cur, slow_every, n_sub, vf
         q = e - lo
         kk = k[e]
         jj = kk // slow_every
-        if jj != j[e] or kk == 0:
-            coef_cur[e] = coef_all[e, jj]
-            j[e] = jj
+        j[e] = jj
         if has_cx and detuned[e]:
             sc[0, q], sc[1, q], sc[2, q], sc[3, q], sc[4, q] = _complex_step(xc[e], state[STATE.vl, e], d[e],
                                                                              ccoef[e, jj], vf, dr, v1, n_sub)
             continue
         i1n, i2n, pk, il, v2, split, vm, rx = _link_step(state[STATE.i1, e], state[STATE.i2, e], state[STATE.vl, e],
-                                                         d[e], coef_cur[e], vf, dr)
+                                                         d[e], coef_tab[coef_ix[jj, e]], vf, dr)
         sc[0, q], sc[1, q], sc[2, q], sc[3, q], sc[4, q] = i1n, i2n, pk, il, v2
         # noted without a branch (about half the steps split, at random): the slot m is written
         # every time and kept when the step splits
@@ -318,7 +317,7 @@ def _link_pass(lo, hi, d, state, k, j, coef_all, coef_cur, slow_every, n_sub, vf
 
 
 @njit(cache=True, error_model="numpy")
-def _substep_pass(lo, idx, m, state, coef_cur, n_sub, vf, sc, w, h):
+def _substep_pass(lo, idx, m, state, j, coef_tab, coef_ix, n_sub, vf, sc, w, h):
     """Pass 2: the split steps ``idx[:m]`` re-done in ``n_sub`` sub-steps (:func:`_substep`), the sub-step
     loop outside; results into ``sc`` (the clamp's |V2c| and the excess rx those of pass 1: a split
     step has sign(I2) = +-1, so |V2c| is the sub-steps' magnitude to the bit; no second sine). ``w``
@@ -328,8 +327,9 @@ def _substep_pass(lo, idx, m, state, coef_cur, n_sub, vf, sc, w, h):
         e = idx[q]
         w[0, q], w[1, q], w[3, q], w[4, q] = state[STATE.i1, e], state[STATE.i2, e], -1.0, 0.0
         w[2, q], w[5, q] = sc[5, q], sc[6, q]
+        c = coef_tab[coef_ix[j[e], e]]
         for r in range(8):
-            h[r, q] = coef_cur[e, _SUB_COLS[r]]
+            h[r, q] = c[_SUB_COLS[r]]
     for _ in range(n_sub):
         for q in range(m):
             w[0, q], w[1, q], w[3, q], w[4, q] = _substep(w[0, q], w[1, q], w[2, q], w[5, q], w[3, q], w[4, q],
@@ -346,7 +346,7 @@ def _substep_pass(lo, idx, m, state, coef_cur, n_sub, vf, sc, w, h):
 def _finish_pass(lo, hi, d, state, k, j, bat, cmd_all, noise_all, lm_all, ep, par, scale, offset, sc, ptab, obs,
                  reward, trunc, info):
     """Pass 3 on ``[lo, hi)``: instantaneous peak, battery, reward, objective, state, observation and
-    info of each sub-environment. ``ep`` = (i2sm_all (n, S), stop_k, t_stop, run_max, sm_ok,
+    info of each sub-environment. ``ep`` = (i2sm_all (S, n) step-major, stop_k, t_stop, run_max, sm_ok,
     sm_checked) of the episodes; ``par`` (:data:`PAR`) the env's constants; ``ptab`` the peak table."""
     i2sm_all, stop_k, t_stop, run_max, ok, checked = ep
     dt = par[PAR.dt]
@@ -360,7 +360,7 @@ def _finish_pass(lo, hi, d, state, k, j, bat, cmd_all, noise_all, lm_all, ep, pa
         cmd = cmd_all[kk, e]
         reward[e], over = _reward(il, cmd, pk, par[PAR.inv_rated], par[PAR.w_track], par[PAR.w_over],
                                   par[PAR.i_ref])
-        rm, ok[e], checked[e], cost = _objective(kk, pk, il, i2sm_all[e, jj], dt, run_max[e], stop_k[e], ok[e],
+        rm, ok[e], checked[e], cost = _objective(kk, pk, il, i2sm_all[jj, e], dt, run_max[e], stop_k[e], ok[e],
                                                  checked[e])
         run_max[e] = rm
         state[STATE.i1, e], state[STATE.i2, e], state[STATE.vl, e] = i1, i2, vl
@@ -375,7 +375,7 @@ def _finish_pass(lo, hi, d, state, k, j, bat, cmd_all, noise_all, lm_all, ep, pa
 
 
 @njit(cache=True)
-def _chunk(lo, hi, d, state, k, j, coef_all, coef_cur, bat, cmd_all, noise_all, lm_all, ep, slow_every, n_sub, par,
+def _chunk(lo, hi, d, state, k, j, coef_tab, coef_ix, bat, cmd_all, noise_all, lm_all, ep, slow_every, n_sub, par,
            scale, offset, ptab, obs, reward, trunc, info, cx):
     """The step of sub-environments ``[lo, hi)``: the three passes (module docstring) on blocks of
     :data:`_BLOCK` sub-environments, so that their scratch stays in the L1 cache."""
@@ -385,40 +385,41 @@ def _chunk(lo, hi, d, state, k, j, coef_all, coef_cur, bat, cmd_all, noise_all, 
     vf, dr = par[PAR.vf], par[PAR.dr]
     for b0 in range(lo, hi, _BLOCK):
         b1 = min(b0 + _BLOCK, hi)
-        m = _link_pass(b0, b1, d, state, k, j, coef_all, coef_cur, slow_every, n_sub, vf, dr, cx, sc, idx)
+        m = _link_pass(b0, b1, d, state, k, j, coef_tab, coef_ix, slow_every, n_sub, vf, dr, cx, sc, idx)
         if m:
-            _substep_pass(b0, idx, m, state, coef_cur, n_sub, vf, sc, w, h)
+            _substep_pass(b0, idx, m, state, j, coef_tab, coef_ix, n_sub, vf, sc, w, h)
         _finish_pass(b0, b1, d, state, k, j, bat, cmd_all, noise_all, lm_all, ep, par, scale, offset, sc, ptab, obs,
                      reward, trunc, info)
 
 
 @njit(cache=True, parallel=True)
-def env_step(d, state, k, j, coef_all, coef_cur, bat, cmd_all, noise_all, lm_all, ep, slow_every, n_sub, par, scale,
+def env_step(d, state, k, j, coef_tab, coef_ix, bat, cmd_all, noise_all, lm_all, ep, slow_every, n_sub, par, scale,
              offset, ptab, obs, reward, trunc, info, cx, n_chunks):
     """Step every sub-environment with duty ``d`` (n,), in ``n_chunks`` contiguous chunks run in
     parallel (``n_chunks = 1``: one chunk on the calling thread, no thread pool). ``state`` (:data:`STATE`,
-    (6, n)) and the step index ``k`` / slow index ``j`` are updated in place, and so are the current
-    ZOH coefficients ``coef_cur`` (n, 20) (copied from ``coef_all`` (n, S, 20) when a sub-environment
-    enters a new slow segment) and the objective's running values in ``ep`` (:func:`_finish_pass`);
+    (6, n)) and the step index ``k`` / slow index ``j`` are updated in place, and so are the
+    objective's running values in ``ep`` (:func:`_finish_pass`); the ZOH coefficients of slow segment
+    ``j`` of sub-environment ``e`` are ``coef_tab[coef_ix[j, e]]`` (``coef_tab`` (U, 20) one row per
+    distinct Lm, ``coef_ix`` (S, n) step-major);
     ``bat`` (:data:`BAT`, (9, n)); ``cmd_all`` (T + 1, n), ``noise_all`` (T, n), ``lm_all`` (S, n)
     step-major; ``cx`` the detuned windows (:func:`_link_pass`). ``obs`` (n, 8) float32, ``reward``,
     ``trunc`` and ``info`` (n, len(INFO)) are filled."""
     n = d.shape[0]
     if n_chunks <= 1:
-        _chunk(0, n, d, state, k, j, coef_all, coef_cur, bat, cmd_all, noise_all, lm_all, ep, slow_every, n_sub, par,
+        _chunk(0, n, d, state, k, j, coef_tab, coef_ix, bat, cmd_all, noise_all, lm_all, ep, slow_every, n_sub, par,
                scale, offset, ptab, obs, reward, trunc, info, cx)
         return
     for c in prange(n_chunks):
-        _chunk(c * n // n_chunks, (c + 1) * n // n_chunks, d, state, k, j, coef_all, coef_cur, bat, cmd_all,
+        _chunk(c * n // n_chunks, (c + 1) * n // n_chunks, d, state, k, j, coef_tab, coef_ix, bat, cmd_all,
                noise_all, lm_all, ep, slow_every, n_sub, par, scale, offset, ptab, obs, reward, trunc, info, cx)
 
 
 @njit(cache=True)
-def step_kernel(d, state, k, j, coef_all, coef_cur, bat, cmd_all, noise_all, lm_all, ep, slow_every, n_sub, par,
+def step_kernel(d, state, k, j, coef_tab, coef_ix, bat, cmd_all, noise_all, lm_all, ep, slow_every, n_sub, par,
                 scale, offset, ptab, obs, reward, trunc, info):
     """:func:`env_step` on the calling thread, without detuned windows (:mod:`envs.rollout`'s replay)."""
     cx = (np.zeros(0, np.bool_), np.zeros((0, 4)), np.zeros((0, 0, 32)), 0.0)
-    _chunk(0, d.shape[0], d, state, k, j, coef_all, coef_cur, bat, cmd_all, noise_all, lm_all, ep, slow_every, n_sub,
+    _chunk(0, d.shape[0], d, state, k, j, coef_tab, coef_ix, bat, cmd_all, noise_all, lm_all, ep, slow_every, n_sub,
            par, scale, offset, ptab, obs, reward, trunc, info, cx)
 
 

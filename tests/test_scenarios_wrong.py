@@ -59,7 +59,7 @@ def test_lm_drift_falls_linearly(name, lo, hi):
     drift = (lm[:, 1] / lm[:, 0] - 1.0) / (t[1] / (v.config.n_steps * v.config.dt_s))
     assert np.all((drift >= lo - 1e-9) & (drift <= hi + 1e-9))
     assert np.allclose(lm, lm[:, :1] * (1.0 + drift[:, None] * t[None, :] / 0.03), rtol=1e-12)
-    assert np.allclose(v._i2sm_all, short_mode_i2_a(v.config.link, lm, v.config.device_set()), rtol=1e-12)
+    assert np.allclose(v._i2sm_all.T, short_mode_i2_a(v.config.link, lm, v.config.device_set()), rtol=1e-12)
     # the scenarios the existing windows came from are unchanged by the new fields (nothing drawn)
     n = SbarChargingVectorEnv(num_envs=8, scenario="nominal")
     n.reset(seed=3)
