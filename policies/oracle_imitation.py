@@ -44,7 +44,7 @@ import numpy as np
 
 from mission_sim.contract import OBS_INDEX, PolicyContext, denormalise_obs
 
-__all__ = ["HISTORY", "HORIZON", "stop_features", "target_sequences", "predict", "sequences_from", "save_model", "load_model",
+__all__ = ["BASES", "check_base", "HISTORY", "HORIZON", "stop_features", "target_sequences", "predict", "sequences_from", "save_model", "load_model",
            "choose_targets", "fit", "OracleImitationPolicy", "PRETRAINED_ORACLE_IMITATION", "FEATURE_NAMES"]
 
 #: frames of observation history the policy keeps (the features use the last few before the stop)
@@ -56,8 +56,26 @@ PRETRAINED_ORACLE_IMITATION = Path(__file__).parent / "pretrained" / "oracle_imi
 _I2, _VL, _IB, _IL, _SOC, _CMD, _D, _T = (OBS_INDEX[k] for k in (
     "i2_amp_a", "battery_v", "battery_current_a", "rect_current_a", "soc", "charge_cmd_a", "last_d_short",
     "t_since_stop_s"))
+#: controllers the policy can run before the stop (``meta["base"]``; a model without it: ``model_based``)
+BASES = ("model_based", "mpc")
 FEATURE_NAMES = ("d_pre", "cmd_before_a", "vl_v", "soc", "i2_mean_a", "il_mean_a", "ib_mean_a", "d_slope",
                  "i2_per_duty")
+
+
+def check_base(base) -> str:
+    """``base`` if it is one of :data:`BASES`, else ``ValueError`` (one line naming it and the valid names)."""
+    if base not in BASES:
+        raise ValueError(f"base={base!r} is invalid; valid values: {', '.join(BASES)}")
+    return base
+
+
+def make_base(base: str, ctx: PolicyContext):
+    """The controller before the stop: the paper's (``model_based``) or the MPC at budget 0 (``mpc``)."""
+    if check_base(base) == "mpc":
+        from .mpc import MPCPolicy
+        return MPCPolicy(ctx)
+    from .classical import ModelBasedPolicy
+    return ModelBasedPolicy(ctx)
 
 
 def stop_features(frames) -> np.ndarray:
@@ -168,9 +186,12 @@ def _check_model(z: dict) -> str:
     if slow.shape != () or not float(slow) >= 1.0:
         return f"slow={slow.tolist()!r}, not a number >= 1"
     try:
-        dt = float(json.loads(str(z["meta"]))["control_period_s"])
+        meta = json.loads(str(z["meta"]))
+        dt = float(meta["control_period_s"])
     except (ValueError, KeyError, TypeError):
         return "no control_period_s in its meta"
+    if meta.get("base", "model_based") not in BASES:
+        return f"base={meta['base']!r} in its meta, not one of {', '.join(BASES)}"
     if not (np.isfinite(dt) and dt > 0):
         return f"control_period_s={dt!r} in its meta, not > 0"
     return ""
@@ -183,7 +204,7 @@ def load_model(path) -> dict:
     import json
     import zipfile
     expected = (f"an oracle imitation model (.npz with W (1 + len(cols), {HORIZON}), cols in FEATURE_NAMES, "
-                "feat_mean, feat_std, slow >= 1, meta with control_period_s)")
+                "feat_mean, feat_std, slow >= 1, meta with control_period_s and base in BASES)")
     try:
         if not zipfile.is_zipfile(path):
             raise ValueError("not an .npz (zip) archive")
@@ -212,14 +233,13 @@ class OracleImitationPolicy:
     name = "oracle_imitation"
 
     def __init__(self, ctx: PolicyContext = PolicyContext(), path=PRETRAINED_ORACLE_IMITATION):
-        from .classical import ModelBasedPolicy
         self.ctx = ctx
         self.model = load_model(path)
         dt = float(self.model["meta"]["control_period_s"])
         if abs(ctx.control_period_s - dt) > 1e-9 * dt:    # its HORIZON steps are learned at this period
             raise ValueError(f"control_period_s={ctx.control_period_s!r} is invalid for {Path(path).name}; "
                              f"valid value: {dt!r} (the period it was trained at)")
-        self.base = ModelBasedPolicy(ctx)
+        self.base = make_base(self.model["meta"].get("base", "model_based"), ctx)
         self.reset(1)
 
     def reset(self, n: int = 1) -> None:
