@@ -8,7 +8,8 @@ training windows, choose each window's budget by one Lagrangian multiplier, fit 
 is ``out/oracle_imitation/oracle_imitation`` so a run never overwrites the shipped models; with the
 oracle's cache warm it reproduces them bit for bit, ~20 s) writes ``OUT_s<k>.npz`` per training seed
 ``k`` (a few kB each; the command, the scenarios, windows, budgets, the control period and the
-teacher's mean overshoot / energy in its ``meta``). The oracle is solved on each
+teacher's mean overshoot / energy in its ``meta``; ``--base mpc`` runs the MPC before the stop and solves
+the teacher from its state there, stored as ``meta["base"]``). The oracle is solved on each
 scenario's *plant* (a scenario that differs from another only in its sensing delay shares its
 windows' oracle: the delay changes what the policy sees, not the link), cached on disk
 (``$DRONEWPT_CACHE_DIR``), ~1-5 s of CPU per (window, budget) the first time. Training windows must

@@ -32,6 +32,10 @@ oracle's sequences vary between windows in ways the stop observation does not ex
 training seeds are bootstrap draws of the windows. Stored as ``.npz`` (8 kB: the feature columns and
 normalisation, ``W``, ``slow``, the command in ``meta``); inference is one small matrix product.
 
+The base before the stop is the model's ``meta["base"]`` (:data:`BASES`: ``model_based``, the default and the
+shipped models', or ``mpc``, the MPC at budget 0, whose teacher is solved from the MPC's state at the stop:
+``train_oracle_imitation.py --base mpc``; on the Lm drift it was not better than the MPC itself, docs/rl.md).
+
 Policy: :class:`OracleImitationPolicy` (``oracle_imitation:PATH``; ``oracle_imitation`` = shipped seed 0,
 ``policies/pretrained/oracle_imitation_s0..4.npz``).
 """
@@ -221,7 +225,8 @@ def load_model(path) -> dict:
 
 
 class OracleImitationPolicy:
-    """The paper's controller before the stop, the learned oracle sequence from the stop on (module notes).
+    """The base (the paper's controller, or the MPC if the model's meta says so) before the stop, the learned
+    oracle sequence from the stop on (module notes).
 
     Causal: the duty at step k depends on the observations up to k only (the frame history and the
     sequence latched at the stop). The base controller is stepped every period (so before every stop
