@@ -8,7 +8,8 @@ training windows, choose each window's budget by one Lagrangian multiplier, fit 
 is ``out/oracle_imitation/oracle_imitation`` so a run never overwrites the shipped models; with the
 oracle's cache warm it reproduces them bit for bit, ~20 s) writes ``OUT_s<k>.npz`` per training seed
 ``k`` (a few kB each; the command, the scenarios, windows, budgets, the control period and the
-teacher's mean overshoot / energy in its ``meta``). The oracle is solved on each
+teacher's mean overshoot / energy in its ``meta``; ``--base mpc`` runs the MPC before the stop and solves
+the teacher from its state there, stored as ``meta["base"]``). The oracle is solved on each
 scenario's *plant* (a scenario that differs from another only in its sensing delay shares its
 windows' oracle: the delay changes what the policy sees, not the link), cached on disk
 (``$DRONEWPT_CACHE_DIR``), ~1-5 s of CPU per (window, budget) the first time. Training windows must
@@ -82,6 +83,11 @@ def _features(text):
     return [FEATURE_NAMES.index(x) for x in names]
 
 
+def _base(text):
+    from policies.oracle_imitation import BASES
+    return text if text in BASES else None
+
+
 def _seed(text):
     v = int(text)
     return v if 0 <= v < 2**32 else None
@@ -106,6 +112,9 @@ def parse(argv):
                     type=_conv("--slow", "a number in [1, 3]", _in(1.0, 3.0)))
     ap.add_argument("--features", default="d_pre,cmd_before_a", help="stop features the clone reads "
                     "(policies.oracle_imitation.FEATURE_NAMES)")
+    ap.add_argument("--base", default="model_based", help="controller before the stop (the teacher is solved "
+                    "from its state at the stop; stored in the model's meta)",
+                    type=_conv("--base", "one of model_based, mpc", _base))
     ap.add_argument("--out", default="out/oracle_imitation/oracle_imitation",
                     help="output prefix: writes OUT_s<k>.npz (default under out/, not the shipped models)")
     a = ap.parse_args(argv)
@@ -128,15 +137,15 @@ def parse(argv):
     return a
 
 
-def dataset(scenarios, seeds, deltas, lam):
-    """``(features, targets, info)`` of every (scenario, window): the stop features of the paper's
-    controller's run and the chosen oracle sequence."""
+def dataset(scenarios, seeds, deltas, lam, base="model_based"):
+    """``(features, targets, info)`` of every (scenario, window): the stop features of ``base``'s run
+    (the paper's controller by default) and the chosen oracle sequence, solved from its state at the stop."""
     from policies.oracle_imitation import choose_targets, stop_features, target_sequences
     from policies.oracle_imitation_train import collect_stop_observations, oracle_targets
     X, Y, ov, en, fl = [], [], [], [], []
     for s in scenarios:
-        frames, k0 = collect_stop_observations(s, seeds[0], len(seeds))
-        tg = oracle_targets(plant_scenario(s), seeds, deltas, progress=True)
+        frames, k0 = collect_stop_observations(s, seeds[0], len(seeds), base=base)
+        tg = oracle_targets(plant_scenario(s), seeds, deltas, progress=True, base=base)
         pick = choose_targets(tg["energy_j"], tg["overshoot"], lam)
         rows = np.arange(len(seeds))
         X.append(stop_features(frames))
@@ -153,7 +162,7 @@ def main(argv=None):
     from envs.core import EnvConfig
     from policies.oracle_imitation import fit, predict, save_model
     t0, c0 = time.time(), time.process_time()
-    X, Y, info = dataset(a.scenarios, a.seeds, a.deltas, a.lam)
+    X, Y, info = dataset(a.scenarios, a.seeds, a.deltas, a.lam, a.base)
     print(f"teacher: {len(X)} windows, overshoot {100 * info['overshoot'].mean():.3f} % (floor "
           f"{100 * info['floor'].mean():.3f} %), energy after the stop {info['energy_j'].mean():.4f} J")
     os.makedirs(os.path.dirname(a.out) or ".", exist_ok=True)
@@ -163,7 +172,7 @@ def main(argv=None):
         model["slow"] = np.array(a.slow)
         meta = {"command": " ".join(["python", "benchmarks/train_oracle_imitation.py"] + list(sys.argv[1:] if argv is None else argv)),
                 "scenarios": a.scenarios, "windows": [a.seeds[0], a.seeds[-1] + 1], "deltas": a.deltas, "lam": a.lam, "slow": a.slow,
-                "seed": k, "features": a.features.split(","), "teacher_overshoot_pct": 100 * float(info["overshoot"].mean()),
+                "seed": k, "base": a.base, "features": a.features.split(","), "teacher_overshoot_pct": 100 * float(info["overshoot"].mean()),
                 "teacher_energy_j": float(info["energy_j"].mean()), "fit_rms_duty": rms,
                 "control_period_s": EnvConfig().dt_s}   # the windows' env (config None): the period it learned at
         save_model(model, f"{a.out}_s{k}.npz", meta)

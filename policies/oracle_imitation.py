@@ -32,6 +32,10 @@ oracle's sequences vary between windows in ways the stop observation does not ex
 training seeds are bootstrap draws of the windows. Stored as ``.npz`` (8 kB: the feature columns and
 normalisation, ``W``, ``slow``, the command in ``meta``); inference is one small matrix product.
 
+The base before the stop is the model's ``meta["base"]`` (:data:`BASES`: ``model_based``, the default and the
+shipped models', or ``mpc``, the MPC at budget 0, whose teacher is solved from the MPC's state at the stop:
+``train_oracle_imitation.py --base mpc``; on the Lm drift it was not better than the MPC itself, docs/rl.md).
+
 Policy: :class:`OracleImitationPolicy` (``oracle_imitation:PATH``; ``oracle_imitation`` = shipped seed 0,
 ``policies/pretrained/oracle_imitation_s0..4.npz``).
 """
@@ -44,7 +48,7 @@ import numpy as np
 
 from mission_sim.contract import OBS_INDEX, PolicyContext, denormalise_obs
 
-__all__ = ["HISTORY", "HORIZON", "stop_features", "target_sequences", "predict", "sequences_from", "save_model", "load_model",
+__all__ = ["BASES", "check_base", "HISTORY", "HORIZON", "stop_features", "target_sequences", "predict", "sequences_from", "save_model", "load_model",
            "choose_targets", "fit", "OracleImitationPolicy", "PRETRAINED_ORACLE_IMITATION", "FEATURE_NAMES"]
 
 #: frames of observation history the policy keeps (the features use the last few before the stop)
@@ -56,8 +60,26 @@ PRETRAINED_ORACLE_IMITATION = Path(__file__).parent / "pretrained" / "oracle_imi
 _I2, _VL, _IB, _IL, _SOC, _CMD, _D, _T = (OBS_INDEX[k] for k in (
     "i2_amp_a", "battery_v", "battery_current_a", "rect_current_a", "soc", "charge_cmd_a", "last_d_short",
     "t_since_stop_s"))
+#: controllers the policy can run before the stop (``meta["base"]``; a model without it: ``model_based``)
+BASES = ("model_based", "mpc")
 FEATURE_NAMES = ("d_pre", "cmd_before_a", "vl_v", "soc", "i2_mean_a", "il_mean_a", "ib_mean_a", "d_slope",
                  "i2_per_duty")
+
+
+def check_base(base) -> str:
+    """``base`` if it is one of :data:`BASES`, else ``ValueError`` (one line naming it and the valid names)."""
+    if base not in BASES:
+        raise ValueError(f"base={base!r} is invalid; valid values: {', '.join(BASES)}")
+    return base
+
+
+def make_base(base: str, ctx: PolicyContext):
+    """The controller before the stop: the paper's (``model_based``) or the MPC at budget 0 (``mpc``)."""
+    if check_base(base) == "mpc":
+        from .mpc import MPCPolicy
+        return MPCPolicy(ctx)
+    from .classical import ModelBasedPolicy
+    return ModelBasedPolicy(ctx)
 
 
 def stop_features(frames) -> np.ndarray:
@@ -168,9 +190,12 @@ def _check_model(z: dict) -> str:
     if slow.shape != () or not float(slow) >= 1.0:
         return f"slow={slow.tolist()!r}, not a number >= 1"
     try:
-        dt = float(json.loads(str(z["meta"]))["control_period_s"])
+        meta = json.loads(str(z["meta"]))
+        dt = float(meta["control_period_s"])
     except (ValueError, KeyError, TypeError):
         return "no control_period_s in its meta"
+    if meta.get("base", "model_based") not in BASES:
+        return f"base={meta['base']!r} in its meta, not one of {', '.join(BASES)}"
     if not (np.isfinite(dt) and dt > 0):
         return f"control_period_s={dt!r} in its meta, not > 0"
     return ""
@@ -183,7 +208,7 @@ def load_model(path) -> dict:
     import json
     import zipfile
     expected = (f"an oracle imitation model (.npz with W (1 + len(cols), {HORIZON}), cols in FEATURE_NAMES, "
-                "feat_mean, feat_std, slow >= 1, meta with control_period_s)")
+                "feat_mean, feat_std, slow >= 1, meta with control_period_s and base in BASES)")
     try:
         if not zipfile.is_zipfile(path):
             raise ValueError("not an .npz (zip) archive")
@@ -200,7 +225,8 @@ def load_model(path) -> dict:
 
 
 class OracleImitationPolicy:
-    """The paper's controller before the stop, the learned oracle sequence from the stop on (module notes).
+    """The base (the paper's controller, or the MPC if the model's meta says so) before the stop, the learned
+    oracle sequence from the stop on (module notes).
 
     Causal: the duty at step k depends on the observations up to k only (the frame history and the
     sequence latched at the stop). The base controller is stepped every period (so before every stop
@@ -212,14 +238,13 @@ class OracleImitationPolicy:
     name = "oracle_imitation"
 
     def __init__(self, ctx: PolicyContext = PolicyContext(), path=PRETRAINED_ORACLE_IMITATION):
-        from .classical import ModelBasedPolicy
         self.ctx = ctx
         self.model = load_model(path)
         dt = float(self.model["meta"]["control_period_s"])
         if abs(ctx.control_period_s - dt) > 1e-9 * dt:    # its HORIZON steps are learned at this period
             raise ValueError(f"control_period_s={ctx.control_period_s!r} is invalid for {Path(path).name}; "
                              f"valid value: {dt!r} (the period it was trained at)")
-        self.base = ModelBasedPolicy(ctx)
+        self.base = make_base(self.model["meta"].get("base", "model_based"), ctx)
         self.reset(1)
 
     def reset(self, n: int = 1) -> None:

@@ -11,7 +11,7 @@ import numpy as np
 
 from mission_sim.contract import OBS_DIM, denormalise_obs
 
-from .oracle_imitation import _CMD, _D, HISTORY, HORIZON, predict, stop_features
+from .oracle_imitation import _CMD, _D, HISTORY, HORIZON, check_base, predict, stop_features
 
 __all__ = ["collect_stop_observations", "oracle_targets", "SearchWindows"]
 
@@ -21,6 +21,7 @@ def collect_stop_observations(scenario, seed: int, episodes: int, config=None, b
     ``(frames (n, HISTORY, OBS_DIM) physical, stop step k0 (n,))``: the policy's history at its first
     observation with command 0 (the one that chooses the duty of step k0)."""
     from envs import SbarChargingVectorEnv
+    check_base(base)
 
     from . import make
     venv = SbarChargingVectorEnv(num_envs=episodes, scenario=scenario, config=config)
@@ -43,19 +44,23 @@ def collect_stop_observations(scenario, seed: int, episodes: int, config=None, b
     return frames, k0
 
 
-def oracle_targets(scenario, seeds, deltas, config=None, progress: bool = False) -> dict:
-    """The oracle on windows ``seeds`` of ``scenario``: the floor ``f`` (from the paper's controller's
-    duties before the stop) and the best sequences within budgets ``f + delta`` (fractions) for every
-    ``delta``; ``{"floor" (n,), "overshoot" (n, D), "energy_j" (n, D), "feasible" (n, D), "duties" (n, D, T)}``
-    (cached on disk by :mod:`policies.oracle`)."""
+def oracle_targets(scenario, seeds, deltas, config=None, progress: bool = False, base: str = "model_based") -> dict:
+    """The oracle on windows ``seeds`` of ``scenario``: the floor ``f`` (from the duties of ``base``, one of
+    :data:`policies.oracle_imitation.BASES`, before the stop) and the best sequences within budgets
+    ``f + delta`` (fractions) for every ``delta``; ``{"floor" (n,), "overshoot" (n, D), "energy_j" (n, D),
+    "feasible" (n, D), "duties" (n, D, T)}`` (cached on disk by :mod:`policies.oracle`). With ``base="mpc"``
+    every start sequence is the MPC's (its own after the stop, and the floor's), so the duties before the
+    stop, and the state at the stop, are the MPC's; ``model_based`` keeps the oracle's default starts (the
+    budgeted paper's controller, whose duties before the stop are ``model_based``'s)."""
     from tqdm import tqdm
 
-    from .oracle import oracle_floor, oracle_window
+    from .oracle import DEFAULT_STARTS, oracle_floor, oracle_window
+    starts = DEFAULT_STARTS if check_base(base) == "model_based" else (base,)
     seeds = [int(s) for s in seeds]
     out = {"floor": [], "overshoot": [], "energy_j": [], "feasible": [], "duties": []}
     for s in tqdm(seeds, desc=f"oracle {scenario}", disable=not progress):
-        f = oracle_floor(scenario, s, config)
-        res = [oracle_window(scenario, s, f.overshoot + float(dl), config=config, extra_starts=(f.duties,))
+        f = oracle_floor(scenario, s, config, base=base)
+        res = [oracle_window(scenario, s, f.overshoot + float(dl), starts=starts, config=config, extra_starts=(f.duties,))
                for dl in deltas]
         out["floor"].append(f.overshoot)
         out["overshoot"].append([r.overshoot for r in res])

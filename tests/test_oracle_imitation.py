@@ -114,7 +114,7 @@ def test_policy_is_causal_and_releases_a_new_window():
     (["--features", "bogus"], ["--features", "bogus", "d_pre"]), (["--deltas", "0.5"], ["--deltas", "0.5", "(0, 0.2]"]),
     (["--scenarios", "nowhere"], ["--scenarios", "nowhere", "nominal"]),
     (["--train-seeds", "-1"], ["--train-seeds", "-1", "0..2^32-1"]), (["--train-seeds", "0,x"], ["--train-seeds", "0,x"]),
-    (["--out", "FILE/m"], ["--out", "FILE"])])
+    (["--out", "FILE/m"], ["--out", "FILE"]), (["--base", "pid"], ["--base", "'pid'", "model_based, mpc"])])
 def test_train_script_bad_options_exit_2_with_one_line(args, names, tmp_path):
     """Each bad option: exit 2, one line naming the option, the value and what is valid, before any oracle
     solve (the oracle's disk cache stays empty) and with nothing written."""
@@ -182,7 +182,7 @@ def _write(path, **arrays):
     return path
 
 
-@pytest.mark.parametrize("case", ["no_W", "W_shape", "cols_range", "slow", "no_period", "text", "zip"])
+@pytest.mark.parametrize("case", ["no_W", "W_shape", "cols_range", "slow", "no_period", "bad_base", "text", "zip"])
 def test_load_model_refuses_a_wrong_file_naming_it(case, tmp_path, capsys):
     """A file that is not such a model (keys, shapes, cols outside FEATURE_NAMES, slow < 1, no period in
     its meta, not an npz, a zip without arrays): one ValueError naming the file and what was expected;
@@ -203,7 +203,8 @@ def test_load_model_refuses_a_wrong_file_naming_it(case, tmp_path, capsys):
                "W_shape": {**good, "W": np.zeros((3, HORIZON - 1))},
                "cols_range": {**good, "cols": np.array([0, len(FEATURE_NAMES)])},
                "slow": {**good, "slow": np.array(0.5)},
-               "no_period": {**good, "meta": np.array(json.dumps({"seed": 0}))}}[case]
+               "no_period": {**good, "meta": np.array(json.dumps({"seed": 0}))},
+               "bad_base": {**good, "meta": np.array(json.dumps({"control_period_s": 1e-4, "base": "pid"}))}}[case]
         _write(p, **bad)
     with pytest.raises(ValueError, match=r"oracle imitation model .*" + case + r"\.npz.*valid: an oracle imitation model"):
         load_model(p)
@@ -227,3 +228,32 @@ def test_save_model_leaves_no_temporary_file_on_failure(tmp_path, monkeypatch):
     oi.save_model(model, tmp_path / "m.npz", {"control_period_s": 1e-4})
     assert [f.name for f in tmp_path.iterdir()] == ["m.npz"]
     np.testing.assert_array_equal(oi.load_model(tmp_path / "m.npz")["W"], model["W"])
+
+
+def test_base_in_meta_runs_the_mpc_before_the_stop(tmp_path):
+    """``meta["base"] = "mpc"``: before the stop the policy's duties are the MPC's (budget 0) in closed loop on
+    the same windows (lm_drift 1000-1002, bit for bit: the same observations), after it the latched
+    sequence (not the MPC's); a model without ``base`` keeps the paper's controller. A base that is not one
+    of BASES: one-line ValueError naming it and the valid names (also from the teacher's functions)."""
+    import json
+
+    from envs import SbarChargingVectorEnv
+    from policies.compare import run_policy
+    from policies.oracle_imitation import BASES, check_base, load_model
+    from policies.oracle_imitation_train import collect_stop_observations, oracle_targets
+    good = dict(np.load(SHIPPED))
+    assert "base" not in json.loads(str(good["meta"])) and load_model(SHIPPED)["meta"].get("base", "model_based") == "model_based"
+    p = _write(tmp_path / "drift.npz", **{**good, "meta": np.array(json.dumps({"control_period_s": 1e-4, "base": "mpc"}))})
+    assert load_model(p)["meta"]["base"] == "mpc"
+    pol = run_policy(f"oracle_imitation:{p}", "lm_drift", 3, 1000)
+    mpc = run_policy("mpc", "lm_drift", 3, 1000)
+    venv = SbarChargingVectorEnv(num_envs=3, scenario="lm_drift")
+    venv.reset(seed=1000)
+    for i, k0 in enumerate(venv._stop_k):
+        np.testing.assert_array_equal(pol.d_short[:k0, i], mpc.d_short[:k0, i])
+        assert np.abs(pol.d_short[k0:, i] - mpc.d_short[k0:, i]).max() > 1e-3
+    for call in (lambda: check_base("pid"), lambda: collect_stop_observations("nominal", 0, 1, base="pid"),
+                 lambda: oracle_targets("nominal", [0], [0.01], base="pid")):
+        with pytest.raises(ValueError) as exc:
+            call()
+        assert str(exc.value) == f"base='pid' is invalid; valid values: {', '.join(BASES)}"
