@@ -24,8 +24,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
-import shutil
 import statistics
 import subprocess
 import sys
@@ -33,23 +31,11 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench_startup import _console_script as _cli, _cpu_children   # the same script lookup and child CPU
+
 ROOT = Path(__file__).resolve().parents[1]
 ARGS = ["compare", "--episodes", "100", "--scenarios", "nominal", "--no-plot", "--no-progress"]
 PACKAGES = ("wpt_receiver", "mission_sim", "envs", "policies")
-
-
-def _cli() -> list[str]:
-    """The ``dronewpt`` script of this interpreter, else ``python -m mission_sim.cli``."""
-    script = Path(sys.executable).with_name("dronewpt")
-    if script.is_file():
-        return [str(script)]
-    found = shutil.which("dronewpt")
-    return [found] if found else [sys.executable, "-m", "mission_sim.cli"]
-
-
-def _cpu_children() -> float:
-    r = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return r.ru_utime + r.ru_stime
 
 
 def _run(tree: Path, out: Path) -> tuple[float, float, str]:

@@ -10,6 +10,8 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from mission_sim.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -30,8 +32,13 @@ def _children_of(pid: int) -> list[int]:
     return kids
 
 
-def test_worker_draws_the_same_figures_as_in_process_and_leaves_no_process(tmp_path, monkeypatch, capsys):
+@pytest.mark.parametrize("helper", [False, True])
+def test_worker_draws_the_same_figures_as_in_process_and_leaves_no_process(tmp_path, monkeypatch, capsys, helper):
+    """The real mission figures drawn by the forked worker (alone, or with its helper as on a machine with a
+    free core) are the PNG bytes drawn in one process, and no process is left behind."""
     import mission_sim.cli.mission as cm
+    from mission_sim.figures import worker as fw
+    monkeypatch.setattr(fw, "core_free", lambda: helper)      # inherited by the forked worker
     assert main(["mission", "--out", str(tmp_path / "w"), "--no-progress"]) == 0
     assert multiprocessing.active_children() == [] and _children_of(os.getpid()) == []
     monkeypatch.setattr(cm, "FIGURE_WORKER_MAX_ROWS", -1)        # drawn in this process

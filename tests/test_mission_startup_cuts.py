@@ -173,21 +173,6 @@ def test_core_free_follows_the_load_average(monkeypatch):
     assert fw.core_free() is False
 
 
-def test_figures_split_over_worker_and_helper_are_the_bytes_drawn_in_process(tmp_path, monkeypatch):
-    """The real mission figures with the helper forced on (as on a machine with a free core): the same PNG
-    bytes as the five drawn in one process."""
-    import mission_sim.cli.mission as cm
-    from mission_sim.cli import main
-    monkeypatch.setattr(fw, "core_free", lambda: True)      # inherited by the forked worker
-    assert main(["mission", "--out", str(tmp_path / "w"), "--no-progress"]) == 0
-    monkeypatch.setattr(cm, "FIGURE_WORKER_MAX_ROWS", -1)    # drawn in this process
-    assert main(["mission", "--out", str(tmp_path / "p"), "--no-progress"]) == 0
-    pngs = sorted(p.name for p in (tmp_path / "w").glob("*.png"))
-    assert pngs == ["i2_envelope.png", "lm.png", "power.png", "soc.png", "trajectory.png"]
-    for name in pngs:
-        assert (tmp_path / "w" / name).read_bytes() == (tmp_path / "p" / name).read_bytes(), name
-
-
 def test_numba_start_survives_a_find_spec_probe_and_fails_safe_without_the_extension():
     """A ``find_spec('scipy.linalg')`` probe before the import leaves the hook in place (the package still gets
     its ``cython_blas``), and with the extension missing ``prepare`` does nothing (numba imports as before)."""
