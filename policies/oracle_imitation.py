@@ -157,18 +157,13 @@ def sequences_from(model, features, d_pre) -> np.ndarray:
 
 
 def save_model(model: dict, path, meta: dict) -> None:
-    """Write ``model`` (+ ``meta`` as JSON) to ``path`` (.npz) under a temporary name, then rename (the
-    temporary file is removed if writing fails)."""
+    """Write ``model`` (+ ``meta`` as JSON) to ``path`` (.npz) under a temporary name, then rename
+    (:func:`mission_sim.files.atomic_output`: the temporary file is removed if writing fails)."""
     import json
-    import os
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp.npz")
-    try:
+
+    from mission_sim.files import atomic_output
+    with atomic_output(path) as tmp:
         np.savez(tmp, meta=np.array(json.dumps(meta)), **model)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def _check_model(z: dict) -> str:
