@@ -118,14 +118,22 @@ def _draw_once(conn) -> None:
         result, out = conn.recv()
     except EOFError:   # the parent ended before the run's end (an error, an interrupt)
         return
+    helpers = HELPER_FIGURES if core_free() else ()
+    conn.send_bytes(_reply_bytes(lambda: _draw_split(mission, result, out, conn, helpers)))
+
+
+def _reply_bytes(draw) -> bytes:
+    """The pickled ``(True, draw())``, or ``(False, exception)`` for what it raised (an exception that does
+    not pickle becomes a RuntimeError naming it): the answer of the worker and of its helper."""
+    import pickle
     try:
-        reply = (True, _draw_split(mission, result, out, conn, HELPER_FIGURES if core_free() else ()))
+        reply = (True, draw())
     except Exception as exc:  # noqa: BLE001 - reported to the parent, which raises it
         reply = (False, exc)
     try:
-        conn.send(reply)
+        return pickle.dumps(reply)
     except Exception as exc:  # noqa: BLE001 - an exception that does not pickle (PicklingError included)
-        conn.send((False, RuntimeError(f"drawing the figures failed: {reply[1]!r} ({exc})")))
+        return pickle.dumps((False, RuntimeError(f"drawing the figures failed: {reply[1]!r} ({exc})")))
 
 
 #: the figures a helper forked by the worker draws while the worker draws the others (about half the
@@ -167,21 +175,13 @@ class _Helper:
     handler) ends it like the worker, its temporary files removed."""
 
     def __init__(self, mission, result, out, names, conn):
-        import pickle
         r, w = os.pipe()
         pid = os.fork()
         if pid == 0:   # the helper
             try:
                 os.close(r)
                 conn.close()   # the parent's pipe stays the worker's alone
-                try:
-                    reply = (True, mission.plot_mission(result, out, which=names))
-                except Exception as exc:  # noqa: BLE001 - raised by the worker
-                    reply = (False, exc)
-                try:
-                    data = pickle.dumps(reply)
-                except Exception as exc:  # noqa: BLE001 - an exception that does not pickle
-                    data = pickle.dumps((False, RuntimeError(f"drawing the figures failed: {reply[1]!r} ({exc})")))
+                data = _reply_bytes(lambda: mission.plot_mission(result, out, which=names))
                 with os.fdopen(w, "wb") as f:
                     f.write(data)
             except BaseException:  # noqa: BLE001, S110 - interrupted or the worker is gone
