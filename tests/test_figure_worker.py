@@ -151,3 +151,19 @@ def test_long_missions_draw_in_process(tmp_path, monkeypatch):
     monkeypatch.setattr(fw.FigureWorker, "__init__", lambda self: started.append(1))
     assert main(["mission", "--out", str(tmp_path / "m"), "--no-progress", "--format", "json"]) == 0
     assert started == [] and len(list((tmp_path / "m").glob("*.png"))) == 5
+
+
+def test_a_refused_out_folder_forks_no_figure_process(tmp_path, monkeypatch, capsys):
+    """A second mission on an ``--out`` another one is writing is refused (exit 2, one line) before the
+    figure process is forked: nothing is imported or drawn for a run that does not happen."""
+    import mission_sim.figures.worker as fw
+    from mission_sim.cli.mission import MISSION_LOCK
+    from mission_sim.files import folder_lock
+    made = []
+    monkeypatch.setattr(fw, "FigureWorker", lambda: made.append(1))
+    out = tmp_path / "busy"
+    out.mkdir()
+    with folder_lock(out, MISSION_LOCK, "busy"):
+        assert main(["mission", "--out", str(out), "--no-progress"]) == 2
+    assert made == [] and _children_of(os.getpid()) == []
+    assert "another mission is writing there" in capsys.readouterr().err

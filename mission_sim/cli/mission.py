@@ -160,12 +160,15 @@ def _cmd_mission(args) -> int:
     prepare_out_dir(args.out)
     est = estimate_run(cfg)
     every = stored_every_s(args.every, est)
-    worker = _figure_worker(args, est)
-    try:
-        return _run_and_write(args, cfg, pol, every, worker)
-    finally:
-        if worker is not None:
-            worker.close()
+    with folder_lock(args.out, MISSION_LOCK, f"--out {str(args.out)!r}: another mission is writing there; "
+                     "wait for it or use another --out"):  # before any simulation or fork; removed at the end
+        worker = _figure_worker(args, est)
+        try:
+            res, files = _run_and_write(args, cfg, pol, every, worker)
+        finally:
+            if worker is not None:
+                worker.close()
+    return _report(args, res.summary, files)
 
 
 def _figure_worker(args, est):
@@ -178,23 +181,26 @@ def _figure_worker(args, est):
     return FigureWorker()
 
 
-def _run_and_write(args, cfg, pol, every, worker) -> int:
-    """The run streamed to ``args.out``, then the figures and summary.json; prints the summary; the exit status."""
+def _run_and_write(args, cfg, pol, every, worker):
+    """The run streamed to ``args.out`` (whose writer lock the caller holds), then the figures and
+    summary.json; the result and the files written."""
     from ..world.runner import run_mission
     from ..world.stream import SeriesWriter
-    with folder_lock(args.out, MISSION_LOCK, f"--out {str(args.out)!r}: another mission is writing there; "
-                     "wait for it or use another --out"):  # before any simulation; removed at the end
-        (args.out / "summary.json").unlink(missing_ok=True)  # present again only when this run's set is complete
-        writer = SeriesWriter(args.out, csv=args.csv, every_s=every, figure_points=None if args.no_plot else FIGURE_POINTS)
-        try:
-            res = run_mission(cfg, pol, charge=not args.no_charge, progress=show_progress(args),
-                              frame=False, sink=writer)
-            files = [str(f) for f in writer.close()]
-        except BaseException:
-            writer.abort()
-            raise
-        files += _figures_and_summary(res, args.out, plots=not args.no_plot, thinned=writer.thinned, worker=worker)
-    s = res.summary
+    (args.out / "summary.json").unlink(missing_ok=True)  # present again only when this run's set is complete
+    writer = SeriesWriter(args.out, csv=args.csv, every_s=every, figure_points=None if args.no_plot else FIGURE_POINTS)
+    try:
+        res = run_mission(cfg, pol, charge=not args.no_charge, progress=show_progress(args),
+                          frame=False, sink=writer)
+        files = [str(f) for f in writer.close()]
+    except BaseException:
+        writer.abort()
+        raise
+    files += _figures_and_summary(res, args.out, plots=not args.no_plot, thinned=writer.thinned, worker=worker)
+    return res, files
+
+
+def _report(args, s, files) -> int:
+    """The summary ``s`` printed (table or JSON); the exit status (3 when the battery ran empty)."""
     if args.format == "json":
         print(json.dumps({**s, "files": files}))
     else:
