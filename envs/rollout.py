@@ -80,7 +80,7 @@ class DutyRollout:
         if T != self.n_steps or not np.all(np.isfinite(d)):
             raise ValueError(f"duties shape {d.shape} is invalid; valid: (m, {self.n_steps}) finite values")
         env = self._env(m)
-        if env._kernel is None:
+        if env._kernel is None or self.config.link_model != "envelope":   # the replay is eq. 4's step
             env.reset(seed=[self.seed] * m)
             return self._run_steps(env, d)
         # the env's duty arithmetic: d = clip((a + 1)/2, 0, 1) of the float32 action
