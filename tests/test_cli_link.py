@@ -30,6 +30,14 @@ def test_invalid_link_is_one_line_exit_2(cmd, tmp_path):
     assert out.stdout == "" and not (tmp_path / "never_made").exists() and not os.path.exists("never_made")
 
 
+def test_train_env_link_model_bad_value_is_one_line_before_anything_is_written(tmp_path):
+    out = _cli("train", "--algo", "ppo", "--timesteps", "1", "--out", str(tmp_path / "run"), "--env", "link_model=x")
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert out.stderr.strip().splitlines() == [
+        "dronewpt train: error: --env: link_model='x' is invalid; valid values: envelope, modal"]
+    assert not (tmp_path / "run").exists()
+
+
 def test_train_env_key_selects_the_link():
     """``train --env link_model=modal`` (the config key) builds the same EnvConfig as ``--link modal``."""
     from policies.train import env_config

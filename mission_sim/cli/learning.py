@@ -185,6 +185,11 @@ def _cmd_train(args) -> int:
     env = _env_overrides(args.env)
     if args.link is not None:
         env["link_model"] = args.link
+    from policies.train import env_config
+    try:   # a bad --env key or value is refused before anything is written
+        env_config(env)
+    except ValueError as exc:
+        raise CliError(f"--env: {exc}") from None
     from policies import require_sb3
     require_sb3()
     if args.hyperparams is not None:  # malformed, unknown keys, wrong types: refused before --out is created
