@@ -308,3 +308,35 @@ def test_detuned_modal_rm_state_is_the_detuned_modes():
             got.append(abs(mk.phasors(mc, z, v1, v2e)[1]))
         assert info["i2_a"][e] == pytest.approx(got[0], rel=1e-6)
         assert abs(got[0] / got[1] - 1.0) > 1e-3   # the detuning matters
+
+
+@pytest.mark.parametrize("c_rel", [0.0, 0.02])
+def test_detuned_link_settles_where_the_switching_model_does(c_rel):
+    """A window with C1 +c, C2 -c (schottky devices, stiff 30 V) dropped from d = 0.3 to RM: the modal link's
+    |I2| settles within 1 % of the switching model's fundamental of the same circuit (measured -0.43 % at
+    2 %, 0.00 % tuned). (At +-4 % it does not: docs/envs.md.)"""
+    from wpt_receiver.switching import SwitchingConfig, SwitchingLink
+    dev = preset("schottky")
+    w = P.omega_rad_s
+    c1, c2 = (1 + c_rel) / (w * w * P.l1_h), (1 - c_rel) / (w * w * P.l2_h)
+    d = np.r_[np.full(10, 0.3), np.zeros(190)]
+    sw = SwitchingLink(P, SwitchingConfig(c1_f=c1, c2_f=c2, devices=dev)).simulate(d, ENV_DT).envelope()
+    sw_end = sw["i2_fund_a"].to_numpy()[-50:]
+    lc, tab = mk.link_constants(P, dev, c1, c2), mk.modal_table(P, dev)
+    cfg = EnvConfig()
+    cz = np.zeros(N_CZ, dtype=complex)
+    vk._segment(lc, P.lm_h, ENV_DT, cfg.modal_n_sub, cfg.modal_n_q, cz, True)
+    v1, vf, dr = -1j * P.v1_amp_v, dev.rect_vf_v, dev.short_r_ohm - dev.rect_rd_ohm
+    z = np.zeros(4)
+    v2, e = mk.steady_state(lc, cz[CZ_MODES:CZ_STEP], tab, 0.3, v1, P.vl_v + vf, z), -1.0
+    for dd in d:
+        v2, e, _, i2, *_ = vk._link_step(z, v2, e, P.vl_v, dd, lc, tab, cz, ENV_DT, cfg.modal_n_sub, cfg.modal_n_q, vf,
+                                         dr, P.v1_amp_v, 1e-3, np.empty(9), np.zeros(4))
+    assert np.ptp(sw_end) < 1e-3 * sw_end.mean()                 # the switching model has settled
+    assert abs(i2) == pytest.approx(sw_end.mean(), rel=0.01)
+    if c_rel:   # the detuning matters: against the tuned link's RM steady state
+        lt = mk.link_constants(P, dev)
+        mt, zt = np.empty(mk.N_MODES_C, dtype=complex), np.zeros(4)
+        mk.modes(lt, P.lm_h, mt)
+        i2_tuned = abs(mk.phasors(mt, zt, v1, mk.steady_state(lt, mt, tab, 0.0, v1, P.vl_v + vf, zt))[1])
+        assert sw_end.mean() < 0.75 * i2_tuned
