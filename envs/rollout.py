@@ -74,7 +74,8 @@ class DutyRollout:
         """Roll out every row of ``duties`` (m, n_steps) (or one sequence (n_steps,)): the env's
         compiled step (:func:`envs.vector_kernel.step_kernel`) called for every step inside one
         compiled loop (:func:`_replay`, no Python per step), the same numbers as ``env.step``
-        (``tests/test_oracle.py``)."""
+        (``tests/test_oracle.py``). On the exact-mode link (``config.link_model == "modal"``) the env is
+        stepped from Python (:meth:`_run_steps`: the same numbers, slower; the replay is eq. 4's step)."""
         d = np.atleast_2d(np.asarray(duties, dtype=float))
         m, T = d.shape
         if T != self.n_steps or not np.all(np.isfinite(d)):
