@@ -31,7 +31,7 @@ once in compiled form (:mod:`envs.vector_kernel`) and called by the single and t
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from functools import cached_property
 
 import numpy as np
@@ -140,6 +140,15 @@ class EnvConfig:
             raise ValueError(f"bus_c_f={self.bus_c_f!r} is invalid; valid range: (0, inf)")
         if not (np.isfinite(self.rated_i2_a) and self.rated_i2_a > 0):
             raise ValueError(f"rated_i2_a={self.rated_i2_a!r} is invalid; valid range: (0, inf)")
+
+    def __repr__(self):
+        """The dataclass's repr, the exact-mode link's fields (``link_model``, ``hold_tol_a``, ``v2_updates``)
+        named only where they differ from their defaults: a default config reads as before the option (the
+        oracle's disk-cache keys hold the repr, :mod:`policies.oracle`)."""
+        opt = {"link_model", "hold_tol_a", "v2_updates"}
+        items = [f"{f.name}={getattr(self, f.name)!r}" for f in fields(self)
+                 if f.name not in opt or getattr(self, f.name) != f.default]
+        return f"{type(self).__qualname__}({', '.join(items)})"
 
     def device_set(self):
         """The :class:`wpt_receiver.devices.DeviceSet` of ``devices``."""

@@ -185,6 +185,9 @@ def test_link_model_is_an_option_eq4_the_default():
     a, b = SbarChargingVectorEnv(2, "nominal"), SbarChargingVectorEnv(2, "nominal", MODAL)
     assert not hasattr(a.parts.plant, "mstate") and b.parts.plant.mstate.shape == (7, 2)
     assert type(a.parts.plant).__name__ == "PlantPart" and type(b.parts.plant).__name__ == "ModalPlantPart"
+    # the repr (the oracle's disk-cache key) names the link only when it is not the default one
+    assert "link_model" not in repr(EnvConfig()) and "hold_tol_a" not in repr(EnvConfig())
+    assert "link_model='modal'" in repr(MODAL) and "v2_updates=3" in repr(EnvConfig(link_model="modal", v2_updates=3))
 
 
 def _run(scenario, cfg=SHORT, steps=50, seed=3):
