@@ -15,6 +15,9 @@
   (the worst case for ours: the I2 envelope changes sign in many windows every step, and those
   steps are re-stepped in 17 rectifier-period sub-steps; issue 22's goal: ratio >= 1.0 at N >= 4096).
   ``--vector-only`` skips the single-env rows; the N table is printed last.
+* ``--links``: instead, the vector env on the exact-mode link (``EnvConfig(link_model="modal")``)
+  against the default eq. 4 envelope, alternating in the same run, one thread, at the ``--n`` widths
+  (held duty and random actions): ns per env-step of each and the ratio modal / envelope.
 
 Every measurement is warmed up once (discarded), then alternates between the two envs in
 rounds and reports the median round (and the
@@ -108,6 +111,34 @@ def _vector(n_vec, rng, seconds, rounds):
     return out
 
 
+def _links(n_vec, rng, seconds, rounds):
+    """ns per env-step of the modal link against the envelope (default) at width ``n_vec``, one thread."""
+    from envs import EnvConfig, SbarChargingVectorEnv
+    env_a = SbarChargingVectorEnv(num_envs=n_vec, scenario="random", num_threads=1)
+    env_b = SbarChargingVectorEnv(num_envs=n_vec, scenario="random", num_threads=1,
+                                  config=EnvConfig(link_model="modal"))
+    acts = np.zeros((n_vec, 1), np.float32)
+    acts_rand = [rng.uniform(-1, 1, (n_vec, 1)).astype(np.float32) for _ in range(20)]
+    out = {"n_envs": n_vec}
+    for label, a in (("held", acts), ("random", acts_rand)):
+        r = _pair(lambda: _vector_rate(env_a, a, seconds), lambda: _vector_rate(env_b, a, seconds), rounds)
+        out[label] = {"envelope_ns": 1e9 / r["cartpole_steps_s"], "modal_ns": 1e9 / r["sbar_steps_s"],
+                      "ratio": 1.0 / r["ratio"], "ratio_min": 1.0 / r["ratio_max"], "ratio_max": 1.0 / r["ratio_min"]}
+    return out
+
+
+def _print_links(res):
+    print("\nvector env, one thread, ns per env-step (medians); ratio = modal / envelope (range over rounds)")
+    print("| N | actions | envelope (eq. 4, default) ns | modal ns | ratio |")
+    print("|---|---|---|---|---|")
+    for v in res["links"]:
+        for label in ("held", "random"):
+            r = v[label]
+            print(f"| {v['n_envs']} | {label} | {r['envelope_ns']:.1f} | {r['modal_ns']:.1f} | {r['ratio']:.2f}x "
+                  f"({r['ratio_min']:.2f}-{r['ratio_max']:.2f}) |")
+    print(f"load average (1 min) before {res['load_before'][0]:.2f}, after {res['load_after'][0]:.2f}")
+
+
 def run(seconds=1.0, rounds=5, n_vec=(64, 256, 1024, 4096, 16384), vector_only=False):
     out = {"load_before": os.getloadavg()}
     if not vector_only:
@@ -162,7 +193,15 @@ def main(argv=None):
                     help="vector env widths (default 64 256 1024 4096 16384)")
     ap.add_argument("--vector-only", action="store_true", help="skip the single-env measurements")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--links", action="store_true", help="the modal link against the envelope (module docstring)")
     args = ap.parse_args(argv)
+    if args.links:
+        res = {"load_before": os.getloadavg()}
+        rng = np.random.default_rng(1)
+        res["links"] = [_links(n, rng, args.seconds, args.rounds) for n in args.n]
+        res["load_after"] = os.getloadavg()
+        print(json.dumps(res, indent=2)) if args.json else _print_links(res)
+        return 0
     res = run(args.seconds, args.rounds, args.n, args.vector_only)
     if args.json:
         print(json.dumps(res, indent=2))

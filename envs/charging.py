@@ -11,8 +11,9 @@ from gymnasium import spaces
 from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
 
 from .core import OBS_OFFSET, OBS_SCALE, EnvConfig
-from .layout import INFO, SINGLE_PAR
-from .parts import SingleObjective, SingleObservation, SinglePlant, alias_parts
+from .layout import INFO
+from .modal_plant import single_plant
+from .parts import SingleObjective, SingleObservation, alias_parts
 from .peaks import PeakLookup
 from .render import draw_envelope
 from .scenario import ScenarioPart, get_scenario
@@ -146,13 +147,13 @@ class SbarChargingEnv(gym.Env):
         # the per-step row of the single kernel (command, I2 sensor noise): the scenario part's stores
         self._steps = np.zeros((self._T + 1, 2))
         self._cmd = self._steps[:, 0]   # the command per step [A] (a view)
-        plant = SinglePlant(c, self._compiled)
+        plant = single_plant(c, self._compiled)
         observation = SingleObservation(c, self._peak, self._compiled, self.history)
         self.parts = Parts(ScenarioPart(self.scenario, self._T, self._dt, self._steps[:, :1], self._steps[:-1, 1:]),
                            plant, SingleObjective(c, plant), observation)
         # the compiled step's constants, each part's by name, then the observation map and the peak table
         vals = {**plant.constants(self._peak), **self.parts.objective.constants()}
-        self._par = np.concatenate([[vals[f] for f in SINGLE_PAR._fields], OBS_SCALE, OBS_OFFSET,
+        self._par = np.concatenate([[vals[f] for f in plant.PAR._fields], OBS_SCALE, OBS_OFFSET,
                                     self._peak.kernel_table.ravel()]).astype(float)
 
     # ------------------------------------------------------------------ interface
@@ -234,5 +235,6 @@ class SbarChargingDiscreteEnv(SbarChargingEnv):
 
 
 alias_parts(SbarChargingEnv, {"_st": ("plant", "st"), "_slow": ("plant", "slow"), "_cc": ("plant", "cc"),
+                              "_lc": ("plant", "lc"), "_cz": ("plant", "cz"), "_tab": ("plant", "tab"),
                               "_t_stop": ("objective", "t_stop"), "_stop_k": ("objective", "stop_k"),
                               "_line": ("observation", "line")})

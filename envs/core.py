@@ -31,7 +31,7 @@ once in compiled form (:mod:`envs.vector_kernel`) and called by the single and t
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from functools import cached_property
 
 import numpy as np
@@ -43,12 +43,14 @@ from wpt_receiver.sbar import rectifier_current, short_weight
 from .layout import BAT, COEF, STATE, XC
 from .plant import battery_operating_point, lm_window_h
 
-__all__ = ["EnvConfig", "RewardWeights", "Plans", "DetunedPlan", "build_plans", "OBS_SCALE", "OBS_OFFSET", "N_COEF", "N_BAT", "kernel_function"]
+__all__ = ["LINK_MODELS", "window_lm", "EnvConfig", "RewardWeights", "Plans", "DetunedPlan", "build_plans", "OBS_SCALE", "OBS_OFFSET", "N_COEF", "N_BAT", "kernel_function"]
 
 HALF_PI = 0.5 * math.pi
 FOUR_OVER_PI = 4.0 / math.pi
 N_COEF = len(COEF)
 N_BAT = len(BAT)
+#: the plant's link models (:attr:`EnvConfig.link_model`): eq. 4's envelope (default), the exact modes
+LINK_MODELS = ("envelope", "modal")
 
 #: affine map physical -> [-1, 1] of :data:`mission_sim.contract.OBS_FIELDS` (same as normalise_obs)
 OBS_SCALE = np.array([2.0 / (f.hi - f.lo) for f in OBS_FIELDS])
@@ -84,6 +86,21 @@ class EnvConfig:
         channels' excess ``(2 Ron - Rd) w(d) I2`` added to V2 (see ``envs.vector_kernel._link_step``).
     device_tj_c : junction temperature of the devices' conduction values [C] (0 = the table's, as
         the mission's ``link.device_tj_c``); ``device_terms`` keeps its ``(Vf, dR)`` interface.
+    link_model : the plant's link model, one of :data:`LINK_MODELS`: ``"envelope"`` (default) eq. 4's
+        envelope with the ripple table for the peak (:mod:`envs.vector_kernel`); ``"modal"`` the mission's
+        exact-mode link (:mod:`envs.modal_step`: eq. 1's coupled modes, the SBAR's v2 with its quadrature,
+        the phase-aware instantaneous peak; within 0.23 % of the switching model's peak on the paper's
+        trajectories where eq. 4 + ripple is 2.85 % low on the V2* ramp; a vector step costs ~10x eq. 4's).
+        The policies that predict with eq. 4 (``mpc``, ``model_based_budget``) keep their model: on the
+        modal plant their measured overshoot is larger (docs/switching.md).
+    hold_tol_a : (modal) a step holds V2 over the control period when the link is within this [A] of the
+        steady state of the step's inputs (the ringing, and the error of the held V2, stay below it);
+        else it runs in ``v2_updates`` sub-steps (``envs.modal_step._link_step``)
+    v2_updates : (modal) sub-steps of a step that is not held, V2 updated at each; 0 (default): one per
+        rectifier period, as the mission's fine step (at most that many); |I2| sampled at least once
+        per rectifier period. V2 follows i2's phase, which moves with the modes' beat (125 us at
+        Table I); fewer updates let the held V2 feed the tank in a large transient
+        (``tests/test_env_modal.py``): the default follows the circuit.
     """
 
     link: LinkParams = TABLE_I
@@ -95,9 +112,19 @@ class EnvConfig:
     reward: RewardWeights = RewardWeights()
     devices: str = "schottky"
     device_tj_c: float = 0.0
+    link_model: str = "envelope"
+    hold_tol_a: float = 1e-3
+    v2_updates: int = 0
 
     def __post_init__(self):
         from wpt_receiver.devices import preset_names
+        if self.link_model not in LINK_MODELS:
+            raise ValueError(f"link_model={self.link_model!r} is invalid; valid values: {', '.join(LINK_MODELS)}")
+        if int(self.v2_updates) != self.v2_updates or not 0 <= self.v2_updates <= 1000:
+            raise ValueError(f"v2_updates={self.v2_updates!r} is invalid; valid range: integer 0..1000 (0: one "
+                             "per rectifier period)")
+        if not (np.isfinite(self.hold_tol_a) and self.hold_tol_a >= 0):
+            raise ValueError(f"hold_tol_a={self.hold_tol_a!r} is invalid; valid range: [0, inf) A")
         if not (self.device_tj_c == 0.0 or 25.0 <= self.device_tj_c <= 175.0):
             raise ValueError(f"device_tj_c={self.device_tj_c!r} is invalid; valid range: 0 (table values) or "
                              "[25, 175] C")
@@ -113,6 +140,15 @@ class EnvConfig:
             raise ValueError(f"bus_c_f={self.bus_c_f!r} is invalid; valid range: (0, inf)")
         if not (np.isfinite(self.rated_i2_a) and self.rated_i2_a > 0):
             raise ValueError(f"rated_i2_a={self.rated_i2_a!r} is invalid; valid range: (0, inf)")
+
+    def __repr__(self):
+        """The dataclass's repr, the exact-mode link's fields (``link_model``, ``hold_tol_a``, ``v2_updates``)
+        named only where they differ from their defaults: a default config reads as before the option (the
+        oracle's disk-cache keys hold the repr, :mod:`policies.oracle`)."""
+        opt = {"link_model", "hold_tol_a", "v2_updates"}
+        items = [f"{f.name}={getattr(self, f.name)!r}" for f in fields(self)
+                 if f.name not in opt or getattr(self, f.name) != f.default]
+        return f"{type(self).__qualname__}({', '.join(items)})"
 
     def device_set(self):
         """The :class:`wpt_receiver.devices.DeviceSet` of ``devices``."""
@@ -144,6 +180,26 @@ class EnvConfig:
     def n_sub(self) -> int:
         """Rectifier-period sub-steps of a step in which I2 changes sign (17 at the default)."""
         return max(1, math.ceil(self.dt_s / self.link.rectifier_period_s - 1e-9))
+
+    @cached_property
+    def modal_link(self):
+        """``(lc, table)`` of the ``"modal"`` link: :func:`wpt_receiver.modal_kernel.link_constants` of the link
+        with the devices (resonant) and its :func:`~wpt_receiver.modal_kernel.modal_table` (one per link and
+        device set, at the nominal Lm and VL; disk-cached)."""
+        from wpt_receiver import modal_kernel as mk
+        dev = self.device_set()
+        return mk.link_constants(self.link, dev), mk.modal_table(self.link, dev)
+
+    @property
+    def modal_n_sub(self) -> int:
+        """(modal) sub-steps (V2 updated) of a step that is not held (``v2_updates``, at most :attr:`n_sub`,
+        the rectifier periods per step; 0: that)."""
+        return min(self.v2_updates or self.n_sub, self.n_sub)
+
+    @property
+    def modal_n_q(self) -> int:
+        """(modal) samples of |I2| per sub-step (together at least one per rectifier period)."""
+        return -(-self.n_sub // self.modal_n_sub)
 
 
 @dataclass
@@ -195,13 +251,8 @@ def build_plans(win, cfg: EnvConfig, table: bool = False) -> Plans:
     ``coef_ix``); ``table=True`` keeps only that table (the vector env's store: windows sharing an Lm share
     one row, no per-window copies), else ``coef`` holds them per window (the same numbers)."""
     draws = win.draw
-    n, T, S, link = draws.n, cfg.n_steps, cfg.n_slow, cfg.link_folded
-    t_slow = np.arange(S) * (cfg.slow_every * cfg.dt_s)
-    lm = lm_window_h(draws.wind_speed_m_s, draws.record_u, t_slow)
-    lm *= np.asarray(draws.lm_scale)[:, None]
-    drift = np.asarray(draws.lm_drift, dtype=float)
-    if np.any(drift != 0.0):   # Lm moving within the window (scenario lm_drift): linear in time
-        lm *= 1.0 + drift[:, None] * (t_slow / (T * cfg.dt_s))[None, :]
+    n, S, link = draws.n, cfg.n_slow, cfg.link_folded
+    lm = window_lm(win, cfg)
     # windows without wind share one Lm: discretise each distinct value once (same numbers)
     flat = lm.ravel()
     if np.all(flat == flat[0]):   # one Lm for all (no wind, no drift): no sort
@@ -221,6 +272,19 @@ def build_plans(win, cfg: EnvConfig, table: bool = False) -> Plans:
         detuned = _detuned_plans(link, lm, c1, c2, state0[:, STATE.vl], state0[:, STATE.d], cfg)
         state0[:, STATE.i1], state0[:, STATE.i2] = magnitudes(detuned.xc0)
     return Plans(coef, lm, battery, state0, detuned, zoh, coef_ix)
+
+
+def window_lm(win, cfg: EnvConfig) -> np.ndarray:
+    """The true Lm [H] (n, S) of the windows of ``win`` per slow segment: the hover pose's
+    (:func:`envs.plant.lm_window_h`), scaled, drifting linearly in time (scenario ``lm_drift``)."""
+    draws, T, S = win.draw, cfg.n_steps, cfg.n_slow
+    t_slow = np.arange(S) * (cfg.slow_every * cfg.dt_s)
+    lm = lm_window_h(draws.wind_speed_m_s, draws.record_u, t_slow)
+    lm *= np.asarray(draws.lm_scale)[:, None]
+    drift = np.asarray(draws.lm_drift, dtype=float)
+    if np.any(drift != 0.0):   # Lm moving within the window (scenario lm_drift): linear in time
+        lm *= 1.0 + drift[:, None] * (t_slow / (T * cfg.dt_s))[None, :]
+    return lm
 
 
 def _detuned_plans(link, lm, c1_rel, c2_rel, vl0, d0, cfg: EnvConfig):

@@ -10,7 +10,9 @@ from __future__ import annotations
 
 from collections import namedtuple
 
-__all__ = ["fields", "STATE", "BAT", "COEF", "INFO", "PAR", "SINGLE", "SLOW", "SINGLE_PAR", "CCOEF_N", "XC"]
+__all__ = ["fields", "STATE", "BAT", "COEF", "INFO", "PAR", "SINGLE", "SLOW", "SINGLE_PAR", "CCOEF_N", "XC", "MSTATE",
+           "MPAR", "MSINGLE_PAR", "CZ_MODES", "CZ_STEP", "CZ_SUB", "CZ_SAMPLE", "CZ_FAST", "CZ_FASTH", "CZ_KEY", "N_CZ",
+           "FAST"]
 
 
 def fields(name: str, names: str):
@@ -47,3 +49,26 @@ SLOW = fields("Slow", COEF._fields + ("lm_h", "i2_sm_a"))
 #: detuned tank's source; nd ni nq: the table's shape)
 SINGLE_PAR = fields("SinglePar", "n_steps dt inv_rated w_track w_over i_ref slow_every n_sub vf dr vlc inv_imax "
                     "v1 nd ni nq")
+
+# ---------------------------------------------------------------- the exact-mode link (EnvConfig.link_model="modal")
+#: the exact-mode link's own state of a window (:mod:`envs.modal_step`; vector env: rows of ``_mstate`` (7, n),
+#: single env: after the :data:`SINGLE` slots of ``st``): the two mode amplitudes (re, im;
+#: :mod:`wpt_receiver.modal_kernel`), the V2 phasor held over the last step [V] and a spare slot ``e`` (the
+#: SBAR's commutation angle of a secant solve; -1: the closed form needs no first guess)
+MSTATE = fields("ModalState", "z0r z0i z1r z1i v2r v2i e")
+#: the link coefficients of a window's current slow segment (complex, ``_coef_cur`` (n, N_CZ)): the modes
+#: at its Lm (:func:`wpt_receiver.modal_kernel.modes`), the ZOH of the step, of a sub-step (V2 updated)
+#: and of a peak sample within a sub-step (:func:`~wpt_receiver.modal_kernel.zoh`), and the Lm they are
+#: for (the key); ``CZ_FAST`` the sub-step's affine maps (:data:`FAST`), ``CZ_FASTH`` the whole step's
+CZ_MODES, CZ_STEP, CZ_SUB, CZ_SAMPLE, CZ_FAST, CZ_FASTH, CZ_KEY, N_CZ = 0, 22, 29, 36, 43, 57, 71, 72
+#: a sub-step's affine maps with V2 held (``envs.modal_step._fast_coefs``; the V1 terms per volt of the
+#: phasor V1): mode m's ``z_m+ = e_m z_m + k_m V1 + l_m V2``, the end I2 ``q0 + q1 V2`` with ``q0 = a0 z0 +
+#: a1 z1 + b V1``, the sub-step's ``int I2 dt = c0 z0 + c1 z1 + p0 V1 + p1 V2``
+FAST = fields("Fast", "e0 e1 k0 k1 l0 l1 a0 a1 b q1 c0 c1 p0 p1")
+#: the modal vector env's constants (``_par``): :data:`PAR`'s first eight slots (the same indices), then V1 [V]
+#: the pad's amplitude, hold_tol [A] the transient below which a step holds V2 over the control period,
+#: n_q the peak samples per sub-step (``envs.modal_step._link_step``)
+MPAR = fields("ModalPar", "n_steps dt inv_rated w_track w_over i_ref vf dr v1 hold_tol n_q")
+#: the modal single env's constants (``par``) before the observation maps
+MSINGLE_PAR = fields("ModalSinglePar", "n_steps dt inv_rated w_track w_over i_ref slow_every n_sub vf dr v1 hold_tol "
+                     "n_q")

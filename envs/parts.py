@@ -40,7 +40,7 @@ from mission_sim.contract import OBS_DIM
 from wpt_receiver.sbar import rectifier_current, rectifier_v2_folded
 
 from .core import N_BAT, N_COEF, OBS_OFFSET, OBS_SCALE, EnvConfig, build_plans, kernel_function
-from .layout import BAT, CCOEF_N, COEF, INFO, SINGLE, SLOW, STATE, XC
+from .layout import BAT, CCOEF_N, COEF, INFO, PAR, SINGLE, SINGLE_PAR, SLOW, STATE, XC
 from .objective import short_mode_i2_a, stop_step
 from .peaks import LOOKUP_SCALARS
 
@@ -58,6 +58,8 @@ class PlantPart:
     index ``j``, ZOH coefficients, true Lm, battery rows, detuned tanks; its step is the compiled step."""
 
     state_names = STATE._fields
+    #: the slots of the compiled step's constants (``constants`` by these names)
+    PAR = PAR
 
     def __init__(self, cfg: EnvConfig, n: int, compiled: bool = True):
         S = cfg.n_slow
@@ -133,6 +135,14 @@ class PlantPart:
         self.detuned[idx] = True
         self.ccoef[idx], self.xc[idx] = det.coef, det.xc0
         self.c_rel[:, idx] = relative_errors(self.cfg, det.c1_f, det.c2_f)
+
+    def start_values(self, peak):
+        """``(I_L, instantaneous peak, V2)`` at the windows' start state: the SBAR's rules on it (eq. 9,
+        :func:`wpt_receiver.sbar.rectifier_current`) and ``peak``'s table (:class:`envs.peaks.PeakLookup`)."""
+        st = self.state
+        d, i2, vl = st[STATE.d], st[STATE.i2], st[STATE.vl]
+        return (rectifier_current(d, np.abs(i2)), peak.array(np.abs(i2), d, vl),
+                rectifier_v2_folded(d, vl, i2, self.cfg.device_set()))
 
     def step(self, d, k, scenario, objective, par, ptab, obs, reward, truncated, block, chunks):
         """One step of every window: the compiled :func:`envs.vector_kernel.env_step` (link, battery,
@@ -227,7 +237,7 @@ class ObservationPart:
         st, bat, n, dt = plant.state, plant.bat, self.n, self.cfg.dt_s
         ar = np.arange(n)
         i1, i2, vl, soc, d = st[STATE.i1], st[STATE.i2], st[STATE.vl], st[STATE.soc], st[STATE.d]
-        il = rectifier_current(d, np.abs(i2))
+        il, pk0, v2 = plant.start_values(self.peak)
         ib = il - bat[BAT.i_load]
         cmd = scenario.cmd[k, ar]
         t_stop, run_max = objective.t_stop, objective.run_max
@@ -235,8 +245,8 @@ class ObservationPart:
         obs = np.empty((n, OBS_DIM), np.float32)
         kernel_function("obs_rows", self.compiled)(np.stack([i2, vl, ib, il, soc, cmd, d, t_since]), OBS_SCALE,
                                                     OBS_OFFSET, obs)
-        info = {"t_s": k * dt, "i2_a": i2.copy(), "i2_peak_a": self.peak.array(np.abs(i2), d, vl),
-                "i1_a": i1.copy(), "d_short": d.copy(), "v2_v": rectifier_v2_folded(d, vl, i2, self.cfg.device_set()),
+        info = {"t_s": k * dt, "i2_a": i2.copy(), "i2_peak_a": pk0,
+                "i1_a": i1.copy(), "d_short": d.copy(), "v2_v": v2,
                 "rect_current_a": il, "battery_v": vl.copy(), "battery_current_a": ib, "soc": soc.copy(),
                 "charge_cmd_a": cmd, "lm_h": plant.lm_all[plant.j, ar], "energy_j": np.zeros(n),
                 "cost": np.zeros(n), "overcurrent": np.zeros(n),
@@ -289,6 +299,8 @@ class SinglePlant(PlantPart):
     :data:`SINGLE` slots then a detuned window's :data:`XC` state; ``slow``: :data:`SLOW` per slow
     segment; ``cc``: the detuned coefficients); its step is :func:`envs.vector_kernel.single_step`."""
 
+    PAR = SINGLE_PAR
+
     def __init__(self, cfg: EnvConfig, compiled: bool = True):
         self.cfg, self.compiled = cfg, compiled
         self.kernel = kernel_function("single_step", compiled)   # also: numba imported here
@@ -312,6 +324,13 @@ class SinglePlant(PlantPart):
         slow[:, SLOW.lm_h] = p.lm_h[0]
         self.st, self.slow = st, slow
         return p
+
+    def start_values(self, peak):
+        """``(I_L, instantaneous peak, V2)`` at the window's start state (floats; as :meth:`PlantPart.start_values`)."""
+        st, devices = self.st, self.cfg.device_set()
+        i2, vl, d = (float(st[f]) for f in (SINGLE.i2, SINGLE.vl, SINGLE.d))
+        return (float(rectifier_current(d, abs(i2))), peak.scalar(abs(i2), d, vl),
+                rectifier_v2_folded(d, vl, i2, devices, sin=math.sin, sign=_sign))
 
     def step(self, k, d, steps, par, obs, out):
         """The single window's step; returns the reward."""
@@ -349,13 +368,12 @@ class SingleObservation:
         self.hist = _history(history)
 
     def reset(self, win, plant, objective):
-        st, devices = plant.st, self.cfg.device_set()
+        st = plant.st
         i1, i2, vl, d, soc = (float(st[f]) for f in (SINGLE.i1, SINGLE.i2, SINGLE.vl, SINGLE.d, SINGLE.soc))
         cmd0 = float(win.cmd_a[0, 0])
-        il = float(rectifier_current(d, abs(i2)))
+        il, pk0, v2 = plant.start_values(self.peak)
         ib = il - float(st[SINGLE.i_load])
-        v2 = rectifier_v2_folded(d, vl, i2, devices, sin=math.sin, sign=_sign)
-        info = {"t_s": 0.0, "i2_a": i2, "i2_peak_a": self.peak.scalar(abs(i2), d, vl), "i1_a": i1, "d_short": d,
+        info = {"t_s": 0.0, "i2_a": i2, "i2_peak_a": pk0, "i1_a": i1, "d_short": d,
                 "v2_v": v2, "rect_current_a": il, "battery_v": vl, "battery_current_a": ib, "soc": soc,
                 "charge_cmd_a": cmd0, "lm_h": float(plant.slow[0, SLOW.lm_h]), "energy_j": 0.0, "cost": 0.0,
                 "overcurrent": 0.0, "overshoot": -np.inf, "episode_cost": 0.0, "reached_short_mode": False,

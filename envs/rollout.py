@@ -74,13 +74,14 @@ class DutyRollout:
         """Roll out every row of ``duties`` (m, n_steps) (or one sequence (n_steps,)): the env's
         compiled step (:func:`envs.vector_kernel.step_kernel`) called for every step inside one
         compiled loop (:func:`_replay`, no Python per step), the same numbers as ``env.step``
-        (``tests/test_oracle.py``)."""
+        (``tests/test_oracle.py``). On the exact-mode link (``config.link_model == "modal"``) the env is
+        stepped from Python (:meth:`_run_steps`: the same numbers, slower; the replay is eq. 4's step)."""
         d = np.atleast_2d(np.asarray(duties, dtype=float))
         m, T = d.shape
         if T != self.n_steps or not np.all(np.isfinite(d)):
             raise ValueError(f"duties shape {d.shape} is invalid; valid: (m, {self.n_steps}) finite values")
         env = self._env(m)
-        if env._kernel is None:
+        if env._kernel is None or self.config.link_model != "envelope":   # the replay is eq. 4's step
             env.reset(seed=[self.seed] * m)
             return self._run_steps(env, d)
         # the env's duty arithmetic: d = clip((a + 1)/2, 0, 1) of the float32 action

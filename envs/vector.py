@@ -35,8 +35,9 @@ from gymnasium.vector.utils import batch_space
 from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
 
 from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, kernel_function
-from .layout import INFO, PAR
-from .parts import ObjectivePart, ObservationPart, PlantPart, alias_parts
+from .layout import INFO
+from .modal_plant import vector_plant
+from .parts import ObjectivePart, ObservationPart, alias_parts
 from .peaks import PeakLookup
 from .scenario import ScenarioPart, get_scenario
 
@@ -87,17 +88,17 @@ class SbarChargingVectorEnv(VectorEnv):
         """The parts (:mod:`envs.parts`) and the step's constants (named slots: :mod:`envs.layout`)."""
         n, T = self.num_envs, c.n_steps
         self._T, self._M, self._dt = T, c.slow_every, c.dt_s
-        self._n_sub = c.n_sub
+        self._n_sub = c.modal_n_sub if c.link_model == "modal" else c.n_sub
         self._devices, self._dev = c.device_set(), c.device_terms
         self._peak = PeakLookup(c.link, self._devices)
         self._ar = np.arange(n)
         # per-step data stored step-major (T, n): a step reads one contiguous row across the envs
         self.parts = Parts(ScenarioPart(self.scenario, T, c.dt_s, np.zeros((T + 1, n)), np.zeros((T, n))),
-                           PlantPart(c, n, self._compiled), ObjectivePart(c, n),
+                           vector_plant(c, n, self._compiled), ObjectivePart(c, n),
                            ObservationPart(c, n, self._peak, self._compiled, self.history))
         # the compiled step's constants, each part's by name
         vals = {**self.parts.plant.constants(self._peak), **self.parts.objective.constants()}
-        self._par = np.array([vals[f] for f in PAR._fields], dtype=float)
+        self._par = np.array([vals[f] for f in self.parts.plant.PAR._fields], dtype=float)
         self._k = np.zeros(n, dtype=np.int64)
         self._prev_done = np.zeros(n, dtype=bool)
         self._rngs = [None] * n
@@ -281,6 +282,7 @@ alias_parts(SbarChargingVectorEnv, {
     "_kernel": ("plant", "kernel"), "_state": ("plant", "state"), "_j": ("plant", "j"),
     "_coef_tab": ("plant", "coef_tab"), "_coef_ix": ("plant", "coef_ix"), "_lm_all": ("plant", "lm_all"),
     "_bat": ("plant", "bat"), "_detuned": ("plant", "detuned"), "_xc": ("plant", "xc"), "_ccoef": ("plant", "ccoef"),
-    "_c_rel": ("plant", "c_rel"), "_i2sm_all": ("objective", "i2sm_all"), "_stop_k": ("objective", "stop_k"),
+    "_c_rel": ("plant", "c_rel"), "_mstate": ("plant", "mstate"), "_lc": ("plant", "lc"), "_tab": ("plant", "tab"),
+    "_coef_cur": ("plant", "coef_cur"), "_start0": ("plant", "start0"), "_i2sm_all": ("objective", "i2sm_all"), "_stop_k": ("objective", "stop_k"),
     "_t_stop": ("objective", "t_stop"), "_run_max": ("objective", "run_max"), "_sm_ok": ("objective", "sm_ok"),
     "_sm_checked": ("objective", "sm_checked"), "_delay": ("observation", "delay"), "_line": ("observation", "line")})

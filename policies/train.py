@@ -57,7 +57,7 @@ DEFAULT_HYPERPARAMS = {
 
 def env_config(overrides: dict | None = None):
     """:class:`envs.EnvConfig` with ``overrides``: its fields (n_steps, slow_every, rated_i2_a, bus_c_f,
-    dt_s, devices - a preset name) and the reward weights (tracking, overcurrent, i_ref_a) by name."""
+    dt_s, devices - a preset name, link_model - ``envelope`` or ``modal``) and the reward weights (tracking, overcurrent, i_ref_a) by name."""
     from envs import EnvConfig, RewardWeights
 
     ov = dict(overrides or {})
@@ -67,11 +67,12 @@ def env_config(overrides: dict | None = None):
     if bad:
         raise ValueError(f"env config key {sorted(bad)[0]!r} is invalid; valid keys: {', '.join(sorted(rw_keys | cfg_keys))}")
     devices = ov.pop("devices", EnvConfig.devices)
+    link_model = ov.pop("link_model", EnvConfig.link_model)
     for k, v in ov.items():
         if not np.isfinite(float(v)):
             raise ValueError(f"{k}={v!r} is invalid; valid range: a finite number")
     rw = RewardWeights(**{k: float(v) for k, v in ov.items() if k in rw_keys})
-    return EnvConfig(reward=rw, devices=devices, **{k: (int(v) if k in ("n_steps", "slow_every") else float(v))
+    return EnvConfig(reward=rw, devices=devices, link_model=link_model, **{k: (int(v) if k in ("n_steps", "slow_every", "v2_updates") else float(v))
                                                     for k, v in ov.items() if k in cfg_keys})
 
 

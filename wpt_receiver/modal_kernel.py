@@ -55,7 +55,7 @@ from numba import njit
 from .devices import IDEAL, DeviceSet
 from .params import LinkParams
 
-__all__ = ["link_constants", "modes", "zoh", "step", "advance_z", "phasors", "stored_energy_j", "sbar_v2", "sbar_edge", "sbar_clamp_f", "inst_peak",
+__all__ = ["link_constants", "modes", "zoh", "step", "advance_z", "phasors", "stored_energy_j", "sbar_v2", "sbar_edge", "sbar_shift", "sbar_clamp_f", "sbar_implicit", "end_i2", "short_weight", "inst_peak",
            "build_table", "modal_table", "run_duties", "steady_state", "rect_current_a", "rect_affine", "N_MODES_C", "N_ZOH_C",
            "LC_NAMES"]
 
@@ -320,6 +320,19 @@ def sbar_edge(lc, tab, d_short, ih, vc_v):
 
 
 @njit(cache=True)
+def sbar_shift(lc, tab, d_short, ih, vc_v):
+    """The harmonics' shift ``delta`` [rad] of the commutation angle (:func:`sbar_edge`'s ``e = pi/2 -
+    arg(ih) + delta`` before the window's clip) for the sign-folded i2 phasor ``ih`` [A] at duty
+    ``d_short`` and clamp ``vc_v`` [V]: the table's plane 0 (the envs hold it over a control period)."""
+    amp = abs(ih)
+    rho = amp / vc_v if vc_v > 0.0 else 0.0
+    rmax = lc[LC_RHO_MAX]
+    phi = math.atan2(ih.imag, ih.real) if amp > 0.0 else 0.0
+    pl = min(max(phi, -0.5 * math.pi), 0.5 * math.pi)
+    return _lookup(lc, tab, 0, pl, d_short, rho) * (1.0 if rho <= rmax else rmax / rho)
+
+
+@njit(cache=True)
 def sbar_clamp_f(d_short, e, sgn):
     """V2's clamp part per volt [1] at commutation angle ``e`` [rad] (:func:`sbar_edge`) and i2 sign
     ``sgn``: ``sgn (4/pi) (j e^{-j e} - sin(pi d/2))`` (eq. 9 for ``e = pi/2``)."""
@@ -334,8 +347,124 @@ def sbar_v2(lc, tab, d_short, i2, vc_v):
     module docstring, eq. 9 for ``e = pi/2``)."""
     sgn = -1.0 if i2.real < 0.0 else 1.0
     f = sbar_clamp_f(d_short, sbar_edge(lc, tab, d_short, i2 * sgn, vc_v), sgn)
-    w_short = d_short + math.sin(math.pi * d_short) / math.pi
-    return vc_v * f + lc[LC_DR_SHORT] * w_short * i2, f
+    return vc_v * f + lc[LC_DR_SHORT] * short_weight(d_short) * i2, f
+
+
+@njit(cache=True)
+def short_weight(d_short):
+    """Share of the short window in the conduction, ``w(d) = d + sin(pi d) / pi`` [1]: the shorted
+    channels' excess resistance enters V2 as ``(2 Ron - Rd) w(d) I2`` (:func:`wpt_receiver.sbar.short_weight`)."""
+    return d_short + math.sin(math.pi * d_short) / math.pi
+
+
+@njit(cache=True)
+def end_i2(mc, zc, z0, z1, v1, v2):
+    """I2 phasor [A] at the end of the ``zc`` step from the mode amplitudes ``z0, z1`` (complex) with
+    ``v1, v2`` held (:func:`advance_z` then :func:`phasors`, the same arithmetic on scalars)."""
+    zs = -(mc[MC_G1] * v1 + mc[MC_G2] * v2) / mc[MC_LAM]
+    n0 = zs + zc[ZC_E] * (z0 - zs)
+    zs = -(mc[MC_G1 + 1] * v1 + mc[MC_G2 + 1] * v2) / mc[MC_LAM + 1]
+    n1 = zs + zc[ZC_E + 1] * (z1 - zs)
+    return mc[MC_S + 1] * n0 + mc[MC_S + 5] * n1 + mc[MC_D + 2] * v1 + mc[MC_D + 3] * v2
+
+
+@njit(cache=True)
+def _edge_gap(lc, tab, d, e, sgn, vc, ws, q0, q1, den):
+    """``e - e_end`` [rad]: the commutation angle ``e`` against the one of the step's end i2 when the v2
+    of ``e`` is held (:func:`sbar_implicit`)."""
+    f = sbar_clamp_f(d, e, sgn)
+    i2e = q0 + q1 * (f * vc + ws * q0) / den
+    return e - sbar_edge(lc, tab, d, i2e * sgn, vc)
+
+
+@njit(cache=True)
+def _secant_edge(lc, tab, d, sgn, vc, ws, q0, q1, den, lo, hi, e0, tol):
+    """Root of :func:`_edge_gap` in ``[lo, hi]`` by the secant from ``e0`` (its first step the fixed-point
+    one, ``e0 - g(e0)``), iterates clipped to the window: ``(e, converged)``; converged when a step is
+    below ``tol`` [rad] (at a window end when the root is beyond it, as the bracket gives)."""
+    e0 = min(max(e0, lo), hi)
+    g0 = _edge_gap(lc, tab, d, e0, sgn, vc, ws, q0, q1, den)
+    if g0 == 0.0:
+        return e0, True
+    e1 = min(max(e0 - g0, lo), hi)
+    for _ in range(8):
+        if abs(e1 - e0) <= tol:
+            return e1, True
+        g1 = _edge_gap(lc, tab, d, e1, sgn, vc, ws, q0, q1, den)
+        if g1 == 0.0:
+            return e1, True
+        if g1 == g0:
+            return e1, False
+        e0, g0, e1 = e1, g1, min(max(e1 - g1 * (e1 - e0) / (g1 - g0), lo), hi)
+    return e1, False
+
+
+@njit(cache=True)
+def sbar_implicit(lc, tab, mc, zc, z0, z1, v1, v2_held, d_short, vc_v, ws, e_guess=-1.0, tol=1e-13):
+    """The SBAR's v2 held over the ``zc`` step from the mode amplitudes ``z0, z1`` (complex) under ``v1``:
+    ``(F, i2e)``, its clamp part per volt and the step's end I2 [A], ``V2 = F vc_v + ws i2e`` (``ws``
+    [ohm] the shorted switches' excess ``(2 Ron - Rd) w(d)``; ``vc_v = VL + Vf`` [V]); ``v2_held`` the V2
+    of the last step (only the sign of the start's i2 is taken from it).
+
+    Implicit (backward Euler in the commutation): the commutation angle ``e`` is the one the i2 at the
+    step's *end* has, with the v2 of ``e`` held over the step. The quadrature of v2 turns i2's phase
+    back towards the conduction window (negative feedback), with a gain ``(4/pi) Vc dt / (2 L2 |I2|)``
+    per step that is > 1 at small |I2| near short mode (a window of a few hundredths of a rad) or for
+    long steps: explicit v2 (or a predictor-corrector) then overshoots step to step (period-2 chatter
+    that amplifies rounding by orders of magnitude), where the circuit pins the zero crossing in the
+    window (sliding). ``i2_end = q0 + q1 V2`` is affine in the held V2 and ``e_end(e)`` decreases in
+    ``e``, so ``g(e) = e - e_end(e)`` has one root in the window (``g <= 0`` at its start, ``>= 0`` at
+    its end): bracketed (Illinois) to ``tol`` [rad] (1e-13), a continuous function of the state. The sign
+    of i2 is the step start's (at Re I2 = 0 both signs give the same F). With ``e_guess >= 0`` (the last
+    step's angle) a secant from it comes first (:func:`_secant_edge`: ``g`` is increasing with slope
+    >= 1, so it converges in a few lookups), the bracket on the window only when it does not. Returns
+    ``(F, i2e, e)``."""
+    d = d_short
+    vc = vc_v
+    i2a = mc[MC_S + 1] * z0 + mc[MC_S + 5] * z1 + mc[MC_D + 2] * v1 + mc[MC_D + 3] * v2_held
+    sgn = -1.0 if i2a.real < 0.0 else 1.0
+    q0 = end_i2(mc, zc, z0, z1, v1, 0j)
+    q1 = end_i2(mc, zc, z0, z1, v1, 1.0 + 0j) - q0
+    den = 1.0 - ws * q1
+    wd = 0.5 * math.pi * min(max(d, 0.0), 1.0)
+    lo, hi = wd, math.pi - wd
+    if hi - lo <= 0.0:
+        e = 0.5 * math.pi
+    else:
+        warm, glo, ghi = False, 0.0, 0.0
+        if e_guess >= 0.0:
+            e, warm = _secant_edge(lc, tab, d, sgn, vc, ws, q0, q1, den, lo, hi, e_guess, tol)
+            if warm:
+                lo, hi = e, e
+        if not warm:
+            glo, ghi = _edge_gap(lc, tab, d, lo, sgn, vc, ws, q0, q1, den), _edge_gap(lc, tab, d, hi, sgn, vc, ws, q0, q1, den)
+        e, side = lo, 0
+        if warm:
+            pass
+        elif glo >= 0.0:
+            e, hi = lo, lo
+        elif ghi <= 0.0:
+            e, lo = hi, hi
+        for _ in range(100):
+            if hi - lo <= tol:
+                break
+            e = (lo * ghi - hi * glo) / (ghi - glo)
+            e = min(max(e, lo), hi)
+            g = _edge_gap(lc, tab, d, e, sgn, vc, ws, q0, q1, den)
+            if g == 0.0:
+                break
+            if g < 0.0:
+                lo, glo = e, g
+                if side == -1:
+                    ghi *= 0.5
+                side = -1
+            else:
+                hi, ghi = e, g
+                if side == 1:
+                    glo *= 0.5
+                side = 1
+    f = sbar_clamp_f(d, e, sgn)
+    return f, q0 + q1 * (f * vc + ws * q0) / den, e
 
 
 @njit(cache=True)

@@ -44,7 +44,8 @@ def _add_train(sub):
     p.add_argument("--env", action="append", default=[], metavar="KEY=VALUE",
                    help="env config / reward weight override, repeatable: n_steps, slow_every, rated_i2_a, "
                         "bus_c_f, dt_s, tracking, overcurrent, i_ref_a; devices=PRESET (ideal, schottky, sic; "
-                        "default schottky)")
+                        "default schottky); link_model=envelope|modal (or --link)")
+    _add_link_flag(p)
     p.add_argument("--cost", choices=("overshoot", "overcurrent"), default="overshoot",
                    help="episode cost: overshoot = max(0, peak |I2| after the stop / true short-mode I2 - 1) "
                         "(default); overcurrent = sum of max(0, |I2|/rated - 1) per step")
@@ -96,11 +97,30 @@ def _add_train(sub):
     p.set_defaults(func=_cmd_train)
 
 
+LINK_CHOICES = ("envelope", "modal")
+
+
+def _add_link_flag(p):
+    """``--link {envelope,modal}``: the envs' plant (``envs.EnvConfig.link_model``)."""
+    p.add_argument("--link", choices=LINK_CHOICES, default=None,
+                   help="the env's link model: envelope = eq. 4 with the ripple table (default), modal = the "
+                        "mission's exact-mode link (peaks within 0.23 %% of the switching model; ~10x the step "
+                        "cost; docs/switching.md)")
+
+
+def _link_config(args):
+    """The :class:`envs.EnvConfig` of ``--link`` (None for the default envelope: the envs' own default)."""
+    if args.link in (None, "envelope"):
+        return None
+    from envs import EnvConfig
+    return EnvConfig(link_model=args.link)
+
+
 def _env_overrides(items) -> dict:
     from .common import parse_set
     out = {}
     for k, v in parse_set(items).items():
-        if k == "devices" and isinstance(v, str):
+        if k in ("devices", "link_model") and isinstance(v, str):
             out[k] = v
             continue
         if isinstance(v, bool) or not isinstance(v, (int, float)):
@@ -163,6 +183,13 @@ def _check_train(args):
 def _cmd_train(args) -> int:
     _check_train(args)
     env = _env_overrides(args.env)
+    if args.link is not None:
+        env["link_model"] = args.link
+    from policies.train import env_config
+    try:   # a bad --env key or value is refused before anything is written
+        env_config(env)
+    except ValueError as exc:
+        raise CliError(f"--env: {exc}") from None
     from policies import require_sb3
     require_sb3()
     if args.hyperparams is not None:  # malformed, unknown keys, wrong types: refused before --out is created
@@ -220,6 +247,7 @@ def _add_compare(sub):
                         "the stop, policies.oracle; cached on disk) curve in the frontier figure and every policy's "
                         "gap to it at its own overshoot (default 0: off; ~2-5 s CPU per window and policy the "
                         "first time)")
+    _add_link_flag(p)
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--out", type=path_arg("--out"), default=Path("out/compare"), help="folder for the figures")
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
@@ -329,18 +357,20 @@ def _cmd_compare(args) -> int:
     pols = _mpc_or_skip(pols, explicit=bool(args.policies))
     if not args.no_plot:
         prepare_out_dir(args.out)
+    cfg = _link_config(args)
     try:
         more = {}   # the frontier's budgets run in compare's batched env (one rollout, not two)
         rows, traces = compare(pols, scns, args.episodes, args.seed, progress=show_progress(args), train_seeds=groups,
-                               extra=() if args.no_frontier else frontier_specs(), extra_traces=more)
-        sweep = [] if args.no_frontier else frontier(scns[0], episodes=args.episodes, seed=args.seed,
+                               extra=() if args.no_frontier else frontier_specs(), extra_traces=more, config=cfg)
+        sweep = [] if args.no_frontier else frontier(scns[0], episodes=args.episodes, seed=args.seed, config=cfg,
                                                           progress=show_progress(args), traces={**more, **traces})
-        curve = _oracle(args, rows, traces, scns[0])
+        curve = _oracle(args, rows, traces, scns[0], cfg)
     except (ValueError, FileNotFoundError) as exc:
         raise CliError(str(exc)) from None
     figs = [] if args.no_plot else _compare_figures(traces, rows, sweep, scns[0], args.out, curve)
     if args.format == "json":
-        print(json.dumps({"episodes": args.episodes, "seed": args.seed, "rows": rows, "frontier": sweep,
+        print(json.dumps({"episodes": args.episodes, "seed": args.seed, "link": args.link or "envelope", "rows": rows,
+                          "frontier": sweep,
                           "oracle": [{k: v for k, v in r.items() if k != "per_window"} for r in curve],
                           "figures": figs}))
         return 0
@@ -350,13 +380,13 @@ def _cmd_compare(args) -> int:
     return 0
 
 
-def _oracle(args, rows, traces, scenario) -> list:
+def _oracle(args, rows, traces, scenario, cfg=None) -> list:
     """The oracle curve and gaps of ``--oracle-windows`` (rows updated in place); [] when off."""
     if not args.oracle_windows:
         return []
     from policies.compare import oracle_curve, oracle_gaps
-    oracle_gaps(rows, traces, scenario, args.oracle_windows, args.seed, progress=show_progress(args))
-    return oracle_curve(scenario, args.oracle_windows, args.seed, progress=show_progress(args))
+    oracle_gaps(rows, traces, scenario, args.oracle_windows, args.seed, config=cfg, progress=show_progress(args))
+    return oracle_curve(scenario, args.oracle_windows, args.seed, config=cfg, progress=show_progress(args))
 
 
 def _compare_figures(traces, rows, sweep, scenario, out, curve=()) -> list[str]:
@@ -372,6 +402,8 @@ def _ci(r, k, scale=1.0, fmt="{:.2f}"):
 def _print_compare(rows, sweep, args):
     print(f"{args.episodes} episodes per scenario, seeds {args.seed}..{args.seed + args.episodes - 1}; mean "
           "[95 % interval]: bootstrap over episodes, or t over training seeds when seeds > 1")
+    if args.link == "modal":
+        print("plant: the exact-mode link (--link modal); mpc and model_based_budget still predict with eq. 4")
     hdr = (f"{'scenario':<12} {'policy':<24} {'seeds':>5} {'overshoot %':>20} {'in SM':>5} {'peak I2 A':>8} "
            f"{'E before J':>10} {'E after J':>20} {'track A':>6} {'return':>22} {'d return vs model_based':>24}")
     print(hdr)

@@ -56,7 +56,7 @@ from numba import from_dtype, njit, types
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
 from wpt_receiver.modal_kernel import (MC_G1, MC_G2, MC_LAM, N_MODES_C, N_ZOH_C, advance_z, inst_peak, modes, phasors,
-                                       rect_affine, rect_current_a, sbar_clamp_f, sbar_edge, stored_energy_j, zoh)
+                                       rect_affine, rect_current_a, sbar_implicit, short_weight, stored_energy_j, zoh)
 from wpt_receiver.modal_kernel import step as modal_step
 
 from wpt_receiver import modal_kernel as _modal_kernel
@@ -251,12 +251,6 @@ def _track_peak(st, c, lk, i2c, d, dt_each, vl):
 
 # ---------------------------------------------------------------------- SBAR, battery, charger
 @njit(cache=True)
-def _w_short(d):
-    """Share of the short window in the conduction, ``d + sin(pi d) / pi`` (the shorted channels' excess)."""
-    return d + math.sin(math.pi * d) / math.pi
-
-
-@njit(cache=True)
 def _ocv_cell(soc):
     """Open-circuit voltage of one cell [V] (Chen & Rincon-Mora 2006 fit, :mod:`.battery`); SoC clipped into [0, 1]."""
     s = 0.0 if soc < 0.0 else (1.0 if soc > 1.0 else soc)
@@ -350,75 +344,16 @@ def _coefs(lk, lm_h, dt, slot):
 @njit(cache=True)
 def _sbar_v2(st, c, lk, mc, zc, v1c):
     """SBAR input of the step: ``(F, v2x)`` with ``V2 = F VL + v2x`` held over it: the clamp part per volt
-    (eq. 9 with its quadrature, :func:`wpt_receiver.modal_kernel.sbar_edge` / ``sbar_clamp_f``, at the
-    last VL) plus the forward drops and the shorted switches' excess ``(2 Ron - Rd) w(d) I2``; 0 with
-    the pad off.
-
-    Implicit (backward Euler in the commutation): the commutation angle ``e`` is the one the i2 at the
-    step's *end* has, with the v2 of ``e`` held over the step. The quadrature of v2 turns i2's phase
-    back towards the conduction window (negative feedback), with a gain ``(4/pi) Vc dt / (2 L2 |I2|)``
-    per step that is > 1 at small |I2| near short mode (the pad ramping down: a window of a few
-    hundredths of a rad, |I2| ~ 1 A): explicit v2 (or a predictor-corrector) then overshoots step to
-    step (period-2 chatter that amplifies rounding by orders of magnitude), where the circuit pins
-    the zero crossing in the window (sliding). ``i2_end = q0 + q1 V2`` is affine in the held V2 and
-    ``e_end(e)`` decreases in ``e``, so ``g(e) = e - e_end(e)`` has one root in the window (``g <= 0``
-    at its start, ``>= 0`` at its end): bracketed (Illinois) to 1e-13 rad, a continuous function of
-    the state. The sign of i2 is the step start's (at Re I2 = 0 both signs give the same F)."""
+    (eq. 9 with its quadrature, at the last VL; the commutation implicit,
+    :func:`wpt_receiver.modal_kernel.sbar_implicit`) plus the forward drops and the shorted switches'
+    excess ``(2 Ron - Rd) w(d) I2``; 0 with the pad off."""
     if st.v1 <= 0.0:
         return 0j, 0j
-    lc, tab = lk[0], lk[1]
     d = st.d
-    vc, ws = st.last_vl + c.vf, c.dr_short * _w_short(d)
-    i2a = phasors(mc, st.z, v1c, complex(st.v2re, st.v2im))[1]
-    sgn = -1.0 if i2a.real < 0.0 else 1.0
-    zq = st.z.copy()
-    advance_z(mc, zc, zq, v1c, 0j)
-    q0 = phasors(mc, zq, v1c, 0j)[1]
-    zq[:] = st.z
-    advance_z(mc, zc, zq, v1c, 1.0 + 0j)
-    q1 = phasors(mc, zq, v1c, 1.0 + 0j)[1] - q0
-    den = 1.0 - ws * q1
-    wd = 0.5 * math.pi * min(max(d, 0.0), 1.0)
-    lo, hi = wd, math.pi - wd
-    if hi - lo <= 0.0:
-        e = 0.5 * math.pi
-    else:
-        glo, ghi = _edge_gap(lc, tab, d, lo, sgn, vc, ws, q0, q1, den), _edge_gap(lc, tab, d, hi, sgn, vc, ws, q0, q1, den)
-        e, side = lo, 0
-        if glo >= 0.0:
-            e, hi = lo, lo
-        elif ghi <= 0.0:
-            e, lo = hi, hi
-        for _ in range(100):
-            if hi - lo <= 1e-13:
-                break
-            e = (lo * ghi - hi * glo) / (ghi - glo)
-            e = min(max(e, lo), hi)
-            g = _edge_gap(lc, tab, d, e, sgn, vc, ws, q0, q1, den)
-            if g == 0.0:
-                break
-            if g < 0.0:
-                lo, glo = e, g
-                if side == -1:
-                    ghi *= 0.5
-                side = -1
-            else:
-                hi, ghi = e, g
-                if side == 1:
-                    glo *= 0.5
-                side = 1
-    f = sbar_clamp_f(d, e, sgn)
-    i2e = q0 + q1 * (f * vc + ws * q0) / den
+    ws = c.dr_short * short_weight(d)
+    f, i2e, _ = sbar_implicit(lk[0], lk[1], mc, zc, complex(st.z[0], st.z[1]), complex(st.z[2], st.z[3]), v1c,
+                           complex(st.v2re, st.v2im), d, st.last_vl + c.vf, ws)
     return f, f * c.vf + ws * i2e
-
-
-@njit(cache=True)
-def _edge_gap(lc, tab, d, e, sgn, vc, ws, q0, q1, den):
-    """``e - e_end`` [rad]: the commutation angle ``e`` against the one of the step's end i2 when the v2
-    of ``e`` is held (:func:`_sbar_v2`)."""
-    f = sbar_clamp_f(d, e, sgn)
-    i2e = q0 + q1 * (f * vc + ws * q0) / den
-    return e - sbar_edge(lc, tab, d, i2e * sgn, vc)
 
 
 @njit(cache=True)
@@ -474,7 +409,7 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
     v2_row = (v2 * i2n.conjugate()).real / a2 if a2 > 0.0 else v2.real   # v2's fundamental in phase with i2
     _write_row(st, c, rows, (t0 + dt, dt, float(row_k), lm, v1, y0, y1, d, v2_row, i_l, vl, i_b, soc, st.cmd,
                              1.0 if fine else 0.0, out[6]), out[7] + out[8] - jump - e_out, i_l * dt,
-               _w_short(d), e_out, e_chem, e_r0, e_r1, e_c1, vl * i_p * dt)
+               short_weight(d), e_out, e_chem, e_r0, e_r1, e_c1, vl * i_p * dt)
     return OK
 
 

@@ -1,0 +1,72 @@
+"""``--link {envelope,modal}`` on ``compare`` and ``train``: the envs' plant (``envs.EnvConfig.link_model``).
+A bad value is one line on stderr naming it and the valid choices, exit 2, nothing run; ``--link modal``
+reaches the batched env of every policy (the same numbers as the env built with the modal config)."""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from mission_sim.cli import main
+
+
+def _cli(*args):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    return subprocess.run([sys.executable, "-m", "mission_sim.cli", *args], capture_output=True, text=True, env=env,
+                          timeout=600)
+
+
+@pytest.mark.parametrize("cmd", [["compare", "--episodes", "2", "--no-plot"],
+                                 ["train", "--algo", "ppo", "--timesteps", "1", "--out", "never_made"]])
+def test_invalid_link_is_one_line_exit_2(cmd, tmp_path):
+    out = _cli(*cmd, "--link", "exact")
+    assert out.returncode == 2
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in out.stderr
+    assert "--link" in lines[0] and "'exact'" in lines[0] and "'envelope'" in lines[0] and "'modal'" in lines[0]
+    assert out.stdout == "" and not (tmp_path / "never_made").exists() and not os.path.exists("never_made")
+
+
+def test_train_env_link_model_bad_value_is_one_line_before_anything_is_written(tmp_path):
+    out = _cli("train", "--algo", "ppo", "--timesteps", "1", "--out", str(tmp_path / "run"), "--env", "link_model=x")
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert out.stderr.strip().splitlines() == [
+        "dronewpt train: error: --env: link_model='x' is invalid; valid values: envelope, modal"]
+    assert not (tmp_path / "run").exists()
+
+
+def test_train_env_key_selects_the_link():
+    """``train --env link_model=modal`` (the config key) builds the same EnvConfig as ``--link modal``."""
+    from policies.train import env_config
+    assert env_config({"link_model": "modal"}).link_model == "modal"
+    assert env_config({}).link_model == "envelope"
+    with pytest.raises(ValueError, match="link_model='x' is invalid; valid values: envelope, modal"):
+        env_config({"link_model": "x"})
+
+
+def _compare_json(capsys, link):
+    argv = ["compare", "--episodes", "2", "--policies", "model_based,step", "--scenarios", "nominal", "--no-plot",
+            "--no-frontier", "--format", "json"] + (["--link", link] if link else [])
+    assert main(argv) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_link_modal_reaches_every_policys_env(capsys):
+    """``compare --link modal`` scores the policies on the exact-mode plant: its rows are those of
+    ``run_policies`` on ``EnvConfig(link_model="modal")`` to the bit, and not the default's (eq. 4); without
+    ``--link`` (or with ``--link envelope``) the default's."""
+    from envs import EnvConfig
+    from policies.compare import run_policies
+    modal = _compare_json(capsys, "modal")
+    default, envelope = _compare_json(capsys, None), _compare_json(capsys, "envelope")
+    assert modal["link"] == "modal" and default["link"] == envelope["link"] == "envelope"
+    assert default["rows"] == envelope["rows"]
+    ref = run_policies(["model_based", "step"], "nominal", 2, 1000, EnvConfig(link_model="modal"))
+    for row in modal["rows"]:
+        m = ref[row["policy"]].metrics
+        assert row["peak_i2_a"] == pytest.approx(float(np.mean(m["peak_i2_a"])), rel=1e-12)
+        assert row["energy_after_stop_j"] == pytest.approx(float(np.mean(m["energy_after_stop_j"])), rel=1e-12)
+    assert modal["rows"][0]["peak_i2_a"] != default["rows"][0]["peak_i2_a"]

@@ -1,0 +1,408 @@
+"""The envs' exact-mode plant (``EnvConfig(link_model="modal")``, envs/modal_step.py; the default stays eq. 4):
+its link is the mission's exact-mode estimator (wpt_receiver.modal_kernel): its peak on the paper's
+trajectories (Table I, fixed Lm, a stiff 30 V battery, ideal devices) agrees with the switching model, at
+the paper's control period (the rectifier period) and at the env's 100 us; its energy balance closes; the
+env and the mission give the same peak on the same window; the single env is the vector env's row; a
+constant of the step changed once moves both; full rectification settles at the exact modes' RM state
+(tuned and detuned)."""
+
+import numpy as np
+import pytest
+
+from envs import EnvConfig, SbarChargingEnv, SbarChargingVectorEnv
+from envs import modal_step as vk
+from envs.layout import CZ_MODES, CZ_STEP, N_CZ
+from test_mission_modal import _kernel_run
+from wpt_receiver import TABLE_I
+from wpt_receiver import modal_kernel as mk
+from wpt_receiver.devices import IDEAL, preset
+from wpt_receiver.references import reference_duty
+
+P = TABLE_I
+T = P.rectifier_period_s
+ENV_DT = 17 * T
+
+
+def _trajectory(name, kind, dt):
+    return reference_duty(name, P, 0.5e-3, 2.5e-3 if name == "step" else 6.5e-3, dt, ramp_kind=kind)[1]
+
+
+def _link(devices=IDEAL):
+    return mk.link_constants(P, devices), mk.modal_table(P, devices)
+
+
+def _env_run(d_seq, dt, devices=IDEAL, hold_tol=1e-3, energy=False):
+    """The env's link step (envs.vector_kernel._link_step, compiled) over ``d_seq`` (one duty per control
+    period ``dt``) at Table I's Lm and a stiff 30 V battery, from the steady state of the first duty.
+    Returns the instantaneous and the fundamental's peak [A], the steps run in sub-steps, and per step
+    (source, coil, rect, jumps, W_start, W_end, V2 before, I_L) when ``energy``."""
+    cfg = EnvConfig(dt_s=dt)
+    n_sub, n_q = cfg.modal_n_sub, cfg.modal_n_q
+    lc, tab = _link(devices)
+    cz = np.zeros(N_CZ, dtype=complex)
+    vk._segment(lc, P.lm_h, dt, n_sub, n_q, cz, True)
+    mc = cz[CZ_MODES:CZ_STEP]
+    v1 = -1j * P.v1_amp_v
+    vf, dr = devices.rect_vf_v, devices.short_r_ohm - devices.rect_rd_ohm
+    z = np.zeros(4)
+    v2 = mk.steady_state(lc, mc, tab, float(d_seq[0]), v1, P.vl_v + vf, z)
+    out, en = np.empty(9), np.zeros(4)
+    pk = pke = 0.0
+    n_split, rec, e = 0, [], -1.0
+    for d in d_seq:
+        w0 = mk.stored_energy_j(lc, mc, z, v1, v2, P.lm_h)
+        en[3] = np.nan if energy else 0.0
+        v2n, e, _, _, pe, p, il, _, split = vk._link_step(z, v2, e, P.vl_v, d, lc, tab, cz, dt, n_sub, n_q, vf, dr,
+                                                          P.v1_amp_v, hold_tol, out, en)
+        if energy:
+            rec.append((*en, w0, mk.stored_energy_j(lc, mc, z, v1, v2n, P.lm_h), il))
+        v2 = v2n
+        pk, pke, n_split = max(pk, p), max(pke, pe), n_split + split
+    return pk, pke, n_split, np.array(rec)
+
+
+def _switching(d, dt):
+    from wpt_receiver.switching import SwitchingConfig, SwitchingLink
+    env = SwitchingLink(P, SwitchingConfig(samples_per_half_cycle=64)).simulate(d, dt).envelope()
+    return env["i2_env_a"].max(), env["i2_fund_a"].max()
+
+
+@pytest.mark.parametrize("dt", [T, ENV_DT], ids=["T", "100us"])
+@pytest.mark.parametrize("name,kind", [("ramp", "v2"), ("ramp", "duty"), ("step", "v2"), ("proposed", "v2")])
+def test_env_peak_on_the_paper_trajectories_against_the_switching_model(name, kind, dt):
+    """The instantaneous peak within 0.5 % of the switching model's at the paper's control period, within
+    1 % at the env's 100 us (measured: V2* ramp +0.14 % / -0.46 %, d_short ramp +0.08 % / -0.15 %, step
+    +0.07 % / +0.18 %, proposed -0.07 % / -0.00 %); the eq. 4 + ripple estimator the env had was 2.85 %
+    low on the V2* ramp. The fundamental's peak within 0.5 % too. Held over 100 us without sub-steps,
+    V2 (which follows i2's phase) would put the peak 2-16 % low: the sub-steps are what the physics
+    needs (one per rectifier period, EnvConfig.v2_updates)."""
+    d = _trajectory(name, kind, dt)
+    sw_inst, sw_fund = _switching(d, dt)
+    inst, fund, n_split, _ = _env_run(d, dt)
+    assert inst == pytest.approx(sw_inst, rel=0.005 if dt == T else 0.01)
+    assert fund == pytest.approx(sw_fund, rel=0.005)
+    if dt == ENV_DT and name != "step":
+        held, _, n0, _ = _env_run(d, dt, hold_tol=np.inf)
+        assert n0 == 0 and n_split > 0.7 * len(d)
+        assert held < sw_inst * 0.985
+
+
+@pytest.mark.parametrize("name,dt", [("ramp", ENV_DT), ("proposed", ENV_DT), ("step", T), ("step", ENV_DT)])
+def test_env_and_mission_give_the_same_peak_on_the_same_window(name, dt):
+    """The env's link step and the mission's fine step (mission_sim.world.loop_kernel) on the same duties:
+    the same instantaneous peak within 1 %, the env's the nearer to the switching model's. The mission
+    samples a sub-stepped fine step's quarter points, the env its sub-step ends: on the V2* ramp at 100 us
+    the mission is 0.47 % below the switching model, the env 0.23 % (measured). The step at 100 us: both
+    50.30 A (a short-mode fine step samples its peak once per rectifier period)."""
+    d = _trajectory(name, "v2", dt)
+    env_inst, env_fund, _, _ = _env_run(d, dt)
+    mis_inst, mis_fund = _kernel_run(d, dt)
+    sw_inst, _ = _switching(d, dt)
+    assert env_inst == pytest.approx(mis_inst, rel=0.01)
+    assert env_fund == pytest.approx(mis_fund, rel=0.01)
+    assert abs(env_inst / sw_inst - 1.0) <= abs(mis_inst / sw_inst - 1.0) + 1e-3
+
+
+@pytest.mark.parametrize("devices", [IDEAL, preset("schottky")], ids=["ideal", "schottky"])
+def test_env_link_energy_balance_closes(devices):
+    """Per control period (held or in sub-steps): source = W_end - W_start + coil + rectifier - jumps (the
+    feedthrough's stored energy when V2 changes between sub-steps) to rounding; with ideal devices the
+    rectifier's energy is the battery's, VL I_L dt, exactly."""
+    rng = np.random.default_rng(7)
+    d = np.concatenate([np.zeros(5), rng.uniform(0.0, 1.0, 40), np.full(40, 0.3)])
+    _, _, n_split, rec = _env_run(d, ENV_DT, devices=devices, energy=True)
+    src, coil, rect, jumps, w0, w1, il = rec.T
+    assert 0 < n_split < len(d)                          # both kinds of step were taken
+    scale = np.abs(src) + coil + np.abs(rect) + w0 + w1
+    np.testing.assert_allclose(src, w1 - w0 + coil + rect - jumps, rtol=0, atol=1e-10 * scale.max())
+    assert np.all(coil > 0.0)
+    if devices is IDEAL:
+        np.testing.assert_allclose(rect, P.vl_v * il * ENV_DT, rtol=1e-12, atol=1e-15)
+
+
+def test_held_steps_are_within_hold_tol_of_the_sub_stepped_link():
+    """In steady state (the transient below ``hold_tol_a``) a step holds V2 over the control period: the
+    same state as in sub-steps to within the tolerance, for a tenth of the work."""
+    lc, tab = _link()
+    cfg = EnvConfig()
+    n_sub, n_q = cfg.modal_n_sub, cfg.modal_n_q
+    cz = np.zeros(N_CZ, dtype=complex)
+    vk._segment(lc, P.lm_h, ENV_DT, n_sub, n_q, cz, True)
+    v1 = -1j * P.v1_amp_v
+    for d in (0.0, 0.4, 0.9):
+        z = np.zeros(4)
+        v2 = mk.steady_state(lc, cz[CZ_MODES:CZ_STEP], tab, d, v1, P.vl_v, z)
+        res = []
+        for tol in (1e-3, -1.0):   # held, forced into sub-steps
+            zz = z.copy()
+            r = vk._link_step(zz, v2, -1.0, P.vl_v, d, lc, tab, cz, ENV_DT, n_sub, n_q, 0.0, 0.0, P.v1_amp_v, tol,
+                              np.empty(9), np.zeros(4))
+            res.append((zz, r))
+        (za, ra), (zb, rb) = res
+        assert not ra[-1] and rb[-1]
+        i2a = mk.phasors(cz[CZ_MODES:CZ_STEP], za, v1, ra[0])[1]
+        i2b = mk.phasors(cz[CZ_MODES:CZ_STEP], zb, v1, rb[0])[1]
+        assert abs(i2a - i2b) < 1e-3 and abs(ra[5] - rb[5]) < 2e-3 and ra[6] == pytest.approx(rb[6], rel=1e-3)
+
+
+@pytest.mark.parametrize("v2_updates", [0, 6, 3])
+def test_a_large_transient_settles_at_the_rm_state(v2_updates):
+    """A window at d = 0.32 dropped to RM rings and settles at the RM steady state when V2 follows i2 every
+    rectifier period (the default), its peak within 1.5x the RM current. With fewer updates per 100 us
+    (6, 3) V2 is held while i2 turns: the held V2 feeds the tank, the peak of the ringing is 1.7-3.3x
+    higher (measured 27.5 A and 51 A against 16 A) and with 6 or 3 it has not settled after 20 ms: why the
+    default follows the circuit's once-per-half-cycle decision."""
+    lc, tab = _link()
+    cfg = EnvConfig(v2_updates=v2_updates)
+    cz = np.zeros(N_CZ, dtype=complex)
+    vk._segment(lc, P.lm_h, ENV_DT, cfg.modal_n_sub, cfg.modal_n_q, cz, True)
+    mc, v1 = cz[CZ_MODES:CZ_STEP], -1j * P.v1_amp_v
+    z_rm = np.zeros(4)
+    i2_rm = abs(mk.phasors(mc, z_rm, v1, mk.steady_state(lc, mc, tab, 0.0, v1, P.vl_v, z_rm))[1])
+    z = np.zeros(4)
+    v2, e, pk = mk.steady_state(lc, mc, tab, 0.32, v1, P.vl_v, z), -1.0, 0.0
+    for _ in range(200):
+        v2, e, _, i2, _, p, *_ = vk._link_step(z, v2, e, P.vl_v, 0.0, lc, tab, cz, ENV_DT, cfg.modal_n_sub, cfg.modal_n_q, 0.0,
+                                               0.0, P.v1_amp_v, 1e-3, np.empty(9), np.zeros(4))
+        pk = max(pk, p)
+    if v2_updates == 0:
+        assert abs(i2) == pytest.approx(i2_rm, rel=1e-4) and pk < 1.5 * i2_rm
+    else:
+        assert pk > 2.0 * i2_rm and abs(abs(i2) / i2_rm - 1.0) > 1e-3
+
+
+# ---------------------------------------------------------------------------------------------- the envs
+MODAL = EnvConfig(link_model="modal")
+SHORT = EnvConfig(n_steps=40, link_model="modal")
+
+
+def test_link_model_is_an_option_eq4_the_default():
+    """``envelope`` (eq. 4) is the default; an unknown model is refused naming the valid ones; the env's plant
+    part is the one of the config (its state has the link's mode amplitudes only on the modal link)."""
+    assert EnvConfig().link_model == "envelope"
+    with pytest.raises(ValueError, match=r"link_model='exact' is invalid; valid values: envelope, modal"):
+        EnvConfig(link_model="exact")
+    a, b = SbarChargingVectorEnv(2, "nominal"), SbarChargingVectorEnv(2, "nominal", MODAL)
+    assert not hasattr(a.parts.plant, "mstate") and b.parts.plant.mstate.shape == (7, 2)
+    assert type(a.parts.plant).__name__ == "PlantPart" and type(b.parts.plant).__name__ == "ModalPlantPart"
+    # the repr (the oracle's disk-cache key) names the link only when it is not the default one
+    assert "link_model" not in repr(EnvConfig()) and "hold_tol_a" not in repr(EnvConfig())
+    assert "link_model='modal'" in repr(MODAL) and "v2_updates=3" in repr(EnvConfig(link_model="modal", v2_updates=3))
+
+
+def _run(scenario, cfg=SHORT, steps=50, seed=3):
+    """Single env and row 0 of a 2-env vector env on ``cfg``, seeded alike, the same random actions (through
+    an autoreset of the vector env): arrays of (reward, I2, I_L, peak, VL) of each, and the observations."""
+    single = SbarChargingEnv(scenario=scenario, config=cfg)
+    vec = SbarChargingVectorEnv(2, scenario, cfg)
+    o1, _ = single.reset(seed=seed)
+    ov, _ = vec.reset(seed=seed)
+    rng = np.random.default_rng(0)
+    rs, rv, obs = [], [], [(o1, ov[0])]
+    keys = ("i2_a", "rect_current_a", "i2_peak_a", "battery_v")
+    for k in range(steps):
+        a = rng.uniform(-1.0, 1.0, (2, 1)).astype(np.float32)
+        if k == cfg.n_steps:
+            o1, _ = single.reset()   # the vector env autoresets row 0 on this step
+            s1 = (o1, 0.0, False, False, None)
+        else:
+            s1 = single.step(a[0])
+        sv = vec.step(a)
+        obs.append((s1[0], sv[0][0]))
+        if s1[4] is not None:
+            rs.append([s1[1]] + [s1[4][key] for key in keys])
+            rv.append([sv[1][0]] + [sv[4][key][0] for key in keys])
+    return np.array(rs), np.array(rv), np.array(obs)
+
+
+@pytest.mark.parametrize("scenario", ["random", "detuned"])
+def test_single_env_is_the_vector_row_on_the_modal_link(scenario):
+    """The single env and row 0 of the vector env step the same compiled helpers: equal to the bit, through
+    the vector env's autoreset, tuned and detuned (a detuned window: its C1, C2 in the link constants)."""
+    fs, fv, fo = _run(scenario)
+    assert np.array_equal(fs, fv) and np.array_equal(fo[:, 0], fo[:, 1])
+    assert np.ptp(fs[:, 1]) > 1.0   # the random duties move the link
+
+
+def _wide_short(d):
+    """A wrong short-window weight (3x): the shorted switches' excess in V2 tripled."""
+    return 3.0 * (d + np.sin(np.pi * d) / np.pi)
+
+
+def test_one_change_moves_single_and_vector_alike(monkeypatch):
+    """A function of the modal step changed once (in envs/modal_step.py's source, run by the interpreter)
+    changes the single env's and the vector env's trajectories alike: equal before and after, different."""
+    for name in dir(vk):
+        f = getattr(vk, name)
+        if hasattr(f, "py_func"):
+            monkeypatch.setattr(vk, name, f.py_func)
+    cfg = EnvConfig(n_steps=12, link_model="modal")
+    s0, v0, _ = _run("random", cfg, steps=12)
+    monkeypatch.setattr(vk, "short_weight", _wide_short)
+    s1, v1, _ = _run("random", cfg, steps=12)
+    assert np.array_equal(s0, v0) and np.array_equal(s1, v1)
+    # more resistance in the short window: less current where the duty is high, in both envs alike
+    assert np.abs(s1 - s0)[:, 1:3].max() > 1e-3
+
+
+@pytest.mark.parametrize("devices", ["ideal", "schottky"])
+def test_modal_env_settles_at_the_exact_mode_rm_state(devices):
+    """Full rectification settles at the periodic steady state of the exact-mode link
+    (wpt_receiver.modal_kernel.steady_state: the harmonic balance's v2) at the window's Lm and VL, its
+    peak the phase-aware instantaneous one, and within 0.3 % of eq. 4's closed-form RM current (the
+    fundamentals agree in RM): with ideal devices and with R1 + 2 Ron, R2 + Rd, clamp VL + Vf."""
+    cfg = EnvConfig(n_steps=400, devices=devices, link_model="modal")
+    env = SbarChargingEnv(scenario="nominal", config=cfg)
+    _, info = env.reset(seed=5)
+    for _ in range(cfg.n_steps):
+        _, _, _, _, info = env.step(np.array([-1.0], np.float32))   # RM
+    dev, p = preset(devices), TABLE_I
+    lc, tab = mk.link_constants(p, dev), mk.modal_table(p, dev)
+    mc, z = np.empty(mk.N_MODES_C, dtype=complex), np.zeros(4)
+    mk.modes(lc, info["lm_h"], mc)
+    v1 = -1j * p.v1_amp_v
+    vc = info["battery_v"] + dev.rect_vf_v
+    v2 = mk.steady_state(lc, mc, tab, 0.0, v1, vc, z)
+    i1, i2 = mk.phasors(mc, z, v1, v2)
+    assert info["i2_a"] == pytest.approx(abs(i2), rel=1e-5) and info["i1_a"] == pytest.approx(abs(i1), rel=1e-5)
+    assert info["i2_peak_a"] == pytest.approx(mk.inst_peak(lc, tab, 0.0, i2, vc), rel=1e-5)
+    r1, r2, x = p.r1_ohm + 2 * dev.inv_switch.ron_ohm, p.r2_ohm + dev.rect_diode.rd_ohm + dev.rect_switch.body.rd_ohm, \
+        p.omega_rad_s * p.lm_h
+    vf = dev.rect_diode.vf0_v + dev.rect_switch.body.vf0_v
+    i2_rm = (x * p.v1_amp_v - r1 * 4 / np.pi * (info["battery_v"] + vf)) / (r1 * r2 + x * x)
+    assert info["i2_a"] == pytest.approx(i2_rm, rel=3e-3)
+
+
+def test_modal_env_starts_in_its_steady_state():
+    """Windows start at the exact-mode link's periodic steady state of their first duty: held at that duty the
+    link stays (I2 within 1e-5 over 20 steps; measured 6e-8, only VL drifts). The duty is planned on eq. 4
+    (the duty that delivers the first command there), whose v2 in phase with i2 is above the exact one's:
+    the exact link delivers a little less than the command, measured 0.4-2.5 % on nominal windows (more at
+    the small commands, where the duty is large)."""
+    v = SbarChargingVectorEnv(64, "nominal", MODAL)
+    _, info = v.reset(seed=1)
+    d0, i2_0, cmd0 = info["d_short"].copy(), info["i2_a"].copy(), info["charge_cmd_a"].copy()
+    ratio = info["rect_current_a"] / cmd0
+    assert np.all(ratio < 1.0) and np.all(ratio > 0.97)
+    for _ in range(20):
+        _, _, _, _, info = v.step((2 * d0 - 1)[:, None].astype(np.float32))
+    np.testing.assert_allclose(info["i2_a"], i2_0, rtol=1e-5)
+
+
+def test_detuned_modal_rm_state_is_the_detuned_modes():
+    """Detuned capacitors (C off by up to 2 %): held in RM the modal env settles at the exact-mode steady state
+    of the detuned link (its C1, C2 in the modes), which differs from the tuned link's."""
+    v = SbarChargingVectorEnv(num_envs=3, scenario={"base": "nominal", "c_detune": (-0.02, 0.02)}, config=MODAL)
+    _, info = v.reset(seed=11)
+    for _ in range(300):
+        _, _, _, _, info = v.step(np.full((3, 1), -1.0, np.float32))
+    link, dev = v.config.link, v.config.device_set()
+    w, vf = link.omega_rad_s, dev.rect_vf_v
+    cc1 = 1.0 / (w * w * link.l1_h) * (1.0 + v._c_rel[0])
+    cc2 = 1.0 / (w * w * link.l2_h) * (1.0 + v._c_rel[1])
+    v1 = -1j * link.v1_amp_v
+    for e in range(3):
+        got = []
+        for c1, c2 in ((cc1[e], cc2[e]), (None, None)):
+            lc = mk.link_constants(link, dev, c1, c2) if c1 is not None else mk.link_constants(link, dev)
+            mc, z = np.empty(mk.N_MODES_C, dtype=complex), np.zeros(4)
+            mk.modes(lc, float(v._lm_all[-1, e]), mc)
+            v2e = mk.steady_state(lc, mc, v._tab, 0.0, v1, float(info["battery_v"][e]) + vf, z)
+            got.append(abs(mk.phasors(mc, z, v1, v2e)[1]))
+        assert info["i2_a"][e] == pytest.approx(got[0], rel=1e-6)
+        assert abs(got[0] / got[1] - 1.0) > 1e-3   # the detuning matters
+
+
+@pytest.mark.parametrize("c_rel", [0.0, 0.02])
+def test_detuned_link_settles_where_the_switching_model_does(c_rel):
+    """A window with C1 +c, C2 -c (schottky devices, stiff 30 V) dropped from d = 0.3 to RM: the modal link's
+    |I2| settles within 1 % of the switching model's fundamental of the same circuit (measured -0.43 % at
+    2 %, 0.00 % tuned). (At +-4 % it does not: docs/envs.md.)"""
+    from wpt_receiver.switching import SwitchingConfig, SwitchingLink
+    dev = preset("schottky")
+    w = P.omega_rad_s
+    c1, c2 = (1 + c_rel) / (w * w * P.l1_h), (1 - c_rel) / (w * w * P.l2_h)
+    d = np.r_[np.full(10, 0.3), np.zeros(190)]
+    sw = SwitchingLink(P, SwitchingConfig(c1_f=c1, c2_f=c2, devices=dev)).simulate(d, ENV_DT).envelope()
+    sw_end = sw["i2_fund_a"].to_numpy()[-50:]
+    lc, tab = mk.link_constants(P, dev, c1, c2), mk.modal_table(P, dev)
+    cfg = EnvConfig()
+    cz = np.zeros(N_CZ, dtype=complex)
+    vk._segment(lc, P.lm_h, ENV_DT, cfg.modal_n_sub, cfg.modal_n_q, cz, True)
+    v1, vf, dr = -1j * P.v1_amp_v, dev.rect_vf_v, dev.short_r_ohm - dev.rect_rd_ohm
+    z = np.zeros(4)
+    v2, e = mk.steady_state(lc, cz[CZ_MODES:CZ_STEP], tab, 0.3, v1, P.vl_v + vf, z), -1.0
+    for dd in d:
+        v2, e, _, i2, *_ = vk._link_step(z, v2, e, P.vl_v, dd, lc, tab, cz, ENV_DT, cfg.modal_n_sub, cfg.modal_n_q, vf,
+                                         dr, P.v1_amp_v, 1e-3, np.empty(9), np.zeros(4))
+    assert np.ptp(sw_end) < 1e-3 * sw_end.mean()                 # the switching model has settled
+    assert abs(i2) == pytest.approx(sw_end.mean(), rel=0.01)
+    if c_rel:   # the detuning matters: against the tuned link's RM steady state
+        lt = mk.link_constants(P, dev)
+        mt, zt = np.empty(mk.N_MODES_C, dtype=complex), np.zeros(4)
+        mk.modes(lt, P.lm_h, mt)
+        i2_tuned = abs(mk.phasors(mt, zt, v1, mk.steady_state(lt, mt, tab, 0.0, v1, P.vl_v + vf, zt))[1])
+        assert sw_end.mean() < 0.75 * i2_tuned
+
+
+def _random_run(n, h, seed=3):
+    """Random duties (redrawn every 100 us) on ``random`` windows of the modal env with the step divided by
+    ``h``; per-step arrays (T, n) of the info fields."""
+    base = EnvConfig()
+    cfg = EnvConfig(dt_s=base.dt_s / h, n_steps=base.n_steps * h, slow_every=base.slow_every * h, link_model="modal")
+    venv = SbarChargingVectorEnv(num_envs=n, scenario="random", config=cfg)
+    _, info = venv.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    rec = {k: [] for k in ("i2_a", "i2_peak_a", "i2_peak_envelope_a", "v2_v", "rect_current_a")}
+    for k in range(cfg.n_steps - 1):   # one window each (no autoreset)
+        if k % h == 0:
+            a = rng.uniform(-1, 1, (n, 1)).astype(np.float32)
+        _, _, _, _, info = venv.step(a)
+        for key in rec:
+            rec[key].append(info[key].copy())
+    return {k: np.array(v) for k, v in rec.items()}
+
+
+def test_rectifier_absorbs_power_with_random_duties_on_the_modal_link():
+    """(envmodal2's test_envs check, on the modal plant.) The SBAR's v2 follows i2's phase: with random duties
+    the I2 envelope swings through zero, yet the SBAR output current stays >= 0 up to the fundamental's
+    approximation of the diodes' current (where i2 reverses inside a rectifier period its projection on v2
+    dips a little below 0) and the rectifier absorbs power on average; the instantaneous peak adds the
+    ripple's excess (as low as -0.65 A: the 3rd harmonic flattens the crest when i2 is 0.4 rad off v2);
+    the ringing is not pumped (halving the step does not raise the peak)."""
+    r = _random_run(64, 1)
+    assert r["i2_a"].min() < -5.0
+    il = r["rect_current_a"]
+    assert il.min() >= -0.2 and (il < 0.0).mean() < 1e-3 and il.mean() > 1.0
+    assert (r["v2_v"] * np.abs(r["i2_a"])).mean() > 0.0
+    assert np.all(r["i2_peak_envelope_a"] >= np.abs(r["i2_a"]))
+    assert np.all(r["i2_peak_a"] >= r["i2_peak_envelope_a"] - 0.66)
+    assert (r["i2_peak_a"] > r["i2_peak_envelope_a"] + 0.2).any()
+    r2 = _random_run(64, 2)
+    pk1, pk2 = np.abs(r["i2_a"]).max(), np.abs(r2["i2_a"][1::2]).max()
+    assert pk2 < 1.05 * pk1 and pk1 < 100.0
+
+
+@pytest.mark.parametrize("duty", [0.0, 0.4])
+def test_modal_env_steady_state_is_the_missions_link_with_devices(duty):
+    """(envmodal2's test_env_devices check, on the modal plant.) Held at a duty, the env settles at the
+    mission's link's steady state (the exact modes with the schottky devices): |I1|, |I2| and I_L within
+    1e-5; real parts cost 2-6 points of DC efficiency against ideal devices."""
+    res = {}
+    for devices in ("schottky", "ideal"):
+        env = SbarChargingEnv(scenario="nominal", config=EnvConfig(devices=devices, n_steps=600, link_model="modal"))
+        env.reset(seed=0)
+        for _ in range(600):
+            _, _, _, _, info = env.step(np.array([2 * duty - 1], np.float32))
+        dev = preset(devices)
+        lc, tab = mk.link_constants(P, dev), mk.modal_table(P, dev)
+        mc, z = np.empty(mk.N_MODES_C, dtype=complex), np.zeros(4)
+        mk.modes(lc, info["lm_h"], mc)
+        v1, vc = -1j * P.v1_amp_v, info["battery_v"] + dev.rect_vf_v
+        v2 = mk.steady_state(lc, mc, tab, duty, v1, vc, z)
+        i1, i2 = mk.phasors(mc, z, v1, v2)
+        il = 0.5 * (mk.sbar_v2(lc, tab, duty, i2, vc)[1] * i2.conjugate()).real
+        assert info["i2_a"] == pytest.approx(abs(i2), rel=1e-5) and info["i1_a"] == pytest.approx(abs(i1), rel=1e-5)
+        assert info["rect_current_a"] == pytest.approx(il, rel=1e-5)
+        res[devices] = info["battery_v"] * il / (0.5 * (v1 * i1.conjugate()).real)
+    assert res["ideal"] - 0.06 < res["schottky"] < res["ideal"] - 0.02
