@@ -138,14 +138,34 @@ class _Model:
 
     @staticmethod
     def _kalman(ad, b2, meas_sd_a=0.1, q_i=1e-3, q_w=0.05):
-        """Steady-state gain of the filter on z = [I1, I2, w] (w a random walk on V2) from I2."""
-        from scipy.linalg import solve_discrete_are
+        """Steady-state gain of the filter on z = [I1, I2, w] (w a random walk on V2) from I2 (3, 1)."""
         A = np.zeros((3, 3))
         A[:2, :2], A[:2, 2], A[2, 2] = ad, b2, 1.0
         C = np.array([[0.0, 1.0, 0.0]])
         Q = np.diag([q_i ** 2, q_i ** 2, q_w ** 2])
-        P = solve_discrete_are(A.T, C.T, Q, np.array([[meas_sd_a ** 2]]))
-        return P @ C.T @ np.linalg.inv(C @ P @ C.T + meas_sd_a ** 2)
+        return _steady_kalman_gain(A, C, Q, np.array([[meas_sd_a ** 2]]))
+
+
+def _steady_kalman_gain(A, C, Q, R) -> np.ndarray:
+    """``P C^T (C P C^T + R)^-1`` with ``P`` the solution of the filter's discrete Riccati equation
+    (``scipy.linalg.solve_discrete_are(A.T, C.T, Q, R)``), through the disk cache
+    (:mod:`wpt_receiver.diskcache`, keyed by the exact bits of the four matrices and the scipy and numpy
+    versions): ``import scipy.linalg`` is 0.3-1 s of CPU, most of the MPC's set-up (``compare`` pays it in
+    its forked MPC child, on the critical path) for one 3 x 3 equation whose answer never changes. A cached
+    gain is the array computed here before (the same bits)."""
+    import scipy  # the top-level package only (cheap): its version is part of the key
+
+    from wpt_receiver.diskcache import load, store
+
+    key = (f"kalman v1 A{A.shape}={A.tobytes().hex()} C{C.shape}={C.tobytes().hex()} Q{Q.shape}={Q.tobytes().hex()} "
+           f"R{R.shape}={R.tobytes().hex()} scipy={scipy.__version__} numpy={np.__version__}")
+    gain = load("kalman", key, (A.shape[0], C.shape[0]))
+    if gain is None:
+        from scipy.linalg import solve_discrete_are
+        P = solve_discrete_are(A.T, C.T, Q, R)
+        gain = P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+        store("kalman", key, gain)
+    return gain
 
 
 class _DelayBank:
