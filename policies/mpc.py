@@ -338,6 +338,7 @@ class MPCPolicy:
         self._A_stop[:, :f], self._A_stop[:, f] = self._Gf, -1.0
         self._m2_flat = np.ravel_multi_index((self._m2_r, self._m2_c), self._A_stop.shape)
         self._A_m2 = self._A_stop.flat[self._m2_flat].copy()   # G's entries where the excess slope is added
+        self._A_stop_flat = self._A_stop.reshape(-1)   # a view: per QP only the slope's entries are written
         self._knots = np.asarray(BLOCKS[:f])
         self._bl_stop = np.concatenate([np.zeros(f + 1), np.full(len(m.G), -_BIG)])
         self._sense = np.zeros(f + 1 + len(m.G), dtype=np.int32)
@@ -396,6 +397,7 @@ class MPCPolicy:
         # the entries the slope changes, for every receiver at once (n, nnz): the same sums as one at a time;
         # the other entries of A are fixed (self._A_stop, which daqp only reads)
         A, vals = self._A_stop, self._A_m2 + slope[:, self._m2_r // 2] * self._m2_v
+        A_flat, m2_flat = self._A_stop_flat, self._m2_flat
         # V2 = 0 from a fixed time after the stop on (a shrinking horizon: a receding terminal could be
         # put off forever while the bound holds V2 up), at the first knot at or after it
         bu = np.empty((len(e), f + 1 + ub.shape[1]))
@@ -406,7 +408,7 @@ class MPCPolicy:
         v, slack = np.zeros((len(e), f + 1)), np.zeros(len(e))
         knots = np.asarray(BLOCKS[:-1])
         for r in range(len(e)):
-            A.flat[self._m2_flat] = vals[r]
+            A_flat[m2_flat] = vals[r]   # into A through its flat view (A.flat's iterator costs ~5x)
             x, flag = self._daqp(e[r], q[r], A, bu[r], self._bl_stop)
             if flag < 1:
                 v[r, :f] = np.minimum(v_bar[r, knots], vmax[r])   # keep the plan
