@@ -2,7 +2,9 @@
 
 * the MPC's steady-state Kalman gain goes through the disk cache: the cached gain is the array scipy's
   ``solve_discrete_are`` gives (the same bits), and an MPC built on a warm cache does not import the
-  ``scipy.linalg`` package (0.3-1 s of CPU in compare's forked MPC child).
+  ``scipy.linalg`` package (0.3-1 s of CPU in compare's forked MPC child);
+* numba's cache loads without its registries (``wpt_receiver.numba_start.cache_loads_without_registries``):
+  the same machine code runs (the same bits out), a cache miss still compiles.
 """
 
 from __future__ import annotations
@@ -62,3 +64,64 @@ def test_mpc_on_a_warm_cache_does_not_import_scipy_linalg(tmp_path):
     out = [subprocess.run([sys.executable, "-c", _NO_LINALG], env=env, capture_output=True, text=True, check=True)
            .stdout.strip() for _ in range(2)]
     assert out == ["True", "False"]   # the first run solves the equation (and stores it), the second loads it
+
+
+_KERNEL = '''
+import numpy as np
+from numba import njit, prange
+
+@njit(cache=True)
+def energy(i, r, dt):
+    """sum(i^2 r dt) [J] with a temporary array (numba's runtime allocates it)"""
+    p = np.empty_like(i)
+    for k in range(i.size):
+        p[k] = i[k] * i[k] * r
+    return p.sum() * dt
+
+@njit(cache=True, parallel=True)
+def scaled(x, a):
+    out = np.empty_like(x)
+    for k in prange(x.size):
+        out[k] = np.sin(a * x[k])
+    return out
+'''
+
+_USE = '''
+import json, sys
+import numpy as np
+from wpt_receiver.numba_start import cache_loads_without_registries
+lazy = sys.argv[1] == "lazy" and cache_loads_without_registries()
+import kern
+i = np.linspace(0.0, 2.0, 1001)
+e = kern.energy(i, 0.5, 1e-3)
+s = kern.scaled(i, 3.0)
+import hashlib
+print(json.dumps({"lazy": lazy, "e": e.hex(), "s": hashlib.sha256(s.tobytes()).hexdigest(), "s_sum": float(s.sum()).hex(),
+                  "registries": "numba.np.polynomial.polynomial_core" in sys.modules,
+                  "hits": sum(kern.energy.stats.cache_hits.values()) + sum(kern.scaled.stats.cache_hits.values())}))
+'''
+
+
+def test_cached_kernels_load_without_registries_and_run_the_same_code(tmp_path):
+    """A kernel compiled and cached by one process, then loaded by others with and without the hook: the
+    same results to the bit (a runtime-allocated array, a parallel loop), a cache hit, and with the hook
+    numba's registries (``numba.np.polynomial``, imported only by them) never loaded; a cache miss under the hook compiles as usual."""
+    import json
+    import os
+    (tmp_path / "kern.py").write_text(_KERNEL)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")]),
+           "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+
+    def run(mode):
+        r = subprocess.run([sys.executable, "-c", _USE, mode], env=env, capture_output=True, text=True, check=True)
+        return json.loads(r.stdout)
+
+    first = run("lazy")      # a cache miss under the hook: compiled (the compiler refreshes the registries)
+    plain, lazy = run("plain"), run("lazy")
+    assert first["lazy"] and lazy["lazy"] and not plain["lazy"]
+    assert first["registries"] and plain["registries"] and not lazy["registries"]
+    assert (first["hits"], plain["hits"], lazy["hits"]) == (0, 2, 2)
+    for k in ("e", "s", "s_sum"):
+        assert first[k] == plain[k] == lazy[k]
+    i = np.linspace(0.0, 2.0, 1001)
+    assert abs(float.fromhex(lazy["e"]) - float(np.sum(i * i) * 0.5e-3)) < 1e-12   # Joule heating sum
