@@ -125,3 +125,36 @@ def test_cached_kernels_load_without_registries_and_run_the_same_code(tmp_path):
         assert first[k] == plain[k] == lazy[k]
     i = np.linspace(0.0, 2.0, 1001)
     assert abs(float.fromhex(lazy["e"]) - float(np.sum(i * i) * 0.5e-3)) < 1e-12   # Joule heating sum
+
+
+def test_frontier_rows_made_before_waiting_for_the_mpc_child(monkeypatch):
+    """``compare(on_extra=...)`` hands over the frontier's traces before the forked MPC child's result is
+    awaited, and the frontier's rows made from them then are the rows made from all traces afterwards (the
+    budgets' curve: more budget, more overshoot and less energy after the stop)."""
+    import policies.forked as forked
+    from policies.compare import compare, frontier, frontier_specs
+
+    events, early, more = [], [], {}
+    result = forked.Forked.result
+
+    def spy(self):
+        events.append("child's result")
+        return result(self)
+
+    monkeypatch.setattr(forked.Forked, "result", spy)
+
+    def on_extra(tr):
+        events.append("frontier")
+        early.append(frontier("nominal", budgets=(0.0, 0.02, 0.1), episodes=3, seed=1000, traces=tr))
+
+    fork = forked.available()   # before compare (whose env steps may start numba's thread pool)
+    rows, traces = compare(("model_based", "mpc"), ("nominal",), 3, 1000, extra=frontier_specs((0.0, 0.02, 0.1)),
+                           extra_traces=more, on_extra=on_extra)
+    later = frontier("nominal", budgets=(0.0, 0.02, 0.1), episodes=3, seed=1000, traces={**more, **traces})
+    assert events[0] == "frontier" and events.count("frontier") == 1
+    if fork:
+        assert events == ["frontier", "child's result"]
+    assert early[0] == later
+    over = [r["overshoot_pct"] for r in later]
+    after = [r["energy_after_stop_j"] for r in later]
+    assert over == sorted(over) and after == sorted(after, reverse=True)
