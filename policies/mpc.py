@@ -182,6 +182,8 @@ class _DelayBank:
         self.u = np.repeat(np.asarray(u0, dtype=float)[None], max(self.delays) + 1, axis=0)   # u[j] = V2 of step k-1-j
         self.score = np.zeros((len(self.delays), self.n))
         self.best = np.zeros(self.n, dtype=int)
+        self._lag = np.asarray(self.delays)   # u's rows of the hypotheses (an index array, built once)
+        self._prefer = (1.0 + 0.1 * np.arange(len(self.delays)))[:, None]   # a shorter delay preferred
 
     def _step(self, z, u):
         """One model step of the estimates ``z`` (..., 3) under the V2 ``u`` (...) [V]."""
@@ -193,21 +195,21 @@ class _DelayBank:
 
     def update(self, y, u_last):
         """Filter the measured I2 ``y`` (n,) [A] given the V2 of the last step ``u_last`` (n,) [V]: ``z`` now."""
-        self.u = np.roll(self.u, 1, axis=0)
+        self.u[1:] = self.u[:-1]   # shifted by one step in place (np.roll's values, without a new array)
         self.u[0] = u_last
-        x = self._step(self.z, self.u[list(self.delays)])   # every hypothesis at once (H, n, 3)
+        x = self._step(self.z, self.u[self._lag])   # every hypothesis at once (H, n, 3)
         innov = y[None, :] - x[..., 1]
         self.z = x + innov[..., None] * self.m.kalman[:, 0]
         self.score += (1.0 / _DELAY_MEMORY) * (innov * innov - self.score)
         # a shorter delay is preferred unless a longer one explains the measurements clearly better
-        self.best = np.argmin(self.score * (1.0 + 0.1 * np.arange(len(self.delays)))[:, None], axis=0)
+        self.best = np.argmin(self.score * self._prefer, axis=0)
         return self.now()
 
     def now(self):
         """The chosen hypothesis' estimate carried forward over its delay (n, 3)."""
         cols = np.arange(self.n)
         z = self.z[self.best, cols]
-        d = np.asarray(self.delays)[self.best]
+        d = self._lag[self.best]
         for j in range(int(d.max(initial=0)) - 1, -1, -1):
             go = np.flatnonzero(d > j)
             z[go] = self._step(z[go], self.u[j, go])
@@ -268,20 +270,25 @@ class MPCPolicy:
         steady state the first measured I2 implies (``w`` explains the offset); the rows ``new`` (a new
         window in a batched env that resets its windows) are started afresh the same way."""
         u_last = self._v2_of(d_last, vl)
-        lk = self._link
-        x = lk.omega_rad_s * lk.lm_h
-        det = lk.r1_ohm * lk.r2_ohm + x * x
-        w = (x * lk.v1_amp_v - det * i2m) / lk.r1_ohm - u_last
-        z0 = np.stack([(lk.r2_ohm * lk.v1_amp_v + x * (u_last + w)) / det, i2m, w], axis=1)
         if self._bank is None or self._bank.n != len(i2m):
-            self._bank = _DelayBank(self._model, z0, u_last, self.delays)
+            self._bank = _DelayBank(self._model, self._steady_z(i2m, u_last), u_last, self.delays)
             return self._bank.now()
         out = self._bank.update(i2m, u_last)
         if new is not None and len(new):
+            z0 = self._steady_z(i2m, u_last)
             b = self._bank
             b.z[:, new], b.u[:, new], b.score[:, new], b.best[new] = z0[new], u_last[new], 0.0, 0
             out[new] = z0[new]
         return out
+
+    def _steady_z(self, i2m, u_last):
+        """The steady state ``z = [I1, I2, w]`` (n, 3) the measured I2 ``i2m`` implies under the V2 ``u_last``
+        (``w`` explains the offset): a filter's start (made only when one starts)."""
+        lk = self._link
+        x = lk.omega_rad_s * lk.lm_h
+        det = lk.r1_ohm * lk.r2_ohm + x * x
+        w = (x * lk.v1_amp_v - det * i2m) / lk.r1_ohm - u_last
+        return np.stack([(lk.r2_ohm * lk.v1_amp_v + x * (u_last + w)) / det, i2m, w], axis=1)
 
     def act(self, obs):
         from .threads import single_blas_thread
