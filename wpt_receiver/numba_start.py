@@ -19,7 +19,7 @@ layout puts it (then numba imports it as before).
 :func:`cache_loads_without_registries` goes further for a process that only *loads* compiled kernels from
 numba's cache (``compare``): numba's ``Cache.load_overload`` refreshes the target context before it reads an
 entry, i.e. imports and installs every typing and lowering registry numba has (``numba.cpython.*``,
-``numba.np.arraymath``, ``linalg``, ``random``, ``typed``, ...: 0.3-0.6 s of CPU, the largest part of
+``numba.np.arraymath``, ``linalg``, ``random``, ``typed``, ...: ~0.3 s of CPU under load, much of
 numba's start-up), although a cached entry is machine code that needs none of them, only numba's runtime
 (NRT) linked in. With the hook a cache load initialises the runtime alone; anything that compiles (a cache
 miss, a new signature) still refreshes both contexts first (numba's compiler does that itself), so what runs

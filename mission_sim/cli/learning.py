@@ -325,7 +325,7 @@ def _cmd_compare(args) -> int:
     if not args.policies and not args.train_seeds and sb3_installed():
         pols, groups = _shipped_seed_rows(pols)
     _check_compare(args, pols, scns, groups)
-    cache_loads_without_registries()   # cached kernels loaded without numba's registries (0.3-0.6 s of CPU)
+    cache_loads_without_registries()   # cached kernels loaded without numba's registries (~0.3 s of CPU)
     pols = _rl_or_skip(pols, explicit=bool(args.policies))
     pols = _mpc_or_skip(pols, explicit=bool(args.policies))
     if not args.no_plot:
