@@ -11,12 +11,13 @@ round each (numba's caches, the disk cache); median and range of the wall time a
 without ``__pycache__`` compiles its ~60 modules in every run. The printed tables of the two trees are
 compared (they must be the same text).
 
-Critical path (``--timeline``): one run of the same command in this process, the CPU time of the parent
+Critical path (``--timeline N``): N runs of the same command, each a fresh interpreter calling ``main()`` (this
+tree's, and the peer's alternating when ``--peer`` is given), the CPU time of the parent
 before the fork (imports, numba's start-up), of the parent after it (its batched env), of the forked
 child (the MPC) and the wall times of those points. On 2 free cores the wall time is about
 ``before-fork + max(parent after, child) + tail``.
 
-    python benchmarks/bench_compare.py [--repeat 5] [--peer DIR] [--timeline] [--json]
+    python benchmarks/bench_compare.py [--repeat 5] [--peer DIR] [--timeline N] [--json]
 """
 
 from __future__ import annotations
@@ -102,14 +103,14 @@ print(json.dumps({"marks": marks, "child_cpu_s": r.ru_utime + r.ru_stime, "load"
 '''
 
 
-def timeline() -> dict:
-    """One in-process run: the wall and CPU times of the parent at the fork, when its own runs are done, when
-    the child's result arrives and at the end; the child's CPU time."""
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+def timeline(tree: Path = ROOT) -> dict:
+    """One in-process run on ``tree``: the wall and CPU times of the parent at the fork, when its own runs are
+    done, when the child's result arrives and at the end; the child's CPU time."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
     with tempfile.TemporaryDirectory() as tmp:
-        r = subprocess.run([sys.executable, "-c", _TIMELINE, *ARGS, "--out", f"{tmp}/c"], cwd=ROOT, env=env,
+        r = subprocess.run([sys.executable, "-c", _TIMELINE, *ARGS, "--out", f"{tmp}/c"], cwd=tree, env=env,
                            check=True, capture_output=True, text=True)
-    return json.loads(r.stdout.splitlines()[-1])
+    return {"tree": str(tree), **json.loads(r.stdout.splitlines()[-1])}
 
 
 def _print(r: dict) -> None:
@@ -126,7 +127,8 @@ def _print(r: dict) -> None:
         f_w, f_c = m["fork"]
         d_w, d_c = m["parent done, waits for the child"]
         got = m["child's result received"][0]
-        print(f"  in process (load {t['load'][0]:.2f}): before the fork {f_c:.2f} s CPU ({f_w:.2f} s wall); parent after "
+        who = "" if t.get("tree", str(ROOT)) == str(ROOT) else f" {t['tree']}"
+        print(f"  in process{who} (load {t['load'][0]:.2f}): before the fork {f_c:.2f} s CPU ({f_w:.2f} s wall); parent after "
               f"it {d_c - f_c:.2f} s CPU (done at {d_w:.2f} s wall); child {t['child_cpu_s']:.2f} s CPU (result at "
               f"{got:.2f} s wall); end {m['end'][0]:.2f} s wall, {m['end'][1]:.2f} s CPU in the parent")
 
@@ -140,7 +142,8 @@ def main(argv=None):
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
     r = {"end_to_end": end_to_end(a.repeat, a.peer)}
-    r["timeline"] = [timeline() for _ in range(a.timeline)]
+    trees = [ROOT] + ([a.peer.resolve()] if a.peer is not None else [])
+    r["timeline"] = [timeline(tree) for _ in range(a.timeline) for tree in trees]   # alternating with the peer
     if a.json:
         print(json.dumps(r, indent=1))
     else:

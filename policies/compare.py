@@ -188,7 +188,8 @@ def _row_seeds(label, scenario, per_seed, ref):
 
 def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: int = DEFAULT_EPISODES,
             seed: int = 1000, progress: bool = False, config=None, train_seeds: dict | None = None,
-            reference: str = REFERENCE, fork: bool = True, extra=(), extra_traces: dict | None = None):
+            reference: str = REFERENCE, fork: bool = True, extra=(), extra_traces: dict | None = None,
+            on_extra=None):
     """Run every policy on every scenario (same seeds); returns ``(rows, traces)``; ``fork``: the MPC's runs
     in a forked process beside the others where possible (:mod:`policies.forked`; the same results).
 
@@ -197,7 +198,8 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
     and the paired differences ``d_<metric>...`` against ``reference`` (run even when not listed).
     ``extra``: more specs run on the first scenario in the same batched env, no rows; their traces go
     into ``extra_traces`` under ``(spec, scenario)`` (e.g. :func:`frontier_specs`, for :func:`frontier`'s
-    ``traces``: one env and one rollout instead of two)."""
+    ``traces``: one env and one rollout instead of two). ``on_extra``: called with those traces as soon as they
+    are there, before waiting for the forked child (e.g. the frontier's rows, off the critical path)."""
     if int(episodes) != episodes or not 1 <= episodes <= 100_000:
         raise ValueError(f"episodes={episodes!r} is invalid; valid range: integer 1..100000")
     groups = [(p, [p]) for p in policies] + list((train_seeds or {}).items())
@@ -206,7 +208,7 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
     bar = _bar(progress, total=len(jobs), desc="compare", unit="run", dynamic_ncols=True)
     with single_blas_thread():   # batched small matrices (policies.threads)
         _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar, fork,
-                      (tuple(extra), {} if extra_traces is None else extra_traces))
+                      (tuple(extra), {} if extra_traces is None else extra_traces, on_extra))
     bar.close()
     return rows, traces
 
@@ -243,10 +245,11 @@ def _one_numba_thread():
 
 
 def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar, fork=True,
-                  extra=((), None)):
+                  extra=((), None, None)):
     """The runs of :func:`compare` (rows and traces filled in place); with ``fork`` the :data:`FORKED`
     policies run in a child process (:class:`policies.forked.Forked`) on the same windows meanwhile;
-    ``extra``: ``(specs, traces)``, specs run beside the first scenario's, their traces filled in place."""
+    ``extra``: ``(specs, traces, on_extra)``, specs run beside the first scenario's, their traces filled in
+    place, then ``on_extra(traces)`` (if given) before the child's result is awaited."""
     from .forked import Forked, available
 
     n, seed = int(episodes), int(seed)
@@ -257,6 +260,7 @@ def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, tr
     if heavy:   # numba's kernels loaded before the fork (the child inherits them), its thread pool not yet
         from envs import SbarChargingVectorEnv
         SbarChargingVectorEnv(num_envs=1, scenario=scenarios[0], config=config).reset(seed=seed)
+        _preimport("numba.np.arrayobj")   # the env step's cache entry imports it on loading: once, not in both
         job = Forked(_forked_runs, heavy, scenarios, n, seed, config)
     placed, refs = {}, {}
     try:
@@ -269,6 +273,8 @@ def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, tr
                 extra[1].update({(sp, s): runs[sp] for sp in extra[0] if first and sp in runs})
                 refs[s] = runs[reference]
                 _add_rows(s, groups, reference, runs, placed, bar)
+        if extra[0] and extra[2] is not None:
+            extra[2](extra[1])
         for s, runs in (job.result() if job else {}).items():
             _add_rows(s, groups, reference, {**runs, reference: refs[s]}, placed, bar)
     except BaseException:
@@ -279,6 +285,16 @@ def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, tr
         for label, _ in groups:
             rows.append(placed[(s, label)][0])
             traces[(label, s)] = placed[(s, label)][1]
+
+
+def _preimport(module: str) -> None:
+    """Import ``module`` if it exists (a module a cached kernel's entry imports when it is loaded: numba's
+    ``arrayobj``, ~0.1 s of CPU, imported before the fork instead of in both processes after it)."""
+    import importlib
+    try:
+        importlib.import_module(module)
+    except ImportError:
+        pass
 
 
 def _add_rows(s, groups, reference, runs, placed, bar):

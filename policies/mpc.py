@@ -138,14 +138,34 @@ class _Model:
 
     @staticmethod
     def _kalman(ad, b2, meas_sd_a=0.1, q_i=1e-3, q_w=0.05):
-        """Steady-state gain of the filter on z = [I1, I2, w] (w a random walk on V2) from I2."""
-        from scipy.linalg import solve_discrete_are
+        """Steady-state gain of the filter on z = [I1, I2, w] (w a random walk on V2) from I2 (3, 1)."""
         A = np.zeros((3, 3))
         A[:2, :2], A[:2, 2], A[2, 2] = ad, b2, 1.0
         C = np.array([[0.0, 1.0, 0.0]])
         Q = np.diag([q_i ** 2, q_i ** 2, q_w ** 2])
-        P = solve_discrete_are(A.T, C.T, Q, np.array([[meas_sd_a ** 2]]))
-        return P @ C.T @ np.linalg.inv(C @ P @ C.T + meas_sd_a ** 2)
+        return _steady_kalman_gain(A, C, Q, np.array([[meas_sd_a ** 2]]))
+
+
+def _steady_kalman_gain(A, C, Q, R) -> np.ndarray:
+    """``P C^T (C P C^T + R)^-1`` with ``P`` the solution of the filter's discrete Riccati equation
+    (``scipy.linalg.solve_discrete_are(A.T, C.T, Q, R)``), through the disk cache
+    (:mod:`wpt_receiver.diskcache`, keyed by the exact bits of the four matrices and the scipy and numpy
+    versions): ``import scipy.linalg`` is 0.3-1 s of CPU, most of the MPC's set-up (``compare`` pays it in
+    its forked MPC child, on the critical path) for one 3 x 3 equation whose answer never changes. A cached
+    gain is the array computed here before (the same bits)."""
+    import scipy  # the top-level package only (cheap): its version is part of the key
+
+    from wpt_receiver.diskcache import load, store
+
+    key = (f"kalman v1 A{A.shape}={A.tobytes().hex()} C{C.shape}={C.tobytes().hex()} Q{Q.shape}={Q.tobytes().hex()} "
+           f"R{R.shape}={R.tobytes().hex()} scipy={scipy.__version__} numpy={np.__version__}")
+    gain = load("kalman", key, (A.shape[0], C.shape[0]))
+    if gain is None:
+        from scipy.linalg import solve_discrete_are
+        P = solve_discrete_are(A.T, C.T, Q, R)
+        gain = P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+        store("kalman", key, gain)
+    return gain
 
 
 class _DelayBank:
@@ -162,6 +182,8 @@ class _DelayBank:
         self.u = np.repeat(np.asarray(u0, dtype=float)[None], max(self.delays) + 1, axis=0)   # u[j] = V2 of step k-1-j
         self.score = np.zeros((len(self.delays), self.n))
         self.best = np.zeros(self.n, dtype=int)
+        self._lag = np.asarray(self.delays)   # u's rows of the hypotheses (an index array, built once)
+        self._prefer = (1.0 + 0.1 * np.arange(len(self.delays)))[:, None]   # a shorter delay preferred
 
     def _step(self, z, u):
         """One model step of the estimates ``z`` (..., 3) under the V2 ``u`` (...) [V]."""
@@ -173,21 +195,21 @@ class _DelayBank:
 
     def update(self, y, u_last):
         """Filter the measured I2 ``y`` (n,) [A] given the V2 of the last step ``u_last`` (n,) [V]: ``z`` now."""
-        self.u = np.roll(self.u, 1, axis=0)
+        self.u[1:] = self.u[:-1]   # shifted by one step in place (np.roll's values, without a new array)
         self.u[0] = u_last
-        x = self._step(self.z, self.u[list(self.delays)])   # every hypothesis at once (H, n, 3)
+        x = self._step(self.z, self.u[self._lag])   # every hypothesis at once (H, n, 3)
         innov = y[None, :] - x[..., 1]
         self.z = x + innov[..., None] * self.m.kalman[:, 0]
         self.score += (1.0 / _DELAY_MEMORY) * (innov * innov - self.score)
         # a shorter delay is preferred unless a longer one explains the measurements clearly better
-        self.best = np.argmin(self.score * (1.0 + 0.1 * np.arange(len(self.delays)))[:, None], axis=0)
+        self.best = np.argmin(self.score * self._prefer, axis=0)
         return self.now()
 
     def now(self):
         """The chosen hypothesis' estimate carried forward over its delay (n, 3)."""
         cols = np.arange(self.n)
         z = self.z[self.best, cols]
-        d = np.asarray(self.delays)[self.best]
+        d = self._lag[self.best]
         for j in range(int(d.max(initial=0)) - 1, -1, -1):
             go = np.flatnonzero(d > j)
             z[go] = self._step(z[go], self.u[j, go])
@@ -248,20 +270,25 @@ class MPCPolicy:
         steady state the first measured I2 implies (``w`` explains the offset); the rows ``new`` (a new
         window in a batched env that resets its windows) are started afresh the same way."""
         u_last = self._v2_of(d_last, vl)
-        lk = self._link
-        x = lk.omega_rad_s * lk.lm_h
-        det = lk.r1_ohm * lk.r2_ohm + x * x
-        w = (x * lk.v1_amp_v - det * i2m) / lk.r1_ohm - u_last
-        z0 = np.stack([(lk.r2_ohm * lk.v1_amp_v + x * (u_last + w)) / det, i2m, w], axis=1)
         if self._bank is None or self._bank.n != len(i2m):
-            self._bank = _DelayBank(self._model, z0, u_last, self.delays)
+            self._bank = _DelayBank(self._model, self._steady_z(i2m, u_last), u_last, self.delays)
             return self._bank.now()
         out = self._bank.update(i2m, u_last)
         if new is not None and len(new):
+            z0 = self._steady_z(i2m, u_last)
             b = self._bank
             b.z[:, new], b.u[:, new], b.score[:, new], b.best[new] = z0[new], u_last[new], 0.0, 0
             out[new] = z0[new]
         return out
+
+    def _steady_z(self, i2m, u_last):
+        """The steady state ``z = [I1, I2, w]`` (n, 3) the measured I2 ``i2m`` implies under the V2 ``u_last``
+        (``w`` explains the offset): a filter's start (made only when one starts)."""
+        lk = self._link
+        x = lk.omega_rad_s * lk.lm_h
+        det = lk.r1_ohm * lk.r2_ohm + x * x
+        w = (x * lk.v1_amp_v - det * i2m) / lk.r1_ohm - u_last
+        return np.stack([(lk.r2_ohm * lk.v1_amp_v + x * (u_last + w)) / det, i2m, w], axis=1)
 
     def act(self, obs):
         from .threads import single_blas_thread
@@ -318,6 +345,7 @@ class MPCPolicy:
         self._A_stop[:, :f], self._A_stop[:, f] = self._Gf, -1.0
         self._m2_flat = np.ravel_multi_index((self._m2_r, self._m2_c), self._A_stop.shape)
         self._A_m2 = self._A_stop.flat[self._m2_flat].copy()   # G's entries where the excess slope is added
+        self._A_stop_flat = self._A_stop.reshape(-1)   # a view: per QP only the slope's entries are written
         self._knots = np.asarray(BLOCKS[:f])
         self._bl_stop = np.concatenate([np.zeros(f + 1), np.full(len(m.G), -_BIG)])
         self._sense = np.zeros(f + 1 + len(m.G), dtype=np.int32)
@@ -376,6 +404,7 @@ class MPCPolicy:
         # the entries the slope changes, for every receiver at once (n, nnz): the same sums as one at a time;
         # the other entries of A are fixed (self._A_stop, which daqp only reads)
         A, vals = self._A_stop, self._A_m2 + slope[:, self._m2_r // 2] * self._m2_v
+        A_flat, m2_flat = self._A_stop_flat, self._m2_flat
         # V2 = 0 from a fixed time after the stop on (a shrinking horizon: a receding terminal could be
         # put off forever while the bound holds V2 up), at the first knot at or after it
         bu = np.empty((len(e), f + 1 + ub.shape[1]))
@@ -386,7 +415,7 @@ class MPCPolicy:
         v, slack = np.zeros((len(e), f + 1)), np.zeros(len(e))
         knots = np.asarray(BLOCKS[:-1])
         for r in range(len(e)):
-            A.flat[self._m2_flat] = vals[r]
+            A_flat[m2_flat] = vals[r]   # into A through its flat view (A.flat's iterator costs ~5x)
             x, flag = self._daqp(e[r], q[r], A, bu[r], self._bl_stop)
             if flag < 1:
                 v[r, :f] = np.minimum(v_bar[r, knots], vmax[r])   # keep the plan

@@ -23,7 +23,8 @@ Depends on nothing else of dronewpt. Modules, in the order data flows:
 ``modal_kernel``        the exact-mode link step compiled (numba, imported on demand): modes per Lm,
                         ZOH per dt, energies, v2 with quadrature and peak from a table
 ``kernel_cache``        numba's cache of a kernel dropped when a module it compiles in changes
-``numba_start``         numba's start-up without the scipy.linalg package (its BLAS probe's module alone)
+``numba_start``         numba's start-up without the scipy.linalg package (its BLAS probe's module alone),
+                        cache loads without numba's registries
 ``sizing``              rectifier rating, parts and mass per policy (switching or envelope runs)
 ``detuning``            C1 / C2 off resonance: overshoot table of the controllers
 ``c_export``            the controller (Fig. 5) as generated C99 for a DSP, test vectors, op count

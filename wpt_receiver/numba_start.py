@@ -15,6 +15,15 @@ import hook (:class:`_Attach`) then sets the package's ``cython_blas`` attribute
 importing it after the package would have. Nothing happens when numba's registries are loaded already, when
 ``scipy.linalg`` (or the module) is imported already, or when the extension is not where scipy's
 layout puts it (then numba imports it as before).
+
+:func:`cache_loads_without_registries` goes further for a process that only *loads* compiled kernels from
+numba's cache (``compare``): numba's ``Cache.load_overload`` refreshes the target context before it reads an
+entry, i.e. imports and installs every typing and lowering registry numba has (``numba.cpython.*``,
+``numba.np.arraymath``, ``linalg``, ``random``, ``typed``, ...: ~0.3 s of CPU under load, much of
+numba's start-up), although a cached entry is machine code that needs none of them, only numba's runtime
+(NRT) linked in. With the hook a cache load initialises the runtime alone; anything that compiles (a cache
+miss, a new signature) still refreshes both contexts first (numba's compiler does that itself), so what runs
+is the same machine code either way (``tests/test_compare_startup.py``).
 """
 
 from __future__ import annotations
@@ -24,7 +33,7 @@ import importlib.util
 import os
 import sys
 
-__all__ = ["prepare", "BLAS_MODULE"]
+__all__ = ["prepare", "cache_loads_without_registries", "BLAS_MODULE"]
 
 #: the module numba's BLAS probe imports
 BLAS_MODULE = "scipy.linalg.cython_blas"
@@ -99,3 +108,33 @@ class _AttachLoader:
 
     def __getattr__(self, name):   # get_filename, get_code, is_package, ... of the real loader
         return getattr(self._loader, name)
+
+
+def cache_loads_without_registries() -> bool:
+    """Make numba's cache loads skip the registries' refresh (module notes); True if installed now. Imports
+    numba (call it where numba is used anyway). Installed only over numba's own ``Cache.load_overload`` of the
+    known shape (a refresh, then ``_load_overload`` inside ``_guard_against_spurious_io_errors``): another
+    numba version keeps its own. Idempotent, never raises."""
+    try:
+        from numba.core import caching
+
+        load = caching.Cache.load_overload
+        if getattr(load, "_dronewpt_lazy", False):
+            return False
+        names = set(getattr(getattr(load, "__code__", None), "co_names", ()))
+        if not {"refresh", "_load_overload", "_guard_against_spurious_io_errors"} <= names:
+            return False
+    except Exception:  # noqa: BLE001 - numba missing or laid out otherwise: nothing to do
+        return False
+
+    def load_overload(self, sig, target_context):
+        from numba.core.runtime import rtsys
+
+        rtsys.initialize(target_context)   # what a cached entry needs of the refresh: numba's runtime (NRT)
+        with self._guard_against_spurious_io_errors():
+            return self._load_overload(sig, target_context)
+
+    load_overload._dronewpt_lazy = True
+    load_overload.__doc__ = load.__doc__
+    caching.Cache.load_overload = load_overload
+    return True
