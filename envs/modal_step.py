@@ -125,7 +125,11 @@ def _v2_closed(q0, sgn, k):
     r`` solves ``|r - B| = |A|``, one square root (``r = Re B + sqrt(|A|^2 - Im(B)^2)``, the root with r >
     0). Outside the conduction window (``Re(sgn n kw) < sin(pi d/2)``: the bracket's ``g`` is of one sign
     over the window) the angle is the window's edge on the solution's side, ``F = +-j sgn (4/pi) cos(pi
-    d/2)``. Without such a solution: :func:`_v2_edges`. Returns ``(F, I2e, j e^{-j e}, ok)``, ``V2 = Vc F +
+    d/2)``. Without such a solution (``|A| <= |B|``: the clamp alone would turn I2 within the sub-step) the
+    diode rectifier blocks when the V2 that holds the end I2 at 0, ``F = -q0 / (den qv)``, is within the
+    clamp (``|F| <= (4/pi)(1 - sin(pi d/2))``, the describing function's set-valued clamp at I2 = 0; a
+    C1 detuned so that the emf stays below the clamp, where the switching model settles at no
+    transfer): ``I2e = 0``; else :func:`_v2_edges`. Returns ``(F, I2e, j e^{-j e}, ok)``, ``V2 = Vc F +
     ws I2e``."""
     inv_den, qv, cs, bn, kw, s, c = k
     a = q0 * inv_den - sgn * cs
@@ -142,6 +146,10 @@ def _v2_closed(q0, sgn, k):
             t = complex(s, c if t.imag > 0.0 else -c)
             f = complex(0.0, sgn * _FOUR_OVER_PI * t.imag)
             return f, q0 * inv_den + qv * f, t, True
+    # no conducting end current: the rectifier blocks if the V2 that holds I2e at 0 is within the clamp
+    f = -q0 * inv_den / qv if qv != 0.0 else 0j
+    if abs(f) <= _FOUR_OVER_PI * (1.0 - s):
+        return f, 0j, complex(c, sgn * s), True
     return _v2_edges(q0, sgn, k)
 
 
