@@ -317,7 +317,7 @@ def test_detuned_modal_rm_state_is_the_detuned_modes():
 def test_detuned_link_settles_where_the_switching_model_does(c_rel):
     """A window with C1 +c, C2 -c (schottky devices, stiff 30 V) dropped from d = 0.3 to RM: the modal link's
     |I2| settles within 1 % of the switching model's fundamental of the same circuit (measured -0.43 % at
-    2 %, 0.00 % tuned). (At +-4 % it does not: docs/envs.md.)"""
+    2 %, 0.00 % tuned). At +-4.3 % both block: test_detuned_modal_link_blocks_where_the_switching_model_does."""
     from wpt_receiver.switching import SwitchingConfig, SwitchingLink
     dev = preset("schottky")
     w = P.omega_rad_s
