@@ -15,7 +15,9 @@ vector env.
 
 The steady state (:func:`complex_steady`) has a closed form: with ``Z_k = R_k + j X_k``,
 ``X = w Lm`` and ``Zeff = Z2 + X^2 / Z1 = a + j b``, the RM / any-duty steady ``|J2| = r`` solves
-``(a r + |V2|)^2 + (b r)^2 = (X V1 / |Z1|)^2``.
+``(a r + |V2|)^2 + (b r)^2 = (X V1 / |Z1|)^2``; when ``X V1 / |Z1|`` (the induced emf with J2 = 0)
+is at most ``|V2|`` it has no root r > 0 (``a > 0``) and the rectifier blocks: ``J2 = 0``, ``J1 = V1 / Z1``
+(a C1 off by more than ~3 % at Table I in RM; the switching model settles there from any start).
 """
 
 from __future__ import annotations
@@ -70,7 +72,9 @@ def complex_steady(link, lm_h, c1_f, c2_f, v2_mag_v, r2_add_ohm=0.0):
     a, b = zeff.real, zeff.imag
     k = x * link.v1_amp_v / np.abs(z1)
     r = (-a * v2 + np.sqrt(np.maximum(a * a * v2 * v2 - (a * a + b * b) * (v2 * v2 - k * k), 0.0))) / (a * a + b * b)
-    j2 = 1j * x * link.v1_amp_v / z1 / (zeff + v2 / r)
+    blocks = k <= v2   # the emf with J2 = 0 is within the clamp: the rectifier blocks, J2 = 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        j2 = np.where(blocks, 0j, 1j * x * link.v1_amp_v / z1 / (zeff + v2 / np.where(blocks, 1.0, r)))
     j1 = (link.v1_amp_v + 1j * x * j2) / z1
     return j1, j2
 

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit, prange
 
-from wpt_receiver.modal_kernel import (MC_D, MC_G1, MC_G2, MC_LAM, MC_S, ZC_E, ZC_PHI, inst_peak, modes, phasors,
+from wpt_receiver.modal_kernel import (MC_D, MC_G1, MC_G2, MC_LAM, MC_S, ZC_E, ZC_PHI, blocking_v2, inst_peak, modes, phasors,
                                        rect_current_a, sbar_implicit, sbar_shift, sbar_v2, short_weight,
                                        steady_state, stored_energy_j, zoh)
 from wpt_receiver.modal_kernel import step as modal_step
@@ -116,7 +116,7 @@ def _fast_coefs(mc, zc, h, cf):
 
 
 @njit(cache=True)
-def _v2_closed(q0, sgn, k):
+def _v2_closed(q0, sgn, k, block=False):
     """The SBAR's V2 over a sub-step whose end I2 is ``q0 + q1 V2``, implicit in the commutation as
     :func:`wpt_receiver.modal_kernel.sbar_implicit` (the commutation angle the end i2 has, with the v2 of
     that angle held; the sign ``sgn`` of the start's Re I2) with the harmonics' shift ``delta`` held.
@@ -125,7 +125,13 @@ def _v2_closed(q0, sgn, k):
     r`` solves ``|r - B| = |A|``, one square root (``r = Re B + sqrt(|A|^2 - Im(B)^2)``, the root with r >
     0). Outside the conduction window (``Re(sgn n kw) < sin(pi d/2)``: the bracket's ``g`` is of one sign
     over the window) the angle is the window's edge on the solution's side, ``F = +-j sgn (4/pi) cos(pi
-    d/2)``. Without such a solution: :func:`_v2_edges`. Returns ``(F, I2e, j e^{-j e}, ok)``, ``V2 = Vc F +
+    d/2)``. Without such a solution (``|A| <= |B|``: the clamp alone would turn I2 within the sub-step) the
+    diode rectifier blocks when the V2 that holds the end I2 at 0, ``F = -q0 / (den qv)``, is within the
+    clamp (``|F| <= (4/pi)(1 - sin(pi d/2))``, the describing function's set-valued clamp at I2 = 0),
+    on a window in the blocking regime (``block``: its steady state at this duty blocks,
+    :func:`wpt_receiver.modal_kernel.blocking_v2`; a C1 detuned so that the emf stays below the clamp,
+    where the switching model settles at no transfer): ``I2e = 0``; else :func:`_v2_edges` (every other
+    window's step unchanged). Returns ``(F, I2e, j e^{-j e}, ok)``, ``V2 = Vc F +
     ws I2e``."""
     inv_den, qv, cs, bn, kw, s, c = k
     a = q0 * inv_den - sgn * cs
@@ -142,6 +148,10 @@ def _v2_closed(q0, sgn, k):
             t = complex(s, c if t.imag > 0.0 else -c)
             f = complex(0.0, sgn * _FOUR_OVER_PI * t.imag)
             return f, q0 * inv_den + qv * f, t, True
+    if block:   # no conducting end current: the rectifier blocks if the V2 holding I2e at 0 is within the clamp
+        f = -q0 * inv_den / qv if qv != 0.0 else 0j
+        if abs(f) <= _FOUR_OVER_PI * (1.0 - s):
+            return f, 0j, complex(c, sgn * s), True
     return _v2_edges(q0, sgn, k)
 
 
@@ -225,14 +235,15 @@ def _samples(mc, zq, z, v1, v2, n_q, best, i2_best):
 
 
 @njit(cache=True)
-def _substeps(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v1c, out, en, book, lm):
+def _substeps(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v1c, out, en, book, lm, block):
     """``n_sub`` sub-steps of ``h`` [s] from the mode amplitudes ``z`` (4 reals, in place) and the start's
     I2 ``i2``, V2 updated at each (the circuit decides v2 once per half cycle) by :func:`_v2_closed`
     (constants ``k``; the harmonics' shift looked up again when |I2| moved by 20 % since), the state advanced by the sub-step's affine maps ``cf`` (:data:`envs.layout.FAST`;
     with ``book`` by :func:`wpt_receiver.modal_kernel.step` on the ZOH ``zs``, its energies into ``en``,
     the same state to rounding). A sub-step that the closed forms do not solve takes
     :func:`~wpt_receiver.modal_kernel.sbar_implicit`. Returns ``(V2, j e^{-j e}, |I2| peak, its I2 phasor,
-    sum of I_L over the sub-steps)``; ``lm`` [H] the Lm of ``mc`` (the stored energy)."""
+    sum of I_L over the sub-steps)``; ``lm`` [H] the Lm of ``mc`` (the stored energy); ``block``: the window
+    blocks in steady state (:func:`_v2_closed`)."""
     z0, z1 = complex(z[0], z[1]), complex(z[2], z[3])
     q1, a0, a1, bv = cf[FAST.q1], cf[FAST.a0], cf[FAST.a1], cf[FAST.b] * v1c
     e0, e1, k0, k1 = cf[FAST.e0], cf[FAST.e1], cf[FAST.k0] * v1c, cf[FAST.k1] * v1c
@@ -241,7 +252,7 @@ def _substeps(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v
     sgn = -1.0 if i2.real < 0.0 else 1.0
     r_ref = abs(i2)
     for _ in range(n_sub):
-        f, i2e, t, ok = _v2_closed(a0 * z0 + a1 * z1 + bv, sgn, k)
+        f, i2e, t, ok = _v2_closed(a0 * z0 + a1 * z1 + bv, sgn, k, block)
         if not ok:
             f, i2e, e = sbar_implicit(lc, tab, mc, zs, z0, z1, v1c, v2, d, vc, ws, -1.0, 1e-13)
             t = complex(math.sin(e), math.cos(e))
@@ -314,8 +325,9 @@ def _link_step(z, v2, e, vl, d, lc, tab, cz, dt, n_sub, n_q, vf, dr, v1, hold_to
     if split:
         n, h, zs, cf = n_sub, dt / n_sub, cz[CZ_SUB:CZ_SAMPLE], cz[CZ_FAST:CZ_FASTH]
     k = _solve_consts(cf[FAST.q1], ws, vc, kw, sw, cw)
+    block = abs(blocking_v2(mc, v1c)) <= _FOUR_OVER_PI * vc * (1.0 - sw)   # the window blocks in steady state
     v2, t, pk_env, i2_pk, qsum = _substeps(z, v2, i2a, k, vc, d, ws, lc, tab, mc, zs, cf, cz[CZ_SAMPLE:CZ_FAST], h,
-                                           n, n_q if split else 1, v1c, out, en, book, cz[CZ_KEY].real)
+                                           n, n_q if split else 1, v1c, out, en, book, cz[CZ_KEY].real, block)
     i1, i2 = phasors(mc, z, v1c, v2)
     a = abs(i2)
     if a > pk_env:   # the end's I2 from the state (the closed form's end current to rounding)

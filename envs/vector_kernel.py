@@ -155,26 +155,65 @@ def _substeps_one(i1, i2, vm, rx, vc, c, n_sub):
 
 
 @njit(cache=True, error_model="numpy")
+def _clamp_implicit(m2r, m2i, hr, hi, v2c, rx):
+    """The SBAR's V2 over a rectifier-period sub-step taken implicitly (V2 in phase with the sub-step's
+    *end* J2, the describing function's set-valued clamp at J2 = 0): ``m2 = m2r + j m2i`` [A] the end J2
+    with V2 = 0, ``h = hr + j hi`` [A/V] the end J2 per volt of the input ``U = -V2``, ``v2c`` [V] the
+    clamp's magnitude (:func:`_sbar`), ``rx`` [ohm] the short window's excess. The end J2 = rho
+    e^(j theta) solves ``|(1 + h rx) rho + h v2c| = |m2|``; when ``|h v2c| >= |m2|`` the rectifier blocks
+    (the diodes see less than the clamp: J2 = 0 at the end, ``U = -m2 / h`` with ``|U| <= v2c``).
+    Returns the input ``(Re U, Im U)`` [V]."""
+    br, bi = hr * v2c, hi * v2c
+    mm = m2r * m2r + m2i * m2i
+    if br * br + bi * bi >= mm:   # blocking: the V2 that holds J2 at 0 is within the clamp
+        hh = hr * hr + hi * hi
+        return -(m2r * hr + m2i * hi) / hh, -(m2i * hr - m2r * hi) / hh
+    ar, ai = 1.0 + hr * rx, hi * rx
+    aa = ar * ar + ai * ai
+    p = ar * br + ai * bi   # Re(A conj B)
+    rho = (-p + math.sqrt(p * p - aa * (br * br + bi * bi - mm))) / aa
+    # e^(j theta) = m2 / (A rho + B)
+    dr_, di_ = ar * rho + br, ai * rho + bi
+    dd = dr_ * dr_ + di_ * di_
+    er, ei = (m2r * dr_ + m2i * di_) / dd, (m2i * dr_ - m2r * di_) / dd
+    v2 = v2c + rx * rho
+    return -v2 * er, -v2 * ei
+
+
+@njit(cache=True, error_model="numpy")
 def _complex_step(x, vl, d, cc, vf, dr, v1, n_sub):
     """One control period of a detuned tank (:mod:`envs.detuned`): ``x`` (:data:`XC`) the complex
     envelope ``[Re J1, Re J2, Im J1, Im J2]`` [A], updated in place over ``n_sub`` rectifier-period
     sub-steps with ``cc`` = Ad (16), Bd (16) of one sub-step; the SBAR's V2 in phase with J2,
-    re-evaluated every sub-step (``V2 = |V2c| + rx |J2|``, :func:`_sbar`). Returns ``(|J1|, |J2|, peak
-    |J2| over the sub-step ends, I_L (mean |J2|), |V2| at the start)``."""
+    re-evaluated every sub-step (``V2 = |V2c| + rx |J2|``, :func:`_sbar`). Where the clamp alone could
+    turn J2 within a sub-step (|J2| <= |h| |V2c|, ``h`` the end J2 per volt of V2) or the explicit V2
+    would reverse J2, the sub-step is taken implicitly (:func:`_clamp_implicit`): the diode rectifier
+    blocks (J2 held at 0) while the V2 that would hold it there is within the clamp, as the switching
+    model does when the induced emf stays below the clamp (a strongly detuned C1), instead of an
+    explicit sign that chatters about J2 = 0. Returns ``(|J1|, |J2|, peak |J2| over the sub-step ends,
+    I_L (mean |J2|), |V2| at the start)``."""
     vc = vl + vf
     v2c, rx = _sbar(vc, d, dr)
     x0, x1, x2, x3 = x[XC.re_j1], x[XC.re_j2], x[XC.im_j1], x[XC.im_j2]
     r = math.hypot(x1, x3)
     v2_0 = v2c + rx * r
+    hr, hi = cc[21], cc[29]   # end J2 per volt of U (the complex structure of Bd: cc[31] = hr, cc[23] = -hi)
+    h_clamp = math.hypot(hr, hi) * v2c
     pk, tot = -1.0, 0.0
     for _ in range(n_sub):
         pr, pi_ = (x1 / r, x3 / r) if r > 0.0 else (0.0, 1.0)
         v2 = v2c + rx * r
         u1, u3 = -v2 * pr, -v2 * pi_   # inputs [V1, -V2 e^(j phase(J2))] as real parts, imaginary parts
+        f1 = cc[4] * x0 + cc[5] * x1 + cc[6] * x2 + cc[7] * x3 + cc[20] * v1
+        f3 = cc[12] * x0 + cc[13] * x1 + cc[14] * x2 + cc[15] * x3 + cc[28] * v1
+        n1 = f1 + cc[21] * u1 + cc[23] * u3
+        n3 = f3 + cc[29] * u1 + cc[31] * u3
+        if r <= h_clamp or n1 * x1 + n3 * x3 <= 0.0:
+            u1, u3 = _clamp_implicit(f1, f3, hr, hi, v2c, rx)
+            n1 = f1 + cc[21] * u1 + cc[23] * u3
+            n3 = f3 + cc[29] * u1 + cc[31] * u3
         n0 = cc[0] * x0 + cc[1] * x1 + cc[2] * x2 + cc[3] * x3 + cc[16] * v1 + cc[17] * u1 + cc[19] * u3
-        n1 = cc[4] * x0 + cc[5] * x1 + cc[6] * x2 + cc[7] * x3 + cc[20] * v1 + cc[21] * u1 + cc[23] * u3
         n2 = cc[8] * x0 + cc[9] * x1 + cc[10] * x2 + cc[11] * x3 + cc[24] * v1 + cc[25] * u1 + cc[27] * u3
-        n3 = cc[12] * x0 + cc[13] * x1 + cc[14] * x2 + cc[15] * x3 + cc[28] * v1 + cc[29] * u1 + cc[31] * u3
         x0, x1, x2, x3 = n0, n1, n2, n3
         rn = math.hypot(x1, x3)
         pk = max(pk, rn)

@@ -140,3 +140,57 @@ def test_single_env_steps_detuned_as_the_vector_row():
         s1, sv = single.step(a[0]), vec.step(a)
         assert np.array_equal(s1[0], sv[0][0]) and s1[1] == sv[1][0]
         assert all(s1[4][k] == sv[4][k][0] for k in s1[4])
+
+
+def _emf_open_v(link, lm_h, c1_f, r1_extra_ohm=0.0):
+    """The induced emf amplitude [V] with the secondary open (J2 = 0): w Lm V1 / |Z1| (closed form)."""
+    w = link.omega_rad_s
+    z1 = complex(link.r1_ohm + r1_extra_ohm, w * link.l1_h - 1.0 / (w * c1_f))
+    return w * lm_h * link.v1_amp_v / abs(z1)
+
+
+def test_detuned_rectifier_blocks_where_the_emf_is_below_the_clamp():
+    """C1 +4.3..4.5 %: with the secondary open the induced emf (w Lm V1 / |Z1|, ~25 V) is below the clamp
+    VL + Vf, so the diodes cannot conduct in RM. Dropped from short mode (d = 1, where the shorted
+    secondary carries current) to RM, the envelope plant's |J2| settles at 0 with no ringing (it rang at
+    1.7-4.4 A before the clamp was set-valued), as the switching model of the same circuit does (its i2
+    fundamental below 1 mA)."""
+    from wpt_receiver.switching import SwitchingConfig, SwitchingLink
+    v = SbarChargingVectorEnv(num_envs=2, scenario={"base": "nominal", "c_detune": (0.043, 0.045)})
+    v.reset(seed=11)
+    link, dev = v.config.link, v.config.device_set()
+    w = link.omega_rad_s
+    c1 = (1.0 + v._c_rel[0]) / (w * w * link.l1_h)
+    c2 = (1.0 + v._c_rel[1]) / (w * w * link.l2_h)
+    lm = v._lm_all[:, 0]
+    emf = np.array([_emf_open_v(link, lm[e], c1[e], dev.inv_r_ohm) for e in range(2)])
+    assert np.all(emf < link.vl_v + dev.rect_vf_v)                   # the premise: below the clamp
+    i2 = []
+    for k in range(300):
+        _, _, _, _, info = v.step(np.full((2, 1), 1.0 if k < 30 else -1.0, np.float32))
+        i2.append(np.abs(info["i2_a"]))
+        if k == 29:
+            assert np.all(np.abs(info["i2_a"]) > 1.0)                # conducting in short mode
+    i2 = np.array(i2)
+    assert np.all(i2[-100:] < 1e-9) and np.all(np.abs(info["rect_current_a"]) < 1e-9)
+    d = np.r_[np.full(30, 1.0), np.zeros(120)]
+    sw = SwitchingLink(link.with_(lm_h=float(lm[0])), SwitchingConfig(c1_f=c1[0], c2_f=c2[0], devices=dev))
+    env = sw.simulate(d, v.config.dt_s).envelope()
+    assert env["i2_fund_a"].to_numpy()[:30].max() > 1.0 and np.all(env["i2_fund_a"].to_numpy()[-20:] < 1e-3)
+
+
+def test_detuned_blocking_start_and_closed_form():
+    """complex_steady's blocking state: J2 = 0 and J1 = V1 / Z1 when the open-circuit emf is at most |V2|,
+    the conducting root otherwise (C1 at 2 %: the emf ~51 V is above the (4/pi) 31 V clamp)."""
+    from envs.detuned import complex_steady
+    from wpt_receiver import TABLE_I
+    link = TABLE_I
+    w = link.omega_rad_s
+    c1 = np.array([1.043, 1.02]) / (w * w * link.l1_h)
+    c2 = np.array([0.957, 0.98]) / (w * w * link.l2_h)
+    v2 = 4.0 / np.pi * 31.0
+    j1, j2 = complex_steady(link, np.full(2, link.lm_h), c1, c2, np.full(2, v2))
+    emf = [_emf_open_v(link, link.lm_h, c) for c in c1]
+    assert emf[0] < v2 < emf[1]
+    assert j2[0] == 0 and j1[0] == pytest.approx(link.v1_amp_v / complex(link.r1_ohm, w * link.l1_h - 1 / (w * c1[0])))
+    assert abs(j2[1]) > 1.0 and np.isfinite(j1).all()

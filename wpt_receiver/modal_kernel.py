@@ -55,7 +55,7 @@ from numba import njit
 from .devices import IDEAL, DeviceSet
 from .params import LinkParams
 
-__all__ = ["link_constants", "modes", "zoh", "step", "advance_z", "phasors", "stored_energy_j", "sbar_v2", "sbar_edge", "sbar_shift", "sbar_clamp_f", "sbar_implicit", "end_i2", "short_weight", "inst_peak",
+__all__ = ["link_constants", "modes", "zoh", "step", "advance_z", "phasors", "stored_energy_j", "sbar_v2", "sbar_edge", "sbar_shift", "sbar_clamp_f", "sbar_implicit", "end_i2", "blocking_v2", "short_weight", "inst_peak",
            "build_table", "modal_table", "run_duties", "steady_state", "rect_current_a", "rect_affine", "N_MODES_C", "N_ZOH_C",
            "LC_NAMES"]
 
@@ -595,9 +595,31 @@ def modal_table(params: LinkParams, devices: DeviceSet = IDEAL) -> np.ndarray:
 
 # ---------------------------------------------------------------------- runs of a duty sequence
 @njit(cache=True)
+def blocking_v2(mc, v1):
+    """The V2 phasor [V] whose steady state under ``v1`` has I2 = 0 (I2 is affine in the held V2:
+    ``I2 = c0 + c1 V2`` from the modes' steady amplitudes and the feedthrough). The rectifier can block
+    in steady state at duty d iff ``|blocking_v2| <= (4/pi) Vc (1 - sin(pi d/2))`` (the induced emf
+    below the clamp; a strongly detuned C1)."""
+    c0 = -(mc[MC_S + 1] * mc[MC_G1] / mc[MC_LAM] + mc[MC_S + 5] * mc[MC_G1 + 1] / mc[MC_LAM + 1]) * v1 + mc[MC_D + 2] * v1
+    c1 = -(mc[MC_S + 1] * mc[MC_G2] / mc[MC_LAM] + mc[MC_S + 5] * mc[MC_G2 + 1] / mc[MC_LAM + 1]) + mc[MC_D + 3]
+    return -c0 / c1
+
+
+@njit(cache=True)
 def steady_state(lc, mc, tab, d_short, v1, vc_v, z, iters=60):
-    """Periodic steady state at a constant duty into ``z`` (fixed point on V2); returns V2 [V]."""
-    v2 = (4.0 / math.pi) * vc_v * (1.0 - math.sin(0.5 * math.pi * d_short)) + 0j
+    """Periodic steady state at a constant duty into ``z`` (fixed point on V2); returns V2 [V]. When the
+    V2 that holds the steady I2 at 0 is within the clamp ``(4/pi) Vc (1 - sin(pi d/2))`` (the induced emf
+    below the clamp: a strongly detuned C1) the rectifier blocks: that V2, I2 = 0 (the fixed point has
+    no conducting solution there and would not converge)."""
+    clamp = (4.0 / math.pi) * vc_v * (1.0 - math.sin(0.5 * math.pi * d_short))
+    v2b = blocking_v2(mc, v1)
+    if abs(v2b) <= clamp:
+        u0 = mc[MC_G1] * v1 + mc[MC_G2] * v2b
+        u1 = mc[MC_G1 + 1] * v1 + mc[MC_G2 + 1] * v2b
+        zs0, zs1 = -u0 / mc[MC_LAM], -u1 / mc[MC_LAM + 1]
+        z[0], z[1], z[2], z[3] = zs0.real, zs0.imag, zs1.real, zs1.imag
+        return v2b
+    v2 = clamp + 0j
     for _ in range(iters):
         u0 = mc[MC_G1] * v1 + mc[MC_G2] * v2
         u1 = mc[MC_G1 + 1] * v1 + mc[MC_G2 + 1] * v2
