@@ -32,7 +32,7 @@ KINDS = {
                  "--budget {budget} --lambda-lr 50 --residual --residual-scale 0.1 --residual-base-budget 0.01 "
                  "--hyperparams policies/hyperparams/residual.yml"),
     "ppo_lagrangian": ("dronewpt train --algo ppo --timesteps {timesteps} --seed {seed} --scenario random --lagrangian "
-                       "--budget {budget} --lambda-lr 1 --hyperparams policies/hyperparams/ppo_lagrangian.yml"),
+                       "--budget {budget} --lambda-lr 20 --hyperparams policies/hyperparams/ppo_lagrangian.yml"),
 }
 
 
