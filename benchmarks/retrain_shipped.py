@@ -56,7 +56,8 @@ def _load() -> float:
 def train_seed(kind: str, seed: int, timesteps: int, budget: float, out_root: Path) -> dict:
     """Run one seed's command (niced) into ``out_root/<kind>_s<seed>``; returns the run's record."""
     out = out_root / f"{kind}_s{seed}"
-    cmd = KINDS[kind].format(timesteps=timesteps, seed=seed, budget=f"{budget:g}") + f" --out {out}"
+    rel = out.relative_to(ROOT) if out.is_relative_to(ROOT) else out
+    cmd = KINDS[kind].format(timesteps=timesteps, seed=seed, budget=f"{budget:g}") + f" --out {rel}"
     rec = {"commit": _commit(), "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()), "command": cmd,
            "load_avg_1min_before": _load()}
     t0 = time.time()
