@@ -254,6 +254,17 @@ def _callbacks(spec: dict, out: Path, eval_env, penalty, progress: bool):
     return CallbackList(cbs), lag, cbs[2]
 
 
+def _one_thread_each() -> None:
+    """torch and numba on one thread each. numba's OpenMP workers (its own libgomp) spin after every
+    parallel env step and starve torch's one thread: measured 2026-11-26, a 64x64 tanh took 0.02 ms of CPU
+    before the first env step, 0.2-4.7 ms after; PPO ran ~1,100 env-steps per CPU-second instead of
+    several thousand. The env's rows are independent, so its results do not depend on its threads."""
+    import numba
+    import torch
+    torch.set_num_threads(1)
+    numba.set_num_threads(1)
+
+
 def _reproduce(spec: dict) -> str:
     cmd = (f"dronewpt train --algo {spec['algo']} --timesteps {spec['timesteps']} --seed {spec['seed']} "
            f"--n-envs {spec['n_envs']} --scenario {spec['scenario']} --cost {spec['cost']}")
@@ -422,12 +433,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
                 residual_base_budget=residual_base_budget, vec=vec, name=name, eval_episodes=eval_episodes,
                 eval_every=eval_every, checkpoint_every=checkpoint_every, probe_episodes=probe_episodes)
     spec = _spec(algo, timesteps, opts)
-    torch.set_num_threads(1)
-    # numba's OpenMP workers (its own libgomp) spin after every parallel env step and starve torch's one
-    # thread: measured 2026-11-26, a 64x64 tanh 0.02 ms of CPU before the first env step, 0.2-4.7 ms after;
-    # PPO ~1,100 env-steps per CPU-second instead of ~10,000+. The env's rows are independent (bit-equal).
-    import numba
-    numba.set_num_threads(1)
+    _one_thread_each()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if importlib.util.find_spec("tensorboard") is not None:
