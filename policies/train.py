@@ -420,10 +420,9 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     ``lagrangian``) for ``timesteps`` steps (0: imitation only). ``slow_budget``: ``"LO:HI"``, the action is
     the MPC's overshoot budget, the duty the MPC's (:mod:`policies.slow_budget`); ``slow_budget_every``:
     ``window`` (taken at the stop, held) or ``step``.
-    Deterministic for a given seed on one thread (torch threads set to 1)."""
+    Deterministic for a given seed on one thread (torch and numba threads set to 1)."""
     import importlib.util
 
-    import torch
     extra = dict(history=history, action_filter=action_filter, smooth_penalty=smooth_penalty, imitate=imitate,
                  dagger=dagger, imitation_episodes=imitation_episodes, slow_budget=slow_budget, slow_budget_every=slow_budget_every)
     _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra)
