@@ -255,6 +255,17 @@ def _callbacks(spec: dict, out: Path, eval_env, penalty, progress: bool):
     return CallbackList(cbs), lag, cbs[2]
 
 
+def _one_thread_each() -> None:
+    """torch and numba on one thread each. numba's OpenMP workers (its own libgomp) spin after every
+    parallel env step and starve torch's one thread: measured 2026-11-26, a 64x64 tanh took 0.02 ms of CPU
+    before the first env step, 0.2-4.7 ms after; PPO ran ~1,100 env-steps per CPU-second instead of
+    several thousand. The env's rows are independent, so its results do not depend on its threads."""
+    import numba
+    import torch
+    torch.set_num_threads(1)
+    numba.set_num_threads(1)
+
+
 def _reproduce(spec: dict) -> str:
     cmd = (f"dronewpt train --algo {spec['algo']} --timesteps {spec['timesteps']} --seed {spec['seed']} "
            f"--n-envs {spec['n_envs']} --scenario {spec['scenario']} --cost {spec['cost']}")
@@ -410,10 +421,9 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     ``lagrangian``) for ``timesteps`` steps (0: imitation only). ``slow_budget``: ``"LO:HI"``, the action is
     the MPC's overshoot budget, the duty the MPC's (:mod:`policies.slow_budget`); ``slow_budget_every``:
     ``window`` (taken at the stop, held) or ``step``.
-    Deterministic for a given seed on one thread (torch threads set to 1)."""
+    Deterministic for a given seed on one thread (torch and numba threads set to 1)."""
     import importlib.util
 
-    import torch
     extra = dict(history=history, action_filter=action_filter, smooth_penalty=smooth_penalty, imitate=imitate,
                  dagger=dagger, imitation_episodes=imitation_episodes, slow_budget=slow_budget, slow_budget_every=slow_budget_every)
     _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra)
@@ -423,7 +433,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
                 residual_base_budget=residual_base_budget, vec=vec, name=name, eval_episodes=eval_episodes,
                 eval_every=eval_every, checkpoint_every=checkpoint_every, probe_episodes=probe_episodes)
     spec = _spec(algo, timesteps, opts)
-    torch.set_num_threads(1)
+    _one_thread_each()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if importlib.util.find_spec("tensorboard") is not None:

@@ -1,0 +1,115 @@
+"""Retrain the shipped constrained-RL policies (``residual_s<k>``, ``ppo_lagrangian_s<k>``) on the current env,
+one ``dronewpt train`` per seed, one after the other, and optionally install them in ``policies/pretrained``.
+
+    python benchmarks/retrain_shipped.py --kind residual --seeds 0-4 --timesteps 400000 --budget 0.05 --install
+    python benchmarks/retrain_shipped.py --kind ppo_lagrangian --seeds 0-4 --timesteps 400000 --budget 0.05 --install
+
+Each seed runs exactly the command of ``KINDS[kind]`` (``{seed}``, ``{timesteps}``, ``{budget}`` filled in)
+under ``nice -n 10`` into ``out/retrain/<kind>_s<k>/``; the output's own metadata holds the env config
+(devices, reward), budget, multiplier history and the ``reproduce`` command. ``--install`` copies the final
+model (no selection) to ``policies/pretrained/<kind>_s<k>.zip`` and its metadata to ``.json`` (each written
+under a temporary name and renamed) with a ``trained`` record added: the git commit the training ran on
+(the env's version), the date, the wall time and the 1-min load average before / after (the machine is
+shared). Bad options: one line on stderr, exit 2, nothing trained.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: the training command of each shipped kind (docs/rl.md, "Shipped learned policies")
+KINDS = {
+    "residual": ("dronewpt train --algo ppo --timesteps {timesteps} --seed {seed} --scenario random --lagrangian "
+                 "--budget {budget} --lambda-lr 50 --residual --residual-scale 0.1 --residual-base-budget 0.01 "
+                 "--hyperparams policies/hyperparams/residual.yml"),
+    "ppo_lagrangian": ("dronewpt train --algo ppo --timesteps {timesteps} --seed {seed} --scenario random --lagrangian "
+                       "--budget {budget} --lambda-lr 20 --hyperparams policies/hyperparams/ppo_lagrangian.yml"),
+}
+
+
+def _seeds(text: str) -> list[int]:
+    lo, _, hi = text.partition("-")
+    seeds = list(range(int(lo), int(hi or lo) + 1))
+    if not seeds or seeds[0] < 0:
+        raise ValueError
+    return seeds
+
+
+def _commit() -> str:
+    out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True)
+    return out.stdout.strip() or "unknown"
+
+
+def _load() -> float:
+    return float(Path("/proc/loadavg").read_text().split()[0]) if Path("/proc/loadavg").is_file() else float("nan")
+
+
+def train_seed(kind: str, seed: int, timesteps: int, budget: float, out_root: Path) -> dict:
+    """Run one seed's command (niced) into ``out_root/<kind>_s<seed>``; returns the run's record."""
+    out = out_root / f"{kind}_s{seed}"
+    rel = out.relative_to(ROOT) if out.is_relative_to(ROOT) else out
+    cmd = KINDS[kind].format(timesteps=timesteps, seed=seed, budget=f"{budget:g}") + f" --out {rel}"
+    rec = {"commit": _commit(), "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()), "command": cmd,
+           "load_avg_1min_before": _load()}
+    t0 = time.time()
+    with open(out_root / f"{kind}_s{seed}.log", "w") as log:
+        rc = subprocess.run(["nice", "-n", "10", *cmd.split()], cwd=ROOT, stdout=log, stderr=subprocess.STDOUT).returncode
+    rec.update(wall_s=round(time.time() - t0, 1), load_avg_1min_after=_load(), returncode=rc)
+    return rec
+
+
+def install(kind: str, seed: int, out_root: Path, rec: dict) -> None:
+    """Final model and metadata (plus ``trained``) into policies/pretrained, each under a temp name, renamed."""
+    from mission_sim.files import atomic_output
+    src = out_root / f"{kind}_s{seed}"
+    dst = ROOT / "policies" / "pretrained" / f"{kind}_s{seed}"
+    meta = json.loads((src / "ppo_sbar.json").read_text())
+    meta["trained"] = rec
+    with atomic_output(dst.with_suffix(".zip")) as tmp:
+        shutil.copyfile(src / "ppo_sbar.zip", tmp)
+    with atomic_output(dst.with_suffix(".json")) as tmp:
+        Path(tmp).write_text(json.dumps(meta, indent=2) + "\n")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--kind", required=True, choices=sorted(KINDS))
+    ap.add_argument("--seeds", default="0-4", help="LO-HI (default 0-4)")
+    ap.add_argument("--timesteps", type=int, required=True)
+    ap.add_argument("--budget", type=float, required=True, help="measured-overshoot budget (fraction)")
+    ap.add_argument("--out", default="out/retrain")
+    ap.add_argument("--install", action="store_true", help="copy the final models into policies/pretrained")
+    a = ap.parse_args(argv)
+    try:
+        seeds = _seeds(a.seeds)
+    except ValueError:
+        print(f"retrain_shipped: --seeds {a.seeds!r} is invalid; valid: LO-HI with 0 <= LO <= HI", file=sys.stderr)
+        return 2
+    if a.timesteps <= 0 or not (0.0 < a.budget < 10.0):
+        print(f"retrain_shipped: --timesteps {a.timesteps} / --budget {a.budget} is invalid; valid: "
+              "timesteps > 0, budget in (0, 10)", file=sys.stderr)
+        return 2
+    out_root = ROOT / a.out
+    out_root.mkdir(parents=True, exist_ok=True)
+    for seed in seeds:
+        rec = train_seed(a.kind, seed, a.timesteps, a.budget, out_root)
+        print(json.dumps({"kind": a.kind, "seed": seed, **rec}), flush=True)
+        if rec["returncode"] != 0:
+            return 1
+        if a.install:
+            install(a.kind, seed, out_root, rec)
+    return 0
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("PYTHONPATH", str(ROOT))
+    sys.exit(main())
