@@ -296,3 +296,33 @@ def test_mission_whose_kernel_misses_the_cache_compiles_it_after_a_registry_free
     assert miss["loop_hits"] == 1 and miss["table_misses"] >= 1
     assert miss["runs"] == plain["runs"]
     _check_physics(miss["runs"]["model_based"])
+
+
+_SWEEP_WORKER = r'''
+import json, sys
+import wpt_receiver.numba_start as ns
+if sys.argv[1] == "plain":
+    ns.cache_loads_without_registries = lambda: False
+import policies
+from mission_sim.config import load_config_dict
+from mission_sim.studies.mission_cases import MissionCaseRunner
+r = MissionCaseRunner(load_config_dict(), policies.make, policies.available())
+r.warm()
+out = [r(p) for p in ({"seed": 3}, {"policy": "step", "wind.speed_m_s": 4.0}, {"policy": "hysteresis"})]
+for s in out:
+    s.pop("wall_s"), s.pop("realtime_factor")
+print(json.dumps({"registries": "numba.np.polynomial.polynomial_core" in sys.modules, "cases": out}))
+'''
+
+
+def test_sweep_worker_warmed_without_registries_gives_the_same_summaries():
+    """A sweep worker's warm-up (``MissionCaseRunner.warm``) installs the hook: its cases' summaries are those of
+    a worker without it, to the bit, and numba's registries are never loaded."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    res = {m: json.loads(subprocess.run([sys.executable, "-c", _SWEEP_WORKER, m], capture_output=True, text=True,
+                                        env=env, cwd=ROOT, timeout=600, check=True).stdout.strip().splitlines()[-1])
+           for m in ("plain", "lazy")}
+    assert res["plain"]["registries"] and not res["lazy"]["registries"]
+    assert res["lazy"]["cases"] == res["plain"]["cases"]
+    for s in res["lazy"]["cases"]:
+        assert abs(s["energy_balance_error_rel"]) < 1e-3 and s["final_soc"] > s["final_soc_without_charging"]
