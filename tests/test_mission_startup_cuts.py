@@ -326,3 +326,33 @@ def test_sweep_worker_warmed_without_registries_gives_the_same_summaries():
     assert res["lazy"]["cases"] == res["plain"]["cases"]
     for s in res["lazy"]["cases"]:
         assert abs(s["energy_balance_error_rel"]) < 1e-3 and s["final_soc"] > s["final_soc_without_charging"]
+
+
+_PAPER = r'''
+import contextlib, io, json, sys
+import wpt_receiver.numba_start as ns
+if sys.argv[1] == "plain":
+    ns.cache_loads_without_registries = lambda: False
+from mission_sim.cli import main
+buf = io.StringIO()
+with contextlib.redirect_stdout(buf):
+    rc = main(["paper", "--no-plot", "--format", "json", "--model", sys.argv[2]])
+rows = json.loads(buf.getvalue())["rows"]
+for r in rows:
+    r.pop("sim_wall_s")
+print(json.dumps({"rc": rc, "registries": "numba.np.polynomial.polynomial_core" in sys.modules, "rows": rows}))
+'''
+
+
+@pytest.mark.parametrize("model", ["modal", "switching"])
+def test_paper_with_its_kernels_loaded_without_registries_gives_the_same_table(model):
+    """``dronewpt paper --model modal|switching`` installs the hook: Table II's rows to the bit as without it, the
+    registries never loaded, and the paper's ordering (overshoot: step > ramp > proposed)."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    res = {m: json.loads(subprocess.run([sys.executable, "-c", _PAPER, m, model], capture_output=True, text=True,
+                                        env=env, cwd=ROOT, timeout=600, check=True).stdout.strip().splitlines()[-1])
+           for m in ("plain", "lazy")}
+    assert res["plain"]["registries"] and not res["lazy"]["registries"]
+    assert res["lazy"]["rows"] == res["plain"]["rows"]
+    over = {r["trajectory"]: r["overshoot_pct"] for r in res["lazy"]["rows"]}
+    assert over["step"] > over["ramp"] > over["proposed"] >= 0.0
