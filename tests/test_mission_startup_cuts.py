@@ -356,3 +356,33 @@ def test_paper_with_its_kernels_loaded_without_registries_gives_the_same_table(m
     assert res["lazy"]["rows"] == res["plain"]["rows"]
     over = {r["trajectory"]: r["overshoot_pct"] for r in res["lazy"]["rows"]}
     assert over["step"] > over["ramp"] > over["proposed"] >= 0.0
+
+
+_SIZING = r'''
+import contextlib, io, json, sys
+import wpt_receiver.numba_start as ns
+if sys.argv[1] == "plain":
+    ns.cache_loads_without_registries = lambda: False
+from mission_sim.cli import main
+buf = io.StringIO()
+with contextlib.redirect_stdout(buf):
+    rc = main(["sizing", "--no-plot", "--no-progress", "--format", "json", "--source", "mission"])
+print(json.dumps({"rc": rc, "registries": "numba.np.polynomial.polynomial_core" in sys.modules,
+                  "out": json.loads(buf.getvalue())}))
+'''
+
+
+def test_sizing_from_missions_without_registries_gives_the_same_rows():
+    """``dronewpt sizing --source mission`` installs the hook once its input is checked: the same rows to the bit,
+    the registries never loaded; the rating is the margin times the peak |i2|, the step's peak the largest."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    res = {m: json.loads(subprocess.run([sys.executable, "-c", _SIZING, m], capture_output=True, text=True,
+                                        env=env, cwd=ROOT, timeout=600, check=True).stdout.strip().splitlines()[-1])
+           for m in ("plain", "lazy")}
+    assert res["plain"]["registries"] and not res["lazy"]["registries"]
+    assert res["lazy"]["out"] == res["plain"]["out"]
+    out = res["lazy"]["out"]
+    peak = {r["policy"]: r["peak_i2_a"] for r in out["rows"]}
+    assert peak["step"] > max(peak["ramp"], peak["model_based"]) > 0
+    for r in out["rows"]:
+        assert r["required_rating_a"] == pytest.approx(out["margin"] * r["peak_i2_a"], rel=1e-12)
