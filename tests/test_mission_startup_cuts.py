@@ -386,3 +386,32 @@ def test_sizing_from_missions_without_registries_gives_the_same_rows():
     assert peak["step"] > max(peak["ramp"], peak["model_based"]) > 0
     for r in out["rows"]:
         assert r["required_rating_a"] == pytest.approx(out["margin"] * r["peak_i2_a"], rel=1e-12)
+
+
+_REPLAY = r'''
+import contextlib, io, json, sys
+import wpt_receiver.numba_start as ns
+if sys.argv[1] == "plain":
+    ns.cache_loads_without_registries = lambda: False
+from mission_sim.cli import main
+buf = io.StringIO()
+with contextlib.redirect_stdout(buf):
+    rc = main(["replay", sys.argv[2], "--no-plot", "--no-progress", "--format", "json", "--out", sys.argv[3]])
+out = json.loads(buf.getvalue())
+def strip(d):   # the run's timing: not a result
+    return {k: strip(v) if isinstance(v, dict) else v for k, v in d.items() if "wall" not in k and "realtime" not in k}
+print(json.dumps({"rc": rc, "registries": "numba.np.polynomial.polynomial_core" in sys.modules, "out": strip(out)}))
+'''
+
+
+def test_replay_without_registries_gives_the_same_summary(tmp_path):
+    """``dronewpt replay`` of a real flight log installs the hook once its input is checked: the same summary to
+    the bit as without it, the registries never loaded."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    log = ROOT / "tests" / "data" / "flightlogs" / "dronekit-python_flight.tlog"
+    res = {m: json.loads(subprocess.run([sys.executable, "-c", _REPLAY, m, str(log), str(tmp_path / "out")],
+                                        capture_output=True, text=True, env=env, cwd=ROOT, timeout=600,
+                                        check=True).stdout.strip().splitlines()[-1]) for m in ("plain", "lazy")}
+    assert res["plain"]["registries"] and not res["lazy"]["registries"]
+    assert res["lazy"]["rc"] == res["plain"]["rc"] == 0
+    assert res["lazy"]["out"] == res["plain"]["out"]
