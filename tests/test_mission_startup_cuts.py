@@ -1,7 +1,8 @@
 """The start-up cuts of ``dronewpt mission`` (issue 22): numba's BLAS probe answered without importing the
 ``scipy.linalg`` package (:mod:`wpt_receiver.numba_start`), and the figure worker's forked helper
 (:func:`mission_sim.figures.worker._draw_split`): every figure drawn once, in order, also when the
-helper dies or fails."""
+helper dies or fails; the mission's cached kernels loaded without numba's registries
+(``cache_loads_without_registries``): the same bits for every kernel policy, a cache miss still compiled."""
 
 import json
 import os
@@ -188,3 +189,229 @@ def test_numba_start_survives_a_find_spec_probe_and_fails_safe_without_the_exten
             "assert 'scipy.linalg.cython_blas' not in sys.modules\nprint('ok')\n")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
     assert r.stdout.strip() == "ok", r.stderr
+
+
+# ``dronewpt mission`` loads its cached kernels without numba's registries
+# (``wpt_receiver.numba_start.cache_loads_without_registries``, installed by the CLI just before the run): each
+# mission's summary and stored time series, bit for bit, in a fresh process per mode ("plain": the hook
+# replaced by a no-op), and the registries' state and the kernels' cache statistics at the end.
+_MISSIONS = r'''
+import hashlib, json, sys
+mode, out, seed, *pols = sys.argv[1:]
+import wpt_receiver.numba_start as ns
+if mode == "plain":
+    ns.cache_loads_without_registries = lambda: False
+from mission_sim.cli import main
+from mission_sim.world import loop_kernel
+import pyarrow.parquet as pq
+at_loop = []   # numba's registries loaded when the loop came from the cache?
+advance_for = loop_kernel.advance_for
+def spy(compiled_policy):
+    d = advance_for(compiled_policy)
+    at_loop.append("numba.np.polynomial.polynomial_core" in sys.modules)
+    return d
+loop_kernel.advance_for = spy
+res = {}
+for pol in pols:
+    rc = main(["mission", "--no-plot", "--no-progress", "--format", "json", "--policy", pol, "--out", f"{out}/{pol}",
+               "--set", f"seed={seed}"])
+    t, h = pq.read_table(f"{out}/{pol}/timeseries.parquet"), hashlib.sha256()
+    for name in t.column_names:
+        a = t.column(name).to_numpy(zero_copy_only=False)
+        h.update(name.encode() + (a.tobytes() if a.dtype != object else "\x00".join(map(str, a)).encode()))
+    s = json.load(open(f"{out}/{pol}/summary.json"))
+    wall = {k: s.pop(k) for k in ("wall_s", "realtime_factor")}
+    res[pol] = {"rc": rc, "rows": t.num_rows, "series": h.hexdigest(), "summary": s}
+from numba.core import caching
+from wpt_receiver import coupling_kernel
+print(json.dumps({"hook": getattr(caching.Cache.load_overload, "_dronewpt_lazy", False), "runs": res,
+                  "registries": "numba.np.polynomial.polynomial_core" in sys.modules, "at_loop": at_loop,
+                  "loop_hits": sum(sum(d.stats.cache_hits.values()) for d in loop_kernel._ONE.values()),
+                  "table_misses": sum(coupling_kernel.flux_table.stats.cache_misses.values())}))
+'''
+
+#: every policy ``dronewpt mission --policy`` accepts that has a compiled kernel (policies.kernels.KERNELS),
+#: and one without (its duty computed in Python: the loop's other overload)
+_KERNEL_POLICIES = ("model_based", "step", "ramp", "hysteresis")
+
+
+def _missions(mode, out, seed, pols, **env_extra):
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""), **env_extra}
+    r = subprocess.run([sys.executable, "-c", _MISSIONS, mode, str(out), str(seed), *pols], capture_output=True,
+                       text=True, env=env, cwd=ROOT, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def _check_physics(run):
+    s = run["summary"]
+    assert run["rc"] == 0 and run["rows"] > 100
+    assert abs(s["energy_balance_error_rel"]) < 1e-3
+    assert 0 < s["battery_charge_in_j"] < s["rectifier_output_j"] < s["energy_from_source_j"]
+    assert s["final_soc"] > s["final_soc_without_charging"]
+
+
+def test_mission_loads_its_kernels_without_registries_and_runs_the_same_bits(tmp_path):
+    """The default mission with each kernel policy (and a Python one): the same summary and time series to the bit
+    with and without the hook, the loop loaded from the cache either way, numba's registries never loaded with the
+    hook (the compiled policies go to the cached loop as first-class functions all the same)."""
+    from policies.kernels import KERNELS
+    assert set(KERNELS) <= set(_KERNEL_POLICIES)
+    plain = _missions("plain", tmp_path / "plain", 0, _KERNEL_POLICIES)   # also warms the caches (first run)
+    lazy = _missions("lazy", tmp_path / "lazy", 0, _KERNEL_POLICIES)
+    assert lazy["hook"] and not plain["hook"]
+    assert plain["registries"] and not lazy["registries"] and not any(lazy["at_loop"])
+    assert lazy["loop_hits"] == 2          # both overloads of the loop (compiled policy, Python policy) from the cache
+    for pol in _KERNEL_POLICIES:
+        assert lazy["runs"][pol] == plain["runs"][pol], pol
+        _check_physics(lazy["runs"][pol])
+
+
+def _numba_cache_without(root: Path, dest: Path, module: str) -> None:
+    """numba's cache files of the tree under ``root`` copied into ``dest`` laid out as for ``NUMBA_CACHE_DIR``
+    (numba's ``UserProvidedCacheLocator``), except those of ``module`` (a file stem): its kernels miss."""
+    import hashlib
+    import shutil
+    for f in root.rglob("__pycache__/*"):
+        if f.suffix in (".nbi", ".nbc", ".deps") and not f.name.startswith(module + "."):
+            src = str(f.parent.parent.resolve())
+            sub = dest / f"{os.path.basename(src)}_{hashlib.sha1(src.encode()).hexdigest()}"
+            sub.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(f, sub / f.name)
+
+
+def test_mission_whose_kernel_misses_the_cache_compiles_it_after_a_registry_free_load(tmp_path):
+    """A path never flown (its Lm not on disk) with the coupling kernels missing from numba's cache: the loop loads
+    from the cache without the registries, then the Lm table kernel compiles (the compiler loads them) and the
+    mission gives the bits of a run without the hook."""
+    import shutil
+    disk = tmp_path / "disk"
+    _missions("plain", tmp_path / "other", 8, ("model_based",), DRONEWPT_CACHE_DIR=str(disk))  # tables, hover Lm
+    shutil.copytree(disk, tmp_path / "disk2")     # ... without the Lm of seed 7's path
+    plain = _missions("plain", tmp_path / "plain", 7, ("model_based",), DRONEWPT_CACHE_DIR=str(disk))
+    _numba_cache_without(ROOT, tmp_path / "numba", "coupling_kernel")
+    miss = _missions("lazy", tmp_path / "lazy", 7, ("model_based",), DRONEWPT_CACHE_DIR=str(tmp_path / "disk2"),
+                     NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    assert miss["hook"] and miss["at_loop"][0] is False and miss["registries"]   # loaded first, compiled later
+    assert miss["loop_hits"] == 1 and miss["table_misses"] >= 1
+    assert miss["runs"] == plain["runs"]
+    _check_physics(miss["runs"]["model_based"])
+
+
+_SWEEP_WORKER = r'''
+import json, sys
+import wpt_receiver.numba_start as ns
+if sys.argv[1] == "plain":
+    ns.cache_loads_without_registries = lambda: False
+import policies
+from mission_sim.config import load_config_dict
+from mission_sim.studies.mission_cases import MissionCaseRunner
+r = MissionCaseRunner(load_config_dict(), policies.make, policies.available())
+r.warm()
+out = [r(p) for p in ({"seed": 3}, {"policy": "step", "wind.speed_m_s": 4.0}, {"policy": "hysteresis"})]
+for s in out:
+    s.pop("wall_s"), s.pop("realtime_factor")
+print(json.dumps({"registries": "numba.np.polynomial.polynomial_core" in sys.modules, "cases": out}))
+'''
+
+
+def test_sweep_worker_warmed_without_registries_gives_the_same_summaries():
+    """A sweep worker's warm-up (``MissionCaseRunner.warm``) installs the hook: its cases' summaries are those of
+    a worker without it, to the bit, and numba's registries are never loaded."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    res = {m: json.loads(subprocess.run([sys.executable, "-c", _SWEEP_WORKER, m], capture_output=True, text=True,
+                                        env=env, cwd=ROOT, timeout=600, check=True).stdout.strip().splitlines()[-1])
+           for m in ("plain", "lazy")}
+    assert res["plain"]["registries"] and not res["lazy"]["registries"]
+    assert res["lazy"]["cases"] == res["plain"]["cases"]
+    for s in res["lazy"]["cases"]:
+        assert abs(s["energy_balance_error_rel"]) < 1e-3 and s["final_soc"] > s["final_soc_without_charging"]
+
+
+_PAPER = r'''
+import contextlib, io, json, sys
+import wpt_receiver.numba_start as ns
+if sys.argv[1] == "plain":
+    ns.cache_loads_without_registries = lambda: False
+from mission_sim.cli import main
+buf = io.StringIO()
+with contextlib.redirect_stdout(buf):
+    rc = main(["paper", "--no-plot", "--format", "json", "--model", sys.argv[2]])
+rows = json.loads(buf.getvalue())["rows"]
+for r in rows:
+    r.pop("sim_wall_s")
+print(json.dumps({"rc": rc, "registries": "numba.np.polynomial.polynomial_core" in sys.modules, "rows": rows}))
+'''
+
+
+@pytest.mark.parametrize("model", ["modal", "switching"])
+def test_paper_with_its_kernels_loaded_without_registries_gives_the_same_table(model):
+    """``dronewpt paper --model modal|switching`` installs the hook: Table II's rows to the bit as without it, the
+    registries never loaded, and the paper's ordering (overshoot: step > ramp > proposed)."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    res = {m: json.loads(subprocess.run([sys.executable, "-c", _PAPER, m, model], capture_output=True, text=True,
+                                        env=env, cwd=ROOT, timeout=600, check=True).stdout.strip().splitlines()[-1])
+           for m in ("plain", "lazy")}
+    assert res["plain"]["registries"] and not res["lazy"]["registries"]
+    assert res["lazy"]["rows"] == res["plain"]["rows"]
+    over = {r["trajectory"]: r["overshoot_pct"] for r in res["lazy"]["rows"]}
+    assert over["step"] > over["ramp"] > over["proposed"] >= 0.0
+
+
+_SIZING = r'''
+import contextlib, io, json, sys
+import wpt_receiver.numba_start as ns
+if sys.argv[1] == "plain":
+    ns.cache_loads_without_registries = lambda: False
+from mission_sim.cli import main
+buf = io.StringIO()
+with contextlib.redirect_stdout(buf):
+    rc = main(["sizing", "--no-plot", "--no-progress", "--format", "json", "--source", "mission"])
+print(json.dumps({"rc": rc, "registries": "numba.np.polynomial.polynomial_core" in sys.modules,
+                  "out": json.loads(buf.getvalue())}))
+'''
+
+
+def test_sizing_from_missions_without_registries_gives_the_same_rows():
+    """``dronewpt sizing --source mission`` installs the hook once its input is checked: the same rows to the bit,
+    the registries never loaded; the rating is the margin times the peak |i2|, the step's peak the largest."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    res = {m: json.loads(subprocess.run([sys.executable, "-c", _SIZING, m], capture_output=True, text=True,
+                                        env=env, cwd=ROOT, timeout=600, check=True).stdout.strip().splitlines()[-1])
+           for m in ("plain", "lazy")}
+    assert res["plain"]["registries"] and not res["lazy"]["registries"]
+    assert res["lazy"]["out"] == res["plain"]["out"]
+    out = res["lazy"]["out"]
+    peak = {r["policy"]: r["peak_i2_a"] for r in out["rows"]}
+    assert peak["step"] > max(peak["ramp"], peak["model_based"]) > 0
+    for r in out["rows"]:
+        assert r["required_rating_a"] == pytest.approx(out["margin"] * r["peak_i2_a"], rel=1e-12)
+
+
+_REPLAY = r'''
+import contextlib, io, json, sys
+import wpt_receiver.numba_start as ns
+if sys.argv[1] == "plain":
+    ns.cache_loads_without_registries = lambda: False
+from mission_sim.cli import main
+buf = io.StringIO()
+with contextlib.redirect_stdout(buf):
+    rc = main(["replay", sys.argv[2], "--no-plot", "--no-progress", "--format", "json", "--out", sys.argv[3]])
+out = json.loads(buf.getvalue())
+def strip(d):   # the run's timing: not a result
+    return {k: strip(v) if isinstance(v, dict) else v for k, v in d.items() if "wall" not in k and "realtime" not in k}
+print(json.dumps({"rc": rc, "registries": "numba.np.polynomial.polynomial_core" in sys.modules, "out": strip(out)}))
+'''
+
+
+def test_replay_without_registries_gives_the_same_summary(tmp_path):
+    """``dronewpt replay`` of a real flight log installs the hook once its input is checked: the same summary to
+    the bit as without it, the registries never loaded."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    log = ROOT / "tests" / "data" / "flightlogs" / "dronekit-python_flight.tlog"
+    res = {m: json.loads(subprocess.run([sys.executable, "-c", _REPLAY, m, str(log), str(tmp_path / "out")],
+                                        capture_output=True, text=True, env=env, cwd=ROOT, timeout=600,
+                                        check=True).stdout.strip().splitlines()[-1]) for m in ("plain", "lazy")}
+    assert res["plain"]["registries"] and not res["lazy"]["registries"]
+    assert res["lazy"]["rc"] == res["plain"]["rc"] == 0
+    assert res["lazy"]["out"] == res["plain"]["out"]

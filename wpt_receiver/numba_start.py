@@ -17,7 +17,7 @@ importing it after the package would have. Nothing happens when numba's registri
 layout puts it (then numba imports it as before).
 
 :func:`cache_loads_without_registries` goes further for a process that only *loads* compiled kernels from
-numba's cache (``compare``): numba's ``Cache.load_overload`` refreshes the target context before it reads an
+numba's cache (``compare``, ``mission``, ``paper``, ``sizing``, ``replay``, the sweep workers' warm-up): numba's ``Cache.load_overload`` refreshes the target context before it reads an
 entry, i.e. imports and installs every typing and lowering registry numba has (``numba.cpython.*``,
 ``numba.np.arraymath``, ``linalg``, ``random``, ``typed``, ...: ~0.3 s of CPU under load, much of
 numba's start-up), although a cached entry is machine code that needs none of them, only numba's runtime

@@ -127,6 +127,8 @@ def _cmd_replay(args) -> int:
     cfg = _mav_config(args, {"drone.mass_kg": args.mass} if args.mass else None, single_pad=True)
     policy = _mav_policy(cfg, args.policy)
     prepare_out_dir(args.out)
+    from wpt_receiver.numba_start import cache_loads_without_registries
+    cache_loads_without_registries()   # input checked: cached kernels without numba's registries (~0.5-1 s of CPU)
     res = replay_log(log, cfg, policy, pad=pad, ground_gap_m=args.ground_gap, window=window,
                      progress=show_progress(args), segment=args.segment)
     s = res.summary

@@ -184,9 +184,14 @@ def _figure_worker(args, est):
 def _run_and_write(args, cfg, pol, every, worker):
     """The run streamed to ``args.out`` (whose writer lock the caller holds), then the figures and
     summary.json; the result and the files written."""
+    from wpt_receiver.numba_start import cache_loads_without_registries
+
     from ..world.runner import run_mission
     from ..world.stream import SeriesWriter
     (args.out / "summary.json").unlink(missing_ok=True)  # present again only when this run's set is complete
+    # every check passed and the figure worker forked: numba (imported by the run anyway) loads the cached
+    # kernels without its typing/lowering registries (a cache miss still compiles; wpt_receiver.numba_start)
+    cache_loads_without_registries()
     writer = SeriesWriter(args.out, csv=args.csv, every_s=every, figure_points=None if args.no_plot else FIGURE_POINTS)
     try:
         res = run_mission(cfg, pol, charge=not args.no_charge, progress=show_progress(args),

@@ -140,5 +140,9 @@ class MissionCaseRunner:
 
     def warm(self) -> None:
         """Run the base mission once (summary only): imports, the numba cache and the coupling table are
-        loaded before the first case (the sweep engine calls this once on every worker)."""
+        loaded before the first case (the sweep engine calls this once on every worker). The worker's cached
+        kernels load without numba's typing/lowering registries (~0.3 s of CPU per worker; a case that compiles
+        still loads them: :func:`wpt_receiver.numba_start.cache_loads_without_registries`)."""
+        from wpt_receiver.numba_start import cache_loads_without_registries
+        cache_loads_without_registries()
         self({})
