@@ -141,14 +141,18 @@ class EnvConfig:
         if not (np.isfinite(self.rated_i2_a) and self.rated_i2_a > 0):
             raise ValueError(f"rated_i2_a={self.rated_i2_a!r} is invalid; valid range: (0, inf)")
 
-    def __repr__(self):
-        """The dataclass's repr, the exact-mode link's fields (``link_model``, ``hold_tol_a``, ``v2_updates``)
-        named only where they differ from their defaults: a default config reads as before the option (the
-        oracle's disk-cache keys hold the repr, :mod:`policies.oracle`)."""
+    def stated_fields(self) -> list:
+        """``(name, value)`` of the fields, the exact-mode link's (``link_model``, ``hold_tol_a``,
+        ``v2_updates``) only where they differ from their defaults: a default config reads as before the
+        option. The one rule of :meth:`__repr__` (the oracle's disk-cache keys hold the repr,
+        :mod:`policies.oracle`) and of the trained models' metadata (``policies.train.config_dict``)."""
         opt = {"link_model", "hold_tol_a", "v2_updates"}
-        items = [f"{f.name}={getattr(self, f.name)!r}" for f in fields(self)
-                 if f.name not in opt or getattr(self, f.name) != f.default]
-        return f"{type(self).__qualname__}({', '.join(items)})"
+        return [(f.name, getattr(self, f.name)) for f in fields(self)
+                if f.name not in opt or getattr(self, f.name) != f.default]
+
+    def __repr__(self):
+        """The dataclass's repr over :meth:`stated_fields`."""
+        return f"{type(self).__qualname__}({', '.join(f'{k}={v!r}' for k, v in self.stated_fields())})"
 
     def device_set(self):
         """The :class:`wpt_receiver.devices.DeviceSet` of ``devices``."""

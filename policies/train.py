@@ -77,8 +77,10 @@ def env_config(overrides: dict | None = None):
 
 
 def config_dict(cfg) -> dict:
-    """The metadata form of an EnvConfig (without the link, which is Table I)."""
-    d = {f.name: getattr(cfg, f.name) for f in fields(cfg) if f.name not in ("link", "reward")}
+    """The metadata form of an EnvConfig (without the link, which is Table I): its stated fields
+    (:meth:`envs.EnvConfig.stated_fields`: the exact-mode link's only where not at their defaults, so a
+    default config's record reads as before the option and the shipped models' records still match)."""
+    d = {k: v for k, v in cfg.stated_fields() if k not in ("link", "reward")}
     return {**d, "reward": asdict(cfg.reward)}
 
 

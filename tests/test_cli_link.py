@@ -70,3 +70,19 @@ def test_link_modal_reaches_every_policys_env(capsys):
         assert row["peak_i2_a"] == pytest.approx(float(np.mean(m["peak_i2_a"])), rel=1e-12)
         assert row["energy_after_stop_j"] == pytest.approx(float(np.mean(m["energy_after_stop_j"])), rel=1e-12)
     assert modal["rows"][0]["peak_i2_a"] != default["rows"][0]["peak_i2_a"]
+
+
+def test_config_dict_states_the_exact_mode_fields_only_off_their_defaults():
+    """The trained models' metadata follows ``EnvConfig.__repr__``'s rule (one rule,
+    ``EnvConfig.stated_fields``): a default config's record has no link_model / hold_tol_a / v2_updates (the
+    shipped models' records match it), a non-default one names exactly the fields that differ."""
+    from envs import EnvConfig
+    from policies.train import config_dict
+    opt = {"link_model", "hold_tol_a", "v2_updates"}
+    assert not opt & set(config_dict(EnvConfig()))
+    d = config_dict(EnvConfig(link_model="modal", v2_updates=4))
+    assert d["link_model"] == "modal" and d["v2_updates"] == 4 and "hold_tol_a" not in d
+    assert config_dict(EnvConfig(hold_tol_a=2e-3))["hold_tol_a"] == 2e-3
+    for cfg in (EnvConfig(), EnvConfig(link_model="modal", hold_tol_a=5e-3)):
+        named = {k for k, _ in cfg.stated_fields()} & opt
+        assert named == {k for k in opt if k in repr(cfg)} == set(config_dict(cfg)) & opt
