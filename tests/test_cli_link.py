@@ -86,3 +86,17 @@ def test_config_dict_states_the_exact_mode_fields_only_off_their_defaults():
     for cfg in (EnvConfig(), EnvConfig(link_model="modal", hold_tol_a=5e-3)):
         named = {k for k, _ in cfg.stated_fields()} & opt
         assert named == {k for k in opt if k in repr(cfg)} == set(config_dict(cfg)) & opt
+
+
+@pytest.mark.parametrize("kv, valid", [("v2_updates=2.5", "integer 0..1000"), ("n_steps=300.5", "integer 2..1e6"),
+                                       ("slow_every=1.5", "integer >= 1")])
+def test_train_env_non_integer_count_is_refused_not_truncated(kv, valid, tmp_path):
+    """``--env v2_updates=2.5`` is refused by EnvConfig's check (one line, exit 2), not trained with int()'s 2."""
+    out = _cli("train", "--algo", "ppo", "--timesteps", "1", "--out", str(tmp_path / "run"), "--env", kv)
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and f"{kv} is invalid" in lines[0] and valid in lines[0]
+    assert not (tmp_path / "run").exists()
+    from policies.train import env_config
+    key, value = kv.split("=")
+    assert getattr(env_config({key: float(value.split(".")[0])}), key) == int(value.split(".")[0])  # whole: taken
