@@ -100,3 +100,18 @@ def test_train_env_non_integer_count_is_refused_not_truncated(kv, valid, tmp_pat
     from policies.train import env_config
     key, value = kv.split("=")
     assert getattr(env_config({key: float(value.split(".")[0])}), key) == int(value.split(".")[0])  # whole: taken
+
+
+def test_train_link_and_env_link_model_conflict_is_one_line_exit_2(tmp_path):
+    """``--link modal --env link_model=envelope``: neither silently wins; one line naming both, nothing written.
+    The same value twice is no conflict (refused here only by the bad v2_updates, checked after the link)."""
+    out = _cli("train", "--algo", "ppo", "--timesteps", "1", "--out", str(tmp_path / "run"), "--link", "modal",
+               "--env", "link_model=envelope")
+    assert out.returncode == 2 and "Traceback" not in out.stderr and out.stdout == ""
+    assert out.stderr.strip().splitlines() == [
+        "dronewpt train: error: --link modal conflicts with --env link_model=envelope; valid: one of them, or both "
+        "with the same value"]
+    assert not (tmp_path / "run").exists()
+    same = _cli("train", "--algo", "ppo", "--timesteps", "1", "--out", str(tmp_path / "run"), "--link", "modal",
+                "--env", "link_model=modal", "--env", "v2_updates=2.5")
+    assert same.returncode == 2 and "conflicts" not in same.stderr and "v2_updates=2.5 is invalid" in same.stderr
