@@ -39,8 +39,8 @@ import numpy as np
 from numba import njit, prange
 
 from wpt_receiver.modal_kernel import (MC_D, MC_G1, MC_G2, MC_LAM, MC_S, ZC_E, ZC_PHI, blocking_v2, inst_peak, modes, phasors,
-                                       rect_current_a, sbar_implicit, sbar_shift, sbar_v2, short_weight,
-                                       steady_state, stored_energy_j, zoh)
+                                       readout, rect_current_a, sbar_implicit, sbar_shift, sbar_v2, short_weight,
+                                       steady_modes, steady_state, stored_energy_j, zoh)
 from wpt_receiver.modal_kernel import step as modal_step
 
 from wpt_receiver import modal_kernel as _modal_kernel
@@ -209,8 +209,7 @@ def _v2_edges(q0, sgn, k):
 def _transient_a(mc, z0, z1, v1, v2):
     """Bound [A] of the ringing of I2 about the steady state of the inputs ``v1, v2`` held: the two
     modes' distances from their steady amplitudes, in I2 units (they only decay under held inputs)."""
-    zs0 = -(mc[MC_G1] * v1 + mc[MC_G2] * v2) / mc[MC_LAM]
-    zs1 = -(mc[MC_G1 + 1] * v1 + mc[MC_G2 + 1] * v2) / mc[MC_LAM + 1]
+    zs0, zs1 = steady_modes(mc, v1, v2)
     return abs(mc[MC_S + 1] * (z0 - zs0)) + abs(mc[MC_S + 5] * (z1 - zs1))
 
 
@@ -219,11 +218,10 @@ def _samples(mc, zq, z, v1, v2, n_q, best, i2_best):
     """The largest |I2| [A] at the ``n_q - 1`` inner sample points of a sub-step from ``z`` with ``v1, v2``
     held (``zq`` the sample's ZOH; the modes advanced on scalars, :func:`~wpt_receiver.modal_kernel.end_i2`'s
     arithmetic): ``(best, its I2 phasor)``, starting from ``best``, ``i2_best``."""
-    zs0 = -(mc[MC_G1] * v1 + mc[MC_G2] * v2) / mc[MC_LAM]
-    zs1 = -(mc[MC_G1 + 1] * v1 + mc[MC_G2 + 1] * v2) / mc[MC_LAM + 1]
+    zs0, zs1 = steady_modes(mc, v1, v2)
     c0, c1 = complex(z[0], z[1]) - zs0, complex(z[2], z[3]) - zs1
     s0, s1 = mc[MC_S + 1], mc[MC_S + 5]
-    i2s = s0 * zs0 + s1 * zs1 + mc[MC_D + 2] * v1 + mc[MC_D + 3] * v2
+    i2s = readout(mc, 1, zs0, zs1, v1, v2)
     e0, e1 = zq[ZC_E], zq[ZC_E + 1]
     for _ in range(n_q - 1):
         c0, c1 = c0 * e0, c1 * e1
@@ -308,7 +306,7 @@ def _link_step(z, v2, e, vl, d, lc, tab, cz, dt, n_sub, n_q, vf, dr, v1, hold_to
     v1c = complex(0.0, -v1)
     mc = cz[CZ_MODES:CZ_STEP]
     z0, z1 = complex(z[0], z[1]), complex(z[2], z[3])
-    i2a = mc[MC_S + 1] * z0 + mc[MC_S + 5] * z1 + mc[MC_D + 2] * v1c + mc[MC_D + 3] * v2
+    i2a = readout(mc, 1, z0, z1, v1c, v2)
     sgn = -1.0 if i2a.real < 0.0 else 1.0
     dl = sbar_shift(lc, tab, d, i2a * sgn, vc)
     kw = complex(math.cos(dl), -math.sin(dl))
