@@ -90,7 +90,9 @@ class EnvConfig:
         envelope with the ripple table for the peak (:mod:`envs.vector_kernel`); ``"modal"`` the mission's
         exact-mode link (:mod:`envs.modal_step`: eq. 1's coupled modes, the SBAR's v2 with its quadrature,
         the phase-aware instantaneous peak; within 0.23 % of the switching model's peak on the paper's
-        trajectories where eq. 4 + ripple is 2.85 % low on the V2* ramp; a vector step costs ~10x eq. 4's).
+        trajectories where eq. 4 + ripple is 2.85 % low on the V2* ramp; a vector env-step costs 5.9x eq. 4's with
+        the duty held, 10.7x with random actions: ``benchmarks/bench_env.py --links``, N = 1024, one thread,
+        load 4.7-5.0, 2026-11-26).
         The policies that predict with eq. 4 (``mpc``, ``model_based_budget``) keep their model: on the
         modal plant their measured overshoot is larger (docs/switching.md).
     hold_tol_a : (modal) a step holds V2 over the control period when the link is within this [A] of the

@@ -131,8 +131,8 @@ def _v2_closed(q0, sgn, k, block=False):
     on a window in the blocking regime (``block``: its steady state at this duty blocks,
     :func:`wpt_receiver.modal_kernel.blocking_v2`; a C1 detuned so that the emf stays below the clamp,
     where the switching model settles at no transfer): ``I2e = 0``; else :func:`_v2_edges` (every other
-    window's step unchanged). Returns ``(F, I2e, j e^{-j e}, ok)``, ``V2 = Vc F +
-    ws I2e``."""
+    window's step unchanged). Returns ``(F, I2e, t, ok)``, ``V2 = Vc F + ws I2e``, ``F = sgn (4/pi) (t - s)``:
+    ``t = j e^{-j e}`` of the commutation angle ``e`` where the SBAR commutates (not when blocked)."""
     inv_den, qv, cs, bn, kw, s, c = k
     a = q0 * inv_den - sgn * cs
     a2 = a.real * a.real + a.imag * a.imag
@@ -151,7 +151,9 @@ def _v2_closed(q0, sgn, k, block=False):
     if block:   # no conducting end current: the rectifier blocks if the V2 holding I2e at 0 is within the clamp
         f = -q0 * inv_den / qv if qv != 0.0 else 0j
         if abs(f) <= _FOUR_OVER_PI * (1.0 - s):
-            return f, 0j, complex(c, sgn * s), True
+            # blocked: no commutation, so no angle; t is the point with F = sgn (4/pi) (t - s) as in every
+            # other branch (inside the unit circle here). No caller reads it (_link_step keeps its ``e``).
+            return f, 0j, s + sgn * (0.25 * math.pi) * f, True
     return _v2_edges(q0, sgn, k)
 
 
