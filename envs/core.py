@@ -90,7 +90,9 @@ class EnvConfig:
         envelope with the ripple table for the peak (:mod:`envs.vector_kernel`); ``"modal"`` the mission's
         exact-mode link (:mod:`envs.modal_step`: eq. 1's coupled modes, the SBAR's v2 with its quadrature,
         the phase-aware instantaneous peak; within 0.23 % of the switching model's peak on the paper's
-        trajectories where eq. 4 + ripple is 2.85 % low on the V2* ramp; a vector step costs ~10x eq. 4's).
+        trajectories where eq. 4 + ripple is 2.85 % low on the V2* ramp; a vector env-step costs 5.9x eq. 4's with
+        the duty held, 10.7x with random actions: ``benchmarks/bench_env.py --links``, N = 1024, one thread,
+        load 4.7-5.0, 2026-11-26).
         The policies that predict with eq. 4 (``mpc``, ``model_based_budget``) keep their model: on the
         modal plant their measured overshoot is larger (docs/switching.md).
     hold_tol_a : (modal) a step holds V2 over the control period when the link is within this [A] of the
@@ -141,14 +143,18 @@ class EnvConfig:
         if not (np.isfinite(self.rated_i2_a) and self.rated_i2_a > 0):
             raise ValueError(f"rated_i2_a={self.rated_i2_a!r} is invalid; valid range: (0, inf)")
 
-    def __repr__(self):
-        """The dataclass's repr, the exact-mode link's fields (``link_model``, ``hold_tol_a``, ``v2_updates``)
-        named only where they differ from their defaults: a default config reads as before the option (the
-        oracle's disk-cache keys hold the repr, :mod:`policies.oracle`)."""
+    def stated_fields(self) -> list:
+        """``(name, value)`` of the fields, the exact-mode link's (``link_model``, ``hold_tol_a``,
+        ``v2_updates``) only where they differ from their defaults: a default config reads as before the
+        option. The one rule of :meth:`__repr__` (the oracle's disk-cache keys hold the repr,
+        :mod:`policies.oracle`) and of the trained models' metadata (``policies.train.config_dict``)."""
         opt = {"link_model", "hold_tol_a", "v2_updates"}
-        items = [f"{f.name}={getattr(self, f.name)!r}" for f in fields(self)
-                 if f.name not in opt or getattr(self, f.name) != f.default]
-        return f"{type(self).__qualname__}({', '.join(items)})"
+        return [(f.name, getattr(self, f.name)) for f in fields(self)
+                if f.name not in opt or getattr(self, f.name) != f.default]
+
+    def __repr__(self):
+        """The dataclass's repr over :meth:`stated_fields`."""
+        return f"{type(self).__qualname__}({', '.join(f'{k}={v!r}' for k, v in self.stated_fields())})"
 
     def device_set(self):
         """The :class:`wpt_receiver.devices.DeviceSet` of ``devices``."""

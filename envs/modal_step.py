@@ -39,8 +39,8 @@ import numpy as np
 from numba import njit, prange
 
 from wpt_receiver.modal_kernel import (MC_D, MC_G1, MC_G2, MC_LAM, MC_S, ZC_E, ZC_PHI, blocking_v2, inst_peak, modes, phasors,
-                                       rect_current_a, sbar_implicit, sbar_shift, sbar_v2, short_weight,
-                                       steady_state, stored_energy_j, zoh)
+                                       readout, rect_current_a, sbar_implicit, sbar_shift, sbar_v2, short_weight,
+                                       steady_modes, steady_state, stored_energy_j, zoh)
 from wpt_receiver.modal_kernel import step as modal_step
 
 from wpt_receiver import modal_kernel as _modal_kernel
@@ -131,8 +131,8 @@ def _v2_closed(q0, sgn, k, block=False):
     on a window in the blocking regime (``block``: its steady state at this duty blocks,
     :func:`wpt_receiver.modal_kernel.blocking_v2`; a C1 detuned so that the emf stays below the clamp,
     where the switching model settles at no transfer): ``I2e = 0``; else :func:`_v2_edges` (every other
-    window's step unchanged). Returns ``(F, I2e, j e^{-j e}, ok)``, ``V2 = Vc F +
-    ws I2e``."""
+    window's step unchanged). Returns ``(F, I2e, t, ok)``, ``V2 = Vc F + ws I2e``, ``F = sgn (4/pi) (t - s)``:
+    ``t = j e^{-j e}`` of the commutation angle ``e`` where the SBAR commutates (not when blocked)."""
     inv_den, qv, cs, bn, kw, s, c = k
     a = q0 * inv_den - sgn * cs
     a2 = a.real * a.real + a.imag * a.imag
@@ -151,7 +151,9 @@ def _v2_closed(q0, sgn, k, block=False):
     if block:   # no conducting end current: the rectifier blocks if the V2 holding I2e at 0 is within the clamp
         f = -q0 * inv_den / qv if qv != 0.0 else 0j
         if abs(f) <= _FOUR_OVER_PI * (1.0 - s):
-            return f, 0j, complex(c, sgn * s), True
+            # blocked: no commutation, so no angle; t is the point with F = sgn (4/pi) (t - s) as in every
+            # other branch (inside the unit circle here). No caller reads it (_link_step keeps its ``e``).
+            return f, 0j, s + sgn * (0.25 * math.pi) * f, True
     return _v2_edges(q0, sgn, k)
 
 
@@ -209,8 +211,7 @@ def _v2_edges(q0, sgn, k):
 def _transient_a(mc, z0, z1, v1, v2):
     """Bound [A] of the ringing of I2 about the steady state of the inputs ``v1, v2`` held: the two
     modes' distances from their steady amplitudes, in I2 units (they only decay under held inputs)."""
-    zs0 = -(mc[MC_G1] * v1 + mc[MC_G2] * v2) / mc[MC_LAM]
-    zs1 = -(mc[MC_G1 + 1] * v1 + mc[MC_G2 + 1] * v2) / mc[MC_LAM + 1]
+    zs0, zs1 = steady_modes(mc, v1, v2)
     return abs(mc[MC_S + 1] * (z0 - zs0)) + abs(mc[MC_S + 5] * (z1 - zs1))
 
 
@@ -219,11 +220,10 @@ def _samples(mc, zq, z, v1, v2, n_q, best, i2_best):
     """The largest |I2| [A] at the ``n_q - 1`` inner sample points of a sub-step from ``z`` with ``v1, v2``
     held (``zq`` the sample's ZOH; the modes advanced on scalars, :func:`~wpt_receiver.modal_kernel.end_i2`'s
     arithmetic): ``(best, its I2 phasor)``, starting from ``best``, ``i2_best``."""
-    zs0 = -(mc[MC_G1] * v1 + mc[MC_G2] * v2) / mc[MC_LAM]
-    zs1 = -(mc[MC_G1 + 1] * v1 + mc[MC_G2 + 1] * v2) / mc[MC_LAM + 1]
+    zs0, zs1 = steady_modes(mc, v1, v2)
     c0, c1 = complex(z[0], z[1]) - zs0, complex(z[2], z[3]) - zs1
     s0, s1 = mc[MC_S + 1], mc[MC_S + 5]
-    i2s = s0 * zs0 + s1 * zs1 + mc[MC_D + 2] * v1 + mc[MC_D + 3] * v2
+    i2s = readout(mc, 1, zs0, zs1, v1, v2)
     e0, e1 = zq[ZC_E], zq[ZC_E + 1]
     for _ in range(n_q - 1):
         c0, c1 = c0 * e0, c1 * e1
@@ -308,7 +308,7 @@ def _link_step(z, v2, e, vl, d, lc, tab, cz, dt, n_sub, n_q, vf, dr, v1, hold_to
     v1c = complex(0.0, -v1)
     mc = cz[CZ_MODES:CZ_STEP]
     z0, z1 = complex(z[0], z[1]), complex(z[2], z[3])
-    i2a = mc[MC_S + 1] * z0 + mc[MC_S + 5] * z1 + mc[MC_D + 2] * v1c + mc[MC_D + 3] * v2
+    i2a = readout(mc, 1, z0, z1, v1c, v2)
     sgn = -1.0 if i2a.real < 0.0 else 1.0
     dl = sbar_shift(lc, tab, d, i2a * sgn, vc)
     kw = complex(math.cos(dl), -math.sin(dl))

@@ -29,7 +29,9 @@ The *floor* of a window (:func:`oracle_floor`): the smallest measured overshoot 
 search (min over x of the max step ratio); budgets below it are infeasible.
 
 Results are cached on disk per (scenario, seed, budget, starts, env config) with
-:mod:`wpt_receiver.diskcache` (``$DRONEWPT_CACHE_DIR``), keyed with this module's source hash.
+:mod:`wpt_receiver.diskcache` (``$DRONEWPT_CACHE_DIR``), keyed with the source hash of this module and
+of the env's and the link's sources a rollout computes with (:func:`_source_hash`; since 2026-11-26,
+which invalidated the bounds cached before once).
 """
 
 from __future__ import annotations
@@ -201,8 +203,34 @@ class _FloorProblem(_Problem):
                 self.best = OracleResult(float(e[i]), float(over[i]), True, True, d[i].copy())
 
 
+#: the sources an oracle bound is computed with besides this file: the env's step and its replay
+#: (:mod:`envs.rollout`'s compiled replay, the envelope / modal / detuned links, the scenarios, the objective)
+#: and the link's physics in :mod:`wpt_receiver` (with the device presets' table). Not the start policies'
+#: code (``DEFAULT_STARTS``): a start only seeds the search.
+_ROLLOUT_SOURCES = (
+    ("envs", ("core.py", "detuned.py", "layout.py", "modal_plant.py", "modal_step.py", "objective.py", "parts.py",
+              "peaks.py", "plant.py", "rollout.py", "scenario.py", "sensing.py", "vector.py", "vector_kernel.py")),
+    ("wpt_receiver", ("coupling.py", "devices.py", "envelope.py", "lti.py", "modal_kernel.py", "params.py",
+                      "parts.toml", "sbar.py")),
+)
+
+
+def _rollout_files() -> list:
+    """The files of :data:`_ROLLOUT_SOURCES` (paths of the imported packages)."""
+    import envs
+    import wpt_receiver
+    roots = {"envs": Path(envs.__file__).parent, "wpt_receiver": Path(wpt_receiver.__file__).parent}
+    return [roots[pkg] / name for pkg, names in _ROLLOUT_SOURCES for name in names]
+
+
 def _source_hash() -> str:
-    return hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
+    """16 hex digits of sha256 over this file and :func:`_rollout_files`
+    (:func:`wpt_receiver.kernel_cache.dependency_hash`): part of every disk-cache key, so a bound computed
+    by other env physics (the detuned windows' blocking fix of 2026-11-26, say) is recomputed, not reused.
+    Since that date the key covers the env's sources too: oracle bounds cached before are computed again
+    once (the old entries stay unused in the cache folder)."""
+    from wpt_receiver.kernel_cache import dependency_hash
+    return dependency_hash([Path(__file__), *_rollout_files()])[:16]
 
 
 def _cached(kind, scenario, seed, budget, starts, config, compute):

@@ -72,13 +72,18 @@ def env_config(overrides: dict | None = None):
         if not np.isfinite(float(v)):
             raise ValueError(f"{k}={v!r} is invalid; valid range: a finite number")
     rw = RewardWeights(**{k: float(v) for k, v in ov.items() if k in rw_keys})
-    return EnvConfig(reward=rw, devices=devices, link_model=link_model, **{k: (int(v) if k in ("n_steps", "slow_every", "v2_updates") else float(v))
-                                                    for k, v in ov.items() if k in cfg_keys})
+    # the integer fields as int only when whole: 2.5 reaches EnvConfig's check (refused), not int()'s 2
+    ints = ("n_steps", "slow_every", "v2_updates")
+    return EnvConfig(reward=rw, devices=devices, link_model=link_model,
+                     **{k: (int(v) if k in ints and float(v).is_integer() else float(v))
+                        for k, v in ov.items() if k in cfg_keys})
 
 
 def config_dict(cfg) -> dict:
-    """The metadata form of an EnvConfig (without the link, which is Table I)."""
-    d = {f.name: getattr(cfg, f.name) for f in fields(cfg) if f.name not in ("link", "reward")}
+    """The metadata form of an EnvConfig (without the link, which is Table I): its stated fields
+    (:meth:`envs.EnvConfig.stated_fields`: the exact-mode link's only where not at their defaults, so a
+    default config's record reads as before the option and the shipped models' records still match)."""
+    d = {k: v for k, v in cfg.stated_fields() if k not in ("link", "reward")}
     return {**d, "reward": asdict(cfg.reward)}
 
 

@@ -70,3 +70,48 @@ def test_link_modal_reaches_every_policys_env(capsys):
         assert row["peak_i2_a"] == pytest.approx(float(np.mean(m["peak_i2_a"])), rel=1e-12)
         assert row["energy_after_stop_j"] == pytest.approx(float(np.mean(m["energy_after_stop_j"])), rel=1e-12)
     assert modal["rows"][0]["peak_i2_a"] != default["rows"][0]["peak_i2_a"]
+
+
+def test_config_dict_states_the_exact_mode_fields_only_off_their_defaults():
+    """The trained models' metadata follows ``EnvConfig.__repr__``'s rule (one rule,
+    ``EnvConfig.stated_fields``): a default config's record has no link_model / hold_tol_a / v2_updates (the
+    shipped models' records match it), a non-default one names exactly the fields that differ."""
+    from envs import EnvConfig
+    from policies.train import config_dict
+    opt = {"link_model", "hold_tol_a", "v2_updates"}
+    assert not opt & set(config_dict(EnvConfig()))
+    d = config_dict(EnvConfig(link_model="modal", v2_updates=4))
+    assert d["link_model"] == "modal" and d["v2_updates"] == 4 and "hold_tol_a" not in d
+    assert config_dict(EnvConfig(hold_tol_a=2e-3))["hold_tol_a"] == 2e-3
+    for cfg in (EnvConfig(), EnvConfig(link_model="modal", hold_tol_a=5e-3)):
+        named = {k for k, _ in cfg.stated_fields()} & opt
+        assert named == {k for k in opt if k in repr(cfg)} == set(config_dict(cfg)) & opt
+
+
+@pytest.mark.parametrize("kv, valid", [("v2_updates=2.5", "integer 0..1000"), ("n_steps=300.5", "integer 2..1e6"),
+                                       ("slow_every=1.5", "integer >= 1")])
+def test_train_env_non_integer_count_is_refused_not_truncated(kv, valid, tmp_path):
+    """``--env v2_updates=2.5`` is refused by EnvConfig's check (one line, exit 2), not trained with int()'s 2."""
+    out = _cli("train", "--algo", "ppo", "--timesteps", "1", "--out", str(tmp_path / "run"), "--env", kv)
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and f"{kv} is invalid" in lines[0] and valid in lines[0]
+    assert not (tmp_path / "run").exists()
+    from policies.train import env_config
+    key, value = kv.split("=")
+    assert getattr(env_config({key: float(value.split(".")[0])}), key) == int(value.split(".")[0])  # whole: taken
+
+
+def test_train_link_and_env_link_model_conflict_is_one_line_exit_2(tmp_path):
+    """``--link modal --env link_model=envelope``: neither silently wins; one line naming both, nothing written.
+    The same value twice is no conflict (refused here only by the bad v2_updates, checked after the link)."""
+    out = _cli("train", "--algo", "ppo", "--timesteps", "1", "--out", str(tmp_path / "run"), "--link", "modal",
+               "--env", "link_model=envelope")
+    assert out.returncode == 2 and "Traceback" not in out.stderr and out.stdout == ""
+    assert out.stderr.strip().splitlines() == [
+        "dronewpt train: error: --link modal conflicts with --env link_model=envelope; valid: one of them, or both "
+        "with the same value"]
+    assert not (tmp_path / "run").exists()
+    same = _cli("train", "--algo", "ppo", "--timesteps", "1", "--out", str(tmp_path / "run"), "--link", "modal",
+                "--env", "link_model=modal", "--env", "v2_updates=2.5")
+    assert same.returncode == 2 and "conflicts" not in same.stderr and "v2_updates=2.5 is invalid" in same.stderr

@@ -206,3 +206,50 @@ def test_compiled_table_equals_the_numpy_harmonic_balance(table):
         e = np.clip(e - np.clip(np.where(dg < 0, g / np.where(dg < 0, dg, -1.0), 0.0), -0.3, 0.3), 0.0, np.pi)
     assert table[0, a, b, c] == pytest.approx(e - 0.5 * np.pi + np.angle(ip), abs=1e-10)
     assert table[1, a, b, c] == pytest.approx((sh.peak(ds[b], ip) - np.abs(ip)) / sh.clamp_v, abs=1e-10)
+
+
+@pytest.mark.parametrize("dt", [1e-7, T, 1e-4])
+def test_end_i2_is_advance_z_then_phasors_to_the_bit(dt):
+    """:func:`end_i2` (scalars) is :func:`advance_z` then :func:`phasors` (the state array) to the last bit;
+    the readout is phasors' I2 to the bit; a step from the steady amplitudes stays there (to rounding)."""
+    lc, mc = _modes(P.with_(lm_h=5.5e-6), SCHOTTKY)
+    rng = np.random.default_rng(11)
+    for _ in range(20):
+        z, v1, v2, zc = _random_step(rng, lc, mc, dt)
+        z0, z1 = complex(z[0], z[1]), complex(z[2], z[3])
+        assert mk.readout(mc, 1, z0, z1, v1, v2) == mk.phasors(mc, z, v1, v2)[1]
+        ref = z.copy()
+        mk.advance_z(mc, zc, ref, v1, v2)
+        assert mk.end_i2(mc, zc, z0, z1, v1, v2) == mk.phasors(mc, ref, v1, v2)[1]
+        zs0, zs1 = mk.steady_modes(mc, v1, v2)
+        zs = np.array([zs0.real, zs0.imag, zs1.real, zs1.imag])
+        held = zs.copy()
+        mk.advance_z(mc, zc, held, v1, v2)
+        assert held == pytest.approx(zs, rel=1e-12, abs=1e-12 * np.abs(zs).max())
+
+
+@pytest.mark.parametrize("c1_scale, lm_h", [(1.0, 6.25e-6), (0.7, 6.25e-6), (1.3, 3e-6), (0.7, 9e-6)])
+def test_blocking_v2_holds_the_steady_i2_at_zero(c1_scale, lm_h):
+    """At V2 = :func:`blocking_v2` the steady state has I2 = 0 (to rounding against the short-mode I2), and
+    then the secondary only carries the induced emf: ``|V2| = omega Lm |V1| / |Z1|``, ``|I1| = |V1| / |Z1|``
+    with ``Z1 = R1 + j (omega L1 - 1 / (omega C1))`` (the phasor circuit, independent of the modes). A C1
+    detuned enough puts it within the clamp: :func:`steady_state` then blocks (returns it, I2 = 0)."""
+    w = P.omega_rad_s
+    lc = mk.link_constants(P, c1_f=c1_scale / (w * w * P.l1_h))
+    mc = np.empty(mk.N_MODES_C, dtype=complex)
+    mk.modes(lc, lm_h, mc)
+    v1 = complex(0.0, -P.vdc_v)
+    v2b = mk.blocking_v2(mc, v1)
+    zs0, zs1 = mk.steady_modes(mc, v1, v2b)
+    i2_short = abs(mk.readout(mc, 1, *mk.steady_modes(mc, v1, 0j), v1, 0j))
+    assert abs(mk.readout(mc, 1, zs0, zs1, v1, v2b)) < 1e-12 * i2_short
+    z1_ohm = abs(complex(lc[mk.LC_R1], w * P.l1_h - 1.0 / (w * lc[mk.LC_C1])))
+    assert abs(v2b) == pytest.approx(w * lm_h * P.vdc_v / z1_ohm, rel=1e-9)
+    assert abs(mk.readout(mc, 0, zs0, zs1, v1, v2b)) == pytest.approx(P.vdc_v / z1_ohm, rel=1e-9)
+    z = np.zeros(4)
+    vc = P.vl_v
+    v2 = mk.steady_state(lc, mc, mk.modal_table(P), 0.0, v1, vc, z)
+    if abs(v2b) <= 4 / np.pi * vc:   # within the clamp at d = 0: the rectifier blocks
+        assert c1_scale != 1.0 and v2 == v2b and abs(mk.phasors(mc, z, v1, v2)[1]) < 1e-12 * i2_short
+    else:                            # the tuned link conducts: the emf far above the clamp
+        assert c1_scale == 1.0 and abs(mk.phasors(mc, z, v1, v2)[1]) > 0.5 * i2_short

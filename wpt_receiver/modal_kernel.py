@@ -55,7 +55,7 @@ from numba import njit
 from .devices import IDEAL, DeviceSet
 from .params import LinkParams
 
-__all__ = ["link_constants", "modes", "zoh", "step", "advance_z", "phasors", "stored_energy_j", "sbar_v2", "sbar_edge", "sbar_shift", "sbar_clamp_f", "sbar_implicit", "end_i2", "blocking_v2", "short_weight", "inst_peak",
+__all__ = ["link_constants", "modes", "zoh", "step", "steady_modes", "readout", "advance_z", "phasors", "stored_energy_j", "sbar_v2", "sbar_edge", "sbar_shift", "sbar_clamp_f", "sbar_implicit", "end_i2", "blocking_v2", "short_weight", "inst_peak",
            "build_table", "modal_table", "run_duties", "steady_state", "rect_current_a", "rect_affine", "N_MODES_C", "N_ZOH_C",
            "LC_NAMES"]
 
@@ -193,21 +193,38 @@ def zoh(mc, dt_s, zc):
 
 # ---------------------------------------------------------------------- state -> phasors, the step
 @njit(cache=True)
+def steady_modes(mc, v1, v2):
+    """The modes' steady amplitudes ``(zs0, zs1)`` (complex) under the inputs ``v1, v2`` (complex [V]) held:
+    ``zs_m = -(g1_m V1 + g2_m V2) / lam'_m`` (eq. 1 in modal form, ``dz/dt = lam' z + g1 V1 + g2 V2``). The
+    one source of this formula (the step, the ZOH, the steady state, the blocking V2, the env's and the
+    mission's modal links)."""
+    zs0 = -(mc[MC_G1] * v1 + mc[MC_G2] * v2) / mc[MC_LAM]
+    zs1 = -(mc[MC_G1 + 1] * v1 + mc[MC_G2 + 1] * v2) / mc[MC_LAM + 1]
+    return zs0, zs1
+
+
+@njit(cache=True)
+def readout(mc, r, z0, z1, v1, v2):
+    """State ``r`` of ``[i1, i2, vC1, vC2]`` (phasor [A or V]) of the mode amplitudes ``z0, z1`` (complex)
+    under ``v1, v2``: ``S_r0 z0 + S_r1 z1 + D_r1 V1 + D_r2 V2`` (r = 1: I2 = ``S1 z0 + S5 z1 + D2 V1 + D3
+    V2``). The one source of the modes' readout."""
+    return mc[MC_S + r] * z0 + mc[MC_S + 4 + r] * z1 + mc[MC_D + 2 * r] * v1 + mc[MC_D + 2 * r + 1] * v2
+
+
+@njit(cache=True)
 def phasors(mc, z, v1, v2):
     """``(I1, I2)`` phasors [A] of the mode state ``z`` (4 reals) under the inputs ``v1, v2`` (complex [V])."""
     z0, z1 = complex(z[0], z[1]), complex(z[2], z[3])
-    i1 = mc[MC_S] * z0 + mc[MC_S + 4] * z1 + mc[MC_D] * v1 + mc[MC_D + 1] * v2
-    i2 = mc[MC_S + 1] * z0 + mc[MC_S + 5] * z1 + mc[MC_D + 2] * v1 + mc[MC_D + 3] * v2
-    return i1, i2
+    return readout(mc, 0, z0, z1, v1, v2), readout(mc, 1, z0, z1, v1, v2)
 
 
 @njit(cache=True)
 def advance_z(mc, zc, z, v1, v2):
     """The state part of :func:`step` alone: ``z`` (4 reals) advanced in place over the ``zc`` step."""
-    for m in range(2):
-        zs = -(mc[MC_G1 + m] * v1 + mc[MC_G2 + m] * v2) / mc[MC_LAM + m]
-        n = zs + zc[ZC_E + m] * (complex(z[2 * m], z[2 * m + 1]) - zs)
-        z[2 * m], z[2 * m + 1] = n.real, n.imag
+    zs0, zs1 = steady_modes(mc, v1, v2)
+    n0 = zs0 + zc[ZC_E] * (complex(z[0], z[1]) - zs0)
+    n1 = zs1 + zc[ZC_E + 1] * (complex(z[2], z[3]) - zs1)
+    z[0], z[1], z[2], z[3] = n0.real, n0.imag, n1.real, n1.imag
 
 
 @njit(cache=True)
@@ -216,7 +233,7 @@ def stored_energy_j(lc, mc, z, v1, v2, lm_h):
     x = np.empty(4, dtype=np.complex128)
     z0, z1 = complex(z[0], z[1]), complex(z[2], z[3])
     for r in range(4):
-        x[r] = mc[MC_S + r] * z0 + mc[MC_S + 4 + r] * z1 + mc[MC_D + 2 * r] * v1 + mc[MC_D + 2 * r + 1] * v2
+        x[r] = readout(mc, r, z0, z1, v1, v2)
     wl = lc[LC_L1] * abs(x[0]) ** 2 + lc[LC_L2] * abs(x[1]) ** 2 - 2.0 * lm_h * (x[0] * x[1].conjugate()).real
     return 0.25 * (wl + lc[LC_C1] * abs(x[2]) ** 2 + lc[LC_C2] * abs(x[3]) ** 2)
 
@@ -237,16 +254,13 @@ def step(lc, mc, zc, dt_s, z, v1, v2, out):
     ``int |I1|^2 dt``, ``int |I2|^2 dt`` [A^2 s], and the energies [J]: source, coil (R1, R2 with the
     devices' resistances), rectifier (module docstring)."""
     z0, z1 = complex(z[0], z[1]), complex(z[2], z[3])
-    u0 = mc[MC_G1] * v1 + mc[MC_G2] * v2
-    u1 = mc[MC_G1 + 1] * v1 + mc[MC_G2 + 1] * v2
-    zs0, zs1 = -u0 / mc[MC_LAM], -u1 / mc[MC_LAM + 1]
+    zs0, zs1 = steady_modes(mc, v1, v2)
     c0, c1 = z0 - zs0, z1 - zs1
     e0, e1 = zc[ZC_E], zc[ZC_E + 1]
     n0, n1 = zs0 + e0 * c0, zs1 + e1 * c1
     z[0], z[1], z[2], z[3] = n0.real, n0.imag, n1.real, n1.imag
     s10, s20, s11, s21 = mc[MC_S], mc[MC_S + 1], mc[MC_S + 4], mc[MC_S + 5]
-    ss1 = s10 * zs0 + s11 * zs1 + mc[MC_D] * v1 + mc[MC_D + 1] * v2
-    ss2 = s20 * zs0 + s21 * zs1 + mc[MC_D + 2] * v1 + mc[MC_D + 3] * v2
+    ss1, ss2 = readout(mc, 0, zs0, zs1, v1, v2), readout(mc, 1, zs0, zs1, v1, v2)
     p0, p1 = zc[ZC_PHI], zc[ZC_PHI + 1]
     int1, sq1 = _quad(ss1, s10 * c0, s11 * c1, p0, p1, zc, dt_s)
     int2, sq2 = _quad(ss2, s20 * c0, s21 * c1, p0, p1, zc, dt_s)
@@ -361,11 +375,10 @@ def short_weight(d_short):
 def end_i2(mc, zc, z0, z1, v1, v2):
     """I2 phasor [A] at the end of the ``zc`` step from the mode amplitudes ``z0, z1`` (complex) with
     ``v1, v2`` held (:func:`advance_z` then :func:`phasors`, the same arithmetic on scalars)."""
-    zs = -(mc[MC_G1] * v1 + mc[MC_G2] * v2) / mc[MC_LAM]
-    n0 = zs + zc[ZC_E] * (z0 - zs)
-    zs = -(mc[MC_G1 + 1] * v1 + mc[MC_G2 + 1] * v2) / mc[MC_LAM + 1]
-    n1 = zs + zc[ZC_E + 1] * (z1 - zs)
-    return mc[MC_S + 1] * n0 + mc[MC_S + 5] * n1 + mc[MC_D + 2] * v1 + mc[MC_D + 3] * v2
+    zs0, zs1 = steady_modes(mc, v1, v2)
+    n0 = zs0 + zc[ZC_E] * (z0 - zs0)
+    n1 = zs1 + zc[ZC_E + 1] * (z1 - zs1)
+    return readout(mc, 1, n0, n1, v1, v2)
 
 
 @njit(cache=True)
@@ -421,7 +434,7 @@ def sbar_implicit(lc, tab, mc, zc, z0, z1, v1, v2_held, d_short, vc_v, ws, e_gue
     ``(F, i2e, e)``."""
     d = d_short
     vc = vc_v
-    i2a = mc[MC_S + 1] * z0 + mc[MC_S + 5] * z1 + mc[MC_D + 2] * v1 + mc[MC_D + 3] * v2_held
+    i2a = readout(mc, 1, z0, z1, v1, v2_held)
     sgn = -1.0 if i2a.real < 0.0 else 1.0
     q0 = end_i2(mc, zc, z0, z1, v1, 0j)
     q1 = end_i2(mc, zc, z0, z1, v1, 1.0 + 0j) - q0
@@ -600,8 +613,10 @@ def blocking_v2(mc, v1):
     ``I2 = c0 + c1 V2`` from the modes' steady amplitudes and the feedthrough). The rectifier can block
     in steady state at duty d iff ``|blocking_v2| <= (4/pi) Vc (1 - sin(pi d/2))`` (the induced emf
     below the clamp; a strongly detuned C1)."""
-    c0 = -(mc[MC_S + 1] * mc[MC_G1] / mc[MC_LAM] + mc[MC_S + 5] * mc[MC_G1 + 1] / mc[MC_LAM + 1]) * v1 + mc[MC_D + 2] * v1
-    c1 = -(mc[MC_S + 1] * mc[MC_G2] / mc[MC_LAM] + mc[MC_S + 5] * mc[MC_G2 + 1] / mc[MC_LAM + 1]) + mc[MC_D + 3]
+    zs0, zs1 = steady_modes(mc, v1, 0j)
+    c0 = readout(mc, 1, zs0, zs1, v1, 0j)                  # the steady I2 at V2 = 0 [A]
+    zs0, zs1 = steady_modes(mc, 0j, 1.0 + 0j)
+    c1 = readout(mc, 1, zs0, zs1, 0j, 1.0 + 0j)            # the steady I2 per volt of V2 [A/V]
     return -c0 / c1
 
 
@@ -614,16 +629,12 @@ def steady_state(lc, mc, tab, d_short, v1, vc_v, z, iters=60):
     clamp = (4.0 / math.pi) * vc_v * (1.0 - math.sin(0.5 * math.pi * d_short))
     v2b = blocking_v2(mc, v1)
     if abs(v2b) <= clamp:
-        u0 = mc[MC_G1] * v1 + mc[MC_G2] * v2b
-        u1 = mc[MC_G1 + 1] * v1 + mc[MC_G2 + 1] * v2b
-        zs0, zs1 = -u0 / mc[MC_LAM], -u1 / mc[MC_LAM + 1]
+        zs0, zs1 = steady_modes(mc, v1, v2b)
         z[0], z[1], z[2], z[3] = zs0.real, zs0.imag, zs1.real, zs1.imag
         return v2b
     v2 = clamp + 0j
     for _ in range(iters):
-        u0 = mc[MC_G1] * v1 + mc[MC_G2] * v2
-        u1 = mc[MC_G1 + 1] * v1 + mc[MC_G2 + 1] * v2
-        zs0, zs1 = -u0 / mc[MC_LAM], -u1 / mc[MC_LAM + 1]
+        zs0, zs1 = steady_modes(mc, v1, v2)
         z[0], z[1], z[2], z[3] = zs0.real, zs0.imag, zs1.real, zs1.imag
         new = sbar_v2(lc, tab, d_short, phasors(mc, z, v1, v2)[1], vc_v)[0]
         if abs(new - v2) <= 1e-13 * (1.0 + abs(v2)):

@@ -55,8 +55,9 @@ import numpy as np
 from numba import from_dtype, njit, types
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
-from wpt_receiver.modal_kernel import (MC_G1, MC_G2, MC_LAM, N_MODES_C, N_ZOH_C, advance_z, inst_peak, modes, phasors,
-                                       rect_affine, rect_current_a, sbar_implicit, short_weight, stored_energy_j, zoh)
+from wpt_receiver.modal_kernel import (N_MODES_C, N_ZOH_C, advance_z, inst_peak, modes, phasors, readout,
+                                       rect_affine, rect_current_a, sbar_implicit, short_weight, steady_modes,
+                                       stored_energy_j, zoh)
 from wpt_receiver.modal_kernel import step as modal_step
 
 from wpt_receiver import modal_kernel as _modal_kernel
@@ -573,11 +574,8 @@ def _settled(st, c, lk, lm):
         return abs(st.x0) < tol and abs(st.x1) < tol
     mc = _modes_of(lk, lm if lm > 0 else 1e-12)
     v1c, v2 = complex(0.0, -v1), complex(st.v2re, st.v2im)
-    zss = np.empty(4)
-    for m in range(2):
-        zs = -(mc[MC_G1 + m] * v1c + mc[MC_G2 + m] * v2) / mc[MC_LAM + m]
-        zss[2 * m], zss[2 * m + 1] = zs.real, zs.imag
-    return abs(phasors(mc, st.z, v1c, v2)[1] - phasors(mc, zss, v1c, v2)[1]) < tol
+    zs0, zs1 = steady_modes(mc, v1c, v2)
+    return abs(phasors(mc, st.z, v1c, v2)[1] - readout(mc, 1, zs0, zs1, v1c, v2)) < tol
 
 
 @njit(cache=True)

@@ -1,0 +1,51 @@
+"""The oracle's disk-cache key covers the env's physics: a bound computed by other env / link sources
+(the detuned windows' blocking fix changed ``envs/vector_kernel.py`` and ``envs/detuned.py``) is computed
+again, never read back stale (``policies.oracle._source_hash``)."""
+
+import shutil
+
+import numpy as np
+
+from policies import oracle
+
+
+def test_the_key_covers_the_sources_of_the_rollouts_step():
+    names = {(f.parent.name, f.name) for f in oracle._rollout_files()}
+    for need in [("envs", "vector_kernel.py"), ("envs", "detuned.py"), ("envs", "modal_step.py"), ("envs", "core.py"),
+                 ("envs", "layout.py"), ("envs", "rollout.py"), ("wpt_receiver", "modal_kernel.py"),
+                 ("wpt_receiver", "sbar.py"), ("wpt_receiver", "parts.toml")]:
+        assert need in names
+    assert all(f.is_file() for f in oracle._rollout_files())
+
+
+def test_changing_one_env_source_changes_the_key(tmp_path, monkeypatch):
+    copies = []
+    for f in oracle._rollout_files():
+        (tmp_path / f.parent.name).mkdir(exist_ok=True)
+        copies.append(tmp_path / f.parent.name / f.name)
+        shutil.copy(f, copies[-1])
+    before = oracle._source_hash()
+    monkeypatch.setattr(oracle, "_rollout_files", lambda: copies)
+    assert oracle._source_hash() == before          # the same bytes: the same key
+    detuned = tmp_path / "envs" / "detuned.py"
+    detuned.write_text(detuned.read_text() + "\n# another blocking rule\n")
+    assert oracle._source_hash() != before
+
+
+def test_a_cached_bound_is_recomputed_when_the_env_sources_change(tmp_path, monkeypatch):
+    monkeypatch.setenv("DRONEWPT_CACHE_DIR", str(tmp_path / "cache"))
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return oracle.OracleResult(1.5, 0.01, True, True, np.linspace(0.0, 1.0, 300))
+
+    args = ("floor", "nominal", 1000, 0.01, oracle.DEFAULT_STARTS, None, compute)
+    r1, r2 = oracle._cached(*args), oracle._cached(*args)
+    assert len(calls) == 1 and r1.energy_after_stop_j == r2.energy_after_stop_j == 1.5   # the second from disk
+    src = tmp_path / "vector_kernel.py"
+    src.write_text("# other physics\n")
+    monkeypatch.setattr(oracle, "_rollout_files", lambda: [src])
+    oracle._cached(*args)
+    assert len(calls) == 2
+    np.testing.assert_array_equal(r2.duties, np.linspace(0.0, 1.0, 300))
