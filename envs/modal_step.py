@@ -70,9 +70,7 @@ _DELTA_RATIO2 = 1.44
 
 
 def kernel_function(name: str, compiled: bool = True):
-    """The function ``name`` of this module: compiled, or with ``compiled=False`` the same source run
-    by the interpreter (its ``py_func``; looked up in the module at each call, so a test may swap the
-    module's functions and constants)."""
+    """This module's ``name``, as :func:`envs.vector_kernel.kernel_function` gives that module's."""
     f = globals()[name]
     return f if compiled else getattr(f, "py_func", f)
 
