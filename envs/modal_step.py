@@ -46,9 +46,9 @@ from wpt_receiver.modal_kernel import step as modal_step
 from wpt_receiver import modal_kernel as _modal_kernel
 from wpt_receiver.kernel_cache import drop_stale_cache
 
-from .layout import (CZ_FAST, CZ_FASTH, CZ_KEY, CZ_MODES, CZ_SAMPLE, CZ_STEP, CZ_SUB, FAST, INFO, MPAR, MSINGLE_PAR,
+from .layout import (CZ_FAST, CZ_FASTH, CZ_KEY, CZ_MODES, CZ_SAMPLE, CZ_STEP, CZ_SUB, FAST, MPAR, MSINGLE_PAR,
                      MSTATE, SINGLE, SLOW, STATE)
-from .vector_kernel import _battery, _objective, _put_info, _put_obs, _reward, _t_since
+from .vector_kernel import _battery, _objective, _put_info, _put_obs, _reward, _t_since, single_finish
 
 __all__ = ["env_step", "step_kernel", "single_step", "start_link", "kernel_function"]
 
@@ -469,19 +469,7 @@ def single_step(k, d, st, steps, slow, par, obs, out, lc, cz, tab):
                                                          vl_old, d, lc, tab, cz, dt, n_sub, int(par[P.n_q]), par[P.vf],
                                                          par[P.dr], par[P.v1], par[P.hold_tol], np.empty(9), en)
     ms[MSTATE.v2r], ms[MSTATE.v2i], ms[MSTATE.e] = v2c.real, v2c.imag, ang
-    ib, soc, vrc, vl = _battery(il, st[SINGLE.soc], st[SINGLE.vrc], vl_old, st[SINGLE.ocv0:SINGLE.bus_decay + 1])
-    cmd = steps[k, 0]
-    reward, over = _reward(il, cmd, pk, par[P.inv_rated], par[P.w_track], par[P.w_over], par[P.i_ref])
-    stop_k = int(st[SINGLE.stop_k])
-    rm, ok, checked, cost = _objective(k, pk, il, slow[j, SLOW.i2_sm_a], dt, st[SINGLE.run_max], stop_k,
-                                       st[SINGLE.sm_ok] != 0.0, st[SINGLE.sm_checked] != 0.0)
-    st[SINGLE.i1], st[SINGLE.i2], st[SINGLE.vl], st[SINGLE.soc], st[SINGLE.vrc], st[SINGLE.d] = i1, i2, vl, soc, vrc, d
-    st[SINGLE.run_max], st[SINGLE.sm_ok], st[SINGLE.sm_checked] = rm, 1.0 if ok else 0.0, 1.0 if checked else 0.0
-    kk = k + 1
-    _put_obs(obs, i2 + steps[kk - 1, 1], vl, ib, il, soc, steps[kk, 0], d, _t_since(kk, dt, st[SINGLE.t_stop], stop_k),
-             par[len(P):len(P) + 8], par[len(P) + 8:len(P) + 16])
-    _put_info(out, kk * dt, i2, pk, i1, d, v2, il, vl, ib, soc, cmd, slow[j, SLOW.lm_h], vl_old * il * dt, over, cost,
-              rm, pk_env)
-    out[len(INFO)] = 1.0 if (ok and checked) else 0.0
-    return reward
+    return single_finish(k, d, st, steps, i1, i2, pk, pk_env, il, v2, vl_old, slow[j, SLOW.i2_sm_a], slow[j, SLOW.lm_h],
+                         dt, par[P.inv_rated], par[P.w_track], par[P.w_over], par[P.i_ref], par[len(P):len(P) + 8],
+                         par[len(P) + 8:len(P) + 16], obs, out)
 

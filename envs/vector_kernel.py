@@ -15,7 +15,9 @@ the envs keep the orchestration (reset, seeding, plans, info dicts, rendering) a
 * :func:`step_kernel` is :func:`env_step` serial and without detuned windows (the signature
   :mod:`envs.rollout` replays).
 * :func:`single_step` is the single env's per-env entry: the same helpers on one window (a call
-  with 8 arguments: the single env is stepped from Python one step at a time).
+  with 8 arguments: the single env is stepped from Python one step at a time); what follows its link
+  (battery, reward, objective, observation, info) is :func:`single_finish`, which the exact-mode link's
+  single step (:mod:`envs.modal_step`) calls too.
 
 The slots of every array are named (:mod:`envs.layout`). Tests run the same source uncompiled
 through each function's ``.py_func`` (``tests/test_env_kernel.py``: a change to one constant here
@@ -40,7 +42,7 @@ from wpt_receiver.kernel_cache import drop_stale_cache
 
 from .objective import SHORT_MODE_IL_A, SHORT_MODE_WITHIN_S
 
-__all__ = ["env_step", "step_kernel", "duty_kernel", "single_step", "inst_peak_rows", "obs_rows", "INFO_ROWS",
+__all__ = ["env_step", "step_kernel", "duty_kernel", "single_step", "single_finish", "inst_peak_rows", "obs_rows", "INFO_ROWS",
            "kernel_function"]
 
 
@@ -486,18 +488,29 @@ def single_step(k, d, st, steps, slow, par, obs, out, cc):
     pk_env = pk
     ptab = par[len(P) + 16:].reshape((int(par[P.nd]), int(par[P.ni]), int(par[P.nq])))
     pk = _inst_peak(pk_env, d, vl_old, ptab, par[P.vlc], par[P.inv_imax])
+    return single_finish(k, d, st, steps, i1, i2, pk, pk_env, il, v2, vl_old, c[SLOW.i2_sm_a], c[SLOW.lm_h], dt,
+                         par[P.inv_rated], par[P.w_track], par[P.w_over], par[P.i_ref], par[len(P):len(P) + 8],
+                         par[len(P) + 8:len(P) + 16], obs, out)
+
+
+@njit(cache=True)
+def single_finish(k, d, st, steps, i1, i2, pk, pk_env, il, v2, vl_old, i2_sm, lm_h, dt, inv_rated, w_track, w_over,
+                  i_ref, scale, offset, obs, out):
+    """The single env's step ``k`` after its link (either link's ``single_step``): battery, reward, objective,
+    the state's :data:`SINGLE` slots, observation and info, from the link's end currents ``i1``, ``i2``, peak
+    ``pk`` (its envelope ``pk_env``), ``I_L`` ``il``, ``v2`` and the segment's short-mode I2 ``i2_sm`` and Lm
+    ``lm_h``. Fills ``obs`` and ``out`` (:data:`INFO`, then reached short mode 1.0 / 0.0); returns the reward."""
     ib, soc, vrc, vl = _battery(il, st[SINGLE.soc], st[SINGLE.vrc], vl_old, st[SINGLE.ocv0:SINGLE.bus_decay + 1])
     cmd = steps[k, 0]
-    reward, over = _reward(il, cmd, pk, par[P.inv_rated], par[P.w_track], par[P.w_over], par[P.i_ref])
+    reward, over = _reward(il, cmd, pk, inv_rated, w_track, w_over, i_ref)
     stop_k = int(st[SINGLE.stop_k])
-    rm, ok, checked, cost = _objective(k, pk, il, c[SLOW.i2_sm_a], dt, st[SINGLE.run_max], stop_k,
+    rm, ok, checked, cost = _objective(k, pk, il, i2_sm, dt, st[SINGLE.run_max], stop_k,
                                        st[SINGLE.sm_ok] != 0.0, st[SINGLE.sm_checked] != 0.0)
     st[SINGLE.i1], st[SINGLE.i2], st[SINGLE.vl], st[SINGLE.soc], st[SINGLE.vrc], st[SINGLE.d] = i1, i2, vl, soc, vrc, d
     st[SINGLE.run_max], st[SINGLE.sm_ok], st[SINGLE.sm_checked] = rm, 1.0 if ok else 0.0, 1.0 if checked else 0.0
     kk = k + 1
     _put_obs(obs, i2 + steps[kk - 1, 1], vl, ib, il, soc, steps[kk, 0], d, _t_since(kk, dt, st[SINGLE.t_stop], stop_k),
-             par[len(P):len(P) + 8], par[len(P) + 8:len(P) + 16])
-    _put_info(out, kk * dt, i2, pk, i1, d, v2, il, vl, ib, soc, cmd, c[SLOW.lm_h], vl_old * il * dt, over, cost, rm,
-              pk_env)
+             scale, offset)
+    _put_info(out, kk * dt, i2, pk, i1, d, v2, il, vl, ib, soc, cmd, lm_h, vl_old * il * dt, over, cost, rm, pk_env)
     out[len(INFO)] = 1.0 if (ok and checked) else 0.0
     return reward
