@@ -20,18 +20,18 @@ def _use_py_funcs(monkeypatch):
             monkeypatch.setattr(vk, name, f.py_func)
 
 
-def _run(scenario, compiled=True, steps=50, seed=3):
-    """Single env and row 0 of a 2-env vector env, seeded alike, the same random actions (through an
-    autoreset of the vector env): arrays of (reward, I2, I_L, peak, VL) and the observations."""
-    single = SbarChargingEnv(scenario=scenario, config=SHORT, compiled=compiled)
-    vec = SbarChargingVectorEnv(2, scenario, SHORT, compiled=compiled)
+def _run(scenario, compiled=True, steps=50, seed=3, cfg=SHORT):
+    """Single env and row 0 of a 2-env vector env on ``cfg``, seeded alike, the same random actions (through
+    an autoreset of the vector env): arrays of (reward, I2, I_L, peak, VL) and the observations."""
+    single = SbarChargingEnv(scenario=scenario, config=cfg, compiled=compiled)
+    vec = SbarChargingVectorEnv(2, scenario, cfg, compiled=compiled)
     o1, _ = single.reset(seed=seed)
     ov, _ = vec.reset(seed=seed)
     rng = np.random.default_rng(0)
     rs, rv, obs = [], [], [(o1, ov[0])]
     for k in range(steps):
         a = rng.uniform(-1.0, 1.0, (2, 1)).astype(np.float32)
-        if k == SHORT.n_steps:
+        if k == cfg.n_steps:
             o1, _ = single.reset()   # the vector env autoresets row 0 on this step
             s1 = (o1, 0.0, False, False, None)
         else:

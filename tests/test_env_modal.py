@@ -12,6 +12,7 @@ import pytest
 from envs import EnvConfig, SbarChargingEnv, SbarChargingVectorEnv
 from envs import modal_step as vk
 from envs.layout import CZ_MODES, CZ_STEP, N_CZ
+from test_env_kernel import _run
 from test_mission_modal import _kernel_run
 from wpt_receiver import TABLE_I
 from wpt_receiver import modal_kernel as mk
@@ -190,36 +191,11 @@ def test_link_model_is_an_option_eq4_the_default():
     assert "link_model='modal'" in repr(MODAL) and "v2_updates=3" in repr(EnvConfig(link_model="modal", v2_updates=3))
 
 
-def _run(scenario, cfg=SHORT, steps=50, seed=3):
-    """Single env and row 0 of a 2-env vector env on ``cfg``, seeded alike, the same random actions (through
-    an autoreset of the vector env): arrays of (reward, I2, I_L, peak, VL) of each, and the observations."""
-    single = SbarChargingEnv(scenario=scenario, config=cfg)
-    vec = SbarChargingVectorEnv(2, scenario, cfg)
-    o1, _ = single.reset(seed=seed)
-    ov, _ = vec.reset(seed=seed)
-    rng = np.random.default_rng(0)
-    rs, rv, obs = [], [], [(o1, ov[0])]
-    keys = ("i2_a", "rect_current_a", "i2_peak_a", "battery_v")
-    for k in range(steps):
-        a = rng.uniform(-1.0, 1.0, (2, 1)).astype(np.float32)
-        if k == cfg.n_steps:
-            o1, _ = single.reset()   # the vector env autoresets row 0 on this step
-            s1 = (o1, 0.0, False, False, None)
-        else:
-            s1 = single.step(a[0])
-        sv = vec.step(a)
-        obs.append((s1[0], sv[0][0]))
-        if s1[4] is not None:
-            rs.append([s1[1]] + [s1[4][key] for key in keys])
-            rv.append([sv[1][0]] + [sv[4][key][0] for key in keys])
-    return np.array(rs), np.array(rv), np.array(obs)
-
-
 @pytest.mark.parametrize("scenario", ["random", "detuned"])
 def test_single_env_is_the_vector_row_on_the_modal_link(scenario):
     """The single env and row 0 of the vector env step the same compiled helpers: equal to the bit, through
     the vector env's autoreset, tuned and detuned (a detuned window: its C1, C2 in the link constants)."""
-    fs, fv, fo = _run(scenario)
+    fs, fv, fo = _run(scenario, cfg=SHORT)
     assert np.array_equal(fs, fv) and np.array_equal(fo[:, 0], fo[:, 1])
     assert np.ptp(fs[:, 1]) > 1.0   # the random duties move the link
 
@@ -237,9 +213,9 @@ def test_one_change_moves_single_and_vector_alike(monkeypatch):
         if hasattr(f, "py_func"):
             monkeypatch.setattr(vk, name, f.py_func)
     cfg = EnvConfig(n_steps=12, link_model="modal")
-    s0, v0, _ = _run("random", cfg, steps=12)
+    s0, v0, _ = _run("random", cfg=cfg, steps=12)
     monkeypatch.setattr(vk, "short_weight", _wide_short)
-    s1, v1, _ = _run("random", cfg, steps=12)
+    s1, v1, _ = _run("random", cfg=cfg, steps=12)
     assert np.array_equal(s0, v0) and np.array_equal(s1, v1)
     # more resistance in the short window: less current where the duty is high, in both envs alike
     assert np.abs(s1 - s0)[:, 1:3].max() > 1e-3
