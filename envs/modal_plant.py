@@ -150,17 +150,11 @@ class ModalPlantPart(PlantPart):
         self._reset_detuned(idx, p.detuned)
         return p
 
-    def _reset_detuned(self, idx, det):
-        if det is None:
-            if len(self.detuned):
-                self.detuned[idx] = False
-            return
-        from .detuned import relative_errors
-        if not len(self.detuned):
-            n = self.state.shape[1]
-            self.detuned, self.c_rel = np.zeros(n, np.bool_), np.zeros((2, n))
-        self.detuned[idx] = True
-        self.c_rel[:, idx] = relative_errors(self.cfg, det.c1_f, det.c2_f)
+    def _alloc_complex(self, n):
+        """Nothing: a detuned window's C1, C2 are in its link constants (no complex envelope)."""
+
+    def _set_complex(self, idx, det):
+        """Nothing (see :meth:`_alloc_complex`)."""
 
     def start_values(self, peak):
         """``(I_L, instantaneous peak, v2 in phase with i2)`` at the windows' start: the steady state's."""

@@ -128,13 +128,20 @@ class PlantPart:
         from .detuned import relative_errors
         if not len(self.detuned):
             n = self.state.shape[1]
-            self.detuned = np.zeros(n, np.bool_)
-            self.ccoef = np.zeros((n, self.cfg.n_slow, CCOEF_N))
-            self.xc = np.zeros((n, len(XC)))
-            self.c_rel = np.zeros((2, n))
+            self.detuned, self.c_rel = np.zeros(n, np.bool_), np.zeros((2, n))
+            self._alloc_complex(n)
         self.detuned[idx] = True
-        self.ccoef[idx], self.xc[idx] = det.coef, det.xc0
+        self._set_complex(idx, det)
         self.c_rel[:, idx] = relative_errors(self.cfg, det.c1_f, det.c2_f)
+
+    def _alloc_complex(self, n):
+        """Room for ``n`` windows' complex envelope (eq. 4's detuned step): coefficients and state."""
+        self.ccoef = np.zeros((n, self.cfg.n_slow, CCOEF_N))
+        self.xc = np.zeros((n, len(XC)))
+
+    def _set_complex(self, idx, det):
+        """The detuned windows ``idx``'s complex-envelope coefficients and start state from their plan ``det``."""
+        self.ccoef[idx], self.xc[idx] = det.coef, det.xc0
 
     def start_values(self, peak):
         """``(I_L, instantaneous peak, V2)`` at the windows' start state: the SBAR's rules on it (eq. 9,
