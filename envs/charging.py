@@ -173,7 +173,8 @@ class SbarChargingEnv(gym.Env):
     @property
     def policy_context(self) -> PolicyContext:
         """What a policy may assume: Table I link (not the true Lm), the control period, the rating."""
-        return PolicyContext(link=self.config.link, control_period_s=self._dt, rated_i2_a=self.config.rated_i2_a)
+        return PolicyContext(link=self.config.link, control_period_s=self._dt, rated_i2_a=self.config.rated_i2_a,
+                             link_model=self.config.link_model)
 
     @property
     def state_names(self) -> tuple:

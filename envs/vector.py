@@ -128,7 +128,8 @@ class SbarChargingVectorEnv(VectorEnv):
 
     @property
     def policy_context(self) -> PolicyContext:
-        return PolicyContext(link=self.config.link, control_period_s=self._dt, rated_i2_a=self.config.rated_i2_a)
+        return PolicyContext(link=self.config.link, control_period_s=self._dt, rated_i2_a=self.config.rated_i2_a,
+                             link_model=self.config.link_model)
 
     # ------------------------------------------------------------------ episodes
     def _start(self, idx, options=ScenarioPart.KEEP):

@@ -150,17 +150,22 @@ class PolicyContext:
     control_period_s : how often ``act`` is called [s]; default 100 us, the control period of the
         environments and of the default mission (a 10 kHz DSP loop)
     rated_i2_a : rated secondary coil current amplitude [A]
+    link_model : the plant's link model the policy runs on: ``"envelope"`` (eq. 4, the default) or ``"modal"``
+        (the exact-mode link, ``envs.EnvConfig(link_model="modal")``); a model-predictive policy predicts with it
     """
 
     link: LinkParams = TABLE_I
     control_period_s: float = 1e-4
     rated_i2_a: float = 15.0
+    link_model: str = "envelope"
 
     def __post_init__(self):
         if not np.isfinite(self.control_period_s) or self.control_period_s <= 0:
             raise ValueError(f"control_period_s={self.control_period_s!r} is invalid; valid range: (0, inf)")
         if not np.isfinite(self.rated_i2_a) or self.rated_i2_a <= 0:
             raise ValueError(f"rated_i2_a={self.rated_i2_a!r} is invalid; valid range: (0, inf)")
+        if self.link_model not in ("envelope", "modal"):
+            raise ValueError(f"link_model={self.link_model!r} is invalid; valid values: envelope, modal")
 
 
 @runtime_checkable

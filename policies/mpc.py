@@ -184,21 +184,28 @@ class _DelayBank:
         self.best = np.zeros(self.n, dtype=int)
         self._lag = np.asarray(self.delays)   # u's rows of the hypotheses (an index array, built once)
         self._prefer = (1.0 + 0.1 * np.arange(len(self.delays)))[:, None]   # a shorter delay preferred
+        self.vc = None   # the receivers' clamp voltages [V] (the modal model's residual of V2 needs them)
 
-    def _step(self, z, u):
-        """One model step of the estimates ``z`` (..., 3) under the V2 ``u`` (...) [V]."""
+    def _step(self, z, u, vc=None):
+        """One model step of the estimates ``z`` (..., 3) under the V2 ``u`` (...) [V] (the modal model's:
+        ``z`` (..., 5), at the clamp ``vc``)."""
         m = self.m
+        if getattr(m, "modal", False):
+            return m.step(z, u, vc)
         out = np.empty_like(z)
         out[..., :2] = z[..., :2] @ m.ad.T + (u + z[..., 2])[..., None] * m.b2 + m.e
         out[..., 2] = z[..., 2]
         return out
 
-    def update(self, y, u_last):
-        """Filter the measured I2 ``y`` (n,) [A] given the V2 of the last step ``u_last`` (n,) [V]: ``z`` now."""
+    def update(self, y, u_last, vc=None):
+        """Filter the measured I2 ``y`` (n,) [A] given the V2 of the last step ``u_last`` (n,) [V] (and, for the
+        modal model, the clamp voltages ``vc`` (n,) [V]): ``z`` now."""
         self.u[1:] = self.u[:-1]   # shifted by one step in place (np.roll's values, without a new array)
         self.u[0] = u_last
-        x = self._step(self.z, self.u[self._lag])   # every hypothesis at once (H, n, 3)
-        innov = y[None, :] - x[..., 1]
+        self.vc = vc
+        uh = self.u[self._lag]
+        x = self._step(self.z, uh, vc)   # every hypothesis at once (H, n, 3)
+        innov = y[None, :] - (self.m.measure(x, uh, vc) if vc is not None else x[..., 1])
         self.z = x + innov[..., None] * self.m.kalman[:, 0]
         self.score += (1.0 / _DELAY_MEMORY) * (innov * innov - self.score)
         # a shorter delay is preferred unless a longer one explains the measurements clearly better
@@ -212,7 +219,7 @@ class _DelayBank:
         d = self._lag[self.best]
         for j in range(int(d.max(initial=0)) - 1, -1, -1):
             go = np.flatnonzero(d > j)
-            z[go] = self._step(z[go], self.u[j, go])
+            z[go] = self._step(z[go], self.u[j, go], None if self.vc is None else self.vc[go])
         return z
 
 
@@ -242,7 +249,13 @@ class MPCPolicy:
         dev = preset(devices)
         self._vf = dev.rect_vf_v
         self._link = envelope_params(base, dev)
-        self._model = _model(self._link, float(ctx.control_period_s))
+        # the plant's link (the context's link_model): eq. 4's envelope, or the exact modes (policies.mpc_modal)
+        self._modal = getattr(ctx, "link_model", "envelope") == "modal"
+        if self._modal:
+            from .mpc_modal import modal_model
+            self._model = modal_model(base, devices, float(ctx.control_period_s), N_PRED, BLOCKS)
+        else:
+            self._model = _model(self._link, float(ctx.control_period_s))
         self._i2_sm = float(short_mode_i2_a(base, base.lm_h, dev))
         self._peak_table = fold_vl(peak_table(base, dev))
         from .classical import ModelBasedPolicy
@@ -270,20 +283,28 @@ class MPCPolicy:
         steady state the first measured I2 implies (``w`` explains the offset); the rows ``new`` (a new
         window in a batched env that resets its windows) are started afresh the same way."""
         u_last = self._v2_of(d_last, vl)
+        vc = vl + self._vf if self._modal else None
         if self._bank is None or self._bank.n != len(i2m):
-            self._bank = _DelayBank(self._model, self._steady_z(i2m, u_last), u_last, self.delays)
+            self._bank = _DelayBank(self._model, self._steady_z(i2m, u_last, vc), u_last, self.delays)
+            self._bank.vc = vc
             return self._bank.now()
-        out = self._bank.update(i2m, u_last)
+        out = self._bank.update(i2m, u_last, vc)
         if new is not None and len(new):
-            z0 = self._steady_z(i2m, u_last)
+            z0 = self._steady_z(i2m, u_last, vc)
             b = self._bank
             b.z[:, new], b.u[:, new], b.score[:, new], b.best[new] = z0[new], u_last[new], 0.0, 0
             out[new] = z0[new]
         return out
 
-    def _steady_z(self, i2m, u_last):
+    def _steady_z(self, i2m, u_last, vc=None):
         """The steady state ``z = [I1, I2, w]`` (n, 3) the measured I2 ``i2m`` implies under the V2 ``u_last``
-        (``w`` explains the offset): a filter's start (made only when one starts)."""
+        (``w`` explains the offset): a filter's start (made only when one starts). The modal model's
+        (``vc`` the clamp voltages): ``z = [s (4), w]`` (n, 5), the same way."""
+        if self._modal:
+            m = self._model
+            i0 = m.steady(u_last, 0.0, vc)[1]
+            w = (i2m - i0) / self._ss_i2[1]
+            return np.concatenate([m.steady(u_last, w, vc)[0], w[:, None]], axis=1)
         lk = self._link
         x = lk.omega_rad_s * lk.lm_h
         det = lk.r1_ohm * lk.r2_ohm + x * x
@@ -349,8 +370,13 @@ class MPCPolicy:
         self._knots = np.asarray(BLOCKS[:f])
         self._bl_stop = np.concatenate([np.zeros(f + 1), np.full(len(m.G), -_BIG)])
         self._sense = np.zeros(f + 1 + len(m.G), dtype=np.int32)
-        ss = np.linalg.solve(np.eye(2) - m.ad, np.stack([m.e, m.b2], axis=1))   # steady [I1, I2] of (1, w)
-        self._ss_i2 = (float(ss[1, 0]), float(ss[1, 1]))
+        if self._modal:   # steady I2 [A] at V2 = 0 (clamp at 31 V) and per volt of w
+            vc0 = np.array(_VLC + self._vf)
+            i0 = float(m.steady(np.zeros(()), 0.0, vc0)[1])
+            self._ss_i2 = (i0, float(m.steady(np.zeros(()), 1.0, vc0)[1]) - i0)
+        else:
+            ss = np.linalg.solve(np.eye(2) - m.ad, np.stack([m.e, m.b2], axis=1))   # steady [I1, I2] of (1, w)
+            self._ss_i2 = (float(ss[1, 0]), float(ss[1, 1]))
         self._excess_curve()
 
     def _solve_stop(self, e, z, vl, u_prev):
@@ -397,6 +423,9 @@ class MPCPolicy:
         vmax = 4.0 / np.pi * (vl + self._vf)
         free = z @ m.F.T + m.h
         ex, slope = self._excess(v_bar, vl)
+        extra = None
+        if self._modal:   # the residual of V2 linearised along v_bar: a constant and a term in the knots
+            free, extra = self._residual_lin(free, v_bar, vl, f)
         ub = (((1.0 + self._budget_of(e) - _MARGIN) * self._bound_sm(z) + self._relax[e])[:, None]
               - (ex - slope * v_bar).repeat(2, axis=1) - free)
         # x = [v (f knots), s]: 0 <= v <= vmax, s >= 0 (simple bounds), (G + slope M) v - s <= ub; M's rows have
@@ -416,12 +445,33 @@ class MPCPolicy:
         knots = np.asarray(BLOCKS[:-1])
         for r in range(len(e)):
             A_flat[m2_flat] = vals[r]   # into A through its flat view (A.flat's iterator costs ~5x)
-            x, flag = self._daqp(e[r], q[r], A, bu[r], self._bl_stop)
+            x, flag = self._daqp(e[r], q[r], A if extra is None else A + extra[r], bu[r], self._bl_stop)
             if flag < 1:
                 v[r, :f] = np.minimum(v_bar[r, knots], vmax[r])   # keep the plan
             else:
                 v[r, :f], slack[r] = x[:f], x[f]
         return v, slack
+
+    def _rterm(self, plan, vl):
+        """(modal model) The I2 samples' part (n, 2 N_PRED) [A] of the residual of V2 in I2's frame along the
+        V2 plans ``plan`` (n, N_PRED) [V] at the battery voltages ``vl`` (n,) (:mod:`policies.mpc_modal`)."""
+        m = self._model
+        rr, ri = m.residual(plan, (vl + self._vf)[:, None])
+        return np.concatenate([rr, ri], axis=1) @ m.Gr.T
+
+    def _residual_lin(self, free, v_bar, vl, f):
+        """(modal model) The residual of V2 linearised along the plans ``v_bar`` (n, N_PRED) [V]: ``free`` (n, 2
+        N_PRED) with its constant part added, and its part in the ``f`` free knots (n, 2 N_PRED, f + 1) (the
+        slack's column 0), added to the after-stop QP's constraint rows."""
+        m = self._model
+        n = N_PRED
+        (rr, ri), (sr, si) = m.residual_slope(v_bar, (vl + self._vf)[:, None])
+        free = free + np.concatenate([rr - sr * v_bar, ri - si * v_bar], axis=1) @ m.Gr.T
+        lin = np.einsum("pk,rk,kj->rpj", m.Gr[:, :n], sr, m.M[:, :f]) + np.einsum("pk,rk,kj->rpj", m.Gr[:, n:], si,
+                                                                                   m.M[:, :f])
+        extra = np.zeros((len(v_bar), 2 * n, f + 1))
+        extra[:, :, :f] = lin
+        return free, extra
 
     def _daqp(self, e, q, A, bu, bl):
         """Solve receiver ``e``'s after-stop QP with daqp, warm-started from its last solve's multipliers
@@ -464,6 +514,9 @@ class MPCPolicy:
         vmax = 4.0 / np.pi * (vl + self._vf)
         Ge = m.G[m.ends]
         free = z @ m.F[m.ends].T + m.h[m.ends]
+        if self._modal:   # the residual of V2 along the previous plan, shifted by a step
+            prev = np.concatenate([self._plan[idx, 1:], self._plan[idx, -1:]], axis=1)
+            free += self._rterm(prev, vl)[:, m.ends]
         q = 2.0 * (free - ref[:, None]) @ Ge
         q[:, 0] -= 2.0 * _LAMBDA * u_prev
         v = -q @ self._track_inv.T   # the unconstrained optimum: the QP's solution when the box is inactive
@@ -509,6 +562,8 @@ class MPCPolicy:
         (n, N_PRED) from ``z`` (n, 3) within the bound of receiver ``e`` (n,) (bool (n,))."""
         m = self._model
         i2 = z @ m.F.T + m.h + plan @ m.Gu.T
+        if self._modal:
+            i2 += self._rterm(plan, vl)
         ex = self._excess_at(plan, vl[:, None])
         bound = (1.0 + self._budget_of(e) - 0.5 * _MARGIN) * self._bound_sm(z) + self._relax[e]
         return np.all(i2 + ex.repeat(2, axis=1) <= bound[:, None], axis=1)
@@ -531,6 +586,8 @@ class MPCPolicy:
         receivers (bool (n,))."""
         m = self._model
         free = z @ m.F.T + m.h
+        if self._modal:
+            free = free + self._rterm(np.zeros((len(z), N_PRED)), np.full(len(z), _VLC))
         sm = self._bound_sm(z)
         return np.all(free + self._ex0 <= ((1.0 + self._budget_of(e) - _MARGIN) * sm + relax)[:, None], axis=1)
 

@@ -1,0 +1,215 @@
+"""The MPC's prediction model of the exact-mode link (``EnvConfig(link_model="modal")``): what
+:class:`policies.mpc.MPCPolicy` predicts with when its :class:`~mission_sim.contract.PolicyContext` says the
+plant is the modal link (``link_model="modal"``); eq. 4's model (:class:`policies.mpc._Model`) otherwise.
+
+Why eq. 4 is not enough there (measured on nominal windows 1000-1003 with the eq. 4 MPC on the modal plant,
+docs/rl.md): the steady I2 of both links agree within 0.03 % at every duty, and the ripple excess the MPC
+adds is within 0.02 A of the modal peak's; but the SBAR's v2 has a quadrature component (eq. 9
+generalised: ``V2 = (4/pi) Vc (j e^{-j e} - sin(pi d/2))``, the commutation angle ``e`` off ``pi/2`` by the
+harmonics' shift) of 1.4-4.7 V, steepest near short mode (``~ sqrt(V2)``), and on the exact modes
+(asymmetric about w, ``w / sqrt(1 -+ k)``) a change of it rings |I2|. The eq. 4 MPC ends its after-stop
+ramp with a step from d ~ 0.94 to 1 (0.2 V in phase, ~1 V in quadrature) and the modal link rings
+0.7-1.0 A above the eq. 4 prediction 1 ms later: the measured overshoot is that ring.
+
+The model here (4 real states + the MPC's input disturbance ``w``):
+
+* the link's two positive-frequency modes (:func:`wpt_receiver.modal.link_matrices`, the devices'
+  resistances folded in, Table I's Lm), in the frame rotating at w and turned to I2's phase in short
+  mode, each scaled to its contribution to I2 [A]; the negative-frequency modes' quasi-static response
+  as the feedthrough of V1 and V2 to I2; discretised with ``scipy.linalg.expm`` (ZOH) at the control
+  period and at its half (the env's mid-step samples);
+* the input V2 in I2's frame is ``u + r(u)``: ``u`` the MPC's decision (eq. 9's V2, the duty from
+  ``f^-1``, the in-phase part in eq. 4's model), ``r(u) = P(d(u)) Vc / Vc0 - u`` the residual, complex,
+  with ``P(d)`` the SBAR's fundamental in I2's frame at the modal link's periodic steady state at duty
+  ``d`` (:func:`wpt_receiver.modal_kernel.steady_state`, nominal Lm and battery ``Vc0``; the shift of the
+  commutation depends on |I2| / Vc, the duty and the phase, which move little about the operating
+  point); linearised along the plan like the ripple excess (the MPC's SCP);
+* the output is ``Re I2`` in that frame (|I2| to second order in the phase, which stays within a
+  degree under the MPC's plans).
+
+Checked by ``tests/test_mpc_modal.py``: the open-loop prediction of a V2 ramp against the modal plant, and
+the MPC on the modal plant at its floor.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+__all__ = ["ModalModel", "modal_model", "v2_frame_table"]
+
+_N_D = 201          # duty grid of the residual table (quadratic towards d = 1, where the quadrature is steep)
+
+
+@lru_cache(maxsize=4)
+def v2_frame_table(link, devices_name: str):
+    """``(d grid, P(d) complex [V], Vc0 [V], theta [rad])``: the SBAR's fundamental in I2's frame
+    (``V2 conj(I2) / |I2|``) at the modal link's periodic steady state per duty, at the link's Lm and
+    battery voltage (clamp ``Vc0 = VL + Vf``), and I2's phase in short mode ``theta``."""
+    from wpt_receiver import modal_kernel as mk
+    from wpt_receiver.devices import preset
+    dev = preset(devices_name)
+    lc, tab = mk.link_constants(link, dev), mk.modal_table(link, dev)
+    mc = np.empty(mk.N_MODES_C, dtype=np.complex128)
+    mk.modes(lc, link.lm_h, mc)
+    vc0 = link.vl_v + dev.rect_vf_v
+    v1 = -1j * link.v1_amp_v
+    d = 1.0 - (1.0 - np.linspace(0.0, 1.0, _N_D)) ** 2
+    p = np.empty(_N_D, dtype=complex)
+    z = np.zeros(4)
+    theta = 0.0
+    for i, dk in enumerate(d):
+        v2 = mk.steady_state(lc, mc, tab, dk, v1, vc0, z)
+        i2 = mk.phasors(mc, z, v1, v2)[1]
+        p[i] = v2 * np.conj(i2) / abs(i2)
+        theta = float(np.angle(i2))
+    return d, p, vc0, theta
+
+
+def _modes(link, dev):
+    """The continuous model in I2's frame: ``(A (4, 4), B (4, 3), C (4,), D (3,))`` on the modes scaled to
+    their I2 [A], inputs ``[Re V2, Im V2, 1]`` (the last the pad's V1, constant), output Re I2."""
+    from wpt_receiver.modal import link_matrices
+    m, b1, b2 = link_matrices(link, dev)
+    lam, vec = np.linalg.eig(m)
+    order = np.argsort(-lam.imag)
+    keep, neg = order[:2], order[2:]
+    left = np.linalg.inv(vec)
+    w = link.omega_rad_s
+    lam_r = lam[keep] - 1j * w
+    shape = 2 * vec[2, keep]
+    g1, g2 = 0.5 * left[keep] @ b1, 0.5 * left[keep] @ b2
+    feed = vec[:, neg] @ np.diag(1 / (1j * w - lam[neg])) @ left[neg]
+    d1, d2 = feed[2] @ b1, feed[2] @ b2
+    v1 = -1j * link.v1_amp_v
+    return lam_r, shape, g1, g2, d1, d2, v1
+
+
+def _real_system(link, dev, theta):
+    """The complex modal model as a real one in I2's frame (turned by ``-theta``): states ``s_m = shape_m y_m
+    e^{-j theta}`` [A] (Re, Im per mode)."""
+    lam_r, shape, g1, g2, d1, d2, v1 = _modes(link, dev)
+    rot = np.exp(-1j * theta)
+    A = np.zeros((4, 4))
+    B = np.zeros((4, 3))
+    for k in range(2):
+        lr, li = lam_r[k].real, lam_r[k].imag
+        A[2 * k:2 * k + 2, 2 * k:2 * k + 2] = [[lr, -li], [li, lr]]
+        # complex input gains per unit Re V2', Im V2' (V2' = V2 e^{-j theta}) and the constant V1 drive
+        for j, gain in enumerate((shape[k] * g2[k], 1j * shape[k] * g2[k], shape[k] * g1[k] * v1 * rot)):
+            B[2 * k, j], B[2 * k + 1, j] = gain.real, gain.imag
+    C = np.array([1.0, 0.0, 1.0, 0.0])
+    D = np.array([d2.real, -d2.imag, (d1 * v1 * rot).real])
+    return A, B, C, D
+
+
+def _zoh(A, B, dt_s):
+    """``(Ad, Bd)``: exact ZOH of ``dx/dt = A x + B u`` over ``dt_s`` [s] (``scipy.linalg.expm``)."""
+    from scipy.linalg import expm
+    n, m = B.shape
+    big = np.zeros((n + m, n + m))
+    big[:n, :n], big[:n, n:] = A, B
+    e = expm(big * dt_s)
+    return e[:n, :n], e[:n, n:]
+
+
+@lru_cache(maxsize=4)
+def modal_model(link, devices_name: str, dt_s: float, n_pred: int, blocks: tuple):
+    """The :class:`ModalModel` of a link, device preset, control period and horizon (shared by instances)."""
+    return ModalModel(link, devices_name, dt_s, n_pred, blocks)
+
+
+class ModalModel:
+    """Condensed predictions over ``n_pred`` steps (the samples the env's peak takes: mid-step and end of
+    every step, ``2 n_pred`` rows): ``I2 = F z + G v + h + Gr r`` with ``z = [s (4), w]``, ``v`` the knots of
+    the V2 plan (``M``), ``r = [Re r_0 .. Re r_{n-1}, Im r_0 .. Im r_{n-1}]`` the residual of V2 in I2's
+    frame per step (:meth:`residual`); one-step ``ad, bu, br, e`` and the measurement ``c, du, dr, d0``."""
+
+    modal = True
+
+    def __init__(self, link, devices_name, dt_s, n_pred, blocks):
+        from wpt_receiver.devices import preset
+        self.d_grid, p, self.vc0, theta = v2_frame_table(link, devices_name)
+        self.p_re, self.p_im = p.real.copy(), p.imag.copy()
+        A, B, C, D = _real_system(link, preset(devices_name), theta)
+        ad, bd = _zoh(A, B, dt_s)
+        am, bm = _zoh(A, B, 0.5 * dt_s)
+        self.nx = 4
+        self.ad, self.bu, self.br, self.e = ad, bd[:, 0], bd[:, :2], bd[:, 2]
+        self.c, self.du, self.dr, self.d0 = C, D[0], D[:2], D[2]
+        self.b2 = self.bu
+        self._condense(ad, bd, am, bm, C, D, n_pred, blocks)
+        self.kalman = self._kalman()
+
+    def _condense(self, ad, bd, am, bm, C, D, n, blocks):
+        """``F, h, Gu, Gr, G, M, ends`` (class docstring)."""
+        M = np.stack([np.interp(np.arange(n), blocks, np.eye(len(blocks))[i]) for i in range(len(blocks))], axis=1)
+        F = np.zeros((2 * n, 5))
+        h = np.zeros(2 * n)
+        imp = np.zeros((3, 2, n))   # output of the mid / end sample of a step to each input i steps earlier
+        Phi, c = np.eye(4), np.zeros(4)
+        x = bd[:, :2].copy()
+        for k in range(n):
+            for r, (A_, B_) in enumerate(((am, bm), (ad, bd))):
+                F[2 * k + r, :4] = C @ A_ @ Phi
+                h[2 * k + r] = C @ (A_ @ c + B_[:, 2]) + D[2]
+            if k:
+                imp[:2, :, k] = np.stack([C @ am @ x, C @ ad @ x], axis=1)
+                x = ad @ x
+            Phi, c = ad @ Phi, ad @ c + bd[:, 2]
+        imp[:2, :, 0] = np.stack([C @ bm[:, :2] + D[:2], C @ bd[:, :2] + D[:2]], axis=1)
+        lag = np.arange(n)[:, None] - np.arange(n)[None, :]
+        G2 = [np.where(lag >= 0, imp[j][:, np.maximum(lag, 0)], 0.0).transpose(1, 0, 2).reshape(2 * n, n) for j in (0, 1)]
+        F[:, 4] = G2[0].sum(axis=1)
+        self.F, self.h, self.Gu, self.M = F, h, G2[0], M
+        self.Gr = np.concatenate(G2, axis=1)
+        self.G = G2[0] @ M
+        self.ends = np.arange(1, 2 * n, 2)
+
+    def _kalman(self, meas_sd_a=0.1, q_i=1e-3, q_w=0.05):
+        """Steady-state gain (5, 1) of the filter on ``z = [s, w]`` (``w`` a random walk on V2) from I2."""
+        from .mpc import _steady_kalman_gain
+        A = np.zeros((5, 5))
+        A[:4, :4], A[:4, 4], A[4, 4] = self.ad, self.bu, 1.0
+        Cm = np.concatenate([self.c, [self.du]])[None, :]
+        Q = np.diag([q_i ** 2] * 4 + [q_w ** 2])
+        return _steady_kalman_gain(A, Cm, Q, np.array([[meas_sd_a ** 2]]))
+
+    def residual(self, u, vc):
+        """``(Re r, Im r)`` [V]: the modal link's V2 in I2's frame minus ``u`` at the eq. 9 V2 ``u`` [V] (any
+        shape) and clamp ``vc`` [V] (broadcast): the table's ``P(d)`` at ``d = f^-1(u)``, scaled by ``vc / Vc0``."""
+        from wpt_receiver import duty_from_v2_clipped
+        d = duty_from_v2_clipped(u, vc)
+        s = vc / self.vc0
+        return np.interp(d, self.d_grid, self.p_re) * s - u, np.interp(d, self.d_grid, self.p_im) * s
+
+    def residual_slope(self, u, vc, h=0.25):
+        """``(r(u), dr/du)`` (each ``(Re, Im)``) by a central difference of ``h`` [V] inside ``[0, (4/pi) vc]``."""
+        vmax = 4.0 / np.pi * vc
+        hi, lo = np.minimum(u + h, vmax), np.maximum(u - h, 0.0)
+        r0, rh, rl = self.residual(u, vc), self.residual(hi, vc), self.residual(lo, vc)
+        den = np.maximum(hi - lo, 1e-9)
+        return r0, ((rh[0] - rl[0]) / den, (rh[1] - rl[1]) / den)
+
+    def step(self, z, u, vc):
+        """One step of the estimates ``z`` (..., 5) under the V2 ``u`` (...) [V] at the clamp ``vc``."""
+        rr, ri = self.residual(u, vc)
+        out = np.empty_like(z)
+        out[..., :4] = (z[..., :4] @ self.ad.T + (u + z[..., 4])[..., None] * self.bu + rr[..., None] * self.br[:, 0]
+                        + ri[..., None] * self.br[:, 1] + self.e)
+        out[..., 4] = z[..., 4]
+        return out
+
+    def measure(self, z, u, vc):
+        """The I2 [A] the sensor reads at the end of a step with V2 ``u`` from the state ``z`` (after it)."""
+        rr, ri = self.residual(u, vc)
+        return z[..., :4] @ self.c + self.du * (u + z[..., 4]) + self.dr[0] * rr + self.dr[1] * ri + self.d0
+
+    def steady(self, u, w, vc):
+        """The steady state ``s`` (..., 4) and I2 [A] at the V2 ``u`` with the disturbance ``w`` [V]."""
+        rr, ri = self.residual(u, vc)
+        inp = np.stack([u + w + rr, ri, np.ones_like(rr)], axis=-1)
+        bd = np.column_stack([self.bu, self.br[:, 1], self.e])
+        s = inp @ np.linalg.solve(np.eye(4) - self.ad, bd).T
+        return s, s @ self.c + self.du * (u + w) + self.dr[0] * rr + self.dr[1] * ri + self.d0
