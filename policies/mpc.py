@@ -83,6 +83,9 @@ _DELAY_MEMORY = 50.0  # memory of the innovation scores [control periods]
 _VLC = 31.0         # the battery voltage of the excess fold [V] (envs.peaks.VL_GRID_V[1], checked in __init__)
 _SM_DEADLINE = 110  # steps after the stop from which V2 = 0 (at the next knot; short mode is scored from 14 ms)
 _BIG = 1e30         # an absent bound for daqp
+#: (modal model) below this V2 [V] after the stop the duty goes to 1 linearly over _TAIL_STEPS (policies.mpc_modal)
+_TAIL_V = 2.0
+_TAIL_STEPS = 30
 _F = {k: OBS_INDEX[k] for k in ("i2_amp_a", "battery_v", "charge_cmd_a", "last_d_short")}
 
 
@@ -274,6 +277,7 @@ class MPCPolicy:
         self._age = np.zeros(self.n, dtype=int)      # steps since the plan was solved
         self._lam = np.zeros((self.n, len(self._sense)))   # the last after-stop QP's multipliers (warm start)
         self._lam_k = np.full(self.n, -1)            # the step after the stop they are from (-1: none, solve cold)
+        self._tail = np.full((2, self.n), -1.0)      # (modal) the duty at the tail's start, its steps so far
 
     def _v2_of(self, d, vl):
         return 4.0 / np.pi * (vl + self._vf) * (1.0 - np.sin(0.5 * np.pi * d))
@@ -327,6 +331,7 @@ class MPCPolicy:
         if len(new):
             self._relax[new], self._n_stop[new], self._k_stop[new], self._age[new] = 0.0, 0, 0, 0
             self._lam_k[new] = -1
+            self._tail[:, new] = -1.0
         z = self._estimate(i2m, vl, d_last, new)
         u_prev = self._v2_of(d_last, vl)
         stop = cmd <= 0.0
@@ -338,6 +343,8 @@ class MPCPolicy:
         stopped = np.flatnonzero(stop)
         if len(stopped):
             v2[stopped] = self._after_stop(stopped, z[stopped], vl[stopped], u_prev[stopped])
+            if self._modal:
+                v2[stopped] = self._duty_tail(stopped, v2[stopped], vl[stopped], d_last[stopped])
         return duty_from_v2_clipped(v2, vl + self._vf)
 
     def _setup_qp(self):
@@ -451,6 +458,24 @@ class MPCPolicy:
             else:
                 v[r, :f], slack[r] = x[:f], x[f]
         return v, slack
+
+    def _duty_tail(self, idx, v2, vl, d_last):
+        """(modal model) V2 [V] of the receivers ``idx`` after their stop: the plan's ``v2`` until it falls below
+        :data:`_TAIL_V`, then the duty from the last one ``d_last`` to 1 linearly over :data:`_TAIL_STEPS` steps.
+        Near short mode the SBAR's V2 quadrature grows like sqrt(V2) (:mod:`policies.mpc_modal`): a plan linear
+        in V2 ends in a steep duty step that rings the exact-mode link (5.6 % on a 10 ms V2 ramp, against 0.6 %
+        with its last 2 V linear in the duty) where the linearised residual is least accurate."""
+        t = self._tail[:, idx]
+        start = (t[0] < 0.0) & (v2 < _TAIL_V)
+        t[0, start], t[1, start] = d_last[start], 0.0
+        on = t[0] >= 0.0
+        t[1, on] += 1.0
+        d = t[0, on] + (1.0 - t[0, on]) * np.minimum(t[1, on] / _TAIL_STEPS, 1.0)
+        out = v2.copy()
+        out[on] = self._v2_of(d, vl[on])
+        self._tail[:, idx] = t
+        self._plan[idx[on]] = 0.0
+        return out
 
     def _rterm(self, plan, vl):
         """(modal model) The I2 samples' part (n, 2 N_PRED) [A] of the residual of V2 in I2's frame along the
