@@ -93,8 +93,9 @@ class EnvConfig:
         trajectories where eq. 4 + ripple is 2.85 % low on the V2* ramp; a vector env-step costs 5.9x eq. 4's with
         the duty held, 10.7x with random actions: ``benchmarks/bench_env.py --links``, N = 1024, one thread,
         load 4.7-5.0, 2026-11-26).
-        The policies that predict with eq. 4 (``mpc``, ``model_based_budget``) keep their model: on the
-        modal plant their measured overshoot is larger (docs/switching.md).
+        The env's :attr:`policy_context` carries the link model: ``mpc`` predicts with the exact modes on
+        it (:mod:`policies.mpc_modal`); ``model_based_budget`` keeps eq. 4 (on the modal plant its measured
+        overshoot is larger, docs/switching.md).
     hold_tol_a : (modal) a step holds V2 over the control period when the link is within this [A] of the
         steady state of the step's inputs (the ringing, and the error of the held V2, stay below it);
         else it runs in ``v2_updates`` sub-steps (``envs.modal_step._link_step``)

@@ -412,7 +412,8 @@ def _print_compare(rows, sweep, args):
     print(f"{args.episodes} episodes per scenario, seeds {args.seed}..{args.seed + args.episodes - 1}; mean "
           "[95 % interval]: bootstrap over episodes, or t over training seeds when seeds > 1")
     if args.link == "modal":
-        print("plant: the exact-mode link (--link modal); mpc and model_based_budget still predict with eq. 4")
+        print("plant: the exact-mode link (--link modal); mpc predicts with its modes (policies.mpc_modal), "
+              "model_based_budget still with eq. 4")
     hdr = (f"{'scenario':<12} {'policy':<24} {'seeds':>5} {'overshoot %':>20} {'in SM':>5} {'peak I2 A':>8} "
            f"{'E before J':>10} {'E after J':>20} {'track A':>6} {'return':>22} {'d return vs model_based':>24}")
     print(hdr)
