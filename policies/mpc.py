@@ -254,6 +254,7 @@ class MPCPolicy:
         self._link = envelope_params(base, dev)
         # the plant's link (the context's link_model): eq. 4's envelope, or the exact modes (policies.mpc_modal)
         self._modal = getattr(ctx, "link_model", "envelope") == "modal"
+        self._tail_on = self._modal   # the duty-linear approach to short mode (:meth:`_duty_tail`)
         if self._modal:
             from .mpc_modal import modal_model
             self._model = modal_model(base, devices, float(ctx.control_period_s), N_PRED, BLOCKS)
@@ -338,12 +339,12 @@ class MPCPolicy:
         v2 = np.empty(len(i2m))
         track = np.flatnonzero(~stop)
         if len(track):
-            ref = self._i2_ref(cmd[track], vl[track] + self._vf, z[track, 2])
+            ref = self._i2_ref(cmd[track], vl[track] + self._vf, z[track, -1])
             v2[track] = self._track(track, z[track], vl[track], ref, u_prev[track])
         stopped = np.flatnonzero(stop)
         if len(stopped):
             v2[stopped] = self._after_stop(stopped, z[stopped], vl[stopped], u_prev[stopped])
-            if self._modal:
+            if self._tail_on:
                 v2[stopped] = self._duty_tail(stopped, v2[stopped], vl[stopped], d_last[stopped])
         return duty_from_v2_clipped(v2, vl + self._vf)
 
@@ -603,7 +604,7 @@ class MPCPolicy:
         estimated disturbance ``w`` (on nominal windows within ~0.1 % of the nominal one; a link whose I2
         the disturbance explains - detuned tanks - has its own: with the nominal one as the bound the MPC
         overshot the detuned link's short-mode current by 35 % on 5 windows, with this 8.6 %)."""
-        return self._ss_i2[0] + self._ss_i2[1] * z[..., 2]
+        return self._ss_i2[0] + self._ss_i2[1] * z[..., -1]
 
     def _settled(self, z, relax, e):
         """Per row of ``z`` (n, 3): the free response (V2 = 0) stays within the budget's bound with the
