@@ -14,6 +14,7 @@ Modules, from the classical controllers to learning and comparing:
 =================  ==========================================================================
 ``classical``      step, ramp and the paper's model-based inverse controller (Fig. 5)
 ``mpc``            model-predictive control: receding-horizon QP in V2 on the nominal model (daqp)
+``mpc_modal``      the MPC's prediction model on the exact-mode link (the context's ``link_model="modal"``)
 ``oracle``         the per-window limit: best open-loop duty sequence after the stop (SLSQP)
 ``budgeted``       the model-based controller with an overshoot budget (the classical frontier)
 ``online``         the model-based controller with an online Lm estimate

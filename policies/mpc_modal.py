@@ -140,7 +140,7 @@ class ModalModel:
         self.c, self.du, self.dr, self.d0 = C, D[0], D[:2], D[2]
         self.b2 = self.bu
         self._condense(ad, bd, am, bm, C, D, n_pred, blocks)
-        self.kalman = self._kalman()
+        self.kalman = None   # the filter's gain (5, 1): policies.mpc solves kalman_problem() once per model
 
     def _condense(self, ad, bd, am, bm, C, D, n, blocks):
         """``F, h, Gu, Gr, G, M, ends`` (class docstring)."""
@@ -167,14 +167,14 @@ class ModalModel:
         self.G = G2[0] @ M
         self.ends = np.arange(1, 2 * n, 2)
 
-    def _kalman(self, meas_sd_a=0.1, q_i=1e-3, q_w=0.05):
-        """Steady-state gain (5, 1) of the filter on ``z = [s, w]`` (``w`` a random walk on V2) from I2."""
-        from .mpc import _steady_kalman_gain
+    def kalman_problem(self, meas_sd_a=0.1, q_i=1e-3, q_w=0.05):
+        """``(A, C, Q, R)`` of the steady-state filter on ``z = [s, w]`` (``w`` a random walk on V2) from the
+        measured I2 (sd ``meas_sd_a`` [A]), as eq. 4's (:meth:`policies.mpc._Model._kalman`)."""
         A = np.zeros((5, 5))
         A[:4, :4], A[:4, 4], A[4, 4] = self.ad, self.bu, 1.0
         Cm = np.concatenate([self.c, [self.du]])[None, :]
         Q = np.diag([q_i ** 2] * 4 + [q_w ** 2])
-        return _steady_kalman_gain(A, Cm, Q, np.array([[meas_sd_a ** 2]]))
+        return A, Cm, Q, np.array([[meas_sd_a ** 2]])
 
     def residual(self, u, vc):
         """``(Re r, Im r)`` [V]: the modal link's V2 in I2's frame minus ``u`` at the eq. 9 V2 ``u`` [V] (any
