@@ -85,6 +85,7 @@ _RELAX_STEPS = 3    # after-stop steps in which the bound may be raised to the f
 _REPLAN_EVERY = 5   # after-stop steps a still-feasible plan is followed before it is re-solved
 _SCP_ITERS = 3      # linearisations of the ripple excess per solve in those steps
 _MARGIN = 0.002      # constraint back-off, fraction of I2_sm (model error)
+_MARGIN_MODAL = 0.006   # the same on the modal model (policies.mpc_modal: its end-of-descent error; mpc:0.05 5.40 % -> 5.01 % on 4 windows)
 #: hypotheses of the sensing delay [control periods] the estimator tells apart (:class:`_DelayBank`)
 DELAYS = (0, 1, 2, 3, 4, 5)
 _DELAY_MEMORY = 50.0  # memory of the innovation scores [control periods]
@@ -263,6 +264,7 @@ class MPCPolicy:
         # the plant's link (the context's link_model): eq. 4's envelope, or the exact modes (policies.mpc_modal)
         self._modal = getattr(ctx, "link_model", "envelope") == "modal"
         self._tail_on = self._modal   # the duty-linear approach to short mode (:meth:`_duty_tail`)
+        self._margin = _MARGIN_MODAL if self._modal else _MARGIN
         if self._modal:
             from .mpc_modal import modal_model
             self._model = modal_model(base, devices, float(ctx.control_period_s), N_PRED, BLOCKS)
@@ -444,7 +446,7 @@ class MPCPolicy:
         extra = None
         if self._modal:   # the residual of V2 linearised along v_bar: a constant and a term in the knots
             free, extra = self._residual_lin(free, v_bar, vl, f)
-        ub = (((1.0 + self._budget_of(e) - _MARGIN) * self._bound_sm(z) + self._relax[e])[:, None]
+        ub = (((1.0 + self._budget_of(e) - self._margin) * self._bound_sm(z) + self._relax[e])[:, None]
               - (ex - slope * v_bar).repeat(2, axis=1) - free)
         # x = [v (f knots), s]: 0 <= v <= vmax, s >= 0 (simple bounds), (G + slope M) v - s <= ub; M's rows have
         # at most two non-zeros (V2 linear between knots), so the slope term is added where they are
@@ -601,7 +603,7 @@ class MPCPolicy:
         if self._modal:
             i2 += self._rterm(plan, vl)
         ex = self._excess_at(plan, vl[:, None])
-        bound = (1.0 + self._budget_of(e) - 0.5 * _MARGIN) * self._bound_sm(z) + self._relax[e]
+        bound = (1.0 + self._budget_of(e) - 0.5 * self._margin) * self._bound_sm(z) + self._relax[e]
         return np.all(i2 + ex.repeat(2, axis=1) <= bound[:, None], axis=1)
 
     def _budget_of(self, e):
@@ -625,7 +627,7 @@ class MPCPolicy:
         if self._modal:
             free = free + self._rterm(np.zeros((len(z), N_PRED)), np.full(len(z), _VLC))
         sm = self._bound_sm(z)
-        return np.all(free + self._ex0 <= ((1.0 + self._budget_of(e) - _MARGIN) * sm + relax)[:, None], axis=1)
+        return np.all(free + self._ex0 <= ((1.0 + self._budget_of(e) - self._margin) * sm + relax)[:, None], axis=1)
 
     def _excess_at(self, v2, vl):
         """Ripple excess [A] at V2 ``v2`` (any shape) [V], the short-mode current and battery voltage ``vl``:
