@@ -30,7 +30,7 @@ The model here (4 real states + the MPC's input disturbance ``w``):
 With it, the MPC also ends its descent with the last :data:`policies.mpc._TAIL_V` of V2 linear in the duty
 (:meth:`policies.mpc.MPCPolicy._duty_tail`): the same ramp rings ~9x less that way, and both models predict
 it within 0.08 A. Nominal, 100 windows on the modal plant: overshoot 6.39 % -> 2.57 %, energy after the
-stop 0.832 -> 0.826 J (docs/rl.md, "The MPC on the exact-mode link").
+stop 0.832 -> 0.806 J (docs/rl.md, "The MPC on the exact-mode link").
 
 Checked by ``tests/test_mpc_modal.py``: the open-loop prediction of a V2 ramp against the modal plant, and
 the MPC on the modal plant at its floor.
