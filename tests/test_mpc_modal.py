@@ -102,3 +102,15 @@ def test_mpc_on_the_modal_plant_measures_its_floor():
     assert m["reached_short_mode"][0] == 1.0
     assert floor - 1e-9 <= m["overshoot_pct"][0] <= floor + 0.5
     assert m["overshoot_pct"][0] < out["model_based"].metrics["overshoot_pct"][0]
+
+
+def test_mpc_budget_on_the_modal_plant_is_measured_overshoot():
+    """mpc:0.05 on the modal plant (windows 1000-1001, floors below 3 %): every window in short mode and its
+    measured overshoot within 0.5 points of the budget (the budget is in the metric's units on this link too),
+    with less energy after the stop than at budget 0."""
+    from policies.compare import run_policies
+    out = run_policies(["mpc:0.05", "mpc"], "nominal", 2, 1000, config=EnvConfig(link_model="modal"))
+    m, m0 = out["mpc:0.05"].metrics, out["mpc"].metrics
+    assert np.all(m["reached_short_mode"] == 1.0)
+    assert np.all(np.abs(m["overshoot_pct"] - 5.0) <= 0.5)
+    assert np.all(m["energy_after_stop_j"] < m0["energy_after_stop_j"])
