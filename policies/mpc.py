@@ -506,10 +506,10 @@ class MPCPolicy:
         n = N_PRED
         (rr, ri), (sr, si) = m.residual_slope(v_bar, (vl + self._vf)[:, None])
         free = free + np.concatenate([rr - sr * v_bar, ri - si * v_bar], axis=1) @ m.Gr.T
-        lin = np.einsum("pk,rk,kj->rpj", m.Gr[:, :n], sr, m.M[:, :f]) + np.einsum("pk,rk,kj->rpj", m.Gr[:, n:], si,
-                                                                                   m.M[:, :f])
+        mf = m.M[None, :, :f]
         extra = np.zeros((len(v_bar), 2 * n, f + 1))
-        extra[:, :, :f] = lin
+        # Gr_re diag(slope_re) M + Gr_im diag(slope_im) M, batched BLAS products (einsum's loop cost 30x)
+        extra[:, :, :f] = m.Gr[:, :n] @ (sr[:, :, None] * mf) + m.Gr[:, n:] @ (si[:, :, None] * mf)
         return free, extra
 
     def _daqp(self, e, q, A, bu, bl):
