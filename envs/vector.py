@@ -92,6 +92,8 @@ class SbarChargingVectorEnv(VectorEnv):
         self._devices, self._dev = c.device_set(), c.device_terms
         self._peak = PeakLookup(c.link, self._devices)
         self._ar = np.arange(n)
+        # the compiled duty map looked up once (not per step); uncompiled: per call (tests swap the source)
+        self._duty_kernel = kernel_function("duty_kernel") if self._compiled else None
         # per-step data stored step-major (T, n): a step reads one contiguous row across the envs
         self.parts = Parts(ScenarioPart(self.scenario, T, c.dt_s, np.zeros((T + 1, n)), np.zeros((T, n))),
                            vector_plant(c, n, self._compiled), ObjectivePart(c, n),
@@ -121,7 +123,7 @@ class SbarChargingVectorEnv(VectorEnv):
     def _duty(self, actions) -> np.ndarray:
         a = actions if isinstance(actions, np.ndarray) and actions.dtype.kind == "f" else np.asarray(actions, float)
         d = np.empty(self.num_envs)
-        k = kernel_function("duty_kernel", self._compiled)(a.reshape(self.num_envs), d)
+        k = (self._duty_kernel or kernel_function("duty_kernel", False))(a.reshape(self.num_envs), d)
         if k >= 0:   # NaN would poison the link state and every reward after it
             raise ValueError(f"actions[{k}]={float(a.reshape(-1)[k])!r} is invalid; valid range: [-1, 1] (finite)")
         return d
