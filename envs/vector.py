@@ -141,6 +141,9 @@ class SbarChargingVectorEnv(VectorEnv):
         rngs = self._rngs if full else [self._rngs[i] for i in idx]
         sel = slice(None) if full else idx   # all at once (the usual autoreset): written in place, plain slices
         scenario, plant, objective, observation = self.parts
+        # the draws on the step's threads when the step runs parallel (the default: when its probes chose that)
+        par = self._n_chunks > 1 and (self._auto is None or self._auto.best != 1)
+        scenario.threads = self.num_threads if par else 1
         win = scenario.reset(rngs, sel, options)
         plan = plant.reset(sel, win)
         objective.reset(sel, win, plan)
