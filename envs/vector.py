@@ -18,7 +18,8 @@ the default (``None``) chooses between one thread and all of numba's by measured
 descheduled threads). Below :attr:`SbarChargingVectorEnv.PARALLEL_MIN_ENVS` sub-environments the step
 always runs on the calling thread (waking a thread pool costs more than it saves there). The
 results do not depend on the threads (each sub-environment's arithmetic is the same in any chunk):
-parallel == serial to the bit.
+parallel == serial to the bit. When the step runs parallel, a full autoreset's generator draws, command
+profile and noise store run on the same threads too (:func:`envs.scenario.split_rows`; the same numbers).
 """
 
 from __future__ import annotations
