@@ -7,11 +7,13 @@ the envs keep the orchestration (reset, seeding, plans, info dicts, rendering) a
 * :func:`env_step` steps sub-environments ``[0, n)`` of the vector env, in chunks that run in parallel
   (``prange``) when ``n_chunks > 1``; each sub-environment's arithmetic does not depend on the chunk
   it is in, so the parallel step is the serial one to the bit (``tests/test_vector_parallel.py``).
-  A chunk runs three passes over its sub-environments: (1) the link step (:func:`_link_step`, or
+  A chunk runs three passes over its sub-environments: (1) the link step (:func:`_link_step_s`, or
   :func:`_complex_step` for a detuned window), noting the steps where the I2 envelope changes sign;
   (2) those steps re-done in rectifier-period sub-steps, the sub-step loop outside and the
   sub-environments inside (independent iterations the CPU overlaps); (3) the instantaneous peak,
-  battery, reward, objective, state, observation and info (:func:`_finish_pass`).
+  battery, reward, objective, state, observation and info (:func:`_finish_pass`). Passes (1) and (3)
+  first take the block's sines / instantaneous peaks in a short loop of their own (the same arithmetic:
+  the long per-window chains split so that the CPU overlaps windows; ~5-10 % of the step's CPU).
 * :func:`step_kernel` is :func:`env_step` serial and without detuned windows (the signature
   :mod:`envs.rollout` replays).
 * :func:`single_step` is the single env's per-env entry: the same helpers on one window (a call
