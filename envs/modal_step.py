@@ -392,10 +392,10 @@ def _finish(e, d, state, kk, jj, bat, cmd_all, noise_all, lm_all, ep, par, scale
     state[STATE.i1, e], state[STATE.i2, e], state[STATE.vl, e] = i1, i2, vl
     state[STATE.soc, e], state[STATE.vrc, e], state[STATE.d, e] = soc, vrc, d
     kk += 1
-    _put_obs(obs[e], i2 + noise_all[kk - 1, e], vl, ib, il, soc, cmd_all[kk, e], d,
+    _put_obs(obs, e, i2 + noise_all[kk - 1, e], vl, ib, il, soc, cmd_all[kk, e], d,
              _t_since(kk, dt, t_stop[e], stop_k[e]), scale, offset)
     trunc[e] = kk >= par[MPAR.n_steps]
-    _put_info(info[e], kk * dt, i2, pk, i1, d, v2, il, vl, ib, soc, cmd, lm_all[jj, e], vl_old * il * dt, over,
+    _put_info(info, e, kk * dt, i2, pk, i1, d, v2, il, vl, ib, soc, cmd, lm_all[jj, e], vl_old * il * dt, over,
               cost, rm, pk_env)
     return kk
 

@@ -18,7 +18,8 @@ the default (``None``) chooses between one thread and all of numba's by measured
 descheduled threads). Below :attr:`SbarChargingVectorEnv.PARALLEL_MIN_ENVS` sub-environments the step
 always runs on the calling thread (waking a thread pool costs more than it saves there). The
 results do not depend on the threads (each sub-environment's arithmetic is the same in any chunk):
-parallel == serial to the bit.
+parallel == serial to the bit. When the step runs parallel, a full autoreset's generator draws, command
+profile and noise store run on the same threads too (:func:`envs.scenario.split_rows`; the same numbers).
 """
 
 from __future__ import annotations
@@ -92,6 +93,8 @@ class SbarChargingVectorEnv(VectorEnv):
         self._devices, self._dev = c.device_set(), c.device_terms
         self._peak = PeakLookup(c.link, self._devices)
         self._ar = np.arange(n)
+        # the compiled duty map looked up once (not per step); uncompiled: per call (tests swap the source)
+        self._duty_kernel = kernel_function("duty_kernel") if self._compiled else None
         # per-step data stored step-major (T, n): a step reads one contiguous row across the envs
         self.parts = Parts(ScenarioPart(self.scenario, T, c.dt_s, np.zeros((T + 1, n)), np.zeros((T, n))),
                            vector_plant(c, n, self._compiled), ObjectivePart(c, n),
@@ -121,7 +124,7 @@ class SbarChargingVectorEnv(VectorEnv):
     def _duty(self, actions) -> np.ndarray:
         a = actions if isinstance(actions, np.ndarray) and actions.dtype.kind == "f" else np.asarray(actions, float)
         d = np.empty(self.num_envs)
-        k = kernel_function("duty_kernel", self._compiled)(a.reshape(self.num_envs), d)
+        k = (self._duty_kernel or kernel_function("duty_kernel", False))(a.reshape(self.num_envs), d)
         if k >= 0:   # NaN would poison the link state and every reward after it
             raise ValueError(f"actions[{k}]={float(a.reshape(-1)[k])!r} is invalid; valid range: [-1, 1] (finite)")
         return d
@@ -140,6 +143,9 @@ class SbarChargingVectorEnv(VectorEnv):
         rngs = self._rngs if full else [self._rngs[i] for i in idx]
         sel = slice(None) if full else idx   # all at once (the usual autoreset): written in place, plain slices
         scenario, plant, objective, observation = self.parts
+        # the draws on the step's threads when the step runs parallel (the default: when its probes chose that)
+        par = self._n_chunks > 1 and (self._auto is None or self._auto.best != 1)
+        scenario.threads = self.num_threads if par else 1
         win = scenario.reset(rngs, sel, options)
         plan = plant.reset(sel, win)
         objective.reset(sel, win, plan)

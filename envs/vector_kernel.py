@@ -7,11 +7,13 @@ the envs keep the orchestration (reset, seeding, plans, info dicts, rendering) a
 * :func:`env_step` steps sub-environments ``[0, n)`` of the vector env, in chunks that run in parallel
   (``prange``) when ``n_chunks > 1``; each sub-environment's arithmetic does not depend on the chunk
   it is in, so the parallel step is the serial one to the bit (``tests/test_vector_parallel.py``).
-  A chunk runs three passes over its sub-environments: (1) the link step (:func:`_link_step`, or
+  A chunk runs three passes over its sub-environments: (1) the link step (:func:`_link_step_s`, or
   :func:`_complex_step` for a detuned window), noting the steps where the I2 envelope changes sign;
   (2) those steps re-done in rectifier-period sub-steps, the sub-step loop outside and the
   sub-environments inside (independent iterations the CPU overlaps); (3) the instantaneous peak,
-  battery, reward, objective, state, observation and info (:func:`_finish_pass`).
+  battery, reward, objective, state, observation and info (:func:`_finish_pass`). Passes (1) and (3)
+  first take the block's sines / instantaneous peaks in a short loop of their own (the same arithmetic:
+  the long per-window chains split so that the CPU overlaps windows; ~5-10 % of the step's CPU).
 * :func:`step_kernel` is :func:`env_step` serial and without detuned windows (the signature
   :mod:`envs.rollout` replays).
 * :func:`single_step` is the single env's per-env entry: the same helpers on one window (a call
@@ -73,12 +75,12 @@ def kernel_function(name: str, compiled: bool = True):
     return f if compiled else getattr(f, "py_func", f)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _sign(x):
     return 1.0 if x > 0.0 else (-1.0 if x < 0.0 else 0.0)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _clip1(x):
     return -1.0 if x < -1.0 else (1.0 if x > 1.0 else x)
 
@@ -103,31 +105,44 @@ def _sbar(vc, d, dr):
     magnitude ``(4/pi) VC (1 - sin(pi/2 d))`` [V] for the clamp voltage ``VC = VL + Vf`` and the short
     window's excess resistance ``dR w(d)`` [ohm], ``w(d) = d + sin(pi d)/pi`` (``sin(pi d) = 2 s
     cos(pi d/2)``, d in [0, 1]); ``V2 = mag sign(I2) + rx I2``."""
-    s = math.sin(_HALF_PI * d)
+    return _sbar_s(vc, math.sin(_HALF_PI * d), d, dr)
+
+
+@njit(cache=True, inline="always")
+def _sbar_s(vc, s, d, dr):
+    """:func:`_sbar` with ``s = sin(pi/2 d)`` given (the vector step takes the sines of a block in a loop of
+    their own: independent calls the CPU overlaps, the rest of the link step without a call)."""
     return _FOUR_OVER_PI * vc * (1.0 - s), dr * (d + 2.0 * s * math.sqrt(1.0 - s * s) / math.pi)
 
 
 @njit(cache=True)
-def _link_step(i1, i2, vl, d, c, vf, dr):
+def _link_step(i1, i2, vl, d, c, r, vf, dr):
+    """:func:`_link_step_s` with the sine of the duty taken here (the single env's step)."""
+    return _link_step_s(i1, i2, vl, d, math.sin(_HALF_PI * d), c, r, vf, dr)
+
+
+@njit(cache=True, inline="always")
+def _link_step_s(i1, i2, vl, d, s, c, r, vf, dr):
     """One control period of the envelope link (paper eq. 4, exact ZOH coefficients ``c``, :data:`COEF`)
-    with duty ``d`` held, the devices ``vf`` [V], ``dr`` [ohm]: ``(i1n, i2n, pk, il, v2, split, |V2c|,
-    rx)``. ``pk`` the largest |I2| at mid-step and at the end, ``il`` the SBAR output current (the
-    clamp's ``V2c I2 / (2 VC)``, Simpson's rule on I2), ``v2`` the V2 applied; ``split``: the I2
-    envelope changes sign within the step (re-done in rectifier-period sub-steps, :func:`_substep`,
-    with the clamp's |V2c| and the short-window excess ``rx I2``)."""
+    with duty ``d`` held (``s = sin(pi/2 d)``), the coefficients ``c[r]`` (row ``r`` of a table: no row view),
+    the devices ``vf`` [V], ``dr`` [ohm]: ``(i1n, i2n, pk, il, v2, split, |V2c|, rx)``. ``pk`` the largest |I2|
+    at mid-step and at the end, ``il`` the SBAR output current (the clamp's ``V2c I2 / (2 VC)``, Simpson's
+    rule on I2), ``v2`` the V2 applied; ``split``: the I2 envelope changes sign within the step (re-done in
+    rectifier-period sub-steps, :func:`_substep`, with the clamp's |V2c| and the short-window excess
+    ``rx I2``)."""
     vc = vl + vf
-    mag, rx = _sbar(vc, d, dr)
+    mag, rx = _sbar_s(vc, s, d, dr)
     v2c = mag * _sign(i2)
     v2 = v2c + rx * i2
-    i2m = c[COEF.m10] * i1 + c[COEF.m11] * i2 + c[COEF.me1] + c[COEF.mb11] * v2
-    i1n = c[COEF.a00] * i1 + c[COEF.a01] * i2 + c[COEF.e0] + c[COEF.b01] * v2
-    i2n = c[COEF.a10] * i1 + c[COEF.a11] * i2 + c[COEF.e1] + c[COEF.b11] * v2
+    i2m = c[r, COEF.m10] * i1 + c[r, COEF.m11] * i2 + c[r, COEF.me1] + c[r, COEF.mb11] * v2
+    i1n = c[r, COEF.a00] * i1 + c[r, COEF.a01] * i2 + c[r, COEF.e0] + c[r, COEF.b01] * v2
+    i2n = c[r, COEF.a10] * i1 + c[r, COEF.a11] * i2 + c[r, COEF.e1] + c[r, COEF.b11] * v2
     il = v2c * (i2 + 4.0 * i2m + i2n) / (12.0 * vc)
     pk = max(abs(i2m), abs(i2n))
     return i1n, i2n, pk, il, v2, (i2m * v2c < 0.0 or i2n * v2c < 0.0), abs(v2c), rx
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _substep(i1, a, vm, rx, pk, tot, h00, h01, f0, g01, h10, h11, f1, g11):
     """One rectifier-period sub-step (V2 = |V2c| sign(I2) + rx I2 at its start): ``(i1, i2, peak |I2|,
     sum of |I2| means)`` after it (mean |I2| on the linear sub-step from a to b: (|a| + |b|)/2, or
@@ -146,13 +161,13 @@ def _substep(i1, a, vm, rx, pk, tot, h00, h01, f0, g01, h10, h11, f1, g11):
 
 
 @njit(cache=True, error_model="numpy")
-def _substeps_one(i1, i2, vm, rx, vc, c, n_sub):
+def _substeps_one(i1, i2, vm, rx, vc, c, r, n_sub):
     """One split step re-done in ``n_sub`` sub-steps (``vc`` the clamp voltage VL + Vf): ``(i1, i2,
     peak |I2|, mean I_L)``, the numbers of :func:`_substep_pass` for one sub-environment."""
     pk, tot = -1.0, 0.0
     for _ in range(n_sub):
-        i1, i2, pk, tot = _substep(i1, i2, vm, rx, pk, tot, c[COEF.h00], c[COEF.h01], c[COEF.f0], c[COEF.g01],
-                                   c[COEF.h10], c[COEF.h11], c[COEF.f1], c[COEF.g11])
+        i1, i2, pk, tot = _substep(i1, i2, vm, rx, pk, tot, c[r, COEF.h00], c[r, COEF.h01], c[r, COEF.f0],
+                                   c[r, COEF.g01], c[r, COEF.h10], c[r, COEF.h11], c[r, COEF.f1], c[r, COEF.g11])
     return i1, i2, pk, vm * tot / (2.0 * n_sub * vc)
 
 
@@ -225,7 +240,7 @@ def _complex_step(x, vl, d, cc, vf, dr, v1, n_sub):
     return math.hypot(x0, x2), r, pk, v2c * tot / (2.0 * n_sub * vc), v2_0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _inst_peak(pk, d, vl, tab, vlc, inv_imax):
     """Instantaneous peak [A] (:mod:`envs.peaks`) for the envelope peak ``pk``, duty ``d``, battery
     voltage ``vl``: bilinear in (duty, sqrt(pk / I2_MAX_A)) on the (n_d, n_i, 2) table of
@@ -250,7 +265,7 @@ def inst_peak_rows(pk, d, vl, tab, vlc, inv_imax, out):
         out[e] = _inst_peak(pk[e], d[e], vl[e], tab, vlc, inv_imax)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _battery(il, soc, vrc, vl, b):
     """The battery after a step delivering ``il`` [A] (equivalent circuit around the window's operating
     point, ``b`` the battery row, :data:`BAT`): ``(i_batt, soc, v_rc, VL)``; the DC bus follows ``OCV +
@@ -263,7 +278,7 @@ def _battery(il, soc, vrc, vl, b):
     return ib, soc, vrc, vl
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _reward(il, cmd, pk, inv_rated, w_track, w_over, i_ref):
     """``(reward, overcurrent)``: reward = (min(I_L, I*) - w_track |I_L - I*|) / i_ref - w_over
     overcurrent, overcurrent = max(0, |I2_pk| / I2_rated - 1) (:class:`envs.core.RewardWeights`)."""
@@ -273,7 +288,7 @@ def _reward(il, cmd, pk, inv_rated, w_track, w_over, i_ref):
     return (mn - w_track * abs(il - cmd)) / i_ref - w_over * over, over
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _objective(kk, pk, il, i2_sm, dt, run_max, stop_k, ok, checked):
     """:mod:`envs.objective` after step ``kk`` (``i2_sm`` the short-mode I2 of its slow segment):
     ``(running overshoot, ok, checked, step cost)``, the cost the rise of max(0, running overshoot)."""
@@ -288,20 +303,20 @@ def _objective(kk, pk, il, i2_sm, dt, run_max, stop_k, ok, checked):
     return new, ok, checked, (new if new > 0.0 else 0.0) - (run_max if run_max > 0.0 else 0.0)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _t_since(kk, dt, t_stop, stop_k):
     """Observation field ``t_since_stop_s`` before step ``kk``."""
     t = kk * dt - t_stop
     return (t if t > 0.0 else 0.0) if kk >= stop_k else 0.0
 
 
-@njit(cache=True)
-def _put_obs(o, i2m, vl, ib, il, soc, cmd, d, t_since, scale, offset):
-    """One observation row (:data:`mission_sim.contract.OBS_FIELDS`): the fields mapped to [-1, 1]
+@njit(cache=True, inline="always")
+def _put_obs(o, e, i2m, vl, ib, il, soc, cmd, d, t_since, scale, offset):
+    """Observation row ``o[e]`` (:data:`mission_sim.contract.OBS_FIELDS`): the fields mapped to [-1, 1]
     and clipped, as float32."""
     vals = (i2m, vl, ib, il, soc, cmd, d, t_since)
     for f in range(8):
-        o[f] = np.float32(_clip1(vals[f] * scale[f] + offset[f]))
+        o[e, f] = np.float32(_clip1(vals[f] * scale[f] + offset[f]))
 
 
 @njit(cache=True)
@@ -309,20 +324,20 @@ def obs_rows(vals, scale, offset, obs):
     """Observation rows ``obs`` (n, 8) float32 from the physical fields ``vals`` (8, n) (:func:`_put_obs`;
     the envs' first observation after a reset)."""
     for e in range(obs.shape[0]):
-        _put_obs(obs[e], vals[0, e], vals[1, e], vals[2, e], vals[3, e], vals[4, e], vals[5, e], vals[6, e],
+        _put_obs(obs, e, vals[0, e], vals[1, e], vals[2, e], vals[3, e], vals[4, e], vals[5, e], vals[6, e],
                  vals[7, e], scale, offset)
 
 
-@njit(cache=True)
-def _put_info(row, t, i2, pk, i1, d, v2, il, vl, ib, soc, cmd, lm, energy, over, cost, rm, pk_env):
-    """One sub-environment's info values (:data:`INFO`)."""
-    row[INFO.t_s], row[INFO.i2_a], row[INFO.i2_peak_a], row[INFO.i1_a] = t, i2, pk, i1
-    row[INFO.d_short], row[INFO.v2_v], row[INFO.rect_current_a], row[INFO.battery_v] = d, v2, il, vl
-    row[INFO.battery_current_a], row[INFO.soc], row[INFO.charge_cmd_a], row[INFO.lm_h] = ib, soc, cmd, lm
-    row[INFO.energy_j], row[INFO.overcurrent], row[INFO.cost] = energy, over, cost
-    row[INFO.overshoot] = rm
-    row[INFO.episode_cost] = rm if rm > 0.0 else 0.0
-    row[INFO.i2_peak_envelope_a] = pk_env
+@njit(cache=True, inline="always")
+def _put_info(row, e, t, i2, pk, i1, d, v2, il, vl, ib, soc, cmd, lm, energy, over, cost, rm, pk_env):
+    """Sub-environment ``e``'s info values, ``row[e]`` (:data:`INFO`)."""
+    row[e, INFO.t_s], row[e, INFO.i2_a], row[e, INFO.i2_peak_a], row[e, INFO.i1_a] = t, i2, pk, i1
+    row[e, INFO.d_short], row[e, INFO.v2_v], row[e, INFO.rect_current_a], row[e, INFO.battery_v] = d, v2, il, vl
+    row[e, INFO.battery_current_a], row[e, INFO.soc], row[e, INFO.charge_cmd_a], row[e, INFO.lm_h] = ib, soc, cmd, lm
+    row[e, INFO.energy_j], row[e, INFO.overcurrent], row[e, INFO.cost] = energy, over, cost
+    row[e, INFO.overshoot] = rm
+    row[e, INFO.episode_cost] = rm if rm > 0.0 else 0.0
+    row[e, INFO.i2_peak_envelope_a] = pk_env
 
 
 @njit(cache=True)
@@ -337,6 +352,8 @@ def _link_pass(lo, hi, d, state, k, j, coef_tab, coef_ix, slow_every, n_sub, vf,
     has_cx = detuned.shape[0] > 0
     m = 0
     sub = n_sub > 1
+    for e in range(lo, hi):   # the sines first: independent calls, overlapped
+        sc[7, e - lo] = math.sin(_HALF_PI * d[e])
     for e in range(lo, hi):
         q = e - lo
         kk = k[e]
@@ -346,8 +363,8 @@ def _link_pass(lo, hi, d, state, k, j, coef_tab, coef_ix, slow_every, n_sub, vf,
             sc[0, q], sc[1, q], sc[2, q], sc[3, q], sc[4, q] = _complex_step(xc[e], state[STATE.vl, e], d[e],
                                                                              ccoef[e, jj], vf, dr, v1, n_sub)
             continue
-        i1n, i2n, pk, il, v2, split, vm, rx = _link_step(state[STATE.i1, e], state[STATE.i2, e], state[STATE.vl, e],
-                                                         d[e], coef_tab[coef_ix[jj, e]], vf, dr)
+        i1n, i2n, pk, il, v2, split, vm, rx = _link_step_s(state[STATE.i1, e], state[STATE.i2, e], state[STATE.vl, e],
+                                                           d[e], sc[7, q], coef_tab, coef_ix[jj, e], vf, dr)
         sc[0, q], sc[1, q], sc[2, q], sc[3, q], sc[4, q] = i1n, i2n, pk, il, v2
         # noted without a branch (about half the steps split, at random): the slot m is written
         # every time and kept when the step splits
@@ -368,9 +385,9 @@ def _substep_pass(lo, idx, m, state, j, coef_tab, coef_ix, n_sub, vf, sc, w, h):
         e = idx[q]
         w[0, q], w[1, q], w[3, q], w[4, q] = state[STATE.i1, e], state[STATE.i2, e], -1.0, 0.0
         w[2, q], w[5, q] = sc[5, q], sc[6, q]
-        c = coef_tab[coef_ix[j[e], e]]
+        row = coef_ix[j[e], e]
         for r in range(8):
-            h[r, q] = c[_SUB_COLS[r]]
+            h[r, q] = coef_tab[row, _SUB_COLS[r]]
     for _ in range(n_sub):
         for q in range(m):
             w[0, q], w[1, q], w[3, q], w[4, q] = _substep(w[0, q], w[1, q], w[2, q], w[5, q], w[3, q], w[4, q],
@@ -391,12 +408,15 @@ def _finish_pass(lo, hi, d, state, k, j, bat, cmd_all, noise_all, lm_all, ep, pa
     sm_checked) of the episodes; ``par`` (:data:`PAR`) the env's constants; ``ptab`` the peak table."""
     i2sm_all, stop_k, t_stop, run_max, ok, checked = ep
     dt = par[PAR.dt]
+    vlc, inv_imax = par[PAR.vlc], par[PAR.inv_imax]
+    for e in range(lo, hi):   # the peaks first (row 5 of the scratch is free here): a short loop the CPU overlaps
+        sc[5, e - lo] = _inst_peak(sc[2, e - lo], d[e], state[STATE.vl, e], ptab, vlc, inv_imax)
     for e in range(lo, hi):
         q = e - lo
         kk, jj = k[e], j[e]
         vl_old = state[STATE.vl, e]
         i1, i2, pk_env, il, v2 = sc[0, q], sc[1, q], sc[2, q], sc[3, q], sc[4, q]
-        pk = _inst_peak(pk_env, d[e], vl_old, ptab, par[PAR.vlc], par[PAR.inv_imax])
+        pk = sc[5, q]
         ib, soc, vrc, vl = _battery(il, state[STATE.soc, e], state[STATE.vrc, e], vl_old, bat[:, e])
         cmd = cmd_all[kk, e]
         reward[e], over = _reward(il, cmd, pk, par[PAR.inv_rated], par[PAR.w_track], par[PAR.w_over],
@@ -408,10 +428,10 @@ def _finish_pass(lo, hi, d, state, k, j, bat, cmd_all, noise_all, lm_all, ep, pa
         state[STATE.soc, e], state[STATE.vrc, e], state[STATE.d, e] = soc, vrc, d[e]
         kk += 1
         k[e] = kk
-        _put_obs(obs[e], i2 + noise_all[kk - 1, e], vl, ib, il, soc, cmd_all[kk, e], d[e],
+        _put_obs(obs, e, i2 + noise_all[kk - 1, e], vl, ib, il, soc, cmd_all[kk, e], d[e],
                  _t_since(kk, dt, t_stop[e], stop_k[e]), scale, offset)
         trunc[e] = kk >= par[PAR.n_steps]
-        _put_info(info[e], kk * dt, i2, pk, i1, d[e], v2, il, vl, ib, soc, cmd, lm_all[jj, e], vl_old * il * dt, over,
+        _put_info(info, e, kk * dt, i2, pk, i1, d[e], v2, il, vl, ib, soc, cmd, lm_all[jj, e], vl_old * il * dt, over,
                   cost, rm, pk_env)
 
 
@@ -421,7 +441,7 @@ def _chunk(lo, hi, d, state, k, j, coef_tab, coef_ix, bat, cmd_all, noise_all, l
     """The step of sub-environments ``[lo, hi)``: the three passes (module docstring) on blocks of
     :data:`_BLOCK` sub-environments, so that their scratch stays in the L1 cache."""
     nb = min(_BLOCK, hi - lo)
-    sc, idx = np.empty((7, nb)), np.empty(nb, dtype=np.int64)
+    sc, idx = np.empty((8, nb)), np.empty(nb, dtype=np.int64)
     w, h = np.empty((6, nb)), np.empty((8, nb))
     vf, dr = par[PAR.vf], par[PAR.dr]
     for b0 in range(lo, hi, _BLOCK):
@@ -476,19 +496,19 @@ def single_step(k, d, st, steps, slow, par, obs, out, cc):
     P = SINGLE_PAR
     dt, n_sub, vf, dr = par[P.dt], int(par[P.n_sub]), par[P.vf], par[P.dr]
     j = k // int(par[P.slow_every])
-    c = slow[j]
     vl_old = st[SINGLE.vl]
     if cc.shape[0]:
         x = st[len(SINGLE):]
         i1, i2, pk, il, v2 = _complex_step(x, vl_old, d, cc[j], vf, dr, par[P.v1], n_sub)
     else:
-        i1, i2, pk, il, v2, split, vm, rx = _link_step(st[SINGLE.i1], st[SINGLE.i2], vl_old, d, c, vf, dr)
+        i1, i2, pk, il, v2, split, vm, rx = _link_step(st[SINGLE.i1], st[SINGLE.i2], vl_old, d, slow, j, vf, dr)
         if n_sub > 1 and split:
-            i1, i2, pk, il = _substeps_one(st[SINGLE.i1], st[SINGLE.i2], vm, rx, vl_old + vf, c, n_sub)
+            i1, i2, pk, il = _substeps_one(st[SINGLE.i1], st[SINGLE.i2], vm, rx, vl_old + vf, slow, j, n_sub)
     pk_env = pk
     ptab = par[len(P) + 16:].reshape((int(par[P.nd]), int(par[P.ni]), int(par[P.nq])))
     pk = _inst_peak(pk_env, d, vl_old, ptab, par[P.vlc], par[P.inv_imax])
-    return single_finish(k, d, st, steps, i1, i2, pk, pk_env, il, v2, vl_old, c[SLOW.i2_sm_a], c[SLOW.lm_h], dt,
+    return single_finish(k, d, st, steps, i1, i2, pk, pk_env, il, v2, vl_old, slow[j, SLOW.i2_sm_a],
+                         slow[j, SLOW.lm_h], dt,
                          par[P.inv_rated], par[P.w_track], par[P.w_over], par[P.i_ref], par[len(P):len(P) + 8],
                          par[len(P) + 8:len(P) + 16], obs, out)
 
@@ -509,8 +529,9 @@ def single_finish(k, d, st, steps, i1, i2, pk, pk_env, il, v2, vl_old, i2_sm, lm
     st[SINGLE.i1], st[SINGLE.i2], st[SINGLE.vl], st[SINGLE.soc], st[SINGLE.vrc], st[SINGLE.d] = i1, i2, vl, soc, vrc, d
     st[SINGLE.run_max], st[SINGLE.sm_ok], st[SINGLE.sm_checked] = rm, 1.0 if ok else 0.0, 1.0 if checked else 0.0
     kk = k + 1
-    _put_obs(obs, i2 + steps[kk - 1, 1], vl, ib, il, soc, steps[kk, 0], d, _t_since(kk, dt, st[SINGLE.t_stop], stop_k),
-             scale, offset)
-    _put_info(out, kk * dt, i2, pk, i1, d, v2, il, vl, ib, soc, cmd, lm_h, vl_old * il * dt, over, cost, rm, pk_env)
+    _put_obs(obs.reshape((1, obs.shape[0])), 0, i2 + steps[kk - 1, 1], vl, ib, il, soc, steps[kk, 0], d,
+             _t_since(kk, dt, st[SINGLE.t_stop], stop_k), scale, offset)
+    _put_info(out.reshape((1, out.shape[0])), 0, kk * dt, i2, pk, i1, d, v2, il, vl, ib, soc, cmd, lm_h,
+              vl_old * il * dt, over, cost, rm, pk_env)
     out[len(INFO)] = 1.0 if (ok and checked) else 0.0
     return reward
