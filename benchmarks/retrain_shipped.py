@@ -2,7 +2,7 @@
 constrained) on the current env, one ``dronewpt train`` per seed, one after the other, and optionally install
 them in ``policies/pretrained``.
 
-    python benchmarks/retrain_shipped.py --kind rl --seeds 0-4 --timesteps 600000 --install
+    python benchmarks/retrain_shipped.py --kind rl --seeds 0-4 --timesteps 800000 --install
     python benchmarks/retrain_shipped.py --kind residual --seeds 0-4 --timesteps 400000 --budget 0.05 --install
     python benchmarks/retrain_shipped.py --kind ppo_lagrangian --seeds 0-4 --timesteps 400000 --budget 0.05 --install
 
@@ -67,7 +67,8 @@ def train_seed(kind: str, seed: int, timesteps: int, budget, out_root: Path) -> 
     """Run one seed's command (niced) into ``out_root/<kind>_s<seed>``; returns the run's record."""
     out = out_root / f"{kind}_s{seed}"
     rel = out.relative_to(ROOT) if out.is_relative_to(ROOT) else out
-    cmd = KINDS[kind].format(timesteps=timesteps, seed=seed, budget=f"{budget:g}" if budget is not None else "") + f" --out {rel}"
+    budget_text = "" if budget is None else f"{budget:g}"   # rl: no {budget} in its command
+    cmd = KINDS[kind].format(timesteps=timesteps, seed=seed, budget=budget_text) + f" --out {rel}"
     rec = {"commit": _commit(), "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()), "command": cmd,
            "load_avg_1min_before": _load()}
     t0 = time.time()
@@ -110,8 +111,8 @@ def main(argv=None) -> int:
               f"valid: --budget only with {', '.join(k for k in sorted(KINDS) if constrained(k))}", file=sys.stderr)
         return 2
     if a.timesteps <= 0 or (a.budget is not None and not (0.0 < a.budget < 10.0)):
-        print(f"retrain_shipped: --timesteps {a.timesteps} / --budget {a.budget} is invalid; valid: "
-              "timesteps > 0, budget in (0, 10)", file=sys.stderr)
+        shown = f"--timesteps {a.timesteps}" + ("" if a.budget is None else f" / --budget {a.budget}")
+        print(f"retrain_shipped: {shown} is invalid; valid: timesteps > 0, budget in (0, 10)", file=sys.stderr)
         return 2
     out_root = ROOT / a.out
     out_root.mkdir(parents=True, exist_ok=True)

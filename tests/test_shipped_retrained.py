@@ -108,3 +108,18 @@ def test_shipped_rl_stays_physical_and_is_the_default_rl_policy():
     step = runs["step"].metrics
     for sp in specs:
         assert np.all(runs[sp].metrics["peak_i2_a"] < step["peak_i2_a"])
+
+
+@pytest.mark.parametrize("args, bad", [(["--kind", "rl", "--budget", "0.05"], "--budget is not valid with --kind rl"),
+                                       (["--kind", "residual"], "--budget is required with --kind residual"),
+                                       (["--kind", "rl", "--timesteps", "0"], "--timesteps 0 is invalid")])
+def test_retrain_script_refuses_a_budget_for_rl_and_needs_one_for_the_constrained_kinds(tmp_path, args, bad):
+    """One line on stderr naming the option, exit 2, nothing trained (no output folder)."""
+    import subprocess
+    import sys
+    root = Path(__file__).resolve().parents[1]
+    cmd = [sys.executable, str(root / "benchmarks" / "retrain_shipped.py"), "--timesteps", "1000",
+           "--out", str(tmp_path / "retrain"), *args]
+    r = subprocess.run(cmd, cwd=root, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and bad in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "retrain").exists()
