@@ -1,10 +1,13 @@
-"""Retrain the shipped constrained-RL policies (``residual_s<k>``, ``ppo_lagrangian_s<k>``) on the current env,
-one ``dronewpt train`` per seed, one after the other, and optionally install them in ``policies/pretrained``.
+"""Retrain the shipped RL policies (``rl_s<k>``: unconstrained PPO; ``residual_s<k>``, ``ppo_lagrangian_s<k>``:
+constrained) on the current env, one ``dronewpt train`` per seed, one after the other, and optionally install
+them in ``policies/pretrained``.
 
+    python benchmarks/retrain_shipped.py --kind rl --seeds 0-4 --timesteps 800000 --install
     python benchmarks/retrain_shipped.py --kind residual --seeds 0-4 --timesteps 400000 --budget 0.05 --install
     python benchmarks/retrain_shipped.py --kind ppo_lagrangian --seeds 0-4 --timesteps 400000 --budget 0.05 --install
 
-Each seed runs exactly the command of ``KINDS[kind]`` (``{seed}``, ``{timesteps}``, ``{budget}`` filled in)
+Each seed runs exactly the command of ``KINDS[kind]`` (``{seed}``, ``{timesteps}``, ``{budget}`` filled in;
+``--budget`` is required for the constrained kinds and refused for ``rl``)
 under ``nice -n 10`` into ``out/retrain/<kind>_s<k>/``; the output's own metadata holds the env config
 (devices, reward), budget, multiplier history and the ``reproduce`` command. ``--install`` copies the final
 model (no selection) to ``policies/pretrained/<kind>_s<k>.zip`` and its metadata to ``.json`` (each written
@@ -28,6 +31,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: the training command of each shipped kind (docs/rl.md, "Shipped learned policies")
 KINDS = {
+    "rl": ("dronewpt train --algo ppo --timesteps {timesteps} --seed {seed} --scenario random "
+           "--hyperparams policies/hyperparams/ppo.yml"),
     "residual": ("dronewpt train --algo ppo --timesteps {timesteps} --seed {seed} --scenario random --lagrangian "
                  "--budget {budget} --lambda-lr 50 --residual --residual-scale 0.1 --residual-base-budget 0.01 "
                  "--hyperparams policies/hyperparams/residual.yml"),
@@ -44,6 +49,11 @@ def _seeds(text: str) -> list[int]:
     return seeds
 
 
+def constrained(kind: str) -> bool:
+    """Whether the kind's command takes a ``--budget`` (Lagrangian)."""
+    return "{budget}" in KINDS[kind]
+
+
 def _commit() -> str:
     out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True)
     return out.stdout.strip() or "unknown"
@@ -53,11 +63,12 @@ def _load() -> float:
     return float(Path("/proc/loadavg").read_text().split()[0]) if Path("/proc/loadavg").is_file() else float("nan")
 
 
-def train_seed(kind: str, seed: int, timesteps: int, budget: float, out_root: Path) -> dict:
+def train_seed(kind: str, seed: int, timesteps: int, budget, out_root: Path) -> dict:
     """Run one seed's command (niced) into ``out_root/<kind>_s<seed>``; returns the run's record."""
     out = out_root / f"{kind}_s{seed}"
     rel = out.relative_to(ROOT) if out.is_relative_to(ROOT) else out
-    cmd = KINDS[kind].format(timesteps=timesteps, seed=seed, budget=f"{budget:g}") + f" --out {rel}"
+    budget_text = "" if budget is None else f"{budget:g}"   # rl: no {budget} in its command
+    cmd = KINDS[kind].format(timesteps=timesteps, seed=seed, budget=budget_text) + f" --out {rel}"
     rec = {"commit": _commit(), "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()), "command": cmd,
            "load_avg_1min_before": _load()}
     t0 = time.time()
@@ -85,7 +96,8 @@ def main(argv=None) -> int:
     ap.add_argument("--kind", required=True, choices=sorted(KINDS))
     ap.add_argument("--seeds", default="0-4", help="LO-HI (default 0-4)")
     ap.add_argument("--timesteps", type=int, required=True)
-    ap.add_argument("--budget", type=float, required=True, help="measured-overshoot budget (fraction)")
+    ap.add_argument("--budget", type=float, default=None,
+                    help="measured-overshoot budget (fraction); required for residual / ppo_lagrangian, not for rl")
     ap.add_argument("--out", default="out/retrain")
     ap.add_argument("--install", action="store_true", help="copy the final models into policies/pretrained")
     a = ap.parse_args(argv)
@@ -94,9 +106,13 @@ def main(argv=None) -> int:
     except ValueError:
         print(f"retrain_shipped: --seeds {a.seeds!r} is invalid; valid: LO-HI with 0 <= LO <= HI", file=sys.stderr)
         return 2
-    if a.timesteps <= 0 or not (0.0 < a.budget < 10.0):
-        print(f"retrain_shipped: --timesteps {a.timesteps} / --budget {a.budget} is invalid; valid: "
-              "timesteps > 0, budget in (0, 10)", file=sys.stderr)
+    if constrained(a.kind) != (a.budget is not None):
+        print(f"retrain_shipped: --budget {'is required' if a.budget is None else 'is not valid'} with --kind {a.kind}; "
+              f"valid: --budget only with {', '.join(k for k in sorted(KINDS) if constrained(k))}", file=sys.stderr)
+        return 2
+    if a.timesteps <= 0 or (a.budget is not None and not (0.0 < a.budget < 10.0)):
+        shown = f"--timesteps {a.timesteps}" + ("" if a.budget is None else f" / --budget {a.budget}")
+        print(f"retrain_shipped: {shown} is invalid; valid: timesteps > 0, budget in (0, 10)", file=sys.stderr)
         return 2
     out_root = ROOT / a.out
     out_root.mkdir(parents=True, exist_ok=True)

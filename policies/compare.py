@@ -53,8 +53,8 @@ NO_GAP = ("step", "hysteresis", "random", "rl")
 REFERENCE = "model_based"
 DEFAULT_EPISODES = 100
 #: learned kinds shipped with several training seeds (``policies/pretrained/<prefix>_s<k>.zip``)
-SHIPPED_SEEDS = {"ppo_lagrangian": "ppo_lagrangian_s", "residual": "residual_s", "imitation": "imitation_s",
-                 "slow_budget": "slow_budget_s"}
+SHIPPED_SEEDS = {"rl": "rl_s", "ppo_lagrangian": "ppo_lagrangian_s", "residual": "residual_s",
+                 "imitation": "imitation_s", "slow_budget": "slow_budget_s"}
 #: shipped kinds left out of compare's default rows (each seed is a full MPC run: ~5x the MPC's cost per
 #: scenario); ``--train-seeds 'slow_budget=slow_budget:policies/pretrained/slow_budget_s*.zip'`` adds them
 OPT_IN_SEEDS = ("slow_budget",)

@@ -26,7 +26,7 @@ from .inference import export_actor, load_ppo_actor
 
 __all__ = ["RLPolicy", "PRETRAINED", "PRETRAINED_LAGRANGIAN", "load_meta", "ALGOS"]
 
-PRETRAINED = Path(__file__).parent / "pretrained" / "ppo_sbar.zip"
+PRETRAINED = Path(__file__).parent / "pretrained" / "rl_s0.zip"   # unconstrained PPO, seeds _s0.._s4 shipped
 PRETRAINED_LAGRANGIAN = Path(__file__).parent / "pretrained" / "ppo_lagrangian_s0.zip"   # seeds _s0.._s4 shipped
 ALGOS = ("ppo", "sac", "td3", "dqn")
 

@@ -63,7 +63,7 @@ def test_duplicate_names_run_once_on_the_same_windows():
     np.testing.assert_array_equal(runs["ramp"].t_stop_s, runs["step"].t_stop_s)   # paired: same windows
 
 
-@pytest.mark.parametrize("kind", ["ppo_lagrangian", "residual", "imitation"])
+@pytest.mark.parametrize("kind", ["rl", "ppo_lagrangian", "residual", "imitation"])
 def test_stacked_training_seeds_equal_separate_runs_row_by_row(kind):
     pytest.importorskip("stable_baselines3")
     specs = shipped_seed_groups()[kind]

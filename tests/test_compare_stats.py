@@ -68,14 +68,17 @@ def test_shipped_learned_policies_have_five_seeds_small_files_and_their_commands
     from policies.compare import shipped_seed_groups
 
     groups = shipped_seed_groups()
-    assert set(groups) == {"ppo_lagrangian", "residual", "imitation", "slow_budget"}
+    assert set(groups) == {"rl", "ppo_lagrangian", "residual", "imitation", "slow_budget"}
     for kind, specs in groups.items():
         paths = [Path(s.split(":", 1)[1]) for s in specs]
         metas = [json.loads(p.with_suffix(".json").read_text()) for p in paths]
         assert len(paths) >= 5 and len({m["seed"] for m in metas}) == len(paths)
         assert all(p.stat().st_size < 300_000 for p in paths)
         for m in metas:
-            assert (m["imitation"] if kind == "imitation" else m["lagrangian"])   # imitation: a clone, not constrained RL
+            if kind == "rl":   # the unconstrained PPO: no multiplier, no budget
+                assert m["lagrangian"] is None and m["budget"] is None
+            else:   # imitation: a clone, not constrained RL
+                assert (m["imitation"] if kind == "imitation" else m["lagrangian"])
             assert m["reproduce"].startswith("dronewpt train --algo ppo")
             assert f"--seed {m['seed']} " in m["reproduce"] and ("--residual" in m["reproduce"]) == (kind in ("residual", "imitation"))
             assert ("--slow-budget 0:0.15" in m["reproduce"]) == (kind == "slow_budget") == bool(m.get("slow_budget"))

@@ -5,7 +5,9 @@ it must be today's default (real devices, instantaneous peaks: the objective has
 latter, so the config and the retraining record are the version). The residual seeds must keep their
 duty within ``scale`` of their budgeted model-based base, reach short mode and deliver less energy after
 the stop than the paper's controller; the Lagrangian seeds must have trained against a budget in the
-measured units (the ramp's measured cost) and stay physical (no swing of I2 above the step's peak)."""
+measured units (the ramp's measured cost) and stay physical (no swing of I2 above the step's peak); the
+unconstrained PPO seeds (``rl``) must be plain PPO (no budget, no multiplier) run by the same retraining
+script and stay physical the same way."""
 
 import json
 from pathlib import Path
@@ -32,11 +34,17 @@ def test_every_shipped_seed_group_was_trained_on_todays_env_config():
     for kind in shipped_seed_groups():
         for m in _metas(kind):
             assert m["env_config"] == today, (kind, m["seed"])
-    for kind in ("residual", "ppo_lagrangian"):
+    for kind in ("rl", "residual", "ppo_lagrangian"):
         for m in _metas(kind):
             t = m["trained"]
             assert len(t["commit"]) == 40 and t["returncode"] == 0 and t["command"].startswith("dronewpt train")
-            assert f"--budget {m['budget']:g} " in t["command"] and f"--seed {m['seed']} " in t["command"]
+            assert f"--seed {m['seed']} " in t["command"] and f"--timesteps {m['timesteps']} " in t["command"]
+            if kind == "rl":   # plain PPO: no budget, no multiplier, no residual base
+                assert "--budget" not in t["command"] and "--lagrangian" not in t["command"]
+                assert m["budget"] is None and m["lagrangian"] is None and m["residual"] is None
+            else:
+                assert f"--budget {m['budget']:g} " in t["command"]
+    assert len({m["seed"] for m in _metas("rl")}) == len(_metas("rl")) >= 2
 
 
 def test_shipped_budgets_are_in_measured_overshoot_units():
@@ -88,3 +96,30 @@ def test_shipped_lagrangian_stays_physical():
     for sp in specs:
         m = runs[sp].metrics
         assert np.all(m["peak_i2_a"] < step["peak_i2_a"])
+
+
+def test_shipped_rl_stays_physical_and_is_the_default_rl_policy():
+    """Each unconstrained seed's peak |I2| stays below the step's (the hardest RM -> SM switch) in every
+    window; ``--policy rl`` (policies.rl.PRETRAINED) is seed 0 of the group."""
+    from policies.rl import PRETRAINED
+    specs = shipped_seed_groups()["rl"]
+    assert specs[0] == f"rl:{PRETRAINED}"
+    runs = run_policies(["step", *specs], "nominal", WINDOWS, SEED)
+    step = runs["step"].metrics
+    for sp in specs:
+        assert np.all(runs[sp].metrics["peak_i2_a"] < step["peak_i2_a"])
+
+
+@pytest.mark.parametrize("args, bad", [(["--kind", "rl", "--budget", "0.05"], "--budget is not valid with --kind rl"),
+                                       (["--kind", "residual"], "--budget is required with --kind residual"),
+                                       (["--kind", "rl", "--timesteps", "0"], "--timesteps 0 is invalid")])
+def test_retrain_script_refuses_a_budget_for_rl_and_needs_one_for_the_constrained_kinds(tmp_path, args, bad):
+    """One line on stderr naming the option, exit 2, nothing trained (no output folder)."""
+    import subprocess
+    import sys
+    root = Path(__file__).resolve().parents[1]
+    cmd = [sys.executable, str(root / "benchmarks" / "retrain_shipped.py"), "--timesteps", "1000",
+           "--out", str(tmp_path / "retrain"), *args]
+    r = subprocess.run(cmd, cwd=root, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and bad in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "retrain").exists()
