@@ -65,6 +65,21 @@ def test_modal_model_predicts_the_modal_plant_on_ramps():
     assert err4 > 2.0 * err
 
 
+def test_contexts_name_the_plants_link():
+    """Every context names the link its plant runs: the scalar and the vector env their EnvConfig's, the mission
+    (always the exact modes, mission_sim.world.loop_kernel) "modal", so the MPC of `dronewpt mission --policy mpc`
+    and of MAVLink replays predicts with the modes."""
+    from envs import SbarChargingEnv, SbarChargingVectorEnv
+    from mission_sim.config import load_config, policy_context
+    from policies.mpc import MPCPolicy
+    for lm in ("envelope", "modal"):
+        assert SbarChargingEnv(config=EnvConfig(link_model=lm)).policy_context.link_model == lm
+        assert SbarChargingVectorEnv(num_envs=1, config=EnvConfig(link_model=lm)).policy_context.link_model == lm
+    ctx = policy_context(load_config())
+    assert ctx.link_model == "modal"
+    assert MPCPolicy(ctx)._modal
+
+
 def test_mpc_picks_its_model_from_the_context():
     """The env's policy context names its link; the MPC predicts with the modes on the modal link and with eq. 4
     otherwise (the default context too); a bad link model is refused."""
