@@ -105,6 +105,38 @@ def _require_daqp():
         raise ValueError("policy 'mpc' needs the QP solver daqp: pip install 'dronewpt[mpc]' (or daqp)")
 
 
+def _block_basis(n: int = None, blocks=None) -> np.ndarray:
+    """``M`` (n, knots): V2 over the ``n`` (default :data:`N_PRED`) steps of the horizon piecewise linear between
+    the knots ``blocks`` (default :data:`BLOCKS`) (a staircase of held moves would ring the 4 kHz resonance at
+    every step of it), held after the last knot. The basis of both prediction models."""
+    n = N_PRED if n is None else n
+    blocks = BLOCKS if blocks is None else blocks
+    return np.stack([np.interp(np.arange(n), blocks, np.eye(len(blocks))[i]) for i in range(len(blocks))], axis=1)
+
+
+def _kalman_gain(ad, b_w, c, d_w, meas_sd_a=0.1, q_i=1e-3, q_w=0.05) -> np.ndarray:
+    """Steady-state gain (nx + 1, 1) of the filter on ``z = [x, w]`` (``x`` the model's nx states, one step
+    ``ad``; ``w`` a random walk on V2 entering as ``b_w``) from the measured I2 ``c x + d_w w`` (sd
+    ``meas_sd_a`` [A]); process noise sd ``q_i`` per state, ``q_w`` [V] on ``w``. Both models' filter (eq. 4's
+    ``c = [0, 1]``, ``d_w = 0``), solved through :func:`_steady_kalman_gain`'s disk cache."""
+    nx = len(ad)
+    A = np.zeros((nx + 1, nx + 1))
+    A[:nx, :nx], A[:nx, nx], A[nx, nx] = ad, b_w, 1.0
+    C = np.concatenate([np.asarray(c, dtype=float), [float(d_w)]])[None, :]
+    Q = np.diag([q_i ** 2] * nx + [q_w ** 2])
+    return _steady_kalman_gain(A, C, Q, np.array([[meas_sd_a ** 2]]))
+
+
+@lru_cache(maxsize=4)
+def _modal_model(link, devices: str, dt_s: float):
+    """The exact-mode link's prediction model (:class:`policies.mpc_modal.ModalModel`) of a link, device preset
+    and control period over the horizon, on this module's basis and with its filter (shared by the instances)."""
+    from .mpc_modal import ModalModel
+    m = ModalModel(link, devices, dt_s, N_PRED, _block_basis())
+    m.kalman = _kalman_gain(m.ad, m.bu, m.c, m.du)
+    return m
+
+
 @lru_cache(maxsize=8)
 def _model(link, dt_s: float):
     """The prediction model of a link and control period (:class:`_Model`, shared by the MPC instances)."""
@@ -123,9 +155,7 @@ class _Model:
         v1 = link.v1_amp_v
         n = N_PRED
         self.ad, self.b2, self.e = ad, bd[:, 1], bd[:, 0] * v1
-        # V2 piecewise linear between the knots BLOCKS (a staircase of held moves would ring the
-        # 4 kHz resonance at every step of it), held after the last knot
-        M = np.stack([np.interp(np.arange(n), BLOCKS, np.eye(len(BLOCKS))[i]) for i in range(len(BLOCKS))], axis=1)
+        M = _block_basis()
         # state response: x_k = Phi_k x0 + sum_j Psi_{k-1-j} (u_j + w) + c_k; rows 2k (mid-step of step k, from
         # x_k) and 2k + 1 (end of step k: x_{k+1})
         F = np.zeros((2 * n, 3))
@@ -147,16 +177,7 @@ class _Model:
         F[:, 2] = Gu.sum(axis=1)   # the disturbance acts on every step like an input
         self.F, self.G, self.h, self.M, self.Gu = F, Gu @ M, h, M, Gu
         self.ends = np.arange(1, 2 * n, 2)
-        self.kalman = self._kalman(ad, bd[:, 1])
-
-    @staticmethod
-    def _kalman(ad, b2, meas_sd_a=0.1, q_i=1e-3, q_w=0.05):
-        """Steady-state gain of the filter on z = [I1, I2, w] (w a random walk on V2) from I2 (3, 1)."""
-        A = np.zeros((3, 3))
-        A[:2, :2], A[:2, 2], A[2, 2] = ad, b2, 1.0
-        C = np.array([[0.0, 1.0, 0.0]])
-        Q = np.diag([q_i ** 2, q_i ** 2, q_w ** 2])
-        return _steady_kalman_gain(A, C, Q, np.array([[meas_sd_a ** 2]]))
+        self.kalman = _kalman_gain(ad, bd[:, 1], (0.0, 1.0), 0.0)   # on z = [I1, I2, w] from I2 (3, 1)
 
 
 def _steady_kalman_gain(A, C, Q, R) -> np.ndarray:
@@ -267,10 +288,7 @@ class MPCPolicy:
         self._tail_on = self._modal   # the duty-linear approach to short mode (:meth:`_duty_tail`)
         self._margin = _MARGIN_MODAL if self._modal else _MARGIN
         if self._modal:
-            from .mpc_modal import modal_model
-            self._model = modal_model(base, devices, float(ctx.control_period_s), N_PRED, BLOCKS)
-            if self._model.kalman is None:
-                self._model.kalman = _steady_kalman_gain(*self._model.kalman_problem())
+            self._model = _modal_model(base, devices, float(ctx.control_period_s))
         else:
             self._model = _model(self._link, float(ctx.control_period_s))
         self._i2_sm = float(short_mode_i2_a(base, base.lm_h, dev))

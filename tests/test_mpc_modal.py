@@ -32,8 +32,7 @@ def _open_loop_errors(tail: bool):
     (wpt_receiver.modal_kernel.simulate: the devices, V2 updated every rectifier period) on the ramp, both from
     the plant's periodic steady state of the first duty (eq. 4's with its w fitted to that I2), and the
     modal model's relative steady-state error there."""
-    from policies.mpc import BLOCKS, N_PRED, _model
-    from policies.mpc_modal import modal_model
+    from policies.mpc import _modal_model, _model
     from wpt_receiver import modal_kernel as mk
     from wpt_receiver.devices import preset
     cfg = EnvConfig(link_model="modal")
@@ -42,7 +41,7 @@ def _open_loop_errors(tail: bool):
     u = _ramp(vc, tail)
     sim = mk.simulate(link, duty_from_v2_clipped(u, vc), cfg.dt_s, devices=dev, substeps=cfg.n_sub)
     truth, i_start = np.abs(sim["i2"][1:]), abs(sim["i2"][0])
-    m = modal_model(link, "schottky", cfg.dt_s, N_PRED, BLOCKS)
+    m = _modal_model(link, "schottky", cfg.dt_s)
     s0, i0 = m.steady(np.array(u[0]), 0.0, vc)
     rr, ri = m.residual(u, vc)
     pred = (np.r_[s0, 0.0] @ m.F.T + m.h + u @ m.Gu.T + np.r_[rr, ri] @ m.Gr.T)[1::2]
