@@ -97,20 +97,10 @@ def test_mpc_on_the_modal_plant_measures_its_floor():
     """Nominal window 1003 on the modal plant, budget 0: the MPC reaches short mode and measures the window's
     floor (policies.oracle.oracle_floor on the modal env from the MPC's state at the stop) within 0.5 points,
     below the paper's controller on the same window."""
-    import os
-    import tempfile
     from policies.compare import run_policies
     from policies.oracle import oracle_floor
     cfg = EnvConfig(link_model="modal")
-    old = os.environ.get("DRONEWPT_CACHE_DIR")
-    os.environ["DRONEWPT_CACHE_DIR"] = tempfile.mkdtemp()
-    try:
-        floor = 100.0 * oracle_floor("nominal", 1003, cfg, base="mpc").overshoot
-    finally:
-        if old is None:
-            os.environ.pop("DRONEWPT_CACHE_DIR")
-        else:
-            os.environ["DRONEWPT_CACHE_DIR"] = old
+    floor = 100.0 * oracle_floor("nominal", 1003, cfg, base="mpc").overshoot   # keyed by mpc's sources too
     out = run_policies(["mpc", "model_based"], "nominal", 1, 1003, config=cfg)
     m = out["mpc"].metrics
     assert m["reached_short_mode"][0] == 1.0
