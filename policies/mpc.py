@@ -374,7 +374,13 @@ class MPCPolicy:
             v2[track] = self._track(track, z[track], vl[track], ref, u_prev[track])
         stopped = np.flatnonzero(stop)
         if len(stopped):
-            v2[stopped] = self._after_stop(stopped, z[stopped], vl[stopped], u_prev[stopped])
+            plan = stopped
+            if self._tail_on:   # a receiver on its tail past the relaxing steps: no plan (the tail decides)
+                done = (self._tail[0, stopped] >= 0.0) & (self._n_stop[stopped] >= _RELAX_STEPS)
+                plan, v2[stopped[done]] = stopped[~done], 0.0
+                self._k_stop[stopped[done]] += 1
+            if len(plan):
+                v2[plan] = self._after_stop(plan, z[plan], vl[plan], u_prev[plan])
             if self._tail_on:
                 v2[stopped] = self._duty_tail(stopped, v2[stopped], vl[stopped], d_last[stopped])
         return duty_from_v2_clipped(v2, vl + self._vf)
