@@ -10,7 +10,8 @@ state ``x = [I1, I2]``, input the fundamental ``V2`` (linear: eq. 5's duty comes
 input disturbance ``w`` on V2 (offset-free MPC: it absorbs the forward drop, the short window's
 resistance and a wrong Lm in the steady state).
 
-**Estimation** (:class:`_DelayBank`): steady-state Kalman filters of ``[I1, I2, w]`` from the measured
+**Estimation** (:class:`_DelayBank`): steady-state Kalman filters of ``z = [I1, I2, w]`` (the modal model's
+``[s (4), w]``; ``nz`` 3 or 5 below) from the measured
 (noisy) I2 envelope and the V2 the previous duties applied, one per hypothesis of the sensing delay
 (:data:`DELAYS`, 0-5 control periods: filter ``D`` reads the measurement as the state ``D`` steps ago);
 each receiver follows the hypothesis with the least weighted squared innovation, carried forward over
@@ -51,7 +52,8 @@ along the plan, the same ``w``, bound, QPs and filters (``z = [s (4), w]``); and
 of V2 after the stop go linearly in the duty over :data:`_TAIL_STEPS` steps (:meth:`MPCPolicy._duty_tail`).
 Its constraint back-off is :data:`_MARGIN_MODAL`. Nominal, 100 windows (``compare --link modal``): overshoot
 6.39 % -> 2.57 %, energy after the stop 0.832 -> 0.806 J (eq. 4's MPC on eq. 4's plant: 2.54 %, 0.844 J);
-eq. 4's path is unchanged to the bit. ~64 ms of CPU per window (eq. 4's model on that plant 30-43 ms).
+eq. 4's path is unchanged to the bit. It costs about twice eq. 4's MPC on that plant (in process, 100 windows
+batched: 25-31 ms of CPU per window against 13 ms; end to end 1.4-1.9x; docs/rl.md).
 
 Solver: DAQP (``pip install daqp``; a dual active-set solver for small dense QPs in C, exact), one
 QP of 21 variables and 300 constraints per receiver and re-plan, warm-started from the receiver's last
@@ -147,6 +149,8 @@ class _Model:
     """Condensed predictions of the nominal model over the horizon: the I2 samples (mid-step and end
     of every step, 2 N_PRED rows) = ``F z + G v + h`` with ``z = [I1, I2, w]``, ``v`` the blocked moves."""
 
+    modal = False   # (policies.mpc_modal.ModalModel: True)
+
     def __init__(self, link, dt_s):
         from wpt_receiver import state_matrices, zoh_discretise
         a, b = state_matrices(link)
@@ -203,7 +207,7 @@ def _steady_kalman_gain(A, C, Q, R) -> np.ndarray:
 
 
 class _DelayBank:
-    """Steady-state Kalman filters of ``z = [I1, I2, w]``, one per hypothesis ``D`` of the sensing delay
+    """Steady-state Kalman filters of ``z`` (n, nz) (``[I1, I2, w]``, the modal model's ``[s (4), w]``), one per hypothesis ``D`` of the sensing delay
     [control periods] (multiple-model estimation): filter ``D`` reads the measured I2 as the state ``D``
     steps ago and is stepped with the V2 applied then (kept in a history); each receiver follows the
     hypothesis with the least exponentially weighted squared innovation (memory :data:`_DELAY_MEMORY`
@@ -212,7 +216,7 @@ class _DelayBank:
 
     def __init__(self, model, z0, u0, delays):
         self.m, self.delays, self.n = model, tuple(int(d) for d in delays), len(z0)
-        self.z = np.repeat(np.asarray(z0, dtype=float)[None], len(self.delays), axis=0)   # (H, n, 3)
+        self.z = np.repeat(np.asarray(z0, dtype=float)[None], len(self.delays), axis=0)   # (H, n, nz)
         self.u = np.repeat(np.asarray(u0, dtype=float)[None], max(self.delays) + 1, axis=0)   # u[j] = V2 of step k-1-j
         self.score = np.zeros((len(self.delays), self.n))
         self.best = np.zeros(self.n, dtype=int)
@@ -221,10 +225,10 @@ class _DelayBank:
         self.vc = None   # the receivers' clamp voltages [V] (the modal model's residual of V2 needs them)
 
     def _step(self, z, u, vc=None):
-        """One model step of the estimates ``z`` (..., 3) under the V2 ``u`` (...) [V] (the modal model's:
-        ``z`` (..., 5), at the clamp ``vc``)."""
+        """One model step of the estimates ``z`` (..., nz) under the V2 ``u`` (...) [V] (the modal model's at the
+        clamp ``vc``)."""
         m = self.m
-        if getattr(m, "modal", False):
+        if m.modal:
             return m.step(z, u, vc)
         out = np.empty_like(z)
         out[..., :2] = z[..., :2] @ m.ad.T + (u + z[..., 2])[..., None] * m.b2 + m.e
@@ -238,7 +242,7 @@ class _DelayBank:
         self.u[0] = u_last
         self.vc = vc
         uh = self.u[self._lag]
-        x = self._step(self.z, uh, vc)   # every hypothesis at once (H, n, 3)
+        x = self._step(self.z, uh, vc)   # every hypothesis at once (H, n, nz)
         innov = y[None, :] - (self.m.measure(x, uh, vc) if vc is not None else x[..., 1])
         self.z = x + innov[..., None] * self.m.kalman[:, 0]
         self.score += (1.0 / _DELAY_MEMORY) * (innov * innov - self.score)
@@ -247,7 +251,7 @@ class _DelayBank:
         return self.now()
 
     def now(self):
-        """The chosen hypothesis' estimate carried forward over its delay (n, 3)."""
+        """The chosen hypothesis' estimate carried forward over its delay (n, nz)."""
         cols = np.arange(self.n)
         z = self.z[self.best, cols]
         d = self._lag[self.best]
@@ -284,7 +288,7 @@ class MPCPolicy:
         self._vf = dev.rect_vf_v
         self._link = envelope_params(base, dev)
         # the plant's link (the context's link_model): eq. 4's envelope, or the exact modes (policies.mpc_modal)
-        self._modal = getattr(ctx, "link_model", "envelope") == "modal"
+        self._modal = ctx.link_model == "modal"
         self._tail_on = self._modal   # the duty-linear approach to short mode (:meth:`_duty_tail`)
         self._margin = _MARGIN_MODAL if self._modal else _MARGIN
         if self._modal:
@@ -315,7 +319,7 @@ class MPCPolicy:
         return 4.0 / np.pi * (vl + self._vf) * (1.0 - np.sin(0.5 * np.pi * d))
 
     def _estimate(self, i2m, vl, d_last, new=None):
-        """The state ``z = [I1, I2, w]`` now (n, 3): from the delay bank (:class:`_DelayBank`), started in the
+        """The state ``z`` now (n, nz): from the delay bank (:class:`_DelayBank`), started in the
         steady state the first measured I2 implies (``w`` explains the offset); the rows ``new`` (a new
         window in a batched env that resets its windows) are started afresh the same way."""
         u_last = self._v2_of(d_last, vl)
@@ -333,7 +337,7 @@ class MPCPolicy:
         return out
 
     def _steady_z(self, i2m, u_last, vc=None):
-        """The steady state ``z = [I1, I2, w]`` (n, 3) the measured I2 ``i2m`` implies under the V2 ``u_last``
+        """The steady state ``z = [I1, I2, w]`` (n, 3) of eq. 4's model the measured I2 ``i2m`` implies under the V2 ``u_last``
         (``w`` explains the offset): a filter's start (made only when one starts). The modal model's
         (``vc`` the clamp voltages): ``z = [s (4), w]`` (n, 5), the same way."""
         if self._modal:
@@ -425,7 +429,7 @@ class MPCPolicy:
         self._excess_curve()
 
     def _solve_stop(self, e, z, vl, u_prev):
-        """V2 plans [V] (the knots, (n, nb)) after the stop of the receivers ``e`` (n,) (``z`` (n, 3), ``vl``,
+        """V2 plans [V] (the knots, (n, nb)) after the stop of the receivers ``e`` (n,) (``z`` (n, nz), ``vl``,
         ``u_prev`` (n,)): min energy + move penalty + slack penalty s.t. the predicted peak (envelope + ripple
         excess linearised along a plan) within the bound + slack, V2 in the box; one QP per receiver. The
         excess is linearised along the previous plan shifted by a step (at the stop: a ramp from the V2 now
@@ -592,7 +596,7 @@ class MPCPolicy:
         return self._plan[idx, 0]
 
     def _after_stop(self, idx, z, vl, u_prev):
-        """V2 now [V] of the receivers ``idx`` after their stop (batched; ``z`` (n, 3), ``vl``, ``u_prev`` (n,)):
+        """V2 now [V] of the receivers ``idx`` after their stop (batched; ``z`` (n, nz), ``vl``, ``u_prev`` (n,)):
         0 once settled in short mode; the previous plan's next move while that plan, shifted by a step, still
         keeps the predicted peak within the bound from the state now (at most :data:`_REPLAN_EVERY` steps: the
         plan's tail is the optimum's continuation when the model holds); else the first move of a new
@@ -622,7 +626,7 @@ class MPCPolicy:
 
     def _feasible(self, z, vl, plan, e):
         """Per row: the predicted peak (envelope + ripple excess at the plan's duties) of the V2 ``plan``
-        (n, N_PRED) from ``z`` (n, 3) within the bound of receiver ``e`` (n,) (bool (n,))."""
+        (n, N_PRED) from ``z`` (n, nz) within the bound of receiver ``e`` (n,) (bool (n,))."""
         m = self._model
         i2 = z @ m.F.T + m.h + plan @ m.Gu.T
         if self._modal:
@@ -644,7 +648,7 @@ class MPCPolicy:
         return self._ss_i2[0] + self._ss_i2[1] * z[..., -1]
 
     def _settled(self, z, relax, e):
-        """Per row of ``z`` (n, 3): the free response (V2 = 0) stays within the budget's bound with the
+        """Per row of ``z`` (n, nz): the free response (V2 = 0) stays within the budget's bound with the
         short-mode ripple (:meth:`_excess` at V2 = 0), ``relax`` (n,) [A] the raised bounds, ``e`` (n,) the
         receivers (bool (n,))."""
         m = self._model
