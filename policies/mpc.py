@@ -207,8 +207,8 @@ def _steady_kalman_gain(A, C, Q, R) -> np.ndarray:
 
 
 class _DelayBank:
-    """Steady-state Kalman filters of ``z`` (n, nz) (``[I1, I2, w]``, the modal model's ``[s (4), w]``), one per hypothesis ``D`` of the sensing delay
-    [control periods] (multiple-model estimation): filter ``D`` reads the measured I2 as the state ``D``
+    """Steady-state Kalman filters of ``z`` (n, nz) (``[I1, I2, w]``, the modal model's ``[s (4), w]``), one
+    per hypothesis ``D`` of the sensing delay [control periods] (multiple-model estimation): filter ``D`` reads the measured I2 as the state ``D``
     steps ago and is stepped with the V2 applied then (kept in a history); each receiver follows the
     hypothesis with the least exponentially weighted squared innovation (memory :data:`_DELAY_MEMORY`
     steps), whose estimate is carried forward over its delay with the V2 applied since (a Smith
@@ -337,9 +337,9 @@ class MPCPolicy:
         return out
 
     def _steady_z(self, i2m, u_last, vc=None):
-        """The steady state ``z = [I1, I2, w]`` (n, 3) of eq. 4's model the measured I2 ``i2m`` implies under the V2 ``u_last``
-        (``w`` explains the offset): a filter's start (made only when one starts). The modal model's
-        (``vc`` the clamp voltages): ``z = [s (4), w]`` (n, 5), the same way."""
+        """The steady state ``z = [I1, I2, w]`` (n, 3) of eq. 4's model the measured I2 ``i2m`` implies under the
+        V2 ``u_last`` (``w`` explains the offset): a filter's start (made only when one starts). The modal
+        model's (``vc`` the clamp voltages): ``z = [s (4), w]`` (n, 5), the same way."""
         if self._modal:
             m = self._model
             i0 = m.steady(u_last, 0.0, vc)[1]

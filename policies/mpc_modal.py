@@ -17,7 +17,8 @@ The model here (4 real states + the MPC's input disturbance ``w``):
   resistances folded in, Table I's Lm), in the frame rotating at w and turned to I2's phase in short
   mode, each scaled to its contribution to I2 [A]; the negative-frequency modes' quasi-static response
   as the feedthrough of V1 and V2 to I2 (all from :func:`wpt_receiver.modal_kernel.modes`); discretised
-  with the modes' exact ZOH (:func:`wpt_receiver.modal_kernel.zoh`) at the control period and at its half (the env's mid-step samples);
+  with the modes' exact ZOH (:func:`wpt_receiver.modal_kernel.zoh`) at the control period and at its half
+  (the env's mid-step samples);
 * the input V2 in I2's frame is ``u + r(u)``: ``u`` the MPC's decision (eq. 9's V2, the duty from
   ``f^-1``, the in-phase part in eq. 4's model), ``r(u) = P(d(u)) Vc / Vc0 - u`` the residual, complex,
   with ``P(d)`` the SBAR's fundamental in I2's frame at the modal link's periodic steady state at duty

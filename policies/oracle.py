@@ -278,7 +278,8 @@ def _cached(kind, scenario, seed, budget, starts, config, compute):
     from envs import EnvConfig, get_scenario
     from wpt_receiver import diskcache
     cfg = config or EnvConfig()
-    key = f"oracle {kind} {_source_hash(tuple(s for s in starts if isinstance(s, str)))} {get_scenario(scenario)!r} seed={seed} b={budget!r} {starts!r} {cfg!r}"
+    src = _source_hash(tuple(s for s in starts if isinstance(s, str)))
+    key = f"oracle {kind} {src} {get_scenario(scenario)!r} seed={seed} b={budget!r} {starts!r} {cfg!r}"
     shape = (4 + cfg.n_steps,)
     arr = diskcache.load("oracle", key, shape)
     if arr is None:
