@@ -1,5 +1,7 @@
-"""The MPC on the exact-mode link (policies.mpc_modal): its prediction model against the modal plant, the
-automatic choice from the policy context, and the closed loop at the window's floor."""
+"""The MPC on the exact-mode link (policies.mpc_modal): its prediction model against the modal plant (the
+quadrature ring eq. 4 misses; both models on the duty-tail ramp) and against its own one-step form, the link
+model named by every context (envs, mission) and the MPC's choice from it, the one list of link models, and
+the closed loop at the window's floor and at a budget."""
 
 import numpy as np
 import pytest
