@@ -169,3 +169,13 @@ def test_mpc_budget_on_the_modal_plant_is_measured_overshoot():
     assert np.all(m["reached_short_mode"] == 1.0)
     assert np.all(np.abs(m["overshoot_pct"] - 5.0) <= 0.5)
     assert np.all(m["energy_after_stop_j"] < m0["energy_after_stop_j"])
+
+
+def test_a_blocking_link_is_refused(monkeypatch):
+    """A link whose steady I2 vanishes (blocks) has no I2 frame: the modal model refuses it with an error naming
+    |I2| and the duty, instead of a table of NaN (P = V2 conj(I2) / |I2|)."""
+    from policies import mpc_modal
+    from wpt_receiver import modal_kernel as mk
+    monkeypatch.setattr(mk, "phasors", lambda mc, z, v1, v2: (0j, 0j))
+    with pytest.raises(ValueError, match=r"\|I2\| = 0 A at duty 0.000 \(it blocks\)"):
+        mpc_modal.v2_frame_table.__wrapped__(EnvConfig().link, "schottky")
