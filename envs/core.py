@@ -36,7 +36,7 @@ from functools import cached_property
 
 import numpy as np
 
-from mission_sim.contract import OBS_FIELDS
+from mission_sim.contract import LINK_MODELS, OBS_FIELDS
 from wpt_receiver import TABLE_I, LinkParams, duty_from_v2_clipped, state_matrices, steady_state, zoh_discretise
 from wpt_receiver.sbar import rectifier_current, short_weight
 
@@ -49,8 +49,6 @@ HALF_PI = 0.5 * math.pi
 FOUR_OVER_PI = 4.0 / math.pi
 N_COEF = len(COEF)
 N_BAT = len(BAT)
-#: the plant's link models (:attr:`EnvConfig.link_model`): eq. 4's envelope (default), the exact modes
-LINK_MODELS = ("envelope", "modal")
 
 #: affine map physical -> [-1, 1] of :data:`mission_sim.contract.OBS_FIELDS` (same as normalise_obs)
 OBS_SCALE = np.array([2.0 / (f.hi - f.lo) for f in OBS_FIELDS])

@@ -506,14 +506,18 @@ def policy_context(cfg: MissionConfig):
 
     The receiver's assumed link is the Table I-like model at the nominal hover pose (coil
     inductances of the coupling model, Lm at ``(0, 0, mission.hover_gap_m)``),
-    ``control_period_s = sim.control_period_s`` and ``rated_i2_a = link.rated_i2_a``.
+    ``control_period_s = sim.control_period_s`` and ``rated_i2_a = link.rated_i2_a``; ``link_model="modal"``:
+    every mission runs the exact-mode link (:mod:`mission_sim.world.loop_kernel` steps
+    :mod:`wpt_receiver.modal_kernel`; there is no eq. 4 link in a mission), so a model-predictive
+    policy (``mpc``) predicts with the modes.
     """
     from .contract import PolicyContext
 
     model = cfg.coupling.model()
     lm_h = float(model.lm_h(0.0, 0.0, cfg.mission.hover_gap_m))
     return PolicyContext(link=cfg.link.link_params(model.l1_h, model.l2_h, lm_h),
-                         control_period_s=cfg.sim.control_period_s, rated_i2_a=cfg.link.rated_i2_a)
+                         control_period_s=cfg.sim.control_period_s, rated_i2_a=cfg.link.rated_i2_a,
+                         link_model="modal")
 
 
 def _flat(d: dict) -> dict:

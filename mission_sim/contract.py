@@ -56,7 +56,11 @@ from wpt_receiver import TABLE_I, LinkParams
 
 __all__ = ["ObsField", "OBS_FIELDS", "OBS_DIM", "OBS_INDEX", "normalise_obs", "normalise_obs_row", "denormalise_obs",
            "denormalise_obs_field", "action_to_duty", "duty_to_action", "PolicyContext", "Policy",
-           "POLICY_KERNEL_SIGNATURE", "MAX_HISTORY", "history_obs_dim"]
+           "POLICY_KERNEL_SIGNATURE", "MAX_HISTORY", "history_obs_dim", "LINK_MODELS"]
+
+#: the plant's link models a policy may run on (:attr:`PolicyContext.link_model`, ``envs.EnvConfig.link_model``,
+#: ``--link``): eq. 4's envelope (the envs' default), the exact modes (the mission's link). The one list.
+LINK_MODELS = ("envelope", "modal")
 
 #: numba signature of a policy's optional compiled step ``d = fn(obs, params, state)`` (module notes)
 POLICY_KERNEL_SIGNATURE = "float64(float64[::1], float64[::1], float64[::1])"
@@ -150,7 +154,8 @@ class PolicyContext:
     control_period_s : how often ``act`` is called [s]; default 100 us, the control period of the
         environments and of the default mission (a 10 kHz DSP loop)
     rated_i2_a : rated secondary coil current amplitude [A]
-    link_model : the plant's link model the policy runs on: ``"envelope"`` (eq. 4, the default) or ``"modal"``
+    link_model : the plant's link model the policy runs on, one of :data:`LINK_MODELS`: ``"envelope"`` (eq. 4,
+        the default) or ``"modal"``
         (the exact-mode link, ``envs.EnvConfig(link_model="modal")``); a model-predictive policy predicts with it
     """
 
@@ -164,8 +169,8 @@ class PolicyContext:
             raise ValueError(f"control_period_s={self.control_period_s!r} is invalid; valid range: (0, inf)")
         if not np.isfinite(self.rated_i2_a) or self.rated_i2_a <= 0:
             raise ValueError(f"rated_i2_a={self.rated_i2_a!r} is invalid; valid range: (0, inf)")
-        if self.link_model not in ("envelope", "modal"):
-            raise ValueError(f"link_model={self.link_model!r} is invalid; valid values: envelope, modal")
+        if self.link_model not in LINK_MODELS:
+            raise ValueError(f"link_model={self.link_model!r} is invalid; valid values: {', '.join(LINK_MODELS)}")
 
 
 @runtime_checkable

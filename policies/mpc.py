@@ -10,7 +10,8 @@ state ``x = [I1, I2]``, input the fundamental ``V2`` (linear: eq. 5's duty comes
 input disturbance ``w`` on V2 (offset-free MPC: it absorbs the forward drop, the short window's
 resistance and a wrong Lm in the steady state).
 
-**Estimation** (:class:`_DelayBank`): steady-state Kalman filters of ``[I1, I2, w]`` from the measured
+**Estimation** (:class:`_DelayBank`): steady-state Kalman filters of ``z = [I1, I2, w]`` (the modal model's
+``[s (4), w]``; ``nz`` 3 or 5 below) from the measured
 (noisy) I2 envelope and the V2 the previous duties applied, one per hypothesis of the sensing delay
 (:data:`DELAYS`, 0-5 control periods: filter ``D`` reads the measurement as the state ``D`` steps ago);
 each receiver follows the hypothesis with the least weighted squared innovation, carried forward over
@@ -51,7 +52,8 @@ along the plan, the same ``w``, bound, QPs and filters (``z = [s (4), w]``); and
 of V2 after the stop go linearly in the duty over :data:`_TAIL_STEPS` steps (:meth:`MPCPolicy._duty_tail`).
 Its constraint back-off is :data:`_MARGIN_MODAL`. Nominal, 100 windows (``compare --link modal``): overshoot
 6.39 % -> 2.57 %, energy after the stop 0.832 -> 0.806 J (eq. 4's MPC on eq. 4's plant: 2.54 %, 0.844 J);
-eq. 4's path is unchanged to the bit. ~64 ms of CPU per window (eq. 4's model on that plant 30-43 ms).
+eq. 4's path is unchanged to the bit. It costs about twice eq. 4's MPC on that plant (in process, 100 windows
+batched: 25-31 ms of CPU per window against 13 ms; end to end 1.4-1.9x; docs/rl.md).
 
 Solver: DAQP (``pip install daqp``; a dual active-set solver for small dense QPs in C, exact), one
 QP of 21 variables and 300 constraints per receiver and re-plan, warm-started from the receiver's last
@@ -105,6 +107,38 @@ def _require_daqp():
         raise ValueError("policy 'mpc' needs the QP solver daqp: pip install 'dronewpt[mpc]' (or daqp)")
 
 
+def _block_basis(n: int = None, blocks=None) -> np.ndarray:
+    """``M`` (n, knots): V2 over the ``n`` (default :data:`N_PRED`) steps of the horizon piecewise linear between
+    the knots ``blocks`` (default :data:`BLOCKS`) (a staircase of held moves would ring the 4 kHz resonance at
+    every step of it), held after the last knot. The basis of both prediction models."""
+    n = N_PRED if n is None else n
+    blocks = BLOCKS if blocks is None else blocks
+    return np.stack([np.interp(np.arange(n), blocks, np.eye(len(blocks))[i]) for i in range(len(blocks))], axis=1)
+
+
+def _kalman_gain(ad, b_w, c, d_w, meas_sd_a=0.1, q_i=1e-3, q_w=0.05) -> np.ndarray:
+    """Steady-state gain (nx + 1, 1) of the filter on ``z = [x, w]`` (``x`` the model's nx states, one step
+    ``ad``; ``w`` a random walk on V2 entering as ``b_w``) from the measured I2 ``c x + d_w w`` (sd
+    ``meas_sd_a`` [A]); process noise sd ``q_i`` per state, ``q_w`` [V] on ``w``. Both models' filter (eq. 4's
+    ``c = [0, 1]``, ``d_w = 0``), solved through :func:`_steady_kalman_gain`'s disk cache."""
+    nx = len(ad)
+    A = np.zeros((nx + 1, nx + 1))
+    A[:nx, :nx], A[:nx, nx], A[nx, nx] = ad, b_w, 1.0
+    C = np.concatenate([np.asarray(c, dtype=float), [float(d_w)]])[None, :]
+    Q = np.diag([q_i ** 2] * nx + [q_w ** 2])
+    return _steady_kalman_gain(A, C, Q, np.array([[meas_sd_a ** 2]]))
+
+
+@lru_cache(maxsize=4)
+def _modal_model(link, devices: str, dt_s: float):
+    """The exact-mode link's prediction model (:class:`policies.mpc_modal.ModalModel`) of a link, device preset
+    and control period over the horizon, on this module's basis and with its filter (shared by the instances)."""
+    from .mpc_modal import ModalModel
+    m = ModalModel(link, devices, dt_s, N_PRED, _block_basis())
+    m.kalman = _kalman_gain(m.ad, m.bu, m.c, m.du)
+    return m
+
+
 @lru_cache(maxsize=8)
 def _model(link, dt_s: float):
     """The prediction model of a link and control period (:class:`_Model`, shared by the MPC instances)."""
@@ -115,6 +149,8 @@ class _Model:
     """Condensed predictions of the nominal model over the horizon: the I2 samples (mid-step and end
     of every step, 2 N_PRED rows) = ``F z + G v + h`` with ``z = [I1, I2, w]``, ``v`` the blocked moves."""
 
+    modal = False   # (policies.mpc_modal.ModalModel: True)
+
     def __init__(self, link, dt_s):
         from wpt_receiver import state_matrices, zoh_discretise
         a, b = state_matrices(link)
@@ -123,9 +159,7 @@ class _Model:
         v1 = link.v1_amp_v
         n = N_PRED
         self.ad, self.b2, self.e = ad, bd[:, 1], bd[:, 0] * v1
-        # V2 piecewise linear between the knots BLOCKS (a staircase of held moves would ring the
-        # 4 kHz resonance at every step of it), held after the last knot
-        M = np.stack([np.interp(np.arange(n), BLOCKS, np.eye(len(BLOCKS))[i]) for i in range(len(BLOCKS))], axis=1)
+        M = _block_basis()
         # state response: x_k = Phi_k x0 + sum_j Psi_{k-1-j} (u_j + w) + c_k; rows 2k (mid-step of step k, from
         # x_k) and 2k + 1 (end of step k: x_{k+1})
         F = np.zeros((2 * n, 3))
@@ -147,16 +181,7 @@ class _Model:
         F[:, 2] = Gu.sum(axis=1)   # the disturbance acts on every step like an input
         self.F, self.G, self.h, self.M, self.Gu = F, Gu @ M, h, M, Gu
         self.ends = np.arange(1, 2 * n, 2)
-        self.kalman = self._kalman(ad, bd[:, 1])
-
-    @staticmethod
-    def _kalman(ad, b2, meas_sd_a=0.1, q_i=1e-3, q_w=0.05):
-        """Steady-state gain of the filter on z = [I1, I2, w] (w a random walk on V2) from I2 (3, 1)."""
-        A = np.zeros((3, 3))
-        A[:2, :2], A[:2, 2], A[2, 2] = ad, b2, 1.0
-        C = np.array([[0.0, 1.0, 0.0]])
-        Q = np.diag([q_i ** 2, q_i ** 2, q_w ** 2])
-        return _steady_kalman_gain(A, C, Q, np.array([[meas_sd_a ** 2]]))
+        self.kalman = _kalman_gain(ad, bd[:, 1], (0.0, 1.0), 0.0)   # on z = [I1, I2, w] from I2 (3, 1)
 
 
 def _steady_kalman_gain(A, C, Q, R) -> np.ndarray:
@@ -182,8 +207,8 @@ def _steady_kalman_gain(A, C, Q, R) -> np.ndarray:
 
 
 class _DelayBank:
-    """Steady-state Kalman filters of ``z = [I1, I2, w]``, one per hypothesis ``D`` of the sensing delay
-    [control periods] (multiple-model estimation): filter ``D`` reads the measured I2 as the state ``D``
+    """Steady-state Kalman filters of ``z`` (n, nz) (``[I1, I2, w]``, the modal model's ``[s (4), w]``), one
+    per hypothesis ``D`` of the sensing delay [control periods] (multiple-model estimation): filter ``D`` reads the measured I2 as the state ``D``
     steps ago and is stepped with the V2 applied then (kept in a history); each receiver follows the
     hypothesis with the least exponentially weighted squared innovation (memory :data:`_DELAY_MEMORY`
     steps), whose estimate is carried forward over its delay with the V2 applied since (a Smith
@@ -191,7 +216,7 @@ class _DelayBank:
 
     def __init__(self, model, z0, u0, delays):
         self.m, self.delays, self.n = model, tuple(int(d) for d in delays), len(z0)
-        self.z = np.repeat(np.asarray(z0, dtype=float)[None], len(self.delays), axis=0)   # (H, n, 3)
+        self.z = np.repeat(np.asarray(z0, dtype=float)[None], len(self.delays), axis=0)   # (H, n, nz)
         self.u = np.repeat(np.asarray(u0, dtype=float)[None], max(self.delays) + 1, axis=0)   # u[j] = V2 of step k-1-j
         self.score = np.zeros((len(self.delays), self.n))
         self.best = np.zeros(self.n, dtype=int)
@@ -200,10 +225,10 @@ class _DelayBank:
         self.vc = None   # the receivers' clamp voltages [V] (the modal model's residual of V2 needs them)
 
     def _step(self, z, u, vc=None):
-        """One model step of the estimates ``z`` (..., 3) under the V2 ``u`` (...) [V] (the modal model's:
-        ``z`` (..., 5), at the clamp ``vc``)."""
+        """One model step of the estimates ``z`` (..., nz) under the V2 ``u`` (...) [V] (the modal model's at the
+        clamp ``vc``)."""
         m = self.m
-        if getattr(m, "modal", False):
+        if m.modal:
             return m.step(z, u, vc)
         out = np.empty_like(z)
         out[..., :2] = z[..., :2] @ m.ad.T + (u + z[..., 2])[..., None] * m.b2 + m.e
@@ -217,7 +242,7 @@ class _DelayBank:
         self.u[0] = u_last
         self.vc = vc
         uh = self.u[self._lag]
-        x = self._step(self.z, uh, vc)   # every hypothesis at once (H, n, 3)
+        x = self._step(self.z, uh, vc)   # every hypothesis at once (H, n, nz)
         innov = y[None, :] - (self.m.measure(x, uh, vc) if vc is not None else x[..., 1])
         self.z = x + innov[..., None] * self.m.kalman[:, 0]
         self.score += (1.0 / _DELAY_MEMORY) * (innov * innov - self.score)
@@ -226,7 +251,7 @@ class _DelayBank:
         return self.now()
 
     def now(self):
-        """The chosen hypothesis' estimate carried forward over its delay (n, 3)."""
+        """The chosen hypothesis' estimate carried forward over its delay (n, nz)."""
         cols = np.arange(self.n)
         z = self.z[self.best, cols]
         d = self._lag[self.best]
@@ -263,14 +288,11 @@ class MPCPolicy:
         self._vf = dev.rect_vf_v
         self._link = envelope_params(base, dev)
         # the plant's link (the context's link_model): eq. 4's envelope, or the exact modes (policies.mpc_modal)
-        self._modal = getattr(ctx, "link_model", "envelope") == "modal"
+        self._modal = ctx.link_model == "modal"
         self._tail_on = self._modal   # the duty-linear approach to short mode (:meth:`_duty_tail`)
         self._margin = _MARGIN_MODAL if self._modal else _MARGIN
         if self._modal:
-            from .mpc_modal import modal_model
-            self._model = modal_model(base, devices, float(ctx.control_period_s), N_PRED, BLOCKS)
-            if self._model.kalman is None:
-                self._model.kalman = _steady_kalman_gain(*self._model.kalman_problem())
+            self._model = _modal_model(base, devices, float(ctx.control_period_s))
         else:
             self._model = _model(self._link, float(ctx.control_period_s))
         self._i2_sm = float(short_mode_i2_a(base, base.lm_h, dev))
@@ -297,7 +319,7 @@ class MPCPolicy:
         return 4.0 / np.pi * (vl + self._vf) * (1.0 - np.sin(0.5 * np.pi * d))
 
     def _estimate(self, i2m, vl, d_last, new=None):
-        """The state ``z = [I1, I2, w]`` now (n, 3): from the delay bank (:class:`_DelayBank`), started in the
+        """The state ``z`` now (n, nz): from the delay bank (:class:`_DelayBank`), started in the
         steady state the first measured I2 implies (``w`` explains the offset); the rows ``new`` (a new
         window in a batched env that resets its windows) are started afresh the same way."""
         u_last = self._v2_of(d_last, vl)
@@ -315,9 +337,9 @@ class MPCPolicy:
         return out
 
     def _steady_z(self, i2m, u_last, vc=None):
-        """The steady state ``z = [I1, I2, w]`` (n, 3) the measured I2 ``i2m`` implies under the V2 ``u_last``
-        (``w`` explains the offset): a filter's start (made only when one starts). The modal model's
-        (``vc`` the clamp voltages): ``z = [s (4), w]`` (n, 5), the same way."""
+        """The steady state ``z = [I1, I2, w]`` (n, 3) of eq. 4's model the measured I2 ``i2m`` implies under the
+        V2 ``u_last`` (``w`` explains the offset): a filter's start (made only when one starts). The modal
+        model's (``vc`` the clamp voltages): ``z = [s (4), w]`` (n, 5), the same way."""
         if self._modal:
             m = self._model
             i0 = m.steady(u_last, 0.0, vc)[1]
@@ -356,7 +378,13 @@ class MPCPolicy:
             v2[track] = self._track(track, z[track], vl[track], ref, u_prev[track])
         stopped = np.flatnonzero(stop)
         if len(stopped):
-            v2[stopped] = self._after_stop(stopped, z[stopped], vl[stopped], u_prev[stopped])
+            plan = stopped
+            if self._tail_on:   # a receiver on its tail past the relaxing steps: no plan (the tail decides)
+                done = (self._tail[0, stopped] >= 0.0) & (self._n_stop[stopped] >= _RELAX_STEPS)
+                plan, v2[stopped[done]] = stopped[~done], 0.0
+                self._k_stop[stopped[done]] += 1
+            if len(plan):
+                v2[plan] = self._after_stop(plan, z[plan], vl[plan], u_prev[plan])
             if self._tail_on:
                 v2[stopped] = self._duty_tail(stopped, v2[stopped], vl[stopped], d_last[stopped])
         return duty_from_v2_clipped(v2, vl + self._vf)
@@ -401,7 +429,7 @@ class MPCPolicy:
         self._excess_curve()
 
     def _solve_stop(self, e, z, vl, u_prev):
-        """V2 plans [V] (the knots, (n, nb)) after the stop of the receivers ``e`` (n,) (``z`` (n, 3), ``vl``,
+        """V2 plans [V] (the knots, (n, nb)) after the stop of the receivers ``e`` (n,) (``z`` (n, nz), ``vl``,
         ``u_prev`` (n,)): min energy + move penalty + slack penalty s.t. the predicted peak (envelope + ripple
         excess linearised along a plan) within the bound + slack, V2 in the box; one QP per receiver. The
         excess is linearised along the previous plan shifted by a step (at the stop: a ramp from the V2 now
@@ -568,7 +596,7 @@ class MPCPolicy:
         return self._plan[idx, 0]
 
     def _after_stop(self, idx, z, vl, u_prev):
-        """V2 now [V] of the receivers ``idx`` after their stop (batched; ``z`` (n, 3), ``vl``, ``u_prev`` (n,)):
+        """V2 now [V] of the receivers ``idx`` after their stop (batched; ``z`` (n, nz), ``vl``, ``u_prev`` (n,)):
         0 once settled in short mode; the previous plan's next move while that plan, shifted by a step, still
         keeps the predicted peak within the bound from the state now (at most :data:`_REPLAN_EVERY` steps: the
         plan's tail is the optimum's continuation when the model holds); else the first move of a new
@@ -598,7 +626,7 @@ class MPCPolicy:
 
     def _feasible(self, z, vl, plan, e):
         """Per row: the predicted peak (envelope + ripple excess at the plan's duties) of the V2 ``plan``
-        (n, N_PRED) from ``z`` (n, 3) within the bound of receiver ``e`` (n,) (bool (n,))."""
+        (n, N_PRED) from ``z`` (n, nz) within the bound of receiver ``e`` (n,) (bool (n,))."""
         m = self._model
         i2 = z @ m.F.T + m.h + plan @ m.Gu.T
         if self._modal:
@@ -620,7 +648,7 @@ class MPCPolicy:
         return self._ss_i2[0] + self._ss_i2[1] * z[..., -1]
 
     def _settled(self, z, relax, e):
-        """Per row of ``z`` (n, 3): the free response (V2 = 0) stays within the budget's bound with the
+        """Per row of ``z`` (n, nz): the free response (V2 = 0) stays within the budget's bound with the
         short-mode ripple (:meth:`_excess` at V2 = 0), ``relax`` (n,) [A] the raised bounds, ``e`` (n,) the
         receivers (bool (n,))."""
         m = self._model

@@ -16,8 +16,9 @@ The model here (4 real states + the MPC's input disturbance ``w``):
 * the link's two positive-frequency modes (:func:`wpt_receiver.modal.link_matrices`, the devices'
   resistances folded in, Table I's Lm), in the frame rotating at w and turned to I2's phase in short
   mode, each scaled to its contribution to I2 [A]; the negative-frequency modes' quasi-static response
-  as the feedthrough of V1 and V2 to I2; discretised with ``scipy.linalg.expm`` (ZOH) at the control
-  period and at its half (the env's mid-step samples);
+  as the feedthrough of V1 and V2 to I2 (all from :func:`wpt_receiver.modal_kernel.modes`); discretised
+  with the modes' exact ZOH (:func:`wpt_receiver.modal_kernel.zoh`) at the control period and at its half
+  (the env's mid-step samples);
 * the input V2 in I2's frame is ``u + r(u)``: ``u`` the MPC's decision (eq. 9's V2, the duty from
   ``f^-1``, the in-phase part in eq. 4's model), ``r(u) = P(d(u)) Vc / Vc0 - u`` the residual, complex,
   with ``P(d)`` the SBAR's fundamental in I2's frame at the modal link's periodic steady state at duty
@@ -42,22 +43,32 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["ModalModel", "modal_model", "v2_frame_table"]
+__all__ = ["ModalModel", "v2_frame_table"]
 
 _N_D = 201          # duty grid of the residual table (quadratic towards d = 1, where the quadrature is steep)
 
 
 @lru_cache(maxsize=4)
-def v2_frame_table(link, devices_name: str):
-    """``(d grid, P(d) complex [V], Vc0 [V], theta [rad])``: the SBAR's fundamental in I2's frame
-    (``V2 conj(I2) / |I2|``) at the modal link's periodic steady state per duty, at the link's Lm and
-    battery voltage (clamp ``Vc0 = VL + Vf``), and I2's phase in short mode ``theta``."""
+def _link_modes(link, devices_name: str):
+    """``(lc, tab, mc, dev)``: the link's constants, SBAR table and modes
+    (:func:`wpt_receiver.modal_kernel.modes`, at the link's Lm) and the device set of the preset."""
     from wpt_receiver import modal_kernel as mk
     from wpt_receiver.devices import preset
     dev = preset(devices_name)
     lc, tab = mk.link_constants(link, dev), mk.modal_table(link, dev)
     mc = np.empty(mk.N_MODES_C, dtype=np.complex128)
     mk.modes(lc, link.lm_h, mc)
+    return lc, tab, mc, dev
+
+
+@lru_cache(maxsize=4)
+def v2_frame_table(link, devices_name: str):
+    """``(d grid, P(d) complex [V], Vc0 [V], theta [rad])``: the SBAR's fundamental in I2's frame
+    (``V2 conj(I2) / |I2|``) at the modal link's periodic steady state per duty, at the link's Lm and
+    battery voltage (clamp ``Vc0 = VL + Vf``), and I2's phase in short mode ``theta``. A link whose I2
+    vanishes at some duty (a blocking link: I2's frame undefined) is refused."""
+    from wpt_receiver import modal_kernel as mk
+    lc, tab, mc, dev = _link_modes(link, devices_name)
     vc0 = link.vl_v + dev.rect_vf_v
     v1 = -1j * link.v1_amp_v
     d = 1.0 - (1.0 - np.linspace(0.0, 1.0, _N_D)) ** 2
@@ -67,92 +78,67 @@ def v2_frame_table(link, devices_name: str):
     for i, dk in enumerate(d):
         v2 = mk.steady_state(lc, mc, tab, dk, v1, vc0, z)
         i2 = mk.phasors(mc, z, v1, v2)[1]
+        if not abs(i2) > 1e-9:   # [A]; NaN too
+            raise ValueError(f"the modal MPC's link has |I2| = {abs(i2):.3g} A at duty {dk:.3f} (it blocks): "
+                             "I2's frame is undefined; valid: a link whose steady I2 is non-zero at every duty")
         p[i] = v2 * np.conj(i2) / abs(i2)
         theta = float(np.angle(i2))
     return d, p, vc0, theta
 
 
-def _modes(link, dev):
-    """The continuous model in I2's frame: ``(A (4, 4), B (4, 3), C (4,), D (3,))`` on the modes scaled to
-    their I2 [A], inputs ``[Re V2, Im V2, 1]`` (the last the pad's V1, constant), output Re I2."""
-    from wpt_receiver.modal import link_matrices
-    m, b1, b2 = link_matrices(link, dev)
-    lam, vec = np.linalg.eig(m)
-    order = np.argsort(-lam.imag)
-    keep, neg = order[:2], order[2:]
-    left = np.linalg.inv(vec)
-    w = link.omega_rad_s
-    lam_r = lam[keep] - 1j * w
-    shape = 2 * vec[2, keep]
-    g1, g2 = 0.5 * left[keep] @ b1, 0.5 * left[keep] @ b2
-    feed = vec[:, neg] @ np.diag(1 / (1j * w - lam[neg])) @ left[neg]
-    d1, d2 = feed[2] @ b1, feed[2] @ b2
-    v1 = -1j * link.v1_amp_v
-    return lam_r, shape, g1, g2, d1, d2, v1
-
-
-def _real_system(link, dev, theta):
-    """The complex modal model as a real one in I2's frame (turned by ``-theta``): states ``s_m = shape_m y_m
-    e^{-j theta}`` [A] (Re, Im per mode)."""
-    lam_r, shape, g1, g2, d1, d2, v1 = _modes(link, dev)
-    rot = np.exp(-1j * theta)
-    A = np.zeros((4, 4))
-    B = np.zeros((4, 3))
+def _real_system(link, devices_name, theta, dt_s):
+    """The modal model (:func:`wpt_receiver.modal_kernel.modes`) as a real one in I2's frame (turned by
+    ``-theta``), discretised with the modes' exact ZOH (:func:`wpt_receiver.modal_kernel.zoh`) over ``dt_s``
+    [s]: ``(Ad (4, 4), Bd (4, 3), C (4,), D (3,))``, states ``s_m = S_m z_m e^{-j theta}`` [A] (Re, Im per
+    mode; ``S_m`` the mode's I2 shape, so ``C`` sums the real parts), inputs ``[Re V2', Im V2', 1]`` (``V2' =
+    V2 e^{-j theta}``; the last the pad's V1, constant), output Re I2 (the feedthrough ``D`` of the
+    negative-frequency modes)."""
+    from wpt_receiver import modal_kernel as mk
+    mc = _link_modes(link, devices_name)[2]
+    zc = np.empty(mk.N_ZOH_C, dtype=np.complex128)
+    mk.zoh(mc, dt_s, zc)
+    rot, v1 = np.exp(-1j * theta), -1j * link.v1_amp_v
+    Ad, Bd = np.zeros((4, 4)), np.zeros((4, 3))
     for k in range(2):
-        lr, li = lam_r[k].real, lam_r[k].imag
-        A[2 * k:2 * k + 2, 2 * k:2 * k + 2] = [[lr, -li], [li, lr]]
-        # complex input gains per unit Re V2', Im V2' (V2' = V2 e^{-j theta}) and the constant V1 drive
-        for j, gain in enumerate((shape[k] * g2[k], 1j * shape[k] * g2[k], shape[k] * g1[k] * v1 * rot)):
-            B[2 * k, j], B[2 * k + 1, j] = gain.real, gain.imag
+        shape, g1, g2 = mc[mk.MC_S + 4 * k + 1], mc[mk.MC_G1 + k], mc[mk.MC_G2 + k]
+        e, phi = zc[mk.ZC_E + k], zc[mk.ZC_PHI + k]
+        Ad[2 * k:2 * k + 2, 2 * k:2 * k + 2] = [[e.real, -e.imag], [e.imag, e.real]]
+        # complex input gains per unit Re V2', Im V2' and the constant V1 drive, through the held-input ZOH
+        for j, gain in enumerate((shape * g2, 1j * shape * g2, shape * g1 * v1 * rot)):
+            Bd[2 * k, j], Bd[2 * k + 1, j] = (phi * gain).real, (phi * gain).imag
     C = np.array([1.0, 0.0, 1.0, 0.0])
+    d1, d2 = mc[mk.MC_D + 2], mc[mk.MC_D + 3]
     D = np.array([d2.real, -d2.imag, (d1 * v1 * rot).real])
-    return A, B, C, D
-
-
-def _zoh(A, B, dt_s):
-    """``(Ad, Bd)``: exact ZOH of ``dx/dt = A x + B u`` over ``dt_s`` [s] (``scipy.linalg.expm``)."""
-    from scipy.linalg import expm
-    n, m = B.shape
-    big = np.zeros((n + m, n + m))
-    big[:n, :n], big[:n, n:] = A, B
-    e = expm(big * dt_s)
-    return e[:n, :n], e[:n, n:]
-
-
-@lru_cache(maxsize=4)
-def modal_model(link, devices_name: str, dt_s: float, n_pred: int, blocks: tuple):
-    """The :class:`ModalModel` of a link, device preset, control period and horizon (shared by instances)."""
-    return ModalModel(link, devices_name, dt_s, n_pred, blocks)
+    return Ad, Bd, C, D
 
 
 class ModalModel:
     """Condensed predictions over ``n_pred`` steps (the samples the env's peak takes: mid-step and end of
     every step, ``2 n_pred`` rows): ``I2 = F z + G v + h + Gr r`` with ``z = [s (4), w]``, ``v`` the knots of
-    the V2 plan (``M``), ``r = [Re r_0 .. Re r_{n-1}, Im r_0 .. Im r_{n-1}]`` the residual of V2 in I2's
-    frame per step (:meth:`residual`); one-step ``ad, bu, br, e`` and the measurement ``c, du, dr, d0``."""
+    the V2 plan (``M`` (n_pred, knots), the MPC's basis: V2 linear between them), ``r = [Re r_0 .. Re r_{n-1},
+    Im r_0 .. Im r_{n-1}]`` the residual of V2 in I2's frame per step (:meth:`residual`); one-step ``ad, bu, br,
+    e`` and the measurement ``c, du, dr, d0``. The filter's gain ``kalman`` is set by its maker
+    (:func:`policies.mpc._modal_model`, eq. 4's filter problem on this model)."""
 
     modal = True
 
-    def __init__(self, link, devices_name, dt_s, n_pred, blocks):
-        from wpt_receiver.devices import preset
+    def __init__(self, link, devices_name, dt_s, n_pred, M):
         self.d_grid, p, self.vc0, theta = v2_frame_table(link, devices_name)
         self.p_re, self.p_im = p.real.copy(), p.imag.copy()
-        A, B, C, D = _real_system(link, preset(devices_name), theta)
-        ad, bd = _zoh(A, B, dt_s)
-        am, bm = _zoh(A, B, 0.5 * dt_s)
+        ad, bd, C, D = _real_system(link, devices_name, theta, dt_s)
+        am, bm = _real_system(link, devices_name, theta, 0.5 * dt_s)[:2]
         self.nx = 4
         self.ad, self.bu, self.br, self.e = ad, bd[:, 0], bd[:, :2], bd[:, 2]
         self.c, self.du, self.dr, self.d0 = C, D[0], D[:2], D[2]
         self.b2 = self.bu
-        self._condense(ad, bd, am, bm, C, D, n_pred, blocks)
-        self.kalman = None   # the filter's gain (5, 1): policies.mpc solves kalman_problem() once per model
+        self._condense(ad, bd, am, bm, C, D, n_pred, M)
+        self.kalman = None
 
-    def _condense(self, ad, bd, am, bm, C, D, n, blocks):
+    def _condense(self, ad, bd, am, bm, C, D, n, M):
         """``F, h, Gu, Gr, G, M, ends`` (class docstring)."""
-        M = np.stack([np.interp(np.arange(n), blocks, np.eye(len(blocks))[i]) for i in range(len(blocks))], axis=1)
         F = np.zeros((2 * n, 5))
         h = np.zeros(2 * n)
-        imp = np.zeros((3, 2, n))   # output of the mid / end sample of a step to each input i steps earlier
+        imp = np.zeros((2, 2, n))   # output of the mid / end sample of a step to each of Re / Im V2' i steps earlier
         Phi, c = np.eye(4), np.zeros(4)
         x = bd[:, :2].copy()
         for k in range(n):
@@ -160,10 +146,10 @@ class ModalModel:
                 F[2 * k + r, :4] = C @ A_ @ Phi
                 h[2 * k + r] = C @ (A_ @ c + B_[:, 2]) + D[2]
             if k:
-                imp[:2, :, k] = np.stack([C @ am @ x, C @ ad @ x], axis=1)
+                imp[:, :, k] = np.stack([C @ am @ x, C @ ad @ x], axis=1)
                 x = ad @ x
             Phi, c = ad @ Phi, ad @ c + bd[:, 2]
-        imp[:2, :, 0] = np.stack([C @ bm[:, :2] + D[:2], C @ bd[:, :2] + D[:2]], axis=1)
+        imp[:, :, 0] = np.stack([C @ bm[:, :2] + D[:2], C @ bd[:, :2] + D[:2]], axis=1)
         lag = np.arange(n)[:, None] - np.arange(n)[None, :]
         G2 = [np.where(lag >= 0, imp[j][:, np.maximum(lag, 0)], 0.0).transpose(1, 0, 2).reshape(2 * n, n) for j in (0, 1)]
         F[:, 4] = G2[0].sum(axis=1)
@@ -171,15 +157,6 @@ class ModalModel:
         self.Gr = np.concatenate(G2, axis=1)
         self.G = G2[0] @ M
         self.ends = np.arange(1, 2 * n, 2)
-
-    def kalman_problem(self, meas_sd_a=0.1, q_i=1e-3, q_w=0.05):
-        """``(A, C, Q, R)`` of the steady-state filter on ``z = [s, w]`` (``w`` a random walk on V2) from the
-        measured I2 (sd ``meas_sd_a`` [A]), as eq. 4's (:meth:`policies.mpc._Model._kalman`)."""
-        A = np.zeros((5, 5))
-        A[:4, :4], A[:4, 4], A[4, 4] = self.ad, self.bu, 1.0
-        Cm = np.concatenate([self.c, [self.du]])[None, :]
-        Q = np.diag([q_i ** 2] * 4 + [q_w ** 2])
-        return A, Cm, Q, np.array([[meas_sd_a ** 2]])
 
     def residual(self, u, vc):
         """``(Re r, Im r)`` [V]: the modal link's V2 in I2's frame minus ``u`` at the eq. 9 V2 ``u`` [V] (any

@@ -30,8 +30,8 @@ search (min over x of the max step ratio); budgets below it are infeasible.
 
 Results are cached on disk per (scenario, seed, budget, starts, env config) with
 :mod:`wpt_receiver.diskcache` (``$DRONEWPT_CACHE_DIR``), keyed with the source hash of this module and
-of the env's and the link's sources a rollout computes with (:func:`_source_hash`; since 2026-11-26,
-which invalidated the bounds cached before once).
+of the env's and the link's sources a rollout computes with and of the base / start policies' modules
+(:func:`_source_hash`; each since 2026-11-26, which invalidated the bounds cached before once).
 """
 
 from __future__ import annotations
@@ -205,8 +205,9 @@ class _FloorProblem(_Problem):
 
 #: the sources an oracle bound is computed with besides this file: the env's step and its replay
 #: (:mod:`envs.rollout`'s compiled replay, the envelope / modal / detuned links, the scenarios, the objective)
-#: and the link's physics in :mod:`wpt_receiver` (with the device presets' table). Not the start policies'
-#: code (``DEFAULT_STARTS``): a start only seeds the search.
+#: and the link's physics in :mod:`wpt_receiver` (with the device presets' table). The base and start policies'
+#: modules enter the key as well (:func:`_policy_files`): the base sets the state at the stop, a start the
+#: local optimum the search finds.
 _ROLLOUT_SOURCES = (
     ("envs", ("core.py", "detuned.py", "layout.py", "modal_plant.py", "modal_step.py", "objective.py", "parts.py",
               "peaks.py", "plant.py", "rollout.py", "scenario.py", "sensing.py", "vector.py", "vector_kernel.py")),
@@ -223,21 +224,62 @@ def _rollout_files() -> list:
     return [roots[pkg] / name for pkg, names in _ROLLOUT_SOURCES for name in names]
 
 
-def _source_hash() -> str:
-    """16 hex digits of sha256 over this file and :func:`_rollout_files`
-    (:func:`wpt_receiver.kernel_cache.dependency_hash`): part of every disk-cache key, so a bound computed
-    by other env physics (the detuned windows' blocking fix of 2026-11-26, say) is recomputed, not reused.
-    Since that date the key covers the env's sources too: oracle bounds cached before are computed again
-    once (the old entries stay unused in the cache folder)."""
+def _relative_imports(text: str, root: Path) -> list:
+    """The files under ``root`` (the policies package) that the source ``text`` imports relatively
+    (``from .x import y``, ``from . import x``; inside functions too, where the lazy imports are)."""
+    import ast
+    out = []
+    for node in ast.walk(ast.parse(text)):
+        if isinstance(node, ast.ImportFrom) and node.level == 1:
+            names = [node.module] if node.module else [a.name for a in node.names]
+            out += [root / f"{n.split('.')[0]}.py" for n in names if (root / f"{n.split('.')[0]}.py").is_file()]
+    return out
+
+
+@lru_cache(maxsize=16)
+def _policy_files(names: tuple) -> tuple:
+    """The policies modules the policies ``names`` (:func:`policies.make` names) run with: the module of each
+    one's class or factory and, transitively, what it imports relatively (``mpc``: mpc.py, mpc_modal.py,
+    classical.py, ...); sorted, this file and the package's ``__init__`` left out."""
+    import inspect
+
+    from . import _REGISTRY
+    root = Path(__file__).parent
+    todo = []
+    for name in names:
+        f = _REGISTRY.get(name.partition(":")[0])
+        if f is None:
+            continue
+        if inspect.isclass(f):
+            todo.append(Path(inspect.getsourcefile(f)))
+        else:   # a factory in the package's __init__: the modules it imports
+            todo += _relative_imports(inspect.getsource(f), root)
+    seen = set()
+    while todo:
+        p = todo.pop()
+        if p not in seen and p.name not in ("oracle.py", "__init__.py"):
+            seen.add(p)
+            todo += _relative_imports(p.read_text(), root)
+    return tuple(sorted(seen))
+
+
+def _source_hash(policies: tuple = ()) -> str:
+    """16 hex digits of sha256 over this file, :func:`_rollout_files` and the modules of the base / start
+    policies ``policies`` (:func:`_policy_files`) (:func:`wpt_receiver.kernel_cache.dependency_hash`): part
+    of every disk-cache key, so a bound computed by other env physics (the detuned windows' blocking fix of
+    2026-11-26, say) or from another base policy's state at the stop (the MPC on the modal link, 2026-11-26)
+    is recomputed, not reused. Each widening of the key computes the bounds cached before again once (the
+    old entries stay unused in the cache folder)."""
     from wpt_receiver.kernel_cache import dependency_hash
-    return dependency_hash([Path(__file__), *_rollout_files()])[:16]
+    return dependency_hash([Path(__file__), *_rollout_files(), *_policy_files(tuple(policies))])[:16]
 
 
 def _cached(kind, scenario, seed, budget, starts, config, compute):
     from envs import EnvConfig, get_scenario
     from wpt_receiver import diskcache
     cfg = config or EnvConfig()
-    key = f"oracle {kind} {_source_hash()} {get_scenario(scenario)!r} seed={seed} b={budget!r} {starts!r} {cfg!r}"
+    src = _source_hash(tuple(s for s in starts if isinstance(s, str)))
+    key = f"oracle {kind} {src} {get_scenario(scenario)!r} seed={seed} b={budget!r} {starts!r} {cfg!r}"
     shape = (4 + cfg.n_steps,)
     arr = diskcache.load("oracle", key, shape)
     if arr is None:

@@ -68,7 +68,9 @@ def budget_of_action(action, lo: float, hi: float) -> np.ndarray:
 
 
 class BudgetScheduledMPC(MPCPolicy):
-    """The MPC with a budget per receiver (fraction of measured overshoot), settable every control period."""
+    """The MPC with a budget per receiver (fraction of measured overshoot), settable every control period. Its
+    model is the MPC's: eq. 4's, or the exact modes when the context's ``link_model`` is ``"modal"`` (the shipped
+    agents were trained with eq. 4's, docs/rl.md)."""
 
     def __init__(self, ctx: PolicyContext = PolicyContext(), budget: float = 0.0, **kwargs):
         super().__init__(ctx, budget=budget, **kwargs)

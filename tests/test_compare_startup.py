@@ -52,16 +52,21 @@ _NO_LINALG = """
 import sys
 from wpt_receiver.numba_start import prepare
 prepare()
+from mission_sim.contract import PolicyContext
 from policies.mpc import MPCPolicy
-MPCPolicy()
+MPCPolicy(PolicyContext(link_model="{link}"))
 print("scipy.linalg" in sys.modules)
 """
 
 
-def test_mpc_on_a_warm_cache_does_not_import_scipy_linalg(tmp_path):
+@pytest.mark.parametrize("link", ["envelope", "modal"])
+def test_mpc_on_a_warm_cache_does_not_import_scipy_linalg(tmp_path, link):
+    """eq. 4's MPC and the modal one (its modes and ZOH from wpt_receiver.modal_kernel, its filter through the
+    same cache)."""
     import os
     env = {**os.environ, "DRONEWPT_CACHE_DIR": str(tmp_path)}
-    out = [subprocess.run([sys.executable, "-c", _NO_LINALG], env=env, capture_output=True, text=True, check=True)
+    code = _NO_LINALG.replace("{link}", link)
+    out = [subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
            .stdout.strip() for _ in range(2)]
     assert out == ["True", "False"]   # the first run solves the equation (and stores it), the second loads it
 

@@ -21,17 +21,20 @@ KEYS = ("overshoot_pct", "energy_after_stop_j", "reached_short_mode", "return")
 WINDOWS = 3
 
 
-def _metrics(name, scenario, episodes, seed):
-    m = run_policy(name, scenario, episodes, seed).metrics
+def _metrics(name, scenario, episodes, seed, link="envelope"):
+    from envs import EnvConfig
+    m = run_policy(name, scenario, episodes, seed, config=EnvConfig(link_model=link)).metrics
     return np.array([m[k] for k in KEYS])
 
 
-@pytest.mark.parametrize("scenario", ["nominal", "sense_delay"])
-def test_batched_mpc_equals_each_window_alone(scenario):
+@pytest.mark.parametrize("scenario, link", [("nominal", "envelope"), ("sense_delay", "envelope"),
+                                            ("nominal", "modal")])
+def test_batched_mpc_equals_each_window_alone(scenario, link):
     """Windows 1000..1002 in one batch and each alone (a batch of one): the same overshoot, energy after
-    the stop, short mode and return per window (to the QP solver's tolerance)."""
-    batch = _metrics("mpc", scenario, WINDOWS, 1000)
-    alone = np.concatenate([_metrics("mpc", scenario, 1, 1000 + i) for i in range(WINDOWS)], axis=1)
+    the stop, short mode and return per window (to the QP solver's tolerance); on eq. 4's plant and on the
+    exact-mode link (the modal model's MPC, with its duty tail and the after-stop QPs it skips)."""
+    batch = _metrics("mpc", scenario, WINDOWS, 1000, link)
+    alone = np.concatenate([_metrics("mpc", scenario, 1, 1000 + i, link) for i in range(WINDOWS)], axis=1)
     assert batch[2].min() == 1.0   # short mode reached: the after-stop path ran in every window
     np.testing.assert_allclose(batch, alone, rtol=1e-6, atol=1e-6)
 

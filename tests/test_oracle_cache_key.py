@@ -49,3 +49,22 @@ def test_a_cached_bound_is_recomputed_when_the_env_sources_change(tmp_path, monk
     oracle._cached(*args)
     assert len(calls) == 2
     np.testing.assert_array_equal(r2.duties, np.linspace(0.0, 1.0, 300))
+
+
+def test_the_key_covers_the_base_policys_sources(tmp_path, monkeypatch):
+    """A floor's base policy sets the state at the stop: its modules are in the key (the MPC's: mpc.py and the
+    modal model's mpc_modal.py), and a change of one changes the key of a base-"mpc" bound only."""
+    names = {f.name for f in oracle._policy_files(("mpc",))}
+    assert {"mpc.py", "mpc_modal.py", "classical.py"} <= names
+    assert "budgeted.py" in {f.name for f in oracle._policy_files(oracle.DEFAULT_STARTS)}
+    copies = []
+    for f in oracle._policy_files(("mpc",)):
+        copies.append(tmp_path / f.name)
+        shutil.copy(f, copies[-1])
+    before, other = oracle._source_hash(("mpc",)), oracle._source_hash(("model_based",))
+    real = oracle._policy_files
+    monkeypatch.setattr(oracle, "_policy_files", lambda names: tuple(copies) if names == ("mpc",) else real(names))
+    assert oracle._source_hash(("mpc",)) == before
+    (tmp_path / "mpc_modal.py").write_text((tmp_path / "mpc_modal.py").read_text() + "\n# another model\n")
+    assert oracle._source_hash(("mpc",)) != before
+    assert oracle._source_hash(("model_based",)) == other

@@ -97,6 +97,8 @@ def _add_train(sub):
     p.set_defaults(func=_cmd_train)
 
 
+#: :data:`mission_sim.contract.LINK_MODELS` (not imported: the parser stays free of wpt_receiver's import;
+#: tests/test_mpc_modal.py checks they agree)
 LINK_CHOICES = ("envelope", "modal")
 
 
