@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import struct
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -16,6 +17,28 @@ LOG_NAMES = ("dronekit-python_flight.tlog", "dronekit-la-testdata_log171.bin",
              "uavlogviewer_vtol_sitl.tlog", "ardusub_log_tools_small_rov.tlog")
 ULOG_NAME = "pyulog_sample_log_small.ulg"
 DATA_DIR = Path(__file__).resolve().parent / "data" / "flightlogs"
+#: every test file that reads a flight log (the hypothesis fuzz tests aside: they read the same files);
+#: tests/conftest.py runs them under :func:`log_guard`, tests/test_mavlink_selfcontained.py checks the list
+LOG_TESTS = ("test_mavlink_io.py", "test_cli_replay_errors.py", "test_replay_integration.py",
+             "test_mavlink_armed.py", "test_mavlink_ulog.py", "test_telemetry_loopback.py", "test_mavlink_clock.py",
+             "test_calibrate.py")
+LOG_SUFFIXES = (".tlog", ".bin", ".ulg", "SOURCES.md")
+
+
+def log_guard(home: Path, refused: Path, active=lambda: True):
+    """An audit hook (``sys.addaudithook``) under which opening a file named like a flight log
+    (:data:`LOG_SUFFIXES`) fails with PermissionError unless it lies under ``home``, or in the
+    temporary folder (copies the tests make) but not under ``refused``; inert while ``active()`` is false."""
+    home_s, refused_s = str(Path(home).resolve()) + os.sep, str(Path(refused).resolve()) + os.sep
+    tmp_s = str(Path(tempfile.gettempdir()).resolve()) + os.sep
+
+    def hook(event, args):
+        if event != "open" or not args or not isinstance(args[0], (str, bytes, os.PathLike)) or not active():
+            return
+        p = str(Path(os.fsdecode(args[0])).resolve())
+        if p.endswith(LOG_SUFFIXES) and not p.startswith(home_s) and (p.startswith(refused_s) or not p.startswith(tmp_s)):
+            raise PermissionError(f"test opened a flight log outside the repository: {p}")
+    return hook
 
 
 def flightlogs_dir() -> Path:

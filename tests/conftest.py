@@ -3,12 +3,34 @@
 Every in-process mission (the CLI, replay, telemetry, studies run in-process, the tests' own calls)
 ends in ``MissionLoop.result``; wrapped here, it fails the test if any row of the time series has
 SoC outside [0, 1]. Missions run in other processes (CLI subprocesses, Dask workers) are not seen.
+
+And the flight-log tests (``_flightlogs.LOG_TESTS``) read logs from the repository only (issue 16): while
+one of their modules runs, opening a file named like a flight log outside the repository (and outside
+the temporary folder; never in a ``../shared`` beside it) fails (``_flightlogs.log_guard``, an audit hook
+inert at other times).
 """
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
+
+from _flightlogs import LOG_TESTS, log_guard
+
+_ROOT = Path(__file__).resolve().parents[1]
+_GUARDED = [False]
+sys.addaudithook(log_guard(_ROOT, _ROOT.parent / "shared", lambda: _GUARDED[0]))
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _flight_logs_from_the_repository_only(request):
+    """The guard on for a whole module of ``LOG_TESTS`` (its module fixtures too), off after it."""
+    _GUARDED[0] = request.path.name in LOG_TESTS
+    yield
+    _GUARDED[0] = False
 
 
 @pytest.fixture(autouse=True)

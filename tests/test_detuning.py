@@ -44,11 +44,14 @@ def test_detuned_secondary_develops_quadrature_and_lm_inverse():
 
 def test_controller_overshoot_with_detuned_secondary():
     """C2 +5 %: the model-based controller still keeps the fundamental's overshoot < 1 % and the
-    instantaneous peak's < 6 % (harmonics), while the step overshoots by > 250 %."""
-    prop = detuning_row(P, "c2", 0.05, "proposed", t_end_s=20e-3, settle_s=5e-3)
+    instantaneous peak's < 6 % (harmonics), while the step overshoots by > 250 %. The exact-mode
+    envelope of the detuned link (run on the step's short window only: it is most of a row's time)
+    finds the step's instantaneous peak within 2 % of the switching model's."""
+    prop = detuning_row(P, "c2", 0.05, "proposed", t_end_s=20e-3, settle_s=5e-3, modal=False)
     step = detuning_row(P, "c2", 0.05, "step", t_end_s=6e-3, settle_s=5e-3)
     assert prop["fund_overshoot_pct"] < 1.0 and prop["overshoot_pct"] < 6.0
     assert step["overshoot_pct"] > 250.0
+    assert step["modal_peak_a"] == pytest.approx(step["peak_i2_a"], rel=0.02)
 
 
 def test_strongly_detuned_primary_blocks_the_rectifier_in_rm():

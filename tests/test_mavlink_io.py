@@ -1,5 +1,7 @@
 """mission_sim.mavlink.logs and the log-only parts of mission_sim.mavlink.replay against pymavlink directly."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -16,6 +18,14 @@ def _both(name):
         p = log_path(name)
         _cache[name] = (read_log(p), pymavlink_reference(p))
     return _cache[name]
+
+
+def test_a_log_beside_the_repository_is_refused_here():
+    """tests/conftest.py runs the flight-log tests under ``_flightlogs.log_guard``: a log in a
+    ``shared`` folder beside the repository cannot be opened (it need not exist)."""
+    shared = Path(__file__).resolve().parents[2] / "shared" / "flightlogs" / LOG_NAMES[0]
+    with pytest.raises(PermissionError, match="outside the repository"):
+        open(shared, "rb")
 
 
 @pytest.mark.parametrize("name", LOG_NAMES)

@@ -88,11 +88,14 @@ def _settled_rm(link, settle_s):
 
 
 def detuning_row(p: LinkParams, side: str, detuning: float, policy: str, t_switch_s: float = 1e-3,
-                 t_end_s: float = 31e-3, devices: DeviceSet = IDEAL, settle_s: float = 20e-3) -> dict:
+                 t_end_s: float = 31e-3, devices: DeviceSet = IDEAL, settle_s: float = 20e-3,
+                 modal: bool = True) -> dict:
     """One row: overshoot of the instantaneous peak (switching model), of the fundamental
     (switching model) and of the complex envelope model, for one side, detuning and policy. Both
     models first settle ``settle_s`` in RM on the detuned link; ``rm_i2_a`` is the RM fundamental
-    there. The online-Lm row is NaN when no Lm explains the measured RM current."""
+    there. The online-Lm row is NaN when no Lm explains the measured RM current. ``modal=False``
+    leaves out the exact-mode envelope (:class:`ModalEnvelope`, a harmonic balance per period and
+    most of the row's time): its two columns are NaN."""
     from .switching import SwitchingConfig, SwitchingLink
     c1, c2 = detuned_capacitors(p, side, detuning)
     T = p.rectifier_period_s
@@ -111,7 +114,7 @@ def detuning_row(p: LinkParams, side: str, detuning: float, policy: str, t_switc
     tc, _, j2 = simulate_complex(p, v2, T / 4, c1, c2)
     keep = n_settle + 1
     cm = transition_metrics(tc[keep:] - tc[keep - 1], np.abs(j2[keep:]), t_switch_s)
-    if i2_rm < _MIN_CONDUCTION_A:   # the diodes block in RM: the harmonic balance assumes conduction
+    if i2_rm < _MIN_CONDUCTION_A or not modal:   # the diodes block in RM: the harmonic balance assumes conduction
         return {**row, **_switching_only(peak, fund, cm), "modal_overshoot_pct": float("nan"),
                 "modal_peak_a": float("nan")}
     mo = ModalEnvelope(p, devices, c1, c2).run(d, T)
