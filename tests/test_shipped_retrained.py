@@ -99,8 +99,10 @@ def test_shipped_lagrangian_stays_physical():
 
 
 def test_shipped_rl_stays_physical_and_is_the_default_rl_policy():
-    """Each unconstrained seed's peak |I2| stays below the step's (the hardest RM -> SM switch) in every
-    window; ``--policy rl`` (policies.rl.PRETRAINED) is seed 0 of the group."""
+    """A sanity bound, not a quality test: each unconstrained seed's peak |I2| stays below the step's (the
+    hardest RM -> SM switch) in every window (``random`` and ``hysteresis`` peak at ~51-53 A and fail it; the
+    seeds' failure to reach short mode is documented in docs/rl.md, not asserted); ``--policy rl``
+    (policies.rl.PRETRAINED) is seed 0 of the group."""
     from policies.rl import PRETRAINED
     specs = shipped_seed_groups()["rl"]
     assert specs[0] == f"rl:{PRETRAINED}"
