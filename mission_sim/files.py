@@ -16,6 +16,8 @@ import os
 from contextlib import contextmanager
 from pathlib import Path
 
+from .signals import raise_lost
+
 __all__ = ["atomic_output", "OutputError", "storage_error", "folder_lock", "FolderBusy"]
 
 #: errors of the storage, not of the data: reported as :class:`OutputError` naming the file
@@ -59,6 +61,7 @@ def atomic_output(path, tmp_name: str | None = None, fsync: bool = False):
         if fsync:
             with open(tmp, "rb+") as fh:
                 os.fsync(fh.fileno())
+        raise_lost()   # an interrupt a callback swallowed: nothing is renamed into place after it
         os.replace(tmp, path)
     except OutputError:
         raise

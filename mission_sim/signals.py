@@ -5,16 +5,19 @@ for SIGTERM).
 
 :func:`interrupts_raised` installs the handlers (``dronewpt``'s ``main`` does, for every command);
 :func:`interrupts_deferred` holds a signal back over a section that must not be cut in the
-middle (Dask's cluster start) and raises it on leaving.
+middle (Dask's cluster start) and raises it on leaving. A signal that lands while Python runs a callback
+whose exceptions it cannot raise (a weakref callback, ``__del__``) is kept and raised at the next safe
+point (:func:`raise_lost`: before a file is renamed into place, when the command returns), not lost.
 """
 
 from __future__ import annotations
 
 import contextlib
 import signal
+import sys
 import threading
 
-__all__ = ["Interrupted", "interrupts_raised", "interrupts_deferred", "HANDLED", "exit_status", "signal_name"]
+__all__ = ["Interrupted", "interrupts_raised", "interrupts_deferred", "raise_lost", "HANDLED", "exit_status", "signal_name"]
 
 #: the signals turned into :class:`Interrupted`
 HANDLED = (signal.SIGINT, signal.SIGTERM)
@@ -42,6 +45,33 @@ def _raise(signum, frame):
     raise Interrupted(signum)
 
 
+#: signals whose :class:`Interrupted` Python could not raise (it landed while a weakref callback or a
+#: ``__del__`` ran - e.g. import's module-lock callback - whose exceptions are only reported as
+#: "Exception ignored in ..."): kept here and raised by :func:`raise_lost` at the next safe point
+_LOST: list[int] = []
+
+
+def _keep_lost(old_hook):
+    """A ``sys.unraisablehook`` that keeps an unraisable :class:`Interrupted` in :data:`_LOST` (silently)
+    and passes anything else to ``old_hook``."""
+    def hook(unraisable):
+        if isinstance(unraisable.exc_value, Interrupted):
+            _LOST.append(unraisable.exc_value.signum)
+        else:
+            old_hook(unraisable)
+    return hook
+
+
+def raise_lost() -> None:
+    """Raise the first interrupt Python could not raise where it landed (:data:`_LOST`), if any: called
+    before a file is renamed into place (:func:`mission_sim.files.atomic_output`) and when a command
+    returns, so a SIGTERM/Ctrl-C is never swallowed by a callback."""
+    if _LOST:
+        signum = _LOST[0]
+        _LOST.clear()
+        raise Interrupted(signum)
+
+
 def _in_main_thread() -> bool:
     return threading.current_thread() is threading.main_thread()
 
@@ -54,9 +84,12 @@ def interrupts_raised():
         yield
         return
     old = {s: signal.signal(s, _raise) for s in HANDLED}
+    old_hook = sys.unraisablehook
+    sys.unraisablehook = _keep_lost(old_hook)
     try:
         yield
     finally:
+        sys.unraisablehook = old_hook
         for s, h in old.items():
             signal.signal(s, h)
 

@@ -131,7 +131,10 @@ def _main(argv=None) -> int:
         from .notices import announce_compilation
         announce_compilation()
     try:
-        return int(args.func(args) or 0)
+        rc = int(args.func(args) or 0)
+        from ..signals import raise_lost
+        raise_lost()   # a SIGTERM / Ctrl-C that landed in a callback is still an interrupt
+        return rc
     except BrokenPipeError:  # output piped into head & co.: not an error of ours
         import os
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
