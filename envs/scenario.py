@@ -322,8 +322,9 @@ def stack_draws(draws) -> EpisodeDraw:
 def command_profile(draws, n_steps: int, dt_s: float, out=None) -> np.ndarray:
     """Charge command [A] per step, shape (n, n_steps + 1) for a batched draw (or a list of
     draws): cmd0 until t_change, cmd1 until t_stop, then 0 (stop charging -> short mode) to the
-    end of the window; the transposed view of a step-major (n_steps + 1, n) array: ``out`` if given (a
-    C-contiguous float array, the vector env's store), else a new one."""
+    end of the window; the transposed view of a step-major (n_steps + 1, n) array: ``out`` if given (any
+    float array of that shape, written in place; the vector env passes its whole C-contiguous store), else a
+    new one."""
     b = stack_draws(draws) if isinstance(draws, (list, tuple)) else draws
     t = (np.arange(n_steps + 1) * dt_s)[:, None]
     tc, ts = np.reshape(b.t_change_s, (1, -1)), np.reshape(b.t_stop_s, (1, -1))
