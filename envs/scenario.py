@@ -32,7 +32,6 @@ present, a battery near 30 V) inside a window, where an adaptive or learned poli
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, fields, replace
 from itertools import accumulate
 
@@ -289,12 +288,11 @@ DRAWS = (_Field("soc", "soc0"), _Field("lm_scale", "lm_scale"), _Field("wind_spe
          _SenseDelay("sense_delay_steps", "sense_delay"), _Detune())
 
 
-def draw_episodes(rngs, scn: Scenario, n_steps: int, threads: int = 1) -> EpisodeDraw:
+def draw_episodes(rngs, scn: Scenario, n_steps: int) -> EpisodeDraw:
     """A batched :class:`EpisodeDraw`, episode ``i`` from generator ``rngs[i]``: the :data:`DRAWS` and then the
     scenario's own ``parts``, each filling its named fields (the same numbers as :func:`draw_episode` with each
     generator: ``uniform(lo, hi)`` is ``lo + (hi - lo) u`` of the generator's next double, so one ``random(k)``
-    call gives the k scalar draws); two generator calls per episode and the rest on arrays. ``threads > 1``:
-    the generators' calls on that many threads (:func:`split_rows`; the same numbers)."""
+    call gives the k scalar draws); two generator calls per episode and the rest on arrays."""
     parts = DRAWS + scn.parts
     ranges = [part.ranges(scn) for part in parts]
     flat = [r for rs in ranges for r in rs]
@@ -302,52 +300,15 @@ def draw_episodes(rngs, scn: Scenario, n_steps: int, threads: int = 1) -> Episod
     n = len(rngs)
     u = np.empty((n, drawn[-1] + 1))
     noise = np.empty((n, n_steps))
-    split_rows(lambda lo, hi: _draw_rows(rngs, u, noise, lo, hi), n, threads)
+    for i, rng in enumerate(rngs):  # each sub-environment owns its generator: one call per array
+        rng.random(out=u[i])
+        rng.standard_normal(out=noise[i])
     cols = [lo + (hi - lo) * u[:, drawn[i]] if hi > lo else np.full(n, float(lo)) for i, (lo, hi) in enumerate(flat)]
     win, at = {}, 0
     for part, rs in zip(parts, ranges):
         part.apply(scn, cols[at:at + len(rs)], win)
         at += len(rs)
     return EpisodeDraw(noise=noise, **win)
-
-
-def _draw_rows(rngs, u, noise, lo, hi):
-    """Generators ``rngs[lo:hi]``: each its uniforms ``u[i]`` then its normals ``noise[i]`` (one call per array)."""
-    for i in range(lo, hi):   # each sub-environment owns its generator
-        rng = rngs[i]
-        rng.random(out=u[i])
-        rng.standard_normal(out=noise[i])
-
-
-#: fewer rows than this are never split over threads (a thread hand-off costs more than it saves)
-SPLIT_MIN_ROWS = 1024
-_POOLS = {}
-
-
-def split_rows(fn, n: int, threads: int = 1) -> None:
-    """``fn(lo, hi)`` over the contiguous slices of ``range(n)``, one per thread (the calling thread takes the
-    first; a process-wide pool per thread count, made on first use in each process). For work that fills
-    disjoint rows and spends its time inside numpy, which releases the GIL while it fills an array: each row
-    is done by one thread with the same calls in the same order, so the numbers do not depend on ``threads``."""
-    if threads <= 1 or n < SPLIT_MIN_ROWS:
-        fn(0, n)
-        return
-    key = (os.getpid(), int(threads))   # a forked child makes its own pool (the parent's threads do not exist there)
-    if key not in _POOLS:
-        from concurrent.futures import ThreadPoolExecutor
-        _POOLS[key] = ThreadPoolExecutor(max_workers=threads - 1, thread_name_prefix="dronewpt-draws")
-    b = [n * i // threads for i in range(threads + 1)]
-    futs = [_POOLS[key].submit(fn, b[i], b[i + 1]) for i in range(1, threads)]
-    fn(b[0], b[1])
-    for f in futs:
-        f.result()
-
-
-def _columns(b, lo, hi):
-    """The command fields of windows ``lo:hi`` of a batched draw (what :func:`command_profile` reads)."""
-    from types import SimpleNamespace
-    keys = ("t_change_s", "t_stop_s", "cmd0_a", "cmd1_a")
-    return SimpleNamespace(**{k: np.asarray(getattr(b, k))[lo:hi] for k in keys})
 
 
 def stack_draws(draws) -> EpisodeDraw:
@@ -361,8 +322,9 @@ def stack_draws(draws) -> EpisodeDraw:
 def command_profile(draws, n_steps: int, dt_s: float, out=None) -> np.ndarray:
     """Charge command [A] per step, shape (n, n_steps + 1) for a batched draw (or a list of
     draws): cmd0 until t_change, cmd1 until t_stop, then 0 (stop charging -> short mode) to the
-    end of the window; the transposed view of a step-major (n_steps + 1, n) array: ``out`` if given (a
-    C-contiguous float array, the vector env's store), else a new one."""
+    end of the window; the transposed view of a step-major (n_steps + 1, n) array: ``out`` if given (any
+    float array of that shape, written in place; the vector env passes its whole C-contiguous store), else a
+    new one."""
     b = stack_draws(draws) if isinstance(draws, (list, tuple)) else draws
     t = (np.arange(n_steps + 1) * dt_s)[:, None]
     tc, ts = np.reshape(b.t_change_s, (1, -1)), np.reshape(b.t_stop_s, (1, -1))
@@ -420,8 +382,6 @@ class ScenarioPart:
         self.default = self.current = get_scenario(default)
         self.n_steps, self.dt_s = int(n_steps), float(dt_s)
         self.cmd, self.noise = cmd, noise
-        #: threads of the draws and of the noise's store at a reset (:func:`split_rows`; set by the env)
-        self.threads = 1
 
     def reset(self, rngs, idx, options=KEEP) -> Window:
         """Windows ``idx`` (a slice for all, or indices of the stores' columns) start, drawn with ``rngs``
@@ -429,21 +389,13 @@ class ScenarioPart:
         if options is not self.KEEP:
             self.current = scenario_from_options(options, self.default)
         scn, T = self.current, self.n_steps
-        draws = draw_episodes(rngs, scn, T, self.threads)
+        draws = draw_episodes(rngs, scn, T)
         n = draws.n
         full = isinstance(idx, slice)
-        if full:
-            split_rows(lambda lo, hi: command_profile(_columns(draws, lo, hi), T, self.dt_s, out=self.cmd[:, lo:hi]),
-                       n, self.threads)
-            cmd = self.cmd.T
-        else:
-            cmd = command_profile(draws, T, self.dt_s)
+        cmd = command_profile(draws, T, self.dt_s, out=self.cmd if full else None)
         noise_sd = np.full(n, scn.i2_noise_a)
-        if full:   # written in place (the usual autoreset of all windows): no temporaries, column slices on threads
-            raw = draws.noise
-            split_rows(lambda lo, hi: np.multiply(raw[lo:hi].T, noise_sd[lo:hi], out=self.noise[:, lo:hi]), n,
-                       self.threads)
-            noise = self.noise.T
+        if full:   # written in place (the usual autoreset of all windows): no temporaries
+            noise = np.multiply(draws.noise.T, noise_sd, out=self.noise).T
         else:
             noise = np.multiply(draws.noise.T, noise_sd).T
             self.cmd[:, idx], self.noise[:, idx] = cmd.T, noise.T

@@ -18,8 +18,8 @@ the default (``None``) chooses between one thread and all of numba's by measured
 descheduled threads). Below :attr:`SbarChargingVectorEnv.PARALLEL_MIN_ENVS` sub-environments the step
 always runs on the calling thread (waking a thread pool costs more than it saves there). The
 results do not depend on the threads (each sub-environment's arithmetic is the same in any chunk):
-parallel == serial to the bit. When the step runs parallel, a full autoreset's generator draws, command
-profile and noise store run on the same threads too (:func:`envs.scenario.split_rows`; the same numbers).
+parallel == serial to the bit. An autoreset's generator draws, command profile and noise store run on
+the calling thread (one generator per sub-environment, in order).
 """
 
 from __future__ import annotations
@@ -143,9 +143,6 @@ class SbarChargingVectorEnv(VectorEnv):
         rngs = self._rngs if full else [self._rngs[i] for i in idx]
         sel = slice(None) if full else idx   # all at once (the usual autoreset): written in place, plain slices
         scenario, plant, objective, observation = self.parts
-        # the draws on the step's threads when the step runs parallel (the default: when its probes chose that)
-        par = self._n_chunks > 1 and (self._auto is None or self._auto.best != 1)
-        scenario.threads = self.num_threads if par else 1
         win = scenario.reset(rngs, sel, options)
         plan = plant.reset(sel, win)
         objective.reset(sel, win, plan)

@@ -75,12 +75,12 @@ def kernel_function(name: str, compiled: bool = True):
     return f if compiled else getattr(f, "py_func", f)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _sign(x):
     return 1.0 if x > 0.0 else (-1.0 if x < 0.0 else 0.0)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _clip1(x):
     return -1.0 if x < -1.0 else (1.0 if x > 1.0 else x)
 
@@ -240,7 +240,7 @@ def _complex_step(x, vl, d, cc, vf, dr, v1, n_sub):
     return math.hypot(x0, x2), r, pk, v2c * tot / (2.0 * n_sub * vc), v2_0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _inst_peak(pk, d, vl, tab, vlc, inv_imax):
     """Instantaneous peak [A] (:mod:`envs.peaks`) for the envelope peak ``pk``, duty ``d``, battery
     voltage ``vl``: bilinear in (duty, sqrt(pk / I2_MAX_A)) on the (n_d, n_i, 2) table of
@@ -265,7 +265,7 @@ def inst_peak_rows(pk, d, vl, tab, vlc, inv_imax, out):
         out[e] = _inst_peak(pk[e], d[e], vl[e], tab, vlc, inv_imax)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _battery(il, soc, vrc, vl, b):
     """The battery after a step delivering ``il`` [A] (equivalent circuit around the window's operating
     point, ``b`` the battery row, :data:`BAT`): ``(i_batt, soc, v_rc, VL)``; the DC bus follows ``OCV +
@@ -278,7 +278,7 @@ def _battery(il, soc, vrc, vl, b):
     return ib, soc, vrc, vl
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _reward(il, cmd, pk, inv_rated, w_track, w_over, i_ref):
     """``(reward, overcurrent)``: reward = (min(I_L, I*) - w_track |I_L - I*|) / i_ref - w_over
     overcurrent, overcurrent = max(0, |I2_pk| / I2_rated - 1) (:class:`envs.core.RewardWeights`)."""
@@ -288,7 +288,7 @@ def _reward(il, cmd, pk, inv_rated, w_track, w_over, i_ref):
     return (mn - w_track * abs(il - cmd)) / i_ref - w_over * over, over
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _objective(kk, pk, il, i2_sm, dt, run_max, stop_k, ok, checked):
     """:mod:`envs.objective` after step ``kk`` (``i2_sm`` the short-mode I2 of its slow segment):
     ``(running overshoot, ok, checked, step cost)``, the cost the rise of max(0, running overshoot)."""
@@ -303,14 +303,14 @@ def _objective(kk, pk, il, i2_sm, dt, run_max, stop_k, ok, checked):
     return new, ok, checked, (new if new > 0.0 else 0.0) - (run_max if run_max > 0.0 else 0.0)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _t_since(kk, dt, t_stop, stop_k):
     """Observation field ``t_since_stop_s`` before step ``kk``."""
     t = kk * dt - t_stop
     return (t if t > 0.0 else 0.0) if kk >= stop_k else 0.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _put_obs(o, e, i2m, vl, ib, il, soc, cmd, d, t_since, scale, offset):
     """Observation row ``o[e]`` (:data:`mission_sim.contract.OBS_FIELDS`): the fields mapped to [-1, 1]
     and clipped, as float32."""
@@ -328,7 +328,7 @@ def obs_rows(vals, scale, offset, obs):
                  vals[7, e], scale, offset)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _put_info(row, e, t, i2, pk, i1, d, v2, il, vl, ib, soc, cmd, lm, energy, over, cost, rm, pk_env):
     """Sub-environment ``e``'s info values, ``row[e]`` (:data:`INFO`)."""
     row[e, INFO.t_s], row[e, INFO.i2_a], row[e, INFO.i2_peak_a], row[e, INFO.i1_a] = t, i2, pk, i1
