@@ -183,6 +183,18 @@ class _Model:
         self.ends = np.arange(1, 2 * n, 2)
         self.kalman = _kalman_gain(ad, bd[:, 1], (0.0, 1.0), 0.0)   # on z = [I1, I2, w] from I2 (3, 1)
 
+    def step(self, z, u, vc=None):
+        """One step of the estimates ``z`` (..., 3) under the V2 ``u`` (...) [V] (``vc``: the modal model's)."""
+        out = np.empty_like(z)
+        out[..., :2] = z[..., :2] @ self.ad.T + (u + z[..., 2])[..., None] * self.b2 + self.e
+        out[..., 2] = z[..., 2]
+        return out
+
+    def step_measure(self, z, u, vc=None):
+        """:meth:`step` and the I2 [A] the sensor reads after it (the state's I2)."""
+        x = self.step(z, u)
+        return x, x[..., 1]
+
 
 def _steady_kalman_gain(A, C, Q, R) -> np.ndarray:
     """``P C^T (C P C^T + R)^-1`` with ``P`` the solution of the filter's discrete Riccati equation
@@ -224,17 +236,6 @@ class _DelayBank:
         self._prefer = (1.0 + 0.1 * np.arange(len(self.delays)))[:, None]   # a shorter delay preferred
         self.vc = None   # the receivers' clamp voltages [V] (the modal model's residual of V2 needs them)
 
-    def _step(self, z, u, vc=None):
-        """One model step of the estimates ``z`` (..., nz) under the V2 ``u`` (...) [V] (the modal model's at the
-        clamp ``vc``)."""
-        m = self.m
-        if m.modal:
-            return m.step(z, u, vc)
-        out = np.empty_like(z)
-        out[..., :2] = z[..., :2] @ m.ad.T + (u + z[..., 2])[..., None] * m.b2 + m.e
-        out[..., 2] = z[..., 2]
-        return out
-
     def update(self, y, u_last, vc=None):
         """Filter the measured I2 ``y`` (n,) [A] given the V2 of the last step ``u_last`` (n,) [V] (and, for the
         modal model, the clamp voltages ``vc`` (n,) [V]): ``z`` now."""
@@ -242,8 +243,8 @@ class _DelayBank:
         self.u[0] = u_last
         self.vc = vc
         uh = self.u[self._lag]
-        x = self._step(self.z, uh, vc)   # every hypothesis at once (H, n, nz)
-        innov = y[None, :] - (self.m.measure(x, uh, vc) if vc is not None else x[..., 1])
+        x, y_model = self.m.step_measure(self.z, uh, vc)   # every hypothesis at once (H, n, nz)
+        innov = y[None, :] - y_model
         self.z = x + innov[..., None] * self.m.kalman[:, 0]
         self.score += (1.0 / _DELAY_MEMORY) * (innov * innov - self.score)
         # a shorter delay is preferred unless a longer one explains the measurements clearly better
@@ -257,7 +258,7 @@ class _DelayBank:
         d = self._lag[self.best]
         for j in range(int(d.max(initial=0)) - 1, -1, -1):
             go = np.flatnonzero(d > j)
-            z[go] = self._step(z[go], self.u[j, go], None if self.vc is None else self.vc[go])
+            z[go] = self.m.step(z[go], self.u[j, go], None if self.vc is None else self.vc[go])
         return z
 
 

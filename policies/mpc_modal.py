@@ -131,6 +131,8 @@ class ModalModel:
         self.ad, self.bu, self.br, self.e = ad, bd[:, 0], bd[:, :2], bd[:, 2]
         self.c, self.du, self.dr, self.d0 = C, D[0], D[:2], D[2]
         self.b2 = self.bu
+        # steady state per unit of the inputs [in-phase V2, quadrature V2, V1 drive] (a constant of the model)
+        self._ss = np.linalg.solve(np.eye(4) - ad, np.column_stack([self.bu, self.br[:, 1], self.e])).T
         self._condense(ad, bd, am, bm, C, D, n_pred, M)
         self.kalman = None
 
@@ -174,24 +176,30 @@ class ModalModel:
         den = np.maximum(hi - lo, 1e-9)
         return r0, ((rh[0] - rl[0]) / den, (rh[1] - rl[1]) / den)
 
-    def step(self, z, u, vc):
-        """One step of the estimates ``z`` (..., 5) under the V2 ``u`` (...) [V] at the clamp ``vc``."""
-        rr, ri = self.residual(u, vc)
+    def step(self, z, u, vc, r=None):
+        """One step of the estimates ``z`` (..., 5) under the V2 ``u`` (...) [V] at the clamp ``vc`` (``r``: the
+        residual :meth:`residual` of ``u``, if already computed)."""
+        rr, ri = self.residual(u, vc) if r is None else r
         out = np.empty_like(z)
         out[..., :4] = (z[..., :4] @ self.ad.T + (u + z[..., 4])[..., None] * self.bu + rr[..., None] * self.br[:, 0]
                         + ri[..., None] * self.br[:, 1] + self.e)
         out[..., 4] = z[..., 4]
         return out
 
-    def measure(self, z, u, vc):
+    def measure(self, z, u, vc, r=None):
         """The I2 [A] the sensor reads at the end of a step with V2 ``u`` from the state ``z`` (after it)."""
-        rr, ri = self.residual(u, vc)
+        rr, ri = self.residual(u, vc) if r is None else r
         return z[..., :4] @ self.c + self.du * (u + z[..., 4]) + self.dr[0] * rr + self.dr[1] * ri + self.d0
+
+    def step_measure(self, z, u, vc):
+        """:meth:`step` and :meth:`measure` after it, the residual of ``u`` computed once."""
+        r = self.residual(u, vc)
+        x = self.step(z, u, vc, r)
+        return x, self.measure(x, u, vc, r)
 
     def steady(self, u, w, vc):
         """The steady state ``s`` (..., 4) and I2 [A] at the V2 ``u`` with the disturbance ``w`` [V]."""
         rr, ri = self.residual(u, vc)
         inp = np.stack([u + w + rr, ri, np.ones_like(rr)], axis=-1)
-        bd = np.column_stack([self.bu, self.br[:, 1], self.e])
-        s = inp @ np.linalg.solve(np.eye(4) - self.ad, bd).T
+        s = inp @ self._ss
         return s, s @ self.c + self.du * (u + w) + self.dr[0] * rr + self.dr[1] * ri + self.d0
