@@ -73,7 +73,6 @@ from functools import lru_cache
 import numpy as np
 
 from mission_sim.contract import OBS_INDEX, PolicyContext, denormalise_obs
-from wpt_receiver.sbar import _FOUR_OVER_PI   # the duty of a V2 (eq. 9 inverted): the compiled lookups' constant
 
 __all__ = ["MPCPolicy", "N_PRED", "BLOCKS"]
 
@@ -661,19 +660,15 @@ class MPCPolicy:
         return np.all(free + self._ex0 <= ((1.0 + self._budget_of(e) - self._margin) * sm + relax)[:, None], axis=1)
 
     def _excess_at(self, v2, vl):
-        """Ripple excess [A] at V2 ``v2`` [V], the short-mode current and battery voltage ``vl``:
+        """Ripple excess [A] at V2 ``v2`` (any shape) [V], the short-mode current and battery voltage ``vl``:
         the env's lookup (:mod:`envs.peaks`) at that current is piecewise linear in the duty between the
-        table's duty grid points (:meth:`_excess_curve`), so one ``np.interp`` gives it exactly. ``v2`` (n, N)
-        with ``vl`` (n, 1) per row: compiled (:func:`policies.mpc_kernel.excess_rows`, the same arithmetic);
-        a scalar ``vl``: any shape of ``v2``."""
+        table's duty grid points (:meth:`_excess_curve`), so one ``np.interp`` gives it exactly."""
+        from wpt_receiver import duty_from_v2_clipped
+        d = duty_from_v2_clipped(v2, vl + self._vf)
+        a, b = self._ex_curve
         if np.ndim(vl) == 0:
-            from wpt_receiver import duty_from_v2_clipped
-            d = duty_from_v2_clipped(v2, vl + self._vf)
-            a, b = self._ex_curve
             return np.interp(d, self._ex_grid, a + b * (vl - _VLC))
-        from .mpc_kernel import excess_rows
-        return excess_rows(np.ascontiguousarray(v2, dtype=float), np.ascontiguousarray(np.reshape(vl, -1), dtype=float),
-                           self._vf, _FOUR_OVER_PI, 2.0 / np.pi, _VLC, *self._ex_args)
+        return np.interp(d, self._ex_grid, a) + (vl - _VLC) * np.interp(d, self._ex_grid, b)   # vl per row
 
     def _excess_curve(self):
         """The lookup's excess at the short-mode current on the duty grid: ``(A, B)`` [A], [A/V] with
@@ -688,16 +683,13 @@ class MPCPolicy:
         c = tab[:, k] * (1.0 - fy) + tab[:, k + 1] * fy
         self._ex_grid = np.linspace(0.0, 1.0, nd)
         self._ex_curve = (c[:, 0], c[:, 1])
-        # the compiled lookups' data (policies.mpc_kernel): the grid, both curves and their slopes per interval as
-        # np.interp computes them ((fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j]))
-        g = self._ex_grid
-        a, b = (np.ascontiguousarray(x, dtype=float) for x in self._ex_curve)
-        self._ex_args = (g, a, b, (a[1:] - a[:-1]) / (g[1:] - g[:-1]), (b[1:] - b[:-1]) / (g[1:] - g[:-1]))
 
     def _excess(self, v2, vl):
         """Ripple excess [A] at V2 ``v2`` (n, N) [V] and its slope dexcess/dV2 [A/V] (central difference,
-        0.5 V, inside the box) at the short-mode current and the battery voltages ``vl`` (n,) (:mod:`envs.peaks`),
-        compiled: :func:`policies.mpc_kernel.excess_slope_rows`."""
-        from .mpc_kernel import excess_slope_rows
-        return excess_slope_rows(np.ascontiguousarray(v2, dtype=float), np.ascontiguousarray(vl, dtype=float), self._vf,
-                                 0.5, 4.0 / np.pi, _FOUR_OVER_PI, 2.0 / np.pi, _VLC, *self._ex_args)
+        0.5 V) at the short-mode current and the battery voltages ``vl`` (n,) (:mod:`envs.peaks`)."""
+        h = 0.5
+        vmax = (4.0 / np.pi * (vl + self._vf))[:, None]
+        hi, lo = np.minimum(v2 + h, vmax), np.maximum(v2 - h, 0.0)
+        ex = self._excess_at(np.stack([v2, hi, lo]), vl[:, None])
+        slope = (ex[1] - ex[2]) / np.maximum(hi - lo, 1e-9)
+        return ex[0], np.maximum(slope, 0.0)
