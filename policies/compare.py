@@ -259,9 +259,10 @@ def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, tr
     job = None
     if heavy:   # numba's kernels loaded before the fork (the child inherits them), its thread pool not yet
         from envs import SbarChargingVectorEnv
-        SbarChargingVectorEnv(num_envs=1, scenario=scenarios[0], config=config).reset(seed=seed)
-        _preimport("numba.np.arrayobj")   # the env step's cache entry imports it on loading: once, not in both
-        job = Forked(_forked_runs, heavy, scenarios, n, seed, config)
+        with _no_gc():   # set-up on the critical path: nothing for the cyclic collector to free
+            SbarChargingVectorEnv(num_envs=1, scenario=scenarios[0], config=config).reset(seed=seed)
+            _preimport("numba.np.arrayobj")   # the env step's cache entry imports it on loading: once, not in both
+            job = Forked(_forked_runs, heavy, scenarios, n, seed, config)
     placed, refs = {}, {}
     try:
         with _one_numba_thread() if job else contextlib.nullcontext():   # the child has the other core
@@ -285,6 +286,20 @@ def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, tr
         for label, _ in groups:
             rows.append(placed[(s, label)][0])
             traces[(label, s)] = placed[(s, label)][1]
+
+
+@contextlib.contextmanager
+def _no_gc():
+    """Python's cyclic garbage collector paused inside (its previous state restored after): the set-up before the
+    MPC's fork (a kernel cache load, ~10^4 new long-lived objects) triggers collections that free nothing."""
+    import gc
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
 
 
 def _preimport(module: str) -> None:
