@@ -149,6 +149,18 @@ MISSION_LOCK = ".mission.lock"
 
 
 def _cmd_mission(args) -> int:
+    import gc
+    # the start-up (numba, the config, the policy) allocates ~10^5 objects that live as long as the command; the
+    # cyclic collector's passes over them free nothing: off until the run starts, then they are frozen (never
+    # scanned again) and it is back on for the run (policies.compare does the same before its fork)
+    gc.disable()
+    try:
+        return _mission_command(args, gc)
+    finally:
+        gc.enable()
+
+
+def _mission_command(args, gc) -> int:
     from wpt_receiver.numba_start import prepare
 
     from ..world.budget import estimate_run
@@ -189,6 +201,10 @@ def _run_and_write(args, cfg, pol, every, worker):
     from ..world.runner import run_mission
     from ..world.stream import SeriesWriter
     (args.out / "summary.json").unlink(missing_ok=True)  # present again only when this run's set is complete
+    import gc
+    if not gc.isenabled():   # _cmd_mission paused it for the start-up: its objects frozen, collection back on
+        gc.freeze()
+        gc.enable()
     # every check passed and the figure worker forked: numba (imported by the run anyway) loads the cached
     # kernels without its typing/lowering registries (a cache miss still compiles; wpt_receiver.numba_start)
     cache_loads_without_registries()
