@@ -4,7 +4,11 @@
   ``solve_discrete_are`` gives (the same bits), and an MPC built on a warm cache does not import the
   ``scipy.linalg`` package (0.3-1 s of CPU in compare's forked MPC child);
 * numba's cache loads without its registries (``wpt_receiver.numba_start.cache_loads_without_registries``):
-  the same machine code runs (the same bits out), a cache miss still compiles.
+  the same machine code runs (the same bits out), a cache miss still compiles;
+* the MPC's forked child imports neither ``policies.rl`` nor ``policies.residual`` (``batched.stackable`` looks
+  their classes up instead of importing them), while a learned policy is still told apart and stacked;
+* the cyclic garbage collector is paused through the command's start-up and on again (the start-up's objects
+  frozen) once the runs start: the rows are the same with and without the pause.
 """
 
 from __future__ import annotations
@@ -163,3 +167,76 @@ def test_frontier_rows_made_before_waiting_for_the_mpc_child(monkeypatch):
     over = [r["overshoot_pct"] for r in later]
     after = [r["energy_after_stop_j"] for r in later]
     assert over == sorted(over) and after == sorted(after, reverse=True)
+
+
+_NO_LEARNED = """
+import sys
+from policies import make
+from policies.batched import BlockPolicy, stackable
+pol = make("mpc")
+BlockPolicy([pol, make("step")], 2)
+print(stackable(pol) is None, "policies.rl" in sys.modules, "policies.residual" in sys.modules)
+"""
+
+
+def test_block_policy_of_an_mpc_imports_no_learned_policy_module():
+    """The forked MPC child's BlockPolicy (a policy not of the learned kinds): ``stackable`` answers without
+    importing ``policies.rl`` / ``policies.residual`` (~0.05 s of CPU on compare's critical path)."""
+    out = subprocess.run([sys.executable, "-c", _NO_LEARNED], capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["True", "False", "False"]
+
+
+def test_stackable_still_groups_learned_and_model_based_policies():
+    """With their modules imported (a learned policy made), RL actors of the same layers share a key, a residual
+    policy gets its own kind, the model-based family one key, anything else none."""
+    from policies import make
+    from policies.batched import stackable
+    from policies.compare import shipped_seed_groups
+
+    groups = shipped_seed_groups()
+    if "ppo_lagrangian" not in groups or "residual" not in groups:
+        pytest.skip("the shipped learned policies are not installed")
+    rl = [make(spec) for spec in groups["ppo_lagrangian"][:2]]
+    res = make(groups["residual"][0])
+    assert stackable(rl[0]) is not None and stackable(rl[0]) == stackable(rl[1])
+    assert stackable(res)[0] == "residual"
+    assert stackable(make("model_based"))[0] == "model_based" == stackable(make("model_based_budget:0.02"))[0]
+    assert stackable(make("step")) is None
+
+
+def test_compare_pauses_the_collector_only_through_its_start_up(monkeypatch):
+    """``dronewpt compare`` (``main``): the collector is off while the command starts, back on (and the start-up's
+    objects frozen) when the runs start and after the command; the JSON output is that of a run with the
+    collector on throughout (``gc.disable`` made a no-op), to the byte."""
+    import contextlib
+    import gc
+    import io
+    import json
+
+    import policies.compare as pc
+    from mission_sim.cli import main
+
+    argv = ["compare", "--episodes", "3", "--scenarios", "nominal", "--policies", "model_based,step,mpc",
+            "--no-plot", "--no-frontier", "--no-progress", "--format", "json"]
+    seen = []
+    runs = pc._compare_runs
+
+    def spy(*a, **k):
+        seen.append((gc.isenabled(), gc.get_freeze_count()))
+        return runs(*a, **k)
+
+    monkeypatch.setattr(pc, "_compare_runs", spy)
+    gc.unfreeze()
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert main(argv) == 0
+    assert gc.isenabled() and seen[0][0] and seen[0][1] > 0
+    gc.unfreeze()
+    monkeypatch.setattr(gc, "disable", lambda: None)
+    monkeypatch.setattr(gc, "freeze", lambda: None)
+    plain = io.StringIO()
+    with contextlib.redirect_stdout(plain):
+        assert main(argv) == 0
+    gc.unfreeze()
+    assert seen[1] == (True, 0)
+    assert buf.getvalue() == plain.getvalue() and len(json.loads(buf.getvalue())["rows"]) == 3
