@@ -262,7 +262,7 @@ def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, tr
         with _no_gc():   # set-up on the critical path: nothing for the cyclic collector to free
             SbarChargingVectorEnv(num_envs=1, scenario=scenarios[0], config=config).reset(seed=seed)
             _preimport("numba.np.arrayobj")   # the env step's cache entry imports it on loading: once, not in both
-            job = Forked(_forked_runs, heavy, scenarios, n, seed, config)
+        job = Forked(_forked_runs, heavy, scenarios, n, seed, config)   # (the child: the collector as here)
     placed, refs = {}, {}
     try:
         with _one_numba_thread() if job else contextlib.nullcontext():   # the child has the other core

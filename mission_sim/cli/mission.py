@@ -152,7 +152,7 @@ def _cmd_mission(args) -> int:
     import gc
     # the start-up (numba, the config, the policy) allocates ~10^5 objects that live as long as the command; the
     # cyclic collector's passes over them free nothing: off until the run starts, then they are frozen (never
-    # scanned again) and it is back on for the run (policies.compare does the same before its fork)
+    # scanned again) and it is back on for the run (`dronewpt compare` does the same: cli/learning.py)
     gc.disable()
     try:
         return _mission_command(args, gc)
@@ -172,6 +172,8 @@ def _mission_command(args, gc) -> int:
     prepare_out_dir(args.out)
     est = estimate_run(cfg)
     every = stored_every_s(args.every, est)
+    gc.freeze()   # the start-up's objects out of the collector's generations (_cmd_mission), then collection back
+    gc.enable()   # on: for the run and for the figure process forked next (which inherits both)
     with folder_lock(args.out, MISSION_LOCK, f"--out {str(args.out)!r}: another mission is writing there; "
                      "wait for it or use another --out"):  # before any simulation or fork; removed at the end
         worker = _figure_worker(args, est)
@@ -201,10 +203,6 @@ def _run_and_write(args, cfg, pol, every, worker):
     from ..world.runner import run_mission
     from ..world.stream import SeriesWriter
     (args.out / "summary.json").unlink(missing_ok=True)  # present again only when this run's set is complete
-    import gc
-    if not gc.isenabled():   # _cmd_mission paused it for the start-up: its objects frozen, collection back on
-        gc.freeze()
-        gc.enable()
     # every check passed and the figure worker forked: numba (imported by the run anyway) loads the cached
     # kernels without its typing/lowering registries (a cache miss still compiles; wpt_receiver.numba_start)
     cache_loads_without_registries()
