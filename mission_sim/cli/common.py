@@ -31,6 +31,28 @@ class OneLineParser(argparse.ArgumentParser):
         return super().format_help()
 
 
+def startup_gc_paused(command, args) -> int:
+    """``command(args, started)`` with Python's cyclic garbage collector off through its start-up.
+
+    A command's start-up (numba, gymnasium, the kernels, the config) allocates ~10^5 objects that live as
+    long as the command; the collector's passes over them (~0.05-0.15 s of CPU before the runs, measured in
+    ``compare`` and ``mission``) free nothing. ``command`` calls ``started()`` before its runs: the start-up's
+    objects are frozen (never scanned again) and collection is back on (a forked child inherits both). The
+    collector is on again when the command returns, however it ends. Results are unchanged: no cycle that
+    holds a result is freed earlier or later."""
+    import gc
+
+    def started() -> None:
+        gc.freeze()
+        gc.enable()
+
+    gc.disable()
+    try:
+        return command(args, started)
+    finally:
+        gc.enable()
+
+
 def lazy_names_help(action, text: str, names) -> None:
     """Give ``action`` (from ``add_argument``) the help ``text; one of: <names()>``, computed only when
     the help is shown (``names`` imports policies / envs, which takes a second or two)."""

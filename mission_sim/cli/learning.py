@@ -19,6 +19,7 @@ from .common import (
     scenario_names,
     seed_int,
     show_progress,
+    startup_gc_paused,
 )
 
 
@@ -348,20 +349,10 @@ def _listed(text: str, flag: str) -> tuple:
 
 
 def _cmd_compare(args) -> int:
-    import gc
-    # start-up (numba, gymnasium, the kernels) allocates ~10^5 objects that live as long as the command: the
-    # cyclic collector's passes over them (~0.05-0.1 s of CPU before the MPC's fork, on the critical path) find
-    # nothing to free. Off until the runs start, then those objects are frozen (never scanned again) and it is
-    # back on (the forked child inherits both). Results unchanged (no cycle is freed earlier or later that
-    # holds a result).
-    gc.disable()
-    try:
-        return _compare_command(args, gc)
-    finally:
-        gc.enable()
+    return startup_gc_paused(_compare_command, args)   # (cli/common.py: the collector off through the start-up)
 
 
-def _compare_command(args, gc) -> int:
+def _compare_command(args, started) -> int:
     from wpt_receiver.numba_start import cache_loads_without_registries, prepare
     prepare()   # numba's start-up without importing the scipy.linalg package (~0.3 s of CPU)
     from policies.compare import DEFAULT_POLICIES, DEFAULT_SCENARIOS, compare, frontier, frontier_specs
@@ -378,8 +369,7 @@ def _compare_command(args, gc) -> int:
     if not args.no_plot:
         prepare_out_dir(args.out)
     cfg = _link_config(args)
-    gc.freeze()   # the start-up's objects out of the collector's generations (see _cmd_compare)
-    gc.enable()
+    started()   # the start-up's objects frozen, the collector back on for the runs (startup_gc_paused)
     try:
         more, early = {}, []   # the frontier's budgets run in compare's batched env (one rollout, not two)
 

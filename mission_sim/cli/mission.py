@@ -18,6 +18,7 @@ from .common import (
     policy_names,
     prepare_out_dir,
     show_progress,
+    startup_gc_paused,
 )
 
 
@@ -149,18 +150,10 @@ MISSION_LOCK = ".mission.lock"
 
 
 def _cmd_mission(args) -> int:
-    import gc
-    # the start-up (numba, the config, the policy) allocates ~10^5 objects that live as long as the command; the
-    # cyclic collector's passes over them free nothing: off until the run starts, then they are frozen (never
-    # scanned again) and it is back on for the run (`dronewpt compare` does the same: cli/learning.py)
-    gc.disable()
-    try:
-        return _mission_command(args, gc)
-    finally:
-        gc.enable()
+    return startup_gc_paused(_mission_command, args)   # (cli/common.py: the collector off through the start-up)
 
 
-def _mission_command(args, gc) -> int:
+def _mission_command(args, started) -> int:
     from wpt_receiver.numba_start import prepare
 
     from ..world.budget import estimate_run
@@ -172,8 +165,7 @@ def _mission_command(args, gc) -> int:
     prepare_out_dir(args.out)
     est = estimate_run(cfg)
     every = stored_every_s(args.every, est)
-    gc.freeze()   # the start-up's objects out of the collector's generations (_cmd_mission), then collection back
-    gc.enable()   # on: for the run and for the figure process forked next (which inherits both)
+    started()   # the start-up's objects frozen, the collector back on for the runs (startup_gc_paused)
     with folder_lock(args.out, MISSION_LOCK, f"--out {str(args.out)!r}: another mission is writing there; "
                      "wait for it or use another --out"):  # before any simulation or fork; removed at the end
         worker = _figure_worker(args, est)
