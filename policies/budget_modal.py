@@ -20,7 +20,8 @@ steady state of the last duty before the stop, with the battery voltage measured
 
 searched on a grid of ``r`` in ``[0, R_MAX]`` and refined by bisection (:func:`relaxation`). The budget is
 then *the measured overshoot above the floor of the controller's own plans*, as the prediction sees it (a
-window's oracle floor is lower: docs/rl.md, "model_based_budget on the exact-mode link").
+window's oracle floor is lower: docs/rl.md, "model_based_budget on the exact-mode link"). ``b = 0`` stays the
+paper's controller (``r = 0``, no prediction), as on eq. 4.
 """
 
 from __future__ import annotations

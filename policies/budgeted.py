@@ -81,8 +81,9 @@ class BudgetedModelBasedPolicy(ModelBasedPolicy):
         """The reference's relaxation after the stop per receiver (n,) on the exact-mode link: chosen at each
         receiver's stop (its first command <= 0 after a positive one) from its controller state, last duty and
         battery voltage (:func:`policies.budget_modal.relaxation`), kept until its command turns positive;
-        the budget itself before the controller exists (a window that starts stopped). ``budget`` may be one
-        per receiver (:class:`policies.batched.StackedModelBased`)."""
+        the budget itself before the controller exists (a window that starts stopped); 0 at budget 0 (the paper's
+        controller, as on eq. 4: ``model_based`` stacked with budgeted variants stays itself). ``budget`` may be
+        one per receiver (:class:`policies.batched.StackedModelBased`)."""
         from wpt_receiver import duty_from_v2_clipped
 
         from .budget_modal import relaxation
@@ -96,7 +97,7 @@ class BudgetedModelBasedPolicy(ModelBasedPolicy):
         if self._stopped is None or len(self._stopped) != len(cmd):
             self._stopped, self._relax = np.zeros(len(cmd), bool), budget.copy()
         u0 = self._i2_sm - ctl.i2_sm_a   # the controller's input at the reference I2_sm (r = 0)
-        for i in np.flatnonzero(stop & ~self._stopped):
+        for i in np.flatnonzero(stop & ~self._stopped & (budget > 0.0)):   # b = 0: the paper's controller, r = 0
             d_prev = float(duty_from_v2_clipped(ctl.v2_cmd_v[i], vl[i]))
             self._relax[i] = relaxation(float(budget[i]), self.ctx.link, "schottky", self.ctx.control_period_s,
                                         ctl.discrete_ss, ctl.x[i], u0, self._i2_sm, d_prev, float(vl[i]))
