@@ -16,7 +16,7 @@ steady state of the last duty before the stop, with the battery voltage measured
 
     P(r) = max_k peak_k(r) / I2_sm - 1          (the predicted measured overshoot of the plan)
     F    = min_r P(r)                           (the least this controller's plans reach: its floor)
-    r*   = the largest r with P(r) <= F + b     (the least energy after the stop within the budget)
+    r*   = the largest r with P(r') <= F + b for every r' <= r   (the least energy within the budget)
 
 searched on a grid of ``r`` in ``[0, R_MAX]`` and refined by bisection (:func:`relaxation`). The budget is
 then *the measured overshoot above the floor of the controller's own plans*, as the prediction sees it (a
@@ -78,10 +78,11 @@ def predicted_overshoot(link, devices, dt_s, d_prev, vl_v, a, b, r):
     d = np.empty(len(a) + 1)
     d[0] = d_prev
     d[1:] = duty_from_v2_clipped(a + r * b, vl_v)
-    # V2 follows i2's phase once per rectifier period (as the env's sub-steps): held longer, it pumps the link
+    # V2 follows i2's phase once per rectifier period (as the env's sub-steps; held longer, it pumps the link),
+    # and the peak is taken at every sub-step's end as the env's (each duty repeated over its sub-steps)
     sub = max(1, int(round(dt_s / link.rectifier_period_s)))
-    pk = mk.run_duties(lc, mc, tab, d, dt_s, sub, v1, vl_v + vf, link.lm_h)[3]
-    return float(pk[2:].max() / i2_sm - 1.0)
+    pk = mk.run_duties(lc, mc, tab, np.repeat(d, sub), dt_s / sub, 1, v1, vl_v + vf, link.lm_h)[3]
+    return float(pk[sub + 1:].max() / i2_sm - 1.0)
 
 
 def relaxation(budget, link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v) -> float:
@@ -93,8 +94,11 @@ def relaxation(budget, link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v) ->
     grid = np.linspace(0.0, R_MAX, _N_GRID)
     p = np.array([predicted_overshoot(link, devices, dt_s, d_prev, vl_v, a, b, r) for r in grid])
     target = p.min() + budget
-    ok = np.flatnonzero(p <= target + 1e-12)
-    i = int(ok[-1])
+    # the first crossing of the target from r = 0 up (P is not monotone at large r: a dip of the ringing's
+    # phase past the crossing is not trusted, the prediction being least accurate on steep plans)
+    i = int(np.argmax(p > target)) - 1 if np.any(p > target) else len(grid) - 1
+    if i < 0:
+        return 0.0
     if i == len(grid) - 1:
         return float(grid[i])
     lo, hi = grid[i], grid[i + 1]
