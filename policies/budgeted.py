@@ -73,7 +73,11 @@ class BudgetedModelBasedPolicy(ModelBasedPolicy):
 
     def _i2_ref1(self, cmd: float, vl: float) -> float:
         ref = super()._i2_ref1(cmd, vl)
-        if self._modal and cmd <= 0.0:
+        if self._modal:
+            if cmd > 0.0:   # charging: the next stop chooses its relaxation afresh (a mission has several)
+                if self._stopped is not None:
+                    self._stopped[:] = False
+                return ref
             return ref + float(self.relaxation(np.array([cmd]), np.array([vl]))[0]) * self._i2_sm
         return ref + self.budget * self._i2_sm if cmd <= 0.0 else ref
 

@@ -128,3 +128,32 @@ def test_stacked_equals_alone_on_modal():
     for n in names:
         alone = run_policies([n], "nominal", 2, 1010, MODAL)[n]
         assert np.array_equal(both[n].d_short, alone.d_short)
+
+
+def test_each_stop_of_a_mission_chooses_its_relaxation():
+    """One receiver (the mission's scalar path): every stop after charging computes a relaxation from the state
+    at that stop (two stops, two calls; none while charging or while staying stopped); the eq. 4 context never
+    predicts."""
+    from mission_sim.contract import OBS_DIM, OBS_INDEX, normalise_obs
+    calls = []
+    orig = bm.relaxation
+
+    def spy(*a):
+        calls.append(a[8])   # the last duty before the stop
+        return orig(*a)
+
+    for link_model, want in (("modal", 2), ("envelope", 0)):
+        calls.clear()
+        pol = BudgetedModelBasedPolicy(PolicyContext(link_model=link_model), budget=0.02)
+        pol.reset(1)
+        phys = np.zeros(OBS_DIM)
+        phys[OBS_INDEX["battery_v"]] = 30.0
+        bm.relaxation = spy
+        try:
+            for cmd in [2.0] * 30 + [0.0] * 30 + [3.0] * 30 + [0.0] * 5:
+                phys[OBS_INDEX["charge_cmd_a"]] = cmd
+                pol.act(normalise_obs(phys[None, :]))
+        finally:
+            bm.relaxation = orig
+        assert len(calls) == want, link_model
+    assert calls == [] and pol._relax is None
