@@ -7,6 +7,11 @@ same seed and steps the ``m`` candidate sequences side by side. One batch of 64 
 steps takes ~20 ms after numba's first compile; finite differences of a sequence's parameters or a
 population method cost one batch each. Used by the per-window oracle (:mod:`policies.oracle`).
 
+Both links replay compiled: eq. 4's envelope (:func:`envs.vector_kernel.step_kernel`, the default) and the
+exact-mode link (``EnvConfig(link_model="modal")``: :func:`envs.modal_step.step_kernel`, detuned windows
+included, their C1, C2 being in the window's link constants); ``DutyRollout(..., compiled=False)`` steps the
+env from Python instead (the reference the tests compare the replays with).
+
 What a rollout returns (:class:`RolloutResult`, arrays (m, n_steps)): the step's energy into the
 battery node ``VL I_L dt`` [J], the instantaneous peak |i2| [A] (the objective's, envelope + ripple,
 :mod:`envs.peaks`), the short-mode I2 of the true link at each step [A] (:func:`envs.objective.short_mode_i2_a`),
@@ -53,15 +58,20 @@ class DutyRollout:
     """Fixed duty sequences (m, n_steps) on the window ``seed`` of ``scenario`` (one batched env per
     batch size, kept; duties clipped to [0, 1] as the env does)."""
 
-    def __init__(self, scenario="nominal", seed: int = 0, config: EnvConfig | None = None):
+    def __init__(self, scenario="nominal", seed: int = 0, config: EnvConfig | None = None, compiled: bool = True):
         self.scenario = get_scenario(scenario)
         self.seed = int(seed)
         self.config = config or EnvConfig()
+        self.compiled = bool(compiled)
+        self._modal = self.config.link_model == "modal"
         self._envs, self._snap, self._prefix = {}, {}, {}
         self.n_steps = self.config.n_steps
         probe = self._env(1)
         probe.reset(seed=[self.seed])
         self.stop_k = int(probe._stop_k[0])
+        # eq. 4's env with a detuned window: its replay step (vector_kernel.step_kernel) has no complex envelope,
+        # so that window is stepped from Python; the exact-mode link's replay covers it (C1, C2 in the constants)
+        self._detuned_envelope = not self._modal and bool(len(probe._detuned) and probe._detuned.any())
         self.i2_sm_a = probe._i2sm_all[np.arange(self.n_steps) // self.config.slow_every, 0].copy()
 
     def _env(self, m: int):
@@ -74,14 +84,16 @@ class DutyRollout:
         """Roll out every row of ``duties`` (m, n_steps) (or one sequence (n_steps,)): the env's
         compiled step (:func:`envs.vector_kernel.step_kernel`) called for every step inside one
         compiled loop (:func:`_replay`, no Python per step), the same numbers as ``env.step``
-        (``tests/test_oracle.py``). On the exact-mode link (``config.link_model == "modal"``) the env is
-        stepped from Python (:meth:`_run_steps`: the same numbers, slower; the replay is eq. 4's step)."""
+        (``tests/test_oracle_mpc.py``); on the exact-mode link (``config.link_model == "modal"``) the loop calls
+        :func:`envs.modal_step.step_kernel` (``tests/test_rollout_modal.py``). Uncompiled (``compiled=False``),
+        or eq. 4's env with a detuned window (its replay step is the tuned one), the env is stepped from
+        Python (:meth:`_run_steps`: the same numbers, slower)."""
         d = np.atleast_2d(np.asarray(duties, dtype=float))
         m, T = d.shape
         if T != self.n_steps or not np.all(np.isfinite(d)):
             raise ValueError(f"duties shape {d.shape} is invalid; valid: (m, {self.n_steps}) finite values")
         env = self._env(m)
-        if env._kernel is None or self.config.link_model != "envelope":   # the replay is eq. 4's step
+        if env._kernel is None or not self.compiled or self._detuned_envelope:
             env.reset(seed=[self.seed] * m)
             return self._run_steps(env, d)
         # the env's duty arithmetic: d = clip((a + 1)/2, 0, 1) of the float32 action
@@ -97,13 +109,18 @@ class DutyRollout:
                              env._run_max.copy(), env._sm_ok & env._sm_checked)
 
     _MUTABLE = ("_state", "_k", "_j", "_run_max", "_sm_ok", "_sm_checked")
+    #: the exact-mode link's own state besides: mode amplitudes and V2 (MSTATE), the current segment's modes and ZOH
+    _MUTABLE_MODAL = _MUTABLE + ("_mstate", "_coef_cur")
+
+    def _mutable(self):
+        return self._MUTABLE_MODAL if self._modal else self._MUTABLE
 
     def _restore(self, env, m, prefix):
         """Put env (m rows) at the window's start, or after the duty ``prefix`` shared by every row
         (kept per prefix: one env reset per batch size, the prefix stepped once with one row)."""
         if m not in self._snap:
             env.reset(seed=[self.seed] * m)
-            self._snap[m] = {a: getattr(env, a).copy() for a in self._MUTABLE}
+            self._snap[m] = {a: getattr(env, a).copy() for a in self._mutable()}
         for a, v in self._snap[m].items():
             getattr(env, a)[...] = v
         if len(prefix) == 0:
@@ -114,22 +131,27 @@ class DutyRollout:
             self._restore(one, 1, prefix[:0])
             out = np.zeros((3, len(prefix), 1))
             self._replay(one, np.ascontiguousarray(prefix[:, None]), out)
-            self._prefix[key] = ({a: getattr(one, a).copy() for a in self._MUTABLE}, out)
+            self._prefix[key] = ({a: getattr(one, a).copy() for a in self._mutable()}, out)
         for a, v in self._prefix[key][0].items():
             x = getattr(env, a)
             x[...] = v if x.ndim == 1 and len(v) == 1 else (v if x.shape == v.shape else np.broadcast_to(
-                v, x.shape) if x.ndim == 1 else (np.repeat(v, x.shape[1], axis=1) if a == "_state" else
+                v, x.shape) if x.ndim == 1 else (np.repeat(v, x.shape[1], axis=1) if a in ("_state", "_mstate") else
                                                 np.repeat(v, x.shape[0], axis=0)))
 
-    @staticmethod
-    def _replay(env, duty, out):
+    def _replay(self, env, duty, out):
         """Step ``env`` with ``duty`` (T', m) in one compiled call; energy, peak and I_L into ``out`` (3, T', m)."""
         from .vector_kernel import INFO_ROWS
         cols = np.array([INFO_ROWS.index(k) for k in ("energy_j", "i2_peak_a", "rect_current_a")], dtype=np.int64)
         ep = (env._i2sm_all, env._stop_k, env._t_stop, env._run_max, env._sm_ok, env._sm_checked)
-        _replay()(duty, env._state, env._k, env._j, env._coef_tab, env._coef_ix, env._bat, env._cmd, env._noise,
-                  env._lm_all, ep, env._M, env._n_sub, env._par, env._obs_scale[:, 0].copy(),
-                  env._obs_offset[:, 0].copy(), env._peak.kernel_table, len(INFO_ROWS), cols, out)
+        scale, offset = env._obs_scale[:, 0].copy(), env._obs_offset[:, 0].copy()
+        if self._modal:
+            _replay_modal()(duty, env._state, env._mstate, env._k, env._j, env._lc, env._coef_cur, env._bat, env._cmd,
+                            env._noise, env._lm_all, ep, env._M, env._n_sub, env._par, scale, offset, env._tab,
+                            len(INFO_ROWS), cols, out)
+        else:
+            _replay()(duty, env._state, env._k, env._j, env._coef_tab, env._coef_ix, env._bat, env._cmd, env._noise,
+                      env._lm_all, ep, env._M, env._n_sub, env._par, scale, offset, env._peak.kernel_table,
+                      len(INFO_ROWS), cols, out)
         env._started = False   # the env's own bookkeeping (autoreset flags) was bypassed: reset before reuse
 
     def _run_steps(self, env, d) -> RolloutResult:
@@ -145,6 +167,23 @@ class DutyRollout:
 
 
 _REPLAY = []
+_CHECKED = []
+
+
+def _drop_stale():
+    """Drop this module's numba cache when a step it compiles in changed (numba keys on this file alone). Both
+    replays' sources in one stamp (one stamp per module: two sets would drop each other's cache), by path, so
+    the envelope's replay does not import the modal step; checked once per process."""
+    if _CHECKED:
+        return
+    from pathlib import Path
+
+    import wpt_receiver
+    from wpt_receiver.kernel_cache import drop_stale_cache
+    here = Path(__file__).parent
+    deps = [here / f for f in ("vector_kernel.py", "layout.py", "objective.py", "modal_step.py")]
+    drop_stale_cache(_here, deps + [Path(wpt_receiver.__file__).parent / "modal_kernel.py"])
+    _CHECKED.append(True)
 
 
 def _here():
@@ -156,13 +195,9 @@ def _replay():
     if not _REPLAY:
         from numba import njit
 
-        from wpt_receiver.kernel_cache import drop_stale_cache
-
-        from . import layout, objective, vector_kernel
         from .vector_kernel import step_kernel
 
-        # the replay's cache holds the env step's code: dropped when it changes (numba keys on this file)
-        drop_stale_cache(_here, (vector_kernel, layout, objective))
+        _drop_stale()
 
         @njit(cache=True)
         def replay(duty, state, k, j, coef_tab, coef_ix, bat, cmd_all, noise_all, lm_all, ep, slow_every, n_sub,
@@ -181,3 +216,34 @@ def _replay():
 
         _REPLAY.append(replay)
     return _REPLAY[0]
+
+
+_REPLAY_MODAL = []
+
+
+def _replay_modal():
+    """The compiled replay loop of the exact-mode link (:func:`envs.modal_step.step_kernel`; built on first use)."""
+    if not _REPLAY_MODAL:
+        from numba import njit
+
+        from .modal_step import step_kernel
+
+        _drop_stale()
+
+        @njit(cache=True)
+        def replay_modal(duty, state, mstate, k, j, lc_all, cz_all, bat, cmd_all, noise_all, lm_all, ep, slow_every,
+                         n_sub, par, scale, offset, tab, n_info, cols, out):
+            T, n = duty.shape
+            obs = np.empty((n, 8), np.float32)
+            reward = np.empty(n)
+            trunc = np.empty(n, np.bool_)
+            info = np.empty((n, n_info))
+            for s in range(T):
+                step_kernel(duty[s], state, mstate, k, j, lc_all, cz_all, bat, cmd_all, noise_all, lm_all, ep,
+                            slow_every, n_sub, par, scale, offset, tab, obs, reward, trunc, info)
+                for c in range(cols.shape[0]):
+                    for e in range(n):
+                        out[c, s, e] = info[e, cols[c]]
+
+        _REPLAY_MODAL.append(replay_modal)
+    return _REPLAY_MODAL[0]

@@ -1,7 +1,7 @@
 """Policies behind one protocol (:class:`mission_sim.contract.Policy`), made by name.
 
 Modules: ``classical`` (step, ramp, model_based), ``kernels`` (their compiled per-step functions for
-the mission's fast path; numba, imported on demand), ``onoff``, ``online``, ``budgeted``,
+the mission's fast path; numba, imported on demand), ``onoff``, ``online``, ``budgeted``, ``budget_modal``,
 ``random_policy``, ``mpc``, ``oracle``, ``rl`` / ``residual`` / ``constrained`` / ``imitation`` / ``smoothing`` /
 ``train`` / ``callbacks`` / ``hyperparams`` / ``slow_budget`` (RL, needs stable-baselines3), ``oracle_imitation`` / ``oracle_imitation_train``, ``inference``,
 ``compare``, ``batched``, ``forked``, ``stats``, ``threads``.
@@ -17,6 +17,7 @@ Modules, from the classical controllers to learning and comparing:
 ``mpc_modal``      the MPC's prediction model on the exact-mode link (the context's ``link_model="modal"``)
 ``oracle``         the per-window limit: best open-loop duty sequence after the stop (SLSQP)
 ``budgeted``       the model-based controller with an overshoot budget (the classical frontier)
+``budget_modal``   its after-stop plan predicted on the exact-mode link (the context's ``link_model="modal"``)
 ``online``         the model-based controller with an online Lm estimate
 ``onoff``          hysteresis ON-OFF (the classic unsynchronised mode switching)
 ``random_policy``  uniformly random duties (the floor)

@@ -58,11 +58,52 @@ class BudgetedModelBasedPolicy(ModelBasedPolicy):
         wlm_v1, det, _ = self._consts
         self._i2_sm = wlm_v1 / det   # assumed short-mode current (V2 = 0)
         self.name = f"model_based_budget:{budget:g}"
+        self._modal = ctx.link_model == "modal"
+        self._stopped = self._relax = None
+
+    def reset(self, n: int = 1) -> None:
+        super().reset(n)
+        self._stopped = self._relax = None
 
     def i2_ref(self, cmd, vl):
         ref = super().i2_ref(cmd, vl)
+        if self._modal:
+            return np.where(np.asarray(cmd) <= 0.0, ref + self.relaxation(cmd, vl) * self._i2_sm, ref)
         return np.where(np.asarray(cmd) <= 0.0, ref + self.budget * self._i2_sm, ref)
 
     def _i2_ref1(self, cmd: float, vl: float) -> float:
         ref = super()._i2_ref1(cmd, vl)
+        if self._modal:
+            if cmd > 0.0:   # charging: the next stop chooses its relaxation afresh (a mission has several)
+                if self._stopped is not None:
+                    self._stopped[:] = False
+                return ref
+            return ref + float(self.relaxation(np.array([cmd]), np.array([vl]))[0]) * self._i2_sm
         return ref + self.budget * self._i2_sm if cmd <= 0.0 else ref
+
+    def relaxation(self, cmd, vl) -> np.ndarray:
+        """The reference's relaxation after the stop per receiver (n,) on the exact-mode link: chosen at each
+        receiver's stop (its first command <= 0 after a positive one) from its controller state, last duty and
+        battery voltage (:func:`policies.budget_modal.relaxation`), kept until its command turns positive;
+        the budget itself before the controller exists (a window that starts stopped); 0 at budget 0 (the paper's
+        controller, as on eq. 4: ``model_based`` stacked with budgeted variants stays itself). ``budget`` may be
+        one per receiver (:class:`policies.batched.StackedModelBased`)."""
+        from wpt_receiver import duty_from_v2_clipped
+
+        from .budget_modal import relaxation
+        cmd, vl = np.asarray(cmd, dtype=float).reshape(-1), np.broadcast_to(np.asarray(vl, dtype=float), np.shape(cmd))
+        stop = cmd <= 0.0
+        ctl = self._ctl
+        budget = np.broadcast_to(np.asarray(self.budget, dtype=float), cmd.shape)
+        if ctl is None or ctl.n != len(cmd):
+            self._stopped, self._relax = stop.copy(), budget.copy()
+            return self._relax
+        if self._stopped is None or len(self._stopped) != len(cmd):
+            self._stopped, self._relax = np.zeros(len(cmd), bool), budget.copy()
+        u0 = self._i2_sm - ctl.i2_sm_a   # the controller's input at the reference I2_sm (r = 0)
+        for i in np.flatnonzero(stop & ~self._stopped & (budget > 0.0)):   # b = 0: the paper's controller, r = 0
+            d_prev = float(duty_from_v2_clipped(ctl.v2_cmd_v[i], vl[i]))
+            self._relax[i] = relaxation(float(budget[i]), self.ctx.link, "schottky", self.ctx.control_period_s,
+                                        ctl.discrete_ss, ctl.x[i], u0, self._i2_sm, d_prev, float(vl[i]))
+        self._stopped = stop.copy()
+        return self._relax

@@ -421,7 +421,7 @@ def _print_compare(rows, sweep, args):
           "[95 % interval]: bootstrap over episodes, or t over training seeds when seeds > 1")
     if args.link == "modal":
         print("plant: the exact-mode link (--link modal); mpc predicts with its modes (policies.mpc_modal), "
-              "model_based_budget still with eq. 4")
+              "model_based_budget plans its after-stop duties with them (policies.budget_modal)")
     hdr = (f"{'scenario':<12} {'policy':<24} {'seeds':>5} {'overshoot %':>20} {'in SM':>5} {'peak I2 A':>8} "
            f"{'E before J':>10} {'E after J':>20} {'track A':>6} {'return':>22} {'d return vs model_based':>24}")
     print(hdr)

@@ -1,0 +1,111 @@
+"""The budgeted model-based controller's after-stop plan predicted on the exact-mode link: what
+:class:`policies.budgeted.BudgetedModelBasedPolicy` turns its budget into when its
+:class:`~mission_sim.contract.PolicyContext` says the plant is the modal link (``link_model="modal"``).
+
+**What the budget sets.** The controller (paper Fig. 5: ``Q G22^-1``, eq. 4's model, then ``f^-1``) is pure
+feed-forward: from the stop on, its V2* sequence is fixed by its state at the stop and the reference it is
+given, ``(1 + r) I2_sm``; so is the duty plan ``d_k(r) = f^-1(V2*_k(r), VL)``. With eq. 4's model (the
+envelope path, unchanged) ``r`` is the budget ``b`` itself: the envelope overshoot the model promises. On the
+modal link that promise is off twice: the SBAR's quadrature rings the exact modes near short mode, and the
+measured overshoot is the instantaneous peak (the ripple on top), each window with its floor.
+
+**Here** the plan is predicted with the exact-mode link (:func:`wpt_receiver.modal_kernel.run_duties`: the
+link's modes at the assumed Lm, the SBAR's implicit commutation with its quadrature, the phase-aware
+instantaneous peak; the constants of :func:`policies.mpc_modal._link_modes`, the MPC's), from the periodic
+steady state of the last duty before the stop, with the battery voltage measured at the stop held:
+
+    P(r) = max_k peak_k(r) / I2_sm - 1          (the predicted measured overshoot of the plan)
+    F    = min_r P(r)                           (the least this controller's plans reach: its floor)
+    r*   = the largest r with P(r') <= F + b for every r' <= r   (the least energy within the budget)
+
+searched on a grid of ``r`` in ``[0, R_MAX]`` and refined by bisection (:func:`relaxation`). The budget is
+then *the measured overshoot above the floor of the controller's own plans*, as the prediction sees it (a
+window's oracle floor is lower: docs/rl.md, "model_based_budget on the exact-mode link"). ``b = 0`` stays the
+paper's controller (``r = 0``, no prediction), as on eq. 4.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+__all__ = ["relaxation", "predicted_overshoot", "R_MAX", "HORIZON_S"]
+
+#: the largest relaxation of the reference searched (fraction of I2_sm)
+R_MAX = 0.5
+#: the prediction's horizon after the stop [s] (V2* reaches 0 within ~10 ms at the smallest budgets searched)
+HORIZON_S = 0.02
+_N_GRID = 21
+_N_BISECT = 8
+
+
+@lru_cache(maxsize=4)
+def _plant(link, devices: str):
+    """``(lc, tab, mc, v1, I2_sm, Vf)`` of the exact-mode link (the MPC's constants, :mod:`policies.mpc_modal`):
+    the short-mode |I2| [A] of the modes (steady state at duty 1) and the rectifier's forward drop [V]."""
+    from wpt_receiver import modal_kernel as mk
+
+    from .mpc_modal import _link_modes
+    lc, tab, mc, dev = _link_modes(link, devices)
+    v1 = -1j * link.v1_amp_v
+    z = np.zeros(4)
+    vc = link.vl_v + dev.rect_vf_v
+    v2 = mk.steady_state(lc, mc, tab, 1.0, v1, vc, z)
+    return lc, tab, mc, v1, float(abs(mk.phasors(mc, z, v1, v2)[1])), dev.rect_vf_v
+
+
+def _v2_plans(ctl_ss, x0, u0, du, n):
+    """``(A (n,), B (n,))``: the controller's V2* [V] over ``n`` steps from the state ``x0`` under the constant
+    input ``u0 + r du`` is ``A + r B`` (``ctl_ss`` = ``(Ad, Bd, Cd, Dd)`` of the inverse controller)."""
+    ad, bd, cd, dd = ctl_ss
+    a, b = np.empty(n), np.empty(n)
+    x, xb = np.asarray(x0, dtype=float).copy(), np.zeros(len(bd))
+    for k in range(n):
+        a[k] = cd @ x + dd * u0
+        b[k] = cd @ xb + dd * du
+        x = ad @ x + bd * u0
+        xb = ad @ xb + bd * du
+    return a, b
+
+
+def predicted_overshoot(link, devices, dt_s, d_prev, vl_v, a, b, r):
+    """``P(r)`` (module docstring): the exact-mode link's predicted overshoot (fraction) of the plan
+    ``f^-1(a + r b, vl_v)`` after the duty ``d_prev`` held before it."""
+    from wpt_receiver import duty_from_v2_clipped
+    from wpt_receiver import modal_kernel as mk
+    lc, tab, mc, v1, i2_sm, vf = _plant(link, devices)
+    d = np.empty(len(a) + 1)
+    d[0] = d_prev
+    d[1:] = duty_from_v2_clipped(a + r * b, vl_v)
+    # V2 follows i2's phase once per rectifier period (as the env's sub-steps; held longer, it pumps the link),
+    # and the peak is taken at every sub-step's end as the env's (each duty repeated over its sub-steps)
+    sub = max(1, int(round(dt_s / link.rectifier_period_s)))
+    pk = mk.run_duties(lc, mc, tab, np.repeat(d, sub), dt_s / sub, 1, v1, vl_v + vf, link.lm_h)[3]
+    return float(pk[sub + 1:].max() / i2_sm - 1.0)
+
+
+def relaxation(budget, link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v) -> float:
+    """``r*`` (module docstring) of one receiver at its stop: the controller's state ``x0``, its input ``u0 +
+    r du`` after the stop (``du`` = I2_sm of the assumed model [A]), the last duty ``d_prev`` and the battery
+    voltage ``vl_v`` [V]."""
+    n = int(round(HORIZON_S / dt_s))
+    a, b = _v2_plans(ctl_ss, x0, u0, du, n)
+    grid = np.linspace(0.0, R_MAX, _N_GRID)
+    p = np.array([predicted_overshoot(link, devices, dt_s, d_prev, vl_v, a, b, r) for r in grid])
+    target = p.min() + budget
+    # the first crossing of the target from r = 0 up (P is not monotone at large r: a dip of the ringing's
+    # phase past the crossing is not trusted, the prediction being least accurate on steep plans)
+    i = int(np.argmax(p > target)) - 1 if np.any(p > target) else len(grid) - 1
+    if i < 0:
+        return 0.0
+    if i == len(grid) - 1:
+        return float(grid[i])
+    lo, hi = grid[i], grid[i + 1]
+    for _ in range(_N_BISECT):
+        mid = 0.5 * (lo + hi)
+        if predicted_overshoot(link, devices, dt_s, d_prev, vl_v, a, b, mid) <= target:
+            lo = mid
+        else:
+            hi = mid
+    return float(lo)
