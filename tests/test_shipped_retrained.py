@@ -125,3 +125,33 @@ def test_retrain_script_refuses_a_budget_for_rl_and_needs_one_for_the_constraine
     r = subprocess.run(cmd, cwd=root, capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and bad in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "retrain").exists()
+
+
+def test_retrain_script_rl_bc_is_the_cloned_start_and_installs_as_rl(tmp_path, monkeypatch):
+    """``--kind rl_bc``: its command is a valid ``dronewpt train`` that clones model_based_budget:0.05 with the
+    current fields hidden, without a budget; ``install`` writes ``rl_s<k>`` (not ``rl_bc_s<k>``) with the
+    ``trained`` record, the final model copied byte for byte."""
+    import importlib.util
+
+    from mission_sim.cli import build_parser
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location("retrain_shipped", root / "benchmarks" / "retrain_shipped.py")
+    rs = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(rs)
+    cmd = rs.KINDS["rl_bc"].format(timesteps=800000, seed=2, budget="")
+    a = build_parser().parse_args(cmd.split()[1:] + ["--out", str(tmp_path / "x")])
+    assert a.imitate == "model_based_budget:0.05" and a.timesteps == 800000 and a.seed == 2 and a.budget is None
+    assert set(a.imitation_mask.split(",")) == {"last_d_short", "i2_amp_a", "battery_current_a", "rect_current_a"}
+    assert not rs.constrained("rl_bc")
+    src = tmp_path / "out" / "rl_bc_s2"
+    src.mkdir(parents=True)
+    (src / "ppo_sbar.zip").write_bytes(b"model bytes")
+    (src / "ppo_sbar.json").write_text(json.dumps({"seed": 2}))
+    (src / "clone.zip").write_bytes(b"clone bytes")
+    (tmp_path / "policies" / "pretrained").mkdir(parents=True)
+    monkeypatch.setattr(rs, "ROOT", tmp_path)
+    rs.install("rl_bc", 2, tmp_path / "out", {"command": cmd})
+    dst = tmp_path / "policies" / "pretrained"
+    assert sorted(p.name for p in dst.iterdir()) == ["rl_s2.json", "rl_s2.zip"]
+    assert (dst / "rl_s2.zip").read_bytes() == b"model bytes"
+    assert json.loads((dst / "rl_s2.json").read_text()) == {"seed": 2, "trained": {"command": cmd}}
