@@ -39,9 +39,13 @@ def test_every_shipped_seed_group_was_trained_on_todays_env_config():
             t = m["trained"]
             assert len(t["commit"]) == 40 and t["returncode"] == 0 and t["command"].startswith("dronewpt train")
             assert f"--seed {m['seed']} " in t["command"] and f"--timesteps {m['timesteps']} " in t["command"]
-            if kind == "rl":   # plain PPO: no budget, no multiplier, no residual base
+            if kind == "rl":   # plain PPO from a feed-forward clone: no budget, no multiplier, no residual base
                 assert "--budget" not in t["command"] and "--lagrangian" not in t["command"]
                 assert m["budget"] is None and m["lagrangian"] is None and m["residual"] is None
+                assert "--imitate model_based_budget:0.05 " in t["command"] and m["imitation"]["teacher"] == \
+                    "model_based_budget:0.05" and {"i2_amp_a", "battery_current_a", "rect_current_a"} <= \
+                    set(m["imitation"]["masked"])
+                assert m["imitation"]["clone"] == "clone.zip" and m["policy_kwargs"]["log_std_init"] == -2.5
             else:
                 assert f"--budget {m['budget']:g} " in t["command"]
     assert len({m["seed"] for m in _metas("rl")}) == len(_metas("rl")) >= 2
@@ -99,10 +103,10 @@ def test_shipped_lagrangian_stays_physical():
 
 
 def test_shipped_rl_stays_physical_and_is_the_default_rl_policy():
-    """A sanity bound, not a quality test: each unconstrained seed's peak |I2| stays below the step's (the
-    hardest RM -> SM switch) in every window (``random`` and ``hysteresis`` peak at ~51-53 A and fail it; the
-    seeds' failure to reach short mode is documented in docs/rl.md, not asserted); ``--policy rl``
-    (policies.rl.PRETRAINED) is seed 0 of the group."""
+    """Each unconstrained seed's peak |I2| stays below the step's (the hardest RM -> SM switch) in every
+    window (``random`` and ``hysteresis`` peak at ~51-53 A and fail it) and, started from the clone of a
+    teacher that does (docs/rl.md), every seed reaches short mode (I_L < 0.5 A from 14 ms after the stop)
+    in every window; ``--policy rl`` (policies.rl.PRETRAINED) is seed 0 of the group."""
     from policies.rl import PRETRAINED
     specs = shipped_seed_groups()["rl"]
     assert specs[0] == f"rl:{PRETRAINED}"
@@ -110,6 +114,7 @@ def test_shipped_rl_stays_physical_and_is_the_default_rl_policy():
     step = runs["step"].metrics
     for sp in specs:
         assert np.all(runs[sp].metrics["peak_i2_a"] < step["peak_i2_a"])
+        assert np.all(runs[sp].metrics["reached_short_mode"] == 1.0), sp
 
 
 @pytest.mark.parametrize("args, bad", [(["--kind", "rl", "--budget", "0.05"], "--budget is not valid with --kind rl"),
