@@ -401,6 +401,17 @@ def _imitation_stage(spec: dict, out: Path, progress: bool, epochs: int, masked:
     return res
 
 
+def _imitation_meta(meta: dict, out: Path, start_log_std) -> None:
+    """The fine-tuned model's metadata after ``--imitate``: the imitation stage's record, the clone's file and
+    the ``log_std`` PPO really started from (the clone's, not the hyperparameters' ``log_std_init``)."""
+    meta["imitation"] = json.loads((out / "imitation_stage.json").read_text())
+    meta["imitation"]["clone"] = f"{CLONE_NAME}.zip"
+    if start_log_std is not None:
+        meta["policy_kwargs"] = {**meta["policy_kwargs"], "log_std_init": start_log_std}
+        meta["imitation"]["ppo_start_log_std"] = (f"{start_log_std:g}: the clone's log_std; the hyperparameters' "
+                                                  "log_std_init is not used when PPO starts from the clone")
+
+
 def _written_dirs(dirs: dict) -> dict:
     """The folders of ``dirs`` that hold files; empty ones (no evaluation or checkpoint was due within
     ``--timesteps``: SB3 creates them up front) are removed and left out."""
@@ -434,9 +445,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     (``dagger`` > 0: DAgger) the teacher policy of that name (``privileged:NAME``: the teacher sees the present,
     noise-free currents) on ``imitation_episodes`` windows per iteration, ``imitation_mask`` observation fields
     hidden from the student (:mod:`policies.imitation`), then fine-tune with PPO (Lagrangian with
-    ``lagrangian``) for ``timesteps`` steps (0: imitation only, the clone is ``<name>.zip``; else the clone
-    stays in ``clone.zip`` / ``clone.json`` / ``clone_vecnormalize.pkl`` beside the fine-tuned ``<name>.zip``,
-    whose metadata records the clone's ``log_std`` as the ``log_std_init`` PPO started from). ``slow_budget``: ``"LO:HI"``, the action is
+    ``lagrangian``) for ``timesteps`` steps (0: imitation only; else the clone is kept, :func:`_imitation_stage`). ``slow_budget``: ``"LO:HI"``, the action is
     the MPC's overshoot budget, the duty the MPC's (:mod:`policies.slow_budget`); ``slow_budget_every``:
     ``window`` (taken at the stop, held) or ``step``.
     Deterministic for a given seed on one thread (torch and numba threads set to 1)."""
@@ -465,7 +474,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
             return res
         resume = res["model"]
     venv, eval_env, model, penalty = _build(spec, out, resume)
-    start_log_std = float(model.policy.log_std.detach().mean()) if imitate and hasattr(model.policy, "log_std") else None
+    start_log_std = float(model.policy.log_std.detach().mean()) if imitate else None   # PPO's start: the clone's
     cbs, lag, ev = _callbacks(spec, out, eval_env, penalty, progress)
     todo = spec["timesteps"] - (model.num_timesteps if resume is not None else 0)   # SB3 adds num_timesteps on resume
     model.learn(total_timesteps=max(todo, 1), callback=cbs, reset_num_timesteps=resume is None)
@@ -475,12 +484,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     meta = _meta(spec, venv, lag, float(spec["config"].dt_s))
     meta["final_eval"] = ev.curve[-1] if ev.curve else None
     if imitate:
-        meta["imitation"] = json.loads((out / "imitation_stage.json").read_text())
-        meta["imitation"]["clone"] = f"{CLONE_NAME}.zip"
-        if start_log_std is not None:   # PPO starts from the clone's log_std, not the hyperparameters' log_std_init
-            meta["policy_kwargs"] = {**meta["policy_kwargs"], "log_std_init": start_log_std}
-            meta["imitation"]["ppo_start_log_std"] = (f"{start_log_std:g}: the clone's log_std; the hyperparameters' "
-                                                      "log_std_init is not used when PPO starts from the clone")
+        _imitation_meta(meta, out, start_log_std)
     meta_path = zip_path.with_suffix(".json")
     meta_path.write_text(json.dumps(meta, indent=2))
     if (out / "eval" / "best_model.zip").is_file():   # usable as rl:/residual: too (normalisation: the final one)
