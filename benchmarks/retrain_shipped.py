@@ -5,12 +5,14 @@ them in ``policies/pretrained``.
     python benchmarks/retrain_shipped.py --kind rl --seeds 0-4 --timesteps 800000 --install
     python benchmarks/retrain_shipped.py --kind residual --seeds 0-4 --timesteps 400000 --budget 0.05 --install
     python benchmarks/retrain_shipped.py --kind ppo_lagrangian --seeds 0-4 --timesteps 400000 --budget 0.05 --install
+    python benchmarks/retrain_shipped.py --kind rl_bc --seeds 0-4 --timesteps 800000 --install   # installs as rl_s<k>
 
 Each seed runs exactly the command of ``KINDS[kind]`` (``{seed}``, ``{timesteps}``, ``{budget}`` filled in;
 ``--budget`` is required for the constrained kinds and refused for ``rl``)
 under ``nice -n 10`` into ``out/retrain/<kind>_s<k>/``; the output's own metadata holds the env config
 (devices, reward), budget, multiplier history and the ``reproduce`` command. ``--install`` copies the final
-model (no selection) to ``policies/pretrained/<kind>_s<k>.zip`` and its metadata to ``.json`` (each written
+model (no selection) to ``policies/pretrained/<kind>_s<k>.zip`` (``rl_bc``: PPO from a behaviour clone of
+``model_based_budget:0.05``, installed as ``rl_s<k>``; its clone stays in ``out/retrain/rl_bc_s<k>/clone.zip``) and its metadata to ``.json`` (each written
 under a temporary name and renamed) with a ``trained`` record added: the git commit the training ran on
 (the env's version), the date, the wall time and the 1-min load average before / after (the machine is
 shared). Bad options: one line on stderr, exit 2, nothing trained.
@@ -38,7 +40,16 @@ KINDS = {
                  "--hyperparams policies/hyperparams/residual.yml"),
     "ppo_lagrangian": ("dronewpt train --algo ppo --timesteps {timesteps} --seed {seed} --scenario random --lagrangian "
                        "--budget {budget} --lambda-lr 20 --hyperparams policies/hyperparams/ppo_lagrangian.yml"),
+    # plain PPO started from a feed-forward behaviour clone of model_based_budget:0.05 (the current fields
+    # hidden from the student); --timesteps counts the PPO steps after the clone (docs/rl.md, issue 21)
+    "rl_bc": ("dronewpt train --algo ppo --timesteps {timesteps} --seed {seed} --scenario random "
+              "--hyperparams policies/hyperparams/ppo.yml --imitate model_based_budget:0.05 "
+              "--imitation-mask last_d_short,i2_amp_a,battery_current_a,rect_current_a "
+              "--eval-every 100000 --checkpoint-every 100000"),
 }
+
+#: the shipped name a kind installs as (``policies/pretrained/<name>_s<k>``), when not the kind's own
+INSTALL_AS = {"rl_bc": "rl"}
 
 
 def _seeds(text: str) -> list[int]:
@@ -82,7 +93,7 @@ def install(kind: str, seed: int, out_root: Path, rec: dict) -> None:
     """Final model and metadata (plus ``trained``) into policies/pretrained, each under a temp name, renamed."""
     from mission_sim.files import atomic_output
     src = out_root / f"{kind}_s{seed}"
-    dst = ROOT / "policies" / "pretrained" / f"{kind}_s{seed}"
+    dst = ROOT / "policies" / "pretrained" / f"{INSTALL_AS.get(kind, kind)}_s{seed}"
     meta = json.loads((src / "ppo_sbar.json").read_text())
     meta["trained"] = rec
     with atomic_output(dst.with_suffix(".zip")) as tmp:

@@ -24,6 +24,7 @@ Writes into ``out_dir``:
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import asdict, fields
 from pathlib import Path
 
@@ -37,6 +38,7 @@ __all__ = ["train", "plot_learning_curve", "DEFAULT_HYPERPARAMS", "env_config", 
 
 #: fixed held-out evaluation seeds ``EVAL_SEED + i`` (training seeds are small integers)
 EVAL_SEED = 900_000
+CLONE_NAME = "clone"   #: ``train --imitate`` with fine-tuning: the clone's files are clone.zip / .json / _vecnormalize.pkl
 VEC_PATHS = ("batched", "make_vec_env")
 
 DEFAULT_HYPERPARAMS = {
@@ -197,12 +199,15 @@ def _base_env(spec: dict, n_envs: int, monitor_path, reset_seed=None):
 
 def _checkpoint_pkl(zip_path: Path) -> Path:
     """The VecNormalize statistics saved with a model: ``<p>_vecnormalize_<n>_steps.pkl`` next to a
-    ``CheckpointCallback`` file ``<p>_<n>_steps.zip``, else ``vecnormalize.pkl`` in its folder."""
+    ``CheckpointCallback`` file ``<p>_<n>_steps.zip``, else ``<stem>_vecnormalize.pkl`` next to ``<stem>.zip``
+    (the imitation stage's ``clone.zip``), else ``vecnormalize.pkl`` in its folder."""
     import re
 
     m = re.fullmatch(r"(.*)_(\d+)_steps\.zip", zip_path.name)
     pkl = zip_path.with_name(f"{m.group(1)}_vecnormalize_{m.group(2)}_steps.pkl") if m else None
     if pkl is None or not pkl.is_file():
+        pkl = zip_path.with_name(f"{zip_path.stem}_vecnormalize.pkl")   # e.g. clone.zip's clone_vecnormalize.pkl
+    if not pkl.is_file():
         pkl = zip_path.with_name("vecnormalize.pkl")
     if not pkl.is_file():
         raise FileNotFoundError(f"resume={str(zip_path)!r}: no VecNormalize statistics next to it ({pkl.name})")
@@ -370,7 +375,9 @@ def _spec(algo, timesteps, o: dict) -> dict:
 def _imitation_stage(spec: dict, out: Path, progress: bool, epochs: int, masked: tuple) -> dict:
     """BC / DAgger of ``spec["imitate"]`` into ``out`` (:func:`policies.imitation.imitate`), the student a
     PPO actor with the run's hyperparameters (so ``resume`` fine-tunes it); the stage's record is
-    kept in ``imitation_stage.json``."""
+    kept in ``imitation_stage.json``. Imitation only (``timesteps`` 0): the model is ``<name>.zip``; with
+    fine-tuning to follow, the clone is ``clone.zip`` / ``clone.json`` / ``clone_vecnormalize.pkl``, kept
+    beside the fine-tuned ``<name>.zip``."""
     from .imitation import ImitationSpec, imitate
 
     pk = dict(spec["hp"].get("policy_kwargs") or {})
@@ -384,10 +391,25 @@ def _imitation_stage(spec: dict, out: Path, progress: bool, epochs: int, masked:
             "env_config": config_dict(spec["config"]), "env_overrides": spec["env_overrides"],
             "hyperparams": {k: v for k, v in spec["hp"].items() if k != "policy_kwargs"}, "residual": None,
             "lagrangian": None, "budget": None, "reproduce": _reproduce({**spec, "timesteps": 0})}
-    res = imitate(ispec, out, name=spec["name"], config=spec["config"], progress=progress, base_meta=base,
+    name = spec["name"] if not spec["timesteps"] else CLONE_NAME   # fine-tuned later: the clone keeps its own files
+    res = imitate(ispec, out, name=name, config=spec["config"], progress=progress, base_meta=base,
                   ppo_kwargs={k: v for k, v in spec["hp"].items() if k != "policy_kwargs"})
+    if name == CLONE_NAME:   # PPO's final vecnormalize.pkl would overwrite the clone's statistics
+        os.replace(res["vecnormalize"], out / f"{CLONE_NAME}_vecnormalize.pkl")
+        res["vecnormalize"] = out / f"{CLONE_NAME}_vecnormalize.pkl"
     (out / "imitation_stage.json").write_text(json.dumps(json.loads(res["meta"].read_text())["imitation"]))
     return res
+
+
+def _imitation_meta(meta: dict, out: Path, start_log_std) -> None:
+    """The fine-tuned model's metadata after ``--imitate``: the imitation stage's record, the clone's file and
+    the ``log_std`` PPO really started from (the clone's, not the hyperparameters' ``log_std_init``)."""
+    meta["imitation"] = json.loads((out / "imitation_stage.json").read_text())
+    meta["imitation"]["clone"] = f"{CLONE_NAME}.zip"
+    if start_log_std is not None:
+        meta["policy_kwargs"] = {**meta["policy_kwargs"], "log_std_init": start_log_std}
+        meta["imitation"]["ppo_start_log_std"] = (f"{start_log_std:g}: the clone's log_std; the hyperparameters' "
+                                                  "log_std_init is not used when PPO starts from the clone")
 
 
 def _written_dirs(dirs: dict) -> dict:
@@ -423,7 +445,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     (``dagger`` > 0: DAgger) the teacher policy of that name (``privileged:NAME``: the teacher sees the present,
     noise-free currents) on ``imitation_episodes`` windows per iteration, ``imitation_mask`` observation fields
     hidden from the student (:mod:`policies.imitation`), then fine-tune with PPO (Lagrangian with
-    ``lagrangian``) for ``timesteps`` steps (0: imitation only). ``slow_budget``: ``"LO:HI"``, the action is
+    ``lagrangian``) for ``timesteps`` steps (0: imitation only; else the clone is kept, :func:`_imitation_stage`). ``slow_budget``: ``"LO:HI"``, the action is
     the MPC's overshoot budget, the duty the MPC's (:mod:`policies.slow_budget`); ``slow_budget_every``:
     ``window`` (taken at the stop, held) or ``step``.
     Deterministic for a given seed on one thread (torch and numba threads set to 1)."""
@@ -452,6 +474,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
             return res
         resume = res["model"]
     venv, eval_env, model, penalty = _build(spec, out, resume)
+    start_log_std = float(model.policy.log_std.detach().mean()) if imitate else None   # PPO's start: the clone's
     cbs, lag, ev = _callbacks(spec, out, eval_env, penalty, progress)
     todo = spec["timesteps"] - (model.num_timesteps if resume is not None else 0)   # SB3 adds num_timesteps on resume
     model.learn(total_timesteps=max(todo, 1), callback=cbs, reset_num_timesteps=resume is None)
@@ -461,7 +484,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     meta = _meta(spec, venv, lag, float(spec["config"].dt_s))
     meta["final_eval"] = ev.curve[-1] if ev.curve else None
     if imitate:
-        meta["imitation"] = json.loads((out / "imitation_stage.json").read_text())
+        _imitation_meta(meta, out, start_log_std)
     meta_path = zip_path.with_suffix(".json")
     meta_path.write_text(json.dumps(meta, indent=2))
     if (out / "eval" / "best_model.zip").is_file():   # usable as rl:/residual: too (normalisation: the final one)
@@ -476,7 +499,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     venv.close()
     mon = out / "monitor.monitor.csv"
     res = {"model": zip_path, "meta": meta_path, "vecnormalize": out / "vecnormalize.pkl", "monitor": mon,
-           **_written_dirs({"eval_dir": out / "eval", "checkpoints": out / "checkpoints"})}
+           **({"clone": out / f"{CLONE_NAME}.zip"} if imitate else {}), **_written_dirs({"eval_dir": out / "eval", "checkpoints": out / "checkpoints"})}
     if mon.is_file():
         res["learning_curve"] = plot_learning_curve(mon, out / "learning_curve.png",
                                                     f"{algo.upper()} on {spec['env_id']} ({scenario})", ev.curve)

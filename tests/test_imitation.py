@@ -214,3 +214,43 @@ def test_td3_with_filtered_actions_trains_and_runs_the_same_filter(tmp_path):
     raw.action_filter = 0.0
     raw.reset(3)
     np.testing.assert_allclose(pol.act(obs), 0.5 * np.array([0.0, 0.5, 1.0]) + 0.5 * raw.act(obs), atol=1e-6)
+
+
+def _actor_state(zip_path):
+    import stable_baselines3 as sb3
+    pol = sb3.PPO.load(str(zip_path), device="cpu").policy
+    return {k: v.detach().numpy().copy() for k, v in pol.state_dict().items()
+            if k.startswith(("mlp_extractor.policy_net", "action_net", "log_std"))}
+
+
+def test_train_imitate_then_ppo_keeps_the_clone_and_records_the_log_std_ppo_starts_from(tmp_path):
+    """``train --imitate T --timesteps N > 0`` keeps the clone as ``clone.zip`` / ``clone.json`` /
+    ``clone_vecnormalize.pkl`` (weights and normalisation identical to an imitation-only run of the same
+    seed), writes the fine-tuned model to ``ppo_sbar.zip`` (moved away from the clone), and its metadata's
+    ``log_std_init`` is the clone's ``log_std`` (-2.5), not the hyperparameters' -1.5 it never used."""
+    import json
+    import pickle
+
+    from policies.train import train
+
+    kw = dict(n_envs=8, scenario="nominal", progress=False, env={"n_steps": 40}, imitate="model_based_budget:0.05",
+              imitation_episodes=2, imitation_epochs=2, imitation_mask=FEEDFORWARD, seed=3, eval_every=10**9,
+              checkpoint_every=10**9, hyperparams={"n_steps": 64, "batch_size": 128,
+                                                   "policy_kwargs": {"net_arch": [64, 64], "log_std_init": -1.5}})
+    only = train("ppo", 0, tmp_path / "only", **kw)
+    res = train("ppo", 1024, tmp_path / "ft", **kw)
+    ft = tmp_path / "ft"
+    assert res["clone"] == ft / "clone.zip" and res["model"] == ft / "ppo_sbar.zip"
+    clone, alone, tuned = (_actor_state(p) for p in (ft / "clone.zip", only["model"], ft / "ppo_sbar.zip"))
+    for k in clone:
+        np.testing.assert_array_equal(clone[k], alone[k])
+    assert any(not np.array_equal(clone[k], tuned[k]) for k in clone)   # PPO did update the fine-tuned one
+    c_meta, t_meta = (json.loads((ft / f"{n}.json").read_text()) for n in ("clone", "ppo_sbar"))
+    assert c_meta["timesteps"] == 0 and t_meta["timesteps"] == 1024 and t_meta["imitation"]["clone"] == "clone.zip"
+    start = float(clone["log_std"].mean())
+    assert start == pytest.approx(-2.5)
+    assert t_meta["policy_kwargs"]["log_std_init"] == pytest.approx(start)
+    assert c_meta["policy_kwargs"]["log_std_init"] == pytest.approx(start)
+    with open(ft / "clone_vecnormalize.pkl", "rb") as f1, open(only["vecnormalize"], "rb") as f2:
+        np.testing.assert_array_equal(pickle.load(f1).obs_rms.mean, pickle.load(f2).obs_rms.mean)
+    np.testing.assert_allclose(c_meta["obs_norm"]["mean"], json.loads(only["meta"].read_text())["obs_norm"]["mean"])

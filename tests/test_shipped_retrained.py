@@ -39,9 +39,13 @@ def test_every_shipped_seed_group_was_trained_on_todays_env_config():
             t = m["trained"]
             assert len(t["commit"]) == 40 and t["returncode"] == 0 and t["command"].startswith("dronewpt train")
             assert f"--seed {m['seed']} " in t["command"] and f"--timesteps {m['timesteps']} " in t["command"]
-            if kind == "rl":   # plain PPO: no budget, no multiplier, no residual base
+            if kind == "rl":   # plain PPO from a feed-forward clone: no budget, no multiplier, no residual base
                 assert "--budget" not in t["command"] and "--lagrangian" not in t["command"]
                 assert m["budget"] is None and m["lagrangian"] is None and m["residual"] is None
+                assert "--imitate model_based_budget:0.05 " in t["command"] and m["imitation"]["teacher"] == \
+                    "model_based_budget:0.05" and {"i2_amp_a", "battery_current_a", "rect_current_a"} <= \
+                    set(m["imitation"]["masked"])
+                assert m["imitation"]["clone"] == "clone.zip" and m["policy_kwargs"]["log_std_init"] == -2.5
             else:
                 assert f"--budget {m['budget']:g} " in t["command"]
     assert len({m["seed"] for m in _metas("rl")}) == len(_metas("rl")) >= 2
@@ -99,10 +103,10 @@ def test_shipped_lagrangian_stays_physical():
 
 
 def test_shipped_rl_stays_physical_and_is_the_default_rl_policy():
-    """A sanity bound, not a quality test: each unconstrained seed's peak |I2| stays below the step's (the
-    hardest RM -> SM switch) in every window (``random`` and ``hysteresis`` peak at ~51-53 A and fail it; the
-    seeds' failure to reach short mode is documented in docs/rl.md, not asserted); ``--policy rl``
-    (policies.rl.PRETRAINED) is seed 0 of the group."""
+    """Each unconstrained seed's peak |I2| stays below the step's (the hardest RM -> SM switch) in every
+    window (``random`` and ``hysteresis`` peak at ~51-53 A and fail it) and, started from the clone of a
+    teacher that does (docs/rl.md), every seed reaches short mode (I_L < 0.5 A from 14 ms after the stop)
+    in every window; ``--policy rl`` (policies.rl.PRETRAINED) is seed 0 of the group."""
     from policies.rl import PRETRAINED
     specs = shipped_seed_groups()["rl"]
     assert specs[0] == f"rl:{PRETRAINED}"
@@ -110,6 +114,7 @@ def test_shipped_rl_stays_physical_and_is_the_default_rl_policy():
     step = runs["step"].metrics
     for sp in specs:
         assert np.all(runs[sp].metrics["peak_i2_a"] < step["peak_i2_a"])
+        assert np.all(runs[sp].metrics["reached_short_mode"] == 1.0), sp
 
 
 @pytest.mark.parametrize("args, bad", [(["--kind", "rl", "--budget", "0.05"], "--budget is not valid with --kind rl"),
@@ -125,3 +130,33 @@ def test_retrain_script_refuses_a_budget_for_rl_and_needs_one_for_the_constraine
     r = subprocess.run(cmd, cwd=root, capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and bad in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "retrain").exists()
+
+
+def test_retrain_script_rl_bc_is_the_cloned_start_and_installs_as_rl(tmp_path, monkeypatch):
+    """``--kind rl_bc``: its command is a valid ``dronewpt train`` that clones model_based_budget:0.05 with the
+    current fields hidden, without a budget; ``install`` writes ``rl_s<k>`` (not ``rl_bc_s<k>``) with the
+    ``trained`` record, the final model copied byte for byte."""
+    import importlib.util
+
+    from mission_sim.cli import build_parser
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location("retrain_shipped", root / "benchmarks" / "retrain_shipped.py")
+    rs = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(rs)
+    cmd = rs.KINDS["rl_bc"].format(timesteps=800000, seed=2, budget="")
+    a = build_parser().parse_args(cmd.split()[1:] + ["--out", str(tmp_path / "x")])
+    assert a.imitate == "model_based_budget:0.05" and a.timesteps == 800000 and a.seed == 2 and a.budget is None
+    assert set(a.imitation_mask.split(",")) == {"last_d_short", "i2_amp_a", "battery_current_a", "rect_current_a"}
+    assert not rs.constrained("rl_bc")
+    src = tmp_path / "out" / "rl_bc_s2"
+    src.mkdir(parents=True)
+    (src / "ppo_sbar.zip").write_bytes(b"model bytes")
+    (src / "ppo_sbar.json").write_text(json.dumps({"seed": 2}))
+    (src / "clone.zip").write_bytes(b"clone bytes")
+    (tmp_path / "policies" / "pretrained").mkdir(parents=True)
+    monkeypatch.setattr(rs, "ROOT", tmp_path)
+    rs.install("rl_bc", 2, tmp_path / "out", {"command": cmd})
+    dst = tmp_path / "policies" / "pretrained"
+    assert sorted(p.name for p in dst.iterdir()) == ["rl_s2.json", "rl_s2.zip"]
+    assert (dst / "rl_s2.zip").read_bytes() == b"model bytes"
+    assert json.loads((dst / "rl_s2.json").read_text()) == {"seed": 2, "trained": {"command": cmd}}

@@ -80,8 +80,10 @@ def _add_train(sub):
     p.add_argument("--imitate", default=None, metavar="TEACHER",
                    help="behaviour-clone the policy TEACHER first (a policy name: mpc, mpc:0.05, "
                         "model_based_budget:0.02, ...; privileged:NAME = the teacher sees the present, noise-free "
-                        "currents); --timesteps then counts PPO fine-tuning steps (0: imitation only; "
-                        "policies.imitation)")
+                        "currents); --timesteps then counts PPO fine-tuning steps (0: imitation only, the clone is "
+                        "OUT/ppo_sbar.zip; otherwise the clone is kept as OUT/clone.zip + clone.json, the "
+                        "fine-tuned model is OUT/ppo_sbar.zip and starts from the clone's log_std, not "
+                        "log_std_init; policies.imitation)")
     p.add_argument("--dagger", type=int, default=0, metavar="N",
                    help="DAgger iterations after behaviour cloning (default 0)")
     p.add_argument("--imitation-episodes", type=int, default=64, help="windows per imitation iteration (default 64)")
