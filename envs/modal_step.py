@@ -232,7 +232,7 @@ def _samples(mc, zq, z, v1, v2, n_q, best, i2_best):
     return best, i2_best
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _substeps(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v1c, out, en, book, lm, block):
     """``n_sub`` sub-steps of ``h`` [s] from the mode amplitudes ``z`` (4 reals, in place) and the start's
     I2 ``i2``, V2 updated at each (the circuit decides v2 once per half cycle) by :func:`_v2_closed`
@@ -286,7 +286,7 @@ def _substeps(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v
     return v2, t, pk, i2_pk, qsum
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _link_step(z, v2, e, vl, d, lc, tab, cz, dt, n_sub, n_q, vf, dr, v1, hold_tol, out, en):
     """One control period of the exact-mode link (:mod:`wpt_receiver.modal_kernel`) with duty ``d`` held,
     from the mode amplitudes ``z`` (4 reals, advanced in place), the V2 phasor ``v2`` [V] held over the
