@@ -27,6 +27,13 @@ State: the envs' :data:`envs.layout.STATE` (as eq. 4's step) plus the link's own
 (``tests/test_env_modal.py``) check the peak against the switching model on the paper's trajectories,
 the energy balance, and the single env against the vector env's row.
 
+Cost: a step is sub-stepped in nearly every window (the link rarely rings below ``hold_tol``); the helpers called
+once per step with arrays (:func:`_finish`, :func:`_link_of`, :func:`_transient_a`, and the link kernel's lookups
+and readouts) are inlined (``inline="always"``): a call that passes arrays costs numba two atomic reference counts
+per array, the arithmetic is the same (outputs equal to the bit). Profile, what was tried and the figures:
+docs/performance.md ("The exact-mode (modal) env step"); ``benchmarks/profile_modal_step.py``,
+``benchmarks/ab_modal_step.py``.
+
 Imported only when an env with ``link_model="modal"`` is built.
 """
 

@@ -36,7 +36,10 @@ module is the same model, cheap enough for a mission or an env step:
 
 Cost (``benchmarks/bench_modal_step.py``, in-process, 2026-11-25, load average 3.3 on 2 cores):
 0.51 us per step (v2 lookup + step with energies + peak lookup) against 0.20 us for eq. 4's step;
-1.46 us when Lm changes every step (modes + ZOH recomputed).
+1.46 us when Lm changes every step (modes + ZOH recomputed). The small functions a step calls with arrays
+(``_lookup``, ``_bilinear``, ``sbar_shift``, ``inst_peak``, ``steady_modes``, ``readout``, ``phasors``) are
+inlined (``inline="always"``): numba puts two atomic reference counts per array argument around a call
+(~10 % of the modal env step); the arithmetic, and so every result, is unchanged.
 
 Validated (``tests/test_modal_kernel.py``) against :func:`wpt_receiver.modal.simulate_modal` on the
 three paper trajectories (peak within 0.5 %, in fact ~0.05 %), the switching model on the ramp
