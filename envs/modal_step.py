@@ -27,6 +27,13 @@ State: the envs' :data:`envs.layout.STATE` (as eq. 4's step) plus the link's own
 (``tests/test_env_modal.py``) check the peak against the switching model on the paper's trajectories,
 the energy balance, and the single env against the vector env's row.
 
+Cost: a step is sub-stepped in nearly every window (the link rarely rings below ``hold_tol``); the helpers called
+once per step with arrays (:func:`_finish`, :func:`_link_of`, :func:`_transient_a`, and the link kernel's lookups
+and readouts) are inlined (``inline="always"``): a call that passes arrays costs numba two atomic reference counts
+per array, the arithmetic is the same (outputs equal to the bit). Profile, what was tried and the figures:
+docs/performance.md ("The exact-mode (modal) env step"); ``benchmarks/profile_modal_step.py``,
+``benchmarks/ab_modal_step.py``.
+
 Imported only when an env with ``link_model="modal"`` is built.
 """
 
@@ -205,7 +212,7 @@ def _v2_edges(q0, sgn, k):
     return 0j, 0j, 0j, False
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _transient_a(mc, z0, z1, v1, v2):
     """Bound [A] of the ringing of I2 about the steady state of the inputs ``v1, v2`` held: the two
     modes' distances from their steady amplitudes, in I2 units (they only decay under held inputs)."""
@@ -335,7 +342,7 @@ def _link_step(z, v2, e, vl, d, lc, tab, cz, dt, n_sub, n_q, vf, dr, v1, hold_to
             inst_peak(lc, tab, d, i2_pk, vc), qsum / n, v2_row, split)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _link_of(state, ms, e, lc, tab, cz, d, par, n_sub, out, en, zb):
     """:func:`_link_step` of window ``e`` of the vector env (battery voltage from ``state``, :data:`STATE`; the
     link's own state ``ms``, :data:`MSTATE`, updated): ``(|I1|, I2, |I2| peak, instantaneous peak, I_L, v2 in
@@ -374,7 +381,7 @@ def start_link(lc_all, lm0, d0, vl0, vf, v1, tab, dt, n_sub, n_q, cz_all, z_out,
         rows[4, e] = (v2 * i2.conjugate()).real / a if a > 0.0 else v2.real
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _finish(e, d, state, kk, jj, bat, cmd_all, noise_all, lm_all, ep, par, scale, offset, link, obs, reward, trunc,
             info):
     """Battery, reward, objective, state, observation and info of window ``e`` after its link step

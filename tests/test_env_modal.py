@@ -415,3 +415,36 @@ def test_detuned_modal_link_blocks_where_the_switching_model_does():
                                                  cfg.modal_n_q, vf, dr, P.v1_amp_v, 1e-3, np.empty(9), np.zeros(4))
         got.append(abs(i2))
     assert max(got[:10]) > 1.0 and max(got[-50:]) < 1e-9 and abs(il) < 1e-4   # I_L: the held V2 within a sub-step
+
+
+def test_parallel_chunks_are_the_serial_step_to_the_bit():
+    """The modal step over chunks run with ``prange`` (``env_step``, n_chunks > 1) equals the serial step
+    (``step_kernel``, the replay's entry) to the bit, on a step after random duties, a slow segment change
+    and autoresets (SHORT: 40-step episodes): each window's arithmetic does not depend on its chunk."""
+    from envs.core import OBS_OFFSET, OBS_SCALE
+    from envs.layout import INFO
+    n = 48
+    env = SbarChargingVectorEnv(n, "random", SHORT, num_threads=1)
+    env.reset(seed=3)
+    rng = np.random.default_rng(3)
+    for _ in range(51):   # past one episode end (autoreset) and into a new slow segment
+        env.step(rng.uniform(-1, 1, (n, 1)).astype(np.float32))
+    plant, grabbed = env.parts.plant, []
+
+    def grab(d, k, scenario, objective, par, *rest):
+        grabbed.append((d.copy(), k.copy(), scenario, objective, par.copy(), plant.state.copy(), plant.mstate.copy(),
+                        plant.j.copy(), plant.coef_cur.copy(), tuple(a.copy() for a in objective.ep)))
+    plant.step = grab
+    env.step(rng.uniform(-1, 1, (n, 1)).astype(np.float32))
+    d, k, sc, _, par, state, mstate, j, cz, ep = grabbed[0]
+    outs = []
+    for chunks in (1, 5):
+        a = [state.copy(), mstate.copy(), k.copy(), j.copy(), cz.copy(), tuple(x.copy() for x in ep)]
+        obs, rew = np.empty((n, 8), np.float32), np.empty(n)
+        trunc, info = np.empty(n, bool), np.empty((n, len(INFO)))
+        args = (d, a[0], a[1], a[2], a[3], plant.lc, a[4], plant.bat, sc.cmd, sc.noise, plant.lm_all, a[5],
+                SHORT.slow_every, plant.n_sub, par, OBS_SCALE, OBS_OFFSET, plant.tab, obs, rew, trunc, info)
+        vk.step_kernel(*args) if chunks == 1 else vk.env_step(*args, chunks)
+        outs.append((obs, rew, trunc, info, *a[:5], *a[5]))
+    assert all(np.array_equal(x, y, equal_nan=True) for x, y in zip(*outs))
+    assert not np.array_equal(outs[0][4], state) and np.ptp(outs[0][3][:, INFO.i2_peak_a]) > 1.0   # it stepped

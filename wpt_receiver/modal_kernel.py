@@ -36,7 +36,10 @@ module is the same model, cheap enough for a mission or an env step:
 
 Cost (``benchmarks/bench_modal_step.py``, in-process, 2026-11-25, load average 3.3 on 2 cores):
 0.51 us per step (v2 lookup + step with energies + peak lookup) against 0.20 us for eq. 4's step;
-1.46 us when Lm changes every step (modes + ZOH recomputed).
+1.46 us when Lm changes every step (modes + ZOH recomputed). The small functions a step calls with arrays
+(``_lookup``, ``_bilinear``, ``sbar_shift``, ``inst_peak``, ``steady_modes``, ``readout``, ``phasors``) are
+inlined (``inline="always"``): numba puts two atomic reference counts per array argument around a call
+(~10 % of the modal env step); the arithmetic, and so every result, is unchanged.
 
 Validated (``tests/test_modal_kernel.py``) against :func:`wpt_receiver.modal.simulate_modal` on the
 three paper trajectories (peak within 0.5 %, in fact ~0.05 %), the switching model on the ramp
@@ -192,7 +195,7 @@ def zoh(mc, dt_s, zc):
 
 
 # ---------------------------------------------------------------------- state -> phasors, the step
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def steady_modes(mc, v1, v2):
     """The modes' steady amplitudes ``(zs0, zs1)`` (complex) under the inputs ``v1, v2`` (complex [V]) held:
     ``zs_m = -(g1_m V1 + g2_m V2) / lam'_m`` (eq. 1 in modal form, ``dz/dt = lam' z + g1 V1 + g2 V2``). The
@@ -203,7 +206,7 @@ def steady_modes(mc, v1, v2):
     return zs0, zs1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def readout(mc, r, z0, z1, v1, v2):
     """State ``r`` of ``[i1, i2, vC1, vC2]`` (phasor [A or V]) of the mode amplitudes ``z0, z1`` (complex)
     under ``v1, v2``: ``S_r0 z0 + S_r1 z1 + D_r1 V1 + D_r2 V2`` (r = 1: I2 = ``S1 z0 + S5 z1 + D2 V1 + D3
@@ -211,7 +214,7 @@ def readout(mc, r, z0, z1, v1, v2):
     return mc[MC_S + r] * z0 + mc[MC_S + 4 + r] * z1 + mc[MC_D + 2 * r] * v1 + mc[MC_D + 2 * r + 1] * v2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def phasors(mc, z, v1, v2):
     """``(I1, I2)`` phasors [A] of the mode state ``z`` (4 reals) under the inputs ``v1, v2`` (complex [V])."""
     z0, z1 = complex(z[0], z[1]), complex(z[2], z[3])
@@ -296,13 +299,13 @@ def rect_affine(mc, zc, dt_s, z, v1, f_clamp, v2x):
 
 
 # ---------------------------------------------------------------------- SBAR (eq. 9 with its quadrature)
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _bilinear(tab, plane, m, j, k, fx, fy):
     return ((tab[plane, m, j, k] * (1 - fx) + tab[plane, m, j + 1, k] * fx) * (1 - fy)
             + (tab[plane, m, j, k + 1] * (1 - fx) + tab[plane, m, j + 1, k + 1] * fx) * fy)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _lookup(lc, tab, plane, phi, d, rho):
     """Trilinear lookup of table plane ``plane`` at phase ``phi`` [rad] in [-pi/2, pi/2], duty ``d``
     and ``rho = |I2|/Vc`` (both grids quadratic, :func:`build_table`; rho clamped at its top)."""
@@ -333,7 +336,7 @@ def sbar_edge(lc, tab, d_short, ih, vc_v):
     return min(max(0.5 * math.pi + delta - phi, wd), math.pi - wd)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def sbar_shift(lc, tab, d_short, ih, vc_v):
     """The harmonics' shift ``delta`` [rad] of the commutation angle (:func:`sbar_edge`'s ``e = pi/2 -
     arg(ih) + delta`` before the window's clip) for the sign-folded i2 phasor ``ih`` [A] at duty
@@ -480,7 +483,7 @@ def sbar_implicit(lc, tab, mc, zc, z0, z1, v1, v2_held, d_short, vc_v, ws, e_gue
     return f, q0 + q1 * (f * vc + ws * q0) / den, e
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def inst_peak(lc, tab, d_short, i2, vc_v):
     """Instantaneous peak |i2| [A] at duty ``d_short`` for the fundamental phasor ``i2`` [A] (complex)
     and clamp ``vc_v`` [V]: ``|I2| + Vc excess(arg I2, d, |I2|/Vc)`` (:meth:`SbarHarmonics.peak`, tabulated)."""
