@@ -579,11 +579,29 @@ def _settled(st, c, lk, lm):
 
 
 @njit(cache=True)
+def _answering(st):
+    """True while the receiver is shorted (d = 1, the clip) with a positive charge command and the pad on.
+
+    Short mode delivers no charge current (I_L = 0 < I_L*), so no charging controller rests there: the
+    policy is still moving towards rectification, possibly hidden behind the clip (a stateful policy's
+    V2* below 0 V, e.g. ``model_based_budget``'s relaxed reference held while the command was 0). A
+    real receiver's DSP runs it every control period until the duty leaves 1; so does the fine window
+    (up to ``sim.max_fine_s``). A policy called once per coarse period instead would advance its filter
+    by one control period per call and stay shorted for seconds."""
+    return st.tx_on and st.cmd > 0.0 and st.d >= 1.0 - 1e-9
+
+
+@njit(cache=True)
 def _window_done(st, c, lk, t, d_prev, lm):
     """Close the fine window once the SBAR output ``1 - sin(pi d / 2)`` and I2 have settled (or at its
-    deadline). Settles on V2, not on the duty: near short mode the duty is ill-conditioned (arcsin)."""
+    deadline). Settles on V2, not on the duty: near short mode the duty is ill-conditioned (arcsin).
+
+    Not while the receiver is shorted under a positive charge command (:func:`_answering`): the policy
+    has not answered the command yet, and outside the window it would be called once per
+    ``coarse_policy_period_s`` instead of once per control period."""
     dv = abs(math.sin(0.5 * math.pi * st.d) - math.sin(0.5 * math.pi * d_prev))
-    if t >= st.fine_until_min and (dv < c.settle_duty_tol or st.v1 == 0.0) and _settled(st, c, lk, lm):
+    if t >= st.fine_until_min and (dv < c.settle_duty_tol or st.v1 == 0.0) and not _answering(st) \
+            and _settled(st, c, lk, lm):
         st.in_fine = False
     elif t >= st.fine_deadline and st.v1 == (c.v1_nom if st.tx_on else 0.0):
         st.in_fine = False

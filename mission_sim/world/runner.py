@@ -44,13 +44,17 @@ by the policy, fast Lm changes with the pad on. A fine window lasts at least ``m
 ends when the SBAR output ``1 - sin(pi d / 2)`` (= V2 / ((4/pi) VL), eq. 9) moves less than
 ``settle_duty_tol`` per step and I2 is within ``settle_i2_tol_a`` of the steady state for the held
 inputs (or after ``max_fine_s``); with the pad off it ends once the coil currents have died out.
+It does not end while the receiver is shorted (d = 1) under a positive charge command: no charging
+controller rests there, and a stateful policy may be moving behind the clip (``model_based_budget``'s
+V2* below 0 V after a stop): the receiver's DSP runs it every control period until it answers, so does
+the window [``_answering``].
 Otherwise *coarse* steps run to the next trajectory sample (Lm, power held: the ZOH step is exact
 for any length) with the policy called at most every ``coarse_policy_period_s`` and its duty held
 in between; if that duty moves by more than ``duty_event_tol`` a fine window starts.
 With the pad off and nothing pending, samples are merged into steps of up to ``sim.flight_dt_s``
 and the policy is not called (the SBAR has nothing to do; its duty is held).
 [``_interval`` (fine steps ``_fine_begin`` / ``_fine_end``, coarse steps, ``_coarse_duty``),
-``_open_window`` / ``_window_done`` / ``_settled``, ``_quiet_flight``; ``MissionLoop.result``
+``_open_window`` / ``_window_done`` / ``_answering`` / ``_settled``, ``_quiet_flight``; ``MissionLoop.result``
 assembles the time series and the summary.]
 
 Sensor noise: ``sim.i2_noise_a`` (default 0: none) adds seeded Gaussian noise to the i2
