@@ -157,3 +157,42 @@ def test_each_stop_of_a_mission_chooses_its_relaxation():
             bm.relaxation = orig
         assert len(calls) == want, link_model
     assert calls == [] and pol._relax is None
+
+
+@pytest.fixture(scope="module")
+def stop_1000():
+    """The arguments of :func:`policies.budget_modal.relaxation` at nominal window 1000's real stop on the modal
+    env (``model_based_budget:0.05``), captured in the closed loop."""
+    caps = []
+    orig = bm.relaxation
+
+    def spy(*a):
+        caps.append(a)
+        return orig(*a)
+    bm.relaxation = spy
+    try:
+        run_policies(["model_based_budget:0.05"], "nominal", 1, 1000, MODAL)
+    finally:
+        bm.relaxation = orig
+    assert len(caps) == 1
+    return caps[0][1:]
+
+
+@pytest.mark.parametrize("budget", [0.02, 0.05])
+def test_every_smaller_relaxation_meets_the_target(stop_1000, budget):
+    """At a real stop, every r' <= r* on a 0.0005 grid (independent of the search's own step) predicts P <= F + b,
+    F the least over the coarse grid, and the search's next grid point above r* does not (r* is the largest).
+    P(r) is a saw-tooth here: a search that lands in a tooth's dip (r* = 0.0315 at b = 0.05, with r' = 0.03
+    predicting 9.91 % against the target 8.48 %) fails this."""
+    link, devices, dt, ss, x0, u0, du, d_prev, vl = stop_1000
+    a, b = bm._v2_plans(ss, x0, u0, du, int(round(bm.HORIZON_S / dt)))
+
+    def pred(r):
+        return bm.predicted_overshoot(link, devices, dt, d_prev, vl, a, b, r)
+    target = min(pred(r) for r in np.linspace(0.0, bm.R_MAX, bm._N_GRID)) + budget
+    r_star = bm.relaxation(budget, *stop_1000)
+    assert 0.0 < r_star < bm.R_MAX
+    worst = max(pred(r) for r in np.arange(0.0, r_star + 1e-12, 0.0005))
+    assert worst <= target, (r_star, worst, target)
+    assert pred(r_star + bm.R_STEP) > target
+
