@@ -29,8 +29,10 @@ target (at most up to the coarse grid's first point above it), so its cost is ``
 (~5 ms each: ~0.8 s per stop at b = 0.05, ~3.4 s at b = 0.1 on window 1000, load ~4).
 
 The budget is then *the measured overshoot above the floor of the controller's own plans*, as the prediction
-sees it (a window's oracle floor is lower: docs/rl.md, "model_based_budget on the exact-mode link"). ``b = 0`` stays the paper's controller (``r = 0``, no prediction), as on eq. 4. A non-finite
-prediction counts as above the target (the scan stops there).
+sees it (a window's oracle floor is lower: docs/rl.md, "model_based_budget on the exact-mode link"). ``b = 0`` stays the paper's controller (``r = 0``, no prediction), as on eq. 4. Bad inputs (a
+non-finite or non-positive battery voltage, a last duty outside [0, 1], a non-finite controller state or
+budget) raise :class:`ValueError` naming the value and its valid range; a non-finite prediction counts as
+above the target (the scan stops there).
 """
 
 from __future__ import annotations
@@ -95,10 +97,24 @@ def predicted_overshoot(link, devices, dt_s, d_prev, vl_v, a, b, r):
     return float(pk[sub + 1:].max() / i2_sm - 1.0)
 
 
+def _check(budget, d_prev, vl_v, x0) -> None:
+    """:class:`ValueError` naming the bad value and its valid range (a NaN would make every ``P`` NaN and the
+    search return ``R_MAX`` silently)."""
+    if not (np.isfinite(budget) and 0.0 <= budget <= 1.0):
+        raise ValueError(f"budget={budget!r} is invalid; valid range: [0, 1] (an overshoot fraction)")
+    if not (np.isfinite(vl_v) and vl_v > 0.0):
+        raise ValueError(f"vl_v={vl_v!r} is invalid; valid range: a finite battery voltage > 0 V")
+    if not (np.isfinite(d_prev) and 0.0 <= d_prev <= 1.0):
+        raise ValueError(f"d_prev={d_prev!r} is invalid; valid range: [0, 1] (the last short-mode duty)")
+    if not np.all(np.isfinite(x0)):
+        raise ValueError(f"x0={np.asarray(x0)!r} is invalid; valid range: a finite controller state")
+
+
 def relaxation(budget, link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v) -> float:
     """``r*`` (module docstring) of one receiver at its stop: the controller's state ``x0``, its input ``u0 +
     r du`` after the stop (``du`` = I2_sm of the assumed model [A]), the last duty ``d_prev`` and the battery
     voltage ``vl_v`` [V]. ``r*`` is a multiple of :data:`R_STEP` in ``[0, R_MAX]``."""
+    _check(budget, d_prev, vl_v, x0)
     n = int(round(HORIZON_S / dt_s))
     a, b = _v2_plans(ctl_ss, x0, u0, du, n)
 

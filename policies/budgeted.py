@@ -102,6 +102,8 @@ class BudgetedModelBasedPolicy(ModelBasedPolicy):
             self._stopped, self._relax = np.zeros(len(cmd), bool), budget.copy()
         u0 = self._i2_sm - ctl.i2_sm_a   # the controller's input at the reference I2_sm (r = 0)
         for i in np.flatnonzero(stop & ~self._stopped & (budget > 0.0)):   # b = 0: the paper's controller, r = 0
+            if not (np.isfinite(vl[i]) and vl[i] > 0.0):   # before f^-1 divides by it
+                raise ValueError(f"vl={vl[i]!r} (receiver {i}) is invalid; valid range: a finite battery voltage > 0 V")
             d_prev = float(duty_from_v2_clipped(ctl.v2_cmd_v[i], vl[i]))
             self._relax[i] = relaxation(float(budget[i]), self.ctx.link, "schottky", self.ctx.control_period_s,
                                         ctl.discrete_ss, ctl.x[i], u0, self._i2_sm, d_prev, float(vl[i]))

@@ -196,3 +196,31 @@ def test_every_smaller_relaxation_meets_the_target(stop_1000, budget):
     assert worst <= target, (r_star, worst, target)
     assert pred(r_star + bm.R_STEP) > target
 
+
+@pytest.mark.parametrize("field,value", [("vl_v", float("nan")), ("vl_v", -30.0), ("vl_v", 0.0),
+                                         ("d_prev", float("nan")), ("d_prev", 1.5), ("x0", float("nan")),
+                                         ("budget", float("nan"))])
+def test_bad_stop_state_raises(stop_1000, field, value):
+    """A NaN or out-of-range battery voltage, last duty, controller state or budget raises ValueError naming the
+    value (a NaN made every P NaN, so that no P exceeded the target and r = R_MAX was returned silently)."""
+    link, devices, dt, ss, x0, u0, du, d_prev, vl = stop_1000
+    kw = {"budget": 0.05, "vl_v": vl, "d_prev": d_prev, "x0": x0}
+    kw[field] = np.full_like(x0, value) if field == "x0" else value
+    with pytest.raises(ValueError, match=field):
+        bm.relaxation(kw["budget"], link, devices, dt, ss, kw["x0"], u0, du, kw["d_prev"], kw["vl_v"])
+
+
+def test_bad_battery_voltage_at_a_stop_raises():
+    """The policy's one-receiver path: a stop observed with a NaN battery voltage raises ValueError naming it
+    (it chose r = R_MAX silently; a measured voltage below 20 V is clamped by the policy's sensing)."""
+    from mission_sim.contract import OBS_DIM, OBS_INDEX, normalise_obs
+    pol = BudgetedModelBasedPolicy(PolicyContext(link_model="modal"), budget=0.02)
+    pol.reset(1)
+    phys = np.zeros(OBS_DIM)
+    phys[OBS_INDEX["battery_v"]] = 30.0
+    phys[OBS_INDEX["charge_cmd_a"]] = 2.0
+    for _ in range(20):
+        pol.act(normalise_obs(phys[None, :]))
+    phys[OBS_INDEX["battery_v"]], phys[OBS_INDEX["charge_cmd_a"]] = np.nan, 0.0
+    with pytest.raises(ValueError, match="vl"):
+        pol.act(normalise_obs(phys[None, :]))
