@@ -10,7 +10,9 @@ modal link that promise is off twice: the SBAR's quadrature rings the exact mode
 measured overshoot is the instantaneous peak (the ripple on top), each window with its floor.
 
 **Here** the plan is predicted with the exact-mode link (:func:`wpt_receiver.modal_kernel.run_duties`: the
-link's modes at the assumed Lm, the SBAR's implicit commutation with its quadrature, the phase-aware
+link's modes at the assumed Lm; the SBAR's *explicit* commutation :func:`~wpt_receiver.modal_kernel.sbar_v2`
+with its quadrature, V2 set from i2's phase at the start of each rectifier sub-step, where the env and the
+mission solve the commutation implicitly, :func:`~wpt_receiver.modal_kernel.sbar_implicit`; the phase-aware
 instantaneous peak; the constants of :func:`policies.mpc_modal._link_modes`, the MPC's), from the periodic
 steady state of the last duty before the stop, with the battery voltage measured at the stop held:
 
@@ -19,17 +21,19 @@ steady state of the last duty before the stop, with the battery voltage measured
     r*   = the largest fine-grid r whose running max  max_{r' <= r} P(r')  is <= F + b
 
 **Why a running max on a fine grid.** ``P(r)`` is a saw-tooth at the 0.001 scale of ``r``: each tooth is
-one control period by which the plan's arrival at duty 1 moves, ``P`` jumps up at a tooth's left edge and
-falls smoothly across it (window 1000 at b = 0.05: P = 9.91 % at r = 0.030, 6.56 % at 0.0315, 9.86 % at
-0.032; the env agrees within 0.1 point). A bisection or a coarse grid lands in a tooth's dip; the running
-max over a grid of step :data:`R_STEP` (finer than a tooth, ~9 points per tooth near r = 0.03) does not.
-Between two grid points the envelope may still be exceeded by up to the tooth's slope times the step (up to
-~0.4 point at a tooth's left edge). The fine scan runs from ``r = 0`` up to the first grid point above the
-target (at most up to the coarse grid's first point above it), so its cost is ``r* / R_STEP`` predictions
-(~5 ms each: ~0.8 s per stop at b = 0.05, ~3.4 s at b = 0.1 on window 1000, load ~4).
+(apparently) one control period by which the plan's arrival at duty 1 moves, ``P`` jumps up at a tooth's left
+edge and falls smoothly across it (window 1000 at b = 0.05: P = 9.91 % at r = 0.030, 6.56 % at 0.0315, 9.86 % at
+0.032; the closed loop on the env, with its implicit commutation, measured 9.96 / 8.46 / 6.61 / 9.92 % at 0.03 /
+0.031 / 0.0315 / 0.032: the explicit prediction is within 0.2 point of it there). A bisection or a coarse grid
+lands in a tooth's dip; the running max over a grid of step :data:`R_STEP` (finer than a tooth, ~9 points per
+tooth near r = 0.03) does not. Between two grid points the envelope may still be exceeded by up to the tooth's
+slope times the step (up to ~0.4 point at a tooth's left edge). The fine scan runs from ``r = 0`` up to the first
+grid point above the target (at most up to the coarse grid's first point above it), so its cost is ``r* /
+R_STEP`` predictions (~5 ms each: ~0.8 s per stop at b = 0.05, ~3.4 s at b = 0.1 on window 1000, load ~4).
 
 The budget is then *the measured overshoot above the floor of the controller's own plans*, as the prediction
-sees it (a window's oracle floor is lower: docs/rl.md, "model_based_budget on the exact-mode link"). ``b = 0`` stays the paper's controller (``r = 0``, no prediction), as on eq. 4. Bad inputs (a
+sees it (a window's oracle floor is lower: docs/modal_policies.md, section "`model_based_budget:b` on the
+modal link"). ``b = 0`` stays the paper's controller (``r = 0``, no prediction), as on eq. 4. Bad inputs (a
 non-finite or non-positive battery voltage, a last duty outside [0, 1], a non-finite controller state or
 budget) raise :class:`ValueError` naming the value and its valid range; a non-finite prediction counts as
 above the target (the scan stops there).
