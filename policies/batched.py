@@ -45,7 +45,7 @@ def stackable(p):
     from .residual import ResidualPolicy
     from .rl import RLPolicy
 
-    if type(p) in (ModelBasedPolicy, BudgetedModelBasedPolicy):
+    if type(p) in (ModelBasedPolicy, BudgetedModelBasedPolicy) and not getattr(p, "eq4_relaxation", False):
         return ("model_based", p.ctx, p.lpf)
     if type(p) is RLPolicy:
         return _rl_key(p)

@@ -49,7 +49,10 @@ class BudgetedModelBasedPolicy(ModelBasedPolicy):
     name = "model_based_budget"
 
     def __init__(self, ctx: PolicyContext = PolicyContext(), lpf: LowPassFilter = LowPassFilter(),
-                 budget: float = 0.02):
+                 budget: float = 0.02, eq4_relaxation: bool = False):
+        """``eq4_relaxation=True``: the relaxation ``r = b`` on any link, also the modal one (the policy before its
+        modal plan, 2026-11-26; named ``model_based_budget_eq4:b``, not stacked with the others:
+        :func:`policies.batched.stackable`), for comparisons on the same plant."""
         budget = float(budget)
         if not (np.isfinite(budget) and 0.0 <= budget <= 1.0):
             raise ValueError(f"budget={budget!r} is invalid; valid range: [0, 1] (an overshoot fraction)")
@@ -57,8 +60,9 @@ class BudgetedModelBasedPolicy(ModelBasedPolicy):
         self.budget = budget
         wlm_v1, det, _ = self._consts
         self._i2_sm = wlm_v1 / det   # assumed short-mode current (V2 = 0)
-        self.name = f"model_based_budget:{budget:g}"
-        self._modal = ctx.link_model == "modal"
+        self.eq4_relaxation = bool(eq4_relaxation)
+        self.name = f"model_based_budget{'_eq4' if self.eq4_relaxation else ''}:{budget:g}"
+        self._modal = ctx.link_model == "modal" and not self.eq4_relaxation
         self._stopped = self._relax = None
 
     def reset(self, n: int = 1) -> None:

@@ -10,20 +10,12 @@ from envs import EnvConfig
 from mission_sim.contract import PolicyContext
 from policies import budget_modal as bm
 from policies.budgeted import BudgetedModelBasedPolicy
+from policies.classical import ModelBasedPolicy
 from policies.compare import run_policies
 
 MODAL = EnvConfig(link_model="modal")
 SEEDS = (1000, 4)
 BUDGETS = (0.0, 0.01, 0.02, 0.05)
-
-
-class _Eq4Budget(BudgetedModelBasedPolicy):
-    """The relaxation r = b on the modal plant (the policy before its modal plan; a subclass: not stacked)."""
-
-    def __init__(self, ctx, budget):
-        super().__init__(ctx, budget=budget)
-        self._modal = False
-        self.name = f"eq4:{budget:g}"
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +32,9 @@ def runs(tmp_path_factory):
 
     def patched(name, ctx=None, **kw):
         base, _, arg = name.partition(":")
-        return _Eq4Budget(ctx, float(arg)) if base == "eq4" else make(name, ctx, **kw)
+        if base == "eq4":   # the relaxation r = b on the modal plant (the policy before its modal plan)
+            return BudgetedModelBasedPolicy(ctx, budget=float(arg), eq4_relaxation=True)
+        return make(name, ctx, **kw)
 
     policies.make = patched
     try:
@@ -224,3 +218,24 @@ def test_bad_battery_voltage_at_a_stop_raises():
     phys[OBS_INDEX["battery_v"]], phys[OBS_INDEX["charge_cmd_a"]] = np.nan, 0.0
     with pytest.raises(ValueError, match="vl"):
         pol.act(normalise_obs(phys[None, :]))
+
+
+def test_eq4_relaxation_option():
+    """``eq4_relaxation=True`` on the modal context: the reference after the stop is relaxed by the budget itself
+    (eq. 4's ``(1 + b) I2_sm``, as on the envelope context), no prediction is made, and it is not stacked with
+    the modal policies (its rows would get the modal plan)."""
+    from policies.batched import stackable
+    calls = []
+    orig = bm.relaxation
+    bm.relaxation = lambda *a: calls.append(a) or orig(*a)
+    try:
+        env4 = BudgetedModelBasedPolicy(PolicyContext(link_model="envelope"), budget=0.05)
+        opt = BudgetedModelBasedPolicy(PolicyContext(link_model="modal"), budget=0.05, eq4_relaxation=True)
+        cmd, vl = np.array([2.0, 0.0]), np.array([30.0, 30.0])
+        got = opt.i2_ref(cmd, vl)
+        assert np.allclose(got, env4.i2_ref(cmd, vl))
+        assert got[1] == pytest.approx(ModelBasedPolicy(opt.ctx).i2_ref(cmd, vl)[1] + 0.05 * opt._i2_sm)
+    finally:
+        bm.relaxation = orig
+    assert calls == [] and opt.name == "model_based_budget_eq4:0.05"
+    assert stackable(opt) is None and stackable(BudgetedModelBasedPolicy(opt.ctx, budget=0.05)) is not None
