@@ -69,6 +69,14 @@ class BudgetedModelBasedPolicy(ModelBasedPolicy):
         super().reset(n)
         self._stopped = self._relax = None
 
+    def act(self, obs, restart=None):
+        if self._modal and restart is not None and len(restart) and self._stopped is not None:
+            # a recycled row starts a new window as a fresh one does: stopped with r = b until its first charge
+            # (it kept the previous window's r when its new window opened with cmd <= 0)
+            self._stopped[restart] = True
+            self._relax[restart] = np.broadcast_to(np.asarray(self.budget, dtype=float), self._relax.shape)[restart]
+        return super().act(obs, restart)
+
     def i2_ref(self, cmd, vl):
         ref = super().i2_ref(cmd, vl)
         if self._modal:
@@ -89,7 +97,8 @@ class BudgetedModelBasedPolicy(ModelBasedPolicy):
         """The reference's relaxation after the stop per receiver (n,) on the exact-mode link: chosen at each
         receiver's stop (its first command <= 0 after a positive one) from its controller state, last duty and
         battery voltage (:func:`policies.budget_modal.relaxation`), kept until its command turns positive;
-        the budget itself before the controller exists (a window that starts stopped); 0 at budget 0 (the paper's
+        the budget itself before the controller exists (a window that starts stopped) and for a recycled row
+        (``restart``) until its first charge (eq. 4's ``r = b``, not calibrated on this link); 0 at budget 0 (the paper's
         controller, as on eq. 4: ``model_based`` stacked with budgeted variants stays itself). ``budget`` may be
         one per receiver (:class:`policies.batched.StackedModelBased`)."""
         from wpt_receiver import duty_from_v2_clipped

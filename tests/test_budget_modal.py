@@ -239,3 +239,29 @@ def test_eq4_relaxation_option():
         bm.relaxation = orig
     assert calls == [] and opt.name == "model_based_budget_eq4:0.05"
     assert stackable(opt) is None and stackable(BudgetedModelBasedPolicy(opt.ctx, budget=0.05)) is not None
+
+
+def test_a_recycled_row_starts_its_window_afresh():
+    """Two receivers on the modal context: both charge, both stop (each chooses its r from its state); row 0 is
+    recycled (``restart``) into a window that opens stopped. Its r is then the budget, as for a window that starts
+    stopped, not the previous window's r; row 1 keeps its own. After charging again, row 0's next stop chooses afresh."""
+    from mission_sim.contract import OBS_DIM, OBS_INDEX, normalise_obs
+    pol = BudgetedModelBasedPolicy(PolicyContext(link_model="modal"), budget=0.05)
+    pol.reset(2)
+    phys = np.zeros((2, OBS_DIM))
+    phys[:, OBS_INDEX["battery_v"]] = 30.0
+
+    def step(cmds, restart=None):
+        phys[:, OBS_INDEX["charge_cmd_a"]] = cmds
+        pol.act(normalise_obs(phys), restart)
+    for _ in range(20):
+        step([2.0, 3.0])
+    step([0.0, 0.0])
+    r_first = pol._relax.copy()
+    assert np.all(r_first > 0.0) and np.all(r_first != 0.05), r_first
+    step([0.0, 0.0], restart=np.array([0]))
+    assert pol._relax[0] == 0.05 and pol._relax[1] == r_first[1]
+    for _ in range(20):
+        step([2.0, 0.0])
+    step([0.0, 0.0])
+    assert pol._relax[0] != 0.05 and pol._relax[1] == r_first[1]
