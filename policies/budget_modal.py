@@ -22,9 +22,9 @@ steady state of the last duty before the stop, with the battery voltage measured
 
 **Why a running max on a fine grid.** ``P(r)`` is a saw-tooth at the 0.001 scale of ``r``: each tooth is
 (apparently) one control period by which the plan's arrival at duty 1 moves, ``P`` jumps up at a tooth's left
-edge and falls smoothly across it (window 1000 at b = 0.05: P = 9.91 % at r = 0.030, 6.56 % at 0.0315, 9.86 % at
-0.032; the closed loop on the env, with its implicit commutation, measured 9.96 / 8.46 / 6.61 / 9.92 % at 0.03 /
-0.031 / 0.0315 / 0.032: the explicit prediction is within 0.2 point of it there). A bisection or a coarse grid
+edge and falls smoothly across it (window 1000's stop at b = 0.05, target 8.48 %: P = 9.91 / 8.41 / 6.56 / 9.86 %
+at r = 0.03 / 0.031 / 0.0315 / 0.032; the closed loop on the env, with its implicit commutation, measured 9.96 /
+8.46 / 6.61 / 9.92 %: the explicit prediction is within 0.2 point of it there). A bisection or a coarse grid
 lands in a tooth's dip; the running max over a grid of step :data:`R_STEP` (finer than a tooth, ~9 points per
 tooth near r = 0.03) does not. Between two grid points the envelope may still be exceeded by up to the tooth's
 slope times the step (up to ~0.4 point at a tooth's left edge). The fine scan runs from ``r = 0`` up to the first
