@@ -26,7 +26,7 @@ edge and falls smoothly across it (window 1000's stop at b = 0.05, target 8.48 %
 at r = 0.03 / 0.031 / 0.0315 / 0.032; the closed loop on the env, with its implicit commutation, measured 9.96 /
 8.46 / 6.61 / 9.92 %: the explicit prediction is within 0.2 point of it there). A bisection or a coarse grid
 lands in a tooth's dip; the running max over a grid of step :data:`R_STEP` (finer than a tooth, ~9 points per
-tooth near r = 0.03) does not. Between two grid points the envelope may still be exceeded by up to the tooth's
+tooth near r = 0.03) does not. Between two grid points the running max may still be exceeded by up to the tooth's
 slope times the step (up to ~0.4 point at a tooth's left edge). The fine scan runs from ``r = 0`` up to the first
 grid point above the target (at most up to the coarse grid's first point above it), so its cost is ``r* /
 R_STEP`` predictions (~5 ms each: ~0.8 s per stop at b = 0.05, ~3.4 s at b = 0.1 on window 1000, load ~4).
@@ -128,7 +128,7 @@ def relaxation(budget, link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v) ->
     pc = np.array([pred(r) for r in coarse])
     target = np.nanmin(pc) + budget if np.any(np.isfinite(pc)) else -np.inf
     above = ~(pc <= target)   # NaN counts as above
-    # the envelope's first crossing lies at or below the coarse grid's first point above the target
+    # the running max's first crossing lies at or below the coarse grid's first point above the target
     r_end = coarse[int(np.argmax(above))] if above.any() else R_MAX
     n_fine = int(round(r_end / R_STEP))
     r_best = -1
