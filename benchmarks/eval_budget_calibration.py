@@ -3,7 +3,7 @@ oracle floor (:func:`policies.oracle.oracle_floor`, the paper's controller's sta
 env), energy after the stop, short-mode fraction; 95 % bootstrap intervals over the windows
 (:func:`policies.stats.mean_ci`). On the modal link both the plan predicted with the exact-mode link (the
 policy as it is, :mod:`policies.budget_modal`) and eq. 4's relaxation (``model_based_budget_eq4:b``: the same
-class with the modal prediction off, i.e. the policy before 2026-11-26) run side by side in one batched env.
+class with ``eq4_relaxation=True``, i.e. the policy before 2026-11-26) run side by side in one batched env.
 
     nice -n 10 python benchmarks/eval_budget_calibration.py --episodes 100 --out out/budget_calibration.json
 """
@@ -22,15 +22,7 @@ BUDGETS = (0.0, 0.01, 0.02, 0.05, 0.1)
 
 def _eq4_factory(ctx, budget=0.02, **kw):
     from policies.budgeted import BudgetedModelBasedPolicy
-
-    class Eq4Budget(BudgetedModelBasedPolicy):
-        """Eq. 4's relaxation r = b (the policy before its modal plan); a subclass, so that
-        :class:`policies.batched.StackedModelBased` does not stack it with the modal ones."""
-
-    pol = Eq4Budget(ctx, budget=budget, **kw)
-    pol._modal = False
-    pol.name = f"model_based_budget_eq4:{budget:g}"
-    return pol
+    return BudgetedModelBasedPolicy(ctx, budget=budget, eq4_relaxation=True, **kw)
 
 
 def _names(link):

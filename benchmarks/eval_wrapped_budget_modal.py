@@ -22,9 +22,8 @@ def _run(names, episodes, seed, eq4: bool):
     from policies.compare import run_policies
     init = budgeted.BudgetedModelBasedPolicy.__init__
 
-    def patched(self, *a, **kw):
-        init(self, *a, **kw)
-        self._modal = False if eq4 else self._modal
+    def patched(self, *a, **kw):   # the bases built inside residual / imitation take the option too
+        init(self, *a, **{"eq4_relaxation": eq4, **kw})
     budgeted.BudgetedModelBasedPolicy.__init__ = patched
     try:
         return run_policies(names, "nominal", episodes, seed, EnvConfig(link_model="modal"))

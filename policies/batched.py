@@ -57,7 +57,7 @@ def stackable(p):
     BudgetedModelBasedPolicy = _loaded("budgeted", "BudgetedModelBasedPolicy")
     ResidualPolicy, RLPolicy = _loaded("residual", "ResidualPolicy"), _loaded("rl", "RLPolicy")
 
-    if type(p) in (ModelBasedPolicy, BudgetedModelBasedPolicy):
+    if type(p) in (ModelBasedPolicy, BudgetedModelBasedPolicy) and not getattr(p, "eq4_relaxation", False):
         return ("model_based", p.ctx, p.lpf)
     if type(p) is RLPolicy:
         return _rl_key(p)

@@ -49,7 +49,10 @@ class BudgetedModelBasedPolicy(ModelBasedPolicy):
     name = "model_based_budget"
 
     def __init__(self, ctx: PolicyContext = PolicyContext(), lpf: LowPassFilter = LowPassFilter(),
-                 budget: float = 0.02):
+                 budget: float = 0.02, eq4_relaxation: bool = False):
+        """``eq4_relaxation=True``: the relaxation ``r = b`` on any link, also the modal one (the policy before its
+        modal plan, 2026-11-26; named ``model_based_budget_eq4:b``, not stacked with the others:
+        :func:`policies.batched.stackable`), for comparisons on the same plant."""
         budget = float(budget)
         if not (np.isfinite(budget) and 0.0 <= budget <= 1.0):
             raise ValueError(f"budget={budget!r} is invalid; valid range: [0, 1] (an overshoot fraction)")
@@ -57,13 +60,22 @@ class BudgetedModelBasedPolicy(ModelBasedPolicy):
         self.budget = budget
         wlm_v1, det, _ = self._consts
         self._i2_sm = wlm_v1 / det   # assumed short-mode current (V2 = 0)
-        self.name = f"model_based_budget:{budget:g}"
-        self._modal = ctx.link_model == "modal"
+        self.eq4_relaxation = bool(eq4_relaxation)
+        self.name = f"model_based_budget{'_eq4' if self.eq4_relaxation else ''}:{budget:g}"
+        self._modal = ctx.link_model == "modal" and not self.eq4_relaxation
         self._stopped = self._relax = None
 
     def reset(self, n: int = 1) -> None:
         super().reset(n)
         self._stopped = self._relax = None
+
+    def act(self, obs, restart=None):
+        if self._modal and restart is not None and len(restart) and self._stopped is not None:
+            # a recycled row starts a new window as a fresh one does: stopped with r = b until its first charge
+            # (it kept the previous window's r when its new window opened with cmd <= 0)
+            self._stopped[restart] = True
+            self._relax[restart] = np.broadcast_to(np.asarray(self.budget, dtype=float), self._relax.shape)[restart]
+        return super().act(obs, restart)
 
     def i2_ref(self, cmd, vl):
         ref = super().i2_ref(cmd, vl)
@@ -85,7 +97,8 @@ class BudgetedModelBasedPolicy(ModelBasedPolicy):
         """The reference's relaxation after the stop per receiver (n,) on the exact-mode link: chosen at each
         receiver's stop (its first command <= 0 after a positive one) from its controller state, last duty and
         battery voltage (:func:`policies.budget_modal.relaxation`), kept until its command turns positive;
-        the budget itself before the controller exists (a window that starts stopped); 0 at budget 0 (the paper's
+        the budget itself before the controller exists (a window that starts stopped) and for a recycled row
+        (``restart``) until its first charge (eq. 4's ``r = b``, not calibrated on this link); 0 at budget 0 (the paper's
         controller, as on eq. 4: ``model_based`` stacked with budgeted variants stays itself). ``budget`` may be
         one per receiver (:class:`policies.batched.StackedModelBased`)."""
         from wpt_receiver import duty_from_v2_clipped
@@ -102,6 +115,8 @@ class BudgetedModelBasedPolicy(ModelBasedPolicy):
             self._stopped, self._relax = np.zeros(len(cmd), bool), budget.copy()
         u0 = self._i2_sm - ctl.i2_sm_a   # the controller's input at the reference I2_sm (r = 0)
         for i in np.flatnonzero(stop & ~self._stopped & (budget > 0.0)):   # b = 0: the paper's controller, r = 0
+            if not (np.isfinite(vl[i]) and vl[i] > 0.0):   # before f^-1 divides by it
+                raise ValueError(f"vl={vl[i]!r} (receiver {i}) is invalid; valid range: a finite battery voltage > 0 V")
             d_prev = float(duty_from_v2_clipped(ctl.v2_cmd_v[i], vl[i]))
             self._relax[i] = relaxation(float(budget[i]), self.ctx.link, "schottky", self.ctx.control_period_s,
                                         ctl.discrete_ss, ctl.x[i], u0, self._i2_sm, d_prev, float(vl[i]))

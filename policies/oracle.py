@@ -205,14 +205,15 @@ class _FloorProblem(_Problem):
 
 #: the sources an oracle bound is computed with besides this file: the env's step and its replay
 #: (:mod:`envs.rollout`'s compiled replay, the envelope / modal / detuned links, the scenarios, the objective)
-#: and the link's physics in :mod:`wpt_receiver` (with the device presets' table). The base and start policies'
-#: modules enter the key as well (:func:`_policy_files`): the base sets the state at the stop, a start the
-#: local optimum the search finds.
+#: and the link's physics in :mod:`wpt_receiver` (with the device presets' table; ``inverse_controller``: the
+#: paper's controller, the base of the floor, and its ``discrete_ss`` that :mod:`policies.budget_modal` plans
+#: with). The base and start policies' modules enter the key as well (:func:`_policy_files`): the base sets the
+#: state at the stop, a start the local optimum the search finds.
 _ROLLOUT_SOURCES = (
     ("envs", ("core.py", "detuned.py", "layout.py", "modal_plant.py", "modal_step.py", "objective.py", "parts.py",
               "peaks.py", "plant.py", "rollout.py", "scenario.py", "sensing.py", "vector.py", "vector_kernel.py")),
-    ("wpt_receiver", ("coupling.py", "devices.py", "envelope.py", "lti.py", "modal_kernel.py", "params.py",
-                      "parts.toml", "sbar.py")),
+    ("wpt_receiver", ("coupling.py", "devices.py", "envelope.py", "inverse_controller.py", "lti.py",
+                      "modal_kernel.py", "params.py", "parts.toml", "sbar.py")),
 )
 
 

@@ -10,20 +10,12 @@ from envs import EnvConfig
 from mission_sim.contract import PolicyContext
 from policies import budget_modal as bm
 from policies.budgeted import BudgetedModelBasedPolicy
+from policies.classical import ModelBasedPolicy
 from policies.compare import run_policies
 
 MODAL = EnvConfig(link_model="modal")
 SEEDS = (1000, 4)
 BUDGETS = (0.0, 0.01, 0.02, 0.05)
-
-
-class _Eq4Budget(BudgetedModelBasedPolicy):
-    """The relaxation r = b on the modal plant (the policy before its modal plan; a subclass: not stacked)."""
-
-    def __init__(self, ctx, budget):
-        super().__init__(ctx, budget=budget)
-        self._modal = False
-        self.name = f"eq4:{budget:g}"
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +32,9 @@ def runs(tmp_path_factory):
 
     def patched(name, ctx=None, **kw):
         base, _, arg = name.partition(":")
-        return _Eq4Budget(ctx, float(arg)) if base == "eq4" else make(name, ctx, **kw)
+        if base == "eq4":   # the relaxation r = b on the modal plant (the policy before its modal plan)
+            return BudgetedModelBasedPolicy(ctx, budget=float(arg), eq4_relaxation=True)
+        return make(name, ctx, **kw)
 
     policies.make = patched
     try:
@@ -157,3 +151,117 @@ def test_each_stop_of_a_mission_chooses_its_relaxation():
             bm.relaxation = orig
         assert len(calls) == want, link_model
     assert calls == [] and pol._relax is None
+
+
+@pytest.fixture(scope="module")
+def stop_1000():
+    """The arguments of :func:`policies.budget_modal.relaxation` at nominal window 1000's real stop on the modal
+    env (``model_based_budget:0.05``), captured in the closed loop."""
+    caps = []
+    orig = bm.relaxation
+
+    def spy(*a):
+        caps.append(a)
+        return orig(*a)
+    bm.relaxation = spy
+    try:
+        run_policies(["model_based_budget:0.05"], "nominal", 1, 1000, MODAL)
+    finally:
+        bm.relaxation = orig
+    assert len(caps) == 1
+    return caps[0][1:]
+
+
+@pytest.mark.parametrize("budget", [0.02, 0.05])
+def test_every_smaller_relaxation_meets_the_target(stop_1000, budget):
+    """At a real stop, every r' <= r* on a 0.0005 grid (independent of the search's own step) predicts P <= F + b,
+    F the least over the coarse grid, and the search's next grid point above r* does not (r* is the largest).
+    P(r) is a saw-tooth here: a search that lands in a tooth's dip (r* = 0.0315 at b = 0.05, with r' = 0.03
+    predicting 9.91 % against the target 8.48 %) fails this."""
+    link, devices, dt, ss, x0, u0, du, d_prev, vl = stop_1000
+    a, b = bm._v2_plans(ss, x0, u0, du, int(round(bm.HORIZON_S / dt)))
+
+    def pred(r):
+        return bm.predicted_overshoot(link, devices, dt, d_prev, vl, a, b, r)
+    target = min(pred(r) for r in np.linspace(0.0, bm.R_MAX, bm._N_GRID)) + budget
+    r_star = bm.relaxation(budget, *stop_1000)
+    assert 0.0 < r_star < bm.R_MAX
+    worst = max(pred(r) for r in np.arange(0.0, r_star + 1e-12, 0.0005))
+    assert worst <= target, (r_star, worst, target)
+    assert pred(r_star + bm.R_STEP) > target
+
+
+@pytest.mark.parametrize("field,value", [("vl_v", float("nan")), ("vl_v", -30.0), ("vl_v", 0.0),
+                                         ("d_prev", float("nan")), ("d_prev", 1.5), ("x0", float("nan")),
+                                         ("budget", float("nan"))])
+def test_bad_stop_state_raises(stop_1000, field, value):
+    """A NaN or out-of-range battery voltage, last duty, controller state or budget raises ValueError naming the
+    value (a NaN made every P NaN, so that no P exceeded the target and r = R_MAX was returned silently)."""
+    link, devices, dt, ss, x0, u0, du, d_prev, vl = stop_1000
+    kw = {"budget": 0.05, "vl_v": vl, "d_prev": d_prev, "x0": x0}
+    kw[field] = np.full_like(x0, value) if field == "x0" else value
+    with pytest.raises(ValueError, match=field):
+        bm.relaxation(kw["budget"], link, devices, dt, ss, kw["x0"], u0, du, kw["d_prev"], kw["vl_v"])
+
+
+def test_bad_battery_voltage_at_a_stop_raises():
+    """The policy's one-receiver path: a stop observed with a NaN battery voltage raises ValueError naming it
+    (it chose r = R_MAX silently; a measured voltage below 20 V is clamped by the policy's sensing)."""
+    from mission_sim.contract import OBS_DIM, OBS_INDEX, normalise_obs
+    pol = BudgetedModelBasedPolicy(PolicyContext(link_model="modal"), budget=0.02)
+    pol.reset(1)
+    phys = np.zeros(OBS_DIM)
+    phys[OBS_INDEX["battery_v"]] = 30.0
+    phys[OBS_INDEX["charge_cmd_a"]] = 2.0
+    for _ in range(20):
+        pol.act(normalise_obs(phys[None, :]))
+    phys[OBS_INDEX["battery_v"]], phys[OBS_INDEX["charge_cmd_a"]] = np.nan, 0.0
+    with pytest.raises(ValueError, match="vl"):
+        pol.act(normalise_obs(phys[None, :]))
+
+
+def test_eq4_relaxation_option():
+    """``eq4_relaxation=True`` on the modal context: the reference after the stop is relaxed by the budget itself
+    (eq. 4's ``(1 + b) I2_sm``, as on the envelope context), no prediction is made, and it is not stacked with
+    the modal policies (its rows would get the modal plan)."""
+    from policies.batched import stackable
+    calls = []
+    orig = bm.relaxation
+    bm.relaxation = lambda *a: calls.append(a) or orig(*a)
+    try:
+        env4 = BudgetedModelBasedPolicy(PolicyContext(link_model="envelope"), budget=0.05)
+        opt = BudgetedModelBasedPolicy(PolicyContext(link_model="modal"), budget=0.05, eq4_relaxation=True)
+        cmd, vl = np.array([2.0, 0.0]), np.array([30.0, 30.0])
+        got = opt.i2_ref(cmd, vl)
+        assert np.allclose(got, env4.i2_ref(cmd, vl))
+        assert got[1] == pytest.approx(ModelBasedPolicy(opt.ctx).i2_ref(cmd, vl)[1] + 0.05 * opt._i2_sm)
+    finally:
+        bm.relaxation = orig
+    assert calls == [] and opt.name == "model_based_budget_eq4:0.05"
+    assert stackable(opt) is None and stackable(BudgetedModelBasedPolicy(opt.ctx, budget=0.05)) is not None
+
+
+def test_a_recycled_row_starts_its_window_afresh():
+    """Two receivers on the modal context: both charge, both stop (each chooses its r from its state); row 0 is
+    recycled (``restart``) into a window that opens stopped. Its r is then the budget, as for a window that starts
+    stopped, not the previous window's r; row 1 keeps its own. After charging again, row 0's next stop chooses afresh."""
+    from mission_sim.contract import OBS_DIM, OBS_INDEX, normalise_obs
+    pol = BudgetedModelBasedPolicy(PolicyContext(link_model="modal"), budget=0.05)
+    pol.reset(2)
+    phys = np.zeros((2, OBS_DIM))
+    phys[:, OBS_INDEX["battery_v"]] = 30.0
+
+    def step(cmds, restart=None):
+        phys[:, OBS_INDEX["charge_cmd_a"]] = cmds
+        pol.act(normalise_obs(phys), restart)
+    for _ in range(20):
+        step([2.0, 3.0])
+    step([0.0, 0.0])
+    r_first = pol._relax.copy()
+    assert np.all(r_first > 0.0) and np.all(r_first != 0.05), r_first
+    step([0.0, 0.0], restart=np.array([0]))
+    assert pol._relax[0] == 0.05 and pol._relax[1] == r_first[1]
+    for _ in range(20):
+        step([2.0, 0.0])
+    step([0.0, 0.0])
+    assert pol._relax[0] != 0.05 and pol._relax[1] == r_first[1]
