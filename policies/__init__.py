@@ -2,7 +2,7 @@
 
 Modules: ``classical`` (step, ramp, model_based), ``kernels`` (their compiled per-step functions for
 the mission's fast path; numba, imported on demand), ``onoff``, ``online``, ``budgeted``, ``budget_modal``,
-``random_policy``, ``mpc``, ``oracle``, ``rl`` / ``residual`` / ``constrained`` / ``imitation`` / ``smoothing`` /
+``random_policy``, ``mpc``, ``oracle``, ``rl`` / ``residual`` / ``constrained`` / ``imitation`` / ``obs_mask`` / ``smoothing`` /
 ``train`` / ``callbacks`` / ``hyperparams`` / ``slow_budget`` (RL, needs stable-baselines3), ``oracle_imitation`` / ``oracle_imitation_train``, ``inference``,
 ``compare``, ``batched``, ``forked``, ``stats``, ``threads``.
 
@@ -26,6 +26,7 @@ Modules, from the classical controllers to learning and comparing:
 ``residual``       model-based duty plus a bounded learned correction
 ``constrained``    Lagrangian cost penalty and residual action space on SB3
 ``imitation``      behaviour cloning / DAgger of a (privileged) teacher into an SB3 PPO actor
+``obs_mask``       observation fields held at exactly 0 at the network input (imitation's mask, kept by PPO)
 ``smoothing``      low-pass filtered duty and duty-change penalty (SAC / TD3 / PPO train options)
 ``slow_budget``    a learned policy acting in a slow variable: the MPC's overshoot budget per step
 ``oracle_imitation``  the oracle's after-stop sequence learned from the stop observation (amortised imitation)

@@ -77,8 +77,8 @@ class CostEvalCallback(EvalCallback):
         obs_norm = None
         if norm is not None:
             norm.save(str(folder / "best_feasible_vecnormalize.pkl"))
-            obs_norm = {"mean": norm.obs_rms.mean.tolist(), "var": norm.obs_rms.var.tolist(),
-                        "clip": float(norm.clip_obs), "epsilon": float(norm.epsilon)}
+            from .obs_mask import obs_norm_meta
+            obs_norm = obs_norm_meta(norm)
         self.feasible = {**point, "obs_norm": obs_norm}
 
     def _log_success_callback(self, locals_, globals_) -> None:

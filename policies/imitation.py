@@ -37,6 +37,8 @@ Loss: mean squared error of the action in [-1, 1] (Adam, minibatches, ``epochs``
 Input normalisation: the running mean / variance of the collected inputs, stored like
 ``VecNormalize``'s (``obs_norm`` in the metadata JSON and ``vecnormalize.pkl``), so ``RLPolicy``,
 ``PPO.load`` + ``VecNormalize.load`` and ``train --resume`` (fine-tuning) all see the same numbers.
+The masked fields are exactly 0 at the network's input, in cloning and in PPO fine-tuning (their
+statistics frozen, ``obs_norm["masked"]``; :mod:`policies.obs_mask`).
 """
 
 from __future__ import annotations
@@ -121,11 +123,14 @@ def student_actions(policy, x_norm) -> np.ndarray:
 class _Norm:
     """Input normalisation of the student: ``VecNormalize``'s arithmetic on fixed statistics."""
 
-    def __init__(self, mean, var, clip: float = 10.0, eps: float = 1e-8):
+    def __init__(self, mean, var, clip: float = 10.0, eps: float = 1e-8, masked=()):
         self.mean, self.var, self.clip, self.eps = np.asarray(mean), np.asarray(var), float(clip), float(eps)
+        self.masked = np.asarray(masked, dtype=np.int64)   # columns held at exactly 0 (policies.obs_mask)
 
     def __call__(self, x) -> np.ndarray:
-        return np.clip((x - self.mean) / np.sqrt(self.var + self.eps), -self.clip, self.clip).astype(np.float32)
+        out = np.clip((x - self.mean) / np.sqrt(self.var + self.eps), -self.clip, self.clip).astype(np.float32)
+        out[..., self.masked] = 0.0
+        return out
 
 
 #: variance given to a masked input: its normalised value is ~0 whatever it is (dropped, in the same arithmetic)
@@ -136,11 +141,12 @@ def _input_norm(X, spec: ImitationSpec) -> _Norm:
     """Mean / variance of the inputs; the ``masked`` fields of every frame are dropped (by default
     ``last_d_short`` (the "copycat" problem of cloning smooth actions with the previous action in the input: the
     student learns ``d_k = d_{k-1}`` and its closed loop dithers the duty next to the 4 kHz resonance)."""
+    from .obs_mask import masked_indices
+
     mean, var = X.mean(axis=0), X.var(axis=0)
-    width = X.shape[1] // spec.history
-    for field in spec.masked:
-        var[np.arange(spec.history) * width + OBS_INDEX[field]] = _MASKED_VAR
-    return _Norm(mean, var)
+    idx = masked_indices(spec.masked, spec.history, X.shape[1])
+    var[idx] = _MASKED_VAR   # also in the statistics, for loaders that ignore obs_norm["masked"]
+    return _Norm(mean, var, masked=idx)
 
 
 def collect(spec: ImitationSpec, seed: int, student=None, beta: float = 1.0, config=None):
@@ -258,17 +264,18 @@ def _student_fn(model, norm: _Norm):
 def _new_model(spec: ImitationSpec, config=None, ppo_kwargs=None):
     """A PPO ``MlpPolicy`` on the stacked observation (the env stack ``train`` uses, for fine-tuning)."""
     import stable_baselines3 as sb3
-    from stable_baselines3.common.vec_env import VecNormalize
 
     from envs.history import HistoryVecEnv
+
+    from .obs_mask import MaskedVecNormalize
     from envs.sb3_vec import SbarSB3VecEnv
 
     venv = SbarSB3VecEnv(8, spec.scenario, config)   # 8 x n_steps 128 = one minibatch of 1024 when fine-tuned
     if spec.residual_scale:
         from .constrained import ResidualVecEnv
         venv = ResidualVecEnv(venv, spec.residual_scale, spec.residual_base_budget)
-    venv = VecNormalize(HistoryVecEnv(venv, spec.history) if spec.history > 1 else venv, norm_obs=True,
-                        norm_reward=True, clip_obs=10.0, gamma=0.98)
+    venv = MaskedVecNormalize(HistoryVecEnv(venv, spec.history) if spec.history > 1 else venv, norm_obs=True,
+                              norm_reward=True, clip_obs=10.0, gamma=0.98)   # the mask: set with the statistics
     kw = dict(net_arch=list(spec.net_arch), log_std_init=spec.log_std_init)
     return sb3.PPO("MlpPolicy", venv, seed=spec.seed, verbose=0, device="cpu", policy_kwargs=kw,
                    **(ppo_kwargs or {})), venv
@@ -298,11 +305,14 @@ def imitate(spec: ImitationSpec, out_dir, *, name: str = "ppo_sbar", config=None
         rms = fit_student(model, X, Y, norm, spec, rng)
         log.append({"iteration": it, "samples": int(len(X)), "train_rms_action": rms})
     venv.obs_rms.mean, venv.obs_rms.var = norm.mean.astype(np.float64), norm.var.astype(np.float64)
+    venv.set_mask(norm.masked)   # fine-tuning keeps these columns at 0, their statistics frozen (policies.obs_mask)
     return _save(model, venv, spec, out, name, log, base_meta or {})
 
 
 def _save(model, venv, spec: ImitationSpec, out: Path, name: str, log: list, base_meta: dict) -> dict:
     from dataclasses import asdict
+
+    from .obs_mask import obs_norm_meta
 
     zip_path = out / f"{name}.zip"
     model.save(str(zip_path))
@@ -312,8 +322,7 @@ def _save(model, venv, spec: ImitationSpec, out: Path, name: str, log: list, bas
             "action_filter": spec.action_filter,
             "obs_dim": int(venv.observation_space.shape[0]),
             "policy_kwargs": {"net_arch": list(spec.net_arch), "log_std_init": spec.log_std_init},
-            "obs_norm": {"mean": venv.obs_rms.mean.tolist(), "var": venv.obs_rms.var.tolist(),
-                         "clip": float(venv.clip_obs), "epsilon": float(venv.epsilon)},
+            "obs_norm": obs_norm_meta(venv),
             **base_meta,
             "residual": {"scale": spec.residual_scale, "base_budget": spec.residual_base_budget,
                          "base": f"model_based_budget:{spec.residual_base_budget:g}"} if spec.residual_scale else None,

@@ -84,6 +84,8 @@ class RLPolicy:
             self._mean = np.asarray(norm["mean"], dtype=np.float32)
             self._scale = (1.0 / np.sqrt(np.asarray(norm["var"], dtype=np.float64) + norm["epsilon"])).astype(np.float32)
             self._clip = float(norm["clip"])
+            self._scale[np.asarray(norm.get("masked", ()), dtype=np.int64)] = 0.0   # hidden fields: exactly 0 in
+            # (policies.obs_mask; models without the key, trained before it, are unchanged)
         else:
             self._mean = None
         # models trained on the 7-field contract (before t_since_stop_s) see the first obs_dim fields

@@ -220,6 +220,7 @@ def _build(spec: dict, out: Path, resume):
     from stable_baselines3.common.vec_env import VecNormalize
 
     from .constrained import CostPenaltyVecEnv
+    from .obs_mask import MaskedVecNormalize
 
     venv = _base_env(spec, spec["n_envs"], out / "monitor")
     penalty = None
@@ -228,10 +229,8 @@ def _build(spec: dict, out: Path, resume):
     eval_env = _base_env(spec, spec["eval_episodes"], None, reset_seed=EVAL_SEED)
     if penalty is not None:   # same wrapper chain as training (sync_envs_normalization walks both); the
         eval_env = CostPenaltyVecEnv(eval_env, 0.0)   # evaluation return is VecMonitor's, unpenalised
-    eval_env = VecNormalize(eval_env, training=False,
-                            norm_obs=True, norm_reward=False, clip_obs=10.0, gamma=spec["hp"].get("gamma", 0.99))
     cls = getattr(sb3, spec["algo"].upper())
-    if resume is not None:
+    if resume is not None:   # a masked clone's / run's statistics load as a MaskedVecNormalize (policies.obs_mask)
         venv = VecNormalize.load(str(_checkpoint_pkl(Path(resume))), venv)
         model = cls.load(str(resume), env=venv, device="cpu")
     else:
@@ -241,6 +240,9 @@ def _build(spec: dict, out: Path, resume):
             spec["hp"]["action_noise"] = NormalActionNoise(np.zeros(1), 0.1 * np.ones(1))
         model = cls("MlpPolicy", venv, seed=spec["seed"], verbose=0, device="cpu", tensorboard_log=spec["tb"],
                     **spec["hp"])
+    kw = dict(training=False, norm_obs=True, norm_reward=False, clip_obs=10.0, gamma=spec["hp"].get("gamma", 0.99))
+    eval_env = MaskedVecNormalize(eval_env, venv.masked, **kw) if isinstance(venv, MaskedVecNormalize) \
+        else VecNormalize(eval_env, **kw)   # the training env's mask (policies.obs_mask)
     return venv, eval_env, model, penalty
 
 
@@ -303,6 +305,8 @@ def _reproduce(spec: dict) -> str:
 
 
 def _meta(spec: dict, venv, lag, probe_dt: float) -> dict:
+    from .obs_mask import obs_norm_meta
+
     hp = spec["hp"]
     return {
         "algo": spec["algo"], "env_id": spec["env_id"], "discrete": spec["algo"] == "dqn", "scenario": spec["scenario"],
@@ -323,8 +327,7 @@ def _meta(spec: dict, venv, lag, probe_dt: float) -> dict:
                         "every": spec["slow_budget_every"],
                         "action": "b = lo + (a + 1) / 2 (hi - lo): the MPC's measured-overshoot budget"}
         if spec.get("slow_budget") else None,
-        "obs_norm": {"mean": venv.obs_rms.mean.tolist(), "var": venv.obs_rms.var.tolist(),
-                     "clip": float(venv.clip_obs), "epsilon": float(venv.epsilon)},
+        "obs_norm": obs_norm_meta(venv),
         "eval": {"seed": EVAL_SEED, "episodes": spec["eval_episodes"], "every_steps": spec["eval_every"]},
         "reproduce": _reproduce(spec),
     }

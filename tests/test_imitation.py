@@ -254,3 +254,50 @@ def test_train_imitate_then_ppo_keeps_the_clone_and_records_the_log_std_ppo_star
     with open(ft / "clone_vecnormalize.pkl", "rb") as f1, open(only["vecnormalize"], "rb") as f2:
         np.testing.assert_array_equal(pickle.load(f1).obs_rms.mean, pickle.load(f2).obs_rms.mean)
     np.testing.assert_allclose(c_meta["obs_norm"]["mean"], json.loads(only["meta"].read_text())["obs_norm"]["mean"])
+
+
+def test_masked_fields_stay_invisible_after_ppo_fine_tuning(tmp_path):
+    """``--imitation-mask`` holds through PPO: after fine-tuning, the actions of the fine-tuned model do not
+    depend on the masked fields at all (bit-identical when only they change, in ``RLPolicy``'s numpy actor,
+    its SB3 ``predict`` path, the stacked seed rows of ``policies.batched`` and ``PPO.load`` +
+    ``VecNormalize.load``), while they do depend on an unmasked field; the masked fields' statistics stay
+    the clone's. (Before the mask was kept, PPO's running statistics let them back in, attenuated ~1/sqrt(var).)"""
+    import json
+
+    import stable_baselines3 as sb3
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from envs.sb3_vec import SbarSB3VecEnv
+    from policies.batched import StackedRL
+    from policies.rl import RLPolicy
+    from policies.train import train
+
+    kw = dict(n_envs=8, scenario="nominal", progress=False, env={"n_steps": 40}, imitate="model_based_budget:0.05",
+              imitation_episodes=2, imitation_epochs=2, imitation_mask=FEEDFORWARD, seed=4, eval_every=10**9,
+              checkpoint_every=10**9, hyperparams={"n_steps": 64, "batch_size": 128, "n_epochs": 4})
+    res = train("ppo", 2048, tmp_path / "ft", **kw)
+    c_meta, t_meta = (json.loads((tmp_path / "ft" / f"{n}.json").read_text()) for n in ("clone", "ppo_sbar"))
+    idx = [OBS_INDEX[f] for f in FEEDFORWARD]
+    rng = np.random.default_rng(1)
+    obs = rng.uniform(-1.0, 1.0, (16, OBS_DIM)).astype(np.float32)
+    moved = obs.copy()
+    moved[:, idx] += rng.uniform(-3.0, 3.0, (16, len(idx))).astype(np.float32)   # the hidden currents, far apart
+    other = obs.copy()
+    other[:, OBS_INDEX["charge_cmd_a"]] += 0.5
+    for fast in (True, False):
+        pol = RLPolicy(path=res["model"], fast=fast)
+        d = pol.act(obs)
+        np.testing.assert_array_equal(pol.act(moved), d)
+        assert not np.array_equal(pol.act(other), d)   # the test can fail: a visible field does move the duty
+    stacked = StackedRL([RLPolicy(path=res["model"]), RLPolicy(path=res["model"])])
+    stacked.reset(16)
+    both = stacked.act(np.concatenate([obs, obs]))   # (the stacked matmul may differ from one actor's by 1 ulp)
+    np.testing.assert_array_equal(stacked.act(np.concatenate([moved, moved])), both)
+    model = sb3.PPO.load(str(res["model"]), device="cpu")
+    vn = VecNormalize.load(str(res["vecnormalize"]), SbarSB3VecEnv(1, "nominal", _cfg()))
+    vn.training = False
+    a, _ = model.predict(vn.normalize_obs(obs), deterministic=True)
+    b, _ = model.predict(vn.normalize_obs(moved), deterministic=True)
+    np.testing.assert_array_equal(a, b)
+    assert t_meta["obs_norm"]["masked"] == sorted(idx)
+    np.testing.assert_array_equal(np.take(t_meta["obs_norm"]["var"], idx), np.take(c_meta["obs_norm"]["var"], idx))
