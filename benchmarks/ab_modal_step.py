@@ -30,7 +30,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import profile_modal_step as pm  # noqa: E402
-from envs import EnvConfig, SbarChargingVectorEnv  # noqa: E402
 from envs import modal_step as ms_b  # noqa: E402
 from envs.core import OBS_OFFSET, OBS_SCALE  # noqa: E402
 from envs.layout import INFO  # noqa: E402
@@ -75,19 +74,7 @@ def _run(mod, s):
 
 def run(path, n=1024, actions="random", snaps=10, reps=9, warm=60, seed=0, scenario="random", kernel_path=None):
     mod_a = _load(path, kernel_path)
-    env = SbarChargingVectorEnv(num_envs=n, scenario=scenario, num_threads=1, config=EnvConfig(link_model="modal"))
-    env.reset(seed=seed)
-    rng = np.random.default_rng(seed)
-
-    def act():
-        return (rng.uniform(-1, 1, (n, 1)) if actions == "random" else np.zeros((n, 1))).astype(np.float32)
-    for _ in range(warm):
-        env.step(act())
-    shots, grab, orig = pm._capture(env, snaps)
-    env.parts.plant.step = grab
-    for _ in range(snaps):
-        env.step(act())
-    env.parts.plant.step = orig
+    shots = pm.captured_steps(n, actions, scenario, warm, snaps, seed)
     _run(mod_a, pm._copy(shots[0])), _run(ms_b, pm._copy(shots[0]))   # compile / cache load
     ta, tb, same = [], [], True
     for s in shots:

@@ -156,7 +156,9 @@ def _fallbacks(snaps, n_win=200):
     return cnt
 
 
-def run(n=1024, actions="random", scenario="random", warm=60, snaps=20, reps=3, seed=0):
+def captured_steps(n, actions, scenario, warm, snaps, seed):
+    """``snaps`` plant steps of a modal vector env of ``n`` windows (after ``warm`` steps; ``actions`` "random"
+    or "held" duties), captured for replay (:func:`_capture`)."""
     env = SbarChargingVectorEnv(num_envs=n, scenario=scenario, num_threads=1, config=EnvConfig(link_model="modal"))
     env.reset(seed=seed)
     rng = np.random.default_rng(seed)
@@ -170,6 +172,11 @@ def run(n=1024, actions="random", scenario="random", warm=60, snaps=20, reps=3, 
     for _ in range(snaps):
         env.step(act())
     env.parts.plant.step = orig
+    return shots
+
+
+def run(n=1024, actions="random", scenario="random", warm=60, snaps=20, reps=3, seed=0):
+    shots = captured_steps(n, actions, scenario, warm, snaps, seed)
     res = {"n": n, "actions": actions, "scenario": scenario, "load_avg_1min": os.getloadavg()[0]}
     counts = [_link(_copy(s)) for s in shots]
     res["split_fraction"] = sum(c[1] for c in counts) / (snaps * n)
