@@ -141,17 +141,18 @@ class DutyRollout:
     def _replay(self, env, duty, out):
         """Step ``env`` with ``duty`` (T', m) in one compiled call; energy, peak and I_L into ``out`` (3, T', m)."""
         from .vector_kernel import INFO_ROWS
-        cols = np.array([INFO_ROWS.index(k) for k in ("energy_j", "i2_peak_a", "rect_current_a")], dtype=np.int64)
         ep = (env._i2sm_all, env._stop_k, env._t_stop, env._run_max, env._sm_ok, env._sm_checked)
         scale, offset = env._obs_scale[:, 0].copy(), env._obs_offset[:, 0].copy()
         if self._modal:
-            _replay_modal()(duty, env._state, env._mstate, env._k, env._j, env._lc, env._coef_cur, env._bat, env._cmd,
-                            env._noise, env._lm_all, ep, env._M, env._n_sub, env._par, scale, offset, env._tab,
-                            len(INFO_ROWS), cols, out)
+            info = _replay_modal()(duty, env._state, env._mstate, env._k, env._j, env._lc, env._coef_cur, env._bat,
+                                   env._cmd, env._noise, env._lm_all, ep, env._M, env._n_sub, env._par, scale, offset,
+                                   env._tab, len(INFO_ROWS))
         else:
-            _replay()(duty, env._state, env._k, env._j, env._coef_tab, env._coef_ix, env._bat, env._cmd, env._noise,
-                      env._lm_all, ep, env._M, env._n_sub, env._par, scale, offset, env._peak.kernel_table,
-                      len(INFO_ROWS), cols, out)
+            info = _replay()(duty, env._state, env._k, env._j, env._coef_tab, env._coef_ix, env._bat, env._cmd,
+                             env._noise, env._lm_all, ep, env._M, env._n_sub, env._par, scale, offset,
+                             env._peak.kernel_table, len(INFO_ROWS))
+        cols = [INFO_ROWS.index(k) for k in ("energy_j", "i2_peak_a", "rect_current_a")]
+        out[...] = info[:, :, cols].transpose(2, 0, 1)   # (T', m, 3) -> (3, T', m)
         env._started = False   # the env's own bookkeeping (autoreset flags) was bypassed: reset before reuse
 
     def _run_steps(self, env, d) -> RolloutResult:
@@ -201,18 +202,14 @@ def _replay():
 
         @njit(cache=True)
         def replay(duty, state, k, j, coef_tab, coef_ix, bat, cmd_all, noise_all, lm_all, ep, slow_every, n_sub,
-                   par, scale, offset, ptab, n_info, cols, out):
+                   par, scale, offset, ptab, n_info):
             T, n = duty.shape
-            obs = np.empty((n, 8), np.float32)
-            reward = np.empty(n)
-            trunc = np.empty(n, np.bool_)
-            info = np.empty((n, n_info))
+            obs, reward, trunc = np.empty((n, 8), np.float32), np.empty(n), np.empty(n, np.bool_)
+            info = np.empty((T, n, n_info))   # every step's info block (DutyRollout._replay takes its columns)
             for s in range(T):
                 step_kernel(duty[s], state, k, j, coef_tab, coef_ix, bat, cmd_all, noise_all, lm_all, ep,
-                            slow_every, n_sub, par, scale, offset, ptab, obs, reward, trunc, info)
-                for c in range(cols.shape[0]):
-                    for e in range(n):
-                        out[c, s, e] = info[e, cols[c]]
+                            slow_every, n_sub, par, scale, offset, ptab, obs, reward, trunc, info[s])
+            return info
 
         _REPLAY.append(replay)
     return _REPLAY[0]
@@ -232,18 +229,14 @@ def _replay_modal():
 
         @njit(cache=True)
         def replay_modal(duty, state, mstate, k, j, lc_all, cz_all, bat, cmd_all, noise_all, lm_all, ep, slow_every,
-                         n_sub, par, scale, offset, tab, n_info, cols, out):
+                         n_sub, par, scale, offset, tab, n_info):
             T, n = duty.shape
-            obs = np.empty((n, 8), np.float32)
-            reward = np.empty(n)
-            trunc = np.empty(n, np.bool_)
-            info = np.empty((n, n_info))
+            obs, reward, trunc = np.empty((n, 8), np.float32), np.empty(n), np.empty(n, np.bool_)
+            info = np.empty((T, n, n_info))   # as _replay's loop, on the modal step
             for s in range(T):
                 step_kernel(duty[s], state, mstate, k, j, lc_all, cz_all, bat, cmd_all, noise_all, lm_all, ep,
-                            slow_every, n_sub, par, scale, offset, tab, obs, reward, trunc, info)
-                for c in range(cols.shape[0]):
-                    for e in range(n):
-                        out[c, s, e] = info[e, cols[c]]
+                            slow_every, n_sub, par, scale, offset, tab, obs, reward, trunc, info[s])
+            return info
 
         _REPLAY_MODAL.append(replay_modal)
     return _REPLAY_MODAL[0]
