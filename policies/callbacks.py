@@ -62,6 +62,17 @@ class CostEvalCallback(EvalCallback):
         self.curve: list[dict] = []
         self.budget = budget
         self.feasible: dict | None = None
+        self.best: dict | None = None
+
+    def _save_norm(self, pkl_name: str) -> dict | None:
+        """The training VecNormalize of this moment saved as ``<best_model_save_path>/pkl_name``; its
+        ``obs_norm`` metadata (None without normalisation)."""
+        norm = self.model.get_vec_normalize_env()
+        if norm is None:
+            return None
+        norm.save(str(Path(self.best_model_save_path) / pkl_name))
+        from .obs_mask import obs_norm_meta
+        return obs_norm_meta(norm)
 
     def _keep_if_feasible(self, point: dict) -> None:
         """Save the model when ``point`` (an eval_curve entry) is feasible and the best so far."""
@@ -71,15 +82,14 @@ class CostEvalCallback(EvalCallback):
             return
         if self.feasible is not None and point["return_mean"] <= self.feasible["return_mean"]:
             return
-        folder = Path(self.best_model_save_path)
-        self.model.save(str(folder / "best_feasible_model.zip"))
-        norm = self.model.get_vec_normalize_env()
-        obs_norm = None
-        if norm is not None:
-            norm.save(str(folder / "best_feasible_vecnormalize.pkl"))
-            from .obs_mask import obs_norm_meta
-            obs_norm = obs_norm_meta(norm)
-        self.feasible = {**point, "obs_norm": obs_norm}
+        self.model.save(str(Path(self.best_model_save_path) / "best_feasible_model.zip"))
+        self.feasible = {**point, "obs_norm": self._save_norm("best_feasible_vecnormalize.pkl")}
+
+    def _keep_best_norm(self, point: dict) -> None:
+        """``EvalCallback`` has just written ``best_model.zip`` (a new best mean return): keep the training
+        VecNormalize statistics it was evaluated with (``best_vecnormalize.pkl``, ``best["obs_norm"]``),
+        not the end of training's, which drift on (the policy's input scaling is part of the model)."""
+        self.best = {**point, "obs_norm": self._save_norm("best_vecnormalize.pkl")}
 
     def _log_success_callback(self, locals_, globals_) -> None:
         super()._log_success_callback(locals_, globals_)
@@ -90,6 +100,7 @@ class CostEvalCallback(EvalCallback):
 
     def _on_step(self) -> bool:
         self._ep = [] if self.eval_freq > 0 and self.n_calls % self.eval_freq == 0 else self._ep
+        best_before = self.best_mean_reward
         go_on = super()._on_step()
         if self.eval_freq > 0 and self.n_calls % self.eval_freq == 0 and self._ep:
             c, o, s = (float(np.mean(x)) for x in zip(*self._ep))
@@ -100,6 +111,8 @@ class CostEvalCallback(EvalCallback):
                                "return_std": float(np.std(self.evaluations_results[-1])), "cost": c,
                                "overshoot": o, "reached_short_mode": s})
             self._keep_if_feasible(self.curve[-1])
+            if self.best_model_save_path is not None and self.best_mean_reward > best_before:
+                self._keep_best_norm(self.curve[-1])
             if self.log_path is not None:
                 Path(self.log_path).parent.mkdir(parents=True, exist_ok=True)
                 (Path(self.log_path).parent / "eval_curve.json").write_text(json.dumps(self.curve, indent=1))

@@ -49,7 +49,7 @@ DEFAULT_POLICIES = ("step", "ramp", "hysteresis", "model_based", "model_based_on
 DEFAULT_SCENARIOS = ("nominal", "lm_mismatch", "windy", "battery", "lm_high", "lm_drift", "lm_drift_fast",
                      "sense_delay", "sense_delay_long", "battery_low", "battery_empty", "detuned", "detuned_wide")
 #: policies without an oracle gap (far from short mode without overshoot: the gap says nothing)
-NO_GAP = ("step", "hysteresis", "random", "rl")
+NO_GAP = ("step", "hysteresis", "random")
 REFERENCE = "model_based"
 DEFAULT_EPISODES = 100
 #: learned kinds shipped with several training seeds (``policies/pretrained/<prefix>_s<k>.zip``)

@@ -490,9 +490,11 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
         _imitation_meta(meta, out, start_log_std)
     meta_path = zip_path.with_suffix(".json")
     meta_path.write_text(json.dumps(meta, indent=2))
-    if (out / "eval" / "best_model.zip").is_file():   # usable as rl:/residual: too (normalisation: the final one)
-        (out / "eval" / "best_model.json").write_text(json.dumps({**meta, "note": "best evaluation return; obs_norm "
-                                                                  "is the end of training's"}, indent=2))
+    if (out / "eval" / "best_model.zip").is_file() and ev.best is not None:   # usable as rl:/residual: too
+        best = {k: v for k, v in ev.best.items() if k != "obs_norm"}
+        (out / "eval" / "best_model.json").write_text(json.dumps(
+            {**meta, "obs_norm": ev.best["obs_norm"] or meta["obs_norm"], "selected_at": best,
+             "note": "best evaluation return, with the training normalisation it was evaluated with"}, indent=2))
     if ev.feasible is not None:   # best evaluation within the budget, with its own normalisation
         feas = {k: v for k, v in ev.feasible.items() if k != "obs_norm"}
         (out / "eval" / "best_feasible_model.json").write_text(json.dumps(

@@ -79,6 +79,23 @@ def test_outputs_metadata_eval_and_checkpoints(runs):
     assert not (runs["ppo"]["eval_dir"] / "best_feasible_model.zip").exists()   # unconstrained: no budget
 
 
+@pytest.mark.parametrize("kind", ["ppo", "res"])
+def test_best_model_json_carries_the_normalisation_it_was_evaluated_with(runs, kind):
+    """best_model.zip is paired with the training statistics of its evaluation, not the final ones."""
+    import pickle
+    res = runs[kind]
+    curve = json.loads((res["eval_dir"] / "eval_curve.json").read_text())
+    best = json.loads((res["eval_dir"] / "best_model.json").read_text())
+    first_max = max(range(len(curve)), key=lambda i: (curve[i]["return_mean"], -i))   # EvalCallback: strict >
+    assert best["selected_at"] == curve[first_max]
+    with open(res["eval_dir"] / "best_vecnormalize.pkl", "rb") as f:
+        vn = pickle.load(f)
+    np.testing.assert_array_equal(np.asarray(best["obs_norm"]["mean"]), vn.obs_rms.mean)
+    final = json.loads(res["meta"].read_text())["obs_norm"]["mean"]
+    # the statistics keep moving after an early best; equal only when the best is the last evaluation
+    assert (np.asarray(best["obs_norm"]["mean"]) == np.asarray(final)).all() == (first_max == len(curve) - 1)
+
+
 def test_a_killed_run_resumes_from_its_last_checkpoint(runs, tmp_path):
     import stable_baselines3 as sb3
     ck = sorted(runs["ppo"]["checkpoints"].glob("*_steps.zip"), key=lambda p: int(p.stem.split("_")[-2]))
