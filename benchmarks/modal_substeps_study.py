@@ -8,6 +8,10 @@ rectifier-period sub-steps, V2 implicit in the commutation at each). The variant
 * ``traj``: the paper's three trajectories (step, V2* ramp, proposed; Table I, fixed Lm, stiff 30 V, ideal
   devices, 100 us control period; as ``tests/test_env_modal.py`` runs them): instantaneous and fundamental
   peak, charge delivered (sum of I_L), each variant against the reference.
+* ``converge``: two large transients (d = 0.32 dropped to RM, random duties) and the paper's trajectories:
+  the largest instantaneous peak per V2 update count (2 ... 136 per 100 us) and scheme (the kernel's V2
+  implicit at the sub-step's end current; the experiment :func:`_substeps_mid`, implicit at its midpoint
+  current) against the switching model and the reference.
 * ``env``: ``--windows`` windows of the vector env per scenario (nominal, detuned) under model_based, mpc and
   random actions: the policy runs on the reference env, its duties are replayed open loop on each variant
   (same seeds: same windows, commands, Lm), per window the energy delivered (sum of ``energy_j``), the largest
@@ -16,13 +20,14 @@ rectifier-period sub-steps, V2 implicit in the commutation at each). The variant
   variants, the reference and eq. 4's envelope env stepped alternately in one process, held duty and random
   actions, median over the timed steps.
 
-    python benchmarks/modal_substeps_study.py [traj] [env] [cost] [--k 1 2 4 8] [--windows 100] [--json out.json]
+    python benchmarks/modal_substeps_study.py [traj] [converge] [env] [cost] [--k 1 2 4 8] [--windows 100] [--json out.json]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -34,7 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from envs import EnvConfig, SbarChargingVectorEnv  # noqa: E402
 from envs import modal_step as vk  # noqa: E402
-from envs.layout import CZ_MODES, CZ_STEP, N_CZ  # noqa: E402
+from envs.layout import CZ_MODES, CZ_STEP, FAST, N_CZ  # noqa: E402
 from wpt_receiver import TABLE_I  # noqa: E402
 from wpt_receiver import modal_kernel as mk  # noqa: E402
 from wpt_receiver.devices import IDEAL  # noqa: E402
@@ -60,35 +65,139 @@ def trajectory(name, kind, dt=ENV_DT):
     return reference_duty(name, P, 0.5e-3, 2.5e-3 if name == "step" else 6.5e-3, dt, ramp_kind=kind)[1]
 
 
-def link_run(d_seq, cfg: EnvConfig, devices=IDEAL):
-    """The env's link step (``envs.modal_step._link_step``) over ``d_seq`` at Table I's Lm and a stiff 30 V
-    battery from the steady state of the first duty, with ``cfg``'s sub-steps: ``(instantaneous peak,
-    fundamental peak, sum of I_L)`` [A, A, A]."""
+def link_run(d_seq, n_sub, n_q, scheme="end", devices=IDEAL, hold_tol=1e-3):
+    """The env's link step (``envs.modal_step._link_step``) over ``d_seq`` (one duty per 100 us) at Table I's
+    Lm and a stiff 30 V battery from the steady state of the first duty, in ``n_sub`` sub-steps with ``n_q``
+    peak samples each: per step ``(instantaneous peak, fundamental peak, I_L)`` [A] arrays. ``scheme``
+    ``"end"``: the kernel's V2 (implicit in the sub-step's end current); ``"mid"``: the experiment
+    :func:`_substeps_mid` (uncompiled driver on the compiled helpers)."""
     lc, tab = mk.link_constants(P, devices), mk.modal_table(P, devices)
-    n_sub, n_q, dt = cfg.modal_n_sub, cfg.modal_n_q, cfg.dt_s
     cz = np.zeros(N_CZ, dtype=complex)
-    vk._segment(lc, P.lm_h, dt, n_sub, n_q, cz, True)
+    vk._segment(lc, P.lm_h, ENV_DT, n_sub, n_q, cz, True)
     mc, v1 = cz[CZ_MODES:CZ_STEP], -1j * P.v1_amp_v
+    zc = np.zeros(mk.N_ZOH_C, dtype=complex)
+    mk.zoh(mc, ENV_DT / n_sub / 2, zc)
+    _MID["cf"] = np.zeros(len(FAST), dtype=complex)
+    vk._fast_coefs(mc, zc, ENV_DT / n_sub / 2, _MID["cf"])
     z = np.zeros(4)
     v2 = mk.steady_state(lc, mc, tab, float(d_seq[0]), v1, P.vl_v, z)
-    pk = pke = q = 0.0
-    e = -1.0
-    for d in d_seq:
-        v2, e, _, _, pe, p, il, _, _ = vk._link_step(z, v2, e, P.vl_v, d, lc, tab, cz, dt, n_sub, n_q, 0.0, 0.0,
-                                                    P.v1_amp_v, cfg.hold_tol_a, np.empty(9), np.zeros(4))
-        pk, pke, q = max(pk, p), max(pke, pe), q + il
-    return pk, pke, q
+    rows, e = [], -1.0
+    step, orig = (vk._link_step, vk._substeps) if scheme == "end" else (vk._link_step.py_func, vk._substeps)
+    if scheme == "mid":
+        vk._substeps = _substeps_mid
+    try:
+        for d in d_seq:
+            v2, e, _, _, pe, p, il, _, _ = step(z, v2, e, P.vl_v, d, lc, tab, cz, ENV_DT, n_sub, n_q, 0.0, 0.0,
+                                                P.v1_amp_v, hold_tol, np.empty(9), np.zeros(4))
+            rows.append((p, pe, il))
+    finally:
+        vk._substeps = orig
+    return np.array(rows).T
+
+
+_MID = {}
+
+
+def _substeps_mid(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v1c, out, en, book, lm, block):
+    """EXPERIMENT (not shipped): ``envs.modal_step._substeps`` with V2 implicit in the sub-step's MIDPOINT
+    current (``_v2_closed`` on the affine map of ``h/2``, ``_MID["cf"]``), held over the sub-step (an implicit
+    midpoint rule for V2 instead of the kernel's implicit end point); falls back to the end point where the
+    closed form has no root; no energy book."""
+    cm = _MID["cf"]
+    z0, z1 = complex(z[0], z[1]), complex(z[2], z[3])
+    q1, a0, a1, bv = cf[FAST.q1], cf[FAST.a0], cf[FAST.a1], cf[FAST.b] * v1c
+    e0, e1, k0, k1 = cf[FAST.e0], cf[FAST.e1], cf[FAST.k0] * v1c, cf[FAST.k1] * v1c
+    l0, l1, c0, c1, p0, p1 = cf[FAST.l0], cf[FAST.l1], cf[FAST.c0], cf[FAST.c1], cf[FAST.p0] * v1c, cf[FAST.p1]
+    ma0, ma1, mbv = cm[FAST.a0], cm[FAST.a1], cm[FAST.b] * v1c
+    km = vk._solve_consts(cm[FAST.q1], ws, vc, k[4], k[5], k[6])
+    pk, i2_pk, qsum, t = -1.0, 0j, 0.0, 0j
+    sgn = -1.0 if i2.real < 0.0 else 1.0
+    r_ref = abs(i2)
+    for _ in range(n_sub):
+        f, i2m, t, ok = vk._v2_closed(ma0 * z0 + ma1 * z1 + mbv, sgn, km, block)
+        if not ok:
+            f, i2m, t, ok = vk._v2_closed(a0 * z0 + a1 * z1 + bv, sgn, k, block)
+        v2 = f * vc + ws * i2m
+        i2e = a0 * z0 + a1 * z1 + bv + q1 * v2
+        if n_q > 1:
+            z[0], z[1], z[2], z[3] = z0.real, z0.imag, z1.real, z1.imag
+            pk, i2_pk = vk._samples(mc, zq, z, v1c, v2, n_q, pk, i2_pk)
+        qsum += mk.rect_current_a(f, c0 * z0 + c1 * z1 + p0 + p1 * v2, h)
+        z0, z1 = e0 * z0 + k0 + l0 * v2, e1 * z1 + k1 + l1 * v2
+        a = i2e.real ** 2 + i2e.imag ** 2
+        if a > pk * abs(pk):
+            pk, i2_pk = math.sqrt(a), i2e
+        sgn = -1.0 if i2e.real < 0.0 else 1.0
+        if a > 1.44 * r_ref * r_ref or 1.44 * a < r_ref * r_ref:   # as the kernel: the shift looked up again
+            r_ref = math.sqrt(a)
+            dl = mk.sbar_shift(lc, tab, d, i2e * sgn, vc)
+            kw = complex(math.cos(dl), -math.sin(dl))
+            k = (k[0], k[1], k[2], 4.0 / math.pi * k[1] * kw, kw, k[5], k[6])
+            km = (km[0], km[1], km[2], 4.0 / math.pi * km[1] * kw, kw, km[5], km[6])
+    z[0], z[1], z[2], z[3] = z0.real, z0.imag, z1.real, z1.imag
+    return v2, t, pk, i2_pk, qsum
 
 
 def traj_study(var: dict) -> dict:
     res = {}
     for name, kind in TRAJECTORIES:
         d = trajectory(name, kind)
-        runs = {lab: link_run(d, EnvConfig(**kw)) for lab, kw in var.items()}
+        runs = {}
+        for lab, kw in var.items():
+            c = EnvConfig(**kw)
+            pk, pe, il = link_run(d, c.modal_n_sub, c.modal_n_q)
+            runs[lab] = (pk.max(), pe.max(), il.sum())
         ref = runs["ref"]
         res[f"{name}/{kind}"] = {lab: dict(inst_a=r[0], fund_a=r[1], charge=r[2],
                                            inst_pct=100 * (r[0] / ref[0] - 1), fund_pct=100 * (r[1] / ref[1] - 1),
                                            charge_pct=100 * (r[2] / ref[2] - 1)) for lab, r in runs.items()}
+    return res
+
+
+# ------------------------------------------------------------------------------------------ convergence
+def switching_peaks(d_seq):
+    """The switching model's instantaneous |i2| peak per 100 us step (64 samples per half cycle)."""
+    from wpt_receiver.switching import SwitchingConfig, SwitchingLink
+    env = SwitchingLink(P, SwitchingConfig(samples_per_half_cycle=64)).simulate(d_seq, ENV_DT).envelope()
+    k = np.minimum((env["t_s"].to_numpy() / ENV_DT).astype(int), len(d_seq) - 1)
+    pk = np.zeros(len(d_seq))
+    np.maximum.at(pk, k, env["i2_env_a"].to_numpy())
+    return pk
+
+
+def transient_cases(pre=40) -> dict:
+    """``{name: (duties per 100 us, first step compared)}``: two large transients (a window at d = 0.32
+    dropped to RM; random duties redrawn every step), each after ``pre`` steps at its first duty (the switching
+    model starts at rest), and the paper's trajectories."""
+    rng = np.random.default_rng(1)
+    out = {"drop 0.32->RM": (np.r_[np.full(pre, 0.32), np.zeros(150)], pre),
+           "random duties": (np.r_[np.full(pre, 0.5), rng.uniform(0.0, 1.0, 150)], pre)}
+    for name, kind in TRAJECTORIES:
+        out[f"{name}/{kind}"] = (trajectory(name, kind), 0)
+    return out
+
+
+def converge_study(rows=(("end", 2), ("end", 4), ("end", 8), ("end", 17), ("end", 34), ("end", 68), ("end", 136),
+                         ("mid", 2), ("mid", 4), ("mid", 8), ("mid", 17), ("mid", 34))) -> dict:
+    """Largest instantaneous peak after the transient's start, against the switching model's and the
+    reference's (end point, 17 sub-steps), and the charge (sum of I_L) against the reference's, per V2 update
+    count and scheme; |I2| sampled once per rectifier period at least (``n_q``)."""
+    res = {}
+    for name, (d, p0) in transient_cases().items():
+        sw = switching_peaks(d)[p0:]
+        ref_pk, _, ref_il = link_run(d, 17, 1)
+        ref_pk, ref_il = ref_pk[p0:], ref_il[p0:]
+        row = {"switching_a": float(sw.max()), "ref_a": float(ref_pk.max())}
+        for scheme, k in rows:
+            pk, _, il = link_run(d, k, max(1, -(-17 // k)), scheme)
+            pk, il = pk[p0:], il[p0:]
+            row[f"{scheme} K={k}"] = dict(peak_a=float(pk.max()), vs_switching_pct=100 * (pk.max() / sw.max() - 1),
+                                          vs_ref_pct=100 * (pk.max() / ref_pk.max() - 1),
+                                          charge_vs_ref_pct=100 * (il.sum() / ref_il.sum() - 1))
+        res[name] = row
+        print(name, f"switching {sw.max():.3f} A, ref {ref_pk.max():.3f} A |",
+              "  ".join(f"{lab}: {r['vs_switching_pct']:+.2f}%/{r['vs_ref_pct']:+.2f}%" for lab, r in row.items()
+                        if isinstance(r, dict)), flush=True)
     return res
 
 
@@ -226,6 +335,8 @@ def main(argv=None):
         for key, row in out["traj"].items():
             print(key, "  ".join(f"{lab}: inst {r['inst_pct']:+.3f}% fund {r['fund_pct']:+.3f}% "
                                  f"q {r['charge_pct']:+.3f}%" for lab, r in row.items() if lab != "ref"))
+    if "converge" in a.parts:
+        out["converge"] = converge_study()
     if "env" in a.parts:
         out["env"] = env_study(var, a.windows, a.seed, tuple(a.policies))
     if "cost" in a.parts:
