@@ -19,8 +19,10 @@ rectifier-period sub-steps, V2 implicit in the commutation at each). The variant
 * ``cost``: thread CPU time of the plant's compiled step (one thread, ``n_chunks = 1``) per env-step, the
   variants, the reference and eq. 4's envelope env stepped alternately in one process, held duty and random
   actions, median over the timed steps.
+* ``finer``: the link part's CPU with 17, 34, 68, 136 V2 updates per 100 us (what converging the reference in
+  large transients would cost; replay of captured steps, ``benchmarks/profile_modal_step.py``).
 
-    python benchmarks/modal_substeps_study.py [traj] [converge] [env] [cost] [--k 1 2 4 8] [--windows 100] [--json out.json]
+    python benchmarks/modal_substeps_study.py [traj] [converge] [env] [cost] [finer] [--k 1 2 4 8] [--windows 100] [--json out.json]
 """
 
 from __future__ import annotations
@@ -319,6 +321,33 @@ def cost_study(var: dict, ns=(1024, 4096), steps=40, warm=20, seed=0) -> dict:
     return res
 
 
+def finer_cost(n=1024, ks=(17, 34, 68, 136), steps=10, reps=3) -> dict:
+    """CPU [ns per env-step] of the link part alone (``benchmarks/profile_modal_step.py``'s replay of captured
+    steps) with ``k`` V2 updates per 100 us (beyond the env's 17, which ``v2_updates`` cannot exceed), one
+    sample per sub-step; every window rebuilds its segment (modes and ZOHs for ``k``) in each timed step, the
+    same ~1.2 us for every ``k``."""
+    import profile_modal_step as pm
+    dt = EnvConfig().dt_s
+    res = {}
+    for actions in ("held", "random"):
+        shots = pm.captured_steps(n, actions, "random", 60, steps, 0)
+        row = {}
+        for k in ks:
+            sh = []
+            for s in shots:
+                c = pm._copy(s)
+                c["n_sub"], c["par"] = k, c["par"].copy()
+                c["par"][pm.MPAR.n_q] = 1
+                c["j"] = c["j"] - 1   # every window enters "a new slow segment": _segment for k at its true Lm
+                sh.append(c)
+            pm._link(pm._copy(sh[0]))
+            row[k] = pm._time(sh, pm._link, reps)
+        res[actions] = dict(ns=row, vs_17={k: v / row[ks[0]] for k, v in row.items()}, load_avg_1min=os.getloadavg()[0],
+                            dt_s=dt)
+        print("finer", n, actions, json.dumps(res[actions]), flush=True)
+    return res
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("parts", nargs="*", default=["traj", "env", "cost"])
@@ -339,6 +368,9 @@ def main(argv=None):
         out["converge"] = converge_study()
     if "env" in a.parts:
         out["env"] = env_study(var, a.windows, a.seed, tuple(a.policies))
+    if "finer" in a.parts:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        out["finer"] = finer_cost()
     if "cost" in a.parts:
         out["cost"] = cost_study(var)
     out["load_avg_end"] = os.getloadavg()
