@@ -98,10 +98,12 @@ class EnvConfig:
         steady state of the step's inputs (the ringing, and the error of the held V2, stay below it);
         else it runs in ``v2_updates`` sub-steps (``envs.modal_step._link_step``)
     v2_updates : (modal) sub-steps of a step that is not held, V2 updated at each; 0 (default): one per
-        rectifier period, as the mission's fine step (at most that many); |I2| sampled at least once
-        per rectifier period. V2 follows i2's phase, which moves with the modes' beat (125 us at
-        Table I); fewer updates let the held V2 feed the tank in a large transient
-        (``tests/test_env_modal.py``): the default follows the circuit.
+        rectifier period, as the mission's fine step; |I2| sampled at least once per rectifier period.
+        V2 follows i2's phase, which moves with the modes' beat (125 us at Table I); fewer updates let
+        the held V2 feed the tank in a large transient (``tests/test_env_modal.py``). More updates than
+        rectifier periods (e.g. 68 per 100 us) converge a large transient's peak to the switching model's,
+        which one per rectifier period puts 9-22 % low (docs/performance.md, "Fewer V2 updates per modal
+        env step"), for about twice the link's CPU.
     """
 
     link: LinkParams = TABLE_I
@@ -197,9 +199,9 @@ class EnvConfig:
 
     @property
     def modal_n_sub(self) -> int:
-        """(modal) sub-steps (V2 updated) of a step that is not held (``v2_updates``, at most :attr:`n_sub`,
-        the rectifier periods per step; 0: that)."""
-        return min(self.v2_updates or self.n_sub, self.n_sub)
+        """(modal) sub-steps (V2 updated) of a step that is not held (``v2_updates``; 0: :attr:`n_sub`, the
+        rectifier periods per step)."""
+        return int(self.v2_updates) or self.n_sub
 
     @property
     def modal_n_q(self) -> int:

@@ -511,3 +511,48 @@ def test_large_transient_peak_converges_with_v2_updates(case):
     assert pk[68] == pytest.approx(sw, rel=0.05) and pk[136] == pytest.approx(sw, rel=0.05)
     assert pk[68] == pytest.approx(pk[136], rel=0.02)
     assert pk[17] < min(pk[68], pk[136], sw)
+
+
+def _window_peaks(cfg, acts_or_policy, n=16, seed=1000):
+    """Largest instantaneous peak [A] per window of ``n`` nominal windows (seeds ``seed + i``) of the modal env
+    with ``cfg``; ``acts_or_policy`` a policy name (its duties are returned) or the (T, n, 1) actions to replay."""
+    from policies import make
+    venv = SbarChargingVectorEnv(num_envs=n, scenario="nominal", config=cfg, num_threads=1)
+    obs, _ = venv.reset(seed=[seed + i for i in range(n)])
+    pol = make(acts_or_policy, venv.policy_context) if isinstance(acts_or_policy, str) else None
+    if pol is not None and hasattr(pol, "reset"):
+        pol.reset(n)
+    acts, pk = [], np.zeros(n)
+    for k in range(cfg.n_steps):
+        if pol is None:
+            a = acts_or_policy[k]
+        else:
+            a = (2.0 * np.clip(np.asarray(pol.act(obs), float).reshape(n), 0.0, 1.0) - 1.0)[:, None].astype(np.float32)
+        acts.append(a)
+        obs, _, _, _, info = venv.step(a)
+        pk = np.maximum(pk, info["i2_peak_a"])
+    venv.close()
+    return pk, np.array(acts)
+
+
+@pytest.mark.parametrize("policy", ["model_based", "random"])
+def test_more_v2_updates_than_rectifier_periods_on_env_windows(policy):
+    """``v2_updates`` above the rectifier periods per step (68 per 100 us; one |I2| sample per sub-step) is
+    stepped as asked (it was capped at 17). On nominal windows under the model-based controller the windows'
+    peaks equal the default's within 0.05 % (measured 0.006 % on 100 windows: smooth control needs no more);
+    under random duties (a large transient every step) they are higher, as the switching model's are
+    (test_large_transient_peak_converges_with_v2_updates): measured up to +23 % on 100 windows, the measured
+    overshoot +22 points on average."""
+    fine = EnvConfig(link_model="modal", v2_updates=68)
+    assert fine.modal_n_sub == 68 and fine.modal_n_q == 1 and MODAL.modal_n_sub == 17
+    if policy == "model_based":
+        ref, acts = _window_peaks(MODAL, policy)
+    else:
+        rng = np.random.default_rng(5)
+        acts = rng.uniform(-1.0, 1.0, (MODAL.n_steps, 16, 1)).astype(np.float32)
+        ref, _ = _window_peaks(MODAL, acts)
+    got, _ = _window_peaks(fine, acts)
+    if policy == "model_based":
+        np.testing.assert_allclose(got, ref, rtol=5e-4)
+    else:
+        assert np.mean(got / ref - 1.0) > 0.02 and np.all(got > 0.98 * ref)
