@@ -541,8 +541,8 @@ def test_more_v2_updates_than_rectifier_periods_on_env_windows(policy):
     stepped as asked (it was capped at 17). On nominal windows under the model-based controller the windows'
     peaks equal the default's within 0.05 % (measured 0.006 % on 100 windows: smooth control needs no more);
     under random duties (a large transient every step) they are higher, as the switching model's are
-    (test_large_transient_peak_converges_with_v2_updates): measured up to +23 % on 100 windows, the measured
-    overshoot +22 points on average."""
+    (test_large_transient_peak_converges_with_v2_updates): on these 16 windows +4.6 % on average, 15 higher
+    (on 100 windows up to +23 %, the measured overshoot +22 points on average)."""
     fine = EnvConfig(link_model="modal", v2_updates=68)
     assert fine.modal_n_sub == 68 and fine.modal_n_q == 1 and MODAL.modal_n_sub == 17
     if policy == "model_based":
@@ -555,4 +555,4 @@ def test_more_v2_updates_than_rectifier_periods_on_env_windows(policy):
     if policy == "model_based":
         np.testing.assert_allclose(got, ref, rtol=5e-4)
     else:
-        assert np.mean(got / ref - 1.0) > 0.02 and np.all(got > 0.98 * ref)
+        assert np.mean(got / ref - 1.0) > 0.02 and np.sum(got > ref) >= 12
