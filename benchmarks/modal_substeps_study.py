@@ -100,7 +100,7 @@ def link_run(d_seq, n_sub, n_q, scheme="end", devices=IDEAL, hold_tol=1e-3):
 _MID = {}
 
 
-def _substeps_mid(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v1c, out, en, book, lm, block):
+def _substeps_mid(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v1c, out, en, book, lm, block, cr=None):
     """EXPERIMENT (not shipped): ``envs.modal_step._substeps`` with V2 implicit in the sub-step's MIDPOINT
     current (``_v2_closed`` on the affine map of ``h/2``, ``_MID["cf"]``), held over the sub-step (an implicit
     midpoint rule for V2 instead of the kernel's implicit end point); falls back to the end point where the

@@ -104,6 +104,11 @@ class EnvConfig:
         rectifier periods (e.g. 68 per 100 us) converge a large transient's peak to the switching model's,
         which one per rectifier period puts 9-22 % low (docs/performance.md, "Fewer V2 updates per modal
         env step"), for about twice the link's CPU.
+    v2_refine_tol, v2_refine_levels : (modal) a sub-step whose end I2 moved from its start's by more than
+        ``v2_refine_tol`` of |I2| is redone in 2^L pieces (L <= ``v2_refine_levels``; 0: never), V2 implicit at
+        each piece's end (``envs.modal_step._refine``): converges a large transient (a drop to RM, random
+        duties) to the envelope's fine-step limit; smooth control does not trigger it (docs/performance.md,
+        "Adaptive refinement of the modal env step").
     """
 
     link: LinkParams = TABLE_I
@@ -118,6 +123,8 @@ class EnvConfig:
     link_model: str = "envelope"
     hold_tol_a: float = 1e-3
     v2_updates: int = 0
+    v2_refine_tol: float = 0.05
+    v2_refine_levels: int = 3
 
     def __post_init__(self):
         from wpt_receiver.devices import preset_names
@@ -126,6 +133,11 @@ class EnvConfig:
         if int(self.v2_updates) != self.v2_updates or not 0 <= self.v2_updates <= 1000:
             raise ValueError(f"v2_updates={self.v2_updates!r} is invalid; valid range: integer 0..1000 (0: one "
                              "per rectifier period)")
+        if int(self.v2_refine_levels) != self.v2_refine_levels or not 0 <= self.v2_refine_levels <= 5:
+            raise ValueError(f"v2_refine_levels={self.v2_refine_levels!r} is invalid; valid range: integer 0..5 (0: "
+                             "no refinement)")
+        if not (np.isfinite(self.v2_refine_tol) and self.v2_refine_tol > 0):
+            raise ValueError(f"v2_refine_tol={self.v2_refine_tol!r} is invalid; valid range: (0, inf)")
         if not (np.isfinite(self.hold_tol_a) and self.hold_tol_a >= 0):
             raise ValueError(f"hold_tol_a={self.hold_tol_a!r} is invalid; valid range: [0, inf) A")
         if not (self.device_tj_c == 0.0 or 25.0 <= self.device_tj_c <= 175.0):
@@ -149,7 +161,7 @@ class EnvConfig:
         ``v2_updates``) only where they differ from their defaults: a default config reads as before the
         option. The one rule of :meth:`__repr__` (the oracle's disk-cache keys hold the repr,
         :mod:`policies.oracle`) and of the trained models' metadata (``policies.train.config_dict``)."""
-        opt = {"link_model", "hold_tol_a", "v2_updates"}
+        opt = {"link_model", "hold_tol_a", "v2_updates", "v2_refine_tol", "v2_refine_levels"}
         return [(f.name, getattr(self, f.name)) for f in fields(self)
                 if f.name not in opt or getattr(self, f.name) != f.default]
 
