@@ -501,9 +501,9 @@ def test_large_transient_peak_converges_with_v2_updates(case):
     alone (refinement off, the kernel before the refinement) is not converged: its largest instantaneous peak
     is 21.7 % (drop) / 9.1 % (random) below the switching model's and 25 % / 10 % below the envelope's
     fine-step limit (1088 updates per 100 us). The default step (17 sub-steps, each whose I2 moves by more than
-    2 % redone in up to 32 pieces, ``envs.modal_step._refine``) is within 1.5 % of that limit (measured -0.34 %
-    / +0.18 % against 4352 updates) and within 5 % of the switching model (+4.4 % / +1.3 %: the envelope
-    model's own error in such a transient, 4.7 % / 1.2 % at the limit; docs/performance.md, "Adaptive
+    5 % redone in up to 8 pieces, ``envs.modal_step._refine``) is within 3 % of that limit (measured -2.1 % /
+    -0.5 % against 4352 updates) and within 5 % of the switching model (+2.5 % / +0.7 %; the envelope's limit
+    itself is +4.7 % / +1.2 %: the model's own error in such a transient; docs/performance.md, "Adaptive
     refinement of the modal env step")."""
     pre, rng = 40, np.random.default_rng(1)
     d = (np.r_[np.full(pre, 0.32), np.zeros(150)] if case == "drop"
@@ -515,7 +515,7 @@ def test_large_transient_peak_converges_with_v2_updates(case):
     coarse = _updates_run(d, 17, levels=0)[pre:].max()
     limit = _updates_run(d, 1088, levels=0)[pre:].max()
     got = _updates_run(d, 17)[pre:].max()
-    assert got == pytest.approx(limit, rel=0.015) and got == pytest.approx(sw, rel=0.05)
+    assert got == pytest.approx(limit, rel=0.03) and got == pytest.approx(sw, rel=0.05)
     assert coarse < 0.95 * min(limit, sw)
 
 
