@@ -32,16 +32,17 @@ def _link(devices=IDEAL):
     return mk.link_constants(P, devices), mk.modal_table(P, devices)
 
 
-def _env_run(d_seq, dt, devices=IDEAL, hold_tol=1e-3, energy=False):
+def _env_run(d_seq, dt, devices=IDEAL, hold_tol=1e-3, energy=False, levels=None):
     """The env's link step (envs.vector_kernel._link_step, compiled) over ``d_seq`` (one duty per control
     period ``dt``) at Table I's Lm and a stiff 30 V battery, from the steady state of the first duty.
     Returns the instantaneous and the fundamental's peak [A], the steps run in sub-steps, and per step
-    (source, coil, rect, jumps, W_start, W_end, V2 before, I_L) when ``energy``."""
-    cfg = EnvConfig(dt_s=dt)
+    (source, coil, rect, jumps, W_start, W_end, V2 before, I_L) when ``energy``; ``levels`` the sub-steps'
+    refinement levels (None: the default's)."""
+    cfg = EnvConfig(dt_s=dt) if levels is None else EnvConfig(dt_s=dt, v2_refine_levels=levels)
     n_sub, n_q = cfg.modal_n_sub, cfg.modal_n_q
     lc, tab = _link(devices)
     cz = np.zeros(N_CZ, dtype=complex)
-    vk._segment(lc, P.lm_h, dt, n_sub, n_q, cz, True)
+    vk._segment(lc, P.lm_h, dt, n_sub, n_q, cz, True, cfg.v2_refine_tol, cfg.v2_refine_levels)
     mc = cz[CZ_MODES:CZ_STEP]
     v1 = -1j * P.v1_amp_v
     vf, dr = devices.rect_vf_v, devices.short_r_ohm - devices.rect_rd_ohm
@@ -108,10 +109,12 @@ def test_env_and_mission_give_the_same_peak_on_the_same_window(name, dt):
 def test_env_link_energy_balance_closes(devices):
     """Per control period (held or in sub-steps): source = W_end - W_start + coil + rectifier - jumps (the
     feedthrough's stored energy when V2 changes between sub-steps) to rounding; with ideal devices the
-    rectifier's energy is the battery's, VL I_L dt, exactly."""
+    rectifier's energy is the battery's, VL I_L dt, exactly. The random duties make the sub-steps refine
+    (``envs.modal_step._refine``: the run differs from one without refinement), so the pieces' book closes too."""
     rng = np.random.default_rng(7)
     d = np.concatenate([np.zeros(5), rng.uniform(0.0, 1.0, 40), np.full(40, 0.3)])
-    _, _, n_split, rec = _env_run(d, ENV_DT, devices=devices, energy=True)
+    pk, _, n_split, rec = _env_run(d, ENV_DT, devices=devices, energy=True)
+    assert pk != _env_run(d, ENV_DT, devices=devices, levels=0)[0]
     src, coil, rect, jumps, w0, w1, il = rec.T
     assert 0 < n_split < len(d)                          # both kinds of step were taken
     scale = np.abs(src) + coil + np.abs(rect) + w0 + w1
@@ -190,6 +193,12 @@ def test_link_model_is_an_option_eq4_the_default():
     # the repr (the oracle's disk-cache key) names the link only when it is not the default one
     assert "link_model" not in repr(EnvConfig()) and "hold_tol_a" not in repr(EnvConfig())
     assert "link_model='modal'" in repr(MODAL) and "v2_updates=3" in repr(EnvConfig(link_model="modal", v2_updates=3))
+    # the sub-steps' refinement: named only when not the default's; bad values refused naming the valid range
+    assert "v2_refine" not in repr(MODAL) and "v2_refine_levels=0" in repr(EnvConfig(v2_refine_levels=0))
+    with pytest.raises(ValueError, match=r"v2_refine_levels=6 is invalid; valid range: integer 0\.\.5"):
+        EnvConfig(v2_refine_levels=6)
+    with pytest.raises(ValueError, match=r"v2_refine_tol=0.0 is invalid; valid range: \(0, inf\)"):
+        EnvConfig(v2_refine_tol=0.0)
 
 
 @pytest.mark.parametrize("scenario", ["random", "detuned"])
