@@ -11,7 +11,7 @@ of the modal env step").
   open loop on each variant) with the reference = today's arithmetic (levels 0) and the refined variants.
 
     python benchmarks/modal_refine_study.py cost [--old /tmp/modal_old] [--n 1024] [--steps 40]
-    python benchmarks/modal_refine_study.py env [--windows 100]
+    python benchmarks/modal_refine_study.py env [--windows 100] [--ref off|"L5 tol 0.02"]
 """
 
 from __future__ import annotations
@@ -80,9 +80,11 @@ def cost(n=1024, steps=40, warm=20, seed=0, old=None, actions_list=("held", "ran
     return res
 
 
-def env(windows=100) -> dict:
+def env(windows=100, ref="off") -> dict:
+    """The windows against ``ref`` (``off``: today's arithmetic; ``L5 tol 0.02``: the finest setting, so the
+    rows say how far each setting is from converged)."""
     import modal_substeps_study as ms
-    var = {"ref": dict(v2_refine_levels=0), **{k: v for k, v in VARIANTS.items() if k != "off"}}
+    var = {"ref": VARIANTS[ref], **{k: v for k, v in VARIANTS.items() if k != ref}}
     return ms.env_study(var, windows, 1000)
 
 
@@ -93,6 +95,7 @@ def main(argv=None):
     ap.add_argument("--n", type=int, default=1024)
     ap.add_argument("--steps", type=int, default=40)
     ap.add_argument("--windows", type=int, default=100)
+    ap.add_argument("--ref", default="off", choices=tuple(VARIANTS), help="env: the windows' reference setting")
     ap.add_argument("--actions", nargs="+", default=["held", "random"], choices=("held", "random"))
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
@@ -100,7 +103,7 @@ def main(argv=None):
     if "cost" in a.parts:
         out["cost"] = cost(a.n, a.steps, old=a.old, actions_list=a.actions)
     if "env" in a.parts:
-        out["env"] = env(a.windows)
+        out["env"] = env(a.windows, a.ref)
     if a.json:
         tmp = a.json + ".tmp"
         Path(tmp).write_text(json.dumps(out, indent=1, default=float))

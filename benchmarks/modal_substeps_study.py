@@ -23,6 +23,9 @@ rectifier-period sub-steps, V2 implicit in the commutation at each). The variant
   large transients would cost; replay of captured steps, ``benchmarks/profile_modal_step.py``).
 
     python benchmarks/modal_substeps_study.py [traj] [converge] [env] [cost] [finer] [--k 1 2 4 8] [--windows 100] [--json out.json]
+
+Every variant here is uniform (``v2_refine_levels=0``): the study of the kernel before its adaptive refinement
+(``benchmarks/modal_refine_study.py`` studies that).
 """
 
 from __future__ import annotations
@@ -54,9 +57,9 @@ TRAJECTORIES = (("step", "v2"), ("ramp", "v2"), ("ramp", "duty"), ("proposed", "
 
 def variants(ks, extra=()) -> dict:
     """``{label: EnvConfig kwargs}``: the reference (``ref``) first, then ``K=k`` per sub-step count."""
-    out = {"ref": {}}
+    out = {"ref": dict(v2_refine_levels=0)}   # uniform sub-steps: the kernel before the refinement (modal_refine_study)
     for k in ks:
-        out[f"K={k}"] = dict(v2_updates=k)
+        out[f"K={k}"] = dict(v2_updates=k, v2_refine_levels=0)
     for label, kw in extra:
         out[label] = kw
     return out
@@ -75,7 +78,7 @@ def link_run(d_seq, n_sub, n_q, scheme="end", devices=IDEAL, hold_tol=1e-3):
     :func:`_substeps_mid` (uncompiled driver on the compiled helpers)."""
     lc, tab = mk.link_constants(P, devices), mk.modal_table(P, devices)
     cz = np.zeros(N_CZ, dtype=complex)
-    vk._segment(lc, P.lm_h, ENV_DT, n_sub, n_q, cz, True)
+    vk._segment(lc, P.lm_h, ENV_DT, n_sub, n_q, cz, True, 0.05, 0)   # uniform: no refinement (modal_refine_study)
     mc, v1 = cz[CZ_MODES:CZ_STEP], -1j * P.v1_amp_v
     zc = np.zeros(mk.N_ZOH_C, dtype=complex)
     mk.zoh(mc, ENV_DT / n_sub / 2, zc)
