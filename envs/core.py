@@ -100,10 +100,9 @@ class EnvConfig:
     v2_updates : (modal) sub-steps of a step that is not held, V2 updated at each; 0 (default): one per
         rectifier period, as the mission's fine step; |I2| sampled at least once per rectifier period.
         V2 follows i2's phase, which moves with the modes' beat (125 us at Table I); fewer updates let
-        the held V2 feed the tank in a large transient (``tests/test_env_modal.py``). More updates than
-        rectifier periods (e.g. 68 per 100 us) converge a large transient's peak to the switching model's,
-        which one per rectifier period puts 9-22 % low (docs/performance.md, "Fewer V2 updates per modal
-        env step"), for about twice the link's CPU.
+        the held V2 feed the tank in a large transient (``tests/test_env_modal.py``). One update per
+        rectifier period alone put a large transient's peak 9-22 % low (docs/performance.md, "Fewer V2
+        updates per modal env step"); the refinement below fixes that where it is needed.
     v2_refine_tol, v2_refine_levels : (modal) a sub-step whose end I2 moved from its start's by more than
         ``v2_refine_tol`` of |I2| is redone in 2^L pieces (L <= ``v2_refine_levels``; 0: never), V2 implicit at
         each piece's end (``envs.modal_step._refine``): converges a large transient (a drop to RM, random

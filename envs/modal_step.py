@@ -12,7 +12,11 @@ the instantaneous peak phase-aware), the mission's link (:mod:`mission_sim.world
 v2 follows i2's phase every half cycle, so a step runs in rectifier-period sub-steps (as the mission's
 fine step) unless the link is within ``hold_tol`` [A] of the steady state of the step's inputs (then V2
 is held over the control period: the ringing, and so any error of the held V2, stays below
-``hold_tol``). Detuned windows (:mod:`envs.detuned`) are the same step with their C1, C2 in the
+``hold_tol``). In a large transient a V2 held for a rectifier period is too coarse (the clamp loads the secondary
+like a resistance (4/pi) Vc / |I2|, an envelope mode of 0.5-1.2 per period): a sub-step whose I2 moves by more
+than ``EnvConfig.v2_refine_tol`` of |I2| is redone in up to 2^``v2_refine_levels`` pieces (:func:`_refine`);
+below that tolerance the step's arithmetic is the one before (smooth control never triggers it: bit-identical
+windows). Detuned windows (:mod:`envs.detuned`) are the same step with their C1, C2 in the
 window's link constants.
 
 * :func:`env_step` steps sub-environments ``[0, n)`` of the vector env, in chunks that run in parallel
@@ -27,7 +31,8 @@ State: the envs' :data:`envs.layout.STATE` (as eq. 4's step) plus the link's own
 (``tests/test_env_modal.py``) check the peak against the switching model on the paper's trajectories,
 the energy balance, and the single env against the vector env's row.
 
-Cost: a step is sub-stepped in nearly every window (the link rarely rings below ``hold_tol``); the helpers called
+Cost: with random actions the refinement makes a step ~5x the unrefined one (docs/performance.md, "Adaptive
+refinement of the modal env step"), with the duty held the same. A step is sub-stepped in nearly every window (the link rarely rings below ``hold_tol``); the helpers called
 once per step with arrays (:func:`_finish`, :func:`_link_of`, :func:`_transient_a`, and the link kernel's lookups
 and readouts) are inlined (``inline="always"``): a call that passes arrays costs numba two atomic reference counts
 per array, the arithmetic is the same (outputs equal to the bit). Profile, what was tried and the figures:
