@@ -126,7 +126,8 @@ def _fallbacks(snaps, n_win=200):
     windows of every snapshot, uncompiled (module globals wrapped with counters)."""
     cnt = {"v2_closed": 0, "v2_edges": 0, "sbar_implicit": 0, "sbar_shift": 0}
     counted = ("_v2_closed", "_v2_edges", "sbar_implicit", "sbar_shift")
-    plain = ("_link_step", "_link_pre", "_link_rest", "_substeps", "_sub_v2", "_sub_track")
+    plain = ("_link_step", "_link_pre", "_link_rest", "_substeps", "_refine", "_solve", "_reshift", "_sub_v2",
+             "_sub_track")
     saved = {name: getattr(ms, name) for name in counted + plain if hasattr(ms, name)}
 
     def wrap(name):

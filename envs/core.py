@@ -98,10 +98,17 @@ class EnvConfig:
         steady state of the step's inputs (the ringing, and the error of the held V2, stay below it);
         else it runs in ``v2_updates`` sub-steps (``envs.modal_step._link_step``)
     v2_updates : (modal) sub-steps of a step that is not held, V2 updated at each; 0 (default): one per
-        rectifier period, as the mission's fine step (at most that many); |I2| sampled at least once
-        per rectifier period. V2 follows i2's phase, which moves with the modes' beat (125 us at
-        Table I); fewer updates let the held V2 feed the tank in a large transient
-        (``tests/test_env_modal.py``): the default follows the circuit.
+        rectifier period, as the mission's fine step; |I2| sampled at least once per rectifier period.
+        V2 follows i2's phase, which moves with the modes' beat (125 us at Table I); fewer updates let
+        the held V2 feed the tank in a large transient (``tests/test_env_modal.py``). One update per
+        rectifier period alone put a large transient's peak 9-22 % low (docs/performance.md, "Fewer V2
+        updates per modal env step"); the refinement below fixes that where it is needed.
+    v2_refine_tol, v2_refine_levels : (modal) a sub-step whose end I2 moved from its start's by more than
+        ``v2_refine_tol`` of |I2| is redone in 2^L pieces (L <= ``v2_refine_levels``; 0: never), V2 implicit at
+        each piece's end (``envs.modal_step._refine``). The defaults (0.05, 3) put a large transient's peak
+        (a drop to RM, random duties) within ~2 % of the envelope's fine-step limit (without: 10-25 % low), for
+        ~5x the step's CPU under random actions; (0.02, 5) within ~0.3 %, ~13x. Smooth control does not
+        trigger it (bit-identical windows; docs/performance.md, "Adaptive refinement of the modal env step").
     """
 
     link: LinkParams = TABLE_I
@@ -116,6 +123,8 @@ class EnvConfig:
     link_model: str = "envelope"
     hold_tol_a: float = 1e-3
     v2_updates: int = 0
+    v2_refine_tol: float = 0.05
+    v2_refine_levels: int = 3
 
     def __post_init__(self):
         from wpt_receiver.devices import preset_names
@@ -124,6 +133,11 @@ class EnvConfig:
         if int(self.v2_updates) != self.v2_updates or not 0 <= self.v2_updates <= 1000:
             raise ValueError(f"v2_updates={self.v2_updates!r} is invalid; valid range: integer 0..1000 (0: one "
                              "per rectifier period)")
+        if int(self.v2_refine_levels) != self.v2_refine_levels or not 0 <= self.v2_refine_levels <= 5:
+            raise ValueError(f"v2_refine_levels={self.v2_refine_levels!r} is invalid; valid range: integer 0..5 (0: "
+                             "no refinement)")
+        if not (np.isfinite(self.v2_refine_tol) and self.v2_refine_tol > 0):
+            raise ValueError(f"v2_refine_tol={self.v2_refine_tol!r} is invalid; valid range: (0, inf)")
         if not (np.isfinite(self.hold_tol_a) and self.hold_tol_a >= 0):
             raise ValueError(f"hold_tol_a={self.hold_tol_a!r} is invalid; valid range: [0, inf) A")
         if not (self.device_tj_c == 0.0 or 25.0 <= self.device_tj_c <= 175.0):
@@ -147,7 +161,7 @@ class EnvConfig:
         ``v2_updates``) only where they differ from their defaults: a default config reads as before the
         option. The one rule of :meth:`__repr__` (the oracle's disk-cache keys hold the repr,
         :mod:`policies.oracle`) and of the trained models' metadata (``policies.train.config_dict``)."""
-        opt = {"link_model", "hold_tol_a", "v2_updates"}
+        opt = {"link_model", "hold_tol_a", "v2_updates", "v2_refine_tol", "v2_refine_levels"}
         return [(f.name, getattr(self, f.name)) for f in fields(self)
                 if f.name not in opt or getattr(self, f.name) != f.default]
 
@@ -197,9 +211,9 @@ class EnvConfig:
 
     @property
     def modal_n_sub(self) -> int:
-        """(modal) sub-steps (V2 updated) of a step that is not held (``v2_updates``, at most :attr:`n_sub`,
-        the rectifier periods per step; 0: that)."""
-        return min(self.v2_updates or self.n_sub, self.n_sub)
+        """(modal) sub-steps (V2 updated) of a step that is not held (``v2_updates``; 0: :attr:`n_sub`, the
+        rectifier periods per step)."""
+        return int(self.v2_updates) or self.n_sub
 
     @property
     def modal_n_q(self) -> int:

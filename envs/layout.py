@@ -12,7 +12,7 @@ from collections import namedtuple
 
 __all__ = ["fields", "STATE", "BAT", "COEF", "INFO", "PAR", "SINGLE", "SLOW", "SINGLE_PAR", "CCOEF_N", "XC", "MSTATE",
            "MPAR", "MSINGLE_PAR", "CZ_MODES", "CZ_STEP", "CZ_SUB", "CZ_SAMPLE", "CZ_FAST", "CZ_FASTH", "CZ_KEY", "N_CZ",
-           "FAST"]
+           "FAST", "CZ_RPAR", "CZ_LEVELS", "CZ_LEVEL_N", "REFINE_LEVELS_CAP"]
 
 
 def fields(name: str, names: str):
@@ -60,15 +60,21 @@ MSTATE = fields("ModalState", "z0r z0i z1r z1i v2r v2i e")
 #: at its Lm (:func:`wpt_receiver.modal_kernel.modes`), the ZOH of the step, of a sub-step (V2 updated)
 #: and of a peak sample within a sub-step (:func:`~wpt_receiver.modal_kernel.zoh`), and the Lm they are
 #: for (the key); ``CZ_FAST`` the sub-step's affine maps (:data:`FAST`), ``CZ_FASTH`` the whole step's
-CZ_MODES, CZ_STEP, CZ_SUB, CZ_SAMPLE, CZ_FAST, CZ_FASTH, CZ_KEY, N_CZ = 0, 22, 29, 36, 43, 57, 71, 72
+CZ_MODES, CZ_STEP, CZ_SUB, CZ_SAMPLE, CZ_FAST, CZ_FASTH, CZ_KEY = 0, 22, 29, 36, 43, 57, 71
+#: the adaptive refinement of a sub-step (``envs.modal_step._refine``): ``CZ_RPAR`` = complex(relative tolerance,
+#: levels), then per level L = 1 ... ``REFINE_LEVELS_CAP`` a key (the piece's length [s] once made, 0 until), the
+#: ZOH (7) and the affine maps (:data:`FAST`, 14) of a sub-step / 2^L, ``CZ_LEVEL_N`` complex each from ``CZ_LEVELS``
+REFINE_LEVELS_CAP, CZ_RPAR, CZ_LEVELS, CZ_LEVEL_N = 5, 72, 73, 22
+N_CZ = CZ_LEVELS + REFINE_LEVELS_CAP * CZ_LEVEL_N
 #: a sub-step's affine maps with V2 held (``envs.modal_step._fast_coefs``; the V1 terms per volt of the
 #: phasor V1): mode m's ``z_m+ = e_m z_m + k_m V1 + l_m V2``, the end I2 ``q0 + q1 V2`` with ``q0 = a0 z0 +
 #: a1 z1 + b V1``, the sub-step's ``int I2 dt = c0 z0 + c1 z1 + p0 V1 + p1 V2``
 FAST = fields("Fast", "e0 e1 k0 k1 l0 l1 a0 a1 b q1 c0 c1 p0 p1")
 #: the modal vector env's constants (``_par``): :data:`PAR`'s first eight slots (the same indices), then V1 [V]
 #: the pad's amplitude, hold_tol [A] the transient below which a step holds V2 over the control period,
-#: n_q the peak samples per sub-step (``envs.modal_step._link_step``)
-MPAR = fields("ModalPar", "n_steps dt inv_rated w_track w_over i_ref vf dr v1 hold_tol n_q")
+#: n_q the peak samples per sub-step (``envs.modal_step._link_step``), rtol, rlevels the sub-steps' refinement
+#: (``EnvConfig.v2_refine_tol`` / ``v2_refine_levels``, ``envs.modal_step._refine``)
+MPAR = fields("ModalPar", "n_steps dt inv_rated w_track w_over i_ref vf dr v1 hold_tol n_q rtol rlevels")
 #: the modal single env's constants (``par``) before the observation maps
 MSINGLE_PAR = fields("ModalSinglePar", "n_steps dt inv_rated w_track w_over i_ref slow_every n_sub vf dr v1 hold_tol "
-                     "n_q")
+                     "n_q rtol rlevels")

@@ -110,7 +110,8 @@ def _modal_constants(cfg: EnvConfig) -> dict:
     samples per sub-step (``envs.modal_step._link_step``)."""
     vf, dr = cfg.device_terms
     return dict(n_steps=cfg.n_steps, dt=cfg.dt_s, slow_every=cfg.slow_every, n_sub=cfg.modal_n_sub, vf=vf, dr=dr,
-                v1=cfg.link.v1_amp_v, hold_tol=cfg.hold_tol_a, n_q=cfg.modal_n_q)
+                v1=cfg.link.v1_amp_v, hold_tol=cfg.hold_tol_a, n_q=cfg.modal_n_q,
+                rtol=cfg.v2_refine_tol, rlevels=cfg.v2_refine_levels)
 
 
 class ModalPlantPart(PlantPart):

@@ -12,7 +12,11 @@ the instantaneous peak phase-aware), the mission's link (:mod:`mission_sim.world
 v2 follows i2's phase every half cycle, so a step runs in rectifier-period sub-steps (as the mission's
 fine step) unless the link is within ``hold_tol`` [A] of the steady state of the step's inputs (then V2
 is held over the control period: the ringing, and so any error of the held V2, stays below
-``hold_tol``). Detuned windows (:mod:`envs.detuned`) are the same step with their C1, C2 in the
+``hold_tol``). In a large transient a V2 held for a rectifier period is too coarse (the clamp loads the secondary
+like a resistance (4/pi) Vc / |I2|, an envelope mode of 0.5-1.2 per period): a sub-step whose I2 moves by more
+than ``EnvConfig.v2_refine_tol`` of |I2| is redone in up to 2^``v2_refine_levels`` pieces (:func:`_refine`);
+below that tolerance the step's arithmetic is the one before (smooth control never triggers it: bit-identical
+windows). Detuned windows (:mod:`envs.detuned`) are the same step with their C1, C2 in the
 window's link constants.
 
 * :func:`env_step` steps sub-environments ``[0, n)`` of the vector env, in chunks that run in parallel
@@ -27,7 +31,8 @@ State: the envs' :data:`envs.layout.STATE` (as eq. 4's step) plus the link's own
 (``tests/test_env_modal.py``) check the peak against the switching model on the paper's trajectories,
 the energy balance, and the single env against the vector env's row.
 
-Cost: a step is sub-stepped in nearly every window (the link rarely rings below ``hold_tol``); the helpers called
+Cost: with random actions the refinement makes a step ~5x the unrefined one (docs/performance.md, "Adaptive
+refinement of the modal env step"), with the duty held the same. A step is sub-stepped in nearly every window (the link rarely rings below ``hold_tol``); the helpers called
 once per step with arrays (:func:`_finish`, :func:`_link_of`, :func:`_transient_a`, and the link kernel's lookups
 and readouts) are inlined (``inline="always"``): a call that passes arrays costs numba two atomic reference counts
 per array, the arithmetic is the same (outputs equal to the bit). Profile, what was tried and the figures:
@@ -53,7 +58,8 @@ from wpt_receiver.modal_kernel import step as modal_step
 from wpt_receiver import modal_kernel as _modal_kernel
 from wpt_receiver.kernel_cache import drop_stale_cache
 
-from .layout import (CZ_FAST, CZ_FASTH, CZ_KEY, CZ_MODES, CZ_SAMPLE, CZ_STEP, CZ_SUB, FAST, MPAR, MSINGLE_PAR,
+from .layout import (CZ_FAST, CZ_FASTH, CZ_KEY, CZ_LEVEL_N, CZ_LEVELS, CZ_MODES, CZ_RPAR, CZ_SAMPLE, CZ_STEP, CZ_SUB,
+                     FAST, MPAR, MSINGLE_PAR, REFINE_LEVELS_CAP,
                      MSTATE, SINGLE, SLOW, STATE)
 from .vector_kernel import _battery, _objective, _put_info, _put_obs, _reward, _t_since, single_finish
 
@@ -74,6 +80,11 @@ _EDGE_TOL = 1e-8
 _FOUR_OVER_PI = 4.0 / math.pi
 #: the harmonics' shift is looked up again when |I2|^2 moved by more than this factor since (1.2^2)
 _DELTA_RATIO2 = 1.44
+#: adaptive refinement (:func:`_refine`), :func:`_segment`'s defaults (``EnvConfig.v2_refine_tol`` /
+#: ``v2_refine_levels``): a sub-step whose end I2 moved from its start's by more than this fraction of |I2| is
+#: redone in 2^L pieces (V2 implicit at each piece's end), L = 1 ... ``_REFINE_LEVELS``
+_REFINE_TOL = 0.05
+_REFINE_LEVELS = 3
 
 
 def kernel_function(name: str, compiled: bool = True):
@@ -84,9 +95,10 @@ def kernel_function(name: str, compiled: bool = True):
 
 # ---------------------------------------------------------------------- the link (exact modes)
 @njit(cache=True)
-def _segment(lc, lm_h, dt, n_sub, n_q, cz, force):
+def _segment(lc, lm_h, dt, n_sub, n_q, cz, force, rtol=_REFINE_TOL, levels=_REFINE_LEVELS):
     """The window's link coefficients ``cz`` (:data:`envs.layout.CZ_MODES` ...) at ``lm_h`` [H]: the modes
-    and the ZOH of the step ``dt`` [s], of its ``n_sub``-th and of that one's ``n_q``-th; kept when ``cz``
+    and the ZOH of the step ``dt`` [s], of its ``n_sub``-th and of that one's ``n_q``-th, and the refinement's
+    pieces (:func:`_refine`; its tolerance ``rtol`` and ``levels`` into ``cz[CZ_RPAR]``); kept when ``cz``
     is for ``lm_h`` already (unless ``force``: a new episode, whose link constants ``lc`` may differ)."""
     if not force and cz[CZ_KEY].real == lm_h:
         return
@@ -97,6 +109,9 @@ def _segment(lc, lm_h, dt, n_sub, n_q, cz, force):
     zoh(mc, dt / (n_sub * n_q), cz[CZ_SAMPLE:CZ_FAST])
     _fast_coefs(mc, cz[CZ_SUB:CZ_SAMPLE], dt / n_sub, cz[CZ_FAST:CZ_FASTH])
     _fast_coefs(mc, cz[CZ_STEP:CZ_SUB], dt, cz[CZ_FASTH:CZ_KEY])
+    for lev in range(REFINE_LEVELS_CAP):   # the refinement's pieces: made when first used (_refine)
+        cz[CZ_LEVELS + lev * CZ_LEVEL_N] = 0j
+    cz[CZ_RPAR] = complex(rtol, levels)
     cz[CZ_KEY] = lm_h
 
 
@@ -239,28 +254,141 @@ def _samples(mc, zq, z, v1, v2, n_q, best, i2_best):
     return best, i2_best
 
 
+@njit(cache=True, inline="always")
+def _coef_tuple(cf, v1c):
+    """A sub-step's affine maps (:data:`envs.layout.FAST`) as scalars, the V1 terms times the phasor ``v1c``:
+    ``(e0, e1, k0, k1, l0, l1, c0, c1, p0, p1, a0, a1, b, q1)``."""
+    return (cf[FAST.e0], cf[FAST.e1], cf[FAST.k0] * v1c, cf[FAST.k1] * v1c, cf[FAST.l0], cf[FAST.l1], cf[FAST.c0],
+            cf[FAST.c1], cf[FAST.p0] * v1c, cf[FAST.p1], cf[FAST.a0], cf[FAST.a1], cf[FAST.b] * v1c, cf[FAST.q1])
+
+
+@njit(cache=True, inline="always")
+def _rekey(k, kw):
+    """:func:`_solve_consts`'s tuple ``k`` with the harmonics' shift ``kw = e^{-j delta}`` replaced."""
+    return (k[0], k[1], k[2], _FOUR_OVER_PI * k[1] * kw, kw, k[5], k[6])
+
+
+@njit(cache=True, inline="always")
+def _held(z, z0, z1, v2, v2n, f, co, v1c, zs, h, lc, mc, lm, book, out, en):
+    """One sub-step of ``h`` [s] from the mode amplitudes ``z0, z1`` with ``v2n`` held (``v2`` the last one's; ``f``
+    its clamp part per volt): by the affine maps ``co`` (:func:`_coef_tuple`), or with ``book`` by
+    :func:`wpt_receiver.modal_kernel.step` on the ZOH ``zs`` (energies and the feedthrough's jump into ``en``;
+    ``z`` scratch). Returns ``(z0, z1, mean I_L)`` [A]."""
+    if book:
+        z[0], z[1], z[2], z[3] = z0.real, z0.imag, z1.real, z1.imag
+        en[3] += stored_energy_j(lc, mc, z, v1c, v2n, lm) - stored_energy_j(lc, mc, z, v1c, v2, lm)
+        modal_step(lc, mc, zs, h, z, v1c, v2n, out)
+        en[0] += out[6]
+        en[1] += out[7]
+        en[2] += out[8]
+        return complex(z[0], z[1]), complex(z[2], z[3]), rect_current_a(f, complex(out[2], out[3]), h)
+    il = rect_current_a(f, co[6] * z0 + co[7] * z1 + co[8] + co[9] * v2n, h)
+    return co[0] * z0 + co[2] + co[4] * v2n, co[1] * z1 + co[3] + co[5] * v2n, il
+
+
+@njit(cache=True, inline="always")
+def _reshift(lc, tab, d, i2e, sgn, vc, a, r_ref, k):
+    """The harmonics' shift looked up again at the end current ``i2e`` (``a = |i2e|^2``) when |I2| moved by more
+    than ``sqrt(_DELTA_RATIO2)`` since ``r_ref`` [A]: ``(r_ref, k)``."""
+    if a > _DELTA_RATIO2 * r_ref * r_ref or _DELTA_RATIO2 * a < r_ref * r_ref:
+        r_ref = math.sqrt(a)
+        dl = sbar_shift(lc, tab, d, i2e * sgn, vc)
+        k = _rekey(k, complex(math.cos(dl), -math.sin(dl)))
+    return r_ref, k
+
+
+@njit(cache=True, inline="always")
+def _solve(co, z0, z1, sgn, k, block, lc, tab, mc, zs, v1c, v2, d, vc, ws):
+    """V2 of a sub-step (maps ``co``, ZOH ``zs``): :func:`_v2_closed`, else
+    :func:`~wpt_receiver.modal_kernel.sbar_implicit`: ``(F, I2 end, j e^{-j e})``."""
+    f, i2e, t, ok = _v2_closed(co[10] * z0 + co[11] * z1 + co[12], sgn, k, block)
+    if not ok:
+        f, i2e, e = sbar_implicit(lc, tab, mc, zs, z0, z1, v1c, v2, d, vc, ws, -1.0, 1e-13)
+        t = complex(math.sin(e), math.cos(e))
+    return f, i2e, t
+
+
 @njit(cache=True)
-def _substeps(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v1c, out, en, book, lm, block):
+def _refine(z, z0, z1, v2, lev, sgn, k, r_ref, pk, i2_pk, vc, d, ws, lc, tab, mc, cr, h, v1c, out, en, book, lm, block):
+    """A sub-step of ``h`` [s] redone in ``2^lev`` pieces, V2 implicit at each piece's end (:func:`_v2_closed` on
+    the piece's maps; the refinement levels' coefficients ``cr`` = ``cz[CZ_RPAR:]``, made here at a level's first use
+    in a segment), the shift looked up again as
+    in :func:`_substeps`. Returns ``(z0, z1, V2, j e^{-j e}, end I2, sgn, k, r_ref, |I2| peak, its I2, mean I_L)``."""
+    b, m = 1 + (lev - 1) * CZ_LEVEL_N, 1 << lev
+    hl, il, t, i2e = h / m, 0.0, 0j, 0j
+    zl = cr[b + 1:b + 8]
+    if cr[b].real != hl:   # this level's pieces not made yet for this segment: the ZOH and the maps of h / 2^L
+        zoh(mc, hl, zl)
+        _fast_coefs(mc, zl, hl, cr[b + 8:b + CZ_LEVEL_N])
+        cr[b] = hl
+    co = _coef_tuple(cr[b + 8:b + CZ_LEVEL_N], v1c)
+    kl = _solve_consts(co[13], ws, vc, k[4], k[5], k[6])
+    for _ in range(m):
+        f, i2e, t = _solve(co, z0, z1, sgn, kl, block, lc, tab, mc, zl, v1c, v2, d, vc, ws)
+        v2n = f * vc + ws * i2e
+        z0, z1, q = _held(z, z0, z1, v2, v2n, f, co, v1c, zl, hl, lc, mc, lm, book, out, en)
+        v2, il = v2n, il + q / m
+        a = i2e.real * i2e.real + i2e.imag * i2e.imag
+        if a > pk * abs(pk):
+            pk, i2_pk = math.sqrt(a), i2e
+        sgn = -1.0 if i2e.real < 0.0 else 1.0
+        r_new, k = _reshift(lc, tab, d, i2e, sgn, vc, a, r_ref, k)
+        if r_new != r_ref:
+            r_ref, kl = r_new, _rekey(kl, k[4])
+    return z0, z1, v2, t, i2e, sgn, k, r_ref, pk, i2_pk, il
+
+
+@njit(cache=True, inline="always")
+def _level(i2s, i2e, rtol, levels):
+    """The refinement level of a sub-step whose I2 went from ``i2s`` to ``i2e``: 0 when ``|i2e - i2s| <= rtol
+    max(|i2s|, |i2e|)``, else the least L with ``|i2e - i2s| / 2^L <= rtol max(...)``, at most ``levels``."""
+    dd = i2e - i2s
+    d2 = dd.real * dd.real + dd.imag * dd.imag
+    ref = rtol * rtol * max(i2s.real * i2s.real + i2s.imag * i2s.imag, i2e.real * i2e.real + i2e.imag * i2e.imag)
+    lev = 0
+    while d2 > ref and lev < levels:
+        lev += 1
+        d2 *= 0.25
+    return lev
+
+
+@njit(cache=True)
+def _substeps(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v1c, out, en, book, lm, block, cr):
     """``n_sub`` sub-steps of ``h`` [s] from the mode amplitudes ``z`` (4 reals, in place) and the start's
     I2 ``i2``, V2 updated at each (the circuit decides v2 once per half cycle) by :func:`_v2_closed`
-    (constants ``k``; the harmonics' shift looked up again when |I2| moved by 20 % since), the state advanced by the sub-step's affine maps ``cf`` (:data:`envs.layout.FAST`;
-    with ``book`` by :func:`wpt_receiver.modal_kernel.step` on the ZOH ``zs``, its energies into ``en``,
-    the same state to rounding). A sub-step that the closed forms do not solve takes
-    :func:`~wpt_receiver.modal_kernel.sbar_implicit`. Returns ``(V2, j e^{-j e}, |I2| peak, its I2 phasor,
-    sum of I_L over the sub-steps)``; ``lm`` [H] the Lm of ``mc`` (the stored energy); ``block``: the window
-    blocks in steady state (:func:`_v2_closed`)."""
+    (constants ``k``; the harmonics' shift looked up again when |I2| moved by 20 % since), the state advanced by
+    the sub-step's affine maps ``cf`` (:data:`envs.layout.FAST`; with ``book`` by
+    :func:`wpt_receiver.modal_kernel.step` on the ZOH ``zs``, its energies into ``en``, the same state to
+    rounding). A sub-step that the closed forms do not solve takes :func:`~wpt_receiver.modal_kernel.sbar_implicit`.
+    A sub-step whose end I2 moved from its start's by more than ``cr[0].real`` of |I2| is redone in pieces
+    (:func:`_refine`, at most ``cr[0].imag`` halvings; not with ``n_q > 1`` samples per sub-step): in large
+    transients V2 held over a rectifier period is too coarse (docs/performance.md). Returns ``(V2, j e^{-j e},
+    |I2| peak, its I2 phasor, sum of I_L over the sub-steps)``; ``lm`` [H] the Lm of ``mc`` (the stored energy);
+    ``block``: the window blocks in steady state (:func:`_v2_closed`). The unrefined sub-step is written out
+    here, not through :func:`_held` / :func:`_reshift` as in :func:`_refine`: the same arithmetic, but the
+    helpers made the hot loop ~25 % slower (docs/performance.md)."""
     z0, z1 = complex(z[0], z[1]), complex(z[2], z[3])
     q1, a0, a1, bv = cf[FAST.q1], cf[FAST.a0], cf[FAST.a1], cf[FAST.b] * v1c
     e0, e1, k0, k1 = cf[FAST.e0], cf[FAST.e1], cf[FAST.k0] * v1c, cf[FAST.k1] * v1c
     l0, l1, c0, c1, p0, p1 = cf[FAST.l0], cf[FAST.l1], cf[FAST.c0], cf[FAST.c1], cf[FAST.p0] * v1c, cf[FAST.p1]
     pk, i2_pk, qsum, t = -1.0, 0j, 0.0, 0j
     sgn = -1.0 if i2.real < 0.0 else 1.0
-    r_ref = abs(i2)
+    r_ref, i2s = abs(i2), i2
+    rtol, levels = cr[0].real, int(cr[0].imag) if n_q == 1 and len(cr) > 1 else 0   # held steps: never
     for _ in range(n_sub):
         f, i2e, t, ok = _v2_closed(a0 * z0 + a1 * z1 + bv, sgn, k, block)
         if not ok:
             f, i2e, e = sbar_implicit(lc, tab, mc, zs, z0, z1, v1c, v2, d, vc, ws, -1.0, 1e-13)
             t = complex(math.sin(e), math.cos(e))
+        lev = _level(i2s, i2e, rtol, levels) if levels > 0 else 0
+        if lev > 0:   # I2 moved too much for one held V2: this sub-step again, in 2^lev pieces
+            z0, z1, v2, t, i2e, sgn, k, r_ref, pk, i2_pk, q = _refine(z, z0, z1, v2, lev, sgn, k, r_ref, pk, i2_pk, vc, d,
+                                                                      ws, lc, tab, mc, cr, h, v1c, out, en, book, lm,
+                                                                      block)
+            qsum += q
+            i2s = i2e
+            continue
+        i2s = i2e
         v2n = f * vc + ws * i2e
         if book or n_q > 1:
             z[0], z[1], z[2], z[3] = z0.real, z0.imag, z1.real, z1.imag
@@ -332,7 +460,8 @@ def _link_step(z, v2, e, vl, d, lc, tab, cz, dt, n_sub, n_q, vf, dr, v1, hold_to
     k = _solve_consts(cf[FAST.q1], ws, vc, kw, sw, cw)
     block = abs(blocking_v2(mc, v1c)) <= _FOUR_OVER_PI * vc * (1.0 - sw)   # the window blocks in steady state
     v2, t, pk_env, i2_pk, qsum = _substeps(z, v2, i2a, k, vc, d, ws, lc, tab, mc, zs, cf, cz[CZ_SAMPLE:CZ_FAST], h,
-                                           n, n_q if split else 1, v1c, out, en, book, cz[CZ_KEY].real, block)
+                                           n, n_q if split else 1, v1c, out, en, book, cz[CZ_KEY].real, block,
+                                           cz[CZ_RPAR:] if split else cz[CZ_RPAR:CZ_LEVELS])
     i1, i2 = phasors(mc, z, v1c, v2)
     a = abs(i2)
     if a > pk_env:   # the end's I2 from the state (the closed form's end current to rounding)
@@ -418,7 +547,8 @@ def _chunk(lo, hi, d, state, mstate, k, j, lc_all, cz_all, bat, cmd_all, noise_a
         kk = k[e]
         jj = kk // slow_every
         if jj != j[e] or kk == 0:
-            _segment(lc_all[e], lm_all[jj, e], dt, n_sub, int(par[MPAR.n_q]), cz_all[e], kk == 0)
+            _segment(lc_all[e], lm_all[jj, e], dt, n_sub, int(par[MPAR.n_q]), cz_all[e], kk == 0, par[MPAR.rtol],
+                     int(par[MPAR.rlevels]))
             j[e] = jj
         link = _link_of(state, mstate, e, lc_all[e], tab, cz_all[e], d[e], par, n_sub, out, en, zb)
         k[e] = _finish(e, d[e], state, kk, jj, bat, cmd_all, noise_all, lm_all, ep, par, scale, offset, link, obs,
@@ -467,7 +597,7 @@ def single_step(k, d, st, steps, slow, par, obs, out, lc, cz, tab):
     dt, n_sub, se = par[P.dt], int(par[P.n_sub]), int(par[P.slow_every])
     j = k // se
     if k == 0 or j != (k - 1) // se:
-        _segment(lc, slow[j, SLOW.lm_h], dt, n_sub, int(par[P.n_q]), cz, k == 0)
+        _segment(lc, slow[j, SLOW.lm_h], dt, n_sub, int(par[P.n_q]), cz, k == 0, par[P.rtol], int(par[P.rlevels]))
     vl_old = st[SINGLE.vl]
     ms = st[len(SINGLE):]   # the link's own state (MSTATE) after the SINGLE slots
     z = ms[MSTATE.z0r:MSTATE.z1i + 1]
