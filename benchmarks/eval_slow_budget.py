@@ -16,6 +16,9 @@ every scenario, and prints / writes per scenario:
     python benchmarks/eval_slow_budget.py --models 'policies/pretrained/slow_budget_s*.zip' \
         --refs model_based,model_based_online,mpc --scenarios nominal,lm_drift --episodes 100 --json out/x.json
 
+``--link modal`` evaluates on the exact-mode link (``envs.EnvConfig(link_model="modal")``, as ``compare --link``),
+the oracle gaps included (the oracle on the same env config; its cache key holds the config).
+
 The same numbers as ``dronewpt compare --train-seeds slow_budget=slow_budget:PATH,...`` for the
 reference ``model_based`` (compare's default); the other references are what this adds.
 """
@@ -35,22 +38,24 @@ def _per_seed(metrics_list, ref, key):
     return [float(np.nanmean(m[key] - ref[key])) for m in metrics_list]
 
 
-def oracle_gap(tr, scenario, windows, seed):
+def oracle_gap(tr, scenario, windows, seed, config=None):
     """Per window (in short mode) of a policy's traces: 100 (E - E_oracle) / E at the policy's own measured
-    overshoot (as :func:`policies.compare.oracle_gaps`); returns the list of gaps [%]."""
+    overshoot (as :func:`policies.compare.oracle_gaps`; the oracle on the env config ``config``, its link
+    included); returns the list of gaps [%]."""
     from policies.oracle import oracle_window
     m, gaps = tr.metrics, []
     for i in range(min(int(windows), tr.d_short.shape[1])):
         if not m["reached_short_mode"][i]:
             continue
         o = oracle_window(scenario, seed + i, max(m["overshoot_pct"][i], 0.0) / 100.0,
-                          starts=("model_based_budget:0.01",), extra_starts=(tr.d_short[:, i],))
+                          starts=("model_based_budget:0.01",), config=config, extra_starts=(tr.d_short[:, i],))
         e = m["energy_after_stop_j"][i]
         gaps.append(100.0 * (e - o.energy_after_stop_j) / e)
     return gaps
 
 
-def evaluate(models, refs, scenarios, episodes, seed, kind="slow_budget", extra=(), oracle_windows=0, no_gap=()):
+def evaluate(models, refs, scenarios, episodes, seed, kind="slow_budget", extra=(), oracle_windows=0, no_gap=(),
+             config=None):
     from tqdm import tqdm
 
     from policies.compare import run_policy
@@ -62,10 +67,10 @@ def evaluate(models, refs, scenarios, episodes, seed, kind="slow_budget", extra=
     for s in scenarios:
         met, gaps = {}, {}
         for p in list(refs) + list(extra) + [f"{kind}:{m}" for m in models]:
-            tr = run_policy(p, s, episodes, seed)
+            tr = run_policy(p, s, episodes, seed, config)
             met[p] = tr.metrics
             if oracle_windows and s == scenarios[0] and p not in no_gap:
-                gaps[p] = oracle_gap(tr, s, oracle_windows, seed)
+                gaps[p] = oracle_gap(tr, s, oracle_windows, seed, config)
             bar.update(1)
         learned = [met[f"{kind}:{m}"] for m in models]
         row = {"policies": {}, "paired": {}}
@@ -136,15 +141,21 @@ def main(argv=None):
     ap.add_argument("--json", default=None)
     ap.add_argument("--oracle-windows", type=int, default=0, help="gap to the oracle on the first scenario's first N")
     ap.add_argument("--no-gap", default="model_based_online", help="policies without an oracle gap")
+    ap.add_argument("--link", choices=("envelope", "modal"), default="envelope",
+                    help="the env's link model (envs.EnvConfig.link_model, as compare --link); the oracle on the same")
     a = ap.parse_args(argv)
     models = sorted(glob.glob(a.models))
     if not models:
         raise SystemExit(f"--models {a.models!r}: no file matches")
+    config = None
+    if a.link != "envelope":
+        from envs import EnvConfig
+        config = EnvConfig(link_model=a.link)
     t0, c0, l0 = time.time(), time.process_time(), os.getloadavg()
     res = evaluate(models, [r for r in a.refs.split(",") if r], a.scenarios.split(","), a.episodes, a.seed, a.kind,
-                   [e for e in a.extra.split(",") if e], a.oracle_windows, tuple(a.no_gap.split(",")))
+                   [e for e in a.extra.split(",") if e], a.oracle_windows, tuple(a.no_gap.split(",")), config)
     report(res, a.kind)
-    info = {"models": models, "episodes": a.episodes, "seed": a.seed, "wall_s": time.time() - t0,
+    info = {"models": models, "episodes": a.episodes, "seed": a.seed, "link": a.link, "wall_s": time.time() - t0,
             "cpu_s": time.process_time() - c0, "load_before": l0, "load_after": os.getloadavg()}
     print(f"\n{info}")
     if a.json:
