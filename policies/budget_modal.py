@@ -85,20 +85,40 @@ def _v2_plans(ctl_ss, x0, u0, du, n):
     return a, b
 
 
-def predicted_overshoot(link, devices, dt_s, d_prev, vl_v, a, b, r):
-    """``P(r)`` (module docstring): the exact-mode link's predicted overshoot (fraction) of the plan
-    ``f^-1(a + r b, vl_v)`` after the duty ``d_prev`` held before it."""
-    from wpt_receiver import duty_from_v2_clipped
+def _start(link, devices, dt_s, d_prev, vl_v):
+    """``(z, v2, sub, zc, vc)`` at the plan's start: the mode state (4 reals) and V2 [V] after the duty ``d_prev``
+    held for one control period from its periodic steady state, the rectifier sub-steps per control period,
+    the sub-step's ZOH and the clamp ``VL + Vf`` [V]; the same for every ``r`` (computed once per stop)."""
     from wpt_receiver import modal_kernel as mk
     lc, tab, mc, v1, i2_sm, vf = _plant(link, devices)
-    d = np.empty(len(a) + 1)
-    d[0] = d_prev
-    d[1:] = duty_from_v2_clipped(a + r * b, vl_v)
     # V2 follows i2's phase once per rectifier period (as the env's sub-steps; held longer, it pumps the link),
     # and the peak is taken at every sub-step's end as the env's (each duty repeated over its sub-steps)
     sub = max(1, int(round(dt_s / link.rectifier_period_s)))
-    pk = mk.run_duties(lc, mc, tab, np.repeat(d, sub), dt_s / sub, 1, v1, vl_v + vf, link.lm_h)[3]
-    return float(pk[sub + 1:].max() / i2_sm - 1.0)
+    zc = np.empty(mk.N_ZOH_C, dtype=np.complex128)
+    mk.zoh(mc, dt_s / sub, zc)
+    vc = vl_v + vf
+    z = np.zeros(4)
+    v2 = mk.steady_state(lc, mc, tab, d_prev, v1, vc, z)
+    v2 = mk.held_peak(lc, mc, tab, zc, z, v2, np.array([float(d_prev)]), sub, v1, vc)[1]
+    return z, v2, sub, zc, vc
+
+
+def _plan_overshoot(link, devices, start, vl_v, a, b, r):
+    """``P(r)`` from the plan's ``start`` (:func:`_start`): the peak of the duties ``f^-1(a + r b, vl_v)``."""
+    from wpt_receiver import duty_from_v2_clipped
+    from wpt_receiver import modal_kernel as mk
+    lc, tab, mc, v1, i2_sm, vf = _plant(link, devices)
+    z, v2, sub, zc, vc = start
+    d = np.ascontiguousarray(duty_from_v2_clipped(a + r * b, vl_v), dtype=float)
+    return float(mk.held_peak(lc, mc, tab, zc, z.copy(), v2, d, sub, v1, vc)[0] / i2_sm - 1.0)
+
+
+def predicted_overshoot(link, devices, dt_s, d_prev, vl_v, a, b, r):
+    """``P(r)`` (module docstring): the exact-mode link's predicted overshoot (fraction) of the plan
+    ``f^-1(a + r b, vl_v)`` after the duty ``d_prev`` held before it (the peak over the plan's sub-steps,
+    :func:`wpt_receiver.modal_kernel.held_peak`; the same numbers as :func:`~wpt_receiver.modal_kernel.run_duties`
+    on ``[d_prev, plan]`` each repeated over the sub-steps)."""
+    return _plan_overshoot(link, devices, _start(link, devices, dt_s, d_prev, vl_v), vl_v, a, b, r)
 
 
 def _check(budget, d_prev, vl_v, x0) -> None:
@@ -122,8 +142,10 @@ def relaxation(budget, link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v) ->
     n = int(round(HORIZON_S / dt_s))
     a, b = _v2_plans(ctl_ss, x0, u0, du, n)
 
+    start = _start(link, devices, dt_s, d_prev, vl_v)
+
     def pred(r):
-        return predicted_overshoot(link, devices, dt_s, d_prev, vl_v, a, b, r)
+        return _plan_overshoot(link, devices, start, vl_v, a, b, r)
     coarse = np.linspace(0.0, R_MAX, _N_GRID)
     pc = np.array([pred(r) for r in coarse])
     target = np.nanmin(pc) + budget if np.any(np.isfinite(pc)) else -np.inf
