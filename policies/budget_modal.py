@@ -85,32 +85,91 @@ def _v2_plans(ctl_ss, x0, u0, du, n):
     return a, b
 
 
-def _start(link, devices, dt_s, d_prev, vl_v):
-    """``(z, v2, sub, zc, vc)`` at the plan's start: the mode state (4 reals) and V2 [V] after the duty ``d_prev``
-    held for one control period from its periodic steady state, the rectifier sub-steps per control period,
-    the sub-step's ZOH and the clamp ``VL + Vf`` [V]; the same for every ``r`` (computed once per stop)."""
+@lru_cache(maxsize=4)
+def _tail_bound(link, devices: str, dt_s: float):
+    """``(V^-1 (3, 3), x* (3,), w (3,), |I2*| [A], excess [A/V])`` of the short-mode tail for
+    :func:`wpt_receiver.modal_kernel.held_peak` (its docstring): the step at duty 1 is affine in ``x = (z0, z1,
+    V2)``; its linear part ``M`` and I2's readout ``C`` are taken from the kernel's own step
+    (:func:`~wpt_receiver.modal_kernel.held_peak` over one sub-step, :func:`~wpt_receiver.modal_kernel.phasors`)
+    on the unit vectors with ``V1 = 0`` and ``Vc = 0`` (then exactly linear), ``x*`` its fixed point under
+    ``V1``, ``M = V diag(lam) V^-1``, ``w_i = |(C V)_i| |lam_i| (1 + 1e-9)``; ``excess`` the peak table's largest
+    excess at duty 1 (the lookup there interpolates in phase and |I2| only). ``None`` when a mode does not decay (``|lam| >= 1``) or ``V`` is ill-conditioned: no
+    early stop then."""
     from wpt_receiver import modal_kernel as mk
     lc, tab, mc, v1, i2_sm, vf = _plant(link, devices)
+    sub, zc = _substeps(link, dt_s, mc)
+    one = np.ones(1)
+    no_vinv, no_x, no_w = np.zeros((3, 3), np.complex128), np.zeros(3, np.complex128), np.zeros(3)
+
+    def step(x, v1x):
+        z = np.array([x[0].real, x[0].imag, x[1].real, x[1].imag])
+        v2 = mk.held_peak(lc, mc, tab, zc, z, x[2], one, 1, v1x, 0.0, 1, no_vinv, no_x, no_w, 0.0)[1]
+        return np.array([complex(z[0], z[1]), complex(z[2], z[3]), v2])
+
+    def i2(x, v1x):
+        return mk.phasors(mc, np.array([x[0].real, x[0].imag, x[1].real, x[1].imag]), v1x, x[2])[1]
+    eye = np.eye(3, dtype=np.complex128)
+    m = np.column_stack([step(e, 0j) for e in eye])
+    c = np.array([i2(e, 0j) for e in eye])
+    xs = np.linalg.solve(eye - m, step(np.zeros(3, np.complex128), v1))
+    lam, vec = np.linalg.eig(m)
+    if not (np.all(np.abs(lam) < 1.0) and np.linalg.cond(vec) < 1e6):
+        return None
+    w = np.abs(c @ vec) * np.abs(lam) * (1.0 + 1e-9)
+    excess = float(tab[1, :, -1, :].max())   # duty 1 is the table's last row: the lookup's weight on it is 1
+    return np.linalg.inv(vec), xs, w, abs(i2(xs, v1)), excess
+
+
+def _substeps(link, dt_s, mc):
+    """``(sub, zc)``: the rectifier sub-steps per control period and the sub-step's ZOH coefficients."""
+    from wpt_receiver import modal_kernel as mk
     # V2 follows i2's phase once per rectifier period (as the env's sub-steps; held longer, it pumps the link),
     # and the peak is taken at every sub-step's end as the env's (each duty repeated over its sub-steps)
     sub = max(1, int(round(dt_s / link.rectifier_period_s)))
     zc = np.empty(mk.N_ZOH_C, dtype=np.complex128)
     mk.zoh(mc, dt_s / sub, zc)
+    return sub, zc
+
+
+def _start(link, devices, dt_s, d_prev, vl_v):
+    """``(z, v2, sub, zc, vc, tail)`` at the plan's start: the mode state (4 reals) and V2 [V] after the duty
+    ``d_prev`` held for one control period from its periodic steady state, the rectifier sub-steps per control
+    period, the sub-step's ZOH, the clamp ``VL + Vf`` [V] and the short-mode tail's bound (:func:`_tail_bound`,
+    its cap with this clamp; ``None``: none); the same for every ``r`` (computed once per stop)."""
+    from wpt_receiver import modal_kernel as mk
+    lc, tab, mc, v1, i2_sm, vf = _plant(link, devices)
+    sub, zc = _substeps(link, dt_s, mc)
     vc = vl_v + vf
     z = np.zeros(4)
     v2 = mk.steady_state(lc, mc, tab, d_prev, v1, vc, z)
-    v2 = mk.held_peak(lc, mc, tab, zc, z, v2, np.array([float(d_prev)]), sub, v1, vc)[1]
-    return z, v2, sub, zc, vc
+    tail = _tail_bound(link, devices, dt_s)
+    if tail is not None:
+        vinv, xs, w, i2s, excess = tail
+        # the margin (1e-6 A) is ~1e6 times the rounding and the ~1e-15 V of V2's clamp part in short mode
+        tail = (vinv, xs, w, i2s + vc * excess + 1e-6)
+    v2 = _held_peak(lc, mc, tab, zc, z, v2, np.array([float(d_prev)]), sub, v1, vc)[1]
+    return z, v2, sub, zc, vc, tail
+
+
+def _held_peak(lc, mc, tab, zc, z, v2, d, sub, v1, vc, tail=None):
+    """:func:`wpt_receiver.modal_kernel.held_peak`, with the short-mode tail's early stop when ``tail`` is
+    given (``(V^-1, x*, w, cap)``) and ``d`` ends in duties 1."""
+    from wpt_receiver import modal_kernel as mk
+    if tail is None:
+        return mk.held_peak(lc, mc, tab, zc, z, v2, d, sub, v1, vc, len(d), np.zeros((3, 3), np.complex128),
+                            np.zeros(3, np.complex128), np.zeros(3), 0.0)
+    not_one = np.flatnonzero(d != 1.0)
+    k_tail = int(not_one[-1]) + 1 if len(not_one) else 0
+    return mk.held_peak(lc, mc, tab, zc, z, v2, d, sub, v1, vc, k_tail, *tail)
 
 
 def _plan_overshoot(link, devices, start, vl_v, a, b, r):
     """``P(r)`` from the plan's ``start`` (:func:`_start`): the peak of the duties ``f^-1(a + r b, vl_v)``."""
     from wpt_receiver import duty_from_v2_clipped
-    from wpt_receiver import modal_kernel as mk
     lc, tab, mc, v1, i2_sm, vf = _plant(link, devices)
-    z, v2, sub, zc, vc = start
+    z, v2, sub, zc, vc, tail = start
     d = np.ascontiguousarray(duty_from_v2_clipped(a + r * b, vl_v), dtype=float)
-    return float(mk.held_peak(lc, mc, tab, zc, z.copy(), v2, d, sub, v1, vc)[0] / i2_sm - 1.0)
+    return float(_held_peak(lc, mc, tab, zc, z.copy(), v2, d, sub, v1, vc, tail)[0] / i2_sm - 1.0)
 
 
 def predicted_overshoot(link, devices, dt_s, d_prev, vl_v, a, b, r):
