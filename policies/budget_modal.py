@@ -41,6 +41,7 @@ above the target (the scan stops there).
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from functools import lru_cache
 
 import numpy as np
@@ -193,18 +194,52 @@ def _check(budget, d_prev, vl_v, x0) -> None:
         raise ValueError(f"x0={np.asarray(x0)!r} is invalid; valid range: a finite controller state")
 
 
+def _stop_key(link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v):
+    """The exact inputs of a stop's plans (bytes of every array, with its shape): equal keys, equal plans."""
+    def arr(x):
+        x = np.asarray(x, dtype=float)
+        return x.shape, x.tobytes()
+    return (link, devices, float(dt_s), tuple(arr(m) for m in ctl_ss), arr(x0), float(u0), float(du), float(d_prev),
+            float(vl_v))
+
+
+#: the last stops' plans: key (:func:`_stop_key`) -> ``(pred, ...)`` (:func:`_stop_plans`), least recent first
+_STOPS: OrderedDict = OrderedDict()
+_N_STOPS = 64
+
+
+def _stop_plans(link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v):
+    """``pred(r)`` = ``P(r)`` at one stop, each ``r`` predicted once: kept for the last :data:`_N_STOPS` stops, so
+    stacked controllers at the same stop (two budgets of ``compare``'s stacked batch; seeds of a learned policy
+    over the same base whose stop states coincide) and the grids' common points (``r = 0``) share their plans.
+    ``P`` does not depend on the budget; the key is the exact inputs, so a shared plan is the same number."""
+    key = _stop_key(link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v)
+    pred = _STOPS.get(key)
+    if pred is not None:
+        _STOPS.move_to_end(key)
+        return pred
+    n = int(round(HORIZON_S / dt_s))
+    a, b = _v2_plans(ctl_ss, x0, u0, du, n)
+    start = _start(link, devices, dt_s, d_prev, vl_v)
+    memo = {}
+
+    def pred(r):
+        p = memo.get(r)
+        if p is None:
+            p = memo[r] = _plan_overshoot(link, devices, start, vl_v, a, b, r)
+        return p
+    _STOPS[key] = pred
+    if len(_STOPS) > _N_STOPS:
+        _STOPS.popitem(last=False)
+    return pred
+
+
 def relaxation(budget, link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v) -> float:
     """``r*`` (module docstring) of one receiver at its stop: the controller's state ``x0``, its input ``u0 +
     r du`` after the stop (``du`` = I2_sm of the assumed model [A]), the last duty ``d_prev`` and the battery
     voltage ``vl_v`` [V]. ``r*`` is a multiple of :data:`R_STEP` in ``[0, R_MAX]``."""
     _check(budget, d_prev, vl_v, x0)
-    n = int(round(HORIZON_S / dt_s))
-    a, b = _v2_plans(ctl_ss, x0, u0, du, n)
-
-    start = _start(link, devices, dt_s, d_prev, vl_v)
-
-    def pred(r):
-        return _plan_overshoot(link, devices, start, vl_v, a, b, r)
+    pred = _stop_plans(link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v)
     coarse = np.linspace(0.0, R_MAX, _N_GRID)
     pc = np.array([pred(r) for r in coarse])
     target = np.nanmin(pc) + budget if np.any(np.isfinite(pc)) else -np.inf
