@@ -9,7 +9,7 @@ envelope path, unchanged) ``r`` is the budget ``b`` itself: the envelope oversho
 modal link that promise is off twice: the SBAR's quadrature rings the exact modes near short mode, and the
 measured overshoot is the instantaneous peak (the ripple on top), each window with its floor.
 
-**Here** the plan is predicted with the exact-mode link (:func:`wpt_receiver.modal_kernel.run_duties`: the
+**Here** the plan is predicted with the exact-mode link (:func:`wpt_receiver.modal_kernel.run_duties`' steps: the
 link's modes at the assumed Lm; the SBAR's *explicit* commutation :func:`~wpt_receiver.modal_kernel.sbar_v2`
 with its quadrature, V2 set from i2's phase at the start of each rectifier sub-step, where the env and the
 mission solve the commutation implicitly, :func:`~wpt_receiver.modal_kernel.sbar_implicit`; the phase-aware
@@ -29,7 +29,19 @@ lands in a tooth's dip; the running max over a grid of step :data:`R_STEP` (fine
 tooth near r = 0.03) does not. Between two grid points the running max may still be exceeded by up to the tooth's
 slope times the step (up to ~0.4 point at a tooth's left edge). The fine scan runs from ``r = 0`` up to the first
 grid point above the target (at most up to the coarse grid's first point above it), so its cost is ``r* /
-R_STEP`` predictions (~5 ms each: ~0.8 s per stop at b = 0.05, ~3.4 s at b = 0.1 on window 1000, load ~4).
+R_STEP`` predictions.
+
+**Cost, the same numbers.** A prediction is :func:`wpt_receiver.modal_kernel.held_peak`: ``run_duties``' steps
+without its energies (two stored-energy evaluations and the step's integrals per sub-step), from the state after
+``d_prev``'s control period computed once per stop; once a plan's remaining duties are all 1 (short mode, the link
+affine) it stops as soon as a bound on every later peak (the modes' decay, :func:`_tail_bound`) is below the max
+so far, so the max is unchanged. A stop's predictions are kept per ``r`` (:func:`_stop_plans`, the last 64 stops
+keyed on their exact inputs): ``r = 0`` is on both grids, and stacked budgets at one stop share them. ``P(r)`` is
+bit-identical to ``run_duties``' (``tests/test_budget_modal.py``) and so ``r*``: the same on all 100 stops of
+nominal windows 1000-1099 at b = 0.01, 0.02, 0.05, 0.1. Per stop (in-process CPU, medians over those 100 stops,
+load 3-5 on 2 cores, 2026-11-26): 25 / 30 / 44 / 94 ms at b = 0.01 / 0.02 / 0.05 / 0.1, against 133 / 169 / 283 /
+964 ms with ``run_duties`` (5.2x / 5.6x / 6.4x / 10.3x). What remains is the non-linear SBAR step itself (~0.2 us
+per sub-step, 17 sub-steps per control period, up to 200 periods while a plan has not reached duty 1).
 
 The budget is then *the measured overshoot above the floor of the controller's own plans*, as the prediction
 sees it (a window's oracle floor is lower: docs/modal_policies.md, section "`model_based_budget:b` on the
