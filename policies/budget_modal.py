@@ -90,11 +90,12 @@ def _v2_plans(ctl_ss, x0, u0, du, n):
     ad, bd, cd, dd = ctl_ss
     a, b = np.empty(n), np.empty(n)
     x, xb = np.asarray(x0, dtype=float).copy(), np.zeros(len(bd))
+    du_a, du_b, bu_a, bu_b = dd * u0, dd * du, bd * u0, bd * du   # the constant terms, once (the same numbers)
     for k in range(n):
-        a[k] = cd @ x + dd * u0
-        b[k] = cd @ xb + dd * du
-        x = ad @ x + bd * u0
-        xb = ad @ xb + bd * du
+        a[k] = cd @ x + du_a
+        b[k] = cd @ xb + du_b
+        x = ad @ x + bu_a
+        xb = ad @ xb + bu_b
     return a, b
 
 
