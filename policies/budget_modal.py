@@ -165,25 +165,27 @@ def _start(link, devices, dt_s, d_prev, vl_v):
     return z, v2, sub, zc, vc, tail
 
 
-def _held_peak(lc, mc, tab, zc, z, v2, d, sub, v1, vc, tail=None):
+def _held_peak(lc, mc, tab, zc, z, v2, d, sub, v1, vc, tail=None, i2_ref=1.0, above=np.inf):
     """:func:`wpt_receiver.modal_kernel.held_peak`, with the short-mode tail's early stop when ``tail`` is
-    given (``(V^-1, x*, w, cap)``) and ``d`` ends in duties 1."""
+    given (``(V^-1, x*, w, cap)``) and ``d`` ends in duties 1, and the stop once ``pmax / i2_ref - 1 > above``."""
     from wpt_receiver import modal_kernel as mk
     if tail is None:
         return mk.held_peak(lc, mc, tab, zc, z, v2, d, sub, v1, vc, len(d), np.zeros((3, 3), np.complex128),
-                            np.zeros(3, np.complex128), np.zeros(3), 0.0)
+                            np.zeros(3, np.complex128), np.zeros(3), 0.0, i2_ref, above)
     not_one = np.flatnonzero(d != 1.0)
     k_tail = int(not_one[-1]) + 1 if len(not_one) else 0
-    return mk.held_peak(lc, mc, tab, zc, z, v2, d, sub, v1, vc, k_tail, *tail)
+    return mk.held_peak(lc, mc, tab, zc, z, v2, d, sub, v1, vc, k_tail, *tail, i2_ref, above)
 
 
-def _plan_overshoot(link, devices, start, vl_v, a, b, r):
-    """``P(r)`` from the plan's ``start`` (:func:`_start`): the peak of the duties ``f^-1(a + r b, vl_v)``."""
+def _plan_overshoot(link, devices, start, vl_v, a, b, r, above=np.inf):
+    """``P(r)`` from the plan's ``start`` (:func:`_start`): the peak of the duties ``f^-1(a + r b, vl_v)``; with
+    ``above`` finite, a lower bound of ``P(r)`` above ``above`` as soon as the plan's peak so far shows one."""
     from wpt_receiver import duty_from_v2_clipped
     lc, tab, mc, v1, i2_sm, vf = _plant(link, devices)
     z, v2, sub, zc, vc, tail = start
     d = np.ascontiguousarray(duty_from_v2_clipped(a + r * b, vl_v), dtype=float)
-    return float(_held_peak(lc, mc, tab, zc, z.copy(), v2, d, sub, v1, vc, tail)[0] / i2_sm - 1.0)
+    above = float(above) if above == above else np.inf   # a NaN threshold: no stop
+    return float(_held_peak(lc, mc, tab, zc, z.copy(), v2, d, sub, v1, vc, tail, i2_sm, above)[0] / i2_sm - 1.0)
 
 
 def predicted_overshoot(link, devices, dt_s, d_prev, vl_v, a, b, r):
@@ -236,10 +238,12 @@ def _stop_plans(link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v):
     start = _start(link, devices, dt_s, d_prev, vl_v)
     memo = {}
 
-    def pred(r):
-        p = memo.get(r)
-        if p is None:
-            p = memo[r] = _plan_overshoot(link, devices, start, vl_v, a, b, r)
+    def pred(r, above=np.inf):
+        """``P(r)``, or a lower bound of it above ``above`` (then ``P(r) > above`` is all that is known)."""
+        p, exact = memo.get(r, (None, False))
+        if p is None or not (exact or p > above):
+            p = _plan_overshoot(link, devices, start, vl_v, a, b, r, above)
+            memo[r] = (p, not (p > above))
         return p
     _STOPS[key] = pred
     if len(_STOPS) > _N_STOPS:
@@ -254,7 +258,14 @@ def relaxation(budget, link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v) ->
     _check(budget, d_prev, vl_v, x0)
     pred = _stop_plans(link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v)
     coarse = np.linspace(0.0, R_MAX, _N_GRID)
-    pc = np.array([pred(r) for r in coarse])
+    # a coarse point whose plan is above (the least exact P so far) + b is neither the floor nor below the target:
+    # its plan stops there (a lower bound of P above that, which leaves the floor and the flags below as they are)
+    pc = np.empty(_N_GRID)
+    floor = np.inf
+    for i, r in enumerate(coarse):
+        pc[i] = pred(r, floor + budget)
+        if pc[i] < floor:
+            floor = pc[i]
     target = np.nanmin(pc) + budget if np.any(np.isfinite(pc)) else -np.inf
     above = ~(pc <= target)   # NaN counts as above
     # the running max's first crossing lies at or below the coarse grid's first point above the target
@@ -262,7 +273,7 @@ def relaxation(budget, link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v) ->
     n_fine = int(round(r_end / R_STEP))
     r_best = -1
     for k in range(n_fine + 1):
-        if not (pred(k * R_STEP) <= target):
+        if not (pred(k * R_STEP, target) <= target):
             break
         r_best = k
     return round(max(0, r_best) * R_STEP, 12)

@@ -345,7 +345,7 @@ def test_search_equals_the_reference_search(stop_1000, budget):
     assert bm.relaxation(budget, *stop_1000) == round(k * bm.R_STEP, 12)
     calls = []
     orig = bm._plan_overshoot
-    bm._plan_overshoot = lambda *args: calls.append(args[-1]) or orig(*args)
+    bm._plan_overshoot = lambda *args: calls.append(args[6]) or orig(*args)   # args[6]: r
     try:
         r_shared = bm.relaxation(0.01, *stop_1000)   # a smaller budget after it at the same stop: no new plan
         assert calls == []
@@ -354,3 +354,18 @@ def test_search_equals_the_reference_search(stop_1000, budget):
     finally:
         bm._plan_overshoot = orig
     assert len(calls) == len(set(calls)) > bm._N_GRID   # each r once (r = 0 is on both grids)
+
+
+def test_plan_stopped_above_a_threshold_is_a_lower_bound(stop_1000):
+    """A plan stopped once its overshoot so far exceeds a threshold returns a value above the threshold and at most
+    the whole plan's P (so "above the target" is decided as on the whole plan); a threshold above P changes
+    nothing (the whole plan's P, bit for bit)."""
+    link, devices, dt, ss, x0, u0, du, d_prev, vl = stop_1000
+    a, b = bm._v2_plans(ss, x0, u0, du, int(round(bm.HORIZON_S / dt)))
+    start = bm._start(link, devices, dt, d_prev, vl)
+    for r in (0.0, 0.0316, 0.1):
+        p = bm._plan_overshoot(link, devices, start, vl, a, b, r)
+        assert bm._plan_overshoot(link, devices, start, vl, a, b, r, p + 1e-3) == p
+        for below in (0.005, 0.02):
+            q = bm._plan_overshoot(link, devices, start, vl, a, b, r, p - below)
+            assert p - below < q <= p, (r, below, q, p)

@@ -683,7 +683,8 @@ def run_duties(lc, mc, tab, d_short, control_period_s, substeps, v1, vc_v, lm_h)
 
 
 @njit(cache=True)
-def held_peak(lc, mc, tab, zc, z, v2, d_short, substeps, v1, vc_v, k_tail, tail_vinv, tail_x, tail_w, tail_cap):
+def held_peak(lc, mc, tab, zc, z, v2, d_short, substeps, v1, vc_v, k_tail, tail_vinv, tail_x, tail_w, tail_cap,
+              i2_ref=1.0, above=math.inf):
     """The instantaneous peak [A] of a run of held duties without its energies: :func:`run_duties`' steps (V2
     from i2's phase at each step's start, :func:`sbar_v2`; the state part of :func:`step`, :func:`advance_z`;
     :func:`inst_peak` at each step's end) from the mode state ``z`` (4 reals, advanced in place) under the
@@ -700,7 +701,11 @@ def held_peak(lc, mc, tab, zc, z, v2, d_short, substeps, v1, vc_v, k_tail, tail_
     ``tail_x`` = x*) and the peak exceeds ``|I2|`` by at most the table's largest excess at duty 1: with
     ``tail_cap`` = ``|I2*|`` + ``Vc`` times that excess + a margin for the rounding, no later peak can reach
     the max once ``tail_cap + sum_i ...`` is below it, and the run returns then (the max unchanged; the V2
-    returned is then the last one computed). Built by :func:`policies.budget_modal._tail_bound`."""
+    returned is then the last one computed). Built by :func:`policies.budget_modal._tail_bound`.
+
+    **Stopping once above.** With ``above`` finite the run also returns as soon as the max so far, as the
+    overshoot ``pmax / i2_ref - 1`` (the same arithmetic as the caller's), exceeds ``above``: the returned max is
+    then a lower bound of the run's (the whole run's overshoot is above ``above`` too)."""
     pmax = -math.inf
     i2 = phasors(mc, z, v1, v2)[1]
     for k in range(len(d_short)):
@@ -714,6 +719,8 @@ def held_peak(lc, mc, tab, zc, z, v2, d_short, substeps, v1, vc_v, k_tail, tail_
                 return math.nan, v2
             if p > pmax:
                 pmax = p
+                if pmax / i2_ref - 1.0 > above:
+                    return pmax, v2
             if k >= k_tail:
                 dx0, dx1, dx2 = complex(z[0], z[1]) - tail_x[0], complex(z[2], z[3]) - tail_x[1], v2 - tail_x[2]
                 bound = tail_cap
