@@ -36,11 +36,14 @@ without its energies (two stored-energy evaluations and the step's integrals per
 ``d_prev``'s control period computed once per stop; once a plan's remaining duties are all 1 (short mode, the link
 affine) it stops as soon as a bound on every later peak (the modes' decay, :func:`_tail_bound`) is below the max
 so far, so the max is unchanged. A stop's predictions are kept per ``r`` (:func:`_stop_plans`, the last 64 stops
-keyed on their exact inputs): ``r = 0`` is on both grids, and stacked budgets at one stop share them. ``P(r)`` is
+keyed on their exact inputs): ``r = 0`` is on both grids, and stacked budgets at one stop share them; a plan stops
+as soon as it is above the threshold it is asked about (the target in the fine scan; the least exact ``P`` so far
+plus b on the coarse grid, which leaves the floor and every flag as they are), kept as a lower bound. ``P(r)`` is
 bit-identical to ``run_duties``' (``tests/test_budget_modal.py``) and so ``r*``: the same on all 100 stops of
-nominal windows 1000-1099 at b = 0.01, 0.02, 0.05, 0.1. Per stop (in-process CPU, medians over those 100 stops,
-load 3-5 on 2 cores, 2026-11-26): 25 / 30 / 44 / 94 ms at b = 0.01 / 0.02 / 0.05 / 0.1, against 133 / 169 / 283 /
-964 ms with ``run_duties`` (5.2x / 5.6x / 6.4x / 10.3x). What remains is the non-linear SBAR step itself (~0.2 us
+nominal windows 1000-1099 at b = 0.01, 0.02, 0.05, 0.1 (``benchmarks/bench_budget_modal.py``). Per stop
+(in-process CPU, medians over those stops, load 3.6-4.1 on 2 cores, 2026-11-26): 17 / 27 / 46 / 104 ms at b =
+0.01 / 0.02 / 0.05 / 0.1, against 97 / 161 / 327 / 1070 ms with ``run_duties`` (5.6x / 5.9x / 7.1x / 10.3x;
+docs/budget_search_cost.md). What remains is the non-linear SBAR step itself (~0.2 us
 per sub-step, 17 sub-steps per control period, up to 200 periods while a plan has not reached duty 1).
 
 The budget is then *the measured overshoot above the floor of the controller's own plans*, as the prediction
