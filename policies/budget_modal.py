@@ -9,7 +9,7 @@ envelope path, unchanged) ``r`` is the budget ``b`` itself: the envelope oversho
 modal link that promise is off twice: the SBAR's quadrature rings the exact modes near short mode, and the
 measured overshoot is the instantaneous peak (the ripple on top), each window with its floor.
 
-**Here** the plan is predicted with the exact-mode link (:func:`wpt_receiver.modal_kernel.run_duties`: the
+**Here** the plan is predicted with the exact-mode link (:func:`wpt_receiver.modal_kernel.run_duties`' steps: the
 link's modes at the assumed Lm; the SBAR's *explicit* commutation :func:`~wpt_receiver.modal_kernel.sbar_v2`
 with its quadrature, V2 set from i2's phase at the start of each rectifier sub-step, where the env and the
 mission solve the commutation implicitly, :func:`~wpt_receiver.modal_kernel.sbar_implicit`; the phase-aware
@@ -29,7 +29,22 @@ lands in a tooth's dip; the running max over a grid of step :data:`R_STEP` (fine
 tooth near r = 0.03) does not. Between two grid points the running max may still be exceeded by up to the tooth's
 slope times the step (up to ~0.4 point at a tooth's left edge). The fine scan runs from ``r = 0`` up to the first
 grid point above the target (at most up to the coarse grid's first point above it), so its cost is ``r* /
-R_STEP`` predictions (~5 ms each: ~0.8 s per stop at b = 0.05, ~3.4 s at b = 0.1 on window 1000, load ~4).
+R_STEP`` predictions.
+
+**Cost, the same numbers.** A prediction is :func:`wpt_receiver.modal_kernel.held_peak`: ``run_duties``' steps
+without its energies (two stored-energy evaluations and the step's integrals per sub-step), from the state after
+``d_prev``'s control period computed once per stop; once a plan's remaining duties are all 1 (short mode, the link
+affine) it stops as soon as a bound on every later peak (the modes' decay, :func:`_tail_bound`) is below the max
+so far, so the max is unchanged. A stop's predictions are kept per ``r`` (:func:`_stop_plans`, the last 64 stops
+keyed on their exact inputs): ``r = 0`` is on both grids, and stacked budgets at one stop share them; a plan stops
+as soon as it is above the threshold it is asked about (the target in the fine scan; the least exact ``P`` so far
+plus b on the coarse grid, which leaves the floor and every flag as they are), kept as a lower bound. ``P(r)`` is
+bit-identical to ``run_duties``' (``tests/test_budget_modal.py``) and so ``r*``: the same on all 100 stops of
+nominal windows 1000-1099 at b = 0.01, 0.02, 0.05, 0.1 (``benchmarks/bench_budget_modal.py``). Per stop
+(in-process CPU, medians over those stops, load 3.6-4.1 on 2 cores, 2026-11-26): 17 / 27 / 46 / 104 ms at b =
+0.01 / 0.02 / 0.05 / 0.1, against 97 / 161 / 327 / 1070 ms with ``run_duties`` (5.6x / 5.9x / 7.1x / 10.3x;
+docs/budget_search_cost.md). What remains is the non-linear SBAR step itself (~0.2 us
+per sub-step, 17 sub-steps per control period, up to 200 periods while a plan has not reached duty 1).
 
 The budget is then *the measured overshoot above the floor of the controller's own plans*, as the prediction
 sees it (a window's oracle floor is lower: docs/modal_policies.md, section "`model_based_budget:b` on the
@@ -41,6 +56,7 @@ above the target (the scan stops there).
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from functools import lru_cache
 
 import numpy as np
@@ -77,28 +93,110 @@ def _v2_plans(ctl_ss, x0, u0, du, n):
     ad, bd, cd, dd = ctl_ss
     a, b = np.empty(n), np.empty(n)
     x, xb = np.asarray(x0, dtype=float).copy(), np.zeros(len(bd))
+    du_a, du_b, bu_a, bu_b = dd * u0, dd * du, bd * u0, bd * du   # the constant terms, once (the same numbers)
     for k in range(n):
-        a[k] = cd @ x + dd * u0
-        b[k] = cd @ xb + dd * du
-        x = ad @ x + bd * u0
-        xb = ad @ xb + bd * du
+        a[k] = cd @ x + du_a
+        b[k] = cd @ xb + du_b
+        x = ad @ x + bu_a
+        xb = ad @ xb + bu_b
     return a, b
+
+
+@lru_cache(maxsize=4)
+def _tail_bound(link, devices: str, dt_s: float):
+    """``(V^-1 (3, 3), x* (3,), w (3,), |I2*| [A], excess [A/V])`` of the short-mode tail for
+    :func:`wpt_receiver.modal_kernel.held_peak` (its docstring): the step at duty 1 is affine in ``x = (z0, z1,
+    V2)``; its linear part ``M`` and I2's readout ``C`` are taken from the kernel's own step
+    (:func:`~wpt_receiver.modal_kernel.held_peak` over one sub-step, :func:`~wpt_receiver.modal_kernel.phasors`)
+    on the unit vectors with ``V1 = 0`` and ``Vc = 0`` (then exactly linear), ``x*`` its fixed point under
+    ``V1``, ``M = V diag(lam) V^-1``, ``w_i = |(C V)_i| |lam_i| (1 + 1e-9)``; ``excess`` the peak table's largest
+    excess at duty 1 (the lookup there interpolates in phase and |I2| only). ``None`` when a mode does not decay (``|lam| >= 1``) or ``V`` is ill-conditioned: no
+    early stop then."""
+    from wpt_receiver import modal_kernel as mk
+    lc, tab, mc, v1, i2_sm, vf = _plant(link, devices)
+    sub, zc = _substeps(link, dt_s, mc)
+    one = np.ones(1)
+    no_vinv, no_x, no_w = np.zeros((3, 3), np.complex128), np.zeros(3, np.complex128), np.zeros(3)
+
+    def step(x, v1x):
+        z = np.array([x[0].real, x[0].imag, x[1].real, x[1].imag])
+        v2 = mk.held_peak(lc, mc, tab, zc, z, x[2], one, 1, v1x, 0.0, 1, no_vinv, no_x, no_w, 0.0)[1]
+        return np.array([complex(z[0], z[1]), complex(z[2], z[3]), v2])
+
+    def i2(x, v1x):
+        return mk.phasors(mc, np.array([x[0].real, x[0].imag, x[1].real, x[1].imag]), v1x, x[2])[1]
+    eye = np.eye(3, dtype=np.complex128)
+    m = np.column_stack([step(e, 0j) for e in eye])
+    c = np.array([i2(e, 0j) for e in eye])
+    xs = np.linalg.solve(eye - m, step(np.zeros(3, np.complex128), v1))
+    lam, vec = np.linalg.eig(m)
+    if not (np.all(np.abs(lam) < 1.0) and np.linalg.cond(vec) < 1e6):
+        return None
+    w = np.abs(c @ vec) * np.abs(lam) * (1.0 + 1e-9)
+    excess = float(tab[1, :, -1, :].max())   # duty 1 is the table's last row: the lookup's weight on it is 1
+    return np.linalg.inv(vec), xs, w, abs(i2(xs, v1)), excess
+
+
+def _substeps(link, dt_s, mc):
+    """``(sub, zc)``: the rectifier sub-steps per control period and the sub-step's ZOH coefficients."""
+    from wpt_receiver import modal_kernel as mk
+    # V2 follows i2's phase once per rectifier period (as the env's sub-steps; held longer, it pumps the link),
+    # and the peak is taken at every sub-step's end as the env's (each duty repeated over its sub-steps)
+    sub = max(1, int(round(dt_s / link.rectifier_period_s)))
+    zc = np.empty(mk.N_ZOH_C, dtype=np.complex128)
+    mk.zoh(mc, dt_s / sub, zc)
+    return sub, zc
+
+
+def _start(link, devices, dt_s, d_prev, vl_v):
+    """``(z, v2, sub, zc, vc, tail)`` at the plan's start: the mode state (4 reals) and V2 [V] after the duty
+    ``d_prev`` held for one control period from its periodic steady state, the rectifier sub-steps per control
+    period, the sub-step's ZOH, the clamp ``VL + Vf`` [V] and the short-mode tail's bound (:func:`_tail_bound`,
+    its cap with this clamp; ``None``: none); the same for every ``r`` (computed once per stop)."""
+    from wpt_receiver import modal_kernel as mk
+    lc, tab, mc, v1, i2_sm, vf = _plant(link, devices)
+    sub, zc = _substeps(link, dt_s, mc)
+    vc = vl_v + vf
+    z = np.zeros(4)
+    v2 = mk.steady_state(lc, mc, tab, d_prev, v1, vc, z)
+    tail = _tail_bound(link, devices, dt_s)
+    if tail is not None:
+        vinv, xs, w, i2s, excess = tail
+        # the margin (1e-6 A) is ~1e6 times the rounding and the ~1e-15 V of V2's clamp part in short mode
+        tail = (vinv, xs, w, i2s + vc * excess + 1e-6)
+    v2 = _held_peak(lc, mc, tab, zc, z, v2, np.array([float(d_prev)]), sub, v1, vc)[1]
+    return z, v2, sub, zc, vc, tail
+
+
+def _held_peak(lc, mc, tab, zc, z, v2, d, sub, v1, vc, tail=None, i2_ref=1.0, above=np.inf):
+    """:func:`wpt_receiver.modal_kernel.held_peak`, with the short-mode tail's early stop when ``tail`` is
+    given (``(V^-1, x*, w, cap)``) and ``d`` ends in duties 1, and the stop once ``pmax / i2_ref - 1 > above``."""
+    from wpt_receiver import modal_kernel as mk
+    if tail is None:
+        return mk.held_peak(lc, mc, tab, zc, z, v2, d, sub, v1, vc, len(d), np.zeros((3, 3), np.complex128),
+                            np.zeros(3, np.complex128), np.zeros(3), 0.0, i2_ref, above)
+    not_one = np.flatnonzero(d != 1.0)
+    k_tail = int(not_one[-1]) + 1 if len(not_one) else 0
+    return mk.held_peak(lc, mc, tab, zc, z, v2, d, sub, v1, vc, k_tail, *tail, i2_ref, above)
+
+
+def _plan_overshoot(link, devices, start, vl_v, a, b, r, above=np.inf):
+    """``P(r)`` from the plan's ``start`` (:func:`_start`): the peak of the duties ``f^-1(a + r b, vl_v)``; with
+    ``above`` finite, a lower bound of ``P(r)`` above ``above`` as soon as the plan's peak so far shows one."""
+    from wpt_receiver import duty_from_v2_clipped
+    lc, tab, mc, v1, i2_sm, vf = _plant(link, devices)
+    z, v2, sub, zc, vc, tail = start
+    d = np.ascontiguousarray(duty_from_v2_clipped(a + r * b, vl_v), dtype=float)
+    above = float(above) if above == above else np.inf   # a NaN threshold: no stop
+    return float(_held_peak(lc, mc, tab, zc, z.copy(), v2, d, sub, v1, vc, tail, i2_sm, above)[0] / i2_sm - 1.0)
 
 
 def predicted_overshoot(link, devices, dt_s, d_prev, vl_v, a, b, r):
     """``P(r)`` (module docstring): the exact-mode link's predicted overshoot (fraction) of the plan
-    ``f^-1(a + r b, vl_v)`` after the duty ``d_prev`` held before it."""
-    from wpt_receiver import duty_from_v2_clipped
-    from wpt_receiver import modal_kernel as mk
-    lc, tab, mc, v1, i2_sm, vf = _plant(link, devices)
-    d = np.empty(len(a) + 1)
-    d[0] = d_prev
-    d[1:] = duty_from_v2_clipped(a + r * b, vl_v)
-    # V2 follows i2's phase once per rectifier period (as the env's sub-steps; held longer, it pumps the link),
-    # and the peak is taken at every sub-step's end as the env's (each duty repeated over its sub-steps)
-    sub = max(1, int(round(dt_s / link.rectifier_period_s)))
-    pk = mk.run_duties(lc, mc, tab, np.repeat(d, sub), dt_s / sub, 1, v1, vl_v + vf, link.lm_h)[3]
-    return float(pk[sub + 1:].max() / i2_sm - 1.0)
+    ``f^-1(a + r b, vl_v)`` after the duty ``d_prev`` held before it (the peak over the plan's sub-steps,
+    :func:`wpt_receiver.modal_kernel.held_peak`; the same numbers as :func:`~wpt_receiver.modal_kernel.run_duties`
+    on ``[d_prev, plan]`` each repeated over the sub-steps)."""
+    return _plan_overshoot(link, devices, _start(link, devices, dt_s, d_prev, vl_v), vl_v, a, b, r)
 
 
 def _check(budget, d_prev, vl_v, x0) -> None:
@@ -114,18 +212,63 @@ def _check(budget, d_prev, vl_v, x0) -> None:
         raise ValueError(f"x0={np.asarray(x0)!r} is invalid; valid range: a finite controller state")
 
 
+def _stop_key(link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v):
+    """The exact inputs of a stop's plans (bytes of every array, with its shape): equal keys, equal plans."""
+    def arr(x):
+        x = np.asarray(x, dtype=float)
+        return x.shape, x.tobytes()
+    return (link, devices, float(dt_s), tuple(arr(m) for m in ctl_ss), arr(x0), float(u0), float(du), float(d_prev),
+            float(vl_v))
+
+
+#: the last stops' plans: key (:func:`_stop_key`) -> ``(pred, ...)`` (:func:`_stop_plans`), least recent first
+_STOPS: OrderedDict = OrderedDict()
+_N_STOPS = 64
+
+
+def _stop_plans(link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v):
+    """``pred(r)`` = ``P(r)`` at one stop, each ``r`` predicted once: kept for the last :data:`_N_STOPS` stops, so
+    stacked controllers at the same stop (two budgets of ``compare``'s stacked batch; seeds of a learned policy
+    over the same base whose stop states coincide) and the grids' common points (``r = 0``) share their plans.
+    ``P`` does not depend on the budget; the key is the exact inputs, so a shared plan is the same number."""
+    key = _stop_key(link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v)
+    pred = _STOPS.get(key)
+    if pred is not None:
+        _STOPS.move_to_end(key)
+        return pred
+    n = int(round(HORIZON_S / dt_s))
+    a, b = _v2_plans(ctl_ss, x0, u0, du, n)
+    start = _start(link, devices, dt_s, d_prev, vl_v)
+    memo = {}
+
+    def pred(r, above=np.inf):
+        """``P(r)``, or a lower bound of it above ``above`` (then ``P(r) > above`` is all that is known)."""
+        p, exact = memo.get(r, (None, False))
+        if p is None or not (exact or p > above):
+            p = _plan_overshoot(link, devices, start, vl_v, a, b, r, above)
+            memo[r] = (p, not (p > above))
+        return p
+    _STOPS[key] = pred
+    if len(_STOPS) > _N_STOPS:
+        _STOPS.popitem(last=False)
+    return pred
+
+
 def relaxation(budget, link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v) -> float:
     """``r*`` (module docstring) of one receiver at its stop: the controller's state ``x0``, its input ``u0 +
     r du`` after the stop (``du`` = I2_sm of the assumed model [A]), the last duty ``d_prev`` and the battery
     voltage ``vl_v`` [V]. ``r*`` is a multiple of :data:`R_STEP` in ``[0, R_MAX]``."""
     _check(budget, d_prev, vl_v, x0)
-    n = int(round(HORIZON_S / dt_s))
-    a, b = _v2_plans(ctl_ss, x0, u0, du, n)
-
-    def pred(r):
-        return predicted_overshoot(link, devices, dt_s, d_prev, vl_v, a, b, r)
+    pred = _stop_plans(link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v)
     coarse = np.linspace(0.0, R_MAX, _N_GRID)
-    pc = np.array([pred(r) for r in coarse])
+    # a coarse point whose plan is above (the least exact P so far) + b is neither the floor nor below the target:
+    # its plan stops there (a lower bound of P above that, which leaves the floor and the flags below as they are)
+    pc = np.empty(_N_GRID)
+    floor = np.inf
+    for i, r in enumerate(coarse):
+        pc[i] = pred(r, floor + budget)
+        if pc[i] < floor:
+            floor = pc[i]
     target = np.nanmin(pc) + budget if np.any(np.isfinite(pc)) else -np.inf
     above = ~(pc <= target)   # NaN counts as above
     # the running max's first crossing lies at or below the coarse grid's first point above the target
@@ -133,7 +276,7 @@ def relaxation(budget, link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v) ->
     n_fine = int(round(r_end / R_STEP))
     r_best = -1
     for k in range(n_fine + 1):
-        if not (pred(k * R_STEP) <= target):
+        if not (pred(k * R_STEP, target) <= target):
             break
         r_best = k
     return round(max(0, r_best) * R_STEP, 12)

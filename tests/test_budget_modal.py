@@ -265,3 +265,107 @@ def test_a_recycled_row_starts_its_window_afresh():
         step([2.0, 0.0])
     step([0.0, 0.0])
     assert pol._relax[0] != 0.05 and pol._relax[1] == r_first[1]
+
+
+def _run_duties_overshoot(link, devices, dt, d_prev, vl, a, b, r):
+    """``P(r)`` as the search predicted it before :func:`wpt_receiver.modal_kernel.held_peak` (the reference):
+    :func:`wpt_receiver.modal_kernel.run_duties` (with energies) on ``[d_prev, plan]``, each duty repeated over
+    the rectifier sub-steps, the max over the plan's sub-step ends."""
+    from wpt_receiver import duty_from_v2_clipped
+    from wpt_receiver import modal_kernel as mk
+    lc, tab, mc, v1, i2_sm, vf = bm._plant(link, devices)
+    d = np.r_[d_prev, duty_from_v2_clipped(a + r * b, vl)]
+    sub = max(1, int(round(dt / link.rectifier_period_s)))
+    pk = mk.run_duties(lc, mc, tab, np.repeat(d, sub), dt / sub, 1, v1, vl + vf, link.lm_h)[3]
+    return float(pk[sub + 1:].max() / i2_sm - 1.0)
+
+
+def test_plan_peak_is_run_duties_bit_for_bit(stop_1000):
+    """The search's P(r) (held_peak without energies, the d_prev prefix once per stop, the short-mode tail stopped
+    early by its bound) is exactly run_duties' on the same duties, for plans that never reach duty 1 (r = 0), reach it
+    late or early (r up to R_MAX): the search's answer cannot move."""
+    from wpt_receiver import duty_from_v2_clipped
+    link, devices, dt, ss, x0, u0, du, d_prev, vl = stop_1000
+    a, b = bm._v2_plans(ss, x0, u0, du, int(round(bm.HORIZON_S / dt)))
+    tails = set()
+    for r in (0.0, 0.0002, 0.003, 0.0316, 0.1, 0.5):
+        d = duty_from_v2_clipped(a + r * b, vl)
+        tails.add(bool(d[-1] == 1.0))
+        assert bm.predicted_overshoot(link, devices, dt, d_prev, vl, a, b, r) == \
+            _run_duties_overshoot(link, devices, dt, d_prev, vl, a, b, r), r
+    assert tails == {False, True}
+
+
+def test_short_mode_tail_bound_holds(stop_1000):
+    """The bound held_peak stops on: at every sub-step of a plan's short-mode tail, every later sub-step's
+    instantaneous peak is at most ``cap + sum_i w_i |(V^-1 (x - x*))_i|`` (stepped one sub-step at a time with the
+    kernel, the bound evaluated in numpy), and the bound falls below the plan's max before the horizon ends (the
+    early stop does save steps); x* is the steady state of duty 1 (modal_kernel.steady_state)."""
+    from wpt_receiver import duty_from_v2_clipped
+    from wpt_receiver import modal_kernel as mk
+    link, devices, dt, ss, x0, u0, du, d_prev, vl = stop_1000
+    lc, tab, mc, v1, i2_sm, vf = bm._plant(link, devices)
+    a, b = bm._v2_plans(ss, x0, u0, du, int(round(bm.HORIZON_S / dt)))
+    z, v2, sub, zc, vc, tail = bm._start(link, devices, dt, d_prev, vl)
+    vinv, xs, w, cap = tail
+    zs = np.zeros(4)
+    v2s = mk.steady_state(lc, mc, tab, 1.0, v1, vc, zs)
+    assert np.allclose(xs, [complex(zs[0], zs[1]), complex(zs[2], zs[3]), v2s], rtol=1e-9, atol=1e-9)
+    d = duty_from_v2_clipped(a + 0.05 * b, vl)
+    k_tail = int(np.flatnonzero(d != 1.0)[-1]) + 1
+    peaks, bounds = [], []
+    for k, dk in enumerate(d):
+        for _ in range(sub):
+            p, v2 = bm._held_peak(lc, mc, tab, zc, z, v2, np.array([dk]), 1, v1, vc)
+            peaks.append(p)
+            x = np.array([complex(z[0], z[1]), complex(z[2], z[3]), v2])
+            bounds.append(cap + w @ np.abs(vinv @ (x - xs)) if k >= k_tail else np.inf)
+    peaks, bounds = np.array(peaks), np.array(bounds)
+    later = np.maximum.accumulate(peaks[::-1])[::-1]   # the max over each sub-step and every later one
+    assert np.all(later[1:] <= bounds[:-1])
+    hit = np.flatnonzero(bounds < np.maximum.accumulate(peaks))
+    assert len(hit) and hit[0] < len(peaks) - 10 * sub, (len(hit), len(peaks))
+
+
+@pytest.mark.parametrize("budget", [0.02, 0.05])
+def test_search_equals_the_reference_search(stop_1000, budget):
+    """r* is the reference search's (the same coarse floor and running max on the R_STEP grid) on run_duties'
+    predictions, and a second budget at the same stop (as compare's stacked rows) reuses the stop's plans: no
+    plan is predicted twice, and its r* is the same as without the shared plans."""
+    link, devices, dt, ss, x0, u0, du, d_prev, vl = stop_1000
+    a, b = bm._v2_plans(ss, x0, u0, du, int(round(bm.HORIZON_S / dt)))
+
+    def ref(r):
+        return _run_duties_overshoot(link, devices, dt, d_prev, vl, a, b, r)
+    target = min(ref(r) for r in np.linspace(0.0, bm.R_MAX, bm._N_GRID)) + budget
+    k = 0
+    while ref((k + 1) * bm.R_STEP) <= target:
+        k += 1
+    bm._STOPS.clear()
+    assert bm.relaxation(budget, *stop_1000) == round(k * bm.R_STEP, 12)
+    calls = []
+    orig = bm._plan_overshoot
+    bm._plan_overshoot = lambda *args: calls.append(args[6]) or orig(*args)   # args[6]: r
+    try:
+        r_shared = bm.relaxation(0.01, *stop_1000)   # a smaller budget after it at the same stop: no new plan
+        assert calls == []
+        bm._STOPS.clear()
+        assert bm.relaxation(0.01, *stop_1000) == r_shared
+    finally:
+        bm._plan_overshoot = orig
+    assert len(calls) == len(set(calls)) > bm._N_GRID   # each r once (r = 0 is on both grids)
+
+
+def test_plan_stopped_above_a_threshold_is_a_lower_bound(stop_1000):
+    """A plan stopped once its overshoot so far exceeds a threshold returns a value above the threshold and at most
+    the whole plan's P (so "above the target" is decided as on the whole plan); a threshold above P changes
+    nothing (the whole plan's P, bit for bit)."""
+    link, devices, dt, ss, x0, u0, du, d_prev, vl = stop_1000
+    a, b = bm._v2_plans(ss, x0, u0, du, int(round(bm.HORIZON_S / dt)))
+    start = bm._start(link, devices, dt, d_prev, vl)
+    for r in (0.0, 0.0316, 0.1):
+        p = bm._plan_overshoot(link, devices, start, vl, a, b, r)
+        assert bm._plan_overshoot(link, devices, start, vl, a, b, r, p + 1e-3) == p
+        for below in (0.005, 0.02):
+            q = bm._plan_overshoot(link, devices, start, vl, a, b, r, p - below)
+            assert p - below < q <= p, (r, below, q, p)

@@ -59,7 +59,7 @@ from .devices import IDEAL, DeviceSet
 from .params import LinkParams
 
 __all__ = ["link_constants", "modes", "zoh", "step", "steady_modes", "readout", "advance_z", "phasors", "stored_energy_j", "sbar_v2", "sbar_edge", "sbar_shift", "sbar_clamp_f", "sbar_implicit", "end_i2", "blocking_v2", "short_weight", "inst_peak",
-           "build_table", "modal_table", "run_duties", "steady_state", "rect_current_a", "rect_affine", "N_MODES_C", "N_ZOH_C",
+           "build_table", "modal_table", "run_duties", "held_peak", "steady_state", "rect_current_a", "rect_affine", "N_MODES_C", "N_ZOH_C",
            "LC_NAMES"]
 
 #: ``lc`` (float64) layout: coil / capacitor values with the devices' resistances folded in, and the table scalars
@@ -679,6 +679,56 @@ def run_duties(lc, mc, tab, d_short, control_period_s, substeps, v1, vc_v, lm_h)
         v2o[k + 1], pk[k + 1] = v2, inst_peak(lc, tab, dk, i2o[k + 1], vc_v)
     en[3] = stored_energy_j(lc, mc, z, v1, v2, lm_h) - w_start
     return i1o, i2o, v2o, pk, en
+
+
+
+@njit(cache=True)
+def held_peak(lc, mc, tab, zc, z, v2, d_short, substeps, v1, vc_v, k_tail, tail_vinv, tail_x, tail_w, tail_cap,
+              i2_ref=1.0, above=math.inf):
+    """The instantaneous peak [A] of a run of held duties without its energies: :func:`run_duties`' steps (V2
+    from i2's phase at each step's start, :func:`sbar_v2`; the state part of :func:`step`, :func:`advance_z`;
+    :func:`inst_peak` at each step's end) from the mode state ``z`` (4 reals, advanced in place) under the
+    V2 ``v2`` [V] held before it, each duty of ``d_short`` held ``substeps`` steps of ``zc``. Returns ``(max
+    peak over every step's end, the last V2)``: the same arithmetic as :func:`run_duties` with ``substeps=1``
+    on the duties repeated, so the same peaks bit for bit (``tests/test_budget_modal.py``); NaN when a peak is
+    NaN (as numpy's ``max``).
+
+    **Stopping early without changing the max.** From the duty ``k_tail`` on every duty is 1 (short mode; pass
+    ``len(d_short)`` for none): V2 is then the shorted switches' ``ws I2`` (plus ``Vc (4/pi) cos(pi/2)``,
+    ~1e-15 V) and the step is affine in ``x = (z0, z1, V2)``, ``x+ - x* = M (x - x*)``, with ``M = V diag(lam)
+    V^-1`` (``|lam| < 1``). After a step of that tail, ``|I2| <= |I2*| + sum_i tail_w_i |(V^-1 (x - x*))_i|``
+    at every later step (``tail_w_i = |(C V)_i| |lam_i|``, ``C`` I2's readout of ``x``; ``tail_vinv`` = V^-1,
+    ``tail_x`` = x*) and the peak exceeds ``|I2|`` by at most the table's largest excess at duty 1: with
+    ``tail_cap`` = ``|I2*|`` + ``Vc`` times that excess + a margin for the rounding, no later peak can reach
+    the max once ``tail_cap + sum_i ...`` is below it, and the run returns then (the max unchanged; the V2
+    returned is then the last one computed). Built by :func:`policies.budget_modal._tail_bound`.
+
+    **Stopping once above.** With ``above`` finite the run also returns as soon as the max so far, as the
+    overshoot ``pmax / i2_ref - 1`` (the same arithmetic as the caller's), exceeds ``above``: the returned max is
+    then a lower bound of the run's (the whole run's overshoot is above ``above`` too)."""
+    pmax = -math.inf
+    i2 = phasors(mc, z, v1, v2)[1]
+    for k in range(len(d_short)):
+        dk = d_short[k]
+        for _ in range(substeps):
+            v2 = sbar_v2(lc, tab, dk, i2, vc_v)[0]
+            advance_z(mc, zc, z, v1, v2)
+            i2 = phasors(mc, z, v1, v2)[1]
+            p = inst_peak(lc, tab, dk, i2, vc_v)
+            if math.isnan(p):
+                return math.nan, v2
+            if p > pmax:
+                pmax = p
+                if pmax / i2_ref - 1.0 > above:
+                    return pmax, v2
+            if k >= k_tail:
+                dx0, dx1, dx2 = complex(z[0], z[1]) - tail_x[0], complex(z[2], z[3]) - tail_x[1], v2 - tail_x[2]
+                bound = tail_cap
+                for i in range(3):
+                    bound += tail_w[i] * abs(tail_vinv[i, 0] * dx0 + tail_vinv[i, 1] * dx1 + tail_vinv[i, 2] * dx2)
+                if bound < pmax:
+                    return pmax, v2
+    return pmax, v2
 
 
 def simulate(params: LinkParams, d_short, control_period_s: float | None = None, devices: DeviceSet = IDEAL,
