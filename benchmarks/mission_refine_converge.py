@@ -1,5 +1,5 @@
 """The mission's fine step (``mission_sim.world.loop_kernel._fine_step``) on the env's large transients and the
-paper's trajectories, refinement off / default / finer, against the switching model and the fine step's limit
+paper's trajectories (and the step policy's charge start, SM -> RM), refinement off / default / finer, against the switching model and the fine step's limit
 (uniform sub-steps of T/256, 4,352 V2 updates per 100 us, no refinement): the largest instantaneous peak after the
 transient, per-step rms against the limit, and the charge (mean I_L) against the unrefined step.
 
@@ -40,6 +40,8 @@ def run(d, div, tol, levels):
 def main(out):
     res = {}
     cases = s.transient_cases()
+    # the step policy's charge start in the default mission: short mode, then d = 0.27 (RM) held
+    cases["rise SM->RM 0.27"] = (np.r_[np.ones(40), np.full(150, 0.27)], 40)
     for name, (d, p0) in cases.items():
         sw = s.switching_peaks(d)[p0:]
         lim = run(d, 256, 0.05, 0)[p0:]

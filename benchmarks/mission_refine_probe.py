@@ -1,4 +1,4 @@
-"""Does the env's refinement criterion (issue 23, ``envs.modal_step._level``) trigger in a mission?
+"""Does the env's refinement criterion (issue 23) trigger in a mission?
 
 Runs ``dronewpt mission`` (the embedded default unless more arguments are given) on an INSTRUMENTED COPY of
 ``mission_sim/world/loop_kernel.py`` (written to a temporary folder and compiled there; the shipped kernel and
@@ -6,7 +6,10 @@ its numba cache are untouched): the fine step's rows are not merged (one row per
 each row's ``v2_v`` column holds ``|I2 end - I2 start| / max(|I2 start|, |I2 end|)`` of the step instead of v2
 (I2 start: the state's phasor with the V2 held over the previous step, as ``_substeps`` starts from). Prints, per
 policy, how many fine sub-steps (d < 1, pad on) exceed the env's ``v2_refine_tol`` (0.05) and the level
-``envs.modal_step._level`` would pick (at most 3), and where (time, phase: the duty and the command around).
+``envs.modal_step._level`` (now ``wpt_receiver.modal_kernel.refine_level``) would pick (at most 3), and where (time,
+phase: the duty and the command around). The counts in docs/performance.md ("Adaptive refinement of the mission's
+fine step") are of the kernel before the mission's refinement (branch modalconv); on a kernel that refines, the rows
+are the pieces (the unrefined try's row is dropped), so the counts are of what is left above the tolerance.
 
     python benchmarks/mission_refine_probe.py OUT_JSON [POLICY ...]
 """
@@ -57,7 +60,7 @@ def probe_module():
 
 
 def level(r):
-    """``envs.modal_step._level`` of a sub-step whose relative change is ``r``."""
+    """``wpt_receiver.modal_kernel.refine_level`` of a sub-step whose relative change is ``r``."""
     lev = 0
     while r > TOL and lev < LEVELS:
         lev, r = lev + 1, r / 2
