@@ -27,12 +27,12 @@ SETTINGS = {"off (before)": (1, 0.05, 0), "default L3 tol 0.05": (1, 0.05, 3), "
             "uniform 136": (8, 0.05, 0)}
 
 
-def run(d, div, tol, levels):
+def run(d, div, tol, levels, rest=False):
     """Per-step instantaneous peaks of the fine step with ``t_rect / div`` sub-steps."""
     old = (tmm.T, tmm.mk.REFINE_TOL)
     tmm.T, tmm.mk.REFINE_TOL = T / div, tol
     try:
-        return tmm._kernel_run(d, 17 * T, levels=levels, per_step=True)
+        return tmm._kernel_run(d, 17 * T, levels=levels, per_step=True, rest=rest)
     finally:
         tmm.T, tmm.mk.REFINE_TOL = old
 
@@ -42,14 +42,16 @@ def main(out):
     cases = s.transient_cases()
     # the step policy's charge start in the default mission: short mode, then d = 0.27 (RM) held
     cases["rise SM->RM 0.27"] = (np.r_[np.ones(40), np.full(150, 0.27)], 40)
+    cases["from rest at 0.27"] = (np.full(150, 0.27), 0)   # the pad on at full V1, the coils at rest (as the switching model)
     for name, (d, p0) in cases.items():
         sw = s.switching_peaks(d)[p0:]
-        lim = run(d, 256, 0.05, 0)[p0:]
-        base = run(d, 1, 0.05, 0)[p0:]
+        rest = name.startswith("from rest")
+        lim = run(d, 256, 0.05, 0, rest)[p0:]
+        base = run(d, 1, 0.05, 0, rest)[p0:]
         row = {"switching_a": float(sw.max()), "limit_a": float(lim.max()),
                "limit_vs_switching_pct": 100 * (lim.max() / sw.max() - 1)}
         for lab, (div, tol, lev) in SETTINGS.items():
-            pk = run(d, div, tol, lev)[p0:]
+            pk = run(d, div, tol, lev, rest)[p0:]
             e = pk / lim - 1
             row[lab] = dict(peak_a=float(pk.max()), vs_switching_pct=100 * (pk.max() / sw.max() - 1),
                             vs_limit_pct=100 * (pk.max() / lim.max() - 1),

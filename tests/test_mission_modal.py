@@ -27,12 +27,13 @@ def _ocv_soc(v_cell):
     return 0.5 * (lo + hi)
 
 
-def _kernel_run(d_seq, dt=T, levels=mk.REFINE_LEVELS, per_step=False, book=None):
+def _kernel_run(d_seq, dt=T, levels=mk.REFINE_LEVELS, per_step=False, book=None, rest=False):
     """The kernel's fine step over ``d_seq`` (one duty per control period ``dt``, the rectifier period by
     default) from the steady state of the first duty, sub-steps refined up to ``levels`` (the mission's
     default; 0: off); returns the instantaneous and the fundamental's peak [A] the kernel tracked (with
     ``per_step``: the instantaneous peak of each step, an array). ``book`` (a dict) gets the link's energies
-    summed over the rows [J] (source, coil + devices, rectifier) and its stored energy at the start and end."""
+    summed over the rows [J] (source, coil + devices, rectifier) and its stored energy at the start and end.
+    ``rest``: start from rest (the pad switched on at full V1, coil currents 0) instead."""
     vals = {**fastpath.link_values(P.l1_h, P.l2_h, P.r1_ohm, P.r2_ohm, P.omega_rad_s), "t_rect": T, "rated": 1e9,
             "v1_nom": P.v1_amp_v, "is_ideal": True, "coil_r1": P.r1_ohm, "coil_r2": P.r2_ohm, "n_cells": 8.0,
             "r0": 1e-7, "r1b": 1e-7, "tau1": 1.0, "bat_c1": 1e7, "capacity_c": 1e15,
@@ -45,7 +46,7 @@ def _kernel_run(d_seq, dt=T, levels=mk.REFINE_LEVELS, per_step=False, book=None)
     mk.modes(lc, P.lm_h, mc)
     z = np.zeros(4)
     v1c = -1j * P.v1_amp_v
-    v2 = mk.steady_state(lc, mc, tab, float(d_seq[0]), v1c, P.vl_v, z)
+    v2 = 0j if rest else mk.steady_state(lc, mc, tab, float(d_seq[0]), v1c, P.vl_v, z)
     st = s[0]
     for name, v in {"soc": _ocv_soc(P.vl_v / 8), "last_vl": P.vl_v, "v1": P.v1_amp_v, "tx_on": True, "d": d_seq[0],
                     "depleted_at": math.nan, "v2re": v2.real, "v2im": v2.imag,
