@@ -50,9 +50,10 @@ from pathlib import Path
 import numpy as np
 from numba import njit, prange
 
-from wpt_receiver.modal_kernel import (MC_D, MC_G1, MC_G2, MC_LAM, MC_S, ZC_E, ZC_PHI, blocking_v2, inst_peak, modes, phasors,
-                                       readout, rect_current_a, sbar_implicit, sbar_shift, sbar_v2, short_weight,
-                                       steady_modes, steady_state, stored_energy_j, zoh)
+from wpt_receiver.modal_kernel import (MC_D, MC_G1, MC_G2, MC_LAM, MC_S, REFINE_LEVELS, REFINE_TOL, ZC_E, ZC_PHI,
+                                       blocking_v2, inst_peak, modes, phasors, readout, rect_current_a, refine_level,
+                                       sbar_implicit, sbar_shift, sbar_v2, short_weight, steady_modes, steady_state,
+                                       stored_energy_j, zoh)
 from wpt_receiver.modal_kernel import step as modal_step
 
 from wpt_receiver import modal_kernel as _modal_kernel
@@ -83,8 +84,8 @@ _DELTA_RATIO2 = 1.44
 #: adaptive refinement (:func:`_refine`), :func:`_segment`'s defaults (``EnvConfig.v2_refine_tol`` /
 #: ``v2_refine_levels``): a sub-step whose end I2 moved from its start's by more than this fraction of |I2| is
 #: redone in 2^L pieces (V2 implicit at each piece's end), L = 1 ... ``_REFINE_LEVELS``
-_REFINE_TOL = 0.05
-_REFINE_LEVELS = 3
+_REFINE_TOL = REFINE_TOL
+_REFINE_LEVELS = REFINE_LEVELS
 
 
 def kernel_function(name: str, compiled: bool = True):
@@ -338,20 +339,6 @@ def _refine(z, z0, z1, v2, lev, sgn, k, r_ref, pk, i2_pk, vc, d, ws, lc, tab, mc
     return z0, z1, v2, t, i2e, sgn, k, r_ref, pk, i2_pk, il
 
 
-@njit(cache=True, inline="always")
-def _level(i2s, i2e, rtol, levels):
-    """The refinement level of a sub-step whose I2 went from ``i2s`` to ``i2e``: 0 when ``|i2e - i2s| <= rtol
-    max(|i2s|, |i2e|)``, else the least L with ``|i2e - i2s| / 2^L <= rtol max(...)``, at most ``levels``."""
-    dd = i2e - i2s
-    d2 = dd.real * dd.real + dd.imag * dd.imag
-    ref = rtol * rtol * max(i2s.real * i2s.real + i2s.imag * i2s.imag, i2e.real * i2e.real + i2e.imag * i2e.imag)
-    lev = 0
-    while d2 > ref and lev < levels:
-        lev += 1
-        d2 *= 0.25
-    return lev
-
-
 @njit(cache=True)
 def _substeps(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v1c, out, en, book, lm, block, cr):
     """``n_sub`` sub-steps of ``h`` [s] from the mode amplitudes ``z`` (4 reals, in place) and the start's
@@ -361,8 +348,8 @@ def _substeps(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v
     :func:`wpt_receiver.modal_kernel.step` on the ZOH ``zs``, its energies into ``en``, the same state to
     rounding). A sub-step that the closed forms do not solve takes :func:`~wpt_receiver.modal_kernel.sbar_implicit`.
     A sub-step whose end I2 moved from its start's by more than ``cr[0].real`` of |I2| is redone in pieces
-    (:func:`_refine`, at most ``cr[0].imag`` halvings; not with ``n_q > 1`` samples per sub-step): in large
-    transients V2 held over a rectifier period is too coarse (docs/performance.md). Returns ``(V2, j e^{-j e},
+    (:func:`_refine`; the level :func:`wpt_receiver.modal_kernel.refine_level`, at most ``cr[0].imag``
+    halvings; not with ``n_q > 1`` samples per sub-step): in large transients V2 held over a rectifier period is too coarse (docs/performance.md). Returns ``(V2, j e^{-j e},
     |I2| peak, its I2 phasor, sum of I_L over the sub-steps)``; ``lm`` [H] the Lm of ``mc`` (the stored energy);
     ``block``: the window blocks in steady state (:func:`_v2_closed`). The unrefined sub-step is written out
     here, not through :func:`_held` / :func:`_reshift` as in :func:`_refine`: the same arithmetic, but the
@@ -380,7 +367,7 @@ def _substeps(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v
         if not ok:
             f, i2e, e = sbar_implicit(lc, tab, mc, zs, z0, z1, v1c, v2, d, vc, ws, -1.0, 1e-13)
             t = complex(math.sin(e), math.cos(e))
-        lev = _level(i2s, i2e, rtol, levels) if levels > 0 else 0
+        lev = refine_level(i2s, i2e, rtol, levels) if levels > 0 else 0
         if lev > 0:   # I2 moved too much for one held V2: this sub-step again, in 2^lev pieces
             z0, z1, v2, t, i2e, sgn, k, r_ref, pk, i2_pk, q = _refine(z, z0, z1, v2, lev, sgn, k, r_ref, pk, i2_pk, vc, d,
                                                                       ws, lc, tab, mc, cr, h, v1c, out, en, book, lm,

@@ -60,7 +60,7 @@ from .params import LinkParams
 
 __all__ = ["link_constants", "modes", "zoh", "step", "steady_modes", "readout", "advance_z", "phasors", "stored_energy_j", "sbar_v2", "sbar_edge", "sbar_shift", "sbar_clamp_f", "sbar_implicit", "end_i2", "blocking_v2", "short_weight", "inst_peak",
            "build_table", "modal_table", "run_duties", "held_peak", "steady_state", "rect_current_a", "rect_affine", "N_MODES_C", "N_ZOH_C",
-           "LC_NAMES"]
+           "LC_NAMES", "refine_level", "REFINE_TOL", "REFINE_LEVELS"]
 
 #: ``lc`` (float64) layout: coil / capacitor values with the devices' resistances folded in, and the table scalars
 LC_NAMES = ("l1", "l2", "r1", "r2", "c1", "c2", "omega", "rho_max", "inv_hd", "dr_short", "inv_hphi", "vf")
@@ -76,6 +76,12 @@ N_ZOH_C = 7
 N_D, N_RHO, N_PHI = 51, 81, 17
 RHO_MAX = 3.0          # |I2| / Vc at the top of the table [A/V]; beyond: delta ~ 1/rho, excess constant
 _CACHE_VERSION = "modal-kernel-table v5"
+#: adaptive refinement of the implicit V2 update (:func:`refine_level`; issue 23): a rectifier-period sub-step whose
+#: end I2 moved from its start's by more than ``REFINE_TOL`` of |I2| is redone in up to 2^``REFINE_LEVELS``
+#: pieces, V2 implicit at each piece's end (the env's ``EnvConfig.v2_refine_tol`` / ``v2_refine_levels`` defaults;
+#: the mission's fine step, :mod:`mission_sim.world.loop_kernel`)
+REFINE_TOL = 0.05
+REFINE_LEVELS = 3
 
 
 def link_constants(params: LinkParams, devices: DeviceSet = IDEAL, c1_f=None, c2_f=None) -> np.ndarray:
@@ -372,6 +378,25 @@ def short_weight(d_short):
     """Share of the short window in the conduction, ``w(d) = d + sin(pi d) / pi`` [1]: the shorted
     channels' excess resistance enters V2 as ``(2 Ron - Rd) w(d) I2`` (:func:`wpt_receiver.sbar.short_weight`)."""
     return d_short + math.sin(math.pi * d_short) / math.pi
+
+
+@njit(cache=True, inline="always")
+def refine_level(i2s, i2e, rtol, levels):
+    """The refinement level of a sub-step whose I2 phasor went from ``i2s`` to ``i2e`` [A] (V2 held over it,
+    decided at its end: a backward-Euler step on the envelope mode the clamp's load ``(4/pi) Vc / |I2|`` makes,
+    ``2 L2 / R`` ~ 2 rectifier periods at 11 A, which damps and delays a large transient's ringing): 0 when
+    ``|i2e - i2s| <= rtol max(|i2s|, |i2e|)``, else the least L with ``|i2e - i2s| / 2^L <= rtol max(...)``, at
+    most ``levels``. The caller redoes the sub-step in 2^L pieces (the env's ``envs.modal_step._refine``, the
+    mission's ``loop_kernel._sub_step``); below ``rtol`` its arithmetic is unchanged (docs/performance.md,
+    "Adaptive refinement of the modal env step")."""
+    dd = i2e - i2s
+    d2 = dd.real * dd.real + dd.imag * dd.imag
+    ref = rtol * rtol * max(i2s.real * i2s.real + i2s.imag * i2s.imag, i2e.real * i2e.real + i2e.imag * i2e.imag)
+    lev = 0
+    while d2 > ref and lev < levels:
+        lev += 1
+        d2 *= 0.25
+    return lev
 
 
 @njit(cache=True)

@@ -68,6 +68,7 @@ def constants(values: dict) -> np.ndarray:
 
 def pack_constants(loop) -> np.ndarray:
     """The loop's constants as a 1-element :data:`.loop_kernel.CONST_DTYPE` array (every field set)."""
+    from wpt_receiver.modal_kernel import REFINE_LEVELS, REFINE_TOL
     from ..contract import _INV_SPAN, _LO
     from .loop_kernel import CONST_DTYPE
     sim, dev, lk = loop.sim, loop.dev, loop.lk
@@ -83,7 +84,9 @@ def pack_constants(loop) -> np.ndarray:
         "lm_rel_tol": sim.lm_rel_tol, "coarse_period": sim.coarse_policy_period_s,
         "duty_event_tol": sim.duty_event_tol, "settle_duty_tol": sim.settle_duty_tol,
         "settle_i2_tol": sim.settle_i2_tol_a, "noise_a": sim.i2_noise_a,
-        "obs_lo": _LO, "obs_inv": _INV_SPAN, "row_margin": math.ceil(loop.dtc / loop.t_rect) + 3,
+        "obs_lo": _LO, "obs_inv": _INV_SPAN,
+        "row_margin": math.ceil(loop.dtc / loop.t_rect) * 2 ** REFINE_LEVELS + 3,
+        "refine_tol": REFINE_TOL, "refine_levels": REFINE_LEVELS,
     }
     assert set(val) == set(CONST_DTYPE.names)
     return constants(val)

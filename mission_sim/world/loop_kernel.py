@@ -56,8 +56,8 @@ from numba import from_dtype, njit, types
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
 from wpt_receiver.modal_kernel import (N_MODES_C, N_ZOH_C, advance_z, inst_peak, modes, phasors, readout,
-                                       rect_affine, rect_current_a, sbar_implicit, short_weight, steady_modes,
-                                       stored_energy_j, zoh)
+                                       rect_affine, rect_current_a, refine_level, sbar_implicit, short_weight,
+                                       steady_modes, stored_energy_j, zoh)
 from wpt_receiver.modal_kernel import step as modal_step
 
 from wpt_receiver import modal_kernel as _modal_kernel
@@ -130,8 +130,10 @@ CONST_DTYPE = np.dtype([
     ("settle_duty_tol", "f8"), ("settle_i2_tol", "f8"), ("noise_a", "f8"),
     # the contract's normalisation of the observation (lo, 1 / span)
     ("obs_lo", "f8", (OBS_DIM,)), ("obs_inv", "f8", (OBS_DIM,)),
-    # most rows one iteration can write (a fine step split into rectifier periods)
+    # most rows one iteration can write (a fine step split into rectifier periods, each in up to 2^levels pieces)
     ("row_margin", "i8"),
+    # adaptive refinement of a fine step's rectifier-period sub-steps (_sub_step; levels 0: off)
+    ("refine_tol", "f8"), ("refine_levels", "i8"),
 ])
 
 #: one trajectory sample: time [s], Lm of the nearest pad [H], coupling k, propulsion power [W], energising
@@ -476,26 +478,63 @@ def _step_d(s, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
 
 
 @njit(cache=True)
+def _sub_step(s, saved, c, lk, rows, t0, h, lm, p_prop, row_k):
+    """One rectifier-period sub-step of a fine step (:func:`_step_d`), redone in 2^L pieces of ``h / 2^L`` when
+    its I2 moved too much for one V2 (:func:`wpt_receiver.modal_kernel.refine_level`: the end I2 phasor off the
+    start's by more than ``refine_tol`` of |I2|, L at most ``refine_levels``; the env's criterion and levels).
+
+    V2 decided at the sub-step's end and held over it is a backward-Euler step on the envelope mode the clamp's
+    load makes (~2 rectifier periods at 11 A): in a large transient (a step's charge start) it damps and delays the
+    ringing. Each piece is a full :func:`_step` (V2 implicit at its end, the battery node solved with it, its
+    row, the peak samples), so the energies close per piece as per step; the unrefined try is undone by restoring
+    the state (``saved``, a scratch copy of ``s``; its row dropped with ``n_rows``). Below the tolerance the
+    sub-step is the one before, to the bit."""
+    if c.refine_levels <= 0:
+        return _step_d(s, c, lk, rows, t0, h, lm, p_prop, row_k, True)
+    st = s[0]
+    mc = _modes_of(lk, lm if lm > 0 else 1e-12)
+    v1c = complex(0.0, -st.v1)
+    i2s = phasors(mc, st.z, v1c, complex(st.v2re, st.v2im))[1]
+    saved[0] = s[0]
+    r = _step_d(s, c, lk, rows, t0, h, lm, p_prop, row_k, True)
+    if r != OK:
+        return r
+    st = s[0]
+    lev = refine_level(i2s, phasors(mc, st.z, v1c, complex(st.v2re, st.v2im))[1], c.refine_tol, c.refine_levels)
+    if lev == 0:
+        return OK
+    s[0] = saved[0]
+    m = 1 << lev
+    for i in range(m):
+        r = _step_d(s, c, lk, rows, t0 + i * (h / m), h / m, lm, p_prop, row_k, True)
+        if r != OK:
+            return r
+    return OK
+
+
+@njit(cache=True)
 def _fine_step(s, c, lk, rows, t0, dt, lm, p_prop, row_k):
     """A fine step, in rectifier-period sub-steps while the SBAR rectifies (pad on, d < 1).
 
     The SBAR's v2 follows i2 (its phase and, through the commutation, its size) every half cycle;
     holding the v2 of the step's start over a step that is a sizeable part of the envelope's beat
     period would feed the beat instead of damping it. So v2 is updated every rectifier period
-    T = 1/(2f) (the duty is held: the policy is not called). Always, not on a test of how much v2
-    moves: a threshold would make the stepping depend on the last bit of the duty."""
+    T = 1/(2f) (the duty is held: the policy is not called). A sub-step whose I2 moves by more than
+    ``refine_tol`` of |I2| is redone in pieces (:func:`_sub_step`, the env's criterion): near a tolerance the
+    stepping depends on the last bits of the state, as the env's does (docs/performance.md)."""
     st = s[0]
-    if st.v1 > 0.0 and st.d < 1.0 and dt > 1.5 * c.t_rect:
-        k_sub = math.ceil(dt / c.t_rect - 1e-9)
+    if st.v1 > 0.0 and st.d < 1.0:
+        k_sub = math.ceil(dt / c.t_rect - 1e-9) if dt > 1.5 * c.t_rect else 1
         h = dt / k_sub
         n0 = st.n_rows
+        saved = s.copy()
         for j in range(k_sub):
-            r = _step_d(s, c, lk, rows, t0 + j * h, h, lm, p_prop, row_k, True)
+            r = _sub_step(s, saved, c, lk, rows, t0 + j * h, h, lm, p_prop, row_k)
             if r != OK:
                 return r
-        _merge_rows(st, rows, n0)
+        _merge_rows(s[0], rows, n0)
         return OK
-    return _step_d(s, c, lk, rows, t0, dt, lm, p_prop, row_k, True)
+    return _step_d(s, c, lk, rows, t0, dt, lm, p_prop, row_k, True)   # short mode or pad off: V2 = 0 or blocked
 
 
 @njit(cache=True)
