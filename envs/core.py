@@ -107,8 +107,12 @@ class EnvConfig:
         ``v2_refine_tol`` of |I2| is redone in 2^L pieces (L <= ``v2_refine_levels``; 0: never), V2 implicit at
         each piece's end (``envs.modal_step._refine``). The defaults (0.05, 3) put a large transient's peak
         (a drop to RM, random duties) within ~2 % of the envelope's fine-step limit (without: 10-25 % low), for
-        ~5x the step's CPU under random actions; (0.02, 5) within ~0.3 %, ~13x. Smooth control does not
-        trigger it (bit-identical windows; docs/performance.md, "Adaptive refinement of the modal env step").
+        ~5x the step's CPU under random actions; (0.02, 5) within ~0.3 %, ~13x. Smooth control on tuned windows
+        does not trigger it (nominal ``model_based`` / ``mpc`` windows bit-identical to the unrefined step); on
+        detuned windows it does (peaks move by up to ~5 A there: those windows ring). Only with one update per
+        rectifier period or more (``v2_updates`` 0 or >= 17): with 1-16 updates the |I2| samples between updates
+        leave no room for it and it is off (docs/performance.md, "Adaptive refinement of the modal env step").
+        Defaults: :data:`wpt_receiver.modal_kernel.REFINE_TOL` / ``REFINE_LEVELS`` (the mission's too).
     """
 
     link: LinkParams = TABLE_I
@@ -123,8 +127,8 @@ class EnvConfig:
     link_model: str = "envelope"
     hold_tol_a: float = 1e-3
     v2_updates: int = 0
-    v2_refine_tol: float = 0.05
-    v2_refine_levels: int = 3
+    v2_refine_tol: float = 0.05   # = wpt_receiver.modal_kernel.REFINE_TOL (a test keeps them equal; not imported:
+    v2_refine_levels: int = 3     # = REFINE_LEVELS   the eq. 4 env does not load the modal kernel)
 
     def __post_init__(self):
         from wpt_receiver.devices import preset_names
@@ -133,7 +137,8 @@ class EnvConfig:
         if int(self.v2_updates) != self.v2_updates or not 0 <= self.v2_updates <= 1000:
             raise ValueError(f"v2_updates={self.v2_updates!r} is invalid; valid range: integer 0..1000 (0: one "
                              "per rectifier period)")
-        if int(self.v2_refine_levels) != self.v2_refine_levels or not 0 <= self.v2_refine_levels <= 5:
+        if isinstance(self.v2_refine_levels, bool) or int(self.v2_refine_levels) != self.v2_refine_levels \
+                or not 0 <= self.v2_refine_levels <= 5:
             raise ValueError(f"v2_refine_levels={self.v2_refine_levels!r} is invalid; valid range: integer 0..5 (0: "
                              "no refinement)")
         if not (np.isfinite(self.v2_refine_tol) and self.v2_refine_tol > 0):

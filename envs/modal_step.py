@@ -15,8 +15,8 @@ is held over the control period: the ringing, and so any error of the held V2, s
 ``hold_tol``). In a large transient a V2 held for a rectifier period is too coarse (the clamp loads the secondary
 like a resistance (4/pi) Vc / |I2|, an envelope mode of 0.5-1.2 per period): a sub-step whose I2 moves by more
 than ``EnvConfig.v2_refine_tol`` of |I2| is redone in up to 2^``v2_refine_levels`` pieces (:func:`_refine`);
-below that tolerance the step's arithmetic is the one before (smooth control never triggers it: bit-identical
-windows). Detuned windows (:mod:`envs.detuned`) are the same step with their C1, C2 in the
+below that tolerance the step's arithmetic is the one before (smooth control on tuned windows never triggers it:
+nominal ``model_based`` / ``mpc`` windows bit-identical; detuned windows ring and do trigger it). Detuned windows (:mod:`envs.detuned`) are the same step with their C1, C2 in the
 window's link constants.
 
 * :func:`env_step` steps sub-environments ``[0, n)`` of the vector env, in chunks that run in parallel
@@ -112,7 +112,7 @@ def _segment(lc, lm_h, dt, n_sub, n_q, cz, force, rtol=_REFINE_TOL, levels=_REFI
     _fast_coefs(mc, cz[CZ_STEP:CZ_SUB], dt, cz[CZ_FASTH:CZ_KEY])
     for lev in range(REFINE_LEVELS_CAP):   # the refinement's pieces: made when first used (_refine)
         cz[CZ_LEVELS + lev * CZ_LEVEL_N] = 0j
-    cz[CZ_RPAR] = complex(rtol, levels)
+    cz[CZ_RPAR] = complex(rtol, min(max(levels, 0), REFINE_LEVELS_CAP))   # never past cz's level slots
     cz[CZ_KEY] = lm_h
 
 

@@ -75,7 +75,7 @@ def env_config(overrides: dict | None = None):
             raise ValueError(f"{k}={v!r} is invalid; valid range: a finite number")
     rw = RewardWeights(**{k: float(v) for k, v in ov.items() if k in rw_keys})
     # the integer fields as int only when whole: 2.5 reaches EnvConfig's check (refused), not int()'s 2
-    ints = ("n_steps", "slow_every", "v2_updates")
+    ints = ("n_steps", "slow_every", "v2_updates", "v2_refine_levels")
     return EnvConfig(reward=rw, devices=devices, link_model=link_model,
                      **{k: (int(v) if k in ints and float(v).is_integer() else float(v))
                         for k, v in ov.items() if k in cfg_keys})

@@ -199,6 +199,15 @@ def test_link_model_is_an_option_eq4_the_default():
         EnvConfig(v2_refine_levels=6)
     with pytest.raises(ValueError, match=r"v2_refine_tol=0.0 is invalid; valid range: \(0, inf\)"):
         EnvConfig(v2_refine_tol=0.0)
+    with pytest.raises(ValueError, match=r"v2_refine_levels=True is invalid"):
+        EnvConfig(v2_refine_levels=True)
+    # one criterion for the env and the mission: EnvConfig's defaults are the kernel's constants
+    from wpt_receiver.modal_kernel import REFINE_LEVELS, REFINE_TOL
+    assert (EnvConfig().v2_refine_tol, EnvConfig().v2_refine_levels) == (REFINE_TOL, REFINE_LEVELS)
+    # the CLI's --env form builds the same config (an int, so the same repr: the oracle's cache key)
+    from policies.train import env_config
+    assert repr(env_config({"link_model": "modal", "v2_refine_levels": "2"})) == \
+        repr(EnvConfig(link_model="modal", v2_refine_levels=2))
 
 
 @pytest.mark.parametrize("scenario", ["random", "detuned"])
