@@ -171,6 +171,40 @@ def test_mpc_budget_on_the_modal_plant_is_measured_overshoot():
     assert np.all(m["energy_after_stop_j"] < m0["energy_after_stop_j"])
 
 
+def test_tail_length_follows_the_budget():
+    """The duty tail is 30 steps at budget 0 (and up to ~1.9 %), never longer as the budget grows, never below
+    _TAIL_MIN, and its modelled ring (_TAIL_RING / n of I2_sm) stays _TAIL_RESERVE below the budget; with a large
+    estimated disturbance (the model wrong) it stays 30 steps."""
+    from mission_sim.contract import PolicyContext
+    from policies import mpc as M
+    pol = M.MPCPolicy(PolicyContext(link_model="modal"))
+    budgets = np.array([0.0, 0.01, 0.019, 0.02, 0.03, 0.05, 0.07, 0.1, 0.3, 1.0])
+    pol._budget_of = lambda e: budgets[e]
+    n = pol._tail_steps(np.arange(len(budgets)), np.zeros(len(budgets)))
+    assert n[0] == n[1] == n[2] == M._TAIL_STEPS
+    # a link the model does not explain (large estimated disturbance w: detuned tanks) keeps the full tail
+    assert np.all(pol._tail_steps(np.arange(len(budgets)), np.full(len(budgets), 2 * M._TAIL_W_MAX)) == M._TAIL_STEPS)
+    assert np.all(np.diff(n) <= 0) and n.min() >= M._TAIL_MIN
+    short = n < M._TAIL_STEPS
+    assert short.any() and np.all(M._TAIL_RING / n[short] <= budgets[short] - M._TAIL_RESERVE + 1e-12)
+
+
+def test_budgeted_tail_delivers_less_at_the_same_overshoot(monkeypatch):
+    """mpc:0.1 on the modal plant (windows 1000-1001): the budget's shorter tail delivers less energy after the
+    stop than the 30-step tail of budget 0 on every window, at the same measured overshoot (within 0.1 points),
+    within 0.5 points of the budget, every window in short mode."""
+    from policies import mpc as M
+    from policies.compare import run_policies
+    cfg = EnvConfig(link_model="modal")
+    new = run_policies(["mpc:0.1"], "nominal", 2, 1000, config=cfg)["mpc:0.1"].metrics
+    monkeypatch.setattr(M.MPCPolicy, "_tail_steps", lambda self, e, w: np.full(len(e), float(M._TAIL_STEPS)))
+    old = run_policies(["mpc:0.1"], "nominal", 2, 1000, config=cfg)["mpc:0.1"].metrics
+    assert np.all(new["reached_short_mode"] == 1.0)
+    assert np.all(new["energy_after_stop_j"] < old["energy_after_stop_j"])
+    assert np.all(np.abs(new["overshoot_pct"] - old["overshoot_pct"]) <= 0.1)
+    assert np.all(np.abs(new["overshoot_pct"] - 10.0) <= 0.5)
+
+
 def test_a_blocking_link_is_refused(monkeypatch):
     """A link whose steady I2 vanishes (blocks) has no I2 frame: the modal model refuses it with an error naming
     |I2| and the duty, instead of a table of NaN (P = V2 conj(I2) / |I2|)."""
