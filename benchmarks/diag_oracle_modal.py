@@ -6,6 +6,10 @@ on the exact-mode link").
 2. On one window, the same search (``policies.oracle._Problem``) from the same policy's sequence on eq. 4 and on the
    modal link: how far it moves, and the measured overshoot along the first basis directions (its kink).
 
+The stall this showed (floor 2.53 % against eq. 4's 1.63 %) was the forward-difference step: 2e-3 in x against
+the modal link's per-step peaks, kinked on that scale; the oracle differences with 1e-4 on that link since
+2026-11-26 (``policies.oracle._fd_step``; docs/rl.md, "Why the oracle stalled on the exact-mode link").
+
     python benchmarks/diag_oracle_modal.py [--policies oracle_imitation:PATH,mpc] [--window 1]
 """
 

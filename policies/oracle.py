@@ -17,7 +17,8 @@ basis of :data:`N_BASIS` functions over the steps after the stop with knots dens
 problem is solved with scipy's SLSQP (two passes, the budget backed off by 0.03 and 0.15 points, each
 followed by a line search from the start to SLSQP's end point, whose last iterate may violate the
 constraints by the solver's tolerance), gradients by forward differences evaluated in one batch of
-``N_BASIS + 1`` rollouts, from several starts (the budgeted model-based controller's sequences at
+``N_BASIS + 1`` rollouts (step 2e-3 in x on eq. 4's link, 1e-4 on the exact-mode link, whose per-step peaks
+are kinked on the larger scale: :func:`_fd_step`), from several starts (the budgeted model-based controller's sequences at
 b = 0.01 and 0.05, the floor's sequence on the frontier, and - for the gap of a policy - that
 policy's own sequence). The result is the best *feasible*
 sequence of every rollout evaluated (finite-difference points included), so it is never worse than
@@ -51,7 +52,13 @@ N_BASIS = 14
 DEFAULT_STARTS = ("model_based_budget:0.01", "model_based_budget:0.05")
 #: the short-mode constraint's current [A] (the objective's 0.5 A less a margin)
 SM_MARGIN_A = 0.45
+#: forward-difference step in the basis coefficients x (eq. 4's envelope link)
 _FD_STEP = 2e-3
+#: the same on the exact-mode link: its per-step peaks are kinked on the scale of ``_FD_STEP`` (the largest |I2|
+#: over the rectifier-period sub-steps), so differences over 2e-3 mix slopes of both sides of the kinks and SLSQP
+#: stalls at the start; 1e-4 resolves them (docs/rl.md, "Why the oracle stalled on the exact-mode link").
+#: eq. 4 keeps 2e-3 so that its cached bounds stay the same to the bit.
+_FD_STEP_MODAL = 1e-4
 _MAXITER = 40
 #: budget margins of the successive SLSQP passes (each warm-started from the last)
 _MARGINS = (3e-4, 1.5e-3)
@@ -107,12 +114,20 @@ def policy_duties(name: str, scenario, seed: int, config=None, episodes: int = 1
     return _policy_traces(name, scenario, int(seed), int(episodes), config)[0]
 
 
+def _fd_step(config) -> float:
+    """The forward-difference step in x on the link of ``config`` (:data:`_FD_STEP_MODAL` on the exact-mode
+    link, ``link_model == "modal"``; else :data:`_FD_STEP`)."""
+    return _FD_STEP_MODAL if getattr(config, "link_model", "envelope") == "modal" else _FD_STEP
+
+
 class _Problem:
     """Energy, step ratios and late I_L of ``d_start + B x`` on one window, evaluated with forward
-    differences in one batch; keeps the best feasible sequence of every rollout."""
+    differences (step :func:`_fd_step` of the window's link) in one batch; keeps the best feasible sequence
+    of every rollout."""
 
     def __init__(self, roll, d_start, budget):
         self.roll, self.k0, self.budget = roll, roll.stop_k, budget
+        self.fd = _fd_step(roll.config)
         self.d_start = np.asarray(d_start, dtype=float)
         self.B = _basis(roll.n_steps - self.k0)
         self.late = np.arange(roll.n_steps) >= self.k0 + int(round(14e-3 / roll.config.dt_s))
@@ -130,13 +145,13 @@ class _Problem:
         key = x.tobytes()
         got = self._memo.get(key)
         if got is None or (jac and got[0][1] is None):
-            xs = np.vstack([x, x + _FD_STEP * np.eye(len(x))]) if jac else x[None, :]
+            xs = np.vstack([x, x + self.fd * np.eye(len(x))]) if jac else x[None, :]
             d = self.duties(xs)
             r = self.roll.run(d)
             e, rat, il = r.energy_after_stop_j, r.ratios, r.rect_current_a[:, self.late]
             self._keep(d, e, r.overshoot, r.reached_short_mode)
             vals = (e / 0.3, rat, il)
-            got = [(v[0], (v[1:] - v[0]) / _FD_STEP if jac else None) for v in vals]
+            got = [(v[0], (v[1:] - v[0]) / self.fd if jac else None) for v in vals]
             self._memo = {key: got}
         return got
 
