@@ -162,7 +162,7 @@ def run(loop, bar=None):
     n = loop.samples.n
     if n < 2:
         return
-    rows = np.empty((max(BLOCK_ROWS, 2 * int(c[0]["row_margin"])), N_COLUMNS))  # blocks of at most BLOCK_ROWS rows
+    rows = np.empty((max(BLOCK_ROWS, 2 * int(c[0]["row_margin"])), N_COLUMNS))  # blocks of at most BLOCK_ROWS rows (or twice the row margin)
     lc, tab, lw = link_arrays(loop)
     noise, obs = np.empty(NOISE_BLOCK if loop.sim.i2_noise_a > 0 else 0), np.empty(len(c[0]["obs_lo"]))
     duty_in, duty_ready, n_rows = s["duty_in"], s["duty_ready"], s["n_rows"]  # views into the state
