@@ -8,7 +8,9 @@ training windows, choose each window's budget by one Lagrangian multiplier, fit 
 is ``out/oracle_imitation/oracle_imitation`` so a run never overwrites the shipped models; with the
 oracle's cache warm it reproduces them bit for bit, ~20 s) writes ``OUT_s<k>.npz`` per training seed
 ``k`` (a few kB each; the command, the scenarios, windows, budgets, the control period and the
-teacher's mean overshoot / energy in its ``meta``; ``--base mpc`` runs the MPC before the stop and solves
+teacher's mean overshoot / energy in its ``meta``; ``--link modal`` solves the teacher and takes the stop
+observations on the exact-mode link, ``EnvConfig(link_model="modal")``, and says ``link`` in the ``meta``; the default
+``envelope`` passes no config, as the shipped command; ``--base mpc`` runs the MPC before the stop and solves
 the teacher from its state there, stored as ``meta["base"]``). The oracle is solved on each
 scenario's *plant* (a scenario that differs from another only in its sensing delay shares its
 windows' oracle: the delay changes what the policy sees, not the link), cached on disk
