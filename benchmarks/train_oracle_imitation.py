@@ -8,7 +8,9 @@ training windows, choose each window's budget by one Lagrangian multiplier, fit 
 is ``out/oracle_imitation/oracle_imitation`` so a run never overwrites the shipped models; with the
 oracle's cache warm it reproduces them bit for bit, ~20 s) writes ``OUT_s<k>.npz`` per training seed
 ``k`` (a few kB each; the command, the scenarios, windows, budgets, the control period and the
-teacher's mean overshoot / energy in its ``meta``; ``--base mpc`` runs the MPC before the stop and solves
+teacher's mean overshoot / energy in its ``meta``; ``--link modal`` solves the teacher and takes the stop
+observations on the exact-mode link, ``EnvConfig(link_model="modal")``, and says ``link`` in the ``meta``; the default
+``envelope`` passes no config, as the shipped command; ``--base mpc`` runs the MPC before the stop and solves
 the teacher from its state there, stored as ``meta["base"]``). The oracle is solved on each
 scenario's *plant* (a scenario that differs from another only in its sensing delay shares its
 windows' oracle: the delay changes what the policy sees, not the link), cached on disk
@@ -115,6 +117,10 @@ def parse(argv):
     ap.add_argument("--base", default="model_based", help="controller before the stop (the teacher is solved "
                     "from its state at the stop; stored in the model's meta)",
                     type=_conv("--base", "one of model_based, mpc", _base))
+    ap.add_argument("--link", choices=("envelope", "modal"), default="envelope",
+                    help="the env's link model (envs.EnvConfig.link_model, as compare --link): the plant of the oracle "
+                    "solves and of the stop observations; a model fitted on a link other than envelope says so in "
+                    "meta['link']")
     ap.add_argument("--out", default="out/oracle_imitation/oracle_imitation",
                     help="output prefix: writes OUT_s<k>.npz (default under out/, not the shipped models)")
     a = ap.parse_args(argv)
@@ -137,15 +143,16 @@ def parse(argv):
     return a
 
 
-def dataset(scenarios, seeds, deltas, lam, base="model_based"):
+def dataset(scenarios, seeds, deltas, lam, base="model_based", config=None):
     """``(features, targets, info)`` of every (scenario, window): the stop features of ``base``'s run
-    (the paper's controller by default) and the chosen oracle sequence, solved from its state at the stop."""
+    (the paper's controller by default) and the chosen oracle sequence, solved from its state at the stop, on
+    the env config ``config`` (None: eq. 4's envelope link; the oracle's disk cache keys hold it)."""
     from policies.oracle_imitation import choose_targets, stop_features, target_sequences
     from policies.oracle_imitation_train import collect_stop_observations, oracle_targets
     X, Y, ov, en, fl = [], [], [], [], []
     for s in scenarios:
-        frames, k0 = collect_stop_observations(s, seeds[0], len(seeds), base=base)
-        tg = oracle_targets(plant_scenario(s), seeds, deltas, progress=True, base=base)
+        frames, k0 = collect_stop_observations(s, seeds[0], len(seeds), config=config, base=base)
+        tg = oracle_targets(plant_scenario(s), seeds, deltas, config=config, progress=True, base=base)
         pick = choose_targets(tg["energy_j"], tg["overshoot"], lam)
         rows = np.arange(len(seeds))
         X.append(stop_features(frames))
@@ -162,7 +169,8 @@ def main(argv=None):
     from envs.core import EnvConfig
     from policies.oracle_imitation import fit, predict, save_model
     t0, c0 = time.time(), time.process_time()
-    X, Y, info = dataset(a.scenarios, a.seeds, a.deltas, a.lam, a.base)
+    config = None if a.link == "envelope" else EnvConfig(link_model=a.link)   # envelope: None, the shipped run's
+    X, Y, info = dataset(a.scenarios, a.seeds, a.deltas, a.lam, a.base, config)
     print(f"teacher: {len(X)} windows, overshoot {100 * info['overshoot'].mean():.3f} % (floor "
           f"{100 * info['floor'].mean():.3f} %), energy after the stop {info['energy_j'].mean():.4f} J")
     os.makedirs(os.path.dirname(a.out) or ".", exist_ok=True)
@@ -174,7 +182,9 @@ def main(argv=None):
                 "scenarios": a.scenarios, "windows": [a.seeds[0], a.seeds[-1] + 1], "deltas": a.deltas, "lam": a.lam, "slow": a.slow,
                 "seed": k, "base": a.base, "features": a.features.split(","), "teacher_overshoot_pct": 100 * float(info["overshoot"].mean()),
                 "teacher_energy_j": float(info["energy_j"].mean()), "fit_rms_duty": rms,
-                "control_period_s": EnvConfig().dt_s}   # the windows' env (config None): the period it learned at
+                "control_period_s": (config or EnvConfig()).dt_s}   # the windows' env: the period it learned at
+        if config is not None:   # only off the default, so the shipped (envelope) models' bytes stay the same
+            meta["link"] = a.link
         save_model(model, f"{a.out}_s{k}.npz", meta)
         print(f"seed {k}: fit RMS {rms:.4f} (duty) -> {a.out}_s{k}.npz")
     print(f"{time.time() - t0:.0f} s wall, {time.process_time() - c0:.0f} s CPU, load {os.getloadavg()[0]:.1f}")

@@ -114,7 +114,8 @@ def test_policy_is_causal_and_releases_a_new_window():
     (["--features", "bogus"], ["--features", "bogus", "d_pre"]), (["--deltas", "0.5"], ["--deltas", "0.5", "(0, 0.2]"]),
     (["--scenarios", "nowhere"], ["--scenarios", "nowhere", "nominal"]),
     (["--train-seeds", "-1"], ["--train-seeds", "-1", "0..2^32-1"]), (["--train-seeds", "0,x"], ["--train-seeds", "0,x"]),
-    (["--out", "FILE/m"], ["--out", "FILE"]), (["--base", "pid"], ["--base", "'pid'", "model_based, mpc"])])
+    (["--out", "FILE/m"], ["--out", "FILE"]), (["--base", "pid"], ["--base", "'pid'", "model_based, mpc"]),
+    (["--link", "exact"], ["--link", "'exact'", "envelope", "modal"])])
 def test_train_script_bad_options_exit_2_with_one_line(args, names, tmp_path):
     """Each bad option: exit 2, one line naming the option, the value and what is valid, before any oracle
     solve (the oracle's disk cache stays empty) and with nothing written."""
@@ -148,6 +149,41 @@ def test_train_script_defaults_are_the_shipped_models_command(tmp_path, monkeypa
     assert default["seeds"] == list(range(*meta["windows"])) and default["lam"] == meta["lam"]
     assert default["slow"] == meta["slow"] and default["deltas"] == meta["deltas"]
     assert Path(default["out"]).parts[0] == "out" and "pretrained" not in default["out"]
+
+
+def test_train_script_link_reaches_the_teacher_and_the_meta(tmp_path, monkeypatch):
+    """``--link modal``: the stop observations and the oracle solves run on ``EnvConfig(link_model="modal")``
+    (the oracle's cache key holds the config) and the models' meta says ``link``; the default (envelope)
+    passes no config and writes no ``link`` key (the shipped models' meta unchanged)."""
+    import json
+
+    import policies.oracle_imitation_train as oit
+    from envs.core import EnvConfig
+    from policies.oracle_imitation import HORIZON
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    import train_oracle_imitation as tr
+    seen, n, T = [], 6, EnvConfig().n_steps
+
+    def stop_obs(scenario, seed, episodes, config=None, base="model_based"):
+        seen.append(("obs", config))
+        from mission_sim.contract import OBS_DIM
+        from policies.oracle_imitation import HISTORY
+        return np.random.default_rng(seed).normal(size=(episodes, HISTORY, OBS_DIM)), np.full(episodes, 10)
+
+    def targets(scenario, seeds, deltas, config=None, progress=False, base="model_based"):
+        seen.append(("oracle", config))
+        m, d = len(seeds), len(deltas)
+        return {"floor": np.full(m, 0.01), "overshoot": np.full((m, d), 0.02), "energy_j": np.ones((m, d)),
+                "feasible": np.ones((m, d), bool), "duties": np.full((m, d, T), 0.5)}
+    monkeypatch.setattr(oit, "collect_stop_observations", stop_obs)
+    monkeypatch.setattr(oit, "oracle_targets", targets)
+    for link, want in (("modal", EnvConfig(link_model="modal")), (None, None)):
+        seen.clear()
+        out = tmp_path / f"{link}" / "m"
+        tr.main(["--windows", f"0:{n}", "--train-seeds", "0", "--out", str(out)] + (["--link", link] if link else []))
+        assert seen == [("obs", want), ("oracle", want)]
+        meta = json.loads(str(np.load(f"{out}_s0.npz")["meta"]))
+        assert meta.get("link") == link and np.load(f"{out}_s0.npz")["W"].shape[1] == HORIZON
 
 
 def _mission_cli(args, capsys):
