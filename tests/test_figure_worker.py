@@ -32,6 +32,23 @@ def _children_of(pid: int) -> list[int]:
     return kids
 
 
+_BEFORE: set[int] = set()
+
+
+@pytest.fixture(autouse=True)
+def _children_before():
+    """This process's children before the test: another test file run earlier in the same process (pytest-xdist
+    puts several on one worker) may have left multiprocessing's session-long forkserver and resource tracker
+    (Dask's workers start them); those are not the command's."""
+    _BEFORE.clear()
+    _BEFORE.update(_children_of(os.getpid()))
+
+
+def _left() -> list[int]:
+    """Child processes of this test process started during the test and still alive."""
+    return [k for k in _children_of(os.getpid()) if k not in _BEFORE]
+
+
 @pytest.mark.parametrize("helper", [False, True])
 def test_worker_draws_the_same_figures_as_in_process_and_leaves_no_process(tmp_path, monkeypatch, capsys, helper):
     """The real mission figures drawn by the forked worker (alone, or with its helper as on a machine with a
@@ -40,7 +57,7 @@ def test_worker_draws_the_same_figures_as_in_process_and_leaves_no_process(tmp_p
     from mission_sim.figures import worker as fw
     monkeypatch.setattr(fw, "core_free", lambda: helper)      # inherited by the forked worker
     assert main(["mission", "--out", str(tmp_path / "w"), "--no-progress"]) == 0
-    assert multiprocessing.active_children() == [] and _children_of(os.getpid()) == []
+    assert multiprocessing.active_children() == [] and _left() == []
     monkeypatch.setattr(cm, "FIGURE_WORKER_MAX_ROWS", -1)        # drawn in this process
     assert main(["mission", "--out", str(tmp_path / "p"), "--no-progress"]) == 0
     pngs = sorted(p.name for p in (tmp_path / "w").glob("*.png"))
@@ -70,7 +87,7 @@ def test_a_worker_that_dies_is_replaced_by_drawing_in_process(tmp_path, monkeypa
     assert sorted(p.name for p in out.glob("*.png")) == ["i2_envelope.png", "lm.png", "power.png", "soc.png",
                                                          "trajectory.png"]
     assert (out / "summary.json").exists() and "Traceback" not in capsys.readouterr().err
-    assert _children_of(os.getpid()) == []
+    assert _left() == []
 
 
 def test_a_full_disk_in_the_worker_is_one_line_naming_the_file(tmp_path, monkeypatch, capsys):
@@ -91,7 +108,7 @@ def test_a_full_disk_in_the_worker_is_one_line_naming_the_file(tmp_path, monkeyp
     assert len(err) == 1 and f"cannot write {str(out / 'soc.png')!r}: no space left on device" in err[0], err
     assert not (out / "summary.json").exists()
     assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
-    assert _children_of(os.getpid()) == []
+    assert _left() == []
 
 
 def _imported(code: str, names) -> list[str]:
@@ -165,5 +182,5 @@ def test_a_refused_out_folder_forks_no_figure_process(tmp_path, monkeypatch, cap
     out.mkdir()
     with folder_lock(out, MISSION_LOCK, "busy"):
         assert main(["mission", "--out", str(out), "--no-progress"]) == 2
-    assert made == [] and _children_of(os.getpid()) == []
+    assert made == [] and _left() == []
     assert "another mission is writing there" in capsys.readouterr().err
