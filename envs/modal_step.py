@@ -81,11 +81,6 @@ _EDGE_TOL = 1e-8
 _FOUR_OVER_PI = 4.0 / math.pi
 #: the harmonics' shift is looked up again when |I2|^2 moved by more than this factor since (1.2^2)
 _DELTA_RATIO2 = 1.44
-#: adaptive refinement (:func:`_refine`), :func:`_segment`'s defaults (``EnvConfig.v2_refine_tol`` /
-#: ``v2_refine_levels``): a sub-step whose end I2 moved from its start's by more than this fraction of |I2| is
-#: redone in 2^L pieces (V2 implicit at each piece's end), L = 1 ... ``_REFINE_LEVELS``
-_REFINE_TOL = REFINE_TOL
-_REFINE_LEVELS = REFINE_LEVELS
 
 
 def kernel_function(name: str, compiled: bool = True):
@@ -96,7 +91,7 @@ def kernel_function(name: str, compiled: bool = True):
 
 # ---------------------------------------------------------------------- the link (exact modes)
 @njit(cache=True)
-def _segment(lc, lm_h, dt, n_sub, n_q, cz, force, rtol=_REFINE_TOL, levels=_REFINE_LEVELS):
+def _segment(lc, lm_h, dt, n_sub, n_q, cz, force, rtol=REFINE_TOL, levels=REFINE_LEVELS):
     """The window's link coefficients ``cz`` (:data:`envs.layout.CZ_MODES` ...) at ``lm_h`` [H]: the modes
     and the ZOH of the step ``dt`` [s], of its ``n_sub``-th and of that one's ``n_q``-th, and the refinement's
     pieces (:func:`_refine`; its tolerance ``rtol`` and ``levels`` into ``cz[CZ_RPAR]``); kept when ``cz``

@@ -315,8 +315,14 @@ def _solve_vl(st, c, dt, il0, il1, p_prop):
     return (beta + math.sqrt(disc)) / (2 * alpha)
 
 
-_LW_MODES, _LW_ZOH, _LW_KEYS = 0, N_MODES_C, N_MODES_C + 3 * N_ZOH_C
-LW_SIZE = _LW_KEYS + 4   # the link work array: modes, three ZOH slots (step, quarter, eighth), their keys, the modes' Lm
+#: ZOH slots per role (0: the step's length, 1: its peak samples' quarter): a refined fine step (:func:`_sub_step`)
+#: steps pieces of h / 2^L between sub-steps of h, so each role keeps a few lengths instead of re-discretising
+_LW_PER_ROLE = 4
+_LW_SLOTS = 2 * _LW_PER_ROLE
+_LW_MODES, _LW_ZOH, _LW_KEYS = 0, N_MODES_C, N_MODES_C + _LW_SLOTS * N_ZOH_C
+_LW_LM, _LW_NEXT = _LW_KEYS + _LW_SLOTS, _LW_KEYS + _LW_SLOTS + 1
+#: the link work array: the modes, the ZOH slots, their keys (step lengths), the modes' Lm, each role's next slot
+LW_SIZE = _LW_NEXT + 2
 
 
 @njit(cache=True)
@@ -324,23 +330,31 @@ def _modes_of(lk, lm_h):
     """The exact modes at ``lm_h`` (:func:`wpt_receiver.modal_kernel.modes`), cached in the work array ``lw``."""
     lc, tab, lw = lk
     mc = lw[_LW_MODES:_LW_ZOH]
-    if lw[_LW_KEYS + 3].real != lm_h:
+    if lw[_LW_LM].real != lm_h:
         modes(lc, lm_h, mc)
-        lw[_LW_KEYS + 3] = lm_h
-        for j in range(3):
+        lw[_LW_LM] = lm_h
+        for j in range(_LW_SLOTS):
             lw[_LW_KEYS + j] = math.nan
     return mc
 
 
 @njit(cache=True)
-def _coefs(lk, lm_h, dt, slot):
-    """``(modes, ZOH over dt)`` at ``lm_h``; ``slot`` 0, 1, 2 keeps three step lengths cached (step, dt/4, dt/8)."""
+def _coefs(lk, lm_h, dt, role):
+    """``(modes, ZOH over dt)`` at ``lm_h``: the ZOH kept in one of ``role``'s slots (0: a step, 1: its peak
+    samples), found by its length, else made in the role's next slot (round robin; the other role's slots,
+    in use by the same step, are never replaced)."""
     lw = lk[2]
     mc = _modes_of(lk, lm_h)
-    zc = lw[_LW_ZOH + N_ZOH_C * slot:_LW_ZOH + N_ZOH_C * (slot + 1)]
-    if lw[_LW_KEYS + slot].real != dt:
-        zoh(mc, dt, zc)
-        lw[_LW_KEYS + slot] = dt
+    lo = role * _LW_PER_ROLE
+    for j in range(lo, lo + _LW_PER_ROLE):
+        if lw[_LW_KEYS + j].real == dt:
+            return mc, lw[_LW_ZOH + N_ZOH_C * j:_LW_ZOH + N_ZOH_C * (j + 1)]
+    nxt = lw[_LW_NEXT + role].real
+    j = lo + (0 if math.isnan(nxt) else int(nxt))
+    lw[_LW_NEXT + role] = (j - lo + 1) % _LW_PER_ROLE
+    zc = lw[_LW_ZOH + N_ZOH_C * j:_LW_ZOH + N_ZOH_C * (j + 1)]
+    zoh(mc, dt, zc)
+    lw[_LW_KEYS + j] = dt
     return mc, zc
 
 
