@@ -41,10 +41,11 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--policies", default="mpc:0.05,mpc:0.1")
     ap.add_argument("--windows", type=int, default=20)
+    ap.add_argument("--link", default="modal", choices=("envelope", "modal"))
     a = ap.parse_args(argv)
     from envs import EnvConfig
     for name in a.policies.split(","):
-        split(name, EnvConfig(link_model="modal"), a.windows)
+        split(name, EnvConfig(link_model=a.link), a.windows)
 
 
 if __name__ == "__main__":
