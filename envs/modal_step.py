@@ -149,7 +149,7 @@ def _v2_closed(q0, sgn, k, block=False):
     where the switching model settles at no transfer): ``I2e = 0``; else :func:`_v2_edges` (every other
     window's step unchanged). Returns ``(F, I2e, t, ok)``, ``V2 = Vc F + ws I2e``, ``F = sgn (4/pi) (t - s)``:
     ``t = j e^{-j e}`` of the commutation angle ``e`` where the SBAR commutates (not when blocked)."""
-    inv_den, qv, cs, bn, kw, s, c = k
+    inv_den, qv, cs, bn, kw, s, c, wd = k
     a = q0 * inv_den - sgn * cs
     a2 = a.real * a.real + a.imag * a.imag
     disc = a2 - bn.imag * bn.imag
@@ -174,23 +174,27 @@ def _v2_closed(q0, sgn, k, block=False):
 
 
 @njit(cache=True)
-def _solve_consts(q1, ws, vc, kw, s, c):
+def _solve_consts(q1, ws, vc, kw, s, c, wd=-1.0):
     """The step's constants of :func:`_v2_closed` for the end-current gain ``q1`` [A/V], the shorted
     switches' excess ``ws`` [ohm], the clamp ``vc`` [V], ``kw = e^{-j delta}`` (the harmonics' shift) and
-    ``s, c = sin, cos(pi d/2)``: ``(1/den, q1 Vc/den, q1 K s/den, q1 K kw/den, kw, s, c)``, ``den = 1 - q1
-    ws``, ``K = (4/pi) Vc``."""
+    ``s, c = sin, cos(pi d/2)``: ``(1/den, q1 Vc/den, q1 K s/den, q1 K kw/den, kw, s, c, wd)``, ``den = 1 - q1
+    ws``, ``K = (4/pi) Vc``, ``wd = atan2(s, c)`` [rad] the window's edge as :func:`_v2_edges` compares it (pass
+    the step's, computed once: it depends on the duty only; negative: computed here)."""
     inv_den = 1.0 / (1.0 - q1 * ws)
     qv = q1 * vc * inv_den
-    return inv_den, qv, _FOUR_OVER_PI * s * qv, _FOUR_OVER_PI * qv * kw, kw, s, c
+    if wd < 0.0:
+        wd = math.atan2(s, c)
+    return inv_den, qv, _FOUR_OVER_PI * s * qv, _FOUR_OVER_PI * qv * kw, kw, s, c, wd
 
 
 @njit(cache=True)
-def _edge_angle(i2e, kw, sgn):
+def _edge_angle(i2e, kw_arg, sgn):
     """The commutation angle [rad] of the end current ``i2e`` before the window's clip (``sbar_edge``'s
-    ``pi/2 - arg + delta`` of the sign-folded phasor, its phase clipped to +-pi/2; ``kw = e^{-j delta}``)."""
+    ``pi/2 - arg + delta`` of the sign-folded phasor, its phase clipped to +-pi/2; ``kw_arg = arg(e^{-j delta})``,
+    ``atan2`` of ``kw``)."""
     ih = i2e * sgn
     ph = min(max(math.atan2(ih.imag, ih.real), -0.5 * math.pi), 0.5 * math.pi)
-    return 0.5 * math.pi - ph - math.atan2(kw.imag, kw.real)
+    return 0.5 * math.pi - ph - kw_arg
 
 
 @njit(cache=True)
@@ -200,12 +204,12 @@ def _v2_edges(q0, sgn, k):
     there), else at the jump of ``g`` where the end current reverses (i2 turns within the sub-step: the
     end I2 real and against ``sgn``; ``Im I2e(e) = 0`` is ``R sin(e + psi) = -Im A``); ``ok`` False when
     none is found (the caller's bracket)."""
-    inv_den, qv, cs, bn, kw, s, c = k
-    wd = math.atan2(s, c)
+    inv_den, qv, cs, bn, kw, s, c, wd = k
+    kw_arg = math.atan2(kw.imag, kw.real)   # once per call (both sides use it); wd: once per step, in k
     for side in (1.0, -1.0):
         f = complex(0.0, sgn * side * _FOUR_OVER_PI * c)
         i2e = q0 * inv_den + qv * f
-        g = (wd if side > 0.0 else math.pi - wd) - _edge_angle(i2e, kw, sgn)
+        g = (wd if side > 0.0 else math.pi - wd) - _edge_angle(i2e, kw_arg, sgn)
         if (side > 0.0 and g >= 0.0) or (side < 0.0 and g <= 0.0):
             return f, i2e, complex(s, side * c), True
     a = q0 * inv_den - sgn * cs
@@ -261,7 +265,7 @@ def _coef_tuple(cf, v1c):
 @njit(cache=True, inline="always")
 def _rekey(k, kw):
     """:func:`_solve_consts`'s tuple ``k`` with the harmonics' shift ``kw = e^{-j delta}`` replaced."""
-    return (k[0], k[1], k[2], _FOUR_OVER_PI * k[1] * kw, kw, k[5], k[6])
+    return (k[0], k[1], k[2], _FOUR_OVER_PI * k[1] * kw, kw, k[5], k[6], k[7])
 
 
 @njit(cache=True, inline="always")
@@ -304,7 +308,7 @@ def _solve(co, z0, z1, sgn, k, block, lc, tab, mc, zs, v1c, v2, d, vc, ws):
     return f, i2e, t
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _refine(z, z0, z1, v2, lev, sgn, k, r_ref, pk, i2_pk, vc, d, ws, lc, tab, mc, cr, h, v1c, out, en, book, lm, block):
     """A sub-step of ``h`` [s] redone in ``2^lev`` pieces, V2 implicit at each piece's end (:func:`_v2_closed` on
     the piece's maps; the refinement levels' coefficients ``cr`` = ``cz[CZ_RPAR:]``, made here at a level's first use
@@ -318,7 +322,7 @@ def _refine(z, z0, z1, v2, lev, sgn, k, r_ref, pk, i2_pk, vc, d, ws, lc, tab, mc
         _fast_coefs(mc, zl, hl, cr[b + 8:b + CZ_LEVEL_N])
         cr[b] = hl
     co = _coef_tuple(cr[b + 8:b + CZ_LEVEL_N], v1c)
-    kl = _solve_consts(co[13], ws, vc, k[4], k[5], k[6])
+    kl = _solve_consts(co[13], ws, vc, k[4], k[5], k[6], k[7])
     for _ in range(m):
         f, i2e, t = _solve(co, z0, z1, sgn, kl, block, lc, tab, mc, zl, v1c, v2, d, vc, ws)
         v2n = f * vc + ws * i2e
@@ -398,7 +402,7 @@ def _substeps(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v
             r_ref = math.sqrt(a)
             dl = sbar_shift(lc, tab, d, i2e * sgn, vc)
             kw = complex(math.cos(dl), -math.sin(dl))
-            k = (k[0], k[1], k[2], _FOUR_OVER_PI * k[1] * kw, kw, k[5], k[6])
+            k = (k[0], k[1], k[2], _FOUR_OVER_PI * k[1] * kw, kw, k[5], k[6], k[7])
     z[0], z[1], z[2], z[3] = z0.real, z0.imag, z1.real, z1.imag
     return v2, t, pk, i2_pk, qsum
 
@@ -439,7 +443,7 @@ def _link_step(z, v2, e, vl, d, lc, tab, cz, dt, n_sub, n_q, vf, dr, v1, hold_to
     n, h, zs, cf = 1, dt, cz[CZ_STEP:CZ_SUB], cz[CZ_FASTH:CZ_KEY]
     if split:
         n, h, zs, cf = n_sub, dt / n_sub, cz[CZ_SUB:CZ_SAMPLE], cz[CZ_FAST:CZ_FASTH]
-    k = _solve_consts(cf[FAST.q1], ws, vc, kw, sw, cw)
+    k = _solve_consts(cf[FAST.q1], ws, vc, kw, sw, cw, kx[7])
     block = abs(blocking_v2(mc, v1c)) <= _FOUR_OVER_PI * vc * (1.0 - sw)   # the window blocks in steady state
     v2, t, pk_env, i2_pk, qsum = _substeps(z, v2, i2a, k, vc, d, ws, lc, tab, mc, zs, cf, cz[CZ_SAMPLE:CZ_FAST], h,
                                            n, n_q if split else 1, v1c, out, en, book, cz[CZ_KEY].real, block,
