@@ -338,7 +338,7 @@ def _refine(z, z0, z1, v2, lev, sgn, k, r_ref, pk, i2_pk, vc, d, ws, lc, tab, mc
     return z0, z1, v2, t, i2e, sgn, k, r_ref, pk, i2_pk, il
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _substeps(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v1c, out, en, book, lm, block, cr):
     """``n_sub`` sub-steps of ``h`` [s] from the mode amplitudes ``z`` (4 reals, in place) and the start's
     I2 ``i2``, V2 updated at each (the circuit decides v2 once per half cycle) by :func:`_v2_closed`
