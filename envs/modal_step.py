@@ -111,7 +111,7 @@ def _segment(lc, lm_h, dt, n_sub, n_q, cz, force, rtol=REFINE_TOL, levels=REFINE
     cz[CZ_KEY] = lm_h
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _fast_coefs(mc, zc, h, cf):
     """The affine maps of a sub-step of ``h`` [s] with V1, V2 held (:data:`envs.layout.FAST`, from the modes
     ``mc`` and their ZOH ``zc``): with ``e^{lam' h} = 1 + lam' phi`` the exact step is ``z+ = e z + phi (g1 V1
@@ -131,7 +131,7 @@ def _fast_coefs(mc, zc, h, cf):
     cf[FAST.b], cf[FAST.q1], cf[FAST.p0], cf[FAST.p1] = b, q1, p0, p1
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _v2_closed(q0, sgn, k, block=False):
     """The SBAR's V2 over a sub-step whose end I2 is ``q0 + q1 V2``, implicit in the commutation as
     :func:`wpt_receiver.modal_kernel.sbar_implicit` (the commutation angle the end i2 has, with the v2 of
@@ -173,7 +173,7 @@ def _v2_closed(q0, sgn, k, block=False):
     return _v2_edges(q0, sgn, k)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _solve_consts(q1, ws, vc, kw, s, c, wd=-1.0):
     """The step's constants of :func:`_v2_closed` for the end-current gain ``q1`` [A/V], the shorted
     switches' excess ``ws`` [ohm], the clamp ``vc`` [V], ``kw = e^{-j delta}`` (the harmonics' shift) and
@@ -197,7 +197,7 @@ def _edge_angle(i2e, kw_arg, sgn):
     return 0.5 * math.pi - ph - kw_arg
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _v2_edges(q0, sgn, k):
     """:func:`_v2_closed` when its closed form has no solution: the root of the bracket's increasing ``g(e) =
     e - e_end(e)`` at a window edge (``e = pi d/2`` when ``g >= 0`` there, ``pi - pi d/2`` when ``g <= 0``
@@ -235,7 +235,7 @@ def _transient_a(mc, z0, z1, v1, v2):
     return abs(mc[MC_S + 1] * (z0 - zs0)) + abs(mc[MC_S + 5] * (z1 - zs1))
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _samples(mc, zq, z, v1, v2, n_q, best, i2_best):
     """The largest |I2| [A] at the ``n_q - 1`` inner sample points of a sub-step from ``z`` with ``v1, v2``
     held (``zq`` the sample's ZOH; the modes advanced on scalars, :func:`~wpt_receiver.modal_kernel.end_i2`'s
