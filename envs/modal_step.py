@@ -35,7 +35,12 @@ Cost: with random actions the refinement makes a step ~5x the unrefined one (doc
 refinement of the modal env step"), with the duty held the same. A step is sub-stepped in nearly every window (the link rarely rings below ``hold_tol``); the helpers called
 once per step with arrays (:func:`_finish`, :func:`_link_of`, :func:`_transient_a`, and the link kernel's lookups
 and readouts) are inlined (``inline="always"``): a call that passes arrays costs numba two atomic reference counts
-per array, the arithmetic is the same (outputs equal to the bit). Profile, what was tried and the figures:
+per array, the arithmetic is the same (outputs equal to the bit). The sub-step loop (:func:`_substeps`, with
+:func:`_refine` inlined into it) is compiled without numba's reference counting (``_nrt=False``: it allocates
+nothing, and the inlined helpers' array arguments cost an atomic incref/decref pair each per piece, ~1/4 of a
+refined step); the dispatchers it calls carry an explicit ``_nrt=True`` (numba's default), since a nested compile
+inherits the caller's flag when the callee sets none (docs/performance.md, "The modal env step without reference
+counts"). Profile, what was tried and the figures:
 docs/performance.md ("The exact-mode (modal) env step"); ``benchmarks/profile_modal_step.py``,
 ``benchmarks/ab_modal_step.py``.
 
@@ -352,7 +357,8 @@ def _substeps(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v
     |I2| peak, its I2 phasor, sum of I_L over the sub-steps)``; ``lm`` [H] the Lm of ``mc`` (the stored energy);
     ``block``: the window blocks in steady state (:func:`_v2_closed`). The unrefined sub-step is written out
     here, not through :func:`_held` / :func:`_reshift` as in :func:`_refine`: the same arithmetic, but the
-    helpers made the hot loop ~25 % slower (docs/performance.md)."""
+    helpers made the hot loop ~25 % slower (docs/performance.md). Compiled with ``_nrt=False`` (no reference
+    counts; every dispatcher it calls sets ``_nrt=True`` itself, see the module docstring)."""
     z0, z1 = complex(z[0], z[1]), complex(z[2], z[3])
     q1, a0, a1, bv = cf[FAST.q1], cf[FAST.a0], cf[FAST.a1], cf[FAST.b] * v1c
     e0, e1, k0, k1 = cf[FAST.e0], cf[FAST.e1], cf[FAST.k0] * v1c, cf[FAST.k1] * v1c
