@@ -31,8 +31,9 @@ State: the envs' :data:`envs.layout.STATE` (as eq. 4's step) plus the link's own
 (``tests/test_env_modal.py``) check the peak against the switching model on the paper's trajectories,
 the energy balance, and the single env against the vector env's row.
 
-Cost: with random actions the refinement makes a step ~5x the unrefined one (docs/performance.md, "Adaptive
-refinement of the modal env step"), with the duty held the same. A step is sub-stepped in nearly every window (the link rarely rings below ``hold_tol``); the helpers called
+Cost: with random actions the refinement made a step ~5x the unrefined one (docs/performance.md, "Adaptive
+refinement of the modal env step"; ~0.72x of that since the sub-step loop runs without reference counts, below),
+with the duty held the same. A step is sub-stepped in nearly every window (the link rarely rings below ``hold_tol``); the helpers called
 once per step with arrays (:func:`_finish`, :func:`_link_of`, :func:`_transient_a`, and the link kernel's lookups
 and readouts) are inlined (``inline="always"``): a call that passes arrays costs numba two atomic reference counts
 per array, the arithmetic is the same (outputs equal to the bit). The sub-step loop (:func:`_substeps`, with
