@@ -31,11 +31,17 @@ State: the envs' :data:`envs.layout.STATE` (as eq. 4's step) plus the link's own
 (``tests/test_env_modal.py``) check the peak against the switching model on the paper's trajectories,
 the energy balance, and the single env against the vector env's row.
 
-Cost: with random actions the refinement makes a step ~5x the unrefined one (docs/performance.md, "Adaptive
-refinement of the modal env step"), with the duty held the same. A step is sub-stepped in nearly every window (the link rarely rings below ``hold_tol``); the helpers called
+Cost: with random actions the refinement made a step ~5x the unrefined one (docs/performance.md, "Adaptive
+refinement of the modal env step"; ~0.72x of that since the sub-step loop runs without reference counts, below),
+with the duty held the same. A step is sub-stepped in nearly every window (the link rarely rings below ``hold_tol``); the helpers called
 once per step with arrays (:func:`_finish`, :func:`_link_of`, :func:`_transient_a`, and the link kernel's lookups
 and readouts) are inlined (``inline="always"``): a call that passes arrays costs numba two atomic reference counts
-per array, the arithmetic is the same (outputs equal to the bit). Profile, what was tried and the figures:
+per array, the arithmetic is the same (outputs equal to the bit). The sub-step loop (:func:`_substeps`, with
+:func:`_refine` inlined into it) is compiled without numba's reference counting (``_nrt=False``: it allocates
+nothing, and the inlined helpers' array arguments cost an atomic incref/decref pair each per piece, ~1/4 of a
+refined step); the dispatchers it calls carry an explicit ``_nrt=True`` (numba's default), since a nested compile
+inherits the caller's flag when the callee sets none (docs/performance.md, "The modal env step without reference
+counts"). Profile, what was tried and the figures:
 docs/performance.md ("The exact-mode (modal) env step"); ``benchmarks/profile_modal_step.py``,
 ``benchmarks/ab_modal_step.py``.
 
@@ -111,7 +117,7 @@ def _segment(lc, lm_h, dt, n_sub, n_q, cz, force, rtol=REFINE_TOL, levels=REFINE
     cz[CZ_KEY] = lm_h
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _fast_coefs(mc, zc, h, cf):
     """The affine maps of a sub-step of ``h`` [s] with V1, V2 held (:data:`envs.layout.FAST`, from the modes
     ``mc`` and their ZOH ``zc``): with ``e^{lam' h} = 1 + lam' phi`` the exact step is ``z+ = e z + phi (g1 V1
@@ -131,7 +137,7 @@ def _fast_coefs(mc, zc, h, cf):
     cf[FAST.b], cf[FAST.q1], cf[FAST.p0], cf[FAST.p1] = b, q1, p0, p1
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _v2_closed(q0, sgn, k, block=False):
     """The SBAR's V2 over a sub-step whose end I2 is ``q0 + q1 V2``, implicit in the commutation as
     :func:`wpt_receiver.modal_kernel.sbar_implicit` (the commutation angle the end i2 has, with the v2 of
@@ -149,7 +155,7 @@ def _v2_closed(q0, sgn, k, block=False):
     where the switching model settles at no transfer): ``I2e = 0``; else :func:`_v2_edges` (every other
     window's step unchanged). Returns ``(F, I2e, t, ok)``, ``V2 = Vc F + ws I2e``, ``F = sgn (4/pi) (t - s)``:
     ``t = j e^{-j e}`` of the commutation angle ``e`` where the SBAR commutates (not when blocked)."""
-    inv_den, qv, cs, bn, kw, s, c = k
+    inv_den, qv, cs, bn, kw, s, c, wd = k
     a = q0 * inv_den - sgn * cs
     a2 = a.real * a.real + a.imag * a.imag
     disc = a2 - bn.imag * bn.imag
@@ -173,39 +179,43 @@ def _v2_closed(q0, sgn, k, block=False):
     return _v2_edges(q0, sgn, k)
 
 
-@njit(cache=True)
-def _solve_consts(q1, ws, vc, kw, s, c):
+@njit(cache=True, _nrt=True)
+def _solve_consts(q1, ws, vc, kw, s, c, wd=-1.0):
     """The step's constants of :func:`_v2_closed` for the end-current gain ``q1`` [A/V], the shorted
     switches' excess ``ws`` [ohm], the clamp ``vc`` [V], ``kw = e^{-j delta}`` (the harmonics' shift) and
-    ``s, c = sin, cos(pi d/2)``: ``(1/den, q1 Vc/den, q1 K s/den, q1 K kw/den, kw, s, c)``, ``den = 1 - q1
-    ws``, ``K = (4/pi) Vc``."""
+    ``s, c = sin, cos(pi d/2)``: ``(1/den, q1 Vc/den, q1 K s/den, q1 K kw/den, kw, s, c, wd)``, ``den = 1 - q1
+    ws``, ``K = (4/pi) Vc``, ``wd = atan2(s, c)`` [rad] the window's edge as :func:`_v2_edges` compares it (pass
+    the step's, computed once: it depends on the duty only; negative: computed here)."""
     inv_den = 1.0 / (1.0 - q1 * ws)
     qv = q1 * vc * inv_den
-    return inv_den, qv, _FOUR_OVER_PI * s * qv, _FOUR_OVER_PI * qv * kw, kw, s, c
+    if wd < 0.0:
+        wd = math.atan2(s, c)
+    return inv_den, qv, _FOUR_OVER_PI * s * qv, _FOUR_OVER_PI * qv * kw, kw, s, c, wd
 
 
 @njit(cache=True)
-def _edge_angle(i2e, kw, sgn):
+def _edge_angle(i2e, kw_arg, sgn):
     """The commutation angle [rad] of the end current ``i2e`` before the window's clip (``sbar_edge``'s
-    ``pi/2 - arg + delta`` of the sign-folded phasor, its phase clipped to +-pi/2; ``kw = e^{-j delta}``)."""
+    ``pi/2 - arg + delta`` of the sign-folded phasor, its phase clipped to +-pi/2; ``kw_arg = arg(e^{-j delta})``,
+    ``atan2`` of ``kw``)."""
     ih = i2e * sgn
     ph = min(max(math.atan2(ih.imag, ih.real), -0.5 * math.pi), 0.5 * math.pi)
-    return 0.5 * math.pi - ph - math.atan2(kw.imag, kw.real)
+    return 0.5 * math.pi - ph - kw_arg
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _v2_edges(q0, sgn, k):
     """:func:`_v2_closed` when its closed form has no solution: the root of the bracket's increasing ``g(e) =
     e - e_end(e)`` at a window edge (``e = pi d/2`` when ``g >= 0`` there, ``pi - pi d/2`` when ``g <= 0``
     there), else at the jump of ``g`` where the end current reverses (i2 turns within the sub-step: the
     end I2 real and against ``sgn``; ``Im I2e(e) = 0`` is ``R sin(e + psi) = -Im A``); ``ok`` False when
     none is found (the caller's bracket)."""
-    inv_den, qv, cs, bn, kw, s, c = k
-    wd = math.atan2(s, c)
+    inv_den, qv, cs, bn, kw, s, c, wd = k
+    kw_arg = math.atan2(kw.imag, kw.real)   # once per call (both sides use it); wd: once per step, in k
     for side in (1.0, -1.0):
         f = complex(0.0, sgn * side * _FOUR_OVER_PI * c)
         i2e = q0 * inv_den + qv * f
-        g = (wd if side > 0.0 else math.pi - wd) - _edge_angle(i2e, kw, sgn)
+        g = (wd if side > 0.0 else math.pi - wd) - _edge_angle(i2e, kw_arg, sgn)
         if (side > 0.0 and g >= 0.0) or (side < 0.0 and g <= 0.0):
             return f, i2e, complex(s, side * c), True
     a = q0 * inv_den - sgn * cs
@@ -231,7 +241,7 @@ def _transient_a(mc, z0, z1, v1, v2):
     return abs(mc[MC_S + 1] * (z0 - zs0)) + abs(mc[MC_S + 5] * (z1 - zs1))
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _samples(mc, zq, z, v1, v2, n_q, best, i2_best):
     """The largest |I2| [A] at the ``n_q - 1`` inner sample points of a sub-step from ``z`` with ``v1, v2``
     held (``zq`` the sample's ZOH; the modes advanced on scalars, :func:`~wpt_receiver.modal_kernel.end_i2`'s
@@ -261,7 +271,7 @@ def _coef_tuple(cf, v1c):
 @njit(cache=True, inline="always")
 def _rekey(k, kw):
     """:func:`_solve_consts`'s tuple ``k`` with the harmonics' shift ``kw = e^{-j delta}`` replaced."""
-    return (k[0], k[1], k[2], _FOUR_OVER_PI * k[1] * kw, kw, k[5], k[6])
+    return (k[0], k[1], k[2], _FOUR_OVER_PI * k[1] * kw, kw, k[5], k[6], k[7])
 
 
 @njit(cache=True, inline="always")
@@ -304,7 +314,7 @@ def _solve(co, z0, z1, sgn, k, block, lc, tab, mc, zs, v1c, v2, d, vc, ws):
     return f, i2e, t
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _refine(z, z0, z1, v2, lev, sgn, k, r_ref, pk, i2_pk, vc, d, ws, lc, tab, mc, cr, h, v1c, out, en, book, lm, block):
     """A sub-step of ``h`` [s] redone in ``2^lev`` pieces, V2 implicit at each piece's end (:func:`_v2_closed` on
     the piece's maps; the refinement levels' coefficients ``cr`` = ``cz[CZ_RPAR:]``, made here at a level's first use
@@ -318,7 +328,7 @@ def _refine(z, z0, z1, v2, lev, sgn, k, r_ref, pk, i2_pk, vc, d, ws, lc, tab, mc
         _fast_coefs(mc, zl, hl, cr[b + 8:b + CZ_LEVEL_N])
         cr[b] = hl
     co = _coef_tuple(cr[b + 8:b + CZ_LEVEL_N], v1c)
-    kl = _solve_consts(co[13], ws, vc, k[4], k[5], k[6])
+    kl = _solve_consts(co[13], ws, vc, k[4], k[5], k[6], k[7])
     for _ in range(m):
         f, i2e, t = _solve(co, z0, z1, sgn, kl, block, lc, tab, mc, zl, v1c, v2, d, vc, ws)
         v2n = f * vc + ws * i2e
@@ -334,7 +344,7 @@ def _refine(z, z0, z1, v2, lev, sgn, k, r_ref, pk, i2_pk, vc, d, ws, lc, tab, mc
     return z0, z1, v2, t, i2e, sgn, k, r_ref, pk, i2_pk, il
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _substeps(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v1c, out, en, book, lm, block, cr):
     """``n_sub`` sub-steps of ``h`` [s] from the mode amplitudes ``z`` (4 reals, in place) and the start's
     I2 ``i2``, V2 updated at each (the circuit decides v2 once per half cycle) by :func:`_v2_closed`
@@ -348,7 +358,8 @@ def _substeps(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v
     |I2| peak, its I2 phasor, sum of I_L over the sub-steps)``; ``lm`` [H] the Lm of ``mc`` (the stored energy);
     ``block``: the window blocks in steady state (:func:`_v2_closed`). The unrefined sub-step is written out
     here, not through :func:`_held` / :func:`_reshift` as in :func:`_refine`: the same arithmetic, but the
-    helpers made the hot loop ~25 % slower (docs/performance.md)."""
+    helpers made the hot loop ~25 % slower (docs/performance.md). Compiled with ``_nrt=False`` (no reference
+    counts; every dispatcher it calls sets ``_nrt=True`` itself, see the module docstring)."""
     z0, z1 = complex(z[0], z[1]), complex(z[2], z[3])
     q1, a0, a1, bv = cf[FAST.q1], cf[FAST.a0], cf[FAST.a1], cf[FAST.b] * v1c
     e0, e1, k0, k1 = cf[FAST.e0], cf[FAST.e1], cf[FAST.k0] * v1c, cf[FAST.k1] * v1c
@@ -398,7 +409,7 @@ def _substeps(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v
             r_ref = math.sqrt(a)
             dl = sbar_shift(lc, tab, d, i2e * sgn, vc)
             kw = complex(math.cos(dl), -math.sin(dl))
-            k = (k[0], k[1], k[2], _FOUR_OVER_PI * k[1] * kw, kw, k[5], k[6])
+            k = (k[0], k[1], k[2], _FOUR_OVER_PI * k[1] * kw, kw, k[5], k[6], k[7])
     z[0], z[1], z[2], z[3] = z0.real, z0.imag, z1.real, z1.imag
     return v2, t, pk, i2_pk, qsum
 
@@ -439,7 +450,7 @@ def _link_step(z, v2, e, vl, d, lc, tab, cz, dt, n_sub, n_q, vf, dr, v1, hold_to
     n, h, zs, cf = 1, dt, cz[CZ_STEP:CZ_SUB], cz[CZ_FASTH:CZ_KEY]
     if split:
         n, h, zs, cf = n_sub, dt / n_sub, cz[CZ_SUB:CZ_SAMPLE], cz[CZ_FAST:CZ_FASTH]
-    k = _solve_consts(cf[FAST.q1], ws, vc, kw, sw, cw)
+    k = _solve_consts(cf[FAST.q1], ws, vc, kw, sw, cw, kx[7])
     block = abs(blocking_v2(mc, v1c)) <= _FOUR_OVER_PI * vc * (1.0 - sw)   # the window blocks in steady state
     v2, t, pk_env, i2_pk, qsum = _substeps(z, v2, i2a, k, vc, d, ws, lc, tab, mc, zs, cf, cz[CZ_SAMPLE:CZ_FAST], h,
                                            n, n_q if split else 1, v1c, out, en, book, cz[CZ_KEY].real, block,

@@ -185,7 +185,7 @@ def _expm1_over(mu, h):
     return complex(em * math.cos(b) - 2.0 * hb * hb, em * sb + sb) / mu
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)   # explicit: called from envs.modal_step._substeps' _nrt=False compile
 def zoh(mc, dt_s, zc):
     """Fill ``zc`` (complex, :data:`N_ZOH_C`) for a held-input step of ``dt_s`` [s]: ``e^{lam' dt}``,
     ``phi = (e^{lam' dt} - 1)/lam'`` per mode, and ``psi_ij = int_0^dt e^{(lam'_i + conj lam'_j) t} dt``."""
@@ -236,7 +236,7 @@ def advance_z(mc, zc, z, v1, v2):
     z[0], z[1], z[2], z[3] = n0.real, n0.imag, n1.real, n1.imag
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)   # explicit: called from envs.modal_step._substeps' _nrt=False compile
 def stored_energy_j(lc, mc, z, v1, v2, lm_h):
     """Cycle-averaged stored energy ``W = X^H E X / 4`` [J] of the coils and capacitors."""
     x = np.empty(4, dtype=np.complex128)
@@ -256,7 +256,7 @@ def _quad(ss, c0, c1, phi0, phi1, zc, dt_s):
     return ss * dt_s + lin, sq
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)   # explicit: called from envs.modal_step._substeps' _nrt=False compile
 def step(lc, mc, zc, dt_s, z, v1, v2, out):
     """Advance the mode state ``z`` (4 reals, in place) over ``dt_s`` [s] with ``v1, v2`` (complex
     phasors [V]) held; ``out`` (float, 9): ``int I1 dt`` (re, im) [C], ``int I2 dt`` (re, im) [C],
@@ -279,7 +279,7 @@ def step(lc, mc, zc, dt_s, z, v1, v2, out):
     out[8] = 0.5 * (v2 * int2.conjugate()).real
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)   # explicit: called from envs.modal_step._substeps' _nrt=False compile
 def rect_current_a(f_clamp, int_i2, dt_s):
     """DC current [A] into the clamp (battery + diode drops) over a step: the rectifier's power on
     the clamp, ``Re(Vc F conj(I2))/2``, over Vc (``f_clamp`` = V2's clamp part per volt, from
@@ -440,7 +440,7 @@ def _secant_edge(lc, tab, d, sgn, vc, ws, q0, q1, den, lo, hi, e0, tol):
     return e1, False
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)   # explicit: called from envs.modal_step._substeps' _nrt=False compile
 def sbar_implicit(lc, tab, mc, zc, z0, z1, v1, v2_held, d_short, vc_v, ws, e_guess=-1.0, tol=1e-13):
     """The SBAR's v2 held over the ``zc`` step from the mode amplitudes ``z0, z1`` (complex) under ``v1``:
     ``(F, i2e)``, its clamp part per volt and the step's end I2 [A], ``V2 = F vc_v + ws i2e`` (``ws``
