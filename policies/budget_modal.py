@@ -89,17 +89,32 @@ def _plant(link, devices: str):
 
 def _v2_plans(ctl_ss, x0, u0, du, n):
     """``(A (n,), B (n,))``: the controller's V2* [V] over ``n`` steps from the state ``x0`` under the constant
-    input ``u0 + r du`` is ``A + r B`` (``ctl_ss`` = ``(Ad, Bd, Cd, Dd)`` of the inverse controller)."""
+    input ``u0 + r du`` is ``A + r B`` (``ctl_ss`` = ``(Ad, Bd, Cd, Dd)`` of the inverse controller). ``B``, the
+    response to ``du`` from rest, does not depend on the stop: computed once per controller (:func:`_v2_step`)."""
     ad, bd, cd, dd = ctl_ss
-    a, b = np.empty(n), np.empty(n)
-    x, xb = np.asarray(x0, dtype=float).copy(), np.zeros(len(bd))
-    du_a, du_b, bu_a, bu_b = dd * u0, dd * du, bd * u0, bd * du   # the constant terms, once (the same numbers)
+    a = np.empty(n)
+    x = np.asarray(x0, dtype=float).copy()
+    du_a, bu_a = dd * u0, bd * u0   # the constant terms, once (the same numbers)
     for k in range(n):
         a[k] = cd @ x + du_a
-        b[k] = cd @ xb + du_b
         x = ad @ x + bu_a
+    return a, _v2_step(*((np.asarray(m, dtype=float).shape, np.asarray(m, dtype=float).tobytes()) for m in ctl_ss),
+                       float(du), int(n))
+
+
+@lru_cache(maxsize=8)
+def _v2_step(ad, bd, cd, dd, du, n):
+    """``B`` of :func:`_v2_plans` for the controller ``(Ad, Bd, Cd, Dd)`` (each ``(shape, bytes)``, so it can be a
+    cache key): its V2* [V] over ``n`` steps from rest under the input ``du`` (read-only)."""
+    ad, bd, cd, dd = (np.frombuffer(m[1]).reshape(m[0]) for m in (ad, bd, cd, dd))
+    b = np.empty(n)
+    xb = np.zeros(len(bd))
+    du_b, bu_b = dd * du, bd * du
+    for k in range(n):
+        b[k] = cd @ xb + du_b
         xb = ad @ xb + bu_b
-    return a, b
+    b.flags.writeable = False
+    return b
 
 
 @lru_cache(maxsize=4)
