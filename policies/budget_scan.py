@@ -6,17 +6,14 @@ Each plan's prediction is :func:`wpt_receiver.modal_kernel.held_peak` itself (no
 duties of a block of plans are computed by the caller with numpy (:func:`wpt_receiver.duty_from_v2_clipped` on
 the block, bit-equal to its rows one at a time). What a stop knows about ``P(r)`` is an interval per grid point,
 ``lo <= P(r) <= hi`` (``(-inf, inf)``: nothing yet; ``lo == hi``: exact; both NaN: a NaN prediction), so a point
-asked once is not predicted again unless a later question needs more (a coarse point stopped above one threshold
-and asked about a higher one; a fine point certified below one target and asked about a lower one).
+asked once is not predicted again unless a later question needs more (a point stopped above one threshold and
+asked about a higher one).
 
 - :func:`coarse_pass` asks every coarse point "the exact ``P``, or a lower bound above (the least exact ``P`` so
   far) + ``b``" in order, as the Python loop did (module docstring of :mod:`policies.budget_modal`), so the floor,
   the target and every flag are the same numbers.
-- :func:`fine_scan` asks the fine points "is ``P <= target``?" in order and stops at the first that is not. A plan
-  stops as soon as its peak so far is above the target (a lower bound) or, in its short-mode tail, as soon as the
-  tail's bound on every later peak and the max so far are both at most the target
-  (:func:`~wpt_receiver.modal_kernel.held_peak`'s ``below``: the plan is then below the target whatever comes
-  later), so the answer is the one the whole plan gives.
+- :func:`fine_scan` asks the fine points "is ``P <= target``?" in order and stops at the first that is not (a plan
+  stops as soon as its peak so far is above the target: a lower bound), as the Python loop did.
 """
 
 from __future__ import annotations
@@ -60,12 +57,12 @@ def k_tails(duties, has_tail):
 
 @njit(cache=True)
 def _predict(lc, mc, tab, zc, z0, v2_0, d, substeps, v1, vc_v, k_tail, tail_vinv, tail_x, tail_w, tail_cap, i2_ref,
-             above, below):
+             above):
     """``P`` of one plan (the overshoot ``pmax / i2_ref - 1``) from a copy of the start ``z0``, ``v2_0``
-    (:func:`~wpt_receiver.modal_kernel.held_peak` with its early stops at ``above`` and ``below``)."""
+    (:func:`~wpt_receiver.modal_kernel.held_peak`: its short-mode tail's stop, and its stop once above ``above``)."""
     z = z0.copy()
     pmax = held_peak(lc, mc, tab, zc, z, v2_0, d, substeps, v1, vc_v, k_tail, tail_vinv, tail_x, tail_w, tail_cap,
-                     i2_ref, above, below)[0]
+                     i2_ref, above)[0]
     return pmax / i2_ref - 1.0
 
 
@@ -83,7 +80,7 @@ def coarse_pass(lc, mc, tab, zc, z0, v2_0, duties, substeps, v1, vc_v, tails, ta
             p = lo[i]                       # NaN, exact, or known to be above the threshold
         else:
             p = _predict(lc, mc, tab, zc, z0, v2_0, duties[i], substeps, v1, vc_v, tails[i], tail_vinv, tail_x,
-                         tail_w, tail_cap, i2_ref, above, -math.inf)
+                         tail_w, tail_cap, i2_ref, above)
             if math.isnan(p):
                 lo[i] = hi[i] = p
             elif p > above:
@@ -100,20 +97,20 @@ def fine_scan(lc, mc, tab, zc, z0, v2_0, duties, substeps, v1, vc_v, tails, tail
               i2_ref, target, lo, hi):
     """The first row of ``duties`` (plans in increasing ``r``) whose ``P`` is not ``<= target`` (NaN counts as
     above), or the number of rows when every one is. ``lo``, ``hi`` (per row) are what is known about each ``P``:
-    a row is predicted only when they do not decide it, and they are updated (a plan below the target may be
-    certified so before its end: then ``lo`` is its peak so far and ``hi`` the target)."""
+    a row is predicted only when they do not decide it, and they are updated (a plan stopped once above the target:
+    ``lo``; a whole plan: ``lo = hi = P``)."""
     for j in range(duties.shape[0]):
         if math.isnan(lo[j]) or lo[j] > target:
             return j
         if hi[j] <= target:
             continue
         p = _predict(lc, mc, tab, zc, z0, v2_0, duties[j], substeps, v1, vc_v, tails[j], tail_vinv, tail_x, tail_w,
-                     tail_cap, i2_ref, target, target)
+                     tail_cap, i2_ref, target)
         if math.isnan(p):
             lo[j] = hi[j] = p
             return j
         if p > target:
-            lo[j] = p
+            lo[j] = p   # a lower bound (the plan stopped once above)
             return j
-        lo[j], hi[j] = max(lo[j], p), target
+        lo[j] = hi[j] = p
     return duties.shape[0]

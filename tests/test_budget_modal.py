@@ -387,11 +387,12 @@ def stops_1001():
 
 
 def test_compiled_search_equals_a_plain_search_on_real_stops(stops_1001):
-    """The compiled search (coarse pass and fine scan in one call each, a plan stopped once above the target or once
-    its short-mode tail is certified below it, a stop's intervals shared by its budgets) gives the plain reference
-    search's r* (whole plans of held_peak, no cache) on three real stops at four budgets, each stop's cache fresh and
-    shared by the budgets in a mixed order (a larger budget's certificates then a smaller budget's question); every
-    r* positive and below R_MAX (the scan, not an end of the grid, decides it)."""
+    """The compiled search (coarse pass and fine scan over blocks of plans in one call each, a plan stopped once above
+    its threshold, a stop's intervals shared by its budgets) gives the plain reference search's r* (whole plans of
+    held_peak, no cache) on three real stops at four budgets, each stop's cache fresh and shared by the budgets in a
+    mixed order (a larger budget's lower bounds, then a smaller budget's question); every r* positive and below R_MAX
+    (the scan, not an end of the grid, decides it). What the stop keeps about each P it was asked (lo <= P <= hi)
+    holds the whole plan's P."""
     def plain(link, devices, dt, d_prev, vl, a, b, r):
         return bm.predicted_overshoot(link, devices, dt, d_prev, vl, a, b, r)
     for stop in stops_1001:
@@ -403,6 +404,18 @@ def test_compiled_search_equals_a_plain_search_on_real_stops(stops_1001):
         bm._STOPS.clear()
         for b in (0.02, 0.005, 0.05, 0.01):
             assert bm.relaxation(b, *stop) == want[b], (b, want)
+        # what the stop keeps about each P it asked (an interval: exact, or a lower bound) holds the whole plan's P
+        link, devices, dt, ss, x0, u0, du, d_prev, vl = stop
+        kept = next(iter(bm._STOPS.values()))
+        a, b = kept.a, kept.b
+        asked = np.flatnonzero(np.isfinite(kept.f_lo) | np.isfinite(kept.f_hi))
+        assert len(asked) > 10 and np.any(kept.f_lo[asked] < kept.f_hi[asked])   # exact ones and lower bounds
+        for k in asked:
+            p = plain(link, devices, dt, d_prev, vl, a, b, k * bm.R_STEP)
+            assert kept.f_lo[k] <= p <= kept.f_hi[k], (k, kept.f_lo[k], p, kept.f_hi[k])
+        for i, r in enumerate(np.linspace(0.0, bm.R_MAX, bm._N_GRID)):
+            p = plain(link, devices, dt, d_prev, vl, a, b, r)
+            assert kept.c_lo[i] <= p <= kept.c_hi[i], (r, kept.c_lo[i], p, kept.c_hi[i])
 
 
 def test_plan_stopped_above_a_threshold_is_a_lower_bound(stop_1000):

@@ -709,7 +709,7 @@ def run_duties(lc, mc, tab, d_short, control_period_s, substeps, v1, vc_v, lm_h)
 
 @njit(cache=True)
 def held_peak(lc, mc, tab, zc, z, v2, d_short, substeps, v1, vc_v, k_tail, tail_vinv, tail_x, tail_w, tail_cap,
-              i2_ref=1.0, above=math.inf, below=-math.inf):
+              i2_ref=1.0, above=math.inf):
     """The instantaneous peak [A] of a run of held duties without its energies: :func:`run_duties`' steps (V2
     from i2's phase at each step's start, :func:`sbar_v2`; the state part of :func:`step`, :func:`advance_z`;
     :func:`inst_peak` at each step's end) from the mode state ``z`` (4 reals, advanced in place) under the
@@ -730,13 +730,7 @@ def held_peak(lc, mc, tab, zc, z, v2, d_short, substeps, v1, vc_v, k_tail, tail_
 
     **Stopping once above.** With ``above`` finite the run also returns as soon as the max so far, as the
     overshoot ``pmax / i2_ref - 1`` (the same arithmetic as the caller's), exceeds ``above``: the returned max is
-    then a lower bound of the run's (the whole run's overshoot is above ``above`` too).
-
-    **Stopping once certified below.** With ``below`` finite the short-mode tail also returns as soon as both the
-    max so far and the tail's bound on every later peak, as overshoots (the same arithmetic), are at most
-    ``below``: the whole run's overshoot is then at most ``below`` (the rounding is monotone) and the returned
-    max is the max so far (a lower bound of the run's). For a search that only asks "is the overshoot at most
-    ``below``?" (:mod:`policies.budget_scan`)."""
+    then a lower bound of the run's (the whole run's overshoot is above ``above`` too)."""
     pmax = -math.inf
     i2 = phasors(mc, z, v1, v2)[1]
     for k in range(len(d_short)):
@@ -757,7 +751,7 @@ def held_peak(lc, mc, tab, zc, z, v2, d_short, substeps, v1, vc_v, k_tail, tail_
                 bound = tail_cap
                 for i in range(3):
                     bound += tail_w[i] * abs(tail_vinv[i, 0] * dx0 + tail_vinv[i, 1] * dx1 + tail_vinv[i, 2] * dx2)
-                if bound < pmax or (bound / i2_ref - 1.0 <= below and pmax / i2_ref - 1.0 <= below):
+                if bound < pmax:
                     return pmax, v2
     return pmax, v2
 
