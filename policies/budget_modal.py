@@ -45,7 +45,7 @@ nominal windows 1000-1099 at b = 0.01, 0.02, 0.05, 0.1 (``benchmarks/bench_budge
 0.01 / 0.02 / 0.05 / 0.1, against 97 / 161 / 327 / 1070 ms with ``run_duties`` (5.6x / 5.9x / 7.1x / 10.3x;
 docs/budget_search_cost.md). The coarse pass and the fine scan run compiled over blocks of plans
 (:mod:`policies.budget_scan`, one call per block instead of one per plan; a stop keeps what it knows of each
-``P`` as an interval), and ``B`` is computed once per controller (:func:`_v2_step`): ~1.3x less CPU per stop again,
+``P`` as an interval), and ``B`` is computed once per controller (:func:`_v2_step`): ~1.1-1.3x less CPU per stop,
 the same ``r*`` on all 1,500 stops of the modal ``compare --episodes 100`` (2026-11-26, branch ``budgetspeed``).
 What remains is the non-linear SBAR step itself (~0.2 us per sub-step, 17 sub-steps per control period, up to 200
 periods while a plan has not reached duty 1), needed whole for every fine point below ``r*``.
