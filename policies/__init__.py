@@ -2,7 +2,7 @@
 
 Modules: ``classical`` (step, ramp, model_based), ``kernels`` (their compiled per-step functions for
 the mission's fast path; numba, imported on demand), ``onoff``, ``online``, ``budgeted``, ``budget_modal``,
-``random_policy``, ``mpc``, ``oracle``, ``rl`` / ``residual`` / ``constrained`` / ``imitation`` / ``obs_mask`` / ``smoothing`` /
+``budget_scan``, ``random_policy``, ``mpc``, ``oracle``, ``rl`` / ``residual`` / ``constrained`` / ``imitation`` / ``obs_mask`` / ``smoothing`` /
 ``train`` / ``callbacks`` / ``hyperparams`` / ``slow_budget`` (RL, needs stable-baselines3), ``oracle_imitation`` / ``oracle_imitation_train``, ``inference``,
 ``compare``, ``batched``, ``forked``, ``stats``, ``threads``.
 
@@ -18,6 +18,7 @@ Modules, from the classical controllers to learning and comparing:
 ``oracle``         the per-window limit: best open-loop duty sequence after the stop (SLSQP)
 ``budgeted``       the model-based controller with an overshoot budget (the classical frontier)
 ``budget_modal``   its after-stop plan predicted on the exact-mode link (the context's ``link_model="modal"``)
+``budget_scan``    that plan's relaxation search compiled (numba): the coarse pass and the fine scan over blocks of plans
 ``online``         the model-based controller with an online Lm estimate
 ``onoff``          hysteresis ON-OFF (the classic unsynchronised mode switching)
 ``random_policy``  uniformly random duties (the floor)

@@ -43,8 +43,12 @@ bit-identical to ``run_duties``' (``tests/test_budget_modal.py``) and so ``r*``:
 nominal windows 1000-1099 at b = 0.01, 0.02, 0.05, 0.1 (``benchmarks/bench_budget_modal.py``). Per stop
 (in-process CPU, medians over those stops, load 3.6-4.1 on 2 cores, 2026-11-26): 17 / 27 / 46 / 104 ms at b =
 0.01 / 0.02 / 0.05 / 0.1, against 97 / 161 / 327 / 1070 ms with ``run_duties`` (5.6x / 5.9x / 7.1x / 10.3x;
-docs/budget_search_cost.md). What remains is the non-linear SBAR step itself (~0.2 us
-per sub-step, 17 sub-steps per control period, up to 200 periods while a plan has not reached duty 1).
+docs/budget_search_cost.md). The coarse pass and the fine scan run compiled over blocks of plans
+(:mod:`policies.budget_scan`, one call per block instead of one per plan; a stop keeps what it knows of each
+``P`` as an interval), and ``B`` is computed once per controller (:func:`_v2_step`): ~1.1-1.3x less CPU per stop,
+the same ``r*`` on all 1,500 stops of the modal ``compare --episodes 100`` (2026-11-26, branch ``budgetspeed``).
+What remains is the non-linear SBAR step itself (~0.2 us per sub-step, 17 sub-steps per control period, up to 200
+periods while a plan has not reached duty 1), needed whole for every fine point below ``r*``.
 
 The budget is then *the measured overshoot above the floor of the controller's own plans*, as the prediction
 sees it (a window's oracle floor is lower: docs/modal_policies.md, section "`model_based_budget:b` on the
@@ -89,17 +93,32 @@ def _plant(link, devices: str):
 
 def _v2_plans(ctl_ss, x0, u0, du, n):
     """``(A (n,), B (n,))``: the controller's V2* [V] over ``n`` steps from the state ``x0`` under the constant
-    input ``u0 + r du`` is ``A + r B`` (``ctl_ss`` = ``(Ad, Bd, Cd, Dd)`` of the inverse controller)."""
+    input ``u0 + r du`` is ``A + r B`` (``ctl_ss`` = ``(Ad, Bd, Cd, Dd)`` of the inverse controller). ``B``, the
+    response to ``du`` from rest, does not depend on the stop: computed once per controller (:func:`_v2_step`)."""
     ad, bd, cd, dd = ctl_ss
-    a, b = np.empty(n), np.empty(n)
-    x, xb = np.asarray(x0, dtype=float).copy(), np.zeros(len(bd))
-    du_a, du_b, bu_a, bu_b = dd * u0, dd * du, bd * u0, bd * du   # the constant terms, once (the same numbers)
+    a = np.empty(n)
+    x = np.asarray(x0, dtype=float).copy()
+    du_a, bu_a = dd * u0, bd * u0   # the constant terms, once (the same numbers)
     for k in range(n):
         a[k] = cd @ x + du_a
-        b[k] = cd @ xb + du_b
         x = ad @ x + bu_a
+    return a, _v2_step(*((np.asarray(m, dtype=float).shape, np.asarray(m, dtype=float).tobytes()) for m in ctl_ss),
+                       float(du), int(n))
+
+
+@lru_cache(maxsize=8)
+def _v2_step(ad, bd, cd, dd, du, n):
+    """``B`` of :func:`_v2_plans` for the controller ``(Ad, Bd, Cd, Dd)`` (each ``(shape, bytes)``, so it can be a
+    cache key): its V2* [V] over ``n`` steps from rest under the input ``du`` (read-only)."""
+    ad, bd, cd, dd = (np.frombuffer(m[1]).reshape(m[0]) for m in (ad, bd, cd, dd))
+    b = np.empty(n)
+    xb = np.zeros(len(bd))
+    du_b, bu_b = dd * du, bd * du
+    for k in range(n):
+        b[k] = cd @ xb + du_b
         xb = ad @ xb + bu_b
-    return a, b
+    b.flags.writeable = False
+    return b
 
 
 @lru_cache(maxsize=4)
@@ -221,37 +240,93 @@ def _stop_key(link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v):
             float(vl_v))
 
 
-#: the last stops' plans: key (:func:`_stop_key`) -> ``(pred, ...)`` (:func:`_stop_plans`), least recent first
+#: the last stops' plans: key (:func:`_stop_key`) -> :class:`_Stop`, least recent first
 _STOPS: OrderedDict = OrderedDict()
 _N_STOPS = 64
+#: fine-grid plans predicted per compiled call (:func:`policies.budget_scan.fine_scan`); their duties cost ~1 us each
+_BLOCK = 48
 
 
-def _stop_plans(link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v):
-    """``pred(r)`` = ``P(r)`` at one stop, each ``r`` predicted once: kept for the last :data:`_N_STOPS` stops, so
-    stacked controllers at the same stop (two budgets of ``compare``'s stacked batch; seeds of a learned policy
-    over the same base whose stop states coincide) and the grids' common points (``r = 0``) share their plans.
-    ``P`` does not depend on the budget; the key is the exact inputs, so a shared plan is the same number."""
+class _Stop:
+    """One stop's plans (:func:`_stop_plans`): the controller's V2* ``A + r B`` (:func:`_v2_plans`), the plans'
+    start (:func:`_start`), the coarse grid's duties, and what is known of every ``P`` on the coarse and the fine
+    grid (intervals ``lo <= P <= hi``, :mod:`policies.budget_scan`). ``P`` does not depend on the budget."""
+
+    __slots__ = ("link", "devices", "vl_v", "a", "b", "start", "args", "tail", "coarse", "c_lo", "c_hi", "c_tails",
+                 "f_lo", "f_hi")
+
+    def __init__(self, link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v):
+        from .budget_scan import k_tails
+        self.link, self.devices, self.vl_v = link, devices, float(vl_v)
+        self.a, self.b = _v2_plans(ctl_ss, x0, u0, du, int(round(HORIZON_S / dt_s)))
+        lc, tab, mc, v1, i2_sm, vf = _plant(link, devices)
+        self.start = z, v2, sub, zc, vc, tail = _start(link, devices, dt_s, d_prev, vl_v)
+        self.tail = tail is not None
+        if tail is None:
+            tail = (np.zeros((3, 3), np.complex128), np.zeros(3, np.complex128), np.zeros(3), 0.0)
+        self.args = (lc, mc, tab, zc, z, v2), (sub, v1, vc), (*tail, i2_sm)
+        self.coarse = self.duties(np.linspace(0.0, R_MAX, _N_GRID))
+        self.c_tails = k_tails(self.coarse, self.tail)
+        self.c_lo, self.c_hi = np.full(_N_GRID, -np.inf), np.full(_N_GRID, np.inf)
+        n = int(round(R_MAX / R_STEP)) + 1
+        self.f_lo, self.f_hi = np.full(n, -np.inf), np.full(n, np.inf)
+
+    def duties(self, r):
+        """The plans' duties ``f^-1(A + r B, VL)`` (len(r), n) for the relaxations ``r`` (each row the same numbers
+        as :func:`_plan_overshoot`'s)."""
+        from wpt_receiver import duty_from_v2_clipped
+        r = np.asarray(r, dtype=float)
+        return np.ascontiguousarray(duty_from_v2_clipped(self.a[None, :] + r[:, None] * self.b[None, :], self.vl_v),
+                                    dtype=float)
+
+    def floor_pass(self, budget):
+        """The coarse grid's ``P`` (exact, or a lower bound above the least so far + ``budget``: module docstring)."""
+        from .budget_scan import coarse_pass
+        pc = np.empty(_N_GRID)
+        (lc, mc, tab, zc, z, v2), (sub, v1, vc), (*tail, i2_sm) = self.args
+        coarse_pass(lc, mc, tab, zc, z, v2, self.coarse, sub, v1, vc, self.c_tails, *tail, i2_sm, float(budget),
+                    self.c_lo, self.c_hi, pc)
+        if self.c_lo[0] == self.c_hi[0] and self.f_lo[0] != self.f_hi[0]:   # r = 0 is on both grids
+            self.f_lo[0] = self.f_hi[0] = self.c_lo[0]
+        return pc
+
+    def first_above(self, target, n_fine):
+        """The least ``k`` in ``0 .. n_fine`` whose ``P(k R_STEP)`` is not ``<= target``, ``n_fine + 1`` if none."""
+        from .budget_scan import fine_scan, k_tails
+        (lc, mc, tab, zc, z, v2), (sub, v1, vc), (*tail, i2_sm) = self.args
+        k = 0
+        while k <= n_fine:
+            m = min(_BLOCK, n_fine + 1 - k)
+            lo, hi = self.f_lo[k:k + m], self.f_hi[k:k + m]
+            below = hi <= target
+            if below.all():   # known from earlier questions at this stop: no duties, no plan
+                k += m
+                continue
+            j = int(np.argmin(below))
+            if np.isnan(lo[j]) or lo[j] > target:
+                return k + j
+            d = self.duties(np.arange(k, k + m) * R_STEP)
+            j = fine_scan(lc, mc, tab, zc, z, v2, d, sub, v1, vc, k_tails(d, self.tail), *tail, i2_sm, float(target),
+                          lo, hi)
+            if j < m:
+                return k + j
+            k += m
+        return n_fine + 1
+
+
+def _stop_plans(link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v) -> _Stop:
+    """The stop's :class:`_Stop`, kept for the last :data:`_N_STOPS` stops, so stacked controllers at the same stop
+    (the budgets of compare's stacked batch; seeds of a learned policy over the same base whose stop states
+    coincide) share their plans. The key is the exact inputs, so a shared plan is the same number."""
     key = _stop_key(link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v)
-    pred = _STOPS.get(key)
-    if pred is not None:
+    stop = _STOPS.get(key)
+    if stop is not None:
         _STOPS.move_to_end(key)
-        return pred
-    n = int(round(HORIZON_S / dt_s))
-    a, b = _v2_plans(ctl_ss, x0, u0, du, n)
-    start = _start(link, devices, dt_s, d_prev, vl_v)
-    memo = {}
-
-    def pred(r, above=np.inf):
-        """``P(r)``, or a lower bound of it above ``above`` (then ``P(r) > above`` is all that is known)."""
-        p, exact = memo.get(r, (None, False))
-        if p is None or not (exact or p > above):
-            p = _plan_overshoot(link, devices, start, vl_v, a, b, r, above)
-            memo[r] = (p, not (p > above))
-        return p
-    _STOPS[key] = pred
+        return stop
+    stop = _STOPS[key] = _Stop(link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v)
     if len(_STOPS) > _N_STOPS:
         _STOPS.popitem(last=False)
-    return pred
+    return stop
 
 
 def relaxation(budget, link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v) -> float:
@@ -259,24 +334,15 @@ def relaxation(budget, link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v) ->
     r du`` after the stop (``du`` = I2_sm of the assumed model [A]), the last duty ``d_prev`` and the battery
     voltage ``vl_v`` [V]. ``r*`` is a multiple of :data:`R_STEP` in ``[0, R_MAX]``."""
     _check(budget, d_prev, vl_v, x0)
-    pred = _stop_plans(link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v)
+    stop = _stop_plans(link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v)
     coarse = np.linspace(0.0, R_MAX, _N_GRID)
     # a coarse point whose plan is above (the least exact P so far) + b is neither the floor nor below the target:
     # its plan stops there (a lower bound of P above that, which leaves the floor and the flags below as they are)
-    pc = np.empty(_N_GRID)
-    floor = np.inf
-    for i, r in enumerate(coarse):
-        pc[i] = pred(r, floor + budget)
-        if pc[i] < floor:
-            floor = pc[i]
+    pc = stop.floor_pass(budget)
     target = np.nanmin(pc) + budget if np.any(np.isfinite(pc)) else -np.inf
     above = ~(pc <= target)   # NaN counts as above
     # the running max's first crossing lies at or below the coarse grid's first point above the target
     r_end = coarse[int(np.argmax(above))] if above.any() else R_MAX
     n_fine = int(round(r_end / R_STEP))
-    r_best = -1
-    for k in range(n_fine + 1):
-        if not (pred(k * R_STEP, target) <= target):
-            break
-        r_best = k
+    r_best = stop.first_above(target, n_fine) - 1
     return round(max(0, r_best) * R_STEP, 12)

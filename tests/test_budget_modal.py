@@ -333,33 +333,89 @@ def test_short_mode_tail_bound_holds(stop_1000):
     assert len(hit) and hit[0] < len(peaks) - 10 * sub, (len(hit), len(peaks))
 
 
+def _reference_search(stop, budget, predict=_run_duties_overshoot):
+    """``r*`` by the module docstring's rule, plainly: every coarse point's whole plan (the floor), then every fine
+    point's whole plan from ``r = 0`` up to the first above the target (at most up to the coarse grid's first point
+    above it), one prediction per point, no cache, no early stop."""
+    link, devices, dt, ss, x0, u0, du, d_prev, vl = stop
+    a, b = bm._v2_plans(ss, x0, u0, du, int(round(bm.HORIZON_S / dt)))
+    coarse = np.linspace(0.0, bm.R_MAX, bm._N_GRID)
+    pc = np.array([predict(link, devices, dt, d_prev, vl, a, b, r) for r in coarse])
+    target = np.nanmin(pc) + budget
+    above = ~(pc <= target)
+    n_fine = int(round((coarse[int(np.argmax(above))] if above.any() else bm.R_MAX) / bm.R_STEP))
+    k = 0
+    while k <= n_fine and predict(link, devices, dt, d_prev, vl, a, b, k * bm.R_STEP) <= target:
+        k += 1
+    return round(max(0, k - 1) * bm.R_STEP, 12)
+
+
 @pytest.mark.parametrize("budget", [0.02, 0.05])
 def test_search_equals_the_reference_search(stop_1000, budget):
-    """r* is the reference search's (the same coarse floor and running max on the R_STEP grid) on run_duties'
-    predictions, and a second budget at the same stop (as compare's stacked rows) reuses the stop's plans: no
-    plan is predicted twice, and its r* is the same as without the shared plans."""
-    link, devices, dt, ss, x0, u0, du, d_prev, vl = stop_1000
-    a, b = bm._v2_plans(ss, x0, u0, du, int(round(bm.HORIZON_S / dt)))
-
-    def ref(r):
-        return _run_duties_overshoot(link, devices, dt, d_prev, vl, a, b, r)
-    target = min(ref(r) for r in np.linspace(0.0, bm.R_MAX, bm._N_GRID)) + budget
-    k = 0
-    while ref((k + 1) * bm.R_STEP) <= target:
-        k += 1
+    """r* is the plain reference search's on run_duties' predictions (the same coarse floor and running max on the
+    R_STEP grid); asked again at the same stop nothing is predicted again (the stop's intervals are unchanged), and
+    a second budget at the same stop (as compare's stacked rows) that reuses the stop's plans gets the r* it gets
+    alone."""
     bm._STOPS.clear()
-    assert bm.relaxation(budget, *stop_1000) == round(k * bm.R_STEP, 12)
-    calls = []
-    orig = bm._plan_overshoot
-    bm._plan_overshoot = lambda *args: calls.append(args[6]) or orig(*args)   # args[6]: r
+    assert bm.relaxation(budget, *stop_1000) == _reference_search(stop_1000, budget)
+    stop = next(iter(bm._STOPS.values()))
+    known = [x.copy() for x in (stop.c_lo, stop.c_hi, stop.f_lo, stop.f_hi)]
+    r_again = bm.relaxation(budget, *stop_1000)
+    assert all(np.array_equal(x, y, equal_nan=True) for x, y in zip(known, (stop.c_lo, stop.c_hi, stop.f_lo, stop.f_hi)))
+    r_shared = bm.relaxation(0.01, *stop_1000)
+    bm._STOPS.clear()
+    assert bm.relaxation(0.01, *stop_1000) == r_shared and r_again == bm.relaxation(budget, *stop_1000)
+
+
+@pytest.fixture(scope="module")
+def stops_1001():
+    """The arguments of :func:`policies.budget_modal.relaxation` at the real stops of nominal windows 1001-1003 on
+    the modal env (``model_based_budget:0.01``), captured in the closed loop."""
+    caps = []
+    orig = bm.relaxation
+
+    def spy(*a):
+        caps.append(a[1:])
+        return orig(*a)
+    bm.relaxation = spy
     try:
-        r_shared = bm.relaxation(0.01, *stop_1000)   # a smaller budget after it at the same stop: no new plan
-        assert calls == []
-        bm._STOPS.clear()
-        assert bm.relaxation(0.01, *stop_1000) == r_shared
+        run_policies(["model_based_budget:0.01"], "nominal", 3, 1001, MODAL)
     finally:
-        bm._plan_overshoot = orig
-    assert len(calls) == len(set(calls)) > bm._N_GRID   # each r once (r = 0 is on both grids)
+        bm.relaxation = orig
+    assert len(caps) == 3
+    return caps
+
+
+def test_compiled_search_equals_a_plain_search_on_real_stops(stops_1001):
+    """The compiled search (coarse pass and fine scan over blocks of plans in one call each, a plan stopped once above
+    its threshold, a stop's intervals shared by its budgets) gives the plain reference search's r* (whole plans of
+    held_peak, no cache) on three real stops at four budgets, each stop's cache fresh and shared by the budgets in a
+    mixed order (a larger budget's lower bounds, then a smaller budget's question); every r* positive and below R_MAX
+    (the scan, not an end of the grid, decides it). What the stop keeps about each P it was asked (lo <= P <= hi)
+    holds the whole plan's P."""
+    def plain(link, devices, dt, d_prev, vl, a, b, r):
+        return bm.predicted_overshoot(link, devices, dt, d_prev, vl, a, b, r)
+    for stop in stops_1001:
+        want = {b: _reference_search(stop, b, plain) for b in (0.005, 0.01, 0.02, 0.05)}
+        assert all(0.0 < r < bm.R_MAX for r in want.values()), want
+        for b in want:
+            bm._STOPS.clear()
+            assert bm.relaxation(b, *stop) == want[b], (b, want)
+        bm._STOPS.clear()
+        for b in (0.02, 0.005, 0.05, 0.01):
+            assert bm.relaxation(b, *stop) == want[b], (b, want)
+        # what the stop keeps about each P it asked (an interval: exact, or a lower bound) holds the whole plan's P
+        link, devices, dt, ss, x0, u0, du, d_prev, vl = stop
+        kept = next(iter(bm._STOPS.values()))
+        a, b = kept.a, kept.b
+        asked = np.flatnonzero(np.isfinite(kept.f_lo) | np.isfinite(kept.f_hi))
+        assert len(asked) > 10 and np.any(kept.f_lo[asked] < kept.f_hi[asked])   # exact ones and lower bounds
+        for k in asked:
+            p = plain(link, devices, dt, d_prev, vl, a, b, k * bm.R_STEP)
+            assert kept.f_lo[k] <= p <= kept.f_hi[k], (k, kept.f_lo[k], p, kept.f_hi[k])
+        for i, r in enumerate(np.linspace(0.0, bm.R_MAX, bm._N_GRID)):
+            p = plain(link, devices, dt, d_prev, vl, a, b, r)
+            assert kept.c_lo[i] <= p <= kept.c_hi[i], (r, kept.c_lo[i], p, kept.c_hi[i])
 
 
 def test_plan_stopped_above_a_threshold_is_a_lower_bound(stop_1000):
