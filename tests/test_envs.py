@@ -308,13 +308,15 @@ def test_cost_counts_a_negative_swing_beyond_rated():
         assert info["overcurrent"] == pytest.approx(info["i2_peak_a"] / 15.0 - 1.0) and info["overcurrent"] > 0.0
 
 
+@pytest.mark.parametrize("link", ["modal", EQ4])   # the default's single step (envs.modal_step) and eq. 4's
 @pytest.mark.parametrize("cls", [SbarChargingEnv, SbarChargingDiscreteEnv])
-def test_compiled_step_equals_float_step_bitwise(cls):
-    """The compiled single step (envs.vector_kernel.single_step) against its own source run by the
-    interpreter (``compiled=False``: its ``py_func``): random actions over whole episodes (steps split
-    into sub-steps after the stop), truncation, plain and seeded resets, a reset mid-episode with
-    another scenario."""
-    fast, ref = cls(scenario="random", compiled=True), cls(scenario="random", compiled=False)
+def test_compiled_step_equals_float_step_bitwise(cls, link):
+    """The compiled single step (envs.vector_kernel.single_step; envs.modal_step.single_step on the modal link)
+    against its own source run by the interpreter (``compiled=False``: its ``py_func``): random actions over whole
+    episodes (steps split into sub-steps after the stop), truncation, plain and seeded resets, a reset mid-episode
+    with another scenario."""
+    cfg = EnvConfig(link_model=link)
+    fast, ref = cls(scenario="random", compiled=True, config=cfg), cls(scenario="random", compiled=False, config=cfg)
     assert fast._compiled and not ref._compiled
     rng = np.random.default_rng(7)
     sign_changes, T = 0, fast.config.n_steps
