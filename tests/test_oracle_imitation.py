@@ -145,7 +145,8 @@ def test_train_script_bad_options_exit_2_with_one_line(args, names, tmp_path):
 
 def test_train_script_defaults_are_the_shipped_models_command(tmp_path, monkeypatch):
     """The defaults are the shipped models' training options (their meta's command) but for --out, which
-    is under out/ (never the shipped files)."""
+    is under out/ (never the shipped files; the shipped modal-teacher models were written under out/ and copied to
+    policies/pretrained/, 2026-11-26); the command names its link, the envs' default."""
     import json
     monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
     monkeypatch.chdir(tmp_path)
@@ -153,7 +154,8 @@ def test_train_script_defaults_are_the_shipped_models_command(tmp_path, monkeypa
     meta = json.loads(str(np.load(SHIPPED)["meta"]))
     cmd = meta["command"].split()[2:]
     out_at = cmd.index("--out")
-    assert Path(cmd[out_at + 1]).parent == Path("policies/pretrained")
+    assert Path(cmd[out_at + 1]).parent in (Path("policies/pretrained"), Path("out/oracle_imitation_modal"))
+    assert "--link" in cmd and meta["link"] == cmd[cmd.index("--link") + 1] == "modal"
     shipped = vars(parse(cmd[:out_at] + cmd[out_at + 2:]))
     default = vars(parse([]))
     assert shipped == default

@@ -162,7 +162,8 @@ MODAL_POLICIES = ("model_based", "ramp", "mpc", "oracle_imitation:policies/pretr
 def modal_fixed():
     """The fixed policies of the modal oracle test on nominal windows 1000-1001 on the exact-mode link (closed
     loop, recorded): the paper's controller, ramp, the MPC (its modal-aware predictor) and a shipped clone of
-    eq. 4's oracle (an open-loop sequence after the stop, the paper's controller's duties before it)."""
+    the oracle (an open-loop sequence after the stop, the paper's controller's duties before it; the shipped maps are
+    fitted on the modal oracle since 2026-11-26, eq. 4's before)."""
     from envs import EnvConfig
     cfg = EnvConfig(link_model="modal")
     return cfg, {p: run_policy(p, "nominal", 2, 1000, cfg) for p in MODAL_POLICIES}
