@@ -293,7 +293,15 @@ def test_base_in_meta_runs_the_mpc_before_the_stop(tmp_path):
     from policies.oracle_imitation import BASES, check_base, load_model
     from policies.oracle_imitation_train import collect_stop_observations, oracle_targets
     good = dict(np.load(SHIPPED))
-    assert "base" not in json.loads(str(good["meta"])) and load_model(SHIPPED)["meta"].get("base", "model_based") == "model_based"
+    assert json.loads(str(good["meta"])).get("base", "model_based") == "model_based"   # the shipped maps: the paper's
+    bare = {k: v for k, v in json.loads(str(good["meta"])).items() if k != "base"}    # a model without ``base``
+    p0 = _write(tmp_path / "bare.npz", **{**good, "meta": np.array(json.dumps(bare))})
+    assert "base" not in load_model(p0)["meta"]
+    r0, r1 = run_policy(f"oracle_imitation:{p0}", "lm_drift", 3, 1000), run_policy("model_based", "lm_drift", 3, 1000)
+    venv = SbarChargingVectorEnv(num_envs=3, scenario="lm_drift")
+    venv.reset(seed=1000)
+    for i, k0 in enumerate(venv._stop_k):   # without ``base``: the paper's controller before the stop
+        np.testing.assert_array_equal(r0.d_short[:k0, i], r1.d_short[:k0, i])
     p = _write(tmp_path / "drift.npz", **{**good, "meta": np.array(json.dumps({"control_period_s": 1e-4, "base": "mpc"}))})
     assert load_model(p)["meta"]["base"] == "mpc"
     pol = run_policy(f"oracle_imitation:{p}", "lm_drift", 3, 1000)
