@@ -15,9 +15,13 @@
   (the worst case for ours: the I2 envelope changes sign in many windows every step, and those
   steps are re-stepped in 17 rectifier-period sub-steps; issue 22's goal: ratio >= 1.0 at N >= 4096).
   ``--vector-only`` skips the single-env rows; the N table is printed last.
-* ``--links``: instead, the vector env on the exact-mode link (``EnvConfig(link_model="modal")``)
-  against the default eq. 4 envelope, alternating in the same run, one thread, at the ``--n`` widths
-  (held duty and random actions): ns per env-step of each and the ratio modal / envelope.
+* ``--links``: instead, the vector env on the exact-mode link (``EnvConfig(link_model="modal")``, the envs'
+  default since 2026-11-26) against eq. 4's envelope (``EnvConfig(link_model="envelope")``, the default before),
+  both named explicitly, alternating in the same run, one thread, at the ``--n`` widths (held duty and random
+  actions): ns per env-step of each and the ratio modal / envelope.
+* ``--link {envelope,modal}``: the link of our env in the CartPole comparisons (default: the envs' default, modal;
+  the goals above were set, and met, on eq. 4's envelope link: ``--link envelope`` reproduces those runs).
+  Printed with every table.
 
 Every measurement is warmed up once (discarded), then alternates between the two envs in
 rounds and reports the median round (and the
@@ -88,9 +92,9 @@ def _pair(rate_a, rate_b, rounds):
             "ratio": statistics.median(ratios), "ratio_min": min(ratios), "ratio_max": max(ratios)}
 
 
-def _vector(n_vec, rng, seconds, rounds):
-    """Ours (``make_vec``, vector entry point; default threads and one thread) against CartPoleVectorEnv
-    at the same N."""
+def _vector(n_vec, rng, seconds, rounds, config=None):
+    """Ours (``make_vec``, vector entry point; default threads and one thread; env config ``config``) against
+    CartPoleVectorEnv at the same N."""
     from gymnasium.envs.classic_control.cartpole import CartPoleVectorEnv
 
     out = {"n_envs": n_vec}
@@ -102,7 +106,7 @@ def _vector(n_vec, rng, seconds, rounds):
     import numba
     top = numba.config.NUMBA_NUM_THREADS
     for mode, kw in (("", {"num_threads": top}), ("_1thread", {"num_threads": 1}), ("_auto", {})):
-        venv = gym.make_vec(envs.ENV_ID, num_envs=n_vec, vectorization_mode="vector_entry_point", **kw)
+        venv = gym.make_vec(envs.ENV_ID, num_envs=n_vec, vectorization_mode="vector_entry_point", config=config, **kw)
         out["threads" + mode] = venv.unwrapped.num_threads if venv.unwrapped._n_chunks > 1 else 1
         out["held" + mode] = _pair(lambda: _vector_rate(cpv, acts_cp, seconds), lambda: _vector_rate(venv, acts, seconds),
                                    rounds)
@@ -112,9 +116,11 @@ def _vector(n_vec, rng, seconds, rounds):
 
 
 def _links(n_vec, rng, seconds, rounds):
-    """ns per env-step of the modal link against the envelope (default) at width ``n_vec``, one thread."""
+    """ns per env-step of the modal link (the default) against eq. 4's envelope at width ``n_vec``, one thread
+    (both links named: the result does not depend on which is the default)."""
     from envs import EnvConfig, SbarChargingVectorEnv
-    env_a = SbarChargingVectorEnv(num_envs=n_vec, scenario="random", num_threads=1)
+    env_a = SbarChargingVectorEnv(num_envs=n_vec, scenario="random", num_threads=1,
+                                  config=EnvConfig(link_model="envelope"))
     env_b = SbarChargingVectorEnv(num_envs=n_vec, scenario="random", num_threads=1,
                                   config=EnvConfig(link_model="modal"))
     acts = np.zeros((n_vec, 1), np.float32)
@@ -129,7 +135,7 @@ def _links(n_vec, rng, seconds, rounds):
 
 def _print_links(res):
     print("\nvector env, one thread, ns per env-step (medians); ratio = modal / envelope (range over rounds)")
-    print("| N | actions | envelope (eq. 4, default) ns | modal ns | ratio |")
+    print("| N | actions | envelope (eq. 4) ns | modal (exact modes, the envs' default) ns | ratio |")
     print("|---|---|---|---|---|")
     for v in res["links"]:
         for label in ("held", "random"):
@@ -139,23 +145,25 @@ def _print_links(res):
     print(f"load average (1 min) before {res['load_before'][0]:.2f}, after {res['load_after'][0]:.2f}")
 
 
-def run(seconds=1.0, rounds=5, n_vec=(64, 256, 1024, 4096, 16384), vector_only=False):
-    out = {"load_before": os.getloadavg()}
+def run(seconds=1.0, rounds=5, n_vec=(64, 256, 1024, 4096, 16384), vector_only=False, link=None):
+    from envs import EnvConfig
+    config = EnvConfig() if link is None else EnvConfig(link_model=link)
+    out = {"load_before": os.getloadavg(), "link": config.link_model}
     if not vector_only:
-        out.update(_singles(seconds, rounds))
+        out.update(_singles(seconds, rounds, config))
     rng = np.random.default_rng(1)
-    out["vector"] = [_vector(n, rng, seconds, rounds) for n in n_vec]
+    out["vector"] = [_vector(n, rng, seconds, rounds, config) for n in n_vec]
     out["load_after"] = os.getloadavg()
     return out
 
 
-def _singles(seconds, rounds):
+def _singles(seconds, rounds, config=None):
     from gymnasium.envs.classic_control.cartpole import CartPoleEnv
 
     out = {}
     pairs = {
-        "raw": (CartPoleEnv(), envs.SbarChargingEnv()),
-        "make": (gym.make("CartPole-v1"), gym.make(envs.ENV_ID)),
+        "raw": (CartPoleEnv(), envs.SbarChargingEnv(config=config)),
+        "make": (gym.make("CartPole-v1"), gym.make(envs.ENV_ID, config=config)),
     }
     # CartPole alternates left/right (long episodes, few resets: its best case); ours holds a duty
     a_cp, a_ours = [0, 1] * 250, [np.array([0.0], np.float32)] * 500
@@ -173,7 +181,8 @@ def _singles(seconds, rounds):
 
 def _print_table(res):
     """The N table: ns per env-step (medians), ratio CartPoleVectorEnv / ours with the per-round range."""
-    print("\nvector env, random actions (autoresets), ns per env-step, medians; ratio = CartPole ns / ours ns")
+    print(f"\nvector env ({res['link']} link), random actions (autoresets), ns per env-step, medians; ratio = "
+          "CartPole ns / ours ns")
     print("| N | CartPoleVectorEnv ns | ours, all threads: ns, ratio (range) | 1 thread | default (auto) |")
     print("|---|---|---|---|---|")
     for v in res["vector"]:
@@ -194,6 +203,8 @@ def main(argv=None):
     ap.add_argument("--vector-only", action="store_true", help="skip the single-env measurements")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--links", action="store_true", help="the modal link against the envelope (module docstring)")
+    ap.add_argument("--link", choices=("envelope", "modal"), default=None,
+                    help="our env's link in the CartPole comparisons (default: the envs' default, modal)")
     args = ap.parse_args(argv)
     if args.links:
         res = {"load_before": os.getloadavg()}
@@ -202,11 +213,12 @@ def main(argv=None):
         res["load_after"] = os.getloadavg()
         print(json.dumps(res, indent=2)) if args.json else _print_links(res)
         return 0
-    res = run(args.seconds, args.rounds, args.n, args.vector_only)
+    res = run(args.seconds, args.rounds, args.n, args.vector_only, args.link)
     if args.json:
         print(json.dumps(res, indent=2))
         return 0
-    print(f"load average before {res['load_before'][0]:.2f}, after {res['load_after'][0]:.2f} (1 min)")
+    print(f"our env on the {res['link']} link; load average before {res['load_before'][0]:.2f}, after "
+          f"{res['load_after'][0]:.2f} (1 min)")
     for label, goal in (("single_raw", 1.0), ("single_make", 1.0), ("single_make_random", 1.5)):
         if label not in res:
             continue

@@ -16,8 +16,9 @@ every scenario, and prints / writes per scenario:
     python benchmarks/eval_slow_budget.py --models 'policies/pretrained/slow_budget_s*.zip' \
         --refs model_based,model_based_online,mpc --scenarios nominal,lm_drift --episodes 100 --json out/x.json
 
-``--link modal`` evaluates on the exact-mode link (``envs.EnvConfig(link_model="modal")``, as ``compare --link``),
-the oracle gaps included (the oracle on the same env config; its cache key holds the config).
+``--link modal`` (the default since 2026-11-26, as the envs') evaluates on the exact-mode link
+(``envs.EnvConfig(link_model="modal")``, as ``compare --link``), ``--link envelope`` on eq. 4's, the oracle gaps
+included (the oracle on the same env config; its cache key holds the config).
 
 The same numbers as ``dronewpt compare --train-seeds slow_budget=slow_budget:PATH,...`` for the
 reference ``model_based`` (compare's default); the other references are what this adds.
@@ -141,16 +142,15 @@ def main(argv=None):
     ap.add_argument("--json", default=None)
     ap.add_argument("--oracle-windows", type=int, default=0, help="gap to the oracle on the first scenario's first N")
     ap.add_argument("--no-gap", default="model_based_online", help="policies without an oracle gap")
-    ap.add_argument("--link", choices=("envelope", "modal"), default="envelope",
-                    help="the env's link model (envs.EnvConfig.link_model, as compare --link); the oracle on the same")
+    ap.add_argument("--link", choices=("envelope", "modal"), default="modal",
+                    help="the env's link model (envs.EnvConfig.link_model, as compare --link; default modal, the envs' "
+                    "default since 2026-11-26); the oracle on the same")
     a = ap.parse_args(argv)
     models = sorted(glob.glob(a.models))
     if not models:
         raise SystemExit(f"--models {a.models!r}: no file matches")
-    config = None
-    if a.link != "envelope":
-        from envs import EnvConfig
-        config = EnvConfig(link_model=a.link)
+    from envs import EnvConfig
+    config = EnvConfig(link_model=a.link)   # always named: the result must not depend on the envs' default
     t0, c0, l0 = time.time(), time.process_time(), os.getloadavg()
     res = evaluate(models, [r for r in a.refs.split(",") if r], a.scenarios.split(","), a.episodes, a.seed, a.kind,
                    [e for e in a.extra.split(",") if e], a.oracle_windows, tuple(a.no_gap.split(",")), config)

@@ -1,17 +1,19 @@
 """Train the amortised imitation of the oracle (:mod:`policies.oracle_imitation`): solve the oracle on
 training windows, choose each window's budget by one Lagrangian multiplier, fit one model per seed.
 
-    python benchmarks/train_oracle_imitation.py --scenarios nominal --windows 0:80 \
-        --deltas 0.003,0.006,0.01,0.016 --lam 0.4 --slow 1.1 --out policies/pretrained/oracle_imitation
+    python benchmarks/train_oracle_imitation.py --link modal --scenarios nominal --windows 0:80 \
+        --deltas 0.003,0.006,0.01,0.016 --lam 0.4 --slow 1.1 --out out/oracle_imitation_modal/oracle_imitation
 
-(the shipped models' command, in their ``meta``; the defaults are these options but ``--out``, which
-is ``out/oracle_imitation/oracle_imitation`` so a run never overwrites the shipped models; with the
-oracle's cache warm it reproduces them bit for bit, ~20 s) writes ``OUT_s<k>.npz`` per training seed
-``k`` (a few kB each; the command, the scenarios, windows, budgets, the control period and the
-teacher's mean overshoot / energy in its ``meta``; ``--link modal`` solves the teacher and takes the stop
-observations on the exact-mode link, ``EnvConfig(link_model="modal")``, and says ``link`` in the ``meta``; the default
-``envelope`` passes no config, as the shipped command; ``--base mpc`` runs the MPC before the stop and solves
-the teacher from its state there, stored as ``meta["base"]``). The oracle is solved on each
+(the shipped models' command since 2026-11-26, in their ``meta``, the files then copied to
+``policies/pretrained/``; the defaults are these options but ``--out``, which is
+``out/oracle_imitation/oracle_imitation`` so a run never overwrites the shipped models; with the oracle's cache
+warm it reproduces them bit for bit, ~20 s) writes ``OUT_s<k>.npz`` per training seed ``k`` (a few kB each; the
+command, the scenarios, windows, budgets, the control period, the link and the teacher's mean overshoot / energy in
+its ``meta``). ``--link`` (default ``modal``, the envs' default since 2026-11-26) is the plant of the teacher's
+solves and of the stop observations, always passed as an explicit ``EnvConfig(link_model=...)`` and recorded as
+``meta["link"]``; the models shipped before 2026-11-26 were fitted on ``--link envelope`` (eq. 4; no ``link`` in
+their meta then). ``--base mpc`` runs the MPC before the stop and solves
+the teacher from its state there, stored as ``meta["base"]``. The oracle is solved on each
 scenario's *plant* (a scenario that differs from another only in its sensing delay shares its
 windows' oracle: the delay changes what the policy sees, not the link), cached on disk
 (``$DRONEWPT_CACHE_DIR``), ~1-5 s of CPU per (window, budget) the first time. Training windows must
@@ -117,10 +119,10 @@ def parse(argv):
     ap.add_argument("--base", default="model_based", help="controller before the stop (the teacher is solved "
                     "from its state at the stop; stored in the model's meta)",
                     type=_conv("--base", "one of model_based, mpc", _base))
-    ap.add_argument("--link", choices=("envelope", "modal"), default="envelope",
-                    help="the env's link model (envs.EnvConfig.link_model, as compare --link): the plant of the oracle "
-                    "solves and of the stop observations; a model fitted on a link other than envelope says so in "
-                    "meta['link']")
+    ap.add_argument("--link", choices=("envelope", "modal"), default="modal",
+                    help="the env's link model (envs.EnvConfig.link_model, as compare --link; default modal, the envs' "
+                    "default since 2026-11-26): the plant of the oracle solves and of the stop observations, recorded "
+                    "in meta['link']")
     ap.add_argument("--out", default="out/oracle_imitation/oracle_imitation",
                     help="output prefix: writes OUT_s<k>.npz (default under out/, not the shipped models)")
     a = ap.parse_args(argv)
@@ -146,7 +148,7 @@ def parse(argv):
 def dataset(scenarios, seeds, deltas, lam, base="model_based", config=None):
     """``(features, targets, info)`` of every (scenario, window): the stop features of ``base``'s run
     (the paper's controller by default) and the chosen oracle sequence, solved from its state at the stop, on
-    the env config ``config`` (None: eq. 4's envelope link; the oracle's disk cache keys hold it)."""
+    the env config ``config`` (None: the envs' default, the modal link; the oracle's disk cache keys hold it)."""
     from policies.oracle_imitation import choose_targets, stop_features, target_sequences
     from policies.oracle_imitation_train import collect_stop_observations, oracle_targets
     X, Y, ov, en, fl = [], [], [], [], []
@@ -169,7 +171,7 @@ def main(argv=None):
     from envs.core import EnvConfig
     from policies.oracle_imitation import fit, predict, save_model
     t0, c0 = time.time(), time.process_time()
-    config = None if a.link == "envelope" else EnvConfig(link_model=a.link)   # envelope: None, the shipped run's
+    config = EnvConfig(link_model=a.link)   # always named: the teacher must not depend on the envs' default
     X, Y, info = dataset(a.scenarios, a.seeds, a.deltas, a.lam, a.base, config)
     print(f"teacher: {len(X)} windows, overshoot {100 * info['overshoot'].mean():.3f} % (floor "
           f"{100 * info['floor'].mean():.3f} %), energy after the stop {info['energy_j'].mean():.4f} J")
@@ -182,9 +184,7 @@ def main(argv=None):
                 "scenarios": a.scenarios, "windows": [a.seeds[0], a.seeds[-1] + 1], "deltas": a.deltas, "lam": a.lam, "slow": a.slow,
                 "seed": k, "base": a.base, "features": a.features.split(","), "teacher_overshoot_pct": 100 * float(info["overshoot"].mean()),
                 "teacher_energy_j": float(info["energy_j"].mean()), "fit_rms_duty": rms,
-                "control_period_s": (config or EnvConfig()).dt_s}   # the windows' env: the period it learned at
-        if config is not None:   # only off the default, so the shipped (envelope) models' bytes stay the same
-            meta["link"] = a.link
+                "control_period_s": config.dt_s, "link": a.link}   # the windows' env: the period, the plant
         save_model(model, f"{a.out}_s{k}.npz", meta)
         print(f"seed {k}: fit RMS {rms:.4f} (duty) -> {a.out}_s{k}.npz")
     print(f"{time.time() - t0:.0f} s wall, {time.process_time() - c0:.0f} s CPU, load {os.getloadavg()[0]:.1f}")

@@ -28,8 +28,8 @@ Modules, in the order data flows:
 ``peaks``          the instantaneous peak: envelope peak + the SBAR's harmonic excess (table)
 ``vector_kernel``  THE env step, once, compiled (numba): link, sub-steps, detuned tank, peak,
                    battery, reward, objective, observation, info; parallel over sub-envs
-``modal_plant``    the plant's link model chosen per env (``EnvConfig.link_model``): eq. 4's
-                   envelope (default) or the mission's exact-mode link (plans, plant parts)
+``modal_plant``    the plant's link model chosen per env (``EnvConfig.link_model``): the
+                   mission's exact-mode link (default) or eq. 4's envelope (plans, plant parts)
 ``modal_step``     the env step on the exact-mode link, compiled (numba): the link's modes,
                    sub-steps with the closed-form commutation, phase-aware peak; the rest of
                    the step is ``vector_kernel``'s helpers
@@ -43,8 +43,8 @@ Modules, in the order data flows:
 ``render``         the picture: the episode's current envelope as an RGB array
 =================  ==========================================================================
 
-The step is :mod:`envs.vector_kernel` for both envs (:mod:`envs.modal_step` with
-``EnvConfig(link_model="modal")``) (the single env through a per-env entry,
+The step is :mod:`envs.modal_step` for both envs (the default ``EnvConfig(link_model="modal")``;
+:mod:`envs.vector_kernel` with ``EnvConfig(link_model="envelope")``) (the single env through a per-env entry,
 ``single_step``; the vector env through ``env_step``); the other modules make plans and keep the
 orchestration (reset, seeding, autoreset, info dicts, rendering).
 """

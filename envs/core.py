@@ -84,13 +84,15 @@ class EnvConfig:
         channels' excess ``(2 Ron - Rd) w(d) I2`` added to V2 (see ``envs.vector_kernel._link_step``).
     device_tj_c : junction temperature of the devices' conduction values [C] (0 = the table's, as
         the mission's ``link.device_tj_c``); ``device_terms`` keeps its ``(Vf, dR)`` interface.
-    link_model : the plant's link model, one of :data:`LINK_MODELS`: ``"envelope"`` (default) eq. 4's
-        envelope with the ripple table for the peak (:mod:`envs.vector_kernel`); ``"modal"`` the mission's
+    link_model : the plant's link model, one of :data:`LINK_MODELS`: ``"modal"`` (the default since
+        2026-11-26, issue 23: one peak estimator in the mission, ``paper`` and the envs) the mission's
         exact-mode link (:mod:`envs.modal_step`: eq. 1's coupled modes, the SBAR's v2 with its quadrature,
         the phase-aware instantaneous peak; within 0.23 % of the switching model's peak on the paper's
         trajectories where eq. 4 + ripple is 2.85 % low on the V2* ramp; a vector env-step costs 5.9x eq. 4's with
         the duty held, 10.7x with random actions: ``benchmarks/bench_env.py --links``, N = 1024, one thread,
-        load 4.7-5.0, 2026-11-26).
+        load 4.7-5.0, 2026-11-26); ``"envelope"`` eq. 4's envelope with the ripple table for the peak
+        (:mod:`envs.vector_kernel`; the default until 2026-11-26, what every shipped RL model was trained on:
+        ``EnvConfig(link_model="envelope")``, ``--link envelope``).
         The env's :attr:`policy_context` carries the link model: ``mpc`` predicts with the exact modes on
         it (:mod:`policies.mpc_modal`); ``model_based_budget`` keeps eq. 4 (on the modal plant its measured
         overshoot is larger, docs/switching.md).
@@ -124,7 +126,7 @@ class EnvConfig:
     reward: RewardWeights = RewardWeights()
     devices: str = "schottky"
     device_tj_c: float = 0.0
-    link_model: str = "envelope"
+    link_model: str = "modal"
     hold_tol_a: float = 1e-3
     v2_updates: int = 0
     v2_refine_tol: float = 0.05   # = wpt_receiver.modal_kernel.REFINE_TOL (a test keeps them equal; not imported:
@@ -162,11 +164,13 @@ class EnvConfig:
             raise ValueError(f"rated_i2_a={self.rated_i2_a!r} is invalid; valid range: (0, inf)")
 
     def stated_fields(self) -> list:
-        """``(name, value)`` of the fields, the exact-mode link's (``link_model``, ``hold_tol_a``,
-        ``v2_updates``) only where they differ from their defaults: a default config reads as before the
-        option. The one rule of :meth:`__repr__` (the oracle's disk-cache keys hold the repr,
-        :mod:`policies.oracle`) and of the trained models' metadata (``policies.train.config_dict``)."""
-        opt = {"link_model", "hold_tol_a", "v2_updates", "v2_refine_tol", "v2_refine_levels"}
+        """``(name, value)`` of the fields: ``link_model`` always (a record must not depend on which link is
+        the default: the default changed from ``"envelope"`` to ``"modal"`` on 2026-11-26), the exact-mode
+        link's step options (``hold_tol_a``, ``v2_updates``, ``v2_refine_tol``, ``v2_refine_levels``) only where
+        they differ from their defaults. The one rule of :meth:`__repr__` (the oracle's disk-cache keys hold
+        the repr, :mod:`policies.oracle`: eq. 4's and the modal link's keys always differ) and of the trained
+        models' metadata (``policies.train.config_dict``)."""
+        opt = {"hold_tol_a", "v2_updates", "v2_refine_tol", "v2_refine_levels"}
         return [(f.name, getattr(self, f.name)) for f in fields(self)
                 if f.name not in opt or getattr(self, f.name) != f.default]
 

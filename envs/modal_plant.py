@@ -1,7 +1,7 @@
 """The plant's link model, chosen per env (gym-electric-motor's swappable physical system):
-``EnvConfig(link_model="envelope")`` (the default) is eq. 4's envelope with the ripple table
-(:class:`envs.parts.PlantPart`, :mod:`envs.vector_kernel`); ``link_model="modal"`` is the mission's
-exact-mode link (this module's :class:`ModalPlantPart` / :class:`ModalSinglePlant`, the compiled step
+``EnvConfig(link_model="envelope")`` is eq. 4's envelope with the ripple table
+(:class:`envs.parts.PlantPart`, :mod:`envs.vector_kernel`; the default until 2026-11-26); ``link_model="modal"``
+(the default since, issue 23) is the mission's exact-mode link (this module's :class:`ModalPlantPart` / :class:`ModalSinglePlant`, the compiled step
 :mod:`envs.modal_step`).
 
 The choice is made once, when the env is built (:func:`vector_plant`, :func:`single_plant`): each link

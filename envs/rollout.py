@@ -7,8 +7,9 @@ same seed and steps the ``m`` candidate sequences side by side. One batch of 64 
 steps takes ~20 ms after numba's first compile; finite differences of a sequence's parameters or a
 population method cost one batch each. Used by the per-window oracle (:mod:`policies.oracle`).
 
-Both links replay compiled: eq. 4's envelope (:func:`envs.vector_kernel.step_kernel`, the default) and the
-exact-mode link (``EnvConfig(link_model="modal")``: :func:`envs.modal_step.step_kernel`, detuned windows
+Both links replay compiled: eq. 4's envelope (``EnvConfig(link_model="envelope")``:
+:func:`envs.vector_kernel.step_kernel`) and the exact-mode link (the default since 2026-11-26,
+``EnvConfig(link_model="modal")``: :func:`envs.modal_step.step_kernel`, detuned windows
 included, their C1, C2 being in the window's link constants); ``DutyRollout(..., compiled=False)`` steps the
 env from Python instead (the reference the tests compare the replays with).
 

@@ -59,7 +59,7 @@ __all__ = ["ObsField", "OBS_FIELDS", "OBS_DIM", "OBS_INDEX", "normalise_obs", "n
            "POLICY_KERNEL_SIGNATURE", "MAX_HISTORY", "history_obs_dim", "LINK_MODELS"]
 
 #: the plant's link models a policy may run on (:attr:`PolicyContext.link_model`, ``envs.EnvConfig.link_model``,
-#: ``--link``): eq. 4's envelope (the envs' default), the exact modes (the mission's link). The one list.
+#: ``--link``): eq. 4's envelope, the exact modes (the mission's link, the envs' default since 2026-11-26). The one list.
 LINK_MODELS = ("envelope", "modal")
 
 #: numba signature of a policy's optional compiled step ``d = fn(obs, params, state)`` (module notes)
@@ -155,8 +155,9 @@ class PolicyContext:
         environments and of the default mission (a 10 kHz DSP loop)
     rated_i2_a : rated secondary coil current amplitude [A]
     link_model : the plant's link model the policy runs on, one of :data:`LINK_MODELS`: ``"envelope"`` (eq. 4,
-        the default) or ``"modal"``
-        (the exact-mode link, ``envs.EnvConfig(link_model="modal")``); a model-predictive policy predicts with it
+        a standalone context's default) or ``"modal"`` (the exact-mode link, the envs' default
+        ``envs.EnvConfig(link_model="modal")``; the mission's); a model-predictive policy predicts with it. An env
+        gives its own (``env.policy_context``), so a policy run by an env always sees that env's link
     """
 
     link: LinkParams = TABLE_I

@@ -37,7 +37,9 @@ shipped models', or ``mpc``, the MPC at budget 0, whose teacher is solved from t
 ``train_oracle_imitation.py --base mpc``; on the Lm drift it was not better than the MPC itself, docs/rl.md).
 
 Policy: :class:`OracleImitationPolicy` (``oracle_imitation:PATH``; ``oracle_imitation`` = shipped seed 0,
-``policies/pretrained/oracle_imitation_s0..4.npz``).
+``policies/pretrained/oracle_imitation_s0..4.npz``: fitted on the exact-mode link's oracle since 2026-11-26, when that
+link became the envs' default, ``meta["link"] == "modal"``; the maps shipped before were fitted on eq. 4's, and
+``train_oracle_imitation.py --link envelope`` gives those again).
 """
 
 from __future__ import annotations

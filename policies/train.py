@@ -83,8 +83,8 @@ def env_config(overrides: dict | None = None):
 
 def config_dict(cfg) -> dict:
     """The metadata form of an EnvConfig (without the link, which is Table I): its stated fields
-    (:meth:`envs.EnvConfig.stated_fields`: the exact-mode link's only where not at their defaults, so a
-    default config's record reads as before the option and the shipped models' records still match)."""
+    (:meth:`envs.EnvConfig.stated_fields`: ``link_model`` always, so a record says which plant it was trained on
+    whatever the default is; the exact-mode link's step options only where not at their defaults)."""
     d = {k: v for k, v in cfg.stated_fields() if k not in ("link", "reward")}
     return {**d, "reward": asdict(cfg.reward)}
 

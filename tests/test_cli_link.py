@@ -42,7 +42,8 @@ def test_train_env_key_selects_the_link():
     """``train --env link_model=modal`` (the config key) builds the same EnvConfig as ``--link modal``."""
     from policies.train import env_config
     assert env_config({"link_model": "modal"}).link_model == "modal"
-    assert env_config({}).link_model == "envelope"
+    assert env_config({"link_model": "envelope"}).link_model == "envelope"
+    assert env_config({}).link_model == "modal"   # the envs' default since 2026-11-26 (issue 23)
     with pytest.raises(ValueError, match="link_model='x' is invalid; valid values: envelope, modal"):
         env_config({"link_model": "x"})
 
@@ -55,35 +56,41 @@ def _compare_json(capsys, link):
 
 
 def test_link_modal_reaches_every_policys_env(capsys):
-    """``compare --link modal`` scores the policies on the exact-mode plant: its rows are those of
-    ``run_policies`` on ``EnvConfig(link_model="modal")`` to the bit, and not the default's (eq. 4); without
-    ``--link`` (or with ``--link envelope``) the default's."""
+    """``compare --link X`` scores the policies on X's plant: its rows are those of ``run_policies`` on
+    ``EnvConfig(link_model=X)`` to the bit; without ``--link`` the default's, the exact-mode link's since
+    2026-11-26 (issue 23), and ``--link envelope`` is eq. 4's (other numbers), named so in the JSON."""
     from envs import EnvConfig
     from policies.compare import run_policies
     modal = _compare_json(capsys, "modal")
     default, envelope = _compare_json(capsys, None), _compare_json(capsys, "envelope")
-    assert modal["link"] == "modal" and default["link"] == envelope["link"] == "envelope"
-    assert default["rows"] == envelope["rows"]
-    ref = run_policies(["model_based", "step"], "nominal", 2, 1000, EnvConfig(link_model="modal"))
-    for row in modal["rows"]:
-        m = ref[row["policy"]].metrics
-        assert row["peak_i2_a"] == pytest.approx(float(np.mean(m["peak_i2_a"])), rel=1e-12)
-        assert row["energy_after_stop_j"] == pytest.approx(float(np.mean(m["energy_after_stop_j"])), rel=1e-12)
-    assert modal["rows"][0]["peak_i2_a"] != default["rows"][0]["peak_i2_a"]
+    assert default["link"] == modal["link"] == "modal" and envelope["link"] == "envelope"
+    assert default["rows"] == modal["rows"]
+    for link, out in (("modal", modal), ("envelope", envelope)):
+        ref = run_policies(["model_based", "step"], "nominal", 2, 1000, EnvConfig(link_model=link))
+        for row in out["rows"]:
+            m = ref[row["policy"]].metrics
+            assert row["peak_i2_a"] == pytest.approx(float(np.mean(m["peak_i2_a"])), rel=1e-12)
+            assert row["energy_after_stop_j"] == pytest.approx(float(np.mean(m["energy_after_stop_j"])), rel=1e-12)
+    assert modal["rows"][0]["peak_i2_a"] != envelope["rows"][0]["peak_i2_a"]
 
 
-def test_config_dict_states_the_exact_mode_fields_only_off_their_defaults():
+def test_config_dict_states_the_link_always_and_the_modal_step_options_only_off_their_defaults():
     """The trained models' metadata follows ``EnvConfig.__repr__``'s rule (one rule,
-    ``EnvConfig.stated_fields``): a default config's record has no link_model / hold_tol_a / v2_updates (the
-    shipped models' records match it), a non-default one names exactly the fields that differ."""
+    ``EnvConfig.stated_fields``): ``link_model`` always, whatever the default (it changed on 2026-11-26: an
+    eq. 4-trained model's record must not read as modal, nor a modal one's as eq. 4, and the oracle's cache keys
+    of the two links never meet); hold_tol_a / v2_updates only where they differ from their defaults."""
     from envs import EnvConfig
     from policies.train import config_dict
-    opt = {"link_model", "hold_tol_a", "v2_updates"}
-    assert not opt & set(config_dict(EnvConfig()))
+    opt = {"hold_tol_a", "v2_updates"}
+    assert config_dict(EnvConfig())["link_model"] == EnvConfig.link_model == "modal"
+    assert config_dict(EnvConfig(link_model="envelope"))["link_model"] == "envelope"
+    assert repr(EnvConfig(link_model="envelope")) != repr(EnvConfig()) == repr(EnvConfig(link_model="modal"))
+    for cfg in (EnvConfig(), EnvConfig(link_model="envelope")):
+        assert f"link_model={cfg.link_model!r}" in repr(cfg) and not opt & set(config_dict(cfg))
     d = config_dict(EnvConfig(link_model="modal", v2_updates=4))
     assert d["link_model"] == "modal" and d["v2_updates"] == 4 and "hold_tol_a" not in d
     assert config_dict(EnvConfig(hold_tol_a=2e-3))["hold_tol_a"] == 2e-3
-    for cfg in (EnvConfig(), EnvConfig(link_model="modal", hold_tol_a=5e-3)):
+    for cfg in (EnvConfig(), EnvConfig(link_model="envelope", hold_tol_a=5e-3)):
         named = {k for k, _ in cfg.stated_fields()} & opt
         assert named == {k for k in opt if k in repr(cfg)} == set(config_dict(cfg)) & opt
 

@@ -1,4 +1,5 @@
-"""The env step exists once (``envs/vector_kernel.py``, compiled): the single and the vector env both
+"""Eq. 4's env step exists once (``envs/vector_kernel.py``, compiled; ``EnvConfig(link_model="envelope")``): the single
+and the vector env both
 call it, so a change to one constant or equation there changes both alike; the compiled kernel is
 its own source run by the interpreter (every numba function swapped for its ``py_func``)."""
 
@@ -8,7 +9,8 @@ import pytest
 from envs import EnvConfig, SbarChargingEnv, SbarChargingVectorEnv
 from envs import vector_kernel as vk
 
-SHORT = EnvConfig(n_steps=40)
+SHORT = EnvConfig(n_steps=40, link_model="envelope")   # pinned: this module is eq. 4's step (envs/vector_kernel.py),
+#   the envs' default link is the exact-mode one since 2026-11-26 (its versions: tests/test_env_modal.py)
 
 
 def _use_py_funcs(monkeypatch):

@@ -1,4 +1,4 @@
-"""The envs' exact-mode plant (``EnvConfig(link_model="modal")``, envs/modal_step.py; the default stays eq. 4):
+"""The envs' exact-mode plant (``EnvConfig(link_model="modal")``, envs/modal_step.py; the default since 2026-11-26):
 its link is the mission's exact-mode estimator (wpt_receiver.modal_kernel): its peak on the paper's
 trajectories (Table I, fixed Lm, a stiff 30 V battery, ideal devices) agrees with the switching model, at
 the paper's control period (the rectifier period) and at the env's 100 us; its energy balance closes; the
@@ -181,17 +181,20 @@ MODAL = EnvConfig(link_model="modal")
 SHORT = EnvConfig(n_steps=40, link_model="modal")
 
 
-def test_link_model_is_an_option_eq4_the_default():
-    """``envelope`` (eq. 4) is the default; an unknown model is refused naming the valid ones; the env's plant
-    part is the one of the config (its state has the link's mode amplitudes only on the modal link)."""
-    assert EnvConfig().link_model == "envelope"
+def test_link_model_is_an_option_modal_the_default():
+    """``modal`` (the exact-mode link) is the default since 2026-11-26 (issue 23), ``envelope`` (eq. 4) an option;
+    an unknown model is refused naming the valid ones; the env's plant part is the one of the config (its state
+    has the link's mode amplitudes only on the modal link)."""
+    assert EnvConfig().link_model == "modal"
     with pytest.raises(ValueError, match=r"link_model='exact' is invalid; valid values: envelope, modal"):
         EnvConfig(link_model="exact")
-    a, b = SbarChargingVectorEnv(2, "nominal"), SbarChargingVectorEnv(2, "nominal", MODAL)
+    a, b = SbarChargingVectorEnv(2, "nominal", EnvConfig(link_model="envelope")), SbarChargingVectorEnv(2, "nominal")
     assert not hasattr(a.parts.plant, "mstate") and b.parts.plant.mstate.shape == (7, 2)
     assert type(a.parts.plant).__name__ == "PlantPart" and type(b.parts.plant).__name__ == "ModalPlantPart"
-    # the repr (the oracle's disk-cache key) names the link only when it is not the default one
-    assert "link_model" not in repr(EnvConfig()) and "hold_tol_a" not in repr(EnvConfig())
+    # the repr (the oracle's disk-cache key) always names the link (the keys of the two links never meet, whichever
+    # is the default), the modal step's options only when not at their defaults
+    assert "link_model='modal'" in repr(EnvConfig()) and "hold_tol_a" not in repr(EnvConfig())
+    assert "link_model='envelope'" in repr(EnvConfig(link_model="envelope"))
     assert "link_model='modal'" in repr(MODAL) and "v2_updates=3" in repr(EnvConfig(link_model="modal", v2_updates=3))
     # the sub-steps' refinement: named only when not the default's; bad values refused naming the valid range
     assert "v2_refine" not in repr(MODAL) and "v2_refine_levels=0" in repr(EnvConfig(v2_refine_levels=0))

@@ -17,6 +17,9 @@ from wpt_receiver.peak import SbarHarmonics
 from wpt_receiver.sbar import conduction_losses
 
 SHORT = EnvConfig(n_steps=40)
+#: eq. 4's envelope link, pinned where a test checks eq. 4's own closed forms (the envs' default is the exact-mode
+#: link since 2026-11-26, whose own versions of these checks are in tests/test_env_modal.py)
+EQ4 = "envelope"
 INFO_KEYS = ("i2_a", "i2_peak_a", "i1_a", "d_short", "v2_v", "rect_current_a", "battery_v", "battery_current_a",
              "soc", "charge_cmd_a", "lm_h", "energy_j", "cost", "overcurrent", "overshoot", "episode_cost",
              "reached_short_mode", "i2_peak_envelope_a")
@@ -105,8 +108,9 @@ def test_vector_env_equals_looped_single_envs_including_autoreset():
 def test_link_matches_envelope_link_and_rm_steady_state(devices):
     """The env's precomputed ZOH stepping equals wpt_receiver.EnvelopeLink (devices' R folded in) with
     the same V2 and Lm, and full rectification settles at the closed-form RM current: the paper's
-    with ideal devices, with R1 + 2 Ron, R2 + Rd and the clamp VL + Vf with the schottky preset."""
-    cfg = EnvConfig(n_steps=400, devices=devices)
+    with ideal devices, with R1 + 2 Ron, R2 + Rd and the clamp VL + Vf with the schottky preset. Eq. 4's link
+    (pinned: EnvelopeLink is eq. 4)."""
+    cfg = EnvConfig(n_steps=400, devices=devices, link_model=EQ4)
     env = SbarChargingEnv(scenario="nominal", config=cfg)
     _, info = env.reset(seed=5)
     link = EnvelopeLink(envelope_params(TABLE_I, preset(devices)), 1)
@@ -130,7 +134,11 @@ def test_link_matches_envelope_link_and_rm_steady_state(devices):
 
 @pytest.mark.parametrize("devices", ["ideal", "schottky", "sic"])
 def test_start_is_steady_and_power_balance_closes(devices):
-    env = SbarChargingEnv(scenario="battery", config=EnvConfig(n_steps=60, devices=devices))
+    """Eq. 4's link (pinned): its episodes start at eq. 4's steady state of the command's duty and its balance is
+    the fundamental's (the modal link starts at its own steady state of that duty, 0.4-2.5 % less current:
+    tests/test_env_modal.py::test_modal_env_starts_in_its_steady_state, and its balance per step:
+    test_env_link_energy_balance_closes)."""
+    env = SbarChargingEnv(scenario="battery", config=EnvConfig(n_steps=60, devices=devices, link_model=EQ4))
     obs, info = env.reset(seed=2)
     d0 = info["d_short"]
     cmd0 = info["charge_cmd_a"]
@@ -234,10 +242,12 @@ def test_discrete_env_maps_actions_to_modes_and_render():
 
 
 def _random_run(n, h, seed=3):
-    """Random duties (redrawn every 100 us) on ``random`` windows with the step divided by ``h``;
+    """Random duties (redrawn every 100 us) on ``random`` windows of eq. 4's link (pinned: its sign-split
+    sub-steps are what is tested; the modal link's: tests/test_env_modal.py::
+    test_rectifier_absorbs_power_with_random_duties_on_the_modal_link) with the step divided by ``h``;
     returns per-step arrays (T, n) of the info fields and the I2 at the start of each step."""
     base = EnvConfig()
-    cfg = EnvConfig(dt_s=base.dt_s / h, n_steps=base.n_steps * h, slow_every=base.slow_every * h)
+    cfg = EnvConfig(dt_s=base.dt_s / h, n_steps=base.n_steps * h, slow_every=base.slow_every * h, link_model=EQ4)
     venv = SbarChargingVectorEnv(num_envs=n, scenario="random", config=cfg)
     _, info = venv.reset(seed=seed)
     rng = np.random.default_rng(seed)
@@ -298,13 +308,15 @@ def test_cost_counts_a_negative_swing_beyond_rated():
         assert info["overcurrent"] == pytest.approx(info["i2_peak_a"] / 15.0 - 1.0) and info["overcurrent"] > 0.0
 
 
+@pytest.mark.parametrize("link", ["modal", EQ4])   # the default's single step (envs.modal_step) and eq. 4's
 @pytest.mark.parametrize("cls", [SbarChargingEnv, SbarChargingDiscreteEnv])
-def test_compiled_step_equals_float_step_bitwise(cls):
-    """The compiled single step (envs.vector_kernel.single_step) against its own source run by the
-    interpreter (``compiled=False``: its ``py_func``): random actions over whole episodes (steps split
-    into sub-steps after the stop), truncation, plain and seeded resets, a reset mid-episode with
-    another scenario."""
-    fast, ref = cls(scenario="random", compiled=True), cls(scenario="random", compiled=False)
+def test_compiled_step_equals_float_step_bitwise(cls, link):
+    """The compiled single step (envs.vector_kernel.single_step; envs.modal_step.single_step on the modal link)
+    against its own source run by the interpreter (``compiled=False``: its ``py_func``): random actions over whole
+    episodes (steps split into sub-steps after the stop), truncation, plain and seeded resets, a reset mid-episode
+    with another scenario."""
+    cfg = EnvConfig(link_model=link)
+    fast, ref = cls(scenario="random", compiled=True, config=cfg), cls(scenario="random", compiled=False, config=cfg)
     assert fast._compiled and not ref._compiled
     rng = np.random.default_rng(7)
     sign_changes, T = 0, fast.config.n_steps

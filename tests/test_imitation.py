@@ -8,9 +8,16 @@ pytest.importorskip("stable_baselines3")
 from mission_sim.contract import OBS_DIM, OBS_INDEX, history_obs_dim  # noqa: E402
 
 
-def _cfg(n_steps=40):
+def _cfg(n_steps=40, **kw):
     from policies.train import env_config
-    return env_config({"n_steps": n_steps})
+    return env_config({"n_steps": n_steps, **kw})
+
+
+def _eq4():
+    """Eq. 4's link, pinned where a test's tolerance is eq. 4's (the envs' default is the exact-mode link since
+    2026-11-26)."""
+    from envs import EnvConfig
+    return EnvConfig(link_model="envelope")
 
 
 def test_history_obs_dim_and_bad_values():
@@ -82,8 +89,11 @@ def test_action_filter_and_smoothness_penalty_are_exact():
     from policies.smoothing import SmoothActionVecEnv, filtered_duty
 
     alpha, w, n = 0.6, 3.0, 4
-    base = SbarSB3VecEnv(n, "nominal", _cfg())
-    raw = SbarSB3VecEnv(n, "nominal", _cfg())
+    # eq. 4's link (pinned): the wrapper's arithmetic does not depend on the link, but the filtered duty reaches the
+    # env through a float32 action, and on the modal link that last-bit difference moves a step's reward by up to
+    # 3.5e-5 (its sub-steps' refinement is a threshold on |dI2|), beyond this exactness test's 1e-5
+    base = SbarSB3VecEnv(n, "nominal", _cfg(link_model="envelope"))
+    raw = SbarSB3VecEnv(n, "nominal", _cfg(link_model="envelope"))
     env = SmoothActionVecEnv(base, alpha, w)
     base.seed(1)
     raw.seed(1)
@@ -107,13 +117,16 @@ FEEDFORWARD = ("last_d_short", "i2_amp_a", "battery_current_a", "rect_current_a"
 
 @pytest.fixture(scope="module")
 def clone(tmp_path_factory):
-    """BC (16 windows, seeds 10000+) of model_based_budget:0.02 as a residual on model_based_budget:0.01."""
+    """BC (16 windows, seeds 10000+) of model_based_budget:0.02 as a residual on model_based_budget:0.01, on eq. 4's
+    link (pinned: the tolerances of the test below were set on eq. 4's teacher; on the exact-mode link, the envs'
+    default since 2026-11-26, the teacher is the modal plan (policies.budget_modal) and the teacher-forced RMS was
+    0.0059, over this test's 0.005)."""
     from policies.imitation import ImitationSpec, imitate
 
     spec = ImitationSpec(teacher="model_based_budget:0.02", scenario="nominal", episodes=16, epochs=60,
                          batch_size=256, residual_scale=0.1, residual_base_budget=0.01, masked=FEEDFORWARD)
     out = tmp_path_factory.mktemp("clone")
-    return spec, imitate(spec, out, progress=False)
+    return spec, imitate(spec, out, progress=False, config=_eq4())
 
 
 def test_imitation_reproduces_its_teacher(clone):
@@ -129,13 +142,13 @@ def test_imitation_reproduces_its_teacher(clone):
 
     spec, res = clone
     pol = make(f"residual:{res['model']}")
-    X, Y = collect(replace(spec, episodes=4), 5000)   # teacher's own windows, not trained on
+    X, Y = collect(replace(spec, episodes=4), 5000, config=_eq4())   # teacher's own windows, not trained on
     rows = X.reshape(300, 4, -1)
     pol.rl.reset(4)
     a = np.concatenate([2.0 * pol.rl.act(r) - 1.0 for r in rows])
     duty_rms = spec.residual_scale * np.sqrt(np.mean((np.clip(a, -1, 1) - Y) ** 2))
     assert duty_rms < 0.005
-    m = {p: run_policy(p, "nominal", 16, 1000).metrics for p in
+    m = {p: run_policy(p, "nominal", 16, 1000, _eq4()).metrics for p in
          (f"residual:{res['model']}", "model_based_budget:0.02", "model_based_budget:0.01")}
     s, t, b = (m[k] for k in m)
     assert s["reached_short_mode"].min() == 1.0

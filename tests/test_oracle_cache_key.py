@@ -68,3 +68,31 @@ def test_the_key_covers_the_base_policys_sources(tmp_path, monkeypatch):
     (tmp_path / "mpc_modal.py").write_text((tmp_path / "mpc_modal.py").read_text() + "\n# another model\n")
     assert oracle._source_hash(("mpc",)) != before
     assert oracle._source_hash(("model_based",)) == other
+
+
+def test_the_two_links_bounds_never_mix_whichever_is_the_default(tmp_path, monkeypatch):
+    """The key holds ``repr(config)``, which always names ``link_model`` (issue 23 swapped the envs' default from
+    eq. 4's envelope to the exact-mode link on 2026-11-26: a key that left the default out would have read an eq. 4
+    bound cached under the old default as a modal one). A bound cached on one link is computed again on the other;
+    the default config (None) and the explicit modal config share theirs."""
+    from envs import EnvConfig
+    monkeypatch.setenv("DRONEWPT_CACHE_DIR", str(tmp_path / "cache"))
+    calls = []
+
+    def compute(value):
+        def run():
+            calls.append(value)
+            return oracle.OracleResult(value, 0.01, True, True, np.full(300, value))
+        return run
+
+    eq4, modal = EnvConfig(link_model="envelope"), EnvConfig(link_model="modal")
+    assert "link_model='envelope'" in repr(eq4) and "link_model='modal'" in repr(modal) == repr(EnvConfig())
+
+    def cached(cfg, value):
+        return oracle._cached("floor", "nominal", 1000, 0.0, ("model_based",), cfg, compute(value))
+
+    assert cached(eq4, 1.0).energy_after_stop_j == 1.0
+    assert cached(modal, 2.0).energy_after_stop_j == 2.0     # not eq. 4's bound
+    assert cached(None, 3.0).energy_after_stop_j == 2.0      # the default is the modal link: its bound, from disk
+    assert cached(eq4, 4.0).energy_after_stop_j == 1.0       # eq. 4's, from disk
+    assert calls == [1.0, 2.0]

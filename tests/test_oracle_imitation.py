@@ -16,6 +16,15 @@ ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "policies" / "pretrained" / "oracle_imitation_s0.npz"
 
 
+def _shipped_config():
+    """The env config of the shipped model's plant (its meta's ``link``; a model without it was fitted on eq. 4's
+    envelope link, the envs' default until 2026-11-26)."""
+    import json
+
+    from envs import EnvConfig
+    return EnvConfig(link_model=json.loads(str(np.load(SHIPPED)["meta"])).get("link", "envelope"))
+
+
 def _clone(slow=None):
     from policies.oracle_imitation import load_model
     m = load_model(SHIPPED)
@@ -30,17 +39,19 @@ def test_clone_reproduces_its_teacher_on_training_windows():
     the budget (floor + delta) picked by lam = 0.4 J / point. The clone (its sequence as learned, not
     slowed) lands within 1 point of the teacher's measured overshoot and 0.25 J of its energy after the
     stop in each (measured over all 80 training windows: mean +0.10..+0.23 points, -0.02..+0.01 J over the
-    five seeds, worst window +0.95 points, 0.23 J), and every window reaches short mode."""
+    five seeds, worst window +0.95 points, 0.23 J), and every window reaches short mode. Teacher and clone on
+    the plant the shipped model was fitted on (its meta's link)."""
     import json
 
     from policies.oracle_imitation import choose_targets
     from policies.oracle_imitation_train import SearchWindows, oracle_targets
     meta = json.loads(str(np.load(SHIPPED)["meta"]))
-    tg = oracle_targets("nominal", [0, 1], meta["deltas"])
+    cfg = _shipped_config()
+    tg = oracle_targets("nominal", [0, 1], meta["deltas"], config=cfg)
     pick = choose_targets(tg["energy_j"], tg["overshoot"], meta["lam"])
     t_ov = 100.0 * tg["overshoot"][[0, 1], pick]
     t_e = tg["energy_j"][[0, 1], pick]
-    e, ov, il = SearchWindows("nominal", "nominal", [0, 1]).run([_clone(slow=1.0)])
+    e, ov, il = SearchWindows("nominal", "nominal", [0, 1], config=cfg).run([_clone(slow=1.0)])
     assert np.all(np.abs(100.0 * ov[:, 0] - t_ov) < 1.0), (100.0 * ov[:, 0], t_ov)
     assert np.all(np.abs(e[:, 0] - t_e) < 0.25), (e[:, 0], t_e)
     assert np.all(il[:, 0] < 0.5)
@@ -134,7 +145,8 @@ def test_train_script_bad_options_exit_2_with_one_line(args, names, tmp_path):
 
 def test_train_script_defaults_are_the_shipped_models_command(tmp_path, monkeypatch):
     """The defaults are the shipped models' training options (their meta's command) but for --out, which
-    is under out/ (never the shipped files)."""
+    is under out/ (never the shipped files; the shipped modal-teacher models were written under out/ and copied to
+    policies/pretrained/, 2026-11-26); the command names its link, the envs' default."""
     import json
     monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
     monkeypatch.chdir(tmp_path)
@@ -142,7 +154,8 @@ def test_train_script_defaults_are_the_shipped_models_command(tmp_path, monkeypa
     meta = json.loads(str(np.load(SHIPPED)["meta"]))
     cmd = meta["command"].split()[2:]
     out_at = cmd.index("--out")
-    assert Path(cmd[out_at + 1]).parent == Path("policies/pretrained")
+    assert Path(cmd[out_at + 1]).parent in (Path("policies/pretrained"), Path("out/oracle_imitation_modal"))
+    assert "--link" in cmd and meta["link"] == cmd[cmd.index("--link") + 1] == "modal"
     shipped = vars(parse(cmd[:out_at] + cmd[out_at + 2:]))
     default = vars(parse([]))
     assert shipped == default
@@ -152,9 +165,10 @@ def test_train_script_defaults_are_the_shipped_models_command(tmp_path, monkeypa
 
 
 def test_train_script_link_reaches_the_teacher_and_the_meta(tmp_path, monkeypatch):
-    """``--link modal``: the stop observations and the oracle solves run on ``EnvConfig(link_model="modal")``
-    (the oracle's cache key holds the config) and the models' meta says ``link``; the default (envelope)
-    passes no config and writes no ``link`` key (the shipped models' meta unchanged)."""
+    """``--link L``: the stop observations and the oracle solves run on ``EnvConfig(link_model=L)`` (the oracle's
+    cache key holds the config) and the models' meta says ``link``; the default is the envs' default (modal since
+    2026-11-26), passed as an explicit config too, so a model's teacher never depends on which link is the
+    default."""
     import json
 
     import policies.oracle_imitation_train as oit
@@ -177,13 +191,14 @@ def test_train_script_link_reaches_the_teacher_and_the_meta(tmp_path, monkeypatc
                 "feasible": np.ones((m, d), bool), "duties": np.full((m, d, T), 0.5)}
     monkeypatch.setattr(oit, "collect_stop_observations", stop_obs)
     monkeypatch.setattr(oit, "oracle_targets", targets)
-    for link, want in (("modal", EnvConfig(link_model="modal")), (None, None)):
+    for link, want in (("modal", "modal"), ("envelope", "envelope"), (None, EnvConfig.link_model)):
         seen.clear()
         out = tmp_path / f"{link}" / "m"
         tr.main(["--windows", f"0:{n}", "--train-seeds", "0", "--out", str(out)] + (["--link", link] if link else []))
-        assert seen == [("obs", want), ("oracle", want)]
+        assert seen == [("obs", EnvConfig(link_model=want)), ("oracle", EnvConfig(link_model=want))]
+        assert all(type(c) is EnvConfig for _, c in seen)
         meta = json.loads(str(np.load(f"{out}_s0.npz")["meta"]))
-        assert meta.get("link") == link and np.load(f"{out}_s0.npz")["W"].shape[1] == HORIZON
+        assert meta["link"] == want and np.load(f"{out}_s0.npz")["W"].shape[1] == HORIZON
 
 
 def _mission_cli(args, capsys):
@@ -278,7 +293,15 @@ def test_base_in_meta_runs_the_mpc_before_the_stop(tmp_path):
     from policies.oracle_imitation import BASES, check_base, load_model
     from policies.oracle_imitation_train import collect_stop_observations, oracle_targets
     good = dict(np.load(SHIPPED))
-    assert "base" not in json.loads(str(good["meta"])) and load_model(SHIPPED)["meta"].get("base", "model_based") == "model_based"
+    assert json.loads(str(good["meta"])).get("base", "model_based") == "model_based"   # the shipped maps: the paper's
+    bare = {k: v for k, v in json.loads(str(good["meta"])).items() if k != "base"}    # a model without ``base``
+    p0 = _write(tmp_path / "bare.npz", **{**good, "meta": np.array(json.dumps(bare))})
+    assert "base" not in load_model(p0)["meta"]
+    r0, r1 = run_policy(f"oracle_imitation:{p0}", "lm_drift", 3, 1000), run_policy("model_based", "lm_drift", 3, 1000)
+    venv = SbarChargingVectorEnv(num_envs=3, scenario="lm_drift")
+    venv.reset(seed=1000)
+    for i, k0 in enumerate(venv._stop_k):   # without ``base``: the paper's controller before the stop
+        np.testing.assert_array_equal(r0.d_short[:k0, i], r1.d_short[:k0, i])
     p = _write(tmp_path / "drift.npz", **{**good, "meta": np.array(json.dumps({"control_period_s": 1e-4, "base": "mpc"}))})
     assert load_model(p)["meta"]["base"] == "mpc"
     pol = run_policy(f"oracle_imitation:{p}", "lm_drift", 3, 1000)

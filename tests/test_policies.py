@@ -30,8 +30,11 @@ def test_model_based_in_env_reproduces_no_overshoot(devices):
     held for 100 us, seen at mid-step), with the paper's ideal devices and with real ones. Its
     instantaneous peak (the env's objective) adds the SBAR's harmonic ripple at the duty of the
     crest: at most the largest excess over duties at 11.5 A and VL 33 V (tests/_ripple.py: 5.0 / 5.3
-    points ideal / schottky, near d = 0.15)."""
-    cfg = EnvConfig(devices=devices)
+    points ideal / schottky, near d = 0.15). Eq. 4's link (pinned since the envs' default became the exact-mode
+    link, 2026-11-26: the bounds here are eq. 4's, its envelope and its ripple table; on the modal link, whose
+    peak is 2.85 % higher on the paper's ramp, the ramp overshoots 10.1 % with ideal devices; docs/rl.md has
+    the modal link's numbers)."""
+    cfg = EnvConfig(devices=devices, link_model="envelope")
     res = {p: run_policy(p, "nominal", 6, 100, cfg).metrics for p in ("step", "ramp", "model_based")}
     os_ = {p: float(np.mean(m["overshoot_pct"])) for p, m in res.items()}
     assert os_["step"] > 150.0

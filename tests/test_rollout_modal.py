@@ -11,6 +11,7 @@ from envs.rollout import DutyRollout
 from policies.compare import run_policy
 
 MODAL = EnvConfig(link_model="modal")
+EQ4 = EnvConfig(link_model="envelope")   # named: the envs' default is the modal link since 2026-11-26
 FIELDS = ("energy_j", "i2_peak_a", "rect_current_a", "overshoot", "reached_short_mode")
 
 
@@ -56,11 +57,12 @@ def test_modal_replay_reproduces_the_closed_loop():
 def test_envelope_detuned_window_steps_from_python():
     """Eq. 4's env: a detuned window is replayed through ``env.step`` (its compiled replay is the tuned step),
     a tuned window through the compiled loop; the modal env replays both compiled."""
-    assert DutyRollout("detuned", 1001)._detuned_envelope
-    assert not DutyRollout("nominal", 1001)._detuned_envelope
+    assert DutyRollout("detuned", 1001, EQ4)._detuned_envelope
+    assert not DutyRollout("nominal", 1001, EQ4)._detuned_envelope
     assert not DutyRollout("detuned", 1001, MODAL)._detuned_envelope
-    base = run_policy("model_based", "detuned", 1, 1001).d_short[:, 0]
-    a = DutyRollout("detuned", 1001).run(np.stack([base] * 2))
-    b = DutyRollout("detuned", 1001, compiled=False).run(np.stack([base] * 2))
+    assert not DutyRollout("detuned", 1001)._detuned_envelope   # the default: the modal link
+    base = run_policy("model_based", "detuned", 1, 1001, EQ4).d_short[:, 0]
+    a = DutyRollout("detuned", 1001, EQ4).run(np.stack([base] * 2))
+    b = DutyRollout("detuned", 1001, EQ4, compiled=False).run(np.stack([base] * 2))
     for f in FIELDS:
         assert np.array_equal(getattr(a, f), getattr(b, f)), f

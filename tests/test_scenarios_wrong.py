@@ -5,9 +5,13 @@ current with it), a battery far from nominal sets VL; each has a held-out varian
 import numpy as np
 import pytest
 
-from envs import SCENARIOS, SbarChargingEnv, SbarChargingVectorEnv
+from envs import SCENARIOS, EnvConfig, SbarChargingEnv, SbarChargingVectorEnv
 from envs.scenario import HELD_OUT
 from envs.sensing import SENSED
+
+#: eq. 4's envelope link, pinned where a test checks eq. 4's own detuned step (its complex envelope); the envs'
+#: default is the exact-mode link since 2026-11-26 (its detuned checks: tests/test_env_modal.py)
+EQ4 = EnvConfig(link_model="envelope")
 
 
 def _run(env, steps, n, seed=5, undelayed=False):
@@ -89,11 +93,13 @@ def test_compare_defaults_hold_each_held_out_variant():
 def test_detuned_rm_steady_current_is_the_closed_form():
     """detuned: held in RM (d = 0) the I2 envelope |J2| settles at the closed-form steady state of the
     detuned tank, which equals wpt_receiver's fixed point of the complex envelope (an independent
-    implementation), and differs from the tuned link's; at zero detuning the complex path is eq. 4."""
+    implementation), and differs from the tuned link's; at zero detuning the complex path is eq. 4. Eq. 4's link
+    (pinned: the complex envelope is its detuned step; the modal link's detuned RM state is
+    tests/test_env_modal.py::test_detuned_modal_rm_state_is_the_detuned_modes)."""
     from wpt_receiver.envelope import _complex_steady, complex_envelope_matrices
 
     from envs.detuned import complex_steady
-    v = SbarChargingVectorEnv(num_envs=3, scenario={"base": "nominal", "c_detune": (-0.02, 0.02)})
+    v = SbarChargingVectorEnv(num_envs=3, scenario={"base": "nominal", "c_detune": (-0.02, 0.02)}, config=EQ4)
     v.reset(seed=11)
     for _ in range(300):
         _, _, _, _, info = v.step(np.full((3, 1), -1.0, np.float32))
@@ -109,7 +115,7 @@ def test_detuned_rm_steady_current_is_the_closed_form():
         a, b = complex_envelope_matrices(link.with_(lm_h=float(v._lm_all[-1, e])), cc1[e], cc2[e])
         ref = _complex_steady(a, b, link.v1_amp_v, float(v2[e]))
         assert abs(j2[e]) == pytest.approx(abs(ref[1]), rel=1e-9)
-    tuned = SbarChargingVectorEnv(num_envs=3, scenario="nominal")
+    tuned = SbarChargingVectorEnv(num_envs=3, scenario="nominal", config=EQ4)
     tuned.reset(seed=11)
     for _ in range(300):
         _, _, _, _, ti = tuned.step(np.full((3, 1), -1.0, np.float32))
@@ -119,10 +125,11 @@ def test_detuned_rm_steady_current_is_the_closed_form():
 def test_complex_path_at_zero_detuning_is_eq4():
     """A batch on the complex envelope with (numerically) zero detuning scores the paper's controller
     as the two-state env: overshoot within 0.02 points, energy after the stop within 0.1 % (the complex
-    path re-evaluates V2 every rectifier period, the two-state one per step unless I2 changes sign)."""
+    path re-evaluates V2 every rectifier period, the two-state one per step unless I2 changes sign). Eq. 4's link
+    (pinned: its two paths)."""
     from policies.compare import run_policy
-    a = run_policy("model_based", "nominal", 4, 1000).metrics
-    b = run_policy("model_based", {"base": "nominal", "c_detune": (0.0, 1e-300)}, 4, 1000).metrics
+    a = run_policy("model_based", "nominal", 4, 1000, EQ4).metrics
+    b = run_policy("model_based", {"base": "nominal", "c_detune": (0.0, 1e-300)}, 4, 1000, EQ4).metrics
     assert np.all(np.abs(a["overshoot_pct"] - b["overshoot_pct"]) < 0.02)
     assert np.allclose(a["energy_after_stop_j"], b["energy_after_stop_j"], rtol=1e-3)
 
@@ -154,9 +161,10 @@ def test_detuned_rectifier_blocks_where_the_emf_is_below_the_clamp():
     VL + Vf, so the diodes cannot conduct in RM. Dropped from short mode (d = 1, where the shorted
     secondary carries current) to RM, the envelope plant's |J2| settles at 0 with no ringing (it rang at
     1.7-4.4 A before the clamp was set-valued), as the switching model of the same circuit does (its i2
-    fundamental below 1 mA)."""
+    fundamental below 1 mA). Eq. 4's link (pinned; the modal link's blocking is
+    tests/test_env_modal.py::test_detuned_modal_link_blocks_where_the_switching_model_does)."""
     from wpt_receiver.switching import SwitchingConfig, SwitchingLink
-    v = SbarChargingVectorEnv(num_envs=2, scenario={"base": "nominal", "c_detune": (0.043, 0.045)})
+    v = SbarChargingVectorEnv(num_envs=2, scenario={"base": "nominal", "c_detune": (0.043, 0.045)}, config=EQ4)
     v.reset(seed=11)
     link, dev = v.config.link, v.config.device_set()
     w = link.omega_rad_s

@@ -1,8 +1,12 @@
-"""The shipped learned seeds were trained on the env as it is today and behave within physical bounds.
+"""The shipped learned seeds were trained on the env as it is today but for its link, and behave within physical
+bounds on the plant they were trained on.
 
 Every shipped seed group (``compare``'s default learned rows) records the env config it was trained on;
 it must be today's default (real devices, instantaneous peaks: the objective has no switch for the
-latter, so the config and the retraining record are the version). The residual seeds must keep their
+latter, so the config and the retraining record are the version) except the link: every shipped SB3 model
+was trained on eq. 4's envelope link, the envs' default until 2026-11-26 (issue 23 made the exact-mode link
+the default), and says so (``link_model: envelope``). So the behaviour tests below run them on
+``TRAINED_ON``, the plant they were trained on, pinned. The residual seeds must keep their
 duty within ``scale`` of their budgeted model-based base, reach short mode and deliver less energy after
 the stop than the paper's controller; the Lagrangian seeds must have trained against a budget in the
 measured units (the ramp's measured cost) and stay physical (no swing of I2 above the step's peak); the
@@ -22,6 +26,11 @@ pytest.importorskip("stable_baselines3")
 WINDOWS, SEED = 8, 5000   # fixed nominal windows, disjoint from compare's 1000-1099 and the training ones
 
 
+def _trained_on():
+    from envs.core import EnvConfig
+    return EnvConfig(link_model="envelope")   # the shipped SB3 models' plant (module notes)
+
+
 def _metas(kind):
     return [json.loads(Path(s.split(":", 1)[1]).with_suffix(".json").read_text()) for s in shipped_seed_groups()[kind]]
 
@@ -29,8 +38,8 @@ def _metas(kind):
 def test_every_shipped_seed_group_was_trained_on_todays_env_config():
     from envs.core import EnvConfig
     from policies.train import config_dict
-    today = json.loads(json.dumps(config_dict(EnvConfig())))
-    assert today["devices"] != "ideal"
+    today = json.loads(json.dumps(config_dict(EnvConfig(link_model="envelope"))))
+    assert today["devices"] != "ideal" and today["link_model"] == "envelope" != EnvConfig.link_model
     for kind in shipped_seed_groups():
         for m in _metas(kind):
             assert m["env_config"] == today, (kind, m["seed"])
@@ -56,7 +65,7 @@ def test_shipped_budgets_are_in_measured_overshoot_units():
     trade), the Lagrangian's is the ramp's measured mean cost there (the documented default)."""
     from policies.constrained import BUDGET_EPISODES, BUDGET_SEED
     base_name = "model_based_budget:0.01"
-    runs = run_policies([base_name, "ramp"], "random", BUDGET_EPISODES, BUDGET_SEED)
+    runs = run_policies([base_name, "ramp"], "random", BUDGET_EPISODES, BUDGET_SEED, _trained_on())
     base = float(np.mean(np.maximum(runs[base_name].metrics["cost"], 0.0)))
     ramp = float(np.mean(runs["ramp"].metrics["cost"]))
     assert 0.03 < base < 0.06   # the ripple term: ~3 points above the envelope's ~1.5 %
@@ -84,7 +93,7 @@ def test_shipped_residual_keeps_its_duty_within_scale_of_its_base():
 
 def test_shipped_residual_reaches_short_mode_and_delivers_less_than_the_paper_after_the_stop():
     specs = shipped_seed_groups()["residual"]
-    runs = run_policies(["model_based", "step", *specs], "nominal", WINDOWS, SEED)
+    runs = run_policies(["model_based", "step", *specs], "nominal", WINDOWS, SEED, _trained_on())
     mb, step = runs["model_based"].metrics, runs["step"].metrics
     for sp in specs:
         m = runs[sp].metrics
@@ -95,7 +104,7 @@ def test_shipped_residual_reaches_short_mode_and_delivers_less_than_the_paper_af
 
 def test_shipped_lagrangian_stays_physical():
     specs = shipped_seed_groups()["ppo_lagrangian"]
-    runs = run_policies(["step", *specs], "nominal", WINDOWS, SEED)
+    runs = run_policies(["step", *specs], "nominal", WINDOWS, SEED, _trained_on())
     step = runs["step"].metrics
     for sp in specs:
         m = runs[sp].metrics
@@ -110,7 +119,7 @@ def test_shipped_rl_stays_physical_and_is_the_default_rl_policy():
     from policies.rl import PRETRAINED
     specs = shipped_seed_groups()["rl"]
     assert specs[0] == f"rl:{PRETRAINED}"
-    runs = run_policies(["step", *specs], "nominal", WINDOWS, SEED)
+    runs = run_policies(["step", *specs], "nominal", WINDOWS, SEED, _trained_on())
     step = runs["step"].metrics
     for sp in specs:
         assert np.all(runs[sp].metrics["peak_i2_a"] < step["peak_i2_a"])

@@ -43,18 +43,20 @@ def test_lm_windows_equal_np_interp():
         np.testing.assert_array_equal(got[i], np.interp(t, np.arange(len(seg)) * RECORD_DT_S, seg))
 
 
+@pytest.mark.parametrize("link", ["modal", "envelope"])   # the default (modal since 2026-11-26) and eq. 4's step
 @pytest.mark.parametrize("discrete", [False, True])
-def test_compiled_step_equals_numpy_step_through_autoresets(discrete):
+def test_compiled_step_equals_numpy_step_through_autoresets(discrete, link):
     pytest.importorskip("numba")
     from envs.vector import SbarChargingDiscreteVectorEnv
     cls = SbarChargingDiscreteVectorEnv if discrete else SbarChargingVectorEnv
     n = 16
-    fast, ref = cls(n, "random", SHORT, compiled=True), cls(n, "random", SHORT, compiled=False)
+    cfg = EnvConfig(n_steps=SHORT.n_steps, link_model=link)
+    fast, ref = cls(n, "random", cfg, compiled=True), cls(n, "random", cfg, compiled=False)
     of, _ = fast.reset(seed=3)
     orf, _ = ref.reset(seed=3)
     np.testing.assert_array_equal(of, orf)
     rng = np.random.default_rng(0)
-    for _ in range(2 * SHORT.n_steps + 7):
+    for _ in range(2 * cfg.n_steps + 7):
         act = rng.integers(0, 2, n) if discrete else rng.uniform(-1, 1, (n, 1)).astype(np.float32)
         f, r = fast.step(act), ref.step(act)
         np.testing.assert_allclose(f[0], r[0], atol=1e-6)

@@ -10,18 +10,19 @@ from envs import EnvConfig, SbarChargingVectorEnv
 SHORT = EnvConfig(n_steps=40)
 
 
-def _pair(scenario, n, chunks):
-    serial = SbarChargingVectorEnv(n, scenario, SHORT, num_threads=1)
-    par = SbarChargingVectorEnv(n, scenario, SHORT)
+def _pair(scenario, n, chunks, cfg=SHORT):
+    serial = SbarChargingVectorEnv(n, scenario, cfg, num_threads=1)
+    par = SbarChargingVectorEnv(n, scenario, cfg)
     par._n_chunks = chunks   # whatever N: uneven chunks, more chunks than threads
     assert serial._n_chunks == 1
     return serial, par
 
 
+@pytest.mark.parametrize("link", ["modal", "envelope"])   # the default (modal since 2026-11-26) and eq. 4's step
 @pytest.mark.parametrize("scenario", ["random", "detuned"])
-def test_parallel_step_equals_serial_bitwise(scenario):
+def test_parallel_step_equals_serial_bitwise(scenario, link):
     n = 301
-    serial, par = _pair(scenario, n, 7)
+    serial, par = _pair(scenario, n, 7, EnvConfig(n_steps=SHORT.n_steps, link_model=link))
     o1, i1 = serial.reset(seed=12)
     o2, i2 = par.reset(seed=12)
     assert np.array_equal(o1, o2)

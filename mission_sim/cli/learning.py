@@ -108,17 +108,26 @@ LINK_CHOICES = ("envelope", "modal")
 def _add_link_flag(p):
     """``--link {envelope,modal}``: the envs' plant (``envs.EnvConfig.link_model``)."""
     p.add_argument("--link", choices=LINK_CHOICES, default=None,
-                   help="the env's link model: envelope = eq. 4 with the ripple table (default), modal = the "
-                        "mission's exact-mode link (peaks within 0.23 %% of the switching model; a vector env-step "
-                        "costs 5.9x (duty held) to 10.7x (random actions) the envelope's; docs/switching.md)")
+                   help="the env's link model: modal = the mission's exact-mode link (default since 2026-11-26; "
+                        "peaks within 0.23 %% of the switching model; a vector env-step costs 5.9x (duty held) to "
+                        "10.7x (random actions) the envelope's), envelope = eq. 4 with the ripple table (what the "
+                        "shipped RL models were trained on); docs/envs.md")
 
 
 def _link_config(args):
-    """The :class:`envs.EnvConfig` of ``--link`` (None for the default envelope: the envs' own default)."""
-    if args.link in (None, "envelope"):
+    """The :class:`envs.EnvConfig` of ``--link`` (None without it: the envs' own default, the modal link)."""
+    if args.link is None:
         return None
     from envs import EnvConfig
     return EnvConfig(link_model=args.link)
+
+
+def _link_name(args) -> str:
+    """The link the envs of this command run on: ``--link``, else the envs' default (``EnvConfig.link_model``)."""
+    if args.link is not None:
+        return args.link
+    from envs import EnvConfig
+    return EnvConfig.link_model
 
 
 def _env_overrides(items) -> dict:
@@ -388,7 +397,7 @@ def _compare_command(args, started) -> int:
         raise CliError(str(exc)) from None
     figs = [] if args.no_plot else _compare_figures(traces, rows, sweep, scns[0], args.out, curve)
     if args.format == "json":
-        print(json.dumps({"episodes": args.episodes, "seed": args.seed, "link": args.link or "envelope", "rows": rows,
+        print(json.dumps({"episodes": args.episodes, "seed": args.seed, "link": _link_name(args), "rows": rows,
                           "frontier": sweep,
                           "oracle": [{k: v for k, v in r.items() if k != "per_window"} for r in curve],
                           "figures": figs}))
@@ -421,9 +430,9 @@ def _ci(r, k, scale=1.0, fmt="{:.2f}"):
 def _print_compare(rows, sweep, args):
     print(f"{args.episodes} episodes per scenario, seeds {args.seed}..{args.seed + args.episodes - 1}; mean "
           "[95 % interval]: bootstrap over episodes, or t over training seeds when seeds > 1")
-    if args.link == "modal":
-        print("plant: the exact-mode link (--link modal); mpc predicts with its modes (policies.mpc_modal), "
-              "model_based_budget plans its after-stop duties with them (policies.budget_modal)")
+    if _link_name(args) == "modal":
+        print("plant: the exact-mode link (the default; --link envelope for eq. 4's); mpc predicts with its modes "
+              "(policies.mpc_modal), model_based_budget plans its after-stop duties with them (policies.budget_modal)")
     hdr = (f"{'scenario':<12} {'policy':<24} {'seeds':>5} {'overshoot %':>20} {'in SM':>5} {'peak I2 A':>8} "
            f"{'E before J':>10} {'E after J':>20} {'track A':>6} {'return':>22} {'d return vs model_based':>24}")
     print(hdr)
