@@ -41,6 +41,15 @@ Cost (``benchmarks/bench_modal_step.py``, in-process, 2026-11-25, load average 3
 inlined (``inline="always"``): numba puts two atomic reference counts per array argument around a call
 (~10 % of the modal env step); the arithmetic, and so every result, is unchanged.
 
+The SBAR and peak formulas are small inlined pieces, each the one source of its formula: i2's fold and polar
+form (``_fold``, ``_polar``), the table's cell on the phase and rho axes and on the duty axis
+(``_phase_rho_coords``, ``_duty_coords``, ``_trilinear``; ``_lookup`` is the three), the window, the shift, the
+commutation angle, the clamp part, V2 and the peak (``_window``, ``_shift``, ``_commutation``, ``_clamp_f``,
+``_v2_of``, ``_peak_of``). :func:`sbar_edge`, :func:`sbar_v2`, :func:`inst_peak` are made of them, and so is
+:func:`held_peak`'s fused sub-step, which shares one i2's polar form and table cell between a sub-step's end
+peak and the next sub-step's edge and the duty's terms over its sub-steps (the same numbers bit for bit; ~1.5x
+per budget-search stop, docs/budget_search_cost.md).
+
 Validated (``tests/test_modal_kernel.py``) against :func:`wpt_receiver.modal.simulate_modal` on the
 three paper trajectories (peak within 0.5 %, in fact ~0.05 %), the switching model on the ramp
 (1 %), and across the default mission's Lm and battery range. This module imports numba at
@@ -786,7 +795,9 @@ def held_peak(lc, mc, tab, zc, z, v2, d_short, substeps, v1, vc_v, k_tail, tail_
     V2 ``v2`` [V] held before it, each duty of ``d_short`` held ``substeps`` steps of ``zc``. Returns ``(max
     peak over every step's end, the last V2)``: the same arithmetic as :func:`run_duties` with ``substeps=1``
     on the duties repeated, so the same peaks bit for bit (``tests/test_budget_modal.py``); NaN when a peak is
-    NaN (as numpy's ``max``).
+    NaN (as numpy's ``max``). Fused: :func:`sbar_v2`'s and :func:`inst_peak`'s pieces, i2's polar form and table
+    cell computed once per sub-step end for the peak there and the next edge, the duty's window sine, short
+    weight and duty cell once per duty (the edge's phase clip is left out: it does not move the cell).
 
     **Stopping early without changing the max.** From the duty ``k_tail`` on every duty is 1 (short mode; pass
     ``len(d_short)`` for none): V2 is then the shorted switches' ``ws I2`` (plus ``Vc (4/pi) cos(pi/2)``,
