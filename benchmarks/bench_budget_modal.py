@@ -10,6 +10,10 @@ the two ``r*`` must be equal (a difference is printed and the exit status is 1).
 median with the range; the load average before and after.
 
     python benchmarks/bench_budget_modal.py [--episodes 100] [--budgets 0.01,0.02,0.05,0.1] [--baseline OLD.py]
+        [--save-rstar FILE.npy]
+
+A change in :mod:`wpt_receiver.modal_kernel` (which both modules share) is timed by running this script on two
+trees in turn (``PYTHONPATH``), alternating, each with ``--save-rstar``, and comparing the saved ``r*``.
 """
 
 from __future__ import annotations
@@ -70,6 +74,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=1000)
     ap.add_argument("--budgets", default="0.01,0.02,0.05,0.1")
     ap.add_argument("--baseline", type=Path, default=None, help="an older policies/budget_modal.py to time beside")
+    ap.add_argument("--save-rstar", type=Path, default=None,
+                    help="write every (budget, stop) r* of the current search to this .npy (to compare two trees)")
     args = ap.parse_args(argv)
     from policies import budget_modal as bm
     old = _load(args.baseline) if args.baseline else None
@@ -78,7 +84,7 @@ def main(argv=None) -> int:
     if old is not None:
         old.relaxation(0.01, *stops[0])
     print(f"{len(stops)} stops of nominal windows {args.seed}..{args.seed + args.episodes - 1}; load {os.getloadavg()}")
-    differ = 0
+    differ, rstars = 0, []
     for budget in (float(b) for b in args.budgets.split(",")):
         t_new, t_old, n_diff = [], [], 0
         for i, stop in enumerate(stops):
@@ -88,6 +94,7 @@ def main(argv=None) -> int:
             bm._STOPS.clear()
             r_new, t = _cpu(bm.relaxation, budget, *stop)
             t_new.append(t)
+            rstars.append(r_new)
             if old is not None and r_old != r_new:
                 n_diff += 1
                 print(f"  b={budget} stop {i}: r* {r_old} (baseline) != {r_new}")
@@ -96,6 +103,8 @@ def main(argv=None) -> int:
             line += f"; baseline {_summary(t_old)} ({np.median(t_old) / np.median(t_new):.1f}x); r* differing: {n_diff}"
         print(line + f"; load {os.getloadavg()[0]:.2f}", flush=True)
         differ += n_diff
+    if args.save_rstar is not None:
+        np.save(args.save_rstar, np.asarray(rstars, dtype=float))
     return 1 if differ else 0
 
 

@@ -253,3 +253,36 @@ def test_blocking_v2_holds_the_steady_i2_at_zero(c1_scale, lm_h):
         assert c1_scale != 1.0 and v2 == v2b and abs(mk.phasors(mc, z, v1, v2)[1]) < 1e-12 * i2_short
     else:                            # the tuned link conducts: the emf far above the clamp
         assert c1_scale == 1.0 and abs(mk.phasors(mc, z, v1, v2)[1]) > 0.5 * i2_short
+
+
+def test_held_peak_fused_substep_is_sbar_v2_then_inst_peak_to_the_bit(table):
+    """:func:`held_peak`'s fused sub-step (i2's polar form and table cell shared by a sub-step's end peak and
+    the next edge; the duty's terms once per duty) gives the same numbers to the last bit as the unfused
+    :func:`sbar_v2`, :func:`advance_z`, :func:`phasors`, :func:`inst_peak` sequence, from states of any phase
+    (Re I2 of both signs, so both folds), over duties with windows from none to short mode."""
+    lc, mc = _modes(P, SCHOTTKY)
+    tab = mk.modal_table(P, SCHOTTKY)
+    rng = np.random.default_rng(5)
+    vc, v1 = P.vl_v + SCHOTTKY.rect_vf_v, -1j * P.v1_amp_v
+    zc = np.empty(mk.N_ZOH_C, dtype=complex)
+    mk.zoh(mc, T, zc)
+    no_tail = (np.zeros((3, 3), complex), np.zeros(3, complex), np.zeros(3), 0.0)
+    signs = set()
+    for _ in range(12):
+        z0 = rng.normal(0.0, 1.0, 4) * 15.0
+        v2_0 = complex(*rng.normal(0.0, 20.0, 2))
+        d = np.clip(rng.uniform(0.0, 1.0) + np.cumsum(rng.normal(0.0, 0.15, 8)), 0.0, 1.0)
+        sub = int(rng.integers(1, 4))
+        z, v2, ref_max = z0.copy(), v2_0, -np.inf
+        i2 = mk.phasors(mc, z, v1, v2)[1]
+        for dk in d:
+            for _ in range(sub):
+                signs.add(i2.real < 0.0)
+                v2 = mk.sbar_v2(lc, tab, dk, i2, vc)[0]
+                mk.advance_z(mc, zc, z, v1, v2)
+                i2 = mk.phasors(mc, z, v1, v2)[1]
+                ref_max = max(ref_max, mk.inst_peak(lc, tab, dk, i2, vc))
+        zf = z0.copy()
+        pk, v2f = mk.held_peak(lc, mc, tab, zc, zf, v2_0, d, sub, v1, vc, len(d), *no_tail, 1.0, np.inf)
+        assert (pk, v2f) == (ref_max, v2) and np.array_equal(zf, z)
+    assert signs == {True, False}

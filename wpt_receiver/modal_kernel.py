@@ -41,6 +41,15 @@ Cost (``benchmarks/bench_modal_step.py``, in-process, 2026-11-25, load average 3
 inlined (``inline="always"``): numba puts two atomic reference counts per array argument around a call
 (~10 % of the modal env step); the arithmetic, and so every result, is unchanged.
 
+The SBAR and peak formulas are small inlined pieces, each the one source of its formula: i2's fold and polar
+form (``_fold``, ``_polar``), the table's cell on the phase and rho axes and on the duty axis
+(``_phase_rho_coords``, ``_duty_coords``, ``_trilinear``; ``_lookup`` is the three), the window, the shift, the
+commutation angle, the clamp part, V2 and the peak (``_window``, ``_shift``, ``_commutation``, ``_clamp_f``,
+``_v2_of``, ``_peak_of``). :func:`sbar_edge`, :func:`sbar_v2`, :func:`inst_peak` are made of them, and so is
+:func:`held_peak`'s fused sub-step, which shares one i2's polar form and table cell between a sub-step's end
+peak and the next sub-step's edge and the duty's terms over its sub-steps (the same numbers bit for bit; ~1.5x
+per budget-search stop, docs/budget_search_cost.md).
+
 Validated (``tests/test_modal_kernel.py``) against :func:`wpt_receiver.modal.simulate_modal` on the
 three paper trajectories (peak within 0.5 %, in fact ~0.05 %), the switching model on the ramp
 (1 %), and across the default mission's Lm and battery range. This module imports numba at
@@ -312,18 +321,98 @@ def _bilinear(tab, plane, m, j, k, fx, fy):
 
 
 @njit(cache=True, inline="always")
+def _phase_rho_coords(lc, tab, phi, rho):
+    """The table's cell and fractions on the phase and |I2|/Vc axes, ``(m, k, fz, fy)``, at phase ``phi`` [rad]
+    (its magnitude clamped at pi/2: a phase beyond +-pi/2 takes the edge's cell) and ``rho = |I2|/Vc`` [A/V]
+    (both grids quadratic, :func:`build_table`; rho clamped at its top). Shared by both planes and every duty."""
+    u = min(abs(phi) / (0.5 * math.pi), 1.0) ** 0.5
+    z = (1.0 + (u if phi >= 0.0 else -u)) * lc[LC_INV_HPHI]
+    y = math.sqrt(min(rho / lc[LC_RHO_MAX], 1.0)) * (tab.shape[3] - 1)
+    m = min(int(z), tab.shape[1] - 2)
+    k = min(int(y), tab.shape[3] - 2)
+    return m, k, z - m, y - k
+
+
+@njit(cache=True, inline="always")
+def _duty_coords(lc, tab, d):
+    """The table's cell and fraction on the duty axis, ``(j, fx)``, at duty ``d`` (clipped into [0, 1])."""
+    x = min(max(d, 0.0), 1.0) * lc[LC_INV_HD]
+    j = min(int(x), tab.shape[2] - 2)
+    return j, x - j
+
+
+@njit(cache=True, inline="always")
+def _trilinear(tab, plane, m, j, k, fz, fx, fy):
+    """Table plane ``plane`` interpolated in the cell ``(m, j, k)`` (phase, duty, rho) at the fractions ``fz,
+    fx, fy`` (:func:`_phase_rho_coords`, :func:`_duty_coords`)."""
+    return _bilinear(tab, plane, m, j, k, fx, fy) * (1 - fz) + _bilinear(tab, plane, m + 1, j, k, fx, fy) * fz
+
+
+@njit(cache=True, inline="always")
 def _lookup(lc, tab, plane, phi, d, rho):
     """Trilinear lookup of table plane ``plane`` at phase ``phi`` [rad] in [-pi/2, pi/2], duty ``d``
     and ``rho = |I2|/Vc`` (both grids quadratic, :func:`build_table`; rho clamped at its top)."""
-    u = min(abs(phi) / (0.5 * math.pi), 1.0) ** 0.5
-    z = (1.0 + (u if phi >= 0.0 else -u)) * lc[LC_INV_HPHI]
-    x = min(max(d, 0.0), 1.0) * lc[LC_INV_HD]
-    y = math.sqrt(min(rho / lc[LC_RHO_MAX], 1.0)) * (tab.shape[3] - 1)
-    m = min(int(z), tab.shape[1] - 2)
-    j = min(int(x), tab.shape[2] - 2)
-    k = min(int(y), tab.shape[3] - 2)
-    fz, fx, fy = z - m, x - j, y - k
-    return _bilinear(tab, plane, m, j, k, fx, fy) * (1 - fz) + _bilinear(tab, plane, m + 1, j, k, fx, fy) * fz
+    m, k, fz, fy = _phase_rho_coords(lc, tab, phi, rho)
+    j, fx = _duty_coords(lc, tab, d)
+    return _trilinear(tab, plane, m, j, k, fz, fx, fy)
+
+
+@njit(cache=True, inline="always")
+def _fold(i2):
+    """``(sgn, ih)``: the sign of Re i2 (+1 at Re i2 = 0) and the sign-folded phasor ``ih = sgn i2`` (Re >= 0) [A]."""
+    if i2.real < 0.0:
+        return -1.0, -i2
+    return 1.0, i2
+
+
+@njit(cache=True, inline="always")
+def _polar(ih, vc_v):
+    """``(|ih| [A], rho = |ih|/Vc [A/V], arg ih [rad])`` of the sign-folded phasor ``ih`` at clamp ``vc_v`` [V]
+    (rho 0 for Vc <= 0, the phase 0 at ih = 0): the table's coordinates of both planes."""
+    amp = abs(ih)
+    rho = amp / vc_v if vc_v > 0.0 else 0.0
+    phi = math.atan2(ih.imag, ih.real) if amp > 0.0 else 0.0
+    return amp, rho, phi
+
+
+@njit(cache=True, inline="always")
+def _window(d_short):
+    """Half-width of the short window ``pi d / 2`` [rad] (d clipped into [0, 1]): the conduction window is
+    ``[pi d/2, pi - pi d/2]``."""
+    return 0.5 * math.pi * min(max(d_short, 0.0), 1.0)
+
+
+@njit(cache=True, inline="always")
+def _shift(lc, plane0, rho):
+    """The harmonics' shift ``delta`` [rad] from the table's plane-0 value ``plane0`` at ``rho`` (beyond the
+    table's top ``delta ~ 1/rho``)."""
+    rmax = lc[LC_RHO_MAX]
+    return plane0 * (1.0 if rho <= rmax else rmax / rho)
+
+
+@njit(cache=True, inline="always")
+def _commutation(delta, phi, wd):
+    """The commutation angle ``e = pi/2 + delta - arg(ih)`` [rad] clipped into the window ``[wd, pi - wd]``."""
+    return min(max(0.5 * math.pi + delta - phi, wd), math.pi - wd)
+
+
+@njit(cache=True, inline="always")
+def _clamp_f(sin_wd, e, sgn):
+    """V2's clamp part per volt [1], ``sgn (4/pi) (j e^{-j e} - sin(pi d/2))``, with ``sin_wd = sin(pi d/2)``."""
+    return sgn * (4.0 / math.pi) * complex(math.sin(e) - sin_wd, math.cos(e))
+
+
+@njit(cache=True, inline="always")
+def _v2_of(vc_v, f, ws_ohm, i2):
+    """V2 [V] of the clamp part ``f`` at clamp ``vc_v`` [V] plus the shorted channels' excess ``ws_ohm i2``
+    (``ws_ohm = (2 Ron - Rd) w(d)`` [ohm], :func:`short_weight`)."""
+    return vc_v * f + ws_ohm * i2
+
+
+@njit(cache=True, inline="always")
+def _peak_of(amp, vc_v, plane1):
+    """Instantaneous peak [A]: ``|I2| + Vc excess`` with the table's plane-1 value ``plane1``."""
+    return amp + vc_v * plane1
 
 
 @njit(cache=True)
@@ -332,14 +421,10 @@ def sbar_edge(lc, tab, d_short, ih, vc_v):
     conduction window ``[pi d/2, pi - pi d/2]``) for the sign-folded i2 phasor ``ih`` [A] (Re >= 0
     in use; a phase beyond +-pi/2 clips to a window edge) at duty ``d_short`` and clamp ``vc_v`` [V]:
     ``e = pi/2 - arg(ih) + delta`` with the harmonics' shift ``delta`` (module docstring)."""
-    wd = 0.5 * math.pi * min(max(d_short, 0.0), 1.0)
-    amp = abs(ih)
-    rho = amp / vc_v if vc_v > 0.0 else 0.0
-    rmax = lc[LC_RHO_MAX]
-    phi = math.atan2(ih.imag, ih.real) if amp > 0.0 else 0.0
+    amp, rho, phi = _polar(ih, vc_v)
     pl = min(max(phi, -0.5 * math.pi), 0.5 * math.pi)
-    delta = _lookup(lc, tab, 0, pl, d_short, rho) * (1.0 if rho <= rmax else rmax / rho)
-    return min(max(0.5 * math.pi + delta - phi, wd), math.pi - wd)
+    delta = _shift(lc, _lookup(lc, tab, 0, pl, d_short, rho), rho)
+    return _commutation(delta, phi, _window(d_short))
 
 
 @njit(cache=True, inline="always")
@@ -347,20 +432,16 @@ def sbar_shift(lc, tab, d_short, ih, vc_v):
     """The harmonics' shift ``delta`` [rad] of the commutation angle (:func:`sbar_edge`'s ``e = pi/2 -
     arg(ih) + delta`` before the window's clip) for the sign-folded i2 phasor ``ih`` [A] at duty
     ``d_short`` and clamp ``vc_v`` [V]: the table's plane 0 (the envs hold it over a control period)."""
-    amp = abs(ih)
-    rho = amp / vc_v if vc_v > 0.0 else 0.0
-    rmax = lc[LC_RHO_MAX]
-    phi = math.atan2(ih.imag, ih.real) if amp > 0.0 else 0.0
+    amp, rho, phi = _polar(ih, vc_v)
     pl = min(max(phi, -0.5 * math.pi), 0.5 * math.pi)
-    return _lookup(lc, tab, 0, pl, d_short, rho) * (1.0 if rho <= rmax else rmax / rho)
+    return _shift(lc, _lookup(lc, tab, 0, pl, d_short, rho), rho)
 
 
 @njit(cache=True)
 def sbar_clamp_f(d_short, e, sgn):
     """V2's clamp part per volt [1] at commutation angle ``e`` [rad] (:func:`sbar_edge`) and i2 sign
     ``sgn``: ``sgn (4/pi) (j e^{-j e} - sin(pi d/2))`` (eq. 9 for ``e = pi/2``)."""
-    wd = 0.5 * math.pi * min(max(d_short, 0.0), 1.0)
-    return sgn * (4.0 / math.pi) * complex(math.sin(e) - math.sin(wd), math.cos(e))
+    return _clamp_f(math.sin(_window(d_short)), e, sgn)
 
 
 @njit(cache=True)
@@ -368,9 +449,9 @@ def sbar_v2(lc, tab, d_short, i2, vc_v):
     """``(V2, F)``: the SBAR's complex fundamental [V] at duty ``d_short`` and i2 phasor ``i2`` [A]
     with clamp ``vc_v = VL + Vf`` [V], and its clamp part per volt ``F`` (``V2 = Vc F + excess``;
     module docstring, eq. 9 for ``e = pi/2``)."""
-    sgn = -1.0 if i2.real < 0.0 else 1.0
-    f = sbar_clamp_f(d_short, sbar_edge(lc, tab, d_short, i2 * sgn, vc_v), sgn)
-    return vc_v * f + lc[LC_DR_SHORT] * short_weight(d_short) * i2, f
+    sgn, ih = _fold(i2)
+    f = sbar_clamp_f(d_short, sbar_edge(lc, tab, d_short, ih, vc_v), sgn)
+    return _v2_of(vc_v, f, lc[LC_DR_SHORT] * short_weight(d_short), i2), f
 
 
 @njit(cache=True)
@@ -512,10 +593,8 @@ def sbar_implicit(lc, tab, mc, zc, z0, z1, v1, v2_held, d_short, vc_v, ws, e_gue
 def inst_peak(lc, tab, d_short, i2, vc_v):
     """Instantaneous peak |i2| [A] at duty ``d_short`` for the fundamental phasor ``i2`` [A] (complex)
     and clamp ``vc_v`` [V]: ``|I2| + Vc excess(arg I2, d, |I2|/Vc)`` (:meth:`SbarHarmonics.peak`, tabulated)."""
-    ih = -i2 if i2.real < 0.0 else i2
-    a = abs(ih)
-    phi = math.atan2(ih.imag, ih.real) if a > 0.0 else 0.0
-    return a + vc_v * _lookup(lc, tab, 1, phi, d_short, a / vc_v if vc_v > 0.0 else 0.0)
+    amp, rho, phi = _polar(_fold(i2)[1], vc_v)
+    return _peak_of(amp, vc_v, _lookup(lc, tab, 1, phi, d_short, rho))
 
 
 # ---------------------------------------------------------------------- the table (built once, numpy)
@@ -716,7 +795,9 @@ def held_peak(lc, mc, tab, zc, z, v2, d_short, substeps, v1, vc_v, k_tail, tail_
     V2 ``v2`` [V] held before it, each duty of ``d_short`` held ``substeps`` steps of ``zc``. Returns ``(max
     peak over every step's end, the last V2)``: the same arithmetic as :func:`run_duties` with ``substeps=1``
     on the duties repeated, so the same peaks bit for bit (``tests/test_budget_modal.py``); NaN when a peak is
-    NaN (as numpy's ``max``).
+    NaN (as numpy's ``max``). Fused: :func:`sbar_v2`'s and :func:`inst_peak`'s pieces, i2's polar form and table
+    cell computed once per sub-step end for the peak there and the next edge, the duty's window sine, short
+    weight and duty cell once per duty (the edge's phase clip is left out: it does not move the cell).
 
     **Stopping early without changing the max.** From the duty ``k_tail`` on every duty is 1 (short mode; pass
     ``len(d_short)`` for none): V2 is then the shorted switches' ``ws I2`` (plus ``Vc (4/pi) cos(pi/2)``,
@@ -733,13 +814,28 @@ def held_peak(lc, mc, tab, zc, z, v2, d_short, substeps, v1, vc_v, k_tail, tail_
     then a lower bound of the run's (the whole run's overshoot is above ``above`` too)."""
     pmax = -math.inf
     i2 = phasors(mc, z, v1, v2)[1]
+    # the fused sub-step: i2's fold, polar form and table cell at a sub-step's end serve both its peak and the
+    # next sub-step's edge; the duty's window, sine, short weight and duty cell once per duty. The pieces of
+    # sbar_v2 / inst_peak, so their arithmetic (the edge's phase clip leaves the cell unchanged: a phase beyond
+    # +-pi/2 has |u| = 1 either way, and the folded phase is within it)
+    sgn, ih = _fold(i2)
+    amp, rho, phi = _polar(ih, vc_v)
+    m, kk, fz, fy = _phase_rho_coords(lc, tab, phi, rho)
     for k in range(len(d_short)):
         dk = d_short[k]
+        wd = _window(dk)
+        sin_wd = math.sin(wd)
+        ws = lc[LC_DR_SHORT] * short_weight(dk)
+        j, fx = _duty_coords(lc, tab, dk)
         for _ in range(substeps):
-            v2 = sbar_v2(lc, tab, dk, i2, vc_v)[0]
+            e = _commutation(_shift(lc, _trilinear(tab, 0, m, j, kk, fz, fx, fy), rho), phi, wd)
+            v2 = _v2_of(vc_v, _clamp_f(sin_wd, e, sgn), ws, i2)
             advance_z(mc, zc, z, v1, v2)
             i2 = phasors(mc, z, v1, v2)[1]
-            p = inst_peak(lc, tab, dk, i2, vc_v)
+            sgn, ih = _fold(i2)
+            amp, rho, phi = _polar(ih, vc_v)
+            m, kk, fz, fy = _phase_rho_coords(lc, tab, phi, rho)
+            p = _peak_of(amp, vc_v, _trilinear(tab, 1, m, j, kk, fz, fx, fy))
             if math.isnan(p):
                 return math.nan, v2
             if p > pmax:
