@@ -74,9 +74,10 @@ def capture(n: int, scenario: str, warm: int):
     """One ``env_step`` call of the vector env (one thread) after ``warm`` random steps: ``(args, snapshot,
     mutated)``: the call's arguments on private copies, the copies' values before the call, and the indices
     of the arrays the call changes."""
+    from envs import EnvConfig
     from envs.vector import SbarChargingVectorEnv
 
-    env = SbarChargingVectorEnv(n, scenario=scenario, num_threads=1)
+    env = SbarChargingVectorEnv(n, scenario=scenario, num_threads=1, config=EnvConfig(link_model="envelope"))   # eq. 4's kernel
     env.reset(seed=1)
     rng = np.random.default_rng(0)
     for _ in range(warm):

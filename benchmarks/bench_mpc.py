@@ -54,13 +54,14 @@ def _blas_threads(n):
 def _run(name, make_pol, episodes, seed):
     """One rollout of a policy on the nominal windows: (wall s, cpu s, metrics)."""
     import policies
+    from envs import EnvConfig
     from policies.compare import run_policy
     orig = policies.make
     if make_pol is not None:
         policies.make = lambda n, ctx: make_pol(ctx)
     try:
         t, c = time.perf_counter(), time.process_time()
-        tr = run_policy(name, "nominal", episodes, seed)
+        tr = run_policy(name, "nominal", episodes, seed, EnvConfig(link_model="envelope"))   # the figures quoted are eq. 4's
         return time.perf_counter() - t, time.process_time() - c, tr.metrics
     finally:
         policies.make = orig

@@ -45,7 +45,7 @@ def one_window(name, link, i, seed=1000):
     from envs.rollout import DutyRollout
     from policies import oracle as O
     from policies.compare import run_policy
-    cfg = EnvConfig(link_model="modal") if link == "modal" else None
+    cfg = EnvConfig(link_model="modal" if link == "modal" else "envelope")
     tr = run_policy(name, "nominal", i + 1, seed, cfg)
     P = O._Problem(DutyRollout("nominal", seed + i, cfg), tr.d_short[:, i], tr.metrics["overshoot_pct"][i] / 100)
     r0 = P.roll.run(P.duties(np.zeros((1, O.N_BASIS))))

@@ -37,14 +37,15 @@ def sequences(dt_s: float) -> dict:
 
 def run(episodes: int, seed: int, scenario: str, noise: float, mean_offset: float, noise_seed: int = 0):
     from envs import SbarChargingVectorEnv
+    from envs import EnvConfig   # these diagnostics measured eq. 4's env (the default until 2026-11-26)
     from envs.objective import stop_step
     from policies import make
 
-    venv = SbarChargingVectorEnv(num_envs=1, scenario=scenario)
+    venv = SbarChargingVectorEnv(num_envs=1, scenario=scenario, config=EnvConfig(link_model="envelope"))
     seqs = sequences(venv.config.dt_s)
     names = list(seqs)
     n, B = episodes, len(names)
-    venv = SbarChargingVectorEnv(num_envs=n * B, scenario=scenario)
+    venv = SbarChargingVectorEnv(num_envs=n * B, scenario=scenario, config=EnvConfig(link_model="envelope"))
     c = venv.config
     pol = make("model_based", venv.policy_context)
     pol.reset(venv.num_envs)

@@ -16,6 +16,7 @@ import numpy as np
 
 def main(argv):
     from envs import SbarChargingVectorEnv
+    from envs import EnvConfig   # these diagnostics measured eq. 4's env (the default until 2026-11-26)
     from envs.objective import stop_step
     from policies import make
 
@@ -25,7 +26,7 @@ def main(argv):
     lifts = [0.0, 0.1, 0.25, 0.5, 0.75, 1.0]
     combos = [("ramp", R, h) for R in ramps for h in levels] + [("lift", x, None) for x in lifts]
     n = 100; B = len(combos)
-    venv = SbarChargingVectorEnv(num_envs=n * B, scenario=scen)
+    venv = SbarChargingVectorEnv(num_envs=n * B, scenario=scen, config=EnvConfig(link_model="envelope"))
     c = venv.config
     pol = make(base, venv.policy_context); pol.reset(venv.num_envs)
     obs, info = venv.reset(seed=[1000 + i for i in range(n)] * B)

@@ -14,6 +14,7 @@ import numpy as np
 
 def main(argv):
     from envs import SbarChargingVectorEnv
+    from envs import EnvConfig   # these diagnostics measured eq. 4's env (the default until 2026-11-26)
     from envs.objective import stop_step
     from policies import make
 
@@ -22,7 +23,7 @@ def main(argv):
     mods = [("lift", 0.0), ("lift", 0.1), ("lift", 0.25), ("ramp1", None)]
     combos = [(s, m) for s in sigmas for m in mods]
     n = 100; B = len(combos)
-    venv = SbarChargingVectorEnv(num_envs=n * B, scenario=scen); c = venv.config
+    venv = SbarChargingVectorEnv(num_envs=n * B, scenario=scen, config=EnvConfig(link_model="envelope")); c = venv.config
     pol = make(base, venv.policy_context); pol.reset(venv.num_envs)
     obs, info = venv.reset(seed=[1000 + i for i in range(n)] * B)
     T = c.n_steps; ks = stop_step(info["t_stop_s"], c.dt_s, T)

@@ -20,13 +20,14 @@ OFFSETS = (0, 1, 2, 5, 10, 20, 40, 80)
 
 def main(argv):
     from envs import SbarChargingVectorEnv
+    from envs import EnvConfig   # these diagnostics measured eq. 4's env (the default until 2026-11-26)
     from envs.objective import stop_step
     from policies import make
 
     base = argv[0] if argv else "rl:policies/pretrained/rl_s0.zip"
     delta = float(argv[1]) if len(argv) > 1 else 0.05
     n, B = 100, len(OFFSETS) + 1
-    venv = SbarChargingVectorEnv(num_envs=n * B, scenario="nominal")
+    venv = SbarChargingVectorEnv(num_envs=n * B, scenario="nominal", config=EnvConfig(link_model="envelope"))
     c = venv.config
     pol = make(base, venv.policy_context)
     pol.reset(venv.num_envs)

@@ -49,7 +49,7 @@ def cost(n=1024, steps=40, warm=20, seed=0, old=None, actions_list=("held", "ran
     import modal_substeps_study as ms
     res = {}
     for actions in actions_list:
-        cfgs = {"eq4": EnvConfig(), **{lab: EnvConfig(link_model="modal", **kw) for lab, kw in VARIANTS.items()}}
+        cfgs = {"eq4": EnvConfig(link_model="envelope"), **{lab: EnvConfig(link_model="modal", **kw) for lab, kw in VARIANTS.items()}}
         if old:
             cfgs["today"] = EnvConfig(link_model="modal")
         envs, times = {}, {}

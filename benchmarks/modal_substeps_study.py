@@ -137,8 +137,8 @@ def _substeps_mid(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_
             r_ref = math.sqrt(a)
             dl = mk.sbar_shift(lc, tab, d, i2e * sgn, vc)
             kw = complex(math.cos(dl), -math.sin(dl))
-            k = (k[0], k[1], k[2], 4.0 / math.pi * k[1] * kw, kw, k[5], k[6])
-            km = (km[0], km[1], km[2], 4.0 / math.pi * km[1] * kw, kw, km[5], km[6])
+            k = (k[0], k[1], k[2], 4.0 / math.pi * k[1] * kw, kw, k[5], k[6], k[7])
+            km = (km[0], km[1], km[2], 4.0 / math.pi * km[1] * kw, kw, km[5], km[6], km[7])
     z[0], z[1], z[2], z[3] = z0.real, z0.imag, z1.real, z1.imag
     return v2, t, pk, i2_pk, qsum
 
@@ -299,7 +299,7 @@ def cost_study(var: dict, ns=(1024, 4096), steps=40, warm=20, seed=0) -> dict:
     res = {}
     for n in ns:
         for actions in ("held", "random"):
-            cfgs = {"eq4": EnvConfig(), **{lab: EnvConfig(link_model="modal", **kw) for lab, kw in var.items()}}
+            cfgs = {"eq4": EnvConfig(link_model="envelope"), **{lab: EnvConfig(link_model="modal", **kw) for lab, kw in var.items()}}
             envs, times = {}, {}
             for lab, cfg in cfgs.items():
                 envs[lab] = SbarChargingVectorEnv(num_envs=n, scenario="random", config=cfg, num_threads=1)

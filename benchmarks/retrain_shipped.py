@@ -74,12 +74,12 @@ def _load() -> float:
     return float(Path("/proc/loadavg").read_text().split()[0]) if Path("/proc/loadavg").is_file() else float("nan")
 
 
-def train_seed(kind: str, seed: int, timesteps: int, budget, out_root: Path) -> dict:
+def train_seed(kind: str, seed: int, timesteps: int, budget, out_root: Path, link: str = "envelope") -> dict:
     """Run one seed's command (niced) into ``out_root/<kind>_s<seed>``; returns the run's record."""
     out = out_root / f"{kind}_s{seed}"
     rel = out.relative_to(ROOT) if out.is_relative_to(ROOT) else out
     budget_text = "" if budget is None else f"{budget:g}"   # rl: no {budget} in its command
-    cmd = KINDS[kind].format(timesteps=timesteps, seed=seed, budget=budget_text) + f" --out {rel}"
+    cmd = KINDS[kind].format(timesteps=timesteps, seed=seed, budget=budget_text) + f" --link {link} --out {rel}"
     rec = {"commit": _commit(), "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()), "command": cmd,
            "load_avg_1min_before": _load()}
     t0 = time.time()
@@ -111,6 +111,8 @@ def main(argv=None) -> int:
                     help="measured-overshoot budget (fraction); required for residual / ppo_lagrangian, not for rl")
     ap.add_argument("--out", default="out/retrain")
     ap.add_argument("--install", action="store_true", help="copy the final models into policies/pretrained")
+    ap.add_argument("--link", choices=("envelope", "modal"), default="envelope",
+                    help="the env's link (default envelope: what the shipped models were trained on)")
     a = ap.parse_args(argv)
     try:
         seeds = _seeds(a.seeds)
@@ -128,7 +130,7 @@ def main(argv=None) -> int:
     out_root = ROOT / a.out
     out_root.mkdir(parents=True, exist_ok=True)
     for seed in seeds:
-        rec = train_seed(a.kind, seed, a.timesteps, a.budget, out_root)
+        rec = train_seed(a.kind, seed, a.timesteps, a.budget, out_root, a.link)
         print(json.dumps({"kind": a.kind, "seed": seed, **rec}), flush=True)
         if rec["returncode"] != 0:
             return 1

@@ -88,9 +88,9 @@ class EnvConfig:
         2026-11-26, issue 23: one peak estimator in the mission, ``paper`` and the envs) the mission's
         exact-mode link (:mod:`envs.modal_step`: eq. 1's coupled modes, the SBAR's v2 with its quadrature,
         the phase-aware instantaneous peak; within 0.23 % of the switching model's peak on the paper's
-        trajectories where eq. 4 + ripple is 2.85 % low on the V2* ramp; a vector env-step costs 5.9x eq. 4's with
-        the duty held, 10.7x with random actions: ``benchmarks/bench_env.py --links``, N = 1024, one thread,
-        load 4.7-5.0, 2026-11-26); ``"envelope"`` eq. 4's envelope with the ripple table for the peak
+        trajectories where eq. 4 + ripple is 2.85 % low on the V2* ramp; an env-step costs ~2.2 us of kernel CPU with
+        the duty held and ~15.5 us with random actions against eq. 4's ~0.1-0.15 us: ``benchmarks/ab_modal_step.py``,
+        N = 1024, one thread, load 6-7, 2026-11-26, docs/performance.md); ``"envelope"`` eq. 4's envelope with the ripple table for the peak
         (:mod:`envs.vector_kernel`; the default until 2026-11-26, what every shipped RL model was trained on:
         ``EnvConfig(link_model="envelope")``, ``--link envelope``).
         The env's :attr:`policy_context` carries the link model: ``mpc`` predicts with the exact modes on

@@ -316,6 +316,8 @@ def _reproduce(spec: dict) -> str:
                 f" --imitation-mask {','.join(spec.get('imitation_mask', ('last_d_short',)))}")
     if spec["env_overrides"]:
         cmd += " " + " ".join(f"--env {k}={v}" for k, v in spec["env_overrides"].items())
+    if "link_model" not in (spec["env_overrides"] or {}) and spec.get("config") is not None:
+        cmd += f" --link {spec['config'].link_model}"   # always named: the envs' default changed once (2026-11-26)
     if spec["hyperparams_file"]:
         cmd += f" --hyperparams {spec['hyperparams_file']}"
     return cmd + " --out DIR"

@@ -122,3 +122,15 @@ def test_train_link_and_env_link_model_conflict_is_one_line_exit_2(tmp_path):
     same = _cli("train", "--algo", "ppo", "--timesteps", "1", "--out", str(tmp_path / "run"), "--link", "modal",
                 "--env", "link_model=modal", "--env", "v2_updates=2.5")
     assert same.returncode == 2 and "conflicts" not in same.stderr and "v2_updates=2.5 is invalid" in same.stderr
+
+
+def test_train_reproduce_command_always_names_the_link():
+    """A trained model's ``reproduce`` command names its link whether or not ``--link`` was given (the envs' default
+    changed once: a command without it would retrain on another plant)."""
+    from envs import EnvConfig
+    from policies.train import _reproduce
+    spec = dict(algo="ppo", timesteps=1000, seed=0, n_envs=4, scenario="nominal", cost="overshoot", lagrangian=False,
+                residual=False, history=1, slow_budget=None, action_filter=0.0, smooth_penalty=0.0, imitate=None,
+                env_overrides={}, hyperparams_file=None)
+    assert " --link modal " in _reproduce({**spec, "config": EnvConfig()})
+    assert " --link envelope " in _reproduce({**spec, "config": EnvConfig(link_model="envelope")})

@@ -588,3 +588,11 @@ def test_more_v2_updates_than_rectifier_periods_on_env_windows(policy):
     else:
         assert np.mean(old / ref - 1.0) < -0.02 and np.sum(old < ref) >= 12
         assert abs(np.mean(got / ref - 1.0)) < 0.01
+
+
+def test_substeps_compiled_without_reference_counting():
+    """``_substeps`` runs without numba's reference counting (numba's private ``_nrt`` option: docs/performance.md,
+    "The modal env step without reference counts"); a numba that drops or renames the option must show up here,
+    not as a silent slowdown or an import error in the default env."""
+    import envs.modal_step as ms
+    assert ms._substeps.targetoptions.get("_nrt") is False
