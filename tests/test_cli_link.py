@@ -134,3 +134,16 @@ def test_train_reproduce_command_always_names_the_link():
                 env_overrides={}, hyperparams_file=None)
     assert " --link modal " in _reproduce({**spec, "config": EnvConfig()})
     assert " --link envelope " in _reproduce({**spec, "config": EnvConfig(link_model="envelope")})
+
+
+def test_compare_help_names_the_real_defaults(capsys):
+    """``compare --help`` lists the default policies and scenarios that ``compare`` actually runs."""
+    import pytest
+
+    from mission_sim.cli import main
+    from policies.compare import DEFAULT_POLICIES, DEFAULT_SCENARIOS
+    with pytest.raises(SystemExit):
+        main(["compare", "--help"])
+    text = "".join(capsys.readouterr().out.split())   # argparse wraps inside words
+    assert "(default:" + ",".join(DEFAULT_POLICIES) + ";" in text
+    assert "(default:" + ",".join(DEFAULT_SCENARIOS) + ";" in text

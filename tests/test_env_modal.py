@@ -596,3 +596,41 @@ def test_substeps_compiled_without_reference_counting():
     not as a silent slowdown or an import error in the default env."""
     import envs.modal_step as ms
     assert ms._substeps.targetoptions.get("_nrt") is False
+
+
+def test_modal_step_interpreted_to_the_bottom_matches_the_compiled_step(monkeypatch):
+    """The compiled single step against the same sources *all* interpreted: every numba dispatcher of
+    :mod:`envs.modal_step` (``_substeps``, compiled with ``_nrt=False``, and the helpers it inlines) replaced by its
+    ``py_func`` in the module, so nothing below the entry runs compiled (``compiled=False`` alone swaps only the
+    entry). Random actions through a whole episode; equal to rounding (the compiled code may fuse operations)."""
+    import numba
+
+    import envs.modal_step as ms
+    from envs import EnvConfig, SbarChargingEnv
+    cfg = EnvConfig(link_model="modal")
+    fast = SbarChargingEnv(scenario="random", compiled=True, config=cfg)
+    fast.reset(seed=3)
+    fast.step(np.zeros(1, np.float32))   # compiled (or loaded) before the module's dispatchers are swapped
+    swapped = [k for k, v in vars(ms).items() if isinstance(v, numba.core.registry.CPUDispatcher)]
+    assert "_substeps" in swapped
+    for k in swapped:
+        monkeypatch.setattr(ms, k, getattr(ms, k).py_func)
+    calls, sub = [0], ms._substeps
+
+    def counted(*args):
+        calls[0] += 1
+        return sub(*args)
+    monkeypatch.setattr(ms, "_substeps", counted)
+    ref = SbarChargingEnv(scenario="random", compiled=False, config=cfg)
+    (of, _), (orf, _) = fast.reset(seed=3), ref.reset(seed=3)
+    assert np.array_equal(of, orf)
+    rng = np.random.default_rng(11)
+    for _ in range(fast.config.n_steps):
+        a = rng.uniform(-1, 1, 1).astype(np.float32)
+        f, r = fast.step(a), ref.step(a)
+        np.testing.assert_allclose(f[0], r[0], rtol=1e-6, atol=1e-6)   # float32 observations
+        assert f[1] == pytest.approx(r[1], rel=1e-9, abs=1e-12)
+        assert f[4]["i2_peak_a"] == pytest.approx(r[4]["i2_peak_a"], rel=1e-9, abs=1e-12)
+        if f[2] or f[3]:
+            break
+    assert calls[0] > 10   # the interpreted sub-step loop ran

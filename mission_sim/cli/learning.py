@@ -246,11 +246,13 @@ def _add_compare(sub):
                                    "the budgeted model-based curve.")
     lazy_names_help(p.add_argument("--policies", default=None),
                     "comma-separated policy names (default: step,ramp,hysteresis,model_based,model_based_online,"
-                    "model_based_budget:0.01,model_based_budget:0.02,rl,ppo_lagrangian,residual,random; the "
+                    "model_based_budget:0.01,model_based_budget:0.02,mpc,rl,ppo_lagrangian,residual,random; the "
                     "SB3 ones are skipped with a note when stable-baselines3 is not installed)", policy_names)
     lazy_names_help(p.add_argument("--scenarios", default=None),
-                    "comma-separated scenarios (default: nominal,lm_mismatch,windy,battery,lm_high; lm_high is "
-                    "outside the training range)", scenario_names)
+                    "comma-separated scenarios (default: nominal,lm_mismatch,windy,battery,lm_high,lm_drift,lm_drift_fast,"
+                    "sense_delay,sense_delay_long,battery_low,battery_empty,detuned,detuned_wide; lm_high is outside "
+                    "the training range, each model-is-wrong scenario has a held-out variant; on the default "
+                    "exact-mode link the whole default set takes ~5-10 min)", scenario_names)
     p.add_argument("--episodes", type=int, default=100, help="episodes per scenario (default 100)")
     p.add_argument("--seed", type=seed_int(), default=1000,
                    help="seed of episode 0 (episode i uses seed + i), 0 .. 2^32-1 (default 1000)")

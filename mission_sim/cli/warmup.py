@@ -23,7 +23,7 @@ def _add_warmup(sub):
                        description="Compile (or load from numba's disk cache) every numba kernel the commands "
                                    "use: the compiled mission loop with the step, ramp and model_based policy "
                                    "kernels (mission, replay, sweep, sizing --source mission), the batched env "
-                                   "and its policy kernels (compare, train) and the switching model (paper "
+                                   "on both links and its policy kernels with the budgeted plan's search (compare, train) and the switching model (paper "
                                    "--model switching, sizing). Prints each stage, how many kernels it compiled "
                                    "and how long it took.")
     p.add_argument("--format", choices=("table", "json"), default="table")
@@ -40,9 +40,12 @@ def _missions() -> None:
 
 
 def _envs() -> None:
+    from envs import EnvConfig
     from policies.compare import run_policy
-    for name in KERNEL_POLICIES:
-        run_policy(name, "nominal", 2, 1000)
+    for link in ("modal", "envelope"):   # the envs' default (exact-mode) link and eq. 4's (`--link envelope`)
+        cfg = EnvConfig(link_model=link)
+        for name in (*KERNEL_POLICIES, "model_based_budget:0.01"):   # + the budgeted plan's search (compare)
+            run_policy(name, "nominal", 2, 1000, cfg)
 
 
 def _switching() -> None:
