@@ -94,8 +94,8 @@ class EnvConfig:
         (:mod:`envs.vector_kernel`; the default until 2026-11-26, what every shipped RL model was trained on:
         ``EnvConfig(link_model="envelope")``, ``--link envelope``).
         The env's :attr:`policy_context` carries the link model: ``mpc`` predicts with the exact modes on
-        it (:mod:`policies.mpc_modal`); ``model_based_budget`` keeps eq. 4 (on the modal plant its measured
-        overshoot is larger, docs/switching.md).
+        it (:mod:`policies.mpc_modal`); ``model_based_budget`` plans its after-stop duties with them
+        (:mod:`policies.budget_modal`, docs/budget_search_cost.md).
     hold_tol_a : (modal) a step holds V2 over the control period when the link is within this [A] of the
         steady state of the step's inputs (the ringing, and the error of the held V2, stay below it);
         else it runs in ``v2_updates`` sub-steps (``envs.modal_step._link_step``)
