@@ -408,8 +408,7 @@ def _substeps(z, v2, i2, k, vc, d, ws, lc, tab, mc, zs, cf, zq, h, n_sub, n_q, v
             # |I2| moved by more than the ratio since delta was looked up: again, at this end's I2
             r_ref = math.sqrt(a)
             dl = sbar_shift(lc, tab, d, i2e * sgn, vc)
-            kw = complex(math.cos(dl), -math.sin(dl))
-            k = (k[0], k[1], k[2], _FOUR_OVER_PI * k[1] * kw, kw, k[5], k[6], k[7])
+            k = _rekey(k, complex(math.cos(dl), -math.sin(dl)))
     z[0], z[1], z[2], z[3] = z0.real, z0.imag, z1.real, z1.imag
     return v2, t, pk, i2_pk, qsum
 

@@ -163,19 +163,26 @@ def test_each_stop_of_a_mission_chooses_its_relaxation():
 def stop_1000():
     """The arguments of :func:`policies.budget_modal.relaxation` at nominal window 1000's real stop on the modal
     env (``model_based_budget:0.05``), captured in the closed loop."""
+    caps = _captured_stops("model_based_budget:0.05", 1, 1000)
+    assert len(caps) == 1
+    return caps[0]
+
+
+def _captured_stops(spec: str, episodes: int, seed: int) -> list:
+    """The arguments (after the first) of every :func:`policies.budget_modal.relaxation` call while ``spec`` runs
+    ``episodes`` nominal windows from ``seed`` on the modal env."""
     caps = []
     orig = bm.relaxation
 
     def spy(*a):
-        caps.append(a)
+        caps.append(a[1:])
         return orig(*a)
     bm.relaxation = spy
     try:
-        run_policies(["model_based_budget:0.05"], "nominal", 1, 1000, MODAL)
+        run_policies([spec], "nominal", episodes, seed, MODAL)
     finally:
         bm.relaxation = orig
-    assert len(caps) == 1
-    return caps[0][1:]
+    return caps
 
 
 @pytest.mark.parametrize("budget", [0.02, 0.05])
@@ -371,17 +378,7 @@ def test_search_equals_the_reference_search(stop_1000, budget):
 def stops_1001():
     """The arguments of :func:`policies.budget_modal.relaxation` at the real stops of nominal windows 1001-1003 on
     the modal env (``model_based_budget:0.01``), captured in the closed loop."""
-    caps = []
-    orig = bm.relaxation
-
-    def spy(*a):
-        caps.append(a[1:])
-        return orig(*a)
-    bm.relaxation = spy
-    try:
-        run_policies(["model_based_budget:0.01"], "nominal", 3, 1001, MODAL)
-    finally:
-        bm.relaxation = orig
+    caps = _captured_stops("model_based_budget:0.01", 3, 1001)
     assert len(caps) == 3
     return caps
 
