@@ -1,0 +1,159 @@
+"""Select ``oracle_imitation``'s playback (``slow``) and teacher multiplier (``lam``) on validation windows,
+against the MPC, by the rule written in docs/rl.md ("Re-selecting the playback on the modal link").
+
+    python benchmarks/select_oracle_imitation_playback.py --slows 1.0,1.025,1.05,1.075,1.1,1.15,1.2 \
+        --lams 0.4 --scenarios sense_delay,battery_low --seed 300 --episodes 100 --link modal --json out/x.json
+
+For every ``lam`` the five bootstrap maps are refitted (``train_oracle_imitation.dataset`` and ``fit``: the
+shipped command's teacher, nominal windows 0-79, budgets floor + 0.003 / 0.006 / 0.01 / 0.016, its oracle solves
+from the disk cache or solved now), then written once per ``slow`` (only the ``slow`` array and ``meta["slow"]``
+differ) under ``--work``; every map of every setting of one ``lam`` and the reference ``mpc`` run side by side on
+the same windows (``policies.compare.run_policies``). Per setting and scenario: the mean over the maps of the paired
+overshoot difference against the reference (points) and of the return difference, the pooled window
+bootstrap of both, the fraction of windows in short mode (min over the maps); then the rule: admissible if
+the overshoot difference is <= ``-margin`` on every scenario, chosen the largest least return difference over
+the scenarios (within 0.1 of it: the larger least overshoot margin). Validation windows only: ``--seed`` must
+keep the windows off the training (0-79) and evaluation (1000-1099, 2000-2099) seeds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+
+def fit_maps(lam, link, seeds=(0, 1, 2, 3, 4), windows=(0, 80), deltas=(0.003, 0.006, 0.01, 0.016)):
+    """The five bootstrap maps of the shipped command at multiplier ``lam`` (unslowed) and the teacher's means."""
+    from train_oracle_imitation import dataset
+
+    from envs.core import EnvConfig
+    from policies.oracle_imitation import fit
+    config = EnvConfig(link_model=link)
+    X, Y, info = dataset(["nominal"], list(range(*windows)), list(deltas), lam, "model_based", config)
+    maps = [fit(X, Y, cols=(0, 1), seed=k) for k in seeds]
+    return maps, {"teacher_overshoot_pct": 100 * float(info["overshoot"].mean()),
+                  "teacher_energy_j": float(info["energy_j"].mean()), "dt_s": config.dt_s}
+
+
+def write_map(model, path, lam, slow, seed, link, dt_s):
+    from policies.oracle_imitation import save_model
+    m = dict(model)
+    m["slow"] = np.array(float(slow))
+    meta = {"command": f"select_oracle_imitation_playback.py candidate lam={lam} slow={slow}", "scenarios": ["nominal"],
+            "windows": [0, 80], "lam": lam, "slow": slow, "seed": seed, "base": "model_based",
+            "features": ["d_pre", "cmd_before_a"], "control_period_s": dt_s, "link": link}
+    save_model(m, path, meta)
+
+
+def choose(table, margin):
+    """The rule (docs/rl.md): ``table[(lam, slow)][scenario] = {'dov': .., 'dret': ..}``; returns the chosen key
+    (None if no setting is admissible) and the admissible keys."""
+    ok = [k for k, row in table.items() if all(v["dov"] <= -margin for v in row.values())]
+    if not ok:
+        return None, ok
+    worst_ret = {k: min(v["dret"] for v in table[k].values()) for k in ok}
+    worst_margin = {k: min(-v["dov"] for v in table[k].values()) for k in ok}
+    best = max(worst_ret.values())
+    near = [k for k in ok if worst_ret[k] >= best - 0.1]
+    return max(near, key=lambda k: worst_margin[k]), ok
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--slows", default="1.0,1.025,1.05,1.075,1.1,1.15,1.2")
+    ap.add_argument("--lams", default="0.4")
+    ap.add_argument("--scenarios", default="sense_delay,battery_low")
+    ap.add_argument("--ref", default="mpc")
+    ap.add_argument("--seed", type=int, default=300)
+    ap.add_argument("--episodes", type=int, default=100)
+    ap.add_argument("--margin", type=float, default=0.10, help="overshoot margin below the reference, points")
+    ap.add_argument("--link", choices=("envelope", "modal"), default="modal")
+    ap.add_argument("--models", default=None, help="glob of fitted maps to re-time instead of refitting (their meta's "
+                    "lam; --lams ignored), e.g. the shipped policies/pretrained/oracle_imitation_s*.npz")
+    ap.add_argument("--work", default="out/oislow/grid")
+    ap.add_argument("--json", default=None)
+    a = ap.parse_args(argv)
+    lo, hi = a.seed, a.seed + a.episodes
+    if hi > 0 and lo < 80 or lo < 1100 and hi > 1000 or lo < 2100 and hi > 2000:
+        ap.error(f"--seed {a.seed} --episodes {a.episodes}: windows {lo}-{hi - 1} overlap training (0-79) or "
+                 "evaluation (1000-1099, 2000-2099) windows")
+    slows = [float(x) for x in a.slows.split(",")]
+    lams = [float(x) for x in a.lams.split(",")]
+    scenarios = a.scenarios.split(",")
+    from envs import EnvConfig
+    from policies.compare import run_policies
+    from policies.stats import mean_ci
+    config = EnvConfig(link_model=a.link)
+    t0, c0, l0 = time.time(), time.process_time(), os.getloadavg()
+    Path(a.work).mkdir(parents=True, exist_ok=True)
+    names, teacher = {}, {}
+    if a.models:
+        import glob
+
+        from policies.oracle_imitation import load_model
+        loaded = [load_model(p) for p in sorted(glob.glob(a.models))]
+        if not loaded or any(m["meta"].get("link", "envelope") != a.link for m in loaded):
+            ap.error(f"--models {a.models!r}: no file, or maps fitted on another link than {a.link}")
+        lams = [float(loaded[0]["meta"]["lam"])]
+        fitted = {lams[0]: ([{k: v for k, v in m.items() if k not in ("meta", "slow")} for m in loaded],
+                            {"teacher_overshoot_pct": loaded[0]["meta"].get("teacher_overshoot_pct"),
+                             "teacher_energy_j": loaded[0]["meta"].get("teacher_energy_j"),
+                             "dt_s": float(loaded[0]["meta"]["control_period_s"])})}
+    for lam in lams:
+        maps, teacher[lam] = fitted[lam] if a.models else fit_maps(lam, a.link)
+        for slow in slows:
+            names[(lam, slow)] = []
+            for k, m in enumerate(maps):
+                p = f"{a.work}/lam{lam:g}_slow{slow:g}_s{k}.npz"
+                write_map(m, p, lam, slow, k, a.link, teacher[lam]["dt_s"])
+                names[(lam, slow)].append(f"oracle_imitation:{p}")
+    table = {k: {} for k in names}
+    for s in scenarios:
+        runs = {}
+        for lam in lams:   # one batched run per lam (the reference in each: the same windows, the same numbers)
+            runs.update(run_policies([a.ref] + [n for k, v in names.items() if k[0] == lam for n in v], s, a.episodes,
+                                     a.seed, config))
+        ref = runs[a.ref].metrics
+        for key, ns in names.items():
+            ms = [runs[n].metrics for n in ns]
+            dov = [m["overshoot_pct"] - ref["overshoot_pct"] for m in ms]
+            dret = [m["return"] - ref["return"] for m in ms]
+            table[key][s] = {"dov": float(np.mean([d.mean() for d in dov])),
+                             "dret": float(np.mean([d.mean() for d in dret])),
+                             "dov_pooled": mean_ci(np.mean(dov, axis=0)), "dret_pooled": mean_ci(np.mean(dret, axis=0)),
+                             "dov_seeds": [float(d.mean()) for d in dov], "dret_seeds": [float(d.mean()) for d in dret],
+                             "overshoot_pct": float(np.mean([m["overshoot_pct"].mean() for m in ms])),
+                             "energy_after_stop_j": float(np.mean([m["energy_after_stop_j"].mean() for m in ms])),
+                             "return": float(np.mean([m["return"].mean() for m in ms])),
+                             "min_in_sm": min(float(np.mean(m["reached_short_mode"])) for m in ms)}
+        print(f"\n== {s}, windows {lo}-{hi - 1}, {a.link} link; {a.ref}: overshoot {ref['overshoot_pct'].mean():.2f} %, "
+              f"E after {ref['energy_after_stop_j'].mean():.3f} J, return {ref['return'].mean():.1f}")
+        print("  lam   slow   overshoot %  E after J  return  | d return (pooled 95 %)        | d overshoot pts (pooled 95 %)  | SM")
+        for (lam, slow), row in table.items():
+            v = row[s]
+            print(f"  {lam:<5g} {slow:<6g} {v['overshoot_pct']:6.2f}      {v['energy_after_stop_j']:.3f}    {v['return']:5.1f}  | "
+                  f"{v['dret']:+5.2f} [{v['dret_pooled'][1]:+5.2f}, {v['dret_pooled'][2]:+5.2f}]          | "
+                  f"{v['dov']:+5.2f} [{v['dov_pooled'][1]:+5.2f}, {v['dov_pooled'][2]:+5.2f}]           | {v['min_in_sm']:.2f}")
+    chosen, ok = choose(table, a.margin)
+    print(f"\nadmissible (overshoot <= -{a.margin} pts on {', '.join(scenarios)}): {ok}")
+    print(f"chosen: {chosen}")
+    info = {"seed": a.seed, "episodes": a.episodes, "link": a.link, "ref": a.ref, "margin": a.margin,
+            "teacher": {str(k): v for k, v in teacher.items()}, "wall_s": time.time() - t0,
+            "cpu_s": time.process_time() - c0, "load_before": l0, "load_after": os.getloadavg()}
+    print(info)
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump({"info": info, "chosen": chosen, "admissible": ok,
+                       "table": {f"lam={k[0]:g},slow={k[1]:g}": v for k, v in table.items()}}, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()
