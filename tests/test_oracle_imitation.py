@@ -316,3 +316,36 @@ def test_base_in_meta_runs_the_mpc_before_the_stop(tmp_path):
         with pytest.raises(ValueError) as exc:
             call()
         assert str(exc.value) == f"base='pid' is invalid; valid values: {', '.join(BASES)}"
+
+
+def test_playback_selection_rule_and_retimed_maps(tmp_path, monkeypatch):
+    """benchmarks/select_oracle_imitation_playback.py (docs/rl.md, "Re-selecting the playback on the modal link"):
+    the rule keeps the settings <= -margin points of overshoot against the reference on every scenario and picks the
+    largest least return difference (within 0.1 of it: the larger least margin); none admissible gives None. A map
+    re-timed to another ``slow`` differs from the shipped one in ``slow`` only (its unslowed prediction is the same
+    and the slowed one is its interpolation at j / slow); windows that touch the training or evaluation seeds are
+    refused (exit 2) before anything runs."""
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    from select_oracle_imitation_playback import choose, main, write_map
+
+    from policies.oracle_imitation import HORIZON, load_model, predict
+    t = {(0.4, 1.0): {"a": {"dov": -0.05, "dret": 5.0}, "b": {"dov": -0.2, "dret": 6.0}},
+         (0.4, 1.1): {"a": {"dov": -0.12, "dret": 2.0}, "b": {"dov": -0.3, "dret": 1.0}},
+         (0.4, 1.2): {"a": {"dov": -0.15, "dret": 1.5}, "b": {"dov": -0.4, "dret": 0.95}},
+         (0.5, 1.0): {"a": {"dov": -0.11, "dret": 0.5}, "b": {"dov": -0.11, "dret": 3.0}}}
+    assert choose(t, 0.10) == ((0.4, 1.2), [(0.4, 1.1), (0.4, 1.2), (0.5, 1.0)])   # 0.95 is within 0.1 of 1.0
+    assert choose(t, 0.13)[0] == (0.4, 1.2) and choose(t, 0.5) == (None, [])
+    shipped = load_model(SHIPPED)
+    m = {k: v for k, v in shipped.items() if k not in ("meta", "slow")}
+    write_map(m, tmp_path / "m.npz", 0.4, 1.2, 0, "modal", shipped["meta"]["control_period_s"])
+    re = load_model(tmp_path / "m.npz")
+    assert float(re["slow"]) == 1.2 and re["meta"]["slow"] == 1.2
+    assert all(np.array_equal(re[k], shipped[k]) for k in ("W", "cols", "feat_mean", "feat_std"))
+    f = np.array([[0.3, 2.0] + [0.0] * 7])
+    base = predict({**re, "slow": np.array(1.0)}, f)[0]
+    assert np.array_equal(predict(re, f)[0], np.interp(np.arange(HORIZON) / 1.2, np.arange(HORIZON), base))
+    for seed in ("1000", "950", "2050", "40"):
+        with pytest.raises(SystemExit) as e:
+            main(["--seed", seed, "--episodes", "100", "--models", str(SHIPPED), "--work", str(tmp_path / "w")])
+        assert e.value.code == 2
+    assert not (tmp_path / "w").exists()
