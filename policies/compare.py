@@ -259,7 +259,8 @@ def _one_numba_thread():
 def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar, fork=True,
                   extra=((), None, None)):
     """The runs of :func:`compare` (rows and traces filled in place); with ``fork`` the :data:`FORKED`
-    policies run in a child process (:class:`policies.forked.Forked`) on the same windows meanwhile;
+    policies and the share of the others :func:`_split` gives it run in a child process
+    (:class:`policies.forked.Forked`) on the same windows meanwhile;
     ``extra``: ``(specs, traces, on_extra)``, specs run beside the first scenario's, their traces filled in
     place, then ``on_extra(traces)`` (if given) before the child's result is awaited."""
     from .forked import Forked, available
