@@ -17,7 +17,7 @@ before the fork (imports, numba's start-up), of the parent after it (its batched
 child (the MPC) and the wall times of those points. On 2 free cores the wall time is about
 ``before-fork + max(parent after, child) + tail``.
 
-    python benchmarks/bench_compare.py [--repeat 5] [--peer DIR] [--timeline N] [--json]
+    python benchmarks/bench_compare.py [--repeat 5] [--peer DIR] [--timeline N] [--link modal|envelope] [--json]
 """
 
 from __future__ import annotations
@@ -139,8 +139,12 @@ def main(argv=None):
     ap.add_argument("--peer", type=Path, default=None, help="another code tree run alternately (e.g. an older commit's "
                     "`git archive`)")
     ap.add_argument("--timeline", type=int, default=0, metavar="N", help="also N in-process runs of the critical path")
+    ap.add_argument("--link", choices=("modal", "envelope"), default=None,
+                    help="the command's --link (default: none given, the env's default link)")
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
+    if a.link is not None:
+        ARGS.extend(["--link", a.link])
     r = {"end_to_end": end_to_end(a.repeat, a.peer)}
     trees = [ROOT] + ([a.peer.resolve()] if a.peer is not None else [])
     r["timeline"] = [timeline(tree) for _ in range(a.timeline) for tree in trees]   # alternating with the peer

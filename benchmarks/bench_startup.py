@@ -13,19 +13,23 @@ so a change of load hits all alike, after one untimed warm-up round; median and 
   starts and the table kernel loads from its cache (what a changed route or wind costs);
 * ``dronewpt compare --episodes 100 --scenarios nominal --no-plot`` (goal <= 2.5 s): ``--compare
   default`` (every default policy, MPC included: slow, see docs/performance.md) or ``no-mpc`` (the
-  default policies and seed rows without ``mpc``; the default of this script) or ``none``.
+  default policies and seed rows without ``mpc``; the default of this script) or ``none``; on the link(s) of
+  ``--link`` (``modal``, the env's default, ``envelope`` (eq. 4) or ``both``; default: the command as typed,
+  no ``--link``). Each compare's printed table is hashed (SHA-1) in every run: the report says whether
+  every run of every tree printed the same table per link.
 
 In process (``--phases``): the mission's and the compare's phases timed with ``time.process_time`` in
 one fresh interpreter each (imports, config, policy, simulation, Parquet, figures; each policy's
 rollout, statistics, frontier).
 
-    python benchmarks/bench_startup.py [--repeat 5] [--compare no-mpc|default|none] [--phases] [--json] [--root DIR]
-        [--before DIR] [--pyc DIR|inherit] [--mission-only]
+    python benchmarks/bench_startup.py [--repeat 5] [--compare no-mpc|default|none] [--link modal|envelope|both]
+        [--phases] [--json] [--root DIR] [--before DIR] [--pyc DIR|inherit] [--mission-only | --compare-only]
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import resource
@@ -56,17 +60,17 @@ def _cpu_children() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def _run(argv, env) -> tuple[float, float]:
-    """Wall and CPU time [s] of one fresh process (``env``'s PYTHONPATH: the tree it runs)."""
+def _run(argv, env) -> tuple[float, float, str]:
+    """Wall and CPU time [s] of one fresh process (``env``'s PYTHONPATH: the tree it runs) and its stdout's SHA-1."""
     c0, t0 = _cpu_children(), time.perf_counter()
-    r = subprocess.run(argv, cwd=env["PYTHONPATH"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    r = subprocess.run(argv, cwd=env["PYTHONPATH"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     wall, cpu = time.perf_counter() - t0, _cpu_children() - c0
     if r.returncode != 0:
-        raise SystemExit(f"{' '.join(argv)} failed ({r.returncode}): {r.stderr.strip()[-400:]}")
-    return wall, cpu
+        raise SystemExit(f"{' '.join(argv)} failed ({r.returncode}): {r.stderr.decode(errors='replace').strip()[-400:]}")
+    return wall, cpu, hashlib.sha1(r.stdout).hexdigest()
 
 
-def _commands(tmp: str, compare: str) -> dict:
+def _commands(tmp: str, compare: str, links=(None,)) -> dict:
     cli = _console_script()
     cmds = {"python -c pass": [sys.executable, "-c", "pass"],
             "python -c 'import numpy'": [sys.executable, "-c", "import numpy"],
@@ -77,8 +81,10 @@ def _commands(tmp: str, compare: str) -> dict:
                                                      f"{tmp}/s", "--set", "seed={seed}"]}
     if compare != "none":
         extra = ["--policies", NO_MPC, *_seed_rows()] if compare == "no-mpc" else []
-        cmds[f"dronewpt compare ({compare})"] = [*cli, "compare", "--episodes", "100", "--scenarios", "nominal",
-                                                 "--no-plot", "--no-progress", "--out", f"{tmp}/c", *extra]
+        for link in links:
+            name = f"dronewpt compare ({compare}{'' if link is None else ', --link ' + link})"
+            cmds[name] = [*cli, "compare", "--episodes", "100", "--scenarios", "nominal", "--no-plot", "--no-progress",
+                          "--out", f"{tmp}/c", *extra, *([] if link is None else ["--link", link])]
     return cmds
 
 
@@ -107,34 +113,44 @@ def _bytecode_env(env: dict, pyc: str | None) -> dict:
     return {**env, "PYTHONPYCACHEPREFIX": pyc}
 
 
+def _pick(cmds: dict, mission_only: bool, compare_only: bool) -> dict:
+    if mission_only:
+        return {k: v for k, v in cmds.items() if k in ("python -c pass", "dronewpt mission", "dronewpt mission --no-plot")}
+    if compare_only:
+        return {k: v for k, v in cmds.items() if k == "python -c pass" or k.startswith("dronewpt compare")}
+    return cmds
+
+
 def end_to_end(repeat: int = 5, compare: str = "no-mpc", before: Path | None = None, pyc: str | None = None,
-               mission_only: bool = False) -> dict:
+               mission_only: bool = False, links=(None,), compare_only: bool = False) -> dict:
     env = _bytecode_env({**os.environ, "PYTHONPATH": str(ROOT)}, pyc)
     envs = {}
     with tempfile.TemporaryDirectory() as tmp:
-        cmds = _commands(tmp, compare)
-        if mission_only:
-            cmds = {k: v for k, v in cmds.items() if k in ("python -c pass", "dronewpt mission",
-                                                           "dronewpt mission --no-plot")}
-        if before is not None:   # the same two mission commands on another tree, interleaved with these
-            for name in ("dronewpt mission", "dronewpt mission --no-plot"):
+        cmds = _pick(_commands(tmp, compare, links), mission_only, compare_only)
+        if before is not None:   # the same mission and compare commands on another tree, interleaved with these
+            for name in [k for k in cmds if k.startswith(("dronewpt mission", "dronewpt compare")) and "new path" not in k]:
                 cmds[f"{name} (before: {before.name})"] = [a.replace(f"{tmp}/", f"{tmp}/before-") for a in cmds[name]]
                 envs[f"{name} (before: {before.name})"] = {**env, "PYTHONPATH": str(before.resolve())}
         seed = 1000 + int(time.time()) % 100_000 * 100   # new paths: seeds not flown before
         for name, argv in cmds.items():   # warm-up: .pyc, numba's cache, coupling table, Lm of the default path
             _run(_expand(argv, seed), envs.get(name, env))
         load0 = os.getloadavg()
-        res = {k: ([], []) for k in cmds}
+        res = {k: ([], [], set()) for k in cmds}
         for i in range(repeat):
             for name, argv in cmds.items():
-                w, c = _run(_expand(argv, seed + 1 + i), envs.get(name, env))
+                w, c, h = _run(_expand(argv, seed + 1 + i), envs.get(name, env))
                 res[name][0].append(w)
                 res[name][1].append(c)
+                res[name][2].add(h)
         load1 = os.getloadavg()
     out = {"load_before": load0, "load_after": load1, "console_script": _console_script()[0], "pyc": pyc}
-    for name, (w, c) in res.items():
+    for name, (w, c, h) in res.items():
         out[name] = {"median_s": statistics.median(w), "min_s": min(w), "max_s": max(w), "n": len(w),
-                     "cpu_median_s": statistics.median(c), "cpu_min_s": min(c), "cpu_max_s": max(c)}
+                     "cpu_median_s": statistics.median(c), "cpu_min_s": min(c), "cpu_max_s": max(c), "stdout_sha1": sorted(h)}
+    for name in [k for k in res if k.startswith("dronewpt compare") and "(before:" not in k]:
+        peers = [k for k in res if k.startswith(name + " (before:")]
+        out[name]["same_table_as_before"] = (None if not peers else
+                                             len(res[name][2] | set().union(*(res[p][2] for p in peers))) == 1)
     return out
 
 
@@ -218,9 +234,13 @@ def _print(r: dict) -> None:
     for name, s in r.items():
         if not isinstance(s, dict):
             continue
+        key = name.split(" (before:")[0].split(", --link")[0]
+        goal = goals.get(key + ")" if key.startswith("dronewpt compare (") and not key.endswith(")") else key, "")
+        same = "" if s.get("same_table_as_before") is None else \
+            f"; every run's table the same as the peer's: {s['same_table_as_before']} ({s['stdout_sha1'][0][:12]})"
         print(f"  {name:<38} wall median {s['median_s']:.3f} s (range {s['min_s']:.3f}-{s['max_s']:.3f}, "
               f"n={s['n']}; {s['median_s'] / base:.1f}x python -c pass); CPU {s['cpu_median_s']:.3f} s "
-              f"({s['cpu_min_s']:.3f}-{s['cpu_max_s']:.3f})  {goals.get(name, '')}")
+              f"({s['cpu_min_s']:.3f}-{s['cpu_max_s']:.3f})  {goal}{same}")
 
 
 def main(argv=None):
@@ -236,13 +256,18 @@ def main(argv=None):
     ap.add_argument("--pyc", default=os.path.join(tempfile.gettempdir(), "dronewpt-bench-pyc"), metavar="DIR",
                     help="bytecode cache of the measured processes (PYTHONPYCACHEPREFIX; a user's install has its "
                          ".pyc files): default %(default)s; 'inherit' leaves the environment as it is")
-    ap.add_argument("--mission-only", action="store_true", help="only python -c pass and the two mission commands")
+    only = ap.add_mutually_exclusive_group()
+    only.add_argument("--mission-only", action="store_true", help="only python -c pass and the two mission commands")
+    only.add_argument("--compare-only", action="store_true", help="only python -c pass and the compare command(s)")
+    ap.add_argument("--link", choices=("modal", "envelope", "both"), default=None,
+                    help="compare on this link (`--link` of the command; both: one command each); default: none given")
     a = ap.parse_args(argv)
     if a.root is not None:
         global ROOT
         ROOT = a.root.resolve()
+    links = (None,) if a.link is None else ("modal", "envelope") if a.link == "both" else (a.link,)
     r = {"end_to_end": end_to_end(a.repeat, a.compare, a.before, None if a.pyc == "inherit" else a.pyc,
-                                  a.mission_only)}
+                                  a.mission_only, links, a.compare_only)}
     if a.phases:
         r["in_process"] = phases()
         r["in_process_load"] = os.getloadavg()

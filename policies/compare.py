@@ -221,6 +221,20 @@ def frontier_specs(budgets=None) -> tuple:
 
 #: policies run in a forked process beside the others (:mod:`policies.forked`): the MPC's QPs are ~40 % of the CPU
 FORKED = ("mpc",)
+#: kinds whose runs may also go to the forked child to share the work between the two processes
+#: (:func:`_split`): on the exact-mode link each of their seeds runs ``model_based_budget``'s search under it
+MOVABLE = ("residual", "imitation")
+#: CPU seconds of one spec's run per scenario of 100 windows, by link and policy kind (in process, nominal windows,
+#: ``num_threads=1``, 2026-11-26, load ~5; a stacked group's shared work spread over its specs; the modal ``mpc``
+#: 3.5 instead of its 2.8 alone: the child's CPU beside the moved seeds ran 1-2 s above the sum, in 4 runs of 4): only
+#: used to share the runs between the parent and the forked child (:func:`_split`), so a wrong figure costs balance,
+#: never a result
+RUN_COST = {"modal": {"mpc": 3.5, "residual": 1.06, "imitation": 1.18, "model_based_budget": 1.1, "rl": 0.07,
+                      "ppo_lagrangian": 0.07, "model_based": 0.2, "model_based_online": 0.3},
+            "envelope": {"mpc": 1.8, "residual": 0.04, "imitation": 0.04}}
+_OTHER_COST = {"modal": 0.25, "envelope": 0.03}
+#: least estimated work [s] worth a forked child of its own (no MPC among the specs)
+_MIN_FORK_S = 1.0
 
 
 def _forked_runs(specs, scenarios, episodes, seed, config) -> dict:
@@ -247,14 +261,15 @@ def _one_numba_thread():
 def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, traces, bar, fork=True,
                   extra=((), None, None)):
     """The runs of :func:`compare` (rows and traces filled in place); with ``fork`` the :data:`FORKED`
-    policies run in a child process (:class:`policies.forked.Forked`) on the same windows meanwhile;
+    policies and the share of the others :func:`_split` gives it run in a child process
+    (:class:`policies.forked.Forked`) on the same windows meanwhile;
     ``extra``: ``(specs, traces, on_extra)``, specs run beside the first scenario's, their traces filled in
     place, then ``on_extra(traces)`` (if given) before the child's result is awaited."""
     from .forked import Forked, available
 
     n, seed = int(episodes), int(seed)
     specs = list(dict.fromkeys([reference] + [sp for _, sps in groups for sp in sps]))
-    heavy = [sp for sp in specs if sp.split(":", 1)[0] in FORKED and sp != reference] \
+    heavy = _split(specs, reference, [sp for sp in extra[0] if sp not in specs], len(scenarios), config) \
         if fork and len(specs) > 1 and available() else []
     job = None
     if heavy:   # numba's kernels loaded before the fork (the child inherits them), its thread pool not yet
@@ -263,7 +278,7 @@ def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, tr
             SbarChargingVectorEnv(num_envs=1, scenario=scenarios[0], config=config).reset(seed=seed)
             _preimport("numba.np.arrayobj")   # the env step's cache entry imports it on loading: once, not in both
         job = Forked(_forked_runs, heavy, scenarios, n, seed, config)   # (the child: the collector as here)
-    placed, refs = {}, {}
+    placed, mine = {}, {}
     try:
         with _one_numba_thread() if job else contextlib.nullcontext():   # the child has the other core
             for s in scenarios:
@@ -272,12 +287,12 @@ def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, tr
                 runs = run_policies([sp for sp in specs if sp not in heavy] + more, s, n, seed, config,
                                     num_threads=1 if job else None)
                 extra[1].update({(sp, s): runs[sp] for sp in extra[0] if first and sp in runs})
-                refs[s] = runs[reference]
+                mine[s] = runs
                 _add_rows(s, groups, reference, runs, placed, bar)
         if extra[0] and extra[2] is not None:
             extra[2](extra[1])
-        for s, runs in (job.result() if job else {}).items():
-            _add_rows(s, groups, reference, {**runs, reference: refs[s]}, placed, bar)
+        for s, runs in (job.result() if job else {}).items():   # a group's seeds may be in both processes
+            _add_rows(s, groups, reference, {**mine[s], **runs}, placed, bar)
     except BaseException:
         if job:
             job.cancel()
@@ -286,6 +301,33 @@ def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, tr
         for label, _ in groups:
             rows.append(placed[(s, label)][0])
             traces[(label, s)] = placed[(s, label)][1]
+
+
+def _split(specs, reference, extra, n_scenarios, config) -> list:
+    """The specs the forked child runs: the :data:`FORKED` kinds', then seeds of the :data:`MOVABLE` kinds (the
+    last first) while moving one lowers the larger of the two processes' estimated work (:data:`RUN_COST`; the
+    ``extra`` specs run in the parent on the first scenario only). Without a :data:`FORKED` spec, a child only
+    for at least :data:`_MIN_FORK_S` of work. Which process runs a spec never changes its results (the rows are
+    independent: :func:`run_policies`)."""
+    from envs import EnvConfig
+
+    link = (config or EnvConfig()).link_model
+    table, other = RUN_COST.get(link, {}), _OTHER_COST.get(link, 0.05)
+
+    def cost(sp):
+        return table.get(sp.split(":", 1)[0], other)
+    heavy = [sp for sp in specs if sp.split(":", 1)[0] in FORKED and sp != reference]
+    rest = [sp for sp in specs if sp not in heavy]
+    child = sum(cost(sp) for sp in heavy)
+    parent = sum(cost(sp) for sp in rest) + sum(cost(sp) for sp in extra) / n_scenarios
+    moved = []
+    for sp in reversed([sp for sp in rest if sp.split(":", 1)[0] in MOVABLE and sp != reference]):
+        if max(parent - cost(sp), child + cost(sp)) < max(parent, child):
+            moved.append(sp)
+            parent, child = parent - cost(sp), child + cost(sp)
+    if not heavy and child < _MIN_FORK_S:
+        return []
+    return heavy + moved[::-1]
 
 
 @contextlib.contextmanager

@@ -374,6 +374,27 @@ def test_search_equals_the_reference_search(stop_1000, budget):
     assert bm.relaxation(0.01, *stop_1000) == r_shared and r_again == bm.relaxation(budget, *stop_1000)
 
 
+def test_a_stop_is_shared_only_by_the_exact_same_state(stop_1000):
+    """The stop memo (``_STOPS``, keyed on the bytes of the stop's inputs) gives a repeated stop exactly the fresh
+    search's r* without a new entry; a state one ulp away (in the controller's state or the battery voltage: the
+    residual's and imitation's seeds stop within ~4e-5 of each other, never at the same state) is a new stop,
+    searched afresh, with the r* of its own fresh search."""
+    link, devices, dt, ss, x0, u0, du, d_prev, vl = stop_1000
+    bm._STOPS.clear()
+    fresh = bm.relaxation(0.01, *stop_1000)
+    assert len(bm._STOPS) == 1 and bm.relaxation(0.01, *stop_1000) == fresh and len(bm._STOPS) == 1
+    x1 = np.array(x0, dtype=float)
+    x1[0] = np.nextafter(x1[0], np.inf)
+    for moved in ((link, devices, dt, ss, x1, u0, du, d_prev, vl),
+                  (link, devices, dt, ss, x0, u0, du, d_prev, float(np.nextafter(vl, 0.0)))):
+        n = len(bm._STOPS)
+        got = bm.relaxation(0.01, *moved)
+        assert len(bm._STOPS) == n + 1   # a miss
+        bm._STOPS.clear()
+        assert bm.relaxation(0.01, *moved) == got
+    bm._STOPS.clear()
+
+
 @pytest.fixture(scope="module")
 def stops_1001():
     """The arguments of :func:`policies.budget_modal.relaxation` at the real stops of nominal windows 1001-1003 on

@@ -155,3 +155,42 @@ def test_forked_child_that_dies_is_run_again_in_the_parent_and_errors_are_raised
     out = _child(code, timeout=120)
     lines = out.stdout.strip().splitlines()
     assert lines[-2] == f"{len(os.sched_getaffinity(0)) > 1} 42" and lines[-1] == "in the child"
+
+
+def test_split_moves_budgeted_seeds_to_the_child_on_the_modal_link_only():
+    from envs import EnvConfig
+    from policies.compare import _split
+    seeds = [f"residual:r{k}" for k in range(5)] + [f"imitation:i{k}" for k in range(5)]
+    specs = ["model_based", "ramp", "mpc", "model_based_budget:0.01"] + seeds
+    child = _split(specs, "model_based", [], 1, EnvConfig(link_model="modal"))
+    assert child[0] == "mpc" and len(child) > 1
+    assert set(child[1:]) <= set(seeds) and child[1:] == [s for s in seeds if s in child]   # the last seeds, in order
+    assert _split(specs, "model_based", [], 1, EnvConfig(link_model="envelope")) == ["mpc"]   # the MPC dominates
+    assert _split(["model_based", "ramp", "step"], "model_based", [], 1, None) == []          # nothing worth a child
+    assert _split(["model_based"] + seeds, "model_based", [], 1, None) != []                   # seeds alone: a child
+
+
+def test_seeds_split_between_parent_and_child_give_the_in_process_rows():
+    """A seed group whose runs are shared between the parent and the forked child (the modal link: the residual's
+    seeds) gives the rows and traces of the same compare without a fork, to the bit."""
+    pytest.importorskip("stable_baselines3")
+    pytest.importorskip("daqp")
+    import json
+    code = (
+        "import json, numpy as np, policies.compare as pc\n"
+        "from policies.compare import compare, shipped_seed_groups\n"
+        "split = pc._split\n"
+        "moved = []\n"
+        "def rec(*a):\n"
+        "    r = split(*a); moved.extend(r); return r\n"
+        "pc._split = rec\n"
+        "seeds = {'residual': shipped_seed_groups()['residual']}\n"
+        "args = (('model_based', 'mpc', 'ramp'), ('nominal',))\n"
+        "r1, t1 = compare(*args, episodes=2, seed=1010, train_seeds=seeds)\n"
+        "r2, t2 = compare(*args, episodes=2, seed=1010, train_seeds=seeds, fork=False)\n"
+        "same = list(t1) == list(t2) and all(np.array_equal(t1[k].d_short, t2[k].d_short) for k in t2)\n"
+        "print(json.dumps({'moved': [m.split(':')[0] for m in moved], 'rows': r1 == r2, 'traces': same}))\n")
+    res = json.loads(_child(code, timeout=900).stdout.strip().splitlines()[-1])
+    assert res["moved"][0] == "mpc" and "residual" in res["moved"]                   # the group is split
+    assert len([m for m in res["moved"] if m == "residual"]) < 5
+    assert res["rows"] and res["traces"]
