@@ -156,6 +156,7 @@ def _cmd_mission(args) -> int:
 def _mission_command(args, started) -> int:
     from wpt_receiver.numba_start import prepare
 
+    from ..world import aot
     from ..world.budget import estimate_run
     prepare()   # numba's start-up without importing the scipy.linalg package (~0.3 s)
     cfg = mission_config(args)
@@ -163,6 +164,7 @@ def _mission_command(args, started) -> int:
     if args.dry_run:
         return _print_estimate(estimate_run(cfg), args)
     prepare_out_dir(args.out)
+    aot.enable()   # the run on the loop's ahead-of-time build when it is there (no numba; mission_sim.world.aot)
     est = estimate_run(cfg)
     every = stored_every_s(args.every, est)
     started()   # the start-up's objects frozen, the collector back on for the runs (startup_gc_paused)
@@ -174,7 +176,19 @@ def _mission_command(args, started) -> int:
         finally:
             if worker is not None:
                 worker.close()
-    return _report(args, res.summary, files)
+    status = _report(args, res.summary, files)
+    _build_ahead_of_time(pol)
+    return status
+
+
+def _build_ahead_of_time(pol) -> None:
+    """After a run of a policy the loop's ahead-of-time build covers but that ran on numba's JIT (the build
+    missing): build it once, saying so on stderr (:func:`mission_sim.world.aot.build_if_missing`)."""
+    from ..world import aot
+    name = aot.policy_entry(pol)
+    if name is not None:
+        sys.stdout.flush()
+        aot.build_if_missing(name, say=lambda line: print(line, file=sys.stderr, flush=True))
 
 
 def _figure_worker(args, est):
@@ -192,12 +206,14 @@ def _run_and_write(args, cfg, pol, every, worker):
     summary.json; the result and the files written."""
     from wpt_receiver.numba_start import cache_loads_without_registries
 
+    from ..world import aot
     from ..world.runner import run_mission
     from ..world.stream import SeriesWriter
     (args.out / "summary.json").unlink(missing_ok=True)  # present again only when this run's set is complete
     # every check passed and the figure worker forked: numba (imported by the run anyway) loads the cached
     # kernels without its typing/lowering registries (a cache miss still compiles; wpt_receiver.numba_start)
-    cache_loads_without_registries()
+    if not aot.covers(aot.policy_entry(pol)):   # the ahead-of-time build runs it without numba
+        cache_loads_without_registries()
     writer = SeriesWriter(args.out, csv=args.csv, every_s=every, figure_points=None if args.no_plot else FIGURE_POINTS)
     try:
         res = run_mission(cfg, pol, charge=not args.no_charge, progress=show_progress(args),
