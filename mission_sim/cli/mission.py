@@ -154,23 +154,34 @@ def _cmd_mission(args) -> int:
 
 
 def _mission_command(args, started) -> int:
+    worker = _figure_worker(args)   # first: matplotlib imports in the child while this process checks and runs
+    try:
+        return _checked_run(args, started, worker)
+    finally:
+        if worker is not None:
+            worker.close(wait_s=0.0)   # bad input, a refused --out, a long mission: ended at once (no-op if reaped)
+
+
+def _checked_run(args, started, worker) -> int:
     from wpt_receiver.numba_start import prepare
 
     from ..world import aot
     from ..world.budget import estimate_run
-    prepare()   # numba's start-up without importing the scipy.linalg package (~0.3 s)
     cfg = mission_config(args)
     pol = make_policy(args.policy, cfg)
     if args.dry_run:
         return _print_estimate(estimate_run(cfg), args)
     prepare_out_dir(args.out)
-    aot.enable()   # the run on the loop's ahead-of-time build when it is there (no numba; mission_sim.world.aot)
+    if not aot.enable() or not aot.covers(aot.policy_entry(pol)):   # else no numba (mission_sim.world.aot)
+        prepare()   # numba's start-up without importing the scipy.linalg package (~0.3 s)
     est = estimate_run(cfg)
     every = stored_every_s(args.every, est)
     started()   # the start-up's objects frozen, the collector back on for the runs (startup_gc_paused)
     with folder_lock(args.out, MISSION_LOCK, f"--out {str(args.out)!r}: another mission is writing there; "
-                     "wait for it or use another --out"):  # before any simulation or fork; removed at the end
-        worker = _figure_worker(args, est)
+                     "wait for it or use another --out"):  # before any simulation; removed at the end
+        if worker is not None and est.rows > FIGURE_WORKER_MAX_ROWS:
+            worker.close(wait_s=0.0)   # a long run's memory is not held twice: drawn here after the run
+            worker = None
         try:
             res, files = _run_and_write(args, cfg, pol, every, worker)
         finally:
@@ -191,12 +202,14 @@ def _build_ahead_of_time(pol) -> None:
         aot.build_if_missing(name, say=lambda line: print(line, file=sys.stderr, flush=True))
 
 
-def _figure_worker(args, est):
+def _figure_worker(args):
     """A :class:`~mission_sim.figures.worker.FigureWorker` (matplotlib imported in a forked process while
-    the mission runs) for a short mission with figures; None otherwise (drawn in process after the run:
-    a long run's memory is not doubled by a second process)."""
+    this one checks its input and runs the mission), forked first thing for a mission with figures; None
+    otherwise. The command ends it at once when the run does not happen (bad input, a refused ``--out``)
+    and for a long mission (estimated rows above :data:`FIGURE_WORKER_MAX_ROWS`: drawn in process after
+    the run, a long run's memory is not doubled by a second process)."""
     from ..figures.worker import FigureWorker, fork_available
-    if args.no_plot or est.rows > FIGURE_WORKER_MAX_ROWS or not fork_available():
+    if args.no_plot or args.dry_run or not fork_available():
         return None
     return FigureWorker()
 

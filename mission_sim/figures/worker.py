@@ -82,11 +82,12 @@ class FigureWorker:
             raise value
         return value
 
-    def close(self) -> None:
+    def close(self, wait_s: float = CLOSE_WAIT_S) -> None:
         """Reap the child: it exits by itself after drawing, or at the EOF of the closed pipe once its
-        import is done; after :data:`CLOSE_WAIT_S` it is terminated (its temporary files removed). Idempotent."""
+        import is done; after ``wait_s`` it is terminated (its temporary files removed; 0: at once, for a
+        worker whose figures will not be asked for). Idempotent."""
         self._conn.close()
-        self._proc.join(timeout=CLOSE_WAIT_S)
+        self._proc.join(timeout=wait_s)
         if self._proc.is_alive():
             self._proc.terminate()
             self._proc.join()

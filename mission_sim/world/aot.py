@@ -15,7 +15,8 @@ written twice: the build compiles the same functions numba's JIT compiles (the r
   interpreter and the extension suffix. A changed source means another name: the old file is never loaded
   (stale entries are left to the cache's owner; each is ~1 MB). The module also returns the key from
   ``aot_key()``, checked on load.
-* **Fail safe.** A missing, unloadable (truncated, wrong platform) or mismatched module gives None here and
+* **Fail safe.** A missing, changed or truncated (its SHA-256, written after it, checked before loading: a
+  broken shared object can crash the process that loads it), unloadable or mismatched module gives None here and
   the mission runs on numba's JIT as before, with identical results; a build that fails leaves a
   ``.failed`` note with its error (no retry on every run; ``dronewpt warmup`` retries).
 * **Who uses it.** Only a process that called :func:`enable` (``dronewpt mission``) and only for a policy
@@ -40,7 +41,7 @@ import tempfile
 from pathlib import Path
 
 __all__ = ["ENTRIES", "ENV_VAR", "enable", "enabled", "covers", "advance", "build", "build_key", "module_path",
-           "sources", "failed_note", "build_if_missing", "policy_entry"]
+           "sources", "failed_note", "digest_note", "build_if_missing", "policy_entry"]
 
 #: the policies whose compiled kernel gets an entry ``advance_<name>`` (the default mission's policy; each entry
 #: compiles the whole loop once more: ~30 s of CPU)
@@ -117,6 +118,11 @@ def failed_note(path: Path) -> Path:
     return path.with_name(path.name.split(".")[0] + ".failed")
 
 
+def digest_note(path: Path) -> Path:
+    """The SHA-256 of the module at ``path``, written after it: checked before the module is loaded."""
+    return path.with_name(path.name.split(".")[0] + ".sha256")
+
+
 def _load():
     """The built module of the current sources, loaded once per process; None if absent or unusable."""
     if _state["loaded"]:
@@ -127,6 +133,8 @@ def _load():
         path = module_path(key)
         if path is None or not path.is_file():
             return None
+        if hashlib.sha256(path.read_bytes()).hexdigest() != digest_note(path).read_text().strip():
+            return None   # truncated or changed since the build (loading a broken shared object can crash)
         spec = importlib.util.spec_from_file_location(_name(key), path)
         mod = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(mod)
@@ -209,7 +217,11 @@ def build(force: bool = True, timeout_s: float = 1800.0) -> Path | None:
             built = list(Path(tmp).glob(_name(key) + "*" + importlib.machinery.EXTENSION_SUFFIXES[0]))
             if r.returncode != 0 or len(built) != 1:
                 raise RuntimeError(f"exit status {r.returncode}: {(r.stderr or r.stdout).strip()[-2000:]}")
+            digest = hashlib.sha256(built[0].read_bytes()).hexdigest()
             os.replace(built[0], path)
+            tmp_note = Path(tmp) / "digest"
+            tmp_note.write_text(digest + "\n")
+            os.replace(tmp_note, digest_note(path))
         note.unlink(missing_ok=True)
     except (OSError, RuntimeError, subprocess.SubprocessError) as exc:
         try:
