@@ -113,6 +113,7 @@ def _serve(conn, parent_end) -> None:
 
 def _draw_once(conn) -> None:
     from . import mission
+    from .. import config  # noqa: F401 - what unpickling the result imports, before it arrives (forked early)
     if core_free():   # while the parent simulates: ~0.03 s off the first figure for ~0.1 s of CPU (measured)
         mission.warm_up()
     try:
