@@ -23,7 +23,8 @@ written twice: the build compiles the same functions numba's JIT compiles (the r
   with a :meth:`kernel_spec` named in :data:`ENTRIES` (:func:`.fastpath.run`); library calls of
   :func:`~.runner.run_mission`, sweeps and tests run on the JIT unless they enable it. ``$DRONEWPT_AOT``:
   ``0`` never, ``use`` load only (never build), anything else (the default) also builds after a
-  ``dronewpt mission`` that missed it (~30-40 s of CPU once, said on stderr); ``NUMBA_DISABLE_JIT=1`` never.
+  ``dronewpt mission`` that missed it (once, said on stderr: 16 s after a first run that compiled the loop's
+  kernels into numba's cache, 77-113 s when they had to be compiled again; load ~5); ``NUMBA_DISABLE_JIT=1`` never.
 * **Build.** :func:`build` runs the compiler in a child process (numba, ``numba.pycc``, a C compiler) into
   a temporary folder beside the entry and renames the module into place: concurrent builders and readers
   never see half a file.
@@ -243,6 +244,6 @@ def build_if_missing(policy_name: str, say=None) -> Path | None:
     if path is None or failed_note(path).is_file():
         return None
     if say is not None:
-        say("dronewpt mission: compiling the mission loop ahead of time once (~30-60 s; later runs start "
+        say("dronewpt mission: compiling the mission loop ahead of time once (~15-120 s; later runs start "
             "without numba; DRONEWPT_AOT=use skips this)")
     return build(force=False)
