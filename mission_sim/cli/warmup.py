@@ -10,6 +10,7 @@ every stage as loaded from the cache.
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
 
@@ -24,7 +25,9 @@ def _add_warmup(sub):
                                    "use: the compiled mission loop with the step, ramp and model_based policy "
                                    "kernels (mission, replay, sweep, sizing --source mission), the batched env "
                                    "on both links and its policy kernels with the budgeted plan's search (compare, train) and the switching model (paper "
-                                   "--model switching, sizing). Prints each stage, how many kernels it compiled "
+                                   "--model switching, sizing), and builds the mission loop ahead of time into the disk cache "
+                                   "(`dronewpt mission` then runs without numba; skipped with DRONEWPT_AOT=0). Prints "
+                                   "each stage, how many kernels it compiled "
                                    "and how long it took.")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.set_defaults(func=_cmd_warmup)
@@ -59,6 +62,8 @@ def _ahead_of_time() -> str:
     """The mission loop's ahead-of-time build (:mod:`mission_sim.world.aot`; a child process compiles it)."""
     from ..world import aot
     path = aot.module_path()
+    if not aot.enable():
+        return f"skipped ({aot.ENV_VAR}={os.environ.get(aot.ENV_VAR, '')}, or NUMBA_DISABLE_JIT set)"
     if path is None:
         return "skipped (the disk cache is off: DRONEWPT_CACHE_DIR is empty)"
     if path.is_file():
