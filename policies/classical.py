@@ -83,11 +83,16 @@ class _CommandPolicy:
         name, params, state = spec
         return KERNELS[name], params, state
 
+    def kernel_name(self):
+        """The name of this policy's kernel in :data:`policies.kernels.KERNELS`, or None (no kernel: a subclass
+        that changes what ``act`` computes, or a batch)."""
+        return self.name if type(self) in _KERNEL_CLASSES and self.n == 1 else None
+
     def kernel_spec(self):
         """:meth:`kernel` without numba: ``(name, params, state)``, the kernel by its name in
         :data:`policies.kernels.KERNELS` (an ahead-of-time build of the mission loop binds it in by name:
         :mod:`mission_sim.world.aot`), or None."""
-        if type(self) not in _KERNEL_CLASSES or self.n != 1:
+        if self.kernel_name() is None:
             return None
         wlm_v1, det, r1 = self._consts
         head = [float(wlm_v1), float(det), float(r1), float(wlm_v1**2)]

@@ -147,7 +147,9 @@ def test_sigterm_during_the_run_ends_the_worker_too(tmp_path):
                              "--set", "sim.traj_dt_s=0.01"], cwd=ROOT, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 120
-    while not (out / ".mission.lock").exists() or not _children_of(proc.pid):
+    # the worker is forked first thing; the run streams its rows to a temporary Parquet file
+    while not (out / ".mission.lock").exists() or not _children_of(proc.pid) or \
+            not any(p.name.startswith(".timeseries.tmp") for p in out.iterdir()):
         assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
         time.sleep(0.05)
     kids = _children_of(proc.pid)

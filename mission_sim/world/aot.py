@@ -106,12 +106,18 @@ def _name(key: str) -> str:
 
 
 def module_path(key: str | None = None) -> Path | None:
-    """Where the module of ``key`` (default: the current sources') lives; None when the disk cache is off."""
+    """Where the module of ``key`` (default: the current sources') lives; None when the disk cache is off or
+    the sources cannot be read (an install without its ``.py`` files: no key, so no module)."""
     from wpt_receiver.diskcache import cache_dir
     d = cache_dir()
     if d is None:
         return None
-    return d / "aot" / (_name(key or build_key()) + importlib.machinery.EXTENSION_SUFFIXES[0])
+    if key is None:
+        try:
+            key = build_key()
+        except OSError:
+            return None
+    return d / "aot" / (_name(key) + importlib.machinery.EXTENSION_SUFFIXES[0])
 
 
 def failed_note(path: Path) -> Path:
@@ -148,10 +154,11 @@ def _load():
 
 
 def policy_entry(policy) -> str | None:
-    """The name of ``policy``'s compiled kernel (:meth:`kernel_spec`) if :data:`ENTRIES` has it, else None."""
-    spec = getattr(policy, "kernel_spec", None)
-    got = spec() if callable(spec) else None
-    return got[0] if got is not None and got[0] in ENTRIES else None
+    """The name of ``policy``'s compiled kernel (its ``kernel_name()``, the name :meth:`kernel_spec` gives) if
+    :data:`ENTRIES` has it, else None."""
+    name = getattr(policy, "kernel_name", None)
+    name = name() if callable(name) else None
+    return name if name in ENTRIES else None
 
 
 def covers(policy_name: str | None) -> bool:
@@ -201,7 +208,10 @@ def build(force: bool = True, timeout_s: float = 1800.0) -> Path | None:
     """Build the module of the current sources into the disk cache (a child process); its path, or None when
     the cache is off or the build failed (its error in :func:`failed_note`). ``force=False`` returns the
     existing module's path, or None after an earlier failure, without building."""
-    key = build_key()
+    try:
+        key = build_key()
+    except OSError:   # the sources are not there to compile: nothing to build
+        return None
     path = module_path(key)
     if path is None:
         return None
