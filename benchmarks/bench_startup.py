@@ -172,14 +172,18 @@ from mission_sim.world.runner import run_mission
 from mission_sim.world.stream import SeriesWriter
 out = Path(sys.argv[1]); out.mkdir(exist_ok=True)
 w = SeriesWriter(out, csv=False, every_s=0.0, figure_points=20000); lap("import runner, stream, pyarrow")
-from wpt_receiver.numba_start import prepare
-prepare(); lap("numba_start.prepare (scipy's cython_blas alone)")
-import numba; lap("import numba")
-from numba.core.registry import cpu_target
-cpu_target.target_context.refresh(); lap("numba's registries")
-import policies.kernels; lap("the policy's compiled kernel from numba's cache")
-from mission_sim.world import loop_kernel
-loop_kernel.advance_for(True); lap("the mission loop from numba's cache (one overload)")
+from mission_sim.world import aot
+if aot.enable() and aot.covers("model_based"):   # as dronewpt mission: no numba (mission_sim.world.aot)
+    lap("the loop's ahead-of-time build: key, SHA-256, load")
+else:
+    from wpt_receiver.numba_start import prepare
+    prepare(); lap("numba_start.prepare (scipy's cython_blas alone)")
+    import numba; lap("import numba")
+    from numba.core.registry import cpu_target
+    cpu_target.target_context.refresh(); lap("numba's registries")
+    import policies.kernels; lap("the policy's compiled kernel from numba's cache")
+    from mission_sim.world import loop_kernel
+    loop_kernel.advance_for(True); lap("the mission loop from numba's cache (one overload)")
 res = run_mission(cfg, pol, charge=True, progress=False, frame=False, sink=w); lap("simulation + uncharged baseline")
 w.close(); lap("Parquet close")
 import matplotlib; matplotlib.use("Agg"); import matplotlib.pyplot; lap("import matplotlib")

@@ -79,7 +79,7 @@ def _here():
 
 # numba's cache of this module holds the link kernel's code, the env step's shared helpers and the layout's /
 # objective's constants: dropped when those files change (numba keys the cache on this file alone)
-drop_stale_cache(_here, (_modal_kernel, *(Path(__file__).with_name(f) for f in ("vector_kernel.py", "layout.py",
+drop_stale_cache(_here, (_modal_kernel, _modal_kernel._modal_link, *(Path(__file__).with_name(f) for f in ("vector_kernel.py", "layout.py",
                                                                                "objective.py"))))
 
 #: the commutation angle's tolerance [rad] (V2 to < 1e-6 V; the solve starts from the last angle)

@@ -184,7 +184,7 @@ def _drop_stale():
     from wpt_receiver.kernel_cache import drop_stale_cache
     here = Path(__file__).parent
     deps = [here / f for f in ("vector_kernel.py", "layout.py", "objective.py", "modal_step.py")]
-    drop_stale_cache(_here, deps + [Path(wpt_receiver.__file__).parent / "modal_kernel.py"])
+    drop_stale_cache(_here, deps + [Path(wpt_receiver.__file__).parent / f for f in ("modal_kernel.py", "modal_link.py")])
     _CHECKED.append(True)
 
 

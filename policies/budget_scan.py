@@ -25,6 +25,7 @@ import numpy as np
 from numba import njit
 
 from wpt_receiver import modal_kernel as _modal_kernel
+from wpt_receiver import modal_link as _modal_link
 from wpt_receiver.kernel_cache import drop_stale_cache
 from wpt_receiver.modal_kernel import held_peak
 
@@ -35,8 +36,8 @@ def _here():
     """This file, for :func:`wpt_receiver.kernel_cache.drop_stale_cache`."""
 
 
-# held_peak is compiled into this module's cache: drop it when modal_kernel's source changes
-drop_stale_cache(_here, (_modal_kernel, Path(__file__)))
+# held_peak is compiled into this module's cache: drop it when modal_kernel's (or its layout's) source changes
+drop_stale_cache(_here, (_modal_kernel, _modal_link, Path(__file__)))
 
 
 @njit(cache=True)

@@ -76,13 +76,27 @@ class _CommandPolicy:
     def kernel(self):
         """The optional fast-path hook of :class:`mission_sim.contract.Policy`: ``(fn, params, state)``
         (:mod:`policies.kernels`), or None for a subclass that changes what ``act`` computes."""
-        if type(self) not in _KERNEL_CLASSES or self.n != 1:
+        spec = self.kernel_spec()
+        if spec is None:
             return None
         from .kernels import KERNELS  # numba: imported on the first compiled mission only
+        name, params, state = spec
+        return KERNELS[name], params, state
+
+    def kernel_name(self):
+        """The name of this policy's kernel in :data:`policies.kernels.KERNELS`, or None (no kernel: a subclass
+        that changes what ``act`` computes, or a batch)."""
+        return self.name if type(self) in _KERNEL_CLASSES and self.n == 1 else None
+
+    def kernel_spec(self):
+        """:meth:`kernel` without numba: ``(name, params, state)``, the kernel by its name in
+        :data:`policies.kernels.KERNELS` (an ahead-of-time build of the mission loop binds it in by name:
+        :mod:`mission_sim.world.aot`), or None."""
+        if self.kernel_name() is None:
+            return None
         wlm_v1, det, r1 = self._consts
         head = [float(wlm_v1), float(det), float(r1), float(wlm_v1**2)]
-        return KERNELS[self.name], np.array(head + self._kernel_params()), \
-            np.zeros(1 + self._kernel_state_size())
+        return self.name, np.array(head + self._kernel_params()), np.zeros(1 + self._kernel_state_size())
 
     def _kernel_params(self) -> list:
         return []

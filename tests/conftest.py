@@ -8,10 +8,15 @@ And the flight-log tests (``_flightlogs.LOG_TESTS``) read logs from the reposito
 one of their modules runs, opening a file named like a flight log outside the repository (and outside
 the temporary folder; never in a ``../shared`` beside it) fails (``_flightlogs.log_guard``, an audit hook
 inert at other times).
+
+``dronewpt mission`` run by the tests (in process or in a child) stays on numba's JIT and never builds the
+loop ahead of time (``DRONEWPT_AOT=0`` unless set: a build is ~30-60 s of CPU, and tests that change the
+loop's code in process must run it); ``tests/test_mission_aot.py`` builds and checks that path.
 """
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -21,6 +26,7 @@ import pytest
 from _flightlogs import LOG_TESTS, log_guard
 
 _ROOT = Path(__file__).resolve().parents[1]
+os.environ.setdefault("DRONEWPT_AOT", "0")   # mission_sim.world.aot (module notes above)
 _GUARDED = [False]
 sys.addaudithook(log_guard(_ROOT, _ROOT.parent / "shared", lambda: _GUARDED[0]))
 

@@ -147,7 +147,9 @@ def test_sigterm_during_the_run_ends_the_worker_too(tmp_path):
                              "--set", "sim.traj_dt_s=0.01"], cwd=ROOT, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 120
-    while not (out / ".mission.lock").exists() or not _children_of(proc.pid):
+    # the worker is forked first thing; the run streams its rows to a temporary Parquet file
+    while not (out / ".mission.lock").exists() or not _children_of(proc.pid) or \
+            not any(p.name.startswith(".timeseries.tmp") for p in out.iterdir()):
         assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
         time.sleep(0.05)
     kids = _children_of(proc.pid)
@@ -160,27 +162,38 @@ def test_sigterm_during_the_run_ends_the_worker_too(tmp_path):
 
 
 def test_long_missions_draw_in_process(tmp_path, monkeypatch):
-    """Above FIGURE_WORKER_MAX_ROWS no worker is started (a long run's memory is not held twice)."""
+    """Above FIGURE_WORKER_MAX_ROWS the worker (forked first thing) is ended before the run, which then
+    draws in process (a long run's memory is not held twice); nothing is asked of it, no process is left."""
     import mission_sim.cli.mission as cm
     import mission_sim.figures.worker as fw
     monkeypatch.setattr(cm, "FIGURE_WORKER_MAX_ROWS", 3000)     # the default mission: ~4,500 rows estimated
-    started = []
-    monkeypatch.setattr(fw.FigureWorker, "__init__", lambda self: started.append(1))
+    events = []
+    real_close = fw.FigureWorker.close
+    monkeypatch.setattr(fw.FigureWorker, "draw", lambda self, *a: events.append("draw"))
+    monkeypatch.setattr(fw.FigureWorker, "close", lambda self, **k: (events.append(("close", k)),
+                                                                     real_close(self, **k))[-1])
+    import mission_sim.world.runner as runner
+    run_mission = runner.run_mission
+    monkeypatch.setattr(runner, "run_mission", lambda *a, **k: (events.append("run"), run_mission(*a, **k))[-1])
     assert main(["mission", "--out", str(tmp_path / "m"), "--no-progress", "--format", "json"]) == 0
-    assert started == [] and len(list((tmp_path / "m").glob("*.png"))) == 5
+    assert events[:2] == [("close", {"wait_s": 0.0}), "run"] and "draw" not in events
+    assert len(list((tmp_path / "m").glob("*.png"))) == 5 and _left() == []
 
 
-def test_a_refused_out_folder_forks_no_figure_process(tmp_path, monkeypatch, capsys):
-    """A second mission on an ``--out`` another one is writing is refused (exit 2, one line) before the
-    figure process is forked: nothing is imported or drawn for a run that does not happen."""
+def test_a_refused_out_folder_ends_the_figure_process(tmp_path, monkeypatch, capsys):
+    """A second mission on an ``--out`` another one is writing is refused (exit 2, one line): the figure
+    process, forked first thing, is ended at once (not waited for), nothing is drawn, no process is left."""
     import mission_sim.figures.worker as fw
     from mission_sim.cli.mission import MISSION_LOCK
     from mission_sim.files import folder_lock
-    made = []
-    monkeypatch.setattr(fw, "FigureWorker", lambda: made.append(1))
+    closed = []
+    real_close = fw.FigureWorker.close
+    monkeypatch.setattr(fw.FigureWorker, "draw", lambda self, *a: closed.append("draw"))
+    monkeypatch.setattr(fw.FigureWorker, "close", lambda self, **k: (closed.append(k), real_close(self, **k))[-1])
     out = tmp_path / "busy"
     out.mkdir()
     with folder_lock(out, MISSION_LOCK, "busy"):
         assert main(["mission", "--out", str(out), "--no-progress"]) == 2
-    assert made == [] and _left() == []
+    assert closed == [{"wait_s": 0.0}] and _left() == []
     assert "another mission is writing there" in capsys.readouterr().err
+    assert list(out.iterdir()) == []

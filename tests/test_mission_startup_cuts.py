@@ -166,10 +166,31 @@ def test_without_a_free_core_no_helper_is_forked(tmp_path, monkeypatch):
     assert [line.split()[1] for line in log.read_text().splitlines()] == ["worker"] * len(names)
 
 
-def test_core_free_follows_the_load_average(monkeypatch):
+def test_core_free_follows_the_running_count_else_the_load_average(monkeypatch):
+    """Free: at most CPUs - 1 runnable tasks (this one included) in every read of /proc/loadavg; without that
+    file, the 1-minute load average below CPUs - 0.5."""
+    import builtins
+    import io
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    real_open, reads = builtins.open, []
+
+    def fake_open(path, *a, **k):
+        if path != "/proc/loadavg":
+            return real_open(path, *a, **k)
+        if reads[0] is None:
+            raise FileNotFoundError(path)
+        return io.StringIO(f"3.10 2.00 1.50 {reads.pop(0)}/321 4567\n")
+    monkeypatch.setattr(builtins, "open", fake_open)
+    reads[:] = [1, 1, 1]
+    assert fw.core_free() is True                  # only this process runs: the other core is free
+    reads[:] = [1, 2, 1]
+    assert fw.core_free() is False                 # something else ran in one of the reads
+    reads[:] = [3]
+    assert fw.core_free() is False
+    reads[:] = [None]                              # no /proc/loadavg: the load average decides
     monkeypatch.setattr(os, "getloadavg", lambda: (1.2, 1.0, 1.0))
     assert fw.core_free() is True
+    reads[:] = [None]
     monkeypatch.setattr(os, "getloadavg", lambda: (1.6, 1.0, 1.0))
     assert fw.core_free() is False
 

@@ -154,35 +154,62 @@ def _cmd_mission(args) -> int:
 
 
 def _mission_command(args, started) -> int:
+    worker = _figure_worker(args)   # first: matplotlib imports in the child while this process checks and runs
+    try:
+        return _checked_run(args, started, worker)
+    finally:
+        if worker is not None:
+            worker.close(wait_s=0.0)   # bad input, a refused --out, a long mission: ended at once (no-op if reaped)
+
+
+def _checked_run(args, started, worker) -> int:
     from wpt_receiver.numba_start import prepare
 
+    from ..world import aot
     from ..world.budget import estimate_run
-    prepare()   # numba's start-up without importing the scipy.linalg package (~0.3 s)
     cfg = mission_config(args)
     pol = make_policy(args.policy, cfg)
     if args.dry_run:
         return _print_estimate(estimate_run(cfg), args)
     prepare_out_dir(args.out)
+    if not aot.enable() or not aot.covers(aot.policy_entry(pol)):   # else no numba (mission_sim.world.aot)
+        prepare()   # numba's start-up without importing the scipy.linalg package (~0.3 s)
     est = estimate_run(cfg)
     every = stored_every_s(args.every, est)
     started()   # the start-up's objects frozen, the collector back on for the runs (startup_gc_paused)
     with folder_lock(args.out, MISSION_LOCK, f"--out {str(args.out)!r}: another mission is writing there; "
-                     "wait for it or use another --out"):  # before any simulation or fork; removed at the end
-        worker = _figure_worker(args, est)
+                     "wait for it or use another --out"):  # before any simulation; removed at the end
+        if worker is not None and est.rows > FIGURE_WORKER_MAX_ROWS:
+            worker.close(wait_s=0.0)   # a long run's memory is not held twice: drawn here after the run
+            worker = None
         try:
             res, files = _run_and_write(args, cfg, pol, every, worker)
         finally:
             if worker is not None:
                 worker.close()
-    return _report(args, res.summary, files)
+    status = _report(args, res.summary, files)
+    _build_ahead_of_time(pol)
+    return status
 
 
-def _figure_worker(args, est):
+def _build_ahead_of_time(pol) -> None:
+    """After a run of a policy the loop's ahead-of-time build covers but that ran on numba's JIT (the build
+    missing): build it once, saying so on stderr (:func:`mission_sim.world.aot.build_if_missing`)."""
+    from ..world import aot
+    name = aot.policy_entry(pol)
+    if name is not None:
+        sys.stdout.flush()
+        aot.build_if_missing(name, say=lambda line: print(line, file=sys.stderr, flush=True))
+
+
+def _figure_worker(args):
     """A :class:`~mission_sim.figures.worker.FigureWorker` (matplotlib imported in a forked process while
-    the mission runs) for a short mission with figures; None otherwise (drawn in process after the run:
-    a long run's memory is not doubled by a second process)."""
+    this one checks its input and runs the mission), forked first thing for a mission with figures; None
+    otherwise. The command ends it at once when the run does not happen (bad input, a refused ``--out``)
+    and for a long mission (estimated rows above :data:`FIGURE_WORKER_MAX_ROWS`: drawn in process after
+    the run, a long run's memory is not doubled by a second process)."""
     from ..figures.worker import FigureWorker, fork_available
-    if args.no_plot or est.rows > FIGURE_WORKER_MAX_ROWS or not fork_available():
+    if args.no_plot or args.dry_run or not fork_available():
         return None
     return FigureWorker()
 
@@ -192,12 +219,14 @@ def _run_and_write(args, cfg, pol, every, worker):
     summary.json; the result and the files written."""
     from wpt_receiver.numba_start import cache_loads_without_registries
 
+    from ..world import aot
     from ..world.runner import run_mission
     from ..world.stream import SeriesWriter
     (args.out / "summary.json").unlink(missing_ok=True)  # present again only when this run's set is complete
     # every check passed and the figure worker forked: numba (imported by the run anyway) loads the cached
     # kernels without its typing/lowering registries (a cache miss still compiles; wpt_receiver.numba_start)
-    cache_loads_without_registries()
+    if not aot.covers(aot.policy_entry(pol)):   # the ahead-of-time build runs it without numba
+        cache_loads_without_registries()
     writer = SeriesWriter(args.out, csv=args.csv, every_s=every, figure_points=None if args.no_plot else FIGURE_POINTS)
     try:
         res = run_mission(cfg, pol, charge=not args.no_charge, progress=show_progress(args),

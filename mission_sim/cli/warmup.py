@@ -10,6 +10,7 @@ every stage as loaded from the cache.
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
 
@@ -24,7 +25,9 @@ def _add_warmup(sub):
                                    "use: the compiled mission loop with the step, ramp and model_based policy "
                                    "kernels (mission, replay, sweep, sizing --source mission), the batched env "
                                    "on both links and its policy kernels with the budgeted plan's search (compare, train) and the switching model (paper "
-                                   "--model switching, sizing). Prints each stage, how many kernels it compiled "
+                                   "--model switching, sizing), and builds the mission loop ahead of time into the disk cache "
+                                   "(`dronewpt mission` then runs without numba; skipped with DRONEWPT_AOT=0). Prints "
+                                   "each stage, how many kernels it compiled "
                                    "and how long it took.")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.set_defaults(func=_cmd_warmup)
@@ -55,7 +58,21 @@ def _switching() -> None:
     size_policies(["step"], TABLE_I, preset("schottky"), SizingRules(), t_end_s=3e-3)
 
 
+def _ahead_of_time() -> str:
+    """The mission loop's ahead-of-time build (:mod:`mission_sim.world.aot`; a child process compiles it)."""
+    from ..world import aot
+    path = aot.module_path()
+    if not aot.enable():
+        return f"skipped ({aot.ENV_VAR}={os.environ.get(aot.ENV_VAR, '')}, or NUMBA_DISABLE_JIT set)"
+    if path is None:
+        return "skipped (the disk cache is off: DRONEWPT_CACHE_DIR is empty)"
+    if path.is_file():
+        return "built already"
+    return "built" if aot.build(force=True) is not None else f"failed (numba's JIT is used; {aot.failed_note(path)})"
+
+
 STAGES = (("mission loop and policy kernels (mission, replay, sweep)", _missions),
+          ("mission loop built ahead of time (dronewpt mission without numba)", _ahead_of_time),
           ("batched env and policy kernels (compare, train)", _envs),
           ("switching model (paper --model switching, sizing)", _switching))
 
@@ -86,12 +103,14 @@ def _cmd_warmup(args) -> int:
     rows = []
     for name, run in STAGES:
         n0, t0 = counter.n, time.perf_counter()
-        run()
+        note = run()
         row = {"stage": name, "kernels_compiled": counter.n - n0, "wall_s": round(time.perf_counter() - t0, 2)}
+        if note is not None:
+            row["result"] = note
         rows.append(row)
         if args.format == "table":
-            what = (f"{row['kernels_compiled']} kernels compiled" if row["kernels_compiled"]
-                    else "loaded from numba's cache")
+            what = row.get("result") or (f"{row['kernels_compiled']} kernels compiled" if row["kernels_compiled"]
+                                         else "loaded from numba's cache")
             print(f"{name}: {what} in {row['wall_s']:.1f} s", flush=True)
     total = sum(r["wall_s"] for r in rows)
     if args.format == "json":

@@ -7,8 +7,8 @@ them: it forks (POSIX ``fork``: nothing is pickled at start, the config and the 
 inherited) before the run, the child imports :mod:`.mission` and waits; after the run the parent sends
 the summary and the figures' bounded copy of the series, the child draws and writes the PNG files
 (atomically, :func:`.common.save_figure`) and sends their paths back. The figures are the same as drawn
-in process (same module, same data). When a core is free (:func:`core_free`) it warms matplotlib up while
-it waits (:func:`.mission.warm_up`) and, when the data arrives, forks a helper (:class:`_Helper`, matplotlib
+in process (same module, same data). When the load is low it warms matplotlib up while it waits
+(:func:`.mission.warm_up`) and, when the data arrives and a core is free (:func:`core_free`), forks a helper (:class:`_Helper`, matplotlib
 and the data inherited) that draws :data:`HELPER_FIGURES` while the worker draws the others.
 
 Nothing outlives the command: the child is a daemon process that exits after one set of figures (its
@@ -82,11 +82,12 @@ class FigureWorker:
             raise value
         return value
 
-    def close(self) -> None:
+    def close(self, wait_s: float = CLOSE_WAIT_S) -> None:
         """Reap the child: it exits by itself after drawing, or at the EOF of the closed pipe once its
-        import is done; after :data:`CLOSE_WAIT_S` it is terminated (its temporary files removed). Idempotent."""
+        import is done; after ``wait_s`` it is terminated (its temporary files removed; 0: at once, for a
+        worker whose figures will not be asked for). Idempotent."""
         self._conn.close()
-        self._proc.join(timeout=CLOSE_WAIT_S)
+        self._proc.join(timeout=wait_s)
         if self._proc.is_alive():
             self._proc.terminate()
             self._proc.join()
@@ -112,7 +113,8 @@ def _serve(conn, parent_end) -> None:
 
 def _draw_once(conn) -> None:
     from . import mission
-    if core_free():   # while the parent simulates: ~0.03 s off the first figure for ~0.1 s of CPU (measured)
+    from .. import config  # noqa: F401 - what unpickling the result imports, before it arrives (forked early)
+    if _load_low():   # while the parent simulates: ~0.03 s off the first figure for ~0.1 s of CPU (measured)
         mission.warm_up()
     try:
         result, out = conn.recv()
@@ -141,15 +143,40 @@ def _reply_bytes(draw) -> bytes:
 HELPER_FIGURES = ("i2", "soc")
 
 
-def core_free() -> bool:
-    """True when a core is free for the helper: the 1-minute load average is below the usable CPUs minus
-    0.5. On a busy machine the helper gains no time and costs ~0.2 s of CPU (its copy-on-write pages;
-    measured at load ~7 on 2 cores: CPU 3.48 against 3.28 s, wall the same within the spread)."""
+def _load_low() -> bool:
+    """The 1-minute load average below the usable CPUs minus 0.5 (True where there is none): the warm-up's gate
+    (it runs while the parent simulates, so the running count says nothing about whether the worker waits)."""
     try:
         cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
         return os.getloadavg()[0] < cpus - 0.5
-    except OSError:   # no load average on this platform
+    except OSError:
         return True
+
+
+def core_free() -> bool:
+    """True when a core is free for the helper now: at most ``CPUs - 1`` runnable tasks (this process
+    included) in each of three reads of ``/proc/loadavg``'s running count, 1 ms apart; where that file is
+    missing, the 1-minute load average below the usable CPUs minus 0.5. On a busy machine the helper gains
+    no time and costs ~0.2 s of CPU (its copy-on-write pages; measured at load ~7 on 2 cores: CPU 3.48
+    against 3.28 s, wall the same within the spread). The running count, not the 1-minute average: on an
+    otherwise idle machine the average still counts the last minute's runs of the command itself (1.2-2.0
+    during back-to-back runs), which turned the helper off when both cores were free."""
+    try:
+        cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    except OSError:
+        cpus = os.cpu_count() or 1
+    try:
+        import time
+        for i in range(3):
+            if i:
+                time.sleep(0.001)
+            with open("/proc/loadavg") as f:
+                running = int(f.read().split()[3].split("/")[0])
+            if running > cpus - 1:
+                return False
+        return True
+    except (OSError, ValueError, IndexError):
+        return _load_low()
 
 
 def _draw_split(mission, result, out, conn, helper_figures=HELPER_FIGURES) -> list[str]:

@@ -19,7 +19,8 @@ A policy with the ``kernel()`` hook (:class:`mission_sim.contract.Policy`) is ca
 (``compiled`` None or True); any other (``compiled=False``, RL, arbitrary Python) is called here at
 ``NEED_ACT``. The physics is the same compiled code either way.
 
-This module does not import numba; :mod:`.loop_kernel` does, on the first run.
+This module does not import numba; :mod:`.loop_kernel` does, on the first run (not at all when the run uses the
+loop's ahead-of-time build, :mod:`.aot`).
 """
 
 from __future__ import annotations
@@ -59,7 +60,7 @@ def battery_values(bp, ch) -> dict:
 
 def constants(values: dict) -> np.ndarray:
     """A 1-element :data:`.loop_kernel.CONST_DTYPE` array with ``values`` by name (the others 0)."""
-    from .loop_kernel import CONST_DTYPE
+    from .loop_records import CONST_DTYPE
     c = np.zeros(1, CONST_DTYPE)
     for name, v in values.items():
         c[name] = v
@@ -68,9 +69,9 @@ def constants(values: dict) -> np.ndarray:
 
 def pack_constants(loop) -> np.ndarray:
     """The loop's constants as a 1-element :data:`.loop_kernel.CONST_DTYPE` array (every field set)."""
-    from wpt_receiver.modal_kernel import REFINE_LEVELS, REFINE_TOL
+    from wpt_receiver.modal_link import REFINE_LEVELS, REFINE_TOL
     from ..contract import _INV_SPAN, _LO
-    from .loop_kernel import CONST_DTYPE
+    from .loop_records import CONST_DTYPE
     sim, dev, lk = loop.sim, loop.dev, loop.lk
     val = {
         "dtc": loop.dtc, "k_on": loop.k_on, "k_off": loop.k_off, "ramp_rate": loop.ramp_rate, "rated": loop.rated,
@@ -97,8 +98,8 @@ def link_arrays(loop):
     (:func:`wpt_receiver.modal_kernel.link_constants`, devices folded), the SBAR table
     (:func:`wpt_receiver.modal_kernel.modal_table` at the hover-gap Lm; disk-cached) and the work array
     (cached modes and ZOH coefficients; NaN keys: computed on first use)."""
-    from wpt_receiver.modal_kernel import link_constants, modal_table
-    from .loop_kernel import LW_SIZE
+    from wpt_receiver.modal_link import link_constants, modal_table
+    from .loop_records import LW_SIZE
     return (link_constants(loop.base, loop.dev), modal_table(loop.base, loop.dev),
             np.full(LW_SIZE, np.nan, dtype=complex))
 
@@ -106,11 +107,11 @@ def link_arrays(loop):
 def initial_state(loop) -> np.ndarray:
     """The state at the mission's start as a 1-element :data:`.loop_kernel.STATE_DTYPE` array (the
     receiver in short mode, the pad off, the battery at rest at ``initial_soc``)."""
-    from .loop_kernel import STATE_DTYPE, _ocv_cell
+    from .loop_records import STATE_DTYPE, ocv_cell
     s = np.zeros(1, STATE_DTYPE)
     st = s[0]
     soc = loop.bp.initial_soc
-    for name, v in {"d": 1.0, "soc": soc, "last_vl": loop.bp.n_series * getattr(_ocv_cell, "py_func", _ocv_cell)(soc),
+    for name, v in {"d": 1.0, "soc": soc, "last_vl": loop.bp.n_series * ocv_cell(soc),
                     "t_cmd_zero": -math.inf, "t_last_bms": -math.inf, "t_last_act": -math.inf,
                     "fine_until_min": -1.0, "fine_deadline": -1.0, "peak_d": 1.0, "depleted_at": math.nan,
                     "depleted_k": -1, "noise_i": NOISE_BLOCK}.items():
@@ -121,7 +122,7 @@ def initial_state(loop) -> np.ndarray:
 def samples(loop, a: int = 0, b: int | None = None) -> np.ndarray:
     """Trajectory samples ``[a, b)`` (from :class:`.samples.MissionSamples`) as a
     :data:`.loop_kernel.SAMPLE_DTYPE` array (the state's ``k0`` = ``a``)."""
-    from .loop_kernel import SAMPLE_DTYPE
+    from .loop_records import SAMPLE_DTYPE
     ch = loop.samples.chunk(a, loop.samples.n if b is None else b)
     smp = np.empty(len(ch), SAMPLE_DTYPE)
     smp["t"], smp["lm"], smp["k"], smp["p"], smp["elig"] = ch.t_s, ch.lm_h, ch.k, ch.p_w, ch.elig
@@ -146,17 +147,23 @@ def run(loop, bar=None):
     """Run ``loop`` (a fresh MissionLoop): the kernel until done, window by window of samples (memory
     bounded in the mission's length), Python's part at each status; leaves the final state in
     ``loop.state`` and the last rows in ``loop.rows``."""
-    from . import loop_kernel as kern
-    hook = loop.policy.kernel() if usable(loop) else None
-    if loop.compiled and hook is None:
-        raise ValueError("compiled=True needs a policy with the kernel hook (mission_sim.contract.Policy); "
-                         "pass compiled=None or False")
-    fn, params, pstate = hook if hook is not None else (None, (), ())   # None: NEED_ACT for each duty
+    from . import loop_records as kern   # the status codes (numba-free)
+    built = _ahead_of_time(loop)
+    if built is not None:   # the loop built ahead of time with this policy's kernel bound in: no numba (.aot)
+        advance, params, pstate = built
+        fn, rec = None, False
+    else:
+        from . import loop_kernel
+        hook = loop.policy.kernel() if usable(loop) else None
+        if loop.compiled and hook is None:
+            raise ValueError("compiled=True needs a policy with the kernel hook (mission_sim.contract.Policy); "
+                             "pass compiled=None or False")
+        fn, params, pstate = hook if hook is not None else (None, (), ())   # None: NEED_ACT for each duty
+        advance = loop_kernel.advance_for(fn is not None)   # only the overload this policy needs is loaded
+        rec = not hasattr(advance, "py_func")   # NUMBA_DISABLE_JIT=1: the kernel runs as Python on record views
     params, pstate = np.ascontiguousarray(params, dtype=float), np.ascontiguousarray(pstate, dtype=float)
     c, s = pack_constants(loop), initial_state(loop)
     loop.consts, loop.state = c, s
-    advance = kern.advance_for(fn is not None)   # only the overload this policy needs is loaded
-    rec = not hasattr(advance, "py_func")   # NUMBA_DISABLE_JIT=1: the kernel runs as Python on record views
     if rec:
         c, s = c.view(np.recarray), s.view(np.recarray)
     n = loop.samples.n
@@ -197,6 +204,22 @@ def run(loop, bar=None):
             loop.fail(kern.STATUS_NAMES[status], s[0])
     _progress(bar, loop.samples.t_last_s, t_done)
     loop.rows = rows[:int(n_rows[0])]
+
+
+def _ahead_of_time(loop):
+    """``(advance, params, state)`` when this process runs missions on the loop's ahead-of-time build
+    (:func:`.aot.enable`: ``dronewpt mission``), the build is there for the policy's compiled kernel
+    (:meth:`kernel_spec` by name) and loads; else None (numba's JIT, the same source)."""
+    from . import aot
+    if not aot.enabled() or not usable(loop):
+        return None
+    spec = getattr(loop.policy, "kernel_spec", None)
+    got = spec() if callable(spec) else None
+    if got is None:
+        return None
+    name, params, state = got
+    advance = aot.advance(name)
+    return None if advance is None else (advance, params, state)
 
 
 def _progress(bar, t_now: float, t_done: float) -> float:
