@@ -6,6 +6,8 @@ them in ``policies/pretrained``.
     python benchmarks/retrain_shipped.py --kind residual --seeds 0-4 --timesteps 400000 --budget 0.05 --install
     python benchmarks/retrain_shipped.py --kind ppo_lagrangian --seeds 0-4 --timesteps 400000 --budget 0.05 --install
     python benchmarks/retrain_shipped.py --kind rl_bc --seeds 0-4 --timesteps 800000 --install   # installs as rl_s<k>
+    python benchmarks/retrain_shipped.py --kind slow_budget --seeds 0-4 --timesteps 307200 --budget 0.1 --install
+    python benchmarks/retrain_shipped.py --kind imitation --seeds 0-4 --timesteps 0 --install   # a clone: no PPO steps
 
 Each seed runs exactly the command of ``KINDS[kind]`` (``{seed}``, ``{timesteps}``, ``{budget}`` filled in;
 ``--budget`` is required for the constrained kinds and refused for ``rl``)
@@ -46,7 +48,19 @@ KINDS = {
               "--hyperparams policies/hyperparams/ppo.yml --imitate model_based_budget:0.05 "
               "--imitation-mask last_d_short,i2_amp_a,battery_current_a,rect_current_a "
               "--eval-every 100000 --checkpoint-every 100000"),
+    # the MPC's measured-overshoot budget per window as the action (docs/rl.md, "A learned slow variable")
+    "slow_budget": ("dronewpt train --algo ppo --timesteps {timesteps} --seed {seed} --scenario nominal --lagrangian "
+                    "--budget {budget} --lambda-lr 50 --slow-budget 0:0.15 --slow-budget-every window "
+                    "--hyperparams policies/hyperparams/slow_budget.yml --eval-every 153600 --checkpoint-every 307200"),
+    # feed-forward residual clone of model_based_budget:0.02 on model_based_budget:0.01 (BC only: --timesteps 0)
+    "imitation": ("dronewpt train --algo ppo --timesteps {timesteps} --seed {seed} --scenario nominal "
+                  "--residual --residual-scale 0.1 --residual-base-budget 0.01 --imitate model_based_budget:0.02 "
+                  "--dagger 0 --imitation-episodes 32 --imitation-epochs 60 "
+                  "--imitation-mask last_d_short,i2_amp_a,battery_current_a,rect_current_a"),
 }
+
+#: kinds whose shipped models had no PPO steps (``--timesteps 0`` is their only valid count)
+CLONE_ONLY = {"imitation"}
 
 #: the shipped name a kind installs as (``policies/pretrained/<name>_s<k>``), when not the kind's own
 INSTALL_AS = {"rl_bc": "rl"}
@@ -108,7 +122,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", default="0-4", help="LO-HI (default 0-4)")
     ap.add_argument("--timesteps", type=int, required=True)
     ap.add_argument("--budget", type=float, default=None,
-                    help="measured-overshoot budget (fraction); required for residual / ppo_lagrangian, not for rl")
+                    help="measured-overshoot budget (fraction); required for the Lagrangian kinds (residual, ppo_lagrangian, slow_budget), not for rl, rl_bc, imitation")
     ap.add_argument("--out", default="out/retrain")
     ap.add_argument("--install", action="store_true", help="copy the final models into policies/pretrained")
     ap.add_argument("--link", choices=("envelope", "modal"), default="envelope",
@@ -123,9 +137,12 @@ def main(argv=None) -> int:
         print(f"retrain_shipped: --budget {'is required' if a.budget is None else 'is not valid'} with --kind {a.kind}; "
               f"valid: --budget only with {', '.join(k for k in sorted(KINDS) if constrained(k))}", file=sys.stderr)
         return 2
-    if a.timesteps <= 0 or (a.budget is not None and not (0.0 < a.budget < 10.0)):
+    steps_ok = a.timesteps == 0 if a.kind in CLONE_ONLY else a.timesteps > 0
+    if not steps_ok or (a.budget is not None and not (0.0 < a.budget < 10.0)):
         shown = f"--timesteps {a.timesteps}" + ("" if a.budget is None else f" / --budget {a.budget}")
-        print(f"retrain_shipped: {shown} is invalid; valid: timesteps > 0, budget in (0, 10)", file=sys.stderr)
+        valid = "timesteps 0 (a clone)" if a.kind in CLONE_ONLY else "timesteps > 0"
+        print(f"retrain_shipped: {shown} is invalid with --kind {a.kind}; valid: {valid}, budget in (0, 10)",
+              file=sys.stderr)
         return 2
     out_root = ROOT / a.out
     out_root.mkdir(parents=True, exist_ok=True)
