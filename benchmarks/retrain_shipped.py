@@ -16,7 +16,7 @@ under ``nice -n 10`` into ``out/retrain/<kind>_s<k>/``; the output's own metadat
 model (no selection) to ``policies/pretrained/<kind>_s<k>.zip`` (``rl_bc``: PPO from a behaviour clone of
 ``model_based_budget:0.05``, installed as ``rl_s<k>``; its clone stays in ``out/retrain/rl_bc_s<k>/clone.zip``) and its metadata to ``.json`` (each written
 under a temporary name and renamed) with a ``trained`` record added: the git commit the training ran on
-(the env's version), the date, the wall time and the 1-min load average before / after (the machine is
+(the env's version), the date, the wall and CPU time and the 1-min load average before / after (the machine is
 shared). Bad options: one line on stderr, exit 2, nothing trained.
 """
 
@@ -88,6 +88,13 @@ def _load() -> float:
     return float(Path("/proc/loadavg").read_text().split()[0]) if Path("/proc/loadavg").is_file() else float("nan")
 
 
+def _children_cpu() -> float:
+    """User + system CPU seconds of the finished child processes (the training runs)."""
+    import resource
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
+
 def train_seed(kind: str, seed: int, timesteps: int, budget, out_root: Path, link: str = "envelope") -> dict:
     """Run one seed's command (niced) into ``out_root/<kind>_s<seed>``; returns the run's record."""
     out = out_root / f"{kind}_s{seed}"
@@ -96,10 +103,11 @@ def train_seed(kind: str, seed: int, timesteps: int, budget, out_root: Path, lin
     cmd = KINDS[kind].format(timesteps=timesteps, seed=seed, budget=budget_text) + f" --link {link} --out {rel}"
     rec = {"commit": _commit(), "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()), "command": cmd,
            "load_avg_1min_before": _load()}
-    t0 = time.time()
+    t0, c0 = time.time(), _children_cpu()
     with open(out_root / f"{kind}_s{seed}.log", "w") as log:
         rc = subprocess.run(["nice", "-n", "10", *cmd.split()], cwd=ROOT, stdout=log, stderr=subprocess.STDOUT).returncode
-    rec.update(wall_s=round(time.time() - t0, 1), load_avg_1min_after=_load(), returncode=rc)
+    rec.update(wall_s=round(time.time() - t0, 1), cpu_s=round(_children_cpu() - c0, 1), load_avg_1min_after=_load(),
+               returncode=rc)
     return rec
 
 
@@ -116,6 +124,25 @@ def install(kind: str, seed: int, out_root: Path, rec: dict) -> None:
         Path(tmp).write_text(json.dumps(meta, indent=2) + "\n")
 
 
+def install_from(kind: str, seeds: list, out_root: Path, records: Path) -> int:
+    """Install seeds already trained (evaluated first, then installed): each needs its record in ``records``
+    with returncode 0 and its output folder; all are checked before any is installed."""
+    recs = {}
+    for line in records.read_text().splitlines() if records.is_file() else []:
+        if line.startswith("{"):
+            r = json.loads(line)
+            if r.get("kind") == kind and r.get("returncode") == 0:
+                recs[r["seed"]] = {k: v for k, v in r.items() if k not in ("kind", "seed")}
+    missing = [s for s in seeds if s not in recs or not (out_root / f"{kind}_s{s}" / "ppo_sbar.zip").is_file()]
+    if missing:
+        print(f"retrain_shipped: --install-from {records}: seeds {missing} of --kind {kind} have no finished run; "
+              f"valid: seeds with a returncode-0 record and out/{kind}_s<k>/ppo_sbar.zip", file=sys.stderr)
+        return 2
+    for s in seeds:
+        install(kind, s, out_root, recs[s])
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--kind", required=True, choices=sorted(KINDS))
@@ -125,6 +152,9 @@ def main(argv=None) -> int:
                     help="measured-overshoot budget (fraction); required for the Lagrangian kinds (residual, ppo_lagrangian, slow_budget), not for rl, rl_bc, imitation")
     ap.add_argument("--out", default="out/retrain")
     ap.add_argument("--install", action="store_true", help="copy the final models into policies/pretrained")
+    ap.add_argument("--install-from", default=None, metavar="RECORDS",
+                    help="train nothing: install the finished runs of --kind / --seeds whose records (this script's "
+                         "stdout, one JSON line per seed) are in RECORDS, from --out")
     ap.add_argument("--link", choices=("envelope", "modal"), default="envelope",
                     help="the env's link (default envelope: what the shipped models were trained on)")
     a = ap.parse_args(argv)
@@ -145,6 +175,8 @@ def main(argv=None) -> int:
               file=sys.stderr)
         return 2
     out_root = ROOT / a.out
+    if a.install_from is not None:
+        return install_from(a.kind, seeds, out_root, Path(a.install_from))
     out_root.mkdir(parents=True, exist_ok=True)
     for seed in seeds:
         rec = train_seed(a.kind, seed, a.timesteps, a.budget, out_root, a.link)
