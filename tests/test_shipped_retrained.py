@@ -136,26 +136,6 @@ def test_shipped_rl_stays_physical_and_is_the_default_rl_policy():
         assert np.all(runs[sp].metrics["reached_short_mode"] == 1.0), sp
 
 
-def test_shipped_imitation_reproduces_its_teacher_on_its_plant():
-    """Each shipped imitation seed (a residual clone of ``model_based_budget:0.02``), on the plant it was trained
-    on and 8 fixed nominal windows: in short mode in every window, its energy after the stop within 5 % of its
-    teacher's, its measured overshoot within 2 points of the teacher's in every window and at most 0.5 points
-    above it on average. (The eq. 4-trained seeds shipped before 2026-11-26 19:35 UTC fail it on either link: on
-    their own eq. 4 plant +0.7 to +2.6 points on average, up to 8.0 in a window, 8-9 % more energy; on the modal
-    link +0.9 to +3.2 points, up to 9.7, 12-13 % less energy.)"""
-    specs = shipped_seed_groups()["imitation"]
-    teacher = _metas("imitation")[0]["imitation"]["teacher"]
-    assert teacher == "model_based_budget:0.02"
-    runs = run_policies([teacher, *specs], "nominal", WINDOWS, SEED, _trained_on("imitation"))
-    t = runs[teacher].metrics
-    for sp in specs:
-        m = runs[sp].metrics
-        assert np.all(m["reached_short_mode"] == 1.0), sp
-        assert abs(np.mean(m["energy_after_stop_j"]) / np.mean(t["energy_after_stop_j"]) - 1.0) < 0.05, sp
-        d = m["overshoot_pct"] - t["overshoot_pct"]
-        assert np.max(np.abs(d)) < 2.0 and np.mean(d) < 0.5, (sp, d)
-
-
 @pytest.mark.parametrize("args, bad", [(["--kind", "rl", "--budget", "0.05"], "--budget is not valid with --kind rl"),
                                        (["--kind", "residual"], "--budget is required with --kind residual"),
                                        (["--kind", "rl", "--timesteps", "0"], "--timesteps 0 is invalid")])
