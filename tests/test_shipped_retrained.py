@@ -218,3 +218,15 @@ def test_retrain_script_refuses_ppo_steps_for_the_clone_and_installs_only_finish
     r = subprocess.run([*script, "--kind", "imitation", "--timesteps", "0", "--seeds", "0-1", "--out", str(tmp_path / "r"),
                         "--install-from", str(tmp_path / "recs")], cwd=root, capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "seeds [0, 1] of --kind imitation have no finished run" in r.stderr
+
+
+@pytest.mark.parametrize("links", ["envelope", "modal,modal", "envelope,exact"])
+def test_bench_train_refuses_bad_links(links):
+    """``bench_train.py --links``: two or more distinct link names, else one line naming the value, exit 2."""
+    import subprocess
+    import sys
+    root = Path(__file__).resolve().parents[1]
+    r = subprocess.run([sys.executable, str(root / "benchmarks" / "bench_train.py"), "--links", links],
+                       cwd=root, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and f"--links {links!r} is invalid" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
