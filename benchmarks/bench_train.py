@@ -20,6 +20,13 @@ when the repository's git history is not there (e.g. an sdist).
 
     OMP_NUM_THREADS=1 python benchmarks/bench_train.py [--steps 65536] [--rounds 5] [--n-envs 64]
         [--as-filed REV | --no-as-filed] [--json]
+
+``--links envelope,modal`` measures instead the batched adapter (train's path, train's thread settings:
+torch and numba on one thread) on each named link (``EnvConfig.link_model``: ``envelope`` = eq. 4,
+``modal`` = the exact-mode link, the envs' default since 2026-11-26), the links alternating in every round
+after a warm-up of each; both PPO ``model.learn`` and ``VecEnv.step`` alone, as above.
+
+    OMP_NUM_THREADS=1 python benchmarks/bench_train.py --links envelope,modal --steps 16384 --rounds 3
 """
 
 from __future__ import annotations
@@ -68,7 +75,7 @@ print(rate(steps))
 """
 
 
-def _env(path: str, n_envs: int):
+def _env(path: str, n_envs: int, link: str | None = None):
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
@@ -76,7 +83,8 @@ def _env(path: str, n_envs: int):
     from envs.sb3_vec import EPISODE_KEYS, SbarSB3VecEnv
 
     if path == "batched":
-        venv = VecMonitor(SbarSB3VecEnv(n_envs, "random"), info_keywords=EPISODE_KEYS)
+        config = None if link is None else envs.EnvConfig(link_model=link)
+        venv = VecMonitor(SbarSB3VecEnv(n_envs, "random", config=config), info_keywords=EPISODE_KEYS)
         venv.seed(0)
     else:
         venv = make_vec_env(envs.ENV_ID, n_envs=n_envs, seed=0, env_kwargs={"scenario": "random"},
@@ -84,12 +92,12 @@ def _env(path: str, n_envs: int):
     return VecNormalize(venv, gamma=0.98)
 
 
-def _rate(path: str, n_envs: int, steps: int) -> float:
+def _rate(path: str, n_envs: int, steps: int, link: str | None = None) -> float:
     import stable_baselines3 as sb3
 
     from policies.train import DEFAULT_HYPERPARAMS
 
-    venv = _env(path, n_envs)
+    venv = _env(path, n_envs, link)
     model = sb3.PPO("MlpPolicy", venv, seed=0, device="cpu", verbose=0, **DEFAULT_HYPERPARAMS["ppo"])
     t0 = time.perf_counter()
     model.learn(total_timesteps=steps)
@@ -98,11 +106,11 @@ def _rate(path: str, n_envs: int, steps: int) -> float:
     return model.num_timesteps / dt
 
 
-def _step_rate(path: str, n_envs: int, steps: int) -> float:
+def _step_rate(path: str, n_envs: int, steps: int, link: str | None = None) -> float:
     """env-steps/s of the wrapped VecEnv alone (random actions, same stack as training)."""
     import numpy as np
 
-    venv = _env(path, n_envs)
+    venv = _env(path, n_envs, link)
     rng = np.random.default_rng(0)
     venv.reset()
     n_calls = max(1, steps // n_envs)
@@ -174,8 +182,18 @@ def main(argv=None) -> int:
                     help=f"git revision of the as-filed make_vec_env path (default {AS_FILED_REV})")
     ap.add_argument("--no-as-filed", action="store_true", help="skip the as-filed path")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--links", default=None, metavar="A,B",
+                    help="compare the batched path on these links instead (envelope, modal), alternating")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
+    if args.links is not None:
+        links = args.links.split(",")
+        bad = [k for k in links if k not in ("envelope", "modal")]
+        if bad or len(links) < 2 or len(set(links)) != len(links):
+            print(f"bench_train: --links {args.links!r} is invalid; valid: two or more distinct of envelope, modal",
+                  file=sys.stderr)
+            return 2
+        return _links_main(args, links)
     with tempfile.TemporaryDirectory(prefix="bench_train_") as tmp:
         tree = None
         if not args.no_as_filed:
@@ -191,6 +209,48 @@ def main(argv=None) -> int:
     _print("VecEnv.step alone (random actions, same wrappers):", res["vecenv_step_only"], args.rounds)
     print(f"load average before {res['loadavg_before'][0]:.2f}, after {res['loadavg_after'][0]:.2f} (2 cores)")
     return 0
+
+
+def _links_main(args, links: list) -> int:
+    """The batched path (train's) on each link, alternating per round after a warm-up of each."""
+    import numba
+
+    numba.set_num_threads(1)   # as policies.train.train (numba's spinning OpenMP worker starves torch)
+    for link in links:         # warm-up (compile the link's step), not measured
+        _rate("batched", args.n_envs, 2 * args.n_envs * 128, link)
+        _step_rate("batched", args.n_envs, 2 * args.n_envs * 128, link)
+    load0 = os.getloadavg()
+    learn = {k: [] for k in links}
+    step = {k: [] for k in links}
+    cpu = {k: [] for k in links}
+    for _ in range(args.rounds):
+        for link in links:
+            c0 = time.process_time()
+            learn[link].append(_rate("batched", args.n_envs, args.steps, link))
+            cpu[link].append(args.steps / (time.process_time() - c0))
+            step[link].append(_step_rate("batched", args.n_envs, args.steps, link))
+    res = {"steps_per_round": args.steps, "n_envs": args.n_envs, "rounds": args.rounds, "links": links,
+           "ppo_learn_env_steps_per_wall_s": {k: _med_range(v) for k, v in learn.items()},
+           "ppo_learn_env_steps_per_cpu_s": {k: _med_range(v) for k, v in cpu.items()},
+           "vecenv_step_only_env_steps_per_s": {k: _med_range(v) for k, v in step.items()},
+           "loadavg_before": load0, "loadavg_after": os.getloadavg()}
+    if args.json:
+        print(json.dumps(res, indent=1))
+        return 0
+    for title, key in (("PPO model.learn, env-steps per wall second", "ppo_learn_env_steps_per_wall_s"),
+                       ("PPO model.learn, env-steps per CPU second", "ppo_learn_env_steps_per_cpu_s"),
+                       ("VecEnv.step alone (random actions)", "vecenv_step_only_env_steps_per_s")):
+        print(title)
+        for k, (med, lo, hi) in res[key].items():
+            print(f"  {k:>9}: median {med:,.0f} (range {lo:,.0f} .. {hi:,.0f}) over {args.rounds} rounds")
+        a, b = links[0], links[1]
+        print(f"  ratio {a} / {b}: {res[key][a][0] / res[key][b][0]:.1f}x")
+    print(f"load average before {res['loadavg_before'][0]:.2f}, after {res['loadavg_after'][0]:.2f} (2 cores)")
+    return 0
+
+
+def _med_range(v: list) -> list:
+    return [statistics.median(v), min(v), max(v)]
 
 
 def _measure(args, tree) -> dict:

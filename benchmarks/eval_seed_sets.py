@@ -11,6 +11,11 @@ For every scenario, every model of both sets and the references run side by side
 
     python benchmarks/eval_seed_sets.py --new 'out/retrain_mask/rl_bc_s*/ppo_sbar.zip' \
         --old 'out/retrain_mask/old/rl_s*.zip' --refs model_based_budget:0.05 --scenarios nominal,sense_delay
+    python benchmarks/eval_seed_sets.py --kind imitation --new 'out/modal/imitation_s*/ppo_sbar.zip' \
+        --old 'policies/pretrained/imitation_s*.zip' --refs model_based_budget:0.02 --link envelope
+
+``--kind`` names the models' policy kind (``KIND:PATH``, default ``rl``); ``--link`` the env's link (default
+``modal``, the envs' default since 2026-11-26; ``envelope``: eq. 4's).
 """
 
 from __future__ import annotations
@@ -48,12 +53,12 @@ def _set_row(mets) -> dict:
     return row
 
 
-def scenario_row(met: dict, new: list, old: list, refs: list) -> dict:
+def scenario_row(met: dict, new: list, old: list, refs: list, kind: str = "rl") -> dict:
     from policies.stats import mean_ci
 
-    mn, mo = [met[f"rl:{p}"] for p in new], [met[f"rl:{p}"] for p in old]
+    mn, mo = [met[f"{kind}:{p}"] for p in new], [met[f"{kind}:{p}"] for p in old]
     row = {"new": _set_row(mn), "old": _set_row(mo), "refs": {r: {k: mean_ci(met[r][k]) for k in KEYS} for r in refs}}
-    for k in ("return", "overshoot_pct"):
+    for k in ("return", "overshoot_pct", "energy_after_stop_j"):
         row[f"d_{k}_welch"] = welch_ci([np.mean(m[k]) for m in mn], [np.mean(m[k]) for m in mo])
         row[f"d_{k}_paired_boot"] = mean_ci(np.mean([m[k] for m in mn], axis=0) - np.mean([m[k] for m in mo], axis=0))
     return row
@@ -73,7 +78,10 @@ def report(res: dict) -> None:
                   f"per seed {[round(x, 1) for x in r['per_seed_return']]}")
         print(f"  new - old: d return {_fmt(row['d_return_welch'])} (Welch over seeds), "
               f"{_fmt(row['d_return_paired_boot'])} (paired on windows, bootstrap); d overshoot "
-              f"{_fmt(row['d_overshoot_pct_welch'])} pts (Welch), {_fmt(row['d_overshoot_pct_paired_boot'])} (paired)")
+              f"{_fmt(row['d_overshoot_pct_welch'], '{:.2f}')} pts (Welch), "
+              f"{_fmt(row['d_overshoot_pct_paired_boot'], '{:.2f}')} (paired); d E after "
+              f"{_fmt(row['d_energy_after_stop_j_welch'], '{:.4f}')} J (Welch), "
+              f"{_fmt(row['d_energy_after_stop_j_paired_boot'], '{:.4f}')} (paired)")
         for p, v in row["refs"].items():
             print(f"  {p:<26} overshoot {_fmt(v['overshoot_pct'])} %  E after "
                   f"{_fmt(v['energy_after_stop_j'], '{:.3f}')} J  return {_fmt(v['return'])}")
@@ -90,18 +98,24 @@ def main(argv=None):
     ap.add_argument("--episodes", type=int, default=100)
     ap.add_argument("--seed", type=int, default=1000)
     ap.add_argument("--json", default=None)
+    ap.add_argument("--kind", default="rl", help="the models' policy kind (KIND:PATH; default rl)")
+    ap.add_argument("--link", choices=("envelope", "modal"), default="modal", help="the env's link (default modal)")
     a = ap.parse_args(argv)
     new, old = sorted(glob.glob(a.new)), sorted(glob.glob(a.old))
     if not new or not old:
         raise SystemExit(f"--new {a.new!r} / --old {a.old!r}: no file matches")
+    from envs import EnvConfig
+
     refs = [r for r in a.refs.split(",") if r]
+    config = EnvConfig(link_model=a.link)
     t0, c0, l0 = time.time(), time.process_time(), os.getloadavg()
     res = {}
     for s in a.scenarios.split(","):
-        met = {k: v.metrics for k, v in run_policies(refs + [f"rl:{p}" for p in new + old], s, a.episodes, a.seed).items()}
-        res[s] = scenario_row(met, new, old, refs)
+        specs = refs + [f"{a.kind}:{p}" for p in new + old]
+        met = {k: v.metrics for k, v in run_policies(specs, s, a.episodes, a.seed, config).items()}
+        res[s] = scenario_row(met, new, old, refs, a.kind)
     report(res)
-    info = {"new": new, "old": old, "episodes": a.episodes, "seed": a.seed, "wall_s": time.time() - t0,
+    info = {"kind": a.kind, "link": a.link, "new": new, "old": old, "episodes": a.episodes, "seed": a.seed, "wall_s": time.time() - t0,
             "cpu_s": time.process_time() - c0, "load_before": l0, "load_after": os.getloadavg()}
     print(f"\n{info}")
     if a.json:

@@ -6,6 +6,8 @@ them in ``policies/pretrained``.
     python benchmarks/retrain_shipped.py --kind residual --seeds 0-4 --timesteps 400000 --budget 0.05 --install
     python benchmarks/retrain_shipped.py --kind ppo_lagrangian --seeds 0-4 --timesteps 400000 --budget 0.05 --install
     python benchmarks/retrain_shipped.py --kind rl_bc --seeds 0-4 --timesteps 800000 --install   # installs as rl_s<k>
+    python benchmarks/retrain_shipped.py --kind slow_budget --seeds 0-4 --timesteps 307200 --budget 0.1 --install
+    python benchmarks/retrain_shipped.py --kind imitation --seeds 0-4 --timesteps 0 --install   # a clone: no PPO steps
 
 Each seed runs exactly the command of ``KINDS[kind]`` (``{seed}``, ``{timesteps}``, ``{budget}`` filled in;
 ``--budget`` is required for the constrained kinds and refused for ``rl``)
@@ -14,7 +16,7 @@ under ``nice -n 10`` into ``out/retrain/<kind>_s<k>/``; the output's own metadat
 model (no selection) to ``policies/pretrained/<kind>_s<k>.zip`` (``rl_bc``: PPO from a behaviour clone of
 ``model_based_budget:0.05``, installed as ``rl_s<k>``; its clone stays in ``out/retrain/rl_bc_s<k>/clone.zip``) and its metadata to ``.json`` (each written
 under a temporary name and renamed) with a ``trained`` record added: the git commit the training ran on
-(the env's version), the date, the wall time and the 1-min load average before / after (the machine is
+(the env's version), the date, the wall and CPU time and the 1-min load average before / after (the machine is
 shared). Bad options: one line on stderr, exit 2, nothing trained.
 """
 
@@ -46,7 +48,19 @@ KINDS = {
               "--hyperparams policies/hyperparams/ppo.yml --imitate model_based_budget:0.05 "
               "--imitation-mask last_d_short,i2_amp_a,battery_current_a,rect_current_a "
               "--eval-every 100000 --checkpoint-every 100000"),
+    # the MPC's measured-overshoot budget per window as the action (docs/rl.md, "A learned slow variable")
+    "slow_budget": ("dronewpt train --algo ppo --timesteps {timesteps} --seed {seed} --scenario nominal --lagrangian "
+                    "--budget {budget} --lambda-lr 50 --slow-budget 0:0.15 --slow-budget-every window "
+                    "--hyperparams policies/hyperparams/slow_budget.yml --eval-every 153600 --checkpoint-every 307200"),
+    # feed-forward residual clone of model_based_budget:0.02 on model_based_budget:0.01 (BC only: --timesteps 0)
+    "imitation": ("dronewpt train --algo ppo --timesteps {timesteps} --seed {seed} --scenario nominal "
+                  "--residual --residual-scale 0.1 --residual-base-budget 0.01 --imitate model_based_budget:0.02 "
+                  "--dagger 0 --imitation-episodes 32 --imitation-epochs 60 "
+                  "--imitation-mask last_d_short,i2_amp_a,battery_current_a,rect_current_a"),
 }
+
+#: kinds whose shipped models had no PPO steps (``--timesteps 0`` is their only valid count)
+CLONE_ONLY = {"imitation"}
 
 #: the shipped name a kind installs as (``policies/pretrained/<name>_s<k>``), when not the kind's own
 INSTALL_AS = {"rl_bc": "rl"}
@@ -74,6 +88,13 @@ def _load() -> float:
     return float(Path("/proc/loadavg").read_text().split()[0]) if Path("/proc/loadavg").is_file() else float("nan")
 
 
+def _children_cpu() -> float:
+    """User + system CPU seconds of the finished child processes (the training runs)."""
+    import resource
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
+
 def train_seed(kind: str, seed: int, timesteps: int, budget, out_root: Path, link: str = "envelope") -> dict:
     """Run one seed's command (niced) into ``out_root/<kind>_s<seed>``; returns the run's record."""
     out = out_root / f"{kind}_s{seed}"
@@ -82,10 +103,11 @@ def train_seed(kind: str, seed: int, timesteps: int, budget, out_root: Path, lin
     cmd = KINDS[kind].format(timesteps=timesteps, seed=seed, budget=budget_text) + f" --link {link} --out {rel}"
     rec = {"commit": _commit(), "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()), "command": cmd,
            "load_avg_1min_before": _load()}
-    t0 = time.time()
+    t0, c0 = time.time(), _children_cpu()
     with open(out_root / f"{kind}_s{seed}.log", "w") as log:
         rc = subprocess.run(["nice", "-n", "10", *cmd.split()], cwd=ROOT, stdout=log, stderr=subprocess.STDOUT).returncode
-    rec.update(wall_s=round(time.time() - t0, 1), load_avg_1min_after=_load(), returncode=rc)
+    rec.update(wall_s=round(time.time() - t0, 1), cpu_s=round(_children_cpu() - c0, 1), load_avg_1min_after=_load(),
+               returncode=rc)
     return rec
 
 
@@ -102,15 +124,37 @@ def install(kind: str, seed: int, out_root: Path, rec: dict) -> None:
         Path(tmp).write_text(json.dumps(meta, indent=2) + "\n")
 
 
+def install_from(kind: str, seeds: list, out_root: Path, records: Path) -> int:
+    """Install seeds already trained (evaluated first, then installed): each needs its record in ``records``
+    with returncode 0 and its output folder; all are checked before any is installed."""
+    recs = {}
+    for line in records.read_text().splitlines() if records.is_file() else []:
+        if line.startswith("{"):
+            r = json.loads(line)
+            if r.get("kind") == kind and r.get("returncode") == 0:
+                recs[r["seed"]] = {k: v for k, v in r.items() if k not in ("kind", "seed")}
+    missing = [s for s in seeds if s not in recs or not (out_root / f"{kind}_s{s}" / "ppo_sbar.zip").is_file()]
+    if missing:
+        print(f"retrain_shipped: --install-from {records}: seeds {missing} of --kind {kind} have no finished run; "
+              f"valid: seeds with a returncode-0 record and out/{kind}_s<k>/ppo_sbar.zip", file=sys.stderr)
+        return 2
+    for s in seeds:
+        install(kind, s, out_root, recs[s])
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--kind", required=True, choices=sorted(KINDS))
     ap.add_argument("--seeds", default="0-4", help="LO-HI (default 0-4)")
     ap.add_argument("--timesteps", type=int, required=True)
     ap.add_argument("--budget", type=float, default=None,
-                    help="measured-overshoot budget (fraction); required for residual / ppo_lagrangian, not for rl")
+                    help="measured-overshoot budget (fraction); required for the Lagrangian kinds (residual, ppo_lagrangian, slow_budget), not for rl, rl_bc, imitation")
     ap.add_argument("--out", default="out/retrain")
     ap.add_argument("--install", action="store_true", help="copy the final models into policies/pretrained")
+    ap.add_argument("--install-from", default=None, metavar="RECORDS",
+                    help="train nothing: install the finished runs of --kind / --seeds whose records (this script's "
+                         "stdout, one JSON line per seed) are in RECORDS, from --out")
     ap.add_argument("--link", choices=("envelope", "modal"), default="envelope",
                     help="the env's link (default envelope: what the shipped models were trained on)")
     a = ap.parse_args(argv)
@@ -123,11 +167,16 @@ def main(argv=None) -> int:
         print(f"retrain_shipped: --budget {'is required' if a.budget is None else 'is not valid'} with --kind {a.kind}; "
               f"valid: --budget only with {', '.join(k for k in sorted(KINDS) if constrained(k))}", file=sys.stderr)
         return 2
-    if a.timesteps <= 0 or (a.budget is not None and not (0.0 < a.budget < 10.0)):
+    steps_ok = a.timesteps == 0 if a.kind in CLONE_ONLY else a.timesteps > 0
+    if not steps_ok or (a.budget is not None and not (0.0 < a.budget < 10.0)):
         shown = f"--timesteps {a.timesteps}" + ("" if a.budget is None else f" / --budget {a.budget}")
-        print(f"retrain_shipped: {shown} is invalid; valid: timesteps > 0, budget in (0, 10)", file=sys.stderr)
+        valid = "timesteps 0 (a clone)" if a.kind in CLONE_ONLY else "timesteps > 0"
+        print(f"retrain_shipped: {shown} is invalid with --kind {a.kind}; valid: {valid}, budget in (0, 10)",
+              file=sys.stderr)
         return 2
     out_root = ROOT / a.out
+    if a.install_from is not None:
+        return install_from(a.kind, seeds, out_root, Path(a.install_from))
     out_root.mkdir(parents=True, exist_ok=True)
     for seed in seeds:
         rec = train_seed(a.kind, seed, a.timesteps, a.budget, out_root, a.link)

@@ -82,5 +82,8 @@ def test_shipped_learned_policies_have_five_seeds_small_files_and_their_commands
             assert m["reproduce"].startswith("dronewpt train --algo ppo")
             assert f"--seed {m['seed']} " in m["reproduce"] and ("--residual" in m["reproduce"]) == (kind in ("residual", "imitation"))
             assert ("--slow-budget 0:0.15" in m["reproduce"]) == (kind == "slow_budget") == bool(m.get("slow_budget"))
-            # trained on eq. 4's link, the envs' default until 2026-11-26: the command and the record name it
-            assert m["env_config"]["link_model"] == "envelope" and " --link envelope " in m["reproduce"]
+            # one link per group (eq. 4's, the envs' default until 2026-11-26, or the exact-mode link for a group
+            # retrained since): the record and the command name it
+            link = metas[0]["env_config"]["link_model"]
+            assert m["env_config"]["link_model"] == link in ("envelope", "modal")
+            assert f" --link {link} " in m["reproduce"] or f" --env link_model={link} " in m["reproduce"]

@@ -3,10 +3,11 @@ bounds on the plant they were trained on.
 
 Every shipped seed group (``compare``'s default learned rows) records the env config it was trained on;
 it must be today's default (real devices, instantaneous peaks: the objective has no switch for the
-latter, so the config and the retraining record are the version) except the link: every shipped SB3 model
-was trained on eq. 4's envelope link, the envs' default until 2026-11-26 (issue 23 made the exact-mode link
-the default), and says so (``link_model: envelope``). So the behaviour tests below run them on
-``TRAINED_ON``, the plant they were trained on, pinned. The residual seeds must keep their
+latter, so the config and the retraining record are the version) but for the link, which is one per group:
+the SB3 models were trained on eq. 4's envelope link, the envs' default until 2026-11-26 (issue 23 made the
+exact-mode link the default), and the groups retrained since on the exact-mode link say ``link_model: modal``
+(docs/rl.md, "Retrained on the exact-mode link"). So the behaviour tests below run each group on
+:func:`_trained_on` (the plant its metadata says it was trained on), not on whatever the default is. The residual seeds must keep their
 duty within ``scale`` of their budgeted model-based base, reach short mode and deliver less energy after
 the stop than the paper's controller; the Lagrangian seeds must have trained against a budget in the
 measured units (the ramp's measured cost) and stay physical (no swing of I2 above the step's peak); the
@@ -26,23 +27,31 @@ pytest.importorskip("stable_baselines3")
 WINDOWS, SEED = 8, 5000   # fixed nominal windows, disjoint from compare's 1000-1099 and the training ones
 
 
-def _trained_on():
-    from envs.core import EnvConfig
-    return EnvConfig(link_model="envelope")   # the shipped SB3 models' plant (module notes)
-
-
 def _metas(kind):
     return [json.loads(Path(s.split(":", 1)[1]).with_suffix(".json").read_text()) for s in shipped_seed_groups()[kind]]
+
+
+def _trained_on(kind):
+    """The EnvConfig of the plant a seed group was trained on (one link per group, module notes)."""
+    from envs.core import EnvConfig
+    links = {m["env_config"]["link_model"] for m in _metas(kind)}
+    assert len(links) == 1, (kind, links)
+    return EnvConfig(link_model=links.pop())
 
 
 def test_every_shipped_seed_group_was_trained_on_todays_env_config():
     from envs.core import EnvConfig
     from policies.train import config_dict
-    today = json.loads(json.dumps(config_dict(EnvConfig(link_model="envelope"))))
-    assert today["devices"] != "ideal" and today["link_model"] == "envelope" != EnvConfig.link_model
     for kind in shipped_seed_groups():
+        link = _trained_on(kind).link_model
+        today = json.loads(json.dumps(config_dict(EnvConfig(link_model=link))))
+        assert today["devices"] != "ideal" and today["link_model"] == link
         for m in _metas(kind):
             assert m["env_config"] == today, (kind, m["seed"])
+            # the command names the link it trained on (as --link or as the --env override of retrain_shipped)
+            assert f" --link {link} " in m["reproduce"] or f" --env link_model={link} " in m["reproduce"]
+            if link != "envelope":   # retrained on the exact-mode link: by the retraining script, with its record
+                assert m["trained"]["returncode"] == 0 and f" --link {link} " in m["trained"]["command"]
     for kind in ("rl", "residual", "ppo_lagrangian"):
         for m in _metas(kind):
             t = m["trained"]
@@ -65,9 +74,10 @@ def test_shipped_budgets_are_in_measured_overshoot_units():
     trade), the Lagrangian's is the ramp's measured mean cost there (the documented default)."""
     from policies.constrained import BUDGET_EPISODES, BUDGET_SEED
     base_name = "model_based_budget:0.01"
-    runs = run_policies([base_name, "ramp"], "random", BUDGET_EPISODES, BUDGET_SEED, _trained_on())
+    on_res, on_lag = _trained_on("residual"), _trained_on("ppo_lagrangian")   # each group on its own plant
+    runs = run_policies([base_name], "random", BUDGET_EPISODES, BUDGET_SEED, on_res)
     base = float(np.mean(np.maximum(runs[base_name].metrics["cost"], 0.0)))
-    ramp = float(np.mean(runs["ramp"].metrics["cost"]))
+    ramp = float(np.mean(run_policies(["ramp"], "random", BUDGET_EPISODES, BUDGET_SEED, on_lag)["ramp"].metrics["cost"]))
     assert 0.03 < base < 0.06   # the ripple term: ~3 points above the envelope's ~1.5 %
     for m in _metas("residual"):
         assert m["residual"]["base"] == base_name and base < m["budget"] < base + 0.02
@@ -93,7 +103,7 @@ def test_shipped_residual_keeps_its_duty_within_scale_of_its_base():
 
 def test_shipped_residual_reaches_short_mode_and_delivers_less_than_the_paper_after_the_stop():
     specs = shipped_seed_groups()["residual"]
-    runs = run_policies(["model_based", "step", *specs], "nominal", WINDOWS, SEED, _trained_on())
+    runs = run_policies(["model_based", "step", *specs], "nominal", WINDOWS, SEED, _trained_on("residual"))
     mb, step = runs["model_based"].metrics, runs["step"].metrics
     for sp in specs:
         m = runs[sp].metrics
@@ -104,7 +114,7 @@ def test_shipped_residual_reaches_short_mode_and_delivers_less_than_the_paper_af
 
 def test_shipped_lagrangian_stays_physical():
     specs = shipped_seed_groups()["ppo_lagrangian"]
-    runs = run_policies(["step", *specs], "nominal", WINDOWS, SEED, _trained_on())
+    runs = run_policies(["step", *specs], "nominal", WINDOWS, SEED, _trained_on("ppo_lagrangian"))
     step = runs["step"].metrics
     for sp in specs:
         m = runs[sp].metrics
@@ -119,7 +129,7 @@ def test_shipped_rl_stays_physical_and_is_the_default_rl_policy():
     from policies.rl import PRETRAINED
     specs = shipped_seed_groups()["rl"]
     assert specs[0] == f"rl:{PRETRAINED}"
-    runs = run_policies(["step", *specs], "nominal", WINDOWS, SEED, _trained_on())
+    runs = run_policies(["step", *specs], "nominal", WINDOWS, SEED, _trained_on("rl"))
     step = runs["step"].metrics
     for sp in specs:
         assert np.all(runs[sp].metrics["peak_i2_a"] < step["peak_i2_a"])
@@ -169,3 +179,54 @@ def test_retrain_script_rl_bc_is_the_cloned_start_and_installs_as_rl(tmp_path, m
     assert sorted(p.name for p in dst.iterdir()) == ["rl_s2.json", "rl_s2.zip"]
     assert (dst / "rl_s2.zip").read_bytes() == b"model bytes"
     assert json.loads((dst / "rl_s2.json").read_text()) == {"seed": 2, "trained": {"command": cmd}}
+
+
+def _retrain_script():
+    import importlib.util
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location("retrain_shipped", root / "benchmarks" / "retrain_shipped.py")
+    rs = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(rs)
+    return rs
+
+
+@pytest.mark.parametrize("kind, timesteps, budget", [("slow_budget", 307200, "0.1"), ("imitation", 0, "")])
+def test_retrain_script_slow_budget_and_imitation_are_the_shipped_commands(kind, timesteps, budget):
+    """The script's command of each kind parses to the options of the shipped seed 0's own ``reproduce``
+    (link and output aside): the retraining runs what was shipped, on the link it is told."""
+    from mission_sim.cli import build_parser
+    rs = _retrain_script()
+    assert rs.constrained(kind) == bool(budget)
+    ours = vars(build_parser().parse_args(
+        rs.KINDS[kind].format(timesteps=timesteps, seed=0, budget=budget).split()[1:] + ["--out", "x"]))
+    shipped = json.loads((Path(__file__).resolve().parents[1] / "policies" / "pretrained" / f"{kind}_s0.json").read_text())
+    theirs = vars(build_parser().parse_args(shipped["reproduce"].replace(" --out DIR", " --out x").split()[1:]))
+    skip = {"link", "env", "eval_every", "checkpoint_every"}   # the link is the run's; evaluation cadence is not the model
+    assert {k: v for k, v in ours.items() if k not in skip} == {k: v for k, v in theirs.items() if k not in skip}
+
+
+def test_retrain_script_refuses_ppo_steps_for_the_clone_and_installs_only_finished_runs(tmp_path):
+    import subprocess
+    import sys
+    root = Path(__file__).resolve().parents[1]
+    script = [sys.executable, str(root / "benchmarks" / "retrain_shipped.py")]
+    r = subprocess.run([*script, "--kind", "imitation", "--timesteps", "1000", "--out", str(tmp_path / "r")],
+                       cwd=root, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "--timesteps 1000 is invalid with --kind imitation" in r.stderr
+    assert not (tmp_path / "r").exists()
+    (tmp_path / "recs").write_text(json.dumps({"kind": "imitation", "seed": 0, "returncode": 0}) + "\n")
+    r = subprocess.run([*script, "--kind", "imitation", "--timesteps", "0", "--seeds", "0-1", "--out", str(tmp_path / "r"),
+                        "--install-from", str(tmp_path / "recs")], cwd=root, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "seeds [0, 1] of --kind imitation have no finished run" in r.stderr
+
+
+@pytest.mark.parametrize("links", ["envelope", "modal,modal", "envelope,exact"])
+def test_bench_train_refuses_bad_links(links):
+    """``bench_train.py --links``: two or more distinct link names, else one line naming the value, exit 2."""
+    import subprocess
+    import sys
+    root = Path(__file__).resolve().parents[1]
+    r = subprocess.run([sys.executable, str(root / "benchmarks" / "bench_train.py"), "--links", links],
+                       cwd=root, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and f"--links {links!r} is invalid" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
