@@ -49,7 +49,7 @@ def built(tmp_path_factory):
     os.environ["DRONEWPT_CACHE_DIR"] = str(cache)
     try:
         path = aot.build(force=True)
-        assert path is not None, aot.failed_note(aot.module_path()).read_text()
+        assert path is not None, aot.failed_note().read_text()
     finally:
         if old is None:
             os.environ.pop("DRONEWPT_CACHE_DIR", None)
@@ -70,8 +70,10 @@ def test_the_built_loop_gives_the_jits_bits_without_numba(built, tmp_path):
     assert got["summary"]["fine_steps"] > 1000
 
 
-def test_a_broken_module_falls_back_to_the_jit(built, tmp_path):
-    """A truncated module (a full disk, a killed copy) is not loaded: the run uses the JIT, same bits."""
+def test_a_broken_module_falls_back_to_the_jit_and_is_removed(built, tmp_path):
+    """A truncated module (a full disk, a killed copy) is not loaded: the run uses the JIT, same bits, and the
+    file is removed (warmup builds it again); a whole module under a name whose digest is not its own, as
+    well."""
     cache, path, jit = built
     other = tmp_path / "cache"
     shutil.copytree(cache, other)
@@ -79,53 +81,76 @@ def test_a_broken_module_falls_back_to_the_jit(built, tmp_path):
     broken.write_bytes(path.read_bytes()[:4096])
     got = _mission(tmp_path / "out", other, "use")
     assert got["numba"] and got["summary"] == jit["summary"] and got["parquet"] == jit["parquet"]
-    aot.digest_note(broken).unlink()                       # no digest: not loaded either
-    broken.write_bytes(path.read_bytes())
+    assert not broken.exists()
+    suffix = aot.importlib.machinery.EXTENSION_SUFFIXES[0]
+    wrong = broken.with_name(path.name[:path.name.index("-") + 1] + "0" * 16 + suffix)
+    wrong.write_bytes(path.read_bytes())                   # the module's bytes, another digest in its name
     got = _mission(tmp_path / "out2", other, "use")
     assert got["numba"] and got["summary"] == jit["summary"] and got["parquet"] == jit["parquet"]
+    assert not wrong.exists()
 
 
-def test_stale_or_foreign_modules_are_not_loaded(built, tmp_path, monkeypatch):
-    """Changed sources mean another key, so another file: the old one is never loaded; a module built for
-    another key but found under this key's name does not load either (its init function has another name)."""
+def test_stale_foreign_or_other_cpu_modules_are_not_loaded(built, tmp_path, monkeypatch):
+    """Changed sources, versions or CPU mean another key, so another file: the old one is never loaded; a module
+    built for another key but found under this key's name does not load either (its init function has another
+    name)."""
     cache, path, _ = built
     monkeypatch.setenv("DRONEWPT_CACHE_DIR", str(tmp_path))
     monkeypatch.setenv("DRONEWPT_AOT", "use")
     monkeypatch.setattr(aot, "_state", {"enabled": False, "module": None, "loaded": False})
     assert aot.enable()
     assert not aot.covers("model_based")                   # nothing built in this cache
-    target = aot.module_path()
-    target.parent.mkdir(parents=True)
+    (tmp_path / "aot").mkdir()
+    target = tmp_path / "aot" / path.name
     shutil.copy(path, target)
     monkeypatch.setattr(aot, "_state", {"enabled": True, "module": None, "loaded": False})
-    assert not aot.covers("model_based")                   # no digest beside it: not trusted
-    shutil.copy(aot.digest_note(path), aot.digest_note(target))
-    monkeypatch.setattr(aot, "_state", {"enabled": True, "module": None, "loaded": False})
     assert aot.covers("model_based")                       # the module of these sources loads
+    key = aot.build_key()
+    monkeypatch.setattr(aot, "cpu_id", lambda: b"another CPU")
+    assert aot.build_key() != key                          # the CPU is in the key
     monkeypatch.setattr(aot, "_state", {"enabled": True, "module": None, "loaded": False})
+    assert aot.find_module() is None and not aot.covers("model_based") and target.exists()
     monkeypatch.setattr(aot, "build_key", lambda: "0123456789abcde")   # as if a compiled source had changed
-    assert aot.module_path() != target and not aot.covers("model_based")
-    foreign = aot.module_path()
-    shutil.copy(path, foreign)                             # another key's module under this key's name
-    shutil.copy(aot.digest_note(path), aot.digest_note(foreign))
     monkeypatch.setattr(aot, "_state", {"enabled": True, "module": None, "loaded": False})
-    assert not aot.covers("model_based") and aot.advance("model_based") is None
+    assert not aot.covers("model_based")
+    digest = path.name[path.name.index("-") + 1:][:16]
+    foreign = aot.module_file("0123456789abcde", digest)
+    shutil.copy(path, foreign)                             # another key's module under this key's name
+    assert aot.find_module() == foreign                    # its bytes match its name ...
+    monkeypatch.setattr(aot, "_state", {"enabled": True, "module": None, "loaded": False})
+    assert not aot.covers("model_based") and aot.advance("model_based") is None   # ... but it does not load
 
 
-def test_a_failed_build_leaves_a_note_and_is_not_retried_by_missions(tmp_path, monkeypatch):
+def test_a_failed_build_leaves_a_note_and_missions_never_build(tmp_path, monkeypatch):
     monkeypatch.setenv("DRONEWPT_CACHE_DIR", str(tmp_path))
-    monkeypatch.setenv("DRONEWPT_AOT", "auto")
     monkeypatch.setattr(aot, "_state", {"enabled": False, "module": None, "loaded": False})
+    monkeypatch.setenv("DRONEWPT_AOT", "auto")
     monkeypatch.setattr(aot, "_BUILD", "import sys; sys.exit('no C compiler here')")
     assert aot.enable()
-    said = []
-    assert aot.build_if_missing("model_based", say=said.append) is None and len(said) == 1
-    note = aot.failed_note(aot.module_path())
-    assert "no C compiler here" in note.read_text() and not aot.module_path().exists()
-    runs = []
-    monkeypatch.setattr(subprocess, "run", lambda *a, **k: runs.append(a))
-    assert aot.build_if_missing("model_based", say=said.append) is None and runs == [] and len(said) == 1
-    assert not aot.covers("model_based")
+    assert aot.build(force=True) is None
+    assert "no C compiler here" in aot.failed_note().read_text() and aot.find_module() is None
+    assert not hasattr(aot, "build_if_missing")            # the mission command has nothing to call
+    from mission_sim.cli import mission
+    assert "build(" not in Path(mission.__file__).read_text()
+
+
+def test_a_successful_build_replaces_the_failed_note_and_other_versions(tmp_path, monkeypatch):
+    """Without running the compiler: a fake build that writes a module file; the note and other keys' files go."""
+    monkeypatch.setenv("DRONEWPT_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(aot, "_state", {"enabled": True, "module": None, "loaded": False})
+    d = tmp_path / "aot"
+    d.mkdir()
+    suffix = aot.importlib.machinery.EXTENSION_SUFFIXES[0]
+    old = d / f"dronewpt_mission_aot_fffffffffffffff-{'1' * 16}{suffix}"
+    old.write_bytes(b"old")
+    aot.failed_note().write_text("earlier failure\n")
+    fake = ("import sys, pathlib; out, name = sys.argv[1], sys.argv[2]; "
+            f"pathlib.Path(out, name + {suffix!r}).write_bytes(b'module bytes')")
+    monkeypatch.setattr(aot, "_BUILD", fake)
+    path = aot.build(force=True)
+    assert path is not None and path.read_bytes() == b"module bytes"
+    assert aot.find_module() == path and not old.exists() and not aot.failed_note().exists()
+    assert aot.build(force=False) == path                  # a valid module: nothing to build
 
 
 def test_what_turns_it_off(monkeypatch):

@@ -187,19 +187,7 @@ def _checked_run(args, started, worker) -> int:
         finally:
             if worker is not None:
                 worker.close()
-    status = _report(args, res.summary, files)
-    _build_ahead_of_time(pol)
-    return status
-
-
-def _build_ahead_of_time(pol) -> None:
-    """After a run of a policy the loop's ahead-of-time build covers but that ran on numba's JIT (the build
-    missing): build it once, saying so on stderr (:func:`mission_sim.world.aot.build_if_missing`)."""
-    from ..world import aot
-    name = aot.policy_entry(pol)
-    if name is not None:
-        sys.stdout.flush()
-        aot.build_if_missing(name, say=lambda line: print(line, file=sys.stderr, flush=True))
+    return _report(args, res.summary, files)
 
 
 def _figure_worker(args):

@@ -59,16 +59,16 @@ def _switching() -> None:
 
 
 def _ahead_of_time() -> str:
-    """The mission loop's ahead-of-time build (:mod:`mission_sim.world.aot`; a child process compiles it)."""
+    """The mission loop's ahead-of-time build (:mod:`mission_sim.world.aot`; a child process compiles it; a
+    module whose bytes do not match its digest is removed and built again)."""
     from ..world import aot
-    path = aot.module_path()
     if not aot.enable():
         return f"skipped ({aot.ENV_VAR}={os.environ.get(aot.ENV_VAR, '')}, or NUMBA_DISABLE_JIT set)"
-    if path is None:
+    if aot.module_dir() is None:
         return "skipped (the disk cache is off: DRONEWPT_CACHE_DIR is empty)"
-    if path.is_file():
+    if aot.find_module() is not None:
         return "built already"
-    return "built" if aot.build(force=True) is not None else f"failed (numba's JIT is used; {aot.failed_note(path)})"
+    return "built" if aot.build(force=True) is not None else f"failed (numba's JIT is used; {aot.failed_note()})"
 
 
 STAGES = (("mission loop and policy kernels (mission, replay, sweep)", _missions),

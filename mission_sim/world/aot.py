@@ -10,24 +10,28 @@ written twice: the build compiles the same functions numba's JIT compiles (the r
 :mod:`policies.kernels`), for this machine's CPU like the JIT, and the results are the same to the bit
 (``tests/test_mission_aot.py``).
 
-* **Key.** The module's name (and file) carries :func:`build_key`: a hash of every source compiled in
-  (:func:`sources`, this file included), numba's and llvmlite's version files, numpy's version, the
-  interpreter and the extension suffix. A changed source means another name: the old file is never loaded
-  (stale entries are left to the cache's owner; each is ~1 MB). The module also returns the key from
-  ``aot_key()``, checked on load.
-* **Fail safe.** A missing, changed or truncated (its SHA-256, written after it, checked before loading: a
-  broken shared object can crash the process that loads it), unloadable or mismatched module gives None here and
-  the mission runs on numba's JIT as before, with identical results; a build that fails leaves a
-  ``.failed`` note with its error (no retry on every run; ``dronewpt warmup`` retries).
-* **Who uses it.** Only a process that called :func:`enable` (``dronewpt mission``) and only for a policy
-  with a :meth:`kernel_spec` named in :data:`ENTRIES` (:func:`.fastpath.run`); library calls of
-  :func:`~.runner.run_mission`, sweeps and tests run on the JIT unless they enable it. ``$DRONEWPT_AOT``:
-  ``0`` never, ``use`` load only (never build), anything else (the default) also builds after a
-  ``dronewpt mission`` that missed it (once, said on stderr: 16 s after a first run that compiled the loop's
-  kernels into numba's cache, 77-113 s when they had to be compiled again; load ~5); ``NUMBA_DISABLE_JIT=1`` never.
-* **Build.** :func:`build` runs the compiler in a child process (numba, ``numba.pycc``, a C compiler) into
-  a temporary folder beside the entry and renames the module into place: concurrent builders and readers
-  never see half a file.
+* **Key.** The module's name carries :func:`build_key`: a hash of every source compiled in
+  (:func:`sources`, this file included), numba's, llvmlite's and numpy's versions, the interpreter, the
+  extension suffix and this machine's CPU (:func:`cpu_id`: the module is compiled for the host CPU like the
+  JIT, so a cache copied to another machine must not load it: an unsupported instruction kills the process).
+  A changed source means another name: the old file is never loaded (a successful build removes the other
+  keys' modules). The module also returns the key from ``aot_key()``, checked on load.
+* **One file, its digest in its name.** The module is ``<name>-<sha256[:16]>`` + the extension suffix,
+  renamed into place in one step: concurrent builders and readers never see half a module or a module
+  beside another build's digest. Before loading, the file's SHA-256 must match its name (a truncated or
+  changed shared object can crash the process that loads it); a file that does not match is removed, so
+  ``dronewpt warmup`` builds it again.
+* **Fail safe.** A missing, broken, stale or unloadable module gives None here and the mission runs on
+  numba's JIT as before, with identical results; a build that fails leaves a ``.failed`` note with its error.
+* **Who builds, who uses it.** Only ``dronewpt warmup`` builds it (:func:`build`; a child process: numba,
+  ``numba.pycc``, which needs setuptools, and a C compiler; 16 s after the loop's kernels are in numba's
+  cache, 77-113 s when they had to be compiled, load ~5): a mission never waits for a build. Only a process
+  that called :func:`enable` (``dronewpt mission``) loads it, and only for a policy with a
+  :meth:`kernel_spec` named in :data:`ENTRIES` (:func:`.fastpath.run`); library calls of
+  :func:`~.runner.run_mission`, sweeps and tests run on the JIT unless they enable it. ``$DRONEWPT_AOT=0``
+  (or ``NUMBA_DISABLE_JIT=1``) turns it off.
+* ``numba.pycc`` has been "pending deprecation" since numba 0.57 (still in 0.68): without it the build fails,
+  leaves its note, and missions keep the JIT with the same bits.
 """
 
 from __future__ import annotations
@@ -41,14 +45,14 @@ import sys
 import tempfile
 from pathlib import Path
 
-__all__ = ["ENTRIES", "ENV_VAR", "enable", "enabled", "covers", "advance", "build", "build_key", "module_path",
-           "sources", "failed_note", "digest_note", "build_if_missing", "policy_entry"]
+__all__ = ["ENTRIES", "ENV_VAR", "enable", "enabled", "covers", "advance", "build", "build_key", "module_dir",
+           "module_file", "find_module", "sources", "failed_note", "policy_entry", "cpu_id"]
 
 #: the policies whose compiled kernel gets an entry ``advance_<name>`` (the default mission's policy; each entry
 #: compiles the whole loop once more: ~30 s of CPU)
 ENTRIES = ("model_based",)
 
-#: ``0``: never; ``use``: load when built, never build; otherwise: load, and build after a mission that missed it
+#: ``0`` (or ``off``, ``no``, ``false``): never load the built module; anything else: load it when built
 ENV_VAR = "DRONEWPT_AOT"
 
 _ROOT = Path(__file__).resolve().parents[2]   # the folder holding mission_sim/, wpt_receiver/, policies/
@@ -79,24 +83,41 @@ def sources() -> list[Path]:
             _ROOT / "policies" / "kernels.py"]
 
 
-def _version_file(package: str) -> bytes:
-    """The bytes of ``package``'s ``_version.py`` (found without importing the package), or its name."""
+def _version(package: str) -> bytes:
+    """``package``'s installed version (from its metadata, without importing it), or its name."""
+    from importlib import metadata
     try:
-        spec = importlib.util.find_spec(package)
-        return Path(spec.origin).with_name("_version.py").read_bytes()
-    except Exception:  # noqa: BLE001 - not installed or laid out otherwise: still a key
+        return f"{package}=={metadata.version(package)}".encode()
+    except Exception:  # noqa: BLE001 - not installed as a distribution: still a key
         return package.encode()
 
 
+def cpu_id() -> bytes:
+    """What identifies this machine's CPU for compiled code: the first processor's model and feature flags
+    from ``/proc/cpuinfo`` (Linux: ``model name``, ``flags``; ARM: ``CPU implementer``, ``CPU part``,
+    ``Features``), else the platform's machine and processor names."""
+    import platform
+    keys = ("vendor_id", "model name", "flags", "cpu implementer", "cpu architecture", "cpu part", "features")
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+            first = f.read().split("\n\n")[0]
+        lines = sorted(ln.strip() for ln in first.splitlines() if ln.split(":")[0].strip().lower() in keys)
+        if lines:
+            return "\n".join(lines).encode()
+    except OSError:
+        pass
+    return f"{platform.machine()}|{platform.processor()}".encode()
+
+
 def build_key() -> str:
-    """16 hex digits over :func:`sources`, the compiler's versions, numpy's, the interpreter and the platform."""
-    import numpy as np
+    """15 hex digits over :func:`sources`, the compiler's and numpy's versions, the interpreter, the platform
+    and the CPU (:func:`cpu_id`)."""
     h = hashlib.sha256()
     for p in sources():
         h.update(p.name.encode())
         h.update(p.read_bytes())
-    for part in (_version_file("numba"), _version_file("llvmlite"), np.__version__.encode(), sys.version.encode(),
-                 importlib.machinery.EXTENSION_SUFFIXES[0].encode(), ",".join(ENTRIES).encode()):
+    for part in (_version("numba"), _version("llvmlite"), _version("numpy"), sys.version.encode(),
+                 importlib.machinery.EXTENSION_SUFFIXES[0].encode(), ",".join(ENTRIES).encode(), cpu_id()):
         h.update(part)
     return h.hexdigest()[:15]
 
@@ -105,29 +126,48 @@ def _name(key: str) -> str:
     return f"dronewpt_mission_aot_{key}"
 
 
-def module_path(key: str | None = None) -> Path | None:
-    """Where the module of ``key`` (default: the current sources') lives; None when the disk cache is off or
-    the sources cannot be read (an install without its ``.py`` files: no key, so no module)."""
+def module_dir() -> Path | None:
+    """The folder of the built modules (the disk cache's ``aot``); None when the disk cache is off."""
     from wpt_receiver.diskcache import cache_dir
     d = cache_dir()
-    if d is None:
+    return None if d is None else d / "aot"
+
+
+def _key() -> str | None:
+    try:
+        return build_key()
+    except OSError:   # an install without its .py files: no key, so no module
         return None
-    if key is None:
+
+
+def module_file(key: str, digest: str) -> Path | None:
+    """The file of ``key``'s module whose SHA-256 starts with ``digest`` (16 hex digits)."""
+    d = module_dir()
+    return None if d is None else d / f"{_name(key)}-{digest[:16]}{importlib.machinery.EXTENSION_SUFFIXES[0]}"
+
+
+def failed_note(key: str | None = None) -> Path | None:
+    """The note a failed build of ``key`` (default: the current sources') leaves (its error)."""
+    d, key = module_dir(), key or _key()
+    return None if d is None or key is None else d / f"{_name(key)}.failed"
+
+
+def find_module(key: str | None = None) -> Path | None:
+    """The built module of ``key`` (default: the current sources') whose bytes match the digest in its name;
+    files of that key that do not match are removed (a later build replaces them). None if there is none."""
+    d, key = module_dir(), key or _key()
+    if d is None or key is None or not d.is_dir():
+        return None
+    suffix = importlib.machinery.EXTENSION_SUFFIXES[0]
+    for path in sorted(d.glob(f"{_name(key)}-*{suffix}")):
+        digest = path.name[len(_name(key)) + 1:-len(suffix)]
         try:
-            key = build_key()
+            if len(digest) == 16 and hashlib.sha256(path.read_bytes()).hexdigest()[:16] == digest:
+                return path
+            path.unlink()   # truncated or changed since the build: never loaded, built again by warmup
         except OSError:
-            return None
-    return d / "aot" / (_name(key) + importlib.machinery.EXTENSION_SUFFIXES[0])
-
-
-def failed_note(path: Path) -> Path:
-    """The note a failed build leaves beside ``path`` (its error)."""
-    return path.with_name(path.name.split(".")[0] + ".failed")
-
-
-def digest_note(path: Path) -> Path:
-    """The SHA-256 of the module at ``path``, written after it: checked before the module is loaded."""
-    return path.with_name(path.name.split(".")[0] + ".sha256")
+            continue
+    return None
 
 
 def _load():
@@ -137,17 +177,15 @@ def _load():
     _state["loaded"] = True
     try:
         key = build_key()
-        path = module_path(key)
-        if path is None or not path.is_file():
+        path = find_module(key)
+        if path is None:
             return None
-        if hashlib.sha256(path.read_bytes()).hexdigest() != digest_note(path).read_text().strip():
-            return None   # truncated or changed since the build (loading a broken shared object can crash)
         spec = importlib.util.spec_from_file_location(_name(key), path)
         mod = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(mod)
         if mod.aot_key() != int(key, 16):
             return None
-    except Exception:  # noqa: BLE001 - unloadable (truncated, another platform, ...): numba's JIT instead
+    except Exception:  # noqa: BLE001 - unloadable (another platform, ...): numba's JIT instead
         return None
     _state["module"] = mod
     return mod
@@ -206,21 +244,20 @@ cc.compile()
 
 def build(force: bool = True, timeout_s: float = 1800.0) -> Path | None:
     """Build the module of the current sources into the disk cache (a child process); its path, or None when
-    the cache is off or the build failed (its error in :func:`failed_note`). ``force=False`` returns the
-    existing module's path, or None after an earlier failure, without building."""
-    try:
-        key = build_key()
-    except OSError:   # the sources are not there to compile: nothing to build
+    the cache is off or the build failed (its error in :func:`failed_note`). ``force=False`` returns a valid
+    existing module's path without building. A successful build removes the modules of other keys."""
+    key = _key()
+    d = module_dir()
+    if key is None or d is None:
         return None
-    path = module_path(key)
-    if path is None:
-        return None
-    note = failed_note(path)
-    if not force and (path.is_file() or note.is_file()):
-        return path if path.is_file() else None
+    if not force and (found := find_module(key)) is not None:
+        return found
+    note = failed_note(key)
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(dir=path.parent, prefix=".build-") as tmp:
+        d.mkdir(parents=True, exist_ok=True)
+        if importlib.util.find_spec("setuptools") is None:
+            raise RuntimeError("numba.pycc needs setuptools, which is not installed (pip install setuptools)")
+        with tempfile.TemporaryDirectory(dir=d, prefix=".build-") as tmp:
             env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(_ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])}
             env.pop("NUMBA_DISABLE_JIT", None)
             r = subprocess.run([sys.executable, "-c", _BUILD, tmp, _name(key), str(int(key, 16)), *ENTRIES],
@@ -228,11 +265,8 @@ def build(force: bool = True, timeout_s: float = 1800.0) -> Path | None:
             built = list(Path(tmp).glob(_name(key) + "*" + importlib.machinery.EXTENSION_SUFFIXES[0]))
             if r.returncode != 0 or len(built) != 1:
                 raise RuntimeError(f"exit status {r.returncode}: {(r.stderr or r.stdout).strip()[-2000:]}")
-            digest = hashlib.sha256(built[0].read_bytes()).hexdigest()
-            os.replace(built[0], path)
-            tmp_note = Path(tmp) / "digest"
-            tmp_note.write_text(digest + "\n")
-            os.replace(tmp_note, digest_note(path))
+            path = module_file(key, hashlib.sha256(built[0].read_bytes()).hexdigest())
+            os.replace(built[0], path)   # one rename: the module and its digest (in its name) arrive together
         note.unlink(missing_ok=True)
     except (OSError, RuntimeError, subprocess.SubprocessError) as exc:
         try:
@@ -240,20 +274,8 @@ def build(force: bool = True, timeout_s: float = 1800.0) -> Path | None:
         except OSError:
             pass
         return None
+    for old in d.glob("dronewpt_mission_aot_*"):   # other keys' modules and notes, and older builds of this key
+        if old != path and old.is_file():
+            old.unlink(missing_ok=True)
     _state["loaded"] = False   # a later covers() loads the new module
     return path
-
-
-def build_if_missing(policy_name: str, say=None) -> Path | None:
-    """After a mission that ran ``policy_name`` on the JIT because the module was missing: build it once
-    (not with ``$DRONEWPT_AOT=use``/``0``, not after an earlier failure, not when the cache is off); ``say``
-    gets one line before the build. The path built, or None."""
-    if not enabled() or _mode() == "use" or policy_name not in ENTRIES or _load() is not None:
-        return None
-    path = module_path()
-    if path is None or failed_note(path).is_file():
-        return None
-    if say is not None:
-        say("dronewpt mission: compiling the mission loop ahead of time once (~15-120 s; later runs start "
-            "without numba; DRONEWPT_AOT=use skips this)")
-    return build(force=False)
