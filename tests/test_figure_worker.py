@@ -197,3 +197,36 @@ def test_a_refused_out_folder_ends_the_figure_process(tmp_path, monkeypatch, cap
     assert closed == [{"wait_s": 0.0}] and _left() == []
     assert "another mission is writing there" in capsys.readouterr().err
     assert list(out.iterdir()) == []
+
+
+_FORK_RACE = r"""
+import os, sys
+from mission_sim.figures.worker import FigureWorker
+from mission_sim.signals import interrupts_raised
+pid0, codes = os.getpid(), []
+with interrupts_raised():            # the command's handlers: SIGTERM raises in the process that takes it
+    for _ in range(int(sys.argv[1])):
+        try:
+            w = FigureWorker()
+            w.close(wait_s=0.0)      # what a bad input does right after the fork: terminate at once
+        except BaseException as exc:  # noqa: BLE001
+            if os.getpid() != pid0:
+                os._exit(3)          # a child that escaped the worker's code with the parent's stack
+            raise
+        if os.getpid() != pid0:
+            os._exit(3)
+        codes.append(w._proc.exitcode)
+print(sorted(set(codes)))
+"""
+
+
+def test_a_worker_terminated_right_after_the_fork_never_runs_the_parents_code():
+    """SIGTERM sent the instant after the fork (a bad input closes the worker with ``wait_s=0``) must end the
+    child inside the worker's code: it is blocked across the fork and unblocked only inside ``_serve``. Before,
+    a child that took it before reaching ``_serve``'s ``try`` raised the command's interrupt up the parent's
+    stack: in a pytest-xdist worker that copy went on running the test session (a hang in CI)."""
+    r = subprocess.run([sys.executable, "-c", _FORK_RACE, "60"], cwd=ROOT, capture_output=True, text=True, timeout=600,
+                       env={**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])})
+    assert r.returncode == 0, r.stderr[-2000:]
+    codes = eval(r.stdout.strip().splitlines()[-1])   # noqa: S307 - our own printed list of ints
+    assert 3 not in codes and set(codes) <= {0, -15}, codes

@@ -22,12 +22,16 @@ is raised there. This module imports neither matplotlib nor multiprocessing unti
 from __future__ import annotations
 
 import os
+import signal
 import sys
 
 from . import PATH_SAMPLES
 
 __all__ = ["FigureWorker", "FigureWorkerLost", "fork_available", "for_figures", "core_free", "PATH_SAMPLES", "CLOSE_WAIT_S",
            "HELPER_FIGURES"]
+
+#: the signals blocked across the worker's fork (taken by the child only inside :func:`_serve`)
+_BLOCKED = frozenset({signal.SIGTERM, signal.SIGINT})
 
 #: seconds :meth:`FigureWorker.close` waits for the child to exit by itself before terminating it
 CLOSE_WAIT_S = 1.0
@@ -65,7 +69,14 @@ class FigureWorker:
         sys.stderr.flush()   # nothing buffered is copied into the child (it flushes at its exit)
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(target=_serve, args=(child, self._conn), daemon=True, name="dronewpt-figures")
-        self._proc.start()
+        # SIGTERM / SIGINT blocked across the fork: the child takes them only inside _serve's try (unblocked
+        # there), never on its way to it with the parent's handlers and stack (an interrupt raised there would
+        # run the parent's code in the child: a bad input terminates the worker the instant after the fork)
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, _BLOCKED)
+        try:
+            self._proc.start()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
         child.close()
 
     def draw(self, result, out_dir) -> list[str]:
@@ -100,10 +111,10 @@ def _interrupted(signum, frame):
 def _serve(conn, parent_end) -> None:
     """The child: import the figures, draw one set, send the paths (or the exception) back, exit. Quietly
     (no traceback) when the parent went away or it was interrupted: the parent reports what matters."""
-    import signal
-    parent_end.close()   # EOF on recv once the parent's end is closed (also when the parent dies)
-    signal.signal(signal.SIGTERM, _interrupted)
     try:
+        parent_end.close()   # EOF on recv once the parent's end is closed (also when the parent dies)
+        signal.signal(signal.SIGTERM, _interrupted)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, _BLOCKED)   # blocked by the parent across the fork
         _draw_once(conn)
     except BaseException:  # noqa: BLE001, S110 - interrupted or the parent is gone: no one to tell
         pass
