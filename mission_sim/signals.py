@@ -8,6 +8,9 @@ for SIGTERM).
 middle (Dask's cluster start) and raises it on leaving. A signal that lands while Python runs a callback
 whose exceptions it cannot raise (a weakref callback, ``__del__``) is kept and raised at the next safe
 point (:func:`raise_lost`: before a file is renamed into place, when the command returns), not lost.
+A process forked by the command (:func:`blocked_across_fork`) takes them only once inside its own code
+(:func:`unblock_in_child`): one taken on its way there would raise the parent's interrupt up the
+parent's stack in the child, which would then run the parent's code.
 """
 
 from __future__ import annotations
@@ -17,7 +20,8 @@ import signal
 import sys
 import threading
 
-__all__ = ["Interrupted", "interrupts_raised", "interrupts_deferred", "raise_lost", "HANDLED", "exit_status", "signal_name"]
+__all__ = ["Interrupted", "interrupts_raised", "interrupts_deferred", "raise_lost", "HANDLED", "exit_status", "signal_name",
+           "blocked_across_fork", "unblock_in_child"]
 
 #: the signals turned into :class:`Interrupted`
 HANDLED = (signal.SIGINT, signal.SIGTERM)
@@ -112,3 +116,28 @@ def interrupts_deferred():
             signal.signal(s, h)
     if caught:
         raise Interrupted(caught[0])
+
+
+@contextlib.contextmanager
+def blocked_across_fork():
+    """SIGINT and SIGTERM blocked in this thread while a child is forked inside (the mask restored on
+    leaving): the child inherits the block and takes a signal sent to it (a ``terminate()`` right after
+    the fork, a Ctrl-C to the process group) only when it calls :func:`unblock_in_child`, inside the
+    ``try`` that ends it, never on its way there with the parent's handlers and stack. A signal sent to
+    the parent meanwhile stays pending until the mask is restored. Where threads' signal masks cannot be
+    set (not POSIX) it does nothing."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, HANDLED)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def unblock_in_child() -> None:
+    """In a child forked inside :func:`blocked_across_fork`, once inside the ``try`` that ends it: take
+    SIGINT and SIGTERM again (one sent meanwhile is taken now)."""
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, HANDLED)

@@ -18,6 +18,8 @@ from __future__ import annotations
 import os
 import sys
 
+from mission_sim.signals import blocked_across_fork, unblock_in_child
+
 __all__ = ["Forked", "available"]
 
 
@@ -40,6 +42,7 @@ def available() -> bool:
 
 def _child(conn, fn, args):
     try:
+        unblock_in_child()   # blocked by the parent across the fork (mission_sim.signals.blocked_across_fork)
         out = ("ok", fn(*args))
     except BaseException as exc:   # noqa: BLE001 - handed to the parent, which raises it
         out = ("error", exc)
@@ -61,7 +64,8 @@ class Forked:
             self._recv, send = ctx.Pipe(duplex=False)
             self.proc = ctx.Process(target=_child, args=(send, fn, args), daemon=True)
             try:
-                self.proc.start()
+                with blocked_across_fork():   # the child takes SIGINT / SIGTERM only inside _child's try
+                    self.proc.start()
             except OSError:   # no process to be had (limits): run it in-process at result()
                 self.proc = None
                 self._recv.close()

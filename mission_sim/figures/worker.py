@@ -25,13 +25,11 @@ import os
 import signal
 import sys
 
+from ..signals import blocked_across_fork, unblock_in_child
 from . import PATH_SAMPLES
 
 __all__ = ["FigureWorker", "FigureWorkerLost", "fork_available", "for_figures", "core_free", "PATH_SAMPLES", "CLOSE_WAIT_S",
            "HELPER_FIGURES"]
-
-#: the signals blocked across the worker's fork (taken by the child only inside :func:`_serve`)
-_BLOCKED = frozenset({signal.SIGTERM, signal.SIGINT})
 
 #: seconds :meth:`FigureWorker.close` waits for the child to exit by itself before terminating it
 CLOSE_WAIT_S = 1.0
@@ -69,14 +67,10 @@ class FigureWorker:
         sys.stderr.flush()   # nothing buffered is copied into the child (it flushes at its exit)
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(target=_serve, args=(child, self._conn), daemon=True, name="dronewpt-figures")
-        # SIGTERM / SIGINT blocked across the fork: the child takes them only inside _serve's try (unblocked
-        # there), never on its way to it with the parent's handlers and stack (an interrupt raised there would
-        # run the parent's code in the child: a bad input terminates the worker the instant after the fork)
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, _BLOCKED)
-        try:
+        # the child takes SIGTERM / SIGINT only inside _serve's try, never on its way to it with the parent's
+        # handlers and stack (a bad input terminates the worker the instant after the fork)
+        with blocked_across_fork():
             self._proc.start()
-        finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, old)
         child.close()
 
     def draw(self, result, out_dir) -> list[str]:
@@ -114,7 +108,7 @@ def _serve(conn, parent_end) -> None:
     try:
         parent_end.close()   # EOF on recv once the parent's end is closed (also when the parent dies)
         signal.signal(signal.SIGTERM, _interrupted)
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, _BLOCKED)   # blocked by the parent across the fork
+        unblock_in_child()   # blocked by the parent across the fork
         _draw_once(conn)
     except BaseException:  # noqa: BLE001, S110 - interrupted or the parent is gone: no one to tell
         pass
