@@ -99,6 +99,32 @@ PRESETS = ("ideal", "schottky", "sic")
 BRIDGE_PRESETS = ("ideal", "schottky")
 
 
+_NUM = re.compile(r"^(?P<pre>[A-Za-z]+=)?(?P<num>[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)$")
+
+
+def netlist_mismatches(stored: str, fresh: str, rel: float = 1e-9) -> list[str]:
+    """Where two netlists differ beyond round-off: every token equal, except numbers (also ``IC=<x>``), which
+    must agree to ``rel`` relative (or 1e-12 absolute). Computed initial conditions come from a steady state
+    whose last bits depend on the machine's BLAS / libm paths (seen: 1e-13 relative between two x86 machines)."""
+    a, b = stored.splitlines(), fresh.splitlines()
+    if len(a) != len(b):
+        return [f"{len(a)} lines stored, {len(b)} fresh"]
+    out = []
+    for n, (la, lb) in enumerate(zip(a, b), 1):
+        ta, tb = la.split(), lb.split()
+        if len(ta) != len(tb):
+            out.append(f"line {n}: {la!r} != {lb!r}")
+            continue
+        for x, y in zip(ta, tb):
+            if x == y:
+                continue
+            mx, my = _NUM.match(x), _NUM.match(y)
+            if not (mx and my and mx["pre"] == my["pre"]
+                    and math.isclose(float(mx["num"]), float(my["num"]), rel_tol=rel, abs_tol=1e-12)):
+                out.append(f"line {n}: {x!r} != {y!r}")
+    return out
+
+
 def netlist_path(name: str, bridge: bool = False) -> Path:
     return HERE / (f"link_bridge_{name}.cir" if bridge else f"link_{name}.cir")
 

@@ -22,6 +22,8 @@ Depends on nothing else of dronewpt. Modules, in the order data flows:
 ``modal``               envelope on the exact coupled modes w/sqrt(1 -+ k), SBAR v2 balanced
 ``modal_kernel``        the exact-mode link step compiled (numba, imported on demand): modes per Lm,
                         ZOH per dt, energies, v2 with quadrature and peak from a table
+``modal_link``          the exact-mode link's layout, constants and cached table without numba (for
+                        ``modal_kernel`` and a mission run by the ahead-of-time build)
 ``kernel_cache``        numba's cache of a kernel dropped when a module it compiles in changes
 ``numba_start``         numba's start-up without the scipy.linalg package (its BLAS probe's module alone),
                         cache loads without numba's registries

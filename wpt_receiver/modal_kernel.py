@@ -69,7 +69,7 @@ from .kernel_cache import drop_stale_cache
 from .modal_link import (  # noqa: F401 - the layout and constants, one definition each (numba-free module)
     LC_NAMES, LC_L1, LC_L2, LC_R1, LC_R2, LC_C1, LC_C2, LC_W, LC_RHO_MAX, LC_INV_HD, LC_DR_SHORT, LC_INV_HPHI,
     LC_VF, MC_LAM, MC_G1, MC_G2, MC_S, MC_D, N_MODES_C, ZC_E, ZC_PHI, ZC_PSI00, ZC_PSI11, ZC_PSI01, N_ZOH_C, N_D,
-    N_RHO, N_PHI, RHO_MAX, _CACHE_VERSION, REFINE_TOL, REFINE_LEVELS, link_constants, modal_table)
+    N_RHO, N_PHI, RHO_MAX, _CACHE_VERSION, REFINE_TOL, REFINE_LEVELS, link_constants, table_key, cached_table)
 from .devices import IDEAL, DeviceSet
 from .params import LinkParams
 
@@ -678,6 +678,17 @@ def build_table(params: LinkParams, devices: DeviceSet = IDEAL, n_d: int = N_D, 
     tab = np.empty((2, n_phi, n_d, n_rho))
     _fill_table(sh.i2_from_v1, sh.y2, sh.n.astype(np.float64), sh.clamp_v, 0.5 * np.pi * u * np.abs(u),
                 np.linspace(0.0, 1.0, n_d), RHO_MAX * np.linspace(0.0, 1.0, n_rho) ** 2, len(sh.theta), tab)
+    return tab
+
+
+def modal_table(params: LinkParams, devices: DeviceSet = IDEAL) -> np.ndarray:
+    """:func:`build_table` of a resonant link, from the disk cache (:mod:`wpt_receiver.diskcache`) when there
+    (:func:`.modal_link.cached_table`), built and stored on a miss."""
+    from . import diskcache
+    tab = cached_table(params, devices)
+    if tab is None:
+        tab = build_table(params, devices)
+        diskcache.store("modal_table", table_key(params, devices), tab)
     return tab
 
 

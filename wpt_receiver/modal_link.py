@@ -2,8 +2,8 @@
 
 What a run of the compiled kernels needs from Python and nothing compiled: the ``lc`` / ``mc`` / ``zc`` array
 layouts, the table's grid, the refinement defaults, :func:`link_constants` (a link's ``lc`` array) and
-:func:`modal_table` (the SBAR table from the disk cache; built by :func:`.modal_kernel.build_table` on a miss,
-which imports numba). Split out of :mod:`.modal_kernel` so that a mission run by an ahead-of-time build of its
+:func:`cached_table` (the SBAR table from the disk cache, or None: :func:`.modal_kernel.modal_table` builds and
+stores it, with numba). Split out of :mod:`.modal_kernel` so that a mission run by an ahead-of-time build of its
 loop (:mod:`mission_sim.world.aot`) packs its arrays without importing numba; :mod:`.modal_kernel` imports
 every name from here (one definition each), and its numba cache, and its dependents', follow this file's
 source (:func:`wpt_receiver.kernel_cache.drop_stale_cache`).
@@ -17,7 +17,7 @@ from .devices import IDEAL, DeviceSet
 from .params import LinkParams
 
 __all__ = ["LC_NAMES", "N_MODES_C", "N_ZOH_C", "N_D", "N_RHO", "N_PHI", "RHO_MAX", "REFINE_TOL", "REFINE_LEVELS",
-           "link_constants", "modal_table"]
+           "link_constants", "table_key", "cached_table"]
 
 #: ``lc`` (float64) layout: coil / capacitor values with the devices' resistances folded in, and the table scalars
 LC_NAMES = ("l1", "l2", "r1", "r2", "c1", "c2", "omega", "rho_max", "inv_hd", "dr_short", "inv_hphi", "vf")
@@ -55,13 +55,13 @@ def link_constants(params: LinkParams, devices: DeviceSet = IDEAL, c1_f=None, c2
                      devices.rect_vf_v])
 
 
-def modal_table(params: LinkParams, devices: DeviceSet = IDEAL) -> np.ndarray:
-    """:func:`build_table` of a resonant link, from the disk cache (:mod:`wpt_receiver.diskcache`) when there."""
+def table_key(params: LinkParams, devices: DeviceSet = IDEAL) -> str:
+    """The disk-cache key of a link's SBAR table (:func:`cached_table`, :func:`.modal_kernel.modal_table`)."""
+    return f"{_CACHE_VERSION} {params!r} {devices!r} rho={RHO_MAX} n={N_PHI}x{N_D}x{N_RHO}"
+
+
+def cached_table(params: LinkParams, devices: DeviceSet = IDEAL) -> np.ndarray | None:
+    """The SBAR table of a resonant link from the disk cache (:mod:`wpt_receiver.diskcache`), or None on a miss
+    (:func:`.modal_kernel.modal_table` builds and stores it; it needs numba, this module does not)."""
     from . import diskcache
-    key = f"{_CACHE_VERSION} {params!r} {devices!r} rho={RHO_MAX} n={N_PHI}x{N_D}x{N_RHO}"
-    tab = diskcache.load("modal_table", key, (2, N_PHI, N_D, N_RHO))
-    if tab is None:
-        from .modal_kernel import build_table   # numba: on a miss only
-        tab = build_table(params, devices)
-        diskcache.store("modal_table", key, tab)
-    return tab
+    return diskcache.load("modal_table", table_key(params, devices), (2, N_PHI, N_D, N_RHO))

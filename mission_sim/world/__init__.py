@@ -11,6 +11,8 @@
 ``loop``         ``MissionLoop``: orchestration (constants, per-sample arrays, Python policy calls, result)
 ``fastpath``     the driver: records packed, the kernel run in chunks, Python policies / noise / errors served
 ``loop_kernel``  every formula of a mission step, once, compiled (numba; link, battery, BMS, gating, windows)
+``loop_records`` the loop's record dtypes, status codes and work-array layout, without numba
+``aot``          the loop built ahead of time by ``dronewpt warmup`` (``mission`` then runs without numba)
 ``results``      :class:`MissionResult`: time series, summary, files
 ``stream``       rows in blocks: the summary on the fly, the time series to Parquet row groups (CSV on request)
 ===============  ==============================================================================

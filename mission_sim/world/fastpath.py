@@ -98,10 +98,13 @@ def link_arrays(loop):
     (:func:`wpt_receiver.modal_kernel.link_constants`, devices folded), the SBAR table
     (:func:`wpt_receiver.modal_kernel.modal_table` at the hover-gap Lm; disk-cached) and the work array
     (cached modes and ZOH coefficients; NaN keys: computed on first use)."""
-    from wpt_receiver.modal_link import link_constants, modal_table
+    from wpt_receiver.modal_link import cached_table, link_constants
     from .loop_records import LW_SIZE
-    return (link_constants(loop.base, loop.dev), modal_table(loop.base, loop.dev),
-            np.full(LW_SIZE, np.nan, dtype=complex))
+    tab = cached_table(loop.base, loop.dev)
+    if tab is None:   # a miss: built with numba (wpt_receiver.modal_kernel), stored for the next run
+        from wpt_receiver.modal_kernel import modal_table
+        tab = modal_table(loop.base, loop.dev)
+    return link_constants(loop.base, loop.dev), tab, np.full(LW_SIZE, np.nan, dtype=complex)
 
 
 def initial_state(loop) -> np.ndarray:
