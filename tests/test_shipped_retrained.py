@@ -155,13 +155,8 @@ def test_retrain_script_rl_bc_is_the_cloned_start_and_installs_as_rl(tmp_path, m
     """``--kind rl_bc``: its command is a valid ``dronewpt train`` that clones model_based_budget:0.05 with the
     current fields hidden, without a budget; ``install`` writes ``rl_s<k>`` (not ``rl_bc_s<k>``) with the
     ``trained`` record, the final model copied byte for byte."""
-    import importlib.util
-
     from mission_sim.cli import build_parser
-    root = Path(__file__).resolve().parents[1]
-    spec = importlib.util.spec_from_file_location("retrain_shipped", root / "benchmarks" / "retrain_shipped.py")
-    rs = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(rs)
+    rs = _retrain_script()
     cmd = rs.KINDS["rl_bc"].format(timesteps=800000, seed=2, budget="")
     a = build_parser().parse_args(cmd.split()[1:] + ["--out", str(tmp_path / "x")])
     assert a.imitate == "model_based_budget:0.05" and a.timesteps == 800000 and a.seed == 2 and a.budget is None

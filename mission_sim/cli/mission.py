@@ -172,7 +172,8 @@ def _checked_run(args, started, worker) -> int:
     if args.dry_run:
         return _print_estimate(estimate_run(cfg), args)
     prepare_out_dir(args.out)
-    if not aot.enable() or not aot.covers(aot.policy_entry(pol)):   # else no numba (mission_sim.world.aot)
+    jit = not (aot.enable() and aot.covers(aot.policy_entry(pol)))   # else no numba (mission_sim.world.aot)
+    if jit:
         prepare()   # numba's start-up without importing the scipy.linalg package (~0.3 s)
     est = estimate_run(cfg)
     every = stored_every_s(args.every, est)
@@ -183,7 +184,7 @@ def _checked_run(args, started, worker) -> int:
             worker.close(wait_s=0.0)   # a long run's memory is not held twice: drawn here after the run
             worker = None
         try:
-            res, files = _run_and_write(args, cfg, pol, every, worker)
+            res, files = _run_and_write(args, cfg, pol, every, worker, jit)
         finally:
             if worker is not None:
                 worker.close()
@@ -202,18 +203,18 @@ def _figure_worker(args):
     return FigureWorker()
 
 
-def _run_and_write(args, cfg, pol, every, worker):
+def _run_and_write(args, cfg, pol, every, worker, jit: bool):
     """The run streamed to ``args.out`` (whose writer lock the caller holds), then the figures and
-    summary.json; the result and the files written."""
+    summary.json; the result and the files written. ``jit``: the run uses numba's JIT (not the loop built
+    ahead of time, :mod:`mission_sim.world.aot`)."""
     from wpt_receiver.numba_start import cache_loads_without_registries
 
-    from ..world import aot
     from ..world.runner import run_mission
     from ..world.stream import SeriesWriter
     (args.out / "summary.json").unlink(missing_ok=True)  # present again only when this run's set is complete
     # every check passed and the figure worker forked: numba (imported by the run anyway) loads the cached
     # kernels without its typing/lowering registries (a cache miss still compiles; wpt_receiver.numba_start)
-    if not aot.covers(aot.policy_entry(pol)):   # the ahead-of-time build runs it without numba
+    if jit:   # (the ahead-of-time build runs it without numba)
         cache_loads_without_registries()
     writer = SeriesWriter(args.out, csv=args.csv, every_s=every, figure_points=None if args.no_plot else FIGURE_POINTS)
     try:

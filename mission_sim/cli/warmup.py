@@ -65,10 +65,11 @@ def _ahead_of_time() -> str:
     if not aot.enable():
         return f"skipped ({aot.ENV_VAR}={os.environ.get(aot.ENV_VAR, '')}, or NUMBA_DISABLE_JIT set)"
     if aot.module_dir() is None:
-        return "skipped (the disk cache is off: DRONEWPT_CACHE_DIR is empty)"
+        from wpt_receiver.diskcache import ENV_VAR
+        return f"skipped (the disk cache is off: {ENV_VAR} is empty)"
     if aot.find_module() is not None:
         return "built already"
-    return "built" if aot.build(force=True) is not None else f"failed (numba's JIT is used; {aot.failed_note()})"
+    return "built" if aot.build() is not None else f"failed (numba's JIT is used; {aot.failed_note()})"
 
 
 STAGES = (("mission loop and policy kernels (mission, replay, sweep)", _missions),

@@ -59,14 +59,10 @@ _ROOT = Path(__file__).resolve().parents[2]   # the folder holding mission_sim/,
 _state = {"enabled": False, "module": None, "loaded": False}
 
 
-def _mode() -> str:
-    return os.environ.get(ENV_VAR, "auto").strip().lower() or "auto"
-
-
 def enable() -> bool:
     """Let this process run missions on the ahead-of-time build (unless ``$DRONEWPT_AOT=0`` or
     ``NUMBA_DISABLE_JIT`` is set); True if enabled."""
-    _state["enabled"] = _mode() not in ("0", "off", "no", "false") and os.environ.get("NUMBA_DISABLE_JIT", "0") in ("", "0")
+    _state["enabled"] = os.environ.get(ENV_VAR, "").strip().lower() not in ("0", "off", "no", "false") and os.environ.get("NUMBA_DISABLE_JIT", "0") in ("", "0")
     return _state["enabled"]
 
 
@@ -174,7 +170,7 @@ def _load():
     """The built module of the current sources, loaded once per process; None if absent or unusable."""
     if _state["loaded"]:
         return _state["module"]
-    _state["loaded"] = True
+    _state.update(loaded=True, module=None)   # not an earlier module if this load fails
     try:
         key = build_key()
         path = find_module(key)
@@ -274,7 +270,7 @@ def build(force: bool = True, timeout_s: float = 1800.0) -> Path | None:
         except OSError:
             pass
         return None
-    for old in d.glob("dronewpt_mission_aot_*"):   # other keys' modules and notes, and older builds of this key
+    for old in d.glob(_name("*")):   # other keys' modules and notes, and older builds of this key
         if old != path and old.is_file():
             old.unlink(missing_ok=True)
     _state["loaded"] = False   # a later covers() loads the new module

@@ -55,7 +55,7 @@ import numpy as np
 from numba import from_dtype, njit, types
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
-from wpt_receiver.modal_kernel import (N_MODES_C, N_ZOH_C, advance_z, inst_peak, modes, phasors, readout,
+from wpt_receiver.modal_kernel import (N_ZOH_C, advance_z, inst_peak, modes, phasors, readout,
                                        rect_affine, rect_current_a, refine_level, sbar_implicit, short_weight,
                                        steady_modes, stored_energy_j, zoh)
 from wpt_receiver.modal_kernel import step as modal_step
