@@ -62,7 +62,7 @@ from wpt_receiver.modal_kernel import (MC_D, MC_G1, MC_G2, MC_LAM, MC_S, REFINE_
                                        stored_energy_j, zoh)
 from wpt_receiver.modal_kernel import step as modal_step
 
-from wpt_receiver import modal_kernel as _modal_kernel
+from wpt_receiver.modal_link import SOURCES as _LINK_SOURCES
 from wpt_receiver.kernel_cache import drop_stale_cache
 
 from .layout import (CZ_FAST, CZ_FASTH, CZ_KEY, CZ_LEVEL_N, CZ_LEVELS, CZ_MODES, CZ_RPAR, CZ_SAMPLE, CZ_STEP, CZ_SUB,
@@ -79,7 +79,7 @@ def _here():
 
 # numba's cache of this module holds the link kernel's code, the env step's shared helpers and the layout's /
 # objective's constants: dropped when those files change (numba keys the cache on this file alone)
-drop_stale_cache(_here, (_modal_kernel, _modal_kernel._modal_link, *(Path(__file__).with_name(f) for f in ("vector_kernel.py", "layout.py",
+drop_stale_cache(_here, (*_LINK_SOURCES, *(Path(__file__).with_name(f) for f in ("vector_kernel.py", "layout.py",
                                                                                "objective.py"))))
 
 #: the commutation angle's tolerance [rad] (V2 to < 1e-6 V; the solve starts from the last angle)

@@ -180,11 +180,11 @@ def _drop_stale():
         return
     from pathlib import Path
 
-    import wpt_receiver
     from wpt_receiver.kernel_cache import drop_stale_cache
+    from wpt_receiver.modal_link import SOURCES
     here = Path(__file__).parent
     deps = [here / f for f in ("vector_kernel.py", "layout.py", "objective.py", "modal_step.py")]
-    drop_stale_cache(_here, deps + [Path(wpt_receiver.__file__).parent / f for f in ("modal_kernel.py", "modal_link.py")])
+    drop_stale_cache(_here, deps + list(SOURCES))
     _CHECKED.append(True)
 
 

@@ -24,8 +24,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from wpt_receiver import modal_kernel as _modal_kernel
-from wpt_receiver import modal_link as _modal_link
+from wpt_receiver.modal_link import SOURCES as _LINK_SOURCES
 from wpt_receiver.kernel_cache import drop_stale_cache
 from wpt_receiver.modal_kernel import held_peak
 
@@ -37,7 +36,7 @@ def _here():
 
 
 # held_peak is compiled into this module's cache: drop it when modal_kernel's (or its layout's) source changes
-drop_stale_cache(_here, (_modal_kernel, _modal_link, Path(__file__)))
+drop_stale_cache(_here, (*_LINK_SOURCES, Path(__file__)))
 
 
 @njit(cache=True)

@@ -314,14 +314,17 @@ def _split(specs, reference, extra, n_scenarios, config) -> list:
     link = (config or EnvConfig()).link_model
     table, other = RUN_COST.get(link, {}), _OTHER_COST.get(link, 0.05)
 
+    def kind(sp):
+        return sp.split(":", 1)[0]
+
     def cost(sp):
-        return table.get(sp.split(":", 1)[0], other)
-    heavy = [sp for sp in specs if sp.split(":", 1)[0] in FORKED and sp != reference]
+        return table.get(kind(sp), other)
+    heavy = [sp for sp in specs if kind(sp) in FORKED and sp != reference]
     rest = [sp for sp in specs if sp not in heavy]
     child = sum(cost(sp) for sp in heavy)
     parent = sum(cost(sp) for sp in rest) + sum(cost(sp) for sp in extra) / n_scenarios
     moved = []
-    for sp in reversed([sp for sp in rest if sp.split(":", 1)[0] in MOVABLE and sp != reference]):
+    for sp in reversed([sp for sp in rest if kind(sp) in MOVABLE and sp != reference]):
         if max(parent - cost(sp), child + cost(sp)) < max(parent, child):
             moved.append(sp)
             parent, child = parent - cost(sp), child + cost(sp)

@@ -11,13 +11,20 @@ source (:func:`wpt_receiver.kernel_cache.drop_stale_cache`).
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from .devices import IDEAL, DeviceSet
 from .params import LinkParams
 
 __all__ = ["LC_NAMES", "N_MODES_C", "N_ZOH_C", "N_D", "N_RHO", "N_PHI", "RHO_MAX", "REFINE_TOL", "REFINE_LEVELS",
-           "link_constants", "table_key", "cached_table"]
+           "link_constants", "table_key", "cached_table", "SOURCES"]
+
+#: the link's source files: numba-cached code compiled on the link (``modal_kernel``'s functions, this layout's
+#: constants) is stale when either changes; each dependent's stamp lists them
+#: (:func:`wpt_receiver.kernel_cache.drop_stale_cache`)
+SOURCES = (Path(__file__).with_name("modal_kernel.py"), Path(__file__))
 
 #: ``lc`` (float64) layout: coil / capacitor values with the devices' resistances folded in, and the table scalars
 LC_NAMES = ("l1", "l2", "r1", "r2", "c1", "c2", "omega", "rho_max", "inv_hd", "dr_short", "inv_hphi", "vf")

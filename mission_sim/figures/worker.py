@@ -148,11 +148,16 @@ def _reply_bytes(draw) -> bytes:
 HELPER_FIGURES = ("i2", "soc")
 
 
+def _cpus() -> int:
+    """The CPUs this process may run on (its affinity where the platform has one); may raise OSError."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
 def _load_low() -> bool:
     """The 1-minute load average below the usable CPUs minus 0.5 (True where there is none): the warm-up's gate
     (it runs while the parent simulates, so the running count says nothing about whether the worker waits)."""
     try:
-        cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        cpus = _cpus()
         return os.getloadavg()[0] < cpus - 0.5
     except OSError:
         return True
@@ -167,7 +172,7 @@ def core_free() -> bool:
     otherwise idle machine the average still counts the last minute's runs of the command itself (1.2-2.0
     during back-to-back runs), which turned the helper off when both cores were free."""
     try:
-        cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        cpus = _cpus()
     except OSError:
         cpus = os.cpu_count() or 1
     try:

@@ -60,7 +60,7 @@ from wpt_receiver.modal_kernel import (N_ZOH_C, advance_z, inst_peak, modes, pha
                                        steady_modes, stored_energy_j, zoh)
 from wpt_receiver.modal_kernel import step as modal_step
 
-from wpt_receiver import modal_kernel as _modal_kernel
+from wpt_receiver.modal_link import SOURCES as _LINK_SOURCES
 from wpt_receiver.kernel_cache import drop_stale_cache
 
 from .. import contract as _contract
@@ -78,7 +78,7 @@ def _here():
 
 # numba's cache of this module holds the link kernel's code, its layout's, the contract's and the records' constants:
 # dropped when those files change (numba keys the cache on this file alone)
-drop_stale_cache(_here, (_modal_kernel, _modal_kernel._modal_link, _contract, _loop_records))
+drop_stale_cache(_here, (*_LINK_SOURCES, _contract, _loop_records))
 
 __all__ = ["advance", "advance_for", "link_disc", "link_step", "link_stored_j", "LW_SIZE", "STATE_DTYPE",
            "CONST_DTYPE", "SAMPLE_DTYPE", "OK", "DONE", "PAUSED", "FULL", "NEED_ACT", "NEED_NOISE", "DEPLETED",
