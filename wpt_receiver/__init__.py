@@ -24,7 +24,8 @@ Depends on nothing else of dronewpt. Modules, in the order data flows:
                         ZOH per dt, energies, v2 with quadrature and peak from a table
 ``modal_link``          the exact-mode link's layout, constants and cached table without numba (for
                         ``modal_kernel`` and a mission run by the ahead-of-time build)
-``kernel_cache``        numba's cache of a kernel dropped when a module it compiles in changes
+``kernel_cache``        numba's cache of a kernel dropped when a module it compiles in changes; an
+                        installed copy's numba cache kept out of site-packages
 ``numba_start``         numba's start-up without the scipy.linalg package (its BLAS probe's module alone),
                         cache loads without numba's registries
 ``sizing``              rectifier rating, parts and mass per policy (switching or envelope runs)
@@ -34,6 +35,10 @@ Depends on nothing else of dronewpt. Modules, in the order data flows:
 ``tolerance_kernel``    the tolerance transient compiled with numba (imported on demand)
 ======================  =====================================================================
 """
+
+from .kernel_cache import place_numba_cache
+
+place_numba_cache(__path__[0])      # an installed copy: numba's cache in dronewpt's disk cache, not site-packages
 
 from .envelope import EnvelopeLink, coefficients, g22, simulate, state_matrices, steady_state, zoh_discretise
 from .inverse_controller import InverseModelController, LowPassFilter

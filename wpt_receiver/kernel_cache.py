@@ -11,15 +11,46 @@ with a stamp kept beside numba's cache files and, when they differ, deletes the 
 
 Used by :mod:`mission_sim.world.loop_kernel` (on :mod:`wpt_receiver.modal_kernel`),
 :mod:`envs.vector_kernel` and :mod:`envs.rollout`'s replay loop.
+
+:func:`place_numba_cache` keeps numba's cache out of ``site-packages`` for an installed (not editable) copy:
+numba writes its cache files into a ``__pycache__`` beside each source it can write to, ``pip uninstall`` (or
+the ``pip install -e .`` that replaces the copy) removes only the files it installed, and the package folders
+left behind with those caches alone are namespace packages that shadow an editable install of the same
+packages (``ImportError: ... (unknown location)``: the README's two quickstart lines run in one venv did this).
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import sys
 from pathlib import Path
 
-__all__ = ["drop_stale_cache", "dependency_hash"]
+#: numba's variable for a user-chosen cache root (numba mirrors each source's folder under it)
+NUMBA_CACHE_VAR = "NUMBA_CACHE_DIR"
+_INSTALL_DIRS = ("site-packages", "dist-packages")
+
+
+def place_numba_cache(package_dir) -> Path | None:
+    """For an installed copy (``package_dir``'s parent is a ``site-packages`` / ``dist-packages`` folder) and no
+    ``NUMBA_CACHE_DIR`` of the user's: numba's cache root becomes ``<dronewpt's disk cache>/numba`` (the process's
+    environment, inherited by its workers, and numba's config when numba is imported already); returns it, or
+    ``None`` when nothing changed (a checkout or an editable install keeps numba's ``__pycache__`` beside its
+    sources, a ``NUMBA_CACHE_DIR`` set by the user is kept, and ``DRONEWPT_CACHE_DIR=""`` leaves numba as it is)."""
+    from .diskcache import cache_dir
+    if Path(package_dir).resolve().parent.name not in _INSTALL_DIRS or os.environ.get(NUMBA_CACHE_VAR):
+        return None
+    root = cache_dir()
+    if root is None:
+        return None
+    folder = root / "numba"
+    os.environ[NUMBA_CACHE_VAR] = str(folder)
+    config = sys.modules.get("numba.core.config")
+    if config is not None and not getattr(config, "CACHE_DIR", ""):
+        config.CACHE_DIR = str(folder)      # numba read its environment already; its locators read this
+    return folder
+
+__all__ = ["drop_stale_cache", "dependency_hash", "place_numba_cache"]
 
 
 def dependency_hash(modules) -> str:
