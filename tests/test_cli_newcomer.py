@@ -48,3 +48,21 @@ def test_garbage_dataflash_plan_is_one_line(tmp_path, capfd):
     out, err = capfd.readouterr()
     assert out == "" and err.splitlines() == [
         "dronewpt mission: error: garbage.bin: no flown track: 0 usable position(s) (GPS fix >= 3) while armed"], err
+
+
+# ------------------------------------------------------------------ the example study
+def test_subnormal_edge_current_gives_no_overflow_warning():
+    """``dronewpt sweep examples/study_small.toml`` printed ``edge_losses.py:58: RuntimeWarning: overflow
+    encountered in divide`` (twice, from the workers): a duty near 1 makes the switched current
+    ``I2 cos(pi d / 2)`` subnormal and ``V / I`` overflows. The energy is the same (0 J for that edge)."""
+    import warnings
+
+    from wpt_receiver.edge_losses import turn_off_energy
+    v, i = np.array([30.0, 30.0, 30.0]), np.array([5e-324, 0.0, 5.0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        e = turn_off_energy(v, i, 2e-8, 1e-9)
+    assert e[0] == 0.0 and e[1] == 0.0
+    t1 = np.sqrt(2.0 * 2e-8 * 1e-9 * 30.0 / 5.0)   # the closed form of the docstring at 5 A
+    u = min(t1 / 2e-8, 1.0)
+    assert e[2] == 25.0 * 4e-16 * (u ** 3 / 3 - u ** 4 / 4) / 2e-9 + 0.5 * 30.0 * 5.0 * 2e-8 * (1 - u) ** 2
