@@ -66,3 +66,25 @@ def test_subnormal_edge_current_gives_no_overflow_warning():
     t1 = np.sqrt(2.0 * 2e-8 * 1e-9 * 30.0 / 5.0)   # the closed form of the docstring at 5 A
     u = min(t1 / 2e-8, 1.0)
     assert e[2] == 25.0 * 4e-16 * (u ** 3 / 3 - u ** 4 / 4) / 2e-9 + 0.5 * 30.0 * 5.0 * 2e-8 * (1 - u) ** 2
+
+
+# ------------------------------------------------------------------ telemetry pacing
+def test_telemetry_speed_and_rate_checked_before_the_simulation(tmp_path, capsys, monkeypatch):
+    """``telemetry --speed 1e-300`` simulated the mission and then ended in a traceback
+    (``OverflowError: timestamp out of range for platform time_t`` from time.sleep) with exit 1;
+    ``--rate 1e6`` was refused only after the simulation. Both are one line before any work now."""
+    import mission_sim.world.runner as runner
+
+    def no_run(*a, **k):
+        raise AssertionError("simulated before the pacing was checked")
+    monkeypatch.setattr(runner, "run_mission", no_run)
+    tlog = str(tmp_path / "t.tlog")
+    base = ["telemetry", "--connect", "none", "--tlog", tlog]
+    assert _one_error_line(capsys, base + ["--speed", "1e-300"]) == (
+        "dronewpt telemetry: error: speed=1e-300 is invalid; valid range: [0.001, inf] simulated seconds per wall "
+        "second (inf = as fast as possible)")
+    for bad in ("0", "-1", "nan"):
+        assert "valid range: [0.001, inf]" in _one_error_line(capsys, base + ["--speed", bad])
+    assert _one_error_line(capsys, base + ["--rate", "1e6"]) == (
+        "dronewpt telemetry: error: rate=1000000.0 is invalid; valid range: (0, 1000] Hz")
+    assert not (tmp_path / "t.tlog").exists()

@@ -34,13 +34,11 @@ def _mav_common(p):
 
 
 def _mav_speed(text):
+    """A number (its range is checked by :func:`mission_sim.mavlink.telemetry.check_pacing`)."""
     try:
-        v = float(text)
+        return float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"speed={text!r} is not a number") from None
-    if not v > 0:  # also rejects nan
-        raise argparse.ArgumentTypeError(f"speed={text!r} is invalid; valid range: (0, inf] (inf = as fast as possible)")
-    return v
 
 
 def _mav_config(args, overrides=None, single_pad=False):
@@ -253,7 +251,8 @@ def _add_telemetry(sub):
                    help="where to send (default udpout:127.0.0.1:14550; 'none' = only --tlog)")
     p.add_argument("--rate", type=positive_float("rate"), default=10.0, help="telemetry rate in Hz (default 10)")
     p.add_argument("--speed", type=_mav_speed, default=1.0,
-                   help="simulated seconds per wall second (default 1 = real time; inf = as fast as possible)")
+                   help="simulated seconds per wall second, 0.001 .. inf (default 1 = real time; inf = as fast as "
+                   "possible)")
     p.add_argument("--tlog", type=path_arg("--tlog"), default=None, help="also write the telemetry to this .tlog")
     p.add_argument("--home", default=None, metavar="LAT,LON,ALT",
                    help="where the pad frame's origin is (default: the home of the config's mission file, else the first "
@@ -287,6 +286,7 @@ def _cmd_telemetry(args) -> int:
     if args.tlog is not None:
         check_out_file(args.tlog, "--tlog")  # a folder, an unwritable place: refused before the simulation
     telemetry.check_ids(args.sysid, args.compid)
+    telemetry.check_pacing(args.rate, args.speed)   # before the simulation, not after it
     home = parse_geo_point(args.home, "--home") if args.home else telemetry.DEFAULT_HOME
     if home.alt_m is None:
         raise CliError(f"--home {args.home!r} needs an altitude; valid format: LAT,LON,ALT")
