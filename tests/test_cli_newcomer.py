@@ -88,3 +88,30 @@ def test_telemetry_speed_and_rate_checked_before_the_simulation(tmp_path, capsys
     assert _one_error_line(capsys, base + ["--rate", "1e6"]) == (
         "dronewpt telemetry: error: rate=1000000.0 is invalid; valid range: (0, 1000] Hz")
     assert not (tmp_path / "t.tlog").exists()
+
+
+# ------------------------------------------------------------------ output paths inside a file
+def test_paper_waveforms_inside_a_file_refused_before_simulating(tmp_path, capsys, monkeypatch):
+    """``paper --model switching --waveforms FILE/w.csv`` ran the three switching runs (~20 s on a loaded
+    machine) and then ended with ``[Errno 17] File exists: 'FILE'`` (no flag, no valid form)."""
+    from wpt_receiver import paper
+
+    def no_run(*a, **k):
+        raise AssertionError("simulated before --waveforms was checked")
+    monkeypatch.setattr(paper, "run_paper", no_run)
+    (tmp_path / "plain").write_text("x")
+    line = _one_error_line(capsys, ["paper", "--model", "switching", "--no-plot",
+                                    "--waveforms", str(tmp_path / "plain" / "w.csv")])
+    assert line == (f"dronewpt paper: error: --waveforms folder {str(tmp_path / 'plain')!r} is an existing file; "
+                    "valid: a folder (created if missing)")
+
+
+def test_sweep_out_is_a_file(tmp_path, capsys):
+    """``sweep STUDY --out FILE`` ended with ``[Errno 17] File exists: 'FILE'``; now named like mission's --out."""
+    study = Path(__file__).resolve().parents[1] / "examples" / "study_small.toml"
+    (tmp_path / "plain").write_text("x")
+    line = _one_error_line(capsys, ["sweep", str(study), "--out", str(tmp_path / "plain"), "--workers", "0",
+                                    "--no-plot", "--no-progress"])
+    assert line == (f"dronewpt sweep: error: --out {str(tmp_path / 'plain')!r} is an existing file; "
+                    "valid: a folder (created if missing)")
+    assert (tmp_path / "plain").read_text() == "x"
