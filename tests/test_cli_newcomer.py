@@ -115,3 +115,23 @@ def test_sweep_out_is_a_file(tmp_path, capsys):
     assert line == (f"dronewpt sweep: error: --out {str(tmp_path / 'plain')!r} is an existing file; "
                     "valid: a folder (created if missing)")
     assert (tmp_path / "plain").read_text() == "x"
+
+
+# ------------------------------------------------------------------ Ctrl-C in a re-run
+def test_interrupted_rerun_keeps_the_earlier_complete_set(tmp_path, capsys, monkeypatch):
+    """Ctrl-C while a mission re-run into the same --out simulates: the earlier run's summary.json was
+    removed at the start, so its complete set was lost (its figures and series left without it); now
+    every earlier file stays as it was until this run replaces one, and no temporary is left."""
+    import mission_sim.world.runner as runner
+    out = tmp_path / "m"
+    out.mkdir()
+    earlier = {"summary.json": b'{"policy": "step"}', "timeseries.parquet": b"PAR1 earlier", "soc.png": b"png"}
+    for name, data in earlier.items():
+        (out / name).write_bytes(data)
+
+    def interrupted(*a, **k):   # Ctrl-C in the simulation
+        raise KeyboardInterrupt
+    monkeypatch.setattr(runner, "run_mission", interrupted)
+    assert main(["mission", "--out", str(out), "--no-plot", "--no-progress"]) == 130
+    assert capsys.readouterr().err == "dronewpt mission: interrupted (SIGINT)\n"
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == earlier
