@@ -135,3 +135,23 @@ def test_interrupted_rerun_keeps_the_earlier_complete_set(tmp_path, capsys, monk
     assert main(["mission", "--out", str(out), "--no-plot", "--no-progress"]) == 130
     assert capsys.readouterr().err == "dronewpt mission: interrupted (SIGINT)\n"
     assert {p.name: p.read_bytes() for p in out.iterdir()} == earlier
+
+
+# ------------------------------------------------------------------ policy names with a parameter
+def test_policy_parameter_typos_are_named(tmp_path, capsys):
+    """``--policy rl:$MODEL`` with MODEL unset (``rl:``) ran the shipped model and ``step:`` the step
+    policy, silently; ``model_based_budget:abc`` said only "could not convert string to float: 'abc'";
+    ``rl:FOLDER`` said the folder "does not exist"."""
+    def err(policy):
+        return _one_error_line(capsys, ["mission", "--dry-run", "--out", str(tmp_path / "m"), "--policy", policy])
+    assert err("rl:") == ("dronewpt mission: error: policy='rl:' is invalid: nothing after ':'; valid: rl alone, "
+                          "or rl:PATH")
+    assert err("model_based_budget:") == ("dronewpt mission: error: policy='model_based_budget:' is invalid: nothing "
+                                          "after ':'; valid: model_based_budget alone, or model_based_budget:B (a number)")
+    assert err("step:").startswith("dronewpt mission: error: policy='step:' is invalid; valid values: hysteresis, ")
+    assert err("model_based_budget:abc") == (
+        "dronewpt mission: error: policy='model_based_budget:abc' is invalid; valid: model_based_budget:B with B a "
+        "number, the overshoot budget (e.g. 0.02)")
+    assert err(f"rl:{tmp_path}") == (f"dronewpt mission: error: RL model file {str(tmp_path)!r} is a folder; valid: "
+                                     "a model file (as `dronewpt train` writes)")
+    assert main(["mission", "--dry-run", "--out", str(tmp_path / "m"), "--policy", "model_based_budget:0.02"]) == 0
