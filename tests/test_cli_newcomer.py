@@ -14,8 +14,12 @@ MISSIONS = Path(__file__).resolve().parent / "data" / "missions"
 
 
 def _one_error_line(capsys, argv) -> str:
-    """``main(argv)``: exit status 2, nothing on stdout, one line on stderr (returned)."""
-    assert main(argv) == 2
+    """``main(argv)``: exit status 2 (argparse's errors exit), nothing on stdout, one line on stderr (returned)."""
+    try:
+        rc = main(argv)
+    except SystemExit as exc:
+        rc = exc.code
+    assert rc == 2
     cap = capsys.readouterr()
     lines = cap.err.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in cap.err, cap.err
@@ -155,3 +159,22 @@ def test_policy_parameter_typos_are_named(tmp_path, capsys):
     assert err(f"rl:{tmp_path}") == (f"dronewpt mission: error: RL model file {str(tmp_path)!r} is a folder; valid: "
                                      "a model file (as `dronewpt train` writes)")
     assert main(["mission", "--dry-run", "--out", str(tmp_path / "m"), "--policy", "model_based_budget:0.02"]) == 0
+
+
+# ------------------------------------------------------------------ integer options
+def test_integer_options_name_their_range(capsys, tmp_path):
+    """``tolerance --draws -5`` said "valid range: integer >= 0" and then ``--draws 0`` was refused (">= 1");
+    ``export-controller --lpf-order 2.5`` said only "invalid int value: '2.5'"; an integer option given
+    a non-integer named no range."""
+    def err(*argv):
+        return _one_error_line(capsys, list(argv))
+    for bad in ("-5", "0"):
+        assert err("tolerance", "--draws", bad, "--out", str(tmp_path / "t")) == (
+            f"dronewpt tolerance: error: argument --draws: draws='{bad}' is invalid; valid range: integer >= 1 "
+            "(see dronewpt tolerance --help)")
+    assert err("export-controller", "--lpf-order", "2.5", "--out", str(tmp_path / "c")) == (
+        "dronewpt export-controller: error: argument --lpf-order: lpf-order='2.5' is not an integer; valid range: "
+        "integer 1..8 (see dronewpt export-controller --help)")
+    assert "lpf-order='9' is invalid; valid range: integer 1..8" in err("export-controller", "--lpf-order", "9")
+    assert err("sweep", "--workers", "abc").startswith(
+        "dronewpt sweep: error: argument --workers: workers='abc' is not an integer; valid range: integer 0..")

@@ -121,7 +121,7 @@ def int_in(name, lo: int, hi: int | None = None, why: str = ""):
         try:
             v = int(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{name}={text!r} is not an integer") from None
+            raise argparse.ArgumentTypeError(f"{name}={text!r} is not an integer; valid range: {valid}") from None
         if v < lo or (hi is not None and v > hi):
             raise argparse.ArgumentTypeError(f"{name}={text!r} is invalid; valid range: {valid}")
         return v
