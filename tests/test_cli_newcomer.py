@@ -178,3 +178,14 @@ def test_integer_options_name_their_range(capsys, tmp_path):
     assert "lpf-order='9' is invalid; valid range: integer 1..8" in err("export-controller", "--lpf-order", "9")
     assert err("sweep", "--workers", "abc").startswith(
         "dronewpt sweep: error: argument --workers: workers='abc' is not an integer; valid range: integer 0..")
+
+
+def test_unwritable_out_named_before_any_work(capsys):
+    """An --out that cannot be created (here under /proc, which even root cannot write; a read-only mount
+    gives "Read-only file system" the same way): ``tolerance``, ``export-controller`` and ``sweep`` said
+    only ``[Errno 2] No such file or directory: '...'`` (tolerance after computing its nominal link)."""
+    bad = "/proc/self/newbie"
+    study = str(Path(__file__).resolve().parents[1] / "examples" / "study_small.toml")
+    for cmd in (["tolerance", "--draws", "10"], ["export-controller"], ["sweep", study, "--workers", "0"]):
+        assert _one_error_line(capsys, [*cmd, "--out", bad]) == (
+            f"dronewpt {cmd[0]}: error: --out {bad!r} is not a writable folder: No such file or directory")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .common import CliError, float_arg, int_in, path_arg
+from .common import CliError, float_arg, int_in, path_arg, prepare_out_dir
 
 _PRECISIONS = {"float32": ("f32",), "float64": ("f64",), "both": ("f32", "f64")}
 
@@ -58,8 +58,7 @@ def _cmd_export_controller(args) -> int:
     from wpt_receiver import LowPassFilter, c_export
     params = _link_params(args.link)
     spec = c_export.controller_spec(params, args.control_period, LowPassFilter(args.lpf_tau, args.lpf_order))
-    if args.out.exists() and not args.out.is_dir():
-        raise CliError(f"--out {str(args.out)!r} is a file; valid: a folder (created if missing)")
+    prepare_out_dir(args.out)   # a file in its place, read-only: one line before any work (was "[Errno 30] ...")
     precs = _PRECISIONS[args.precision]
     res = c_export.write_export(args.out, spec, precs)
     checks = {prec: _check(args.out, prec, args.cc) for prec in precs} if args.check else {}

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .common import CliError, add_progress_flag, float_arg, int_in, nonneg_int, path_arg, show_progress
+from .common import CliError, add_progress_flag, float_arg, int_in, nonneg_int, path_arg, prepare_out_dir, show_progress
 
 
 def _add_tolerance(sub):
@@ -52,8 +52,7 @@ def _cmd_tolerance(args) -> int:
         spreads = Spreads(args.spread_c, args.spread_l, args.spread_lm, args.spread_r)
     except ValueError as exc:
         raise CliError(str(exc).replace("spread ", "--spread-").replace("=", " ")) from None
-    if args.out.exists() and not args.out.is_dir():
-        raise CliError(f"--out {str(args.out)!r} is a file; valid: a folder")
+    prepare_out_dir(args.out)   # a file in its place, read-only: one line before any work (was "[Errno 30] ...")
     runner = ToleranceRunner(args.devices).with_transitions()  # shipped to the workers, built once here
     nominal = _nominal(runner)
     factory = None if args.workers == 0 else functools.partial(dask_client, None, args.workers)
