@@ -189,3 +189,14 @@ def test_unwritable_out_named_before_any_work(capsys):
     for cmd in (["tolerance", "--draws", "10"], ["export-controller"], ["sweep", study, "--workers", "0"]):
         assert _one_error_line(capsys, [*cmd, "--out", bad]) == (
             f"dronewpt {cmd[0]}: error: --out {bad!r} is not a writable folder: No such file or directory")
+
+
+# ------------------------------------------------------------------ conflicting options
+def test_replay_mass_and_set_mass_conflict(capsys):
+    """``replay LOG --mass 2 --set drone.mass_kg=3`` flew a 3 kg drone without a word (--set won); with
+    ``--pads`` (the re-flight) too. Refused now, before the log is read."""
+    log = str(Path(__file__).resolve().parent / "data" / "flightlogs" / "dronekit-python_flight.tlog")
+    pads = str(MISSIONS / "dronekit_flight_pads.csv")
+    for extra in ([], ["--pads", pads]):
+        assert _one_error_line(capsys, ["replay", log, "--mass", "2", "--set", "drone.mass_kg=3", *extra]) == (
+            "dronewpt replay: error: --mass 2 and --set drone.mass_kg=3 both set the drone's mass; valid: one of them")

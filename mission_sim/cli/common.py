@@ -112,6 +112,18 @@ def parse_set(items):
     return out
 
 
+def mass_override(args) -> dict:
+    """``--mass KG`` as the override ``drone.mass_kg`` (empty without it); ``CliError`` when ``--set``
+    gives that key too (``--set`` won silently over ``--mass``)."""
+    if not args.mass:
+        return {}
+    sets = parse_set(args.set)
+    if "drone.mass_kg" in sets:
+        raise CliError(f"--mass {args.mass:g} and --set drone.mass_kg={sets['drone.mass_kg']} both set the drone's mass; "
+                       "valid: one of them")
+    return {"drone.mass_kg": args.mass}
+
+
 def int_in(name, lo: int, hi: int | None = None, why: str = ""):
     """argparse type: an integer in ``lo..hi`` (``hi`` None: no upper end; underscores allowed: 1_000),
     every error naming the value and the one range text (``why`` follows it, e.g. " (4 per CPU)")."""

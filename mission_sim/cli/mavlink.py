@@ -13,6 +13,7 @@ from .common import (
     check_out_file,
     float_arg,
     lazy_names_help,
+    mass_override,
     parse_set,
     path_arg,
     policy_names,
@@ -110,6 +111,7 @@ def _cmd_replay(args) -> int:
     from ..files import atomic_output
     from ..mavlink.logs import read_log
     from ..mavlink.replay import parse_window, replay_log, replay_span, track_from_log
+    mass_override(args)   # --mass with --set drone.mass_kg: refused before the log is read
     if getattr(args, "pads", None) is not None:  # what-if re-flight with pads: its own module
         from .refly import cmd_refly
         return cmd_refly(args)
@@ -122,7 +124,7 @@ def _cmd_replay(args) -> int:
     log = read_log(args.log)
     span, _ = replay_span(log, window, args.segment)
     track_from_log(log, pad=pad, window=span)  # no usable position: one-line error before any simulation
-    cfg = _mav_config(args, {"drone.mass_kg": args.mass} if args.mass else None, single_pad=True)
+    cfg = _mav_config(args, mass_override(args), single_pad=True)
     policy = _mav_policy(cfg, args.policy)
     prepare_out_dir(args.out)
     from wpt_receiver.numba_start import cache_loads_without_registries
