@@ -164,8 +164,9 @@ def test_policy_parameter_typos_are_named(tmp_path, capsys):
 # ------------------------------------------------------------------ integer options
 def test_integer_options_name_their_range(capsys, tmp_path):
     """``tolerance --draws -5`` said "valid range: integer >= 0" and then ``--draws 0`` was refused (">= 1");
-    ``export-controller --lpf-order 2.5`` said only "invalid int value: '2.5'"; an integer option given
-    a non-integer named no range."""
+    ``export-controller --lpf-order 2.5`` and ``train --n-envs abc`` (``--eval-every``, ``--eval-episodes``,
+    ``--checkpoint-every``) said only "invalid int value: '...'"; an integer option given a non-integer
+    named no range."""
     def err(*argv):
         return _one_error_line(capsys, list(argv))
     for bad in ("-5", "0"):
@@ -176,6 +177,12 @@ def test_integer_options_name_their_range(capsys, tmp_path):
         "dronewpt export-controller: error: argument --lpf-order: lpf-order='2.5' is not an integer; valid range: "
         "integer 1..8 (see dronewpt export-controller --help)")
     assert "lpf-order='9' is invalid; valid range: integer 1..8" in err("export-controller", "--lpf-order", "9")
+    assert err("train", "--algo", "ppo", "--timesteps", "10", "--n-envs", "abc") == (
+        "dronewpt train: error: argument --n-envs: n-envs='abc' is not an integer; valid range: integer 1..1024 "
+        "(see dronewpt train --help)")
+    for flag in ("--eval-every", "--eval-episodes", "--checkpoint-every"):
+        assert f"{flag[2:]}='2.5' is not an integer; valid range: integer >= 1" in err(
+            "train", "--algo", "ppo", "--timesteps", "10", flag, "2.5")
     assert err("sweep", "--workers", "abc").startswith(
         "dronewpt sweep: error: argument --workers: workers='abc' is not an integer; valid range: integer 0..")
 
