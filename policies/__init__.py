@@ -158,18 +158,29 @@ def available() -> list[str]:
 
 def make(name: str, ctx: PolicyContext | None = None, **kwargs) -> Policy:
     """A fresh policy by name (``"rl:PATH"`` loads an SB3 model file); ``ValueError`` naming the valid names."""
-    base, _, arg = name.partition(":")
+    base, colon, arg = name.partition(":")
+    if colon and not arg.strip() and (base in _WITH_PATH or base in ("model_based_budget", "mpc")):
+        # `--policy rl:$MODEL` with MODEL unset ran the shipped model
+        raise ValueError(f"policy={name!r} is invalid: nothing after ':'; valid: {base} alone, or "
+                         f"{base}:{'B (a number)' if base in ('model_based_budget', 'mpc') else 'PATH'}")
     if arg and base in ("model_based_budget", "mpc"):   # model_based_budget:0.02 = overshoot budget 2 %
         try:
-            return _REGISTRY[base](ctx or PolicyContext(), **{**kwargs, "budget": float(arg)})
+            budget = float(arg)
+        except ValueError:
+            raise ValueError(f"policy={name!r} is invalid; valid: {base}:B with B a number, the overshoot budget "
+                             "(e.g. 0.02)") from None
+        try:
+            return _REGISTRY[base](ctx or PolicyContext(), **{**kwargs, "budget": budget})
         except ValueError as exc:
             raise ValueError(f"policy={name!r} is invalid: {exc}") from None
-    if base not in _REGISTRY or (arg and base not in _WITH_PATH):
+    if base not in _REGISTRY or (colon and base not in _WITH_PATH):
         raise ValueError(f"policy={name!r} is invalid; valid values: {', '.join(available())} "
                          f"(or {':PATH, '.join(_WITH_PATH)}:PATH)")
     if arg:
         from pathlib import Path
 
+        if Path(arg).is_dir():
+            raise ValueError(f"RL model file {arg!r} is a folder; valid: a model file (as `dronewpt train` writes)")
         if not Path(arg).is_file():
             raise FileNotFoundError(f"RL model file {arg!r} does not exist")
         kwargs = {**kwargs, "path": arg}

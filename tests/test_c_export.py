@@ -177,4 +177,6 @@ def test_cli_writes_and_checks(tmp_path):
     from mission_sim.cli import main
     assert main(["export-controller", "--out", str(tmp_path), "--float64", "--format", "json"]) == 0
     assert (tmp_path / "dwpt_ctl_f64.c").exists() and not (tmp_path / "dwpt_ctl_f32.c").exists()
-    assert main(["export-controller", "--out", str(tmp_path), "--lpf-order", "0"]) == 2
+    with pytest.raises(SystemExit) as bad:   # refused by the option's type (argparse): exit status 2
+        main(["export-controller", "--out", str(tmp_path), "--lpf-order", "0"])
+    assert bad.value.code == 2

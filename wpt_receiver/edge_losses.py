@@ -54,7 +54,7 @@ def turn_off_energy(v_v, i_a, t_f_s: float, c_f: float):
         return np.zeros(np.broadcast(v, i).shape) + 0.0
     if c_f <= 0:
         return 0.5 * v * i * t_f_s
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):   # a subnormal I: t1 = inf, u = 1
         t1 = np.sqrt(2.0 * t_f_s * c_f * v / np.where(i > 0, i, 1.0))
     u = np.minimum(t1 / t_f_s, 1.0)                          # share of the fall before the clamp
     # ramp part: int_0^{u tf} I^2 t^2/(2 tf C) (1 - t/tf) dt = I^2 tf^2 (u^3/3 - u^4/4) / (2 C)

@@ -112,6 +112,18 @@ def parse_set(items):
     return out
 
 
+def mass_override(args) -> dict:
+    """``--mass KG`` as the override ``drone.mass_kg`` (empty without it); ``CliError`` when ``--set``
+    gives that key too (``--set`` won silently over ``--mass``)."""
+    if not args.mass:
+        return {}
+    sets = parse_set(args.set)
+    if "drone.mass_kg" in sets:
+        raise CliError(f"--mass {args.mass:g} and --set drone.mass_kg={sets['drone.mass_kg']} both set the drone's mass; "
+                       "valid: one of them")
+    return {"drone.mass_kg": args.mass}
+
+
 def int_in(name, lo: int, hi: int | None = None, why: str = ""):
     """argparse type: an integer in ``lo..hi`` (``hi`` None: no upper end; underscores allowed: 1_000),
     every error naming the value and the one range text (``why`` follows it, e.g. " (4 per CPU)")."""
@@ -121,7 +133,7 @@ def int_in(name, lo: int, hi: int | None = None, why: str = ""):
         try:
             v = int(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{name}={text!r} is not an integer") from None
+            raise argparse.ArgumentTypeError(f"{name}={text!r} is not an integer; valid range: {valid}") from None
         if v < lo or (hi is not None and v > hi):
             raise argparse.ArgumentTypeError(f"{name}={text!r} is invalid; valid range: {valid}")
         return v

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .common import CliError, float_arg, path_arg
+from .common import CliError, float_arg, int_in, path_arg, prepare_out_dir
 
 _PRECISIONS = {"float32": ("f32",), "float64": ("f64",), "both": ("f32", "f64")}
 
@@ -26,7 +26,7 @@ def _add_export_controller(sub):
                    help="control period in s, 1e-7 .. 1e-3 (default: the rectifier period 1/(2f), the paper's)")
     p.add_argument("--lpf-tau", type=float_arg("lpf-tau", positive=True, lo=1e-6, hi=1e-1), default=2e-4,
                    help="time constant of the low-pass Q in s, 1e-6 .. 0.1 (default 2e-4)")
-    p.add_argument("--lpf-order", type=int, default=2, help="order of Q, 1 .. 8 (default 2)")
+    p.add_argument("--lpf-order", type=int_in("lpf-order", 1, 8), default=2, help="order of Q, 1 .. 8 (default 2)")
     p.add_argument("--link", action="append", default=[], metavar="KEY=VALUE",
                    help="a link parameter other than Table I (repeatable), e.g. lm_h=5e-6; keys: l1_h, l2_h, lm_h, "
                         "r1_ohm, r2_ohm, vdc_v, vl_v, f_hz")
@@ -56,12 +56,9 @@ def _link_params(items):
 
 def _cmd_export_controller(args) -> int:
     from wpt_receiver import LowPassFilter, c_export
-    if not 1 <= args.lpf_order <= 8:
-        raise CliError(f"--lpf-order {args.lpf_order} is invalid; valid range: 1 .. 8")
     params = _link_params(args.link)
     spec = c_export.controller_spec(params, args.control_period, LowPassFilter(args.lpf_tau, args.lpf_order))
-    if args.out.exists() and not args.out.is_dir():
-        raise CliError(f"--out {str(args.out)!r} is a file; valid: a folder (created if missing)")
+    prepare_out_dir(args.out)   # a file in its place, read-only: one line before any work (was "[Errno 30] ...")
     precs = _PRECISIONS[args.precision]
     res = c_export.write_export(args.out, spec, precs)
     checks = {prec: _check(args.out, prec, args.cc) for prec in precs} if args.check else {}

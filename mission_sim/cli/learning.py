@@ -11,6 +11,7 @@ from .common import (
     CliError,
     add_progress_flag,
     float_arg,
+    int_in,
     lazy_names_help,
     name_list,
     path_arg,
@@ -36,7 +37,8 @@ def _add_train(sub):
     p.add_argument("--timesteps", type=int, required=True, help="environment steps to train for")
     p.add_argument("--out", type=path_arg("--out"), required=True, help="output folder")
     p.add_argument("--seed", type=seed_int(), default=0, help="seed, 0 .. 2^32-1 (default 0)")
-    p.add_argument("--n-envs", type=int, default=64, help="parallel windows of the batched env (default 64)")
+    p.add_argument("--n-envs", type=int_in("n-envs", 1, 1024), default=64,
+                   help="parallel windows of the batched env, 1 .. 1024 (default 64)")
     lazy_names_help(p.add_argument("--scenario", default="random"),
                     "training scenario (default random: domain randomisation)", scenario_names)
     p.add_argument("--hyperparams", type=path_arg("--hyperparams"), default=None, metavar="FILE",
@@ -91,9 +93,12 @@ def _add_train(sub):
     p.add_argument("--imitation-mask", default="last_d_short", metavar="FIELD,...",
                    help="observation fields hidden from the student (default last_d_short; add i2_amp_a,"
                         "battery_current_a,rect_current_a for a feed-forward student; '' for none)")
-    p.add_argument("--eval-every", type=int, default=50_000, help="env steps between evaluations (default 50000)")
-    p.add_argument("--eval-episodes", type=int, default=32, help="held-out evaluation windows (default 32)")
-    p.add_argument("--checkpoint-every", type=int, default=100_000, help="env steps between checkpoints")
+    p.add_argument("--eval-every", type=int_in("eval-every", 1), default=50_000,
+                   help="env steps between evaluations (default 50000)")
+    p.add_argument("--eval-episodes", type=int_in("eval-episodes", 1), default=32,
+                   help="held-out evaluation windows (default 32)")
+    p.add_argument("--checkpoint-every", type=int_in("checkpoint-every", 1), default=100_000,
+                   help="env steps between checkpoints")
     p.add_argument("--resume", type=path_arg("--resume"), default=None, metavar="CHECKPOINT.zip",
                    help="continue from a checkpoint of checkpoints/ (its VecNormalize statistics next to it)")
     add_progress_flag(p)
@@ -168,12 +173,6 @@ def _check_train(args):
         if teacher.split(":", 1)[0] not in available():
             raise CliError(f"--imitate {args.imitate!r} is invalid; valid values: a policy name ({', '.join(available())}"
                            "), optionally privileged:NAME")
-    if not 1 <= args.n_envs <= 1024:
-        raise CliError(f"--n-envs {args.n_envs} is invalid; valid range: 1..1024")
-    for flag, v in (("--eval-every", args.eval_every), ("--eval-episodes", args.eval_episodes),
-                    ("--checkpoint-every", args.checkpoint_every)):
-        if v < 1:
-            raise CliError(f"{flag} {v} is invalid; valid range: >= 1")
     if args.scenario not in scenario_names():
         raise CliError(f"--scenario {args.scenario!r} is invalid; valid values: {', '.join(scenario_names())}")
     for flag, path in (("--hyperparams", args.hyperparams), ("--resume", args.resume)):

@@ -13,6 +13,7 @@ from .common import (
     check_out_file,
     float_arg,
     lazy_names_help,
+    mass_override,
     parse_set,
     path_arg,
     policy_names,
@@ -34,13 +35,11 @@ def _mav_common(p):
 
 
 def _mav_speed(text):
+    """A number (its range is checked by :func:`mission_sim.mavlink.telemetry.check_pacing`)."""
     try:
-        v = float(text)
+        return float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"speed={text!r} is not a number") from None
-    if not v > 0:  # also rejects nan
-        raise argparse.ArgumentTypeError(f"speed={text!r} is invalid; valid range: (0, inf] (inf = as fast as possible)")
-    return v
 
 
 def _mav_config(args, overrides=None, single_pad=False):
@@ -112,6 +111,7 @@ def _cmd_replay(args) -> int:
     from ..files import atomic_output
     from ..mavlink.logs import read_log
     from ..mavlink.replay import parse_window, replay_log, replay_span, track_from_log
+    mass_override(args)   # --mass with --set drone.mass_kg: refused before the log is read
     if getattr(args, "pads", None) is not None:  # what-if re-flight with pads: its own module
         from .refly import cmd_refly
         return cmd_refly(args)
@@ -124,7 +124,7 @@ def _cmd_replay(args) -> int:
     log = read_log(args.log)
     span, _ = replay_span(log, window, args.segment)
     track_from_log(log, pad=pad, window=span)  # no usable position: one-line error before any simulation
-    cfg = _mav_config(args, {"drone.mass_kg": args.mass} if args.mass else None, single_pad=True)
+    cfg = _mav_config(args, mass_override(args), single_pad=True)
     policy = _mav_policy(cfg, args.policy)
     prepare_out_dir(args.out)
     from wpt_receiver.numba_start import cache_loads_without_registries
@@ -253,7 +253,8 @@ def _add_telemetry(sub):
                    help="where to send (default udpout:127.0.0.1:14550; 'none' = only --tlog)")
     p.add_argument("--rate", type=positive_float("rate"), default=10.0, help="telemetry rate in Hz (default 10)")
     p.add_argument("--speed", type=_mav_speed, default=1.0,
-                   help="simulated seconds per wall second (default 1 = real time; inf = as fast as possible)")
+                   help="simulated seconds per wall second, 0.001 .. inf (default 1 = real time; inf = as fast as "
+                   "possible)")
     p.add_argument("--tlog", type=path_arg("--tlog"), default=None, help="also write the telemetry to this .tlog")
     p.add_argument("--home", default=None, metavar="LAT,LON,ALT",
                    help="where the pad frame's origin is (default: the home of the config's mission file, else the first "
@@ -287,6 +288,7 @@ def _cmd_telemetry(args) -> int:
     if args.tlog is not None:
         check_out_file(args.tlog, "--tlog")  # a folder, an unwritable place: refused before the simulation
     telemetry.check_ids(args.sysid, args.compid)
+    telemetry.check_pacing(args.rate, args.speed)   # before the simulation, not after it
     home = parse_geo_point(args.home, "--home") if args.home else telemetry.DEFAULT_HOME
     if home.alt_m is None:
         raise CliError(f"--home {args.home!r} needs an altitude; valid format: LAT,LON,ALT")

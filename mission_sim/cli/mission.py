@@ -211,7 +211,6 @@ def _run_and_write(args, cfg, pol, every, worker, jit: bool):
 
     from ..world.runner import run_mission
     from ..world.stream import SeriesWriter
-    (args.out / "summary.json").unlink(missing_ok=True)  # present again only when this run's set is complete
     # every check passed and the figure worker forked: numba (imported by the run anyway) loads the cached
     # kernels without its typing/lowering registries (a cache miss still compiles; wpt_receiver.numba_start)
     if jit:   # (the ahead-of-time build runs it without numba)
@@ -220,6 +219,9 @@ def _run_and_write(args, cfg, pol, every, worker, jit: bool):
     try:
         res = run_mission(cfg, pol, charge=not args.no_charge, progress=show_progress(args),
                           frame=False, sink=writer)
+        # an earlier run's set stays whole until this one replaces a file (a Ctrl-C in the simulation
+        # lost its summary.json); present again only when this run's set is complete
+        (args.out / "summary.json").unlink(missing_ok=True)
         files = [str(f) for f in writer.close()]
     except BaseException:
         writer.abort()

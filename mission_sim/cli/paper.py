@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .common import CliError, float_arg, path_arg, prepare_out_dir
+from .common import CliError, check_out_file, float_arg, path_arg, prepare_out_dir
 
 
 def _add_paper(sub):
@@ -116,8 +116,7 @@ def _check_waveforms(args) -> None:
                        "has instantaneous waveforms")
     if args.waveforms.suffix.lower() not in (".csv", ".parquet"):
         raise CliError(f"--waveforms {str(args.waveforms)!r} is invalid; valid: a file name ending .csv or .parquet")
-    if args.waveforms.is_dir():
-        raise CliError(f"--waveforms {str(args.waveforms)!r} is a folder; valid: a file name")
+    check_out_file(args.waveforms, "--waveforms")   # a folder, a file in the folder's place, unwritable
 
 
 def _write_waveforms(runs, path: Path) -> str:

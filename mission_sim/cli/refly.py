@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import sys
 
-from .common import CliError, parse_set, prepare_out_dir, show_progress, write_mission
+from .common import CliError, mass_override, parse_set, prepare_out_dir, show_progress, write_mission
 
 __all__ = ["cmd_refly"]
 
@@ -24,8 +24,7 @@ def _config(args, track):
     d["waypoints"] = []                       # the log is the route
     d["mission"]["file"] = ""
     d["pads"] = pads_to_local(read_pads(args.pads), track.pad)
-    over = {"drone.mass_kg": args.mass} if args.mass else {}
-    return config_from_dict(apply_overrides(d, {**over, **parse_set(args.set)}))
+    return config_from_dict(apply_overrides(d, {**mass_override(args), **parse_set(args.set)}))
 
 
 def cmd_refly(args) -> int:

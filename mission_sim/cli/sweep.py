@@ -9,7 +9,8 @@ import sys
 from pathlib import Path
 
 from ..studies import DEFAULT_MAX_CASES
-from .common import CliError, add_progress_flag, float_arg, int_in, max_workers, path_arg, show_progress
+from .common import (CliError, add_progress_flag, float_arg, int_in, max_workers, path_arg, prepare_out_dir,
+                     show_progress)
 
 
 def _add_sweep(sub):
@@ -114,6 +115,8 @@ def _client_factory(args):
 def _run(args, st, runner, cases, fingerprint):
     from ..studies import sweep
     from ..studies.status import check_same_study, write_manifest
+
+    prepare_out_dir(args.out)   # a file in its place, unwritable: one line naming --out (was "[Errno 17] File exists")
 
     def before_run():  # under the store's lock: another study in --out is refused unless --force
         if not args.force:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .common import CliError, add_progress_flag, float_arg, nonneg_int, path_arg, show_progress
+from .common import CliError, add_progress_flag, float_arg, int_in, nonneg_int, path_arg, prepare_out_dir, show_progress
 
 
 def _add_tolerance(sub):
@@ -16,7 +16,7 @@ def _add_tolerance(sub):
                                    "(fundamental, complex envelope model), and the yield: RM power >= --min-power x "
                                    "nominal and peak <= --margin x the nominal peak. Runs on the sweep engine "
                                    "(Dask, resumable store in --out).")
-    p.add_argument("--draws", type=nonneg_int("draws"), default=10_000, help="number of draws (default 10000)")
+    p.add_argument("--draws", type=int_in("draws", 1), default=10_000, help="number of draws (default 10000)")
     p.add_argument("--seed", type=nonneg_int("seed"), default=0, help="seed of the draws (default 0)")
     spread = float_arg("spread", positive=False)
     p.add_argument("--spread-c", type=spread, default=0.05, help="C1, C2 tolerance, relative (default 0.05 = +-5 %%)")
@@ -48,14 +48,11 @@ def _cmd_tolerance(args) -> int:
     from ..studies.tolerance import ToleranceRunner, summarise, tolerance_cases
     if args.devices not in preset_names():
         raise CliError(f"--devices {args.devices!r} is invalid; valid values: {', '.join(preset_names())}")
-    if args.draws < 1:
-        raise CliError(f"--draws {args.draws} is invalid; valid range: >= 1")
     try:
         spreads = Spreads(args.spread_c, args.spread_l, args.spread_lm, args.spread_r)
     except ValueError as exc:
         raise CliError(str(exc).replace("spread ", "--spread-").replace("=", " ")) from None
-    if args.out.exists() and not args.out.is_dir():
-        raise CliError(f"--out {str(args.out)!r} is a file; valid: a folder")
+    prepare_out_dir(args.out)   # a file in its place, read-only: one line before any work (was "[Errno 30] ...")
     runner = ToleranceRunner(args.devices).with_transitions()  # shipped to the workers, built once here
     nominal = _nominal(runner)
     factory = None if args.workers == 0 else functools.partial(dask_client, None, args.workers)

@@ -130,10 +130,12 @@ _CONVERT = {
 
 
 # ----------------------------------------------------------------------------- reading
-def _open(path: Path, mu):
+def open_log(path: Path, mu):
     """(reader, kind). DataFlash by magic bytes or suffix; everything else is read as a .tlog.
 
-    The readers are built directly: ``mavlink_connection`` would execute a path containing /bin/.
+    The readers are built directly: ``mavlink_connection`` would execute a path containing /bin/ (and
+    treat one with a ':' as a UDP address). DataFlash corrupt-byte reports are Python prints: callers
+    capture stdout and stderr around reading.
     """
     from pymavlink import DFReader
     with open(path, "rb") as fh:
@@ -218,7 +220,7 @@ def read_log(path) -> FlightLog:
         # DFReader reports skipped corrupt bytes with print(); count those reports as bad frames.
         with contextlib.redirect_stderr(captured), contextlib.redirect_stdout(captured):
             try:
-                reader, kind = _open(path, mu)
+                reader, kind = open_log(path, mu)
                 _collect(reader, kind, raw, stats)
             except Exception as exc:  # noqa: BLE001 -- untrusted bytes: keep what was decoded, report
                 errors.append(f"{type(exc).__name__}: {exc}")

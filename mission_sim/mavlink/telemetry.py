@@ -404,11 +404,23 @@ class StreamStats:
     counts: dict
 
 
-def _check_stream(rate_hz, speed, connect, tlog, conn):
+#: slowest pacing, simulated seconds per wall second (a slower one waits past what time.sleep takes:
+#: ``--speed 1e-300`` ended in an OverflowError traceback)
+MIN_SPEED = 1e-3
+
+
+def check_pacing(rate_hz, speed) -> None:
+    """``rate_hz`` in (0, 1000] Hz and ``speed`` in [:data:`MIN_SPEED`, inf] (inf: as fast as possible),
+    else ``ValueError`` naming the value and its range."""
     if not (math.isfinite(rate_hz) and 0 < rate_hz <= 1000):
         raise ValueError(f"rate={rate_hz!r} is invalid; valid range: (0, 1000] Hz")
-    if not (speed > 0):
-        raise ValueError(f"speed={speed!r} is invalid; valid range: (0, inf] (inf = as fast as possible)")
+    if not (speed >= MIN_SPEED):
+        raise ValueError(f"speed={speed!r} is invalid; valid range: [{MIN_SPEED:g}, inf] simulated seconds per wall "
+                         "second (inf = as fast as possible)")
+
+
+def _check_stream(rate_hz, speed, connect, tlog, conn):
+    check_pacing(rate_hz, speed)
     if connect is None and tlog is None and conn is None:
         raise ValueError("nothing to do: give a connection (--connect) and/or a --tlog file")
 

@@ -1,0 +1,209 @@
+"""What a newcomer ran into on a fresh clone (2026-11-26 night; every case tried is listed in
+docs/robustness.md, "A newcomer's pass"): each test here failed before its fix."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from mission_sim.cli import main
+
+MISSIONS = Path(__file__).resolve().parent / "data" / "missions"
+
+
+def _one_error_line(capsys, argv) -> str:
+    """``main(argv)``: exit status 2 (argparse's errors exit), nothing on stdout, one line on stderr (returned)."""
+    try:
+        rc = main(argv)
+    except SystemExit as exc:
+        rc = exc.code
+    assert rc == 2
+    cap = capsys.readouterr()
+    lines = cap.err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in cap.err, cap.err
+    assert cap.out == "", cap.out
+    return lines[0]
+
+
+# ------------------------------------------------------------------ a mission in a flight log
+def test_log_under_a_bin_folder_is_read_not_executed(tmp_path, capfd):
+    """``--plan .../bin/flight.tlog``: the uploaded mission was read with ``mavlink_connection``, which runs
+    any existing file whose path contains /bin/ as a program ("executing '...'", then
+    ``[Errno 13] Permission denied``, or the file run if it was executable)."""
+    from mission_sim.plans.items import uploaded_mission
+    src = MISSIONS / "uavlogviewer_vtol_sitl_mission.tlog"
+    (tmp_path / "bin").mkdir()
+    moved = tmp_path / "bin" / src.name
+    shutil.copyfile(src, moved)
+    capfd.readouterr()
+    a, b = uploaded_mission(src), uploaded_mission(moved)
+    assert len(a.items) == 4 and a.items == b.items and a.home == b.home
+    assert capfd.readouterr() == ("", "")
+
+
+def test_garbage_dataflash_plan_is_one_line(tmp_path, capfd):
+    """``--plan garbage.bin``: pymavlink's DataFlash reader printed one "bad header 0x... at N" line per
+    corrupt byte run (4,474 lines for 5 kB of noise) before the one-line error."""
+    p = tmp_path / "garbage.bin"
+    p.write_bytes(np.random.default_rng(0).integers(0, 256, 5000, dtype=np.uint8).tobytes())
+    assert main(["mission", "--plan", str(p), "--no-plot", "--out", str(tmp_path / "m")]) == 2
+    out, err = capfd.readouterr()
+    assert out == "" and err.splitlines() == [
+        "dronewpt mission: error: garbage.bin: no flown track: 0 usable position(s) (GPS fix >= 3) while armed"], err
+
+
+# ------------------------------------------------------------------ the example study
+def test_subnormal_edge_current_gives_no_overflow_warning():
+    """``dronewpt sweep examples/study_small.toml`` printed ``edge_losses.py:58: RuntimeWarning: overflow
+    encountered in divide`` (twice, from the workers): a duty near 1 makes the switched current
+    ``I2 cos(pi d / 2)`` subnormal and ``V / I`` overflows. The energy is the same (0 J for that edge)."""
+    import warnings
+
+    from wpt_receiver.edge_losses import turn_off_energy
+    v, i = np.array([30.0, 30.0, 30.0]), np.array([5e-324, 0.0, 5.0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        e = turn_off_energy(v, i, 2e-8, 1e-9)
+    assert e[0] == 0.0 and e[1] == 0.0
+    t1 = np.sqrt(2.0 * 2e-8 * 1e-9 * 30.0 / 5.0)   # the closed form of the docstring at 5 A
+    u = min(t1 / 2e-8, 1.0)
+    assert e[2] == 25.0 * 4e-16 * (u ** 3 / 3 - u ** 4 / 4) / 2e-9 + 0.5 * 30.0 * 5.0 * 2e-8 * (1 - u) ** 2
+
+
+# ------------------------------------------------------------------ telemetry pacing
+def test_telemetry_speed_and_rate_checked_before_the_simulation(tmp_path, capsys, monkeypatch):
+    """``telemetry --speed 1e-300`` simulated the mission and then ended in a traceback
+    (``OverflowError: timestamp out of range for platform time_t`` from time.sleep) with exit 1;
+    ``--rate 1e6`` was refused only after the simulation. Both are one line before any work now."""
+    import mission_sim.world.runner as runner
+
+    def no_run(*a, **k):
+        raise AssertionError("simulated before the pacing was checked")
+    monkeypatch.setattr(runner, "run_mission", no_run)
+    tlog = str(tmp_path / "t.tlog")
+    base = ["telemetry", "--connect", "none", "--tlog", tlog]
+    assert _one_error_line(capsys, base + ["--speed", "1e-300"]) == (
+        "dronewpt telemetry: error: speed=1e-300 is invalid; valid range: [0.001, inf] simulated seconds per wall "
+        "second (inf = as fast as possible)")
+    for bad in ("0", "-1", "nan"):
+        assert "valid range: [0.001, inf]" in _one_error_line(capsys, base + ["--speed", bad])
+    assert _one_error_line(capsys, base + ["--rate", "1e6"]) == (
+        "dronewpt telemetry: error: rate=1000000.0 is invalid; valid range: (0, 1000] Hz")
+    assert not (tmp_path / "t.tlog").exists()
+
+
+# ------------------------------------------------------------------ output paths inside a file
+def test_paper_waveforms_inside_a_file_refused_before_simulating(tmp_path, capsys, monkeypatch):
+    """``paper --model switching --waveforms FILE/w.csv`` ran the three switching runs (~20 s on a loaded
+    machine) and then ended with ``[Errno 17] File exists: 'FILE'`` (no flag, no valid form)."""
+    from wpt_receiver import paper
+
+    def no_run(*a, **k):
+        raise AssertionError("simulated before --waveforms was checked")
+    monkeypatch.setattr(paper, "run_paper", no_run)
+    (tmp_path / "plain").write_text("x")
+    line = _one_error_line(capsys, ["paper", "--model", "switching", "--no-plot",
+                                    "--waveforms", str(tmp_path / "plain" / "w.csv")])
+    assert line == (f"dronewpt paper: error: --waveforms folder {str(tmp_path / 'plain')!r} is an existing file; "
+                    "valid: a folder (created if missing)")
+
+
+def test_sweep_out_is_a_file(tmp_path, capsys):
+    """``sweep STUDY --out FILE`` ended with ``[Errno 17] File exists: 'FILE'``; now named like mission's --out."""
+    study = Path(__file__).resolve().parents[1] / "examples" / "study_small.toml"
+    (tmp_path / "plain").write_text("x")
+    line = _one_error_line(capsys, ["sweep", str(study), "--out", str(tmp_path / "plain"), "--workers", "0",
+                                    "--no-plot", "--no-progress"])
+    assert line == (f"dronewpt sweep: error: --out {str(tmp_path / 'plain')!r} is an existing file; "
+                    "valid: a folder (created if missing)")
+    assert (tmp_path / "plain").read_text() == "x"
+
+
+# ------------------------------------------------------------------ Ctrl-C in a re-run
+def test_interrupted_rerun_keeps_the_earlier_complete_set(tmp_path, capsys, monkeypatch):
+    """Ctrl-C while a mission re-run into the same --out simulates: the earlier run's summary.json was
+    removed at the start, so its complete set was lost (its figures and series left without it); now
+    every earlier file stays as it was until this run replaces one, and no temporary is left."""
+    import mission_sim.world.runner as runner
+    out = tmp_path / "m"
+    out.mkdir()
+    earlier = {"summary.json": b'{"policy": "step"}', "timeseries.parquet": b"PAR1 earlier", "soc.png": b"png"}
+    for name, data in earlier.items():
+        (out / name).write_bytes(data)
+
+    def interrupted(*a, **k):   # Ctrl-C in the simulation
+        raise KeyboardInterrupt
+    monkeypatch.setattr(runner, "run_mission", interrupted)
+    assert main(["mission", "--out", str(out), "--no-plot", "--no-progress"]) == 130
+    assert capsys.readouterr().err == "dronewpt mission: interrupted (SIGINT)\n"
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == earlier
+
+
+# ------------------------------------------------------------------ policy names with a parameter
+def test_policy_parameter_typos_are_named(tmp_path, capsys):
+    """``--policy rl:$MODEL`` with MODEL unset (``rl:``) ran the shipped model and ``step:`` the step
+    policy, silently; ``model_based_budget:abc`` said only "could not convert string to float: 'abc'";
+    ``rl:FOLDER`` said the folder "does not exist"."""
+    def err(policy):
+        return _one_error_line(capsys, ["mission", "--dry-run", "--out", str(tmp_path / "m"), "--policy", policy])
+    assert err("rl:") == ("dronewpt mission: error: policy='rl:' is invalid: nothing after ':'; valid: rl alone, "
+                          "or rl:PATH")
+    assert err("model_based_budget:") == ("dronewpt mission: error: policy='model_based_budget:' is invalid: nothing "
+                                          "after ':'; valid: model_based_budget alone, or model_based_budget:B (a number)")
+    assert err("step:").startswith("dronewpt mission: error: policy='step:' is invalid; valid values: hysteresis, ")
+    assert err("model_based_budget:abc") == (
+        "dronewpt mission: error: policy='model_based_budget:abc' is invalid; valid: model_based_budget:B with B a "
+        "number, the overshoot budget (e.g. 0.02)")
+    assert err(f"rl:{tmp_path}") == (f"dronewpt mission: error: RL model file {str(tmp_path)!r} is a folder; valid: "
+                                     "a model file (as `dronewpt train` writes)")
+    assert main(["mission", "--dry-run", "--out", str(tmp_path / "m"), "--policy", "model_based_budget:0.02"]) == 0
+
+
+# ------------------------------------------------------------------ integer options
+def test_integer_options_name_their_range(capsys, tmp_path):
+    """``tolerance --draws -5`` said "valid range: integer >= 0" and then ``--draws 0`` was refused (">= 1");
+    ``export-controller --lpf-order 2.5`` and ``train --n-envs abc`` (``--eval-every``, ``--eval-episodes``,
+    ``--checkpoint-every``) said only "invalid int value: '...'"; an integer option given a non-integer
+    named no range."""
+    def err(*argv):
+        return _one_error_line(capsys, list(argv))
+    for bad in ("-5", "0"):
+        assert err("tolerance", "--draws", bad, "--out", str(tmp_path / "t")) == (
+            f"dronewpt tolerance: error: argument --draws: draws='{bad}' is invalid; valid range: integer >= 1 "
+            "(see dronewpt tolerance --help)")
+    assert err("export-controller", "--lpf-order", "2.5", "--out", str(tmp_path / "c")) == (
+        "dronewpt export-controller: error: argument --lpf-order: lpf-order='2.5' is not an integer; valid range: "
+        "integer 1..8 (see dronewpt export-controller --help)")
+    assert "lpf-order='9' is invalid; valid range: integer 1..8" in err("export-controller", "--lpf-order", "9")
+    assert err("train", "--algo", "ppo", "--timesteps", "10", "--n-envs", "abc") == (
+        "dronewpt train: error: argument --n-envs: n-envs='abc' is not an integer; valid range: integer 1..1024 "
+        "(see dronewpt train --help)")
+    for flag in ("--eval-every", "--eval-episodes", "--checkpoint-every"):
+        assert f"{flag[2:]}='2.5' is not an integer; valid range: integer >= 1" in err(
+            "train", "--algo", "ppo", "--timesteps", "10", flag, "2.5")
+    assert err("sweep", "--workers", "abc").startswith(
+        "dronewpt sweep: error: argument --workers: workers='abc' is not an integer; valid range: integer 0..")
+
+
+def test_unwritable_out_named_before_any_work(capsys):
+    """An --out that cannot be created (here under /proc, which even root cannot write; a read-only mount
+    gives "Read-only file system" the same way): ``tolerance``, ``export-controller`` and ``sweep`` said
+    only ``[Errno 2] No such file or directory: '...'`` (tolerance after computing its nominal link)."""
+    bad = "/proc/self/newbie"
+    study = str(Path(__file__).resolve().parents[1] / "examples" / "study_small.toml")
+    for cmd in (["tolerance", "--draws", "10"], ["export-controller"], ["sweep", study, "--workers", "0"]):
+        assert _one_error_line(capsys, [*cmd, "--out", bad]) == (
+            f"dronewpt {cmd[0]}: error: --out {bad!r} is not a writable folder: No such file or directory")
+
+
+# ------------------------------------------------------------------ conflicting options
+def test_replay_mass_and_set_mass_conflict(capsys):
+    """``replay LOG --mass 2 --set drone.mass_kg=3`` flew a 3 kg drone without a word (--set won); with
+    ``--pads`` (the re-flight) too. Refused now, before the log is read."""
+    log = str(Path(__file__).resolve().parent / "data" / "flightlogs" / "dronekit-python_flight.tlog")
+    pads = str(MISSIONS / "dronekit_flight_pads.csv")
+    for extra in ([], ["--pads", pads]):
+        assert _one_error_line(capsys, ["replay", log, "--mass", "2", "--set", "drone.mass_kg=3", *extra]) == (
+            "dronewpt replay: error: --mass 2 and --set drone.mass_kg=3 both set the drone's mass; valid: one of them")
