@@ -61,12 +61,16 @@ def main(argv=None):
     ap.add_argument("--lock", type=int, default=None, help="1/0: force the locked prediction on/off (default: the code's)")
     ap.add_argument("--link", default="modal", choices=("envelope", "modal"))
     ap.add_argument("--no-oracle", action="store_true")
+    ap.add_argument("--set", default="", help="NAME=VALUE,... module constants of policies.mpc (an experiment)")
     ap.add_argument("--out", required=True)
     a = ap.parse_args(argv)
     from envs import EnvConfig
     import policies.mpc as mpc
     if a.lock is not None and hasattr(mpc, "_LOCK"):
         mpc._LOCK = bool(a.lock)
+    for kv in filter(None, a.set.split(",")):
+        k, v = kv.split("=")
+        setattr(mpc, k, type(getattr(mpc, k))(float(v)))
     res = run(a.policies.split(","), a.scenario, a.windows, a.seed, EnvConfig(link_model=a.link), not a.no_oracle)
     with open(a.out, "w") as f:
         json.dump({"args": vars(a), "results": res}, f)

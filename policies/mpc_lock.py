@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["LockedModel", "locked_rows", "FIX_ITERS", "SUBSTEPS"]
+__all__ = ["LockedModel", "locked_rows", "locked_step", "FIX_ITERS", "SUBSTEPS"]
 
 #: sub-steps per control period (the lock is applied at each; 2 are unstable, 8 within 0.05 points of 64)
 SUBSTEPS = 8
@@ -158,3 +158,41 @@ def locked_rows(lm, model, z, plan, vc, M, grad=True, qmin=None):
                  QMIN_V if qmin is None else float(qmin), lm.c1, lm.d2, lm.ns,
                  rows, J, Jv, grad)
     return rows, J, Jv
+
+
+@njit(cache=True)
+def _step_kernel(sig, q, E, beta, gamma, c1, d2, ns, out, y):
+    """One control period of the locked model for rows ``i``: modes ``sig`` (m, 2) under the V2 ``q`` (m,) in I2's
+    frame; the modes after it into ``out`` (m, 2) and the |I2'| at its end into ``y`` (m,)."""
+    for i in range(sig.shape[0]):
+        s0, s1, Q = sig[i, 0], sig[i, 1], q[i]
+        v = Q
+        for _ in range(ns):
+            v = Q
+            for _ in range(FIX_ITERS):
+                a = s0 + s1 + c1 + d2 * v
+                aa = abs(a)
+                if aa < 1e-9:
+                    break
+                v = Q * a / aa
+            s0 = E[0] * s0 + beta[0] * v + gamma[0]
+            s1 = E[1] * s1 + beta[1] * v + gamma[1]
+        out[i, 0], out[i, 1] = s0, s1
+        y[i] = abs(s0 + s1 + c1 + d2 * v)
+
+
+def locked_step(lm, model, z, u, vc):
+    """The locked model's step of the estimates ``z`` (..., 5) under the eq. 9 V2 ``u`` (...) [V] at the clamp
+    voltages ``vc`` (...) [V] (what :meth:`policies.mpc_modal.ModalModel.step_measure` does unlocked): ``(z after
+    the step, the |I2| [A] the sensor reads at its end)``."""
+    z = np.asarray(z, dtype=float)
+    shape = z.shape[:-1]
+    zf = z.reshape(-1, z.shape[-1])
+    rr, ri = model.residual(np.broadcast_to(u, shape).reshape(-1), np.broadcast_to(vc, shape).reshape(-1))
+    q = (np.broadcast_to(u, shape).reshape(-1) + rr + zf[:, 4]) + 1j * ri
+    sig = np.stack([zf[:, 0] + 1j * zf[:, 1], zf[:, 2] + 1j * zf[:, 3]], axis=1)
+    out, y = np.empty_like(sig), np.empty(len(zf))
+    _step_kernel(sig, q, lm.E, lm.beta, lm.gamma, lm.c1, lm.d2, lm.ns, out, y)
+    x = zf.copy()
+    x[:, 0], x[:, 1], x[:, 2], x[:, 3] = out[:, 0].real, out[:, 0].imag, out[:, 1].real, out[:, 1].imag
+    return x.reshape(z.shape), y.reshape(shape)
