@@ -296,10 +296,11 @@ class _DelayBank:
         d = self._lag[self.best]
         for j in range(int(d.max(initial=0)) - 1, -1, -1):
             go = np.flatnonzero(d > j)
+            c = go[self.lock[go]] if self.lock is not None else go[:0]
+            zc = self.lock_step(z[c], self.u[j, c], self.vc[c])[0] if len(c) else None
             z[go] = self.m.step(z[go], self.u[j, go], None if self.vc is None else self.vc[go])
-            if self.lock is not None and self.lock[go].any():
-                c = go[self.lock[go]]
-                z[c] = self.lock_step(z[c], self.u[j, c], self.vc[c])[0]
+            if len(c):
+                z[c] = zc
         return z
 
 
