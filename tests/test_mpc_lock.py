@@ -64,31 +64,16 @@ def test_locked_rows_derivatives_are_their_finite_differences():
 
 
 def _descent(window):
-    """mpc:0.1 on window ``window``: its duties from the stop on, the env's per-step envelope peak [A], its estimate
-    at the stop and its battery voltage there."""
-    from envs import SbarChargingVectorEnv
-    from policies import make
-    venv = SbarChargingVectorEnv(num_envs=1, scenario="nominal", config=CFG)
-    pol = make("mpc:0.1", venv.policy_context)
-    pol.reset(1)
-    cap, orig = {}, pol._after_stop
-
-    def hook(idx, z, vl, u_prev):
-        cap.setdefault("z", z.copy())
-        cap.setdefault("vl", vl.copy())
-        return orig(idx, z, vl, u_prev)
-
-    pol._after_stop = hook
-    obs, _ = venv.reset(seed=[window])
-    ds, pk = [], []
-    for _ in range(venv.config.n_steps):
-        d = np.asarray(pol.act(obs), dtype=float).reshape(1)
-        obs, _, _, _, info = venv.step((2.0 * np.clip(d, 0.0, 1.0) - 1.0)[:, None].astype(np.float32))
-        if "z" in cap:
-            ds.append(info["d_short"][0])
-            pk.append(info["i2_peak_envelope_a"][0])
-    venv.close()
-    return pol, np.array(ds), np.array(pk), cap["z"], cap["vl"]
+    """mpc:0.1 on window ``window`` (benchmarks/diag_mpc_modal_lock.py's closed loop): the policy, its duties from the
+    stop on, the env's per-step envelope peak [A], its estimate at the stop (1, 5) and its battery voltage there (1,)."""
+    import importlib.util
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "diag_mpc_modal_lock.py"
+    spec = importlib.util.spec_from_file_location("diag_mpc_modal_lock", path)
+    diag = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(diag)
+    pol, _, ds, pk, z, vl = diag._closed_loop("mpc:0.1", window, CFG)
+    return pol, ds, pk, z[None], np.array([vl])
 
 
 def test_locked_rows_predict_the_budgeted_descent_better():
