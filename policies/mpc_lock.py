@@ -19,7 +19,8 @@ each half step (the QP's rows: mid-step and end) as the largest |I2'| of its sub
 plan and, in forward mode, gives the rows' derivatives with respect to the plan's free knots (the MPC's basis
 ``M``: V2 linear between knots) and along the plan itself: the locked rows' linearisation ``rows(v) ~ rows(v_bar)
 + J (M v - v_bar)`` the MPC's after-stop QP takes in its sequential convex iterations (a time-varying
-condensation: the lock's gain varies with V2 along the plan).
+condensation: the lock's gain varies with V2 along the plan). :func:`locked_step` is the same model over one control
+period, which the MPC's estimator steps after the stop (open loop: its correction from the noisy I2 lost the ring).
 """
 
 from __future__ import annotations
