@@ -9,7 +9,9 @@ its own modal model (:mod:`policies.mpc_modal`) from its estimate at the stop, i
   frame: ``V2' = P(d)``);
 * ``fixed``: the same model sub-stepped 16 times a step (is it the sampling?);
 * ``locked``: sub-stepped 16 times with the SBAR's V2 turned onto I2's phase at every sub-step
-  (``V2' = P(d) e^{j arg I2'}``: the rectifier commutates on i2; the fixed point through the feedthrough).
+  (``V2' = P(d) e^{j arg I2'}``: the rectifier commutates on i2; the fixed point through the feedthrough);
+* ``lockrows``: the locked model the budgeted MPC's after-stop QP now linearises (:mod:`policies.mpc_lock`: 8
+  sub-steps, |I2'| sampled at mid-step and end like the QP's rows).
 
     python benchmarks/diag_mpc_modal_lock.py [--policy mpc:0.1] [--windows 1013,1016,1004,1001] [--steps 20]
 """
@@ -86,6 +88,16 @@ def rows(pol, ds, z, vl, n):
     return i2.reshape(N_PRED, 2).max(axis=1)[:n]
 
 
+def lock_rows(pol, ctx, ds, z, vl, n):
+    """The locked model's larger sample of each of the first ``n`` steps (:func:`policies.mpc_lock.locked_rows`)."""
+    from policies.mpc import N_PRED
+    from policies.mpc_lock import LockedModel, locked_rows
+    lm = LockedModel(ctx.link, "schottky", ctx.control_period_s)
+    v2 = pol._v2_of(np.r_[ds, np.ones(N_PRED)][:N_PRED], vl)[None]
+    r = locked_rows(lm, pol._model, z[None], v2, np.array([vl + pol._vf]), pol._model.M[:, :-1], grad=False)[0]
+    return r.reshape(N_PRED, 2).max(axis=1)[:n]
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--policy", default="mpc:0.1")
@@ -95,13 +107,13 @@ def main(argv=None):
     from envs import EnvConfig
     cfg = EnvConfig(link_model="modal")
     np.set_printoptions(linewidth=200, precision=2, suppress=True)
-    err = {"rows": [], "fixed": [], "locked": []}
+    err = {"rows": [], "fixed": [], "locked": [], "lockrows": []}
     for w in (int(x) for x in a.windows.split(",")):
         pol, ctx, ds, pk, z, vl = _closed_loop(a.policy, w, cfg)
         n = min(a.steps, int(np.argmax(ds >= 0.999)) + 1 if np.any(ds >= 0.999) else a.steps)   # the descent
         sm = float(pol._bound_sm(z[None])[0])
         got = {"rows": rows(pol, ds, z, vl, n), "fixed": replay(pol, ctx, ds, z, vl, n),
-               "locked": replay(pol, ctx, ds, z, vl, n, lock=True)}
+               "locked": replay(pol, ctx, ds, z, vl, n, lock=True), "lockrows": lock_rows(pol, ctx, ds, z, vl, n)}
         print(f"{a.policy} window {w}: per-step |I2| peak over I2_sm - 1 [%], the descent's {n} steps")
         print(f"   env      {100 * (pk[:n] / sm - 1)}")
         for k, v in got.items():
