@@ -200,9 +200,13 @@ def _figure_worker(args):
     from ..figures.worker import FigureWorker, fork_available
     if args.no_plot or args.dry_run or not fork_available():
         return None
-    # what both processes import (numpy, the config that unpickling the result needs): once, before the
-    # fork, not once in each (~0.15 s of CPU; the worker is ready for the data no later: it skips them)
+    # what both processes need, once before the fork instead of once in each (~0.15 s of CPU; the worker is
+    # ready for the data no later, it skips them): numpy, the config module (unpickling the result imports
+    # it), the coil model from the disk cache (the run's policy context; the figures' pad radius, L1 and L2)
+    from wpt_receiver.coupling import default_coupling
+
     from .. import config  # noqa: F401
+    default_coupling()
     return FigureWorker()
 
 

@@ -120,8 +120,8 @@ def _draw_once(conn) -> None:
     matplotlib_without_docstrings()
     from . import mission
     from .. import config  # noqa: F401 - what unpickling the result imports, before it arrives (forked early)
-    if _load_low():   # while the parent simulates: ~0.03 s off the first figure for ~0.1 s of CPU (measured)
-        mission.warm_up()
+    if _load_low() and not conn.poll():   # while the parent simulates (not when the data waits already): ~0.03 s
+        mission.warm_up()                  # off the first figure for ~0.1 s of CPU (measured)
     try:
         result, out = conn.recv()
     except EOFError:   # the parent ended before the run's end (an error, an interrupt)
