@@ -4,7 +4,8 @@ Runs the command in a fresh interpreter (``python -c`` calling ``mission_sim.cli
 console script) with timestamps added from outside (wrappers set before ``main`` runs; the code measured is
 not changed): the parent's start-up, the figure worker's fork, its matplotlib import, the data's arrival,
 each figure written (by the worker or its helper), the parent's run and exit. Each event is appended to a
-file as ``process event seconds-since-launch cpu-seconds-of-that-process``. ``--repeat N`` runs, the
+file as ``process event seconds-since-launch cpu-seconds system-seconds minor-page-faults`` (the last three
+of that process so far: ``getrusage``; a forked process starts from zero). ``--repeat N`` runs, the
 median of each event's time printed, with the load.
 
     python benchmarks/timeline_mission.py [--repeat 5] [--root DIR] [-- extra mission args]
@@ -27,7 +28,9 @@ _CHILD = r"""
 import os, sys, time
 T0 = float(os.environ["TL_T0"]); LOG = os.environ["TL_LOG"]
 def ev(who, what):
-    line = f"{who} {what} {time.time() - T0:.4f} {time.process_time():.4f}\n"
+    import resource
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    line = f"{who} {what} {time.time() - T0:.4f} {r.ru_utime + r.ru_stime:.4f} {r.ru_stime:.4f} {r.ru_minflt}\n"
     fd = os.open(LOG, os.O_WRONLY | os.O_APPEND | os.O_CREAT)
     os.write(fd, line.encode()); os.close(fd)
 ev("parent", "interpreter")
@@ -44,6 +47,7 @@ def draw_once(conn):
     who = "worker"
     wpid = os.getpid()
     ev(who, "start")
+    getattr(W, "matplotlib_without_docstrings", lambda: None)()   # as _draw_once does first (where it exists)
     from mission_sim.figures import mission as M
     ev(who, "matplotlib-imported")
     _recv = conn.recv
@@ -80,9 +84,10 @@ def _one(root: Path, extra, out: str) -> list[tuple[str, str, float, float]]:
     end = time.time() - float(env["TL_T0"])
     if r.returncode != 0:
         raise SystemExit(r.stderr.decode(errors="replace")[-600:])
-    rows = [(w, e, float(t), float(c)) for w, e, t, c in (line.split() for line in Path(log).read_text().splitlines())]
+    rows = [(w, e, float(t), float(c), float(s), int(f))
+            for w, e, t, c, s, f in (line.split() for line in Path(log).read_text().splitlines())]
     os.unlink(log)
-    return rows + [("launcher", "exited", end, 0.0)]
+    return rows + [("launcher", "exited", end, 0.0, 0.0, 0)]
 
 
 def main() -> None:
@@ -98,16 +103,16 @@ def main() -> None:
         load1 = os.getloadavg()[0]
     keys = []
     for run in runs:
-        for w, e, *_ in sorted(run, key=lambda r: r[2]):
+        for w, e, *_ in sorted(run, key=lambda row: row[2]):
             if (w, e) not in keys:
                 keys.append((w, e))
     print(f"{a.root}: n = {a.repeat}, load {load0:.2f} -> {load1:.2f}; seconds since launch (median [range]), "
           "CPU s of that process so far")
     for who, what in keys:
-        ts = [t for run in runs for w, e, t, c in run if (w, e) == (who, what)]
-        cs = [c for run in runs for w, e, t, c in run if (w, e) == (who, what)]
+        got = [row[2:] for run in runs for row in run if row[:2] == (who, what)]
+        ts, cs, ss, fs = (list(x) for x in zip(*got))
         print(f"  {who:9s} {what:22s} {statistics.median(ts):6.3f} [{min(ts):.3f}, {max(ts):.3f}]  cpu {statistics.median(cs):.3f}"
-              f"  (n={len(ts)})")
+              f" (sys {statistics.median(ss):.3f}, minor faults {statistics.median(fs):,.0f})  (n={len(ts)})")
 
 
 if __name__ == "__main__":
