@@ -9,6 +9,9 @@ of that process so far: ``getrusage``; a forked process starts from zero). ``--r
 median of each event's time printed, with the load.
 
     python benchmarks/timeline_mission.py [--repeat 5] [--root DIR] [-- extra mission args]
+
+The bytecode cache is bench_startup.py's (``PYTHONPYCACHEPREFIX=/tmp/dronewpt-bench-pyc``, PYTHONDONTWRITEBYTECODE
+dropped), the warm-up run fills it.
 """
 
 from __future__ import annotations
@@ -23,6 +26,12 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_startup import _bytecode_env  # noqa: E402 - the bytecode cache as a user's install has it
+
+#: the measured processes' bytecode cache (as bench_startup.py's default: the trees' modules are not compiled
+#: from source in every run where PYTHONDONTWRITEBYTECODE is set)
+PYC = "/tmp/dronewpt-bench-pyc"
 
 _CHILD = r"""
 import os, sys, time
@@ -77,7 +86,7 @@ sys.exit(code)
 def _one(root: Path, extra, out: str) -> list[tuple[str, str, float, float]]:
     with tempfile.NamedTemporaryFile("r", suffix=".log", delete=False) as f:
         log = f.name
-    env = {**os.environ, "PYTHONPATH": str(root), "TL_LOG": log}
+    env = _bytecode_env({**os.environ, "PYTHONPATH": str(root), "TL_LOG": log}, PYC)
     argv = [sys.executable, "-c", _CHILD, "mission", "--no-progress", "--out", out, *extra]
     env["TL_T0"] = repr(time.time())
     r = subprocess.run(argv, cwd=root, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
