@@ -4,12 +4,14 @@
 numba (import, its registries, the compiled loop loaded from the cache) before the simulation and
 matplotlib (import) before the figures. On a machine with a free core :class:`FigureWorker` overlaps
 them: it forks (POSIX ``fork``: nothing is pickled at start, the config and the coupling model are
-inherited) before the run, the child imports :mod:`.mission` and waits; after the run the parent sends
+inherited) before the run, the child imports :mod:`.mission` (matplotlib without its artists' docstrings,
+:func:`matplotlib_without_docstrings`) and waits; after the run the parent sends
 the summary and the figures' bounded copy of the series, the child draws and writes the PNG files
 (atomically, :func:`.common.save_figure`) and sends their paths back. The figures are the same as drawn
-in process (same module, same data). When the load is low it warms matplotlib up while it waits
-(:func:`.mission.warm_up`) and, when the data arrives and a core is free (:func:`core_free`), forks a helper (:class:`_Helper`, matplotlib
-and the data inherited) that draws :data:`HELPER_FIGURES` while the worker draws the others.
+in process (same module, same data). When the load is low and the data is not there yet
+it warms matplotlib up while it waits (:func:`.mission.warm_up`); when the data arrives and a core is free
+(:func:`core_free`) it forks a helper (:class:`_Helper`, matplotlib and the data inherited) that draws
+:data:`HELPER_FIGURES` while the worker draws the others.
 
 Nothing outlives the command: the child is a daemon process that exits after one set of figures (its
 helper reaped first; terminated if the worker is), when
