@@ -46,6 +46,8 @@ ev("parent", "interpreter")
 import mission_sim.cli as cli
 ev("parent", "cli-imported")
 import mission_sim.figures.worker as W
+if os.environ.get("TL_HELPER") in ("on", "off"):   # --helper: the figure helper forced on / off (inherited by the fork)
+    W.core_free = (lambda: True) if os.environ["TL_HELPER"] == "on" else (lambda: False)
 _init = W.FigureWorker.__init__
 def init(self):
     _init(self)
@@ -83,10 +85,10 @@ sys.exit(code)
 """
 
 
-def _one(root: Path, extra, out: str) -> list[tuple[str, str, float, float]]:
+def _one(root: Path, extra, out: str, helper: str = "auto") -> list[tuple]:
     with tempfile.NamedTemporaryFile("r", suffix=".log", delete=False) as f:
         log = f.name
-    env = _bytecode_env({**os.environ, "PYTHONPATH": str(root), "TL_LOG": log}, PYC)
+    env = _bytecode_env({**os.environ, "PYTHONPATH": str(root), "TL_LOG": log, "TL_HELPER": helper}, PYC)
     argv = [sys.executable, "-c", _CHILD, "mission", "--no-progress", "--out", out, *extra]
     env["TL_T0"] = repr(time.time())
     r = subprocess.run(argv, cwd=root, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -103,19 +105,21 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--root", type=Path, default=ROOT)
+    ap.add_argument("--helper", choices=("auto", "on", "off"), default="auto",
+                    help="the figure helper as the worker decides (core_free), or forced on / off")
     ap.add_argument("extra", nargs="*")
     a = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        _one(a.root, a.extra, f"{tmp}/m")   # warm-up, not counted
+        _one(a.root, a.extra, f"{tmp}/m", a.helper)   # warm-up, not counted
         load0 = os.getloadavg()[0]
-        runs = [_one(a.root, a.extra, f"{tmp}/m") for _ in range(a.repeat)]
+        runs = [_one(a.root, a.extra, f"{tmp}/m", a.helper) for _ in range(a.repeat)]
         load1 = os.getloadavg()[0]
     keys = []
     for run in runs:
         for w, e, *_ in sorted(run, key=lambda row: row[2]):
             if (w, e) not in keys:
                 keys.append((w, e))
-    print(f"{a.root}: n = {a.repeat}, load {load0:.2f} -> {load1:.2f}; seconds since launch (median [range]), "
+    print(f"{a.root} (helper {a.helper}): n = {a.repeat}, load {load0:.2f} -> {load1:.2f}; seconds since launch (median [range]), "
           "CPU s of that process so far")
     for who, what in keys:
         got = [row[2:] for run in runs for row in run if row[:2] == (who, what)]
