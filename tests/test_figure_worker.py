@@ -230,3 +230,101 @@ def test_a_worker_terminated_right_after_the_fork_never_runs_the_parents_code():
     assert r.returncode == 0, r.stderr[-2000:]
     codes = eval(r.stdout.strip().splitlines()[-1])   # noqa: S307 - our own printed list of ints
     assert 3 not in codes and set(codes) <= {0, -15}, codes
+
+
+_DRAW_IN_PROCESS = r"""
+import contextlib, io, json, sys
+from mission_sim.figures.worker import matplotlib_without_docstrings
+applied = matplotlib_without_docstrings() if sys.argv[2] == "lean" else None
+import mission_sim.cli.mission as cm
+from mission_sim.cli import main
+cm.FIGURE_WORKER_MAX_ROWS = -1   # drawn in this process, the one whose matplotlib import was (not) lean
+with contextlib.redirect_stdout(io.StringIO()):
+    rc = main(["mission", "--out", sys.argv[1], "--no-progress"])
+from matplotlib.lines import Line2D
+print(json.dumps([rc, applied, "Properties:" in (Line2D.set.__doc__ or "")]))
+"""
+
+
+def test_matplotlib_without_docstrings_draws_the_same_bytes(tmp_path):
+    """The figure worker's lean matplotlib import (no ``set()`` docstrings or signatures built for the artist
+    classes) applies to the installed matplotlib, really skips them, and the five PNGs are the bytes of a
+    process that imported matplotlib as usual."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    got = {}
+    for mode in ("lean", "usual"):
+        r = subprocess.run([sys.executable, "-c", _DRAW_IN_PROCESS, str(tmp_path / mode), mode], capture_output=True,
+                           text=True, env=env, cwd=ROOT, timeout=600)
+        assert r.returncode == 0, r.stderr[-2000:]
+        got[mode] = __import__("json").loads(r.stdout.strip().splitlines()[-1])
+    assert got == {"lean": [0, True, False], "usual": [0, None, True]}
+    pngs = sorted(p.name for p in (tmp_path / "lean").glob("*.png"))
+    assert len(pngs) == 5
+    for name in pngs:
+        assert (tmp_path / "lean" / name).read_bytes() == (tmp_path / "usual" / name).read_bytes(), name
+
+
+def test_matplotlib_without_docstrings_is_a_no_op_once_artists_exist():
+    """In a process whose matplotlib artists are defined already (a test process that drew before) nothing is
+    patched: False, and ``kwdoc`` is matplotlib's own."""
+    r = subprocess.run([sys.executable, "-c", "import matplotlib.lines, matplotlib.artist as a\n"
+                        "from mission_sim.figures.worker import matplotlib_without_docstrings as m\n"
+                        "k = a.kwdoc\nprint(m(), a.kwdoc is k)"], capture_output=True, text=True, cwd=ROOT, timeout=300,
+                       env={**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")})
+    assert r.returncode == 0 and r.stdout.split() == ["False", "True"], r.stderr[-2000:]
+
+
+_AT_FORK = r"""
+import contextlib, io, json, sys
+import mission_sim.figures.worker as fw
+from wpt_receiver.coupling import default_coupling
+seen = []
+real_init = fw.FigureWorker.__init__
+def init(self):
+    seen.append(["numpy" in sys.modules, "mission_sim.config" in sys.modules, default_coupling.cache_info().currsize,
+                 "matplotlib" in sys.modules])
+    real_init(self)
+fw.FigureWorker.__init__ = init
+from mission_sim.cli import main
+with contextlib.redirect_stdout(io.StringIO()):
+    rc = main(["mission", "--out", sys.argv[1], "--no-progress"])
+print(json.dumps([rc, seen]))
+"""
+
+
+def test_what_both_processes_need_is_loaded_once_before_the_fork(tmp_path):
+    """numpy, the config module (unpickling the result needs it) and the coil model are loaded before the figure
+    worker is forked, so the worker does not load them again; matplotlib is not (the worker's alone)."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    r = subprocess.run([sys.executable, "-c", _AT_FORK, str(tmp_path / "m")], capture_output=True, text=True, env=env,
+                       cwd=ROOT, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert __import__("json").loads(r.stdout.strip().splitlines()[-1]) == [0, [[True, True, 1, False]]]
+    assert len(list((tmp_path / "m").glob("*.png"))) == 5
+
+
+class _Conn:
+    """A pipe end whose result is (not yet) waiting; the parent then ends (EOF) before sending anything."""
+
+    def __init__(self, waiting: bool):
+        self.waiting = waiting
+
+    def poll(self, timeout=0.0):
+        return self.waiting
+
+    def recv(self):
+        raise EOFError
+
+
+@pytest.mark.parametrize("waiting", [False, True])
+def test_the_worker_warms_up_only_while_it_waits_for_the_result(monkeypatch, waiting):
+    """With a low load the worker draws its warm-up figure only when the result is not in its pipe yet: with the
+    result there, the warm-up would only delay the figures."""
+    from mission_sim.figures import mission
+    from mission_sim.figures import worker as fw
+    calls = []
+    monkeypatch.setattr(fw, "matplotlib_without_docstrings", lambda: False)   # this test process's matplotlib as is
+    monkeypatch.setattr(fw, "_load_low", lambda: True)
+    monkeypatch.setattr(mission, "warm_up", lambda: calls.append("warm_up"))
+    fw._draw_once(_Conn(waiting))
+    assert calls == ([] if waiting else ["warm_up"])
