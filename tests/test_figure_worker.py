@@ -248,8 +248,9 @@ print(json.dumps([rc, applied, "Properties:" in (Line2D.set.__doc__ or "")]))
 
 def test_matplotlib_without_docstrings_draws_the_same_bytes(tmp_path):
     """The figure worker's lean matplotlib import (no ``set()`` docstrings or signatures built for the artist
-    classes) applies to the installed matplotlib, really skips them, and the five PNGs are the bytes of a
-    process that imported matplotlib as usual."""
+    classes) really skips them where it applies, and the five PNGs are the bytes of a process that imported
+    matplotlib as usual. A matplotlib without its private hooks (a later release; CI takes the latest) gets the
+    usual import: then the docstrings are built and the bytes must still agree."""
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     got = {}
     for mode in ("lean", "usual"):
@@ -257,7 +258,8 @@ def test_matplotlib_without_docstrings_draws_the_same_bytes(tmp_path):
                            text=True, env=env, cwd=ROOT, timeout=600)
         assert r.returncode == 0, r.stderr[-2000:]
         got[mode] = __import__("json").loads(r.stdout.strip().splitlines()[-1])
-    assert got == {"lean": [0, True, False], "usual": [0, None, True]}
+    assert got["usual"] == [0, None, True]
+    assert got["lean"] in ([0, True, False], [0, False, True])   # applied and skipped, or no hooks: as usual
     pngs = sorted(p.name for p in (tmp_path / "lean").glob("*.png"))
     assert len(pngs) == 5
     for name in pngs:
