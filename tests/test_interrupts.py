@@ -352,3 +352,19 @@ def test_a_sigterm_swallowed_by_a_callback_is_raised_before_a_file_is_renamed_in
             Path(tmp).write_text("{}")
     assert info.value.signum == signal.SIGTERM
     assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("signum, rc", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_interrupt_while_the_parser_is_built_is_one_line(monkeypatch, capsys, signum, rc):
+    """A Ctrl-C / SIGTERM in the ~10-20 ms while argparse's parser is built or parses (before any command
+    runs) gives the one line and 130 / 143, not an ``Interrupted`` traceback and exit 1 (found by timing a
+    ``kill -INT`` 0.33 s after the start)."""
+    import mission_sim.cli as cli
+    from mission_sim.signals import Interrupted
+
+    def interrupted():
+        raise Interrupted(signum)
+    monkeypatch.setattr(cli, "build_parser", interrupted)
+    assert cli.main(["mission"]) == rc
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"dronewpt: interrupted ({signal.Signals(signum).name})"]

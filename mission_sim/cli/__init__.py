@@ -122,15 +122,18 @@ def _exit_now(rc: int) -> None:
 
 
 def _main(argv=None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    try:   # a Ctrl-C while the parser is built (~10-20 ms) is an interrupt too, not a traceback
+        parser = build_parser()
+        args = parser.parse_args(argv)
+    except KeyboardInterrupt as exc:
+        return _interrupted("dronewpt", exc)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    if show_progress(args):  # a terminal: say so when numba compiles (the first run's silent half-minute)
-        from .notices import announce_compilation
-        announce_compilation()
     try:
+        if show_progress(args):  # a terminal: say so when numba compiles (the first run's silent half-minute)
+            from .notices import announce_compilation
+            announce_compilation()
         rc = int(args.func(args) or 0)
         from ..signals import raise_lost
         raise_lost()   # a SIGTERM / Ctrl-C that landed in a callback is still an interrupt
@@ -150,9 +153,14 @@ def _main(argv=None) -> int:
               "(make the run smaller; see docs/robustness.md)", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM (mission_sim.signals.Interrupted)
-        from ..signals import exit_status, signal_name
-        print(f"dronewpt {args.command}: interrupted ({signal_name(exc)})", file=sys.stderr)
-        return exit_status(exc)
+        return _interrupted(f"dronewpt {args.command}", exc)
+
+
+def _interrupted(who: str, exc: KeyboardInterrupt) -> int:
+    """One line for an interrupt and its exit status (130 for SIGINT, 143 for SIGTERM)."""
+    from ..signals import exit_status, signal_name
+    print(f"{who}: interrupted ({signal_name(exc)})", file=sys.stderr)
+    return exit_status(exc)
 
 
 def _one_line(exc: BaseException) -> str:
