@@ -205,27 +205,35 @@ def test_split_of_the_default_rows_by_the_shipped_table():
     assert _split(specs, "model_based", extra, 1, EnvConfig(link_model="envelope")) == ["mpc"]
 
 
-def test_seeds_split_between_parent_and_child_give_the_in_process_rows():
-    """A seed group whose runs are shared between the parent and the forked child (the modal link: the residual's
-    seeds) gives the rows and traces of the same compare without a fork, to the bit."""
+def _forked_against_in_process(policies: tuple, kind: str, setup: str = "") -> dict:
+    """compare of ``policies`` and the shipped seeds of ``kind`` on 2 nominal windows with the fork and without
+    (``setup``: code run first, e.g. a cost table): the specs the split gave the child (their kinds), and whether
+    the rows and the traces of the two runs are the same to the bit."""
     pytest.importorskip("stable_baselines3")
     pytest.importorskip("daqp")
     import json
     code = (
         "import json, numpy as np, policies.compare as pc\n"
         "from policies.compare import compare, shipped_seed_groups\n"
+        f"{setup}\n"
         "split = pc._split\n"
         "moved = []\n"
         "def rec(*a):\n"
         "    r = split(*a); moved.extend(r); return r\n"
         "pc._split = rec\n"
-        "seeds = {'residual': shipped_seed_groups()['residual']}\n"
-        "args = (('model_based', 'mpc', 'ramp'), ('nominal',))\n"
+        f"seeds = {{{kind!r}: shipped_seed_groups()[{kind!r}]}}\n"
+        f"args = ({policies!r}, ('nominal',))\n"
         "r1, t1 = compare(*args, episodes=2, seed=1010, train_seeds=seeds)\n"
         "r2, t2 = compare(*args, episodes=2, seed=1010, train_seeds=seeds, fork=False)\n"
         "same = list(t1) == list(t2) and all(np.array_equal(t1[k].d_short, t2[k].d_short) for k in t2)\n"
         "print(json.dumps({'moved': [m.split(':')[0] for m in moved], 'rows': r1 == r2, 'traces': same}))\n")
-    res = json.loads(_child(code, timeout=900).stdout.strip().splitlines()[-1])
+    return json.loads(_child(code, timeout=900).stdout.strip().splitlines()[-1])
+
+
+def test_seeds_split_between_parent_and_child_give_the_in_process_rows():
+    """A seed group whose runs are shared between the parent and the forked child (the modal link: the residual's
+    seeds) gives the rows and traces of the same compare without a fork, to the bit."""
+    res = _forked_against_in_process(("model_based", "mpc", "ramp"), "residual")
     assert res["moved"][0] == "mpc" and "residual" in res["moved"]                   # the group is split
     assert len([m for m in res["moved"] if m == "residual"]) < 5
     assert res["rows"] and res["traces"]
@@ -234,24 +242,7 @@ def test_seeds_split_between_parent_and_child_give_the_in_process_rows():
 def test_random_and_learned_seeds_moved_to_the_child_give_the_in_process_rows():
     """The finer movable kinds (the random policy, a stacked learned kind's seeds split between the two processes)
     give the rows and traces of the same compare without a fork, to the bit (a cost table that moves them)."""
-    pytest.importorskip("stable_baselines3")
-    pytest.importorskip("daqp")
-    import json
-    code = (
-        "import json, numpy as np, policies.compare as pc\n"
-        "from policies.compare import compare, shipped_seed_groups\n"
-        "pc.RUN_COST['modal'] = {'mpc': 0.1, 'random': 1.0, 'rl': 0.3, 'model_based': 0.1}\n"
-        "split = pc._split\n"
-        "moved = []\n"
-        "def rec(*a):\n"
-        "    r = split(*a); moved.extend(r); return r\n"
-        "pc._split = rec\n"
-        "seeds = {'rl': shipped_seed_groups()['rl']}\n"
-        "args = (('model_based', 'mpc', 'random'), ('nominal',))\n"
-        "r1, t1 = compare(*args, episodes=2, seed=1010, train_seeds=seeds)\n"
-        "r2, t2 = compare(*args, episodes=2, seed=1010, train_seeds=seeds, fork=False)\n"
-        "same = list(t1) == list(t2) and all(np.array_equal(t1[k].d_short, t2[k].d_short) for k in t2)\n"
-        "print(json.dumps({'moved': [m.split(':')[0] for m in moved], 'rows': r1 == r2, 'traces': same}))\n")
-    res = json.loads(_child(code, timeout=900).stdout.strip().splitlines()[-1])
+    res = _forked_against_in_process(("model_based", "mpc", "random"), "rl",
+                                     "pc.RUN_COST['modal'] = {'mpc': 0.1, 'random': 1.0, 'rl': 0.3, 'model_based': 0.1}")
     assert res["moved"] == ["mpc", "random", "rl"]          # random and one of the five rl seeds (the last)
     assert res["rows"] and res["traces"]
