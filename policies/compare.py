@@ -223,11 +223,12 @@ def frontier_specs(budgets=None) -> tuple:
 FORKED = ("mpc",)
 #: kinds whose runs may also go to the forked child to share the work between the two processes
 #: (:func:`_split`): on the exact-mode link each residual or imitation seed runs ``model_based_budget``'s search under
-#: it (~1.1 s each); ``random`` (random duties: the exact-mode step's costliest rows) and the learned seeds of
-#: ``rl`` / ``ppo_lagrangian`` (~0.07 s each) are the finer steps that even out what the ~1.1-s seeds leave. None of
-#: them shares work with a spec outside its own kind (a stacked seed's rows are those of its own network: the same
-#: product per block, :mod:`policies.batched`), so moving one changes no result
-MOVABLE = ("residual", "imitation", "random", "hysteresis", "rl", "ppo_lagrangian")
+#: it (~1.1 s each); the learned seeds of ``rl`` / ``ppo_lagrangian`` (~0.07 s each) are the finer steps that even out
+#: what the ~1.1-s seeds leave. None of them shares work with a spec outside its own kind (a stacked seed's rows are
+#: those of its own network: the same product per block, :mod:`policies.batched`), so moving one changes no result.
+#: (``random``, ~0.5-0.7 s on the modal link, moved too: the child became the longer side by a median 0.56 s of CPU,
+#: 4 runs of 4, docs/performance.md)
+MOVABLE = ("residual", "imitation", "rl", "ppo_lagrangian")
 #: CPU seconds of one spec's run per scenario of 100 windows, by link and policy kind (in process, nominal windows,
 #: ``num_threads=1``, 2026-11-26, load ~5; a stacked group's shared work spread over its specs; the modal ``mpc``
 #: 3.5 instead of its 2.8 alone: the child's CPU beside the moved seeds ran 1-2 s above the sum, in 4 runs of 4;

@@ -172,36 +172,38 @@ def test_split_moves_budgeted_seeds_to_the_child_on_the_modal_link_only():
 
 def test_split_evens_out_with_the_finer_kinds_costliest_first(monkeypatch):
     """Given a cost table, the split moves the costliest movable spec first (the last first among equal costs)
-    while that lowers the larger side, then the finer ones, and lists the child's specs in the order given."""
+    while that lowers the larger side, then the finer ones (learned seeds), and lists the child's specs in the
+    order given; kinds that are not movable (random) stay in the parent whatever their cost."""
     import policies.compare as pc
     from envs import EnvConfig
-    monkeypatch.setitem(pc.RUN_COST, "modal", {"mpc": 3.0, "residual": 1.0, "random": 0.3, "rl": 0.1,
-                                               "model_based": 0.2, "ramp": 2.0})
+    monkeypatch.setitem(pc.RUN_COST, "modal", {"mpc": 3.0, "residual": 1.0, "random": 0.3, "rl": 0.15,
+                                               "model_based": 0.2, "ramp": 1.75})
     specs = ["model_based", "ramp", "random", "mpc"] + [f"rl:r{k}" for k in range(5)] + [f"residual:s{k}" for k in range(5)]
-    # parent / child 8.0 / 3.0 -> residual s4, s3 (6.0 / 5.0), not s2 (6.0 either way), random (5.7 / 5.3),
-    # rl r4, r3 (5.5 / 5.5), not r2 (5.6)
+    # parent / child 8.0 / 3.0 -> residual s4, s3 (6.0 / 5.0), not s2 (6.0 either way), rl r4, r3, r2 (5.55 / 5.45),
+    # not r1 (5.6)
     assert pc._split(specs, "model_based", [], 1, EnvConfig(link_model="modal")) == \
-        ["mpc", "random", "rl:r3", "rl:r4", "residual:s3", "residual:s4"]
-    # the frontier's specs (first scenario only) count once over the scenarios: 2.0 / 2 more on the parent's side,
-    # 9.0 / 3.0 -> residual s4, s3, s2 (6.0 / 6.0), then nothing lowers 6.0
+        ["mpc", "rl:r2", "rl:r3", "rl:r4", "residual:s3", "residual:s4"]
+    # the frontier's specs (first scenario only) count once over the scenarios: 1.75 / 2 more on the parent's side,
+    # 8.875 / 3.0 -> residual s4, s3, s2 (5.875 / 6.0), then nothing lowers 6.0
     assert pc._split(specs, "model_based", ["ramp"], 2, EnvConfig(link_model="modal")) == \
         ["mpc", "residual:s2", "residual:s3", "residual:s4"]
-    # without the rl seeds: 7.5 / 3.0 -> residual s4, s3 (5.5 / 5.0), random (5.2 / 5.3)
+    # without the rl seeds: 7.25 / 3.0 -> residual s4, s3 (5.25 / 5.0); random (0.3) would even it out, but stays
     assert pc._split(specs[:4] + specs[9:], "model_based", [], 1, EnvConfig(link_model="modal")) == \
-        ["mpc", "random", "residual:s3", "residual:s4"]
+        ["mpc", "residual:s3", "residual:s4"]
 
 
 def test_split_of_the_default_rows_by_the_shipped_table():
-    """compare's default rows: on the modal link the child takes the MPC, the random policy and 7 of the 10 budgeted
-    seeds (estimated 11.99 s against the parent's 11.68 s); on eq. 4's link the MPC alone (it outweighs the rest)."""
+    """compare's default rows: on the modal link the child takes the MPC, 7 of the 10 budgeted seeds and 4 of the 5
+    ppo_lagrangian seeds (estimated 11.80 s against the parent's 11.87 s); on eq. 4's link the MPC alone (it
+    outweighs the rest)."""
     from envs import EnvConfig
     from policies.compare import DEFAULT_POLICIES, SHIPPED_SEEDS, _split, frontier_specs
     seeds = [f"{k}:{k}_s{i}.zip" for k in ("rl", "ppo_lagrangian", "residual", "imitation") for i in range(5)]
     specs = list(dict.fromkeys(["model_based"] + [p for p in DEFAULT_POLICIES if p not in SHIPPED_SEEDS] + seeds))
     extra = [sp for sp in frontier_specs() if sp not in specs]
     assert _split(specs, "model_based", extra, 1, EnvConfig(link_model="modal")) == \
-        ["mpc", "random", "residual:residual_s3.zip", "residual:residual_s4.zip"] + \
-        [f"imitation:imitation_s{i}.zip" for i in range(5)]
+        ["mpc"] + [f"ppo_lagrangian:ppo_lagrangian_s{i}.zip" for i in range(1, 5)] + \
+        ["residual:residual_s3.zip", "residual:residual_s4.zip"] + [f"imitation:imitation_s{i}.zip" for i in range(5)]
     assert _split(specs, "model_based", extra, 1, EnvConfig(link_model="envelope")) == ["mpc"]
 
 
@@ -239,10 +241,11 @@ def test_seeds_split_between_parent_and_child_give_the_in_process_rows():
     assert res["rows"] and res["traces"]
 
 
-def test_random_and_learned_seeds_moved_to_the_child_give_the_in_process_rows():
-    """The finer movable kinds (the random policy, a stacked learned kind's seeds split between the two processes)
-    give the rows and traces of the same compare without a fork, to the bit (a cost table that moves them)."""
+def test_learned_seeds_split_between_parent_and_child_give_the_in_process_rows():
+    """A stacked learned kind's seeds split between the two processes (the finer steps of the split: the rl stack
+    4 / 1 here, by a cost table that moves them) give the rows and traces of the same compare without a fork, to the
+    bit; the random policy, not movable, stays in the parent."""
     res = _forked_against_in_process(("model_based", "mpc", "random"), "rl",
                                      "pc.RUN_COST['modal'] = {'mpc': 0.1, 'random': 1.0, 'rl': 0.3, 'model_based': 0.1}")
-    assert res["moved"] == ["mpc", "random", "rl"]          # random and one of the five rl seeds (the last)
+    assert res["moved"] == ["mpc", "rl", "rl", "rl", "rl"]          # 2.6 / 0.1 -> r4, r3, r2, r1 (1.4 / 1.3)
     assert res["rows"] and res["traces"]
