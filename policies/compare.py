@@ -233,8 +233,11 @@ MOVABLE = ("residual", "imitation", "rl", "ppo_lagrangian")
 #: ``num_threads=1``, 2026-11-26, load ~5; a stacked group's shared work spread over its specs; the modal ``mpc``
 #: 3.5 instead of its 2.8 alone: the child's CPU beside the moved seeds ran 1-2 s above the sum, in 4 runs of 4;
 #: modal ``random`` and ``hysteresis``: 0.55 and 0.23 s at load ~8, scaled by the residual's and imitation's ratio
-#: between the two loads, 0.86): only used to share the runs between the parent and the forked child
-#: (:func:`_split`), so a wrong figure costs balance, never a result
+#: between the two loads, 0.86). At load ~2 the child's work costs the same in and out of the fork and the figures are
+#: mpc 2.28, residual 1.10, imitation 1.34, rl 0.096, ppo_lagrangian 0.104, random 0.52: this table's split is the
+#: better one by those too (11.60 s child, 11.91 s parent; theirs would move a third residual seed, 12.28 / 11.23).
+#: Only used to share the runs between the parent and the forked child (:func:`_split`), so a wrong figure costs
+#: balance, never a result
 RUN_COST = {"modal": {"mpc": 3.5, "residual": 1.06, "imitation": 1.18, "model_based_budget": 1.1, "rl": 0.07,
                       "ppo_lagrangian": 0.07, "model_based": 0.2, "model_based_online": 0.3, "random": 0.47,
                       "hysteresis": 0.2},
