@@ -226,8 +226,8 @@ FORKED = ("mpc",)
 #: it (~1.1 s each); the learned seeds of ``rl`` / ``ppo_lagrangian`` (~0.07 s each) are the finer steps that even out
 #: what the ~1.1-s seeds leave. None of them shares work with a spec outside its own kind (a stacked seed's rows are
 #: those of its own network: the same product per block, :mod:`policies.batched`), so moving one changes no result.
-#: (``random``, ~0.5-0.7 s on the modal link, moved too: the child became the longer side by a median 0.56 s of CPU,
-#: 4 runs of 4, docs/performance.md)
+#: (``random``, ~0.5-0.7 s on the modal link, was tried as movable: the split moved it instead of the finer seeds and
+#: the child became the longer side by a median 0.56 s of CPU, 4 runs of 4, docs/performance.md)
 MOVABLE = ("residual", "imitation", "rl", "ppo_lagrangian")
 #: CPU seconds of one spec's run per scenario of 100 windows, by link and policy kind (in process, nominal windows,
 #: ``num_threads=1``, 2026-11-26, load ~5; a stacked group's shared work spread over its specs; the modal ``mpc``
