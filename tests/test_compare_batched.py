@@ -178,7 +178,8 @@ def test_split_evens_out_with_the_finer_kinds_costliest_first(monkeypatch):
     from envs import EnvConfig
     monkeypatch.setitem(pc.RUN_COST, "modal", {"mpc": 3.0, "residual": 1.0, "random": 0.3, "rl": 0.15,
                                                "model_based": 0.2, "ramp": 1.75})
-    specs = ["model_based", "ramp", "random", "mpc"] + [f"rl:r{k}" for k in range(5)] + [f"residual:s{k}" for k in range(5)]
+    specs = ["model_based", "ramp", "random", "mpc"] + [f"rl:r{k}" for k in range(5)] + \
+        [f"residual:s{k}" for k in range(5)]
     # parent / child 8.0 / 3.0 -> residual s4, s3 (6.0 / 5.0), not s2 (6.0 either way), rl r4, r3, r2 (5.55 / 5.45),
     # not r1 (5.6)
     assert pc._split(specs, "model_based", [], 1, EnvConfig(link_model="modal")) == \
@@ -245,7 +246,7 @@ def test_learned_seeds_split_between_parent_and_child_give_the_in_process_rows()
     """A stacked learned kind's seeds split between the two processes (the finer steps of the split: the rl stack
     4 / 1 here, by a cost table that moves them) give the rows and traces of the same compare without a fork, to the
     bit; the random policy, not movable, stays in the parent."""
-    res = _forked_against_in_process(("model_based", "mpc", "random"), "rl",
-                                     "pc.RUN_COST['modal'] = {'mpc': 0.1, 'random': 1.0, 'rl': 0.3, 'model_based': 0.1}")
+    table = "pc.RUN_COST['modal'] = {'mpc': 0.1, 'random': 1.0, 'rl': 0.3, 'model_based': 0.1}"
+    res = _forked_against_in_process(("model_based", "mpc", "random"), "rl", table)
     assert res["moved"] == ["mpc", "rl", "rl", "rl", "rl"]          # 2.6 / 0.1 -> r4, r3, r2, r1 (1.4 / 1.3)
     assert res["rows"] and res["traces"]
