@@ -96,7 +96,7 @@ def mark(k):
     marks[k] = (time.perf_counter() - T0, cpu(), runq())
 import policies.compare as pc
 import policies.forked as pf
-init, result, forked_runs = pf.Forked.__init__, pf.Forked.result, pc._forked_runs
+init, result, forked_runs = pf.Forked.__init__, pf.Forked.result, getattr(pc, "_forked_runs", None)
 CHILD = tempfile.mktemp(suffix=".json")
 def _init(self, *a, **k):
     mark("fork"); init(self, *a, **k)
@@ -110,7 +110,9 @@ def _forked_runs(*a, **k):   # in the child: its own start and end (perf_counter
         json.dump({"start": w0, "end": time.perf_counter() - T0, "cpu": cpu() - c0,
                    "runq": None if q is None or q0 is None else q - q0}, f)
     return r
-pf.Forked.__init__, pf.Forked.result, pc._forked_runs = _init, _result, _forked_runs
+pf.Forked.__init__, pf.Forked.result = _init, _result
+if forked_runs is not None:   # (a peer tree older than compare's _forked_runs: no child marks)
+    pc._forked_runs = _forked_runs
 from mission_sim.cli import main
 with contextlib.redirect_stdout(io.StringIO()):
     main(sys.argv[1:])   # with argv: returns (the command line's main() ends the process)
