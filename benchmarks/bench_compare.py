@@ -14,8 +14,10 @@ compared (they must be the same text).
 Critical path (``--timeline N``): N runs of the same command, each a fresh interpreter calling ``main()`` (this
 tree's, and the peer's alternating when ``--peer`` is given), the CPU time of the parent
 before the fork (imports, numba's start-up), of the parent after it (its batched env), of the forked
-child (the MPC) and the wall times of those points. On 2 free cores the wall time is about
-``before-fork + max(parent after, child) + tail``.
+child (the MPC and the share of the other runs ``policies.compare._split`` gives it) and the wall times of those
+points: which process finished first and by how much, and (Linux) how long each waited for a CPU, runnable
+(``/proc/self/schedstat``: on a shared machine the part of the wall time that is other processes' turn). On 2 free
+cores the wall time is about ``before-fork + max(parent after, child) + tail``.
 
     python benchmarks/bench_compare.py [--repeat 5] [--peer DIR] [--timeline N] [--link modal|envelope] [--json]
 """
@@ -79,27 +81,45 @@ def end_to_end(repeat: int, peer: Path | None) -> dict:
 
 
 _TIMELINE = r'''
-import contextlib, io, json, os, resource, sys, time
+import contextlib, io, json, os, resource, sys, tempfile, time
 T0 = time.perf_counter()
 def cpu():
     r = resource.getrusage(resource.RUSAGE_SELF)
     return r.ru_utime + r.ru_stime
+def runq():   # seconds this process was runnable but waited for a CPU (Linux schedstat; None elsewhere)
+    try:
+        return int(open("/proc/self/schedstat").read().split()[1]) / 1e9
+    except (OSError, IndexError, ValueError):
+        return None
 marks = {}
 def mark(k):
-    marks[k] = (time.perf_counter() - T0, cpu())
+    marks[k] = (time.perf_counter() - T0, cpu(), runq())
+import policies.compare as pc
 import policies.forked as pf
-init, result = pf.Forked.__init__, pf.Forked.result
+init, result, forked_runs = pf.Forked.__init__, pf.Forked.result, getattr(pc, "_forked_runs", None)
+CHILD = tempfile.mktemp(suffix=".json")
 def _init(self, *a, **k):
     mark("fork"); init(self, *a, **k)
 def _result(self):
     mark("parent done, waits for the child"); r = result(self); mark("child's result received"); return r
+def _forked_runs(*a, **k):   # in the child: its own start and end (perf_counter is the same clock in both)
+    w0, c0, q0 = time.perf_counter() - T0, cpu(), runq()
+    r = forked_runs(*a, **k)
+    q = runq()
+    with open(CHILD, "w") as f:
+        json.dump({"start": w0, "end": time.perf_counter() - T0, "cpu": cpu() - c0,
+                   "runq": None if q is None or q0 is None else q - q0}, f)
+    return r
 pf.Forked.__init__, pf.Forked.result = _init, _result
+if forked_runs is not None:   # (a peer tree older than compare's _forked_runs: no child marks)
+    pc._forked_runs = _forked_runs
 from mission_sim.cli import main
 with contextlib.redirect_stdout(io.StringIO()):
     main(sys.argv[1:])   # with argv: returns (the command line's main() ends the process)
 mark("end")
 r = resource.getrusage(resource.RUSAGE_CHILDREN)
-print(json.dumps({"marks": marks, "child_cpu_s": r.ru_utime + r.ru_stime, "load": os.getloadavg()}))
+child = json.load(open(CHILD)) if os.path.exists(CHILD) else None
+print(json.dumps({"marks": marks, "child_cpu_s": r.ru_utime + r.ru_stime, "child": child, "load": os.getloadavg()}))
 '''
 
 
@@ -124,13 +144,20 @@ def _print(r: dict) -> None:
                   f"CPU {c['median']:.2f} s ({c['min']:.2f}-{c['max']:.2f})")
     for t in r.get("timeline", []):
         m = t["marks"]
-        f_w, f_c = m["fork"]
-        d_w, d_c = m["parent done, waits for the child"]
+        f_w, f_c = m["fork"][:2]
+        d_w, d_c = m["parent done, waits for the child"][:2]
         got = m["child's result received"][0]
         who = "" if t.get("tree", str(ROOT)) == str(ROOT) else f" {t['tree']}"
         print(f"  in process{who} (load {t['load'][0]:.2f}): before the fork {f_c:.2f} s CPU ({f_w:.2f} s wall); parent after "
               f"it {d_c - f_c:.2f} s CPU (done at {d_w:.2f} s wall); child {t['child_cpu_s']:.2f} s CPU (result at "
               f"{got:.2f} s wall); end {m['end'][0]:.2f} s wall, {m['end'][1]:.2f} s CPU in the parent")
+        c, q = t.get("child"), [v[2] for v in (m["fork"], m["parent done, waits for the child"])]
+        if c is not None:   # who finished first, and the time each process waited for a CPU (the machine's share)
+            print(f"    child's runs {c['start']:.2f}-{c['end']:.2f} s wall, {c['cpu']:.2f} s CPU; the "
+                  f"{'parent' if c['end'] < d_w else 'child'} finished {abs(d_w - c['end']):.2f} s later"
+                  + ("" if None in q or c["runq"] is None else
+                     f"; waited for a CPU: parent {q[0]:.2f} s before the fork, {q[1] - q[0]:.2f} s after it, "
+                     f"child {c['runq']:.2f} s"))
 
 
 def main(argv=None):

@@ -3,8 +3,8 @@ console script in a fresh process (numba's cache and the disk cache warm), again
 interpreter in the same run; beside them, labelled as such, where the time goes *in one process*.
 
 End to end (wall and CPU = user + system of the child), each command ``--repeat`` times, interleaved
-so a change of load hits all alike, after one untimed warm-up round; median and range, and
-``os.getloadavg()`` before and after:
+so a change of load hits all alike (the compare commands of each ``--link`` in their own rounds, one link after
+the other), after one untimed warm-up round; median and range, and ``os.getloadavg()`` before and after:
 
 * ``python -c pass``, ``dronewpt --help``;
 * ``dronewpt mission`` (default mission, five figures; goal <= 1.0 s) and ``--no-plot``: the path is
@@ -121,6 +121,19 @@ def _pick(cmds: dict, mission_only: bool, compare_only: bool) -> dict:
     return cmds
 
 
+def _by_link(cmds: dict) -> list[list[str]]:
+    """The command names in timing groups: those without ``--link`` first, then each link's compare commands (all
+    trees'), each group timed ``--repeat`` rounds before the next. Interleaved, each tree's eq. 4 compare ran right
+    after its own modal one, which keeps both cores busy to its end (the forked child shares its work): the other
+    sessions' jobs, held back meanwhile, then took their turn in the eq. 4 run (0.3-2 s more wall, the same CPU;
+    docs/performance.md, "seventh pass")."""
+    groups: dict[str, list[str]] = {}
+    for name in cmds:
+        link = name.split(", --link ", 1)[1].split(")", 1)[0] if ", --link " in name else ""
+        groups.setdefault(link, []).append(name)
+    return list(groups.values())
+
+
 def end_to_end(repeat: int = 5, compare: str = "no-mpc", before: Path | None = None, pyc: str | None = None,
                mission_only: bool = False, links=(None,), compare_only: bool = False) -> dict:
     env = _bytecode_env({**os.environ, "PYTHONPATH": str(ROOT)}, pyc)
@@ -136,12 +149,13 @@ def end_to_end(repeat: int = 5, compare: str = "no-mpc", before: Path | None = N
             _run(_expand(argv, seed), envs.get(name, env))
         load0 = os.getloadavg()
         res = {k: ([], [], set()) for k in cmds}
-        for i in range(repeat):
-            for name, argv in cmds.items():
-                w, c, h = _run(_expand(argv, seed + 1 + i), envs.get(name, env))
-                res[name][0].append(w)
-                res[name][1].append(c)
-                res[name][2].add(h)
+        for group in _by_link(cmds):   # one link after the other: no eq. 4 run right after a modal one
+            for i in range(repeat):
+                for name in group:
+                    w, c, h = _run(_expand(cmds[name], seed + 1 + i), envs.get(name, env))
+                    res[name][0].append(w)
+                    res[name][1].append(c)
+                    res[name][2].add(h)
         load1 = os.getloadavg()
     out = {"load_before": load0, "load_after": load1, "console_script": _console_script()[0], "pyc": pyc}
     for name, (w, c, h) in res.items():

@@ -222,15 +222,25 @@ def frontier_specs(budgets=None) -> tuple:
 #: policies run in a forked process beside the others (:mod:`policies.forked`): the MPC's QPs are ~40 % of the CPU
 FORKED = ("mpc",)
 #: kinds whose runs may also go to the forked child to share the work between the two processes
-#: (:func:`_split`): on the exact-mode link each of their seeds runs ``model_based_budget``'s search under it
-MOVABLE = ("residual", "imitation")
+#: (:func:`_split`): on the exact-mode link each residual or imitation seed runs ``model_based_budget``'s search under
+#: it (~1.1 s each); the learned seeds of ``rl`` / ``ppo_lagrangian`` (~0.07 s each) are the finer steps that even out
+#: what the ~1.1-s seeds leave. None of them shares work with a spec outside its own kind (a stacked seed's rows are
+#: those of its own network: the same product per block, :mod:`policies.batched`), so moving one changes no result.
+#: (``random``, ~0.5-0.7 s on the modal link, was tried as movable: the split moved it instead of the finer seeds and
+#: the child became the longer side by a median 0.56 s of CPU, 4 runs of 4, docs/performance.md)
+MOVABLE = ("residual", "imitation", "rl", "ppo_lagrangian")
 #: CPU seconds of one spec's run per scenario of 100 windows, by link and policy kind (in process, nominal windows,
 #: ``num_threads=1``, 2026-11-26, load ~5; a stacked group's shared work spread over its specs; the modal ``mpc``
-#: 3.5 instead of its 2.8 alone: the child's CPU beside the moved seeds ran 1-2 s above the sum, in 4 runs of 4): only
-#: used to share the runs between the parent and the forked child (:func:`_split`), so a wrong figure costs balance,
-#: never a result
+#: 3.5 instead of its 2.8 alone: the child's CPU beside the moved seeds ran 1-2 s above the sum, in 4 runs of 4;
+#: modal ``random`` and ``hysteresis``: 0.55 and 0.23 s at load ~8, scaled by the residual's and imitation's ratio
+#: between the two loads, 0.86). At load ~2 the child's work costs the same in and out of the fork and the figures are
+#: mpc 2.28, residual 1.10, imitation 1.34, rl 0.096, ppo_lagrangian 0.104, random 0.52: this table's split is the
+#: better one by those too (11.60 s child, 11.91 s parent; theirs would move a third residual seed, 12.28 / 11.23).
+#: Only used to share the runs between the parent and the forked child (:func:`_split`), so a wrong figure costs
+#: balance, never a result
 RUN_COST = {"modal": {"mpc": 3.5, "residual": 1.06, "imitation": 1.18, "model_based_budget": 1.1, "rl": 0.07,
-                      "ppo_lagrangian": 0.07, "model_based": 0.2, "model_based_online": 0.3},
+                      "ppo_lagrangian": 0.07, "model_based": 0.2, "model_based_online": 0.3, "random": 0.47,
+                      "hysteresis": 0.2},
             "envelope": {"mpc": 1.8, "residual": 0.04, "imitation": 0.04}}
 _OTHER_COST = {"modal": 0.25, "envelope": 0.03}
 #: least estimated work [s] worth a forked child of its own (no MPC among the specs)
@@ -304,11 +314,11 @@ def _compare_runs(scenarios, groups, reference, episodes, seed, config, rows, tr
 
 
 def _split(specs, reference, extra, n_scenarios, config) -> list:
-    """The specs the forked child runs: the :data:`FORKED` kinds', then seeds of the :data:`MOVABLE` kinds (the
-    last first) while moving one lowers the larger of the two processes' estimated work (:data:`RUN_COST`; the
-    ``extra`` specs run in the parent on the first scenario only). Without a :data:`FORKED` spec, a child only
-    for at least :data:`_MIN_FORK_S` of work. Which process runs a spec never changes its results (the rows are
-    independent: :func:`run_policies`)."""
+    """The specs the forked child runs, in the order of ``specs``: the :data:`FORKED` kinds', then specs of the
+    :data:`MOVABLE` kinds, the costliest first (the last first among equal costs), each moved when moving it lowers
+    the larger of the two processes' estimated work (:data:`RUN_COST`; the ``extra`` specs run in the parent on the
+    first scenario only). Without a :data:`FORKED` spec, a child only for at least :data:`_MIN_FORK_S` of work.
+    Which process runs a spec never changes its results (the rows are independent: :func:`run_policies`)."""
     from envs import EnvConfig
 
     link = (config or EnvConfig()).link_model
@@ -323,14 +333,14 @@ def _split(specs, reference, extra, n_scenarios, config) -> list:
     rest = [sp for sp in specs if sp not in heavy]
     child = sum(cost(sp) for sp in heavy)
     parent = sum(cost(sp) for sp in rest) + sum(cost(sp) for sp in extra) / n_scenarios
-    moved = []
-    for sp in reversed([sp for sp in rest if kind(sp) in MOVABLE and sp != reference]):
+    moved = set()
+    for sp in sorted(reversed([sp for sp in rest if kind(sp) in MOVABLE and sp != reference]), key=cost, reverse=True):
         if max(parent - cost(sp), child + cost(sp)) < max(parent, child):
-            moved.append(sp)
+            moved.add(sp)
             parent, child = parent - cost(sp), child + cost(sp)
     if not heavy and child < _MIN_FORK_S:
         return []
-    return heavy + moved[::-1]
+    return heavy + [sp for sp in rest if sp in moved]
 
 
 @contextlib.contextmanager

@@ -170,27 +170,83 @@ def test_split_moves_budgeted_seeds_to_the_child_on_the_modal_link_only():
     assert _split(["model_based"] + seeds, "model_based", [], 1, None) != []                   # seeds alone: a child
 
 
-def test_seeds_split_between_parent_and_child_give_the_in_process_rows():
-    """A seed group whose runs are shared between the parent and the forked child (the modal link: the residual's
-    seeds) gives the rows and traces of the same compare without a fork, to the bit."""
+def test_split_evens_out_with_the_finer_kinds_costliest_first(monkeypatch):
+    """Given a cost table, the split moves the costliest movable spec first (the last first among equal costs)
+    while that lowers the larger side, then the finer ones (learned seeds), and lists the child's specs in the
+    order given; kinds that are not movable (random) stay in the parent whatever their cost."""
+    import policies.compare as pc
+    from envs import EnvConfig
+    monkeypatch.setitem(pc.RUN_COST, "modal", {"mpc": 3.0, "residual": 1.0, "random": 0.3, "rl": 0.15,
+                                               "model_based": 0.2, "ramp": 1.75})
+    specs = ["model_based", "ramp", "random", "mpc"] + [f"rl:r{k}" for k in range(5)] + \
+        [f"residual:s{k}" for k in range(5)]
+    # parent / child 8.0 / 3.0 -> residual s4, s3 (6.0 / 5.0), not s2 (6.0 either way), rl r4, r3, r2 (5.55 / 5.45),
+    # not r1 (5.6)
+    assert pc._split(specs, "model_based", [], 1, EnvConfig(link_model="modal")) == \
+        ["mpc", "rl:r2", "rl:r3", "rl:r4", "residual:s3", "residual:s4"]
+    # the frontier's specs (first scenario only) count once over the scenarios: 1.75 / 2 more on the parent's side,
+    # 8.875 / 3.0 -> residual s4, s3, s2 (5.875 / 6.0), then nothing lowers 6.0
+    assert pc._split(specs, "model_based", ["ramp"], 2, EnvConfig(link_model="modal")) == \
+        ["mpc", "residual:s2", "residual:s3", "residual:s4"]
+    # without the rl seeds: 7.25 / 3.0 -> residual s4, s3 (5.25 / 5.0); random (0.3) would even it out, but stays
+    assert pc._split(specs[:4] + specs[9:], "model_based", [], 1, EnvConfig(link_model="modal")) == \
+        ["mpc", "residual:s3", "residual:s4"]
+
+
+def test_split_of_the_default_rows_by_the_shipped_table():
+    """compare's default rows: on the modal link the child takes the MPC, 7 of the 10 budgeted seeds and 4 of the 5
+    ppo_lagrangian seeds (estimated 11.80 s against the parent's 11.87 s); on eq. 4's link the MPC alone (it
+    outweighs the rest)."""
+    from envs import EnvConfig
+    from policies.compare import DEFAULT_POLICIES, SHIPPED_SEEDS, _split, frontier_specs
+    seeds = [f"{k}:{k}_s{i}.zip" for k in ("rl", "ppo_lagrangian", "residual", "imitation") for i in range(5)]
+    specs = list(dict.fromkeys(["model_based"] + [p for p in DEFAULT_POLICIES if p not in SHIPPED_SEEDS] + seeds))
+    extra = [sp for sp in frontier_specs() if sp not in specs]
+    assert _split(specs, "model_based", extra, 1, EnvConfig(link_model="modal")) == \
+        ["mpc"] + [f"ppo_lagrangian:ppo_lagrangian_s{i}.zip" for i in range(1, 5)] + \
+        ["residual:residual_s3.zip", "residual:residual_s4.zip"] + [f"imitation:imitation_s{i}.zip" for i in range(5)]
+    assert _split(specs, "model_based", extra, 1, EnvConfig(link_model="envelope")) == ["mpc"]
+
+
+def _forked_against_in_process(policies: tuple, kind: str, setup: str = "") -> dict:
+    """compare of ``policies`` and the shipped seeds of ``kind`` on 2 nominal windows with the fork and without
+    (``setup``: code run first, e.g. a cost table): the specs the split gave the child (their kinds), and whether
+    the rows and the traces of the two runs are the same to the bit."""
     pytest.importorskip("stable_baselines3")
     pytest.importorskip("daqp")
     import json
     code = (
         "import json, numpy as np, policies.compare as pc\n"
         "from policies.compare import compare, shipped_seed_groups\n"
+        f"{setup}\n"
         "split = pc._split\n"
         "moved = []\n"
         "def rec(*a):\n"
         "    r = split(*a); moved.extend(r); return r\n"
         "pc._split = rec\n"
-        "seeds = {'residual': shipped_seed_groups()['residual']}\n"
-        "args = (('model_based', 'mpc', 'ramp'), ('nominal',))\n"
+        f"seeds = {{{kind!r}: shipped_seed_groups()[{kind!r}]}}\n"
+        f"args = ({policies!r}, ('nominal',))\n"
         "r1, t1 = compare(*args, episodes=2, seed=1010, train_seeds=seeds)\n"
         "r2, t2 = compare(*args, episodes=2, seed=1010, train_seeds=seeds, fork=False)\n"
         "same = list(t1) == list(t2) and all(np.array_equal(t1[k].d_short, t2[k].d_short) for k in t2)\n"
         "print(json.dumps({'moved': [m.split(':')[0] for m in moved], 'rows': r1 == r2, 'traces': same}))\n")
-    res = json.loads(_child(code, timeout=900).stdout.strip().splitlines()[-1])
+    return json.loads(_child(code, timeout=900).stdout.strip().splitlines()[-1])
+
+
+def test_seeds_split_between_parent_and_child_give_the_in_process_rows():
+    """A seed group whose runs are shared between the parent and the forked child (the modal link: the residual's
+    seeds) gives the rows and traces of the same compare without a fork, to the bit."""
+    res = _forked_against_in_process(("model_based", "mpc", "ramp"), "residual")
     assert res["moved"][0] == "mpc" and "residual" in res["moved"]                   # the group is split
     assert len([m for m in res["moved"] if m == "residual"]) < 5
+    assert res["rows"] and res["traces"]
+
+
+def test_learned_seeds_split_between_parent_and_child_give_the_in_process_rows():
+    """A stacked learned kind's seeds split between the two processes (the finer steps of the split: the rl stack
+    4 / 1 here, by a cost table that moves them) give the rows and traces of the same compare without a fork, to the
+    bit; the random policy, not movable, stays in the parent."""
+    table = "pc.RUN_COST['modal'] = {'mpc': 0.1, 'random': 1.0, 'rl': 0.3, 'model_based': 0.1}"
+    res = _forked_against_in_process(("model_based", "mpc", "random"), "rl", table)
+    assert res["moved"] == ["mpc", "rl", "rl", "rl", "rl"]          # 2.6 / 0.1 -> r4, r3, r2, r1 (1.4 / 1.3)
     assert res["rows"] and res["traces"]

@@ -115,8 +115,9 @@ def _add_link_flag(p):
     p.add_argument("--link", choices=LINK_CHOICES, default=None,
                    help="the env's link model: modal = the mission's exact-mode link (default since 2026-11-26; "
                         "peaks within 0.23 %% of the switching model; an env-step costs ~15x (duty held) to "
-                        "~100x (random actions) the envelope's CPU, compare ~7x), envelope = eq. 4 with the ripple table (what the "
-                        "shipped RL models were trained on); docs/envs.md")
+                        "~100x (random actions) the envelope's CPU; compare's default rows 5-6x its wall time on "
+                        "two free cores, 6-9x its CPU: docs/performance.md), envelope = eq. 4 with the ripple table "
+                        "(what the shipped RL models were trained on); docs/envs.md")
 
 
 def _link_config(args):
