@@ -13,6 +13,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -85,3 +86,18 @@ def test_users_numba_cache_dir_and_checkouts_are_left_alone(tmp_path):
     probe = code + "; from wpt_receiver._probe import twice; twice(1.0)"
     assert _run(checkout, probe, DRONEWPT_CACHE_DIR=str(tmp_path / "c")) == "-"
     assert any(f.name.startswith("_probe.twice") for f in _cache_files(checkout / "wpt_receiver" / "__pycache__"))
+
+
+def test_unusable_or_relative_cache_folder_never_falls_back_into_site_packages(tmp_path):
+    """A cache folder numba cannot write (here under a file) would make numba fall back to ``__pycache__`` beside
+    the installed sources: a private temporary folder is used instead; a relative one is made absolute (workers
+    started in another folder, as the ahead-of-time build's child, find the same cache)."""
+    site = _installed_copy(tmp_path)
+    (tmp_path / "afile").write_text("")
+    code = ("import wpt_receiver, os; from wpt_receiver._probe import twice; twice(1.0); "
+            "print(os.environ['NUMBA_CACHE_DIR'])")
+    got = Path(_run(site, code, DRONEWPT_CACHE_DIR=str(tmp_path / "afile" / "cache")))
+    assert got.is_absolute() and "dronewpt-numba-" in got.name and got.parent == Path(tempfile.gettempdir())
+    assert _cache_files(site) == []
+    assert _run(site, code, DRONEWPT_CACHE_DIR="relcache") == str(tmp_path / "relcache" / "numba")
+    assert _cache_files(site) == []

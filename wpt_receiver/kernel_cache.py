@@ -31,19 +31,38 @@ NUMBA_CACHE_VAR = "NUMBA_CACHE_DIR"
 _INSTALL_DIRS = ("site-packages", "dist-packages")
 
 
+def _usable(folder: Path) -> Path | None:
+    """``folder``, made if missing, when a file can be written in it (numba's own test); else ``None``."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / f".probe.{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError:
+        return None
+    return folder
+
+
 def place_numba_cache(package_dir) -> Path | None:
     """For an installed copy (``package_dir``'s parent is a ``site-packages`` / ``dist-packages`` folder) and no
     ``NUMBA_CACHE_DIR`` of the user's: numba's cache root becomes ``<dronewpt's disk cache>/numba`` (the process's
     environment, inherited by its workers, and numba's config when numba is imported already); returns it, or
     ``None`` when nothing changed (a checkout or an editable install keeps numba's ``__pycache__`` beside its
-    sources, a ``NUMBA_CACHE_DIR`` set by the user is kept, and ``DRONEWPT_CACHE_DIR=""`` leaves numba as it is)."""
+    sources, a ``NUMBA_CACHE_DIR`` set by the user is kept, and ``DRONEWPT_CACHE_DIR=""`` leaves numba as it is). A
+    cache folder that cannot be written (numba would decline it and fall back to ``site-packages``) is replaced by
+    a private one in the temporary folder; a relative ``DRONEWPT_CACHE_DIR`` is made absolute."""
     from .diskcache import cache_dir
     if Path(package_dir).resolve().parent.name not in _INSTALL_DIRS or os.environ.get(NUMBA_CACHE_VAR):
         return None
     root = cache_dir()
     if root is None:
         return None
-    folder = root / "numba"
+    folder = _usable(root.absolute() / "numba")   # absolute: workers started in another folder find the same
+    if folder is None:   # numba would decline it and write beside the sources again: a private temporary one
+        import tempfile
+        folder = _usable(Path(tempfile.gettempdir()) / f"dronewpt-numba-{os.getuid() if hasattr(os, 'getuid') else 0}")
+        if folder is None:
+            return None
     os.environ[NUMBA_CACHE_VAR] = str(folder)
     config = sys.modules.get("numba.core.config")
     if config is not None and not getattr(config, "CACHE_DIR", ""):
