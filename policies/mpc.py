@@ -532,6 +532,9 @@ class MPCPolicy:
         """The estimator's next step with the phase lock on the receivers ``mask`` (bool (n,))."""
         if self._bank is None or self._bank.n != len(mask):
             return
+        if not mask.any() and self._bank.lock_step is None:   # nothing locked yet (budget 0: never): no model built
+            self._bank.lock = mask.copy()
+            return
         if self._bank.lock_step is None:
             from .mpc_lock import locked_step
             if self._lm is None:

@@ -121,23 +121,14 @@ class LockedModel:
     """The locked model's constants for a link, device preset and control period (:func:`locked_rows`)."""
 
     def __init__(self, link, devices_name, dt_s, ns=SUBSTEPS):
-        from wpt_receiver import modal_kernel as mk
-
-        from .mpc_modal import _link_modes, v2_frame_table
-        mc = _link_modes(link, devices_name)[2]
+        from .mpc_modal import complex_system, v2_frame_table
         theta = v2_frame_table(link, devices_name)[3]
-        rot, v1 = np.exp(-1j * theta), -1j * link.v1_amp_v
         self.ns = int(ns)
-        shape = [mc[mk.MC_S + 4 * k + 1] for k in range(2)]
         for tag, h in (("", dt_s / ns), ("h", 0.5 * dt_s)):   # the sub-step and the half step
-            zc = np.empty(mk.N_ZOH_C, dtype=np.complex128)
-            mk.zoh(mc, h, zc)
-            phi = [zc[mk.ZC_PHI + k] for k in range(2)]
-            setattr(self, "E" + tag, np.array([zc[mk.ZC_E + k] for k in range(2)]))
-            setattr(self, "beta" + tag, np.array([phi[k] * shape[k] * mc[mk.MC_G2 + k] for k in range(2)]))
-            setattr(self, "gamma" + tag, np.array([phi[k] * shape[k] * mc[mk.MC_G1 + k] * v1 * rot for k in range(2)]))
-        self.c1 = complex(mc[mk.MC_D + 2] * v1 * rot)
-        self.d2 = complex(mc[mk.MC_D + 3])
+            E, beta, gamma, self.c1, self.d2 = complex_system(link, devices_name, theta, h)
+            setattr(self, "E" + tag, E)
+            setattr(self, "beta" + tag, beta)
+            setattr(self, "gamma" + tag, gamma)
 
 
 def locked_rows(lm, model, z, plan, vc, M, grad=True, qmin=None):

@@ -93,23 +93,36 @@ def _real_system(link, devices_name, theta, dt_s):
     mode; ``S_m`` the mode's I2 shape, so ``C`` sums the real parts), inputs ``[Re V2', Im V2', 1]`` (``V2' =
     V2 e^{-j theta}``; the last the pad's V1, constant), output Re I2 (the feedthrough ``D`` of the
     negative-frequency modes)."""
+    E, beta, gamma, c1, d2 = complex_system(link, devices_name, theta, dt_s)
+    Ad, Bd = np.zeros((4, 4)), np.zeros((4, 3))
+    for k in range(2):
+        e = E[k]
+        Ad[2 * k:2 * k + 2, 2 * k:2 * k + 2] = [[e.real, -e.imag], [e.imag, e.real]]
+        # per unit Re V2', Im V2' (1j beta: exact) and the constant V1 drive
+        for j, gain in enumerate((beta[k], 1j * beta[k], gamma[k])):
+            Bd[2 * k, j], Bd[2 * k + 1, j] = gain.real, gain.imag
+    C = np.array([1.0, 0.0, 1.0, 0.0])
+    D = np.array([d2.real, -d2.imag, c1.real])
+    return Ad, Bd, C, D
+
+
+def complex_system(link, devices_name, theta, dt_s):
+    """The modal model (:func:`wpt_receiver.modal_kernel.modes`) in I2's frame (turned by ``-theta``) over ``dt_s``
+    [s] with the modes' exact ZOH (:func:`wpt_receiver.modal_kernel.zoh`), as complex per-mode constants: ``s_m <-
+    E_m s_m + beta_m V2' + gamma_m`` and ``I2' = s_0 + s_1 + c1 + d2 V2'`` (``V2' = V2 e^{-j theta}``; ``gamma`` and
+    ``c1`` carry the pad's constant V1 drive): ``(E (2,), beta (2,), gamma (2,), c1, d2)``. The one source of
+    :func:`_real_system` (its real 4-state form) and of :class:`policies.mpc_lock.LockedModel`."""
     from wpt_receiver import modal_kernel as mk
     mc = _link_modes(link, devices_name)[2]
     zc = np.empty(mk.N_ZOH_C, dtype=np.complex128)
     mk.zoh(mc, dt_s, zc)
     rot, v1 = np.exp(-1j * theta), -1j * link.v1_amp_v
-    Ad, Bd = np.zeros((4, 4)), np.zeros((4, 3))
+    E, beta, gamma = (np.empty(2, dtype=np.complex128) for _ in range(3))
     for k in range(2):
         shape, g1, g2 = mc[mk.MC_S + 4 * k + 1], mc[mk.MC_G1 + k], mc[mk.MC_G2 + k]
-        e, phi = zc[mk.ZC_E + k], zc[mk.ZC_PHI + k]
-        Ad[2 * k:2 * k + 2, 2 * k:2 * k + 2] = [[e.real, -e.imag], [e.imag, e.real]]
-        # complex input gains per unit Re V2', Im V2' and the constant V1 drive, through the held-input ZOH
-        for j, gain in enumerate((shape * g2, 1j * shape * g2, shape * g1 * v1 * rot)):
-            Bd[2 * k, j], Bd[2 * k + 1, j] = (phi * gain).real, (phi * gain).imag
-    C = np.array([1.0, 0.0, 1.0, 0.0])
-    d1, d2 = mc[mk.MC_D + 2], mc[mk.MC_D + 3]
-    D = np.array([d2.real, -d2.imag, (d1 * v1 * rot).real])
-    return Ad, Bd, C, D
+        phi = zc[mk.ZC_PHI + k]
+        E[k], beta[k], gamma[k] = zc[mk.ZC_E + k], phi * (shape * g2), phi * (shape * g1 * v1 * rot)
+    return E, beta, gamma, complex(mc[mk.MC_D + 2] * v1 * rot), complex(mc[mk.MC_D + 3])
 
 
 class ModalModel:
