@@ -15,6 +15,8 @@ Modules, from the classical controllers to learning and comparing:
 ``classical``      step, ramp and the paper's model-based inverse controller (Fig. 5)
 ``mpc``            model-predictive control: receding-horizon QP in V2 on the nominal model (daqp)
 ``mpc_modal``      the MPC's prediction model on the exact-mode link (the context's ``link_model="modal"``)
+``mpc_lock``       the modal MPC's after-stop prediction with the rectifier's phase lock (V2 turned onto I2's phase;
+                   numba), its rows and derivatives for the sequential convex iterations, the estimator's locked step
 ``oracle``         the per-window limit: best open-loop duty sequence after the stop (SLSQP)
 ``budgeted``       the model-based controller with an overshoot budget (the classical frontier)
 ``budget_modal``   its after-stop plan predicted on the exact-mode link (the context's ``link_model="modal"``)
