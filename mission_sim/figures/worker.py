@@ -132,6 +132,11 @@ def _draw_once(conn) -> None:
     conn.send_bytes(_reply_bytes(lambda: _draw_split(mission, result, out, conn, helpers)))
 
 
+#: matplotlib releases on which :func:`matplotlib_without_docstrings` applies (its hooks are private: a later
+#: release gets the usual import until its figures are checked, ``tests/test_figure_worker.py``)
+CHECKED_MATPLOTLIB = ("3.11.",)
+
+
 def matplotlib_without_docstrings() -> bool:
     """Make matplotlib's import skip what only its docstrings and ``inspect.signature`` use: every ``Artist``
     subclass builds, as the class is created, the docstring and signature of its ``set()`` from all of its
@@ -141,11 +146,15 @@ def matplotlib_without_docstrings() -> bool:
     are the same bytes. For a process that draws and exits (the figure worker, forked for it), never the
     command's own process; before matplotlib's artists are defined (a no-op if they are already: an earlier
     import in the same process). True when the hooks were found (matplotlib 3.11's ``artist.kwdoc`` and
-    ``Artist._update_set_signature_and_docstring``), False if this matplotlib has none: nothing changed."""
+    ``Artist._update_set_signature_and_docstring``), False on another release (:data:`CHECKED_MATPLOTLIB`) or if this
+    matplotlib has none: nothing changed."""
     if "matplotlib.lines" in sys.modules:   # artists defined already (a test process that drew before)
         return False
+    import matplotlib
     import matplotlib.artist as artist
-    if not (callable(getattr(artist, "kwdoc", None))
+    # private hooks: only on the releases whose figures were checked to the byte with and without them
+    if not (str(getattr(matplotlib, "__version__", "")).startswith(CHECKED_MATPLOTLIB)
+            and callable(getattr(artist, "kwdoc", None))
             and hasattr(artist.Artist, "_update_set_signature_and_docstring")):
         return False
 
