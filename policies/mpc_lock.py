@@ -177,8 +177,8 @@ def locked_step(lm, model, z, u, vc):
     """The locked model's step of the estimates ``z`` (..., 5) under the eq. 9 V2 ``u`` (...) [V] at the clamp
     voltages ``vc`` (...) [V] (what :meth:`policies.mpc_modal.ModalModel.step_measure` does unlocked): ``(z after
     the step, the |I2| [A] the sensor reads at its end)``. It always sub-steps with the lock, also below
-    :data:`QMIN_V`, where :func:`locked_rows` switches to the unlocked half steps (there the two agree within the
-    unlocked model's sampling: |V2| is small and turns little of I2)."""
+    :data:`QMIN_V`, where :func:`locked_rows` switches to the unlocked half steps: below it the estimator's model
+    and the prediction's differ (a difference left as measured: the docs/rl.md section on the lock)."""
     z = np.asarray(z, dtype=float)
     shape = z.shape[:-1]
     zf = z.reshape(-1, z.shape[-1])
