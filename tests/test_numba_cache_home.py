@@ -101,3 +101,21 @@ def test_unusable_or_relative_cache_folder_never_falls_back_into_site_packages(t
     assert _cache_files(site) == []
     assert _run(site, code, DRONEWPT_CACHE_DIR="relcache") == str(tmp_path / "relcache" / "numba")
     assert _cache_files(site) == []
+
+
+def test_private_temporary_folder_is_never_one_others_can_write(tmp_path, monkeypatch):
+    """numba's cache files hold pickles: the shared temporary fallback is used only when it is this user's alone
+    (not group/world-writable, not a symlink); otherwise a fresh folder of this process's."""
+    from wpt_receiver import kernel_cache
+
+    monkeypatch.setattr(tempfile, "gettempdir", lambda: str(tmp_path))
+    shared = tmp_path / f"dronewpt-numba-{os.getuid()}"
+    assert kernel_cache._private_temporary() == shared and oct(shared.stat().st_mode & 0o777) == oct(0o700)
+    shared.chmod(0o777)                                   # as if another user had made it writable for all
+    other = kernel_cache._private_temporary()
+    assert other is not None and other != shared and other.parent == tmp_path and other.name.startswith("dronewpt-numba-")
+    shared.chmod(0o700)
+    shared.rmdir()
+    shared.symlink_to(tmp_path / "elsewhere", target_is_directory=True)
+    (tmp_path / "elsewhere").mkdir()
+    assert kernel_cache._private_temporary() not in (shared, tmp_path / "elsewhere")

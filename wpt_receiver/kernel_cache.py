@@ -43,6 +43,27 @@ def _usable(folder: Path) -> Path | None:
     return folder
 
 
+def _private_temporary() -> Path | None:
+    """``<tmp>/dronewpt-numba-<uid>`` when it is this user's alone (numba's cache files hold pickles: never one
+    another user could have written), else a new folder of this process's (``tempfile.mkdtemp``); ``None`` if
+    neither can be made."""
+    import tempfile
+    uid = os.getuid() if hasattr(os, "getuid") else None
+    if uid is not None:
+        shared = Path(tempfile.gettempdir()) / f"dronewpt-numba-{uid}"
+        try:
+            shared.mkdir(mode=0o700, exist_ok=True)
+            st = shared.lstat()
+            if shared.is_dir() and not shared.is_symlink() and st.st_uid == uid and not st.st_mode & 0o022:
+                return _usable(shared)
+        except OSError:
+            pass
+    try:
+        return Path(tempfile.mkdtemp(prefix="dronewpt-numba-"))
+    except OSError:
+        return None
+
+
 def place_numba_cache(package_dir) -> Path | None:
     """For an installed copy (``package_dir``'s parent is a ``site-packages`` / ``dist-packages`` folder) and no
     ``NUMBA_CACHE_DIR`` of the user's: numba's cache root becomes ``<dronewpt's disk cache>/numba`` (the process's
@@ -59,8 +80,7 @@ def place_numba_cache(package_dir) -> Path | None:
         return None
     folder = _usable(root.absolute() / "numba")   # absolute: workers started in another folder find the same
     if folder is None:   # numba would decline it and write beside the sources again: a private temporary one
-        import tempfile
-        folder = _usable(Path(tempfile.gettempdir()) / f"dronewpt-numba-{os.getuid() if hasattr(os, 'getuid') else 0}")
+        folder = _private_temporary()
         if folder is None:
             return None
     os.environ[NUMBA_CACHE_VAR] = str(folder)
@@ -68,6 +88,7 @@ def place_numba_cache(package_dir) -> Path | None:
     if config is not None and not getattr(config, "CACHE_DIR", ""):
         config.CACHE_DIR = str(folder)      # numba read its environment already; its locators read this
     return folder
+
 
 __all__ = ["drop_stale_cache", "dependency_hash", "place_numba_cache"]
 
