@@ -121,9 +121,8 @@ _TAIL_W_MAX = 5.0
 _LOCK = True
 _LOCK_ITERS = 2
 _LOCK_TRUST = 3.0
-#: the estimator of a locked receiver after its stop: 0 steps the locked model open loop (no correction), 1 corrects
-#: w only, 2 the full filter (with a correction the 1-step prediction lost the modes' ring; w alone rang: docs/rl.md)
-_LOCK_GAIN = 0
+#: (the estimator of a locked receiver after its stop steps the locked model open loop, no correction: with the
+#: filter's correction the 1-step prediction lost the modes' ring, and correcting w alone rang; docs/rl.md)
 _MARGIN_LOCK = 0.004   # the constraint back-off of the locked rows, fraction of I2_sm (20 nominal windows: 0.3 % overshot mpc:0.05 by 0.06 points)
 _F = {k: OBS_INDEX[k] for k in ("i2_amp_a", "battery_v", "charge_cmd_a", "last_d_short")}
 
@@ -286,12 +285,8 @@ class _DelayBank:
             x[:, c], y_model[:, c] = self.lock_step(self.z[:, c], uh[:, c], vc[c])
         innov = y[None, :] - y_model
         self.z = x + innov[..., None] * self.m.kalman[:, 0]
-        if c is not None and len(c) and _LOCK_GAIN < 2:
-            g = self.m.kalman[:, 0].copy()
-            g[:-1] = 0.0
-            if _LOCK_GAIN == 0:
-                g[-1] = 0.0
-            self.z[:, c] = x[:, c] + innov[:, c, None] * g
+        if c is not None and len(c):
+            self.z[:, c] = x[:, c]   # locked after the stop: open loop (the innovation still scores the delays)
         self.score += (1.0 / _DELAY_MEMORY) * (innov * innov - self.score)
         # a shorter delay is preferred unless a longer one explains the measurements clearly better
         self.best = np.argmin(self.score * self._prefer, axis=0)
@@ -342,7 +337,6 @@ class MPCPolicy:
         self._modal = ctx.link_model == "modal"
         self._tail_on = self._modal   # the duty-linear approach to short mode (:meth:`_duty_tail`)
         self._margin = _MARGIN_MODAL if self._modal else _MARGIN
-        self._lm = None
         if self._modal:
             self._model = _modal_model(base, devices, float(ctx.control_period_s))
             self._lm_args = (base, devices, float(ctx.control_period_s))
@@ -537,9 +531,7 @@ class MPCPolicy:
             return
         if self._bank.lock_step is None:
             from .mpc_lock import locked_step
-            if self._lm is None:
-                self._lm = _locked_model(*self._lm_args)
-            lm, m = self._lm, self._model
+            lm, m = _locked_model(*self._lm_args), self._model
             self._bank.lock_step = lambda z, u, vc: locked_step(lm, m, z, u, vc)
         self._bank.lock = mask.copy()
 
@@ -555,9 +547,7 @@ class MPCPolicy:
         """The locked model's I2 rows (n, 2 N_PRED) [A] along ``v_bar`` and (``grad``) their derivatives in the free
         knots and along ``v_bar`` (:func:`policies.mpc_lock.locked_rows`)."""
         from .mpc_lock import locked_rows
-        if self._lm is None:
-            self._lm = _locked_model(*self._lm_args)
-        return locked_rows(self._lm, self._model, z, v_bar, vl + self._vf, self._model.M[:, :-1], grad=grad)
+        return locked_rows(_locked_model(*self._lm_args), self._model, z, v_bar, vl + self._vf, self._model.M[:, :-1], grad=grad)
 
     def _qp_stop(self, e, z, vl, u_prev, v_bar, locked=False):
         """One after-stop QP per receiver ``e`` (n,) with the excess linearised along ``v_bar`` (n, N_PRED)

@@ -131,6 +131,11 @@ class LockedModel:
             setattr(self, "gamma" + tag, gamma)
 
 
+def _modes(z):
+    """The two modes (n, 2) complex of the estimates ``z`` (n, 5): ``[s0r, s0i, s1r, s1i, w]``."""
+    return np.stack([z[:, 0] + 1j * z[:, 1], z[:, 2] + 1j * z[:, 3]], axis=1)
+
+
 def locked_rows(lm, model, z, plan, vc, M, grad=True, qmin=None):
     """The locked model's rows along the V2 plans ``plan`` (n, N) [V] from the estimates ``z`` (n, 5) at the clamp
     voltages ``vc`` (n,) [V]: ``rows`` (n, 2N) [A], and with ``grad`` ``J`` (n, 2N, f) (per free knot of ``M``
@@ -140,7 +145,7 @@ def locked_rows(lm, model, z, plan, vc, M, grad=True, qmin=None):
     (rr, ri), (sr, si) = model.residual_slope(plan, vc[:, None])
     q = (plan + rr + z[:, 4:5]) + 1j * ri
     dq = (1.0 + sr) + 1j * si
-    sig = np.stack([z[:, 0] + 1j * z[:, 1], z[:, 2] + 1j * z[:, 3]], axis=1)
+    sig = _modes(z)
     f = M.shape[1]
     rows = np.empty((n, 2 * N))
     J = np.zeros((n, 2 * N, f) if grad else (0, 0, 0))
@@ -178,13 +183,13 @@ def locked_step(lm, model, z, u, vc):
     voltages ``vc`` (...) [V] (what :meth:`policies.mpc_modal.ModalModel.step_measure` does unlocked): ``(z after
     the step, the |I2| [A] the sensor reads at its end)``. It always sub-steps with the lock, also below
     :data:`QMIN_V`, where :func:`locked_rows` switches to the unlocked half steps: below it the estimator's model
-    and the prediction's differ (a difference left as measured: the docs/rl.md section on the lock)."""
+    and the prediction's differ (not measured apart; left as it is)."""
     z = np.asarray(z, dtype=float)
     shape = z.shape[:-1]
     zf = z.reshape(-1, z.shape[-1])
     rr, ri = model.residual(np.broadcast_to(u, shape).reshape(-1), np.broadcast_to(vc, shape).reshape(-1))
     q = (np.broadcast_to(u, shape).reshape(-1) + rr + zf[:, 4]) + 1j * ri
-    sig = np.stack([zf[:, 0] + 1j * zf[:, 1], zf[:, 2] + 1j * zf[:, 3]], axis=1)
+    sig = _modes(zf)
     out, y = np.empty_like(sig), np.empty(len(zf))
     _step_kernel(sig, q, lm.E, lm.beta, lm.gamma, lm.c1, lm.d2, lm.ns, out, y)
     x = zf.copy()

@@ -90,7 +90,7 @@ def test_locked_rows_predict_the_budgeted_descent_better():
         n = int(np.argmax(ds >= 0.999)) + 1
         v2 = pol._v2_of(np.r_[ds, np.ones(N_PRED)][:N_PRED], vl[0])[None]
         unl = (z @ m.F.T + m.h + v2 @ m.Gu.T + pol._rterm(v2, vl)).reshape(N_PRED, 2).max(axis=1)[:n]
-        lck = locked_rows(pol._lm or _models()[1], m, z, v2, vl + pol._vf, m.M[:, :-1], grad=False)[0]
+        lck = locked_rows(_models()[1], m, z, v2, vl + pol._vf, m.M[:, :-1], grad=False)[0]
         lck = lck.reshape(N_PRED, 2).max(axis=1)[:n]
         sm = pol._i2_sm
         err_u.append(100 * (unl - pk[:n]) / sm)

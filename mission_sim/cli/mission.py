@@ -194,8 +194,8 @@ def _checked_run(args, started, worker) -> int:
 def _figure_worker(args):
     """A :class:`~mission_sim.figures.worker.FigureWorker` (matplotlib imported in a forked process while
     this one checks its input and runs the mission), forked first thing for a mission with figures (once what
-    both processes need is loaded: numpy, the config module, the coil model); None otherwise. The command ends it at once when the run does not happen (bad input, a refused ``--out``)
-    and for a long mission (estimated rows above :data:`FIGURE_WORKER_MAX_ROWS`: drawn in process after
+    both processes need is loaded: numpy, the config module, the coil model); None otherwise. The command ends
+    it at once when the run does not happen (bad input, a refused ``--out``) and for a long mission (estimated rows above :data:`FIGURE_WORKER_MAX_ROWS`: drawn in process after
     the run, a long run's memory is not doubled by a second process)."""
     from ..figures.worker import FigureWorker, fork_available
     if args.no_plot or args.dry_run or not fork_available():
