@@ -3,7 +3,7 @@
 Modules: ``classical`` (step, ramp, model_based), ``kernels`` (their compiled per-step functions for
 the mission's fast path; numba, imported on demand), ``onoff``, ``online``, ``budgeted``, ``budget_modal``,
 ``budget_scan``, ``random_policy``, ``mpc``, ``oracle``, ``rl`` / ``residual`` / ``constrained`` / ``imitation`` / ``obs_mask`` / ``smoothing`` /
-``train`` / ``callbacks`` / ``hyperparams`` / ``slow_budget`` (RL, needs stable-baselines3), ``oracle_imitation`` / ``oracle_imitation_train``, ``inference``,
+``train`` / ``callbacks`` / ``hyperparams`` / ``slow_budget`` (RL, needs stable-baselines3), ``oracle_imitation`` / ``oracle_imitation_train`` / ``oracle_imitation_filter``, ``inference``,
 ``compare``, ``batched``, ``forked``, ``stats``, ``threads``.
 
 >>> from policies import make
@@ -34,6 +34,7 @@ Modules, from the classical controllers to learning and comparing:
 ``slow_budget``    a learned policy acting in a slow variable: the MPC's overshoot budget per step
 ``oracle_imitation``  the oracle's after-stop sequence learned from the stop observation (amortised imitation)
 ``oracle_imitation_train``  its training side: stop observations, the oracle's sequences, open-loop scoring
+``oracle_imitation_filter``  that sequence as the reference of a safety filter on the MPC's model after the stop
 ``callbacks``      SB3 callbacks of ``train``: progress bar with return and cost, evaluation
 ``hyperparams``    rl-baselines3-zoo style hyperparameter files (YAML / JSON)
 ``train``          ``dronewpt train``: PPO / SAC / TD3 / DQN on the batched env, imitation, outputs and metadata
@@ -117,6 +118,13 @@ def _oracle_imitation(ctx, **kwargs):
     return OracleImitationPolicy(ctx, **kwargs)
 
 
+def _oracle_imitation_filtered(ctx, **kwargs):
+    """The learned oracle sequence with the MPC's model as a safety filter after the stop
+    (:mod:`policies.oracle_imitation_filter`; ``oracle_imitation_filtered:PATH``)."""
+    from .oracle_imitation_filter import OracleImitationFilteredPolicy
+    return OracleImitationFilteredPolicy(ctx, **kwargs)
+
+
 def _mpc(ctx, **kwargs):
     from .mpc import MPCPolicy
     return MPCPolicy(ctx, **kwargs)
@@ -144,9 +152,11 @@ _REGISTRY: dict[str, Callable[..., Policy]] = {
     "imitation": _imitation,
     "slow_budget": _slow_budget,
     "oracle_imitation": _oracle_imitation,
+    "oracle_imitation_filtered": _oracle_imitation_filtered,
 }
 #: names that take a model file as ``name:PATH``
-_WITH_PATH = ("rl", "ppo_lagrangian", "residual", "imitation", "slow_budget", "oracle_imitation")
+_WITH_PATH = ("rl", "ppo_lagrangian", "residual", "imitation", "slow_budget", "oracle_imitation",
+              "oracle_imitation_filtered")
 
 
 def register(name: str, factory: Callable[..., Policy]) -> None:

@@ -739,11 +739,22 @@ class MPCPolicy:
     def _feasible(self, z, vl, plan, e):
         """Per row: the predicted peak (envelope + ripple excess at the plan's duties) of the V2 ``plan``
         (n, N_PRED) from ``z`` (n, nz) within the bound of receiver ``e`` (n,) (bool (n,))."""
+        rows, margin = self.predicted_rows(z, vl, plan, self._locked(e, z) if self._modal else None)
+        bound = (1.0 + self._budget_of(e) - 0.5 * margin) * self._bound_sm(z) + self._relax[e]
+        return np.all(rows <= bound[:, None], axis=1)
+
+    def predicted_rows(self, z, vl, plan, locked=None):
+        """The predicted peak samples (n, 2 N_PRED) [A] of the V2 ``plan`` (n, N_PRED) [V] from the estimates ``z``
+        (n, nz) at the battery voltages ``vl`` (n,): the model's I2 at mid-step and end of every step (on the modal
+        model with the residual of V2, and the rows ``locked`` (bool (n,)) with the phase lock,
+        :func:`policies.mpc_lock.locked_rows`) plus the ripple excess at the plan's duties; and the constraint
+        back-off of each row's model (fraction of I2_sm; (n,) on the modal model). What :meth:`_feasible` bounds and
+        :class:`policies.oracle_imitation.OracleImitationFilteredPolicy` filters with."""
         m = self._model
         i2 = z @ m.F.T + m.h + plan @ m.Gu.T
         if self._modal:
             i2 += self._rterm(plan, vl)
-            locked = self._locked(e, z)
+            locked = np.zeros(len(z), dtype=bool) if locked is None else locked
             lock = np.flatnonzero(locked)
             if len(lock):
                 i2[lock] = self._locked_rows(z[lock], plan[lock], vl[lock], grad=False)[0]
@@ -751,8 +762,7 @@ class MPCPolicy:
         else:
             margin = self._margin
         ex = self._excess_at(plan, vl[:, None])
-        bound = (1.0 + self._budget_of(e) - 0.5 * margin) * self._bound_sm(z) + self._relax[e]
-        return np.all(i2 + ex.repeat(2, axis=1) <= bound[:, None], axis=1)
+        return i2 + ex.repeat(2, axis=1), margin
 
     def _budget_of(self, e):
         """The measured-overshoot budget of receivers ``e`` (n,): the policy's one ``budget`` (a subclass may

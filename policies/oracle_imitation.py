@@ -271,7 +271,12 @@ class OracleImitationPolicy:
             self._j[stop] = 0
             self._armed[stop] = False
         after = np.flatnonzero(self._j >= 0)
-        j = self._j[after]
-        d[after] = np.where(j < HORIZON, self._seq[after, np.minimum(j, HORIZON - 1)], 1.0)
+        d[after] = self._play(after, phys)
         self._j[after] += 1
         return d
+
+    def _play(self, after, phys):
+        """The duties (len(after),) of the receivers ``after`` (indices; a sequence latched, ``self._j`` steps since
+        their stop, 0 at it): the sequence at step ``j``, duty 1 past its horizon (``phys`` unused here)."""
+        j = self._j[after]
+        return np.where(j < HORIZON, self._seq[after, np.minimum(j, HORIZON - 1)], 1.0)
