@@ -53,6 +53,23 @@ def write_map(model, path, lam, slow, seed, link, dt_s):
     save_model(m, path, meta)
 
 
+def row_stats(ms, ref) -> dict:
+    """One setting's row on one scenario: the metrics ``ms`` of its maps against the reference's ``ref`` (the same
+    windows): the means over the maps of the paired overshoot (points) and return differences (``dov``, ``dret``), their
+    pooled window bootstrap, per map, the means of overshoot, energy after the stop, return, the least fraction in
+    short mode."""
+    from policies.stats import mean_ci
+    dov = [m["overshoot_pct"] - ref["overshoot_pct"] for m in ms]
+    dret = [m["return"] - ref["return"] for m in ms]
+    return {"dov": float(np.mean([d.mean() for d in dov])), "dret": float(np.mean([d.mean() for d in dret])),
+            "dov_pooled": mean_ci(np.mean(dov, axis=0)), "dret_pooled": mean_ci(np.mean(dret, axis=0)),
+            "dov_seeds": [float(d.mean()) for d in dov], "dret_seeds": [float(d.mean()) for d in dret],
+            "overshoot_pct": float(np.mean([m["overshoot_pct"].mean() for m in ms])),
+            "energy_after_stop_j": float(np.mean([m["energy_after_stop_j"].mean() for m in ms])),
+            "return": float(np.mean([m["return"].mean() for m in ms])),
+            "min_in_sm": min(float(np.mean(m["reached_short_mode"])) for m in ms)}
+
+
 def choose(table, margin):
     """The rule (docs/rl.md): ``table[(lam, slow)][scenario] = {'dov': .., 'dret': ..}``; returns the chosen key
     (None if no setting is admissible) and the admissible keys."""
@@ -90,7 +107,6 @@ def main(argv=None):
     scenarios = a.scenarios.split(",")
     from envs import EnvConfig
     from policies.compare import run_policies
-    from policies.stats import mean_ci
     config = EnvConfig(link_model=a.link)
     t0, c0, l0 = time.time(), time.process_time(), os.getloadavg()
     Path(a.work).mkdir(parents=True, exist_ok=True)
@@ -123,17 +139,7 @@ def main(argv=None):
                                      a.seed, config))
         ref = runs[a.ref].metrics
         for key, ns in names.items():
-            ms = [runs[n].metrics for n in ns]
-            dov = [m["overshoot_pct"] - ref["overshoot_pct"] for m in ms]
-            dret = [m["return"] - ref["return"] for m in ms]
-            table[key][s] = {"dov": float(np.mean([d.mean() for d in dov])),
-                             "dret": float(np.mean([d.mean() for d in dret])),
-                             "dov_pooled": mean_ci(np.mean(dov, axis=0)), "dret_pooled": mean_ci(np.mean(dret, axis=0)),
-                             "dov_seeds": [float(d.mean()) for d in dov], "dret_seeds": [float(d.mean()) for d in dret],
-                             "overshoot_pct": float(np.mean([m["overshoot_pct"].mean() for m in ms])),
-                             "energy_after_stop_j": float(np.mean([m["energy_after_stop_j"].mean() for m in ms])),
-                             "return": float(np.mean([m["return"].mean() for m in ms])),
-                             "min_in_sm": min(float(np.mean(m["reached_short_mode"])) for m in ms)}
+            table[key][s] = row_stats([runs[n].metrics for n in ns], ref)
         print(f"\n== {s}, windows {lo}-{hi - 1}, {a.link} link; {a.ref}: overshoot {ref['overshoot_pct'].mean():.2f} %, "
               f"E after {ref['energy_after_stop_j'].mean():.3f} J, return {ref['return'].mean():.1f}")
         print("  lam   slow   overshoot %  E after J  return  | d return (pooled 95 %)        | d overshoot pts (pooled 95 %)  | SM")
