@@ -316,6 +316,7 @@ class OracleImitationFilteredPolicy(OracleImitationPolicy):
         vmax = 4.0 / np.pi * (vl + mpc._vf)
         sense = np.zeros(f + 1 + rows.shape[1], dtype=np.int32)
         out = ref.copy()
+        self.last_slack = np.zeros(m)   # [A] the least violation each QP kept (0: the limit met)
         for i in range(m):
             Ai = np.concatenate([A[i], -np.ones((rows.shape[1], 1))], axis=1)
             bu = np.concatenate([vmax[i] - ref[i, knots], [_BIG], lim[i] - rows[i]])
@@ -323,4 +324,5 @@ class OracleImitationFilteredPolicy(OracleImitationPolicy):
             x, _, flag, _ = daqp.solve(H, q, Ai, bu, bl, sense.copy())
             if flag >= 1:
                 out[i] = np.clip(ref[i] + M[:, :f] @ x[:f], 0.0, vmax[i])
+                self.last_slack[i] = x[f]
         return out
