@@ -54,7 +54,7 @@ def factory(path, spec):
 
 
 def main(argv=None):
-    from select_oracle_imitation_playback import choose, row_stats
+    from select_oracle_imitation_playback import choose, row_stats, validation_windows
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--models", default="policies/pretrained/oracle_imitation_s*.npz")
@@ -66,10 +66,7 @@ def main(argv=None):
     ap.add_argument("--margin", type=float, default=0.10)
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
-    lo, hi = a.seed, a.seed + a.episodes
-    if hi > 0 and lo < 80 or lo < 1100 and hi > 1000 or lo < 2100 and hi > 2000:
-        ap.error(f"--seed {a.seed} --episodes {a.episodes}: windows {lo}-{hi - 1} overlap training (0-79) or "
-                 "evaluation (1000-1099, 2000-2099) windows")
+    lo, hi = validation_windows(ap, a.seed, a.episodes)
     models = sorted(glob.glob(a.models))
     labels = [s for s in a.settings.split(",") if s] or list(GRID)
     bad = [s for s in labels if s not in GRID]

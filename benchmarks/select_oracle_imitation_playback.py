@@ -70,6 +70,16 @@ def row_stats(ms, ref) -> dict:
             "min_in_sm": min(float(np.mean(m["reached_short_mode"])) for m in ms)}
 
 
+def validation_windows(ap, seed, episodes):
+    """``(first, last + 1)`` of the windows ``seed .. seed + episodes - 1``; ``ap.error`` (exit 2) when they touch the
+    training (0-79) or evaluation (1000-1099, 2000-2099) windows."""
+    lo, hi = seed, seed + episodes
+    if hi > 0 and lo < 80 or lo < 1100 and hi > 1000 or lo < 2100 and hi > 2000:
+        ap.error(f"--seed {seed} --episodes {episodes}: windows {lo}-{hi - 1} overlap training (0-79) or "
+                 "evaluation (1000-1099, 2000-2099) windows")
+    return lo, hi
+
+
 def choose(table, margin):
     """The rule (docs/rl.md): ``table[(lam, slow)][scenario] = {'dov': .., 'dret': ..}``; returns the chosen key
     (None if no setting is admissible) and the admissible keys."""
@@ -98,10 +108,7 @@ def main(argv=None):
     ap.add_argument("--work", default="out/oislow/grid")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
-    lo, hi = a.seed, a.seed + a.episodes
-    if hi > 0 and lo < 80 or lo < 1100 and hi > 1000 or lo < 2100 and hi > 2000:
-        ap.error(f"--seed {a.seed} --episodes {a.episodes}: windows {lo}-{hi - 1} overlap training (0-79) or "
-                 "evaluation (1000-1099, 2000-2099) windows")
+    lo, hi = validation_windows(ap, a.seed, a.episodes)
     slows = [float(x) for x in a.slows.split(",")]
     lams = [float(x) for x in a.lams.split(",")]
     scenarios = a.scenarios.split(",")
