@@ -19,8 +19,8 @@ POLICIES = {
     "mpc": None,
     "filtered qp (stop)": dict(correction="qp", limit=0.0, slow=1.0, smooth=300.0, every_period=False),
     "filtered qp (every period)": dict(correction="qp", limit=0.006, slow=1.1, smooth=300.0, every_period=True),
-    "filtered rate": dict(correction="rate", limit=0.004, slow=1.0, rates=(1.0, 0.97, 0.94, 0.91, 0.88, 0.85, 0.82,
-                                                                             0.79, 0.76)),
+    "filtered rate (limit)": dict(correction="rate", limit=0.004, lam=None, slow=1.0),
+    "filtered rate (lam 0.6)": dict(correction="rate", lam=0.6, slow=1.0),
 }
 
 

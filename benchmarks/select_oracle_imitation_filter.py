@@ -32,7 +32,7 @@ GRID = {
     "clone slow=1.0": {"slow": 1.0},
     "clone slow=1.1": {"slow": 1.1},
     "clone slow=1.2": {"slow": 1.2},
-    "rate limit=0.004": {"filter": dict(correction="rate", limit=0.004, slow=1.0, rates=_FINE)},
+    "rate limit=0.004": {"filter": dict(correction="rate", limit=0.004, lam=None, slow=1.0, rates=_FINE)},
     **{f"rate lam={lam:g}": {"filter": dict(correction="rate", lam=lam, slow=1.0, rates=_FINE)} for lam in (0.4, 0.6)},
     "qp stop limit=0 slow=1": {"filter": dict(correction="qp", limit=0.0, slow=1.0, smooth=300.0, every_period=False)},
     "qp every limit=0.006 slow=1.1": {"filter": dict(correction="qp", limit=0.006, slow=1.1, smooth=300.0,

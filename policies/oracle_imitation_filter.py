@@ -45,7 +45,7 @@ from .oracle_imitation import _CMD, _D, _I2, _VL, HORIZON, PRETRAINED_ORACLE_IMI
 __all__ = ["OracleImitationFilteredPolicy", "RATES", "LIMIT", "MAX_LAG", "LOCK", "SLOW"]
 
 #: playback rates the filter may choose, fastest first (1: the learned sequence as it is; 0: held)
-RATES = (1.0, 0.75, 0.5, 0.25, 0.0)
+RATES = (1.0, 0.97, 0.94, 0.91, 0.88, 0.85, 0.82, 0.79, 0.76)
 #: the limit's budget above the MPC's bound at budget 0 (fraction of the short-mode current)
 LIMIT = 0.0
 #: the longest lag of the playback behind the steps since the stop [control periods]
@@ -53,15 +53,15 @@ MAX_LAG = 30
 #: predict with the rectifier's phase lock (policies.mpc_lock)
 LOCK = False
 #: the playback's slow-down (None: the model's own)
-SLOW = None
+SLOW = 1.0
 #: the rate re-decided every control period after the stop (False: at the stop only)
 EVERY_PERIOD = True
 #: (None: the limit decides) the rate chosen at the stop with the least predicted E + lam * overshoot [J per point]
-LAM = None
+LAM = 0.6
 #: how the filter changes the learned sequence: ``qp`` (the least change of the plan, the MPC's QP machinery) or
 #: ``rate`` (the least slowing of its playback)
 CORRECTIONS = ("qp", "rate")
-CORRECTION = "qp"
+CORRECTION = "rate"
 #: (qp) the penalty of the correction's moves between knots, relative to its squared size summed over the horizon
 SMOOTH = 0.0
 #: rates whose predicted peaks are within this [A] of the least are ties (the fastest of them is taken)

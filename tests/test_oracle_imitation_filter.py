@@ -12,7 +12,6 @@ pytest.importorskip("daqp")
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "policies" / "pretrained" / "oracle_imitation_s0.npz"
-_RATES = (1.0, 0.97, 0.94, 0.91, 0.88, 0.85, 0.82, 0.79, 0.76)
 
 
 def _register(name, cls=None, **options):
@@ -36,9 +35,10 @@ def test_a_filter_that_never_binds_plays_the_clone_bit_for_bit():
         pol.model["slow"] = np.array(1.0)
         return pol
     register("t_clone10", clone10)
-    names = [f"oracle_imitation:{SHIPPED}", "t_clone10", _register("t_qp1", limit=1.0),
-             _register("t_rate1", limit=1.0, correction="rate", rates=_RATES),
-             _register("t_qp1_10", limit=1.0, slow=1.0), _register("t_qp0", limit=0.0, slow=1.0)]
+    names = [f"oracle_imitation:{SHIPPED}", "t_clone10", _register("t_qp1", limit=1.0, correction="qp", slow=None),
+             _register("t_rate1", limit=1.0, correction="rate", lam=None, slow=None),
+             _register("t_qp1_10", limit=1.0, correction="qp", slow=1.0),
+             _register("t_qp0", limit=0.0, correction="qp", slow=1.0)]
     r = run_policies(names, "battery_low", 3, 300)
     d = {n: r[n].d_short for n in names}
     np.testing.assert_array_equal(d["t_qp1"], d[names[0]])
@@ -80,7 +80,7 @@ def test_rate_filter_takes_the_fastest_rate_within_its_limit():
                 assert not np.any(may[:k] & (peaks[:k] <= bound))
                 seen.append(out[i])
             return out
-    _register("t_rate_checked", Checked, limit=0.0, correction="rate", rates=_RATES, slow=1.0, max_lag=200)
+    _register("t_rate_checked", Checked, limit=0.0, correction="rate", lam=None, slow=1.0, max_lag=200)
     r = run_policies(["t_rate_checked"], "battery_low", 4, 300)
     assert np.all(r["t_rate_checked"].metrics["reached_short_mode"])
     assert min(seen) < 1.0   # it bound
@@ -103,7 +103,7 @@ def test_qp_correction_brings_the_predicted_peak_to_its_limit():
             assert np.all(after <= lim + self.last_slack + 0.01)
             assert np.all(after < rows.max(axis=1))
             return out
-    _register("t_qp_checked", Checked, limit=0.0, slow=1.0, every_period=False, smooth=300.0)
+    _register("t_qp_checked", Checked, limit=0.0, correction="qp", slow=1.0, every_period=False, smooth=300.0)
     r = run_policies(["t_qp_checked"], "battery_low", 4, 300)
     assert len(seen) >= 2
     assert np.all(r["t_qp_checked"].metrics["reached_short_mode"])
