@@ -25,8 +25,8 @@ peak would exceed a limit:
     the stop as the least predicted ``E + lam * overshoot`` instead (``E`` the MPC's after-stop energy term);
   - ``"qp"``: the least change of the plan in the MPC's V2 knots (squared change over the horizon, ``smooth`` x
     its moves between knots) whose *linearised* prediction (the rows' derivatives as the MPC's after-stop QP builds
-    them) is within the limit, with the MPC's slack penalty (the least violation where none fits), solved with
-    daqp; the change is kept, shifted, as part of the plan.
+    them) is within the limit, with the MPC's slack penalty (the least violation where none fits), each knot within
+    ``trust`` [V] of the plan's, solved with daqp; the change is kept, shifted, as part of the plan.
 
 ``slow`` re-times the map first (``None``: the model's own). The defaults are the filter's best setting on the
 validation windows 300-399 (``rate``, ``lam = 0.6``, ``slow = 1.0``, docs/rl.md), which did not beat the unfiltered
@@ -36,7 +36,7 @@ optimistically, and slowing buys overshoot at the same energy in every window. W
 Options are keyword arguments (``policies.make("oracle_imitation_filtered[:PATH]", ctx, limit=...)``): ``limit`` [0, 1]
 (fraction of I2_sm), ``slow`` (None or [1, 10]), ``rates`` (descending in [0, 1], the first 1), ``max_lag`` (0..200
 steps), ``lock`` (bool; the exact-mode link only), ``every_period`` (bool), ``lam`` (None or >= 0), ``correction``
-(``rate``, ``qp``), ``smooth`` (>= 0); a bad value: one-line ``ValueError`` naming it and the valid range.
+(``rate``, ``qp``), ``smooth`` (>= 0), ``trust`` (> 0, default unbounded); a bad value: one-line ``ValueError`` naming it and the valid range.
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ from mission_sim.contract import PolicyContext, denormalise_obs
 from .oracle_imitation import _CMD, _D, _I2, _VL, HORIZON, PRETRAINED_ORACLE_IMITATION, OracleImitationPolicy
 
 __all__ = ["OracleImitationFilteredPolicy", "RATES", "LIMIT", "MAX_LAG", "LOCK", "SLOW", "EVERY_PERIOD", "LAM",
-           "CORRECTIONS", "CORRECTION", "SMOOTH"]
+           "CORRECTIONS", "CORRECTION", "SMOOTH", "TRUST"]
 
 #: playback rates the filter may choose, fastest first (1: the learned sequence as it is; 0: held)
 RATES = (1.0, 0.97, 0.94, 0.91, 0.88, 0.85, 0.82, 0.79, 0.76)
@@ -70,6 +70,8 @@ CORRECTIONS = ("qp", "rate")
 CORRECTION = "rate"
 #: (qp) the penalty of the correction's moves between knots, relative to its squared size summed over the horizon
 SMOOTH = 0.0
+#: (qp) the largest change of a knot of the plan [V] (a trust region, as the MPC's locked iterations keep)
+TRUST = np.inf
 #: rates whose predicted peaks are within this [A] of the least are ties (the fastest of them is taken)
 _TIE_A = 1e-3
 
@@ -131,7 +133,7 @@ class OracleImitationFilteredPolicy(OracleImitationPolicy):
 
     def __init__(self, ctx: PolicyContext = PolicyContext(), path=PRETRAINED_ORACLE_IMITATION, limit=LIMIT,
                  slow=SLOW, rates=RATES, max_lag=MAX_LAG, lock=LOCK, every_period=EVERY_PERIOD, lam=LAM,
-                 correction=CORRECTION, smooth=SMOOTH):
+                 correction=CORRECTION, smooth=SMOOTH, trust=TRUST):
         self.limit, slow, self.rates, self.max_lag, self.lock = _check(limit, slow, rates, max_lag, lock, ctx)
         if not isinstance(every_period, (bool, np.bool_)):
             raise ValueError(f"every_period={every_period!r} is invalid; valid values: True, False")
@@ -145,6 +147,9 @@ class OracleImitationFilteredPolicy(OracleImitationPolicy):
         if not (np.isfinite(float(smooth)) and float(smooth) >= 0.0):
             raise ValueError(f"smooth={smooth!r} is invalid; valid: a number >= 0 (the move penalty of the correction)")
         self.smooth = float(smooth)
+        if not (float(trust) > 0.0):
+            raise ValueError(f"trust={trust!r} is invalid; valid: a number > 0 [V] (the largest change of a knot)")
+        self.trust = float(trust)
         self._mpc = _shadow_mpc(ctx)   # budget 0: its estimate, floor and predicted rows; its duties are not played
         super().__init__(ctx, path)
         if slow is not None:
@@ -325,8 +330,8 @@ class OracleImitationFilteredPolicy(OracleImitationPolicy):
         self.last_slack = np.zeros(m)   # [A] the least violation each QP kept (0: the limit met)
         for i in range(m):
             Ai = np.concatenate([A[i], -np.ones((rows.shape[1], 1))], axis=1)
-            bu = np.concatenate([vmax[i] - ref[i, knots], [_BIG], lim[i] - rows[i]])
-            bl = np.concatenate([-ref[i, knots], [0.0], np.full(rows.shape[1], -_BIG)])
+            bu = np.concatenate([np.minimum(vmax[i] - ref[i, knots], self.trust), [_BIG], lim[i] - rows[i]])
+            bl = np.concatenate([np.maximum(-ref[i, knots], -self.trust), [0.0], np.full(rows.shape[1], -_BIG)])
             x, _, flag, _ = daqp.solve(H, q, Ai, bu, bl, sense.copy())
             if flag >= 1:
                 out[i] = np.clip(ref[i] + M[:, :f] @ x[:f], 0.0, vmax[i])

@@ -116,7 +116,8 @@ def test_qp_correction_brings_the_predicted_peak_to_its_limit():
     ({"rates": (1.0, -0.5)}, ["rates=(1.0, -0.5)", "[0, 1]"]), ({"max_lag": -1}, ["max_lag=-1", "0..200"]),
     ({"max_lag": 2.5}, ["max_lag=2.5", "0..200"]), ({"lock": "yes"}, ["lock='yes'", "True, False"]),
     ({"every_period": 1}, ["every_period=1", "True, False"]), ({"lam": -1.0}, ["lam=-1.0", ">= 0"]),
-    ({"correction": "mpc"}, ["correction='mpc'", "qp, rate"]), ({"smooth": -2.0}, ["smooth=-2.0", ">= 0"])])
+    ({"correction": "mpc"}, ["correction='mpc'", "qp, rate"]), ({"smooth": -2.0}, ["smooth=-2.0", ">= 0"]),
+    ({"trust": 0.0}, ["trust=0.0", "> 0"])])
 def test_bad_options_are_refused_with_one_line(options, names):
     from policies import make
     with pytest.raises(ValueError) as exc:
