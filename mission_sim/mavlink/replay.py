@@ -357,10 +357,7 @@ def replay_trajectory(track: FlightTrack):
     from ..world.trajectory import Trajectory
 
     class ReplayTrajectory(Trajectory):
-        def propulsion_w(self, drone):
-            p = np.array(super().propulsion_w(drone), dtype=float)
-            p[self.phase == "ground"] = drone.avionics_w
-            return p
+        motors_off_phases = ("ground",)
 
     return ReplayTrajectory.from_samples(track.t_s, track.pos_m, tilt_rad=track.tilt_rad, phase=track.phase())
 
