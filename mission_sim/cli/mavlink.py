@@ -302,30 +302,71 @@ def _cmd_telemetry(args) -> int:
     from ..world.runner import run_mission
     from ..world.trajectory import plan_mission
     check_run_size(cfg, force=args.force, frame=True)   # the stream needs the whole series in memory
-    traj = plan_mission(cfg)
-    res = run_mission(cfg, _mav_policy(cfg, args.policy), trajectory=traj, progress=show_progress(args))
-    st = telemetry.stream(res.timeseries, connect=connect, rate_hz=args.rate, speed=args.speed, home=home,
-                          tlog=args.tlog, duration_s=args.duration, ground_gap_m=cfg.mission.hover_gap_m,
-                          track=(traj.t_s, traj.pos_m, traj.tilt_rad), progress=show_progress(args), sysid=args.sysid,
-                          compid=args.compid)
+    policy = _mav_policy(cfg, args.policy)
+    conn = _open_link(connect, args)                    # refused, port taken: said before the simulation
+    try:
+        traj = plan_mission(cfg)
+        res = run_mission(cfg, policy, trajectory=traj, progress=show_progress(args))
+        st = telemetry.stream(res.timeseries, conn=conn, rate_hz=args.rate, speed=args.speed, home=home,
+                              tlog=args.tlog, duration_s=args.duration, ground_gap_m=cfg.mission.hover_gap_m,
+                              track=(traj.t_s, traj.pos_m, traj.tilt_rad), progress=show_progress(args),
+                              sysid=args.sysid, compid=args.compid)
+    finally:
+        if conn is not None:
+            conn.close()
     print(f"sent {st.frames} MAVLink 2 frames in {st.ticks} ticks at {args.rate:g} Hz: {st.sim_s:.1f} s of the "
           f"mission in {st.wall_s:.1f} s wall to {connect or 'no link'}"
           + (f"; wrote {args.tlog}" if args.tlog else ""))
+    _warn_undelivered(connect, st.frames, st.delivered)
     if res.summary.get("battery_depleted"):
         from .mission import depletion_text
         print(f"dronewpt telemetry: warning: {depletion_text(res.summary)} (the stream ends there)", file=sys.stderr)
     return 0
 
 
+def _open_link(connect, args):
+    """The --connect link opened before any simulation (None for 'none'); CliError naming it."""
+    from ..mavlink import telemetry
+    if connect is None:
+        return None
+    try:
+        return telemetry.open_link(connect, args.sysid, args.compid)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+
+
+def _warn_undelivered(connect, frames: int, delivered: int) -> None:
+    """A listening --connect (udpin, udp, tcpin) that no ground station contacted delivered nothing: say so."""
+    from ..mavlink.telemetry import SERVER_KINDS
+    if connect is None or connect.partition(":")[0] not in SERVER_KINDS or delivered >= frames:
+        return
+    what = ("no ground station contacted it, so nothing was delivered" if delivered == 0 else
+            f"only the last {delivered} of the {frames} frames were delivered (a ground station contacted it late)")
+    print(f"dronewpt telemetry: warning: --connect {connect} listens: {what}; a listening link sends only to a "
+          "ground station that has sent to it first (QGroundControl and MAVProxy listen on UDP 14550 themselves: "
+          "use --connect udpout:HOST:14550)", file=sys.stderr)
+
+
 def _cmd_telemetry_follow(args, connect, home) -> int:
     from ..mavlink import follow
     vin = follow.open_follow(args.follow)  # listen first: the set-up below takes a while
-    cfg = _mav_config(args)
+    try:
+        cfg = _mav_config(args)
+        policy = _mav_policy(cfg, args.policy)
+        out = _open_link(connect, args)
+    except BaseException:
+        vin.close()
+        raise
     from ..world.runner import run_mission
-    st = follow.follow(args.follow, cfg, _mav_policy(cfg, args.policy), run_mission, connect=connect,
-                          rate_hz=args.rate, home=home if args.home else None, tlog=args.tlog,
-                          max_wall_s=args.follow_time, idle_timeout_s=args.follow_idle, in_conn=vin,
-                          sysid=args.sysid, compid=args.compid)
+    try:
+        st = follow.follow(args.follow, cfg, policy, run_mission, out_conn=out,
+                           rate_hz=args.rate, home=home if args.home else None, tlog=args.tlog,
+                           max_wall_s=args.follow_time, idle_timeout_s=args.follow_idle, in_conn=vin,
+                           sysid=args.sysid, compid=args.compid)
+    finally:
+        if out is not None:
+            out.close()
     print(f"followed {st.positions} live positions over {st.wall_s:.1f} s in {st.chunks} chunk(s); sent "
           f"{st.frames} frames to {connect or 'no link'}" + (f"; wrote {args.tlog}" if args.tlog else ""))
+    _warn_undelivered(connect, st.frames, st.delivered)
     return 0
