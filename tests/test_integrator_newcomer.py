@@ -145,3 +145,81 @@ def test_listening_connect_nobody_contacted_warns(capsys):
     assert rc == 0
     assert f"--connect udpin:127.0.0.1:{port} listens: no ground station contacted it, so nothing was delivered" in err
     assert "use --connect udpout:HOST:14550" in err
+
+
+def _tlog_records(path):
+    """(receive time [s], frame bytes) of every record of a .tlog (BAD_DATA included, as it was)."""
+    import os
+    os.environ["MAVLINK20"] = "1"
+    from pymavlink import mavutil
+    m = mavutil.mavlogfile(str(path))
+    out = []
+    while (msg := m.recv_match(blocking=False)) is not None:
+        out.append((msg._timestamp, bytes(msg.get_msgbuf())))
+    return out
+
+
+def _write_tlog(path, records):
+    import struct
+    path.write_bytes(b"".join(struct.pack(">Q", int(round(t * 1e6))) + f for t, f in records))
+    return path
+
+
+@pytest.fixture(scope="module")
+def dronekit_read():
+    """The shipped dronekit tlog as read (its facts agree with pymavlink's: test_mavlink_io) and its records."""
+    from mission_sim.mavlink.logs import read_log
+    path = log_path("dronekit-python_flight.tlog")
+    return read_log(path), _tlog_records(path)
+
+
+@pytest.mark.parametrize("step_s", [-3600.0, -10.0, 3600.0])
+def test_ground_station_clock_set_mid_log(tmp_path, dronekit_read, step_s):
+    """The ground station's clock set back or forward (NTP, a laptop's clock changed) 800 s into the dronekit
+    log, the vehicle's boot clock running on. Set back 1 h, the log ended at 800.6 s (the rest of the flight, 3
+    of its 7 armed periods, gone) with 661 s "armed from the start"; 10 s back gave 10 armed periods and 1380.6 s;
+    1 h forward fitted a 0.996x vehicle clock. Now the step is found (receive minus boot time moving by more
+    than clock.RECV_STEP_S) and taken out: the log reads as the original within 0.2 s."""
+    from mission_sim.mavlink.logs import read_log
+    ref, rec = dronekit_read
+    t0 = rec[0][0]
+    path = _write_tlog(tmp_path / "stepped.tlog", [(t + step_s if t - t0 > 800.0 else t, f) for t, f in rec])
+    log = read_log(path)
+    assert log.duration_s == pytest.approx(ref.duration_s, abs=0.2)
+    assert len(log.armed_periods) == len(ref.armed_periods) == 7
+    np.testing.assert_allclose(np.array(log.armed_periods), np.array(ref.armed_periods), atol=0.2)
+    assert not log.starts_armed
+    assert [round(s.rate, 6) for s in log.clock.segments] == [1.0, 1.0]
+    assert len(log.position) == len(ref.position)
+    np.testing.assert_allclose(log.position["t_s"].to_numpy(), ref.position["t_s"].to_numpy(), atol=0.2)
+    # battery samples (no boot time of their own) in their place: the logged energy over the log is the same
+    e = lambda b: float(np.trapezoid(b["voltage_v"] * b["current_a"], b["t_s"]))  # noqa: E731
+    assert e(log.battery) == pytest.approx(e(ref.battery), rel=2e-3)
+
+
+def test_two_logs_joined_read_and_replay(tmp_path):
+    """Two vehicles' tlogs joined in one file (the SITL VTOL's of 2018, then the dronekit quad's of 2015:
+    the receive clock goes back 3 years at the join). pymavlink's indexing reader failed on it ("the log could
+    not be parsed: AttributeError ... '_instance_field'"); read with the streaming reader, the receive clock
+    going back across the reboot placed the second log 97.7 million s before the first, and the replay tried
+    to allocate 3.6 GiB (the OOM killer ended it without a word). Now each boot follows the last, and a track
+    too long for memory is refused before anything is allocated."""
+    from mission_sim.mavlink.logs import read_log
+    from mission_sim.mavlink.replay import MAX_REPLAY_SAMPLES, FlightTrack, resample_track
+    from mission_sim.mavlink.geodesy import GeoPoint
+    a, b = log_path("uavlogviewer_vtol_sitl.tlog"), log_path("dronekit-python_flight.tlog")
+    joined = tmp_path / "joined.tlog"
+    joined.write_bytes(a.read_bytes() + b.read_bytes())
+    la, lb, lj = read_log(a), read_log(b), read_log(joined)
+    assert not lj.errors
+    assert lj.duration_s == pytest.approx(la.duration_s + lb.duration_s, abs=5.0)
+    armed = lambda lg: sum(e - s for s, e in lg.armed_periods)  # noqa: E731
+    assert armed(lj) == pytest.approx(armed(la) + armed(lb), abs=0.5)
+    assert lj.position["t_s"].min() == pytest.approx(la.position["t_s"].min(), abs=1e-6)   # nothing moved before
+    # the guard itself: a track of 10 years on the 0.2 s grid is refused, naming --window
+    t = np.array([0.0, 10 * 365.25 * 86400])
+    track = FlightTrack(t_s=t, pos_m=np.zeros((2, 3)), tilt_rad=np.zeros(2), height_m=np.zeros(2), t_offset_s=0.0,
+                        pad=GeoPoint(0.0, 0.0, 0.0), ground_gap_m=0.0, armed=np.ones(2, bool), n_tilt_clipped=0)
+    with pytest.raises(ValueError, match=r"more than the 21\.9 h that fit in memory .* --window T0,T1"):
+        resample_track(track, 0.2)
+    assert MAX_REPLAY_SAMPLES * 0.2 > 20 * 3600            # a long real log still replays

@@ -179,6 +179,11 @@ def track_from_log(log: FlightLog, pad: GeoPoint | None = None, ground_gap_m: fl
                        n_tilt_clipped=clipped)
 
 
+#: trajectory samples a replay may hold: each costs a sample (world.budget.SAMPLE_BYTES) and a row of the time series
+#: held whole (world.budget.ROW_MEMORY_BYTES) within world.budget.MAX_MEMORY_BYTES (~395,000: 22 h at 0.2 s)
+MAX_REPLAY_SAMPLES = 395_000
+
+
 def resample_track(track: FlightTrack, dt_s: float) -> FlightTrack:
     """The track on a uniform grid of ``dt_s`` (linear interpolation; armed state held).
 
@@ -188,7 +193,12 @@ def resample_track(track: FlightTrack, dt_s: float) -> FlightTrack:
     """
     if not (np.isfinite(dt_s) and dt_s > 0):
         raise ValueError(f"dt_s={dt_s!r} is invalid; valid range: (0, inf) s")
-    t = np.arange(0.0, float(track.t_s[-1]), dt_s)
+    span = float(track.t_s[-1])
+    if span / dt_s > MAX_REPLAY_SAMPLES:   # before allocating: a joined or mis-stamped log may span years
+        raise ValueError(f"the replayed track spans {span:.6g} s ({span / 3600:.3g} h; from {track.t_offset_s:.6g} s "
+                         f"of the log), more than the {MAX_REPLAY_SAMPLES * dt_s / 3600:.3g} h that fit in memory at "
+                         f"sim.traj_dt_s={dt_s:g}; valid: a part of it, --window T0,T1 (or --segment N)")
+    t = np.arange(0.0, span, dt_s)
     t = np.append(t[t < track.t_s[-1] - 1e-9], track.t_s[-1])
     pos = np.column_stack([np.interp(t, track.t_s, track.pos_m[:, i]) for i in range(3)])
     held = np.clip(np.searchsorted(track.t_s, t, side="right") - 1, 0, len(track.t_s) - 1)
