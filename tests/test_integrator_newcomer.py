@@ -223,3 +223,43 @@ def test_two_logs_joined_read_and_replay(tmp_path):
     with pytest.raises(ValueError, match=r"more than the 21\.9 h that fit in memory .* --window T0,T1"):
         resample_track(track, 0.2)
     assert MAX_REPLAY_SAMPLES * 0.2 > 20 * 3600            # a long real log still replays
+
+
+def _wpl(path, rows, home=(-35.363262, 149.165237, 584.09), bom=False):
+    """A QGC WPL 110 file: home, then rows of (frame, command, p1, p2, p3, p4, lat, lon, alt)."""
+    lines = ["QGC WPL 110", f"0\t1\t0\t16\t0\t0\t0\t0\t{home[0]:.7f}\t{home[1]:.7f}\t{home[2]:.3f}\t1"]
+    lines += ["\t".join([str(i), "0", *map(str, r[:6]), f"{r[6]:.7f}", f"{r[7]:.7f}", f"{r[8]:.3f}", "1"])
+              for i, r in enumerate(rows, 1)]
+    path.write_bytes(("\ufeff" if bom else "").encode() + ("\r\n".join(lines) + "\r\n").encode())
+    return path
+
+
+def test_far_waypoint_names_the_row_not_an_internal_key(tmp_path, capsys):
+    """A waypoint 225 km from home (Canberra to Sydney) said ``mission.land_x_m=166763.8 is invalid; valid range:
+    [-100000, 100000] m``: a key the user never wrote. Now the file, the row and the distance (as pads already did)."""
+    from mission_sim.cli import main
+    f = _wpl(tmp_path / "far.waypoints", [(3, 22, 0, 0, 0, 0, 0, 0, 30), (3, 16, 0, 0, 0, 0, -34.0, 151.0, 30),
+                                           (3, 21, 0, 0, 0, 0, -34.0, 151.0, 0)])
+    rc = main(["mission", "--plan", str(f), "--dry-run"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1
+    assert "far.waypoints: row 2: (-34, 151) is 225 km from home; valid: within 100 km of home" in err[0]
+
+
+def test_mission_file_with_a_byte_order_mark(tmp_path):
+    """A .waypoints or .plan saved by a Windows editor starts with a UTF-8 byte order mark: it was "not a mission
+    file" (the .plan: "malformed JSON"). Now it reads as the same file without it."""
+    import json
+
+    from mission_sim.plans.items import read_mission
+    rows = [(3, 22, 0, 0, 0, 0, 0, 0, 20), (3, 16, 0, 0, 0, 0, -35.3625, 149.1655, 20), (3, 21, 0, 0, 0, 0, 0, 0, 0)]
+    plain = read_mission(_wpl(tmp_path / "a.waypoints", rows))
+    with_bom = read_mission(_wpl(tmp_path / "b.waypoints", rows, bom=True))
+    assert with_bom.items == plain.items and with_bom.home == plain.home and len(plain.items) == 3
+    plan = {"fileType": "Plan", "mission": {"items": [
+        {"type": "SimpleItem", "command": 22, "frame": 3, "params": [0, 0, 0, None, 0, 0, 20]},
+        {"type": "SimpleItem", "command": 16, "frame": 3, "params": [0, 0, 0, None, -35.3625, 149.1655, 20]}],
+        "plannedHomePosition": [-35.363262, 149.165237, 584.09]}, "version": 1}
+    (tmp_path / "a.plan").write_text(json.dumps(plan))
+    (tmp_path / "b.plan").write_bytes(b"\xef\xbb\xbf" + json.dumps(plan).encode())
+    assert repr(read_mission(tmp_path / "b.plan").items) == repr(read_mission(tmp_path / "a.plan").items)   # nan params

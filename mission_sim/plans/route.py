@@ -32,6 +32,7 @@ __all__ = ["apply_mission_files", "mission_home", "route_from_items", "pads_to_l
 DO_CHANGE_SPEED = 178
 CHARGE_CLEARANCE_M = 1.0   # a loiter becomes a charging hover only this far above the pad (it descends to it)
 RTL_ALT_M = 15.0   # ArduCopter's RTL_ALT default (1500 cm): RTL climbs to at least this height
+MAX_FROM_HOME_M = 100e3   # items farther from home than this are refused (the config's positions: within 1e5 m)
 #: commands that do not move the vehicle: CONDITION_YAW, DO_SET_RELAY, DO_REPEAT_RELAY, DO_SET_SERVO,
 #: DO_REPEAT_SERVO, DO_SET_ROI_LOCATION, DO_SET_ROI_NONE, DO_CONTROL_VIDEO, DO_SET_ROI,
 #: DO_DIGICAM_CONFIGURE, DO_DIGICAM_CONTROL, DO_MOUNT_CONFIGURE, DO_MOUNT_CONTROL,
@@ -83,6 +84,9 @@ class _Builder:
             except ValueError as exc:
                 self.fail(it, str(exc))
             x, y = float(e), float(n)
+            if math.hypot(x, y) > MAX_FROM_HOME_M:   # the pad frame is a tangent plane about home
+                self.fail(it, f"({it.lat_deg:g}, {it.lon_deg:g}) is {math.hypot(x, y) / 1e3:.0f} km from home; valid: "
+                              f"within {MAX_FROM_HOME_M / 1e3:g} km of home (a longer route: one mission per part)")
         if math.isnan(it.alt_m) or it.alt_m == 0:
             return x, y, self.z
         z = it.alt_m - home.alt_m if it.frame in _AMSL_FRAMES else it.alt_m
