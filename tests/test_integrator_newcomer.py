@@ -4,6 +4,8 @@ streaming telemetry to a ground station found, each case a test that failed befo
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -263,3 +265,28 @@ def test_mission_file_with_a_byte_order_mark(tmp_path):
     (tmp_path / "a.plan").write_text(json.dumps(plan))
     (tmp_path / "b.plan").write_bytes(b"\xef\xbb\xbf" + json.dumps(plan).encode())
     assert repr(read_mission(tmp_path / "b.plan").items) == repr(read_mission(tmp_path / "a.plan").items)   # nan params
+
+
+def test_telemetry_streams_your_own_mission_file(tmp_path, capsys):
+    """``telemetry`` had no --plan / --pads (``mission`` has): an integrator streaming their own QGC plan needed a
+    TOML with a [mission] file (and ``--set mission.file=...`` was laid over the config after its route was read,
+    so the default route was streamed about the file's home). Now the stream flies the plan about its home."""
+    import os
+
+    from mission_sim.cli import main
+    plan = Path(__file__).resolve().parent / "data" / "missions" / "qgc_simple_square.plan"
+    tlog = tmp_path / "square.tlog"
+    rc = main(["telemetry", "--plan", str(plan), "--connect", "none", "--tlog", str(tlog), "--speed", "inf",
+               "--no-progress"])
+    assert rc == 0, capsys.readouterr().err
+    os.environ["MAVLINK20"] = "1"
+    from pymavlink import mavutil
+    m = mavutil.mavlogfile(str(tlog))
+    pos = []
+    while (g := m.recv_match(type="GLOBAL_POSITION_INT", blocking=False)) is not None:
+        pos.append((g.lat * 1e-7, g.lon * 1e-7, g.relative_alt * 1e-3))
+    pos = np.array(pos)
+    assert np.abs(pos[0, :2] - [47.397742, 8.545594]).max() < 1e-4          # starts at the plan's home (Zurich)
+    assert pos[:, 2].max() == pytest.approx(20.0, abs=0.5)                   # the plan's 20 m above home
+    north_m = (pos[:, 0] - pos[0, 0]) * 111_200
+    assert north_m.max() - north_m.min() > 50                                # it flies the square

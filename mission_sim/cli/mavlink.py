@@ -43,9 +43,12 @@ def _mav_speed(text):
 
 
 def _mav_config(args, overrides=None, single_pad=False):
-    """Mission config from --config, --set and ``overrides``; ``single_pad``: one pad at the origin."""
-    from ..config import apply_overrides, config_from_dict, config_to_dict, load_config
-    d = config_to_dict(load_config(args.config))
+    """Mission config from --config (with telemetry's --plan / --pads: the mission and pads files), --set and
+    ``overrides``; ``single_pad``: one pad at the origin."""
+    from ..config import apply_overrides, config_from_dict, load_config_dict
+    from .mission import mission_file_keys
+    d = load_config_dict(args.config, getattr(args, "plan", None), getattr(args, "mission_pads", None),
+                         mission_file_keys(parse_set(args.set)))
     if single_pad:
         d["pads"] = [{"x_m": 0.0, "y_m": 0.0, "z_m": 0.0}]
     drone = {}
@@ -261,6 +264,8 @@ def _add_telemetry(sub):
                    "pad of its pads file, else ArduPilot SITL home, CMAC: --home=-35.363261,149.165230,584)")
     p.add_argument("--duration", type=positive_float("duration"), default=None, metavar="S",
                    help="stream at most S simulated seconds (default: the whole mission)")
+    from .mission import add_plan_args
+    add_plan_args(p, pads_dest="mission_pads")
     p.add_argument("--follow", default=None, metavar="udpin:HOST:PORT",
                    help="drive the simulation from a live vehicle's GLOBAL_POSITION_INT instead of the plan")
     p.add_argument("--follow-time", type=float_arg("follow-time", positive=True, hi=7 * 86400), default=60.0,
