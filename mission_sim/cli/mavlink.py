@@ -341,15 +341,21 @@ def _open_link(connect, args):
 
 
 def _warn_undelivered(connect, frames: int, delivered: int) -> None:
-    """A listening --connect (udpin, udp, tcpin) that no ground station contacted delivered nothing: say so."""
+    """Frames that did not reach a ground station on --connect: a listening link (udpin, udp, tcpin) that no
+    ground station contacted, a TCP ground station that closed the connection. One warning line."""
     from ..mavlink.telemetry import SERVER_KINDS
-    if connect is None or connect.partition(":")[0] not in SERVER_KINDS or delivered >= frames:
+    if connect is None or delivered >= frames:
         return
-    what = ("no ground station contacted it, so nothing was delivered" if delivered == 0 else
-            f"only the last {delivered} of the {frames} frames were delivered (a ground station contacted it late)")
-    print(f"dronewpt telemetry: warning: --connect {connect} listens: {what}; a listening link sends only to a "
-          "ground station that has sent to it first (QGroundControl and MAVProxy listen on UDP 14550 themselves: "
-          "use --connect udpout:HOST:14550)", file=sys.stderr)
+    listens = connect.partition(":")[0] in SERVER_KINDS
+    if delivered == 0 and listens:
+        what = "it listens and no ground station contacted it, so nothing was delivered"
+    else:
+        what = (f"{frames - delivered} of the {frames} frames were not delivered ("
+                + ("no ground station had contacted it yet)" if listens else
+                   "the ground station closed the connection, or read too slowly)"))
+    hint = ("; a listening link sends only to a ground station that has sent to it first (QGroundControl and "
+            "MAVProxy listen on UDP 14550 themselves: use --connect udpout:HOST:14550)") if listens else ""
+    print(f"dronewpt telemetry: warning: --connect {connect}: {what}{hint}", file=sys.stderr)
 
 
 def _cmd_telemetry_follow(args, connect, home) -> int:

@@ -30,7 +30,7 @@ import numpy as np
 from .geodesy import GeoPoint, geodetic_to_enu
 from .logs import mavutil
 from .telemetry import (TlogWriter, check_connect, check_ids, drawn_totals, encode_tick, heartbeat_msgs,
-                        landing_rows, link_has_peer, mavlink_table, open_link, schedule, send_msgs)
+                        landing_rows, mavlink_table, open_link, schedule, send_msgs)
 
 __all__ = ["FollowStats", "open_follow", "follow", "ChunkedMission", "WARM_S"]
 
@@ -48,7 +48,7 @@ class FollowStats:
     wall_s: float
     final_soc: float | None
     home: GeoPoint | None
-    delivered: int = 0      # frames written while the out link had a peer (telemetry.link_has_peer)
+    delivered: int = 0      # frames that went to a peer on the out link (telemetry.write_frame)
 
 
 def _chunk_config(cfg, soc):
@@ -194,9 +194,9 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
         while queue and wall0 + queue[0][0] <= now:
             t_send, row, hb = queue.pop(0)
             msgs = heartbeat_msgs(mav, row) if hb else encode_tick(mav, row)
-            n = send_msgs(mav, msgs, out, writer, epoch0 + t_send - chunk_s)
+            n, n_out = send_msgs(mav, msgs, out, writer, epoch0 + t_send - chunk_s)
             frames += n
-            delivered += n if out is not None and link_has_peer(out) else 0
+            delivered += n_out
 
     try:
         while n_msgs < max_messages and time.monotonic() < wall0 + max_wall_s \

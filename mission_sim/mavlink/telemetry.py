@@ -67,7 +67,7 @@ from .logs import mavutil
 
 __all__ = ["DEFAULT_HOME", "TlogWriter", "mavlink_table", "encode_tick", "encode_heartbeat", "stream", "StreamStats",
            "check_connect", "check_ids", "CONNECT_FORMAT", "NVF_NAMES", "COPTER_MODES", "schedule", "drawn_totals",
-           "gps_quality", "heartbeat_msgs", "landing_rows", "open_link", "link_has_peer", "SERVER_KINDS"]
+           "gps_quality", "heartbeat_msgs", "landing_rows", "open_link", "link_has_peer", "write_frame", "SERVER_KINDS"]
 
 #: ArduPilot SITL's default home (CMAC, Canberra), where two of the real logs were flown.
 DEFAULT_HOME = GeoPoint(-35.363261, 149.165230, 584.0)
@@ -354,19 +354,38 @@ def _cells_mv(voltage_mv: int) -> list[int]:
     return cells + [_UINT16_MAX] * (10 - len(cells))
 
 
-def send_msgs(mav, msgs, conn, writer, t_log_s: float) -> int:
+def write_frame(conn, frame: bytes) -> bool:
+    """Write one frame on ``conn``; whether it went to a peer (:func:`link_has_peer`). A TCP ground station
+    that has closed the connection is written to no more: pymavlink printed "Connection reset or closed by
+    peer on TCP socket" on stdout for every frame after it (4,279 lines in a 30 s stream)."""
+    if isinstance(conn, mavutil().mavtcp):
+        if getattr(conn, "peer_closed", False):
+            return False
+        try:
+            return conn.port.send(frame) == len(frame)
+        except BlockingIOError:             # the ground station reads slower than we send: this frame is lost
+            return False
+        except OSError:                      # EPIPE, ECONNRESET: it went away
+            conn.peer_closed = True
+            return False
+    conn.write(frame)
+    return link_has_peer(conn)
+
+
+def send_msgs(mav, msgs, conn, writer, t_log_s: float) -> tuple[int, int]:
     """Pack and send each message on ``conn`` and log it to ``writer`` (either may be None) with
-    timestamp ``t_log_s`` [s since the epoch]; returns the number of frames. A listening ``conn``
-    is read first (:func:`poll_link`)."""
+    timestamp ``t_log_s`` [s since the epoch]; returns the number of frames and of those delivered to a
+    peer on ``conn`` (:func:`write_frame`). A listening ``conn`` is read first (:func:`poll_link`)."""
     poll_link(conn)
+    delivered = 0
     for msg in msgs:
         frame = msg.pack(mav)
         mav.seq = (mav.seq + 1) % 256
         if conn is not None:
-            conn.write(frame)
+            delivered += write_frame(conn, frame)
         if writer is not None:
             writer.write(frame, t_log_s)
-    return len(msgs)
+    return len(msgs), delivered
 
 
 def encode_heartbeat(mav, row):
@@ -452,7 +471,7 @@ class StreamStats:
     sim_s: float
     wall_s: float
     counts: dict
-    delivered: int = 0      # frames written while the link had a peer (:func:`link_has_peer`)
+    delivered: int = 0      # frames that went to a peer (:func:`write_frame`)
 
 
 #: slowest pacing, simulated seconds per wall second (a slower one waits past what time.sleep takes:
@@ -521,9 +540,9 @@ def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.
                 if delay > 0:
                     time.sleep(min(delay, 1.0 / speed + 1.0))
             msgs = heartbeat_msgs(mav, row) if hb else encode_tick(mav, row)
-            n = send_msgs(mav, msgs, conn, writer, epoch0 + sim_s)
+            n, n_out = send_msgs(mav, msgs, conn, writer, epoch0 + sim_s)
             frames += n
-            delivered += n if conn is not None and link_has_peer(conn) else 0
+            delivered += n_out
             for msg in msgs:
                 counts[msg.get_type()] = counts.get(msg.get_type(), 0) + 1
             if bar is not None and not hb:
