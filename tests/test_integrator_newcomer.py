@@ -329,3 +329,20 @@ def test_tcp_ground_station_going_away(capsys):
     assert "Connection reset" not in out and "closed by peer" not in out
     assert st.ticks == 41 and 0 < st.delivered < 0.5 * st.frames
     assert len(b"".join(got)) > 0
+
+
+def test_position_gap_while_armed_is_warned(tmp_path, dronekit_read):
+    """100 s of the dronekit flight cut out of its tlog (a radio out of range): the replay flew a straight line
+    across the gap without a word. Now a warning names the gap; the shipped logs (gaps <= 5.3 s) give none."""
+    from mission_sim.mavlink.logs import read_log
+    from mission_sim.mavlink.replay import replay_span, replay_warnings, track_from_log
+
+    def gap_warnings(log):
+        window, _ = replay_span(log, None, None)
+        return [w for w in replay_warnings(log, track_from_log(log, window=window)) if "no position" in w]
+    ref, rec = dronekit_read
+    t0 = rec[0][0]
+    log = read_log(_write_tlog(tmp_path / "gap.tlog", [(t, f) for t, f in rec if not 600 < t - t0 < 700]))
+    w = gap_warnings(log)
+    assert len(w) == 1 and "gap.tlog: no position for 101.2 s while armed (log 599.1..700.3 s)" in w[0]
+    assert gap_warnings(ref) == []

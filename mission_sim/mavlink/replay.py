@@ -385,6 +385,7 @@ class ReplayResult:
 
 
 FAR_PAD_M = 10_000.0  # a pad farther than this from the whole track is almost surely a wrong --pad
+GAP_WARN_S = 10.0     # positions missing longer than this while armed: the replay invents a straight line
 
 
 def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
@@ -400,6 +401,13 @@ def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
     if not np.any(track.armed):
         out.append(f"{log.path.name}: the vehicle never armed in the replayed part: the track is marked NOT FLOWN "
                    "(its distance and height are GPS drift on the ground; nothing here was a flight)")
+    gaps = np.flatnonzero((np.diff(track.t_s) > GAP_WARN_S) & track.armed[:-1] & track.armed[1:])
+    if len(gaps):
+        i = int(gaps[np.argmax(np.diff(track.t_s)[gaps])])
+        t0, t1 = track.t_offset_s + float(track.t_s[i]), track.t_offset_s + float(track.t_s[i + 1])
+        out.append(f"{log.path.name}: no position for {t1 - t0:.1f} s while armed (log {t0:.1f}..{t1:.1f} s"
+                   + (f"; {len(gaps)} such gaps" if len(gaps) > 1 else "") + "): the replay flies a straight line "
+                   "across it; --window can leave it out")
     dist = float(np.min(np.hypot(track.pos_m[:, 0], track.pos_m[:, 1])))
     if dist > FAR_PAD_M:
         out.append(f"the pad ({track.pad.lat_deg:.6f}, {track.pad.lon_deg:.6f}) is {dist / 1e3:.0f} km from the "
