@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from _flightlogs import log_path
+from _flightlogs import log_path, tlog_records, write_tlog
 from mission_sim.config import load_config
 
 
@@ -149,30 +149,12 @@ def test_listening_connect_nobody_contacted_warns(capsys):
     assert "use --connect udpout:HOST:14550" in err
 
 
-def _tlog_records(path):
-    """(receive time [s], frame bytes) of every record of a .tlog (BAD_DATA included, as it was)."""
-    import os
-    os.environ["MAVLINK20"] = "1"
-    from pymavlink import mavutil
-    m = mavutil.mavlogfile(str(path))
-    out = []
-    while (msg := m.recv_match(blocking=False)) is not None:
-        out.append((msg._timestamp, bytes(msg.get_msgbuf())))
-    return out
-
-
-def _write_tlog(path, records):
-    import struct
-    path.write_bytes(b"".join(struct.pack(">Q", int(round(t * 1e6))) + f for t, f in records))
-    return path
-
-
 @pytest.fixture(scope="module")
 def dronekit_read():
     """The shipped dronekit tlog as read (its facts agree with pymavlink's: test_mavlink_io) and its records."""
     from mission_sim.mavlink.logs import read_log
     path = log_path("dronekit-python_flight.tlog")
-    return read_log(path), _tlog_records(path)
+    return read_log(path), tlog_records(path)
 
 
 @pytest.mark.parametrize("step_s", [-3600.0, -10.0, 3600.0])
@@ -185,7 +167,7 @@ def test_ground_station_clock_set_mid_log(tmp_path, dronekit_read, step_s):
     from mission_sim.mavlink.logs import read_log
     ref, rec = dronekit_read
     t0 = rec[0][0]
-    path = _write_tlog(tmp_path / "stepped.tlog", [(t + step_s if t - t0 > 800.0 else t, f) for t, f in rec])
+    path = write_tlog(tmp_path / "stepped.tlog", [(t + step_s if t - t0 > 800.0 else t, f) for t, f in rec])
     log = read_log(path)
     assert log.duration_s == pytest.approx(ref.duration_s, abs=0.2)
     assert len(log.armed_periods) == len(ref.armed_periods) == 7
@@ -342,7 +324,7 @@ def test_position_gap_while_armed_is_warned(tmp_path, dronekit_read):
         return [w for w in replay_warnings(log, track_from_log(log, window=window)) if "no position" in w]
     ref, rec = dronekit_read
     t0 = rec[0][0]
-    log = read_log(_write_tlog(tmp_path / "gap.tlog", [(t, f) for t, f in rec if not 600 < t - t0 < 700]))
+    log = read_log(write_tlog(tmp_path / "gap.tlog", [(t, f) for t, f in rec if not 600 < t - t0 < 700]))
     w = gap_warnings(log)
     assert len(w) == 1 and "gap.tlog: no position for 101.2 s while armed (log 599.1..700.3 s)" in w[0]
     assert gap_warnings(ref) == []
