@@ -328,3 +328,25 @@ def test_position_gap_while_armed_is_warned(tmp_path, dronekit_read):
     w = gap_warnings(log)
     assert len(w) == 1 and "gap.tlog: no position for 101.2 s while armed (log 599.1..700.3 s)" in w[0]
     assert gap_warnings(ref) == []
+
+
+def test_follow_places_the_pads_of_a_pads_file(tmp_path, monkeypatch):
+    """``telemetry --follow`` with a pads file (``--pads``, or a config's [mission] pads_file) took the live
+    vehicle's first position as the pad frame's origin, while the pads were placed about the file's first pad: a
+    vehicle taking off 50 m from the pad was simulated as if the pad were where it took off. Now the frame is the
+    file's, as in a streamed mission."""
+    from mission_sim.cli import main
+    from mission_sim.mavlink import follow
+    pads = tmp_path / "pads.csv"
+    pads.write_text("lat,lon,hover_time_s\n-35.3620800,149.1658531,60\n")
+    seen = {}
+
+    def fake_follow(*a, **kw):
+        seen.update(kw)
+        return follow.FollowStats(positions=0, chunks=0, frames=0, wall_s=0.0, final_soc=None, home=kw["home"])
+    monkeypatch.setattr(follow, "follow", fake_follow)
+    monkeypatch.setattr(follow, "open_follow", lambda connect: type("C", (), {"close": lambda self: None})())
+    assert main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--pads", str(pads), "--connect", "none",
+                 "--tlog", str(tmp_path / "f.tlog")]) == 0
+    assert seen["home"] is not None
+    assert (seen["home"].lat_deg, seen["home"].lon_deg) == pytest.approx((-35.36208, 149.1658531))

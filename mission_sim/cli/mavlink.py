@@ -364,6 +364,9 @@ def _cmd_telemetry_follow(args, connect, home) -> int:
     try:
         cfg = _mav_config(args)
         policy = _mav_policy(cfg, args.policy)
+        if not args.home:   # a mission or pads file places the pads on Earth; else the first position is the pad
+            from ..plans.route import mission_home
+            home = mission_home(cfg.mission)
         out = _open_link(connect, args)
     except BaseException:
         vin.close()
@@ -371,7 +374,7 @@ def _cmd_telemetry_follow(args, connect, home) -> int:
     from ..world.runner import run_mission
     try:
         st = follow.follow(args.follow, cfg, policy, run_mission, out_conn=out,
-                           rate_hz=args.rate, home=home if args.home else None, tlog=args.tlog,
+                           rate_hz=args.rate, home=home, tlog=args.tlog,
                            max_wall_s=args.follow_time, idle_timeout_s=args.follow_idle, in_conn=vin,
                            sysid=args.sysid, compid=args.compid)
     finally:
