@@ -350,3 +350,17 @@ def test_follow_places_the_pads_of_a_pads_file(tmp_path, monkeypatch):
                  "--tlog", str(tmp_path / "f.tlog")]) == 0
     assert seen["home"] is not None
     assert (seen["home"].lat_deg, seen["home"].lon_deg) == pytest.approx((-35.36208, 149.1658531))
+
+
+def test_replay_pads_far_from_the_log_names_the_file(tmp_path, capsys):
+    """``replay LOG --pads pads.csv`` with the pads of another site (Canberra pads, a Norwegian PX4 log) said
+    ``pads.0.x_m=6930816.3 is invalid; valid range: [-100000, 100000] m``; now the file, the pad and the distance,
+    as for a mission's pads file (one check, ``plans.route.pads_to_local``)."""
+    from mission_sim.cli import main
+    pads = tmp_path / "pads.csv"
+    pads.write_text("lat,lon,hover_time_s\n-35.3620800,149.1658531,60\n")
+    rc = main(["replay", str(log_path("pyulog_sample_log_small.ulg")), "--pads", str(pads), "--out",
+               str(tmp_path / "out"), "--no-progress", "--no-plot"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1
+    assert "pads.csv: pad 0 is 13011 km from the replay's pad frame origin" in err[0] and "within 100 km" in err[0]
