@@ -364,3 +364,21 @@ def test_replay_pads_far_from_the_log_names_the_file(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1
     assert "pads.csv: pad 0 is 13011 km from the replay's pad frame origin" in err[0] and "within 100 km" in err[0]
+
+
+def test_a_stalled_sender_is_no_clock_step(dronekit_read):
+    """The step detection keeps only steps that persist: 10 s of frames held back and delivered in one burst (a radio
+    fade, a stalled ground-station process) are no step of the receive clock; the log reads as before."""
+    from mission_sim.mavlink.clock import fit_clock
+    rng = np.random.default_rng(1)
+    boot = np.arange(0.0, 600.0, 0.25)
+    recv = boot + 3.0 + 0.05 * rng.random(len(boot))
+    stalled = (boot >= 300) & (boot < 310)
+    recv[stalled] = 310.0 + 3.0                            # held back, then all at once
+    cm = fit_clock(np.arange(len(boot)), recv, boot)
+    assert cm.segments[0].steps == ()
+    stepped = recv + np.where(boot >= 400, -3600.0, 0.0)   # the same with the clock set back 1 h at 400 s
+    cm = fit_clock(np.arange(len(boot)), stepped, boot)
+    assert len(cm.segments[0].steps) == 1 and cm.segments[0].steps[0][4] == pytest.approx(-3600.0, abs=0.1)
+    t = cm.map(np.arange(len(boot)), stepped)
+    assert np.abs(t - recv)[~stalled].max() < 0.01           # receive times with the step taken out (to its median)

@@ -197,13 +197,16 @@ def _recv_steps(rec: np.ndarray, recv: np.ndarray, boot: np.ndarray) -> tuple:
     if len(rec) < 2:
         return ()
     d = pd.Series(recv - boot).rolling(5, center=True, min_periods=1).median().to_numpy()
-    cuts = np.flatnonzero(np.abs(np.diff(d)) > RECV_STEP_S) + 1
-    if not len(cuts):
-        return ()
-    bounds = [0, *cuts.tolist(), len(rec)]
-    med = [float(np.median(recv[i:j] - boot[i:j])) for i, j in zip(bounds[:-1], bounds[1:])]
-    return tuple((int(rec[c - 1]), float(recv[c - 1]), int(rec[c]), float(recv[c]), med[n + 1] - med[n])
-                 for n, c in enumerate(cuts))
+    cuts = (np.flatnonzero(np.abs(np.diff(d)) > RECV_STEP_S) + 1).tolist()
+    while cuts:   # a step persists: the levels (medians) on either side differ; a sender's stall and catch-up do not
+        bounds = [0, *cuts, len(rec)]
+        med = [float(np.median(recv[i:j] - boot[i:j])) for i, j in zip(bounds[:-1], bounds[1:])]
+        keep = [c for n, c in enumerate(cuts) if abs(med[n + 1] - med[n]) > RECV_STEP_S]
+        if keep == cuts:
+            return tuple((int(rec[c - 1]), float(recv[c - 1]), int(rec[c]), float(recv[c]), med[n + 1] - med[n])
+                         for n, c in enumerate(cuts))
+        cuts = keep
+    return ()
 
 
 def fit_clock(rec, recv, boot) -> ClockMap:
