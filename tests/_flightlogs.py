@@ -21,7 +21,7 @@ DATA_DIR = Path(__file__).resolve().parent / "data" / "flightlogs"
 #: tests/conftest.py runs them under :func:`log_guard`, tests/test_mavlink_selfcontained.py checks the list
 LOG_TESTS = ("test_mavlink_io.py", "test_cli_replay_errors.py", "test_replay_integration.py",
              "test_mavlink_armed.py", "test_mavlink_ulog.py", "test_telemetry_loopback.py", "test_mavlink_clock.py",
-             "test_calibrate.py")
+             "test_calibrate.py", "test_integrator_newcomer.py")
 LOG_SUFFIXES = (".tlog", ".bin", ".ulg", "SOURCES.md")
 
 
@@ -134,3 +134,20 @@ def dataflash_records(data: bytes):
             lengths[t], names[t] = length, name.rstrip(b"\0").decode("ascii", "replace")
         yield off, names[typ], lengths[typ]
         off += lengths[typ]
+
+
+def tlog_records(path) -> list[tuple[float, bytes]]:
+    """(receive time [s], frame bytes) of every record of a .tlog, by pymavlink."""
+    os.environ["MAVLINK20"] = "1"
+    from pymavlink import mavutil
+    m = mavutil.mavlink_connection(str(path))
+    out = []
+    while (msg := m.recv_match(blocking=False)) is not None:
+        out.append((msg._timestamp, bytes(msg.get_msgbuf())))
+    return out
+
+
+def write_tlog(path: Path, records) -> Path:
+    """A .tlog of ``records`` (receive time [s], frame bytes): 8-byte big-endian microseconds, then the frame."""
+    path.write_bytes(b"".join(struct.pack(">Q", int(round(t * 1e6))) + f for t, f in records))
+    return path

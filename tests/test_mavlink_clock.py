@@ -5,14 +5,12 @@ Data: tests/data/telemetry (the project's own ``telemetry --speed 3`` stream, as
 as MAVProxy recorded it; see the README there) and the dronekit tlog of tests/data/flightlogs.
 """
 
-import os
-import struct
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from _flightlogs import log_path
+from _flightlogs import log_path, tlog_records, write_tlog
 from mission_sim.mavlink.clock import fit_clock
 from mission_sim.mavlink.logs import read_log
 from mission_sim.mavlink.replay import flight_stats, replay_log, replay_span, replay_warnings, track_from_log
@@ -22,28 +20,12 @@ ONE_X = TELEMETRY / "telemetry_1x.tlog"
 MAVPROXY_3X = TELEMETRY / "mavproxy_speed3.tlog"
 
 
-def _records(path):
-    """(receive time [s], frame bytes) of every record of a .tlog, by pymavlink."""
-    os.environ["MAVLINK20"] = "1"
-    from pymavlink import mavutil
-    m = mavutil.mavlink_connection(str(path))
-    out = []
-    while (msg := m.recv_match(blocking=False)) is not None:
-        out.append((msg._timestamp, bytes(msg.get_msgbuf())))
-    return out
-
-
-def _write(path, records):
-    path.write_bytes(b"".join(struct.pack(">Q", int(round(t * 1e6))) + f for t, f in records))
-    return path
-
-
 def _restamp(src, dst, speed, shift_s=0.0):
     """The tlog as a ground station would have recorded a vehicle whose clock runs ``speed`` x faster:
     receive times compressed by ``speed`` about the first record (time_boot_ms untouched)."""
-    rec = _records(src)
+    rec = tlog_records(src)
     t0 = rec[0][0]
-    return _write(dst, [(t0 + shift_s + (t - t0) / speed, f) for t, f in rec])
+    return write_tlog(dst, [(t0 + shift_s + (t - t0) / speed, f) for t, f in rec])
 
 
 @pytest.fixture(scope="module")
@@ -118,10 +100,10 @@ def test_mavproxy_recording_of_speed3_stream_replays_like_1x(cfg_policy, one_x):
 def test_reboot_splits_the_log_and_one_segment_is_replayed(tmp_path, cfg_policy, one_x):
     """Two boots in one tlog (the vehicle restarts 30 s after the first stream ends; its clock
     restarts at 1 s): two segments, each with the 1x energy; the replay names the segment it flies."""
-    rec = _records(ONE_X)
+    rec = tlog_records(ONE_X)
     t_end = rec[-1][0]
     second = [(t + (t_end - rec[0][0]) + 30.0, f) for t, f in rec]
-    path = _write(tmp_path / "reboot.tlog", rec + second)
+    path = write_tlog(tmp_path / "reboot.tlog", rec + second)
     log = read_log(path)
     assert log.reboots == 1 and len(log.segments) == 2
     (a0, b0), (a1, b1) = log.segments
@@ -147,8 +129,8 @@ def test_never_armed_log_is_marked_not_flown_and_reboot_step_rejected(tmp_path):
     """Issue 24: the first 30 % of the dronekit tlog never arms ("1833 m flown, max 589.2 m above the
     pad" before). The estimator's altitudes without a GPS origin (0.22 m AMSL beside GPS fixes at
     ~590 m) are rejected, and the track is marked not flown."""
-    rec = _records(log_path("dronekit-python_flight.tlog"))
-    path = _write(tmp_path / "first30.tlog", rec[:int(0.3 * len(rec))])
+    rec = tlog_records(log_path("dronekit-python_flight.tlog"))
+    path = write_tlog(tmp_path / "first30.tlog", rec[:int(0.3 * len(rec))])
     log = read_log(path)
     assert log.armed_time_s == 0.0 and log.gps_rejected["origin"] > 100
     window, _ = replay_span(log)

@@ -43,9 +43,12 @@ def _mav_speed(text):
 
 
 def _mav_config(args, overrides=None, single_pad=False):
-    """Mission config from --config, --set and ``overrides``; ``single_pad``: one pad at the origin."""
-    from ..config import apply_overrides, config_from_dict, config_to_dict, load_config
-    d = config_to_dict(load_config(args.config))
+    """Mission config from --config (with telemetry's --plan / --pads: the mission and pads files), --set and
+    ``overrides``; ``single_pad``: one pad at the origin."""
+    from ..config import apply_overrides, config_from_dict, load_config_dict
+    from .mission import mission_file_keys
+    d = load_config_dict(args.config, getattr(args, "plan", None), getattr(args, "mission_pads", None),
+                         mission_file_keys(parse_set(args.set)))
     if single_pad:
         d["pads"] = [{"x_m": 0.0, "y_m": 0.0, "z_m": 0.0}]
     drone = {}
@@ -261,6 +264,8 @@ def _add_telemetry(sub):
                    "pad of its pads file, else ArduPilot SITL home, CMAC: --home=-35.363261,149.165230,584)")
     p.add_argument("--duration", type=positive_float("duration"), default=None, metavar="S",
                    help="stream at most S simulated seconds (default: the whole mission)")
+    from .mission import add_plan_args
+    add_plan_args(p, pads_dest="mission_pads")
     p.add_argument("--follow", default=None, metavar="udpin:HOST:PORT",
                    help="drive the simulation from a live vehicle's GLOBAL_POSITION_INT instead of the plan")
     p.add_argument("--follow-time", type=float_arg("follow-time", positive=True, hi=7 * 86400), default=60.0,
@@ -302,30 +307,80 @@ def _cmd_telemetry(args) -> int:
     from ..world.runner import run_mission
     from ..world.trajectory import plan_mission
     check_run_size(cfg, force=args.force, frame=True)   # the stream needs the whole series in memory
-    traj = plan_mission(cfg)
-    res = run_mission(cfg, _mav_policy(cfg, args.policy), trajectory=traj, progress=show_progress(args))
-    st = telemetry.stream(res.timeseries, connect=connect, rate_hz=args.rate, speed=args.speed, home=home,
-                          tlog=args.tlog, duration_s=args.duration, ground_gap_m=cfg.mission.hover_gap_m,
-                          track=(traj.t_s, traj.pos_m, traj.tilt_rad), progress=show_progress(args), sysid=args.sysid,
-                          compid=args.compid)
+    policy = _mav_policy(cfg, args.policy)
+    conn = _open_link(connect, args)                    # refused, port taken: said before the simulation
+    try:
+        traj = plan_mission(cfg)
+        res = run_mission(cfg, policy, trajectory=traj, progress=show_progress(args))
+        st = telemetry.stream(res.timeseries, conn=conn, rate_hz=args.rate, speed=args.speed, home=home,
+                              tlog=args.tlog, duration_s=args.duration, ground_gap_m=cfg.mission.hover_gap_m,
+                              track=(traj.t_s, traj.pos_m, traj.tilt_rad), progress=show_progress(args),
+                              sysid=args.sysid, compid=args.compid)
+    finally:
+        if conn is not None:
+            conn.close()
     print(f"sent {st.frames} MAVLink 2 frames in {st.ticks} ticks at {args.rate:g} Hz: {st.sim_s:.1f} s of the "
           f"mission in {st.wall_s:.1f} s wall to {connect or 'no link'}"
           + (f"; wrote {args.tlog}" if args.tlog else ""))
+    _warn_undelivered(connect, st.frames, st.delivered)
     if res.summary.get("battery_depleted"):
         from .mission import depletion_text
         print(f"dronewpt telemetry: warning: {depletion_text(res.summary)} (the stream ends there)", file=sys.stderr)
     return 0
 
 
+def _open_link(connect, args):
+    """The --connect link opened before any simulation (None for 'none'); CliError naming it."""
+    from ..mavlink import telemetry
+    if connect is None:
+        return None
+    try:
+        return telemetry.open_link(connect, args.sysid, args.compid)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+
+
+def _warn_undelivered(connect, frames: int, delivered: int) -> None:
+    """Frames that did not reach a ground station on --connect: a listening link (udpin, udp, tcpin) that no
+    ground station contacted, a TCP ground station that closed the connection. One warning line."""
+    from ..mavlink.telemetry import SERVER_KINDS
+    if connect is None or delivered >= frames:
+        return
+    listens = connect.partition(":")[0] in SERVER_KINDS
+    if delivered == 0 and listens:
+        what = "it listens and no ground station contacted it, so nothing was delivered"
+    else:
+        what = (f"{frames - delivered} of the {frames} frames were not delivered ("
+                + ("no ground station had contacted it yet)" if listens else
+                   "the ground station closed the connection, or read too slowly)"))
+    hint = ("; a listening link sends only to a ground station that has sent to it first (QGroundControl and "
+            "MAVProxy listen on UDP 14550 themselves: use --connect udpout:HOST:14550)") if listens else ""
+    print(f"dronewpt telemetry: warning: --connect {connect}: {what}{hint}", file=sys.stderr)
+
+
 def _cmd_telemetry_follow(args, connect, home) -> int:
     from ..mavlink import follow
     vin = follow.open_follow(args.follow)  # listen first: the set-up below takes a while
-    cfg = _mav_config(args)
+    try:
+        cfg = _mav_config(args)
+        policy = _mav_policy(cfg, args.policy)
+        if not args.home:   # a mission or pads file places the pads on Earth; else the first position is the pad
+            from ..plans.route import mission_home
+            home = mission_home(cfg.mission)
+        out = _open_link(connect, args)
+    except BaseException:
+        vin.close()
+        raise
     from ..world.runner import run_mission
-    st = follow.follow(args.follow, cfg, _mav_policy(cfg, args.policy), run_mission, connect=connect,
-                          rate_hz=args.rate, home=home if args.home else None, tlog=args.tlog,
-                          max_wall_s=args.follow_time, idle_timeout_s=args.follow_idle, in_conn=vin,
-                          sysid=args.sysid, compid=args.compid)
+    try:
+        st = follow.follow(args.follow, cfg, policy, run_mission, out_conn=out,
+                           rate_hz=args.rate, home=home, tlog=args.tlog,
+                           max_wall_s=args.follow_time, idle_timeout_s=args.follow_idle, in_conn=vin,
+                           sysid=args.sysid, compid=args.compid)
+    finally:
+        if out is not None:
+            out.close()
     print(f"followed {st.positions} live positions over {st.wall_s:.1f} s in {st.chunks} chunk(s); sent "
           f"{st.frames} frames to {connect or 'no link'}" + (f"; wrote {args.tlog}" if args.tlog else ""))
+    _warn_undelivered(connect, st.frames, st.delivered)
     return 0

@@ -85,13 +85,7 @@ def _add_mission(sub):
                                    "status 0: done; 2: bad input (one line on stderr); 3: the battery was "
                                    "depleted, the mission ended there (results written).")
     p.add_argument("config", nargs="?", type=path_arg("config file"), default=None, help="mission TOML (default: embedded default)")
-    p.add_argument("--plan", type=path_arg("--plan"), default=None, metavar="FILE",
-                   help="fly this mission file instead of the config's route: QGroundControl .plan, .waypoints "
-                        "(QGC WPL 110), or a flight log (.tlog / .bin: the mission it uploaded, else the track it "
-                        "flew); pad frame = ENU about its home (same as [mission] file)")
-    p.add_argument("--pads", type=path_arg("--pads"), default=None, metavar="FILE",
-                   help="charging pads from a CSV (lat,lon[,alt][,hover_time_s]) or GeoJSON Points file "
-                        "(same as [mission] pads_file); a loiter item within mission.pad_radius_m of a pad charges there")
+    add_plan_args(p)
     lazy_names_help(p.add_argument("--policy", default="model_based"), "receiver policy (default model_based)",
                     policy_names)
     p.add_argument("--out", type=path_arg("--out"), default=Path("out/mission"), help="output folder (default out/mission)")
@@ -115,6 +109,26 @@ def _add_mission(sub):
     p.set_defaults(func=_cmd_mission)
 
 
+#: --set keys read together with the mission file (they decide what is read), not laid over it afterwards
+MISSION_FILE_KEYS = ("mission.file", "mission.pads_file", "mission.from_log", "mission.pad_radius_m")
+
+
+def mission_file_keys(overrides: dict) -> dict:
+    """The ``[mission]`` keys of ``overrides`` that :func:`mission_sim.config.load_config_dict` reads with the file."""
+    return {k.split(".", 1)[1]: v for k, v in overrides.items() if k in MISSION_FILE_KEYS}
+
+
+def add_plan_args(p, pads_dest: str = "pads") -> None:
+    """``--plan FILE`` and ``--pads FILE``: a mission file and a pads file instead of the config's route."""
+    p.add_argument("--plan", type=path_arg("--plan"), default=None, metavar="FILE",
+                   help="fly this mission file instead of the config's route: QGroundControl .plan, .waypoints "
+                        "(QGC WPL 110), or a flight log (.tlog / .bin: the mission it uploaded, else the track it "
+                        "flew); pad frame = ENU about its home (same as [mission] file)")
+    p.add_argument("--pads", dest=pads_dest, type=path_arg("--pads"), default=None, metavar="FILE",
+                   help="charging pads from a CSV (lat,lon[,alt][,hover_time_s]) or GeoJSON Points file "
+                        "(same as [mission] pads_file); a loiter item within mission.pad_radius_m of a pad charges there")
+
+
 def mission_config(args):
     """Validated MissionConfig from ``args.config`` (None: the embedded default) and ``--set``; the run
     size is checked against the limits unless ``--force`` (see :mod:`mission_sim.world.budget`)."""
@@ -124,8 +138,7 @@ def mission_config(args):
     if getattr(args, "drone", None) is not None:
         from ..mavlink.calibrate import read_drone_toml
         overrides = {**read_drone_toml(args.drone), **overrides}
-    files = {k.split(".", 1)[1]: v for k, v in overrides.items()   # read with the mission file, not after
-             if k in ("mission.file", "mission.pads_file", "mission.from_log", "mission.pad_radius_m")}
+    files = mission_file_keys(overrides)
     d = mconfig.load_config_dict(args.config, getattr(args, "plan", None), getattr(args, "pads", None), files)
     cfg = mconfig.config_from_dict(mconfig.apply_overrides(d, overrides) if overrides else d)
     check_run_size(cfg, force=getattr(args, "force", False))

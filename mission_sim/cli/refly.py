@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import sys
+from pathlib import Path
 
 from .common import CliError, mass_override, parse_set, prepare_out_dir, show_progress, write_mission
 
@@ -23,7 +24,8 @@ def _config(args, track):
     d = config_to_dict(load_config(args.config))
     d["waypoints"] = []                       # the log is the route
     d["mission"]["file"] = ""
-    d["pads"] = pads_to_local(read_pads(args.pads), track.pad)
+    d["pads"] = pads_to_local(read_pads(args.pads), track.pad, Path(args.pads).name,
+                              "the replay's pad frame origin (the take-off spot, or --pad)")
     return config_from_dict(apply_overrides(d, {**mass_override(args), **parse_set(args.set)}))
 
 

@@ -47,9 +47,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["BootSegment", "ClockMap", "fit_clock", "identity_clock", "REBOOT_DROP_S", "FIT_MAX_POINTS", "DRIFT_SNAP"]
+__all__ = ["BootSegment", "ClockMap", "fit_clock", "identity_clock", "REBOOT_DROP_S", "FIT_MAX_POINTS", "DRIFT_SNAP",
+           "RECV_STEP_S"]
 
 REBOOT_DROP_S = 10.0      # a time_boot drop this large is a reboot, not jitter between message types
+RECV_STEP_S = 5.0         # receive minus boot time stepping by more than this is the ground station's clock set
 DRIFT_SNAP = 1e-3         # |b - 1| up to this (1000 ppm, beyond any crystal) is link latency, not a faster clock
 FIT_MAX_POINTS = 600      # Theil-Sen is O(n^2): fit on this many evenly spread samples per segment
 _SLOPE_RANGE = (1e-3, 1e3)  # receive seconds per vehicle second accepted from a fit (else 1)
@@ -72,6 +74,25 @@ class BootSegment:
     boot_end_s: float
     n_fit: int
     fit_slope: float = float("nan")   # the fitted b before the snap to 1 (reported: the link's drift)
+    #: steps of the receive clock within the boot (the ground station's clock set back or forward), each
+    #: (rec_before, recv_before, rec_after, recv_after, step_s): the last boot-stamped record before the
+    #: step and the first after it (record numbers, receive times) and the step [s]; receive times
+    #: after a step are taken back by the sum of the steps so far (:meth:`unstep`)
+    steps: tuple = ()
+
+    def unstep(self, rec, recv) -> np.ndarray:
+        """Receive times ``recv`` of records ``rec`` of this segment with its receive-clock :attr:`steps`
+        taken out. A record between the two boot-stamped records around a step goes with the one whose
+        receive time is nearer."""
+        recv = np.asarray(recv, dtype=float)
+        if not self.steps:
+            return recv
+        rec, out, total = np.asarray(rec), recv.copy(), 0.0
+        for rec_b, recv_b, rec_a, recv_a, step in self.steps:
+            total += step
+            after = (rec >= rec_a) | ((rec > rec_b) & (np.abs(recv - recv_a) < np.abs(recv - recv_b)))
+            out[after] = recv[after] - total
+        return out
 
     @property
     def rate(self) -> float:
@@ -108,10 +129,11 @@ class ClockMap:
         out = np.empty(len(recv))
         for k, s in enumerate(self.segments):
             m = seg == k
-            out[m] = s.recv_to_t(recv[m])
+            r = s.unstep(rec[m], recv[m])
+            out[m] = s.recv_to_t(r)
             if k < len(self.anchors) and len(self.anchors[k][0]) >= 1 and s.slope != 1.0:
                 x, y = self.anchors[k]
-                r = recv[m]     # between nodes: interpolated; beyond them: the fitted rate from the end node
+                # between nodes: interpolated; beyond them: the fitted rate from the end node
                 est = np.interp(r, x, y) + np.minimum(r - x[0], 0.0) / s.slope + np.maximum(r - x[-1], 0.0) / s.slope
                 out[m] = s.boot_to_t(est)
             if boot is not None:
@@ -167,6 +189,26 @@ def _anchors(recv: np.ndarray, boot: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return np.maximum.accumulate(recv), np.maximum.accumulate(y)
 
 
+def _recv_steps(rec: np.ndarray, recv: np.ndarray, boot: np.ndarray) -> tuple:
+    """:attr:`BootSegment.steps` of one boot segment's boot-stamped records: where receive minus boot time
+    (smoothed by a rolling median of 5: one late frame is no step) moves by more than :data:`RECV_STEP_S`."""
+    import pandas as pd
+
+    if len(rec) < 2:
+        return ()
+    d = pd.Series(recv - boot).rolling(5, center=True, min_periods=1).median().to_numpy()
+    cuts = (np.flatnonzero(np.abs(np.diff(d)) > RECV_STEP_S) + 1).tolist()
+    while cuts:   # a step persists: the levels (medians) on either side differ; a sender's stall and catch-up do not
+        bounds = [0, *cuts, len(rec)]
+        med = [float(np.median(recv[i:j] - boot[i:j])) for i, j in zip(bounds[:-1], bounds[1:])]
+        keep = [c for n, c in enumerate(cuts) if abs(med[n + 1] - med[n]) > RECV_STEP_S]
+        if keep == cuts:
+            return tuple((int(rec[c - 1]), float(recv[c - 1]), int(rec[c]), float(recv[c]), med[n + 1] - med[n])
+                         for n, c in enumerate(cuts))
+        cuts = keep
+    return ()
+
+
 def fit_clock(rec, recv, boot) -> ClockMap:
     """The :class:`ClockMap` of a .tlog from its boot-stamped records: record numbers ``rec``,
     receive times ``recv`` [s from the log start] and boot times ``boot`` [s] (any order; sorted
@@ -183,15 +225,20 @@ def fit_clock(rec, recv, boot) -> ClockMap:
     bounds = [0, *cuts.tolist(), len(rec)]
     segments, anchors, t_start = [], [], 0.0
     for k, (i, j) in enumerate(zip(bounds[:-1], bounds[1:])):
-        anchors.append(_anchors(recv[i:j], boot[i:j]))
-        a, b, b_fit = _theil_sen(boot[i:j], recv[i:j])
+        steps = _recv_steps(rec[i:j], recv[i:j], boot[i:j])
+        seg_recv = BootSegment(k, 0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0, steps=steps).unstep(rec[i:j], recv[i:j])
+        anchors.append(_anchors(seg_recv, boot[i:j]))
+        a, b, b_fit = _theil_sen(boot[i:j], seg_recv)
         r_k = float(recv[i])
         if k == 0:
             t_start = r_k / b        # t(recv = 0) = 0
         else:
             prev = segments[-1]
-            t_start = float(prev.recv_to_t(r_k))
-        segments.append(BootSegment(k, int(rec[i]), r_k, t_start, b, a, float(boot[i]), float(boot[j - 1]), j - i, b_fit))
+            t_start = float(prev.recv_to_t(prev.unstep([rec[i]], [r_k])[0]))   # a clock step persists
+            # the receive clock set back across the reboot (or two logs joined): the boot starts where the last ended
+            t_start = max(t_start, float(prev.boot_to_t(prev.boot_end_s)))
+        segments.append(BootSegment(k, int(rec[i]), r_k, t_start, b, a, float(boot[i]), float(boot[j - 1]), j - i, b_fit,
+                                    steps))
     rates = sorted({round(s.rate, 3) for s in segments})
     return ClockMap(tuple(segments), anchors=tuple(anchors), source=f"vehicle boot clock (time_boot_ms; rate {', '.join(f'{r:g}' for r in rates)} "
                                      "x the receive clock, Theil-Sen fit)")

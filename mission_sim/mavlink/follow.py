@@ -30,7 +30,7 @@ import numpy as np
 from .geodesy import GeoPoint, geodetic_to_enu
 from .logs import mavutil
 from .telemetry import (TlogWriter, check_connect, check_ids, drawn_totals, encode_tick, heartbeat_msgs,
-                        landing_rows, mavlink_table, schedule, send_msgs)
+                        landing_rows, mavlink_table, open_link, schedule, send_msgs)
 
 __all__ = ["FollowStats", "open_follow", "follow", "ChunkedMission", "WARM_S"]
 
@@ -48,6 +48,7 @@ class FollowStats:
     wall_s: float
     final_soc: float | None
     home: GeoPoint | None
+    delivered: int = 0      # frames that went to a peer on the out link (telemetry.write_frame)
 
 
 def _chunk_config(cfg, soc):
@@ -173,13 +174,12 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
     mu = mavutil()
     vin = in_conn if in_conn is not None else open_follow(follow_connect)
     own_out = out_conn is None and connect is not None
-    out = mu.mavlink_connection(check_connect(connect), source_system=sysid, source_component=compid) \
-        if own_out else out_conn
+    out = open_link(connect, sysid, compid) if own_out else out_conn
     mav = mu.mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
     writer = TlogWriter(tlog) if tlog is not None else None
     wall0, epoch0 = time.monotonic(), time.time()
     clock, sim, queue = _Clock(), None, []        # queue: (send at wall offset, row, is_heartbeat)
-    frames = n_msgs = 0
+    frames = n_msgs = delivered = 0
     last_rx, idle = wall0, False
     last_tick = []                              # (time, row) of the latest tick queued
 
@@ -190,11 +190,13 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
                 last_tick[:] = [(t + chunk_s, row)]
 
     def send_due(now):
-        nonlocal frames
+        nonlocal frames, delivered
         while queue and wall0 + queue[0][0] <= now:
             t_send, row, hb = queue.pop(0)
             msgs = heartbeat_msgs(mav, row) if hb else encode_tick(mav, row)
-            frames += send_msgs(mav, msgs, out, writer, epoch0 + t_send - chunk_s)
+            n, n_out = send_msgs(mav, msgs, out, writer, epoch0 + t_send - chunk_s)
+            frames += n
+            delivered += n_out
 
     try:
         while n_msgs < max_messages and time.monotonic() < wall0 + max_wall_s \
@@ -229,4 +231,5 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
         if writer is not None:
             writer.close()
     return FollowStats(positions=len(sim.t) if sim else 0, chunks=sim.chunks if sim else 0, frames=frames,
+                       delivered=delivered,
                        wall_s=time.monotonic() - wall0, final_soc=sim.final_soc if sim else None, home=home)

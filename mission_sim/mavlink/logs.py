@@ -153,7 +153,11 @@ def open_log(path: Path, mu):
                 os.environ["PYMAVLINK_FAST_INDEX"] = old
     if path.suffix.lower() == ".log" and DFReader.DFReader_is_text_log(str(path)):
         return DFReader.DFReader_text(str(path)), "dataflash"
-    return mu.mavmmaplog(str(path)), "tlog"
+    try:
+        return mu.mavmmaplog(str(path)), "tlog"
+    except Exception:  # noqa: BLE001 -- pymavlink's indexer, e.g. AttributeError "'NoneType' object has no
+        # attribute '_instance_field'" on a .tlog that joins two vehicles' logs; the streaming reader reads it
+        return mu.mavlogfile(str(path)), "tlog"
 
 
 def _collect(reader, kind: str, raw: dict, stats: dict) -> None:
@@ -369,9 +373,9 @@ def _assemble(path: Path, kind: str, raw: dict, stats: dict, errors: list[str]) 
     t0 = float(ts[good][0]) if good.any() else float("nan")
     tab = _Tables(raw, good, t0, kind)
     duration = 0.0
-    if good.any():
-        last = int(np.flatnonzero(good)[np.argmax(ts[good])])
-        duration = max(float(tab.clock.map([last], [ts[last] - t0])[0]), 0.0)
+    if good.any():    # the latest record on the log's time base (not the latest receive time: its clock may step)
+        idx = np.flatnonzero(good)
+        duration = max(float(np.max(tab.clock.map(idx, ts[idx] - t0))), 0.0)
     position, reboots, fix_checked, rejected = _position(tab)
     attitude = _clean_time(tab.vehicle("attitude"), ATTITUDE_COLUMNS)
     armed, armed_source, starts_armed = _armed(tab)

@@ -179,6 +179,11 @@ def track_from_log(log: FlightLog, pad: GeoPoint | None = None, ground_gap_m: fl
                        n_tilt_clipped=clipped)
 
 
+#: trajectory samples a replay may hold: each costs a sample (world.budget.SAMPLE_BYTES) and a row of the time series
+#: held whole (world.budget.ROW_MEMORY_BYTES) within world.budget.MAX_MEMORY_BYTES (~395,000: 22 h at 0.2 s)
+MAX_REPLAY_SAMPLES = 395_000
+
+
 def resample_track(track: FlightTrack, dt_s: float) -> FlightTrack:
     """The track on a uniform grid of ``dt_s`` (linear interpolation; armed state held).
 
@@ -188,7 +193,12 @@ def resample_track(track: FlightTrack, dt_s: float) -> FlightTrack:
     """
     if not (np.isfinite(dt_s) and dt_s > 0):
         raise ValueError(f"dt_s={dt_s!r} is invalid; valid range: (0, inf) s")
-    t = np.arange(0.0, float(track.t_s[-1]), dt_s)
+    span = float(track.t_s[-1])
+    if span / dt_s > MAX_REPLAY_SAMPLES:   # before allocating: a joined or mis-stamped log may span years
+        raise ValueError(f"the replayed track spans {span:.6g} s ({span / 3600:.3g} h; from {track.t_offset_s:.6g} s "
+                         f"of the log), more than the {MAX_REPLAY_SAMPLES * dt_s / 3600:.3g} h that fit in memory at "
+                         f"sim.traj_dt_s={dt_s:g}; valid: a part of it, --window T0,T1 (or --segment N)")
+    t = np.arange(0.0, span, dt_s)
     t = np.append(t[t < track.t_s[-1] - 1e-9], track.t_s[-1])
     pos = np.column_stack([np.interp(t, track.t_s, track.pos_m[:, i]) for i in range(3)])
     held = np.clip(np.searchsorted(track.t_s, t, side="right") - 1, 0, len(track.t_s) - 1)
@@ -357,10 +367,7 @@ def replay_trajectory(track: FlightTrack):
     from ..world.trajectory import Trajectory
 
     class ReplayTrajectory(Trajectory):
-        def propulsion_w(self, drone):
-            p = np.array(super().propulsion_w(drone), dtype=float)
-            p[self.phase == "ground"] = drone.avionics_w
-            return p
+        motors_off_phases = ("ground",)
 
     return ReplayTrajectory.from_samples(track.t_s, track.pos_m, tilt_rad=track.tilt_rad, phase=track.phase())
 
@@ -378,6 +385,7 @@ class ReplayResult:
 
 
 FAR_PAD_M = 10_000.0  # a pad farther than this from the whole track is almost surely a wrong --pad
+GAP_WARN_S = 10.0     # positions missing longer than this while armed: the replay invents a straight line
 
 
 def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
@@ -393,6 +401,13 @@ def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
     if not np.any(track.armed):
         out.append(f"{log.path.name}: the vehicle never armed in the replayed part: the track is marked NOT FLOWN "
                    "(its distance and height are GPS drift on the ground; nothing here was a flight)")
+    gaps = np.flatnonzero((np.diff(track.t_s) > GAP_WARN_S) & track.armed[:-1] & track.armed[1:])
+    if len(gaps):
+        i = int(gaps[np.argmax(np.diff(track.t_s)[gaps])])
+        t0, t1 = track.t_offset_s + float(track.t_s[i]), track.t_offset_s + float(track.t_s[i + 1])
+        out.append(f"{log.path.name}: no position for {t1 - t0:.1f} s while armed (log {t0:.1f}..{t1:.1f} s"
+                   + (f"; {len(gaps)} such gaps" if len(gaps) > 1 else "") + "): the replay flies a straight line "
+                   "across it; --window can leave it out")
     dist = float(np.min(np.hypot(track.pos_m[:, 0], track.pos_m[:, 1])))
     if dist > FAR_PAD_M:
         out.append(f"the pad ({track.pad.lat_deg:.6f}, {track.pad.lon_deg:.6f}) is {dist / 1e3:.0f} km from the "

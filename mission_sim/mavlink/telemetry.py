@@ -67,7 +67,7 @@ from .logs import mavutil
 
 __all__ = ["DEFAULT_HOME", "TlogWriter", "mavlink_table", "encode_tick", "encode_heartbeat", "stream", "StreamStats",
            "check_connect", "check_ids", "CONNECT_FORMAT", "NVF_NAMES", "COPTER_MODES", "schedule", "drawn_totals",
-           "gps_quality", "heartbeat_msgs", "landing_rows"]
+           "gps_quality", "heartbeat_msgs", "landing_rows", "open_link", "link_has_peer", "write_frame", "SERVER_KINDS"]
 
 #: ArduPilot SITL's default home (CMAC, Canberra), where two of the real logs were flown.
 DEFAULT_HOME = GeoPoint(-35.363261, 149.165230, 584.0)
@@ -105,6 +105,54 @@ def check_connect(text: str, name: str = "--connect") -> str:
             or not 0 < int(port) < 65536:
         raise ValueError(f"{name} {text!r} is invalid; valid format: {CONNECT_FORMAT}")
     return text
+
+
+#: connection kinds on which this end listens: it sends only to a ground station that has sent to it first
+SERVER_KINDS = ("udpin", "udp", "tcpin")
+
+
+def open_link(connect: str, sysid: int = 1, compid: int = 1, name: str = "--connect"):
+    """The vehicle's link ``connect`` (see :func:`check_connect`), opened now (before a simulation, so
+    that a refused connection or a port that cannot be bound is said at once): an ``OSError`` becomes
+    a ``ValueError`` naming the connection."""
+    try:
+        return mavutil().mavlink_connection(check_connect(connect, name), source_system=sysid,
+                                            source_component=compid)
+    except OSError as exc:
+        what = exc.strerror or str(exc)
+        hint = ("nothing listens there: start the ground station first, or send with udpout:HOST:PORT (QGroundControl "
+                "and MAVProxy listen on UDP 14550)" if isinstance(exc, ConnectionRefusedError) else
+                "another program holds the port, or the address is not this machine's")
+        raise ValueError(f"{name} {connect!r} cannot be opened: {what}; {hint}") from None
+
+
+def _listens(conn) -> bool:
+    return bool(getattr(conn, "udp_server", False)) or hasattr(conn, "listen")
+
+
+def link_has_peer(conn) -> bool:
+    """Whether ``conn`` has someone to send to: always for a link that sends out (udpout, tcp); for a
+    listening link (:data:`SERVER_KINDS`) once a ground station has sent to it (pymavlink drops
+    what is written before that)."""
+    if getattr(conn, "udp_server", False):
+        return bool(conn.clients)
+    if hasattr(conn, "listen"):
+        return conn.port is not None
+    return True
+
+
+def poll_link(conn, max_reads: int = 16) -> None:
+    """Read what a ground station sent to a listening link, without blocking: pymavlink's udpin
+    learns its peers, and tcpin accepts its client, only while reading (the stream never read, so
+    ``--connect udpin:`` / ``tcpin:`` sent nothing). Incoming messages are dropped."""
+    if conn is None or not _listens(conn):
+        return
+    for _ in range(max_reads):
+        try:
+            if conn.recv_msg() is None:
+                return
+        except OSError:
+            return
 
 
 def check_ids(sysid: int, compid: int) -> tuple[int, int]:
@@ -306,17 +354,38 @@ def _cells_mv(voltage_mv: int) -> list[int]:
     return cells + [_UINT16_MAX] * (10 - len(cells))
 
 
-def send_msgs(mav, msgs, conn, writer, t_log_s: float) -> int:
+def write_frame(conn, frame: bytes) -> bool:
+    """Write one frame on ``conn``; whether it went to a peer (:func:`link_has_peer`). A TCP ground station
+    that has closed the connection is written to no more: pymavlink printed "Connection reset or closed by
+    peer on TCP socket" on stdout for every frame after it (4,279 lines in a 30 s stream)."""
+    if isinstance(conn, mavutil().mavtcp):
+        if getattr(conn, "peer_closed", False):
+            return False
+        try:
+            return conn.port.send(frame) == len(frame)
+        except BlockingIOError:             # the ground station reads slower than we send: this frame is lost
+            return False
+        except OSError:                      # EPIPE, ECONNRESET: it went away
+            conn.peer_closed = True
+            return False
+    conn.write(frame)
+    return link_has_peer(conn)
+
+
+def send_msgs(mav, msgs, conn, writer, t_log_s: float) -> tuple[int, int]:
     """Pack and send each message on ``conn`` and log it to ``writer`` (either may be None) with
-    timestamp ``t_log_s`` [s since the epoch]; returns the number of frames."""
+    timestamp ``t_log_s`` [s since the epoch]; returns the number of frames and of those delivered to a
+    peer on ``conn`` (:func:`write_frame`). A listening ``conn`` is read first (:func:`poll_link`)."""
+    poll_link(conn)
+    delivered = 0
     for msg in msgs:
         frame = msg.pack(mav)
         mav.seq = (mav.seq + 1) % 256
         if conn is not None:
-            conn.write(frame)
+            delivered += write_frame(conn, frame)
         if writer is not None:
             writer.write(frame, t_log_s)
-    return len(msgs)
+    return len(msgs), delivered
 
 
 def encode_heartbeat(mav, row):
@@ -402,6 +471,7 @@ class StreamStats:
     sim_s: float
     wall_s: float
     counts: dict
+    delivered: int = 0      # frames that went to a peer (:func:`write_frame`)
 
 
 #: slowest pacing, simulated seconds per wall second (a slower one waits past what time.sleep takes:
@@ -452,12 +522,12 @@ def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.
     events += [(float(sim_t[-1]) + dt, row, True) for dt, row in landing_rows(rows[-1])]
     own = conn is None and connect is not None
     if own:
-        conn = mu.mavlink_connection(check_connect(connect), source_system=sysid, source_component=compid)
+        conn = open_link(connect, sysid, compid)
     mav = mu.mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
     writer = TlogWriter(tlog) if tlog is not None else None
     epoch0 = time.time() if start_epoch_s is None else float(start_epoch_s)
     counts: dict[str, int] = {}
-    frames = 0
+    frames = delivered = 0
     wall0 = time.monotonic()
     bar = None
     if progress:
@@ -470,7 +540,9 @@ def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.
                 if delay > 0:
                     time.sleep(min(delay, 1.0 / speed + 1.0))
             msgs = heartbeat_msgs(mav, row) if hb else encode_tick(mav, row)
-            frames += send_msgs(mav, msgs, conn, writer, epoch0 + sim_s)
+            n, n_out = send_msgs(mav, msgs, conn, writer, epoch0 + sim_s)
+            frames += n
+            delivered += n_out
             for msg in msgs:
                 counts[msg.get_type()] = counts.get(msg.get_type(), 0) + 1
             if bar is not None and not hb:
@@ -483,4 +555,4 @@ def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.
         if bar is not None:
             bar.close()
     return StreamStats(ticks=n_ticks, frames=frames, sim_s=float(sim_t[-1]), wall_s=time.monotonic() - wall0,
-                       counts=counts)
+                       counts=counts, delivered=delivered)

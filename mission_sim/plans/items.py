@@ -99,7 +99,7 @@ def read_mission(path, from_log: str = "auto") -> RawMission:
                                      "records); valid: from_log = \"flown\" for its GPS track")
                 return up
         return flown_mission(path)
-    head = path.read_bytes()[:64].lstrip()
+    head = path.read_bytes()[:64].removeprefix(b"\xef\xbb\xbf").lstrip()   # a UTF-8 BOM (Windows editors)
     if head.startswith(b"QGC WPL"):
         return read_wpl(path)
     if head.startswith(b"{") or path.suffix.lower() == ".plan":
@@ -114,7 +114,7 @@ def read_plan(path) -> RawMission:
     path = Path(path)
     name = path.name
     try:
-        doc = json.loads(path.read_bytes().decode("utf-8"))
+        doc = json.loads(path.read_bytes().decode("utf-8-sig"))
     except UnicodeDecodeError as exc:
         raise ValueError(f"{name}: not a UTF-8 text (JSON) file: byte {exc.object[exc.start]:#04x} at offset "
                          f"{exc.start}") from None
@@ -187,7 +187,7 @@ def read_wpl(path) -> RawMission:
     path = Path(path)
     name = path.name
     try:
-        lines = path.read_bytes().decode("utf-8").splitlines()
+        lines = path.read_bytes().decode("utf-8-sig").splitlines()
     except UnicodeDecodeError as exc:
         raise ValueError(f"{name}: not a text file: byte {exc.object[exc.start]:#04x} at offset {exc.start}") from None
     if not lines or not lines[0].strip().startswith("QGC WPL 110"):

@@ -32,6 +32,7 @@ __all__ = ["apply_mission_files", "mission_home", "route_from_items", "pads_to_l
 DO_CHANGE_SPEED = 178
 CHARGE_CLEARANCE_M = 1.0   # a loiter becomes a charging hover only this far above the pad (it descends to it)
 RTL_ALT_M = 15.0   # ArduCopter's RTL_ALT default (1500 cm): RTL climbs to at least this height
+MAX_FROM_HOME_M = 100e3   # items farther from home than this are refused (the config's positions: within 1e5 m)
 #: commands that do not move the vehicle: CONDITION_YAW, DO_SET_RELAY, DO_REPEAT_RELAY, DO_SET_SERVO,
 #: DO_REPEAT_SERVO, DO_SET_ROI_LOCATION, DO_SET_ROI_NONE, DO_CONTROL_VIDEO, DO_SET_ROI,
 #: DO_DIGICAM_CONFIGURE, DO_DIGICAM_CONTROL, DO_MOUNT_CONFIGURE, DO_MOUNT_CONTROL,
@@ -83,6 +84,9 @@ class _Builder:
             except ValueError as exc:
                 self.fail(it, str(exc))
             x, y = float(e), float(n)
+            if math.hypot(x, y) > MAX_FROM_HOME_M:   # the pad frame is a tangent plane about home
+                self.fail(it, f"({it.lat_deg:g}, {it.lon_deg:g}) is {math.hypot(x, y) / 1e3:.0f} km from home; valid: "
+                              f"within {MAX_FROM_HOME_M / 1e3:g} km of home (a longer route: one mission per part)")
         if math.isnan(it.alt_m) or it.alt_m == 0:
             return x, y, self.z
         z = it.alt_m - home.alt_m if it.frame in _AMSL_FRAMES else it.alt_m
@@ -151,13 +155,17 @@ def route_from_items(raw: RawMission, pads_xyz=(), pad_radius_m: float = 5.0) ->
     return b.out
 
 
-def pads_to_local(pads, ref: GeoPoint) -> list[dict]:
+def pads_to_local(pads, ref: GeoPoint, name: str = "pads", what: str = "the mission's home") -> list[dict]:
     """``[[pads]]`` dicts of :class:`~mission_sim.plans.pads.GeoPad` records about ``ref`` (a pad
-    without altitude sits on the ground of ``ref``: z = 0)."""
+    without altitude sits on the ground of ``ref``: z = 0). A pad more than :data:`MAX_FROM_HOME_M` from
+    ``ref`` is a ``ValueError`` naming the file ``name`` and ``what`` ``ref`` is."""
     out = []
-    for p in pads:
+    for i, p in enumerate(pads):
         e, n, u = geodetic_to_enu(p.point.lat_deg, p.point.lon_deg,
                                   ref.alt_m if p.point.alt_m is None else p.point.alt_m, ref)
+        if math.hypot(e, n) > MAX_FROM_HOME_M:
+            raise ValueError(f"{name}: pad {i} is {math.hypot(e, n) / 1e3:.0f} km from {what} ({ref.lat_deg:.6f}, "
+                             f"{ref.lon_deg:.6f}); valid: within {MAX_FROM_HOME_M / 1e3:g} km (lat, lon swapped?)")
         d = {"x_m": float(e), "y_m": float(n), "z_m": float(u)}
         if p.hover_time_s is not None:
             d["hover_time_s"] = p.hover_time_s
@@ -216,12 +224,7 @@ def apply_mission_files(d: dict, base_dir=None, mission_file=None, pads_file=Non
         geo = read_pads(pf)
         if ref is None:
             ref = _first_pad_ref(geo)
-        out["pads"] = pads_to_local(geo, ref)
-        for i, q in enumerate(out["pads"]):
-            dist = math.hypot(q["x_m"], q["y_m"])
-            if dist > 1e5:
-                raise ValueError(f"{pf.name}: pad {i} is {dist / 1e3:.0f} km from the mission's home "
-                                 f"({ref.lat_deg:.6f}, {ref.lon_deg:.6f}); valid: within 100 km (lat, lon swapped?)")
+        out["pads"] = pads_to_local(geo, ref, pf.name)
         out["mission"]["pads_file"] = str(pf)
     if raw is not None:
         pads = [(p.get("x_m", 0.0), p.get("y_m", 0.0), p.get("z_m", 0.0)) for p in out.get("pads") or []

@@ -147,7 +147,8 @@ class MissionSamples:
         win = self.traj.chunk(a, b)
         vel = gradient_rows(win.pos_m, win.t_s, self.uniform)[k0 - a:k0 - a + k1 - k0]
         tr = self.traj.chunk(k0, k1) if (a, b) != (k0, k1) else win
-        p_w = np.asarray(propulsion_from(self.cfg.drone, vel, tr.wind_m_s), dtype=float).reshape(-1)
+        p_w = np.asarray(propulsion_from(self.cfg.drone, vel, tr.wind_m_s, tr.phase,
+                                         getattr(self.traj, "motors_off_phases", ())), dtype=float).reshape(-1)
         if self.lm_given is None:
             lm = lm_along(self.cfg, self.model, tr)[0]
         elif np.ndim(self.lm_given):

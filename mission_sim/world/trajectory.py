@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -106,16 +107,25 @@ class Trajectory:
         """Velocity (N, 3) [m/s] by second-order finite differences."""
         return np.gradient(self.pos_m, self.t_s, axis=0)
 
+    #: phases whose motors are off: the avionics alone draw power there (a replayed log's "ground",
+    #: i.e. disarmed); empty for planned missions. Read by :meth:`propulsion_w` and, chunk by chunk,
+    #: by ``world.samples.MissionSamples`` (chunks are plain views, so it is read off the whole).
+    motors_off_phases: ClassVar[tuple[str, ...]] = ()
+
     def propulsion_w(self, drone) -> np.ndarray:
         """Electrical propulsion power (N,) [W] from momentum theory (airspeed = |v_xy - wind_xy|)."""
-        return propulsion_from(drone, self.velocity_m_s(), self.wind_m_s)
+        return propulsion_from(drone, self.velocity_m_s(), self.wind_m_s, self.phase, self.motors_off_phases)
 
 
-def propulsion_from(drone, vel_m_s, wind_m_s) -> np.ndarray:
+def propulsion_from(drone, vel_m_s, wind_m_s, phase=None, motors_off=()) -> np.ndarray:
     """Electrical propulsion power (N,) [W] at velocities (N, 3) [m/s] in winds (N, 3) [m/s]
-    (momentum theory, :func:`.power.propulsion_power_w`; airspeed = |v_xy - wind_xy|)."""
+    (momentum theory, :func:`.power.propulsion_power_w`; airspeed = |v_xy - wind_xy|); samples
+    whose ``phase`` is one of ``motors_off`` draw ``drone.avionics_w`` only."""
     air = np.hypot(vel_m_s[:, 0] - wind_m_s[:, 0], vel_m_s[:, 1] - wind_m_s[:, 1])
-    return propulsion_power_w(drone, air, vel_m_s[:, 2])
+    p = propulsion_power_w(drone, air, vel_m_s[:, 2])
+    if len(motors_off) and phase is not None:
+        p = np.where(np.isin(np.asarray(phase, dtype=object), list(motors_off)), float(drone.avionics_w), p)
+    return p
 
 
 # --------------------------------------------------------------------------- planning
