@@ -252,10 +252,11 @@ def check_section_values(cfg: MissionConfig) -> None:
     """Every section of ``cfg`` of its class and every numeric key inside its :data:`PLAUSIBLE` range, as
     :func:`config_from_dict` checks a file (a tree changed with ``dataclasses.replace`` skips that path:
     ``capacity_ah=1300``, mAh for A h, was accepted); ``ValueError`` naming the dotted key, its value and the
-    valid range. Section objects already checked (the same object: they are frozen) are not checked again."""
-    if not isinstance(cfg.pads, tuple) or not 1 <= len(cfg.pads) <= 100:
-        raise ValueError(f"pads={cfg.pads!r} is invalid; valid: a list of 1..100 [[pads]] tables (PadConfig); "
-                         "a mission without charging: run_mission(..., charge=False)")
+    valid range. Section objects already checked (the same object: they are frozen) are not checked again. A tree
+    may hold more than a file's 100 pads (``dataclasses.replace(cfg, pads=cfg.pads * 835)``: a 50 h mission)."""
+    if not isinstance(cfg.pads, tuple) or not cfg.pads:   # (more than a file's 100: long missions repeat the pads)
+        raise ValueError(f"pads={cfg.pads!r:.80} is invalid; valid: a tuple of at least one PadConfig; a mission "
+                         "without charging: run_mission(..., charge=False)")
     for name, cls in _SECTIONS.items():
         _check_section(name, cls, getattr(cfg, name))
     for i, pad in enumerate(cfg.pads):

@@ -56,7 +56,8 @@ def test_the_python_blocks_of_docs_mission_run_as_pasted(tmp_path, monkeypatch, 
     (lambda c: R(c, link=R(c.link, f_hz=85.0)), "link.f_hz=85.0 is invalid; valid range: [10000, 1e+07] Hz"),   # kHz
     (lambda c: R(c, pads=(R(c.pads[0], hover_time_s=1e7),)),
      "pads.0.hover_time_s=10000000.0 is invalid; valid range: [0, 1e+06] s"),
-    (lambda c: R(c, pads=()), "pads=() is invalid; valid: a list of 1..100 [[pads]] tables"),
+    (lambda c: R(c, pads=()), "pads=() is invalid; valid: a tuple of at least one PadConfig"),
+    (lambda c: R(c, pads=c.pads[0]), "pads=PadConfig(x_m=0.0, y_m=0.0, z_m=0.0, hover_time_s=60.0) is invalid"),
     (lambda c: R(c, seed=-1), "seed=-1 is invalid; valid range: integer in [0, 2^63)"),
     (lambda c: R(c, seed=1.5), "seed=1.5 is invalid"),
     (lambda c: R(c, drone=c.battery), "drone=BatteryParams("),
@@ -73,6 +74,7 @@ def test_a_config_changed_in_python_within_range_is_the_files_config():
     mine = R(cfg, battery=R(cfg.battery, capacity_ah=2.0), pads=list(cfg.pads), seed=np.int64(3))
     theirs = config_from_dict(apply_overrides(load_config_dict(), {"battery.capacity_ah": 2.0, "seed": 3}))
     assert mine == theirs and type(mine.pads) is tuple and type(mine.seed) is int
+    assert len(R(cfg, pads=cfg.pads * 835).pads) == 1670   # more than a file's 100: long missions (test_budget)
 
 
 def test_numpy_numbers_are_numbers():
@@ -169,3 +171,20 @@ def test_steady_secondary_current_is_the_series_series_closed_form():
     p_dc = charging["battery_v"] * charging["rect_current_a"]
     # (rect_current_a is the step mean, v2 and i2 the step's end: 8e-6 apart)
     assert np.max(np.abs(p_dc / (charging["v2_v"].abs() * charging["i2_amp_a"] / 2) - 1)) < 2e-5
+
+
+def test_a_pad_below_the_home_ground_is_reached_and_charges():
+    """A pad at z = -3 m (a pads file's pad lower than home) was hovered over at z = 0 (the ground clamp), 3 m
+    above its coil: it never energised and the mission charged at pad 0 only, silently."""
+    out = {}
+    for z in (0.0, -3.0):
+        cfg = config_from_dict(apply_overrides(load_config_dict(), {"pads.1.z_m": z}))
+        res = run_mission(cfg, policies.make("model_based", policy_context(cfg)))
+        ts = res.timeseries
+        at_pad1 = ts[(ts["phase"] == "charge") & ((ts["x_m"] - 40.0).abs() < 1.0)]
+        gap = at_pad1["z_m"] - z
+        assert len(at_pad1) > 500 and gap.min() > 0.1 and gap.max() < 0.25
+        assert ts["z_m"][~ts["phase"].isin(["approach", "charge", "depart"])].min() >= 0.0   # home's ground elsewhere
+        out[z] = res.summary
+    assert out[-3.0]["charge_time_s"] == pytest.approx(out[0.0]["charge_time_s"], rel=0.01)
+    assert out[-3.0]["energy_from_source_j"] == pytest.approx(out[0.0]["energy_from_source_j"], rel=0.05)
