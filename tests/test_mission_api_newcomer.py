@@ -61,12 +61,34 @@ def test_the_python_blocks_of_docs_mission_run_as_pasted(tmp_path, monkeypatch, 
     (lambda c: R(c, seed=-1), "seed=-1 is invalid; valid range: integer in [0, 2^63)"),
     (lambda c: R(c, seed=1.5), "seed=1.5 is invalid"),
     (lambda c: R(c, drone=c.battery), "drone=BatteryParams("),
+    # the sections' own integer checks: 'cannot convert float NaN to integer', OverflowError for inf
+    (lambda c: R(c, drone=R(c.drone, n_rotors=float("nan"))), "n_rotors=nan is invalid; valid range: integer >= 1"),
+    (lambda c: R(c, battery=R(c.battery, n_series=float("inf"))), "n_series=inf is invalid; valid range: integer 1..32"),
 ])
 def test_a_config_changed_in_python_is_checked_as_a_file_is(change, message):
-    """``dataclasses.replace`` skipped config_from_dict's ranges: 1300 A h ran, pads=() died in ``min()``."""
+    """``dataclasses.replace`` skipped config_from_dict's ranges: 1300 A h ran, pads=() died in ``min()``. Every
+    numeric key with NaN, +-inf, -1, 0 and 1e308 through ``replace`` (66 keys): refused naming it, or in range."""
     with pytest.raises(ValueError) as exc:
         change(load_config())
     assert message in str(exc.value)
+
+
+def test_every_key_out_of_range_through_replace_is_refused_naming_it():
+    from mission_sim.config import PLAUSIBLE
+
+    cfg = load_config()
+    for key, rng in PLAUSIBLE.items():
+        sec, name = key.split(".")
+        for v in (float("nan"), float("inf"), -1.0, 0.0, 1e308):
+            def change():
+                if sec == "pads":
+                    return R(cfg, pads=(R(cfg.pads[0], **{name: v}),) + cfg.pads[1:])
+                return R(cfg, **{sec: R(getattr(cfg, sec), **{name: v})})
+            if rng.contains(v):
+                continue
+            with pytest.raises(ValueError) as exc:   # (not OverflowError, not a message without the key)
+                change()
+            assert name in str(exc.value) or "cruise_altitude_m" in str(exc.value), (key, v, str(exc.value))
 
 
 def test_a_config_changed_in_python_within_range_is_the_files_config():
