@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import copy
 import math
+import numbers
 import tomllib
 from dataclasses import asdict, dataclass, field, fields
 from importlib import resources
@@ -237,7 +238,56 @@ class MissionConfig:
     waypoints: tuple = ()          # WaypointConfig route; () = the built-in pattern (start, pads, land)
 
     def __post_init__(self):
+        # a tree built in Python (dataclasses.replace, a section made by hand) is checked as a file is: every
+        # numeric key in its PLAUSIBLE range, 1..100 pads, the seed; lists of pads / waypoints become tuples
+        object.__setattr__(self, "seed", check_seed(self.seed))
+        for name in ("pads", "waypoints"):
+            if isinstance(getattr(self, name), list):
+                object.__setattr__(self, name, tuple(getattr(self, name)))
+        check_section_values(self)
         check_cross_fields(self)
+
+
+def check_section_values(cfg: MissionConfig) -> None:
+    """Every section of ``cfg`` of its class and every numeric key inside its :data:`PLAUSIBLE` range, as
+    :func:`config_from_dict` checks a file (a tree changed with ``dataclasses.replace`` skips that path:
+    ``capacity_ah=1300``, mAh for A h, was accepted); ``ValueError`` naming the dotted key, its value and the
+    valid range. Section objects already checked (the same object: they are frozen) are not checked again. A tree
+    may hold more than a file's 100 pads (``dataclasses.replace(cfg, pads=cfg.pads * 835)``: a 50 h mission)."""
+    if not isinstance(cfg.pads, tuple) or not cfg.pads:   # (more than a file's 100: long missions repeat the pads)
+        raise ValueError(f"pads={cfg.pads!r:.80} is invalid; valid: a tuple of at least one PadConfig; a mission "
+                         "without charging: run_mission(..., charge=False)")
+    for name, cls in _SECTIONS.items():
+        _check_section(name, cls, getattr(cfg, name))
+    for i, pad in enumerate(cfg.pads):
+        _check_section(f"pads.{i}", PadConfig, pad)
+    for i, wp in enumerate(cfg.waypoints):
+        if not isinstance(wp, WaypointConfig):
+            raise ValueError(f"waypoints.{i}={wp!r} is invalid; valid type: WaypointConfig")
+
+
+def _check_section(section: str, cls, obj) -> None:
+    if _CHECKED.get(id(obj)) is obj and type(obj) is cls:
+        return
+    if not isinstance(obj, cls):
+        raise ValueError(f"{section}={obj!r} is invalid; valid type: {cls.__name__}")
+    for f in fields(cls):
+        rng = plausible_range(section, f.name)
+        v = getattr(obj, f.name)
+        if rng is not None and v is not None:
+            check_range(f"{section}.{f.name}", v, rng)
+    _remember_checked(obj)
+
+
+#: ``id -> object`` of the (frozen) section objects whose values passed :func:`check_section_values` or
+#: ``_build``'s checks (the object is held, so its id is not reused while it is in here)
+_CHECKED: dict = {}
+
+
+def _remember_checked(obj) -> None:
+    if len(_CHECKED) > 4096:
+        _CHECKED.clear()
+    _CHECKED[id(obj)] = obj
 
 
 def check_cross_fields(cfg: MissionConfig) -> None:
@@ -334,14 +384,14 @@ def _coerce(section: str, cls, name: str, value):
         if not isinstance(value, str):
             raise ValueError(f"{key}={value!r} is invalid; valid type: string")
         return value
-    if ftype == "int":
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or (
-                isinstance(value, float) and not math.isfinite(value)) or int(value) != value:
+    if ftype == "int":   # numbers.Real: numpy's integers and floats too (np.arange, np.linspace)
+        if isinstance(value, bool) or not isinstance(value, numbers.Real) or (
+                not math.isfinite(value)) or int(value) != value:
             raise ValueError(f"{key}={value!r} is invalid; valid type: integer")
         return int(value)
     if value is None and "None" in ftype:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise ValueError(f"{key}={value!r} is invalid; valid type: number")
     return float(value)
 
@@ -360,9 +410,12 @@ def _build(section: str, cls, d):
             # integer keys: the value as given (1e308, not its 309-digit integer)
             check_range(f"{section}.{k}", d[k] if rng.integer else v, rng)
     try:
-        return cls(**kwargs)
+        obj = cls(**kwargs)
     except ValueError as exc:
         raise ValueError(f"{section}.{exc}") from None
+    if section in _SECTIONS or section.startswith("pads."):
+        _remember_checked(obj)   # its ranges were checked above (MissionConfig does not check them again)
+    return obj
 
 
 def config_from_dict(d: dict) -> MissionConfig:
@@ -394,7 +447,8 @@ def config_from_dict(d: dict) -> MissionConfig:
 
 def check_seed(s) -> int:
     """The mission ``seed`` (an integer in [0, 2^63)); ``ValueError`` naming the value otherwise."""
-    if isinstance(s, bool) or not isinstance(s, int) or not 0 <= s < 2**63:
+    if type(s) is not int and (isinstance(s, bool) or not isinstance(s, numbers.Integral)) or not 0 <= s < 2**63:
+        # (numpy's integers too)
         raise ValueError(f"seed={s!r} is invalid; valid range: integer in [0, 2^63)")
     return int(s)
 

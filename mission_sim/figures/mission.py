@@ -50,7 +50,11 @@ def plot_mission(result, out_dir, which=None) -> list[str]:
     :data:`FIGURES` to draw (None: all), drawn in that tuple's order. The paths written."""
     import gc
     from pathlib import Path
+    if getattr(result, "timeseries", None) is None:
+        from ..world.results import NO_SERIES
+        raise ValueError(NO_SERIES)
     out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
     plots = {"trajectory": _plot_trajectory, "lm": _plot_lm, "i2": _plot_i2, "soc": _plot_soc, "power": _plot_power}
     files = []
     gc.freeze()   # what exists now is not scanned again: collecting a figure's cycles costs ~3 ms, not ~100 ms

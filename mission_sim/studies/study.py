@@ -196,6 +196,10 @@ def _flatten(d: dict, prefix: str, where: str) -> dict:
 def _check_scalar(where: str, key: str, v) -> Any:
     if isinstance(v, bool) or isinstance(v, (int, str)):
         return v
+    if isinstance(v, (np.bool_, np.integer, np.floating)):   # a study built in Python: np.arange, np.linspace
+        v = v.item()
+        if not isinstance(v, float):
+            return v
     if isinstance(v, float):
         if not math.isfinite(v):
             raise ValueError(f"[{where}] {key!r} = {v!r} is invalid; valid: a finite number")
@@ -218,13 +222,16 @@ def _grid_values(key: str, v) -> list:
                              f"with start and stop numbers")
         start, stop = (_check_scalar("grid", key, float(a)) for a in args[:2])
         return Linspace(start, stop, args[2] if start != stop else 1)
+    if isinstance(v, np.ndarray) and v.ndim == 1 or isinstance(v, tuple):   # a study built in Python
+        v = list(v)
     if not isinstance(v, list):
         v = [v]
     if not v:
         raise ValueError(f"[grid] {key!r} is an empty list; valid: at least one value")
     unique = {}
     for x in v:  # 5 and 5.0 are the same case: keep the first
-        unique.setdefault(canonical_json(_check_scalar("grid", key, x)), x)
+        x = _check_scalar("grid", key, x)
+        unique.setdefault(canonical_json(x), x)
     return list(unique.values())
 
 

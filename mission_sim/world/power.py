@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..validation import check_positive
+from ..validation import Range, check_positive
 
 __all__ = ["DroneParams", "propulsion_power_w", "hover_power_w", "G_M_S2"]
 
@@ -56,7 +56,7 @@ class DroneParams:
             v = float(getattr(self, name))
             if not 0 < v <= 1:
                 raise ValueError(f"{name}={v!r} is invalid; valid range: (0, 1]")
-        if int(self.n_rotors) != self.n_rotors or self.n_rotors < 1:
+        if not Range(1, math.inf, integer=True).contains(self.n_rotors):   # (never raises: NaN, inf, a string)
             raise ValueError(f"n_rotors={self.n_rotors!r} is invalid; valid range: integer >= 1")
 
     @property

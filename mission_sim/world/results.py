@@ -9,7 +9,12 @@ from pathlib import Path
 
 from ..files import atomic_output
 
-__all__ = ["MissionResult", "SUMMARY_KEYS", "TIMESERIES_COLUMNS"]
+__all__ = ["MissionResult", "SUMMARY_KEYS", "TIMESERIES_COLUMNS", "NO_SERIES"]
+
+#: the error of writing (or drawing) a result without its time series
+NO_SERIES = ("the result holds no time series (run_mission(..., frame=False)); valid: a result of run_mission(..., "
+             "frame=True), or the rows streamed to a folder by run_mission(..., sink=SeriesWriter(folder)) and read "
+             "back with mission_sim.world.stream.read_series")
 
 SUMMARY_KEYS = ("sim_time_s", "wall_s", "energy_from_source_j", "rectifier_output_j", "battery_charge_in_j",
                 "propulsion_energy_j", "losses_j", "device_losses_j", "dc_to_battery_efficiency",
@@ -44,6 +49,8 @@ class MissionResult:
         complete. ``progress``: a tqdm bar over the files (the CSV, the long one, in row chunks).
         Returns the paths.
         """
+        if self.timeseries is None:
+            raise ValueError(NO_SERIES)
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         (out / "summary.json").unlink(missing_ok=True)

@@ -65,6 +65,7 @@ coarse steps.
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -75,7 +76,7 @@ from .results import MissionResult
 from .samples import lm_along as _lm_along
 from .trajectory import PlannedTrajectory, Trajectory
 
-__all__ = ["run_mission", "ENERGISE_PHASES", "_lm_along"]
+__all__ = ["run_mission", "check_policy_context", "ENERGISE_PHASES", "_lm_along"]
 
 
 def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bool = True,
@@ -94,7 +95,10 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     ``frame=False`` keeps no time series in memory (``timeseries`` is None; the summary is computed on
     the fly, memory bounded whatever the mission's length); ``sink`` (e.g.
     :class:`~.stream.SeriesWriter`) receives the charged run's rows in blocks as they are produced.
+    A policy whose context (``policy.ctx``) has another ``control_period_s`` or ``rated_i2_a`` than ``cfg``
+    is refused (``ValueError``): make it with ``mission_sim.config.policy_context(cfg)``.
     """
+    check_policy_context(cfg, policy)
     try:
         res = _run_mission(cfg, policy, trajectory, charge, progress, compiled, frame, sink)
         bad = [k for k, v in res.summary.items() if isinstance(v, float) and not np.isfinite(v)]
@@ -107,6 +111,20 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
             f"the inputs that differ from the default mission, farthest first: {', '.join(keys)})" if keys else
             "with the default mission's inputs)")) from None
     return res
+
+
+def check_policy_context(cfg, policy) -> None:
+    """``ValueError`` naming both values when ``policy`` was made for another control period or rated current
+    than the mission ``cfg`` (a policy made with ``policies.make(name)``'s default context for a mission with
+    ``sim.control_period_s = 5e-5`` ran, its filters discretised for 100 us, silently). A policy without a
+    :class:`~mission_sim.contract.PolicyContext` in ``policy.ctx`` is not checked."""
+    ctx = getattr(policy, "ctx", None)
+    for name, mine in (("control_period_s", cfg.sim.control_period_s), ("rated_i2_a", cfg.link.rated_i2_a)):
+        theirs = getattr(ctx, name, None)
+        if isinstance(theirs, float | int) and not math.isclose(theirs, mine, rel_tol=1e-9):
+            key = "sim" if name == "control_period_s" else "link"
+            raise ValueError(f"the policy's {name}={theirs!r} is invalid for this mission; valid: {key}.{name}="
+                             f"{mine!r} (make the policy with mission_sim.config.policy_context(cfg))")
 
 
 def _run_mission(cfg, policy, trajectory, charge, progress, compiled, frame=True, sink=None) -> MissionResult:

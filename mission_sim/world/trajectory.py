@@ -26,6 +26,7 @@ from .wind import drag_force_n, hover_error_m, tilt_from_force, wind_series
 __all__ = ["Trajectory", "PlannedTrajectory", "plan_mission", "PHASES", "PLAN_BLOCK"]
 
 PHASES = ("ground", "takeoff", "transit", "approach", "charge", "depart", "land", "hover", "flight")
+_PAD_CODES = np.array([PHASES.index(p) for p in ("approach", "charge", "depart")], dtype=np.int8)
 
 
 @dataclass
@@ -365,7 +366,14 @@ class PlannedTrajectory:
         on_ground = code == PHASES.index("ground")
         err[on_ground] = 0.0
         pos = pos + err
-        pos[:, 2] = np.maximum(pos[:, 2], 0.0)
+        lowest = min(p.z_m for p in cfg.pads)
+        if lowest < 0.0:   # a pad below the home's ground (a pads file's AMSL altitude; no terrain model): the
+            # ground is the home's except on the way to, at and from the pads (it was z = 0 there too: the drone
+            # hovered at 0, over its pad, which never energised)
+            ground = np.where(np.isin(code, _PAD_CODES), lowest, 0.0)
+            pos[:, 2] = np.maximum(pos[:, 2], ground)
+        else:
+            pos[:, 2] = np.maximum(pos[:, 2], 0.0)
         # never let the coil touch a pad while charging
         chg = code == PHASES.index("charge")
         floor = min(0.03, cfg.mission.hover_gap_m)
