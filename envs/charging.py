@@ -10,7 +10,7 @@ from gymnasium import spaces
 
 from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
 
-from .core import OBS_OFFSET, OBS_SCALE, EnvConfig
+from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config
 from .layout import INFO
 from .modal_plant import single_plant
 from .parts import SingleObjective, SingleObservation, alias_parts
@@ -126,7 +126,7 @@ class SbarChargingEnv(gym.Env):
     def __init__(self, scenario="nominal", render_mode: str | None = None, config: EnvConfig | None = None,
                  compiled: bool | None = None, history: int = 1):
         self.scenario = get_scenario(scenario)
-        self.config = config or EnvConfig()
+        self.config = as_config(config)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode={render_mode!r} is invalid; valid values: None, 'rgb_array'")
         self.render_mode = render_mode
@@ -163,8 +163,8 @@ class SbarChargingEnv(gym.Env):
     def _duty(self, action) -> float:
         try:   # the usual case (an array of one value or a numpy scalar), without array conversions
             a = float(action.item())
-        except (AttributeError, ValueError, TypeError):
-            a = float(np.asarray(action, dtype=float).reshape(-1)[0])
+        except (AttributeError, ValueError, TypeError, RuntimeError):   # RuntimeError: torch's two-element .item()
+            a = _one_number(action)
         if not math.isfinite(a):  # NaN would poison the link state and every reward after it
             raise ValueError(f"action={a!r} is invalid; valid range: [-1, 1] (finite)")
         d = (a + 1.0) * 0.5
@@ -229,10 +229,26 @@ class SbarChargingDiscreteEnv(SbarChargingEnv):
         return spaces.Discrete(2)
 
     def _duty(self, action) -> float:
-        a = int(action)
+        if type(action) is int or isinstance(action, np.integer):   # the usual case (SB3, action_space.sample())
+            a = action
+        else:   # one number of any kind (a 0-d or one-element array, a float that is whole); 0.5 is not 0
+            try:
+                a = _one_number(action)
+            except ValueError:
+                a = None
         if a != 0 and a != 1:
             raise ValueError(f"action={action!r} is invalid; valid values: 0 (RM), 1 (SM)")
         return float(a)
+
+
+def _one_number(action) -> float:
+    """The one real number of ``action`` (a Python number, a list or array of one element); a ``ValueError``
+    naming it for anything else: two values (only the first was used), none, None, a string, a complex."""
+    x = np.asarray(action)
+    if x.size != 1 or x.dtype.kind not in "biuf":
+        raise ValueError(f"action={action!r} is invalid; valid: one number in [-1, 1], shape (1,) as the "
+                         "action_space (values outside are clipped)")
+    return float(x.reshape(-1)[0])
 
 
 alias_parts(SbarChargingEnv, {"_st": ("plant", "st"), "_slow": ("plant", "slow"), "_cc": ("plant", "cc"),

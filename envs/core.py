@@ -31,6 +31,7 @@ once in compiled form (:mod:`envs.vector_kernel`) and called by the single and t
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from functools import cached_property
 
@@ -43,7 +44,7 @@ from wpt_receiver.sbar import rectifier_current, short_weight
 from .layout import BAT, COEF, STATE, XC
 from .plant import battery_operating_point, lm_window_h
 
-__all__ = ["LINK_MODELS", "window_lm", "EnvConfig", "RewardWeights", "Plans", "DetunedPlan", "build_plans", "OBS_SCALE", "OBS_OFFSET", "N_COEF", "N_BAT", "kernel_function"]
+__all__ = ["LINK_MODELS", "window_lm", "EnvConfig", "RewardWeights", "Plans", "DetunedPlan", "build_plans", "OBS_SCALE", "OBS_OFFSET", "N_COEF", "N_BAT", "kernel_function", "as_config"]
 
 HALF_PI = 0.5 * math.pi
 FOUR_OVER_PI = 4.0 / math.pi
@@ -65,6 +66,14 @@ class RewardWeights:
     tracking: float = 1.0
     overcurrent: float = 10.0
     i_ref_a: float = 7.0
+
+    def __post_init__(self):   # a NaN weight made every reward NaN, i_ref_a = 0 a ZeroDivisionError at the env's build
+        for name, lo in (("tracking", "[0, inf)"), ("overcurrent", "[0, inf)"), ("i_ref_a", "(0, inf) A")):
+            v = getattr(self, name)
+            ok = isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(v) \
+                and (v > 0 if name == "i_ref_a" else v >= 0)
+            if not ok:
+                raise ValueError(f"reward {name}={v!r} is invalid; valid range: {lo}")
 
 
 @dataclass(frozen=True)
@@ -134,6 +143,12 @@ class EnvConfig:
 
     def __post_init__(self):
         from wpt_receiver.devices import preset_names
+        if isinstance(self.reward, Mapping):   # EnvConfig(reward={"overcurrent": 20}): its fields by name
+            object.__setattr__(self, "reward", _from_mapping(RewardWeights, self.reward, "reward"))
+        if not isinstance(self.reward, RewardWeights):
+            raise ValueError(f"reward={self.reward!r} is invalid; valid: an envs.RewardWeights or a dict of its fields")
+        if not isinstance(self.link, LinkParams):
+            raise ValueError(f"link={self.link!r} is invalid; valid: a wpt_receiver.LinkParams (default TABLE_I)")
         if self.link_model not in LINK_MODELS:
             raise ValueError(f"link_model={self.link_model!r} is invalid; valid values: {', '.join(LINK_MODELS)}")
         if int(self.v2_updates) != self.v2_updates or not 0 <= self.v2_updates <= 1000:
@@ -253,6 +268,29 @@ class Plans:
     detuned: DetunedPlan | None = None   # detuned windows (envs.detuned)
     zoh: np.ndarray | None = None        # (U, 20) the coefficients of each distinct Lm: coef = zoh[coef_ix]
     coef_ix: np.ndarray | None = None    # (n, S) row of ``zoh`` per window and slow segment
+
+
+def _from_mapping(cls, values: Mapping, what: str):
+    """``cls(**values)`` with an unknown key refused by name (one line naming the valid keys)."""
+    known = [f.name for f in fields(cls)]
+    bad = sorted(set(values) - set(known), key=str)
+    if bad:
+        raise ValueError(f"{what} key {bad[0]!r} is invalid; valid keys: {', '.join(known)}")
+    return cls(**values)
+
+
+def as_config(config) -> "EnvConfig":
+    """The env's :class:`EnvConfig` from ``config``: an EnvConfig, None (the defaults) or a dict of its fields
+    (``gymnasium.make(ENV_ID, config={"link_model": "envelope"})``, as a YAML file of env kwargs gives it; a
+    ``reward`` entry may be a dict of :class:`RewardWeights` fields); anything else, or an unknown key, is a
+    one-line ``ValueError``."""
+    if config is None:
+        return EnvConfig()
+    if isinstance(config, EnvConfig):
+        return config
+    if isinstance(config, Mapping):
+        return _from_mapping(EnvConfig, config, "config")
+    raise ValueError(f"config={config!r} is invalid; valid: an envs.EnvConfig, a dict of its fields or None")
 
 
 def kernel_function(name: str, compiled: bool = True):

@@ -32,6 +32,7 @@ present, a battery near 30 V) inside a window, where an adaptive or learned poli
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
 from itertools import accumulate
 
@@ -102,7 +103,7 @@ class Scenario:
         for f in fields(self):
             if f.name not in limits:
                 continue
-            lo, hi = (float(v) for v in getattr(self, f.name))
+            lo, hi = _pair(f.name, getattr(self, f.name))
             vlo, vhi = limits[f.name]
             if not (vlo <= lo <= hi <= vhi):
                 raise ValueError(f"scenario {f.name}=({lo}, {hi}) is invalid; valid range: "
@@ -130,6 +131,18 @@ class Scenario:
         return replace(self, **changes)
 
 
+def _pair(name: str, value) -> tuple:
+    """A scenario range as ``(low, high)`` floats: a pair, or one number for a point range (``soc=0.5`` is
+    ``soc=(0.5, 0.5)``, which draws nothing); anything else one line naming it."""
+    if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
+        return float(value), float(value)
+    try:
+        lo, hi = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ValueError(f"scenario {name}={value!r} is invalid; valid: a number or a (low, high) pair") from None
+    return lo, hi
+
+
 SCENARIOS: dict[str, Scenario] = {
     "nominal": Scenario("nominal"),
     "lm_mismatch": Scenario("lm_mismatch", lm_scale=(0.8, 1.25)),
@@ -155,6 +168,9 @@ def scenario_from_options(options, default: Scenario) -> Scenario:
     """The scenario of ``reset(options=...)``: ``options["scenario"]`` or ``default``; other keys are errors."""
     if not options:
         return default
+    if not isinstance(options, Mapping):   # a string was iterated: "reset option 'w' is invalid"
+        raise ValueError(f"options={options!r} is invalid; valid: None or a dict {{'scenario': NAME, a Scenario or a "
+                         "dict of its fields}")
     bad = set(options) - {"scenario"}
     if bad:
         raise ValueError(f"reset option {sorted(bad)[0]!r} is invalid; valid keys: 'scenario'")

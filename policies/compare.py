@@ -106,6 +106,14 @@ def _rollout(pol, venv, seeds):
     return rec, rew, info["t_stop_s"], last
 
 
+def _check_specs(specs) -> None:
+    """Policies are given by name (a :func:`policies.make` spec); a policy object was an AttributeError deep inside."""
+    for sp in specs:
+        if not isinstance(sp, str):
+            raise ValueError(f"policy {sp!r} is invalid; valid: a policies.make name such as 'model_based' or "
+                             "'rl:PATH' (your own class: policies.register(NAME, factory), then NAME)")
+
+
 def run_policy(name: str, scenario: str, episodes: int, seed: int, config=None) -> EpisodeTraces:
     """Run policy ``name`` (a :func:`policies.make` name, e.g. ``rl:PATH`` or ``model_based_budget:0.02``)
     on ``episodes`` windows seeded ``seed + i``."""
@@ -123,6 +131,7 @@ def run_policies(names, scenario: str, episodes: int, seed: int, config=None, nu
     from . import make
     from .batched import BlockPolicy
 
+    _check_specs(names)
     names = list(dict.fromkeys(names))
     n = int(episodes)
     venv = SbarChargingVectorEnv(num_envs=len(names) * n, scenario=scenario, config=config, num_threads=num_threads)
@@ -202,6 +211,7 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
     are there, before waiting for the forked child (e.g. the frontier's rows, off the critical path)."""
     if int(episodes) != episodes or not 1 <= episodes <= 100_000:
         raise ValueError(f"episodes={episodes!r} is invalid; valid range: integer 1..100000")
+    _check_specs(list(policies) + [sp for specs in (train_seeds or {}).values() for sp in specs])
     groups = [(p, [p]) for p in policies] + list((train_seeds or {}).items())
     rows, traces = [], {}
     jobs = [(s, g) for s in scenarios for g in groups]
