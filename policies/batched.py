@@ -190,4 +190,4 @@ def _act_error(p, d, n: int) -> ValueError:
         return ValueError(f"policy {name!r}: act() returned shape {d.shape}; valid: ({n},), one duty in [0, 1] per "
                           "observation row")
     bad = d.reshape(-1)[~np.isfinite(d.reshape(-1))][0]
-    return ValueError(f"policy {name!r}: act() returned a duty {bad!r}; valid: finite duties in [0, 1]")
+    return ValueError(f"policy {name!r}: act() returned a duty {float(bad)!r}; valid: finite duties in [0, 1]")

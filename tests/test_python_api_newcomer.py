@@ -1,0 +1,228 @@
+"""What an RL researcher new to dronewpt found using it from Python (docs/robustness.md, "An RL researcher's
+pass over the Python API"; every case tried: /work/notes/pyapi_cases.txt of that session). Each test fails on
+the code before its fix: a bad input gave a silent wrong number, numpy's message or an AttributeError deep
+inside; now one line naming the value and what is valid, or the convenience the user reached for works."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import policies
+from envs import ENV_ID, EnvConfig, RewardWeights, Scenario, SbarChargingEnv, SbarChargingVectorEnv
+from envs.charging import SbarChargingDiscreteEnv
+from envs.vector import SbarChargingDiscreteVectorEnv
+from mission_sim.contract import OBS_INDEX, denormalise_obs
+
+ENVELOPE = EnvConfig(link_model="envelope", n_steps=40)   # cheap windows; the checks are before the step
+
+
+def _rollout(env, actions, seed=5, options=None):
+    obs, _ = env.reset(seed=seed, options=options)
+    out = [obs]
+    rewards = []
+    for a in actions:
+        obs, r, _, _, _ = env.step(a)
+        out.append(obs)
+        rewards.append(r)
+    return np.array(out), np.array(rewards)
+
+
+# ------------------------------------------------------------------ actions of a single env
+@pytest.mark.parametrize("action, shown", [
+    (np.array([0.1, 0.5]), "array([0.1, 0.5])"),   # was: 0.1 used, 0.5 dropped silently
+    (np.zeros(0), "array([]"),                      # was: IndexError
+    (None, "action=None"),                          # was: "action=nan is invalid"
+    ("0.5", "action='0.5'"),                        # was: taken as 0.5
+    (np.array([0.3 + 1j]), "0.3+1.j"),              # was: ComplexWarning, imaginary part dropped
+])
+def test_single_env_refuses_an_action_that_is_not_one_number(action, shown):
+    env = SbarChargingEnv(config=ENVELOPE)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="one number in \\[-1, 1\\], shape \\(1,\\)") as err:
+        env.step(action)
+    assert shown in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_single_env_takes_one_number_in_any_container_alike():
+    acts = [0.25, np.float32(0.25), np.array([0.25]), [0.25], np.array([[0.25]], np.float32)]   # 0.25: exact in float32
+    ref = _rollout(SbarChargingEnv(config=ENVELOPE), [np.array([0.25], np.float32)] * 5)
+    for a in acts:
+        got = _rollout(SbarChargingEnv(config=ENVELOPE), [a] * 5)
+        assert np.array_equal(got[0], ref[0]) and np.array_equal(got[1], ref[1])
+
+
+@pytest.mark.parametrize("action", [0.5, float("nan"), 2, -1, np.array([0, 1]), None, "1"])
+def test_discrete_env_refuses_anything_but_0_or_1(action):
+    env = SbarChargingDiscreteEnv(config=ENVELOPE)   # was: 0.5 taken as 0 (int()), NaN numpy's message
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="valid values: 0 \\(RM\\), 1 \\(SM\\)"):
+        env.step(action)
+
+
+def test_discrete_env_takes_0_and_1_in_any_container_alike():
+    ref = _rollout(SbarChargingDiscreteEnv(config=ENVELOPE), [1, 0, 1, 1])
+    for one, zero in ((np.int64(1), np.int64(0)), (1.0, 0.0), (np.array(1), np.array(0)), (np.array([1]), [0]),
+                      (True, False)):
+        got = _rollout(SbarChargingDiscreteEnv(config=ENVELOPE), [one, zero, one, one])
+        assert np.array_equal(got[0], ref[0]) and np.array_equal(got[1], ref[1])
+
+
+# ------------------------------------------------------------------ actions of a vector env
+@pytest.mark.parametrize("cls", [SbarChargingVectorEnv, SbarChargingDiscreteVectorEnv])
+@pytest.mark.parametrize("shape", [(2, 1), (3, 2), (6,), ()])
+def test_vector_env_names_actions_of_the_wrong_shape(cls, shape):
+    env = cls(3, config=ENVELOPE)   # was: "cannot reshape array of size 2 into shape (3,)"
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=f"actions of shape {shape!r}".replace("(", "\\(").replace(")", "\\)")
+                       + " are invalid; valid: one per sub-environment, shape \\(3, 1\\) or \\(3,\\)"):
+        env.step(np.zeros(shape))
+
+
+def test_vector_env_names_actions_that_are_not_numbers():
+    env = SbarChargingVectorEnv(2, config=ENVELOPE)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="actions=None are invalid; valid: real numbers"):
+        env.step(None)   # was: "cannot reshape array of size 1 into shape (2,)"
+
+
+# ------------------------------------------------------------------ reset options, scenarios
+@pytest.mark.parametrize("make", [lambda: SbarChargingEnv(config=ENVELOPE),
+                                  lambda: SbarChargingVectorEnv(2, config=ENVELOPE)])
+def test_reset_options_that_are_not_a_dict(make):
+    with pytest.raises(ValueError, match="options='windy' is invalid; valid: None or a dict"):
+        make().reset(seed=0, options="windy")   # was: "reset option 'd' is invalid" (the string iterated)
+
+
+def test_a_scenario_range_may_be_one_number():
+    assert Scenario(soc=0.3) == Scenario(soc=(0.3, 0.3))   # was: TypeError 'float' object is not iterable
+    a = _rollout(SbarChargingEnv(scenario={"soc": 0.3, "cmd_a": 4}, config=ENVELOPE), [np.zeros(1)] * 5)
+    b = _rollout(SbarChargingEnv(scenario={"soc": (0.3, 0.3), "cmd_a": (4, 4)}, config=ENVELOPE), [np.zeros(1)] * 5)
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    assert denormalise_obs(a[0][0])[OBS_INDEX["soc"]] == pytest.approx(0.3, abs=1e-6)
+
+
+@pytest.mark.parametrize("value", [(0.1, 0.2, 0.3), "low", None])
+def test_a_scenario_range_of_another_kind_is_named(value):
+    with pytest.raises(ValueError, match="scenario soc=.* is invalid; valid: a number or a \\(low, high\\) pair"):
+        Scenario(soc=value)
+
+
+# ------------------------------------------------------------------ EnvConfig and the reward weights
+@pytest.mark.parametrize("kw, text", [
+    (dict(i_ref_a=0.0), "reward i_ref_a=0.0 is invalid; valid range: \\(0, inf\\) A"),   # was: ZeroDivisionError
+    (dict(i_ref_a=-7.0), "reward i_ref_a=-7.0 is invalid"),                               # was: accepted
+    (dict(tracking=float("nan")), "reward tracking=nan is invalid; valid range: \\[0, inf\\)"),  # was: NaN rewards
+    (dict(overcurrent=-10.0), "reward overcurrent=-10.0 is invalid"),
+    (dict(overcurrent="10"), "reward overcurrent='10' is invalid"),
+])
+def test_reward_weights_are_checked(kw, text):
+    with pytest.raises(ValueError, match=text):
+        RewardWeights(**kw)
+
+
+def test_config_may_be_a_dict_of_its_fields():
+    """``gymnasium.make(ENV_ID, config={...})`` as a YAML file of env kwargs gives it (was: AttributeError
+    'dict' object has no attribute 'n_steps'); the same env as with the EnvConfig."""
+    cfg = {"link_model": "envelope", "n_steps": 40, "reward": {"overcurrent": 20.0}}
+    env = gym.make(ENV_ID, config=cfg)
+    assert env.unwrapped.config == EnvConfig(link_model="envelope", n_steps=40, reward=RewardWeights(overcurrent=20.0))
+    acts = [np.array([a], np.float32) for a in np.linspace(-1, 1, 40)]
+    ref = _rollout(SbarChargingEnv(config=EnvConfig(link_model="envelope", n_steps=40,
+                                                    reward=RewardWeights(overcurrent=20.0))), acts)
+    got = _rollout(env, acts)
+    assert np.array_equal(got[0], ref[0]) and np.array_equal(got[1], ref[1])
+    venv = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="vector_entry_point", config=cfg)
+    assert venv.config == env.unwrapped.config
+
+
+@pytest.mark.parametrize("config, text", [
+    ({"link_modle": "envelope"}, "config key 'link_modle' is invalid; valid keys: link, dt_s"),
+    ({"reward": {"overcurent": 1}}, "reward key 'overcurent' is invalid; valid keys: tracking, overcurrent, i_ref_a"),
+    ("envelope", "config='envelope' is invalid; valid: an envs.EnvConfig, a dict of its fields or None"),
+    ({"link": None}, "link=None is invalid; valid: a wpt_receiver.LinkParams"),   # was: AttributeError
+    ({"reward": 7.0}, "reward=7.0 is invalid; valid: an envs.RewardWeights or a dict"),
+])
+def test_a_bad_config_is_named(config, text):
+    with pytest.raises(ValueError, match=text):
+        SbarChargingEnv(config=config)
+
+
+# ------------------------------------------------------------------ one's own policy through compare's loop
+@pytest.fixture
+def registered():
+    names = []
+
+    def register(name, factory):
+        policies.register(name, factory)
+        names.append(name)
+    yield register
+    for n in names:
+        policies._REGISTRY.pop(n, None)
+
+
+class _Returns:
+    """A policy whose act returns ``value(n)`` for n observation rows."""
+
+    def __init__(self, value, name):
+        self.value, self.name = value, name
+
+    def reset(self, n=1):
+        pass
+
+    def act(self, obs):
+        return self.value(len(obs))
+
+
+@pytest.mark.parametrize("value, text", [
+    (lambda n: np.zeros(n + 1), "policy 'wrong_shape': act\\(\\) returned shape \\(3,\\); valid: \\(2,\\)"),
+    (lambda n: 1.0, "policy 'wrong_shape': act\\(\\) returned shape \\(\\); valid: \\(2,\\)"),
+    (lambda n: np.full(n, np.nan), "policy 'wrong_shape': act\\(\\) returned a duty nan; valid: finite duties"),
+])
+def test_run_policy_names_a_policy_whose_act_is_wrong(registered, value, text):
+    from policies.compare import run_policy
+    registered("wrong_shape", lambda ctx, **kw: _Returns(value, "wrong_shape"))
+    with pytest.raises(ValueError, match=text):   # was: numpy's reshape message / the env's "actions[0]=nan"
+        run_policy("wrong_shape", "nominal", 2, 1000, ENVELOPE)
+
+
+def test_compare_names_a_policy_object_given_for_a_name():
+    from policies.compare import compare, run_policies
+    pol = _Returns(lambda n: np.zeros(n), "mine")
+    for call in (lambda: compare(policies=[pol], scenarios=["nominal"], episodes=2, config=ENVELOPE),
+                 lambda: run_policies([pol], "nominal", 2, 1000, ENVELOPE)):
+        with pytest.raises(ValueError, match="valid: a policies.make name .* policies.register\\(NAME, factory\\)"):
+            call()   # was: AttributeError 'Mine' object has no attribute 'partition'
+
+
+def test_ones_own_registered_policy_runs_the_loop_a_single_env_runs(registered):
+    """``policies.register`` + ``run_policy`` (compare's closed loop) == the same policy by hand on a single env."""
+    from policies.compare import run_policy
+
+    class AfterStopShort:
+        name = "after_stop_short"
+
+        def __init__(self, ctx=None, **kw):
+            pass
+
+        def reset(self, n=1):
+            pass
+
+        def act(self, obs):
+            return np.where(np.asarray(obs)[:, 7] > -1.0, 1.0, 0.3)
+
+    registered("after_stop_short", AfterStopShort)
+    tr = run_policy("after_stop_short", "nominal", 2, 1000, ENVELOPE)
+    for w in range(2):
+        env = SbarChargingEnv(config=ENVELOPE)
+        obs, _ = env.reset(seed=1000 + w)
+        pol = AfterStopShort()
+        pol.reset(1)
+        total = 0.0
+        for _ in range(ENVELOPE.n_steps):
+            d = pol.act(obs[None, :])
+            obs, r, _, _, _ = env.step(np.array([2.0 * d[0] - 1.0], np.float32))
+            total += r
+        assert tr.metrics["return"][w] == pytest.approx(total, rel=1e-12, abs=1e-12)
