@@ -226,3 +226,37 @@ def test_ones_own_registered_policy_runs_the_loop_a_single_env_runs(registered):
             obs, r, _, _, _ = env.step(np.array([2.0 * d[0] - 1.0], np.float32))
             total += r
         assert tr.metrics["return"][w] == pytest.approx(total, rel=1e-12, abs=1e-12)
+
+
+def test_a_shipped_models_env_config_makes_its_env():
+    """A trained model's metadata ``env_config`` (``policies.train.config_dict``) is a dict of EnvConfig fields:
+    ``gymnasium.make(ENV_ID, config=meta["env_config"])`` is the env it was trained on (was: AttributeError)."""
+    import json
+    from pathlib import Path
+
+    from policies.train import config_dict
+
+    files = sorted((Path(policies.__file__).parent / "pretrained").glob("*.json"))
+    assert len(files) >= 20
+    for f in files:
+        ec = json.loads(f.read_text())["env_config"]
+        env = gym.make(ENV_ID, config=ec)
+        assert config_dict(env.unwrapped.config) == ec
+        assert env.unwrapped.config.link_model == "envelope"   # every shipped SB3 model: trained on eq. 4 (docs/rl.md)
+
+
+@pytest.mark.parametrize("doc, first", [("docs/envs.md", None), ("docs/rl.md", 1)])
+def test_the_docs_python_snippets_run_as_written(doc, first, monkeypatch):
+    """Every ```python block of docs/envs.md (and the first of docs/rl.md) runs in a fresh namespace as pasted
+    (two used ``gymnasium`` without importing it: NameError)."""
+    import re
+    from pathlib import Path
+
+    from envs.scenario import SCENARIOS
+    monkeypatch.setattr("envs.scenario.SCENARIOS", dict(SCENARIOS))   # the snippet registers a scenario
+
+    text = (Path(__file__).resolve().parents[1] / doc).read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)[:first]
+    assert blocks
+    for code in blocks:
+        exec(compile(code, doc, "exec"), {"__name__": "snippet"})
