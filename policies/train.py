@@ -34,7 +34,7 @@ from mission_sim.files import atomic_output
 
 from .rl import ALGOS
 
-__all__ = ["train", "plot_learning_curve", "DEFAULT_HYPERPARAMS", "env_config", "EVAL_SEED", "VEC_PATHS"]
+__all__ = ["train", "plot_learning_curve", "DEFAULT_HYPERPARAMS", "env_config", "env_overrides", "EVAL_SEED", "VEC_PATHS"]
 
 #: fixed held-out evaluation seeds ``EVAL_SEED + i`` (training seeds are small integers)
 EVAL_SEED = 900_000
@@ -79,6 +79,28 @@ def env_config(overrides: dict | None = None):
     return EnvConfig(reward=rw, devices=devices, link_model=link_model,
                      **{k: (int(v) if k in ints and float(v).is_integer() else float(v))
                         for k, v in ov.items() if k in cfg_keys})
+
+
+def env_overrides(env) -> dict | None:
+    """``train``'s ``env`` as the flat overrides :func:`env_config` takes (and the metadata and ``reproduce``
+    record): a dict as it is, or an :class:`envs.EnvConfig` (what a Python user has at hand; it was ``TypeError:
+    'EnvConfig' object is not iterable``) as its fields and reward weights that differ from the defaults. Its
+    link must be Table I's (the one ``train`` runs and its metadata assume)."""
+    from envs import EnvConfig
+
+    if env is None or isinstance(env, dict):
+        return env
+    if not isinstance(env, EnvConfig):
+        raise ValueError(f"env={env!r} is invalid; valid: None, an envs.EnvConfig or a dict of its fields and reward "
+                         "weights by name (e.g. {'link_model': 'envelope', 'overcurrent': 20})")
+    if env.link != EnvConfig.link:
+        raise ValueError(f"env=EnvConfig(link={env.link!r}) is invalid; valid: Table I's link (train's metadata "
+                         "records the other fields only)")
+    out = {f.name: getattr(env, f.name) for f in fields(EnvConfig)
+           if f.name not in ("link", "reward") and getattr(env, f.name) != f.default}
+    out.update({f.name: getattr(env.reward, f.name) for f in fields(env.reward)
+                if getattr(env.reward, f.name) != f.default})
+    return out
 
 
 def config_dict(cfg) -> dict:
@@ -473,6 +495,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     Deterministic for a given seed on one thread (torch and numba threads set to 1)."""
     import importlib.util
 
+    env = env_overrides(env)
     extra = dict(history=history, action_filter=action_filter, smooth_penalty=smooth_penalty, imitate=imitate,
                  dagger=dagger, imitation_episodes=imitation_episodes, slow_budget=slow_budget, slow_budget_every=slow_budget_every)
     _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra)

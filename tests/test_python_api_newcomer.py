@@ -260,3 +260,26 @@ def test_the_docs_python_snippets_run_as_written(doc, first, monkeypatch):
     assert blocks
     for code in blocks:
         exec(compile(code, doc, "exec"), {"__name__": "snippet"})
+
+
+def test_train_takes_an_env_config(monkeypatch):
+    """``policies.train.train(..., env=EnvConfig(...))`` (was: TypeError 'EnvConfig' object is not iterable): the
+    config becomes train's flat overrides, which rebuild the same EnvConfig."""
+    from policies import train as tr
+
+    cfg = EnvConfig(link_model="envelope", n_steps=200, devices="ideal", reward=RewardWeights(overcurrent=20.0))
+    flat = tr.env_overrides(cfg)
+    assert flat == {"n_steps": 200, "devices": "ideal", "link_model": "envelope", "overcurrent": 20.0}
+    assert tr.env_config(flat) == cfg
+    assert tr.env_overrides(EnvConfig()) == {} and tr.env_config({}) == EnvConfig()
+    seen = {}
+
+    def spec(algo, timesteps, opts):
+        seen.update(opts)
+        raise RuntimeError("stop before training")
+    monkeypatch.setattr(tr, "_spec", spec)
+    with pytest.raises(RuntimeError, match="stop before training"):
+        tr.train("ppo", 1000, "unused", env=cfg, progress=False)
+    assert seen["env"] == flat
+    with pytest.raises(ValueError, match="env='envelope' is invalid; valid: None, an envs.EnvConfig or a dict"):
+        tr.train("ppo", 1000, "unused", env="envelope", progress=False)
