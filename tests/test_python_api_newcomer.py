@@ -245,17 +245,20 @@ def test_a_shipped_models_env_config_makes_its_env():
         assert env.unwrapped.config.link_model == "envelope"   # every shipped SB3 model: trained on eq. 4 (docs/rl.md)
 
 
-@pytest.mark.parametrize("doc, first", [("docs/envs.md", None), ("docs/rl.md", 1)])
-def test_the_docs_python_snippets_run_as_written(doc, first, monkeypatch):
-    """Every ```python block of docs/envs.md (and the first of docs/rl.md) runs in a fresh namespace as pasted
-    (two used ``gymnasium`` without importing it: NameError)."""
+@pytest.mark.parametrize("doc, after, first", [("docs/envs.md", None, None), ("docs/rl.md", None, 1),
+                                               ("docs/rl.md", "### From Python", 1)])
+def test_the_docs_python_snippets_run_as_written(doc, after, first, monkeypatch):
+    """Every ```python block of docs/envs.md, the first of docs/rl.md and its "From Python" one run in a fresh
+    namespace as pasted (two of docs/envs.md used ``gymnasium`` without importing it: NameError)."""
     import re
     from pathlib import Path
 
     from envs.scenario import SCENARIOS
-    monkeypatch.setattr("envs.scenario.SCENARIOS", dict(SCENARIOS))   # the snippet registers a scenario
-
+    monkeypatch.setattr("envs.scenario.SCENARIOS", dict(SCENARIOS))   # a snippet registers a scenario
+    monkeypatch.setattr(policies, "_REGISTRY", dict(policies._REGISTRY))   # one registers a policy
     text = (Path(__file__).resolve().parents[1] / doc).read_text()
+    if after:
+        text = text[text.index(after):]
     blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)[:first]
     assert blocks
     for code in blocks:
