@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mission_sim.contract import PolicyContext, action_to_duty
+from mission_sim.contract import OBS_DIM, PolicyContext, action_to_duty
 
 from .inference import export_actor, load_ppo_actor
 
@@ -119,6 +119,10 @@ class RLPolicy:
 
     def act(self, obs):
         raw = obs
+        if np.shape(obs)[-1] > OBS_DIM + 1:   # one contract frame per row (+ the base duty: a residual's input)
+            raise ValueError(f"policy {self.name!r}: observations of shape {np.shape(obs)} are invalid; valid: (n, "
+                             f"{OBS_DIM}), one contract frame per row (an env made with history=K stacks K frames; a "
+                             "policy keeps its own history: make the env without it)")
         if self.history > 1:
             if self._hist is None:
                 self.reset(len(np.atleast_2d(obs)))

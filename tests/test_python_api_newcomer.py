@@ -286,3 +286,20 @@ def test_train_takes_an_env_config(monkeypatch):
     assert seen["env"] == flat
     with pytest.raises(ValueError, match="env='envelope' is invalid; valid: None, an envs.EnvConfig or a dict"):
         tr.train("ppo", 1000, "unused", env="envelope", progress=False)
+
+
+def test_a_learned_policy_refuses_a_stacked_observation():
+    """An env made with ``history=4`` returns 32 values (four frames, oldest first); the shipped PPO given them
+    read the first 8, the *oldest* frame, silently (``RLPolicy.normalise`` keeps the first ``obs_dim`` fields, for
+    7-field models). Now one line; the classical policies already refused (numpy's broadcast error)."""
+    pytest.importorskip("stable_baselines3")
+    env = SbarChargingEnv(config=ENVELOPE, history=4)
+    obs, _ = env.reset(seed=1000)
+    pol = policies.make("rl", env.policy_context)
+    pol.reset(1)
+    with pytest.raises(ValueError, match="observations of shape \\(1, 32\\) are invalid; valid: \\(n, 8\\)"):
+        pol.act(obs[None, :])
+    frame = SbarChargingEnv(config=ENVELOPE)
+    one, _ = frame.reset(seed=1000)
+    np.testing.assert_array_equal(obs[-8:], one)   # the newest frame is the plain env's observation
+    assert pol.act(one[None, :]).shape == (1,)
