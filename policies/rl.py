@@ -39,7 +39,9 @@ def load_meta(path) -> dict:
     if not path.is_file():
         raise FileNotFoundError(f"RL model {str(path)!r} not found (train one with `dronewpt train`)")
     if not meta_path.is_file():
-        raise FileNotFoundError(f"RL model metadata {str(meta_path)!r} not found (written by `dronewpt train`)")
+        raise FileNotFoundError(f"RL model metadata {str(meta_path)!r} not found (written by `dronewpt train`; for an "
+                                'SB3 model of your own, {"algo": "ppo", "control_period_s": 0.0001} in that file, with '
+                                '"obs_norm" if it was trained under VecNormalize: docs/rl.md, "From Python")')
     meta = json.loads(meta_path.read_text())
     if meta.get("algo") not in ALGOS:
         raise ValueError(f"algo={meta.get('algo')!r} in {meta_path} is invalid; valid values: {', '.join(ALGOS)}")

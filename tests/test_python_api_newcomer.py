@@ -303,3 +303,35 @@ def test_a_learned_policy_refuses_a_stacked_observation():
     one, _ = frame.reset(seed=1000)
     np.testing.assert_array_equal(obs[-8:], one)   # the newest frame is the plain env's observation
     assert pol.act(one[None, :]).shape == (1,)
+
+
+def test_an_sb3_model_of_ones_own_runs_as_rl_path(tmp_path):
+    """A PPO trained in one's own script (``model.save``) has no metadata JSON: ``policies.make("rl:PATH")`` said only
+    "written by `dronewpt train`"; now it says what the JSON needs, and with that JSON (``obs_norm`` from
+    ``policies.obs_mask.obs_norm_meta``) the policy acts as ``model.predict`` on the VecNormalize'd observation."""
+    pytest.importorskip("stable_baselines3")
+    import json
+
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from envs.sb3_vec import SbarSB3VecEnv
+    from policies.obs_mask import obs_norm_meta
+
+    venv = VecNormalize(SbarSB3VecEnv(4, scenario="nominal", config=ENVELOPE))
+    venv.reset()
+    for _ in range(30):   # some statistics
+        venv.step(np.random.default_rng(0).uniform(-1, 1, (4, 1)).astype(np.float32))
+    model = PPO("MlpPolicy", venv, seed=0, device="cpu", n_steps=64, batch_size=64)
+    path = tmp_path / "mine.zip"
+    model.save(path)
+    with pytest.raises(FileNotFoundError, match='for an SB3 model of your own, {"algo": "ppo", "control_period_s": '
+                                                '0.0001} in that file, with "obs_norm"'):
+        policies.make(f"rl:{path}")
+    path.with_suffix(".json").write_text(json.dumps({"algo": "ppo", "control_period_s": 1e-4,
+                                                     "obs_norm": obs_norm_meta(venv)}))
+    pol = policies.make(f"rl:{path}")
+    pol.reset(3)
+    obs = np.random.default_rng(1).uniform(-1, 1, (3, 8)).astype(np.float32)
+    a, _ = model.predict(venv.normalize_obs(obs), deterministic=True)
+    np.testing.assert_allclose(pol.act(obs), np.clip((a[:, 0] + 1) / 2, 0, 1), rtol=0, atol=1e-6)   # numpy actor: 1 ulp
