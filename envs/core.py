@@ -44,7 +44,7 @@ from wpt_receiver.sbar import rectifier_current, short_weight
 from .layout import BAT, COEF, STATE, XC
 from .plant import battery_operating_point, lm_window_h
 
-__all__ = ["LINK_MODELS", "window_lm", "EnvConfig", "RewardWeights", "Plans", "DetunedPlan", "build_plans", "OBS_SCALE", "OBS_OFFSET", "N_COEF", "N_BAT", "kernel_function", "as_config"]
+__all__ = ["LINK_MODELS", "window_lm", "EnvConfig", "RewardWeights", "Plans", "DetunedPlan", "build_plans", "OBS_SCALE", "OBS_OFFSET", "N_COEF", "N_BAT", "kernel_function", "as_config", "given_config"]
 
 HALF_PI = 0.5 * math.pi
 FOUR_OVER_PI = 4.0 / math.pi
@@ -291,6 +291,12 @@ def as_config(config) -> "EnvConfig":
     if isinstance(config, Mapping):
         return _from_mapping(EnvConfig, config, "config")
     raise ValueError(f"config={config!r} is invalid; valid: an envs.EnvConfig, a dict of its fields or None")
+
+
+def given_config(config):
+    """``config`` for a function whose own default is None: None stays None, an EnvConfig stays, a dict of its fields
+    becomes one (:func:`as_config`; hashable, and the oracle's cache keys hold its repr)."""
+    return config if config is None or isinstance(config, EnvConfig) else as_config(config)
 
 
 def kernel_function(name: str, compiled: bool = True):

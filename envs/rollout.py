@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .core import EnvConfig
+from .core import EnvConfig, as_config
 from .scenario import get_scenario
 
 __all__ = ["RolloutResult", "DutyRollout"]
@@ -62,7 +62,7 @@ class DutyRollout:
     def __init__(self, scenario="nominal", seed: int = 0, config: EnvConfig | None = None, compiled: bool = True):
         self.scenario = get_scenario(scenario)
         self.seed = int(seed)
-        self.config = config or EnvConfig()
+        self.config = as_config(config)
         self.compiled = bool(compiled)
         self._modal = self.config.link_model == "modal"
         self._envs, self._snap, self._prefix = {}, {}, {}

@@ -127,11 +127,13 @@ def run_policies(names, scenario: str, episodes: int, seed: int, config=None, nu
     each equal to its separate run. ``num_threads``: the env's (:class:`envs.SbarChargingVectorEnv`; the
     same results whatever the threads)."""
     from envs import SbarChargingVectorEnv
+    from envs.core import given_config
 
     from . import make
     from .batched import BlockPolicy
 
     _check_specs(names)
+    config = given_config(config)   # a dict of EnvConfig fields too (as the envs take it)
     names = list(dict.fromkeys(names))
     n = int(episodes)
     venv = SbarChargingVectorEnv(num_envs=len(names) * n, scenario=scenario, config=config, num_threads=num_threads)
@@ -329,9 +331,9 @@ def _split(specs, reference, extra, n_scenarios, config) -> list:
     the larger of the two processes' estimated work (:data:`RUN_COST`; the ``extra`` specs run in the parent on the
     first scenario only). Without a :data:`FORKED` spec, a child only for at least :data:`_MIN_FORK_S` of work.
     Which process runs a spec never changes its results (the rows are independent: :func:`run_policies`)."""
-    from envs import EnvConfig
+    from envs.core import as_config
 
-    link = (config or EnvConfig()).link_model
+    link = as_config(config).link_model
     table, other = RUN_COST.get(link, {}), _OTHER_COST.get(link, 0.05)
 
     def kind(sp):

@@ -335,3 +335,21 @@ def test_an_sb3_model_of_ones_own_runs_as_rl_path(tmp_path):
     obs = np.random.default_rng(1).uniform(-1, 1, (3, 8)).astype(np.float32)
     a, _ = model.predict(venv.normalize_obs(obs), deterministic=True)
     np.testing.assert_allclose(pol.act(obs), np.clip((a[:, 0] + 1) / 2, 0, 1), rtol=0, atol=1e-6)   # numpy actor: 1 ulp
+
+
+def test_compare_and_the_oracle_take_a_dict_config():
+    """``compare(..., config={...})`` with the MPC among the policies (its forked-child split reads the link) and the
+    oracle's duty replay (lru-cached on the config) took a dict as the envs do; they raised AttributeError
+    ``'dict' object has no attribute 'link_model'`` / TypeError ``unhashable type: 'dict'``. Same rows as the EnvConfig."""
+    pytest.importorskip("daqp")
+    from policies.compare import compare
+    from policies.oracle import policy_duties
+
+    as_dict = {"link_model": "envelope", "n_steps": 160}
+    cfg = EnvConfig(link_model="envelope", n_steps=160)
+    rows_d, _ = compare(policies=["ramp", "mpc"], scenarios=["nominal"], episodes=2, config=as_dict)
+    rows_c, _ = compare(policies=["ramp", "mpc"], scenarios=["nominal"], episodes=2, config=cfg)
+    assert [r["policy"] for r in rows_d] == [r["policy"] for r in rows_c]
+    for a, b in zip(rows_d, rows_c):
+        assert a["return"] == b["return"] and a["overshoot_pct"] == b["overshoot_pct"]
+    np.testing.assert_array_equal(policy_duties("ramp", "nominal", 1000, as_dict), policy_duties("ramp", "nominal", 1000, cfg))
