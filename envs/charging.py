@@ -107,8 +107,8 @@ class SbarChargingEnv(gym.Env):
     | Key                  | Unit | Meaning                                                                        |
     |----------------------|------|--------------------------------------------------------------------------------|
     | t_s                  | s    | time at the end of the step                                                    |
-    | i2_a, i1_a           | A    | true I2 / I1 amplitude, no noise (I2 signed as obs field 0; I1: eq. 4 signed, exact-mode link ``|I1|``) |
-    | i2_peak_a            | A    | the step's instantaneous peak ``|i2|`` (what the reward, cost and overshoot use) |
+    | i2_a, i1_a           | A    | true I2 / I1 amplitude, no noise (I2 signed as obs field 0; I1: eq. 4 signed, exact-mode link ``abs(I1)``) |
+    | i2_peak_a            | A    | the step's instantaneous peak ``abs(i2)`` (what the reward, cost and overshoot use) |
     | i2_peak_envelope_a   | A    | the step's envelope (fundamental) peak, without the ripple                      |
     | d_short              | -    | the duty applied in this step                                                  |
     | v2_v                 | V    | the SBAR's V2 (fundamental; eq. 4 signed with I2, exact-mode: its component in phase with I2) |
