@@ -9,6 +9,7 @@ import gymnasium as gym
 from gymnasium import spaces
 
 from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
+from mission_sim.validation import shown
 
 from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config
 from .layout import INFO
@@ -279,7 +280,7 @@ class SbarChargingDiscreteEnv(SbarChargingEnv):
             except ValueError:
                 a = None
         if a != 0 and a != 1:
-            raise ValueError(f"action={action!r} is invalid; valid values: 0 (RM), 1 (SM)")
+            raise ValueError(f"action={shown(action)} is invalid; valid values: 0 (RM), 1 (SM)")
         return float(a)
 
 
@@ -288,7 +289,7 @@ def _one_number(action) -> float:
     naming it for anything else: two values (only the first was used), none, None, a string, a complex."""
     x = np.asarray(action)
     if x.size != 1 or x.dtype.kind not in "biuf":
-        raise ValueError(f"action={action!r} is invalid; valid: one number in [-1, 1], shape (1,) as the "
+        raise ValueError(f"action={shown(action)} is invalid; valid: one number in [-1, 1], shape (1,) as the "
                          "action_space (values outside are clipped)")
     return float(x.reshape(-1)[0])
 

@@ -34,6 +34,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
+from mission_sim.validation import shown
 
 from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config, kernel_function
 from .layout import INFO
@@ -275,7 +276,7 @@ def _numbers(actions) -> np.ndarray:
     complex values: numpy's own message named neither the argument nor what is valid)."""
     a = np.asarray(actions)
     if a.dtype.kind not in "biuf":
-        raise ValueError(f"actions={actions!r} are invalid; valid: real numbers, one per sub-environment")
+        raise ValueError(f"actions={shown(actions)} are invalid; valid: real numbers, one per sub-environment")
     return a.astype(float, copy=False)
 
 

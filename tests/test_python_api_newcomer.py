@@ -31,7 +31,9 @@ def _rollout(env, actions, seed=5, options=None):
 
 # ------------------------------------------------------------------ actions of a single env
 @pytest.mark.parametrize("action, shown", [
-    (np.array([0.1, 0.5]), "array([0.1, 0.5])"),   # was: 0.1 used, 0.5 dropped silently
+    (np.array([0.1, 0.5]), "action=array of shape (2,), dtype float64"),   # was: 0.1 used, 0.5 dropped silently
+    (np.zeros((2, 1)), "action=array of shape (2, 1), dtype float64"),    # (the repr spans lines)
+    (np.zeros(100), "action=array of shape (100,), dtype float64"),
     (np.zeros(0), "array([]"),                      # was: IndexError
     (None, "action=None"),                          # was: "action=nan is invalid"
     ("0.5", "action='0.5'"),                        # was: taken as 0.5
@@ -54,12 +56,14 @@ def test_single_env_takes_one_number_in_any_container_alike():
         assert np.array_equal(got[0], ref[0]) and np.array_equal(got[1], ref[1])
 
 
-@pytest.mark.parametrize("action", [0.5, float("nan"), 2, -1, np.array([0, 1]), None, "1"])
+@pytest.mark.parametrize("action", [0.5, float("nan"), 2, -1, np.array([0, 1]), None, "1", np.zeros((2, 1)),
+                                    np.zeros(100)])
 def test_discrete_env_refuses_anything_but_0_or_1(action):
     env = SbarChargingDiscreteEnv(config=ENVELOPE)   # was: 0.5 taken as 0 (int()), NaN numpy's message
     env.reset(seed=0)
-    with pytest.raises(ValueError, match="valid values: 0 \\(RM\\), 1 \\(SM\\)"):
+    with pytest.raises(ValueError, match="valid values: 0 \\(RM\\), 1 \\(SM\\)") as err:
         env.step(action)
+    assert "\n" not in str(err.value)
 
 
 def test_discrete_env_takes_0_and_1_in_any_container_alike():
@@ -86,6 +90,12 @@ def test_vector_env_names_actions_that_are_not_numbers():
     env.reset(seed=0)
     with pytest.raises(ValueError, match="actions=None are invalid; valid: real numbers"):
         env.step(None)   # was: "cannot reshape array of size 1 into shape (2,)"
+    for cls in (SbarChargingVectorEnv, SbarChargingDiscreteVectorEnv):   # one line for an array of strings too
+        env = cls(2, config=ENVELOPE)
+        env.reset(seed=0)
+        with pytest.raises(ValueError, match="actions=array of shape \\(2, 1\\), dtype <U3 are invalid") as err:
+            env.step(np.array([["0.5"], ["0.1"]]))
+        assert "\n" not in str(err.value)
 
 
 # ------------------------------------------------------------------ reset options, scenarios
