@@ -38,6 +38,7 @@ from functools import cached_property
 import numpy as np
 
 from mission_sim.contract import LINK_MODELS, OBS_FIELDS
+from mission_sim.validation import Range, check_number
 from wpt_receiver import TABLE_I, LinkParams, duty_from_v2_clipped, state_matrices, steady_state, zoh_discretise
 from wpt_receiver.sbar import rectifier_current, short_weight
 
@@ -151,32 +152,16 @@ class EnvConfig:
             raise ValueError(f"link={self.link!r} is invalid; valid: a wpt_receiver.LinkParams (default TABLE_I)")
         if self.link_model not in LINK_MODELS:
             raise ValueError(f"link_model={self.link_model!r} is invalid; valid values: {', '.join(LINK_MODELS)}")
-        if int(self.v2_updates) != self.v2_updates or not 0 <= self.v2_updates <= 1000:
-            raise ValueError(f"v2_updates={self.v2_updates!r} is invalid; valid range: integer 0..1000 (0: one "
-                             "per rectifier period)")
-        if isinstance(self.v2_refine_levels, bool) or int(self.v2_refine_levels) != self.v2_refine_levels \
-                or not 0 <= self.v2_refine_levels <= 5:
-            raise ValueError(f"v2_refine_levels={self.v2_refine_levels!r} is invalid; valid range: integer 0..5 (0: "
-                             "no refinement)")
-        if not (np.isfinite(self.v2_refine_tol) and self.v2_refine_tol > 0):
-            raise ValueError(f"v2_refine_tol={self.v2_refine_tol!r} is invalid; valid range: (0, inf)")
-        if not (np.isfinite(self.hold_tol_a) and self.hold_tol_a >= 0):
-            raise ValueError(f"hold_tol_a={self.hold_tol_a!r} is invalid; valid range: [0, inf) A")
+        for name, rng, note in _RANGES:   # one real number each (YAML 1.1 reads 1e-4 as the string "1e-4")
+            v = getattr(self, name)
+            c = check_number(name, v, rng, note + _YAML_NOTE * isinstance(v, str))
+            if rng.integer or type(v) not in (int, float):   # whole numbers as int (n_steps=40.0 stepped nothing)
+                object.__setattr__(self, name, c)
         if not (self.device_tj_c == 0.0 or 25.0 <= self.device_tj_c <= 175.0):
             raise ValueError(f"device_tj_c={self.device_tj_c!r} is invalid; valid range: 0 (table values) or "
                              "[25, 175] C")
         if not isinstance(self.devices, str) or self.devices not in preset_names():
             raise ValueError(f"devices={self.devices!r} is invalid; valid values: {', '.join(preset_names())}")
-        if not (np.isfinite(self.dt_s) and 1e-7 <= self.dt_s <= 1e-2):
-            raise ValueError(f"dt_s={self.dt_s!r} is invalid; valid range: [1e-7, 1e-2] s")
-        if int(self.n_steps) != self.n_steps or not 2 <= self.n_steps <= 10**6:
-            raise ValueError(f"n_steps={self.n_steps!r} is invalid; valid range: integer 2..1e6")
-        if int(self.slow_every) != self.slow_every or self.slow_every < 1:
-            raise ValueError(f"slow_every={self.slow_every!r} is invalid; valid range: integer >= 1")
-        if not (np.isfinite(self.bus_c_f) and self.bus_c_f > 0):
-            raise ValueError(f"bus_c_f={self.bus_c_f!r} is invalid; valid range: (0, inf)")
-        if not (np.isfinite(self.rated_i2_a) and self.rated_i2_a > 0):
-            raise ValueError(f"rated_i2_a={self.rated_i2_a!r} is invalid; valid range: (0, inf)")
 
     def stated_fields(self) -> list:
         """``(name, value)`` of the fields: ``link_model`` always (a record must not depend on which link is
@@ -268,6 +253,21 @@ class Plans:
     detuned: DetunedPlan | None = None   # detuned windows (envs.detuned)
     zoh: np.ndarray | None = None        # (U, 20) the coefficients of each distinct Lm: coef = zoh[coef_ix]
     coef_ix: np.ndarray | None = None    # (n, S) row of ``zoh`` per window and slow segment
+
+
+_INF = math.inf
+#: EnvConfig's numeric fields: (name, valid range, what follows the range in the message)
+_RANGES = (("dt_s", Range(1e-7, 1e-2, "s"), ""),
+           ("n_steps", Range(2, 10**6, integer=True), ""),
+           ("slow_every", Range(1, 10**9, integer=True), ""),
+           ("rated_i2_a", Range(0, _INF, "A", lo_open=True, hi_open=True), ""),
+           ("bus_c_f", Range(0, _INF, "F", lo_open=True, hi_open=True), ""),
+           ("device_tj_c", Range(0, 175, "C"), " (0: the table's values, else [25, 175] C)"),
+           ("hold_tol_a", Range(0, _INF, "A", hi_open=True), ""),
+           ("v2_updates", Range(0, 1000, integer=True), " (0: one per rectifier period)"),
+           ("v2_refine_tol", Range(0, _INF, lo_open=True, hi_open=True), ""),
+           ("v2_refine_levels", Range(0, 5, integer=True), " (0: no refinement)"))
+_YAML_NOTE = "; a number, not a string (YAML 1.1 reads 1e-4 as a string: write 1.0e-4)"
 
 
 def _from_mapping(cls, values: Mapping, what: str):

@@ -160,6 +160,36 @@ def test_a_bad_config_is_named(config, text):
         SbarChargingEnv(config=config)
 
 
+@pytest.mark.parametrize("config, text", [
+    ({"dt_s": "1e-4"}, "dt_s='1e-4' is invalid; valid range: \\[1e-07, 0.01\\] s; a number, not a string \\(YAML"),
+    ({"rated_i2_a": "15"}, "rated_i2_a='15' is invalid; valid range: \\(0, inf\\) A; a number"),
+    ({"bus_c_f": None}, "bus_c_f=None is invalid; valid range: \\(0, inf\\) F"),
+    ({"n_steps": 40.5}, "n_steps=40.5 is invalid; valid range: integer 2..1000000"),
+    ({"slow_every": True}, "slow_every=True is invalid; valid range: integer 1..1000000000"),
+    ({"hold_tol_a": np.array([1e-3, 2e-3])}, "hold_tol_a=array of shape \\(2,\\), dtype float64 is invalid"),
+])
+def test_a_config_value_that_is_not_a_number_is_named(config, text):
+    """As PyYAML gives a YAML file of env kwargs (``dt_s: 1e-4`` is the string "1e-4"); was numpy's TypeError from
+    ``np.isfinite`` naming neither the key nor the range."""
+    with pytest.raises(ValueError, match=text) as err:
+        SbarChargingEnv(config=config)
+    assert "\n" not in str(err.value)
+
+
+def test_whole_number_config_fields_become_ints():
+    """``n_steps: 40.0`` (YAML, JSON) passed the check and crashed the env's build; now the same env as 40."""
+    cfg = EnvConfig(link_model="envelope", n_steps=40.0, slow_every=np.int64(10), v2_updates=0.0,
+                    v2_refine_levels=np.float64(3), rated_i2_a=np.float32(15.0))
+    assert cfg == EnvConfig(link_model="envelope", n_steps=40) and repr(cfg) == repr(EnvConfig(link_model="envelope",
+                                                                                               n_steps=40))
+    assert [type(getattr(cfg, k)) for k in ("n_steps", "slow_every", "v2_updates", "v2_refine_levels", "rated_i2_a")] \
+        == [int, int, int, int, float]
+    acts = [np.array([a], np.float32) for a in np.linspace(-1, 1, 40)]
+    got = _rollout(SbarChargingEnv(config={"link_model": "envelope", "n_steps": 40.0}), acts)
+    ref = _rollout(SbarChargingEnv(config=ENVELOPE), acts)
+    assert np.array_equal(got[0], ref[0]) and np.array_equal(got[1], ref[1])
+
+
 # ------------------------------------------------------------------ one's own policy through compare's loop
 @pytest.fixture
 def registered():
