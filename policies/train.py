@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Mapping
 from dataclasses import asdict, fields
 from pathlib import Path
 
@@ -85,9 +86,14 @@ def env_overrides(env) -> dict | None:
     """``train``'s ``env`` as the flat overrides :func:`env_config` takes (and the metadata and ``reproduce``
     record): a dict as it is, or an :class:`envs.EnvConfig` (what a Python user has at hand; it was ``TypeError:
     'EnvConfig' object is not iterable``) as its fields and reward weights that differ from the defaults. Its
-    link must be Table I's (the one ``train`` runs and its metadata assume)."""
+    link must be Table I's (the one ``train`` runs and its metadata assume). A dict with a ``reward`` entry (a
+    trained model's metadata ``env_config``, as the envs, ``compare`` and the oracle take it: ``{"reward":
+    {"overcurrent": 20}, ...}``) goes through :func:`envs.core.as_config` to the same flat form."""
     from envs import EnvConfig
+    from envs.core import as_config
 
+    if isinstance(env, Mapping) and "reward" in env:
+        env = as_config(env)
     if env is None or isinstance(env, dict):
         return env
     if not isinstance(env, EnvConfig):
@@ -469,7 +475,7 @@ def _written_dirs(dirs: dict) -> dict:
 
 
 def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64, scenario: str = "random",
-          progress: bool = True, hyperparams: dict | None = None, hyperparams_file=None, env: dict | None = None,
+          progress: bool = True, hyperparams: dict | None = None, hyperparams_file=None, env=None,
           cost: str = "overshoot", lagrangian: bool = False, budget: float | None = None, lambda_lr: float = 50.0,
           residual: bool = False, residual_scale: float = 0.25, vec: str = "batched", name: str | None = None,
           eval_episodes: int = 32, eval_every: int = 50_000, checkpoint_every: int = 100_000, resume=None,
@@ -478,7 +484,9 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
           imitation_epochs: int = 30, imitation_mask: tuple = ("last_d_short",), slow_budget=None, slow_budget_every="window") -> dict:
     """Train ``algo`` for ``timesteps`` environment steps; returns a dict of the written paths.
 
-    ``env``: EnvConfig / reward-weight overrides (:func:`env_config`); ``cost``: ``overshoot`` or ``overcurrent``
+    ``env``: None (the defaults), an :class:`envs.EnvConfig` (Table I's link), a dict of its fields with a nested
+    ``reward`` dict (a model's metadata ``env_config``) or train's flat overrides (EnvConfig fields and reward weights
+    by name, :func:`env_config`), all recorded flat (:func:`env_overrides`); ``cost``: ``overshoot`` or ``overcurrent``
     (:mod:`envs.sb3_vec`); ``lagrangian``: penalise the cost with a multiplier learned against ``budget``
     (default: the ramp policy's mean episode cost on ``scenario``); ``residual``: learn a bounded correction
     ``residual_scale * a`` of the model-based duty (of the budgeted controller with ``residual_base_budget`` > 0);

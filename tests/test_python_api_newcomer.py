@@ -328,6 +328,33 @@ def test_train_takes_an_env_config(monkeypatch):
         tr.train("ppo", 1000, "unused", env="envelope", progress=False)
 
 
+def test_train_takes_a_models_metadata_env_config(monkeypatch):
+    """``train(env=meta["env_config"])``, the nested form the envs, compare and the oracle take (was: "env config key
+    'reward' is invalid"): the same flat overrides as the EnvConfig it makes."""
+    import json
+    from pathlib import Path
+
+    from envs.core import as_config
+    from policies import train as tr
+
+    meta = json.loads((Path(policies.__file__).parent / "pretrained" / "ppo_lagrangian_s0.json").read_text())
+    ec = dict(meta["env_config"], reward={**meta["env_config"]["reward"], "overcurrent": 20.0}, n_steps=200)
+    assert tr.env_overrides(ec) == tr.env_overrides(as_config(ec)) == {"n_steps": 200, "link_model": "envelope",
+                                                                      "overcurrent": 20.0}
+    assert tr.env_config(tr.env_overrides(ec)) == as_config(ec)
+    seen = {}
+
+    def spec(algo, timesteps, opts):
+        seen.update(opts)
+        raise RuntimeError("stop before training")
+    monkeypatch.setattr(tr, "_spec", spec)
+    with pytest.raises(RuntimeError, match="stop before training"):
+        tr.train("ppo", 1000, "unused", env=meta["env_config"], progress=False)
+    assert tr.env_config(seen["env"]) == as_config(meta["env_config"])
+    with pytest.raises(ValueError, match="config key 'overcurrent' is invalid"):   # both forms at once: named
+        tr.env_overrides({"reward": {}, "overcurrent": 20.0})
+
+
 def test_a_learned_policy_refuses_a_stacked_observation():
     """An env made with ``history=4`` returns 32 values (four frames, oldest first); the shipped PPO given them
     read the first 8, the *oldest* frame, silently (``RLPolicy.normalise`` keeps the first ``obs_dim`` fields, for
