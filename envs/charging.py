@@ -204,10 +204,12 @@ class SbarChargingEnv(gym.Env):
         return spaces.Box(-1.0, 1.0, (1,), np.float32)
 
     def _duty(self, action) -> float:
-        try:   # the usual case (an array of one value or a numpy scalar), without array conversions
-            a = float(action.item())
-        except (AttributeError, ValueError, TypeError, RuntimeError):   # RuntimeError: torch's two-element .item()
-            a = _one_number(action)
+        try:   # the usual case (a float array of one value, a numpy float or a torch scalar): no array conversion
+            a = action.item()
+        except (AttributeError, ValueError, RuntimeError):   # no .item() (a list); two values (numpy's, torch's)
+            a = None
+        if type(a) is not float:   # "0.5" of an array of strings was float()ed; ints, bools: one number of any kind,
+            a = _one_number(action)   # or a one-line error naming it (no dtype check here: ~0.1 us of the step's ~5)
         if not math.isfinite(a):  # NaN would poison the link state and every reward after it
             raise ValueError(f"action={a!r} is invalid; valid range: [-1, 1] (finite)")
         d = (a + 1.0) * 0.5

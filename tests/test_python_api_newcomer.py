@@ -37,6 +37,9 @@ def _rollout(env, actions, seed=5, options=None):
     (np.zeros(0), "array([]"),                      # was: IndexError
     (None, "action=None"),                          # was: "action=nan is invalid"
     ("0.5", "action='0.5'"),                        # was: taken as 0.5
+    (np.array(["0.5"]), "action=array(['0.5'], dtype='<U3')"),   # was: taken as 0.5 (float() of .item())
+    (np.str_("0.5"), "action=np.str_('0.5')"),                   # idem
+    (np.array(["0.5"], dtype=object), "action=array(['0.5'], dtype=object)"),   # idem
     (np.array([0.3 + 1j]), "0.3+1.j"),              # was: ComplexWarning, imaginary part dropped
 ])
 def test_single_env_refuses_an_action_that_is_not_one_number(action, shown):
