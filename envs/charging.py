@@ -9,7 +9,7 @@ import gymnasium as gym
 from gymnasium import spaces
 
 from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
-from mission_sim.validation import shown
+from mission_sim.validation import real_array, shown
 
 from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config
 from .layout import INFO
@@ -289,8 +289,8 @@ class SbarChargingDiscreteEnv(SbarChargingEnv):
 def _one_number(action) -> float:
     """The one real number of ``action`` (a Python number, a list or array of one element); a ``ValueError``
     naming it for anything else: two values (only the first was used), none, None, a string, a complex."""
-    x = np.asarray(action)
-    if x.size != 1 or x.dtype.kind not in "biuf":
+    x = real_array(action)
+    if x is None or x.size != 1:
         raise ValueError(f"action={shown(action)} is invalid; valid: one number in [-1, 1], shape (1,) as the "
                          "action_space (values outside are clipped)")
     return float(x.reshape(-1)[0])

@@ -57,6 +57,22 @@ OBS_SCALE = np.array([2.0 / (f.hi - f.lo) for f in OBS_FIELDS])
 OBS_OFFSET = np.array([-1.0 - f.lo * 2.0 / (f.hi - f.lo) for f in OBS_FIELDS])
 
 
+_WEIGHT = Range(0, math.inf, hi_open=True)
+_CURRENT_SCALE = Range(0, math.inf, "A", lo_open=True, hi_open=True)
+#: EnvConfig's numeric fields: (name, valid range, what follows the range in the message)
+_RANGES = (("dt_s", Range(1e-7, 1e-2, "s"), ""),
+           ("n_steps", Range(2, 10**6, integer=True), ""),
+           ("slow_every", Range(1, 10**9, integer=True), ""),
+           ("rated_i2_a", Range(0, math.inf, "A", lo_open=True, hi_open=True), ""),
+           ("bus_c_f", Range(0, math.inf, "F", lo_open=True, hi_open=True), ""),
+           ("device_tj_c", Range(0, 175, "C"), " (0: the table's values, else [25, 175] C)"),
+           ("hold_tol_a", Range(0, math.inf, "A", hi_open=True), ""),
+           ("v2_updates", Range(0, 1000, integer=True), " (0: one per rectifier period)"),
+           ("v2_refine_tol", Range(0, math.inf, lo_open=True, hi_open=True), ""),
+           ("v2_refine_levels", Range(0, 5, integer=True), " (0: no refinement)"))
+_YAML_NOTE = "; a number, not a string (YAML 1.1 reads 1e-4 as a string: write 1.0e-4)"
+
+
 @dataclass(frozen=True)
 class RewardWeights:
     """reward = (min(I_L, I*) - tracking |I_L - I*|) / i_ref_a - overcurrent max(0, I2_peak/I2_rated - 1)
@@ -69,12 +85,11 @@ class RewardWeights:
     i_ref_a: float = 7.0
 
     def __post_init__(self):   # a NaN weight made every reward NaN, i_ref_a = 0 a ZeroDivisionError at the env's build
-        for name, lo in (("tracking", "[0, inf)"), ("overcurrent", "[0, inf)"), ("i_ref_a", "(0, inf) A")):
+        for name, rng in (("tracking", _WEIGHT), ("overcurrent", _WEIGHT), ("i_ref_a", _CURRENT_SCALE)):
             v = getattr(self, name)
-            ok = isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(v) \
-                and (v > 0 if name == "i_ref_a" else v >= 0)
-            if not ok:
-                raise ValueError(f"reward {name}={v!r} is invalid; valid range: {lo}")
+            c = check_number(f"reward {name}", v, rng)   # a numpy or torch scalar becomes the float it holds
+            if type(v) not in (int, float):
+                object.__setattr__(self, name, c)
 
 
 @dataclass(frozen=True)
@@ -253,21 +268,6 @@ class Plans:
     detuned: DetunedPlan | None = None   # detuned windows (envs.detuned)
     zoh: np.ndarray | None = None        # (U, 20) the coefficients of each distinct Lm: coef = zoh[coef_ix]
     coef_ix: np.ndarray | None = None    # (n, S) row of ``zoh`` per window and slow segment
-
-
-_INF = math.inf
-#: EnvConfig's numeric fields: (name, valid range, what follows the range in the message)
-_RANGES = (("dt_s", Range(1e-7, 1e-2, "s"), ""),
-           ("n_steps", Range(2, 10**6, integer=True), ""),
-           ("slow_every", Range(1, 10**9, integer=True), ""),
-           ("rated_i2_a", Range(0, _INF, "A", lo_open=True, hi_open=True), ""),
-           ("bus_c_f", Range(0, _INF, "F", lo_open=True, hi_open=True), ""),
-           ("device_tj_c", Range(0, 175, "C"), " (0: the table's values, else [25, 175] C)"),
-           ("hold_tol_a", Range(0, _INF, "A", hi_open=True), ""),
-           ("v2_updates", Range(0, 1000, integer=True), " (0: one per rectifier period)"),
-           ("v2_refine_tol", Range(0, _INF, lo_open=True, hi_open=True), ""),
-           ("v2_refine_levels", Range(0, 5, integer=True), " (0: no refinement)"))
-_YAML_NOTE = "; a number, not a string (YAML 1.1 reads 1e-4 as a string: write 1.0e-4)"
 
 
 def _from_mapping(cls, values: Mapping, what: str):

@@ -34,7 +34,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
-from mission_sim.validation import shown
+from mission_sim.validation import real_array, shown
 
 from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config, kernel_function
 from .layout import INFO
@@ -274,8 +274,8 @@ def _set_threads(k: int) -> None:
 def _numbers(actions) -> np.ndarray:
     """``actions`` as a float array; a ``ValueError`` naming them when they are not real numbers (None, strings,
     complex values: numpy's own message named neither the argument nor what is valid)."""
-    a = np.asarray(actions)
-    if a.dtype.kind not in "biuf":
+    a = real_array(actions)
+    if a is None:
         raise ValueError(f"actions={shown(actions)} are invalid; valid: real numbers, one per sub-environment")
     return a.astype(float, copy=False)
 

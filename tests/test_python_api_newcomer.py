@@ -136,6 +136,33 @@ def test_reward_weights_are_checked(kw, text):
         RewardWeights(**kw)
 
 
+def test_reward_weights_take_numpy_and_torch_scalars():
+    """A 0-d array or a torch scalar is one real number (they worked before the weights were checked; a narrow
+    isinstance list refused them): the same weights as the float, stored as it."""
+    torch = pytest.importorskip("torch")
+    ref = RewardWeights(overcurrent=20.0, i_ref_a=7.5)
+    for oc, ir in ((np.array(20.0), np.float32(7.5)), (torch.tensor(20.0), torch.tensor(7.5, dtype=torch.float64)),
+                   (np.int64(20), 7.5)):
+        w = RewardWeights(overcurrent=oc, i_ref_a=ir)
+        assert w == ref and type(w.overcurrent) is float and type(w.i_ref_a) is float
+    with pytest.raises(ValueError, match="reward overcurrent=array of shape \\(2,\\), dtype float64 is invalid"):
+        RewardWeights(overcurrent=np.array([20.0, 1.0]))
+    with pytest.raises(ValueError, match="reward tracking=True is invalid; valid range: \\[0, inf\\)"):
+        RewardWeights(tracking=True)
+
+
+@pytest.mark.parametrize("kw, text", [
+    (dict(soc=("0.1", "0.2")), "scenario soc=\\('0.1', '0.2'\\) is invalid; valid: a number or a \\(low, high\\) pair"),
+    (dict(i2_noise_a="0.1"), "i2_noise_a='0.1' is invalid; valid range: \\[0, inf\\)"),   # was: numpy's TypeError
+    (dict(hover_power_w=[1.0, 2.0]), "hover_power_w=\\[1.0, 2.0\\] is invalid; valid range: \\[0, inf\\)"),
+])
+def test_scenario_numbers_are_real_numbers(kw, text):
+    """The scenario's numbers as the config's and the actions' (one test of a real number, not a string)."""
+    with pytest.raises(ValueError, match=text):
+        Scenario(**kw)
+    assert Scenario(soc=np.array(0.3), cmd_a=(np.float32(4.0), 5)) == Scenario(soc=(0.3, 0.3), cmd_a=(4.0, 5.0))
+
+
 def test_config_may_be_a_dict_of_its_fields():
     """``gymnasium.make(ENV_ID, config={...})`` as a YAML file of env kwargs gives it (was: AttributeError
     'dict' object has no attribute 'n_steps'); the same env as with the EnvConfig."""
