@@ -1,5 +1,5 @@
 """What an RL researcher new to dronewpt found using it from Python (docs/robustness.md, "An RL researcher's
-pass over the Python API"; every case tried: /work/notes/pyapi_cases.txt of that session). Each test fails on
+pass over the Python API"; every case tried is in that session's notes, kept outside the repository). Each test fails on
 the code before its fix: a bad input gave a silent wrong number, numpy's message or an AttributeError deep
 inside; now one line naming the value and what is valid, or the convenience the user reached for works."""
 
