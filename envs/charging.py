@@ -166,7 +166,7 @@ class SbarChargingEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
 
-    def __init__(self, scenario="nominal", render_mode: str | None = None, config: EnvConfig | None = None,
+    def __init__(self, scenario="nominal", render_mode: str | None = None, config: EnvConfig | dict | None = None,
                  compiled: bool | None = None, history: int = 1):
         self.scenario = get_scenario(scenario)
         self.config = as_config(config)

@@ -64,7 +64,7 @@ class SbarChargingVectorEnv(VectorEnv):
     #: chunks per thread of the parallel step (smaller chunks even out a busy core)
     CHUNKS_PER_THREAD = 4
 
-    def __init__(self, num_envs: int = 1, scenario="nominal", config: EnvConfig | None = None,
+    def __init__(self, num_envs: int = 1, scenario="nominal", config: EnvConfig | dict | None = None,
                  render_mode: str | None = None, compiled: bool | None = None, num_threads: int | None = None,
                  history: int = 1):
         if int(num_envs) != num_envs or num_envs < 1:
@@ -124,7 +124,7 @@ class SbarChargingVectorEnv(VectorEnv):
 
     def _duty(self, actions) -> np.ndarray:
         a = actions if isinstance(actions, np.ndarray) and actions.dtype.kind == "f" else _numbers(actions)
-        if a.size != self.num_envs:
+        if a.size != self.num_envs or a.ndim != 1 and (a.ndim != 2 or a.shape[1] != 1):   # (n, 1) or (n,)
             raise _shape_error(actions, self.num_envs)
         d = np.empty(self.num_envs)
         k = (self._duty_kernel or kernel_function("duty_kernel", False))(a.reshape(self.num_envs), d)
@@ -276,8 +276,12 @@ def _numbers(actions) -> np.ndarray:
     complex values: numpy's own message named neither the argument nor what is valid)."""
     a = real_array(actions)
     if a is None:
-        raise ValueError(f"actions={shown(actions)} are invalid; valid: real numbers, one per sub-environment")
+        raise _numbers_error(actions)
     return a.astype(float, copy=False)
+
+
+def _numbers_error(actions) -> ValueError:
+    return ValueError(f"actions={shown(actions)} are invalid; valid: real numbers, one per sub-environment")
 
 
 def _shape_error(actions, n: int) -> ValueError:
@@ -292,12 +296,14 @@ class SbarChargingDiscreteVectorEnv(SbarChargingVectorEnv):
         return spaces.Discrete(2)
 
     def _duty(self, actions) -> np.ndarray:
-        a = _numbers(actions)
-        if a.size != self.num_envs:
+        a = real_array(actions)   # as given (ints from SB3): one copy to float below
+        if a is None:
+            raise _numbers_error(actions)
+        if a.size != self.num_envs or a.ndim != 1 and (a.ndim != 2 or a.shape[1] != 1):   # (n, 1) or (n,)
             raise _shape_error(actions, self.num_envs)
         a = a.reshape(self.num_envs)
         if np.any((a != 0) & (a != 1)):
-            raise ValueError(f"actions={a[(a != 0) & (a != 1)][0]!r} is invalid; valid values: 0 (RM), 1 (SM)")
+            raise ValueError(f"actions={a[(a != 0) & (a != 1)][0].item()!r} is invalid; valid values: 0 (RM), 1 (SM)")
         return a.astype(float)
 
 

@@ -211,9 +211,12 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
     into ``extra_traces`` under ``(spec, scenario)`` (e.g. :func:`frontier_specs`, for :func:`frontier`'s
     ``traces``: one env and one rollout instead of two). ``on_extra``: called with those traces as soon as they
     are there, before waiting for the forked child (e.g. the frontier's rows, off the critical path)."""
+    from envs.core import given_config
+
     if int(episodes) != episodes or not 1 <= episodes <= 100_000:
         raise ValueError(f"episodes={episodes!r} is invalid; valid range: integer 1..100000")
     _check_specs(list(policies) + [sp for specs in (train_seeds or {}).values() for sp in specs])
+    config = given_config(config)   # a dict of EnvConfig fields once here (the split, the child, run_policies)
     groups = [(p, [p]) for p in policies] + list((train_seeds or {}).items())
     rows, traces = [], {}
     jobs = [(s, g) for s in scenarios for g in groups]

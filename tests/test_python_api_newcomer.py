@@ -79,7 +79,7 @@ def test_discrete_env_takes_0_and_1_in_any_container_alike():
 
 # ------------------------------------------------------------------ actions of a vector env
 @pytest.mark.parametrize("cls", [SbarChargingVectorEnv, SbarChargingDiscreteVectorEnv])
-@pytest.mark.parametrize("shape", [(2, 1), (3, 2), (6,), ()])
+@pytest.mark.parametrize("shape", [(2, 1), (3, 2), (6,), (), (1, 3), (3, 1, 1)])   # the last two: size 3, was taken
 def test_vector_env_names_actions_of_the_wrong_shape(cls, shape):
     env = cls(3, config=ENVELOPE)   # was: "cannot reshape array of size 2 into shape (3,)"
     env.reset(seed=0)
@@ -394,7 +394,8 @@ def test_a_learned_policy_refuses_a_stacked_observation():
     obs, _ = env.reset(seed=1000)
     pol = policies.make("rl", env.policy_context)
     pol.reset(1)
-    with pytest.raises(ValueError, match="observations of shape \\(1, 32\\) are invalid; valid: \\(n, 8\\)"):
+    with pytest.raises(ValueError, match="observations of shape \\(1, 32\\) are invalid; valid: \\(n, 8\\), one contract "
+                       "frame per row, or \\(n, 9\\) for a residual's input"):   # (n, 9) is taken: say so
         pol.act(obs[None, :])
     frame = SbarChargingEnv(config=ENVELOPE)
     one, _ = frame.reset(seed=1000)
@@ -434,6 +435,17 @@ def test_an_sb3_model_of_ones_own_runs_as_rl_path(tmp_path):
     np.testing.assert_allclose(pol.act(obs), np.clip((a[:, 0] + 1) / 2, 0, 1), rtol=0, atol=1e-6)   # numpy actor: 1 ulp
 
 
+def test_compare_converts_a_dict_config_once_at_its_entry(monkeypatch):
+    """compare() hands an EnvConfig to its runs (the split, the forked child, run_policies), not the dict given."""
+    import policies.compare as pc
+
+    seen = []
+    monkeypatch.setattr(pc, "_compare_runs", lambda scenarios, groups, reference, episodes, seed, config, *a: seen.append(config))
+    pc.compare(policies=["ramp"], scenarios=["nominal"], episodes=2, config={"link_model": "envelope", "n_steps": 40},
+               progress=False)
+    assert seen == [ENVELOPE] and type(seen[0]) is EnvConfig
+
+
 def test_compare_and_the_oracle_take_a_dict_config():
     """``compare(..., config={...})`` with the MPC among the policies (its forked-child split reads the link) and the
     oracle's duty replay (lru-cached on the config) took a dict as the envs do; they raised AttributeError
@@ -446,7 +458,5 @@ def test_compare_and_the_oracle_take_a_dict_config():
     cfg = EnvConfig(link_model="envelope", n_steps=160)
     rows_d, _ = compare(policies=["ramp", "mpc"], scenarios=["nominal"], episodes=2, config=as_dict)
     rows_c, _ = compare(policies=["ramp", "mpc"], scenarios=["nominal"], episodes=2, config=cfg)
-    assert [r["policy"] for r in rows_d] == [r["policy"] for r in rows_c]
-    for a, b in zip(rows_d, rows_c):
-        assert a["return"] == b["return"] and a["overshoot_pct"] == b["overshoot_pct"]
+    assert rows_d == rows_c
     np.testing.assert_array_equal(policy_duties("ramp", "nominal", 1000, as_dict), policy_duties("ramp", "nominal", 1000, cfg))
