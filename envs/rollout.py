@@ -59,7 +59,8 @@ class DutyRollout:
     """Fixed duty sequences (m, n_steps) on the window ``seed`` of ``scenario`` (one batched env per
     batch size, kept; duties clipped to [0, 1] as the env does)."""
 
-    def __init__(self, scenario="nominal", seed: int = 0, config: EnvConfig | dict | None = None, compiled: bool = True):
+    def __init__(self, scenario="nominal", seed: int = 0, config: EnvConfig | dict | None = None,
+                 compiled: bool = True):
         self.scenario = get_scenario(scenario)
         self.seed = int(seed)
         self.config = as_config(config)

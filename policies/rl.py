@@ -122,9 +122,9 @@ class RLPolicy:
     def act(self, obs):
         raw = obs
         if np.shape(obs)[-1] > OBS_DIM + 1:   # one contract frame per row (+ the base duty: a residual's input)
-            raise ValueError(f"policy {self.name!r}: observations of shape {np.shape(obs)} are invalid; valid: (n, "
-                             f"{OBS_DIM}), one contract frame per row, or (n, {OBS_DIM + 1}) for a residual's input (the "
-                             "frame and the base duty) (an env made with history=K stacks K frames; a "
+            raise ValueError(f"policy {self.name!r}: observations of shape {np.shape(obs)} are invalid; valid: "
+                             f"(n, {OBS_DIM}), one contract frame per row, or (n, {OBS_DIM + 1}) for a residual's "
+                             "input (the frame and the base duty) (an env made with history=K stacks K frames; a "
                              "policy keeps its own history: make the env without it)")
         if self.history > 1:
             if self._hist is None:

@@ -335,6 +335,21 @@ def test_the_docs_python_snippets_run_as_written(doc, after, first, monkeypatch)
         exec(compile(code, doc, "exec"), {"__name__": "snippet"})
 
 
+def _train_env(monkeypatch, env):
+    """The ``env`` overrides ``policies.train.train(..., env=env)`` hands on (stopped before training)."""
+    from policies import train as tr
+
+    seen = {}
+
+    def spec(algo, timesteps, opts):
+        seen.update(opts)
+        raise RuntimeError("stop before training")
+    monkeypatch.setattr(tr, "_spec", spec)
+    with pytest.raises(RuntimeError, match="stop before training"):
+        tr.train("ppo", 1000, "unused", env=env, progress=False)
+    return seen["env"]
+
+
 def test_train_takes_an_env_config(monkeypatch):
     """``policies.train.train(..., env=EnvConfig(...))`` (was: TypeError 'EnvConfig' object is not iterable): the
     config becomes train's flat overrides, which rebuild the same EnvConfig."""
@@ -345,15 +360,7 @@ def test_train_takes_an_env_config(monkeypatch):
     assert flat == {"n_steps": 200, "devices": "ideal", "link_model": "envelope", "overcurrent": 20.0}
     assert tr.env_config(flat) == cfg
     assert tr.env_overrides(EnvConfig()) == {} and tr.env_config({}) == EnvConfig()
-    seen = {}
-
-    def spec(algo, timesteps, opts):
-        seen.update(opts)
-        raise RuntimeError("stop before training")
-    monkeypatch.setattr(tr, "_spec", spec)
-    with pytest.raises(RuntimeError, match="stop before training"):
-        tr.train("ppo", 1000, "unused", env=cfg, progress=False)
-    assert seen["env"] == flat
+    assert _train_env(monkeypatch, cfg) == flat
     with pytest.raises(ValueError, match="env='envelope' is invalid; valid: None, an envs.EnvConfig or a dict"):
         tr.train("ppo", 1000, "unused", env="envelope", progress=False)
 
@@ -372,15 +379,7 @@ def test_train_takes_a_models_metadata_env_config(monkeypatch):
     assert tr.env_overrides(ec) == tr.env_overrides(as_config(ec)) == {"n_steps": 200, "link_model": "envelope",
                                                                       "overcurrent": 20.0}
     assert tr.env_config(tr.env_overrides(ec)) == as_config(ec)
-    seen = {}
-
-    def spec(algo, timesteps, opts):
-        seen.update(opts)
-        raise RuntimeError("stop before training")
-    monkeypatch.setattr(tr, "_spec", spec)
-    with pytest.raises(RuntimeError, match="stop before training"):
-        tr.train("ppo", 1000, "unused", env=meta["env_config"], progress=False)
-    assert tr.env_config(seen["env"]) == as_config(meta["env_config"])
+    assert tr.env_config(_train_env(monkeypatch, meta["env_config"])) == as_config(meta["env_config"])
     with pytest.raises(ValueError, match="config key 'overcurrent' is invalid"):   # both forms at once: named
         tr.env_overrides({"reward": {}, "overcurrent": 20.0})
 
@@ -394,8 +393,8 @@ def test_a_learned_policy_refuses_a_stacked_observation():
     obs, _ = env.reset(seed=1000)
     pol = policies.make("rl", env.policy_context)
     pol.reset(1)
-    with pytest.raises(ValueError, match="observations of shape \\(1, 32\\) are invalid; valid: \\(n, 8\\), one contract "
-                       "frame per row, or \\(n, 9\\) for a residual's input"):   # (n, 9) is taken: say so
+    with pytest.raises(ValueError, match="observations of shape \\(1, 32\\) are invalid; valid: \\(n, 8\\), one "
+                       "contract frame per row, or \\(n, 9\\) for a residual's input"):   # (n, 9) is taken: say so
         pol.act(obs[None, :])
     frame = SbarChargingEnv(config=ENVELOPE)
     one, _ = frame.reset(seed=1000)
@@ -440,7 +439,8 @@ def test_compare_converts_a_dict_config_once_at_its_entry(monkeypatch):
     import policies.compare as pc
 
     seen = []
-    monkeypatch.setattr(pc, "_compare_runs", lambda scenarios, groups, reference, episodes, seed, config, *a: seen.append(config))
+    monkeypatch.setattr(pc, "_compare_runs", lambda scenarios, groups, reference, episodes, seed, config, *a:
+                        seen.append(config))
     pc.compare(policies=["ramp"], scenarios=["nominal"], episodes=2, config={"link_model": "envelope", "n_steps": 40},
                progress=False)
     assert seen == [ENVELOPE] and type(seen[0]) is EnvConfig
