@@ -62,7 +62,7 @@ _CURRENT_SCALE = Range(0, math.inf, "A", lo_open=True, hi_open=True)
 #: EnvConfig's numeric fields: (name, valid range, what follows the range in the message)
 _RANGES = (("dt_s", Range(1e-7, 1e-2, "s"), ""),
            ("n_steps", Range(2, 10**6, integer=True), ""),
-           ("slow_every", Range(1, 10**9, integer=True), ""),
+           ("slow_every", Range(1, math.inf, integer=True), ""),
            ("rated_i2_a", Range(0, math.inf, "A", lo_open=True, hi_open=True), ""),
            ("bus_c_f", Range(0, math.inf, "F", lo_open=True, hi_open=True), ""),
            ("device_tj_c", Range(0, 175, "C"), " (0: the table's values, else [25, 175] C)"),
