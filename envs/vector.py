@@ -73,6 +73,7 @@ class SbarChargingVectorEnv(VectorEnv):
             raise ValueError(f"render_mode={render_mode!r} is invalid for the vector env; valid values: None "
                              "(render a single env instead)")
         self.num_envs = int(num_envs)
+        self._action_shapes = ((self.num_envs, 1), (self.num_envs,))   # what step takes (_duty)
         self.render_mode = None
         self.scenario = get_scenario(scenario)
         self.config = c = as_config(config)
@@ -124,7 +125,7 @@ class SbarChargingVectorEnv(VectorEnv):
 
     def _duty(self, actions) -> np.ndarray:
         a = actions if isinstance(actions, np.ndarray) and actions.dtype.kind == "f" else _numbers(actions)
-        if a.size != self.num_envs or a.ndim != 1 and (a.ndim != 2 or a.shape[1] != 1):   # (n, 1) or (n,)
+        if a.shape not in self._action_shapes:   # (n, 1) or (n,)
             raise _shape_error(actions, self.num_envs)
         d = np.empty(self.num_envs)
         k = (self._duty_kernel or kernel_function("duty_kernel", False))(a.reshape(self.num_envs), d)
@@ -299,7 +300,7 @@ class SbarChargingDiscreteVectorEnv(SbarChargingVectorEnv):
         a = real_array(actions)   # as given (ints from SB3): one copy to float below
         if a is None:
             raise _numbers_error(actions)
-        if a.size != self.num_envs or a.ndim != 1 and (a.ndim != 2 or a.shape[1] != 1):   # (n, 1) or (n,)
+        if a.shape not in self._action_shapes:   # (n, 1) or (n,)
             raise _shape_error(actions, self.num_envs)
         a = a.reshape(self.num_envs)
         if np.any((a != 0) & (a != 1)):
