@@ -9,8 +9,9 @@ import gymnasium as gym
 from gymnasium import spaces
 
 from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
+from mission_sim.validation import real_array, shown
 
-from .core import OBS_OFFSET, OBS_SCALE, EnvConfig
+from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config
 from .layout import INFO
 from .modal_plant import single_plant
 from .parts import SingleObjective, SingleObservation, alias_parts
@@ -28,9 +29,11 @@ class SbarChargingEnv(gym.Env):
     short mode (SM) without a secondary coil current overshoot.
 
     ## Description
-    The series-series link of the paper (Table I, envelope model eq. 4, exact ZOH) is stepped every
-    control period (100 us = 17 rectifier periods; split into rectifier periods when the I2
-    envelope changes sign within it). Wind moves the drone around its hover pose, so
+    The series-series link of the paper (Table I) is stepped every control period (100 us = 17
+    rectifier periods): by default the mission's exact-mode link (``EnvConfig(link_model="modal")``,
+    :mod:`envs.modal_step`: eq. 1's coupled modes, V2 updated every rectifier period), or eq. 4's
+    envelope with exact ZOH (``EnvConfig(link_model="envelope")``, :mod:`envs.vector_kernel`; split into
+    rectifier periods when the I2 envelope changes sign within a step). Wind moves the drone around its hover pose, so
     the true mutual inductance Lm follows the pose error (updated every 1 ms). The agent sets the
     short duty ``d_short`` of the SBAR (eq. 9) for the next control period; the SBAR's V2 takes the
     sign of the I2 envelope (the diodes conduct with the instantaneous i2), so it always absorbs
@@ -50,6 +53,10 @@ class SbarChargingEnv(gym.Env):
     | ``SbarCharging-v0``      | a      | -1 .. 1   | ``d_short = (a + 1) / 2`` (:func:`mission_sim.contract.action_to_duty`): -1 = RM, +1 = SM |
     | ``SbarChargingDiscrete-v0`` | 0 / 1 | {0, 1} | 0 = rectification mode (d = 0), 1 = short mode (d = 1)       |
 
+    A continuous action outside [-1, 1] is clipped (the duty stays in [0, 1]); NaN or inf, more or fewer
+    than one number, or anything that is not a real number is a ``ValueError`` naming it (the discrete env:
+    anything but 0 or 1, e.g. 0.5). A vector env takes shape ``(num_envs, 1)`` or ``(num_envs,)``.
+
     ## Observation Space
     ``Box(-1, 1, (8,), float32)``, the contract of :mod:`mission_sim.contract`, each field mapped
     linearly from its physical range to [-1, 1] and clipped:
@@ -64,6 +71,13 @@ class SbarChargingEnv(gym.Env):
     | 5   | charge_cmd_a        | 0 .. 20        | A    | command for the next step; 0 = stop charging    |
     | 6   | last_d_short        | 0 .. 1         | -    | duty applied in the previous step               |
     | 7   | t_since_stop_s      | 0 .. 0.01      | s    | time since the stop command (0 before it)       |
+
+    Field 0 is the I2 envelope as the step ends (signed: on eq. 4's link the envelope, on the exact-mode link
+    ``|I2|`` with the sign of the phasor's real part) plus the noise, so a negative value reads 0 A after
+    the clipping (a policy ringing the link, e.g. random duties: ~8 % of steps, up to ~27 A unseen; the
+    mission observes ``|I2|``; docs/robustness.md, "An RL researcher's pass over the Python API").
+    Field 5 is the command of the *next* step; ``info["charge_cmd_a"]`` is the one the step just taken
+    was scored against (the previous observation's field 5).
 
     With ``history=K`` (2..the contract's MAX_HISTORY) the observation is the last K of these rows,
     oldest first, ``Box(-1, 1, (8 K,))`` (a window starts with K copies of its first row: the observation
@@ -87,6 +101,29 @@ class SbarChargingEnv(gym.Env):
     ``info["cost"]`` carries the overcurrent term unweighted (safety-gymnasium style), rated
     I2 = 15 A by default.
 
+    ## Info
+    Floats (``reached_short_mode`` a bool), the same keys after ``reset`` (at t = 0, with ``scenario`` and
+    ``t_stop_s`` besides) and after every ``step`` (the step's end); a vector env's are arrays (num_envs,):
+
+    | Key                  | Unit | Meaning                                                                        |
+    |----------------------|------|--------------------------------------------------------------------------------|
+    | t_s                  | s    | time at the end of the step                                                    |
+    | i2_a, i1_a           | A    | true I2 / I1 amplitude, no noise (I2 signed as obs field 0; I1: eq. 4 signed, exact-mode link ``abs(I1)``) |
+    | i2_peak_a            | A    | the step's instantaneous peak ``abs(i2)`` (what the reward, cost and overshoot use) |
+    | i2_peak_envelope_a   | A    | the step's envelope (fundamental) peak, without the ripple                      |
+    | d_short              | -    | the duty applied in this step                                                  |
+    | v2_v                 | V    | the SBAR's V2 (fundamental; eq. 4 signed with I2, exact-mode: its component in phase with I2) |
+    | rect_current_a       | A    | SBAR output current I_L, mean over the step                                    |
+    | battery_v, battery_current_a, soc | V, A, - | battery terminal voltage, current (+ = charging), state of charge |
+    | charge_cmd_a         | A    | the command this step was scored against                                       |
+    | lm_h                 | H    | the true mutual inductance of the step                                         |
+    | energy_j             | J    | ``VL I_L dt`` delivered to the battery node in the step                         |
+    | overcurrent          | -    | ``max(0, i2_peak_a / rated - 1)``, the reward's overcurrent term unweighted     |
+    | cost                 | -    | the rise of the running overshoot in this step (sums to ``episode_cost``)      |
+    | overshoot            | -    | running overshoot since the stop (:mod:`envs.objective`); ``-inf`` before the stop, and all window long if the stop falls after ``n_steps`` |
+    | episode_cost         | -    | ``max(0, overshoot)`` so far                                                   |
+    | reached_short_mode   | bool | the window has reached short mode (decided 14 ms after the stop; False until then) |
+
     ## Starting State
     Drawn with the environment's ``np_random`` by the scenario part (:class:`envs.scenario.ScenarioPart`,
     the scenario's :class:`~envs.scenario.Draw` parts in order), at the nominal scenario:
@@ -109,11 +146,17 @@ class SbarChargingEnv(gym.Env):
     ``gymnasium.make("dronewpt/SbarCharging-v0", scenario="nominal", render_mode=None, config=None)``;
     ``scenario`` is a name of :data:`envs.scenario.SCENARIOS` (nominal, lm_mismatch, windy, battery,
     random and the model-is-wrong ones, or one added with :func:`envs.scenario.register_scenario`), a
-    :class:`~envs.scenario.Scenario` or a dict of its fields; ``reset(options={"scenario":
-    ...})`` overrides it for one episode. ``config`` is an :class:`~envs.core.EnvConfig`.
-    ``compiled``: the step is one numba-compiled call (:func:`envs.vector_kernel.single_step`, the
-    helpers of the vector env's step on one window); ``False`` runs the same source uncompiled
-    (``py_func``: slow, for tests). Detuned windows (scenario ``detuned``) step their complex envelope.
+    :class:`~envs.scenario.Scenario` or a dict of its fields (a range may be one number: ``{"soc": 0.3}``);
+    ``reset(options={"scenario": ...})`` overrides it for that episode only (a ``reset()`` without options
+    returns to ``scenario``). ``config`` is an :class:`~envs.core.EnvConfig` or a dict of its fields
+    (``config={"link_model": "envelope", "reward": {"overcurrent": 20}}``). ``history=K``: the frame stack
+    above. ``compiled``: the step is one numba-compiled call (``single_step`` of :mod:`envs.modal_step`, or of
+    :mod:`envs.vector_kernel` on eq. 4's link: the helpers of the vector env's step on one window); ``False``
+    runs the same source uncompiled (``py_func``: slow, for tests). Detuned windows (scenario ``detuned``) step
+    their complex envelope on eq. 4's link, their C1, C2 in the link constants on the exact-mode link.
+    ``terminated`` is always False and the env truncates itself after ``n_steps``, so the registration has no
+    ``max_episode_steps`` (``env.spec.max_episode_steps`` is None; ``gymnasium.make(..., max_episode_steps=N)``
+    adds a ``TimeLimit`` that cuts windows shorter).
 
     ## Parts
     ``env.parts`` = (scenario, plant, objective, observation) (:mod:`envs.parts`, docs/envs.md): ``reset``
@@ -123,10 +166,10 @@ class SbarChargingEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
 
-    def __init__(self, scenario="nominal", render_mode: str | None = None, config: EnvConfig | None = None,
+    def __init__(self, scenario="nominal", render_mode: str | None = None, config: EnvConfig | dict | None = None,
                  compiled: bool | None = None, history: int = 1):
         self.scenario = get_scenario(scenario)
-        self.config = config or EnvConfig()
+        self.config = as_config(config)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode={render_mode!r} is invalid; valid values: None, 'rgb_array'")
         self.render_mode = render_mode
@@ -161,10 +204,12 @@ class SbarChargingEnv(gym.Env):
         return spaces.Box(-1.0, 1.0, (1,), np.float32)
 
     def _duty(self, action) -> float:
-        try:   # the usual case (an array of one value or a numpy scalar), without array conversions
-            a = float(action.item())
-        except (AttributeError, ValueError, TypeError):
-            a = float(np.asarray(action, dtype=float).reshape(-1)[0])
+        try:   # the usual case (a float array of one value, a numpy float or a torch scalar): no array conversion
+            a = action.item()
+        except (AttributeError, ValueError, RuntimeError):   # no .item() (a list); two values (numpy's, torch's)
+            a = None
+        if type(a) is not float:   # "0.5" of an array of strings was float()ed; ints, bools: one number of any kind,
+            a = _one_number(action)   # or a one-line error naming it (no dtype check here: ~0.1 us of the step's ~5)
         if not math.isfinite(a):  # NaN would poison the link state and every reward after it
             raise ValueError(f"action={a!r} is invalid; valid range: [-1, 1] (finite)")
         d = (a + 1.0) * 0.5
@@ -229,10 +274,26 @@ class SbarChargingDiscreteEnv(SbarChargingEnv):
         return spaces.Discrete(2)
 
     def _duty(self, action) -> float:
-        a = int(action)
+        if type(action) is int or isinstance(action, np.integer):   # the usual case (SB3, action_space.sample())
+            a = action
+        else:   # one number of any kind (a 0-d or one-element array, a float that is whole); 0.5 is not 0
+            try:
+                a = _one_number(action)
+            except ValueError:
+                a = None
         if a != 0 and a != 1:
-            raise ValueError(f"action={action!r} is invalid; valid values: 0 (RM), 1 (SM)")
+            raise ValueError(f"action={shown(action)} is invalid; valid values: 0 (RM), 1 (SM)")
         return float(a)
+
+
+def _one_number(action) -> float:
+    """The one real number of ``action`` (a Python number, a list or array of one element); a ``ValueError``
+    naming it for anything else: two values (only the first was used), none, None, a string, a complex."""
+    x = real_array(action)
+    if x is None or x.size != 1:
+        raise ValueError(f"action={shown(action)} is invalid; valid: one number in [-1, 1], shape (1,) as the "
+                         "action_space (values outside are clipped)")
+    return float(x.reshape(-1)[0])
 
 
 alias_parts(SbarChargingEnv, {"_st": ("plant", "st"), "_slow": ("plant", "slow"), "_cc": ("plant", "cc"),

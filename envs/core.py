@@ -31,19 +31,21 @@ once in compiled form (:mod:`envs.vector_kernel`) and called by the single and t
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from functools import cached_property
 
 import numpy as np
 
 from mission_sim.contract import LINK_MODELS, OBS_FIELDS
+from mission_sim.validation import Range, check_number
 from wpt_receiver import TABLE_I, LinkParams, duty_from_v2_clipped, state_matrices, steady_state, zoh_discretise
 from wpt_receiver.sbar import rectifier_current, short_weight
 
 from .layout import BAT, COEF, STATE, XC
 from .plant import battery_operating_point, lm_window_h
 
-__all__ = ["LINK_MODELS", "window_lm", "EnvConfig", "RewardWeights", "Plans", "DetunedPlan", "build_plans", "OBS_SCALE", "OBS_OFFSET", "N_COEF", "N_BAT", "kernel_function"]
+__all__ = ["LINK_MODELS", "window_lm", "EnvConfig", "RewardWeights", "Plans", "DetunedPlan", "build_plans", "OBS_SCALE", "OBS_OFFSET", "N_COEF", "N_BAT", "kernel_function", "as_config", "given_config"]
 
 HALF_PI = 0.5 * math.pi
 FOUR_OVER_PI = 4.0 / math.pi
@@ -53,6 +55,22 @@ N_BAT = len(BAT)
 #: affine map physical -> [-1, 1] of :data:`mission_sim.contract.OBS_FIELDS` (same as normalise_obs)
 OBS_SCALE = np.array([2.0 / (f.hi - f.lo) for f in OBS_FIELDS])
 OBS_OFFSET = np.array([-1.0 - f.lo * 2.0 / (f.hi - f.lo) for f in OBS_FIELDS])
+
+
+_WEIGHT = Range(0, math.inf, hi_open=True)
+_CURRENT_SCALE = Range(0, math.inf, "A", lo_open=True, hi_open=True)
+#: EnvConfig's numeric fields: (name, valid range, what follows the range in the message)
+_RANGES = (("dt_s", Range(1e-7, 1e-2, "s"), ""),
+           ("n_steps", Range(2, 10**6, integer=True), ""),
+           ("slow_every", Range(1, math.inf, integer=True), ""),
+           ("rated_i2_a", Range(0, math.inf, "A", lo_open=True, hi_open=True), ""),
+           ("bus_c_f", Range(0, math.inf, "F", lo_open=True, hi_open=True), ""),
+           ("device_tj_c", Range(0, 175, "C"), " (0: the table's values, else [25, 175] C)"),
+           ("hold_tol_a", Range(0, math.inf, "A", hi_open=True), ""),
+           ("v2_updates", Range(0, 1000, integer=True), " (0: one per rectifier period)"),
+           ("v2_refine_tol", Range(0, math.inf, lo_open=True, hi_open=True), ""),
+           ("v2_refine_levels", Range(0, 5, integer=True), " (0: no refinement)"))
+_YAML_NOTE = "; a number, not a string (YAML 1.1 reads 1e-4 as a string: write 1.0e-4)"
 
 
 @dataclass(frozen=True)
@@ -65,6 +83,13 @@ class RewardWeights:
     tracking: float = 1.0
     overcurrent: float = 10.0
     i_ref_a: float = 7.0
+
+    def __post_init__(self):   # a NaN weight made every reward NaN, i_ref_a = 0 a ZeroDivisionError at the env's build
+        for name, rng in (("tracking", _WEIGHT), ("overcurrent", _WEIGHT), ("i_ref_a", _CURRENT_SCALE)):
+            v = getattr(self, name)
+            c = check_number(f"reward {name}", v, rng)   # a numpy or torch scalar becomes the float it holds
+            if type(v) not in (int, float):
+                object.__setattr__(self, name, c)
 
 
 @dataclass(frozen=True)
@@ -134,34 +159,24 @@ class EnvConfig:
 
     def __post_init__(self):
         from wpt_receiver.devices import preset_names
+        if isinstance(self.reward, Mapping):   # EnvConfig(reward={"overcurrent": 20}): its fields by name
+            object.__setattr__(self, "reward", _from_mapping(RewardWeights, self.reward, "reward"))
+        if not isinstance(self.reward, RewardWeights):
+            raise ValueError(f"reward={self.reward!r} is invalid; valid: an envs.RewardWeights or a dict of its fields")
+        if not isinstance(self.link, LinkParams):
+            raise ValueError(f"link={self.link!r} is invalid; valid: a wpt_receiver.LinkParams (default TABLE_I)")
         if self.link_model not in LINK_MODELS:
             raise ValueError(f"link_model={self.link_model!r} is invalid; valid values: {', '.join(LINK_MODELS)}")
-        if int(self.v2_updates) != self.v2_updates or not 0 <= self.v2_updates <= 1000:
-            raise ValueError(f"v2_updates={self.v2_updates!r} is invalid; valid range: integer 0..1000 (0: one "
-                             "per rectifier period)")
-        if isinstance(self.v2_refine_levels, bool) or int(self.v2_refine_levels) != self.v2_refine_levels \
-                or not 0 <= self.v2_refine_levels <= 5:
-            raise ValueError(f"v2_refine_levels={self.v2_refine_levels!r} is invalid; valid range: integer 0..5 (0: "
-                             "no refinement)")
-        if not (np.isfinite(self.v2_refine_tol) and self.v2_refine_tol > 0):
-            raise ValueError(f"v2_refine_tol={self.v2_refine_tol!r} is invalid; valid range: (0, inf)")
-        if not (np.isfinite(self.hold_tol_a) and self.hold_tol_a >= 0):
-            raise ValueError(f"hold_tol_a={self.hold_tol_a!r} is invalid; valid range: [0, inf) A")
+        for name, rng, note in _RANGES:   # one real number each (YAML 1.1 reads 1e-4 as the string "1e-4")
+            v = getattr(self, name)
+            c = check_number(name, v, rng, note + _YAML_NOTE * isinstance(v, str))
+            if rng.integer or type(v) not in (int, float):   # whole numbers as int (n_steps=40.0 stepped nothing)
+                object.__setattr__(self, name, c)
         if not (self.device_tj_c == 0.0 or 25.0 <= self.device_tj_c <= 175.0):
             raise ValueError(f"device_tj_c={self.device_tj_c!r} is invalid; valid range: 0 (table values) or "
                              "[25, 175] C")
         if not isinstance(self.devices, str) or self.devices not in preset_names():
             raise ValueError(f"devices={self.devices!r} is invalid; valid values: {', '.join(preset_names())}")
-        if not (np.isfinite(self.dt_s) and 1e-7 <= self.dt_s <= 1e-2):
-            raise ValueError(f"dt_s={self.dt_s!r} is invalid; valid range: [1e-7, 1e-2] s")
-        if int(self.n_steps) != self.n_steps or not 2 <= self.n_steps <= 10**6:
-            raise ValueError(f"n_steps={self.n_steps!r} is invalid; valid range: integer 2..1e6")
-        if int(self.slow_every) != self.slow_every or self.slow_every < 1:
-            raise ValueError(f"slow_every={self.slow_every!r} is invalid; valid range: integer >= 1")
-        if not (np.isfinite(self.bus_c_f) and self.bus_c_f > 0):
-            raise ValueError(f"bus_c_f={self.bus_c_f!r} is invalid; valid range: (0, inf)")
-        if not (np.isfinite(self.rated_i2_a) and self.rated_i2_a > 0):
-            raise ValueError(f"rated_i2_a={self.rated_i2_a!r} is invalid; valid range: (0, inf)")
 
     def stated_fields(self) -> list:
         """``(name, value)`` of the fields: ``link_model`` always (a record must not depend on which link is
@@ -253,6 +268,35 @@ class Plans:
     detuned: DetunedPlan | None = None   # detuned windows (envs.detuned)
     zoh: np.ndarray | None = None        # (U, 20) the coefficients of each distinct Lm: coef = zoh[coef_ix]
     coef_ix: np.ndarray | None = None    # (n, S) row of ``zoh`` per window and slow segment
+
+
+def _from_mapping(cls, values: Mapping, what: str):
+    """``cls(**values)`` with an unknown key refused by name (one line naming the valid keys)."""
+    known = [f.name for f in fields(cls)]
+    bad = sorted(set(values) - set(known), key=str)
+    if bad:
+        raise ValueError(f"{what} key {bad[0]!r} is invalid; valid keys: {', '.join(known)}")
+    return cls(**values)
+
+
+def as_config(config) -> "EnvConfig":
+    """The env's :class:`EnvConfig` from ``config``: an EnvConfig, None (the defaults) or a dict of its fields
+    (``gymnasium.make(ENV_ID, config={"link_model": "envelope"})``, as a YAML file of env kwargs gives it; a
+    ``reward`` entry may be a dict of :class:`RewardWeights` fields); anything else, or an unknown key, is a
+    one-line ``ValueError``."""
+    if config is None:
+        return EnvConfig()
+    if isinstance(config, EnvConfig):
+        return config
+    if isinstance(config, Mapping):
+        return _from_mapping(EnvConfig, config, "config")
+    raise ValueError(f"config={config!r} is invalid; valid: an envs.EnvConfig, a dict of its fields or None")
+
+
+def given_config(config):
+    """``config`` for a function whose own default is None: None stays None, an EnvConfig stays, a dict of its fields
+    becomes one (:func:`as_config`; hashable, and the oracle's cache keys hold its repr)."""
+    return config if config is None or isinstance(config, EnvConfig) else as_config(config)
 
 
 def kernel_function(name: str, compiled: bool = True):

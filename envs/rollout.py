@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .core import EnvConfig
+from .core import EnvConfig, as_config
 from .scenario import get_scenario
 
 __all__ = ["RolloutResult", "DutyRollout"]
@@ -59,10 +59,11 @@ class DutyRollout:
     """Fixed duty sequences (m, n_steps) on the window ``seed`` of ``scenario`` (one batched env per
     batch size, kept; duties clipped to [0, 1] as the env does)."""
 
-    def __init__(self, scenario="nominal", seed: int = 0, config: EnvConfig | None = None, compiled: bool = True):
+    def __init__(self, scenario="nominal", seed: int = 0, config: EnvConfig | dict | None = None,
+                 compiled: bool = True):
         self.scenario = get_scenario(scenario)
         self.seed = int(seed)
-        self.config = config or EnvConfig()
+        self.config = as_config(config)
         self.compiled = bool(compiled)
         self._modal = self.config.link_model == "modal"
         self._envs, self._snap, self._prefix = {}, {}, {}

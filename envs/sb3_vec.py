@@ -42,7 +42,7 @@ COSTS = ("overshoot", "overcurrent")
 class SbarSB3VecEnv(VecEnv):
     """``num_envs`` charging windows as one SB3 ``VecEnv`` (continuous, or ``discrete=True`` ON-OFF)."""
 
-    def __init__(self, num_envs: int = 64, scenario="random", config: EnvConfig | None = None,
+    def __init__(self, num_envs: int = 64, scenario="random", config: EnvConfig | dict | None = None,
                  discrete: bool = False, cost: str = "overshoot", reset_seed: int | None = None):
         if cost not in COSTS:
             raise ValueError(f"cost={cost!r} is invalid; valid values: {', '.join(COSTS)}")

@@ -32,10 +32,13 @@ present, a battery near 30 V) inside a window, where an adaptive or learned poli
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
 from itertools import accumulate
 
 import numpy as np
+
+from mission_sim.validation import Range, check_number, real_number, shown
 
 __all__ = ["Scenario", "SCENARIOS", "HELD_OUT", "get_scenario", "EpisodeDraw", "draw_episode", "draw_episodes", "stack_draws",
            "command_profile", "scenario_from_options", "Draw", "DRAWS", "register_scenario", "ScenarioPart", "Window"]
@@ -102,7 +105,7 @@ class Scenario:
         for f in fields(self):
             if f.name not in limits:
                 continue
-            lo, hi = (float(v) for v in getattr(self, f.name))
+            lo, hi = _pair(f.name, getattr(self, f.name))
             vlo, vhi = limits[f.name]
             if not (vlo <= lo <= hi <= vhi):
                 raise ValueError(f"scenario {f.name}=({lo}, {hi}) is invalid; valid range: "
@@ -112,10 +115,9 @@ class Scenario:
                     raise ValueError(f"scenario sense_delay_steps=({lo}, {hi}) is invalid; valid: integers 0..20")
                 lo, hi = int(lo), int(hi)
             object.__setattr__(self, f.name, (lo, hi))
-        if not (np.isfinite(self.i2_noise_a) and self.i2_noise_a >= 0):
-            raise ValueError(f"i2_noise_a={self.i2_noise_a!r} is invalid; valid range: [0, inf)")
-        if self.hover_power_w is not None and not (np.isfinite(self.hover_power_w) and self.hover_power_w >= 0):
-            raise ValueError(f"hover_power_w={self.hover_power_w!r} is invalid; valid range: [0, inf)")
+        check_number("i2_noise_a", self.i2_noise_a, _NONNEGATIVE)   # (a string: one line, not numpy's TypeError)
+        if self.hover_power_w is not None:
+            check_number("hover_power_w", self.hover_power_w, _NONNEGATIVE)
         object.__setattr__(self, "parts", tuple(self.parts))
         for part in self.parts:
             if not isinstance(part, Draw):
@@ -128,6 +130,25 @@ class Scenario:
 
     def with_(self, **changes) -> "Scenario":
         return replace(self, **changes)
+
+
+_NONNEGATIVE = Range(0, float("inf"), hi_open=True)
+
+
+def _pair(name: str, value) -> tuple:
+    """A scenario range as ``(low, high)`` floats: a pair, or one number for a point range (``soc=0.5`` is
+    ``soc=(0.5, 0.5)``, which draws nothing); anything else one line naming it (real numbers as
+    :func:`mission_sim.validation.real_number` takes them: not a string such as YAML's ``"1e-4"``)."""
+    v = real_number(value)
+    if v is not None:
+        return v, v
+    try:
+        lo, hi = (real_number(x) for x in value)
+    except (TypeError, ValueError):   # not iterable, or not two items
+        lo = hi = None
+    if lo is None or hi is None:
+        raise ValueError(f"scenario {name}={shown(value)} is invalid; valid: a number or a (low, high) pair")
+    return lo, hi
 
 
 SCENARIOS: dict[str, Scenario] = {
@@ -155,6 +176,9 @@ def scenario_from_options(options, default: Scenario) -> Scenario:
     """The scenario of ``reset(options=...)``: ``options["scenario"]`` or ``default``; other keys are errors."""
     if not options:
         return default
+    if not isinstance(options, Mapping):   # a string was iterated: "reset option 'w' is invalid"
+        raise ValueError(f"options={options!r} is invalid; valid: None or a dict {{'scenario': NAME, a Scenario or a "
+                         "dict of its fields}")
     bad = set(options) - {"scenario"}
     if bad:
         raise ValueError(f"reset option {sorted(bad)[0]!r} is invalid; valid keys: 'scenario'")

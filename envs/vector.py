@@ -34,8 +34,9 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
+from mission_sim.validation import real_array, shown
 
-from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, kernel_function
+from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config, kernel_function
 from .layout import INFO
 from .modal_plant import vector_plant
 from .parts import ObjectivePart, ObservationPart, alias_parts
@@ -63,7 +64,7 @@ class SbarChargingVectorEnv(VectorEnv):
     #: chunks per thread of the parallel step (smaller chunks even out a busy core)
     CHUNKS_PER_THREAD = 4
 
-    def __init__(self, num_envs: int = 1, scenario="nominal", config: EnvConfig | None = None,
+    def __init__(self, num_envs: int = 1, scenario="nominal", config: EnvConfig | dict | None = None,
                  render_mode: str | None = None, compiled: bool | None = None, num_threads: int | None = None,
                  history: int = 1):
         if int(num_envs) != num_envs or num_envs < 1:
@@ -72,9 +73,10 @@ class SbarChargingVectorEnv(VectorEnv):
             raise ValueError(f"render_mode={render_mode!r} is invalid for the vector env; valid values: None "
                              "(render a single env instead)")
         self.num_envs = int(num_envs)
+        self._action_shapes = ((self.num_envs, 1), (self.num_envs,))   # what step takes (_duty)
         self.render_mode = None
         self.scenario = get_scenario(scenario)
-        self.config = c = config or EnvConfig()
+        self.config = c = as_config(config)
         self.history = history
         self.single_observation_space = spaces.Box(-1.0, 1.0, (history_obs_dim(history),), np.float32)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
@@ -122,7 +124,9 @@ class SbarChargingVectorEnv(VectorEnv):
         return spaces.Box(-1.0, 1.0, (1,), np.float32)
 
     def _duty(self, actions) -> np.ndarray:
-        a = actions if isinstance(actions, np.ndarray) and actions.dtype.kind == "f" else np.asarray(actions, float)
+        a = actions if isinstance(actions, np.ndarray) and actions.dtype.kind == "f" else _numbers(actions)
+        if a.shape not in self._action_shapes:   # (n, 1) or (n,)
+            raise _shape_error(actions, self.num_envs)
         d = np.empty(self.num_envs)
         k = (self._duty_kernel or kernel_function("duty_kernel", False))(a.reshape(self.num_envs), d)
         if k >= 0:   # NaN would poison the link state and every reward after it
@@ -268,6 +272,24 @@ def _set_threads(k: int) -> None:
         numba.set_parallel_chunksize(1)
 
 
+def _numbers(actions) -> np.ndarray:
+    """``actions`` as a float array; a ``ValueError`` naming them when they are not real numbers (None, strings,
+    complex values: numpy's own message named neither the argument nor what is valid)."""
+    a = real_array(actions)
+    if a is None:
+        raise _numbers_error(actions)
+    return a.astype(float, copy=False)
+
+
+def _numbers_error(actions) -> ValueError:
+    return ValueError(f"actions={shown(actions)} are invalid; valid: real numbers, one per sub-environment")
+
+
+def _shape_error(actions, n: int) -> ValueError:
+    return ValueError(f"actions of shape {np.shape(actions)} are invalid; valid: one per sub-environment, shape "
+                      f"({n}, 1) or ({n},)")
+
+
 class SbarChargingDiscreteVectorEnv(SbarChargingVectorEnv):
     """Batched :class:`envs.charging.SbarChargingDiscreteEnv`: actions in {0: RM, 1: SM}."""
 
@@ -275,9 +297,14 @@ class SbarChargingDiscreteVectorEnv(SbarChargingVectorEnv):
         return spaces.Discrete(2)
 
     def _duty(self, actions) -> np.ndarray:
-        a = np.asarray(actions).reshape(self.num_envs)
+        a = real_array(actions)   # as given (ints from SB3): one copy to float below
+        if a is None:
+            raise _numbers_error(actions)
+        if a.shape not in self._action_shapes:   # (n, 1) or (n,)
+            raise _shape_error(actions, self.num_envs)
+        a = a.reshape(self.num_envs)
         if np.any((a != 0) & (a != 1)):
-            raise ValueError(f"actions={a[(a != 0) & (a != 1)][0]!r} is invalid; valid values: 0 (RM), 1 (SM)")
+            raise ValueError(f"actions={a[(a != 0) & (a != 1)][0].item()!r} is invalid; valid values: 0 (RM), 1 (SM)")
         return a.astype(float)
 
 

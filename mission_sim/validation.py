@@ -9,7 +9,8 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["check_positive", "read_toml_file", "Range", "check_range", "check_regular_file"]
+__all__ = ["check_positive", "read_toml_file", "Range", "check_range", "check_regular_file", "shown", "real_array",
+           "real_number", "check_number"]
 
 
 @dataclass(frozen=True)
@@ -37,9 +38,9 @@ class Range:
         return above and below
 
     def text(self) -> str:
-        """``(0, 100] m/s``, ``integer 1..32``: the text after "valid range:" in every message."""
-        if self.integer:
-            body = f"integer {int(self.lo)}..{int(self.hi)}"
+        """``(0, 100] m/s``, ``integer 1..32``, ``integer >= 1``: the text after "valid range:" in every message."""
+        if self.integer:   # no upper end: "integer >= 1", the CLI's words
+            body = f"integer >= {int(self.lo)}" if math.isinf(self.hi) else f"integer {int(self.lo)}..{int(self.hi)}"
         else:
             body = f"{'(' if self.lo_open else '['}{self.lo:.6g}, {self.hi:.6g}{')' if self.hi_open else ']'}"
         return f"{body} {self.unit}".rstrip()
@@ -49,6 +50,48 @@ def check_range(key: str, value, rng: Range) -> None:
     """``ValueError("key=value is invalid; valid range: <rng.text()>")`` unless ``rng`` contains ``value``."""
     if not rng.contains(value):
         raise ValueError(f"{key}={value!r} is invalid; valid range: {rng.text()}")
+
+
+def shown(value) -> str:
+    """``value`` as a message names it, on one line: ``array of shape (2, 1), dtype float64`` for an array (a numpy
+    array, a torch tensor) of more than one element, whose repr spans lines; else its repr."""
+    shape, dtype = getattr(value, "shape", None), getattr(value, "dtype", None)
+    if shape is not None and dtype is not None and math.prod(shape) > 1:
+        return f"array of shape {tuple(shape)}, dtype {dtype}"
+    return " ".join(repr(value).split()) if "\n" in repr(value) else repr(value)
+
+
+def real_array(value):
+    """``value`` as a numpy array if it holds real numbers (dtype bool, integer or float: a Python or numpy
+    number, a list of numbers, an array, a torch tensor); None for anything else (None, strings, complex
+    values, objects, ragged lists). Never raises."""
+    import numpy as np
+    try:
+        x = np.asarray(value)
+    except Exception:   # noqa: BLE001 (ragged lists, a tensor that requires grad, ...): not real numbers either
+        return None
+    return x if x.dtype.kind in "biuf" else None
+
+
+def real_number(value):
+    """``float(value)`` for one real number that is not a bool (a Python or numpy number, a 0-d array, a torch
+    scalar); None for anything else (a string such as YAML's ``"1e-4"``, None, a bool, a complex, a sequence)."""
+    if type(value) is float:
+        return value
+    x = real_array(value)
+    if x is None or x.ndim != 0 or x.dtype.kind == "b":
+        return None
+    return float(x)
+
+
+def check_number(key: str, value, rng: Range, note: str = ""):
+    """``value`` as a Python float (an int if ``rng.integer``) when it is one real number inside ``rng``
+    (:func:`real_number`); else ``ValueError("key=value is invalid; valid range: <rng.text()><note>")``, one line
+    (:func:`check_range`'s, which takes a numeric string)."""
+    v = real_number(value)
+    if v is None or not rng.contains(v):
+        raise ValueError(f"{key}={shown(value)} is invalid; valid range: {rng.text()}{note}")
+    return int(v) if rng.integer else v
 
 
 def check_regular_file(path, what: str, valid: str = "a regular file") -> Path:

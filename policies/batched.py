@@ -176,5 +176,18 @@ class BlockPolicy:
         n = self.n
         for b, k, p in self.units:
             rows = slice(b * n, (b + k) * n)
-            out[rows] = np.asarray(p.act(obs[rows].copy()), dtype=float).reshape(k * n)
+            d = np.asarray(p.act(obs[rows].copy()), dtype=float)
+            if d.size != k * n or not np.isfinite(d).all():   # named here: the env's error names neither policy nor shape
+                raise _act_error(p, d, k * n)
+            out[rows] = d.reshape(k * n)
         return out
+
+
+def _act_error(p, d, n: int) -> ValueError:
+    """One line naming the policy whose ``act`` gave ``d`` (not ``n`` finite duties)."""
+    name = getattr(p, "name", type(p).__name__)
+    if d.size != n:
+        return ValueError(f"policy {name!r}: act() returned shape {d.shape}; valid: ({n},), one duty in [0, 1] per "
+                          "observation row")
+    bad = d.reshape(-1)[~np.isfinite(d.reshape(-1))][0]
+    return ValueError(f"policy {name!r}: act() returned a duty {float(bad)!r}; valid: finite duties in [0, 1]")

@@ -106,6 +106,14 @@ def _rollout(pol, venv, seeds):
     return rec, rew, info["t_stop_s"], last
 
 
+def _check_specs(specs) -> None:
+    """Policies are given by name (a :func:`policies.make` spec); a policy object was an AttributeError deep inside."""
+    for sp in specs:
+        if not isinstance(sp, str):
+            raise ValueError(f"policy {sp!r} is invalid; valid: a policies.make name such as 'model_based' or "
+                             "'rl:PATH' (your own class: policies.register(NAME, factory), then NAME)")
+
+
 def run_policy(name: str, scenario: str, episodes: int, seed: int, config=None) -> EpisodeTraces:
     """Run policy ``name`` (a :func:`policies.make` name, e.g. ``rl:PATH`` or ``model_based_budget:0.02``)
     on ``episodes`` windows seeded ``seed + i``."""
@@ -119,10 +127,13 @@ def run_policies(names, scenario: str, episodes: int, seed: int, config=None, nu
     each equal to its separate run. ``num_threads``: the env's (:class:`envs.SbarChargingVectorEnv`; the
     same results whatever the threads)."""
     from envs import SbarChargingVectorEnv
+    from envs.core import given_config
 
     from . import make
     from .batched import BlockPolicy
 
+    _check_specs(names)
+    config = given_config(config)   # a dict of EnvConfig fields too (as the envs take it)
     names = list(dict.fromkeys(names))
     n = int(episodes)
     venv = SbarChargingVectorEnv(num_envs=len(names) * n, scenario=scenario, config=config, num_threads=num_threads)
@@ -200,8 +211,12 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
     into ``extra_traces`` under ``(spec, scenario)`` (e.g. :func:`frontier_specs`, for :func:`frontier`'s
     ``traces``: one env and one rollout instead of two). ``on_extra``: called with those traces as soon as they
     are there, before waiting for the forked child (e.g. the frontier's rows, off the critical path)."""
+    from envs.core import given_config
+
     if int(episodes) != episodes or not 1 <= episodes <= 100_000:
         raise ValueError(f"episodes={episodes!r} is invalid; valid range: integer 1..100000")
+    _check_specs(list(policies) + [sp for specs in (train_seeds or {}).values() for sp in specs])
+    config = given_config(config)   # a dict of EnvConfig fields once here (the split, the child, run_policies)
     groups = [(p, [p]) for p in policies] + list((train_seeds or {}).items())
     rows, traces = [], {}
     jobs = [(s, g) for s in scenarios for g in groups]
@@ -319,9 +334,9 @@ def _split(specs, reference, extra, n_scenarios, config) -> list:
     the larger of the two processes' estimated work (:data:`RUN_COST`; the ``extra`` specs run in the parent on the
     first scenario only). Without a :data:`FORKED` spec, a child only for at least :data:`_MIN_FORK_S` of work.
     Which process runs a spec never changes its results (the rows are independent: :func:`run_policies`)."""
-    from envs import EnvConfig
+    from envs.core import as_config
 
-    link = (config or EnvConfig()).link_model
+    link = as_config(config).link_model
     table, other = RUN_COST.get(link, {}), _OTHER_COST.get(link, 0.05)
 
     def kind(sp):

@@ -111,7 +111,8 @@ def _policy_traces(name: str, scenario, seed: int, episodes: int, config):
 def policy_duties(name: str, scenario, seed: int, config=None, episodes: int = 1) -> np.ndarray:
     """The duty sequences (episodes, n_steps) a policy applies on the windows ``seed .. seed + episodes - 1``
     (closed loop; replayed open loop by :class:`envs.rollout.DutyRollout` they give the same window)."""
-    return _policy_traces(name, scenario, int(seed), int(episodes), config)[0]
+    from envs.core import given_config
+    return _policy_traces(name, scenario, int(seed), int(episodes), given_config(config))[0]   # (lru-cached: hashable)
 
 
 def _fd_step(config) -> float:
@@ -291,9 +292,10 @@ def _source_hash(policies: tuple = ()) -> str:
 
 
 def _cached(kind, scenario, seed, budget, starts, config, compute):
-    from envs import EnvConfig, get_scenario
+    from envs import get_scenario
+    from envs.core import as_config
     from wpt_receiver import diskcache
-    cfg = config or EnvConfig()
+    cfg = as_config(config)   # a dict of its fields too: the key holds the EnvConfig's repr either way
     src = _source_hash(tuple(s for s in starts if isinstance(s, str)))
     key = f"oracle {kind} {src} {get_scenario(scenario)!r} seed={seed} b={budget!r} {starts!r} {cfg!r}"
     shape = (4 + cfg.n_steps,)
@@ -314,7 +316,9 @@ def oracle_window(scenario, seed: int, budget: float, starts=DEFAULT_STARTS, con
     (a fraction), from the start sequences of the policies ``starts`` and the arrays ``extra_starts``
     (n_steps,) (cached; an extra start enters the key through its bytes). Infeasible (budget below
     what any search reached): ``feasible=False`` and the floor's sequence."""
+    from envs.core import given_config
     from envs.rollout import DutyRollout
+    config = given_config(config)
     extra = [np.asarray(s, dtype=float) for s in extra_starts]
     tag = tuple(starts) + tuple(hashlib.sha256(s.tobytes()).hexdigest()[:12] for s in extra)
 
@@ -337,7 +341,9 @@ def oracle_floor(scenario, seed: int, config=None, base: str = "model_based") ->
     """The smallest measured overshoot found for window ``seed``, the duties before the stop being those of
     the policy ``base`` (a :func:`policies.make` name; the state at the stop, and so the floor, is that
     policy's: the paper's controller by default, every classical policy's own for its own floor)."""
+    from envs.core import given_config
     from envs.rollout import DutyRollout
+    config = given_config(config)
 
     def compute():
         roll = DutyRollout(scenario, seed, config)

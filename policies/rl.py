@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mission_sim.contract import PolicyContext, action_to_duty
+from mission_sim.contract import OBS_DIM, PolicyContext, action_to_duty
 
 from .inference import export_actor, load_ppo_actor
 
@@ -39,7 +39,9 @@ def load_meta(path) -> dict:
     if not path.is_file():
         raise FileNotFoundError(f"RL model {str(path)!r} not found (train one with `dronewpt train`)")
     if not meta_path.is_file():
-        raise FileNotFoundError(f"RL model metadata {str(meta_path)!r} not found (written by `dronewpt train`)")
+        raise FileNotFoundError(f"RL model metadata {str(meta_path)!r} not found (written by `dronewpt train`; for an "
+                                'SB3 model of your own, {"algo": "ppo", "control_period_s": 0.0001} in that file, with '
+                                '"obs_norm" if it was trained under VecNormalize: docs/rl.md, "From Python")')
     meta = json.loads(meta_path.read_text())
     if meta.get("algo") not in ALGOS:
         raise ValueError(f"algo={meta.get('algo')!r} in {meta_path} is invalid; valid values: {', '.join(ALGOS)}")
@@ -119,6 +121,11 @@ class RLPolicy:
 
     def act(self, obs):
         raw = obs
+        if np.shape(obs)[-1] > OBS_DIM + 1:   # one contract frame per row (+ the base duty: a residual's input)
+            raise ValueError(f"policy {self.name!r}: observations of shape {np.shape(obs)} are invalid; valid: "
+                             f"(n, {OBS_DIM}), one contract frame per row, or (n, {OBS_DIM + 1}) for a residual's "
+                             "input (the frame and the base duty) (an env made with history=K stacks K frames; a "
+                             "policy keeps its own history: make the env without it)")
         if self.history > 1:
             if self._hist is None:
                 self.reset(len(np.atleast_2d(obs)))

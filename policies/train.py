@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Mapping
 from dataclasses import asdict, fields
 from pathlib import Path
 
@@ -34,7 +35,7 @@ from mission_sim.files import atomic_output
 
 from .rl import ALGOS
 
-__all__ = ["train", "plot_learning_curve", "DEFAULT_HYPERPARAMS", "env_config", "EVAL_SEED", "VEC_PATHS"]
+__all__ = ["train", "plot_learning_curve", "DEFAULT_HYPERPARAMS", "env_config", "env_overrides", "EVAL_SEED", "VEC_PATHS"]
 
 #: fixed held-out evaluation seeds ``EVAL_SEED + i`` (training seeds are small integers)
 EVAL_SEED = 900_000
@@ -79,6 +80,33 @@ def env_config(overrides: dict | None = None):
     return EnvConfig(reward=rw, devices=devices, link_model=link_model,
                      **{k: (int(v) if k in ints and float(v).is_integer() else float(v))
                         for k, v in ov.items() if k in cfg_keys})
+
+
+def env_overrides(env) -> dict | None:
+    """``train``'s ``env`` as the flat overrides :func:`env_config` takes (and the metadata and ``reproduce``
+    record): a dict as it is, or an :class:`envs.EnvConfig` (what a Python user has at hand; it was ``TypeError:
+    'EnvConfig' object is not iterable``) as its fields and reward weights that differ from the defaults. Its
+    link must be Table I's (the one ``train`` runs and its metadata assume). A dict with a ``reward`` entry (a
+    trained model's metadata ``env_config``, as the envs, ``compare`` and the oracle take it: ``{"reward":
+    {"overcurrent": 20}, ...}``) goes through :func:`envs.core.as_config` to the same flat form."""
+    from envs import EnvConfig
+    from envs.core import as_config
+
+    if isinstance(env, Mapping) and "reward" in env:
+        env = as_config(env)
+    if env is None or isinstance(env, dict):
+        return env
+    if not isinstance(env, EnvConfig):
+        raise ValueError(f"env={env!r} is invalid; valid: None, an envs.EnvConfig or a dict of its fields and reward "
+                         "weights by name (e.g. {'link_model': 'envelope', 'overcurrent': 20})")
+    if env.link != EnvConfig.link:
+        raise ValueError(f"env=EnvConfig(link={env.link!r}) is invalid; valid: Table I's link (train's metadata "
+                         "records the other fields only)")
+    out = {f.name: getattr(env, f.name) for f in fields(EnvConfig)
+           if f.name not in ("link", "reward") and getattr(env, f.name) != f.default}
+    out.update({f.name: getattr(env.reward, f.name) for f in fields(env.reward)
+                if getattr(env.reward, f.name) != f.default})
+    return out
 
 
 def config_dict(cfg) -> dict:
@@ -447,7 +475,7 @@ def _written_dirs(dirs: dict) -> dict:
 
 
 def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64, scenario: str = "random",
-          progress: bool = True, hyperparams: dict | None = None, hyperparams_file=None, env: dict | None = None,
+          progress: bool = True, hyperparams: dict | None = None, hyperparams_file=None, env=None,
           cost: str = "overshoot", lagrangian: bool = False, budget: float | None = None, lambda_lr: float = 50.0,
           residual: bool = False, residual_scale: float = 0.25, vec: str = "batched", name: str | None = None,
           eval_episodes: int = 32, eval_every: int = 50_000, checkpoint_every: int = 100_000, resume=None,
@@ -456,7 +484,9 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
           imitation_epochs: int = 30, imitation_mask: tuple = ("last_d_short",), slow_budget=None, slow_budget_every="window") -> dict:
     """Train ``algo`` for ``timesteps`` environment steps; returns a dict of the written paths.
 
-    ``env``: EnvConfig / reward-weight overrides (:func:`env_config`); ``cost``: ``overshoot`` or ``overcurrent``
+    ``env``: None (the defaults), an :class:`envs.EnvConfig` (Table I's link), a dict of its fields with a nested
+    ``reward`` dict (a model's metadata ``env_config``) or train's flat overrides (EnvConfig fields and reward weights
+    by name, :func:`env_config`), all recorded flat (:func:`env_overrides`); ``cost``: ``overshoot`` or ``overcurrent``
     (:mod:`envs.sb3_vec`); ``lagrangian``: penalise the cost with a multiplier learned against ``budget``
     (default: the ramp policy's mean episode cost on ``scenario``); ``residual``: learn a bounded correction
     ``residual_scale * a`` of the model-based duty (of the budgeted controller with ``residual_base_budget`` > 0);
@@ -473,6 +503,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     Deterministic for a given seed on one thread (torch and numba threads set to 1)."""
     import importlib.util
 
+    env = env_overrides(env)
     extra = dict(history=history, action_filter=action_filter, smooth_penalty=smooth_penalty, imitate=imitate,
                  dagger=dagger, imitation_episodes=imitation_episodes, slow_budget=slow_budget, slow_budget_every=slow_budget_every)
     _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra)
