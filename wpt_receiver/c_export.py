@@ -104,8 +104,8 @@ typedef struct {
     ${P}_real dd;
     ${P}_real xss[${PU}_NX];         /* steady state per unit input: x = u xss (reset) */
     ${P}_real i2_sm_a;               /* short-mode I2 of the assumed model [A] */
-    ${P}_real wlm_v1;                /* omega Lm V1 [V^2/ohm .. as in target_v2] */
-    ${P}_real wlm_v1_sq;             /* wlm_v1^2 */
+    ${P}_real wlm_v1;                /* omega Lm V1 [V ohm] (as in target_v2) */
+    ${P}_real wlm_v1_sq;             /* wlm_v1^2 [V^2 ohm^2] */
     ${P}_real det_ohm2;              /* R1 R2 + (omega Lm)^2 [ohm^2] */
     ${P}_real r1_ohm;                /* R1 [ohm] */
     ${P}_real control_period_s;      /* the period Ad, Bd were discretised at [s] (information) */

@@ -253,8 +253,11 @@ class EnvelopeLink:
                 return
         if not np.isfinite(dt_s) or dt_s <= 0:
             raise ValueError(f"dt_s={dt_s!r} is invalid; valid range: (0, inf)")
-        if np.any(~np.isfinite(lm)) or np.any(lm <= 0):
-            raise ValueError(f"lm_h={lm[~(lm > 0)].flat[0]!r} is invalid; valid range: (0, inf)")
+        lm_max = np.sqrt(self.params.l1_h * self.params.l2_h)
+        bad = ~(np.isfinite(lm) & (lm > 0) & (lm < lm_max))   # inf used to fail on an empty index here
+        if np.any(bad):
+            raise ValueError(f"lm_h={float(lm[bad].flat[0])!r} is invalid; valid range: (0, {lm_max:.6g}) H "
+                             f"(0 < k < 1)")
         self._dt, self._lm = float(dt_s), lm.copy()
         xt = self._real()
         a, b = state_matrices(self.params, lm)

@@ -93,7 +93,8 @@ def run_paper(params: LinkParams = TABLE_I, model: str = "envelope", t_switch_s:
         t0 = time.perf_counter()
         out = MODELS[model](params, d, period)
         wall = time.perf_counter() - t0
-        m = transition_metrics(out["t_s"], out["i2_a"], t_switch_s, out["i1_a"], out["v2_v"])
+        m = transition_metrics(out["t_s"], out["i2_a"], t_switch_s, out["i1_a"], out["v2_v"],
+                               i2_fund_a=out.get("i2_fund_a"))
         extra = {k: v for k, v in out.items() if k not in ("t_s", "i1_a", "i2_a", "v2_v")}
         runs.append(PaperRun(name, out["t_s"], v2_ref, t_ctrl, d, out["i1_a"], out["i2_a"], out["v2_v"], m, wall, extra))
     return runs

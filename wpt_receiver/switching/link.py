@@ -313,7 +313,7 @@ class SwitchingLink:
         d = np.atleast_1d(np.asarray(d_short, dtype=float))
         bad = ~np.isfinite(d) | (d < 0) | (d > 1)
         if bad.any():
-            raise ValueError(f"d_short={d[bad][0]!r} is out of range; valid range: [0, 1]")
+            raise ValueError(f"d_short={float(d[bad][0])!r} is out of range; valid range: [0, 1]")
         cp = self.T if control_period_s is None else float(control_period_s)
         t_end = len(d) * cp if t_end_s is None else float(t_end_s)
         if x0 is None:
