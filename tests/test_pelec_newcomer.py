@@ -132,3 +132,21 @@ def test_exported_c_states_the_units_of_its_constants():
     from wpt_receiver.c_export import controller_spec, generate_c
     header = generate_c(controller_spec(TABLE_I), "f64")[1]
     assert "omega Lm V1 [V ohm]" in header and "V^2/ohm" not in header
+
+
+# ------------------------------------------------------------------ the exact-mode model's range
+def test_modal_plant_warns_near_the_blocking_point():
+    """With Vdc scaled to an emf margin of 4 the exact-mode model's battery energy was 31 % below the
+    switching model's (at 3 negative: a diode rectifier feeding the coil), without a word."""
+    import warnings
+
+    from wpt_receiver.paper import MODAL_MIN_EMF_MARGIN, modal_plant, rm_emf_margin
+    assert rm_emf_margin(TABLE_I) == pytest.approx(30.9, abs=0.05)
+    d = np.zeros(40)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        modal_plant(TABLE_I, d, TABLE_I.rectifier_period_s)          # Table I: no warning
+    low = TABLE_I.with_(vdc_v=30.0 * 4.0 / rm_emf_margin(TABLE_I))
+    assert rm_emf_margin(low) == pytest.approx(4.0) and 4.0 < MODAL_MIN_EMF_MARGIN
+    with pytest.warns(RuntimeWarning, match=r"emf margin .* = 4 is outside .* validated range \(>= 8"):
+        modal_plant(low, d, low.rectifier_period_s)
