@@ -150,3 +150,40 @@ def test_modal_plant_warns_near_the_blocking_point():
     assert rm_emf_margin(low) == pytest.approx(4.0) and 4.0 < MODAL_MIN_EMF_MARGIN
     with pytest.warns(RuntimeWarning, match=r"emf margin .* = 4 is outside .* validated range \(>= 8"):
         modal_plant(low, d, low.rectifier_period_s)
+
+
+# ------------------------------------------------------------------ controller, envelope and metrics inputs
+def test_controller_and_filter_refuse_bad_inputs_with_one_clear_error():
+    """n = 0 built a controller of nothing, n = -1 failed in numpy ("negative dimensions"), a text
+    time constant raised numpy's TypeError, a reference of the wrong shape numpy's broadcast error."""
+    from wpt_receiver import InverseModelController, LowPassFilter
+    with pytest.raises(ValueError, match=r"^n=0 is invalid; valid range: integer >= 1$"):
+        InverseModelController(TABLE_I, n=0)
+    with pytest.raises(ValueError, match=r"^n=-1 is invalid"):
+        InverseModelController(TABLE_I, n=-1)
+    with pytest.raises(ValueError, match=r"^tau_s='a' is not a number"):
+        LowPassFilter(tau_s="a")
+    with pytest.raises(ValueError, match=r"i2_ref_a has shape \(2,\); valid: a scalar or shape \(3,\)"):
+        InverseModelController(TABLE_I, n=3).update(np.ones(2))
+
+
+def test_envelope_simulate_refuses_nan_and_zero_step():
+    """A NaN V2 gave a NaN run and dt = 0 a run of zero length in time, both without a word."""
+    from wpt_receiver.envelope import simulate
+    with pytest.raises(ValueError, match=r"^v2_v=nan is invalid"):
+        simulate(TABLE_I, np.array([1.0, np.nan]), 1e-6)
+    with pytest.raises(ValueError, match=r"^dt_s=0.0 is invalid; valid range: \(0, inf\) s$"):
+        simulate(TABLE_I, np.ones(3), 0.0)
+    with pytest.raises(ValueError, match=r"^lm_h=0.001 is invalid"):
+        simulate(TABLE_I, np.ones(3), 1e-6, lm_h=1e-3)
+    t, i1, i2 = simulate(TABLE_I, np.full(3, TABLE_I.v2_rm_amp_v), 1e-6)   # RM steady state stays put
+    assert i2 == pytest.approx(np.full(4, 11.069594367899441), rel=1e-12)
+
+
+def test_transition_metrics_refuse_nan_and_a_zero_final_value():
+    """NaN samples gave NaN metrics; a transition ending at 0 A raised ZeroDivisionError."""
+    t = np.linspace(0.0, 1.0, 10)
+    with pytest.raises(ValueError, match=r"i2_a\[5\]=nan at t_s=0.55.* is not finite"):
+        transition_metrics(t, np.r_[np.ones(5), np.full(5, np.nan)], 0.5)
+    with pytest.raises(ValueError, match=r"final_current_a = 0.0 .* undefined"):
+        transition_metrics(t, np.r_[np.ones(5), np.zeros(5)], 0.5)

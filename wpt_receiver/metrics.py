@@ -37,6 +37,9 @@ def transition_metrics(t_s, i2_a, t_switch_s: float, i1_a=None, v2_v=None, band:
     i2 = np.asarray(i2_a, dtype=float)
     if t.shape != i2.shape or t.ndim != 1 or len(t) < 3:
         raise ValueError("t_s and i2_a must be 1-D arrays of the same length >= 3")
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(i2))):
+        k = int(np.argmin(np.isfinite(t) & np.isfinite(i2)))
+        raise ValueError(f"i2_a[{k}]={float(i2[k])!r} at t_s={float(t[k])!r} is not finite; valid: finite samples")
     before = t < t_switch_s
     after = ~before
     if not before.any() or after.sum() < 2:
@@ -47,6 +50,9 @@ def transition_metrics(t_s, i2_a, t_switch_s: float, i1_a=None, v2_v=None, band:
     i2a = i2[after]
     ta = t[after]
     mx = float(np.max(i2a))
+    if final == 0.0:
+        raise ValueError("final_current_a = 0.0 (mean of the last 2 % of i2_a): the overshoot (max - final) / final "
+                         "is undefined; valid: a transition that ends with current")
     outside = np.abs(i2a - final) > band * abs(final)
     settle = float(ta[np.nonzero(outside)[0][-1] + 1] - t_switch_s) if outside.any() and np.nonzero(outside)[0][-1] + 1 < len(ta) else (
         0.0 if not outside.any() else float("nan"))
