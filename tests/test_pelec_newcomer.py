@@ -187,3 +187,36 @@ def test_transition_metrics_refuse_nan_and_a_zero_final_value():
         transition_metrics(t, np.r_[np.ones(5), np.full(5, np.nan)], 0.5)
     with pytest.raises(ValueError, match=r"final_current_a = 0.0 .* undefined"):
         transition_metrics(t, np.r_[np.ones(5), np.zeros(5)], 0.5)
+
+
+# ------------------------------------------------------------------ dronewpt paper --link
+def test_paper_cli_runs_an_own_link(capsys):
+    """``paper`` had no ``--link`` (netlist and export-controller had): a researcher could not put
+    their own coil values through Table II from the command line. The envelope model's RM and SM
+    currents are eq. 4-5's closed form for the changed link."""
+    import json
+
+    from mission_sim.cli import main
+    from wpt_receiver.envelope import steady_state
+    assert main(["paper", "--model", "envelope", "--format", "json", "--no-plot",
+                 "--link", "lm_h=4e-6", "--link", "vl_v=24"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    p = TABLE_I.with_(lm_h=4e-6, vl_v=24.0)
+    assert out["link"]["lm_h"] == 4e-6 and out["link"]["vl_v"] == 24.0
+    rm, sm = steady_state(p, p.v2_rm_amp_v)[1], steady_state(p, 0.0)[1]
+    for row in out["rows"]:
+        assert row["rm_current_a"] == pytest.approx(rm, rel=1e-9)          # 17.14 A (Table I: 11.07 A)
+        assert row["final_current_a"] == pytest.approx(sm, rel=1e-4)
+    assert main(["paper", "--model", "envelope", "--no-plot", "--link", "lm_h=4e-6"]) == 0
+    assert "Table I with lm_h=4e-06 parameters" in capsys.readouterr().out
+
+
+def test_paper_cli_link_errors_and_the_modal_margin_warning(capsys):
+    from mission_sim.cli import main
+    assert main(["paper", "--no-plot", "--link", "lm_h=1e-3"]) == 2
+    assert "lm_h < 6.67862e-05 H" in capsys.readouterr().err
+    assert main(["paper", "--no-plot", "--link", "r2_ohm=0"]) == 2
+    assert "r2_ohm=0.0 is invalid; valid range: (0, inf)" in capsys.readouterr().err
+    assert main(["paper", "--no-plot", "--format", "json", "--link", "vdc_v=3"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "emf margin" in err and "= 3.09 is below the modal model's validated 8" in err
