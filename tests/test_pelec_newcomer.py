@@ -220,3 +220,13 @@ def test_paper_cli_link_errors_and_the_modal_margin_warning(capsys):
     assert main(["paper", "--no-plot", "--format", "json", "--link", "vdc_v=3"]) == 0
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "emf margin" in err and "= 3.09 is below the modal model's validated 8" in err
+
+
+def test_docstrings_cite_the_papers_equation_numbers():
+    """In the paper's numbering (eq. 9 is f(d), as cited everywhere) G22 is eq. 8 and the coefficients
+    eq. 6; the docstrings said eq. 10 and eq. 7-8."""
+    import wpt_receiver.envelope as env
+    import wpt_receiver.inverse_controller as ic
+    assert "(eq. 8)" in env.g22.__doc__ and "eq. 10" not in env.g22.__doc__
+    assert "eq. 6" in env.EnvelopeCoefficients.__doc__ and "eq. 6" in env.coefficients.__doc__
+    assert "eq. 8 has relative degree 1" in ic.__doc__

@@ -2,10 +2,11 @@
 
 States are the fundamental amplitudes ``I1(t)``, ``I2(t)`` of ``i1 = I1 sin(wt)`` and
 ``i2 = I2 cos(wt)``; inputs are ``V1 = (4/pi) Vdc`` and ``V2`` (the rectifier's fundamental,
-eq. 9). With the sign of V2 consistent with eq. 4-5 (eq. 3b as printed has a sign slip)::
+eq. 9). With the sign of V2 consistent with eq. 4b-5 (eq. 3b as printed has a sign slip, and so has
+eq. 4a with +V1: eq. 5a needs -V1 there)::
 
-    2 L1 dI1/dt + R1 I1 + w Lm I2 - V1 = 0          (eq. 4a)
-    2 L2 dI2/dt + R2 I2 - w Lm I1 + V2 = 0          (eq. 4b, consistent sign)
+    2 L1 dI1/dt + R1 I1 + w Lm I2 - V1 = 0          (eq. 3a)
+    2 L2 dI2/dt + R2 I2 - w Lm I1 + V2 = 0          (eq. 3b with the sign of eq. 4b and 5b)
 
 i.e. ``dx/dt = A x + B u`` with ``x = [I1, I2]``, ``u = [V1, V2]``.
 
@@ -35,7 +36,7 @@ __all__ = [
 
 @dataclass(frozen=True)
 class EnvelopeCoefficients:
-    """Coefficients of eq. 7-8 (units: zeta [-], omega_n [rad/s], alpha [1/H],
+    """Coefficients of eq. 6 (units: zeta [-], omega_n [rad/s], alpha [1/H],
     beta [ohm/H^2], gamma [ohm/H^2])."""
 
     zeta: float
@@ -48,7 +49,7 @@ class EnvelopeCoefficients:
 
 
 def coefficients(p: LinkParams) -> EnvelopeCoefficients:
-    """zeta, omega_n, alpha1/2, beta1/2, gamma exactly as in the paper (after eq. 7)."""
+    """zeta, omega_n, alpha1/2, beta1/2, gamma exactly as in the paper (eq. 6)."""
     wlm = p.omega_rad_s * p.lm_h
     det = p.r1_ohm * p.r2_ohm + wlm**2
     l1l2 = p.l1_h * p.l2_h
@@ -81,7 +82,7 @@ def state_matrices(p: LinkParams, lm_h=None):
 
 
 def g22(p: LinkParams):
-    """Transfer function G22 = I2/V2 = -(alpha2 s + beta2)/(s^2 + 2 zeta omega_n s + omega_n^2) (eq. 10)."""
+    """Transfer function G22 = I2/V2 = -(alpha2 s + beta2)/(s^2 + 2 zeta omega_n s + omega_n^2) (eq. 8)."""
     c = coefficients(p)
     from scipy import signal   # 1.2 s import: only here
 

@@ -2,7 +2,7 @@
 
 ``I2ref -> Q(s) -> G22^-1(s) -> V2* -> f^-1 -> d_short*``
 
-``G22^-1`` is improper (eq. 10 has relative degree 1), so a low-pass filter
+``G22^-1`` is improper (eq. 8 has relative degree 1), so a low-pass filter
 ``Q(s) = 1/(tau s + 1)^order`` (order >= 1) precedes it. The cascade ``H = Q G22^-1`` is
 discretised once (ZOH at the control period) and run as a state-space recursion; nothing is
 discretised per step.
