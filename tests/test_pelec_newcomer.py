@@ -230,3 +230,17 @@ def test_docstrings_cite_the_papers_equation_numbers():
     assert "(eq. 8)" in env.g22.__doc__ and "eq. 10" not in env.g22.__doc__
     assert "eq. 6" in env.EnvelopeCoefficients.__doc__ and "eq. 6" in env.coefficients.__doc__
     assert "eq. 8 has relative degree 1" in ic.__doc__
+
+
+def test_detuned_capacitors_must_be_positive():
+    """``rm_steady(p, c1_f=0, ...)`` raised ZeroDivisionError, ``c1_f=nan`` gave NaN power silently."""
+    from wpt_receiver.detuning import detuned_capacitors
+    from wpt_receiver.paper import rm_emf_margin
+    from wpt_receiver.tolerance import rm_steady
+    c1, c2 = detuned_capacitors(TABLE_I, "c1", 0.0)
+    tuned = rm_steady(TABLE_I, c1, c2)
+    assert tuned["i2_a"] == pytest.approx(11.069594367899441, rel=1e-12)     # eq. 4-5's RM current
+    assert tuned["clamp_margin"] == pytest.approx(rm_emf_margin(TABLE_I), rel=1e-9)
+    for bad in (0.0, math.nan, -1e-9):
+        with pytest.raises(ValueError, match=r"c1_f=.* is invalid; valid range: \(0, inf\) F"):
+            rm_steady(TABLE_I, bad, c2)

@@ -16,6 +16,7 @@ state matrix), vectorised over a batch of independent links: see :class:`Envelop
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -368,6 +369,9 @@ def complex_envelope_matrices(p: LinkParams, c1_f: float | None = None, c2_f: fl
     w = p.omega_rad_s
     c1 = 1.0 / (w * w * p.l1_h) if c1_f is None else float(c1_f)
     c2 = 1.0 / (w * w * p.l2_h) if c2_f is None else float(c2_f)
+    for name, c in (("c1_f", c1), ("c2_f", c2)):   # 0 raised ZeroDivisionError, NaN gave NaN currents
+        if not (math.isfinite(c) and c > 0):
+            raise ValueError(f"{name}={c!r} is invalid; valid range: (0, inf) F or None (resonant)")
     lm_d = p.lm_h if cross else 0.0
     m = np.array([[p.l1_h + 1.0 / (w * w * c1), -lm_d], [-lm_d, p.l2_h + 1.0 / (w * w * c2)]], dtype=complex)
     z = np.array([[p.r1_ohm + 1j * (w * p.l1_h - 1.0 / (w * c1)), -1j * w * p.lm_h],
