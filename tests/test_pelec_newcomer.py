@@ -244,3 +244,16 @@ def test_detuned_capacitors_must_be_positive():
     for bad in (0.0, math.nan, -1e-9):
         with pytest.raises(ValueError, match=r"c1_f=.* is invalid; valid range: \(0, inf\) F"):
             rm_steady(TABLE_I, bad, c2)
+
+
+def test_steady_junctions_name_the_bad_input():
+    """d_short = 2 gave junction temperatures; a NaN duty or ambient was reported as ``vf0_v=nan``."""
+    from wpt_receiver.thermal import steady_junctions
+    with pytest.raises(ValueError, match=r"^d_short=2.0 is out of range; valid range: \[0, 1\]$"):
+        steady_junctions("schottky", TABLE_I, 2.0)
+    with pytest.raises(ValueError, match=r"^d_short=nan is out of range"):
+        steady_junctions("schottky", TABLE_I, math.nan)
+    with pytest.raises(ValueError, match=r"^t_amb_c=nan is invalid; valid range: \[-55, 200\] C$"):
+        steady_junctions("schottky", TABLE_I, 0.3, t_amb_c=math.nan)
+    with pytest.raises(ValueError, match=r"^dt_sink_k=-5.0 is invalid"):
+        steady_junctions("schottky", TABLE_I, 0.3, dt_sink_k=-5.0)
