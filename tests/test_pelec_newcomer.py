@@ -257,3 +257,10 @@ def test_steady_junctions_name_the_bad_input():
         steady_junctions("schottky", TABLE_I, 0.3, t_amb_c=math.nan)
     with pytest.raises(ValueError, match=r"^dt_sink_k=-5.0 is invalid"):
         steady_junctions("schottky", TABLE_I, 0.3, dt_sink_k=-5.0)
+
+
+def test_with_names_the_valid_fields():
+    """``TABLE_I.with_(lm=1e-6)`` raised ``TypeError: LinkParams.__init__() got an unexpected keyword``."""
+    with pytest.raises(ValueError, match=r"^'lm' is not a LinkParams field; valid: l1_h, l2_h, lm_h, r1_ohm"):
+        TABLE_I.with_(lm=1e-6)
+    assert TABLE_I.with_(lm_h=5e-6).lm_h == 5e-6

@@ -84,7 +84,12 @@ class LinkParams:
         return 0.5 / self.f_hz
 
     def with_(self, **changes: float) -> "LinkParams":
-        """Copy with some fields changed (validated again)."""
+        """Copy with some fields changed (validated again); an unknown field name is a ValueError naming the
+        valid ones (``with_(lm=...)`` gave dataclasses' TypeError about ``__init__``)."""
+        names = [f.name for f in fields(self)]
+        bad = [k for k in changes if k not in names]
+        if bad:
+            raise ValueError(f"{bad[0]!r} is not a LinkParams field; valid: {', '.join(names)}")
         return replace(self, **changes)
 
 
