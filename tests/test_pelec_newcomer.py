@@ -264,3 +264,31 @@ def test_with_names_the_valid_fields():
     with pytest.raises(ValueError, match=r"^'lm' is not a LinkParams field; valid: l1_h, l2_h, lm_h, r1_ohm"):
         TABLE_I.with_(lm=1e-6)
     assert TABLE_I.with_(lm_h=5e-6).lm_h == 5e-6
+
+
+def test_exported_c_refuses_fast_math(tmp_path):
+    """Under gcc -O2 -ffast-math a NaN V2* gave d = 1 (full short), not the documented d = 0: the source
+    now stops such a build unless DWPT_ALLOW_FAST_MATH is defined; a plain build still gives 0."""
+    import shutil
+    import subprocess
+
+    from wpt_receiver.c_export import controller_spec, generate_c
+    cc = shutil.which("cc")
+    if cc is None:
+        pytest.skip("no C compiler")
+    base, header, source = generate_c(controller_spec(TABLE_I), "f32")
+    (tmp_path / f"{base}.h").write_text(header)
+    (tmp_path / f"{base}.c").write_text(source)
+    (tmp_path / "main.c").write_text(
+        f'#include <stdio.h>\n#include "{base}.h"\nint main(void) {{ volatile float z = 0.0f; '
+        'printf("%g", (double)dwpt_f32_duty_from_v2(z / z, 30.0f)); return 0; }\n')
+
+    def build(*flags):
+        return subprocess.run([cc, "-std=c99", *flags, "-I", str(tmp_path), str(tmp_path / "main.c"),
+                               str(tmp_path / f"{base}.c"), "-lm", "-o", str(tmp_path / "t")],
+                              capture_output=True, text=True)
+    r = build("-O2", "-ffast-math")
+    assert r.returncode != 0 and "ffast-math" in r.stderr
+    assert build("-O2").returncode == 0
+    assert subprocess.run([str(tmp_path / "t")], capture_output=True, text=True).stdout == "0"
+    assert build("-O2", "-ffast-math", "-DDWPT_ALLOW_FAST_MATH").returncode == 0

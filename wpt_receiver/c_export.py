@@ -135,6 +135,12 @@ _SOURCE = Template("""\
 #include <math.h>
 #include "$HNAME"
 
+/* duty_from_v2's clamps send a NaN V2* to d = 0 by IEEE comparisons; -ffast-math / -ffinite-math-only let the
+   compiler assume no NaN (gcc 12 -O2 -ffast-math then gives d = 1). Define DWPT_ALLOW_FAST_MATH to build anyway. */
+#if (defined(__FAST_MATH__) || (defined(__FINITE_MATH_ONLY__) && __FINITE_MATH_ONLY__)) && !defined(DWPT_ALLOW_FAST_MATH)
+#error "compile without -ffast-math / -ffinite-math-only (a NaN V2* must give d = 0), or define DWPT_ALLOW_FAST_MATH"
+#endif
+
 #define ${PU}_FOUR_OVER_PI $FOUR_OVER_PI$F
 #define ${PU}_TWO_OVER_PI $TWO_OVER_PI$F
 
