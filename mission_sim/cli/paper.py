@@ -42,11 +42,10 @@ def _cmd_paper(args) -> int:
     _check_waveforms(args)
     params = _link_params(args.link)
     link_text = _link_text(params)
-    if args.model == "modal" and paper.rm_emf_margin(params) < paper.MODAL_MIN_EMF_MARGIN:
+    reason = paper.modal_range_problem(params) if args.model == "modal" else None
+    if reason is not None:
         import sys
-        print(f"dronewpt paper: warning: emf margin wLm V1 / (R1 (4/pi) VL) = {paper.rm_emf_margin(params):.3g} is below "
-              f"the modal model's validated {paper.MODAL_MIN_EMF_MARGIN:g} (Table I: 30.9); --model switching is exact "
-              "there", file=sys.stderr)
+        print("dronewpt paper: warning: " + reason.replace("model='switching'", "--model switching"), file=sys.stderr)
     t_switch = 1e-3
     if not args.no_plot:
         prepare_out_dir(args.out)
@@ -55,7 +54,7 @@ def _cmd_paper(args) -> int:
         cache_loads_without_registries()
     import warnings
     with warnings.catch_warnings():   # the margin warning is the line above
-        warnings.filterwarnings("ignore", message="emf margin", category=RuntimeWarning)
+        warnings.filterwarnings("ignore", message=".*exact-mode model's checked range", category=RuntimeWarning)
         runs = paper.run_paper(params, model=args.model, t_switch_s=t_switch, control_period_s=args.control_period)
     figs = []
     if not args.no_plot:
