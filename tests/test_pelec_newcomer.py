@@ -325,3 +325,25 @@ def test_run_paper_warns_when_the_window_ends_before_settling():
         warnings.simplefilter("error")
         runs = run_paper(TABLE_I, model="envelope")
     assert runs[0].metrics.max_current_a == pytest.approx(50.51, abs=0.005)     # docs/paper.md's 50.51 A
+
+
+def test_paper_cli_t_end_and_the_settling_warning(capsys):
+    """A lightly damped own link rings past the fixed 31 ms window: the CLI now says so in one line and
+    takes ``--t-end``; with 0.3 s the step settles (final = eq. 4-5's SM current)."""
+    import json
+
+    from mission_sim.cli import main
+    from wpt_receiver.envelope import steady_state
+    link = ["--link", "r1_ohm=0.01", "--link", "r2_ohm=0.003"]
+    assert main(["paper", "--model", "envelope", "--no-plot", "--format", "json", *link]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "step: I2 has not settled within 2 % by --t-end 0.031" in err
+    assert main(["paper", "--model", "envelope", "--no-plot", "--format", "json", "--t-end", "0.3", *link]) == 0
+    out, err = capsys.readouterr()
+    step = json.loads(out)["rows"][0]
+    sm = steady_state(TABLE_I.with_(r1_ohm=0.01, r2_ohm=0.003), 0.0)[1]
+    assert err == "" and step["final_current_a"] == pytest.approx(sm, rel=2e-3)
+    with pytest.raises(SystemExit) as exc:      # argparse's own exit for a bad option value
+        main(["paper", "--no-plot", "--t-end", "0.001"])
+    assert exc.value.code == 2
+    assert "t-end='0.001' is invalid; valid range: [0.005, 1]" in capsys.readouterr().err

@@ -19,6 +19,8 @@ def _add_paper(sub):
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--control-period", type=float_arg("control-period", positive=True, lo=1e-7, hi=1e-3), default=None,
                    help="controller update period in s, 1e-7 .. 1e-3 (default: rectifier period 1/(2f))")
+    p.add_argument("--t-end", type=float_arg("t-end", positive=True, lo=5e-3, hi=1.0), default=31e-3,
+                   help="end of the window in s, 0.005 .. 1 (default 0.031; the switch is at 0.001)")
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
     p.add_argument("--link", action="append", default=[], metavar="KEY=VALUE",
                    help="a link parameter other than Table I (repeatable), e.g. lm_h=5e-6; keys: l1_h, l2_h, lm_h, "
@@ -53,9 +55,11 @@ def _cmd_paper(args) -> int:
         from wpt_receiver.numba_start import cache_loads_without_registries
         cache_loads_without_registries()
     import warnings
-    with warnings.catch_warnings():   # the margin warning is the line above
-        warnings.filterwarnings("ignore", message=".*exact-mode model's checked range", category=RuntimeWarning)
-        runs = paper.run_paper(params, model=args.model, t_switch_s=t_switch, control_period_s=args.control_period)
+    with warnings.catch_warnings(record=True) as caught:   # the model's own warnings as one line each
+        warnings.simplefilter("always", RuntimeWarning)
+        runs = paper.run_paper(params, model=args.model, t_switch_s=t_switch, t_end_s=args.t_end,
+                               control_period_s=args.control_period)
+    _print_warnings(caught, skip=reason)
     figs = []
     if not args.no_plot:
         from ..figures import paper as figures
@@ -95,6 +99,15 @@ def _row(r, t_switch: float, model: str) -> dict:
             row["max_fundamental_a"] = float(np.max(np.asarray(fund)[np.asarray(r.t_s) >= t_switch]))
         row["sim_wall_s"] = r.sim_wall_s
     return row
+
+
+def _print_warnings(caught, skip=None) -> None:
+    """The RuntimeWarnings of a run as ``dronewpt paper: warning: ...`` lines (``skip``: one printed already)."""
+    import sys
+    for w in caught:
+        if issubclass(w.category, RuntimeWarning) and str(w.message) != skip:
+            text = str(w.message).replace("t_end_s=", "--t-end ").replace("(default 31e-3 s)", "(--t-end, default 0.031 s)")
+            print(f"dronewpt paper: warning: {text}", file=sys.stderr)
 
 
 def _link_text(params) -> str:
