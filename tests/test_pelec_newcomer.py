@@ -347,3 +347,17 @@ def test_paper_cli_t_end_and_the_settling_warning(capsys):
         main(["paper", "--no-plot", "--t-end", "0.001"])
     assert exc.value.code == 2
     assert "t-end='0.001' is invalid; valid range: [0.005, 1]" in capsys.readouterr().err
+
+
+def test_switching_simulate_refuses_empty_negative_and_misshapen_inputs():
+    """An empty duty sequence and a negative t_end_s raised IndexError, a wrong x0 numpy's broadcast error."""
+    from wpt_receiver.switching import SwitchingConfig, SwitchingLink
+    link = SwitchingLink(TABLE_I, SwitchingConfig())
+    with pytest.raises(ValueError, match=r"d_short has shape \(0,\); valid: a non-empty 1-D sequence"):
+        link.simulate(np.zeros(0))
+    with pytest.raises(ValueError, match=r"^t_end_s=-1.0 is invalid; valid range: \(0, inf\) s$"):
+        link.simulate(np.zeros(5), t_end_s=-1.0)
+    with pytest.raises(ValueError, match=r"x0 has shape \(2,\); valid: \(5,\)"):
+        link.simulate(np.zeros(5), x0=np.zeros(2))
+    x = link.periodic_steady_state(0.3)
+    assert link.simulate(np.full(5, 0.3), x0=x).t_end == pytest.approx(5 * link.T)
