@@ -157,6 +157,27 @@ def test_modal_plant_warns_outside_its_checked_range():
         modal_plant(low_lm, d, low_lm.rectifier_period_s)
 
 
+def test_modal_run_is_checked_after_the_fact():
+    """A random link inside both limits (k 0.75, Q2 15, Vdc/VL 0.74) gave the exact-mode model a ramp peak of
+    4.46 A against the switching model's 1.40 A and a negative battery energy, silently; now each run is checked
+    against eq. 4-5's RM and short-mode steady states and for a negative energy. Table I, Lm 0.42 uH and
+    k 0.6 (where it agrees with the switching model within 0.4 %) pass without a warning."""
+    import warnings
+
+    from wpt_receiver.paper import modal_range_problem, run_paper
+    odd = LinkParams(l1_h=6.34290668644369e-05, l2_h=5.03555942261995e-06, lm_h=1.3361788427318356e-05,
+                     r1_ohm=0.003240548482754132, r2_ohm=0.06939619789996489, vdc_v=1.2483991770643372,
+                     vl_v=1.6954572463828184, f_hz=33495.77360458215)
+    assert modal_range_problem(odd) is None
+    with pytest.warns(RuntimeWarning, match=r"ramp: the exact-mode run is not physical here \(.*negative battery energy"):
+        run_paper(odd, model="modal", trajectories=("ramp",))
+    k06 = TABLE_I.with_(lm_h=0.6 * math.sqrt(TABLE_I.l1_h * TABLE_I.l2_h), vdc_v=192.3)
+    for good in (TABLE_I, TABLE_I.with_(lm_h=0.42e-6), k06):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            run_paper(good, model="modal")
+
+
 # ------------------------------------------------------------------ controller, envelope and metrics inputs
 def test_controller_and_filter_refuse_bad_inputs_with_one_clear_error():
     """n = 0 built a controller of nothing, n = -1 failed in numpy ("negative dimensions"), a text
