@@ -5,7 +5,7 @@ Model (what the controller assumes, like every model-based policy: Table I from 
 paper eq. 4 with the known semiconductors' constant resistances folded in (R1 + 2 Ron, R2 + Rd,
 :func:`wpt_receiver.devices.envelope_params`), discretised at the control period with the exact ZOH
 (:func:`wpt_receiver.zoh_discretise`; half-step too, for the mid-step samples the env's peak takes),
-state ``x = [I1, I2]``, input the fundamental ``V2`` (linear: eq. 5's duty comes after, from
+state ``x = [I1, I2]``, input the fundamental ``V2`` (linear: eq. 9's duty comes after, from
 ``f^-1``, :func:`wpt_receiver.duty_from_v2_clipped` at the measured clamp voltage ``VL + Vf``), plus an
 input disturbance ``w`` on V2 (offset-free MPC: it absorbs the forward drop, the short window's
 resistance and a wrong Lm in the steady state).

@@ -104,8 +104,8 @@ typedef struct {
     ${P}_real dd;
     ${P}_real xss[${PU}_NX];         /* steady state per unit input: x = u xss (reset) */
     ${P}_real i2_sm_a;               /* short-mode I2 of the assumed model [A] */
-    ${P}_real wlm_v1;                /* omega Lm V1 [V^2/ohm .. as in target_v2] */
-    ${P}_real wlm_v1_sq;             /* wlm_v1^2 */
+    ${P}_real wlm_v1;                /* omega Lm V1 [V ohm] (as in target_v2) */
+    ${P}_real wlm_v1_sq;             /* wlm_v1^2 [V^2 ohm^2] */
     ${P}_real det_ohm2;              /* R1 R2 + (omega Lm)^2 [ohm^2] */
     ${P}_real r1_ohm;                /* R1 [ohm] */
     ${P}_real control_period_s;      /* the period Ad, Bd were discretised at [s] (information) */
@@ -134,6 +134,12 @@ _SOURCE = Template("""\
 /* $banner */
 #include <math.h>
 #include "$HNAME"
+
+/* duty_from_v2's clamps send a NaN V2* to d = 0 by IEEE comparisons; -ffast-math / -ffinite-math-only let the
+   compiler assume no NaN (gcc 12 -O2 -ffast-math then gives d = 1). Define DWPT_ALLOW_FAST_MATH to build anyway. */
+#if (defined(__FAST_MATH__) || (defined(__FINITE_MATH_ONLY__) && __FINITE_MATH_ONLY__)) && !defined(DWPT_ALLOW_FAST_MATH)
+#error "compile without -ffast-math / -ffinite-math-only (a NaN V2* must give d = 0), or define DWPT_ALLOW_FAST_MATH"
+#endif
 
 #define ${PU}_FOUR_OVER_PI $FOUR_OVER_PI$F
 #define ${PU}_TWO_OVER_PI $TWO_OVER_PI$F
@@ -285,6 +291,22 @@ def python_duties(spec: ControllerSpec, kind: str, inputs, vl_v) -> np.ndarray:
     return np.array([duty_from_v2_clipped(ctl.update1(float(a)), float(b)) for a, b in zip(x, vl)])
 
 
+#: above this many control steps per case the error bound's convolutions go by FFT (np.convolve is direct,
+#: O(n^2): 17.6 s at 16,000 steps, ~30 min a case at --control-period 1e-7's 160,000, uninterruptible)
+_FFT_MIN_STEPS = 8192
+
+
+def _positive_convolution(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.convolve(a, b)`` of two non-negative sequences; above :data:`_FFT_MIN_STEPS` by FFT plus a margin for
+    the FFT's rounding, ``8 eps log2(N) |a|_2 |b|_2`` (more than its known bound), so it stays an upper bound."""
+    if max(len(a), len(b)) <= _FFT_MIN_STEPS:
+        return np.convolve(a, b)
+    m = len(a) + len(b) - 1
+    nfft = 1 << (m - 1).bit_length()
+    out = np.fft.irfft(np.fft.rfft(a, nfft) * np.fft.rfft(b, nfft), nfft)[:m]
+    return np.maximum(out, 0.0) + 8 * np.finfo(float).eps * math.log2(nfft) * np.linalg.norm(a) * np.linalg.norm(b)
+
+
 def _v2_error_bound(spec: ControllerSpec, i2_ref) -> tuple[np.ndarray, np.ndarray]:
     """``(v2_exact, |error of V2*| bound)`` of the float32 recursion, first order (module docstring)."""
     r = np.asarray(i2_ref, dtype=float)
@@ -306,7 +328,7 @@ def _v2_error_bound(spec: ControllerSpec, i2_ref) -> tuple[np.ndarray, np.ndarra
     e0 = np.abs(xss) * du[0] + 2 * _U32 * np.abs(xss * u[0])
     prop = np.zeros(len(r))
     for i in range(n):
-        prop[1:] += np.convolve(rho[:-1, i], h[:, i])[:len(r) - 1]
+        prop[1:] += _positive_convolution(rho[:-1, i], h[:, i])[:len(r) - 1]
     prop += h @ e0
     return v2, prop + abs(dd) * du + g * (np.abs(x) @ np.abs(cd) + abs(dd) * np.abs(u))
 

@@ -144,6 +144,22 @@ def spiral_coil(n_turns: int, outer_radius_m: float, pitch_m: float, wire_radius
 
 
 # --------------------------------------------------------------------------- closed forms
+def _check_finite(name: str, v) -> None:
+    """ValueError naming the first non-finite entry of ``v``."""
+    v = np.asarray(v, dtype=float)
+    bad = ~np.isfinite(v)
+    if np.any(bad):
+        raise ValueError(f"{name}={float(v[bad].flat[0])!r} is invalid; valid range: finite")
+
+
+def _check_positive(name: str, v) -> None:
+    """ValueError naming the first entry of ``v`` that is not finite and > 0."""
+    v = np.asarray(v, dtype=float)
+    bad = ~(np.isfinite(v) & (v > 0))
+    if np.any(bad):
+        raise ValueError(f"{name}={float(v[bad].flat[0])!r} is invalid; valid range: (0, inf) m")
+
+
 def mutual_coaxial_h(a_m, b_m, d_m):
     """Mutual inductance of two coaxial circular filaments, radii ``a``, ``b``, axial distance ``d`` [H].
 
@@ -151,13 +167,26 @@ def mutual_coaxial_h(a_m, b_m, d_m):
     Broadcasts over arrays.
     """
     a, b, d = (np.asarray(v, dtype=float) for v in (a_m, b_m, d_m))
+    _check_positive("a_m", a)
+    _check_positive("b_m", b)
+    _check_finite("d_m", d)
     m = 4 * a * b / ((a + b) ** 2 + d**2)
     return 2 * MU0 * np.sqrt(a * b) * _g(m) / np.sqrt(m)
 
 
 def loop_self_h(radius_m, wire_radius_m):
-    """Self inductance of one circular turn of round wire, uniform current: ``mu0 R (ln(8R/a) - 7/4)`` [H]."""
+    """Self inductance of one circular turn of round wire, uniform current: ``mu0 R (ln(8R/a) - 7/4)`` [H].
+
+    The formula is the thin-wire limit (a << R); it is refused for ``wire_radius_m >= radius_m``
+    (no such turn; there it would give a negative inductance from R/a < e^1.75 / 8 = 0.72)."""
     r = np.asarray(radius_m, dtype=float)
+    a = np.asarray(wire_radius_m, dtype=float)
+    _check_positive("wire_radius_m", a)
+    _check_positive("radius_m", r)
+    if np.any(r <= a):
+        bad = np.broadcast_to(r, np.broadcast(r, a).shape)[np.broadcast_to(r <= a, np.broadcast(r, a).shape)]
+        raise ValueError(f"radius_m={float(bad.flat[0])!r} is invalid; valid range: > wire_radius_m "
+                         f"({float(np.max(a))!r} m)")
     return MU0 * r * (np.log(8 * r / wire_radius_m) - 1.75)
 
 
@@ -219,6 +248,8 @@ def _rx_frame(dx, dy, dz, tilt, tilt_axis):
     """
     dx, dy, dz, tilt, tilt_axis = np.broadcast_arrays(*(np.asarray(v, dtype=float)
                                                         for v in (dx, dy, dz, tilt, tilt_axis)))
+    for name, v in (("dx_m", dx), ("dy_m", dy), ("dz_m", dz), ("tilt_rad", tilt), ("tilt_axis_rad", tilt_axis)):
+        _check_finite(name, v)   # a NaN pose gave Lm = 0.0 (the table's "uncoupled") without a word
     ux, uy = np.cos(tilt_axis), np.sin(tilt_axis)
     c, s = np.cos(tilt), np.sin(tilt)
     # Rodrigues rotation about unit axis (ux, uy, 0)

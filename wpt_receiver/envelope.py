@@ -2,10 +2,11 @@
 
 States are the fundamental amplitudes ``I1(t)``, ``I2(t)`` of ``i1 = I1 sin(wt)`` and
 ``i2 = I2 cos(wt)``; inputs are ``V1 = (4/pi) Vdc`` and ``V2`` (the rectifier's fundamental,
-eq. 9). With the sign of V2 consistent with eq. 4-5 (eq. 3b as printed has a sign slip)::
+eq. 9). With the sign of V2 consistent with eq. 4b-5 (eq. 3b as printed has a sign slip, and so has
+eq. 4a with +V1: eq. 5a needs -V1 there)::
 
-    2 L1 dI1/dt + R1 I1 + w Lm I2 - V1 = 0          (eq. 4a)
-    2 L2 dI2/dt + R2 I2 - w Lm I1 + V2 = 0          (eq. 4b, consistent sign)
+    2 L1 dI1/dt + R1 I1 + w Lm I2 - V1 = 0          (eq. 3a)
+    2 L2 dI2/dt + R2 I2 - w Lm I1 + V2 = 0          (eq. 3b with the sign of eq. 4b and 5b)
 
 i.e. ``dx/dt = A x + B u`` with ``x = [I1, I2]``, ``u = [V1, V2]``.
 
@@ -15,6 +16,7 @@ state matrix), vectorised over a batch of independent links: see :class:`Envelop
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,7 +37,7 @@ __all__ = [
 
 @dataclass(frozen=True)
 class EnvelopeCoefficients:
-    """Coefficients of eq. 7-8 (units: zeta [-], omega_n [rad/s], alpha [1/H],
+    """Coefficients of eq. 6 (units: zeta [-], omega_n [rad/s], alpha [1/H],
     beta [ohm/H^2], gamma [ohm/H^2])."""
 
     zeta: float
@@ -48,7 +50,7 @@ class EnvelopeCoefficients:
 
 
 def coefficients(p: LinkParams) -> EnvelopeCoefficients:
-    """zeta, omega_n, alpha1/2, beta1/2, gamma exactly as in the paper (after eq. 7)."""
+    """zeta, omega_n, alpha1/2, beta1/2, gamma exactly as in the paper (eq. 6)."""
     wlm = p.omega_rad_s * p.lm_h
     det = p.r1_ohm * p.r2_ohm + wlm**2
     l1l2 = p.l1_h * p.l2_h
@@ -81,7 +83,7 @@ def state_matrices(p: LinkParams, lm_h=None):
 
 
 def g22(p: LinkParams):
-    """Transfer function G22 = I2/V2 = -(alpha2 s + beta2)/(s^2 + 2 zeta omega_n s + omega_n^2) (eq. 10)."""
+    """Transfer function G22 = I2/V2 = -(alpha2 s + beta2)/(s^2 + 2 zeta omega_n s + omega_n^2) (eq. 8)."""
     c = coefficients(p)
     from scipy import signal   # 1.2 s import: only here
 
@@ -253,8 +255,11 @@ class EnvelopeLink:
                 return
         if not np.isfinite(dt_s) or dt_s <= 0:
             raise ValueError(f"dt_s={dt_s!r} is invalid; valid range: (0, inf)")
-        if np.any(~np.isfinite(lm)) or np.any(lm <= 0):
-            raise ValueError(f"lm_h={lm[~(lm > 0)].flat[0]!r} is invalid; valid range: (0, inf)")
+        lm_max = np.sqrt(self.params.l1_h * self.params.l2_h)
+        bad = ~(np.isfinite(lm) & (lm > 0) & (lm < lm_max))   # inf used to fail on an empty index here
+        if np.any(bad):
+            raise ValueError(f"lm_h={float(lm[bad].flat[0])!r} is invalid; valid range: (0, {lm_max:.6g}) H "
+                             f"(0 < k < 1)")
         self._dt, self._lm = float(dt_s), lm.copy()
         xt = self._real()
         a, b = state_matrices(self.params, lm)
@@ -318,6 +323,14 @@ def simulate(params: LinkParams, v2_v, dt_s: float, x0=None, lm_h=None, v1_v=Non
     ``x0`` defaults to the closed-form steady state for ``v2_v[0]``.
     """
     v2 = np.asarray(v2_v, dtype=float)
+    if v2.ndim != 1 or len(v2) == 0 or not np.all(np.isfinite(v2)):
+        bad = v2.ravel()[~np.isfinite(v2.ravel())]
+        raise ValueError(f"v2_v={float(bad[0]) if bad.size else v2.shape!r} is invalid; valid: a non-empty 1-D "
+                         "sequence of finite V2 amplitudes [V]")
+    if not (np.isfinite(dt_s) and dt_s > 0):
+        raise ValueError(f"dt_s={dt_s!r} is invalid; valid range: (0, inf) s")
+    if lm_h is not None and not (np.isfinite(lm_h) and 0 < lm_h < np.sqrt(params.l1_h * params.l2_h)):
+        raise ValueError(f"lm_h={lm_h!r} is invalid; valid range: (0, {np.sqrt(params.l1_h * params.l2_h):.6g}) H")
     a, b = state_matrices(params, lm_h)
     ad, bd = zoh_discretise(a, b, dt_s)
     v1 = params.v1_amp_v if v1_v is None else float(v1_v)
@@ -356,6 +369,9 @@ def complex_envelope_matrices(p: LinkParams, c1_f: float | None = None, c2_f: fl
     w = p.omega_rad_s
     c1 = 1.0 / (w * w * p.l1_h) if c1_f is None else float(c1_f)
     c2 = 1.0 / (w * w * p.l2_h) if c2_f is None else float(c2_f)
+    for name, c in (("c1_f", c1), ("c2_f", c2)):   # 0 raised ZeroDivisionError, NaN gave NaN currents
+        if not (math.isfinite(c) and c > 0):
+            raise ValueError(f"{name}={c!r} is invalid; valid range: (0, inf) F or None (resonant)")
     lm_d = p.lm_h if cross else 0.0
     m = np.array([[p.l1_h + 1.0 / (w * w * c1), -lm_d], [-lm_d, p.l2_h + 1.0 / (w * w * c2)]], dtype=complex)
     z = np.array([[p.r1_ohm + 1j * (w * p.l1_h - 1.0 / (w * c1)), -1j * w * p.lm_h],

@@ -2,7 +2,7 @@
 
 ``I2ref -> Q(s) -> G22^-1(s) -> V2* -> f^-1 -> d_short*``
 
-``G22^-1`` is improper (eq. 10 has relative degree 1), so a low-pass filter
+``G22^-1`` is improper (eq. 8 has relative degree 1), so a low-pass filter
 ``Q(s) = 1/(tau s + 1)^order`` (order >= 1) precedes it. The cascade ``H = Q G22^-1`` is
 discretised once (ZOH at the control period) and run as a state-space recursion; nothing is
 discretised per step.
@@ -40,7 +40,11 @@ class LowPassFilter:
     order: int = 2
 
     def __post_init__(self):
-        if not np.isfinite(self.tau_s) or self.tau_s <= 0:
+        try:
+            tau = float(self.tau_s)
+        except (TypeError, ValueError):
+            raise ValueError(f"tau_s={self.tau_s!r} is not a number; valid range: (0, inf)") from None
+        if not np.isfinite(tau) or tau <= 0:
             raise ValueError(f"tau_s={self.tau_s!r} is invalid; valid range: (0, inf)")
         if int(self.order) != self.order or not 1 <= self.order <= 8:
             raise ValueError(f"order={self.order!r} is invalid; valid range: integer 1..8 (G22^-1 needs >= 1)")
@@ -75,6 +79,8 @@ class InverseModelController:
                  lpf: LowPassFilter = LowPassFilter(), n: int = 1):
         self.params = params
         self.lpf = lpf
+        if int(n) != n or n < 1:
+            raise ValueError(f"n={n!r} is invalid; valid range: integer >= 1")
         self.n = int(n)
         self.control_period_s = params.rectifier_period_s if control_period_s is None else float(control_period_s)
         if not np.isfinite(self.control_period_s) or self.control_period_s <= 0:
@@ -124,6 +130,8 @@ class InverseModelController:
         """
         u = np.asarray(i2_ref_a, dtype=float) - self._i2_sm
         if u.shape != (self.n,):
+            if u.ndim > 1 or u.size not in (1, self.n):
+                raise ValueError(f"i2_ref_a has shape {u.shape}; valid: a scalar or shape ({self.n},), one per receiver")
             u = np.broadcast_to(u, (self.n,))
         self.v2_cmd_v = self.x @ self._cd + self._dd * u
         self.x = self.x @ self._ad.T + u[:, None] * self._bd

@@ -20,7 +20,8 @@ from .params import TABLE_I, LinkParams
 from .references import TRAJECTORIES, reference_duty
 from .sbar import v2_from_duty
 
-__all__ = ["PAPER_TABLE_II", "PaperRun", "MODELS", "envelope_plant", "modal_plant", "run_paper"]
+__all__ = ["PAPER_TABLE_II", "PaperRun", "MODELS", "envelope_plant", "modal_plant", "run_paper", "rm_emf_margin",
+           "modal_range_problem", "MODAL_MIN_EMF_MARGIN", "MODAL_MIN_VOLTAGE_RATIO"]
 
 #: Table II of the paper: trajectory -> (maximum current amplitude [A], overshoot [%]).
 PAPER_TABLE_II = {"step": (49.1, 368.0), "ramp": (11.4, 8.6), "proposed": (10.5, 0.0)}
@@ -66,12 +67,47 @@ def modal_plant(params: LinkParams, d_short: np.ndarray, control_period_s: float
     control period, ``i2_fund_a`` the fundamental's amplitude, ``v2_v`` the fundamental of v2 in
     phase with i2 [V], ``i1_a`` |I1| [A]."""
     from .modal_kernel import simulate as simulate_compiled
+    reason = modal_range_problem(params)
+    if reason is not None:
+        import warnings
+        warnings.warn(reason, RuntimeWarning, stacklevel=2)
     out = simulate_compiled(params, d_short, control_period_s)
     i2 = out["i2"]
     fund = np.abs(i2)
     v2_in_phase = np.real(out["v2"] * np.conj(i2)) / np.where(fund > 0, fund, 1.0)
     return {"t_s": out["t_s"], "i1_a": np.abs(out["i1"]), "i2_a": out["peak_i2_a"], "v2_v": v2_in_phase,
             "i2_fund_a": fund}
+
+
+#: :func:`modal_range_problem`'s limits. Against the switching model (ramp trajectory; RM I2 / peak / battery energy):
+#: the emf margin matters only close to blocking (Lm 0.42 uH, M = 2.08: 0.0 / 0.0 / +0.2 %; f 5 kHz, M = 1.82: the
+#: RM steady state +45 %; Lm 0.25 uH, M = 1.24: 195 A against 45.7 A), the voltage ratio where the clamp is high
+#: against V1 (Vdc/VL = 0.32: -0.0 / -0.4 / -0.4 %; 0.25-0.26: +0.0 / +2 / -1.2 %; 0.20: +0.5 / +1.5 / -3.4 %; 0.13:
+#: +4.4 / +5.5 / -31 %; docs/robustness.md, "A power-electronics researcher's pass")
+MODAL_MIN_EMF_MARGIN = 2.0
+MODAL_MIN_VOLTAGE_RATIO = 0.25
+
+
+def rm_emf_margin(params: LinkParams) -> float:
+    """``w Lm V1 / (R1 (4/pi) VL)`` [-]: eq. 4's V2 that holds I2 at 0 (the rectifier blocks) over the RM clamp
+    ``(4/pi) VL``. Below 1 the tuned link cannot conduct in RM; ``1/M`` is about the share of V1 lost on R1.
+    Table I: 30.9. The tuned, ideal-device case of :func:`wpt_receiver.tolerance.rm_steady`'s ``clamp_margin``."""
+    return params.omega_rad_s * params.lm_h * params.v1_amp_v / (params.r1_ohm * params.v2_rm_amp_v)
+
+
+def modal_range_problem(params: LinkParams) -> str | None:
+    """Why the exact-mode model (:func:`modal_plant`, the missions' and envs' link) is outside the range where it
+    was checked against the switching model, or None (Table I: emf margin 30.9, Vdc/VL 1)."""
+    m, ratio = rm_emf_margin(params), params.vdc_v / params.vl_v
+    if m < MODAL_MIN_EMF_MARGIN:
+        return (f"emf margin wLm V1 / (R1 (4/pi) VL) = {m:.3g} is below the exact-mode model's checked range "
+                f"(>= {MODAL_MIN_EMF_MARGIN:g}; Table I: 30.9): this close to the rectifier's blocking point its RM "
+                "state departs from the switching model's; use model='switching'")
+    if ratio < MODAL_MIN_VOLTAGE_RATIO:
+        return (f"vdc_v / vl_v = {ratio:.3g} is below the exact-mode model's checked range (>= "
+                f"{MODAL_MIN_VOLTAGE_RATIO:g}; Table I: 1): with the clamp this high against V1 its battery energy is "
+                "low against the switching model (-3 % at 0.2, -31 % at 0.13); use model='switching'")
+    return None
 
 
 #: plant models: name -> callable(params, d_short, control_period_s) -> dict(t_s, i1_a, i2_a, v2_v, ...)
@@ -93,7 +129,44 @@ def run_paper(params: LinkParams = TABLE_I, model: str = "envelope", t_switch_s:
         t0 = time.perf_counter()
         out = MODELS[model](params, d, period)
         wall = time.perf_counter() - t0
-        m = transition_metrics(out["t_s"], out["i2_a"], t_switch_s, out["i1_a"], out["v2_v"])
+        m = transition_metrics(out["t_s"], out["i2_a"], t_switch_s, out["i1_a"], out["v2_v"],
+                               i2_fund_a=out.get("i2_fund_a"))
         extra = {k: v for k, v in out.items() if k not in ("t_s", "i1_a", "i2_a", "v2_v")}
         runs.append(PaperRun(name, out["t_s"], v2_ref, t_ctrl, d, out["i1_a"], out["i2_a"], out["v2_v"], m, wall, extra))
+        problem = None
+        if not np.isfinite(m.settling_time_s):   # t_end_s = 3 ms: "final" 0.69 A mid-ring, overshoot 7,220 %
+            problem = (f"{name}: I2 has not settled within 2 % by t_end_s={t_end_s!r}: its final_current_a "
+                       f"({m.final_current_a:.4g} A) and overshoot_pct are not steady values; valid: a longer "
+                       "window (default 31e-3 s)")
+        elif model == "modal":
+            problem = _modal_inconsistency(params, name, d, out, m)
+        if problem is not None:
+            import warnings
+            warnings.warn(problem, RuntimeWarning, stacklevel=2)
     return runs
+
+
+#: :func:`_modal_inconsistency`'s tolerance on the RM start and the SM end against their closed forms (within 0.2 %
+#: where the exact-mode model agrees with the switching model; 2-330 % where it does not)
+MODAL_CHECK_RTOL = 0.02
+
+
+def _modal_inconsistency(params: LinkParams, name: str, d, out: dict, m: TransitionMetrics) -> str | None:
+    """What an exact-mode run gets physically wrong, checked after the fact (the run itself can leave the range
+    where the model was checked in ways :func:`modal_range_problem` does not foresee): its RM start against eq.
+    4-5's RM steady state, its short-mode end against the (exact, linear) short-mode phasor solution, and a
+    negative battery energy (a diode rectifier cannot feed the coil). None when all hold."""
+    from .envelope import steady_state
+    fund = np.asarray(out["i2_fund_a"])
+    rm, sm = float(steady_state(params, params.v2_rm_amp_v)[1]), float(steady_state(params, 0.0)[1])
+    what = []
+    if d[0] == 0.0 and rm > 0 and abs(fund[0] / rm - 1) > MODAL_CHECK_RTOL:
+        what.append(f"its RM start {fund[0]:.4g} A against eq. 4-5's {rm:.4g} A")
+    if d[-1] == 1.0 and abs(fund[-1] / sm - 1) > MODAL_CHECK_RTOL:
+        what.append(f"its short-mode end {fund[-1]:.4g} A against the short-mode steady state {sm:.4g} A")
+    if m.energy_to_battery_j < -1e-9:
+        what.append(f"a negative battery energy {m.energy_to_battery_j:.3g} J")
+    if not what:
+        return None
+    return (f"{name}: the exact-mode run is not physical here ({'; '.join(what)}): this link is outside the range "
+            "where the model was checked against the switching model; use model='switching'")

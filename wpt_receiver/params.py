@@ -10,6 +10,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields, replace
 
+import numpy as np
+
 __all__ = ["LinkParams", "TABLE_I"]
 
 
@@ -39,6 +41,8 @@ class LinkParams:
     def __post_init__(self) -> None:
         for fld in fields(self):
             value = getattr(self, fld.name)
+            if isinstance(value, (bool, np.bool_)):   # float(True) = 1.0 would pass as 1 H, 1 ohm, 1 Hz
+                raise ValueError(f"{fld.name}={value!r} is not a number; valid range: (0, inf)")
             try:
                 value = float(value)
             except (TypeError, ValueError):
@@ -80,7 +84,12 @@ class LinkParams:
         return 0.5 / self.f_hz
 
     def with_(self, **changes: float) -> "LinkParams":
-        """Copy with some fields changed (validated again)."""
+        """Copy with some fields changed (validated again); an unknown field name is a ValueError naming the
+        valid ones (``with_(lm=...)`` gave dataclasses' TypeError about ``__init__``)."""
+        names = [f.name for f in fields(self)]
+        bad = [k for k in changes if k not in names]
+        if bad:
+            raise ValueError(f"{bad[0]!r} is not a LinkParams field; valid: {', '.join(names)}")
         return replace(self, **changes)
 
 

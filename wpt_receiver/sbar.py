@@ -32,7 +32,7 @@ def v2_from_duty(d_short, vl_v: float):
     d = np.asarray(d_short, dtype=float)
     bad = ~np.isfinite(d) | (d < 0.0) | (d > 1.0)
     if np.any(bad):
-        raise ValueError(f"d_short={d[bad].flat[0]!r} is out of range; valid range: [0, 1]")
+        raise ValueError(f"d_short={float(d[bad].flat[0])!r} is out of range; valid range: [0, 1]")
     out = _FOUR_OVER_PI * vl_v * (1.0 - np.sin(0.5 * np.pi * d))
     return out if out.ndim else float(out)
 
@@ -47,7 +47,7 @@ def duty_from_v2(v2_v, vl_v: float):
     vmax = _FOUR_OVER_PI * vl_v
     bad = ~np.isfinite(v) | (v < 0.0) | (v > vmax * (1 + 1e-12))
     if np.any(bad):
-        raise ValueError(f"v2_v={v[bad].flat[0]!r} is out of range; valid range: [0, {vmax:.6g}] V")
+        raise ValueError(f"v2_v={float(v[bad].flat[0])!r} is out of range; valid range: [0, {vmax:.6g}] V")
     return duty_from_v2_clipped(v, vl_v)
 
 

@@ -32,6 +32,11 @@ def settle_junctions(losses_w, rth_k_w: dict, tj_max_c: dict, t_amb_c: float = 4
     device), ``total_w``, ``t_sink_c`` and ``iterations``."""
     if (dt_sink_k is None) == (rth_sa_k_w is None):
         raise ValueError("give exactly one of dt_sink_k and rth_sa_k_w")
+    if not (math.isfinite(t_amb_c) and -55.0 <= t_amb_c <= 200.0):   # NaN was reported as "vf0_v=nan"
+        raise ValueError(f"t_amb_c={t_amb_c!r} is invalid; valid range: [-55, 200] C")
+    for key, v in (("dt_sink_k", dt_sink_k), ("rth_sa_k_w", rth_sa_k_w)):
+        if v is not None and not (math.isfinite(v) and v >= 0.0):
+            raise ValueError(f"{key}={v!r} is invalid; valid range: [0, inf)")
     tj = dict.fromkeys(rth_k_w, 25.0)
     step_prev = math.inf
     for it in range(1, max_iter + 1):
@@ -71,6 +76,8 @@ def steady_junctions(name: str, params, d_short: float, t_amb_c: float = 40.0, d
     from .edge_losses import averaged_edge_losses
     from .envelope import steady_state
     from .sbar import conduction_losses
+    if not (math.isfinite(d_short) and 0.0 <= d_short <= 1.0):   # d = 2 gave temperatures, NaN "vf0_v=nan"
+        raise ValueError(f"d_short={d_short!r} is out of range; valid range: [0, 1]")
     pr = parts()["preset"].get(name)
     if pr is None:
         raise ValueError(f"device preset {name!r} has no parts (valid: {', '.join(parts()['preset'])})")

@@ -19,7 +19,12 @@ def _add_paper(sub):
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--control-period", type=float_arg("control-period", positive=True, lo=1e-7, hi=1e-3), default=None,
                    help="controller update period in s, 1e-7 .. 1e-3 (default: rectifier period 1/(2f))")
+    p.add_argument("--t-end", type=float_arg("t-end", positive=True, lo=5e-3, hi=1.0), default=31e-3,
+                   help="end of the window in s, 0.005 .. 1 (default 0.031; the switch is at 0.001)")
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
+    p.add_argument("--link", action="append", default=[], metavar="KEY=VALUE",
+                   help="a link parameter other than Table I (repeatable), e.g. lm_h=5e-6; keys: l1_h, l2_h, lm_h, "
+                        "r1_ohm, r2_ohm, vdc_v, vl_v, f_hz (the paper's columns stay Table I's)")
     p.add_argument("--waveforms", type=Path, default=None, metavar="FILE.csv|FILE.parquet",
                    help="with --model switching: write the instantaneous waveforms of the three runs (t_s, i1_a, "
                         "vc1_v, i2_a, vc2_v, v1_v, v2_v, i_load_a, sbar_gate, inverter_cmd, trajectory)")
@@ -35,19 +40,31 @@ def _cmd_paper(args) -> int:
     from wpt_receiver import paper
     if args.model not in paper.MODELS:
         raise CliError(f"--model {args.model!r} is invalid; valid values: {', '.join(sorted(paper.MODELS))}")
+    from .controller import _link_params
     _check_waveforms(args)
+    params = _link_params(args.link)
+    link_text = _link_text(params)
+    reason = paper.modal_range_problem(params) if args.model == "modal" else None
+    if reason is not None:
+        import sys
+        print("dronewpt paper: warning: " + reason.replace("model='switching'", "--model switching"), file=sys.stderr)
     t_switch = 1e-3
     if not args.no_plot:
         prepare_out_dir(args.out)
     if args.model in COMPILED_MODELS:   # numba's cached kernels without its registries (~0.3-0.5 s of CPU)
         from wpt_receiver.numba_start import cache_loads_without_registries
         cache_loads_without_registries()
-    runs = paper.run_paper(model=args.model, t_switch_s=t_switch, control_period_s=args.control_period)
+    import warnings
+    with warnings.catch_warnings(record=True) as caught:   # the model's own warnings as one line each
+        warnings.simplefilter("always", RuntimeWarning)
+        runs = paper.run_paper(params, model=args.model, t_switch_s=t_switch, t_end_s=args.t_end,
+                               control_period_s=args.control_period)
+    _print_warnings(caught, skip=reason)
     figs = []
     if not args.no_plot:
         from ..figures import paper as figures
         figs.append(figures.plot_paper_fig6(runs, args.out / f"fig6_{args.model}.png", t_switch,
-                                            f"RM -> SM transition, {args.model} model, Table I"))
+                                            f"RM -> SM transition, {args.model} model, {link_text}"))
         if args.model == "switching":
             from ..figures.switching import plot_switching_waveforms
             figs.extend(plot_switching_waveforms(runs, args.out))
@@ -55,9 +72,9 @@ def _cmd_paper(args) -> int:
     if args.waveforms is not None:
         figs.append(_write_waveforms(runs, args.waveforms))
     if args.format == "json":
-        print(json.dumps({"model": args.model, "rows": rows, "figures": figs}))
+        print(json.dumps({"model": args.model, "link": dict(vars(params)), "rows": rows, "figures": figs}))
         return 0
-    _print_table(runs, rows, args.model)
+    _print_table(runs, rows, args.model, link_text)
     for f in figs:
         print(f"{'waveforms' if str(f).endswith(('.csv', '.parquet')) else 'figure'}: {f}")
     return 0
@@ -84,10 +101,31 @@ def _row(r, t_switch: float, model: str) -> dict:
     return row
 
 
-def _print_table(runs, rows, model: str) -> None:
+def _print_warnings(caught, skip=None) -> None:
+    """The RuntimeWarnings of a run as ``dronewpt paper: warning: ...`` lines (``skip``: one printed already)."""
+    import sys
+    for w in caught:   # after the range warning, the per-trajectory "not physical" ones would only repeat it
+        if skip is not None and "exact-mode run is not physical" in str(w.message):
+            continue
+        if issubclass(w.category, RuntimeWarning) and str(w.message) != skip:
+            text = str(w.message).replace("t_end_s=", "--t-end ").replace("(default 31e-3 s)", "(--t-end, default 0.031 s)")
+            print(f"dronewpt paper: warning: {text}", file=sys.stderr)
+
+
+def _link_text(params) -> str:
+    """``Table I`` or ``Table I with lm_h=4e-06, ...`` (the fields ``--link`` changed)."""
+    from dataclasses import fields
+
+    from wpt_receiver import TABLE_I
+    changed = [f"{f.name}={getattr(params, f.name)!r}" for f in fields(params)
+               if getattr(params, f.name) != getattr(TABLE_I, f.name)]
+    return "Table I" if not changed else "Table I with " + ", ".join(changed)
+
+
+def _print_table(runs, rows, model: str, link_text: str = "Table I") -> None:
     from wpt_receiver import paper
     inst = model != "envelope"
-    print(f"Table II, {model} model (Table I parameters; RM steady state -> SM at t = 0)")
+    print(f"Table II, {model} model ({link_text} parameters; RM steady state -> SM at t = 0)")
     head = f"{'max inst.':>9} {'max fund.':>9}" if inst else f"{'max fund.':>9}"
     print(f"{'trajectory':<10} {'paper max':>10} {'paper OS':>9} | {'RM':>7} {'final':>7} {head} {'OS':>8} {'settle':>8}")
     for r, row in zip(runs, rows):

@@ -38,7 +38,8 @@ def plot_switching_waveforms(runs, out_dir, t_switch_s: float | None = None, shi
         cp = float(prop.t_ctrl_s[1] - prop.t_ctrl_s[0]) if len(prop.t_ctrl_s) > 1 else None
         out = switching_plant(prop.extra["link_params"], prop.d_short, cp, prop.extra["switching_config"],
                               phase_rad=shifted_phase_rad)
-        m = transition_metrics(out["t_s"], out["i2_a"], t_switch_s, out["i1_a"], out["v2_v"])
+        m = transition_metrics(out["t_s"], out["i2_a"], t_switch_s, out["i1_a"], out["v2_v"],
+                               i2_fund_a=out.get("i2_fund_a"))
         out = dict(out, i2_env=out["i2_a"], t_env=out["t_s"])
         cols.append((f"proposed, gate shifted {shifted_phase_rad / math.pi:.2g} pi", out, m))
     fig, axes = plt.subplots(2, len(cols), figsize=(4.0 * len(cols), 5.6), sharex=True, squeeze=False)

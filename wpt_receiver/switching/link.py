@@ -311,11 +311,18 @@ class SwitchingLink:
         """Run a duty sequence (one duty per control period) from t = 0, starting at the periodic
         steady state of the first duty unless ``x0`` is given."""
         d = np.atleast_1d(np.asarray(d_short, dtype=float))
+        if d.ndim != 1 or len(d) == 0:   # an empty sequence raised IndexError
+            raise ValueError(f"d_short has shape {d.shape}; valid: a non-empty 1-D sequence of duties in [0, 1]")
         bad = ~np.isfinite(d) | (d < 0) | (d > 1)
         if bad.any():
-            raise ValueError(f"d_short={d[bad][0]!r} is out of range; valid range: [0, 1]")
+            raise ValueError(f"d_short={float(d[bad][0])!r} is out of range; valid range: [0, 1]")
         cp = self.T if control_period_s is None else float(control_period_s)
         t_end = len(d) * cp if t_end_s is None else float(t_end_s)
+        if not (math.isfinite(t_end) and t_end > 0):   # a negative one raised IndexError deep in the result
+            raise ValueError(f"t_end_s={t_end_s!r} is invalid; valid range: (0, inf) s")
+        if x0 is not None and np.shape(x0) != (self.cir.m,):
+            raise ValueError(f"x0 has shape {np.shape(x0)}; valid: ({self.cir.m},), the circuit's state "
+                             "(SwitchingLink.periodic_steady_state gives one)")
         if x0 is None:
             x0 = self.periodic_steady_state(d[0], phase_rad)
         return self.run(self.schedule(0.0, t_end, d, cp, phase_rad), x0)

@@ -18,8 +18,9 @@ has 470x less time.
 **Edge ringing.** At a hard turn-off of a lower switch the node capacitance ``C = Coss + Cj`` is
 charged by ``I`` and, at the clamp, the current has to move into the diode path through the stray
 loop inductance ``L_s`` (package + layout): a series RLC. :func:`edge_ring` gives its closed-form
-overshoot ``I sqrt(L_s/C) exp(-zeta pi / (2 sqrt(1 - zeta^2)))`` above the clamp and its frequency
-``1 / (2 pi sqrt(L_s C))`` (lossless upper bound for zeta -> 0; not yet checked against SPICE).
+first peak above the clamp (``I sqrt(L_s/C)`` without resistance; the path's resistance raises it)
+and its frequency ``1 / (2 pi sqrt(L_s C))``, with the channel's fall time taken as zero;
+:func:`edge_turn_off_transient` has the fall (checked against SPICE).
 """
 
 from __future__ import annotations
@@ -36,14 +37,37 @@ _R_OPEN_OHM = 1e9
 
 def edge_ring(i_a: float, l_stray_h: float, c_f: float, r_ohm: float = 0.0) -> dict:
     """Overshoot [V] above the clamp and ring frequency [Hz] of the series RLC of an edge
-    (module docstring): ``z0 = sqrt(L/C)``, ``zeta = R / (2 z0)``."""
-    if not (l_stray_h > 0 and c_f > 0):
+    (module docstring): ``z0 = sqrt(L/C)``, ``zeta = R / (2 z0)``.
+
+    The circuit: the current ``I`` charges the node ``C`` to the clamp, then has to move into the
+    diode path ``L`` + ``R``: ``C de/dt = I - i_L``, ``L di_L/dt = e - R i_L`` from ``e = i_L = 0``
+    (``e`` = node voltage above the clamp). Its first maximum in closed form: with
+    ``s = -alpha +- j wd``, ``e(t) = R I + I e^(-alpha t) (a cos wd t + b sin wd t)``,
+    ``a = -R``, ``b = (1/C - R alpha)/wd``, at ``wd t* = atan2(wd b - alpha a, alpha b + wd a)``.
+    ``I z0`` for ``R = 0``; the path's resistance *raises* the first peak (``e`` ends at ``R I``),
+    it does not damp it (an earlier ``I z0 exp(-zeta pi / (2 sqrt(1 - zeta^2)))`` was 2 % low at
+    zeta = 0.01 and 47 % low at 0.3 against this circuit integrated). Overdamped (zeta >= 1) ``e``
+    rises monotonically to ``R I``."""
+    i, l, c, r = abs(float(i_a)), float(l_stray_h), float(c_f), float(r_ohm)
+    if not (l > 0 and c > 0):
         return {"overshoot_v": 0.0, "ring_hz": math.inf, "z0_ohm": 0.0, "zeta": 0.0}
-    z0 = math.sqrt(l_stray_h / c_f)
-    zeta = r_ohm / (2.0 * z0)
-    damp = math.exp(-zeta * math.pi / (2.0 * math.sqrt(1.0 - zeta * zeta))) if zeta < 1 else 0.0
-    return {"overshoot_v": abs(i_a) * z0 * damp, "ring_hz": 1.0 / (2.0 * math.pi * math.sqrt(l_stray_h * c_f)),
+    z0 = math.sqrt(l / c)
+    zeta = r / (2.0 * z0)
+    return {"overshoot_v": i * _rlc_first_peak(l, c, r), "ring_hz": 1.0 / (2.0 * math.pi * math.sqrt(l * c)),
             "z0_ohm": z0, "zeta": zeta}
+
+
+def _rlc_first_peak(l: float, c: float, r: float) -> float:
+    """First maximum of ``e(t)`` per ampere [ohm] for :func:`edge_ring`'s circuit."""
+    alpha, w0 = r / (2.0 * l), 1.0 / math.sqrt(l * c)
+    if alpha < w0:
+        wd = math.sqrt(w0 * w0 - alpha * alpha)
+        a, b = -r, (1.0 / c - r * alpha) / wd
+        th = math.atan2(wd * b - alpha * a, alpha * b + wd * a)
+        return r + math.exp(-alpha * th / wd) * (a * math.cos(th) + b * math.sin(th))
+    # overdamped: de/dt is proportional to e^(s1 t)(R + L s1) - e^(s2 t)(R + L s2) with s2 < s1 < 0 and
+    # R + L s2 = R/2 - L q > 0: positive for all t, so e rises monotonically to R I
+    return r
 
 
 def edge_turn_off_transient(i_a: float, v_clamp_v: float, c_f: float, l_stray_h: float, r_ohm: float,
