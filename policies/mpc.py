@@ -749,7 +749,7 @@ class MPCPolicy:
         model with the residual of V2, and the rows ``locked`` (bool (n,)) with the phase lock,
         :func:`policies.mpc_lock.locked_rows`) plus the ripple excess at the plan's duties; and the constraint
         back-off of each row's model (fraction of I2_sm; (n,) on the modal model). What :meth:`_feasible` bounds and
-        :class:`policies.oracle_imitation.OracleImitationFilteredPolicy` filters with."""
+        :class:`policies.oracle_imitation_filter.OracleImitationFilteredPolicy` filters with."""
         m = self._model
         i2 = z @ m.F.T + m.h + plan @ m.Gu.T
         if self._modal:

@@ -41,9 +41,12 @@ steps), ``lock`` (bool; the exact-mode link only), ``every_period`` (bool), ``la
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from mission_sim.contract import PolicyContext, denormalise_obs
+from mission_sim.validation import Range, check_number, real_number
 
 from .oracle_imitation import _CMD, _D, _I2, _VL, HORIZON, PRETRAINED_ORACLE_IMITATION, OracleImitationPolicy
 
@@ -88,13 +91,9 @@ def _at(seq, pos):
 
 
 def _check(limit, slow, rates, max_lag, lock, ctx):
-    limit = float(limit)
-    if not (np.isfinite(limit) and 0.0 <= limit <= 1.0):
-        raise ValueError(f"limit={limit!r} is invalid; valid range: [0, 1] (a fraction of the short-mode current)")
+    limit = check_number("limit", limit, Range(0.0, 1.0), " (a fraction of the short-mode current)")
     if slow is not None:
-        slow = float(slow)
-        if not (np.isfinite(slow) and 1.0 <= slow <= 10.0):
-            raise ValueError(f"slow={slow!r} is invalid; valid range: [1, 10] (or None: the model's own)")
+        slow = check_number("slow", slow, Range(1.0, 10.0), " (or None: the model's own)")
     try:
         r = tuple(float(x) for x in rates)
     except (TypeError, ValueError):
@@ -138,22 +137,23 @@ class OracleImitationFilteredPolicy(OracleImitationPolicy):
         if not isinstance(every_period, (bool, np.bool_)):
             raise ValueError(f"every_period={every_period!r} is invalid; valid values: True, False")
         self.every_period = bool(every_period)
-        if lam is not None and not (np.isfinite(float(lam)) and float(lam) >= 0.0):
-            raise ValueError(f"lam={lam!r} is invalid; valid: None (the limit decides) or a number >= 0 [J per point]")
-        self.lam = None if lam is None else float(lam)
+        self.lam = None if lam is None else check_number("lam", lam, Range(0.0, math.inf, "J per point"),
+                                                           " (or None: the limit decides)")
         if correction not in CORRECTIONS:
             raise ValueError(f"correction={correction!r} is invalid; valid values: {', '.join(CORRECTIONS)}")
         self.correction = correction
-        if not (np.isfinite(float(smooth)) and float(smooth) >= 0.0):
-            raise ValueError(f"smooth={smooth!r} is invalid; valid: a number >= 0 (the move penalty of the correction)")
-        self.smooth = float(smooth)
-        if not (float(trust) > 0.0):
-            raise ValueError(f"trust={trust!r} is invalid; valid: a number > 0 [V] (the largest change of a knot)")
-        self.trust = float(trust)
+        self.smooth = check_number("smooth", smooth, Range(0.0, math.inf), " (the move penalty of the correction)")
+        self.trust = math.inf if real_number(trust) == math.inf else check_number(   # inf: no trust region
+            "trust", trust, Range(0.0, math.inf, "V", lo_open=True), " (the largest change of a knot; inf: none)")
         self._mpc = _shadow_mpc(ctx)   # budget 0: its estimate, floor and predicted rows; its duties are not played
         super().__init__(ctx, path)
         if slow is not None:
             self.model["slow"] = np.array(slow)
+
+    def _locked(self, z):
+        """The estimates ``z`` (n, nz) whose rows predict with the phase lock (the MPC's gate, |w| <= its tail's), or
+        None without ``lock``."""
+        return np.abs(z[:, -1]) <= _TAIL_W_MAX if self.lock else None
 
     def reset(self, n: int = 1) -> None:
         super().reset(n)
@@ -201,7 +201,7 @@ class OracleImitationFilteredPolicy(OracleImitationPolicy):
         mpc = self._mpc
         pos = start[:, None] + rate[:, None] * np.arange(N_PRED)[None, :]
         plan = mpc._v2_of(_at(seq, pos), vl[:, None])
-        locked = np.abs(z[:, -1]) <= _TAIL_W_MAX if self.lock else None
+        locked = self._locked(z)
         rows, margin = mpc.predicted_rows(z, vl, plan, locked)
         return rows.max(axis=1), (1.0 + self.limit - margin) * mpc._bound_sm(z) + mpc._relax[idx]
 
@@ -249,7 +249,7 @@ class OracleImitationFilteredPolicy(OracleImitationPolicy):
         r = np.tile(rates, m)
         pos = r[:, None] * np.arange(N_PRED)[None, :]
         plan = mpc._v2_of(_at(seq[b], pos), vl[b, None])
-        locked = np.abs(z[b, -1]) <= _TAIL_W_MAX if self.lock else None
+        locked = self._locked(z[b])
         rows = mpc.predicted_rows(z[b], vl[b], plan, locked)[0]
         sm = mpc._bound_sm(z[b])
         cost = plan.sum(axis=1) * sm * 0.5 * self.ctx.control_period_s + self.lam * 100.0 * (rows.max(axis=1) / sm - 1.0)
@@ -280,7 +280,7 @@ class OracleImitationFilteredPolicy(OracleImitationPolicy):
         ref = mpc._v2_of(_at(seq[go], pos), vl[:, None])
         vmax = 4.0 / np.pi * (vl + mpc._vf)
         plan = np.clip(ref + corr[go], 0.0, vmax[:, None])
-        locked = np.abs(z[:, -1]) <= _TAIL_W_MAX if self.lock else None
+        locked = self._locked(z)
         rows, margin = mpc.predicted_rows(z, vl, plan, locked)
         lim = (1.0 + self.limit - margin) * mpc._bound_sm(z) + mpc._relax[idx]
         bind = np.flatnonzero((rows.max(axis=1) > lim) & ((j[go] == 0) | self.every_period))

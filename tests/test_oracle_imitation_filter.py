@@ -14,6 +14,13 @@ ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "policies" / "pretrained" / "oracle_imitation_s0.npz"
 
 
+@pytest.fixture(autouse=True)
+def _registry_restored(monkeypatch):
+    """The test policies registered here (``t_*``) leave the registry as they found it."""
+    import policies
+    monkeypatch.setattr(policies, "_REGISTRY", dict(policies._REGISTRY))
+
+
 def _register(name, cls=None, **options):
     from policies import register
     from policies.oracle_imitation_filter import OracleImitationFilteredPolicy
@@ -115,9 +122,11 @@ def test_qp_correction_brings_the_predicted_peak_to_its_limit():
     ({"rates": (1.0, 1.0)}, ["rates=(1.0, 1.0)", "descending"]), ({"rates": "fast"}, ["rates='fast'", "descending"]),
     ({"rates": (1.0, -0.5)}, ["rates=(1.0, -0.5)", "[0, 1]"]), ({"max_lag": -1}, ["max_lag=-1", "0..200"]),
     ({"max_lag": 2.5}, ["max_lag=2.5", "0..200"]), ({"lock": "yes"}, ["lock='yes'", "True, False"]),
-    ({"every_period": 1}, ["every_period=1", "True, False"]), ({"lam": -1.0}, ["lam=-1.0", ">= 0"]),
-    ({"correction": "mpc"}, ["correction='mpc'", "qp, rate"]), ({"smooth": -2.0}, ["smooth=-2.0", ">= 0"]),
-    ({"trust": 0.0}, ["trust=0.0", "> 0"])])
+    ({"every_period": 1}, ["every_period=1", "True, False"]), ({"lam": -1.0}, ["lam=-1.0", "[0, inf] J per point"]),
+    ({"correction": "mpc"}, ["correction='mpc'", "qp, rate"]), ({"smooth": -2.0}, ["smooth=-2.0", "[0, inf]"]),
+    ({"trust": 0.0}, ["trust=0.0", "(0, inf] V"]), ({"limit": "x"}, ["limit='x'", "[0, 1]"]),
+    ({"lam": "x"}, ["lam='x'", "[0, inf]"]), ({"smooth": "x"}, ["smooth='x'", "[0, inf]"]),
+    ({"trust": "x"}, ["trust='x'", "(0, inf] V"]), ({"slow": "x"}, ["slow='x'", "[1, 10]"])])
 def test_bad_options_are_refused_with_one_line(options, names):
     from policies import make
     with pytest.raises(ValueError) as exc:
