@@ -2,6 +2,7 @@
 changes (wpt_receiver.kernel_cache; numba alone keys the cache on the caller's file and would load the
 stale machine code). Checked on a two-module package in a temporary folder, in fresh processes."""
 
+import os
 import subprocess
 import sys
 import textwrap
@@ -51,6 +52,9 @@ def test_a_changed_dependency_reaches_the_cached_caller(tmp_path, guard):
 
     def run(value):
         (folder / "dep.py").write_text(textwrap.dedent(DEP.format(value=value)))
+        # each version its own whole-second mtime: Python's .pyc keys on (int mtime, size), and "return 1" /
+        # "return 2" have one size, so two writes within a second loaded the stale bytecode (a flaky 11 == 12)
+        os.utime(folder / "dep.py", (1_700_000_000 + 10 * value,) * 2)
         (folder / "caller.py").write_text(textwrap.dedent(CALLER.format(guard=guard)))
         out = subprocess.run([sys.executable, "-c", "import caller; print(caller.total(10))"], cwd=folder,
                              capture_output=True, text=True, env={"PYTHONPATH": f"{folder}:{sys_path0}",
