@@ -368,7 +368,9 @@ def test_replay_pads_far_from_the_log_names_the_file(tmp_path, capsys):
 
 def test_a_stalled_sender_is_no_clock_step(dronekit_read):
     """The step detection keeps only steps that persist: 10 s of frames held back and delivered in one burst (a radio
-    fade, a stalled ground-station process) are no step of the receive clock; the log reads as before."""
+    fade, a stalled ground-station process) are no step of the receive clock; the log reads as before. At the log's
+    end the burst is its last level, which persistence alone does not tell from a step: the level after a step must
+    run on the receive clock."""
     from mission_sim.mavlink.clock import fit_clock
     rng = np.random.default_rng(1)
     boot = np.arange(0.0, 600.0, 0.25)
@@ -382,3 +384,23 @@ def test_a_stalled_sender_is_no_clock_step(dronekit_read):
     assert len(cm.segments[0].steps) == 1 and cm.segments[0].steps[0][4] == pytest.approx(-3600.0, abs=0.1)
     t = cm.map(np.arange(len(boot)), stepped)
     assert np.abs(t - recv)[~stalled].max() < 0.01           # receive times with the step taken out (to its median)
+    at_end = boot + 3.0 + 0.05 * rng.random(len(boot))
+    at_end[boot >= 590] = 600.0 + 3.0                      # held back at the log's end: the burst is its last level
+    assert fit_clock(np.arange(len(boot)), at_end, boot).segments[0].steps == ()
+
+
+
+@pytest.mark.parametrize("stall_s", [(1030.0, 1060.0), (1000.0, 1060.0)])
+def test_a_stall_at_the_end_of_a_log_is_no_clock_step(tmp_path, dronekit_read, stall_s):
+    """A stall near the end of the log: the dronekit tlog's frames between 1030 (or 1000) and 1060 s held back and
+    delivered in one burst at 1060 s make the burst the log's last level, and the persistence test alone took it
+    for a step (+18.2 s; 32.7 s): duration 1358.8 s (1344.4 s) instead of 1377.0 s. A step is kept only if the level
+    after it runs on the receive clock (a burst's receive span is ~0); the log reads as the original."""
+    from mission_sim.mavlink.logs import read_log
+    ref, rec = dronekit_read
+    t0 = rec[0][0]
+    a, b = stall_s
+    path = write_tlog(tmp_path / "stalled.tlog", [(t0 + b if t0 + a < t <= t0 + b else t, f) for t, f in rec])
+    log = read_log(path)
+    assert log.duration_s == pytest.approx(ref.duration_s, abs=1e-6)
+    assert len(log.armed_periods) == len(ref.armed_periods)
