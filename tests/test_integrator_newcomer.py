@@ -114,7 +114,8 @@ def test_listening_connect_delivers_to_a_ground_station(kind):
 
 def test_connect_refused_is_said_before_the_simulation(monkeypatch, capsys):
     """``--connect tcp:`` to a port where nothing listens simulated the whole mission first, then ended with
-    ``[Errno 111] Connection refused`` naming no option; now one line naming --connect, nothing simulated."""
+    ``[Errno 111] Connection refused`` naming no option; now one line naming --connect, nothing simulated, and one
+    attempt (pymavlink's default retries=3 printed "... sleeping" on stdout twice and waited 2 s)."""
     import socket
 
     import mission_sim.world.runner as runner
@@ -127,8 +128,10 @@ def test_connect_refused_is_said_before_the_simulation(monkeypatch, capsys):
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]                          # closed again: nothing listens there
     rc = main(["telemetry", "--connect", f"tcp:127.0.0.1:{port}", "--speed", "inf", "--no-progress"])
-    err = capsys.readouterr().err.strip().splitlines()
+    out, err = capsys.readouterr()
+    err = err.strip().splitlines()
     assert rc == 2 and len(err) == 1
+    assert out == ""         # pymavlink's default 3 retries printed "[Errno 111] Connection refused sleeping" twice
     assert f"--connect 'tcp:127.0.0.1:{port}' cannot be opened: Connection refused" in err[0]
 
 

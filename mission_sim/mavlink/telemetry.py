@@ -115,9 +115,9 @@ def open_link(connect: str, sysid: int = 1, compid: int = 1, name: str = "--conn
     """The vehicle's link ``connect`` (see :func:`check_connect`), opened now (before a simulation, so
     that a refused connection or a port that cannot be bound is said at once): an ``OSError`` becomes
     a ``ValueError`` naming the connection."""
-    try:
+    try:   # retries=0: one attempt (tcp: only; the default 3 printed "... sleeping" on stdout and waited 2 s)
         return mavutil().mavlink_connection(check_connect(connect, name), source_system=sysid,
-                                            source_component=compid)
+                                            source_component=compid, retries=0)
     except OSError as exc:
         what = exc.strerror or str(exc)
         hint = ("nothing listens there: start the ground station first, or send with udpout:HOST:PORT (QGroundControl "
