@@ -212,6 +212,22 @@ def test_two_logs_joined_read_and_replay(tmp_path):
     assert MAX_REPLAY_SAMPLES * 0.2 > 20 * 3600            # a long real log still replays
 
 
+def test_replay_sample_limit_follows_the_memory_budget():
+    """replay.MAX_REPLAY_SAMPLES was written as 395,000 while its comment derived it from world.budget: the most
+    samples, each a sample and a held row, that fit in MAX_MEMORY_BYTES beside FIXED_BYTES (394,763). Now computed
+    from them; a track of 394,900 samples is refused (it was resampled)."""
+    from mission_sim.mavlink.geodesy import GeoPoint
+    from mission_sim.mavlink.replay import MAX_REPLAY_SAMPLES, FlightTrack, resample_track
+    from mission_sim.world import budget as b
+    per = b.SAMPLE_BYTES + b.ROW_MEMORY_BYTES
+    assert b.FIXED_BYTES + per * MAX_REPLAY_SAMPLES <= b.MAX_MEMORY_BYTES < b.FIXED_BYTES + per * (MAX_REPLAY_SAMPLES + 1)
+    t = np.array([0.0, 394_900 * 0.2])
+    track = FlightTrack(t_s=t, pos_m=np.zeros((2, 3)), tilt_rad=np.zeros(2), height_m=np.zeros(2), t_offset_s=0.0,
+                        pad=GeoPoint(0.0, 0.0, 0.0), ground_gap_m=0.0, armed=np.ones(2, bool), n_tilt_clipped=0)
+    with pytest.raises(ValueError, match=r"that fit in memory at sim\.traj_dt_s=0\.2"):
+        resample_track(track, 0.2)
+
+
 def _wpl(path, rows, home=(-35.363262, 149.165237, 584.09), bom=False):
     """A QGC WPL 110 file: home, then rows of (frame, command, p1, p2, p3, p4, lat, lon, alt)."""
     lines = ["QGC WPL 110", f"0\t1\t0\t16\t0\t0\t0\t0\t{home[0]:.7f}\t{home[1]:.7f}\t{home[2]:.3f}\t1"]
