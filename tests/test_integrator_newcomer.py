@@ -423,3 +423,58 @@ def test_a_stall_at_the_end_of_a_log_is_no_clock_step(tmp_path, dronekit_read, s
     log = read_log(path)
     assert log.duration_s == pytest.approx(ref.duration_s, abs=1e-6)
     assert len(log.armed_periods) == len(ref.armed_periods)
+
+
+class _SlowSocket:
+    """A non-blocking TCP socket whose send takes at most the next of ``caps`` bytes (0: EAGAIN), then all."""
+
+    def __init__(self, caps):
+        self.caps, self.got = list(caps), bytearray()
+
+    def send(self, buf):
+        cap = self.caps.pop(0) if self.caps else len(buf)
+        if cap == 0:
+            raise BlockingIOError(11, "Resource temporarily unavailable")
+        self.got += bytes(buf[:cap])
+        return min(cap, len(buf))
+
+    def sendall(self, buf):
+        self.got += bytes(buf)
+
+    def settimeout(self, t):
+        pass
+
+    def close(self):
+        self.closed = True
+
+
+@pytest.mark.parametrize("kind", ["mavtcp", "mavtcpin"])
+def test_tcp_partial_send_keeps_the_stream_whole(kind):
+    """A TCP send that takes part of a frame (the ground station's receive window full) put those bytes on the wire
+    while the frame counted as undelivered (tcp:) or delivered whole (tcpin:), and the next frame followed them: the
+    stream was corrupt. Now the unsent rest goes first; frames that find it still unsent are dropped whole. What the
+    ground station gets is exactly the frames counted as delivered, each intact."""
+    from mission_sim.mavlink.logs import mavutil
+    from mission_sim.mavlink.telemetry import write_frame
+    mu = mavutil()
+    mav = mu.mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    frames = []
+    for k in range(8):
+        frames.append(mav.heartbeat_encode(2, 3, 0, k, 4).pack(mav))
+        mav.seq = (mav.seq + 1) % 256
+    sock = _SlowSocket([len(frames[0]), 5, 0, 3, 0, 0])   # frame 1 in part, its rest blocked, then in part again
+    conn = object.__new__(getattr(mu, kind))
+    conn.port = sock
+    sent = [write_frame(conn, f) for f in frames]
+    assert sent.count(False) >= 2                            # frames that met a backlog are lost, whole
+    assert bytes(sock.got) == b"".join(f for f, ok in zip(frames, sent) if ok)
+    parser = mu.mavlink.MAVLink(None)
+    msgs = parser.parse_buffer(bytes(sock.got))
+    assert [m.custom_mode for m in msgs] == [k for k, ok in enumerate(sent) if ok]
+    # a rest still unsent when the stream ends goes before the link is closed (close_link): no frame cut short
+    from mission_sim.mavlink.telemetry import close_link
+    conn.port = sock = _SlowSocket([4, 0])
+    conn.listen = _SlowSocket([])                           # tcpin's listening socket, closed with it
+    assert write_frame(conn, frames[0]) and not write_frame(conn, frames[1])
+    close_link(conn)
+    assert bytes(sock.got) == frames[0] and sock.closed
