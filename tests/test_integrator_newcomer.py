@@ -478,3 +478,18 @@ def test_tcp_partial_send_keeps_the_stream_whole(kind):
     assert write_frame(conn, frames[0]) and not write_frame(conn, frames[1])
     close_link(conn)
     assert bytes(sock.got) == frames[0] and sock.closed
+
+
+def test_write_frame_resolves_pymavlink_once(monkeypatch):
+    """write_frame called mavutil() (setting MAVLINK20 and importing) for every frame, ~1 us each: ~33 ms of a
+    32,000-frame --speed inf stream. The TCP classes are resolved once per process."""
+    import mission_sim.mavlink.telemetry as tel
+    from mission_sim.mavlink.logs import mavutil
+    calls = []
+    monkeypatch.setattr(tel, "mavutil", lambda: calls.append(1) or mavutil())
+    monkeypatch.setattr(tel, "_STREAM_CLASSES", (), raising=False)
+    conn = object.__new__(mavutil().mavtcp)
+    conn.port = _SlowSocket([])
+    for _ in range(100):
+        assert tel.write_frame(conn, b"\xfd\x00")
+    assert len(calls) <= 1 and bytes(conn.port.got) == 100 * b"\xfd\x00"

@@ -355,6 +355,17 @@ def _cells_mv(voltage_mv: int) -> list[int]:
     return cells + [_UINT16_MAX] * (10 - len(cells))
 
 
+_STREAM_CLASSES: tuple = ()   # pymavlink's (mavtcp, mavtcpin), resolved once (mavutil() costs ~1 us a frame)
+
+
+def _stream_classes() -> tuple:
+    global _STREAM_CLASSES
+    if not _STREAM_CLASSES:
+        mu = mavutil()
+        _STREAM_CLASSES = (mu.mavtcp, mu.mavtcpin)
+    return _STREAM_CLASSES
+
+
 def _send_stream(conn, sock, frame: bytes) -> bool:
     """``frame`` on the non-blocking TCP socket ``sock`` of ``conn``. A send may take part of a frame: its bytes are
     on the wire, so the rest is kept (``conn.unsent``) and goes first; a frame that finds it still unsent is dropped
@@ -393,8 +404,7 @@ def write_frame(conn, frame: bytes) -> bool:
     that has closed the connection is written to no more: pymavlink printed "Connection reset or closed by
     peer on TCP socket" on stdout for every frame after it (4,279 lines in a 30 s stream). On TCP a frame is
     never sent in part (:func:`_send_stream`)."""
-    mu = mavutil()
-    tcp, tcpin = mu.mavtcp, mu.mavtcpin
+    tcp, tcpin = _STREAM_CLASSES or _stream_classes()
     if isinstance(conn, tcp):
         if getattr(conn, "peer_closed", False) or conn.port is None:
             return False
