@@ -114,7 +114,8 @@ def test_listening_connect_delivers_to_a_ground_station(kind):
 
 def test_connect_refused_is_said_before_the_simulation(monkeypatch, capsys):
     """``--connect tcp:`` to a port where nothing listens simulated the whole mission first, then ended with
-    ``[Errno 111] Connection refused`` naming no option; now one line naming --connect, nothing simulated."""
+    ``[Errno 111] Connection refused`` naming no option; now one line naming --connect, nothing simulated, and one
+    attempt (pymavlink's default retries=3 printed "... sleeping" on stdout twice and waited 2 s)."""
     import socket
 
     import mission_sim.world.runner as runner
@@ -127,8 +128,10 @@ def test_connect_refused_is_said_before_the_simulation(monkeypatch, capsys):
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]                          # closed again: nothing listens there
     rc = main(["telemetry", "--connect", f"tcp:127.0.0.1:{port}", "--speed", "inf", "--no-progress"])
-    err = capsys.readouterr().err.strip().splitlines()
+    out, err = capsys.readouterr()
+    err = err.strip().splitlines()
     assert rc == 2 and len(err) == 1
+    assert out == ""         # pymavlink's default 3 retries printed "[Errno 111] Connection refused sleeping" twice
     assert f"--connect 'tcp:127.0.0.1:{port}' cannot be opened: Connection refused" in err[0]
 
 
@@ -207,6 +210,22 @@ def test_two_logs_joined_read_and_replay(tmp_path):
     with pytest.raises(ValueError, match=r"more than the 21\.9 h that fit in memory .* --window T0,T1"):
         resample_track(track, 0.2)
     assert MAX_REPLAY_SAMPLES * 0.2 > 20 * 3600            # a long real log still replays
+
+
+def test_replay_sample_limit_follows_the_memory_budget():
+    """replay.MAX_REPLAY_SAMPLES was written as 395,000 while its comment derived it from world.budget: the most
+    samples, each a sample and a held row, that fit in MAX_MEMORY_BYTES beside FIXED_BYTES (394,763). Now computed
+    from them; a track of 394,900 samples is refused (it was resampled)."""
+    from mission_sim.mavlink.geodesy import GeoPoint
+    from mission_sim.mavlink.replay import MAX_REPLAY_SAMPLES, FlightTrack, resample_track
+    from mission_sim.world import budget as b
+    per = b.SAMPLE_BYTES + b.ROW_MEMORY_BYTES
+    assert b.FIXED_BYTES + per * MAX_REPLAY_SAMPLES <= b.MAX_MEMORY_BYTES < b.FIXED_BYTES + per * (MAX_REPLAY_SAMPLES + 1)
+    t = np.array([0.0, 394_900 * 0.2])
+    track = FlightTrack(t_s=t, pos_m=np.zeros((2, 3)), tilt_rad=np.zeros(2), height_m=np.zeros(2), t_offset_s=0.0,
+                        pad=GeoPoint(0.0, 0.0, 0.0), ground_gap_m=0.0, armed=np.ones(2, bool), n_tilt_clipped=0)
+    with pytest.raises(ValueError, match=r"that fit in memory at sim\.traj_dt_s=0\.2"):
+        resample_track(track, 0.2)
 
 
 def _wpl(path, rows, home=(-35.363262, 149.165237, 584.09), bom=False):
@@ -368,7 +387,9 @@ def test_replay_pads_far_from_the_log_names_the_file(tmp_path, capsys):
 
 def test_a_stalled_sender_is_no_clock_step(dronekit_read):
     """The step detection keeps only steps that persist: 10 s of frames held back and delivered in one burst (a radio
-    fade, a stalled ground-station process) are no step of the receive clock; the log reads as before."""
+    fade, a stalled ground-station process) are no step of the receive clock; the log reads as before. At the log's
+    end the burst is its last level, which persistence alone does not tell from a step: the level after a step must
+    run on the receive clock."""
     from mission_sim.mavlink.clock import fit_clock
     rng = np.random.default_rng(1)
     boot = np.arange(0.0, 600.0, 0.25)
@@ -382,3 +403,93 @@ def test_a_stalled_sender_is_no_clock_step(dronekit_read):
     assert len(cm.segments[0].steps) == 1 and cm.segments[0].steps[0][4] == pytest.approx(-3600.0, abs=0.1)
     t = cm.map(np.arange(len(boot)), stepped)
     assert np.abs(t - recv)[~stalled].max() < 0.01           # receive times with the step taken out (to its median)
+    at_end = boot + 3.0 + 0.05 * rng.random(len(boot))
+    at_end[boot >= 590] = 600.0 + 3.0                      # held back at the log's end: the burst is its last level
+    assert fit_clock(np.arange(len(boot)), at_end, boot).segments[0].steps == ()
+
+
+
+@pytest.mark.parametrize("stall_s", [(1030.0, 1060.0), (1000.0, 1060.0)])
+def test_a_stall_at_the_end_of_a_log_is_no_clock_step(tmp_path, dronekit_read, stall_s):
+    """A stall near the end of the log: the dronekit tlog's frames between 1030 (or 1000) and 1060 s held back and
+    delivered in one burst at 1060 s make the burst the log's last level, and the persistence test alone took it
+    for a step (+18.2 s; 32.7 s): duration 1358.8 s (1344.4 s) instead of 1377.0 s. A step is kept only if the level
+    after it runs on the receive clock (a burst's receive span is ~0); the log reads as the original."""
+    from mission_sim.mavlink.logs import read_log
+    ref, rec = dronekit_read
+    t0 = rec[0][0]
+    a, b = stall_s
+    path = write_tlog(tmp_path / "stalled.tlog", [(t0 + b if t0 + a < t <= t0 + b else t, f) for t, f in rec])
+    log = read_log(path)
+    assert log.duration_s == pytest.approx(ref.duration_s, abs=1e-6)
+    assert len(log.armed_periods) == len(ref.armed_periods)
+
+
+class _SlowSocket:
+    """A non-blocking TCP socket whose send takes at most the next of ``caps`` bytes (0: EAGAIN), then all."""
+
+    def __init__(self, caps):
+        self.caps, self.got = list(caps), bytearray()
+
+    def send(self, buf):
+        cap = self.caps.pop(0) if self.caps else len(buf)
+        if cap == 0:
+            raise BlockingIOError(11, "Resource temporarily unavailable")
+        self.got += bytes(buf[:cap])
+        return min(cap, len(buf))
+
+    def sendall(self, buf):
+        self.got += bytes(buf)
+
+    def settimeout(self, t):
+        pass
+
+    def close(self):
+        self.closed = True
+
+
+@pytest.mark.parametrize("kind", ["mavtcp", "mavtcpin"])
+def test_tcp_partial_send_keeps_the_stream_whole(kind):
+    """A TCP send that takes part of a frame (the ground station's receive window full) put those bytes on the wire
+    while the frame counted as undelivered (tcp:) or delivered whole (tcpin:), and the next frame followed them: the
+    stream was corrupt. Now the unsent rest goes first; frames that find it still unsent are dropped whole. What the
+    ground station gets is exactly the frames counted as delivered, each intact."""
+    from mission_sim.mavlink.logs import mavutil
+    from mission_sim.mavlink.telemetry import write_frame
+    mu = mavutil()
+    mav = mu.mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    frames = []
+    for k in range(8):
+        frames.append(mav.heartbeat_encode(2, 3, 0, k, 4).pack(mav))
+        mav.seq = (mav.seq + 1) % 256
+    sock = _SlowSocket([len(frames[0]), 5, 0, 3, 0, 0])   # frame 1 in part, its rest blocked, then in part again
+    conn = object.__new__(getattr(mu, kind))
+    conn.port = sock
+    sent = [write_frame(conn, f) for f in frames]
+    assert sent.count(False) >= 2                            # frames that met a backlog are lost, whole
+    assert bytes(sock.got) == b"".join(f for f, ok in zip(frames, sent) if ok)
+    parser = mu.mavlink.MAVLink(None)
+    msgs = parser.parse_buffer(bytes(sock.got))
+    assert [m.custom_mode for m in msgs] == [k for k, ok in enumerate(sent) if ok]
+    # a rest still unsent when the stream ends goes before the link is closed (close_link): no frame cut short
+    from mission_sim.mavlink.telemetry import close_link
+    conn.port = sock = _SlowSocket([4, 0])
+    conn.listen = _SlowSocket([])                           # tcpin's listening socket, closed with it
+    assert write_frame(conn, frames[0]) and not write_frame(conn, frames[1])
+    close_link(conn)
+    assert bytes(sock.got) == frames[0] and sock.closed
+
+
+def test_write_frame_resolves_pymavlink_once(monkeypatch):
+    """write_frame called mavutil() (setting MAVLINK20 and importing) for every frame, ~1 us each: ~33 ms of a
+    32,000-frame --speed inf stream. The TCP classes are resolved once per process."""
+    import mission_sim.mavlink.telemetry as tel
+    from mission_sim.mavlink.logs import mavutil
+    calls = []
+    monkeypatch.setattr(tel, "mavutil", lambda: calls.append(1) or mavutil())
+    monkeypatch.setattr(tel, "_STREAM_CLASSES", (), raising=False)
+    conn = object.__new__(mavutil().mavtcp)
+    conn.port = _SlowSocket([])
+    for _ in range(100):
+        assert tel.write_frame(conn, b"\xfd\x00")
+    assert len(calls) <= 1 and bytes(conn.port.got) == 100 * b"\xfd\x00"

@@ -318,7 +318,7 @@ def _cmd_telemetry(args) -> int:
                               sysid=args.sysid, compid=args.compid)
     finally:
         if conn is not None:
-            conn.close()
+            telemetry.close_link(conn)
     print(f"sent {st.frames} MAVLink 2 frames in {st.ticks} ticks at {args.rate:g} Hz: {st.sim_s:.1f} s of the "
           f"mission in {st.wall_s:.1f} s wall to {connect or 'no link'}"
           + (f"; wrote {args.tlog}" if args.tlog else ""))
@@ -359,7 +359,7 @@ def _warn_undelivered(connect, frames: int, delivered: int) -> None:
 
 
 def _cmd_telemetry_follow(args, connect, home) -> int:
-    from ..mavlink import follow
+    from ..mavlink import follow, telemetry
     vin = follow.open_follow(args.follow)  # listen first: the set-up below takes a while
     try:
         cfg = _mav_config(args)
@@ -379,7 +379,7 @@ def _cmd_telemetry_follow(args, connect, home) -> int:
                            sysid=args.sysid, compid=args.compid)
     finally:
         if out is not None:
-            out.close()
+            telemetry.close_link(out)
     print(f"followed {st.positions} live positions over {st.wall_s:.1f} s in {st.chunks} chunk(s); sent "
           f"{st.frames} frames to {connect or 'no link'}" + (f"; wrote {args.tlog}" if args.tlog else ""))
     _warn_undelivered(connect, st.frames, st.delivered)

@@ -198,10 +198,14 @@ def _recv_steps(rec: np.ndarray, recv: np.ndarray, boot: np.ndarray) -> tuple:
         return ()
     d = pd.Series(recv - boot).rolling(5, center=True, min_periods=1).median().to_numpy()
     cuts = (np.flatnonzero(np.abs(np.diff(d)) > RECV_STEP_S) + 1).tolist()
-    while cuts:   # a step persists: the levels (medians) on either side differ; a sender's stall and catch-up do not
+    # a step persists: the levels (medians) on either side differ, and the level after it runs on the receive clock
+    # (receive span at least half its boot span). A sender's stall and catch-up mid-log leave the levels equal; one at
+    # the log's end leaves its burst (receive span ~0) as the last level, which differs.
+    while cuts:
         bounds = [0, *cuts, len(rec)]
         med = [float(np.median(recv[i:j] - boot[i:j])) for i, j in zip(bounds[:-1], bounds[1:])]
-        keep = [c for n, c in enumerate(cuts) if abs(med[n + 1] - med[n]) > RECV_STEP_S]
+        keep = [c for n, (c, j) in enumerate(zip(cuts, bounds[2:])) if abs(med[n + 1] - med[n]) > RECV_STEP_S
+                and recv[j - 1] - recv[c] >= 0.5 * (boot[j - 1] - boot[c])]
         if keep == cuts:
             return tuple((int(rec[c - 1]), float(recv[c - 1]), int(rec[c]), float(recv[c]), med[n + 1] - med[n])
                          for n, c in enumerate(cuts))

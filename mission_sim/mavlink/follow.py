@@ -29,7 +29,7 @@ import numpy as np
 
 from .geodesy import GeoPoint, geodetic_to_enu
 from .logs import mavutil
-from .telemetry import (TlogWriter, check_connect, check_ids, drawn_totals, encode_tick, heartbeat_msgs,
+from .telemetry import (TlogWriter, check_connect, close_link, check_ids, drawn_totals, encode_tick, heartbeat_msgs,
                         landing_rows, mavlink_table, open_link, schedule, send_msgs)
 
 __all__ = ["FollowStats", "open_follow", "follow", "ChunkedMission", "WARM_S"]
@@ -227,7 +227,7 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
     finally:
         vin.close()
         if own_out:
-            out.close()
+            close_link(out)
         if writer is not None:
             writer.close()
     return FollowStats(positions=len(sim.t) if sim else 0, chunks=sim.chunks if sim else 0, frames=frames,

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from ..world import budget as _budget
 from .geodesy import GeoPoint, geodetic_to_enu
 from .logs import FlightLog, read_log
 
@@ -180,8 +181,9 @@ def track_from_log(log: FlightLog, pad: GeoPoint | None = None, ground_gap_m: fl
 
 
 #: trajectory samples a replay may hold: each costs a sample (world.budget.SAMPLE_BYTES) and a row of the time series
-#: held whole (world.budget.ROW_MEMORY_BYTES) within world.budget.MAX_MEMORY_BYTES (~395,000: 22 h at 0.2 s)
-MAX_REPLAY_SAMPLES = 395_000
+#: held whole (world.budget.ROW_MEMORY_BYTES) within world.budget.MAX_MEMORY_BYTES beside its FIXED_BYTES
+#: (394,763 today: 21.9 h at 0.2 s)
+MAX_REPLAY_SAMPLES = int((_budget.MAX_MEMORY_BYTES - _budget.FIXED_BYTES) // (_budget.SAMPLE_BYTES + _budget.ROW_MEMORY_BYTES))
 
 
 def resample_track(track: FlightTrack, dt_s: float) -> FlightTrack:

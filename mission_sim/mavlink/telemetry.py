@@ -67,7 +67,8 @@ from .logs import mavutil
 
 __all__ = ["DEFAULT_HOME", "TlogWriter", "mavlink_table", "encode_tick", "encode_heartbeat", "stream", "StreamStats",
            "check_connect", "check_ids", "CONNECT_FORMAT", "NVF_NAMES", "COPTER_MODES", "schedule", "drawn_totals",
-           "gps_quality", "heartbeat_msgs", "landing_rows", "open_link", "link_has_peer", "write_frame", "SERVER_KINDS"]
+           "gps_quality", "heartbeat_msgs", "landing_rows", "open_link", "link_has_peer", "write_frame",
+           "close_link", "SERVER_KINDS"]
 
 #: ArduPilot SITL's default home (CMAC, Canberra), where two of the real logs were flown.
 DEFAULT_HOME = GeoPoint(-35.363261, 149.165230, 584.0)
@@ -115,9 +116,9 @@ def open_link(connect: str, sysid: int = 1, compid: int = 1, name: str = "--conn
     """The vehicle's link ``connect`` (see :func:`check_connect`), opened now (before a simulation, so
     that a refused connection or a port that cannot be bound is said at once): an ``OSError`` becomes
     a ``ValueError`` naming the connection."""
-    try:
+    try:   # retries=0: one attempt (tcp: only; the default 3 printed "... sleeping" on stdout and waited 2 s)
         return mavutil().mavlink_connection(check_connect(connect, name), source_system=sysid,
-                                            source_component=compid)
+                                            source_component=compid, retries=0)
     except OSError as exc:
         what = exc.strerror or str(exc)
         hint = ("nothing listens there: start the ground station first, or send with udpout:HOST:PORT (QGroundControl "
@@ -354,19 +355,73 @@ def _cells_mv(voltage_mv: int) -> list[int]:
     return cells + [_UINT16_MAX] * (10 - len(cells))
 
 
+_STREAM_CLASSES: tuple = ()   # pymavlink's (mavtcp, mavtcpin), resolved once (mavutil() costs ~1 us a frame)
+
+
+def _stream_classes() -> tuple:
+    global _STREAM_CLASSES
+    if not _STREAM_CLASSES:
+        mu = mavutil()
+        _STREAM_CLASSES = (mu.mavtcp, mu.mavtcpin)
+    return _STREAM_CLASSES
+
+
+def _send_stream(conn, sock, frame: bytes) -> bool:
+    """``frame`` on the non-blocking TCP socket ``sock`` of ``conn``. A send may take part of a frame: its bytes are
+    on the wire, so the rest is kept (``conn.unsent``) and goes first; a frame that finds it still unsent is dropped
+    whole (the ground station reads slower than we send). Whether the frame went (or is under way) to the peer."""
+    held, rest = getattr(conn, "unsent", (None, b""))
+    if held is not sock:                    # a new connection (tcpin: another client): the old rest is void
+        rest = b""
+    try:
+        if rest:
+            rest = rest[sock.send(rest):]
+        if not rest:
+            rest = frame[sock.send(frame):]
+            conn.unsent = (sock, rest)
+            return True
+    except BlockingIOError:
+        pass
+    conn.unsent = (sock, rest)
+    return False
+
+
+def close_link(conn, timeout_s: float = 1.0) -> None:
+    """Close ``conn``, first sending (blocking, up to ``timeout_s``) a TCP frame's rest still unsent
+    (:func:`_send_stream`), so that the stream does not end inside a frame."""
+    held, rest = getattr(conn, "unsent", (None, b""))
+    if rest and held is not None and held is getattr(conn, "port", None):
+        try:
+            held.settimeout(timeout_s)
+            held.sendall(rest)
+        except OSError:
+            pass
+    conn.close()
+
+
 def write_frame(conn, frame: bytes) -> bool:
     """Write one frame on ``conn``; whether it went to a peer (:func:`link_has_peer`). A TCP ground station
     that has closed the connection is written to no more: pymavlink printed "Connection reset or closed by
-    peer on TCP socket" on stdout for every frame after it (4,279 lines in a 30 s stream)."""
-    if isinstance(conn, mavutil().mavtcp):
-        if getattr(conn, "peer_closed", False):
+    peer on TCP socket" on stdout for every frame after it (4,279 lines in a 30 s stream). On TCP a frame is
+    never sent in part (:func:`_send_stream`)."""
+    tcp, tcpin = _STREAM_CLASSES or _stream_classes()
+    if isinstance(conn, tcp):
+        if getattr(conn, "peer_closed", False) or conn.port is None:
             return False
         try:
-            return conn.port.send(frame) == len(frame)
-        except BlockingIOError:             # the ground station reads slower than we send: this frame is lost
-            return False
+            return _send_stream(conn, conn.port, frame)
         except OSError:                      # EPIPE, ECONNRESET: it went away
             conn.peer_closed = True
+            return False
+    if isinstance(conn, tcpin):
+        if conn.port is None:                # no ground station connected (yet, or any more)
+            return False
+        try:
+            return _send_stream(conn, conn.port, frame)
+        except OSError:                      # it went away: listen for the next (as pymavlink's write does)
+            conn.port.close()
+            conn.port = None
+            conn.fd = conn.listen.fileno()
             return False
     conn.write(frame)
     return link_has_peer(conn)
@@ -551,7 +606,7 @@ def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.
         if writer is not None:
             writer.close()
         if own:
-            conn.close()
+            close_link(conn)
         if bar is not None:
             bar.close()
     return StreamStats(ticks=n_ticks, frames=frames, sim_s=float(sim_t[-1]), wall_s=time.monotonic() - wall0,
