@@ -64,6 +64,9 @@ def test_the_python_blocks_of_docs_mission_run_as_pasted(tmp_path, monkeypatch, 
     # the sections' own integer checks: 'cannot convert float NaN to integer', OverflowError for inf
     (lambda c: R(c, drone=R(c.drone, n_rotors=float("nan"))), "n_rotors=nan is invalid; valid range: integer >= 1"),
     (lambda c: R(c, battery=R(c.battery, n_series=float("inf"))), "n_series=inf is invalid; valid range: integer 1..32"),
+    # a numeric string passed float() and crashed later (hover_power_w: can't multiply sequence by non-int)
+    (lambda c: R(c, drone=R(c.drone, n_rotors="4")), "n_rotors='4' is invalid; valid range: integer >= 1"),
+    (lambda c: R(c, battery=R(c.battery, n_series="6")), "n_series='6' is invalid; valid range: integer 1..32"),
 ])
 def test_a_config_changed_in_python_is_checked_as_a_file_is(change, message):
     """``dataclasses.replace`` skipped config_from_dict's ranges: 1300 A h ran, pads=() died in ``min()``. Every
@@ -108,6 +111,9 @@ def test_numpy_numbers_are_numbers():
                                              "seed": np.int64(4)})
     cfg = config_from_dict(d)
     assert (cfg.battery.n_series, cfg.drone.mass_kg, cfg.seed) == (6, 1.5, 4) and type(cfg.battery.n_series) is int
+    from mission_sim.world.battery import BatteryParams
+    from mission_sim.world.power import DroneParams
+    assert type(DroneParams(n_rotors=np.int64(6)).n_rotors) is int and type(BatteryParams(n_series=6.0).n_series) is int
     assert check_seed(np.uint8(9)) == 9
     with pytest.raises(ValueError, match=r"battery\.n_series=np\.float64\(6\.5\) is invalid; valid type: integer"):
         config_from_dict(apply_overrides(load_config_dict(), {"battery.n_series": np.float64(6.5)}))
