@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..validation import Range, check_number, check_positive
+from ..validation import Range, check_number, check_number_fields, check_positive
 
 __all__ = ["DroneParams", "propulsion_power_w", "hover_power_w", "G_M_S2"]
 
@@ -50,6 +50,7 @@ class DroneParams:
     air_density_kg_m3: float = 1.225
 
     def __post_init__(self):
+        check_number_fields(self)
         check_positive(self, "mass_kg", "rotor_radius_m", "flat_plate_area_m2", "air_density_kg_m3")
         check_positive(self, "payload_kg", "avionics_w", allow_zero=True)
         for name in ("figure_of_merit", "drive_efficiency"):
