@@ -253,3 +253,22 @@ def test_a_pad_below_the_home_ground_is_reached_and_charges():
         out[z] = res.summary
     assert out[-3.0]["charge_time_s"] == pytest.approx(out[0.0]["charge_time_s"], rel=0.01)
     assert out[-3.0]["energy_from_source_j"] == pytest.approx(out[0.0]["energy_from_source_j"], rel=0.05)
+
+
+def test_each_pad_is_the_ground_of_its_own_approach_charge_and_depart():
+    """With pads at -3 m and 0 m the lowest pad's z was the ground of every pad: at the pad at 0 m (hover gap 0.03 m,
+    8 m/s wind, 3 m/s gusts) the coil went 0.118 m below it while charging; each pad's own z limits its segments."""
+    from mission_sim.world.trajectory import plan_mission
+
+    cfg = load_config()
+    cfg = R(cfg, pads=(R(cfg.pads[0], z_m=-3.0), R(cfg.pads[1], z_m=0.0)), mission=R(cfg.mission, hover_gap_m=0.03),
+            wind=R(cfg.wind, speed_m_s=8.0, gust_sigma_m_s=3.0))
+    tr = plan_mission(cfg)
+    z, ph = tr.pos_m[:, 2], tr.phase
+    for pad in cfg.pads:
+        near = (np.hypot(tr.pos_m[:, 0] - pad.x_m, tr.pos_m[:, 1] - pad.y_m) < 1.0) & np.isin(
+            ph, ["approach", "charge", "depart"])
+        chg = near & (ph == "charge")
+        assert chg.sum() > 200 and z[near].min() >= pad.z_m
+        assert z[chg].min() == pad.z_m + 0.03   # the coil's floor over its own pad, reached in this wind
+    assert z[~np.isin(ph, ["approach", "charge", "depart"])].min() >= 0.0
