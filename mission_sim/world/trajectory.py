@@ -217,7 +217,7 @@ def _path(cfg) -> _Path:
 
 
 def _route_segments(cfg):
-    """Segments of the ``cfg.waypoints`` route, from the ground at (start_x_m, start_y_m). A waypoint
+    """The :class:`_Path` of the ``cfg.waypoints`` route, from the ground at (start_x_m, start_y_m). A waypoint
     reached from the ground first climbs vertically to its height; the route ends on the ground (a
     vertical landing where the last waypoint left the drone, if it did not land)."""
     m = cfg.mission
@@ -381,8 +381,8 @@ class PlannedTrajectory:
         err[on_ground] = 0.0
         pos = pos + err
         # the ground of each sample's segment (no terrain model): the home's z = 0, the target pad's z on the way
-        # to, at and from a pad (a pad below home, a pads file's AMSL altitude, was hovered over at z = 0 and never
-        # energised; then the lowest pad's z served every pad)
+        # to, at and from a pad (a pad below home, a pads file's AMSL altitude, is flown down to; one ground for
+        # all pads, the lowest's, let the coil 0.118 m into a pad at 0 m behind one at -3 m)
         pos[:, 2] = np.maximum(pos[:, 2], ground)
         # never let the coil touch a pad while charging
         chg = code == PHASES.index("charge")
