@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import stat
@@ -105,12 +106,22 @@ def check_number_fields(obj, prefix: str = "") -> None:
     else ``ValueError("<prefix>name=value is invalid; valid type: number")`` ("integer" for an ``int`` field),
     one line. First in a section's ``__post_init__``: ``float("3")`` passed its range checks and ``"1e-4" <= 1e-3``
     raised a TypeError. Whole numbers and ranges are the section's own checks."""
+    for name, kind, none_ok in _number_fields(type(obj)):
+        v = getattr(obj, name)
+        if type(v) is not float and real_number(v) is None and not (v is None and none_ok):
+            raise ValueError(f"{prefix}{name}={shown(v)} is invalid; valid type: {kind}")
+
+
+@functools.lru_cache(maxsize=None)
+def _number_fields(cls) -> tuple:
+    """``(name, "number" | "integer", None allowed)`` of the number fields of dataclass ``cls``."""
     from dataclasses import fields
-    for f in fields(obj):
+    out = []
+    for f in fields(cls):
         kind = _NUMBER_FIELDS.get(f.type if isinstance(f.type, str) else getattr(f.type, "__name__", ""))
-        v = getattr(obj, f.name)
-        if kind is not None and real_number(v) is None and not (v is None and "None" in str(f.type)):
-            raise ValueError(f"{prefix}{f.name}={shown(v)} is invalid; valid type: {kind}")
+        if kind is not None:
+            out.append((f.name, kind, "None" in str(f.type)))
+    return tuple(out)
 
 
 def check_regular_file(path, what: str, valid: str = "a regular file") -> Path:
