@@ -23,7 +23,7 @@ from wpt_receiver.coupling import NOMINAL_GAP_M
 
 from .world.battery import BatteryParams, CcCvParams
 from .world.power import DroneParams
-from .validation import Range, check_positive, check_range, read_toml_file
+from .validation import Range, check_number_fields, check_positive, check_range, read_toml_file
 from .world.wind import WindParams
 
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
@@ -51,6 +51,7 @@ class LinkConfig:
     device_tj_c: float = 0.0
 
     def __post_init__(self):
+        check_number_fields(self)
         check_positive(self, "r1_ohm", "r2_ohm", "vdc_v", "f_hz", "rated_i2_a")
         if not (self.device_tj_c == 0.0 or 25.0 <= self.device_tj_c <= 175.0):
             raise ValueError(f"device_tj_c={self.device_tj_c!r} is invalid; valid range: 0 (table values) or "
@@ -79,6 +80,7 @@ class CouplingConfig:
     tx_k_hysteresis: float = 0.003
 
     def __post_init__(self):
+        check_number_fields(self)
         if self.geometry != "default":
             raise ValueError(f"geometry={self.geometry!r} is invalid; valid values: 'default'")
         if not 0 < self.tx_min_k < 1:
@@ -102,6 +104,7 @@ class PadConfig:
     hover_time_s: float | None = None
 
     def __post_init__(self):
+        check_number_fields(self)
         for name in ("x_m", "y_m", "z_m"):
             v = getattr(self, name)
             if not math.isfinite(v) or abs(v) > 1e5:
@@ -131,6 +134,7 @@ class MissionPlan:
     from_log: str = "auto"         # a log as mission file: "uploaded" items, "flown" track, "auto"
 
     def __post_init__(self):
+        check_number_fields(self)
         check_positive(self, "pad_radius_m")
         if self.from_log not in ("auto", "uploaded", "flown"):
             raise ValueError(f"from_log={self.from_log!r} is invalid; valid values: auto, uploaded, flown")
@@ -170,6 +174,7 @@ class WaypointConfig:
     pad: int = -1
 
     def __post_init__(self):
+        check_number_fields(self)
         if self.action not in WAYPOINT_ACTIONS:
             raise ValueError(f"action={self.action!r} is invalid; valid values: {', '.join(WAYPOINT_ACTIONS)}")
         for name in ("x_m", "y_m"):
@@ -205,6 +210,7 @@ class SimConfig:
     tx_off_delay_s: float = 0.025
 
     def __post_init__(self):
+        check_number_fields(self)
         check_positive(self, "control_period_s", "traj_dt_s", "flight_dt_s", "min_fine_s", "max_fine_s",
                   "settle_duty_tol", "duty_event_tol", "lm_rel_tol", "coarse_policy_period_s", "settle_i2_tol_a", "bms_period_s")
         check_positive(self, "i2_noise_a", "cmd_deadband_a", "tx_off_delay_s", allow_zero=True)
@@ -271,6 +277,7 @@ def _check_section(section: str, cls, obj) -> None:
         return
     if not isinstance(obj, cls):
         raise ValueError(f"{section}={obj!r} is invalid; valid type: {cls.__name__}")
+    check_number_fields(obj, f"{section}.")   # (its __post_init__ did, unless a subclass's skipped it)
     for f in fields(cls):
         rng = plausible_range(section, f.name)
         v = getattr(obj, f.name)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import stat
@@ -10,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 __all__ = ["check_positive", "read_toml_file", "Range", "check_range", "check_regular_file", "shown", "real_array",
-           "real_number", "check_number"]
+           "real_number", "check_number", "check_number_fields"]
 
 
 @dataclass(frozen=True)
@@ -92,6 +93,35 @@ def check_number(key: str, value, rng: Range, note: str = ""):
     if v is None or not rng.contains(v):
         raise ValueError(f"{key}={shown(value)} is invalid; valid range: {rng.text()}{note}")
     return int(v) if rng.integer else v
+
+
+#: the annotations of a dataclass's number fields (``from __future__ import annotations``: strings) -> the type
+#: a message asks for
+_NUMBER_FIELDS = {"float": "number", "int": "integer", "float | None": "number", "int | None": "integer"}
+
+
+def check_number_fields(obj, prefix: str = "") -> None:
+    """Every field of the dataclass ``obj`` annotated ``float`` or ``int`` (``| None``: None too) holds one real
+    number (:func:`real_number`), as a config file's key must (a string such as ``"3"``, a bool, None refused);
+    else ``ValueError("<prefix>name=value is invalid; valid type: number")`` ("integer" for an ``int`` field),
+    one line. First in a section's ``__post_init__``: ``float("3")`` passed its range checks and ``"1e-4" <= 1e-3``
+    raised a TypeError. Whole numbers and ranges are the section's own checks."""
+    for name, kind, none_ok in _number_fields(type(obj)):
+        v = getattr(obj, name)
+        if type(v) is not float and real_number(v) is None and not (v is None and none_ok):
+            raise ValueError(f"{prefix}{name}={shown(v)} is invalid; valid type: {kind}")
+
+
+@functools.lru_cache(maxsize=None)
+def _number_fields(cls) -> tuple:
+    """``(name, "number" | "integer", None allowed)`` of the number fields of dataclass ``cls``."""
+    from dataclasses import fields
+    out = []
+    for f in fields(cls):
+        kind = _NUMBER_FIELDS.get(f.type if isinstance(f.type, str) else getattr(f.type, "__name__", ""))
+        if kind is not None:
+            out.append((f.name, kind, "None" in str(f.type)))
+    return tuple(out)
 
 
 def check_regular_file(path, what: str, valid: str = "a regular file") -> Path:

@@ -64,6 +64,9 @@ def test_the_python_blocks_of_docs_mission_run_as_pasted(tmp_path, monkeypatch, 
     # the sections' own integer checks: 'cannot convert float NaN to integer', OverflowError for inf
     (lambda c: R(c, drone=R(c.drone, n_rotors=float("nan"))), "n_rotors=nan is invalid; valid range: integer >= 1"),
     (lambda c: R(c, battery=R(c.battery, n_series=float("inf"))), "n_series=inf is invalid; valid range: integer 1..32"),
+    # a numeric string passed float() and crashed later (hover_power_w: can't multiply sequence by non-int)
+    (lambda c: R(c, drone=R(c.drone, n_rotors="4")), "n_rotors='4' is invalid; valid type: integer"),
+    (lambda c: R(c, battery=R(c.battery, n_series="6")), "n_series='6' is invalid; valid type: integer"),
 ])
 def test_a_config_changed_in_python_is_checked_as_a_file_is(change, message):
     """``dataclasses.replace`` skipped config_from_dict's ranges: 1300 A h ran, pads=() died in ``min()``. Every
@@ -71,6 +74,43 @@ def test_a_config_changed_in_python_is_checked_as_a_file_is(change, message):
     with pytest.raises(ValueError) as exc:
         change(load_config())
     assert message in str(exc.value)
+
+
+@pytest.mark.parametrize("change, message", [
+    # accepted (float("3") passed the ranges; the string ran into the mission) ...
+    (lambda c: R(c, wind=R(c.wind, speed_m_s="3")), "speed_m_s='3' is invalid; valid type: number"),
+    (lambda c: R(c, battery=R(c.battery, capacity_ah="1.3")), "capacity_ah='1.3' is invalid; valid type: number"),
+    (lambda c: R(c, link=R(c.link, f_hz="85000")), "f_hz='85000' is invalid; valid type: number"),
+    # ... or a raw TypeError ("'<=' not supported between 'float' and 'str'", "must be real number, not str")
+    (lambda c: R(c, sim=R(c.sim, control_period_s="1e-4")), "control_period_s='1e-4' is invalid; valid type: number"),
+    (lambda c: R(c, pads=(R(c.pads[0], z_m="0"),)), "z_m='0' is invalid; valid type: number"),
+    # bools as a file's: refused ("valid type: number"), not 1.0
+    (lambda c: R(c, wind=R(c.wind, speed_m_s=True)), "speed_m_s=True is invalid; valid type: number"),
+    (lambda c: R(c, mission=R(c.mission, hover_time_s=None)), "hover_time_s=None is invalid; valid type: number"),
+])
+def test_numbers_from_python_are_type_checked_as_a_files_are(change, message):
+    with pytest.raises(ValueError) as exc:
+        change(load_config())
+    assert str(exc.value) == message
+
+
+def test_number_types_of_files_and_set_are_unchanged():
+    """TOML and ``--set`` give numbers (accepted as before) and bools (refused as before, naming the key); None
+    stays allowed where the key may be absent (a pad's hover_time_s)."""
+    from mission_sim.cli.common import parse_set
+    from mission_sim.config import _check_section
+
+    cfg = load_config()
+    sets = parse_set(["wind.speed_m_s=3", "battery.capacity_ah=1.3", "link.f_hz=85e3", "sim.control_period_s=1e-4"])
+    assert config_from_dict(apply_overrides(load_config_dict(), sets)) == cfg
+    assert R(cfg, pads=(R(cfg.pads[0], hover_time_s=None),)).pads[0].hover_time_s is None
+    for sets in (["wind.speed_m_s=true"], ['wind.speed_m_s="3"']):
+        with pytest.raises(ValueError, match=r"^wind\.speed_m_s=(True|'3') is invalid; valid type: number$"):
+            config_from_dict(apply_overrides(load_config_dict(), parse_set(sets)))
+    bad = R(cfg.wind)   # a section whose value changed after its own checks: MissionConfig names the key
+    object.__setattr__(bad, "speed_m_s", "3")
+    with pytest.raises(ValueError, match=r"^wind\.speed_m_s='3' is invalid; valid type: number$"):
+        _check_section("wind", type(bad), bad)
 
 
 def test_every_key_out_of_range_through_replace_is_refused_naming_it():
@@ -108,6 +148,9 @@ def test_numpy_numbers_are_numbers():
                                              "seed": np.int64(4)})
     cfg = config_from_dict(d)
     assert (cfg.battery.n_series, cfg.drone.mass_kg, cfg.seed) == (6, 1.5, 4) and type(cfg.battery.n_series) is int
+    from mission_sim.world.battery import BatteryParams
+    from mission_sim.world.power import DroneParams
+    assert type(DroneParams(n_rotors=np.int64(6)).n_rotors) is int and type(BatteryParams(n_series=6.0).n_series) is int
     assert check_seed(np.uint8(9)) == 9
     with pytest.raises(ValueError, match=r"battery\.n_series=np\.float64\(6\.5\) is invalid; valid type: integer"):
         config_from_dict(apply_overrides(load_config_dict(), {"battery.n_series": np.float64(6.5)}))
@@ -210,3 +253,22 @@ def test_a_pad_below_the_home_ground_is_reached_and_charges():
         out[z] = res.summary
     assert out[-3.0]["charge_time_s"] == pytest.approx(out[0.0]["charge_time_s"], rel=0.01)
     assert out[-3.0]["energy_from_source_j"] == pytest.approx(out[0.0]["energy_from_source_j"], rel=0.05)
+
+
+def test_each_pad_is_the_ground_of_its_own_approach_charge_and_depart():
+    """With pads at -3 m and 0 m the lowest pad's z was the ground of every pad: at the pad at 0 m (hover gap 0.03 m,
+    8 m/s wind, 3 m/s gusts) the coil went 0.118 m below it while charging; each pad's own z limits its segments."""
+    from mission_sim.world.trajectory import plan_mission
+
+    cfg = load_config()
+    cfg = R(cfg, pads=(R(cfg.pads[0], z_m=-3.0), R(cfg.pads[1], z_m=0.0)), mission=R(cfg.mission, hover_gap_m=0.03),
+            wind=R(cfg.wind, speed_m_s=8.0, gust_sigma_m_s=3.0))
+    tr = plan_mission(cfg)
+    z, ph = tr.pos_m[:, 2], tr.phase
+    for pad in cfg.pads:
+        near = (np.hypot(tr.pos_m[:, 0] - pad.x_m, tr.pos_m[:, 1] - pad.y_m) < 1.0) & np.isin(
+            ph, ["approach", "charge", "depart"])
+        chg = near & (ph == "charge")
+        assert chg.sum() > 200 and z[near].min() >= pad.z_m
+        assert z[chg].min() == pad.z_m + 0.03   # the coil's floor over its own pad, reached in this wind
+    assert z[~np.isin(ph, ["approach", "charge", "depart"])].min() >= 0.0

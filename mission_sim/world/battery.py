@@ -45,7 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..validation import Range, check_positive
+from ..validation import Range, check_number, check_number_fields, check_positive
 
 __all__ = ["BatteryParams", "ocv_cell_v", "ocv_cell_energy_v", "CcCvParams"]
 
@@ -79,8 +79,9 @@ class BatteryParams:
     initial_soc: float = 0.9
 
     def __post_init__(self):
-        if not Range(1, 32, integer=True).contains(self.n_series):   # (never raises: NaN, inf, a string)
-            raise ValueError(f"n_series={self.n_series!r} is invalid; valid range: integer 1..32")
+        check_number_fields(self)
+        # a Python int from any whole number; a string such as "6" refused (it passed float() and failed later)
+        object.__setattr__(self, "n_series", check_number("n_series", self.n_series, Range(1, 32, integer=True)))
         check_positive(self, "capacity_ah", "r0_ohm_cell", "r1_ohm_cell", "c1_f_cell")
         if not 0.0 <= self.initial_soc <= 1.0:
             raise ValueError(f"initial_soc={self.initial_soc!r} is invalid; valid range: [0, 1]")
@@ -132,6 +133,7 @@ class CcCvParams:
     recharge_drop_cell_v: float = 0.1
 
     def __post_init__(self):
+        check_number_fields(self)
         check_positive(self, "cc_current_a", "cv_cell_v", "cutoff_current_a")
         lo, hi = float(ocv_cell_v(0.0)), float(ocv_cell_v(1.0))
         if not lo <= self.cv_cell_v <= hi:  # above the OCV at SoC 1 the CV phase never ends: SoC > 1

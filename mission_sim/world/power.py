@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..validation import Range, check_positive
+from ..validation import Range, check_number, check_number_fields, check_positive
 
 __all__ = ["DroneParams", "propulsion_power_w", "hover_power_w", "G_M_S2"]
 
@@ -50,14 +50,16 @@ class DroneParams:
     air_density_kg_m3: float = 1.225
 
     def __post_init__(self):
+        check_number_fields(self)
         check_positive(self, "mass_kg", "rotor_radius_m", "flat_plate_area_m2", "air_density_kg_m3")
         check_positive(self, "payload_kg", "avionics_w", allow_zero=True)
         for name in ("figure_of_merit", "drive_efficiency"):
             v = float(getattr(self, name))
             if not 0 < v <= 1:
                 raise ValueError(f"{name}={v!r} is invalid; valid range: (0, 1]")
-        if not Range(1, math.inf, integer=True).contains(self.n_rotors):   # (never raises: NaN, inf, a string)
-            raise ValueError(f"n_rotors={self.n_rotors!r} is invalid; valid range: integer >= 1")
+        # a Python int from any whole number (4.0, np.int64(4)); a string such as "4" refused (float("4") is not
+        # asked: "4" would pass and fail later, in hover_power_w's n_rotors * pi R^2)
+        object.__setattr__(self, "n_rotors", check_number("n_rotors", self.n_rotors, Range(1, math.inf, integer=True)))
 
     @property
     def total_mass_kg(self) -> float:

@@ -26,7 +26,6 @@ from .wind import drag_force_n, hover_error_m, tilt_from_force, wind_series
 __all__ = ["Trajectory", "PlannedTrajectory", "plan_mission", "PHASES", "PLAN_BLOCK"]
 
 PHASES = ("ground", "takeoff", "transit", "approach", "charge", "depart", "land", "hover", "flight")
-_PAD_CODES = np.array([PHASES.index(p) for p in ("approach", "charge", "depart")], dtype=np.int8)
 
 
 @dataclass
@@ -164,10 +163,13 @@ def _move_limit(m, d, speed_m_s: float) -> float:
 
 
 class _Path:
-    """Builds the segment list: ``move`` (straight, rest to rest, trapezoidal) and ``hold``."""
+    """Builds the segment list: ``move`` (straight, rest to rest, trapezoidal) and ``hold``; ``grounds``: each
+    segment's ground height [m] (``ground`` when it was added: the home's 0, a pad's z on the way to, at and
+    from that pad), the lowest the drone's z may go there (its position-hold error included)."""
 
     def __init__(self, m, start):
         self.m, self.pos, self.segs = m, np.asarray(start, dtype=float), []
+        self.ground, self.grounds = 0.0, []
 
     def move(self, p1, phase, speed_m_s=None):
         p1 = np.asarray(p1, dtype=float)
@@ -178,16 +180,23 @@ class _Path:
         vmax = _move_limit(self.m, d, self.m.cruise_speed_m_s if speed_m_s is None else speed_m_s)
         dur, ev = _profile(dist, vmax, self.m.max_accel_m_s2)
         self.segs.append((phase, self.pos.copy(), d / dist, dur, ev))
+        self.grounds.append(self.ground)
         self.pos = p1
 
     def hold(self, dur, phase):
         if dur > 0:
             self.segs.append((phase, self.pos.copy(), None, float(dur), None))
+            self.grounds.append(self.ground)
 
 
 def _segments(cfg):
     """Segments (phase, p0, unit direction or None, duration, evaluator) of the mission: the route of
     ``cfg.waypoints`` if any (:func:`_route_segments`), else the built-in pattern start -> pads -> land."""
+    return _path(cfg).segs
+
+
+def _path(cfg) -> _Path:
+    """The mission's :class:`_Path`: its segments (:func:`_segments`) and their grounds."""
     if cfg.waypoints:
         return _route_segments(cfg)
     m = cfg.mission
@@ -196,17 +205,19 @@ def _segments(cfg):
     path.move([m.start_x_m, m.start_y_m, alt], "takeoff")
     for pad in cfg.pads:
         path.move([pad.x_m, pad.y_m, alt], "transit")
+        path.ground = pad.z_m
         path.move([pad.x_m, pad.y_m, pad.z_m + m.hover_gap_m], "approach")
         path.hold(m.hover_time_s if pad.hover_time_s is None else pad.hover_time_s, "charge")
         path.move([pad.x_m, pad.y_m, alt], "depart")
+        path.ground = 0.0
     path.move([m.land_x_m, m.land_y_m, alt], "transit")
     path.move([m.land_x_m, m.land_y_m, 0.0], "land")
     path.hold(1.0, "ground")
-    return path.segs
+    return path
 
 
 def _route_segments(cfg):
-    """Segments of the ``cfg.waypoints`` route, from the ground at (start_x_m, start_y_m). A waypoint
+    """The :class:`_Path` of the ``cfg.waypoints`` route, from the ground at (start_x_m, start_y_m). A waypoint
     reached from the ground first climbs vertically to its height; the route ends on the ground (a
     vertical landing where the last waypoint left the drone, if it did not land)."""
     m = cfg.mission
@@ -232,13 +243,15 @@ def _route_segments(cfg):
             path.hold(wp.hold_s, "hover")
         elif wp.action == "charge":
             pad = cfg.pads[wp.pad]
+            path.ground = pad.z_m
             path.move([x, y, pad.z_m + m.hover_gap_m], "approach")
             path.hold(wp.hold_s if pad.hover_time_s is None else pad.hover_time_s, "charge")
             path.move([x, y, z], "depart")
+            path.ground = 0.0
     if path.pos[2] > 0.0:
         path.move([path.pos[0], path.pos[1], 0.0], "land")
     path.hold(1.0, "ground")
-    return path.segs
+    return path
 
 
 def plan_mission(cfg, rng: np.random.Generator | None = None) -> Trajectory:
@@ -284,7 +297,8 @@ class PlannedTrajectory:
     def __init__(self, cfg, rng: np.random.Generator | None = None):
         rng = np.random.default_rng(cfg.seed) if rng is None else rng
         self.cfg, self.dt = cfg, cfg.sim.traj_dt_s
-        self.segs = _segments(cfg)
+        path = _path(cfg)
+        self.segs, self._grounds = path.segs, np.array(path.grounds)
         total = sum(s[3] for s in self.segs)
         self.n = int(math.floor(total / self.dt)) + 1
         starts, t0 = [], 0.0
@@ -355,7 +369,7 @@ class PlannedTrajectory:
         """Block ``j``: (t, pos, tilt, phase, tilt axis, wind) of samples ``[j B, (j + 1) B)``."""
         k0, k1 = j * PLAN_BLOCK, min((j + 1) * PLAN_BLOCK, self.n)
         t = np.arange(k0, k1) * self.dt
-        pos, vel, acc, code = self._nominal(t)
+        pos, vel, acc, code, ground = self._nominal(t)
         wind = self._wind(k0, k1)
         phase = _PHASE_NAMES[code]
         wp, cfg = self.cfg.wind, self.cfg
@@ -366,28 +380,26 @@ class PlannedTrajectory:
         on_ground = code == PHASES.index("ground")
         err[on_ground] = 0.0
         pos = pos + err
-        lowest = min(p.z_m for p in cfg.pads)
-        if lowest < 0.0:   # a pad below the home's ground (a pads file's AMSL altitude; no terrain model): the
-            # ground is the home's except on the way to, at and from the pads (it was z = 0 there too: the drone
-            # hovered at 0, over its pad, which never energised)
-            ground = np.where(np.isin(code, _PAD_CODES), lowest, 0.0)
-            pos[:, 2] = np.maximum(pos[:, 2], ground)
-        else:
-            pos[:, 2] = np.maximum(pos[:, 2], 0.0)
+        # the ground of each sample's segment (no terrain model): the home's z = 0, the target pad's z on the way
+        # to, at and from a pad (a pad below home, a pads file's AMSL altitude, is flown down to; one ground for
+        # all pads, the lowest's, let the coil 0.118 m into a pad at 0 m behind one at -3 m)
+        pos[:, 2] = np.maximum(pos[:, 2], ground)
         # never let the coil touch a pad while charging
         chg = code == PHASES.index("charge")
         floor = min(0.03, cfg.mission.hover_gap_m)
-        pos[chg, 2] = np.maximum(pos[chg, 2], floor + min(p.z_m for p in cfg.pads))
+        pos[chg, 2] = np.maximum(pos[chg, 2], floor + ground[chg])
         tilt, axis = tilt_from_force(mass, acc, force)
         tilt[on_ground] = 0.0
         return t, pos, tilt, phase, axis, wind
 
     def _nominal(self, t):
-        """Nominal position, velocity, acceleration (n, 3) and phase codes at the times ``t`` (sorted)."""
+        """Nominal position, velocity, acceleration (n, 3), phase codes and ground heights [m] (n,) at the times
+        ``t`` (sorted)."""
         pos = np.empty((len(t), 3))
         vel = np.zeros((len(t), 3))
         acc = np.zeros((len(t), 3))
         code = np.zeros(len(t), dtype=np.int8)
+        ground = np.zeros(len(t))
         n_seg = len(self.segs)
         j0 = max(int(np.searchsorted(self._starts, t[0], "right")) - 1, 0)
         j1 = int(np.searchsorted(self._starts, t[-1], "right"))
@@ -405,7 +417,8 @@ class PlannedTrajectory:
                 vel[mask] = v[:, None] * u
                 acc[mask] = a[:, None] * u
             code[mask] = PHASES.index(ph)
-        return pos, vel, acc, code
+            ground[mask] = self._grounds[j]
+        return pos, vel, acc, code, ground
 
     def _wind(self, k0: int, k1: int) -> np.ndarray:
         """Wind (k1 - k0, 3) [m/s] of samples ``[k0, k1)``: :func:`.wind.wind_series` continued."""

@@ -26,6 +26,7 @@ import numpy as np
 
 from wpt_receiver.lti import lfilter, zoh_tf
 
+from ..validation import check_number_fields
 from .power import G_M_S2
 
 __all__ = ["WindParams", "gust_series", "wind_series", "drag_force_n", "hold_filter", "hover_error_m", "tilt_from_force"]
@@ -50,6 +51,7 @@ class WindParams:
     air_density_kg_m3: float = 1.225
 
     def __post_init__(self):
+        check_number_fields(self)
         for name in ("speed_m_s", "gust_sigma_m_s"):
             v = float(getattr(self, name))
             if not math.isfinite(v) or v < 0 or v > 30:
