@@ -399,3 +399,35 @@ def test_paper_modal_at_a_coarse_control_period_is_physical_on_table_i():
             warnings.simplefilter("error", RuntimeWarning)
             (run,) = run_paper(TABLE_I, model="modal", control_period_s=cp, trajectories=("ramp",))
         assert abs(run.metrics.max_current_a / ref["ramp"] - 1) < 0.02, (cp, run.metrics.max_current_a)
+
+
+def test_edge_ring_takes_an_array_current_and_refuses_a_bad_resistance():
+    """edge_ring took arrays of currents before the exact first peak (sizing-style callers vectorise); a negative or
+    NaN diode-path resistance gave 2.96 V or NaN and is now one line naming it."""
+    import numpy as np
+
+    from wpt_receiver.switching.stress import edge_ring
+    both = edge_ring(np.array([1.0, 2.0]), 10e-9, 1e-9, 0.5)["overshoot_v"]
+    one = edge_ring(1.0, 10e-9, 1e-9, 0.5)["overshoot_v"]
+    np.testing.assert_allclose(both, [one, 2.0 * one], rtol=1e-15)
+    for r in (-1.0, float("nan")):
+        with pytest.raises(ValueError, match=r"r_ohm=.* is invalid; valid range: \[0, inf\) ohm"):
+            edge_ring(1.0, 10e-9, 1e-9, r)
+
+
+def test_paper_cli_prints_the_models_warnings_in_cli_terms_and_keeps_others(capsys, monkeypatch):
+    """`paper`'s per-trajectory warnings named the Python argument (model='switching') where the range line names
+    the option; a warning that is not the model's (not a RuntimeWarning) was recorded and dropped."""
+    import warnings
+
+    from mission_sim.cli.paper import _print_warnings
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        warnings.warn("ramp: the exact-mode run is not physical here (x); use model='switching'", RuntimeWarning)
+        warnings.warn("something else", UserWarning)
+    shown = []
+    monkeypatch.setattr(warnings, "showwarning", lambda message, category, *a, **k: shown.append((category, str(message))))
+    _print_warnings(caught)
+    err = capsys.readouterr().err
+    assert "dronewpt paper: warning: ramp: the exact-mode run is not physical here (x); use --model switching" in err
+    assert "model='switching'" not in err and shown == [(UserWarning, "something else")]

@@ -102,13 +102,18 @@ def _row(r, t_switch: float, model: str) -> dict:
 
 
 def _print_warnings(caught, skip=None) -> None:
-    """The RuntimeWarnings of a run as ``dronewpt paper: warning: ...`` lines (``skip``: one printed already)."""
+    """The RuntimeWarnings of a run as ``dronewpt paper: warning: ...`` lines (``skip``: one printed already);
+    any other warning caught with them is shown as Python shows it."""
     import sys
+    import warnings
     for w in caught:   # after the range warning, the per-trajectory "not physical" ones would only repeat it
         if skip is not None and "exact-mode run is not physical" in str(w.message):
             continue
-        if issubclass(w.category, RuntimeWarning) and str(w.message) != skip:
-            text = str(w.message).replace("t_end_s=", "--t-end ").replace("(default 31e-3 s)", "(--t-end, default 0.031 s)")
+        if not issubclass(w.category, RuntimeWarning):   # not the model's: Python's own display, as uncaught
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+        elif str(w.message) != skip:
+            text = (str(w.message).replace("t_end_s=", "--t-end ").replace("(default 31e-3 s)", "(--t-end, default 0.031 s)")
+                    .replace("model='switching'", "--model switching"))
             print(f"dronewpt paper: warning: {text}", file=sys.stderr)
 
 

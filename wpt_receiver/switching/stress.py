@@ -48,7 +48,9 @@ def edge_ring(i_a: float, l_stray_h: float, c_f: float, r_ohm: float = 0.0) -> d
     it does not damp it (an earlier ``I z0 exp(-zeta pi / (2 sqrt(1 - zeta^2)))`` was 2 % low at
     zeta = 0.01 and 47 % low at 0.3 against this circuit integrated). Overdamped (zeta >= 1) ``e``
     rises monotonically to ``R I``."""
-    i, l, c, r = abs(float(i_a)), float(l_stray_h), float(c_f), float(r_ohm)
+    i, l, c, r = np.abs(np.asarray(i_a, dtype=float)), float(l_stray_h), float(c_f), float(r_ohm)   # i: scalar or array
+    if not (math.isfinite(r) and r >= 0.0):
+        raise ValueError(f"r_ohm={r_ohm!r} is invalid; valid range: [0, inf) ohm (the diode path's resistance)")
     if not (l > 0 and c > 0):
         return {"overshoot_v": 0.0, "ring_hz": math.inf, "z0_ohm": 0.0, "zeta": 0.0}
     z0 = math.sqrt(l / c)
