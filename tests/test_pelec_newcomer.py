@@ -275,8 +275,10 @@ def test_detuned_capacitors_must_be_positive():
 def test_steady_junctions_name_the_bad_input():
     """d_short = 2 gave junction temperatures; a NaN duty or ambient was reported as ``vf0_v=nan``."""
     from wpt_receiver.thermal import steady_junctions
-    with pytest.raises(ValueError, match=r"^d_short=2.0 is out of range; valid range: \[0, 1\]$"):
+    with pytest.raises(ValueError, match=r"^d_short=2.0 is out of range; valid range: \[0, 1\] \(one number\)$"):
         steady_junctions("schottky", TABLE_I, 2.0)
+    with pytest.raises(ValueError, match=r"^d_short=\[0.3, 0.4\] is out of range"):   # float()'s TypeError before
+        steady_junctions("schottky", TABLE_I, [0.3, 0.4])
     with pytest.raises(ValueError, match=r"^d_short=nan is out of range"):
         steady_junctions("schottky", TABLE_I, math.nan)
     with pytest.raises(ValueError, match=r"^t_amb_c=nan is invalid; valid range: \[-55, 200\] C$"):
@@ -431,3 +433,10 @@ def test_paper_cli_prints_the_models_warnings_in_cli_terms_and_keeps_others(caps
     err = capsys.readouterr().err
     assert "dronewpt paper: warning: ramp: the exact-mode run is not physical here (x); use --model switching" in err
     assert "model='switching'" not in err and shown == [(UserWarning, "something else")]
+
+
+def test_envelope_names_a_scalar_v2_by_its_shape():
+    """A scalar V2 was reported as ``v2_v=() is invalid``."""
+    from wpt_receiver.envelope import simulate
+    with pytest.raises(ValueError, match=r"^v2_v of shape \(\) is invalid; valid: a non-empty 1-D sequence"):
+        simulate(TABLE_I, 3.0, 1e-4)

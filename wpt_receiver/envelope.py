@@ -325,8 +325,8 @@ def simulate(params: LinkParams, v2_v, dt_s: float, x0=None, lm_h=None, v1_v=Non
     v2 = np.asarray(v2_v, dtype=float)
     if v2.ndim != 1 or len(v2) == 0 or not np.all(np.isfinite(v2)):
         bad = v2.ravel()[~np.isfinite(v2.ravel())]
-        raise ValueError(f"v2_v={float(bad[0]) if bad.size else v2.shape!r} is invalid; valid: a non-empty 1-D "
-                         "sequence of finite V2 amplitudes [V]")
+        what = f"v2_v={float(bad[0])!r}" if bad.size else f"v2_v of shape {v2.shape}"
+        raise ValueError(f"{what} is invalid; valid: a non-empty 1-D sequence of finite V2 amplitudes [V]")
     if not (np.isfinite(dt_s) and dt_s > 0):
         raise ValueError(f"dt_s={dt_s!r} is invalid; valid range: (0, inf) s")
     if lm_h is not None and not (np.isfinite(lm_h) and 0 < lm_h < np.sqrt(params.l1_h * params.l2_h)):

@@ -76,8 +76,12 @@ def steady_junctions(name: str, params, d_short: float, t_amb_c: float = 40.0, d
     from .edge_losses import averaged_edge_losses
     from .envelope import steady_state
     from .sbar import conduction_losses
-    if not (math.isfinite(d_short) and 0.0 <= d_short <= 1.0):   # d = 2 gave temperatures, NaN "vf0_v=nan"
-        raise ValueError(f"d_short={d_short!r} is out of range; valid range: [0, 1]")
+    try:
+        d = float(d_short)
+    except (TypeError, ValueError):   # a list, a string: one line, not float()'s message
+        d = math.nan
+    if not (math.isfinite(d) and 0.0 <= d <= 1.0):   # d = 2 gave temperatures, NaN "vf0_v=nan"
+        raise ValueError(f"d_short={d_short!r} is out of range; valid range: [0, 1] (one number)")
     pr = parts()["preset"].get(name)
     if pr is None:
         raise ValueError(f"device preset {name!r} has no parts (valid: {', '.join(parts()['preset'])})")
