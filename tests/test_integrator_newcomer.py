@@ -493,3 +493,21 @@ def test_write_frame_resolves_pymavlink_once(monkeypatch):
     for _ in range(100):
         assert tel.write_frame(conn, b"\xfd\x00")
     assert len(calls) <= 1 and bytes(conn.port.got) == 100 * b"\xfd\x00"
+
+
+def test_reading_a_log_or_its_mission_leaves_no_file_open():
+    """open_log's readers were never closed: each read of a .tlog / .bin left its file (and map) to the collector,
+    a ResourceWarning in the suite's summary. Reading every shipped log and the mission in a .tlog now closes them."""
+    import gc
+    import warnings
+
+    from mission_sim.mavlink.logs import read_log
+    from mission_sim.plans.items import uploaded_mission
+    logs = Path(__file__).parent / "data" / "flightlogs"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ResourceWarning)
+        for name in ("dronekit-python_flight.tlog", "dronekit-la-testdata_log171.bin", "uavlogviewer_vtol_sitl.tlog"):
+            read_log(logs / name)
+        uploaded_mission(logs / "uavlogviewer_vtol_sitl.tlog")
+        gc.collect()
+    assert not [w for w in caught if issubclass(w.category, ResourceWarning)], [str(w.message) for w in caught]

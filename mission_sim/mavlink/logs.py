@@ -153,11 +153,26 @@ def open_log(path: Path, mu):
                 os.environ["PYMAVLINK_FAST_INDEX"] = old
     if path.suffix.lower() == ".log" and DFReader.DFReader_is_text_log(str(path)):
         return DFReader.DFReader_text(str(path)), "dataflash"
+    reader = mu.mavmmaplog.__new__(mu.mavmmaplog)
     try:
-        return mu.mavmmaplog(str(path)), "tlog"
+        reader.__init__(str(path))
+        return reader, "tlog"
     except Exception:  # noqa: BLE001 -- pymavlink's indexer, e.g. AttributeError "'NoneType' object has no
-        # attribute '_instance_field'" on a .tlog that joins two vehicles' logs; the streaming reader reads it
+        # attribute '_instance_field'" on a .tlog that joins two vehicles' logs; the streaming reader reads it.
+        # The half-built reader's map and file are closed here (left to the collector: a ResourceWarning)
+        close_log(reader)
         return mu.mavlogfile(str(path)), "tlog"
+
+
+def close_log(reader) -> None:
+    """Close a reader of :func:`open_log` (also a half-built one): its memory map and file (left to the
+    collector they were a ResourceWarning each)."""
+    for part in (getattr(reader, "data_map", None), getattr(reader, "f", None), getattr(reader, "filehandle", None)):
+        if part is not None:
+            try:
+                part.close()
+            except (OSError, ValueError, BufferError):
+                pass
 
 
 def _collect(reader, kind: str, raw: dict, stats: dict) -> None:
@@ -223,11 +238,15 @@ def read_log(path) -> FlightLog:
     if path.stat().st_size > 0:
         # DFReader reports skipped corrupt bytes with print(); count those reports as bad frames.
         with contextlib.redirect_stderr(captured), contextlib.redirect_stdout(captured):
+            reader = None
             try:
                 reader, kind = open_log(path, mu)
                 _collect(reader, kind, raw, stats)
             except Exception as exc:  # noqa: BLE001 -- untrusted bytes: keep what was decoded, report
                 errors.append(f"{type(exc).__name__}: {exc}")
+            finally:
+                if reader is not None:
+                    close_log(reader)
     text = captured.getvalue()
     stats["bad"] += text.count("Skipped ") + text.count("Failed to parse")
     return _assemble(path, kind, raw, stats, errors)

@@ -220,7 +220,7 @@ def uploaded_mission(path) -> RawMission:
     HOME_POSITION. No items: a RawMission with none. Read with the flight-log readers of
     :func:`mission_sim.mavlink.logs.open_log` (never ``mavlink_connection``, which executes a path
     containing /bin/), pymavlink's reports on corrupt bytes kept off the terminal."""
-    from ..mavlink.logs import mavutil, open_log
+    from ..mavlink.logs import close_log, mavutil, open_log
     path = Path(path)
     found: dict[int, tuple] = {}
     home, count = None, None
@@ -231,27 +231,30 @@ def uploaded_mission(path) -> RawMission:
         except Exception as exc:  # noqa: BLE001 -- untrusted bytes
             raise ValueError(f"{path.name}: the log could not be parsed: {type(exc).__name__}: {exc}") from None
         ardupilot = kind == "dataflash"
-        while True:
-            try:
-                msg = conn.recv_match(type=types, blocking=False)
-            except Exception as exc:  # noqa: BLE001 -- untrusted bytes: stop where the parser failed
-                raise ValueError(f"{path.name}: the log could not be parsed: {type(exc).__name__}: {exc}") from None
-            if msg is None:
-                break
-            t = msg.get_type()
-            if t == "HEARTBEAT":
-                ardupilot |= msg.autopilot == 3   # MAV_AUTOPILOT_ARDUPILOTMEGA: item 0 is home
-            elif t == "MISSION_COUNT" and getattr(msg, "mission_type", 0) == 0:
-                count = int(msg.count)   # the last upload / download: its items are seq 0 .. count - 1
-            elif t == "HOME_POSITION":
-                home = (msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
-            elif t == "CMD":
-                found[int(msg.CNum)] = (int(msg.CId), int(getattr(msg, "Frame", 0 if msg.CNum == 0 else 3)),
-                                        (msg.Prm1, msg.Prm2, msg.Prm3, msg.Prm4), msg.Lat, msg.Lng, msg.Alt)
-            elif getattr(msg, "mission_type", 0) == 0:
-                scale = 1e-7 if t == "MISSION_ITEM_INT" else 1.0
-                found[int(msg.seq)] = (int(msg.command), int(msg.frame), (msg.param1, msg.param2, msg.param3,
-                                       msg.param4), msg.x * scale, msg.y * scale, float(msg.z))
+        try:
+            while True:
+                try:
+                    msg = conn.recv_match(type=types, blocking=False)
+                except Exception as exc:  # noqa: BLE001 -- untrusted bytes: stop where the parser failed
+                    raise ValueError(f"{path.name}: the log could not be parsed: {type(exc).__name__}: {exc}") from None
+                if msg is None:
+                    break
+                t = msg.get_type()
+                if t == "HEARTBEAT":
+                    ardupilot |= msg.autopilot == 3   # MAV_AUTOPILOT_ARDUPILOTMEGA: item 0 is home
+                elif t == "MISSION_COUNT" and getattr(msg, "mission_type", 0) == 0:
+                    count = int(msg.count)   # the last upload / download: its items are seq 0 .. count - 1
+                elif t == "HOME_POSITION":
+                    home = (msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
+                elif t == "CMD":
+                    found[int(msg.CNum)] = (int(msg.CId), int(getattr(msg, "Frame", 0 if msg.CNum == 0 else 3)),
+                                            (msg.Prm1, msg.Prm2, msg.Prm3, msg.Prm4), msg.Lat, msg.Lng, msg.Alt)
+                elif getattr(msg, "mission_type", 0) == 0:
+                    scale = 1e-7 if t == "MISSION_ITEM_INT" else 1.0
+                    found[int(msg.seq)] = (int(msg.command), int(msg.frame), (msg.param1, msg.param2, msg.param3,
+                                           msg.param4), msg.x * scale, msg.y * scale, float(msg.z))
+        finally:
+            close_log(conn)
     seqs = sorted(s for s in found if count is None or s < count)
     if ardupilot and 0 in found:
         _, _, _, lat, lon, alt = found.pop(0)
