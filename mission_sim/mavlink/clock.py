@@ -84,15 +84,7 @@ class BootSegment:
         """Receive times ``recv`` of records ``rec`` of this segment with its receive-clock :attr:`steps`
         taken out. A record between the two boot-stamped records around a step goes with the one whose
         receive time is nearer."""
-        recv = np.asarray(recv, dtype=float)
-        if not self.steps:
-            return recv
-        rec, out, total = np.asarray(rec), recv.copy(), 0.0
-        for rec_b, recv_b, rec_a, recv_a, step in self.steps:
-            total += step
-            after = (rec >= rec_a) | ((rec > rec_b) & (np.abs(recv - recv_a) < np.abs(recv - recv_b)))
-            out[after] = recv[after] - total
-        return out
+        return _unstep(self.steps, rec, recv)
 
     @property
     def rate(self) -> float:
@@ -106,6 +98,19 @@ class BootSegment:
         return self.recv_to_t(self.offset_s + self.slope * np.asarray(boot, dtype=float))
 
 
+def _unstep(steps, rec, recv) -> np.ndarray:
+    """:meth:`BootSegment.unstep` of the receive-clock ``steps`` (also before the segment is built)."""
+    recv = np.asarray(recv, dtype=float)
+    if not steps:
+        return recv
+    rec, out, total = np.asarray(rec), recv.copy(), 0.0
+    for rec_b, recv_b, rec_a, recv_a, step in steps:
+        total += step
+        after = (rec >= rec_a) | ((rec > rec_b) & (np.abs(recv - recv_a) < np.abs(recv - recv_b)))
+        out[after] = recv[after] - total
+    return out
+
+
 @dataclass(frozen=True)
 class ClockMap:
     """The log's time base: its boot segments (one for a log without boot times) and where it came from."""
@@ -113,7 +118,6 @@ class ClockMap:
     segments: tuple
     source: str
     anchors: tuple = ()    # per segment: (receive times, boot times) of its boot-stamped records, sorted
-
 
     def segment_of(self, rec) -> np.ndarray:
         """Segment index of each record number ``rec`` (records before the first segment: 0)."""
@@ -230,7 +234,7 @@ def fit_clock(rec, recv, boot) -> ClockMap:
     segments, anchors, t_start = [], [], 0.0
     for k, (i, j) in enumerate(zip(bounds[:-1], bounds[1:])):
         steps = _recv_steps(rec[i:j], recv[i:j], boot[i:j])
-        seg_recv = BootSegment(k, 0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0, steps=steps).unstep(rec[i:j], recv[i:j])
+        seg_recv = _unstep(steps, rec[i:j], recv[i:j])
         anchors.append(_anchors(seg_recv, boot[i:j]))
         a, b, b_fit = _theil_sen(boot[i:j], seg_recv)
         r_k = float(recv[i])

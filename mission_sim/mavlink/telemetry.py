@@ -127,19 +127,26 @@ def open_link(connect: str, sysid: int = 1, compid: int = 1, name: str = "--conn
         raise ValueError(f"{name} {connect!r} cannot be opened: {what}; {hint}") from None
 
 
+def _listening(conn) -> str | None:
+    """``"udp"`` or ``"tcp"`` for a link that listens (:data:`SERVER_KINDS`: pymavlink's udp server, tcpin), else
+    None (udpout, tcp: it sends out)."""
+    if getattr(conn, "udp_server", False):
+        return "udp"
+    return "tcp" if hasattr(conn, "listen") else None
+
+
 def _listens(conn) -> bool:
-    return bool(getattr(conn, "udp_server", False)) or hasattr(conn, "listen")
+    return _listening(conn) is not None
 
 
 def link_has_peer(conn) -> bool:
     """Whether ``conn`` has someone to send to: always for a link that sends out (udpout, tcp); for a
     listening link (:data:`SERVER_KINDS`) once a ground station has sent to it (pymavlink drops
     what is written before that)."""
-    if getattr(conn, "udp_server", False):
+    kind = _listening(conn)
+    if kind == "udp":
         return bool(conn.clients)
-    if hasattr(conn, "listen"):
-        return conn.port is not None
-    return True
+    return conn.port is not None if kind == "tcp" else True
 
 
 def poll_link(conn, max_reads: int = 16) -> None:
