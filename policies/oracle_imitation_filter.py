@@ -153,7 +153,10 @@ class OracleImitationFilteredPolicy(OracleImitationPolicy):
     def _locked(self, z):
         """The estimates ``z`` (n, nz) whose rows predict with the phase lock (the MPC's gate, |w| <= its tail's), or
         None without ``lock``."""
-        return np.abs(z[:, -1]) <= _TAIL_W_MAX if self.lock else None
+        if not self.lock:
+            return None
+        from .mpc import _TAIL_W_MAX
+        return np.abs(z[:, -1]) <= _TAIL_W_MAX
 
     def reset(self, n: int = 1) -> None:
         super().reset(n)
@@ -197,7 +200,7 @@ class OracleImitationFilteredPolicy(OracleImitationPolicy):
         """Predicted peak samples' maximum (m,) [A] and the limit (m,) [A] of the sequences ``seq`` (m, HORIZON)
         played from the position ``start`` (m,) on at ``rate`` (m,) from the estimates ``z`` (m, nz) of the
         receivers ``idx`` (m,)."""
-        from .mpc import _TAIL_W_MAX, N_PRED
+        from .mpc import N_PRED
         mpc = self._mpc
         pos = start[:, None] + rate[:, None] * np.arange(N_PRED)[None, :]
         plan = mpc._v2_of(_at(seq, pos), vl[:, None])
@@ -241,7 +244,7 @@ class OracleImitationFilteredPolicy(OracleImitationPolicy):
         """At the stop: per receiver the rate of :data:`RATES` with the least ``E + lam * overshoot [points]``, both
         predicted over the MPC's horizon (``E`` the energy after the stop, ``sum V2 I2_sm(w) / 2 dt``, the MPC's
         after-stop energy term; the overshoot from the predicted peak samples)."""
-        from .mpc import _TAIL_W_MAX, N_PRED
+        from .mpc import N_PRED
         mpc = self._mpc
         rates = np.asarray(self.rates)
         k, m = len(rates), len(idx)
@@ -264,7 +267,7 @@ class OracleImitationFilteredPolicy(OracleImitationPolicy):
         where no correction was ever needed."""
         from wpt_receiver import duty_from_v2_clipped
 
-        from .mpc import _TAIL_W_MAX, N_PRED
+        from .mpc import N_PRED
         j, seq = self._j[after], self._seq[after]
         out = _at(seq, j[:, None].astype(float))[:, 0]
         corr = self._corr[after]

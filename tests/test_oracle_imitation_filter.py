@@ -143,3 +143,13 @@ def test_lock_is_refused_on_eq4_link():
         make("oracle_imitation_filtered", venv.policy_context, lock=True)
     assert str(exc.value) == "lock=True is invalid on link_model='envelope'; valid: lock=False, or the modal link"
     make("oracle_imitation_filtered", venv.policy_context)   # unlocked: eq. 4's MPC model
+
+
+@pytest.mark.parametrize("correction", ["rate", "qp"])
+def test_the_phase_locked_filter_runs_on_the_modal_link(correction):
+    """``lock=True`` predicts the locked rows with the MPC's gate (|w| <= its tail's); one battery_low window in closed
+    loop reaches short mode with either correction (the gate was once looked up from a name not imported)."""
+    from policies.compare import run_policies
+    name = _register(f"t_lock_{correction}", limit=0.0, correction=correction, lock=True, slow=1.0)
+    r = run_policies([name], "battery_low", 1, 300)
+    assert np.all(r[name].metrics["reached_short_mode"])
