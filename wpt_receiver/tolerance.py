@@ -87,8 +87,9 @@ def _folded(p: LinkParams, devices: DeviceSet) -> LinkParams:
                                               r2_ohm=p.r2_ohm + devices.rect_rd_ohm)
 
 
-def rm_steady(p: LinkParams, c1_f: float, c2_f: float, devices: DeviceSet = IDEAL) -> dict:
-    """RM steady state in closed form (module docstring): ``x`` = [J1, J2] (complex amplitudes),
+def rm_steady(p: LinkParams, c1_f: float | None, c2_f: float | None, devices: DeviceSet = IDEAL) -> dict:
+    """RM steady state in closed form (module docstring; ``c1_f`` / ``c2_f`` None: tuned to ``p.f_hz``, as
+    :func:`wpt_receiver.envelope.complex_envelope_matrices`): ``x`` = [J1, J2] (complex amplitudes),
     ``i2_a`` |J2|, ``p_batt_w``, ``p_in_w``, ``efficiency`` (0 when nothing conducts) and
     ``clamp_margin`` = ``|E| / (V2 |G22|)``, the induced emf over the clamp it must overcome: the
     rectifier conducts iff it exceeds 1 (when ``Im G22 = 0``), and near 1 it conducts only briefly
