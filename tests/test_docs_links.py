@@ -23,6 +23,7 @@ are not used in these docs and are not read.
 
 from __future__ import annotations
 
+import itertools
 import posixpath
 import re
 import subprocess
@@ -119,17 +120,18 @@ def _plain(s: str) -> str:
 
 def _matches(quote: str, heading: str) -> bool:
     """The quoted text is in the heading (case-insensitive; an ``...`` in the quote stands for any text)."""
-    parts = [re.escape(p) for p in _plain(quote).split("...")]
+    parts = [re.escape(p) for p in re.split(r"\s*\.\.\.\s*", _plain(quote))]
     return re.search(".*?".join(parts), _plain(heading)) is not None
 
 
-def named_headings(quote: str, heads: list[str]) -> list[str]:
-    """The headings a quote names: those equal to it, else those opening with it, else those containing it."""
+def named_headings(quote: str, *groups: list[str]) -> list[str]:
+    """The names a quote picks: those equal to it, else those opening with it, else those containing it;
+    at each step the first group that has one (headings before bold leads)."""
     q = _plain(quote)
-    for tier in ([h for h in heads if _plain(h) == q], [h for h in heads if _plain(h).startswith(q)],
-                 [h for h in heads if _matches(quote, h)]):
-        if tier:
-            return tier
+    for test in (lambda h: _plain(h) == q, lambda h: _plain(h).startswith(q), lambda h: _matches(quote, h)):
+        for names in groups:
+            if hit := [h for h in names if test(h)]:
+                return hit
     return []
 
 
@@ -186,30 +188,37 @@ def check_links(docs: Docs, src: str) -> tuple[int, list[str]]:
     return n, bad
 
 
+def bold_leads(text: str) -> list[str]:
+    """The bold text that opens a paragraph (``**Speed.** Medians ...`` -> ``Speed.``; it may wrap a line)."""
+    lines, out = prose_lines(text), []
+    for k, ln in enumerate(lines):
+        if ln.startswith("**") and (k == 0 or not lines[k - 1].strip() or _HEADING.match(lines[k - 1])):
+            para = "\n".join(itertools.takewhile(lambda x: x.strip(), lines[k:]))
+            if m := re.match(r"\*\*(.+?)\*\*", para, flags=re.S):
+                out.append(heading_text(" ".join(m.group(1).split())))
+    return out
+
+
 def check_quotes(docs: Docs, src: str) -> tuple[int, list[str]]:
     """(number of quoted section references checked, problems) for the markdown file ``src``."""
-    n, bad = 0, []
+    bad = []
     text = "\n".join(prose_lines(docs.text(src)))
-    refs = [(m.group("path"), m) for m in _XREF.finditer(text)]
-    refs += [(None, m) for m in _SELFREF.finditer(text) if not any(r.start() <= m.start() < r.end() for _, r in refs)]
-    leads = [_plain(ln[2:]) for ln in text.splitlines() if ln.startswith("**")]
-    for path, m in sorted(refs, key=lambda r: r[1].start()):
-        n += 1
-        quote = " ".join((m.group("quote") or m.group("near")).split())
+    refs = [(m.group("path"), m.group("quote"), m.start()) for m in _XREF.finditer(text)]
+    refs += [(None, m.group("quote") or m.group("near"), m.start()) for m in _SELFREF.finditer(text)
+             if not any(r.start() <= m.start() < r.end() for r in _XREF.finditer(text))]
+    refs += [(None, f"**{m.group('bold')}**", m.start()) for m in _BOLDREF.finditer(text)]
+    for path, quote, pos in sorted(refs, key=lambda r: r[2]):
+        quote = " ".join(quote.split())
         target = docs.resolve_quoted(src, path) if path else src
-        where = f'{src}:{_line(text, m.start())}: {path or "(this file)"}, "{quote}"'
+        where = f'{src}:{_line(text, pos)}: {path or "(this file)"}, "{quote}"'
         if target is None:
             bad.append(f"{where}: {path} is not a tracked file")
-        elif len(named := named_headings(quote, headings(docs.text(target)))) != 1:
-            bad.append(f"{where}: " + (f"{len(named)} headings of {target} contain the quoted text: "
-                                       + " | ".join(named) if named else f"no heading of {target} contains the quoted text"))
-    for m in _BOLDREF.finditer(text):
-        n += 1
-        bold = _plain(m.group("bold"))
-        if not any(lead.startswith(bold) for lead in leads) and not any(_matches(bold, h) for h in headings(text)):
-            bad.append(f'{src}:{_line(text, m.start())}: (this file), **{m.group("bold")}**: no heading or '
-                       f"paragraph opening with that bold text")
-    return n, bad
+            continue
+        named = named_headings(quote, headings(docs.text(target)), bold_leads(docs.text(target)))
+        if len(named) != 1:
+            bad.append(f"{where}: {len(named)} headings / bold leads of {target} contain the quoted text"
+                       + (": " + " | ".join(named) if named else ""))
+    return len(refs), bad
 
 
 def check_tree(root: Path, files: set[str] | None = None) -> tuple[int, int, list[str]]:
