@@ -48,9 +48,9 @@ _LINK = re.compile(r"(!?)\[((?:[^\[\]]|\[[^\[\]]*\])*)\]\(\s*<?([^()\s<>]*(?:\([
                    r"(?:\s+(?:\"[^\"]*\"|'[^']*'))?\s*\)")
 _SCHEME = re.compile(r"^(?:[a-zA-Z][a-zA-Z0-9+.-]*:|//)")
 _MD_PATH = r"(?P<path>(?:[\w.-]+/)*[\w.-]+\.md)"
-#: docs/X.md, "Text" | [..](docs/X.md), "Text" | docs/X.md ("Text" | docs/X.md "Text"
 _QUOTE = r"\"(?P<quote>(?:[^\"\n]|\n(?![ \t]*\n)){1,300}?)\""   # may wrap a line, not a paragraph
 _WS = r"[ \t]*\n?[ \t]*"   # blanks, at most one line break
+#: docs/X.md, "Text" | [..](docs/X.md), "Text" | docs/X.md ("Text" | docs/X.md "Text"
 _XREF = re.compile(r"(?:\[[^\[\]]*\]\()?" + _MD_PATH + r"(?:#[\w-]*)?\)?(?:," + _WS + r"|" + _WS + r"\(" + _WS
                    + r"|(?=\s)" + _WS + r")" + _QUOTE)
 _SELFREF = re.compile(r"\b(?:[Ss]ee|[Ss]ection|[Uu]nder)(?=\s)" + _WS + _QUOTE
@@ -98,6 +98,18 @@ def heading_text(raw: str) -> str:
 @functools.lru_cache(maxsize=None)
 def headings(text: str) -> tuple[str, ...]:
     return tuple(heading_text(m.group(2)) for line in prose_lines(text) if (m := _HEADING.match(line)))
+
+
+@functools.lru_cache(maxsize=None)
+def bold_leads(text: str) -> tuple[str, ...]:
+    """The bold text that opens a paragraph (``**Speed.** Medians ...`` -> ``Speed.``; it may wrap a line)."""
+    lines, out = prose_lines(text), []
+    for k, ln in enumerate(lines):
+        if ln.startswith("**") and (k == 0 or not lines[k - 1].strip() or _HEADING.match(lines[k - 1])):
+            para = "\n".join(itertools.takewhile(lambda x: x.strip(), lines[k:]))
+            if m := re.match(r"\*\*(.+?)\*\*", para, flags=re.S):
+                out.append(heading_text(" ".join(m.group(1).split())))
+    return tuple(out)
 
 
 def slug(text: str) -> str:
@@ -194,18 +206,6 @@ def check_links(docs: Docs, src: str) -> tuple[int, list[str]]:
         elif anchor and not _LINE_ANCHOR.match(anchor):
             bad.append(f"{where} #{anchor} on a file that is not markdown")
     return n, bad
-
-
-@functools.lru_cache(maxsize=None)
-def bold_leads(text: str) -> tuple[str, ...]:
-    """The bold text that opens a paragraph (``**Speed.** Medians ...`` -> ``Speed.``; it may wrap a line)."""
-    lines, out = prose_lines(text), []
-    for k, ln in enumerate(lines):
-        if ln.startswith("**") and (k == 0 or not lines[k - 1].strip() or _HEADING.match(lines[k - 1])):
-            para = "\n".join(itertools.takewhile(lambda x: x.strip(), lines[k:]))
-            if m := re.match(r"\*\*(.+?)\*\*", para, flags=re.S):
-                out.append(heading_text(" ".join(m.group(1).split())))
-    return tuple(out)
 
 
 def check_quotes(docs: Docs, src: str) -> tuple[int, list[str]]:
