@@ -81,6 +81,13 @@ def test_cccv_charges_to_full_without_exceeding_cv_and_then_stops():
     assert st.full and st.cv and st.soc > 0.98
     # full: the power path, the command is the load current alone (the pack gets 0); no load -> short mode
     assert _charger_command(st, c, 5.0) == 5.0 and _charger_command(st, c, 0.0) == 0.0
+    # a full pack pushed above the CV voltage (a receiver delivering more than the load): short mode until it is
+    # back at CV, so it cannot be charged past it
+    v_cv = cc.cv_cell_v * p.n_series
+    st.vrc = v_cv - float(p.ocv_v(st.soc)) + 1e-3
+    assert _charger_command(st, c, 5.0) == 0.0 and st.full
+    st.vrc -= 2e-3
+    assert _charger_command(st, c, 5.0) == 5.0 and st.full
 
 
 def test_full_battery_recharges_below_the_recharge_threshold_and_not_above():
