@@ -47,7 +47,7 @@ of 1.3 Ah, sized for a ~1 kg drone.
   it: a receiver that delivers more than the load (the hysteresis policy does) would otherwise charge a
   full pack past the CV voltage and SoC 1 (the default mission with ``hysteresis``: SoC 1.006 without
   this rule; with it max SoC 0.9890, final 0.9756, 22.1 kJ from the pads, against final 0.9118 and
-  11.7 kJ with the command 0 when full).
+  11.7 kJ on main of 2026-11-27, the command 0 when full).
 * Recharge: a full battery starts a new charge cycle when its voltage falls ``recharge_drop_cell_v``
   (default 100 mV) per cell below the CV voltage: the recharge threshold of charger ICs (e.g. TI
   BQ25601D, register bit VRECHG: "recharge threshold 100 mV (default) or 200 mV" below VREG; TI's
