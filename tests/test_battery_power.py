@@ -79,12 +79,21 @@ def test_cccv_charges_to_full_without_exceeding_cv_and_then_stops():
     c, st = _consts(p, cc), _state(0.93)
     assert _charge_to_full(p, cc, c, st)
     assert st.full and st.cv and st.soc > 0.98
-    assert _charger_command(st, c, 5.0) == 0.0  # full -> short mode whatever the propulsion draw
+    # full: the power path, the command is the load current alone (the pack gets 0); no load -> short mode
+    assert _charger_command(st, c, 5.0) == 5.0 and _charger_command(st, c, 0.0) == 0.0
+    # a full pack pushed above the CV voltage (a receiver delivering more than the load): short mode until it is
+    # back at CV, so it cannot be charged past it
+    v_cv = cc.cv_cell_v * p.n_series
+    st.vrc = v_cv - float(p.ocv_v(st.soc)) + 1e-3
+    assert _charger_command(st, c, 5.0) == 0.0 and st.full
+    st.vrc -= 2e-3
+    assert _charger_command(st, c, 5.0) == 5.0 and st.full
 
 
 def test_full_battery_recharges_below_the_recharge_threshold_and_not_above():
-    """A full battery under load: the command stays 0 while (OCV + v1)/n >= cv_cell_v - recharge_drop_cell_v
-    and a new CC cycle (cv flag cleared, command = propulsion + CC current) starts at the first BMS call below."""
+    """A full battery under load: the command stays the load current (the power path: no battery current) while
+    (OCV + v1)/n >= cv_cell_v - recharge_drop_cell_v, and a new CC cycle (cv flag cleared, command = propulsion +
+    CC current) starts at the first BMS call below."""
     p, cc = BatteryParams(initial_soc=0.93), CcCvParams(recharge_drop_cell_v=0.1)
     c, st = _consts(p, cc), _state(0.93)
     _charge_to_full(p, cc, c, st)
@@ -94,7 +103,7 @@ def test_full_battery_recharges_below_the_recharge_threshold_and_not_above():
         v_rest = float(p.ocv_v(st.soc) + st.vrc)
         cmd = _charger_command(st, c, i_prop)
         if v_rest >= threshold:
-            assert cmd == 0.0 and st.full
+            assert cmd == i_prop and st.full
         else:
             assert not st.full and not st.cv        # a new cycle, in CC (far below CV)
             assert cmd == pytest.approx(i_prop + cc.cc_current_a)

@@ -272,3 +272,29 @@ def test_a_policy_returning_nan_is_an_error_not_silent_short_mode():
     cfg = load_config()
     with pytest.raises(ValueError, match="broken.*nan.*valid range"):
         run_mission(cfg, NanPolicy())
+
+
+@pytest.mark.parametrize("mission_file", [None, "qgc_simple_square.plan"])
+def test_a_built_in_missions_ground_samples_draw_the_avionics_only(mission_file):
+    """The hold on the ground after landing ("ground", motors off) draws ``drone.avionics_w`` alone, as a replay's
+    disarmed samples do (``Trajectory.motors_off_phases``, one source); airborne samples momentum theory. Before,
+    the built-in pattern's and a mission file's route's ground hold drew hover-class power (~93 W in the wind)."""
+    from mission_sim.config import load_config_dict
+    from mission_sim.world.samples import MissionSamples
+    from mission_sim.world.trajectory import PlannedTrajectory
+
+    path = None if mission_file is None else str(Path(__file__).parent / "data" / "missions" / mission_file)
+    cfg = config_from_dict(load_config_dict(None, mission_file=path))
+    planned = PlannedTrajectory(cfg)
+    tr = planned.materialise()
+    ground = tr.phase == "ground"
+    assert ground.sum() >= 5 and (~ground).sum() > 100
+    for p in (tr.propulsion_w(cfg.drone), MissionSamples(cfg, planned, charge=True).chunk(0, len(tr)).p_w):
+        np.testing.assert_array_equal(p[ground], cfg.drone.avionics_w)
+        assert p[~ground].min() > 5 * cfg.drone.avionics_w
+    # through the loop: the ground rows' step-mean power and energy are the avionics'
+    ts = run_mission(cfg, policy(cfg, "model_based"), frame=True).timeseries
+    rows = (ts["phase"] == "ground").to_numpy()
+    assert rows.any()
+    np.testing.assert_allclose(ts.loc[rows, "propulsion_w"], cfg.drone.avionics_w, rtol=1e-12)
+    np.testing.assert_allclose(ts.loc[rows, "e_propulsion_j"], cfg.drone.avionics_w * ts.loc[rows, "dt_s"], rtol=1e-12)

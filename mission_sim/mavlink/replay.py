@@ -366,12 +366,8 @@ def fit_mass_kg(traj, drone, target_energy_j: float, t_s, mask, runner_energy_j:
 def replay_trajectory(track: FlightTrack):
     """A :class:`~mission_sim.world.trajectory.Trajectory` of the track whose propulsion power is the
     avionics alone while disarmed ("ground": the motors are off), momentum theory otherwise."""
-    from ..world.trajectory import Trajectory
-
-    class ReplayTrajectory(Trajectory):
-        motors_off_phases = ("ground",)
-
-    return ReplayTrajectory.from_samples(track.t_s, track.pos_m, tilt_rad=track.tilt_rad, phase=track.phase())
+    from ..world.trajectory import Trajectory   # "ground" is one of its motors-off phases
+    return Trajectory.from_samples(track.t_s, track.pos_m, tilt_rad=track.tilt_rad, phase=track.phase())
 
 
 @dataclass

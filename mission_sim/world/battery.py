@@ -27,15 +27,35 @@ of 1.3 Ah, sized for a ~1 kg drone.
   hobby chargers report for high-rate 1-2 Ah LiPo packs (3-15 mOhm/cell internal resistance); not
   from a datasheet. The RC pair gives the slow relaxation seen after load steps.
 * CC at 1 C (1.3 A), cut-off at C/10: the usual LiPo charging rule. The charge manager's command
-  is the DC current the rectifier should deliver: the propulsion current plus the battery current,
-  ``cc_current_a`` in CC and, in CV, the model-based ``(V_cv - OCV - v1) / R0`` that puts the terminal
-  voltage at the CV limit; below the cut-off the battery is *full* and the command 0 (short mode).
+  is the DC current the rectifier should deliver: the load current (propulsion + avionics, ``P / VL``)
+  plus the battery current, ``cc_current_a`` in CC and, in CV, the model-based ``(V_cv - OCV - v1) / R0``
+  that puts the terminal voltage at the CV limit (never above ``cc_current_a``); below the cut-off the
+  battery is *full*.
+* Power path: a *full* battery's command is the load current alone (battery current 0), so over an
+  energised pad the pad feeds the motors and the avionics and the pack is held, as a charger IC with a
+  power path does (TI BQ25601/BQ25601D, "power path management": the input powers the system, charging
+  terminated or not; the battery joins in, "supplement mode", only when the input is overloaded). The
+  command follows the load at each BMS update outside the dead band (``sim.cmd_deadband_a``); the pack
+  carries the difference between the load and what the rectifier delivers. Measured
+  (``tests/test_mission_recharge.py``), 600 s hovering over pad 0 without wind from SoC 0.985: full at
+  0.9934 after ~100 s, then down to 0.9850 at the end (the model-based policy delivers ~0.07 A less than
+  its command: the feed-forward's shortfall), 1.3 kJ into the pack, 64.4 kJ from the pad (min SoC 0.9849
+  in the first 0.2 s, before the charger's first command); with the command 0 when full (before
+  2026-11-27) the drone flew on its pack down to the recharge threshold (min SoC 0.901), final 0.988,
+  14.6 kJ into the pack, 65.5 kJ from the pad. With no load (``P = 0``) the command is 0: short mode.
+  A full pack whose ``OCV + v1`` is above the CV voltage gets command 0 (short mode) until it is back at
+  it: a receiver that delivers more than the load (the hysteresis policy does) would otherwise charge a
+  full pack past the CV voltage and SoC 1 (the default mission with ``hysteresis``: SoC 1.006 without
+  this rule; with it max SoC 0.9890, final 0.9756, 22.1 kJ from the pads, against final 0.9118 and
+  11.7 kJ on main of 2026-11-27, the command 0 when full).
 * Recharge: a full battery starts a new charge cycle when its voltage falls ``recharge_drop_cell_v``
   (default 100 mV) per cell below the CV voltage: the recharge threshold of charger ICs (e.g. TI
   BQ25601D, register bit VRECHG: "recharge threshold 100 mV (default) or 200 mV" below VREG; TI's
   other single-cell chargers use the same convention). The voltage compared is the charger's own
   estimate without the ohmic drop, ``(OCV(SoC) + v1) / n`` (the quantity its CV law regulates), so
-  the propulsion load's ``R0 i`` does not trigger it; 100 mV/cell is SoC ~0.87 on this OCV curve.
+  the propulsion load's ``R0 i`` does not trigger it; 100 mV/cell is SoC ~0.87 on this OCV curve. The
+  charger looks at it at its BMS updates, i.e. over an energised pad: a full pack that the flight
+  between pads has run below the threshold starts its new cycle at the next pad.
 """
 
 from __future__ import annotations

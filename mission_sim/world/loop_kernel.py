@@ -220,9 +220,11 @@ def _bat_step(c, soc, v1_v, i, dt_s):
 
 @njit(cache=True)
 def _charger_command(st, c, i_prop):
-    """CC-CV charge manager (:mod:`.battery`, :class:`.battery.CcCvParams`): the SBAR command ``I_L*`` [A], propulsion
-    current ``i_prop`` plus the battery's CC/CV current, 0 when full; ``full`` and ``cv`` clear once
-    ``OCV + v1`` falls below the recharge threshold."""
+    """CC-CV charge manager (:mod:`.battery`, :class:`.battery.CcCvParams`): the SBAR command ``I_L*`` [A], the load
+    current ``i_prop`` (propulsion + avionics) plus the battery's CC/CV current (at most ``cc_a``); when full the load
+    current alone (the charger's power path: the input feeds the load, the pack is held), or 0 (short mode) while
+    ``OCV + v1`` is above the CV voltage (a receiver delivering more than the load would charge a full pack past
+    it); ``full`` and ``cv`` clear once ``OCV + v1`` falls below the recharge threshold."""
     v_rest = c.n_cells * _ocv_cell(st.soc) + st.vrc
     if st.full and v_rest < c.v_recharge:
         st.full, st.cv = False, False
@@ -233,7 +235,7 @@ def _charger_command(st, c, i_prop):
     if st.cv and tgt < c.cutoff_a:
         st.full = True
     if st.full:
-        return 0.0
+        return i_prop if v_rest <= c.v_cv else 0.0
     return max(tgt, 0.0) + i_prop
 
 

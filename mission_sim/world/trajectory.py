@@ -107,10 +107,11 @@ class Trajectory:
         """Velocity (N, 3) [m/s] by second-order finite differences."""
         return np.gradient(self.pos_m, self.t_s, axis=0)
 
-    #: phases whose motors are off: the avionics alone draw power there (a replayed log's "ground",
-    #: i.e. disarmed); empty for planned missions. Read by :meth:`propulsion_w` and, chunk by chunk,
-    #: by ``world.samples.MissionSamples`` (chunks are plain views, so it is read off the whole).
-    motors_off_phases: ClassVar[tuple[str, ...]] = ()
+    #: phases whose motors are off: the avionics alone draw power there ("ground": a planned mission's
+    #: hold after landing, a replayed log's disarmed samples, a re-flight's). Read by :meth:`propulsion_w`
+    #: and, chunk by chunk, by ``world.samples.MissionSamples`` (chunks are plain views, so it is read off
+    #: the whole; :class:`PlannedTrajectory` has the same).
+    motors_off_phases: ClassVar[tuple[str, ...]] = ("ground",)
 
     def propulsion_w(self, drone) -> np.ndarray:
         """Electrical propulsion power (N,) [W] from momentum theory (airspeed = |v_xy - wind_xy|)."""
@@ -293,6 +294,8 @@ class PlannedTrajectory:
     :class:`Trajectory` (``t_s``, ``pos_m``, ...) materialise the whole trajectory on first use
     (cached): for short missions and error messages, not for long runs.
     """
+
+    motors_off_phases: ClassVar[tuple[str, ...]] = Trajectory.motors_off_phases
 
     def __init__(self, cfg, rng: np.random.Generator | None = None):
         rng = np.random.default_rng(cfg.seed) if rng is None else rng
