@@ -30,7 +30,8 @@ from .layout import BAT, MPAR, MSINGLE_PAR, MSTATE, N_CZ, SINGLE, SLOW, STATE
 from .parts import PlantPart, SinglePlant
 from .plant import battery_operating_point
 
-__all__ = ["ModalPlans", "build_modal_plans", "ModalPlantPart", "ModalSinglePlant", "vector_plant", "single_plant"]
+__all__ = ["ModalPlans", "build_modal_plans", "ModalPlantPart", "ModalSinglePlant", "vector_plant", "single_plant",
+           "warn_link_range"]
 
 
 def _kernel_function(name: str, compiled: bool = True):
@@ -40,13 +41,33 @@ def _kernel_function(name: str, compiled: bool = True):
 
 
 def vector_plant(cfg: EnvConfig, n: int, compiled: bool = True) -> PlantPart:
-    """The vector env's plant part of ``cfg.link_model``."""
-    return ModalPlantPart(cfg, n, compiled) if cfg.link_model == "modal" else PlantPart(cfg, n, compiled)
+    """The vector env's plant part of ``cfg.link_model`` (:func:`warn_link_range` for the exact-mode link)."""
+    if cfg.link_model != "modal":
+        return PlantPart(cfg, n, compiled)
+    warn_link_range(cfg)
+    return ModalPlantPart(cfg, n, compiled)
 
 
 def single_plant(cfg: EnvConfig, compiled: bool = True) -> SinglePlant:
-    """The single env's plant part of ``cfg.link_model``."""
-    return ModalSinglePlant(cfg, compiled) if cfg.link_model == "modal" else SinglePlant(cfg, compiled)
+    """The single env's plant part of ``cfg.link_model`` (:func:`warn_link_range` for the exact-mode link)."""
+    if cfg.link_model != "modal":
+        return SinglePlant(cfg, compiled)
+    warn_link_range(cfg)
+    return ModalSinglePlant(cfg, compiled)
+
+
+def warn_link_range(cfg: EnvConfig) -> None:
+    """A :class:`~wpt_receiver.notices.DronewptWarning` when ``cfg.link`` is outside the range where the exact-mode
+    model was checked against the switching model (:func:`wpt_receiver.paper.modal_range_problem`, the limits'
+    one source); once per env built (~50 us), nothing per step."""
+    from wpt_receiver.paper import modal_range_problem
+    problem = modal_range_problem(cfg.link, remedy=(
+        "the env has no switching-level link, so its currents, peaks and energies may be off; valid: an "
+        "EnvConfig(link=...) inside that range"))
+    if problem is not None:
+        from wpt_receiver.notices import warn
+        warn(f"EnvConfig link (vdc_v={cfg.link.vdc_v:g} V, vl_v={cfg.link.vl_v:g} V, lm_h={cfg.link.lm_h:.4g} H): "
+             f"{problem}")
 
 
 @dataclass

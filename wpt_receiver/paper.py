@@ -102,18 +102,20 @@ def rm_emf_margin(params: LinkParams) -> float:
     return float(rm_steady(params, None, None)["clamp_margin"])
 
 
-def modal_range_problem(params: LinkParams) -> str | None:
+def modal_range_problem(params: LinkParams, remedy: str = "use model='switching'") -> str | None:
     """Why the exact-mode model (:func:`modal_plant`, the missions' and envs' link) is outside the range where it
-    was checked against the switching model, or None (Table I: emf margin 30.9, Vdc/VL 1)."""
+    was checked against the switching model, or None (Table I: emf margin 30.9, Vdc/VL 1). ``remedy`` ends the
+    message (what to do: the missions and envs, which have no switching model, name their own keys). The one
+    source of these limits for ``paper``, the missions (:mod:`mission_sim.setup_warnings`) and the envs."""
     m, ratio = rm_emf_margin(params), params.vdc_v / params.vl_v
     if m < MODAL_MIN_EMF_MARGIN:
         return (f"emf margin wLm V1 / (R1 (4/pi) VL) = {m:.3g} is below the exact-mode model's checked range "
                 f"(>= {MODAL_MIN_EMF_MARGIN:g}; Table I: 30.9): this close to the rectifier's blocking point its RM "
-                "state departs from the switching model's; use model='switching'")
+                f"state departs from the switching model's; {remedy}")
     if ratio < MODAL_MIN_VOLTAGE_RATIO:
         return (f"vdc_v / vl_v = {ratio:.3g} is below the exact-mode model's checked range (>= "
                 f"{MODAL_MIN_VOLTAGE_RATIO:g}; Table I: 1): with the clamp this high against V1 its battery energy is "
-                "low against the switching model (-3 % at 0.2, -31 % at 0.13); use model='switching'")
+                f"low against the switching model (-3 % at 0.2, -31 % at 0.13); {remedy}")
     return None
 
 

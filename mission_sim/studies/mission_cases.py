@@ -32,6 +32,35 @@ class MissionParamChecker:
         self.cfg = config_from_dict(base)
         self._sections: dict[tuple, object] = {}
         self._sizes: dict[tuple, str | None] = {}
+        self._notes: dict[tuple, tuple] = {}    # section identities -> (the sections, their setup warnings)
+        self.warned: dict[str, int] = {}         # setup warning -> cases it concerns
+        self.checked = 0                         # cases whose values passed
+
+    def _note(self, cfg) -> None:
+        """Count ``cfg``'s setup warnings (:func:`mission_sim.setup_warnings.mission_warnings`), computed once per
+        distinct set of the sections they read (the cached section objects: a key of identities, ~1 us a case)."""
+        from ..setup_warnings import mission_warnings
+
+        secs = (cfg.link, cfg.battery, cfg.charger, cfg.coupling, cfg.mission, cfg.waypoints, *cfg.pads)
+        key = tuple(map(id, secs))
+        hit = self._notes.get(key)
+        if hit is None:
+            if len(self._notes) > _CACHE_MAX:
+                self._notes.clear()
+            hit = self._notes[key] = (secs, mission_warnings(cfg))
+        self.checked += 1
+        for text in hit[1]:
+            self.warned[text] = self.warned.get(text, 0) + 1
+
+    def study_warnings(self, name: str) -> list[str]:
+        """One line for the study (``name``) when some of its checked cases have setup warnings: how many, the
+        most frequent warning and how many distinct ones; [] otherwise."""
+        if not self.warned:
+            return []
+        text, count = max(self.warned.items(), key=lambda kv: kv[1])
+        more = len(self.warned) - 1
+        return [f"{count:,} of {self.checked:,} cases of study {name!r}: {text}"
+                + (f" (and {more:,} other distinct warning{'s' * (more > 1)})" if more else "")]
 
     def _section(self, sec: str, values: dict):
         from ..config import check_seed, section_from_dict
@@ -87,7 +116,10 @@ class MissionParamChecker:
             cfg = dataclasses.replace(self.cfg, pads=tuple(pads), **kw)  # cross-field checks
         except ValueError as exc:
             return str(exc)
-        return self._size_error(cfg)
+        err = self._size_error(cfg)
+        if err is None:
+            self._note(cfg)
+        return err
 
 
 class MissionCaseRunner:
@@ -129,6 +161,11 @@ class MissionCaseRunner:
             self._checker = MissionParamChecker(self.base)
         return self._checker({k: v for k, v in params.items() if k != POLICY_KEY})
 
+    def study_warnings(self, name: str) -> list[str]:
+        """The setup warnings of the cases checked so far, once for the study
+        (:meth:`MissionParamChecker.study_warnings`)."""
+        return [] if self._checker is None else self._checker.study_warnings(name)
+
     def __call__(self, params: dict) -> dict:
         """The case's summary; summary-only (``run_mission(frame=False)``: no DataFrame, no figure)."""
         from ..config import policy_context
@@ -136,7 +173,7 @@ class MissionCaseRunner:
 
         cfg = self.config(params)
         policy = self.make_policy(params.get(POLICY_KEY, "model_based"), policy_context(cfg))
-        return dict(run_mission(cfg, policy, frame=False).summary)
+        return dict(run_mission(cfg, policy, frame=False, warn=False).summary)   # warned once per study
 
     def warm(self) -> None:
         """Run the base mission once (summary only): imports, the numba cache and the coupling table are
