@@ -17,7 +17,6 @@ otherwise). One source for the library and the ``dronewpt`` command line.
 from __future__ import annotations
 
 import importlib.util
-import logging
 import os
 import sys
 
@@ -56,6 +55,7 @@ def warn(text: str) -> None:
 
 
 def _log_notice(text: str) -> None:
+    import logging   # (imported here: ~2 ms that a run loading every kernel from the cache does not need)
     logging.getLogger(LOGGER_NAME).warning(text)
 
 
