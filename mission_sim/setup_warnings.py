@@ -81,15 +81,16 @@ def unreached_pad_warnings(cfg) -> list[str]:
 
 
 def policy_link_warning(cfg, policy) -> str | None:
-    """One line when ``policy``'s context (``policy.ctx.link_model``) names another link model than the mission's
-    (a standalone ``PolicyContext()`` is eq. 4's ``"envelope"``: ``mpc`` would predict with eq. 4 on the
-    mission's exact-mode link), else None."""
+    """One line when ``policy`` predicts with its context's link model (``uses_link_model``: ``mpc``,
+    ``model_based_budget``, ...) and that (``policy.ctx.link_model``) is not the mission's (a standalone
+    ``PolicyContext()`` is eq. 4's ``"envelope"``: ``mpc`` would predict with eq. 4 on the mission's exact-mode
+    link), else None. A policy that does not read it (``model_based``, ``step``, ...) runs the same either way."""
     model = getattr(getattr(policy, "ctx", None), "link_model", None)
-    if not isinstance(model, str) or model == MISSION_LINK_MODEL:
+    if not getattr(policy, "uses_link_model", False) or not isinstance(model, str) or model == MISSION_LINK_MODEL:
         return None
     name = getattr(policy, "name", type(policy).__name__)
-    return (f"the policy {name!r} was made for link_model={model!r}, the mission runs {MISSION_LINK_MODEL!r} (the "
-            "exact-mode link); a model-based or predictive policy assumes the wrong plant; valid: make it with "
+    return (f"the policy {name!r} predicts with link_model={model!r}, the mission runs {MISSION_LINK_MODEL!r} (the "
+            "exact-mode link): it assumes another plant than it controls; valid: make it with "
             "mission_sim.config.policy_context(cfg)")
 
 

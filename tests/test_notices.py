@@ -166,12 +166,18 @@ def test_the_replay_command_prints_it(capsys, tmp_path):
 
 
 # ------------------------------------------------------------------ 4. a policy made for another link model
-def test_run_mission_warns_on_a_policy_made_for_another_link_model():
+def test_run_mission_warns_on_a_policy_that_predicts_with_another_link_model():
+    """``policies.make("model_based_budget:0.1")`` alone: a standalone context, eq. 4's link, whose after-stop plan
+    the policy predicts with; the same made with ``policy_context(cfg)`` (the exact modes), or a policy that reads no
+    link model (``model_based``), runs without a word."""
     cfg = load_config()
-    msgs = _quiet_run(cfg, policies.make("model_based"), frame=False)   # a standalone context: eq. 4's link
-    assert msgs == ["the policy 'model_based' was made for link_model='envelope', the mission runs 'modal' (the "
-                    "exact-mode link); a model-based or predictive policy assumes the wrong plant; valid: make it "
-                    "with mission_sim.config.policy_context(cfg)"]
+    msgs = _quiet_run(cfg, policies.make("model_based_budget:0.1"), frame=False)
+    assert msgs == ["the policy 'model_based_budget' predicts with link_model='envelope', the mission runs 'modal' "
+                    "(the exact-mode link): it assumes another plant than it controls; valid: make it with "
+                    "mission_sim.config.policy_context(cfg)"]
+    from mission_sim.setup_warnings import policy_link_warning
+    assert policy_link_warning(cfg, policies.make("model_based_budget:0.1", policy_context(cfg))) is None
+    assert policy_link_warning(cfg, policies.make("model_based")) is None
 
 
 # ------------------------------------------------------------------ 5. CSV on request, as the CLI

@@ -99,10 +99,11 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     is refused (``ValueError``): make it with ``mission_sim.config.policy_context(cfg)``.
     ``warn``: before the run, :func:`mission_sim.setup_warnings.mission_warnings` as
     :class:`wpt_receiver.notices.DronewptWarning` (a link outside the exact-mode model's checked range, a pad the
-    route never comes near, a policy made for another link model); False skips them (a sweep warns once per study).
+    route never comes near, a policy made for another link model; none with ``charge=False``); False skips them (a
+    sweep warns once per study).
     """
     check_policy_context(cfg, policy)
-    if warn:
+    if warn and charge:   # (pads never energised: neither the link nor the pads matter)
         warn_setup(cfg, policy, own_route=trajectory is None)
     try:
         res = _run_mission(cfg, policy, trajectory, charge, progress, compiled, frame, sink)
