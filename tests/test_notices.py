@@ -172,7 +172,7 @@ def test_run_mission_warns_on_a_policy_that_predicts_with_another_link_model():
     link model (``model_based``), runs without a word."""
     cfg = load_config()
     msgs = _quiet_run(cfg, policies.make("model_based_budget:0.1"), frame=False)
-    assert msgs == ["the policy 'model_based_budget' predicts with link_model='envelope', the mission runs 'modal' "
+    assert msgs == ["the policy 'model_based_budget:0.1' predicts with link_model='envelope', the mission runs 'modal' "
                     "(the exact-mode link): it assumes another plant than it controls; valid: make it with "
                     "mission_sim.config.policy_context(cfg)"]
     from mission_sim.setup_warnings import policy_link_warning
