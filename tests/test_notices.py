@@ -19,7 +19,7 @@ from mission_sim.cli import main
 from mission_sim.config import (apply_overrides, config_from_dict, config_to_dict, load_config, load_config_dict,
                                 policy_context)
 from mission_sim.world.runner import run_mission
-from wpt_receiver.notices import NOTICE, DronewptWarning
+from wpt_receiver.notices import NOTICE, NOTICE_VAR, DronewptWarning
 
 ROOT = Path(__file__).resolve().parents[1]
 MISSIONS = ROOT / "tests" / "data" / "missions"
@@ -191,7 +191,8 @@ def test_mission_result_write_has_no_csv_unless_asked(tmp_path):
 
 # ------------------------------------------------------------------ 6. the first compilation, from Python
 def _python(code: str, cache: Path) -> subprocess.CompletedProcess:
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "NUMBA_CACHE_DIR": str(cache)}
+    env = {**{k: v for k, v in os.environ.items() if k != NOTICE_VAR}, "PYTHONPATH": str(ROOT),
+           "NUMBA_CACHE_DIR": str(cache)}   # (a main() run in this process set NOTICE_VAR for its children)
     return subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True,
                           timeout=600)
 
@@ -208,6 +209,8 @@ def test_the_first_compilation_of_our_kernels_is_logged_once_and_not_from_the_ca
     assert again.returncode == 0 and again.stderr == "", again.stderr
     configured = _python("import logging\nlogging.basicConfig(level=logging.ERROR)\n" + OURS, tmp_path / "d")
     assert configured.returncode == 0 and NOTICE not in configured.stderr   # the user's logging decides
+    off = _python("import os\nos.environ['DRONEWPT_COMPILE_NOTICE'] = '0'\n" + OURS, tmp_path / "f")
+    assert off.returncode == 0 and off.stderr == ""   # what the CLI sets for the processes it starts
     users = _python("import wpt_receiver, numba\nf = numba.njit(lambda x: 2 * x)\nassert f(2) == 4\n", tmp_path / "e")
     assert users.returncode == 0 and users.stderr == ""   # a kernel of the user's own is not ours to announce
 

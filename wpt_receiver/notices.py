@@ -10,8 +10,9 @@ otherwise). One source for the library and the ``dronewpt`` command line.
   ``wpt_receiver`` is imported) waits for numba's import with a ``sys.meta_path`` hook, then listens. The
   first compilation of one of dronewpt's kernels in a process is logged once, ``logging.getLogger("dronewpt")
   .warning(...)``: shown by Python's last-resort handler when nothing configured logging, silenced by a normal
-  logging configuration. The command line replaces that sink (:func:`set_compile_sink`): a line above its
-  progress bars on a terminal, nothing otherwise.
+  logging configuration (``DRONEWPT_COMPILE_NOTICE=0`` turns it off). The command line replaces that sink
+  (:func:`set_compile_sink`): a line above its progress bars on a terminal, nothing otherwise; the processes it
+  starts (a sweep's workers) stay silent, as before.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import importlib.util
 import os
 import sys
 
-__all__ = ["DronewptWarning", "warn", "NOTICE", "LOGGER_NAME", "OUR_PACKAGES", "listen_for_compilation",
+__all__ = ["DronewptWarning", "warn", "NOTICE", "NOTICE_VAR", "LOGGER_NAME", "OUR_PACKAGES", "listen_for_compilation",
            "set_compile_sink"]
 
 NOTICE = ("compiling numba kernels once (~40 s on 2 cores; cached afterwards, "
@@ -59,8 +60,13 @@ def _log_notice(text: str) -> None:
     logging.getLogger(LOGGER_NAME).warning(text)
 
 
+#: ``DRONEWPT_COMPILE_NOTICE=0``: no notice from the library (the command line sets it for the processes it starts,
+#: e.g. a sweep's workers, which stayed silent before the library had a notice)
+NOTICE_VAR = "DRONEWPT_COMPILE_NOTICE"
+
 #: ``sink``: called once with the notice's line; ``ours_only``: only a kernel of :data:`OUR_PACKAGES` counts
-_state = {"registered": False, "announced": False, "sink": _log_notice, "ours_only": True}
+_state = {"registered": False, "announced": False, "ours_only": True,
+          "sink": None if os.environ.get(NOTICE_VAR) == "0" else _log_notice}
 
 
 def set_compile_sink(sink, ours_only: bool = False) -> None:

@@ -7,10 +7,11 @@ bars are (a terminal, no ``--no-progress``; :func:`announce_compilation`), nothi
 from __future__ import annotations
 
 import contextlib
+import os
 import sys
 import warnings
 
-from wpt_receiver.notices import NOTICE, DronewptWarning, set_compile_sink
+from wpt_receiver.notices import NOTICE, NOTICE_VAR, DronewptWarning, set_compile_sink
 
 __all__ = ["announce_compilation", "quiet_compilation", "warning_lines", "NOTICE"]
 
@@ -20,14 +21,22 @@ def _above_bars(line: str) -> None:
     tqdm.write(line, file=sys.stderr)  # above an active progress bar
 
 
+def _children_quiet() -> None:
+    """The processes this command starts (a sweep's workers) give no notice of their own, as before the library
+    had one (:data:`wpt_receiver.notices.NOTICE_VAR`)."""
+    os.environ[NOTICE_VAR] = "0"
+
+
 def announce_compilation() -> None:
     """From now on, print the notice (once per process) when numba compiles a kernel."""
     set_compile_sink(_above_bars)
+    _children_quiet()
 
 
 def quiet_compilation() -> None:
     """No notice (piped output, ``--no-progress``): the library's logged notice is off too."""
     set_compile_sink(None)
+    _children_quiet()
 
 
 @contextlib.contextmanager
