@@ -37,19 +37,28 @@ class MissionParamChecker:
         self.checked = 0                         # cases whose values passed
 
     def _note(self, cfg) -> None:
-        """Count ``cfg``'s setup warnings (:func:`mission_sim.setup_warnings.mission_warnings`), computed once per
-        distinct set of the sections they read (the cached section objects: a key of identities, ~1 us a case)."""
-        from ..setup_warnings import mission_warnings
+        """Count ``cfg``'s setup warnings (:mod:`mission_sim.setup_warnings`; its cases are made with
+        ``policy_context``, so no policy warning), each computed once per distinct value of what it reads (the
+        cached section objects: keys of identities, ~1 us a case; ~50 us for each new link, e.g. a Monte Carlo
+        draw of ``link.vdc_v``)."""
+        from ..setup_warnings import link_range_warning, unreached_pad_warnings
 
-        secs = (cfg.link, cfg.battery, cfg.charger, cfg.coupling, cfg.mission, cfg.waypoints, *cfg.pads)
-        key = tuple(map(id, secs))
-        hit = self._notes.get(key)
-        if hit is None:
-            if len(self._notes) > _CACHE_MAX:
-                self._notes.clear()
-            hit = self._notes[key] = (secs, mission_warnings(cfg))
+        link = (cfg.link, cfg.coupling, cfg.battery.n_series, cfg.charger.cv_cell_v, cfg.mission.hover_gap_m)
+        route = (cfg.waypoints, cfg.mission, *cfg.pads) if cfg.waypoints else ()
+        texts = []
+        for what, check in ((link, link_range_warning), (route, unreached_pad_warnings)):
+            if not what:
+                continue
+            key = (check.__name__, *map(id, what))
+            hit = self._notes.get(key)
+            if hit is None:
+                if len(self._notes) > _CACHE_MAX:
+                    self._notes.clear()
+                got = check(cfg)
+                hit = self._notes[key] = (what, [got] if isinstance(got, str) else list(got or ()))
+            texts += hit[1]
         self.checked += 1
-        for text in hit[1]:
+        for text in texts:
             self.warned[text] = self.warned.get(text, 0) + 1
 
     def study_warnings(self, name: str) -> list[str]:
