@@ -176,11 +176,7 @@ class PolicyContext:
 
 @runtime_checkable
 class Policy(Protocol):
-    """A receiver policy: normalised observations in, short duties out, for ``n`` receivers at once.
-
-    Optional attributes read by the mission: ``ctx`` (its :class:`PolicyContext`, checked against the mission's
-    control period and rated current) and ``uses_link_model`` (True: it predicts with ``ctx.link_model``, so a
-    mission warns when that is not the mission's exact-mode link; ``mpc``, ``model_based_budget`` & co.)."""
+    """A receiver policy: normalised observations in, short duties out, for ``n`` receivers at once."""
 
     name: str
 

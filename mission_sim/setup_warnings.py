@@ -9,7 +9,10 @@ each by the command line.
   source of the limits), at the hover pose's Lm and the pack's highest voltage (``n_series * cv_cell_v``).
 * :func:`unreached_pad_warnings`: a pad no charge item of the route comes to (a mission file's loiter farther
   than ``mission.pad_radius_m`` from it): it charges nothing.
-* :func:`policy_link_warning`: a policy made for another link model than the mission's (``"modal"``).
+* :func:`policy_link_warning`: a policy made for another link model than the mission's (``"modal"``), if it
+  predicts with it: a policy says so with a class attribute ``uses_link_model = True`` (``mpc``,
+  ``model_based_budget``, ``slow_budget``, ``oracle_imitation_filtered``; not part of the
+  :class:`~mission_sim.contract.Policy` protocol's required members).
 """
 
 from __future__ import annotations
