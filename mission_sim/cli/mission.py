@@ -141,8 +141,8 @@ def mission_config(args):
         overrides = {**read_drone_toml(args.drone), **overrides}
     files = mission_file_keys(overrides)
     d = mconfig.load_config_dict(args.config, getattr(args, "plan", None), getattr(args, "pads", None), files)
-    default_pads_notice(args.command, getattr(args, "plan", None), getattr(args, "pads", None), d, overrides,
-                        "--no-charge to fly it without charging")
+    default_pads_notice(getattr(args, "command", "mission"), getattr(args, "plan", None), getattr(args, "pads", None),
+                        d, overrides, "--no-charge to fly it without charging")
     cfg = mconfig.config_from_dict(mconfig.apply_overrides(d, overrides) if overrides else d)
     check_run_size(cfg, force=getattr(args, "force", False))
     return cfg
