@@ -18,6 +18,7 @@ import numpy as np
 from .envelope import simulate
 from .inverse_controller import LowPassFilter
 from .metrics import TransitionMetrics, transition_metrics
+from .notices import DronewptWarning
 from .params import TABLE_I, LinkParams
 from .references import TRAJECTORIES, reference_duty
 from .sbar import v2_from_duty
@@ -72,7 +73,7 @@ def modal_plant(params: LinkParams, d_short: np.ndarray, control_period_s: float
     reason = modal_range_problem(params)
     if reason is not None:
         import warnings
-        warnings.warn(reason, RuntimeWarning, stacklevel=2)
+        warnings.warn(reason, DronewptWarning, stacklevel=2)
     # the SBAR's v2 is updated at least twice a rectifier period whatever the control period (the kernel's
     # default 2 sub-steps per control period rang up to 187 A at 2e-4 s on Table I)
     substeps = max(2, 2 * math.ceil(control_period_s / params.rectifier_period_s - 1e-9))
@@ -151,7 +152,7 @@ def run_paper(params: LinkParams = TABLE_I, model: str = "envelope", t_switch_s:
             problem = _modal_inconsistency(params, name, d, out, m)
         if problem is not None:
             import warnings
-            warnings.warn(problem, RuntimeWarning, stacklevel=2)
+            warnings.warn(problem, DronewptWarning, stacklevel=2)
     return runs
 
 
