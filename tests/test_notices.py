@@ -114,7 +114,9 @@ def test_an_env_on_a_link_outside_the_modal_range_warns():
     import envs
     from envs.core import EnvConfig
     from wpt_receiver import TABLE_I
-    with pytest.warns(DronewptWarning, match=r"vdc_v / vl_v = 0.167 is below .* valid: an EnvConfig\(link=...\)"):
+    with pytest.warns(DronewptWarning, match=r"EnvConfig link \(vdc_v=5 V, r1_ohm=0.108, f_hz=85000\) with the env's "
+                      r"pack \(VL up to 32.8 V\) at the hover pose \(Lm 6.25 uH\): vdc_v / vl_v = 0.152 is below "
+                      r".* valid: an EnvConfig\(link=...\)"):
         envs.SbarChargingEnv(config=EnvConfig(link=TABLE_I.with_(vdc_v=5.0)))
     with warnings.catch_warnings(record=True) as caught:   # eq. 4's link: no exact-mode model to warn about
         warnings.simplefilter("always")
