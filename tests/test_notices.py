@@ -9,6 +9,7 @@ import dataclasses
 import os
 import subprocess
 import sys
+import time
 import warnings
 from pathlib import Path
 
@@ -215,6 +216,18 @@ def test_the_first_compilation_of_our_kernels_is_logged_once_and_not_from_the_ca
     assert off.returncode == 0 and off.stderr == ""   # what the CLI sets for the processes it starts
     users = _python("import wpt_receiver, numba\nf = numba.njit(lambda x: 2 * x)\nassert f(2) == 4\n", tmp_path / "e")
     assert users.returncode == 0 and users.stderr == ""   # a kernel of the user's own is not ours to announce
+
+
+def test_the_command_line_keeps_its_notice_on_the_terminal_only(tmp_path):
+    """``dronewpt coupling`` piped, compiling the coupling table's kernels into an empty cache: no notice (the
+    library's logged one is off in the command line, which prints its own on a terminal only)."""
+    env = {**{k: v for k, v in os.environ.items() if k != NOTICE_VAR}, "PYTHONPATH": str(ROOT),
+           "NUMBA_CACHE_DIR": str(tmp_path / "c")}
+    dx = f"{0.01 + (time.time_ns() % 10**9) * 1e-15:.15f}"   # a pose not in the disk cache of Lm: the kernels run
+    proc = subprocess.run([sys.executable, "-m", "mission_sim.cli", "coupling", "--dx", dx], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0 and "Lm = 6.2" in proc.stdout and proc.stderr == "", proc.stderr
+    assert any((tmp_path / "c").rglob("*.nbi"))   # it did compile
 
 
 # ------------------------------------------------------------------ 7. --plan without --pads
