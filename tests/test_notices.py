@@ -253,7 +253,7 @@ def test_the_default_mission_warns_nothing(capsys, tmp_path):
 
 def test_a_shipped_log_that_fits_the_pack_replays_without_a_warning(capsys, tmp_path):
     rc, err = _cli(capsys, ["replay", str(LOGS / "pyulog_sample_log_small.ulg"), "--no-plot", "--out", str(tmp_path)])
-    assert rc == 0 and err == [], err   # 23.4 V: inside the 8S pack's 21.2-32.8 V
+    assert rc == 0 and err == [], err   # 23.4 V (a 6S): inside the 8S pack's 21.2-32.8 V, at its SoC ~0.01
     rc, err = _cli(capsys, ["replay", str(LOGS / "dronekit-python_flight.tlog"), "--no-plot", "--out",
                             str(tmp_path / "b"), "--set", "battery.n_series=3"])
     assert rc == 0 and err == [], err
