@@ -22,6 +22,7 @@ objective and observation parts are shared; the plant parts differ in their plan
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -30,7 +31,8 @@ from .layout import BAT, MPAR, MSINGLE_PAR, MSTATE, N_CZ, SINGLE, SLOW, STATE
 from .parts import PlantPart, SinglePlant
 from .plant import battery_operating_point
 
-__all__ = ["ModalPlans", "build_modal_plans", "ModalPlantPart", "ModalSinglePlant", "vector_plant", "single_plant"]
+__all__ = ["ModalPlans", "build_modal_plans", "ModalPlantPart", "ModalSinglePlant", "vector_plant", "single_plant",
+           "warn_link_range"]
 
 
 def _kernel_function(name: str, compiled: bool = True):
@@ -40,13 +42,45 @@ def _kernel_function(name: str, compiled: bool = True):
 
 
 def vector_plant(cfg: EnvConfig, n: int, compiled: bool = True) -> PlantPart:
-    """The vector env's plant part of ``cfg.link_model``."""
-    return ModalPlantPart(cfg, n, compiled) if cfg.link_model == "modal" else PlantPart(cfg, n, compiled)
+    """The vector env's plant part of ``cfg.link_model`` (:func:`warn_link_range` for the exact-mode link)."""
+    if cfg.link_model != "modal":
+        return PlantPart(cfg, n, compiled)
+    warn_link_range(cfg)
+    return ModalPlantPart(cfg, n, compiled)
 
 
 def single_plant(cfg: EnvConfig, compiled: bool = True) -> SinglePlant:
-    """The single env's plant part of ``cfg.link_model``."""
-    return ModalSinglePlant(cfg, compiled) if cfg.link_model == "modal" else SinglePlant(cfg, compiled)
+    """The single env's plant part of ``cfg.link_model`` (:func:`warn_link_range` for the exact-mode link)."""
+    if cfg.link_model != "modal":
+        return SinglePlant(cfg, compiled)
+    warn_link_range(cfg)
+    return ModalSinglePlant(cfg, compiled)
+
+
+@lru_cache(maxsize=1)
+def _plant_lm_vl() -> tuple[float, float]:
+    """The plant's Lm at the hover pose [H] and its pack's highest open-circuit voltage [V] (the env's true Lm and
+    VL come from the coupling model and the battery, not from ``EnvConfig.link``'s ``lm_h`` / ``vl_v``)."""
+    from mission_sim.world.battery import BatteryParams, ocv_cell_v
+    from wpt_receiver.coupling import NOMINAL_GAP_M, default_coupling
+    lm = float(default_coupling().lm_h(0.0, 0.0, NOMINAL_GAP_M, 0.0))
+    return lm, BatteryParams().n_series * float(ocv_cell_v(1.0))
+
+
+def warn_link_range(cfg: EnvConfig) -> None:
+    """A :class:`~wpt_receiver.notices.DronewptWarning` when the env's link (``cfg.link`` at the hover pose's Lm and
+    the pack's full voltage: :func:`_plant_lm_vl`) is outside the range where the exact-mode model was checked
+    against the switching model (:func:`wpt_receiver.paper.modal_range_problem`, the limits' one source); once
+    per env built (~50 us), nothing per step."""
+    from wpt_receiver.paper import modal_range_problem
+    lm, vl = _plant_lm_vl()
+    problem = modal_range_problem(cfg.link.with_(lm_h=lm, vl_v=vl), remedy=(
+        "the env has no switching-level link, so its currents, peaks and energies may be off; valid: an "
+        "EnvConfig(link=...) inside that range"))
+    if problem is not None:
+        from wpt_receiver.notices import warn
+        warn(f"EnvConfig link (vdc_v={cfg.link.vdc_v:g} V, r1_ohm={cfg.link.r1_ohm:g}, f_hz={cfg.link.f_hz:g}) with the "
+             f"env's pack (VL up to {vl:.3g} V) at the hover pose (Lm {lm * 1e6:.3g} uH): {problem}")
 
 
 @dataclass

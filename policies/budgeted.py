@@ -47,6 +47,7 @@ class BudgetedModelBasedPolicy(ModelBasedPolicy):
     """Model-based controller whose reference after the stop is ``(1 + budget) I2_sm``."""
 
     name = "model_based_budget"
+    uses_link_model = True   # plans its after-stop duties on the context's link_model
 
     def __init__(self, ctx: PolicyContext = PolicyContext(), lpf: LowPassFilter = LowPassFilter(),
                  budget: float = 0.02, eq4_relaxation: bool = False):

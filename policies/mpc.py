@@ -314,6 +314,7 @@ class MPCPolicy:
     delays [control periods] its estimator tells apart (``(0,)``: a plain Kalman filter)."""
 
     name = "mpc"
+    uses_link_model = True   # predicts with the context's link_model (mission_sim.setup_warnings)
 
     def __init__(self, ctx: PolicyContext = PolicyContext(), budget: float = 0.0, link=None,
                  devices: str = "schottky", delays=DELAYS):

@@ -129,6 +129,7 @@ class OracleImitationFilteredPolicy(OracleImitationPolicy):
     steps after the stop of each receiver in which the filter did not play rate 1."""
 
     name = "oracle_imitation_filtered"
+    uses_link_model = True   # the MPC's model and estimator of the context's link_model
 
     def __init__(self, ctx: PolicyContext = PolicyContext(), path=PRETRAINED_ORACLE_IMITATION, limit=LIMIT,
                  slow=SLOW, rates=RATES, max_lag=MAX_LAG, lock=LOCK, every_period=EVERY_PERIOD, lam=LAM,

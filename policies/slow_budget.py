@@ -187,6 +187,7 @@ class SlowBudgetPolicy:
     (``--slow-budget-every window``, the shipped seeds) or every control period (``step``)."""
 
     name = "slow_budget"
+    uses_link_model = True   # the MPC's model of the context's link_model
 
     def __init__(self, ctx: PolicyContext = PolicyContext(), path=None, fast: bool = True):
         from .rl import RLPolicy

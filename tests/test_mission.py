@@ -159,7 +159,7 @@ def test_default_mission_energy_closes_and_summary_is_complete(default_runs, tmp
         # rectifier delivers 1-2 % less current than commanded and the CV taper is slower
         assert ts["soc"].max() > 0.99 and s["final_soc"] > s["final_soc_without_charging"]
     from mission_sim.figures.mission import plot_mission
-    files = runs["model_based"].write(tmp_path) + [Path(f) for f in plot_mission(runs["model_based"], tmp_path)]
+    files = runs["model_based"].write(tmp_path, csv=True) + [Path(f) for f in plot_mission(runs["model_based"], tmp_path)]
     names = {f.name for f in files}
     assert {"timeseries.parquet", "timeseries.csv", "summary.json", "i2_envelope.png", "lm.png", "soc.png",
             "power.png", "trajectory.png"} <= names

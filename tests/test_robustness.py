@@ -90,7 +90,7 @@ def test_interrupted_write_leaves_no_partial_file_and_no_stale_summary(tmp_path,
 
     monkeypatch.setattr(pd.DataFrame, "to_csv", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        _small_result().write(tmp_path)
+        _small_result().write(tmp_path, csv=True)
     names = sorted(p.name for p in tmp_path.iterdir())
     assert names == ["timeseries.csv", "timeseries.parquet"]  # no summary.json, no temporary file
     assert (tmp_path / "timeseries.csv").read_text() == "old,complete\n1,2\n"  # the old file, untouched

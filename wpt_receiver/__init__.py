@@ -26,6 +26,7 @@ Depends on nothing else of dronewpt. Modules, in the order data flows:
                         ``modal_kernel`` and a mission run by the ahead-of-time build)
 ``kernel_cache``        numba's cache of a kernel dropped when a module it compiles in changes; an
                         installed copy's numba cache kept out of site-packages
+``notices``             :class:`DronewptWarning`; the one notice when numba compiles our kernels (logged)
 ``numba_start``         numba's start-up without the scipy.linalg package (its BLAS probe's module alone),
                         cache loads without numba's registries
 ``sizing``              rectifier rating, parts and mass per policy (switching or envelope runs)
@@ -39,6 +40,10 @@ Depends on nothing else of dronewpt. Modules, in the order data flows:
 from .kernel_cache import place_numba_cache
 
 place_numba_cache(__path__[0])      # an installed copy: numba's cache in dronewpt's disk cache, not site-packages
+
+from .notices import listen_for_compilation
+
+listen_for_compilation()            # one notice when numba first compiles one of our kernels (a silent ~40 s)
 
 from .envelope import EnvelopeLink, coefficients, g22, simulate, state_matrices, steady_state, zoh_discretise
 from .inverse_controller import InverseModelController, LowPassFilter

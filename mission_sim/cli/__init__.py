@@ -12,7 +12,7 @@ subcommands import what they need lazily, inside the function that runs them.
 ``sweep``     ``sweep`` (parameter studies on Dask)
 ``sizing``    ``sizing`` (rectifier rating, parts and mass per policy)
 ``warmup``    ``warmup`` (compile the numba kernels ahead, once per machine)
-``notices``   the one-line notice when numba compiles kernels (first run on a machine)
+``notices``   the one-line notice when numba compiles kernels (first run on a machine), warnings as one line
 ``calibrate`` ``calibrate`` (the drone power model fitted to a flight log's battery power)
 ``controller``  ``export-controller`` (the paper's controller as C99 for a DSP)
 ``netlist``   ``netlist`` (SPICE netlist of the switching model's circuit and devices)
@@ -131,10 +131,13 @@ def _main(argv=None) -> int:
         parser.print_help()
         return 2
     try:
+        from .notices import announce_compilation, quiet_compilation, warning_lines
         if show_progress(args):  # a terminal: say so when numba compiles (the first run's silent half-minute)
-            from .notices import announce_compilation
             announce_compilation()
-        rc = int(args.func(args) or 0)
+        else:
+            quiet_compilation()
+        with warning_lines(args.command):   # the library's warnings as one line each
+            rc = int(args.func(args) or 0)
         from ..signals import raise_lost
         raise_lost()   # a SIGTERM / Ctrl-C that landed in a callback is still an interrupt
         return rc

@@ -235,9 +235,10 @@ def show_progress(args) -> bool:
 
 
 def write_mission(result, out_dir, plots: bool, progress: bool = False) -> list[str]:
-    """Write a mission's data files, unless ``plots`` is false its figures, and ``summary.json`` last
-    (see :meth:`mission_sim.world.results.MissionResult.write`; ``progress``: a bar); returns the paths."""
+    """Write a mission's data files (Parquet and CSV: ``replay``'s ``mission/`` and ``refly/`` have always had the
+    CSV), unless ``plots`` is false its figures, and ``summary.json`` last (see
+    :meth:`mission_sim.world.results.MissionResult.write`; ``progress``: a bar); returns the paths."""
     figures = None
     if plots:
         from ..figures.mission import plot_mission as figures
-    return [str(f) for f in result.write(out_dir, figures=figures, progress=progress)]
+    return [str(f) for f in result.write(out_dir, figures=figures, progress=progress, csv=True)]

@@ -51,6 +51,11 @@ def _mav_config(args, overrides=None, single_pad=False):
                          mission_file_keys(parse_set(args.set)))
     if single_pad:
         d["pads"] = [{"x_m": 0.0, "y_m": 0.0, "z_m": 0.0}]
+    else:
+        from .mission import default_pads_notice
+        default_pads_notice(getattr(args, "command", "telemetry"), getattr(args, "plan", None),
+                            getattr(args, "mission_pads", None), d, parse_set(args.set),
+                            "a config file with your own [[pads]]")
     drone = {}
     if getattr(args, "drone", None) is not None:
         from ..mavlink.calibrate import read_drone_toml

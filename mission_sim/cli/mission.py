@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+import tomllib
 from pathlib import Path
 
 from ..files import folder_lock
@@ -140,9 +141,27 @@ def mission_config(args):
         overrides = {**read_drone_toml(args.drone), **overrides}
     files = mission_file_keys(overrides)
     d = mconfig.load_config_dict(args.config, getattr(args, "plan", None), getattr(args, "pads", None), files)
+    default_pads_notice(getattr(args, "command", "mission"), getattr(args, "plan", None), getattr(args, "pads", None),
+                        d, overrides, "--no-charge to fly it without charging")
     cfg = mconfig.config_from_dict(mconfig.apply_overrides(d, overrides) if overrides else d)
     check_run_size(cfg, force=getattr(args, "force", False))
     return cfg
+
+
+def default_pads_notice(command: str, plan, pads, d: dict, overrides: dict, none_hint: str) -> None:
+    """``--plan`` without ``--pads`` (and no pads of the user's: a config's ``[[pads]]`` or ``pads_file``, a ``--set
+    pads.*``): one line on stderr saying the built-in mission's pads are kept, about the plan's home, and how to
+    give one's own or none (``none_hint``)."""
+    if plan is None or pads is not None or any(str(k).startswith("pads.") for k in overrides):
+        return
+    from ..config import DEFAULT_MISSION_TOML
+    default = tomllib.loads(DEFAULT_MISSION_TOML)["pads"]
+    if d.get("pads") != default:
+        return
+    where = " and ".join(f"({p.get('x_m', 0.0):g}, {p.get('y_m', 0.0):g})" for p in default)
+    print(f"dronewpt {command}: note: --plan without --pads keeps the built-in mission's {len(default)} pads, at "
+          f"{where} m about the plan's home (a loiter within mission.pad_radius_m of one charges there); give your "
+          f"own with --pads FILE (CSV lat,lon[,alt][,hover_time_s] or GeoJSON), or {none_hint}", file=sys.stderr)
 
 
 def make_policy(name: str, cfg):

@@ -63,6 +63,8 @@ def cmd_refly(args) -> int:
     s["files"] = files
     with atomic_output(args.out / "refly_summary.json") as tmp:
         tmp.write_text(json.dumps(s, indent=2, allow_nan=False, default=float))
+    for w in s["warnings"]:
+        print(f"dronewpt replay: warning: {w}", file=sys.stderr)
     if args.format == "json":
         print(json.dumps(s, allow_nan=False, default=float))
         return 0

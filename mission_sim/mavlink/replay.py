@@ -30,6 +30,7 @@ from .logs import FlightLog, read_log
 
 __all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "flight_stats",
            "logged_energy_j", "compare_power", "fit_mass_kg", "resample_track", "replay_trajectory", "ReplayResult", "replay_log", "parse_window",
+           "battery_voltage_warning",
            "choose_segment", "replay_span"]
 
 
@@ -413,6 +414,30 @@ def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
     return out
 
 
+def battery_voltage_warning(log: FlightLog, battery) -> str | None:
+    """One line when the log's battery voltage (the median of its positive samples) lies outside the model pack's
+    open-circuit range ``n_series x [OCV(0), OCV(1)]`` (8S: 21.2-32.8 V): the replay flies the config's pack (its
+    energy, SoC and voltage), not the logged one. Names the cell count whose OCV at SoC 0.5 is nearest the logged
+    voltage (``--set battery.n_series=N``). None when the log has no battery voltage or it fits."""
+    from ..world.battery import ocv_cell_v
+
+    if not len(log.battery) or "voltage_v" not in log.battery:
+        return None
+    v = log.battery["voltage_v"].to_numpy(float)
+    v = v[np.isfinite(v) & (v > 0)]
+    if not len(v):
+        return None
+    med, n = float(np.median(v)), battery.n_series
+    lo, hi = n * float(ocv_cell_v(0.0)), n * float(ocv_cell_v(1.0))
+    if lo <= med <= hi:
+        return None
+    fit = int(min(32, max(1, round(med / float(ocv_cell_v(0.5))))))
+    return (f"{log.path.name}: the logged battery voltage (median {med:.1f} V) is outside the model pack's "
+            f"open-circuit range {lo:.1f}-{hi:.1f} V (battery.n_series={n} x {lo / n:.3f}-{hi / n:.3f} V per cell): "
+            f"the replay flies the config's pack, not the logged one; a {fit}-cell pack fits "
+            f"(--set battery.n_series={fit}; and its battery.capacity_ah)")
+
+
 def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: float | None = None,
                window: tuple[float, float] | None = None, progress: bool = False,
                segment: int | None = None) -> ReplayResult:
@@ -450,7 +475,7 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
         "sim_time_s": float(ms["sim_time_s"]),
         "window_s": list(window) if window else None,
         "battery_source": log.battery_source,
-        "warnings": replay_warnings(log, track),
+        "warnings": replay_warnings(log, track) + [w for w in (battery_voltage_warning(log, cfg.battery),) if w],
     })
     table = None
     if len(log.battery):

@@ -156,6 +156,7 @@ def refly_log(log, cfg, policy, *, pad=None, ground_gap_m=None, window=None, rea
     """Re-fly ``log`` (a FlightLog) with the pads of ``cfg`` (pad frame = ENU about ``pad``, default
     the take-off spot, as in :func:`~mission_sim.mavlink.replay.replay_log`) and compare; see the
     module docstring and :func:`plan_refly` (its errors)."""
+    from ..mavlink.replay import battery_voltage_warning
     from ..world.runner import run_mission
     track, pads_xyz, detours, skipped = plan_refly(log, cfg, pad=pad, ground_gap_m=ground_gap_m, window=window,
                                                    reach_m=reach_m)
@@ -182,5 +183,6 @@ def refly_log(log, cfg, policy, *, pad=None, ground_gap_m=None, window=None, rea
         "net_battery_energy_gain_j": float(cfg.battery.usable_energy_j(s["final_soc"])
                                            - cfg.battery.usable_energy_j(o["final_soc"])),
         "battery_depleted_logged_flight": bool(o["battery_depleted"]), "battery_depleted_refly": bool(s["battery_depleted"]),
+        "warnings": [w for w in (battery_voltage_warning(log, cfg.battery),) if w],
     }
     return ReflyResult(original, refly, track, new, pads_xyz, detours, summary)

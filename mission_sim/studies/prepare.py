@@ -110,4 +110,16 @@ def prepare_study(study: Study, make_policy: Callable | None = None, policy_name
             raise ValueError(f"policy={bad[0]!r} is invalid; valid values: {', '.join(sorted(valid))}")
     if check_values:
         check_cases(cases, runner, progress=progress)
+        _warn_study(study, runner)
     return runner, cases, fingerprint
+
+
+def _warn_study(study: Study, runner) -> None:
+    """The runner's setup warnings of the checked cases (``study_warnings(name)``, if it has it), once per study
+    as :class:`~wpt_receiver.notices.DronewptWarning` (the cases themselves run without warnings)."""
+    notes = getattr(runner, "study_warnings", None)
+    if notes is None:
+        return
+    from wpt_receiver.notices import warn
+    for text in notes(study.name):
+        warn(text)

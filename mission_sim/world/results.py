@@ -39,8 +39,9 @@ class MissionResult:
     trajectory: object = None
     extra: dict = field(default_factory=dict)
 
-    def write(self, out_dir, figures=None, progress: bool = False, csv: bool = True) -> list[Path]:
-        """Write ``timeseries.parquet``, ``timeseries.csv`` (unless ``csv`` is False), the figures of ``figures(result, out_dir)``
+    def write(self, out_dir, figures=None, progress: bool = False, csv: bool = False) -> list[Path]:
+        """Write ``timeseries.parquet``, ``timeseries.csv`` (only with ``csv=True``, as ``dronewpt mission --csv``;
+        the default until 2026-11-27 was True), the figures of ``figures(result, out_dir)``
         (if given, e.g. :func:`mission_sim.figures.mission.plot_mission`) and ``summary.json`` last.
 
         Every file is written under a temporary name and renamed when complete (removed on any failure:

@@ -76,12 +76,12 @@ from .results import MissionResult
 from .samples import lm_along as _lm_along
 from .trajectory import PlannedTrajectory, Trajectory
 
-__all__ = ["run_mission", "check_policy_context", "ENERGISE_PHASES", "_lm_along"]
+__all__ = ["run_mission", "check_policy_context", "warn_setup", "ENERGISE_PHASES", "_lm_along"]
 
 
 def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bool = True,
                 progress: bool = False, compiled: bool | None = None, frame: bool = True,
-                sink=None) -> MissionResult:
+                sink=None, warn: bool = True) -> MissionResult:
     """Run one mission; returns a :class:`~mission_sim.world.results.MissionResult`.
 
     ``policy`` is a :class:`mission_sim.contract.Policy` made for ``control_period_s =
@@ -97,8 +97,14 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     :class:`~.stream.SeriesWriter`) receives the charged run's rows in blocks as they are produced.
     A policy whose context (``policy.ctx``) has another ``control_period_s`` or ``rated_i2_a`` than ``cfg``
     is refused (``ValueError``): make it with ``mission_sim.config.policy_context(cfg)``.
+    ``warn``: before the run, :func:`mission_sim.setup_warnings.mission_warnings` as
+    :class:`wpt_receiver.notices.DronewptWarning` (a link outside the exact-mode model's checked range, a pad the
+    route never comes near, a policy made for another link model; none with ``charge=False``); False skips them (a
+    sweep warns once per study).
     """
     check_policy_context(cfg, policy)
+    if warn and charge:   # (pads never energised: neither the link nor the pads matter)
+        warn_setup(cfg, policy, own_route=trajectory is None)
     try:
         res = _run_mission(cfg, policy, trajectory, charge, progress, compiled, frame, sink)
         bad = [k for k, v in res.summary.items() if isinstance(v, float) and not np.isfinite(v)]
@@ -111,6 +117,16 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
             f"the inputs that differ from the default mission, farthest first: {', '.join(keys)})" if keys else
             "with the default mission's inputs)")) from None
     return res
+
+
+def warn_setup(cfg, policy, own_route: bool = True) -> None:
+    """:func:`mission_sim.setup_warnings.mission_warnings` of the mission, each a
+    :class:`~wpt_receiver.notices.DronewptWarning` pointed at the caller outside dronewpt."""
+    from wpt_receiver.notices import warn
+
+    from ..setup_warnings import mission_warnings
+    for text in mission_warnings(cfg, policy, own_route):
+        warn(text)
 
 
 def check_policy_context(cfg, policy) -> None:

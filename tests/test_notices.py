@@ -1,0 +1,273 @@
+"""Where dronewpt did something surprising without a word (docs/robustness.md, "Warnings (2026-11-27)"): each
+case warns once (Python: a ``DronewptWarning``; the CLI: one line ``dronewpt COMMAND: warning: ...``, exit status
+unchanged), and the default mission, the default env, a shipped log and the shipped example study warn nothing.
+Each warning test failed before the change (no warning, no line)."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import subprocess
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import pytest
+
+import policies
+from mission_sim.cli import main
+from mission_sim.config import (apply_overrides, config_from_dict, config_to_dict, load_config, load_config_dict,
+                                policy_context)
+from mission_sim.world.runner import run_mission
+from wpt_receiver.notices import NOTICE, NOTICE_VAR, DronewptWarning
+
+ROOT = Path(__file__).resolve().parents[1]
+MISSIONS = ROOT / "tests" / "data" / "missions"
+LOGS = ROOT / "tests" / "data" / "flightlogs"
+SQUARE = MISSIONS / "qgc_simple_square.plan"   # home (47.397742, 8.545594): four waypoints, no loiter
+
+
+def _cfg(**overrides):
+    return config_from_dict(apply_overrides(config_to_dict(load_config()), overrides))
+
+
+def _ours(caught) -> list[str]:
+    return [str(w.message) for w in caught if issubclass(w.category, DronewptWarning)]
+
+
+def _quiet_run(*args, **kw) -> list[str]:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        run_mission(*args, **kw)
+    return _ours(caught)
+
+
+def _cli(capsys, argv) -> tuple[int, list[str]]:
+    rc = main(argv)
+    return rc, capsys.readouterr().err.strip().splitlines()
+
+
+# ------------------------------------------------------------------ 1. the exact-mode link outside its checked range
+def test_a_mission_outside_the_modal_range_warns_once_from_python():
+    """docs' example: a 32S pack (VL up to 32 x 4.1 = 131.2 V at CV) on Vdc 30 V: Vdc/VL = 0.229 < 0.25."""
+    cfg = _cfg(**{"battery.n_series": 32})
+    pol = policies.make("model_based", policy_context(cfg))
+    with pytest.warns(DronewptWarning) as rec:
+        run_mission(cfg, pol, frame=False)
+    msgs = _ours(rec)
+    assert len(msgs) == 1 and rec[0].filename == __file__   # pointed at the caller
+    assert "link.vdc_v=30 V with battery.n_series=32 (VL up to 131.2 V" in msgs[0]
+    assert "vdc_v / vl_v = 0.229 is below the exact-mode model's checked range (>= 0.25" in msgs[0]
+    assert "valid: raise link.vdc_v" in msgs[0]
+
+
+def test_the_limits_have_one_source(monkeypatch):
+    """``wpt_receiver.paper.MODAL_MIN_VOLTAGE_RATIO`` moved: the mission's check moves with it."""
+    import wpt_receiver.paper as paper
+    from mission_sim.setup_warnings import link_range_warning
+    cfg = _cfg(**{"battery.n_series": 32})
+    assert link_range_warning(cfg) is not None
+    monkeypatch.setattr(paper, "MODAL_MIN_VOLTAGE_RATIO", 0.2)
+    assert link_range_warning(cfg) is None
+
+
+def test_a_pad_far_below_the_emf_margin_warns():
+    """A 0.9 m hover gap: Lm 0.168 uH, emf margin 0.76 < 2 (the rectifier hardly conducts)."""
+    from mission_sim.setup_warnings import link_range_warning
+    text = link_range_warning(_cfg(**{"mission.hover_gap_m": 0.9}))
+    assert "emf margin wLm V1 / (R1 (4/pi) VL) = 0.759 is below the exact-mode model's checked range (>= 2" in text
+
+
+def test_the_mission_command_warns_in_one_line_exit_status_unchanged(capsys, tmp_path):
+    rc, err = _cli(capsys, ["mission", "--no-plot", "--out", str(tmp_path), "--set", "battery.n_series=32"])
+    assert rc == 0 and len(err) == 1, err
+    assert err[0].startswith("dronewpt mission: warning: link.vdc_v=30 V with battery.n_series=32")
+
+
+def test_telemetry_warns_too(capsys, tmp_path):
+    rc, err = _cli(capsys, ["telemetry", "--connect", "none", "--tlog", str(tmp_path / "x.tlog"), "--speed", "inf",
+                            "--no-progress", "--set", "battery.n_series=32"])
+    assert rc == 0 and [e for e in err if "warning" in e] == [e for e in err if "vdc_v / vl_v = 0.229" in e], err
+    assert len([e for e in err if "vdc_v / vl_v" in e]) == 1
+
+
+def _study(tmp_path, body: str):
+    from mission_sim.studies.study import load_study
+    path = tmp_path / "study.toml"
+    path.write_text(body)
+    return load_study(path)
+
+
+def test_a_sweep_warns_once_per_study_not_per_case(tmp_path):
+    from mission_sim.studies.prepare import prepare_study
+    study = _study(tmp_path, '[study]\nname = "hv"\n[fixed]\n"battery.n_series" = 32\n'
+                             '[grid]\n"wind.speed_m_s" = [1.0, 2.0, 3.0]\n')
+    with pytest.warns(DronewptWarning) as rec:
+        runner, cases, _ = prepare_study(study, policies.make, policies.available())
+    msgs = _ours(rec)
+    assert len(msgs) == 1 and msgs[0].startswith("3 of 3 cases of study 'hv': link.vdc_v=30 V"), msgs
+    assert _quiet_run(runner.config({}), policies.make("model_based", policy_context(runner.config({}))),
+                      frame=False, warn=False) == []   # the cases run without it
+
+
+def test_an_env_on_a_link_outside_the_modal_range_warns():
+    import envs
+    from envs.core import EnvConfig
+    from wpt_receiver import TABLE_I
+    with pytest.warns(DronewptWarning, match=r"EnvConfig link \(vdc_v=5 V, r1_ohm=0.108, f_hz=85000\) with the env's "
+                      r"pack \(VL up to 32.8 V\) at the hover pose \(Lm 6.25 uH\): vdc_v / vl_v = 0.152 is below "
+                      r".* valid: an EnvConfig\(link=...\)"):
+        envs.SbarChargingEnv(config=EnvConfig(link=TABLE_I.with_(vdc_v=5.0)))
+    with warnings.catch_warnings(record=True) as caught:   # eq. 4's link: no exact-mode model to warn about
+        warnings.simplefilter("always")
+        envs.SbarChargingEnv(config=EnvConfig(link=TABLE_I.with_(vdc_v=5.0), link_model="envelope"))
+    assert _ours(caught) == []
+
+
+# ------------------------------------------------------------------ 2. a pad the route never comes near
+def test_a_pad_no_loiter_comes_near_warns_with_its_closest_approach():
+    d = load_config_dict(None, SQUARE)   # the built-in pads kept about the plan's home
+    cfg = config_from_dict(d)
+    msgs = _quiet_run(cfg, policies.make("model_based", policy_context(cfg)), frame=False)
+    assert msgs == [
+        "pad 0 at (0.0, 0.0) m charges nothing: no loiter of the route within mission.pad_radius_m=5 m of it (closest "
+        "approach 0.0 m); valid: a loiter item over the pad, a larger mission.pad_radius_m, or leave the pad out",
+        "pad 1 at (40.0, 20.0) m charges nothing: no loiter of the route within mission.pad_radius_m=5 m of it (closest "
+        "approach 21.9 m); valid: a loiter item over the pad, a larger mission.pad_radius_m, or leave the pad out"]
+
+
+def test_closest_approach_is_the_distance_to_the_route_polyline():
+    from mission_sim.setup_warnings import _distance_to_route
+    assert _distance_to_route(1.0, 5.0, [(0.0, 0.0), (10.0, 0.0)]) == 5.0
+    assert _distance_to_route(13.0, 4.0, [(0.0, 0.0), (10.0, 0.0)]) == 5.0
+    assert _distance_to_route(3.0, 4.0, [(0.0, 0.0)]) == 5.0
+
+
+# ------------------------------------------------------------------ 3. replay's pack against the logged voltage
+def test_replay_warns_when_the_logged_voltage_is_far_from_the_model_pack():
+    from mission_sim.mavlink.logs import read_log
+    from mission_sim.mavlink.replay import battery_voltage_warning
+    cfg = load_config()
+    log = read_log(LOGS / "dronekit-python_flight.tlog")   # a 3S quad, median 11.1 V
+    text = battery_voltage_warning(log, cfg.battery)
+    assert text == ("dronekit-python_flight.tlog: the logged battery voltage (median 11.1 V) is outside the model "
+                    "pack's open-circuit range 21.2-32.8 V (battery.n_series=8 x 2.654-4.103 V per cell): the replay "
+                    "flies the config's pack, not the logged one; a 3-cell pack fits (--set battery.n_series=3; and "
+                    "its battery.capacity_ah)")
+    assert battery_voltage_warning(log, dataclasses.replace(cfg.battery, n_series=3)) is None
+    assert battery_voltage_warning(read_log(LOGS / "dronekit-la-testdata_log171.bin"), cfg.battery).endswith(
+        "a 4-cell pack fits (--set battery.n_series=4; and its battery.capacity_ah)")
+
+
+def test_the_replay_command_prints_it(capsys, tmp_path):
+    rc, err = _cli(capsys, ["replay", str(LOGS / "dronekit-python_flight.tlog"), "--no-plot", "--out", str(tmp_path)])
+    assert rc == 0 and err == ["dronewpt replay: warning: dronekit-python_flight.tlog: the logged battery voltage "
+                               "(median 11.1 V) is outside the model pack's open-circuit range 21.2-32.8 V (battery."
+                               "n_series=8 x 2.654-4.103 V per cell): the replay flies the config's pack, not the "
+                               "logged one; a 3-cell pack fits (--set battery.n_series=3; and its battery.capacity_ah)"]
+
+
+# ------------------------------------------------------------------ 4. a policy made for another link model
+def test_run_mission_warns_on_a_policy_that_predicts_with_another_link_model():
+    """``policies.make("model_based_budget:0.1")`` alone: a standalone context, eq. 4's link, whose after-stop plan
+    the policy predicts with; the same made with ``policy_context(cfg)`` (the exact modes), or a policy that reads no
+    link model (``model_based``), runs without a word."""
+    cfg = load_config()
+    msgs = _quiet_run(cfg, policies.make("model_based_budget:0.1"), frame=False)
+    assert msgs == ["the policy 'model_based_budget:0.1' predicts with link_model='envelope', the mission runs 'modal' "
+                    "(the exact-mode link): it assumes another plant than it controls; valid: make it with "
+                    "mission_sim.config.policy_context(cfg)"]
+    from mission_sim.setup_warnings import policy_link_warning
+    assert policy_link_warning(cfg, policies.make("model_based_budget:0.1", policy_context(cfg))) is None
+    assert policy_link_warning(cfg, policies.make("model_based")) is None
+
+
+# ------------------------------------------------------------------ 5. CSV on request, as the CLI
+def test_mission_result_write_has_no_csv_unless_asked(tmp_path):
+    cfg = load_config()
+    res = run_mission(cfg, policies.make("model_based", policy_context(cfg)))
+    names = {p.name for p in res.write(tmp_path / "a")}
+    assert names == {"timeseries.parquet", "summary.json"}
+    assert "timeseries.csv" in {p.name for p in res.write(tmp_path / "b", csv=True)}
+
+
+# ------------------------------------------------------------------ 6. the first compilation, from Python
+def _python(code: str, cache: Path) -> subprocess.CompletedProcess:
+    env = {**{k: v for k, v in os.environ.items() if k != NOTICE_VAR}, "PYTHONPATH": str(ROOT),
+           "NUMBA_CACHE_DIR": str(cache)}   # (a main() run in this process set NOTICE_VAR for its children)
+    return subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True,
+                          timeout=600)
+
+
+OURS = "from wpt_receiver.coupling_kernel import _mirror\nassert _mirror(3, 10) == 3\n"
+
+
+def test_the_first_compilation_of_our_kernels_is_logged_once_and_not_from_the_cache(tmp_path):
+    first = _python("import wpt_receiver\n" + OURS + "from wpt_receiver.coupling_kernel import _weights\n"
+                    "_weights(0.5)\n", tmp_path / "c")
+    assert first.returncode == 0 and first.stderr.count(NOTICE) == 1, first.stderr
+    assert first.stderr.strip() == f"dronewpt: {NOTICE}"
+    again = _python("import wpt_receiver\n" + OURS, tmp_path / "c")   # loaded from the cache: silent
+    assert again.returncode == 0 and again.stderr == "", again.stderr
+    configured = _python("import logging\nlogging.basicConfig(level=logging.ERROR)\n" + OURS, tmp_path / "d")
+    assert configured.returncode == 0 and NOTICE not in configured.stderr   # the user's logging decides
+    off = _python("import os\nos.environ['DRONEWPT_COMPILE_NOTICE'] = '0'\n" + OURS, tmp_path / "f")
+    assert off.returncode == 0 and off.stderr == ""   # what the CLI sets for the processes it starts
+    users = _python("import wpt_receiver, numba\nf = numba.njit(lambda x: 2 * x)\nassert f(2) == 4\n", tmp_path / "e")
+    assert users.returncode == 0 and users.stderr == ""   # a kernel of the user's own is not ours to announce
+
+
+def test_the_command_line_keeps_its_notice_on_the_terminal_only(tmp_path):
+    """``dronewpt coupling`` piped, compiling the coupling table's kernels into an empty cache: no notice (the
+    library's logged one is off in the command line, which prints its own on a terminal only)."""
+    env = {**{k: v for k, v in os.environ.items() if k != NOTICE_VAR}, "PYTHONPATH": str(ROOT),
+           "NUMBA_CACHE_DIR": str(tmp_path / "c")}
+    dx = f"{0.01 + (time.time_ns() % 10**9) * 1e-15:.15f}"   # a pose not in the disk cache of Lm: the kernels run
+    proc = subprocess.run([sys.executable, "-m", "mission_sim.cli", "coupling", "--dx", dx], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0 and "Lm = 6.2" in proc.stdout and proc.stderr == "", proc.stderr
+    assert any((tmp_path / "c").rglob("*.nbi"))   # it did compile
+
+
+# ------------------------------------------------------------------ 7. --plan without --pads
+def test_plan_without_pads_says_the_built_in_pads_are_kept(capsys, tmp_path):
+    rc, err = _cli(capsys, ["mission", "--plan", str(SQUARE), "--dry-run"])
+    assert rc == 0 and err == [
+        "dronewpt mission: note: --plan without --pads keeps the built-in mission's 2 pads, at (0, 0) and (40, 20) m "
+        "about the plan's home (a loiter within mission.pad_radius_m of one charges there); give your own with --pads "
+        "FILE (CSV lat,lon[,alt][,hover_time_s] or GeoJSON), or --no-charge to fly it without charging"]
+    pads = tmp_path / "pads.csv"
+    pads.write_text("lat,lon\n47.398742,8.546594\n")
+    rc, err = _cli(capsys, ["mission", "--plan", str(SQUARE), "--pads", str(pads), "--dry-run"])
+    assert rc == 0 and err == [], err
+
+
+# ------------------------------------------------------------------ no noise for normal use
+def test_the_default_mission_warns_nothing(capsys, tmp_path):
+    cfg = load_config()
+    assert _quiet_run(cfg, policies.make("model_based", policy_context(cfg)), frame=False) == []
+    rc, err = _cli(capsys, ["mission", "--no-plot", "--out", str(tmp_path)])
+    assert rc == 0 and err == [], err
+
+
+def test_a_shipped_log_that_fits_the_pack_replays_without_a_warning(capsys, tmp_path):
+    rc, err = _cli(capsys, ["replay", str(LOGS / "pyulog_sample_log_small.ulg"), "--no-plot", "--out", str(tmp_path)])
+    assert rc == 0 and err == [], err   # 23.4 V (a 6S): inside the 8S pack's 21.2-32.8 V, at its SoC ~0.01
+    rc, err = _cli(capsys, ["replay", str(LOGS / "dronekit-python_flight.tlog"), "--no-plot", "--out",
+                            str(tmp_path / "b"), "--set", "battery.n_series=3"])
+    assert rc == 0 and err == [], err
+
+
+def test_the_shipped_example_study_and_the_default_env_warn_nothing():
+    import envs
+    from mission_sim.studies.prepare import prepare_study
+    from mission_sim.studies.study import load_study
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for example in sorted((ROOT / "examples").glob("*.toml")):
+            prepare_study(load_study(example), policies.make, policies.available())
+        env = envs.SbarChargingEnv()
+        env.reset(seed=0)
+        env.step(env.action_space.sample())
+    assert _ours(caught) == []
