@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Iterable
 
-from .study import POLICY_KEY
+from .study import DEFAULT_POLICY, POLICY_KEY
 
 __all__ = ["MissionCaseRunner", "MissionParamChecker"]
 
@@ -23,12 +23,14 @@ _CACHE_MAX = 200_000  # section value sets remembered (continuous Monte Carlo dr
 
 
 class MissionParamChecker:
-    """``checker(overrides) -> None | error message`` for a base mission dict (``config_to_dict``)."""
+    """``checker(overrides) -> None | error message`` for a base mission dict (``config_to_dict``).
+    ``run_size``: also the planned mission's run-size estimate (False for replays: the log is the route)."""
 
-    def __init__(self, base: dict):
+    def __init__(self, base: dict, run_size: bool = True):
         from ..config import config_from_dict
 
         self.base = base
+        self.run_size = run_size
         self.cfg = config_from_dict(base)
         self._sections: dict[tuple, object] = {}
         self._sizes: dict[tuple, str | None] = {}
@@ -87,7 +89,7 @@ class MissionParamChecker:
             cfg = dataclasses.replace(self.cfg, pads=tuple(pads), **kw)  # cross-field checks
         except ValueError as exc:
             return str(exc)
-        return self._size_error(cfg)
+        return self._size_error(cfg) if self.run_size else None
 
 
 class MissionCaseRunner:
@@ -98,6 +100,8 @@ class MissionCaseRunner:
         picklable by reference, so workers import ``policies`` themselves)
     policy_names : the valid policy names (checked before a sweep starts), or None
     """
+
+    _check_run_size = True   # the planned mission's run-size estimate is part of a case's check
 
     def __init__(self, base: dict, make_policy: Callable, policy_names: Iterable[str] | None = None):
         self.base = base
@@ -122,11 +126,11 @@ class MissionCaseRunner:
 
     def check_params(self, params: dict) -> str | None:
         """None if the case would build its mission, else the error (naming the key and value)."""
-        policy = params.get(POLICY_KEY, "model_based")
+        policy = params.get(POLICY_KEY, DEFAULT_POLICY)
         if self.policy_names is not None and policy not in self.policy_names:
             return f"policy={policy!r} is invalid; valid values: {', '.join(sorted(self.policy_names))}"
         if self._checker is None:
-            self._checker = MissionParamChecker(self.base)
+            self._checker = MissionParamChecker(self.base, self._check_run_size)
         return self._checker({k: v for k, v in params.items() if k != POLICY_KEY})
 
     def __call__(self, params: dict) -> dict:
@@ -135,7 +139,7 @@ class MissionCaseRunner:
         from ..world.runner import run_mission
 
         cfg = self.config(params)
-        policy = self.make_policy(params.get(POLICY_KEY, "model_based"), policy_context(cfg))
+        policy = self.make_policy(params.get(POLICY_KEY, DEFAULT_POLICY), policy_context(cfg))
         return dict(run_mission(cfg, policy, frame=False).summary)
 
     def warm(self) -> None:
