@@ -56,6 +56,14 @@ def load_inputs(kind: str, path: Path, sha: str | None = None):
     return obj
 
 
+def _study_words(msg: str) -> str:
+    """A replay's error in the study file's words (its options are ``[replay]`` keys, not command-line flags)."""
+    for flag, key in (("--reach", "[replay] reach_m ="), ("--segment", "[replay] segment ="),
+                      ("--window", "[replay] window ="), ("check --pad", "check the pads")):
+        msg = msg.replace(flag, key)
+    return msg
+
+
 def _flat(summary: dict, prefix: str = "") -> dict:
     """The summary's numbers, flags and texts as flat columns (nested tables as ``outer.inner``; lists are
     left out but counted: ``n_detours``, ``n_warnings``, ...)."""
@@ -119,7 +127,7 @@ class ReplayCaseRunner(MissionCaseRunner):
                 span, _ = replay_span(log, o.get("window"), o.get("segment"))
                 resample_track(track_from_log(log, ground_gap_m=gap, window=span), cfg.sim.traj_dt_s)
         except ValueError as exc:
-            return str(exc)
+            return _study_words(str(exc))
         return None
 
     def __call__(self, params: dict) -> dict:
@@ -179,9 +187,13 @@ def replay_runner(study: Study, make_policy, policy_names) -> tuple[ReplayCaseRu
         if key in o:
             check_regular_file(o[key], f"[replay] {key}", valid)
     log_sha = _sha256(o["log"])
-    log = load_inputs("log", o["log"], log_sha)
-    span, _ = replay_span(log, o.get("window"), o.get("segment"))
-    track_from_log(log, window=span)   # no usable position (not a flight log): one line naming the file
+    try:
+        log = load_inputs("log", o["log"], log_sha)
+        span, _ = replay_span(log, o.get("window"), o.get("segment"))
+        track_from_log(log, window=span)   # no usable position (not a flight log): one line naming the file
+    except ValueError as exc:
+        msg, name = _study_words(str(exc)), f"{Path(o['log']).name}: "
+        raise ValueError(f"[replay] log {str(o['log'])!r}: {msg[len(name):]}" if msg.startswith(name) else msg) from None
     pads_sha = _sha256(o["pads"]) if "pads" in o else None
     pads = load_inputs("pads", o["pads"], pads_sha) if "pads" in o else None
     base = _base(study, o, log, pads)
