@@ -207,3 +207,22 @@ def test_the_example_replay_study_is_valid_and_its_files_are_shipped():
     runner, cases, _ = prepare_study(st, policies.make, policies.available())
     assert len(cases) == 12 and st.replay["log"].resolve().parent == (DATA / "flightlogs").resolve()
     assert isinstance(runner, replay_cases.ReplayCaseRunner)
+
+
+def test_two_local_workers_equal_serial_and_each_parses_the_log_once(tmp_path):
+    import policies
+    from mission_sim.studies.study import load_study
+    from mission_sim.studies.sweep import dask_client, prepare_study, run_sweep
+    study = _study(tmp_path, f'log = "{LOG}"\npads = "{PADS}"\nwindow = [440.0, 620.0]',
+                   '"drone.mass_kg" = [1.0, 1.4]\n"mission.hover_time_s" = [20.0, 50.0]')
+    runner, cases, _ = prepare_study(load_study(study), policies.make, policies.available())
+    with dask_client(workers=2) as client:
+        res = run_sweep(cases, runner, tmp_path / "dask", client=client, progress=False)
+        parsed = client.run(lambda: sorted(k[0] for k in __import__("mission_sim.studies.replay_cases",
+                                                                       fromlist=["_INPUTS"])._INPUTS))
+    serial = run_sweep(cases, runner, tmp_path / "serial", progress=False)
+    assert res.n_ok == 4 and len(parsed) == 2 and all(v == ["log"] for v in parsed.values()), parsed
+    volatile = ["case_wall_s", "case_cpu_s", "worker", "traceback"]
+    pd.testing.assert_frame_equal(res.results.drop(columns=volatile).sort_values("case_id").reset_index(drop=True),
+                                  serial.results.drop(columns=volatile).sort_values("case_id").reset_index(drop=True),
+                                  check_exact=True)

@@ -85,15 +85,15 @@ class ReplayCaseRunner(MissionCaseRunner):
         :func:`~mission_sim.plans.refly.refly_base` of the ``--config`` mission, without them the
         ``--config`` mission with one pad at the frame origin (as ``dronewpt replay`` builds them)
     options : the ``[replay]`` section (paths resolved)
-    log_sha, pads_sha : the files' sha256 (checked where they are read)
+    log_sha : the log's sha256 (checked where it is read; the pads are in ``base`` already)
     """
 
     _check_run_size = False   # the route is the log: the planner's size estimate does not apply (see check_params)
 
-    def __init__(self, base: dict, make_policy, policy_names, options: dict, log_sha: str, pads_sha: str | None):
+    def __init__(self, base: dict, make_policy, policy_names, options: dict, log_sha: str):
         super().__init__(base, make_policy, policy_names)
         self.options = dict(options)
-        self.log_sha, self.pads_sha = log_sha, pads_sha
+        self.log_sha = log_sha
         self._refused: dict = {}
 
     def __getstate__(self):
@@ -197,7 +197,7 @@ def replay_runner(study: Study, make_policy, policy_names) -> tuple[ReplayCaseRu
     pads_sha = _sha256(o["pads"]) if "pads" in o else None
     pads = load_inputs("pads", o["pads"], pads_sha) if "pads" in o else None
     base = _base(study, o, log, pads)
-    runner = ReplayCaseRunner(base, make_policy, policy_names, o, log_sha, pads_sha)
+    runner = ReplayCaseRunner(base, make_policy, policy_names, o, log_sha)
     ident = {"runner": "replay v1", "base": base, "log": log_sha, "pads": pads_sha,
              "options": {k: v for k, v in o.items() if k not in ("log", "pads", "drone")}}
     return runner, hashlib.sha256(canonical_json(ident).encode()).hexdigest()[:16]
