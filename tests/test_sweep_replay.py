@@ -226,3 +226,26 @@ def test_two_local_workers_equal_serial_and_each_parses_the_log_once(tmp_path):
     pd.testing.assert_frame_equal(res.results.drop(columns=volatile).sort_values("case_id").reset_index(drop=True),
                                   serial.results.drop(columns=volatile).sort_values("case_id").reset_index(drop=True),
                                   check_exact=True)
+
+
+def test_replay_with_pads_honours_segment(tmp_path, capsys):
+    """`replay --pads` flew the whole log whatever --segment said; boot segment 1 of the dronekit log
+    (0..254 s) is never armed, so no pad can be reached from it, and segment 3 does not exist."""
+    for seg, words in (("1", ["no pad within --reach"]), ("3", ["--segment 3 is invalid", "1..2"])):
+        assert main(["replay", str(LOG), "--pads", str(PADS), "--segment", seg, "--out", str(tmp_path / "o"),
+                     "--no-progress"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and all(w in err[0] for w in words), err
+
+
+def test_the_documented_replay_section_parses(tmp_path):
+    import inspect
+    import textwrap
+    import tomllib
+
+    from mission_sim.studies import study as study_mod
+    doc = inspect.getdoc(study_mod)
+    block = textwrap.dedent(doc.split("A ``[replay]`` section")[1].split("::\n", 1)[1].split("\n\nDistributions")[0])
+    st = study_mod.parse_study({**tomllib.loads(block), "grid": {"drone.mass_kg": [1.0, 2.0]}}, base_dir=tmp_path)
+    assert set(st.replay) == {"log", "pads", "drone", "window", "segment", "reach_m", "ground_gap_m"}
+    assert st.replay["log"] == tmp_path / "flight.tlog" and st.replay["window"] == (440.0, 620.0)

@@ -31,6 +31,9 @@ keys of :func:`mission_sim.config.apply_overrides` (``"pads.1.hover_time_s"``, `
     x = "pads.1.hover_time_s"
     hue = "pads.1.x_m"
 
+Keys may be quoted (``"mission.hover_time_s" = ...``) or written as TOML dotted keys / sub-tables
+(``mission.hover_time_s = ...``); both flatten to the same dotted key.
+
 A ``[replay]`` section makes every case a replay of one of your flight logs instead of a mission
 (:mod:`mission_sim.studies.replay_cases`; ``[study] base`` is then the ``--config`` mission that
 gives the drone, battery, link and charger, and the keys are what ``dronewpt replay --set`` takes)::
@@ -43,9 +46,6 @@ gives the drone, battery, link and charger, and the keys are what ``dronewpt rep
     segment = 2               # optional: boot segment N, 1-based (replay --segment)
     reach_m = 500.0           # optional: with pads, visit pads this close to the track (replay --reach)
     ground_gap_m = 0.17       # optional: coil gap when landed, [0, 1] m (replay --ground-gap)
-
-Keys may be quoted (``"mission.hover_time_s" = ...``) or written as TOML dotted keys / sub-tables
-(``mission.hover_time_s = ...``); both flatten to the same dotted key.
 
 Distributions (``[monte_carlo.params]``): ``uniform = [lo, hi]``, ``loguniform = [lo, hi]``,
 ``normal = [mean, std]``, ``integers = [lo, hi]`` (hi exclusive), ``choice = [v0, v1, ...]``.
