@@ -193,6 +193,11 @@ def test_an_interrupted_replay_sweep_resumes_with_only_the_missing_cases(tmp_pat
     pd.testing.assert_frame_equal(resumed.drop(columns=volatile).sort_values("case_id").reset_index(drop=True),
                                   whole.drop(columns=volatile).sort_values("case_id").reset_index(drop=True),
                                   check_exact=True)
+    # the folder records the code that made the rows, the log-to-replay code included (a resume by another
+    # version of it is refused, as for missions)
+    from mission_sim.studies.status import physics_code_hash
+    man = json.loads((tmp_path / "o" / "sweep.json").read_text())
+    assert man["physics_code"] == physics_code_hash(replay=True) != physics_code_hash()
     # and the status sees the study done
     capsys.readouterr()
     assert main(["sweep", "--status", str(tmp_path / "o")]) == 0
