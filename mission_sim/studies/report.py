@@ -129,7 +129,7 @@ def _plot_tradeoff(df, study, x, hue, metric, path) -> str:
                 ax.fill_between(mean.index, lo.values, hi.values, color=color, alpha=0.15, lw=0)
         if hue is not None:
             ax.legend(fontsize=8)
-        ax.set_title(f"{metric}: mean (line) and range (band) over the other parameters", fontsize=9)
+        ax.set_title("mean (line) and range (band) over the other parameters", fontsize=9)  # the metric: suptitle
     else:
         c = pd.to_numeric(df[hue], errors="coerce") if hue is not None and _numeric(df[hue]) else None
         sc = ax.scatter(df[x], y, c=c, s=14, cmap="viridis")
@@ -148,10 +148,10 @@ def _plot_tradeoff(df, study, x, hue, metric, path) -> str:
         for (i, j), v in np.ndenumerate(piv.values):
             if np.isfinite(v):
                 ax.text(j, i, f"{v:.3g}", ha="center", va="center", fontsize=7, color="w")
-        fig.colorbar(im, ax=ax, label=f"mean {metric}")
+        fig.colorbar(im, ax=ax, label="mean")
         ax.set_xlabel(x)
         ax.set_ylabel(hue)
-        ax.set_title(f"mean {metric} over ({x}, {hue})", fontsize=9)
+        ax.set_title(f"mean over ({x}, {hue})", fontsize=9)
     fig.suptitle(f"{study.name}: {metric}")
     fig.tight_layout()
     return save_figure(fig, path)
