@@ -26,9 +26,9 @@ BOOKKEEPING = {"case_id", "status", "error", "traceback", "case_wall_s", "case_c
                "params_json"}
 
 
-def _study(tmp_path, replay: str, grid: str, name="s.toml") -> Path:
+def _study(tmp_path, replay: str, grid: str, name="s.toml", head: str = "") -> Path:
     p = tmp_path / name
-    p.write_text(f"[replay]\n{replay}\n[grid]\n{grid}\n")
+    p.write_text(f"{head}[replay]\n{replay}\n[grid]\n{grid}\n")
     return p
 
 
@@ -95,13 +95,14 @@ def test_a_refly_case_equals_the_replay_command_with_pads_drone_and_set(tmp_path
 
 
 def test_a_replay_case_without_pads_equals_the_replay_command(tmp_path, capsys):
-    study = _study(tmp_path, f'log = "{LOG171}"', '"drone.mass_kg" = [1.0, 1.83]')
+    (tmp_path / "cfg.toml").write_text("[battery]\ncapacity_ah = 1.5\n")   # [study] base = the replay's --config
+    study = _study(tmp_path, f'log = "{LOG171}"', '"drone.mass_kg" = [1.0, 1.83]', head='[study]\nbase = "cfg.toml"\n')
     assert _sweep(study, tmp_path / "o") == 0
     df = read_results(tmp_path / "o")
     capsys.readouterr()
     row = df[df["drone.mass_kg"] == 1.83].iloc[0]
-    assert main(["replay", str(LOG171), "--set", "drone.mass_kg=1.83", "--out", str(tmp_path / "r"),
-                 "--format", "json", "--no-plot", "--no-progress"]) == 0
+    assert main(["replay", str(LOG171), "--config", str(tmp_path / "cfg.toml"), "--set", "drone.mass_kg=1.83",
+                 "--out", str(tmp_path / "r"), "--format", "json", "--no-plot", "--no-progress"]) == 0
     cmd = json.loads(capsys.readouterr().out)
     _assert_row_equals_command(row, cmd, min_numbers=30)
     # the power comparison is there (read from the rows as produced, no time series kept): at the

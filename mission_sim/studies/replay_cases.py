@@ -30,6 +30,8 @@ from .study import DEFAULT_POLICY, POLICY_KEY, Study, canonical_json
 __all__ = ["ReplayCaseRunner", "replay_runner", "load_inputs"]
 
 _INPUTS: dict = {}  # (path, sha256) -> parsed log / pads, once per process (driver or worker)
+#: the keys a replay's own refusals depend on (pad positions, the coil gap, the trajectory step)
+_REPLAY_INPUTS = ("pads.", "mission.hover_gap_m", "sim.traj_dt_s")
 
 
 def _sha256(path: Path) -> str:
@@ -108,10 +110,9 @@ class ReplayCaseRunner(MissionCaseRunner):
         msg = super().check_params(params)
         if msg is not None:
             return msg
-        cfg = self.config(params)
-        key = (cfg.pads, cfg.mission.hover_gap_m, cfg.sim.traj_dt_s)
-        if key not in self._refused:
-            self._refused[key] = self._replay_error(cfg)
+        key = tuple(sorted((k, repr(v)) for k, v in params.items() if k.startswith(_REPLAY_INPUTS)))
+        if key not in self._refused:   # the replay's own checks depend on these keys only: once per value set
+            self._refused[key] = self._replay_error(self.config(params))
         return self._refused[key]
 
     def _replay_error(self, cfg) -> str | None:
