@@ -30,7 +30,7 @@ from .study import DEFAULT_POLICY, POLICY_KEY, Study, canonical_json
 __all__ = ["ReplayCaseRunner", "replay_runner", "load_inputs"]
 
 _INPUTS: dict = {}  # (path, sha256) -> parsed log / pads, once per process (driver or worker)
-#: the keys a replay's own refusals depend on (pad positions, the coil gap, the trajectory step)
+#: the keys a replay's own refusals depend on (pad positions, not their hover times; the coil gap, the trajectory step)
 _REPLAY_INPUTS = ("pads.", "mission.hover_gap_m", "sim.traj_dt_s")
 
 
@@ -110,7 +110,8 @@ class ReplayCaseRunner(MissionCaseRunner):
         msg = super().check_params(params)
         if msg is not None:
             return msg
-        key = tuple(sorted((k, repr(v)) for k, v in params.items() if k.startswith(_REPLAY_INPUTS)))
+        key = tuple(sorted((k, repr(v)) for k, v in params.items()
+                           if k.startswith(_REPLAY_INPUTS) and not k.endswith(".hover_time_s")))
         if key not in self._refused:   # the replay's own checks depend on these keys only: once per value set
             self._refused[key] = self._replay_error(self.config(params))
         return self._refused[key]
