@@ -1,8 +1,9 @@
 """``dronewpt replay LOG --pads FILE``: the what-if re-flight (:mod:`mission_sim.plans.refly`).
 
 Reached from ``replay`` (``cli/mavlink.py``) by one hook when ``--pads`` is given; shares its
-options (``--pad`` sets the frame origin, ``--window``, ``--ground-gap``, ``--mass``, ``--config``,
-``--set``, ``--policy``) and adds ``--reach``.
+options (``--pad`` sets the frame origin, ``--window``, ``--segment``, ``--ground-gap``, ``--mass``,
+``--config``, ``--drone``, ``--set``, ``--policy``) and adds ``--reach``. Without ``--window`` or
+``--segment`` the whole log is re-flown (reboots included; ``replay`` without pads picks a segment).
 """
 
 from __future__ import annotations
@@ -17,16 +18,17 @@ __all__ = ["cmd_refly"]
 
 
 def _config(args, track):
-    """The replay's mission config with the pads of ``--pads`` about the replay's frame origin."""
+    """The replay's mission config with the pads of ``--pads`` about the replay's frame origin, the
+    ``--drone`` file, ``--mass`` and ``--set`` laid over it (as ``replay`` without pads does)."""
     from ..config import apply_overrides, config_from_dict, config_to_dict, load_config
     from ..plans.pads import read_pads
-    from ..plans.route import pads_to_local
-    d = config_to_dict(load_config(args.config))
-    d["waypoints"] = []                       # the log is the route
-    d["mission"]["file"] = ""
-    d["pads"] = pads_to_local(read_pads(args.pads), track.pad, Path(args.pads).name,
-                              "the replay's pad frame origin (the take-off spot, or --pad)")
-    return config_from_dict(apply_overrides(d, {**mass_override(args), **parse_set(args.set)}))
+    from ..plans.refly import refly_base
+    d = refly_base(config_to_dict(load_config(args.config)), read_pads(args.pads), track.pad, Path(args.pads).name)
+    drone = {}
+    if args.drone is not None:
+        from ..mavlink.calibrate import read_drone_toml
+        drone = read_drone_toml(args.drone)
+    return config_from_dict(apply_overrides(d, {**drone, **mass_override(args), **parse_set(args.set)}))
 
 
 def cmd_refly(args) -> int:
@@ -47,6 +49,9 @@ def cmd_refly(args) -> int:
     if args.ground_gap is not None and not (0 <= args.ground_gap <= 1.0):
         raise CliError(f"--ground-gap {args.ground_gap!r} is invalid; valid range: [0, 1] m")
     log = read_log(args.log)
+    if args.segment is not None:   # a log with reboots: re-fly boot segment N alone (no --window)
+        from ..mavlink.replay import replay_span
+        window = replay_span(log, window, args.segment)[0]
     track = track_from_log(log, pad=pad, window=window)
     cfg = _config(args, track)
     policy = make_policy(args.policy, cfg)

@@ -15,14 +15,16 @@ from .common import (CliError, add_progress_flag, float_arg, int_in, max_workers
 
 def _add_sweep(sub):
     p = sub.add_parser("sweep", help="run a parameter study (grid / Monte Carlo) on Dask, resumable",
-                       description="Run every case of STUDY.toml (a base mission and the parameters to vary) "
-                                   "on a Dask cluster and store one Parquet row per mission under DIR/cases. "
+                       description="Run every case of STUDY.toml (a base mission and the parameters to vary; "
+                                   "with a [replay] section, replays of your own flight log: "
+                                   "examples/study_replay.toml) on a Dask cluster and store one Parquet row per "
+                                   "case under DIR/cases. "
                                    "Re-running the same command skips the cases already stored. Prints a "
                                    "summary table and writes trade-off plots to DIR/plots. Exit status 1 if "
                                    "some cases failed (stored with their error) or did not finish. "
                                    "`dronewpt sweep --status DIR` prints how many cases are done, failed, pending.")
     p.add_argument("study", type=path_arg("study file"), nargs="?", metavar="STUDY.toml",
-                   help="study TOML file (see examples/study_small.toml)")
+                   help="study TOML file (see examples/study_small.toml, examples/study_replay.toml)")
     p.add_argument("--out", type=path_arg("--out"), metavar="DIR", help="output folder (created; reused to resume)")
     p.add_argument("--status", type=path_arg("--status"), metavar="DIR", default=None,
                    help="print the counts of done, failed and pending cases of the sweep in DIR and exit")

@@ -371,6 +371,21 @@ def replay_trajectory(track: FlightTrack):
     return Trajectory.from_samples(track.t_s, track.pos_m, tilt_rad=track.tilt_rad, phase=track.phase())
 
 
+class _PowerColumns:
+    """A run's sink keeping only ``t_s`` and ``propulsion_w`` (as the time series computes them) of its rows."""
+
+    def __init__(self):
+        self.t, self.p = [], []
+
+    def __call__(self, loop, arr) -> None:
+        c = {name: j for j, name in enumerate(loop.columns)}
+        self.t.append(arr[:, c["t_s"]].copy())
+        self.p.append(arr[:, c["e_propulsion_j"]] / arr[:, c["dt_s"]])
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        return tuple(np.concatenate(x) if x else np.zeros(0) for x in (self.t, self.p))
+
+
 @dataclass
 class ReplayResult:
     """A replayed log: the log, its track, the mission result and the summary (JSON-ready)."""
@@ -440,7 +455,7 @@ def battery_voltage_warning(log: FlightLog, battery) -> str | None:
 
 def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: float | None = None,
                window: tuple[float, float] | None = None, progress: bool = False,
-               segment: int | None = None) -> ReplayResult:
+               segment: int | None = None, frame: bool = True) -> ReplayResult:
     """Build the track of ``log`` (a :class:`FlightLog` or a path), run the mission world along it,
     compare the power.
 
@@ -448,6 +463,8 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
     the receiver coil sits at its nominal height above the pad coil. A log with reboots replays one
     boot segment (:func:`replay_span`; ``segment`` 1-based, None: the one with the most armed
     time) unless ``window`` is given; the summary names it (``replayed_segment``).
+    ``frame=False``: summary only (``mission.timeseries`` is None; the power comparison reads the two
+    columns it needs from the rows as they are produced, the same numbers).
     Raises :class:`NoPositionError` (a ``ValueError``) if the log has no usable position.
     """
     from ..world.runner import run_mission
@@ -460,8 +477,10 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
     track = track_from_log(log, pad=pad, ground_gap_m=ground_gap_m, window=window)
     grid = resample_track(track, cfg.sim.traj_dt_s)
     traj = replay_trajectory(grid)
-    mission = run_mission(cfg, policy, trajectory=traj, progress=progress)
+    cols = _PowerColumns()
+    mission = run_mission(cfg, policy, trajectory=traj, progress=progress, frame=frame, sink=None if frame else cols)
     ts = mission.timeseries
+    sim_t, sim_p = (ts["t_s"].to_numpy(), ts["propulsion_w"].to_numpy()) if frame else cols.arrays()
     summary = flight_stats(log, track)
     summary.update(span_info)
     ms = mission.summary
@@ -471,6 +490,9 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
         "propulsion_energy_j": float(ms["propulsion_energy_j"]),
         "energy_from_source_j": float(ms["energy_from_source_j"]),
         "final_soc": float(ms["final_soc"]),
+        "min_soc": float(ms["min_soc"]),
+        "battery_depleted": bool(ms["battery_depleted"]),
+        "depleted_at_s": ms["depleted_at_s"],
         "peak_i2_a": float(ms["peak_i2_a"]),
         "sim_time_s": float(ms["sim_time_s"]),
         "window_s": list(window) if window else None,
@@ -481,7 +503,7 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
     if len(log.battery):
         t0, t1 = track.t_offset_s, track.t_offset_s + float(track.t_s[-1])
         summary["logged_energy_j"] = logged_energy_j(log.battery, t0 - _EDGE_S, t1 + _EDGE_S)
-        table, cmp = compare_power(log, track, ts["t_s"].to_numpy(), ts["propulsion_w"].to_numpy())
+        table, cmp = compare_power(log, track, sim_t, sim_p)
         air = table["airborne"].to_numpy()
         cmp["drone_mass_kg"] = float(cfg.drone.mass_kg)
         cmp["equivalent_mass_kg"] = fit_mass_kg(traj, cfg.drone, cmp.get("logged_energy_airborne_j", np.nan),

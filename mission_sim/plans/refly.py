@@ -24,7 +24,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["Detour", "plan_detours", "refly_track", "ReflyResult", "plan_refly", "refly_log", "DEFAULT_REACH_M"]
+__all__ = ["Detour", "plan_detours", "refly_track", "ReflyResult", "refly_base", "plan_refly", "refly_log",
+           "DEFAULT_REACH_M"]
 
 DEFAULT_REACH_M = 500.0   # a pad farther than this (horizontally) from the airborne track is not visited
 AIRBORNE_M = 1.0          # height above the take-off spot that counts as airborne (as the replay's)
@@ -135,11 +136,40 @@ def _trajectory(track, phase=None):
     return traj
 
 
-def plan_refly(log, cfg, *, pad=None, ground_gap_m=None, window=None, reach_m: float = DEFAULT_REACH_M):
+def refly_base(base: dict, pads, origin, pads_name: str = "pads") -> dict:
+    """The re-flight's mission dict (not yet validated; lay ``--set`` overrides over it, then
+    :func:`~mission_sim.config.config_from_dict`): ``base`` (``config_to_dict`` of the ``--config``
+    mission) without its route (the log is the route) and with the pads ``pads``
+    (:class:`~mission_sim.plans.pads.GeoPad` records, ``read_pads``) about the replay's frame origin
+    ``origin`` (the take-off spot, or ``--pad``). ``dronewpt replay --pads`` and the replay studies of
+    ``dronewpt sweep`` both build their missions here."""
+    import copy
+
+    from .route import pads_to_local
+    d = copy.deepcopy(base)
+    d["waypoints"] = []                       # the log is the route
+    d["mission"]["file"] = ""
+    d["pads"] = pads_to_local(pads, origin, pads_name, "the replay's pad frame origin (the take-off spot, or --pad)")
+    return d
+
+
+def _segment_window(log, window, segment):
+    """``window``, or boot segment ``segment``'s span (1-based) when one is asked for and no window is
+    given; without either the whole log is re-flown (a log with reboots included)."""
+    if segment is None:
+        return window
+    from ..mavlink.replay import replay_span
+    return replay_span(log, window, segment)[0]
+
+
+def plan_refly(log, cfg, *, pad=None, ground_gap_m=None, window=None, reach_m: float = DEFAULT_REACH_M,
+               segment: int | None = None):
     """The logged track (resampled), the pads (K, 3) of ``cfg``, the detours and the skipped pads;
-    ``ValueError`` (one line) if no pad is within ``reach_m`` of the airborne track."""
+    ``ValueError`` (one line) if no pad is within ``reach_m`` of the airborne track, or ``segment``
+    (1-based boot segment, re-flown alone when no ``window`` is given) is out of range."""
     from ..mavlink.replay import resample_track, track_from_log
     gap = cfg.mission.hover_gap_m if ground_gap_m is None else ground_gap_m
+    window = _segment_window(log, window, segment)
     track = resample_track(track_from_log(log, pad=pad, ground_gap_m=gap, window=window), cfg.sim.traj_dt_s)
     pads_xyz = np.array([[p.x_m, p.y_m, p.z_m] for p in cfg.pads])
     hover = [cfg.mission.hover_time_s if p.hover_time_s is None else p.hover_time_s for p in cfg.pads]
@@ -152,17 +182,18 @@ def plan_refly(log, cfg, *, pad=None, ground_gap_m=None, window=None, reach_m: f
 
 
 def refly_log(log, cfg, policy, *, pad=None, ground_gap_m=None, window=None, reach_m: float = DEFAULT_REACH_M,
-              progress: bool = False) -> ReflyResult:
+              progress: bool = False, segment: int | None = None, frame: bool = True) -> ReflyResult:
     """Re-fly ``log`` (a FlightLog) with the pads of ``cfg`` (pad frame = ENU about ``pad``, default
     the take-off spot, as in :func:`~mission_sim.mavlink.replay.replay_log`) and compare; see the
-    module docstring and :func:`plan_refly` (its errors)."""
+    module docstring and :func:`plan_refly` (its errors). ``frame=False``: summary only (the runs keep
+    no time series; the summary is the same, see :func:`~mission_sim.world.runner.run_mission`)."""
     from ..mavlink.replay import battery_voltage_warning
     from ..world.runner import run_mission
     track, pads_xyz, detours, skipped = plan_refly(log, cfg, pad=pad, ground_gap_m=ground_gap_m, window=window,
-                                                   reach_m=reach_m)
+                                                   reach_m=reach_m, segment=segment)
     new, phase = refly_track(track, pads_xyz, detours, cfg.mission, cfg.sim.traj_dt_s)
-    original = run_mission(cfg, policy, trajectory=_trajectory(track), charge=False, progress=progress)
-    refly = run_mission(cfg, policy, trajectory=_trajectory(new, phase), progress=progress)
+    original = run_mission(cfg, policy, trajectory=_trajectory(track), charge=False, progress=progress, frame=frame)
+    refly = run_mission(cfg, policy, trajectory=_trajectory(new, phase), progress=progress, frame=frame)
     s, o = refly.summary, original.summary
     summary = {
         "log": str(log.path), "pad_frame_origin": {"lat_deg": track.pad.lat_deg, "lon_deg": track.pad.lon_deg,
@@ -178,6 +209,9 @@ def refly_log(log, cfg, policy, *, pad=None, ground_gap_m=None, window=None, rea
         "battery_charge_in_j": float(s["battery_charge_in_j"]), "charge_time_s": float(s["charge_time_s"]),
         "final_soc_logged_flight": float(o["final_soc"]), "final_soc_refly": float(s["final_soc"]),
         "final_soc_refly_without_charging": float(s["final_soc_without_charging"]),
+        "min_soc_logged_flight": float(o["min_soc"]), "min_soc_refly": float(s["min_soc"]),
+        "peak_i2_a": float(s["peak_i2_a"]), "rated_i2_a": float(s["rated_i2_a"]),
+        "time_above_rated_s": float(s["time_above_rated_s"]),
         "flight_time_gain_s": _gain_s(cfg, s, o, float(new.t_s[-1] - track.t_s[-1])),
         "flight_time_gain_vs_refly_without_charging_s": float(s["flight_time_gain_s"]),
         "net_battery_energy_gain_j": float(cfg.battery.usable_energy_j(s["final_soc"])

@@ -5,6 +5,7 @@
                    space, size check, case identity
 ``prepare``        a study made ready to run: size, runner, keys and every case's values checked
 ``mission_cases``  the mission case runner and the fast check of a case's values
+``replay_cases``   the replay case runner of ``[replay]`` studies: your flight logs, re-flown per case
 ``sweep``          the engine: lazy cases in chunks with back-pressure, results into the store
 ``store``          the Parquet store: parts by count or age, incremental merges, compaction
 ``cluster``        a Dask client that starts and stops quietly and fast

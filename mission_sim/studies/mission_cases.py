@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Iterable
 
-from .study import POLICY_KEY
+from .study import DEFAULT_POLICY, POLICY_KEY
 
 __all__ = ["MissionCaseRunner", "MissionParamChecker"]
 
@@ -23,12 +23,14 @@ _CACHE_MAX = 200_000  # section value sets remembered (continuous Monte Carlo dr
 
 
 class MissionParamChecker:
-    """``checker(overrides) -> None | error message`` for a base mission dict (``config_to_dict``)."""
+    """``checker(overrides) -> None | error message`` for a base mission dict (``config_to_dict``).
+    ``run_size``: also the planned mission's run-size estimate (False for replays: the log is the route)."""
 
-    def __init__(self, base: dict):
+    def __init__(self, base: dict, run_size: bool = True):
         from ..config import config_from_dict
 
         self.base = base
+        self.run_size = run_size
         self.cfg = config_from_dict(base)
         self._sections: dict[tuple, object] = {}
         self._sizes: dict[tuple, str | None] = {}
@@ -125,7 +127,7 @@ class MissionParamChecker:
             cfg = dataclasses.replace(self.cfg, pads=tuple(pads), **kw)  # cross-field checks
         except ValueError as exc:
             return str(exc)
-        err = self._size_error(cfg)
+        err = self._size_error(cfg) if self.run_size else None
         if err is None:
             self._note(cfg)
         return err
@@ -139,6 +141,8 @@ class MissionCaseRunner:
         picklable by reference, so workers import ``policies`` themselves)
     policy_names : the valid policy names (checked before a sweep starts), or None
     """
+
+    _check_run_size = True   # the planned mission's run-size estimate is part of a case's check
 
     def __init__(self, base: dict, make_policy: Callable, policy_names: Iterable[str] | None = None):
         self.base = base
@@ -163,11 +167,11 @@ class MissionCaseRunner:
 
     def check_params(self, params: dict) -> str | None:
         """None if the case would build its mission, else the error (naming the key and value)."""
-        policy = params.get(POLICY_KEY, "model_based")
+        policy = params.get(POLICY_KEY, DEFAULT_POLICY)
         if self.policy_names is not None and policy not in self.policy_names:
             return f"policy={policy!r} is invalid; valid values: {', '.join(sorted(self.policy_names))}"
         if self._checker is None:
-            self._checker = MissionParamChecker(self.base)
+            self._checker = MissionParamChecker(self.base, self._check_run_size)
         return self._checker({k: v for k, v in params.items() if k != POLICY_KEY})
 
     def study_warnings(self, name: str) -> list[str]:
@@ -181,7 +185,7 @@ class MissionCaseRunner:
         from ..world.runner import run_mission
 
         cfg = self.config(params)
-        policy = self.make_policy(params.get(POLICY_KEY, "model_based"), policy_context(cfg))
+        policy = self.make_policy(params.get(POLICY_KEY, DEFAULT_POLICY), policy_context(cfg))
         return dict(run_mission(cfg, policy, frame=False, warn=False).summary)   # warned once per study
 
     def warm(self) -> None:

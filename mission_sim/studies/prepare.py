@@ -33,16 +33,20 @@ def import_factory(spec: str):
 
 
 def _runner(study: Study, make_policy: Callable | None, policy_names):
-    """(case runner, base fingerprint) of a study."""
+    """(case runner, base fingerprint) of a study: its own ``[study] runner``, the replay runner of a
+    ``[replay]`` study (:mod:`.replay_cases`), else the mission runner."""
     if study.runner:
         runner = import_factory(study.runner)(study)
         base_text = study.base_path.read_text() if study.base_path else ""
         return runner, hashlib.sha256(f"{study.runner}\n{base_text}".encode()).hexdigest()[:16]
+    if make_policy is None:
+        raise ValueError("the mission and replay runners need a policy factory (make_policy=policies.make)")
+    if study.replay is not None:
+        from .replay_cases import replay_runner
+        return replay_runner(study, make_policy, policy_names)
     from ..config import config_to_dict, load_config
     from .mission_cases import MissionCaseRunner
 
-    if make_policy is None:
-        raise ValueError("the mission runner needs a policy factory (make_policy=policies.make)")
     base = config_to_dict(load_config(study.base_path))
     runner = MissionCaseRunner(base, make_policy, policy_names)
     return runner, hashlib.sha256(canonical_json(base).encode()).hexdigest()[:16]
@@ -91,7 +95,8 @@ def prepare_study(study: Study, make_policy: Callable | None = None, policy_name
     """``(runner, cases, fingerprint)`` of a study, checked before anything runs.
 
     The size is checked first (``max_cases``, from the axis lengths alone). The mission runner needs
-    ``make_policy`` (and ``policy_names`` to check the policies); a study with ``[study] runner =
+    ``make_policy`` (and ``policy_names`` to check the policies), so does the replay runner of a study
+    with a ``[replay]`` section (:mod:`.replay_cases`); a study with ``[study] runner =
     "mod:factory"`` uses ``factory(study)`` (any picklable ``run_case``, optionally with
     ``validate_keys`` and ``check_params`` hooks). ``cases`` is the lazy
     :class:`~mission_sim.studies.study.CaseSpace`. Unknown keys, unknown policies and bad values

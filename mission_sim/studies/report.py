@@ -17,10 +17,15 @@ from .study import POLICY_KEY, Study  # noqa: E402
 
 __all__ = ["SUMMARY_METRICS", "summary_table", "error_table", "plot_sweep"]
 
-#: metrics shown in the summary table when the runner reports them (mission summary keys)
+#: metrics shown in the summary table when the runner reports them (mission summary keys; then the replay
+#: runner's: re-flights with pads, replays' power comparison)
 SUMMARY_METRICS = ("flight_time_gain_s", "peak_i2_a", "time_above_rated_s", "rectifier_output_j",
                    "battery_charge_in_j", "device_losses_j",
-                   "energy_from_source_j", "final_soc", "energy_balance_error_rel")
+                   "energy_from_source_j", "final_soc", "energy_balance_error_rel",
+                   "flight_time_gain_vs_refly_without_charging_s", "energy_from_pads_j", "final_soc_refly",
+                   "min_soc_refly", "power_comparison.energy_error_rel", "power_comparison.equivalent_mass_kg")
+#: further trade-off plots drawn when the rows have them (replay studies)
+EXTRA_TRADEOFFS = ("flight_time_gain_vs_refly_without_charging_s", "power_comparison.energy_error_rel")
 
 
 def _metric_columns(df: pd.DataFrame, study: Study) -> list[str]:
@@ -82,7 +87,8 @@ def plot_sweep(df: pd.DataFrame, study: Study, out_dir, metric: str = "flight_ti
 
     - ``tradeoff_<metric>.png``: ``metric`` against the x parameter (mean over the other parameters,
       one line per hue value; scatter when x is Monte Carlo), and a heat map over (x, hue) when both
-      are grid parameters.
+      are grid parameters; the same for each of :data:`EXTRA_TRADEOFFS` the rows have (replay studies:
+      the gain against the same detours unpowered, the energy error against the logged power).
     - ``peak_i2_by_policy.png``: peak secondary coil current (and time above rated) per policy.
     """
     out = Path(out_dir)
@@ -92,8 +98,9 @@ def plot_sweep(df: pd.DataFrame, study: Study, out_dir, metric: str = "flight_ti
     if ok.empty:
         return paths
     x, hue = _axes(ok, study)
-    if metric in ok.columns and x is not None:
-        paths.append(_plot_tradeoff(ok, study, x, hue, metric, out / f"tradeoff_{metric}.png"))
+    for m in (metric, *EXTRA_TRADEOFFS):
+        if m in ok.columns and x is not None:
+            paths.append(_plot_tradeoff(ok, study, x, hue, m, out / f"tradeoff_{m}.png"))
     if "peak_i2_a" in ok.columns and POLICY_KEY in ok.columns:
         paths.append(_plot_by_policy(ok, out / "peak_i2_by_policy.png"))
     return paths
@@ -122,7 +129,7 @@ def _plot_tradeoff(df, study, x, hue, metric, path) -> str:
                 ax.fill_between(mean.index, lo.values, hi.values, color=color, alpha=0.15, lw=0)
         if hue is not None:
             ax.legend(fontsize=8)
-        ax.set_title(f"{metric}: mean (line) and range (band) over the other parameters", fontsize=9)
+        ax.set_title("mean (line) and range (band) over the other parameters", fontsize=9)  # the metric: suptitle
     else:
         c = pd.to_numeric(df[hue], errors="coerce") if hue is not None and _numeric(df[hue]) else None
         sc = ax.scatter(df[x], y, c=c, s=14, cmap="viridis")
@@ -141,10 +148,10 @@ def _plot_tradeoff(df, study, x, hue, metric, path) -> str:
         for (i, j), v in np.ndenumerate(piv.values):
             if np.isfinite(v):
                 ax.text(j, i, f"{v:.3g}", ha="center", va="center", fontsize=7, color="w")
-        fig.colorbar(im, ax=ax, label=f"mean {metric}")
+        fig.colorbar(im, ax=ax, label="mean")
         ax.set_xlabel(x)
         ax.set_ylabel(hue)
-        ax.set_title(f"mean {metric} over ({x}, {hue})", fontsize=9)
+        ax.set_title(f"mean over ({x}, {hue})", fontsize=9)
     fig.suptitle(f"{study.name}: {metric}")
     fig.tight_layout()
     return save_figure(fig, path)

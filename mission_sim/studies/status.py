@@ -42,13 +42,16 @@ class SweepStatus:
                 f"{self.failed:,} failed, {self.pending:,} pending{other}")
 
 
-def physics_code_hash() -> str:
+def physics_code_hash(replay: bool = False) -> str:
     """sha256 (16 hex digits) of the sources that compute a mission's numbers: :mod:`wpt_receiver` and
-    :mod:`mission_sim.world` (link, devices, battery, the compiled loop). A sweep folder records it, so a
-    resume by another version of that code is refused instead of mixing old and new results."""
+    :mod:`mission_sim.world` (link, devices, battery, the compiled loop); with ``replay`` also those that
+    turn a log into a replay or a re-flight (:mod:`mission_sim.mavlink`, :mod:`mission_sim.plans`). A sweep
+    folder records it, so a resume by another version of that code is refused instead of mixing old and
+    new results."""
     from wpt_receiver.kernel_cache import dependency_hash
     import wpt_receiver
-    roots = (Path(wpt_receiver.__file__).parent, Path(__file__).resolve().parents[1] / "world")
+    pkg = Path(__file__).resolve().parents[1]
+    roots = (Path(wpt_receiver.__file__).parent, pkg / "world") + ((pkg / "mavlink", pkg / "plans") if replay else ())
     files = sorted((f for root in roots for f in root.rglob("*.py")), key=lambda f: (f.parent.name, f.name))
     return dependency_hash(files)[:16]
 
@@ -58,7 +61,7 @@ def _manifest(study: Study, fingerprint: str, n_cases: int) -> dict:
     doc = json.loads(json.dumps(study.source, default=str))
     doc.get("study", {}).pop("base", None)  # the fingerprint stands for it; the path may not resolve later
     return {"study": study.name, "n_cases": n_cases, "fingerprint": fingerprint, "doc": doc,
-            "physics_code": physics_code_hash()}
+            "physics_code": physics_code_hash(study.replay is not None)}
 
 
 def check_same_study(out_dir, study: Study, fingerprint: str, n_cases: int) -> None:

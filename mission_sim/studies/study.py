@@ -34,6 +34,19 @@ keys of :func:`mission_sim.config.apply_overrides` (``"pads.1.hover_time_s"``, `
 Keys may be quoted (``"mission.hover_time_s" = ...``) or written as TOML dotted keys / sub-tables
 (``mission.hover_time_s = ...``); both flatten to the same dotted key.
 
+A ``[replay]`` section makes every case a replay of one of your flight logs instead of a mission
+(:mod:`mission_sim.studies.replay_cases`; ``[study] base`` is then the ``--config`` mission that
+gives the drone, battery, link and charger, and the keys are what ``dronewpt replay --set`` takes)::
+
+    [replay]
+    log = "flight.tlog"       # required, relative to this file: .tlog, .bin or .ulg
+    pads = "pads.csv"         # optional: re-fly with detours to these pads (replay --pads)
+    drone = "drone.toml"      # optional: a [drone] file from `dronewpt calibrate` (replay --drone)
+    window = [440.0, 620.0]   # optional: log seconds T0, T1 (replay --window)
+    segment = 2               # optional: boot segment N, 1-based (replay --segment)
+    reach_m = 500.0           # optional: with pads, visit pads this close to the track (replay --reach)
+    ground_gap_m = 0.17       # optional: coil gap when landed, [0, 1] m (replay --ground-gap)
+
 Distributions (``[monte_carlo.params]``): ``uniform = [lo, hi]``, ``loguniform = [lo, hi]``,
 ``normal = [mean, std]``, ``integers = [lo, hi]`` (hi exclusive), ``choice = [v0, v1, ...]``.
 Monte Carlo draw ``j`` uses its own generator ``default_rng(SeedSequence([seed, j]))`` and draws
@@ -73,7 +86,8 @@ POLICY_KEY = "policy"
 DEFAULT_POLICY = "model_based"
 DISTRIBUTIONS = ("uniform", "loguniform", "normal", "integers", "choice")
 _SPECS = DISTRIBUTIONS + ("linspace",)
-_SECTIONS = ("study", "fixed", "grid", "monte_carlo", "report")
+_SECTIONS = ("study", "fixed", "grid", "monte_carlo", "report", "replay")
+_REPLAY_KEYS = ("log", "pads", "drone", "window", "segment", "reach_m", "ground_gap_m")
 _STUDY_KEYS = ("name", "base", "runner", "allow_single")
 _CONTINUOUS = ("uniform", "loguniform", "normal")
 _DRAW_CACHE = 10_000  # Monte Carlo draws kept in memory while iterating (more are recomputed per grid point)
@@ -133,6 +147,8 @@ class Study:
     runner : "module:factory" import path of a case-runner factory, or None for the mission runner
     report : plot axes, e.g. {"x": "mission.hover_time_s", "hue": "pads.1.x_m"}
     allow_single : a study that varies nothing (the base mission once) is allowed
+    replay : the ``[replay]`` section (paths resolved against the study file's folder), or None for a
+        mission study
     source : the TOML document it was parsed from (``dronewpt sweep --status`` re-reads it)
     """
 
@@ -146,6 +162,7 @@ class Study:
     runner: str | None = None
     report: dict = field(default_factory=dict)
     allow_single: bool = False
+    replay: dict | None = None
     source: dict = field(default_factory=dict, repr=False, compare=False)  # the TOML document parsed
 
     @property
@@ -284,6 +301,54 @@ def _parse_head(head: dict, base_dir):
     return head, base_path, runner, allow_single
 
 
+def _number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _parse_replay(rep, base_dir) -> dict:
+    """The ``[replay]`` table, checked (types and ranges; the files are read by the replay runner), its
+    paths resolved against ``base_dir``."""
+    if not isinstance(rep, dict):
+        raise ValueError(f"[replay] = {rep!r} is invalid; valid: a table with log = 'flight.tlog'")
+    bad = sorted(set(rep) - set(_REPLAY_KEYS))
+    if bad:
+        raise ValueError(f"[replay] key {bad[0]!r} is unknown; valid keys: {', '.join(_REPLAY_KEYS)}")
+    if "log" not in rep:
+        raise ValueError("[replay] has no log; valid: log = 'path/to/flight.tlog' (.tlog, .bin or .ulg, "
+                         "relative to the study file)")
+    out = {}
+    for key in ("log", "pads", "drone"):
+        if key in rep:
+            v = rep[key]
+            if not isinstance(v, str) or not v:
+                raise ValueError(f"[replay] {key} = {v!r} is invalid; valid: a file path (string)")
+            p = Path(v).expanduser()
+            out[key] = p if p.is_absolute() or base_dir is None else Path(base_dir) / p
+    w = rep.get("window")
+    if w is not None:
+        if not (isinstance(w, list) and len(w) == 2 and all(_number(x) for x in w) and 0 <= w[0] < w[1]):
+            raise ValueError(f"[replay] window = {w!r} is invalid; valid: [T0, T1] seconds of log time with "
+                             "0 <= T0 < T1, e.g. [440.0, 620.0]")
+        out["window"] = (float(w[0]), float(w[1]))
+    seg = rep.get("segment")
+    if seg is not None:
+        if isinstance(seg, bool) or not isinstance(seg, int) or seg < 1:
+            raise ValueError(f"[replay] segment = {seg!r} is invalid; valid range: integer >= 1 (a boot segment)")
+        out["segment"] = seg
+    reach = rep.get("reach_m", 500.0)
+    if not _number(reach) or not reach > 0:
+        raise ValueError(f"[replay] reach_m = {reach!r} is invalid; valid range: (0, inf) m")
+    if "pads" not in rep and "reach_m" in rep:
+        raise ValueError("[replay] reach_m is set without pads; valid: give pads = 'pads.csv' too, or drop reach_m")
+    out["reach_m"] = float(reach)
+    gap = rep.get("ground_gap_m")
+    if gap is not None:
+        if not _number(gap) or not 0 <= gap <= 1.0:
+            raise ValueError(f"[replay] ground_gap_m = {gap!r} is invalid; valid range: [0, 1] m")
+        out["ground_gap_m"] = float(gap)
+    return out
+
+
 def parse_study(doc: dict, name: str = "study", base_dir=None) -> Study:
     """A study from its TOML document (a dict). ``base_dir`` resolves a relative ``[study] base``."""
     unknown = sorted(set(doc) - set(_SECTIONS))
@@ -291,6 +356,12 @@ def parse_study(doc: dict, name: str = "study", base_dir=None) -> Study:
         raise ValueError(f"study section [{unknown[0]}] is unknown; valid sections: "
                          + ", ".join(f"[{s}]" for s in _SECTIONS))
     head, base_path, runner, allow_single = _parse_head(doc.get("study", {}), base_dir)
+    replay = None
+    if "replay" in doc:
+        if runner:
+            raise ValueError(f"[study] runner = {runner!r} and a [replay] section exclude each other; valid: one "
+                             "of them (a [replay] study runs the built-in replay runner)")
+        replay = _parse_replay(doc["replay"], base_dir)
 
     fixed = {k: _check_scalar("fixed", k, v) for k, v in _flatten(doc.get("fixed", {}), "", "fixed").items()}
     grid = {k: _grid_values(k, v) for k, v in _flatten(doc.get("grid", {}), "", "grid").items()}
@@ -326,7 +397,7 @@ def parse_study(doc: dict, name: str = "study", base_dir=None) -> Study:
 
     study = Study(name=str(head.get("name", name)), base_path=base_path, fixed=fixed, grid=grid, mc_n=mc_n,
                   mc_seed=mc_seed, mc_params=mc_params, runner=runner, report=report, allow_single=allow_single,
-                  source=doc)
+                  replay=replay, source=doc)
     for k in (POLICY_KEY,):
         if k in mc_params and mc_params[k][0] != "choice":
             raise ValueError(f"[monte_carlo.params] {k!r} must use {{choice = [...]}}")

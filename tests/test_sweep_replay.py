@@ -1,0 +1,257 @@
+"""Parameter studies over one's own flight logs: `dronewpt sweep` on a study with a `[replay]` section.
+
+A case equals `dronewpt replay LOG [--pads FILE] --set KEY=VALUE ...` (every summary number, to the bit),
+bad keys / values / files are refused before anything runs (one line, exit 2), the log is parsed once
+per process (not per case), and an interrupted sweep resumes with only the missing cases."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from mission_sim.cli import main
+from mission_sim.studies import replay_cases
+from mission_sim.studies.sweep import read_results
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "tests" / "data"
+LOG = DATA / "flightlogs" / "dronekit-python_flight.tlog"
+LOG171 = DATA / "flightlogs" / "dronekit-la-testdata_log171.bin"
+PADS = DATA / "missions" / "dronekit_flight_pads.csv"
+BOOKKEEPING = {"case_id", "status", "error", "traceback", "case_wall_s", "case_cpu_s", "worker", "attempt",
+               "params_json"}
+
+
+def _study(tmp_path, replay: str, grid: str, name="s.toml", head: str = "") -> Path:
+    p = tmp_path / name
+    p.write_text(f"{head}[replay]\n{replay}\n[grid]\n{grid}\n")
+    return p
+
+
+def _sweep(study, out, *extra) -> int:
+    return main(["sweep", str(study), "--out", str(out), "--workers", "0", "--no-plot", "--no-progress",
+                 "--format", "json", *extra])
+
+
+def _flat(d: dict, prefix="") -> dict:
+    """The replay command's JSON as the sweep's columns: nested tables dotted, lists counted."""
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flat(v, f"{prefix}{k}."))
+        elif isinstance(v, list):
+            out[f"{prefix}n_{k}"] = len(v)
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+def _assert_row_equals_command(row: pd.Series, cmd: dict, min_numbers: int) -> None:
+    """Every number and flag of the command's summary is the row's, bit for bit (JSON null = nan)."""
+    compared = 0
+    for k, want in _flat(cmd).items():
+        if k in ("files", "n_files", "log", "policy", "pads_file") or isinstance(want, str):
+            continue
+        assert k in row.index, k
+        got = row[k]
+        if want is None:
+            assert got is None or (isinstance(got, float) and math.isnan(got)), (k, got)
+        elif isinstance(want, bool):
+            assert bool(got) is want, (k, got, want)
+        else:
+            assert float(got) == float(want), (k, got, want)   # exact: the same runs, summary-only
+        compared += 1
+    assert compared >= min_numbers, compared
+
+
+def test_a_refly_case_equals_the_replay_command_with_pads_drone_and_set(tmp_path, capsys):
+    drone = tmp_path / "drone.toml"
+    drone.write_text("[drone]\nmass_kg = 1.2\nfigure_of_merit = 0.62\n")
+    study = _study(tmp_path, f'log = "{LOG}"\npads = "{PADS}"\nwindow = [440.0, 620.0]\ndrone = "drone.toml"',
+                   '"pads.0.hover_time_s" = [30.0, 75.0]\n"battery.capacity_ah" = 1.6')
+    assert _sweep(study, tmp_path / "o") == 0
+    df = read_results(tmp_path / "o")
+    capsys.readouterr()
+    assert len(df) == 2 and (df["status"] == "ok").all()
+    row = df[df["pads.0.hover_time_s"] == 75.0].iloc[0]
+    assert main(["replay", str(LOG), "--pads", str(PADS), "--window", "440,620", "--drone", str(drone),
+                 "--set", "pads.0.hover_time_s=75.0", "--set", "battery.capacity_ah=1.6", "--out", str(tmp_path / "r"),
+                 "--format", "json", "--no-plot", "--no-progress"]) == 0
+    cmd = json.loads(capsys.readouterr().out)
+    _assert_row_equals_command(row, cmd, min_numbers=25)
+    # the --drone file reached the command (it was ignored with --pads before) and the case
+    assert cmd["drone_mass_kg"] == 1.2 and row["drone_mass_kg"] == 1.2
+    # physics: a longer charging hover over pad 0 buys more flight time, against the logged flight and
+    # against the same detours unpowered; the detours' extra time is the hover difference
+    short = df[df["pads.0.hover_time_s"] == 30.0].iloc[0]
+    assert row["flight_time_gain_s"] > short["flight_time_gain_s"]
+    assert row["flight_time_gain_vs_refly_without_charging_s"] > short["flight_time_gain_vs_refly_without_charging_s"]
+    assert row["detour_time_s"] - short["detour_time_s"] == pytest.approx(45.0, abs=0.25)
+    assert row["min_soc_refly"] <= row["final_soc_refly"]
+
+
+def test_a_replay_case_without_pads_equals_the_replay_command(tmp_path, capsys):
+    (tmp_path / "cfg.toml").write_text("[battery]\ncapacity_ah = 1.5\n")   # [study] base = the replay's --config
+    study = _study(tmp_path, f'log = "{LOG171}"', '"drone.mass_kg" = [1.0, 1.83]', head='[study]\nbase = "cfg.toml"\n')
+    assert _sweep(study, tmp_path / "o") == 0
+    df = read_results(tmp_path / "o")
+    capsys.readouterr()
+    row = df[df["drone.mass_kg"] == 1.83].iloc[0]
+    assert main(["replay", str(LOG171), "--config", str(tmp_path / "cfg.toml"), "--set", "drone.mass_kg=1.83",
+                 "--out", str(tmp_path / "r"), "--format", "json", "--no-plot", "--no-progress"]) == 0
+    cmd = json.loads(capsys.readouterr().out)
+    _assert_row_equals_command(row, cmd, min_numbers=30)
+    # the power comparison is there (read from the rows as produced, no time series kept): at the
+    # heavier mass the model's airborne energy is closer to the logged one (docs: equivalent mass 1.83 kg)
+    light = df[df["drone.mass_kg"] == 1.0].iloc[0]
+    assert abs(row["power_comparison.energy_error_rel"]) < 0.05 < abs(light["power_comparison.energy_error_rel"])
+
+
+def test_the_log_is_parsed_once_per_process_not_per_case(tmp_path, monkeypatch):
+    from mission_sim.mavlink import logs
+    calls = []
+    real = logs.read_log
+    monkeypatch.setattr(logs, "read_log", lambda path, *a, **k: calls.append(path) or real(path, *a, **k))
+    monkeypatch.setattr(replay_cases, "_INPUTS", {})
+    study = _study(tmp_path, f'log = "{LOG}"\npads = "{PADS}"\nwindow = [440.0, 620.0]',
+                   '"drone.mass_kg" = [1.0, 1.1, 1.2]')
+    assert _sweep(study, tmp_path / "o") == 0
+    assert len(read_results(tmp_path / "o")) == 3 and len(calls) == 1
+
+
+@pytest.mark.parametrize("grid, words", [
+    ('"drone.mas_kg" = [1.0, 2.0]', ["drone.mas_kg", "mass_kg"]),
+    ('"drone.mass_kg" = [1.0, -1.0]', ["1 of 2 cases", "drone.mass_kg=-1.0", "valid range", "nothing was run"]),
+    ('"pads.7.hover_time_s" = [10.0, 20.0]', ["pads.7.hover_time_s", "0..1"]),
+    ('policy = ["step", "bang"]', ["policy='bang'", "model_based"]),
+    ('"sim.traj_dt_s" = [0.2, 1e-5]', ["sim.traj_dt_s=1e-05", "valid range"]),
+    ('"pads.0.x_m" = [3000.0, 4000.0]\n"pads.1.x_m" = 3000.0', ["2 of 2 cases", "no pad within", "[replay] reach_m"]),
+])
+def test_bad_keys_and_values_are_refused_before_anything_runs(tmp_path, capsys, monkeypatch, grid, words):
+    ran = []
+    monkeypatch.setattr(replay_cases.ReplayCaseRunner, "__call__", lambda self, p: ran.append(p) or {})
+    study = _study(tmp_path, f'log = "{LOG}"\npads = "{PADS}"\nwindow = [440.0, 620.0]', grid)
+    assert _sweep(study, tmp_path / "o") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(w in err[0] for w in words), err
+    assert not ran and not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("replay, words", [
+    ('log = "missing.tlog"', ["[replay] log", "missing.tlog", "does not exist"]),
+    ('log = "notes.tlog"', ["[replay] log", "notes.tlog", "no usable position"]),
+    ('log = "."', ["[replay] log", "is a folder"]),
+    (f'log = "{LOG}"\npads = "nopads.csv"', ["[replay] pads", "nopads.csv", "does not exist"]),
+    (f'log = "{LOG}"\nsegment = 3', ["[replay] segment = 3", "1..2"]),
+    ('pads = "x.csv"', ["[replay] has no log"]),
+    (f'log = "{LOG}"\nwindow = [5.0, 1.0]', ["[replay] window", "T0 < T1"]),
+    (f'log = "{LOG}"\nlogg = 1', ["[replay] key 'logg' is unknown", "ground_gap_m"]),
+])
+def test_a_study_on_a_missing_or_non_log_file_is_one_line(tmp_path, capsys, replay, words):
+    (tmp_path / "notes.tlog").write_text("not a flight log\n" * 50)
+    study = _study(tmp_path, replay, '"drone.mass_kg" = [1.0, 2.0]')
+    assert _sweep(study, tmp_path / "o") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(w in err[0] for w in words), err
+    assert not (tmp_path / "o").exists()
+
+
+def test_an_interrupted_replay_sweep_resumes_with_only_the_missing_cases(tmp_path, capsys, monkeypatch):
+    study = _study(tmp_path, f'log = "{LOG}"\npads = "{PADS}"\nwindow = [440.0, 620.0]',
+                   '"drone.mass_kg" = [1.0, 1.2]\n"mission.hover_time_s" = [20.0, 40.0]')
+    real = replay_cases.ReplayCaseRunner.__call__
+    ran = []
+
+    def interrupted_after_two(self, params):
+        if len(ran) == 2:
+            raise KeyboardInterrupt
+        ran.append(params)
+        return real(self, params)
+
+    monkeypatch.setattr(replay_cases.ReplayCaseRunner, "__call__", interrupted_after_two)
+    assert _sweep(study, tmp_path / "o") == 130
+    assert len(read_results(tmp_path / "o")) == 2      # what finished is stored
+    capsys.readouterr()
+
+    def counting(self, params):
+        ran.append(params)
+        return real(self, params)
+
+    monkeypatch.setattr(replay_cases.ReplayCaseRunner, "__call__", counting)
+    assert _sweep(study, tmp_path / "o") == 0
+    s = json.loads(capsys.readouterr().out)
+    assert (s["cases"], s["skipped"], s["run"], s["ok"]) == (4, 2, 2, 4)
+    assert len(ran) == 4 and len({json.dumps(p, sort_keys=True) for p in ran}) == 4   # each case run once
+    resumed = read_results(tmp_path / "o")
+    # equal, bit for bit, to an uninterrupted sweep
+    assert _sweep(study, tmp_path / "whole") == 0
+    whole = read_results(tmp_path / "whole")
+    volatile = ["case_wall_s", "case_cpu_s", "worker", "attempt", "traceback"]
+    pd.testing.assert_frame_equal(resumed.drop(columns=volatile).sort_values("case_id").reset_index(drop=True),
+                                  whole.drop(columns=volatile).sort_values("case_id").reset_index(drop=True),
+                                  check_exact=True)
+    # the folder records the code that made the rows, the log-to-replay code included (a resume by another
+    # version of it is refused, as for missions)
+    from mission_sim.studies.status import physics_code_hash
+    man = json.loads((tmp_path / "o" / "sweep.json").read_text())
+    assert man["physics_code"] == physics_code_hash(replay=True) != physics_code_hash()
+    # and the status sees the study done
+    capsys.readouterr()
+    assert main(["sweep", "--status", str(tmp_path / "o")]) == 0
+    assert "4 cases, 4 done (100.0 %): 4 ok, 0 failed, 0 pending" in capsys.readouterr().out
+
+
+def test_the_example_replay_study_is_valid_and_its_files_are_shipped():
+    import policies
+    from mission_sim.studies.study import load_study
+    from mission_sim.studies.sweep import prepare_study
+    st = load_study(ROOT / "examples" / "study_replay.toml")
+    runner, cases, _ = prepare_study(st, policies.make, policies.available())
+    assert len(cases) == 12 and st.replay["log"].resolve().parent == (DATA / "flightlogs").resolve()
+    assert isinstance(runner, replay_cases.ReplayCaseRunner)
+
+
+def test_two_local_workers_equal_serial_and_each_parses_the_log_once(tmp_path):
+    import policies
+    from mission_sim.studies.study import load_study
+    from mission_sim.studies.sweep import dask_client, prepare_study, run_sweep
+    study = _study(tmp_path, f'log = "{LOG}"\npads = "{PADS}"\nwindow = [440.0, 620.0]',
+                   '"drone.mass_kg" = [1.0, 1.4]\n"mission.hover_time_s" = [20.0, 50.0]')
+    runner, cases, _ = prepare_study(load_study(study), policies.make, policies.available())
+    with dask_client(workers=2) as client:
+        res = run_sweep(cases, runner, tmp_path / "dask", client=client, progress=False)
+        parsed = client.run(lambda: sorted(k[0] for k in __import__("mission_sim.studies.replay_cases",
+                                                                       fromlist=["_INPUTS"])._INPUTS))
+    serial = run_sweep(cases, runner, tmp_path / "serial", progress=False)
+    assert res.n_ok == 4 and len(parsed) == 2 and all(v == ["log"] for v in parsed.values()), parsed
+    volatile = ["case_wall_s", "case_cpu_s", "worker", "traceback"]
+    pd.testing.assert_frame_equal(res.results.drop(columns=volatile).sort_values("case_id").reset_index(drop=True),
+                                  serial.results.drop(columns=volatile).sort_values("case_id").reset_index(drop=True),
+                                  check_exact=True)
+
+
+def test_replay_with_pads_honours_segment(tmp_path, capsys):
+    """`replay --pads` flew the whole log whatever --segment said; boot segment 1 of the dronekit log
+    (0..254 s) is never armed, so no pad can be reached from it, and segment 3 does not exist."""
+    for seg, words in (("1", ["no pad within --reach"]), ("3", ["--segment 3 is invalid", "1..2"])):
+        assert main(["replay", str(LOG), "--pads", str(PADS), "--segment", seg, "--out", str(tmp_path / "o"),
+                     "--no-progress"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and all(w in err[0] for w in words), err
+
+
+def test_the_documented_replay_section_parses(tmp_path):
+    import inspect
+    import textwrap
+    import tomllib
+
+    from mission_sim.studies import study as study_mod
+    doc = inspect.getdoc(study_mod)
+    block = textwrap.dedent(doc.split("A ``[replay]`` section")[1].split("::\n", 1)[1].split("\n\nDistributions")[0])
+    st = study_mod.parse_study({**tomllib.loads(block), "grid": {"drone.mass_kg": [1.0, 2.0]}}, base_dir=tmp_path)
+    assert set(st.replay) == {"log", "pads", "drone", "window", "segment", "reach_m", "ground_gap_m"}
+    assert st.replay["log"] == tmp_path / "flight.tlog" and st.replay["window"] == (440.0, 620.0)
