@@ -312,11 +312,13 @@ DRAWS = (_Field("soc", "soc0"), _Field("lm_scale", "lm_scale"), _Field("wind_spe
          _SenseDelay("sense_delay_steps", "sense_delay"), _Detune())
 
 
-def draw_episodes(rngs, scn: Scenario, n_steps: int) -> EpisodeDraw:
+def draw_episodes(rngs, scn: Scenario, n_steps: int, fill=None) -> EpisodeDraw:
     """A batched :class:`EpisodeDraw`, episode ``i`` from generator ``rngs[i]``: the :data:`DRAWS` and then the
     scenario's own ``parts``, each filling its named fields (the same numbers as :func:`draw_episode` with each
     generator: ``uniform(lo, hi)`` is ``lo + (hi - lo) u`` of the generator's next double, so one ``random(k)``
-    call gives the k scalar draws); two generator calls per episode and the rest on arrays."""
+    call gives the k scalar draws); two generator calls per episode and the rest on arrays. ``fill(rngs, u,
+    noise)``: draws the generators' numbers into ``u`` and ``noise`` instead of those calls, the same numbers
+    (the vector env's compiled draws, :mod:`envs.draw_kernel`), or returns False to leave them to the calls."""
     parts = DRAWS + scn.parts
     ranges = [part.ranges(scn) for part in parts]
     flat = [r for rs in ranges for r in rs]
@@ -324,9 +326,10 @@ def draw_episodes(rngs, scn: Scenario, n_steps: int) -> EpisodeDraw:
     n = len(rngs)
     u = np.empty((n, drawn[-1] + 1))
     noise = np.empty((n, n_steps))
-    for i, rng in enumerate(rngs):  # each sub-environment owns its generator: one call per array
-        rng.random(out=u[i])
-        rng.standard_normal(out=noise[i])
+    if fill is None or not fill(rngs, u, noise):
+        for i, rng in enumerate(rngs):  # each sub-environment owns its generator: one call per array
+            rng.random(out=u[i])
+            rng.standard_normal(out=noise[i])
     cols = [lo + (hi - lo) * u[:, drawn[i]] if hi > lo else np.full(n, float(lo)) for i, (lo, hi) in enumerate(flat)]
     win, at = {}, 0
     for part, rs in zip(parts, ranges):
@@ -402,10 +405,11 @@ class ScenarioPart:
 
     KEEP = object()   # reset(options=KEEP): the current scenario (an autoreset)
 
-    def __init__(self, default: Scenario, n_steps: int, dt_s: float, cmd: np.ndarray, noise: np.ndarray):
+    def __init__(self, default: Scenario, n_steps: int, dt_s: float, cmd: np.ndarray, noise: np.ndarray, fill=None):
         self.default = self.current = get_scenario(default)
         self.n_steps, self.dt_s = int(n_steps), float(dt_s)
         self.cmd, self.noise = cmd, noise
+        self.fill = fill   # the draws' fill (draw_episodes), None: the generators' own calls
 
     def reset(self, rngs, idx, options=KEEP) -> Window:
         """Windows ``idx`` (a slice for all, or indices of the stores' columns) start, drawn with ``rngs``
@@ -413,7 +417,7 @@ class ScenarioPart:
         if options is not self.KEEP:
             self.current = scenario_from_options(options, self.default)
         scn, T = self.current, self.n_steps
-        draws = draw_episodes(rngs, scn, T)
+        draws = draw_episodes(rngs, scn, T, self.fill)
         n = draws.n
         full = isinstance(idx, slice)
         cmd = command_profile(draws, T, self.dt_s, out=self.cmd if full else None)
