@@ -123,7 +123,7 @@ class SbarChargingVectorEnv(VectorEnv):
         if self._draws is None:
             from .draw_kernel import Draws
             self._draws = Draws()
-        chunks = self._n_chunks if len(rngs) >= self.PARALLEL_MIN_ENVS else 1
+        chunks = min(self._n_chunks, len(rngs))
         if self._auto is not None:   # auto threads: as the step's probes chose (one thread until they have)
             chunks = min(chunks, self._auto.best or 1)
         if chunks > 1:
