@@ -91,14 +91,25 @@ def _bitgen_at(typingctx, addr):
     return sig, codegen
 
 
+#: windows drawn per block: their normals go to ``noise`` a block at a time, so that a transposed view (a store
+#: (T, n) step-major) is written a run of _BLOCK values per step instead of one value per cache line
+_BLOCK = 16
+
+
 @njit(cache=True)
 def _draw_rows(lo, hi, addr, u, noise):
-    for i in range(lo, hi):
-        bg = _bitgen_at(addr[i])
-        for k in range(u.shape[1]):    # rng.random(out=u[i])
-            u[i, k] = next_double(bg)
-        for t in range(noise.shape[1]):   # rng.standard_normal(out=noise[i])
-            noise[i, t] = random_standard_normal(bg)
+    buf = np.empty((_BLOCK, noise.shape[1]))
+    for b0 in range(lo, hi, _BLOCK):
+        b1 = min(b0 + _BLOCK, hi)
+        for i in range(b0, b1):
+            bg = _bitgen_at(addr[i])
+            for k in range(u.shape[1]):    # rng.random(out=u[i])
+                u[i, k] = next_double(bg)
+            for t in range(noise.shape[1]):   # rng.standard_normal(out=noise[i])
+                buf[i - b0, t] = random_standard_normal(bg)
+        for t in range(noise.shape[1]):
+            for i in range(b0, b1):
+                noise[i, t] = buf[i - b0, t]
 
 
 @njit(cache=True, parallel=True)
