@@ -22,6 +22,7 @@ Imported only when the vector env draws (numba is not imported by ``import envs`
 from __future__ import annotations
 
 import ctypes
+import operator
 
 import numpy as np
 from llvmlite import ir
@@ -61,7 +62,7 @@ class Draws:
         self._rngs, self._addr = (), None
 
     def __call__(self, rngs, u, noise, n_chunks) -> bool:
-        if len(rngs) != len(self._rngs) or any(a is not b for a, b in zip(rngs, self._rngs)):
+        if len(rngs) != len(self._rngs) or not all(map(operator.is_, rngs, self._rngs)):
             self._rngs, self._addr = tuple(rngs), bitgen_addresses(rngs)
         if self._addr is None:
             return False
