@@ -56,17 +56,19 @@ class Draws:
     """The draws of :func:`envs.scenario.draw_episodes` (its ``fill``) by :func:`draw_rows`: ``draws(rngs, u,
     noise, n_chunks)`` returns False (nothing drawn) when one of ``rngs`` is not a numpy ``Generator``. The
     addresses of the last list of generators are kept with the generators themselves (alive and the same
-    objects: checked at each call) and reused."""
+    objects: checked at each call) and reused. A list that holds one generator twice is drawn on one thread, in
+    order (numpy's calls draw from it one window after the other)."""
 
     def __init__(self):
-        self._rngs, self._addr = (), None
+        self._rngs, self._addr, self._shared = (), None, False
 
     def __call__(self, rngs, u, noise, n_chunks) -> bool:
         if len(rngs) != len(self._rngs) or not all(map(operator.is_, rngs, self._rngs)):
             self._rngs, self._addr = tuple(rngs), bitgen_addresses(rngs)
+            self._shared = self._addr is not None and len(np.unique(self._addr)) < len(self._addr)
         if self._addr is None:
             return False
-        draw_rows(self._addr, u, noise, n_chunks)
+        draw_rows(self._addr, u, noise, 1 if self._shared else n_chunks)
         return True
 
 

@@ -82,3 +82,15 @@ def test_other_bit_generators_and_fallback():
     ref = np.random.default_rng(3)
     ref.random(2), ref.standard_normal(5), ref.random(2), ref.standard_normal(5)
     assert rngs[0].bit_generator.state == ref.bit_generator.state
+
+
+def test_a_generator_shared_by_windows_is_drawn_in_order():
+    """One generator in two windows' slots (numpy's calls draw from it window after window): the same numbers,
+    on one thread whatever the chunks."""
+    g, h = np.random.default_rng(5), np.random.default_rng(6)
+    gr, hr = np.random.default_rng(5), np.random.default_rng(6)
+    u, z = np.empty((4, 2)), np.empty((4, 300))
+    assert Draws()([g, h, g, h], u, z, 4)
+    ur, zr = _numpy([gr, hr, gr, hr], 2, 300)
+    assert u.tobytes() == ur.tobytes() and z.tobytes() == zr.tobytes()
+    assert g.bit_generator.state == gr.bit_generator.state and h.bit_generator.state == hr.bit_generator.state
