@@ -19,7 +19,10 @@ import numpy as np
 CASES = [("envelope", "random", 64, 1500, 1, 700), ("envelope", "detuned", 64, 700, 1, None),
          ("envelope", "sense_delay", 64, 700, 1, None), ("modal", "random", 64, 700, 1, 300),
          ("envelope", "random", 4096, 700, 1, 400), ("envelope", "random", 4096, 400, 2, None),
-         ("envelope", "windy", 4096, 350, 2, None), ("modal", "nominal", 4096, 320, 2, None)]
+         ("envelope", "windy", 4096, 350, 2, None), ("modal", "nominal", 4096, 320, 2, None),
+         # (2026-11-27, the autoreset's compiled draws and one-Lm shortcuts: the default scenario on both threads)
+         ("envelope", "nominal", 4096, 700, 2, 400), ("envelope", "nominal", 16384, 320, 2, 310),
+         ("envelope", "random", 16384, 320, 2, None), ("envelope", "lm_drift", 2100, 320, 1, 200)]
 
 
 def fingerprint(link, scenario, n, steps, threads, restart_at=None) -> str:

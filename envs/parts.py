@@ -191,12 +191,16 @@ class ObjectivePart:
         """``(i2_sm (n, S), stop_k (n,), t_stop (n,))`` of the windows of ``win`` on the plant's ``plan``."""
         c = self.cfg
         t_stop = np.asarray(win.draw.t_stop_s, dtype=float)
-        det = plan.detuned
+        det, lm = plan.detuned, plan.lm_h
         if det is None:
-            i2_sm = short_mode_i2_a(c.link, plan.lm_h, c.device_set())
+            flat = lm.reshape(-1)
+            one = flat.size > 0 and bool(np.all(flat == flat[0]))   # one Lm for all (no wind, no drift): once
+            i2_sm = short_mode_i2_a(c.link, flat[:1] if one else lm, c.device_set())   # (elementwise: same numbers)
+            if one:
+                i2_sm = np.broadcast_to(i2_sm, lm.shape)
         else:   # the detuned link's short-mode current
             from .detuned import short_mode_i2
-            i2_sm = short_mode_i2(c, c.device_set(), plan.lm_h, det.c1_f, det.c2_f)
+            i2_sm = short_mode_i2(c, c.device_set(), lm, det.c1_f, det.c2_f)
         return i2_sm, stop_step(t_stop, c.dt_s, c.n_steps), t_stop
 
     def reset(self, idx, win, plan):

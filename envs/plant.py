@@ -84,6 +84,13 @@ def _valid_starts(wind_level_m_s: int, n_span: int):
     return starts
 
 
+@lru_cache(maxsize=64)
+def _constant(wind_level_m_s: int) -> bool:
+    """The wind level's Lm record is one value (no wind)."""
+    lm, _ = lm_record(wind_level_m_s)
+    return bool(np.all(lm == lm[0]))
+
+
 def lm_window_h(wind_speed_m_s, start_frac, t_s):
     """True Lm [H] (n, len(t_s)) for n windows: wind speed (rounded to the 1 m/s record levels),
     start at fraction ``start_frac`` in [0, 1) of the record's valid starts, sampled at times
@@ -100,6 +107,9 @@ def lm_window_h(wind_speed_m_s, start_frac, t_s):
         rows = np.flatnonzero(level == lv)
         lm, _ = lm_record(int(lv))
         starts = _valid_starts(int(lv), n_span)
+        if _constant(int(lv)):   # no wind: one Lm along the record (np.interp of a constant is that number)
+            out[rows] = lm[0]
+            continue
         i0 = starts[np.minimum((u[rows] * len(starts)).astype(int), len(starts) - 1)]
         seg = lm[i0[:, None] + np.arange(n_span + 1)]
         out[rows] = _interp_rows(xp, seg, t_s, j)

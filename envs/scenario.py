@@ -216,7 +216,7 @@ class EpisodeDraw:
     cmd1_a: float
     t_change_s: float
     t_stop_s: float
-    noise: np.ndarray        # (n_steps,) standard normals for the I2 sensor
+    noise: np.ndarray | None  # (n_steps,) standard normals for the I2 sensor (None: drawn into a store, Window)
     lm_drift: float = 0.0    # relative Lm change over the window
     sense_delay: float = 0.0  # measurement delay [control periods] (integer valued)
     c1_detune: float = 0.0   # relative C1 error
@@ -312,21 +312,29 @@ DRAWS = (_Field("soc", "soc0"), _Field("lm_scale", "lm_scale"), _Field("wind_spe
          _SenseDelay("sense_delay_steps", "sense_delay"), _Detune())
 
 
-def draw_episodes(rngs, scn: Scenario, n_steps: int) -> EpisodeDraw:
+def draw_episodes(rngs, scn: Scenario, n_steps: int, fill=None, noise=None) -> EpisodeDraw:
     """A batched :class:`EpisodeDraw`, episode ``i`` from generator ``rngs[i]``: the :data:`DRAWS` and then the
     scenario's own ``parts``, each filling its named fields (the same numbers as :func:`draw_episode` with each
     generator: ``uniform(lo, hi)`` is ``lo + (hi - lo) u`` of the generator's next double, so one ``random(k)``
-    call gives the k scalar draws); two generator calls per episode and the rest on arrays."""
+    call gives the k scalar draws); two generator calls per episode and the rest on arrays. ``fill(rngs, u,
+    noise)``: draws the generators' numbers into ``u`` and ``noise`` instead of those calls, the same numbers
+    (the vector env's compiled draws, :mod:`envs.draw_kernel`), or returns False to leave them to the calls.
+    ``noise``: the (n, n_steps) array the normals are drawn into (any strides: a store's transposed view), else
+    a new one."""
     parts = DRAWS + scn.parts
     ranges = [part.ranges(scn) for part in parts]
     flat = [r for rs in ranges for r in rs]
     drawn = [i - 1 for i in accumulate(hi > lo for lo, hi in flat)]   # column in u of each drawn range
     n = len(rngs)
     u = np.empty((n, drawn[-1] + 1))
-    noise = np.empty((n, n_steps))
-    for i, rng in enumerate(rngs):  # each sub-environment owns its generator: one call per array
-        rng.random(out=u[i])
-        rng.standard_normal(out=noise[i])
+    noise = np.empty((n, n_steps)) if noise is None else noise
+    if fill is None or not fill(rngs, u, noise):
+        rows = noise if noise.flags.c_contiguous else np.empty((n, n_steps))   # numpy's out: contiguous
+        for i, rng in enumerate(rngs):  # each sub-environment owns its generator: one call per array
+            rng.random(out=u[i])
+            rng.standard_normal(out=rows[i])
+        if rows is not noise:
+            noise[...] = rows
     cols = [lo + (hi - lo) * u[:, drawn[i]] if hi > lo else np.full(n, float(lo)) for i, (lo, hi) in enumerate(flat)]
     win, at = {}, 0
     for part, rs in zip(parts, ranges):
@@ -380,7 +388,8 @@ def register_scenario(scn: Scenario, held_out: Scenario | None = None) -> Scenar
 class Window:
     """What the scenario part hands the other parts at a reset, for the ``n`` windows that start (named
     fields, arrays along the windows): the draws, the command (the reference) and the I2 sensor noise
-    (views of the part's stores), the hover draw and the scenario."""
+    (views of the part's stores), the hover draw and the scenario. (When all windows start the normals are
+    drawn into the noise store and scaled there: ``draw.noise`` is None, ``noise_a`` has them.)"""
 
     draw: EpisodeDraw
     cmd_a: np.ndarray       # (n, T + 1) charge command per step [A]
@@ -402,10 +411,11 @@ class ScenarioPart:
 
     KEEP = object()   # reset(options=KEEP): the current scenario (an autoreset)
 
-    def __init__(self, default: Scenario, n_steps: int, dt_s: float, cmd: np.ndarray, noise: np.ndarray):
+    def __init__(self, default: Scenario, n_steps: int, dt_s: float, cmd: np.ndarray, noise: np.ndarray, fill=None):
         self.default = self.current = get_scenario(default)
         self.n_steps, self.dt_s = int(n_steps), float(dt_s)
         self.cmd, self.noise = cmd, noise
+        self.fill = fill   # the draws' fill (draw_episodes), None: the generators' own calls
 
     def reset(self, rngs, idx, options=KEEP) -> Window:
         """Windows ``idx`` (a slice for all, or indices of the stores' columns) start, drawn with ``rngs``
@@ -413,14 +423,15 @@ class ScenarioPart:
         if options is not self.KEEP:
             self.current = scenario_from_options(options, self.default)
         scn, T = self.current, self.n_steps
-        draws = draw_episodes(rngs, scn, T)
-        n = draws.n
         full = isinstance(idx, slice)
+        # all windows (the usual autoreset): the normals drawn into the noise store and scaled there, no temporaries
+        draws = draw_episodes(rngs, scn, T, self.fill, noise=self.noise.T if full else None)
+        n = draws.n
         cmd = command_profile(draws, T, self.dt_s, out=self.cmd if full else None)
-        noise_sd = np.full(n, scn.i2_noise_a)
-        if full:   # written in place (the usual autoreset of all windows): no temporaries
-            noise = np.multiply(draws.noise.T, noise_sd, out=self.noise).T
+        if full:
+            noise = np.multiply(self.noise, scn.i2_noise_a, out=self.noise).T
+            draws = replace(draws, noise=None)   # (its normals were scaled in place: the store holds the noise)
         else:
-            noise = np.multiply(draws.noise.T, noise_sd).T
+            noise = np.multiply(draws.noise.T, np.full(n, scn.i2_noise_a)).T
             self.cmd[:, idx], self.noise[:, idx] = cmd.T, noise.T
         return Window(draws, cmd, noise, np.full(n, scn.load_power_w), scn)

@@ -98,7 +98,8 @@ class SbarChargingVectorEnv(VectorEnv):
         # the compiled duty map looked up once (not per step); uncompiled: per call (tests swap the source)
         self._duty_kernel = kernel_function("duty_kernel") if self._compiled else None
         # per-step data stored step-major (T, n): a step reads one contiguous row across the envs
-        self.parts = Parts(ScenarioPart(self.scenario, T, c.dt_s, np.zeros((T + 1, n)), np.zeros((T, n))),
+        self.parts = Parts(ScenarioPart(self.scenario, T, c.dt_s, np.zeros((T + 1, n)), np.zeros((T, n)),
+                                        self._fill if self._compiled else None),
                            vector_plant(c, n, self._compiled), ObjectivePart(c, n),
                            ObservationPart(c, n, self._peak, self._compiled, self.history))
         # the compiled step's constants, each part's by name
@@ -107,6 +108,7 @@ class SbarChargingVectorEnv(VectorEnv):
         self._k = np.zeros(n, dtype=np.int64)
         self._prev_done = np.zeros(n, dtype=bool)
         self._rngs = [None] * n
+        self._draws = None   # the compiled draws (envs.draw_kernel.Draws), made at the first reset
         self._started = False
         self._obs_scale = OBS_SCALE[:, None]
         self._obs_offset = OBS_OFFSET[:, None]
@@ -114,6 +116,19 @@ class SbarChargingVectorEnv(VectorEnv):
         self._n_chunks = 1 if serial else min(self.num_threads * self.CHUNKS_PER_THREAD, max(1, n // 256))
         # auto (num_threads=None, parallel possible): the step times decide between one thread and all
         self._auto = _AutoThreads() if self._threads_auto and self._n_chunks > 1 else None
+
+    def _fill(self, rngs, u, noise) -> bool:
+        """The scenario's draws (:func:`envs.scenario.draw_episodes`'s ``fill``) compiled, on the step's threads
+        when it runs parallel (:mod:`envs.draw_kernel`: the generators' own numbers and end states)."""
+        if self._draws is None:
+            from .draw_kernel import Draws
+            self._draws = Draws()
+        chunks = min(self._n_chunks, len(rngs))
+        if self._auto is not None:   # auto threads: as the step's probes chose (one thread until they have)
+            chunks = min(chunks, self._auto.best or 1)
+        if chunks > 1:
+            _set_threads(self.num_threads)
+        return self._draws(rngs, u, noise, chunks)
 
     @property
     def state_names(self) -> tuple:

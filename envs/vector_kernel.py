@@ -92,13 +92,18 @@ def _clip1(x):
 def duty_kernel(a, d):
     """``d = clip((a + 1) / 2, 0, 1)`` (:func:`mission_sim.contract.action_to_duty` in float64) for
     actions ``a`` (n,) of any float type; returns the index of the first non-finite action (``d``
-    then unusable) or -1."""
+    then unusable) or -1. (The check is or-ed over the loop, without an early exit, so that LLVM vectorises
+    it: ~1.3 instead of ~8-16 us at n = 4,096; the index is looked for only when one is bad.)"""
+    bad = False
     for e in range(a.shape[0]):
         x = np.float64(a[e])
-        if not np.isfinite(x):
-            return e
+        bad |= not abs(x) < np.inf   # NaN or +-inf
         x = (x + 1.0) * 0.5
         d[e] = 0.0 if x < 0.0 else (1.0 if x > 1.0 else x)
+    if bad:
+        for e in range(a.shape[0]):
+            if not np.isfinite(np.float64(a[e])):
+                return e
     return -1
 
 

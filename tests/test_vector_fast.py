@@ -65,3 +65,26 @@ def test_compiled_step_equals_numpy_step_through_autoresets(discrete, link):
         assert set(f[4]) == set(r[4])
         for key in r[4]:
             np.testing.assert_allclose(f[4][key], r[4][key], rtol=1e-9, atol=1e-12, err_msg=key)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_non_finite_action_is_refused_by_its_index(compiled):
+    """The duty map's finiteness check (or-ed over the actions, the index looked up after) names the first
+    NaN or infinite action, and the step does not run."""
+    pytest.importorskip("numba")
+    n = 300
+    env = SbarChargingVectorEnv(n, config=EnvConfig(n_steps=SHORT.n_steps, link_model="envelope"), compiled=compiled)
+    env.reset(seed=1)
+    a = np.zeros((n, 1), np.float32)
+    env.step(a)
+    before = env._state.copy()
+    for bad in ({7: np.nan}, {250: np.inf, 260: np.nan}, {0: -np.inf}, {299: np.nan}):
+        b = a.copy()
+        for i, v in bad.items():
+            b[i] = v
+        first = min(bad)
+        with pytest.raises(ValueError, match=rf"actions\[{first}\]={float(bad[first])!r} is invalid; valid range"):
+            env.step(b)
+        np.testing.assert_array_equal(env._state, before)
+    np.testing.assert_array_equal(env._duty(np.linspace(-1.5, 1.5, n, dtype=np.float32)),
+                                  np.clip((np.linspace(-1.5, 1.5, n, dtype=np.float32).astype(float) + 1.0) * 0.5, 0, 1))

@@ -1,0 +1,128 @@
+"""The scenario's per-window draws (:func:`envs.scenario.draw_episodes`) compiled and run over the windows in
+parallel, the same numbers as numpy's ``Generator`` calls to the bit.
+
+Window ``i`` owns a numpy ``Generator``; numpy draws its numbers with two calls,
+``rng.random(out=u[i])`` (each number the bit generator's ``next_double``) and
+``rng.standard_normal(out=noise[i])`` (numpy's ziggurat, ``random_standard_normal`` of numpy's
+``distributions.c``, on the bit generator's ``next_uint64`` and ``next_double``). Here each window's draws
+call the same C functions of numpy's bit generator (the function pointers of its ``bitgen_t``, reached
+through ``bit_generator.capsule``) on its state in place, and the ziggurat is numba's port of numpy's
+(``numba.np.random.distributions.random_standard_normal``, the code behind numba's own
+``Generator.standard_normal``): no copy of either algorithm here. After the draws each ``Generator`` is in
+the state numpy's two calls leave it in (the state lives in the bit generator's C struct and is advanced
+there), so the streams go on as before. ``tests/test_draw_kernel.py`` checks the numbers and the states
+against numpy's calls (many seeds, the ziggurat's tail and wedge branches hit).
+
+Windows are independent (one generator each), so the draws run in ``n_chunks`` contiguous chunks in
+parallel (``prange``; ``n_chunks = 1``: on the calling thread); the numbers do not depend on the chunks.
+
+Imported only when the vector env draws (numba is not imported by ``import envs``).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import operator
+
+import numpy as np
+from llvmlite import ir
+from numba import njit, prange, types
+from numba.core import cgutils
+from numba.extending import intrinsic
+from numba.np.random.distributions import random_standard_normal
+from numba.np.random.generator_core import next_double
+
+__all__ = ["bitgen_addresses", "Draws", "draw_rows"]
+
+_BITGEN = types.NumPyRandomBitGeneratorType("bit_generator")
+_CAPSULE_POINTER = ctypes.pythonapi.PyCapsule_GetPointer
+_CAPSULE_POINTER.restype = ctypes.c_void_p
+_CAPSULE_POINTER.argtypes = [ctypes.py_object, ctypes.c_char_p]
+
+
+def bitgen_addresses(rngs) -> np.ndarray | None:
+    """The address of each generator's ``bitgen_t`` (numpy's C struct: state, ``next_uint64``,
+    ``next_uint32``, ``next_double``), or None when one of ``rngs`` is not a numpy ``Generator`` (the caller
+    then draws with numpy). Valid while the generators live."""
+    out = np.empty(len(rngs), dtype=np.uintp)
+    for i, rng in enumerate(rngs):
+        if type(rng) is not np.random.Generator:
+            return None
+        out[i] = _CAPSULE_POINTER(rng.bit_generator.capsule, b"BitGenerator")
+    return out
+
+
+class Draws:
+    """The draws of :func:`envs.scenario.draw_episodes` (its ``fill``) by :func:`draw_rows`: ``draws(rngs, u,
+    noise, n_chunks)`` returns False (nothing drawn) when one of ``rngs`` is not a numpy ``Generator``. The
+    addresses of the last list of generators are kept with the generators themselves (alive and the same
+    objects: checked at each call) and reused. A list that holds one generator twice is drawn on one thread, in
+    order (numpy's calls draw from it one window after the other)."""
+
+    def __init__(self):
+        self._rngs, self._addr, self._shared = (), None, False
+
+    def __call__(self, rngs, u, noise, n_chunks) -> bool:
+        if len(rngs) != len(self._rngs) or not all(map(operator.is_, rngs, self._rngs)):
+            self._rngs, self._addr = tuple(rngs), bitgen_addresses(rngs)
+            self._shared = self._addr is not None and len(np.unique(self._addr)) < len(self._addr)
+        if self._addr is None:
+            return False
+        draw_rows(self._addr, u, noise, 1 if self._shared else n_chunks)
+        return True
+
+
+@intrinsic
+def _bitgen_at(typingctx, addr):
+    """numba's bit-generator value (the struct its ``Generator`` support unboxes: the state and numpy's
+    function pointers) read from the ``bitgen_t`` at address ``addr`` (no Python object behind it)."""
+    sig = _BITGEN(types.uintp)
+
+    def codegen(context, builder, sig, args):
+        ll_uintp = context.get_value_type(types.uintp)
+        fields = builder.inttoptr(args[0], ir.PointerType(ll_uintp))
+
+        def field(k):
+            return builder.load(builder.gep(fields, [ir.Constant(ir.IntType(32), k)]))
+
+        bg = cgutils.create_struct_proxy(_BITGEN)(context, builder)   # zero-filled: no parent object
+        state = field(0)
+        bg.state_address, bg.state = state, state
+        bg.fnptr_next_uint64, bg.fnptr_next_uint32, bg.fnptr_next_double = field(1), field(2), field(3)
+        return bg._getvalue()
+
+    return sig, codegen
+
+
+#: windows drawn per block: their normals go to ``noise`` a block at a time, so that a transposed view (a store
+#: (T, n) step-major) is written a run of _BLOCK values per step instead of one value per cache line
+_BLOCK = 16
+
+
+@njit(cache=True)
+def _draw_rows(lo, hi, addr, u, noise):
+    buf = np.empty((_BLOCK, noise.shape[1]))
+    for b0 in range(lo, hi, _BLOCK):
+        b1 = min(b0 + _BLOCK, hi)
+        for i in range(b0, b1):
+            bg = _bitgen_at(addr[i])
+            for k in range(u.shape[1]):    # rng.random(out=u[i])
+                u[i, k] = next_double(bg)
+            for t in range(noise.shape[1]):   # rng.standard_normal(out=noise[i])
+                buf[i - b0, t] = random_standard_normal(bg)
+        for t in range(noise.shape[1]):
+            for i in range(b0, b1):
+                noise[i, t] = buf[i - b0, t]
+
+
+@njit(cache=True, parallel=True)
+def draw_rows(addr, u, noise, n_chunks):
+    """Window ``i``'s uniform numbers into ``u[i]`` and its standard normals into ``noise[i]``, drawn from the
+    generator whose ``bitgen_t`` is at ``addr[i]`` (:func:`bitgen_addresses`), in ``n_chunks`` chunks of
+    windows run in parallel."""
+    n = u.shape[0]
+    if n_chunks <= 1:
+        _draw_rows(0, n, addr, u, noise)
+        return
+    for c in prange(n_chunks):
+        _draw_rows(c * n // n_chunks, (c + 1) * n // n_chunks, addr, u, noise)
