@@ -20,6 +20,8 @@ Modules, in the order data flows:
 =================  ==========================================================================
 ``scenario``       scenarios, their draws (``Draw`` parts) and the seeded charge-command
                    generator (the reference): the scenario part
+``draw_kernel``    the autoreset's per-window draws, compiled and parallel over windows: each window's own
+                   numpy generator driven in place (numpy's C bit generator, numba's port of its ziggurat)
 ``plant``          the world as the env needs it: hover pose error -> true Lm, battery, power
 ``layout``         the named slots of the state, battery, coefficient, info and constant arrays
 ``core``           the env's settings and the plant's per-episode plans (ZOH coefficients, initial state)
