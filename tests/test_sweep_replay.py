@@ -255,3 +255,22 @@ def test_the_documented_replay_section_parses(tmp_path):
     st = study_mod.parse_study({**tomllib.loads(block), "grid": {"drone.mass_kg": [1.0, 2.0]}}, base_dir=tmp_path)
     assert set(st.replay) == {"log", "pads", "drone", "window", "segment", "reach_m", "ground_gap_m"}
     assert st.replay["log"] == tmp_path / "flight.tlog" and st.replay["window"] == (440.0, 620.0)
+
+
+def test_a_depleted_replay_case_counts_the_commands_warnings(tmp_path, capsys):
+    """The command warned where the battery ran out, the study's row did not count it (n_warnings differed):
+    both now take the summary's one list (mission_sim.mavlink.replay.replay_summary_warnings)."""
+    study = _study(tmp_path, f'log = "{LOG171}"', '"battery.capacity_ah" = [0.05, 1.5]')
+    assert _sweep(study, tmp_path / "o") == 0
+    df = read_results(tmp_path / "o")
+    capsys.readouterr()
+    row = df[df["battery.capacity_ah"] == 0.05].iloc[0]
+    assert main(["replay", str(LOG171), "--set", "battery.capacity_ah=0.05", "--out", str(tmp_path / "r"),
+                 "--format", "json", "--no-plot", "--no-progress"]) == 0
+    cmd = json.loads(capsys.readouterr().out)
+    assert cmd["battery_depleted"] is True and bool(row["battery_depleted"])
+    assert any(w.startswith("battery depleted at t = ") for w in cmd["warnings"])
+    assert row["n_warnings"] == len(cmd["warnings"])
+    _assert_row_equals_command(row, cmd, min_numbers=30)
+    full = df[df["battery.capacity_ah"] == 1.5].iloc[0]
+    assert not full["battery_depleted"] and full["n_warnings"] == row["n_warnings"] - 1
