@@ -274,3 +274,41 @@ def test_a_depleted_replay_case_counts_the_commands_warnings(tmp_path, capsys):
     _assert_row_equals_command(row, cmd, min_numbers=30)
     full = df[df["battery.capacity_ah"] == 1.5].iloc[0]
     assert not full["battery_depleted"] and full["n_warnings"] == row["n_warnings"] - 1
+
+
+def _never_run(monkeypatch):
+    from mission_sim.world import runner
+
+    def ran(*a, **k):
+        raise AssertionError("a run started")
+    monkeypatch.setattr(runner, "run_mission", ran)
+
+
+def test_a_refly_too_long_for_memory_is_refused_by_the_command_before_it_runs(tmp_path, capsys, monkeypatch):
+    """`replay --pads --set mission.hover_time_s=100000` ran for minutes at ~2 GB: the re-flight's samples
+    (logged span + detours with their charging hovers, at sim.traj_dt_s) are held to the replay's limit."""
+    from mission_sim.mavlink.replay import MAX_REPLAY_SAMPLES
+    _never_run(monkeypatch)
+    pads = tmp_path / "pads.csv"   # the test pads without their own hover_time_s: mission.hover_time_s applies
+    pads.write_text("lat,lon\n" + "".join(",".join(r.split(",")[:2]) + "\n" for r in PADS.read_text().splitlines()[1:]))
+    dt = 0.2
+    hover = MAX_REPLAY_SAMPLES * dt + 1.0   # one pad visited: its hover alone is over the limit
+    assert main(["replay", str(LOG), "--pads", str(pads), "--window", "440,620", "--set", f"mission.hover_time_s={hover}",
+                 "--set", f"sim.traj_dt_s={dt}", "--out", str(tmp_path / "o"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"mission.hover_time_s={hover:g}" in err[0] and "valid range: [0, " in err[0], err
+    room = float(err[0].split("valid range: [0, ")[1].split("]")[0])
+    assert 0 < room < hover and not (tmp_path / "o").exists()
+
+
+def test_a_refly_case_too_long_for_memory_is_refused_before_the_sweep_runs(tmp_path, capsys, monkeypatch):
+    """In a sweep a 20000 s hover took 13.7 s and 374 MB, the allowed 1e6 s gigabytes per worker: refused with the
+    other bad values, before anything runs (a pad's own hover named by its key)."""
+    _never_run(monkeypatch)
+    study = _study(tmp_path, f'log = "{LOG}"\npads = "{PADS}"\nwindow = [440.0, 620.0]',
+                   '"pads.0.hover_time_s" = [30.0, 1e6]\n"drone.mass_kg" = [1.0, 1.2]')
+    assert _sweep(study, tmp_path / "o") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(w in err[0] for w in ("2 of 4 cases", "pads.0.hover_time_s=1e+06", "valid range",
+                                                        "nothing was run")), err
+    assert not (tmp_path / "o").exists()
