@@ -312,3 +312,42 @@ def test_a_refly_case_too_long_for_memory_is_refused_before_the_sweep_runs(tmp_p
     assert len(err) == 1 and all(w in err[0] for w in ("2 of 4 cases", "pads.0.hover_time_s=1e+06", "valid range",
                                                         "nothing was run")), err
     assert not (tmp_path / "o").exists()
+
+
+def test_a_resume_over_a_changed_log_names_the_file(tmp_path, capsys):
+    """A changed log was refused as "another study (..., another base mission)": sweep.json records the log's
+    (and the pads file's) sha256 and the refusal names the changed file."""
+    import hashlib
+    import shutil
+    log = tmp_path / "f.tlog"
+    shutil.copyfile(LOG, log)
+    study = _study(tmp_path, f'log = "f.tlog"\npads = "{PADS}"\nwindow = [440.0, 620.0]', '"drone.mass_kg" = [1.0, 1.2]')
+    assert _sweep(study, tmp_path / "o") == 0
+    man = json.loads((tmp_path / "o" / "sweep.json").read_text())
+    assert man["inputs"] == {"[replay] log": {"path": str(log), "sha256": hashlib.sha256(LOG.read_bytes()).hexdigest()},
+                             "[replay] pads": {"path": str(PADS), "sha256": hashlib.sha256(PADS.read_bytes()).hexdigest()}}
+    capsys.readouterr()
+    with open(log, "ab") as fh:   # the same flight with a few bytes of junk after it: still a log, another file
+        fh.write(b"\0" * 64)
+    assert _sweep(study, tmp_path / "o") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(w in err[0] for w in ("[replay] log", str(log), "changed since it ran",
+                                                        man["inputs"]["[replay] log"]["sha256"][:12])), err
+    assert "another base mission" not in err[0]
+
+
+def test_a_missing_relative_log_says_paths_are_relative_to_the_study_file(tmp_path, capsys, monkeypatch):
+    (tmp_path / "studies").mkdir()
+    (tmp_path / "flight.tlog").write_bytes(LOG.read_bytes())   # beside the current folder, not the study file
+    monkeypatch.chdir(tmp_path)
+    study = _study(tmp_path / "studies", 'log = "flight.tlog"', '"drone.mass_kg" = [1.0, 2.0]')
+    assert _sweep(study, tmp_path / "o") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(w in err[0] for w in (
+        "[replay] log", "does not exist", "relative to the study file's folder", repr(str(tmp_path / "studies")))), err
+
+
+def test_a_replay_study_that_varies_nothing_says_replay(tmp_path):
+    from mission_sim.studies.study import parse_study
+    with pytest.raises(ValueError, match="would replay the log once"):
+        parse_study({"replay": {"log": "f.tlog"}}, base_dir=tmp_path)

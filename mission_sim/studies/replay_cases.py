@@ -89,6 +89,9 @@ class ReplayCaseRunner(MissionCaseRunner):
         ``--config`` mission with one pad at the frame origin (as ``dronewpt replay`` builds them)
     options : the ``[replay]`` section (paths resolved)
     log_sha : the log's sha256 (checked where it is read; the pads are in ``base`` already)
+
+    ``input_files`` (set by :func:`replay_runner`): the log's and the pads file's path and sha256, recorded in
+    the sweep's ``sweep.json`` so a resume over a changed file names it.
     """
 
     _check_run_size = False   # the route is the log: the planner's size estimate does not apply; the replay's own
@@ -99,6 +102,7 @@ class ReplayCaseRunner(MissionCaseRunner):
         self.options = dict(options)
         self.log_sha = log_sha
         self._refused: dict = {}
+        self.input_files: dict = {}
 
     def __getstate__(self):
         return {**super().__getstate__(), "_refused": {}}
@@ -179,6 +183,18 @@ def _base(study: Study, options: dict, log, pads) -> dict:
     return d
 
 
+def _relative_note(study: Study, key: str) -> str:
+    """For a missing file given by a relative path: where it was looked for (the study file's folder, not the
+    folder the sweep was started in)."""
+    raw = str((study.source.get("replay") or {}).get(key, ""))
+    rel = Path(raw).expanduser()
+    if not raw or rel.is_absolute():
+        return ""
+    folder = Path(study.replay[key]).parents[len(rel.parts) - 1]
+    return (f" (a relative [replay] {key} = {raw!r} is relative to the study file's folder {str(folder)!r}, not to "
+            "the current folder; valid: a path from there, or an absolute one)")
+
+
 def replay_runner(study: Study, make_policy, policy_names) -> tuple[ReplayCaseRunner, str]:
     """(runner, fingerprint) of a ``[replay]`` study: the files checked and read here, on the driver (a
     missing file, a folder, a file that is not a flight log: one-line ``ValueError`` / ``FileNotFoundError``
@@ -187,10 +203,13 @@ def replay_runner(study: Study, make_policy, policy_names) -> tuple[ReplayCaseRu
     from ..mavlink.replay import replay_span, track_from_log
     from ..validation import check_regular_file
     o = dict(study.replay)
-    check_regular_file(o["log"], "[replay] log", "a .tlog, .bin or .ulg flight log")
-    for key, valid in (("pads", "a CSV or GeoJSON pads file"), ("drone", "a TOML file with a [drone] table")):
+    for key, valid in (("log", "a .tlog, .bin or .ulg flight log"), ("pads", "a CSV or GeoJSON pads file"),
+                       ("drone", "a TOML file with a [drone] table")):
         if key in o:
-            check_regular_file(o[key], f"[replay] {key}", valid)
+            try:
+                check_regular_file(o[key], f"[replay] {key}", valid)
+            except FileNotFoundError as exc:
+                raise FileNotFoundError(f"{exc}{_relative_note(study, key)}") from None
     log_sha = _sha256(o["log"])
     try:
         log = load_inputs("log", o["log"], log_sha)
@@ -203,6 +222,8 @@ def replay_runner(study: Study, make_policy, policy_names) -> tuple[ReplayCaseRu
     pads = load_inputs("pads", o["pads"], pads_sha) if "pads" in o else None
     base = _base(study, o, log, pads)
     runner = ReplayCaseRunner(base, make_policy, policy_names, o, log_sha)
+    runner.input_files = {f"[replay] {k}": {"path": str(o[k]), "sha256": sha}
+                          for k, sha in (("log", log_sha), ("pads", pads_sha)) if sha is not None}
     ident = {"runner": "replay v1", "base": base, "log": log_sha, "pads": pads_sha,
              "options": {k: v for k, v in o.items() if k not in ("log", "pads", "drone")}}
     return runner, hashlib.sha256(canonical_json(ident).encode()).hexdigest()[:16]

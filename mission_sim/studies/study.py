@@ -402,8 +402,9 @@ def parse_study(doc: dict, name: str = "study", base_dir=None) -> Study:
         if k in mc_params and mc_params[k][0] != "choice":
             raise ValueError(f"[monte_carlo.params] {k!r} must use {{choice = [...]}}")
     if not grid and not mc_params and not allow_single:
+        once = "replay the log once" if study.replay is not None else "run the base mission once"
         raise ValueError(f"study {study.name!r} varies nothing (no [grid] or [monte_carlo.params] entries), so it "
-                         "would run the base mission once; add parameters to vary, or set "
+                         f"would {once}; add parameters to vary, or set "
                          "[study] allow_single = true")
     return study
 
