@@ -351,3 +351,33 @@ def test_a_replay_study_that_varies_nothing_says_replay(tmp_path):
     from mission_sim.studies.study import parse_study
     with pytest.raises(ValueError, match="would replay the log once"):
         parse_study({"replay": {"log": "f.tlog"}}, base_dir=tmp_path)
+
+
+def test_a_worker_that_does_not_see_the_log_parses_the_bytes_sent_with_the_warm_up(tmp_path, monkeypatch):
+    """Remote `--scheduler` workers needed the log at the driver's absolute path (else every case was stored as
+    an error with a bare FileNotFoundError): a log up to SHIP_MAX_BYTES goes with the warm-up, checked by its
+    sha256; a larger one that a worker does not see is one line naming [replay] log."""
+    import pickle
+    import shutil
+
+    import policies
+    from mission_sim.studies.study import load_study
+    from mission_sim.studies.sweep import prepare_study
+    log = tmp_path / "f.tlog"
+    shutil.copyfile(LOG, log)
+    study = _study(tmp_path, f'log = "f.tlog"\npads = "{PADS}"\nwindow = [440.0, 620.0]', '"drone.mass_kg" = [1.0, 1.2]')
+    runner, _, _ = prepare_study(load_study(study), policies.make, policies.available())
+    params = {"drone.mass_kg": 1.2}
+    want = runner(params)
+    sent = pickle.dumps(runner.warm)            # what the engine sends to every worker, once
+    case_runner = pickle.dumps(runner)          # what it sends with each chunk: no log bytes in it
+    assert len(sent) > LOG.stat().st_size > len(case_runner)
+    log.unlink()                                # the worker's machine has no such file
+    monkeypatch.setattr(replay_cases, "_INPUTS", {})
+    monkeypatch.setattr(replay_cases, "_SHIPPED", {})
+    worker = pickle.loads(case_runner)
+    with pytest.raises(ValueError, match=r"^\[replay\] log '.*f\.tlog' does not exist on worker .* shared folder\)$"):
+        worker(params)
+    pickle.loads(sent)()                        # the warm-up: the bytes installed, the base case replayed
+    assert worker(params) == want      # the same row, bit for bit
+    assert replay_cases._INPUTS[("log", str(log), runner.log_sha)].path == log

@@ -30,6 +30,9 @@ from .study import DEFAULT_POLICY, POLICY_KEY, Study, canonical_json
 __all__ = ["ReplayCaseRunner", "replay_runner", "load_inputs"]
 
 _INPUTS: dict = {}  # (path, sha256) -> parsed log / pads, once per process (driver or worker)
+_SHIPPED: dict = {}  # (kind, path, sha256) -> the file's bytes, sent to a worker that may not see the path
+#: a log up to this size is sent to every Dask worker with the warm-up (remote workers need not see the driver's path)
+SHIP_MAX_BYTES = 64 * 2**20
 #: the keys a replay's own refusals depend on (the pads, the mission: the detours' hovers, speeds and coil gap, which
 #: set the re-flight's size; the trajectory step)
 _REPLAY_INPUTS = ("pads.", "mission.", "sim.traj_dt_s")
@@ -46,17 +49,57 @@ def load_inputs(kind: str, path: Path, sha: str | None = None):
     key = (kind, str(path), sha)
     obj = _INPUTS.get(key)
     if obj is None:
-        if sha is not None and _sha256(Path(path)) != sha:
-            raise ValueError(f"[replay] {kind} {str(path)!r} changed since the sweep started; valid: the file the "
-                             "sweep was prepared with (run the sweep again with a new --out)")
-        if kind == "log":
-            from ..mavlink.logs import read_log
-            obj = read_log(path)
+        if not Path(path).exists():
+            obj = _parse_shipped(kind, Path(path), sha)   # a remote worker: the bytes the driver sent
         else:
-            from ..plans.pads import read_pads
-            obj = read_pads(path)
+            if sha is not None and _sha256(Path(path)) != sha:
+                raise ValueError(f"[replay] {kind} {str(path)!r} changed since the sweep started; valid: the file "
+                                 "the sweep was prepared with (run the sweep again with a new --out)")
+            obj = _parse(kind, Path(path))
         _INPUTS[key] = obj
     return obj
+
+
+def _parse(kind: str, path: Path):
+    if kind == "log":
+        from ..mavlink.logs import read_log
+        return read_log(path)
+    from ..plans.pads import read_pads
+    return read_pads(path)
+
+
+def _parse_shipped(kind: str, path: Path, sha: str | None):
+    """The file the driver sent with the warm-up (its sha256 checked), parsed from a temporary copy of the same
+    name (the log's name is in its warnings); a one-line ``ValueError`` when it was not sent (too large)."""
+    import socket
+    import tempfile
+    from dataclasses import replace
+    data = _SHIPPED.get((kind, str(path), sha))
+    if data is None:
+        raise ValueError(f"[replay] {kind} {str(path)!r} does not exist on worker {socket.gethostname()!r} and was "
+                         f"not sent to it (files up to {SHIP_MAX_BYTES // 2**20} MB are); valid: a {kind} the workers "
+                         "see at the same absolute path (a shared folder)")
+    if sha is not None and hashlib.sha256(data).hexdigest() != sha:
+        raise ValueError(f"[replay] {kind} {str(path)!r}: the bytes received differ from the file's sha256 {sha[:12]}...")
+    with tempfile.TemporaryDirectory(prefix="dronewpt-replay-") as tmp:
+        copy = Path(tmp) / path.name
+        copy.write_bytes(data)
+        obj = _parse(kind, copy)
+    return replace(obj, path=path) if kind == "log" else obj
+
+
+class _WarmWithLog:
+    """``runner.warm`` as sent to every Dask worker: the log's bytes go with it (once per worker, not with every
+    chunk of cases) when it is at most :data:`SHIP_MAX_BYTES`, so workers that do not see the driver's path (other
+    machines, ``dronewpt sweep --scheduler``) parse the same file; workers that see it read their own copy."""
+
+    def __init__(self, runner, data: bytes | None):
+        self.runner, self.data = runner, data
+
+    def __call__(self):
+        if self.data is not None:
+            _SHIPPED[("log", str(self.runner.options["log"]), self.runner.log_sha)] = self.data
+        self.runner._warm()
 
 
 def _study_words(msg: str) -> str:
@@ -158,7 +201,15 @@ class ReplayCaseRunner(MissionCaseRunner):
         out["drone_mass_kg"] = float(cfg.drone.mass_kg)
         return out
 
-    def warm(self) -> None:
+    @property
+    def warm(self):
+        """The warm-up the sweep engine runs once on every worker (:meth:`_warm`), with the log's bytes when it is
+        small enough to send (:class:`_WarmWithLog`)."""
+        path = Path(self.options["log"])
+        small = path.is_file() and path.stat().st_size <= SHIP_MAX_BYTES
+        return _WarmWithLog(self, path.read_bytes() if small else None)
+
+    def _warm(self) -> None:
         """Read and parse the log (and the pads) on this worker, then replay the base case once (summary
         only): numba's cache and the coupling table are loaded before the first case."""
         from wpt_receiver.numba_start import cache_loads_without_registries
