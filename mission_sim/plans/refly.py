@@ -25,7 +25,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 __all__ = ["Detour", "plan_detours", "refly_track", "ReflyResult", "refly_base", "plan_refly", "refly_log",
-           "DEFAULT_REACH_M"]
+           "DEFAULT_REACH_M", "check_refly_size"]
 
 DEFAULT_REACH_M = 500.0   # a pad farther than this (horizontally) from the airborne track is not visited
 AIRBORNE_M = 1.0          # height above the take-off spot that counts as airborne (as the replay's)
@@ -177,22 +177,29 @@ def plan_refly(log, cfg, *, pad=None, ground_gap_m=None, window=None, reach_m: f
     window = _segment_window(log, window, segment)
     track = resample_track(track_from_log(log, pad=pad, ground_gap_m=gap, window=window), cfg.sim.traj_dt_s)
     pads_xyz = np.array([[p.x_m, p.y_m, p.z_m] for p in cfg.pads])
-    hover = [cfg.mission.hover_time_s if p.hover_time_s is None else p.hover_time_s for p in cfg.pads]
-    detours, skipped = plan_detours(track, pads_xyz, hover, reach_m)
+    detours, skipped = plan_detours(track, pads_xyz, _hovers(cfg), reach_m)
     if not detours:
         far = ", ".join(f"pad {k} at {d:.0f} m" for k, d in skipped)
         raise ValueError(f"{log.path.name}: no pad within --reach {reach_m:g} m of the airborne track ({far}); "
                          "valid: pads near where the vehicle flew (pad frame: ENU about the take-off spot)")
-    _check_refly_size(track, pads_xyz, detours, cfg)
+    check_refly_size(track, pads_xyz, detours, cfg)
     return track, pads_xyz, detours, skipped
 
 
-def _check_refly_size(track, pads_xyz, detours, cfg) -> None:
+def _hovers(cfg) -> list:
+    """Each pad's charging hover [s]: its own ``hover_time_s``, else ``mission.hover_time_s``."""
+    return [cfg.mission.hover_time_s if p.hover_time_s is None else p.hover_time_s for p in cfg.pads]
+
+
+def check_refly_size(track, pads_xyz, detours, cfg) -> None:
     """``ValueError`` (one line naming the longest hover's key, its value and the valid range) when the re-flight
-    (the logged samples plus the detours' at ``sim.traj_dt_s``) holds more samples than a replay may
-    (:data:`~mission_sim.mavlink.replay.MAX_REPLAY_SAMPLES`, the limit of the logged track alone): a charging
-    hover of days would run for minutes and take gigabytes before anything checked it."""
+    (the logged samples plus the detours' at ``sim.traj_dt_s``, their hovers as ``cfg`` sets them) holds more
+    samples than a replay may (:data:`~mission_sim.mavlink.replay.MAX_REPLAY_SAMPLES`, the limit of the logged track
+    alone): a charging hover of days would run for minutes and take gigabytes before anything checked it.
+    :func:`plan_refly` calls it; the replay studies call it per case on a plan they keep."""
     from ..mavlink.replay import MAX_REPLAY_SAMPLES
+    hover = _hovers(cfg)
+    detours = [replace(d, hover_s=float(hover[d.pad])) for d in detours]
     dt = cfg.sim.traj_dt_s
     durs = [sum(sg[3] for sg in _detour_segs(track, pads_xyz, d, cfg.mission)) for d in detours]
     n = len(track.t_s) + sum(max(1, math.ceil(t / dt)) for t in durs)

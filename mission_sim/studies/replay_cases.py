@@ -33,9 +33,11 @@ _INPUTS: dict = {}  # (path, sha256) -> parsed log / pads, once per process (dri
 _SHIPPED: dict = {}  # (kind, path, sha256) -> the file's bytes, sent to a worker that may not see the path
 #: a log up to this size is sent to every Dask worker with the warm-up (remote workers need not see the driver's path)
 SHIP_MAX_BYTES = 64 * 2**20
-#: the keys a replay's own refusals depend on (the pads, the mission: the detours' hovers, speeds and coil gap, which
-#: set the re-flight's size; the trajectory step)
-_REPLAY_INPUTS = ("pads.", "mission.", "sim.traj_dt_s")
+#: the keys a replay's own refusals depend on: the track and the detours (pad positions, not their hover times; the
+#: coil gap, the trajectory step), then the re-flight's size (the hovers and the mission's speeds too)
+_REPLAY_INPUTS = ("pads.", "mission.hover_gap_m", "sim.traj_dt_s")
+_SIZE_INPUTS = ("pads.", "mission.", "sim.traj_dt_s")
+_PLANS_MAX = 64   # re-flight plans (track, detours) kept by the driver's check: a few MB at most
 
 
 def _sha256(path: Path) -> str:
@@ -145,10 +147,11 @@ class ReplayCaseRunner(MissionCaseRunner):
         self.options = dict(options)
         self.log_sha = log_sha
         self._refused: dict = {}
+        self._plans: dict = {}
         self.input_files: dict = {}
 
     def __getstate__(self):
-        return {**super().__getstate__(), "_refused": {}}
+        return {**super().__getstate__(), "_refused": {}, "_plans": {}}
 
     def log(self):
         return load_inputs("log", self.options["log"], self.log_sha)
@@ -159,21 +162,34 @@ class ReplayCaseRunner(MissionCaseRunner):
         msg = super().check_params(params)
         if msg is not None:
             return msg
-        key = tuple(sorted((k, repr(v)) for k, v in params.items() if k.startswith(_REPLAY_INPUTS)))
+        key = tuple(sorted((k, repr(v)) for k, v in params.items() if k.startswith(_SIZE_INPUTS)))
         if key not in self._refused:   # the replay's own checks depend on these keys only: once per value set
             if len(self._refused) > _CACHE_MAX:
                 self._refused.clear()
-            self._refused[key] = self._replay_error(self.config(params))
+            self._refused[key] = self._replay_error(self.config(params), params)
         return self._refused[key]
 
-    def _replay_error(self, cfg) -> str | None:
+    def _replay_error(self, cfg, params: dict) -> str | None:
         from ..mavlink.replay import replay_span, resample_track, track_from_log
-        from ..plans.refly import plan_refly
+        from ..plans.refly import check_refly_size, plan_refly
         o, log = self.options, self.log()
         try:
-            if "pads" in o:
-                plan_refly(log, cfg, ground_gap_m=o.get("ground_gap_m"), window=o.get("window"),
-                           reach_m=o["reach_m"], segment=o.get("segment"))
+            if "pads" in o:   # the plan (track, detours) once per track-and-pads value set, the size per case
+                key = tuple(sorted((k, repr(v)) for k, v in params.items()
+                                   if k.startswith(_REPLAY_INPUTS) and not k.endswith(".hover_time_s")))
+                plan = self._plans.get(key)
+                if plan is None:
+                    if len(self._plans) >= _PLANS_MAX:
+                        self._plans.clear()
+                    try:
+                        plan = plan_refly(log, cfg, ground_gap_m=o.get("ground_gap_m"), window=o.get("window"),
+                                          reach_m=o["reach_m"], segment=o.get("segment"))[:3]
+                    except ValueError as exc:
+                        plan = exc
+                    self._plans[key] = plan
+                if isinstance(plan, ValueError):
+                    raise plan
+                check_refly_size(*plan, cfg)
             else:
                 gap = cfg.mission.hover_gap_m if o.get("ground_gap_m") is None else o["ground_gap_m"]
                 span, _ = replay_span(log, o.get("window"), o.get("segment"))
