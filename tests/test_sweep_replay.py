@@ -253,7 +253,10 @@ def test_the_documented_replay_section_parses(tmp_path):
     doc = inspect.getdoc(study_mod)
     block = textwrap.dedent(doc.split("A ``[replay]`` section")[1].split("::\n", 1)[1].split("\n\nDistributions")[0])
     st = study_mod.parse_study({**tomllib.loads(block), "grid": {"drone.mass_kg": [1.0, 2.0]}}, base_dir=tmp_path)
-    assert set(st.replay) == {"log", "pads", "drone", "window", "segment", "reach_m", "ground_gap_m"}
+    assert set(st.replay) == {"log", "pads", "drone", "window", "reach_m", "ground_gap_m"}
+    seg = study_mod.parse_study({**tomllib.loads(block.replace("# segment", "segment").replace("window =", "# window =")),
+                                 "grid": {"drone.mass_kg": [1.0, 2.0]}}, base_dir=tmp_path)
+    assert seg.replay["segment"] == 2 and "window" not in seg.replay
     assert st.replay["log"] == tmp_path / "flight.tlog" and st.replay["window"] == (440.0, 620.0)
 
 
@@ -381,3 +384,18 @@ def test_a_worker_that_does_not_see_the_log_parses_the_bytes_sent_with_the_warm_
     pickle.loads(sent)()                        # the warm-up: the bytes installed, the base case replayed
     assert worker(params) == want      # the same row, bit for bit
     assert replay_cases._INPUTS[("log", str(log), runner.log_sha)].path == log
+
+
+def test_segment_and_window_together_are_refused_not_one_silently_ignored(tmp_path, capsys):
+    """The window won and the segment was ignored without a word, in the study and in the commands."""
+    study = _study(tmp_path, f'log = "{LOG}"\nwindow = [440.0, 620.0]\nsegment = 2', '"drone.mass_kg" = [1.0, 2.0]')
+    assert _sweep(study, tmp_path / "o") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(w in err[0] for w in ("[replay] segment = 2", "window = [440.0, 620.0]",
+                                                        "exclude each other")), err
+    for pads in ([], ["--pads", str(PADS)]):
+        assert main(["replay", str(LOG), *pads, "--window", "440,620", "--segment", "2", "--out", str(tmp_path / "r"),
+                     "--no-progress"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--segment 2 and --window 440,620 exclude each other" in err[0], err
+    assert not (tmp_path / "r").exists()

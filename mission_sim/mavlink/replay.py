@@ -119,11 +119,14 @@ def replay_span(log: FlightLog, window: tuple[float, float] | None = None,
                 segment: int | None = None) -> tuple[tuple[float, float] | None, dict]:
     """The part of ``log`` a replay flies and what to report about it: ``window`` (log seconds) if
     given, else boot segment ``segment`` (1-based; None: :func:`choose_segment` when the log has
-    more than one). Returns (window or None for the whole log, facts for the summary)."""
+    more than one; both given: ``ValueError``). Returns (window or None for the whole log, facts for the summary)."""
     spans = log.segments
     n = len(spans)
     info = {"segments": n, "clock": log.clock.source if log.clock is not None else "the log's own (vehicle) clock",
             "segment_clock": log.clock.describe() if log.clock is not None else []}
+    if segment is not None and window is not None:   # was: the window won, the segment silently ignored
+        raise ValueError(f"--segment {segment!r} and --window {window[0]:g},{window[1]:g} exclude each other (a window "
+                         "is log seconds, across boot segments); valid: one of them")
     if segment is not None and not 1 <= segment <= n:
         raise ValueError(f"--segment {segment!r} is invalid; valid range: 1..{n} (the log has {n} boot segment(s))")
     if window is not None:
