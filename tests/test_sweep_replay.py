@@ -253,5 +253,149 @@ def test_the_documented_replay_section_parses(tmp_path):
     doc = inspect.getdoc(study_mod)
     block = textwrap.dedent(doc.split("A ``[replay]`` section")[1].split("::\n", 1)[1].split("\n\nDistributions")[0])
     st = study_mod.parse_study({**tomllib.loads(block), "grid": {"drone.mass_kg": [1.0, 2.0]}}, base_dir=tmp_path)
-    assert set(st.replay) == {"log", "pads", "drone", "window", "segment", "reach_m", "ground_gap_m"}
+    assert set(st.replay) == {"log", "pads", "drone", "window", "reach_m", "ground_gap_m"}
+    seg = study_mod.parse_study({**tomllib.loads(block.replace("# segment", "segment").replace("window =", "# window =")),
+                                 "grid": {"drone.mass_kg": [1.0, 2.0]}}, base_dir=tmp_path)
+    assert seg.replay["segment"] == 2 and "window" not in seg.replay
     assert st.replay["log"] == tmp_path / "flight.tlog" and st.replay["window"] == (440.0, 620.0)
+
+
+def test_a_depleted_replay_case_counts_the_commands_warnings(tmp_path, capsys):
+    """The command warned where the battery ran out, the study's row did not count it (n_warnings differed):
+    both now take the summary's one list (mission_sim.mavlink.replay.replay_summary_warnings)."""
+    study = _study(tmp_path, f'log = "{LOG171}"', '"battery.capacity_ah" = [0.05, 1.5]')
+    assert _sweep(study, tmp_path / "o") == 0
+    df = read_results(tmp_path / "o")
+    capsys.readouterr()
+    row = df[df["battery.capacity_ah"] == 0.05].iloc[0]
+    assert main(["replay", str(LOG171), "--set", "battery.capacity_ah=0.05", "--out", str(tmp_path / "r"),
+                 "--format", "json", "--no-plot", "--no-progress"]) == 0
+    cmd = json.loads(capsys.readouterr().out)
+    assert cmd["battery_depleted"] is True and bool(row["battery_depleted"])
+    assert any(w.startswith("battery depleted at t = ") for w in cmd["warnings"])
+    assert row["n_warnings"] == len(cmd["warnings"])
+    _assert_row_equals_command(row, cmd, min_numbers=30)
+    full = df[df["battery.capacity_ah"] == 1.5].iloc[0]
+    assert not full["battery_depleted"] and full["n_warnings"] == row["n_warnings"] - 1
+
+
+def _never_run(monkeypatch):
+    from mission_sim.world import runner
+
+    def ran(*a, **k):
+        raise AssertionError("a run started")
+    monkeypatch.setattr(runner, "run_mission", ran)
+
+
+def test_a_refly_too_long_for_memory_is_refused_by_the_command_before_it_runs(tmp_path, capsys, monkeypatch):
+    """`replay --pads --set mission.hover_time_s=100000` ran for minutes at ~2 GB: the re-flight's samples
+    (logged span + detours with their charging hovers, at sim.traj_dt_s) are held to the replay's limit."""
+    from mission_sim.mavlink.replay import MAX_REPLAY_SAMPLES
+    _never_run(monkeypatch)
+    pads = tmp_path / "pads.csv"   # the test pads without their own hover_time_s: mission.hover_time_s applies
+    pads.write_text("lat,lon\n" + "".join(",".join(r.split(",")[:2]) + "\n" for r in PADS.read_text().splitlines()[1:]))
+    dt = 0.2
+    hover = MAX_REPLAY_SAMPLES * dt + 1.0   # one pad visited: its hover alone is over the limit
+    assert main(["replay", str(LOG), "--pads", str(pads), "--window", "440,620", "--set", f"mission.hover_time_s={hover}",
+                 "--set", f"sim.traj_dt_s={dt}", "--out", str(tmp_path / "o"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"mission.hover_time_s={hover:g}" in err[0] and "valid range: [0, " in err[0], err
+    room = float(err[0].split("valid range: [0, ")[1].split("]")[0])
+    assert 0 < room < hover and not (tmp_path / "o").exists()
+
+
+def test_a_refly_case_too_long_for_memory_is_refused_before_the_sweep_runs(tmp_path, capsys, monkeypatch):
+    """In a sweep a 20000 s hover took 13.7 s and 374 MB, the allowed 1e6 s gigabytes per worker: refused with the
+    other bad values, before anything runs (a pad's own hover named by its key)."""
+    _never_run(monkeypatch)
+    study = _study(tmp_path, f'log = "{LOG}"\npads = "{PADS}"\nwindow = [440.0, 620.0]',
+                   '"pads.0.hover_time_s" = [30.0, 1e6]\n"drone.mass_kg" = [1.0, 1.2]')
+    assert _sweep(study, tmp_path / "o") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(w in err[0] for w in ("2 of 4 cases", "pads.0.hover_time_s=1e+06", "valid range",
+                                                        "nothing was run")), err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_resume_over_a_changed_log_names_the_file(tmp_path, capsys):
+    """A changed log was refused as "another study (..., another base mission)": sweep.json records the log's
+    (and the pads file's) sha256 and the refusal names the changed file."""
+    import hashlib
+    import shutil
+    log = tmp_path / "f.tlog"
+    shutil.copyfile(LOG, log)
+    study = _study(tmp_path, f'log = "f.tlog"\npads = "{PADS}"\nwindow = [440.0, 620.0]', '"drone.mass_kg" = [1.0, 1.2]')
+    assert _sweep(study, tmp_path / "o") == 0
+    man = json.loads((tmp_path / "o" / "sweep.json").read_text())
+    assert man["inputs"] == {"[replay] log": {"path": str(log), "sha256": hashlib.sha256(LOG.read_bytes()).hexdigest()},
+                             "[replay] pads": {"path": str(PADS), "sha256": hashlib.sha256(PADS.read_bytes()).hexdigest()}}
+    capsys.readouterr()
+    with open(log, "ab") as fh:   # the same flight with a few bytes of junk after it: still a log, another file
+        fh.write(b"\0" * 64)
+    assert _sweep(study, tmp_path / "o") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(w in err[0] for w in ("[replay] log", str(log), "changed since it ran",
+                                                        man["inputs"]["[replay] log"]["sha256"][:12])), err
+    assert "another base mission" not in err[0]
+
+
+def test_a_missing_relative_log_says_paths_are_relative_to_the_study_file(tmp_path, capsys, monkeypatch):
+    (tmp_path / "studies").mkdir()
+    (tmp_path / "flight.tlog").write_bytes(LOG.read_bytes())   # beside the current folder, not the study file
+    monkeypatch.chdir(tmp_path)
+    study = _study(tmp_path / "studies", 'log = "flight.tlog"', '"drone.mass_kg" = [1.0, 2.0]')
+    assert _sweep(study, tmp_path / "o") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(w in err[0] for w in (
+        "[replay] log", "does not exist", "relative to the study file's folder", repr(str(tmp_path / "studies")))), err
+
+
+def test_a_replay_study_that_varies_nothing_says_replay(tmp_path):
+    from mission_sim.studies.study import parse_study
+    with pytest.raises(ValueError, match="would replay the log once"):
+        parse_study({"replay": {"log": "f.tlog"}}, base_dir=tmp_path)
+
+
+def test_a_worker_that_does_not_see_the_log_parses_the_bytes_sent_with_the_warm_up(tmp_path, monkeypatch):
+    """Remote `--scheduler` workers needed the log at the driver's absolute path (else every case was stored as
+    an error with a bare FileNotFoundError): a log up to SHIP_MAX_BYTES goes with the warm-up, checked by its
+    sha256; a larger one that a worker does not see is one line naming [replay] log."""
+    import pickle
+    import shutil
+
+    import policies
+    from mission_sim.studies.study import load_study
+    from mission_sim.studies.sweep import prepare_study
+    log = tmp_path / "f.tlog"
+    shutil.copyfile(LOG, log)
+    study = _study(tmp_path, f'log = "f.tlog"\npads = "{PADS}"\nwindow = [440.0, 620.0]', '"drone.mass_kg" = [1.0, 1.2]')
+    runner, _, _ = prepare_study(load_study(study), policies.make, policies.available())
+    params = {"drone.mass_kg": 1.2}
+    want = runner(params)
+    sent = pickle.dumps(runner.warm)            # what the engine sends to every worker, once
+    case_runner = pickle.dumps(runner)          # what it sends with each chunk: no log bytes in it
+    assert len(sent) > LOG.stat().st_size > len(case_runner)
+    log.unlink()                                # the worker's machine has no such file
+    monkeypatch.setattr(replay_cases, "_INPUTS", {})
+    monkeypatch.setattr(replay_cases, "_SHIPPED", {})
+    worker = pickle.loads(case_runner)
+    with pytest.raises(ValueError, match=r"^\[replay\] log '.*f\.tlog' does not exist on worker .* shared folder\)$"):
+        worker(params)
+    pickle.loads(sent)()                        # the warm-up: the bytes installed, the base case replayed
+    assert worker(params) == want      # the same row, bit for bit
+    assert replay_cases._INPUTS[("log", str(log), runner.log_sha)].path == log
+
+
+def test_segment_and_window_together_are_refused_not_one_silently_ignored(tmp_path, capsys):
+    """The window won and the segment was ignored without a word, in the study and in the commands."""
+    study = _study(tmp_path, f'log = "{LOG}"\nwindow = [440.0, 620.0]\nsegment = 2', '"drone.mass_kg" = [1.0, 2.0]')
+    assert _sweep(study, tmp_path / "o") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(w in err[0] for w in ("[replay] segment = 2", "window = [440.0, 620.0]",
+                                                        "exclude each other")), err
+    for pads in ([], ["--pads", str(PADS)]):
+        assert main(["replay", str(LOG), *pads, "--window", "440,620", "--segment", "2", "--out", str(tmp_path / "r"),
+                     "--no-progress"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--segment 2 and --window 440,620 exclude each other" in err[0], err
+    assert not (tmp_path / "r").exists()

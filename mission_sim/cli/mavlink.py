@@ -139,11 +139,7 @@ def _cmd_replay(args) -> int:
     cache_loads_without_registries()   # input checked: cached kernels without numba's registries (~0.5-1 s of CPU)
     res = replay_log(log, cfg, policy, pad=pad, ground_gap_m=args.ground_gap, window=window,
                      progress=show_progress(args), segment=args.segment)
-    s = res.summary
-    if res.mission.summary.get("battery_depleted"):
-        from .mission import depletion_text
-        s["warnings"] = [*s.get("warnings", ()), f"{depletion_text(res.mission.summary)} (the power comparison "
-                         "covers the flight up to that point)"]
+    s = res.summary   # its warnings: replay_summary_warnings (the replay studies' n_warnings count the same list)
     for w in s.get("warnings", ()):
         print(f"dronewpt replay: warning: {w}", file=sys.stderr)
     s["log"] = str(args.log)
@@ -329,7 +325,7 @@ def _cmd_telemetry(args) -> int:
           + (f"; wrote {args.tlog}" if args.tlog else ""))
     _warn_undelivered(connect, st.frames, st.delivered)
     if res.summary.get("battery_depleted"):
-        from .mission import depletion_text
+        from ..world.results import depletion_text
         print(f"dronewpt telemetry: warning: {depletion_text(res.summary)} (the stream ends there)", file=sys.stderr)
     return 0
 

@@ -8,6 +8,7 @@ import tomllib
 from pathlib import Path
 
 from ..files import folder_lock
+from ..world.results import depletion_text
 from .common import (
     CliError,
     add_progress_flag,
@@ -339,14 +340,6 @@ def _figures_and_summary(res, out: Path, plots: bool, thinned=None, worker=None)
     with atomic_output(out / "summary.json") as tmp:
         tmp.write_text(json.dumps(res.summary, indent=2))
     return files + [str(out / "summary.json")]
-
-
-def depletion_text(s: dict) -> str:
-    """One line on where the battery ran out (summary keys ``depleted_at_s``, ``depleted_pad_distance_m``)."""
-    if s.get("depleted_at_s") is None:
-        return f"battery depleted (min SoC {s['min_soc']:.3f})"
-    return (f"battery depleted at t = {s['depleted_at_s']:.1f} s, {s['depleted_pad_distance_m']:.0f} m from the "
-            f"nearest pad; the mission ended there")
 
 
 def _print_mission(s: dict, files) -> None:

@@ -121,10 +121,12 @@ def _run(args, st, runner, cases, fingerprint):
     client_factory = _client_factory(args)   # a bad scheduler address fails first, --out not created
     prepare_out_dir(args.out)   # a file in its place, unwritable: one line naming --out (was "[Errno 17] File exists")
 
+    inputs = getattr(runner, "input_files", None)   # a replay study's log and pads: their sha256 in sweep.json
+
     def before_run():  # under the store's lock: another study in --out is refused unless --force
         if not args.force:
-            check_same_study(args.out, st, fingerprint, len(cases))
-        write_manifest(args.out, st, fingerprint, len(cases))
+            check_same_study(args.out, st, fingerprint, len(cases), inputs)
+        write_manifest(args.out, st, fingerprint, len(cases), inputs)
     return sweep.run_sweep(cases, runner, args.out, client_factory=client_factory,
                            progress=show_progress(args), progress_desc=st.name, retry_errors=args.retry_errors,
                            before_run=before_run)

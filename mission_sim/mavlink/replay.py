@@ -30,7 +30,7 @@ from .logs import FlightLog, read_log
 
 __all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "flight_stats",
            "logged_energy_j", "compare_power", "fit_mass_kg", "resample_track", "replay_trajectory", "ReplayResult", "replay_log", "parse_window",
-           "battery_voltage_warning",
+           "battery_voltage_warning", "replay_summary_warnings",
            "choose_segment", "replay_span"]
 
 
@@ -119,11 +119,14 @@ def replay_span(log: FlightLog, window: tuple[float, float] | None = None,
                 segment: int | None = None) -> tuple[tuple[float, float] | None, dict]:
     """The part of ``log`` a replay flies and what to report about it: ``window`` (log seconds) if
     given, else boot segment ``segment`` (1-based; None: :func:`choose_segment` when the log has
-    more than one). Returns (window or None for the whole log, facts for the summary)."""
+    more than one; both given: ``ValueError``). Returns (window or None for the whole log, facts for the summary)."""
     spans = log.segments
     n = len(spans)
     info = {"segments": n, "clock": log.clock.source if log.clock is not None else "the log's own (vehicle) clock",
             "segment_clock": log.clock.describe() if log.clock is not None else []}
+    if segment is not None and window is not None:   # was: the window won, the segment silently ignored
+        raise ValueError(f"--segment {segment!r} and --window {window[0]:g},{window[1]:g} exclude each other (a window "
+                         "is log seconds, across boot segments); valid: one of them")
     if segment is not None and not 1 <= segment <= n:
         raise ValueError(f"--segment {segment!r} is invalid; valid range: 1..{n} (the log has {n} boot segment(s))")
     if window is not None:
@@ -453,6 +456,17 @@ def battery_voltage_warning(log: FlightLog, battery) -> str | None:
             f"(--set battery.n_series={fit}; and its battery.capacity_ah)")
 
 
+def replay_summary_warnings(log: FlightLog, track: FlightTrack, battery, mission_summary: dict) -> list[str]:
+    """The replay summary's ``warnings``, the one list ``dronewpt replay`` prints and the replay studies count
+    (``n_warnings``): :func:`replay_warnings`, :func:`battery_voltage_warning` and, when the battery ran out,
+    where (the power comparison stops there)."""
+    out = replay_warnings(log, track) + [w for w in (battery_voltage_warning(log, battery),) if w]
+    if mission_summary.get("battery_depleted"):
+        from ..world.results import depletion_text
+        out.append(f"{depletion_text(mission_summary)} (the power comparison covers the flight up to that point)")
+    return out
+
+
 def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: float | None = None,
                window: tuple[float, float] | None = None, progress: bool = False,
                segment: int | None = None, frame: bool = True) -> ReplayResult:
@@ -497,7 +511,7 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
         "sim_time_s": float(ms["sim_time_s"]),
         "window_s": list(window) if window else None,
         "battery_source": log.battery_source,
-        "warnings": replay_warnings(log, track) + [w for w in (battery_voltage_warning(log, cfg.battery),) if w],
+        "warnings": replay_summary_warnings(log, track, cfg.battery, ms),
     })
     table = None
     if len(log.battery):

@@ -15,8 +15,8 @@ The log (and the pads file) is read and parsed once per process: on the driver w
 prepared (a missing file, or one that is not a flight log, is refused there with one line), and on
 every Dask worker in :meth:`ReplayCaseRunner.warm`, never per case. Keys and values are checked
 before anything runs exactly as the mission runner checks them (:class:`.mission_cases.MissionParamChecker`,
-on the replay's mission), plus what a replay itself refuses (no pad within reach, a track too long
-for ``sim.traj_dt_s``).
+on the replay's mission), plus what a replay itself refuses (no pad within reach, a track, or a re-flight with its charging
+hovers, too long for ``sim.traj_dt_s``).
 """
 
 from __future__ import annotations
@@ -24,14 +24,20 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-from .mission_cases import MissionCaseRunner
+from .mission_cases import _CACHE_MAX, MissionCaseRunner
 from .study import DEFAULT_POLICY, POLICY_KEY, Study, canonical_json
 
 __all__ = ["ReplayCaseRunner", "replay_runner", "load_inputs"]
 
 _INPUTS: dict = {}  # (path, sha256) -> parsed log / pads, once per process (driver or worker)
-#: the keys a replay's own refusals depend on (pad positions, not their hover times; the coil gap, the trajectory step)
+_SHIPPED: dict = {}  # (kind, path, sha256) -> the file's bytes, sent to a worker that may not see the path
+#: a log up to this size is sent to every Dask worker with the warm-up (remote workers need not see the driver's path)
+SHIP_MAX_BYTES = 64 * 2**20
+#: the keys a replay's own refusals depend on: the track and the detours (pad positions, not their hover times; the
+#: coil gap, the trajectory step), then the re-flight's size (the hovers and the mission's speeds too)
 _REPLAY_INPUTS = ("pads.", "mission.hover_gap_m", "sim.traj_dt_s")
+_SIZE_INPUTS = ("pads.", "mission.", "sim.traj_dt_s")
+_PLANS_MAX = 64   # re-flight plans (track, detours) kept by the driver's check: a few MB at most
 
 
 def _sha256(path: Path) -> str:
@@ -45,17 +51,57 @@ def load_inputs(kind: str, path: Path, sha: str | None = None):
     key = (kind, str(path), sha)
     obj = _INPUTS.get(key)
     if obj is None:
-        if sha is not None and _sha256(Path(path)) != sha:
-            raise ValueError(f"[replay] {kind} {str(path)!r} changed since the sweep started; valid: the file the "
-                             "sweep was prepared with (run the sweep again with a new --out)")
-        if kind == "log":
-            from ..mavlink.logs import read_log
-            obj = read_log(path)
+        if not Path(path).exists():
+            obj = _parse_shipped(kind, Path(path), sha)   # a remote worker: the bytes the driver sent
         else:
-            from ..plans.pads import read_pads
-            obj = read_pads(path)
+            if sha is not None and _sha256(Path(path)) != sha:
+                raise ValueError(f"[replay] {kind} {str(path)!r} changed since the sweep started; valid: the file "
+                                 "the sweep was prepared with (run the sweep again with a new --out)")
+            obj = _parse(kind, Path(path))
         _INPUTS[key] = obj
     return obj
+
+
+def _parse(kind: str, path: Path):
+    if kind == "log":
+        from ..mavlink.logs import read_log
+        return read_log(path)
+    from ..plans.pads import read_pads
+    return read_pads(path)
+
+
+def _parse_shipped(kind: str, path: Path, sha: str | None):
+    """The file the driver sent with the warm-up (its sha256 checked), parsed from a temporary copy of the same
+    name (the log's name is in its warnings); a one-line ``ValueError`` when it was not sent (too large)."""
+    import socket
+    import tempfile
+    from dataclasses import replace
+    data = _SHIPPED.get((kind, str(path), sha))
+    if data is None:
+        raise ValueError(f"[replay] {kind} {str(path)!r} does not exist on worker {socket.gethostname()!r} and was "
+                         f"not sent to it (files up to {SHIP_MAX_BYTES // 2**20} MB are); valid: a {kind} the workers "
+                         "see at the same absolute path (a shared folder)")
+    if sha is not None and hashlib.sha256(data).hexdigest() != sha:
+        raise ValueError(f"[replay] {kind} {str(path)!r}: the bytes received differ from the file's sha256 {sha[:12]}...")
+    with tempfile.TemporaryDirectory(prefix="dronewpt-replay-") as tmp:
+        copy = Path(tmp) / path.name
+        copy.write_bytes(data)
+        obj = _parse(kind, copy)
+    return replace(obj, path=path) if kind == "log" else obj
+
+
+class _WarmWithLog:
+    """``runner.warm`` as sent to every Dask worker: the log's bytes go with it (once per worker, not with every
+    chunk of cases) when it is at most :data:`SHIP_MAX_BYTES`, so workers that do not see the driver's path (other
+    machines, ``dronewpt sweep --scheduler``) parse the same file; workers that see it read their own copy."""
+
+    def __init__(self, runner, data: bytes | None):
+        self.runner, self.data = runner, data
+
+    def __call__(self):
+        if self.data is not None:
+            _SHIPPED[("log", str(self.runner.options["log"]), self.runner.log_sha)] = self.data
+        self.runner._warm()
 
 
 def _study_words(msg: str) -> str:
@@ -88,18 +134,24 @@ class ReplayCaseRunner(MissionCaseRunner):
         ``--config`` mission with one pad at the frame origin (as ``dronewpt replay`` builds them)
     options : the ``[replay]`` section (paths resolved)
     log_sha : the log's sha256 (checked where it is read; the pads are in ``base`` already)
+
+    ``input_files`` (set by :func:`replay_runner`): the log's and the pads file's path and sha256, recorded in
+    the sweep's ``sweep.json`` so a resume over a changed file names it.
     """
 
-    _check_run_size = False   # the route is the log: the planner's size estimate does not apply (see check_params)
+    _check_run_size = False   # the route is the log: the planner's size estimate does not apply; the replay's own
+    #                           limit (MAX_REPLAY_SAMPLES, the re-flight's detours included) is checked in check_params
 
     def __init__(self, base: dict, make_policy, policy_names, options: dict, log_sha: str):
         super().__init__(base, make_policy, policy_names)
         self.options = dict(options)
         self.log_sha = log_sha
         self._refused: dict = {}
+        self._plans: dict = {}
+        self.input_files: dict = {}
 
     def __getstate__(self):
-        return {**super().__getstate__(), "_refused": {}}
+        return {**super().__getstate__(), "_refused": {}, "_plans": {}}
 
     def log(self):
         return load_inputs("log", self.options["log"], self.log_sha)
@@ -110,20 +162,34 @@ class ReplayCaseRunner(MissionCaseRunner):
         msg = super().check_params(params)
         if msg is not None:
             return msg
-        key = tuple(sorted((k, repr(v)) for k, v in params.items()
-                           if k.startswith(_REPLAY_INPUTS) and not k.endswith(".hover_time_s")))
+        key = tuple(sorted((k, repr(v)) for k, v in params.items() if k.startswith(_SIZE_INPUTS)))
         if key not in self._refused:   # the replay's own checks depend on these keys only: once per value set
-            self._refused[key] = self._replay_error(self.config(params))
+            if len(self._refused) > _CACHE_MAX:
+                self._refused.clear()
+            self._refused[key] = self._replay_error(self.config(params), params)
         return self._refused[key]
 
-    def _replay_error(self, cfg) -> str | None:
+    def _replay_error(self, cfg, params: dict) -> str | None:
         from ..mavlink.replay import replay_span, resample_track, track_from_log
-        from ..plans.refly import plan_refly
+        from ..plans.refly import check_refly_size, plan_refly
         o, log = self.options, self.log()
         try:
-            if "pads" in o:
-                plan_refly(log, cfg, ground_gap_m=o.get("ground_gap_m"), window=o.get("window"),
-                           reach_m=o["reach_m"], segment=o.get("segment"))
+            if "pads" in o:   # the plan (track, detours) once per track-and-pads value set, the size per case
+                key = tuple(sorted((k, repr(v)) for k, v in params.items()
+                                   if k.startswith(_REPLAY_INPUTS) and not k.endswith(".hover_time_s")))
+                plan = self._plans.get(key)
+                if plan is None:
+                    if len(self._plans) >= _PLANS_MAX:
+                        self._plans.clear()
+                    try:
+                        plan = plan_refly(log, cfg, ground_gap_m=o.get("ground_gap_m"), window=o.get("window"),
+                                          reach_m=o["reach_m"], segment=o.get("segment"))[:3]
+                    except ValueError as exc:
+                        plan = exc
+                    self._plans[key] = plan
+                if isinstance(plan, ValueError):
+                    raise plan
+                check_refly_size(*plan, cfg)
             else:
                 gap = cfg.mission.hover_gap_m if o.get("ground_gap_m") is None else o["ground_gap_m"]
                 span, _ = replay_span(log, o.get("window"), o.get("segment"))
@@ -151,7 +217,15 @@ class ReplayCaseRunner(MissionCaseRunner):
         out["drone_mass_kg"] = float(cfg.drone.mass_kg)
         return out
 
-    def warm(self) -> None:
+    @property
+    def warm(self):
+        """The warm-up the sweep engine runs once on every worker (:meth:`_warm`), with the log's bytes when it is
+        small enough to send (:class:`_WarmWithLog`)."""
+        path = Path(self.options["log"])
+        small = path.is_file() and path.stat().st_size <= SHIP_MAX_BYTES
+        return _WarmWithLog(self, path.read_bytes() if small else None)
+
+    def _warm(self) -> None:
         """Read and parse the log (and the pads) on this worker, then replay the base case once (summary
         only): numba's cache and the coupling table are loaded before the first case."""
         from wpt_receiver.numba_start import cache_loads_without_registries
@@ -176,6 +250,18 @@ def _base(study: Study, options: dict, log, pads) -> dict:
     return d
 
 
+def _relative_note(study: Study, key: str) -> str:
+    """For a missing file given by a relative path: where it was looked for (the study file's folder, not the
+    folder the sweep was started in)."""
+    raw = str((study.source.get("replay") or {}).get(key, ""))
+    rel = Path(raw).expanduser()
+    if not raw or rel.is_absolute():
+        return ""
+    folder = Path(study.replay[key]).parents[len(rel.parts) - 1]
+    return (f" (a relative [replay] {key} = {raw!r} is relative to the study file's folder {str(folder)!r}, not to "
+            "the current folder; valid: a path from there, or an absolute one)")
+
+
 def replay_runner(study: Study, make_policy, policy_names) -> tuple[ReplayCaseRunner, str]:
     """(runner, fingerprint) of a ``[replay]`` study: the files checked and read here, on the driver (a
     missing file, a folder, a file that is not a flight log: one-line ``ValueError`` / ``FileNotFoundError``
@@ -184,10 +270,13 @@ def replay_runner(study: Study, make_policy, policy_names) -> tuple[ReplayCaseRu
     from ..mavlink.replay import replay_span, track_from_log
     from ..validation import check_regular_file
     o = dict(study.replay)
-    check_regular_file(o["log"], "[replay] log", "a .tlog, .bin or .ulg flight log")
-    for key, valid in (("pads", "a CSV or GeoJSON pads file"), ("drone", "a TOML file with a [drone] table")):
+    for key, valid in (("log", "a .tlog, .bin or .ulg flight log"), ("pads", "a CSV or GeoJSON pads file"),
+                       ("drone", "a TOML file with a [drone] table")):
         if key in o:
-            check_regular_file(o[key], f"[replay] {key}", valid)
+            try:
+                check_regular_file(o[key], f"[replay] {key}", valid)
+            except FileNotFoundError as exc:
+                raise FileNotFoundError(f"{exc}{_relative_note(study, key)}") from None
     log_sha = _sha256(o["log"])
     try:
         log = load_inputs("log", o["log"], log_sha)
@@ -200,6 +289,8 @@ def replay_runner(study: Study, make_policy, policy_names) -> tuple[ReplayCaseRu
     pads = load_inputs("pads", o["pads"], pads_sha) if "pads" in o else None
     base = _base(study, o, log, pads)
     runner = ReplayCaseRunner(base, make_policy, policy_names, o, log_sha)
+    runner.input_files = {f"[replay] {k}": {"path": str(o[k]), "sha256": sha}
+                          for k, sha in (("log", log_sha), ("pads", pads_sha)) if sha is not None}
     ident = {"runner": "replay v1", "base": base, "log": log_sha, "pads": pads_sha,
              "options": {k: v for k, v in o.items() if k not in ("log", "pads", "drone")}}
     return runner, hashlib.sha256(canonical_json(ident).encode()).hexdigest()[:16]

@@ -56,20 +56,37 @@ def physics_code_hash(replay: bool = False) -> str:
     return dependency_hash(files)[:16]
 
 
-def _manifest(study: Study, fingerprint: str, n_cases: int) -> dict:
-    """The manifest's content (the base mission is named by its fingerprint only)."""
+def _manifest(study: Study, fingerprint: str, n_cases: int, inputs: dict | None = None) -> dict:
+    """The manifest's content (the base mission is named by its fingerprint only; ``inputs``: the files the
+    cases read, ``{"[replay] log": {"path": ..., "sha256": ...}, ...}``, recorded so a changed one is named)."""
     doc = json.loads(json.dumps(study.source, default=str))
     doc.get("study", {}).pop("base", None)  # the fingerprint stands for it; the path may not resolve later
-    return {"study": study.name, "n_cases": n_cases, "fingerprint": fingerprint, "doc": doc,
-            "physics_code": physics_code_hash(study.replay is not None)}
+    out = {"study": study.name, "n_cases": n_cases, "fingerprint": fingerprint, "doc": doc,
+           "physics_code": physics_code_hash(study.replay is not None)}
+    if inputs:
+        out["inputs"] = inputs
+    return out
 
 
-def check_same_study(out_dir, study: Study, fingerprint: str, n_cases: int) -> None:
+def _changed_input(old: dict, new: dict) -> str | None:
+    """The first input file whose content differs between two manifests, in words; None if none does (or the
+    old manifest recorded none)."""
+    for what, now in (new.get("inputs") or {}).items():
+        was = (old.get("inputs") or {}).get(what)
+        if was and was.get("sha256") != now.get("sha256"):
+            moved = "" if was.get("path") == now.get("path") else f", then {was.get('path')!r}"
+            return (f"{what} {now.get('path')!r} changed since it ran (sha256 {str(was.get('sha256'))[:12]}...{moved}, "
+                    f"now {str(now.get('sha256'))[:12]}...)")
+    return None
+
+
+def check_same_study(out_dir, study: Study, fingerprint: str, n_cases: int, inputs: dict | None = None) -> None:
     """``ValueError`` (one line naming ``--out``) when ``out_dir`` already holds the manifest of another
-    study (other parameters or another base mission); the same study (a resume) and a new folder pass."""
+    study (other parameters, another base mission, or a changed input file, which it names); the same study
+    (a resume) and a new folder pass."""
     if not (Path(out_dir) / MANIFEST).is_file():
         return
-    old, new = read_manifest(out_dir, "--out"), _manifest(study, fingerprint, n_cases)
+    old, new = read_manifest(out_dir, "--out"), _manifest(study, fingerprint, n_cases, inputs)
     if old.get("doc") == new["doc"] and old.get("fingerprint") == new["fingerprint"]:
         if old.get("physics_code") == new["physics_code"]:
             return
@@ -78,17 +95,22 @@ def check_same_study(out_dir, study: Study, fingerprint: str, n_cases: int) -> N
                          f"{new['physics_code']}); valid: a new --out folder, or --force to resume it anyway "
                          "(old and new results then mix)")
     what = "another base mission" if old.get("doc") == new["doc"] else "other parameters"
+    changed = _changed_input(old, new) if old.get("doc") == new["doc"] else None
+    if changed:
+        raise ValueError(f"--out {str(out_dir)!r} holds this study's results over another file: {changed}; valid: a "
+                         "new --out folder, the file as it was to resume, or --force to add this study's cases to it "
+                         "(its sweep.json then describes this study)")
     raise ValueError(f"--out {str(out_dir)!r} holds another study ({old.get('study')!r}, {old.get('n_cases')} "
                      f"cases, {what}); valid: a new --out folder, the same study to resume it, or --force to add "
                      "this study's cases to it (its sweep.json then describes this study)")
 
 
-def write_manifest(out_dir, study: Study, fingerprint: str, n_cases: int) -> Path:
+def write_manifest(out_dir, study: Study, fingerprint: str, n_cases: int, inputs: dict | None = None) -> Path:
     """Write ``out_dir/sweep.json`` atomically (:func:`_manifest`)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     with atomic_output(out / MANIFEST, tmp_name=f".{MANIFEST}.{os.getpid()}.tmp") as tmp:
-        tmp.write_text(json.dumps(_manifest(study, fingerprint, n_cases), indent=1))
+        tmp.write_text(json.dumps(_manifest(study, fingerprint, n_cases, inputs), indent=1))
     return out / MANIFEST
 
 

@@ -43,7 +43,7 @@ gives the drone, battery, link and charger, and the keys are what ``dronewpt rep
     pads = "pads.csv"         # optional: re-fly with detours to these pads (replay --pads)
     drone = "drone.toml"      # optional: a [drone] file from `dronewpt calibrate` (replay --drone)
     window = [440.0, 620.0]   # optional: log seconds T0, T1 (replay --window)
-    segment = 2               # optional: boot segment N, 1-based (replay --segment)
+    # segment = 2             # optional, instead of window: boot segment N, 1-based (replay --segment)
     reach_m = 500.0           # optional: with pads, visit pads this close to the track (replay --reach)
     ground_gap_m = 0.17       # optional: coil gap when landed, [0, 1] m (replay --ground-gap)
 
@@ -334,6 +334,9 @@ def _parse_replay(rep, base_dir) -> dict:
     if seg is not None:
         if isinstance(seg, bool) or not isinstance(seg, int) or seg < 1:
             raise ValueError(f"[replay] segment = {seg!r} is invalid; valid range: integer >= 1 (a boot segment)")
+        if "window" in out:
+            raise ValueError(f"[replay] segment = {seg!r} and window = {list(out['window'])!r} exclude each other (a "
+                             "window is log seconds, across boot segments); valid: one of them")
         out["segment"] = seg
     reach = rep.get("reach_m", 500.0)
     if not _number(reach) or not reach > 0:
@@ -402,8 +405,9 @@ def parse_study(doc: dict, name: str = "study", base_dir=None) -> Study:
         if k in mc_params and mc_params[k][0] != "choice":
             raise ValueError(f"[monte_carlo.params] {k!r} must use {{choice = [...]}}")
     if not grid and not mc_params and not allow_single:
+        once = "replay the log once" if study.replay is not None else "run the base mission once"
         raise ValueError(f"study {study.name!r} varies nothing (no [grid] or [monte_carlo.params] entries), so it "
-                         "would run the base mission once; add parameters to vary, or set "
+                         f"would {once}; add parameters to vary, or set "
                          "[study] allow_single = true")
     return study
 

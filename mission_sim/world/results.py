@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..files import atomic_output
 
-__all__ = ["MissionResult", "SUMMARY_KEYS", "TIMESERIES_COLUMNS", "NO_SERIES"]
+__all__ = ["MissionResult", "SUMMARY_KEYS", "TIMESERIES_COLUMNS", "NO_SERIES", "depletion_text"]
 
 #: the error of writing (or drawing) a result without its time series
 NO_SERIES = ("the result holds no time series (run_mission(..., frame=False)); valid: a result of run_mission(..., "
@@ -21,6 +21,15 @@ SUMMARY_KEYS = ("sim_time_s", "wall_s", "energy_from_source_j", "rectifier_outpu
                 "energy_balance_error_rel", "final_soc", "peak_i2_a", "time_above_rated_s", "flight_time_gain_s")
 TIMESERIES_COLUMNS = ("t_s", "x_m", "y_m", "z_m", "lm_h", "tx_on", "i1_amp_a", "i2_amp_a", "d_short", "v2_v",
                       "rect_current_a", "battery_v", "battery_current_a", "soc", "propulsion_w")
+
+
+def depletion_text(s: dict) -> str:
+    """One line on where the battery ran out (summary keys ``depleted_at_s``, ``depleted_pad_distance_m``,
+    ``min_soc``): ``dronewpt mission``, ``replay`` and ``telemetry`` and the replay studies all word it here."""
+    if s.get("depleted_at_s") is None:
+        return f"battery depleted (min SoC {s['min_soc']:.3f})"
+    return (f"battery depleted at t = {s['depleted_at_s']:.1f} s, {s['depleted_pad_distance_m']:.0f} m from the "
+            f"nearest pad; the mission ended there")
 
 
 @dataclass
