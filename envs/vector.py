@@ -121,8 +121,13 @@ class SbarChargingVectorEnv(VectorEnv):
         """The scenario's draws (:func:`envs.scenario.draw_episodes`'s ``fill``) compiled, on the step's threads
         when it runs parallel (:mod:`envs.draw_kernel`: the generators' own numbers and end states)."""
         if self._draws is None:
-            from .draw_kernel import Draws
-            self._draws = Draws()
+            try:   # numba's private random-number modules: a numba without them draws with numpy's calls
+                from .draw_kernel import Draws
+                self._draws = Draws()
+            except (ImportError, AttributeError):
+                self._draws = False
+        if self._draws is False:
+            return False
         chunks = min(self._n_chunks, len(rngs))
         if self._auto is not None:   # auto threads: as the step's probes chose (one thread until they have)
             chunks = min(chunks, self._auto.best or 1)

@@ -94,3 +94,89 @@ def test_a_generator_shared_by_windows_is_drawn_in_order():
     ur, zr = _numpy([gr, hr, gr, hr], 2, 300)
     assert u.tobytes() == ur.tobytes() and z.tobytes() == zr.tobytes()
     assert g.bit_generator.state == gr.bit_generator.state and h.bit_generator.state == hr.bit_generator.state
+
+
+def _fingerprint(env, steps: int, seed_actions: int = 7) -> str:
+    """SHA-1 of every observation and reward of ``steps`` random-action steps (autoresets included)."""
+    import hashlib
+
+    rng, h = np.random.default_rng(seed_actions), hashlib.sha1()
+    for _ in range(steps):
+        obs, rew, *_ = env.step(rng.uniform(-1, 1, (env.num_envs, 1)).astype(np.float32))
+        h.update(obs.tobytes()), h.update(rew.tobytes())
+    return h.hexdigest()
+
+
+def _venv(n=64):
+    from envs.core import EnvConfig
+    from envs.vector import SbarChargingVectorEnv
+
+    return SbarChargingVectorEnv(n, scenario="nominal", config=EnvConfig(link_model="envelope"), num_threads=1)
+
+
+@pytest.mark.parametrize("how", ["deepcopy", "pickle"])
+def test_a_copied_env_draws_from_its_own_generators(how):
+    """A deepcopy / pickle round trip of an env mid-episode: the copy and the original go on independently, each
+    as a fresh env stepped the same way (the review found the copy's cached addresses pointing at the original's
+    generators: the copy advanced them, and a copy pickled into another process crashed)."""
+    import copy
+    import pickle
+
+    steps = 330   # past the autoreset of the 301-step windows: the compiled draws run again
+    ref = _venv()
+    ref.reset(seed=5)
+    _fingerprint(ref, 60)
+    want = _fingerprint(ref, steps)
+    env = _venv()
+    env.reset(seed=5)
+    _fingerprint(env, 60)
+    cp = copy.deepcopy(env) if how == "deepcopy" else pickle.loads(pickle.dumps(env))
+    assert _fingerprint(cp, steps) == want
+    assert _fingerprint(env, steps) == want   # the original's generators were not advanced by the copy
+
+
+def test_a_pickled_env_steps_in_another_process(tmp_path):
+    import pickle
+    import subprocess
+    import sys
+
+    env = _venv()
+    env.reset(seed=9)
+    _fingerprint(env, 40)
+    path = tmp_path / "env.pkl"
+    path.write_bytes(pickle.dumps(env))
+    want = _fingerprint(env, 300)
+    code = ("import pickle, sys; sys.path[:0] = [%r, %r]; import test_draw_kernel as t; "
+            "print(t._fingerprint(pickle.loads(open(%r, 'rb').read()), 300))"
+            % (str(__import__("pathlib").Path(__file__).parent), str(__import__("pathlib").Path(__file__).parents[1]), str(path)))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split()[-1] == want
+
+
+def test_reset_with_a_new_seed_and_a_reinitialised_generator_look_the_generators_up_again():
+    """``reset(seed=B)`` after an autoreset under seed A equals a fresh env seeded B; a generator given a new
+    bit generator (``g.__init__(PCG64(k))``, the same Generator object) is drawn from its new state."""
+    env, fresh = _venv(), _venv()
+    env.reset(seed=1)
+    _fingerprint(env, 310)
+    env.reset(seed=2)
+    fresh.reset(seed=2)
+    assert _fingerprint(env, 320) == _fingerprint(fresh, 320)
+
+    draws, g = Draws(), np.random.default_rng(1)
+    u, z = np.empty((1, 3)), np.empty((1, 50))
+    assert draws([g], u, z, 1)
+    g.__init__(np.random.PCG64(99))
+    assert draws([g], u, z, 1)
+    ru, rz = _numpy([np.random.default_rng(99)], 3, 50)
+    assert u.tobytes() == ru.tobytes() and z.tobytes() == rz.tobytes()
+
+
+def test_the_self_check_falls_back_to_numpy_when_the_compiled_draws_disagree(monkeypatch):
+    import envs.draw_kernel as dk
+
+    assert dk.compiled_draws_agree()
+    monkeypatch.setattr(dk, "_AGREE", [False])
+    u, z = np.empty((2, 3)), np.empty((2, 10))
+    assert Draws()([np.random.default_rng(0), np.random.default_rng(1)], u, z, 1) is False
