@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from mission_sim.world.battery import BatteryParams, CcCvParams, ocv_cell_v
+from mission_sim.world.battery import TRIP_MARGIN_CELL_V, BatteryParams, CcCvParams, ocv_cell_v
 from mission_sim.world.fastpath import battery_values, constants
 from mission_sim.world.loop_kernel import STATE_DTYPE, _bat_step, _charger_command, _ocv_cell
 from mission_sim.world.power import G_M_S2, DroneParams, hover_power_w, propulsion_power_w
@@ -81,13 +81,20 @@ def test_cccv_charges_to_full_without_exceeding_cv_and_then_stops():
     assert st.full and st.cv and st.soc > 0.98
     # full: the power path, the command is the load current alone (the pack gets 0); no load -> short mode
     assert _charger_command(st, c, 5.0) == 5.0 and _charger_command(st, c, 0.0) == 0.0
-    # a full pack pushed above the CV voltage (a receiver delivering more than the load): short mode until it is
-    # back at CV, so it cannot be charged past it
+    # a full pack pushed above the CV voltage (a receiver delivering more than the load): the command is the load
+    # less the CV law's (negative) current, so the pack is drawn back to CV in proportion, no on-off switching; 0
+    # (short mode) only when the command would be negative or above the over-voltage trip (TRIP_MARGIN_CELL_V)
     v_cv = cc.cv_cell_v * p.n_series
-    st.vrc = v_cv - float(p.ocv_v(st.soc)) + 1e-3
-    assert _charger_command(st, c, 5.0) == 0.0 and st.full
-    st.vrc -= 2e-3
-    assert _charger_command(st, c, 5.0) == 5.0 and st.full
+    for excess in (1e-3, 0.1, TRIP_MARGIN_CELL_V * p.n_series - 1e-6):
+        st.vrc = v_cv - float(p.ocv_v(st.soc)) + excess
+        assert _charger_command(st, c, 5.0) == pytest.approx(5.0 - excess / p.r0_ohm, rel=1e-9, abs=1e-9) and st.full
+    assert 5.0 - excess / p.r0_ohm < 4.0                                   # the trip is well into the proportional range
+    st.vrc = v_cv - float(p.ocv_v(st.soc)) + 0.1
+    assert _charger_command(st, c, 0.5) == 0.0 and st.full               # 0.5 A - 1.04 A: clipped at 0
+    st.vrc = v_cv - float(p.ocv_v(st.soc)) + TRIP_MARGIN_CELL_V * p.n_series + 1e-6
+    assert _charger_command(st, c, 5.0) == 0.0 and st.full               # the trip
+    st.vrc = v_cv - float(p.ocv_v(st.soc)) - 1e-3
+    assert _charger_command(st, c, 5.0) == 5.0 and st.full               # at or below CV: the load current alone
 
 
 def test_full_battery_recharges_below_the_recharge_threshold_and_not_above():

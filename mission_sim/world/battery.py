@@ -67,7 +67,13 @@ import numpy as np
 
 from ..validation import Range, check_number, check_number_fields, check_positive
 
-__all__ = ["BatteryParams", "ocv_cell_v", "ocv_cell_energy_v", "CcCvParams"]
+__all__ = ["BatteryParams", "ocv_cell_v", "ocv_cell_energy_v", "CcCvParams", "TRIP_MARGIN_CELL_V"]
+
+#: over-voltage trip of a *full* pack [V per cell]: above ``cv_cell_v`` + this, ``OCV + v1`` per cell, the charger's
+#: command is 0 (short mode) until the pack is back below it (module notes). 20 mV/cell = 160 mV on the default 8S
+#: pack = R0 x 1.7 A: above what the CV hold leaves for a policy's tracking error (the hold drains the pack with
+#: ``(V_cv - OCV - v1) / R0``), so the trip acts only on a gross over-delivery.
+TRIP_MARGIN_CELL_V = 0.02
 
 
 def ocv_cell_v(soc):
