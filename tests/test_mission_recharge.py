@@ -156,11 +156,15 @@ def test_a_full_battery_hovering_over_a_pad_floats_on_the_power_path():
     load and the pack is held near full. Before, a full pack's command was 0: the drone flew on the pack down to
     the recharge threshold (min SoC 0.901) and charged again, 14.6 kJ into the pack.
 
-    The band, from the charger alone: *full* is the CV current at the cut-off, ``OCV + (R0 + R1) I_cut = V_cv``
-    (v1 at its steady ``R1 I``), so SoC_full solves ``OCV(SoC) = cv_cell_v - (r0 + r1) cutoff`` per cell; after
-    that the command is the load current as of the last BMS update, and a new one comes once it moves by more
-    than the dead band, so the pack carries at most ``cmd_deadband_a`` (0.25 A) on average and the SoC stays
-    within ``delta = deadband T / Q`` (0.032 over 600 s) of SoC_full. The start (0.985) is inside that band."""
+    The band: *full* is the CV current at the cut-off, ``OCV + (R0 + R1) I_cut = V_cv`` (v1 at its steady ``R1 I``),
+    so SoC_full solves ``OCV(SoC) = cv_cell_v - (r0 + r1) cutoff`` per cell. After that the pack carries the
+    difference between the load and what the receiver delivers: the command's error (the load as of the last BMS
+    update, held within the dead band) plus the policy's tracking error around its command, which neither the dead
+    band nor the charger bounds (the hysteresis policy, over the same 600 s, lets the pack down to SoC 0.899, the
+    recharge threshold). ``delta = deadband T / Q`` (0.032 over 600 s) is the drift of a 0.25 A error held for
+    the whole hover: the model-based policy's measured shortfall at this constant load (~0.07 A) plus the dead band's
+    error stay inside it, so this checks the policy as much as the charger. Above CV the full command is the load
+    less ``(OCV + v1 - V_cv) / R0``, so the SoC never passes 1. The start (0.985) is inside the band."""
     from mission_sim.config import policy_context
     from mission_sim.world.trajectory import Trajectory
 
@@ -179,6 +183,7 @@ def test_a_full_battery_hovering_over_a_pad_floats_on_the_power_path():
     soc = ts["soc"].to_numpy()
     assert 0.99 < soc_full < 1.0 and delta < 0.035
     assert np.all(np.abs(soc - soc_full) <= delta), (soc.min(), soc.max(), soc_full, delta)
+    assert soc.max() <= 1.0
     assert s["battery_full"] and not s["battery_depleted"]       # never down to the recharge threshold
     # the command is the load current: after the CV taper (tau ~ 60 s near full, from 0.985 done well before
     # 300 s), within the dead band of propulsion / VL
