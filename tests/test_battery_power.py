@@ -88,7 +88,7 @@ def test_cccv_charges_to_full_without_exceeding_cv_and_then_stops():
     for excess in (1e-3, 0.1, TRIP_MARGIN_CELL_V * p.n_series - 1e-6):
         st.vrc = v_cv - float(p.ocv_v(st.soc)) + excess
         assert _charger_command(st, c, 5.0) == pytest.approx(5.0 - excess / p.r0_ohm, rel=1e-9, abs=1e-9) and st.full
-    assert 5.0 - excess / p.r0_ohm < 4.0                                   # the trip is well into the proportional range
+    assert 5.0 - excess / p.r0_ohm < 4.0        # the trip is well into the proportional range
     st.vrc = v_cv - float(p.ocv_v(st.soc)) + 0.1
     assert _charger_command(st, c, 0.5) == 0.0 and st.full               # 0.5 A - 1.04 A: clipped at 0
     st.vrc = v_cv - float(p.ocv_v(st.soc)) + TRIP_MARGIN_CELL_V * p.n_series + 1e-6

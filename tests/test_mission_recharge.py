@@ -74,7 +74,7 @@ def test_default_pads_repeated_10x_top_off_at_every_long_pad_and_never_run_low()
     pol = make("model_based", PolicyContext(control_period_s=cfg.sim.control_period_s, rated_i2_a=cfg.link.rated_i2_a))
     res = run_mission(cfg, pol)
     s, ts = res.summary, res.timeseries
-    assert not s["battery_depleted"] and s["sim_time_s"] > 2000.0   # the whole mission flown (it used to end at 1,917 s)
+    assert not s["battery_depleted"] and s["sim_time_s"] > 2000.0   # the whole mission (it used to end at 1,917 s)
     soc, t = ts["soc"].to_numpy(), ts["t_s"].to_numpy()
     # full is declared at OCV + v1 = V_cv - R0 I_cut, v1 lagging the CV taper's falling current: at most R1 I_cc
     b, ch = cfg.battery, cfg.charger

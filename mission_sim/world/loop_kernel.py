@@ -225,7 +225,8 @@ def _charger_command(st, c, i_prop):
     current plus the CV current where that is negative, ``max(i_prop + min(0, (V_cv - OCV - v1) / R0), 0)`` (the
     charger's power path: the input feeds the load and the pack is held at the CV voltage, not pushed above it by a
     receiver delivering more than the load), and 0 (short mode) above the over-voltage trip ``v_trip``; ``full`` and
-    ``cv`` clear once ``OCV + v1`` falls below the recharge threshold (and when a pad switches on: :func:`_gate_pad`)."""
+    ``cv`` clear once ``OCV + v1`` falls below the recharge threshold (and when a pad switches on:
+    :func:`_gate_pad`)."""
     v_rest = c.n_cells * _ocv_cell(st.soc) + st.vrc
     if st.full and v_rest < c.v_recharge:
         st.full, st.cv = False, False
