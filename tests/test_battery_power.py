@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from mission_sim.world.battery import BatteryParams, CcCvParams, ocv_cell_v
+from mission_sim.world.battery import TRIP_MARGIN_CELL_V, BatteryParams, CcCvParams, ocv_cell_v
 from mission_sim.world.fastpath import battery_values, constants
 from mission_sim.world.loop_kernel import STATE_DTYPE, _bat_step, _charger_command, _ocv_cell
 from mission_sim.world.power import G_M_S2, DroneParams, hover_power_w, propulsion_power_w
@@ -81,13 +81,20 @@ def test_cccv_charges_to_full_without_exceeding_cv_and_then_stops():
     assert st.full and st.cv and st.soc > 0.98
     # full: the power path, the command is the load current alone (the pack gets 0); no load -> short mode
     assert _charger_command(st, c, 5.0) == 5.0 and _charger_command(st, c, 0.0) == 0.0
-    # a full pack pushed above the CV voltage (a receiver delivering more than the load): short mode until it is
-    # back at CV, so it cannot be charged past it
+    # a full pack pushed above the CV voltage (a receiver delivering more than the load): the command is the load
+    # less the CV law's (negative) current, so the pack is drawn back to CV in proportion, no on-off switching; 0
+    # (short mode) only when the command would be negative or above the over-voltage trip (TRIP_MARGIN_CELL_V)
     v_cv = cc.cv_cell_v * p.n_series
-    st.vrc = v_cv - float(p.ocv_v(st.soc)) + 1e-3
-    assert _charger_command(st, c, 5.0) == 0.0 and st.full
-    st.vrc -= 2e-3
-    assert _charger_command(st, c, 5.0) == 5.0 and st.full
+    for excess in (1e-3, 0.1, TRIP_MARGIN_CELL_V * p.n_series - 1e-6):
+        st.vrc = v_cv - float(p.ocv_v(st.soc)) + excess
+        assert _charger_command(st, c, 5.0) == pytest.approx(5.0 - excess / p.r0_ohm, rel=1e-9, abs=1e-9) and st.full
+    assert 5.0 - excess / p.r0_ohm < 4.0        # the trip is well into the proportional range
+    st.vrc = v_cv - float(p.ocv_v(st.soc)) + 0.1
+    assert _charger_command(st, c, 0.5) == 0.0 and st.full               # 0.5 A - 1.04 A: clipped at 0
+    st.vrc = v_cv - float(p.ocv_v(st.soc)) + TRIP_MARGIN_CELL_V * p.n_series + 1e-6
+    assert _charger_command(st, c, 5.0) == 0.0 and st.full               # the trip
+    st.vrc = v_cv - float(p.ocv_v(st.soc)) - 1e-3
+    assert _charger_command(st, c, 5.0) == 5.0 and st.full               # at or below CV: the load current alone
 
 
 def test_full_battery_recharges_below_the_recharge_threshold_and_not_above():
@@ -159,3 +166,54 @@ def test_gusts_are_stationary_markov_and_hover_error_is_seeded():
     # tilt: thrust balances a horizontal drag of m g -> 45 degrees, leaning against the force
     tilt, axis = tilt_from_force(1.0, np.zeros((1, 3)), np.array([[G_M_S2, 0.0, 0.0]]))
     assert tilt[0] == pytest.approx(math.pi / 4) and math.sin(axis[0] - math.pi / 2) == pytest.approx(0, abs=1e-12)
+
+
+def _bms_setup(soc, cmd, **sim):
+    """A kernel state over an energised pad (on, V1 nominal) with the last command ``cmd``, a sample with a 300 W
+    load, and constants with the default battery and charger, a 4 s BMS period and a 0.25 A dead band."""
+    from mission_sim.world.loop_records import SAMPLE_DTYPE
+    p, cc = BatteryParams(), CcCvParams()
+    vals = dict(battery_values(p, cc), v1_nom=100.0, bms_period=4.0, cmd_deadband=0.25, k_on=0.1, k_off=0.05)
+    vals.update(sim)
+    c = constants(vals).view(np.recarray)[0]
+    st = _state(soc)
+    st.tx_on, st.v1, st.cmd, st.last_vl, st.t_last_bms = True, 100.0, cmd, 30.0, -10.0
+    here = np.zeros(1, SAMPLE_DTYPE).view(np.recarray)[0]
+    here.t, here.k, here.p, here.elig = 0.0, 0.2, 300.0, True
+    return p, cc, c, st, here
+
+
+def test_entering_full_applies_the_command_despite_the_dead_band():
+    """The CV command just above the cut-off and the full one (the load alone) differ by ~the cut-off current (0.13 A),
+    less than the dead band (0.25 A): entering *full* applies the command anyway, so the pack is not left on the
+    last CV current until the load moves. Leaving it (a new cycle below the recharge threshold) likewise."""
+    from mission_sim.world.loop_kernel import _bms_command
+    p, cc = BatteryParams(), CcCvParams()
+    v_cv = cc.cv_cell_v * p.n_series
+    # a SoC whose CV current (v1 = 0) is just below the cut-off: full at this update
+    lo, hi = 0.9, 1.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if (v_cv - float(p.ocv_v(mid))) / p.r0_ohm > 0.9 * cc.cutoff_current_a else (lo, mid)
+    i_load = 300.0 / 30.0
+    _, _, c, st, here = _bms_setup(hi, i_load + cc.cutoff_current_a)   # the last CV command, held since
+    st.cv = True
+    assert _bms_command(st, c, here, 0.0, False)
+    assert st.full and st.cmd == i_load
+    # the same step without the change of state is swallowed by the dead band
+    st.cmd, st.t_last_bms = i_load + cc.cutoff_current_a, -10.0
+    assert not _bms_command(st, c, here, 0.0, False) and st.cmd == i_load + cc.cutoff_current_a
+
+
+def test_a_pad_switching_on_starts_a_new_charge_cycle():
+    """The pad's off -> on edge clears *full* and *cv* (the host restarts the charge cycle on input power, e.g. TI
+    BQ25601D's CE toggled), so a full pack that the flight drained a little is topped off at the next pad."""
+    from mission_sim.world.loop_kernel import _charger_command, _gate_pad
+    p, cc, c, st, here = _bms_setup(0.97, 0.0)
+    st.full, st.cv, st.tx_on, st.v1 = True, True, False, 0.0
+    v_rest = float(p.ocv_v(0.97))
+    assert v_rest > (cc.cv_cell_v - cc.recharge_drop_cell_v) * p.n_series   # above the recharge threshold
+    assert _charger_command(st, c, 10.0) == 10.0 and st.full               # full: the load alone
+    assert _gate_pad(st, c, here, 0.0, False) and st.tx_on
+    assert not st.full and not st.cv
+    assert _charger_command(st, c, 10.0) == pytest.approx(10.0 + cc.cc_current_a)   # charging again (CC)

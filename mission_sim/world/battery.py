@@ -31,23 +31,35 @@ of 1.3 Ah, sized for a ~1 kg drone.
   plus the battery current, ``cc_current_a`` in CC and, in CV, the model-based ``(V_cv - OCV - v1) / R0``
   that puts the terminal voltage at the CV limit (never above ``cc_current_a``); below the cut-off the
   battery is *full*.
-* Power path: a *full* battery's command is the load current alone (battery current 0), so over an
-  energised pad the pad feeds the motors and the avionics and the pack is held, as a charger IC with a
-  power path does (TI BQ25601/BQ25601D, "power path management": the input powers the system, charging
-  terminated or not; the battery joins in, "supplement mode", only when the input is overloaded). The
-  command follows the load at each BMS update outside the dead band (``sim.cmd_deadband_a``); the pack
-  carries the difference between the load and what the rectifier delivers. Measured
-  (``tests/test_mission_recharge.py``), 600 s hovering over pad 0 without wind from SoC 0.985: full at
-  0.9934 after ~100 s, then down to 0.9850 at the end (the model-based policy delivers ~0.07 A less than
-  its command: the feed-forward's shortfall), 1.3 kJ into the pack, 64.4 kJ from the pad (min SoC 0.9849
-  in the first 0.2 s, before the charger's first command); with the command 0 when full (before
-  2026-11-27) the drone flew on its pack down to the recharge threshold (min SoC 0.901), final 0.988,
-  14.6 kJ into the pack, 65.5 kJ from the pad. With no load (``P = 0``) the command is 0: short mode.
-  A full pack whose ``OCV + v1`` is above the CV voltage gets command 0 (short mode) until it is back at
-  it: a receiver that delivers more than the load (the hysteresis policy does) would otherwise charge a
-  full pack past the CV voltage and SoC 1 (the default mission with ``hysteresis``: SoC 1.006 without
-  this rule; with it max SoC 0.9890, final 0.9756, 22.1 kJ from the pads, against final 0.9118 and
-  11.7 kJ on main of 2026-11-27, the command 0 when full).
+* Power path: a *full* battery's command is the load current, less the CV law's current where that is
+  negative: ``max(P / VL + min(0, (V_cv - OCV - v1) / R0), 0)``. Over an energised pad the pad feeds the
+  motors and the avionics and the pack is held at or below the CV voltage, as a charger IC with a power
+  path does (TI BQ25601/BQ25601D, "power path management": the input powers the system, charging
+  terminated or not; the battery joins in, "supplement mode", only when the input is overloaded); a pack
+  above CV (a receiver that delivered more than the load) is drawn back to it in proportion, with no on-off
+  switching. Over-voltage trip: above ``V_cv + TRIP_MARGIN_CELL_V`` per cell (20 mV/cell) the command is 0
+  (short mode) until the pack is back below it. The command follows the load at each BMS update outside
+  the dead band (``sim.cmd_deadband_a``; entering or leaving *full* is always applied). The hold depends on
+  the policy delivering its command: the pack carries the difference between the load and what the
+  rectifier delivers, which neither the dead band nor the charger bounds. Measured
+  (``tests/test_mission_recharge.py``), 600 s hovering over pad 0 without wind from SoC 0.985, model_based:
+  full at 0.9934 after ~100 s, then down to 0.9850 at the end (the policy delivers ~0.07 A less than its
+  command: the feed-forward's shortfall), 1.3 kJ into the pack, 64.4 kJ from the pad; ``hysteresis``, same
+  hover: its delivery swings between ~0 and ~6 A in bursts of seconds, and for ~130 s it delivers ~0.14 A
+  against a 3.0 A command, so the pack falls to the recharge threshold (min SoC 0.8993), charges again and
+  ends at 0.9725 (max 0.9934, 33.1 kJ into the pack). With the command 0 when full (before 2026-11-27)
+  model_based flew on its pack down to the recharge threshold (min SoC 0.901), final 0.988, 14.6 kJ into the
+  pack, 65.5 kJ from the pad. With no load (``P = 0``) the command is 0: short mode. The default mission
+  with ``hysteresis``: max SoC 0.9899, at most 3.6 mV/cell above CV (11.4 s above CV, 0.6 s above
+  ``V_cv + R0 deadband``, the excess below which the correction is under the dead band), final 0.9669,
+  20.7 kJ from the pads (SoC 1.006 with the command 0 when full and no CV rule, main before 2026-11-27).
+  A policy that overshoots its command by amperes for seconds can still take the pack a little past CV:
+  ``hysteresis`` from SoC 0.999 (above CV's SoC 0.9965 at rest, where the CV correction, 0.2 A, is under
+  the dead band) reaches SoC 1.0015 (max 13.6 mV/cell above CV).
+* New charge cycle at each pad: a pad switching on (input power appearing) clears *full*, as a drone's
+  host restarts the charger's cycle on arrival (TI BQ25601D: toggling CE or CHG_CONFIG starts a new
+  cycle), so the pack is topped off at every pad visit (CC/CV, then *full* again at the cut-off) instead of
+  floating at whatever SoC it arrived with.
 * Recharge: a full battery starts a new charge cycle when its voltage falls ``recharge_drop_cell_v``
   (default 100 mV) per cell below the CV voltage: the recharge threshold of charger ICs (e.g. TI
   BQ25601D, register bit VRECHG: "recharge threshold 100 mV (default) or 200 mV" below VREG; TI's
@@ -67,7 +79,13 @@ import numpy as np
 
 from ..validation import Range, check_number, check_number_fields, check_positive
 
-__all__ = ["BatteryParams", "ocv_cell_v", "ocv_cell_energy_v", "CcCvParams"]
+__all__ = ["BatteryParams", "ocv_cell_v", "ocv_cell_energy_v", "CcCvParams", "TRIP_MARGIN_CELL_V"]
+
+#: over-voltage trip of a *full* pack [V per cell]: above ``cv_cell_v`` + this, ``OCV + v1`` per cell, the charger's
+#: command is 0 (short mode) until the pack is back below it (module notes). 20 mV/cell = 160 mV on the default 8S
+#: pack = R0 x 1.7 A: above what the CV hold leaves for a policy's tracking error (the hold drains the pack with
+#: ``(V_cv - OCV - v1) / R0``), so the trip acts only on a gross over-delivery.
+TRIP_MARGIN_CELL_V = 0.02
 
 
 def ocv_cell_v(soc):

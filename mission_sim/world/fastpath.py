@@ -53,9 +53,11 @@ def link_values(l1_h, l2_h, r1_ohm, r2_ohm, omega_rad_s) -> dict:
 def battery_values(bp, ch) -> dict:
     """The battery's (:class:`.battery.BatteryParams` ``bp``) and the charger's (:class:`.battery.CcCvParams`
     ``ch``) constants of :data:`.loop_kernel.CONST_DTYPE`."""
+    from .battery import TRIP_MARGIN_CELL_V
     return {"r0": bp.r0_ohm, "r1b": bp.r1_ohm, "tau1": bp.tau1_s, "bat_c1": bp.c1_f, "n_cells": bp.n_series,
             "capacity_c": bp.capacity_c, "cc_a": ch.cc_current_a, "v_cv": ch.cv_cell_v * bp.n_series,
-            "cutoff_a": ch.cutoff_current_a, "v_recharge": (ch.cv_cell_v - ch.recharge_drop_cell_v) * bp.n_series}
+            "cutoff_a": ch.cutoff_current_a, "v_recharge": (ch.cv_cell_v - ch.recharge_drop_cell_v) * bp.n_series,
+            "v_trip": (ch.cv_cell_v + TRIP_MARGIN_CELL_V) * bp.n_series}
 
 
 def constants(values: dict) -> np.ndarray:

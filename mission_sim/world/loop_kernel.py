@@ -222,9 +222,11 @@ def _bat_step(c, soc, v1_v, i, dt_s):
 def _charger_command(st, c, i_prop):
     """CC-CV charge manager (:mod:`.battery`, :class:`.battery.CcCvParams`): the SBAR command ``I_L*`` [A], the load
     current ``i_prop`` (propulsion + avionics) plus the battery's CC/CV current (at most ``cc_a``); when full the load
-    current alone (the charger's power path: the input feeds the load, the pack is held), or 0 (short mode) while
-    ``OCV + v1`` is above the CV voltage (a receiver delivering more than the load would charge a full pack past
-    it); ``full`` and ``cv`` clear once ``OCV + v1`` falls below the recharge threshold."""
+    current plus the CV current where that is negative, ``max(i_prop + min(0, (V_cv - OCV - v1) / R0), 0)`` (the
+    charger's power path: the input feeds the load and the pack is held at the CV voltage, not pushed above it by a
+    receiver delivering more than the load), and 0 (short mode) above the over-voltage trip ``v_trip``; ``full`` and
+    ``cv`` clear once ``OCV + v1`` falls below the recharge threshold (and when a pad switches on:
+    :func:`_gate_pad`)."""
     v_rest = c.n_cells * _ocv_cell(st.soc) + st.vrc
     if st.full and v_rest < c.v_recharge:
         st.full, st.cv = False, False
@@ -235,7 +237,7 @@ def _charger_command(st, c, i_prop):
     if st.cv and tgt < c.cutoff_a:
         st.full = True
     if st.full:
-        return i_prop if v_rest <= c.v_cv else 0.0
+        return 0.0 if v_rest > c.v_trip else max(i_prop + min(0.0, i_cv), 0.0)
     return max(tgt, 0.0) + i_prop
 
 
@@ -703,7 +705,7 @@ def _interval(s, c, lk, smp, rows, noise, obs, fn, params, pstate):
 def _gate_pad(st, c, here, t_k, ending):
     """Pad gating (transmitter side) at a sample; True if it is an event (opens a fine window).
 
-    On in an energising phase with ``k >= k_on``; off at once (ramp down) when ``k < k_off``; at the
+    On in an energising phase with ``k >= k_on`` (a new charge cycle: ``full`` and ``cv`` cleared); off at once (ramp down) when ``k < k_off``; at the
     phase's end the command drops to 0 first and the pad stays on ``tx_off_delay_s``."""
     if st.tx_on:
         if here.k < c.k_off:
@@ -721,19 +723,25 @@ def _gate_pad(st, c, here, t_k, ending):
             return False
         return True
     if here.elig and not ending and here.k >= c.k_on and st.v1 == 0.0:
-        st.tx_on = True
+        # input power appears: the drone's host starts a new charge cycle (a charger IC's CE toggled), so the
+        # charger tops the pack off at every pad visit and terminates again at the cut-off
+        st.tx_on, st.full, st.cv = True, False, False
         return True
     return False
 
 
 @njit(cache=True)
 def _bms_command(st, c, here, t_k, ending):
-    """Battery management: a new charge command every ``bms_period_s`` (deadband); True if it changed."""
+    """Battery management: a new charge command every ``bms_period_s``, applied if it moves by more than the dead band,
+    between zero and non-zero, or as the charger enters or leaves *full* (the full command differs from the last CV
+    one by about the cut-off current, which the dead band would swallow); True if it changed."""
     if not (st.tx_on and st.v1 == c.v1_nom and here.elig and not ending and t_k - st.t_last_bms >= c.bms_period - 1e-12):
         return False
     st.t_last_bms = t_k
+    was_full = st.full
     new = _charger_command(st, c, here.p / st.last_vl)
-    if abs(new - st.cmd) > c.cmd_deadband or (new == 0.0) != (st.cmd == 0.0):
+    if (abs(new - st.cmd) > c.cmd_deadband or (new == 0.0) != (st.cmd == 0.0)
+            or (st.full != was_full and new != st.cmd)):
         if new == 0.0:
             st.t_cmd_zero = t_k
         st.cmd = new

@@ -62,9 +62,10 @@ CONST_DTYPE = np.dtype([
     # devices: forward drop of the rectifying path [V], shorted-SBAR resistance minus Rd [ohm], the loss split
     ("vf", "f8"), ("dr_short", "f8"), ("inv_r", "f8"), ("vf0", "f8"), ("rd", "f8"), ("is_ideal", "?"),
     ("coil_r1", "f8"), ("coil_r2", "f8"),
-    # battery: R0, R1 [ohm], tau1 [s], C1 [F], cells in series, capacity [C]; charger: CC [A], CV [V], cut-off [A], recharge [V]
+    # battery: R0, R1 [ohm], tau1 [s], C1 [F], cells in series, capacity [C]; charger: CC [A], CV [V], cut-off [A],
+    # recharge [V], over-voltage trip [V]
     ("r0", "f8"), ("r1b", "f8"), ("tau1", "f8"), ("bat_c1", "f8"), ("n_cells", "f8"), ("capacity_c", "f8"),
-    ("cc_a", "f8"), ("v_cv", "f8"), ("cutoff_a", "f8"), ("v_recharge", "f8"),
+    ("cc_a", "f8"), ("v_cv", "f8"), ("cutoff_a", "f8"), ("v_recharge", "f8"), ("v_trip", "f8"),
     # sim.*
     ("tx_off_delay", "f8"), ("bms_period", "f8"), ("cmd_deadband", "f8"), ("min_fine", "f8"), ("max_fine", "f8"),
     ("flight_dt", "f8"), ("lm_rel_tol", "f8"), ("coarse_period", "f8"), ("duty_event_tol", "f8"),

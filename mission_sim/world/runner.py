@@ -20,8 +20,10 @@ Loop (one drone, one receiver):
    the pad stays on ``sim.tx_off_delay_s`` so the receiver reaches short mode under power
    [``_gate_pad``; per fine step inside ``_fine_begin``].
 3. **Battery management** (CC-CV, :mod:`~mission_sim.world.battery`) sets the charge command
-   ``I_L*`` every ``sim.bms_period_s`` (propulsion current + CC/CV battery current, 0 when full);
-   changes below ``sim.cmd_deadband_a`` are not applied [``_bms_command``, ``_charger_command``].
+   ``I_L*`` every ``sim.bms_period_s`` (load current + CC/CV battery current; when full the load current less
+   the CV law's current above CV, the charger's power path; a new charge cycle at each pad switch-on); changes
+   below ``sim.cmd_deadband_a`` are not applied, except entering or leaving *full* [``_bms_command``,
+   ``_charger_command``].
 4. **Policy** (:class:`mission_sim.contract.Policy`): observation built exactly per the contract
    (normalised i2, battery V and current, rectifier current, SoC, command, last duty, time since
    the stop), output ``d_short``; the SBAR applies its v2 fundamental: eq. 9's ``(4/pi) VL (1 - sin(pi
