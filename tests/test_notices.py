@@ -130,11 +130,61 @@ def test_a_pad_no_loiter_comes_near_warns_with_its_closest_approach():
     d = load_config_dict(None, SQUARE)   # the built-in pads kept about the plan's home
     cfg = config_from_dict(d)
     msgs = _quiet_run(cfg, policies.make("model_based", policy_context(cfg)), frame=False)
+    valid = ("valid: a loiter item within mission.pad_radius_m=5 m of the pad and at least 1 m above it (it becomes a "
+             "charging hover), a larger mission.pad_radius_m, or leave the pad out of --pads")
     assert msgs == [
-        "pad 0 at (0.0, 0.0) m charges nothing: no loiter of the route within mission.pad_radius_m=5 m of it (closest "
-        "approach 0.0 m); valid: a loiter item over the pad, a larger mission.pad_radius_m, or leave the pad out",
-        "pad 1 at (40.0, 20.0) m charges nothing: no loiter of the route within mission.pad_radius_m=5 m of it (closest "
-        "approach 21.9 m); valid: a loiter item over the pad, a larger mission.pad_radius_m, or leave the pad out"]
+        f"pad 0 at (0.0, 0.0) m charges nothing: the route never hovers over it (closest approach 0.0 m); {valid}",
+        f"pad 1 at (40.0, 20.0) m charges nothing: the route never hovers over it (closest approach 21.9 m); {valid}"]
+
+
+def _loiter_route(z_m: float) -> dict:
+    d = config_to_dict(load_config())   # pads at (0, 0) and (40, 20); the start at (-15, 0)
+    d["waypoints"] = [{"action": "takeoff", "z_m": 5.0},
+                      {"action": "loiter", "x_m": 40.0, "y_m": 20.0, "z_m": z_m, "hold_s": 30.0},
+                      {"action": "land", "x_m": 40.0, "y_m": 20.0}]
+    return d
+
+
+def test_a_loiter_over_a_pad_charges_there_and_is_not_warned_about():
+    """A config route's plain loiter 0.2 m over pad 1 energises it (a "hover" phase inside its coupling range, the
+    run's own rule): the run charges, no warning about pad 1 (it said "charges nothing" before). Pad 0 is left
+    out: warned, with the closest approach from the mission's start (-15, 0) (5.1 m; it said 0.0 m from (0, 0))
+    and a config route's remedy (a charge item, not mission.pad_radius_m)."""
+    cfg = config_from_dict(_loiter_route(0.2))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = run_mission(cfg, policies.make("model_based", policy_context(cfg)), frame=False)
+    assert res.summary["battery_charge_in_j"] > 500.0
+    assert _ours(caught) == ['pad 0 at (0.0, 0.0) m charges nothing: the route never hovers over it (closest '
+                             'approach 5.1 m); valid: a [[waypoints]] item with action = "charge", pad = 0, or leave '
+                             'the pad out']
+    from mission_sim.setup_warnings import energised_pads
+    assert energised_pads(cfg) == {1}
+    assert energised_pads(config_from_dict(_loiter_route(3.0))) == set()   # 3 m up: outside the coupling range
+    high = config_from_dict(_loiter_route(3.0))
+    assert run_mission(high, policies.make("model_based", policy_context(high)), frame=False,
+                       warn=False).summary["battery_charge_in_j"] == 0.0
+
+
+LOW_LOITER = ("QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t0\t1\n"
+              "1\t0\t3\t22\t0\t0\t0\t0\t0\t0\t20\t1\n2\t0\t3\t16\t0\t0\t0\t0\t47.398742\t8.546594\t20\t1\n"
+              "3\t0\t3\t19\t30\t0\t0\t0\t47.398742\t8.546594\t0.2\t1\n4\t0\t3\t21\t0\t0\t0\t0\t47.398742\t8.546594\t0\t1\n")
+
+
+def test_a_mission_files_loiter_just_above_a_pad_is_not_warned_about(capsys, tmp_path):
+    """A loiter 0.2 m above a ``--pads`` pad stays a loiter (less than CHARGE_CLEARANCE_M above it) and charges
+    there: only the other pad, which the route never comes near, is warned about, with a mission file's remedy."""
+    plan, pads = tmp_path / "low.waypoints", tmp_path / "pads.csv"
+    plan.write_text(LOW_LOITER)
+    pads.write_text("lat,lon\n47.398742,8.546594\n47.397742,8.548594\n")
+    rc, err = _cli(capsys, ["mission", "--plan", str(plan), "--pads", str(pads), "--no-plot", "--out",
+                            str(tmp_path / "o")])
+    assert rc == 0 and err == [
+        "dronewpt mission: warning: pad 1 at (226.5, 0.0) m charges nothing: the route never hovers over it (closest "
+        "approach 187.4 m); valid: a loiter item within mission.pad_radius_m=5 m of the pad and at least 1 m above it "
+        "(it becomes a charging hover), a larger mission.pad_radius_m, or leave the pad out of --pads"], err
+    import json
+    assert json.loads((tmp_path / "o" / "summary.json").read_text())["battery_charge_in_j"] > 500.0
 
 
 def test_closest_approach_is_the_distance_to_the_route_polyline():
