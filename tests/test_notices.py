@@ -281,16 +281,46 @@ def test_the_command_line_keeps_its_notice_on_the_terminal_only(tmp_path):
 
 
 # ------------------------------------------------------------------ 7. --plan without --pads
+NOTE = ("dronewpt mission: note: --plan without --pads keeps the built-in mission's 2 pads, at (0, 0) and (40, 20) m "
+        "about the plan's home; the plan's route charges at none of them (a loiter within mission.pad_radius_m of one "
+        "charges there); give your own with --pads FILE (CSV lat,lon[,alt][,hover_time_s] or GeoJSON), or --no-charge "
+        "to fly it without charging")
+
+
 def test_plan_without_pads_says_the_built_in_pads_are_kept(capsys, tmp_path):
     rc, err = _cli(capsys, ["mission", "--plan", str(SQUARE), "--dry-run"])
-    assert rc == 0 and err == [
-        "dronewpt mission: note: --plan without --pads keeps the built-in mission's 2 pads, at (0, 0) and (40, 20) m "
-        "about the plan's home (a loiter within mission.pad_radius_m of one charges there); give your own with --pads "
-        "FILE (CSV lat,lon[,alt][,hover_time_s] or GeoJSON), or --no-charge to fly it without charging"]
+    assert rc == 0 and err == [NOTE], err
     pads = tmp_path / "pads.csv"
     pads.write_text("lat,lon\n47.398742,8.546594\n")
     rc, err = _cli(capsys, ["mission", "--plan", str(SQUARE), "--pads", str(pads), "--dry-run"])
     assert rc == 0 and err == [], err
+
+
+def test_the_note_is_not_repeated_by_the_pad_warnings_nor_given_with_no_charge(capsys, tmp_path):
+    """The run after the note: no "pad 0 ... charges nothing" lines repeating it (the note says which pads the route
+    charges at); ``--no-charge``: no note telling the user to use ``--no-charge`` (the pads never energise)."""
+    rc, err = _cli(capsys, ["mission", "--plan", str(SQUARE), "--no-plot", "--out", str(tmp_path / "a")])
+    assert rc == 0 and err == [NOTE], err
+    rc, err = _cli(capsys, ["mission", "--plan", str(SQUARE), "--no-charge", "--no-plot", "--out", str(tmp_path / "b")])
+    assert rc == 0 and err == [], err
+    rc, err = _cli(capsys, ["telemetry", "--plan", str(SQUARE), "--connect", "none", "--tlog", str(tmp_path / "x.tlog"),
+                            "--speed", "inf", "--no-progress"])
+    assert rc == 0 and err == [NOTE.replace("mission: note", "telemetry: note").replace(
+        "--no-charge to fly it without charging", "a config file with your own [[pads]]")], err
+
+
+def test_telemetry_warns_about_an_unreached_pad(capsys, tmp_path):
+    """telemetry flies ``plan_mission(cfg)``, cfg's own route: its pads are checked (they were not: any trajectory
+    counted as a replayed one)."""
+    plan, pads = tmp_path / "low.waypoints", tmp_path / "pads.csv"
+    plan.write_text(LOW_LOITER)
+    pads.write_text("lat,lon\n47.398742,8.546594\n47.397742,8.548594\n")
+    rc, err = _cli(capsys, ["telemetry", "--plan", str(plan), "--pads", str(pads), "--connect", "none", "--tlog",
+                            str(tmp_path / "x.tlog"), "--speed", "inf", "--no-progress"])
+    assert rc == 0 and err == [
+        "dronewpt telemetry: warning: pad 1 at (226.5, 0.0) m charges nothing: the route never hovers over it (closest "
+        "approach 187.4 m); valid: a loiter item within mission.pad_radius_m=5 m of the pad and at least 1 m above it "
+        "(it becomes a charging hover), a larger mission.pad_radius_m, or leave the pad out of --pads"], err
 
 
 # ------------------------------------------------------------------ no noise for normal use
