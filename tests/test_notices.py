@@ -106,9 +106,24 @@ def test_a_sweep_warns_once_per_study_not_per_case(tmp_path):
     with pytest.warns(DronewptWarning) as rec:
         runner, cases, _ = prepare_study(study, policies.make, policies.available())
     msgs = _ours(rec)
-    assert len(msgs) == 1 and msgs[0].startswith("3 of 3 cases of study 'hv': link.vdc_v=30 V"), msgs
+    assert len(msgs) == 1 and msgs[0].startswith(
+        "3 of 3 cases of study 'hv' have a link outside the exact-mode model's checked range, e.g.: link.vdc_v=30 V"), msgs
     assert _quiet_run(runner.config({}), policies.make("model_based", policy_context(runner.config({}))),
                       frame=False, warn=False) == []   # the cases run without it
+
+
+def test_a_sweeps_line_counts_the_cases_with_a_warning_not_one_message(tmp_path):
+    """Each case's message embeds its own values (here link.vdc_v): 4 of 6 cases warn, with 2 distinct messages; the
+    line said "2 of 6 cases ...: <one message> (and 1 other distinct warning)" before."""
+    from mission_sim.studies.prepare import prepare_study
+    study = _study(tmp_path, '[study]\nname = "hv"\n[fixed]\n"battery.n_series" = 32\n'
+                             '[grid]\n"link.vdc_v" = [20.0, 25.0, 40.0]\n"wind.speed_m_s" = [1.0, 2.0]\n')
+    with pytest.warns(DronewptWarning) as rec:
+        prepare_study(study, policies.make, policies.available())
+    msgs = _ours(rec)
+    assert len(msgs) == 1 and msgs[0].startswith(
+        "4 of 6 cases of study 'hv' have a link outside the exact-mode model's checked range, e.g.: link.vdc_v=20 V "
+        "with battery.n_series=32"), msgs
 
 
 def test_an_env_on_a_link_outside_the_modal_range_warns():
