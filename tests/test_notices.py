@@ -140,6 +140,22 @@ def test_an_env_on_a_link_outside_the_modal_range_warns():
     assert _ours(caught) == []
 
 
+def test_an_envs_warning_through_gym_make_points_at_the_users_line():
+    """``gym.make`` / ``gym.make_vec``: the warning names this file (it named gymnasium's registration.py)."""
+    import gymnasium as gym
+
+    import envs
+    from envs.core import EnvConfig
+    from wpt_receiver import TABLE_I
+    bad = EnvConfig(link=TABLE_I.with_(vdc_v=5.0))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gym.make(envs.ENV_ID, config=bad).close()
+        gym.make_vec(envs.ENV_ID, num_envs=2, config=bad).close()
+    ours = [w for w in caught if issubclass(w.category, DronewptWarning)]
+    assert len(ours) >= 2 and {w.filename for w in ours} == {__file__}, [(w.filename, w.lineno) for w in ours]
+
+
 # ------------------------------------------------------------------ 2. a pad the route never comes near
 def test_a_pad_no_loiter_comes_near_warns_with_its_closest_approach():
     d = load_config_dict(None, SQUARE)   # the built-in pads kept about the plan's home

@@ -43,14 +43,23 @@ class DronewptWarning(RuntimeWarning):
 _OUR_DIRS = tuple(os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), p) + os.sep
                   for p in OUR_PACKAGES)
 
+#: the libraries whose frames also lie between the user's call and ours (``gymnasium.make`` / ``make_vec`` -> env;
+#: stable-baselines3's ``make_vec_env`` and the like): skipped too, by module name (nothing imported for it)
+PASSED_THROUGH = ("gymnasium", "stable_baselines3")
+
+
+def _passed(frame) -> bool:
+    return (frame.f_code.co_filename.startswith(_OUR_DIRS)
+            or str(frame.f_globals.get("__name__", "")).partition(".")[0] in PASSED_THROUGH)
+
 
 def warn(text: str) -> None:
-    """``warnings.warn(text, DronewptWarning)`` pointed at the first caller outside dronewpt's packages (Python
-    3.12's ``skip_file_prefixes``, by hand: the depth of our frames varies, e.g. ``gymnasium.make`` -> env ->
-    plant part)."""
+    """``warnings.warn(text, DronewptWarning)`` pointed at the first caller outside dronewpt's packages and the
+    libraries that call into them (:data:`PASSED_THROUGH`; Python 3.12's ``skip_file_prefixes``, by hand: the
+    depth of those frames varies, e.g. ``gymnasium.make`` -> env -> plant part)."""
     import warnings
     level, frame = 2, sys._getframe(1)
-    while frame is not None and frame.f_code.co_filename.startswith(_OUR_DIRS):
+    while frame is not None and _passed(frame):
         frame, level = frame.f_back, level + 1
     warnings.warn(text, DronewptWarning, stacklevel=level)
 
