@@ -92,6 +92,43 @@ def test_telemetry_warns_too(capsys, tmp_path):
     assert len([e for e in err if "vdc_v / vl_v" in e]) == 1
 
 
+def test_the_command_line_keeps_the_users_warning_filters(capsys, tmp_path):
+    """``-W ignore::RuntimeWarning`` silences the warning line, ``-W error`` makes it one error line, exit 2, no
+    traceback (the CLI's own ``simplefilter("always")`` overrode both before)."""
+    argv = ["mission", "--no-plot", "--out", str(tmp_path), "--set", "battery.n_series=32"]
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", category=RuntimeWarning)
+        rc, err = _cli(capsys, argv)
+    assert rc == 0 and err == [], err
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rc, err = _cli(capsys, argv)
+    assert rc == 2 and len(err) == 1 and err[0].startswith(
+        "dronewpt mission: error: link.vdc_v=30 V with battery.n_series=32") and err[0].endswith(
+        "(a warning, an error under -W error)"), err
+
+
+def test_a_piped_command_imports_nothing_of_the_library_for_its_notices():
+    """``sweep --status`` (piped): neither the compile notice nor the warning lines import wpt_receiver (~66 ms)."""
+    code = ("import sys\nfrom mission_sim.cli import main\nrc = main(['sweep', '--status', 'no-such-folder'])\n"
+            "print(rc, 'wpt_receiver' in sys.modules)\n")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                          capture_output=True, text=True, timeout=120)
+    assert proc.stdout.split() == ["2", "False"], (proc.stdout, proc.stderr)
+
+
+def test_main_leaves_the_callers_environment_and_notice_as_they_were(monkeypatch, capsys, tmp_path):
+    """A notebook calling ``main()``: DRONEWPT_COMPILE_NOTICE is set for the command's own processes only while it
+    runs (it stayed "0" afterwards, silencing the notebook's later notice)."""
+    import wpt_receiver.notices as notices
+    monkeypatch.delenv(NOTICE_VAR, raising=False)
+    sink = notices._state["sink"]
+    assert main(["mission", "--dry-run"]) == 0
+    assert NOTICE_VAR not in os.environ and notices._state["sink"] is sink
+    monkeypatch.setenv(NOTICE_VAR, "1")
+    assert main(["mission", "--dry-run"]) == 0 and os.environ[NOTICE_VAR] == "1"
+
+
 def _study(tmp_path, body: str):
     from mission_sim.studies.study import load_study
     path = tmp_path / "study.toml"
@@ -288,13 +325,16 @@ def test_the_first_compilation_of_our_kernels_is_logged_once_and_not_from_the_ca
     first = _python("import wpt_receiver\n" + OURS + "from wpt_receiver.coupling_kernel import _weights\n"
                     "_weights(0.5)\n", tmp_path / "c")
     assert first.returncode == 0 and first.stderr.count(NOTICE) == 1, first.stderr
-    assert first.stderr.strip() == f"dronewpt: {NOTICE}"
+    assert first.stderr.strip() == NOTICE   # (Python's last-resort handler: the message alone)
     again = _python("import wpt_receiver\n" + OURS, tmp_path / "c")   # loaded from the cache: silent
     assert again.returncode == 0 and again.stderr == "", again.stderr
-    configured = _python("import logging\nlogging.basicConfig(level=logging.ERROR)\n" + OURS, tmp_path / "d")
-    assert configured.returncode == 0 and NOTICE not in configured.stderr   # the user's logging decides
-    off = _python("import os\nos.environ['DRONEWPT_COMPILE_NOTICE'] = '0'\n" + OURS, tmp_path / "f")
-    assert off.returncode == 0 and off.stderr == ""   # what the CLI sets for the processes it starts
+    shown = _python("import logging\nlogging.basicConfig()\n" + OURS, tmp_path / "g")   # WARNING: shown, once
+    assert shown.returncode == 0 and shown.stderr.strip() == f"WARNING:dronewpt:{NOTICE}", shown.stderr
+    configured = _python("import logging\nlogging.getLogger('dronewpt').setLevel(logging.ERROR)\n" + OURS,
+                         tmp_path / "d")
+    assert configured.returncode == 0 and configured.stderr == ""   # what the docs say silences it
+    off = _python("import wpt_receiver, os\nos.environ['DRONEWPT_COMPILE_NOTICE'] = '0'\n" + OURS, tmp_path / "f")
+    assert off.returncode == 0 and off.stderr == ""   # read when the notice would fire, not at import
     users = _python("import wpt_receiver, numba\nf = numba.njit(lambda x: 2 * x)\nassert f(2) == 4\n", tmp_path / "e")
     assert users.returncode == 0 and users.stderr == ""   # a kernel of the user's own is not ours to announce
 
