@@ -339,6 +339,22 @@ def test_the_first_compilation_of_our_kernels_is_logged_once_and_not_from_the_ca
     assert users.returncode == 0 and users.stderr == ""   # a kernel of the user's own is not ours to announce
 
 
+def test_warmup_compiles_what_a_single_envs_first_steps_compile(tmp_path):
+    """The notice's advice "`dronewpt warmup` does it ahead" holds for ``gym.make(envs.ENV_ID)`` too: after warmup's
+    single-env stage (into an empty cache) a gym.make env's first steps compile nothing (~70 kernels otherwise;
+    warmup warmed only the batched envs before)."""
+    code = ("from numba.core import event\n"
+            "class C(event.Listener):\n    n = 0\n    def on_start(self, ev): C.n += 1\n"
+            "    def on_end(self, ev): pass\n"
+            "from mission_sim.cli.warmup import STAGES\n"
+            "[run() for name, run in STAGES if 'single env' in name]\n"
+            "event.register('numba:compile', C())\n"
+            "import gymnasium as gym, envs\nenv = gym.make(envs.ENV_ID)\nenv.reset(seed=1)\n"
+            "[env.step(env.action_space.sample()) for _ in range(5)]\nprint(C.n)\n")
+    proc = _python(code, tmp_path / "c")
+    assert proc.returncode == 0 and proc.stdout.split() == ["0"], (proc.stdout, proc.stderr[-2000:])
+
+
 def test_the_command_line_keeps_its_notice_on_the_terminal_only(tmp_path):
     """``dronewpt coupling`` piped, compiling the coupling table's kernels into an empty cache: no notice (the
     library's logged one is off in the command line, which prints its own on a terminal only)."""
