@@ -263,27 +263,62 @@ def test_closest_approach_is_the_distance_to_the_route_polyline():
 
 
 # ------------------------------------------------------------------ 3. replay's pack against the logged voltage
+VOLTAGE = ("dronekit-python_flight.tlog: the logged battery voltage (median 11.1 V) is outside the model pack's "
+           "open-circuit range 21.2-32.8 V (battery.n_series=8 x 2.654-4.103 V per cell); it fits a 3-cell pack: the "
+           "replay flies the config's drone and pack, not the logged ones (a \"what if our drone flew this route\" "
+           "study); to model the logged drone give its pack (--set battery.n_series=3 and its battery.capacity_ah) "
+           "and a link made for its voltage (link.*: the config's is made for its 8-cell pack)")
+
+
 def test_replay_warns_when_the_logged_voltage_is_far_from_the_model_pack():
     from mission_sim.mavlink.logs import read_log
     from mission_sim.mavlink.replay import battery_voltage_warning
     cfg = load_config()
     log = read_log(LOGS / "dronekit-python_flight.tlog")   # a 3S quad, median 11.1 V
-    text = battery_voltage_warning(log, cfg.battery)
-    assert text == ("dronekit-python_flight.tlog: the logged battery voltage (median 11.1 V) is outside the model "
-                    "pack's open-circuit range 21.2-32.8 V (battery.n_series=8 x 2.654-4.103 V per cell): the replay "
-                    "flies the config's pack, not the logged one; a 3-cell pack fits (--set battery.n_series=3; and "
-                    "its battery.capacity_ah)")
+    assert battery_voltage_warning(log, cfg.battery) == VOLTAGE
     assert battery_voltage_warning(log, dataclasses.replace(cfg.battery, n_series=3)) is None
-    assert battery_voltage_warning(read_log(LOGS / "dronekit-la-testdata_log171.bin"), cfg.battery).endswith(
-        "a 4-cell pack fits (--set battery.n_series=4; and its battery.capacity_ah)")
+    assert "a 4-cell pack: the re-flight flies" in battery_voltage_warning(
+        read_log(LOGS / "dronekit-la-testdata_log171.bin"), cfg.battery, "re-flight")
 
 
-def test_the_replay_command_prints_it(capsys, tmp_path):
+def test_replay_log_raises_it_from_python_once():
+    """docs: each is a ``DronewptWarning`` from Python; ``replay_log`` only put it in ``summary["warnings"]``."""
+    from mission_sim.mavlink.replay import replay_log
+    cfg = load_config()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = replay_log(LOGS / "dronekit-python_flight.tlog", cfg, policies.make("model_based", policy_context(cfg)),
+                         frame=False)
+    assert _ours(caught) == [VOLTAGE] and caught[0].filename == __file__
+    assert res.summary["warnings"] == [VOLTAGE]
+
+
+def test_the_config_pack_on_the_config_link_is_why_the_advice_names_the_link(capsys, tmp_path):
+    """Following the old advice alone (``--set battery.n_series=3`` on the 8S pack's link) the re-flight charges
+    nothing: the link (VL) was made for 8 cells. Hence the line asks for a link made for the logged voltage."""
+    pads = ROOT / "tests" / "data" / "missions" / "dronekit_flight_pads.csv"
+    import json
+    rc, _ = _cli(capsys, ["replay", str(LOGS / "dronekit-python_flight.tlog"), "--pads", str(pads), "--no-plot",
+                          "--out", str(tmp_path / "a"), "--set", "battery.n_series=3", "--format", "json"])
+    assert rc == 0
+    s = json.loads((tmp_path / "a" / "refly_summary.json").read_text())
+    assert s["battery_charge_in_j"] < 100.0 and s["warnings"] == []
+
+
+def test_the_replay_command_prints_it_once(capsys, tmp_path):
     rc, err = _cli(capsys, ["replay", str(LOGS / "dronekit-python_flight.tlog"), "--no-plot", "--out", str(tmp_path)])
-    assert rc == 0 and err == ["dronewpt replay: warning: dronekit-python_flight.tlog: the logged battery voltage "
-                               "(median 11.1 V) is outside the model pack's open-circuit range 21.2-32.8 V (battery."
-                               "n_series=8 x 2.654-4.103 V per cell): the replay flies the config's pack, not the "
-                               "logged one; a 3-cell pack fits (--set battery.n_series=3; and its battery.capacity_ah)"]
+    assert rc == 0 and err == [f"dronewpt replay: warning: {VOLTAGE}"], err
+
+
+def test_replay_with_pads_keeps_the_replays_warnings(capsys, tmp_path):
+    """``replay --pads`` on a log that ends armed: "log ends while armed" (it was missing there) and the voltage."""
+    pads = tmp_path / "pads.csv"
+    pads.write_text("lat,lon\n-35.3623738,149.1658453\n")   # the log's take-off spot
+    rc, err = _cli(capsys, ["replay", str(LOGS / "dronekit-la-testdata_log171.bin"), "--pads", str(pads), "--no-plot",
+                            "--out", str(tmp_path / "o")])
+    assert rc == 0 and len(err) == 2 and "it fits a 4-cell pack: the re-flight flies the config's drone" in err[0], err
+    assert err[1] == ("dronewpt replay: warning: dronekit-la-testdata_log171.bin: the log ends while the vehicle is "
+                      "armed (at 242.6 s): truncated log? the replay covers only what was recorded")
 
 
 # ------------------------------------------------------------------ 4. a policy made for another link model

@@ -144,8 +144,9 @@ def _cmd_replay(args) -> int:
         from .mission import depletion_text
         s["warnings"] = [*s.get("warnings", ()), f"{depletion_text(res.mission.summary)} (the power comparison "
                          "covers the flight up to that point)"]
+    from .notices import say_warning
     for w in s.get("warnings", ()):
-        print(f"dronewpt replay: warning: {w}", file=sys.stderr)
+        say_warning("replay", w)   # (once: the library may have raised it)
     s["log"] = str(args.log)
     s["policy"] = args.policy
     s["drone_mass_kg"] = cfg.drone.mass_kg

@@ -15,7 +15,7 @@ import os
 import sys
 import warnings
 
-__all__ = ["compile_notices", "warning_lines", "is_dronewpt_warning", "NOTICE_VAR"]
+__all__ = ["compile_notices", "warning_lines", "say_warning", "is_dronewpt_warning", "NOTICE_VAR"]
 
 #: :data:`wpt_receiver.notices.NOTICE_VAR` (spelt here: this module does not import the library)
 NOTICE_VAR = "DRONEWPT_COMPILE_NOTICE"
@@ -62,20 +62,35 @@ def warning_lines(command: str):
     (one line); any other warning as Python shows it. The user's warning filters (``-W``, ``PYTHONWARNINGS``,
     ``warnings.filterwarnings``) come first: ``-W ignore::RuntimeWarning`` silences it, ``-W error`` raises it
     (:func:`mission_sim.cli.main` then prints one line and exits 2)."""
-    seen = set()
     shown = warnings.showwarning
 
     def show(message, category, filename, lineno, file=None, line=None):
         if not is_dronewpt_warning(category):
             return shown(message, category, filename, lineno, file, line)
-        text = " ".join(str(message).split())
-        if text not in seen:
-            seen.add(text)
-            print(f"dronewpt {command}: warning: {text}", file=sys.stderr)
+        say_warning(command, str(message))
 
-    with warnings.catch_warnings():
-        # Python's own default for a RuntimeWarning, appended after the user's filters: a no-op but for resetting
-        # the registries of warnings already shown (an earlier main() in this process), so each is shown again
-        warnings.filterwarnings("default", category=RuntimeWarning, append=True)
-        warnings.showwarning = show
-        yield
+    _seen.append(set())
+    try:
+        with warnings.catch_warnings():
+            # Python's own default for a RuntimeWarning, appended after the user's filters: a no-op but for
+            # resetting the registries of warnings already shown (an earlier main() here), so each shows again
+            warnings.filterwarnings("default", category=RuntimeWarning, append=True)
+            warnings.showwarning = show
+            yield
+    finally:
+        _seen.pop()
+
+
+#: the warnings printed by the commands running (:func:`warning_lines`), innermost last
+_seen: list[set] = []
+
+
+def say_warning(command: str, text: str) -> None:
+    """``dronewpt COMMAND: warning: TEXT`` on stderr (one line), unless the command printed it already (e.g. a
+    summary's ``warnings`` that the library also raised as a ``DronewptWarning``)."""
+    text = " ".join(str(text).split())
+    if _seen:
+        if text in _seen[-1]:
+            return
+        _seen[-1].add(text)
+    print(f"dronewpt {command}: warning: {text}", file=sys.stderr)
