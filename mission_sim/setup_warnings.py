@@ -40,9 +40,10 @@ def link_range_warning(cfg) -> str | None:
     range, else None."""
     from wpt_receiver.paper import modal_range_problem
     p = mission_link_params(cfg)
-    problem = modal_range_problem(p, remedy=(
+    problem = modal_range_problem(p, remedy=lambda limit: (
         "the mission has no other link model, so its charging current and energies may be off; valid: raise "
-        "link.vdc_v, use fewer cells (battery.n_series) or a lower mission.hover_gap_m"))
+        + ("link.vdc_v, use fewer cells (battery.n_series) or a lower mission.hover_gap_m (more Lm)"
+           if limit == "emf_margin" else "link.vdc_v or use fewer cells (battery.n_series)")))
     if problem is None:
         return None
     return (f"link.vdc_v={cfg.link.vdc_v:g} V with battery.n_series={cfg.battery.n_series} (VL up to "

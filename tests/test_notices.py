@@ -59,7 +59,8 @@ def test_a_mission_outside_the_modal_range_warns_once_from_python():
     assert len(msgs) == 1 and rec[0].filename == __file__   # pointed at the caller
     assert "link.vdc_v=30 V with battery.n_series=32 (VL up to 131.2 V" in msgs[0]
     assert "vdc_v / vl_v = 0.229 is below the exact-mode model's checked range (>= 0.25" in msgs[0]
-    assert "valid: raise link.vdc_v" in msgs[0]
+    assert msgs[0].endswith("valid: raise link.vdc_v or use fewer cells (battery.n_series)")   # no hover gap: it
+    # does not change Vdc/VL (it did suggest "a lower mission.hover_gap_m")
 
 
 def test_the_limits_have_one_source(monkeypatch):
@@ -77,6 +78,20 @@ def test_a_pad_far_below_the_emf_margin_warns():
     from mission_sim.setup_warnings import link_range_warning
     text = link_range_warning(_cfg(**{"mission.hover_gap_m": 0.9}))
     assert "emf margin wLm V1 / (R1 (4/pi) VL) = 0.759 is below the exact-mode model's checked range (>= 2" in text
+    assert text.endswith("valid: raise link.vdc_v, use fewer cells (battery.n_series) or a lower mission.hover_gap_m "
+                         "(more Lm)")
+
+
+def test_paper_modal_plant_warns_at_the_users_line():
+    """``run_paper(..., model="modal")`` on a link outside the range: the warning names this file (it named
+    paper.py's run_paper: ``stacklevel=2`` from modal_plant)."""
+    from wpt_receiver import TABLE_I
+    from wpt_receiver.paper import run_paper
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        run_paper(TABLE_I.with_(vdc_v=5.0), model="modal", trajectories=("step",))
+    ours = [w for w in caught if issubclass(w.category, DronewptWarning)]
+    assert ours and {w.filename for w in ours} == {__file__}, [(w.filename, str(w.message)[:60]) for w in ours]
 
 
 def test_the_mission_command_warns_in_one_line_exit_status_unchanged(capsys, tmp_path):
