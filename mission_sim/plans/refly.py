@@ -73,29 +73,24 @@ def _sample(segs, t0: float, dt: float):
     return t0 + tau, pos, phase
 
 
-def _detour_segs(track, pads_xyz, d: Detour, mission) -> list:
-    """The planner segments of detour ``d``: to above the pad, down to the charging gap, the hover, up, back."""
-    from ..world.trajectory import _Path
-    p0 = track.pos_m[d.sample]
-    pad = pads_xyz[d.pad]
-    path = _Path(mission, p0)
-    path.move([pad[0], pad[1], p0[2]], "transit")
-    path.move([pad[0], pad[1], pad[2] + mission.hover_gap_m], "approach")
-    path.hold(d.hover_s, "charge")
-    path.move([pad[0], pad[1], p0[2]], "depart")
-    path.move(p0, "transit")
-    return path.segs
-
-
 def refly_track(track, pads_xyz, detours, mission, dt_s: float):
     """The re-flown track (a copy of ``track`` with the detours) and the phase per sample
     ("approach" / "charge" / "depart" / "transit" on the detours, None on logged samples)."""
+    from ..world.trajectory import _Path
     cuts = [0] + [d.sample + 1 for d in detours] + [len(track.t_s)]
     t, pos, tilt, height, armed, phase = [], [], [], [], [], []
     shift = 0.0
     for i, d in enumerate([None] + list(detours)):
         if d is not None:
-            tt, pp, ph = _sample(_detour_segs(track, pads_xyz, d, mission), float(track.t_s[d.sample]) + shift, dt_s)
+            p0 = track.pos_m[d.sample]
+            pad = pads_xyz[d.pad]
+            path = _Path(mission, p0)
+            path.move([pad[0], pad[1], p0[2]], "transit")
+            path.move([pad[0], pad[1], pad[2] + mission.hover_gap_m], "approach")
+            path.hold(d.hover_s, "charge")
+            path.move([pad[0], pad[1], p0[2]], "depart")
+            path.move(p0, "transit")
+            tt, pp, ph = _sample(path.segs, float(track.t_s[d.sample]) + shift, dt_s)
             shift = tt[-1] - float(track.t_s[d.sample])
             t.append(tt), pos.append(pp), phase.append(ph), tilt.append(np.zeros(len(tt)))
             height.append(np.maximum(pp[:, 2] - track.ground_gap_m, 0.0)), armed.append(np.ones(len(tt), bool))
@@ -183,29 +178,7 @@ def plan_refly(log, cfg, *, pad=None, ground_gap_m=None, window=None, reach_m: f
         far = ", ".join(f"pad {k} at {d:.0f} m" for k, d in skipped)
         raise ValueError(f"{log.path.name}: no pad within --reach {reach_m:g} m of the airborne track ({far}); "
                          "valid: pads near where the vehicle flew (pad frame: ENU about the take-off spot)")
-    _check_refly_size(track, pads_xyz, detours, cfg)
     return track, pads_xyz, detours, skipped
-
-
-def _check_refly_size(track, pads_xyz, detours, cfg) -> None:
-    """``ValueError`` (one line naming the longest hover's key, its value and the valid range) when the re-flight
-    (the logged samples plus the detours' at ``sim.traj_dt_s``) holds more samples than a replay may
-    (:data:`~mission_sim.mavlink.replay.MAX_REPLAY_SAMPLES`, the limit of the logged track alone): a charging
-    hover of days would run for minutes and take gigabytes before anything checked it."""
-    from ..mavlink.replay import MAX_REPLAY_SAMPLES
-    dt = cfg.sim.traj_dt_s
-    durs = [sum(sg[3] for sg in _detour_segs(track, pads_xyz, d, cfg.mission)) for d in detours]
-    n = len(track.t_s) + sum(max(1, math.ceil(t / dt)) for t in durs)
-    if n <= MAX_REPLAY_SAMPLES:
-        return
-    d = max(detours, key=lambda dt_: (dt_.hover_s, -dt_.pad))
-    key = "mission.hover_time_s" if cfg.pads[d.pad].hover_time_s is None else f"pads.{d.pad}.hover_time_s"
-    shared = sum(1 for x in detours if cfg.pads[x.pad].hover_time_s is None) if key.startswith("mission.") else 1
-    room = max(0.0, d.hover_s - (n - MAX_REPLAY_SAMPLES + len(detours)) * dt / shared)
-    raise ValueError(f"{key}={d.hover_s:g} is invalid: the re-flight would hold {n} samples at sim.traj_dt_s={dt:g} "
-                     f"(the logged {float(track.t_s[-1]):.0f} s + {sum(durs):.0f} s of pad detours, "
-                     f"{sum(x.hover_s for x in detours):.0f} s of them charging), more than the {MAX_REPLAY_SAMPLES} "
-                     f"that fit in memory; valid range: [0, {room:.6g}] s (the other hovers as they are)")
 
 
 def refly_log(log, cfg, policy, *, pad=None, ground_gap_m=None, window=None, reach_m: float = DEFAULT_REACH_M,

@@ -15,8 +15,8 @@ The log (and the pads file) is read and parsed once per process: on the driver w
 prepared (a missing file, or one that is not a flight log, is refused there with one line), and on
 every Dask worker in :meth:`ReplayCaseRunner.warm`, never per case. Keys and values are checked
 before anything runs exactly as the mission runner checks them (:class:`.mission_cases.MissionParamChecker`,
-on the replay's mission), plus what a replay itself refuses (no pad within reach, a track, or a re-flight with its charging
-hovers, too long for ``sim.traj_dt_s``).
+on the replay's mission), plus what a replay itself refuses (no pad within reach, a track too long
+for ``sim.traj_dt_s``).
 """
 
 from __future__ import annotations
@@ -24,15 +24,14 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-from .mission_cases import _CACHE_MAX, MissionCaseRunner
+from .mission_cases import MissionCaseRunner
 from .study import DEFAULT_POLICY, POLICY_KEY, Study, canonical_json
 
 __all__ = ["ReplayCaseRunner", "replay_runner", "load_inputs"]
 
 _INPUTS: dict = {}  # (path, sha256) -> parsed log / pads, once per process (driver or worker)
-#: the keys a replay's own refusals depend on (the pads, the mission: the detours' hovers, speeds and coil gap, which
-#: set the re-flight's size; the trajectory step)
-_REPLAY_INPUTS = ("pads.", "mission.", "sim.traj_dt_s")
+#: the keys a replay's own refusals depend on (pad positions, not their hover times; the coil gap, the trajectory step)
+_REPLAY_INPUTS = ("pads.", "mission.hover_gap_m", "sim.traj_dt_s")
 
 
 def _sha256(path: Path) -> str:
@@ -91,8 +90,7 @@ class ReplayCaseRunner(MissionCaseRunner):
     log_sha : the log's sha256 (checked where it is read; the pads are in ``base`` already)
     """
 
-    _check_run_size = False   # the route is the log: the planner's size estimate does not apply; the replay's own
-    #                           limit (MAX_REPLAY_SAMPLES, the re-flight's detours included) is checked in check_params
+    _check_run_size = False   # the route is the log: the planner's size estimate does not apply (see check_params)
 
     def __init__(self, base: dict, make_policy, policy_names, options: dict, log_sha: str):
         super().__init__(base, make_policy, policy_names)
@@ -112,10 +110,9 @@ class ReplayCaseRunner(MissionCaseRunner):
         msg = super().check_params(params)
         if msg is not None:
             return msg
-        key = tuple(sorted((k, repr(v)) for k, v in params.items() if k.startswith(_REPLAY_INPUTS)))
+        key = tuple(sorted((k, repr(v)) for k, v in params.items()
+                           if k.startswith(_REPLAY_INPUTS) and not k.endswith(".hover_time_s")))
         if key not in self._refused:   # the replay's own checks depend on these keys only: once per value set
-            if len(self._refused) > _CACHE_MAX:
-                self._refused.clear()
             self._refused[key] = self._replay_error(self.config(params))
         return self._refused[key]
 
