@@ -7,8 +7,8 @@ each by the command line.
 * :func:`link_range_warning`: the mission's link outside the range where the exact-mode model (the mission's
   only link) was checked against the switching model (:func:`wpt_receiver.paper.modal_range_problem`, the one
   source of the limits), at the hover pose's Lm and the pack's highest voltage (``n_series * cv_cell_v``).
-* :func:`unreached_pad_warnings`: a pad no charge item of the route comes to (a mission file's loiter farther
-  than ``mission.pad_radius_m`` from it): it charges nothing.
+* :func:`unreached_pad_warnings`: a pad the route never energises (:func:`energised_pads`: no charging hover
+  or loiter's hover inside its coupling range, the run's own rule): it charges nothing.
 * :func:`policy_link_warning`: a policy made for another link model than the mission's (``"modal"``), if it
   predicts with it: a policy says so with a class attribute ``uses_link_model = True`` (``mpc``,
   ``model_based_budget``, ``slow_budget``, ``oracle_imitation_filtered``; not part of the
@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["link_range_warning", "unreached_pad_warnings", "policy_link_warning", "mission_warnings",
+__all__ = ["link_range_warning", "unreached_pad_warnings", "energised_pads", "policy_link_warning", "mission_warnings",
            "mission_link_params", "MISSION_LINK_MODEL"]
 
 #: the link model every mission runs (:mod:`mission_sim.world.loop_kernel` steps :mod:`wpt_receiver.modal_kernel`)
@@ -40,9 +40,10 @@ def link_range_warning(cfg) -> str | None:
     range, else None."""
     from wpt_receiver.paper import modal_range_problem
     p = mission_link_params(cfg)
-    problem = modal_range_problem(p, remedy=(
+    problem = modal_range_problem(p, remedy=lambda limit: (
         "the mission has no other link model, so its charging current and energies may be off; valid: raise "
-        "link.vdc_v, use fewer cells (battery.n_series) or a lower mission.hover_gap_m"))
+        + ("link.vdc_v, use fewer cells (battery.n_series) or a lower mission.hover_gap_m (more Lm)"
+           if limit == "emf_margin" else "link.vdc_v or use fewer cells (battery.n_series)")))
     if problem is None:
         return None
     return (f"link.vdc_v={cfg.link.vdc_v:g} V with battery.n_series={cfg.battery.n_series} (VL up to "
@@ -63,23 +64,54 @@ def _distance_to_route(x: float, y: float, pts: list) -> float:
     return best
 
 
+def energised_pads(cfg) -> set[int]:
+    """The pads that ``cfg``'s planned route energises, by the run's own rule: a hold of the route in one of
+    :data:`~mission_sim.world.samples.ENERGISE_PHASES` (a ``charge`` item's charging hover, a ``loiter``'s hover)
+    at a pose inside the coupling table's range of its nearest pad (:func:`~mission_sim.world.samples.near_pad`,
+    as :func:`~mission_sim.world.samples.lm_along`: Lm > 0 only there). Pads at the same place count together."""
+    import numpy as np
+
+    from .world.samples import ENERGISE_PHASES, near_pad, pad_offsets
+    from .world.trajectory import _segments
+    holds = [p0 for phase, p0, unit, _, _ in _segments(cfg) if unit is None and phase in ENERGISE_PHASES]
+    if not holds or not cfg.pads:
+        return set()
+    off, idx = pad_offsets(cfg, np.asarray(holds, dtype=float))
+    places = {(cfg.pads[i].x_m, cfg.pads[i].y_m) for i in idx[near_pad(cfg.coupling.model(), off)]}
+    return {i for i, p in enumerate(cfg.pads) if (p.x_m, p.y_m) in places}
+
+
+def _route_points(cfg) -> list:
+    """(x, y) of the route's corners, from the mission's start (``mission.start_x_m``, ``start_y_m``)."""
+    from .world.trajectory import _path
+    path = _path(cfg)
+    return [(float(p0[0]), float(p0[1])) for _, p0, _, _, _ in path.segs] + [(float(path.pos[0]), float(path.pos[1]))]
+
+
 def unreached_pad_warnings(cfg) -> list[str]:
-    """One line per pad that no ``charge`` item of ``cfg.waypoints`` comes to (the built-in route, no waypoints,
-    charges at every pad): its index, position and the route's closest horizontal approach."""
-    if not cfg.waypoints:
+    """One line per pad that ``cfg.waypoints``' route never energises (:func:`energised_pads`; the built-in route,
+    no waypoints, charges at every pad): its index, position, the route's closest horizontal approach and the
+    remedy for the route's kind (a mission file's loiter near the pad, a config's ``charge`` item)."""
+    if not cfg.waypoints or not cfg.pads:
         return []
-    charged = {wp.pad for wp in cfg.waypoints if wp.action == "charge"}
-    if len(charged) >= len(cfg.pads):
+    reached = energised_pads(cfg)
+    if len(reached) >= len(cfg.pads):
         return []
-    pts = [(0.0, 0.0)] + [((cfg.pads[wp.pad].x_m, cfg.pads[wp.pad].y_m) if wp.action == "charge" else
-                           (wp.x_m, wp.y_m)) for wp in cfg.waypoints]
+    from .plans.route import CHARGE_CLEARANCE_M
+    pts = _route_points(cfg)
     out = []
     for i, pad in enumerate(cfg.pads):
-        if i not in charged:
-            d = _distance_to_route(pad.x_m, pad.y_m, pts)
-            out.append(f"pad {i} at ({pad.x_m:.1f}, {pad.y_m:.1f}) m charges nothing: no loiter of the route within "
-                       f"mission.pad_radius_m={cfg.mission.pad_radius_m:g} m of it (closest approach {d:.1f} m); "
-                       "valid: a loiter item over the pad, a larger mission.pad_radius_m, or leave the pad out")
+        if i in reached:
+            continue
+        d = _distance_to_route(pad.x_m, pad.y_m, pts)
+        if cfg.mission.file:
+            valid = (f"a loiter item within mission.pad_radius_m={cfg.mission.pad_radius_m:g} m of the pad and at "
+                     f"least {CHARGE_CLEARANCE_M:g} m above it (it becomes a charging hover), a larger "
+                     "mission.pad_radius_m, or leave the pad out of --pads")
+        else:
+            valid = f'a [[waypoints]] item with action = "charge", pad = {i}, or leave the pad out'
+        out.append(f"pad {i} at ({pad.x_m:.1f}, {pad.y_m:.1f}) m charges nothing: the route never hovers over it "
+                   f"(closest approach {d:.1f} m); valid: {valid}")
     return out
 
 

@@ -59,7 +59,8 @@ def test_a_mission_outside_the_modal_range_warns_once_from_python():
     assert len(msgs) == 1 and rec[0].filename == __file__   # pointed at the caller
     assert "link.vdc_v=30 V with battery.n_series=32 (VL up to 131.2 V" in msgs[0]
     assert "vdc_v / vl_v = 0.229 is below the exact-mode model's checked range (>= 0.25" in msgs[0]
-    assert "valid: raise link.vdc_v" in msgs[0]
+    assert msgs[0].endswith("valid: raise link.vdc_v or use fewer cells (battery.n_series)")   # no hover gap: it
+    # does not change Vdc/VL (it did suggest "a lower mission.hover_gap_m")
 
 
 def test_the_limits_have_one_source(monkeypatch):
@@ -77,6 +78,20 @@ def test_a_pad_far_below_the_emf_margin_warns():
     from mission_sim.setup_warnings import link_range_warning
     text = link_range_warning(_cfg(**{"mission.hover_gap_m": 0.9}))
     assert "emf margin wLm V1 / (R1 (4/pi) VL) = 0.759 is below the exact-mode model's checked range (>= 2" in text
+    assert text.endswith("valid: raise link.vdc_v, use fewer cells (battery.n_series) or a lower mission.hover_gap_m "
+                         "(more Lm)")
+
+
+def test_paper_modal_plant_warns_at_the_users_line():
+    """``run_paper(..., model="modal")`` on a link outside the range: the warning names this file (it named
+    paper.py's run_paper: ``stacklevel=2`` from modal_plant)."""
+    from wpt_receiver import TABLE_I
+    from wpt_receiver.paper import run_paper
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        run_paper(TABLE_I.with_(vdc_v=5.0), model="modal", trajectories=("step",))
+    ours = [w for w in caught if issubclass(w.category, DronewptWarning)]
+    assert ours and {w.filename for w in ours} == {__file__}, [(w.filename, str(w.message)[:60]) for w in ours]
 
 
 def test_the_mission_command_warns_in_one_line_exit_status_unchanged(capsys, tmp_path):
@@ -90,6 +105,43 @@ def test_telemetry_warns_too(capsys, tmp_path):
                             "--no-progress", "--set", "battery.n_series=32"])
     assert rc == 0 and [e for e in err if "warning" in e] == [e for e in err if "vdc_v / vl_v = 0.229" in e], err
     assert len([e for e in err if "vdc_v / vl_v" in e]) == 1
+
+
+def test_the_command_line_keeps_the_users_warning_filters(capsys, tmp_path):
+    """``-W ignore::RuntimeWarning`` silences the warning line, ``-W error`` makes it one error line, exit 2, no
+    traceback (the CLI's own ``simplefilter("always")`` overrode both before)."""
+    argv = ["mission", "--no-plot", "--out", str(tmp_path), "--set", "battery.n_series=32"]
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", category=RuntimeWarning)
+        rc, err = _cli(capsys, argv)
+    assert rc == 0 and err == [], err
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rc, err = _cli(capsys, argv)
+    assert rc == 2 and len(err) == 1 and err[0].startswith(
+        "dronewpt mission: error: link.vdc_v=30 V with battery.n_series=32") and err[0].endswith(
+        "(a warning, an error under -W error)"), err
+
+
+def test_a_piped_command_imports_nothing_of_the_library_for_its_notices():
+    """``sweep --status`` (piped): neither the compile notice nor the warning lines import wpt_receiver (~66 ms)."""
+    code = ("import sys\nfrom mission_sim.cli import main\nrc = main(['sweep', '--status', 'no-such-folder'])\n"
+            "print(rc, 'wpt_receiver' in sys.modules)\n")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                          capture_output=True, text=True, timeout=120)
+    assert proc.stdout.split() == ["2", "False"], (proc.stdout, proc.stderr)
+
+
+def test_main_leaves_the_callers_environment_and_notice_as_they_were(monkeypatch, capsys, tmp_path):
+    """A notebook calling ``main()``: DRONEWPT_COMPILE_NOTICE is set for the command's own processes only while it
+    runs (it stayed "0" afterwards, silencing the notebook's later notice)."""
+    import wpt_receiver.notices as notices
+    monkeypatch.delenv(NOTICE_VAR, raising=False)
+    sink = notices._state["sink"]
+    assert main(["mission", "--dry-run"]) == 0
+    assert NOTICE_VAR not in os.environ and notices._state["sink"] is sink
+    monkeypatch.setenv(NOTICE_VAR, "1")
+    assert main(["mission", "--dry-run"]) == 0 and os.environ[NOTICE_VAR] == "1"
 
 
 def _study(tmp_path, body: str):
@@ -106,9 +158,24 @@ def test_a_sweep_warns_once_per_study_not_per_case(tmp_path):
     with pytest.warns(DronewptWarning) as rec:
         runner, cases, _ = prepare_study(study, policies.make, policies.available())
     msgs = _ours(rec)
-    assert len(msgs) == 1 and msgs[0].startswith("3 of 3 cases of study 'hv': link.vdc_v=30 V"), msgs
+    assert len(msgs) == 1 and msgs[0].startswith(
+        "3 of 3 cases of study 'hv' have a link outside the exact-mode model's checked range, e.g.: link.vdc_v=30 V"), msgs
     assert _quiet_run(runner.config({}), policies.make("model_based", policy_context(runner.config({}))),
                       frame=False, warn=False) == []   # the cases run without it
+
+
+def test_a_sweeps_line_counts_the_cases_with_a_warning_not_one_message(tmp_path):
+    """Each case's message embeds its own values (here link.vdc_v): 4 of 6 cases warn, with 2 distinct messages; the
+    line said "2 of 6 cases ...: <one message> (and 1 other distinct warning)" before."""
+    from mission_sim.studies.prepare import prepare_study
+    study = _study(tmp_path, '[study]\nname = "hv"\n[fixed]\n"battery.n_series" = 32\n'
+                             '[grid]\n"link.vdc_v" = [20.0, 25.0, 40.0]\n"wind.speed_m_s" = [1.0, 2.0]\n')
+    with pytest.warns(DronewptWarning) as rec:
+        prepare_study(study, policies.make, policies.available())
+    msgs = _ours(rec)
+    assert len(msgs) == 1 and msgs[0].startswith(
+        "4 of 6 cases of study 'hv' have a link outside the exact-mode model's checked range, e.g.: link.vdc_v=20 V "
+        "with battery.n_series=32"), msgs
 
 
 def test_an_env_on_a_link_outside_the_modal_range_warns():
@@ -125,16 +192,82 @@ def test_an_env_on_a_link_outside_the_modal_range_warns():
     assert _ours(caught) == []
 
 
+def test_an_envs_warning_through_gym_make_points_at_the_users_line():
+    """``gym.make`` / ``gym.make_vec``: the warning names this file (it named gymnasium's registration.py)."""
+    import gymnasium as gym
+
+    import envs
+    from envs.core import EnvConfig
+    from wpt_receiver import TABLE_I
+    bad = EnvConfig(link=TABLE_I.with_(vdc_v=5.0))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gym.make(envs.ENV_ID, config=bad).close()
+        gym.make_vec(envs.ENV_ID, num_envs=2, config=bad).close()
+    ours = [w for w in caught if issubclass(w.category, DronewptWarning)]
+    assert len(ours) >= 2 and {w.filename for w in ours} == {__file__}, [(w.filename, w.lineno) for w in ours]
+
+
 # ------------------------------------------------------------------ 2. a pad the route never comes near
 def test_a_pad_no_loiter_comes_near_warns_with_its_closest_approach():
     d = load_config_dict(None, SQUARE)   # the built-in pads kept about the plan's home
     cfg = config_from_dict(d)
     msgs = _quiet_run(cfg, policies.make("model_based", policy_context(cfg)), frame=False)
+    valid = ("valid: a loiter item within mission.pad_radius_m=5 m of the pad and at least 1 m above it (it becomes a "
+             "charging hover), a larger mission.pad_radius_m, or leave the pad out of --pads")
     assert msgs == [
-        "pad 0 at (0.0, 0.0) m charges nothing: no loiter of the route within mission.pad_radius_m=5 m of it (closest "
-        "approach 0.0 m); valid: a loiter item over the pad, a larger mission.pad_radius_m, or leave the pad out",
-        "pad 1 at (40.0, 20.0) m charges nothing: no loiter of the route within mission.pad_radius_m=5 m of it (closest "
-        "approach 21.9 m); valid: a loiter item over the pad, a larger mission.pad_radius_m, or leave the pad out"]
+        f"pad 0 at (0.0, 0.0) m charges nothing: the route never hovers over it (closest approach 0.0 m); {valid}",
+        f"pad 1 at (40.0, 20.0) m charges nothing: the route never hovers over it (closest approach 21.9 m); {valid}"]
+
+
+def _loiter_route(z_m: float) -> dict:
+    d = config_to_dict(load_config())   # pads at (0, 0) and (40, 20); the start at (-15, 0)
+    d["waypoints"] = [{"action": "takeoff", "z_m": 5.0},
+                      {"action": "loiter", "x_m": 40.0, "y_m": 20.0, "z_m": z_m, "hold_s": 30.0},
+                      {"action": "land", "x_m": 40.0, "y_m": 20.0}]
+    return d
+
+
+def test_a_loiter_over_a_pad_charges_there_and_is_not_warned_about():
+    """A config route's plain loiter 0.2 m over pad 1 energises it (a "hover" phase inside its coupling range, the
+    run's own rule): the run charges, no warning about pad 1 (it said "charges nothing" before). Pad 0 is left
+    out: warned, with the closest approach from the mission's start (-15, 0) (5.1 m; it said 0.0 m from (0, 0))
+    and a config route's remedy (a charge item, not mission.pad_radius_m)."""
+    cfg = config_from_dict(_loiter_route(0.2))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = run_mission(cfg, policies.make("model_based", policy_context(cfg)), frame=False)
+    assert res.summary["battery_charge_in_j"] > 500.0
+    assert _ours(caught) == ['pad 0 at (0.0, 0.0) m charges nothing: the route never hovers over it (closest '
+                             'approach 5.1 m); valid: a [[waypoints]] item with action = "charge", pad = 0, or leave '
+                             'the pad out']
+    from mission_sim.setup_warnings import energised_pads
+    assert energised_pads(cfg) == {1}
+    assert energised_pads(config_from_dict(_loiter_route(3.0))) == set()   # 3 m up: outside the coupling range
+    high = config_from_dict(_loiter_route(3.0))
+    assert run_mission(high, policies.make("model_based", policy_context(high)), frame=False,
+                       warn=False).summary["battery_charge_in_j"] == 0.0
+
+
+LOW_LOITER = ("QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t0\t1\n"
+              "1\t0\t3\t22\t0\t0\t0\t0\t0\t0\t20\t1\n2\t0\t3\t16\t0\t0\t0\t0\t47.398742\t8.546594\t20\t1\n"
+              "3\t0\t3\t19\t30\t0\t0\t0\t47.398742\t8.546594\t0.2\t1\n4\t0\t3\t21\t0\t0\t0\t0\t47.398742\t8.546594\t0\t1\n")
+
+
+def test_a_mission_files_loiter_just_above_a_pad_is_not_warned_about(capsys, tmp_path):
+    """A loiter 0.2 m above a ``--pads`` pad stays a loiter (less than CHARGE_CLEARANCE_M above it) and charges
+    there: only the other pad, which the route never comes near, is warned about, with a mission file's remedy."""
+    plan, pads = tmp_path / "low.waypoints", tmp_path / "pads.csv"
+    plan.write_text(LOW_LOITER)
+    pads.write_text("lat,lon\n47.398742,8.546594\n47.397742,8.548594\n")
+    rc, err = _cli(capsys, ["mission", "--plan", str(plan), "--pads", str(pads), "--no-plot", "--out",
+                            str(tmp_path / "o")])
+    assert rc == 0 and err == [
+        "dronewpt mission: warning: pad 1 at (226.5, 0.0) m charges nothing: the route never hovers over it (closest "
+        "approach 187.4 m); valid: a loiter item within mission.pad_radius_m=5 m of the pad and at least 1 m above it "
+        "(it becomes a charging hover), a larger mission.pad_radius_m, or leave the pad out of --pads"], err
+    import json
+    assert json.loads((tmp_path / "o" / "summary.json").read_text())["battery_charge_in_j"] > 500.0
 
 
 def test_closest_approach_is_the_distance_to_the_route_polyline():
@@ -145,27 +278,62 @@ def test_closest_approach_is_the_distance_to_the_route_polyline():
 
 
 # ------------------------------------------------------------------ 3. replay's pack against the logged voltage
+VOLTAGE = ("dronekit-python_flight.tlog: the logged battery voltage (median 11.1 V) is outside the model pack's "
+           "open-circuit range 21.2-32.8 V (battery.n_series=8 x 2.654-4.103 V per cell); it fits a 3-cell pack: the "
+           "replay flies the config's drone and pack, not the logged ones (a \"what if our drone flew this route\" "
+           "study); to model the logged drone give its pack (--set battery.n_series=3 and its battery.capacity_ah) "
+           "and a link made for its voltage (link.*: the config's is made for its 8-cell pack)")
+
+
 def test_replay_warns_when_the_logged_voltage_is_far_from_the_model_pack():
     from mission_sim.mavlink.logs import read_log
     from mission_sim.mavlink.replay import battery_voltage_warning
     cfg = load_config()
     log = read_log(LOGS / "dronekit-python_flight.tlog")   # a 3S quad, median 11.1 V
-    text = battery_voltage_warning(log, cfg.battery)
-    assert text == ("dronekit-python_flight.tlog: the logged battery voltage (median 11.1 V) is outside the model "
-                    "pack's open-circuit range 21.2-32.8 V (battery.n_series=8 x 2.654-4.103 V per cell): the replay "
-                    "flies the config's pack, not the logged one; a 3-cell pack fits (--set battery.n_series=3; and "
-                    "its battery.capacity_ah)")
+    assert battery_voltage_warning(log, cfg.battery) == VOLTAGE
     assert battery_voltage_warning(log, dataclasses.replace(cfg.battery, n_series=3)) is None
-    assert battery_voltage_warning(read_log(LOGS / "dronekit-la-testdata_log171.bin"), cfg.battery).endswith(
-        "a 4-cell pack fits (--set battery.n_series=4; and its battery.capacity_ah)")
+    assert "a 4-cell pack: the re-flight flies" in battery_voltage_warning(
+        read_log(LOGS / "dronekit-la-testdata_log171.bin"), cfg.battery, "re-flight")
 
 
-def test_the_replay_command_prints_it(capsys, tmp_path):
+def test_replay_log_raises_it_from_python_once():
+    """docs: each is a ``DronewptWarning`` from Python; ``replay_log`` only put it in ``summary["warnings"]``."""
+    from mission_sim.mavlink.replay import replay_log
+    cfg = load_config()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = replay_log(LOGS / "dronekit-python_flight.tlog", cfg, policies.make("model_based", policy_context(cfg)),
+                         frame=False)
+    assert _ours(caught) == [VOLTAGE] and caught[0].filename == __file__
+    assert res.summary["warnings"] == [VOLTAGE]
+
+
+def test_the_config_pack_on_the_config_link_is_why_the_advice_names_the_link(capsys, tmp_path):
+    """Following the old advice alone (``--set battery.n_series=3`` on the 8S pack's link) the re-flight charges
+    nothing: the link (VL) was made for 8 cells. Hence the line asks for a link made for the logged voltage."""
+    pads = ROOT / "tests" / "data" / "missions" / "dronekit_flight_pads.csv"
+    import json
+    rc, _ = _cli(capsys, ["replay", str(LOGS / "dronekit-python_flight.tlog"), "--pads", str(pads), "--no-plot",
+                          "--out", str(tmp_path / "a"), "--set", "battery.n_series=3", "--format", "json"])
+    assert rc == 0
+    s = json.loads((tmp_path / "a" / "refly_summary.json").read_text())
+    assert s["battery_charge_in_j"] < 100.0 and s["warnings"] == []
+
+
+def test_the_replay_command_prints_it_once(capsys, tmp_path):
     rc, err = _cli(capsys, ["replay", str(LOGS / "dronekit-python_flight.tlog"), "--no-plot", "--out", str(tmp_path)])
-    assert rc == 0 and err == ["dronewpt replay: warning: dronekit-python_flight.tlog: the logged battery voltage "
-                               "(median 11.1 V) is outside the model pack's open-circuit range 21.2-32.8 V (battery."
-                               "n_series=8 x 2.654-4.103 V per cell): the replay flies the config's pack, not the "
-                               "logged one; a 3-cell pack fits (--set battery.n_series=3; and its battery.capacity_ah)"]
+    assert rc == 0 and err == [f"dronewpt replay: warning: {VOLTAGE}"], err
+
+
+def test_replay_with_pads_keeps_the_replays_warnings(capsys, tmp_path):
+    """``replay --pads`` on a log that ends armed: "log ends while armed" (it was missing there) and the voltage."""
+    pads = tmp_path / "pads.csv"
+    pads.write_text("lat,lon\n-35.3623738,149.1658453\n")   # the log's take-off spot
+    rc, err = _cli(capsys, ["replay", str(LOGS / "dronekit-la-testdata_log171.bin"), "--pads", str(pads), "--no-plot",
+                            "--out", str(tmp_path / "o")])
+    assert rc == 0 and len(err) == 2 and "it fits a 4-cell pack: the re-flight flies the config's drone" in err[0], err
+    assert err[1] == ("dronewpt replay: warning: dronekit-la-testdata_log171.bin: the log ends while the vehicle is "
+                      "armed (at 242.6 s): truncated log? the replay covers only what was recorded")
 
 
 # ------------------------------------------------------------------ 4. a policy made for another link model
@@ -207,15 +375,34 @@ def test_the_first_compilation_of_our_kernels_is_logged_once_and_not_from_the_ca
     first = _python("import wpt_receiver\n" + OURS + "from wpt_receiver.coupling_kernel import _weights\n"
                     "_weights(0.5)\n", tmp_path / "c")
     assert first.returncode == 0 and first.stderr.count(NOTICE) == 1, first.stderr
-    assert first.stderr.strip() == f"dronewpt: {NOTICE}"
+    assert first.stderr.strip() == NOTICE   # (Python's last-resort handler: the message alone)
     again = _python("import wpt_receiver\n" + OURS, tmp_path / "c")   # loaded from the cache: silent
     assert again.returncode == 0 and again.stderr == "", again.stderr
-    configured = _python("import logging\nlogging.basicConfig(level=logging.ERROR)\n" + OURS, tmp_path / "d")
-    assert configured.returncode == 0 and NOTICE not in configured.stderr   # the user's logging decides
-    off = _python("import os\nos.environ['DRONEWPT_COMPILE_NOTICE'] = '0'\n" + OURS, tmp_path / "f")
-    assert off.returncode == 0 and off.stderr == ""   # what the CLI sets for the processes it starts
+    shown = _python("import logging\nlogging.basicConfig()\n" + OURS, tmp_path / "g")   # WARNING: shown, once
+    assert shown.returncode == 0 and shown.stderr.strip() == f"WARNING:dronewpt:{NOTICE}", shown.stderr
+    configured = _python("import logging\nlogging.getLogger('dronewpt').setLevel(logging.ERROR)\n" + OURS,
+                         tmp_path / "d")
+    assert configured.returncode == 0 and configured.stderr == ""   # what the docs say silences it
+    off = _python("import wpt_receiver, os\nos.environ['DRONEWPT_COMPILE_NOTICE'] = '0'\n" + OURS, tmp_path / "f")
+    assert off.returncode == 0 and off.stderr == ""   # read when the notice would fire, not at import
     users = _python("import wpt_receiver, numba\nf = numba.njit(lambda x: 2 * x)\nassert f(2) == 4\n", tmp_path / "e")
     assert users.returncode == 0 and users.stderr == ""   # a kernel of the user's own is not ours to announce
+
+
+def test_warmup_compiles_what_a_single_envs_first_steps_compile(tmp_path):
+    """The notice's advice "`dronewpt warmup` does it ahead" holds for ``gym.make(envs.ENV_ID)`` too: after warmup's
+    single-env stage (into an empty cache) a gym.make env's first steps compile nothing (~70 kernels otherwise;
+    warmup warmed only the batched envs before)."""
+    code = ("from numba.core import event\n"
+            "class C(event.Listener):\n    n = 0\n    def on_start(self, ev): C.n += 1\n"
+            "    def on_end(self, ev): pass\n"
+            "from mission_sim.cli.warmup import STAGES\n"
+            "[run() for name, run in STAGES if 'single env' in name]\n"
+            "event.register('numba:compile', C())\n"
+            "import gymnasium as gym, envs\nenv = gym.make(envs.ENV_ID)\nenv.reset(seed=1)\n"
+            "[env.step(env.action_space.sample()) for _ in range(5)]\nprint(C.n)\n")
+    proc = _python(code, tmp_path / "c")
+    assert proc.returncode == 0 and proc.stdout.split() == ["0"], (proc.stdout, proc.stderr[-2000:])
 
 
 def test_the_command_line_keeps_its_notice_on_the_terminal_only(tmp_path):
@@ -231,16 +418,46 @@ def test_the_command_line_keeps_its_notice_on_the_terminal_only(tmp_path):
 
 
 # ------------------------------------------------------------------ 7. --plan without --pads
+NOTE = ("dronewpt mission: note: --plan without --pads keeps the built-in mission's 2 pads, at (0, 0) and (40, 20) m "
+        "about the plan's home; the plan's route charges at none of them (a loiter within mission.pad_radius_m of one "
+        "charges there); give your own with --pads FILE (CSV lat,lon[,alt][,hover_time_s] or GeoJSON), or --no-charge "
+        "to fly it without charging")
+
+
 def test_plan_without_pads_says_the_built_in_pads_are_kept(capsys, tmp_path):
     rc, err = _cli(capsys, ["mission", "--plan", str(SQUARE), "--dry-run"])
-    assert rc == 0 and err == [
-        "dronewpt mission: note: --plan without --pads keeps the built-in mission's 2 pads, at (0, 0) and (40, 20) m "
-        "about the plan's home (a loiter within mission.pad_radius_m of one charges there); give your own with --pads "
-        "FILE (CSV lat,lon[,alt][,hover_time_s] or GeoJSON), or --no-charge to fly it without charging"]
+    assert rc == 0 and err == [NOTE], err
     pads = tmp_path / "pads.csv"
     pads.write_text("lat,lon\n47.398742,8.546594\n")
     rc, err = _cli(capsys, ["mission", "--plan", str(SQUARE), "--pads", str(pads), "--dry-run"])
     assert rc == 0 and err == [], err
+
+
+def test_the_note_is_not_repeated_by_the_pad_warnings_nor_given_with_no_charge(capsys, tmp_path):
+    """The run after the note: no "pad 0 ... charges nothing" lines repeating it (the note says which pads the route
+    charges at); ``--no-charge``: no note telling the user to use ``--no-charge`` (the pads never energise)."""
+    rc, err = _cli(capsys, ["mission", "--plan", str(SQUARE), "--no-plot", "--out", str(tmp_path / "a")])
+    assert rc == 0 and err == [NOTE], err
+    rc, err = _cli(capsys, ["mission", "--plan", str(SQUARE), "--no-charge", "--no-plot", "--out", str(tmp_path / "b")])
+    assert rc == 0 and err == [], err
+    rc, err = _cli(capsys, ["telemetry", "--plan", str(SQUARE), "--connect", "none", "--tlog", str(tmp_path / "x.tlog"),
+                            "--speed", "inf", "--no-progress"])
+    assert rc == 0 and err == [NOTE.replace("mission: note", "telemetry: note").replace(
+        "--no-charge to fly it without charging", "a config file with your own [[pads]]")], err
+
+
+def test_telemetry_warns_about_an_unreached_pad(capsys, tmp_path):
+    """telemetry flies ``plan_mission(cfg)``, cfg's own route: its pads are checked (they were not: any trajectory
+    counted as a replayed one)."""
+    plan, pads = tmp_path / "low.waypoints", tmp_path / "pads.csv"
+    plan.write_text(LOW_LOITER)
+    pads.write_text("lat,lon\n47.398742,8.546594\n47.397742,8.548594\n")
+    rc, err = _cli(capsys, ["telemetry", "--plan", str(plan), "--pads", str(pads), "--connect", "none", "--tlog",
+                            str(tmp_path / "x.tlog"), "--speed", "inf", "--no-progress"])
+    assert rc == 0 and err == [
+        "dronewpt telemetry: warning: pad 1 at (226.5, 0.0) m charges nothing: the route never hovers over it (closest "
+        "approach 187.4 m); valid: a loiter item within mission.pad_radius_m=5 m of the pad and at least 1 m above it "
+        "(it becomes a charging hover), a larger mission.pad_radius_m, or leave the pad out of --pads"], err
 
 
 # ------------------------------------------------------------------ no noise for normal use

@@ -9,10 +9,11 @@ otherwise). One source for the library and the ``dronewpt`` command line.
   its disk cache is silent). numba is imported lazily, so :func:`listen_for_compilation` (called when
   ``wpt_receiver`` is imported) waits for numba's import with a ``sys.meta_path`` hook, then listens. The
   first compilation of one of dronewpt's kernels in a process is logged once, ``logging.getLogger("dronewpt")
-  .warning(...)``: shown by Python's last-resort handler when nothing configured logging, silenced by a normal
-  logging configuration (``DRONEWPT_COMPILE_NOTICE=0`` turns it off). The command line replaces that sink
-  (:func:`set_compile_sink`): a line above its progress bars on a terminal, nothing otherwise; the processes it
-  starts (a sweep's workers) stay silent, as before.
+  .warning(NOTICE)``: shown by Python's last-resort handler when nothing configured logging, and by a logging
+  configuration that shows warnings (``logging.basicConfig()``: ``WARNING:dronewpt:compiling ...``). Silenced by
+  ``logging.getLogger("dronewpt").setLevel(logging.ERROR)`` or ``DRONEWPT_COMPILE_NOTICE=0`` (read when the notice
+  would fire). The command line replaces that sink while a command runs (:func:`set_compile_sink`): a line above
+  its progress bars on a terminal, nothing otherwise; the processes it starts (a sweep's workers) stay silent.
 """
 
 from __future__ import annotations
@@ -43,14 +44,23 @@ class DronewptWarning(RuntimeWarning):
 _OUR_DIRS = tuple(os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), p) + os.sep
                   for p in OUR_PACKAGES)
 
+#: the libraries whose frames also lie between the user's call and ours (``gymnasium.make`` / ``make_vec`` -> env;
+#: stable-baselines3's ``make_vec_env`` and the like): skipped too, by module name (nothing imported for it)
+PASSED_THROUGH = ("gymnasium", "stable_baselines3")
+
+
+def _passed(frame) -> bool:
+    return (frame.f_code.co_filename.startswith(_OUR_DIRS)
+            or str(frame.f_globals.get("__name__", "")).partition(".")[0] in PASSED_THROUGH)
+
 
 def warn(text: str) -> None:
-    """``warnings.warn(text, DronewptWarning)`` pointed at the first caller outside dronewpt's packages (Python
-    3.12's ``skip_file_prefixes``, by hand: the depth of our frames varies, e.g. ``gymnasium.make`` -> env ->
-    plant part)."""
+    """``warnings.warn(text, DronewptWarning)`` pointed at the first caller outside dronewpt's packages and the
+    libraries that call into them (:data:`PASSED_THROUGH`; Python 3.12's ``skip_file_prefixes``, by hand: the
+    depth of those frames varies, e.g. ``gymnasium.make`` -> env -> plant part)."""
     import warnings
     level, frame = 2, sys._getframe(1)
-    while frame is not None and frame.f_code.co_filename.startswith(_OUR_DIRS):
+    while frame is not None and _passed(frame):
         frame, level = frame.f_back, level + 1
     warnings.warn(text, DronewptWarning, stacklevel=level)
 
@@ -60,21 +70,35 @@ def _log_notice(text: str) -> None:
     logging.getLogger(LOGGER_NAME).warning(text)
 
 
-#: ``DRONEWPT_COMPILE_NOTICE=0``: no notice from the library (the command line sets it for the processes it starts,
-#: e.g. a sweep's workers, which stayed silent before the library had a notice)
+#: ``DRONEWPT_COMPILE_NOTICE=0``: no notice from the library (read when it would fire; the command line sets it while
+#: a command runs, for the processes it starts, e.g. a sweep's workers, which stayed silent before the notice)
 NOTICE_VAR = "DRONEWPT_COMPILE_NOTICE"
 
-#: ``sink``: called once with the notice's line; ``ours_only``: only a kernel of :data:`OUR_PACKAGES` counts
-_state = {"registered": False, "announced": False, "ours_only": True,
-          "sink": None if os.environ.get(NOTICE_VAR) == "0" else _log_notice}
+#: ``sink``: called once with :data:`NOTICE`; ``ours_only``: only a kernel of :data:`OUR_PACKAGES` counts
+_state = {"registered": False, "announced": False, "ours_only": True, "sink": _log_notice}
 
 
-def set_compile_sink(sink, ours_only: bool = False) -> None:
-    """From now on the notice goes to ``sink(line)`` (None: nowhere), at the first compilation of any kernel
+def set_compile_sink(sink, ours_only: bool = False):
+    """From now on the notice goes to ``sink(NOTICE)`` (None: nowhere), at the first compilation of any kernel
     (``ours_only`` False, the command line's: it runs only dronewpt's) or of one of dronewpt's; listens if it
-    did not yet."""
+    did not yet. Returns a function that puts the previous sink back."""
+    before = _state["sink"], _state["ours_only"]
     _state["sink"], _state["ours_only"] = sink, ours_only
     listen_for_compilation()
+
+    def restore() -> None:
+        _state["sink"], _state["ours_only"] = before
+    return restore
+
+
+def _fire() -> None:
+    """The notice, once per process, to the sink; the library's own (logged) one unless ``DRONEWPT_COMPILE_NOTICE=0``
+    now (read here, not at import: a user may set it after importing dronewpt)."""
+    _state["announced"] = True
+    sink = _state["sink"]
+    if sink is None or (sink is _log_notice and os.environ.get(NOTICE_VAR) == "0"):
+        return
+    sink(NOTICE)
 
 
 def _ours(ev) -> bool:
@@ -89,9 +113,7 @@ def _listener_class():
         def on_start(self, ev):
             if _state["announced"] or (_state["ours_only"] and not _ours(ev)):
                 return
-            _state["announced"] = True
-            if _state["sink"] is not None:
-                _state["sink"](f"dronewpt: {NOTICE}")
+            _fire()
 
         def on_end(self, ev):
             pass

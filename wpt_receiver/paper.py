@@ -18,7 +18,7 @@ import numpy as np
 from .envelope import simulate
 from .inverse_controller import LowPassFilter
 from .metrics import TransitionMetrics, transition_metrics
-from .notices import DronewptWarning
+from .notices import warn
 from .params import TABLE_I, LinkParams
 from .references import TRAJECTORIES, reference_duty
 from .sbar import v2_from_duty
@@ -72,8 +72,7 @@ def modal_plant(params: LinkParams, d_short: np.ndarray, control_period_s: float
     from .modal_kernel import simulate as simulate_compiled
     reason = modal_range_problem(params)
     if reason is not None:
-        import warnings
-        warnings.warn(reason, DronewptWarning, stacklevel=2)
+        warn(reason)   # (pointed at the caller outside dronewpt: run_paper's, or modal_plant's own)
     # the SBAR's v2 is updated at least twice a rectifier period whatever the control period (the kernel's
     # default 2 sub-steps per control period rang up to 187 A at 2e-4 s on Table I)
     substeps = max(2, 2 * math.ceil(control_period_s / params.rectifier_period_s - 1e-9))
@@ -103,20 +102,23 @@ def rm_emf_margin(params: LinkParams) -> float:
     return float(rm_steady(params, None, None)["clamp_margin"])
 
 
-def modal_range_problem(params: LinkParams, remedy: str = "use model='switching'") -> str | None:
+def modal_range_problem(params: LinkParams, remedy="use model='switching'") -> str | None:
     """Why the exact-mode model (:func:`modal_plant`, the missions' and envs' link) is outside the range where it
     was checked against the switching model, or None (Table I: emf margin 30.9, Vdc/VL 1). ``remedy`` ends the
-    message (what to do: the missions and envs, which have no switching model, name their own keys). The one
-    source of these limits for ``paper``, the missions (:mod:`mission_sim.setup_warnings`) and the envs."""
+    message (what to do: the missions and envs, which have no switching model, name their own keys): a string,
+    or ``remedy(limit)`` for the limit that failed, ``"emf_margin"`` or ``"voltage_ratio"`` (a remedy for the one
+    that failed: a lower hover gap raises the emf margin, not Vdc/VL). The one source of these limits for
+    ``paper``, the missions (:mod:`mission_sim.setup_warnings`) and the envs."""
     m, ratio = rm_emf_margin(params), params.vdc_v / params.vl_v
     if m < MODAL_MIN_EMF_MARGIN:
         return (f"emf margin wLm V1 / (R1 (4/pi) VL) = {m:.3g} is below the exact-mode model's checked range "
                 f"(>= {MODAL_MIN_EMF_MARGIN:g}; Table I: 30.9): this close to the rectifier's blocking point its RM "
-                f"state departs from the switching model's; {remedy}")
+                f"state departs from the switching model's; {remedy('emf_margin') if callable(remedy) else remedy}")
     if ratio < MODAL_MIN_VOLTAGE_RATIO:
         return (f"vdc_v / vl_v = {ratio:.3g} is below the exact-mode model's checked range (>= "
                 f"{MODAL_MIN_VOLTAGE_RATIO:g}; Table I: 1): with the clamp this high against V1 its battery energy is "
-                f"low against the switching model (-3 % at 0.2, -31 % at 0.13); {remedy}")
+                f"low against the switching model (-3 % at 0.2, -31 % at 0.13); "
+                f"{remedy('voltage_ratio') if callable(remedy) else remedy}")
     return None
 
 
@@ -151,8 +153,7 @@ def run_paper(params: LinkParams = TABLE_I, model: str = "envelope", t_switch_s:
         elif model == "modal":
             problem = _modal_inconsistency(params, name, d, out, m)
         if problem is not None:
-            import warnings
-            warnings.warn(problem, DronewptWarning, stacklevel=2)
+            warn(problem)
     return runs
 
 

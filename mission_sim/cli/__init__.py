@@ -131,13 +131,18 @@ def _main(argv=None) -> int:
         parser.print_help()
         return 2
     try:
-        from .notices import announce_compilation, quiet_compilation, warning_lines
-        if show_progress(args):  # a terminal: say so when numba compiles (the first run's silent half-minute)
-            announce_compilation()
-        else:
-            quiet_compilation()
-        with warning_lines(args.command):   # the library's warnings as one line each
-            rc = int(args.func(args) or 0)
+        from .notices import compile_notices, is_dronewpt_warning, warning_lines
+        # a terminal: say so when numba compiles (the first run's silent half-minute); the library's warnings as
+        # one line each
+        with compile_notices(show_progress(args)), warning_lines(args.command):
+            try:
+                rc = int(args.func(args) or 0)
+            except Warning as exc:   # -W error: a DronewptWarning raised; other warnings as Python raises them
+                if not is_dronewpt_warning(type(exc)):
+                    raise
+                print(f"dronewpt {args.command}: error: {_one_line(exc)} (a warning, an error under -W error)",
+                      file=sys.stderr)
+                return 2
         from ..signals import raise_lost
         raise_lost()   # a SIGTERM / Ctrl-C that landed in a callback is still an interrupt
         return rc

@@ -51,16 +51,17 @@ def _mav_config(args, overrides=None, single_pad=False):
                          mission_file_keys(parse_set(args.set)))
     if single_pad:
         d["pads"] = [{"x_m": 0.0, "y_m": 0.0, "z_m": 0.0}]
-    else:
-        from .mission import default_pads_notice
-        default_pads_notice(getattr(args, "command", "telemetry"), getattr(args, "plan", None),
-                            getattr(args, "mission_pads", None), d, parse_set(args.set),
-                            "a config file with your own [[pads]]")
     drone = {}
     if getattr(args, "drone", None) is not None:
         from ..mavlink.calibrate import read_drone_toml
         drone = read_drone_toml(args.drone)
-    return config_from_dict(apply_overrides(d, {**drone, **(overrides or {}), **parse_set(args.set)}))
+    cfg = config_from_dict(apply_overrides(d, {**drone, **(overrides or {}), **parse_set(args.set)}))
+    if not single_pad:
+        from .mission import default_pads_notice
+        args.pads_noted = default_pads_notice(getattr(args, "command", "telemetry"), getattr(args, "plan", None),
+                                              getattr(args, "mission_pads", None), d, parse_set(args.set),
+                                              "a config file with your own [[pads]]", cfg)
+    return cfg
 
 
 def _mav_policy(cfg, name):
@@ -140,8 +141,9 @@ def _cmd_replay(args) -> int:
     res = replay_log(log, cfg, policy, pad=pad, ground_gap_m=args.ground_gap, window=window,
                      progress=show_progress(args), segment=args.segment)
     s = res.summary   # its warnings: replay_summary_warnings (the replay studies' n_warnings count the same list)
+    from .notices import say_warning
     for w in s.get("warnings", ()):
-        print(f"dronewpt replay: warning: {w}", file=sys.stderr)
+        say_warning("replay", w)   # (once: the library may have raised it)
     s["log"] = str(args.log)
     s["policy"] = args.policy
     s["drone_mass_kg"] = cfg.drone.mass_kg
@@ -312,7 +314,8 @@ def _cmd_telemetry(args) -> int:
     conn = _open_link(connect, args)                    # refused, port taken: said before the simulation
     try:
         traj = plan_mission(cfg)
-        res = run_mission(cfg, policy, trajectory=traj, progress=show_progress(args))
+        res = run_mission(cfg, policy, trajectory=traj, progress=show_progress(args),   # cfg's own route
+                          own_route=not getattr(args, "pads_noted", False))
         st = telemetry.stream(res.timeseries, conn=conn, rate_hz=args.rate, speed=args.speed, home=home,
                               tlog=args.tlog, duration_s=args.duration, ground_gap_m=cfg.mission.hover_gap_m,
                               track=(traj.t_s, traj.pos_m, traj.tilt_rad), progress=show_progress(args),

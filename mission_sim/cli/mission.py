@@ -142,27 +142,39 @@ def mission_config(args):
         overrides = {**read_drone_toml(args.drone), **overrides}
     files = mission_file_keys(overrides)
     d = mconfig.load_config_dict(args.config, getattr(args, "plan", None), getattr(args, "pads", None), files)
-    default_pads_notice(getattr(args, "command", "mission"), getattr(args, "plan", None), getattr(args, "pads", None),
-                        d, overrides, "--no-charge to fly it without charging")
     cfg = mconfig.config_from_dict(mconfig.apply_overrides(d, overrides) if overrides else d)
+    args.pads_noted = (not getattr(args, "no_charge", False)   # (pads never energised: nothing to say about them)
+                       and default_pads_notice(getattr(args, "command", "mission"), getattr(args, "plan", None),
+                                               getattr(args, "pads", None), d, overrides,
+                                               "--no-charge to fly it without charging", cfg))
     check_run_size(cfg, force=getattr(args, "force", False))
     return cfg
 
 
-def default_pads_notice(command: str, plan, pads, d: dict, overrides: dict, none_hint: str) -> None:
+def default_pads_notice(command: str, plan, pads, d: dict, overrides: dict, none_hint: str, cfg=None) -> bool:
     """``--plan`` without ``--pads`` (and no pads of the user's: a config's ``[[pads]]`` or ``pads_file``, a ``--set
-    pads.*``): one line on stderr saying the built-in mission's pads are kept, about the plan's home, and how to
-    give one's own or none (``none_hint``)."""
+    pads.*``): one line on stderr saying the built-in mission's pads are kept, about the plan's home, which of them
+    the plan's route charges at (``cfg``'s, :func:`mission_sim.setup_warnings.energised_pads`: the run's own
+    warnings about unreached pads would repeat it; the caller skips them) and how to give one's own or none
+    (``none_hint``). True when it printed the line."""
     if plan is None or pads is not None or any(str(k).startswith("pads.") for k in overrides):
-        return
+        return False
     from ..config import DEFAULT_MISSION_TOML
     default = tomllib.loads(DEFAULT_MISSION_TOML)["pads"]
     if d.get("pads") != default:
-        return
+        return False
     where = " and ".join(f"({p.get('x_m', 0.0):g}, {p.get('y_m', 0.0):g})" for p in default)
+    reached = ""
+    if cfg is not None:
+        from ..setup_warnings import energised_pads
+        hit = sorted(energised_pads(cfg))
+        reached = ("; the plan's route charges at none of them" if not hit else "" if len(hit) == len(default) else
+                   f"; the plan's route charges at pad {', '.join(map(str, hit))} only")
     print(f"dronewpt {command}: note: --plan without --pads keeps the built-in mission's {len(default)} pads, at "
-          f"{where} m about the plan's home (a loiter within mission.pad_radius_m of one charges there); give your "
-          f"own with --pads FILE (CSV lat,lon[,alt][,hover_time_s] or GeoJSON), or {none_hint}", file=sys.stderr)
+          f"{where} m about the plan's home{reached} (a loiter within mission.pad_radius_m of one charges there); "
+          f"give your own with --pads FILE (CSV lat,lon[,alt][,hover_time_s] or GeoJSON), or {none_hint}",
+          file=sys.stderr)
+    return True
 
 
 def make_policy(name: str, cfg):
@@ -258,7 +270,7 @@ def _run_and_write(args, cfg, pol, every, worker, jit: bool):
     writer = SeriesWriter(args.out, csv=args.csv, every_s=every, figure_points=None if args.no_plot else FIGURE_POINTS)
     try:
         res = run_mission(cfg, pol, charge=not args.no_charge, progress=show_progress(args),
-                          frame=False, sink=writer)
+                          frame=False, sink=writer, own_route=not getattr(args, "pads_noted", False))
         # an earlier run's set stays whole until this one replaces a file (a Ctrl-C in the simulation
         # lost its summary.json); present again only when this run's set is complete
         (args.out / "summary.json").unlink(missing_ok=True)

@@ -68,8 +68,9 @@ def cmd_refly(args) -> int:
     s["files"] = files
     with atomic_output(args.out / "refly_summary.json") as tmp:
         tmp.write_text(json.dumps(s, indent=2, allow_nan=False, default=float))
+    from .notices import say_warning
     for w in s["warnings"]:
-        print(f"dronewpt replay: warning: {w}", file=sys.stderr)
+        say_warning("replay", w)   # (once: the library may have raised it)
     if args.format == "json":
         print(json.dumps(s, allow_nan=False, default=float))
         return 0

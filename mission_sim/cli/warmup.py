@@ -24,7 +24,8 @@ def _add_warmup(sub):
                        description="Compile (or load from numba's disk cache) every numba kernel the commands "
                                    "use: the compiled mission loop with the step, ramp and model_based policy "
                                    "kernels (mission, replay, sweep, sizing --source mission), the batched env "
-                                   "on both links and its policy kernels with the budgeted plan's search (compare, train) and the switching model (paper "
+                                   "on both links and its policy kernels with the budgeted plan's search (compare, train), a single env's steps "
+                                   "(gymnasium.make) and the switching model (paper "
                                    "--model switching, sizing), and builds the mission loop ahead of time into the disk cache "
                                    "(`dronewpt mission` then runs without numba; skipped with DRONEWPT_AOT=0). Prints "
                                    "each stage, how many kernels it compiled "
@@ -51,6 +52,18 @@ def _envs() -> None:
             run_policy(name, "nominal", 2, 1000, cfg)
 
 
+def _single_envs() -> None:
+    """What a single env's first steps compile (``gymnasium.make(envs.ENV_ID)``, both links, the discrete one)."""
+    import envs
+    for link in ("modal", "envelope"):
+        for cls in (envs.SbarChargingEnv, envs.SbarChargingDiscreteEnv):
+            env = cls(config=envs.EnvConfig(link_model=link))
+            env.reset(seed=0)
+            for _ in range(3):
+                env.step(env.action_space.sample())
+            env.close()
+
+
 def _switching() -> None:
     from wpt_receiver import TABLE_I
     from wpt_receiver.devices import preset
@@ -75,6 +88,7 @@ def _ahead_of_time() -> str:
 STAGES = (("mission loop and policy kernels (mission, replay, sweep)", _missions),
           ("mission loop built ahead of time (dronewpt mission without numba)", _ahead_of_time),
           ("batched env and policy kernels (compare, train)", _envs),
+          ("single env's steps (gymnasium.make(envs.ENV_ID))", _single_envs),
           ("switching model (paper --model switching, sizing)", _switching))
 
 

@@ -30,7 +30,7 @@ from .logs import FlightLog, read_log
 
 __all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "flight_stats",
            "logged_energy_j", "compare_power", "fit_mass_kg", "resample_track", "replay_trajectory", "ReplayResult", "replay_log", "parse_window",
-           "battery_voltage_warning", "replay_summary_warnings",
+           "battery_voltage_warning", "warn_battery_voltage", "replay_summary_warnings",
            "choose_segment", "replay_span"]
 
 
@@ -432,11 +432,13 @@ def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
     return out
 
 
-def battery_voltage_warning(log: FlightLog, battery) -> str | None:
+def battery_voltage_warning(log: FlightLog, battery, run: str = "replay") -> str | None:
     """One line when the log's battery voltage (the median of its positive samples) lies outside the model pack's
-    open-circuit range ``n_series x [OCV(0), OCV(1)]`` (8S: 21.2-32.8 V): the replay flies the config's pack (its
-    energy, SoC and voltage), not the logged one. Names the cell count whose OCV at SoC 0.5 is nearest the logged
-    voltage (``--set battery.n_series=N``). None when the log has no battery voltage or it fits."""
+    open-circuit range ``n_series x [OCV(0), OCV(1)]`` (8S: 21.2-32.8 V): the ``run`` (the replay, the re-flight)
+    flies the config's drone and pack, not the logged ones. Names the cell count whose OCV at SoC 0.5 is nearest the
+    logged voltage and what modelling the logged drone takes: its pack and a link made for its voltage (the config's
+    link was designed for the config's pack: on the config's link a 3S pack takes ~nothing from a pad). None when
+    the log has no battery voltage or it fits."""
     from ..world.battery import ocv_cell_v
 
     if not len(log.battery) or "voltage_v" not in log.battery:
@@ -451,16 +453,27 @@ def battery_voltage_warning(log: FlightLog, battery) -> str | None:
         return None
     fit = int(min(32, max(1, round(med / float(ocv_cell_v(0.5))))))
     return (f"{log.path.name}: the logged battery voltage (median {med:.1f} V) is outside the model pack's "
-            f"open-circuit range {lo:.1f}-{hi:.1f} V (battery.n_series={n} x {lo / n:.3f}-{hi / n:.3f} V per cell): "
-            f"the replay flies the config's pack, not the logged one; a {fit}-cell pack fits "
-            f"(--set battery.n_series={fit}; and its battery.capacity_ah)")
+            f"open-circuit range {lo:.1f}-{hi:.1f} V (battery.n_series={n} x {lo / n:.3f}-{hi / n:.3f} V per cell); "
+            f"it fits a {fit}-cell pack: the {run} flies the config's drone and pack, not the logged ones (a \"what "
+            f"if our drone flew this route\" study); to model the logged drone give its pack (--set "
+            f"battery.n_series={fit} and its battery.capacity_ah) and a link made for its voltage (link.*: the "
+            f"config's is made for its {n}-cell pack)")
 
 
-def replay_summary_warnings(log: FlightLog, track: FlightTrack, battery, mission_summary: dict) -> list[str]:
+def warn_battery_voltage(log: FlightLog, battery, run: str = "replay") -> str | None:
+    """:func:`battery_voltage_warning`, also raised (once) as a :class:`wpt_receiver.notices.DronewptWarning`."""
+    text = battery_voltage_warning(log, battery, run)
+    if text is not None:
+        from wpt_receiver.notices import warn
+        warn(text)
+    return text
+
+
+def replay_summary_warnings(log: FlightLog, track: FlightTrack, voltage: str | None, mission_summary: dict) -> list[str]:
     """The replay summary's ``warnings``, the one list ``dronewpt replay`` prints and the replay studies count
-    (``n_warnings``): :func:`replay_warnings`, :func:`battery_voltage_warning` and, when the battery ran out,
-    where (the power comparison stops there)."""
-    out = replay_warnings(log, track) + [w for w in (battery_voltage_warning(log, battery),) if w]
+    (``n_warnings``): :func:`replay_warnings`, the logged voltage's (``voltage``: :func:`battery_voltage_warning`'s
+    text or None) and, when the battery ran out, where (the power comparison stops there)."""
+    out = replay_warnings(log, track) + [w for w in (voltage,) if w]
     if mission_summary.get("battery_depleted"):
         from ..world.results import depletion_text
         out.append(f"{depletion_text(mission_summary)} (the power comparison covers the flight up to that point)")
@@ -469,7 +482,7 @@ def replay_summary_warnings(log: FlightLog, track: FlightTrack, battery, mission
 
 def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: float | None = None,
                window: tuple[float, float] | None = None, progress: bool = False,
-               segment: int | None = None, frame: bool = True) -> ReplayResult:
+               segment: int | None = None, frame: bool = True, warn: bool = True) -> ReplayResult:
     """Build the track of ``log`` (a :class:`FlightLog` or a path), run the mission world along it,
     compare the power.
 
@@ -479,6 +492,9 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
     time) unless ``window`` is given; the summary names it (``replayed_segment``).
     ``frame=False``: summary only (``mission.timeseries`` is None; the power comparison reads the two
     columns it needs from the rows as they are produced, the same numbers).
+    ``warn``: the setup warnings (:func:`~mission_sim.world.runner.run_mission`'s and the logged battery voltage's,
+    :func:`battery_voltage_warning`) as ``DronewptWarning`` before the run; they are in the summary's ``warnings``
+    either way.
     Raises :class:`NoPositionError` (a ``ValueError``) if the log has no usable position.
     """
     from ..world.runner import run_mission
@@ -492,7 +508,9 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
     grid = resample_track(track, cfg.sim.traj_dt_s)
     traj = replay_trajectory(grid)
     cols = _PowerColumns()
-    mission = run_mission(cfg, policy, trajectory=traj, progress=progress, frame=frame, sink=None if frame else cols)
+    voltage = (warn_battery_voltage if warn else battery_voltage_warning)(log, cfg.battery)
+    mission = run_mission(cfg, policy, trajectory=traj, progress=progress, frame=frame, sink=None if frame else cols,
+                          warn=warn)
     ts = mission.timeseries
     sim_t, sim_p = (ts["t_s"].to_numpy(), ts["propulsion_w"].to_numpy()) if frame else cols.arrays()
     summary = flight_stats(log, track)
@@ -511,7 +529,7 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
         "sim_time_s": float(ms["sim_time_s"]),
         "window_s": list(window) if window else None,
         "battery_source": log.battery_source,
-        "warnings": replay_summary_warnings(log, track, cfg.battery, ms),
+        "warnings": replay_summary_warnings(log, track, voltage, ms),
     })
     table = None
     if len(log.battery):

@@ -216,18 +216,23 @@ def check_refly_size(track, pads_xyz, detours, cfg) -> None:
 
 
 def refly_log(log, cfg, policy, *, pad=None, ground_gap_m=None, window=None, reach_m: float = DEFAULT_REACH_M,
-              progress: bool = False, segment: int | None = None, frame: bool = True) -> ReflyResult:
+              progress: bool = False, segment: int | None = None, frame: bool = True,
+              warn: bool = True) -> ReflyResult:
     """Re-fly ``log`` (a FlightLog) with the pads of ``cfg`` (pad frame = ENU about ``pad``, default
     the take-off spot, as in :func:`~mission_sim.mavlink.replay.replay_log`) and compare; see the
     module docstring and :func:`plan_refly` (its errors). ``frame=False``: summary only (the runs keep
-    no time series; the summary is the same, see :func:`~mission_sim.world.runner.run_mission`)."""
-    from ..mavlink.replay import battery_voltage_warning
+    no time series; the summary is the same, see :func:`~mission_sim.world.runner.run_mission`). ``warn``: the setup
+    warnings as ``DronewptWarning`` before the runs (as :func:`~mission_sim.mavlink.replay.replay_log`); the summary's
+    ``warnings`` has the replay's (:func:`~mission_sim.mavlink.replay.replay_warnings`) and the logged voltage's."""
+    from ..mavlink.replay import battery_voltage_warning, replay_warnings, warn_battery_voltage
     from ..world.runner import run_mission
     track, pads_xyz, detours, skipped = plan_refly(log, cfg, pad=pad, ground_gap_m=ground_gap_m, window=window,
                                                    reach_m=reach_m, segment=segment)
     new, phase = refly_track(track, pads_xyz, detours, cfg.mission, cfg.sim.traj_dt_s)
-    original = run_mission(cfg, policy, trajectory=_trajectory(track), charge=False, progress=progress, frame=frame)
-    refly = run_mission(cfg, policy, trajectory=_trajectory(new, phase), progress=progress, frame=frame)
+    voltage = (warn_battery_voltage if warn else battery_voltage_warning)(log, cfg.battery, "re-flight")
+    original = run_mission(cfg, policy, trajectory=_trajectory(track), charge=False, progress=progress, frame=frame,
+                           warn=warn)
+    refly = run_mission(cfg, policy, trajectory=_trajectory(new, phase), progress=progress, frame=frame, warn=warn)
     s, o = refly.summary, original.summary
     summary = {
         "log": str(log.path), "pad_frame_origin": {"lat_deg": track.pad.lat_deg, "lon_deg": track.pad.lon_deg,
@@ -251,6 +256,6 @@ def refly_log(log, cfg, policy, *, pad=None, ground_gap_m=None, window=None, rea
         "net_battery_energy_gain_j": float(cfg.battery.usable_energy_j(s["final_soc"])
                                            - cfg.battery.usable_energy_j(o["final_soc"])),
         "battery_depleted_logged_flight": bool(o["battery_depleted"]), "battery_depleted_refly": bool(s["battery_depleted"]),
-        "warnings": [w for w in (battery_voltage_warning(log, cfg.battery),) if w],
+        "warnings": replay_warnings(log, track) + [w for w in (voltage,) if w],
     }
     return ReflyResult(original, refly, track, new, pads_xyz, detours, summary)

@@ -35,7 +35,7 @@ class MissionParamChecker:
         self._sections: dict[tuple, object] = {}
         self._sizes: dict[tuple, str | None] = {}
         self._notes: dict[tuple, tuple] = {}    # section identities -> (the sections, their setup warnings)
-        self.warned: dict[str, int] = {}         # setup warning -> cases it concerns
+        self.warned: dict[str, list] = {}        # kind of setup warning -> [cases with one, an example message]
         self.checked = 0                         # cases whose values passed
 
     def _note(self, cfg) -> None:
@@ -47,8 +47,8 @@ class MissionParamChecker:
 
         link = (cfg.link, cfg.coupling, cfg.battery.n_series, cfg.charger.cv_cell_v, cfg.mission.hover_gap_m)
         route = (cfg.waypoints, cfg.mission, *cfg.pads) if cfg.waypoints else ()
-        texts = []
-        for what, check in ((link, link_range_warning), (route, unreached_pad_warnings)):
+        self.checked += 1
+        for kind, what, check in (("link", link, link_range_warning), ("pad", route, unreached_pad_warnings)):
             if not what:
                 continue
             key = (check.__name__, *map(id, what))
@@ -58,20 +58,19 @@ class MissionParamChecker:
                     self._notes.clear()
                 got = check(cfg)
                 hit = self._notes[key] = (what, [got] if isinstance(got, str) else list(got or ()))
-            texts += hit[1]
-        self.checked += 1
-        for text in texts:
-            self.warned[text] = self.warned.get(text, 0) + 1
+            if hit[1]:
+                seen = self.warned.setdefault(kind, [0, hit[1][0]])
+                seen[0] += 1
+
+    #: the kinds of setup warning a study line counts: what the cases have
+    KINDS = {"link": "a link outside the exact-mode model's checked range",
+             "pad": "a pad their route never energises"}
 
     def study_warnings(self, name: str) -> list[str]:
-        """One line for the study (``name``) when some of its checked cases have setup warnings: how many, the
-        most frequent warning and how many distinct ones; [] otherwise."""
-        if not self.warned:
-            return []
-        text, count = max(self.warned.items(), key=lambda kv: kv[1])
-        more = len(self.warned) - 1
-        return [f"{count:,} of {self.checked:,} cases of study {name!r}: {text}"
-                + (f" (and {more:,} other distinct warning{'s' * (more > 1)})" if more else "")]
+        """One line per kind of setup warning (:data:`KINDS`) some of the study's (``name``) checked cases have: how
+        many cases have one, and the first such case's message as an example; [] when none has any."""
+        return [f"{count:,} of {self.checked:,} cases of study {name!r} have {self.KINDS[kind]}, e.g.: {text}"
+                for kind, (count, text) in self.warned.items()]
 
     def _section(self, sec: str, values: dict):
         from ..config import check_seed, section_from_dict

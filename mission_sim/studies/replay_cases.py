@@ -207,11 +207,11 @@ class ReplayCaseRunner(MissionCaseRunner):
         if "pads" in o:
             from ..plans.refly import refly_log
             res = refly_log(self.log(), cfg, policy, ground_gap_m=o.get("ground_gap_m"), window=o.get("window"),
-                            reach_m=o["reach_m"], segment=o.get("segment"), frame=False)
+                            reach_m=o["reach_m"], segment=o.get("segment"), frame=False, warn=False)
         else:
             from ..mavlink.replay import replay_log
             res = replay_log(self.log(), cfg, policy, ground_gap_m=o.get("ground_gap_m"), window=o.get("window"),
-                             segment=o.get("segment"), frame=False)
+                             segment=o.get("segment"), frame=False, warn=False)
         out = _flat(res.summary)
         out.pop("log", None)   # the study's, the same in every row
         out["drone_mass_kg"] = float(cfg.drone.mass_kg)

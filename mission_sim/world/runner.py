@@ -83,7 +83,7 @@ __all__ = ["run_mission", "check_policy_context", "warn_setup", "ENERGISE_PHASES
 
 def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bool = True,
                 progress: bool = False, compiled: bool | None = None, frame: bool = True,
-                sink=None, warn: bool = True) -> MissionResult:
+                sink=None, warn: bool = True, own_route: bool | None = None) -> MissionResult:
     """Run one mission; returns a :class:`~mission_sim.world.results.MissionResult`.
 
     ``policy`` is a :class:`mission_sim.contract.Policy` made for ``control_period_s =
@@ -101,12 +101,14 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     is refused (``ValueError``): make it with ``mission_sim.config.policy_context(cfg)``.
     ``warn``: before the run, :func:`mission_sim.setup_warnings.mission_warnings` as
     :class:`wpt_receiver.notices.DronewptWarning` (a link outside the exact-mode model's checked range, a pad the
-    route never comes near, a policy made for another link model; none with ``charge=False``); False skips them (a
-    sweep warns once per study).
+    route never energises, a policy made for another link model; none with ``charge=False``); False skips them (a
+    sweep warns once per study). ``own_route``: whether the pads are checked against ``cfg``'s route (None: when
+    no ``trajectory`` is given; True for a trajectory planned from ``cfg``, e.g. ``plan_mission(cfg)``; False for a
+    replayed one, or when the caller said it already).
     """
     check_policy_context(cfg, policy)
     if warn and charge:   # (pads never energised: neither the link nor the pads matter)
-        warn_setup(cfg, policy, own_route=trajectory is None)
+        warn_setup(cfg, policy, own_route=trajectory is None if own_route is None else bool(own_route))
     try:
         res = _run_mission(cfg, policy, trajectory, charge, progress, compiled, frame, sink)
         bad = [k for k, v in res.summary.items() if isinstance(v, float) and not np.isfinite(v)]

@@ -24,7 +24,7 @@ import numpy as np
 from .trajectory import propulsion_from
 
 __all__ = ["MissionSamples", "SampleChunk", "SAMPLE_CHUNK", "ENERGISE_PHASES", "gradient_rows", "pad_offsets",
-           "lm_along"]
+           "near_pad", "lm_along"]
 
 #: trajectory samples per chunk of per-sample arrays (~5 MB of them; the planning temporaries of a block, ~300 B a sample, dominate)
 SAMPLE_CHUNK = 1 << 16
@@ -100,14 +100,23 @@ def pad_offsets(cfg, pos_m):
     return pos_m - pads[idx], idx
 
 
+def near_pad(model, off) -> np.ndarray:
+    """Which receivers at offsets ``off`` (N, 3) from their nearest pad (:func:`pad_offsets`) are inside the
+    coupling table's range (``model.table_range_m``): the only poses with Lm > 0 (:func:`lm_along`), so the only
+    ones a pad energises (in :data:`ENERGISE_PHASES`). One rule for the run and for
+    :func:`mission_sim.setup_warnings.energised_pads`."""
+    off = np.asarray(off, dtype=float).reshape(-1, 3)
+    rho_max, z_min, z_max = model.table_range_m
+    return (np.hypot(off[:, 0], off[:, 1]) < rho_max) & (off[:, 2] < z_max) & (off[:, 2] > 0.5 * z_min)
+
+
 def lm_along(cfg, model, traj, compiled: bool = False):
     """Lm [H] per sample of ``traj`` (a :class:`~.trajectory.Trajectory` or a chunk of one; 0 away from
     the pads) and the nearest pad's index; the coupling table is always evaluated compiled
     (:mod:`wpt_receiver.coupling_kernel`, its one implementation; ``compiled`` is passed on and ignored)."""
     off, idx = pad_offsets(cfg, traj.pos_m)
     lm = np.zeros(len(traj.pos_m))
-    rho_max, z_min, z_max = model.table_range_m
-    near = (np.hypot(off[:, 0], off[:, 1]) < rho_max) & (off[:, 2] < z_max) & (off[:, 2] > 0.5 * z_min)
+    near = near_pad(model, off)
     if np.any(near):
         lm[near] = model.lm_h(off[near, 0], off[near, 1], off[near, 2], traj.tilt_rad[near],
                               tilt_axis_rad=traj.tilt_axis_rad[near], compiled=compiled)
