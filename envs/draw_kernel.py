@@ -32,7 +32,7 @@ from numba.extending import intrinsic
 from numba.np.random.distributions import random_standard_normal
 from numba.np.random.generator_core import next_double
 
-__all__ = ["bitgen_addresses", "compiled_draws_agree", "Draws", "draw_rows"]
+__all__ = ["bitgen_addresses", "compiled_draws_agree", "Draws", "draw", "draw_rows"]
 
 _BITGEN = types.NumPyRandomBitGeneratorType("bit_generator")
 _CAPSULE_POINTER = ctypes.pythonapi.PyCapsule_GetPointer
@@ -86,7 +86,7 @@ class Draws:
             self._shared = self._addr is not None and len(np.unique(self._addr)) < len(self._addr)
         if self._addr is None:
             return False
-        draw_rows(self._addr, u, noise, 1 if self._shared else n_chunks)
+        draw(self._addr, u, noise, 1 if self._shared else n_chunks)
         return True
 
 
@@ -104,7 +104,7 @@ def compiled_draws_agree() -> bool:
         ours = [np.random.default_rng(s) for s in seeds]
         ref = [np.random.default_rng(s) for s in seeds]
         u, noise = np.empty((2, 12)), np.empty((2, 2000))
-        draw_rows(bitgen_addresses(ours), u, noise, 1)
+        draw(bitgen_addresses(ours), u, noise, 1)
         ru, rn = np.empty_like(u), np.empty_like(noise)
         for i, g in enumerate(ref):
             g.random(out=ru[i])
@@ -168,3 +168,13 @@ def draw_rows(addr, u, noise, n_chunks):
         return
     for c in prange(n_chunks):
         _draw_rows(c * n // n_chunks, (c + 1) * n // n_chunks, addr, u, noise)
+
+
+def draw(addr, u, noise, n_chunks) -> None:
+    """:func:`draw_rows`, or on one chunk its serial loop called directly: a ``parallel=True`` function starts
+    numba's thread pool at its first call even when it runs no ``prange``, and a started pool forbids the fork
+    that ``compare`` runs its MPC in (:mod:`policies.forked`: fork before the first parallel call)."""
+    if n_chunks <= 1:
+        _draw_rows(0, u.shape[0], addr, u, noise)
+    else:
+        draw_rows(addr, u, noise, n_chunks)
