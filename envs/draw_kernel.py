@@ -161,13 +161,10 @@ def _draw_rows(lo, hi, addr, u, noise):
 def draw_rows(addr, u, noise, n_chunks):
     """Window ``i``'s uniform numbers into ``u[i]`` and its standard normals into ``noise[i]``, drawn from the
     generator whose ``bitgen_t`` is at ``addr[i]`` (:func:`bitgen_addresses`), in ``n_chunks`` chunks of
-    windows run in parallel."""
-    n = u.shape[0]
-    if n_chunks <= 1:
-        _draw_rows(0, n, addr, u, noise)
-        return
-    for c in prange(n_chunks):
-        _draw_rows(c * n // n_chunks, (c + 1) * n // n_chunks, addr, u, noise)
+    windows run in parallel (one chunk: the same numbers; :func:`draw` then calls the serial loop itself)."""
+    n, k = u.shape[0], max(n_chunks, 1)
+    for c in prange(k):
+        _draw_rows(c * n // k, (c + 1) * n // k, addr, u, noise)
 
 
 def draw(addr, u, noise, n_chunks) -> None:
