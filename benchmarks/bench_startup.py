@@ -18,12 +18,20 @@ the other), after one untimed warm-up round; median and range, and ``os.getloada
   no ``--link``). Each compare's printed table is hashed (SHA-1) in every run: the report says whether
   every run of every tree printed the same table per link.
 
+With ``--before DIR`` the other tree runs with a disk cache folder of its own (``DRONEWPT_CACHE_DIR``; default a
+folder under the temporary directory named after the tree, ``--before-cache``): ``dronewpt warmup`` removes other
+sources' ahead-of-time mission modules from its cache folder (:func:`mission_sim.world.aot.build`), so two trees
+sharing one folder do not both run without numba. Before anything is timed each tree's ``dronewpt warmup`` runs
+with its own ``PYTHONPATH`` and cache folder (``--no-warmup`` skips it; seconds when the kernels are cached and the
+module built, minutes otherwise), so both run on their ahead-of-time loop.
+
 In process (``--phases``): the mission's and the compare's phases timed with ``time.process_time`` in
 one fresh interpreter each (imports, config, policy, simulation, Parquet, figures; each policy's
 rollout, statistics, frontier).
 
     python benchmarks/bench_startup.py [--repeat 5] [--compare no-mpc|default|none] [--link modal|envelope|both]
-        [--phases] [--json] [--root DIR] [--before DIR] [--pyc DIR|inherit] [--mission-only | --compare-only]
+        [--phases] [--json] [--root DIR] [--before DIR [--before-cache DIR]] [--no-warmup] [--pyc DIR|inherit]
+        [--mission-only | --compare-only]
 """
 
 from __future__ import annotations
@@ -68,6 +76,41 @@ def _run(argv, env) -> tuple[float, float, str]:
     if r.returncode != 0:
         raise SystemExit(f"{' '.join(argv)} failed ({r.returncode}): {r.stderr.decode(errors='replace').strip()[-400:]}")
     return wall, cpu, hashlib.sha1(r.stdout).hexdigest()
+
+
+#: the disk cache variable (:data:`wpt_receiver.diskcache.ENV_VAR`; spelt here: the script imports no tree)
+CACHE_VAR = "DRONEWPT_CACHE_DIR"
+
+
+def before_cache_dir(before: Path) -> Path:
+    """The default disk cache folder of the ``--before`` tree: one per tree (its name and a hash of its path) under
+    the temporary directory, never the measured tree's (a ``warmup`` there would remove the other's modules)."""
+    tree = before.resolve()
+    return Path(tempfile.gettempdir()) / "dronewpt-bench-cache" / f"{tree.name}-{hashlib.sha1(str(tree).encode()).hexdigest()[:10]}"
+
+
+def _tree_envs(env: dict, before: Path, before_cache: Path | None) -> dict:
+    """The ``--before`` tree's environment: ``env`` with its ``PYTHONPATH`` and a cache folder of its own."""
+    cache = Path(before_cache) if before_cache is not None else before_cache_dir(before)
+    own = env.get(CACHE_VAR)
+    if own is not None and own != "" and Path(own).resolve() == cache.resolve():
+        raise SystemExit(f"--before-cache {str(cache)!r} is the measured tree's {CACHE_VAR}; valid: another folder "
+                         "(a warmup removes the other tree's ahead-of-time module from a shared folder)")
+    return {**env, "PYTHONPATH": str(before.resolve()), CACHE_VAR: str(cache)}
+
+
+def _warm(env: dict) -> float:
+    """``dronewpt warmup`` of the tree and cache folder of ``env`` (its kernels in numba's cache, its mission loop
+    built ahead of time); its wall time [s]."""
+    t0 = time.perf_counter()
+    r = subprocess.run([*_console_script(), "warmup"], cwd=env["PYTHONPATH"], env=env, stdout=subprocess.PIPE,
+                       stderr=subprocess.STDOUT, text=True)
+    if r.returncode != 0:
+        raise SystemExit(f"dronewpt warmup of {env['PYTHONPATH']} failed ({r.returncode}): {r.stdout.strip()[-400:]}")
+    if any("built ahead of time" in line and "): failed" in line for line in r.stdout.splitlines()):
+        print(f"warning: {env['PYTHONPATH']}: the ahead-of-time build failed; that tree runs on numba's JIT",
+              file=sys.stderr)
+    return time.perf_counter() - t0
 
 
 def _commands(tmp: str, compare: str, links=(None,)) -> dict:
@@ -135,15 +178,22 @@ def _by_link(cmds: dict) -> list[list[str]]:
 
 
 def end_to_end(repeat: int = 5, compare: str = "no-mpc", before: Path | None = None, pyc: str | None = None,
-               mission_only: bool = False, links=(None,), compare_only: bool = False) -> dict:
+               mission_only: bool = False, links=(None,), compare_only: bool = False, warm: bool = False,
+               before_cache: Path | None = None) -> dict:
+    """``warm``: each tree's ``dronewpt warmup`` first (its own cache folder, :func:`_tree_envs`)."""
     env = _bytecode_env({**os.environ, "PYTHONPATH": str(ROOT)}, pyc)
     envs = {}
+    before_env = None if before is None else _tree_envs(env, before, before_cache)
+    warmed = {}
+    if warm:
+        for e in (env, *([before_env] if before_env is not None else [])):
+            warmed[e["PYTHONPATH"]] = {"cache": e.get(CACHE_VAR, "(default)"), "warmup_wall_s": _warm(e)}
     with tempfile.TemporaryDirectory() as tmp:
         cmds = _pick(_commands(tmp, compare, links), mission_only, compare_only)
         if before is not None:   # the same mission and compare commands on another tree, interleaved with these
             for name in [k for k in cmds if k.startswith(("dronewpt mission", "dronewpt compare")) and "new path" not in k]:
                 cmds[f"{name} (before: {before.name})"] = [a.replace(f"{tmp}/", f"{tmp}/before-") for a in cmds[name]]
-                envs[f"{name} (before: {before.name})"] = {**env, "PYTHONPATH": str(before.resolve())}
+                envs[f"{name} (before: {before.name})"] = before_env
         seed = 1000 + int(time.time()) % 100_000 * 100   # new paths: seeds not flown before
         for name, argv in cmds.items():   # warm-up: .pyc, numba's cache, coupling table, Lm of the default path
             _run(_expand(argv, seed), envs.get(name, env))
@@ -157,7 +207,10 @@ def end_to_end(repeat: int = 5, compare: str = "no-mpc", before: Path | None = N
                     res[name][1].append(c)
                     res[name][2].add(h)
         load1 = os.getloadavg()
-    out = {"load_before": load0, "load_after": load1, "console_script": _console_script()[0], "pyc": pyc}
+    out = {"load_before": load0, "load_after": load1, "console_script": _console_script()[0], "pyc": pyc,
+           "caches": {env["PYTHONPATH"]: env.get(CACHE_VAR, "(default)"),
+                      **({before_env["PYTHONPATH"]: before_env[CACHE_VAR]} if before_env is not None else {})},
+           "warmed": warmed}
     for name, (w, c, h) in res.items():
         out[name] = {"median_s": statistics.median(w), "min_s": min(w), "max_s": max(w), "n": len(w),
                      "cpu_median_s": statistics.median(c), "cpu_min_s": min(c), "cpu_max_s": max(c), "stdout_sha1": sorted(h)}
@@ -246,11 +299,14 @@ def phases(policies: str = NO_MPC + ",ppo_lagrangian,residual") -> dict:
 def _print(r: dict) -> None:
     print(f"end to end ({r['console_script']}); load average (1 min) before {r['load_before'][0]:.2f}, "
           f"after {r['load_after'][0]:.2f}; bytecode cache: {r.get('pyc') or 'as inherited'}")
+    for tree, cache in r.get("caches", {}).items():
+        w = r.get("warmed", {}).get(tree)
+        print(f"  tree {tree}: cache {cache}" + (f"; warmed ({w['warmup_wall_s']:.1f} s)" if w else "; not warmed here"))
     base = r["python -c pass"]["median_s"]
     goals = {"dronewpt mission": "goal <= 1.0 s", "dronewpt compare (default)": "goal <= 2.5 s",
              "dronewpt compare (no-mpc)": "goal <= 2.5 s (without mpc)"}
     for name, s in r.items():
-        if not isinstance(s, dict):
+        if not isinstance(s, dict) or name in ("caches", "warmed"):
             continue
         key = name.split(" (before:")[0].split(", --link")[0]
         goal = goals.get(key + ")" if key.startswith("dronewpt compare (") and not key.endswith(")") else key, "")
@@ -274,6 +330,12 @@ def main(argv=None):
     ap.add_argument("--pyc", default=os.path.join(tempfile.gettempdir(), "dronewpt-bench-pyc"), metavar="DIR",
                     help="bytecode cache of the measured processes (PYTHONPYCACHEPREFIX; a user's install has its "
                          ".pyc files): default %(default)s; 'inherit' leaves the environment as it is")
+    ap.add_argument("--before-cache", type=Path, default=None, metavar="DIR",
+                    help="disk cache folder (DRONEWPT_CACHE_DIR) of the --before tree; default one per tree under "
+                         "the temporary directory (never the measured tree's: a warmup removes other sources' "
+                         "ahead-of-time modules from its folder)")
+    ap.add_argument("--no-warmup", action="store_true", help="do not run each tree's `dronewpt warmup` (its own "
+                    "cache folder) before timing")
     only = ap.add_mutually_exclusive_group()
     only.add_argument("--mission-only", action="store_true", help="only python -c pass and the two mission commands")
     only.add_argument("--compare-only", action="store_true", help="only python -c pass and the compare command(s)")
@@ -285,7 +347,8 @@ def main(argv=None):
         ROOT = a.root.resolve()
     links = (None,) if a.link is None else ("modal", "envelope") if a.link == "both" else (a.link,)
     r = {"end_to_end": end_to_end(a.repeat, a.compare, a.before, None if a.pyc == "inherit" else a.pyc,
-                                  a.mission_only, links, a.compare_only)}
+                                  a.mission_only, links, a.compare_only, warm=not a.no_warmup,
+                                  before_cache=a.before_cache)}
     if a.phases:
         r["in_process"] = phases()
         r["in_process_load"] = os.getloadavg()

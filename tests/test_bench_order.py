@@ -28,3 +28,39 @@ def test_each_link_is_timed_in_its_own_rounds_and_every_tree_alternates(monkeypa
     assert trees == [str(ROOT), str(tmp_path.resolve())] * 3      # the two trees alternate within a link's rounds
     assert r["dronewpt compare (default, --link envelope)"]["n"] == 3
     assert r["dronewpt compare (default, --link envelope)"]["same_table_as_before"] is True
+
+
+def test_the_before_tree_has_its_own_cache_folder_and_both_trees_are_warmed_before_timing(monkeypatch, tmp_path):
+    """``dronewpt warmup`` removes other sources' ahead-of-time mission modules from its cache folder: two trees
+    sharing one would not both run without numba. Each tree gets its own ``DRONEWPT_CACHE_DIR`` and its warmup (with
+    that folder and its own ``PYTHONPATH``) runs before the first timed command."""
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    import bench_startup
+
+    events = []
+
+    def fake_run(argv, env):
+        events.append(("run", env["PYTHONPATH"], env.get("DRONEWPT_CACHE_DIR")))
+        return 1.0, 1.0, "same"
+
+    def fake_warm(env):
+        events.append(("warmup", env["PYTHONPATH"], env.get("DRONEWPT_CACHE_DIR")))
+        return 2.0
+
+    monkeypatch.setattr(bench_startup, "_run", fake_run)
+    monkeypatch.setattr(bench_startup, "_warm", fake_warm)
+    own = tmp_path / "own-cache"
+    monkeypatch.setenv("DRONEWPT_CACHE_DIR", str(own))
+    peer = tmp_path / "peer"
+    peer.mkdir()
+    r = bench_startup.end_to_end(repeat=2, compare="none", before=peer, mission_only=True, warm=True)
+    assert [e[0] for e in events[:2]] == ["warmup", "warmup"] and all(e[0] == "run" for e in events[2:])
+    caches = {tree: cache for _, tree, cache in events}
+    assert caches == {str(ROOT): str(own), str(peer.resolve()): str(bench_startup.before_cache_dir(peer))}
+    assert len(set(caches.values())) == 2
+    assert {(tree, cache) for _, tree, cache in events[2:]} == {(t, c) for _, t, c in events[:2]}  # runs as warmed
+    assert r["caches"] == caches and set(r["warmed"]) == set(caches)
+    # a --before-cache equal to the measured tree's folder is refused
+    import pytest
+    with pytest.raises(SystemExit, match="--before-cache"):
+        bench_startup.end_to_end(repeat=1, compare="none", before=peer, mission_only=True, before_cache=own)
