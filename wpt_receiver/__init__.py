@@ -33,6 +33,7 @@ Depends on nothing else of dronewpt. Modules, in the order data flows:
 ``detuning``            C1 / C2 off resonance: overshoot table of the controllers
 ``c_export``            the controller (Fig. 5) as generated C99 for a DSP, test vectors, op count
 ``tolerance``           component-tolerance draws: RM steady state and transient peaks (complex envelope)
+``rm_state``            the complex envelope's RM steady state in closed form (``tolerance``'s, re-exported there)
 ``tolerance_kernel``    the tolerance transient compiled with numba (imported on demand)
 ======================  =====================================================================
 """

@@ -10,14 +10,17 @@ Failing to write (read-only home, full disk) only costs the rebuild next time.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
+import re
+import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["cache_dir", "key_digest", "load", "store", "prune"]
+__all__ = ["cache_dir", "key_digest", "load", "store", "prune", "installed_version"]
 
 ENV_VAR = "DRONEWPT_CACHE_DIR"
 
@@ -108,3 +111,36 @@ def prune(name: str, keep: int) -> int:
         except OSError:
             pass
     return max(0, len(entries) - keep)
+
+
+def installed_version(package: str) -> str | None:
+    """``package``'s installed version for a cache key, without importing the package or :mod:`importlib.metadata`
+    (whose import, ~15 ms with the email parser it loads, was most of a key's cost): the version in the name of its
+    ``NAME-VERSION.dist-info`` folder in the first ``sys.path`` entry that has one (the order in which
+    ``importlib.metadata`` looks; pip names the folder after the name and version of its ``METADATA``), or None
+    (not installed as a distribution: the caller falls back to the package's own ``__version__`` or metadata)."""
+    return _dist_info_versions().get(_normalised(package))
+
+
+def _normalised(name: str) -> str:
+    """A distribution's name as its ``.dist-info`` folder spells it (lower case, each run of ``-``, ``_``, ``.`` one
+    ``_``: PEP 503's normalisation with the wheel spec's escaping)."""
+    return re.sub(r"[-_.]+", "_", name).lower()
+
+
+@functools.lru_cache(maxsize=1)
+def _dist_info_versions() -> dict[str, str]:
+    """Normalised distribution name -> version from the ``.dist-info`` folders of the ``sys.path`` entries (the
+    first entry's winning), read once per process."""
+    out: dict[str, str] = {}
+    for entry in sys.path:
+        try:
+            with os.scandir(entry or ".") as it:
+                names = sorted(e.name for e in it if e.name.endswith(".dist-info"))
+        except OSError:   # a zip file, a missing folder
+            continue
+        for n in names:
+            name, sep, version = n[:-len(".dist-info")].partition("-")
+            if sep and version:
+                out.setdefault(_normalised(name), version)
+    return out

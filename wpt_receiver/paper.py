@@ -96,9 +96,9 @@ MODAL_MIN_VOLTAGE_RATIO = 0.25
 def rm_emf_margin(params: LinkParams) -> float:
     """``w Lm V1 / (R1 (4/pi) VL)`` [-]: eq. 4's V2 that holds I2 at 0 (the rectifier blocks) over the RM clamp
     ``(4/pi) VL``. Below 1 the tuned link cannot conduct in RM; ``1/M`` is about the share of V1 lost on R1.
-    Table I: 30.9. The tuned, ideal-device case of :func:`wpt_receiver.tolerance.rm_steady`'s ``clamp_margin``
-    (computed there: one source for both)."""
-    from .tolerance import rm_steady
+    Table I: 30.9. The tuned, ideal-device case of :func:`wpt_receiver.rm_state.rm_steady`'s ``clamp_margin``
+    (computed there: one source for both; that module alone, not the tolerance study that re-exports it)."""
+    from .rm_state import rm_steady
     return float(rm_steady(params, None, None)["clamp_margin"])
 
 
