@@ -203,14 +203,10 @@ def coil_self_h(coil: CoilGeometry) -> float:
 
 def _code_key() -> str:
     """This module's source hash and the numpy/scipy versions (part of every disk-cache key). scipy's version comes
-    from its ``.dist-info`` folder (:func:`.diskcache.installed_version`, the same string): its top-level import,
-    10-15 ms, was the only use of scipy in a mission with a cached table (before the figure worker's fork)."""
+    from its ``.dist-info`` folder (:func:`.diskcache.package_version`, the same string): its top-level import,
+    ~10 ms, came before the figure worker's fork in every mission (the table cached, scipy was not needed)."""
     src = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
-    scipy_version = diskcache.installed_version("scipy")
-    if scipy_version is None:   # not installed as a distribution (a source build on the path): ask the package
-        import scipy
-        scipy_version = scipy.__version__
-    return f"src={src} numpy={np.__version__} scipy={scipy_version}"
+    return f"src={src} numpy={np.__version__} scipy={diskcache.package_version('scipy')}"
 
 
 def _coil_self_h_cached(coil: CoilGeometry) -> float:

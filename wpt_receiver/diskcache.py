@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["cache_dir", "key_digest", "load", "store", "prune", "installed_version"]
+__all__ = ["cache_dir", "key_digest", "load", "store", "prune", "installed_version", "package_version"]
 
 ENV_VAR = "DRONEWPT_CACHE_DIR"
 
@@ -120,6 +120,16 @@ def installed_version(package: str) -> str | None:
     ``importlib.metadata`` looks; pip names the folder after the name and version of its ``METADATA``), or None
     (not installed as a distribution: the caller falls back to the package's own ``__version__`` or metadata)."""
     return _dist_info_versions().get(_normalised(package))
+
+
+def package_version(package: str) -> str:
+    """``package``'s version for a cache key: :func:`installed_version`, else (not installed as a distribution, e.g. a
+    source build on the path) the imported package's ``__version__``."""
+    found = installed_version(package)
+    if found is None:
+        import importlib
+        found = str(importlib.import_module(package).__version__)
+    return found
 
 
 def _normalised(name: str) -> str:

@@ -71,10 +71,11 @@ _ZOH_MEMO: dict = {}
 
 
 def _zoh_key(a: np.ndarray, b: np.ndarray, dt_s: float) -> str:
-    import scipy  # the top-level package only (cheap)
-
+    """The disk-cache key of a ZOH (scipy's version from its ``.dist-info`` folder, the same string as
+    ``scipy.__version__``: :func:`.diskcache.package_version`; importing scipy for it cost a mission ~10 ms)."""
+    from .diskcache import package_version
     return (f"zoh v1 a{a.shape}={a.tobytes().hex()} b{b.shape}={b.tobytes().hex()} dt={float(dt_s).hex()} "
-            f"scipy={scipy.__version__}")
+            f"scipy={package_version('scipy')}")
 
 
 def ss2tf(a, b, c, d):
