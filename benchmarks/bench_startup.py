@@ -18,8 +18,9 @@ the other), after one untimed warm-up round; median and range, and ``os.getloada
   no ``--link``). Each compare's printed table is hashed (SHA-1) in every run: the report says whether
   every run of every tree printed the same table per link.
 
-With ``--before DIR`` the other tree runs with a disk cache folder of its own (``DRONEWPT_CACHE_DIR``; default a
-folder under the temporary directory named after the tree, ``--before-cache``): ``dronewpt warmup`` removes other
+Each tree runs with a disk cache folder of its own (``DRONEWPT_CACHE_DIR``): the measured tree with the one in the
+environment, else a folder under the temporary directory named after the tree; a ``--before DIR`` tree with
+``--before-cache`` or such a folder of its own: ``dronewpt warmup`` removes other
 sources' ahead-of-time mission modules from its cache folder (:func:`mission_sim.world.aot.build`), so two trees
 sharing one folder do not both run without numba. Before anything is timed each tree's ``dronewpt warmup`` runs
 with its own ``PYTHONPATH`` and cache folder (``--no-warmup`` skips it; seconds when the kernels are cached and the
@@ -82,16 +83,17 @@ def _run(argv, env) -> tuple[float, float, str]:
 CACHE_VAR = "DRONEWPT_CACHE_DIR"
 
 
-def before_cache_dir(before: Path) -> Path:
-    """The default disk cache folder of the ``--before`` tree: one per tree (its name and a hash of its path) under
-    the temporary directory, never the measured tree's (a ``warmup`` there would remove the other's modules)."""
-    tree = before.resolve()
+def tree_cache_dir(tree: Path) -> Path:
+    """The default disk cache folder of a measured tree: one per tree (its name and a hash of its path) under the
+    temporary directory (the ``--before`` tree's, and the measured tree's when ``DRONEWPT_CACHE_DIR`` is not set: a
+    warmup in the user's shared default folder would remove other trees' ahead-of-time modules there)."""
+    tree = tree.resolve()
     return Path(tempfile.gettempdir()) / "dronewpt-bench-cache" / f"{tree.name}-{hashlib.sha1(str(tree).encode()).hexdigest()[:10]}"
 
 
 def _tree_envs(env: dict, before: Path, before_cache: Path | None) -> dict:
     """The ``--before`` tree's environment: ``env`` with its ``PYTHONPATH`` and a cache folder of its own."""
-    cache = Path(before_cache) if before_cache is not None else before_cache_dir(before)
+    cache = Path(before_cache) if before_cache is not None else tree_cache_dir(before)
     own = env.get(CACHE_VAR)
     if own is not None and own != "" and Path(own).resolve() == cache.resolve():
         raise SystemExit(f"--before-cache {str(cache)!r} is the measured tree's {CACHE_VAR}; valid: another folder "
@@ -180,14 +182,17 @@ def _by_link(cmds: dict) -> list[list[str]]:
 def end_to_end(repeat: int = 5, compare: str = "no-mpc", before: Path | None = None, pyc: str | None = None,
                mission_only: bool = False, links=(None,), compare_only: bool = False, warm: bool = False,
                before_cache: Path | None = None) -> dict:
-    """``warm``: each tree's ``dronewpt warmup`` first (its own cache folder, :func:`_tree_envs`)."""
+    """``warm``: each tree's ``dronewpt warmup`` first (its own cache folder: ``$DRONEWPT_CACHE_DIR`` or
+    :func:`tree_cache_dir` for this tree, :func:`_tree_envs` for the ``--before`` tree)."""
     env = _bytecode_env({**os.environ, "PYTHONPATH": str(ROOT)}, pyc)
+    if env.get(CACHE_VAR) is None:   # its own folder, as the --before tree's (an empty value: the cache off, kept)
+        env[CACHE_VAR] = str(tree_cache_dir(ROOT))
     envs = {}
     before_env = None if before is None else _tree_envs(env, before, before_cache)
     warmed = {}
     if warm:
         for e in (env, *([before_env] if before_env is not None else [])):
-            warmed[e["PYTHONPATH"]] = {"cache": e.get(CACHE_VAR, "(default)"), "warmup_wall_s": _warm(e)}
+            warmed[e["PYTHONPATH"]] = {"cache": e[CACHE_VAR], "warmup_wall_s": _warm(e)}
     with tempfile.TemporaryDirectory() as tmp:
         cmds = _pick(_commands(tmp, compare, links), mission_only, compare_only)
         if before is not None:   # the same mission and compare commands on another tree, interleaved with these
@@ -208,7 +213,7 @@ def end_to_end(repeat: int = 5, compare: str = "no-mpc", before: Path | None = N
                     res[name][2].add(h)
         load1 = os.getloadavg()
     out = {"load_before": load0, "load_after": load1, "console_script": _console_script()[0], "pyc": pyc,
-           "caches": {env["PYTHONPATH"]: env.get(CACHE_VAR, "(default)"),
+           "caches": {env["PYTHONPATH"]: env[CACHE_VAR],
                       **({before_env["PYTHONPATH"]: before_env[CACHE_VAR]} if before_env is not None else {})},
            "warmed": warmed}
     for name, (w, c, h) in res.items():

@@ -56,7 +56,7 @@ def test_the_before_tree_has_its_own_cache_folder_and_both_trees_are_warmed_befo
     r = bench_startup.end_to_end(repeat=2, compare="none", before=peer, mission_only=True, warm=True)
     assert [e[0] for e in events[:2]] == ["warmup", "warmup"] and all(e[0] == "run" for e in events[2:])
     caches = {tree: cache for _, tree, cache in events}
-    assert caches == {str(ROOT): str(own), str(peer.resolve()): str(bench_startup.before_cache_dir(peer))}
+    assert caches == {str(ROOT): str(own), str(peer.resolve()): str(bench_startup.tree_cache_dir(peer))}
     assert len(set(caches.values())) == 2
     assert {(tree, cache) for _, tree, cache in events[2:]} == {(t, c) for _, t, c in events[:2]}  # runs as warmed
     assert r["caches"] == caches and set(r["warmed"]) == set(caches)
@@ -64,3 +64,21 @@ def test_the_before_tree_has_its_own_cache_folder_and_both_trees_are_warmed_befo
     import pytest
     with pytest.raises(SystemExit, match="--before-cache"):
         bench_startup.end_to_end(repeat=1, compare="none", before=peer, mission_only=True, before_cache=own)
+
+
+def test_without_a_cache_variable_the_measured_tree_gets_its_own_folder_too(monkeypatch, tmp_path):
+    """No ``DRONEWPT_CACHE_DIR``: the measured tree's warmup does not go to the user's shared default folder (where it
+    would remove other trees' ahead-of-time modules) but to a folder of its own, as the ``--before`` tree's."""
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    import bench_startup
+
+    seen = {}
+    monkeypatch.setattr(bench_startup, "_run", lambda argv, env: (1.0, 1.0, "same"))
+    monkeypatch.setattr(bench_startup, "_warm", lambda env: seen.setdefault(env["PYTHONPATH"], env["DRONEWPT_CACHE_DIR"]) and 0.0)
+    monkeypatch.delenv("DRONEWPT_CACHE_DIR", raising=False)
+    peer = tmp_path / "peer"
+    peer.mkdir()
+    bench_startup.end_to_end(repeat=1, compare="none", before=peer, mission_only=True, warm=True)
+    assert seen == {str(ROOT): str(bench_startup.tree_cache_dir(ROOT)), str(peer.resolve()): str(bench_startup.tree_cache_dir(peer))}
+    assert seen[str(ROOT)] != seen[str(peer.resolve())]
+
