@@ -88,7 +88,8 @@ def tree_cache_dir(tree: Path) -> Path:
     temporary directory (the ``--before`` tree's, and the measured tree's when ``DRONEWPT_CACHE_DIR`` is not set: a
     warmup in the user's shared default folder would remove other trees' ahead-of-time modules there)."""
     tree = tree.resolve()
-    return Path(tempfile.gettempdir()) / "dronewpt-bench-cache" / f"{tree.name}-{hashlib.sha1(str(tree).encode()).hexdigest()[:10]}"
+    digest = hashlib.sha1(str(tree).encode()).hexdigest()[:10]
+    return Path(tempfile.gettempdir()) / "dronewpt-bench-cache" / f"{tree.name}-{digest}"
 
 
 def _tree_envs(env: dict, before: Path, before_cache: Path | None) -> dict:

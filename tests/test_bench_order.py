@@ -74,11 +74,13 @@ def test_without_a_cache_variable_the_measured_tree_gets_its_own_folder_too(monk
 
     seen = {}
     monkeypatch.setattr(bench_startup, "_run", lambda argv, env: (1.0, 1.0, "same"))
-    monkeypatch.setattr(bench_startup, "_warm", lambda env: seen.setdefault(env["PYTHONPATH"], env["DRONEWPT_CACHE_DIR"]) and 0.0)
+    monkeypatch.setattr(bench_startup, "_warm",
+                        lambda env: seen.setdefault(env["PYTHONPATH"], env["DRONEWPT_CACHE_DIR"]) and 0.0)
     monkeypatch.delenv("DRONEWPT_CACHE_DIR", raising=False)
     peer = tmp_path / "peer"
     peer.mkdir()
     bench_startup.end_to_end(repeat=1, compare="none", before=peer, mission_only=True, warm=True)
-    assert seen == {str(ROOT): str(bench_startup.tree_cache_dir(ROOT)), str(peer.resolve()): str(bench_startup.tree_cache_dir(peer))}
+    assert seen == {str(ROOT): str(bench_startup.tree_cache_dir(ROOT)),
+                    str(peer.resolve()): str(bench_startup.tree_cache_dir(peer))}
     assert seen[str(ROOT)] != seen[str(peer.resolve())]
 

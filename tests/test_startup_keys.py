@@ -1,8 +1,9 @@
-"""The cache keys a ``dronewpt mission`` computes at start-up (the ahead-of-time loop's, :func:`mission_sim.world.aot
-.build_key`; the coupling table's, ``wpt_receiver.coupling._code_key``; a ZOH's, ``wpt_receiver.lti._zoh_key``) read
-the installed versions of numba, llvmlite, numpy and scipy from their ``.dist-info`` folders: the same strings as ``importlib.metadata`` and
-``scipy.__version__`` gave, without importing ``importlib.metadata`` (~15 ms with the email parser) or scipy
-(~10 ms), which the mission otherwise never loads (docs/performance.md, "Setup warnings and start-up keys")."""
+"""The cache keys a ``dronewpt mission`` computes at start-up (the ahead-of-time loop's,
+:func:`mission_sim.world.aot.build_key`; the coupling table's, ``wpt_receiver.coupling._code_key``; a ZOH's,
+``wpt_receiver.lti._zoh_key``) read the installed versions of numba, llvmlite, numpy and scipy from their ``.dist-info``
+folders: the same strings as ``importlib.metadata`` and ``scipy.__version__`` gave, without importing
+``importlib.metadata`` (~15 ms with the email parser) or scipy (~10 ms), which the mission otherwise never loads
+(docs/performance.md, "`dronewpt mission` end to end, seventh pass")."""
 
 from __future__ import annotations
 
@@ -60,7 +61,8 @@ def test_the_first_path_entry_wins_and_names_are_normalised(monkeypatch, tmp_pat
 
 def test_the_keys_import_neither_importlib_metadata_nor_scipy():
     code = ("import sys\nimport numpy as np\nfrom mission_sim.world import aot\n"
-            "from wpt_receiver.coupling import _code_key\nfrom wpt_receiver.lti import _zoh_key\naot.build_key(); _code_key(); _zoh_key(np.eye(1), np.eye(1), 1.0)\n"
+            "from wpt_receiver.coupling import _code_key\nfrom wpt_receiver.lti import _zoh_key\n"
+            "aot.build_key(); _code_key(); _zoh_key(np.eye(1), np.eye(1), 1.0)\n"
             "print('importlib.metadata' in sys.modules, 'scipy' in sys.modules)\n")
     proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
                           capture_output=True, text=True, timeout=120)

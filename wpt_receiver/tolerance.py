@@ -37,7 +37,7 @@ from .devices import IDEAL, DeviceSet
 from .envelope import complex_envelope_matrices
 from .params import TABLE_I, LinkParams
 from .references import reference_duty
-from .rm_state import _folded, rm_steady   # (the RM steady state's one source, re-exported: paper's range check imports it alone)
+from .rm_state import _folded, rm_steady   # (its one source, re-exported; paper imports rm_state alone)
 from .sbar import v2_from_duty
 
 __all__ = ["Spreads", "SCALES", "MIN_CONDUCTION_A", "TRUSTED_POWER_FRAC", "draw_scales", "draw_link", "rm_steady", "TransitionSet", "draw_metrics"]
