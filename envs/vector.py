@@ -99,7 +99,7 @@ class SbarChargingVectorEnv(VectorEnv):
         self._duty_kernel = kernel_function("duty_kernel") if self._compiled else None
         # per-step data stored step-major (T, n): a step reads one contiguous row across the envs
         self.parts = Parts(ScenarioPart(self.scenario, T, c.dt_s, np.zeros((T + 1, n)), np.zeros((T, n)),
-                                        self._fill if self._compiled else None),
+                                        self._fill if self._compiled else None, self._reset_chunks, self._compiled),
                            vector_plant(c, n, self._compiled), ObjectivePart(c, n),
                            ObservationPart(c, n, self._peak, self._compiled, self.history))
         # the compiled step's constants, each part's by name
@@ -117,7 +117,17 @@ class SbarChargingVectorEnv(VectorEnv):
         # auto (num_threads=None, parallel possible): the step times decide between one thread and all
         self._auto = _AutoThreads() if self._threads_auto and self._n_chunks > 1 else None
 
-    def _fill(self, rngs, u, noise) -> bool:
+    def _reset_chunks(self) -> int:
+        """The chunks of an autoreset's compiled parallel parts (draws, command profile): the step's, as the auto
+        threads' probes chose (one until they have); numba's threads set when more than one."""
+        chunks = self._n_chunks
+        if self._auto is not None:
+            chunks = min(chunks, self._auto.best or 1)
+        if chunks > 1:
+            _set_threads(self.num_threads)
+        return chunks
+
+    def _fill(self, rngs, u, noise, scale) -> bool:
         """The scenario's draws (:func:`envs.scenario.draw_episodes`'s ``fill``) compiled, on the step's threads
         when it runs parallel (:mod:`envs.draw_kernel`: the generators' own numbers and end states)."""
         if self._draws is None:
@@ -128,12 +138,7 @@ class SbarChargingVectorEnv(VectorEnv):
                 self._draws = False
         if self._draws is False:
             return False
-        chunks = min(self._n_chunks, len(rngs))
-        if self._auto is not None:   # auto threads: as the step's probes chose (one thread until they have)
-            chunks = min(chunks, self._auto.best or 1)
-        if chunks > 1:
-            _set_threads(self.num_threads)
-        return self._draws(rngs, u, noise, chunks)
+        return self._draws(rngs, u, noise, min(self._reset_chunks(), len(rngs)), scale)
 
     @property
     def state_names(self) -> tuple:
