@@ -67,7 +67,7 @@ class Draws:
     by another Python thread meanwhile."""
 
     def __init__(self):
-        self._bgs, self._addr, self._shared = (), None, False
+        self._bgs, self._ids, self._addr, self._shared = [], [], None, False
 
     def __getstate__(self):
         return {}   # addresses are this process's and these objects': never carried to a copy
@@ -78,11 +78,12 @@ class Draws:
     def __call__(self, rngs, u, noise, n_chunks, scale=1.0) -> bool:
         if not compiled_draws_agree():
             return False
-        if any(type(rng) is not np.random.Generator for rng in rngs):
+        if not set(map(type, rngs)) <= _GENERATOR:   # (C-level loops: faster than a generator expression)
             return False
-        bgs = tuple(map(_BIT_GENERATOR, rngs))
-        if len(bgs) != len(self._bgs) or not all(map(operator.is_, bgs, self._bgs)):
-            self._bgs, self._addr = bgs, bitgen_addresses(rngs)
+        bgs = list(map(_BIT_GENERATOR, rngs))
+        ids = list(map(id, bgs))   # compared by identity (the last ones are held: their ids are not reused)
+        if ids != self._ids:
+            self._bgs, self._ids, self._addr = bgs, ids, bitgen_addresses(rngs)
             self._shared = self._addr is not None and len(np.unique(self._addr)) < len(self._addr)
         if self._addr is None:
             return False
@@ -91,6 +92,7 @@ class Draws:
 
 
 _BIT_GENERATOR = operator.attrgetter("bit_generator")
+_GENERATOR = {np.random.Generator}
 _AGREE: list = []
 
 
