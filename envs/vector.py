@@ -18,8 +18,9 @@ the default (``None``) chooses between one thread and all of numba's by measured
 descheduled threads). Below :attr:`SbarChargingVectorEnv.PARALLEL_MIN_ENVS` sub-environments the step
 always runs on the calling thread (waking a thread pool costs more than it saves there). The
 results do not depend on the threads (each sub-environment's arithmetic is the same in any chunk):
-parallel == serial to the bit. An autoreset's generator draws, command profile and noise store run on
-the calling thread (one generator per sub-environment, in order).
+parallel == serial to the bit. An autoreset's generator draws (one generator per sub-environment,
+:mod:`envs.draw_kernel`) and command profile (:mod:`envs.command_kernel`) run compiled on the step's threads when the
+step runs parallel; its plans (numpy) on the calling thread.
 """
 
 from __future__ import annotations
