@@ -192,7 +192,8 @@ class SbarChargingEnv(gym.Env):
         self._cmd = self._steps[:, 0]   # the command per step [A] (a view)
         plant = single_plant(c, self._compiled)
         observation = SingleObservation(c, self._peak, self._compiled, self.history)
-        self.parts = Parts(ScenarioPart(self.scenario, self._T, self._dt, self._steps[:, :1], self._steps[:-1, 1:]),
+        self.parts = Parts(ScenarioPart(self.scenario, self._T, self._dt, self._steps[:, :1], self._steps[:-1, 1:],
+                                        compiled=self._compiled),
                            plant, SingleObjective(c, plant), observation)
         # the compiled step's constants, each part's by name, then the observation map and the peak table
         vals = {**plant.constants(self._peak), **self.parts.objective.constants()}

@@ -67,7 +67,7 @@ class Draws:
     by another Python thread meanwhile."""
 
     def __init__(self):
-        self._bgs, self._addr, self._shared = (), None, False
+        self._bgs, self._ids, self._addr, self._shared = [], [], None, False
 
     def __getstate__(self):
         return {}   # addresses are this process's and these objects': never carried to a copy
@@ -75,22 +75,24 @@ class Draws:
     def __setstate__(self, state):
         self.__init__()
 
-    def __call__(self, rngs, u, noise, n_chunks) -> bool:
+    def __call__(self, rngs, u, noise, n_chunks, scale=1.0) -> bool:
         if not compiled_draws_agree():
             return False
-        if any(type(rng) is not np.random.Generator for rng in rngs):
+        if not set(map(type, rngs)) <= _GENERATOR:   # (C-level loops: faster than a generator expression)
             return False
-        bgs = tuple(map(_BIT_GENERATOR, rngs))
-        if len(bgs) != len(self._bgs) or not all(map(operator.is_, bgs, self._bgs)):
-            self._bgs, self._addr = bgs, bitgen_addresses(rngs)
+        bgs = list(map(_BIT_GENERATOR, rngs))
+        ids = list(map(id, bgs))   # compared by identity (the last ones are held: their ids are not reused)
+        if ids != self._ids:
+            self._bgs, self._ids, self._addr = bgs, ids, bitgen_addresses(rngs)
             self._shared = self._addr is not None and len(np.unique(self._addr)) < len(self._addr)
         if self._addr is None:
             return False
-        draw(self._addr, u, noise, 1 if self._shared else n_chunks)
+        draw(self._addr, u, noise, 1 if self._shared else n_chunks, scale)
         return True
 
 
 _BIT_GENERATOR = operator.attrgetter("bit_generator")
+_GENERATOR = {np.random.Generator}
 _AGREE: list = []
 
 
@@ -142,7 +144,7 @@ _BLOCK = 16
 
 
 @njit(cache=True)
-def _draw_rows(lo, hi, addr, u, noise):
+def _draw_rows(lo, hi, addr, u, noise, scale):
     buf = np.empty((_BLOCK, noise.shape[1]))
     for b0 in range(lo, hi, _BLOCK):
         b1 = min(b0 + _BLOCK, hi)
@@ -154,24 +156,25 @@ def _draw_rows(lo, hi, addr, u, noise):
                 buf[i - b0, t] = random_standard_normal(bg)
         for t in range(noise.shape[1]):
             for i in range(b0, b1):
-                noise[i, t] = buf[i - b0, t]
+                noise[i, t] = buf[i - b0, t] * scale   # (the store's noise: numpy's normal times the scale)
 
 
 @njit(cache=True, parallel=True)
-def draw_rows(addr, u, noise, n_chunks):
-    """Window ``i``'s uniform numbers into ``u[i]`` and its standard normals into ``noise[i]``, drawn from the
-    generator whose ``bitgen_t`` is at ``addr[i]`` (:func:`bitgen_addresses`), in ``n_chunks`` chunks of
-    windows run in parallel (one chunk: the same numbers; :func:`draw` then calls the serial loop itself)."""
+def draw_rows(addr, u, noise, n_chunks, scale=1.0):
+    """Window ``i``'s uniform numbers into ``u[i]`` and its standard normals times ``scale`` into ``noise[i]``
+    (``x * 1.0`` is ``x``: the normals themselves by default), drawn from the generator whose ``bitgen_t`` is
+    at ``addr[i]`` (:func:`bitgen_addresses`), in ``n_chunks`` chunks of windows run in parallel (one chunk: the
+    same numbers; :func:`draw` then calls the serial loop itself)."""
     n, k = u.shape[0], max(n_chunks, 1)
     for c in prange(k):
-        _draw_rows(c * n // k, (c + 1) * n // k, addr, u, noise)
+        _draw_rows(c * n // k, (c + 1) * n // k, addr, u, noise, scale)
 
 
-def draw(addr, u, noise, n_chunks) -> None:
+def draw(addr, u, noise, n_chunks, scale=1.0) -> None:
     """:func:`draw_rows`, or on one chunk its serial loop called directly: a ``parallel=True`` function starts
     numba's thread pool at its first call even when it runs no ``prange``, and a started pool forbids the fork
     that ``compare`` runs its MPC in (:mod:`policies.forked`: fork before the first parallel call)."""
     if n_chunks <= 1:
-        _draw_rows(0, u.shape[0], addr, u, noise)
+        _draw_rows(0, u.shape[0], addr, u, noise, float(scale))
     else:
-        draw_rows(addr, u, noise, n_chunks)
+        draw_rows(addr, u, noise, n_chunks, float(scale))

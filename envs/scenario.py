@@ -312,15 +312,16 @@ DRAWS = (_Field("soc", "soc0"), _Field("lm_scale", "lm_scale"), _Field("wind_spe
          _SenseDelay("sense_delay_steps", "sense_delay"), _Detune())
 
 
-def draw_episodes(rngs, scn: Scenario, n_steps: int, fill=None, noise=None) -> EpisodeDraw:
+def draw_episodes(rngs, scn: Scenario, n_steps: int, fill=None, noise=None, scale: float = 1.0) -> EpisodeDraw:
     """A batched :class:`EpisodeDraw`, episode ``i`` from generator ``rngs[i]``: the :data:`DRAWS` and then the
     scenario's own ``parts``, each filling its named fields (the same numbers as :func:`draw_episode` with each
     generator: ``uniform(lo, hi)`` is ``lo + (hi - lo) u`` of the generator's next double, so one ``random(k)``
     call gives the k scalar draws); two generator calls per episode and the rest on arrays. ``fill(rngs, u,
-    noise)``: draws the generators' numbers into ``u`` and ``noise`` instead of those calls, the same numbers
-    (the vector env's compiled draws, :mod:`envs.draw_kernel`), or returns False to leave them to the calls.
-    ``noise``: the (n, n_steps) array the normals are drawn into (any strides: a store's transposed view), else
-    a new one."""
+    noise, scale)``: draws the generators' numbers into ``u`` and ``noise`` (the normals times ``scale``) instead
+    of those calls, the same numbers (the vector env's compiled draws, :mod:`envs.draw_kernel`), or returns False
+    to leave them to the calls. ``noise``: the (n, n_steps) array the normals are drawn into (any strides: a
+    store's transposed view), else a new one; ``scale``: its normals are multiplied by it (the sensor noise's
+    standard deviation: one product per number, wherever it is taken)."""
     parts = DRAWS + scn.parts
     ranges = [part.ranges(scn) for part in parts]
     flat = [r for rs in ranges for r in rs]
@@ -328,13 +329,13 @@ def draw_episodes(rngs, scn: Scenario, n_steps: int, fill=None, noise=None) -> E
     n = len(rngs)
     u = np.empty((n, drawn[-1] + 1))
     noise = np.empty((n, n_steps)) if noise is None else noise
-    if fill is None or not fill(rngs, u, noise):
+    if fill is None or not fill(rngs, u, noise, scale):
         rows = noise if noise.flags.c_contiguous else np.empty((n, n_steps))   # numpy's out: contiguous
         for i, rng in enumerate(rngs):  # each sub-environment owns its generator: one call per array
             rng.random(out=u[i])
             rng.standard_normal(out=rows[i])
-        if rows is not noise:
-            noise[...] = rows
+        if rows is not noise or scale != 1.0:
+            np.multiply(rows, scale, out=noise)
     cols = [lo + (hi - lo) * u[:, drawn[i]] if hi > lo else np.full(n, float(lo)) for i, (lo, hi) in enumerate(flat)]
     win, at = {}, 0
     for part, rs in zip(parts, ranges):
@@ -351,22 +352,20 @@ def stack_draws(draws) -> EpisodeDraw:
     return EpisodeDraw(**cols, noise=np.stack([d.noise for d in draws]))
 
 
-def command_profile(draws, n_steps: int, dt_s: float, out=None) -> np.ndarray:
+def command_profile(draws, n_steps: int, dt_s: float, out=None, n_chunks: int = 1, compiled: bool = True) -> np.ndarray:
     """Charge command [A] per step, shape (n, n_steps + 1) for a batched draw (or a list of
     draws): cmd0 until t_change, cmd1 until t_stop, then 0 (stop charging -> short mode) to the
     end of the window; the transposed view of a step-major (n_steps + 1, n) array: ``out`` if given (any
     float array of that shape, written in place; the vector env passes its whole C-contiguous store), else a
-    new one."""
+    new one. The arithmetic is :func:`envs.command_kernel.command_rows` (compiled; ``n_chunks > 1``: over the
+    steps in parallel, the same numbers; ``compiled=False``: its source uncompiled)."""
+    from .command_kernel import fill_commands
     b = stack_draws(draws) if isinstance(draws, (list, tuple)) else draws
-    t = (np.arange(n_steps + 1) * dt_s)[:, None]
-    tc, ts = np.reshape(b.t_change_s, (1, -1)), np.reshape(b.t_stop_s, (1, -1))
-    c0, c1 = np.reshape(b.cmd0_a, (1, -1)), np.reshape(b.cmd1_a, (1, -1))
+    tc, ts, c0, c1 = (np.ascontiguousarray(np.reshape(x, -1), dtype=float)
+                      for x in (b.t_change_s, b.t_stop_s, b.cmd0_a, b.cmd1_a))
     if out is None:
-        out = np.empty((n_steps + 1, tc.shape[1]))
-    # np.where(t < tc, c0, np.where(t < ts, c1, 0.0)) without the two full-size temporaries: the same numbers
-    out[...] = 0.0
-    np.copyto(out, c1, where=t < ts)
-    np.copyto(out, c0, where=t < tc)
+        out = np.empty((n_steps + 1, tc.shape[0]))
+    fill_commands(float(dt_s), tc, ts, c0, c1, out, n_chunks, compiled)
     return out.T
 
 
@@ -411,11 +410,14 @@ class ScenarioPart:
 
     KEEP = object()   # reset(options=KEEP): the current scenario (an autoreset)
 
-    def __init__(self, default: Scenario, n_steps: int, dt_s: float, cmd: np.ndarray, noise: np.ndarray, fill=None):
+    def __init__(self, default: Scenario, n_steps: int, dt_s: float, cmd: np.ndarray, noise: np.ndarray, fill=None,
+                 chunks=None, compiled: bool = True):
         self.default = self.current = get_scenario(default)
         self.n_steps, self.dt_s = int(n_steps), float(dt_s)
         self.cmd, self.noise = cmd, noise
         self.fill = fill   # the draws' fill (draw_episodes), None: the generators' own calls
+        self.chunks = chunks   # () -> the parallel chunks of the command profile (threads set); None: one
+        self.compiled = compiled   # False: the command profile's source uncompiled (tests)
 
     def reset(self, rngs, idx, options=KEEP) -> Window:
         """Windows ``idx`` (a slice for all, or indices of the stores' columns) start, drawn with ``rngs``
@@ -424,14 +426,14 @@ class ScenarioPart:
             self.current = scenario_from_options(options, self.default)
         scn, T = self.current, self.n_steps
         full = isinstance(idx, slice)
-        # all windows (the usual autoreset): the normals drawn into the noise store and scaled there, no temporaries
-        draws = draw_episodes(rngs, scn, T, self.fill, noise=self.noise.T if full else None)
+        # the normals drawn times the noise's standard deviation; all windows (the usual autoreset): into the
+        # noise store, and the command into its store, no temporaries
+        draws = draw_episodes(rngs, scn, T, self.fill, noise=self.noise.T if full else None, scale=scn.i2_noise_a)
         n = draws.n
-        cmd = command_profile(draws, T, self.dt_s, out=self.cmd if full else None)
-        if full:
-            noise = np.multiply(self.noise, scn.i2_noise_a, out=self.noise).T
-            draws = replace(draws, noise=None)   # (its normals were scaled in place: the store holds the noise)
-        else:
-            noise = np.multiply(draws.noise.T, np.full(n, scn.i2_noise_a)).T
+        cmd = command_profile(draws, T, self.dt_s, out=self.cmd if full else None,
+                              n_chunks=1 if self.chunks is None else self.chunks(), compiled=self.compiled)
+        noise = draws.noise
+        draws = replace(draws, noise=None)   # (its normals are scaled: the window's noise_a)
+        if not full:
             self.cmd[:, idx], self.noise[:, idx] = cmd.T, noise.T
         return Window(draws, cmd, noise, np.full(n, scn.load_power_w), scn)

@@ -18,8 +18,9 @@ the default (``None``) chooses between one thread and all of numba's by measured
 descheduled threads). Below :attr:`SbarChargingVectorEnv.PARALLEL_MIN_ENVS` sub-environments the step
 always runs on the calling thread (waking a thread pool costs more than it saves there). The
 results do not depend on the threads (each sub-environment's arithmetic is the same in any chunk):
-parallel == serial to the bit. An autoreset's generator draws, command profile and noise store run on
-the calling thread (one generator per sub-environment, in order).
+parallel == serial to the bit. An autoreset's generator draws (one generator per sub-environment,
+:mod:`envs.draw_kernel`) and command profile (:mod:`envs.command_kernel`) run compiled on the step's threads when the
+step runs parallel; its plans (numpy) on the calling thread.
 """
 
 from __future__ import annotations
@@ -99,7 +100,7 @@ class SbarChargingVectorEnv(VectorEnv):
         self._duty_kernel = kernel_function("duty_kernel") if self._compiled else None
         # per-step data stored step-major (T, n): a step reads one contiguous row across the envs
         self.parts = Parts(ScenarioPart(self.scenario, T, c.dt_s, np.zeros((T + 1, n)), np.zeros((T, n)),
-                                        self._fill if self._compiled else None),
+                                        self._fill if self._compiled else None, self._reset_chunks, self._compiled),
                            vector_plant(c, n, self._compiled), ObjectivePart(c, n),
                            ObservationPart(c, n, self._peak, self._compiled, self.history))
         # the compiled step's constants, each part's by name
@@ -117,7 +118,17 @@ class SbarChargingVectorEnv(VectorEnv):
         # auto (num_threads=None, parallel possible): the step times decide between one thread and all
         self._auto = _AutoThreads() if self._threads_auto and self._n_chunks > 1 else None
 
-    def _fill(self, rngs, u, noise) -> bool:
+    def _reset_chunks(self) -> int:
+        """The chunks of an autoreset's compiled parallel parts (draws, command profile): the step's, as the auto
+        threads' probes chose (one until they have); numba's threads set when more than one."""
+        chunks = self._n_chunks
+        if self._auto is not None:
+            chunks = min(chunks, self._auto.best or 1)
+        if chunks > 1:
+            _set_threads(self.num_threads)
+        return chunks
+
+    def _fill(self, rngs, u, noise, scale) -> bool:
         """The scenario's draws (:func:`envs.scenario.draw_episodes`'s ``fill``) compiled, on the step's threads
         when it runs parallel (:mod:`envs.draw_kernel`: the generators' own numbers and end states)."""
         if self._draws is None:
@@ -128,12 +139,7 @@ class SbarChargingVectorEnv(VectorEnv):
                 self._draws = False
         if self._draws is False:
             return False
-        chunks = min(self._n_chunks, len(rngs))
-        if self._auto is not None:   # auto threads: as the step's probes chose (one thread until they have)
-            chunks = min(chunks, self._auto.best or 1)
-        if chunks > 1:
-            _set_threads(self.num_threads)
-        return self._draws(rngs, u, noise, chunks)
+        return self._draws(rngs, u, noise, min(self._reset_chunks(), len(rngs)), scale)
 
     @property
     def state_names(self) -> tuple:
@@ -284,12 +290,32 @@ def _num_threads(num_threads) -> int:
 
 def _set_threads(k: int) -> None:
     """``k`` threads for the parallel step, its chunks handed out one at a time (dynamic schedule:
-    a thread the OS holds back leaves its chunks to the others instead of stalling the step)."""
+    a thread the OS holds back leaves its chunks to the others instead of stalling the step). Once numba's
+    pool runs, its thread-local getters are read without ``numba.get_num_threads``'s launch lock (~1 us each
+    instead of ~3.3; numba's private names, the public calls when they are missing)."""
     import numba
-    if numba.get_num_threads() != k:
+    get_n, get_c = _GETTERS or _getters()
+    if get_n() != k:
         numba.set_num_threads(k)
-    if numba.get_parallel_chunksize() != 1:
+    if get_c() != 1:
         numba.set_parallel_chunksize(1)
+
+
+_GETTERS: list = []
+
+
+def _getters():
+    """numba's getters of the calling thread's thread count and chunk size: the pool's own once it is launched."""
+    import numba
+    try:
+        from numba.np.ufunc import parallel
+        if parallel._is_initialized:
+            _GETTERS[:] = (parallel._get_num_threads, parallel._get_parallel_chunksize)
+            return _GETTERS
+    except (ImportError, AttributeError):
+        _GETTERS[:] = (numba.get_num_threads, numba.get_parallel_chunksize)
+        return _GETTERS
+    return numba.get_num_threads, numba.get_parallel_chunksize   # (launches the pool; looked up again next time)
 
 
 def _numbers(actions) -> np.ndarray:

@@ -180,3 +180,33 @@ def test_the_self_check_falls_back_to_numpy_when_the_compiled_draws_disagree(mon
     monkeypatch.setattr(dk, "_AGREE", [False])
     u, z = np.empty((2, 3)), np.empty((2, 10))
     assert Draws()([np.random.default_rng(0), np.random.default_rng(1)], u, z, 1) is False
+
+
+@pytest.mark.parametrize("chunks", [1, 3])
+def test_the_noise_scale_is_taken_per_number_in_the_draws(chunks):
+    """``scale``: every normal times the sensor noise's standard deviation, the product numpy's multiply gives
+    (the store holds the noise itself; no pass of its own over it), written through a transposed view."""
+    seeds = range(40)
+    mine = [np.random.default_rng(s) for s in seeds]
+    ref = [np.random.default_rng(s) for s in seeds]
+    store = np.empty((300, len(mine)))   # step-major (T, n), as the env's noise store
+    u = np.empty((len(mine), 5))
+    draw_rows(bitgen_addresses(mine), u, store.T, chunks, 0.1)
+    ur, zr = _numpy(ref, 5, 300)
+    assert u.tobytes() == ur.tobytes()
+    assert store.T.tobytes() == np.multiply(zr, 0.1).tobytes()
+    assert not np.array_equal(store.T, zr)
+
+
+def test_draw_episodes_scales_the_noise_alike_with_numpys_calls_and_the_compiled_draws():
+    from envs.scenario import SCENARIOS, draw_episodes
+    scn = SCENARIOS["random"]
+    a = [np.random.default_rng(s) for s in range(9)]
+    b = [np.random.default_rng(s) for s in range(9)]
+    c = [np.random.default_rng(s) for s in range(9)]
+    plain = draw_episodes(a, scn, 50)
+    numpy_scaled = draw_episodes(b, scn, 50, noise=np.empty((50, 9)).T, scale=0.1)   # numpy's calls, strided out
+    compiled = draw_episodes(c, scn, 50, fill=lambda rngs, u, z, s: Draws()(rngs, u, z, 2, s), scale=0.1)
+    assert numpy_scaled.noise.tobytes() == np.multiply(plain.noise, 0.1).tobytes()
+    assert compiled.noise.tobytes() == np.ascontiguousarray(numpy_scaled.noise).tobytes()
+    assert compiled.soc0.tobytes() == plain.soc0.tobytes()
