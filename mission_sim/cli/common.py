@@ -165,13 +165,16 @@ def path_arg(flag: str):
 
 def name_list(text: str, flag: str, valid) -> list[str]:
     """The names of a comma-separated option (``--policies a,b``); ``CliError`` naming ``flag`` when the
-    list is empty (``''``, ``','``) or a name's part before ':' is not in ``valid``."""
+    list is empty (``''``, ``','``), a name's part before ':' is not in ``valid`` or a name is repeated."""
     names = [n.strip() for n in str(text).split(",") if n.strip()]
     if not names:
         raise CliError(f"{flag} {text!r} is empty; valid: comma-separated names out of {', '.join(valid)}")
     for n in names:
         if n.partition(":")[0] not in valid:
             raise CliError(f"{flag} {n!r} is invalid; valid values: {', '.join(valid)}")
+    twice = next((n for i, n in enumerate(names) if n in names[:i]), None)
+    if twice is not None:   # a repeated name ran (and printed) the same rows twice
+        raise CliError(f"{flag} {text!r} names {twice!r} twice; valid: each name once")
     return names
 
 

@@ -289,6 +289,9 @@ def _train_seed_groups(items) -> dict:
             if colon and not hits:
                 raise CliError(f"--train-seeds {sp!r} is invalid: no file matches {path!r}")
             specs += [f"{base}:{h}" for h in hits] if colon else [sp]
+        if label.strip() in out:   # a second group of the same label replaced the first without a word
+            raise CliError(f"--train-seeds {item!r}: label {label.strip()!r} is given twice; valid: one "
+                           "--train-seeds per label (its specs comma-separated)")
         out[label.strip()] = specs
     return out
 
@@ -338,6 +341,11 @@ def _shipped_seed_rows(pols: tuple):
 def _check_compare(args, pols, scns, groups):
     from envs import SCENARIOS
     from policies import available
+    from policies.compare import check_row_labels
+    try:
+        check_row_labels(pols, groups)
+    except ValueError as exc:
+        raise CliError(f"--train-seeds: {exc}" if groups else str(exc)) from None
     for p_ in pols + tuple(sp for specs in groups.values() for sp in specs):
         if p_.split(":", 1)[0] not in available():
             raise CliError(f"--policies {p_!r} is invalid; valid values: {', '.join(available())} (or rl:PATH)")
