@@ -24,6 +24,13 @@ from .common import (
 )
 
 
+#: train's options that have an effect only with another one: {dest: (default, that option)}
+_ONLY_WITH = {"lambda_lr": (50.0, "--lagrangian"), "probe_episodes": (32, "--lagrangian"),
+              "residual_scale": (0.25, "--residual"), "residual_base_budget": (0.0, "--residual"),
+              "dagger": (0, "--imitate"), "imitation_episodes": (64, "--imitate"), "imitation_epochs": (60, "--imitate"),
+              "imitation_mask": ("last_d_short", "--imitate"), "slow_budget_every": ("window", "--slow-budget")}
+
+
 def _add_train(sub):
     p = sub.add_parser("train", help="train an RL mode-switching policy (stable-baselines3)",
                        description="Train PPO or SAC on dronewpt/SbarCharging-v0 or DQN on the discrete "
@@ -55,21 +62,23 @@ def _add_train(sub):
     p.add_argument("--lagrangian", action="store_true", help="learn a multiplier of the episode cost against --budget")
     p.add_argument("--budget", type=float_arg("--budget", positive=True), default=None,
                    help="mean episode cost allowed (default: the ramp policy's on the training scenario)")
-    p.add_argument("--lambda-lr", type=float_arg("--lambda-lr", positive=True), default=50.0,
+    p.add_argument("--lambda-lr", type=float_arg("--lambda-lr", positive=True), default=_ONLY_WITH["lambda_lr"][0],
                    help="multiplier step per rollout at a cost 100 %% over budget (default 50)")
-    p.add_argument("--probe-episodes", type=int, default=32,
+    p.add_argument("--probe-episodes", type=int, default=_ONLY_WITH["probe_episodes"][0],
                    help="deterministic windows the multiplier's cost is measured on after every rollout "
                         "(default 32; 0 = the stochastic rollouts themselves)")
     p.add_argument("--residual", action="store_true", help="learn a bounded correction of the model-based duty")
-    p.add_argument("--residual-scale", type=float_arg("--residual-scale", positive=True, hi=1.0), default=0.25,
+    p.add_argument("--residual-scale", type=float_arg("--residual-scale", positive=True, hi=1.0),
+                   default=_ONLY_WITH["residual_scale"][0],
                    help="largest duty correction (default 0.25)")
-    p.add_argument("--residual-base-budget", type=float_arg("--residual-base-budget"), default=0.0,
+    p.add_argument("--residual-base-budget", type=float_arg("--residual-base-budget"),
+                   default=_ONLY_WITH["residual_base_budget"][0],
                    help="overshoot budget of the model-based controller the residual corrects (default 0: the "
                         "paper's controller)")
     p.add_argument("--slow-budget", default=None, metavar="LO:HI",
                    help="the action is the MPC's measured-overshoot budget in [LO, HI] per control period, the duty "
                         "the MPC's (a slow variable: no dither of the duty; policies.slow_budget), e.g. 0:0.15")
-    p.add_argument("--slow-budget-every", choices=("window", "step"), default="window",
+    p.add_argument("--slow-budget-every", choices=("window", "step"), default=_ONLY_WITH["slow_budget_every"][0],
                    help="with --slow-budget: take the agent's budget once per window at the stop and hold it "
                         "(default) or every control period")
     p.add_argument("--history", type=int, default=1, metavar="K",
@@ -86,11 +95,13 @@ def _add_train(sub):
                         "OUT/ppo_sbar.zip; otherwise the clone is kept as OUT/clone.zip + clone.json, the "
                         "fine-tuned model is OUT/ppo_sbar.zip and starts from the clone's log_std, not "
                         "log_std_init; policies.imitation)")
-    p.add_argument("--dagger", type=int, default=0, metavar="N",
+    p.add_argument("--dagger", type=int, default=_ONLY_WITH["dagger"][0], metavar="N",
                    help="DAgger iterations after behaviour cloning (default 0)")
-    p.add_argument("--imitation-episodes", type=int, default=64, help="windows per imitation iteration (default 64)")
-    p.add_argument("--imitation-epochs", type=int, default=60, help="passes over the data per fit (default 60)")
-    p.add_argument("--imitation-mask", default="last_d_short", metavar="FIELD,...",
+    p.add_argument("--imitation-episodes", type=int, default=_ONLY_WITH["imitation_episodes"][0],
+                   help="windows per imitation iteration (default 64)")
+    p.add_argument("--imitation-epochs", type=int, default=_ONLY_WITH["imitation_epochs"][0],
+                   help="passes over the data per fit (default 60)")
+    p.add_argument("--imitation-mask", default=_ONLY_WITH["imitation_mask"][0], metavar="FIELD,...",
                    help="observation fields hidden from the student (default last_d_short; add i2_amp_a,"
                         "battery_current_a,rect_current_a for a feed-forward student; '' for none)")
     p.add_argument("--eval-every", type=int_in("eval-every", 1), default=50_000,
@@ -192,6 +203,10 @@ def _check_train(args):
                            "--smooth-penalty; valid: --algo ppo / sac / td3 without them (the duty is the MPC's)")
     if args.budget is not None and not args.lagrangian:
         raise CliError("--budget is only used with --lagrangian; add --lagrangian or drop --budget")
+    for dest, (default, needs) in _ONLY_WITH.items():   # given without the option that uses it: ignored before
+        if getattr(args, dest) != default and not getattr(args, needs[2:].replace("-", "_")):
+            flag = "--" + dest.replace("_", "-")
+            raise CliError(f"{flag} is only used with {needs}; add {needs} or drop {flag}")
 
 
 def _cmd_train(args) -> int:
