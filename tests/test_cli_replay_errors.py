@@ -59,3 +59,13 @@ def test_bad_window(capsys):
 ])
 def test_telemetry_bad_input(capsys, argv, needle):
     _one_line_error(capsys, ["telemetry", *argv], needle)
+
+
+def test_reach_without_pads(capsys, tmp_path):
+    """2026-11-27: `replay LOG --reach 10` without --pads replayed the log (exit 0), --reach ignored; a replay study's
+    `reach_m` without `pads` was already refused."""
+    out = tmp_path / "r"
+    err = _one_line_error(capsys, ["replay", str(log_path("dronekit-python_flight.tlog")), "--reach", "10",
+                                   "--out", str(out)])
+    assert err == "dronewpt replay: error: --reach is only used with --pads; add --pads FILE or drop --reach"
+    assert not out.exists()

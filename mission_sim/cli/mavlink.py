@@ -108,7 +108,7 @@ def _add_replay(sub):
     p.add_argument("--pads", type=Path, default=None, metavar="FILE",
                    help="what-if: re-fly the log with charging pads from this CSV (lat,lon[,alt][,hover_time_s]) "
                         "or GeoJSON file, a detour to each, and report the flight time gained (see cli/refly.py)")
-    p.add_argument("--reach", type=float, default=500.0, metavar="M",
+    p.add_argument("--reach", type=float, default=None, metavar="M",
                    help="with --pads: visit only pads within M metres of the airborne track (default 500)")
     add_progress_flag(p)
     _mav_common(p)
@@ -121,6 +121,8 @@ def _cmd_replay(args) -> int:
     from ..mavlink.logs import read_log
     from ..mavlink.replay import parse_window, replay_log, replay_span, track_from_log
     mass_override(args)   # --mass with --set drone.mass_kg: refused before the log is read
+    if args.reach is not None and args.pads is None:   # (it was ignored: a replay without pads visits none)
+        raise CliError("--reach is only used with --pads; add --pads FILE or drop --reach")
     if getattr(args, "pads", None) is not None:  # what-if re-flight with pads: its own module
         from .refly import cmd_refly
         return cmd_refly(args)
