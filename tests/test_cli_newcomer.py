@@ -207,3 +207,17 @@ def test_replay_mass_and_set_mass_conflict(capsys):
     for extra in ([], ["--pads", pads]):
         assert _one_error_line(capsys, ["replay", log, "--mass", "2", "--set", "drone.mass_kg=3", *extra]) == (
             "dronewpt replay: error: --mass 2 and --set drone.mass_kg=3 both set the drone's mass; valid: one of them")
+
+
+# ------------------------------------------------------------------ --dry-run checks what the run checks
+def test_dry_run_refuses_what_the_run_refuses(tmp_path, capsys):
+    """2026-11-27: `mission --dry-run --every -1` and `--dry-run --out FILE` said "config valid" (exit 0) while the
+    run itself refused both; the dry run still creates nothing."""
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    assert _one_error_line(capsys, ["mission", "--dry-run", "--every=-1", "--out", str(tmp_path / "m")]) == (
+        "dronewpt mission: error: --every -1.0 is invalid; valid range: >= 0 s (0: every step)")
+    assert _one_error_line(capsys, ["mission", "--dry-run", "--out", str(afile)]) == (
+        f"dronewpt mission: error: --out {str(afile)!r} is an existing file; valid: a folder (created if missing)")
+    assert main(["mission", "--dry-run", "--every", "0.5", "--out", str(tmp_path / "m")]) == 0
+    assert not (tmp_path / "m").exists() and afile.read_text() == "x"

@@ -10,7 +10,7 @@ from pathlib import Path
 __all__ = ["CliError", "OneLineParser", "float_arg", "positive_float", "finite_float", "nonneg_int", "seed_int",
            "parse_set", "write_mission", "prepare_out_dir", "add_progress_flag", "show_progress", "names_help",
            "lazy_names_help", "policy_names", "scenario_names", "int_in", "max_workers", "path_arg", "name_list",
-           "check_out_file"]
+           "check_out_dir", "check_out_file"]
 
 
 class CliError(Exception):
@@ -204,13 +204,20 @@ def names_help(text: str, names) -> str:
     return f"{text}; one of: {', '.join(names)}"
 
 
+def check_out_dir(path, flag: str = "--out") -> Path:
+    """An output folder's path checked without creating anything (``--dry-run``): ``CliError`` when a file is in
+    its place."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise CliError(f"{flag} {str(path)!r} is an existing file; valid: a folder (created if missing)")
+    return path
+
+
 def prepare_out_dir(path, flag: str = "--out") -> Path:
     """Create the output folder ``path`` now, before any simulation, and check that files can be
     written there; ``CliError`` naming the flag and the path otherwise (a file in its place, no
     permission, a read-only file system)."""
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise CliError(f"{flag} {str(path)!r} is an existing file; valid: a folder (created if missing)")
+    path = check_out_dir(path, flag)
     try:
         path.mkdir(parents=True, exist_ok=True)
         probe = path / f".dronewpt-write-test.{os.getpid()}"
