@@ -9,6 +9,12 @@ from mission_sim.cli import main
 @pytest.mark.parametrize("line, words", [
     ('"mission.hover_tme_s" = [1.0]', ["mission.hover_tme_s", "hover_time_s"]),
     ('policy = ["step", "bang_bang"]', ["bang_bang", "model_based"]),
+    # keys read with the base's mission and pads files: every case ran the same mission (a missing file too)
+    ('"mission.pads_file" = ["/nonexistent.csv", "b.csv"]',
+     ["study key 'mission.pads_file' is invalid", "valid: set it in the [study] base file"]),
+    ('"mission.pad_radius_m" = [1.0, 5.0]', ["study key 'mission.pad_radius_m' is invalid"]),
+    ('"mission.from_log" = ["auto", "flown"]', ["study key 'mission.from_log' is invalid"]),
+    ('"mission.file" = ["a.plan"]', ["study key 'mission.file' is invalid"]),
 ])
 def test_cli_bad_study_for_the_mission_runner_is_one_line_error(tmp_path, capsys, line, words):
     (tmp_path / "s.toml").write_text(f"[grid]\n{line}\n")

@@ -130,6 +130,8 @@ def test_the_log_is_parsed_once_per_process_not_per_case(tmp_path, monkeypatch):
     ('policy = ["step", "bang"]', ["policy='bang'", "model_based"]),
     ('"sim.traj_dt_s" = [0.2, 1e-5]', ["sim.traj_dt_s=1e-05", "valid range"]),
     ('"pads.0.x_m" = [3000.0, 4000.0]\n"pads.1.x_m" = 3000.0', ["2 of 2 cases", "no pad within", "[replay] reach_m"]),
+    # read with the files when the base is loaded: every case re-flew the same pads, even with a missing file
+    ('"mission.pads_file" = ["/nonexistent.csv", "b.csv"]', ["study key 'mission.pads_file' is invalid"]),
 ])
 def test_bad_keys_and_values_are_refused_before_anything_runs(tmp_path, capsys, monkeypatch, grid, words):
     ran = []

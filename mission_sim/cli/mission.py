@@ -8,6 +8,7 @@ import tomllib
 from pathlib import Path
 
 from ..files import folder_lock
+from ..plans import FILE_READ_KEYS
 from ..world.results import depletion_text
 from .common import (
     CliError,
@@ -113,7 +114,7 @@ def _add_mission(sub):
 
 
 #: --set keys read together with the mission file (they decide what is read), not laid over it afterwards
-MISSION_FILE_KEYS = ("mission.file", "mission.pads_file", "mission.from_log", "mission.pad_radius_m")
+MISSION_FILE_KEYS = FILE_READ_KEYS
 
 
 def mission_file_keys(overrides: dict) -> dict:
