@@ -62,23 +62,21 @@ def _add_train(sub):
     p.add_argument("--lagrangian", action="store_true", help="learn a multiplier of the episode cost against --budget")
     p.add_argument("--budget", type=float_arg("--budget", positive=True), default=None,
                    help="mean episode cost allowed (default: the ramp policy's on the training scenario)")
-    p.add_argument("--lambda-lr", type=float_arg("--lambda-lr", positive=True), default=_ONLY_WITH["lambda_lr"][0],
+    p.add_argument("--lambda-lr", type=float_arg("--lambda-lr", positive=True),
                    help="multiplier step per rollout at a cost 100 %% over budget (default 50)")
-    p.add_argument("--probe-episodes", type=int, default=_ONLY_WITH["probe_episodes"][0],
+    p.add_argument("--probe-episodes", type=int,
                    help="deterministic windows the multiplier's cost is measured on after every rollout "
                         "(default 32; 0 = the stochastic rollouts themselves)")
     p.add_argument("--residual", action="store_true", help="learn a bounded correction of the model-based duty")
     p.add_argument("--residual-scale", type=float_arg("--residual-scale", positive=True, hi=1.0),
-                   default=_ONLY_WITH["residual_scale"][0],
                    help="largest duty correction (default 0.25)")
     p.add_argument("--residual-base-budget", type=float_arg("--residual-base-budget"),
-                   default=_ONLY_WITH["residual_base_budget"][0],
                    help="overshoot budget of the model-based controller the residual corrects (default 0: the "
                         "paper's controller)")
     p.add_argument("--slow-budget", default=None, metavar="LO:HI",
                    help="the action is the MPC's measured-overshoot budget in [LO, HI] per control period, the duty "
                         "the MPC's (a slow variable: no dither of the duty; policies.slow_budget), e.g. 0:0.15")
-    p.add_argument("--slow-budget-every", choices=("window", "step"), default=_ONLY_WITH["slow_budget_every"][0],
+    p.add_argument("--slow-budget-every", choices=("window", "step"),
                    help="with --slow-budget: take the agent's budget once per window at the stop and hold it "
                         "(default) or every control period")
     p.add_argument("--history", type=int, default=1, metavar="K",
@@ -95,13 +93,11 @@ def _add_train(sub):
                         "OUT/ppo_sbar.zip; otherwise the clone is kept as OUT/clone.zip + clone.json, the "
                         "fine-tuned model is OUT/ppo_sbar.zip and starts from the clone's log_std, not "
                         "log_std_init; policies.imitation)")
-    p.add_argument("--dagger", type=int, default=_ONLY_WITH["dagger"][0], metavar="N",
+    p.add_argument("--dagger", type=int, metavar="N",
                    help="DAgger iterations after behaviour cloning (default 0)")
-    p.add_argument("--imitation-episodes", type=int, default=_ONLY_WITH["imitation_episodes"][0],
-                   help="windows per imitation iteration (default 64)")
-    p.add_argument("--imitation-epochs", type=int, default=_ONLY_WITH["imitation_epochs"][0],
-                   help="passes over the data per fit (default 60)")
-    p.add_argument("--imitation-mask", default=_ONLY_WITH["imitation_mask"][0], metavar="FIELD,...",
+    p.add_argument("--imitation-episodes", type=int, help="windows per imitation iteration (default 64)")
+    p.add_argument("--imitation-epochs", type=int, help="passes over the data per fit (default 60)")
+    p.add_argument("--imitation-mask", metavar="FIELD,...",
                    help="observation fields hidden from the student (default last_d_short; add i2_amp_a,"
                         "battery_current_a,rect_current_a for a feed-forward student; '' for none)")
     p.add_argument("--eval-every", type=int_in("eval-every", 1), default=50_000,
@@ -113,7 +109,7 @@ def _add_train(sub):
     p.add_argument("--resume", type=path_arg("--resume"), default=None, metavar="CHECKPOINT.zip",
                    help="continue from a checkpoint of checkpoints/ (its VecNormalize statistics next to it)")
     add_progress_flag(p)
-    p.set_defaults(func=_cmd_train)
+    p.set_defaults(func=_cmd_train, **{dest: default for dest, (default, _) in _ONLY_WITH.items()})
 
 
 #: :data:`mission_sim.contract.LINK_MODELS` (not imported: the parser stays free of wpt_receiver's import;
