@@ -69,3 +69,15 @@ def test_reach_without_pads(capsys, tmp_path):
                                    "--out", str(out)])
     assert err == "dronewpt replay: error: --reach is only used with --pads; add --pads FILE or drop --reach"
     assert not out.exists()
+
+
+@pytest.mark.parametrize("key", ["mission.pads_file", "mission.file", "mission.from_log", "mission.pad_radius_m"])
+def test_set_of_a_mission_file_key_is_refused(key, capsys, tmp_path):
+    """2026-11-27: `replay LOG --set mission.pads_file=pads.csv` (instead of --pads) replayed the log about one pad at
+    the take-off spot, exit 0: the key was read, then replaced by the log's route and the replay's pad."""
+    out = tmp_path / "r"
+    err = _one_line_error(capsys, ["replay", str(log_path("dronekit-python_flight.tlog")), "--set", f"{key}=x",
+                                   "--out", str(out)])
+    assert err == (f"dronewpt replay: error: --set {key} is not used by replay: the route is the log's, the pads are "
+                   "--pads FILE (or --pad); valid: drop it (with pads: --pads FILE)")
+    assert not out.exists()

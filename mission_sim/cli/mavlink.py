@@ -123,6 +123,11 @@ def _cmd_replay(args) -> int:
     mass_override(args)   # --mass with --set drone.mass_kg: refused before the log is read
     if args.reach is not None and args.pads is None:   # (it was ignored: a replay without pads visits none)
         raise CliError("--reach is only used with --pads; add --pads FILE or drop --reach")
+    from ..plans import FILE_READ_KEYS
+    unused = [k for k in parse_set(args.set) if k in FILE_READ_KEYS]   # (read, then replaced by the log's route)
+    if unused:
+        raise CliError(f"--set {unused[0]} is not used by replay: the route is the log's, the pads are --pads FILE "
+                       "(or --pad); valid: drop it (with pads: --pads FILE)")
     if getattr(args, "pads", None) is not None:  # what-if re-flight with pads: its own module
         from .refly import cmd_refly
         return cmd_refly(args)
