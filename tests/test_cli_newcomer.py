@@ -221,3 +221,16 @@ def test_dry_run_refuses_what_the_run_refuses(tmp_path, capsys):
         f"dronewpt mission: error: --out {str(afile)!r} is an existing file; valid: a folder (created if missing)")
     assert main(["mission", "--dry-run", "--every", "0.5", "--out", str(tmp_path / "m")]) == 0
     assert not (tmp_path / "m").exists() and afile.read_text() == "x"
+
+
+def test_no_help_text_shows_a_doubled_percent_sign(capsys):
+    """argparse %-formats an option's help but not a command's description: `calibrate --help` printed "the first
+    70 %% of the airborne time" (2026-11-27)."""
+    import pytest
+    commands = ["paper", "coupling", "mission", "replay", "calibrate", "telemetry", "train", "compare", "sweep",
+                "sizing", "tolerance", "netlist", "export-controller", "warmup"]
+    for cmd in commands:
+        with pytest.raises(SystemExit):
+            main([cmd, "--help"])
+        out = capsys.readouterr().out
+        assert out.startswith(f"usage: dronewpt {cmd}") and "%%" not in out, (cmd, out[:200])

@@ -13,7 +13,7 @@ def _add_calibrate(sub):
                        description="Fit the momentum-theory power model's mass, figure of merit, drive efficiency, "
                                    "flat-plate area and avionics power to a log's battery power (V I) against its GPS "
                                    "speed and climb rate: scipy least squares with a robust (soft_l1) loss on the first "
-                                   "70 %% of the airborne time, judged on the last 30 %%. Writes a [drone] TOML that "
+                                   "70 % of the airborne time, judged on the last 30 %. Writes a [drone] TOML that "
                                    "mission / replay / telemetry take with --drone FILE (or a sweep as its base), and "
                                    "a fit report (figure, JSON, samples CSV) beside it.")
     p.add_argument("log", type=path_arg("log"), help="flight log with battery voltage and current: .tlog, .bin or .ulg")
