@@ -234,3 +234,21 @@ def test_no_help_text_shows_a_doubled_percent_sign(capsys):
             main([cmd, "--help"])
         out = capsys.readouterr().out
         assert out.startswith(f"usage: dronewpt {cmd}") and "%%" not in out, (cmd, out[:200])
+
+
+def test_a_key_given_twice_with_different_values_is_refused(tmp_path, capsys):
+    """2026-11-27: `--set drone.mass_kg=1 --set drone.mass_kg=2` (and train's `--env`, paper's `--link`) took the
+    last value without a word; `train --env n_steps` was refused as "--set 'n_steps'". The same value twice is fine."""
+    out = str(tmp_path / "m")
+    assert _one_error_line(capsys, ["mission", "--dry-run", "--out", out, "--set", "drone.mass_kg=1",
+                                    "--set", "drone.mass_kg=2"]) == (
+        "dronewpt mission: error: --set drone.mass_kg is given twice (1 and 2); valid: each key once")
+    assert _one_error_line(capsys, ["train", "--algo", "ppo", "--timesteps", "10", "--out", out, "--env", "n_steps=10",
+                                    "--env", "n_steps=20"]) == (
+        "dronewpt train: error: --env n_steps is given twice (10 and 20); valid: each key once")
+    assert _one_error_line(capsys, ["train", "--algo", "ppo", "--timesteps", "10", "--out", out, "--env", "n_steps"]) == (
+        "dronewpt train: error: --env 'n_steps' is invalid; valid form: KEY=VALUE (e.g. n_steps=200)")
+    assert _one_error_line(capsys, ["paper", "--no-plot", "--link", "lm_h=4e-6", "--link", "lm_h=5e-6"]) == (
+        "dronewpt paper: error: --link lm_h is given twice (4e-06 and 5e-06); valid: each key once")
+    assert main(["mission", "--dry-run", "--out", out, "--set", "drone.mass_kg=1", "--set", "drone.mass_kg=1.0"]) == 0
+    assert not (tmp_path / "m").exists()

@@ -97,18 +97,24 @@ def finite_float(name):
     return float_arg(name)
 
 
-def parse_set(items):
+def parse_set(items, flag: str = "--set"):
+    """``KEY=VALUE`` options (``--set``, train's ``--env``: ``flag``) as a dict, each value read as TOML (else the
+    text); ``CliError`` naming ``flag`` for an item without '=' and for a key given twice with different values."""
     import tomllib
     out = {}
     for item in items or ():
         if "=" not in item:
-            raise CliError(f"--set {item!r} is invalid; valid form: KEY=VALUE (e.g. battery.capacity_ah=2.0)")
+            raise CliError(f"{flag} {item!r} is invalid; valid form: KEY=VALUE (e.g. "
+                           f"{'n_steps=200' if flag == '--env' else 'battery.capacity_ah=2.0'})")
         key, text = item.split("=", 1)
         try:
             value = tomllib.loads(f"v = {text}")["v"]
         except tomllib.TOMLDecodeError:
             value = text
-        out[key.strip()] = value
+        key = key.strip()
+        if key in out and repr(out[key]) != repr(value) and out[key] != value:   # (the last one won without a word)
+            raise CliError(f"{flag} {key} is given twice ({out[key]!r} and {value!r}); valid: each key once")
+        out[key] = value
     return out
 
 

@@ -146,7 +146,7 @@ def _link_name(args) -> str:
 def _env_overrides(items) -> dict:
     from .common import parse_set
     out = {}
-    for k, v in parse_set(items).items():
+    for k, v in parse_set(items, "--env").items():
         if k in ("devices", "link_model") and isinstance(v, str):
             out[k] = v
             continue
