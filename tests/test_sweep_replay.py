@@ -149,6 +149,8 @@ def test_bad_keys_and_values_are_refused_before_anything_runs(tmp_path, capsys, 
     ('log = "."', ["[replay] log", "is a folder"]),
     (f'log = "{LOG}"\npads = "nopads.csv"', ["[replay] pads", "nopads.csv", "does not exist"]),
     (f'log = "{LOG}"\nsegment = 3', ["[replay] segment = 3", "1..2"]),
+    (f'log = "{LOG}"\npads = "{PADS}"\nsegment = 1', ["not airborne", "anywhere in boot segment 1 (window 0..254.433 s)",
+                                                    "valid: a [replay] window = or [replay] segment = in which it flew"]),
     ('pads = "x.csv"', ["[replay] has no log"]),
     (f'log = "{LOG}"\nwindow = [5.0, 1.0]', ["[replay] window", "T0 < T1"]),
     (f'log = "{LOG}"\nlogg = 1', ["[replay] key 'logg' is unknown", "ground_gap_m"]),
@@ -239,7 +241,8 @@ def test_two_local_workers_equal_serial_and_each_parses_the_log_once(tmp_path):
 def test_replay_with_pads_honours_segment(tmp_path, capsys):
     """`replay --pads` flew the whole log whatever --segment said; boot segment 1 of the dronekit log
     (0..254 s) is never armed, so no pad can be reached from it, and segment 3 does not exist."""
-    for seg, words in (("1", ["no pad within --reach"]), ("3", ["--segment 3 is invalid", "1..2"])):
+    for seg, words in (("1", ["not airborne", "anywhere in the window 0..254.433 s"]),
+                       ("3", ["--segment 3 is invalid", "1..2"])):
         assert main(["replay", str(LOG), "--pads", str(PADS), "--segment", seg, "--out", str(tmp_path / "o"),
                      "--no-progress"]) == 2
         err = capsys.readouterr().err.strip().splitlines()
