@@ -70,6 +70,10 @@ def _csv(text: str, name: str) -> tuple[GeoPad, ...]:
                          "lat,lon[,alt][,hover_time_s] (or a GeoJSON FeatureCollection of Points)")
     out = []
     for i, r in enumerate(rows[1:], start=2):
+        if any(c.strip() for c in r[len(head):]):   # (a value past the header's columns was dropped without a word)
+            raise ValueError(f"{name}: line {i} has {len(r)} values, the header {len(head)} ({','.join(head)}); "
+                             "valid: one value per header column (a missing alt / hover_time_s column?)")
+
         def get(k):
             j = col[k]
             return r[j].strip() if j is not None and j < len(r) and r[j].strip() else None
