@@ -252,3 +252,17 @@ def test_a_key_given_twice_with_different_values_is_refused(tmp_path, capsys):
         "dronewpt paper: error: --link lm_h is given twice (4e-06 and 5e-06); valid: each key once")
     assert main(["mission", "--dry-run", "--out", out, "--set", "drone.mass_kg=1", "--set", "drone.mass_kg=1.0"]) == 0
     assert not (tmp_path / "m").exists()
+
+
+def test_an_unknown_option_is_named_with_its_command_and_the_nearest_option(capsys):
+    """2026-11-27: `dronewpt mission --polcy step` said "dronewpt: error: unrecognized arguments: --polcy", naming
+    neither the command nor the option meant."""
+    assert _one_error_line(capsys, ["mission", "--polcy", "step"]) == (
+        "dronewpt mission: error: unrecognized argument '--polcy' (did you mean --policy?); valid: the options and "
+        "arguments of dronewpt mission --help")
+    assert _one_error_line(capsys, ["sweep", "s.toml", "--wokers=1"]) == (
+        "dronewpt sweep: error: unrecognized argument '--wokers=1' (did you mean --workers?); valid: the options and "
+        "arguments of dronewpt sweep --help")
+    assert _one_error_line(capsys, ["mission", "a.toml", "b.toml"]) == (
+        "dronewpt mission: error: unrecognized argument 'b.toml'; valid: the options and arguments of dronewpt "
+        "mission --help")

@@ -23,6 +23,24 @@ class OneLineParser(argparse.ArgumentParser):
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
+    def parse_args(self, args=None, namespace=None):
+        """As argparse's, but an unknown option is named with the command it was given to and the nearest valid
+        option (``dronewpt: error: unrecognized arguments: --polcy`` named neither)."""
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:
+            import difflib
+            cmd = self
+            for action in self._actions:   # the subcommand's own parser, when there is one
+                if isinstance(action, argparse._SubParsersAction) and getattr(ns, action.dest, None) in action.choices:
+                    cmd = action.choices[getattr(ns, action.dest)]
+            known = [o for a in cmd._actions for o in a.option_strings]
+            near = (difflib.get_close_matches(extras[0].split("=", 1)[0], known, n=1, cutoff=0.75)
+                    if extras[0].startswith("-") else [])
+            hint = f" (did you mean {near[0]}?)" if near else ""
+            self.exit(2, f"{cmd.prog}: error: unrecognized argument {extras[0]!r}{hint}; valid: the options and "
+                         f"arguments of {cmd.prog} --help\n")
+        return ns
+
     def format_help(self):
         for action in self._actions:  # help texts listing names that need a slow import: only for --help
             fill = getattr(action, "lazy_help", None)
