@@ -107,7 +107,8 @@ def _add_replay(sub):
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
     p.add_argument("--pads", type=Path, default=None, metavar="FILE",
                    help="what-if: re-fly the log with charging pads from this CSV (lat,lon[,alt][,hover_time_s]) "
-                        "or GeoJSON file, a detour to each, and report the flight time gained (see cli/refly.py)")
+                        "or GeoJSON file, a detour to each, and report the flight time gained (docs/mission_files.md, "
+                        "'What-if re-flight')")
     p.add_argument("--reach", type=float, default=None, metavar="M",
                    help="with --pads: visit only pads within M metres of the airborne track (default 500)")
     add_progress_flag(p)
