@@ -404,3 +404,15 @@ def test_segment_and_window_together_are_refused_not_one_silently_ignored(tmp_pa
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "--segment 2 and --window 440,620 exclude each other" in err[0], err
     assert not (tmp_path / "r").exists()
+
+
+def test_sizing_from_a_replay_sweep_says_it_is_a_replay(tmp_path, capsys):
+    """2026-11-27: `sizing --source sweep --sweep DIR` on a replay study's folder said "ran on base mission c875...,
+    the given mission is 88fb...; valid: the study's base mission (--config)": no --config could ever match."""
+    study = _study(tmp_path, f'log = "{LOG}"\nwindow = [440.0, 470.0]', '"drone.mass_kg" = [1.0, 1.2]')
+    assert _sweep(study, tmp_path / "o") == 0
+    capsys.readouterr()
+    assert main(["sizing", "--source", "sweep", "--sweep", str(tmp_path / "o"), "--no-plot"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"dronewpt sizing: error: sweep {str(tmp_path / 'o')!r} replayed a flight log ([replay] section), "
+                   "its cases are not missions to re-run; valid: a sweep of missions"]
