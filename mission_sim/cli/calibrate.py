@@ -45,7 +45,12 @@ def _cmd_calibrate(args) -> int:
     if args.out.suffix.lower() != ".toml" or args.out.is_dir():
         raise CliError(f"--out {str(args.out)!r} is invalid; valid: a file name ending in .toml")
     window = parse_window(args.window)
-    cfg = config_from_dict(apply_overrides(load_config_dict(args.config), parse_set(args.set)))
+    sets = parse_set(args.set)
+    other = [k for k in sets if not str(k).startswith("drone.")]   # (read into a config that only [drone] was taken from)
+    if other:
+        raise CliError(f"--set {other[0]} is not used by calibrate: it fits the [drone] power model; valid: drone.* "
+                       "keys (e.g. drone.rotor_radius_m=0.12)")
+    cfg = config_from_dict(apply_overrides(load_config_dict(args.config), sets))
     out_dir = prepare_out_dir(args.out.parent, "--out folder")
     log = read_log(args.log)
     if not len(log.battery):
