@@ -170,6 +170,11 @@ def available() -> list[str]:
 
 def make(name: str, ctx: PolicyContext | None = None, **kwargs) -> Policy:
     """A fresh policy by name (``"rl:PATH"`` loads an SB3 model file); ``ValueError`` naming the valid names."""
+    if not isinstance(name, str):   # (None, a policy object: an AttributeError on .partition)
+        raise ValueError(f"policy={name!r:.80} is invalid; valid: a name, one of {', '.join(available())} (or rl:PATH)")
+    if ctx is not None and not isinstance(ctx, PolicyContext):
+        raise ValueError(f"ctx={ctx!r:.80} is invalid; valid: a PolicyContext (mission_sim.config.policy_context(cfg)) "
+                         "or None (Table I's)")
     base, colon, arg = name.partition(":")
     if colon and not arg.strip() and (base in _WITH_PATH or base in ("model_based_budget", "mpc")):
         # `--policy rl:$MODEL` with MODEL unset ran the shipped model

@@ -114,6 +114,20 @@ def _check_specs(specs) -> None:
                              "'rl:PATH' (your own class: policies.register(NAME, factory), then NAME)")
 
 
+def check_row_labels(policies, train_seeds=None) -> None:
+    """Every row of :func:`compare` has its own label: a policy listed twice, or a ``train_seeds`` label that is also
+    one of ``policies``, would share a row's slot (the table showed one row's numbers twice); ``ValueError`` naming it."""
+    seen = set()
+    for p in policies:
+        if p in seen:
+            raise ValueError(f"policies lists {p!r} twice; valid: each policy once")
+        seen.add(p)
+    for label in train_seeds or {}:
+        if label in seen:
+            raise ValueError(f"train_seeds label {label!r} is also one of the policies; valid: a label that names no "
+                             f"listed policy (the policies: {', '.join(map(str, policies))})")
+
+
 def run_policy(name: str, scenario: str, episodes: int, seed: int, config=None) -> EpisodeTraces:
     """Run policy ``name`` (a :func:`policies.make` name, e.g. ``rl:PATH`` or ``model_based_budget:0.02``)
     on ``episodes`` windows seeded ``seed + i``."""
@@ -216,6 +230,7 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
     if int(episodes) != episodes or not 1 <= episodes <= 100_000:
         raise ValueError(f"episodes={episodes!r} is invalid; valid range: integer 1..100000")
     _check_specs(list(policies) + [sp for specs in (train_seeds or {}).values() for sp in specs])
+    check_row_labels(policies, train_seeds)
     config = given_config(config)   # a dict of EnvConfig fields once here (the split, the child, run_policies)
     groups = [(p, [p]) for p in policies] + list((train_seeds or {}).items())
     rows, traces = [], {}

@@ -149,3 +149,15 @@ def test_airspeed_where_logged():
     assert abs(np.median(a.loc[cruise, "airspeed_m_s"] - gps)) < 2.0
     assert len(read_log(log_path("dronekit-python_flight.tlog")).airspeed) == 0
     assert _cal("dronekit-la-testdata_log171.bin").report["speed_source"] == "GPS ground speed"
+
+
+def test_cli_set_of_a_key_calibrate_does_not_use_is_refused(tmp_path, capsys):
+    """2026-11-27: `calibrate LOG --set battery.capacity_ah=5` fitted as without it, exit 0: only the config's [drone]
+    is read."""
+    out = tmp_path / "d.toml"
+    assert main(["calibrate", str(log_path("dronekit-python_flight.tlog")), "--set", "battery.capacity_ah=5",
+                 "--out", str(out), "--no-plot"]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "dronewpt calibrate: error: --set battery.capacity_ah is not used by calibrate: it fits the [drone] power "
+        "model; valid: drone.* keys (e.g. drone.rotor_radius_m=0.12)"]
+    assert not out.exists()

@@ -207,3 +207,62 @@ def test_replay_mass_and_set_mass_conflict(capsys):
     for extra in ([], ["--pads", pads]):
         assert _one_error_line(capsys, ["replay", log, "--mass", "2", "--set", "drone.mass_kg=3", *extra]) == (
             "dronewpt replay: error: --mass 2 and --set drone.mass_kg=3 both set the drone's mass; valid: one of them")
+
+
+# ------------------------------------------------------------------ --dry-run checks what the run checks
+def test_dry_run_refuses_what_the_run_refuses(tmp_path, capsys):
+    """2026-11-27: `mission --dry-run --every -1` and `--dry-run --out FILE` said "config valid" (exit 0) while the
+    run itself refused both; the dry run still creates nothing."""
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    assert _one_error_line(capsys, ["mission", "--dry-run", "--every=-1", "--out", str(tmp_path / "m")]) == (
+        "dronewpt mission: error: --every -1.0 is invalid; valid range: >= 0 s (0: every step)")
+    assert _one_error_line(capsys, ["mission", "--dry-run", "--out", str(afile)]) == (
+        f"dronewpt mission: error: --out {str(afile)!r} is an existing file; valid: a folder (created if missing)")
+    assert main(["mission", "--dry-run", "--every", "0.5", "--out", str(tmp_path / "m")]) == 0
+    assert not (tmp_path / "m").exists() and afile.read_text() == "x"
+
+
+def test_no_help_text_shows_a_doubled_percent_sign(capsys):
+    """argparse %-formats an option's help but not a command's description: `calibrate --help` printed "the first
+    70 %% of the airborne time" (2026-11-27)."""
+    import pytest
+    commands = ["paper", "coupling", "mission", "replay", "calibrate", "telemetry", "train", "compare", "sweep",
+                "sizing", "tolerance", "netlist", "export-controller", "warmup"]
+    for cmd in commands:
+        with pytest.raises(SystemExit):
+            main([cmd, "--help"])
+        out = capsys.readouterr().out
+        assert out.startswith(f"usage: dronewpt {cmd}") and "%%" not in out, (cmd, out[:200])
+
+
+def test_a_key_given_twice_with_different_values_is_refused(tmp_path, capsys):
+    """2026-11-27: `--set drone.mass_kg=1 --set drone.mass_kg=2` (and train's `--env`, paper's `--link`) took the
+    last value without a word; `train --env n_steps` was refused as "--set 'n_steps'". The same value twice is fine."""
+    out = str(tmp_path / "m")
+    assert _one_error_line(capsys, ["mission", "--dry-run", "--out", out, "--set", "drone.mass_kg=1",
+                                    "--set", "drone.mass_kg=2"]) == (
+        "dronewpt mission: error: --set drone.mass_kg is given twice (1 and 2); valid: each key once")
+    assert _one_error_line(capsys, ["train", "--algo", "ppo", "--timesteps", "10", "--out", out, "--env", "n_steps=10",
+                                    "--env", "n_steps=20"]) == (
+        "dronewpt train: error: --env n_steps is given twice (10 and 20); valid: each key once")
+    assert _one_error_line(capsys, ["train", "--algo", "ppo", "--timesteps", "10", "--out", out, "--env", "n_steps"]) == (
+        "dronewpt train: error: --env 'n_steps' is invalid; valid form: KEY=VALUE (e.g. n_steps=200)")
+    assert _one_error_line(capsys, ["paper", "--no-plot", "--link", "lm_h=4e-6", "--link", "lm_h=5e-6"]) == (
+        "dronewpt paper: error: --link lm_h is given twice (4e-06 and 5e-06); valid: each key once")
+    assert main(["mission", "--dry-run", "--out", out, "--set", "drone.mass_kg=1", "--set", "drone.mass_kg=1.0"]) == 0
+    assert not (tmp_path / "m").exists()
+
+
+def test_an_unknown_option_is_named_with_its_command_and_the_nearest_option(capsys):
+    """2026-11-27: `dronewpt mission --polcy step` said "dronewpt: error: unrecognized arguments: --polcy", naming
+    neither the command nor the option meant."""
+    assert _one_error_line(capsys, ["mission", "--polcy", "step"]) == (
+        "dronewpt mission: error: unrecognized argument '--polcy' (did you mean --policy?); valid: the options and "
+        "arguments of dronewpt mission --help")
+    assert _one_error_line(capsys, ["sweep", "s.toml", "--wokers=1"]) == (
+        "dronewpt sweep: error: unrecognized argument '--wokers=1' (did you mean --workers?); valid: the options and "
+        "arguments of dronewpt sweep --help")
+    assert _one_error_line(capsys, ["mission", "a.toml", "b.toml"]) == (
+        "dronewpt mission: error: unrecognized argument 'b.toml'; valid: the options and arguments of dronewpt "
+        "mission --help")

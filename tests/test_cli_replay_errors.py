@@ -59,3 +59,38 @@ def test_bad_window(capsys):
 ])
 def test_telemetry_bad_input(capsys, argv, needle):
     _one_line_error(capsys, ["telemetry", *argv], needle)
+
+
+def test_reach_without_pads(capsys, tmp_path):
+    """2026-11-27: `replay LOG --reach 10` without --pads replayed the log (exit 0), --reach ignored; a replay study's
+    `reach_m` without `pads` was already refused."""
+    out = tmp_path / "r"
+    err = _one_line_error(capsys, ["replay", str(log_path("dronekit-python_flight.tlog")), "--reach", "10",
+                                   "--out", str(out)])
+    assert err == "dronewpt replay: error: --reach is only used with --pads; add --pads FILE or drop --reach"
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("key", ["mission.pads_file", "mission.file", "mission.from_log", "mission.pad_radius_m"])
+def test_set_of_a_mission_file_key_is_refused(key, capsys, tmp_path):
+    """2026-11-27: `replay LOG --set mission.pads_file=pads.csv` (instead of --pads) replayed the log about one pad at
+    the take-off spot, exit 0: the key was read, then replaced by the log's route and the replay's pad."""
+    out = tmp_path / "r"
+    err = _one_line_error(capsys, ["replay", str(log_path("dronekit-python_flight.tlog")), "--set", f"{key}=x",
+                                   "--out", str(out)])
+    assert err == (f"dronewpt replay: error: --set {key} is not used by replay: the route is the log's, the pads are "
+                   "--pads FILE (or --pad); valid: drop it (with pads: --pads FILE)")
+    assert not out.exists()
+
+
+def test_pads_with_a_window_where_the_vehicle_never_flew(capsys, tmp_path):
+    """2026-11-27: `replay LOG --pads P --window 1,300` (on the ground) said "no pad within --reach 500 m of the airborne
+    track (pad 0 at inf m, pad 1 at inf m)", as if the pads were too far; it is the window that holds no flight."""
+    from pathlib import Path
+    pads = Path(__file__).resolve().parents[1] / "examples" / "study_replay_pads.csv"
+    err = _one_line_error(capsys, ["replay", str(log_path("dronekit-python_flight.tlog")), "--pads", str(pads),
+                                   "--window", "1,300", "--out", str(tmp_path / "r")])
+    assert err == ("dronewpt replay: error: dronekit-python_flight.tlog: the vehicle is not airborne (armed and more "
+                   "than 1 m above the take-off spot) anywhere in the window 1..300 s, so there is no track to make a "
+                   "detour from; valid: a --window or --segment in which it flew")
+    assert not (tmp_path / "r").exists()

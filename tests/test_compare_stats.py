@@ -87,3 +87,30 @@ def test_shipped_learned_policies_have_five_seeds_small_files_and_their_commands
             link = metas[0]["env_config"]["link_model"]
             assert m["env_config"]["link_model"] == link in ("envelope", "modal")
             assert f" --link {link} " in m["reproduce"] or f" --env link_model={link} " in m["reproduce"]
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--policies", "step,ramp,step"], "--policies 'step,ramp,step' names 'step' twice; valid: each name once"),
+    (["--policies", "step", "--scenarios", "nominal,nominal"],
+     "--scenarios 'nominal,nominal' names 'nominal' twice; valid: each name once"),
+    # a train-seeds label equal to a listed policy showed that policy's numbers in both rows
+    (["--policies", "step", "--train-seeds", "step=ramp"],
+     "train_seeds label 'step' is also one of the policies; valid: a label that names no listed policy"),
+    # a repeated label kept only the last group, without a word
+    (["--policies", "step", "--train-seeds", "a=ramp", "--train-seeds", "a=hysteresis"],
+     "--train-seeds 'a=hysteresis': label 'a' is given twice; valid: one --train-seeds per label"),
+])
+def test_cli_compare_refuses_rows_that_would_share_a_label(argv, message, capsys):
+    """Each row of the table has its own label (2026-11-27: `--policies step,step` printed the row twice, and
+    `--train-seeds step=ramp` printed step's numbers under both rows)."""
+    from mission_sim.cli import main
+    assert main(["compare", "--episodes", "1", "--no-plot", "--no-frontier", "--no-progress", *argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0], err
+
+
+def test_compare_api_refuses_a_repeated_row_label():
+    with pytest.raises(ValueError, match="policies lists 'ramp' twice; valid: each policy once"):
+        compare(("ramp", "ramp"), ("nominal",), episodes=1)
+    with pytest.raises(ValueError, match="train_seeds label 'ramp' is also one of the policies"):
+        compare(("ramp",), ("nominal",), episodes=1, train_seeds={"ramp": ["step", "step"]})

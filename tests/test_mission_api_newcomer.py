@@ -272,3 +272,18 @@ def test_each_pad_is_the_ground_of_its_own_approach_charge_and_depart():
         assert chg.sum() > 200 and z[near].min() >= pad.z_m
         assert z[chg].min() == pad.z_m + 0.03   # the coil's floor over its own pad, reached in this wind
     assert z[~np.isin(ph, ["approach", "charge", "depart"])].min() >= 0.0
+
+
+def test_run_mission_and_make_name_a_wrong_kind_of_argument():
+    """2026-11-27: `run_mission(cfg, "step")` (a name where the policy object belongs) was `AttributeError: 'str' object
+    has no attribute 'reset'` from inside the loop; `policies.make(None)` and `make("step", 5)` AttributeErrors too."""
+    cfg = load_config()
+    with pytest.raises(ValueError, match=re.escape("policy='step' is invalid; valid: a policy object with reset() and "
+                                                   "act(), e.g. policies.make('step', policy_context(cfg))")):
+        run_mission(cfg, "step", frame=False)
+    with pytest.raises(ValueError, match=re.escape("cfg=None is invalid; valid: a MissionConfig")):
+        run_mission(None, policies.make("step", policy_context(cfg)), frame=False)
+    with pytest.raises(ValueError, match=re.escape("policy=None is invalid; valid: a name, one of hysteresis, ")):
+        policies.make(None)
+    with pytest.raises(ValueError, match=re.escape("ctx=5 is invalid; valid: a PolicyContext")):
+        policies.make("step", 5)

@@ -307,6 +307,12 @@ def test_bad_waypoints_text(capsys, tmp_path, text, needles):
 @pytest.mark.parametrize("name,text,needles", [
     ("p.csv", "x,y\n1,2\n", ("no lat / lon column",)),
     ("p.csv", "lat,lon\n95,8\n", ("line 2", "latitude")),
+    # a value past the header's columns (an altitude without an alt column) was dropped without a word
+    # a misspelt column (hover_time for hover_time_s) was ignored: the default hover instead of the file's
+    ("p.csv", "lat,lon,hover_time\n47,8,30\n", ("column 'hover_time' is unknown (did you mean 'hover_time_s'?)",
+                                                "hover_time_s (hover_s)")),
+    ("p.csv", "lat,lon\n47,8\n47.0001,8,5\n", ("line 3 has 3 values, the header 2 (lat,lon); valid: one value per "
+                                                "header column",)),
     ("p.geojson", '{"type": "FeatureCollection", "features": [{"type": "Feature", "geometry": '
                   '{"type": "LineString", "coordinates": [[8, 47], [8.1, 47]]}}]}', ("feature 0", "LineString")),
     ("p.geojson", '{"type": "FeatureCollection", "features": [', ("malformed JSON",)),
@@ -411,3 +417,14 @@ def test_telemetry_streams_about_the_mission_files_home(capsys, tmp_path):
     conn.close()
     assert first.lat * 1e-7 == pytest.approx(home[0], abs=1e-6) and first.lon * 1e-7 == pytest.approx(home[1], abs=1e-6)
     assert first.alt * 1e-3 == pytest.approx(home[2], abs=2.0)   # near the ground at home (not SITL's 584 m)
+
+
+def test_pads_csv_trailing_empty_fields_are_accepted(tmp_path):
+    """A spreadsheet's trailing commas (empty values past the header's columns) are not a value dropped."""
+    from mission_sim.plans.pads import read_pads
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    a.write_text("lat,lon\n47,8\n")
+    b.write_text("lat,lon\n47,8,,\n")
+    assert read_pads(a) == read_pads(b)
+    b.write_text("id,lat,lon,name\n1,47,8,north pad\n")   # other columns (not near a known name) are ignored
+    assert read_pads(a) == read_pads(b)

@@ -130,6 +130,8 @@ def test_the_log_is_parsed_once_per_process_not_per_case(tmp_path, monkeypatch):
     ('policy = ["step", "bang"]', ["policy='bang'", "model_based"]),
     ('"sim.traj_dt_s" = [0.2, 1e-5]', ["sim.traj_dt_s=1e-05", "valid range"]),
     ('"pads.0.x_m" = [3000.0, 4000.0]\n"pads.1.x_m" = 3000.0', ["2 of 2 cases", "no pad within", "[replay] reach_m"]),
+    # read with the files when the base is loaded: every case re-flew the same pads, even with a missing file
+    ('"mission.pads_file" = ["/nonexistent.csv", "b.csv"]', ["study key 'mission.pads_file' is invalid"]),
 ])
 def test_bad_keys_and_values_are_refused_before_anything_runs(tmp_path, capsys, monkeypatch, grid, words):
     ran = []
@@ -147,6 +149,8 @@ def test_bad_keys_and_values_are_refused_before_anything_runs(tmp_path, capsys, 
     ('log = "."', ["[replay] log", "is a folder"]),
     (f'log = "{LOG}"\npads = "nopads.csv"', ["[replay] pads", "nopads.csv", "does not exist"]),
     (f'log = "{LOG}"\nsegment = 3', ["[replay] segment = 3", "1..2"]),
+    (f'log = "{LOG}"\npads = "{PADS}"\nsegment = 1', ["not airborne", "anywhere in boot segment 1 (window 0..254.433 s)",
+                                                    "valid: a [replay] window = or [replay] segment = in which it flew"]),
     ('pads = "x.csv"', ["[replay] has no log"]),
     (f'log = "{LOG}"\nwindow = [5.0, 1.0]', ["[replay] window", "T0 < T1"]),
     (f'log = "{LOG}"\nlogg = 1', ["[replay] key 'logg' is unknown", "ground_gap_m"]),
@@ -237,7 +241,8 @@ def test_two_local_workers_equal_serial_and_each_parses_the_log_once(tmp_path):
 def test_replay_with_pads_honours_segment(tmp_path, capsys):
     """`replay --pads` flew the whole log whatever --segment said; boot segment 1 of the dronekit log
     (0..254 s) is never armed, so no pad can be reached from it, and segment 3 does not exist."""
-    for seg, words in (("1", ["no pad within --reach"]), ("3", ["--segment 3 is invalid", "1..2"])):
+    for seg, words in (("1", ["not airborne", "anywhere in the window 0..254.433 s"]),
+                       ("3", ["--segment 3 is invalid", "1..2"])):
         assert main(["replay", str(LOG), "--pads", str(PADS), "--segment", seg, "--out", str(tmp_path / "o"),
                      "--no-progress"]) == 2
         err = capsys.readouterr().err.strip().splitlines()
@@ -399,3 +404,15 @@ def test_segment_and_window_together_are_refused_not_one_silently_ignored(tmp_pa
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "--segment 2 and --window 440,620 exclude each other" in err[0], err
     assert not (tmp_path / "r").exists()
+
+
+def test_sizing_from_a_replay_sweep_says_it_is_a_replay(tmp_path, capsys):
+    """2026-11-27: `sizing --source sweep --sweep DIR` on a replay study's folder said "ran on base mission c875...,
+    the given mission is 88fb...; valid: the study's base mission (--config)": no --config could ever match."""
+    study = _study(tmp_path, f'log = "{LOG}"\nwindow = [440.0, 470.0]', '"drone.mass_kg" = [1.0, 1.2]')
+    assert _sweep(study, tmp_path / "o") == 0
+    capsys.readouterr()
+    assert main(["sizing", "--source", "sweep", "--sweep", str(tmp_path / "o"), "--no-plot"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"dronewpt sizing: error: sweep {str(tmp_path / 'o')!r} replayed a flight log ([replay] section), "
+                   "its cases are not missions to re-run; valid: a sweep of missions"]

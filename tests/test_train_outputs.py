@@ -166,3 +166,20 @@ def test_cli_train_errors(capsys):
     assert main(["train", "--algo", "dqn", "--timesteps", "10", "--out", "x", "--residual"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 3 and all("valid" in line or "only used" in line for line in err)
+
+
+@pytest.mark.parametrize("flag, value, needs", [
+    ("--residual-scale", "0.1", "--residual"), ("--residual-base-budget", "0.01", "--residual"),
+    ("--lambda-lr", "10", "--lagrangian"), ("--probe-episodes", "0", "--lagrangian"),
+    ("--dagger", "2", "--imitate"), ("--imitation-episodes", "8", "--imitate"),
+    ("--imitation-epochs", "5", "--imitate"), ("--imitation-mask", "", "--imitate"),
+    ("--slow-budget-every", "step", "--slow-budget")])
+def test_cli_train_refuses_an_option_without_the_one_that_uses_it(flag, value, needs, tmp_path, capsys):
+    """2026-11-27: `train --residual-scale 0.1` without --residual (or --dagger 2 without --imitate, ...) trained a
+    plain PPO and exited 0, the option silently ignored (as --budget without --lagrangian already was not)."""
+    from mission_sim.cli import main
+    out = tmp_path / "run"
+    assert main(["train", "--algo", "ppo", "--timesteps", "10", "--out", str(out), flag, value]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"dronewpt train: error: {flag} is only used with {needs}; add {needs} or drop {flag}"]
+    assert not out.exists()

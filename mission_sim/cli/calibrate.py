@@ -13,7 +13,7 @@ def _add_calibrate(sub):
                        description="Fit the momentum-theory power model's mass, figure of merit, drive efficiency, "
                                    "flat-plate area and avionics power to a log's battery power (V I) against its GPS "
                                    "speed and climb rate: scipy least squares with a robust (soft_l1) loss on the first "
-                                   "70 %% of the airborne time, judged on the last 30 %%. Writes a [drone] TOML that "
+                                   "70 % of the airborne time, judged on the last 30 %. Writes a [drone] TOML that "
                                    "mission / replay / telemetry take with --drone FILE (or a sweep as its base), and "
                                    "a fit report (figure, JSON, samples CSV) beside it.")
     p.add_argument("log", type=path_arg("log"), help="flight log with battery voltage and current: .tlog, .bin or .ulg")
@@ -45,7 +45,12 @@ def _cmd_calibrate(args) -> int:
     if args.out.suffix.lower() != ".toml" or args.out.is_dir():
         raise CliError(f"--out {str(args.out)!r} is invalid; valid: a file name ending in .toml")
     window = parse_window(args.window)
-    cfg = config_from_dict(apply_overrides(load_config_dict(args.config), parse_set(args.set)))
+    sets = parse_set(args.set)
+    other = [k for k in sets if not str(k).startswith("drone.")]   # (read into a config that only [drone] was taken from)
+    if other:
+        raise CliError(f"--set {other[0]} is not used by calibrate: it fits the [drone] power model; valid: drone.* "
+                       "keys (e.g. drone.rotor_radius_m=0.12)")
+    cfg = config_from_dict(apply_overrides(load_config_dict(args.config), sets))
     out_dir = prepare_out_dir(args.out.parent, "--out folder")
     log = read_log(args.log)
     if not len(log.battery):

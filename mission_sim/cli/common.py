@@ -10,7 +10,7 @@ from pathlib import Path
 __all__ = ["CliError", "OneLineParser", "float_arg", "positive_float", "finite_float", "nonneg_int", "seed_int",
            "parse_set", "write_mission", "prepare_out_dir", "add_progress_flag", "show_progress", "names_help",
            "lazy_names_help", "policy_names", "scenario_names", "int_in", "max_workers", "path_arg", "name_list",
-           "check_out_file"]
+           "check_out_dir", "check_out_file"]
 
 
 class CliError(Exception):
@@ -22,6 +22,24 @@ class OneLineParser(argparse.ArgumentParser):
 
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+    def parse_args(self, args=None, namespace=None):
+        """As argparse's, but an unknown option is named with the command it was given to and the nearest valid
+        option (``dronewpt: error: unrecognized arguments: --polcy`` named neither)."""
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:
+            import difflib
+            cmd = self
+            for action in self._actions:   # the subcommand's own parser, when there is one
+                if isinstance(action, argparse._SubParsersAction) and getattr(ns, action.dest, None) in action.choices:
+                    cmd = action.choices[getattr(ns, action.dest)]
+            known = [o for a in cmd._actions for o in a.option_strings]
+            near = (difflib.get_close_matches(extras[0].split("=", 1)[0], known, n=1, cutoff=0.75)
+                    if extras[0].startswith("-") else [])
+            hint = f" (did you mean {near[0]}?)" if near else ""
+            self.exit(2, f"{cmd.prog}: error: unrecognized argument {extras[0]!r}{hint}; valid: the options and "
+                         f"arguments of {cmd.prog} --help\n")
+        return ns
 
     def format_help(self):
         for action in self._actions:  # help texts listing names that need a slow import: only for --help
@@ -97,18 +115,24 @@ def finite_float(name):
     return float_arg(name)
 
 
-def parse_set(items):
+def parse_set(items, flag: str = "--set"):
+    """``KEY=VALUE`` options (``--set``, train's ``--env``: ``flag``) as a dict, each value read as TOML (else the
+    text); ``CliError`` naming ``flag`` for an item without '=' and for a key given twice with different values."""
     import tomllib
     out = {}
     for item in items or ():
         if "=" not in item:
-            raise CliError(f"--set {item!r} is invalid; valid form: KEY=VALUE (e.g. battery.capacity_ah=2.0)")
+            raise CliError(f"{flag} {item!r} is invalid; valid form: KEY=VALUE (e.g. "
+                           f"{'n_steps=200' if flag == '--env' else 'battery.capacity_ah=2.0'})")
         key, text = item.split("=", 1)
         try:
             value = tomllib.loads(f"v = {text}")["v"]
         except tomllib.TOMLDecodeError:
             value = text
-        out[key.strip()] = value
+        key = key.strip()
+        if key in out and repr(out[key]) != repr(value) and out[key] != value:   # (the last one won without a word)
+            raise CliError(f"{flag} {key} is given twice ({out[key]!r} and {value!r}); valid: each key once")
+        out[key] = value
     return out
 
 
@@ -165,13 +189,16 @@ def path_arg(flag: str):
 
 def name_list(text: str, flag: str, valid) -> list[str]:
     """The names of a comma-separated option (``--policies a,b``); ``CliError`` naming ``flag`` when the
-    list is empty (``''``, ``','``) or a name's part before ':' is not in ``valid``."""
+    list is empty (``''``, ``','``), a name's part before ':' is not in ``valid`` or a name is repeated."""
     names = [n.strip() for n in str(text).split(",") if n.strip()]
     if not names:
         raise CliError(f"{flag} {text!r} is empty; valid: comma-separated names out of {', '.join(valid)}")
     for n in names:
         if n.partition(":")[0] not in valid:
             raise CliError(f"{flag} {n!r} is invalid; valid values: {', '.join(valid)}")
+    twice = next((n for i, n in enumerate(names) if n in names[:i]), None)
+    if twice is not None:   # a repeated name ran (and printed) the same rows twice
+        raise CliError(f"{flag} {text!r} names {twice!r} twice; valid: each name once")
     return names
 
 
@@ -201,13 +228,20 @@ def names_help(text: str, names) -> str:
     return f"{text}; one of: {', '.join(names)}"
 
 
+def check_out_dir(path, flag: str = "--out") -> Path:
+    """An output folder's path checked without creating anything (``--dry-run``): ``CliError`` when a file is in
+    its place."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise CliError(f"{flag} {str(path)!r} is an existing file; valid: a folder (created if missing)")
+    return path
+
+
 def prepare_out_dir(path, flag: str = "--out") -> Path:
     """Create the output folder ``path`` now, before any simulation, and check that files can be
     written there; ``CliError`` naming the flag and the path otherwise (a file in its place, no
     permission, a read-only file system)."""
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise CliError(f"{flag} {str(path)!r} is an existing file; valid: a folder (created if missing)")
+    path = check_out_dir(path, flag)
     try:
         path.mkdir(parents=True, exist_ok=True)
         probe = path / f".dronewpt-write-test.{os.getpid()}"

@@ -48,9 +48,13 @@ def _link_params(items):
         if not sep or key.strip() not in keys:
             raise CliError(f"--link {item!r} is invalid; valid: KEY=VALUE with KEY one of {', '.join(keys)}")
         try:
-            changes[key.strip()] = float(val)
+            value = float(val)
         except ValueError:
             raise CliError(f"--link {item!r}: {val!r} is not a number") from None
+        if changes.get(key.strip(), value) != value:   # (the last one won without a word)
+            raise CliError(f"--link {key.strip()} is given twice ({changes[key.strip()]:g} and {value:g}); valid: "
+                           "each key once")
+        changes[key.strip()] = value
     return TABLE_I.with_(**changes) if changes else TABLE_I
 
 

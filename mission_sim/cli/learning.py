@@ -24,6 +24,13 @@ from .common import (
 )
 
 
+#: train's options that have an effect only with another one: {dest: (default, that option)}
+_ONLY_WITH = {"lambda_lr": (50.0, "--lagrangian"), "probe_episodes": (32, "--lagrangian"),
+              "residual_scale": (0.25, "--residual"), "residual_base_budget": (0.0, "--residual"),
+              "dagger": (0, "--imitate"), "imitation_episodes": (64, "--imitate"), "imitation_epochs": (60, "--imitate"),
+              "imitation_mask": ("last_d_short", "--imitate"), "slow_budget_every": ("window", "--slow-budget")}
+
+
 def _add_train(sub):
     p = sub.add_parser("train", help="train an RL mode-switching policy (stable-baselines3)",
                        description="Train PPO or SAC on dronewpt/SbarCharging-v0 or DQN on the discrete "
@@ -55,21 +62,21 @@ def _add_train(sub):
     p.add_argument("--lagrangian", action="store_true", help="learn a multiplier of the episode cost against --budget")
     p.add_argument("--budget", type=float_arg("--budget", positive=True), default=None,
                    help="mean episode cost allowed (default: the ramp policy's on the training scenario)")
-    p.add_argument("--lambda-lr", type=float_arg("--lambda-lr", positive=True), default=50.0,
+    p.add_argument("--lambda-lr", type=float_arg("--lambda-lr", positive=True),
                    help="multiplier step per rollout at a cost 100 %% over budget (default 50)")
-    p.add_argument("--probe-episodes", type=int, default=32,
+    p.add_argument("--probe-episodes", type=int,
                    help="deterministic windows the multiplier's cost is measured on after every rollout "
                         "(default 32; 0 = the stochastic rollouts themselves)")
     p.add_argument("--residual", action="store_true", help="learn a bounded correction of the model-based duty")
-    p.add_argument("--residual-scale", type=float_arg("--residual-scale", positive=True, hi=1.0), default=0.25,
+    p.add_argument("--residual-scale", type=float_arg("--residual-scale", positive=True, hi=1.0),
                    help="largest duty correction (default 0.25)")
-    p.add_argument("--residual-base-budget", type=float_arg("--residual-base-budget"), default=0.0,
+    p.add_argument("--residual-base-budget", type=float_arg("--residual-base-budget"),
                    help="overshoot budget of the model-based controller the residual corrects (default 0: the "
                         "paper's controller)")
     p.add_argument("--slow-budget", default=None, metavar="LO:HI",
                    help="the action is the MPC's measured-overshoot budget in [LO, HI] per control period, the duty "
                         "the MPC's (a slow variable: no dither of the duty; policies.slow_budget), e.g. 0:0.15")
-    p.add_argument("--slow-budget-every", choices=("window", "step"), default="window",
+    p.add_argument("--slow-budget-every", choices=("window", "step"),
                    help="with --slow-budget: take the agent's budget once per window at the stop and hold it "
                         "(default) or every control period")
     p.add_argument("--history", type=int, default=1, metavar="K",
@@ -86,11 +93,11 @@ def _add_train(sub):
                         "OUT/ppo_sbar.zip; otherwise the clone is kept as OUT/clone.zip + clone.json, the "
                         "fine-tuned model is OUT/ppo_sbar.zip and starts from the clone's log_std, not "
                         "log_std_init; policies.imitation)")
-    p.add_argument("--dagger", type=int, default=0, metavar="N",
+    p.add_argument("--dagger", type=int, metavar="N",
                    help="DAgger iterations after behaviour cloning (default 0)")
-    p.add_argument("--imitation-episodes", type=int, default=64, help="windows per imitation iteration (default 64)")
-    p.add_argument("--imitation-epochs", type=int, default=60, help="passes over the data per fit (default 60)")
-    p.add_argument("--imitation-mask", default="last_d_short", metavar="FIELD,...",
+    p.add_argument("--imitation-episodes", type=int, help="windows per imitation iteration (default 64)")
+    p.add_argument("--imitation-epochs", type=int, help="passes over the data per fit (default 60)")
+    p.add_argument("--imitation-mask", metavar="FIELD,...",
                    help="observation fields hidden from the student (default last_d_short; add i2_amp_a,"
                         "battery_current_a,rect_current_a for a feed-forward student; '' for none)")
     p.add_argument("--eval-every", type=int_in("eval-every", 1), default=50_000,
@@ -102,7 +109,7 @@ def _add_train(sub):
     p.add_argument("--resume", type=path_arg("--resume"), default=None, metavar="CHECKPOINT.zip",
                    help="continue from a checkpoint of checkpoints/ (its VecNormalize statistics next to it)")
     add_progress_flag(p)
-    p.set_defaults(func=_cmd_train)
+    p.set_defaults(func=_cmd_train, **{dest: default for dest, (default, _) in _ONLY_WITH.items()})
 
 
 #: :data:`mission_sim.contract.LINK_MODELS` (not imported: the parser stays free of wpt_receiver's import;
@@ -139,7 +146,7 @@ def _link_name(args) -> str:
 def _env_overrides(items) -> dict:
     from .common import parse_set
     out = {}
-    for k, v in parse_set(items).items():
+    for k, v in parse_set(items, "--env").items():
         if k in ("devices", "link_model") and isinstance(v, str):
             out[k] = v
             continue
@@ -192,6 +199,10 @@ def _check_train(args):
                            "--smooth-penalty; valid: --algo ppo / sac / td3 without them (the duty is the MPC's)")
     if args.budget is not None and not args.lagrangian:
         raise CliError("--budget is only used with --lagrangian; add --lagrangian or drop --budget")
+    for dest, (default, needs) in _ONLY_WITH.items():   # given without the option that uses it: ignored before
+        if getattr(args, dest) != default and not getattr(args, needs[2:].replace("-", "_")):
+            flag = "--" + dest.replace("_", "-")
+            raise CliError(f"{flag} is only used with {needs}; add {needs} or drop {flag}")
 
 
 def _cmd_train(args) -> int:
@@ -289,6 +300,9 @@ def _train_seed_groups(items) -> dict:
             if colon and not hits:
                 raise CliError(f"--train-seeds {sp!r} is invalid: no file matches {path!r}")
             specs += [f"{base}:{h}" for h in hits] if colon else [sp]
+        if label.strip() in out:   # a second group of the same label replaced the first without a word
+            raise CliError(f"--train-seeds {item!r}: label {label.strip()!r} is given twice; valid: one "
+                           "--train-seeds per label (its specs comma-separated)")
         out[label.strip()] = specs
     return out
 
@@ -338,6 +352,11 @@ def _shipped_seed_rows(pols: tuple):
 def _check_compare(args, pols, scns, groups):
     from envs import SCENARIOS
     from policies import available
+    from policies.compare import check_row_labels
+    try:
+        check_row_labels(pols, groups)
+    except ValueError as exc:
+        raise CliError(f"--train-seeds: {exc}" if groups else str(exc)) from None
     for p_ in pols + tuple(sp for specs in groups.values() for sp in specs):
         if p_.split(":", 1)[0] not in available():
             raise CliError(f"--policies {p_!r} is invalid; valid values: {', '.join(available())} (or rl:PATH)")

@@ -107,8 +107,9 @@ def _add_replay(sub):
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
     p.add_argument("--pads", type=Path, default=None, metavar="FILE",
                    help="what-if: re-fly the log with charging pads from this CSV (lat,lon[,alt][,hover_time_s]) "
-                        "or GeoJSON file, a detour to each, and report the flight time gained (see cli/refly.py)")
-    p.add_argument("--reach", type=float, default=500.0, metavar="M",
+                        "or GeoJSON file, a detour to each, and report the flight time gained (docs/mission_files.md, "
+                        "'What-if re-flight')")
+    p.add_argument("--reach", type=float, default=None, metavar="M",
                    help="with --pads: visit only pads within M metres of the airborne track (default 500)")
     add_progress_flag(p)
     _mav_common(p)
@@ -121,6 +122,13 @@ def _cmd_replay(args) -> int:
     from ..mavlink.logs import read_log
     from ..mavlink.replay import parse_window, replay_log, replay_span, track_from_log
     mass_override(args)   # --mass with --set drone.mass_kg: refused before the log is read
+    if args.reach is not None and args.pads is None:   # (it was ignored: a replay without pads visits none)
+        raise CliError("--reach is only used with --pads; add --pads FILE or drop --reach")
+    from ..plans import FILE_READ_KEYS
+    unused = [k for k in parse_set(args.set) if k in FILE_READ_KEYS]   # (read, then replaced by the log's route)
+    if unused:
+        raise CliError(f"--set {unused[0]} is not used by replay: the route is the log's, the pads are --pads FILE "
+                       "(or --pad); valid: drop it (with pads: --pads FILE)")
     if getattr(args, "pads", None) is not None:  # what-if re-flight with pads: its own module
         from .refly import cmd_refly
         return cmd_refly(args)

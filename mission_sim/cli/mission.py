@@ -8,10 +8,12 @@ import tomllib
 from pathlib import Path
 
 from ..files import folder_lock
+from ..plans import FILE_READ_KEYS
 from ..world.results import depletion_text
 from .common import (
     CliError,
     add_progress_flag,
+    check_out_dir,
     check_out_file,
     finite_float,
     lazy_names_help,
@@ -112,7 +114,7 @@ def _add_mission(sub):
 
 
 #: --set keys read together with the mission file (they decide what is read), not laid over it afterwards
-MISSION_FILE_KEYS = ("mission.file", "mission.pads_file", "mission.from_log", "mission.pad_radius_m")
+MISSION_FILE_KEYS = FILE_READ_KEYS
 
 
 def mission_file_keys(overrides: dict) -> dict:
@@ -215,7 +217,10 @@ def _checked_run(args, started, worker) -> int:
     cfg = mission_config(args)
     pol = make_policy(args.policy, cfg)
     if args.dry_run:
-        return _print_estimate(estimate_run(cfg), args)
+        est = estimate_run(cfg)
+        stored_every_s(args.every, est)   # --every checked (and a default thinning said) as the run does
+        check_out_dir(args.out)   # a file in --out's place refused as the run refuses it (nothing created)
+        return _print_estimate(est, args)
     prepare_out_dir(args.out)
     jit = not (aot.enable() and aot.covers(aot.policy_entry(pol)))   # else no numba (mission_sim.world.aot)
     if jit:

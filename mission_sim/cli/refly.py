@@ -42,6 +42,9 @@ def cmd_refly(args) -> int:
     from .mission import make_policy
     if not args.log.is_file():
         raise CliError(f"log {str(args.log)!r} does not exist or is not a file")
+    if args.reach is None:
+        from ..plans.refly import DEFAULT_REACH_M
+        args.reach = DEFAULT_REACH_M
     if not (args.reach > 0):
         raise CliError(f"--reach {args.reach!r} is invalid; valid range: (0, inf) m")
     pad = parse_geo_point(args.pad) if args.pad is not None else None

@@ -14,3 +14,8 @@
 Nothing here imports :mod:`mission_sim.config`: the readers produce plain dicts that the config
 validates (config -> plans, never back).
 """
+
+#: the ``[mission]`` keys read together with the mission and pads files when a config is loaded (they decide what is
+#: read: :func:`mission_sim.config.load_config_dict`'s ``mission_keys``, ``--set`` on the command line); laid over a
+#: config already loaded, as a study's case values are, they change nothing
+FILE_READ_KEYS = ("mission.file", "mission.pads_file", "mission.from_log", "mission.pad_radius_m")

@@ -68,13 +68,31 @@ def _csv(text: str, name: str) -> tuple[GeoPad, ...]:
     if col["lat"] is None or col["lon"] is None:
         raise ValueError(f"{name}: header {','.join(head)!r} has no lat / lon column; valid: a CSV header "
                          "lat,lon[,alt][,hover_time_s] (or a GeoJSON FeatureCollection of Points)")
+    _check_other_columns(head, name)
     out = []
     for i, r in enumerate(rows[1:], start=2):
+        if any(c.strip() for c in r[len(head):]):   # (a value past the header's columns was dropped without a word)
+            raise ValueError(f"{name}: line {i} has {len(r)} values, the header {len(head)} ({','.join(head)}); "
+                             "valid: one value per header column (a missing alt / hover_time_s column?)")
+
         def get(k):
             j = col[k]
             return r[j].strip() if j is not None and j < len(r) and r[j].strip() else None
         out.append(_pad(get("lat"), get("lon"), get("alt"), get("hover_time_s"), f"{name}: line {i}"))
     return tuple(out)
+
+
+def _check_other_columns(head: list, name: str) -> None:
+    """Columns other than the known ones are ignored (a pad's name, a note), except one that looks like a misspelt
+    known column (``hover_time``, ``altitude_m``): its values would be dropped without a word."""
+    import difflib
+    known = [a for al in _ALIASES.values() for a in al]
+    for c in head:
+        near = difflib.get_close_matches(c, known, n=1, cutoff=0.75) if c not in known else []
+        if near:
+            valid = "; ".join(f"{k} ({', '.join(al[1:])})" for k, al in _ALIASES.items())
+            raise ValueError(f"{name}: column {c!r} is unknown (did you mean {near[0]!r}?); valid columns: {valid} "
+                             "(alt in m AMSL); other columns are ignored")
 
 
 def _geojson(text: str, name: str) -> tuple[GeoPad, ...]:

@@ -178,6 +178,13 @@ def plan_refly(log, cfg, *, pad=None, ground_gap_m=None, window=None, reach_m: f
     track = resample_track(track_from_log(log, pad=pad, ground_gap_m=gap, window=window), cfg.sim.traj_dt_s)
     pads_xyz = np.array([[p.x_m, p.y_m, p.z_m] for p in cfg.pads])
     detours, skipped = plan_detours(track, pads_xyz, _hovers(cfg), reach_m)
+    if not detours and all(math.isinf(d) for _, d in skipped):   # (was: "pad 0 at inf m", as if the pads were far)
+        where = "the log" if window is None else f"the window {window[0]:g}..{window[1]:g} s"
+        if segment is not None:
+            where = f"boot segment {segment} ({where[4:]})"
+        raise ValueError(f"{log.path.name}: the vehicle is not airborne (armed and more than {AIRBORNE_M:g} m above "
+                         f"the take-off spot) anywhere in {where}, so there is no track to make a detour from; valid: "
+                         "a --window or --segment in which it flew")
     if not detours:
         far = ", ".join(f"pad {k} at {d:.0f} m" for k, d in skipped)
         raise ValueError(f"{log.path.name}: no pad within --reach {reach_m:g} m of the airborne track ({far}); "

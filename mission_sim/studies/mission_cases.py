@@ -150,7 +150,7 @@ class MissionCaseRunner:
         self._checker = None
 
     def __getstate__(self):  # the checker's caches stay on the driver
-        return {**self.__dict__, "_checker": None}
+        return {**self.__dict__, "_checker": None, "_specs": {}}
 
     def config(self, params: dict):
         from ..config import apply_overrides, config_from_dict
@@ -159,19 +159,44 @@ class MissionCaseRunner:
         return config_from_dict(apply_overrides(self.base, overrides))
 
     def validate_keys(self, keys: Iterable[str], example: dict) -> None:
-        """Unknown keys raise ``ValueError`` naming the key (apply_overrides' validation)."""
+        """Unknown keys raise ``ValueError`` naming the key (apply_overrides' validation), and so do the keys read
+        with the base mission's files (:data:`~mission_sim.plans.FILE_READ_KEYS`: a case's value changed nothing)."""
         from ..config import apply_overrides
+        from ..plans import FILE_READ_KEYS
 
+        for k in keys:
+            if k in FILE_READ_KEYS:
+                raise ValueError(f"study key {k!r} is invalid: it is read with the mission and pads files when the "
+                                 "base mission is loaded, so a case's value would change nothing; valid: set it in "
+                                 "the [study] base file (one study per value)")
         apply_overrides(self.base, {k: example[k] for k in keys if k != POLICY_KEY})
 
     def check_params(self, params: dict) -> str | None:
         """None if the case would build its mission, else the error (naming the key and value)."""
         policy = params.get(POLICY_KEY, DEFAULT_POLICY)
-        if self.policy_names is not None and policy not in self.policy_names:
-            return f"policy={policy!r} is invalid; valid values: {', '.join(sorted(self.policy_names))}"
+        if self.policy_names is not None:
+            err = self._policy_error(policy)
+            if err is not None:
+                return err
         if self._checker is None:
             self._checker = MissionParamChecker(self.base, self._check_run_size)
         return self._checker({k: v for k, v in params.items() if k != POLICY_KEY})
+
+    def _policy_error(self, policy) -> str | None:
+        """None if ``policy`` is a valid name or spec (``model_based_budget:0.02``, ``rl:PATH``, as ``--policy``
+        takes them: the spec is made once, with the default context, to check its parameter), else the error."""
+        if not isinstance(policy, str) or policy.partition(":")[0] not in self.policy_names:
+            return f"policy={policy!r} is invalid; valid values: {', '.join(sorted(self.policy_names))} (or NAME:PARAMETER)"
+        if ":" not in policy:
+            return None
+        made = self.__dict__.setdefault("_specs", {})
+        if policy not in made:
+            try:
+                self.make_policy(policy, None)
+                made[policy] = None
+            except (ValueError, FileNotFoundError) as exc:
+                made[policy] = str(exc)
+        return made[policy]
 
     def study_warnings(self, name: str) -> list[str]:
         """The setup warnings of the cases checked so far, once for the study

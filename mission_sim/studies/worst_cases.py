@@ -47,6 +47,9 @@ def worst_cases(out_dir, metric: str = "peak_i2_a", base: dict | None = None) ->
     if man.get("doc", {}).get("study", {}).get("runner"):
         raise ValueError(f"sweep {str(out_dir)!r} ran a custom case runner ({man['doc']['study']['runner']}); "
                          "valid: a sweep of missions")
+    if man.get("doc", {}).get("replay"):   # (said "ran on base mission ...; valid: the study's base mission")
+        raise ValueError(f"sweep {str(out_dir)!r} replayed a flight log ([replay] section), its cases are not "
+                         "missions to re-run; valid: a sweep of missions")
     if base is not None and base_fingerprint(base) != man["fingerprint"]:
         raise ValueError(f"sweep {str(out_dir)!r} ran on base mission {man['fingerprint']}, the given mission is "
                          f"{base_fingerprint(base)}; valid: the study's base mission (--config)")

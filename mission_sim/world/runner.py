@@ -106,6 +106,7 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     no ``trajectory`` is given; True for a trajectory planned from ``cfg``, e.g. ``plan_mission(cfg)``; False for a
     replayed one, or when the caller said it already).
     """
+    check_run_args(cfg, policy)
     check_policy_context(cfg, policy)
     if warn and charge:   # (pads never energised: neither the link nor the pads matter)
         warn_setup(cfg, policy, own_route=trajectory is None if own_route is None else bool(own_route))
@@ -131,6 +132,20 @@ def warn_setup(cfg, policy, own_route: bool = True) -> None:
     from ..setup_warnings import mission_warnings
     for text in mission_warnings(cfg, policy, own_route):
         warn(text)
+
+
+def check_run_args(cfg, policy) -> None:
+    """``ValueError`` naming the value when ``cfg`` is not a :class:`~mission_sim.config.MissionConfig` or ``policy``
+    is not a policy object (``run_mission(cfg, "step")`` was an AttributeError deep in the loop)."""
+    from ..config import MissionConfig
+    if not isinstance(cfg, MissionConfig):
+        raise ValueError(f"cfg={cfg!r:.80} is invalid; valid: a MissionConfig (mission_sim.config.load_config(), "
+                         "or config_from_dict)")
+    if not (callable(getattr(policy, "reset", None)) and callable(getattr(policy, "act", None))):
+        hint = f"policies.make({policy!r}, policy_context(cfg))" if isinstance(policy, str) else \
+            "policies.make('model_based', policy_context(cfg))"
+        raise ValueError(f"policy={policy!r:.80} is invalid; valid: a policy object with reset() and act(), e.g. "
+                         f"{hint}")
 
 
 def check_policy_context(cfg, policy) -> None:
