@@ -270,7 +270,8 @@ def _add_compare(sub):
     p.add_argument("--train-seeds", action="append", default=[], metavar="LABEL=SPEC,SPEC,...",
                    help="one row aggregated over models of one kind trained with different seeds, e.g. "
                         "ppo_lag=rl:a/ppo_sbar.zip,rl:b/ppo_sbar.zip (a glob in a path is expanded); repeatable "
-                        "(default with the default --policies: the shipped ppo_lagrangian and residual seeds)")
+                        "(default with the default --policies: the shipped ppo_lagrangian and residual seeds); "
+                        "without --policies a LABEL that names a default row replaces that row")
     p.add_argument("--no-frontier", action="store_true", help="skip the budgeted model-based sweep")
     p.add_argument("--oracle-windows", type=int, default=0, metavar="N",
                    help="on the first scenario's first N windows: the oracle (best open-loop duty sequence after "
@@ -394,6 +395,8 @@ def _compare_command(args, started) -> int:
     groups = _train_seed_groups(args.train_seeds)
     if not args.policies and not args.train_seeds and sb3_installed():
         pols, groups = _shipped_seed_rows(pols)
+    elif args.policies is None:   # a group labelled as a default row replaces it (docs/rl.md, "Comparison")
+        pols = tuple(p_ for p_ in pols if p_ not in groups)
     _check_compare(args, pols, scns, groups)
     cache_loads_without_registries()   # cached kernels loaded without numba's registries (~0.3 s of CPU)
     pols = _rl_or_skip(pols, explicit=bool(args.policies))
