@@ -57,3 +57,35 @@ def test_a_study_takes_the_policies_with_a_parameter_that_policy_takes():
     st = parse_study({"grid": {"policy": ["model_based_budget:0.02", "step"]}})
     _, cases, _ = prepare_study(st, policies.make, policies.available())
     assert sorted(p["policy"] for p in cases.params()) == ["model_based_budget:0.02", "step"]
+
+
+@pytest.mark.parametrize("content", [b"not a zip", "cut", "no members"])
+def test_a_corrupt_rl_model_zip_is_one_line_for_mission_compare_and_sweep(tmp_path, capsys, monkeypatch, content):
+    """2026-11-27: `policy = ["rl:bad.zip"]` (a valid bad.json beside a file that is not a zip) gave
+    zipfile.BadZipFile with a traceback, exit 1, in sweep, mission --policy and compare alike."""
+    import shutil
+    import zipfile
+    from pathlib import Path
+
+    import policies
+    shipped = Path(policies.__file__).parent / "pretrained" / "rl_s0.zip"
+    bad = tmp_path / "bad.zip"
+    if content == "cut":
+        bad.write_bytes(shipped.read_bytes()[:3000])
+    elif content == "no members":
+        with zipfile.ZipFile(bad, "w") as z:
+            z.writestr("x", "y")
+    else:
+        bad.write_bytes(content)
+    shutil.copy(shipped.with_suffix(".json"), tmp_path / "bad.json")
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "s.toml").write_text('[grid]\npolicy = ["rl:bad.zip"]\n')
+    for argv in (["sweep", "s.toml", "--out", "o"], ["mission", "--policy", "rl:bad.zip", "--out", "o"],
+                 ["compare", "--policies", "rl:bad.zip", "--episodes", "1", "--scenarios", "nominal", "--no-plot",
+                  "--no-frontier", "--no-progress"]):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "RL model 'bad.zip' is not a readable stable-baselines3 model zip" in err[0], err
+    assert not (tmp_path / "o").exists()
+    with pytest.raises(ValueError, match="is not a readable stable-baselines3 model zip"):
+        policies.make(f"rl:{bad}")
