@@ -266,3 +266,9 @@ def test_an_unknown_option_is_named_with_its_command_and_the_nearest_option(caps
     assert _one_error_line(capsys, ["mission", "a.toml", "b.toml"]) == (
         "dronewpt mission: error: unrecognized argument 'b.toml'; valid: the options and arguments of dronewpt "
         "mission --help")
+    # before the command's name the top-level parser got it: it was named 'dronewpt mission'
+    assert _one_error_line(capsys, ["--polcy", "mission"]) == (
+        "dronewpt: error: unrecognized argument '--polcy' (did you mean dronewpt mission --policy? a command's "
+        "options go after its name); valid: the options and arguments of dronewpt --help")
+    assert _one_error_line(capsys, ["--zzz", "mission"]) == (
+        "dronewpt: error: unrecognized argument '--zzz'; valid: the options and arguments of dronewpt --help")
