@@ -13,7 +13,10 @@ the other), after one untimed warm-up round; median and range, and ``os.getloada
   starts and the table kernel loads from its cache (what a changed route or wind costs);
 * ``dronewpt compare --episodes 100 --scenarios nominal --no-plot`` (goal <= 2.5 s): ``--compare
   default`` (every default policy, MPC included: slow, see docs/performance.md) or ``no-mpc`` (the
-  default policies and seed rows without ``mpc``; the default of this script) or ``none``; on the link(s) of
+  default policies and seed rows without ``mpc``; the default of this script) or ``none``. In ``no-mpc`` a
+  policy that has a shipped seed group (``rl``) is its seed-group row only: until 2026-11-27 the command
+  listed ``rl`` in ``--policies`` and as ``--train-seeds rl=...``, which printed two ``rl`` rows (the
+  seed-0 one as well) and is now refused (exit 2), so its times are not comparable with earlier ones; on the link(s) of
   ``--link`` (``modal``, the env's default, ``envelope`` (eq. 4) or ``both``; default: the command as typed,
   no ``--link``). Each compare's printed table is hashed (SHA-1) in every run: the report says whether
   every run of every tree printed the same table per link.
@@ -126,7 +129,7 @@ def _commands(tmp: str, compare: str, links=(None,)) -> dict:
             "dronewpt mission --no-plot, new path": [*cli, "mission", "--no-plot", "--no-progress", "--out",
                                                      f"{tmp}/s", "--set", "seed={seed}"]}
     if compare != "none":
-        extra = ["--policies", NO_MPC, *_seed_rows()] if compare == "no-mpc" else []
+        extra = _no_mpc_args() if compare == "no-mpc" else []
         for link in links:
             name = f"dronewpt compare ({compare}{'' if link is None else ', --link ' + link})"
             cmds[name] = [*cli, "compare", "--episodes", "100", "--scenarios", "nominal", "--no-plot", "--no-progress",
@@ -134,9 +137,17 @@ def _commands(tmp: str, compare: str, links=(None,)) -> dict:
     return cmds
 
 
+def _no_mpc_args() -> list[str]:
+    """``--policies`` NO_MPC without the names that have a seed group (one row each, not a seed-0 row beside
+    its group's row: compare refuses a ``--train-seeds`` label that is also a listed policy), and the groups."""
+    seeds = _seed_rows()
+    labels = {seeds[i + 1].split("=", 1)[0] for i in range(0, len(seeds), 2)}
+    return ["--policies", ",".join(p for p in NO_MPC.split(",") if p not in labels), *seeds]
+
+
 def _seed_rows() -> list[str]:
-    """``--train-seeds`` of the default rows (the shipped ppo_lagrangian and residual seeds), which an
-    explicit ``--policies`` otherwise drops."""
+    """``--train-seeds`` of every shipped seed group (rl, ppo_lagrangian, residual, ...: the default rows'
+    groups, which an explicit ``--policies`` otherwise drops, and the opt-in ones)."""
     sys.path.insert(0, str(ROOT))
     from policies.compare import shipped_seed_groups
     return [x for k, v in shipped_seed_groups().items() for x in ("--train-seeds", f"{k}={','.join(v)}")]

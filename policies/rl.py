@@ -16,6 +16,7 @@ asks the model for its deterministic action (the actor exported to numpy by
 from __future__ import annotations
 
 import json
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -48,6 +49,16 @@ def load_meta(path) -> dict:
     return meta
 
 
+#: what reading a model zip that is not one (or is cut short, or lacks SB3's members) raises
+_UNREADABLE = (zipfile.BadZipFile, KeyError, EOFError, ValueError, RuntimeError)
+
+
+def _unreadable(path, exc) -> ValueError:
+    why = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    return ValueError(f"RL model {str(path)!r} is not a readable stable-baselines3 model zip ({why}); valid: a model "
+                      "zip written by `dronewpt train` (or SB3's model.save)")
+
+
 class RLPolicy:
     """A stable-baselines3 policy (``path``: model zip; default the shipped pre-trained PPO).
 
@@ -77,9 +88,12 @@ class RLPolicy:
         # the shipped PPO models load their actor from the state dict (no SB3, no optimiser); others load
         # the SB3 model (predict() costs 0.15-1 ms a call; the actor exported to numpy ~10 us, same
         # actions to float32 round-off (1 ulp); fast=False keeps predict(), bit-identical to SB3)
-        fast_actor = load_ppo_actor(self.path, self.meta) if self.deterministic and fast else None
-        self._actor = fast_actor if fast_actor is not None else \
-            (export_actor(self.model) if self.deterministic and fast else None)
+        try:
+            fast_actor = load_ppo_actor(self.path, self.meta) if self.deterministic and fast else None
+            self._actor = fast_actor if fast_actor is not None else \
+                (export_actor(self.model) if self.deterministic and fast else None)
+        except _UNREADABLE as exc:   # not a zip, cut short, no data / policy.pth: was a traceback (BadZipFile, ...)
+            raise _unreadable(self.path, exc) from None
         self.discrete = bool(self.meta.get("discrete", self.meta["algo"] == "dqn"))
         norm = self.meta.get("obs_norm")
         if norm:
@@ -104,7 +118,10 @@ class RLPolicy:
         if self._model is None:
             import stable_baselines3 as sb3
             cls = getattr(sb3, self.meta["algo"].upper())
-            self._model = cls.load(str(self.path), device="cpu")
+            try:
+                self._model = cls.load(str(self.path), device="cpu")
+            except _UNREADABLE as exc:
+                raise _unreadable(self.path, exc) from None
         return self._model
 
     def reset(self, n: int = 1) -> None:

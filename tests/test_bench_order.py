@@ -4,6 +4,8 @@ other sessions' jobs held back meanwhile took their turn in the eq. 4 run (docs/
 
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -84,3 +86,31 @@ def test_without_a_cache_variable_the_measured_tree_gets_its_own_folder_too(monk
                     str(peer.resolve()): str(bench_startup.tree_cache_dir(peer))}
     assert seen[str(ROOT)] != seen[str(peer.resolve())]
 
+
+class _Reached(Exception):
+    pass
+
+
+def test_the_no_mpc_compare_command_is_accepted_with_one_row_per_label(monkeypatch, tmp_path):
+    """The default ``--compare no-mpc`` command listed ``rl`` in ``--policies`` and as ``--train-seeds rl=...``:
+    two ``rl`` rows before, exit 2 since compare refuses a seed-group label that is also a listed policy."""
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    import bench_startup
+    import policies.compare as pc
+    from mission_sim.cli import main
+    from policies.compare import shipped_seed_groups
+
+    argv = bench_startup._commands(str(tmp_path), "no-mpc")["dronewpt compare (no-mpc)"]
+    seen = {}
+
+    def fake_compare(pols, scns, *a, train_seeds=None, **k):   # reached only when the options were accepted
+        seen.update(pols=tuple(pols), groups=dict(train_seeds or {}))
+        raise _Reached
+
+    monkeypatch.setattr(pc, "compare", fake_compare)
+    with pytest.raises(_Reached):
+        main(argv[argv.index("compare"):])
+    labels = list(seen["pols"]) + list(seen["groups"])
+    assert len(labels) == len(set(labels))
+    assert set(seen["groups"]) == set(shipped_seed_groups())
+    assert set(seen["pols"]) == set(bench_startup.NO_MPC.split(",")) - set(shipped_seed_groups())

@@ -226,14 +226,18 @@ def test_dry_run_refuses_what_the_run_refuses(tmp_path, capsys):
 def test_no_help_text_shows_a_doubled_percent_sign(capsys):
     """argparse %-formats an option's help but not a command's description: `calibrate --help` printed "the first
     70 %% of the airborne time" (2026-11-27)."""
+    import argparse
+
     import pytest
-    commands = ["paper", "coupling", "mission", "replay", "calibrate", "telemetry", "train", "compare", "sweep",
-                "sizing", "tolerance", "netlist", "export-controller", "warmup"]
-    for cmd in commands:
+
+    from mission_sim.cli import build_parser
+    commands = [name for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction) for name in a.choices]
+    assert {"mission", "calibrate", "sweep"} <= set(commands)   # every command the parser has, a new one too
+    for cmd in ["", *commands]:   # and the top-level help
         with pytest.raises(SystemExit):
-            main([cmd, "--help"])
+            main([cmd, "--help"] if cmd else ["--help"])
         out = capsys.readouterr().out
-        assert out.startswith(f"usage: dronewpt {cmd}") and "%%" not in out, (cmd, out[:200])
+        assert out.startswith(f"usage: dronewpt {cmd}".rstrip()) and "%%" not in out, (cmd, out[:200])
 
 
 def test_a_key_given_twice_with_different_values_is_refused(tmp_path, capsys):
@@ -266,3 +270,9 @@ def test_an_unknown_option_is_named_with_its_command_and_the_nearest_option(caps
     assert _one_error_line(capsys, ["mission", "a.toml", "b.toml"]) == (
         "dronewpt mission: error: unrecognized argument 'b.toml'; valid: the options and arguments of dronewpt "
         "mission --help")
+    # before the command's name the top-level parser got it: it was named 'dronewpt mission'
+    assert _one_error_line(capsys, ["--polcy", "mission"]) == (
+        "dronewpt: error: unrecognized argument '--polcy' (did you mean dronewpt mission --policy? a command's "
+        "options go after its name); valid: the options and arguments of dronewpt --help")
+    assert _one_error_line(capsys, ["--zzz", "mission"]) == (
+        "dronewpt: error: unrecognized argument '--zzz'; valid: the options and arguments of dronewpt --help")

@@ -2,6 +2,7 @@
 aggregate with a t interval, the Pareto front is the non-dominated set."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -114,3 +115,36 @@ def test_compare_api_refuses_a_repeated_row_label():
         compare(("ramp", "ramp"), ("nominal",), episodes=1)
     with pytest.raises(ValueError, match="train_seeds label 'ramp' is also one of the policies"):
         compare(("ramp",), ("nominal",), episodes=1, train_seeds={"ramp": ["step", "step"]})
+
+
+class _Reached(Exception):
+    pass
+
+
+@pytest.mark.parametrize("policies", [None, "step,residual"])
+def test_cli_a_seed_group_labelled_as_a_default_row_replaces_it_without_policies(policies, monkeypatch, capsys):
+    """docs/rl.md ('Comparison'): the default rows are 'equivalent to --train-seeds residual=residual:...'; that
+    command without --policies exited 2 naming policies the user never listed (69cd052). Now the group replaces the
+    default row; with --policies naming the label it is still refused."""
+    import policies.compare as pc
+    from mission_sim.cli import main
+    seen = {}
+
+    def fake_compare(pols, scns, *a, train_seeds=None, **k):   # the real label check, then stop before running
+        pc.check_row_labels(pols, train_seeds)
+        seen.update(pols=tuple(pols), groups=dict(train_seeds))
+        raise _Reached
+
+    monkeypatch.setattr(pc, "compare", fake_compare)
+    argv = ["compare", "--episodes", "1", "--no-plot", "--no-frontier", "--no-progress",
+            "--train-seeds", "residual=residual:policies/pretrained/residual_s*.zip"]
+    if policies is not None:
+        assert main([*argv, "--policies", policies]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "train_seeds label 'residual' is also one of the policies" in err[0], err
+        return
+    monkeypatch.chdir(Path(__file__).resolve().parents[1])
+    with pytest.raises(_Reached):
+        main(argv)
+    assert seen["pols"] == tuple(p for p in pc.DEFAULT_POLICIES if p != "residual")
+    assert list(seen["groups"]) == ["residual"] and len(seen["groups"]["residual"]) == 5

@@ -428,3 +428,13 @@ def test_pads_csv_trailing_empty_fields_are_accepted(tmp_path):
     assert read_pads(a) == read_pads(b)
     b.write_text("id,lat,lon,name\n1,47,8,north pad\n")   # other columns (not near a known name) are ignored
     assert read_pads(a) == read_pads(b)
+
+
+def test_pads_csv_alt_amsl_is_the_altitude_column():
+    """The altitude column is m AMSL (docs/mission_files.md), so `alt_amsl` names it (2026-11-27: refused as a
+    misspelt column); a relative one (alt_agl) is still refused, the message saying the column is AMSL."""
+    from mission_sim.plans.pads import _csv
+    ref = _csv("lat,lon,alt\n47,8,512.5\n", "a.csv")
+    assert _csv("lat,lon,alt_amsl\n47,8,512.5\n", "b.csv") == ref and ref[0].point.alt_m == 512.5
+    with pytest.raises(ValueError, match=r"column 'alt_agl' is unknown .*\(alt in m AMSL\)"):
+        _csv("lat,lon,alt_agl\n47,8,12\n", "c.csv")

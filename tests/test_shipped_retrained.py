@@ -190,12 +190,17 @@ def test_retrain_script_slow_budget_and_imitation_are_the_shipped_commands(kind,
     """The script's command of each kind parses to the options of the shipped seed 0's own ``reproduce``
     (link and output aside): the retraining runs what was shipped, on the link it is told."""
     from mission_sim.cli import build_parser
+    from mission_sim.cli.learning import _only_with
+
+    def parsed(argv):   # the options the run uses: the dependent ones' defaults filled in (None until checked)
+        a = build_parser().parse_args(argv)
+        _only_with(a)
+        return vars(a)
     rs = _retrain_script()
     assert rs.constrained(kind) == bool(budget)
-    ours = vars(build_parser().parse_args(
-        rs.KINDS[kind].format(timesteps=timesteps, seed=0, budget=budget).split()[1:] + ["--out", "x"]))
+    ours = parsed(rs.KINDS[kind].format(timesteps=timesteps, seed=0, budget=budget).split()[1:] + ["--out", "x"])
     shipped = json.loads((Path(__file__).resolve().parents[1] / "policies" / "pretrained" / f"{kind}_s0.json").read_text())
-    theirs = vars(build_parser().parse_args(shipped["reproduce"].replace(" --out DIR", " --out x").split()[1:]))
+    theirs = parsed(shipped["reproduce"].replace(" --out DIR", " --out x").split()[1:])
     skip = {"link", "env", "eval_every", "checkpoint_every"}   # the link is the run's; evaluation cadence is not the model
     assert {k: v for k, v in ours.items() if k not in skip} == {k: v for k, v in theirs.items() if k not in skip}
 

@@ -173,10 +173,14 @@ def test_cli_train_errors(capsys):
     ("--lambda-lr", "10", "--lagrangian"), ("--probe-episodes", "0", "--lagrangian"),
     ("--dagger", "2", "--imitate"), ("--imitation-episodes", "8", "--imitate"),
     ("--imitation-epochs", "5", "--imitate"), ("--imitation-mask", "", "--imitate"),
-    ("--slow-budget-every", "step", "--slow-budget")])
+    ("--slow-budget-every", "step", "--slow-budget"),
+    # given at its default value: the check compared the value with the default, so these trained and exited 0
+    ("--residual-scale", "0.25", "--residual"), ("--lambda-lr", "50", "--lagrangian"), ("--dagger", "0", "--imitate"),
+    ("--imitation-mask", "last_d_short", "--imitate"), ("--slow-budget-every", "window", "--slow-budget")])
 def test_cli_train_refuses_an_option_without_the_one_that_uses_it(flag, value, needs, tmp_path, capsys):
     """2026-11-27: `train --residual-scale 0.1` without --residual (or --dagger 2 without --imitate, ...) trained a
-    plain PPO and exited 0, the option silently ignored (as --budget without --lagrangian already was not)."""
+    plain PPO and exited 0, the option silently ignored (as --budget without --lagrangian already was not); the
+    same when the value given is the option's default (`--residual-scale 0.25`)."""
     from mission_sim.cli import main
     out = tmp_path / "run"
     assert main(["train", "--algo", "ppo", "--timesteps", "10", "--out", str(out), flag, value]) == 2

@@ -17,6 +17,13 @@ class CliError(Exception):
     """A user error: printed as one line, exit status 2."""
 
 
+def _nearest(arg: str, parser) -> list:
+    """The option of ``parser`` nearest ``arg`` (difflib, cutoff 0.75), as a one-element list, or []."""
+    import difflib
+    known = [o for a in parser._actions for o in a.option_strings]
+    return difflib.get_close_matches(arg.split("=", 1)[0], known, n=1, cutoff=0.75)
+
+
 class OneLineParser(argparse.ArgumentParser):
     """argparse with its usage errors on one line (``dronewpt mission: error: ... (see --help)``), exit 2."""
 
@@ -26,17 +33,21 @@ class OneLineParser(argparse.ArgumentParser):
     def parse_args(self, args=None, namespace=None):
         """As argparse's, but an unknown option is named with the command it was given to and the nearest valid
         option (``dronewpt: error: unrecognized arguments: --polcy`` named neither)."""
-        ns, extras = self.parse_known_args(args, namespace)
+        argv = list(sys.argv[1:] if args is None else args)
+        ns, extras = self.parse_known_args(argv, namespace)
         if extras:
-            import difflib
-            cmd = self
+            cmd, sub = self, None
             for action in self._actions:   # the subcommand's own parser, when there is one
                 if isinstance(action, argparse._SubParsersAction) and getattr(ns, action.dest, None) in action.choices:
-                    cmd = action.choices[getattr(ns, action.dest)]
-            known = [o for a in cmd._actions for o in a.option_strings]
-            near = (difflib.get_close_matches(extras[0].split("=", 1)[0], known, n=1, cutoff=0.75)
-                    if extras[0].startswith("-") else [])
+                    name = getattr(ns, action.dest)
+                    sub = action.choices[name]
+                    # given before the command's name: the top-level parser got it (`dronewpt --polcy mission`)
+                    before = name in argv and extras[0] in argv and argv.index(extras[0]) < argv.index(name)
+                    cmd = self if before else sub
+            near = _nearest(extras[0], cmd) if extras[0].startswith("-") else []
             hint = f" (did you mean {near[0]}?)" if near else ""
+            if not near and cmd is self and sub is not None and _nearest(extras[0], sub):
+                hint = f" (did you mean {sub.prog} {_nearest(extras[0], sub)[0]}? a command's options go after its name)"
             self.exit(2, f"{cmd.prog}: error: unrecognized argument {extras[0]!r}{hint}; valid: the options and "
                          f"arguments of {cmd.prog} --help\n")
         return ns

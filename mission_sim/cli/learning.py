@@ -109,7 +109,7 @@ def _add_train(sub):
     p.add_argument("--resume", type=path_arg("--resume"), default=None, metavar="CHECKPOINT.zip",
                    help="continue from a checkpoint of checkpoints/ (its VecNormalize statistics next to it)")
     add_progress_flag(p)
-    p.set_defaults(func=_cmd_train, **{dest: default for dest, (default, _) in _ONLY_WITH.items()})
+    p.set_defaults(func=_cmd_train)   # _ONLY_WITH's options default to None (not given): _only_with fills them
 
 
 #: :data:`mission_sim.contract.LINK_MODELS` (not imported: the parser stays free of wpt_receiver's import;
@@ -156,7 +156,19 @@ def _env_overrides(items) -> dict:
     return out
 
 
+def _only_with(args):
+    """An option of :data:`_ONLY_WITH` given without the option that uses it is refused (given, even at its default
+    value: it had no effect); then the ones not given get their defaults."""
+    for dest, (default, needs) in _ONLY_WITH.items():
+        if getattr(args, dest) is None:
+            setattr(args, dest, default)
+        elif not getattr(args, needs[2:].replace("-", "_")):   # before: trained without it, exit 0
+            flag = "--" + dest.replace("_", "-")
+            raise CliError(f"{flag} is only used with {needs}; add {needs} or drop {flag}")
+
+
 def _check_train(args):
+    _only_with(args)
     lo = 0 if args.imitate else 1
     if args.timesteps < lo:
         raise CliError(f"--timesteps {args.timesteps} is invalid; valid range: >= {lo}")
@@ -199,10 +211,6 @@ def _check_train(args):
                            "--smooth-penalty; valid: --algo ppo / sac / td3 without them (the duty is the MPC's)")
     if args.budget is not None and not args.lagrangian:
         raise CliError("--budget is only used with --lagrangian; add --lagrangian or drop --budget")
-    for dest, (default, needs) in _ONLY_WITH.items():   # given without the option that uses it: ignored before
-        if getattr(args, dest) != default and not getattr(args, needs[2:].replace("-", "_")):
-            flag = "--" + dest.replace("_", "-")
-            raise CliError(f"{flag} is only used with {needs}; add {needs} or drop {flag}")
 
 
 def _cmd_train(args) -> int:
@@ -270,7 +278,8 @@ def _add_compare(sub):
     p.add_argument("--train-seeds", action="append", default=[], metavar="LABEL=SPEC,SPEC,...",
                    help="one row aggregated over models of one kind trained with different seeds, e.g. "
                         "ppo_lag=rl:a/ppo_sbar.zip,rl:b/ppo_sbar.zip (a glob in a path is expanded); repeatable "
-                        "(default with the default --policies: the shipped ppo_lagrangian and residual seeds)")
+                        "(default with the default --policies: the shipped ppo_lagrangian and residual seeds); "
+                        "without --policies a LABEL that names a default row replaces that row")
     p.add_argument("--no-frontier", action="store_true", help="skip the budgeted model-based sweep")
     p.add_argument("--oracle-windows", type=int, default=0, metavar="N",
                    help="on the first scenario's first N windows: the oracle (best open-loop duty sequence after "
@@ -394,6 +403,8 @@ def _compare_command(args, started) -> int:
     groups = _train_seed_groups(args.train_seeds)
     if not args.policies and not args.train_seeds and sb3_installed():
         pols, groups = _shipped_seed_rows(pols)
+    elif args.policies is None:   # a group labelled as a default row replaces it (docs/rl.md, "Comparison")
+        pols = tuple(p_ for p_ in pols if p_ not in groups)
     _check_compare(args, pols, scns, groups)
     cache_loads_without_registries()   # cached kernels loaded without numba's registries (~0.3 s of CPU)
     pols = _rl_or_skip(pols, explicit=bool(args.policies))

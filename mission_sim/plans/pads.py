@@ -1,5 +1,5 @@
 """Charging pads from a file: CSV with a header (``lat``, ``lon``, optional ``alt`` in m AMSL and
-``hover_time_s``; also ``latitude``/``longitude``/``lng``/``altitude``) or GeoJSON (Point /
+``hover_time_s``; also ``latitude``/``longitude``/``lng``/``altitude``/``alt_amsl``, :data:`_ALIASES`) or GeoJSON (Point /
 MultiPoint geometries, coordinates [lon, lat(, alt)], optional property ``hover_time_s``).
 
 Returns :class:`GeoPad` records; :mod:`.route` puts them into the pad frame. Errors are one line
@@ -20,7 +20,7 @@ __all__ = ["GeoPad", "read_pads", "MAX_PADS"]
 
 MAX_PADS = 100
 _ALIASES = {"lat": ("lat", "lat_deg", "latitude"), "lon": ("lon", "lon_deg", "lng", "long", "longitude"),
-            "alt": ("alt", "alt_m", "altitude", "amsl_m"), "hover_time_s": ("hover_time_s", "hover_s")}
+            "alt": ("alt", "alt_m", "altitude", "amsl_m", "alt_amsl"), "hover_time_s": ("hover_time_s", "hover_s")}
 
 
 @dataclass(frozen=True)
