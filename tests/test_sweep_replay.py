@@ -111,6 +111,58 @@ def test_a_replay_case_without_pads_equals_the_replay_command(tmp_path, capsys):
     assert abs(row["power_comparison.energy_error_rel"]) < 0.05 < abs(light["power_comparison.energy_error_rel"])
 
 
+def test_a_replay_case_with_pad_equals_the_replay_command_with_pad(tmp_path, capsys):
+    """``[replay] pad = "LAT,LON,ALT"`` is the command's ``--pad``: the pad (the frame origin) 1.32 m below the
+    take-off spot of log171 (590.82 m AMSL), ~15 m south-east of it."""
+    pad = "-35.36245,149.16595,589.5"
+    study = _study(tmp_path, f'log = "{LOG171}"\npad = "{pad}"', '"drone.mass_kg" = [1.0, 1.83]')
+    assert _sweep(study, tmp_path / "o") == 0
+    df = read_results(tmp_path / "o")
+    capsys.readouterr()
+    row = df[df["drone.mass_kg"] == 1.83].iloc[0]
+    out = ["--out", str(tmp_path / "r"), "--format", "json", "--no-plot", "--no-progress"]
+    assert main(["replay", str(LOG171), f"--pad={pad}", "--set", "drone.mass_kg=1.83", *out]) == 0
+    cmd = json.loads(capsys.readouterr().out)
+    _assert_row_equals_command(row, cmd, min_numbers=30)
+    # the pad reached the case: heights are above it (1.32 m more than above the take-off spot)
+    assert main(["replay", str(LOG171), "--set", "drone.mass_kg=1.83", *out]) == 0
+    default = json.loads(capsys.readouterr().out)
+    assert row["max_alt_m"] - default["max_alt_m"] == pytest.approx(590.82 - 589.5, abs=1e-6)
+
+
+def test_a_refly_case_with_pad_equals_the_command_with_pad_and_pads(tmp_path, capsys):
+    """With ``pads``, ``pad`` is the pads' frame origin as with ``replay --pad ... --pads``; one without altitude
+    takes the take-off spot's (590.76 m AMSL)."""
+    pad = "-35.36235,149.16575"
+    study = _study(tmp_path, f'log = "{LOG}"\npads = "{PADS}"\npad = "{pad}"\nwindow = [440.0, 620.0]',
+                   '"mission.hover_time_s" = [30.0, 60.0]')
+    assert _sweep(study, tmp_path / "o") == 0
+    df = read_results(tmp_path / "o")
+    capsys.readouterr()
+    row = df[df["mission.hover_time_s"] == 60.0].iloc[0]
+    assert main(["replay", str(LOG), f"--pad={pad}", "--pads", str(PADS), "--window", "440,620",
+                 "--set", "mission.hover_time_s=60.0", "--out", str(tmp_path / "r"), "--format", "json", "--no-plot",
+                 "--no-progress"]) == 0
+    cmd = json.loads(capsys.readouterr().out)
+    _assert_row_equals_command(row, cmd, min_numbers=25)
+    assert (row["pad_frame_origin.lat_deg"], row["pad_frame_origin.lon_deg"], row["pad_frame_origin.alt_m"]) == (
+        -35.36235, 149.16575, 590.76)
+
+
+@pytest.mark.parametrize("pad", ["1,2,3,4", "-35.36", "north,east", "95,10", "-35.36,149.16,20000", 5])
+def test_a_bad_pad_is_the_commands_error_in_the_study_files_words(tmp_path, capsys, pad):
+    """The command's parser checks ``[replay] pad`` (one source): the same line, ``--pad`` named as the key."""
+    study = _study(tmp_path, f'log = "{LOG}"\npad = {json.dumps(pad)}', '"drone.mass_kg" = [1.0, 2.0]')
+    assert _sweep(study, tmp_path / "o") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert main(["replay", str(LOG), f"--pad={pad}", "--out", str(tmp_path / "r"), "--no-progress"]) == 2
+    cmd = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 == len(cmd) and "valid" in err[0], err
+    shown = repr(pad)
+    assert err[0].split(f"[replay] pad = {shown}", 1)[1] == cmd[0].split(f"--pad {str(pad)!r}", 1)[1], (err, cmd)
+    assert not (tmp_path / "o").exists() and not (tmp_path / "r").exists()
+
+
 def test_the_log_is_parsed_once_per_process_not_per_case(tmp_path, monkeypatch):
     from mission_sim.mavlink import logs
     calls = []
@@ -253,7 +305,7 @@ def test_the_documented_replay_section_parses(tmp_path):
     doc = inspect.getdoc(study_mod)
     block = textwrap.dedent(doc.split("A ``[replay]`` section")[1].split("::\n", 1)[1].split("\n\nDistributions")[0])
     st = study_mod.parse_study({**tomllib.loads(block), "grid": {"drone.mass_kg": [1.0, 2.0]}}, base_dir=tmp_path)
-    assert set(st.replay) == {"log", "pads", "drone", "window", "reach_m", "ground_gap_m"}
+    assert set(st.replay) == {"log", "pads", "pad", "drone", "window", "reach_m", "ground_gap_m"}
     seg = study_mod.parse_study({**tomllib.loads(block.replace("# segment", "segment").replace("window =", "# window =")),
                                  "grid": {"drone.mass_kg": [1.0, 2.0]}}, base_dir=tmp_path)
     assert seg.replay["segment"] == 2 and "window" not in seg.replay

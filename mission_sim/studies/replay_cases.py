@@ -1,7 +1,7 @@
 """The replay case runner of sweeps: parameter studies over your own flight logs.
 
 A study with a ``[replay]`` section (:mod:`mission_sim.studies.study`) runs every case as
-``dronewpt replay LOG [--pads FILE] --set KEY=VALUE ...`` would, summary-only (no time series, no
+``dronewpt replay LOG [--pad LAT,LON] [--pads FILE] --set KEY=VALUE ...`` would, summary-only (no time series, no
 figure), with the case's values as the ``--set`` keys (``drone.mass_kg``, ``battery.capacity_ah``,
 ``mission.hover_time_s``, ``pads.0.hover_time_s``, ``link.*``, ``charger.*``, ... and ``policy``):
 
@@ -134,6 +134,9 @@ class ReplayCaseRunner(MissionCaseRunner):
         ``--config`` mission with one pad at the frame origin (as ``dronewpt replay`` builds them)
     options : the ``[replay]`` section (paths resolved)
     log_sha : the log's sha256 (checked where it is read; the pads are in ``base`` already)
+    origin : the replay's pad frame origin as the command resolves it (``[replay] pad``, an altitude-less one at the
+        take-off spot's altitude; else the take-off spot: :func:`~mission_sim.mavlink.replay.track_from_log`'s
+        ``track.pad``), given to every replay and re-flight as the command gives it
 
     ``input_files`` (set by :func:`replay_runner`): the log's and the pads file's path and sha256, recorded in
     the sweep's ``sweep.json`` so a resume over a changed file names it.
@@ -142,10 +145,11 @@ class ReplayCaseRunner(MissionCaseRunner):
     _check_run_size = False   # the route is the log: the planner's size estimate does not apply; the replay's own
     #                           limit (MAX_REPLAY_SAMPLES, the re-flight's detours included) is checked in check_params
 
-    def __init__(self, base: dict, make_policy, policy_names, options: dict, log_sha: str):
+    def __init__(self, base: dict, make_policy, policy_names, options: dict, log_sha: str, origin=None):
         super().__init__(base, make_policy, policy_names)
         self.options = dict(options)
         self.log_sha = log_sha
+        self.origin = origin
         self._refused: dict = {}
         self._plans: dict = {}
         self.input_files: dict = {}
@@ -182,8 +186,8 @@ class ReplayCaseRunner(MissionCaseRunner):
                     if len(self._plans) >= _PLANS_MAX:
                         self._plans.clear()
                     try:
-                        plan = plan_refly(log, cfg, ground_gap_m=o.get("ground_gap_m"), window=o.get("window"),
-                                          reach_m=o["reach_m"], segment=o.get("segment"))[:3]
+                        plan = plan_refly(log, cfg, pad=self.origin, ground_gap_m=o.get("ground_gap_m"),
+                                          window=o.get("window"), reach_m=o["reach_m"], segment=o.get("segment"))[:3]
                     except ValueError as exc:
                         plan = exc
                     self._plans[key] = plan
@@ -193,7 +197,7 @@ class ReplayCaseRunner(MissionCaseRunner):
             else:
                 gap = cfg.mission.hover_gap_m if o.get("ground_gap_m") is None else o["ground_gap_m"]
                 span, _ = replay_span(log, o.get("window"), o.get("segment"))
-                resample_track(track_from_log(log, ground_gap_m=gap, window=span), cfg.sim.traj_dt_s)
+                resample_track(track_from_log(log, pad=self.origin, ground_gap_m=gap, window=span), cfg.sim.traj_dt_s)
         except ValueError as exc:
             return _study_words(str(exc))
         return None
@@ -206,12 +210,13 @@ class ReplayCaseRunner(MissionCaseRunner):
         policy = self.make_policy(params.get(POLICY_KEY, DEFAULT_POLICY), policy_context(cfg))
         if "pads" in o:
             from ..plans.refly import refly_log
-            res = refly_log(self.log(), cfg, policy, ground_gap_m=o.get("ground_gap_m"), window=o.get("window"),
-                            reach_m=o["reach_m"], segment=o.get("segment"), frame=False, warn=False)
+            res = refly_log(self.log(), cfg, policy, pad=self.origin, ground_gap_m=o.get("ground_gap_m"),
+                            window=o.get("window"), reach_m=o["reach_m"], segment=o.get("segment"), frame=False,
+                            warn=False)
         else:
             from ..mavlink.replay import replay_log
-            res = replay_log(self.log(), cfg, policy, ground_gap_m=o.get("ground_gap_m"), window=o.get("window"),
-                             segment=o.get("segment"), frame=False, warn=False)
+            res = replay_log(self.log(), cfg, policy, pad=self.origin, ground_gap_m=o.get("ground_gap_m"),
+                             window=o.get("window"), segment=o.get("segment"), frame=False, warn=False)
         out = _flat(res.summary)
         out.pop("log", None)   # the study's, the same in every row
         out["drone_mass_kg"] = float(cfg.drone.mass_kg)
@@ -234,13 +239,13 @@ class ReplayCaseRunner(MissionCaseRunner):
         self({})
 
 
-def _base(study: Study, options: dict, log, pads) -> dict:
-    """The replay's mission dict as ``dronewpt replay`` builds it (``--config`` = ``[study] base``)."""
+def _base(study: Study, options: dict, origin, pads) -> dict:
+    """The replay's mission dict as ``dronewpt replay`` builds it (``--config`` = ``[study] base``; the pads about
+    the frame origin ``origin``)."""
     from ..config import apply_overrides, config_to_dict, load_config, load_config_dict
-    from ..mavlink.replay import default_pad
     if pads is not None:
         from ..plans.refly import refly_base
-        d = refly_base(config_to_dict(load_config(study.base_path)), pads, default_pad(log), Path(options["pads"]).name)
+        d = refly_base(config_to_dict(load_config(study.base_path)), pads, origin, Path(options["pads"]).name)
     else:
         d = load_config_dict(study.base_path)
         d["pads"] = [{"x_m": 0.0, "y_m": 0.0, "z_m": 0.0}]
@@ -281,16 +286,18 @@ def replay_runner(study: Study, make_policy, policy_names) -> tuple[ReplayCaseRu
     try:
         log = load_inputs("log", o["log"], log_sha)
         span, _ = replay_span(log, o.get("window"), o.get("segment"))
-        track_from_log(log, window=span)   # no usable position (not a flight log): one line naming the file
+        # no usable position (not a flight log): one line naming the file; the frame origin as the command's
+        origin = track_from_log(log, pad=o.get("pad"), window=span).pad
     except ValueError as exc:
         msg, name = _study_words(str(exc)), f"{Path(o['log']).name}: "
         raise ValueError(f"[replay] log {str(o['log'])!r}: {msg[len(name):]}" if msg.startswith(name) else msg) from None
     pads_sha = _sha256(o["pads"]) if "pads" in o else None
     pads = load_inputs("pads", o["pads"], pads_sha) if "pads" in o else None
-    base = _base(study, o, log, pads)
-    runner = ReplayCaseRunner(base, make_policy, policy_names, o, log_sha)
+    base = _base(study, o, origin, pads)
+    runner = ReplayCaseRunner(base, make_policy, policy_names, o, log_sha, origin)
     runner.input_files = {f"[replay] {k}": {"path": str(o[k]), "sha256": sha}
                           for k, sha in (("log", log_sha), ("pads", pads_sha)) if sha is not None}
     ident = {"runner": "replay v1", "base": base, "log": log_sha, "pads": pads_sha,
-             "options": {k: v for k, v in o.items() if k not in ("log", "pads", "drone")}}
+             "options": {k: [v.lat_deg, v.lon_deg, v.alt_m] if k == "pad" else v for k, v in o.items()
+                         if k not in ("log", "pads", "drone")}}
     return runner, hashlib.sha256(canonical_json(ident).encode()).hexdigest()[:16]
