@@ -160,6 +160,16 @@ class ReplayCaseRunner(MissionCaseRunner):
     def log(self):
         return load_inputs("log", self.options["log"], self.log_sha)
 
+    def setup_notes(self) -> tuple:
+        """The logged battery voltage against each case's pack, counted once per study with the mission's setup
+        warnings (the cases run with ``warn=False``): the line ``dronewpt replay`` gives
+        (:func:`~mission_sim.mavlink.replay.battery_voltage_warning`, "the re-flight" with pads), computed once per
+        distinct ``battery`` section."""
+        from ..mavlink.replay import battery_voltage_warning
+        log, run = self.log(), "re-flight" if "pads" in self.options else "replay"
+        return (("voltage", "a logged battery voltage outside their model pack's open-circuit range",
+                 lambda cfg: (cfg.battery,), lambda cfg: battery_voltage_warning(log, cfg.battery, run)),)
+
     def check_params(self, params: dict) -> str | None:
         """None if the case would replay, else the error (the mission's own checks first, then the replay's:
         no pad within ``reach_m`` of the track, a track longer than fits at the case's ``sim.traj_dt_s``)."""
