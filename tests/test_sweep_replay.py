@@ -16,6 +16,7 @@ import pytest
 from mission_sim.cli import main
 from mission_sim.studies import replay_cases
 from mission_sim.studies.sweep import read_results
+from wpt_receiver.notices import DronewptWarning
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data"
@@ -262,7 +263,8 @@ def test_the_example_replay_study_is_valid_and_its_files_are_shipped():
     from mission_sim.studies.study import load_study
     from mission_sim.studies.sweep import prepare_study
     st = load_study(ROOT / "examples" / "study_replay.toml")
-    runner, cases, _ = prepare_study(st, policies.make, policies.available())
+    with pytest.warns(DronewptWarning, match="12 of 12 cases .* logged battery voltage"):   # the 8S drone, a 3S log
+        runner, cases, _ = prepare_study(st, policies.make, policies.available())
     assert len(cases) == 12 and st.replay["log"].resolve().parent == (DATA / "flightlogs").resolve()
     assert isinstance(runner, replay_cases.ReplayCaseRunner)
 
@@ -273,7 +275,8 @@ def test_two_local_workers_equal_serial_and_each_parses_the_log_once(tmp_path):
     from mission_sim.studies.sweep import dask_client, prepare_study, run_sweep
     study = _study(tmp_path, f'log = "{LOG}"\npads = "{PADS}"\nwindow = [440.0, 620.0]',
                    '"drone.mass_kg" = [1.0, 1.4]\n"mission.hover_time_s" = [20.0, 50.0]')
-    runner, cases, _ = prepare_study(load_study(study), policies.make, policies.available())
+    with pytest.warns(DronewptWarning, match="logged battery voltage"):   # the 8S model drone, a 3S log
+        runner, cases, _ = prepare_study(load_study(study), policies.make, policies.available())
     with dask_client(workers=2) as client:
         res = run_sweep(cases, runner, tmp_path / "dask", client=client, progress=False)
         parsed = client.run(lambda: sorted(k[0] for k in __import__("mission_sim.studies.replay_cases",
@@ -421,7 +424,8 @@ def test_a_worker_that_does_not_see_the_log_parses_the_bytes_sent_with_the_warm_
     log = tmp_path / "f.tlog"
     shutil.copyfile(LOG, log)
     study = _study(tmp_path, f'log = "f.tlog"\npads = "{PADS}"\nwindow = [440.0, 620.0]', '"drone.mass_kg" = [1.0, 1.2]')
-    runner, _, _ = prepare_study(load_study(study), policies.make, policies.available())
+    with pytest.warns(DronewptWarning, match="logged battery voltage"):   # the 8S model drone, a 3S log
+        runner, _, _ = prepare_study(load_study(study), policies.make, policies.available())
     params = {"drone.mass_kg": 1.2}
     want = runner(params)
     sent = pickle.dumps(runner.warm)            # what the engine sends to every worker, once
