@@ -16,7 +16,8 @@ prepared (a missing file, or one that is not a flight log, is refused there with
 every Dask worker in :meth:`ReplayCaseRunner.warm`, never per case. Keys and values are checked
 before anything runs exactly as the mission runner checks them (:class:`.mission_cases.MissionParamChecker`,
 on the replay's mission), plus what a replay itself refuses (no pad within reach, a track, or a re-flight with its charging
-hovers, too long for ``sim.traj_dt_s``).
+hovers, too long for ``sim.traj_dt_s``). The logged battery voltage against each case's pack is warned once per study,
+counting the cases outside it (:meth:`ReplayCaseRunner.setup_notes`: ``replay``'s line), not per case.
 """
 
 from __future__ import annotations
