@@ -165,11 +165,12 @@ class ReplayCaseRunner(MissionCaseRunner):
         """The logged battery voltage against each case's pack, counted once per study with the mission's setup
         warnings (the cases run with ``warn=False``): the line ``dronewpt replay`` gives
         (:func:`~mission_sim.mavlink.replay.battery_voltage_warning`, "the re-flight" with pads), computed once per
-        distinct ``battery`` section."""
+        cell count (the pack's range is ``battery.n_series`` x the cell's: the line reads nothing else of the case;
+        once per ``battery`` section took the log's median again for every Monte Carlo draw of a capacity)."""
         from ..mavlink.replay import battery_voltage_warning
         log, run = self.log(), "re-flight" if "pads" in self.options else "replay"
         return (("voltage", "a logged battery voltage outside their model pack's open-circuit range",
-                 lambda cfg: (cfg.battery,), lambda cfg: battery_voltage_warning(log, cfg.battery, run)),)
+                 lambda cfg: (cfg.battery.n_series,), lambda cfg: battery_voltage_warning(log, cfg.battery, run)),)
 
     def check_params(self, params: dict) -> str | None:
         """None if the case would replay, else the error (the mission's own checks first, then the replay's:
