@@ -164,6 +164,21 @@ def test_a_bad_pad_is_the_commands_error_in_the_study_files_words(tmp_path, caps
     assert not (tmp_path / "o").exists() and not (tmp_path / "r").exists()
 
 
+def test_a_pads_file_far_from_the_pad_is_the_commands_error_naming_the_study_key(tmp_path, capsys):
+    """``pads`` about a ``pad`` ~4,000 km away: the command's line (a pad far from the frame origin), its ``--pad``
+    named as the study's ``[replay] pad``."""
+    study = _study(tmp_path, f'log = "{LOG}"\npads = "{PADS}"\npad = "0,0"', '"drone.mass_kg" = [1.0, 2.0]')
+    assert _sweep(study, tmp_path / "o") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert main(["replay", str(LOG), "--pad=0,0", "--pads", str(PADS), "--out", str(tmp_path / "r"),
+                 "--no-progress"]) == 2
+    cmd = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 == len(cmd) and "km from the replay's pad frame origin" in cmd[0], (err, cmd)
+    assert "--pad" not in err[0] and "(the take-off spot, or [replay] pad)" in err[0], err
+    assert err[0].split(": ", 1)[1] == cmd[0].split(": ", 1)[1].replace("or --pad)", "or [replay] pad)"), (err, cmd)
+    assert not (tmp_path / "o").exists()
+
+
 def test_the_log_is_parsed_once_per_process_not_per_case(tmp_path, monkeypatch):
     from mission_sim.mavlink import logs
     calls = []

@@ -23,6 +23,7 @@ counting the cases outside it (:meth:`ReplayCaseRunner.setup_notes`: ``replay``'
 from __future__ import annotations
 
 import hashlib
+import re
 from pathlib import Path
 
 from .mission_cases import _CACHE_MAX, MissionCaseRunner
@@ -106,11 +107,12 @@ class _WarmWithLog:
 
 
 def _study_words(msg: str) -> str:
-    """A replay's error in the study file's words (its options are ``[replay]`` keys, not command-line flags)."""
+    """A replay's error or warning in the study file's words (its options are ``[replay]`` keys, not command-line
+    flags: ``--pad`` is ``[replay] pad``, the pads' frame origin with ``pads``)."""
     for flag, key in (("--reach", "[replay] reach_m ="), ("--segment", "[replay] segment ="),
-                      ("--window", "[replay] window ="), ("check --pad", "check the pads")):
+                      ("--window", "[replay] window =")):
         msg = msg.replace(flag, key)
-    return msg
+    return re.sub(r"--pad\b", "[replay] pad", msg)
 
 
 def _flat(summary: dict, prefix: str = "") -> dict:
@@ -305,7 +307,10 @@ def replay_runner(study: Study, make_policy, policy_names) -> tuple[ReplayCaseRu
         raise ValueError(f"[replay] log {str(o['log'])!r}: {msg[len(name):]}" if msg.startswith(name) else msg) from None
     pads_sha = _sha256(o["pads"]) if "pads" in o else None
     pads = load_inputs("pads", o["pads"], pads_sha) if "pads" in o else None
-    base = _base(study, o, origin, pads)
+    try:
+        base = _base(study, o, origin, pads)
+    except ValueError as exc:   # e.g. a pad of the pads file far from the frame origin ([replay] pad)
+        raise ValueError(_study_words(str(exc))) from None
     runner = ReplayCaseRunner(base, make_policy, policy_names, o, log_sha, origin)
     runner.input_files = {f"[replay] {k}": {"path": str(o[k]), "sha256": sha}
                           for k, sha in (("log", log_sha), ("pads", pads_sha)) if sha is not None}
