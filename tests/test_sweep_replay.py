@@ -179,6 +179,36 @@ def test_a_pads_file_far_from_the_pad_is_the_commands_error_naming_the_study_key
     assert not (tmp_path / "o").exists()
 
 
+def _warning_lines(err: str, command: str) -> list[str]:
+    """The command's warning lines but the logged voltage's (the study counts that one per case)."""
+    head = f"dronewpt {command}: warning: "
+    return [ln[len(head):] for ln in err.splitlines() if ln.startswith(head) and "logged battery voltage" not in ln]
+
+
+@pytest.mark.parametrize("replay, flags, words", [
+    # a pad 40 km south of the flight (replay --pad): the drone never comes near it
+    (f'log = "{LOG}"\npad = "-35.0,149.16575"\nwindow = [440.0, 620.0]', ["--pad=-35.0,149.16575", "--window",
+                                                                         "440,620"], "40 km from the nearest point"),
+    (f'log = "{LOG171}"', [], "the log ends while the vehicle is armed"),   # log171 is cut off in flight
+    (f'log = "{LOG171}"\npads = "{PADS}"', ["--pads", str(PADS)], "the log ends while the vehicle is armed"),
+])
+def test_a_replay_study_warns_the_logs_warnings_once_as_the_command_does(tmp_path, capsys, replay, flags, words):
+    """The warnings ``dronewpt replay`` gives about the log (replay_warnings: the log, the pad, the window; the same
+    in every case) are the study's, once, in its words; each case still counts them (n_warnings, as the command's
+    summary)."""
+    study = _study(tmp_path, replay, '"drone.mass_kg" = [1.0, 1.3]')
+    assert _sweep(study, tmp_path / "o") == 0
+    got = _warning_lines(capsys.readouterr().err, "sweep")
+    assert main(["replay", str(LOG if "dronekit-python" in replay else LOG171), *flags, "--set", "drone.mass_kg=1.3",
+                 "--out", str(tmp_path / "r"), "--format", "json", "--no-plot", "--no-progress"]) == 0
+    out, err = capsys.readouterr()
+    want = [w.replace("check --pad", "check [replay] pad") for w in _warning_lines(err, "replay")]
+    assert len(want) == 1 and words in want[0], want
+    assert got == want, (got, want)
+    row = read_results(tmp_path / "o").set_index("drone.mass_kg").loc[1.3]
+    assert row["n_warnings"] == len(json.loads(out)["warnings"]) >= 1
+
+
 def test_the_log_is_parsed_once_per_process_not_per_case(tmp_path, monkeypatch):
     from mission_sim.mavlink import logs
     calls = []

@@ -154,11 +154,12 @@ class ReplayCaseRunner(MissionCaseRunner):
         self.log_sha = log_sha
         self.origin = origin
         self._refused: dict = {}
+        self._log_notes: dict[str, int] = {}   # the log's warnings (replay_warnings) -> cases checked with it
         self._plans: dict = {}
         self.input_files: dict = {}
 
     def __getstate__(self):
-        return {**super().__getstate__(), "_refused": {}, "_plans": {}}
+        return {**super().__getstate__(), "_refused": {}, "_plans": {}, "_log_notes": {}}
 
     def log(self):
         return load_inputs("log", self.options["log"], self.log_sha)
@@ -185,10 +186,26 @@ class ReplayCaseRunner(MissionCaseRunner):
             if len(self._refused) > _CACHE_MAX:
                 self._refused.clear()
             self._refused[key] = self._replay_error(self.config(params), params)
-        return self._refused[key]
+        error, notes = self._refused[key]
+        for text in notes:
+            self._log_notes[text] = self._log_notes.get(text, 0) + 1
+        return error
 
-    def _replay_error(self, cfg, params: dict) -> str | None:
-        from ..mavlink.replay import replay_span, resample_track, track_from_log
+    def study_warnings(self, name: str) -> list[str]:
+        """The mission's and the logged voltage's lines (:meth:`MissionCaseRunner.study_warnings`), then the log's
+        (:func:`~mission_sim.mavlink.replay.replay_warnings`: a log ending armed, reading stopped early, never armed,
+        a position gap, a pad far from the track) in the study's words, once each: alone when every checked case
+        has it (they depend on the log, the origin and the window: the same in every case), else with the count."""
+        checked = 0 if self._checker is None else self._checker.checked
+        return super().study_warnings(name) + [
+            _study_words(text) if count == checked else
+            f"{count:,} of {checked:,} cases of study {name!r} have: {_study_words(text)}"
+            for text, count in self._log_notes.items()]
+
+    def _replay_error(self, cfg, params: dict) -> tuple[str | None, tuple]:
+        """(None if the case would replay, else its error; the log's warnings for the case's track:
+        :func:`~mission_sim.mavlink.replay.replay_warnings`, as its replay's summary has them)."""
+        from ..mavlink.replay import replay_span, replay_warnings, resample_track, track_from_log
         from ..plans.refly import check_refly_size, plan_refly
         o, log = self.options, self.log()
         try:
@@ -202,19 +219,21 @@ class ReplayCaseRunner(MissionCaseRunner):
                     try:
                         plan = plan_refly(log, cfg, pad=self.origin, ground_gap_m=o.get("ground_gap_m"),
                                           window=o.get("window"), reach_m=o["reach_m"], segment=o.get("segment"))[:3]
+                        plan = (plan, tuple(replay_warnings(log, plan[0])))   # refly_log's: its resampled track
                     except ValueError as exc:
                         plan = exc
                     self._plans[key] = plan
                 if isinstance(plan, ValueError):
                     raise plan
-                check_refly_size(*plan, cfg)
-            else:
-                gap = cfg.mission.hover_gap_m if o.get("ground_gap_m") is None else o["ground_gap_m"]
-                span, _ = replay_span(log, o.get("window"), o.get("segment"))
-                resample_track(track_from_log(log, pad=self.origin, ground_gap_m=gap, window=span), cfg.sim.traj_dt_s)
+                check_refly_size(*plan[0], cfg)
+                return None, plan[1]
+            gap = cfg.mission.hover_gap_m if o.get("ground_gap_m") is None else o["ground_gap_m"]
+            span, _ = replay_span(log, o.get("window"), o.get("segment"))
+            track = track_from_log(log, pad=self.origin, ground_gap_m=gap, window=span)
+            resample_track(track, cfg.sim.traj_dt_s)
         except ValueError as exc:
-            return _study_words(str(exc))
-        return None
+            return _study_words(str(exc)), ()
+        return None, tuple(replay_warnings(log, track))
 
     def __call__(self, params: dict) -> dict:
         """The case's replay summary (flat columns), summary-only."""
