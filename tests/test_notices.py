@@ -357,6 +357,22 @@ def test_a_replay_study_warns_once_about_the_logged_voltage_counting_the_packs(t
     assert _ours(rec) == [head + err[0].removeprefix("dronewpt replay: warning: ")], _ours(rec)
 
 
+def test_a_replay_study_checks_the_logged_voltage_once_per_cell_count(tmp_path, monkeypatch):
+    """The line reads only ``battery.n_series`` of the case (docs/sweeps.md): 40 draws of the capacity by two cell
+    counts take the log's median twice, not once per ``battery`` section (80)."""
+    from mission_sim.mavlink import replay
+    from mission_sim.studies.prepare import prepare_study
+    calls, real = [], replay.battery_voltage_warning
+    monkeypatch.setattr(replay, "battery_voltage_warning", lambda log, battery, run="replay": (
+        calls.append(battery.n_series), real(log, battery, run))[1])
+    study = _replay_study(tmp_path, "window = [440.0, 620.0]", '"battery.n_series" = [6, 8]\n'
+                          '[monte_carlo]\nn = 40\nseed = 1\n[monte_carlo.params]\n'
+                          '"battery.capacity_ah" = {uniform = [1.0, 2.0]}')
+    with pytest.warns(DronewptWarning, match="80 of 80 cases of study 'v' have a logged battery voltage"):
+        prepare_study(study, policies.make, policies.available())
+    assert sorted(calls) == [6, 8], calls
+
+
 def test_a_replay_study_whose_pack_fits_the_log_warns_nothing(tmp_path, capsys):
     """As ``replay --set battery.n_series=3`` on the 3S log (test_a_shipped_log_that_fits_the_pack_...)."""
     from mission_sim.studies.prepare import prepare_study
