@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 from pathlib import Path
 
 import pandas as pd
@@ -312,6 +313,36 @@ def test_the_example_replay_study_is_valid_and_its_files_are_shipped():
         runner, cases, _ = prepare_study(st, policies.make, policies.available())
     assert len(cases) == 12 and st.replay["log"].resolve().parent == (DATA / "flightlogs").resolve()
     assert isinstance(runner, replay_cases.ReplayCaseRunner)
+
+
+@pytest.mark.parametrize("study_file", [ROOT / "examples" / "study_replay.toml", "log171"])
+def test_a_study_without_pad_keeps_its_case_ids(tmp_path, study_file):
+    """``[replay] pad`` is new: a study without it keeps its fingerprint and case ids, i.e. those of the code before
+    it (the fingerprint's ``ident``: the replay's base mission with the pads about the take-off spot, the files'
+    sha256 and the other options as they were; computed here from the inputs, not from a run)."""
+    import hashlib
+
+    import policies
+    from mission_sim.mavlink.replay import default_pad
+    from mission_sim.studies.study import canonical_json, case_id, load_study
+    from mission_sim.studies.sweep import prepare_study
+    if study_file == "log171":
+        study_file = _study(tmp_path, f'log = "{LOG171}"', '"drone.mass_kg" = [1.0, 1.83]')
+    st = load_study(study_file)
+    assert "pad" not in st.replay
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DronewptWarning)   # (the 8S drone on a 3S log, a log ending armed)
+        _, cases, fingerprint = prepare_study(st, policies.make, policies.available())
+    o = st.replay
+    sha = {k: hashlib.sha256(Path(o[k]).read_bytes()).hexdigest() if k in o else None for k in ("log", "pads")}
+    log = replay_cases.load_inputs("log", o["log"], sha["log"])
+    pads = replay_cases.load_inputs("pads", o["pads"], sha["pads"]) if "pads" in o else None
+    ident = {"runner": "replay v1", "base": replay_cases._base(st, o, default_pad(log), pads), **sha,
+             "options": {k: v for k, v in o.items() if k not in ("log", "pads", "drone")}}
+    before = hashlib.sha256(canonical_json(ident).encode()).hexdigest()[:16]
+    assert fingerprint == before
+    ids = [c.case_id for c in cases]
+    assert ids == [case_id(params, before) for params in cases.params()] and len(set(ids)) == len(cases) > 1
 
 
 def test_two_local_workers_equal_serial_and_each_parses_the_log_once(tmp_path):
