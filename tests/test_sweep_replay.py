@@ -464,11 +464,24 @@ def test_a_resume_over_a_changed_log_names_the_file(tmp_path, capsys):
     with open(log, "ab") as fh:   # the same flight with a few bytes of junk after it: still a log, another file
         fh.write(b"\0" * 64)
     assert _sweep(study, tmp_path / "o") == 2
-    warning, *err = capsys.readouterr().err.strip().splitlines()   # (the study's: the 8S model drone, a 3S log)
-    assert warning.startswith("dronewpt sweep: warning: 2 of 2 cases of study 's' have a logged battery voltage")
+    err = capsys.readouterr().err.strip().splitlines()   # the refusal alone: the study's warnings come once it runs
     assert len(err) == 1 and all(w in err[0] for w in ("[replay] log", str(log), "changed since it ran",
                                                         man["inputs"]["[replay] log"]["sha256"][:12])), err
     assert "another base mission" not in err[0]
+
+
+def test_a_refused_out_is_one_line_and_the_studys_warnings_follow_the_checks(tmp_path, capsys):
+    """``--out`` a file: the one-line refusal (exit 2), not the study's warnings before it; a sweep that runs
+    says them (the 8S model drone on the 3S log) before its report."""
+    study = _study(tmp_path, f'log = "{LOG}"\nwindow = [440.0, 620.0]', '"drone.mass_kg" = [1.0, 1.2]')
+    (tmp_path / "file").write_text("")
+    assert _sweep(study, tmp_path / "file") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--out" in err[0] and "warning" not in err[0], err
+    assert _sweep(study, tmp_path / "o") == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("dronewpt sweep: warning: 2 of 2 cases of study 's' have a logged "
+                                               "battery voltage"), err
 
 
 def test_a_missing_relative_log_says_paths_are_relative_to_the_study_file(tmp_path, capsys, monkeypatch):
