@@ -536,7 +536,7 @@ def test_a_shipped_log_that_fits_the_pack_replays_without_a_warning(capsys, tmp_
     assert rc == 0 and err == [], err
 
 
-def test_the_shipped_example_study_and_the_default_env_warn_nothing():
+def test_the_shipped_examples_and_the_default_env_warn_nothing_but_the_replay_examples_3s_log():
     """... but the replay example: it re-flies the 3S dronekit log with the 8S model drone ("what if our drone flew
     this route"), which ``replay --pads`` on the same log says once, and so does the study."""
     import envs

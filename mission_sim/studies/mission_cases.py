@@ -26,8 +26,10 @@ class MissionParamChecker:
     """``checker(overrides) -> None | error message`` for a base mission dict (``config_to_dict``).
     ``run_size``: also the planned mission's run-size estimate (False for replays: the log is the route).
     ``notes``: more kinds of setup warning to count, ``(kind, description, what, check)`` each (as :data:`KINDS`;
-    ``what(cfg)``: the cached section objects the warning reads, ``check(cfg)``: its line or None), e.g. a replay's
-    logged battery voltage (:meth:`~mission_sim.studies.replay_cases.ReplayCaseRunner.setup_notes`)."""
+    ``what(cfg)``: a tuple of what the warning reads, the cached section objects or their values (keyed by identity,
+    kept with the result: equal sections are one object; ``check`` runs once per distinct tuple), ``check(cfg)``: its
+    line or None), e.g. a replay's logged battery voltage, ``what`` = ``(cfg.battery.n_series,)``
+    (:meth:`~mission_sim.studies.replay_cases.ReplayCaseRunner.setup_notes`)."""
 
     def __init__(self, base: dict, run_size: bool = True, notes: tuple = ()):
         from ..config import config_from_dict
