@@ -165,6 +165,40 @@ def test_a_bad_pad_is_the_commands_error_in_the_study_files_words(tmp_path, caps
     assert not (tmp_path / "o").exists() and not (tmp_path / "r").exists()
 
 
+@pytest.mark.parametrize("array, text", [("[-35.36245, 149.16595, 589.5]", "-35.36245,149.16595,589.5"),
+                                         ("[-35.36245, 149.16595]", "-35.36245,149.16595")])
+def test_a_pad_array_is_the_same_study_as_its_text(tmp_path, array, text):
+    """``pad = [lat, lon]`` / ``[lat, lon, alt]``: the same point, fingerprint and case ids as the text."""
+    import policies
+    from mission_sim.studies.study import load_study
+    from mission_sim.studies.sweep import prepare_study
+    got = {}
+    for name, pad in (("a.toml", array), ("t.toml", json.dumps(text))):
+        st = load_study(_study(tmp_path, f'log = "{LOG171}"\npad = {pad}', '"drone.mass_kg" = [1.0, 1.83]', name=name))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DronewptWarning)   # (log171 ends armed)
+            _, cases, fingerprint = prepare_study(st, policies.make, policies.available())
+        got[name] = (st.replay["pad"], fingerprint, [c.case_id for c in cases])
+    assert got["a.toml"] == got["t.toml"]
+    assert (got["a.toml"][0].lat_deg, got["a.toml"][0].lon_deg) == (-35.36245, 149.16595)
+
+
+@pytest.mark.parametrize("array, words", [
+    ("[95, 10]", ": latitude 95.0 is invalid; valid range: (-90, 90) degrees"),   # as the text '95,10'
+    ("[-35.36, 149.16, 20000]", ": altitude 20000.0 is invalid; valid range: [-500, 10000] m AMSL"),
+    ("[1, 2, 3, 4]", " is invalid; valid format: [LAT, LON] or [LAT, LON, ALT]"),
+    ("[-35.36]", " is invalid; valid format: [LAT, LON] or [LAT, LON, ALT]"),
+    ('["north", "east"]', " is invalid; valid format: [LAT, LON] or [LAT, LON, ALT]"),
+    ("[true, 149.16]", " is invalid; valid format: [LAT, LON] or [LAT, LON, ALT]"),
+])
+def test_a_bad_pad_array_is_one_line_naming_it(tmp_path, capsys, array, words):
+    study = _study(tmp_path, f'log = "{LOG}"\npad = {array}', '"drone.mass_kg" = [1.0, 2.0]')
+    assert _sweep(study, tmp_path / "o") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"[replay] pad = [" in err[0] and words in err[0], err
+    assert not (tmp_path / "o").exists()
+
+
 def test_a_pads_file_far_from_the_pad_is_the_commands_error_naming_the_study_key(tmp_path, capsys):
     """``pads`` about a ``pad`` ~4,000 km away: the command's line (a pad far from the frame origin), its ``--pad``
     named as the study's ``[replay] pad``."""

@@ -41,7 +41,8 @@ gives the drone, battery, link and charger, and the keys are what ``dronewpt rep
     [replay]
     log = "flight.tlog"       # required, relative to this file: .tlog, .bin or .ulg
     pads = "pads.csv"         # optional: re-fly with detours to these pads (replay --pads)
-    pad = "-35.3632,149.1652" # optional: the pad (with pads: the frame origin) at LAT,LON[,ALT] (replay --pad)
+    pad = "-35.3632,149.1652" # optional: the pad (with pads: the frame origin) at LAT,LON[,ALT] (replay --pad),
+    #                           or the array [-35.3632, 149.1652] / [lat, lon, alt]
     drone = "drone.toml"      # optional: a [drone] file from `dronewpt calibrate` (replay --drone)
     window = [440.0, 620.0]   # optional: log seconds T0, T1 (replay --window)
     # segment = 2             # optional, instead of window: boot segment N, 1-based (replay --segment)
@@ -345,7 +346,7 @@ def _parse_replay(rep, base_dir) -> dict:
     if "pads" not in rep and "reach_m" in rep:
         raise ValueError("[replay] reach_m is set without pads; valid: give pads = 'pads.csv' too, or drop reach_m")
     out["reach_m"] = float(reach)
-    if "pad" in rep:   # the command's --pad, parsed and checked by its own parser (format, ranges)
+    if "pad" in rep:   # the command's --pad, parsed and checked by its own parser (format, ranges; or an array)
         from ..mavlink.geodesy import parse_geo_point
         out["pad"] = parse_geo_point(rep["pad"], "[replay] pad =")
     gap = rep.get("ground_gap_m")
