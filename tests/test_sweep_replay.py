@@ -338,6 +338,25 @@ def test_an_interrupted_replay_sweep_resumes_with_only_the_missing_cases(tmp_pat
     assert "4 cases, 4 done (100.0 %): 4 ok, 0 failed, 0 pending" in capsys.readouterr().out
 
 
+def test_the_replay_physics_code_hash_covers_the_replay_runner(monkeypatch):
+    """What a replay case gives ``replay_log`` / ``refly_log`` (the pad frame origin, the options) is decided in
+    ``studies/replay_cases.py``: a resume by another version of it is refused as for the replay code itself."""
+    from wpt_receiver import kernel_cache
+    from mission_sim.studies.status import physics_code_hash
+    calls = []
+
+    def files_hashed(files):
+        calls.append({(f.parent.name, f.name) for f in files})
+        return "0" * 64
+
+    monkeypatch.setattr(kernel_cache, "dependency_hash", files_hashed)
+    physics_code_hash(replay=True)
+    physics_code_hash(replay=False)
+    names = calls
+    assert ("studies", "replay_cases.py") in names[0] and ("mavlink", "replay.py") in names[0]
+    assert ("studies", "replay_cases.py") not in names[1] and ("world", "runner.py") in names[1]
+
+
 def test_the_example_replay_study_is_valid_and_its_files_are_shipped():
     import policies
     from mission_sim.studies.study import load_study
