@@ -556,3 +556,21 @@ def test_the_shipped_examples_and_the_default_env_warn_nothing_but_the_replay_ex
         prepare_study(load_study(ROOT / "examples" / "study_replay.toml"), policies.make, policies.available())
     assert _ours(caught) == ["12 of 12 cases of study 'study_replay' have a logged battery voltage outside their model "
                              "pack's open-circuit range, e.g.: " + VOLTAGE.replace("the replay", "the re-flight")]
+
+
+def test_a_sweep_refused_under_W_error_does_not_claim_its_out_folder(capsys, tmp_path):
+    """``-W error``: the study's warning refuses the run (one line, exit 2) before the manifest is written, so the
+    folder is not claimed by a study that never ran: another study into the same ``--out`` is not refused as
+    "another study" (it was when the warning came after ``write_manifest``)."""
+    hv = tmp_path / "hv.toml"
+    hv.write_text('[study]\nname = "hv"\n[fixed]\n"battery.n_series" = 32\n[grid]\n"wind.speed_m_s" = [1.0, 2.0]\n')
+    out = tmp_path / "o"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rc, err = _cli(capsys, ["sweep", str(hv), "--out", str(out), "--workers", "0", "--no-plot"])
+    assert rc == 2 and len(err) == 1 and err[0].startswith("dronewpt sweep: error: 2 of 2 cases of study 'hv'"), err
+    assert not (out / "sweep.json").exists()
+    other = tmp_path / "other.toml"
+    other.write_text('[study]\nname = "other"\n[grid]\n"pads.0.hover_time_s" = [5.0]\n')
+    rc, err = _cli(capsys, ["sweep", str(other), "--out", str(out), "--workers", "0", "--no-plot"])
+    assert rc == 0 and not any("holds another study" in e for e in err), err

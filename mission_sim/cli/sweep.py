@@ -127,8 +127,10 @@ def _run(args, st, runner, cases, fingerprint):
     def before_run():  # under the store's lock: another study in --out is refused unless --force
         if not args.force:
             check_same_study(args.out, st, fingerprint, len(cases), inputs)
+        # the study's setup warnings after the refusals (--out, a resume) and before the manifest: under -W error
+        # a warning refuses the run without claiming --out for this study
+        warn_study(st, runner)
         write_manifest(args.out, st, fingerprint, len(cases), inputs)
-        warn_study(st, runner)   # the study's setup warnings once it runs, not before a refusal (--out, a resume)
     return sweep.run_sweep(cases, runner, args.out, client_factory=client_factory,
                            progress=show_progress(args), progress_desc=st.name, retry_errors=args.retry_errors,
                            before_run=before_run)
