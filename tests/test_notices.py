@@ -336,6 +336,66 @@ def test_replay_with_pads_keeps_the_replays_warnings(capsys, tmp_path):
                       "armed (at 242.6 s): truncated log? the replay covers only what was recorded")
 
 
+def _replay_study(tmp_path, replay: str, grid: str):
+    return _study(tmp_path, f'[study]\nname = "v"\n[replay]\nlog = "{LOGS / "dronekit-python_flight.tlog"}"\n{replay}\n'
+                            f'[grid]\n{grid}\n')
+
+
+def test_a_replay_study_warns_once_about_the_logged_voltage_counting_the_packs(tmp_path, capsys):
+    """The study's cases run with ``warn=False``: over the 3S log a study of the 8S drone was silent where ``replay``
+    warns. One line for the study, counting the cases (packs) outside; the example is ``replay``'s own line."""
+    from mission_sim.studies.prepare import prepare_study
+    study = _replay_study(tmp_path, "window = [440.0, 620.0]",
+                          '"battery.n_series" = [3, 6, 8]\n"drone.mass_kg" = [1.0, 1.2]')
+    with pytest.warns(DronewptWarning) as rec:
+        prepare_study(study, policies.make, policies.available())
+    rc, err = _cli(capsys, ["replay", str(LOGS / "dronekit-python_flight.tlog"), "--window", "440,620", "--no-plot",
+                            "--set", "battery.n_series=6", "--out", str(tmp_path / "r")])
+    assert rc == 0 and len(err) == 1 and "(battery.n_series=6 x 2.654-4.103 V per cell)" in err[0], err
+    head = ("4 of 6 cases of study 'v' have a logged battery voltage outside their model pack's open-circuit range, "
+            "e.g.: ")   # the 6S and 8S cases, not the 3S ones (11.1 V is inside 3 x 2.654-4.103 V)
+    assert _ours(rec) == [head + err[0].removeprefix("dronewpt replay: warning: ")], _ours(rec)
+
+
+def test_a_replay_study_checks_the_logged_voltage_once_per_cell_count(tmp_path, monkeypatch):
+    """The line reads only ``battery.n_series`` of the case (docs/sweeps.md): 40 draws of the capacity by two cell
+    counts take the log's median twice, not once per ``battery`` section (80)."""
+    from mission_sim.mavlink import replay
+    from mission_sim.studies.prepare import prepare_study
+    calls, real = [], replay.battery_voltage_warning
+    monkeypatch.setattr(replay, "battery_voltage_warning", lambda log, battery, run="replay": (
+        calls.append(battery.n_series), real(log, battery, run))[1])
+    study = _replay_study(tmp_path, "window = [440.0, 620.0]", '"battery.n_series" = [6, 8]\n'
+                          '[monte_carlo]\nn = 40\nseed = 1\n[monte_carlo.params]\n'
+                          '"battery.capacity_ah" = {uniform = [1.0, 2.0]}')
+    with pytest.warns(DronewptWarning, match="80 of 80 cases of study 'v' have a logged battery voltage"):
+        prepare_study(study, policies.make, policies.available())
+    assert sorted(calls) == [6, 8], calls
+
+
+def test_a_replay_study_whose_pack_fits_the_log_warns_nothing(tmp_path, capsys):
+    """As ``replay --set battery.n_series=3`` on the 3S log (test_a_shipped_log_that_fits_the_pack_...)."""
+    from mission_sim.studies.prepare import prepare_study
+    study = _replay_study(tmp_path, "window = [440.0, 620.0]", '"battery.n_series" = 3\n"drone.mass_kg" = [1.0, 1.2]')
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        prepare_study(study, policies.make, policies.available())
+    assert _ours(caught) == []
+
+
+def test_a_replay_sweep_says_it_once_not_per_case(tmp_path, capsys):
+    """``dronewpt sweep`` over a re-flight study: one line (the re-flight's words), however many cases ran."""
+    pads = ROOT / "tests" / "data" / "missions" / "dronekit_flight_pads.csv"
+    study = tmp_path / "s.toml"
+    study.write_text(f'[study]\nname = "v"\n[replay]\nlog = "{LOGS / "dronekit-python_flight.tlog"}"\npads = "{pads}"\n'
+                     'window = [440.0, 620.0]\n[grid]\n"drone.mass_kg" = [1.0, 1.2, 1.4]\n')
+    rc, err = _cli(capsys, ["sweep", str(study), "--out", str(tmp_path / "o"), "--workers", "0", "--no-plot",
+                            "--no-progress"])
+    assert rc == 0 and len(err) == 1, err
+    assert err[0] == ("dronewpt sweep: warning: 3 of 3 cases of study 'v' have a logged battery voltage outside their "
+                      "model pack's open-circuit range, e.g.: " + VOLTAGE.replace("the replay flies", "the re-flight flies"))
+
+
 # ------------------------------------------------------------------ 4. a policy made for another link model
 def test_run_mission_warns_on_a_policy_that_predicts_with_another_link_model():
     """``policies.make("model_based_budget:0.1")`` alone: a standalone context, eq. 4's link, whose after-stop plan
@@ -476,15 +536,41 @@ def test_a_shipped_log_that_fits_the_pack_replays_without_a_warning(capsys, tmp_
     assert rc == 0 and err == [], err
 
 
-def test_the_shipped_example_study_and_the_default_env_warn_nothing():
+def test_the_shipped_examples_and_the_default_env_warn_nothing_but_the_replay_examples_3s_log():
+    """... but the replay example: it re-flies the 3S dronekit log with the 8S model drone ("what if our drone flew
+    this route"), which ``replay --pads`` on the same log says once, and so does the study."""
     import envs
     from mission_sim.studies.prepare import prepare_study
     from mission_sim.studies.study import load_study
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         for example in sorted((ROOT / "examples").glob("*.toml")):
-            prepare_study(load_study(example), policies.make, policies.available())
+            if example.name != "study_replay.toml":
+                prepare_study(load_study(example), policies.make, policies.available())
         env = envs.SbarChargingEnv()
         env.reset(seed=0)
         env.step(env.action_space.sample())
     assert _ours(caught) == []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        prepare_study(load_study(ROOT / "examples" / "study_replay.toml"), policies.make, policies.available())
+    assert _ours(caught) == ["12 of 12 cases of study 'study_replay' have a logged battery voltage outside their model "
+                             "pack's open-circuit range, e.g.: " + VOLTAGE.replace("the replay", "the re-flight")]
+
+
+def test_a_sweep_refused_under_W_error_does_not_claim_its_out_folder(capsys, tmp_path):
+    """``-W error``: the study's warning refuses the run (one line, exit 2) before the manifest is written, so the
+    folder is not claimed by a study that never ran: another study into the same ``--out`` is not refused as
+    "another study" (it was when the warning came after ``write_manifest``)."""
+    hv = tmp_path / "hv.toml"
+    hv.write_text('[study]\nname = "hv"\n[fixed]\n"battery.n_series" = 32\n[grid]\n"wind.speed_m_s" = [1.0, 2.0]\n')
+    out = tmp_path / "o"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rc, err = _cli(capsys, ["sweep", str(hv), "--out", str(out), "--workers", "0", "--no-plot"])
+    assert rc == 2 and len(err) == 1 and err[0].startswith("dronewpt sweep: error: 2 of 2 cases of study 'hv'"), err
+    assert not (out / "sweep.json").exists()
+    other = tmp_path / "other.toml"
+    other.write_text('[study]\nname = "other"\n[grid]\n"pads.0.hover_time_s" = [5.0]\n')
+    rc, err = _cli(capsys, ["sweep", str(other), "--out", str(out), "--workers", "0", "--no-plot"])
+    assert rc == 0 and not any("holds another study" in e for e in err), err

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 from pathlib import Path
 
 import pandas as pd
@@ -16,6 +17,7 @@ import pytest
 from mission_sim.cli import main
 from mission_sim.studies import replay_cases
 from mission_sim.studies.sweep import read_results
+from wpt_receiver.notices import DronewptWarning
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data"
@@ -109,6 +111,137 @@ def test_a_replay_case_without_pads_equals_the_replay_command(tmp_path, capsys):
     # heavier mass the model's airborne energy is closer to the logged one (docs: equivalent mass 1.83 kg)
     light = df[df["drone.mass_kg"] == 1.0].iloc[0]
     assert abs(row["power_comparison.energy_error_rel"]) < 0.05 < abs(light["power_comparison.energy_error_rel"])
+
+
+def test_a_replay_case_with_pad_equals_the_replay_command_with_pad(tmp_path, capsys):
+    """``[replay] pad = "LAT,LON,ALT"`` is the command's ``--pad``: the pad (the frame origin) 1.32 m below the
+    take-off spot of log171 (590.82 m AMSL), ~15 m south-east of it."""
+    pad = "-35.36245,149.16595,589.5"
+    study = _study(tmp_path, f'log = "{LOG171}"\npad = "{pad}"', '"drone.mass_kg" = [1.0, 1.83]')
+    assert _sweep(study, tmp_path / "o") == 0
+    df = read_results(tmp_path / "o")
+    capsys.readouterr()
+    row = df[df["drone.mass_kg"] == 1.83].iloc[0]
+    out = ["--out", str(tmp_path / "r"), "--format", "json", "--no-plot", "--no-progress"]
+    assert main(["replay", str(LOG171), f"--pad={pad}", "--set", "drone.mass_kg=1.83", *out]) == 0
+    cmd = json.loads(capsys.readouterr().out)
+    _assert_row_equals_command(row, cmd, min_numbers=30)
+    # the pad reached the case: heights are above it (1.32 m more than above the take-off spot)
+    assert main(["replay", str(LOG171), "--set", "drone.mass_kg=1.83", *out]) == 0
+    default = json.loads(capsys.readouterr().out)
+    assert row["max_alt_m"] - default["max_alt_m"] == pytest.approx(590.82 - 589.5, abs=1e-6)
+
+
+def test_a_refly_case_with_pad_equals_the_command_with_pad_and_pads(tmp_path, capsys):
+    """With ``pads``, ``pad`` is the pads' frame origin as with ``replay --pad ... --pads``; one without altitude
+    takes the take-off spot's (590.76 m AMSL)."""
+    pad = "-35.36235,149.16575"
+    study = _study(tmp_path, f'log = "{LOG}"\npads = "{PADS}"\npad = "{pad}"\nwindow = [440.0, 620.0]',
+                   '"mission.hover_time_s" = [30.0, 60.0]')
+    assert _sweep(study, tmp_path / "o") == 0
+    df = read_results(tmp_path / "o")
+    capsys.readouterr()
+    row = df[df["mission.hover_time_s"] == 60.0].iloc[0]
+    assert main(["replay", str(LOG), f"--pad={pad}", "--pads", str(PADS), "--window", "440,620",
+                 "--set", "mission.hover_time_s=60.0", "--out", str(tmp_path / "r"), "--format", "json", "--no-plot",
+                 "--no-progress"]) == 0
+    cmd = json.loads(capsys.readouterr().out)
+    _assert_row_equals_command(row, cmd, min_numbers=25)
+    assert (row["pad_frame_origin.lat_deg"], row["pad_frame_origin.lon_deg"], row["pad_frame_origin.alt_m"]) == (
+        -35.36235, 149.16575, 590.76)
+
+
+@pytest.mark.parametrize("pad", ["1,2,3,4", "-35.36", "north,east", "95,10", "-35.36,149.16,20000", 5])
+def test_a_bad_pad_is_the_commands_error_in_the_study_files_words(tmp_path, capsys, pad):
+    """The command's parser checks ``[replay] pad`` (one source): the same line, ``--pad`` named as the key."""
+    study = _study(tmp_path, f'log = "{LOG}"\npad = {json.dumps(pad)}', '"drone.mass_kg" = [1.0, 2.0]')
+    assert _sweep(study, tmp_path / "o") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert main(["replay", str(LOG), f"--pad={pad}", "--out", str(tmp_path / "r"), "--no-progress"]) == 2
+    cmd = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 == len(cmd) and "valid" in err[0], err
+    shown = repr(pad)
+    assert err[0].split(f"[replay] pad = {shown}", 1)[1] == cmd[0].split(f"--pad {str(pad)!r}", 1)[1], (err, cmd)
+    assert not (tmp_path / "o").exists() and not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize("array, text", [("[-35.36245, 149.16595, 589.5]", "-35.36245,149.16595,589.5"),
+                                         ("[-35.36245, 149.16595]", "-35.36245,149.16595")])
+def test_a_pad_array_is_the_same_study_as_its_text(tmp_path, array, text):
+    """``pad = [lat, lon]`` / ``[lat, lon, alt]``: the same point, fingerprint and case ids as the text."""
+    import policies
+    from mission_sim.studies.study import load_study
+    from mission_sim.studies.sweep import prepare_study
+    got = {}
+    for name, pad in (("a.toml", array), ("t.toml", json.dumps(text))):
+        st = load_study(_study(tmp_path, f'log = "{LOG171}"\npad = {pad}', '"drone.mass_kg" = [1.0, 1.83]', name=name))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DronewptWarning)   # (log171 ends armed)
+            _, cases, fingerprint = prepare_study(st, policies.make, policies.available())
+        got[name] = (st.replay["pad"], fingerprint, [c.case_id for c in cases])
+    assert got["a.toml"] == got["t.toml"]
+    assert (got["a.toml"][0].lat_deg, got["a.toml"][0].lon_deg) == (-35.36245, 149.16595)
+
+
+@pytest.mark.parametrize("array, words", [
+    ("[95, 10]", ": latitude 95.0 is invalid; valid range: (-90, 90) degrees"),   # as the text '95,10'
+    ("[-35.36, 149.16, 20000]", ": altitude 20000.0 is invalid; valid range: [-500, 10000] m AMSL"),
+    ("[1, 2, 3, 4]", " is invalid; valid format: [LAT, LON] or [LAT, LON, ALT]"),
+    ("[-35.36]", " is invalid; valid format: [LAT, LON] or [LAT, LON, ALT]"),
+    ('["north", "east"]', " is invalid; valid format: [LAT, LON] or [LAT, LON, ALT]"),
+    ("[true, 149.16]", " is invalid; valid format: [LAT, LON] or [LAT, LON, ALT]"),
+])
+def test_a_bad_pad_array_is_one_line_naming_it(tmp_path, capsys, array, words):
+    study = _study(tmp_path, f'log = "{LOG}"\npad = {array}', '"drone.mass_kg" = [1.0, 2.0]')
+    assert _sweep(study, tmp_path / "o") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"[replay] pad = [" in err[0] and words in err[0], err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_pads_file_far_from_the_pad_is_the_commands_error_naming_the_study_key(tmp_path, capsys):
+    """``pads`` about a ``pad`` ~4,000 km away: the command's line (a pad far from the frame origin), its ``--pad``
+    named as the study's ``[replay] pad``."""
+    study = _study(tmp_path, f'log = "{LOG}"\npads = "{PADS}"\npad = "0,0"', '"drone.mass_kg" = [1.0, 2.0]')
+    assert _sweep(study, tmp_path / "o") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert main(["replay", str(LOG), "--pad=0,0", "--pads", str(PADS), "--out", str(tmp_path / "r"),
+                 "--no-progress"]) == 2
+    cmd = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 == len(cmd) and "km from the replay's pad frame origin" in cmd[0], (err, cmd)
+    assert "--pad" not in err[0] and "(the take-off spot, or [replay] pad)" in err[0], err
+    assert err[0].split(": ", 1)[1] == cmd[0].split(": ", 1)[1].replace("or --pad)", "or [replay] pad)"), (err, cmd)
+    assert not (tmp_path / "o").exists()
+
+
+def _warning_lines(err: str, command: str) -> list[str]:
+    """The command's warning lines but the logged voltage's (the study counts that one per case)."""
+    head = f"dronewpt {command}: warning: "
+    return [ln[len(head):] for ln in err.splitlines() if ln.startswith(head) and "logged battery voltage" not in ln]
+
+
+@pytest.mark.parametrize("replay, flags, words", [
+    # a pad 40 km south of the flight (replay --pad): the drone never comes near it
+    (f'log = "{LOG}"\npad = "-35.0,149.16575"\nwindow = [440.0, 620.0]', ["--pad=-35.0,149.16575", "--window",
+                                                                         "440,620"], "40 km from the nearest point"),
+    (f'log = "{LOG171}"', [], "the log ends while the vehicle is armed"),   # log171 is cut off in flight
+    (f'log = "{LOG171}"\npads = "{PADS}"', ["--pads", str(PADS)], "the log ends while the vehicle is armed"),
+])
+def test_a_replay_study_warns_the_logs_warnings_once_as_the_command_does(tmp_path, capsys, replay, flags, words):
+    """The warnings ``dronewpt replay`` gives about the log (replay_warnings: the log, the pad, the window; the same
+    in every case) are the study's, once, in its words; each case still counts them (n_warnings, as the command's
+    summary)."""
+    study = _study(tmp_path, replay, '"drone.mass_kg" = [1.0, 1.3]')
+    assert _sweep(study, tmp_path / "o") == 0
+    got = _warning_lines(capsys.readouterr().err, "sweep")
+    assert main(["replay", str(LOG if "dronekit-python" in replay else LOG171), *flags, "--set", "drone.mass_kg=1.3",
+                 "--out", str(tmp_path / "r"), "--format", "json", "--no-plot", "--no-progress"]) == 0
+    out, err = capsys.readouterr()
+    want = [w.replace("check --pad", "check [replay] pad") for w in _warning_lines(err, "replay")]
+    assert len(want) == 1 and words in want[0], want
+    assert got == want, (got, want)
+    row = read_results(tmp_path / "o").set_index("drone.mass_kg").loc[1.3]
+    assert row["n_warnings"] == len(json.loads(out)["warnings"]) >= 1
 
 
 def test_the_log_is_parsed_once_per_process_not_per_case(tmp_path, monkeypatch):
@@ -209,14 +342,64 @@ def test_an_interrupted_replay_sweep_resumes_with_only_the_missing_cases(tmp_pat
     assert "4 cases, 4 done (100.0 %): 4 ok, 0 failed, 0 pending" in capsys.readouterr().out
 
 
+def test_the_replay_physics_code_hash_covers_the_replay_runner(monkeypatch):
+    """What a replay case gives ``replay_log`` / ``refly_log`` (the pad frame origin, the options) is decided in
+    ``studies/replay_cases.py``: a resume by another version of it is refused as for the replay code itself."""
+    from wpt_receiver import kernel_cache
+    from mission_sim.studies.status import physics_code_hash
+    calls = []
+
+    def files_hashed(files):
+        calls.append({(f.parent.name, f.name) for f in files})
+        return "0" * 64
+
+    monkeypatch.setattr(kernel_cache, "dependency_hash", files_hashed)
+    physics_code_hash(replay=True)
+    physics_code_hash(replay=False)
+    names = calls
+    assert ("studies", "replay_cases.py") in names[0] and ("mavlink", "replay.py") in names[0]
+    assert ("studies", "replay_cases.py") not in names[1] and ("world", "runner.py") in names[1]
+
+
 def test_the_example_replay_study_is_valid_and_its_files_are_shipped():
     import policies
     from mission_sim.studies.study import load_study
     from mission_sim.studies.sweep import prepare_study
     st = load_study(ROOT / "examples" / "study_replay.toml")
-    runner, cases, _ = prepare_study(st, policies.make, policies.available())
+    with pytest.warns(DronewptWarning, match="12 of 12 cases .* logged battery voltage"):   # the 8S drone, a 3S log
+        runner, cases, _ = prepare_study(st, policies.make, policies.available())
     assert len(cases) == 12 and st.replay["log"].resolve().parent == (DATA / "flightlogs").resolve()
     assert isinstance(runner, replay_cases.ReplayCaseRunner)
+
+
+@pytest.mark.parametrize("study_file", [ROOT / "examples" / "study_replay.toml", "log171"])
+def test_a_study_without_pad_keeps_its_case_ids(tmp_path, study_file):
+    """``[replay] pad`` is new: a study without it keeps its fingerprint and case ids, i.e. those of the code before
+    it (the fingerprint's ``ident``: the replay's base mission with the pads about the take-off spot, the files'
+    sha256 and the other options as they were; computed here from the inputs, not from a run)."""
+    import hashlib
+
+    import policies
+    from mission_sim.mavlink.replay import default_pad
+    from mission_sim.studies.study import canonical_json, case_id, load_study
+    from mission_sim.studies.sweep import prepare_study
+    if study_file == "log171":
+        study_file = _study(tmp_path, f'log = "{LOG171}"', '"drone.mass_kg" = [1.0, 1.83]')
+    st = load_study(study_file)
+    assert "pad" not in st.replay
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DronewptWarning)   # (the 8S drone on a 3S log, a log ending armed)
+        _, cases, fingerprint = prepare_study(st, policies.make, policies.available())
+    o = st.replay
+    sha = {k: hashlib.sha256(Path(o[k]).read_bytes()).hexdigest() if k in o else None for k in ("log", "pads")}
+    log = replay_cases.load_inputs("log", o["log"], sha["log"])
+    pads = replay_cases.load_inputs("pads", o["pads"], sha["pads"]) if "pads" in o else None
+    ident = {"runner": "replay v1", "base": replay_cases._base(st, o, default_pad(log), pads), **sha,
+             "options": {k: v for k, v in o.items() if k not in ("log", "pads", "drone")}}
+    before = hashlib.sha256(canonical_json(ident).encode()).hexdigest()[:16]
+    assert fingerprint == before
+    ids = [c.case_id for c in cases]
+    assert ids == [case_id(params, before) for params in cases.params()] and len(set(ids)) == len(cases) > 1
 
 
 def test_two_local_workers_equal_serial_and_each_parses_the_log_once(tmp_path):
@@ -225,7 +408,8 @@ def test_two_local_workers_equal_serial_and_each_parses_the_log_once(tmp_path):
     from mission_sim.studies.sweep import dask_client, prepare_study, run_sweep
     study = _study(tmp_path, f'log = "{LOG}"\npads = "{PADS}"\nwindow = [440.0, 620.0]',
                    '"drone.mass_kg" = [1.0, 1.4]\n"mission.hover_time_s" = [20.0, 50.0]')
-    runner, cases, _ = prepare_study(load_study(study), policies.make, policies.available())
+    with pytest.warns(DronewptWarning, match="logged battery voltage"):   # the 8S model drone, a 3S log
+        runner, cases, _ = prepare_study(load_study(study), policies.make, policies.available())
     with dask_client(workers=2) as client:
         res = run_sweep(cases, runner, tmp_path / "dask", client=client, progress=False)
         parsed = client.run(lambda: sorted(k[0] for k in __import__("mission_sim.studies.replay_cases",
@@ -258,7 +442,7 @@ def test_the_documented_replay_section_parses(tmp_path):
     doc = inspect.getdoc(study_mod)
     block = textwrap.dedent(doc.split("A ``[replay]`` section")[1].split("::\n", 1)[1].split("\n\nDistributions")[0])
     st = study_mod.parse_study({**tomllib.loads(block), "grid": {"drone.mass_kg": [1.0, 2.0]}}, base_dir=tmp_path)
-    assert set(st.replay) == {"log", "pads", "drone", "window", "reach_m", "ground_gap_m"}
+    assert set(st.replay) == {"log", "pads", "pad", "drone", "window", "reach_m", "ground_gap_m"}
     seg = study_mod.parse_study({**tomllib.loads(block.replace("# segment", "segment").replace("window =", "# window =")),
                                  "grid": {"drone.mass_kg": [1.0, 2.0]}}, base_dir=tmp_path)
     assert seg.replay["segment"] == 2 and "window" not in seg.replay
@@ -338,10 +522,24 @@ def test_a_resume_over_a_changed_log_names_the_file(tmp_path, capsys):
     with open(log, "ab") as fh:   # the same flight with a few bytes of junk after it: still a log, another file
         fh.write(b"\0" * 64)
     assert _sweep(study, tmp_path / "o") == 2
-    err = capsys.readouterr().err.strip().splitlines()
+    err = capsys.readouterr().err.strip().splitlines()   # the refusal alone: the study's warnings come once it runs
     assert len(err) == 1 and all(w in err[0] for w in ("[replay] log", str(log), "changed since it ran",
                                                         man["inputs"]["[replay] log"]["sha256"][:12])), err
     assert "another base mission" not in err[0]
+
+
+def test_a_refused_out_is_one_line_and_the_studys_warnings_follow_the_checks(tmp_path, capsys):
+    """``--out`` a file: the one-line refusal (exit 2), not the study's warnings before it; a sweep that runs
+    says them (the 8S model drone on the 3S log) before its report."""
+    study = _study(tmp_path, f'log = "{LOG}"\nwindow = [440.0, 620.0]', '"drone.mass_kg" = [1.0, 1.2]')
+    (tmp_path / "file").write_text("")
+    assert _sweep(study, tmp_path / "file") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--out" in err[0] and "warning" not in err[0], err
+    assert _sweep(study, tmp_path / "o") == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("dronewpt sweep: warning: 2 of 2 cases of study 's' have a logged "
+                                               "battery voltage"), err
 
 
 def test_a_missing_relative_log_says_paths_are_relative_to_the_study_file(tmp_path, capsys, monkeypatch):
@@ -374,7 +572,8 @@ def test_a_worker_that_does_not_see_the_log_parses_the_bytes_sent_with_the_warm_
     log = tmp_path / "f.tlog"
     shutil.copyfile(LOG, log)
     study = _study(tmp_path, f'log = "f.tlog"\npads = "{PADS}"\nwindow = [440.0, 620.0]', '"drone.mass_kg" = [1.0, 1.2]')
-    runner, _, _ = prepare_study(load_study(study), policies.make, policies.available())
+    with pytest.warns(DronewptWarning, match="logged battery voltage"):   # the 8S model drone, a 3S log
+        runner, _, _ = prepare_study(load_study(study), policies.make, policies.available())
     params = {"drone.mass_kg": 1.2}
     want = runner(params)
     sent = pickle.dumps(runner.warm)            # what the engine sends to every worker, once

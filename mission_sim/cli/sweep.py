@@ -98,7 +98,7 @@ def _prepare(args):
 
         make_policy, policy_names = policies.make, policies.available()
     runner, cases, fingerprint = prepare_study(st, make_policy, policy_names, max_cases=args.max_cases,
-                                               progress=show_progress(args))
+                                               progress=show_progress(args), warn=False)   # warned in _run
     return st, runner, cases, fingerprint
 
 
@@ -116,6 +116,7 @@ def _client_factory(args):
 
 def _run(args, st, runner, cases, fingerprint):
     from ..studies import sweep
+    from ..studies.prepare import warn_study
     from ..studies.status import check_same_study, write_manifest
 
     client_factory = _client_factory(args)   # a bad scheduler address fails first, --out not created
@@ -126,6 +127,9 @@ def _run(args, st, runner, cases, fingerprint):
     def before_run():  # under the store's lock: another study in --out is refused unless --force
         if not args.force:
             check_same_study(args.out, st, fingerprint, len(cases), inputs)
+        # the study's setup warnings after the refusals (--out, a resume) and before the manifest: under -W error
+        # a warning refuses the run without claiming --out for this study
+        warn_study(st, runner)
         write_manifest(args.out, st, fingerprint, len(cases), inputs)
     return sweep.run_sweep(cases, runner, args.out, client_factory=client_factory,
                            progress=show_progress(args), progress_desc=st.name, retry_errors=args.retry_errors,

@@ -37,15 +37,23 @@ class GeoPoint:
             raise ValueError(f"altitude {self.alt_m!r} is invalid; valid range: [-500, 10000] m AMSL")
 
 
-def parse_geo_point(text: str, name: str = "--pad") -> GeoPoint:
-    """``"LAT,LON[,ALT]"`` -> :class:`GeoPoint`; ``ValueError`` naming the bad value and the format."""
-    parts = [p.strip() for p in str(text).split(",")]
-    if len(parts) not in (2, 3):
-        raise ValueError(f"{name} {text!r} is invalid; valid format: {PAD_FORMAT}")
-    try:
-        vals = [float(p) for p in parts]
-    except ValueError:
-        raise ValueError(f"{name} {text!r} is invalid; valid format: {PAD_FORMAT}") from None
+def parse_geo_point(text, name: str = "--pad") -> GeoPoint:
+    """``"LAT,LON[,ALT]"`` (or a list of 2 or 3 numbers, e.g. a study file's TOML array) -> :class:`GeoPoint`;
+    ``ValueError`` naming the bad value and the format."""
+    if isinstance(text, (list, tuple)):
+        if len(text) not in (2, 3) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in text):
+            raise ValueError(f"{name} {text!r} is invalid; valid format: [LAT, LON] or [LAT, LON, ALT] (numbers: "
+                             f"degrees, degrees, metres above mean sea level), e.g. [-35.3632, 149.1652, 584], or "
+                             f"the text {PAD_FORMAT}")
+        vals = [float(v) for v in text]
+    else:
+        parts = [p.strip() for p in str(text).split(",")]
+        if len(parts) not in (2, 3):
+            raise ValueError(f"{name} {text!r} is invalid; valid format: {PAD_FORMAT}")
+        try:
+            vals = [float(p) for p in parts]
+        except ValueError:
+            raise ValueError(f"{name} {text!r} is invalid; valid format: {PAD_FORMAT}") from None
     try:
         return GeoPoint(vals[0], vals[1], vals[2] if len(vals) == 3 else None)
     except ValueError as exc:

@@ -469,12 +469,15 @@ def warn_battery_voltage(log: FlightLog, battery, run: str = "replay") -> str | 
     return text
 
 
-def replay_summary_warnings(log: FlightLog, track: FlightTrack, voltage: str | None, mission_summary: dict) -> list[str]:
-    """The replay summary's ``warnings``, the one list ``dronewpt replay`` prints and the replay studies count
-    (``n_warnings``): :func:`replay_warnings`, the logged voltage's (``voltage``: :func:`battery_voltage_warning`'s
-    text or None) and, when the battery ran out, where (the power comparison stops there)."""
+def replay_summary_warnings(log: FlightLog, track: FlightTrack, voltage: str | None,
+                            mission_summary: dict | None = None) -> list[str]:
+    """The replay summary's ``warnings``, the one list ``dronewpt replay`` (with or without ``--pads``) prints and the
+    replay studies count (``n_warnings``): :func:`replay_warnings`, the logged voltage's (``voltage``:
+    :func:`battery_voltage_warning`'s text or None) and, with the replay's ``mission_summary``, where the battery ran
+    out (the power comparison stops there; the re-flight passes none: its two runs' depletion is in its summary's
+    ``battery_depleted_*`` flags)."""
     out = replay_warnings(log, track) + [w for w in (voltage,) if w]
-    if mission_summary.get("battery_depleted"):
+    if mission_summary is not None and mission_summary.get("battery_depleted"):
         from ..world.results import depletion_text
         out.append(f"{depletion_text(mission_summary)} (the power comparison covers the flight up to that point)")
     return out

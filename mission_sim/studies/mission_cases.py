@@ -24,13 +24,20 @@ _CACHE_MAX = 200_000  # section value sets remembered (continuous Monte Carlo dr
 
 class MissionParamChecker:
     """``checker(overrides) -> None | error message`` for a base mission dict (``config_to_dict``).
-    ``run_size``: also the planned mission's run-size estimate (False for replays: the log is the route)."""
+    ``run_size``: also the planned mission's run-size estimate (False for replays: the log is the route).
+    ``notes``: more kinds of setup warning to count, ``(kind, description, what, check)`` each (as :data:`KINDS`;
+    ``what(cfg)``: a tuple of what the warning reads, the cached section objects or their values (keyed by identity,
+    kept with the result: equal sections are one object; ``check`` runs once per distinct tuple), ``check(cfg)``: its
+    line or None), e.g. a replay's logged battery voltage, ``what`` = ``(cfg.battery.n_series,)``
+    (:meth:`~mission_sim.studies.replay_cases.ReplayCaseRunner.setup_notes`)."""
 
-    def __init__(self, base: dict, run_size: bool = True):
+    def __init__(self, base: dict, run_size: bool = True, notes: tuple = ()):
         from ..config import config_from_dict
 
         self.base = base
         self.run_size = run_size
+        self.notes = tuple(notes)
+        self.kinds = {**self.KINDS, **{kind: text for kind, text, _, _ in self.notes}}
         self.cfg = config_from_dict(base)
         self._sections: dict[tuple, object] = {}
         self._sizes: dict[tuple, str | None] = {}
@@ -48,10 +55,12 @@ class MissionParamChecker:
         link = (cfg.link, cfg.coupling, cfg.battery.n_series, cfg.charger.cv_cell_v, cfg.mission.hover_gap_m)
         route = (cfg.waypoints, cfg.mission, *cfg.pads) if cfg.waypoints else ()
         self.checked += 1
-        for kind, what, check in (("link", link, link_range_warning), ("pad", route, unreached_pad_warnings)):
+        checks = [("link", link, link_range_warning), ("pad", route, unreached_pad_warnings)]
+        checks += [(kind, what(cfg), check) for kind, _, what, check in self.notes]
+        for kind, what, check in checks:
             if not what:
                 continue
-            key = (check.__name__, *map(id, what))
+            key = (kind, *map(id, what))
             hit = self._notes.get(key)
             if hit is None:
                 if len(self._notes) > _CACHE_MAX:
@@ -62,14 +71,14 @@ class MissionParamChecker:
                 seen = self.warned.setdefault(kind, [0, hit[1][0]])
                 seen[0] += 1
 
-    #: the kinds of setup warning a study line counts: what the cases have
+    #: the kinds of setup warning a study line counts: what the cases have (``notes`` add theirs)
     KINDS = {"link": "a link outside the exact-mode model's checked range",
              "pad": "a pad their route never energises"}
 
     def study_warnings(self, name: str) -> list[str]:
-        """One line per kind of setup warning (:data:`KINDS`) some of the study's (``name``) checked cases have: how
-        many cases have one, and the first such case's message as an example; [] when none has any."""
-        return [f"{count:,} of {self.checked:,} cases of study {name!r} have {self.KINDS[kind]}, e.g.: {text}"
+        """One line per kind of setup warning (:data:`KINDS`, ``notes``) some of the study's (``name``) checked cases
+        have: how many cases have one, and the first such case's message as an example; [] when none has any."""
+        return [f"{count:,} of {self.checked:,} cases of study {name!r} have {self.kinds[kind]}, e.g.: {text}"
                 for kind, (count, text) in self.warned.items()]
 
     def _section(self, sec: str, values: dict):
@@ -179,7 +188,7 @@ class MissionCaseRunner:
             if err is not None:
                 return err
         if self._checker is None:
-            self._checker = MissionParamChecker(self.base, self._check_run_size)
+            self._checker = MissionParamChecker(self.base, self._check_run_size, self.setup_notes())
         return self._checker({k: v for k, v in params.items() if k != POLICY_KEY})
 
     def _policy_error(self, policy) -> str | None:
@@ -197,6 +206,11 @@ class MissionCaseRunner:
             except (ValueError, FileNotFoundError) as exc:
                 made[policy] = str(exc)
         return made[policy]
+
+    def setup_notes(self) -> tuple:
+        """The runner's own kinds of setup warning, counted per study with the mission's (``MissionParamChecker``'s
+        ``notes``): none for missions."""
+        return ()
 
     def study_warnings(self, name: str) -> list[str]:
         """The setup warnings of the cases checked so far, once for the study

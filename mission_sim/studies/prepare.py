@@ -14,7 +14,7 @@ from collections.abc import Callable, Iterable
 
 from .study import DEFAULT_MAX_CASES, POLICY_KEY, CaseSpace, Study, canonical_json, case_id, case_space, check_size
 
-__all__ = ["prepare_study", "check_cases", "import_factory", "MAX_LISTED_ERRORS"]
+__all__ = ["prepare_study", "check_cases", "warn_study", "import_factory", "MAX_LISTED_ERRORS"]
 
 MAX_LISTED_ERRORS = 20  # distinct errors named in the message (the count of the others follows)
 _IDS_PER_ERROR = 3
@@ -91,7 +91,8 @@ def check_cases(space: CaseSpace, runner, progress: bool = False) -> int:
 
 
 def prepare_study(study: Study, make_policy: Callable | None = None, policy_names: Iterable[str] | None = None,
-                  *, max_cases: int = DEFAULT_MAX_CASES, check_values: bool = True, progress: bool = False):
+                  *, max_cases: int = DEFAULT_MAX_CASES, check_values: bool = True, progress: bool = False,
+                  warn: bool = True):
     """``(runner, cases, fingerprint)`` of a study, checked before anything runs.
 
     The size is checked first (``max_cases``, from the axis lengths alone). The mission runner needs
@@ -100,7 +101,9 @@ def prepare_study(study: Study, make_policy: Callable | None = None, policy_name
     "mod:factory"`` uses ``factory(study)`` (any picklable ``run_case``, optionally with
     ``validate_keys`` and ``check_params`` hooks). ``cases`` is the lazy
     :class:`~mission_sim.studies.study.CaseSpace`. Unknown keys, unknown policies and bad values
-    raise ``ValueError`` naming them (bad values: all at once, see :func:`check_cases`).
+    raise ``ValueError`` naming them (bad values: all at once, see :func:`check_cases`). The checked cases' setup
+    warnings are warned once for the study (:func:`warn_study`) unless ``warn=False`` (``dronewpt sweep`` warns them
+    after its own checks of ``--out`` and of a resume, which may refuse the run).
     """
     check_size(study, max_cases)
     runner, fingerprint = _runner(study, make_policy, policy_names)
@@ -115,11 +118,12 @@ def prepare_study(study: Study, make_policy: Callable | None = None, policy_name
             raise ValueError(f"policy={bad[0]!r} is invalid; valid values: {', '.join(sorted(valid))}")
     if check_values:
         check_cases(cases, runner, progress=progress)
-        _warn_study(study, runner)
+        if warn:
+            warn_study(study, runner)
     return runner, cases, fingerprint
 
 
-def _warn_study(study: Study, runner) -> None:
+def warn_study(study: Study, runner) -> None:
     """The runner's setup warnings of the checked cases (``study_warnings(name)``, if it has it), once per study
     as :class:`~wpt_receiver.notices.DronewptWarning` (the cases themselves run without warnings)."""
     notes = getattr(runner, "study_warnings", None)

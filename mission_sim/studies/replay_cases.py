@@ -1,7 +1,7 @@
 """The replay case runner of sweeps: parameter studies over your own flight logs.
 
 A study with a ``[replay]`` section (:mod:`mission_sim.studies.study`) runs every case as
-``dronewpt replay LOG [--pads FILE] --set KEY=VALUE ...`` would, summary-only (no time series, no
+``dronewpt replay LOG [--pad LAT,LON] [--pads FILE] --set KEY=VALUE ...`` would, summary-only (no time series, no
 figure), with the case's values as the ``--set`` keys (``drone.mass_kg``, ``battery.capacity_ah``,
 ``mission.hover_time_s``, ``pads.0.hover_time_s``, ``link.*``, ``charger.*``, ... and ``policy``):
 
@@ -16,12 +16,14 @@ prepared (a missing file, or one that is not a flight log, is refused there with
 every Dask worker in :meth:`ReplayCaseRunner.warm`, never per case. Keys and values are checked
 before anything runs exactly as the mission runner checks them (:class:`.mission_cases.MissionParamChecker`,
 on the replay's mission), plus what a replay itself refuses (no pad within reach, a track, or a re-flight with its charging
-hovers, too long for ``sim.traj_dt_s``).
+hovers, too long for ``sim.traj_dt_s``). The logged battery voltage against each case's pack is warned once per study,
+counting the cases outside it (:meth:`ReplayCaseRunner.setup_notes`: ``replay``'s line), not per case.
 """
 
 from __future__ import annotations
 
 import hashlib
+import re
 from pathlib import Path
 
 from .mission_cases import _CACHE_MAX, MissionCaseRunner
@@ -105,11 +107,12 @@ class _WarmWithLog:
 
 
 def _study_words(msg: str) -> str:
-    """A replay's error in the study file's words (its options are ``[replay]`` keys, not command-line flags)."""
+    """A replay's error or warning in the study file's words (its options are ``[replay]`` keys, not command-line
+    flags: ``--pad`` is ``[replay] pad``, the pads' frame origin with ``pads``)."""
     for flag, key in (("--reach", "[replay] reach_m ="), ("--segment", "[replay] segment ="),
-                      ("--window", "[replay] window ="), ("check --pad", "check the pads")):
+                      ("--window", "[replay] window =")):
         msg = msg.replace(flag, key)
-    return msg
+    return re.sub(r"--pad\b", "[replay] pad", msg)
 
 
 def _flat(summary: dict, prefix: str = "") -> dict:
@@ -134,6 +137,9 @@ class ReplayCaseRunner(MissionCaseRunner):
         ``--config`` mission with one pad at the frame origin (as ``dronewpt replay`` builds them)
     options : the ``[replay]`` section (paths resolved)
     log_sha : the log's sha256 (checked where it is read; the pads are in ``base`` already)
+    origin : the replay's pad frame origin as the command resolves it (``[replay] pad``, an altitude-less one at the
+        take-off spot's altitude; else the take-off spot: :func:`~mission_sim.mavlink.replay.track_from_log`'s
+        ``track.pad``), given to every replay and re-flight as the command gives it
 
     ``input_files`` (set by :func:`replay_runner`): the log's and the pads file's path and sha256, recorded in
     the sweep's ``sweep.json`` so a resume over a changed file names it.
@@ -142,19 +148,32 @@ class ReplayCaseRunner(MissionCaseRunner):
     _check_run_size = False   # the route is the log: the planner's size estimate does not apply; the replay's own
     #                           limit (MAX_REPLAY_SAMPLES, the re-flight's detours included) is checked in check_params
 
-    def __init__(self, base: dict, make_policy, policy_names, options: dict, log_sha: str):
+    def __init__(self, base: dict, make_policy, policy_names, options: dict, log_sha: str, origin=None):
         super().__init__(base, make_policy, policy_names)
         self.options = dict(options)
         self.log_sha = log_sha
+        self.origin = origin
         self._refused: dict = {}
+        self._log_notes: dict[str, int] = {}   # the log's warnings (replay_warnings) -> cases checked with it
         self._plans: dict = {}
         self.input_files: dict = {}
 
     def __getstate__(self):
-        return {**super().__getstate__(), "_refused": {}, "_plans": {}}
+        return {**super().__getstate__(), "_refused": {}, "_plans": {}, "_log_notes": {}}
 
     def log(self):
         return load_inputs("log", self.options["log"], self.log_sha)
+
+    def setup_notes(self) -> tuple:
+        """The logged battery voltage against each case's pack, counted once per study with the mission's setup
+        warnings (the cases run with ``warn=False``): the line ``dronewpt replay`` gives
+        (:func:`~mission_sim.mavlink.replay.battery_voltage_warning`, "the re-flight" with pads), computed once per
+        cell count (the pack's range is ``battery.n_series`` x the cell's: the line reads nothing else of the case;
+        once per ``battery`` section took the log's median again for every Monte Carlo draw of a capacity)."""
+        from ..mavlink.replay import battery_voltage_warning
+        log, run = self.log(), "re-flight" if "pads" in self.options else "replay"
+        return (("voltage", "a logged battery voltage outside their model pack's open-circuit range",
+                 lambda cfg: (cfg.battery.n_series,), lambda cfg: battery_voltage_warning(log, cfg.battery, run)),)
 
     def check_params(self, params: dict) -> str | None:
         """None if the case would replay, else the error (the mission's own checks first, then the replay's:
@@ -167,10 +186,26 @@ class ReplayCaseRunner(MissionCaseRunner):
             if len(self._refused) > _CACHE_MAX:
                 self._refused.clear()
             self._refused[key] = self._replay_error(self.config(params), params)
-        return self._refused[key]
+        error, notes = self._refused[key]
+        for text in notes:
+            self._log_notes[text] = self._log_notes.get(text, 0) + 1
+        return error
 
-    def _replay_error(self, cfg, params: dict) -> str | None:
-        from ..mavlink.replay import replay_span, resample_track, track_from_log
+    def study_warnings(self, name: str) -> list[str]:
+        """The mission's and the logged voltage's lines (:meth:`MissionCaseRunner.study_warnings`), then the log's
+        (:func:`~mission_sim.mavlink.replay.replay_warnings`: a log ending armed, reading stopped early, never armed,
+        a position gap, a pad far from the track) in the study's words, once each: alone when every checked case
+        has it (they depend on the log, the origin and the window: the same in every case), else with the count."""
+        checked = 0 if self._checker is None else self._checker.checked
+        return super().study_warnings(name) + [
+            _study_words(text) if count == checked else
+            f"{count:,} of {checked:,} cases of study {name!r} have: {_study_words(text)}"
+            for text, count in self._log_notes.items()]
+
+    def _replay_error(self, cfg, params: dict) -> tuple[str | None, tuple]:
+        """(None if the case would replay, else its error; the log's warnings for the case's track:
+        :func:`~mission_sim.mavlink.replay.replay_warnings`, as its replay's summary has them)."""
+        from ..mavlink.replay import replay_span, replay_warnings, resample_track, track_from_log
         from ..plans.refly import check_refly_size, plan_refly
         o, log = self.options, self.log()
         try:
@@ -182,21 +217,23 @@ class ReplayCaseRunner(MissionCaseRunner):
                     if len(self._plans) >= _PLANS_MAX:
                         self._plans.clear()
                     try:
-                        plan = plan_refly(log, cfg, ground_gap_m=o.get("ground_gap_m"), window=o.get("window"),
-                                          reach_m=o["reach_m"], segment=o.get("segment"))[:3]
+                        plan = plan_refly(log, cfg, pad=self.origin, ground_gap_m=o.get("ground_gap_m"),
+                                          window=o.get("window"), reach_m=o["reach_m"], segment=o.get("segment"))[:3]
+                        plan = (plan, tuple(replay_warnings(log, plan[0])))   # refly_log's: its resampled track
                     except ValueError as exc:
                         plan = exc
                     self._plans[key] = plan
                 if isinstance(plan, ValueError):
                     raise plan
-                check_refly_size(*plan, cfg)
-            else:
-                gap = cfg.mission.hover_gap_m if o.get("ground_gap_m") is None else o["ground_gap_m"]
-                span, _ = replay_span(log, o.get("window"), o.get("segment"))
-                resample_track(track_from_log(log, ground_gap_m=gap, window=span), cfg.sim.traj_dt_s)
+                check_refly_size(*plan[0], cfg)
+                return None, plan[1]
+            gap = cfg.mission.hover_gap_m if o.get("ground_gap_m") is None else o["ground_gap_m"]
+            span, _ = replay_span(log, o.get("window"), o.get("segment"))
+            track = track_from_log(log, pad=self.origin, ground_gap_m=gap, window=span)
+            resample_track(track, cfg.sim.traj_dt_s)
         except ValueError as exc:
-            return _study_words(str(exc))
-        return None
+            return _study_words(str(exc)), ()
+        return None, tuple(replay_warnings(log, track))
 
     def __call__(self, params: dict) -> dict:
         """The case's replay summary (flat columns), summary-only."""
@@ -206,12 +243,13 @@ class ReplayCaseRunner(MissionCaseRunner):
         policy = self.make_policy(params.get(POLICY_KEY, DEFAULT_POLICY), policy_context(cfg))
         if "pads" in o:
             from ..plans.refly import refly_log
-            res = refly_log(self.log(), cfg, policy, ground_gap_m=o.get("ground_gap_m"), window=o.get("window"),
-                            reach_m=o["reach_m"], segment=o.get("segment"), frame=False, warn=False)
+            res = refly_log(self.log(), cfg, policy, pad=self.origin, ground_gap_m=o.get("ground_gap_m"),
+                            window=o.get("window"), reach_m=o["reach_m"], segment=o.get("segment"), frame=False,
+                            warn=False)
         else:
             from ..mavlink.replay import replay_log
-            res = replay_log(self.log(), cfg, policy, ground_gap_m=o.get("ground_gap_m"), window=o.get("window"),
-                             segment=o.get("segment"), frame=False, warn=False)
+            res = replay_log(self.log(), cfg, policy, pad=self.origin, ground_gap_m=o.get("ground_gap_m"),
+                             window=o.get("window"), segment=o.get("segment"), frame=False, warn=False)
         out = _flat(res.summary)
         out.pop("log", None)   # the study's, the same in every row
         out["drone_mass_kg"] = float(cfg.drone.mass_kg)
@@ -234,13 +272,13 @@ class ReplayCaseRunner(MissionCaseRunner):
         self({})
 
 
-def _base(study: Study, options: dict, log, pads) -> dict:
-    """The replay's mission dict as ``dronewpt replay`` builds it (``--config`` = ``[study] base``)."""
+def _base(study: Study, options: dict, origin, pads) -> dict:
+    """The replay's mission dict as ``dronewpt replay`` builds it (``--config`` = ``[study] base``; the pads about
+    the frame origin ``origin``)."""
     from ..config import apply_overrides, config_to_dict, load_config, load_config_dict
-    from ..mavlink.replay import default_pad
     if pads is not None:
         from ..plans.refly import refly_base
-        d = refly_base(config_to_dict(load_config(study.base_path)), pads, default_pad(log), Path(options["pads"]).name)
+        d = refly_base(config_to_dict(load_config(study.base_path)), pads, origin, Path(options["pads"]).name)
     else:
         d = load_config_dict(study.base_path)
         d["pads"] = [{"x_m": 0.0, "y_m": 0.0, "z_m": 0.0}]
@@ -281,16 +319,21 @@ def replay_runner(study: Study, make_policy, policy_names) -> tuple[ReplayCaseRu
     try:
         log = load_inputs("log", o["log"], log_sha)
         span, _ = replay_span(log, o.get("window"), o.get("segment"))
-        track_from_log(log, window=span)   # no usable position (not a flight log): one line naming the file
+        # no usable position (not a flight log): one line naming the file; the frame origin as the command's
+        origin = track_from_log(log, pad=o.get("pad"), window=span).pad
     except ValueError as exc:
         msg, name = _study_words(str(exc)), f"{Path(o['log']).name}: "
         raise ValueError(f"[replay] log {str(o['log'])!r}: {msg[len(name):]}" if msg.startswith(name) else msg) from None
     pads_sha = _sha256(o["pads"]) if "pads" in o else None
     pads = load_inputs("pads", o["pads"], pads_sha) if "pads" in o else None
-    base = _base(study, o, log, pads)
-    runner = ReplayCaseRunner(base, make_policy, policy_names, o, log_sha)
+    try:
+        base = _base(study, o, origin, pads)
+    except ValueError as exc:   # e.g. a pad of the pads file far from the frame origin ([replay] pad)
+        raise ValueError(_study_words(str(exc))) from None
+    runner = ReplayCaseRunner(base, make_policy, policy_names, o, log_sha, origin)
     runner.input_files = {f"[replay] {k}": {"path": str(o[k]), "sha256": sha}
                           for k, sha in (("log", log_sha), ("pads", pads_sha)) if sha is not None}
     ident = {"runner": "replay v1", "base": base, "log": log_sha, "pads": pads_sha,
-             "options": {k: v for k, v in o.items() if k not in ("log", "pads", "drone")}}
+             "options": {k: [v.lat_deg, v.lon_deg, v.alt_m] if k == "pad" else v for k, v in o.items()
+                         if k not in ("log", "pads", "drone")}}
     return runner, hashlib.sha256(canonical_json(ident).encode()).hexdigest()[:16]

@@ -45,7 +45,8 @@ class SweepStatus:
 def physics_code_hash(replay: bool = False) -> str:
     """sha256 (16 hex digits) of the sources that compute a mission's numbers: :mod:`wpt_receiver` and
     :mod:`mission_sim.world` (link, devices, battery, the compiled loop); with ``replay`` also those that
-    turn a log into a replay or a re-flight (:mod:`mission_sim.mavlink`, :mod:`mission_sim.plans`). A sweep
+    turn a log into a replay or a re-flight (:mod:`mission_sim.mavlink`, :mod:`mission_sim.plans`) and the replay
+    runner that decides what a case gives them (:mod:`mission_sim.studies.replay_cases`: origin, options). A sweep
     folder records it, so a resume by another version of that code is refused instead of mixing old and
     new results."""
     from wpt_receiver.kernel_cache import dependency_hash
@@ -53,6 +54,7 @@ def physics_code_hash(replay: bool = False) -> str:
     pkg = Path(__file__).resolve().parents[1]
     roots = (Path(wpt_receiver.__file__).parent, pkg / "world") + ((pkg / "mavlink", pkg / "plans") if replay else ())
     files = sorted((f for root in roots for f in root.rglob("*.py")), key=lambda f: (f.parent.name, f.name))
+    files += [pkg / "studies" / "replay_cases.py"] if replay else []
     return dependency_hash(files)[:16]
 
 

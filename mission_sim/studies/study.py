@@ -41,6 +41,8 @@ gives the drone, battery, link and charger, and the keys are what ``dronewpt rep
     [replay]
     log = "flight.tlog"       # required, relative to this file: .tlog, .bin or .ulg
     pads = "pads.csv"         # optional: re-fly with detours to these pads (replay --pads)
+    pad = "-35.3632,149.1652" # optional: the pad (with pads: the frame origin) at LAT,LON[,ALT] (replay --pad),
+    #                           or the array [-35.3632, 149.1652] / [lat, lon, alt]
     drone = "drone.toml"      # optional: a [drone] file from `dronewpt calibrate` (replay --drone)
     window = [440.0, 620.0]   # optional: log seconds T0, T1 (replay --window)
     # segment = 2             # optional, instead of window: boot segment N, 1-based (replay --segment)
@@ -87,7 +89,7 @@ DEFAULT_POLICY = "model_based"
 DISTRIBUTIONS = ("uniform", "loguniform", "normal", "integers", "choice")
 _SPECS = DISTRIBUTIONS + ("linspace",)
 _SECTIONS = ("study", "fixed", "grid", "monte_carlo", "report", "replay")
-_REPLAY_KEYS = ("log", "pads", "drone", "window", "segment", "reach_m", "ground_gap_m")
+_REPLAY_KEYS = ("log", "pads", "pad", "drone", "window", "segment", "reach_m", "ground_gap_m")
 _STUDY_KEYS = ("name", "base", "runner", "allow_single")
 _CONTINUOUS = ("uniform", "loguniform", "normal")
 _DRAW_CACHE = 10_000  # Monte Carlo draws kept in memory while iterating (more are recomputed per grid point)
@@ -147,8 +149,8 @@ class Study:
     runner : "module:factory" import path of a case-runner factory, or None for the mission runner
     report : plot axes, e.g. {"x": "mission.hover_time_s", "hue": "pads.1.x_m"}
     allow_single : a study that varies nothing (the base mission once) is allowed
-    replay : the ``[replay]`` section (paths resolved against the study file's folder), or None for a
-        mission study
+    replay : the ``[replay]`` section (paths resolved against the study file's folder; ``pad`` a
+        :class:`~mission_sim.mavlink.geodesy.GeoPoint`), or None for a mission study
     source : the TOML document it was parsed from (``dronewpt sweep --status`` re-reads it)
     """
 
@@ -344,6 +346,9 @@ def _parse_replay(rep, base_dir) -> dict:
     if "pads" not in rep and "reach_m" in rep:
         raise ValueError("[replay] reach_m is set without pads; valid: give pads = 'pads.csv' too, or drop reach_m")
     out["reach_m"] = float(reach)
+    if "pad" in rep:   # the command's --pad, parsed and checked by its own parser (format, ranges; or an array)
+        from ..mavlink.geodesy import parse_geo_point
+        out["pad"] = parse_geo_point(rep["pad"], "[replay] pad =")
     gap = rep.get("ground_gap_m")
     if gap is not None:
         if not _number(gap) or not 0 <= gap <= 1.0:
