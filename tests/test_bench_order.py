@@ -84,3 +84,27 @@ def test_without_a_cache_variable_the_measured_tree_gets_its_own_folder_too(monk
                     str(peer.resolve()): str(bench_startup.tree_cache_dir(peer))}
     assert seen[str(ROOT)] != seen[str(peer.resolve())]
 
+
+
+def test_with_the_cache_off_both_trees_run_without_it(monkeypatch, tmp_path):
+    """``DRONEWPT_CACHE_DIR=`` (empty: the cache off) holds for the ``--before`` tree too: neither tree gets a cache
+    folder or warms one; a ``--before-cache`` then is refused with one line."""
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    import bench_startup
+    import pytest
+
+    seen = []
+    monkeypatch.setattr(bench_startup, "_run", lambda argv, env: seen.append(("run", env["PYTHONPATH"],
+                                                                              env["DRONEWPT_CACHE_DIR"])) or (1., 1., "s"))
+    monkeypatch.setattr(bench_startup, "_warm", lambda env: seen.append(("warmup", env["PYTHONPATH"],
+                                                                         env["DRONEWPT_CACHE_DIR"])) or 0.0)
+    monkeypatch.setenv("DRONEWPT_CACHE_DIR", "")
+    peer = tmp_path / "peer"
+    peer.mkdir()
+    r = bench_startup.end_to_end(repeat=1, compare="none", before=peer, mission_only=True, warm=True)
+    assert {tree for _, tree, _ in seen} == {str(ROOT), str(peer.resolve())}
+    assert {cache for _, _, cache in seen} == {""}
+    assert r["caches"] == {str(ROOT): "", str(peer.resolve()): ""}
+    with pytest.raises(SystemExit, match="--before-cache .* empty"):
+        bench_startup.end_to_end(repeat=1, compare="none", before=peer, mission_only=True,
+                                 before_cache=tmp_path / "c")
