@@ -94,10 +94,11 @@ def test_with_the_cache_off_both_trees_run_without_it(monkeypatch, tmp_path):
     import pytest
 
     seen = []
-    monkeypatch.setattr(bench_startup, "_run", lambda argv, env: seen.append(("run", env["PYTHONPATH"],
-                                                                              env["DRONEWPT_CACHE_DIR"])) or (1., 1., "s"))
-    monkeypatch.setattr(bench_startup, "_warm", lambda env: seen.append(("warmup", env["PYTHONPATH"],
-                                                                         env["DRONEWPT_CACHE_DIR"])) or 0.0)
+    def note(kind, env):
+        seen.append((kind, env["PYTHONPATH"], env["DRONEWPT_CACHE_DIR"]))
+
+    monkeypatch.setattr(bench_startup, "_run", lambda argv, env: note("run", env) or (1.0, 1.0, "s"))
+    monkeypatch.setattr(bench_startup, "_warm", lambda env: note("warmup", env) or 0.0)
     monkeypatch.setenv("DRONEWPT_CACHE_DIR", "")
     peer = tmp_path / "peer"
     peer.mkdir()
