@@ -23,7 +23,11 @@ the other), after one untimed warm-up round; median and range, and ``os.getloada
 
 Each tree runs with a disk cache folder of its own (``DRONEWPT_CACHE_DIR``): the measured tree with the one in the
 environment, else a folder under the temporary directory named after the tree; a ``--before DIR`` tree with
-``--before-cache`` or such a folder of its own: ``dronewpt warmup`` removes other
+``--before-cache`` or such a folder of its own. ``DRONEWPT_CACHE_DIR`` set but empty (the cache off) turns it off for
+both trees (``--before-cache`` is then refused). When ``DRONEWPT_CACHE_DIR`` is unset, no tree's warmup goes to the
+user's shared default folder; when it is set, the measured tree uses (and warms) that folder. The temporary folders,
+``<tmp>/dronewpt-bench-cache/<tree name>-<hash of its path>``, persist between runs (so a second run starts warm);
+remove them with ``rm -r /tmp/dronewpt-bench-cache`` (or the temporary directory's equivalent). ``dronewpt warmup`` removes other
 sources' ahead-of-time mission modules from its cache folder (:func:`mission_sim.world.aot.build`), so two trees
 sharing one folder do not both run without numba. Before anything is timed each tree's ``dronewpt warmup`` runs
 with its own ``PYTHONPATH`` and cache folder (``--no-warmup`` skips it; seconds when the kernels are cached and the
@@ -96,9 +100,15 @@ def tree_cache_dir(tree: Path) -> Path:
 
 
 def _tree_envs(env: dict, before: Path, before_cache: Path | None) -> dict:
-    """The ``--before`` tree's environment: ``env`` with its ``PYTHONPATH`` and a cache folder of its own."""
-    cache = Path(before_cache) if before_cache is not None else tree_cache_dir(before)
+    """The ``--before`` tree's environment: ``env`` with its ``PYTHONPATH`` and a cache folder of its own, or the
+    cache off as the measured tree's (``DRONEWPT_CACHE_DIR`` empty: both trees alike)."""
     own = env.get(CACHE_VAR)
+    if own is not None and not own.strip():
+        if before_cache is not None:
+            raise SystemExit(f"--before-cache {str(before_cache)!r} with {CACHE_VAR} empty (the cache off); valid: "
+                             f"no --before-cache (both trees without the cache) or {CACHE_VAR} set to a folder")
+        return {**env, "PYTHONPATH": str(before.resolve()), CACHE_VAR: own}
+    cache = Path(before_cache) if before_cache is not None else tree_cache_dir(before)
     if own is not None and own != "" and Path(own).resolve() == cache.resolve():
         raise SystemExit(f"--before-cache {str(cache)!r} is the measured tree's {CACHE_VAR}; valid: another folder "
                          "(a warmup removes the other tree's ahead-of-time module from a shared folder)")
@@ -318,7 +328,7 @@ def _print(r: dict) -> None:
           f"after {r['load_after'][0]:.2f}; bytecode cache: {r.get('pyc') or 'as inherited'}")
     for tree, cache in r.get("caches", {}).items():
         w = r.get("warmed", {}).get(tree)
-        print(f"  tree {tree}: cache {cache}" + (f"; warmed ({w['warmup_wall_s']:.1f} s)" if w else "; not warmed here"))
+        print(f"  tree {tree}: cache {cache or 'off'}" + (f"; warmed ({w['warmup_wall_s']:.1f} s)" if w else "; not warmed here"))
     base = r["python -c pass"]["median_s"]
     goals = {"dronewpt mission": "goal <= 1.0 s", "dronewpt compare (default)": "goal <= 2.5 s",
              "dronewpt compare (no-mpc)": "goal <= 2.5 s (without mpc)"}
@@ -349,8 +359,9 @@ def main(argv=None):
                          ".pyc files): default %(default)s; 'inherit' leaves the environment as it is")
     ap.add_argument("--before-cache", type=Path, default=None, metavar="DIR",
                     help="disk cache folder (DRONEWPT_CACHE_DIR) of the --before tree; default one per tree under "
-                         "the temporary directory (never the measured tree's: a warmup removes other sources' "
-                         "ahead-of-time modules from its folder)")
+                         "the temporary directory, kept between runs (never the measured tree's: a warmup removes "
+                         "other sources' ahead-of-time modules from its folder); not allowed with DRONEWPT_CACHE_DIR "
+                         "empty (the cache off for both trees)")
     ap.add_argument("--no-warmup", action="store_true", help="do not run each tree's `dronewpt warmup` (its own "
                     "cache folder) before timing")
     only = ap.add_mutually_exclusive_group()

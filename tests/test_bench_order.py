@@ -114,3 +114,28 @@ def test_the_no_mpc_compare_command_is_accepted_with_one_row_per_label(monkeypat
     assert len(labels) == len(set(labels))
     assert set(seen["groups"]) == set(shipped_seed_groups())
     assert set(seen["pols"]) == set(bench_startup.NO_MPC.split(",")) - set(shipped_seed_groups())
+
+
+def test_with_the_cache_off_both_trees_run_without_it(monkeypatch, tmp_path):
+    """``DRONEWPT_CACHE_DIR=`` (empty: the cache off) holds for the ``--before`` tree too: neither tree gets a cache
+    folder or warms one; a ``--before-cache`` then is refused with one line."""
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    import bench_startup
+    import pytest
+
+    seen = []
+    def note(kind, env):
+        seen.append((kind, env["PYTHONPATH"], env["DRONEWPT_CACHE_DIR"]))
+
+    monkeypatch.setattr(bench_startup, "_run", lambda argv, env: note("run", env) or (1.0, 1.0, "s"))
+    monkeypatch.setattr(bench_startup, "_warm", lambda env: note("warmup", env) or 0.0)
+    monkeypatch.setenv("DRONEWPT_CACHE_DIR", "")
+    peer = tmp_path / "peer"
+    peer.mkdir()
+    r = bench_startup.end_to_end(repeat=1, compare="none", before=peer, mission_only=True, warm=True)
+    assert {tree for _, tree, _ in seen} == {str(ROOT), str(peer.resolve())}
+    assert {cache for _, _, cache in seen} == {""}
+    assert r["caches"] == {str(ROOT): "", str(peer.resolve()): ""}
+    with pytest.raises(SystemExit, match="--before-cache .* empty"):
+        bench_startup.end_to_end(repeat=1, compare="none", before=peer, mission_only=True,
+                                 before_cache=tmp_path / "c")

@@ -203,8 +203,9 @@ def coil_self_h(coil: CoilGeometry) -> float:
 
 def _code_key() -> str:
     """This module's source hash and the numpy/scipy versions (part of every disk-cache key). scipy's version comes
-    from its ``.dist-info`` folder (:func:`.diskcache.package_version`, the same string): its top-level import,
-    ~10 ms, came before the figure worker's fork in every mission (the table cached, scipy was not needed)."""
+    from its ``.dist-info`` folder when that is unambiguous, else from ``scipy.__version__`` as before
+    (:func:`.diskcache.package_version`; the same string for a pip-installed scipy): its top-level import, ~10 ms,
+    came before the figure worker's fork in every mission (the table cached, scipy was not needed)."""
     src = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
     return f"src={src} numpy={np.__version__} scipy={diskcache.package_version('scipy')}"
 

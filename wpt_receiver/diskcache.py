@@ -115,21 +115,35 @@ def prune(name: str, keep: int) -> int:
 
 def installed_version(package: str) -> str | None:
     """``package``'s installed version for a cache key, without importing the package or :mod:`importlib.metadata`
-    (whose import, ~15 ms with the email parser it loads, was most of a key's cost): the version in the name of its
-    ``NAME-VERSION.dist-info`` folder in the first ``sys.path`` entry that has one (the order in which
-    ``importlib.metadata`` looks; pip names the folder after the name and version of its ``METADATA``), or None
-    (not installed as a distribution: the caller falls back to the package's own ``__version__`` or metadata)."""
+    (whose import, ~15 ms with the email parser it loads, was most of a key's cost), or None when the folder names
+    cannot tell it for sure (the caller then falls back to what it did before: :mod:`importlib.metadata` or the
+    package's ``__version__``).
+
+    The version is the one in the name of the package's ``NAME-VERSION.dist-info`` folder in the first ``sys.path``
+    entry that has metadata for it (the order in which ``importlib.metadata`` looks; pip names the folder after the
+    name and version of its ``METADATA``), and only when that is unambiguous: None when that entry holds two
+    ``.dist-info`` folders for it (left behind by ``pip install --target T --upgrade``, pypa/pip#13763) or an
+    ``.egg-info`` one, when an earlier entry holds a module or package of that name without metadata (a source
+    build on ``PYTHONPATH`` shadowing an installed copy), when a zip file or ``.egg`` folder comes earlier on the
+    path (not read here), or when the folder's version is escaped (``_``). So the key holds the same string as
+    ``importlib.metadata.version`` for a distribution installed as one ``.dist-info`` folder in a plain directory
+    (checked for every installed distribution in tests/test_startup_keys.py); a distribution that only a custom
+    ``sys.meta_path`` finder provides is not seen here."""
     return _dist_info_versions().get(_normalised(package))
 
 
 def package_version(package: str) -> str:
-    """``package``'s version for a cache key: :func:`installed_version`, else (not installed as a distribution, e.g. a
-    source build on the path) the imported package's ``__version__``."""
-    found = installed_version(package)
+    """``package``'s version for a cache key (the same string as its ``__version__`` when the two agree): the imported
+    package's ``__version__`` when it is imported already, else :func:`installed_version`, else (not installed as
+    one unambiguous distribution, e.g. a source build on the path) the imported package's ``__version__``."""
+    module = sys.modules.get(package)
+    found = getattr(module, "__version__", None) if module is not None else None
+    if found is None:
+        found = installed_version(package)
     if found is None:
         import importlib
-        found = str(importlib.import_module(package).__version__)
-    return found
+        found = importlib.import_module(package).__version__
+    return str(found)
 
 
 def _normalised(name: str) -> str:
@@ -139,18 +153,36 @@ def _normalised(name: str) -> str:
 
 
 @functools.lru_cache(maxsize=1)
-def _dist_info_versions() -> dict[str, str]:
-    """Normalised distribution name -> version from the ``.dist-info`` folders of the ``sys.path`` entries (the
-    first entry's winning), read once per process."""
-    out: dict[str, str] = {}
+def _dist_info_versions() -> dict[str, str | None]:
+    """Normalised name -> version (None: unknown, see :func:`installed_version`) from the ``.dist-info`` and
+    ``.egg-info`` folders and the top-level modules of the ``sys.path`` entries, the first entry that has a name
+    deciding it; read once per process. Scanning stops at the first zip file or ``.egg`` folder: any name not
+    decided before it is left out (None)."""
+    out: dict[str, str | None] = {}
     for entry in sys.path:
+        folder = os.fspath(entry) or "."
+        if os.path.basename(os.path.normpath(folder)).lower().endswith(".egg"):
+            break
         try:
-            with os.scandir(entry or ".") as it:
-                names = sorted(e.name for e in it if e.name.endswith(".dist-info"))
-        except OSError:   # a zip file, a missing folder
+            with os.scandir(folder) as it:
+                children = [e.name for e in it]
+        except OSError:   # a missing folder, or a zip file (which importlib.metadata reads and this does not)
+            if os.path.exists(folder):
+                break
             continue
-        for n in names:
-            name, sep, version = n[:-len(".dist-info")].partition("-")
-            if sep and version:
-                out.setdefault(_normalised(name), version)
+        found: dict[str, list[str | None]] = {}
+        modules = set()
+        for child in children:
+            low = child.lower()
+            if low.endswith((".dist-info", ".egg-info")):
+                stem, suffix = child.rsplit(".", 1)
+                name, sep, version = stem.partition("-")
+                ok = suffix.lower() == "dist-info" and sep and version and "_" not in version
+                found.setdefault(_normalised(name), []).append(version if ok else None)
+            elif not child.startswith((".", "_")):
+                modules.add(_normalised(child.partition(".")[0]))
+        for name, versions in found.items():
+            out.setdefault(name, versions[0] if len(versions) == 1 else None)
+        for name in modules - found.keys():
+            out.setdefault(name, None)
     return out

@@ -71,8 +71,10 @@ _ZOH_MEMO: dict = {}
 
 
 def _zoh_key(a: np.ndarray, b: np.ndarray, dt_s: float) -> str:
-    """The disk-cache key of a ZOH (scipy's version from its ``.dist-info`` folder, the same string as
-    ``scipy.__version__``: :func:`.diskcache.package_version`; importing scipy for it cost a mission ~10 ms)."""
+    """The disk-cache key of a ZOH (scipy's version: ``scipy.__version__`` when scipy is imported, else from its
+    ``.dist-info`` folder when that is unambiguous, else ``scipy.__version__`` as before:
+    :func:`.diskcache.package_version`; the same string for a pip-installed scipy; importing scipy for it cost a
+    mission ~10 ms)."""
     from .diskcache import package_version
     return (f"zoh v1 a{a.shape}={a.tobytes().hex()} b{b.shape}={b.tobytes().hex()} dt={float(dt_s).hex()} "
             f"scipy={package_version('scipy')}")

@@ -81,9 +81,10 @@ def sources() -> list[Path]:
 
 def _version(package: str) -> bytes:
     """``package``'s installed version (without importing it), or its name: from its ``.dist-info`` folder's name
-    (:func:`wpt_receiver.diskcache.installed_version`), else from :mod:`importlib.metadata`, whose import alone (the
-    email parser, zip and socket modules) took ~15 ms of every ``dronewpt mission``'s start-up, its three look-ups
-    ~5 ms more."""
+    when that is unambiguous (:func:`wpt_receiver.diskcache.installed_version`: one such folder in the first path
+    entry with metadata for it, the same string as :mod:`importlib.metadata` gives), else from
+    :mod:`importlib.metadata` as before, whose import alone (the email parser, zip and socket modules) took ~15 ms of
+    every ``dronewpt mission``'s start-up, its three look-ups ~5 ms more."""
     from wpt_receiver.diskcache import installed_version
     found = installed_version(package)
     if found is not None:
