@@ -405,6 +405,29 @@ def test_warmup_compiles_what_a_single_envs_first_steps_compile(tmp_path):
     assert proc.returncode == 0 and proc.stdout.split() == ["0"], (proc.stdout, proc.stderr[-2000:])
 
 
+def test_warmup_compiles_what_a_parallel_vector_envs_steps_and_autoresets_compile(tmp_path):
+    """After warmup's batched-env stage (into an empty cache), a vector env of N = 2,048 on 2 threads (both links)
+    compiles nothing in its steps, its autoreset and a partial restart (the parallel step, draws and command profile;
+    the draws into a new array); warmup compiled none of them before."""
+    code = ("import numpy as np\nfrom numba.core import event\n"
+            "class C(event.Listener):\n    n = 0\n    def on_start(self, ev): C.n += 1\n"
+            "    def on_end(self, ev): pass\n"
+            "from mission_sim.cli.warmup import STAGES\n"
+            "[run() for name, run in STAGES if 'batched env' in name]\n"
+            "event.register('numba:compile', C())\n"
+            "from envs import EnvConfig, SbarChargingVectorEnv\n"
+            "rng = np.random.default_rng(1)\n"
+            "for link in ('modal', 'envelope'):\n"
+            "    env = SbarChargingVectorEnv(2048, 'random', EnvConfig(n_steps=4, link_model=link), num_threads=2)\n"
+            "    assert env._n_chunks > 1\n"
+            "    env.reset(seed=5)\n"
+            "    [env.step(rng.uniform(-1, 1, (2048, 1)).astype(np.float32)) for _ in range(6)]\n"
+            "    env.restart([3, 5, 9])\n"
+            "print(C.n)\n")
+    proc = _python(code, tmp_path / "c")
+    assert proc.returncode == 0 and proc.stdout.split() == ["0"], (proc.stdout, proc.stderr[-2000:])
+
+
 def test_the_command_line_keeps_its_notice_on_the_terminal_only(tmp_path):
     """``dronewpt coupling`` piped, compiling the coupling table's kernels into an empty cache: no notice (the
     library's logged one is off in the command line, which prints its own on a terminal only)."""
