@@ -387,8 +387,9 @@ def register_scenario(scn: Scenario, held_out: Scenario | None = None) -> Scenar
 class Window:
     """What the scenario part hands the other parts at a reset, for the ``n`` windows that start (named
     fields, arrays along the windows): the draws, the command (the reference) and the I2 sensor noise
-    (views of the part's stores), the hover draw and the scenario. (When all windows start the normals are
-    drawn into the noise store and scaled there: ``draw.noise`` is None, ``noise_a`` has them.)"""
+    (views of the part's stores), the hover draw and the scenario. (``draw.noise`` is None at every reset: the
+    normals are drawn times the noise's standard deviation, into the noise store when all windows start, else into
+    a new array copied into its columns; ``noise_a`` has them.)"""
 
     draw: EpisodeDraw
     cmd_a: np.ndarray       # (n, T + 1) charge command per step [A]

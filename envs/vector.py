@@ -291,8 +291,9 @@ def _num_threads(num_threads) -> int:
 def _set_threads(k: int) -> None:
     """``k`` threads for the parallel step, its chunks handed out one at a time (dynamic schedule:
     a thread the OS holds back leaves its chunks to the others instead of stalling the step). Once numba's
-    pool runs, its thread-local getters are read without ``numba.get_num_threads``'s launch lock (~1 us each
-    instead of ~3.3; numba's private names, the public calls when they are missing)."""
+    pool runs, its thread-local getters are read without ``numba.get_num_threads``'s launch lock (the call 1.3-2.0
+    us instead of 6.3-8.3, ``benchmarks/set_threads.py``; numba's private names, the public calls when they are
+    missing)."""
     import numba
     get_n, get_c = _GETTERS or _getters()
     if get_n() != k:

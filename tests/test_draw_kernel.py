@@ -204,9 +204,40 @@ def test_draw_episodes_scales_the_noise_alike_with_numpys_calls_and_the_compiled
     a = [np.random.default_rng(s) for s in range(9)]
     b = [np.random.default_rng(s) for s in range(9)]
     c = [np.random.default_rng(s) for s in range(9)]
+    d = [np.random.default_rng(s) for s in range(9)]
     plain = draw_episodes(a, scn, 50)
     numpy_scaled = draw_episodes(b, scn, 50, noise=np.empty((50, 9)).T, scale=0.1)   # numpy's calls, strided out
     compiled = draw_episodes(c, scn, 50, fill=lambda rngs, u, z, s: Draws()(rngs, u, z, 2, s), scale=0.1)
+    numpy_own = draw_episodes(d, scn, 50, scale=0.1)   # numpy's calls into its own (contiguous) array, scaled there
     assert numpy_scaled.noise.tobytes() == np.multiply(plain.noise, 0.1).tobytes()
+    assert numpy_own.noise.tobytes() == np.multiply(plain.noise, 0.1).tobytes()
     assert compiled.noise.tobytes() == np.ascontiguousarray(numpy_scaled.noise).tobytes()
     assert compiled.soc0.tobytes() == plain.soc0.tobytes()
+
+
+def test_restart_writes_the_compiled_envs_stores_as_the_uncompiled_ones():
+    """``restart(idx)`` of some windows (not all: their draws into new arrays, then copied into the stores' columns):
+    the compiled env's command and noise stores equal the uncompiled env's (numpy's calls, its noise scaled in
+    :func:`envs.scenario.draw_episodes`) to the bit, the other windows' columns untouched, the same first
+    observations."""
+    from envs.core import EnvConfig
+    from envs.vector import SbarChargingVectorEnv
+
+    cfg = EnvConfig(n_steps=40, link_model="envelope")
+    fast = SbarChargingVectorEnv(9, "random", cfg, compiled=True, num_threads=1)
+    ref = SbarChargingVectorEnv(9, "random", cfg, compiled=False, num_threads=1)
+    fast.reset(seed=5)
+    ref.reset(seed=5)
+    rng = np.random.default_rng(2)
+    for _ in range(3):
+        a = rng.uniform(-1, 1, (9, 1)).astype(np.float32)
+        fast.step(a), ref.step(a)
+    before = ref.parts.scenario.noise.copy()
+    of, orf = fast.restart([1, 4, 7]), ref.restart([1, 4, 7])
+    sf, sr = fast.parts.scenario, ref.parts.scenario
+    assert sf.noise.tobytes() == sr.noise.tobytes() and sf.cmd.tobytes() == sr.cmd.tobytes()
+    kept = [0, 2, 3, 5, 6, 8]
+    assert sr.noise[:, kept].tobytes() == before[:, kept].tobytes()
+    assert not np.array_equal(sr.noise[:, [1, 4, 7]], before[:, [1, 4, 7]])
+    assert np.abs(sr.noise[:, [1, 4, 7]]).max() < 0.1 * 6   # the scenario's 0.1 A standard deviation, not 1
+    np.testing.assert_allclose(of, orf, atol=1e-6)   # as tests/test_vector_fast.py (numpy's sums)

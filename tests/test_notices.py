@@ -453,16 +453,36 @@ def test_warmup_compiles_what_a_single_envs_first_steps_compile(tmp_path):
     """The notice's advice "`dronewpt warmup` does it ahead" holds for ``gym.make(envs.ENV_ID)`` too: after warmup's
     single-env stage (into an empty cache) a gym.make env's first steps compile nothing (~70 kernels otherwise;
     warmup warmed only the batched envs before)."""
+    _compiles_nothing_after_warmup("single env", "import gymnasium as gym, envs\nenv = gym.make(envs.ENV_ID)\n"
+                                   "env.reset(seed=1)\n[env.step(env.action_space.sample()) for _ in range(5)]\n",
+                                   tmp_path)
+
+
+def _compiles_nothing_after_warmup(stage: str, code: str, tmp_path) -> None:
+    """``code`` run after warmup's stages whose names hold ``stage`` (into an empty cache) compiles no kernel."""
     code = ("from numba.core import event\n"
             "class C(event.Listener):\n    n = 0\n    def on_start(self, ev): C.n += 1\n"
             "    def on_end(self, ev): pass\n"
             "from mission_sim.cli.warmup import STAGES\n"
-            "[run() for name, run in STAGES if 'single env' in name]\n"
-            "event.register('numba:compile', C())\n"
-            "import gymnasium as gym, envs\nenv = gym.make(envs.ENV_ID)\nenv.reset(seed=1)\n"
-            "[env.step(env.action_space.sample()) for _ in range(5)]\nprint(C.n)\n")
+            f"[run() for name, run in STAGES if {stage!r} in name]\n"
+            "event.register('numba:compile', C())\n" + code + "print(C.n)\n")
     proc = _python(code, tmp_path / "c")
     assert proc.returncode == 0 and proc.stdout.split() == ["0"], (proc.stdout, proc.stderr[-2000:])
+
+
+def test_warmup_compiles_what_a_parallel_vector_envs_steps_and_autoresets_compile(tmp_path):
+    """After warmup's batched-env stage (into an empty cache), a vector env of N = 2,048 on 2 threads (both links)
+    compiles nothing in its steps, its autoreset and a partial restart (the parallel step, draws and command profile;
+    the draws into a new array); warmup compiled none of them before."""
+    _compiles_nothing_after_warmup("batched env", (
+        "import numpy as np\nfrom envs import EnvConfig, SbarChargingVectorEnv\n"
+        "rng = np.random.default_rng(1)\n"
+        "for link in ('modal', 'envelope'):\n"
+        "    env = SbarChargingVectorEnv(2048, 'random', EnvConfig(n_steps=4, link_model=link), num_threads=2)\n"
+        "    assert env._n_chunks > 1\n"
+        "    env.reset(seed=5)\n"
+        "    [env.step(rng.uniform(-1, 1, (2048, 1)).astype(np.float32)) for _ in range(6)]\n"
+        "    env.restart([3, 5, 9])\n"), tmp_path)
 
 
 def test_the_command_line_keeps_its_notice_on_the_terminal_only(tmp_path):

@@ -67,3 +67,57 @@ def test_auto_threads_follow_the_measured_times():
                 assert a.chunks(8) == want
     big = SbarChargingVectorEnv(SbarChargingVectorEnv.PARALLEL_MIN_ENVS, config=SHORT)
     assert big._auto is not None and SbarChargingVectorEnv(4096, num_threads=1, config=SHORT)._auto is None
+
+
+_THREADS_SCRIPT = """
+import sys, types
+import numba, numpy as np
+import numba.np.ufunc as ufunc
+from numba.np.ufunc import parallel
+from envs import EnvConfig, SbarChargingVectorEnv
+from envs import vector
+
+env = SbarChargingVectorEnv(2048, "random", EnvConfig(n_steps=40, link_model="envelope"), num_threads=2)
+assert env._n_chunks > 1
+seen = []
+plant_step = env.parts.plant.step
+def spy(*args):   # what the step's parallel kernel is called under
+    seen.append((numba.get_num_threads(), numba.get_parallel_chunksize()))
+    return plant_step(*args)
+env.parts.plant.step = spy
+env.reset(seed=3)
+a = np.zeros((2048, 1), np.float32)
+if sys.argv[1] == "fallback":   # a numba without the pool's private names: the public getters
+    env.step(a)   # (compiled with the real module)
+    vector._GETTERS[:] = []
+    ufunc.parallel = types.SimpleNamespace()
+numba.set_num_threads(1)   # the user's own settings on the calling thread
+numba.set_parallel_chunksize(4)
+env.step(a)
+ufunc.parallel = parallel
+print(seen[-1], numba.get_num_threads(), numba.get_parallel_chunksize(),
+      vector._GETTERS[0] is parallel._get_num_threads, vector._GETTERS[1] is parallel._get_parallel_chunksize,
+      vector._GETTERS[0] is numba.get_num_threads, vector._GETTERS[1] is numba.get_parallel_chunksize)
+"""
+
+
+@pytest.mark.parametrize("getters", ["private", "fallback"])
+def test_a_parallel_step_sets_its_threads_and_chunk_size_over_the_users(getters):
+    """The user's ``numba.set_num_threads(1)`` / ``set_parallel_chunksize(4)`` on the calling thread before a step of an
+    env with ``num_threads=2`` (N = 2,048: parallel): the step runs on 2 threads with chunks handed out one at a time,
+    and leaves them so (numba's settings are not restored: the env's contract is its own threads for its steps);
+    the getters cached are the pool's private ones (:func:`envs.vector._getters`), numba's public ones when the
+    private names are missing (a stub module)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+    pytest.importorskip("numba")
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(root), "NUMBA_NUM_THREADS": "2"}
+    proc = subprocess.run([sys.executable, "-c", _THREADS_SCRIPT, getters], cwd=root, env=env, capture_output=True,
+                          text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    private = getters == "private"
+    assert proc.stdout.split() == ["(2,", "1)", "2", "1", str(private), str(private), str(not private),
+                                   str(not private)], proc.stdout

@@ -24,7 +24,8 @@ def _add_warmup(sub):
                        description="Compile (or load from numba's disk cache) every numba kernel the commands "
                                    "use: the compiled mission loop with the step, ramp and model_based policy "
                                    "kernels (mission, replay, sweep, sizing --source mission), the batched env "
-                                   "on both links and its policy kernels with the budgeted plan's search (compare, train), a single env's steps "
+                                   "on both links and its policy kernels with the budgeted plan's search (compare, train), a 2,048-env "
+                                   "vector env's parallel steps and autoresets, a single env's steps "
                                    "(gymnasium.make) and the switching model (paper "
                                    "--model switching, sizing), and builds the mission loop ahead of time into the disk cache "
                                    "(`dronewpt mission` then runs without numba; skipped with DRONEWPT_AOT=0). Prints "
@@ -50,6 +51,24 @@ def _envs() -> None:
         cfg = EnvConfig(link_model=link)
         for name in (*KERNEL_POLICIES, "model_based_budget:0.01"):   # + the budgeted plan's search (compare)
             run_policy(name, "nominal", 2, 1000, cfg)
+    _parallel_vector_envs()
+
+
+def _parallel_vector_envs() -> None:
+    """What a vector env of N >= ``PARALLEL_MIN_ENVS`` on 2 threads compiles in its first steps (both links): the
+    parallel step, an autoreset's parallel draws and command profile, a partial restart's draws into a new array."""
+    import numba
+    import numpy as np
+
+    from envs import EnvConfig, SbarChargingVectorEnv
+    n, threads = SbarChargingVectorEnv.PARALLEL_MIN_ENVS, min(2, numba.config.NUMBA_NUM_THREADS)
+    for link in ("modal", "envelope"):
+        env = SbarChargingVectorEnv(n, config=EnvConfig(n_steps=2, link_model=link), num_threads=threads)
+        env.reset(seed=0)
+        for _ in range(3):   # the episode's 2 steps, then the autoreset of all windows
+            env.step(np.zeros((n, 1), np.float32))
+        env.restart([0, 1])
+        env.close()
 
 
 def _single_envs() -> None:
