@@ -109,7 +109,7 @@ def _tree_envs(env: dict, before: Path, before_cache: Path | None) -> dict:
                              f"no --before-cache (both trees without the cache) or {CACHE_VAR} set to a folder")
         return {**env, "PYTHONPATH": str(before.resolve()), CACHE_VAR: own}
     cache = Path(before_cache) if before_cache is not None else tree_cache_dir(before)
-    if own is not None and own != "" and Path(own).resolve() == cache.resolve():
+    if own is not None and Path(own).resolve() == cache.resolve():
         raise SystemExit(f"--before-cache {str(cache)!r} is the measured tree's {CACHE_VAR}; valid: another folder "
                          "(a warmup removes the other tree's ahead-of-time module from a shared folder)")
     return {**env, "PYTHONPATH": str(before.resolve()), CACHE_VAR: str(cache)}
@@ -150,17 +150,21 @@ def _commands(tmp: str, compare: str, links=(None,)) -> dict:
 def _no_mpc_args() -> list[str]:
     """``--policies`` NO_MPC without the names that have a seed group (one row each, not a seed-0 row beside
     its group's row: compare refuses a ``--train-seeds`` label that is also a listed policy), and the groups."""
-    seeds = _seed_rows()
-    labels = {seeds[i + 1].split("=", 1)[0] for i in range(0, len(seeds), 2)}
-    return ["--policies", ",".join(p for p in NO_MPC.split(",") if p not in labels), *seeds]
+    groups = _seed_groups()
+    return ["--policies", ",".join(p for p in NO_MPC.split(",") if p not in groups), *_seed_rows(groups)]
 
 
-def _seed_rows() -> list[str]:
-    """``--train-seeds`` of every shipped seed group (rl, ppo_lagrangian, residual, ...: the default rows'
-    groups, which an explicit ``--policies`` otherwise drops, and the opt-in ones)."""
+def _seed_groups() -> dict:
+    """Every shipped seed group, label -> its rows (rl, ppo_lagrangian, residual, ...: the default rows' groups,
+    which an explicit ``--policies`` otherwise drops, and the opt-in ones)."""
     sys.path.insert(0, str(ROOT))
     from policies.compare import shipped_seed_groups
-    return [x for k, v in shipped_seed_groups().items() for x in ("--train-seeds", f"{k}={','.join(v)}")]
+    return shipped_seed_groups()
+
+
+def _seed_rows(groups: dict) -> list[str]:
+    """``--train-seeds`` of each seed group of ``groups``."""
+    return [x for k, v in groups.items() for x in ("--train-seeds", f"{k}={','.join(v)}")]
 
 
 def _expand(argv: list[str], seed: int) -> list[str]:

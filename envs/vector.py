@@ -100,7 +100,8 @@ class SbarChargingVectorEnv(VectorEnv):
         self._duty_kernel = kernel_function("duty_kernel") if self._compiled else None
         # per-step data stored step-major (T, n): a step reads one contiguous row across the envs
         self.parts = Parts(ScenarioPart(self.scenario, T, c.dt_s, np.zeros((T + 1, n)), np.zeros((T, n)),
-                                        self._fill if self._compiled else None, self._reset_chunks, self._compiled),
+                                        self._fill if self._compiled else None,
+                                        self._reset_chunks if self._compiled else None, self._compiled),
                            vector_plant(c, n, self._compiled), ObjectivePart(c, n),
                            ObservationPart(c, n, self._peak, self._compiled, self.history))
         # the compiled step's constants, each part's by name

@@ -46,8 +46,9 @@ class OneLineParser(argparse.ArgumentParser):
                     cmd = self if before else sub
             near = _nearest(extras[0], cmd) if extras[0].startswith("-") else []
             hint = f" (did you mean {near[0]}?)" if near else ""
-            if not near and cmd is self and sub is not None and _nearest(extras[0], sub):
-                hint = f" (did you mean {sub.prog} {_nearest(extras[0], sub)[0]}? a command's options go after its name)"
+            after = _nearest(extras[0], sub) if not near and cmd is self and sub is not None else []
+            if after:
+                hint = f" (did you mean {sub.prog} {after[0]}? a command's options go after its name)"
             self.exit(2, f"{cmd.prog}: error: unrecognized argument {extras[0]!r}{hint}; valid: the options and "
                          f"arguments of {cmd.prog} --help\n")
         return ns

@@ -114,12 +114,11 @@ def _add_mission(sub):
 
 
 #: --set keys read together with the mission file (they decide what is read), not laid over it afterwards
-MISSION_FILE_KEYS = FILE_READ_KEYS
 
 
 def mission_file_keys(overrides: dict) -> dict:
     """The ``[mission]`` keys of ``overrides`` that :func:`mission_sim.config.load_config_dict` reads with the file."""
-    return {k.split(".", 1)[1]: v for k, v in overrides.items() if k in MISSION_FILE_KEYS}
+    return {k.split(".", 1)[1]: v for k, v in overrides.items() if k in FILE_READ_KEYS}
 
 
 def add_plan_args(p, pads_dest: str = "pads") -> None:

@@ -157,6 +157,7 @@ class MissionCaseRunner:
         self.make_policy = make_policy
         self.policy_names = None if policy_names is None else tuple(policy_names)
         self._checker = None
+        self._specs: dict[str, str | None] = {}   # a policy spec -> its error (None: valid), made once
 
     def __getstate__(self):  # the checker's caches stay on the driver
         return {**self.__dict__, "_checker": None, "_specs": {}}
@@ -198,7 +199,7 @@ class MissionCaseRunner:
             return f"policy={policy!r} is invalid; valid values: {', '.join(sorted(self.policy_names))} (or NAME:PARAMETER)"
         if ":" not in policy:
             return None
-        made = self.__dict__.setdefault("_specs", {})
+        made = self._specs
         if policy not in made:
             try:
                 self.make_policy(policy, None)

@@ -340,7 +340,8 @@ def _parse_replay(rep, base_dir) -> dict:
             raise ValueError(f"[replay] segment = {seg!r} and window = {list(out['window'])!r} exclude each other (a "
                              "window is log seconds, across boot segments); valid: one of them")
         out["segment"] = seg
-    reach = rep.get("reach_m", 500.0)
+    from ..plans.refly import DEFAULT_REACH_M
+    reach = rep.get("reach_m", DEFAULT_REACH_M)
     if not _number(reach) or not reach > 0:
         raise ValueError(f"[replay] reach_m = {reach!r} is invalid; valid range: (0, inf) m")
     if "pads" not in rep and "reach_m" in rep:
