@@ -14,10 +14,10 @@ from .devices import IDEAL, DeviceSet
 from .envelope import complex_envelope_matrices
 from .params import LinkParams
 
-__all__ = ["rm_steady"]
+__all__ = ["folded_link", "rm_steady"]
 
 
-def _folded(p: LinkParams, devices: DeviceSet) -> LinkParams:
+def folded_link(p: LinkParams, devices: DeviceSet) -> LinkParams:
     return p if devices.is_ideal else p.with_(r1_ohm=p.r1_ohm + devices.inv_r_ohm,
                                               r2_ohm=p.r2_ohm + devices.rect_rd_ohm)
 
@@ -30,7 +30,7 @@ def rm_steady(p: LinkParams, c1_f: float | None, c2_f: float | None, devices: De
     rectifier conducts iff it exceeds 1 (when ``Im G22 = 0``), and near 1 it conducts only briefly
     each half period (discontinuous), where this first-harmonic estimate is not accurate
     (:data:`wpt_receiver.tolerance.TRUSTED_POWER_FRAC`)."""
-    pf = _folded(p, devices)
+    pf = folded_link(p, devices)
     a_m, b_m = complex_envelope_matrices(pf, c1_f, c2_f)
     g = -np.linalg.solve(a_m, b_m)
     v1, v2 = p.v1_amp_v, 4.0 / math.pi * (p.vl_v + devices.rect_vf_v)

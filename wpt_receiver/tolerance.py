@@ -37,7 +37,7 @@ from .devices import IDEAL, DeviceSet
 from .envelope import complex_envelope_matrices
 from .params import TABLE_I, LinkParams
 from .references import reference_duty
-from .rm_state import _folded, rm_steady   # (its one source, re-exported; paper imports rm_state alone)
+from .rm_state import folded_link, rm_steady   # (its one source, re-exported; paper imports rm_state alone)
 from .sbar import v2_from_duty
 
 __all__ = ["Spreads", "SCALES", "MIN_CONDUCTION_A", "TRUSTED_POWER_FRAC", "draw_scales", "draw_link", "rm_steady", "TransitionSet", "draw_metrics"]
@@ -139,7 +139,7 @@ def draw_metrics(p: LinkParams, c1_f: float, c2_f: float, ts: TransitionSet) -> 
            "clamp_margin": rm["clamp_margin"]}
     if rm["i2_a"] < MIN_CONDUCTION_A:   # no RM transfer: the transition's envelope is not modelled
         return out | {f"{n}_{q}_a": float("nan") for n in ts.v2_v for q in ("peak", "final")}
-    a_m, b_m = complex_envelope_matrices(_folded(p, ts.devices), c1_f, c2_f)
+    a_m, b_m = complex_envelope_matrices(folded_link(p, ts.devices), c1_f, c2_f)
     ad, bd = _zoh(a_m, b_m, ts.h_s)
     for name, v2 in ts.v2_v.items():
         peak, final = transient_peak(ad, bd, rm["x"].astype(complex), p.v1_amp_v, v2, ts.i_switch)

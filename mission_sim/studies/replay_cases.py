@@ -153,13 +153,13 @@ class ReplayCaseRunner(MissionCaseRunner):
         self.options = dict(options)
         self.log_sha = log_sha
         self.origin = origin
-        self._refused: dict = {}
+        self._checked: dict = {}   # the replay checks' (error, notes) per value set of the keys they read
         self._log_notes: dict[str, int] = {}   # the log's warnings (replay_warnings) -> cases checked with it
         self._plans: dict = {}
         self.input_files: dict = {}
 
     def __getstate__(self):
-        return {**super().__getstate__(), "_refused": {}, "_plans": {}, "_log_notes": {}}
+        return {**super().__getstate__(), "_checked": {}, "_plans": {}, "_log_notes": {}}
 
     def log(self):
         return load_inputs("log", self.options["log"], self.log_sha)
@@ -182,11 +182,11 @@ class ReplayCaseRunner(MissionCaseRunner):
         if msg is not None:
             return msg
         key = tuple(sorted((k, repr(v)) for k, v in params.items() if k.startswith(_SIZE_INPUTS)))
-        if key not in self._refused:   # the replay's own checks depend on these keys only: once per value set
-            if len(self._refused) > _CACHE_MAX:
-                self._refused.clear()
-            self._refused[key] = self._replay_error(self.config(params), params)
-        error, notes = self._refused[key]
+        if key not in self._checked:   # the replay's own checks depend on these keys only: once per value set
+            if len(self._checked) > _CACHE_MAX:
+                self._checked.clear()
+            self._checked[key] = self._replay_error(self.config(params), params)
+        error, notes = self._checked[key]
         for text in notes:
             self._log_notes[text] = self._log_notes.get(text, 0) + 1
         return error
