@@ -63,7 +63,7 @@ _HALF_PI = 0.5 * np.pi
 _SM_LATE_S = SHORT_MODE_WITHIN_S - 1e-12
 #: columns of the ZOH coefficients used by the sub-steps, in the order of :func:`_substep`'s arguments
 #: sub-environments per block of a chunk (the three passes' scratch, 21 doubles each, stays in L1)
-_BLOCK = 128
+_BLOCK = 512
 _SUB_COLS = np.array([COEF.h00, COEF.h01, COEF.f0, COEF.g01, COEF.h10, COEF.h11, COEF.f1, COEF.g11], dtype=np.int64)
 #: the passes' loop indices are unsigned: numba adds a negative-index fix-up (``i < 0 ? i + size : i``) to every
 #: array access with a signed index and none with an unsigned one (~5 % of the kernel's CPU at N = 4,096)
