@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from numba import njit, prange
 
+from .chunked import run_chunks
+
 __all__ = ["command_rows", "command_rows_parallel", "fill_commands"]
 
 
@@ -36,13 +38,11 @@ def command_rows_parallel(dt_s, t_change, t_stop, cmd0, cmd1, out, n_chunks):
 
 
 def fill_commands(dt_s, t_change, t_stop, cmd0, cmd1, out, n_chunks=1, compiled=True) -> None:
-    """``out`` (n_steps + 1, n) filled by :func:`command_rows`; ``n_chunks > 1``: in parallel (the caller sets
-    numba's threads); one chunk calls the serial loop itself (a ``parallel=True`` function starts numba's
-    thread pool at its first call, and a started pool forbids the fork ``compare`` runs its MPC in).
-    ``compiled=False``: the same source uncompiled (tests)."""
+    """``out`` (n_steps + 1, n) filled by :func:`command_rows`, over ``n_chunks`` chunks of steps
+    (:func:`envs.chunked.run_chunks`: one chunk on the calling thread, more in parallel; the caller sets numba's
+    threads). ``compiled=False``: the same source uncompiled (tests)."""
     if not compiled:
         command_rows.py_func(0, out.shape[0], dt_s, t_change, t_stop, cmd0, cmd1, out)
-    elif n_chunks <= 1:
-        command_rows(0, out.shape[0], dt_s, t_change, t_stop, cmd0, cmd1, out)
     else:
-        command_rows_parallel(dt_s, t_change, t_stop, cmd0, cmd1, out, n_chunks)
+        run_chunks(command_rows, command_rows_parallel, out.shape[0], n_chunks, dt_s, t_change, t_stop, cmd0, cmd1,
+                   out)

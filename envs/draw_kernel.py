@@ -32,6 +32,8 @@ from numba.extending import intrinsic
 from numba.np.random.distributions import random_standard_normal
 from numba.np.random.generator_core import next_double
 
+from .chunked import run_chunks
+
 __all__ = ["bitgen_addresses", "compiled_draws_agree", "Draws", "draw", "draw_rows"]
 
 _BITGEN = types.NumPyRandomBitGeneratorType("bit_generator")
@@ -160,9 +162,9 @@ def _draw_rows(lo, hi, addr, u, noise, scale):
 
 
 @njit(cache=True, parallel=True)
-def draw_rows(addr, u, noise, n_chunks, scale=1.0):
+def draw_rows(addr, u, noise, scale, n_chunks):
     """Window ``i``'s uniform numbers into ``u[i]`` and its standard normals times ``scale`` into ``noise[i]``
-    (``x * 1.0`` is ``x``: the normals themselves by default), drawn from the generator whose ``bitgen_t`` is
+    (``scale = 1.0``: the normals themselves, ``x * 1.0`` is ``x``), drawn from the generator whose ``bitgen_t`` is
     at ``addr[i]`` (:func:`bitgen_addresses`), in ``n_chunks`` chunks of windows run in parallel (one chunk: the
     same numbers; :func:`draw` then calls the serial loop itself)."""
     n, k = u.shape[0], max(n_chunks, 1)
@@ -171,10 +173,6 @@ def draw_rows(addr, u, noise, n_chunks, scale=1.0):
 
 
 def draw(addr, u, noise, n_chunks, scale=1.0) -> None:
-    """:func:`draw_rows`, or on one chunk its serial loop called directly: a ``parallel=True`` function starts
-    numba's thread pool at its first call even when it runs no ``prange``, and a started pool forbids the fork
-    that ``compare`` runs its MPC in (:mod:`policies.forked`: fork before the first parallel call)."""
-    if n_chunks <= 1:
-        _draw_rows(0, u.shape[0], addr, u, noise, float(scale))
-    else:
-        draw_rows(addr, u, noise, n_chunks, float(scale))
+    """:func:`draw_rows` over ``n_chunks`` chunks of windows (:func:`envs.chunked.run_chunks`: one chunk calls the
+    serial loop itself, on the calling thread)."""
+    run_chunks(_draw_rows, draw_rows, u.shape[0], n_chunks, addr, u, noise, float(scale))

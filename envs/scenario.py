@@ -416,8 +416,8 @@ class ScenarioPart:
         self.default = self.current = get_scenario(default)
         self.n_steps, self.dt_s = int(n_steps), float(dt_s)
         self.cmd, self.noise = cmd, noise
-        self.fill = fill   # the draws' fill (draw_episodes), None: the generators' own calls
-        self.chunks = chunks   # () -> the parallel chunks of the command profile (threads set); None: one
+        self.fill = fill   # the draws' fill (draw_episodes' with the chunks last), None: the generators' own calls
+        self.chunks = chunks   # () -> the parallel chunks of the draws and the command profile (threads set); None: one
         self.compiled = compiled   # False: the command profile's source uncompiled (tests)
 
     def reset(self, rngs, idx, options=KEEP) -> Window:
@@ -429,10 +429,12 @@ class ScenarioPart:
         full = isinstance(idx, slice)
         # the normals drawn times the noise's standard deviation; all windows (the usual autoreset): into the
         # noise store, and the command into its store, no temporaries
-        draws = draw_episodes(rngs, scn, T, self.fill, noise=self.noise.T if full else None, scale=scn.i2_noise_a)
+        chunks = 1 if self.chunks is None else self.chunks()   # (once: the draws' and the command profile's)
+        fill = None if self.fill is None else (lambda r, u, z, s: self.fill(r, u, z, s, chunks))
+        draws = draw_episodes(rngs, scn, T, fill, noise=self.noise.T if full else None, scale=scn.i2_noise_a)
         n = draws.n
-        cmd = command_profile(draws, T, self.dt_s, out=self.cmd if full else None,
-                              n_chunks=1 if self.chunks is None else self.chunks(), compiled=self.compiled)
+        cmd = command_profile(draws, T, self.dt_s, out=self.cmd if full else None, n_chunks=chunks,
+                              compiled=self.compiled)
         noise = draws.noise
         draws = replace(draws, noise=None)   # (its normals are scaled: the window's noise_a)
         if not full:

@@ -129,9 +129,10 @@ class SbarChargingVectorEnv(VectorEnv):
             _set_threads(self.num_threads)
         return chunks
 
-    def _fill(self, rngs, u, noise, scale) -> bool:
-        """The scenario's draws (:func:`envs.scenario.draw_episodes`'s ``fill``) compiled, on the step's threads
-        when it runs parallel (:mod:`envs.draw_kernel`: the generators' own numbers and end states)."""
+    def _fill(self, rngs, u, noise, scale, chunks) -> bool:
+        """The scenario's draws (:func:`envs.scenario.draw_episodes`'s ``fill``) compiled, in the autoreset's
+        ``chunks`` (:meth:`_reset_chunks`, taken once per reset by the scenario part: on the step's threads when it
+        runs parallel; :mod:`envs.draw_kernel`: the generators' own numbers and end states)."""
         if self._draws is None:
             try:   # numba's private random-number modules: a numba without them draws with numpy's calls
                 from .draw_kernel import Draws
@@ -140,7 +141,7 @@ class SbarChargingVectorEnv(VectorEnv):
                 self._draws = False
         if self._draws is False:
             return False
-        return self._draws(rngs, u, noise, min(self._reset_chunks(), len(rngs)), scale)
+        return self._draws(rngs, u, noise, min(chunks, len(rngs)), scale)
 
     @property
     def state_names(self) -> tuple:
@@ -219,11 +220,12 @@ class SbarChargingVectorEnv(VectorEnv):
         if any_done:
             idx = np.flatnonzero(done)
             obs0, info0 = self._start(idx)
-            obs[idx] = obs0[idx]
-            reward[idx] = 0.0
-            truncated[idx] = False
+            sel = slice(None) if idx.size == self.num_envs else idx   # all (the usual autoreset): plain copies
+            obs[sel] = obs0[sel]
+            reward[sel] = 0.0
+            truncated[sel] = False
             for key, v in info.items():
-                v[idx] = info0[key][idx]
+                v[sel] = info0[key][sel]
         self._prev_done = truncated.copy()
         return obs, reward, terminated, truncated, info
 
@@ -307,17 +309,21 @@ _GETTERS: list = []
 
 
 def _getters():
-    """numba's getters of the calling thread's thread count and chunk size: the pool's own once it is launched."""
+    """numba's getters of the calling thread's thread count and chunk size: the pool's own once it is launched
+    (numba's private names; its public calls where they are missing), kept in :data:`_GETTERS`; the public calls,
+    not kept, until the pool runs (they launch it: looked up again next time)."""
     import numba
+    getters, keep = (numba.get_num_threads, numba.get_parallel_chunksize), True
     try:
         from numba.np.ufunc import parallel
-        if parallel._is_initialized:
-            _GETTERS[:] = (parallel._get_num_threads, parallel._get_parallel_chunksize)
-            return _GETTERS
+        keep = parallel._is_initialized
+        if keep:
+            getters = (parallel._get_num_threads, parallel._get_parallel_chunksize)
     except (ImportError, AttributeError):
-        _GETTERS[:] = (numba.get_num_threads, numba.get_parallel_chunksize)
-        return _GETTERS
-    return numba.get_num_threads, numba.get_parallel_chunksize   # (launches the pool; looked up again next time)
+        pass
+    if keep:
+        _GETTERS[:] = getters
+    return getters
 
 
 def _numbers(actions) -> np.ndarray:

@@ -49,7 +49,7 @@ def test_compiled_draws_are_numpys_to_the_bit(chunks):
     k, t = 12, 2000
     for _ in range(2):   # twice: the second draws start from the states the first left
         u, z = np.empty((len(mine), k)), np.empty((len(mine), t))
-        draw_rows(bitgen_addresses(mine), u, z, chunks)
+        draw_rows(bitgen_addresses(mine), u, z, 1.0, chunks)
         ur, zr = _numpy(ref, k, t)
         assert u.tobytes() == ur.tobytes() and z.tobytes() == zr.tobytes()
         for a, b in zip(mine, ref):
@@ -59,7 +59,7 @@ def test_compiled_draws_are_numpys_to_the_bit(chunks):
     # the wedge branch (exp: one more double per try) was taken: more draws than the fast path and tail explain
     fresh = np.random.default_rng(1000)
     zf = np.empty((1, 20000))
-    draw_rows(bitgen_addresses([fresh]), np.empty((1, 0)), zf, 1)
+    draw_rows(bitgen_addresses([fresh]), np.empty((1, 0)), zf, 1.0, 1)
     extra = _extra_raw_draws(1000, zf.shape[1], fresh.bit_generator.state)
     assert extra > 2 * np.sum(np.abs(zf) > _R) + 50
     np.testing.assert_array_equal(zf, np.random.default_rng(1000).standard_normal((1, 20000)))
@@ -70,7 +70,7 @@ def test_other_bit_generators_and_fallback():
     for bg in (np.random.MT19937, np.random.Philox, np.random.SFC64, np.random.PCG64DXSM):
         mine, ref = [np.random.Generator(bg(s)) for s in range(5)], [np.random.Generator(bg(s)) for s in range(5)]
         u, z = np.empty((5, 3)), np.empty((5, 400))
-        draw_rows(bitgen_addresses(mine), u, z, 2)
+        draw_rows(bitgen_addresses(mine), u, z, 1.0, 2)
         ur, zr = _numpy(ref, 3, 400)
         assert u.tobytes() == ur.tobytes() and z.tobytes() == zr.tobytes(), bg
         assert all(_same(a.bit_generator.state, b.bit_generator.state) for a, b in zip(mine, ref))
@@ -191,7 +191,7 @@ def test_the_noise_scale_is_taken_per_number_in_the_draws(chunks):
     ref = [np.random.default_rng(s) for s in seeds]
     store = np.empty((300, len(mine)))   # step-major (T, n), as the env's noise store
     u = np.empty((len(mine), 5))
-    draw_rows(bitgen_addresses(mine), u, store.T, chunks, 0.1)
+    draw_rows(bitgen_addresses(mine), u, store.T, 0.1, chunks)
     ur, zr = _numpy(ref, 5, 300)
     assert u.tobytes() == ur.tobytes()
     assert store.T.tobytes() == np.multiply(zr, 0.1).tobytes()
