@@ -105,6 +105,7 @@ def lm_window_h(wind_speed_m_s, start_frac, t_s):
     out = np.empty((len(u), len(t_s)))
     for lv in sorted(set(level.tolist())):  # a handful of wind levels, not one pass per window
         rows = np.flatnonzero(level == lv)
+        rows = slice(None) if len(rows) == len(u) else rows   # one level for all: plain slices, not a gather
         lm, _ = lm_record(int(lv))
         starts = _valid_starts(int(lv), n_span)
         if _constant(int(lv)):   # no wind: one Lm along the record (np.interp of a constant is that number)
