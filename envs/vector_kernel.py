@@ -61,9 +61,11 @@ INFO_ROWS = INFO._fields
 _FOUR_OVER_PI = 4.0 / np.pi
 _HALF_PI = 0.5 * np.pi
 _SM_LATE_S = SHORT_MODE_WITHIN_S - 1e-12
-#: columns of the ZOH coefficients used by the sub-steps, in the order of :func:`_substep`'s arguments
-#: sub-environments per block of a chunk (the three passes' scratch, 21 doubles each, stays in L1)
+#: sub-environments per block of a chunk (the three passes' scratch: 22 doubles each, in L2). Each pass call takes and
+#: drops a reference to every array argument (atomic operations on counts both threads share): 512 instead of 128
+#: windows per block took 4-7 % off the kernel's one-thread CPU at N = 4,096 (2,048: no further gain)
 _BLOCK = 512
+#: columns of the ZOH coefficients used by the sub-steps, in the order of :func:`_substep`'s arguments
 _SUB_COLS = np.array([COEF.h00, COEF.h01, COEF.f0, COEF.g01, COEF.h10, COEF.h11, COEF.f1, COEF.g11], dtype=np.int64)
 #: the passes' loop indices are unsigned: numba adds a negative-index fix-up (``i < 0 ? i + size : i``) to every
 #: array access with a signed index and none with an unsigned one (~5 % of the kernel's CPU at N = 4,096)
@@ -449,7 +451,7 @@ def _finish_pass(lo, hi, d, state, k, j, bat, cmd_all, noise_all, lm_all, ep, pa
 def _chunk(lo, hi, d, state, k, j, coef_tab, coef_ix, bat, cmd_all, noise_all, lm_all, ep, slow_every, n_sub, par,
            scale, offset, ptab, obs, reward, trunc, info, cx):
     """The step of sub-environments ``[lo, hi)``: the three passes (module docstring) on blocks of
-    :data:`_BLOCK` sub-environments, so that their scratch stays in the L1 cache."""
+    :data:`_BLOCK` sub-environments (their scratch in cache, few pass calls)."""
     nb = min(_BLOCK, hi - lo)
     sc, idx = np.empty((8, nb)), np.empty(nb, dtype=np.int64)
     w, h = np.empty((6, nb)), np.empty((8, nb))
