@@ -24,6 +24,8 @@ Modules, in the order data flows:
                    numpy generator driven in place (numpy's C bit generator, numba's port of its ziggurat)
 ``command_kernel`` the charge command of every step of a batch of windows, compiled (the one source of
                    ``scenario.command_profile``), parallel over the steps on the autoreset's threads
+``chunked``        the rule of both: one chunk calls the serial loop (no thread pool started), more the
+                   parallel function
 ``plant``          the world as the env needs it: hover pose error -> true Lm, battery, power
 ``layout``         the named slots of the state, battery, coefficient, info and constant arrays
 ``core``           the env's settings and the plant's per-episode plans (ZOH coefficients, initial state)
