@@ -21,7 +21,7 @@ def _pair(scenario, n, chunks, cfg=SHORT):
 @pytest.mark.parametrize("link", ["modal", "envelope"])   # the default (modal since 2026-11-26) and eq. 4's step
 @pytest.mark.parametrize("scenario", ["random", "detuned"])
 def test_parallel_step_equals_serial_bitwise(scenario, link):
-    n = 301
+    n = 2 * 512 + 77   # the serial env's one chunk: three blocks of envs.vector_kernel._BLOCK, the last partial
     serial, par = _pair(scenario, n, 7, EnvConfig(n_steps=SHORT.n_steps, link_model=link))
     o1, i1 = serial.reset(seed=12)
     o2, i2 = par.reset(seed=12)
