@@ -79,6 +79,7 @@ def test_time_limit_is_truncation_never_termination():
 
 
 def test_vector_env_equals_looped_single_envs_including_autoreset():
+    """Full autoresets (windows 0 and 2 in step) and partial ones (window 1 restarted at step 5)."""
     n, seed, steps = 3, 11, 2 * SHORT.n_steps + 5
     rng = np.random.default_rng(0)
     actions = rng.uniform(-1, 1, (steps, n, 1)).astype(np.float32)
@@ -102,6 +103,10 @@ def test_vector_env_equals_looped_single_envs_including_autoreset():
             assert vtrunc[i] == trunc and not vterm[i]
             for key in INFO_KEYS:
                 assert vinfo[key][i] == pytest.approx(info[key], rel=1e-9, abs=1e-12), key
+        if k == 5:   # window 1 restarted now: out of step with the others, so the autoresets below are partial
+            o, _ = singles[1].reset()   # no seed: its generator goes on, as the vector env's does
+            np.testing.assert_allclose(venv.restart([1])[0], o, atol=1e-6)
+            done[1] = False
 
 
 @pytest.mark.parametrize("devices", ["ideal", "schottky"])
