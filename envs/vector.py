@@ -183,8 +183,16 @@ class SbarChargingVectorEnv(VectorEnv):
 
     def restart(self, idx) -> np.ndarray:
         """Start new episodes in the sub-environments ``idx`` now (same-step autoreset, as
-        stable-baselines3 wants it); returns their first observations, shape (len(idx), OBS_DIM)."""
-        idx = np.asarray(idx, dtype=np.int64)
+        stable-baselines3 wants it); returns their first observations, shape (len(idx), OBS_DIM). ``idx``:
+        distinct indices 0..N-1 (ValueError otherwise); empty, nothing is restarted."""
+        idx = np.asarray(idx, dtype=np.int64).reshape(-1)
+        if idx.size == 0:   # nothing to start (the plans of no window are not built)
+            return np.empty((0,) + self.single_observation_space.shape, np.float32)
+        n = self.num_envs
+        seen, count = np.unique(idx, return_counts=True)
+        if seen[0] < 0 or seen[-1] >= n or count.max() > 1:   # repeated: len(idx) == n would pass for all windows
+            bad = seen[(seen < 0) | (seen >= n) | (count > 1)]
+            raise ValueError(f"restart indices {bad.tolist()} are invalid; valid range: distinct integers 0..{n - 1}")
         obs, _ = self._start(idx)
         self._prev_done[idx] = False
         return obs[idx]

@@ -1,5 +1,6 @@
 """The charging environments: API checkers, seeding, truncation, batched == looped, physics."""
 
+import re
 import warnings
 
 import gymnasium as gym
@@ -107,6 +108,54 @@ def test_vector_env_equals_looped_single_envs_including_autoreset():
             o, _ = singles[1].reset()   # no seed: its generator goes on, as the vector env's does
             np.testing.assert_allclose(venv.restart([1])[0], o, atol=1e-6)
             done[1] = False
+
+
+def _rollout(venv, steps, a, at=None, call=None):
+    """Observations, rewards and infos of ``steps`` steps of ``venv`` with constant actions ``a``, ``call(venv)``
+    before step ``at``."""
+    out = []
+    for k in range(steps):
+        if k == at:
+            call(venv)
+        o, r, _, tr, info = venv.step(a)
+        out.append(np.concatenate([o.ravel(), r, tr, *(info[key] for key in INFO_KEYS)]))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("link", ["modal", EQ4])
+def test_restart_of_no_window_changes_nothing(link):
+    """``restart([])`` restarts nothing, returns no rows and the run goes on as without it (eq. 4's link
+    built the plans of no window and failed on them)."""
+    cfg = EnvConfig(n_steps=SHORT.n_steps, link_model=link)
+    envs_ = [SbarChargingVectorEnv(1, "random", cfg) for _ in range(2)]
+    for e in envs_:
+        e.reset(seed=3)
+    a = np.full((1, 1), 0.3, np.float32)
+
+    def twice(venv):
+        venv.restart([0])
+        got = venv.restart([])
+        assert got.shape == (0, OBS_DIM) and got.dtype == np.float32
+
+    ref = _rollout(envs_[0], 12, a, 3, lambda v: v.restart([0]))
+    np.testing.assert_array_equal(_rollout(envs_[1], 12, a, 3, twice), ref)
+
+
+def test_restart_refuses_repeated_and_out_of_range_indices():
+    """Four indices of four windows are not all windows when one repeats: refused (one line, the valid
+    range), and the env is left as it was."""
+    envs_ = [SbarChargingVectorEnv(4, "random", SHORT) for _ in range(2)]
+    for e in envs_:
+        e.reset(seed=5)
+    a = np.full((4, 1), -0.2, np.float32)
+
+    def bad(venv):
+        for idx, named in (([0, 0, 0, 0], "[0]"), ([2, 1, 2, 1], "[1, 2]"), ([1, 4], "[4]"), ([-1, 0], "[-1]")):
+            with pytest.raises(ValueError, match=r"^restart indices " + re.escape(named)
+                               + r" are invalid; valid range: distinct integers 0\.\.3$"):
+                venv.restart(idx)
+
+    np.testing.assert_array_equal(_rollout(envs_[1], 8, a, 3, bad), _rollout(envs_[0], 8, a))
 
 
 @pytest.mark.parametrize("devices", ["ideal", "schottky"])
