@@ -11,8 +11,8 @@ every info array (keys sorted). Cases: (link model, scenario, N, steps, threads,
 
 from __future__ import annotations
 
+import argparse
 import hashlib
-import sys
 
 import numpy as np
 
@@ -50,8 +50,15 @@ def fingerprint(link, scenario, n, steps, threads, restart_at=None) -> str:
 
 
 def main(argv=None):
-    args = sys.argv[1:] if argv is None else argv
-    for case in [CASES[int(i)] for i in args] or CASES:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                epilog="cases: " + "; ".join(f"{i} {c}" for i, c in enumerate(CASES)))
+    p.add_argument("case", nargs="*", type=int, metavar="CASE",
+                   help=f"case index 0..{len(CASES) - 1} (default: every case)")
+    args = p.parse_args(argv)
+    bad = [i for i in args.case if not 0 <= i < len(CASES)]   # (not choices=: Python 3.11 checks an empty list too)
+    if bad:
+        p.error(f"case {bad[0]} is invalid; valid range: 0..{len(CASES) - 1}")
+    for case in [CASES[i] for i in args.case] or CASES:
         print(*case, fingerprint(*case), flush=True)
 
 
