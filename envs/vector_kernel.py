@@ -63,7 +63,8 @@ _HALF_PI = 0.5 * np.pi
 _SM_LATE_S = SHORT_MODE_WITHIN_S - 1e-12
 #: sub-environments per block of a chunk (the three passes' scratch: 22 doubles each, in L2). Each pass call takes and
 #: drops a reference to every array argument (atomic operations on counts both threads share): 512 instead of 128
-#: windows per block took 5-7 % off the kernel's one-thread CPU at N = 4,096 (2,048: no further gain)
+#: windows per block took 4.7-7.0 % off the kernel's one-thread CPU at N = 4,096 (medians, load 2.5-3.7; 2,048: no
+#: further gain)
 _BLOCK = 512
 #: columns of the ZOH coefficients used by the sub-steps, in the order of :func:`_substep`'s arguments
 _SUB_COLS = np.array([COEF.h00, COEF.h01, COEF.f0, COEF.g01, COEF.h10, COEF.h11, COEF.f1, COEF.g11], dtype=np.int64)
