@@ -257,7 +257,9 @@ _KERNEL_POLICIES = ("model_based", "step", "ramp", "hysteresis")
 
 
 def _missions(mode, out, seed, pols, **env_extra):
+    """The missions of ``pols`` in a fresh process (``env_extra``: environment variables set, None: removed)."""
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""), **env_extra}
+    env = {k: v for k, v in env.items() if v is not None}
     r = subprocess.run([sys.executable, "-c", _MISSIONS, mode, str(out), str(seed), *pols], capture_output=True,
                        text=True, env=env, cwd=ROOT, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
@@ -304,12 +306,17 @@ def _numba_cache_without(root: Path, dest: Path, module: str) -> None:
 def test_mission_whose_kernel_misses_the_cache_compiles_it_after_a_registry_free_load(tmp_path):
     """A path never flown (its Lm not on disk) with the coupling kernels missing from numba's cache: the loop loads
     from the cache without the registries, then the Lm table kernel compiles (the compiler loads them) and the
-    mission gives the bits of a run without the hook."""
+    mission gives the bits of a run without the hook.
+
+    The numba cache copied is the tree's own (``__pycache__``), which the first two runs fill: they run without
+    ``NUMBA_CACHE_DIR`` whatever the test's environment says (with it set they wrote to that folder instead, the
+    copy had no loop and the lazy run compiled it: this test failed wherever ``NUMBA_CACHE_DIR`` was set)."""
     import shutil
     disk = tmp_path / "disk"
-    _missions("plain", tmp_path / "other", 8, ("model_based",), DRONEWPT_CACHE_DIR=str(disk))  # tables, hover Lm
+    tree = dict(NUMBA_CACHE_DIR=None)   # numba's caches in the tree's __pycache__, which _numba_cache_without copies
+    _missions("plain", tmp_path / "other", 8, ("model_based",), DRONEWPT_CACHE_DIR=str(disk), **tree)  # tables, hover Lm
     shutil.copytree(disk, tmp_path / "disk2")     # ... without the Lm of seed 7's path
-    plain = _missions("plain", tmp_path / "plain", 7, ("model_based",), DRONEWPT_CACHE_DIR=str(disk))
+    plain = _missions("plain", tmp_path / "plain", 7, ("model_based",), DRONEWPT_CACHE_DIR=str(disk), **tree)
     _numba_cache_without(ROOT, tmp_path / "numba", "coupling_kernel")
     miss = _missions("lazy", tmp_path / "lazy", 7, ("model_based",), DRONEWPT_CACHE_DIR=str(tmp_path / "disk2"),
                      NUMBA_CACHE_DIR=str(tmp_path / "numba"))
