@@ -316,6 +316,16 @@ def test_bad_waypoints_text(capsys, tmp_path, text, needles):
     ("p.geojson", '{"type": "FeatureCollection", "features": [{"type": "Feature", "geometry": '
                   '{"type": "LineString", "coordinates": [[8, 47], [8.1, 47]]}}]}', ("feature 0", "LineString")),
     ("p.geojson", '{"type": "FeatureCollection", "features": [', ("malformed JSON",)),
+    # a misspelt GeoJSON property was ignored (the default hover instead of the file's), as CSV columns were
+    ("p.geojson", '{"type": "FeatureCollection", "features": [{"type": "Feature", "geometry": {"type": "Point", '
+                  '"coordinates": [8, 47]}, "properties": {"name": "a", "hover_time": 30}}]}',
+     ("feature 0: property 'hover_time' is unknown (did you mean 'hover_time_s'?); valid properties: hover_time_s",
+      "other properties are ignored")),
+    ("p.geojson", '{"type": "Point", "coordinates": [8, 47], "properties": {"altitude": 512}}',
+     ("property 'altitude' is unknown (did you mean the coordinates' alt?)", "[lon, lat, alt] in m AMSL")),
+    # CSV errors name the file's line (blank lines counted; they were the row's number after blank rows were dropped)
+    ("p.csv", "lat,lon\n\n47,8\n\n95,8\n", ("p.csv: line 5: latitude 95.0 is invalid",)),
+    ("p.csv", "\nlat,lon\n47,8\n47.0001,8,5\n", ("line 4 has 3 values, the header 2 (lat,lon)",)),
 ])
 def test_bad_pads_files(capsys, tmp_path, name, text, needles):
     p = tmp_path / name
@@ -438,3 +448,13 @@ def test_pads_csv_alt_amsl_is_the_altitude_column():
     assert _csv("lat,lon,alt_amsl\n47,8,512.5\n", "b.csv") == ref and ref[0].point.alt_m == 512.5
     with pytest.raises(ValueError, match=r"column 'alt_agl' is unknown .*\(alt in m AMSL\)"):
         _csv("lat,lon,alt_agl\n47,8,12\n", "c.csv")
+
+
+def test_geojson_pads_take_other_properties_and_the_same_names_as_before(tmp_path):
+    """Properties not near a pad value's name (a pad's name, an id) are still ignored; hover_time_s is read."""
+    from mission_sim.plans.pads import read_pads
+    p = tmp_path / "p.geojson"
+    p.write_text('{"type": "FeatureCollection", "features": [{"type": "Feature", "geometry": {"type": "Point", '
+                 '"coordinates": [8, 47, 512]}, "properties": {"name": "north pad", "id": 3, "hover_time_s": 30}}]}')
+    (pad,) = read_pads(p)
+    assert (pad.point.lat_deg, pad.point.lon_deg, pad.point.alt_m, pad.hover_time_s) == (47.0, 8.0, 512.0, 30.0)

@@ -115,10 +115,32 @@ def choose_segment(log: FlightLog) -> int:
     return max(range(len(spans)), key=lambda k: score(spans[k]))
 
 
+#: a window may end this much after the log (s): a log's end rounded up (``--window 440,1378`` for a log that ends at
+#: 1377.03 s) is not refused; what lies past it is no part of the replay either way
+WINDOW_END_SLACK_S = 1.0
+
+
+def log_end_s(log: FlightLog) -> float:
+    """The end of ``log``'s time (s): its latest record, or its latest position if that is later."""
+    pos = log.position["t_s"] if len(log.position) else ()
+    return max(float(log.duration_s), float(np.max(pos)) if len(pos) else 0.0)
+
+
+def check_window(log: FlightLog, window: tuple[float, float] | None) -> tuple[float, float] | None:
+    """``window`` (log seconds, or None), a ``ValueError`` naming the log's time range when it ends more than
+    :data:`WINDOW_END_SLACK_S` after the log (:func:`log_end_s`; it was cut to the log without a word)."""
+    if window is not None:
+        end = log_end_s(log)
+        if window[1] > end + WINDOW_END_SLACK_S:
+            raise ValueError(f"--window {window[0]:g},{window[1]:g} is invalid: the log ends at {end:.3f} s; valid: "
+                             f"0 <= T0 < T1 <= {end:.3f} s of log time (its time range 0..{end:.3f} s)")
+    return window
+
+
 def replay_span(log: FlightLog, window: tuple[float, float] | None = None,
                 segment: int | None = None) -> tuple[tuple[float, float] | None, dict]:
     """The part of ``log`` a replay flies and what to report about it: ``window`` (log seconds) if
-    given, else boot segment ``segment`` (1-based; None: :func:`choose_segment` when the log has
+    given (checked, :func:`check_window`), else boot segment ``segment`` (1-based; None: :func:`choose_segment` when the log has
     more than one; both given: ``ValueError``). Returns (window or None for the whole log, facts for the summary)."""
     spans = log.segments
     n = len(spans)
@@ -130,7 +152,7 @@ def replay_span(log: FlightLog, window: tuple[float, float] | None = None,
     if segment is not None and not 1 <= segment <= n:
         raise ValueError(f"--segment {segment!r} is invalid; valid range: 1..{n} (the log has {n} boot segment(s))")
     if window is not None:
-        return window, {**info, "replayed_segment": None}
+        return check_window(log, window), {**info, "replayed_segment": None}
     if segment is None and n == 1:
         return None, {**info, "replayed_segment": 1}
     k = choose_segment(log) if segment is None else segment - 1
