@@ -446,7 +446,8 @@ def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
         t0, t1 = track.t_offset_s + float(track.t_s[i]), track.t_offset_s + float(track.t_s[i + 1])
         out.append(f"{log.path.name}: no position for {t1 - t0:.1f} s while armed (log {t0:.1f}..{t1:.1f} s"
                    + (f"; {len(gaps)} such gaps" if len(gaps) > 1 else "") + "): the replay flies a straight line "
-                   "across it; --window can leave it out")
+                   f"across it; to leave it out, replay the part before or after it: --window T0,{t0:.1f} or "
+                   f"--window {t1:.1f},T1")
     dist = float(np.min(np.hypot(track.pos_m[:, 0], track.pos_m[:, 1])))
     if dist > FAR_PAD_M:
         out.append(f"the pad ({track.pad.lat_deg:.6f}, {track.pad.lon_deg:.6f}) is {dist / 1e3:.0f} km from the "
