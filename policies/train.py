@@ -65,6 +65,17 @@ def unused_option(opts: Mapping) -> tuple[str, str] | None:
     return None
 
 
+def _only_with_values(given: dict) -> dict:
+    """``given`` (:func:`train`'s options of :data:`ONLY_WITH` and those they need) with :data:`ONLY_WITH_DEFAULTS`
+    for the ones not given (None); ``ValueError`` naming an option given without the option it needs."""
+    unused = unused_option(given)
+    if unused is not None:
+        opt, needs = unused
+        raise ValueError(f"{opt}={given[opt]!r} is only used with {needs}; valid: set {needs} too, or leave {opt} out "
+                         "(None)")
+    return {k: ONLY_WITH_DEFAULTS[k] if v is None and k in ONLY_WITH_DEFAULTS else v for k, v in given.items()}
+
+
 DEFAULT_HYPERPARAMS = {
     # log_std_init -1.5 (std 0.22 in action units): a wide Gaussian (std 1) dithers the duty at
     # 10 kHz next to the link's 4 kHz resonance and the early rollouts are all overcurrent penalty
@@ -523,29 +534,14 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     hidden from the student (:mod:`policies.imitation`), then fine-tune with PPO (Lagrangian with
     ``lagrangian``) for ``timesteps`` steps (0: imitation only; else the clone is kept, :func:`_imitation_stage`). ``slow_budget``: ``"LO:HI"``, the action is
     the MPC's overshoot budget, the duty the MPC's (:mod:`policies.slow_budget`); ``slow_budget_every``:
-    ``window`` (taken at the stop, held) or ``step``.
-    The options that have an effect only with another one (:data:`ONLY_WITH`: ``budget``, ``lambda_lr`` and
-    ``probe_episodes`` with ``lagrangian``, ``residual_*`` with ``residual``, ``dagger`` and ``imitation_*`` with
-    ``imitate``, ``slow_budget_every`` with ``slow_budget``) default to None, "not given": their values are then
-    :data:`ONLY_WITH_DEFAULTS` (50, 32, 0.25, 0, 0, 64, 30, ``("last_d_short",)``, ``window``); one given without the
-    option it needs is a ``ValueError`` naming both, as ``dronewpt train`` refuses it.
+    ``window`` (taken at the stop, held) or ``step``. Options used only with another (:data:`ONLY_WITH`) default to None
+    (not given: :data:`ONLY_WITH_DEFAULTS`); one given without the other is a ``ValueError``, as in ``dronewpt train``.
     Deterministic for a given seed on one thread (torch and numba threads set to 1)."""
     import importlib.util
 
-    given = dict(lagrangian=lagrangian, budget=budget, lambda_lr=lambda_lr, probe_episodes=probe_episodes,
-                 residual=residual, residual_scale=residual_scale, residual_base_budget=residual_base_budget,
-                 imitate=imitate, dagger=dagger, imitation_episodes=imitation_episodes, imitation_epochs=imitation_epochs,
-                 imitation_mask=imitation_mask, slow_budget=slow_budget, slow_budget_every=slow_budget_every)
-    unused = unused_option(given)
-    if unused is not None:
-        opt, needs = unused
-        raise ValueError(f"{opt}={given[opt]!r} is only used with {needs}; valid: set {needs} too, or leave {opt} out "
-                         "(None)")
-    dflt = {k: ONLY_WITH_DEFAULTS[k] if v is None and k in ONLY_WITH_DEFAULTS else v for k, v in given.items()}
-    lambda_lr, probe_episodes, residual_scale, residual_base_budget = (dflt[k] for k in (
-        "lambda_lr", "probe_episodes", "residual_scale", "residual_base_budget"))
-    dagger, imitation_episodes, imitation_epochs, imitation_mask, slow_budget_every = (dflt[k] for k in (
-        "dagger", "imitation_episodes", "imitation_epochs", "imitation_mask", "slow_budget_every"))
+    o = _only_with_values({k: v for k, v in locals().items() if k in ONLY_WITH or k in ONLY_WITH.values()})
+    (lambda_lr, probe_episodes, residual_scale, residual_base_budget, dagger, imitation_episodes, imitation_epochs,
+     imitation_mask, slow_budget_every) = (o[k] for k in ONLY_WITH_DEFAULTS)   # (in the table's order)
     env = env_overrides(env)
     extra = dict(history=history, action_filter=action_filter, smooth_penalty=smooth_penalty, imitate=imitate,
                  dagger=dagger, imitation_episodes=imitation_episodes, slow_budget=slow_budget, slow_budget_every=slow_budget_every)
