@@ -70,7 +70,7 @@ def _csv(text: str, name: str) -> tuple[GeoPad, ...]:
     if col["lat"] is None or col["lon"] is None:
         raise ValueError(f"{name}: header {','.join(head)!r} has no lat / lon column; valid: a CSV header "
                          "lat,lon[,alt][,hover_time_s] (or a GeoJSON FeatureCollection of Points)")
-    _check_other_names(head, _KNOWN, f"{name}: column", _CSV_VALID)
+    _check_other_columns(head, f"{name}: column")
     out = []
     for i, r in rows[1:]:   # i: the line in the file (blank lines counted)
         if any(c.strip() for c in r[len(head):]):   # (a value past the header's columns was dropped without a word)
@@ -88,26 +88,20 @@ def _csv(text: str, name: str) -> tuple[GeoPad, ...]:
 _KNOWN = tuple(a for al in _ALIASES.values() for a in al)
 _CSV_VALID = ("valid columns: " + "; ".join(f"{k} ({', '.join(al[1:])})" for k, al in _ALIASES.items())
               + " (alt in m AMSL); other columns are ignored")
-#: what a GeoJSON feature reads from its properties (its position and altitude are its coordinates)
-_GEOJSON_READ = ("hover_time_s",)
 _GEOJSON_VALID = ("valid properties: hover_time_s (a pad's position and altitude are its coordinates, [lon, lat] or "
                   "[lon, lat, alt] in m AMSL); other properties are ignored")
 
 
-def _check_other_names(names, read, what: str, valid: str) -> None:
-    """Names (CSV columns, GeoJSON properties) other than those the format ``read`` s are ignored (a pad's name, a
-    note), except one that is or looks like the name of a pad's value (:data:`_ALIASES`: ``hover_time``,
-    ``altitude_m``, a GeoJSON ``hover_s``): its values would be dropped without a word. ``what``: the error's start
-    (the file and ``column`` / ``feature N: property``), ``valid``: its end."""
+def _check_other_columns(head, what: str) -> None:
+    """CSV columns other than a pad value's (:data:`_ALIASES`) are ignored (a pad's name, a note), except one whose
+    name looks like a pad value's (``hover_time``, ``altitude_m``, ``alt_agl``): its values would be dropped without
+    a word. ``what``: the error's start (the file and ``column``)."""
     import difflib
-    for c in names:
-        if c in read or not isinstance(c, str):
-            continue
-        near = [c] if c in _KNOWN else difflib.get_close_matches(c.lower(), _KNOWN, n=1, cutoff=0.75)
+    for c in head:
+        near = [] if c in _KNOWN else difflib.get_close_matches(c, _KNOWN, n=1, cutoff=0.75)
         if near:
             field = next(k for k, al in _ALIASES.items() if near[0] in al)
-            means = next((r for r in read if r in _ALIASES[field]), None) or ("the coordinates' " + field)
-            raise ValueError(f"{what} {c!r} is unknown (did you mean {means if ' ' in means else repr(means)}?); {valid}")
+            raise ValueError(f"{what} {c!r} is unknown (did you mean {field!r}?); {_CSV_VALID}")
 
 
 def _geojson(text: str, name: str) -> tuple[GeoPad, ...]:
@@ -128,10 +122,28 @@ def _geojson(text: str, name: str) -> tuple[GeoPad, ...]:
             coords = [coords]
         elif kind != "MultiPoint":
             raise ValueError(f"{name}: feature {i}: geometry type {kind!r} is not supported; valid: Point, MultiPoint")
-        if isinstance(props, dict):
-            _check_other_names(props, _GEOJSON_READ, f"{name}: feature {i}: property", _GEOJSON_VALID)
         for c in coords or []:
             if not isinstance(c, list) or len(c) not in (2, 3):
                 raise ValueError(f"{name}: feature {i}: coordinates {c!r} are invalid; valid: [lon, lat] or [lon, lat, alt]")
+        if isinstance(props, dict):
+            _check_geojson_properties(props, any(len(c) == 2 for c in coords or []), f"{name}: feature {i}: property")
+        for c in coords or []:
             out.append(_pad(c[1], c[0], c[2] if len(c) == 3 else None, props.get("hover_time_s"), f"{name}: feature {i}"))
     return tuple(out)
+
+
+def _check_geojson_properties(props, flat: bool, what: str) -> None:
+    """A GeoJSON feature reads only ``hover_time_s`` of its properties; the others are ignored (a name, an id, the
+    ``lat`` / ``lon`` / ``altitude`` that CSV-to-GeoJSON exporters keep beside the coordinates), except those whose
+    values would be lost without a word: a hover time under another name (``hover_s``, ``hover_time``,
+    ``Hover_Time_S``: an alias or a near match) and an altitude (an alias of ``alt``, any case) when the feature's
+    coordinates are 2-D (``flat``; the pad would be on the ground). ``what``: the error's start."""
+    import difflib
+    for c in props:
+        if c == "hover_time_s" or not isinstance(c, str):
+            continue
+        if difflib.get_close_matches(c.lower(), _ALIASES["hover_time_s"], n=1, cutoff=0.75):
+            raise ValueError(f"{what} {c!r} is unknown (did you mean 'hover_time_s'?); {_GEOJSON_VALID}")
+        if flat and c.lower() in _ALIASES["alt"]:
+            raise ValueError(f"{what} {c!r} is ignored (did you mean the coordinates' alt? the feature's coordinates are "
+                             f"2-D, [lon, lat], the pad would be on the ground); {_GEOJSON_VALID}")
