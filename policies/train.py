@@ -24,6 +24,7 @@ Writes into ``out_dir``:
 from __future__ import annotations
 
 import json
+import operator
 import os
 from collections.abc import Mapping
 from dataclasses import asdict, fields
@@ -541,7 +542,9 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
 
     o = _only_with_values({k: v for k, v in locals().items() if k in ONLY_WITH or k in ONLY_WITH.values()})
     (lambda_lr, probe_episodes, residual_scale, residual_base_budget, dagger, imitation_episodes, imitation_epochs,
-     imitation_mask, slow_budget_every) = (o[k] for k in ONLY_WITH_DEFAULTS)   # (in the table's order)
+     imitation_mask, slow_budget_every) = operator.itemgetter(
+        "lambda_lr", "probe_episodes", "residual_scale", "residual_base_budget", "dagger", "imitation_episodes",
+        "imitation_epochs", "imitation_mask", "slow_budget_every")(o)
     env = env_overrides(env)
     extra = dict(history=history, action_filter=action_filter, smooth_penalty=smooth_penalty, imitate=imitate,
                  dagger=dagger, imitation_episodes=imitation_episodes, slow_budget=slow_budget, slow_budget_every=slow_budget_every)

@@ -248,3 +248,28 @@ def test_the_train_rule_is_one_list_and_its_defaults_are_trains_and_the_command_
     assert all(calls[0][k] is None for k in tr.ONLY_WITH)
     assert (calls[1]["imitation_epochs"], calls[1]["imitation_mask"], calls[1]["dagger"]) == (60, ("last_d_short",), 0)
     assert calls[1]["lambda_lr"] is None and calls[1]["residual_scale"] is None
+
+
+def test_train_reads_its_defaults_by_name_and_the_command_line_takes_them_from_train(monkeypatch, tmp_path):
+    """train() took its ONLY_WITH options' values in ONLY_WITH_DEFAULTS' key order (a reordered table swapped them:
+    lambda_lr = 'window'); the command line repeated 7 of train()'s defaults (one edited in train() only would not
+    reach ``dronewpt train``). Now both read ``policies.train.ONLY_WITH_DEFAULTS`` by name, the command line adding
+    its own two (--imitation-epochs 60, --imitation-mask last_d_short)."""
+    from mission_sim.cli import main
+    from policies import train as tr
+    reordered = dict(reversed(list(tr.ONLY_WITH_DEFAULTS.items())))
+    monkeypatch.setattr(tr, "ONLY_WITH_DEFAULTS", reordered)
+    seen = {}
+    _stop_before_training(monkeypatch, seen)
+    with pytest.raises(RuntimeError, match="stop before training"):
+        train("ppo", 1000, tmp_path / "a", progress=False, lagrangian=True, residual=True)
+    assert {k: seen[k] for k in ("lambda_lr", "probe_episodes", "residual_scale", "residual_base_budget",
+                                 "slow_budget_every")} == {"lambda_lr": 50.0, "probe_episodes": 32, "residual_scale": 0.25,
+                                                           "residual_base_budget": 0.0, "slow_budget_every": "window"}
+    monkeypatch.setattr(tr, "ONLY_WITH_DEFAULTS", dict(reordered, lambda_lr=7.0, imitation_episodes=5, imitation_epochs=9))
+    calls = []
+    monkeypatch.setattr(tr, "train", lambda *a, **kw: calls.append(kw) or {})
+    base = ["train", "--algo", "ppo", "--timesteps", "10", "--out", str(tmp_path / "c")]
+    assert main(base + ["--lagrangian", "--imitate", "mpc"]) == 0
+    assert (calls[0]["lambda_lr"], calls[0]["imitation_episodes"], calls[0]["imitation_epochs"],
+            calls[0]["imitation_mask"]) == (7.0, 5, 60, ("last_d_short",))

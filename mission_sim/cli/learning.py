@@ -24,11 +24,10 @@ from .common import (
 )
 
 
-#: the command line's defaults of train's options that have an effect only with another one (which one:
-#: :data:`policies.train.ONLY_WITH`); ``--imitation-epochs``' and ``--imitation-mask``'s differ from ``train()``'s
-_ONLY_WITH_DEFAULTS = {"lambda_lr": 50.0, "probe_episodes": 32, "residual_scale": 0.25, "residual_base_budget": 0.0,
-                       "dagger": 0, "imitation_episodes": 64, "imitation_epochs": 60, "imitation_mask": "last_d_short",
-                       "slow_budget_every": "window"}
+#: the command line's own defaults of train's options that have an effect only with another one, where they differ
+#: from ``train()``'s (:data:`policies.train.ONLY_WITH_DEFAULTS`, the others; which option each needs:
+#: :data:`policies.train.ONLY_WITH`)
+_CLI_ONLY_WITH_DEFAULTS = {"imitation_epochs": 60, "imitation_mask": "last_d_short"}
 
 
 def _add_train(sub):
@@ -159,13 +158,14 @@ def _env_overrides(items) -> dict:
 def _only_with(args):
     """An option of :data:`policies.train.ONLY_WITH` given without the option that uses it is refused (given, even at
     its default value: it had no effect); then the ones not given whose option is on get the command line's defaults
-    (:data:`_ONLY_WITH_DEFAULTS`); the others stay None (not given, as ``train()`` takes it)."""
-    from policies.train import ONLY_WITH, unused_option
+    (``train()``'s, :data:`policies.train.ONLY_WITH_DEFAULTS`, but :data:`_CLI_ONLY_WITH_DEFAULTS`); the others stay
+    None (not given, as ``train()`` takes it)."""
+    from policies.train import ONLY_WITH, ONLY_WITH_DEFAULTS, unused_option
     unused = unused_option(vars(args))
     if unused is not None:   # before: trained without it, exit 0
         flag, needs = ("--" + o.replace("_", "-") for o in unused)
         raise CliError(f"{flag} is only used with {needs}; add {needs} or drop {flag}")
-    for dest, default in _ONLY_WITH_DEFAULTS.items():
+    for dest, default in {**ONLY_WITH_DEFAULTS, **_CLI_ONLY_WITH_DEFAULTS}.items():
         if getattr(args, dest) is None and getattr(args, ONLY_WITH[dest]):
             setattr(args, dest, default)
 
