@@ -50,9 +50,12 @@ __all__ = ["SbarChargingVectorEnv", "SbarChargingDiscreteVectorEnv", "Parts"]
 Parts = namedtuple("Parts", "scenario plant objective observation")
 
 
-#: memory of one sub-environment per step of its window, bytes (the step-major per-step arrays and a reset's draws:
-#: ~29 kB a sub-environment at n_steps = 300, tracemalloc's peak over construction, reset and a step, 2,000 and
-#: 8,000 envs, the envelope link; the modal link ~8 kB)
+#: memory of one sub-environment per step of its window, bytes (the step-major per-step arrays and a reset's draws;
+#: ~29 kB a sub-environment at n_steps = 300). An upper estimate: the process's resident memory (RSS, which counts
+#: numba's allocations; tracemalloc's peak does not) grew by 23-26 B per env and step with the envelope link and 34-46 B
+#: with the modal link over construction, reset and a whole episode of 2,000 and 8,000 envs after a warm-up
+#: (2026-11-27, /proc VmRSS / VmHWM); a review measured 102-117 B (envelope) and 19-46 B (modal), so 96 B is about the
+#: envelope link's worst figure and lenient for the modal link
 BYTES_PER_ENV_STEP = 96
 
 
@@ -60,18 +63,20 @@ def _physical_memory() -> int | None:
     """The machine's physical memory (bytes), None where the system does not say."""
     import os
     try:
-        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+        have = int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
     except (AttributeError, OSError, ValueError):
         return None
+    return have if have > 0 else None   # (sysconf's -1: unknown; it refused every num_envs)
 
 
 def _check_memory(num_envs: int, n_steps: int) -> None:
     """``ValueError`` before anything is allocated when ``num_envs`` windows of ``n_steps`` would need more memory
     than the machine has (``SbarChargingVectorEnv(10**7)`` ended in numpy's ``MemoryError`` after seconds of
-    allocating), naming the memory needed and the largest ``num_envs`` that fits."""
+    allocating), naming the memory needed and the largest ``num_envs`` that fits; no check where the memory is
+    unknown."""
     per = BYTES_PER_ENV_STEP * (n_steps + 1)
     have = _physical_memory()
-    if have and num_envs * per > have:
+    if have is not None and num_envs * per > have:
         raise ValueError(f"num_envs={num_envs:,} is invalid: it would need ~{num_envs * per / 2**30:.3g} GiB of memory "
                          f"(~{per / 1e3:.0f} kB a sub-environment at n_steps={n_steps}), more than this machine's "
                          f"{have / 2**30:.3g} GiB; valid range: 1..{have // per:,}")

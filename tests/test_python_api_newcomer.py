@@ -478,6 +478,33 @@ def test_a_vector_env_too_large_for_the_machine_is_refused_before_it_allocates(n
                             f"valid range: 1..{16 * 2**30 // per:,}")
 
 
+class _Allocating(Exception):
+    pass
+
+
+@pytest.mark.parametrize("unknown", ["None", "-1 pages"])
+def test_a_large_vector_env_is_not_refused_where_the_machine_memory_is_unknown(unknown, monkeypatch):
+    """The memory check is skipped where the system does not say how much memory there is (``os.sysconf`` returns -1
+    when it does not know: the product, negative, refused every num_envs, even 1); the allocation (stubbed here) is
+    reached."""
+    import os
+
+    from envs import vector
+    if unknown == "None":
+        monkeypatch.setattr(vector, "_physical_memory", lambda: None)
+    else:
+        sysconf = os.sysconf
+        monkeypatch.setattr(os, "sysconf", lambda k: -1 if k == "SC_PHYS_PAGES" else sysconf(k))
+        assert vector._physical_memory() is None
+
+    def alloc(self, c):
+        raise _Allocating
+    monkeypatch.setattr(vector.SbarChargingVectorEnv, "_alloc", alloc)
+    for n in (1, 10**7):
+        with pytest.raises(_Allocating):
+            SbarChargingVectorEnv(n, "random")
+
+
 @pytest.mark.parametrize("n", [True, None, "3", 2.5, float("nan")])
 def test_a_vector_env_size_that_is_not_a_whole_number_is_refused(n):
     """``num_envs=True`` made one env (``None`` was a TypeError); a whole float (4.0) is 4 envs as before."""
