@@ -673,3 +673,14 @@ def test_sizing_from_a_replay_sweep_says_it_is_a_replay(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"dronewpt sizing: error: sweep {str(tmp_path / 'o')!r} replayed a flight log ([replay] section), "
                    "its cases are not missions to re-run; valid: a sweep of missions"]
+
+
+@pytest.mark.parametrize("msg,words", [
+    ("--window 440,2000 is invalid: the log ends", "[replay] window = [440, 2000] is invalid: the log ends"),
+    ("--window T0,599.1 or --window 700.3,T1", "[replay] window = [T0, 599.1] or [replay] window = [700.3, T1]"),
+    ("--window 1e+03,-5 is invalid", "[replay] window = [1e+03, -5] is invalid"),
+    # a quoted window is not a window's two numbers (it became "[replay] window = ['5, 1']")
+    ("--window '5,1' is invalid", "[replay] window = '5,1' is invalid"),
+])
+def test_a_window_in_a_message_is_the_study_files_words(msg, words):
+    assert replay_cases._study_words(msg) == words
