@@ -24,7 +24,6 @@ Writes into ``out_dir``:
 from __future__ import annotations
 
 import json
-import operator
 import os
 from collections.abc import Mapping
 from dataclasses import asdict, fields
@@ -541,19 +540,16 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     import importlib.util
 
     o = _only_with_values({k: v for k, v in locals().items() if k in ONLY_WITH or k in ONLY_WITH.values()})
-    (lambda_lr, probe_episodes, residual_scale, residual_base_budget, dagger, imitation_episodes, imitation_epochs,
-     imitation_mask, slow_budget_every) = operator.itemgetter(
-        "lambda_lr", "probe_episodes", "residual_scale", "residual_base_budget", "dagger", "imitation_episodes",
-        "imitation_epochs", "imitation_mask", "slow_budget_every")(o)
-    env = env_overrides(env)
+    env = env_overrides(env)   # (o: the ONLY_WITH options' values, read by name)
     extra = dict(history=history, action_filter=action_filter, smooth_penalty=smooth_penalty, imitate=imitate,
-                 dagger=dagger, imitation_episodes=imitation_episodes, slow_budget=slow_budget, slow_budget_every=slow_budget_every)
+                 dagger=o["dagger"], imitation_episodes=o["imitation_episodes"], slow_budget=slow_budget,
+                 slow_budget_every=o["slow_budget_every"])
     _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra)
     opts = dict(**extra, seed=seed, n_envs=n_envs, scenario=scenario, hyperparams=hyperparams,
                 hyperparams_file=hyperparams_file, env=env, cost=cost, lagrangian=lagrangian, budget=budget,
-                lambda_lr=lambda_lr, residual=residual, residual_scale=residual_scale,
-                residual_base_budget=residual_base_budget, vec=vec, name=name, eval_episodes=eval_episodes,
-                eval_every=eval_every, checkpoint_every=checkpoint_every, probe_episodes=probe_episodes)
+                lambda_lr=o["lambda_lr"], residual=residual, residual_scale=o["residual_scale"],
+                residual_base_budget=o["residual_base_budget"], vec=vec, name=name, eval_episodes=eval_episodes,
+                eval_every=eval_every, checkpoint_every=checkpoint_every, probe_episodes=o["probe_episodes"])
     spec = _spec(algo, timesteps, opts)
     _one_thread_each()
     out = Path(out_dir)
@@ -563,8 +559,9 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     if resume is not None and (out / "lagrange.json").is_file():
         spec["lambda0"] = float(json.loads((out / "lagrange.json").read_text())["lambda"])
     if imitate:
-        spec.update(imitation_epochs=int(imitation_epochs), imitation_mask=tuple(imitation_mask))
-        res = _imitation_stage(spec, out, progress, imitation_epochs, tuple(imitation_mask))
+        epochs, mask = o["imitation_epochs"], tuple(o["imitation_mask"])
+        spec.update(imitation_epochs=int(epochs), imitation_mask=mask)
+        res = _imitation_stage(spec, out, progress, epochs, mask)
         if not spec["timesteps"]:
             return res
         resume = res["model"]
