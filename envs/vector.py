@@ -50,6 +50,38 @@ __all__ = ["SbarChargingVectorEnv", "SbarChargingDiscreteVectorEnv", "Parts"]
 Parts = namedtuple("Parts", "scenario plant objective observation")
 
 
+#: memory of one sub-environment per step of its window, bytes (the step-major per-step arrays and a reset's draws;
+#: ~29 kB a sub-environment at n_steps = 300). An upper estimate: the process's resident memory (RSS, which counts
+#: numba's allocations; tracemalloc's peak does not) grew by 23-26 B per env and step with the envelope link and 34-46 B
+#: with the modal link over construction, reset and a whole episode of 2,000 and 8,000 envs after a warm-up
+#: (2026-11-27, /proc VmRSS / VmHWM); a review measured 102-117 B (envelope) and 19-46 B (modal), so 96 B is about the
+#: envelope link's worst figure and lenient for the modal link
+BYTES_PER_ENV_STEP = 96
+
+
+def _physical_memory() -> int | None:
+    """The machine's physical memory (bytes), None where the system does not say."""
+    import os
+    try:
+        have = int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, OSError, ValueError):
+        return None
+    return have if have > 0 else None   # (sysconf's -1: unknown; it refused every num_envs)
+
+
+def _check_memory(num_envs: int, n_steps: int) -> None:
+    """``ValueError`` before anything is allocated when ``num_envs`` windows of ``n_steps`` would need more memory
+    than the machine has (``SbarChargingVectorEnv(10**7)`` ended in numpy's ``MemoryError`` after seconds of
+    allocating), naming the memory needed and the largest ``num_envs`` that fits; no check where the memory is
+    unknown."""
+    per = BYTES_PER_ENV_STEP * (n_steps + 1)
+    have = _physical_memory()
+    if have is not None and num_envs * per > have:
+        raise ValueError(f"num_envs={num_envs:,} is invalid: it would need ~{num_envs * per / 2**30:.3g} GiB of memory "
+                         f"(~{per / 1e3:.0f} kB a sub-environment at n_steps={n_steps}), more than this machine's "
+                         f"{have / 2**30:.3g} GiB; valid range: 1..{have // per:,}")
+
+
 class SbarChargingVectorEnv(VectorEnv):
     """``num_envs`` charging windows stepped at once; see :class:`envs.charging.SbarChargingEnv` for
     the spaces, reward and episode definition. ``info`` holds arrays of shape (num_envs,).
@@ -68,7 +100,11 @@ class SbarChargingVectorEnv(VectorEnv):
     def __init__(self, num_envs: int = 1, scenario="nominal", config: EnvConfig | dict | None = None,
                  render_mode: str | None = None, compiled: bool | None = None, num_threads: int | None = None,
                  history: int = 1):
-        if int(num_envs) != num_envs or num_envs < 1:
+        try:   # (True made one env)
+            whole = not isinstance(num_envs, bool) and int(num_envs) == num_envs >= 1
+        except (TypeError, ValueError, OverflowError):
+            whole = False
+        if not whole:
             raise ValueError(f"num_envs={num_envs!r} is invalid; valid range: integer >= 1")
         if render_mode is not None:
             raise ValueError(f"render_mode={render_mode!r} is invalid for the vector env; valid values: None "
@@ -78,6 +114,7 @@ class SbarChargingVectorEnv(VectorEnv):
         self.render_mode = None
         self.scenario = get_scenario(scenario)
         self.config = c = as_config(config)
+        _check_memory(int(num_envs), c.n_steps)
         self.history = history
         self.single_observation_space = spaces.Box(-1.0, 1.0, (history_obs_dim(history),), np.float32)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)

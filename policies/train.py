@@ -35,12 +35,46 @@ from mission_sim.files import atomic_output
 
 from .rl import ALGOS
 
-__all__ = ["train", "plot_learning_curve", "DEFAULT_HYPERPARAMS", "env_config", "env_overrides", "EVAL_SEED", "VEC_PATHS"]
+__all__ = ["train", "plot_learning_curve", "DEFAULT_HYPERPARAMS", "env_config", "env_overrides", "EVAL_SEED", "VEC_PATHS",
+           "ONLY_WITH", "ONLY_WITH_DEFAULTS", "unused_option"]
 
 #: fixed held-out evaluation seeds ``EVAL_SEED + i`` (training seeds are small integers)
 EVAL_SEED = 900_000
 CLONE_NAME = "clone"   #: ``train --imitate`` with fine-tuning: the clone's files are clone.zip / .json / _vecnormalize.pkl
 VEC_PATHS = ("batched", "make_vec_env")
+
+#: train's options that have an effect only with another one: {option: the option it needs}. One given (not None)
+#: without it is refused, by :func:`train` (``ValueError``) and ``dronewpt train`` (exit 2) alike (:func:`unused_option`)
+ONLY_WITH = {"lambda_lr": "lagrangian", "probe_episodes": "lagrangian", "residual_scale": "residual",
+             "residual_base_budget": "residual", "dagger": "imitate", "imitation_episodes": "imitate",
+             "imitation_epochs": "imitate", "imitation_mask": "imitate", "slow_budget_every": "slow_budget",
+             "budget": "lagrangian"}
+#: :func:`train`'s values of :data:`ONLY_WITH`'s options not given (``budget``'s None: the ramp policy's cost);
+#: the command line has its own (its ``--imitation-epochs`` is 60)
+ONLY_WITH_DEFAULTS = {"lambda_lr": 50.0, "probe_episodes": 32, "residual_scale": 0.25, "residual_base_budget": 0.0,
+                      "dagger": 0, "imitation_episodes": 64, "imitation_epochs": 30, "imitation_mask": ("last_d_short",),
+                      "slow_budget_every": "window"}
+
+
+def unused_option(opts: Mapping) -> tuple[str, str] | None:
+    """``(option, the option it needs)`` for the first option of :data:`ONLY_WITH` that ``opts`` gives (a value other
+    than None, even the default's) while the option it needs is off (False, None or empty); None when there is none."""
+    for opt, needs in ONLY_WITH.items():
+        if opts.get(opt) is not None and not opts.get(needs):
+            return opt, needs
+    return None
+
+
+def _only_with_values(given: dict) -> dict:
+    """``given`` (:func:`train`'s options of :data:`ONLY_WITH` and those they need) with :data:`ONLY_WITH_DEFAULTS`
+    for the ones not given (None); ``ValueError`` naming an option given without the option it needs."""
+    unused = unused_option(given)
+    if unused is not None:
+        opt, needs = unused
+        raise ValueError(f"{opt}={given[opt]!r} is only used with {needs}; valid: set {needs} too, or leave {opt} out "
+                         "(None)")
+    return {k: ONLY_WITH_DEFAULTS[k] if v is None and k in ONLY_WITH_DEFAULTS else v for k, v in given.items()}
+
 
 DEFAULT_HYPERPARAMS = {
     # log_std_init -1.5 (std 0.22 in action units): a wide Gaussian (std 1) dithers the duty at
@@ -476,12 +510,13 @@ def _written_dirs(dirs: dict) -> dict:
 
 def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64, scenario: str = "random",
           progress: bool = True, hyperparams: dict | None = None, hyperparams_file=None, env=None,
-          cost: str = "overshoot", lagrangian: bool = False, budget: float | None = None, lambda_lr: float = 50.0,
-          residual: bool = False, residual_scale: float = 0.25, vec: str = "batched", name: str | None = None,
+          cost: str = "overshoot", lagrangian: bool = False, budget: float | None = None, lambda_lr: float | None = None,
+          residual: bool = False, residual_scale: float | None = None, vec: str = "batched", name: str | None = None,
           eval_episodes: int = 32, eval_every: int = 50_000, checkpoint_every: int = 100_000, resume=None,
-          probe_episodes: int = 32, residual_base_budget: float = 0.0, history: int = 1, action_filter: float = 0.0,
-          smooth_penalty: float = 0.0, imitate: str | None = None, dagger: int = 0, imitation_episodes: int = 64,
-          imitation_epochs: int = 30, imitation_mask: tuple = ("last_d_short",), slow_budget=None, slow_budget_every="window") -> dict:
+          probe_episodes: int | None = None, residual_base_budget: float | None = None, history: int = 1,
+          action_filter: float = 0.0, smooth_penalty: float = 0.0, imitate: str | None = None, dagger: int | None = None,
+          imitation_episodes: int | None = None, imitation_epochs: int | None = None, imitation_mask: tuple | None = None,
+          slow_budget=None, slow_budget_every: str | None = None) -> dict:
     """Train ``algo`` for ``timesteps`` environment steps; returns a dict of the written paths.
 
     ``env``: None (the defaults), an :class:`envs.EnvConfig` (Table I's link), a dict of its fields with a nested
@@ -499,19 +534,22 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     hidden from the student (:mod:`policies.imitation`), then fine-tune with PPO (Lagrangian with
     ``lagrangian``) for ``timesteps`` steps (0: imitation only; else the clone is kept, :func:`_imitation_stage`). ``slow_budget``: ``"LO:HI"``, the action is
     the MPC's overshoot budget, the duty the MPC's (:mod:`policies.slow_budget`); ``slow_budget_every``:
-    ``window`` (taken at the stop, held) or ``step``.
+    ``window`` (taken at the stop, held) or ``step``. Options used only with another (:data:`ONLY_WITH`) default to None
+    (not given: :data:`ONLY_WITH_DEFAULTS`); one given without the other is a ``ValueError``, as in ``dronewpt train``.
     Deterministic for a given seed on one thread (torch and numba threads set to 1)."""
     import importlib.util
 
-    env = env_overrides(env)
+    o = _only_with_values({k: v for k, v in locals().items() if k in ONLY_WITH or k in ONLY_WITH.values()})
+    env = env_overrides(env)   # (o: the ONLY_WITH options' values, read by name)
     extra = dict(history=history, action_filter=action_filter, smooth_penalty=smooth_penalty, imitate=imitate,
-                 dagger=dagger, imitation_episodes=imitation_episodes, slow_budget=slow_budget, slow_budget_every=slow_budget_every)
+                 dagger=o["dagger"], imitation_episodes=o["imitation_episodes"], slow_budget=slow_budget,
+                 slow_budget_every=o["slow_budget_every"])
     _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra)
     opts = dict(**extra, seed=seed, n_envs=n_envs, scenario=scenario, hyperparams=hyperparams,
                 hyperparams_file=hyperparams_file, env=env, cost=cost, lagrangian=lagrangian, budget=budget,
-                lambda_lr=lambda_lr, residual=residual, residual_scale=residual_scale,
-                residual_base_budget=residual_base_budget, vec=vec, name=name, eval_episodes=eval_episodes,
-                eval_every=eval_every, checkpoint_every=checkpoint_every, probe_episodes=probe_episodes)
+                lambda_lr=o["lambda_lr"], residual=residual, residual_scale=o["residual_scale"],
+                residual_base_budget=o["residual_base_budget"], vec=vec, name=name, eval_episodes=eval_episodes,
+                eval_every=eval_every, checkpoint_every=checkpoint_every, probe_episodes=o["probe_episodes"])
     spec = _spec(algo, timesteps, opts)
     _one_thread_each()
     out = Path(out_dir)
@@ -521,8 +559,9 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     if resume is not None and (out / "lagrange.json").is_file():
         spec["lambda0"] = float(json.loads((out / "lagrange.json").read_text())["lambda"])
     if imitate:
-        spec.update(imitation_epochs=int(imitation_epochs), imitation_mask=tuple(imitation_mask))
-        res = _imitation_stage(spec, out, progress, imitation_epochs, tuple(imitation_mask))
+        epochs, mask = o["imitation_epochs"], tuple(o["imitation_mask"])
+        spec.update(imitation_epochs=int(epochs), imitation_mask=mask)
+        res = _imitation_stage(spec, out, progress, epochs, mask)
         if not spec["timesteps"]:
             return res
         resume = res["model"]

@@ -1,5 +1,7 @@
 """`dronewpt replay` / `telemetry` bad input: one-line errors, exit status 2, no traceback."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -47,8 +49,29 @@ def test_bad_pad(capsys, pad):
 def test_bad_window(capsys):
     _one_line_error(capsys, ["replay", str(log_path("uavlogviewer_vtol_sitl.tlog")), "--window", "9,3"],
                     "--window", "T0,T1")
+    # a window past the log's end (207.9 s): refused naming the log's time range (it said "no usable position")
     _one_line_error(capsys, ["replay", str(log_path("uavlogviewer_vtol_sitl.tlog")), "--window", "500,600"],
-                    "no usable position", "window")
+                    "--window 500,600 is invalid: the log ends at 207.886 s; valid: 0 <= T0 < T1 <= 208.886 s")
+
+
+@pytest.mark.parametrize("pads", [[], ["--pads", str(Path(__file__).parent / "data" / "missions" / "dronekit_flight_pads.csv")]])
+def test_a_window_that_ends_after_the_log_is_refused_not_cut(capsys, tmp_path, pads):
+    """2026-11-27: `replay LOG --window 440,2000` on a log that ends at 1377 s replayed 440..1377 s without a word
+    (also with --pads); now one line naming the log's time range, nothing written. A window ending within
+    WINDOW_END_SLACK_S (1 s) of the end, a rounded-up end, is still taken."""
+    log = str(log_path("dronekit-python_flight.tlog"))
+    _one_line_error(capsys, ["replay", log, *pads, "--window", "440,2000", "--out", str(tmp_path / "o"),
+                             "--no-progress"],
+                    "--window 440,2000 is invalid: the log ends at 1377.029 s; valid: 0 <= T0 < T1 <= 1378.029 s of log "
+                    "time (its time range 0..1377.029 s; 1 s allowed for a rounded end)")
+    assert not (tmp_path / "o").exists()
+    from mission_sim.mavlink.logs import read_log
+    from mission_sim.mavlink.replay import replay_span
+    assert replay_span(read_log(log), (440.0, 1378.0))[0] == (440.0, 1378.0)
+    # the bound the message gives is the one taken (it printed the log's end, 1 s short of it)
+    assert replay_span(read_log(log), (440.0, 1378.029))[0] == (440.0, 1378.029)
+    with pytest.raises(ValueError, match=r"T1 <= 1378\.029 s"):
+        replay_span(read_log(log), (440.0, 1378.03))
 
 
 @pytest.mark.parametrize("argv,needle", [

@@ -347,6 +347,13 @@ def test_position_gap_while_armed_is_warned(tmp_path, dronekit_read):
     log = read_log(write_tlog(tmp_path / "gap.tlog", [(t, f) for t, f in rec if not 600 < t - t0 < 700]))
     w = gap_warnings(log)
     assert len(w) == 1 and "gap.tlog: no position for 101.2 s while armed (log 599.1..700.3 s)" in w[0]
+    # what to do, as a sentence (it ended "...; --window can leave it out", in a study "[replay] window = can leave
+    # it out"), with the windows that do it, in the study file's words in a study
+    assert w[0].endswith("): the replay flies a straight line across it; to leave it out, replay the part before or "
+                         "after it: --window T0,599.1 or --window 700.3,T1")
+    from mission_sim.studies.replay_cases import _study_words
+    assert _study_words(w[0]).endswith("to leave it out, replay the part before or after it: [replay] window = "
+                                       "[T0, 599.1] or [replay] window = [700.3, T1]")
     assert gap_warnings(ref) == []
 
 

@@ -316,6 +316,24 @@ def test_bad_waypoints_text(capsys, tmp_path, text, needles):
     ("p.geojson", '{"type": "FeatureCollection", "features": [{"type": "Feature", "geometry": '
                   '{"type": "LineString", "coordinates": [[8, 47], [8.1, 47]]}}]}', ("feature 0", "LineString")),
     ("p.geojson", '{"type": "FeatureCollection", "features": [', ("malformed JSON",)),
+    # a misspelt GeoJSON property was ignored (the default hover instead of the file's), as CSV columns were
+    ("p.geojson", '{"type": "FeatureCollection", "features": [{"type": "Feature", "geometry": {"type": "Point", '
+                  '"coordinates": [8, 47]}, "properties": {"name": "a", "hover_time": 30}}]}',
+     ("feature 0: property 'hover_time' is unknown (did you mean 'hover_time_s'?); valid properties: hover_time_s",
+      "other properties are ignored")),
+    ("p.geojson", '{"type": "Point", "coordinates": [8, 47], "properties": {"hover_s": 30}}',
+     ("feature 0: property 'hover_s' is unknown (did you mean 'hover_time_s'?)",)),
+    ("p.geojson", '{"type": "Point", "coordinates": [8, 47], "properties": {"Hover_Time_S": 30}}',
+     ("feature 0: property 'Hover_Time_S' is unknown (did you mean 'hover_time_s'?)",)),
+    # an altitude property beside 2-D coordinates would leave the pad on the ground without a word
+    ("p.geojson", '{"type": "Point", "coordinates": [8, 47], "properties": {"altitude": 512}}',
+     ("property 'altitude' is ignored (did you mean the coordinates' alt? the feature's coordinates are 2-D",
+      "[lon, lat, alt] in m AMSL")),
+    ("p.geojson", '{"type": "MultiPoint", "coordinates": [[8, 47, 512], [8.1, 47]], "properties": {"ALT": 3}}',
+     ("property 'ALT' is ignored (did you mean the coordinates' alt?",)),
+    # CSV errors name the file's line (blank lines counted; they were the row's number after blank rows were dropped)
+    ("p.csv", "lat,lon\n\n47,8\n\n95,8\n", ("p.csv: line 5: latitude 95.0 is invalid",)),
+    ("p.csv", "\nlat,lon\n47,8\n47.0001,8,5\n", ("line 4 has 3 values, the header 2 (lat,lon)",)),
 ])
 def test_bad_pads_files(capsys, tmp_path, name, text, needles):
     p = tmp_path / name
@@ -438,3 +456,42 @@ def test_pads_csv_alt_amsl_is_the_altitude_column():
     assert _csv("lat,lon,alt_amsl\n47,8,512.5\n", "b.csv") == ref and ref[0].point.alt_m == 512.5
     with pytest.raises(ValueError, match=r"column 'alt_agl' is unknown .*\(alt in m AMSL\)"):
         _csv("lat,lon,alt_agl\n47,8,12\n", "c.csv")
+
+
+def test_geojson_pads_take_other_properties_and_the_same_names_as_before(tmp_path):
+    """Properties not near a pad value's name (a pad's name, an id) are still ignored; hover_time_s is read."""
+    from mission_sim.plans.pads import read_pads
+    p = tmp_path / "p.geojson"
+    p.write_text('{"type": "FeatureCollection", "features": [{"type": "Feature", "geometry": {"type": "Point", '
+                 '"coordinates": [8, 47, 512]}, "properties": {"name": "north pad", "id": 3, "hover_time_s": 30}}]}')
+    (pad,) = read_pads(p)
+    assert (pad.point.lat_deg, pad.point.lon_deg, pad.point.alt_m, pad.hover_time_s) == (47.0, 8.0, 512.0, 30.0)
+
+
+@pytest.mark.parametrize("props", [
+    {"name": "a", "lat": 47, "lon": 8},                  # the position again, beside the geometry
+    {"latitude": 47.0, "longitude": 8.0},                # as CSV-to-GeoJSON exporters keep them
+    {"altitude": 512}, {"ALT": 3}, {"alt_amsl": 512},    # an altitude beside 3-D coordinates
+    {"lang": "de", "last": "2026-11-27"},                # near lon / lat, not pad values
+])
+def test_geojson_pads_with_ordinary_extra_properties_load(tmp_path, props):
+    """Properties other than a hover time are ignored where the coordinates carry the value (they were refused as
+    misspellings: 'property 'lat' is unknown'); the pads are those of the file without them."""
+    import json
+    from mission_sim.mavlink.geodesy import GeoPoint
+    from mission_sim.plans.pads import GeoPad, read_pads
+
+    def pads(properties):
+        p = tmp_path / "p.geojson"
+        p.write_text(json.dumps({"type": "FeatureCollection", "features": [
+            {"type": "Feature", "geometry": {"type": "Point", "coordinates": [8, 47, 512]}, "properties": properties},
+            {"type": "Feature", "geometry": {"type": "MultiPoint", "coordinates": [[8.001, 47, 515], [8, 47.001, 520]]},
+             "properties": dict(properties, hover_time_s=30)}]}))
+        return read_pads(p)
+    ref = pads({})
+    assert pads(props) == ref and [p.hover_time_s for p in ref] == [None, 30.0, 30.0]
+    assert [p.point.alt_m for p in ref] == [512.0, 515.0, 520.0]
+    if not any(k.lower().startswith("alt") for k in props):   # with 2-D coordinates too (lat / lon never refused)
+        flat = tmp_path / "flat.geojson"
+        flat.write_text(json.dumps({"type": "Point", "coordinates": [8, 47], "properties": props}))
+        assert read_pads(flat) == (GeoPad(GeoPoint(47.0, 8.0, None)),)

@@ -257,7 +257,9 @@ _KERNEL_POLICIES = ("model_based", "step", "ramp", "hysteresis")
 
 
 def _missions(mode, out, seed, pols, **env_extra):
+    """The missions of ``pols`` in a fresh process (``env_extra``: environment variables set, None: removed)."""
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""), **env_extra}
+    env = {k: v for k, v in env.items() if v is not None}
     r = subprocess.run([sys.executable, "-c", _MISSIONS, mode, str(out), str(seed), *pols], capture_output=True,
                        text=True, env=env, cwd=ROOT, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
@@ -288,29 +290,28 @@ def test_mission_loads_its_kernels_without_registries_and_runs_the_same_bits(tmp
         _check_physics(lazy["runs"][pol])
 
 
-def _numba_cache_without(root: Path, dest: Path, module: str) -> None:
-    """numba's cache files of the tree under ``root`` copied into ``dest`` laid out as for ``NUMBA_CACHE_DIR``
-    (numba's ``UserProvidedCacheLocator``), except those of ``module`` (a file stem): its kernels miss."""
-    import hashlib
+def _numba_cache_without(warm: Path, dest: Path, module: str) -> None:
+    """The numba cache folder ``warm`` (a ``NUMBA_CACHE_DIR``) copied into ``dest``, except the files of ``module`` (a
+    file stem): its kernels miss."""
     import shutil
-    for f in root.rglob("__pycache__/*"):
-        if f.suffix in (".nbi", ".nbc", ".deps") and not f.name.startswith(module + "."):
-            src = str(f.parent.parent.resolve())
-            sub = dest / f"{os.path.basename(src)}_{hashlib.sha1(src.encode()).hexdigest()}"
-            sub.mkdir(parents=True, exist_ok=True)
-            shutil.copy2(f, sub / f.name)
+    shutil.copytree(warm, dest, ignore=shutil.ignore_patterns(module + ".*"))
 
 
 def test_mission_whose_kernel_misses_the_cache_compiles_it_after_a_registry_free_load(tmp_path):
     """A path never flown (its Lm not on disk) with the coupling kernels missing from numba's cache: the loop loads
     from the cache without the registries, then the Lm table kernel compiles (the compiler loads them) and the
-    mission gives the bits of a run without the hook."""
+    mission gives the bits of a run without the hook.
+
+    The numba cache copied is the one the first two runs fill, a ``NUMBA_CACHE_DIR`` of the test's own (the tree's
+    ``__pycache__`` was copied, the runs made to write there: the test wrote into the source tree and failed on a
+    read-only checkout; before that, with ``NUMBA_CACHE_DIR`` set, the runs wrote elsewhere than the copy's source)."""
     import shutil
     disk = tmp_path / "disk"
-    _missions("plain", tmp_path / "other", 8, ("model_based",), DRONEWPT_CACHE_DIR=str(disk))  # tables, hover Lm
+    tree = dict(NUMBA_CACHE_DIR=str(tmp_path / "warm"))   # the numba cache _numba_cache_without copies
+    _missions("plain", tmp_path / "other", 8, ("model_based",), DRONEWPT_CACHE_DIR=str(disk), **tree)  # tables, hover Lm
     shutil.copytree(disk, tmp_path / "disk2")     # ... without the Lm of seed 7's path
-    plain = _missions("plain", tmp_path / "plain", 7, ("model_based",), DRONEWPT_CACHE_DIR=str(disk))
-    _numba_cache_without(ROOT, tmp_path / "numba", "coupling_kernel")
+    plain = _missions("plain", tmp_path / "plain", 7, ("model_based",), DRONEWPT_CACHE_DIR=str(disk), **tree)
+    _numba_cache_without(tmp_path / "warm", tmp_path / "numba", "coupling_kernel")
     miss = _missions("lazy", tmp_path / "lazy", 7, ("model_based",), DRONEWPT_CACHE_DIR=str(tmp_path / "disk2"),
                      NUMBA_CACHE_DIR=str(tmp_path / "numba"))
     assert miss["hook"] and miss["at_loop"][0] is False and miss["registries"]   # loaded first, compiled later

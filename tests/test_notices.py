@@ -421,9 +421,9 @@ def test_mission_result_write_has_no_csv_unless_asked(tmp_path):
 
 
 # ------------------------------------------------------------------ 6. the first compilation, from Python
-def _python(code: str, cache: Path) -> subprocess.CompletedProcess:
+def _python(code: str, cache: Path, **env_extra) -> subprocess.CompletedProcess:
     env = {**{k: v for k, v in os.environ.items() if k != NOTICE_VAR}, "PYTHONPATH": str(ROOT),
-           "NUMBA_CACHE_DIR": str(cache)}   # (a main() run in this process set NOTICE_VAR for its children)
+           "NUMBA_CACHE_DIR": str(cache), **env_extra}   # (a main() run in this process set NOTICE_VAR for its children)
     return subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True,
                           timeout=600)
 
@@ -459,14 +459,19 @@ def test_warmup_compiles_what_a_single_envs_first_steps_compile(tmp_path):
 
 
 def _compiles_nothing_after_warmup(stage: str, code: str, tmp_path) -> None:
-    """``code`` run after warmup's stages whose names hold ``stage`` (into an empty cache) compiles no kernel."""
+    """``code`` run after warmup's stages whose names hold ``stage`` (into an empty cache) compiles no kernel.
+
+    Both caches are the test's own, empty: numba's (``NUMBA_CACHE_DIR``) and dronewpt's disk cache of tables
+    (``DRONEWPT_CACHE_DIR``), so what the count sees does not depend on what other processes (another pytest-xdist
+    worker, after a source change) wrote to a shared cache meanwhile: a table written by another process between
+    warmup and ``code`` decided which kernels ran where (it failed under ``pytest -n 2`` without ``--dist loadfile``)."""
     code = ("from numba.core import event\n"
             "class C(event.Listener):\n    n = 0\n    def on_start(self, ev): C.n += 1\n"
             "    def on_end(self, ev): pass\n"
             "from mission_sim.cli.warmup import STAGES\n"
             f"[run() for name, run in STAGES if {stage!r} in name]\n"
             "event.register('numba:compile', C())\n" + code + "print(C.n)\n")
-    proc = _python(code, tmp_path / "c")
+    proc = _python(code, tmp_path / "c", DRONEWPT_CACHE_DIR=str(tmp_path / "disk"))
     assert proc.returncode == 0 and proc.stdout.split() == ["0"], (proc.stdout, proc.stderr[-2000:])
 
 

@@ -460,3 +460,54 @@ def test_compare_and_the_oracle_take_a_dict_config():
     rows_c, _ = compare(policies=["ramp", "mpc"], scenarios=["nominal"], episodes=2, config=cfg)
     assert rows_d == rows_c
     np.testing.assert_array_equal(policy_duties("ramp", "nominal", 1000, as_dict), policy_duties("ramp", "nominal", 1000, cfg))
+
+
+@pytest.mark.parametrize("n", [10**7, 10**12])
+def test_a_vector_env_too_large_for_the_machine_is_refused_before_it_allocates(n, monkeypatch):
+    """2026-11-27: ``SbarChargingVectorEnv(num_envs=10**7)`` allocated for seconds and ended in numpy's MemoryError;
+    now one ValueError, before anything is allocated, naming the memory it would need and the largest num_envs that
+    fits (the machine's memory set here: 16 GiB)."""
+    from envs import vector
+    monkeypatch.setattr(vector, "_physical_memory", lambda: 16 * 2**30)
+    monkeypatch.setattr(vector.SbarChargingVectorEnv, "_alloc", lambda self, c: pytest.fail("allocated"))
+    per = vector.BYTES_PER_ENV_STEP * (EnvConfig().n_steps + 1)
+    with pytest.raises(ValueError) as e:
+        SbarChargingVectorEnv(n, "random")
+    assert str(e.value) == (f"num_envs={n:,} is invalid: it would need ~{n * per / 2**30:.3g} GiB of memory (~{per / 1e3:.0f} "
+                            f"kB a sub-environment at n_steps={EnvConfig().n_steps}), more than this machine's 16 GiB; "
+                            f"valid range: 1..{16 * 2**30 // per:,}")
+
+
+class _Allocating(Exception):
+    pass
+
+
+@pytest.mark.parametrize("unknown", ["None", "-1 pages"])
+def test_a_large_vector_env_is_not_refused_where_the_machine_memory_is_unknown(unknown, monkeypatch):
+    """The memory check is skipped where the system does not say how much memory there is (``os.sysconf`` returns -1
+    when it does not know: the product, negative, refused every num_envs, even 1); the allocation (stubbed here) is
+    reached."""
+    import os
+
+    from envs import vector
+    if unknown == "None":
+        monkeypatch.setattr(vector, "_physical_memory", lambda: None)
+    else:
+        sysconf = os.sysconf
+        monkeypatch.setattr(os, "sysconf", lambda k: -1 if k == "SC_PHYS_PAGES" else sysconf(k))
+        assert vector._physical_memory() is None
+
+    def alloc(self, c):
+        raise _Allocating
+    monkeypatch.setattr(vector.SbarChargingVectorEnv, "_alloc", alloc)
+    for n in (1, 10**7):
+        with pytest.raises(_Allocating):
+            SbarChargingVectorEnv(n, "random")
+
+
+@pytest.mark.parametrize("n", [True, None, "3", 2.5, float("nan")])
+def test_a_vector_env_size_that_is_not_a_whole_number_is_refused(n):
+    """``num_envs=True`` made one env (``None`` was a TypeError); a whole float (4.0) is 4 envs as before."""
+    with pytest.raises(ValueError, match=r"^num_envs=.* is invalid; valid range: integer >= 1$"):
+        SbarChargingVectorEnv(n)
+    assert SbarChargingVectorEnv(4.0).num_envs == 4

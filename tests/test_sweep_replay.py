@@ -28,6 +28,41 @@ BOOKKEEPING = {"case_id", "status", "error", "traceback", "case_wall_s", "case_c
                "params_json"}
 
 
+#: the cell count of each log's pack (median logged voltage 11.1 V: the dronekit quad's 3S; 15.5 V: log171's 4S)
+CELLS = {LOG: 3, LOG171: 4}
+
+
+def _fitting_pack(tmp_path, log, extra: str = "") -> tuple[str, list[str]]:
+    """A base mission whose pack fits ``log``'s (``cfg.toml``: ``battery.n_series`` = :data:`CELLS`, plus ``extra``
+    TOML), as the study's head and the replay command's options. Tests that are not about the logged-voltage warning
+    use it: the default 8S model pack on these logs warns once per study and once per command (a ``DronewptWarning``,
+    an error under ``-W error``), which is not what they test."""
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text(f"[battery]\nn_series = {CELLS[log]}\n{extra}")
+    return '[study]\nbase = "cfg.toml"\n', ["--config", str(cfg)]
+
+
+@pytest.fixture
+def warnings_shown():
+    """For a test that checks the command line's warning lines (a log that warns whatever the pack: log171 ends while
+    armed): Python's default filter for ``DronewptWarning``, each printed once as ``dronewpt COMMAND: warning: ...``,
+    whatever ``-W`` the test run was given (under ``-W error`` the command exits 2 on the first one, as it should)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("default", DronewptWarning)
+        yield
+
+
+ENDS_ARMED = "the log ends while the vehicle is armed"
+EIGHT_CELLS_ON_3S = ("dronekit-python_flight.tlog: the logged battery voltage (median 11.1 V) is outside the model "
+                     "pack's open-circuit range 21.2-32.8 V (battery.n_series=8")
+
+
+def _warned(err: str, command: str) -> list[str]:
+    """The command's warning lines (``dronewpt COMMAND: warning: ...``), their text."""
+    head = f"dronewpt {command}: warning: "
+    return [ln[len(head):] for ln in err.splitlines() if ln.startswith(head)]
+
+
 def _study(tmp_path, replay: str, grid: str, name="s.toml", head: str = "") -> Path:
     p = tmp_path / name
     p.write_text(f"{head}[replay]\n{replay}\n[grid]\n{grid}\n")
@@ -70,20 +105,26 @@ def _assert_row_equals_command(row: pd.Series, cmd: dict, min_numbers: int) -> N
     assert compared >= min_numbers, compared
 
 
-def test_a_refly_case_equals_the_replay_command_with_pads_drone_and_set(tmp_path, capsys):
+def test_a_refly_case_equals_the_replay_command_with_pads_drone_and_set(tmp_path, capsys, warnings_shown):
+    """The 8S model drone re-flies the 3S quad's route (its charging is what the physics below checks: on its 8S
+    link a 3S pack gains less from a longer hover than it spends hovering): both the study and the command say so."""
     drone = tmp_path / "drone.toml"
     drone.write_text("[drone]\nmass_kg = 1.2\nfigure_of_merit = 0.62\n")
     study = _study(tmp_path, f'log = "{LOG}"\npads = "{PADS}"\nwindow = [440.0, 620.0]\ndrone = "drone.toml"',
                    '"pads.0.hover_time_s" = [30.0, 75.0]\n"battery.capacity_ah" = 1.6')
     assert _sweep(study, tmp_path / "o") == 0
     df = read_results(tmp_path / "o")
-    capsys.readouterr()
+    said = _warned(capsys.readouterr().err, "sweep")
+    assert len(said) == 1 and said[0].startswith("2 of 2 cases of study 's' have a logged battery voltage outside "
+                                                 f"their model pack's open-circuit range, e.g.: {EIGHT_CELLS_ON_3S}")
     assert len(df) == 2 and (df["status"] == "ok").all()
     row = df[df["pads.0.hover_time_s"] == 75.0].iloc[0]
     assert main(["replay", str(LOG), "--pads", str(PADS), "--window", "440,620", "--drone", str(drone),
                  "--set", "pads.0.hover_time_s=75.0", "--set", "battery.capacity_ah=1.6", "--out", str(tmp_path / "r"),
                  "--format", "json", "--no-plot", "--no-progress"]) == 0
-    cmd = json.loads(capsys.readouterr().out)
+    out, err = capsys.readouterr()
+    assert [w[:len(EIGHT_CELLS_ON_3S)] for w in _warned(err, "replay")] == [EIGHT_CELLS_ON_3S]
+    cmd = json.loads(out)
     _assert_row_equals_command(row, cmd, min_numbers=25)
     # the --drone file reached the command (it was ignored with --pads before) and the case
     assert cmd["drone_mass_kg"] == 1.2 and row["drone_mass_kg"] == 1.2
@@ -96,16 +137,21 @@ def test_a_refly_case_equals_the_replay_command_with_pads_drone_and_set(tmp_path
     assert row["min_soc_refly"] <= row["final_soc_refly"]
 
 
-def test_a_replay_case_without_pads_equals_the_replay_command(tmp_path, capsys):
-    (tmp_path / "cfg.toml").write_text("[battery]\ncapacity_ah = 1.5\n")   # [study] base = the replay's --config
-    study = _study(tmp_path, f'log = "{LOG171}"', '"drone.mass_kg" = [1.0, 1.83]', head='[study]\nbase = "cfg.toml"\n')
+def test_a_replay_case_without_pads_equals_the_replay_command(tmp_path, capsys, warnings_shown):
+    """log171's 4S quad replayed with its own cell count; the log ends in flight, which both the study and the
+    command say (once)."""
+    head, config = _fitting_pack(tmp_path, LOG171, "capacity_ah = 1.5\n")   # [study] base = the replay's --config
+    study = _study(tmp_path, f'log = "{LOG171}"', '"drone.mass_kg" = [1.0, 1.83]', head=head)
     assert _sweep(study, tmp_path / "o") == 0
     df = read_results(tmp_path / "o")
-    capsys.readouterr()
+    said = _warned(capsys.readouterr().err, "sweep")
+    assert len(said) == 1 and ENDS_ARMED in said[0], said
     row = df[df["drone.mass_kg"] == 1.83].iloc[0]
-    assert main(["replay", str(LOG171), "--config", str(tmp_path / "cfg.toml"), "--set", "drone.mass_kg=1.83",
+    assert main(["replay", str(LOG171), *config, "--set", "drone.mass_kg=1.83",
                  "--out", str(tmp_path / "r"), "--format", "json", "--no-plot", "--no-progress"]) == 0
-    cmd = json.loads(capsys.readouterr().out)
+    out, err = capsys.readouterr()
+    assert _warned(err, "replay") == said
+    cmd = json.loads(out)
     _assert_row_equals_command(row, cmd, min_numbers=30)
     # the power comparison is there (read from the rows as produced, no time series kept): at the
     # heavier mass the model's airborne energy is closer to the logged one (docs: equivalent mass 1.83 kg)
@@ -113,16 +159,19 @@ def test_a_replay_case_without_pads_equals_the_replay_command(tmp_path, capsys):
     assert abs(row["power_comparison.energy_error_rel"]) < 0.05 < abs(light["power_comparison.energy_error_rel"])
 
 
-def test_a_replay_case_with_pad_equals_the_replay_command_with_pad(tmp_path, capsys):
+def test_a_replay_case_with_pad_equals_the_replay_command_with_pad(tmp_path, capsys, warnings_shown):
     """``[replay] pad = "LAT,LON,ALT"`` is the command's ``--pad``: the pad (the frame origin) 1.32 m below the
-    take-off spot of log171 (590.82 m AMSL), ~15 m south-east of it."""
+    take-off spot of log171 (590.82 m AMSL), ~15 m south-east of it. The 4S quad's own cell count; the log ends in
+    flight, which the study says."""
     pad = "-35.36245,149.16595,589.5"
-    study = _study(tmp_path, f'log = "{LOG171}"\npad = "{pad}"', '"drone.mass_kg" = [1.0, 1.83]')
+    head, config = _fitting_pack(tmp_path, LOG171)
+    study = _study(tmp_path, f'log = "{LOG171}"\npad = "{pad}"', '"drone.mass_kg" = [1.0, 1.83]', head=head)
     assert _sweep(study, tmp_path / "o") == 0
     df = read_results(tmp_path / "o")
-    capsys.readouterr()
+    said = _warned(capsys.readouterr().err, "sweep")
+    assert len(said) == 1 and ENDS_ARMED in said[0], said
     row = df[df["drone.mass_kg"] == 1.83].iloc[0]
-    out = ["--out", str(tmp_path / "r"), "--format", "json", "--no-plot", "--no-progress"]
+    out = [*config, "--out", str(tmp_path / "r"), "--format", "json", "--no-plot", "--no-progress"]
     assert main(["replay", str(LOG171), f"--pad={pad}", "--set", "drone.mass_kg=1.83", *out]) == 0
     cmd = json.loads(capsys.readouterr().out)
     _assert_row_equals_command(row, cmd, min_numbers=30)
@@ -136,13 +185,14 @@ def test_a_refly_case_with_pad_equals_the_command_with_pad_and_pads(tmp_path, ca
     """With ``pads``, ``pad`` is the pads' frame origin as with ``replay --pad ... --pads``; one without altitude
     takes the take-off spot's (590.76 m AMSL)."""
     pad = "-35.36235,149.16575"
+    head, config = _fitting_pack(tmp_path, LOG)
     study = _study(tmp_path, f'log = "{LOG}"\npads = "{PADS}"\npad = "{pad}"\nwindow = [440.0, 620.0]',
-                   '"mission.hover_time_s" = [30.0, 60.0]')
+                   '"mission.hover_time_s" = [30.0, 60.0]', head=head)
     assert _sweep(study, tmp_path / "o") == 0
     df = read_results(tmp_path / "o")
     capsys.readouterr()
     row = df[df["mission.hover_time_s"] == 60.0].iloc[0]
-    assert main(["replay", str(LOG), f"--pad={pad}", "--pads", str(PADS), "--window", "440,620",
+    assert main(["replay", str(LOG), *config, f"--pad={pad}", "--pads", str(PADS), "--window", "440,620",
                  "--set", "mission.hover_time_s=60.0", "--out", str(tmp_path / "r"), "--format", "json", "--no-plot",
                  "--no-progress"]) == 0
     cmd = json.loads(capsys.readouterr().out)
@@ -216,8 +266,7 @@ def test_a_pads_file_far_from_the_pad_is_the_commands_error_naming_the_study_key
 
 def _warning_lines(err: str, command: str) -> list[str]:
     """The command's warning lines but the logged voltage's (the study counts that one per case)."""
-    head = f"dronewpt {command}: warning: "
-    return [ln[len(head):] for ln in err.splitlines() if ln.startswith(head) and "logged battery voltage" not in ln]
+    return [w for w in _warned(err, command) if "logged battery voltage" not in w]
 
 
 @pytest.mark.parametrize("replay, flags, words", [
@@ -227,7 +276,8 @@ def _warning_lines(err: str, command: str) -> list[str]:
     (f'log = "{LOG171}"', [], "the log ends while the vehicle is armed"),   # log171 is cut off in flight
     (f'log = "{LOG171}"\npads = "{PADS}"', ["--pads", str(PADS)], "the log ends while the vehicle is armed"),
 ])
-def test_a_replay_study_warns_the_logs_warnings_once_as_the_command_does(tmp_path, capsys, replay, flags, words):
+def test_a_replay_study_warns_the_logs_warnings_once_as_the_command_does(tmp_path, capsys, replay, flags, words,
+                                                                        warnings_shown):
     """The warnings ``dronewpt replay`` gives about the log (replay_warnings: the log, the pad, the window; the same
     in every case) are the study's, once, in its words; each case still counts them (n_warnings, as the command's
     summary)."""
@@ -251,7 +301,7 @@ def test_the_log_is_parsed_once_per_process_not_per_case(tmp_path, monkeypatch):
     monkeypatch.setattr(logs, "read_log", lambda path, *a, **k: calls.append(path) or real(path, *a, **k))
     monkeypatch.setattr(replay_cases, "_INPUTS", {})
     study = _study(tmp_path, f'log = "{LOG}"\npads = "{PADS}"\nwindow = [440.0, 620.0]',
-                   '"drone.mass_kg" = [1.0, 1.1, 1.2]')
+                   '"drone.mass_kg" = [1.0, 1.1, 1.2]', head=_fitting_pack(tmp_path, LOG)[0])
     assert _sweep(study, tmp_path / "o") == 0
     assert len(read_results(tmp_path / "o")) == 3 and len(calls) == 1
 
@@ -286,6 +336,9 @@ def test_bad_keys_and_values_are_refused_before_anything_runs(tmp_path, capsys, 
                                                     "valid: a [replay] window = or [replay] segment = in which it flew"]),
     ('pads = "x.csv"', ["[replay] has no log"]),
     (f'log = "{LOG}"\nwindow = [5.0, 1.0]', ["[replay] window", "T0 < T1"]),
+    # past the log's end (1377.029 s): the cases replayed 440..1377 s without a word
+    (f'log = "{LOG}"\nwindow = [440.0, 2000.0]', ["[replay] window = [440, 2000] is invalid: the log ends at 1377.029 s; "
+                                                  "valid: 0 <= T0 < T1 <= 1378.029 s"]),
     (f'log = "{LOG}"\nlogg = 1', ["[replay] key 'logg' is unknown", "ground_gap_m"]),
 ])
 def test_a_study_on_a_missing_or_non_log_file_is_one_line(tmp_path, capsys, replay, words):
@@ -299,7 +352,7 @@ def test_a_study_on_a_missing_or_non_log_file_is_one_line(tmp_path, capsys, repl
 
 def test_an_interrupted_replay_sweep_resumes_with_only_the_missing_cases(tmp_path, capsys, monkeypatch):
     study = _study(tmp_path, f'log = "{LOG}"\npads = "{PADS}"\nwindow = [440.0, 620.0]',
-                   '"drone.mass_kg" = [1.0, 1.2]\n"mission.hover_time_s" = [20.0, 40.0]')
+                   '"drone.mass_kg" = [1.0, 1.2]\n"mission.hover_time_s" = [20.0, 40.0]', head=_fitting_pack(tmp_path, LOG)[0])
     real = replay_cases.ReplayCaseRunner.__call__
     ran = []
 
@@ -449,15 +502,18 @@ def test_the_documented_replay_section_parses(tmp_path):
     assert st.replay["log"] == tmp_path / "flight.tlog" and st.replay["window"] == (440.0, 620.0)
 
 
-def test_a_depleted_replay_case_counts_the_commands_warnings(tmp_path, capsys):
+def test_a_depleted_replay_case_counts_the_commands_warnings(tmp_path, capsys, warnings_shown):
     """The command warned where the battery ran out, the study's row did not count it (n_warnings differed):
-    both now take the summary's one list (mission_sim.mavlink.replay.replay_summary_warnings)."""
-    study = _study(tmp_path, f'log = "{LOG171}"', '"battery.capacity_ah" = [0.05, 1.5]')
+    both now take the summary's one list (mission_sim.mavlink.replay.replay_summary_warnings). The 4S quad's own
+    cell count; the log ends in flight, which the study says."""
+    head, config = _fitting_pack(tmp_path, LOG171)
+    study = _study(tmp_path, f'log = "{LOG171}"', '"battery.capacity_ah" = [0.05, 1.5]', head=head)
     assert _sweep(study, tmp_path / "o") == 0
     df = read_results(tmp_path / "o")
-    capsys.readouterr()
+    said = _warned(capsys.readouterr().err, "sweep")
+    assert len(said) == 1 and ENDS_ARMED in said[0], said
     row = df[df["battery.capacity_ah"] == 0.05].iloc[0]
-    assert main(["replay", str(LOG171), "--set", "battery.capacity_ah=0.05", "--out", str(tmp_path / "r"),
+    assert main(["replay", str(LOG171), *config, "--set", "battery.capacity_ah=0.05", "--out", str(tmp_path / "r"),
                  "--format", "json", "--no-plot", "--no-progress"]) == 0
     cmd = json.loads(capsys.readouterr().out)
     assert cmd["battery_depleted"] is True and bool(row["battery_depleted"])
@@ -513,7 +569,8 @@ def test_a_resume_over_a_changed_log_names_the_file(tmp_path, capsys):
     import shutil
     log = tmp_path / "f.tlog"
     shutil.copyfile(LOG, log)
-    study = _study(tmp_path, f'log = "f.tlog"\npads = "{PADS}"\nwindow = [440.0, 620.0]', '"drone.mass_kg" = [1.0, 1.2]')
+    study = _study(tmp_path, f'log = "f.tlog"\npads = "{PADS}"\nwindow = [440.0, 620.0]', '"drone.mass_kg" = [1.0, 1.2]',
+                   head=_fitting_pack(tmp_path, LOG)[0])
     assert _sweep(study, tmp_path / "o") == 0
     man = json.loads((tmp_path / "o" / "sweep.json").read_text())
     assert man["inputs"] == {"[replay] log": {"path": str(log), "sha256": hashlib.sha256(LOG.read_bytes()).hexdigest()},
@@ -528,7 +585,7 @@ def test_a_resume_over_a_changed_log_names_the_file(tmp_path, capsys):
     assert "another base mission" not in err[0]
 
 
-def test_a_refused_out_is_one_line_and_the_studys_warnings_follow_the_checks(tmp_path, capsys):
+def test_a_refused_out_is_one_line_and_the_studys_warnings_follow_the_checks(tmp_path, capsys, warnings_shown):
     """``--out`` a file: the one-line refusal (exit 2), not the study's warnings before it; a sweep that runs
     says them (the 8S model drone on the 3S log) before its report."""
     study = _study(tmp_path, f'log = "{LOG}"\nwindow = [440.0, 620.0]', '"drone.mass_kg" = [1.0, 1.2]')
@@ -608,10 +665,22 @@ def test_segment_and_window_together_are_refused_not_one_silently_ignored(tmp_pa
 def test_sizing_from_a_replay_sweep_says_it_is_a_replay(tmp_path, capsys):
     """2026-11-27: `sizing --source sweep --sweep DIR` on a replay study's folder said "ran on base mission c875...,
     the given mission is 88fb...; valid: the study's base mission (--config)": no --config could ever match."""
-    study = _study(tmp_path, f'log = "{LOG}"\nwindow = [440.0, 470.0]', '"drone.mass_kg" = [1.0, 1.2]')
+    study = _study(tmp_path, f'log = "{LOG}"\nwindow = [440.0, 470.0]', '"drone.mass_kg" = [1.0, 1.2]',
+                   head=_fitting_pack(tmp_path, LOG)[0])
     assert _sweep(study, tmp_path / "o") == 0
     capsys.readouterr()
     assert main(["sizing", "--source", "sweep", "--sweep", str(tmp_path / "o"), "--no-plot"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"dronewpt sizing: error: sweep {str(tmp_path / 'o')!r} replayed a flight log ([replay] section), "
                    "its cases are not missions to re-run; valid: a sweep of missions"]
+
+
+@pytest.mark.parametrize("msg,words", [
+    ("--window 440,2000 is invalid: the log ends", "[replay] window = [440, 2000] is invalid: the log ends"),
+    ("--window T0,599.1 or --window 700.3,T1", "[replay] window = [T0, 599.1] or [replay] window = [700.3, T1]"),
+    ("--window 1e+03,-5 is invalid", "[replay] window = [1e+03, -5] is invalid"),
+    # a quoted window is not a window's two numbers (it became "[replay] window = ['5, 1']")
+    ("--window '5,1' is invalid", "[replay] window = '5,1' is invalid"),
+])
+def test_a_window_in_a_message_is_the_study_files_words(msg, words):
+    assert replay_cases._study_words(msg) == words

@@ -172,3 +172,26 @@ def test_a_resume_by_other_physics_code_is_refused(tmp_path):
         with pytest.raises(ValueError, match="another version of dronewpt's physics code") as e:
             check_same_study(tmp_path, st, "f" * 16, 4)
         assert "\n" not in str(e.value) and "--force" in str(e.value)
+
+
+@pytest.mark.parametrize("replay", [False, True])
+def test_an_edit_of_the_mission_case_runner_changes_the_physics_code_hash(monkeypatch, replay):
+    """``studies/mission_cases.py`` turns a case's values into the mission it runs (and the replay case runner
+    is one of its runners): an edit of it changes the physics-code hash of mission and replay studies alike, so a
+    resume by another version of it is refused instead of mixing stale rows with new ones. The edit is seen
+    through the real ``dependency_hash`` (the file's bytes as read, one comment line added)."""
+    from mission_sim.studies import mission_cases
+    from mission_sim.studies.status import physics_code_hash
+    before = physics_code_hash(replay)
+    target = pathlib.Path(mission_cases.__file__).resolve()
+    read_bytes = pathlib.Path.read_bytes
+
+    def edited(self):
+        data = read_bytes(self)
+        return data + b"# edited\n" if pathlib.Path(self).resolve() == target else data
+
+    monkeypatch.setattr(pathlib.Path, "read_bytes", edited)
+    after = physics_code_hash(replay)
+    assert len(after) == 16 and after != before
+    monkeypatch.undo()
+    assert physics_code_hash(replay) == before

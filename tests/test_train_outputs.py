@@ -187,3 +187,89 @@ def test_cli_train_refuses_an_option_without_the_one_that_uses_it(flag, value, n
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"dronewpt train: error: {flag} is only used with {needs}; add {needs} or drop {flag}"]
     assert not out.exists()
+
+
+#: a value of each option that has an effect only with another one (the defaults' among them: given is given), and
+#: the option it needs
+_GIVEN = {"lambda_lr": (10.0, "lagrangian"), "probe_episodes": (32, "lagrangian"), "budget": (0.1, "lagrangian"),
+          "residual_scale": (0.25, "residual"), "residual_base_budget": (0.01, "residual"), "dagger": (0, "imitate"),
+          "imitation_episodes": (8, "imitate"), "imitation_epochs": (30, "imitate"), "imitation_mask": ((), "imitate"),
+          "slow_budget_every": ("window", "slow_budget")}
+
+
+def _stop_before_training(monkeypatch, seen=None):
+    """train() stopped where the run's spec is made (its options recorded in ``seen``): nothing trains."""
+    from policies import train as tr
+
+    def spec(algo, timesteps, opts):
+        (seen if seen is not None else {}).update(opts)
+        raise RuntimeError("stop before training")
+    monkeypatch.setattr(tr, "_spec", spec)
+
+
+@pytest.mark.parametrize("opt", sorted(_GIVEN))
+def test_train_refuses_an_option_without_the_one_that_uses_it(opt, tmp_path, monkeypatch):
+    """2026-11-27: ``policies.train.train(..., residual_scale=0.1)`` without ``residual=True`` (and the like) trained a
+    plain PPO, the option silently ignored, where ``dronewpt train`` refused it; now the same rule
+    (``policies.train.ONLY_WITH``, which the command line reads) is a ValueError naming both options, before anything
+    is written."""
+    _stop_before_training(monkeypatch)
+    out = tmp_path / "run"
+    value, needs = _GIVEN[opt]
+    with pytest.raises(ValueError) as e:
+        train("ppo", 1000, out, progress=False, **{opt: value})
+    assert str(e.value) == f"{opt}={value!r} is only used with {needs}; valid: set {needs} too, or leave {opt} out (None)"
+    assert not out.exists()
+
+
+def test_the_train_rule_is_one_list_and_its_defaults_are_trains_and_the_command_lines(monkeypatch, tmp_path):
+    """Every option of the rule is tested above; not given (None), train() runs with its documented defaults
+    (imitation_epochs 30), the command line hands train() None for an option whose option is off and its own
+    defaults (--imitation-epochs 60) for one whose option is on; given with its option, an option passes."""
+    from mission_sim.cli import main
+    from policies import train as tr
+    assert {k: n for k, (_, n) in _GIVEN.items()} == tr.ONLY_WITH
+    seen = {}
+    _stop_before_training(monkeypatch, seen)
+    with pytest.raises(RuntimeError, match="stop before training"):
+        train("ppo", 1000, tmp_path / "a", progress=False)
+    assert {k: seen.get(k) for k in tr.ONLY_WITH} == {   # imitation_epochs / _mask: read by the imitation stage only
+        "lambda_lr": 50.0, "probe_episodes": 32, "residual_scale": 0.25, "residual_base_budget": 0.0, "dagger": 0,
+        "imitation_episodes": 64, "slow_budget_every": "window", "budget": None, "imitation_epochs": None,
+        "imitation_mask": None}
+    with pytest.raises(RuntimeError, match="stop before training"):
+        train("ppo", 1000, tmp_path / "b", progress=False, residual=True, residual_scale=0.1, lagrangian=True,
+              budget=0.05, lambda_lr=10.0)
+    assert (seen["residual_scale"], seen["budget"], seen["lambda_lr"], seen["probe_episodes"]) == (0.1, 0.05, 10.0, 32)
+    calls = []
+    monkeypatch.setattr(tr, "train", lambda *a, **kw: calls.append(kw) or {})
+    base = ["train", "--algo", "ppo", "--timesteps", "10", "--out", str(tmp_path / "c")]
+    assert main(base) == 0 and main(base + ["--imitate", "mpc"]) == 0
+    assert all(calls[0][k] is None for k in tr.ONLY_WITH)
+    assert (calls[1]["imitation_epochs"], calls[1]["imitation_mask"], calls[1]["dagger"]) == (60, ("last_d_short",), 0)
+    assert calls[1]["lambda_lr"] is None and calls[1]["residual_scale"] is None
+
+
+def test_train_reads_its_defaults_by_name_and_the_command_line_takes_them_from_train(monkeypatch, tmp_path):
+    """train() took its ONLY_WITH options' values in ONLY_WITH_DEFAULTS' key order (a reordered table swapped them:
+    lambda_lr = 'window'); the command line repeated 7 of train()'s defaults (one edited in train() only would not
+    reach ``dronewpt train``). Now both read ``policies.train.ONLY_WITH_DEFAULTS`` by name, the command line adding
+    its own two (--imitation-epochs 60, --imitation-mask last_d_short)."""
+    from mission_sim.cli import main
+    from policies import train as tr
+    reordered = dict(reversed(list(tr.ONLY_WITH_DEFAULTS.items())))
+    monkeypatch.setattr(tr, "ONLY_WITH_DEFAULTS", reordered)
+    seen = {}
+    _stop_before_training(monkeypatch, seen)
+    with pytest.raises(RuntimeError, match="stop before training"):
+        train("ppo", 1000, tmp_path / "a", progress=False, lagrangian=True, residual=True)
+    assert {k: seen[k] for k in ("lambda_lr", "probe_episodes", "residual_scale", "residual_base_budget",
+                                 "slow_budget_every")} == {"lambda_lr": 50.0, "probe_episodes": 32, "residual_scale": 0.25,
+                                                           "residual_base_budget": 0.0, "slow_budget_every": "window"}
+    monkeypatch.setattr(tr, "ONLY_WITH_DEFAULTS", dict(reordered, lambda_lr=7.0, imitation_episodes=5, imitation_epochs=9))
+    calls = []
+    monkeypatch.setattr(tr, "train", lambda *a, **kw: calls.append(kw) or {})
+    base = ["train", "--algo", "ppo", "--timesteps", "10", "--out", str(tmp_path / "c")]
+    assert main(base + ["--lagrangian", "--imitate", "mpc"]) == 0
+    assert (calls[0]["lambda_lr"], calls[0]["imitation_episodes"], calls[0]["imitation_epochs"],
+            calls[0]["imitation_mask"]) == (7.0, 5, 60, ("last_d_short",))

@@ -24,11 +24,10 @@ from .common import (
 )
 
 
-#: train's options that have an effect only with another one: {dest: (default, that option)}
-_ONLY_WITH = {"lambda_lr": (50.0, "--lagrangian"), "probe_episodes": (32, "--lagrangian"),
-              "residual_scale": (0.25, "--residual"), "residual_base_budget": (0.0, "--residual"),
-              "dagger": (0, "--imitate"), "imitation_episodes": (64, "--imitate"), "imitation_epochs": (60, "--imitate"),
-              "imitation_mask": ("last_d_short", "--imitate"), "slow_budget_every": ("window", "--slow-budget")}
+#: the command line's own defaults of train's options that have an effect only with another one, where they differ
+#: from ``train()``'s (:data:`policies.train.ONLY_WITH_DEFAULTS`, the others; which option each needs:
+#: :data:`policies.train.ONLY_WITH`)
+_CLI_ONLY_WITH_DEFAULTS = {"imitation_epochs": 60, "imitation_mask": "last_d_short"}
 
 
 def _add_train(sub):
@@ -109,7 +108,7 @@ def _add_train(sub):
     p.add_argument("--resume", type=path_arg("--resume"), default=None, metavar="CHECKPOINT.zip",
                    help="continue from a checkpoint of checkpoints/ (its VecNormalize statistics next to it)")
     add_progress_flag(p)
-    p.set_defaults(func=_cmd_train)   # _ONLY_WITH's options default to None (not given): _only_with fills them
+    p.set_defaults(func=_cmd_train)   # ONLY_WITH's options default to None (not given): _only_with fills them
 
 
 #: :data:`mission_sim.contract.LINK_MODELS` (not imported: the parser stays free of wpt_receiver's import;
@@ -157,14 +156,18 @@ def _env_overrides(items) -> dict:
 
 
 def _only_with(args):
-    """An option of :data:`_ONLY_WITH` given without the option that uses it is refused (given, even at its default
-    value: it had no effect); then the ones not given get their defaults."""
-    for dest, (default, needs) in _ONLY_WITH.items():
-        if getattr(args, dest) is None:
+    """An option of :data:`policies.train.ONLY_WITH` given without the option that uses it is refused (given, even at
+    its default value: it had no effect); then the ones not given whose option is on get the command line's defaults
+    (``train()``'s, :data:`policies.train.ONLY_WITH_DEFAULTS`, but :data:`_CLI_ONLY_WITH_DEFAULTS`); the others stay
+    None (not given, as ``train()`` takes it)."""
+    from policies.train import ONLY_WITH, ONLY_WITH_DEFAULTS, unused_option
+    unused = unused_option(vars(args))
+    if unused is not None:   # before: trained without it, exit 0
+        flag, needs = ("--" + o.replace("_", "-") for o in unused)
+        raise CliError(f"{flag} is only used with {needs}; add {needs} or drop {flag}")
+    for dest, default in {**ONLY_WITH_DEFAULTS, **_CLI_ONLY_WITH_DEFAULTS}.items():
+        if getattr(args, dest) is None and getattr(args, ONLY_WITH[dest]):
             setattr(args, dest, default)
-        elif not getattr(args, needs[2:].replace("-", "_")):   # before: trained without it, exit 0
-            flag = "--" + dest.replace("_", "-")
-            raise CliError(f"{flag} is only used with {needs}; add {needs} or drop {flag}")
 
 
 def _check_train(args):
@@ -175,16 +178,16 @@ def _check_train(args):
     from mission_sim.contract import MAX_HISTORY
     if not 1 <= args.history <= MAX_HISTORY:
         raise CliError(f"--history {args.history} is invalid; valid range: 1..{MAX_HISTORY}")
-    for flag, v in (("--dagger", args.dagger), ("--imitation-episodes", args.imitation_episodes - 1),
-                    ("--imitation-epochs", args.imitation_epochs - 1)):
-        if v < 0:
-            raise CliError(f"{flag} {v + (flag != '--dagger')} is invalid; valid range: >= {int(flag != '--dagger')}")
+    for flag, v, lo in (("--dagger", args.dagger, 0), ("--imitation-episodes", args.imitation_episodes, 1),
+                        ("--imitation-epochs", args.imitation_epochs, 1)):
+        if v is not None and v < lo:
+            raise CliError(f"{flag} {v} is invalid; valid range: >= {lo}")
     if not 0.0 <= args.action_filter < 1.0:
         raise CliError(f"--action-filter {args.action_filter} is invalid; valid range: [0, 1)")
     if args.smooth_penalty < 0.0:
         raise CliError(f"--smooth-penalty {args.smooth_penalty} is invalid; valid range: >= 0")
     from mission_sim.contract import OBS_INDEX
-    for f in (f.strip() for f in args.imitation_mask.split(",") if f.strip()):
+    for f in _imitation_mask(args) or ():
         if f not in OBS_INDEX:
             raise CliError(f"--imitation-mask {f!r} is invalid; valid values: {', '.join(OBS_INDEX)}")
     if args.imitate is not None:
@@ -198,7 +201,7 @@ def _check_train(args):
     for flag, path in (("--hyperparams", args.hyperparams), ("--resume", args.resume)):
         if path is not None:
             check_regular_file(path, flag)  # a FIFO is refused without opening it
-    if not 0 <= args.probe_episodes <= 1024:
+    if args.probe_episodes is not None and not 0 <= args.probe_episodes <= 1024:
         raise CliError(f"--probe-episodes {args.probe_episodes} is invalid; valid range: 0..1024")
     if args.slow_budget is not None:
         from policies.slow_budget import parse_budget_range
@@ -209,8 +212,13 @@ def _check_train(args):
         if args.algo == "dqn" or args.residual or args.imitate or args.action_filter or args.smooth_penalty:
             raise CliError("--slow-budget is invalid with --algo dqn, --residual, --imitate, --action-filter or "
                            "--smooth-penalty; valid: --algo ppo / sac / td3 without them (the duty is the MPC's)")
-    if args.budget is not None and not args.lagrangian:
-        raise CliError("--budget is only used with --lagrangian; add --lagrangian or drop --budget")
+
+
+def _imitation_mask(args) -> tuple | None:
+    """``--imitation-mask``'s fields (None: not given)."""
+    if args.imitation_mask is None:
+        return None
+    return tuple(f.strip() for f in args.imitation_mask.split(",") if f.strip())
 
 
 def _cmd_train(args) -> int:
@@ -246,7 +254,7 @@ def _cmd_train(args) -> int:
                     imitate=args.imitate, dagger=args.dagger, imitation_episodes=args.imitation_episodes,
                     imitation_epochs=args.imitation_epochs, slow_budget=args.slow_budget,
                     slow_budget_every=args.slow_budget_every,
-                    imitation_mask=tuple(f.strip() for f in args.imitation_mask.split(",") if f.strip()))
+                    imitation_mask=_imitation_mask(args))
     except ValueError as exc:
         raise CliError(str(exc)) from None
     for key, path in res.items():

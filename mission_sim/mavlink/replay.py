@@ -115,10 +115,35 @@ def choose_segment(log: FlightLog) -> int:
     return max(range(len(spans)), key=lambda k: score(spans[k]))
 
 
+#: a window may end this much after the log (s): a log's end rounded up (``--window 440,1378`` for a log that ends at
+#: 1377.03 s) is not refused; what lies past it is no part of the replay either way
+WINDOW_END_SLACK_S = 1.0
+
+
+def log_end_s(log: FlightLog) -> float:
+    """The end of ``log``'s time (s): its latest record, or its latest position if that is later."""
+    pos = log.position["t_s"] if len(log.position) else ()
+    return max(float(log.duration_s), float(np.max(pos)) if len(pos) else 0.0)
+
+
+def check_window(log: FlightLog, window: tuple[float, float] | None) -> tuple[float, float] | None:
+    """``window`` (log seconds, or None), a ``ValueError`` naming the log's time range when it ends more than
+    :data:`WINDOW_END_SLACK_S` after the log (:func:`log_end_s`; it was cut to the log without a word). The bound
+    it prints (the end plus the slack, to the ms) is the one it takes."""
+    if window is not None:
+        end = log_end_s(log)
+        bound = round(end + WINDOW_END_SLACK_S, 3)   # (the bound printed is the one taken)
+        if window[1] > bound:
+            raise ValueError(f"--window {window[0]:g},{window[1]:g} is invalid: the log ends at {end:.3f} s; valid: "
+                             f"0 <= T0 < T1 <= {bound:.3f} s of log time (its time range 0..{end:.3f} s; "
+                             f"{WINDOW_END_SLACK_S:g} s allowed for a rounded end)")
+    return window
+
+
 def replay_span(log: FlightLog, window: tuple[float, float] | None = None,
                 segment: int | None = None) -> tuple[tuple[float, float] | None, dict]:
     """The part of ``log`` a replay flies and what to report about it: ``window`` (log seconds) if
-    given, else boot segment ``segment`` (1-based; None: :func:`choose_segment` when the log has
+    given (checked, :func:`check_window`), else boot segment ``segment`` (1-based; None: :func:`choose_segment` when the log has
     more than one; both given: ``ValueError``). Returns (window or None for the whole log, facts for the summary)."""
     spans = log.segments
     n = len(spans)
@@ -130,7 +155,7 @@ def replay_span(log: FlightLog, window: tuple[float, float] | None = None,
     if segment is not None and not 1 <= segment <= n:
         raise ValueError(f"--segment {segment!r} is invalid; valid range: 1..{n} (the log has {n} boot segment(s))")
     if window is not None:
-        return window, {**info, "replayed_segment": None}
+        return check_window(log, window), {**info, "replayed_segment": None}
     if segment is None and n == 1:
         return None, {**info, "replayed_segment": 1}
     k = choose_segment(log) if segment is None else segment - 1
@@ -424,7 +449,8 @@ def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
         t0, t1 = track.t_offset_s + float(track.t_s[i]), track.t_offset_s + float(track.t_s[i + 1])
         out.append(f"{log.path.name}: no position for {t1 - t0:.1f} s while armed (log {t0:.1f}..{t1:.1f} s"
                    + (f"; {len(gaps)} such gaps" if len(gaps) > 1 else "") + "): the replay flies a straight line "
-                   "across it; --window can leave it out")
+                   f"across it; to leave it out, replay the part before or after it: --window T0,{t0:.1f} or "
+                   f"--window {t1:.1f},T1")
     dist = float(np.min(np.hypot(track.pos_m[:, 0], track.pos_m[:, 1])))
     if dist > FAR_PAD_M:
         out.append(f"the pad ({track.pad.lat_deg:.6f}, {track.pad.lon_deg:.6f}) is {dist / 1e3:.0f} km from the "

@@ -59,18 +59,20 @@ def _pad(lat, lon, alt, hover, where: str) -> GeoPad:
 
 
 def _csv(text: str, name: str) -> tuple[GeoPad, ...]:
-    rows = list(csv.reader(io.StringIO(text)))
-    rows = [r for r in rows if any(c.strip() for c in r)]
+    reader = csv.reader(io.StringIO(text))
+    # (the file's line number of each row: the reader's count after it, less the row's own line breaks in quotes)
+    rows = [(reader.line_num - sum(c.count("\n") for c in r), r) for r in reader]
+    rows = [(n, r) for n, r in rows if any(c.strip() for c in r)]
     if not rows:
         raise ValueError(f"{name}: empty pads file; valid: a CSV header lat,lon[,alt][,hover_time_s] and rows")
-    head = [c.strip().lower() for c in rows[0]]
+    head = [c.strip().lower() for c in rows[0][1]]
     col = {k: next((head.index(a) for a in al if a in head), None) for k, al in _ALIASES.items()}
     if col["lat"] is None or col["lon"] is None:
         raise ValueError(f"{name}: header {','.join(head)!r} has no lat / lon column; valid: a CSV header "
                          "lat,lon[,alt][,hover_time_s] (or a GeoJSON FeatureCollection of Points)")
-    _check_other_columns(head, name)
+    _check_other_columns(head, f"{name}: column")
     out = []
-    for i, r in enumerate(rows[1:], start=2):
+    for i, r in rows[1:]:   # i: the line in the file (blank lines counted)
         if any(c.strip() for c in r[len(head):]):   # (a value past the header's columns was dropped without a word)
             raise ValueError(f"{name}: line {i} has {len(r)} values, the header {len(head)} ({','.join(head)}); "
                              "valid: one value per header column (a missing alt / hover_time_s column?)")
@@ -82,17 +84,24 @@ def _csv(text: str, name: str) -> tuple[GeoPad, ...]:
     return tuple(out)
 
 
-def _check_other_columns(head: list, name: str) -> None:
-    """Columns other than the known ones are ignored (a pad's name, a note), except one that looks like a misspelt
-    known column (``hover_time``, ``altitude_m``): its values would be dropped without a word."""
+#: every name of a pad's value a CSV column may have (:data:`_ALIASES`)
+_KNOWN = tuple(a for al in _ALIASES.values() for a in al)
+_CSV_VALID = ("valid columns: " + "; ".join(f"{k} ({', '.join(al[1:])})" for k, al in _ALIASES.items())
+              + " (alt in m AMSL); other columns are ignored")
+_GEOJSON_VALID = ("valid properties: hover_time_s (a pad's position and altitude are its coordinates, [lon, lat] or "
+                  "[lon, lat, alt] in m AMSL); other properties are ignored")
+
+
+def _check_other_columns(head, what: str) -> None:
+    """CSV columns other than a pad value's (:data:`_ALIASES`) are ignored (a pad's name, a note), except one whose
+    name looks like a pad value's (``hover_time``, ``altitude_m``, ``alt_agl``): its values would be dropped without
+    a word. ``what``: the error's start (the file and ``column``)."""
     import difflib
-    known = [a for al in _ALIASES.values() for a in al]
     for c in head:
-        near = difflib.get_close_matches(c, known, n=1, cutoff=0.75) if c not in known else []
+        near = [] if c in _KNOWN else difflib.get_close_matches(c, _KNOWN, n=1, cutoff=0.75)
         if near:
-            valid = "; ".join(f"{k} ({', '.join(al[1:])})" for k, al in _ALIASES.items())
-            raise ValueError(f"{name}: column {c!r} is unknown (did you mean {near[0]!r}?); valid columns: {valid} "
-                             "(alt in m AMSL); other columns are ignored")
+            field = next(k for k, al in _ALIASES.items() if near[0] in al)
+            raise ValueError(f"{what} {c!r} is unknown (did you mean {field!r}?); {_CSV_VALID}")
 
 
 def _geojson(text: str, name: str) -> tuple[GeoPad, ...]:
@@ -116,5 +125,25 @@ def _geojson(text: str, name: str) -> tuple[GeoPad, ...]:
         for c in coords or []:
             if not isinstance(c, list) or len(c) not in (2, 3):
                 raise ValueError(f"{name}: feature {i}: coordinates {c!r} are invalid; valid: [lon, lat] or [lon, lat, alt]")
+        if isinstance(props, dict):
+            _check_geojson_properties(props, any(len(c) == 2 for c in coords or []), f"{name}: feature {i}: property")
+        for c in coords or []:
             out.append(_pad(c[1], c[0], c[2] if len(c) == 3 else None, props.get("hover_time_s"), f"{name}: feature {i}"))
     return tuple(out)
+
+
+def _check_geojson_properties(props, flat: bool, what: str) -> None:
+    """A GeoJSON feature reads only ``hover_time_s`` of its properties; the others are ignored (a name, an id, the
+    ``lat`` / ``lon`` / ``altitude`` that CSV-to-GeoJSON exporters keep beside the coordinates), except those whose
+    values would be lost without a word: a hover time under another name (``hover_s``, ``hover_time``,
+    ``Hover_Time_S``: an alias or a near match) and an altitude (an alias of ``alt``, any case) when the feature's
+    coordinates are 2-D (``flat``; the pad would be on the ground). ``what``: the error's start."""
+    import difflib
+    for c in props:
+        if c == "hover_time_s" or not isinstance(c, str):
+            continue
+        if difflib.get_close_matches(c.lower(), _ALIASES["hover_time_s"], n=1, cutoff=0.75):
+            raise ValueError(f"{what} {c!r} is unknown (did you mean 'hover_time_s'?); {_GEOJSON_VALID}")
+        if flat and c.lower() in _ALIASES["alt"]:
+            raise ValueError(f"{what} {c!r} is ignored (did you mean the coordinates' alt? the feature's coordinates are "
+                             f"2-D, [lon, lat], the pad would be on the ground); {_GEOJSON_VALID}")

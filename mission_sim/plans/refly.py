@@ -162,7 +162,8 @@ def _segment_window(log, window, segment):
     """``window``, or boot segment ``segment``'s span (1-based) when one is asked for and no window is
     given; without either the whole log is re-flown (a log with reboots included)."""
     if segment is None:
-        return window
+        from ..mavlink.replay import check_window
+        return check_window(log, window)
     from ..mavlink.replay import replay_span
     return replay_span(log, window, segment)[0]
 

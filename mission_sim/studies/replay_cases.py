@@ -108,7 +108,9 @@ class _WarmWithLog:
 
 def _study_words(msg: str) -> str:
     """A replay's error or warning in the study file's words (its options are ``[replay]`` keys, not command-line
-    flags: ``--pad`` is ``[replay] pad``, the pads' frame origin with ``pads``)."""
+    flags: ``--pad`` is ``[replay] pad``, the pads' frame origin with ``pads``; ``--window T0,T1`` is ``[replay] window
+    = [T0, T1]``)."""
+    msg = re.sub(r"--window ([\w.+-]+),([\w.+-]+)", r"[replay] window = [\1, \2]", msg)   # (numbers, T0, T1)
     for flag, key in (("--reach", "[replay] reach_m ="), ("--segment", "[replay] segment ="),
                       ("--window", "[replay] window =")):
         msg = msg.replace(flag, key)

@@ -44,7 +44,8 @@ class SweepStatus:
 
 def physics_code_hash(replay: bool = False) -> str:
     """sha256 (16 hex digits) of the sources that compute a mission's numbers: :mod:`wpt_receiver` and
-    :mod:`mission_sim.world` (link, devices, battery, the compiled loop); with ``replay`` also those that
+    :mod:`mission_sim.world` (link, devices, battery, the compiled loop) and the case runner that turns a case's
+    values into the mission it runs (:mod:`mission_sim.studies.mission_cases`); with ``replay`` also those that
     turn a log into a replay or a re-flight (:mod:`mission_sim.mavlink`, :mod:`mission_sim.plans`) and the replay
     runner that decides what a case gives them (:mod:`mission_sim.studies.replay_cases`: origin, options). A sweep
     folder records it, so a resume by another version of that code is refused instead of mixing old and
@@ -54,7 +55,7 @@ def physics_code_hash(replay: bool = False) -> str:
     pkg = Path(__file__).resolve().parents[1]
     roots = (Path(wpt_receiver.__file__).parent, pkg / "world") + ((pkg / "mavlink", pkg / "plans") if replay else ())
     files = sorted((f for root in roots for f in root.rglob("*.py")), key=lambda f: (f.parent.name, f.name))
-    files += [pkg / "studies" / "replay_cases.py"] if replay else []
+    files += [pkg / "studies" / "mission_cases.py"] + ([pkg / "studies" / "replay_cases.py"] if replay else [])
     return dependency_hash(files)[:16]
 
 
