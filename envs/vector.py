@@ -208,15 +208,19 @@ class SbarChargingVectorEnv(VectorEnv):
         """(Re)start the sub-environments ``idx``: each part reset once, in order (scenario draws with their
         generators, plant, objective, observation); returns the observation and info of every row. The
         scenario is the one of ``options`` (a ``reset``) or the last one (an autoreset)."""
-        full = len(idx) == self.num_envs
-        rngs = self._rngs if full else [self._rngs[i] for i in idx]
-        sel = slice(None) if full else idx   # all at once (the usual autoreset): written in place, plain slices
+        sel = self._rows(idx)
+        rngs = self._rngs if isinstance(sel, slice) else [self._rngs[i] for i in idx]
         scenario, plant, objective, observation = self.parts
         win = scenario.reset(rngs, sel, options)
         plan = plant.reset(sel, win)
         objective.reset(sel, win, plan)
         self._k[sel] = 0
         return observation.reset(sel, win, self._k, scenario, plant, objective)
+
+    def _rows(self, idx):
+        """The rows of the distinct windows ``idx``: ``slice(None)`` when they are all of them (the usual autoreset:
+        written in place, plain copies), else ``idx``."""
+        return slice(None) if len(idx) == self.num_envs else idx
 
     def restart(self, idx) -> np.ndarray:
         """Start new episodes in the sub-environments ``idx`` now (same-step autoreset, as
@@ -265,7 +269,7 @@ class SbarChargingVectorEnv(VectorEnv):
         if any_done:
             idx = np.flatnonzero(done)
             obs0, info0 = self._start(idx)
-            sel = slice(None) if idx.size == self.num_envs else idx   # all (the usual autoreset): plain copies
+            sel = self._rows(idx)
             obs[sel] = obs0[sel]
             reward[sel] = 0.0
             truncated[sel] = False

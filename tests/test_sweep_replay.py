@@ -69,6 +69,18 @@ def _study(tmp_path, replay: str, grid: str, name="s.toml", head: str = "") -> P
     return p
 
 
+def _swept_log171(tmp_path, capsys, replay: str, grid: str, pack_extra: str = ""):
+    """A study over log171 (``[replay]`` lines ``replay``, ``[grid]`` lines ``grid``) with the 4S quad's own cell count
+    (``pack_extra``: more ``[battery]`` lines), swept into ``tmp_path / "o"``; it warns once, that the log ends in
+    flight. Its results, the replay command's ``--config`` arguments of the same pack and the study's warning lines."""
+    head, config = _fitting_pack(tmp_path, LOG171, pack_extra)
+    study = _study(tmp_path, replay, grid, head=head)
+    assert _sweep(study, tmp_path / "o") == 0
+    said = _warned(capsys.readouterr().err, "sweep")
+    assert len(said) == 1 and ENDS_ARMED in said[0], said
+    return read_results(tmp_path / "o"), config, said
+
+
 def _sweep(study, out, *extra) -> int:
     return main(["sweep", str(study), "--out", str(out), "--workers", "0", "--no-plot", "--no-progress",
                  "--format", "json", *extra])
@@ -140,12 +152,8 @@ def test_a_refly_case_equals_the_replay_command_with_pads_drone_and_set(tmp_path
 def test_a_replay_case_without_pads_equals_the_replay_command(tmp_path, capsys, warnings_shown):
     """log171's 4S quad replayed with its own cell count; the log ends in flight, which both the study and the
     command say (once)."""
-    head, config = _fitting_pack(tmp_path, LOG171, "capacity_ah = 1.5\n")   # [study] base = the replay's --config
-    study = _study(tmp_path, f'log = "{LOG171}"', '"drone.mass_kg" = [1.0, 1.83]', head=head)
-    assert _sweep(study, tmp_path / "o") == 0
-    df = read_results(tmp_path / "o")
-    said = _warned(capsys.readouterr().err, "sweep")
-    assert len(said) == 1 and ENDS_ARMED in said[0], said
+    df, config, said = _swept_log171(tmp_path, capsys, f'log = "{LOG171}"', '"drone.mass_kg" = [1.0, 1.83]',
+                               "capacity_ah = 1.5\n")   # [study] base = the replay's --config
     row = df[df["drone.mass_kg"] == 1.83].iloc[0]
     assert main(["replay", str(LOG171), *config, "--set", "drone.mass_kg=1.83",
                  "--out", str(tmp_path / "r"), "--format", "json", "--no-plot", "--no-progress"]) == 0
@@ -164,12 +172,7 @@ def test_a_replay_case_with_pad_equals_the_replay_command_with_pad(tmp_path, cap
     take-off spot of log171 (590.82 m AMSL), ~15 m south-east of it. The 4S quad's own cell count; the log ends in
     flight, which the study says."""
     pad = "-35.36245,149.16595,589.5"
-    head, config = _fitting_pack(tmp_path, LOG171)
-    study = _study(tmp_path, f'log = "{LOG171}"\npad = "{pad}"', '"drone.mass_kg" = [1.0, 1.83]', head=head)
-    assert _sweep(study, tmp_path / "o") == 0
-    df = read_results(tmp_path / "o")
-    said = _warned(capsys.readouterr().err, "sweep")
-    assert len(said) == 1 and ENDS_ARMED in said[0], said
+    df, config, said = _swept_log171(tmp_path, capsys, f'log = "{LOG171}"\npad = "{pad}"', '"drone.mass_kg" = [1.0, 1.83]')
     row = df[df["drone.mass_kg"] == 1.83].iloc[0]
     out = [*config, "--out", str(tmp_path / "r"), "--format", "json", "--no-plot", "--no-progress"]
     assert main(["replay", str(LOG171), f"--pad={pad}", "--set", "drone.mass_kg=1.83", *out]) == 0
@@ -506,12 +509,7 @@ def test_a_depleted_replay_case_counts_the_commands_warnings(tmp_path, capsys, w
     """The command warned where the battery ran out, the study's row did not count it (n_warnings differed):
     both now take the summary's one list (mission_sim.mavlink.replay.replay_summary_warnings). The 4S quad's own
     cell count; the log ends in flight, which the study says."""
-    head, config = _fitting_pack(tmp_path, LOG171)
-    study = _study(tmp_path, f'log = "{LOG171}"', '"battery.capacity_ah" = [0.05, 1.5]', head=head)
-    assert _sweep(study, tmp_path / "o") == 0
-    df = read_results(tmp_path / "o")
-    said = _warned(capsys.readouterr().err, "sweep")
-    assert len(said) == 1 and ENDS_ARMED in said[0], said
+    df, config, said = _swept_log171(tmp_path, capsys, f'log = "{LOG171}"', '"battery.capacity_ah" = [0.05, 1.5]')
     row = df[df["battery.capacity_ah"] == 0.05].iloc[0]
     assert main(["replay", str(LOG171), *config, "--set", "battery.capacity_ah=0.05", "--out", str(tmp_path / "r"),
                  "--format", "json", "--no-plot", "--no-progress"]) == 0

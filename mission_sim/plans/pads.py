@@ -96,12 +96,18 @@ def _check_other_columns(head, what: str) -> None:
     """CSV columns other than a pad value's (:data:`_ALIASES`) are ignored (a pad's name, a note), except one whose
     name looks like a pad value's (``hover_time``, ``altitude_m``, ``alt_agl``): its values would be dropped without
     a word. ``what``: the error's start (the file and ``column``)."""
-    import difflib
     for c in head:
-        near = [] if c in _KNOWN else difflib.get_close_matches(c, _KNOWN, n=1, cutoff=0.75)
-        if near:
-            field = next(k for k, al in _ALIASES.items() if near[0] in al)
+        field = None if c in _KNOWN else _near_field(c, _KNOWN)
+        if field:
             raise ValueError(f"{what} {c!r} is unknown (did you mean {field!r}?); {_CSV_VALID}")
+
+
+def _near_field(name: str, names=_KNOWN) -> str | None:
+    """The pad value (a key of :data:`_ALIASES`) one of whose ``names`` ``name`` nearly matches (a misspelling), or
+    None."""
+    import difflib
+    near = difflib.get_close_matches(name, names, n=1, cutoff=0.75)
+    return next(k for k, al in _ALIASES.items() if near[0] in al) if near else None
 
 
 def _geojson(text: str, name: str) -> tuple[GeoPad, ...]:
@@ -138,11 +144,10 @@ def _check_geojson_properties(props, flat: bool, what: str) -> None:
     values would be lost without a word: a hover time under another name (``hover_s``, ``hover_time``,
     ``Hover_Time_S``: an alias or a near match) and an altitude (an alias of ``alt``, any case) when the feature's
     coordinates are 2-D (``flat``; the pad would be on the ground). ``what``: the error's start."""
-    import difflib
     for c in props:
         if c == "hover_time_s" or not isinstance(c, str):
             continue
-        if difflib.get_close_matches(c.lower(), _ALIASES["hover_time_s"], n=1, cutoff=0.75):
+        if _near_field(c.lower(), _ALIASES["hover_time_s"]):
             raise ValueError(f"{what} {c!r} is unknown (did you mean 'hover_time_s'?); {_GEOJSON_VALID}")
         if flat and c.lower() in _ALIASES["alt"]:
             raise ValueError(f"{what} {c!r} is ignored (did you mean the coordinates' alt? the feature's coordinates are "

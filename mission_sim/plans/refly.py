@@ -161,11 +161,8 @@ def refly_base(base: dict, pads, origin, pads_name: str = "pads") -> dict:
 def _segment_window(log, window, segment):
     """``window``, or boot segment ``segment``'s span (1-based) when one is asked for and no window is
     given; without either the whole log is re-flown (a log with reboots included)."""
-    if segment is None:
-        from ..mavlink.replay import check_window
-        return check_window(log, window)
-    from ..mavlink.replay import replay_span
-    return replay_span(log, window, segment)[0]
+    from ..mavlink.replay import check_window, replay_span
+    return check_window(log, window) if segment is None else replay_span(log, window, segment)[0]
 
 
 def plan_refly(log, cfg, *, pad=None, ground_gap_m=None, window=None, reach_m: float = DEFAULT_REACH_M,
