@@ -51,7 +51,7 @@ Parts = namedtuple("Parts", "scenario plant objective observation")
 
 
 #: memory of one sub-environment per step of its window, bytes (the step-major per-step arrays and a reset's draws;
-#: ~29 kB a sub-environment at n_steps = 300). An upper estimate: the process's resident memory (RSS, which counts
+#: ~29 kB a sub-environment at n_steps = 300). A rough estimate, not a bound: the process's resident memory (RSS, which counts
 #: numba's allocations; tracemalloc's peak does not) grew by 23-26 B per env and step with the envelope link and 34-46 B
 #: with the modal link over construction, reset and a whole episode of 2,000 and 8,000 envs after a warm-up
 #: (2026-11-27, /proc VmRSS / VmHWM); a review measured 102-117 B (envelope) and 19-46 B (modal), so 96 B is about the
@@ -114,7 +114,7 @@ class SbarChargingVectorEnv(VectorEnv):
         self.render_mode = None
         self.scenario = get_scenario(scenario)
         self.config = c = as_config(config)
-        _check_memory(int(num_envs), c.n_steps)
+        _check_memory(self.num_envs, c.n_steps)
         self.history = history
         self.single_observation_space = spaces.Box(-1.0, 1.0, (history_obs_dim(history),), np.float32)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
