@@ -349,10 +349,10 @@ def test_dead_time_start_at_rest_with_c1_at_vdc_advances(alarm, devices, sign):
 
 def test_zero_length_events_raise_instead_of_hanging(alarm, monkeypatch):
     """If the guards ever disagree with the mode rules, the model stops with a clear error."""
-    import wpt_receiver.switching.link as lk
-    link = SwitchingLink(P, SwitchingConfig(dead_time_s=3e-7), compiled=False)  # patches reach the reference loop
-    monkeypatch.setattr(lk, "_first_event", lambda *a: (0.0, 0))
-    monkeypatch.setattr(link, "_after_event", lambda x, sec, p, s, ch: (p, s))
+    import wpt_receiver.switching.compiled as ck
+    link = SwitchingLink(P, SwitchingConfig(dead_time_s=3e-7), compiled=False)  # the interpreted loop sees the patches
+    monkeypatch.setattr(ck, "_first_event", lambda *a: (0.0, 0))
+    monkeypatch.setattr(ck, "_after_event", lambda x, sec, p, s, *rules: (p, s))
     with pytest.raises(ArithmeticError, match="zero-length events"):
         link.run(link.schedule(0.0, 4 * T, 0.0), link.periodic_steady_state(0.0))
 

@@ -1,14 +1,18 @@
-"""The event loop of :class:`~.link.SwitchingLink` compiled with numba (``cache=True``).
+"""The event loop of :class:`~.link.SwitchingLink`, once, compiled with numba (``cache=True``).
 
-The same algorithm as the pure-Python/numpy reference in :mod:`.link` (which the tests compare
-it against to 1e-9): exact modal stepping between events, guard bracketing on the precomputed
-grid of exponentials, safeguarded Newton on the exact solution (:func:`refine`), the diode and
-freewheel rules after an event and at a drive change. All devices of the switching link are
+Exact modal stepping between events, guard bracketing on the precomputed grid of exponentials,
+safeguarded Newton on the exact solution (:func:`refine`), the diode and freewheel rules after an
+event (:func:`_after_event`) and at a drive change (:func:`_modes`). This is the one source of those
+rules: :class:`~.link.SwitchingLink` builds the circuit and packs its arrays (:func:`pack`), then calls
+:func:`run_kernel` (with ``compiled=False`` its ``py_func``: the same source run by the interpreter);
+the slow ``solve_ivp`` reference (:mod:`.ivp`) calls :func:`_modes` and :func:`_after_event` for its
+mode decisions. (Until 2026-11-27 :mod:`.link` held a second, pure-Python/numpy copy of this loop
+that the tests compared against to 1e-9.) All devices of the switching link are
 covered because they only change the topology matrices, guard rows and threshold rows, which
 are packed here as arrays.
 
 This module imports numba at import time, so nothing imports it at module level:
-:meth:`~.link.SwitchingLink.run` imports it on the first compiled run (the compiled code is
+:meth:`~.link.SwitchingLink.run` imports it on the first run (the compiled code is
 cached on disk by numba; the first process compiles, ~10 s, later ones load it).
 
 Packed arrays (``nk`` topologies in the order of :attr:`.circuit.Circuit.keys`, ``m`` states):
@@ -44,7 +48,7 @@ def pack(link) -> dict:
     grows = np.zeros((nk, 2, 3, 4, m), dtype=complex)
     gnum = np.zeros((nk, 2, 3), dtype=np.int64)
     gsec = np.zeros((nk, 2, 3), dtype=np.int64)
-    for (k, gate, cmd), (rows, ns, _) in link._guard_table.items():
+    for (k, gate, cmd), (rows, ns) in link._guard_table.items():
         c = (1, -1, 0).index(cmd)
         if rows is not None:
             grows[k, gate, c, :len(rows)] = rows
@@ -134,19 +138,24 @@ def _matvec(a, v):
 # ---------------------------------------------------------------------------- mode rules
 @njit(cache=True)
 def _secondary_at_zero(x, p, v2open, sec_th):
+    """Diode state when i2 = 0 and the gate is off: by the open-circuit voltage against the output voltage
+    plus the forward drops."""
     v, th = _dot(x, v2open[_pidx(p)]), _dot(x, sec_th)
     return 1 if v > th else (-1 if v < -th else S_OPEN)
 
 
 @njit(cache=True)
 def _primary_at_zero(x, s, v1open, pri_th):
+    """Inverter freewheel state when i1 = 0 during dead time (+-2 = freewheeling)."""
     v = _dot(x, v1open[_sidx(s)])
     return 2 if v > pri_th else (-2 if v < -pri_th else P_OPEN)
 
 
 @njit(cache=True)
 def _modes(x, cmd, gate, v2open, v1open, sec_th, pri_th):
-    """Modes after a drive change (the rule of ``SwitchingLink._modes``)."""
+    """Modes after a drive change: the inverter follows its command (in dead time the current freewheels
+    through the diodes opposite to its sign), the SBAR shorts while the gate is on, else the diode pair of
+    the current's sign conducts; a zero current is decided by the open-circuit voltage."""
     if cmd != 0:
         p = cmd
     else:
@@ -166,7 +175,8 @@ def _modes(x, cmd, gate, v2open, v1open, sec_th, pri_th):
 
 @njit(cache=True)
 def _after_event(x, secondary, p, s, chatter, v2open, v1open, sec_th, pri_th):
-    """New modes after a guard event (the rule of ``SwitchingLink._after_event``; ``x`` in place)."""
+    """New modes after a guard event (``x`` is modified in place: a current that stops is set to 0).
+    ``chatter``: several zero-length events in a row; take the blocked state."""
     if secondary:
         if s == 1 or s == -1 or chatter:
             x[I2] = 0.0
@@ -189,8 +199,8 @@ def _after_event(x, secondary, p, s, chatter, v2open, v1open, sec_th, pri_th):
 # ---------------------------------------------------------------------------- events
 @njit(cache=True)
 def refine(c, lam, a, ga, b, gb, tol):
-    """Root of ``g(t) = Re(sum c exp(lam t))`` in ``[a, b]`` with ``g(a) > 0 >= g(b)`` (the
-    safeguarded Newton iteration of ``link._refine``)."""
+    """Root of ``g(t) = Re(sum c exp(lam t))`` in ``[a, b]`` with ``g(a) > 0 >= g(b)``: Newton on the exact
+    solution, safeguarded by bisection."""
     if ga <= 0.0:
         return a
     t = a + (b - a) * ga / (ga - gb)
@@ -226,8 +236,8 @@ def _guard_at(rows, g, gk, j, z):
 
 @njit(cache=True)
 def _first_event(z, z_end, rows, ng, gk, lam, h, tau, tol):
-    """First guard crossing in ``(0, tau]``: ``(dt, guard index)``, guard index -1 = none
-    (the bracketing of ``link._first_event``)."""
+    """First guard crossing in ``(0, tau]`` for modal state ``z``: ``(dt, guard index)``, guard index -1 =
+    none. The first grid step where a guard is <= 0 brackets the root, refined by :func:`refine`."""
     nj = int(tau / h)
     jh = nj
     for j in range(min(nj, gk.shape[0] - 1)):
@@ -289,7 +299,7 @@ def run_kernel(ts, cmds, gates, x0, lam, vec, inv, trans, grid, grows, gnum, gse
                h, T, cap, max_zero):
     """Integrate the schedule exactly from ``x0``. Returns ``(status, n, seg_t, seg_k, seg_z)``:
     ``status`` OK, FULL (more than ``cap`` segments: call again with more) or STUCK (more than
-    ``max_zero`` zero-length events in a row; the reference path then raises its error)."""
+    ``max_zero`` zero-length events in a row; :meth:`~.link.SwitchingLink.run` then raises)."""
     m = x0.shape[0]
     seg_t = np.empty(cap + 1)
     seg_k = np.empty(cap, dtype=np.int64)

@@ -2,7 +2,8 @@
 
 The right-hand side and the guards are written directly from eq. 1 and the device equations
 (:mod:`wpt_receiver.devices`), not from the topology matrices of :mod:`.circuit`; only the mode
-decisions at a drive change or a zero current are shared with :class:`~.link.SwitchingLink`.
+decisions at a drive change or a zero current are shared with :class:`~.link.SwitchingLink` (the
+functions of :mod:`.compiled`, called on the link's packed arrays).
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import LinkParams
-from .circuit import I1, I2, P_OPEN, S_OPEN, Circuit, SwitchingConfig
+from .circuit import P_OPEN, S_OPEN, Circuit, SwitchingConfig
 from .schedule import Schedule
 
 __all__ = ["simulate_ivp"]
@@ -83,27 +84,6 @@ def _guard_factory(P, cfg, cir, p, s, cmd, gate):
     return fns
 
 
-def _after_event(helper, cir, kind, xa, p, s):
-    """Modes after a terminal event, the same rules as the exact stepper."""
-    if kind == "sec":
-        if s in (1, -1):
-            xa[I2] = 0.0
-            s = helper._secondary_at_zero(xa, p)
-        else:
-            s = 1 if xa @ cir.v2_open_row(p) > 0 else -1
-        if s == S_OPEN:
-            xa[I2] = 0.0
-    else:
-        if p in (2, -2):
-            xa[I1] = 0.0
-            p = helper._primary_at_zero(xa, s)
-        else:
-            p = 2 if xa @ cir.v1_open_row(s) > 0 else -2
-        if p == P_OPEN:
-            xa[I1] = 0.0
-    return p, s
-
-
 def simulate_ivp(params: LinkParams, cfg: SwitchingConfig, schedule: Schedule, x0, rtol: float = 1e-10,
                  atol: float = 1e-10, method: str | None = None, t_eval=None):
     """Slow reference: the same circuit integrated by ``scipy.integrate.solve_ivp`` between
@@ -114,19 +94,21 @@ def simulate_ivp(params: LinkParams, cfg: SwitchingConfig, schedule: Schedule, x
     (``r_bat_ohm * c_out_f < T / 10``): an explicit method then loses accuracy on the fast mode."""
     from scipy.integrate import solve_ivp
 
-    from .link import SwitchingLink  # mode decisions (diode / freewheel rules) are shared
+    from .compiled import _after_event, _modes, pack  # mode decisions (diode / freewheel rules) are shared
+    from .link import SwitchingLink
     cir = Circuit(params, cfg)
     if method is None:
         stiff = cir.has_cap and cfg.r_bat_ohm * cfg.c_out_f < cir.T / 10
         method = "Radau" if stiff else "DOP853"
-    helper = SwitchingLink(params, cfg)
+    a = pack(SwitchingLink(params, cfg))
+    rules = (a["v2open"], a["v1open"], a["sec_th"], a["pri_th"])
     x = np.array(x0, dtype=float)[:cir.n]
     pieces = []  # (t_a, t_b, OdeSolution)
     p = s = None
     for j in range(len(schedule.cmd)):
         t, t_b = float(schedule.t[j]), float(schedule.t[j + 1])
         cmd, gate = int(schedule.cmd[j]), int(schedule.gate[j])
-        p, s = helper._modes(np.append(x, 1.0), cmd, gate, p, s)
+        p, s = _modes(np.append(x, 1.0), cmd, gate, *rules)
         while t < t_b:
             gl = _guard_factory(params, cfg, cir, p, s, cmd, gate)
             sol = solve_ivp(_rhs_factory(params, cfg, cir, p, s), (t, t_b), x, method=method, rtol=rtol, atol=atol,
@@ -137,7 +119,7 @@ def simulate_ivp(params: LinkParams, cfg: SwitchingConfig, schedule: Schedule, x
                 which = [i for i, e in enumerate(sol.t_events) if len(e)][0]
                 xa = np.append(sol.y_events[which][0], 1.0)
                 t = float(sol.t_events[which][0])
-                p, s = _after_event(helper, cir, gl[which][0], xa, p, s)
+                p, s = _after_event(xa, gl[which][0] == "sec", p, s, False, *rules)
                 x = xa[:cir.n]
             else:
                 t = t_b
