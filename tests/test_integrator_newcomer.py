@@ -525,7 +525,8 @@ def test_reading_a_log_or_its_mission_leaves_no_file_open():
 def test_a_log_whose_reader_fails_to_build_leaves_no_file_open(tmp_path):
     """2026-11-27: a DataFlash log with a format pymavlink refuses (its reader's constructor raises): open_log left the
     half-built reader's file to the collector, a ResourceWarning in whichever later test collected it (under -n 2,
-    test_reading_a_log_or_its_mission_leaves_no_file_open failed by it). read_log and uploaded_mission close it."""
+    test_reading_a_log_or_its_mission_leaves_no_file_open failed by it). read_log and uploaded_mission close it; a
+    broken PX4 ULog's file (pyulog's, given the name) as well."""
     import gc
     import warnings
 
@@ -535,10 +536,13 @@ def test_a_log_whose_reader_fails_to_build_leaves_no_file_open(tmp_path):
     i = data.index(b"BIHBcLLeeEefI")                   # the GPS format, with a format char pymavlink does not know
     bad = tmp_path / "badfmt.bin"
     bad.write_bytes(data[:i] + b"BIHBcLLeeEefX" + data[i + 13:])
+    ulg = tmp_path / "broken.ulg"                      # a PX4 ULog's magic, then no valid header: pyulog's file too
+    ulg.write_bytes((Path(__file__).parent / "data" / "flightlogs" / "pyulog_sample_log_small.ulg").read_bytes()[:7] + b"garbage")
     gc.collect()                                       # (what earlier tests left is not this test's)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ResourceWarning)
         assert "Unsupported format char" in read_log(bad).errors[0]
+        assert read_log(ulg).errors[0].startswith("pyulog: ")
         with pytest.raises(ValueError, match="could not be parsed"):
             uploaded_mission(bad)
         gc.collect()
