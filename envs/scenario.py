@@ -419,6 +419,7 @@ class ScenarioPart:
         self.fill = fill   # the draws' fill (draw_episodes' with the chunks last), None: the generators' own calls
         self.chunks = chunks   # () -> the parallel chunks of the draws and the command profile (threads set); None: one
         self.compiled = compiled   # False: the command profile's source uncompiled (tests)
+        self._chunks = 1   # the current reset's chunks (:meth:`_fill_chunks`)
 
     def reset(self, rngs, idx, options=KEEP) -> Window:
         """Windows ``idx`` (a slice for all, or indices of the stores' columns) start, drawn with ``rngs``
@@ -429,8 +430,8 @@ class ScenarioPart:
         full = isinstance(idx, slice)
         # the normals drawn times the noise's standard deviation; all windows (the usual autoreset): into the
         # noise store, and the command into its store, no temporaries
-        chunks = 1 if self.chunks is None else self.chunks()   # (once: the draws' and the command profile's)
-        fill = None if self.fill is None else (lambda r, u, z, s: self.fill(r, u, z, s, chunks))
+        chunks = self._chunks = 1 if self.chunks is None else self.chunks()   # (once: the draws' and the command's)
+        fill = None if self.fill is None else self._fill_chunks
         draws = draw_episodes(rngs, scn, T, fill, noise=self.noise.T if full else None, scale=scn.i2_noise_a)
         n = draws.n
         cmd = command_profile(draws, T, self.dt_s, out=self.cmd if full else None, n_chunks=chunks,
@@ -440,3 +441,7 @@ class ScenarioPart:
         if not full:
             self.cmd[:, idx], self.noise[:, idx] = cmd.T, noise.T
         return Window(draws, cmd, noise, np.full(n, scn.load_power_w), scn)
+
+    def _fill_chunks(self, rngs, u, noise, scale) -> bool:
+        """:func:`draw_episodes`' ``fill``: the part's ``fill`` in the current reset's chunks (a lambda built per reset)."""
+        return self.fill(rngs, u, noise, scale, self._chunks)

@@ -50,13 +50,17 @@ __all__ = ["SbarChargingVectorEnv", "SbarChargingDiscreteVectorEnv", "Parts"]
 Parts = namedtuple("Parts", "scenario plant objective observation")
 
 
-#: memory of one sub-environment per step of its window, bytes (the step-major per-step arrays and a reset's draws;
-#: ~29 kB a sub-environment at n_steps = 300). A rough estimate, not a bound: the process's resident memory (RSS, which counts
-#: numba's allocations; tracemalloc's peak does not) grew by 23-26 B per env and step with the envelope link and 34-46 B
-#: with the modal link over construction, reset and a whole episode of 2,000 and 8,000 envs after a warm-up
-#: (2026-11-27, /proc VmRSS / VmHWM); a review measured 102-117 B (envelope) and 19-46 B (modal), so 96 B is about the
-#: envelope link's worst figure and lenient for the modal link
-BYTES_PER_ENV_STEP = 96
+#: memory of one sub-environment per step of its window, bytes, by link model (the step-major per-step arrays, the
+#: per-segment plans and a reset's draws and temporaries; ~36 kB / ~19 kB a sub-environment at n_steps = 300). Measured
+#: (2026-11-27 midday, tests/test_python_api_newcomer.py checks it): tracemalloc's peak over construction and the first
+#: reset (the peak of a whole episode is the reset's), after a warm-up, per env and step (n_steps + 1), N = 64-8192:
+#: envelope 92-94 B (scenario random), 89-96 B (detuned_wide), 25-30 B (nominal: no per-segment coupling plans);
+#: modal 44-49 B (random, nominal), 47-53 B (detuned_wide). Held after the reset: envelope 22-53 B, modal 32-36 B. The
+#: process's resident memory (RSS, which also counts numba's allocations) grew by 23-26 B (envelope) and 34-46 B (modal)
+#: over a whole episode of 2,000 and 8,000 envs, a review's figures 102-117 B and 19-46 B. So: an upper estimate of
+#: the traced peak with ~25 % room (the envelope link's worst RSS figure covered), lenient for the nominal scenario
+#: (was one 96 B for both links: 2x the modal link's peak)
+BYTES_PER_ENV_STEP = {"envelope": 120, "modal": 64}
 
 
 def _physical_memory() -> int | None:
@@ -69,12 +73,12 @@ def _physical_memory() -> int | None:
     return have if have > 0 else None   # (sysconf's -1: unknown; it refused every num_envs)
 
 
-def _check_memory(num_envs: int, n_steps: int) -> None:
+def _check_memory(num_envs: int, n_steps: int, link_model: str) -> None:
     """``ValueError`` before anything is allocated when ``num_envs`` windows of ``n_steps`` would need more memory
     than the machine has (``SbarChargingVectorEnv(10**7)`` ended in numpy's ``MemoryError`` after seconds of
     allocating), naming the memory needed and the largest ``num_envs`` that fits; no check where the memory is
     unknown."""
-    per = BYTES_PER_ENV_STEP * (n_steps + 1)
+    per = BYTES_PER_ENV_STEP[link_model] * (n_steps + 1)
     have = _physical_memory()
     if have is not None and num_envs * per > have:
         raise ValueError(f"num_envs={num_envs:,} is invalid: it would need ~{num_envs * per / 2**30:.3g} GiB of memory "
@@ -114,7 +118,7 @@ class SbarChargingVectorEnv(VectorEnv):
         self.render_mode = None
         self.scenario = get_scenario(scenario)
         self.config = c = as_config(config)
-        _check_memory(self.num_envs, c.n_steps)
+        _check_memory(self.num_envs, c.n_steps, c.link_model)
         self.history = history
         self.single_observation_space = spaces.Box(-1.0, 1.0, (history_obs_dim(history),), np.float32)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)

@@ -8,6 +8,8 @@
                     file) and the writer lock of an output folder
 ``signals``         SIGTERM handled like Ctrl-C (:class:`Interrupted`, exit 130 / 143)
 ``config``          the mission configuration (TOML, ``default_mission.toml``), ``--set`` overrides
+``train_options``   ``policies.train``'s options that act only with another (``ONLY_WITH``), numpy-free: ``dronewpt
+                    train`` refuses a misuse before importing ``policies``
 ``setup_warnings``  what a mission's setup gets likely wrong, one line each (a link outside the exact-mode
                     model's checked range, a pad the route never comes near, a policy for another link)
 ``world/``          the physical world: trajectory, wind, drone power, battery, the link step,

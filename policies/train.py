@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from mission_sim.files import atomic_output
+from mission_sim.train_options import ONLY_WITH, unused_option
 
 from .rl import ALGOS
 
@@ -43,26 +44,12 @@ EVAL_SEED = 900_000
 CLONE_NAME = "clone"   #: ``train --imitate`` with fine-tuning: the clone's files are clone.zip / .json / _vecnormalize.pkl
 VEC_PATHS = ("batched", "make_vec_env")
 
-#: train's options that have an effect only with another one: {option: the option it needs}. One given (not None)
-#: without it is refused, by :func:`train` (``ValueError``) and ``dronewpt train`` (exit 2) alike (:func:`unused_option`)
-ONLY_WITH = {"lambda_lr": "lagrangian", "probe_episodes": "lagrangian", "residual_scale": "residual",
-             "residual_base_budget": "residual", "dagger": "imitate", "imitation_episodes": "imitate",
-             "imitation_epochs": "imitate", "imitation_mask": "imitate", "slow_budget_every": "slow_budget",
-             "budget": "lagrangian"}
-#: :func:`train`'s values of :data:`ONLY_WITH`'s options not given (``budget``'s None: the ramp policy's cost);
-#: the command line has its own (its ``--imitation-epochs`` is 60)
+#: :func:`train`'s values of :data:`ONLY_WITH`'s options not given (``budget``'s None: the ramp policy's cost), read
+#: here only (:func:`_only_with_values`; ``dronewpt train`` hands None on, but its own ``--imitation-epochs`` 60).
+#: :data:`ONLY_WITH` and :func:`unused_option` live in the numpy-free :mod:`mission_sim.train_options`
 ONLY_WITH_DEFAULTS = {"lambda_lr": 50.0, "probe_episodes": 32, "residual_scale": 0.25, "residual_base_budget": 0.0,
                       "dagger": 0, "imitation_episodes": 64, "imitation_epochs": 30, "imitation_mask": ("last_d_short",),
                       "slow_budget_every": "window"}
-
-
-def unused_option(opts: Mapping) -> tuple[str, str] | None:
-    """``(option, the option it needs)`` for the first option of :data:`ONLY_WITH` that ``opts`` gives (a value other
-    than None, even the default's) while the option it needs is off (False, None or empty); None when there is none."""
-    for opt, needs in ONLY_WITH.items():
-        if opts.get(opt) is not None and not opts.get(needs):
-            return opt, needs
-    return None
 
 
 def _only_with_values(given: dict) -> dict:

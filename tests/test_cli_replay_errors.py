@@ -66,12 +66,14 @@ def test_a_window_that_ends_after_the_log_is_refused_not_cut(capsys, tmp_path, p
                     "time (its time range 0..1377.029 s; 1 s allowed for a rounded end)")
     assert not (tmp_path / "o").exists()
     from mission_sim.mavlink.logs import read_log
-    from mission_sim.mavlink.replay import replay_span
-    assert replay_span(read_log(log), (440.0, 1378.0))[0] == (440.0, 1378.0)
-    # the bound the message gives is the one taken (it printed the log's end, 1 s short of it)
-    assert replay_span(read_log(log), (440.0, 1378.029))[0] == (440.0, 1378.029)
+    from mission_sim.mavlink.replay import replay_span, track_from_log
+    flight = read_log(log)
+    assert replay_span(flight, (440.0, 1378.0))[0] == (440.0, 1378.0)
+    # the bound the message gives is the one taken (it printed the log's end, 1 s short of it); track_from_log, which
+    # cuts the log to the window, checks it (every path: replay, calibrate, refly, the studies)
+    assert track_from_log(flight, window=(440.0, 1378.029)).t_offset_s >= 440.0
     with pytest.raises(ValueError, match=r"T1 <= 1378\.029 s"):
-        replay_span(read_log(log), (440.0, 1378.03))
+        track_from_log(flight, window=(440.0, 1378.03))
 
 
 @pytest.mark.parametrize("argv,needle", [

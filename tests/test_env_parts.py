@@ -164,3 +164,27 @@ def test_history_is_the_observation_part_frame_stack():
             np.testing.assert_array_equal(single.step(a[0])[0], oK[0])
     with pytest.raises(ValueError, match="history"):
         SbarChargingVectorEnv(2, history=0)
+
+
+def test_the_scenario_part_hands_its_fill_the_resets_chunks_without_a_function_per_reset():
+    """2026-11-27 midday: ScenarioPart.reset built a lambda per reset (the draws' fill with the reset's chunks); a
+    method reads them now. The fill gets the chunks of its reset (2, then 3) and the draws are the generators' when it
+    declines (False), as before (benchmarks/env_bits.py cases 0-5: the same fingerprints as main)."""
+    import types
+
+    from envs.scenario import ScenarioPart
+    assert not [c for c in ScenarioPart.reset.__code__.co_consts if isinstance(c, types.CodeType)]
+    n, T, seen, chunks = 3, 10, [], iter([2, 3])
+
+    def fill(rngs, u, noise, scale, k):
+        seen.append(k)
+        return False
+
+    part = ScenarioPart("random", T, 1e-4, np.zeros((T + 1, n)), np.zeros((T, n)), fill, lambda: next(chunks))
+    plain = ScenarioPart("random", T, 1e-4, np.zeros((T + 1, n)), np.zeros((T, n)))
+    for _ in range(2):
+        a = part.reset([np.random.default_rng(s) for s in range(n)], slice(None))
+        b = plain.reset([np.random.default_rng(s) for s in range(n)], slice(None))
+        np.testing.assert_array_equal(a.noise_a, b.noise_a)
+        np.testing.assert_array_equal(a.cmd_a, b.cmd_a)
+    assert seen == [2, 3]

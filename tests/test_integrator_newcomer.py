@@ -287,6 +287,7 @@ def test_telemetry_streams_your_own_mission_file(tmp_path, capsys):
     pos = []
     while (g := m.recv_match(type="GLOBAL_POSITION_INT", blocking=False)) is not None:
         pos.append((g.lat * 1e-7, g.lon * 1e-7, g.relative_alt * 1e-3))
+    m.close()
     pos = np.array(pos)
     assert np.abs(pos[0, :2] - [47.397742, 8.545594]).max() < 1e-4          # starts at the plan's home (Zurich)
     assert pos[:, 2].max() == pytest.approx(20.0, abs=0.5)                   # the plan's 20 m above home
@@ -517,5 +518,32 @@ def test_reading_a_log_or_its_mission_leaves_no_file_open():
         for name in ("dronekit-python_flight.tlog", "dronekit-la-testdata_log171.bin", "uavlogviewer_vtol_sitl.tlog"):
             read_log(logs / name)
         uploaded_mission(logs / "uavlogviewer_vtol_sitl.tlog")
+        gc.collect()
+    assert not [w for w in caught if issubclass(w.category, ResourceWarning)], [str(w.message) for w in caught]
+
+
+def test_a_log_whose_reader_fails_to_build_leaves_no_file_open(tmp_path):
+    """2026-11-27: a DataFlash log with a format pymavlink refuses (its reader's constructor raises): open_log left the
+    half-built reader's file to the collector, a ResourceWarning in whichever later test collected it (under -n 2,
+    test_reading_a_log_or_its_mission_leaves_no_file_open failed by it). read_log and uploaded_mission close it; a
+    broken PX4 ULog's file (pyulog's, given the name) as well."""
+    import gc
+    import warnings
+
+    from mission_sim.mavlink.logs import read_log
+    from mission_sim.plans.items import uploaded_mission
+    data = (Path(__file__).parent / "data" / "flightlogs" / "dronekit-la-testdata_log171.bin").read_bytes()
+    i = data.index(b"BIHBcLLeeEefI")                   # the GPS format, with a format char pymavlink does not know
+    bad = tmp_path / "badfmt.bin"
+    bad.write_bytes(data[:i] + b"BIHBcLLeeEefX" + data[i + 13:])
+    ulg = tmp_path / "broken.ulg"                      # a PX4 ULog's magic, then no valid header: pyulog's file too
+    ulg.write_bytes((Path(__file__).parent / "data" / "flightlogs" / "pyulog_sample_log_small.ulg").read_bytes()[:7] + b"garbage")
+    gc.collect()                                       # (what earlier tests left is not this test's)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ResourceWarning)
+        assert "Unsupported format char" in read_log(bad).errors[0]
+        assert read_log(ulg).errors[0].startswith("pyulog: ")
+        with pytest.raises(ValueError, match="could not be parsed"):
+            uploaded_mission(bad)
         gc.collect()
     assert not [w for w in caught if issubclass(w.category, ResourceWarning)], [str(w.message) for w in caught]

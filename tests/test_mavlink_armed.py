@@ -34,6 +34,7 @@ def _tlog_without(path, drop):
     while (msg := m.recv_match(blocking=False)) is not None:
         if not drop(msg):
             out.append(struct.pack(">Q", int(round(msg._timestamp * 1e6))) + bytes(msg.get_msgbuf()))
+    m.close()
     return b"".join(out)
 
 

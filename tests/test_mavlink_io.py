@@ -116,8 +116,22 @@ def test_window_and_no_position():
     log, _ = _both("uavlogviewer_vtol_sitl.tlog")
     tr = track_from_log(log, window=(50, 60))
     assert tr.t_offset_s >= 50 and tr.t_s[-1] <= 10
-    with pytest.raises(NoPositionError, match="window"):
+    with pytest.raises(NoPositionError, match="window 102..105 s: 0 usable"):   # a 3.4 s gap of fixes at 101.7 s
+        track_from_log(log, window=(102, 105))
+    with pytest.raises(ValueError, match="the log ends at 207.886 s"):   # (was NoPositionError: past the log's end)
         track_from_log(log, window=(300, 400))
+
+
+def test_track_from_log_refuses_a_window_past_the_log_as_replay_does():
+    """2026-11-27: track_from_log took a window ending past the log's end (cut to the log without a word) while replay,
+    calibrate and refly refused it (check_window): it is now the one place the window is checked."""
+    from mission_sim.mavlink.replay import WINDOW_END_SLACK_S, log_end_s
+    log, _ = _both("uavlogviewer_vtol_sitl.tlog")
+    end = log_end_s(log)
+    assert track_from_log(log, window=(50, end + WINDOW_END_SLACK_S)).t_offset_s >= 50   # a rounded-up end: taken
+    with pytest.raises(ValueError, match=rf"--window 50,{end + 5:g} is invalid: the log ends at {end:.3f} s; valid: "
+                                         rf"0 <= T0 < T1 <= {end + WINDOW_END_SLACK_S:.3f} s"):
+        track_from_log(log, window=(50, end + 5))
 
 
 @pytest.mark.parametrize("text", ["1,2,3,4", "abc", "91,0", "10,200", "10,20,nan", ""])

@@ -331,6 +331,24 @@ def test_bad_waypoints_text(capsys, tmp_path, text, needles):
       "[lon, lat, alt] in m AMSL")),
     ("p.geojson", '{"type": "MultiPoint", "coordinates": [[8, 47, 512], [8.1, 47]], "properties": {"ALT": 3}}',
      ("property 'ALT' is ignored (did you mean the coordinates' alt?",)),
+    # 2026-11-27: properties not an object (null: none) were an AttributeError traceback (a list, a string, a number) or
+    # nothing ([], 0); coordinates not JSON numbers were taken (true as 1.0 deg, "8.5" as 8.5); MultiPoint coordinates
+    # not a list a TypeError; a feature without geometry "geometry type 'Feature' is not supported"
+    *[("p.geojson", '{"type": "FeatureCollection", "features": [{"type": "Feature", "geometry": {"type": "Point", '
+                    '"coordinates": [8, 47, 512]}, "properties": %s}]}' % props,
+       (f"p.geojson: feature 0: properties {shown} ({kind}) are not an object; valid: a JSON object {{...}} or null",))
+      for props, shown, kind in (("[1, 2]", "[1, 2]", "list"), ("[]", "[]", "list"), ('"pad"', "'pad'", "str"),
+                                 ("5", "5", "int"), ("0", "0", "int"))],
+    ("p.geojson", '{"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {}}]}',
+     ("p.geojson: feature 0: geometry None is not a geometry object (a feature without one has no location); valid: "
+      "Point, MultiPoint",)),
+    *[("p.geojson", '{"type": "Point", "coordinates": %s}' % c,
+       (f"p.geojson: feature 0: coordinates {shown} are invalid; valid: [lon, lat] or [lon, lat, alt], JSON numbers",))
+      for c, shown in (("[true, false, 512]", "[True, False, 512]"), ('["8.5", "47"]', "['8.5', '47']"))],
+    ("p.geojson", '{"type": "MultiPoint", "coordinates": 5}',
+     ("p.geojson: feature 0: MultiPoint coordinates 5 are invalid; valid: a list of [lon, lat] or [lon, lat, alt]",)),
+    ("p.geojson", '{"type": "Point", "coordinates": [8, 47, 512], "properties": {"hover_time_s": true}}',
+     ("p.geojson: feature 0: hover_time_s=True is invalid; valid range: [0, inf) s, a JSON number",)),
     # CSV errors name the file's line (blank lines counted; they were the row's number after blank rows were dropped)
     ("p.csv", "lat,lon\n\n47,8\n\n95,8\n", ("p.csv: line 5: latitude 95.0 is invalid",)),
     ("p.csv", "\nlat,lon\n47,8\n47.0001,8,5\n", ("line 4 has 3 values, the header 2 (lat,lon)",)),
@@ -486,9 +504,10 @@ def test_geojson_pads_with_ordinary_extra_properties_load(tmp_path, props):
         p.write_text(json.dumps({"type": "FeatureCollection", "features": [
             {"type": "Feature", "geometry": {"type": "Point", "coordinates": [8, 47, 512]}, "properties": properties},
             {"type": "Feature", "geometry": {"type": "MultiPoint", "coordinates": [[8.001, 47, 515], [8, 47.001, 520]]},
-             "properties": dict(properties, hover_time_s=30)}]}))
+             "properties": dict(properties or {}, hover_time_s=30)}]}))
         return read_pads(p)
     ref = pads({})
+    assert pads(None) == ref   # null properties: none (legal GeoJSON)
     assert pads(props) == ref and [p.hover_time_s for p in ref] == [None, 30.0, 30.0]
     assert [p.point.alt_m for p in ref] == [512.0, 515.0, 520.0]
     if not any(k.lower().startswith("alt") for k in props):   # with 2-D coordinates too (lat / lon never refused)

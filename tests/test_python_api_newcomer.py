@@ -470,12 +470,34 @@ def test_a_vector_env_too_large_for_the_machine_is_refused_before_it_allocates(n
     from envs import vector
     monkeypatch.setattr(vector, "_physical_memory", lambda: 16 * 2**30)
     monkeypatch.setattr(vector.SbarChargingVectorEnv, "_alloc", lambda self, c: pytest.fail("allocated"))
-    per = vector.BYTES_PER_ENV_STEP * (EnvConfig().n_steps + 1)
+    per = vector.BYTES_PER_ENV_STEP[EnvConfig().link_model] * (EnvConfig().n_steps + 1)
     with pytest.raises(ValueError) as e:
         SbarChargingVectorEnv(n, "random")
     assert str(e.value) == (f"num_envs={n:,} is invalid: it would need ~{n * per / 2**30:.3g} GiB of memory (~{per / 1e3:.0f} "
                             f"kB a sub-environment at n_steps={EnvConfig().n_steps}), more than this machine's 16 GiB; "
                             f"valid range: 1..{16 * 2**30 // per:,}")
+
+
+@pytest.mark.parametrize("link", ["envelope", "modal"])
+def test_the_vector_env_memory_estimate_is_what_a_reset_allocates(link):
+    """The memory check's bytes per env and step (envs.vector.BYTES_PER_ENV_STEP) against what construction and the
+    first reset allocate (tracemalloc's peak: numpy's arrays, the plans and a reset's temporaries), at two N, for the
+    training scenario and the widest: at least the peak, at most 1.6x it (it was 96 B for both links, ~2.2x the modal
+    link's peak; a review measured more than it for the envelope link)."""
+    import tracemalloc
+
+    from envs import vector
+    cfg = EnvConfig(link_model=link)
+    SbarChargingVectorEnv(4, "random", config=cfg).reset(seed=0)   # (warm-up: compiled kernels, cached tables)
+    for n in (256, 2048):
+        for scenario in ("random", "detuned_wide"):
+            tracemalloc.start()
+            try:
+                SbarChargingVectorEnv(n, scenario, config=cfg).reset(seed=1)
+                peak = tracemalloc.get_traced_memory()[1] / (n * (cfg.n_steps + 1))
+            finally:
+                tracemalloc.stop()
+            assert peak <= vector.BYTES_PER_ENV_STEP[link] <= 1.6 * peak, (n, scenario, peak)
 
 
 class _Allocating(Exception):

@@ -179,6 +179,7 @@ def test_heartbeat_every_second_of_simulated_time(tmp_path, rate_hz):
             hb.append(msg._timestamp - 1.7e9)
         elif msg.get_type() == "ATTITUDE":
             att.append(msg._timestamp - 1.7e9)
+    conn.close()
     n_ticks = math.floor(12.0 * rate_hz + 1e-9) + 1
     last_tick = (n_ticks - 1) / rate_hz                  # the stream ends at its last tick
     np.testing.assert_allclose(hb, np.arange(math.floor(last_tick + 1e-9) + 1.0), atol=1e-6)
@@ -214,6 +215,7 @@ def test_tlog_written_reads_back_with_pymavlink(tmp_path):
         types.add(msg.get_type())
         if msg.get_type() == "GLOBAL_POSITION_INT":
             stamps.append(msg._timestamp - epoch)
+    m.close()
     assert n == st.frames and {"BATTERY_STATUS", "NAMED_VALUE_FLOAT", "HEARTBEAT"} <= types
     np.testing.assert_allclose(stamps, np.arange(101) / 5.0, atol=1e-6)
     # and through our own reader: the flight comes back about the same home
@@ -279,4 +281,5 @@ def stream_frames(path):
     n = 0
     while m.recv_match(blocking=False) is not None:
         n += 1
+    m.close()
     return n

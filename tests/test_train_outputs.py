@@ -168,25 +168,51 @@ def test_cli_train_errors(capsys):
     assert len(err) == 3 and all("valid" in line or "only used" in line for line in err)
 
 
-@pytest.mark.parametrize("flag, value, needs", [
-    ("--residual-scale", "0.1", "--residual"), ("--residual-base-budget", "0.01", "--residual"),
-    ("--lambda-lr", "10", "--lagrangian"), ("--probe-episodes", "0", "--lagrangian"),
-    ("--dagger", "2", "--imitate"), ("--imitation-episodes", "8", "--imitate"),
-    ("--imitation-epochs", "5", "--imitate"), ("--imitation-mask", "", "--imitate"),
-    ("--slow-budget-every", "step", "--slow-budget"),
+@pytest.mark.parametrize("flag, value, shown, needs", [
+    ("--residual-scale", "0.1", "0.1", "--residual"), ("--residual-base-budget", "0.01", "0.01", "--residual"),
+    ("--lambda-lr", "10", "10.0", "--lagrangian"), ("--probe-episodes", "0", "0", "--lagrangian"),
+    ("--dagger", "2", "2", "--imitate"), ("--imitation-episodes", "8", "8", "--imitate"),
+    ("--imitation-epochs", "5", "5", "--imitate"), ("--imitation-mask", "", "''", "--imitate"),
+    ("--slow-budget-every", "step", "'step'", "--slow-budget"),
     # given at its default value: the check compared the value with the default, so these trained and exited 0
-    ("--residual-scale", "0.25", "--residual"), ("--lambda-lr", "50", "--lagrangian"), ("--dagger", "0", "--imitate"),
-    ("--imitation-mask", "last_d_short", "--imitate"), ("--slow-budget-every", "window", "--slow-budget")])
-def test_cli_train_refuses_an_option_without_the_one_that_uses_it(flag, value, needs, tmp_path, capsys):
+    ("--residual-scale", "0.25", "0.25", "--residual"), ("--lambda-lr", "50", "50.0", "--lagrangian"),
+    ("--dagger", "0", "0", "--imitate"), ("--imitation-mask", "last_d_short", "'last_d_short'", "--imitate"),
+    ("--slow-budget-every", "window", "'window'", "--slow-budget")])
+def test_cli_train_refuses_an_option_without_the_one_that_uses_it(flag, value, shown, needs, tmp_path, capsys):
     """2026-11-27: `train --residual-scale 0.1` without --residual (or --dagger 2 without --imitate, ...) trained a
     plain PPO and exited 0, the option silently ignored (as --budget without --lagrangian already was not); the
-    same when the value given is the option's default (`--residual-scale 0.25`)."""
+    same when the value given is the option's default (`--residual-scale 0.25`). The error names the value given
+    (2026-11-27 midday: it named the two options only)."""
     from mission_sim.cli import main
     out = tmp_path / "run"
     assert main(["train", "--algo", "ppo", "--timesteps", "10", "--out", str(out), flag, value]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"dronewpt train: error: {flag} is only used with {needs}; add {needs} or drop {flag}"]
+    assert err == [f"dronewpt train: error: {flag} {shown} is only used with {needs}; valid: add {needs}, or drop {flag}"]
     assert not out.exists()
+
+
+@pytest.mark.parametrize("argv, error", [
+    (["--lambda-lr", "10"], "--lambda-lr 10.0 is only used with --lagrangian"),
+    (["--timesteps", "0"], "--timesteps 0 is invalid; valid range: >= 1"),
+    (["--imitate", "mpc", "--dagger", "-1"], "--dagger -1 is invalid; valid range: >= 0"),
+    (["--action-filter", "1.5"], "--action-filter 1.5 is invalid; valid range: [0, 1)"),
+    (["--lagrangian", "--probe-episodes", "2000"], "--probe-episodes 2000 is invalid; valid range: 0..1024")])
+def test_cli_train_refuses_before_importing_numpy_or_policies(argv, error, tmp_path):
+    """2026-11-27 midday: `dronewpt train` imported policies.train (numpy, the policies: ~0.3-0.4 s at the start of a
+    process, more on a loaded machine) before refusing an option given without the one that uses it or a bad count;
+    now those checks come first and read the numpy-free mission_sim.train_options."""
+    import os
+    import subprocess
+    import sys
+    code = ("import sys; from mission_sim.cli import main; rc = main(sys.argv[1:]); "
+            "print(rc, sorted(m for m in ('numpy', 'policies', 'policies.train', 'envs', 'torch') if m in sys.modules))")
+    base = ["train", "--algo", "ppo", "--timesteps", "10", "--out", str(tmp_path / "run")]
+    args = base + argv if "--timesteps" not in argv else base[:3] + argv + base[5:]
+    r = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=120,
+                       env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert r.stdout.split() == ["2", "[]"], (r.stdout, r.stderr)
+    assert r.stderr.strip() == f"dronewpt train: error: {error}" or r.stderr.strip().startswith(
+        f"dronewpt train: error: {error};"), r.stderr
 
 
 #: a value of each option that has an effect only with another one (the defaults' among them: given is given), and
@@ -246,15 +272,15 @@ def test_the_train_rule_is_one_list_and_its_defaults_are_trains_and_the_command_
     base = ["train", "--algo", "ppo", "--timesteps", "10", "--out", str(tmp_path / "c")]
     assert main(base) == 0 and main(base + ["--imitate", "mpc"]) == 0
     assert all(calls[0][k] is None for k in tr.ONLY_WITH)
-    assert (calls[1]["imitation_epochs"], calls[1]["imitation_mask"], calls[1]["dagger"]) == (60, ("last_d_short",), 0)
-    assert calls[1]["lambda_lr"] is None and calls[1]["residual_scale"] is None
+    # its own --imitation-epochs 60 only; train()'s defaults are filled by train() (the command line filled them too)
+    assert {k: v for k, v in calls[1].items() if k in tr.ONLY_WITH and v is not None} == {"imitation_epochs": 60}
 
 
 def test_train_reads_its_defaults_by_name_and_the_command_line_takes_them_from_train(monkeypatch, tmp_path):
     """train() took its ONLY_WITH options' values in ONLY_WITH_DEFAULTS' key order (a reordered table swapped them:
     lambda_lr = 'window'); the command line repeated 7 of train()'s defaults (one edited in train() only would not
-    reach ``dronewpt train``). Now both read ``policies.train.ONLY_WITH_DEFAULTS`` by name, the command line adding
-    its own two (--imitation-epochs 60, --imitation-mask last_d_short)."""
+    reach ``dronewpt train``). Now train() reads ``policies.train.ONLY_WITH_DEFAULTS`` by name, alone: the command line
+    hands None on, but its own --imitation-epochs 60 (it filled train()'s too, a second reader of the table)."""
     from mission_sim.cli import main
     from policies import train as tr
     reordered = dict(reversed(list(tr.ONLY_WITH_DEFAULTS.items())))
@@ -267,9 +293,10 @@ def test_train_reads_its_defaults_by_name_and_the_command_line_takes_them_from_t
                                  "slow_budget_every")} == {"lambda_lr": 50.0, "probe_episodes": 32, "residual_scale": 0.25,
                                                            "residual_base_budget": 0.0, "slow_budget_every": "window"}
     monkeypatch.setattr(tr, "ONLY_WITH_DEFAULTS", dict(reordered, lambda_lr=7.0, imitation_episodes=5, imitation_epochs=9))
-    calls = []
-    monkeypatch.setattr(tr, "train", lambda *a, **kw: calls.append(kw) or {})
+    taken, only_with_values = {}, tr._only_with_values
+    monkeypatch.setattr(tr, "_only_with_values", lambda given: taken.update(only_with_values(given)) or dict(taken))
     base = ["train", "--algo", "ppo", "--timesteps", "10", "--out", str(tmp_path / "c")]
-    assert main(base + ["--lagrangian", "--imitate", "mpc"]) == 0
-    assert (calls[0]["lambda_lr"], calls[0]["imitation_episodes"], calls[0]["imitation_epochs"],
-            calls[0]["imitation_mask"]) == (7.0, 5, 60, ("last_d_short",))
+    with pytest.raises(RuntimeError, match="stop before training"):
+        main(base + ["--lagrangian", "--imitate", "mpc"])
+    assert (taken["lambda_lr"], taken["imitation_episodes"], taken["imitation_epochs"],
+            taken["imitation_mask"]) == (7.0, 5, 60, ("last_d_short",))

@@ -25,9 +25,9 @@ from .common import (
 
 
 #: the command line's own defaults of train's options that have an effect only with another one, where they differ
-#: from ``train()``'s (:data:`policies.train.ONLY_WITH_DEFAULTS`, the others; which option each needs:
-#: :data:`policies.train.ONLY_WITH`)
-_CLI_ONLY_WITH_DEFAULTS = {"imitation_epochs": 60, "imitation_mask": "last_d_short"}
+#: from ``train()``'s (the others stay None and ``train()`` fills them from ``policies.train.ONLY_WITH_DEFAULTS``;
+#: which option each needs: :data:`mission_sim.train_options.ONLY_WITH`)
+_CLI_ONLY_WITH_DEFAULTS = {"imitation_epochs": 60}
 
 
 def _add_train(sub):
@@ -108,7 +108,7 @@ def _add_train(sub):
     p.add_argument("--resume", type=path_arg("--resume"), default=None, metavar="CHECKPOINT.zip",
                    help="continue from a checkpoint of checkpoints/ (its VecNormalize statistics next to it)")
     add_progress_flag(p)
-    p.set_defaults(func=_cmd_train)   # ONLY_WITH's options default to None (not given): _only_with fills them
+    p.set_defaults(func=_cmd_train)   # ONLY_WITH's options default to None (not given): train() fills them
 
 
 #: :data:`mission_sim.contract.LINK_MODELS` (not imported: the parser stays free of wpt_receiver's import;
@@ -156,28 +156,27 @@ def _env_overrides(items) -> dict:
 
 
 def _only_with(args):
-    """An option of :data:`policies.train.ONLY_WITH` given without the option that uses it is refused (given, even at
-    its default value: it had no effect); then the ones not given whose option is on get the command line's defaults
-    (``train()``'s, :data:`policies.train.ONLY_WITH_DEFAULTS`, but :data:`_CLI_ONLY_WITH_DEFAULTS`); the others stay
-    None (not given, as ``train()`` takes it)."""
-    from policies.train import ONLY_WITH, ONLY_WITH_DEFAULTS, unused_option
+    """An option of :data:`mission_sim.train_options.ONLY_WITH` given without the option that uses it is refused
+    (given, even at its default value: it had no effect; the error names its value); then the ones not given whose
+    option is on get :data:`_CLI_ONLY_WITH_DEFAULTS`; the others stay None (not given: ``train()`` fills them)."""
+    from ..train_options import ONLY_WITH, unused_option
     unused = unused_option(vars(args))
     if unused is not None:   # before: trained without it, exit 0
+        value = getattr(args, unused[0])
         flag, needs = ("--" + o.replace("_", "-") for o in unused)
-        raise CliError(f"{flag} is only used with {needs}; add {needs} or drop {flag}")
-    for dest, default in {**ONLY_WITH_DEFAULTS, **_CLI_ONLY_WITH_DEFAULTS}.items():
+        raise CliError(f"{flag} {value!r} is only used with {needs}; valid: add {needs}, or drop {flag}")
+    for dest, default in _CLI_ONLY_WITH_DEFAULTS.items():
         if getattr(args, dest) is None and getattr(args, ONLY_WITH[dest]):
             setattr(args, dest, default)
 
 
 def _check_train(args):
+    """One-line errors (``CliError``); those that need no import of numpy, envs or policies first (a misuse was
+    refused after ``policies.train`` was imported)."""
     _only_with(args)
     lo = 0 if args.imitate else 1
     if args.timesteps < lo:
         raise CliError(f"--timesteps {args.timesteps} is invalid; valid range: >= {lo}")
-    from mission_sim.contract import MAX_HISTORY
-    if not 1 <= args.history <= MAX_HISTORY:
-        raise CliError(f"--history {args.history} is invalid; valid range: 1..{MAX_HISTORY}")
     for flag, v, lo in (("--dagger", args.dagger, 0), ("--imitation-episodes", args.imitation_episodes, 1),
                         ("--imitation-epochs", args.imitation_epochs, 1)):
         if v is not None and v < lo:
@@ -186,6 +185,11 @@ def _check_train(args):
         raise CliError(f"--action-filter {args.action_filter} is invalid; valid range: [0, 1)")
     if args.smooth_penalty < 0.0:
         raise CliError(f"--smooth-penalty {args.smooth_penalty} is invalid; valid range: >= 0")
+    if args.probe_episodes is not None and not 0 <= args.probe_episodes <= 1024:
+        raise CliError(f"--probe-episodes {args.probe_episodes} is invalid; valid range: 0..1024")
+    from mission_sim.contract import MAX_HISTORY
+    if not 1 <= args.history <= MAX_HISTORY:
+        raise CliError(f"--history {args.history} is invalid; valid range: 1..{MAX_HISTORY}")
     from mission_sim.contract import OBS_INDEX
     for f in _imitation_mask(args) or ():
         if f not in OBS_INDEX:
@@ -201,8 +205,6 @@ def _check_train(args):
     for flag, path in (("--hyperparams", args.hyperparams), ("--resume", args.resume)):
         if path is not None:
             check_regular_file(path, flag)  # a FIFO is refused without opening it
-    if args.probe_episodes is not None and not 0 <= args.probe_episodes <= 1024:
-        raise CliError(f"--probe-episodes {args.probe_episodes} is invalid; valid range: 0..1024")
     if args.slow_budget is not None:
         from policies.slow_budget import parse_budget_range
         try:

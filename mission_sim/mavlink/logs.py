@@ -145,23 +145,32 @@ def open_log(path: Path, mu):
         old = os.environ.get("PYMAVLINK_FAST_INDEX")
         os.environ["PYMAVLINK_FAST_INDEX"] = "0"
         try:
-            return DFReader.DFReader_binary(str(path)), "dataflash"
+            return _built(DFReader.DFReader_binary, path), "dataflash"
         finally:
             if old is None:
                 os.environ.pop("PYMAVLINK_FAST_INDEX")
             else:
                 os.environ["PYMAVLINK_FAST_INDEX"] = old
     if path.suffix.lower() == ".log" and DFReader.DFReader_is_text_log(str(path)):
-        return DFReader.DFReader_text(str(path)), "dataflash"
-    reader = mu.mavmmaplog.__new__(mu.mavmmaplog)
+        return _built(DFReader.DFReader_text, path), "dataflash"
     try:
-        reader.__init__(str(path))
-        return reader, "tlog"
+        return _built(mu.mavmmaplog, path), "tlog"
     except Exception:  # noqa: BLE001 -- pymavlink's indexer, e.g. AttributeError "'NoneType' object has no
         # attribute '_instance_field'" on a .tlog that joins two vehicles' logs; the streaming reader reads it.
-        # The half-built reader's map and file are closed here (left to the collector: a ResourceWarning)
-        close_log(reader)
         return mu.mavlogfile(str(path)), "tlog"
+
+
+def _built(cls, path: Path):
+    """``cls(path)``, a pymavlink reader; one whose constructor fails (its indexer on untrusted bytes: a DataFlash
+    format char it does not know, a .tlog joining two vehicles) has its half-built map and file closed before the error
+    goes on (they were left to the collector: a ResourceWarning, in a later test's ``gc.collect()``)."""
+    reader = cls.__new__(cls)
+    try:
+        reader.__init__(str(path))
+    except BaseException:
+        close_log(reader)
+        raise
+    return reader
 
 
 def close_log(reader) -> None:

@@ -122,8 +122,8 @@ WINDOW_END_SLACK_S = 1.0
 
 def log_end_s(log: FlightLog) -> float:
     """The end of ``log``'s time (s): its latest record, or its latest position if that is later."""
-    pos = log.position["t_s"] if len(log.position) else ()
-    return max(float(log.duration_s), float(np.max(pos)) if len(pos) else 0.0)
+    pos = log.position
+    return max(float(log.duration_s), float(pos["t_s"].max()) if len(pos) else 0.0)
 
 
 def check_window(log: FlightLog, window: tuple[float, float] | None) -> tuple[float, float] | None:
@@ -143,8 +143,9 @@ def check_window(log: FlightLog, window: tuple[float, float] | None) -> tuple[fl
 def replay_span(log: FlightLog, window: tuple[float, float] | None = None,
                 segment: int | None = None) -> tuple[tuple[float, float] | None, dict]:
     """The part of ``log`` a replay flies and what to report about it: ``window`` (log seconds) if
-    given (checked, :func:`check_window`), else boot segment ``segment`` (1-based; None: :func:`choose_segment` when the log has
-    more than one; both given: ``ValueError``). Returns (window or None for the whole log, facts for the summary)."""
+    given (checked by :func:`track_from_log`, which cuts the log to it: :func:`check_window`), else boot segment ``segment``
+    (1-based; None: :func:`choose_segment` when the log has more than one; both given: ``ValueError``). Returns (window
+    or None for the whole log, facts for the summary)."""
     spans = log.segments
     n = len(spans)
     info = {"segments": n, "clock": log.clock.source if log.clock is not None else "the log's own (vehicle) clock",
@@ -155,7 +156,7 @@ def replay_span(log: FlightLog, window: tuple[float, float] | None = None,
     if segment is not None and not 1 <= segment <= n:
         raise ValueError(f"--segment {segment!r} is invalid; valid range: 1..{n} (the log has {n} boot segment(s))")
     if window is not None:
-        return check_window(log, window), {**info, "replayed_segment": None}
+        return window, {**info, "replayed_segment": None}
     if segment is None and n == 1:
         return None, {**info, "replayed_segment": 1}
     k = choose_segment(log) if segment is None else segment - 1
@@ -180,7 +181,9 @@ def default_pad(log: FlightLog) -> GeoPoint:
 def track_from_log(log: FlightLog, pad: GeoPoint | None = None, ground_gap_m: float = 0.0,
                    window: tuple[float, float] | None = None) -> FlightTrack:
     """The flown track about ``pad`` (None: :func:`default_pad`; a pad without altitude takes the
-    default pad's altitude), optionally cut to ``window`` = (t0, t1) seconds of log time."""
+    default pad's altitude), optionally cut to ``window`` = (t0, t1) seconds of log time (:func:`check_window`: the one
+    check of a window on every path, replay, calibrate, refly and the studies; it took a window past the log's end)."""
+    check_window(log, window)
     if not np.isfinite(ground_gap_m) or ground_gap_m < 0:
         raise ValueError(f"ground_gap_m={ground_gap_m!r} is invalid; valid range: [0, inf) m")
     pos = log.position

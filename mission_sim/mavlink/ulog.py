@@ -158,7 +158,8 @@ def read_ulog(path) -> FlightLog:
     from pyulog import ULog
     path = Path(path)
     try:
-        top = _Topics(ULog(str(path)))
+        with open(path, "rb") as fh:   # (given a name, pyulog left its file open when the parse failed: a ResourceWarning)
+            top = _Topics(ULog(fh))
     except Exception as exc:  # noqa: BLE001 -- untrusted bytes: report what failed
         empty = clean_time(pd.DataFrame(), POSITION_COLUMNS)
         return FlightLog(path=path, kind="ulog", t0_epoch_s=float("nan"), duration_s=0.0, position=empty,

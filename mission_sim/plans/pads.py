@@ -120,22 +120,49 @@ def _geojson(text: str, name: str) -> tuple[GeoPad, ...]:
         raise ValueError(f"{name}: \"features\" is not a list")
     out = []
     for i, f in enumerate(feats):
-        geom = f.get("geometry", f) if isinstance(f, dict) else None
-        props = (f.get("properties") or {}) if isinstance(f, dict) else {}
-        kind = geom.get("type") if isinstance(geom, dict) else None
-        coords = geom.get("coordinates") if isinstance(geom, dict) else None
-        if kind == "Point":
-            coords = [coords]
-        elif kind != "MultiPoint":
-            raise ValueError(f"{name}: feature {i}: geometry type {kind!r} is not supported; valid: Point, MultiPoint")
-        for c in coords or []:
-            if not isinstance(c, list) or len(c) not in (2, 3):
-                raise ValueError(f"{name}: feature {i}: coordinates {c!r} are invalid; valid: [lon, lat] or [lon, lat, alt]")
-        if isinstance(props, dict):
-            _check_geojson_properties(props, any(len(c) == 2 for c in coords or []), f"{name}: feature {i}: property")
-        for c in coords or []:
-            out.append(_pad(c[1], c[0], c[2] if len(c) == 3 else None, props.get("hover_time_s"), f"{name}: feature {i}"))
+        where = f"{name}: feature {i}"
+        coords, props = _geojson_feature(f, where)
+        _check_geojson_properties(props, any(len(c) == 2 for c in coords), f"{where}: property")
+        for c in coords:
+            out.append(_pad(c[1], c[0], c[2] if len(c) == 3 else None, props.get("hover_time_s"), where))
     return tuple(out)
+
+
+def _geojson_feature(f, where: str) -> tuple[list, dict]:
+    """(coordinates, a list of [lon, lat(, alt)] numbers; properties, a dict) of one feature (or a bare Point /
+    MultiPoint geometry); ``ValueError`` (``where``: the file and feature) naming what was found instead: a feature
+    without geometry, a geometry other than Point / MultiPoint, ``properties`` that are not an object (``null``: none;
+    a list or a string was an AttributeError), coordinates that are not JSON numbers (``true`` was 1.0 deg, ``"8.5"``
+    taken as 8.5)."""
+    if not isinstance(f, dict):
+        raise ValueError(f"{where} is {f!r}, not a GeoJSON object; valid: a Feature with a Point or MultiPoint geometry")
+    feature = f.get("type") == "Feature" or "geometry" in f
+    geom, props = f.get("geometry") if feature else f, f.get("properties")
+    if not isinstance(geom, dict):
+        raise ValueError(f"{where}: geometry {geom!r} is not a geometry object (a feature without one has no "
+                         "location); valid: Point, MultiPoint")
+    kind = geom.get("type")
+    if kind not in ("Point", "MultiPoint"):
+        raise ValueError(f"{where}: geometry type {kind!r} is not supported; valid: Point, MultiPoint")
+    if props is not None and not isinstance(props, dict):
+        raise ValueError(f"{where}: properties {props!r} ({type(props).__name__}) are not an object; valid: a JSON "
+                         "object {...} or null (hover_time_s in it)")
+    coords = [geom.get("coordinates")] if kind == "Point" else geom.get("coordinates")
+    if not isinstance(coords, list):
+        raise ValueError(f"{where}: MultiPoint coordinates {coords!r} are invalid; valid: a list of [lon, lat] or "
+                         "[lon, lat, alt]")
+    for c in coords:
+        if not isinstance(c, list) or len(c) not in (2, 3) or not all(_json_number(v) for v in c):
+            raise ValueError(f"{where}: coordinates {c!r} are invalid; valid: [lon, lat] or [lon, lat, alt], JSON numbers")
+    hover = (props or {}).get("hover_time_s")
+    if hover is not None and not _json_number(hover):
+        raise ValueError(f"{where}: hover_time_s={hover!r} is invalid; valid range: [0, inf) s, a JSON number")
+    return coords, props or {}
+
+
+def _json_number(v) -> bool:
+    """A JSON number (``true`` / ``false`` are Python ints, ``"8.5"`` a string: neither is)."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
 def _check_geojson_properties(props, flat: bool, what: str) -> None:

@@ -160,9 +160,10 @@ def refly_base(base: dict, pads, origin, pads_name: str = "pads") -> dict:
 
 def _segment_window(log, window, segment):
     """``window``, or boot segment ``segment``'s span (1-based) when one is asked for and no window is
-    given; without either the whole log is re-flown (a log with reboots included)."""
-    from ..mavlink.replay import check_window, replay_span
-    return check_window(log, window) if segment is None else replay_span(log, window, segment)[0]
+    given; without either the whole log is re-flown (a log with reboots included). (The window is checked by
+    ``track_from_log``.)"""
+    from ..mavlink.replay import replay_span
+    return window if segment is None else replay_span(log, window, segment)[0]
 
 
 def plan_refly(log, cfg, *, pad=None, ground_gap_m=None, window=None, reach_m: float = DEFAULT_REACH_M,

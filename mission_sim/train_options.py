@@ -1,0 +1,26 @@
+"""``policies.train.train``'s options that have an effect only with another one (:data:`ONLY_WITH`) and the rule
+refusing one given without it (:func:`unused_option`), numpy-free: ``dronewpt train`` refuses a misuse before it
+imports ``policies`` (numpy, the policies, ``policies.train``: ~0.3 s at a free machine's start, more when loaded);
+``policies.train`` reads the same table (their values when not given: ``policies.train.ONLY_WITH_DEFAULTS``)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+__all__ = ["ONLY_WITH", "unused_option"]
+
+#: train's options that have an effect only with another one: {option: the option it needs}. One given (not None)
+#: without it is refused, by ``train()`` (``ValueError``) and ``dronewpt train`` (exit 2) alike (:func:`unused_option`)
+ONLY_WITH = {"lambda_lr": "lagrangian", "probe_episodes": "lagrangian", "residual_scale": "residual",
+             "residual_base_budget": "residual", "dagger": "imitate", "imitation_episodes": "imitate",
+             "imitation_epochs": "imitate", "imitation_mask": "imitate", "slow_budget_every": "slow_budget",
+             "budget": "lagrangian"}
+
+
+def unused_option(opts: Mapping) -> tuple[str, str] | None:
+    """``(option, the option it needs)`` for the first option of :data:`ONLY_WITH` that ``opts`` gives (a value other
+    than None, even the default's) while the option it needs is off (False, None or empty); None when there is none."""
+    for opt, needs in ONLY_WITH.items():
+        if opts.get(opt) is not None and not opts.get(needs):
+            return opt, needs
+    return None
