@@ -375,6 +375,17 @@ PLAUSIBLE: dict[str, Range] = {
 }
 
 
+#: ``--link KEY=VALUE`` of ``dronewpt paper`` / ``netlist`` / ``export-controller``: a range for every
+#: :class:`~wpt_receiver.LinkParams` field (``vdc_v=1e308`` overflowed, ``f_hz=1e-300`` and ``lm_h=nan`` were
+#: tracebacks); the four keys the mission's ``[link]`` has are its :data:`PLAUSIBLE` ranges (one source), the battery
+#: voltage is the inverter's, the inductances 1 nH .. 1 H (``k < 1`` is LinkParams' own check)
+LINK_PARAM_RANGES: dict[str, Range] = {
+    "l1_h": Range(1e-9, 1.0, "H"), "l2_h": Range(1e-9, 1.0, "H"), "lm_h": Range(0.0, 1.0, "H", lo_open=True),
+    "r1_ohm": PLAUSIBLE["link.r1_ohm"], "r2_ohm": PLAUSIBLE["link.r2_ohm"], "vdc_v": PLAUSIBLE["link.vdc_v"],
+    "vl_v": PLAUSIBLE["link.vdc_v"], "f_hz": PLAUSIBLE["link.f_hz"],
+}
+
+
 def plausible_range(section: str, name: str) -> Range | None:
     """The :data:`PLAUSIBLE` range of key ``name`` of ``section`` (``"battery"``, ``"pads.1"``), None for strings."""
     return PLAUSIBLE.get(f"{'pads' if section.startswith('pads') else section}.{name}")
