@@ -269,8 +269,7 @@ def check_section_values(cfg: MissionConfig) -> None:
     for i, pad in enumerate(cfg.pads):
         _check_section(f"pads.{i}", PadConfig, pad)
     for i, wp in enumerate(cfg.waypoints):
-        if not isinstance(wp, WaypointConfig):
-            raise ValueError(f"waypoints.{i}={wp!r} is invalid; valid type: WaypointConfig")
+        _check_section(f"waypoints.{i}", WaypointConfig, wp)
 
 
 def _check_section(section: str, cls, obj) -> None:
@@ -373,6 +372,10 @@ PLAUSIBLE: dict[str, Range] = {
     "mission.pad_radius_m": Range(0.0, 1000.0, "m", lo_open=True),
     "charger.recharge_drop_cell_v": Range(0.005, 0.5, "V per cell"),
 }
+# a route's speed and holds as the mission's cruise speed and hover times (a waypoint's speed_m_s = 1e308, a
+# mission file's DO_CHANGE_SPEED 1e308 m/s, were accepted: their check was only > 0)
+PLAUSIBLE["waypoints.speed_m_s"] = PLAUSIBLE["mission.cruise_speed_m_s"]
+PLAUSIBLE["waypoints.hold_s"] = PLAUSIBLE["mission.hover_time_s"]
 
 
 #: ``--link KEY=VALUE`` of ``dronewpt paper`` / ``netlist`` / ``export-controller``: a range for every
@@ -387,8 +390,9 @@ LINK_PARAM_RANGES: dict[str, Range] = {
 
 
 def plausible_range(section: str, name: str) -> Range | None:
-    """The :data:`PLAUSIBLE` range of key ``name`` of ``section`` (``"battery"``, ``"pads.1"``), None for strings."""
-    return PLAUSIBLE.get(f"{'pads' if section.startswith('pads') else section}.{name}")
+    """The :data:`PLAUSIBLE` range of key ``name`` of ``section`` (``"battery"``, ``"pads.1"``, ``"waypoints.3"``),
+    None for strings."""
+    return PLAUSIBLE.get(f"{section.partition('.')[0] if section.startswith(('pads.', 'waypoints.')) else section}.{name}")
 
 
 _SECTIONS = {"link": LinkConfig, "coupling": CouplingConfig, "drone": DroneParams, "battery": BatteryParams,
@@ -432,7 +436,7 @@ def _build(section: str, cls, d):
         obj = cls(**kwargs)
     except ValueError as exc:
         raise ValueError(f"{section}.{exc}") from None
-    if section in _SECTIONS or section.startswith("pads."):
+    if section in _SECTIONS or section.startswith(("pads.", "waypoints.")):
         _remember_checked(obj)   # its ranges were checked above (MissionConfig does not check them again)
     return obj
 

@@ -49,3 +49,73 @@ def test_link_ranges_are_the_mission_configs_where_it_has_the_key():
         assert LINK_PARAM_RANGES[key] is PLAUSIBLE[f"link.{key}"]
     for key, rng in LINK_PARAM_RANGES.items():   # Table I inside every range
         assert rng.contains(getattr(TABLE_I, key)), key
+
+
+# ------------------------------------------------------------------ a route's speeds and holds
+_HOME = ("QGC WPL 110\n0\t0\t0\t16\t0\t0\t0\t0\t-35.363262\t149.165237\t584.09\t1\n"
+         "1\t0\t3\t22\t0\t0\t0\t0\t0\t0\t20\t1\n")
+_LEG = "\t0\t3\t16\t0\t0\t0\t0\t-35.362656\t149.165072\t20\t1\n"
+_LEG2 = "\t0\t3\t16\t0\t0\t0\t0\t-35.360174\t149.167908\t14\t1\n"
+
+
+def _wpl(tmp_path, *rows) -> str:
+    path = tmp_path / "m.waypoints"
+    path.write_text(_HOME + "".join(f"{i + 2}{row}" for i, row in enumerate(rows)))
+    return str(path)
+
+
+def _speed_row(v: str) -> str:
+    return f"\t0\t0\t178\t1\t{v}\t0\t0\t0\t0\t0\t1\n"
+
+
+@pytest.mark.parametrize("rows, text", [
+    # DO_CHANGE_SPEED 1e308 m/s: flown (the check was > 0), where mission.cruise_speed_m_s stops at 100 m/s
+    ((_LEG, _speed_row("1e308"), _LEG2),
+     "m.waypoints: row 3: DO_CHANGE_SPEED speed param2=1e+308 is invalid; valid range: (0, 100] m/s"),
+    # a hold the run-size check blamed on "waypoints.hold_s" (no row); pads' hover times stop at 1e6 s
+    (("\t0\t3\t19\t1e308\t0\t0\t0\t-35.362656\t149.165072\t20\t1\n",),
+     "m.waypoints: row 2: hold time param1=1e+308 is invalid; valid range: [0, 1e+06] s"),
+    # a slow speed: "mission.cruise_speed_m_s=8.0 makes the run too large" (a key nobody changed)
+    ((_LEG, _speed_row("1e-9"), _LEG2), "waypoints.2.speed_m_s=1e-09 makes the run too large"),
+    # an altitude of 1e308: the message printed it in 309 digits
+    (("\t0\t3\t16\t0\t0\t0\t0\t-35.362656\t149.165072\t1e308\t1\n",),
+     "m.waypoints: row 2: altitude 1e+308 m (above home) is 1e+308 m above home; valid range: [0, 5000] m above home"),
+])
+def test_mission_file_speeds_holds_and_heights(capsys, tmp_path, rows, text):
+    line = _one_error_line(capsys, ["mission", "--plan", _wpl(tmp_path, *rows), "--no-charge", "--dry-run"])
+    assert text in line, line
+    assert len(line) < 400
+
+
+def test_do_change_speed_in_range_and_no_change_still_fly(capsys, tmp_path):
+    """-1 / 0 (MAVLink's "no change", as ArduCopter) and 100 m/s, the top of the range, are taken as before."""
+    for v in ("-1", "0", "100"):
+        assert main(["mission", "--plan", _wpl(tmp_path, _LEG, _speed_row(v), _LEG2), "--no-charge", "--dry-run"]) == 0
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize("extra, text", [
+    ('speed_m_s = 1e308', "waypoints.1.speed_m_s=1e+308 is invalid; valid range: (0, 100] m/s"),
+    ('speed_m_s = 150.0', "waypoints.1.speed_m_s=150.0 is invalid; valid range: (0, 100] m/s"),
+    ('hold_s = 1e7', "waypoints.1.hold_s=10000000.0 is invalid; valid range: [0, 1e+06] s"),
+    ('speed_m_s = 1e-9', "waypoints.1.speed_m_s=1e-09 makes the run too large"),
+])
+def test_toml_waypoint_speed_and_hold(capsys, tmp_path, extra, text):
+    cfg = tmp_path / "route.toml"
+    cfg.write_text('[[waypoints]]\naction = "takeoff"\nz_m = 20.0\n'
+                   f'[[waypoints]]\naction = "loiter"\nx_m = 50.0\ny_m = 0.0\nz_m = 20.0\n{extra}\n')
+    line = _one_error_line(capsys, ["mission", str(cfg), "--dry-run"])
+    assert text in line, line
+
+
+def test_waypoint_ranges_from_python():
+    """``dataclasses.replace`` with a route is checked as a file is (the route's sections were only type-checked)."""
+    import dataclasses
+
+    from mission_sim.config import WaypointConfig, load_config
+    cfg = load_config()
+    fast = WaypointConfig(action="waypoint", x_m=50.0, z_m=20.0, speed_m_s=1e308)
+    with pytest.raises(ValueError, match=r"waypoints\.1\.speed_m_s=1e\+308 is invalid; valid range: \(0, 100\] m/s"):
+        dataclasses.replace(cfg, waypoints=(WaypointConfig(action="takeoff", z_m=20.0), fast))
+    ok = dataclasses.replace(fast, speed_m_s=12.0)
+    assert dataclasses.replace(cfg, waypoints=(ok,)).waypoints == (ok,)

@@ -67,6 +67,13 @@ class _Builder:
     def fail(self, it, text: str):
         raise ValueError(f"{self.name}: {it.where}: {text}")
 
+    def in_range(self, it, what: str, value: float, key: str):
+        """:meth:`fail` unless ``value`` is inside the config's range for ``key`` (the route's ``[[waypoints]]``
+        key it becomes: one range for a file's item and a hand-written waypoint)."""
+        from ..config import PLAUSIBLE
+        if not PLAUSIBLE[key].contains(value):
+            self.fail(it, f"{what}={value:g} is invalid; valid range: {PLAUSIBLE[key].text()} ({key})")
+
     def where_to(self, it):
         """(x, y, z) of a nav item in the pad frame; "here" for lat = lon = 0 and for alt 0 / unset."""
         home = self.raw.home
@@ -92,7 +99,7 @@ class _Builder:
         z = it.alt_m - home.alt_m if it.frame in _AMSL_FRAMES else it.alt_m
         if not 0 <= z <= 5000:
             self.fail(it, f"altitude {it.alt_m:g} m ({'AMSL' if it.frame in _AMSL_FRAMES else 'above home'}) is "
-                          f"{z:.1f} m above home; valid range: [0, 5000] m above home")
+                          f"{z:.6g} m above home; valid range: [0, 5000] m above home")   # (.1f: 1e308 in 309 digits)
         return x, y, z
 
     def add(self, action, x, y, z, hold_s=0.0):
@@ -111,7 +118,8 @@ class _Builder:
     def item(self, it):
         if it.command == DO_CHANGE_SPEED:
             v = it.params[1]
-            if math.isfinite(v) and v > 0:
+            if math.isfinite(v) and v > 0:   # (-1, 0, unset: no change, as ArduCopter)
+                self.in_range(it, "DO_CHANGE_SPEED speed param2", v, "waypoints.speed_m_s")
                 self.speed = float(v)
             return
         if it.command in IGNORED_COMMANDS:
@@ -134,9 +142,8 @@ class _Builder:
         elif kind == "land":
             self.add("land", x, y, 0.0)
         else:
-            hold = it.params[0] if math.isfinite(it.params[0]) else 0.0
-            if hold < 0:
-                self.fail(it, f"hold time param1={hold:g} is invalid; valid range: [0, inf) s")
+            hold = it.params[0] if math.isfinite(it.params[0]) else 0.0   # (unset: no hold)
+            self.in_range(it, "hold time param1", hold, "waypoints.hold_s")
             self.add("loiter" if kind == "loiter" or hold > 0 else "waypoint", x, y, z, hold)
 
 
