@@ -119,3 +119,35 @@ def test_waypoint_ranges_from_python():
         dataclasses.replace(cfg, waypoints=(WaypointConfig(action="takeoff", z_m=20.0), fast))
     ok = dataclasses.replace(fast, speed_m_s=12.0)
     assert dataclasses.replace(cfg, waypoints=(ok,)).waypoints == (ok,)
+
+
+# ------------------------------------------------------------------ pads files: hover times
+_SQUARE = str(__import__("pathlib").Path(__file__).resolve().parent / "data" / "missions" / "qgc_simple_square.plan")
+
+
+def _feature(props: str) -> str:
+    return ('{"type":"FeatureCollection","features":[{"type":"Feature","geometry":{"type":"Point",'
+            f'"coordinates":[8.5456,47.3977]}},"properties":{props}}}]}}')
+
+
+@pytest.mark.parametrize("name, text, expected", [
+    # the reader said [0, inf) s; 1e308 then failed in the config as "pads.0.hover_time_s=1e+308 ..." (no file, line)
+    ("p.csv", "lat,lon,hover_time_s\n47.3977,8.5456,1e308\n",
+     "p.csv: line 2: hover_time_s='1e308' is invalid; valid range: [0, 1e+06] s"),
+    ("p.csv", "lat,lon,hover_time_s\n47.3977,8.5456,-5\n", "p.csv: line 2: hover_time_s='-5' is invalid; valid range: [0, 1e+06] s"),
+    ("p.geojson", _feature('{"hover_time_s":1e308}'),
+     "p.geojson: feature 0: hover_time_s=1e+308 is invalid; valid range: [0, 1e+06] s"),
+    # JSON's true was float(True): a 1 s hover
+    ("p.geojson", _feature('{"hover_time_s":true}'), "p.geojson: feature 0: lat=47.3977, lon=8.5456, alt=None, "
+                                                     "hover_time_s=True: not numbers; valid: a number each"),
+])
+def test_pad_hover_times_take_the_configs_range_where_read(capsys, tmp_path, name, text, expected):
+    (tmp_path / name).write_text(text)
+    line = _one_error_line(capsys, ["mission", "--plan", _SQUARE, "--pads", str(tmp_path / name), "--dry-run"])
+    assert expected in line, line
+
+
+def test_pad_hover_time_at_the_top_of_the_range_is_read(tmp_path):
+    from mission_sim.plans.pads import read_pads
+    (tmp_path / "p.csv").write_text("lat,lon,hover_time_s\n47.3977,8.5456,1e6\n47.3978,8.5456,0\n")
+    assert [p.hover_time_s for p in read_pads(tmp_path / "p.csv")] == [1e6, 0.0]
