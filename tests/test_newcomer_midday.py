@@ -151,3 +151,10 @@ def test_pad_hover_time_at_the_top_of_the_range_is_read(tmp_path):
     from mission_sim.plans.pads import read_pads
     (tmp_path / "p.csv").write_text("lat,lon,hover_time_s\n47.3977,8.5456,1e6\n47.3978,8.5456,0\n")
     assert [p.hover_time_s for p in read_pads(tmp_path / "p.csv")] == [1e6, 0.0]
+
+
+def test_pad_radius_read_with_a_mission_file_has_the_configs_range(capsys, tmp_path):
+    """The file reader's own check said (0, inf) m, the config (0, 1000] m: one range now."""
+    cfg = tmp_path / "m.toml"
+    cfg.write_text(f'[mission]\nfile = "{_SQUARE}"\npad_radius_m = 0\n')
+    assert "mission.pad_radius_m=0 is invalid; valid range: (0, 1000] m" in _one_error_line(capsys, ["mission", str(cfg), "--dry-run"])

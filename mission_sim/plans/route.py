@@ -220,8 +220,10 @@ def apply_mission_files(d: dict, base_dir=None, mission_file=None, pads_file=Non
     if mf is not None and mission_file is None and d.get("waypoints"):
         raise ValueError(f"mission.file={m.get('file')!r} and [[waypoints]] are both given; valid: one route")
     radius = m.get("pad_radius_m", 5.0)
-    if isinstance(radius, bool) or not isinstance(radius, (int, float)) or not radius > 0:
-        raise ValueError(f"mission.pad_radius_m={radius!r} is invalid; valid range: (0, inf) m")
+    from ..config import PLAUSIBLE
+    if isinstance(radius, bool) or not isinstance(radius, (int, float)) or not PLAUSIBLE["mission.pad_radius_m"].contains(radius):
+        # (the config's range: this said (0, inf) m, the config (0, 1000] m)
+        raise ValueError(f"mission.pad_radius_m={radius!r} is invalid; valid range: {PLAUSIBLE['mission.pad_radius_m'].text()}")
     out = {**d, "mission": dict(m)}
     raw = read_mission(mf, m.get("from_log", "auto")) if mf is not None else None
     ref = raw.home if raw is not None else None
