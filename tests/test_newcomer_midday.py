@@ -158,3 +158,30 @@ def test_pad_radius_read_with_a_mission_file_has_the_configs_range(capsys, tmp_p
     cfg = tmp_path / "m.toml"
     cfg.write_text(f'[mission]\nfile = "{_SQUARE}"\npad_radius_m = 0\n')
     assert "mission.pad_radius_m=0 is invalid; valid range: (0, 1000] m" in _one_error_line(capsys, ["mission", str(cfg), "--dry-run"])
+
+
+# ------------------------------------------------------------------ a route over a raised pad
+def test_a_route_over_a_roof_pad_is_not_refused_for_the_cruise_altitude(capsys, tmp_path):
+    """A pad on a 30 m roof (pads file alt = home + 30 m) under a route loitering at 40 m was refused: "mission.
+    cruise_altitude_m=5.0 is invalid; valid range: > pads.0.z_m + mission.hover_gap_m = 30.17 m", a key only the
+    built-in pattern reads. Now the route charges there; its charge items still have to be above their pads."""
+    import json
+
+    from mission_sim.config import config_from_dict, load_config_dict
+    from mission_sim.world.trajectory import _segments
+    plan = json.loads(open(_SQUARE).read())
+    plan["mission"]["items"][1].update(command=19, params=[30, 0, 0, None, 47.397742, 8.545594, 40])
+    (tmp_path / "roof.plan").write_text(json.dumps(plan))
+    (tmp_path / "roof.csv").write_text("lat,lon,alt\n47.397742,8.545594,518\n")   # the plan's home: 488 m AMSL
+    cfg = config_from_dict(load_config_dict(None, tmp_path / "roof.plan", tmp_path / "roof.csv"))
+    assert cfg.pads[0].z_m == pytest.approx(30.0, abs=1e-6) and cfg.mission.cruise_altitude_m == 5.0
+    charge = [s for s in _segments(cfg) if s[0] == "charge"]
+    assert len(charge) == 1 and charge[0][3] == 30.0 and charge[0][1][2] == pytest.approx(30.0 + cfg.mission.hover_gap_m)
+    assert main(["mission", "--plan", str(tmp_path / "roof.plan"), "--pads", str(tmp_path / "roof.csv"), "--dry-run"]) == 0
+    capsys.readouterr()
+    low = tmp_path / "low.toml"   # a charge item below its pad: still refused, naming the item
+    low.write_text('[[pads]]\nz_m = 30.0\n[[waypoints]]\naction = "charge"\npad = 0\nz_m = 20.0\nhold_s = 10.0\n')
+    assert "waypoints.0.z_m=20.0 is invalid; valid range: > pads.0.z_m + mission.hover_gap_m = 30.17 m" in \
+        _one_error_line(capsys, ["mission", str(low), "--dry-run"])
+    assert "mission.cruise_altitude_m=5.0 is invalid" in _one_error_line(   # the built-in pattern: as before
+        capsys, ["mission", "--set", "pads.0.z_m=7", "--dry-run"])
