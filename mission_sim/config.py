@@ -24,7 +24,8 @@ from wpt_receiver.coupling import NOMINAL_GAP_M
 
 from .world.battery import BatteryParams, CcCvParams
 from .world.power import DroneParams
-from .validation import Range, check_number_fields, check_positive, check_range, read_toml_file
+from .validation import (HOLD_RANGE, PAD_RADIUS_RANGE, SPEED_RANGE, Range, check_number_fields, check_positive,
+                         check_range, read_toml_file)
 from .world.wind import WindParams
 
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
@@ -341,7 +342,7 @@ PLAUSIBLE: dict[str, Range] = {
     "link.rated_i2_a": Range(0.0, 1000.0, "A", lo_open=True), "link.tx_ramp_s": Range(0.0, 10.0, "s"),
     "coupling.tx_min_k": Range(0.0, 1.0, lo_open=True, hi_open=True),
     "coupling.tx_k_hysteresis": Range(0.0, 1.0, hi_open=True),
-    "pads.x_m": _M, "pads.y_m": _M, "pads.z_m": _M, "pads.hover_time_s": Range(0.0, 1e6, "s"),
+    "pads.x_m": _M, "pads.y_m": _M, "pads.z_m": _M, "pads.hover_time_s": HOLD_RANGE,
     "drone.mass_kg": Range(0.01, 1000.0, "kg"), "drone.payload_kg": Range(0.0, 1000.0, "kg"),
     "drone.n_rotors": Range(1, 32, integer=True), "drone.rotor_radius_m": Range(0.01, 10.0, "m"),
     "drone.figure_of_merit": Range(0.05, 1.0), "drone.drive_efficiency": Range(0.05, 1.0),
@@ -358,11 +359,11 @@ PLAUSIBLE: dict[str, Range] = {
     "wind.drag_area_m2": Range(0.0, 100.0, "m^2", lo_open=True), "wind.air_density_kg_m3": Range(0.05, 2.0, "kg/m^3"),
     "mission.start_x_m": _M, "mission.start_y_m": _M, "mission.land_x_m": _M, "mission.land_y_m": _M,
     "mission.cruise_altitude_m": Range(0.0, 500.0, "m", lo_open=True),
-    "mission.cruise_speed_m_s": Range(0.0, 100.0, "m/s", lo_open=True),
+    "mission.cruise_speed_m_s": SPEED_RANGE,
     "mission.max_accel_m_s2": Range(0.0, 100.0, "m/s^2", lo_open=True),
     "mission.climb_rate_m_s": Range(0.0, 50.0, "m/s", lo_open=True),
     "mission.descent_rate_m_s": Range(0.0, 50.0, "m/s", lo_open=True),
-    "mission.hover_gap_m": Range(0.03, 1.0, "m"), "mission.hover_time_s": Range(0.0, 1e6, "s"),
+    "mission.hover_gap_m": Range(0.03, 1.0, "m"), "mission.hover_time_s": HOLD_RANGE,
     "sim.control_period_s": Range(1e-7, 1e-3, "s"), "sim.traj_dt_s": Range(0.0, 1.0, "s", lo_open=True),
     "sim.flight_dt_s": Range(0.0, 3600.0, "s", lo_open=True), "sim.i2_noise_a": Range(0.0, 1000.0, "A"),
     "sim.min_fine_s": Range(0.0, 10.0, "s", lo_open=True), "sim.max_fine_s": Range(0.0, 1e9, "s", lo_open=True),
@@ -371,13 +372,13 @@ PLAUSIBLE: dict[str, Range] = {
     "sim.settle_i2_tol_a": Range(0.0, 1000.0, "A", lo_open=True), "sim.cmd_deadband_a": Range(0.0, 1000.0, "A"),
     "sim.bms_period_s": Range(0.0, 3600.0, "s", lo_open=True), "sim.tx_off_delay_s": Range(0.0, 60.0, "s"),
     "link.device_tj_c": Range(0.0, 175.0, "C (0 = the parts table's values; else >= 25)"),
-    "mission.pad_radius_m": Range(0.0, 1000.0, "m", lo_open=True),
+    "mission.pad_radius_m": PAD_RADIUS_RANGE,
     "charger.recharge_drop_cell_v": Range(0.005, 0.5, "V per cell"),
 }
 # a route's speed and holds as the mission's cruise speed and hover times (a waypoint's speed_m_s = 1e308, a
 # mission file's DO_CHANGE_SPEED 1e308 m/s, were accepted: their check was only > 0)
-PLAUSIBLE["waypoints.speed_m_s"] = PLAUSIBLE["mission.cruise_speed_m_s"]
-PLAUSIBLE["waypoints.hold_s"] = PLAUSIBLE["mission.hover_time_s"]
+PLAUSIBLE["waypoints.speed_m_s"] = SPEED_RANGE
+PLAUSIBLE["waypoints.hold_s"] = HOLD_RANGE
 
 
 #: ``--link KEY=VALUE`` of ``dronewpt paper`` / ``netlist`` / ``export-controller``: a range for every

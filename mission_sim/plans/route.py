@@ -23,6 +23,7 @@ import math
 from pathlib import Path
 
 from ..mavlink.geodesy import GeoPoint, geodetic_to_enu
+from ..validation import HOLD_RANGE, PAD_RADIUS_RANGE, SPEED_RANGE
 from .items import NAV_LAND, NAV_LOITER_TIME, NAV_RTL, NAV_TAKEOFF, NAV_WAYPOINT, RawMission, read_mission
 from .pads import read_pads
 
@@ -67,12 +68,11 @@ class _Builder:
     def fail(self, it, text: str):
         raise ValueError(f"{self.name}: {it.where}: {text}")
 
-    def in_range(self, it, what: str, value: float, key: str):
-        """:meth:`fail` unless ``value`` is inside the config's range for ``key`` (the route's ``[[waypoints]]``
-        key it becomes: one range for a file's item and a hand-written waypoint)."""
-        from ..config import PLAUSIBLE
-        if not PLAUSIBLE[key].contains(value):
-            self.fail(it, f"{what}={value:g} is invalid; valid range: {PLAUSIBLE[key].text()} ({key})")
+    def in_range(self, it, what: str, value: float, rng, key: str):
+        """:meth:`fail` unless ``value`` is inside ``rng``, the range of the route's ``[[waypoints]]`` key it becomes
+        (``key``; one range for a file's item and a hand-written waypoint, :mod:`mission_sim.validation`)."""
+        if not rng.contains(value):
+            self.fail(it, f"{what}={value:g} is invalid; valid range: {rng.text()} ({key})")
 
     def where_to(self, it):
         """(x, y, z) of a nav item in the pad frame; "here" for lat = lon = 0 and for alt 0 / unset."""
@@ -119,7 +119,7 @@ class _Builder:
         if it.command == DO_CHANGE_SPEED:
             v = it.params[1]
             if math.isfinite(v) and v > 0:   # (-1, 0, unset: no change, as ArduCopter)
-                self.in_range(it, "DO_CHANGE_SPEED speed param2", v, "waypoints.speed_m_s")
+                self.in_range(it, "DO_CHANGE_SPEED speed param2", v, SPEED_RANGE, "waypoints.speed_m_s")
                 self.speed = float(v)
             return
         if it.command in IGNORED_COMMANDS:
@@ -143,7 +143,7 @@ class _Builder:
             self.add("land", x, y, 0.0)
         else:
             hold = it.params[0] if math.isfinite(it.params[0]) else 0.0   # (unset: no hold)
-            self.in_range(it, "hold time param1", hold, "waypoints.hold_s")
+            self.in_range(it, "hold time param1", hold, HOLD_RANGE, "waypoints.hold_s")
             self.add("loiter" if kind == "loiter" or hold > 0 else "waypoint", x, y, z, hold)
 
 
@@ -220,10 +220,9 @@ def apply_mission_files(d: dict, base_dir=None, mission_file=None, pads_file=Non
     if mf is not None and mission_file is None and d.get("waypoints"):
         raise ValueError(f"mission.file={m.get('file')!r} and [[waypoints]] are both given; valid: one route")
     radius = m.get("pad_radius_m", 5.0)
-    from ..config import PLAUSIBLE
-    if isinstance(radius, bool) or not isinstance(radius, (int, float)) or not PLAUSIBLE["mission.pad_radius_m"].contains(radius):
+    if isinstance(radius, bool) or not isinstance(radius, (int, float)) or not PAD_RADIUS_RANGE.contains(radius):
         # (the config's range: this said (0, inf) m, the config (0, 1000] m)
-        raise ValueError(f"mission.pad_radius_m={radius!r} is invalid; valid range: {PLAUSIBLE['mission.pad_radius_m'].text()}")
+        raise ValueError(f"mission.pad_radius_m={radius!r} is invalid; valid range: {PAD_RADIUS_RANGE.text()}")
     out = {**d, "mission": dict(m)}
     raw = read_mission(mf, m.get("from_log", "auto")) if mf is not None else None
     ref = raw.home if raw is not None else None
