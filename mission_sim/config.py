@@ -322,6 +322,26 @@ def check_cross_fields(cfg: MissionConfig) -> None:
                          "file or with --plan (mission files are read when the config is loaded)")
 
 
+#: ``[mission]`` keys only the built-in pattern (start -> pads -> land) reads: a route (``[[waypoints]]``, or one read
+#: from ``mission.file`` / ``--plan``) flies its own heights, holds and landing
+PATTERN_KEYS = ("mission.cruise_altitude_m", "mission.land_x_m", "mission.land_y_m", "mission.hover_time_s")
+
+
+def check_route_keys(cfg_or_dict, keys, what: str = "--set") -> None:
+    """``ValueError`` naming the first of ``keys`` (given explicitly: ``--set``'s dict, a study's varied keys) that the
+    route of ``cfg_or_dict`` (a :class:`MissionConfig` or its dict) never reads (:data:`PATTERN_KEYS`): its value would
+    change nothing (``--plan survey.plan --set mission.cruise_altitude_m=60`` flew the plan's 20 m without a word)."""
+    route = cfg_or_dict.get("waypoints") if isinstance(cfg_or_dict, dict) else cfg_or_dict.waypoints
+    key = next((k for k in keys if k in PATTERN_KEYS), None) if route else None
+    if key is not None:
+        value = f"={keys[key]!r}" if isinstance(keys, dict) else ""
+        raise ValueError(
+            f"{what} {key}{value} is invalid: the mission flies a route (--plan, mission.file or [[waypoints]]), which "
+            f"never reads it (the built-in pattern's, as are {', '.join(k for k in PATTERN_KEYS if k != key)}); valid: "
+            "the route's own heights, holds and landing (its mission file's items, or [[waypoints]] z_m / hold_s / "
+            'action = "land"), or leave the key out')
+
+
 def _cv_range() -> Range:
     """``charger.cv_cell_v``: the cell's open-circuit voltage from SoC 0 to 1 (above it the CV phase never ends)."""
     from .world.battery import ocv_cell_v

@@ -185,3 +185,37 @@ def test_a_route_over_a_roof_pad_is_not_refused_for_the_cruise_altitude(capsys, 
         _one_error_line(capsys, ["mission", str(low), "--dry-run"])
     assert "mission.cruise_altitude_m=5.0 is invalid" in _one_error_line(   # the built-in pattern: as before
         capsys, ["mission", "--set", "pads.0.z_m=7", "--dry-run"])
+
+
+# ------------------------------------------------------------------ keys a route never reads
+@pytest.mark.parametrize("argv, key", [
+    (["mission", "--plan", _SQUARE, "--set", "mission.cruise_altitude_m=60", "--dry-run"], "mission.cruise_altitude_m=60"),
+    (["mission", "--plan", _SQUARE, "--set", "mission.hover_time_s=100", "--dry-run"], "mission.hover_time_s=100"),
+    (["telemetry", "--plan", _SQUARE, "--set", "mission.land_x_m=5", "--connect", "none", "--tlog", "x.tlog"],
+     "mission.land_x_m=5"),
+])
+def test_set_of_a_key_a_route_never_reads_is_refused(capsys, tmp_path, monkeypatch, argv, key):
+    """``--plan survey.plan --set mission.cruise_altitude_m=60`` flew the plan's 20 m, exit 0: only the built-in
+    pattern reads the cruise altitude, the landing spot and mission.hover_time_s."""
+    monkeypatch.chdir(tmp_path)
+    line = _one_error_line(capsys, argv)
+    assert f"--set {key} is invalid: the mission flies a route" in line and "valid: the route's own heights" in line
+    assert not (tmp_path / "x.tlog").exists()
+
+
+def test_keys_a_route_reads_and_the_patterns_keys_without_a_route_still_work(capsys):
+    assert main(["mission", "--plan", _SQUARE, "--set", "mission.start_x_m=5", "--set", "mission.cruise_speed_m_s=5",
+                 "--dry-run"]) == 0
+    assert main(["mission", "--set", "mission.cruise_altitude_m=60", "--set", "mission.hover_time_s=10", "--dry-run"]) == 0
+    capsys.readouterr()
+
+
+def test_a_study_varying_a_key_its_route_never_reads_is_refused(capsys, tmp_path):
+    """Every case the same mission (the cruise altitude of a base mission that flies a route), before: 2 cases run."""
+    (tmp_path / "route.toml").write_text('[[waypoints]]\naction = "loiter"\nx_m = 10.0\nz_m = 20.0\nhold_s = 5.0\n')
+    (tmp_path / "s.toml").write_text('[study]\nname = "alt"\nbase = "route.toml"\n[grid]\n'
+                                     '"mission.cruise_altitude_m" = [5.0, 50.0]\n')
+    line = _one_error_line(capsys, ["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "out"), "--workers", "0",
+                                    "--no-plot"])
+    assert "study key mission.cruise_altitude_m is invalid: the mission flies a route" in line, line
+    assert not (tmp_path / "out" / "cases").exists()

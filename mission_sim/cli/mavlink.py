@@ -57,6 +57,8 @@ def _mav_config(args, overrides=None, single_pad=False):
         drone = read_drone_toml(args.drone)
     cfg = config_from_dict(apply_overrides(d, {**drone, **(overrides or {}), **parse_set(args.set)}))
     if not single_pad:
+        from ..config import check_route_keys
+        check_route_keys(cfg, parse_set(args.set))   # (changed nothing: a route flies its own heights)
         from .mission import default_pads_notice
         args.pads_noted = default_pads_notice(getattr(args, "command", "telemetry"), getattr(args, "plan", None),
                                               getattr(args, "mission_pads", None), d, parse_set(args.set),
