@@ -219,3 +219,25 @@ def test_a_study_varying_a_key_its_route_never_reads_is_refused(capsys, tmp_path
                                     "--no-plot"])
     assert "study key mission.cruise_altitude_m is invalid: the mission flies a route" in line, line
     assert not (tmp_path / "out" / "cases").exists()
+
+
+# ------------------------------------------------------------------ a pads file's altitude in another frame
+def test_a_pad_far_above_or_below_home_warns(tmp_path):
+    """``alt = 0`` (meant as "on the ground") at the plan's home 488 m AMSL: the pad 488 m below home, and a route
+    loitering over it flew down there to charge (941.6 s, 87.6 kJ of propulsion instead of ~165 s), no word."""
+    import warnings
+
+    from mission_sim.config import config_from_dict, load_config_dict
+    from mission_sim.setup_warnings import far_pad_warnings, mission_warnings
+    from wpt_receiver.notices import DronewptWarning
+    (tmp_path / "p.csv").write_text("lat,lon,alt\n47.397742,8.545594,0\n47.398742,8.546594,518\n")
+    cfg = config_from_dict(load_config_dict(None, _SQUARE, tmp_path / "p.csv"))
+    assert far_pad_warnings(cfg) == [
+        "pads.0.z_m=-488 is outside +-120 m of the mission's home (the pad is 488 m below it: a drone charging there "
+        "flies up or down to it); valid: a pads file's alt in metres above mean sea level (not above home or the "
+        "ground, not feet)"]
+    assert far_pad_warnings(config_from_dict(load_config_dict())) == []   # the default mission: no warning
+    assert far_pad_warnings(cfg)[0] in mission_warnings(cfg)
+    with warnings.catch_warnings():   # a replayed trajectory (own_route=False) is not the route's: not said there
+        warnings.simplefilter("error", DronewptWarning)
+        assert not any("+-120 m" in w for w in mission_warnings(cfg, own_route=False))
