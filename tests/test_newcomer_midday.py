@@ -241,3 +241,13 @@ def test_a_pad_far_above_or_below_home_warns(tmp_path):
     with warnings.catch_warnings():   # a replayed trajectory (own_route=False) is not the route's: not said there
         warnings.simplefilter("error", DronewptWarning)
         assert not any("+-120 m" in w for w in mission_warnings(cfg, own_route=False))
+
+
+def test_replay_refuses_the_built_in_patterns_keys(capsys):
+    """``replay LOG --set mission.cruise_altitude_m=60`` replayed the log's track, the value ignored, exit 0;
+    ``mission.hover_time_s`` is refused without ``--pads`` only (a re-flight's default hover)."""
+    from pathlib import Path
+    log = str(Path(__file__).resolve().parent / "data" / "flightlogs" / "dronekit-python_flight.tlog")
+    for key in ("mission.cruise_altitude_m=60", "mission.land_y_m=3", "mission.hover_time_s=30"):
+        line = _one_error_line(capsys, ["replay", log, "--window", "440,460", "--set", key, "--no-plot"])
+        assert f"--set {key.partition('=')[0]} is not used by replay: the track, its heights" in line, line
