@@ -118,14 +118,8 @@ def _add_replay(sub):
     p.set_defaults(func=_cmd_replay)
 
 
-def _cmd_replay(args) -> int:
-    from ..mavlink.geodesy import parse_geo_point
-    from ..files import atomic_output
-    from ..mavlink.logs import read_log
-    from ..mavlink.replay import parse_window, replay_log, replay_span, track_from_log
-    mass_override(args)   # --mass with --set drone.mass_kg: refused before the log is read
-    if args.reach is not None and args.pads is None:   # (it was ignored: a replay without pads visits none)
-        raise CliError("--reach is only used with --pads; add --pads FILE or drop --reach")
+def _refuse_unused_keys(args) -> None:
+    """``CliError`` for a ``--set`` key that replay never reads: the files' keys and the built-in pattern's."""
     from ..config import PATTERN_KEYS
     from ..plans import FILE_READ_KEYS
     unused = [k for k in parse_set(args.set) if k in FILE_READ_KEYS]   # (read, then replaced by the log's route)
@@ -137,6 +131,17 @@ def _cmd_replay(args) -> int:
     if unused:
         raise CliError(f"--set {unused[0]} is not used by replay: the track, its heights and its landing are the log's "
                        "(mission.hover_time_s: the default hover of a --pads re-flight); valid: drop it")
+
+
+def _cmd_replay(args) -> int:
+    from ..mavlink.geodesy import parse_geo_point
+    from ..files import atomic_output
+    from ..mavlink.logs import read_log
+    from ..mavlink.replay import parse_window, replay_log, replay_span, track_from_log
+    mass_override(args)   # --mass with --set drone.mass_kg: refused before the log is read
+    if args.reach is not None and args.pads is None:   # (it was ignored: a replay without pads visits none)
+        raise CliError("--reach is only used with --pads; add --pads FILE or drop --reach")
+    _refuse_unused_keys(args)
     if getattr(args, "pads", None) is not None:  # what-if re-flight with pads: its own module
         from .refly import cmd_refly
         return cmd_refly(args)
