@@ -24,7 +24,8 @@ from wpt_receiver.coupling import NOMINAL_GAP_M
 
 from .world.battery import BatteryParams, CcCvParams
 from .world.power import DroneParams
-from .validation import Range, check_number_fields, check_positive, check_range, read_toml_file
+from .validation import (HOLD_RANGE, PAD_RADIUS_RANGE, SPEED_RANGE, Range, check_number_fields, check_positive,
+                         check_range, read_toml_file)
 from .world.wind import WindParams
 
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
@@ -269,8 +270,7 @@ def check_section_values(cfg: MissionConfig) -> None:
     for i, pad in enumerate(cfg.pads):
         _check_section(f"pads.{i}", PadConfig, pad)
     for i, wp in enumerate(cfg.waypoints):
-        if not isinstance(wp, WaypointConfig):
-            raise ValueError(f"waypoints.{i}={wp!r} is invalid; valid type: WaypointConfig")
+        _check_section(f"waypoints.{i}", WaypointConfig, wp)
 
 
 def _check_section(section: str, cls, obj) -> None:
@@ -299,11 +299,13 @@ def _remember_checked(obj) -> None:
 
 
 def check_cross_fields(cfg: MissionConfig) -> None:
-    """Limits between sections (each section checks its own keys): the drone must be able to fly above
-    every pad at the cruise altitude, and the pad ground level must be below that altitude. Raises
+    """Limits between sections (each section checks its own keys): the built-in pattern must be able to fly above
+    every pad at the cruise altitude, a route's charge items above their pads. Raises
     ``ValueError`` naming the dotted key, its value and the valid range."""
     m = cfg.mission
-    for i, pad in enumerate(cfg.pads):
+    # the cruise altitude is the built-in pattern's: a route flies its own heights (its charge items checked below;
+    # a pad on a 30 m roof under a route loitering at 40 m was refused for cruise_altitude_m=5, a key it never reads)
+    for i, pad in enumerate(() if cfg.waypoints else cfg.pads):
         top = pad.z_m + m.hover_gap_m
         if not top < m.cruise_altitude_m:
             raise ValueError(f"mission.cruise_altitude_m={m.cruise_altitude_m!r} is invalid; valid range: "
@@ -318,6 +320,26 @@ def check_cross_fields(cfg: MissionConfig) -> None:
     if m.file and not cfg.waypoints:
         raise ValueError(f"mission.file={m.file!r} was not read into a route; valid: set it in the config "
                          "file or with --plan (mission files are read when the config is loaded)")
+
+
+#: ``[mission]`` keys only the built-in pattern (start -> pads -> land) reads: a route (``[[waypoints]]``, or one read
+#: from ``mission.file`` / ``--plan``) flies its own heights, holds and landing
+PATTERN_KEYS = ("mission.cruise_altitude_m", "mission.land_x_m", "mission.land_y_m", "mission.hover_time_s")
+
+
+def check_route_keys(cfg_or_dict, keys, what: str = "--set") -> None:
+    """``ValueError`` naming the first of ``keys`` (given explicitly: ``--set``'s dict, a study's varied keys) that the
+    route of ``cfg_or_dict`` (a :class:`MissionConfig` or its dict) never reads (:data:`PATTERN_KEYS`): its value would
+    change nothing (``--plan survey.plan --set mission.cruise_altitude_m=60`` flew the plan's 20 m without a word)."""
+    route = cfg_or_dict.get("waypoints") if isinstance(cfg_or_dict, dict) else cfg_or_dict.waypoints
+    key = next((k for k in keys if k in PATTERN_KEYS), None) if route else None
+    if key is not None:
+        value = f"={keys[key]!r}" if isinstance(keys, dict) else ""
+        raise ValueError(
+            f"{what} {key}{value} is invalid: the mission flies a route (--plan, mission.file or [[waypoints]]), which "
+            f"never reads it (the built-in pattern's, as are {', '.join(k for k in PATTERN_KEYS if k != key)}); valid: "
+            "the route's own heights, holds and landing (its mission file's items, or [[waypoints]] z_m / hold_s / "
+            'action = "land"), or leave the key out')
 
 
 def _cv_range() -> Range:
@@ -340,7 +362,7 @@ PLAUSIBLE: dict[str, Range] = {
     "link.rated_i2_a": Range(0.0, 1000.0, "A", lo_open=True), "link.tx_ramp_s": Range(0.0, 10.0, "s"),
     "coupling.tx_min_k": Range(0.0, 1.0, lo_open=True, hi_open=True),
     "coupling.tx_k_hysteresis": Range(0.0, 1.0, hi_open=True),
-    "pads.x_m": _M, "pads.y_m": _M, "pads.z_m": _M, "pads.hover_time_s": Range(0.0, 1e6, "s"),
+    "pads.x_m": _M, "pads.y_m": _M, "pads.z_m": _M, "pads.hover_time_s": HOLD_RANGE,
     "drone.mass_kg": Range(0.01, 1000.0, "kg"), "drone.payload_kg": Range(0.0, 1000.0, "kg"),
     "drone.n_rotors": Range(1, 32, integer=True), "drone.rotor_radius_m": Range(0.01, 10.0, "m"),
     "drone.figure_of_merit": Range(0.05, 1.0), "drone.drive_efficiency": Range(0.05, 1.0),
@@ -357,11 +379,11 @@ PLAUSIBLE: dict[str, Range] = {
     "wind.drag_area_m2": Range(0.0, 100.0, "m^2", lo_open=True), "wind.air_density_kg_m3": Range(0.05, 2.0, "kg/m^3"),
     "mission.start_x_m": _M, "mission.start_y_m": _M, "mission.land_x_m": _M, "mission.land_y_m": _M,
     "mission.cruise_altitude_m": Range(0.0, 500.0, "m", lo_open=True),
-    "mission.cruise_speed_m_s": Range(0.0, 100.0, "m/s", lo_open=True),
+    "mission.cruise_speed_m_s": SPEED_RANGE,
     "mission.max_accel_m_s2": Range(0.0, 100.0, "m/s^2", lo_open=True),
     "mission.climb_rate_m_s": Range(0.0, 50.0, "m/s", lo_open=True),
     "mission.descent_rate_m_s": Range(0.0, 50.0, "m/s", lo_open=True),
-    "mission.hover_gap_m": Range(0.03, 1.0, "m"), "mission.hover_time_s": Range(0.0, 1e6, "s"),
+    "mission.hover_gap_m": Range(0.03, 1.0, "m"), "mission.hover_time_s": HOLD_RANGE,
     "sim.control_period_s": Range(1e-7, 1e-3, "s"), "sim.traj_dt_s": Range(0.0, 1.0, "s", lo_open=True),
     "sim.flight_dt_s": Range(0.0, 3600.0, "s", lo_open=True), "sim.i2_noise_a": Range(0.0, 1000.0, "A"),
     "sim.min_fine_s": Range(0.0, 10.0, "s", lo_open=True), "sim.max_fine_s": Range(0.0, 1e9, "s", lo_open=True),
@@ -370,14 +392,30 @@ PLAUSIBLE: dict[str, Range] = {
     "sim.settle_i2_tol_a": Range(0.0, 1000.0, "A", lo_open=True), "sim.cmd_deadband_a": Range(0.0, 1000.0, "A"),
     "sim.bms_period_s": Range(0.0, 3600.0, "s", lo_open=True), "sim.tx_off_delay_s": Range(0.0, 60.0, "s"),
     "link.device_tj_c": Range(0.0, 175.0, "C (0 = the parts table's values; else >= 25)"),
-    "mission.pad_radius_m": Range(0.0, 1000.0, "m", lo_open=True),
+    "mission.pad_radius_m": PAD_RADIUS_RANGE,
     "charger.recharge_drop_cell_v": Range(0.005, 0.5, "V per cell"),
+}
+# a route's speed and holds as the mission's cruise speed and hover times (a waypoint's speed_m_s = 1e308, a
+# mission file's DO_CHANGE_SPEED 1e308 m/s, were accepted: their check was only > 0)
+PLAUSIBLE["waypoints.speed_m_s"] = SPEED_RANGE
+PLAUSIBLE["waypoints.hold_s"] = HOLD_RANGE
+
+
+#: ``--link KEY=VALUE`` of ``dronewpt paper`` / ``netlist`` / ``export-controller``: a range for every
+#: :class:`~wpt_receiver.LinkParams` field (``vdc_v=1e308`` overflowed, ``f_hz=1e-300`` and ``lm_h=nan`` were
+#: tracebacks); the four keys the mission's ``[link]`` has are its :data:`PLAUSIBLE` ranges (one source), the battery
+#: voltage is the inverter's, the inductances 1 nH .. 1 H (``k < 1`` is LinkParams' own check)
+LINK_PARAM_RANGES: dict[str, Range] = {
+    "l1_h": Range(1e-9, 1.0, "H"), "l2_h": Range(1e-9, 1.0, "H"), "lm_h": Range(0.0, 1.0, "H", lo_open=True),
+    "r1_ohm": PLAUSIBLE["link.r1_ohm"], "r2_ohm": PLAUSIBLE["link.r2_ohm"], "vdc_v": PLAUSIBLE["link.vdc_v"],
+    "vl_v": PLAUSIBLE["link.vdc_v"], "f_hz": PLAUSIBLE["link.f_hz"],
 }
 
 
 def plausible_range(section: str, name: str) -> Range | None:
-    """The :data:`PLAUSIBLE` range of key ``name`` of ``section`` (``"battery"``, ``"pads.1"``), None for strings."""
-    return PLAUSIBLE.get(f"{'pads' if section.startswith('pads') else section}.{name}")
+    """The :data:`PLAUSIBLE` range of key ``name`` of ``section`` (``"battery"``, ``"pads.1"``, ``"waypoints.3"``),
+    None for strings."""
+    return PLAUSIBLE.get(f"{section.partition('.')[0] if section.startswith(('pads.', 'waypoints.')) else section}.{name}")
 
 
 _SECTIONS = {"link": LinkConfig, "coupling": CouplingConfig, "drone": DroneParams, "battery": BatteryParams,
@@ -421,7 +459,7 @@ def _build(section: str, cls, d):
         obj = cls(**kwargs)
     except ValueError as exc:
         raise ValueError(f"{section}.{exc}") from None
-    if section in _SECTIONS or section.startswith("pads."):
+    if section in _SECTIONS or section.startswith(("pads.", "waypoints.")):
         _remember_checked(obj)   # its ranges were checked above (MissionConfig does not check them again)
     return obj
 

@@ -9,6 +9,7 @@ each by the command line.
   source of the limits), at the hover pose's Lm and the pack's highest voltage (``n_series * cv_cell_v``).
 * :func:`unreached_pad_warnings`: a pad the route never energises (:func:`energised_pads`: no charging hover
   or loiter's hover inside its coupling range, the run's own rule): it charges nothing.
+* :func:`far_pad_warnings`: a pad more than 120 m above or below home (an altitude in another frame or unit).
 * :func:`policy_link_warning`: a policy made for another link model than the mission's (``"modal"``), if it
   predicts with it: a policy says so with a class attribute ``uses_link_model = True`` (``mpc``,
   ``model_based_budget``, ``slow_budget``, ``oracle_imitation_filtered``; not part of the
@@ -19,7 +20,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["link_range_warning", "unreached_pad_warnings", "energised_pads", "policy_link_warning", "mission_warnings",
+__all__ = ["link_range_warning", "unreached_pad_warnings", "far_pad_warnings", "energised_pads", "policy_link_warning", "mission_warnings",
            "mission_link_params", "MISSION_LINK_MODEL"]
 
 #: the link model every mission runs (:mod:`mission_sim.world.loop_kernel` steps :mod:`wpt_receiver.modal_kernel`)
@@ -115,6 +116,21 @@ def unreached_pad_warnings(cfg) -> list[str]:
     return out
 
 
+#: a pad farther above or below the mission's home than this is likely an altitude in another frame or unit (a
+#: pads file's ``alt`` is m AMSL: 0 meant as "on the ground", feet for metres): the common legal ceiling of drones
+#: (EU open category 120 m, US 400 ft)
+PAD_HEIGHT_WARN_M = 120.0
+
+
+def far_pad_warnings(cfg) -> list[str]:
+    """One line per pad more than :data:`PAD_HEIGHT_WARN_M` above or below home (a pads file's ``alt = 0`` at a home
+    488 m AMSL put the pad 488 m below it, and a route loitering over it flew down there to charge, without a word)."""
+    return [f"pads.{i}.z_m={pad.z_m:.6g} is outside +-{PAD_HEIGHT_WARN_M:g} m of the mission's home (the pad is "
+            f"{abs(pad.z_m):.0f} m {'above' if pad.z_m > 0 else 'below'} it: a drone charging there flies up or down to it); "
+            "valid: a pads file's alt in metres above mean sea level (not above home or the ground, not feet)"
+            for i, pad in enumerate(cfg.pads) if abs(pad.z_m) > PAD_HEIGHT_WARN_M]
+
+
 def policy_link_warning(cfg, policy) -> str | None:
     """One line when ``policy`` predicts with its context's link model (``uses_link_model``: ``mpc``,
     ``model_based_budget``, ...) and that (``policy.ctx.link_model``) is not the mission's (a standalone
@@ -134,5 +150,5 @@ def mission_warnings(cfg, policy=None, own_route: bool = True) -> list[str]:
     out = [w for w in (link_range_warning(cfg), policy_link_warning(cfg, policy) if policy is not None else None)
            if w is not None]
     if own_route:
-        out += unreached_pad_warnings(cfg)
+        out += far_pad_warnings(cfg) + unreached_pad_warnings(cfg)
     return out

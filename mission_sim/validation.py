@@ -47,6 +47,15 @@ class Range:
         return f"{body} {self.unit}".rstrip()
 
 
+#: ranges shared by the mission config (:data:`mission_sim.config.PLAUSIBLE`) and the mission and pads file readers
+#: (:mod:`mission_sim.plans`, which never import the config): a horizontal speed (``mission.cruise_speed_m_s``, a
+#: route's ``speed_m_s``, a file's DO_CHANGE_SPEED), a hover or hold time (``mission.hover_time_s``, ``pads.*``, a
+#: route's ``hold_s``, a file's loiter time or pad ``hover_time_s``) and ``mission.pad_radius_m``
+SPEED_RANGE = Range(0.0, 100.0, "m/s", lo_open=True)
+HOLD_RANGE = Range(0.0, 1e6, "s")
+PAD_RADIUS_RANGE = Range(0.0, 1000.0, "m", lo_open=True)
+
+
 def check_range(key: str, value, rng: Range) -> None:
     """``ValueError("key=value is invalid; valid range: <rng.text()>")`` unless ``rng`` contains ``value``."""
     if not rng.contains(value):

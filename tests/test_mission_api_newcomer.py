@@ -114,7 +114,7 @@ def test_number_types_of_files_and_set_are_unchanged():
 
 
 def test_every_key_out_of_range_through_replace_is_refused_naming_it():
-    from mission_sim.config import PLAUSIBLE
+    from mission_sim.config import PLAUSIBLE, WaypointConfig
 
     cfg = load_config()
     for key, rng in PLAUSIBLE.items():
@@ -123,6 +123,8 @@ def test_every_key_out_of_range_through_replace_is_refused_naming_it():
             def change():
                 if sec == "pads":
                     return R(cfg, pads=(R(cfg.pads[0], **{name: v}),) + cfg.pads[1:])
+                if sec == "waypoints":   # (a route's speed and holds, since 2026-11-27 midday)
+                    return R(cfg, waypoints=(R(WaypointConfig(action="loiter", x_m=10.0, z_m=20.0), **{name: v}),))
                 return R(cfg, **{sec: R(getattr(cfg, sec), **{name: v})})
             if rng.contains(v):
                 continue

@@ -242,7 +242,7 @@ def test_paper_cli_link_errors_and_the_modal_margin_warning(capsys):
     assert main(["paper", "--no-plot", "--link", "lm_h=1e-3"]) == 2
     assert "lm_h < 6.67862e-05 H" in capsys.readouterr().err
     assert main(["paper", "--no-plot", "--link", "r2_ohm=0"]) == 2
-    assert "r2_ohm=0.0 is invalid; valid range: (0, inf)" in capsys.readouterr().err
+    assert "--link r2_ohm=0.0 is invalid; valid range: [1e-06, 100] ohm" in capsys.readouterr().err
     assert main(["paper", "--no-plot", "--format", "json", "--link", "vdc_v=3"]) == 0
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "vdc_v / vl_v = 0.1 is below" in err and err.endswith("use --model switching\n")

@@ -41,6 +41,9 @@ def _link_params(items):
     from dataclasses import fields
 
     from wpt_receiver import TABLE_I
+
+    from ..config import LINK_PARAM_RANGES
+    from ..validation import check_range
     keys = [f.name for f in fields(TABLE_I)]
     changes = {}
     for item in items:
@@ -51,6 +54,8 @@ def _link_params(items):
             value = float(val)
         except ValueError:
             raise CliError(f"--link {item!r}: {val!r} is not a number") from None
+        # (nan, 1e308, f_hz=1e-300 were a traceback or an overflow further on)
+        check_range(f"--link {key.strip()}", value, LINK_PARAM_RANGES[key.strip()])
         if changes.get(key.strip(), value) != value:   # (the last one won without a word)
             raise CliError(f"--link {key.strip()} is given twice ({changes[key.strip()]:g} and {value:g}); valid: "
                            "each key once")

@@ -57,6 +57,8 @@ def _mav_config(args, overrides=None, single_pad=False):
         drone = read_drone_toml(args.drone)
     cfg = config_from_dict(apply_overrides(d, {**drone, **(overrides or {}), **parse_set(args.set)}))
     if not single_pad:
+        from ..config import check_route_keys
+        check_route_keys(cfg, parse_set(args.set))   # (changed nothing: a route flies its own heights)
         from .mission import default_pads_notice
         args.pads_noted = default_pads_notice(getattr(args, "command", "telemetry"), getattr(args, "plan", None),
                                               getattr(args, "mission_pads", None), d, parse_set(args.set),
@@ -116,6 +118,21 @@ def _add_replay(sub):
     p.set_defaults(func=_cmd_replay)
 
 
+def _refuse_unused_keys(args) -> None:
+    """``CliError`` for a ``--set`` key that replay never reads: the files' keys and the built-in pattern's."""
+    from ..config import PATTERN_KEYS
+    from ..plans import FILE_READ_KEYS
+    unused = [k for k in parse_set(args.set) if k in FILE_READ_KEYS]   # (read, then replaced by the log's route)
+    if unused:
+        raise CliError(f"--set {unused[0]} is not used by replay: the route is the log's, the pads are --pads FILE "
+                       "(or --pad); valid: drop it (with pads: --pads FILE)")
+    # the built-in pattern's keys (mission.cruise_altitude_m=60 was ignored); mission.hover_time_s: a re-flight's hover
+    unused = [k for k in parse_set(args.set) if k in PATTERN_KEYS and (k != "mission.hover_time_s" or args.pads is None)]
+    if unused:
+        raise CliError(f"--set {unused[0]} is not used by replay: the track, its heights and its landing are the log's "
+                       "(mission.hover_time_s: the default hover of a --pads re-flight); valid: drop it")
+
+
 def _cmd_replay(args) -> int:
     from ..mavlink.geodesy import parse_geo_point
     from ..files import atomic_output
@@ -124,11 +141,7 @@ def _cmd_replay(args) -> int:
     mass_override(args)   # --mass with --set drone.mass_kg: refused before the log is read
     if args.reach is not None and args.pads is None:   # (it was ignored: a replay without pads visits none)
         raise CliError("--reach is only used with --pads; add --pads FILE or drop --reach")
-    from ..plans import FILE_READ_KEYS
-    unused = [k for k in parse_set(args.set) if k in FILE_READ_KEYS]   # (read, then replaced by the log's route)
-    if unused:
-        raise CliError(f"--set {unused[0]} is not used by replay: the route is the log's, the pads are --pads FILE "
-                       "(or --pad); valid: drop it (with pads: --pads FILE)")
+    _refuse_unused_keys(args)
     if getattr(args, "pads", None) is not None:  # what-if re-flight with pads: its own module
         from .refly import cmd_refly
         return cmd_refly(args)

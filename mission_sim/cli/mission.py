@@ -144,6 +144,7 @@ def mission_config(args):
     files = mission_file_keys(overrides)
     d = mconfig.load_config_dict(args.config, getattr(args, "plan", None), getattr(args, "pads", None), files)
     cfg = mconfig.config_from_dict(mconfig.apply_overrides(d, overrides) if overrides else d)
+    mconfig.check_route_keys(cfg, parse_set(args.set))   # (changed nothing: a route flies its own heights)
     args.pads_noted = (not getattr(args, "no_charge", False)   # (pads never energised: nothing to say about them)
                        and default_pads_notice(getattr(args, "command", "mission"), getattr(args, "plan", None),
                                                getattr(args, "pads", None), d, overrides,

@@ -15,6 +15,7 @@ import math
 from dataclasses import dataclass
 
 from ..mavlink.geodesy import GeoPoint
+from ..validation import HOLD_RANGE
 
 __all__ = ["GeoPad", "read_pads", "MAX_PADS"]
 
@@ -47,11 +48,14 @@ def read_pads(path) -> tuple[GeoPad, ...]:
 
 def _pad(lat, lon, alt, hover, where: str) -> GeoPad:
     try:
+        if any(isinstance(v, bool) for v in (lat, lon, alt, hover)):   # (GeoJSON's true was a 1 s hover)
+            raise TypeError
         vals = [None if v is None else float(v) for v in (lat, lon, alt, hover)]
     except (TypeError, ValueError):
-        raise ValueError(f"{where}: lat={lat!r}, lon={lon!r}, alt={alt!r}, hover_time_s={hover!r}: not numbers") from None
-    if vals[3] is not None and not (math.isfinite(vals[3]) and vals[3] >= 0):
-        raise ValueError(f"{where}: hover_time_s={hover!r} is invalid; valid range: [0, inf) s")
+        raise ValueError(f"{where}: lat={lat!r}, lon={lon!r}, alt={alt!r}, hover_time_s={hover!r}: not numbers; valid: a number each") from None
+    # the config's range of a hover time (this said [0, inf) s; 1e308 then failed as pads.0.hover_time_s, no file named)
+    if vals[3] is not None and not HOLD_RANGE.contains(vals[3]):
+        raise ValueError(f"{where}: hover_time_s={hover!r} is invalid; valid range: {HOLD_RANGE.text()}")
     try:
         return GeoPad(GeoPoint(vals[0], vals[1], vals[2]), vals[3])
     except (TypeError, ValueError) as exc:

@@ -23,6 +23,7 @@ import math
 from pathlib import Path
 
 from ..mavlink.geodesy import GeoPoint, geodetic_to_enu
+from ..validation import HOLD_RANGE, PAD_RADIUS_RANGE, SPEED_RANGE
 from .items import NAV_LAND, NAV_LOITER_TIME, NAV_RTL, NAV_TAKEOFF, NAV_WAYPOINT, RawMission, read_mission
 from .pads import read_pads
 
@@ -67,6 +68,12 @@ class _Builder:
     def fail(self, it, text: str):
         raise ValueError(f"{self.name}: {it.where}: {text}")
 
+    def in_range(self, it, what: str, value: float, rng, key: str):
+        """:meth:`fail` unless ``value`` is inside ``rng``, the range of the route's ``[[waypoints]]`` key it becomes
+        (``key``; one range for a file's item and a hand-written waypoint, :mod:`mission_sim.validation`)."""
+        if not rng.contains(value):
+            self.fail(it, f"{what}={value:g} is invalid; valid range: {rng.text()} ({key})")
+
     def where_to(self, it):
         """(x, y, z) of a nav item in the pad frame; "here" for lat = lon = 0 and for alt 0 / unset."""
         home = self.raw.home
@@ -92,7 +99,7 @@ class _Builder:
         z = it.alt_m - home.alt_m if it.frame in _AMSL_FRAMES else it.alt_m
         if not 0 <= z <= 5000:
             self.fail(it, f"altitude {it.alt_m:g} m ({'AMSL' if it.frame in _AMSL_FRAMES else 'above home'}) is "
-                          f"{z:.1f} m above home; valid range: [0, 5000] m above home")
+                          f"{z:.6g} m above home; valid range: [0, 5000] m above home")   # (.1f: 1e308 in 309 digits)
         return x, y, z
 
     def add(self, action, x, y, z, hold_s=0.0):
@@ -111,7 +118,8 @@ class _Builder:
     def item(self, it):
         if it.command == DO_CHANGE_SPEED:
             v = it.params[1]
-            if math.isfinite(v) and v > 0:
+            if math.isfinite(v) and v > 0:   # (-1, 0, unset: no change, as ArduCopter)
+                self.in_range(it, "DO_CHANGE_SPEED speed param2", v, SPEED_RANGE, "waypoints.speed_m_s")
                 self.speed = float(v)
             return
         if it.command in IGNORED_COMMANDS:
@@ -134,9 +142,8 @@ class _Builder:
         elif kind == "land":
             self.add("land", x, y, 0.0)
         else:
-            hold = it.params[0] if math.isfinite(it.params[0]) else 0.0
-            if hold < 0:
-                self.fail(it, f"hold time param1={hold:g} is invalid; valid range: [0, inf) s")
+            hold = it.params[0] if math.isfinite(it.params[0]) else 0.0   # (unset: no hold)
+            self.in_range(it, "hold time param1", hold, HOLD_RANGE, "waypoints.hold_s")
             self.add("loiter" if kind == "loiter" or hold > 0 else "waypoint", x, y, z, hold)
 
 
@@ -213,8 +220,9 @@ def apply_mission_files(d: dict, base_dir=None, mission_file=None, pads_file=Non
     if mf is not None and mission_file is None and d.get("waypoints"):
         raise ValueError(f"mission.file={m.get('file')!r} and [[waypoints]] are both given; valid: one route")
     radius = m.get("pad_radius_m", 5.0)
-    if isinstance(radius, bool) or not isinstance(radius, (int, float)) or not radius > 0:
-        raise ValueError(f"mission.pad_radius_m={radius!r} is invalid; valid range: (0, inf) m")
+    if isinstance(radius, bool) or not isinstance(radius, (int, float)) or not PAD_RADIUS_RANGE.contains(radius):
+        # (the config's range: this said (0, inf) m, the config (0, 1000] m)
+        raise ValueError(f"mission.pad_radius_m={radius!r} is invalid; valid range: {PAD_RADIUS_RANGE.text()}")
     out = {**d, "mission": dict(m)}
     raw = read_mission(mf, m.get("from_log", "auto")) if mf is not None else None
     ref = raw.home if raw is not None else None

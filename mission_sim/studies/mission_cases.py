@@ -171,7 +171,7 @@ class MissionCaseRunner:
     def validate_keys(self, keys: Iterable[str], example: dict) -> None:
         """Unknown keys raise ``ValueError`` naming the key (apply_overrides' validation), and so do the keys read
         with the base mission's files (:data:`~mission_sim.plans.FILE_READ_KEYS`: a case's value changed nothing)."""
-        from ..config import apply_overrides
+        from ..config import apply_overrides, check_route_keys
         from ..plans import FILE_READ_KEYS
 
         for k in keys:
@@ -179,6 +179,7 @@ class MissionCaseRunner:
                 raise ValueError(f"study key {k!r} is invalid: it is read with the mission and pads files when the "
                                  "base mission is loaded, so a case's value would change nothing; valid: set it in "
                                  "the [study] base file (one study per value)")
+        check_route_keys(self.base, list(keys), "study key")   # (every case the same mission)
         apply_overrides(self.base, {k: example[k] for k in keys if k != POLICY_KEY})
 
     def check_params(self, params: dict) -> str | None:

@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .trajectory import _segments
+from .trajectory import _path
 
 __all__ = ["RunEstimate", "estimate_run", "check_run_size", "MAX_MEMORY_BYTES", "MAX_OUTPUT_BYTES", "FIXED_BYTES",
            "SAMPLE_BYTES", "HELD_SAMPLES"]
@@ -61,8 +61,9 @@ class RunEstimate:
     value: float
 
 
-def _segment_key(cfg, seg, pad_index: int) -> tuple[str, float]:
-    """The config key that sets a planned segment's duration."""
+def _segment_key(cfg, seg, pad_index: int, speed_key=None) -> tuple[str, float]:
+    """The config key that sets a planned segment's duration (``speed_key``: the route waypoint's speed that set
+    a move's, ``_Path.speed_keys``; a slow DO_CHANGE_SPEED was blamed on mission.cruise_speed_m_s)."""
     phase, _, u, _, _ = seg
     m = cfg.mission
     if u is None:
@@ -77,7 +78,7 @@ def _segment_key(cfg, seg, pad_index: int) -> tuple[str, float]:
     if abs(u[2]) > 1.0 - 1e-9:
         return ("mission.climb_rate_m_s", m.climb_rate_m_s) if u[2] > 0 else \
             ("mission.descent_rate_m_s", m.descent_rate_m_s)
-    return "mission.cruise_speed_m_s", m.cruise_speed_m_s
+    return speed_key or ("mission.cruise_speed_m_s", m.cruise_speed_m_s)
 
 
 def estimate_run(cfg, frame: bool = False) -> RunEstimate:
@@ -88,9 +89,10 @@ def estimate_run(cfg, frame: bool = False) -> RunEstimate:
     per_key: dict[tuple[str, float], float] = {}
     duration = charge_s = 0.0
     pad_index = 0
-    for seg in _segments(cfg):
+    path = _path(cfg)
+    for seg, speed_key in zip(path.segs, path.speed_keys):
         dur = float(seg[3])
-        key = _segment_key(cfg, seg, pad_index)
+        key = _segment_key(cfg, seg, pad_index, speed_key)
         if seg[2] is None and seg[0] == "charge":
             charge_s += dur
             pad_index += 1

@@ -171,8 +171,9 @@ class _Path:
     def __init__(self, m, start):
         self.m, self.pos, self.segs = m, np.asarray(start, dtype=float), []
         self.ground, self.grounds = 0.0, []
+        self.speed_keys = []   # per segment: the route's (key, value) that set a move's speed, else None
 
-    def move(self, p1, phase, speed_m_s=None):
+    def move(self, p1, phase, speed_m_s=None, speed_key=None):
         p1 = np.asarray(p1, dtype=float)
         d = p1 - self.pos
         dist = float(np.linalg.norm(d))
@@ -182,12 +183,14 @@ class _Path:
         dur, ev = _profile(dist, vmax, self.m.max_accel_m_s2)
         self.segs.append((phase, self.pos.copy(), d / dist, dur, ev))
         self.grounds.append(self.ground)
+        self.speed_keys.append(None if speed_m_s is None else speed_key)
         self.pos = p1
 
     def hold(self, dur, phase):
         if dur > 0:
             self.segs.append((phase, self.pos.copy(), None, float(dur), None))
             self.grounds.append(self.ground)
+            self.speed_keys.append(None)
 
 
 def _segments(cfg):
@@ -223,9 +226,10 @@ def _route_segments(cfg):
     vertical landing where the last waypoint left the drone, if it did not land)."""
     m = cfg.mission
     path = _Path(m, [m.start_x_m, m.start_y_m, 0.0])
-    speed = None
-    for wp in cfg.waypoints:
-        speed = wp.speed_m_s if wp.speed_m_s is not None else speed
+    speed = key = None
+    for i, wp in enumerate(cfg.waypoints):
+        if wp.speed_m_s is not None:
+            speed, key = wp.speed_m_s, (f"waypoints.{i}.speed_m_s", wp.speed_m_s)
         x, y, z = wp.x_m, wp.y_m, wp.z_m
         if wp.action == "charge":
             pad = cfg.pads[wp.pad]
@@ -234,12 +238,12 @@ def _route_segments(cfg):
             path.move([path.pos[0], path.pos[1], z], "takeoff")
             continue
         if wp.action == "land":
-            path.move([x, y, path.pos[2]], "transit", speed)
+            path.move([x, y, path.pos[2]], "transit", speed, key)
             path.move([x, y, 0.0], "land")
             continue
         if path.pos[2] <= 0.0 and z > 0.0:
             path.move([path.pos[0], path.pos[1], z], "takeoff")
-        path.move([x, y, z], "transit", speed)
+        path.move([x, y, z], "transit", speed, key)
         if wp.action == "loiter":
             path.hold(wp.hold_s, "hover")
         elif wp.action == "charge":

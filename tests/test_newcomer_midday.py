@@ -1,0 +1,253 @@
+"""A demanding newcomer's bad inputs (2026-11-27 midday; docs/robustness.md, "Newcomer's bad inputs
+(2026-11-27 midday)"): each test failed on the tree before its fix (``main``)."""
+
+from __future__ import annotations
+
+import pytest
+
+from mission_sim.cli import main
+
+
+def _one_error_line(capsys, argv) -> str:
+    """``main(argv)``: exit status 2, nothing on stdout, one line on stderr and no traceback (the line returned)."""
+    try:
+        rc = main(argv)
+    except SystemExit as exc:
+        rc = exc.code
+    cap = capsys.readouterr()
+    assert rc == 2, (rc, cap.err)
+    lines = cap.err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in cap.err, cap.err
+    assert cap.out == "", cap.out
+    return lines[0]
+
+
+# ------------------------------------------------------------------ paper / netlist / export-controller --link
+@pytest.mark.parametrize("argv, text", [
+    # a KeyError traceback (the "given twice" check compared nan with itself), exit 1
+    (["paper", "--no-plot", "--link", "lm_h=nan"], "--link lm_h=nan is invalid; valid range: (0, 1] H"),
+    (["netlist", "--link", "f_hz=nan"], "--link f_hz=nan is invalid; valid range: [10000, 1e+07] Hz"),
+    (["export-controller", "--link", "vl_v=nan"], "--link vl_v=nan is invalid; valid range: (0, 1000] V"),
+    # a ZeroDivisionError traceback
+    (["paper", "--no-plot", "--link", "f_hz=1e-300"], "--link f_hz=1e-300 is invalid; valid range: [10000, 1e+07] Hz"),
+    # RuntimeWarnings (overflow), then "i2_a[0]=nan at t_s=0.0 is not finite" naming no input
+    (["paper", "--no-plot", "--link", "vdc_v=1e308"], "--link vdc_v=1e+308 is invalid; valid range: (0, 1000] V"),
+    (["paper", "--no-plot", "--link", "r1_ohm=1e308"], "--link r1_ohm=1e+308 is invalid; valid range: [1e-06, 100] ohm"),
+    # "c1_f=0.0 is invalid" (a derived value, not the one given)
+    (["paper", "--no-plot", "--link", "l1_h=1e308"], "--link l1_h=1e+308 is invalid; valid range: [1e-09, 1] H"),
+])
+def test_link_values_are_checked_where_read(capsys, argv, text):
+    line = _one_error_line(capsys, argv)
+    assert text in line, line
+
+
+def test_link_ranges_are_the_mission_configs_where_it_has_the_key():
+    """One source: ``--link vdc_v`` / ``r1_ohm`` / ``r2_ohm`` / ``f_hz`` take the mission's ``[link]`` ranges."""
+    from mission_sim.config import LINK_PARAM_RANGES, PLAUSIBLE
+    from wpt_receiver import TABLE_I
+    for key in ("vdc_v", "r1_ohm", "r2_ohm", "f_hz"):
+        assert LINK_PARAM_RANGES[key] is PLAUSIBLE[f"link.{key}"]
+    for key, rng in LINK_PARAM_RANGES.items():   # Table I inside every range
+        assert rng.contains(getattr(TABLE_I, key)), key
+
+
+# ------------------------------------------------------------------ a route's speeds and holds
+_HOME = ("QGC WPL 110\n0\t0\t0\t16\t0\t0\t0\t0\t-35.363262\t149.165237\t584.09\t1\n"
+         "1\t0\t3\t22\t0\t0\t0\t0\t0\t0\t20\t1\n")
+_LEG = "\t0\t3\t16\t0\t0\t0\t0\t-35.362656\t149.165072\t20\t1\n"
+_LEG2 = "\t0\t3\t16\t0\t0\t0\t0\t-35.360174\t149.167908\t14\t1\n"
+
+
+def _wpl(tmp_path, *rows) -> str:
+    path = tmp_path / "m.waypoints"
+    path.write_text(_HOME + "".join(f"{i + 2}{row}" for i, row in enumerate(rows)))
+    return str(path)
+
+
+def _speed_row(v: str) -> str:
+    return f"\t0\t0\t178\t1\t{v}\t0\t0\t0\t0\t0\t1\n"
+
+
+@pytest.mark.parametrize("rows, text", [
+    # DO_CHANGE_SPEED 1e308 m/s: flown (the check was > 0), where mission.cruise_speed_m_s stops at 100 m/s
+    ((_LEG, _speed_row("1e308"), _LEG2),
+     "m.waypoints: row 3: DO_CHANGE_SPEED speed param2=1e+308 is invalid; valid range: (0, 100] m/s"),
+    # a hold the run-size check blamed on "waypoints.hold_s" (no row); pads' hover times stop at 1e6 s
+    (("\t0\t3\t19\t1e308\t0\t0\t0\t-35.362656\t149.165072\t20\t1\n",),
+     "m.waypoints: row 2: hold time param1=1e+308 is invalid; valid range: [0, 1e+06] s"),
+    # a slow speed: "mission.cruise_speed_m_s=8.0 makes the run too large" (a key nobody changed)
+    ((_LEG, _speed_row("1e-9"), _LEG2), "waypoints.2.speed_m_s=1e-09 makes the run too large"),
+    # an altitude of 1e308: the message printed it in 309 digits
+    (("\t0\t3\t16\t0\t0\t0\t0\t-35.362656\t149.165072\t1e308\t1\n",),
+     "m.waypoints: row 2: altitude 1e+308 m (above home) is 1e+308 m above home; valid range: [0, 5000] m above home"),
+])
+def test_mission_file_speeds_holds_and_heights(capsys, tmp_path, rows, text):
+    line = _one_error_line(capsys, ["mission", "--plan", _wpl(tmp_path, *rows), "--no-charge", "--dry-run"])
+    assert text in line, line
+    assert len(line) < 400
+
+
+def test_do_change_speed_in_range_and_no_change_still_fly(capsys, tmp_path):
+    """-1 / 0 (MAVLink's "no change", as ArduCopter) and 100 m/s, the top of the range, are taken as before."""
+    for v in ("-1", "0", "100"):
+        assert main(["mission", "--plan", _wpl(tmp_path, _LEG, _speed_row(v), _LEG2), "--no-charge", "--dry-run"]) == 0
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize("extra, text", [
+    ('speed_m_s = 1e308', "waypoints.1.speed_m_s=1e+308 is invalid; valid range: (0, 100] m/s"),
+    ('speed_m_s = 150.0', "waypoints.1.speed_m_s=150.0 is invalid; valid range: (0, 100] m/s"),
+    ('hold_s = 1e7', "waypoints.1.hold_s=10000000.0 is invalid; valid range: [0, 1e+06] s"),
+    ('speed_m_s = 1e-9', "waypoints.1.speed_m_s=1e-09 makes the run too large"),
+])
+def test_toml_waypoint_speed_and_hold(capsys, tmp_path, extra, text):
+    cfg = tmp_path / "route.toml"
+    cfg.write_text('[[waypoints]]\naction = "takeoff"\nz_m = 20.0\n'
+                   f'[[waypoints]]\naction = "loiter"\nx_m = 50.0\ny_m = 0.0\nz_m = 20.0\n{extra}\n')
+    line = _one_error_line(capsys, ["mission", str(cfg), "--dry-run"])
+    assert text in line, line
+
+
+def test_waypoint_ranges_from_python():
+    """``dataclasses.replace`` with a route is checked as a file is (the route's sections were only type-checked)."""
+    import dataclasses
+
+    from mission_sim.config import WaypointConfig, load_config
+    cfg = load_config()
+    fast = WaypointConfig(action="waypoint", x_m=50.0, z_m=20.0, speed_m_s=1e308)
+    with pytest.raises(ValueError, match=r"waypoints\.1\.speed_m_s=1e\+308 is invalid; valid range: \(0, 100\] m/s"):
+        dataclasses.replace(cfg, waypoints=(WaypointConfig(action="takeoff", z_m=20.0), fast))
+    ok = dataclasses.replace(fast, speed_m_s=12.0)
+    assert dataclasses.replace(cfg, waypoints=(ok,)).waypoints == (ok,)
+
+
+# ------------------------------------------------------------------ pads files: hover times
+_SQUARE = str(__import__("pathlib").Path(__file__).resolve().parent / "data" / "missions" / "qgc_simple_square.plan")
+
+
+def _feature(props: str) -> str:
+    return ('{"type":"FeatureCollection","features":[{"type":"Feature","geometry":{"type":"Point",'
+            f'"coordinates":[8.5456,47.3977]}},"properties":{props}}}]}}')
+
+
+@pytest.mark.parametrize("name, text, expected", [
+    # the reader said [0, inf) s; 1e308 then failed in the config as "pads.0.hover_time_s=1e+308 ..." (no file, line)
+    ("p.csv", "lat,lon,hover_time_s\n47.3977,8.5456,1e308\n",
+     "p.csv: line 2: hover_time_s='1e308' is invalid; valid range: [0, 1e+06] s"),
+    ("p.csv", "lat,lon,hover_time_s\n47.3977,8.5456,-5\n", "p.csv: line 2: hover_time_s='-5' is invalid; valid range: [0, 1e+06] s"),
+    ("p.geojson", _feature('{"hover_time_s":1e308}'),
+     "p.geojson: feature 0: hover_time_s=1e+308 is invalid; valid range: [0, 1e+06] s"),
+    # JSON's true was float(True): a 1 s hover
+    ("p.geojson", _feature('{"hover_time_s":true}'), "p.geojson: feature 0: lat=47.3977, lon=8.5456, alt=None, "
+                                                     "hover_time_s=True: not numbers; valid: a number each"),
+])
+def test_pad_hover_times_take_the_configs_range_where_read(capsys, tmp_path, name, text, expected):
+    (tmp_path / name).write_text(text)
+    line = _one_error_line(capsys, ["mission", "--plan", _SQUARE, "--pads", str(tmp_path / name), "--dry-run"])
+    assert expected in line, line
+
+
+def test_pad_hover_time_at_the_top_of_the_range_is_read(tmp_path):
+    from mission_sim.plans.pads import read_pads
+    (tmp_path / "p.csv").write_text("lat,lon,hover_time_s\n47.3977,8.5456,1e6\n47.3978,8.5456,0\n")
+    assert [p.hover_time_s for p in read_pads(tmp_path / "p.csv")] == [1e6, 0.0]
+
+
+def test_pad_radius_read_with_a_mission_file_has_the_configs_range(capsys, tmp_path):
+    """The file reader's own check said (0, inf) m, the config (0, 1000] m: one range now."""
+    cfg = tmp_path / "m.toml"
+    cfg.write_text(f'[mission]\nfile = "{_SQUARE}"\npad_radius_m = 0\n')
+    assert "mission.pad_radius_m=0 is invalid; valid range: (0, 1000] m" in _one_error_line(capsys, ["mission", str(cfg), "--dry-run"])
+
+
+# ------------------------------------------------------------------ a route over a raised pad
+def test_a_route_over_a_roof_pad_is_not_refused_for_the_cruise_altitude(capsys, tmp_path):
+    """A pad on a 30 m roof (pads file alt = home + 30 m) under a route loitering at 40 m was refused: "mission.
+    cruise_altitude_m=5.0 is invalid; valid range: > pads.0.z_m + mission.hover_gap_m = 30.17 m", a key only the
+    built-in pattern reads. Now the route charges there; its charge items still have to be above their pads."""
+    import json
+
+    from mission_sim.config import config_from_dict, load_config_dict
+    from mission_sim.world.trajectory import _segments
+    plan = json.loads(open(_SQUARE).read())
+    plan["mission"]["items"][1].update(command=19, params=[30, 0, 0, None, 47.397742, 8.545594, 40])
+    (tmp_path / "roof.plan").write_text(json.dumps(plan))
+    (tmp_path / "roof.csv").write_text("lat,lon,alt\n47.397742,8.545594,518\n")   # the plan's home: 488 m AMSL
+    cfg = config_from_dict(load_config_dict(None, tmp_path / "roof.plan", tmp_path / "roof.csv"))
+    assert cfg.pads[0].z_m == pytest.approx(30.0, abs=1e-6) and cfg.mission.cruise_altitude_m == 5.0
+    charge = [s for s in _segments(cfg) if s[0] == "charge"]
+    assert len(charge) == 1 and charge[0][3] == 30.0 and charge[0][1][2] == pytest.approx(30.0 + cfg.mission.hover_gap_m)
+    assert main(["mission", "--plan", str(tmp_path / "roof.plan"), "--pads", str(tmp_path / "roof.csv"), "--dry-run"]) == 0
+    capsys.readouterr()
+    low = tmp_path / "low.toml"   # a charge item below its pad: still refused, naming the item
+    low.write_text('[[pads]]\nz_m = 30.0\n[[waypoints]]\naction = "charge"\npad = 0\nz_m = 20.0\nhold_s = 10.0\n')
+    assert "waypoints.0.z_m=20.0 is invalid; valid range: > pads.0.z_m + mission.hover_gap_m = 30.17 m" in \
+        _one_error_line(capsys, ["mission", str(low), "--dry-run"])
+    assert "mission.cruise_altitude_m=5.0 is invalid" in _one_error_line(   # the built-in pattern: as before
+        capsys, ["mission", "--set", "pads.0.z_m=7", "--dry-run"])
+
+
+# ------------------------------------------------------------------ keys a route never reads
+@pytest.mark.parametrize("argv, key", [
+    (["mission", "--plan", _SQUARE, "--set", "mission.cruise_altitude_m=60", "--dry-run"], "mission.cruise_altitude_m=60"),
+    (["mission", "--plan", _SQUARE, "--set", "mission.hover_time_s=100", "--dry-run"], "mission.hover_time_s=100"),
+    (["telemetry", "--plan", _SQUARE, "--set", "mission.land_x_m=5", "--connect", "none", "--tlog", "x.tlog"],
+     "mission.land_x_m=5"),
+])
+def test_set_of_a_key_a_route_never_reads_is_refused(capsys, tmp_path, monkeypatch, argv, key):
+    """``--plan survey.plan --set mission.cruise_altitude_m=60`` flew the plan's 20 m, exit 0: only the built-in
+    pattern reads the cruise altitude, the landing spot and mission.hover_time_s."""
+    monkeypatch.chdir(tmp_path)
+    line = _one_error_line(capsys, argv)
+    assert f"--set {key} is invalid: the mission flies a route" in line and "valid: the route's own heights" in line
+    assert not (tmp_path / "x.tlog").exists()
+
+
+def test_keys_a_route_reads_and_the_patterns_keys_without_a_route_still_work(capsys):
+    assert main(["mission", "--plan", _SQUARE, "--set", "mission.start_x_m=5", "--set", "mission.cruise_speed_m_s=5",
+                 "--dry-run"]) == 0
+    assert main(["mission", "--set", "mission.cruise_altitude_m=60", "--set", "mission.hover_time_s=10", "--dry-run"]) == 0
+    capsys.readouterr()
+
+
+def test_a_study_varying_a_key_its_route_never_reads_is_refused(capsys, tmp_path):
+    """Every case the same mission (the cruise altitude of a base mission that flies a route), before: 2 cases run."""
+    (tmp_path / "route.toml").write_text('[[waypoints]]\naction = "loiter"\nx_m = 10.0\nz_m = 20.0\nhold_s = 5.0\n')
+    (tmp_path / "s.toml").write_text('[study]\nname = "alt"\nbase = "route.toml"\n[grid]\n'
+                                     '"mission.cruise_altitude_m" = [5.0, 50.0]\n')
+    line = _one_error_line(capsys, ["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "out"), "--workers", "0",
+                                    "--no-plot"])
+    assert "study key mission.cruise_altitude_m is invalid: the mission flies a route" in line, line
+    assert not (tmp_path / "out" / "cases").exists()
+
+
+# ------------------------------------------------------------------ a pads file's altitude in another frame
+def test_a_pad_far_above_or_below_home_warns(tmp_path):
+    """``alt = 0`` (meant as "on the ground") at the plan's home 488 m AMSL: the pad 488 m below home, and a route
+    loitering over it flew down there to charge (941.6 s, 87.6 kJ of propulsion instead of ~165 s), no word."""
+    import warnings
+
+    from mission_sim.config import config_from_dict, load_config_dict
+    from mission_sim.setup_warnings import far_pad_warnings, mission_warnings
+    from wpt_receiver.notices import DronewptWarning
+    (tmp_path / "p.csv").write_text("lat,lon,alt\n47.397742,8.545594,0\n47.398742,8.546594,518\n")
+    cfg = config_from_dict(load_config_dict(None, _SQUARE, tmp_path / "p.csv"))
+    assert far_pad_warnings(cfg) == [
+        "pads.0.z_m=-488 is outside +-120 m of the mission's home (the pad is 488 m below it: a drone charging there "
+        "flies up or down to it); valid: a pads file's alt in metres above mean sea level (not above home or the "
+        "ground, not feet)"]
+    assert far_pad_warnings(config_from_dict(load_config_dict())) == []   # the default mission: no warning
+    assert far_pad_warnings(cfg)[0] in mission_warnings(cfg)
+    with warnings.catch_warnings():   # a replayed trajectory (own_route=False) is not the route's: not said there
+        warnings.simplefilter("error", DronewptWarning)
+        assert not any("+-120 m" in w for w in mission_warnings(cfg, own_route=False))
+
+
+def test_replay_refuses_the_built_in_patterns_keys(capsys):
+    """``replay LOG --set mission.cruise_altitude_m=60`` replayed the log's track, the value ignored, exit 0;
+    ``mission.hover_time_s`` is refused without ``--pads`` only (a re-flight's default hover)."""
+    from pathlib import Path
+    log = str(Path(__file__).resolve().parent / "data" / "flightlogs" / "dronekit-python_flight.tlog")
+    for key in ("mission.cruise_altitude_m=60", "mission.land_y_m=3", "mission.hover_time_s=30"):
+        line = _one_error_line(capsys, ["replay", log, "--window", "440,460", "--set", key, "--no-plot"])
+        assert f"--set {key.partition('=')[0]} is not used by replay: the track, its heights" in line, line
