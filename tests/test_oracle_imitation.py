@@ -179,26 +179,29 @@ def test_train_script_link_reaches_the_teacher_and_the_meta(tmp_path, monkeypatc
     seen, n, T = [], 6, EnvConfig().n_steps
 
     def stop_obs(scenario, seed, episodes, config=None, base="model_based"):
-        seen.append(("obs", config))
+        seen.append(("obs", config, base))
         from mission_sim.contract import OBS_DIM
         from policies.oracle_imitation import HISTORY
         return np.random.default_rng(seed).normal(size=(episodes, HISTORY, OBS_DIM)), np.full(episodes, 10)
 
     def targets(scenario, seeds, deltas, config=None, progress=False, base="model_based"):
-        seen.append(("oracle", config))
+        seen.append(("oracle", config, base))
         m, d = len(seeds), len(deltas)
         return {"floor": np.full(m, 0.01), "overshoot": np.full((m, d), 0.02), "energy_j": np.ones((m, d)),
                 "feasible": np.ones((m, d), bool), "duties": np.full((m, d, T), 0.5)}
     monkeypatch.setattr(oit, "collect_stop_observations", stop_obs)
     monkeypatch.setattr(oit, "oracle_targets", targets)
-    for link, want in (("modal", "modal"), ("envelope", "envelope"), (None, EnvConfig.link_model)):
+    for link, want, base in (("modal", "modal", None), ("envelope", "envelope", None), (None, EnvConfig.link_model, None),
+                             ("modal", "modal", "mpc"), ("envelope", "envelope", "mpc")):   # --link with --base mpc
         seen.clear()
-        out = tmp_path / f"{link}" / "m"
-        tr.main(["--windows", f"0:{n}", "--train-seeds", "0", "--out", str(out)] + (["--link", link] if link else []))
-        assert seen == [("obs", EnvConfig(link_model=want)), ("oracle", EnvConfig(link_model=want))]
-        assert all(type(c) is EnvConfig for _, c in seen)
+        out = tmp_path / f"{link}{base}" / "m"
+        tr.main(["--windows", f"0:{n}", "--train-seeds", "0", "--out", str(out)] + (["--link", link] if link else [])
+                + (["--base", base] if base else []))
+        b = base or "model_based"
+        assert seen == [("obs", EnvConfig(link_model=want), b), ("oracle", EnvConfig(link_model=want), b)]
+        assert all(type(c) is EnvConfig for _, c, _ in seen)
         meta = json.loads(str(np.load(f"{out}_s0.npz")["meta"]))
-        assert meta["link"] == want and np.load(f"{out}_s0.npz")["W"].shape[1] == HORIZON
+        assert meta["link"] == want and meta["base"] == b and np.load(f"{out}_s0.npz")["W"].shape[1] == HORIZON
 
 
 def _mission_cli(args, capsys):
@@ -335,12 +338,22 @@ def test_playback_selection_rule_and_retimed_maps(tmp_path, monkeypatch):
          (0.5, 1.0): {"a": {"dov": -0.11, "dret": 0.5}, "b": {"dov": -0.11, "dret": 3.0}}}
     assert choose(t, 0.10) == ((0.4, 1.2), [(0.4, 1.1), (0.4, 1.2), (0.5, 1.0)])   # 0.95 is within 0.1 of 1.0
     assert choose(t, 0.13)[0] == (0.4, 1.2) and choose(t, 0.5) == (None, [])
+    # admit="upper": the pooled bootstrap's upper bound of the overshoot difference below -margin on every scenario
+    up = {k: {s: {**v, "dov_pooled": (v["dov"], v["dov"] - 0.1, v["dov"] + 0.1)} for s, v in row.items()}
+          for k, row in t.items()}
+    assert choose(up, 0.0, "upper") == ((0.4, 1.2), [(0.4, 1.1), (0.4, 1.2), (0.5, 1.0)])   # -0.05 + 0.1 > 0
+    assert choose(up, 0.03, "upper") == ((0.4, 1.2), [(0.4, 1.2)])   # -0.12 + 0.1 = -0.02 is not < -0.03
+    with pytest.raises(ValueError, match="admit='max' is invalid; valid values: mean, upper"):
+        choose(t, 0.0, "max")
     shipped = load_model(SHIPPED)
     m = {k: v for k, v in shipped.items() if k not in ("meta", "slow")}
     write_map(m, tmp_path / "m.npz", 0.4, 1.2, 0, "modal", shipped["meta"]["control_period_s"])
     re = load_model(tmp_path / "m.npz")
     assert float(re["slow"]) == 1.2 and re["meta"]["slow"] == 1.2
     assert all(np.array_equal(re[k], shipped[k]) for k in ("W", "cols", "feat_mean", "feat_std"))
+    assert re["meta"]["base"] == "model_based"
+    write_map(m, tmp_path / "b.npz", 0.4, 1.2, 0, "modal", shipped["meta"]["control_period_s"], "mpc", (0, 40))
+    assert load_model(tmp_path / "b.npz")["meta"]["base"] == "mpc" and load_model(tmp_path / "b.npz")["meta"]["windows"] == [0, 40]
     f = np.array([[0.3, 2.0] + [0.0] * 7])
     base = predict({**re, "slow": np.array(1.0)}, f)[0]
     assert np.array_equal(predict(re, f)[0], np.interp(np.arange(HORIZON) / 1.2, np.arange(HORIZON), base))
