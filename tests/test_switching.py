@@ -69,7 +69,9 @@ def _stepper_vs_ivp(cfg):
 
 @pytest.mark.parametrize("name", list(CONFIGS))
 def test_exact_stepper_matches_solve_ivp(name):
-    """Exact stepper vs solve_ivp (DOP853 rtol=atol=1e-11, Radau 1e-9) of eq. 1 written out independently,
+    """Exact stepper vs solve_ivp (DOP853 rtol=atol=1e-11, Radau 1e-9) of eq. 1 written out independently (the
+    mode decisions at events are shared: ``compiled._modes`` / ``_after_event``, checked on their own in
+    tests/test_switching_compiled.py),
     over RM -> phase shift (d=0.55) -> SM, 38 half-cycles. Tolerance: 1e-7 of each state's scale
     (currents ~10 A, vC1 ~1.5 kV)."""
     cfg = CONFIGS[name]

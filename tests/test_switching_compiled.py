@@ -125,3 +125,70 @@ def test_refine_finds_the_bracketed_root():
         assert abs(r_fast - r_ref) <= 1e-11 * T
         assert abs(g(r_fast)) < 1e-6 * np.abs(c).sum()
     assert found >= 20
+
+
+def _rules():
+    """The link (dead time: every mode reachable), its circuit and the packed rows the mode rules read."""
+    import wpt_receiver.switching.compiled as ck
+    link = SwitchingLink(P, SwitchingConfig(dead_time_s=3e-7))
+    a = ck.pack(link)
+    return ck, link.cir, (a["v2open"], a["v1open"], a["sec_th"], a["pri_th"])
+
+
+def _states(cir, n=200):
+    """Random augmented states at the circuit's scale (currents ~10 A, capacitor voltages ~1.5 kV)."""
+    rng = np.random.default_rng(0)
+    return [np.r_[rng.normal(size=cir.n) * [10, 1500, 10, 1500, 50][:cir.n], 1.0] for _ in range(n)]
+
+
+def test_after_event_rules_follow_the_circuits_rows():
+    """The mode rules after a guard event, written out here from the circuit's open-circuit rows and thresholds
+    (not taken from the kernel; the comparisons above share them, and so does the ``solve_ivp`` reference)."""
+    from wpt_receiver.switching.circuit import I1, I2, P_OPEN, PRIMARY, S_OPEN, SECONDARY
+    ck, cir, rules = _rules()
+    after = getattr(ck._after_event, "py_func", ck._after_event)
+    th2 = cir.rect_threshold_row()
+    for x in _states(cir):
+        for s in SECONDARY:   # a blocked primary interval ends: freewheel the way the open-circuit voltage drives
+            p, s2 = after(x.copy(), False, P_OPEN, s, False, *rules)
+            assert (p, s2) == (2 if x @ cir.v1_open_row(s) > 0 else -2, s)
+        for p0 in PRIMARY:
+            # a blocked secondary interval ends: the diode pair of the open-circuit voltage's sign
+            p, s = after(x.copy(), True, p0, S_OPEN, False, *rules)
+            assert (p, s) == (p0, 1 if x @ cir.v2_open_row(p0) > 0 else -1)
+            # a conducting secondary's current reaches 0: blocked unless the open-circuit voltage beats the threshold
+            xx = x.copy()
+            p, s = after(xx, True, p0, 1, False, *rules)
+            v, th = xx @ cir.v2_open_row(p0), xx @ th2
+            assert xx[I2] == 0.0 and (p, s) == (p0, 1 if v > th else (-1 if v < -th else S_OPEN))
+            # chatter: the blocked state, the current zeroed
+            xx = x.copy()
+            p, s = after(xx, True, p0, 1, True, *rules)
+            assert (p, s) == (p0, S_OPEN) and xx[I2] == 0.0
+        for s0 in SECONDARY:  # a freewheeling primary's current reaches 0 with chatter: blocked, zeroed
+            xx = x.copy()
+            p, s = after(xx, False, 2, s0, True, *rules)
+            assert (p, s) == (P_OPEN, s0) and xx[I1] == 0.0
+
+
+def test_drive_change_rules_follow_the_circuits_rows():
+    """The modes at a drive change, written out from the circuit: the inverter follows its command (in dead time
+    the current freewheels against its sign), the SBAR shorts under its gate, else the pair of the current's sign."""
+    from wpt_receiver.switching.circuit import I1, I2, P_OPEN, S_OPEN, S_SHORT
+    ck, cir, rules = _rules()
+    modes = getattr(ck._modes, "py_func", ck._modes)
+    for x in _states(cir, 50):
+        for cmd in (1, -1, 0):
+            for gate in (0, 1):
+                p, s = modes(x, cmd, gate, *rules)
+                assert p == (cmd if cmd else (-2 if x[I1] > 0 else 2))
+                assert s == (S_SHORT if gate else (1 if x[I2] > 0 else -1))
+        # zero currents: decided by the open-circuit voltages against the thresholds
+        x0 = x.copy()
+        x0[I1] = x0[I2] = 0.0
+        p, s = modes(x0, 0, 0, *rules)
+        v2, th2 = x0 @ cir.v2_open_row(P_OPEN), x0 @ cir.rect_threshold_row()
+        s_exp = 1 if v2 > th2 else (-1 if v2 < -th2 else S_OPEN)
+        v1 = x0 @ cir.v1_open_row(s_exp)
+        th1 = cir.inverter_threshold_v
+        assert (p, s) == (2 if v1 > th1 else (-2 if v1 < -th1 else P_OPEN), s_exp)

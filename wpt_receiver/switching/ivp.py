@@ -3,7 +3,8 @@
 The right-hand side and the guards are written directly from eq. 1 and the device equations
 (:mod:`wpt_receiver.devices`), not from the topology matrices of :mod:`.circuit`; only the mode
 decisions at a drive change or a zero current are shared with :class:`~.link.SwitchingLink` (the
-functions of :mod:`.compiled`, called on the link's packed arrays).
+functions of :mod:`.compiled`, called on the link's packed arrays: a call imports numba, ~0.8 s in a fresh
+process; ``tests/test_switching_compiled.py`` checks those rules against the circuit's rows on their own).
 """
 
 from __future__ import annotations
