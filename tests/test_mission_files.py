@@ -348,7 +348,7 @@ def test_bad_waypoints_text(capsys, tmp_path, text, needles):
     ("p.geojson", '{"type": "MultiPoint", "coordinates": 5}',
      ("p.geojson: feature 0: MultiPoint coordinates 5 are invalid; valid: a list of [lon, lat] or [lon, lat, alt]",)),
     ("p.geojson", '{"type": "Point", "coordinates": [8, 47, 512], "properties": {"hover_time_s": true}}',
-     ("p.geojson: feature 0: hover_time_s=True is invalid; valid range: [0, inf) s, a JSON number",)),
+     ("p.geojson: feature 0: hover_time_s=True is invalid; valid range: [0, 1e+06] s, a JSON number",)),
     # CSV errors name the file's line (blank lines counted; they were the row's number after blank rows were dropped)
     ("p.csv", "lat,lon\n\n47,8\n\n95,8\n", ("p.csv: line 5: latitude 95.0 is invalid",)),
     ("p.csv", "\nlat,lon\n47,8\n47.0001,8,5\n", ("line 4 has 3 values, the header 2 (lat,lon)",)),

@@ -48,8 +48,6 @@ def read_pads(path) -> tuple[GeoPad, ...]:
 
 def _pad(lat, lon, alt, hover, where: str) -> GeoPad:
     try:
-        if any(isinstance(v, bool) for v in (lat, lon, alt, hover)):   # (GeoJSON's true was a 1 s hover)
-            raise TypeError
         vals = [None if v is None else float(v) for v in (lat, lon, alt, hover)]
     except (TypeError, ValueError):
         raise ValueError(f"{where}: lat={lat!r}, lon={lon!r}, alt={alt!r}, hover_time_s={hover!r}: not numbers; valid: a number each") from None
@@ -160,7 +158,7 @@ def _geojson_feature(f, where: str) -> tuple[list, dict]:
             raise ValueError(f"{where}: coordinates {c!r} are invalid; valid: [lon, lat] or [lon, lat, alt], JSON numbers")
     hover = (props or {}).get("hover_time_s")
     if hover is not None and not _json_number(hover):
-        raise ValueError(f"{where}: hover_time_s={hover!r} is invalid; valid range: [0, inf) s, a JSON number")
+        raise ValueError(f"{where}: hover_time_s={hover!r} is invalid; valid range: {HOLD_RANGE.text()}, a JSON number")
     return coords, props or {}
 
 
