@@ -181,8 +181,9 @@ def default_pad(log: FlightLog) -> GeoPoint:
 def track_from_log(log: FlightLog, pad: GeoPoint | None = None, ground_gap_m: float = 0.0,
                    window: tuple[float, float] | None = None) -> FlightTrack:
     """The flown track about ``pad`` (None: :func:`default_pad`; a pad without altitude takes the
-    default pad's altitude), optionally cut to ``window`` = (t0, t1) seconds of log time (:func:`check_window`: the one
-    check of a window on every path, replay, calibrate, refly and the studies; it took a window past the log's end)."""
+    default pad's altitude), optionally cut to ``window`` = (t0, t1) seconds of log time (:func:`check_window`: a window is
+    checked wherever the log is cut to it, here, for replay, calibrate, refly and the studies; it took a window past
+    the log's end)."""
     check_window(log, window)
     if not np.isfinite(ground_gap_m) or ground_gap_m < 0:
         raise ValueError(f"ground_gap_m={ground_gap_m!r} is invalid; valid range: [0, inf) m")
