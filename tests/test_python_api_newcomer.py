@@ -507,6 +507,14 @@ def test_the_vector_env_memory_estimate_is_what_a_reset_allocates(link):
             tracemalloc.stop()
 
 
+def test_the_vector_env_memory_estimate_has_one_figure_per_link_model():
+    """BYTES_PER_ENV_STEP is keyed by link model (2026-11-27 midday): a link model added to envs.core.LINK_MODELS
+    without its measured figure would be a KeyError in the memory check, one without a model a stale figure."""
+    from envs import vector
+    from envs.core import LINK_MODELS
+    assert set(vector.BYTES_PER_ENV_STEP) == set(LINK_MODELS)
+
+
 class _Allocating(Exception):
     pass
 
