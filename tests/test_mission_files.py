@@ -11,6 +11,7 @@ tangent plane's documented error), so the summaries agree to ~1e-5 relative; the
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 from pathlib import Path
@@ -455,9 +456,8 @@ def test_telemetry_streams_about_the_mission_files_home(capsys, tmp_path):
     assert main(["telemetry", "--config", str(cfg), "--connect", "none", "--tlog", str(tlog), "--speed", "inf",
                  "--duration", "3", "--rate", "2"]) == 0
     home = json.loads((DATA / "qgc_simple_square.plan").read_text())["mission"]["plannedHomePosition"]
-    conn = mavutil().mavlink_connection(str(tlog))
-    first = conn.recv_match(type="GLOBAL_POSITION_INT")
-    conn.close()
+    with contextlib.closing(mavutil().mavlink_connection(str(tlog))) as conn:
+        first = conn.recv_match(type="GLOBAL_POSITION_INT")
     assert first.lat * 1e-7 == pytest.approx(home[0], abs=1e-6) and first.lon * 1e-7 == pytest.approx(home[1], abs=1e-6)
     assert first.alt * 1e-3 == pytest.approx(home[2], abs=2.0)   # near the ground at home (not SITL's 584 m)
 
