@@ -147,6 +147,8 @@ def test_track_from_log_refuses_a_window_outside_what_its_message_says_is_valid(
         track_from_log(log, window=window)
     assert str(e.value) == (f"--window {shown} is invalid; valid: 0 <= T0 < T1 <= {end + WINDOW_END_SLACK_S:.3f} s of log "
                             f"time (its time range 0..{end:.3f} s; {WINDOW_END_SLACK_S:g} s allowed for a rounded end)")
+    with pytest.raises(ValueError, match=r"^window=\('a', 60\) is invalid; valid: 0 <= T0 < T1 <= "):   # not numbers
+        track_from_log(log, window=("a", 60))
 
 
 @pytest.mark.parametrize("text", ["1,2,3,4", "abc", "91,0", "10,200", "10,20,nan", ""])
