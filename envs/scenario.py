@@ -443,5 +443,5 @@ class ScenarioPart:
         return Window(draws, cmd, noise, np.full(n, scn.load_power_w), scn)
 
     def _fill_chunks(self, rngs, u, noise, scale) -> bool:
-        """:func:`draw_episodes`' ``fill``: the part's ``fill`` in the current reset's chunks (a lambda built per reset)."""
+        """:func:`draw_episodes`' ``fill``: the part's ``fill`` in the current reset's chunks (was a lambda built per reset)."""
         return self.fill(rngs, u, noise, scale, self._chunks)

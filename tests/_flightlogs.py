@@ -6,6 +6,7 @@ tests/data/flightlogs/SOURCES.md; no test reads data from outside the repository
 
 from __future__ import annotations
 
+import contextlib
 import os
 import struct
 import tempfile
@@ -62,55 +63,55 @@ def pymavlink_reference(path: Path) -> dict:
     os.environ["MAVLINK20"] = "1"
     from pymavlink import mavutil
 
-    m = mavutil.mavlink_connection(str(path))
-    first = last = None
-    armed_state, armed_start, periods = False, None, []
-    fix, gps_alt, origin = 0, float("nan"), 0
-    lats, lons, alts, volts, volts_bs, power = [], [], [], [], [], []
-    bad = 0
-    while True:
-        msg = m.recv_match(blocking=False)
-        if msg is None:
-            break
-        t = msg._timestamp
-        first = t if first is None else first
-        last = t
-        typ = msg.get_type()
-        if typ == "BAD_DATA":
-            bad += 1
-            continue
-        rel = t - first
-        new_armed = None
-        if typ == "HEARTBEAT" and msg.autopilot != 8 and msg.get_srcComponent() == 1:
-            new_armed = bool(msg.base_mode & 128)
-        elif typ == "EV" and msg.Id in (10, 11):
-            new_armed = msg.Id == 10
-        if new_armed is not None and new_armed != armed_state:
-            if new_armed:
-                armed_start = rel
-            else:
-                periods.append((armed_start, rel))
-            armed_state = new_armed
-        if typ == "GPS_RAW_INT" and msg.get_srcComponent() == 1:
-            poor = (msg.eph != 65535 and msg.eph > 1000) or msg.satellites_visible < 4  # HDOP > 10, < 4 sats
-            fix = 0 if poor else msg.fix_type
-            gps_alt = msg.alt / 1e3
-        if typ == "GLOBAL_POSITION_INT" and msg.get_srcComponent() == 1 and fix >= 3 and msg.lat != 0:
-            if abs(msg.alt / 1e3 - gps_alt) > 100:   # estimator altitude without a GPS origin
-                origin += 1
+    # (closed on a failure too: left to the collector, a ResourceWarning in a later test, test_reading_a_log_..._no_file_open's)
+    with contextlib.closing(mavutil.mavlink_connection(str(path))) as m:
+        first = last = None
+        armed_state, armed_start, periods = False, None, []
+        fix, gps_alt, origin = 0, float("nan"), 0
+        lats, lons, alts, volts, volts_bs, power = [], [], [], [], [], []
+        bad = 0
+        while True:
+            msg = m.recv_match(blocking=False)
+            if msg is None:
+                break
+            t = msg._timestamp
+            first = t if first is None else first
+            last = t
+            typ = msg.get_type()
+            if typ == "BAD_DATA":
+                bad += 1
                 continue
-            lats.append(msg.lat / 1e7), lons.append(msg.lon / 1e7), alts.append(msg.alt / 1e3)
-        if typ == "GPS" and msg.Status >= 3 and msg.HDop <= 10 and msg.NSats >= 4:
-            lats.append(msg.Lat), lons.append(msg.Lng), alts.append(msg.Alt)
-        if typ == "SYS_STATUS" and msg.voltage_battery not in (0, 65535) and msg.current_battery != -1:
-            volts.append(msg.voltage_battery / 1000)
-            power.append((rel, msg.voltage_battery / 1000 * msg.current_battery / 100))
-        if typ == "CURR":
-            volts.append(msg.Volt / 100)
-            power.append((rel, msg.Volt / 100 * msg.Curr / 100))
-        if typ == "BATTERY_STATUS" and msg.id == 0:
-            volts_bs.append(sum(v for v in msg.voltages if v != 65535) / 1000)
-    m.close()   # (left to the collector: a ResourceWarning in a later test, test_reading_a_log_..._no_file_open's)
+            rel = t - first
+            new_armed = None
+            if typ == "HEARTBEAT" and msg.autopilot != 8 and msg.get_srcComponent() == 1:
+                new_armed = bool(msg.base_mode & 128)
+            elif typ == "EV" and msg.Id in (10, 11):
+                new_armed = msg.Id == 10
+            if new_armed is not None and new_armed != armed_state:
+                if new_armed:
+                    armed_start = rel
+                else:
+                    periods.append((armed_start, rel))
+                armed_state = new_armed
+            if typ == "GPS_RAW_INT" and msg.get_srcComponent() == 1:
+                poor = (msg.eph != 65535 and msg.eph > 1000) or msg.satellites_visible < 4  # HDOP > 10, < 4 sats
+                fix = 0 if poor else msg.fix_type
+                gps_alt = msg.alt / 1e3
+            if typ == "GLOBAL_POSITION_INT" and msg.get_srcComponent() == 1 and fix >= 3 and msg.lat != 0:
+                if abs(msg.alt / 1e3 - gps_alt) > 100:   # estimator altitude without a GPS origin
+                    origin += 1
+                    continue
+                lats.append(msg.lat / 1e7), lons.append(msg.lon / 1e7), alts.append(msg.alt / 1e3)
+            if typ == "GPS" and msg.Status >= 3 and msg.HDop <= 10 and msg.NSats >= 4:
+                lats.append(msg.Lat), lons.append(msg.Lng), alts.append(msg.Alt)
+            if typ == "SYS_STATUS" and msg.voltage_battery not in (0, 65535) and msg.current_battery != -1:
+                volts.append(msg.voltage_battery / 1000)
+                power.append((rel, msg.voltage_battery / 1000 * msg.current_battery / 100))
+            if typ == "CURR":
+                volts.append(msg.Volt / 100)
+                power.append((rel, msg.Volt / 100 * msg.Curr / 100))
+            if typ == "BATTERY_STATUS" and msg.id == 0:
+                volts_bs.append(sum(v for v in msg.voltages if v != 65535) / 1000)
     if armed_state:
         periods.append((armed_start, last - first))
     return {"duration_s": last - first, "armed_periods": periods, "n_pos": len(lats),
@@ -141,11 +142,10 @@ def tlog_records(path) -> list[tuple[float, bytes]]:
     """(receive time [s], frame bytes) of every record of a .tlog, by pymavlink."""
     os.environ["MAVLINK20"] = "1"
     from pymavlink import mavutil
-    m = mavutil.mavlink_connection(str(path))
-    out = []
-    while (msg := m.recv_match(blocking=False)) is not None:
-        out.append((msg._timestamp, bytes(msg.get_msgbuf())))
-    m.close()
+    with contextlib.closing(mavutil.mavlink_connection(str(path))) as m:
+        out = []
+        while (msg := m.recv_match(blocking=False)) is not None:
+            out.append((msg._timestamp, bytes(msg.get_msgbuf())))
     return out
 
 

@@ -166,14 +166,12 @@ def test_history_is_the_observation_part_frame_stack():
         SbarChargingVectorEnv(2, history=0)
 
 
-def test_the_scenario_part_hands_its_fill_the_resets_chunks_without_a_function_per_reset():
+def test_the_scenario_part_hands_its_fill_the_resets_chunks():
     """2026-11-27 midday: ScenarioPart.reset built a lambda per reset (the draws' fill with the reset's chunks); a
     method reads them now. The fill gets the chunks of its reset (2, then 3) and the draws are the generators' when it
-    declines (False), as before (benchmarks/env_bits.py cases 0-5: the same fingerprints as main)."""
-    import types
-
+    declines (False), as before (benchmarks/env_bits.py cases 0-5: the same fingerprints as main). (How reset is
+    written, no function built in it, is not asserted: a review, it is not what reset does.)"""
     from envs.scenario import ScenarioPart
-    assert not [c for c in ScenarioPart.reset.__code__.co_consts if isinstance(c, types.CodeType)]
     n, T, seen, chunks = 3, 10, [], iter([2, 3])
 
     def fill(rngs, u, noise, scale, k):

@@ -4,6 +4,7 @@ streaming telemetry to a ground station found, each case a test that failed befo
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import numpy as np
@@ -283,11 +284,10 @@ def test_telemetry_streams_your_own_mission_file(tmp_path, capsys):
     assert rc == 0, capsys.readouterr().err
     os.environ["MAVLINK20"] = "1"
     from pymavlink import mavutil
-    m = mavutil.mavlogfile(str(tlog))
-    pos = []
-    while (g := m.recv_match(type="GLOBAL_POSITION_INT", blocking=False)) is not None:
-        pos.append((g.lat * 1e-7, g.lon * 1e-7, g.relative_alt * 1e-3))
-    m.close()
+    with contextlib.closing(mavutil.mavlogfile(str(tlog))) as m:
+        pos = []
+        while (g := m.recv_match(type="GLOBAL_POSITION_INT", blocking=False)) is not None:
+            pos.append((g.lat * 1e-7, g.lon * 1e-7, g.relative_alt * 1e-3))
     pos = np.array(pos)
     assert np.abs(pos[0, :2] - [47.397742, 8.545594]).max() < 1e-4          # starts at the plan's home (Zurich)
     assert pos[:, 2].max() == pytest.approx(20.0, abs=0.5)                   # the plan's 20 m above home

@@ -1,6 +1,7 @@
 """Armed periods of real logs that start armed or have no armed-state record, sparse last records,
 and parser failures reported as such (issue 12)."""
 
+import contextlib
 import struct
 
 import numpy as np
@@ -29,12 +30,11 @@ def _df_without(name, drop):
 
 def _tlog_without(path, drop):
     """A .tlog's records (timestamp + frame bytes as pymavlink returns them) without those ``drop(msg)``."""
-    m = mavutil().mavlink_connection(str(path))
-    out = []
-    while (msg := m.recv_match(blocking=False)) is not None:
-        if not drop(msg):
-            out.append(struct.pack(">Q", int(round(msg._timestamp * 1e6))) + bytes(msg.get_msgbuf()))
-    m.close()
+    with contextlib.closing(mavutil().mavlink_connection(str(path))) as m:
+        out = []
+        while (msg := m.recv_match(blocking=False)) is not None:
+            if not drop(msg):
+                out.append(struct.pack(">Q", int(round(msg._timestamp * 1e6))) + bytes(msg.get_msgbuf()))
     return b"".join(out)
 
 

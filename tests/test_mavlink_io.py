@@ -134,6 +134,23 @@ def test_track_from_log_refuses_a_window_past_the_log_as_replay_does():
         track_from_log(log, window=(50, end + 5))
 
 
+@pytest.mark.parametrize("window, shown", [((50, float("nan")), "50,nan"), ((100, 50), "100,50"), ((-50, 60), "-50,60"),
+                                           ((60, 60), "60,60"), ((float("-inf"), 60), "-inf,60")])
+def test_track_from_log_refuses_a_window_outside_what_its_message_says_is_valid(window, shown):
+    """2026-11-27 review: check_window printed "valid: 0 <= T0 < T1 <= ..." but checked only T1's bound: from Python
+    (the CLI's parse_window refuses these first) a NaN end, T0 after T1 and a negative T0 passed (an empty or cut
+    track, or "no usable position"). One line naming the window and the log's range."""
+    from mission_sim.mavlink.replay import WINDOW_END_SLACK_S, log_end_s
+    log, _ = _both("uavlogviewer_vtol_sitl.tlog")
+    end = log_end_s(log)
+    with pytest.raises(ValueError) as e:
+        track_from_log(log, window=window)
+    assert str(e.value) == (f"--window {shown} is invalid; valid: 0 <= T0 < T1 <= {end + WINDOW_END_SLACK_S:.3f} s of log "
+                            f"time (its time range 0..{end:.3f} s; {WINDOW_END_SLACK_S:g} s allowed for a rounded end)")
+    with pytest.raises(ValueError, match=r"^window=\('a', 60\) is invalid; valid: 0 <= T0 < T1 <= "):   # not numbers
+        track_from_log(log, window=("a", 60))
+
+
 @pytest.mark.parametrize("text", ["1,2,3,4", "abc", "91,0", "10,200", "10,20,nan", ""])
 def test_bad_pad_names_the_format(text):
     with pytest.raises(ValueError, match="LAT,LON|range"):

@@ -11,6 +11,7 @@ tangent plane's documented error), so the summaries agree to ~1e-5 relative; the
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 from pathlib import Path
@@ -337,18 +338,25 @@ def test_bad_waypoints_text(capsys, tmp_path, text, needles):
     *[("p.geojson", '{"type": "FeatureCollection", "features": [{"type": "Feature", "geometry": {"type": "Point", '
                     '"coordinates": [8, 47, 512]}, "properties": %s}]}' % props,
        (f"p.geojson: feature 0: properties {shown} ({kind}) are not an object; valid: a JSON object {{...}} or null",))
-      for props, shown, kind in (("[1, 2]", "[1, 2]", "list"), ("[]", "[]", "list"), ('"pad"', "'pad'", "str"),
-                                 ("5", "5", "int"), ("0", "0", "int"))],
+      for props, shown, kind in (("[1, 2]", "[1, 2]", "array"), ("[]", "[]", "array"), ('"pad"', '"pad"', "string"),
+                                 ("5", "5", "number"), ("0", "0", "number"))],
     ("p.geojson", '{"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {}}]}',
-     ("p.geojson: feature 0: geometry None is not a geometry object (a feature without one has no location); valid: "
+     ("p.geojson: feature 0: geometry null is not a geometry object (a feature without one has no location); valid: "
       "Point, MultiPoint",)),
     *[("p.geojson", '{"type": "Point", "coordinates": %s}' % c,
        (f"p.geojson: feature 0: coordinates {shown} are invalid; valid: [lon, lat] or [lon, lat, alt], JSON numbers",))
-      for c, shown in (("[true, false, 512]", "[True, False, 512]"), ('["8.5", "47"]', "['8.5', '47']"))],
+      for c, shown in (("[true, false, 512]", "[true, false, 512]"), ('["8.5", "47"]', '["8.5", "47"]'))],
     ("p.geojson", '{"type": "MultiPoint", "coordinates": 5}',
      ("p.geojson: feature 0: MultiPoint coordinates 5 are invalid; valid: a list of [lon, lat] or [lon, lat, alt]",)),
+    # (values as the file spells them, json.dumps: they were Python's, None, True, ['8.5', '47'])
     ("p.geojson", '{"type": "Point", "coordinates": [8, 47, 512], "properties": {"hover_time_s": true}}',
-     ("p.geojson: feature 0: hover_time_s=True is invalid; valid range: [0, 1e+06] s, a JSON number",)),
+     ("p.geojson: feature 0: hover_time_s=true is invalid; valid range: [0, 1e+06] s, a JSON number",)),
+    # a hover time given as a string is refused (JSON numbers only; "5" was taken as 5 s); a MultiPoint without
+    # coordinates (no pad at all: skipped without a word before the review's previous pass)
+    ("p.geojson", '{"type": "Point", "coordinates": [8, 47, 512], "properties": {"hover_time_s": "5"}}',
+     ('p.geojson: feature 0: hover_time_s="5" is invalid; valid range: [0, 1e+06] s, a JSON number',)),
+    ("p.geojson", '{"type": "FeatureCollection", "features": [{"type": "Feature", "geometry": {"type": "MultiPoint"}}]}',
+     ("p.geojson: feature 0: MultiPoint coordinates null are invalid; valid: a list of [lon, lat] or [lon, lat, alt]",)),
     # CSV errors name the file's line (blank lines counted; they were the row's number after blank rows were dropped)
     ("p.csv", "lat,lon\n\n47,8\n\n95,8\n", ("p.csv: line 5: latitude 95.0 is invalid",)),
     ("p.csv", "\nlat,lon\n47,8\n47.0001,8,5\n", ("line 4 has 3 values, the header 2 (lat,lon)",)),
@@ -448,9 +456,8 @@ def test_telemetry_streams_about_the_mission_files_home(capsys, tmp_path):
     assert main(["telemetry", "--config", str(cfg), "--connect", "none", "--tlog", str(tlog), "--speed", "inf",
                  "--duration", "3", "--rate", "2"]) == 0
     home = json.loads((DATA / "qgc_simple_square.plan").read_text())["mission"]["plannedHomePosition"]
-    conn = mavutil().mavlink_connection(str(tlog))
-    first = conn.recv_match(type="GLOBAL_POSITION_INT")
-    conn.close()
+    with contextlib.closing(mavutil().mavlink_connection(str(tlog))) as conn:
+        first = conn.recv_match(type="GLOBAL_POSITION_INT")
     assert first.lat * 1e-7 == pytest.approx(home[0], abs=1e-6) and first.lon * 1e-7 == pytest.approx(home[1], abs=1e-6)
     assert first.alt * 1e-3 == pytest.approx(home[2], abs=2.0)   # near the ground at home (not SITL's 584 m)
 

@@ -139,7 +139,7 @@ def _feature(props: str) -> str:
      "p.geojson: feature 0: hover_time_s=1e+308 is invalid; valid range: [0, 1e+06] s"),
     # JSON's true was float(True): a 1 s hover
     ("p.geojson", _feature('{"hover_time_s":true}'),
-     "p.geojson: feature 0: hover_time_s=True is invalid; valid range: [0, 1e+06] s, a JSON number"),
+     "p.geojson: feature 0: hover_time_s=true is invalid; valid range: [0, 1e+06] s, a JSON number"),
 ])
 def test_pad_hover_times_take_the_configs_range_where_read(capsys, tmp_path, name, text, expected):
     (tmp_path / name).write_text(text)

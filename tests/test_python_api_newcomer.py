@@ -484,20 +484,35 @@ def test_the_vector_env_memory_estimate_is_what_a_reset_allocates(link):
     first reset allocate (tracemalloc's peak: numpy's arrays, the plans and a reset's temporaries), at two N, for the
     training scenario and the widest: at least the peak, at most 1.6x it (it was 96 B for both links, ~2.2x the modal
     link's peak; a review measured more than it for the envelope link)."""
+    import gc
     import tracemalloc
 
     from envs import vector
     cfg = EnvConfig(link_model=link)
     SbarChargingVectorEnv(4, "random", config=cfg).reset(seed=0)   # (warm-up: compiled kernels, cached tables)
-    for n in (256, 2048):
-        for scenario in ("random", "detuned_wide"):
-            tracemalloc.start()
-            try:
+    was = tracemalloc.is_tracing()   # (PYTHONTRACEMALLOC=1: on already, for the whole process; left on)
+    if not was:
+        tracemalloc.start()
+    try:
+        for n in (256, 2048):
+            for scenario in ("random", "detuned_wide"):
+                gc.collect()   # (the previous env, if a cycle keeps it, is freed now, not during this one's build)
+                tracemalloc.reset_peak()
+                start = tracemalloc.get_traced_memory()[0]   # (what was traced before: not this env's)
                 SbarChargingVectorEnv(n, scenario, config=cfg).reset(seed=1)
-                peak = tracemalloc.get_traced_memory()[1] / (n * (cfg.n_steps + 1))
-            finally:
-                tracemalloc.stop()
-            assert peak <= vector.BYTES_PER_ENV_STEP[link] <= 1.6 * peak, (n, scenario, peak)
+                peak = (tracemalloc.get_traced_memory()[1] - start) / (n * (cfg.n_steps + 1))
+                assert peak <= vector.BYTES_PER_ENV_STEP[link] <= 1.6 * peak, (n, scenario, peak)
+    finally:
+        if not was:
+            tracemalloc.stop()
+
+
+def test_the_vector_env_memory_estimate_has_one_figure_per_link_model():
+    """BYTES_PER_ENV_STEP is keyed by link model (2026-11-27 midday): a link model added to envs.core.LINK_MODELS
+    without its measured figure would be a KeyError in the memory check, one without a model a stale figure."""
+    from envs import vector
+    from envs.core import LINK_MODELS
+    assert set(vector.BYTES_PER_ENV_STEP) == set(LINK_MODELS)
 
 
 class _Allocating(Exception):

@@ -4,6 +4,7 @@ These need the mission world of issue 4 (mission_sim.world.runner.run_mission); 
 replay short.
 """
 
+import contextlib
 import json
 import math
 import socket
@@ -220,11 +221,10 @@ def test_follow_live_vehicle(tmp_path):
 
 def _heartbeats(tlog):
     from mission_sim.mavlink.logs import mavutil
-    conn = mavutil().mavlink_connection(str(tlog))
-    out = []
-    while (m := conn.recv_match(type="HEARTBEAT")) is not None:
-        out.append(m)
-    conn.close()
+    with contextlib.closing(mavutil().mavlink_connection(str(tlog))) as conn:
+        out = []
+        while (m := conn.recv_match(type="HEARTBEAT")) is not None:
+            out.append(m)
     return out
 
 

@@ -1,5 +1,6 @@
 """Telemetry sender: loopback to a separate receiving process, and the .tlog writer read back."""
 
+import contextlib
 import json
 import math
 import os
@@ -172,14 +173,13 @@ def test_heartbeat_every_second_of_simulated_time(tmp_path, rate_hz):
     """Whatever the stream rate, HEARTBEATs are 1.0 s apart on the simulated clock (.tlog stamps)."""
     path = tmp_path / "hb.tlog"
     stream(_series(duration_s=12.0, dt=0.05), tlog=path, rate_hz=rate_hz, speed=math.inf, start_epoch_s=1.7e9)
-    conn = mavutil().mavlink_connection(str(path))
-    hb, att = [], []
-    while (msg := conn.recv_match(blocking=False)) is not None:
-        if msg.get_type() == "HEARTBEAT" and msg.custom_mode != COPTER_MODES["LAND"]:  # not the landing at the end
-            hb.append(msg._timestamp - 1.7e9)
-        elif msg.get_type() == "ATTITUDE":
-            att.append(msg._timestamp - 1.7e9)
-    conn.close()
+    with contextlib.closing(mavutil().mavlink_connection(str(path))) as conn:
+        hb, att = [], []
+        while (msg := conn.recv_match(blocking=False)) is not None:
+            if msg.get_type() == "HEARTBEAT" and msg.custom_mode != COPTER_MODES["LAND"]:  # not the landing at the end
+                hb.append(msg._timestamp - 1.7e9)
+            elif msg.get_type() == "ATTITUDE":
+                att.append(msg._timestamp - 1.7e9)
     n_ticks = math.floor(12.0 * rate_hz + 1e-9) + 1
     last_tick = (n_ticks - 1) / rate_hz                  # the stream ends at its last tick
     np.testing.assert_allclose(hb, np.arange(math.floor(last_tick + 1e-9) + 1.0), atol=1e-6)
@@ -207,15 +207,14 @@ def test_tlog_written_reads_back_with_pymavlink(tmp_path):
     st = stream(ts, tlog=path, rate_hz=5.0, speed=math.inf, start_epoch_s=epoch)
     assert st.ticks == 101
     # pymavlink directly: every frame MAVLink 2, timestamps on the simulated clock, no bad data
-    m = mavutil().mavlink_connection(str(path))
-    n, types, stamps = 0, set(), []
-    while (msg := m.recv_match(blocking=False)) is not None:
-        assert msg.get_type() != "BAD_DATA" and msg.get_msgbuf()[:1] == b"\xfd"
-        n += 1
-        types.add(msg.get_type())
-        if msg.get_type() == "GLOBAL_POSITION_INT":
-            stamps.append(msg._timestamp - epoch)
-    m.close()
+    with contextlib.closing(mavutil().mavlink_connection(str(path))) as m:
+        n, types, stamps = 0, set(), []
+        while (msg := m.recv_match(blocking=False)) is not None:
+            assert msg.get_type() != "BAD_DATA" and msg.get_msgbuf()[:1] == b"\xfd"
+            n += 1
+            types.add(msg.get_type())
+            if msg.get_type() == "GLOBAL_POSITION_INT":
+                stamps.append(msg._timestamp - epoch)
     assert n == st.frames and {"BATTERY_STATUS", "NAMED_VALUE_FLOAT", "HEARTBEAT"} <= types
     np.testing.assert_allclose(stamps, np.arange(101) / 5.0, atol=1e-6)
     # and through our own reader: the flight comes back about the same home
@@ -277,9 +276,8 @@ def test_mixed_mavlink1_and_2_tlog(tmp_path):
 
 
 def stream_frames(path):
-    m = mavutil().mavlink_connection(str(path))
-    n = 0
-    while m.recv_match(blocking=False) is not None:
-        n += 1
-    m.close()
+    with contextlib.closing(mavutil().mavlink_connection(str(path))) as m:
+        n = 0
+        while m.recv_match(blocking=False) is not None:
+            n += 1
     return n

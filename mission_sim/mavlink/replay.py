@@ -127,16 +127,22 @@ def log_end_s(log: FlightLog) -> float:
 
 
 def check_window(log: FlightLog, window: tuple[float, float] | None) -> tuple[float, float] | None:
-    """``window`` (log seconds, or None), a ``ValueError`` naming the log's time range when it ends more than
-    :data:`WINDOW_END_SLACK_S` after the log (:func:`log_end_s`; it was cut to the log without a word). The bound
-    it prints (the end plus the slack, to the ms) is the one it takes."""
+    """``window`` (log seconds, or None), a one-line ``ValueError`` naming it and the log's time range unless
+    0 <= T0 < T1 <= the log's end (:func:`log_end_s`) plus :data:`WINDOW_END_SLACK_S`, both finite (a window ending
+    later was cut to the log without a word; from Python a NaN end, T0 >= T1 or T0 < 0 passed, only the end was
+    checked). The bound it prints (the end plus the slack, to the ms) is the one it takes."""
     if window is not None:
         end = log_end_s(log)
         bound = round(end + WINDOW_END_SLACK_S, 3)   # (the bound printed is the one taken)
-        if window[1] > bound:
-            raise ValueError(f"--window {window[0]:g},{window[1]:g} is invalid: the log ends at {end:.3f} s; valid: "
-                             f"0 <= T0 < T1 <= {bound:.3f} s of log time (its time range 0..{end:.3f} s; "
-                             f"{WINDOW_END_SLACK_S:g} s allowed for a rounded end)")
+        valid = (f"valid: 0 <= T0 < T1 <= {bound:.3f} s of log time (its time range 0..{end:.3f} s; "
+                 f"{WINDOW_END_SLACK_S:g} s allowed for a rounded end)")
+        try:
+            t0, t1 = (float(v) for v in window)
+        except (TypeError, ValueError):
+            raise ValueError(f"window={window!r} is invalid; {valid}") from None
+        if not (np.isfinite(t0) and np.isfinite(t1) and 0 <= t0 < t1 <= bound):
+            past = f": the log ends at {end:.3f} s" if t1 > bound else ""
+            raise ValueError(f"--window {t0:g},{t1:g} is invalid{past}; {valid}")
     return window
 
 
@@ -181,8 +187,9 @@ def default_pad(log: FlightLog) -> GeoPoint:
 def track_from_log(log: FlightLog, pad: GeoPoint | None = None, ground_gap_m: float = 0.0,
                    window: tuple[float, float] | None = None) -> FlightTrack:
     """The flown track about ``pad`` (None: :func:`default_pad`; a pad without altitude takes the
-    default pad's altitude), optionally cut to ``window`` = (t0, t1) seconds of log time (:func:`check_window`: the one
-    check of a window on every path, replay, calibrate, refly and the studies; it took a window past the log's end)."""
+    default pad's altitude), optionally cut to ``window`` = (t0, t1) seconds of log time (:func:`check_window`: a window is
+    checked wherever the log is cut to it, here, for replay, calibrate, refly and the studies; it took a window past
+    the log's end)."""
     check_window(log, window)
     if not np.isfinite(ground_gap_m) or ground_gap_m < 0:
         raise ValueError(f"ground_gap_m={ground_gap_m!r} is invalid; valid range: [0, inf) m")

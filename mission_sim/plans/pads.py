@@ -135,31 +135,46 @@ def _geojson_feature(f, where: str) -> tuple[list, dict]:
     MultiPoint geometry); ``ValueError`` (``where``: the file and feature) naming what was found instead: a feature
     without geometry, a geometry other than Point / MultiPoint, ``properties`` that are not an object (``null``: none;
     a list or a string was an AttributeError), coordinates that are not JSON numbers (``true`` was 1.0 deg, ``"8.5"``
-    taken as 8.5)."""
+    taken as 8.5), a MultiPoint without ``coordinates`` (no pad, without a word), a ``hover_time_s`` that is not a JSON
+    number (``"5"`` was taken). Values are shown as the file spells them (:func:`_json_shown`: ``null``, ``true``)."""
     if not isinstance(f, dict):
-        raise ValueError(f"{where} is {f!r}, not a GeoJSON object; valid: a Feature with a Point or MultiPoint geometry")
+        raise ValueError(f"{where} is {_json_shown(f)}, not a GeoJSON object; valid: a Feature with a Point or "
+                         "MultiPoint geometry")
     feature = f.get("type") == "Feature" or "geometry" in f
     geom, props = f.get("geometry") if feature else f, f.get("properties")
     if not isinstance(geom, dict):
-        raise ValueError(f"{where}: geometry {geom!r} is not a geometry object (a feature without one has no "
-                         "location); valid: Point, MultiPoint")
+        raise ValueError(f"{where}: geometry {_json_shown(geom)} is not a geometry object (a feature without one has "
+                         "no location); valid: Point, MultiPoint")
     kind = geom.get("type")
     if kind not in ("Point", "MultiPoint"):
-        raise ValueError(f"{where}: geometry type {kind!r} is not supported; valid: Point, MultiPoint")
+        raise ValueError(f"{where}: geometry type {_json_shown(kind)} is not supported; valid: Point, MultiPoint")
     if props is not None and not isinstance(props, dict):
-        raise ValueError(f"{where}: properties {props!r} ({type(props).__name__}) are not an object; valid: a JSON "
-                         "object {...} or null (hover_time_s in it)")
+        kind = _JSON_TYPES.get(type(props), type(props).__name__)
+        raise ValueError(f"{where}: properties {_json_shown(props)} ({kind}) are not an object; valid: a JSON object "
+                         "{...} or null (hover_time_s in it)")
     coords = [geom.get("coordinates")] if kind == "Point" else geom.get("coordinates")
     if not isinstance(coords, list):
-        raise ValueError(f"{where}: MultiPoint coordinates {coords!r} are invalid; valid: a list of [lon, lat] or "
-                         "[lon, lat, alt]")
+        raise ValueError(f"{where}: MultiPoint coordinates {_json_shown(coords)} are invalid; valid: a list of "
+                         "[lon, lat] or [lon, lat, alt]")
     for c in coords:
         if not isinstance(c, list) or len(c) not in (2, 3) or not all(_json_number(v) for v in c):
-            raise ValueError(f"{where}: coordinates {c!r} are invalid; valid: [lon, lat] or [lon, lat, alt], JSON numbers")
+            raise ValueError(f"{where}: coordinates {_json_shown(c)} are invalid; valid: [lon, lat] or [lon, lat, alt], "
+                             "JSON numbers")
     hover = (props or {}).get("hover_time_s")
     if hover is not None and not _json_number(hover):
-        raise ValueError(f"{where}: hover_time_s={hover!r} is invalid; valid range: {HOLD_RANGE.text()}, a JSON number")
+        raise ValueError(f"{where}: hover_time_s={_json_shown(hover)} is invalid; valid range: {HOLD_RANGE.text()}, a JSON number")
     return coords, props or {}
+
+
+#: JSON's names of the types ``json.load`` returns (what a feature's properties are, as the file says it)
+_JSON_TYPES = {dict: "object", list: "array", str: "string", int: "number", float: "number", bool: "boolean",
+               type(None): "null"}
+
+
+def _json_shown(v) -> str:
+    """``v`` (read by ``json.load``) as the file spells it: ``null``, ``true``, ``"8.5"`` (Python's ``None``, ``True``,
+    ``'8.5'`` are not in the file)."""
+    return json.dumps(v)
 
 
 def _json_number(v) -> bool:
