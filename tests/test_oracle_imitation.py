@@ -466,8 +466,17 @@ def test_select_playback_base_mpc_reaches_the_teacher(tmp_path, monkeypatch):
     (["--models", "MIXED"], ["--models", "base differ", "src_s0.npz: mpc", "src_s1.npz: model_based"])])
 def test_select_playback_bad_options_exit_2_with_one_line(args, names, tmp_path, monkeypatch, capsys):
     """Each bad option or set of maps: exit 2, one line naming the option, the value and what is valid, before
-    anything is fitted, run or written."""
+    anything is fitted, run or written (the teacher and the runs are stubs that fail the test if reached: a broken
+    check fails here at once instead of solving the oracle)."""
+    import train_oracle_imitation as tr
+
+    import policies.compare as pc
     sel = _select_module(monkeypatch)
+
+    def reached(*args, **kw):
+        raise AssertionError("reached the teacher or the runs")
+    monkeypatch.setattr(tr, "dataset", reached)
+    monkeypatch.setattr(pc, "run_policies", reached)
     _write_source_maps(sel, tmp_path / "mixed", ["mpc", "model_based"])
     sub = {"SHIPPED": str(ROOT / "policies" / "pretrained" / "oracle_imitation_s*.npz"),
            "MIXED": str(tmp_path / "mixed" / "src_s*.npz")}
