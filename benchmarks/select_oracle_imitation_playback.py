@@ -15,13 +15,16 @@ the overshoot difference is <= ``-margin`` on every scenario, chosen the largest
 the scenarios (within 0.1 of it: the larger least overshoot margin); ``--admit upper``: admissible if the pooled
 bootstrap's upper bound of the overshoot difference is < ``-margin`` on every scenario instead. ``--base mpc``
 (with ``--deltas`` and ``--windows``) refits maps whose base before the stop is the MPC (the teacher solved from its
-state, as ``train_oracle_imitation.py --base mpc``); with ``--models`` the maps' meta's base is kept. Validation
-windows only: ``--seed`` must keep the windows off the training (0-79) and evaluation (1000-1099, 2000-2099) seeds.
+state, as ``train_oracle_imitation.py --base mpc``); with ``--models`` the maps' meta's base, lam, budgets and
+training windows are kept (every loaded map must share them; ``--base``, ``--deltas``, ``--windows`` given with
+``--models`` must equal them) and each re-timed map's meta is its source's with ``slow``, ``command`` (naming the
+source's), ``base`` and ``windows`` set. Validation windows only: ``--seed`` must keep the windows off the training
+(``--windows`` or the maps' meta's, 0-79 by default) and evaluation (1000-1099, 2000-2099) seeds. Bad options: one
+line naming the option, the value and what is valid, exit 2, before anything is fitted or written.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
@@ -47,15 +50,22 @@ def fit_maps(lam, link, seeds=(0, 1, 2, 3, 4), windows=(0, 80), deltas=(0.003, 0
                   "teacher_energy_j": float(info["energy_j"].mean()), "dt_s": config.dt_s}
 
 
-def write_map(model, path, lam, slow, seed, link, dt_s, base="model_based", windows=(0, 80)):
-    """``model`` (unslowed) played ``slow`` times slower, written to ``path`` with ``base`` in its meta."""
+def write_map(model, path, lam, slow, seed, link, dt_s, base="model_based", windows=(0, 80), meta=None, deltas=None):
+    """``model`` (unslowed) played ``slow`` times slower, written to ``path``; its meta: the source map's ``meta``
+    (a loaded map's; None: a refitted map's, from ``lam``, ``seed``, ``link``, ``dt_s``, ``deltas``) with ``slow``,
+    ``command`` (naming the source's), ``base`` and ``windows`` set."""
     from policies.oracle_imitation import save_model
     m = dict(model)
     m["slow"] = np.array(float(slow))
-    meta = {"command": f"select_oracle_imitation_playback.py candidate lam={lam} slow={slow}", "scenarios": ["nominal"],
-            "windows": list(windows), "lam": lam, "slow": slow, "seed": seed, "base": base,
-            "features": ["d_pre", "cmd_before_a"], "control_period_s": dt_s, "link": link}
-    save_model(m, path, meta)
+    out = dict(meta) if meta is not None else {"scenarios": ["nominal"], "lam": lam, "seed": seed,
+                                                 "features": ["d_pre", "cmd_before_a"], "control_period_s": dt_s,
+                                                 "link": link}
+    if deltas is not None:
+        out["deltas"] = list(deltas)
+    command = f"select_oracle_imitation_playback.py candidate lam={out['lam']} slow={slow}"
+    out.update(slow=slow, base=base, windows=list(windows),
+               command=command + (f", re-timed from: {meta['command']}" if meta and meta.get("command") else ""))
+    save_model(m, path, out)
 
 
 def row_stats(ms, ref) -> dict:
@@ -75,14 +85,51 @@ def row_stats(ms, ref) -> dict:
             "min_in_sm": min(float(np.mean(m["reached_short_mode"])) for m in ms)}
 
 
-def validation_windows(ap, seed, episodes):
+def validation_windows(ap, seed, episodes, train=(0, 80)):
     """``(first, last + 1)`` of the windows ``seed .. seed + episodes - 1``; ``ap.error`` (exit 2) when they touch the
-    training (0-79) or evaluation (1000-1099, 2000-2099) windows."""
+    training windows ``train`` (``(LO, HI)``: LO .. HI - 1) or the evaluation (1000-1099, 2000-2099) windows."""
     lo, hi = seed, seed + episodes
-    if hi > 0 and lo < 80 or lo < 1100 and hi > 1000 or lo < 2100 and hi > 2000:
-        ap.error(f"--seed {seed} --episodes {episodes}: windows {lo}-{hi - 1} overlap training (0-79) or "
+    tlo, thi = train
+    if lo < thi and hi > tlo or lo < 1100 and hi > 1000 or lo < 2100 and hi > 2000:
+        ap.error(f"--seed {seed} --episodes {episodes}: windows {lo}-{hi - 1} overlap training ({tlo}-{thi - 1}) or "
                  "evaluation (1000-1099, 2000-2099) windows")
     return lo, hi
+
+
+def loaded_meta(ap, pattern, link, given):
+    """The maps of the glob ``pattern`` (sorted) and the meta they share: ``ap.error`` (exit 2) when there is none,
+    one is fitted on another link than ``link``, or their base / lam / budgets / training windows differ, or a value
+    in ``given`` (``{"base": .., "deltas": .., "windows": ..}``, None: not given on the command line) differs from
+    theirs."""
+    import glob
+
+    from policies.oracle_imitation import load_model
+    paths = sorted(glob.glob(pattern))
+    if not paths:
+        ap.error(f"--models {pattern!r}: no file matches")
+    try:
+        loaded = [load_model(p) for p in paths]
+    except ValueError as exc:
+        ap.error(f"--models {pattern!r}: {exc}")
+    if any(m["meta"].get("link", "envelope") != link for m in loaded):
+        ap.error(f"--models {pattern!r}: maps fitted on another link than --link {link}")
+    keys = {"base": lambda m: m.get("base", "model_based"), "lam": lambda m: float(m["lam"]),
+            "deltas": lambda m: [float(x) for x in m["deltas"]] if "deltas" in m else None,
+            "windows": lambda m: tuple(m.get("windows", (0, 80)))}
+    def text(k, v):   # as on the command line
+        return ":".join(map(str, v)) if k == "windows" else ",".join(f"{x:g}" for x in v) if k == "deltas" and v else str(v)
+    shared = {}
+    for k, get in keys.items():
+        vals = [get(m["meta"]) for m in loaded]
+        if any(v != vals[0] for v in vals):
+            ap.error(f"--models {pattern!r}: the maps' {k} differ "
+                     f"({', '.join(f'{Path(p).name}: {text(k, v)}' for p, v in zip(paths, vals))}); valid: maps of one fit")
+        shared[k] = vals[0]
+    for k, v in given.items():
+        if v is not None and shared[k] is not None and (tuple(v) if k == "windows" else v) != shared[k]:
+            ap.error(f"--{k} {text(k, v)}: the maps of --models {pattern!r} have {k} {text(k, shared[k])}; "
+                     "valid: theirs, or leave it out")
+    return loaded, shared
 
 
 def choose(table, margin, admit="mean"):
@@ -105,9 +152,14 @@ def choose(table, margin, admit="mean"):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--slows", default="1.0,1.025,1.05,1.075,1.1,1.15,1.2")
-    ap.add_argument("--lams", default="0.4")
+    from train_oracle_imitation import _conv, _in, _list, _windows
+
+    from mission_sim.cli.common import OneLineParser
+    ap = OneLineParser(prog="select_oracle_imitation_playback.py", description=__doc__.split("\n")[0])
+    ap.add_argument("--slows", default=[1.0, 1.025, 1.05, 1.075, 1.1, 1.15, 1.2],
+                    type=_conv("--slows", "comma-separated numbers in [1, 3]", _list(_in(1.0, 3.0))))
+    ap.add_argument("--lams", default=[0.4], type=_conv("--lams", "comma-separated numbers > 0 (J per point)",
+                                                        _list(_in(0.0, np.inf, True))))
     ap.add_argument("--scenarios", default="sense_delay,battery_low")
     ap.add_argument("--ref", default="mpc")
     ap.add_argument("--seed", type=int, default=300)
@@ -115,22 +167,29 @@ def main(argv=None):
     ap.add_argument("--margin", type=float, default=0.10, help="overshoot margin below the reference, points")
     ap.add_argument("--admit", choices=("mean", "upper"), default="mean", help="admissible if the mean overshoot "
                     "difference is <= -margin (mean) or its pooled bootstrap upper bound < -margin (upper)")
-    ap.add_argument("--base", choices=("model_based", "mpc"), default="model_based",
-                    help="controller before the stop of the refitted maps (with --models: the maps' meta's)")
-    ap.add_argument("--deltas", default="0.003,0.006,0.01,0.016", help="the teacher's budgets above the floor")
-    ap.add_argument("--windows", default="0:80", help="the teacher's nominal training windows LO:HI")
+    ap.add_argument("--base", choices=("model_based", "mpc"), default=None, help="controller before the stop of the "
+                    "refitted maps (default model_based; with --models: the maps' meta's, which a given --base must equal)")
+    ap.add_argument("--deltas", default=None, help="the teacher's budgets above the floor (default "
+                    "0.003,0.006,0.01,0.016; with --models: the maps' meta's)",
+                    type=_conv("--deltas", "comma-separated numbers in (0, 0.2]", _list(_in(0.0, 0.2, True))))
+    ap.add_argument("--windows", default=None, help="the teacher's nominal training windows LO:HI (default 0:80; with "
+                    "--models: the maps' meta's)", type=_conv("--windows", "LO:HI, 0 <= LO < HI, disjoint from 1000-1099",
+                                                              _windows))
     ap.add_argument("--link", choices=("envelope", "modal"), default="modal")
     ap.add_argument("--models", default=None, help="glob of fitted maps to re-time instead of refitting (their meta's "
                     "lam; --lams ignored), e.g. the shipped policies/pretrained/oracle_imitation_s*.npz")
     ap.add_argument("--work", default="out/oislow/grid")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
-    lo, hi = validation_windows(ap, a.seed, a.episodes)
-    slows = [float(x) for x in a.slows.split(",")]
-    lams = [float(x) for x in a.lams.split(",")]
-    deltas = [float(x) for x in a.deltas.split(",")]
-    windows = tuple(int(x) for x in a.windows.split(":"))
-    scenarios = a.scenarios.split(",")
+    slows, lams, scenarios = a.slows, a.lams, a.scenarios.split(",")
+    metas = None
+    if a.models:
+        loaded, shared = loaded_meta(ap, a.models, a.link, {"base": a.base, "deltas": a.deltas, "windows": a.windows})
+        lams, base, deltas, windows = [shared["lam"]], shared["base"], shared["deltas"], shared["windows"]
+        metas = [m["meta"] for m in loaded]
+    else:
+        base, deltas, windows = a.base or "model_based", a.deltas or [0.003, 0.006, 0.01, 0.016], a.windows or (0, 80)
+    lo, hi = validation_windows(ap, a.seed, a.episodes, windows)
     from envs import EnvConfig
     from policies.compare import run_policies
     config = EnvConfig(link_model=a.link)
@@ -138,26 +197,18 @@ def main(argv=None):
     Path(a.work).mkdir(parents=True, exist_ok=True)
     names, teacher = {}, {}
     if a.models:
-        import glob
-
-        from policies.oracle_imitation import load_model
-        loaded = [load_model(p) for p in sorted(glob.glob(a.models))]
-        if not loaded or any(m["meta"].get("link", "envelope") != a.link for m in loaded):
-            ap.error(f"--models {a.models!r}: no file, or maps fitted on another link than {a.link}")
-        lams = [float(loaded[0]["meta"]["lam"])]
-        a.base = loaded[0]["meta"].get("base", "model_based")
-        windows = tuple(loaded[0]["meta"].get("windows", windows))
         fitted = {lams[0]: ([{k: v for k, v in m.items() if k not in ("meta", "slow")} for m in loaded],
                             {"teacher_overshoot_pct": loaded[0]["meta"].get("teacher_overshoot_pct"),
                              "teacher_energy_j": loaded[0]["meta"].get("teacher_energy_j"),
                              "dt_s": float(loaded[0]["meta"]["control_period_s"])})}
     for lam in lams:
-        maps, teacher[lam] = fitted[lam] if a.models else fit_maps(lam, a.link, windows=windows, deltas=deltas, base=a.base)
+        maps, teacher[lam] = fitted[lam] if a.models else fit_maps(lam, a.link, windows=windows, deltas=deltas, base=base)
         for slow in slows:
             names[(lam, slow)] = []
             for k, m in enumerate(maps):
                 p = f"{a.work}/lam{lam:g}_slow{slow:g}_s{k}.npz"
-                write_map(m, p, lam, slow, k, a.link, teacher[lam]["dt_s"], a.base, windows)
+                write_map(m, p, lam, slow, k, a.link, teacher[lam]["dt_s"], base, windows,
+                          meta=metas[k] if metas else None, deltas=None if metas else deltas)
                 names[(lam, slow)].append(f"oracle_imitation:{p}")
     table = {k: {} for k in names}
     for s in scenarios:
@@ -181,7 +232,7 @@ def main(argv=None):
           f"{', '.join(scenarios)}): {ok}")
     print(f"chosen: {chosen}")
     info = {"seed": a.seed, "episodes": a.episodes, "link": a.link, "ref": a.ref, "margin": a.margin, "admit": a.admit,
-            "base": a.base, "deltas": deltas, "windows": list(windows),
+            "base": base, "deltas": deltas, "windows": list(windows),
             "teacher": {str(k): v for k, v in teacher.items()}, "wall_s": time.time() - t0,
             "cpu_s": time.process_time() - c0, "load_before": l0, "load_after": os.getloadavg()}
     print(info)

@@ -362,3 +362,128 @@ def test_playback_selection_rule_and_retimed_maps(tmp_path, monkeypatch):
             main(["--seed", seed, "--episodes", "100", "--models", str(SHIPPED), "--work", str(tmp_path / "w")])
         assert e.value.code == 2
     assert not (tmp_path / "w").exists()
+
+
+def _select_module(monkeypatch):
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    import select_oracle_imitation_playback as sel
+    return sel
+
+
+def _stub_run_policies(monkeypatch, calls=None):
+    """``policies.compare.run_policies`` replaced by a stub: every name gets random metrics on ``episodes`` windows
+    (no env is run); ``calls`` collects the names of each call."""
+    from types import SimpleNamespace
+
+    import policies.compare as pc
+
+    def run(names, scenario, episodes, seed, config=None, num_threads=None):
+        if calls is not None:
+            calls.append(list(names))
+        rng = np.random.default_rng(seed)
+        return {n: SimpleNamespace(metrics={"overshoot_pct": rng.normal(2.5, 0.1, episodes),
+                                            "return": rng.normal(40.0, 1.0, episodes),
+                                            "energy_after_stop_j": rng.normal(0.7, 0.01, episodes),
+                                            "reached_short_mode": np.ones(episodes, bool)}) for n in names}
+    monkeypatch.setattr(pc, "run_policies", run)
+
+
+def _write_source_maps(sel, folder, bases):
+    """Maps as the training script writes them (the shipped model's arrays and meta), one per entry of ``bases``
+    (the meta's ``base``), ``folder/src_s<k>.npz``."""
+    from policies.oracle_imitation import load_model, save_model
+    shipped = load_model(SHIPPED)
+    arrays = {k: v for k, v in shipped.items() if k != "meta"}
+    folder.mkdir(parents=True, exist_ok=True)
+    for k, b in enumerate(bases):
+        save_model(arrays, folder / f"src_s{k}.npz", {**shipped["meta"], "seed": k, "base": b,
+                                                     "command": f"train command {k}"})
+    return shipped["meta"]
+
+
+def test_select_playback_retimes_mpc_base_maps_keeping_their_meta(tmp_path, monkeypatch, capsys):
+    """``--models`` of maps whose base is the MPC: every re-timed map's meta is its source's (base ``mpc``, budgets,
+    training windows, lam) with ``slow`` and a command naming the source's; the JSON records the maps' base and
+    budgets (docs/rl.md, "The MPC before the stop on the exact-mode link")."""
+    import json
+
+    from policies.oracle_imitation import load_model
+    sel = _select_module(monkeypatch)
+    calls = []
+    _stub_run_policies(monkeypatch, calls)
+    src = _write_source_maps(sel, tmp_path / "src", ["mpc", "mpc"])
+    work, out = tmp_path / "w", tmp_path / "s.json"
+    sel.main(["--models", str(tmp_path / "src" / "src_s*.npz"), "--slows", "1.0,1.05", "--scenarios", "nominal",
+              "--seed", "300", "--episodes", "4", "--work", str(work), "--json", str(out)])
+    assert calls == [["mpc"] + [f"oracle_imitation:{work}/lam0.4_slow{s}_s{k}.npz" for s in ("1", "1.05") for k in (0, 1)]]
+    for s in (1.0, 1.05):
+        for k in (0, 1):
+            meta = load_model(work / f"lam0.4_slow{s:g}_s{k}.npz")["meta"]
+            assert meta == {**src, "seed": k, "base": "mpc", "slow": s,
+                            "command": f"select_oracle_imitation_playback.py candidate lam=0.4 slow={s}, re-timed from: "
+                                       f"train command {k}"}
+    info = json.loads(out.read_text())["info"]
+    assert info["base"] == "mpc" and info["deltas"] == src["deltas"] and info["windows"] == src["windows"]
+
+
+def test_select_playback_base_mpc_reaches_the_teacher(tmp_path, monkeypatch):
+    """Refitting: ``--base mpc --deltas --windows`` reach ``train_oracle_imitation.dataset`` (the teacher's solves)
+    and every written map's meta; the validation windows are checked against the given training windows."""
+    import train_oracle_imitation as tr
+
+    import policies.oracle_imitation as oi
+    from policies.oracle_imitation import load_model
+    sel = _select_module(monkeypatch)
+    _stub_run_policies(monkeypatch)
+    seen = []
+    shipped = load_model(SHIPPED)
+
+    def dataset(scenarios, seeds, deltas, lam, base="model_based", config=None):
+        seen.append((scenarios, list(seeds), list(deltas), lam, base, config.link_model))
+        return np.zeros((3, 9)), np.zeros((3, 4)), {"overshoot": np.full(3, 0.02), "energy_j": np.ones(3)}
+    monkeypatch.setattr(tr, "dataset", dataset)
+    monkeypatch.setattr(oi, "fit", lambda X, Y, cols=(0, 1), seed=None: {k: v for k, v in shipped.items()
+                                                                          if k not in ("meta", "slow")})
+    work = tmp_path / "w"
+    sel.main(["--base", "mpc", "--deltas", "0.001,0.002", "--windows", "0:40", "--lams", "0.7", "--slows", "1.05",
+              "--scenarios", "nominal", "--seed", "40", "--episodes", "4", "--work", str(work)])
+    assert seen == [(["nominal"], list(range(40)), [0.001, 0.002], 0.7, "mpc", "modal")]
+    meta = load_model(work / "lam0.7_slow1.05_s4.npz")["meta"]
+    assert (meta["base"], meta["deltas"], meta["windows"], meta["lam"], meta["slow"], meta["seed"]) == \
+        ("mpc", [0.001, 0.002], [0, 40], 0.7, 1.05, 4)
+
+
+@pytest.mark.parametrize("args, names", [
+    (["--windows", "a:b"], ["--windows", "'a:b'", "LO:HI"]), (["--windows", "0"], ["--windows", "'0'", "LO:HI"]),
+    (["--windows", "80:0"], ["--windows", "'80:0'", "0 <= LO < HI"]), (["--windows", "0:80:2"], ["--windows", "'0:80:2'"]),
+    (["--deltas", "x"], ["--deltas", "'x'", "(0, 0.2]"]), (["--deltas", ","], ["--deltas", "','", "(0, 0.2]"]),
+    (["--deltas", "-0.1"], ["--deltas", "'-0.1'", "(0, 0.2]"]), (["--slows", "x"], ["--slows", "'x'", "[1, 3]"]),
+    (["--slows", "0.9"], ["--slows", "'0.9'", "[1, 3]"]), (["--lams", "1,y"], ["--lams", "'1,y'", "> 0"]),
+    (["--windows", "0:400"], ["--seed 300", "300-399", "training (0-399)"]),   # the validation windows in the training's
+    (["--models", "SHIPPED", "--base", "mpc"], ["--base mpc", "base model_based"]),
+    (["--models", "SHIPPED", "--windows", "0:40"], ["--windows 0:40", "windows 0:80"]),
+    (["--models", "SHIPPED", "--deltas", "0.003"], ["--deltas 0.003", "deltas 0.003,0.006,0.01,0.016"]),
+    (["--models", "MIXED"], ["--models", "base differ", "src_s0.npz: mpc", "src_s1.npz: model_based"])])
+def test_select_playback_bad_options_exit_2_with_one_line(args, names, tmp_path, monkeypatch, capsys):
+    """Each bad option or set of maps: exit 2, one line naming the option, the value and what is valid, before
+    anything is fitted, run or written (the teacher and the runs are stubs that fail the test if reached: a broken
+    check fails here at once instead of solving the oracle)."""
+    import train_oracle_imitation as tr
+
+    import policies.compare as pc
+    sel = _select_module(monkeypatch)
+
+    def reached(*args, **kw):
+        raise AssertionError("reached the teacher or the runs")
+    monkeypatch.setattr(tr, "dataset", reached)
+    monkeypatch.setattr(pc, "run_policies", reached)
+    _write_source_maps(sel, tmp_path / "mixed", ["mpc", "model_based"])
+    sub = {"SHIPPED": str(ROOT / "policies" / "pretrained" / "oracle_imitation_s*.npz"),
+           "MIXED": str(tmp_path / "mixed" / "src_s*.npz")}
+    with pytest.raises(SystemExit) as e:
+        sel.main([sub.get(x, x) for x in args] + ["--work", str(tmp_path / "w")])
+    err = capsys.readouterr().err
+    assert e.value.code == 2, err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err and "usage:" not in err, err
+    assert all(n in err for n in names), err
+    assert not (tmp_path / "w").exists()
