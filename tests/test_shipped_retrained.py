@@ -191,11 +191,16 @@ def test_retrain_script_slow_budget_and_imitation_are_the_shipped_commands(kind,
     (link and output aside): the retraining runs what was shipped, on the link it is told."""
     from mission_sim.cli import build_parser
     from mission_sim.cli.learning import _only_with
+    from mission_sim.train_options import ONLY_WITH
+    from policies.train import _only_with_values
 
-    def parsed(argv):   # the options the run uses: the dependent ones' defaults filled in (None until checked)
+    def parsed(argv):   # the options the run uses: the dependent ones' defaults filled in, the CLI's then train()'s
         a = build_parser().parse_args(argv)
         _only_with(a)
-        return vars(a)
+        v = vars(a)
+        keys = set(ONLY_WITH) | set(ONLY_WITH.values())
+        v.update(_only_with_values({k: v[k] for k in keys if k in v}))
+        return v
     rs = _retrain_script()
     assert rs.constrained(kind) == bool(budget)
     ours = parsed(rs.KINDS[kind].format(timesteps=timesteps, seed=0, budget=budget).split()[1:] + ["--out", "x"])

@@ -108,24 +108,24 @@ class SwitchingLink:
         the stepping): compiled when :attr:`compiled`, else the same source run by the interpreter (its
         ``py_func``; the functions it calls are looked up in the module at each call, so a test may swap them).
         Raises ``ArithmeticError`` rather than looping on zero-length events."""
-        from . import compiled as kern  # numba: imported on the first run only
+        from .compiled import FULL, STUCK, pack, run_kernel  # numba: imported on the first run only
         if self._packed is None:
-            self._packed = kern.pack(self)
+            self._packed = pack(self)
         a = self._packed
         ts = np.ascontiguousarray(schedule.t, dtype=float)
         cmds = np.ascontiguousarray(schedule.cmd, dtype=np.int64)
         gates = np.ascontiguousarray(schedule.gate, dtype=np.int64)
         x = np.array(x0, dtype=float)
-        loop = kern.run_kernel if self.compiled else getattr(kern.run_kernel, "py_func", kern.run_kernel)
+        loop = run_kernel if self.compiled else getattr(run_kernel, "py_func", run_kernel)
         cap = 4 * len(cmds) + 16
         while True:
             status, n, seg_t, seg_k, seg_z = loop(
                 ts, cmds, gates, x, a["lam"], a["vec"], a["inv"], a["trans"], a["grid"], a["grows"], a["gnum"],
                 a["gsec"], a["v2open"], a["v1open"], a["sec_th"], a["pri_th"], a["h"], a["T"], cap, _MAX_ZERO_EVENTS)
-            if status != kern.FULL:
+            if status != FULL:
                 break
             cap *= 4
-        if status == kern.STUCK:
+        if status == STUCK:
             t, k = float(seg_t[n - 1]), int(seg_k[n - 1])
             j = min(max(int(np.searchsorted(ts, t, side="right")) - 1, 0), len(cmds) - 1)
             state = (self.cir.vec[k] @ seg_z[n - 1]).real
