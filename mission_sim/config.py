@@ -24,8 +24,8 @@ from wpt_receiver.coupling import NOMINAL_GAP_M
 
 from .world.battery import BatteryParams, CcCvParams
 from .world.power import DroneParams
-from .validation import (HOLD_RANGE, PAD_RADIUS_RANGE, SPEED_RANGE, Range, check_number_fields, check_positive,
-                         check_range, read_toml_file)
+from .validation import (CRUISE_ALTITUDE_RANGE, HOLD_RANGE, HOVER_GAP_RANGE, PAD_RADIUS_RANGE, SPEED_RANGE, Range,
+                         check_number_fields, check_positive, check_range, read_toml_file)
 from .world.wind import WindParams
 
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
@@ -378,12 +378,12 @@ PLAUSIBLE: dict[str, Range] = {
     "wind.hold_omega_rad_s": Range(0.01, 100.0, "rad/s"), "wind.hold_zeta": Range(0.01, 10.0),
     "wind.drag_area_m2": Range(0.0, 100.0, "m^2", lo_open=True), "wind.air_density_kg_m3": Range(0.05, 2.0, "kg/m^3"),
     "mission.start_x_m": _M, "mission.start_y_m": _M, "mission.land_x_m": _M, "mission.land_y_m": _M,
-    "mission.cruise_altitude_m": Range(0.0, 500.0, "m", lo_open=True),
+    "mission.cruise_altitude_m": CRUISE_ALTITUDE_RANGE,
     "mission.cruise_speed_m_s": SPEED_RANGE,
     "mission.max_accel_m_s2": Range(0.0, 100.0, "m/s^2", lo_open=True),
     "mission.climb_rate_m_s": Range(0.0, 50.0, "m/s", lo_open=True),
     "mission.descent_rate_m_s": Range(0.0, 50.0, "m/s", lo_open=True),
-    "mission.hover_gap_m": Range(0.03, 1.0, "m"), "mission.hover_time_s": HOLD_RANGE,
+    "mission.hover_gap_m": HOVER_GAP_RANGE, "mission.hover_time_s": HOLD_RANGE,
     "sim.control_period_s": Range(1e-7, 1e-3, "s"), "sim.traj_dt_s": Range(0.0, 1.0, "s", lo_open=True),
     "sim.flight_dt_s": Range(0.0, 3600.0, "s", lo_open=True), "sim.i2_noise_a": Range(0.0, 1000.0, "A"),
     "sim.min_fine_s": Range(0.0, 10.0, "s", lo_open=True), "sim.max_fine_s": Range(0.0, 1e9, "s", lo_open=True),

@@ -251,3 +251,35 @@ def test_replay_refuses_the_built_in_patterns_keys(capsys):
     for key in ("mission.cruise_altitude_m=60", "mission.land_y_m=3", "mission.hover_time_s=30"):
         line = _one_error_line(capsys, ["replay", log, "--window", "440,460", "--set", key, "--no-plot"])
         assert f"--set {key.partition('=')[0]} is not used by replay: the track, its heights" in line, line
+
+
+# ------------------------------------------------------------------ reviewer's findings (2026-11-27, 13:00)
+_LOG = str(__import__("pathlib").Path(__file__).resolve().parent / "data" / "flightlogs" / "dronekit-python_flight.tlog")
+
+
+def test_a_roof_pad_under_a_replay_refly_charges(capsys, tmp_path):
+    """A pad 30 m above the replay's pad frame origin (``--pad ...,500``, the pads file's ``alt = 530``): refused with
+    "mission.cruise_altitude_m=5.0 is invalid; valid range: > pads.0.z_m + mission.hover_gap_m = 30.17 m" once the
+    re-flight had no route, and ``--set mission.cruise_altitude_m`` (main's way round) is refused by replay. The
+    re-flight never flies the built-in pattern: its base carries a cruise altitude above its pads."""
+    import json
+    (tmp_path / "roof.csv").write_text("lat,lon,alt,hover_time_s\n-35.3620800,149.1658531,530,30\n")
+    argv = ["replay", _LOG, "--pads", str(tmp_path / "roof.csv"), "--pad=-35.36208,149.1658531,500", "--window",
+            "440,620", "--no-plot", "--format", "json", "--no-progress", "--out", str(tmp_path / "o")]
+    assert main(argv) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["pads"] == [{"x_m": 0.0, "y_m": 0.0, "z_m": pytest.approx(30.0, abs=1e-6)}]
+    assert [d["pad"] for d in s["detours"]] == [0] and s["detours"][0]["hover_s"] == 30.0
+    assert 29.0 < s["charge_time_s"] <= 31.0 and s["battery_charge_in_j"] > 0
+    from mission_sim.plans.pads import read_pads
+    from mission_sim.plans.refly import refly_base
+    from mission_sim.config import config_from_dict, config_to_dict, load_config
+    from mission_sim.mavlink.geodesy import parse_geo_point
+    base = config_to_dict(load_config())
+    d = refly_base(base, read_pads(tmp_path / "roof.csv"), parse_geo_point("-35.36208,149.1658531,500"))
+    assert d["mission"]["cruise_altitude_m"] == pytest.approx(32.0)   # 30 m + the hover gap's top 1 m + 1 m
+    d["mission"]["hover_gap_m"] = 1.0   # (--set mission.hover_gap_m: any value in its range passes)
+    assert config_from_dict(d).pads[0].z_m == pytest.approx(30.0)
+    ground = read_pads(_LOG.replace("flightlogs/dronekit-python_flight.tlog", "missions/dronekit_flight_pads.csv"))
+    d = refly_base(base, ground, parse_geo_point("-35.36208,149.1658531,500"))   # pads on the ground (z = 0)
+    assert d["mission"] == base["mission"] | {"file": ""}   # the base's mission as it was
