@@ -358,7 +358,7 @@ _FRACTION = Range(0.0, 1.0, lo_open=True)
 #: their ranges only keep the arithmetic finite (``sim.max_fine_s = 1e9``: fine steps throughout).
 PLAUSIBLE: dict[str, Range] = {
     "link.r1_ohm": Range(1e-6, 100.0, "ohm"), "link.r2_ohm": Range(1e-6, 100.0, "ohm"),
-    "link.vdc_v": Range(0.0, 1000.0, "V", lo_open=True), "link.f_hz": Range(1e4, 1e7, "Hz"),
+    "link.vdc_v": Range(0.0, 1000.0, "V", lo_open=True), "link.f_hz": Range(1e4, 3e7, "Hz"),
     "link.rated_i2_a": Range(0.0, 1000.0, "A", lo_open=True), "link.tx_ramp_s": Range(0.0, 10.0, "s"),
     "coupling.tx_min_k": Range(0.0, 1.0, lo_open=True, hi_open=True),
     "coupling.tx_k_hysteresis": Range(0.0, 1.0, hi_open=True),

@@ -26,10 +26,10 @@ def _one_error_line(capsys, argv) -> str:
 @pytest.mark.parametrize("argv, text", [
     # a KeyError traceback (the "given twice" check compared nan with itself), exit 1
     (["paper", "--no-plot", "--link", "lm_h=nan"], "--link lm_h=nan is invalid; valid range: (0, 1] H"),
-    (["netlist", "--link", "f_hz=nan"], "--link f_hz=nan is invalid; valid range: [10000, 1e+07] Hz"),
+    (["netlist", "--link", "f_hz=nan"], "--link f_hz=nan is invalid; valid range: [10000, 3e+07] Hz"),
     (["export-controller", "--link", "vl_v=nan"], "--link vl_v=nan is invalid; valid range: (0, 1000] V"),
     # a ZeroDivisionError traceback
-    (["paper", "--no-plot", "--link", "f_hz=1e-300"], "--link f_hz=1e-300 is invalid; valid range: [10000, 1e+07] Hz"),
+    (["paper", "--no-plot", "--link", "f_hz=1e-300"], "--link f_hz=1e-300 is invalid; valid range: [10000, 3e+07] Hz"),
     # RuntimeWarnings (overflow), then "i2_a[0]=nan at t_s=0.0 is not finite" naming no input
     (["paper", "--no-plot", "--link", "vdc_v=1e308"], "--link vdc_v=1e+308 is invalid; valid range: (0, 1000] V"),
     (["paper", "--no-plot", "--link", "r1_ohm=1e308"], "--link r1_ohm=1e+308 is invalid; valid range: [1e-06, 100] ohm"),
@@ -283,3 +283,16 @@ def test_a_roof_pad_under_a_replay_refly_charges(capsys, tmp_path):
     ground = read_pads(_LOG.replace("flightlogs/dronekit-python_flight.tlog", "missions/dronekit_flight_pads.csv"))
     d = refly_base(base, ground, parse_geo_point("-35.36208,149.1658531,500"))   # pads on the ground (z = 0)
     assert d["mission"] == base["mission"] | {"file": ""}   # the base's mission as it was
+
+
+def test_link_at_an_ism_frequency_above_10_mhz_still_runs(capsys):
+    """``netlist --link f_hz=13.56e6`` (the 13.56 MHz ISM band) ran on main; the mission ``link.f_hz`` range (10 MHz
+    top) that ``--link`` takes was too narrow: it is [1e4, 3e7] Hz (6.78, 13.56, 27.12 MHz), one range for both."""
+    from mission_sim.config import LINK_PARAM_RANGES, apply_overrides, config_from_dict, load_config_dict
+    assert main(["netlist", "--link", "f_hz=13.56e6"]) == 0
+    out = capsys.readouterr().out
+    vinv = next(line for line in out.splitlines() if line.startswith("VINV "))   # PULSE(..., period)
+    assert float(vinv.rstrip(")").split()[-1]) == pytest.approx(1 / 13.56e6, rel=1e-12), vinv
+    for f in (6.78e6, 13.56e6, 27.12e6):
+        assert LINK_PARAM_RANGES["f_hz"].contains(f)
+        assert config_from_dict(apply_overrides(load_config_dict(), {"link.f_hz": f})).link.f_hz == f
