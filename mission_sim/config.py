@@ -30,8 +30,8 @@ from .world.wind import WindParams
 
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
            "MissionConfig", "WaypointConfig", "load_config", "config_from_dict", "config_to_dict", "apply_overrides",
-           "load_config_dict", "check_cross_fields", "section_from_dict", "check_seed", "PLAUSIBLE",
-           "plausible_range", "differing_keys"]
+           "load_config_dict", "check_cross_fields", "check_replay_keys", "section_from_dict", "check_seed",
+           "PLAUSIBLE", "plausible_range", "differing_keys"]
 
 DEFAULT_MISSION_TOML: str = resources.files("mission_sim").joinpath("default_mission.toml").read_text("utf-8")
 
@@ -340,6 +340,17 @@ def check_route_keys(cfg_or_dict, keys, what: str = "--set") -> None:
             f"never reads it (the built-in pattern's, as are {', '.join(k for k in PATTERN_KEYS if k != key)}); valid: "
             "the route's own heights, holds and landing (its mission file's items, or [[waypoints]] z_m / hold_s / "
             'action = "land"), or leave the key out')
+
+
+def check_replay_keys(keys, with_pads: bool, what: str = "--set") -> None:
+    """``ValueError`` naming the first of ``keys`` (``replay --set``'s, a ``[replay]`` study's varied keys) that a
+    replay never reads: the built-in pattern's (:data:`PATTERN_KEYS`; the track, its heights and its landing are the
+    log's), ``mission.hover_time_s`` but with pads (a re-flight's default hover). ``dronewpt replay`` and the replay
+    studies of ``dronewpt sweep`` both check here (a study over ``mission.cruise_altitude_m`` ran identical cases)."""
+    key = next((k for k in keys if k in PATTERN_KEYS and (k != "mission.hover_time_s" or not with_pads)), None)
+    if key is not None:
+        raise ValueError(f"{what} {key} is not used by replay: the track, its heights and its landing are the log's "
+                         "(mission.hover_time_s: the default hover of a re-flight with pads); valid: drop it")
 
 
 def _cv_range() -> Range:

@@ -296,3 +296,24 @@ def test_link_at_an_ism_frequency_above_10_mhz_still_runs(capsys):
     for f in (6.78e6, 13.56e6, 27.12e6):
         assert LINK_PARAM_RANGES["f_hz"].contains(f)
         assert config_from_dict(apply_overrides(load_config_dict(), {"link.f_hz": f})).link.f_hz == f
+
+
+@pytest.mark.parametrize("replay, grid, key", [
+    # with pads: every case the same re-flight (the cruise altitude is the built-in pattern's), 2 cases ran
+    ('pads = "{pads}"\n', '"mission.cruise_altitude_m" = [10.0, 50.0]', "mission.cruise_altitude_m"),
+    # without pads: no hover to set (the track is the log's)
+    ("", '"mission.hover_time_s" = [10.0, 20.0]', "mission.hover_time_s"),
+])
+def test_a_replay_study_refuses_the_keys_replay_set_refuses(capsys, tmp_path, replay, grid, key):
+    """``[replay]`` studies refuse what ``replay --set`` refuses (``config.check_replay_keys``, one rule)."""
+    from pathlib import Path
+    pads = Path(_LOG).parents[1] / "missions" / "dronekit_flight_pads.csv"
+    (tmp_path / "s.toml").write_text(f'[replay]\nlog = "{_LOG}"\n{replay.format(pads=pads)}window = [440.0, 460.0]\n'
+                                     f"[grid]\n{grid}\n")
+    line = _one_error_line(capsys, ["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o"), "--workers", "0",
+                                    "--no-plot", "--no-progress"])
+    assert f"study key {key} is not used by replay: the track, its heights and its landing are the log's" in line, line
+    assert not (tmp_path / "o").exists()
+    cli = _one_error_line(capsys, ["replay", _LOG, "--window", "440,460", "--no-plot", "--set", f"{key}=10"]
+                          + (["--pads", str(pads)] if replay else []))
+    assert cli.split(" is not used by replay", 1)[1] == line.split(" is not used by replay", 1)[1], (cli, line)
