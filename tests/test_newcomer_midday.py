@@ -234,13 +234,29 @@ def test_a_pad_far_above_or_below_home_warns(tmp_path):
     cfg = config_from_dict(load_config_dict(None, _SQUARE, tmp_path / "p.csv"))
     assert far_pad_warnings(cfg) == [
         "pads.0.z_m=-488 is outside +-120 m of the mission's home (the pad is 488 m below it: a drone charging there "
-        "flies up or down to it); valid: a pads file's alt in metres above mean sea level (not above home or the "
-        "ground, not feet)"]
+        "flies up or down to it); valid: a pad's height within +-120 m of it (a pads file's alt in metres above mean "
+        "sea level, not above the ground, not feet; [[pads]] z_m and --set pads.<i>.z_m in metres above it)"]
     assert far_pad_warnings(config_from_dict(load_config_dict())) == []   # the default mission: no warning
     assert far_pad_warnings(cfg)[0] in mission_warnings(cfg)
-    with warnings.catch_warnings():   # a replayed trajectory (own_route=False) is not the route's: not said there
-        warnings.simplefilter("error", DronewptWarning)
-        assert not any("+-120 m" in w for w in mission_warnings(cfg, own_route=False))
+    # whatever the route: a replayed trajectory's pads are about the replay's pad frame origin
+    assert far_pad_warnings(cfg)[0] in mission_warnings(cfg, own_route=False)
+    replayed = [w for w in mission_warnings(cfg, own_route=False, replay=True) if "+-120 m" in w]
+    assert replayed == [far_pad_warnings(cfg)[0].replace("the mission's home", "the replay's pad frame origin")]
+
+
+def test_a_far_pad_under_a_replay_refly_warns(capsys, tmp_path):
+    """``replay --pads`` with a pads file's ``alt = 0`` (150 m below the ``--pad`` origin): the detour flew down there
+    and back (+911 s here; +1918 s and an empty battery at the take-off spot's altitude), without a word."""
+    (tmp_path / "low.csv").write_text("lat,lon,alt,hover_time_s\n-35.3620800,149.1658531,0,10\n")
+    argv = ["replay", _LOG, "--pads", str(tmp_path / "low.csv"), "--pad=-35.36208,149.1658531,150", "--window",
+            "440,620", "--no-plot", "--format", "json", "--no-progress", "--out", str(tmp_path / "o"),
+            "--set", "battery.n_series=3"]
+    assert main(argv) == 0
+    far = [ln for ln in capsys.readouterr().err.splitlines() if "+-120 m" in ln]
+    assert far == ["dronewpt replay: warning: pads.0.z_m=-150 is outside +-120 m of the replay's pad frame origin (the "
+                   "pad is 150 m below it: a drone charging there flies up or down to it); valid: a pad's height within "
+                   "+-120 m of it (a pads file's alt in metres above mean sea level, not above the ground, not feet; "
+                   "[[pads]] z_m and --set pads.<i>.z_m in metres above it)"], far
 
 
 def test_replay_refuses_the_built_in_patterns_keys(capsys):
