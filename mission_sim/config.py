@@ -335,11 +335,13 @@ def check_route_keys(cfg_or_dict, keys, what: str = "--set") -> None:
     key = next((k for k in keys if k in PATTERN_KEYS), None) if route else None
     if key is not None:
         value = f"={keys[key]!r}" if isinstance(keys, dict) else ""
+        valid = ("pads.<i>.hover_time_s (a charge's hover), or the file's loiter times ([[waypoints]] hold_s)"
+                 if key == "mission.hover_time_s" else "the route's own heights, holds and landing (its mission "
+                 'file\'s items, or [[waypoints]] z_m / hold_s / action = "land"), or leave the key out')
         raise ValueError(
             f"{what} {key}{value} is invalid: the mission flies a route (--plan, mission.file or [[waypoints]]), which "
             f"never reads it (the built-in pattern's, as are {', '.join(k for k in PATTERN_KEYS if k != key)}); valid: "
-            "the route's own heights, holds and landing (its mission file's items, or [[waypoints]] z_m / hold_s / "
-            'action = "land"), or leave the key out')
+            f"{valid}")
 
 
 def check_replay_keys(keys, with_pads: bool, what: str = "--set") -> None:

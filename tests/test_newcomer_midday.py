@@ -199,7 +199,9 @@ def test_set_of_a_key_a_route_never_reads_is_refused(capsys, tmp_path, monkeypat
     pattern reads the cruise altitude, the landing spot and mission.hover_time_s."""
     monkeypatch.chdir(tmp_path)
     line = _one_error_line(capsys, argv)
-    assert f"--set {key} is invalid: the mission flies a route" in line and "valid: the route's own heights" in line
+    assert f"--set {key} is invalid: the mission flies a route" in line, line
+    assert line.endswith("valid: pads.<i>.hover_time_s (a charge's hover), or the file's loiter times ([[waypoints]] "
+                         "hold_s)" if "hover_time_s" in key else "or leave the key out"), line   # (--set keys)
     assert not (tmp_path / "x.tlog").exists()
 
 
