@@ -24,8 +24,8 @@ from wpt_receiver.coupling import NOMINAL_GAP_M
 
 from .world.battery import BatteryParams, CcCvParams
 from .world.power import DroneParams
-from .validation import (CRUISE_ALTITUDE_RANGE, HOLD_RANGE, HOVER_GAP_RANGE, PAD_RADIUS_RANGE, SPEED_RANGE, Range,
-                         check_number_fields, check_positive, check_range, read_toml_file)
+from .validation import (ALT_RANGE, CRUISE_ALTITUDE_RANGE, HOLD_RANGE, HOVER_GAP_RANGE, PAD_RADIUS_RANGE,
+                         SPEED_RANGE, Range, check_number_fields, check_positive, check_range, read_toml_file)
 from .world.wind import WindParams
 
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
@@ -111,8 +111,8 @@ class PadConfig:
             v = getattr(self, name)
             if not math.isfinite(v) or abs(v) > 1e5:
                 raise ValueError(f"{name}={v!r} is invalid; valid range: [-1e5, 1e5] m")
-        if self.hover_time_s is not None and not (math.isfinite(self.hover_time_s) and self.hover_time_s >= 0):
-            raise ValueError(f"hover_time_s={self.hover_time_s!r} is invalid; valid range: [0, inf)")
+        if self.hover_time_s is not None:
+            check_range("hover_time_s", self.hover_time_s, HOLD_RANGE)   # (PLAUSIBLE's: [0, inf) here let 2e6 build)
 
 
 @dataclass(frozen=True)
@@ -183,11 +183,10 @@ class WaypointConfig:
             v = getattr(self, name)
             if not math.isfinite(v) or abs(v) > 1e5:
                 raise ValueError(f"{name}={v!r} is invalid; valid range: [-1e5, 1e5] m")
-        if not (math.isfinite(self.z_m) and 0 <= self.z_m <= 5000):
-            raise ValueError(f"z_m={self.z_m!r} is invalid; valid range: [0, 5000] m above home")
-        check_positive(self, "hold_s", allow_zero=True)
+        check_range("z_m", self.z_m, ALT_RANGE)   # the shared ranges (a Python-built hold_s=-1 said [0, inf))
+        check_range("hold_s", self.hold_s, HOLD_RANGE)
         if self.speed_m_s is not None:
-            check_positive(self, "speed_m_s")
+            check_range("speed_m_s", self.speed_m_s, SPEED_RANGE)
         if (self.pad >= 0) != (self.action == "charge"):
             raise ValueError(f"pad={self.pad!r} is invalid; valid: a pad index >= 0 for action 'charge' only")
 

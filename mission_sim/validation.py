@@ -58,6 +58,8 @@ PAD_RADIUS_RANGE = Range(0.0, 1000.0, "m", lo_open=True)
 #: re-flight (:func:`mission_sim.plans.refly.refly_base`) raises the one above its pads by the other's top
 CRUISE_ALTITUDE_RANGE = Range(0.0, 500.0, "m", lo_open=True)
 HOVER_GAP_RANGE = Range(0.03, 1.0, "m")
+#: a route waypoint's height above home (``[[waypoints]] z_m``, a mission file's item altitude)
+ALT_RANGE = Range(0.0, 5000.0, "m above home")
 
 
 def check_range(key: str, value, rng: Range) -> None:

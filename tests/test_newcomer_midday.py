@@ -114,11 +114,35 @@ def test_waypoint_ranges_from_python():
 
     from mission_sim.config import WaypointConfig, load_config
     cfg = load_config()
-    fast = WaypointConfig(action="waypoint", x_m=50.0, z_m=20.0, speed_m_s=1e308)
+    with pytest.raises(ValueError, match=r"^speed_m_s=1e\+308 is invalid; valid range: \(0, 100\] m/s$"):
+        WaypointConfig(action="waypoint", x_m=50.0, z_m=20.0, speed_m_s=1e308)   # (the section's own check)
+    fast = WaypointConfig(action="waypoint", x_m=50.0, z_m=20.0, speed_m_s=100.0)
+    object.__setattr__(fast, "speed_m_s", 1e308)   # (past its own check: the tree's is the other line of defence)
     with pytest.raises(ValueError, match=r"waypoints\.1\.speed_m_s=1e\+308 is invalid; valid range: \(0, 100\] m/s"):
         dataclasses.replace(cfg, waypoints=(WaypointConfig(action="takeoff", z_m=20.0), fast))
     ok = dataclasses.replace(fast, speed_m_s=12.0)
     assert dataclasses.replace(cfg, waypoints=(ok,)).waypoints == (ok,)
+
+
+@pytest.mark.parametrize("cls, kw, text", [
+    # said [0, inf) (a -1 hold: the range a route's hold does not have), 2e6 built and failed later as another key
+    ("WaypointConfig", {"hold_s": -1.0}, "hold_s=-1.0 is invalid; valid range: [0, 1e+06] s"),
+    ("WaypointConfig", {"hold_s": 2e6}, "hold_s=2000000.0 is invalid; valid range: [0, 1e+06] s"),
+    ("WaypointConfig", {"speed_m_s": 101.0}, "speed_m_s=101.0 is invalid; valid range: (0, 100] m/s"),
+    ("WaypointConfig", {"z_m": 5001.0}, "z_m=5001.0 is invalid; valid range: [0, 5000] m above home"),
+    ("PadConfig", {"hover_time_s": -1.0}, "hover_time_s=-1.0 is invalid; valid range: [0, 1e+06] s"),
+    ("PadConfig", {"hover_time_s": 2e6}, "hover_time_s=2000000.0 is invalid; valid range: [0, 1e+06] s"),
+])
+def test_a_waypoint_and_a_pad_built_in_python_have_the_shared_ranges(cls, kw, text):
+    """One range each (``mission_sim.validation``: HOLD_RANGE, SPEED_RANGE, ALT_RANGE), as the files are read."""
+    import mission_sim.config as mc
+    from mission_sim.validation import ALT_RANGE, HOLD_RANGE, SPEED_RANGE
+    with pytest.raises(ValueError) as exc:
+        getattr(mc, cls)(**kw)
+    assert str(exc.value) == text
+    assert mc.PLAUSIBLE["waypoints.hold_s"] is HOLD_RANGE and mc.PLAUSIBLE["waypoints.speed_m_s"] is SPEED_RANGE
+    assert ALT_RANGE.text() == "[0, 5000] m above home"
+    assert mc.WaypointConfig(hold_s=1e6, speed_m_s=100.0, z_m=5000.0).hold_s == 1e6   # the ends are in
 
 
 # ------------------------------------------------------------------ pads files: hover times
