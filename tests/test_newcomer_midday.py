@@ -359,3 +359,25 @@ def test_a_replay_study_refuses_the_keys_replay_set_refuses(capsys, tmp_path, re
     cli = _one_error_line(capsys, ["replay", _LOG, "--window", "440,460", "--no-plot", "--set", f"{key}=10"]
                           + (["--pads", str(pads)] if replay else []))
     assert cli.split(" is not used by replay", 1)[1] == line.split(" is not used by replay", 1)[1], (cli, line)
+
+
+@pytest.mark.parametrize("d, key", [
+    ({"waypoints": [{"action": "takeoff", "z_m": 20.0}, {"action": "loiter", "x_m": 50.0, "z_m": 20.0, "hold_s": 10.0},
+                    {"action": "loiter", "x_m": 60.0, "z_m": 20.0, "hold_s": 1e6}]}, "waypoints.2.hold_s"),
+    ({"pads": [{}], "waypoints": [{"action": "charge", "pad": 0, "z_m": 20.0, "hold_s": 1e6}]}, "waypoints.0.hold_s"),
+    # the pad's hover time replaces the charge item's hold: it is the key
+    ({"pads": [{"hover_time_s": 1e6}], "waypoints": [{"action": "charge", "pad": 0, "z_m": 20.0, "hold_s": 5.0}]},
+     "pads.0.hover_time_s"),
+])
+def test_the_run_size_names_the_hold_that_makes_it(capsys, tmp_path, d, key):
+    """A route's long hold was blamed on a bare ``waypoints.hold_s`` (no index; a pad's hover time too): the planned
+    path records each hold's key (``_Path.keys``), as it does a waypoint's speed."""
+    from mission_sim.config import config_from_dict
+    from mission_sim.world.budget import estimate_run
+    est = estimate_run(config_from_dict(d))
+    assert (est.key, est.value) == (key, 1e6)
+    if key == "pads.0.hover_time_s":   # the command's line names it too
+        (tmp_path / "r.toml").write_text('[[pads]]\nhover_time_s = 1e6\n[[waypoints]]\naction = "charge"\npad = 0\n'
+                                         'z_m = 20.0\nhold_s = 5.0\n')
+        assert main(["mission", str(tmp_path / "r.toml"), "--dry-run"]) == 0
+        assert "(largest contribution: pads.0.hover_time_s)" in capsys.readouterr().out
