@@ -24,14 +24,14 @@ from wpt_receiver.coupling import NOMINAL_GAP_M
 
 from .world.battery import BatteryParams, CcCvParams
 from .world.power import DroneParams
-from .validation import (HOLD_RANGE, PAD_RADIUS_RANGE, SPEED_RANGE, Range, check_number_fields, check_positive,
-                         check_range, read_toml_file)
+from .validation import (ALT_RANGE, CRUISE_ALTITUDE_RANGE, HOLD_RANGE, HOVER_GAP_RANGE, PAD_RADIUS_RANGE,
+                         SPEED_RANGE, Range, check_number_fields, check_positive, check_range, read_toml_file)
 from .world.wind import WindParams
 
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
            "MissionConfig", "WaypointConfig", "load_config", "config_from_dict", "config_to_dict", "apply_overrides",
-           "load_config_dict", "check_cross_fields", "section_from_dict", "check_seed", "PLAUSIBLE",
-           "plausible_range", "differing_keys"]
+           "load_config_dict", "check_cross_fields", "check_replay_keys", "section_from_dict", "check_seed",
+           "PLAUSIBLE", "plausible_range", "differing_keys"]
 
 DEFAULT_MISSION_TOML: str = resources.files("mission_sim").joinpath("default_mission.toml").read_text("utf-8")
 
@@ -111,8 +111,8 @@ class PadConfig:
             v = getattr(self, name)
             if not math.isfinite(v) or abs(v) > 1e5:
                 raise ValueError(f"{name}={v!r} is invalid; valid range: [-1e5, 1e5] m")
-        if self.hover_time_s is not None and not (math.isfinite(self.hover_time_s) and self.hover_time_s >= 0):
-            raise ValueError(f"hover_time_s={self.hover_time_s!r} is invalid; valid range: [0, inf)")
+        if self.hover_time_s is not None:
+            check_range("hover_time_s", self.hover_time_s, HOLD_RANGE)   # (PLAUSIBLE's: [0, inf) here let 2e6 build)
 
 
 @dataclass(frozen=True)
@@ -183,11 +183,10 @@ class WaypointConfig:
             v = getattr(self, name)
             if not math.isfinite(v) or abs(v) > 1e5:
                 raise ValueError(f"{name}={v!r} is invalid; valid range: [-1e5, 1e5] m")
-        if not (math.isfinite(self.z_m) and 0 <= self.z_m <= 5000):
-            raise ValueError(f"z_m={self.z_m!r} is invalid; valid range: [0, 5000] m above home")
-        check_positive(self, "hold_s", allow_zero=True)
+        check_range("z_m", self.z_m, ALT_RANGE)   # the shared ranges (a Python-built hold_s=-1 said [0, inf))
+        check_range("hold_s", self.hold_s, HOLD_RANGE)
         if self.speed_m_s is not None:
-            check_positive(self, "speed_m_s")
+            check_range("speed_m_s", self.speed_m_s, SPEED_RANGE)
         if (self.pad >= 0) != (self.action == "charge"):
             raise ValueError(f"pad={self.pad!r} is invalid; valid: a pad index >= 0 for action 'charge' only")
 
@@ -335,11 +334,24 @@ def check_route_keys(cfg_or_dict, keys, what: str = "--set") -> None:
     key = next((k for k in keys if k in PATTERN_KEYS), None) if route else None
     if key is not None:
         value = f"={keys[key]!r}" if isinstance(keys, dict) else ""
+        valid = ("pads.<i>.hover_time_s (a charge's hover), or the file's loiter times ([[waypoints]] hold_s)"
+                 if key == "mission.hover_time_s" else "the route's own heights, holds and landing (its mission "
+                 'file\'s items, or [[waypoints]] z_m / hold_s / action = "land"), or leave the key out')
         raise ValueError(
             f"{what} {key}{value} is invalid: the mission flies a route (--plan, mission.file or [[waypoints]]), which "
             f"never reads it (the built-in pattern's, as are {', '.join(k for k in PATTERN_KEYS if k != key)}); valid: "
-            "the route's own heights, holds and landing (its mission file's items, or [[waypoints]] z_m / hold_s / "
-            'action = "land"), or leave the key out')
+            f"{valid}")
+
+
+def check_replay_keys(keys, with_pads: bool, what: str = "--set") -> None:
+    """``ValueError`` naming the first of ``keys`` (``replay --set``'s, a ``[replay]`` study's varied keys) that a
+    replay never reads: the built-in pattern's (:data:`PATTERN_KEYS`; the track, its heights and its landing are the
+    log's), ``mission.hover_time_s`` but with pads (a re-flight's default hover). ``dronewpt replay`` and the replay
+    studies of ``dronewpt sweep`` both check here (a study over ``mission.cruise_altitude_m`` ran identical cases)."""
+    key = next((k for k in keys if k in PATTERN_KEYS and (k != "mission.hover_time_s" or not with_pads)), None)
+    if key is not None:
+        raise ValueError(f"{what} {key} is not used by replay: the track, its heights and its landing are the log's "
+                         "(mission.hover_time_s: the default hover of a re-flight with pads); valid: drop it")
 
 
 def _cv_range() -> Range:
@@ -358,7 +370,7 @@ _FRACTION = Range(0.0, 1.0, lo_open=True)
 #: their ranges only keep the arithmetic finite (``sim.max_fine_s = 1e9``: fine steps throughout).
 PLAUSIBLE: dict[str, Range] = {
     "link.r1_ohm": Range(1e-6, 100.0, "ohm"), "link.r2_ohm": Range(1e-6, 100.0, "ohm"),
-    "link.vdc_v": Range(0.0, 1000.0, "V", lo_open=True), "link.f_hz": Range(1e4, 1e7, "Hz"),
+    "link.vdc_v": Range(0.0, 1000.0, "V", lo_open=True), "link.f_hz": Range(1e4, 3e7, "Hz"),
     "link.rated_i2_a": Range(0.0, 1000.0, "A", lo_open=True), "link.tx_ramp_s": Range(0.0, 10.0, "s"),
     "coupling.tx_min_k": Range(0.0, 1.0, lo_open=True, hi_open=True),
     "coupling.tx_k_hysteresis": Range(0.0, 1.0, hi_open=True),
@@ -378,12 +390,12 @@ PLAUSIBLE: dict[str, Range] = {
     "wind.hold_omega_rad_s": Range(0.01, 100.0, "rad/s"), "wind.hold_zeta": Range(0.01, 10.0),
     "wind.drag_area_m2": Range(0.0, 100.0, "m^2", lo_open=True), "wind.air_density_kg_m3": Range(0.05, 2.0, "kg/m^3"),
     "mission.start_x_m": _M, "mission.start_y_m": _M, "mission.land_x_m": _M, "mission.land_y_m": _M,
-    "mission.cruise_altitude_m": Range(0.0, 500.0, "m", lo_open=True),
+    "mission.cruise_altitude_m": CRUISE_ALTITUDE_RANGE,
     "mission.cruise_speed_m_s": SPEED_RANGE,
     "mission.max_accel_m_s2": Range(0.0, 100.0, "m/s^2", lo_open=True),
     "mission.climb_rate_m_s": Range(0.0, 50.0, "m/s", lo_open=True),
     "mission.descent_rate_m_s": Range(0.0, 50.0, "m/s", lo_open=True),
-    "mission.hover_gap_m": Range(0.03, 1.0, "m"), "mission.hover_time_s": HOLD_RANGE,
+    "mission.hover_gap_m": HOVER_GAP_RANGE, "mission.hover_time_s": HOLD_RANGE,
     "sim.control_period_s": Range(1e-7, 1e-3, "s"), "sim.traj_dt_s": Range(0.0, 1.0, "s", lo_open=True),
     "sim.flight_dt_s": Range(0.0, 3600.0, "s", lo_open=True), "sim.i2_noise_a": Range(0.0, 1000.0, "A"),
     "sim.min_fine_s": Range(0.0, 10.0, "s", lo_open=True), "sim.max_fine_s": Range(0.0, 1e9, "s", lo_open=True),

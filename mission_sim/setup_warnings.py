@@ -122,12 +122,14 @@ def unreached_pad_warnings(cfg) -> list[str]:
 PAD_HEIGHT_WARN_M = 120.0
 
 
-def far_pad_warnings(cfg) -> list[str]:
-    """One line per pad more than :data:`PAD_HEIGHT_WARN_M` above or below home (a pads file's ``alt = 0`` at a home
-    488 m AMSL put the pad 488 m below it, and a route loitering over it flew down there to charge, without a word)."""
-    return [f"pads.{i}.z_m={pad.z_m:.6g} is outside +-{PAD_HEIGHT_WARN_M:g} m of the mission's home (the pad is "
-            f"{abs(pad.z_m):.0f} m {'above' if pad.z_m > 0 else 'below'} it: a drone charging there flies up or down to it); "
-            "valid: a pads file's alt in metres above mean sea level (not above home or the ground, not feet)"
+def far_pad_warnings(cfg, origin: str = "the mission's home") -> list[str]:
+    """One line per pad more than :data:`PAD_HEIGHT_WARN_M` above or below ``origin``, the pad frame's (a pads
+    file's ``alt = 0`` at a home 488 m AMSL put the pad 488 m below it, and a route loitering over it flew down there
+    to charge, without a word; a re-flight's detours too, about the replay's pad frame origin: +1918 s)."""
+    return [f"pads.{i}.z_m={pad.z_m:.6g} is outside +-{PAD_HEIGHT_WARN_M:g} m of {origin} (the pad is "
+            f"{abs(pad.z_m):.0f} m {'above' if pad.z_m > 0 else 'below'} it: a drone charging there flies up or down "
+            f"to it); valid: a pad's height within +-{PAD_HEIGHT_WARN_M:g} m of it (a pads file's alt in metres above "
+            "mean sea level, not above the ground, not feet; [[pads]] z_m and --set pads.<i>.z_m in metres above it)"
             for i, pad in enumerate(cfg.pads) if abs(pad.z_m) > PAD_HEIGHT_WARN_M]
 
 
@@ -145,10 +147,13 @@ def policy_link_warning(cfg, policy) -> str | None:
             "mission_sim.config.policy_context(cfg)")
 
 
-def mission_warnings(cfg, policy=None, own_route: bool = True) -> list[str]:
-    """Every setup warning of a mission (``own_route``: ``cfg``'s route is flown, not a replayed trajectory)."""
+def mission_warnings(cfg, policy=None, own_route: bool = True, replay: bool = False) -> list[str]:
+    """Every setup warning of a mission (``own_route``: ``cfg``'s route is flown, not a replayed trajectory, so its
+    pads can be checked against it; ``replay``: the trajectory is a replay's, whose pad frame origin is the take-off
+    spot or ``--pad``, not the mission's home). A far pad warns whatever the route."""
     out = [w for w in (link_range_warning(cfg), policy_link_warning(cfg, policy) if policy is not None else None)
            if w is not None]
+    out += far_pad_warnings(cfg, "the replay's pad frame origin" if replay else "the mission's home")
     if own_route:
-        out += far_pad_warnings(cfg) + unreached_pad_warnings(cfg)
+        out += unreached_pad_warnings(cfg)
     return out

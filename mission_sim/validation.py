@@ -50,10 +50,16 @@ class Range:
 #: ranges shared by the mission config (:data:`mission_sim.config.PLAUSIBLE`) and the mission and pads file readers
 #: (:mod:`mission_sim.plans`, which never import the config): a horizontal speed (``mission.cruise_speed_m_s``, a
 #: route's ``speed_m_s``, a file's DO_CHANGE_SPEED), a hover or hold time (``mission.hover_time_s``, ``pads.*``, a
-#: route's ``hold_s``, a file's loiter time or pad ``hover_time_s``) and ``mission.pad_radius_m``
+#: route's ``hold_s``, a file's loiter time or pad ``hover_time_s``), ``mission.pad_radius_m`` and the heights below
 SPEED_RANGE = Range(0.0, 100.0, "m/s", lo_open=True)
 HOLD_RANGE = Range(0.0, 1e6, "s")
 PAD_RADIUS_RANGE = Range(0.0, 1000.0, "m", lo_open=True)
+#: the built-in pattern's cruise altitude and the charging gap (``mission.cruise_altitude_m``, ``hover_gap_m``): a
+#: re-flight (:func:`mission_sim.plans.refly.refly_base`) raises the one above its pads by the other's top
+CRUISE_ALTITUDE_RANGE = Range(0.0, 500.0, "m", lo_open=True)
+HOVER_GAP_RANGE = Range(0.03, 1.0, "m")
+#: a route waypoint's height above home (``[[waypoints]] z_m``, a mission file's item altitude)
+ALT_RANGE = Range(0.0, 5000.0, "m above home")
 
 
 def check_range(key: str, value, rng: Range) -> None:

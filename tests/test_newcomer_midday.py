@@ -26,10 +26,10 @@ def _one_error_line(capsys, argv) -> str:
 @pytest.mark.parametrize("argv, text", [
     # a KeyError traceback (the "given twice" check compared nan with itself), exit 1
     (["paper", "--no-plot", "--link", "lm_h=nan"], "--link lm_h=nan is invalid; valid range: (0, 1] H"),
-    (["netlist", "--link", "f_hz=nan"], "--link f_hz=nan is invalid; valid range: [10000, 1e+07] Hz"),
+    (["netlist", "--link", "f_hz=nan"], "--link f_hz=nan is invalid; valid range: [10000, 3e+07] Hz"),
     (["export-controller", "--link", "vl_v=nan"], "--link vl_v=nan is invalid; valid range: (0, 1000] V"),
     # a ZeroDivisionError traceback
-    (["paper", "--no-plot", "--link", "f_hz=1e-300"], "--link f_hz=1e-300 is invalid; valid range: [10000, 1e+07] Hz"),
+    (["paper", "--no-plot", "--link", "f_hz=1e-300"], "--link f_hz=1e-300 is invalid; valid range: [10000, 3e+07] Hz"),
     # RuntimeWarnings (overflow), then "i2_a[0]=nan at t_s=0.0 is not finite" naming no input
     (["paper", "--no-plot", "--link", "vdc_v=1e308"], "--link vdc_v=1e+308 is invalid; valid range: (0, 1000] V"),
     (["paper", "--no-plot", "--link", "r1_ohm=1e308"], "--link r1_ohm=1e+308 is invalid; valid range: [1e-06, 100] ohm"),
@@ -114,11 +114,35 @@ def test_waypoint_ranges_from_python():
 
     from mission_sim.config import WaypointConfig, load_config
     cfg = load_config()
-    fast = WaypointConfig(action="waypoint", x_m=50.0, z_m=20.0, speed_m_s=1e308)
+    with pytest.raises(ValueError, match=r"^speed_m_s=1e\+308 is invalid; valid range: \(0, 100\] m/s$"):
+        WaypointConfig(action="waypoint", x_m=50.0, z_m=20.0, speed_m_s=1e308)   # (the section's own check)
+    fast = WaypointConfig(action="waypoint", x_m=50.0, z_m=20.0, speed_m_s=100.0)
+    object.__setattr__(fast, "speed_m_s", 1e308)   # (past its own check: the tree's is the other line of defence)
     with pytest.raises(ValueError, match=r"waypoints\.1\.speed_m_s=1e\+308 is invalid; valid range: \(0, 100\] m/s"):
         dataclasses.replace(cfg, waypoints=(WaypointConfig(action="takeoff", z_m=20.0), fast))
     ok = dataclasses.replace(fast, speed_m_s=12.0)
     assert dataclasses.replace(cfg, waypoints=(ok,)).waypoints == (ok,)
+
+
+@pytest.mark.parametrize("cls, kw, text", [
+    # said [0, inf) (a -1 hold: the range a route's hold does not have), 2e6 built and failed later as another key
+    ("WaypointConfig", {"hold_s": -1.0}, "hold_s=-1.0 is invalid; valid range: [0, 1e+06] s"),
+    ("WaypointConfig", {"hold_s": 2e6}, "hold_s=2000000.0 is invalid; valid range: [0, 1e+06] s"),
+    ("WaypointConfig", {"speed_m_s": 101.0}, "speed_m_s=101.0 is invalid; valid range: (0, 100] m/s"),
+    ("WaypointConfig", {"z_m": 5001.0}, "z_m=5001.0 is invalid; valid range: [0, 5000] m above home"),
+    ("PadConfig", {"hover_time_s": -1.0}, "hover_time_s=-1.0 is invalid; valid range: [0, 1e+06] s"),
+    ("PadConfig", {"hover_time_s": 2e6}, "hover_time_s=2000000.0 is invalid; valid range: [0, 1e+06] s"),
+])
+def test_a_waypoint_and_a_pad_built_in_python_have_the_shared_ranges(cls, kw, text):
+    """One range each (``mission_sim.validation``: HOLD_RANGE, SPEED_RANGE, ALT_RANGE), as the files are read."""
+    import mission_sim.config as mc
+    from mission_sim.validation import ALT_RANGE, HOLD_RANGE, SPEED_RANGE
+    with pytest.raises(ValueError) as exc:
+        getattr(mc, cls)(**kw)
+    assert str(exc.value) == text
+    assert mc.PLAUSIBLE["waypoints.hold_s"] is HOLD_RANGE and mc.PLAUSIBLE["waypoints.speed_m_s"] is SPEED_RANGE
+    assert ALT_RANGE.text() == "[0, 5000] m above home"
+    assert mc.WaypointConfig(hold_s=1e6, speed_m_s=100.0, z_m=5000.0).hold_s == 1e6   # the ends are in
 
 
 # ------------------------------------------------------------------ pads files: hover times
@@ -199,7 +223,9 @@ def test_set_of_a_key_a_route_never_reads_is_refused(capsys, tmp_path, monkeypat
     pattern reads the cruise altitude, the landing spot and mission.hover_time_s."""
     monkeypatch.chdir(tmp_path)
     line = _one_error_line(capsys, argv)
-    assert f"--set {key} is invalid: the mission flies a route" in line and "valid: the route's own heights" in line
+    assert f"--set {key} is invalid: the mission flies a route" in line, line
+    assert line.endswith("valid: pads.<i>.hover_time_s (a charge's hover), or the file's loiter times ([[waypoints]] "
+                         "hold_s)" if "hover_time_s" in key else "or leave the key out"), line   # (--set keys)
     assert not (tmp_path / "x.tlog").exists()
 
 
@@ -234,13 +260,29 @@ def test_a_pad_far_above_or_below_home_warns(tmp_path):
     cfg = config_from_dict(load_config_dict(None, _SQUARE, tmp_path / "p.csv"))
     assert far_pad_warnings(cfg) == [
         "pads.0.z_m=-488 is outside +-120 m of the mission's home (the pad is 488 m below it: a drone charging there "
-        "flies up or down to it); valid: a pads file's alt in metres above mean sea level (not above home or the "
-        "ground, not feet)"]
+        "flies up or down to it); valid: a pad's height within +-120 m of it (a pads file's alt in metres above mean "
+        "sea level, not above the ground, not feet; [[pads]] z_m and --set pads.<i>.z_m in metres above it)"]
     assert far_pad_warnings(config_from_dict(load_config_dict())) == []   # the default mission: no warning
     assert far_pad_warnings(cfg)[0] in mission_warnings(cfg)
-    with warnings.catch_warnings():   # a replayed trajectory (own_route=False) is not the route's: not said there
-        warnings.simplefilter("error", DronewptWarning)
-        assert not any("+-120 m" in w for w in mission_warnings(cfg, own_route=False))
+    # whatever the route: a replayed trajectory's pads are about the replay's pad frame origin
+    assert far_pad_warnings(cfg)[0] in mission_warnings(cfg, own_route=False)
+    replayed = [w for w in mission_warnings(cfg, own_route=False, replay=True) if "+-120 m" in w]
+    assert replayed == [far_pad_warnings(cfg)[0].replace("the mission's home", "the replay's pad frame origin")]
+
+
+def test_a_far_pad_under_a_replay_refly_warns(capsys, tmp_path):
+    """``replay --pads`` with a pads file's ``alt = 0`` (150 m below the ``--pad`` origin): the detour flew down there
+    and back (+911 s here; +1918 s and an empty battery at the take-off spot's altitude), without a word."""
+    (tmp_path / "low.csv").write_text("lat,lon,alt,hover_time_s\n-35.3620800,149.1658531,0,10\n")
+    argv = ["replay", _LOG, "--pads", str(tmp_path / "low.csv"), "--pad=-35.36208,149.1658531,150", "--window",
+            "440,620", "--no-plot", "--format", "json", "--no-progress", "--out", str(tmp_path / "o"),
+            "--set", "battery.n_series=3"]
+    assert main(argv) == 0
+    far = [ln for ln in capsys.readouterr().err.splitlines() if "+-120 m" in ln]
+    assert far == ["dronewpt replay: warning: pads.0.z_m=-150 is outside +-120 m of the replay's pad frame origin (the "
+                   "pad is 150 m below it: a drone charging there flies up or down to it); valid: a pad's height within "
+                   "+-120 m of it (a pads file's alt in metres above mean sea level, not above the ground, not feet; "
+                   "[[pads]] z_m and --set pads.<i>.z_m in metres above it)"], far
 
 
 def test_replay_refuses_the_built_in_patterns_keys(capsys):
@@ -251,3 +293,91 @@ def test_replay_refuses_the_built_in_patterns_keys(capsys):
     for key in ("mission.cruise_altitude_m=60", "mission.land_y_m=3", "mission.hover_time_s=30"):
         line = _one_error_line(capsys, ["replay", log, "--window", "440,460", "--set", key, "--no-plot"])
         assert f"--set {key.partition('=')[0]} is not used by replay: the track, its heights" in line, line
+
+
+# ------------------------------------------------------------------ reviewer's findings (2026-11-27, 13:00)
+_LOG = str(__import__("pathlib").Path(__file__).resolve().parent / "data" / "flightlogs" / "dronekit-python_flight.tlog")
+
+
+def test_a_roof_pad_under_a_replay_refly_charges(capsys, tmp_path):
+    """A pad 30 m above the replay's pad frame origin (``--pad ...,500``, the pads file's ``alt = 530``): refused with
+    "mission.cruise_altitude_m=5.0 is invalid; valid range: > pads.0.z_m + mission.hover_gap_m = 30.17 m" once the
+    re-flight had no route, and ``--set mission.cruise_altitude_m`` (main's way round) is refused by replay. The
+    re-flight never flies the built-in pattern: its base carries a cruise altitude above its pads."""
+    import json
+    (tmp_path / "roof.csv").write_text("lat,lon,alt,hover_time_s\n-35.3620800,149.1658531,530,30\n")
+    argv = ["replay", _LOG, "--pads", str(tmp_path / "roof.csv"), "--pad=-35.36208,149.1658531,500", "--window",
+            "440,620", "--no-plot", "--format", "json", "--no-progress", "--out", str(tmp_path / "o")]
+    assert main(argv) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["pads"] == [{"x_m": 0.0, "y_m": 0.0, "z_m": pytest.approx(30.0, abs=1e-6)}]
+    assert [d["pad"] for d in s["detours"]] == [0] and s["detours"][0]["hover_s"] == 30.0
+    assert 29.0 < s["charge_time_s"] <= 31.0 and s["battery_charge_in_j"] > 0
+    from mission_sim.plans.pads import read_pads
+    from mission_sim.plans.refly import refly_base
+    from mission_sim.config import config_from_dict, config_to_dict, load_config
+    from mission_sim.mavlink.geodesy import parse_geo_point
+    base = config_to_dict(load_config())
+    d = refly_base(base, read_pads(tmp_path / "roof.csv"), parse_geo_point("-35.36208,149.1658531,500"))
+    assert d["mission"]["cruise_altitude_m"] == pytest.approx(32.0)   # 30 m + the hover gap's top 1 m + 1 m
+    d["mission"]["hover_gap_m"] = 1.0   # (--set mission.hover_gap_m: any value in its range passes)
+    assert config_from_dict(d).pads[0].z_m == pytest.approx(30.0)
+    ground = read_pads(_LOG.replace("flightlogs/dronekit-python_flight.tlog", "missions/dronekit_flight_pads.csv"))
+    d = refly_base(base, ground, parse_geo_point("-35.36208,149.1658531,500"))   # pads on the ground (z = 0)
+    assert d["mission"] == base["mission"] | {"file": ""}   # the base's mission as it was
+
+
+def test_link_at_an_ism_frequency_above_10_mhz_still_runs(capsys):
+    """``netlist --link f_hz=13.56e6`` (the 13.56 MHz ISM band) ran on main; the mission ``link.f_hz`` range (10 MHz
+    top) that ``--link`` takes was too narrow: it is [1e4, 3e7] Hz (6.78, 13.56, 27.12 MHz), one range for both."""
+    from mission_sim.config import LINK_PARAM_RANGES, apply_overrides, config_from_dict, load_config_dict
+    assert main(["netlist", "--link", "f_hz=13.56e6"]) == 0
+    out = capsys.readouterr().out
+    vinv = next(line for line in out.splitlines() if line.startswith("VINV "))   # PULSE(..., period)
+    assert float(vinv.rstrip(")").split()[-1]) == pytest.approx(1 / 13.56e6, rel=1e-12), vinv
+    for f in (6.78e6, 13.56e6, 27.12e6):
+        assert LINK_PARAM_RANGES["f_hz"].contains(f)
+        assert config_from_dict(apply_overrides(load_config_dict(), {"link.f_hz": f})).link.f_hz == f
+
+
+@pytest.mark.parametrize("replay, grid, key", [
+    # with pads: every case the same re-flight (the cruise altitude is the built-in pattern's), 2 cases ran
+    ('pads = "{pads}"\n', '"mission.cruise_altitude_m" = [10.0, 50.0]', "mission.cruise_altitude_m"),
+    # without pads: no hover to set (the track is the log's)
+    ("", '"mission.hover_time_s" = [10.0, 20.0]', "mission.hover_time_s"),
+])
+def test_a_replay_study_refuses_the_keys_replay_set_refuses(capsys, tmp_path, replay, grid, key):
+    """``[replay]`` studies refuse what ``replay --set`` refuses (``config.check_replay_keys``, one rule)."""
+    from pathlib import Path
+    pads = Path(_LOG).parents[1] / "missions" / "dronekit_flight_pads.csv"
+    (tmp_path / "s.toml").write_text(f'[replay]\nlog = "{_LOG}"\n{replay.format(pads=pads)}window = [440.0, 460.0]\n'
+                                     f"[grid]\n{grid}\n")
+    line = _one_error_line(capsys, ["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o"), "--workers", "0",
+                                    "--no-plot", "--no-progress"])
+    assert f"study key {key} is not used by replay: the track, its heights and its landing are the log's" in line, line
+    assert not (tmp_path / "o").exists()
+    cli = _one_error_line(capsys, ["replay", _LOG, "--window", "440,460", "--no-plot", "--set", f"{key}=10"]
+                          + (["--pads", str(pads)] if replay else []))
+    assert cli.split(" is not used by replay", 1)[1] == line.split(" is not used by replay", 1)[1], (cli, line)
+
+
+@pytest.mark.parametrize("d, key", [
+    ({"waypoints": [{"action": "takeoff", "z_m": 20.0}, {"action": "loiter", "x_m": 50.0, "z_m": 20.0, "hold_s": 10.0},
+                    {"action": "loiter", "x_m": 60.0, "z_m": 20.0, "hold_s": 1e6}]}, "waypoints.2.hold_s"),
+    ({"pads": [{}], "waypoints": [{"action": "charge", "pad": 0, "z_m": 20.0, "hold_s": 1e6}]}, "waypoints.0.hold_s"),
+    # the pad's hover time replaces the charge item's hold: it is the key
+    ({"pads": [{"hover_time_s": 1e6}], "waypoints": [{"action": "charge", "pad": 0, "z_m": 20.0, "hold_s": 5.0}]},
+     "pads.0.hover_time_s"),
+])
+def test_the_run_size_names_the_hold_that_makes_it(capsys, tmp_path, d, key):
+    """A route's long hold was blamed on a bare ``waypoints.hold_s`` (no index; a pad's hover time too): the planned
+    path records each hold's key (``_Path.keys``), as it does a waypoint's speed."""
+    from mission_sim.config import config_from_dict
+    from mission_sim.world.budget import estimate_run
+    est = estimate_run(config_from_dict(d))
+    assert (est.key, est.value) == (key, 1e6)
+    if key == "pads.0.hover_time_s":   # the command's line names it too
+        (tmp_path / "r.toml").write_text('[[pads]]\nhover_time_s = 1e6\n[[waypoints]]\naction = "charge"\npad = 0\n'
+                                         'z_m = 20.0\nhold_s = 5.0\n')
+        assert main(["mission", str(tmp_path / "r.toml"), "--dry-run"]) == 0
+        assert "(largest contribution: pads.0.hover_time_s)" in capsys.readouterr().out

@@ -120,17 +120,16 @@ def _add_replay(sub):
 
 def _refuse_unused_keys(args) -> None:
     """``CliError`` for a ``--set`` key that replay never reads: the files' keys and the built-in pattern's."""
-    from ..config import PATTERN_KEYS
+    from ..config import check_replay_keys
     from ..plans import FILE_READ_KEYS
     unused = [k for k in parse_set(args.set) if k in FILE_READ_KEYS]   # (read, then replaced by the log's route)
     if unused:
         raise CliError(f"--set {unused[0]} is not used by replay: the route is the log's, the pads are --pads FILE "
                        "(or --pad); valid: drop it (with pads: --pads FILE)")
-    # the built-in pattern's keys (mission.cruise_altitude_m=60 was ignored); mission.hover_time_s: a re-flight's hover
-    unused = [k for k in parse_set(args.set) if k in PATTERN_KEYS and (k != "mission.hover_time_s" or args.pads is None)]
-    if unused:
-        raise CliError(f"--set {unused[0]} is not used by replay: the track, its heights and its landing are the log's "
-                       "(mission.hover_time_s: the default hover of a --pads re-flight); valid: drop it")
+    try:   # the built-in pattern's keys (mission.cruise_altitude_m=60 was ignored); one rule with the replay studies'
+        check_replay_keys(list(parse_set(args.set)), args.pads is not None)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
 
 
 def _cmd_replay(args) -> int:

@@ -155,6 +155,13 @@ def refly_base(base: dict, pads, origin, pads_name: str = "pads") -> dict:
     d["waypoints"] = []                       # the log is the route
     d["mission"]["file"] = ""
     d["pads"] = pads_to_local(pads, origin, pads_name, "the replay's pad frame origin (the take-off spot, or --pad)")
+    # the cruise altitude is the built-in pattern's, which a re-flight never flies (its detours climb from the log's
+    # track): above every pad, as a route's pads are exempt (a pad on a 30 m roof was refused for
+    # mission.cruise_altitude_m=5, a key replay refuses to --set); the hover gap's top (1 m) so --set of it passes
+    from ..validation import CRUISE_ALTITUDE_RANGE, HOVER_GAP_RANGE
+    top = max((p["z_m"] for p in d["pads"]), default=-math.inf) + HOVER_GAP_RANGE.hi + 1.0
+    if top >= d["mission"]["cruise_altitude_m"]:
+        d["mission"]["cruise_altitude_m"] = min(top, CRUISE_ALTITUDE_RANGE.hi)
     return d
 
 

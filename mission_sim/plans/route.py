@@ -23,7 +23,7 @@ import math
 from pathlib import Path
 
 from ..mavlink.geodesy import GeoPoint, geodetic_to_enu
-from ..validation import HOLD_RANGE, PAD_RADIUS_RANGE, SPEED_RANGE
+from ..validation import ALT_RANGE, HOLD_RANGE, PAD_RADIUS_RANGE, SPEED_RANGE
 from .items import NAV_LAND, NAV_LOITER_TIME, NAV_RTL, NAV_TAKEOFF, NAV_WAYPOINT, RawMission, read_mission
 from .pads import read_pads
 
@@ -97,9 +97,9 @@ class _Builder:
         if math.isnan(it.alt_m) or it.alt_m == 0:
             return x, y, self.z
         z = it.alt_m - home.alt_m if it.frame in _AMSL_FRAMES else it.alt_m
-        if not 0 <= z <= 5000:
+        if not ALT_RANGE.contains(z):   # ([[waypoints]] z_m's range)
             self.fail(it, f"altitude {it.alt_m:g} m ({'AMSL' if it.frame in _AMSL_FRAMES else 'above home'}) is "
-                          f"{z:.6g} m above home; valid range: [0, 5000] m above home")   # (.1f: 1e308 in 309 digits)
+                          f"{z:.6g} m above home; valid range: {ALT_RANGE.text()}")   # (.1f: 1e308 in 309 digits)
         return x, y, z
 
     def add(self, action, x, y, z, hold_s=0.0):

@@ -150,6 +150,13 @@ class ReplayCaseRunner(MissionCaseRunner):
     _check_run_size = False   # the route is the log: the planner's size estimate does not apply; the replay's own
     #                           limit (MAX_REPLAY_SAMPLES, the re-flight's detours included) is checked in check_params
 
+    def validate_keys(self, keys, example: dict) -> None:
+        """The mission studies' refusals, and the keys a replay never reads (``config.check_replay_keys``, as
+        ``replay --set``: a grid over ``mission.cruise_altitude_m`` ran identical cases)."""
+        from ..config import check_replay_keys
+        check_replay_keys(list(keys), "pads" in self.options, "study key")
+        super().validate_keys(keys, example)
+
     def __init__(self, base: dict, make_policy, policy_names, options: dict, log_sha: str, origin=None):
         super().__init__(base, make_policy, policy_names)
         self.options = dict(options)

@@ -61,14 +61,15 @@ class RunEstimate:
     value: float
 
 
-def _segment_key(cfg, seg, pad_index: int, speed_key=None) -> tuple[str, float]:
-    """The config key that sets a planned segment's duration (``speed_key``: the route waypoint's speed that set
-    a move's, ``_Path.speed_keys``; a slow DO_CHANGE_SPEED was blamed on mission.cruise_speed_m_s)."""
+def _segment_key(cfg, seg, pad_index: int, route_key=None) -> tuple[str, float]:
+    """The config key that sets a planned segment's duration (``route_key``: the route's key that set it, ``_Path.
+    keys``: a waypoint's speed for a move, a loiter's ``waypoints.{i}.hold_s`` or a charge's pad ``hover_time_s``
+    for a hold; a slow DO_CHANGE_SPEED was blamed on mission.cruise_speed_m_s, a hold on a bare waypoints.hold_s)."""
     phase, _, u, _, _ = seg
     m = cfg.mission
     if u is None:
-        if cfg.waypoints and phase in ("charge", "hover"):  # a route: the hold of a loiter / charge waypoint
-            return "waypoints.hold_s", seg[3]
+        if route_key is not None:  # a route: the hold of a loiter / charge waypoint
+            return route_key
         if phase != "charge":
             return "mission.hover_time_s", m.hover_time_s
         pad = cfg.pads[pad_index]
@@ -78,7 +79,7 @@ def _segment_key(cfg, seg, pad_index: int, speed_key=None) -> tuple[str, float]:
     if abs(u[2]) > 1.0 - 1e-9:
         return ("mission.climb_rate_m_s", m.climb_rate_m_s) if u[2] > 0 else \
             ("mission.descent_rate_m_s", m.descent_rate_m_s)
-    return speed_key or ("mission.cruise_speed_m_s", m.cruise_speed_m_s)
+    return route_key or ("mission.cruise_speed_m_s", m.cruise_speed_m_s)
 
 
 def estimate_run(cfg, frame: bool = False) -> RunEstimate:
@@ -90,9 +91,9 @@ def estimate_run(cfg, frame: bool = False) -> RunEstimate:
     duration = charge_s = 0.0
     pad_index = 0
     path = _path(cfg)
-    for seg, speed_key in zip(path.segs, path.speed_keys):
+    for seg, route_key in zip(path.segs, path.keys):
         dur = float(seg[3])
-        key = _segment_key(cfg, seg, pad_index, speed_key)
+        key = _segment_key(cfg, seg, pad_index, route_key)
         if seg[2] is None and seg[0] == "charge":
             charge_s += dur
             pad_index += 1

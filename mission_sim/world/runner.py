@@ -103,13 +103,15 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     :class:`wpt_receiver.notices.DronewptWarning` (a link outside the exact-mode model's checked range, a pad the
     route never energises, a policy made for another link model; none with ``charge=False``); False skips them (a
     sweep warns once per study). ``own_route``: whether the pads are checked against ``cfg``'s route (None: when
-    no ``trajectory`` is given; True for a trajectory planned from ``cfg``, e.g. ``plan_mission(cfg)``; False for a
-    replayed one, or when the caller said it already).
+    no ``trajectory`` is given, a given one is taken for a replay's, its pads about the replay's pad frame origin;
+    True for a trajectory planned from ``cfg``, e.g. ``plan_mission(cfg)``; False for a replayed one, or when the
+    caller said it already). A pad far above or below its frame's origin warns whatever the route.
     """
     check_run_args(cfg, policy)
     check_policy_context(cfg, policy)
     if warn and charge:   # (pads never energised: neither the link nor the pads matter)
-        warn_setup(cfg, policy, own_route=trajectory is None if own_route is None else bool(own_route))
+        replay = trajectory is not None and own_route is None   # (its pads about the replay's frame origin)
+        warn_setup(cfg, policy, own_route=trajectory is None if own_route is None else bool(own_route), replay=replay)
     try:
         res = _run_mission(cfg, policy, trajectory, charge, progress, compiled, frame, sink)
         bad = [k for k, v in res.summary.items() if isinstance(v, float) and not np.isfinite(v)]
@@ -124,13 +126,13 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     return res
 
 
-def warn_setup(cfg, policy, own_route: bool = True) -> None:
+def warn_setup(cfg, policy, own_route: bool = True, replay: bool = False) -> None:
     """:func:`mission_sim.setup_warnings.mission_warnings` of the mission, each a
     :class:`~wpt_receiver.notices.DronewptWarning` pointed at the caller outside dronewpt."""
     from wpt_receiver.notices import warn
 
     from ..setup_warnings import mission_warnings
-    for text in mission_warnings(cfg, policy, own_route):
+    for text in mission_warnings(cfg, policy, own_route, replay):
         warn(text)
 
 

@@ -171,7 +171,7 @@ class _Path:
     def __init__(self, m, start):
         self.m, self.pos, self.segs = m, np.asarray(start, dtype=float), []
         self.ground, self.grounds = 0.0, []
-        self.speed_keys = []   # per segment: the route's (key, value) that set a move's speed, else None
+        self.keys = []   # per segment: the route's (key, value) that set a move's speed or a hold's time, else None
 
     def move(self, p1, phase, speed_m_s=None, speed_key=None):
         p1 = np.asarray(p1, dtype=float)
@@ -183,14 +183,14 @@ class _Path:
         dur, ev = _profile(dist, vmax, self.m.max_accel_m_s2)
         self.segs.append((phase, self.pos.copy(), d / dist, dur, ev))
         self.grounds.append(self.ground)
-        self.speed_keys.append(None if speed_m_s is None else speed_key)
+        self.keys.append(None if speed_m_s is None else speed_key)
         self.pos = p1
 
-    def hold(self, dur, phase):
+    def hold(self, dur, phase, key=None):
         if dur > 0:
             self.segs.append((phase, self.pos.copy(), None, float(dur), None))
             self.grounds.append(self.ground)
-            self.speed_keys.append(None)
+            self.keys.append(key)
 
 
 def _segments(cfg):
@@ -245,12 +245,13 @@ def _route_segments(cfg):
             path.move([path.pos[0], path.pos[1], z], "takeoff")
         path.move([x, y, z], "transit", speed, key)
         if wp.action == "loiter":
-            path.hold(wp.hold_s, "hover")
+            path.hold(wp.hold_s, "hover", (f"waypoints.{i}.hold_s", wp.hold_s))
         elif wp.action == "charge":
             pad = cfg.pads[wp.pad]
             path.ground = pad.z_m
             path.move([x, y, pad.z_m + m.hover_gap_m], "approach")
-            path.hold(wp.hold_s if pad.hover_time_s is None else pad.hover_time_s, "charge")
+            path.hold(*((wp.hold_s, "charge", (f"waypoints.{i}.hold_s", wp.hold_s)) if pad.hover_time_s is None else
+                        (pad.hover_time_s, "charge", (f"pads.{wp.pad}.hover_time_s", pad.hover_time_s))))
             path.move([x, y, z], "depart")
             path.ground = 0.0
     if path.pos[2] > 0.0:
