@@ -251,11 +251,8 @@ def test_a_study_varying_a_key_its_route_never_reads_is_refused(capsys, tmp_path
 def test_a_pad_far_above_or_below_home_warns(tmp_path):
     """``alt = 0`` (meant as "on the ground") at the plan's home 488 m AMSL: the pad 488 m below home, and a route
     loitering over it flew down there to charge (941.6 s, 87.6 kJ of propulsion instead of ~165 s), no word."""
-    import warnings
-
     from mission_sim.config import config_from_dict, load_config_dict
     from mission_sim.setup_warnings import far_pad_warnings, mission_warnings
-    from wpt_receiver.notices import DronewptWarning
     (tmp_path / "p.csv").write_text("lat,lon,alt\n47.397742,8.545594,0\n47.398742,8.546594,518\n")
     cfg = config_from_dict(load_config_dict(None, _SQUARE, tmp_path / "p.csv"))
     assert far_pad_warnings(cfg) == [

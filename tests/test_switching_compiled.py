@@ -131,8 +131,7 @@ def _rules():
     """The link (dead time: every mode reachable), its circuit and the packed rows the mode rules read."""
     import wpt_receiver.switching.compiled as ck
     link = SwitchingLink(P, SwitchingConfig(dead_time_s=3e-7))
-    a = ck.pack(link)
-    return ck, link.cir, (a["v2open"], a["v1open"], a["sec_th"], a["pri_th"])
+    return ck, link.cir, ck.mode_rows(link.cir)
 
 
 def _states(cir, n=200):

@@ -47,21 +47,22 @@ def _mav_config(args, overrides=None, single_pad=False):
     ``overrides``; ``single_pad``: one pad at the origin."""
     from ..config import apply_overrides, config_from_dict, load_config_dict
     from .mission import mission_file_keys
+    given = parse_set(args.set)
     d = load_config_dict(args.config, getattr(args, "plan", None), getattr(args, "mission_pads", None),
-                         mission_file_keys(parse_set(args.set)))
+                         mission_file_keys(given))
     if single_pad:
         d["pads"] = [{"x_m": 0.0, "y_m": 0.0, "z_m": 0.0}]
     drone = {}
     if getattr(args, "drone", None) is not None:
         from ..mavlink.calibrate import read_drone_toml
         drone = read_drone_toml(args.drone)
-    cfg = config_from_dict(apply_overrides(d, {**drone, **(overrides or {}), **parse_set(args.set)}))
+    cfg = config_from_dict(apply_overrides(d, {**drone, **(overrides or {}), **given}))
     if not single_pad:
         from ..config import check_route_keys
-        check_route_keys(cfg, parse_set(args.set))   # (changed nothing: a route flies its own heights)
+        check_route_keys(cfg, given)   # (changed nothing: a route flies its own heights)
         from .mission import default_pads_notice
         args.pads_noted = default_pads_notice(getattr(args, "command", "telemetry"), getattr(args, "plan", None),
-                                              getattr(args, "mission_pads", None), d, parse_set(args.set),
+                                              getattr(args, "mission_pads", None), d, given,
                                               "a config file with your own [[pads]]", cfg)
     return cfg
 
@@ -122,12 +123,13 @@ def _refuse_unused_keys(args) -> None:
     """``CliError`` for a ``--set`` key that replay never reads: the files' keys and the built-in pattern's."""
     from ..config import check_replay_keys
     from ..plans import FILE_READ_KEYS
-    unused = [k for k in parse_set(args.set) if k in FILE_READ_KEYS]   # (read, then replaced by the log's route)
+    given = parse_set(args.set)
+    unused = [k for k in given if k in FILE_READ_KEYS]   # (read, then replaced by the log's route)
     if unused:
         raise CliError(f"--set {unused[0]} is not used by replay: the route is the log's, the pads are --pads FILE "
                        "(or --pad); valid: drop it (with pads: --pads FILE)")
     try:   # the built-in pattern's keys (mission.cruise_altitude_m=60 was ignored); one rule with the replay studies'
-        check_replay_keys(list(parse_set(args.set)), args.pads is not None)
+        check_replay_keys(list(given), args.pads is not None)
     except ValueError as exc:
         raise CliError(str(exc)) from None
 

@@ -137,14 +137,14 @@ def mission_config(args):
     size is checked against the limits unless ``--force`` (see :mod:`mission_sim.world.budget`)."""
     from .. import config as mconfig
     from ..world.budget import check_run_size
-    overrides = parse_set(args.set)
+    overrides = given = parse_set(args.set)
     if getattr(args, "drone", None) is not None:
         from ..mavlink.calibrate import read_drone_toml
         overrides = {**read_drone_toml(args.drone), **overrides}
     files = mission_file_keys(overrides)
     d = mconfig.load_config_dict(args.config, getattr(args, "plan", None), getattr(args, "pads", None), files)
     cfg = mconfig.config_from_dict(mconfig.apply_overrides(d, overrides) if overrides else d)
-    mconfig.check_route_keys(cfg, parse_set(args.set))   # (changed nothing: a route flies its own heights)
+    mconfig.check_route_keys(cfg, given)   # (changed nothing: a route flies its own heights)
     args.pads_noted = (not getattr(args, "no_charge", False)   # (pads never energised: nothing to say about them)
                        and default_pads_notice(getattr(args, "command", "mission"), getattr(args, "plan", None),
                                                getattr(args, "pads", None), d, overrides,

@@ -11,11 +11,10 @@ from __future__ import annotations
 import csv
 import io
 import json
-import math
 from dataclasses import dataclass
 
 from ..mavlink.geodesy import GeoPoint
-from ..validation import HOLD_RANGE
+from ..validation import HOLD_RANGE, check_range
 
 __all__ = ["GeoPad", "read_pads", "MAX_PADS"]
 
@@ -52,8 +51,8 @@ def _pad(lat, lon, alt, hover, where: str) -> GeoPad:
     except (TypeError, ValueError):
         raise ValueError(f"{where}: lat={lat!r}, lon={lon!r}, alt={alt!r}, hover_time_s={hover!r}: not numbers; valid: a number each") from None
     # the config's range of a hover time (this said [0, inf) s; 1e308 then failed as pads.0.hover_time_s, no file named)
-    if vals[3] is not None and not HOLD_RANGE.contains(vals[3]):
-        raise ValueError(f"{where}: hover_time_s={hover!r} is invalid; valid range: {HOLD_RANGE.text()}")
+    if vals[3] is not None:
+        check_range(f"{where}: hover_time_s", hover, HOLD_RANGE)
     try:
         return GeoPad(GeoPoint(vals[0], vals[1], vals[2]), vals[3])
     except (TypeError, ValueError) as exc:

@@ -250,8 +250,9 @@ def _route_segments(cfg):
             pad = cfg.pads[wp.pad]
             path.ground = pad.z_m
             path.move([x, y, pad.z_m + m.hover_gap_m], "approach")
-            path.hold(*((wp.hold_s, "charge", (f"waypoints.{i}.hold_s", wp.hold_s)) if pad.hover_time_s is None else
-                        (pad.hover_time_s, "charge", (f"pads.{wp.pad}.hover_time_s", pad.hover_time_s))))
+            key = ((f"waypoints.{i}.hold_s", wp.hold_s) if pad.hover_time_s is None else
+                   (f"pads.{wp.pad}.hover_time_s", pad.hover_time_s))
+            path.hold(key[1], "charge", key)
             path.move([x, y, z], "depart")
             path.ground = 0.0
     if path.pos[2] > 0.0:

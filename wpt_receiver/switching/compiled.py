@@ -33,10 +33,17 @@ from numba import njit
 
 from .circuit import I1, I2, P_OPEN, PRIMARY, S_OPEN, S_SHORT, SECONDARY
 
-__all__ = ["pack", "run_kernel", "refine", "OK", "FULL", "STUCK"]
+__all__ = ["pack", "mode_rows", "run_kernel", "refine", "OK", "FULL", "STUCK"]
 
 OK, FULL, STUCK = 0, 1, 2
 _NONE = 99  # "not decided yet" for a primary mode
+
+
+def mode_rows(cir) -> tuple:
+    """The rows the mode rules (:func:`_modes`, :func:`_after_event`) read, of a :class:`~.circuit.Circuit`:
+    ``(v2open (5, m) per primary index, v1open (4, m) per secondary index, sec_th (m,), pri_th)``."""
+    return (np.array([cir.v2_open_row(p) for p in PRIMARY]), np.array([cir.v1_open_row(s) for s in SECONDARY]),
+            np.asarray(cir.rect_threshold_row(), dtype=float), float(cir.inverter_threshold_v))
 
 
 def pack(link) -> dict:
@@ -54,13 +61,11 @@ def pack(link) -> dict:
             grows[k, gate, c, :len(rows)] = rows
             gnum[k, gate, c] = len(rows)
         gsec[k, gate, c] = ns
+    v2open, v1open, sec_th, pri_th = mode_rows(cir)
     return {"lam": np.array(cir.lam), "vec": np.array(cir.vec), "inv": np.array(cir.inv),
             "trans": np.array([[t for t in row] for row in cir.trans]), "grid": np.array(link._grid),
-            "grows": grows, "gnum": gnum, "gsec": gsec,
-            "v2open": np.array([link._v2open[p] for p in PRIMARY]),
-            "v1open": np.array([link._v1open[s] for s in SECONDARY]),
-            "sec_th": np.asarray(link._sec_th, dtype=float), "pri_th": float(link._pri_th),
-            "h": float(link._h), "T": float(link.T)}
+            "grows": grows, "gnum": gnum, "gsec": gsec, "v2open": v2open, "v1open": v1open, "sec_th": sec_th,
+            "pri_th": pri_th, "h": float(link._h), "T": float(link.T)}
 
 
 # ---------------------------------------------------------------------------- indices

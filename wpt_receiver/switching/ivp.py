@@ -3,7 +3,7 @@
 The right-hand side and the guards are written directly from eq. 1 and the device equations
 (:mod:`wpt_receiver.devices`), not from the topology matrices of :mod:`.circuit`; only the mode
 decisions at a drive change or a zero current are shared with :class:`~.link.SwitchingLink` (the
-functions of :mod:`.compiled`, called on the link's packed arrays: a call imports numba, ~0.8 s in a fresh
+functions of :mod:`.compiled`, on the circuit's rows, :func:`.compiled.mode_rows`: a call imports numba, ~0.8 s in a fresh
 process; ``tests/test_switching_compiled.py`` checks those rules against the circuit's rows on their own).
 """
 
@@ -95,14 +95,12 @@ def simulate_ivp(params: LinkParams, cfg: SwitchingConfig, schedule: Schedule, x
     (``r_bat_ohm * c_out_f < T / 10``): an explicit method then loses accuracy on the fast mode."""
     from scipy.integrate import solve_ivp
 
-    from .compiled import _after_event, _modes, pack  # mode decisions (diode / freewheel rules) are shared
-    from .link import SwitchingLink
+    from .compiled import _after_event, _modes, mode_rows  # mode decisions (diode / freewheel rules) are shared
     cir = Circuit(params, cfg)
     if method is None:
         stiff = cir.has_cap and cfg.r_bat_ohm * cfg.c_out_f < cir.T / 10
         method = "Radau" if stiff else "DOP853"
-    a = pack(SwitchingLink(params, cfg))
-    rules = (a["v2open"], a["v1open"], a["sec_th"], a["pri_th"])
+    rules = mode_rows(cir)
     x = np.array(x0, dtype=float)[:cir.n]
     pieces = []  # (t_a, t_b, OdeSolution)
     p = s = None

@@ -29,7 +29,7 @@ import numpy as np
 from ..envelope import steady_state
 from ..params import LinkParams
 from ..sbar import v2_from_duty
-from .circuit import I1, I2, P_OPEN, PRIMARY, S_OPEN, SECONDARY, Circuit, SwitchingConfig
+from .circuit import I1, I2, P_OPEN, S_OPEN, Circuit, SwitchingConfig
 from .result import SwitchingResult
 from .schedule import Schedule, duty_windows, make_schedule
 
@@ -66,10 +66,6 @@ class SwitchingLink:
         self._h = self.T / _GRID
         self._grid = [np.exp(np.outer(np.arange(_GRID + 2) * self._h, lam)) for lam in cir.lam]
         self._guard_table = self._build_guards()
-        self._v2open = {p: cir.v2_open_row(p) for p in PRIMARY}
-        self._v1open = {s: cir.v1_open_row(s) for s in SECONDARY}
-        self._sec_th = cir.rect_threshold_row()
-        self._pri_th = cir.inverter_threshold_v
 
     def _guard_rows(self, p, s):
         """Guard rows over the augmented state (positive while the mode is valid), shifted by a
