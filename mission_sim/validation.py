@@ -62,6 +62,12 @@ HOVER_GAP_RANGE = Range(0.03, 1.0, "m")
 ALT_RANGE = Range(0.0, 5000.0, "m above home")
 
 
+def window_ok(t0, t1, hi: float = math.inf) -> bool:
+    """A replay window ``(t0, t1)`` [s of log time]: finite, ``0 <= t0 < t1 <= hi`` (the one predicate of
+    ``--window``, a ``[replay]`` study's ``window`` and :func:`mission_sim.mavlink.replay.check_window`)."""
+    return math.isfinite(t0) and math.isfinite(t1) and 0 <= t0 < t1 <= hi
+
+
 def check_range(key: str, value, rng: Range) -> None:
     """``ValueError("key=value is invalid; valid range: <rng.text()>")`` unless ``rng`` contains ``value``."""
     if not rng.contains(value):

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from ..validation import window_ok
 from ..world import budget as _budget
 from .geodesy import GeoPoint, geodetic_to_enu
 from .logs import FlightLog, read_log
@@ -97,7 +98,7 @@ def parse_window(text: str | None) -> tuple[float, float] | None:
         t0, t1 = (float(p) for p in str(text).split(","))
     except ValueError:
         raise ValueError(f"--window {text!r} is invalid; valid format: {fmt}") from None
-    if not (np.isfinite(t0) and np.isfinite(t1) and 0 <= t0 < t1):
+    if not window_ok(t0, t1):
         raise ValueError(f"--window {text!r} is invalid; valid format: {fmt}")
     return t0, t1
 
@@ -140,7 +141,7 @@ def check_window(log: FlightLog, window: tuple[float, float] | None) -> tuple[fl
             t0, t1 = (float(v) for v in window)
         except (TypeError, ValueError):
             raise ValueError(f"window={window!r} is invalid; {valid}") from None
-        if not (np.isfinite(t0) and np.isfinite(t1) and 0 <= t0 < t1 <= bound):
+        if not window_ok(t0, t1, bound):
             past = f": the log ends at {end:.3f} s" if t1 > bound else ""
             raise ValueError(f"--window {t0:g},{t1:g} is invalid{past}; {valid}")
     return window

@@ -23,7 +23,7 @@ import math
 from pathlib import Path
 
 from ..mavlink.geodesy import GeoPoint, geodetic_to_enu
-from ..validation import ALT_RANGE, HOLD_RANGE, PAD_RADIUS_RANGE, SPEED_RANGE
+from ..validation import ALT_RANGE, HOLD_RANGE, PAD_RADIUS_RANGE, SPEED_RANGE, check_number
 from .items import NAV_LAND, NAV_LOITER_TIME, NAV_RTL, NAV_TAKEOFF, NAV_WAYPOINT, RawMission, read_mission
 from .pads import read_pads
 
@@ -219,10 +219,7 @@ def apply_mission_files(d: dict, base_dir=None, mission_file=None, pads_file=Non
         return d
     if mf is not None and mission_file is None and d.get("waypoints"):
         raise ValueError(f"mission.file={m.get('file')!r} and [[waypoints]] are both given; valid: one route")
-    radius = m.get("pad_radius_m", 5.0)
-    if isinstance(radius, bool) or not isinstance(radius, (int, float)) or not PAD_RADIUS_RANGE.contains(radius):
-        # (the config's range: this said (0, inf) m, the config (0, 1000] m)
-        raise ValueError(f"mission.pad_radius_m={radius!r} is invalid; valid range: {PAD_RADIUS_RANGE.text()}")
+    radius = check_number("mission.pad_radius_m", m.get("pad_radius_m", 5.0), PAD_RADIUS_RANGE)   # (the config's range)
     out = {**d, "mission": dict(m)}
     raw = read_mission(mf, m.get("from_log", "auto")) if mf is not None else None
     ref = raw.home if raw is not None else None

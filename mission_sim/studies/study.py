@@ -78,6 +78,7 @@ from typing import Any
 
 import numpy as np
 
+from ..validation import window_ok
 from . import DEFAULT_MAX_CASES
 
 __all__ = ["Study", "Case", "CaseSpace", "Linspace", "load_study", "parse_study", "expand_cases", "case_space",
@@ -328,7 +329,7 @@ def _parse_replay(rep, base_dir) -> dict:
             out[key] = p if p.is_absolute() or base_dir is None else Path(base_dir) / p
     w = rep.get("window")
     if w is not None:
-        if not (isinstance(w, list) and len(w) == 2 and all(_number(x) for x in w) and 0 <= w[0] < w[1]):
+        if not (isinstance(w, list) and len(w) == 2 and all(_number(x) for x in w) and window_ok(w[0], w[1])):
             raise ValueError(f"[replay] window = {w!r} is invalid; valid: [T0, T1] seconds of log time with "
                              "0 <= T0 < T1, e.g. [440.0, 620.0]")
         out["window"] = (float(w[0]), float(w[1]))
