@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 
 __all__ = ["link_range_warning", "unreached_pad_warnings", "far_pad_warnings", "energised_pads", "policy_link_warning", "mission_warnings",
-           "mission_link_params", "MISSION_LINK_MODEL"]
+           "mission_link_params", "MISSION_LINK_MODEL", "PAD_HEIGHT_WARN_M", "HOME_ORIGIN", "REPLAY_ORIGIN"]
 
 #: the link model every mission runs (:mod:`mission_sim.world.loop_kernel` steps :mod:`wpt_receiver.modal_kernel`)
 MISSION_LINK_MODEL = "modal"
@@ -120,9 +120,11 @@ def unreached_pad_warnings(cfg) -> list[str]:
 #: pads file's ``alt`` is m AMSL: 0 meant as "on the ground", feet for metres): the common legal ceiling of drones
 #: (EU open category 120 m, US 400 ft)
 PAD_HEIGHT_WARN_M = 120.0
+#: the pad frame's origin as a far pad's line names it: a planned mission's, a replay's or re-flight's
+HOME_ORIGIN, REPLAY_ORIGIN = "the mission's home", "the replay's pad frame origin"
 
 
-def far_pad_warnings(cfg, origin: str = "the mission's home") -> list[str]:
+def far_pad_warnings(cfg, origin: str = HOME_ORIGIN) -> list[str]:
     """One line per pad more than :data:`PAD_HEIGHT_WARN_M` above or below ``origin``, the pad frame's (a pads
     file's ``alt = 0`` at a home 488 m AMSL put the pad 488 m below it, and a route loitering over it flew down there
     to charge, without a word; a re-flight's detours too, about the replay's pad frame origin: +1918 s)."""
@@ -153,7 +155,7 @@ def mission_warnings(cfg, policy=None, own_route: bool = True, replay: bool = Fa
     spot or ``--pad``, not the mission's home). A far pad warns whatever the route."""
     out = [w for w in (link_range_warning(cfg), policy_link_warning(cfg, policy) if policy is not None else None)
            if w is not None]
-    out += far_pad_warnings(cfg, "the replay's pad frame origin" if replay else "the mission's home")
+    out += far_pad_warnings(cfg, REPLAY_ORIGIN if replay else HOME_ORIGIN)
     if own_route:
         out += unreached_pad_warnings(cfg)
     return out

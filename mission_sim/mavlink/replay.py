@@ -507,13 +507,17 @@ def warn_battery_voltage(log: FlightLog, battery, run: str = "replay") -> str | 
 
 
 def replay_summary_warnings(log: FlightLog, track: FlightTrack, voltage: str | None,
-                            mission_summary: dict | None = None) -> list[str]:
+                            mission_summary: dict | None = None, cfg=None) -> list[str]:
     """The replay summary's ``warnings``, the one list ``dronewpt replay`` (with or without ``--pads``) prints and the
     replay studies count (``n_warnings``): :func:`replay_warnings`, the logged voltage's (``voltage``:
-    :func:`battery_voltage_warning`'s text or None) and, with the replay's ``mission_summary``, where the battery ran
-    out (the power comparison stops there; the re-flight passes none: its two runs' depletion is in its summary's
-    ``battery_depleted_*`` flags)."""
+    :func:`battery_voltage_warning`'s text or None), with the mission config ``cfg`` its pads more than 120 m above or
+    below the replay's pad frame origin (:func:`~mission_sim.setup_warnings.far_pad_warnings`, as the run warns them)
+    and, with the replay's ``mission_summary``, where the battery ran out (the power comparison stops there; the
+    re-flight passes none: its two runs' depletion is in its summary's ``battery_depleted_*`` flags)."""
     out = replay_warnings(log, track) + [w for w in (voltage,) if w]
+    if cfg is not None:
+        from ..setup_warnings import REPLAY_ORIGIN, far_pad_warnings
+        out += far_pad_warnings(cfg, REPLAY_ORIGIN)
     if mission_summary is not None and mission_summary.get("battery_depleted"):
         from ..world.results import depletion_text
         out.append(f"{depletion_text(mission_summary)} (the power comparison covers the flight up to that point)")
@@ -569,7 +573,7 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
         "sim_time_s": float(ms["sim_time_s"]),
         "window_s": list(window) if window else None,
         "battery_source": log.battery_source,
-        "warnings": replay_summary_warnings(log, track, voltage, ms),
+        "warnings": replay_summary_warnings(log, track, voltage, ms, cfg),
     })
     table = None
     if len(log.battery):

@@ -236,8 +236,8 @@ def refly_log(log, cfg, policy, *, pad=None, ground_gap_m=None, window=None, rea
     module docstring and :func:`plan_refly` (its errors). ``frame=False``: summary only (the runs keep
     no time series; the summary is the same, see :func:`~mission_sim.world.runner.run_mission`). ``warn``: the setup
     warnings as ``DronewptWarning`` before the runs (as :func:`~mission_sim.mavlink.replay.replay_log`); the summary's
-    ``warnings`` has the replay's (:func:`~mission_sim.mavlink.replay.replay_summary_warnings`: the log's and the logged
-    voltage's)."""
+    ``warnings`` has the replay's (:func:`~mission_sim.mavlink.replay.replay_summary_warnings`: the log's, the logged
+    voltage's and a pad far above or below the pad frame origin)."""
     from ..mavlink.replay import battery_voltage_warning, replay_summary_warnings, warn_battery_voltage
     from ..world.runner import run_mission
     track, pads_xyz, detours, skipped = plan_refly(log, cfg, pad=pad, ground_gap_m=ground_gap_m, window=window,
@@ -270,6 +270,6 @@ def refly_log(log, cfg, policy, *, pad=None, ground_gap_m=None, window=None, rea
         "net_battery_energy_gain_j": float(cfg.battery.usable_energy_j(s["final_soc"])
                                            - cfg.battery.usable_energy_j(o["final_soc"])),
         "battery_depleted_logged_flight": bool(o["battery_depleted"]), "battery_depleted_refly": bool(s["battery_depleted"]),
-        "warnings": replay_summary_warnings(log, track, voltage),
+        "warnings": replay_summary_warnings(log, track, voltage, cfg=cfg),
     }
     return ReflyResult(original, refly, track, new, pads_xyz, detours, summary)

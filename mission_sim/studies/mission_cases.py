@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Iterable
 
+from ..setup_warnings import HOME_ORIGIN, PAD_HEIGHT_WARN_M
 from .study import DEFAULT_POLICY, POLICY_KEY
 
 __all__ = ["MissionCaseRunner", "MissionParamChecker"]
@@ -31,11 +32,12 @@ class MissionParamChecker:
     line or None), e.g. a replay's logged battery voltage, ``what`` = ``(cfg.battery.n_series,)``
     (:meth:`~mission_sim.studies.replay_cases.ReplayCaseRunner.setup_notes`)."""
 
-    def __init__(self, base: dict, run_size: bool = True, notes: tuple = ()):
+    def __init__(self, base: dict, run_size: bool = True, notes: tuple = (), pad_origin: str = HOME_ORIGIN):
         from ..config import config_from_dict
 
         self.base = base
         self.run_size = run_size
+        self.pad_origin = pad_origin   # the pads' frame origin, as the far pad's line names it
         self.notes = tuple(notes)
         self.kinds = {**self.KINDS, **{kind: text for kind, text, _, _ in self.notes}}
         self.cfg = config_from_dict(base)
@@ -49,13 +51,15 @@ class MissionParamChecker:
         """Count ``cfg``'s setup warnings (:mod:`mission_sim.setup_warnings`; its cases are made with
         ``policy_context``, so no policy warning), each computed once per distinct value of what it reads (the
         cached section objects: keys of identities, ~1 us a case; ~50 us for each new link, e.g. a Monte Carlo
-        draw of ``link.vdc_v``)."""
-        from ..setup_warnings import link_range_warning, unreached_pad_warnings
+        draw of ``link.vdc_v``). A far pad (:func:`~mission_sim.setup_warnings.far_pad_warnings`) counts whatever
+        the route, about :attr:`pad_origin` (``run_mission``'s rule)."""
+        from ..setup_warnings import far_pad_warnings, link_range_warning, unreached_pad_warnings
 
         link = (cfg.link, cfg.coupling, cfg.battery.n_series, cfg.charger.cv_cell_v, cfg.mission.hover_gap_m)
         route = (cfg.waypoints, cfg.mission, *cfg.pads) if cfg.waypoints else ()
         self.checked += 1
-        checks = [("link", link, link_range_warning), ("pad", route, unreached_pad_warnings)]
+        checks = [("link", link, link_range_warning), ("pad", route, unreached_pad_warnings),
+                  ("far", tuple(cfg.pads), lambda c: far_pad_warnings(c, self.pad_origin))]
         checks += [(kind, what(cfg), check) for kind, _, what, check in self.notes]
         for kind, what, check in checks:
             if not what:
@@ -73,7 +77,8 @@ class MissionParamChecker:
 
     #: the kinds of setup warning a study line counts: what the cases have (``notes`` add theirs)
     KINDS = {"link": "a link outside the exact-mode model's checked range",
-             "pad": "a pad their route never energises"}
+             "pad": "a pad their route never energises",
+             "far": f"a pad more than {PAD_HEIGHT_WARN_M:g} m above or below its frame's origin"}
 
     def study_warnings(self, name: str) -> list[str]:
         """One line per kind of setup warning (:data:`KINDS`, ``notes``) some of the study's (``name``) checked cases
@@ -151,6 +156,7 @@ class MissionCaseRunner:
     """
 
     _check_run_size = True   # the planned mission's run-size estimate is part of a case's check
+    _pad_origin = HOME_ORIGIN   # the pads' frame origin, as the far pad's line names it (a replay's: its own)
 
     def __init__(self, base: dict, make_policy: Callable, policy_names: Iterable[str] | None = None):
         self.base = base
@@ -190,7 +196,7 @@ class MissionCaseRunner:
             if err is not None:
                 return err
         if self._checker is None:
-            self._checker = MissionParamChecker(self.base, self._check_run_size, self.setup_notes())
+            self._checker = MissionParamChecker(self.base, self._check_run_size, self.setup_notes(), self._pad_origin)
         return self._checker({k: v for k, v in params.items() if k != POLICY_KEY})
 
     def _policy_error(self, policy) -> str | None:

@@ -26,6 +26,7 @@ import hashlib
 import re
 from pathlib import Path
 
+from ..setup_warnings import REPLAY_ORIGIN
 from .mission_cases import _CACHE_MAX, MissionCaseRunner
 from .study import DEFAULT_POLICY, POLICY_KEY, Study, canonical_json
 
@@ -149,6 +150,7 @@ class ReplayCaseRunner(MissionCaseRunner):
 
     _check_run_size = False   # the route is the log: the planner's size estimate does not apply; the replay's own
     #                           limit (MAX_REPLAY_SAMPLES, the re-flight's detours included) is checked in check_params
+    _pad_origin = REPLAY_ORIGIN   # (run_mission's words for a replayed trajectory's pads)
 
     def validate_keys(self, keys, example: dict) -> None:
         """The mission studies' refusals, and the keys a replay never reads (``config.check_replay_keys``, as

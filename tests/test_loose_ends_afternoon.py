@@ -1,0 +1,67 @@
+"""Loose ends left by earlier sessions (2026-11-27 afternoon; docs/robustness.md, "Loose ends (2026-11-27
+afternoon)"): each test failed on the tree before its fix (``main``)."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import pytest
+
+from mission_sim.cli import main
+
+_LOG = str(Path(__file__).resolve().parent / "data" / "flightlogs" / "dronekit-python_flight.tlog")
+_FAR = ("pads.0.z_m={z} is outside +-120 m of {origin} (the pad is {d} m below it: a drone charging there flies up "
+        "or down to it); valid: a pad's height within +-120 m of it (a pads file's alt in metres above mean sea level, "
+        "not above the ground, not feet; [[pads]] z_m and --set pads.<i>.z_m in metres above it)")
+
+
+def _one_error_line(capsys, argv) -> str:
+    """``main(argv)``: exit status 2, nothing on stdout, one line on stderr and no traceback (the line returned)."""
+    try:
+        rc = main(argv)
+    except SystemExit as exc:
+        rc = exc.code
+    cap = capsys.readouterr()
+    assert rc == 2, (rc, cap.err)
+    lines = cap.err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in cap.err, cap.err
+    assert cap.out == "", cap.out
+    return lines[0]
+
+
+def _ours(caught) -> list[str]:
+    from wpt_receiver.notices import DronewptWarning
+    return [str(w.message) for w in caught if issubclass(w.category, DronewptWarning)]
+
+
+# ------------------------------------------------------------------ 1. the far pad among the setup warnings
+def test_a_sweep_counts_the_far_pad_among_its_setup_warnings(tmp_path):
+    """A study whose cases put the pad 200 m / 130 m below home: the cases run with ``warn=False`` (warned once per
+    study), and the study's lines had no word of it (only the link and unreached-pad kinds were counted)."""
+    import policies
+    from mission_sim.studies.prepare import prepare_study
+    from mission_sim.studies.study import load_study
+    (tmp_path / "s.toml").write_text('[study]\nname = "low"\n[grid]\n"pads.0.z_m" = [-200.0, 0.0, -130.0]\n')
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        prepare_study(load_study(tmp_path / "s.toml"), policies.make, policies.available())
+    assert _ours(caught) == ["2 of 3 cases of study 'low' have a pad more than 120 m above or below its frame's origin, "
+                             "e.g.: " + _FAR.format(z=-200, origin="the mission's home", d=200)]
+
+
+def test_a_refly_summary_lists_the_far_pad(capsys, tmp_path):
+    """``replay --pads`` with the pad 150 m below the ``--pad`` origin: warned during the run, but the summary's
+    ``warnings`` (``refly_summary.json``, ``--format json``; a ``[replay]`` study's ``n_warnings``) had no word."""
+    (tmp_path / "low.csv").write_text("lat,lon,alt,hover_time_s\n-35.3620800,149.1658531,0,10\n")
+    argv = ["replay", _LOG, "--pads", str(tmp_path / "low.csv"), "--pad=-35.36208,149.1658531,150", "--window",
+            "440,620", "--no-plot", "--format", "json", "--no-progress", "--out", str(tmp_path / "o"),
+            "--set", "battery.n_series=3"]
+    assert main(argv) == 0
+    cap = capsys.readouterr()
+    line = _FAR.format(z=-150, origin="the replay's pad frame origin", d=150)
+    assert json.loads(cap.out)["warnings"].count(line) == 1
+    assert json.loads((tmp_path / "o" / "refly_summary.json").read_text())["warnings"].count(line) == 1
+    assert cap.err.splitlines().count(f"dronewpt replay: warning: {line}") == 1   # still once on stderr
+
