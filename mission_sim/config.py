@@ -539,8 +539,10 @@ def load_config_dict(path=None, mission_file=None, pads_file=None, mission_keys=
     A ``[mission] file`` / ``pads_file`` (paths relative to the TOML file), or ``mission_file`` /
     ``pads_file`` given here (``--plan``, ``--pads``; they win), is read into ``[[waypoints]]`` /
     ``[[pads]]`` now (:func:`mission_sim.plans.route.apply_mission_files`); ``mission_keys`` (``--set
-    mission.from_log=...`` and the like) are laid over ``[mission]`` before that."""
-    from .plans.route import apply_mission_files
+    mission.from_log=...`` and the like) are laid over ``[mission]`` before that, and refused when no file read
+    uses them (:func:`~mission_sim.plans.route.check_file_keys`: ``from_log`` without a log as the mission file,
+    ``pad_radius_m`` without a mission file)."""
+    from .plans.route import apply_mission_files, check_file_keys
     if path is None:
         d = tomllib.loads(DEFAULT_MISSION_TOML)
     else:
@@ -549,7 +551,10 @@ def load_config_dict(path=None, mission_file=None, pads_file=None, mission_keys=
         d = layer_on_default(raw)
     if mission_keys and isinstance(d.get("mission"), dict):
         d["mission"] = {**d["mission"], **mission_keys}
-    return apply_mission_files(d, None if path is None else Path(path).parent, mission_file, pads_file)
+    out = apply_mission_files(d, None if path is None else Path(path).parent, mission_file, pads_file)
+    if mission_keys and isinstance(out.get("mission"), dict):   # (a key no file read uses changed nothing)
+        check_file_keys(mission_keys, out["mission"].get("file"))
+    return out
 
 
 def check_no_empty_table(d: dict, what: str) -> None:

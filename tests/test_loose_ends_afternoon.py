@@ -65,3 +65,38 @@ def test_a_refly_summary_lists_the_far_pad(capsys, tmp_path):
     assert json.loads((tmp_path / "o" / "refly_summary.json").read_text())["warnings"].count(line) == 1
     assert cap.err.splitlines().count(f"dronewpt replay: warning: {line}") == 1   # still once on stderr
 
+
+# ------------------------------------------------------------------ 2. file keys no file read uses
+_PLAN = str(Path(__file__).resolve().parent / "data" / "missions" / "qgc_simple_square.plan")
+_NO_FILE = "there is no mission file (--plan or mission.file)"
+
+
+@pytest.mark.parametrize("argv, text", [
+    (["mission", "--dry-run", "--set", 'mission.from_log="flown"'],
+     f"--set mission.from_log='flown' is invalid: it chooses what a flight log read as the mission file gives (its "
+     f"uploaded mission or its flown track), and {_NO_FILE}; valid: a flight log (.tlog, .bin, .log, .ulg) as --plan "
+     "or mission.file, or leave the key out"),
+    (["mission", "--dry-run", "--plan", _PLAN, "--set", 'mission.from_log="uploaded"'],
+     "--set mission.from_log='uploaded' is invalid: it chooses what a flight log read as the mission file gives (its "
+     "uploaded mission or its flown track), and the mission file 'qgc_simple_square.plan' is not a log; valid: "),
+    (["mission", "--dry-run", "--set", "mission.pad_radius_m=50"],
+     f"--set mission.pad_radius_m=50 is invalid: it chooses which loiters of a mission file charge at a pad, and "
+     f"{_NO_FILE}; valid: a mission file, or leave the key out (a config's [[waypoints]] charge with action = "
+     '"charge")'),
+    (["telemetry", "--set", "mission.pad_radius_m=50", "--duration", "1"], "--set mission.pad_radius_m=50 is invalid"),
+])
+def test_a_file_key_no_file_read_uses_is_refused(capsys, argv, text):
+    """Before: exit 0, the value changed nothing (a .plan is read whatever from_log says; pad_radius_m picks which
+    loiters of a mission file charge, and there was none)."""
+    line = _one_error_line(capsys, argv)
+    assert line.startswith(f"dronewpt {argv[0]}: error: {text}"), line
+
+
+def test_the_file_keys_with_a_log_as_mission_file_still_run(capsys):
+    """The keys where they are read: a log as ``--plan`` (``from_log``, ``pad_radius_m``) and a .plan
+    (``pad_radius_m``): exit 0."""
+    log = _LOG
+    assert main(["mission", "--dry-run", "--plan", log, "--set", 'mission.from_log="flown"',
+                 "--set", "mission.pad_radius_m=20"]) == 0
+    assert main(["mission", "--dry-run", "--plan", _PLAN, "--set", "mission.pad_radius_m=20"]) == 0
+    capsys.readouterr()

@@ -24,10 +24,10 @@ from pathlib import Path
 
 from ..mavlink.geodesy import GeoPoint, geodetic_to_enu
 from ..validation import ALT_RANGE, HOLD_RANGE, PAD_RADIUS_RANGE, SPEED_RANGE, check_number
-from .items import NAV_LAND, NAV_LOITER_TIME, NAV_RTL, NAV_TAKEOFF, NAV_WAYPOINT, RawMission, read_mission
+from .items import LOG_SUFFIXES, NAV_LAND, NAV_LOITER_TIME, NAV_RTL, NAV_TAKEOFF, NAV_WAYPOINT, RawMission, read_mission
 from .pads import read_pads
 
-__all__ = ["apply_mission_files", "mission_home", "route_from_items", "pads_to_local", "command_name", "RTL_ALT_M",
+__all__ = ["apply_mission_files", "check_file_keys", "mission_home", "route_from_items", "pads_to_local", "command_name", "RTL_ALT_M",
            "IGNORED_COMMANDS"]
 
 DO_CHANGE_SPEED = 178
@@ -239,3 +239,22 @@ def apply_mission_files(d: dict, base_dir=None, mission_file=None, pads_file=Non
         last = out["waypoints"][-1]
         out["mission"].update(land_x_m=last["x_m"], land_y_m=last["y_m"])
     return out
+
+
+def check_file_keys(keys: dict, mission_file, what: str = "--set") -> None:
+    """``ValueError`` (one line) for a ``[mission]`` key of ``keys`` (given explicitly with the files: ``--set``'s,
+    :func:`mission_sim.config.load_config_dict`'s ``mission_keys``) that the files read never use, so its value would
+    change nothing: ``pad_radius_m`` without a mission file ``mission_file`` (it picks which of the file's loiters
+    charge at a pad), ``from_log`` without a flight log as mission file (it picks a log's uploaded mission or its
+    flown track; a .plan or .waypoints file is read whatever it says)."""
+    name = Path(mission_file).name if mission_file else ""
+    none = "there is no mission file (--plan or mission.file)"
+    if "from_log" in keys and Path(name).suffix.lower() not in LOG_SUFFIXES:
+        raise ValueError(f"{what} mission.from_log={keys['from_log']!r} is invalid: it chooses what a flight log read "
+                         "as the mission file gives (its uploaded mission or its flown track), and "
+                         f"{f'the mission file {name!r} is not a log' if name else none}; valid: a flight log "
+                         f"({', '.join(LOG_SUFFIXES)}) as --plan or mission.file, or leave the key out")
+    if "pad_radius_m" in keys and not name:
+        raise ValueError(f"{what} mission.pad_radius_m={keys['pad_radius_m']!r} is invalid: it chooses which loiters "
+                         f"of a mission file charge at a pad, and {none}; valid: a mission file, or leave the key out "
+                         '(a config\'s [[waypoints]] charge with action = "charge")')
