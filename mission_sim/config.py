@@ -541,19 +541,25 @@ def load_config_dict(path=None, mission_file=None, pads_file=None, mission_keys=
     ``[[pads]]`` now (:func:`mission_sim.plans.route.apply_mission_files`); ``mission_keys`` (``--set
     mission.from_log=...`` and the like) are laid over ``[mission]`` before that, and refused when no file read
     uses them (:func:`~mission_sim.plans.route.check_file_keys`: ``from_log`` without a log as the mission file,
-    ``pad_radius_m`` without a mission file)."""
+    ``pad_radius_m`` without a mission file). A built-in pattern key (:data:`PATTERN_KEYS`) that the file itself
+    sets beside a route (its ``[[waypoints]]``, its ``mission.file``, or ``mission_file``) is refused as ``--set``'s
+    (:func:`check_route_keys`): the route never reads it."""
     from .plans.route import apply_mission_files, check_file_keys
+    mine = {}   # the [mission] keys the user's file sets (the default it is laid over has every key)
     if path is None:
         d = tomllib.loads(DEFAULT_MISSION_TOML)
     else:
         raw = read_toml_file(path, "config file")
         check_no_empty_table(raw, f"config file {str(path)!r}")
         d = layer_on_default(raw)
+        mine = raw.get("mission") if isinstance(raw.get("mission"), dict) else {}
     if mission_keys and isinstance(d.get("mission"), dict):
         d["mission"] = {**d["mission"], **mission_keys}
     out = apply_mission_files(d, None if path is None else Path(path).parent, mission_file, pads_file)
     if mission_keys and isinstance(out.get("mission"), dict):   # (a key no file read uses changed nothing)
         check_file_keys(mission_keys, out["mission"].get("file"))
+    if mine:   # a route's unused pattern keys: the --set rule, for the keys the file sets
+        check_route_keys(out, {f"mission.{k}": v for k, v in mine.items()}, f"config file {str(path)!r}:")
     return out
 
 

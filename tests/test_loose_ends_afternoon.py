@@ -100,3 +100,33 @@ def test_the_file_keys_with_a_log_as_mission_file_still_run(capsys):
                  "--set", "mission.pad_radius_m=20"]) == 0
     assert main(["mission", "--dry-run", "--plan", _PLAN, "--set", "mission.pad_radius_m=20"]) == 0
     capsys.readouterr()
+
+
+# ------------------------------------------------------------------ 3. a route's pattern keys in a config file
+_ROUTE = '[[waypoints]]\naction = "loiter"\nx_m = 10.0\nz_m = 20.0\nhold_s = 5.0\n'
+_UNUSED = ("is invalid: the mission flies a route (--plan, mission.file or [[waypoints]]), which never reads it (the "
+           "built-in pattern's, as are ")
+
+
+@pytest.mark.parametrize("body, plan, key", [
+    ("[mission]\ncruise_altitude_m = 60.0\n" + _ROUTE, False, "mission.cruise_altitude_m=60.0"),
+    ("[mission]\nland_y_m = 3.0\n" + _ROUTE, False, "mission.land_y_m=3.0"),
+    ("[mission]\nhover_time_s = 30.0\n", True, "mission.hover_time_s=30.0"),   # the route is --plan's
+])
+def test_a_config_files_pattern_key_under_a_route_is_refused_as_sets(capsys, tmp_path, body, plan, key):
+    """Before: exit 0, the route flown, the file's value ignored (``--set`` of the same key was refused)."""
+    (tmp_path / "r.toml").write_text(body)
+    argv = ["mission", str(tmp_path / "r.toml"), "--dry-run"] + (["--plan", _PLAN] if plan else [])
+    line = _one_error_line(capsys, argv)
+    assert line.startswith(f"dronewpt mission: error: config file {str(tmp_path / 'r.toml')!r}: {key} {_UNUSED}"), line
+
+
+def test_a_config_file_without_its_pattern_keys_still_flies_its_route(capsys, tmp_path):
+    """Only the keys the user's file sets are refused (the default laid under it has every key): a route file with other
+    [mission] keys, and a pattern key without a route, run."""
+    (tmp_path / "r.toml").write_text("[mission]\ncruise_speed_m_s = 6.0\n" + _ROUTE)
+    (tmp_path / "alt.toml").write_text("[mission]\ncruise_altitude_m = 60.0\n")
+    assert main(["mission", str(tmp_path / "r.toml"), "--dry-run"]) == 0
+    assert main(["mission", str(tmp_path / "alt.toml"), "--dry-run"]) == 0
+    capsys.readouterr()
+
