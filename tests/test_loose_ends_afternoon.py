@@ -130,3 +130,44 @@ def test_a_config_file_without_its_pattern_keys_still_flies_its_route(capsys, tm
     assert main(["mission", str(tmp_path / "alt.toml"), "--dry-run"]) == 0
     capsys.readouterr()
 
+
+# ------------------------------------------------------------------ 4. a re-flight makes the logged track once
+def test_a_refly_makes_the_logged_track_once(capsys, tmp_path, monkeypatch):
+    """``replay LOG --pads`` cut the log to its window and made the logged track three times (the origin, the plan
+    checked for its errors, the plan again in ``refly_log``): three window checks. Now once, the same outputs."""
+    import mission_sim.mavlink.replay as rp
+    calls = {"track_from_log": 0, "check_window": 0}
+    for name in calls:
+        def counted(*a, _f=getattr(rp, name), _n=name, **k):
+            calls[_n] += 1
+            return _f(*a, **k)
+        monkeypatch.setattr(rp, name, counted)
+    pads = Path(__file__).resolve().parent / "data" / "missions" / "dronekit_flight_pads.csv"
+    argv = ["replay", _LOG, "--pads", str(pads), "--window", "440,620", "--out", str(tmp_path / "o"), "--format", "json",
+            "--no-progress", "--no-plot", "--set", "battery.n_series=3", "--ground-gap", "0.3"]
+    assert main(argv) == 0
+    assert calls == {"track_from_log": 1, "check_window": 1}
+    assert len(json.loads(capsys.readouterr().out)["detours"]) == 2
+
+
+def test_plan_refly_on_a_given_track_is_the_plan_made_from_the_log():
+    """``plan_refly(..., track=T)`` (T made at another ground gap) gives the plan it makes from the log, bit for bit."""
+    import numpy as np
+
+    from mission_sim.config import config_to_dict, config_from_dict, load_config
+    from mission_sim.mavlink.logs import read_log
+    from mission_sim.mavlink.replay import track_from_log
+    from mission_sim.plans.pads import read_pads
+    from mission_sim.plans.refly import plan_refly, refly_base
+    log = read_log(_LOG)
+    track = track_from_log(log, window=(440.0, 620.0))
+    pads = read_pads(Path(__file__).resolve().parent / "data" / "missions" / "dronekit_flight_pads.csv")
+    cfg = config_from_dict(refly_base(config_to_dict(load_config()), pads, track.pad))
+    kw = dict(pad=track.pad, window=(440.0, 620.0), ground_gap_m=0.3)
+    made, given = plan_refly(log, cfg, **kw), plan_refly(log, cfg, track=track, **kw)
+    for a, b in zip((made[0].t_s, made[0].pos_m, made[0].tilt_rad, made[0].armed, made[1]),
+                    (given[0].t_s, given[0].pos_m, given[0].tilt_rad, given[0].armed, given[1])):
+        assert a.tobytes() == b.tobytes()
+    assert made[0].ground_gap_m == given[0].ground_gap_m == 0.3 and made[2:] == given[2:]
+    assert not np.array_equal(track.pos_m[:, 2], track_from_log(log, window=(440.0, 620.0), ground_gap_m=0.3).pos_m[:, 2])
+

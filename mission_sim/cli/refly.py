@@ -58,10 +58,11 @@ def cmd_refly(args) -> int:
     track = track_from_log(log, pad=pad, window=window)
     cfg = _config(args, track)
     policy = make_policy(args.policy, cfg)
-    plan_refly(log, cfg, pad=track.pad, ground_gap_m=args.ground_gap, window=window, reach_m=args.reach)  # errors first
+    plan = plan_refly(log, cfg, pad=track.pad, ground_gap_m=args.ground_gap, window=window, reach_m=args.reach,
+                      track=track)   # errors first; the logged track made once, here
     prepare_out_dir(args.out)
     res = refly_log(log, cfg, policy, pad=track.pad, ground_gap_m=args.ground_gap, window=window,
-                    reach_m=args.reach, progress=show_progress(args))
+                    reach_m=args.reach, progress=show_progress(args), plan=plan)
     s = {**res.summary, "policy": args.policy, "drone_mass_kg": cfg.drone.mass_kg, "pads_file": str(args.pads)}
     (args.out / "refly_summary.json").unlink(missing_ok=True)  # written last: present = complete
     files = write_mission(res.refly, args.out / "refly", plots=False)

@@ -19,7 +19,7 @@ Pipeline (each step a small function):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -29,7 +29,7 @@ from ..world import budget as _budget
 from .geodesy import GeoPoint, geodetic_to_enu
 from .logs import FlightLog, read_log
 
-__all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "flight_stats",
+__all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "with_ground_gap", "flight_stats",
            "logged_energy_j", "compare_power", "fit_mass_kg", "resample_track", "replay_trajectory", "ReplayResult", "replay_log", "parse_window",
            "battery_voltage_warning", "warn_battery_voltage", "replay_summary_warnings",
            "choose_segment", "replay_span"]
@@ -192,8 +192,7 @@ def track_from_log(log: FlightLog, pad: GeoPoint | None = None, ground_gap_m: fl
     checked wherever the log is cut to it, here, for replay, calibrate, refly and the studies; it took a window past
     the log's end)."""
     check_window(log, window)
-    if not np.isfinite(ground_gap_m) or ground_gap_m < 0:
-        raise ValueError(f"ground_gap_m={ground_gap_m!r} is invalid; valid range: [0, inf) m")
+    _check_ground_gap(ground_gap_m)
     pos = log.position
     if window is not None:
         pos = pos[(pos["t_s"] >= window[0]) & (pos["t_s"] <= window[1])]
@@ -218,6 +217,21 @@ def track_from_log(log: FlightLog, pad: GeoPoint | None = None, ground_gap_m: fl
                        tilt_rad=np.minimum(tilt, MAX_TILT_RAD), height_m=height, t_offset_s=float(t_log[0]),
                        pad=pad, ground_gap_m=float(ground_gap_m), armed=_in_periods(t_log, log.armed_periods),
                        n_tilt_clipped=clipped)
+
+
+def _check_ground_gap(ground_gap_m) -> None:
+    if not np.isfinite(ground_gap_m) or ground_gap_m < 0:
+        raise ValueError(f"ground_gap_m={ground_gap_m!r} is invalid; valid range: [0, inf) m")
+
+
+def with_ground_gap(track: FlightTrack, ground_gap_m: float) -> FlightTrack:
+    """``track`` (from :func:`track_from_log`, not resampled) with another coil gap on the ground: its heights plus
+    ``ground_gap_m``, bit for bit the track :func:`track_from_log` gives for that gap (the log is not read, nor its
+    window checked, again)."""
+    _check_ground_gap(ground_gap_m)
+    pos = track.pos_m.copy()
+    pos[:, 2] = track.height_m + ground_gap_m
+    return replace(track, pos_m=pos, ground_gap_m=float(ground_gap_m))
 
 
 #: trajectory samples a replay may hold: each costs a sample (world.budget.SAMPLE_BYTES) and a row of the time series

@@ -174,14 +174,19 @@ def _segment_window(log, window, segment):
 
 
 def plan_refly(log, cfg, *, pad=None, ground_gap_m=None, window=None, reach_m: float = DEFAULT_REACH_M,
-               segment: int | None = None):
+               segment: int | None = None, track=None):
     """The logged track (resampled), the pads (K, 3) of ``cfg``, the detours and the skipped pads;
     ``ValueError`` (one line) if no pad is within ``reach_m`` of the airborne track, or ``segment``
-    (1-based boot segment, re-flown alone when no ``window`` is given) is out of range."""
-    from ..mavlink.replay import resample_track, track_from_log
+    (1-based boot segment, re-flown alone when no ``window`` is given) is out of range. ``track``: the logged track
+    the caller has already (``track_from_log`` of this log about ``pad`` over this window or segment, any ground gap,
+    not resampled), laid at the re-flight's gap (:func:`~mission_sim.mavlink.replay.with_ground_gap`) instead of made
+    again."""
+    from ..mavlink.replay import resample_track, track_from_log, with_ground_gap
     gap = cfg.mission.hover_gap_m if ground_gap_m is None else ground_gap_m
     window = _segment_window(log, window, segment)
-    track = resample_track(track_from_log(log, pad=pad, ground_gap_m=gap, window=window), cfg.sim.traj_dt_s)
+    track = track_from_log(log, pad=pad, ground_gap_m=gap, window=window) if track is None else \
+        with_ground_gap(track, gap)
+    track = resample_track(track, cfg.sim.traj_dt_s)
     pads_xyz = np.array([[p.x_m, p.y_m, p.z_m] for p in cfg.pads])
     detours, skipped = plan_detours(track, pads_xyz, _hovers(cfg), reach_m)
     if not detours and all(math.isinf(d) for _, d in skipped):   # (was: "pad 0 at inf m", as if the pads were far)
@@ -230,18 +235,19 @@ def check_refly_size(track, pads_xyz, detours, cfg) -> None:
 
 def refly_log(log, cfg, policy, *, pad=None, ground_gap_m=None, window=None, reach_m: float = DEFAULT_REACH_M,
               progress: bool = False, segment: int | None = None, frame: bool = True,
-              warn: bool = True) -> ReflyResult:
+              warn: bool = True, plan=None) -> ReflyResult:
     """Re-fly ``log`` (a FlightLog) with the pads of ``cfg`` (pad frame = ENU about ``pad``, default
     the take-off spot, as in :func:`~mission_sim.mavlink.replay.replay_log`) and compare; see the
     module docstring and :func:`plan_refly` (its errors). ``frame=False``: summary only (the runs keep
     no time series; the summary is the same, see :func:`~mission_sim.world.runner.run_mission`). ``warn``: the setup
     warnings as ``DronewptWarning`` before the runs (as :func:`~mission_sim.mavlink.replay.replay_log`); the summary's
     ``warnings`` has the replay's (:func:`~mission_sim.mavlink.replay.replay_summary_warnings`: the log's, the logged
-    voltage's and a pad far above or below the pad frame origin)."""
+    voltage's and a pad far above or below the pad frame origin). ``plan``: :func:`plan_refly`'s result for the same
+    arguments, when the caller has it (the command line plans first, for its errors), else planned here."""
     from ..mavlink.replay import battery_voltage_warning, replay_summary_warnings, warn_battery_voltage
     from ..world.runner import run_mission
-    track, pads_xyz, detours, skipped = plan_refly(log, cfg, pad=pad, ground_gap_m=ground_gap_m, window=window,
-                                                   reach_m=reach_m, segment=segment)
+    track, pads_xyz, detours, skipped = plan or plan_refly(log, cfg, pad=pad, ground_gap_m=ground_gap_m,
+                                                           window=window, reach_m=reach_m, segment=segment)
     new, phase = refly_track(track, pads_xyz, detours, cfg.mission, cfg.sim.traj_dt_s)
     voltage = (warn_battery_voltage if warn else battery_voltage_warning)(log, cfg.battery, "re-flight")
     original = run_mission(cfg, policy, trajectory=_trajectory(track), charge=False, progress=progress, frame=frame,
