@@ -7,6 +7,8 @@ each by the command line.
 * :func:`link_range_warning`: the mission's link outside the range where the exact-mode model (the mission's
   only link) was checked against the switching model (:func:`wpt_receiver.paper.modal_range_problem`, the one
   source of the limits), at the hover pose's Lm and the pack's highest voltage (``n_series * cv_cell_v``).
+* :func:`link_frequency_warning`: ``link.f_hz`` more than a factor 2 off the coil pair's tanks' resonance (85 kHz:
+  Table I's coils with their capacitors), where the resonant link's secondary current (1/f) halves or doubles.
 * :func:`unreached_pad_warnings`: a pad the route never energises (:func:`energised_pads`: no charging hover
   or loiter's hover inside its coupling range, the run's own rule): it charges nothing.
 * :func:`far_pad_warnings`: a pad more than 120 m above or below home (an altitude in another frame or unit).
@@ -20,7 +22,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["link_range_warning", "unreached_pad_warnings", "far_pad_warnings", "energised_pads", "policy_link_warning", "mission_warnings",
+__all__ = ["link_range_warning", "link_frequency_warning", "unreached_pad_warnings", "far_pad_warnings", "energised_pads", "policy_link_warning", "mission_warnings",
            "mission_link_params", "MISSION_LINK_MODEL", "PAD_HEIGHT_WARN_M", "HOME_ORIGIN", "REPLAY_ORIGIN"]
 
 #: the link model every mission runs (:mod:`mission_sim.world.loop_kernel` steps :mod:`wpt_receiver.modal_kernel`)
@@ -50,6 +52,14 @@ def link_range_warning(cfg) -> str | None:
     return (f"link.vdc_v={cfg.link.vdc_v:g} V with battery.n_series={cfg.battery.n_series} (VL up to "
             f"{p.vl_v:.4g} V at charger.cv_cell_v={cfg.charger.cv_cell_v:g}), Lm {p.lm_h * 1e6:.3g} uH at "
             f"mission.hover_gap_m={cfg.mission.hover_gap_m:.4g}: {problem}")
+
+
+def link_frequency_warning(cfg) -> str | None:
+    """One line when ``link.f_hz`` lies more than a factor :data:`wpt_receiver.params.FREQUENCY_TOLERANCE` (2) off the
+    coil pair's tanks' resonance (:func:`wpt_receiver.params.resonance_warning`: the models tune the capacitors to
+    ``f_hz``, and the resonant link's secondary current scales as 1/f), else None."""
+    from wpt_receiver.params import resonance_warning
+    return resonance_warning(mission_link_params(cfg), "link.f_hz")
 
 
 def _distance_to_route(x: float, y: float, pts: list) -> float:
@@ -153,8 +163,8 @@ def mission_warnings(cfg, policy=None, own_route: bool = True, replay: bool = Fa
     """Every setup warning of a mission (``own_route``: ``cfg``'s route is flown, not a replayed trajectory, so its
     pads can be checked against it; ``replay``: the trajectory is a replay's, whose pad frame origin is the take-off
     spot or ``--pad``, not the mission's home). A far pad warns whatever the route."""
-    out = [w for w in (link_range_warning(cfg), policy_link_warning(cfg, policy) if policy is not None else None)
-           if w is not None]
+    out = [w for w in (link_range_warning(cfg), link_frequency_warning(cfg),
+                       policy_link_warning(cfg, policy) if policy is not None else None) if w is not None]
     out += far_pad_warnings(cfg, REPLAY_ORIGIN if replay else HOME_ORIGIN)
     if own_route:
         out += unreached_pad_warnings(cfg)

@@ -10,25 +10,12 @@ from pathlib import Path
 import pytest
 
 from mission_sim.cli import main
+from test_newcomer_midday import _one_error_line   # exit 2, one line on stderr, no traceback
 
 _LOG = str(Path(__file__).resolve().parent / "data" / "flightlogs" / "dronekit-python_flight.tlog")
 _FAR = ("pads.0.z_m={z} is outside +-120 m of {origin} (the pad is {d} m below it: a drone charging there flies up "
         "or down to it); valid: a pad's height within +-120 m of it (a pads file's alt in metres above mean sea level, "
         "not above the ground, not feet; [[pads]] z_m and --set pads.<i>.z_m in metres above it)")
-
-
-def _one_error_line(capsys, argv) -> str:
-    """``main(argv)``: exit status 2, nothing on stdout, one line on stderr and no traceback (the line returned)."""
-    try:
-        rc = main(argv)
-    except SystemExit as exc:
-        rc = exc.code
-    cap = capsys.readouterr()
-    assert rc == 2, (rc, cap.err)
-    lines = cap.err.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in cap.err, cap.err
-    assert cap.out == "", cap.out
-    return lines[0]
 
 
 def _ours(caught) -> list[str]:
@@ -170,4 +157,52 @@ def test_plan_refly_on_a_given_track_is_the_plan_made_from_the_log():
         assert a.tobytes() == b.tobytes()
     assert made[0].ground_gap_m == given[0].ground_gap_m == 0.3 and made[2:] == given[2:]
     assert not np.array_equal(track.pos_m[:, 2], track_from_log(log, window=(440.0, 620.0), ground_gap_m=0.3).pos_m[:, 2])
+
+
+# ------------------------------------------------------------------ 5. a drive frequency far off the coils' resonance
+_FREQ = ("{key}=1.356e+07 Hz is 159.5x the tanks' resonance 85000 Hz (1/(2 pi sqrt(L C)) of the coil pair, L1 236 uH "
+         "with C1 14.86 nF, L2 18.9 uH with C2 185.5 nF): the model tunes C1, C2 to {key} and runs, but a resonant "
+         "series-series link's secondary current V1/(2 pi f Lm) scales as 1/f, 0.00627x its value at 85000 Hz (outside "
+         "the factor 2 where it halves or doubles); valid: {key} in [42500, 170000] Hz, or coils made for it")
+
+
+def test_a_link_far_off_its_tanks_resonance_warns_once(capsys, tmp_path):
+    """``netlist --link f_hz=13.56e6`` (and a mission at ``link.f_hz=13.56e6``: peak I2 0.084 A, nothing charged) ran
+    without a word. One line naming f_hz, the tanks' resonance from L and C and the ratio."""
+    assert main(["netlist", "--link", "f_hz=13.56e6", "--out", str(tmp_path / "n.cir")]) == 0
+    assert capsys.readouterr().err.splitlines() == ["dronewpt netlist: warning: " + _FREQ.format(key="--link f_hz")]
+    from mission_sim.config import config_from_dict, load_config_dict
+    from mission_sim.setup_warnings import mission_warnings
+    cfg = config_from_dict({**load_config_dict(), "link": {**load_config_dict()["link"], "f_hz": 13.56e6}})
+    assert mission_warnings(cfg).count(_FREQ.format(key="link.f_hz")) == 1
+
+
+@pytest.mark.parametrize("f_hz, warns", [(85e3, False), (42.5e3, False), (170e3, False), (171e3, True), (40e3, True),
+                                         (1e4, True), (3e7, True)])
+def test_the_frequency_tolerance_is_a_factor_2_either_way(f_hz, warns):
+    from wpt_receiver import TABLE_I
+    from wpt_receiver.params import resonance_warning
+    assert (resonance_warning(TABLE_I.with_(f_hz=f_hz)) is not None) is warns
+    assert resonance_warning(TABLE_I.with_(f_hz=13.56e6, l1_h=0.5e-6, l2_h=0.4e-6, lm_h=0.1e-6)) is None   # own coils
+
+
+def test_the_tolerance_is_where_the_resonant_links_current_halves():
+    """The physics of the factor 2: the models tune C to f_hz; the rectification-mode I2 of the resonant link
+    (``rm_state.rm_steady``, devices ideal) at twice 85 kHz is half its value at 85 kHz (0.508), at 13.56 MHz 1/154."""
+    from wpt_receiver import TABLE_I
+    from wpt_receiver.rm_state import rm_steady
+    i2 = {f: float(rm_steady(TABLE_I.with_(f_hz=f), None, None)["i2_a"]) for f in (85e3, 170e3, 13.56e6)}
+    assert 0.45 < i2[170e3] / i2[85e3] < 0.55 and i2[13.56e6] < 0.01 * i2[85e3]
+
+
+def test_a_sweep_counts_the_link_frequency_warning(tmp_path):
+    import policies
+    from mission_sim.studies.prepare import prepare_study
+    from mission_sim.studies.study import load_study
+    (tmp_path / "s.toml").write_text('[study]\nname = "f"\n[grid]\n"link.f_hz" = [85000.0, 13.56e6]\n')
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        prepare_study(load_study(tmp_path / "s.toml"), policies.make, policies.available())
+    assert _ours(caught) == ["1 of 2 cases of study 'f' have a link.f_hz more than a factor 2 off the coil pair's tanks' "
+                             "resonance, e.g.: " + _FREQ.format(key="link.f_hz")]
 

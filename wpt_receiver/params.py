@@ -12,7 +12,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-__all__ = ["LinkParams", "TABLE_I"]
+__all__ = ["LinkParams", "TABLE_I", "FREQUENCY_TOLERANCE", "resonance_warning"]
 
 
 @dataclass(frozen=True)
@@ -94,3 +94,35 @@ class LinkParams:
 
 
 TABLE_I = LinkParams()
+
+
+#: the drive frequency may be this factor off the tanks' resonance, either way, before :func:`resonance_warning` says
+#: so. Every model here tunes C1, C2 to ``f_hz`` (C = 1 / ((2 pi f)^2 L)), so the link runs resonant whatever f_hz;
+#: and a resonant series-series link drives its secondary as a current source, I2 = V1 / (2 pi f Lm) in rectification
+#: mode: at twice the coil pair's own resonance it carries half the current (the default mission's peak I2 13.3 A at
+#: 85 kHz, 6.8 A at 170 kHz, 0.084 A and no charge at 13.56 MHz), at half of it twice the current
+FREQUENCY_TOLERANCE = 2.0
+
+
+def resonance_warning(p: LinkParams, what: str = "f_hz") -> str | None:
+    """One line when ``p.f_hz`` lies more than a factor :data:`FREQUENCY_TOLERANCE` off the resonance of the tanks
+    that Table I's coils (``p``'s, when they are Table I's L1, L2) make with Table I's capacitors (C = 1 / ((2 pi
+    85 kHz)^2 L), the pair's hardware): naming ``what`` (the key the user set), the tanks' resonance frequency
+    computed from L and C and the ratio. None inside the tolerance, and for other coils (their capacitors are the
+    user's design: the models tune them to ``f_hz``)."""
+    ref = TABLE_I
+    if not (math.isclose(p.l1_h, ref.l1_h, rel_tol=1e-9) and math.isclose(p.l2_h, ref.l2_h, rel_tol=1e-9)):
+        return None
+    w0 = 2.0 * math.pi * ref.f_hz
+    c1, c2 = 1.0 / (w0 * w0 * ref.l1_h), 1.0 / (w0 * w0 * ref.l2_h)
+    f0 = 1.0 / (2.0 * math.pi * math.sqrt(p.l1_h * c1))   # (the secondary's: the same, L2 C2 = L1 C1)
+    ratio = p.f_hz / f0
+    if 1.0 / FREQUENCY_TOLERANCE <= ratio <= FREQUENCY_TOLERANCE:
+        return None
+    tol = FREQUENCY_TOLERANCE
+    return (f"{what}={p.f_hz:.6g} Hz is {ratio:.4g}x the tanks' resonance {f0:.6g} Hz (1/(2 pi sqrt(L C)) of the coil "
+            f"pair, L1 {p.l1_h * 1e6:.4g} uH with C1 {c1 * 1e9:.4g} nF, L2 {p.l2_h * 1e6:.4g} uH with C2 "
+            f"{c2 * 1e9:.4g} nF): the model tunes C1, C2 to {what} and runs, but a resonant series-series link's "
+            f"secondary current V1/(2 pi f Lm) scales as 1/f, {1.0 / ratio:.3g}x its value at {f0:.6g} Hz "
+            f"(outside the factor {tol:g} where it halves or doubles); valid: {what} in [{f0 / tol:.6g}, "
+            f"{f0 * tol:.6g}] Hz, or coils made for it")
