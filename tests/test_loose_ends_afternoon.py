@@ -206,3 +206,25 @@ def test_a_sweep_counts_the_link_frequency_warning(tmp_path):
     assert _ours(caught) == ["1 of 2 cases of study 'f' have a link.f_hz more than a factor 2 off the coil pair's tanks' "
                              "resonance, e.g.: " + _FREQ.format(key="link.f_hz")]
 
+
+# ------------------------------------------------------------------ 6. the switching model's "stuck" error
+def test_the_stuck_error_names_the_interval_it_is_stuck_in(monkeypatch):
+    """A schedule with repeated times (interval 1 is [T, T]): stuck there (an event at every zero-length step, the
+    kernel's ``_first_event`` swapped, ``compiled=False`` running the same source), the error named interval 2 (cmd=1,
+    gate=1: the last interval starting at T, ``searchsorted``); now the kernel's own interval (cmd=-1, gate=0)."""
+    import numpy as np
+
+    import wpt_receiver.switching.compiled as ck
+    import wpt_receiver.switching.link as lk
+    from wpt_receiver import TABLE_I
+    from wpt_receiver.switching import SwitchingConfig, SwitchingLink
+    from wpt_receiver.switching.schedule import Schedule
+    monkeypatch.setattr(lk, "_MAX_ZERO_EVENTS", 0)
+    monkeypatch.setattr(ck, "_first_event", lambda z, z_end, rows, ng, gk, lam, h, tau, tol:
+                        (0.0, 0) if tau == 0.0 else (0.0, -1))   # an event only where an interval has no length
+    link = SwitchingLink(TABLE_I, SwitchingConfig(), compiled=False)
+    T = 0.5 / TABLE_I.f_hz
+    sch = Schedule(t=np.array([0.0, T, T, 4 * T]), cmd=np.array([1, -1, 1]), gate=np.array([0, 0, 1]))
+    with pytest.raises(ArithmeticError) as exc:
+        link.run(sch, np.r_[np.zeros(link.cir.n), 1.0])
+    assert f"at t={T!r} s in topology (-1, 2) (cmd=-1, gate=0); state " in str(exc.value), str(exc.value)

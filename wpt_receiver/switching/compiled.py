@@ -302,9 +302,11 @@ def _drive_change(k, z, p, s, cmd, gate, vec, inv, trans, v2open, v1open, sec_th
 @njit(cache=True)
 def run_kernel(ts, cmds, gates, x0, lam, vec, inv, trans, grid, grows, gnum, gsec, v2open, v1open, sec_th, pri_th,
                h, T, cap, max_zero):
-    """Integrate the schedule exactly from ``x0``. Returns ``(status, n, seg_t, seg_k, seg_z)``:
+    """Integrate the schedule exactly from ``x0``. Returns ``(status, n, seg_t, seg_k, seg_z, j)``:
     ``status`` OK, FULL (more than ``cap`` segments: call again with more) or STUCK (more than
-    ``max_zero`` zero-length events in a row; :meth:`~.link.SwitchingLink.run` then raises)."""
+    ``max_zero`` zero-length events in a row; :meth:`~.link.SwitchingLink.run` then raises); ``j`` the schedule
+    interval the loop was in (STUCK: the one it is stuck in, which a search of its time in ``ts`` cannot tell among
+    intervals that start at the same time)."""
     m = x0.shape[0]
     seg_t = np.empty(cap + 1)
     seg_k = np.empty(cap, dtype=np.int64)
@@ -329,7 +331,7 @@ def run_kernel(ts, cmds, gates, x0, lam, vec, inv, trans, grid, grows, gnum, gse
         n_zero = 0
         while True:
             if n >= cap:
-                return FULL, n, seg_t, seg_k, seg_z
+                return FULL, n, seg_t, seg_k, seg_z, j
             seg_t[n] = t
             seg_k[n] = k
             seg_z[n] = z
@@ -346,7 +348,7 @@ def run_kernel(ts, cmds, gates, x0, lam, vec, inv, trans, grid, grows, gnum, gse
                 break
             n_zero = n_zero + 1 if dt <= 1e-13 * T else 0
             if n_zero > max_zero:
-                return STUCK, n, seg_t, seg_k, seg_z
+                return STUCK, n, seg_t, seg_k, seg_z, j
             z = z * np.exp(lam[k] * dt)
             t += dt
             x = _to_state(vec[k], z)
@@ -357,4 +359,4 @@ def run_kernel(ts, cmds, gates, x0, lam, vec, inv, trans, grid, grows, gnum, gse
                 break
         t = t_b
     seg_t[n] = t
-    return OK, n, seg_t, seg_k, seg_z
+    return OK, n, seg_t, seg_k, seg_z, cmds.shape[0] - 1

@@ -115,15 +115,14 @@ class SwitchingLink:
         loop = run_kernel if self.compiled else getattr(run_kernel, "py_func", run_kernel)
         cap = 4 * len(cmds) + 16
         while True:
-            status, n, seg_t, seg_k, seg_z = loop(
+            status, n, seg_t, seg_k, seg_z, j = loop(
                 ts, cmds, gates, x, a["lam"], a["vec"], a["inv"], a["trans"], a["grid"], a["grows"], a["gnum"],
                 a["gsec"], a["v2open"], a["v1open"], a["sec_th"], a["pri_th"], a["h"], a["T"], cap, _MAX_ZERO_EVENTS)
             if status != FULL:
                 break
             cap *= 4
         if status == STUCK:
-            t, k = float(seg_t[n - 1]), int(seg_k[n - 1])
-            j = min(max(int(np.searchsorted(ts, t, side="right")) - 1, 0), len(cmds) - 1)
+            t, k = float(seg_t[n - 1]), int(seg_k[n - 1])   # (j: the kernel's interval; repeated times are several)
             state = (self.cir.vec[k] @ seg_z[n - 1]).real
             raise ArithmeticError(
                 f"switching model stuck: more than {_MAX_ZERO_EVENTS} zero-length events at t={t!r} s in topology "
