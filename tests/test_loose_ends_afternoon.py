@@ -1,5 +1,6 @@
 """Loose ends left by earlier sessions (2026-11-27 afternoon; docs/robustness.md, "Loose ends (2026-11-27
-afternoon)"): each test failed on the tree before its fix (``main``)."""
+afternoon)"): each test fails on the tree before its fix (``main`` 875a414), but the guards of valid inputs
+(``..._still_run``, ``..._still_flies_its_route``, the physics of the frequency tolerance), which pass on both."""
 
 from __future__ import annotations
 
@@ -228,3 +229,26 @@ def test_the_stuck_error_names_the_interval_it_is_stuck_in(monkeypatch):
     with pytest.raises(ArithmeticError) as exc:
         link.run(sch, np.r_[np.zeros(link.cir.n), 1.0])
     assert f"at t={T!r} s in topology (-1, 2) (cmd=-1, gate=0); state " in str(exc.value), str(exc.value)
+
+
+# ------------------------------------------------------------------ 7. the solve_ivp reference without numba
+def test_the_solve_ivp_reference_imports_no_numba():
+    """A fresh process that imports ``wpt_receiver.switching.ivp`` and calls ``simulate_ivp`` imported numba for the
+    kernel's mode rules (0.85-1.27 s against 0.51-0.56 s for the call, docs/performance.md); the rules are now the
+    numba-free ``mode_rules``, which the kernel compiles in (one copy)."""
+    import subprocess
+    import sys
+    code = ("import sys, numpy as np\n"
+            "from wpt_receiver import TABLE_I\n"
+            "from wpt_receiver.switching import SwitchingConfig\n"
+            "from wpt_receiver.switching.ivp import simulate_ivp\n"
+            "from wpt_receiver.switching.schedule import Schedule\n"
+            "T = 0.5 / TABLE_I.f_hz\n"
+            "t, x = simulate_ivp(TABLE_I, SwitchingConfig(), Schedule(np.array([0.0, T]), np.array([1]), "
+            "np.array([1])), np.zeros(4))\n"
+            "print(len(t) > 1, 'numba' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["True", "False"], out
+    import wpt_receiver.switching.compiled as ck
+    import wpt_receiver.switching.mode_rules as rules
+    assert ck._modes is rules._modes and ck._after_event is rules._after_event   # one copy of the rules

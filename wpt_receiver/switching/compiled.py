@@ -2,11 +2,12 @@
 
 Exact modal stepping between events, guard bracketing on the precomputed grid of exponentials,
 safeguarded Newton on the exact solution (:func:`refine`), the diode and freewheel rules after an
-event (:func:`_after_event`) and at a drive change (:func:`_modes`). This is the one source of those
+event (:func:`_after_event`) and at a drive change (:func:`_modes`; both in the numba-free :mod:`.mode_rules`,
+compiled in here). This is the one source of those
 rules: :class:`~.link.SwitchingLink` builds the circuit and packs its arrays (:func:`pack`), then calls
 :func:`run_kernel` (with ``compiled=False`` its ``py_func``: the same source run by the interpreter);
-the slow ``solve_ivp`` reference (:mod:`.ivp`) calls :func:`_modes` and :func:`_after_event` for its
-mode decisions. (Until 2026-11-27 :mod:`.link` held a second, pure-Python/numpy copy of this loop
+the slow ``solve_ivp`` reference (:mod:`.ivp`) calls :func:`_modes` and :func:`_after_event` of
+:mod:`.mode_rules` for its mode decisions, as Python (no numba). (Until 2026-11-27 :mod:`.link` held a second, pure-Python/numpy copy of this loop
 that the tests compared against to 1e-9.) All devices of the switching link are
 covered because they only change the topology matrices, guard rows and threshold rows, which
 are packed here as arrays.
@@ -27,23 +28,31 @@ Packed arrays (``nk`` topologies in the order of :attr:`.circuit.Circuit.keys`, 
 from __future__ import annotations
 
 import cmath
+from pathlib import Path
 
 import numpy as np
 from numba import njit
+from numba.extending import register_jitable
 
-from .circuit import I1, I2, P_OPEN, PRIMARY, S_OPEN, S_SHORT, SECONDARY
+from ..kernel_cache import drop_stale_cache
+from .circuit import I1, I2, P_OPEN, PRIMARY, S_OPEN, SECONDARY
+from .mode_rules import _after_event, _dot, _modes, _pidx, _primary_at_zero, _secondary_at_zero, _sidx, mode_rows
 
 __all__ = ["pack", "mode_rows", "run_kernel", "refine", "OK", "FULL", "STUCK"]
 
 OK, FULL, STUCK = 0, 1, 2
-_NONE = 99  # "not decided yet" for a primary mode
 
 
-def mode_rows(cir) -> tuple:
-    """The rows the mode rules (:func:`_modes`, :func:`_after_event`) read, of a :class:`~.circuit.Circuit`:
-    ``(v2open (5, m) per primary index, v1open (4, m) per secondary index, sec_th (m,), pri_th)``."""
-    return (np.array([cir.v2_open_row(p) for p in PRIMARY]), np.array([cir.v1_open_row(s) for s in SECONDARY]),
-            np.asarray(cir.rect_threshold_row(), dtype=float), float(cir.inverter_threshold_v))
+def _here():
+    """This file, for :func:`wpt_receiver.kernel_cache.drop_stale_cache`."""
+
+
+# the mode rules live, numba-free, in mode_rules.py (the solve_ivp reference calls them as Python): compiled where
+# the kernel calls them, and this module's numba cache dropped when they (or the circuit's constants) change
+drop_stale_cache(_here, (Path(__file__).with_name("mode_rules.py"), Path(__file__).with_name("circuit.py")))
+for _f in (_pidx, _sidx, _dot, _secondary_at_zero, _primary_at_zero, _modes, _after_event):
+    register_jitable(_f)
+del _f
 
 
 def pack(link) -> dict:
@@ -70,32 +79,6 @@ def pack(link) -> dict:
 
 # ---------------------------------------------------------------------------- indices
 @njit(cache=True)
-def _pidx(p):
-    """Index of primary mode ``p`` in PRIMARY = (1, -1, 2, -2, P_OPEN)."""
-    if p == 1:
-        return 0
-    if p == -1:
-        return 1
-    if p == 2:
-        return 2
-    if p == -2:
-        return 3
-    return 4
-
-
-@njit(cache=True)
-def _sidx(s):
-    """Index of secondary mode ``s`` in SECONDARY = (1, -1, S_SHORT, S_OPEN)."""
-    if s == 1:
-        return 0
-    if s == -1:
-        return 1
-    if s == S_SHORT:
-        return 2
-    return 3
-
-
-@njit(cache=True)
 def _kidx(p, s):
     return _pidx(p) * 4 + _sidx(s)
 
@@ -106,14 +89,6 @@ def _cidx(cmd):
 
 
 # ---------------------------------------------------------------------------- linear algebra
-@njit(cache=True)
-def _dot(x, row):
-    acc = 0.0
-    for i in range(x.shape[0]):
-        acc += x[i] * row[i]
-    return acc
-
-
 @njit(cache=True)
 def _to_state(vk, z):
     """x = Re(V z)."""
@@ -138,67 +113,6 @@ def _matvec(a, v):
             acc += a[i, j] * v[j]
         out[i] = acc
     return out
-
-
-# ---------------------------------------------------------------------------- mode rules
-@njit(cache=True)
-def _secondary_at_zero(x, p, v2open, sec_th):
-    """Diode state when i2 = 0 and the gate is off: by the open-circuit voltage against the output voltage
-    plus the forward drops."""
-    v, th = _dot(x, v2open[_pidx(p)]), _dot(x, sec_th)
-    return 1 if v > th else (-1 if v < -th else S_OPEN)
-
-
-@njit(cache=True)
-def _primary_at_zero(x, s, v1open, pri_th):
-    """Inverter freewheel state when i1 = 0 during dead time (+-2 = freewheeling)."""
-    v = _dot(x, v1open[_sidx(s)])
-    return 2 if v > pri_th else (-2 if v < -pri_th else P_OPEN)
-
-
-@njit(cache=True)
-def _modes(x, cmd, gate, v2open, v1open, sec_th, pri_th):
-    """Modes after a drive change: the inverter follows its command (in dead time the current freewheels
-    through the diodes opposite to its sign), the SBAR shorts while the gate is on, else the diode pair of
-    the current's sign conducts; a zero current is decided by the open-circuit voltage."""
-    if cmd != 0:
-        p = cmd
-    else:
-        p = -2 if x[I1] > 0 else (2 if x[I1] < 0 else _NONE)
-    if gate:
-        s = S_SHORT
-    elif x[I2] > 0:
-        s = 1
-    elif x[I2] < 0:
-        s = -1
-    else:
-        s = _secondary_at_zero(x, p if p != _NONE else P_OPEN, v2open, sec_th)
-    if p == _NONE:
-        p = _primary_at_zero(x, s, v1open, pri_th)
-    return p, s
-
-
-@njit(cache=True)
-def _after_event(x, secondary, p, s, chatter, v2open, v1open, sec_th, pri_th):
-    """New modes after a guard event (``x`` is modified in place: a current that stops is set to 0).
-    ``chatter``: several zero-length events in a row; take the blocked state."""
-    if secondary:
-        if s == 1 or s == -1 or chatter:
-            x[I2] = 0.0
-            s = S_OPEN if chatter else _secondary_at_zero(x, p, v2open, sec_th)
-        else:
-            s = 1 if _dot(x, v2open[_pidx(p)]) > 0 else -1
-        if s == S_OPEN:
-            x[I2] = 0.0
-    else:
-        if p == 2 or p == -2 or chatter:
-            x[I1] = 0.0
-            p = P_OPEN if chatter else _primary_at_zero(x, s, v1open, pri_th)
-        else:
-            p = 2 if _dot(x, v1open[_sidx(s)]) > 0 else -2
-        if p == P_OPEN:
-            x[I1] = 0.0
-    return p, s
 
 
 # ---------------------------------------------------------------------------- events

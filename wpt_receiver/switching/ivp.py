@@ -3,8 +3,9 @@
 The right-hand side and the guards are written directly from eq. 1 and the device equations
 (:mod:`wpt_receiver.devices`), not from the topology matrices of :mod:`.circuit`; only the mode
 decisions at a drive change or a zero current are shared with :class:`~.link.SwitchingLink` (the
-functions of :mod:`.compiled`, on the circuit's rows, :func:`.compiled.mode_rows`: a call imports numba, ~0.8 s in a fresh
-process; ``tests/test_switching_compiled.py`` checks those rules against the circuit's rows on their own).
+functions of :mod:`.mode_rules`, on the circuit's rows, :func:`.mode_rules.mode_rows`, which :mod:`.compiled` compiles
+into its event loop; numba-free, so neither importing this module nor a call imports numba;
+``tests/test_switching_compiled.py`` checks those rules against the circuit's rows on their own).
 """
 
 from __future__ import annotations
@@ -95,7 +96,7 @@ def simulate_ivp(params: LinkParams, cfg: SwitchingConfig, schedule: Schedule, x
     (``r_bat_ohm * c_out_f < T / 10``): an explicit method then loses accuracy on the fast mode."""
     from scipy.integrate import solve_ivp
 
-    from .compiled import _after_event, _modes, mode_rows  # mode decisions (diode / freewheel rules) are shared
+    from .mode_rules import _after_event, _modes, mode_rows  # the kernel's mode decisions, numba-free: one source
     cir = Circuit(params, cfg)
     if method is None:
         stiff = cir.has_cap and cfg.r_bat_ohm * cfg.c_out_f < cir.T / 10
