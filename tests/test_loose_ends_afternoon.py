@@ -35,8 +35,8 @@ def test_a_sweep_counts_the_far_pad_among_its_setup_warnings(tmp_path):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         prepare_study(load_study(tmp_path / "s.toml"), policies.make, policies.available())
-    assert _ours(caught) == ["2 of 3 cases of study 'low' have a pad more than 120 m above or below its frame's origin, "
-                             "e.g.: " + _FAR.format(z=-200, origin="the mission's home", d=200)]
+    assert _ours(caught) == ["2 of 3 cases of study 'low' have a pad more than 120 m above or below its frame's "
+                             "origin, e.g.: " + _FAR.format(z=-200, origin="the mission's home", d=200)]
 
 
 def test_a_refly_summary_lists_the_far_pad(capsys, tmp_path):
@@ -131,8 +131,8 @@ def test_a_refly_makes_the_logged_track_once(capsys, tmp_path, monkeypatch):
             return _f(*a, **k)
         monkeypatch.setattr(rp, name, counted)
     pads = Path(__file__).resolve().parent / "data" / "missions" / "dronekit_flight_pads.csv"
-    argv = ["replay", _LOG, "--pads", str(pads), "--window", "440,620", "--out", str(tmp_path / "o"), "--format", "json",
-            "--no-progress", "--no-plot", "--set", "battery.n_series=3", "--ground-gap", "0.3"]
+    argv = ["replay", _LOG, "--pads", str(pads), "--window", "440,620", "--out", str(tmp_path / "o"), "--format",
+            "json", "--no-progress", "--no-plot", "--set", "battery.n_series=3", "--ground-gap", "0.3"]
     assert main(argv) == 0
     assert calls == {"track_from_log": 1, "check_window": 1}
     assert len(json.loads(capsys.readouterr().out)["detours"]) == 2
@@ -142,7 +142,7 @@ def test_plan_refly_on_a_given_track_is_the_plan_made_from_the_log():
     """``plan_refly(..., track=T)`` (T made at another ground gap) gives the plan it makes from the log, bit for bit."""
     import numpy as np
 
-    from mission_sim.config import config_to_dict, config_from_dict, load_config
+    from mission_sim.config import config_from_dict, config_to_dict, load_config
     from mission_sim.mavlink.logs import read_log
     from mission_sim.mavlink.replay import track_from_log
     from mission_sim.plans.pads import read_pads
@@ -157,7 +157,8 @@ def test_plan_refly_on_a_given_track_is_the_plan_made_from_the_log():
                     (given[0].t_s, given[0].pos_m, given[0].tilt_rad, given[0].armed, given[1])):
         assert a.tobytes() == b.tobytes()
     assert made[0].ground_gap_m == given[0].ground_gap_m == 0.3 and made[2:] == given[2:]
-    assert not np.array_equal(track.pos_m[:, 2], track_from_log(log, window=(440.0, 620.0), ground_gap_m=0.3).pos_m[:, 2])
+    other = track_from_log(log, window=(440.0, 620.0), ground_gap_m=0.3)
+    assert not np.array_equal(track.pos_m[:, 2], other.pos_m[:, 2])   # (the given track was at another gap)
 
 
 # ------------------------------------------------------------------ 5. a drive frequency far off the coils' resonance
@@ -204,8 +205,8 @@ def test_a_sweep_counts_the_link_frequency_warning(tmp_path):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         prepare_study(load_study(tmp_path / "s.toml"), policies.make, policies.available())
-    assert _ours(caught) == ["1 of 2 cases of study 'f' have a link.f_hz more than a factor 2 off the coil pair's tanks' "
-                             "resonance, e.g.: " + _FREQ.format(key="link.f_hz")]
+    assert _ours(caught) == ["1 of 2 cases of study 'f' have a link.f_hz more than a factor 2 off the coil pair's "
+                             "tanks' resonance, e.g.: " + _FREQ.format(key="link.f_hz")]
 
 
 # ------------------------------------------------------------------ 6. the switching model's "stuck" error

@@ -27,8 +27,8 @@ from ..validation import ALT_RANGE, HOLD_RANGE, PAD_RADIUS_RANGE, SPEED_RANGE, c
 from .items import LOG_SUFFIXES, NAV_LAND, NAV_LOITER_TIME, NAV_RTL, NAV_TAKEOFF, NAV_WAYPOINT, RawMission, read_mission
 from .pads import read_pads
 
-__all__ = ["apply_mission_files", "check_file_keys", "mission_home", "route_from_items", "pads_to_local", "command_name", "RTL_ALT_M",
-           "IGNORED_COMMANDS"]
+__all__ = ["apply_mission_files", "check_file_keys", "mission_home", "route_from_items", "pads_to_local", "command_name",
+           "RTL_ALT_M", "IGNORED_COMMANDS"]
 
 DO_CHANGE_SPEED = 178
 CHARGE_CLEARANCE_M = 1.0   # a loiter becomes a charging hover only this far above the pad (it descends to it)

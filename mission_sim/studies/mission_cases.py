@@ -53,7 +53,8 @@ class MissionParamChecker:
         cached section objects: keys of identities, ~1 us a case; ~50 us for each new link, e.g. a Monte Carlo
         draw of ``link.vdc_v``). A far pad (:func:`~mission_sim.setup_warnings.far_pad_warnings`) counts whatever
         the route, about :attr:`pad_origin` (``run_mission``'s rule)."""
-        from ..setup_warnings import far_pad_warnings, link_frequency_warning, link_range_warning, unreached_pad_warnings
+        from ..setup_warnings import (far_pad_warnings, link_frequency_warning, link_range_warning,
+                                      unreached_pad_warnings)
 
         link = (cfg.link, cfg.coupling, cfg.battery.n_series, cfg.charger.cv_cell_v, cfg.mission.hover_gap_m)
         route = (cfg.waypoints, cfg.mission, *cfg.pads) if cfg.waypoints else ()
@@ -198,7 +199,8 @@ class MissionCaseRunner:
             if err is not None:
                 return err
         if self._checker is None:
-            self._checker = MissionParamChecker(self.base, self._check_run_size, self.setup_notes(), self._pad_origin)
+            self._checker = MissionParamChecker(self.base, self._check_run_size, self.setup_notes(),
+                                                self._pad_origin)
         return self._checker({k: v for k, v in params.items() if k != POLICY_KEY})
 
     def _policy_error(self, policy) -> str | None:

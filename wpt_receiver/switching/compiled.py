@@ -7,8 +7,8 @@ compiled in here). This is the one source of those
 rules: :class:`~.link.SwitchingLink` builds the circuit and packs its arrays (:func:`pack`), then calls
 :func:`run_kernel` (with ``compiled=False`` its ``py_func``: the same source run by the interpreter);
 the slow ``solve_ivp`` reference (:mod:`.ivp`) calls :func:`_modes` and :func:`_after_event` of
-:mod:`.mode_rules` for its mode decisions, as Python (no numba). (Until 2026-11-27 :mod:`.link` held a second, pure-Python/numpy copy of this loop
-that the tests compared against to 1e-9.) All devices of the switching link are
+:mod:`.mode_rules` for its mode decisions, as Python (no numba). (Until 2026-11-27 :mod:`.link` held a second,
+pure-Python/numpy copy of this loop that the tests compared against to 1e-9.) All devices of the switching link are
 covered because they only change the topology matrices, guard rows and threshold rows, which
 are packed here as arrays.
 
