@@ -30,8 +30,8 @@ from .world.wind import WindParams
 
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
            "MissionConfig", "WaypointConfig", "load_config", "config_from_dict", "config_to_dict", "apply_overrides",
-           "load_config_dict", "check_cross_fields", "check_replay_keys", "section_from_dict", "check_seed",
-           "PLAUSIBLE", "plausible_range", "differing_keys"]
+           "load_config_dict", "check_file_route_keys", "check_cross_fields", "check_replay_keys", "section_from_dict",
+           "check_seed", "PLAUSIBLE", "plausible_range", "differing_keys"]
 
 DEFAULT_MISSION_TOML: str = resources.files("mission_sim").joinpath("default_mission.toml").read_text("utf-8")
 
@@ -541,26 +541,36 @@ def load_config_dict(path=None, mission_file=None, pads_file=None, mission_keys=
     ``[[pads]]`` now (:func:`mission_sim.plans.route.apply_mission_files`); ``mission_keys`` (``--set
     mission.from_log=...`` and the like) are laid over ``[mission]`` before that, and refused when no file read
     uses them (:func:`~mission_sim.plans.route.check_file_keys`: ``from_log`` without a log as the mission file,
-    ``pad_radius_m`` without a mission file). A built-in pattern key (:data:`PATTERN_KEYS`) that the file itself
-    sets beside a route (its ``[[waypoints]]``, its ``mission.file``, or ``mission_file``) is refused as ``--set``'s
-    (:func:`check_route_keys`): the route never reads it."""
+    ``pad_radius_m`` without a mission file). The file's own pattern keys beside a route are checked by the callers
+    that fly it (:func:`check_file_route_keys`), not here: a replay reads the file too."""
     from .plans.route import apply_mission_files, check_file_keys
-    mine = {}   # the [mission] keys the user's file sets (the default it is laid over has every key)
     if path is None:
         d = tomllib.loads(DEFAULT_MISSION_TOML)
     else:
         raw = read_toml_file(path, "config file")
         check_no_empty_table(raw, f"config file {str(path)!r}")
         d = layer_on_default(raw)
-        mine = raw.get("mission") if isinstance(raw.get("mission"), dict) else {}
     if mission_keys and isinstance(d.get("mission"), dict):
         d["mission"] = {**d["mission"], **mission_keys}
     out = apply_mission_files(d, None if path is None else Path(path).parent, mission_file, pads_file)
     if mission_keys and isinstance(out.get("mission"), dict):   # (a key no file read uses changed nothing)
         check_file_keys(mission_keys, out["mission"].get("file"))
-    if mine:   # a route's unused pattern keys: the --set rule, for the keys the file sets
-        check_route_keys(out, {f"mission.{k}": v for k, v in mine.items()}, f"config file {str(path)!r}:")
     return out
+
+
+def check_file_route_keys(path, cfg_or_dict) -> None:
+    """``ValueError`` (:func:`check_route_keys`'s line) for a built-in pattern key (:data:`PATTERN_KEYS`) that the
+    config file ``path`` itself sets (not the default it is laid over, which has every key) beside the route of
+    ``cfg_or_dict`` (its ``[[waypoints]]``, ``mission.file`` or ``--plan``): the route never reads it. For the callers
+    that fly the config's route (``mission``, ``sizing``, ``telemetry``, the mission studies); not ``replay``, whose
+    track is the log's and whose ``--pads`` re-flight reads ``mission.hover_time_s`` (a pad's default hover: its
+    ``--set`` keys follow :func:`check_replay_keys`)."""
+    route = cfg_or_dict.get("waypoints") if isinstance(cfg_or_dict, dict) else cfg_or_dict.waypoints
+    if path is None or not route:
+        return
+    raw = read_toml_file(path, "config file")
+    mine = raw.get("mission") if isinstance(raw.get("mission"), dict) else {}
+    check_route_keys(cfg_or_dict, {f"mission.{k}": v for k, v in mine.items()}, f"config file {str(path)!r}:")
 
 
 def check_no_empty_table(d: dict, what: str) -> None:

@@ -119,6 +119,37 @@ def test_a_config_file_without_its_pattern_keys_still_flies_its_route(capsys, tm
     capsys.readouterr()
 
 
+def test_a_mission_studys_base_with_a_pattern_key_under_its_route_is_refused(tmp_path):
+    """The mission studies fly their base's route: its own ``[mission] cruise_altitude_m`` beside ``[[waypoints]]`` is
+    refused there too (``prepare``'s :func:`~mission_sim.config.check_file_route_keys`)."""
+    import policies
+    from mission_sim.studies.prepare import prepare_study
+    from mission_sim.studies.study import load_study
+    (tmp_path / "r.toml").write_text("[mission]\ncruise_altitude_m = 60.0\n" + _ROUTE)
+    (tmp_path / "s.toml").write_text('[study]\nname = "s"\nbase = "r.toml"\n[grid]\n"drone.mass_kg" = [1.0, 1.2]\n')
+    with pytest.raises(ValueError) as exc:
+        prepare_study(load_study(tmp_path / "s.toml"), policies.make, policies.available())
+    assert str(exc.value).startswith(f"config file {str(tmp_path / 'r.toml')!r}: mission.cruise_altitude_m=60.0 "
+                                     f"{_UNUSED}"), str(exc.value)
+
+
+def test_replay_reads_a_route_configs_hover_time_and_flies_the_log(capsys, tmp_path):
+    """The file-key check ran inside ``load_config_dict``, for every caller: ``replay --pads`` refused a route config's
+    ``mission.hover_time_s`` (exit 2, "the mission flies a route"), the default hover of its pads without their own,
+    and plain ``replay`` its ``cruise_altitude_m`` (the log's track is flown, never the route). Both run (as ``main``),
+    the detours hovering the file's 30 s."""
+    (tmp_path / "pads.csv").write_text("lat,lon\n-35.3620800,149.1658531\n-35.3622242,149.1656661\n")
+    (tmp_path / "hover.toml").write_text("[mission]\nhover_time_s = 30.0\n" + _ROUTE)
+    (tmp_path / "alt.toml").write_text("[mission]\ncruise_altitude_m = 60.0\n" + _ROUTE)
+    common = ["--window", "440,620", "--no-plot", "--format", "json", "--no-progress", "--set", "battery.n_series=3"]
+    assert main(["replay", _LOG, "--pads", str(tmp_path / "pads.csv"), "--config", str(tmp_path / "hover.toml"),
+                 "--out", str(tmp_path / "o")] + common) == 0
+    detours = json.loads(capsys.readouterr().out)["detours"]
+    assert [(d["pad"], d["hover_s"]) for d in detours] == [(1, 30.0), (0, 30.0)]
+    assert main(["replay", _LOG, "--config", str(tmp_path / "alt.toml"), "--out", str(tmp_path / "p")] + common) == 0
+    capsys.readouterr()
+
+
 # ------------------------------------------------------------------ 4. a re-flight makes the logged track once
 def test_a_refly_makes_the_logged_track_once(capsys, tmp_path, monkeypatch):
     """``replay LOG --pads`` cut the log to its window and made the logged track three times (the origin, the plan

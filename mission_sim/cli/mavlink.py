@@ -58,8 +58,9 @@ def _mav_config(args, overrides=None, single_pad=False):
         drone = read_drone_toml(args.drone)
     cfg = config_from_dict(apply_overrides(d, {**drone, **(overrides or {}), **given}))
     if not single_pad:
-        from ..config import check_route_keys
+        from ..config import check_file_route_keys, check_route_keys
         check_route_keys(cfg, given)   # (changed nothing: a route flies its own heights)
+        check_file_route_keys(args.config, cfg)   # (the config file's own; replay's single pad flies the log)
         from .mission import default_pads_notice
         args.pads_noted = default_pads_notice(getattr(args, "command", "telemetry"), getattr(args, "plan", None),
                                               getattr(args, "mission_pads", None), d, given,

@@ -145,6 +145,7 @@ def mission_config(args):
     d = mconfig.load_config_dict(args.config, getattr(args, "plan", None), getattr(args, "pads", None), files)
     cfg = mconfig.config_from_dict(mconfig.apply_overrides(d, overrides) if overrides else d)
     mconfig.check_route_keys(cfg, given)   # (changed nothing: a route flies its own heights)
+    mconfig.check_file_route_keys(args.config, cfg)   # (the config file's own, the same rule)
     args.pads_noted = (not getattr(args, "no_charge", False)   # (pads never energised: nothing to say about them)
                        and default_pads_notice(getattr(args, "command", "mission"), getattr(args, "plan", None),
                                                getattr(args, "pads", None), d, overrides,

@@ -44,10 +44,11 @@ def _runner(study: Study, make_policy: Callable | None, policy_names):
     if study.replay is not None:
         from .replay_cases import replay_runner
         return replay_runner(study, make_policy, policy_names)
-    from ..config import config_to_dict, load_config
+    from ..config import check_file_route_keys, config_to_dict, load_config
     from .mission_cases import MissionCaseRunner
 
     base = config_to_dict(load_config(study.base_path))
+    check_file_route_keys(study.base_path, base)   # (the cases fly its route: its own pattern keys change nothing)
     runner = MissionCaseRunner(base, make_policy, policy_names)
     return runner, hashlib.sha256(canonical_json(base).encode()).hexdigest()[:16]
 
