@@ -7,8 +7,9 @@ each by the command line.
 * :func:`link_range_warning`: the mission's link outside the range where the exact-mode model (the mission's
   only link) was checked against the switching model (:func:`wpt_receiver.paper.modal_range_problem`, the one
   source of the limits), at the hover pose's Lm and the pack's highest voltage (``n_series * cv_cell_v``).
-* :func:`link_frequency_warning`: ``link.f_hz`` more than a factor 2 off the coil pair's tanks' resonance (85 kHz:
-  Table I's coils with their capacitors), where the resonant link's secondary current (1/f) halves or doubles.
+* :func:`link_frequency_warning`: ``link.f_hz`` more than a factor
+  :data:`wpt_receiver.params.FREQUENCY_TOLERANCE` off the coil pair's tanks' resonance (85 kHz: Table I's coils
+  with their capacitors; at a factor 2 the resonant link's secondary current, 1/f, halves or doubles).
 * :func:`unreached_pad_warnings`: a pad the route never energises (:func:`energised_pads`: no charging hover
   or loiter's hover inside its coupling range, the run's own rule): it charges nothing.
 * :func:`far_pad_warnings`: a pad more than 120 m above or below home (an altitude in another frame or unit).
@@ -55,7 +56,7 @@ def link_range_warning(cfg) -> str | None:
 
 
 def link_frequency_warning(cfg) -> str | None:
-    """One line when ``link.f_hz`` lies more than a factor :data:`wpt_receiver.params.FREQUENCY_TOLERANCE` (2) off the
+    """One line when ``link.f_hz`` lies more than a factor :data:`wpt_receiver.params.FREQUENCY_TOLERANCE` off the
     coil pair's tanks' resonance (:func:`wpt_receiver.params.resonance_warning`: the models tune the capacitors to
     ``f_hz``, and the resonant link's secondary current scales as 1/f), else None."""
     from wpt_receiver.params import resonance_warning

@@ -219,6 +219,22 @@ def test_the_frequency_tolerance_is_a_factor_2_either_way(f_hz, warns):
     assert resonance_warning(TABLE_I.with_(f_hz=13.56e6, l1_h=0.5e-6, l2_h=0.4e-6, lm_h=0.1e-6)) is None   # own coils
 
 
+@pytest.mark.parametrize("f_hz, warns", [(170e3, False), (42.5e3, False), (171e3, True), (42e3, True)])
+def test_a_missions_link_warns_outside_the_stated_range_only(f_hz, warns):
+    """The mission's L1 from the coupling model is 0.00023600000000000102 H, not Table I's 236 uH to the bit: the
+    resonance from it and Table I's C1 was 84999.99999999981 Hz, so ``link.f_hz = 170000`` (2.0000000000000044x)
+    warned though the line says [42500, 170000] Hz is valid. Table I's coils resonate at Table I's f_hz."""
+    from mission_sim.config import config_from_dict, load_config_dict
+    from mission_sim.setup_warnings import mission_warnings
+    from wpt_receiver.params import FREQUENCY_TOLERANCE
+    d = load_config_dict()
+    cfg = config_from_dict({**d, "link": {**d["link"], "f_hz": f_hz}})
+    freq = [w for w in mission_warnings(cfg) if w.startswith(f"link.f_hz={f_hz:.6g} Hz is ")]
+    assert len(freq) == warns, freq
+    assert not warns or f"valid: link.f_hz in [{85e3 / FREQUENCY_TOLERANCE:.6g}, {85e3 * FREQUENCY_TOLERANCE:.6g}] Hz" \
+        in freq[0]
+
+
 def test_the_tolerance_is_where_the_resonant_links_current_halves():
     """The physics of the factor 2: the models tune C to f_hz; the rectification-mode I2 of the resonant link
     (``rm_state.rm_steady``, devices ideal) at twice 85 kHz is half its value at 85 kHz (0.508), at 13.56 MHz 1/154."""

@@ -107,15 +107,18 @@ FREQUENCY_TOLERANCE = 2.0
 def resonance_warning(p: LinkParams, what: str = "f_hz") -> str | None:
     """One line when ``p.f_hz`` lies more than a factor :data:`FREQUENCY_TOLERANCE` off the resonance of the tanks
     that Table I's coils (``p``'s, when they are Table I's L1, L2) make with Table I's capacitors (C = 1 / ((2 pi
-    85 kHz)^2 L), the pair's hardware): naming ``what`` (the key the user set), the tanks' resonance frequency
-    computed from L and C and the ratio. None inside the tolerance, and for other coils (their capacitors are the
-    user's design: the models tune them to ``f_hz``)."""
+    85 kHz)^2 L), the pair's hardware; their resonance 1 / (2 pi sqrt(L C)) is Table I's f_hz): naming ``what`` (the
+    key the user set), the tanks' resonance and the ratio. None inside the tolerance, its ends included, and for
+    other coils (their capacitors are the user's design: the models tune them to ``f_hz``)."""
     ref = TABLE_I
     if not (math.isclose(p.l1_h, ref.l1_h, rel_tol=1e-9) and math.isclose(p.l2_h, ref.l2_h, rel_tol=1e-9)):
         return None
     w0 = 2.0 * math.pi * ref.f_hz
     c1, c2 = 1.0 / (w0 * w0 * ref.l1_h), 1.0 / (w0 * w0 * ref.l2_h)
-    f0 = 1.0 / (2.0 * math.pi * math.sqrt(p.l1_h * c1))   # (the secondary's: the same, L2 C2 = L1 C1)
+    # 1/(2 pi sqrt(L1 C1)), the secondary's the same (L2 C2 = L1 C1), is Table I's f_hz: taken as it is, not
+    # recomputed from an L1 within isclose of Table I's (a mission's, 0.00023600000000000102 H from the coupling
+    # model, gave 84999.99999999981 Hz, and 170 kHz, the range's stated end, 2.0000000000000044x: a warning)
+    f0 = ref.f_hz
     ratio = p.f_hz / f0
     if 1.0 / FREQUENCY_TOLERANCE <= ratio <= FREQUENCY_TOLERANCE:
         return None

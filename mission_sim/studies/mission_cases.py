@@ -15,6 +15,8 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Iterable
 
+from wpt_receiver.params import FREQUENCY_TOLERANCE
+
 from ..setup_warnings import HOME_ORIGIN, PAD_HEIGHT_WARN_M
 from .study import DEFAULT_POLICY, POLICY_KEY
 
@@ -79,7 +81,7 @@ class MissionParamChecker:
 
     #: the kinds of setup warning a study line counts: what the cases have (``notes`` add theirs)
     KINDS = {"link": "a link outside the exact-mode model's checked range",
-             "freq": "a link.f_hz more than a factor 2 off the coil pair's tanks' resonance",
+             "freq": f"a link.f_hz more than a factor {FREQUENCY_TOLERANCE:g} off the coil pair's tanks' resonance",
              "pad": "a pad their route never energises",
              "far": f"a pad more than {PAD_HEIGHT_WARN_M:g} m above or below its frame's origin"}
 
