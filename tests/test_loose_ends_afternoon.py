@@ -300,3 +300,24 @@ def test_the_solve_ivp_reference_imports_no_numba():
     import wpt_receiver.switching.compiled as ck
     import wpt_receiver.switching.mode_rules as rules
     assert ck._modes is rules._modes and ck._after_event is rules._after_event   # one copy of the rules
+
+
+def test_the_kernels_numba_cache_depends_on_the_mode_rules_and_the_circuit():
+    """numba keys ``compiled.py``'s cache on that file alone, while its loop compiles in ``mode_rules.py``'s rules and
+    ``circuit.py``'s constants: its ``drop_stale_cache`` must name both (removing it, or either file, failed no test).
+    A fresh process records the dependencies each module declares at its import (``kernel_cache.drop_stale_cache``
+    swapped for a recorder before ``compiled`` is imported)."""
+    import subprocess
+    import sys
+    code = ("import json, os\n"
+            "import wpt_receiver.kernel_cache as kc\n"
+            "seen = {}\n"
+            "def record(here, modules):\n"
+            "    seen[os.path.basename(here.__code__.co_filename)] = [os.path.basename(str(getattr(m, '__file__', m)))"
+            " for m in modules]\n"
+            "    return False\n"
+            "kc.drop_stale_cache = record\n"
+            "import wpt_receiver.switching.compiled\n"
+            "print(json.dumps(seen))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert sorted(json.loads(out)["compiled.py"]) == ["circuit.py", "mode_rules.py"], out
