@@ -54,6 +54,34 @@ def test_a_refly_summary_lists_the_far_pad(capsys, tmp_path):
     assert cap.err.splitlines().count(f"dronewpt replay: warning: {line}") == 1   # still once on stderr
 
 
+def test_a_plain_replay_summary_lists_the_far_pad_once(capsys, tmp_path):
+    """Plain ``replay`` (no ``--pads``: one pad at the origin) with ``--set pads.0.z_m=-200``: ``replay_log(..., cfg)``
+    lists the far pad in the summary's ``warnings`` (``--format json``, ``replay_summary.json``), once, as stderr."""
+    argv = ["replay", _LOG, "--window", "440,620", "--set", "pads.0.z_m=-200", "--set", "battery.n_series=3",
+            "--no-plot", "--format", "json", "--no-progress", "--out", str(tmp_path / "o")]
+    assert main(argv) == 0
+    cap = capsys.readouterr()
+    line = _FAR.format(z=-200, origin="the replay's pad frame origin", d=200)
+    assert json.loads(cap.out)["warnings"].count(line) == 1
+    assert json.loads((tmp_path / "o" / "replay_summary.json").read_text())["warnings"].count(line) == 1
+    assert cap.err.splitlines().count(f"dronewpt replay: warning: {line}") == 1
+
+
+def test_a_replay_study_names_the_replays_pad_frame_origin(tmp_path):
+    """A ``[replay]`` study's far pad is about the replay's pad frame origin (``ReplayCaseRunner._pad_origin``,
+    ``REPLAY_ORIGIN``), not the mission's home: one study line, counting the one case of two."""
+    import policies
+    from mission_sim.studies.prepare import prepare_study
+    from mission_sim.studies.study import load_study
+    (tmp_path / "s.toml").write_text(f'[study]\nname = "rlow"\n[replay]\nlog = {_LOG!r}\nwindow = [440.0, 620.0]\n'
+                                     '[grid]\n"pads.0.z_m" = [-200.0, 0.0]\n"battery.n_series" = [3]\n')
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        prepare_study(load_study(tmp_path / "s.toml"), policies.make, policies.available())
+    assert _ours(caught) == ["1 of 2 cases of study 'rlow' have a pad more than 120 m above or below its frame's "
+                             "origin, e.g.: " + _FAR.format(z=-200, origin="the replay's pad frame origin", d=200)]
+
+
 # ------------------------------------------------------------------ 2. file keys no file read uses
 _PLAN = str(Path(__file__).resolve().parent / "data" / "missions" / "qgc_simple_square.plan")
 _NO_FILE = "there is no mission file (--plan or mission.file)"
