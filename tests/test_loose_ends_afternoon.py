@@ -228,7 +228,7 @@ _FREQ = ("{key}=1.356e+07 Hz is 159.5x the tanks' resonance 85000 Hz (1/(2 pi sq
 
 
 def test_a_link_far_off_its_tanks_resonance_warns_once(capsys, tmp_path):
-    """``netlist --link f_hz=13.56e6`` (and a mission at ``link.f_hz=13.56e6``: peak I2 0.084 A, nothing charged) ran
+    """``netlist --link f_hz=13.56e6`` (and a mission at ``link.f_hz=13.56e6``: peak I2 0.084 A, almost nothing charged) ran
     without a word. One line naming f_hz, the tanks' resonance from L and C and the ratio."""
     assert main(["netlist", "--link", "f_hz=13.56e6", "--out", str(tmp_path / "n.cir")]) == 0
     assert capsys.readouterr().err.splitlines() == ["dronewpt netlist: warning: " + _FREQ.format(key="--link f_hz")]

@@ -100,7 +100,7 @@ TABLE_I = LinkParams()
 #: so. Every model here tunes C1, C2 to ``f_hz`` (C = 1 / ((2 pi f)^2 L)), so the link runs resonant whatever f_hz;
 #: and a resonant series-series link drives its secondary as a current source, I2 = V1 / (2 pi f Lm) in rectification
 #: mode: at twice the coil pair's own resonance it carries half the current (the default mission's peak I2 13.3 A at
-#: 85 kHz, 6.8 A at 170 kHz, 0.084 A and no charge at 13.56 MHz), at half of it twice the current
+#: 85 kHz, 6.8 A at 170 kHz, 0.084 A and almost no charge at 13.56 MHz), at half of it twice the current
 FREQUENCY_TOLERANCE = 2.0
 
 
