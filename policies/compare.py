@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mission_sim.files import atomic_output
+from mission_sim.validation import Range, check_number
 
 from .stats import mean_ci, seed_ci
 from .threads import single_blas_thread
@@ -106,6 +107,28 @@ def _rollout(pol, venv, seeds):
     return rec, rew, info["t_stop_s"], last
 
 
+def check_episodes(episodes, seed) -> tuple[int, int]:
+    """``(episodes, seed)`` as ints when ``episodes`` is a whole number 1..100000 and the episode seeds ``seed ..
+    seed + episodes - 1`` are whole numbers in 0..2^32-1 (:func:`compare`'s and :func:`run_policies`'); else one
+    ``ValueError`` naming the value and its range (``run_policy(..., 0, ...)`` said "num_envs=0", 1.5 ran 1)."""
+    n = check_number("episodes", episodes, Range(1, 100_000, integer=True))
+    s = check_number("seed", seed, Range(0, 2**32 - n, integer=True),
+                     f" (episode seeds go up to seed + episodes - 1, episodes={n})" if n > 1 else "")
+    return n, s
+
+
+def _names(value, what: str) -> list:
+    """A list of names; one string is a comma-separated list, as the CLI's ``--policies`` / ``--scenarios``
+    (``compare(policies="step")`` ran the policies 's', 't', 'e', 'p': "policy='s' is invalid")."""
+    if isinstance(value, str):
+        return [v.strip() for v in value.split(",") if v.strip()]
+    try:
+        return list(value)
+    except TypeError:
+        raise ValueError(f"{what}={value!r} is invalid; valid: a list of names, or one comma-separated string") \
+            from None
+
+
 def _check_specs(specs) -> None:
     """Policies are given by name (a :func:`policies.make` spec); a policy object was an AttributeError deep inside."""
     for sp in specs:
@@ -146,10 +169,11 @@ def run_policies(names, scenario: str, episodes: int, seed: int, config=None, nu
     from . import make
     from .batched import BlockPolicy
 
+    names = _names(names, "names")
     _check_specs(names)
+    n, seed = check_episodes(episodes, seed)
     config = given_config(config)   # a dict of EnvConfig fields too (as the envs take it)
     names = list(dict.fromkeys(names))
-    n = int(episodes)
     venv = SbarChargingVectorEnv(num_envs=len(names) * n, scenario=scenario, config=config, num_threads=num_threads)
     try:
         pol = BlockPolicy([make(name, venv.policy_context) for name in names], n)
@@ -227,8 +251,8 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
     are there, before waiting for the forked child (e.g. the frontier's rows, off the critical path)."""
     from envs.core import given_config
 
-    if int(episodes) != episodes or not 1 <= episodes <= 100_000:
-        raise ValueError(f"episodes={episodes!r} is invalid; valid range: integer 1..100000")
+    policies, scenarios = _names(policies, "policies"), _names(scenarios, "scenarios")
+    episodes, seed = check_episodes(episodes, seed)
     _check_specs(list(policies) + [sp for specs in (train_seeds or {}).values() for sp in specs])
     check_row_labels(policies, train_seeds)
     config = given_config(config)   # a dict of EnvConfig fields once here (the split, the child, run_policies)

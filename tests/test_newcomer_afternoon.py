@@ -1,0 +1,112 @@
+"""A demanding newcomer's afternoon (2026-11-27): an RL researcher (README, docs/rl.md, docs/envs.md) and a MAVLink
+integrator (docs/mavlink.md); docs/robustness.md, "A newcomer's afternoon (2026-11-27)". Each test failed on ``main``.
+
+Probes fixed here:
+
+* ``compare --policies rl:M.zip`` whose ``M.json`` is broken JSON (json's message without the file), a JSON list
+  (``AttributeError`` traceback), has ``control_period_s`` -1 / "x" / missing (an inverted message, "could not
+  convert string to float", ``KeyError``), or says another algorithm than the zip's (SB3's ``AttributeError``).
+* ``policies.compare.run_policy(name, scenario, 0, seed)`` ("num_envs=0 is invalid"), episodes 1.5 and seed 1.5
+  (truncated, silently), seed -1 (gymnasium's error); ``compare(policies="step")`` / ``scenarios="nominal"``
+  (iterated letter by letter: "policy='s' is invalid").
+* ``SbarChargingVectorEnv.restart([1.5])`` (restarted window 1, silently), ``restart([True, False, True])`` (a mask
+  read as indices 1, 0, 1: "indices [1] are invalid"); ``SbarChargingVectorEnv(num_threads="a")`` (int()'s message).
+* ``telemetry --follow-time`` / ``--follow-idle`` without ``--follow`` (no effect, exit 0), ``--duration`` /
+  ``--speed`` with ``--follow`` (ignored); ``--connect udpout:127.0.0.1:99999`` (port 0, 70000: "valid format ..."
+  naming no port range).
+* ``calibrate LOG --mass 5000``: fitted, and wrote a ``[drone]`` TOML that ``mission --drone`` refuses.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mission_sim.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+LOGS = ROOT / "tests" / "data" / "flightlogs"
+
+
+def _one_error_line(capsys, argv) -> str:
+    """``main(argv)``: exit status 2, nothing on stdout, one line on stderr and no traceback (the line returned)."""
+    try:
+        rc = main(argv)
+    except SystemExit as exc:
+        rc = exc.code
+    cap = capsys.readouterr()
+    assert rc == 2, (rc, cap.err)
+    lines = cap.err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in cap.err, cap.err
+    assert cap.out == "", cap.out
+    return lines[0]
+
+
+# ------------------------------------------------------------------ an RL model's metadata JSON
+@pytest.fixture
+def model_zip(tmp_path):
+    """A copy of the shipped PPO ``rl_s0.zip`` without its JSON (each test writes its own)."""
+    z = tmp_path / "mine.zip"
+    shutil.copy(ROOT / "policies" / "pretrained" / "rl_s0.zip", z)
+    return z
+
+
+@pytest.mark.parametrize("meta, text", [
+    ("{", "RL model metadata '{json}' is not valid JSON (Expecting property name enclosed in double quotes: line 1 "
+          "column 2 (char 1)); valid: a JSON object such as {\"algo\": \"ppo\", \"control_period_s\": 0.0001}"),
+    ("[]", "RL model metadata '{json}' holds a JSON list; valid: a JSON object"),
+    ('{"algo": "ppo", "control_period_s": -1}',
+     "control_period_s=-1 in {json} is invalid; valid range: (0, 1] s (the control period it was trained at"),
+    ('{"algo": "ppo", "control_period_s": "x"}', "control_period_s='x' in {json} is invalid; valid range: (0, 1] s"),
+    ('{"algo": "ppo"}', "control_period_s=None in {json} is invalid; valid range: (0, 1] s"),
+    ('{"algo": "dqn", "control_period_s": 0.0001}',
+     "RL model '{zip}' cannot be loaded as algo='dqn' (what mine.json says: AttributeError"),
+])
+def test_rl_model_metadata_is_checked(capsys, model_zip, meta, text):
+    meta_path = model_zip.with_suffix(".json")
+    meta_path.write_text(meta)
+    line = _one_error_line(capsys, ["compare", "--policies", f"rl:{model_zip}", "--episodes", "1",
+                                    "--scenarios", "nominal", "--no-plot", "--no-frontier"])
+    assert text.replace("{json}", str(meta_path)).replace("{zip}", str(model_zip)) in line, line
+
+
+def test_rl_model_with_good_metadata_still_runs(model_zip):
+    """The same zip with the JSON docs/rl.md asks for acts as the shipped model on its normalisation-free input."""
+    import policies
+    model_zip.with_suffix(".json").write_text('{"algo": "ppo", "control_period_s": 0.0001}')
+    pol = policies.make(f"rl:{model_zip}")
+    pol.reset(1)
+    d = pol.act(np.zeros((1, 8), np.float32))
+    assert d.shape == (1,) and 0.0 <= d[0] <= 1.0
+
+
+# ------------------------------------------------------------------ run_policy / compare from Python
+@pytest.mark.parametrize("episodes, seed, text", [
+    (0, 1000, "episodes=0 is invalid; valid range: integer 1..100000"),
+    (1.5, 1000, "episodes=1.5 is invalid; valid range: integer 1..100000"),
+    (2, 1.5, "seed=1.5 is invalid; valid range: integer 0..4294967294 (episode seeds go up to seed + episodes - 1, "
+             "episodes=2)"),
+    (2, -1, "seed=-1 is invalid; valid range: integer 0..4294967294 (episode seeds go up to seed + episodes - 1, "
+            "episodes=2)"),
+    (1, 2**32, "seed=4294967296 is invalid; valid range: integer 0..4294967295"),
+])
+def test_run_policy_checks_episodes_and_seed(episodes, seed, text):
+    from policies.compare import run_policy
+    with pytest.raises(ValueError) as exc:
+        run_policy("step", "nominal", episodes, seed)
+    assert str(exc.value) == text
+
+
+def test_compare_takes_a_comma_separated_string_as_the_cli_does():
+    from policies.compare import compare, run_policies
+    rows, _ = compare(policies="step,ramp", scenarios="nominal", episodes=2, progress=False)
+    listed, _ = compare(policies=["step", "ramp"], scenarios=["nominal"], episodes=2, progress=False)
+    assert [(r["scenario"], r["policy"]) for r in rows] == [("nominal", "step"), ("nominal", "ramp")]
+    assert [r["return"] for r in rows] == [r["return"] for r in listed]
+    assert list(run_policies("step", "nominal", 1, 1000)) == ["step"]
+    with pytest.raises(ValueError, match=r"^policies=5 is invalid; valid: a list of names, or one comma-separated"):
+        compare(policies=5, scenarios="nominal", episodes=1)
