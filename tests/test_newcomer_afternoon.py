@@ -110,3 +110,35 @@ def test_compare_takes_a_comma_separated_string_as_the_cli_does():
     assert list(run_policies("step", "nominal", 1, 1000)) == ["step"]
     with pytest.raises(ValueError, match=r"^policies=5 is invalid; valid: a list of names, or one comma-separated"):
         compare(policies=5, scenarios="nominal", episodes=1)
+
+
+# ------------------------------------------------------------------ the vector env's restart and threads
+@pytest.fixture(scope="module")
+def venv3():
+    from envs import SbarChargingVectorEnv
+    v = SbarChargingVectorEnv(3, "nominal", config={"link_model": "envelope"})
+    v.reset(seed=1)
+    yield v
+    v.close()
+
+
+@pytest.mark.parametrize("idx, named", [([1.5], "[1.5]"), ([True, False, True], "[True, False, True]"),
+                                        ("1", "'1'"), (None, "None")])
+def test_restart_refuses_what_is_not_integer_indices(venv3, idx, named):
+    before = venv3.parts.plant.state.copy()
+    with pytest.raises(ValueError) as exc:
+        venv3.restart(idx)
+    assert str(exc.value) == (f"restart indices {named} are invalid; valid: distinct integers 0..2 (for a mask m: "
+                              "np.flatnonzero(m))")
+    assert np.array_equal(venv3.parts.plant.state, before)   # nothing restarted
+
+
+def test_restart_takes_integer_indices_as_before(venv3):
+    assert venv3.restart(np.array([2], np.uint8)).shape == (1, 8)
+    assert venv3.restart([]).shape == (0, 8)
+
+
+def test_vector_env_num_threads_named():
+    from envs import SbarChargingVectorEnv
+    with pytest.raises(ValueError, match=r"^num_threads='a' is invalid; valid range: integer 1\.\.\d+ \(numba's "):
+        SbarChargingVectorEnv(2, num_threads="a")
