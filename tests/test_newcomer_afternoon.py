@@ -142,3 +142,44 @@ def test_vector_env_num_threads_named():
     from envs import SbarChargingVectorEnv
     with pytest.raises(ValueError, match=r"^num_threads='a' is invalid; valid range: integer 1\.\.\d+ \(numba's "):
         SbarChargingVectorEnv(2, num_threads="a")
+
+
+# ------------------------------------------------------------------ telemetry: options of the other mode, ports
+@pytest.mark.parametrize("extra, text", [
+    (["--follow-time", "5"], "--follow-time 5 is only used with --follow; valid: add --follow udpin:HOST:PORT, or drop "
+                             "--follow-time"),
+    (["--follow-idle", "2.5"], "--follow-idle 2.5 is only used with --follow"),
+    (["--follow", "udpin:127.0.0.1:14561", "--duration", "3"],
+     "--duration 3 is not used with --follow (the live vehicle sets the pace and the length); valid: drop --duration"),
+    (["--follow", "udpin:127.0.0.1:14561", "--speed", "inf"], "--speed inf is not used with --follow"),
+    (["--connect", "udpout:127.0.0.1:99999"], "--connect 'udpout:127.0.0.1:99999' is invalid: port 99999; valid "
+                                              "range: 1..65535"),
+    (["--connect", "udpout:127.0.0.1:0"], "--connect 'udpout:127.0.0.1:0' is invalid: port 0; valid range: 1..65535"),
+    (["--follow", "tcp:127.0.0.1:70000"], "--follow 'tcp:127.0.0.1:70000' is invalid: port 70000; valid range: "
+                                          "1..65535"),
+])
+def test_telemetry_refuses_options_of_the_other_mode_and_names_the_port_range(capsys, tmp_path, extra, text):
+    argv = ["telemetry", "--no-progress", "--tlog", str(tmp_path / "x.tlog")]
+    if "--connect" not in extra:
+        argv += ["--connect", "none"]
+    line = _one_error_line(capsys, argv + extra)
+    assert line.startswith("dronewpt telemetry: error: ") and text in line, line
+    assert not (tmp_path / "x.tlog").exists()
+
+
+def test_telemetry_mode_defaults_unchanged(monkeypatch, tmp_path, capsys):
+    """Not given, the options keep their defaults: --follow gets 60 s / 10 s, a stream speed 1 and no duration."""
+    from mission_sim.mavlink import follow
+    seen = {}
+
+    def fake_follow(*a, **kw):
+        seen.update(kw)
+        return follow.FollowStats(positions=0, chunks=0, frames=0, wall_s=0.0, final_soc=None, home=kw["home"])
+    monkeypatch.setattr(follow, "follow", fake_follow)
+    monkeypatch.setattr(follow, "open_follow", lambda connect: type("C", (), {"close": lambda self: None})())
+    assert main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--connect", "none",
+                 "--tlog", str(tmp_path / "f.tlog")]) == 0
+    assert (seen["max_wall_s"], seen["idle_timeout_s"]) == (60.0, 10.0)
+    from mission_sim.cli import mavlink as cli_mavlink
+    assert [(d, v) for d, v, _ in cli_mavlink._MODE_OPTIONS] == [("follow_time", 60.0), ("follow_idle", 10.0),
+                                                                 ("duration", None), ("speed", 1.0)]
