@@ -183,3 +183,16 @@ def test_telemetry_mode_defaults_unchanged(monkeypatch, tmp_path, capsys):
     from mission_sim.cli import mavlink as cli_mavlink
     assert [(d, v) for d, v, _ in cli_mavlink._MODE_OPTIONS] == [("follow_time", 60.0), ("follow_idle", 10.0),
                                                                  ("duration", None), ("speed", 1.0)]
+
+
+# ------------------------------------------------------------------ calibrate --mass
+@pytest.mark.parametrize("mass", ["5000", "0.005"])
+def test_calibrate_mass_has_the_configs_range(capsys, tmp_path, mass):
+    """``--mass 5000`` was fitted and written as a [drone] TOML that ``mission --drone`` then refused
+    (``drone.mass_kg=5000.0 is invalid; valid range: [0.01, 1000] kg``); now refused before the log is read."""
+    out = tmp_path / "cal" / "drone.toml"
+    line = _one_error_line(capsys, ["calibrate", str(LOGS / "dronekit-la-testdata_log171.bin"), "--no-plot",
+                                    "--out", str(out), "--mass", mass])
+    assert line == (f"dronewpt calibrate: error: --mass {float(mass):g} is invalid; valid range: [0.01, 1000] kg "
+                    "(the config's drone.mass_kg)")
+    assert not out.parent.exists()

@@ -44,6 +44,11 @@ def _cmd_calibrate(args) -> int:
     check_regular_file(args.log, "log", "a .tlog, .bin or .ulg file")  # a FIFO: refused without opening it
     if args.out.suffix.lower() != ".toml" or args.out.is_dir():
         raise CliError(f"--out {str(args.out)!r} is invalid; valid: a file name ending in .toml")
+    if args.mass is not None:   # 5000 kg was fitted and written as a [drone] TOML that mission --drone refuses
+        from ..config import PLAUSIBLE
+        rng = PLAUSIBLE["drone.mass_kg"]
+        if not rng.contains(args.mass):
+            raise CliError(f"--mass {args.mass:g} is invalid; valid range: {rng.text()} (the config's drone.mass_kg)")
     window = parse_window(args.window)
     sets = parse_set(args.set)
     other = [k for k in sets if not str(k).startswith("drone.")]   # (read into a config that only [drone] was taken from)
