@@ -196,3 +196,21 @@ def test_calibrate_mass_has_the_configs_range(capsys, tmp_path, mass):
     assert line == (f"dronewpt calibrate: error: --mass {float(mass):g} is invalid; valid range: [0.01, 1000] kg "
                     "(the config's drone.mass_kg)")
     assert not out.parent.exists()
+
+
+# ------------------------------------------------------------------ a file that is not a flight log
+@pytest.mark.parametrize("command", ["replay", "calibrate"])
+@pytest.mark.parametrize("name, data, what", [
+    ("empty.tlog", b"", "the file is empty (0 bytes)"),
+    ("notes.txt", b"hi\n", "no readable record in its 3 bytes: cut short before its first record, or not a flight "
+                           "log"),
+    ("head.ulg", None, "no readable record in its 2000 bytes: cut short before its first record, or not a flight log"),
+])
+def test_a_file_that_is_not_a_flight_log_is_named_as_such(capsys, tmp_path, command, name, data, what):
+    """It said "0 usable position sample(s), need at least 2" (replay) or "the log has no battery data" (calibrate)."""
+    p = tmp_path / name
+    p.write_bytes(data if data is not None else (LOGS / "pyulog_sample_log_small.ulg").read_bytes()[:2000])
+    out = ["--out", str(tmp_path / "o" / "d.toml")] if command == "calibrate" else ["--out", str(tmp_path / "o")]
+    line = _one_error_line(capsys, [command, str(p), "--no-plot"] + out)
+    assert line == (f"dronewpt {command}: error: {name}: no usable position (GPS fix >= 3): {what}; valid: a MAVLink "
+                    ".tlog, a DataFlash .bin or a PX4 .ulg")
