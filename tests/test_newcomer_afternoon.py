@@ -9,12 +9,15 @@ Probes fixed here:
 * ``policies.compare.run_policy(name, scenario, 0, seed)`` ("num_envs=0 is invalid"), episodes 1.5 and seed 1.5
   (truncated, silently), seed -1 (gymnasium's error); ``compare(policies="step")`` / ``scenarios="nominal"``
   (iterated letter by letter: "policy='s' is invalid").
+* ``SbarSB3VecEnv(reset_seed=1.5)`` (seed 1, silently), ``reset_seed=-1`` (gymnasium's error at the first reset).
 * ``SbarChargingVectorEnv.restart([1.5])`` (restarted window 1, silently), ``restart([True, False, True])`` (a mask
   read as indices 1, 0, 1: "indices [1] are invalid"); ``SbarChargingVectorEnv(num_threads="a")`` (int()'s message).
 * ``telemetry --follow-time`` / ``--follow-idle`` without ``--follow`` (no effect, exit 0), ``--duration`` /
   ``--speed`` with ``--follow`` (ignored); ``--connect udpout:127.0.0.1:99999`` (port 0, 70000: "valid format ..."
   naming no port range).
 * ``calibrate LOG --mass 5000``: fitted, and wrote a ``[drone]`` TOML that ``mission --drone`` refuses.
+* ``replay`` / ``calibrate`` of an empty file, a text file, a ULog cut before its first record: "0 usable position
+  sample(s), need at least 2" / "the log has no battery data", nothing said of what the file was.
 """
 
 from __future__ import annotations
@@ -136,6 +139,16 @@ def test_restart_refuses_what_is_not_integer_indices(venv3, idx, named):
 def test_restart_takes_integer_indices_as_before(venv3):
     assert venv3.restart(np.array([2], np.uint8)).shape == (1, 8)
     assert venv3.restart([]).shape == (0, 8)
+
+
+@pytest.mark.parametrize("seed", [1.5, -1, "a"])
+def test_sb3_adapter_reset_seed_checked(seed):
+    """``SbarSB3VecEnv(reset_seed=1.5)`` re-seeded with 1 (int()), -1 failed at the first reset in gymnasium."""
+    from envs.sb3_vec import SbarSB3VecEnv
+    with pytest.raises(ValueError) as exc:
+        SbarSB3VecEnv(2, reset_seed=seed)
+    assert str(exc.value) == f"reset_seed={seed!r} is invalid; valid range: integer >= 0"
+    assert SbarSB3VecEnv(2, reset_seed=3.0).reset_seed == 3
 
 
 def test_vector_env_num_threads_named():
