@@ -24,6 +24,7 @@ Writes into ``out_dir``:
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections.abc import Mapping
 from dataclasses import asdict, fields
@@ -32,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from mission_sim.files import atomic_output
+from mission_sim.validation import Range, check_number
 from mission_sim.train_options import ONLY_WITH, unused_option
 
 from .rl import ALGOS
@@ -176,6 +178,11 @@ def plot_learning_curve(monitor_csv, out_png, title: str, eval_curve=None) -> Pa
     return out_png
 
 
+#: train()'s whole-number options and their ranges (those of ``dronewpt train``'s --seed, --eval-episodes, ...)
+_COUNTS = (("seed", Range(0, 2**32 - 1, integer=True)), ("eval_episodes", Range(1, math.inf, integer=True)),
+           ("eval_every", Range(1, math.inf, integer=True)), ("checkpoint_every", Range(1, math.inf, integer=True)))
+
+
 def _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra=None):
     import envs
     from mission_sim.contract import history_obs_dim
@@ -193,6 +200,11 @@ def _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, ex
         raise ValueError(f"algo={algo!r} is invalid with imitate; valid value: ppo (the student is a PPO actor)")
     if int(n_envs) != n_envs or not 1 <= n_envs <= 1024:
         raise ValueError(f"n_envs={n_envs!r} is invalid; valid range: integer 1..1024")
+    for key, rng in _COUNTS:   # as dronewpt train's options (seed 1.5 ran seed 1, eval_every=0 was taken, ...)
+        if key in x:
+            check_number(key, x[key], rng)
+    if x.get("lambda_lr") is not None:
+        check_number("lambda_lr", x["lambda_lr"], Range(0, math.inf, lo_open=True, hi_open=True))
     if vec not in VEC_PATHS:
         raise ValueError(f"vec={vec!r} is invalid; valid values: {', '.join(VEC_PATHS)}")
     if (lagrangian or residual) and vec != "batched":
@@ -531,7 +543,9 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     extra = dict(history=history, action_filter=action_filter, smooth_penalty=smooth_penalty, imitate=imitate,
                  dagger=o["dagger"], imitation_episodes=o["imitation_episodes"], slow_budget=slow_budget,
                  slow_budget_every=o["slow_budget_every"])
-    _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra)
+    _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario,
+                dict(extra, seed=seed, eval_episodes=eval_episodes, eval_every=eval_every,
+                     checkpoint_every=checkpoint_every, lambda_lr=o["lambda_lr"]))
     opts = dict(**extra, seed=seed, n_envs=n_envs, scenario=scenario, hyperparams=hyperparams,
                 hyperparams_file=hyperparams_file, env=env, cost=cost, lagrangian=lagrangian, budget=budget,
                 lambda_lr=o["lambda_lr"], residual=residual, residual_scale=o["residual_scale"],

@@ -9,6 +9,8 @@ Probes fixed here:
 * ``policies.compare.run_policy(name, scenario, 0, seed)`` ("num_envs=0 is invalid"), episodes 1.5 and seed 1.5
   (truncated, silently), seed -1 (gymnasium's error); ``compare(policies="step")`` / ``scenarios="nominal"``
   (iterated letter by letter: "policy='s' is invalid").
+* ``policies.train.train(..., seed=1.5)`` (seed 1), ``eval_episodes=0`` ("num_envs=0"), ``eval_every=0``,
+  ``checkpoint_every=-1``, ``lambda_lr=0`` (trained, where ``dronewpt train`` refuses each).
 * ``SbarSB3VecEnv(reset_seed=1.5)`` (seed 1, silently), ``reset_seed=-1`` (gymnasium's error at the first reset).
 * ``SbarChargingVectorEnv.restart([1.5])`` (restarted window 1, silently), ``restart([True, False, True])`` (a mask
   read as indices 1, 0, 1: "indices [1] are invalid"); ``SbarChargingVectorEnv(num_threads="a")`` (int()'s message).
@@ -113,6 +115,23 @@ def test_compare_takes_a_comma_separated_string_as_the_cli_does():
     assert list(run_policies("step", "nominal", 1, 1000)) == ["step"]
     with pytest.raises(ValueError, match=r"^policies=5 is invalid; valid: a list of names, or one comma-separated"):
         compare(policies=5, scenarios="nominal", episodes=1)
+
+
+@pytest.mark.parametrize("kw, text", [
+    ({"seed": 1.5}, "seed=1.5 is invalid; valid range: integer 0..4294967295"),   # ran seed 1
+    ({"seed": -1}, "seed=-1 is invalid; valid range: integer 0..4294967295"),    # numpy's "Seed must be between ..."
+    ({"eval_episodes": 0}, "eval_episodes=0 is invalid; valid range: integer >= 1"),   # "num_envs=0 is invalid"
+    ({"eval_every": 0}, "eval_every=0 is invalid; valid range: integer >= 1"),         # trained, exit 0
+    ({"checkpoint_every": -1}, "checkpoint_every=-1 is invalid; valid range: integer >= 1"),
+    ({"lagrangian": True, "budget": 0.1, "lambda_lr": 0.0}, "lambda_lr=0.0 is invalid; valid range: (0, inf)"),
+])
+def test_train_from_python_checks_as_the_cli_does(tmp_path, kw, text):
+    """``policies.train.train`` refuses what ``dronewpt train`` refuses, before anything is written."""
+    from policies.train import train
+    with pytest.raises(ValueError) as exc:
+        train("ppo", 64, tmp_path / "run", progress=False, n_envs=4, env={"link_model": "envelope"}, **kw)
+    assert str(exc.value) == text
+    assert not (tmp_path / "run").exists()
 
 
 # ------------------------------------------------------------------ the vector env's restart and threads
