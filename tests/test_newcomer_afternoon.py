@@ -11,6 +11,7 @@ Probes fixed here:
   (iterated letter by letter: "policy='s' is invalid").
 * ``policies.train.train(..., seed=1.5)`` (seed 1), ``eval_episodes=0`` ("num_envs=0"), ``eval_every=0``,
   ``checkpoint_every=-1``, ``lambda_lr=0`` (trained, where ``dronewpt train`` refuses each).
+* ``train --hyperparams hp.yml`` with ``learning_rate: 1e-4`` ("valid type: number": PyYAML reads a string).
 * ``SbarSB3VecEnv(reset_seed=1.5)`` (seed 1, silently), ``reset_seed=-1`` (gymnasium's error at the first reset).
 * ``SbarChargingVectorEnv.restart([1.5])`` (restarted window 1, silently), ``restart([True, False, True])`` (a mask
   read as indices 1, 0, 1: "indices [1] are invalid"); ``SbarChargingVectorEnv(num_threads="a")`` (int()'s message).
@@ -132,6 +133,23 @@ def test_train_from_python_checks_as_the_cli_does(tmp_path, kw, text):
         train("ppo", 64, tmp_path / "run", progress=False, n_envs=4, env={"link_model": "envelope"}, **kw)
     assert str(exc.value) == text
     assert not (tmp_path / "run").exists()
+
+
+def test_hyperparams_yaml_number_read_as_a_string_says_why(capsys, tmp_path):
+    """``learning_rate: 1e-4`` in a YAML file (PyYAML reads it as the string "1e-4") said "valid type: number" to
+    someone who wrote a number; now with the YAML hint the env config's message has (one text)."""
+    from mission_sim.validation import YAML_NUMBER_NOTE
+    hp = tmp_path / "hp.yml"
+    hp.write_text("learning_rate: 1e-4\n")
+    line = _one_error_line(capsys, ["train", "--algo", "ppo", "--timesteps", "64", "--out", str(tmp_path / "o"),
+                                    "--hyperparams", str(hp), "--no-progress"])
+    assert line == (f"dronewpt train: error: hyperparams file '{hp}': learning_rate='1e-4' is invalid; valid type: "
+                    "number; a number, not a string (YAML 1.1 reads 1e-4 as a string: write 1.0e-4)")
+    assert YAML_NUMBER_NOTE in line
+    hp.write_text("ent_coef: abc\n")   # not a number at all: no hint
+    assert _one_error_line(capsys, ["train", "--algo", "ppo", "--timesteps", "64", "--out", str(tmp_path / "o"),
+                                    "--hyperparams", str(hp), "--no-progress"]).endswith(
+        "ent_coef='abc' is invalid; valid type: number")
 
 
 # ------------------------------------------------------------------ the vector env's restart and threads
