@@ -586,7 +586,8 @@ def plot_frontier(rows, sweep, scenario: str, out_png, x: str = "overshoot_pct",
         ax.set_xlabel("overshoot after the stop over the true short-mode I2 [%]")
         ax.set_ylabel({"return": "episode return", "energy_after_stop_j": "energy after the stop [J]"}[y])
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=7)
+    if axes[0].get_legend_handles_labels()[0]:   # (none: only step / random / hysteresis rows and no frontier, where
+        axes[0].legend(fontsize=7)                # matplotlib warned "No artists with labels found" on stderr)
     fig.suptitle(f"{scenario}: means with 95 % intervals")
     fig.tight_layout()
     with atomic_output(out_png) as tmp:  # removed on failure (a full disk: the file named)

@@ -11,6 +11,8 @@ Probes fixed here:
   (iterated letter by letter: "policy='s' is invalid").
 * ``policies.train.train(..., seed=1.5)`` (seed 1), ``eval_episodes=0`` ("num_envs=0"), ``eval_every=0``,
   ``checkpoint_every=-1``, ``lambda_lr=0`` (trained, where ``dronewpt train`` refuses each).
+* ``compare --no-plot --out DIR`` (nothing written, nothing said); ``compare --policies step --no-frontier``
+  (matplotlib's "No artists with labels found to put in legend" on stderr).
 * ``train --hyperparams hp.yml`` with ``learning_rate: 1e-4`` ("valid type: number": PyYAML reads a string).
 * ``SbarSB3VecEnv(reset_seed=1.5)`` (seed 1, silently), ``reset_seed=-1`` (gymnasium's error at the first reset).
 * ``SbarChargingVectorEnv.restart([1.5])`` (restarted window 1, silently), ``restart([True, False, True])`` (a mask
@@ -150,6 +152,27 @@ def test_hyperparams_yaml_number_read_as_a_string_says_why(capsys, tmp_path):
     assert _one_error_line(capsys, ["train", "--algo", "ppo", "--timesteps", "64", "--out", str(tmp_path / "o"),
                                     "--hyperparams", str(hp), "--no-progress"]).endswith(
         "ent_coef='abc' is invalid; valid type: number")
+
+
+def test_compare_out_with_no_plot_is_refused(capsys, tmp_path):
+    """``compare --no-plot --out DIR``: --out is the figures' folder; it wrote nothing and said nothing."""
+    line = _one_error_line(capsys, ["compare", "--policies", "step", "--episodes", "1", "--scenarios", "nominal",
+                                    "--no-plot", "--no-frontier", "--out", str(tmp_path / "figs")])
+    assert line == (f"dronewpt compare: error: --out '{tmp_path / 'figs'}' is only used for the figures; valid: drop "
+                    "--no-plot, or drop --out")
+
+
+def test_compare_figures_of_unplotted_rows_print_no_matplotlib_warning(capsys, tmp_path):
+    """``compare --policies step --no-frontier``: the frontier figure has no labelled point (step, random and
+    hysteresis are left out of it); matplotlib's "No artists with labels found to put in legend" went to stderr."""
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)   # (pytest would only collect it)
+        rc = main(["compare", "--policies", "step", "--episodes", "1", "--scenarios", "nominal", "--no-frontier",
+                   "--out", str(tmp_path / "figs"), "--no-progress"])
+    cap = capsys.readouterr()
+    assert rc == 0 and cap.err == "", cap.err
+    assert sorted(p.name for p in (tmp_path / "figs").iterdir()) == ["frontier_nominal.png", "transitions_nominal.png"]
 
 
 # ------------------------------------------------------------------ the vector env's restart and threads
