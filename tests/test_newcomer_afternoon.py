@@ -14,6 +14,7 @@ Probes fixed here:
 * ``compare --no-plot --out DIR`` (nothing written, nothing said); ``compare --policies step --no-frontier``
   (matplotlib's "No artists with labels found to put in legend" on stderr).
 * ``train --hyperparams hp.yml`` with ``learning_rate: 1e-4`` ("valid type: number": PyYAML reads a string).
+* ``register_scenario(Scenario("nominal", soc=(0.1, 0.2)))``: the built-in "nominal" replaced for the process.
 * ``SbarSB3VecEnv(reset_seed=1.5)`` (seed 1, silently), ``reset_seed=-1`` (gymnasium's error at the first reset).
 * ``SbarChargingVectorEnv.restart([1.5])`` (restarted window 1, silently), ``restart([True, False, True])`` (a mask
   read as indices 1, 0, 1: "indices [1] are invalid"); ``SbarChargingVectorEnv(num_threads="a")`` (int()'s message).
@@ -173,6 +174,26 @@ def test_compare_figures_of_unplotted_rows_print_no_matplotlib_warning(capsys, t
     cap = capsys.readouterr()
     assert rc == 0 and cap.err == "", cap.err
     assert sorted(p.name for p in (tmp_path / "figs").iterdir()) == ["frontier_nominal.png", "transitions_nominal.png"]
+
+
+def test_register_scenario_does_not_replace_a_built_in_one():
+    """``register_scenario(Scenario("nominal", soc=(0.1, 0.2)))`` replaced the built-in "nominal" for the whole process
+    (``compare``'s nominal rows, the docs' windows 1000-1099), silently; a name of one's own is re-registered as
+    before (a notebook cell run twice), and the built-in itself unchanged is accepted."""
+    from envs.scenario import BUILT_IN, SCENARIOS, Scenario, register_scenario
+    nominal = SCENARIOS["nominal"]
+    with pytest.raises(ValueError) as exc:
+        register_scenario(Scenario("nominal", soc=(0.1, 0.2)))
+    assert str(exc.value) == ("scenario name 'nominal' is a built-in scenario's; valid: a name of your own (the "
+                              f"built-in ones: {', '.join(BUILT_IN)})")
+    with pytest.raises(ValueError, match="^scenario name 'windy' is a built-in"):   # as a held-out variant: neither
+        register_scenario(Scenario("afternoon_a"), held_out=Scenario("windy", soc=(0.2, 0.3)))
+    assert SCENARIOS["nominal"] is nominal and "afternoon_a" not in SCENARIOS
+    register_scenario(Scenario("afternoon_b"))
+    assert register_scenario(Scenario("afternoon_b", soc=(0.1, 0.2))).soc == SCENARIOS["afternoon_b"].soc == (0.1, 0.2)
+    assert register_scenario(Scenario("nominal")) == nominal
+    for name in ("afternoon_b",):
+        del SCENARIOS[name]
 
 
 # ------------------------------------------------------------------ the vector env's restart and threads
