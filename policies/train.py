@@ -183,6 +183,15 @@ _COUNTS = (("seed", Range(0, 2**32 - 1, integer=True)), ("eval_episodes", Range(
            ("eval_every", Range(1, math.inf, integer=True)), ("checkpoint_every", Range(1, math.inf, integer=True)))
 
 
+def _check_counts(o: dict) -> None:
+    """train()'s ``seed``, ``eval_episodes``, ``eval_every``, ``checkpoint_every`` and ``lambda_lr`` (``o``: its
+    keyword arguments) in dronewpt train's ranges (seed 1.5 ran seed 1, eval_every=0 was taken, ...)."""
+    for key, rng in _COUNTS:
+        check_number(key, o[key], rng)
+    if o.get("lambda_lr") is not None:
+        check_number("lambda_lr", o["lambda_lr"], Range(0, math.inf, lo_open=True, hi_open=True))
+
+
 def _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra=None):
     import envs
     from mission_sim.contract import history_obs_dim
@@ -200,11 +209,6 @@ def _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, ex
         raise ValueError(f"algo={algo!r} is invalid with imitate; valid value: ppo (the student is a PPO actor)")
     if int(n_envs) != n_envs or not 1 <= n_envs <= 1024:
         raise ValueError(f"n_envs={n_envs!r} is invalid; valid range: integer 1..1024")
-    for key, rng in _COUNTS:   # as dronewpt train's options (seed 1.5 ran seed 1, eval_every=0 was taken, ...)
-        if key in x:
-            check_number(key, x[key], rng)
-    if x.get("lambda_lr") is not None:
-        check_number("lambda_lr", x["lambda_lr"], Range(0, math.inf, lo_open=True, hi_open=True))
     if vec not in VEC_PATHS:
         raise ValueError(f"vec={vec!r} is invalid; valid values: {', '.join(VEC_PATHS)}")
     if (lagrangian or residual) and vec != "batched":
@@ -418,6 +422,7 @@ def _spec(algo, timesteps, o: dict) -> dict:
     (defaults < file < ``hyperparams``), the default budget measured when asked for."""
     import envs
 
+    _check_counts(o)
     hp = dict(DEFAULT_HYPERPARAMS[algo])
     if o["hyperparams_file"] is not None:
         from .hyperparams import load_hyperparams
@@ -543,9 +548,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     extra = dict(history=history, action_filter=action_filter, smooth_penalty=smooth_penalty, imitate=imitate,
                  dagger=o["dagger"], imitation_episodes=o["imitation_episodes"], slow_budget=slow_budget,
                  slow_budget_every=o["slow_budget_every"])
-    _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario,
-                dict(extra, seed=seed, eval_episodes=eval_episodes, eval_every=eval_every,
-                     checkpoint_every=checkpoint_every, lambda_lr=o["lambda_lr"]))
+    _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra)
     opts = dict(**extra, seed=seed, n_envs=n_envs, scenario=scenario, hyperparams=hyperparams,
                 hyperparams_file=hyperparams_file, env=env, cost=cost, lagrangian=lagrangian, budget=budget,
                 lambda_lr=o["lambda_lr"], residual=residual, residual_scale=o["residual_scale"],

@@ -35,24 +35,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from _cli_helpers import fake_follow
+from _cli_helpers import one_error_line as _one_error_line
 from mission_sim.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 LOGS = ROOT / "tests" / "data" / "flightlogs"
-
-
-def _one_error_line(capsys, argv) -> str:
-    """``main(argv)``: exit status 2, nothing on stdout, one line on stderr and no traceback (the line returned)."""
-    try:
-        rc = main(argv)
-    except SystemExit as exc:
-        rc = exc.code
-    cap = capsys.readouterr()
-    assert rc == 2, (rc, cap.err)
-    lines = cap.err.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in cap.err, cap.err
-    assert cap.out == "", cap.out
-    return lines[0]
 
 
 # ------------------------------------------------------------------ an RL model's metadata JSON
@@ -263,14 +251,7 @@ def test_telemetry_refuses_options_of_the_other_mode_and_names_the_port_range(ca
 
 def test_telemetry_mode_defaults_unchanged(monkeypatch, tmp_path, capsys):
     """Not given, the options keep their defaults: --follow gets 60 s / 10 s, a stream speed 1 and no duration."""
-    from mission_sim.mavlink import follow
-    seen = {}
-
-    def fake_follow(*a, **kw):
-        seen.update(kw)
-        return follow.FollowStats(positions=0, chunks=0, frames=0, wall_s=0.0, final_soc=None, home=kw["home"])
-    monkeypatch.setattr(follow, "follow", fake_follow)
-    monkeypatch.setattr(follow, "open_follow", lambda connect: type("C", (), {"close": lambda self: None})())
+    seen = fake_follow(monkeypatch)
     assert main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--connect", "none",
                  "--tlog", str(tmp_path / "f.tlog")]) == 0
     assert (seen["max_wall_s"], seen["idle_timeout_s"]) == (60.0, 10.0)
