@@ -27,6 +27,7 @@ with several seeds (``train_seeds``) the mean over seeds with a t interval over 
 from __future__ import annotations
 
 import contextlib
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -145,10 +146,20 @@ def check_row_labels(policies, train_seeds=None) -> None:
         if p in seen:
             raise ValueError(f"policies lists {p!r} twice; valid: each policy once")
         seen.add(p)
-    for label in train_seeds or {}:
+    for label, specs in (train_seeds or {}).items():
         if label in seen:
             raise ValueError(f"train_seeds label {label!r} is also one of the policies; valid: a label that names no "
                              f"listed policy (the policies: {', '.join(map(str, policies))})")
+        models = {}
+        for sp in specs:   # the same model file twice made "2 seeds" with a zero-width interval
+            kind, colon, path = str(sp).partition(":")
+            if not (colon and os.path.isfile(path)):   # (a classical policy listed twice: the tests' fixture of a group)
+                continue
+            key = (kind, os.path.realpath(path))
+            if key in models:
+                raise ValueError(f"train_seeds {label!r} lists the model {sp!r} twice (also as {models[key]!r}); valid: "
+                                 "each model file once (a row over N seeds needs N models)")
+            models[key] = sp
 
 
 def run_policy(name: str, scenario: str, episodes: int, seed: int, config=None) -> EpisodeTraces:

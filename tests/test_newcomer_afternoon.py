@@ -13,6 +13,7 @@ Probes fixed here:
   ``checkpoint_every=-1``, ``lambda_lr=0`` (trained, where ``dronewpt train`` refuses each).
 * ``compare --no-plot --out DIR`` (nothing written, nothing said); ``compare --policies step --no-frontier``
   (matplotlib's "No artists with labels found to put in legend" on stderr).
+* ``compare --train-seeds x=residual:M.zip,residual:./M.zip``: one model as "2 seeds", a zero-width interval.
 * ``train --hyperparams hp.yml`` with ``learning_rate: 1e-4`` ("valid type: number": PyYAML reads a string).
 * ``register_scenario(Scenario("nominal", soc=(0.1, 0.2)))``: the built-in "nominal" replaced for the process.
 * ``SbarSB3VecEnv(reset_seed=1.5)`` (seed 1, silently), ``reset_seed=-1`` (gymnasium's error at the first reset).
@@ -141,6 +142,19 @@ def test_hyperparams_yaml_number_read_as_a_string_says_why(capsys, tmp_path):
     assert _one_error_line(capsys, ["train", "--algo", "ppo", "--timesteps", "64", "--out", str(tmp_path / "o"),
                                     "--hyperparams", str(hp), "--no-progress"]).endswith(
         "ent_coef='abc' is invalid; valid type: number")
+
+
+def test_train_seeds_refuse_the_same_model_twice(capsys):
+    """``--train-seeds x=residual:M.zip,residual:./M.zip`` (or a glob and one of its files) made a row over "2 seeds"
+    of one model: an interval of width 0 (3.47 [3.47, 3.47]); the default groups (five files each) still pass."""
+    from policies.compare import check_row_labels, shipped_seed_groups
+    spec, again = (f"residual:{ROOT}/policies/pretrained/residual_s0.zip",
+                   f"residual:{ROOT}/policies/./pretrained/residual_s0.zip")
+    line = _one_error_line(capsys, ["compare", "--policies", "step", "--train-seeds", f"x={spec},{again}",
+                                    "--episodes", "1", "--scenarios", "nominal", "--no-plot", "--no-frontier"])
+    assert line == (f"dronewpt compare: error: --train-seeds: train_seeds 'x' lists the model '{again}' twice (also "
+                    f"as '{spec}'); valid: each model file once (a row over N seeds needs N models)")
+    check_row_labels(["step"], shipped_seed_groups())
 
 
 def test_compare_out_with_no_plot_is_refused(capsys, tmp_path):
