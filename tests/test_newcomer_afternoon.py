@@ -6,6 +6,8 @@ Probes fixed here:
 * ``compare --policies rl:M.zip`` whose ``M.json`` is broken JSON (json's message without the file), a JSON list
   (``AttributeError`` traceback), has ``control_period_s`` -1 / "x" / missing (an inverted message, "could not
   convert string to float", ``KeyError``), or says another algorithm than the zip's (SB3's ``AttributeError``).
+* ``compare --policies oracle_imitation:nothere.npz`` ("RL model file ... does not exist"), ``rl:FIFO`` ("does not
+  exist").
 * ``policies.compare.run_policy(name, scenario, 0, seed)`` ("num_envs=0 is invalid"), episodes 1.5 and seed 1.5
   (truncated, silently), seed -1 (gymnasium's error); ``compare(policies="step")`` / ``scenarios="nominal"``
   (iterated letter by letter: "policy='s' is invalid").
@@ -70,6 +72,23 @@ def test_rl_model_metadata_is_checked(capsys, model_zip, meta, text):
     line = _one_error_line(capsys, ["compare", "--policies", f"rl:{model_zip}", "--episodes", "1",
                                     "--scenarios", "nominal", "--no-plot", "--no-frontier"])
     assert text.replace("{json}", str(meta_path)).replace("{zip}", str(model_zip)) in line, line
+
+
+@pytest.mark.parametrize("kind, what", [("oracle_imitation", "oracle imitation model file"),
+                                        ("oracle_imitation_filtered", "oracle imitation model file"),
+                                        ("rl", "RL model file")])
+def test_a_policy_file_is_named_by_its_kind_and_a_fifo_is_not_a_missing_file(capsys, tmp_path, kind, what):
+    """``oracle_imitation:nothere.npz`` said "RL model file 'nothere.npz' does not exist"; a FIFO said it does not
+    exist either (it does: not a regular file)."""
+    import os
+    missing = tmp_path / "nothere.npz"
+    argv = ["compare", "--episodes", "1", "--scenarios", "nominal", "--no-plot", "--no-frontier", "--policies"]
+    assert _one_error_line(capsys, argv + [f"{kind}:{missing}"]) == (
+        f"dronewpt compare: error: {what} '{missing}' does not exist")
+    fifo = tmp_path / "pipe.zip"
+    os.mkfifo(fifo)
+    assert _one_error_line(capsys, argv + [f"{kind}:{fifo}"]).startswith(
+        f"dronewpt compare: error: {what} '{fifo}' is a FIFO (named pipe); valid: a model ")
 
 
 def test_rl_model_with_good_metadata_still_runs(model_zip):
