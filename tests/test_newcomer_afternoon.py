@@ -13,6 +13,7 @@ Probes fixed here:
   (iterated letter by letter: "policy='s' is invalid").
 * ``policies.train.train(..., seed=1.5)`` (seed 1), ``eval_episodes=0`` ("num_envs=0"), ``eval_every=0``,
   ``checkpoint_every=-1``, ``lambda_lr=0`` (trained, where ``dronewpt train`` refuses each).
+* ``train --algo dqn --action-filter 0.5``: trained, wrote part of its outputs, then failed on the env's message.
 * ``compare --no-plot --out DIR`` (nothing written, nothing said); ``compare --policies step --no-frontier``
   (matplotlib's "No artists with labels found to put in legend" on stderr).
 * ``compare --train-seeds x=residual:M.zip,residual:./M.zip``: one model as "2 seeds", a zero-width interval.
@@ -144,6 +145,17 @@ def test_train_from_python_checks_as_the_cli_does(tmp_path, kw, text):
         train("ppo", 64, tmp_path / "run", progress=False, n_envs=4, env={"link_model": "envelope"}, **kw)
     assert str(exc.value) == text
     assert not (tmp_path / "run").exists()
+
+
+def test_dqn_with_an_action_filter_is_refused_before_training(capsys, tmp_path):
+    """``train --algo dqn --action-filter 0.5`` built the run, wrote checkpoints/, eval/ and the monitor CSV, then
+    stopped at the env's "actions=0.13... is invalid; valid values: 0 (RM), 1 (SM)" (naming no option)."""
+    out = tmp_path / "run"
+    line = _one_error_line(capsys, ["train", "--algo", "dqn", "--action-filter", "0.5", "--timesteps", "256",
+                                    "--n-envs", "4", "--link", "envelope", "--no-progress", "--out", str(out)])
+    assert line == ("dronewpt train: error: algo='dqn' is invalid with action_filter=0.5; valid values: ppo, sac, td3 "
+                    "(a low-passed duty is not 0 or 1)")
+    assert not out.exists() or not any(out.iterdir())
 
 
 def test_hyperparams_yaml_number_read_as_a_string_says_why(capsys, tmp_path):
