@@ -38,7 +38,7 @@ from functools import cached_property
 import numpy as np
 
 from mission_sim.contract import LINK_MODELS, OBS_FIELDS
-from mission_sim.validation import Range, check_number
+from mission_sim.validation import YAML_NUMBER_NOTE, Range, check_number
 from wpt_receiver import TABLE_I, LinkParams, duty_from_v2_clipped, state_matrices, steady_state, zoh_discretise
 from wpt_receiver.sbar import rectifier_current, short_weight
 
@@ -70,7 +70,7 @@ _RANGES = (("dt_s", Range(1e-7, 1e-2, "s"), ""),
            ("v2_updates", Range(0, 1000, integer=True), " (0: one per rectifier period)"),
            ("v2_refine_tol", Range(0, math.inf, lo_open=True, hi_open=True), ""),
            ("v2_refine_levels", Range(0, 5, integer=True), " (0: no refinement)"))
-_YAML_NOTE = "; a number, not a string (YAML 1.1 reads 1e-4 as a string: write 1.0e-4)"
+_YAML_NOTE = "; " + YAML_NUMBER_NOTE
 
 
 @dataclass(frozen=True)

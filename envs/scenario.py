@@ -170,6 +170,9 @@ SCENARIOS: dict[str, Scenario] = {
 #: held-out variant of each model-is-wrong scenario (not in the range of its default one)
 HELD_OUT = {"lm_drift": "lm_drift_fast", "sense_delay": "sense_delay_long", "battery_low": "battery_empty",
             "detuned": "detuned_wide"}
+#: the built-in scenarios' names: :func:`register_scenario` does not replace them (``compare``'s rows by these names
+#: are the documented windows)
+BUILT_IN = tuple(SCENARIOS)
 
 
 def scenario_from_options(options, default: Scenario) -> Scenario:
@@ -198,7 +201,8 @@ def get_scenario(scenario) -> Scenario:
         known = {f.name for f in fields(Scenario)}
         bad = set(scenario) - known - {"base"}
         if bad:
-            raise ValueError(f"scenario key {sorted(bad)[0]!r} is invalid; valid keys: {', '.join(sorted(known))}")
+            raise ValueError(f"scenario key {sorted(bad)[0]!r} is invalid; valid keys: {', '.join(sorted(known))}, "
+                             "base (the scenario the others change; default nominal)")
         return base.with_(**{k: v for k, v in scenario.items() if k != "base"})
     raise ValueError(f"scenario={scenario!r} is invalid; give a name ({', '.join(SCENARIOS)}), a Scenario or a dict")
 
@@ -377,7 +381,12 @@ def register_scenario(scn: Scenario, held_out: Scenario | None = None) -> Scenar
             continue
         if not isinstance(s, Scenario) or not s.name or s.name == "custom":
             raise ValueError(f"scenario={s!r} is invalid; valid: a Scenario with its own name")
-        SCENARIOS[s.name] = s
+        if s.name in BUILT_IN and s != SCENARIOS[s.name]:   # (it replaced "nominal" for the whole process, silently)
+            raise ValueError(f"scenario name {s.name!r} is a built-in scenario's; valid: a name of your own (the "
+                             f"built-in ones: {', '.join(BUILT_IN)})")
+    for s in (scn, held_out):
+        if s is not None:
+            SCENARIOS[s.name] = s
     if held_out is not None:
         HELD_OUT[scn.name] = held_out.name
     return scn

@@ -35,7 +35,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
-from mission_sim.validation import real_array, shown
+from mission_sim.validation import Range, check_number, real_array, shown
 
 from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config, kernel_function
 from .layout import INFO
@@ -230,7 +230,11 @@ class SbarChargingVectorEnv(VectorEnv):
         """Start new episodes in the sub-environments ``idx`` now (same-step autoreset, as
         stable-baselines3 wants it); returns their first observations, shape (len(idx), OBS_DIM). ``idx``:
         distinct indices 0..N-1 (ValueError otherwise); empty, nothing is restarted."""
-        idx = np.asarray(idx, dtype=np.int64).reshape(-1)
+        given = real_array(idx)   # a float 1.5 was window 1, a bool mask windows 1, 0, 1: silently
+        if given is None or (given.size and given.dtype.kind not in "iu"):
+            raise ValueError(f"restart indices {shown(idx)} are invalid; valid: distinct integers 0..{self.num_envs - 1} "
+                             "(for a mask m: np.flatnonzero(m))")
+        idx = np.asarray(given, dtype=np.int64).reshape(-1)
         if idx.size == 0:   # nothing to start (the plans of no window are not built)
             return np.empty((0,) + self.single_observation_space.shape, np.float32)
         n = self.num_envs
@@ -339,9 +343,7 @@ def _num_threads(num_threads) -> int:
     top = numba.config.NUMBA_NUM_THREADS
     if num_threads is None:
         return top
-    if int(num_threads) != num_threads or not 1 <= num_threads <= top:
-        raise ValueError(f"num_threads={num_threads!r} is invalid; valid range: integer 1..{top} (numba's threads)")
-    return int(num_threads)
+    return check_number("num_threads", num_threads, Range(1, top, integer=True), " (numba's threads)")
 
 
 def _set_threads(k: int) -> None:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 __all__ = ["check_positive", "read_toml_file", "Range", "check_range", "check_regular_file", "shown", "real_array",
-           "real_number", "check_number", "check_number_fields"]
+           "real_number", "check_number", "check_number_fields", "YAML_NUMBER_NOTE"]
 
 
 @dataclass(frozen=True)
@@ -60,6 +60,10 @@ CRUISE_ALTITUDE_RANGE = Range(0.0, 500.0, "m", lo_open=True)
 HOVER_GAP_RANGE = Range(0.03, 1.0, "m")
 #: a route waypoint's height above home (``[[waypoints]] z_m``, a mission file's item altitude)
 ALT_RANGE = Range(0.0, 5000.0, "m above home")
+
+
+#: what a message adds for a number given as a string that reads as one (YAML 1.1, PyYAML's, reads 1e-4 as a string)
+YAML_NUMBER_NOTE = "a number, not a string (YAML 1.1 reads 1e-4 as a string: write 1.0e-4)"
 
 
 def window_ok(t0, t1, hi: float = math.inf) -> bool:

@@ -193,12 +193,12 @@ def make(name: str, ctx: PolicyContext | None = None, **kwargs) -> Policy:
     if base not in _REGISTRY or (colon and base not in _WITH_PATH):
         raise ValueError(f"policy={name!r} is invalid; valid values: {', '.join(available())} "
                          f"(or {':PATH, '.join(_WITH_PATH)}:PATH)")
-    if arg:
-        from pathlib import Path
-
-        if Path(arg).is_dir():
-            raise ValueError(f"RL model file {arg!r} is a folder; valid: a model file (as `dronewpt train` writes)")
-        if not Path(arg).is_file():
-            raise FileNotFoundError(f"RL model file {arg!r} does not exist")
+    if arg:   # (an oracle imitation .npz was named "RL model file"; a FIFO is refused without opening it)
+        from mission_sim.validation import check_regular_file
+        if base.startswith("oracle_imitation"):
+            check_regular_file(arg, "oracle imitation model file", "a model .npz (as "
+                               "benchmarks/train_oracle_imitation.py writes)")
+        else:
+            check_regular_file(arg, "RL model file", "a model file (as `dronewpt train` writes)")
         kwargs = {**kwargs, "path": arg}
     return _REGISTRY[base](ctx or PolicyContext(), **kwargs)

@@ -27,11 +27,13 @@ with several seeds (``train_seeds``) the mean over seeds with a t interval over 
 from __future__ import annotations
 
 import contextlib
+import os
 from dataclasses import dataclass
 
 import numpy as np
 
 from mission_sim.files import atomic_output
+from mission_sim.validation import Range, check_number
 
 from .stats import mean_ci, seed_ci
 from .threads import single_blas_thread
@@ -106,6 +108,28 @@ def _rollout(pol, venv, seeds):
     return rec, rew, info["t_stop_s"], last
 
 
+def check_episodes(episodes, seed) -> tuple[int, int]:
+    """``(episodes, seed)`` as ints when ``episodes`` is a whole number 1..100000 and the episode seeds ``seed ..
+    seed + episodes - 1`` are whole numbers in 0..2^32-1 (:func:`compare`'s and :func:`run_policies`'); else one
+    ``ValueError`` naming the value and its range (``run_policy(..., 0, ...)`` said "num_envs=0", 1.5 ran 1)."""
+    n = check_number("episodes", episodes, Range(1, 100_000, integer=True))
+    s = check_number("seed", seed, Range(0, 2**32 - n, integer=True),
+                     f" (episode seeds go up to seed + episodes - 1, episodes={n})" if n > 1 else "")
+    return n, s
+
+
+def _names(value, what: str) -> list:
+    """A list of names; one string is a comma-separated list, as the CLI's ``--policies`` / ``--scenarios``
+    (``compare(policies="step")`` ran the policies 's', 't', 'e', 'p': "policy='s' is invalid")."""
+    if isinstance(value, str):
+        return [v.strip() for v in value.split(",") if v.strip()]
+    try:
+        return list(value)
+    except TypeError:
+        raise ValueError(f"{what}={value!r} is invalid; valid: a list of names, or one comma-separated string") \
+            from None
+
+
 def _check_specs(specs) -> None:
     """Policies are given by name (a :func:`policies.make` spec); a policy object was an AttributeError deep inside."""
     for sp in specs:
@@ -122,10 +146,20 @@ def check_row_labels(policies, train_seeds=None) -> None:
         if p in seen:
             raise ValueError(f"policies lists {p!r} twice; valid: each policy once")
         seen.add(p)
-    for label in train_seeds or {}:
+    for label, specs in (train_seeds or {}).items():
         if label in seen:
             raise ValueError(f"train_seeds label {label!r} is also one of the policies; valid: a label that names no "
                              f"listed policy (the policies: {', '.join(map(str, policies))})")
+        models = {}
+        for sp in specs:   # the same model file twice made "2 seeds" with a zero-width interval
+            kind, colon, path = str(sp).partition(":")
+            if not (colon and os.path.isfile(path)):   # (a classical policy listed twice: the tests' fixture of a group)
+                continue
+            key = (kind, os.path.realpath(path))
+            if key in models:
+                raise ValueError(f"train_seeds {label!r} lists the model {sp!r} twice (also as {models[key]!r}); valid: "
+                                 "each model file once (a row over N seeds needs N models)")
+            models[key] = sp
 
 
 def run_policy(name: str, scenario: str, episodes: int, seed: int, config=None) -> EpisodeTraces:
@@ -146,10 +180,11 @@ def run_policies(names, scenario: str, episodes: int, seed: int, config=None, nu
     from . import make
     from .batched import BlockPolicy
 
+    names = _names(names, "names")
     _check_specs(names)
+    n, seed = check_episodes(episodes, seed)
     config = given_config(config)   # a dict of EnvConfig fields too (as the envs take it)
     names = list(dict.fromkeys(names))
-    n = int(episodes)
     venv = SbarChargingVectorEnv(num_envs=len(names) * n, scenario=scenario, config=config, num_threads=num_threads)
     try:
         pol = BlockPolicy([make(name, venv.policy_context) for name in names], n)
@@ -227,8 +262,8 @@ def compare(policies=DEFAULT_POLICIES, scenarios=DEFAULT_SCENARIOS, episodes: in
     are there, before waiting for the forked child (e.g. the frontier's rows, off the critical path)."""
     from envs.core import given_config
 
-    if int(episodes) != episodes or not 1 <= episodes <= 100_000:
-        raise ValueError(f"episodes={episodes!r} is invalid; valid range: integer 1..100000")
+    policies, scenarios = _names(policies, "policies"), _names(scenarios, "scenarios")
+    episodes, seed = check_episodes(episodes, seed)
     _check_specs(list(policies) + [sp for specs in (train_seeds or {}).values() for sp in specs])
     check_row_labels(policies, train_seeds)
     config = given_config(config)   # a dict of EnvConfig fields once here (the split, the child, run_policies)
@@ -562,7 +597,8 @@ def plot_frontier(rows, sweep, scenario: str, out_png, x: str = "overshoot_pct",
         ax.set_xlabel("overshoot after the stop over the true short-mode I2 [%]")
         ax.set_ylabel({"return": "episode return", "energy_after_stop_j": "energy after the stop [J]"}[y])
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=7)
+    if axes[0].get_legend_handles_labels()[0]:   # (none: only step / random / hysteresis rows and no frontier, where
+        axes[0].legend(fontsize=7)                # matplotlib warned "No artists with labels found" on stderr)
     fig.suptitle(f"{scenario}: means with 95 % intervals")
     fig.tight_layout()
     with atomic_output(out_png) as tmp:  # removed on failure (a full disk: the file named)

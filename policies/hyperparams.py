@@ -18,7 +18,7 @@ import inspect
 import json
 from pathlib import Path
 
-from mission_sim.validation import Range, check_range, check_regular_file
+from mission_sim.validation import YAML_NUMBER_NOTE, Range, check_range, check_regular_file
 
 __all__ = ["load_hyperparams", "parse_policy_kwargs", "check_hyperparams", "HP_RANGES"]
 
@@ -132,6 +132,16 @@ def check_hyperparams(hp: dict, algo_cls) -> None:
         _check_value(k, v, params[k].default)
 
 
+def _yaml_note(v) -> str:
+    """``; a number, not a string (YAML 1.1 ...)`` for a string that reads as a number (``learning_rate: 1e-4``
+    in a YAML file is the string "1e-4": "valid type: number" alone looked wrong to whoever wrote a number)."""
+    try:
+        float(v)
+    except (TypeError, ValueError):
+        return ""
+    return "; " + YAML_NUMBER_NOTE if isinstance(v, str) else ""
+
+
 def _check_value(k: str, v, default) -> None:
     """One hyperparameter against its default's type and :data:`HP_RANGES`."""
     key = k
@@ -145,7 +155,7 @@ def _check_value(k: str, v, default) -> None:
         if default is None and v is None:
             return
         kind = "integer" if isinstance(default, int) or k in HP_RANGES and HP_RANGES[k].integer else "number"
-        raise ValueError(f"{key}={v!r} is invalid; valid type: {kind}")
+        raise ValueError(f"{key}={v!r} is invalid; valid type: {kind}" + _yaml_note(v))
     rng = HP_RANGES.get(k, Range(-float("inf"), float("inf")) if not isinstance(default, int) else
                         Range(-_BIG, _BIG, integer=True))
     if not rng.contains(v):

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from mission_sim.contract import OBS_DIM, PolicyContext, action_to_duty
+from mission_sim.validation import Range, real_number
 
 from .inference import export_actor, load_ppo_actor
 
@@ -30,6 +31,7 @@ __all__ = ["RLPolicy", "PRETRAINED", "PRETRAINED_LAGRANGIAN", "load_meta", "ALGO
 PRETRAINED = Path(__file__).parent / "pretrained" / "rl_s0.zip"   # unconstrained PPO, seeds _s0.._s4 shipped
 PRETRAINED_LAGRANGIAN = Path(__file__).parent / "pretrained" / "ppo_lagrangian_s0.zip"   # seeds _s0.._s4 shipped
 ALGOS = ("ppo", "sac", "td3", "dqn")
+_PERIOD = Range(0.0, 1.0, "s", lo_open=True)   # a model's control period (the envs' dt_s is 1e-7..1e-2 s)
 
 
 
@@ -43,14 +45,29 @@ def load_meta(path) -> dict:
         raise FileNotFoundError(f"RL model metadata {str(meta_path)!r} not found (written by `dronewpt train`; for an "
                                 'SB3 model of your own, {"algo": "ppo", "control_period_s": 0.0001} in that file, with '
                                 '"obs_norm" if it was trained under VecNormalize: docs/rl.md, "From Python")')
-    meta = json.loads(meta_path.read_text())
+    try:   # a broken file named (it was json's "Expecting property name ..." alone, or a traceback)
+        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"RL model metadata {str(meta_path)!r} is not valid JSON ({exc}); valid: a JSON object "
+                         'such as {"algo": "ppo", "control_period_s": 0.0001}') from None
+    if not isinstance(meta, dict):
+        raise ValueError(f"RL model metadata {str(meta_path)!r} holds a JSON {type(meta).__name__}; valid: a JSON "
+                         'object such as {"algo": "ppo", "control_period_s": 0.0001}')
     if meta.get("algo") not in ALGOS:
         raise ValueError(f"algo={meta.get('algo')!r} in {meta_path} is invalid; valid values: {', '.join(ALGOS)}")
+    dt = real_number(meta.get("control_period_s"))
+    if dt is None or not _PERIOD.contains(dt):
+        raise ValueError(f"control_period_s={meta.get('control_period_s')!r} in {meta_path} is invalid; valid range: "
+                         f"{_PERIOD.text()} (the control period it was trained at, e.g. 0.0001)")
     return meta
 
 
 #: what reading a model zip that is not one (or is cut short, or lacks SB3's members) raises
 _UNREADABLE = (zipfile.BadZipFile, KeyError, EOFError, ValueError, RuntimeError)
+
+
+class _WrongAlgo(ValueError):
+    """The zip is another algorithm's than its JSON's ``algo`` (said as it is, not as an unreadable zip)."""
 
 
 def _unreadable(path, exc) -> ValueError:
@@ -92,6 +109,8 @@ class RLPolicy:
             fast_actor = load_ppo_actor(self.path, self.meta) if self.deterministic and fast else None
             self._actor = fast_actor if fast_actor is not None else \
                 (export_actor(self.model) if self.deterministic and fast else None)
+        except _WrongAlgo:
+            raise
         except _UNREADABLE as exc:   # not a zip, cut short, no data / policy.pth: was a traceback (BadZipFile, ...)
             raise _unreadable(self.path, exc) from None
         self.discrete = bool(self.meta.get("discrete", self.meta["algo"] == "dqn"))
@@ -122,6 +141,10 @@ class RLPolicy:
                 self._model = cls.load(str(self.path), device="cpu")
             except _UNREADABLE as exc:
                 raise _unreadable(self.path, exc) from None
+            except (AttributeError, TypeError) as exc:   # another algorithm's zip: SB3's AttributeError traceback
+                raise _WrongAlgo(f"RL model {str(self.path)!r} cannot be loaded as algo={self.meta['algo']!r} (what "
+                                 f"{self.path.with_suffix('.json').name} says: {type(exc).__name__}: {exc}); valid: "
+                                 f"the algorithm it was trained with, one of {', '.join(ALGOS)}") from None
         return self._model
 
     def reset(self, n: int = 1) -> None:

@@ -24,6 +24,7 @@ Writes into ``out_dir``:
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections.abc import Mapping
 from dataclasses import asdict, fields
@@ -32,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from mission_sim.files import atomic_output
+from mission_sim.validation import Range, check_number
 from mission_sim.train_options import ONLY_WITH, unused_option
 
 from .rl import ALGOS
@@ -176,6 +178,20 @@ def plot_learning_curve(monitor_csv, out_png, title: str, eval_curve=None) -> Pa
     return out_png
 
 
+#: train()'s whole-number options and their ranges (those of ``dronewpt train``'s --seed, --eval-episodes, ...)
+_COUNTS = (("seed", Range(0, 2**32 - 1, integer=True)), ("eval_episodes", Range(1, math.inf, integer=True)),
+           ("eval_every", Range(1, math.inf, integer=True)), ("checkpoint_every", Range(1, math.inf, integer=True)))
+
+
+def _check_counts(o: dict) -> None:
+    """train()'s ``seed``, ``eval_episodes``, ``eval_every``, ``checkpoint_every`` and ``lambda_lr`` (``o``: its
+    keyword arguments) in dronewpt train's ranges (seed 1.5 ran seed 1, eval_every=0 was taken, ...)."""
+    for key, rng in _COUNTS:
+        check_number(key, o[key], rng)
+    if o.get("lambda_lr") is not None:
+        check_number("lambda_lr", o["lambda_lr"], Range(0, math.inf, lo_open=True, hi_open=True))
+
+
 def _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra=None):
     import envs
     from mission_sim.contract import history_obs_dim
@@ -210,6 +226,9 @@ def _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, ex
                              "ppo / sac / td3 alone (the duty is the MPC's)")
     if residual and algo == "dqn":
         raise ValueError("algo='dqn' is invalid with residual=True; valid values: ppo, sac (a continuous correction)")
+    if x.get("action_filter") and algo == "dqn":   # (it trained, then stopped at "actions=0.13 is invalid; valid
+        raise ValueError(f"algo='dqn' is invalid with action_filter={x['action_filter']!r}; valid values: ppo, sac, "
+                         "td3 (a low-passed duty is not 0 or 1)")   # values: 0 (RM), 1 (SM)", outputs half written)
     envs.get_scenario(scenario)
 
 
@@ -406,6 +425,7 @@ def _spec(algo, timesteps, o: dict) -> dict:
     (defaults < file < ``hyperparams``), the default budget measured when asked for."""
     import envs
 
+    _check_counts(o)
     hp = dict(DEFAULT_HYPERPARAMS[algo])
     if o["hyperparams_file"] is not None:
         from .hyperparams import load_hyperparams

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from _cli_helpers import fake_follow
 from _flightlogs import log_path, tlog_records, write_tlog
 from mission_sim.config import load_config
 
@@ -364,16 +365,9 @@ def test_follow_places_the_pads_of_a_pads_file(tmp_path, monkeypatch):
     vehicle taking off 50 m from the pad was simulated as if the pad were where it took off. Now the frame is the
     file's, as in a streamed mission."""
     from mission_sim.cli import main
-    from mission_sim.mavlink import follow
     pads = tmp_path / "pads.csv"
     pads.write_text("lat,lon,hover_time_s\n-35.3620800,149.1658531,60\n")
-    seen = {}
-
-    def fake_follow(*a, **kw):
-        seen.update(kw)
-        return follow.FollowStats(positions=0, chunks=0, frames=0, wall_s=0.0, final_soc=None, home=kw["home"])
-    monkeypatch.setattr(follow, "follow", fake_follow)
-    monkeypatch.setattr(follow, "open_follow", lambda connect: type("C", (), {"close": lambda self: None})())
+    seen = fake_follow(monkeypatch)
     assert main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--pads", str(pads), "--connect", "none",
                  "--tlog", str(tmp_path / "f.tlog")]) == 0
     assert seen["home"] is not None

@@ -5,21 +5,8 @@ from __future__ import annotations
 
 import pytest
 
+from _cli_helpers import one_error_line as _one_error_line
 from mission_sim.cli import main
-
-
-def _one_error_line(capsys, argv) -> str:
-    """``main(argv)``: exit status 2, nothing on stdout, one line on stderr and no traceback (the line returned)."""
-    try:
-        rc = main(argv)
-    except SystemExit as exc:
-        rc = exc.code
-    cap = capsys.readouterr()
-    assert rc == 2, (rc, cap.err)
-    lines = cap.err.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in cap.err, cap.err
-    assert cap.out == "", cap.out
-    return lines[0]
 
 
 # ------------------------------------------------------------------ paper / netlist / export-controller --link

@@ -39,11 +39,16 @@ def _cmd_calibrate(args) -> int:
     from ..files import atomic_output
     from ..mavlink.calibrate import calibrate_log, drone_toml
     from ..mavlink.logs import read_log
-    from ..mavlink.replay import parse_window
+    from ..mavlink.replay import check_decoded, parse_window
     from ..validation import check_regular_file
     check_regular_file(args.log, "log", "a .tlog, .bin or .ulg file")  # a FIFO: refused without opening it
     if args.out.suffix.lower() != ".toml" or args.out.is_dir():
         raise CliError(f"--out {str(args.out)!r} is invalid; valid: a file name ending in .toml")
+    if args.mass is not None:   # 5000 kg was fitted and written as a [drone] TOML that mission --drone refuses
+        from ..config import PLAUSIBLE
+        rng = PLAUSIBLE["drone.mass_kg"]
+        if not rng.contains(args.mass):
+            raise CliError(f"--mass {args.mass:g} is invalid; valid range: {rng.text()} (the config's drone.mass_kg)")
     window = parse_window(args.window)
     sets = parse_set(args.set)
     other = [k for k in sets if not str(k).startswith("drone.")]   # (read into a config that only [drone] was taken from)
@@ -53,6 +58,7 @@ def _cmd_calibrate(args) -> int:
     cfg = config_from_dict(apply_overrides(load_config_dict(args.config), sets))
     out_dir = prepare_out_dir(args.out.parent, "--out folder")
     log = read_log(args.log)
+    check_decoded(log)   # an empty or text file: said as such, not as "no battery data"
     if not len(log.battery):
         raise CliError(f"{args.log.name}: the log has no battery data (no voltage and current in BAT / CURR / "
                        "SYS_STATUS / BATTERY_STATUS / battery_status); nothing to calibrate to")

@@ -298,7 +298,8 @@ def _add_compare(sub):
                         "first time)")
     _add_link_flag(p)
     p.add_argument("--format", choices=("table", "json"), default="table")
-    p.add_argument("--out", type=path_arg("--out"), default=Path("out/compare"), help="folder for the figures")
+    p.add_argument("--out", type=path_arg("--out"), default=None,
+                   help="folder for the figures (default out/compare; not with --no-plot)")
     p.add_argument("--no-plot", action="store_true", help="skip the figures")
     add_progress_flag(p)
     p.set_defaults(func=_cmd_compare)
@@ -384,6 +385,9 @@ def _check_compare(args, pols, scns, groups):
             raise CliError(f"--scenarios {s_!r} is invalid; valid values: {', '.join(SCENARIOS)}")
     if not 1 <= args.episodes <= 100_000:
         raise CliError(f"--episodes {args.episodes} is invalid; valid range: 1..100000")
+    if args.out is not None and args.no_plot:   # (it wrote nothing and said nothing)
+        raise CliError(f"--out {str(args.out)!r} is only used for the figures; valid: drop --no-plot, or drop --out")
+    args.out = Path("out/compare") if args.out is None else args.out
     if not 0 <= args.oracle_windows <= args.episodes:
         raise CliError(f"--oracle-windows {args.oracle_windows} is invalid; valid range: 0..{args.episodes} (--episodes)")
     if args.seed + args.episodes - 1 > 2**32 - 1:

@@ -281,22 +281,22 @@ def _add_telemetry(sub):
     p.add_argument("--connect", default="udpout:127.0.0.1:14550",
                    help="where to send (default udpout:127.0.0.1:14550; 'none' = only --tlog)")
     p.add_argument("--rate", type=positive_float("rate"), default=10.0, help="telemetry rate in Hz (default 10)")
-    p.add_argument("--speed", type=_mav_speed, default=1.0,
+    p.add_argument("--speed", type=_mav_speed, default=None,
                    help="simulated seconds per wall second, 0.001 .. inf (default 1 = real time; inf = as fast as "
-                   "possible)")
+                   "possible; not with --follow)")
     p.add_argument("--tlog", type=path_arg("--tlog"), default=None, help="also write the telemetry to this .tlog")
     p.add_argument("--home", default=None, metavar="LAT,LON,ALT",
                    help="where the pad frame's origin is (default: the home of the config's mission file, else the first "
                    "pad of its pads file, else ArduPilot SITL home, CMAC: --home=-35.363261,149.165230,584)")
     p.add_argument("--duration", type=positive_float("duration"), default=None, metavar="S",
-                   help="stream at most S simulated seconds (default: the whole mission)")
+                   help="stream at most S simulated seconds (default: the whole mission; not with --follow)")
     from .mission import add_plan_args
     add_plan_args(p, pads_dest="mission_pads")
     p.add_argument("--follow", default=None, metavar="udpin:HOST:PORT",
                    help="drive the simulation from a live vehicle's GLOBAL_POSITION_INT instead of the plan")
-    p.add_argument("--follow-time", type=float_arg("follow-time", positive=True, hi=7 * 86400), default=60.0,
+    p.add_argument("--follow-time", type=float_arg("follow-time", positive=True, hi=7 * 86400), default=None,
                    metavar="S", help="with --follow: stop after S wall seconds, at most 7 days (default 60)")
-    p.add_argument("--follow-idle", type=float_arg("follow-idle", positive=True, hi=86400), default=10.0, metavar="S",
+    p.add_argument("--follow-idle", type=float_arg("follow-idle", positive=True, hi=86400), default=None, metavar="S",
                    help="with --follow: stop after S seconds without a position once positions have come (before "
                         "the first, it waits up to --follow-time), at most a day (default 10)")
     p.add_argument("--sysid", type=int, default=1, metavar="ID",
@@ -310,9 +310,30 @@ def _add_telemetry(sub):
     p.set_defaults(func=_cmd_telemetry)
 
 
+#: telemetry's options that only one of its two modes reads: (option, default, with --follow?)
+_MODE_OPTIONS = (("follow_time", 60.0, True), ("follow_idle", 10.0, True), ("duration", None, False),
+                 ("speed", 1.0, False))
+
+
+def _telemetry_modes(args) -> None:
+    """An option the mode does not read is refused (``--follow-time`` without ``--follow``, ``--duration`` /
+    ``--speed`` with it: ignored before, exit 0); then the defaults of the ones not given."""
+    follows = args.follow is not None
+    for dest, default, with_follow in _MODE_OPTIONS:
+        value = getattr(args, dest)
+        if value is not None and with_follow != follows:
+            flag = "--" + dest.replace("_", "-")
+            why = ("is only used with --follow; valid: add --follow udpin:HOST:PORT, or drop " + flag if with_follow
+                   else "is not used with --follow (the live vehicle sets the pace and the length); valid: drop " + flag)
+            raise CliError(f"{flag} {value:g} {why}")
+        if value is None:
+            setattr(args, dest, default)
+
+
 def _cmd_telemetry(args) -> int:
     from ..mavlink import telemetry
     from ..mavlink.geodesy import parse_geo_point
+    _telemetry_modes(args)
     connect = None if str(args.connect).lower() == "none" else _resolve_connect(telemetry.check_connect(args.connect))
     if connect is None and args.tlog is None:
         raise CliError("--connect none needs --tlog FILE (nothing to send to)")

@@ -51,8 +51,25 @@ class LogParseError(NoPositionError):
     """pymavlink (or pyulog) failed on the log before any usable position: says what failed."""
 
 
+def check_decoded(log: FlightLog) -> None:
+    """:class:`NoPositionError` saying what the file is when not one good record was decoded from it (an empty file, a
+    text file, a log cut before its first record): "0 usable position sample(s)" said nothing of that."""
+    if log.errors or log.n_records > log.bad_frames:
+        return
+    try:
+        size = log.path.stat().st_size
+    except OSError:
+        size = -1
+    bad = f", {log.bad_frames} corrupt frame(s)" if log.bad_frames else ""
+    what = ("the file is empty (0 bytes)" if size == 0 else
+            f"no readable record in its {size} bytes{bad}: cut short before its first record, or not a flight log")
+    raise NoPositionError(f"{log.path.name}: no usable position (GPS fix >= 3): {what}; valid: a MAVLink .tlog, a "
+                          "DataFlash .bin or a PX4 .ulg")
+
+
 def _no_position(log: FlightLog, detail: str) -> NoPositionError:
     """The error for a log without enough positions: the parser's own error first if it failed."""
+    check_decoded(log)
     if log.errors:
         return LogParseError(f"{log.path.name}: the log could not be parsed: {log.errors[0]} "
                              f"({log.n_records} records decoded before it{detail})")

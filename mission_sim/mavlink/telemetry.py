@@ -102,9 +102,10 @@ def check_connect(text: str, name: str = "--connect") -> str:
     """Validate a pymavlink connection string of the supported kinds; ``ValueError`` names the format."""
     kind, _, rest = str(text).partition(":")
     host, _, port = rest.rpartition(":")
-    if kind not in ("udpout", "udpin", "udp", "tcp", "tcpin") or not host or not port.isdigit() \
-            or not 0 < int(port) < 65536:
+    if kind not in ("udpout", "udpin", "udp", "tcp", "tcpin") or not host or not port.lstrip("-").isdigit():
         raise ValueError(f"{name} {text!r} is invalid; valid format: {CONNECT_FORMAT}")
+    if not 0 < int(port) < 65536:   # (the format's message named no range: a typo'd port looked like a bad format)
+        raise ValueError(f"{name} {text!r} is invalid: port {int(port)}; valid range: 1..65535")
     return text
 
 
