@@ -335,3 +335,22 @@ def test_a_file_that_is_not_a_flight_log_is_named_as_such(capsys, tmp_path, comm
     line = _one_error_line(capsys, [command, str(p), "--no-plot"] + out)
     assert line == (f"dronewpt {command}: error: {name}: no usable position (GPS fix >= 3): {what}; valid: a MAVLink "
                     ".tlog, a DataFlash .bin or a PX4 .ulg")
+
+
+# ------------------------------------------------------------------ review of this branch (newbie2's mend)
+@pytest.mark.parametrize("port", ["--5", "²", "٣", "+5", " 5"])
+def test_telemetry_port_not_an_integer_is_the_format_message(capsys, tmp_path, port):
+    """``--connect udpout:127.0.0.1:--5`` said "invalid literal for int() with base 10: '--5'" (``lstrip('-')``
+    let it through), ``²`` passed ``str.isdigit``; both are the format's one line, as on main."""
+    from mission_sim.mavlink.telemetry import CONNECT_FORMAT
+    spec = f"udpout:127.0.0.1:{port}"
+    line = _one_error_line(capsys, ["telemetry", "--no-progress", "--tlog", str(tmp_path / "x.tlog"),
+                                    "--connect", spec])
+    assert line == f"dronewpt telemetry: error: --connect {spec!r} is invalid; valid format: {CONNECT_FORMAT}"
+    assert not (tmp_path / "x.tlog").exists()
+
+
+def test_telemetry_negative_port_names_the_range(capsys, tmp_path):
+    line = _one_error_line(capsys, ["telemetry", "--no-progress", "--tlog", str(tmp_path / "x.tlog"),
+                                    "--connect", "udpout:127.0.0.1:-5"])
+    assert line == "dronewpt telemetry: error: --connect 'udpout:127.0.0.1:-5' is invalid: port -5; valid range: 1..65535"
