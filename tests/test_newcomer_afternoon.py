@@ -306,19 +306,6 @@ def test_telemetry_mode_defaults_unchanged(monkeypatch, tmp_path, capsys):
                                                                  ("duration", None), ("speed", 1.0)]
 
 
-# ------------------------------------------------------------------ calibrate --mass
-@pytest.mark.parametrize("mass", ["5000", "0.005"])
-def test_calibrate_mass_has_the_configs_range(capsys, tmp_path, mass):
-    """``--mass 5000`` was fitted and written as a [drone] TOML that ``mission --drone`` then refused
-    (``drone.mass_kg=5000.0 is invalid; valid range: [0.01, 1000] kg``); now refused before the log is read."""
-    out = tmp_path / "cal" / "drone.toml"
-    line = _one_error_line(capsys, ["calibrate", str(LOGS / "dronekit-la-testdata_log171.bin"), "--no-plot",
-                                    "--out", str(out), "--mass", mass])
-    assert line == (f"dronewpt calibrate: error: --mass {float(mass):g} is invalid; valid range: [0.01, 1000] kg "
-                    "(the config's drone.mass_kg)")
-    assert not out.parent.exists()
-
-
 # ------------------------------------------------------------------ a file that is not a flight log
 @pytest.mark.parametrize("command", ["replay", "calibrate"])
 @pytest.mark.parametrize("name, data, what", [
@@ -354,3 +341,30 @@ def test_telemetry_negative_port_names_the_range(capsys, tmp_path):
     line = _one_error_line(capsys, ["telemetry", "--no-progress", "--tlog", str(tmp_path / "x.tlog"),
                                     "--connect", "udpout:127.0.0.1:-5"])
     assert line == "dronewpt telemetry: error: --connect 'udpout:127.0.0.1:-5' is invalid: port -5; valid range: 1..65535"
+
+
+@pytest.mark.parametrize("mass", [5000, 0.0, -1.0, float("nan")])
+def test_calibrate_mass_range_is_the_librarys(mass):
+    """``calibrate_log(log, DroneParams(), mass_kg=5000)`` fitted (the range lived only in the CLI)."""
+    from mission_sim.mavlink.calibrate import calibrate_log, fit_drone
+    from mission_sim.mavlink.logs import read_log
+    from mission_sim.world.power import DroneParams
+    text = f"mass_kg={mass!r} is invalid; valid range: [0.01, 1000] kg (the config's drone.mass_kg)"
+    with pytest.raises(ValueError) as exc:
+        calibrate_log(read_log(LOGS / "dronekit-la-testdata_log171.bin"), DroneParams(), mass_kg=mass)
+    assert str(exc.value) == text
+    with pytest.raises(ValueError) as exc:
+        fit_drone(None, DroneParams(), mass_kg=mass)   # refused before the samples are looked at
+    assert str(exc.value) == text
+
+
+@pytest.mark.parametrize("mass", ["0", "5000", "0.005"])
+def test_calibrate_cli_mass_zero_has_the_same_range(capsys, tmp_path, mass):
+    """``--mass 5000`` was fitted and written as a [drone] TOML that ``mission --drone`` then refused; ``--mass 0``
+    said argparse's "(0, inf)": now the library's one range, before the log is read."""
+    out = tmp_path / "cal" / "drone.toml"
+    line = _one_error_line(capsys, ["calibrate", str(LOGS / "dronekit-la-testdata_log171.bin"), "--no-plot",
+                                    "--out", str(out), "--mass", mass])
+    assert line == (f"dronewpt calibrate: error: --mass={float(mass)!r} is invalid; valid range: [0.01, 1000] kg "
+                    "(the config's drone.mass_kg)")
+    assert not out.parent.exists()
