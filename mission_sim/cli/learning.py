@@ -183,6 +183,10 @@ def _check_train(args):
             raise CliError(f"{flag} {v} is invalid; valid range: >= {lo}")
     if not 0.0 <= args.action_filter < 1.0:
         raise CliError(f"--action-filter {args.action_filter} is invalid; valid range: [0, 1)")
+    from ..train_options import dqn_with_action_filter
+    if dqn_with_action_filter(vars(args)):   # (before: an empty --out folder left, the message in Python's words)
+        raise CliError(f"--algo dqn is invalid with --action-filter {args.action_filter:g}; valid: --algo ppo, sac or "
+                       "td3 (a low-passed duty is not 0 or 1), or drop --action-filter")
     if args.smooth_penalty < 0.0:
         raise CliError(f"--smooth-penalty {args.smooth_penalty} is invalid; valid range: >= 0")
     if args.probe_episodes is not None and not 0 <= args.probe_episodes <= 1024:
