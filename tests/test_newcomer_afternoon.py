@@ -374,3 +374,22 @@ def test_calibrate_cli_mass_zero_has_the_same_range(capsys, tmp_path, mass):
     assert line == (f"dronewpt calibrate: error: --mass={float(mass)!r} is invalid; valid range: [0.01, 1000] kg "
                     "(the config's drone.mass_kg)")
     assert not out.parent.exists()
+
+
+def test_compare_cli_reads_the_librarys_episodes_and_seed_ranges(capsys, monkeypatch):
+    """``--episodes`` / ``--seed`` were checked by the CLI's own copy of ``policies.compare.check_episodes``' ranges
+    (1..100000, seed + episodes - 1 <= 2^32 - 1): now the one table (changed here, both follow; same messages)."""
+    import policies.compare as pc
+    from mission_sim.validation import Range
+    monkeypatch.setattr(pc, "EPISODES", Range(1, 5, integer=True))
+    monkeypatch.setattr(pc, "seed_range", lambda n: Range(0, 10 - n, integer=True))
+    base = ["compare", "--policies", "step", "--scenarios", "nominal", "--no-plot", "--no-frontier"]
+    assert _one_error_line(capsys, base + ["--episodes", "6"]) == ("dronewpt compare: error: --episodes 6 is invalid; "
+                                                                   "valid range: 1..5")
+    assert _one_error_line(capsys, base + ["--episodes", "2", "--seed", "9"]) == (
+        "dronewpt compare: error: --seed 9 is invalid with --episodes 2; valid range: 0 .. 8 (episode seeds go up to "
+        "seed + episodes - 1)")
+    with pytest.raises(ValueError, match=r"^episodes=6 is invalid; valid range: integer 1\.\.5$"):
+        pc.check_episodes(6, 0)
+    with pytest.raises(ValueError, match=r"^seed=9 is invalid; valid range: integer 0\.\.8 "):
+        pc.check_episodes(2, 9)
