@@ -393,3 +393,36 @@ def test_compare_cli_reads_the_librarys_episodes_and_seed_ranges(capsys, monkeyp
         pc.check_episodes(6, 0)
     with pytest.raises(ValueError, match=r"^seed=9 is invalid; valid range: integer 0\.\.8 "):
         pc.check_episodes(2, 9)
+
+
+def test_telemetry_follow_time_and_idle_values_reach_follow(monkeypatch, tmp_path):
+    """Given with --follow, --follow-time / --follow-idle reach ``follow()`` (not only their defaults)."""
+    seen = fake_follow(monkeypatch)
+    assert main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--connect", "none", "--follow-time", "7",
+                 "--follow-idle", "2.5", "--tlog", str(tmp_path / "f.tlog")]) == 0
+    assert (seen["max_wall_s"], seen["idle_timeout_s"]) == (7.0, 2.5)
+
+
+@pytest.mark.parametrize("idx", [[np.int64(0), np.int64(2)], np.array([0, 2], np.int64)])
+def test_restart_takes_numpy_integers_as_plain_ints(idx):
+    """A list of np.int64 and an int64 array restart the same windows, with the same observations, as [0, 2]."""
+    from envs import SbarChargingVectorEnv
+    got = []
+    for i in ([0, 2], idx):
+        v = SbarChargingVectorEnv(3, "nominal", config={"link_model": "envelope"})
+        v.reset(seed=1)
+        v.step(np.full(3, 0.5, np.float32))
+        got.append((v.restart(i), v.parts.plant.state.copy()))
+        v.close()
+    assert got[0][0].shape == (2, 8)
+    assert np.array_equal(got[0][0], got[1][0]) and np.array_equal(got[0][1], got[1][1])
+
+
+def test_sb3_adapter_reset_seed_numpy_integer():
+    """``SbarSB3VecEnv(reset_seed=np.int64(3))``: seed 3, a Python int, and the same first observations as 3."""
+    from envs.sb3_vec import SbarSB3VecEnv
+    a, b = SbarSB3VecEnv(2, reset_seed=np.int64(3)), SbarSB3VecEnv(2, reset_seed=3)
+    assert a.reset_seed == 3 and type(a.reset_seed) is int
+    assert np.array_equal(a.reset(), b.reset())
+    a.close()
+    b.close()
