@@ -1,6 +1,8 @@
 """A demanding newcomer's afternoon (2026-11-27): an RL researcher (README, docs/rl.md, docs/envs.md) and a MAVLink
-integrator (docs/mavlink.md); docs/robustness.md, "A newcomer's afternoon (2026-11-27)". 51 of the 53 tests fail on
-``main`` (875a414); the other 2 guard what worked.
+integrator (docs/mavlink.md); docs/robustness.md, "A newcomer's afternoon (2026-11-27)". 51 of the first 53 tests fail
+on ``main`` (875a414); the other 2 guard what worked. The review's mend (the last section) added 18: 11 failed on the
+branch before it (a port '--5' / '²' / '٣', calibrate's mass range from Python and --mass 0, compare's one table of
+episodes and seeds), 7 guard (numpy integers, --follow-time's value, a negative port).
 
 Probes fixed here:
 
