@@ -41,11 +41,11 @@ ARGS = ["compare", "--episodes", "100", "--scenarios", "nominal", "--no-plot", "
 PACKAGES = ("wpt_receiver", "mission_sim", "envs", "policies")
 
 
-def _run(tree: Path, out: Path) -> tuple[float, float, str]:
+def _run(tree: Path) -> tuple[float, float, str]:
     """(wall s, CPU s, stdout) of one command on ``tree`` in a fresh process."""
     env = {**os.environ, "PYTHONPATH": str(tree)}
     c0, t0 = _cpu_children(), time.perf_counter()
-    r = subprocess.run([*_cli(), *ARGS, "--out", str(out)], cwd=tree, env=env, capture_output=True, text=True)
+    r = subprocess.run([*_cli(), *ARGS], cwd=tree, env=env, capture_output=True, text=True)
     wall, cpu = time.perf_counter() - t0, _cpu_children() - c0
     if r.returncode != 0:
         raise SystemExit(f"{tree}: dronewpt compare failed ({r.returncode}): {r.stderr.strip()[-400:]}")
@@ -65,11 +65,11 @@ def end_to_end(repeat: int, peer: Path | None) -> dict:
     text = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name, tree in trees.items():   # warm-up round (numba's cache, disk cache, .pyc)
-            text[name] = _run(tree, Path(tmp) / "c")[2]
+            text[name] = _run(tree)[2]
         load0 = os.getloadavg()
         for _ in range(repeat):
             for name, tree in trees.items():
-                w, c, _ = _run(tree, Path(tmp) / "c")
+                w, c, _ = _run(tree)
                 res[name][0].append(w)
                 res[name][1].append(c)
         load1 = os.getloadavg()
@@ -128,7 +128,7 @@ def timeline(tree: Path = ROOT) -> dict:
     done, when the child's result arrives and at the end; the child's CPU time."""
     env = {**os.environ, "PYTHONPATH": str(tree)}
     with tempfile.TemporaryDirectory() as tmp:
-        r = subprocess.run([sys.executable, "-c", _TIMELINE, *ARGS, "--out", f"{tmp}/c"], cwd=tree, env=env,
+        r = subprocess.run([sys.executable, "-c", _TIMELINE, *ARGS], cwd=tree, env=env,
                            check=True, capture_output=True, text=True)
     return {"tree": str(tree), **json.loads(r.stdout.splitlines()[-1])}
 

@@ -143,7 +143,7 @@ def _commands(tmp: str, compare: str, links=(None,)) -> dict:
         for link in links:
             name = f"dronewpt compare ({compare}{'' if link is None else ', --link ' + link})"
             cmds[name] = [*cli, "compare", "--episodes", "100", "--scenarios", "nominal", "--no-plot", "--no-progress",
-                          "--out", f"{tmp}/c", *extra, *([] if link is None else ["--link", link])]
+                          *extra, *([] if link is None else ["--link", link])]
     return cmds
 
 

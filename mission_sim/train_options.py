@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-__all__ = ["ONLY_WITH", "unused_option"]
+__all__ = ["ONLY_WITH", "unused_option", "dqn_with_action_filter"]
 
 #: train's options that have an effect only with another one: {option: the option it needs}. One given (not None)
 #: without it is refused, by ``train()`` (``ValueError``) and ``dronewpt train`` (exit 2) alike (:func:`unused_option`)
@@ -24,3 +24,10 @@ def unused_option(opts: Mapping) -> tuple[str, str] | None:
         if opts.get(opt) is not None and not opts.get(needs):
             return opt, needs
     return None
+
+
+def dqn_with_action_filter(opts: Mapping) -> bool:
+    """Whether ``opts`` asks for ``algo`` "dqn" with an ``action_filter``: a low-passed duty is not 0 or 1 (it trained,
+    wrote part of its outputs, then stopped at the discrete env's "actions=0.13 is invalid"). One rule for
+    ``train()`` (``ValueError``) and ``dronewpt train`` (exit 2, before ``--out`` is made)."""
+    return opts.get("algo") == "dqn" and bool(opts.get("action_filter"))

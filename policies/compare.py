@@ -108,12 +108,21 @@ def _rollout(pol, venv, seeds):
     return rec, rew, info["t_stop_s"], last
 
 
+#: episodes per scenario of :func:`compare` / :func:`run_policy` and ``dronewpt compare --episodes`` (one table)
+EPISODES = Range(1, 100_000, integer=True)
+
+
+def seed_range(episodes: int) -> Range:
+    """The seeds whose episode seeds ``seed .. seed + episodes - 1`` stay in numpy's 0..2^32-1 (``--seed`` too)."""
+    return Range(0, 2**32 - episodes, integer=True)
+
+
 def check_episodes(episodes, seed) -> tuple[int, int]:
     """``(episodes, seed)`` as ints when ``episodes`` is a whole number 1..100000 and the episode seeds ``seed ..
     seed + episodes - 1`` are whole numbers in 0..2^32-1 (:func:`compare`'s and :func:`run_policies`'); else one
     ``ValueError`` naming the value and its range (``run_policy(..., 0, ...)`` said "num_envs=0", 1.5 ran 1)."""
-    n = check_number("episodes", episodes, Range(1, 100_000, integer=True))
-    s = check_number("seed", seed, Range(0, 2**32 - n, integer=True),
+    n = check_number("episodes", episodes, EPISODES)
+    s = check_number("seed", seed, seed_range(n),
                      f" (episode seeds go up to seed + episodes - 1, episodes={n})" if n > 1 else "")
     return n, s
 

@@ -195,6 +195,7 @@ def _check_counts(o: dict) -> None:
 def _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra=None):
     import envs
     from mission_sim.contract import history_obs_dim
+    from mission_sim.train_options import dqn_with_action_filter
 
     x = extra or {}
     if algo not in ALGOS:
@@ -226,9 +227,9 @@ def _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, ex
                              "ppo / sac / td3 alone (the duty is the MPC's)")
     if residual and algo == "dqn":
         raise ValueError("algo='dqn' is invalid with residual=True; valid values: ppo, sac (a continuous correction)")
-    if x.get("action_filter") and algo == "dqn":   # (it trained, then stopped at "actions=0.13 is invalid; valid
+    if dqn_with_action_filter({"algo": algo, **x}):
         raise ValueError(f"algo='dqn' is invalid with action_filter={x['action_filter']!r}; valid values: ppo, sac, "
-                         "td3 (a low-passed duty is not 0 or 1)")   # values: 0 (RM), 1 (SM)", outputs half written)
+                         "td3 (a low-passed duty is not 0 or 1)")
     envs.get_scenario(scenario)
 
 

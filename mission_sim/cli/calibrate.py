@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .common import CliError, parse_set, path_arg, positive_float, prepare_out_dir
+from .common import CliError, finite_float, parse_set, path_arg, prepare_out_dir
 
 
 def _add_calibrate(sub):
@@ -19,7 +19,7 @@ def _add_calibrate(sub):
     p.add_argument("log", type=path_arg("log"), help="flight log with battery voltage and current: .tlog, .bin or .ulg")
     p.add_argument("--out", type=path_arg("--out"), default=Path("out/calibrate/drone.toml"),
                    help="the [drone] TOML to write (default out/calibrate/drone.toml); the report goes in its folder")
-    p.add_argument("--mass", type=positive_float("mass"), default=None, metavar="KG",
+    p.add_argument("--mass", type=finite_float("mass"), default=None, metavar="KG",
                    help="the vehicle's weighed mass: fixed, and the figure of merit fitted (default: the mass is "
                         "fitted as an equivalent mass, the figure of merit held near 0.6)")
     p.add_argument("--segment", type=int, default=None, metavar="N",
@@ -37,18 +37,15 @@ def _add_calibrate(sub):
 def _cmd_calibrate(args) -> int:
     from ..config import apply_overrides, config_from_dict, load_config_dict
     from ..files import atomic_output
-    from ..mavlink.calibrate import calibrate_log, drone_toml
+    from ..mavlink.calibrate import calibrate_log, check_mass, drone_toml
     from ..mavlink.logs import read_log
     from ..mavlink.replay import check_decoded, parse_window
     from ..validation import check_regular_file
     check_regular_file(args.log, "log", "a .tlog, .bin or .ulg file")  # a FIFO: refused without opening it
     if args.out.suffix.lower() != ".toml" or args.out.is_dir():
         raise CliError(f"--out {str(args.out)!r} is invalid; valid: a file name ending in .toml")
-    if args.mass is not None:   # 5000 kg was fitted and written as a [drone] TOML that mission --drone refuses
-        from ..config import PLAUSIBLE
-        rng = PLAUSIBLE["drone.mass_kg"]
-        if not rng.contains(args.mass):
-            raise CliError(f"--mass {args.mass:g} is invalid; valid range: {rng.text()} (the config's drone.mass_kg)")
+    if args.mass is not None:   # the library's range, said before the log is read
+        check_mass(args.mass, "--mass")
     window = parse_window(args.window)
     sets = parse_set(args.set)
     other = [k for k in sets if not str(k).startswith("drone.")]   # (read into a config that only [drone] was taken from)

@@ -183,6 +183,10 @@ def _check_train(args):
             raise CliError(f"{flag} {v} is invalid; valid range: >= {lo}")
     if not 0.0 <= args.action_filter < 1.0:
         raise CliError(f"--action-filter {args.action_filter} is invalid; valid range: [0, 1)")
+    from ..train_options import dqn_with_action_filter
+    if dqn_with_action_filter(vars(args)):   # (before: an empty --out folder left, the message in Python's words)
+        raise CliError(f"--algo dqn is invalid with --action-filter {args.action_filter:g}; valid: --algo ppo, sac or "
+                       "td3 (a low-passed duty is not 0 or 1), or drop --action-filter")
     if args.smooth_penalty < 0.0:
         raise CliError(f"--smooth-penalty {args.smooth_penalty} is invalid; valid range: >= 0")
     if args.probe_episodes is not None and not 0 <= args.probe_episodes <= 1024:
@@ -372,7 +376,7 @@ def _shipped_seed_rows(pols: tuple):
 def _check_compare(args, pols, scns, groups):
     from envs import SCENARIOS
     from policies import available
-    from policies.compare import check_row_labels
+    from policies.compare import EPISODES, check_row_labels, seed_range
     try:
         check_row_labels(pols, groups)
     except ValueError as exc:
@@ -383,16 +387,17 @@ def _check_compare(args, pols, scns, groups):
     for s_ in scns:
         if s_ not in SCENARIOS:
             raise CliError(f"--scenarios {s_!r} is invalid; valid values: {', '.join(SCENARIOS)}")
-    if not 1 <= args.episodes <= 100_000:
-        raise CliError(f"--episodes {args.episodes} is invalid; valid range: 1..100000")
+    if not EPISODES.contains(args.episodes):   # (policies.compare's ranges: one table, read at the call)
+        raise CliError(f"--episodes {args.episodes} is invalid; valid range: {EPISODES.lo:g}..{EPISODES.hi:g}")
     if args.out is not None and args.no_plot:   # (it wrote nothing and said nothing)
         raise CliError(f"--out {str(args.out)!r} is only used for the figures; valid: drop --no-plot, or drop --out")
     args.out = Path("out/compare") if args.out is None else args.out
     if not 0 <= args.oracle_windows <= args.episodes:
         raise CliError(f"--oracle-windows {args.oracle_windows} is invalid; valid range: 0..{args.episodes} (--episodes)")
-    if args.seed + args.episodes - 1 > 2**32 - 1:
+    seeds = seed_range(args.episodes)
+    if not seeds.contains(args.seed):
         raise CliError(f"--seed {args.seed} is invalid with --episodes {args.episodes}; valid range: "
-                       f"0 .. {2**32 - args.episodes} (episode seeds go up to seed + episodes - 1)")
+                       f"{seeds.lo:g} .. {seeds.hi:.0f} (episode seeds go up to seed + episodes - 1)")
 
 
 def _listed(text: str, flag: str) -> tuple:

@@ -47,7 +47,7 @@ from ..world.power import DroneParams, propulsion_power_w
 from .logs import FlightLog
 from .replay import AIRBORNE_M, _in_periods, replay_span, track_from_log
 
-__all__ = ["NoBatteryError", "CalibrationSamples", "Calibration", "calibration_samples", "fit_drone",
+__all__ = ["check_mass", "NoBatteryError", "CalibrationSamples", "Calibration", "calibration_samples", "fit_drone",
            "calibrate_log", "heldout_energy", "drone_toml", "read_drone_toml", "BOUNDS", "TRAIN_FRACTION"]
 
 GRID_DT_S = 0.2
@@ -158,11 +158,23 @@ def _residuals(x, names, base, air, dis, priors, scale):
     return np.concatenate(r)
 
 
+def check_mass(mass_kg, key: str = "mass_kg"):
+    """A weighed mass (``--mass``) as a float inside the config's ``drone.mass_kg`` range (one source of the range:
+    5000 kg was fitted and written as a [drone] TOML that ``mission --drone`` refused); ``ValueError`` naming
+    ``key``, the value and the range."""
+    from ..config import PLAUSIBLE
+    from ..validation import check_number
+    return check_number(key, mass_kg, PLAUSIBLE["drone.mass_kg"], " (the config's drone.mass_kg)")
+
+
 def fit_drone(samples: CalibrationSamples, base: DroneParams, mass_kg: float | None = None):
     """Least-squares fit (robust loss) of the drone parameters to the training samples; returns
-    (fitted :class:`DroneParams`, scipy result, priors used). ``mass_kg``: fix the mass (module docstring)."""
+    (fitted :class:`DroneParams`, scipy result, priors used). ``mass_kg``: fix the mass (module docstring,
+    :func:`check_mass`)."""
     from scipy.optimize import least_squares
 
+    if mass_kg is not None:
+        mass_kg = check_mass(mass_kg)
     tab = samples.table[samples.table["train"]]
     air, dis = tab[tab["airborne"]], tab[tab["disarmed"]]
     if mass_kg is not None:
@@ -204,6 +216,8 @@ def _rel(model, logged):
 def calibrate_log(log: FlightLog, base: DroneParams, mass_kg: float | None = None, window=None,
                   segment=None) -> Calibration:
     """Samples, fit and report of one log (module docstring); ``base`` the config's drone."""
+    if mass_kg is not None:
+        check_mass(mass_kg)   # before the samples are built
     samples = calibration_samples(log, window, segment)
     drone, res, priors = fit_drone(samples, base, mass_kg)
     tab = samples.table

@@ -53,6 +53,7 @@ Every network loop here is bounded in both message count and wall time.
 from __future__ import annotations
 
 import math
+import re
 import struct
 import time
 from dataclasses import dataclass
@@ -102,7 +103,7 @@ def check_connect(text: str, name: str = "--connect") -> str:
     """Validate a pymavlink connection string of the supported kinds; ``ValueError`` names the format."""
     kind, _, rest = str(text).partition(":")
     host, _, port = rest.rpartition(":")
-    if kind not in ("udpout", "udpin", "udp", "tcp", "tcpin") or not host or not port.lstrip("-").isdigit():
+    if kind not in ("udpout", "udpin", "udp", "tcp", "tcpin") or not host or re.fullmatch(r"-?[0-9]+", port) is None:
         raise ValueError(f"{name} {text!r} is invalid; valid format: {CONNECT_FORMAT}")
     if not 0 < int(port) < 65536:   # (the format's message named no range: a typo'd port looked like a bad format)
         raise ValueError(f"{name} {text!r} is invalid: port {int(port)}; valid range: 1..65535")
