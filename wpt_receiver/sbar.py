@@ -55,9 +55,11 @@ def duty_from_v2_clipped(v2_v, vl_v: float):
     """Like :func:`duty_from_v2` but saturates ``v2_v`` into ``[0, (4/pi) VL]`` (no errors).
 
     This is what a controller does with a command outside the actuator's range. Python floats in
-    give a float out by the same arithmetic without numpy's per-call overhead (n = 1 loops).
+    give a float out by the same arithmetic without numpy's per-call overhead (n = 1 loops); ``vl_v = 0``
+    takes numpy's path, as an array does (IEEE division, a RuntimeWarning), not Python's ZeroDivisionError.
+    A NaN ``v2_v`` stays NaN (a mission refuses a policy's NaN duty by name); the exported C gives d = 0.
     """
-    if type(v2_v) is float and type(vl_v) is float:
+    if type(v2_v) is float and type(vl_v) is float and vl_v != 0.0:
         s = min(max(1.0 - v2_v / (_FOUR_OVER_PI * vl_v), 0.0), 1.0)
         return float((2.0 / np.pi) * np.arcsin(s))
     v = np.asarray(v2_v, dtype=float)
