@@ -1,0 +1,96 @@
+"""A demanding power-electronics newcomer's pass (2026-11-27 afternoon): the controller's inputs and the SBAR
+mapping from Python, and ``export-controller`` with options inside its ranges. Each test failed on main."""
+
+import math
+import re
+import warnings
+
+import numpy as np
+import pytest
+
+from wpt_receiver import TABLE_I, InverseModelController, LowPassFilter, duty_from_v2_clipped
+from wpt_receiver.envelope import coefficients
+
+
+# ------------------------------------------------------------------ the filter Q and the control period
+@pytest.mark.parametrize("tau", [1e300, 1e-300, 0.2, 9e-7, True])
+def test_filter_time_constant_has_export_controllers_range(tau):
+    """tau_s = 1e300 or 1e-300 gave a controller whose duty was NaN, without a word (the range was (0, inf));
+    ``True`` was taken as 1 s. The range is ``export-controller --lpf-tau``'s."""
+    with pytest.raises(ValueError, match=rf"^tau_s={re.escape(repr(tau))} is invalid; valid range: \[1e-06, 0.1\] s$"):
+        LowPassFilter(tau)
+    LowPassFilter(1e-6), LowPassFilter(0.1)                                   # the ends are valid
+
+
+@pytest.mark.parametrize("order", [True, None])
+def test_filter_order_refuses_a_bool_and_none(order):
+    """``order=True`` built a first-order filter; ``None`` was int()'s TypeError."""
+    with pytest.raises(ValueError, match=rf"^order={re.escape(repr(order))} is invalid; valid range: integer 1..8"):
+        LowPassFilter(2e-4, order)
+
+
+def test_control_period_above_one_second_is_refused():
+    """1e300 s gave a NaN controller (expm overflowed) and d_short = nan."""
+    with pytest.raises(ValueError, match=r"^control_period_s=1e\+300 is invalid; valid range: \(0, 1\] s$"):
+        InverseModelController(TABLE_I, control_period_s=1e300)
+    p, wlm = TABLE_I, TABLE_I.omega_rad_s * TABLE_I.lm_h              # 1 s is valid: reset is eq. 4's steady state
+    v2 = (wlm * p.v1_amp_v - 11.2 * (p.r1_ohm * p.r2_ohm + wlm ** 2)) / p.r1_ohm
+    assert InverseModelController(TABLE_I, control_period_s=1.0).reset(11.2) == pytest.approx(
+        [duty_from_v2_clipped(v2, p.vl_v)], rel=1e-9)
+
+
+def _dc_gain(ctl):
+    ad, bd, cd, dd = ctl.discrete_ss
+    return float(cd @ np.linalg.solve(np.eye(len(ad)) - ad, bd) + dd)
+
+
+def test_controller_whose_discretisation_lost_float64_is_refused():
+    """A fast, high-order Q (tau 3 us, order 6, 0.1 ms: all inside export-controller's ranges) gave a controller
+    whose steady V2* was 14 % off 1/G22(0); tau 1 us order 6 at the rectifier period 229 % off (exported with
+    exit 0). The check: the discrete DC gain against H(0) = -wn^2 / beta2, which holds to 1e-12 at the defaults."""
+    c = coefficients(TABLE_I)
+    h0 = -c.omega_n ** 2 / c.beta2
+    assert _dc_gain(InverseModelController(TABLE_I)) == pytest.approx(h0, rel=1e-12)
+    with pytest.raises(ValueError, match=r"^LowPassFilter\(tau_s=3e-06, order=6\) at control_period_s=0.0001 is "
+                                         r"invalid: float64 loses the discretised controller \(DC gain off by 0\.141, "
+                                         r"limit 0\.001\); valid: a larger tau_s or a lower order"):
+        InverseModelController(TABLE_I, 1e-4, LowPassFilter(3e-6, 6))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                  # refused by name, not by numpy's overflow warnings
+        with pytest.raises(ValueError, match=r"DC gain off by a non-finite amount"):
+            InverseModelController(TABLE_I, 1e-3, LowPassFilter(1e-6, 8))
+    # the message's promise: order <= 4 holds on Table I over the whole tau range and the periods used
+    for order in (1, 2, 3, 4):
+        for tau in (1e-6, 1e-5, 2e-4, 0.1):
+            for cp in (1e-7, TABLE_I.rectifier_period_s, 1e-3, 1e-2):
+                assert _dc_gain(InverseModelController(TABLE_I, cp, LowPassFilter(tau, order))) == pytest.approx(
+                    h0, rel=1e-3)
+
+
+def test_export_controller_refuses_a_lost_controller(capsys, tmp_path):
+    from mission_sim.cli import main
+    assert main(["export-controller", "--out", str(tmp_path / "c"), "--lpf-tau", "1e-6", "--lpf-order", "6"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("dronewpt export-controller: error: LowPassFilter(tau_s=1e-06, order=6) at control_period_s="
+                          "5.88235294117647") and "DC gain off by 2.29" in err and err.count("\n") == 1
+    assert not (tmp_path / "c").exists() or not any((tmp_path / "c").iterdir())
+
+
+@pytest.mark.parametrize("v1", [math.nan, -5.0, math.inf])
+def test_controller_reset_checks_v1(v1):
+    """reset(v1_v=nan) gave d_short = nan, reset(v1_v=-5) d_short = 1 (short), both silently."""
+    with pytest.raises(ValueError, match=rf"^v1_v={re.escape(repr(v1))} is invalid; valid range: \(0, inf\) V"):
+        InverseModelController(TABLE_I).reset(11.2, v1_v=v1)
+
+
+# ------------------------------------------------------------------ f^-1 with clamps
+def test_clipped_duty_at_zero_vl_is_the_arrays_answer_not_zerodivisionerror():
+    """Python floats took a fast path that raised ZeroDivisionError at vl_v = 0.0, where an array (and the exported
+    C) gives the clamped value: V2 > 0 -> d = 0, V2 < 0 -> d = 1."""
+    with pytest.warns(RuntimeWarning, match="divide by zero"):
+        assert duty_from_v2_clipped(10.0, 0.0) == 0.0
+    with pytest.warns(RuntimeWarning, match="divide by zero"):
+        assert duty_from_v2_clipped(-10.0, 0.0) == 1.0
+    with pytest.warns(RuntimeWarning, match="divide by zero"):
+        assert duty_from_v2_clipped(np.array([10.0, -10.0]), 0.0).tolist() == [0.0, 1.0]
+    assert duty_from_v2_clipped(10.0, 30.0) == float(duty_from_v2_clipped(np.array(10.0), 30.0))
