@@ -94,3 +94,46 @@ def test_clipped_duty_at_zero_vl_is_the_arrays_answer_not_zerodivisionerror():
     with pytest.warns(RuntimeWarning, match="divide by zero"):
         assert duty_from_v2_clipped(np.array([10.0, -10.0]), 0.0).tolist() == [0.0, 1.0]
     assert duty_from_v2_clipped(10.0, 30.0) == float(duty_from_v2_clipped(np.array(10.0), 30.0))
+
+
+# ------------------------------------------------------------------ the modal and envelope models' runs
+@pytest.mark.parametrize("which", ["python", "compiled"])
+def test_modal_run_refuses_duties_outside_0_1_nan_and_a_bad_period(which):
+    """``simulate_modal`` (and the compiled ``modal_kernel.simulate``) ran d = 1.5 and d = -0.1 silently, gave NaN
+    currents for a NaN duty or period, a run of zero length in time for a zero period, an IndexError for no
+    duties. The switching model refused all of these already, with the same message."""
+    if which == "python":
+        from wpt_receiver.modal import simulate_modal as sim
+    else:
+        from wpt_receiver.modal_kernel import simulate as sim
+    for d, msg in ((1.5, r"^d_short=1.5 is out of range; valid range: \[0, 1\]$"),
+                   (-0.1, r"^d_short=-0.1 is out of range"), (math.nan, r"^d_short=nan is out of range")):
+        with pytest.raises(ValueError, match=msg):
+            sim(TABLE_I, np.array([0.3, d]))
+    with pytest.raises(ValueError, match=r"^d_short of shape \(0,\) is invalid; valid: a non-empty 1-D sequence"):
+        sim(TABLE_I, np.array([]))
+    for cp in (0.0, math.nan, 2.0):
+        with pytest.raises(ValueError, match=rf"^control_period_s={cp!r} is invalid; valid range: \(0, 1\] s$"):
+            sim(TABLE_I, np.full(3, 0.3), control_period_s=cp)
+    with pytest.raises(ValueError, match=r"^substeps=0 is invalid; valid range: integer >= 1$"):
+        sim(TABLE_I, np.full(3, 0.3), substeps=0)
+    r = sim(TABLE_I, np.array([0.0, 1.0]))                                   # both ends valid
+    assert r["d_short"].tolist() == [0.0, 0.0, 1.0]
+
+
+def test_envelope_simulate_refuses_a_nan_v1_and_a_misshapen_x0():
+    """``v1_v=nan`` gave a NaN run without a word; an ``x0`` of the wrong shape numpy's "could not broadcast"."""
+    from wpt_receiver.envelope import simulate, steady_state
+    with pytest.raises(ValueError, match=r"^v1_v=nan is invalid; valid range: \(0, inf\) V"):
+        simulate(TABLE_I, np.ones(3), 1e-6, v1_v=math.nan)
+    with pytest.raises(ValueError, match=r"^x0=\[0.0, 0.0, 0.0\] is invalid; valid: the \(I1, I2\) amplitudes \[A\], "
+                                         r"shape \(2,\), finite$"):
+        simulate(TABLE_I, np.ones(3), 1e-6, x0=np.zeros(3))
+    with pytest.raises(ValueError, match=r"^x0=\[nan, 1.0\] is invalid"):
+        simulate(TABLE_I, np.ones(3), 1e-6, x0=[math.nan, 1.0])
+    # a given steady x0 stays put (eq. 4-5's SM steady state: I2 = w Lm V1 / (R1 R2 + (w Lm)^2) = 11.44 A)
+    x0 = steady_state(TABLE_I, 0.0)
+    _, _, i2 = simulate(TABLE_I, np.zeros(4), 1e-6, x0=x0)
+    wlm = TABLE_I.omega_rad_s * TABLE_I.lm_h
+    assert i2 == pytest.approx(np.full(5, wlm * TABLE_I.v1_amp_v / (TABLE_I.r1_ohm * TABLE_I.r2_ohm + wlm ** 2)),
+                               rel=1e-12)

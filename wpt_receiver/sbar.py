@@ -26,13 +26,33 @@ def _check_vl(vl_v: float) -> float:
     return vl_v
 
 
-def v2_from_duty(d_short, vl_v: float):
-    """Fundamental amplitude of v2 [V] for short duty ``d_short`` in [0, 1] (eq. 9)."""
-    vl_v = _check_vl(vl_v)
+def check_duty(d_short) -> np.ndarray:
+    """``d_short`` as a float array, after checking every duty is in [0, 1] (NaN refused)."""
     d = np.asarray(d_short, dtype=float)
     bad = ~np.isfinite(d) | (d < 0.0) | (d > 1.0)
     if np.any(bad):
         raise ValueError(f"d_short={float(d[bad].flat[0])!r} is out of range; valid range: [0, 1]")
+    return d
+
+
+def check_duty_run(d_short, control_period_s: float, substeps: int) -> np.ndarray:
+    """A run's duties (one per control period) as a float array, after checking them and the period: the modal
+    models ran d = 1.5 or -0.1 silently, gave NaN currents for a NaN duty or period, a run of zero length in time
+    for a zero period and an IndexError for no duties."""
+    d = check_duty(d_short)
+    if d.ndim != 1 or d.size == 0:
+        raise ValueError(f"d_short of shape {d.shape} is invalid; valid: a non-empty 1-D sequence of duties")
+    if not 0 < control_period_s <= 1.0:
+        raise ValueError(f"control_period_s={control_period_s!r} is invalid; valid range: (0, 1] s")
+    if isinstance(substeps, bool) or int(substeps) != substeps or substeps < 1:
+        raise ValueError(f"substeps={substeps!r} is invalid; valid range: integer >= 1")
+    return d
+
+
+def v2_from_duty(d_short, vl_v: float):
+    """Fundamental amplitude of v2 [V] for short duty ``d_short`` in [0, 1] (eq. 9)."""
+    vl_v = _check_vl(vl_v)
+    d = check_duty(d_short)
     out = _FOUR_OVER_PI * vl_v * (1.0 - np.sin(0.5 * np.pi * d))
     return out if out.ndim else float(out)
 
