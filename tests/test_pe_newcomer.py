@@ -137,3 +137,16 @@ def test_envelope_simulate_refuses_a_nan_v1_and_a_misshapen_x0():
     wlm = TABLE_I.omega_rad_s * TABLE_I.lm_h
     assert i2 == pytest.approx(np.full(5, wlm * TABLE_I.v1_amp_v / (TABLE_I.r1_ohm * TABLE_I.r2_ohm + wlm ** 2)),
                                rel=1e-12)
+
+
+# ------------------------------------------------------------------ the CLI
+def test_paper_refuses_out_with_no_plot(capsys, tmp_path):
+    """``--out`` is the figures' folder: with ``--no-plot`` it was ignored (nothing written there, exit 0), where the
+    project refuses an option that would have no effect."""
+    from mission_sim.cli import main
+    assert main(["paper", "--model", "envelope", "--no-plot", "--out", str(tmp_path / "p")]) == 2
+    assert capsys.readouterr().err == (f"dronewpt paper: error: --out '{tmp_path / 'p'}' is only used without "
+                                       "--no-plot (the figures' folder); valid: drop --out, or drop --no-plot\n")
+    assert not (tmp_path / "p").exists()
+    assert main(["paper", "--model", "envelope", "--format", "json", "--out", str(tmp_path / "p")]) == 0
+    assert [f.name for f in (tmp_path / "p").iterdir()] == ["fig6_envelope.png"]
