@@ -150,3 +150,12 @@ def test_paper_refuses_out_with_no_plot(capsys, tmp_path):
     assert not (tmp_path / "p").exists()
     assert main(["paper", "--model", "envelope", "--format", "json", "--out", str(tmp_path / "p")]) == 0
     assert [f.name for f in (tmp_path / "p").iterdir()] == ["fig6_envelope.png"]
+
+
+@pytest.mark.parametrize("t_end", [math.nan, math.inf, -1.0])
+def test_run_paper_names_a_bad_window_end(t_end):
+    """``t_end_s=nan`` was reported as ``t_switch_s=0.001 is invalid; valid range: [0, t_end_s=nan)`` and ``inf`` as
+    a control period outside ``[inf, inf]``: the value at fault is t_end_s."""
+    from wpt_receiver.paper import run_paper
+    with pytest.raises(ValueError, match=rf"^t_end_s={t_end!r} is invalid; valid range: \(0, inf\) s, after t_switch_s$"):
+        run_paper(TABLE_I, model="envelope", t_end_s=t_end)
