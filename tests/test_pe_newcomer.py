@@ -159,3 +159,20 @@ def test_run_paper_names_a_bad_window_end(t_end):
     from wpt_receiver.paper import run_paper
     with pytest.raises(ValueError, match=rf"^t_end_s={t_end!r} is invalid; valid range: \(0, inf\) s, after t_switch_s$"):
         run_paper(TABLE_I, model="envelope", t_end_s=t_end)
+
+
+def test_export_controller_refuses_millions_of_test_vectors(capsys, tmp_path):
+    """``--link f_hz=2.712e7`` (an ISM band, inside link.f_hz's range) at the rectifier period made 5.2 million test
+    vectors: it ran for more than 5 min towards a ~380 MB header. Refused before any work, naming the period that
+    fits; ``--control-period 1e-6`` exports."""
+    from mission_sim.cli import main
+    from wpt_receiver import c_export
+    out = tmp_path / "c"
+    assert main(["export-controller", "--out", str(out), "--link", "f_hz=2.712e7"]) == 2
+    assert capsys.readouterr().err == (
+        "dronewpt export-controller: error: control_period_s=1.844e-08 gives 5,207,040 test vectors (6 cases of 16 ms, "
+        "one per control period); valid: at most 200,000, i.e. control_period_s >= 4.8e-07 s (--control-period)\n")
+    assert not out.exists()
+    spec = c_export.controller_spec(TABLE_I.with_(f_hz=2.712e7), 1e-6)
+    assert len(c_export.test_vectors(spec)) == 6 * 16_000
+    assert len(c_export.test_vectors(c_export.controller_spec())) == 16_320     # Table I: as before
