@@ -176,3 +176,21 @@ def test_export_controller_refuses_millions_of_test_vectors(capsys, tmp_path):
     spec = c_export.controller_spec(TABLE_I.with_(f_hz=2.712e7), 1e-6)
     assert len(c_export.test_vectors(spec)) == 6 * 16_000
     assert len(c_export.test_vectors(c_export.controller_spec())) == 16_320     # Table I: as before
+
+
+def test_paper_envelope_warns_where_its_rm_state_is_a_negative_current(capsys):
+    """``--model envelope --link vdc_v=1 --link vl_v=1000`` printed RM -11.96 A and a step "peak" of 1,303 A without a
+    word: below an emf margin of 1 the rectifier blocks and eq. 4 with V2 held at (4/pi) VL has the battery driving
+    the coil. One warning (the closed form's I2 named), exit 0; Table I none."""
+    from mission_sim.cli import main
+    from wpt_receiver.paper import envelope_range_problem, rm_emf_margin
+    assert envelope_range_problem(TABLE_I) is None
+    p = TABLE_I.with_(vdc_v=1.0, vl_v=1000.0)
+    assert rm_emf_margin(p) == pytest.approx(0.0309, abs=1e-4)
+    assert main(["paper", "--model", "envelope", "--no-plot", "--link", "vdc_v=1", "--link", "vl_v=1000"]) == 0
+    cap = capsys.readouterr()
+    assert cap.err == ("dronewpt paper: warning: emf margin wLm V1 / (R1 (4/pi) VL) = 0.0309 is below 1: the rectifier "
+                       "blocks in RM, where eq. 4's envelope with V2 = (4/pi) VL held gives I2 = -11.96 A < 0 (the "
+                       "battery driving the coil, which the SBAR's diodes cannot); use --model switching\n")
+    assert "-11.96 A" in cap.out
+    assert main(["paper", "--model", "envelope", "--no-plot"]) == 0 and capsys.readouterr().err == ""
