@@ -39,7 +39,7 @@ from .params import TABLE_I, LinkParams
 from .sbar import duty_from_v2_clipped
 
 __all__ = ["ControllerSpec", "controller_spec", "generate_c", "count_ops", "python_duties", "float32_duty_bound",
-           "test_vectors", "write_export", "PRECISIONS", "F64_TOLERANCE"]
+           "test_vectors", "write_export", "PRECISIONS", "F64_TOLERANCE", "MAX_VECTORS", "check_vector_count"]
 
 #: variant name -> (C type, literal suffix, asin, sqrt)
 PRECISIONS = {"f32": ("float", "f", "asinf", "sqrtf"), "f64": ("double", "", "asin", "sqrt")}
@@ -354,6 +354,21 @@ def float32_duty_bound(spec: ControllerSpec, kind: str, inputs, vl_v) -> np.ndar
 
 
 # ============================================================================ test vectors and files
+#: most test vectors of the paper's cases (16 ms at the rectifier period of 85 kHz: 16,320; 1 MHz: 192,000 in 14 s and a
+#: 14 MB header; 27.12 MHz's 5.2 million ran for more than 5 min towards a ~380 MB header)
+MAX_VECTORS = 200_000
+
+
+def check_vector_count(spec: ControllerSpec, t_end_s: float = 16e-3) -> None:
+    """Refuse a control period that would make more than :data:`MAX_VECTORS` test vectors of the paper's six cases
+    (one per control period over ``t_end_s``), naming the shortest period that fits."""
+    n = 6 * int(round(t_end_s / spec.control_period_s))
+    if n > MAX_VECTORS:
+        raise ValueError(f"control_period_s={spec.control_period_s:.4g} gives {n:,} test vectors (6 cases of "
+                         f"{t_end_s * 1e3:g} ms, one per control period); valid: at most {MAX_VECTORS:,}, i.e. "
+                         f"control_period_s >= {6 * t_end_s / MAX_VECTORS:.3g} s (--control-period)")
+
+
 def test_vectors(spec: ControllerSpec, t_switch_s: float = 1e-3, t_end_s: float = 16e-3, extra=(), paper: bool = True):
     """Test vectors: the paper's three trajectories on the spec's control period, each as f^-1
     alone (``<name>_finv``: V2* in) and as the whole controller (``<name>_ctl``: I2ref in, the
@@ -365,6 +380,8 @@ def test_vectors(spec: ControllerSpec, t_switch_s: float = 1e-3, t_end_s: float 
     from .references import reference_duty
 
     p = spec.params
+    if paper:
+        check_vector_count(spec, t_end_s)
     cases = []
     for name in ("step", "ramp", "proposed") if paper else ():
         t, _, v2 = reference_duty(name, p, t_switch_s, t_end_s, spec.control_period_s, spec.lpf)

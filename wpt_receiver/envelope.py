@@ -334,8 +334,13 @@ def simulate(params: LinkParams, v2_v, dt_s: float, x0=None, lm_h=None, v1_v=Non
     a, b = state_matrices(params, lm_h)
     ad, bd = zoh_discretise(a, b, dt_s)
     v1 = params.v1_amp_v if v1_v is None else float(v1_v)
+    if not 0 < v1 < np.inf:                                 # NaN gave a NaN run without a word
+        raise ValueError(f"v1_v={v1_v!r} is invalid; valid range: (0, inf) V (the inverter's fundamental)")
     if x0 is None:
         x0 = steady_state(params, v2[0], lm_h, v1)
+    elif np.shape(x0) != (2,) or not np.all(np.isfinite(x0)):   # was numpy's "could not broadcast" or a NaN run
+        raise ValueError(f"x0={np.asarray(x0).tolist()!r} is invalid; valid: the (I1, I2) amplitudes [A], shape (2,), "
+                         "finite")
     x = np.empty((len(v2) + 1, 2))
     x[0] = x0
     # linear recursion; inputs precomputed

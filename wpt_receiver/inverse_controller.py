@@ -29,7 +29,14 @@ from .lti import tf2ss, zoh_ss
 from .params import LinkParams
 from .sbar import duty_from_v2_clipped
 
-__all__ = ["LowPassFilter", "InverseModelController", "inverse_tf"]
+__all__ = ["LowPassFilter", "InverseModelController", "inverse_tf", "TAU_RANGE_S", "DC_GAIN_RTOL"]
+
+TAU_RANGE_S = (1e-6, 0.1)
+"""Valid ``LowPassFilter.tau_s`` [s], as ``dronewpt export-controller --lpf-tau`` (1e300 or 1e-300 gave a NaN duty)."""
+
+DC_GAIN_RTOL = 1e-3
+"""Largest relative error of the discretised controller's DC gain against ``1/G22(0)``: beyond it float64 has
+lost the controller (a fast, high-order Q makes the canonical form's coefficients span ~1e40)."""
 
 
 @dataclass(frozen=True)
@@ -40,13 +47,15 @@ class LowPassFilter:
     order: int = 2
 
     def __post_init__(self):
+        lo, hi = TAU_RANGE_S
         try:
             tau = float(self.tau_s)
         except (TypeError, ValueError):
-            raise ValueError(f"tau_s={self.tau_s!r} is not a number; valid range: (0, inf)") from None
-        if not np.isfinite(tau) or tau <= 0:
-            raise ValueError(f"tau_s={self.tau_s!r} is invalid; valid range: (0, inf)")
-        if int(self.order) != self.order or not 1 <= self.order <= 8:
+            raise ValueError(f"tau_s={self.tau_s!r} is not a number; valid range: [{lo:g}, {hi:g}] s") from None
+        if isinstance(self.tau_s, bool) or not lo <= tau <= hi:    # NaN fails too
+            raise ValueError(f"tau_s={self.tau_s!r} is invalid; valid range: [{lo:g}, {hi:g}] s")
+        if (isinstance(self.order, bool) or not isinstance(self.order, (int, float, np.integer, np.floating))
+                or int(self.order) != self.order or not 1 <= self.order <= 8):
             raise ValueError(f"order={self.order!r} is invalid; valid range: integer 1..8 (G22^-1 needs >= 1)")
 
 
@@ -83,19 +92,40 @@ class InverseModelController:
             raise ValueError(f"n={n!r} is invalid; valid range: integer >= 1")
         self.n = int(n)
         self.control_period_s = params.rectifier_period_s if control_period_s is None else float(control_period_s)
-        if not np.isfinite(self.control_period_s) or self.control_period_s <= 0:
-            raise ValueError(f"control_period_s={control_period_s!r} is invalid; valid range: (0, inf)")
+        if not 0 < self.control_period_s <= 1.0:     # NaN fails too; 1e300 s gave a NaN controller
+            raise ValueError(f"control_period_s={control_period_s!r} is invalid; valid range: (0, 1] s")
         num, den = inverse_tf(params, lpf)
         a, b, cd, dd = tf2ss(num, den)   # scipy.signal's algorithms without its 1.2 s import
-        ad, bd = zoh_ss(a, b, self.control_period_s)
+        with np.errstate(all="ignore"):     # a lost controller (below) is refused by name, not by numpy's warnings
+            ad, bd = zoh_ss(a, b, self.control_period_s)
         self._ad, self._bd = ad, bd[:, 0]
         self._cd, self._dd = cd[0], float(dd[0, 0])
         # steady-state map x_ss = (I - Ad)^-1 Bd u
-        self._xss = np.linalg.solve(np.eye(len(ad)) - ad, self._bd)
+        self._xss = self._check_dc_gain(num, den)
         self.v1_v = params.v1_amp_v
         self._i2_sm = float(steady_state(params, 0.0)[1])
         self.x = np.zeros((self.n, len(ad)))
         self.v2_cmd_v = np.zeros(self.n)
+
+    def _check_dc_gain(self, num, den) -> np.ndarray:
+        """``x_ss = (I - Ad)^-1 Bd``, after checking ``Cd x_ss + Dd = H(0)`` (the exact steady V2 the controller
+        promises): a fast, high-order filter gave a controller off by 14 % (tau 3 us, order 6, 0.1 ms) or NaN
+        without a word (1 us, order 8, 1 ms)."""
+        h0 = num[-1] / den[-1]
+        with np.errstate(all="ignore"):
+            try:
+                xss = np.linalg.solve(np.eye(len(self._ad)) - self._ad, self._bd)
+                err = abs(float(self._cd @ xss) + self._dd - h0) / abs(h0)
+            except np.linalg.LinAlgError:
+                err = np.inf
+        if not err <= DC_GAIN_RTOL:
+            raise ValueError(
+                f"LowPassFilter(tau_s={self.lpf.tau_s!r}, order={self.lpf.order!r}) at control_period_s="
+                f"{self.control_period_s!r} is invalid: float64 loses the discretised controller (DC gain off by "
+                f"{f'{err:.3g}' if np.isfinite(err) else 'a non-finite amount'}, limit {DC_GAIN_RTOL:g}); valid: a "
+                f"larger tau_s or a lower order (order <= 4 with any tau_s in [{TAU_RANGE_S[0]:g}, "
+                f"{TAU_RANGE_S[1]:g}] s on Table I)")
+        return xss
 
     # ------------------------------------------------------------------
     @property
@@ -116,6 +146,8 @@ class InverseModelController:
     def reset(self, i2_ref_a, v1_v: float | None = None):
         """Start at steady state for the reference ``i2_ref_a`` (scalar or (n,)); returns d_short."""
         if v1_v is not None:
+            if not 0 < float(v1_v) < np.inf:     # NaN gave a NaN duty, a negative V1 d = 1 (short) without a word
+                raise ValueError(f"v1_v={v1_v!r} is invalid; valid range: (0, inf) V (the inverter's fundamental)")
             self.v1_v = float(v1_v)
             self._i2_sm = float(steady_state(self.params, 0.0, v1_v=self.v1_v)[1])
         u = np.broadcast_to(np.asarray(i2_ref_a, dtype=float), (self.n,)) - self.i2_sm_a

@@ -30,6 +30,7 @@ import numpy as np
 from .devices import IDEAL, DeviceSet
 from .params import LinkParams
 from .peak import SbarHarmonics
+from .sbar import check_duty_run
 
 __all__ = ["ModalEnvelope", "simulate_modal"]
 
@@ -115,7 +116,7 @@ class ModalEnvelope:
 
         Returns a dict of arrays per control period end (plus the start): ``t_s``, ``i2`` and
         ``i1`` phasors [A], ``v2`` phasor [V], ``d_short``, and ``peak_i2_a`` (instantaneous)."""
-        d = np.asarray(d_short, dtype=float)
+        d = check_duty_run(d_short, control_period_s, substeps)
         h = control_period_s / substeps
         ed = np.exp(self.lam * h)
         phi = (ed - 1) / self.lam

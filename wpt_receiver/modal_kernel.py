@@ -72,6 +72,7 @@ from .modal_link import (  # noqa: F401 - the layout and constants, one definiti
     N_RHO, N_PHI, RHO_MAX, _CACHE_VERSION, REFINE_TOL, REFINE_LEVELS, link_constants, table_key, cached_table)
 from .devices import IDEAL, DeviceSet
 from .params import LinkParams
+from .sbar import check_duty_run
 
 __all__ = ["link_constants", "modes", "zoh", "step", "steady_modes", "readout", "advance_z", "phasors", "stored_energy_j", "sbar_v2", "sbar_edge", "sbar_shift", "sbar_clamp_f", "sbar_implicit", "end_i2", "blocking_v2", "short_weight", "inst_peak",
            "build_table", "modal_table", "run_duties", "held_peak", "steady_state", "rect_current_a", "rect_affine", "N_MODES_C", "N_ZOH_C",
@@ -837,7 +838,7 @@ def simulate(params: LinkParams, d_short, control_period_s: float | None = None,
     ``i2``, ``v2``, ``d_short``, ``peak_i2_a``; plus ``energy_j``, see :func:`run_duties`).
     ``table`` defaults to :func:`modal_table` of ``params`` and ``devices``."""
     cp = params.rectifier_period_s if control_period_s is None else float(control_period_s)
-    d = np.ascontiguousarray(d_short, dtype=float)
+    d = np.ascontiguousarray(check_duty_run(d_short, cp, substeps))
     lc = link_constants(params, devices)
     mc = np.empty(N_MODES_C, dtype=np.complex128)
     modes(lc, params.lm_h, mc)

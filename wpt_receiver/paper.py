@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from .envelope import simulate
+from .envelope import simulate, steady_state
 from .inverse_controller import LowPassFilter
 from .metrics import TransitionMetrics, transition_metrics
 from .notices import warn
@@ -24,7 +24,7 @@ from .references import TRAJECTORIES, reference_duty
 from .sbar import v2_from_duty
 
 __all__ = ["PAPER_TABLE_II", "PaperRun", "MODELS", "envelope_plant", "modal_plant", "run_paper", "rm_emf_margin",
-           "modal_range_problem", "MODAL_MIN_EMF_MARGIN", "MODAL_MIN_VOLTAGE_RATIO"]
+           "modal_range_problem", "MODAL_MIN_EMF_MARGIN", "MODAL_MIN_VOLTAGE_RATIO", "envelope_range_problem"]
 
 #: Table II of the paper: trajectory -> (maximum current amplitude [A], overshoot [%]).
 PAPER_TABLE_II = {"step": (49.1, 368.0), "ramp": (11.4, 8.6), "proposed": (10.5, 0.0)}
@@ -122,6 +122,20 @@ def modal_range_problem(params: LinkParams, remedy="use model='switching'") -> s
     return None
 
 
+def envelope_range_problem(params: LinkParams) -> str | None:
+    """Why eq. 4's envelope (:func:`envelope_plant`) gives no physical RM state on this link, or None: below an emf
+    margin of 1 (:func:`rm_emf_margin`) the rectifier blocks in RM, and the linear envelope with V2 = (4/pi) VL held
+    gives a negative I2 (the battery driving the coil; ``--link vdc_v=1 --link vl_v=1000``: RM -11.96 A, a "step
+    peak" of 1,303 A), which the SBAR's diodes cannot."""
+    m = rm_emf_margin(params)
+    if m >= 1.0:
+        return None
+    i2 = float(steady_state(params, params.v2_rm_amp_v)[1])
+    return (f"emf margin wLm V1 / (R1 (4/pi) VL) = {m:.3g} is below 1: the rectifier blocks in RM, where eq. 4's "
+            f"envelope with V2 = (4/pi) VL held gives I2 = {i2:.4g} A < 0 (the battery driving the coil, which the "
+            "SBAR's diodes cannot); use model='switching'")
+
+
 #: plant models: name -> callable(params, d_short, control_period_s) -> dict(t_s, i1_a, i2_a, v2_v, ...)
 MODELS: dict[str, Callable] = {"envelope": envelope_plant, "switching": _switching_plant, "modal": modal_plant}
 
@@ -135,6 +149,9 @@ def run_paper(params: LinkParams = TABLE_I, model: str = "envelope", t_switch_s:
     if model not in MODELS:
         raise ValueError(f"model={model!r} is invalid; valid values: {', '.join(sorted(MODELS))}")
     period = params.rectifier_period_s if control_period_s is None else float(control_period_s)
+    reason = envelope_range_problem(params) if model == "envelope" else None
+    if reason is not None:
+        warn(reason)
     runs = []
     for name in trajectories:
         t_ctrl, d, v2_ref = reference_duty(name, params, t_switch_s, t_end_s, period, lpf, ramp_kind)

@@ -32,6 +32,8 @@ def ramp_duration_s(params: LinkParams) -> float:
 
 
 def _grid(t_switch_s: float, t_end_s: float, period_s: float) -> np.ndarray:
+    if not 0 < t_end_s < np.inf:      # NaN was reported as a bad t_switch_s, inf as a control period in [inf, inf]
+        raise ValueError(f"t_end_s={t_end_s!r} is invalid; valid range: (0, inf) s, after t_switch_s")
     if not (0 <= t_switch_s < t_end_s):
         raise ValueError(f"t_switch_s={t_switch_s!r} is invalid; valid range: [0, t_end_s={t_end_s!r})")
     if not (np.isfinite(period_s) and t_end_s / 1e7 <= period_s <= (t_end_s - t_switch_s) / 10):

@@ -26,13 +26,33 @@ def _check_vl(vl_v: float) -> float:
     return vl_v
 
 
-def v2_from_duty(d_short, vl_v: float):
-    """Fundamental amplitude of v2 [V] for short duty ``d_short`` in [0, 1] (eq. 9)."""
-    vl_v = _check_vl(vl_v)
+def check_duty(d_short) -> np.ndarray:
+    """``d_short`` as a float array, after checking every duty is in [0, 1] (NaN refused)."""
     d = np.asarray(d_short, dtype=float)
     bad = ~np.isfinite(d) | (d < 0.0) | (d > 1.0)
     if np.any(bad):
         raise ValueError(f"d_short={float(d[bad].flat[0])!r} is out of range; valid range: [0, 1]")
+    return d
+
+
+def check_duty_run(d_short, control_period_s: float, substeps: int) -> np.ndarray:
+    """A run's duties (one per control period) as a float array, after checking them and the period: the modal
+    models ran d = 1.5 or -0.1 silently, gave NaN currents for a NaN duty or period, a run of zero length in time
+    for a zero period and an IndexError for no duties."""
+    d = check_duty(d_short)
+    if d.ndim != 1 or d.size == 0:
+        raise ValueError(f"d_short of shape {d.shape} is invalid; valid: a non-empty 1-D sequence of duties")
+    if not 0 < control_period_s <= 1.0:
+        raise ValueError(f"control_period_s={control_period_s!r} is invalid; valid range: (0, 1] s")
+    if isinstance(substeps, bool) or int(substeps) != substeps or substeps < 1:
+        raise ValueError(f"substeps={substeps!r} is invalid; valid range: integer >= 1")
+    return d
+
+
+def v2_from_duty(d_short, vl_v: float):
+    """Fundamental amplitude of v2 [V] for short duty ``d_short`` in [0, 1] (eq. 9)."""
+    vl_v = _check_vl(vl_v)
+    d = check_duty(d_short)
     out = _FOUR_OVER_PI * vl_v * (1.0 - np.sin(0.5 * np.pi * d))
     return out if out.ndim else float(out)
 
@@ -55,9 +75,11 @@ def duty_from_v2_clipped(v2_v, vl_v: float):
     """Like :func:`duty_from_v2` but saturates ``v2_v`` into ``[0, (4/pi) VL]`` (no errors).
 
     This is what a controller does with a command outside the actuator's range. Python floats in
-    give a float out by the same arithmetic without numpy's per-call overhead (n = 1 loops).
+    give a float out by the same arithmetic without numpy's per-call overhead (n = 1 loops); ``vl_v = 0``
+    takes numpy's path, as an array does (IEEE division, a RuntimeWarning), not Python's ZeroDivisionError.
+    A NaN ``v2_v`` stays NaN (a mission refuses a policy's NaN duty by name); the exported C gives d = 0.
     """
-    if type(v2_v) is float and type(vl_v) is float:
+    if type(v2_v) is float and type(vl_v) is float and vl_v != 0.0:
         s = min(max(1.0 - v2_v / (_FOUR_OVER_PI * vl_v), 0.0), 1.0)
         return float((2.0 / np.pi) * np.arcsin(s))
     v = np.asarray(v2_v, dtype=float)

@@ -15,7 +15,8 @@ def _add_paper(sub):
     p.add_argument("--model", default="modal",
                    help="plant model: modal (default: exact modes + SBAR ripple, compiled; the instantaneous peak "
                         "Table II measures, and the fundamental), switching, or envelope (eq. 4: the fundamental only)")
-    p.add_argument("--out", type=path_arg("--out"), default=Path("out/paper"), help="folder for the figures (default out/paper)")
+    p.add_argument("--out", type=path_arg("--out"), default=None,
+                   help="folder for the figures (default out/paper; not with --no-plot)")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--control-period", type=float_arg("control-period", positive=True, lo=1e-7, hi=1e-3), default=None,
                    help="controller update period in s, 1e-7 .. 1e-3 (default: rectifier period 1/(2f))")
@@ -42,6 +43,9 @@ def _cmd_paper(args) -> int:
         raise CliError(f"--model {args.model!r} is invalid; valid values: {', '.join(sorted(paper.MODELS))}")
     from .controller import _link_params
     _check_waveforms(args)
+    if args.no_plot and args.out is not None:   # before: ignored, nothing written there, exit 0
+        raise CliError(f"--out {str(args.out)!r} is only used without --no-plot (the figures' folder); valid: drop "
+                       "--out, or drop --no-plot")
     params = _link_params(args.link)
     link_text = _link_text(params)
     reason = paper.modal_range_problem(params) if args.model == "modal" else None
@@ -50,6 +54,7 @@ def _cmd_paper(args) -> int:
         print("dronewpt paper: warning: " + reason.replace("model='switching'", "--model switching"), file=sys.stderr)
     t_switch = 1e-3
     if not args.no_plot:
+        args.out = Path("out/paper") if args.out is None else args.out
         prepare_out_dir(args.out)
     if args.model in COMPILED_MODELS:   # numba's cached kernels without its registries (~0.3-0.5 s of CPU)
         from wpt_receiver.numba_start import cache_loads_without_registries
