@@ -66,10 +66,6 @@ def load_meta(path) -> dict:
 _UNREADABLE = (zipfile.BadZipFile, KeyError, EOFError, ValueError, RuntimeError)
 
 
-class _WrongAlgo(ValueError):
-    """The zip is another algorithm's than its JSON's ``algo`` (said as it is, not as an unreadable zip)."""
-
-
 def _unreadable(path, exc) -> ValueError:
     why = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
     return ValueError(f"RL model {str(path)!r} is not a readable stable-baselines3 model zip ({why}); valid: a model "
@@ -107,12 +103,16 @@ class RLPolicy:
         # actions to float32 round-off (1 ulp); fast=False keeps predict(), bit-identical to SB3)
         try:
             fast_actor = load_ppo_actor(self.path, self.meta) if self.deterministic and fast else None
-            self._actor = fast_actor if fast_actor is not None else \
-                (export_actor(self.model) if self.deterministic and fast else None)
-        except _WrongAlgo:
-            raise
         except _UNREADABLE as exc:   # not a zip, cut short, no data / policy.pth: was a traceback (BadZipFile, ...)
             raise _unreadable(self.path, exc) from None
+        if fast_actor is not None or not (self.deterministic and fast):
+            self._actor = fast_actor
+        else:
+            model = self.model   # its load errors come out as they are (the property words them)
+            try:
+                self._actor = export_actor(model)
+            except _UNREADABLE as exc:
+                raise _unreadable(self.path, exc) from None
         self.discrete = bool(self.meta.get("discrete", self.meta["algo"] == "dqn"))
         norm = self.meta.get("obs_norm")
         if norm:
@@ -142,7 +142,7 @@ class RLPolicy:
             except _UNREADABLE as exc:
                 raise _unreadable(self.path, exc) from None
             except (AttributeError, TypeError) as exc:   # another algorithm's zip: SB3's AttributeError traceback
-                raise _WrongAlgo(f"RL model {str(self.path)!r} cannot be loaded as algo={self.meta['algo']!r} (what "
+                raise ValueError(f"RL model {str(self.path)!r} cannot be loaded as algo={self.meta['algo']!r} (what "
                                  f"{self.path.with_suffix('.json').name} says: {type(exc).__name__}: {exc}); valid: "
                                  f"the algorithm it was trained with, one of {', '.join(ALGOS)}") from None
         return self._model
