@@ -332,6 +332,21 @@ def test_a_file_that_is_not_a_flight_log_is_named_as_such(capsys, tmp_path, comm
                     ".tlog, a DataFlash .bin or a PX4 .ulg")
 
 
+def test_calibrate_log_from_python_names_a_file_that_is_not_a_flight_log(tmp_path):
+    """2026-11-27 mend: check_decoded ran in the CLI only; calibrate_log from Python still said "the log has no
+    battery data" for an empty file."""
+    from mission_sim.mavlink.calibrate import calibrate_log
+    from mission_sim.world.power import DroneParams
+    from mission_sim.mavlink.logs import read_log
+    from mission_sim.mavlink.replay import NoPositionError
+    p = tmp_path / "empty.tlog"
+    p.write_bytes(b"")
+    with pytest.raises(NoPositionError) as exc:
+        calibrate_log(read_log(p), DroneParams())
+    assert str(exc.value) == ("empty.tlog: no usable position (GPS fix >= 3): the file is empty (0 bytes); valid: a "
+                              "MAVLink .tlog, a DataFlash .bin or a PX4 .ulg")
+
+
 # ------------------------------------------------------------------ review of this branch (newbie2's mend)
 @pytest.mark.parametrize("port", ["--5", "²", "٣", "+5", " 5"])
 def test_telemetry_port_not_an_integer_is_the_format_message(capsys, tmp_path, port):
