@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mission_sim.contract import OBS_DIM, PolicyContext, action_to_duty
-from mission_sim.validation import Range, real_number
+from mission_sim.contract import CONTROL_PERIOD_RANGE, OBS_DIM, PolicyContext, action_to_duty
+from mission_sim.validation import real_number
 
 from .inference import export_actor, load_ppo_actor
 
@@ -31,7 +31,6 @@ __all__ = ["RLPolicy", "PRETRAINED", "PRETRAINED_LAGRANGIAN", "load_meta", "ALGO
 PRETRAINED = Path(__file__).parent / "pretrained" / "rl_s0.zip"   # unconstrained PPO, seeds _s0.._s4 shipped
 PRETRAINED_LAGRANGIAN = Path(__file__).parent / "pretrained" / "ppo_lagrangian_s0.zip"   # seeds _s0.._s4 shipped
 ALGOS = ("ppo", "sac", "td3", "dqn")
-_PERIOD = Range(0.0, 1.0, "s", lo_open=True)   # a model's control period (the envs' dt_s is 1e-7..1e-2 s)
 
 
 
@@ -56,9 +55,9 @@ def load_meta(path) -> dict:
     if meta.get("algo") not in ALGOS:
         raise ValueError(f"algo={meta.get('algo')!r} in {meta_path} is invalid; valid values: {', '.join(ALGOS)}")
     dt = real_number(meta.get("control_period_s"))
-    if dt is None or not _PERIOD.contains(dt):
+    if dt is None or not CONTROL_PERIOD_RANGE.contains(dt):
         raise ValueError(f"control_period_s={meta.get('control_period_s')!r} in {meta_path} is invalid; valid range: "
-                         f"{_PERIOD.text()} (the control period it was trained at, e.g. 0.0001)")
+                         f"{CONTROL_PERIOD_RANGE.text()} (the control period it was trained at, e.g. 0.0001)")
     return meta
 
 

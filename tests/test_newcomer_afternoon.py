@@ -64,9 +64,9 @@ def model_zip(tmp_path):
           "column 2 (char 1)); valid: a JSON object such as {\"algo\": \"ppo\", \"control_period_s\": 0.0001}"),
     ("[]", "RL model metadata '{json}' holds a JSON list; valid: a JSON object"),
     ('{"algo": "ppo", "control_period_s": -1}',
-     "control_period_s=-1 in {json} is invalid; valid range: (0, 1] s (the control period it was trained at"),
-    ('{"algo": "ppo", "control_period_s": "x"}', "control_period_s='x' in {json} is invalid; valid range: (0, 1] s"),
-    ('{"algo": "ppo"}', "control_period_s=None in {json} is invalid; valid range: (0, 1] s"),
+     "control_period_s=-1 in {json} is invalid; valid range: [1e-07, 0.01] s (the control period it was trained at"),
+    ('{"algo": "ppo", "control_period_s": "x"}', "control_period_s='x' in {json} is invalid; valid range: [1e-07, 0.01] s"),
+    ('{"algo": "ppo"}', "control_period_s=None in {json} is invalid; valid range: [1e-07, 0.01] s"),
     ('{"algo": "dqn", "control_period_s": 0.0001}',
      "RL model '{zip}' cannot be loaded as algo='dqn' (what mine.json says: AttributeError"),
 ])
