@@ -402,9 +402,9 @@ def test_compare_cli_reads_the_librarys_episodes_and_seed_ranges(capsys, monkeyp
     monkeypatch.setattr(pc, "seed_range", lambda n: Range(0, 10 - n, integer=True))
     base = ["compare", "--policies", "step", "--scenarios", "nominal", "--no-plot", "--no-frontier"]
     assert _one_error_line(capsys, base + ["--episodes", "6"]) == ("dronewpt compare: error: --episodes 6 is invalid; "
-                                                                   "valid range: 1..5")
+                                                                   "valid range: integer 1..5")
     assert _one_error_line(capsys, base + ["--episodes", "2", "--seed", "9"]) == (
-        "dronewpt compare: error: --seed 9 is invalid with --episodes 2; valid range: 0 .. 8 (episode seeds go up to "
+        "dronewpt compare: error: --seed 9 is invalid with --episodes 2; valid range: integer 0..8 (episode seeds go up to "
         "seed + episodes - 1)")
     with pytest.raises(ValueError, match=r"^episodes=6 is invalid; valid range: integer 1\.\.5$"):
         pc.check_episodes(6, 0)
