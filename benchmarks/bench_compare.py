@@ -30,7 +30,6 @@ import os
 import statistics
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -63,16 +62,15 @@ def end_to_end(repeat: int, peer: Path | None) -> dict:
                        check=True, stdout=subprocess.DEVNULL)
     res = {k: ([], []) for k in trees}
     text = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        for name, tree in trees.items():   # warm-up round (numba's cache, disk cache, .pyc)
-            text[name] = _run(tree)[2]
-        load0 = os.getloadavg()
-        for _ in range(repeat):
-            for name, tree in trees.items():
-                w, c, _ = _run(tree)
-                res[name][0].append(w)
-                res[name][1].append(c)
-        load1 = os.getloadavg()
+    for name, tree in trees.items():   # warm-up round (numba's cache, disk cache, .pyc)
+        text[name] = _run(tree)[2]
+    load0 = os.getloadavg()
+    for _ in range(repeat):
+        for name, tree in trees.items():
+            w, c, _ = _run(tree)
+            res[name][0].append(w)
+            res[name][1].append(c)
+    load1 = os.getloadavg()
     out = {"load_before": load0, "load_after": load1, "command": " ".join(["dronewpt", *ARGS]),
            "same_table": len(set(text.values())) == 1}
     for name, (w, c) in res.items():
@@ -127,9 +125,8 @@ def timeline(tree: Path = ROOT) -> dict:
     """One in-process run on ``tree``: the wall and CPU times of the parent at the fork, when its own runs are
     done, when the child's result arrives and at the end; the child's CPU time."""
     env = {**os.environ, "PYTHONPATH": str(tree)}
-    with tempfile.TemporaryDirectory() as tmp:
-        r = subprocess.run([sys.executable, "-c", _TIMELINE, *ARGS], cwd=tree, env=env,
-                           check=True, capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-c", _TIMELINE, *ARGS], cwd=tree, env=env, check=True, capture_output=True,
+                       text=True)
     return {"tree": str(tree), **json.loads(r.stdout.splitlines()[-1])}
 
 

@@ -93,8 +93,9 @@ def _base(text):
 
 
 def _seed(text):
+    from mission_sim.validation import SEED_RANGE
     v = int(text)
-    return v if 0 <= v < 2**32 else None
+    return v if SEED_RANGE.contains(v) else None
 
 
 def parse(argv):

@@ -37,7 +37,7 @@ from functools import cached_property
 
 import numpy as np
 
-from mission_sim.contract import LINK_MODELS, OBS_FIELDS
+from mission_sim.contract import CONTROL_PERIOD_RANGE, LINK_MODELS, OBS_FIELDS
 from mission_sim.validation import YAML_NUMBER_NOTE, Range, check_number
 from wpt_receiver import TABLE_I, LinkParams, duty_from_v2_clipped, state_matrices, steady_state, zoh_discretise
 from wpt_receiver.sbar import rectifier_current, short_weight
@@ -45,7 +45,8 @@ from wpt_receiver.sbar import rectifier_current, short_weight
 from .layout import BAT, COEF, STATE, XC
 from .plant import battery_operating_point, lm_window_h
 
-__all__ = ["LINK_MODELS", "window_lm", "EnvConfig", "RewardWeights", "Plans", "DetunedPlan", "build_plans", "OBS_SCALE", "OBS_OFFSET", "N_COEF", "N_BAT", "kernel_function", "as_config", "given_config"]
+__all__ = ["LINK_MODELS", "window_lm", "EnvConfig", "RewardWeights", "Plans", "DetunedPlan", "build_plans", "OBS_SCALE", "OBS_OFFSET", "N_COEF", "N_BAT", "kernel_function", "as_config", "given_config",
+           "CONTROL_PERIOD_RANGE"]
 
 HALF_PI = 0.5 * math.pi
 FOUR_OVER_PI = 4.0 / math.pi
@@ -60,7 +61,7 @@ OBS_OFFSET = np.array([-1.0 - f.lo * 2.0 / (f.hi - f.lo) for f in OBS_FIELDS])
 _WEIGHT = Range(0, math.inf, hi_open=True)
 _CURRENT_SCALE = Range(0, math.inf, "A", lo_open=True, hi_open=True)
 #: EnvConfig's numeric fields: (name, valid range, what follows the range in the message)
-_RANGES = (("dt_s", Range(1e-7, 1e-2, "s"), ""),
+_RANGES = (("dt_s", CONTROL_PERIOD_RANGE, ""),
            ("n_steps", Range(2, 10**6, integer=True), ""),
            ("slow_every", Range(1, math.inf, integer=True), ""),
            ("rated_i2_a", Range(0, math.inf, "A", lo_open=True, hi_open=True), ""),

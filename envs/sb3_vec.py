@@ -27,12 +27,10 @@ envs and wrappers. SB3 semantics:
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 
-from mission_sim.validation import Range, check_number
+from mission_sim.validation import SEED_RANGE, check_number
 
 from .core import EnvConfig
 from .vector import SbarChargingDiscreteVectorEnv, SbarChargingVectorEnv
@@ -52,7 +50,7 @@ class SbarSB3VecEnv(VecEnv):
             raise ValueError(f"cost={cost!r} is invalid; valid values: {', '.join(COSTS)}")
         self.cost = cost
         self.reset_seed = None if reset_seed is None else \
-            check_number("reset_seed", reset_seed, Range(0, math.inf, integer=True))   # (1.5 was seed 1, silently)
+            check_number("reset_seed", reset_seed, SEED_RANGE)   # (1.5 was seed 1, silently)
         cls = SbarChargingDiscreteVectorEnv if discrete else SbarChargingVectorEnv
         self.venv = cls(num_envs=num_envs, scenario=scenario, config=config)
         self.render_mode = None

@@ -532,7 +532,7 @@ def load_config(path=None) -> MissionConfig:
     return config_from_dict(load_config_dict(path))
 
 
-def load_config_dict(path=None, mission_file=None, pads_file=None, mission_keys=None) -> dict:
+def load_config_dict(path=None, mission_file=None, pads_file=None, mission_keys=None, file_keys: bool = False):
     """The mission dict of TOML file ``path`` laid over the embedded default (:func:`layer_on_default`;
     ``None`` = the default itself), not yet validated: apply ``--set`` overrides, then
     :func:`config_from_dict`. File errors name the file (see :func:`~mission_sim.validation.read_toml_file`).
@@ -542,35 +542,38 @@ def load_config_dict(path=None, mission_file=None, pads_file=None, mission_keys=
     mission.from_log=...`` and the like) are laid over ``[mission]`` before that, and refused when no file read
     uses them (:func:`~mission_sim.plans.route.check_file_keys`: ``from_log`` without a log as the mission file,
     ``pad_radius_m`` without a mission file). The file's own pattern keys beside a route are checked by the callers
-    that fly it (:func:`check_file_route_keys`), not here: a replay reads the file too."""
+    that fly it (:func:`check_file_route_keys`), not here: a replay reads the file too; ``file_keys=True`` returns
+    ``(dict, keys)`` with ``keys`` the ``[mission]`` keys the file itself sets (``{"mission.KEY": value}``, for that
+    check: the file is read once)."""
     from .plans.route import apply_mission_files, check_file_keys
+    mine = {}
     if path is None:
         d = tomllib.loads(DEFAULT_MISSION_TOML)
     else:
         raw = read_toml_file(path, "config file")
         check_no_empty_table(raw, f"config file {str(path)!r}")
+        if isinstance(raw.get("mission"), dict):
+            mine = {f"mission.{k}": v for k, v in raw["mission"].items()}
         d = layer_on_default(raw)
     if mission_keys and isinstance(d.get("mission"), dict):
         d["mission"] = {**d["mission"], **mission_keys}
     out = apply_mission_files(d, None if path is None else Path(path).parent, mission_file, pads_file)
     if mission_keys and isinstance(out.get("mission"), dict):   # (a key no file read uses changed nothing)
         check_file_keys(mission_keys, out["mission"].get("file"))
-    return out
+    return (out, mine) if file_keys else out
 
 
-def check_file_route_keys(path, cfg_or_dict) -> None:
-    """``ValueError`` (:func:`check_route_keys`'s line) for a built-in pattern key (:data:`PATTERN_KEYS`) that the
-    config file ``path`` itself sets (not the default it is laid over, which has every key) beside the route of
-    ``cfg_or_dict`` (its ``[[waypoints]]``, ``mission.file`` or ``--plan``): the route never reads it. For the callers
-    that fly the config's route (``mission``, ``sizing``, ``telemetry``, the mission studies); not ``replay``, whose
-    track is the log's and whose ``--pads`` re-flight reads ``mission.hover_time_s`` (a pad's default hover: its
-    ``--set`` keys follow :func:`check_replay_keys`)."""
-    route = cfg_or_dict.get("waypoints") if isinstance(cfg_or_dict, dict) else cfg_or_dict.waypoints
-    if path is None or not route:
-        return
-    raw = read_toml_file(path, "config file")
-    mine = raw.get("mission") if isinstance(raw.get("mission"), dict) else {}
-    check_route_keys(cfg_or_dict, {f"mission.{k}": v for k, v in mine.items()}, f"config file {str(path)!r}:")
+def check_file_route_keys(path, cfg_or_dict, file_keys: dict, given=()) -> None:
+    """``ValueError`` (:func:`check_route_keys`'s line) for a built-in pattern key (:data:`PATTERN_KEYS`) given
+    explicitly (``given``: ``--set``'s dict) or set by the config file ``path`` itself (``file_keys``, from
+    :func:`load_config_dict` with ``file_keys=True``; not the default it is laid over, which has every key) beside
+    the route of ``cfg_or_dict`` (its ``[[waypoints]]``, ``mission.file`` or ``--plan``): the route never reads it.
+    For the callers that fly the config's route (``mission``, ``sizing``, ``telemetry``, the mission studies); not
+    ``replay``, whose track is the log's and whose ``--pads`` re-flight reads ``mission.hover_time_s`` (a pad's
+    default hover: its ``--set`` keys follow :func:`check_replay_keys`)."""
+    check_route_keys(cfg_or_dict, given)   # (changed nothing: a route flies its own heights)
+    if path is not None:
+        check_route_keys(cfg_or_dict, file_keys, f"config file {str(path)!r}:")
 
 
 def check_no_empty_table(d: dict, what: str) -> None:

@@ -54,13 +54,19 @@ import numpy as np
 
 from wpt_receiver import TABLE_I, LinkParams
 
+from .validation import Range
+
 __all__ = ["ObsField", "OBS_FIELDS", "OBS_DIM", "OBS_INDEX", "normalise_obs", "normalise_obs_row", "denormalise_obs",
            "denormalise_obs_field", "action_to_duty", "duty_to_action", "PolicyContext", "Policy",
-           "POLICY_KERNEL_SIGNATURE", "MAX_HISTORY", "history_obs_dim", "LINK_MODELS"]
+           "POLICY_KERNEL_SIGNATURE", "MAX_HISTORY", "history_obs_dim", "LINK_MODELS", "CONTROL_PERIOD_RANGE"]
 
 #: the plant's link models a policy may run on (:attr:`PolicyContext.link_model`, ``envs.EnvConfig.link_model``,
 #: ``--link``): eq. 4's envelope, the exact modes (the mission's link, the envs' default since 2026-11-26). The one list.
 LINK_MODELS = ("envelope", "modal")
+
+#: a control period [s]: ``envs.EnvConfig``'s ``dt_s`` (= the env step) and so the ``control_period_s`` a trained
+#: model's metadata may say (:func:`policies.rl.load_meta`)
+CONTROL_PERIOD_RANGE = Range(1e-7, 1e-2, "s")
 
 #: numba signature of a policy's optional compiled step ``d = fn(obs, params, state)`` (module notes)
 POLICY_KERNEL_SIGNATURE = "float64(float64[::1], float64[::1], float64[::1])"

@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mission_sim.contract import OBS_DIM, PolicyContext, action_to_duty
-from mission_sim.validation import Range, real_number
+from mission_sim.contract import CONTROL_PERIOD_RANGE, OBS_DIM, PolicyContext, action_to_duty
+from mission_sim.validation import real_number
 
 from .inference import export_actor, load_ppo_actor
 
@@ -31,7 +31,6 @@ __all__ = ["RLPolicy", "PRETRAINED", "PRETRAINED_LAGRANGIAN", "load_meta", "ALGO
 PRETRAINED = Path(__file__).parent / "pretrained" / "rl_s0.zip"   # unconstrained PPO, seeds _s0.._s4 shipped
 PRETRAINED_LAGRANGIAN = Path(__file__).parent / "pretrained" / "ppo_lagrangian_s0.zip"   # seeds _s0.._s4 shipped
 ALGOS = ("ppo", "sac", "td3", "dqn")
-_PERIOD = Range(0.0, 1.0, "s", lo_open=True)   # a model's control period (the envs' dt_s is 1e-7..1e-2 s)
 
 
 
@@ -56,18 +55,14 @@ def load_meta(path) -> dict:
     if meta.get("algo") not in ALGOS:
         raise ValueError(f"algo={meta.get('algo')!r} in {meta_path} is invalid; valid values: {', '.join(ALGOS)}")
     dt = real_number(meta.get("control_period_s"))
-    if dt is None or not _PERIOD.contains(dt):
+    if dt is None or not CONTROL_PERIOD_RANGE.contains(dt):
         raise ValueError(f"control_period_s={meta.get('control_period_s')!r} in {meta_path} is invalid; valid range: "
-                         f"{_PERIOD.text()} (the control period it was trained at, e.g. 0.0001)")
+                         f"{CONTROL_PERIOD_RANGE.text()} (the control period it was trained at, e.g. 0.0001)")
     return meta
 
 
 #: what reading a model zip that is not one (or is cut short, or lacks SB3's members) raises
 _UNREADABLE = (zipfile.BadZipFile, KeyError, EOFError, ValueError, RuntimeError)
-
-
-class _WrongAlgo(ValueError):
-    """The zip is another algorithm's than its JSON's ``algo`` (said as it is, not as an unreadable zip)."""
 
 
 def _unreadable(path, exc) -> ValueError:
@@ -107,12 +102,16 @@ class RLPolicy:
         # actions to float32 round-off (1 ulp); fast=False keeps predict(), bit-identical to SB3)
         try:
             fast_actor = load_ppo_actor(self.path, self.meta) if self.deterministic and fast else None
-            self._actor = fast_actor if fast_actor is not None else \
-                (export_actor(self.model) if self.deterministic and fast else None)
-        except _WrongAlgo:
-            raise
         except _UNREADABLE as exc:   # not a zip, cut short, no data / policy.pth: was a traceback (BadZipFile, ...)
             raise _unreadable(self.path, exc) from None
+        if fast_actor is not None or not (self.deterministic and fast):
+            self._actor = fast_actor
+        else:
+            model = self.model   # its load errors come out as they are (the property words them)
+            try:
+                self._actor = export_actor(model)
+            except _UNREADABLE as exc:
+                raise _unreadable(self.path, exc) from None
         self.discrete = bool(self.meta.get("discrete", self.meta["algo"] == "dqn"))
         norm = self.meta.get("obs_norm")
         if norm:
@@ -142,7 +141,7 @@ class RLPolicy:
             except _UNREADABLE as exc:
                 raise _unreadable(self.path, exc) from None
             except (AttributeError, TypeError) as exc:   # another algorithm's zip: SB3's AttributeError traceback
-                raise _WrongAlgo(f"RL model {str(self.path)!r} cannot be loaded as algo={self.meta['algo']!r} (what "
+                raise ValueError(f"RL model {str(self.path)!r} cannot be loaded as algo={self.meta['algo']!r} (what "
                                  f"{self.path.with_suffix('.json').name} says: {type(exc).__name__}: {exc}); valid: "
                                  f"the algorithm it was trained with, one of {', '.join(ALGOS)}") from None
         return self._model

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from mission_sim.files import atomic_output
-from mission_sim.validation import Range, check_number
+from mission_sim.validation import SEED_RANGE, Range, check_number
 from mission_sim.train_options import ONLY_WITH, unused_option
 
 from .rl import ALGOS
@@ -179,7 +179,7 @@ def plot_learning_curve(monitor_csv, out_png, title: str, eval_curve=None) -> Pa
 
 
 #: train()'s whole-number options and their ranges (those of ``dronewpt train``'s --seed, --eval-episodes, ...)
-_COUNTS = (("seed", Range(0, 2**32 - 1, integer=True)), ("eval_episodes", Range(1, math.inf, integer=True)),
+_COUNTS = (("seed", SEED_RANGE), ("eval_episodes", Range(1, math.inf, integer=True)),
            ("eval_every", Range(1, math.inf, integer=True)), ("checkpoint_every", Range(1, math.inf, integer=True)))
 
 

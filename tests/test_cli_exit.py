@@ -24,7 +24,7 @@ def test_command_line_output_complete_and_status_kept():
     assert [r["policy"] for r in rows] == ["step", "ramp"]
     bad = _cli("compare", "--episodes", "0", "--no-plot")
     assert bad.returncode == 2
-    assert bad.stderr.strip().splitlines() == ["dronewpt compare: error: --episodes 0 is invalid; valid range: 1..100000"]
+    assert bad.stderr.strip().splitlines() == ["dronewpt compare: error: --episodes 0 is invalid; valid range: integer 1..100000"]
 
 
 def test_main_with_argv_returns():

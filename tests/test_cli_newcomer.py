@@ -8,23 +8,11 @@ from pathlib import Path
 
 import numpy as np
 
+from _cli_helpers import one_error_line as _one_error_line   # exit 2, one line on stderr, no traceback
+
 from mission_sim.cli import main
 
 MISSIONS = Path(__file__).resolve().parent / "data" / "missions"
-
-
-def _one_error_line(capsys, argv) -> str:
-    """``main(argv)``: exit status 2 (argparse's errors exit), nothing on stdout, one line on stderr (returned)."""
-    try:
-        rc = main(argv)
-    except SystemExit as exc:
-        rc = exc.code
-    assert rc == 2
-    cap = capsys.readouterr()
-    lines = cap.err.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in cap.err, cap.err
-    assert cap.out == "", cap.out
-    return lines[0]
 
 
 # ------------------------------------------------------------------ a mission in a flight log

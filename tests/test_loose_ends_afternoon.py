@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from mission_sim.cli import main
-from test_newcomer_midday import _one_error_line   # exit 2, one line on stderr, no traceback
+from _cli_helpers import one_error_line as _one_error_line   # exit 2, one line on stderr, no traceback
 
 _LOG = str(Path(__file__).resolve().parent / "data" / "flightlogs" / "dronekit-python_flight.tlog")
 _FAR = ("pads.0.z_m={z} is outside +-120 m of {origin} (the pad is {d} m below it: a drone charging there flies up "

@@ -64,9 +64,9 @@ def model_zip(tmp_path):
           "column 2 (char 1)); valid: a JSON object such as {\"algo\": \"ppo\", \"control_period_s\": 0.0001}"),
     ("[]", "RL model metadata '{json}' holds a JSON list; valid: a JSON object"),
     ('{"algo": "ppo", "control_period_s": -1}',
-     "control_period_s=-1 in {json} is invalid; valid range: (0, 1] s (the control period it was trained at"),
-    ('{"algo": "ppo", "control_period_s": "x"}', "control_period_s='x' in {json} is invalid; valid range: (0, 1] s"),
-    ('{"algo": "ppo"}', "control_period_s=None in {json} is invalid; valid range: (0, 1] s"),
+     "control_period_s=-1 in {json} is invalid; valid range: [1e-07, 0.01] s (the control period it was trained at"),
+    ('{"algo": "ppo", "control_period_s": "x"}', "control_period_s='x' in {json} is invalid; valid range: [1e-07, 0.01] s"),
+    ('{"algo": "ppo"}', "control_period_s=None in {json} is invalid; valid range: [1e-07, 0.01] s"),
     ('{"algo": "dqn", "control_period_s": 0.0001}',
      "RL model '{zip}' cannot be loaded as algo='dqn' (what mine.json says: AttributeError"),
 ])
@@ -264,13 +264,13 @@ def test_restart_takes_integer_indices_as_before(venv3):
     assert venv3.restart([]).shape == (0, 8)
 
 
-@pytest.mark.parametrize("seed", [1.5, -1, "a"])
+@pytest.mark.parametrize("seed", [1.5, -1, "a", 2**32])
 def test_sb3_adapter_reset_seed_checked(seed):
     """``SbarSB3VecEnv(reset_seed=1.5)`` re-seeded with 1 (int()), -1 failed at the first reset in gymnasium."""
     from envs.sb3_vec import SbarSB3VecEnv
     with pytest.raises(ValueError) as exc:
         SbarSB3VecEnv(2, reset_seed=seed)
-    assert str(exc.value) == f"reset_seed={seed!r} is invalid; valid range: integer >= 0"
+    assert str(exc.value) == f"reset_seed={seed!r} is invalid; valid range: integer 0..4294967295"
     assert SbarSB3VecEnv(2, reset_seed=3.0).reset_seed == 3
 
 
@@ -332,6 +332,21 @@ def test_a_file_that_is_not_a_flight_log_is_named_as_such(capsys, tmp_path, comm
                     ".tlog, a DataFlash .bin or a PX4 .ulg")
 
 
+def test_calibrate_log_from_python_names_a_file_that_is_not_a_flight_log(tmp_path):
+    """2026-11-27 mend: check_decoded ran in the CLI only; calibrate_log from Python still said "the log has no
+    battery data" for an empty file."""
+    from mission_sim.mavlink.calibrate import calibrate_log
+    from mission_sim.world.power import DroneParams
+    from mission_sim.mavlink.logs import read_log
+    from mission_sim.mavlink.replay import NoPositionError
+    p = tmp_path / "empty.tlog"
+    p.write_bytes(b"")
+    with pytest.raises(NoPositionError) as exc:
+        calibrate_log(read_log(p), DroneParams())
+    assert str(exc.value) == ("empty.tlog: no usable position (GPS fix >= 3): the file is empty (0 bytes); valid: a "
+                              "MAVLink .tlog, a DataFlash .bin or a PX4 .ulg")
+
+
 # ------------------------------------------------------------------ review of this branch (newbie2's mend)
 @pytest.mark.parametrize("port", ["--5", "²", "٣", "+5", " 5"])
 def test_telemetry_port_not_an_integer_is_the_format_message(capsys, tmp_path, port):
@@ -387,9 +402,9 @@ def test_compare_cli_reads_the_librarys_episodes_and_seed_ranges(capsys, monkeyp
     monkeypatch.setattr(pc, "seed_range", lambda n: Range(0, 10 - n, integer=True))
     base = ["compare", "--policies", "step", "--scenarios", "nominal", "--no-plot", "--no-frontier"]
     assert _one_error_line(capsys, base + ["--episodes", "6"]) == ("dronewpt compare: error: --episodes 6 is invalid; "
-                                                                   "valid range: 1..5")
+                                                                   "valid range: integer 1..5")
     assert _one_error_line(capsys, base + ["--episodes", "2", "--seed", "9"]) == (
-        "dronewpt compare: error: --seed 9 is invalid with --episodes 2; valid range: 0 .. 8 (episode seeds go up to "
+        "dronewpt compare: error: --seed 9 is invalid with --episodes 2; valid range: integer 0..8 (episode seeds go up to "
         "seed + episodes - 1)")
     with pytest.raises(ValueError, match=r"^episodes=6 is invalid; valid range: integer 1\.\.5$"):
         pc.check_episodes(6, 0)

@@ -91,6 +91,24 @@ def test_a_corrupt_rl_model_zip_is_one_line_for_mission_compare_and_sweep(tmp_pa
         policies.make(f"rl:{bad}")
 
 
+@pytest.mark.parametrize("algo", ["sac", "ppo"])
+def test_an_unreadable_rl_model_zip_is_said_once_not_nested(tmp_path, algo):
+    """2026-11-27 mend: a bad zip whose JSON says sac went through the model property (which words the error)
+    and then __init__'s except, which worded it again: "is not a readable ... zip (RL model ... is not a
+    readable ... zip (...); valid ...); valid ..."."""
+    import json
+
+    from policies.rl import RLPolicy
+    bad = tmp_path / "bad.zip"
+    bad.write_bytes(b"not a zip")
+    (tmp_path / "bad.json").write_text(json.dumps({"algo": algo, "control_period_s": 0.0001}))
+    with pytest.raises(ValueError) as exc:
+        RLPolicy(path=bad)
+    msg = str(exc.value)
+    assert msg.count("is not a readable") == 1 and msg.count("valid: a model zip") == 1, msg
+    assert msg.startswith(f"RL model {str(bad)!r} is not a readable stable-baselines3 model zip ("), msg
+
+
 def test_a_study_case_with_a_parameterised_policy_flies_what_mission_policy_flies(tmp_path, capsys):
     """A study's `policy = ["model_based_budget:0.02"]` (e6d2280) runs the same mission as
     `dronewpt mission --policy model_based_budget:0.02` and run_mission with policies.make of the spec: the same

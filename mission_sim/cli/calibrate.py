@@ -39,7 +39,7 @@ def _cmd_calibrate(args) -> int:
     from ..files import atomic_output
     from ..mavlink.calibrate import calibrate_log, check_mass, drone_toml
     from ..mavlink.logs import read_log
-    from ..mavlink.replay import check_decoded, parse_window
+    from ..mavlink.replay import parse_window
     from ..validation import check_regular_file
     check_regular_file(args.log, "log", "a .tlog, .bin or .ulg file")  # a FIFO: refused without opening it
     if args.out.suffix.lower() != ".toml" or args.out.is_dir():
@@ -55,10 +55,6 @@ def _cmd_calibrate(args) -> int:
     cfg = config_from_dict(apply_overrides(load_config_dict(args.config), sets))
     out_dir = prepare_out_dir(args.out.parent, "--out folder")
     log = read_log(args.log)
-    check_decoded(log)   # an empty or text file: said as such, not as "no battery data"
-    if not len(log.battery):
-        raise CliError(f"{args.log.name}: the log has no battery data (no voltage and current in BAT / CURR / "
-                       "SYS_STATUS / BATTERY_STATUS / battery_status); nothing to calibrate to")
     cal = calibrate_log(log, cfg.drone, mass_kg=args.mass, window=window, segment=args.segment)
     files = []
     stem = args.out.stem

@@ -231,8 +231,10 @@ def check_out_file(path, flag: str, suffix: str | None = None) -> Path:
 
 
 def seed_int(name="seed"):
-    """argparse type for a random seed: integer 0 .. 2^32 - 1 (what numpy's legacy seeding accepts)."""
-    return nonneg_int(name, hi=2**32 - 1)
+    """argparse type for a random seed: :data:`mission_sim.validation.SEED_RANGE` (what numpy's legacy seeding
+    accepts)."""
+    from ..validation import SEED_RANGE
+    return int_in(name, int(SEED_RANGE.lo), int(SEED_RANGE.hi))
 
 
 def names_help(text: str, names) -> str:

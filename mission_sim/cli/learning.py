@@ -388,7 +388,7 @@ def _check_compare(args, pols, scns, groups):
         if s_ not in SCENARIOS:
             raise CliError(f"--scenarios {s_!r} is invalid; valid values: {', '.join(SCENARIOS)}")
     if not EPISODES.contains(args.episodes):   # (policies.compare's ranges: one table, read at the call)
-        raise CliError(f"--episodes {args.episodes} is invalid; valid range: {EPISODES.lo:g}..{EPISODES.hi:g}")
+        raise CliError(f"--episodes {args.episodes} is invalid; valid range: {EPISODES.text()}")
     if args.out is not None and args.no_plot:   # (it wrote nothing and said nothing)
         raise CliError(f"--out {str(args.out)!r} is only used for the figures; valid: drop --no-plot, or drop --out")
     args.out = Path("out/compare") if args.out is None else args.out
@@ -397,7 +397,7 @@ def _check_compare(args, pols, scns, groups):
     seeds = seed_range(args.episodes)
     if not seeds.contains(args.seed):
         raise CliError(f"--seed {args.seed} is invalid with --episodes {args.episodes}; valid range: "
-                       f"{seeds.lo:g} .. {seeds.hi:.0f} (episode seeds go up to seed + episodes - 1)")
+                       f"{seeds.text()} (episode seeds go up to seed + episodes - 1)")
 
 
 def _listed(text: str, flag: str) -> tuple:

@@ -48,8 +48,8 @@ def _mav_config(args, overrides=None, single_pad=False):
     from ..config import apply_overrides, config_from_dict, load_config_dict
     from .mission import mission_file_keys
     given = parse_set(args.set)
-    d = load_config_dict(args.config, getattr(args, "plan", None), getattr(args, "mission_pads", None),
-                         mission_file_keys(given))
+    d, file_keys = load_config_dict(args.config, getattr(args, "plan", None), getattr(args, "mission_pads", None),
+                                    mission_file_keys(given), file_keys=True)
     if single_pad:
         d["pads"] = [{"x_m": 0.0, "y_m": 0.0, "z_m": 0.0}]
     drone = {}
@@ -58,9 +58,9 @@ def _mav_config(args, overrides=None, single_pad=False):
         drone = read_drone_toml(args.drone)
     cfg = config_from_dict(apply_overrides(d, {**drone, **(overrides or {}), **given}))
     if not single_pad:
-        from ..config import check_file_route_keys, check_route_keys
-        check_route_keys(cfg, given)   # (changed nothing: a route flies its own heights)
-        check_file_route_keys(args.config, cfg)   # (the config file's own; replay's single pad flies the log)
+        from ..config import check_file_route_keys
+        check_file_route_keys(args.config, cfg, file_keys, given)   # (--set's and the file's own: a route flies its
+        # own heights; replay's single pad flies the log)
         from .mission import default_pads_notice
         args.pads_noted = default_pads_notice(getattr(args, "command", "telemetry"), getattr(args, "plan", None),
                                               getattr(args, "mission_pads", None), d, given,

@@ -142,10 +142,11 @@ def mission_config(args):
         from ..mavlink.calibrate import read_drone_toml
         overrides = {**read_drone_toml(args.drone), **overrides}
     files = mission_file_keys(overrides)
-    d = mconfig.load_config_dict(args.config, getattr(args, "plan", None), getattr(args, "pads", None), files)
+    d, file_keys = mconfig.load_config_dict(args.config, getattr(args, "plan", None), getattr(args, "pads", None),
+                                            files, file_keys=True)
     cfg = mconfig.config_from_dict(mconfig.apply_overrides(d, overrides) if overrides else d)
-    mconfig.check_route_keys(cfg, given)   # (changed nothing: a route flies its own heights)
-    mconfig.check_file_route_keys(args.config, cfg)   # (the config file's own, the same rule)
+    mconfig.check_file_route_keys(args.config, cfg, file_keys, given)   # (--set's and the file's own: a route flies
+    # its own heights)
     args.pads_noted = (not getattr(args, "no_charge", False)   # (pads never energised: nothing to say about them)
                        and default_pads_notice(getattr(args, "command", "mission"), getattr(args, "plan", None),
                                                getattr(args, "pads", None), d, overrides,

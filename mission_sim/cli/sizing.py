@@ -128,15 +128,16 @@ def _sweep_rows(args, base):
     the link's devices = ``--devices`` (the sweep stores summaries, the sizing needs the time series)."""
     from tqdm import tqdm
 
-    from ..config import check_file_route_keys, config_to_dict, load_config
+    from ..config import check_file_route_keys, config_from_dict, config_to_dict, load_config_dict
     from ..studies.worst_cases import case_config, worst_cases
     if args.sweep is None:
         raise CliError("--source sweep needs --sweep DIR (the --out folder of a finished sweep)")
     if args.set:
         raise CliError("--set is invalid with --source sweep (the cases' own parameters are used); valid: "
                        "--config for the sweep's base mission")
-    base_dict = config_to_dict(load_config(args.config))
-    check_file_route_keys(args.config, base_dict)   # (the cases fly its route, as the sweep's did)
+    d, file_keys = load_config_dict(args.config, file_keys=True)
+    base_dict = config_to_dict(config_from_dict(d))
+    check_file_route_keys(args.config, base_dict, file_keys)   # (the cases fly its route, as the sweep's did)
     rows = []
     for wc in tqdm(worst_cases(args.sweep, "peak_i2_a", base_dict), desc="sizing worst cases",
                    disable=not show_progress(args), file=sys.stderr):

@@ -45,7 +45,7 @@ import pandas as pd
 
 from ..world.power import DroneParams, propulsion_power_w
 from .logs import FlightLog
-from .replay import AIRBORNE_M, _in_periods, replay_span, track_from_log
+from .replay import AIRBORNE_M, _in_periods, check_decoded, replay_span, track_from_log
 
 __all__ = ["check_mass", "NoBatteryError", "CalibrationSamples", "Calibration", "calibration_samples", "fit_drone",
            "calibrate_log", "heldout_energy", "drone_toml", "read_drone_toml", "BOUNDS", "TRAIN_FRACTION"]
@@ -111,6 +111,7 @@ def _no_battery(log: FlightLog, what: str) -> NoBatteryError:
 
 def calibration_samples(log: FlightLog, window=None, segment=None) -> CalibrationSamples:
     """The battery samples of ``log`` with speed, climb and the train / held-out split (module docstring)."""
+    check_decoded(log)   # an empty or text file: said as such, not as "no battery data"
     if not len(log.battery):
         raise _no_battery(log, "the log has no battery data")
     window, info = replay_span(log, window, segment)

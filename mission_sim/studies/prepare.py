@@ -44,11 +44,13 @@ def _runner(study: Study, make_policy: Callable | None, policy_names):
     if study.replay is not None:
         from .replay_cases import replay_runner
         return replay_runner(study, make_policy, policy_names)
-    from ..config import check_file_route_keys, config_to_dict, load_config
+    from ..config import check_file_route_keys, config_from_dict, config_to_dict, load_config_dict
     from .mission_cases import MissionCaseRunner
 
-    base = config_to_dict(load_config(study.base_path))
-    check_file_route_keys(study.base_path, base)   # (the cases fly its route: its own pattern keys change nothing)
+    d, file_keys = load_config_dict(study.base_path, file_keys=True)
+    base = config_to_dict(config_from_dict(d))
+    check_file_route_keys(study.base_path, base, file_keys)   # (the cases fly its route: its own pattern keys change
+    # nothing)
     runner = MissionCaseRunner(base, make_policy, policy_names)
     return runner, hashlib.sha256(canonical_json(base).encode()).hexdigest()[:16]
 
