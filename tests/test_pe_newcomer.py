@@ -145,8 +145,8 @@ def test_paper_refuses_out_with_no_plot(capsys, tmp_path):
     project refuses an option that would have no effect."""
     from mission_sim.cli import main
     assert main(["paper", "--model", "envelope", "--no-plot", "--out", str(tmp_path / "p")]) == 2
-    assert capsys.readouterr().err == (f"dronewpt paper: error: --out '{tmp_path / 'p'}' is only used without "
-                                       "--no-plot (the figures' folder); valid: drop --out, or drop --no-plot\n")
+    assert capsys.readouterr().err == (f"dronewpt paper: error: --out '{tmp_path / 'p'}' is only used for the figures; "
+                                       "valid: drop --no-plot, or drop --out\n")
     assert not (tmp_path / "p").exists()
     assert main(["paper", "--model", "envelope", "--format", "json", "--out", str(tmp_path / "p")]) == 0
     assert [f.name for f in (tmp_path / "p").iterdir()] == ["fig6_envelope.png"]
@@ -196,3 +196,22 @@ def test_paper_envelope_warns_where_its_rm_state_is_a_negative_current(capsys):
                        "battery driving the coil, which the SBAR's diodes cannot); use --model switching\n")
     assert "-11.96 A" in cap.out
     assert main(["paper", "--model", "envelope", "--no-plot"]) == 0 and capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize("substeps", [float("nan"), float("inf"), None, "a"])
+def test_modal_run_names_a_substeps_that_is_not_a_finite_number(substeps):
+    """``check_duty_run``'s ``substeps``: NaN, inf, None and text reached Python's own errors ("cannot convert float
+    NaN to integer", OverflowError, TypeError) instead of the named message."""
+    from wpt_receiver.sbar import check_duty_run
+    with pytest.raises(ValueError, match=r"^substeps=.* is invalid; valid range: integer >= 1$"):
+        check_duty_run([0.5], 1e-4, substeps)
+
+
+def test_sizing_refuses_out_with_no_plot_as_paper_and_compare_do(capsys, tmp_path):
+    """``sizing --no-plot --out DIR`` ignored ``--out`` (the figure's folder: nothing written, exit 0); refused with
+    ``paper``'s and ``compare``'s one message (``cli.common.figures_out``), before any simulation."""
+    from mission_sim.cli import main
+    assert main(["sizing", "--no-plot", "--out", str(tmp_path / "s")]) == 2
+    assert capsys.readouterr().err == (f"dronewpt sizing: error: --out '{tmp_path / 's'}' is only used for the figures; "
+                                       "valid: drop --no-plot, or drop --out\n")
+    assert not (tmp_path / "s").exists()

@@ -12,6 +12,8 @@ controller still works with the window shifted by pi/2.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = ["v2_from_duty", "duty_from_v2", "duty_from_v2_clipped"]
@@ -44,7 +46,8 @@ def check_duty_run(d_short, control_period_s: float, substeps: int) -> np.ndarra
         raise ValueError(f"d_short of shape {d.shape} is invalid; valid: a non-empty 1-D sequence of duties")
     if not 0 < control_period_s <= 1.0:
         raise ValueError(f"control_period_s={control_period_s!r} is invalid; valid range: (0, 1] s")
-    if isinstance(substeps, bool) or int(substeps) != substeps or substeps < 1:
+    if (isinstance(substeps, bool) or not isinstance(substeps, (int, float, np.integer, np.floating))
+            or not math.isfinite(substeps) or int(substeps) != substeps or substeps < 1):
         raise ValueError(f"substeps={substeps!r} is invalid; valid range: integer >= 1")
     return d
 

@@ -251,6 +251,15 @@ def check_out_dir(path, flag: str = "--out") -> Path:
     return path
 
 
+def figures_out(args, default: str) -> Path:
+    """``args.out`` of a command whose ``--out`` holds only its figures (``paper``, ``compare``, ``sizing``): with
+    ``--no-plot`` a given ``--out`` would change nothing (it was ignored, nothing written, exit 0), so it is refused
+    (:class:`CliError`, one line); otherwise ``args.out`` or ``default``."""
+    if args.no_plot and args.out is not None:
+        raise CliError(f"--out {str(args.out)!r} is only used for the figures; valid: drop --no-plot, or drop --out")
+    return Path(default) if args.out is None else args.out
+
+
 def prepare_out_dir(path, flag: str = "--out") -> Path:
     """Create the output folder ``path`` now, before any simulation, and check that files can be
     written there; ``CliError`` naming the flag and the path otherwise (a file in its place, no

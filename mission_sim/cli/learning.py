@@ -10,6 +10,7 @@ from ..validation import check_regular_file
 from .common import (
     CliError,
     add_progress_flag,
+    figures_out,
     float_arg,
     int_in,
     lazy_names_help,
@@ -389,9 +390,7 @@ def _check_compare(args, pols, scns, groups):
             raise CliError(f"--scenarios {s_!r} is invalid; valid values: {', '.join(SCENARIOS)}")
     if not EPISODES.contains(args.episodes):   # (policies.compare's ranges: one table, read at the call)
         raise CliError(f"--episodes {args.episodes} is invalid; valid range: {EPISODES.text()}")
-    if args.out is not None and args.no_plot:   # (it wrote nothing and said nothing)
-        raise CliError(f"--out {str(args.out)!r} is only used for the figures; valid: drop --no-plot, or drop --out")
-    args.out = Path("out/compare") if args.out is None else args.out
+    args.out = figures_out(args, "out/compare")
     if not 0 <= args.oracle_windows <= args.episodes:
         raise CliError(f"--oracle-windows {args.oracle_windows} is invalid; valid range: 0..{args.episodes} (--episodes)")
     seeds = seed_range(args.episodes)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .common import CliError, check_out_file, float_arg, path_arg, prepare_out_dir
+from .common import CliError, check_out_file, figures_out, float_arg, path_arg, prepare_out_dir
 
 
 def _add_paper(sub):
@@ -43,9 +43,7 @@ def _cmd_paper(args) -> int:
         raise CliError(f"--model {args.model!r} is invalid; valid values: {', '.join(sorted(paper.MODELS))}")
     from .controller import _link_params
     _check_waveforms(args)
-    if args.no_plot and args.out is not None:   # before: ignored, nothing written there, exit 0
-        raise CliError(f"--out {str(args.out)!r} is only used without --no-plot (the figures' folder); valid: drop "
-                       "--out, or drop --no-plot")
+    args.out = figures_out(args, "out/paper")
     params = _link_params(args.link)
     link_text = _link_text(params)
     reason = paper.modal_range_problem(params) if args.model == "modal" else None
@@ -54,7 +52,6 @@ def _cmd_paper(args) -> int:
         print("dronewpt paper: warning: " + reason.replace("model='switching'", "--model switching"), file=sys.stderr)
     t_switch = 1e-3
     if not args.no_plot:
-        args.out = Path("out/paper") if args.out is None else args.out
         prepare_out_dir(args.out)
     if args.model in COMPILED_MODELS:   # numba's cached kernels without its registries (~0.3-0.5 s of CPU)
         from wpt_receiver.numba_start import cache_loads_without_registries

@@ -6,7 +6,8 @@ import json
 import sys
 from pathlib import Path
 
-from .common import CliError, add_progress_flag, float_arg, name_list, path_arg, prepare_out_dir, show_progress
+from .common import (CliError, add_progress_flag, figures_out, float_arg, name_list, path_arg, prepare_out_dir,
+                     show_progress)
 
 _COLUMNS = ("peak_i2_a", "diode_rms_a", "diode_avg_a", "switch_rms_a", "required_rating_a", "part", "mass_g",
             "device_mass_g", "sink_mass_g", "conduction_loss_w", "switching_loss_w", "loss_w", "tj_diode_c",
@@ -44,7 +45,8 @@ def _add_sizing(sub):
     p.add_argument("--c-out", type=float_arg("c-out", positive=True, lo=1e-7, hi=1.0), default=4.7e-3,
                    help="open-load study: rectifier output capacitor, F (1e-7 .. 1, default 4.7e-3)")
     p.add_argument("--format", choices=("table", "json"), default="table")
-    p.add_argument("--out", type=path_arg("--out"), default=Path("out/sizing"), help="folder for the figure (default out/sizing)")
+    p.add_argument("--out", type=path_arg("--out"), default=None,
+                   help="folder for the figure (default out/sizing; not with --no-plot)")
     p.add_argument("--no-plot", action="store_true", help="skip the figure")
     add_progress_flag(p)
     p.set_defaults(func=_cmd_sizing)
@@ -148,6 +150,7 @@ def _sweep_rows(args, base):
 
 
 def _cmd_sizing(args) -> int:
+    args.out = figures_out(args, "out/sizing")
     if not args.no_plot:
         prepare_out_dir(args.out)  # before the simulation: a bad folder costs nothing
     rows = _rows(args)
