@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-__all__ = ["ONLY_WITH", "unused_option", "dqn_with_action_filter"]
+__all__ = ["ONLY_WITH", "unused_option", "ALGO_ONLY", "algo_conflict"]
 
 #: train's options that have an effect only with another one: {option: the option it needs}. One given (not None)
 #: without it is refused, by ``train()`` (``ValueError``) and ``dronewpt train`` (exit 2) alike (:func:`unused_option`)
@@ -26,8 +26,21 @@ def unused_option(opts: Mapping) -> tuple[str, str] | None:
     return None
 
 
-def dqn_with_action_filter(opts: Mapping) -> bool:
-    """Whether ``opts`` asks for ``algo`` "dqn" with an ``action_filter``: a low-passed duty is not 0 or 1 (it trained,
-    wrote part of its outputs, then stopped at the discrete env's "actions=0.13 is invalid"). One rule for
-    ``train()`` (``ValueError``) and ``dronewpt train`` (exit 2, before ``--out`` is made)."""
-    return opts.get("algo") == "dqn" and bool(opts.get("action_filter"))
+#: options that only some algorithms take: {option: (the algorithms that take it, why)}. One given (true) with another
+#: ``algo`` is refused by ``train()`` (``ValueError``) and ``dronewpt train`` (exit 2, before ``--out`` is made) alike
+#: (:func:`algo_conflict`): before, ``--algo dqn --residual`` and ``--algo sac --imitate mpc`` were refused by
+#: ``train()`` only, after ``--out`` was made, and ``--algo dqn --action-filter`` trained, wrote part of its outputs,
+#: then stopped at the discrete env's "actions=0.13 is invalid"
+ALGO_ONLY = {"imitate": (("ppo",), "the student is a PPO actor"),
+             "residual": (("ppo", "sac", "td3"), "a continuous correction"),
+             "action_filter": (("ppo", "sac", "td3"), "a low-passed duty is not 0 or 1")}
+
+
+def algo_conflict(opts: Mapping) -> tuple[str, tuple[str, ...], str] | None:
+    """``(option, the algorithms that take it, why)`` for the first option of :data:`ALGO_ONLY` that ``opts`` gives
+    (true) with an ``algo`` (default ``ppo``) that does not take it; None when there is none."""
+    algo = opts.get("algo") or "ppo"
+    for opt, (algos, why) in ALGO_ONLY.items():
+        if opts.get(opt) and algo not in algos:
+            return opt, algos, why
+    return None

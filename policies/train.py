@@ -195,7 +195,7 @@ def _check_counts(o: dict) -> None:
 def _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra=None):
     import envs
     from mission_sim.contract import history_obs_dim
-    from mission_sim.train_options import dqn_with_action_filter
+    from mission_sim.train_options import algo_conflict
 
     x = extra or {}
     if algo not in ALGOS:
@@ -206,8 +206,11 @@ def _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, ex
     history_obs_dim(x.get("history", 1))
     if (x.get("history", 1) > 1 or x.get("action_filter") or x.get("smooth_penalty")) and vec != "batched":
         raise ValueError(f"vec={vec!r} is invalid with history / action smoothing; valid value: batched")
-    if x.get("imitate") and algo != "ppo":
-        raise ValueError(f"algo={algo!r} is invalid with imitate; valid value: ppo (the student is a PPO actor)")
+    bad = algo_conflict({"algo": algo, "residual": residual, **x})
+    if bad:
+        opt, algos, why = bad
+        value = residual if opt == "residual" else x[opt]
+        raise ValueError(f"algo={algo!r} is invalid with {opt}={value!r}; valid values: {', '.join(algos)} ({why})")
     if int(n_envs) != n_envs or not 1 <= n_envs <= 1024:
         raise ValueError(f"n_envs={n_envs!r} is invalid; valid range: integer 1..1024")
     if vec not in VEC_PATHS:
@@ -225,11 +228,6 @@ def _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, ex
         if algo == "dqn" or residual or x.get("imitate") or x.get("action_filter") or x.get("smooth_penalty"):
             raise ValueError("slow_budget is invalid with algo='dqn', residual, imitate or action smoothing; valid: "
                              "ppo / sac / td3 alone (the duty is the MPC's)")
-    if residual and algo == "dqn":
-        raise ValueError("algo='dqn' is invalid with residual=True; valid values: ppo, sac (a continuous correction)")
-    if dqn_with_action_filter({"algo": algo, **x}):
-        raise ValueError(f"algo='dqn' is invalid with action_filter={x['action_filter']!r}; valid values: ppo, sac, "
-                         "td3 (a low-passed duty is not 0 or 1)")
     envs.get_scenario(scenario)
 
 

@@ -167,6 +167,29 @@ def test_dqn_with_an_action_filter_is_refused_before_training(capsys, tmp_path):
     assert not (tmp_path / "py").exists()
 
 
+@pytest.mark.parametrize("argv, line, kw, text", [
+    (["--algo", "dqn", "--residual"], "--algo dqn is invalid with --residual; valid: --algo ppo, sac or td3 (a continuous "
+     "correction), or drop --residual", {"residual": True},
+     "algo='dqn' is invalid with residual=True; valid values: ppo, sac, td3 (a continuous correction)"),
+    (["--algo", "sac", "--imitate", "mpc"], "--algo sac is invalid with --imitate mpc; valid: --algo ppo (the student is "
+     "a PPO actor), or drop --imitate", {"imitate": "mpc"},
+     "algo='sac' is invalid with imitate='mpc'; valid values: ppo (the student is a PPO actor)")])
+def test_an_option_its_algorithm_does_not_take_is_refused_before_out_is_made(capsys, tmp_path, argv, line, kw, text):
+    """``--algo dqn --residual`` and ``--algo sac --imitate mpc`` were refused by ``train()`` only, after ``--out`` was
+    made (an empty folder left), in Python's words; one table now (``mission_sim.train_options.ALGO_ONLY``) for the CLI
+    (before ``--out``) and ``train()``. ``--residual`` with td3 trains (the old message said "ppo, sac")."""
+    out = tmp_path / "run"
+    got = _one_error_line(capsys, ["train", *argv, "--timesteps", "256", "--n-envs", "4", "--link", "envelope",
+                                   "--no-progress", "--out", str(out)])
+    assert got == "dronewpt train: error: " + line
+    assert not out.exists()
+    from policies.train import train
+    with pytest.raises(ValueError) as exc:
+        train(argv[1], 64, tmp_path / "py", progress=False, n_envs=4, env={"link_model": "envelope"}, **kw)
+    assert str(exc.value) == text
+    assert not (tmp_path / "py").exists()
+
+
 def test_hyperparams_yaml_number_read_as_a_string_says_why(capsys, tmp_path):
     """``learning_rate: 1e-4`` in a YAML file (PyYAML reads it as the string "1e-4") said "valid type: number" to
     someone who wrote a number; now with the YAML hint the env config's message has (one text)."""

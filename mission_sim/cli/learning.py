@@ -184,10 +184,14 @@ def _check_train(args):
             raise CliError(f"{flag} {v} is invalid; valid range: >= {lo}")
     if not 0.0 <= args.action_filter < 1.0:
         raise CliError(f"--action-filter {args.action_filter} is invalid; valid range: [0, 1)")
-    from ..train_options import dqn_with_action_filter
-    if dqn_with_action_filter(vars(args)):   # (before: an empty --out folder left, the message in Python's words)
-        raise CliError(f"--algo dqn is invalid with --action-filter {args.action_filter:g}; valid: --algo ppo, sac or "
-                       "td3 (a low-passed duty is not 0 or 1), or drop --action-filter")
+    from ..train_options import algo_conflict
+    bad = algo_conflict(vars(args))   # (before: refused by train() only, after --out was made, in Python's words)
+    if bad:
+        opt, algos, why = bad
+        flag = "--" + opt.replace("_", "-")
+        given = "" if opt == "residual" else f" {getattr(args, opt):g}" if opt == "action_filter" else f" {getattr(args, opt)}"
+        raise CliError(f"--algo {args.algo} is invalid with {flag}{given}; valid: --algo {', '.join(algos[:-1])}"
+                       f"{' or ' if len(algos) > 1 else ''}{algos[-1]} ({why}), or drop {flag}")
     if args.smooth_penalty < 0.0:
         raise CliError(f"--smooth-penalty {args.smooth_penalty} is invalid; valid range: >= 0")
     if args.probe_episodes is not None and not 0 <= args.probe_episodes <= 1024:
