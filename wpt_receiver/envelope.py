@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .params import LinkParams
+from .params import LinkParams, check_v1
 
 __all__ = [
     "EnvelopeCoefficients",
@@ -333,9 +333,7 @@ def simulate(params: LinkParams, v2_v, dt_s: float, x0=None, lm_h=None, v1_v=Non
         raise ValueError(f"lm_h={lm_h!r} is invalid; valid range: (0, {np.sqrt(params.l1_h * params.l2_h):.6g}) H")
     a, b = state_matrices(params, lm_h)
     ad, bd = zoh_discretise(a, b, dt_s)
-    v1 = params.v1_amp_v if v1_v is None else float(v1_v)
-    if not 0 < v1 < np.inf:                                 # NaN gave a NaN run without a word
-        raise ValueError(f"v1_v={v1_v!r} is invalid; valid range: (0, inf) V (the inverter's fundamental)")
+    v1 = params.v1_amp_v if v1_v is None else check_v1(v1_v)
     if x0 is None:
         x0 = steady_state(params, v2[0], lm_h, v1)
     elif np.shape(x0) != (2,) or not np.all(np.isfinite(x0)):   # was numpy's "could not broadcast" or a NaN run

@@ -26,7 +26,7 @@ import numpy as np
 
 from .envelope import coefficients, steady_state
 from .lti import tf2ss, zoh_ss
-from .params import LinkParams
+from .params import LinkParams, check_control_period, check_v1
 from .sbar import duty_from_v2_clipped
 
 __all__ = ["LowPassFilter", "InverseModelController", "inverse_tf", "TAU_RANGE_S", "DC_GAIN_RTOL"]
@@ -92,8 +92,7 @@ class InverseModelController:
             raise ValueError(f"n={n!r} is invalid; valid range: integer >= 1")
         self.n = int(n)
         self.control_period_s = params.rectifier_period_s if control_period_s is None else float(control_period_s)
-        if not 0 < self.control_period_s <= 1.0:     # NaN fails too; 1e300 s gave a NaN controller
-            raise ValueError(f"control_period_s={control_period_s!r} is invalid; valid range: (0, 1] s")
+        check_control_period(self.control_period_s, control_period_s)
         num, den = inverse_tf(params, lpf)
         a, b, cd, dd = tf2ss(num, den)   # scipy.signal's algorithms without its 1.2 s import
         with np.errstate(all="ignore"):     # a lost controller (below) is refused by name, not by numpy's warnings
@@ -146,9 +145,7 @@ class InverseModelController:
     def reset(self, i2_ref_a, v1_v: float | None = None):
         """Start at steady state for the reference ``i2_ref_a`` (scalar or (n,)); returns d_short."""
         if v1_v is not None:
-            if not 0 < float(v1_v) < np.inf:     # NaN gave a NaN duty, a negative V1 d = 1 (short) without a word
-                raise ValueError(f"v1_v={v1_v!r} is invalid; valid range: (0, inf) V (the inverter's fundamental)")
-            self.v1_v = float(v1_v)
+            self.v1_v = check_v1(v1_v)
             self._i2_sm = float(steady_state(self.params, 0.0, v1_v=self.v1_v)[1])
         u = np.broadcast_to(np.asarray(i2_ref_a, dtype=float), (self.n,)) - self.i2_sm_a
         self.x = u[:, None] * self._xss[None, :]

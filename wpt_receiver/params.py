@@ -104,6 +104,33 @@ TABLE_I = LinkParams()
 FREQUENCY_TOLERANCE = 2.0
 
 
+def check_v1(v1_v) -> float:
+    """``v1_v`` [V], the inverter's fundamental amplitude, as a float after checking it is in (0, inf) (a NaN gave a
+    NaN run or duty, a negative V1 short mode, without a word): one rule for :func:`wpt_receiver.envelope.simulate`
+    and :meth:`wpt_receiver.inverse_controller.InverseModelController.reset`."""
+    try:
+        v = float(v1_v)
+    except (TypeError, ValueError):
+        v = math.nan
+    if not 0 < v < np.inf:
+        raise ValueError(f"v1_v={v1_v!r} is invalid; valid range: (0, inf) V (the inverter's fundamental)")
+    return v
+
+
+def check_control_period(control_period_s, shown=None) -> float:
+    """A control period [s] as a float after checking it is in (0, 1] s (NaN fails; 1e300 s gave a NaN controller, a
+    zero period a run of zero length): one rule for the controller and the exact-mode runs. ``shown``: the value
+    the message names (default ``control_period_s``)."""
+    try:
+        v = float(control_period_s)
+    except (TypeError, ValueError):
+        v = math.nan
+    if not 0 < v <= 1.0:
+        raise ValueError(f"control_period_s={control_period_s if shown is None else shown!r} is invalid; valid range: "
+                         "(0, 1] s")
+    return v
+
+
 def resonance_warning(p: LinkParams, what: str = "f_hz") -> str | None:
     """One line when ``p.f_hz`` lies more than a factor :data:`FREQUENCY_TOLERANCE` off the resonance of the tanks
     that Table I's coils (``p``'s, when they are Table I's L1, L2) make with Table I's capacitors (C = 1 / ((2 pi

@@ -16,6 +16,8 @@ import math
 
 import numpy as np
 
+from .params import check_control_period
+
 __all__ = ["v2_from_duty", "duty_from_v2", "duty_from_v2_clipped"]
 
 _FOUR_OVER_PI = 4.0 / np.pi
@@ -44,8 +46,7 @@ def check_duty_run(d_short, control_period_s: float, substeps: int) -> np.ndarra
     d = check_duty(d_short)
     if d.ndim != 1 or d.size == 0:
         raise ValueError(f"d_short of shape {d.shape} is invalid; valid: a non-empty 1-D sequence of duties")
-    if not 0 < control_period_s <= 1.0:
-        raise ValueError(f"control_period_s={control_period_s!r} is invalid; valid range: (0, 1] s")
+    check_control_period(control_period_s)
     if (isinstance(substeps, bool) or not isinstance(substeps, (int, float, np.integer, np.floating))
             or not math.isfinite(substeps) or int(substeps) != substeps or substeps < 1):
         raise ValueError(f"substeps={substeps!r} is invalid; valid range: integer >= 1")
