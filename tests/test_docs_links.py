@@ -24,6 +24,13 @@ Checked in every tracked ``*.md`` (README.md, ARCHITECTURE.md, docs/, tests/data
 
 Headings are ATX headings (``# ...``) outside fenced code; setext headings (underlined with ``===``)
 are not used in these docs and are not read.
+
+And the command lines the docs show (the one import here: the CLI's parser, ~0.1 s, nothing run): every
+``--option`` after ``dronewpt SUB`` (in prose, code spans or fenced blocks) or in a code span opening with a
+subcommand (`` `compare --episodes 100` ``) is an option of that subcommand, and a value given to an option
+with fixed choices (``--link envelope``, ``--format json``) is one of them; the text read runs to the end of
+the code span or line, cut at ``|``, ``;``, ``&&``, `` #`` and ``) ``. A line that shows the refusal itself
+(``unrecognized argument``, ``invalid choice``) is skipped: there the wrong option is the point.
 """
 
 from __future__ import annotations
@@ -243,12 +250,65 @@ def check_tree(root: Path, files: set[str] | None = None) -> tuple[int, int, lis
     return n_links, n_quotes, bad
 
 
+_SKIP_OPTION_LINE = re.compile(r"unrecognized argument|invalid choice")
+_OPTION = re.compile(r"(?<![\w-])(--[a-z][\w-]*)(?:=(\S*))?")
+
+
+def subcommand_options() -> dict[str, dict[str, tuple | None]]:
+    """{subcommand: {option string: its choices (None: any value)}} of ``dronewpt``'s parser."""
+    import argparse
+
+    from mission_sim.cli import build_parser
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return {name: {s: (tuple(act.choices) if act.choices is not None and act.nargs in (None, "?") else None)
+                   for act in sp._actions for s in act.option_strings}
+            for name, sp in sub.choices.items()}
+
+
+def check_options(text: str, src: str, options: dict[str, dict[str, tuple | None]]) -> tuple[int, list[str]]:
+    """(number of option uses checked, problems) in the markdown ``text`` of ``src``."""
+    names = "|".join(sorted(map(re.escape, options), key=len, reverse=True))
+    use = re.compile(r"(?:`(?:dronewpt\s+)?|(?<![\w-])dronewpt\s+)(" + names + r")(?![\w-])([^`\n]*)")
+    n, bad = 0, []
+    for ln, line in enumerate(text.splitlines(), 1):
+        if _SKIP_OPTION_LINE.search(line):
+            continue
+        for m in use.finditer(line):
+            sub, rest = m.group(1), re.split(r"[|;]|&&|\)\s|\s#", m.group(2))[0]
+            toks = rest.split()
+            for k, tok in enumerate(toks):
+                if not (o := _OPTION.fullmatch(tok.rstrip(",.:"))):
+                    continue
+                flag, n = o.group(1), n + 1
+                if flag not in options[sub]:
+                    bad.append(f"{src}:{ln}: dronewpt {sub} has no option {flag}")
+                    continue
+                choices = options[sub][flag]
+                value = o.group(2) if o.group(2) is not None else (toks[k + 1] if k + 1 < len(toks) else "")
+                value = value.strip("`,.;:'\"()")
+                if choices is not None and value and not value.startswith("-") and value.isidentifier() \
+                        and value not in choices:
+                    bad.append(f"{src}:{ln}: dronewpt {sub} {flag} {value}: not one of {', '.join(choices)}")
+    return n, bad
+
+
 # --- the checker on the repository -------------------------------------------------------------
 
 def test_every_link_and_section_reference_resolves():
     n_links, n_quotes, bad = check_tree(ROOT)
     assert n_links >= 50 and n_quotes >= 50, (n_links, n_quotes)   # the docs are read at all
     assert not bad, f"{len(bad)} broken of {n_links} links and {n_quotes} quoted references:\n" + "\n".join(bad)
+
+
+def test_every_option_the_docs_show_exists():
+    options = subcommand_options()
+    assert {"mission", "compare", "train", "sweep", "replay"} <= set(options)
+    n, bad = 0, []
+    for src in sorted(f for f in tracked_files(ROOT) if f.endswith(".md")):
+        k, b = check_options((ROOT / src).read_text("utf-8"), src, options)
+        n, bad = n + k, bad + b
+    assert n >= 300, n   # the docs are read at all
+    assert not bad, f"{len(bad)} of {n} options shown in the docs are not the command's:\n" + "\n".join(bad)
 
 
 # --- the checker on synthetic docs: it can fail ------------------------------------------------
@@ -298,3 +358,18 @@ def test_the_checker_finds_broken_links_and_references(tmp_path):
         'README.md:4: docs/t.md, "tried": 2 headings or bold leads of docs/t.md match: Tried | Tried',
         'README.md:4: (this file), "**Nothing**": no heading or bold lead of README.md has the quoted text',
     ])
+
+
+def test_the_option_checker_finds_options_a_command_lacks():
+    options = {"mission": {"--policy": None, "--format": ("table", "json"), "--set": None},
+               "compare": {"--episodes": None, "--link": ("envelope", "modal")}}
+    text = ("Run `dronewpt mission --policy step --format json` or `compare --episodes 3 --link=modal`.\n"
+            "```\n$ dronewpt mission --set a=1 | grep x --nope\n```\n"
+            "`mission --polcy step` gives `unrecognized argument '--polcy'`; `dronewpt mission --format xml`: invalid choice\n"
+            "Then `dronewpt mission --polcy step` and `compare --episode 3 --link eq4`;\n"
+            "dronewpt mission --format=yaml --set k=v; mission --bogus is prose, not a command\n")
+    n, bad = check_options(text, "t.md", options)
+    assert (n, bad) == (10, ["t.md:6: dronewpt mission has no option --polcy",
+                            "t.md:6: dronewpt compare has no option --episode",
+                            "t.md:6: dronewpt compare --link eq4: not one of envelope, modal",
+                            "t.md:7: dronewpt mission --format yaml: not one of table, json"])
