@@ -10,8 +10,9 @@ model with real devices gives the instantaneous secondary current; from it:
   its body diode's share in the other polarity;
 * ``required_rating_a = margin * peak_i2_a``: the devices' continuous current rating must cover the
   peak, because the overshoot lasts milliseconds (thermally long for a die), with ``margin``
-  (1.25 by default) for tolerances and ageing; the voltage rating must be ``v_margin`` (1.5) times
-  the battery voltage;
+  (1.25 by default) for tolerances and ageing (``peak_i2_a`` is measured with the preset's devices for the
+  rating, again with the chosen parts for the row); the voltage rating: ``v_margin`` (1.1) times the
+  simulated open-load peak (below; it was 1.5 x the battery voltage before issue 23);
 * the part: every shipped diode / switch (``parts.toml``) meeting the voltage rule, paralleled
   ``n = ceil(required / rating)`` times (paralleled dies divide Rd and Ron by n), and the
   combination with the smallest rectifier mass is chosen;
