@@ -29,7 +29,7 @@ def _add_tolerance(sub):
     p.add_argument("--min-power", type=float_arg("min-power", positive=True, lo=0.01, hi=1.0), default=0.9,
                    help="a draw must deliver at least this fraction of the nominal RM power (default 0.9)")
     p.add_argument("--workers", type=nonneg_int("workers"), default=0,
-                   help="local Dask workers (default 0: in this process, ~3 ms a draw; N > 0 scales out)")
+                   help="local Dask workers (default 0: in this process, ~0.5-1 ms a draw; N > 0 scales out)")
     p.add_argument("--out", type=path_arg("--out"), default=Path("out/tolerance"), help="result store (default out/tolerance)")
     p.add_argument("--format", choices=("table", "json"), default="table")
     add_progress_flag(p)
