@@ -77,6 +77,20 @@ def test_replay_with_pads_reports_the_flight_time_gain(capsys, tmp_path):
     assert 0 < s["battery_charge_in_j"] < s["rectifier_output_j"] < s["energy_from_pads_j"]
 
 
+@pytest.mark.parametrize("pads", [True, False])
+def test_replay_lists_every_file_it_wrote_its_summary_last(capsys, tmp_path, pads):
+    """``replay`` (and ``replay --pads``) listed the time series, CSV and figures it wrote but not
+    ``replay_summary.json`` / ``refly_summary.json``, the file docs/mavlink.md and docs/mission_files.md name as its
+    output (``mission`` lists its ``summary.json``): now every written file is listed, the summary last."""
+    out = tmp_path / "o"
+    argv = ["replay", str(LOG), "--window", "440,620", "--out", str(out), "--no-plot", "--no-progress"]
+    assert main(argv + (["--pads", str(PADS)] if pads else [])) == 0
+    wrote = [ln.removeprefix("wrote ") for ln in capsys.readouterr().out.splitlines() if ln.startswith("wrote ")]
+    assert wrote[-1] == str(out / ("refly_summary.json" if pads else "replay_summary.json"))
+    on_disk = {str(p) for p in out.rglob("*") if p.is_file() and not p.name.startswith(".")}
+    assert sorted(wrote) == sorted(on_disk)
+
+
 def _one_line(capsys, argv, *needles):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -101,5 +101,5 @@ def _print(args, s: dict, cfg) -> None:
     print(f"flight time gain {s['flight_time_gain_s']:+.1f} s of hover against the logged flight "
           f"({s['net_battery_energy_gain_j'] / 1e3:+.2f} kJ usable battery energy), "
           f"{s['flight_time_gain_vs_refly_without_charging_s']:+.1f} s against the same re-flight with the pads off")
-    for f in s["files"]:
+    for f in [*s["files"], args.out / "refly_summary.json"]:   # the summary too (written last), as mission lists its
         print(f"wrote {f}")
