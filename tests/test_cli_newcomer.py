@@ -264,3 +264,19 @@ def test_an_unknown_option_is_named_with_its_command_and_the_nearest_option(caps
         "options go after its name); valid: the options and arguments of dronewpt --help")
     assert _one_error_line(capsys, ["--zzz", "mission"]) == (
         "dronewpt: error: unrecognized argument '--zzz'; valid: the options and arguments of dronewpt --help")
+
+
+def test_compare_help_names_every_default_row():
+    """``compare --help`` lists the rows ``compare`` runs at its defaults: ``DEFAULT_POLICIES`` and the shipped
+    learned kinds aggregated over their seeds (it left out ``imitation``, whose row every default run prints; the
+    list is written by hand in the help so that ``--help`` imports no policy code)."""
+    import argparse
+    import re
+
+    from mission_sim.cli import build_parser
+    from policies.compare import DEFAULT_POLICIES, OPT_IN_SEEDS, shipped_seed_groups
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)).choices["compare"]
+    text = " ".join(next(a for a in sub._actions if a.dest == "policies").help.split())
+    assert tuple(re.search(r"default: ([\w:.,]+)", text).group(1).rstrip(",").split(",")) == DEFAULT_POLICIES
+    kinds = re.search(r"shipped learned kinds ([\w, ]+?) as one row each", text).group(1)
+    assert set(re.split(r",\s*|\s+and\s+", kinds)) == set(shipped_seed_groups()) - set(OPT_IN_SEEDS)

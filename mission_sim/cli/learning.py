@@ -284,8 +284,10 @@ def _add_compare(sub):
                                    "the budgeted model-based curve.")
     lazy_names_help(p.add_argument("--policies", default=None),
                     "comma-separated policy names (default: step,ramp,hysteresis,model_based,model_based_online,"
-                    "model_based_budget:0.01,model_based_budget:0.02,mpc,rl,ppo_lagrangian,residual,random; the "
-                    "SB3 ones are skipped with a note when stable-baselines3 is not installed)", policy_names)
+                    "model_based_budget:0.01,model_based_budget:0.02,mpc,rl,ppo_lagrangian,residual,random, and the "
+                    "shipped learned kinds rl, ppo_lagrangian, residual and imitation as one row each over their "
+                    "training seeds; the SB3 ones are skipped with a note when stable-baselines3 is not installed)",
+                    policy_names)
     lazy_names_help(p.add_argument("--scenarios", default=None),
                     "comma-separated scenarios (default: nominal,lm_mismatch,windy,battery,lm_high,lm_drift,lm_drift_fast,"
                     "sense_delay,sense_delay_long,battery_low,battery_empty,detuned,detuned_wide; lm_high is outside "
