@@ -82,8 +82,10 @@ DEFAULT_HYPERPARAMS = {
 
 
 def env_config(overrides: dict | None = None):
-    """:class:`envs.EnvConfig` with ``overrides``: its fields (n_steps, slow_every, rated_i2_a, bus_c_f,
-    dt_s, devices - a preset name, link_model - ``envelope`` or ``modal``) and the reward weights (tracking, overcurrent, i_ref_a) by name."""
+    """:class:`envs.EnvConfig` with ``overrides``: its fields but ``link`` and ``reward`` (n_steps, slow_every,
+    rated_i2_a, bus_c_f, dt_s, device_tj_c, hold_tol_a, v2_updates, v2_refine_levels, v2_refine_tol, devices - a
+    preset name, link_model - ``envelope`` or ``modal``) and the reward weights (tracking, overcurrent, i_ref_a) by
+    name."""
     from envs import EnvConfig, RewardWeights
 
     ov = dict(overrides or {})

@@ -280,3 +280,20 @@ def test_compare_help_names_every_default_row():
     assert tuple(re.search(r"default: ([\w:.,]+)", text).group(1).rstrip(",").split(",")) == DEFAULT_POLICIES
     kinds = re.search(r"shipped learned kinds ([\w, ]+?) as one row each", text).group(1)
     assert set(re.split(r",\s*|\s+and\s+", kinds)) == set(shipped_seed_groups()) - set(OPT_IN_SEEDS)
+
+
+def test_train_env_help_names_every_key_it_takes():
+    """``train --help`` names every ``--env`` key ``policies.train.env_config`` takes (the EnvConfig fields but
+    ``link`` and ``reward``, and the reward weights): it named 8 of the 15, not device_tj_c, hold_tol_a, v2_updates,
+    v2_refine_levels or v2_refine_tol."""
+    import argparse
+    import dataclasses
+    import re
+
+    from envs import EnvConfig, RewardWeights
+    from mission_sim.cli import build_parser
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)).choices["train"]
+    text = " ".join(next(a for a in sub._actions if a.dest == "env").help.split())
+    keys = ({f.name for f in dataclasses.fields(EnvConfig)} - {"link", "reward"}) | \
+        {f.name for f in dataclasses.fields(RewardWeights)}
+    assert keys == {k for k in keys if re.search(rf"(?<![\w]){k}(?![\w])", text)}

@@ -53,7 +53,8 @@ def _add_train(sub):
                         "'dict(...)'); override the defaults")
     p.add_argument("--env", action="append", default=[], metavar="KEY=VALUE",
                    help="env config / reward weight override, repeatable: n_steps, slow_every, rated_i2_a, "
-                        "bus_c_f, dt_s, tracking, overcurrent, i_ref_a; devices=PRESET (ideal, schottky, sic; "
+                        "bus_c_f, dt_s, tracking, overcurrent, i_ref_a, device_tj_c, hold_tol_a, v2_updates, "
+                        "v2_refine_levels, v2_refine_tol; devices=PRESET (ideal, schottky, sic; "
                         "default schottky); link_model=envelope|modal (or --link, not both with different values)")
     _add_link_flag(p)
     p.add_argument("--cost", choices=("overshoot", "overcurrent"), default="overshoot",
