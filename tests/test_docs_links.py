@@ -30,7 +30,9 @@ And the command lines the docs show (the one import here: the CLI's parser, ~0.1
 subcommand (`` `compare --episodes 100` ``) is an option of that subcommand, and a value given to an option
 with fixed choices (``--link envelope``, ``--format json``) is one of them; the text read runs to the end of
 the code span or line, cut at ``|``, ``;``, ``&&``, `` #`` and ``) ``. A line that shows the refusal itself
-(``unrecognized argument``, ``invalid choice``) is skipped: there the wrong option is the point.
+(``unrecognized argument``, ``invalid choice``) is skipped: there the wrong option is the point. Likewise every
+``--set KEY=VALUE`` key shown is one the default mission takes (``mission_sim.config.apply_overrides``), except on
+a line showing its refusal (``is invalid``) and the keys in :data:`WRONG_ON_PURPOSE`.
 """
 
 from __future__ import annotations
@@ -292,6 +294,41 @@ def check_options(text: str, src: str, options: dict[str, dict[str, tuple | None
     return n, bad
 
 
+#: ``--set`` keys the docs show as bad input where the line does not say so (docs/performance.md's start-up checks)
+WRONG_ON_PURPOSE = {"sim.nope"}
+_SET_KEY = re.compile(r"--set[ =]`?([a-z_]+(?:\.\w+)+)=")
+
+
+def check_set_keys(text: str, src: str, valid) -> tuple[int, list[str]]:
+    """(number of ``--set KEY=`` keys checked, problems) in ``text``; ``valid(key)`` is None or the error."""
+    n, bad = 0, []
+    for ln, line in enumerate(text.splitlines(), 1):
+        if "is invalid" in line:
+            continue
+        for m in _SET_KEY.finditer(line):
+            if m.group(1) in WRONG_ON_PURPOSE:
+                continue
+            n += 1
+            if (err := valid(m.group(1))) is not None:
+                bad.append(f"{src}:{ln}: --set {m.group(1)}=...: {err}")
+    return n, bad
+
+
+def default_mission_key():
+    """``valid(key)`` for :func:`check_set_keys`: None when the default mission takes ``key``, else the error."""
+    from mission_sim.config import apply_overrides, load_config_dict
+    base = load_config_dict()
+
+    def valid(key):
+        try:
+            apply_overrides(base, {key: 1.0})
+        except ValueError as exc:
+            if str(exc).startswith("override key"):
+                return str(exc).split(";")[0]
+        return None
+    return valid
+
+
 # --- the checker on the repository -------------------------------------------------------------
 
 def test_every_link_and_section_reference_resolves():
@@ -309,6 +346,16 @@ def test_every_option_the_docs_show_exists():
         n, bad = n + k, bad + b
     assert n >= 300, n   # the docs are read at all
     assert not bad, f"{len(bad)} of {n} options shown in the docs are not the command's:\n" + "\n".join(bad)
+
+
+def test_every_set_key_the_docs_show_exists():
+    valid = default_mission_key()
+    n, bad = 0, []
+    for src in sorted(f for f in tracked_files(ROOT) if f.endswith(".md")):
+        k, b = check_set_keys((ROOT / src).read_text("utf-8"), src, valid)
+        n, bad = n + k, bad + b
+    assert n >= 50, n
+    assert not bad, f"{len(bad)} of {n} --set keys shown in the docs are not the config's:\n" + "\n".join(bad)
 
 
 # --- the checker on synthetic docs: it can fail ------------------------------------------------
@@ -373,3 +420,13 @@ def test_the_option_checker_finds_options_a_command_lacks():
                             "t.md:6: dronewpt compare has no option --episode",
                             "t.md:6: dronewpt compare --link eq4: not one of envelope, modal",
                             "t.md:7: dronewpt mission --format yaml: not one of table, json"])
+
+
+def test_the_set_key_checker_finds_keys_the_config_lacks():
+    text = ("`dronewpt mission --set wind.speed_m_s=6 --set pads.0.hover_time_s=30`\n"
+            "`mission --set wind.gust_sigma=3` and --set=battery.capacity=2\n"
+            "| `mission --set nosuch.key=1` | 2 | `override key 'nosuch.key' is invalid` |\n"
+            "`--set sim.nope=1` on purpose; `--set pads.7.x_m=1`\n")
+    n, bad = check_set_keys(text, "t.md", default_mission_key())
+    assert n == 5 and [b.split(": override")[0] for b in bad] == [
+        "t.md:2: --set wind.gust_sigma=...", "t.md:2: --set battery.capacity=...", "t.md:4: --set pads.7.x_m=..."]
