@@ -277,9 +277,11 @@ def test_compare_help_names_every_default_row():
     from policies.compare import DEFAULT_POLICIES, OPT_IN_SEEDS, shipped_seed_groups
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)).choices["compare"]
     text = " ".join(next(a for a in sub._actions if a.dest == "policies").help.split())
-    assert tuple(re.search(r"default: ([\w:.,]+)", text).group(1).rstrip(",").split(",")) == DEFAULT_POLICIES
-    kinds = re.search(r"shipped learned kinds ([\w, ]+?) as one row each", text).group(1)
-    assert set(re.split(r",\s*|\s+and\s+", kinds)) == set(shipped_seed_groups()) - set(OPT_IN_SEEDS)
+    assert tuple(re.search(r"default: ([\w:.,]+)", text).group(1).rstrip(",;").split(",")) == DEFAULT_POLICIES
+    seeds = " ".join(next(a for a in sub._actions if a.dest == "train_seeds").help.split())
+    for kinds in (re.search(r"the learned rows ([\w, ]+?) are each one row", text).group(1),
+                  re.search(r"the shipped ([\w, ]+?) seeds", seeds).group(1)):
+        assert set(re.split(r",\s*|\s+and\s+", kinds)) == set(shipped_seed_groups()) - set(OPT_IN_SEEDS)
 
 
 def test_train_env_help_names_every_key_it_takes():

@@ -285,9 +285,9 @@ def _add_compare(sub):
                                    "the budgeted model-based curve.")
     lazy_names_help(p.add_argument("--policies", default=None),
                     "comma-separated policy names (default: step,ramp,hysteresis,model_based,model_based_online,"
-                    "model_based_budget:0.01,model_based_budget:0.02,mpc,rl,ppo_lagrangian,residual,random, and the "
-                    "shipped learned kinds rl, ppo_lagrangian, residual and imitation as one row each over their "
-                    "training seeds; the SB3 ones are skipped with a note when stable-baselines3 is not installed)",
+                    "model_based_budget:0.01,model_based_budget:0.02,mpc,rl,ppo_lagrangian,residual,random; the learned "
+                    "rows rl, ppo_lagrangian, residual and imitation are each one row over their shipped training "
+                    "seeds; the SB3 ones are skipped with a note when stable-baselines3 is not installed)",
                     policy_names)
     lazy_names_help(p.add_argument("--scenarios", default=None),
                     "comma-separated scenarios (default: nominal,lm_mismatch,windy,battery,lm_high,lm_drift,lm_drift_fast,"
@@ -300,7 +300,7 @@ def _add_compare(sub):
     p.add_argument("--train-seeds", action="append", default=[], metavar="LABEL=SPEC,SPEC,...",
                    help="one row aggregated over models of one kind trained with different seeds, e.g. "
                         "ppo_lag=rl:a/ppo_sbar.zip,rl:b/ppo_sbar.zip (a glob in a path is expanded); repeatable "
-                        "(default with the default --policies: the shipped ppo_lagrangian and residual seeds); "
+                        "(default with the default --policies: the shipped rl, ppo_lagrangian, residual and imitation seeds); "
                         "without --policies a LABEL that names a default row replaces that row")
     p.add_argument("--no-frontier", action="store_true", help="skip the budgeted model-based sweep")
     p.add_argument("--oracle-windows", type=int, default=0, metavar="N",
