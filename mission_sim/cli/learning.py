@@ -106,7 +106,7 @@ def _add_train(sub):
     p.add_argument("--eval-episodes", type=int_in("eval-episodes", 1), default=32,
                    help="held-out evaluation windows (default 32)")
     p.add_argument("--checkpoint-every", type=int_in("checkpoint-every", 1), default=100_000,
-                   help="env steps between checkpoints")
+                   help="env steps between checkpoints (default 100000)")
     p.add_argument("--resume", type=path_arg("--resume"), default=None, metavar="CHECKPOINT.zip",
                    help="continue from a checkpoint of checkpoints/ (its VecNormalize statistics next to it)")
     add_progress_flag(p)
