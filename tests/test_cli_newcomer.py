@@ -299,3 +299,31 @@ def test_train_env_help_names_every_key_it_takes():
     keys = ({f.name for f in dataclasses.fields(EnvConfig)} - {"link", "reward"}) | \
         {f.name for f in dataclasses.fields(RewardWeights)}
     assert keys == {k for k in keys if re.search(rf"(?<![\w]){k}(?![\w])", text)}
+
+
+def test_every_default_a_help_text_states_is_the_one_used():
+    """A ``(default N)`` in an option's help is its parser default, or for ``train``'s options that act only with
+    another (parser default None: refused when given without it) the value ``train()`` then uses (the command line's
+    own, else ``policies.train.ONLY_WITH_DEFAULTS``)."""
+    import argparse
+    import re
+
+    from mission_sim.cli import build_parser
+    from mission_sim.cli.learning import _CLI_ONLY_WITH_DEFAULTS
+    from policies.train import ONLY_WITH_DEFAULTS
+    subs = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)).choices
+    checked, wrong = 0, []
+    for name, sub in subs.items():
+        for act in sub._actions:
+            m = re.search(r"\(default:? ([-+]?(?:\d{1,3}(?:,\d{3})+|\d[\d_]*)(?:\.\d+)?(?:e-?\d+)?)[;:,) ]",
+                          act.help or "")
+            if not m:
+                continue
+            default = act.default
+            if default is None and name == "train":
+                default = _CLI_ONLY_WITH_DEFAULTS.get(act.dest, ONLY_WITH_DEFAULTS.get(act.dest))
+            if isinstance(default, (int, float)) and not isinstance(default, bool):
+                checked += 1
+                if float(m.group(1).replace(",", "")) != float(default):
+                    wrong.append(f"{name} {act.option_strings[0]}: help {m.group(1)}, used {default!r}")
+    assert checked >= 30 and not wrong, (checked, wrong)
