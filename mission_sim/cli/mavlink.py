@@ -94,7 +94,8 @@ def _add_replay(sub):
                        description="Read a MAVLink telemetry log, an ArduPilot DataFlash log or a PX4 ULog, build the flown "
                                    "track (3D GPS fix only) about a pad, run the mission world along it (Lm(t), "
                                    "SBAR, battery) and compare the logged electrical power with the propulsion "
-                                   "power model.")
+                                   "power model; with --pads FILE, re-fly it with a detour to each pad and report "
+                                   "the flight time gained (docs/mission_files.md).")
     p.add_argument("log", type=path_arg("log"), help="flight log: .tlog, .bin or .ulg")
     p.add_argument("--pad", default=None, metavar="LAT,LON[,ALT]",
                    help="pad position (degrees, degrees, m AMSL); default: the first armed position. "

@@ -17,9 +17,12 @@ _COLUMNS = ("peak_i2_a", "diode_rms_a", "diode_avg_a", "switch_rms_a", "required
 def _add_sizing(sub):
     p = sub.add_parser("sizing", help="rectifier rating, parts and mass per policy (the paper's claim)",
                        description="Simulate the RM -> SM transition of each policy with the switching model and "
-                                   "real devices; size the SBAR: worst-case instantaneous |i2|, device RMS currents, "
-                                   "required rating (margin x peak), smallest-mass combination of shipped parts, "
-                                   "conduction losses and rectifier mass (devices + plate-fin heat sink).")
+                                   "real devices (--source mission: whole missions; --source sweep: a sweep's "
+                                   "worst case per policy); size the SBAR: worst-case instantaneous |i2|, device "
+                                   "RMS currents, required rating (margin x peak), voltage rating (1.1 x the "
+                                   "simulated open-load peak), smallest-mass combination of shipped parts, "
+                                   "conduction and switching losses at the settled junction temperatures and "
+                                   "rectifier mass (devices + plate-fin heat sink).")
     p.add_argument("--source", choices=("paper", "mission", "sweep"), default="paper",
                    help="paper: the RM -> SM transition on the switching model (default); mission: whole missions "
                         "per policy (envelope currents, instantaneous peak estimate); sweep: per policy, the "
