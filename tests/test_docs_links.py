@@ -1,4 +1,5 @@
-"""The docs' links and section references resolve (fast: text only, nothing is simulated or imported).
+"""The docs' links and section references resolve, and the command lines they show exist (fast: text, the
+CLI's parser and the default mission's config; nothing is simulated).
 
 Checked in every tracked ``*.md`` (README.md, ARCHITECTURE.md, docs/, tests/data/):
 
@@ -25,7 +26,7 @@ Checked in every tracked ``*.md`` (README.md, ARCHITECTURE.md, docs/, tests/data
 Headings are ATX headings (``# ...``) outside fenced code; setext headings (underlined with ``===``)
 are not used in these docs and are not read.
 
-And the command lines the docs show (the one import here: the CLI's parser, ~0.1 s, nothing run): every
+And the command lines the docs show (the CLI's parser and the default config, ~0.3 s, nothing run): every
 ``--option`` after ``dronewpt SUB`` (in prose, code spans or fenced blocks) or in a code span opening with a
 subcommand (`` `compare --episodes 100` ``) is an option of that subcommand, and a value given to an option
 with fixed choices (``--link envelope``, ``--format json``) is one of them; the text read runs to the end of
