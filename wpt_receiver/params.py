@@ -12,7 +12,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-__all__ = ["LinkParams", "TABLE_I", "FREQUENCY_TOLERANCE", "resonance_warning"]
+__all__ = ["LinkParams", "TABLE_I", "FREQUENCY_TOLERANCE", "resonance_warning", "warn_off_resonance"]
 
 
 @dataclass(frozen=True)
@@ -156,3 +156,15 @@ def resonance_warning(p: LinkParams, what: str = "f_hz") -> str | None:
             f"secondary current V1/(2 pi f Lm) scales as 1/f, {1.0 / ratio:.3g}x its value at {f0:.6g} Hz "
             f"(outside the factor {tol:g} where it halves or doubles); valid: {what} in [{f0 / tol:.6g}, "
             f"{f0 * tol:.6g}] Hz, or coils made for it")
+
+
+def warn_off_resonance(p: LinkParams) -> None:
+    """:func:`resonance_warning` of ``p`` (naming ``f_hz``) as a :class:`~wpt_receiver.notices.DronewptWarning`, once,
+    when it has one: the one rule of the library's entry points that take a link (:func:`wpt_receiver.paper.run_paper`,
+    :func:`wpt_receiver.c_export.controller_spec`, :func:`wpt_receiver.switching.netlist.netlist`, the envs), which
+    ``dronewpt paper`` / ``netlist`` / ``export-controller --link f_hz`` print as they are (the CLI's own copy until
+    2026-11-27 evening; a mission's ``link.f_hz`` is :mod:`mission_sim.setup_warnings`')."""
+    text = resonance_warning(p)
+    if text is not None:
+        from .notices import warn
+        warn(text)
