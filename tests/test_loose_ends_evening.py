@@ -69,3 +69,36 @@ def test_the_cli_prints_the_librarys_frequency_warning_once_and_first(capsys, tm
     assert sum("tanks' resonance" in line for line in err) == 1
     if first is not None:
         assert err[1].startswith(f"dronewpt paper: warning: {first}"), err
+
+
+# ------------------------------------------------------------------ 2. the compiled duty at VL = 0
+_GRID = (0.0, -0.0, 5e-324, -5e-324, 1.0, -1.0, 10.0, -10.0, 30.0, 38.19718634205488, 1e300, -1e300, float("inf"),
+         float("-inf"), float("nan"))
+
+
+def test_the_compiled_duty_is_the_python_one_at_every_input():
+    """``policies.kernels._duty`` (the mission's compiled ``duty_from_v2_clipped``) raised ZeroDivisionError at VL = 0,
+    where the Python function gives 0 (V2 > 0), 1 (V2 < 0) or NaN (V2 = 0, NaN). Now the same result at every pair of
+    the grid (0, -0, negative, NaN, infinite, tiny, huge; exactly where the duty is 0, 1 or NaN or VL is 0), and within
+    the last bit of numpy's own ``arcsin`` (two ulps of the duty) on 20,000 random pairs."""
+    import math
+
+    import numpy as np
+
+    from policies.kernels import _duty
+    from wpt_receiver.sbar import duty_from_v2_clipped
+    rng = np.random.default_rng(5)
+    pairs = [(v2, vl) for v2 in _GRID for vl in _GRID] + list(zip(rng.uniform(-50, 50, 20_000),
+                                                                   rng.uniform(-5, 60, 20_000)))
+    exact = 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for v2, vl in pairs:
+            want, got = duty_from_v2_clipped(float(v2), float(vl)), _duty(float(v2), float(vl))
+            if math.isnan(want) or want in (0.0, 1.0) or vl == 0.0:
+                assert (math.isnan(got) and math.isnan(want)) or got == want, (v2, vl, want, got)
+                exact += 1
+            else:
+                # (numpy's arcsin and the C library's asin: one ulp of the angle apart, two of the duty at most)
+                assert abs(got - want) <= 2 * np.spacing(want), (v2, vl, want, got)
+    assert _duty(10.0, 0.0) == 0.0 and _duty(-10.0, 0.0) == 1.0 and math.isnan(_duty(0.0, 0.0))
+    assert exact >= len(_GRID) ** 2 - 4 * 4   # (the grid's pairs with a duty strictly inside (0, 1): few)
