@@ -102,3 +102,55 @@ def test_the_compiled_duty_is_the_python_one_at_every_input():
                 assert abs(got - want) <= 2 * np.spacing(want), (v2, vl, want, got)
     assert _duty(10.0, 0.0) == 0.0 and _duty(-10.0, 0.0) == 1.0 and math.isnan(_duty(0.0, 0.0))
     assert exact >= len(_GRID) ** 2 - 4 * 4   # (the grid's pairs with a duty strictly inside (0, 1): few)
+
+
+# ------------------------------------------------------------------ 3. one shipped model under two names
+@pytest.mark.parametrize("pols, also", [
+    (("rl", "rl:policies/pretrained/rl_s0.zip"), "rl"),
+    (("model_based", "residual:policies/pretrained/residual_s0.zip", "residual"), "residual:policies/pretrained/residual_s0.zip"),
+    (("oracle_imitation", "oracle_imitation:policies/./pretrained/oracle_imitation_s0.npz"), "oracle_imitation"),
+])
+def test_compare_refuses_one_model_listed_under_two_names(pols, also, monkeypatch):
+    """``compare(policies=["rl", "rl:policies/pretrained/rl_s0.zip"])`` ran the shipped model twice as two rows: the
+    bare kind's default file is the same model (``policies.shipped``, the one table of the shipped defaults)."""
+    from pathlib import Path
+
+    from policies.compare import check_row_labels
+    monkeypatch.chdir(Path(__file__).resolve().parents[1])
+    with pytest.raises(ValueError, match=rf"^policies lists the model '{pols[-1]}' twice \(also as '{also}'\); "
+                                         r"valid: each policy once$"):
+        check_row_labels(pols)
+    with pytest.raises(ValueError, match=r"^train_seeds 'g' lists the model .* twice"):
+        check_row_labels(["step"], {"g": list(pols)})
+
+
+def test_compare_still_takes_two_seeds_and_the_filtered_oracle_beside_its_base(monkeypatch):
+    from pathlib import Path
+
+    from policies.compare import check_row_labels
+    monkeypatch.chdir(Path(__file__).resolve().parents[1])
+    check_row_labels(["rl", "rl:policies/pretrained/rl_s1.zip", "oracle_imitation", "oracle_imitation_filtered",
+                      "ppo_lagrangian", "model_based_budget:0.02", "model_based"])
+
+
+def test_the_cli_names_the_same_model_once(capsys, monkeypatch):
+    from pathlib import Path
+
+    from _cli_helpers import one_error_line
+    monkeypatch.chdir(Path(__file__).resolve().parents[1])
+    assert one_error_line(capsys, ["compare", "--policies", "rl,rl:policies/pretrained/rl_s0.zip", "--episodes", "2"]) \
+        == ("dronewpt compare: error: --policies lists the model 'rl:policies/pretrained/rl_s0.zip' twice (also as "
+            "'rl'); valid: each policy once")
+
+
+def test_every_shipped_default_is_one_tables():
+    """The default model of each learned kind was spelt in six places (``policies.rl`` twice, ``residual``,
+    ``slow_budget``, ``oracle_imitation`` and inline in ``policies._imitation``); now :mod:`policies.shipped`."""
+    from policies import oracle_imitation, residual, rl, shipped, slow_budget
+    from policies.compare import SHIPPED_SEEDS
+    assert (rl.PRETRAINED, rl.PRETRAINED_LAGRANGIAN, residual.PRETRAINED_RESIDUAL, slow_budget.PRETRAINED_SLOW_BUDGET,
+            oracle_imitation.PRETRAINED_ORACLE_IMITATION) == tuple(
+        shipped.default_model(k) for k in ("rl", "ppo_lagrangian", "residual", "slow_budget", "oracle_imitation"))
+    assert all(shipped.default_model(k).is_file() for k in shipped.SHIPPED)
+    assert SHIPPED_SEEDS == {"rl": "rl_s", "ppo_lagrangian": "ppo_lagrangian_s", "residual": "residual_s",
+                             "imitation": "imitation_s", "slow_budget": "slow_budget_s"}

@@ -384,8 +384,10 @@ def _check_compare(args, pols, scns, groups):
     from policies.compare import EPISODES, check_row_labels, seed_range
     try:
         check_row_labels(pols, groups)
-    except ValueError as exc:
-        raise CliError(f"--train-seeds: {exc}" if groups else str(exc)) from None
+    except ValueError as exc:   # (policies lists the model 'rl:...' twice (also as 'rl'): the --policies' own)
+        text = str(exc)
+        raise CliError("--" + text if text.startswith("policies ") else f"--train-seeds: {text}" if groups
+                       else text) from None
     for p_ in pols + tuple(sp for specs in groups.values() for sp in specs):
         if p_.split(":", 1)[0] not in available():
             raise CliError(f"--policies {p_!r} is invalid; valid values: {', '.join(available())} (or rl:PATH)")
