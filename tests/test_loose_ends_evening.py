@@ -154,3 +154,51 @@ def test_every_shipped_default_is_one_tables():
     assert all(shipped.default_model(k).is_file() for k in shipped.SHIPPED)
     assert SHIPPED_SEEDS == {"rl": "rl_s", "ppo_lagrangian": "ppo_lagrangian_s", "residual": "residual_s",
                              "imitation": "imitation_s", "slow_budget": "slow_budget_s"}
+
+
+# ------------------------------------------------------------------ 4. train's ranges: one table
+_RANGE_OPTS = [("seed", "--seed", "seed"), ("n_envs", "--n-envs", "n-envs"), ("eval_every", "--eval-every", "eval-every"),
+               ("eval_episodes", "--eval-episodes", "eval-episodes"),
+               ("checkpoint_every", "--checkpoint-every", "checkpoint-every")]
+
+
+@pytest.mark.parametrize("key, flag, name", _RANGE_OPTS)
+def test_train_and_its_parser_read_one_table_of_ranges(key, flag, name, capsys, tmp_path, monkeypatch):
+    """``policies.train._COUNTS`` and ``dronewpt train``'s argparse types were two tables of the same ranges; now
+    both read :data:`mission_sim.train_options.RANGES`: a range changed there moves both, with the same words."""
+    from mission_sim.train_options import RANGES
+    from mission_sim.validation import Range
+    from policies.train import train
+
+    from _cli_helpers import one_error_line
+    monkeypatch.setitem(RANGES, key, Range(7, 9, integer=True))
+    out = tmp_path / "o"
+    assert one_error_line(capsys, ["train", "--algo", "ppo", "--timesteps", "1", "--out", str(out), flag, "6"]) == (
+        f"dronewpt train: error: argument {flag}: {name}='6' is invalid; valid range: integer 7..9 (see dronewpt train "
+        "--help)")
+    with pytest.raises(ValueError, match=rf"^{key}=6 is invalid; valid range: integer 7\.\.9$"):
+        train("ppo", 1, out, **{key: 6})
+    assert not out.exists()
+
+
+def test_train_lambda_lr_reads_the_table_too(capsys, tmp_path, monkeypatch):
+    from mission_sim.train_options import RANGES
+    from mission_sim.validation import Range
+    from policies.train import train
+
+    from _cli_helpers import one_error_line
+    monkeypatch.setitem(RANGES, "lambda_lr", Range(1, 2))
+    out = tmp_path / "o"
+    assert one_error_line(capsys, ["train", "--algo", "ppo", "--timesteps", "1", "--out", str(out), "--lagrangian",
+                                   "--lambda-lr", "0.5"]).endswith("--lambda-lr='0.5' is invalid; valid range: [1, 2] "
+                                                                   "(see dronewpt train --help)")
+    with pytest.raises(ValueError, match=r"^lambda_lr=0.5 is invalid; valid range: \[1, 2\]$"):
+        train("ppo", 1, out, lagrangian=True, lambda_lr=0.5)
+
+
+def test_train_refuses_a_bool_n_envs(tmp_path):
+    """``train(n_envs=True)`` ran one env (``1 <= True <= 1024``); the table's check refuses a bool as the CLI would."""
+    from policies.train import train
+    with pytest.raises(ValueError, match=r"^n_envs=True is invalid; valid range: integer 1\.\.1024$"):
+        train("ppo", 1, tmp_path / "o", n_envs=True, progress=False)
+    assert not (tmp_path / "o").exists()
