@@ -202,3 +202,40 @@ def test_train_refuses_a_bool_n_envs(tmp_path):
     with pytest.raises(ValueError, match=r"^n_envs=True is invalid; valid range: integer 1\.\.1024$"):
         train("ppo", 1, tmp_path / "o", n_envs=True, progress=False)
     assert not (tmp_path / "o").exists()
+
+
+# ------------------------------------------------------------------ 5. envelope.steady_state's inputs
+@pytest.mark.parametrize("kwargs, message", [
+    ({"v2_v": float("nan")}, r"^v2_v=nan is invalid; valid: finite V2 amplitudes \[V\]$"),
+    ({"v2_v": [1.0, float("inf")]}, r"^v2_v=inf is invalid; valid: finite V2 amplitudes \[V\]$"),
+    ({"v2_v": 10.0, "lm_h": -1e-6}, r"^lm_h=-1e-06 is invalid; valid range: \[0, 6.67862e-05\) H \(0 <= k < 1\)$"),
+    ({"v2_v": 10.0, "lm_h": [6e-6, float("nan")]}, r"^lm_h=nan is invalid; valid range: \[0, 6.67862e-05\) H"),
+    ({"v2_v": 10.0, "lm_h": 1e-3}, r"^lm_h=0.001 is invalid; valid range: \[0, 6.67862e-05\) H"),
+    ({"v2_v": 10.0, "v1_v": -1.0}, r"^v1_v=-1.0 is invalid; valid range: \(0, inf\) V \(the inverter's fundamental\)$"),
+    ({"v2_v": 10.0, "v1_v": [38.0, float("nan")]}, r"^v1_v=nan is invalid; valid range: \(0, inf\) V"),
+])
+def test_steady_state_refuses_what_simulate_refuses(kwargs, message):
+    """``steady_state(TABLE_I, nan)`` returned NaN currents and ``lm_h=-1e-6`` a steady state of a negative coupling;
+    now the rules :func:`envelope.simulate` applies (one source each: ``check_v2``, ``check_lm``, ``check_v1``),
+    Lm = 0 still allowed (the steady state is regular there)."""
+    from wpt_receiver.envelope import steady_state
+    with pytest.raises(ValueError, match=message):
+        steady_state(TABLE_I, **kwargs)
+
+
+def test_steady_state_still_takes_lm_zero_negative_v2_and_arrays():
+    import numpy as np
+
+    from wpt_receiver.envelope import simulate, steady_state
+    p = TABLE_I
+    i1, i2 = steady_state(p, 10.0, lm_h=0.0)
+    assert (i1, i2) == (p.v1_amp_v / p.r1_ohm, -10.0 / p.r2_ohm)
+    wlm = p.omega_rad_s * p.lm_h
+    det = p.r1_ohm * p.r2_ohm + wlm**2
+    assert steady_state(p, -5.0)[1] == (wlm * p.v1_amp_v + p.r1_ohm * 5.0) / det
+    lm = np.array([0.0, 3e-6, 6.25e-6])
+    assert np.array_equal(steady_state(p, np.array([0.0, 1.0, 2.0]), lm, np.array([30.0, 35.0, 38.0]))[1],
+                          (p.omega_rad_s * lm * np.array([30.0, 35.0, 38.0]) - p.r1_ohm * np.array([0.0, 1.0, 2.0]))
+                          / (p.r1_ohm * p.r2_ohm + (p.omega_rad_s * lm) ** 2))
+    with pytest.raises(ValueError, match=r"^lm_h=0.0 is invalid; valid range: \(0, 6.67862e-05\) H \(0 < k < 1\)$"):
+        simulate(p, [1.0, 2.0], 1e-6, lm_h=0.0)   # (simulate's own range, as before, from the same rule)

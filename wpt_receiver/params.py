@@ -104,10 +104,22 @@ TABLE_I = LinkParams()
 FREQUENCY_TOLERANCE = 2.0
 
 
-def check_v1(v1_v) -> float:
+def check_v1(v1_v):
     """``v1_v`` [V], the inverter's fundamental amplitude, as a float after checking it is in (0, inf) (a NaN gave a
-    NaN run or duty, a negative V1 short mode, without a word): one rule for :func:`wpt_receiver.envelope.simulate`
-    and :meth:`wpt_receiver.inverse_controller.InverseModelController.reset`."""
+    NaN run or duty, a negative V1 short mode, without a word): one rule for :func:`wpt_receiver.envelope.simulate`,
+    :func:`~wpt_receiver.envelope.steady_state` and :meth:`wpt_receiver.inverse_controller.InverseModelController.reset`.
+    An array (``steady_state`` broadcasts) is checked elementwise and returned as a float array, naming the first bad
+    value."""
+    if isinstance(v1_v, (np.ndarray, list, tuple)) and np.ndim(v1_v) > 0:
+        try:
+            v = np.asarray(v1_v, dtype=float)
+        except (TypeError, ValueError):
+            v = np.array([math.nan])
+        bad = ~((v > 0) & (v < np.inf))
+        if np.any(bad):
+            raise ValueError(f"v1_v={float(v[bad].flat[0])!r} is invalid; valid range: (0, inf) V (the inverter's "
+                             "fundamental)")
+        return v
     try:
         v = float(v1_v)
     except (TypeError, ValueError):
