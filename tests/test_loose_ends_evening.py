@@ -239,3 +239,37 @@ def test_steady_state_still_takes_lm_zero_negative_v2_and_arrays():
                           / (p.r1_ohm * p.r2_ohm + (p.omega_rad_s * lm) ** 2))
     with pytest.raises(ValueError, match=r"^lm_h=0.0 is invalid; valid range: \(0, 6.67862e-05\) H \(0 < k < 1\)$"):
         simulate(p, [1.0, 2.0], 1e-6, lm_h=0.0)   # (simulate's own range, as before, from the same rule)
+
+
+# ------------------------------------------------------------------ 6. coils that would touch
+@pytest.mark.parametrize("entry", ["lm_h", "lm_exact_h"])
+def test_the_library_refuses_coils_that_would_touch(entry):
+    """``default_coupling().lm_h(0, 0, 0.001)`` gave an Lm for a receiver coil inside the pad coil's wire (and a
+    negative dz one below it); only ``dronewpt coupling --dz`` refused it. Now the library (one rule,
+    ``CouplingModel.check_clearance``), on arrays too, naming the first bad pose; the threshold is the CLI's."""
+    import math
+
+    import numpy as np
+
+    from wpt_receiver.coupling import default_coupling
+    m = default_coupling()
+    f = getattr(m, entry)
+    with pytest.raises(ValueError, match=r"^dz_m=0.001 is invalid; valid range: > 0.0034 m \(the coils would touch\), "
+                                         r"or a lateral offset hypot\(dx_m, dy_m\) >= 0.3734 m$"):
+        f(0.0, 0.0, 0.001)
+    with pytest.raises(ValueError, match=r"^dz_m=0.1 is invalid; valid range: > 0.1073 m"):
+        f(np.array([0.0, 0.1]), 0.0, np.array([0.2, 0.1]), np.array([0.0, math.radians(60)]))
+    with pytest.raises(ValueError, match=r"^dz_m=-0.5 is invalid"):
+        f(0.2, 0.2, -0.5)
+    gap = m.tx.wire_radius_m + m.rx.wire_radius_m
+    assert m.clearance_m(0.0) == gap
+    assert np.isfinite(f(0.0, 0.0, gap * 1.01))   # just above the wires: computed
+    assert np.isfinite(f(2.0, 0.0, 0.001))   # beside the pad: the coils do not touch
+
+
+def test_the_cli_refuses_touching_coils_by_the_librarys_rule(capsys):
+    from _cli_helpers import one_error_line
+    assert one_error_line(capsys, ["coupling", "--dz", "0.01", "--tilt-deg", "30"]) == (
+        "dronewpt coupling: error: --dz 0.01 is invalid; valid range: > 0.0634 m (the coils would touch), or a lateral "
+        "offset hypot(--dx, --dy) >= 0.3734 m")
+    assert main(["coupling", "--dz", "0.001", "--dx", "2", "--format", "json"]) == 0   # beside the pad (refused before)
