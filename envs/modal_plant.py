@@ -26,6 +26,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from wpt_receiver.params import warn_off_resonance
+
 from .core import OBS_OFFSET, OBS_SCALE, DetunedPlan, EnvConfig, Plans, _initial_state, window_lm
 from .layout import BAT, MPAR, MSINGLE_PAR, MSTATE, N_CZ, SINGLE, SLOW, STATE
 from .parts import PlantPart, SinglePlant
@@ -43,6 +45,7 @@ def _kernel_function(name: str, compiled: bool = True):
 
 def vector_plant(cfg: EnvConfig, n: int, compiled: bool = True) -> PlantPart:
     """The vector env's plant part of ``cfg.link_model`` (:func:`warn_link_range` for the exact-mode link)."""
+    warn_off_resonance(cfg.link)
     if cfg.link_model != "modal":
         return PlantPart(cfg, n, compiled)
     warn_link_range(cfg)
@@ -51,6 +54,7 @@ def vector_plant(cfg: EnvConfig, n: int, compiled: bool = True) -> PlantPart:
 
 def single_plant(cfg: EnvConfig, compiled: bool = True) -> SinglePlant:
     """The single env's plant part of ``cfg.link_model`` (:func:`warn_link_range` for the exact-mode link)."""
+    warn_off_resonance(cfg.link)
     if cfg.link_model != "modal":
         return SinglePlant(cfg, compiled)
     warn_link_range(cfg)

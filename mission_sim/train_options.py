@@ -1,13 +1,25 @@
 """``policies.train.train``'s options that have an effect only with another one (:data:`ONLY_WITH`) and the rule
 refusing one given without it (:func:`unused_option`), numpy-free: ``dronewpt train`` refuses a misuse before it
 imports ``policies`` (numpy, the policies, ``policies.train``: ~0.3 s at a free machine's start, more when loaded);
-``policies.train`` reads the same table (their values when not given: ``policies.train.ONLY_WITH_DEFAULTS``)."""
+``policies.train`` reads the same table (their values when not given: ``policies.train.ONLY_WITH_DEFAULTS``). Also
+the ranges of train's number options (:data:`RANGES`), one table for ``train()`` and ``dronewpt train``'s parser."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
-__all__ = ["ONLY_WITH", "unused_option", "ALGO_ONLY", "algo_conflict"]
+from .validation import SEED_RANGE, Range
+
+__all__ = ["ONLY_WITH", "unused_option", "ALGO_ONLY", "algo_conflict", "RANGES"]
+
+#: train()'s number options and their ranges: ``train()`` checks its keyword arguments against them
+#: (``mission_sim.validation.check_number``) and ``dronewpt train``'s --seed, --n-envs, --eval-every, --eval-episodes,
+#: --checkpoint-every and --lambda-lr are parsed with them (``cli.common.range_arg``): one table, the same range text
+#: (two tables until 2026-11-27 evening, ``policies.train._COUNTS`` and the parser's)
+RANGES = {"seed": SEED_RANGE, "n_envs": Range(1, 1024, integer=True), "eval_every": Range(1, math.inf, integer=True),
+          "eval_episodes": Range(1, math.inf, integer=True), "checkpoint_every": Range(1, math.inf, integer=True),
+          "lambda_lr": Range(0, math.inf, lo_open=True, hi_open=True)}
 
 #: train's options that have an effect only with another one: {option: the option it needs}. One given (not None)
 #: without it is refused, by ``train()`` (``ValueError``) and ``dronewpt train`` (exit 2) alike (:func:`unused_option`)

@@ -43,6 +43,7 @@ Modules, from the classical controllers to learning and comparing:
 ``batched``        compare's policies side by side in one batched env; training seeds as one stacked network
 ``forked``         one piece of work (compare's MPC runs) in a forked child process beside the parent's
 ``threads``        one BLAS thread for the rollouts' batched small matrices (threadpoolctl)
+``shipped``        the shipped models' table: each learned kind's default file and seed prefix (no heavy imports)
 ``pretrained/``    shipped models (``.zip`` + metadata ``.json``); ``hyperparams/`` their settings
 =================  ==========================================================================
 """
@@ -86,10 +87,9 @@ def _ppo_lagrangian(ctx, **kwargs):
 def _imitation(ctx, **kwargs):
     """The shipped imitation student (a PPO actor trained by ``train --imitate``, :mod:`policies.imitation`)."""
     require_sb3()
-    from pathlib import Path
-
     from .rl import RLPolicy, load_meta
-    kwargs = {"path": Path(__file__).parent / "pretrained" / "imitation_s0.zip", **kwargs}
+    from .shipped import default_model
+    kwargs = {"path": default_model("imitation"), **kwargs}
     if load_meta(kwargs["path"]).get("residual"):   # a residual student corrects the budgeted model-based duty
         from .residual import ResidualPolicy
         pol = ResidualPolicy(ctx, **kwargs)

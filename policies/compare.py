@@ -27,7 +27,6 @@ with several seeds (``train_seeds``) the mean over seeds with a t interval over 
 from __future__ import annotations
 
 import contextlib
-import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,6 +34,7 @@ import numpy as np
 from mission_sim.files import atomic_output
 from mission_sim.validation import SEED_RANGE, Range, check_number
 
+from .shipped import PRETRAINED_DIR, SHIPPED, model_of
 from .stats import mean_ci, seed_ci
 from .threads import single_blas_thread
 
@@ -54,9 +54,8 @@ DEFAULT_SCENARIOS = ("nominal", "lm_mismatch", "windy", "battery", "lm_high", "l
 NO_GAP = ("step", "hysteresis", "random")
 REFERENCE = "model_based"
 DEFAULT_EPISODES = 100
-#: learned kinds shipped with several training seeds (``policies/pretrained/<prefix>_s<k>.zip``)
-SHIPPED_SEEDS = {"rl": "rl_s", "ppo_lagrangian": "ppo_lagrangian_s", "residual": "residual_s",
-                 "imitation": "imitation_s", "slow_budget": "slow_budget_s"}
+#: learned kinds shipped with several training seeds (``policies/pretrained/<prefix><k>.zip``; :mod:`policies.shipped`)
+SHIPPED_SEEDS = {kind: prefix for kind, (prefix, ext) in SHIPPED.items() if ext == ".zip"}
 #: shipped kinds left out of compare's default rows (each seed is a full MPC run: ~5x the MPC's cost per
 #: scenario); ``--train-seeds 'slow_budget=slow_budget:policies/pretrained/slow_budget_s*.zip'`` adds them
 OPT_IN_SEEDS = ("slow_budget",)
@@ -65,9 +64,7 @@ OPT_IN_SEEDS = ("slow_budget",)
 def shipped_seed_groups() -> dict:
     """``{kind: ["kind:PATH_s0", ...]}`` for the learned kinds shipped with several training seeds
     (the rows ``compare`` aggregates over seeds by default); kinds with fewer than two files are left out."""
-    from pathlib import Path
-
-    folder = Path(__file__).parent / "pretrained"
+    folder = PRETRAINED_DIR
     out = {}
     import importlib.util
     for kind, prefix in SHIPPED_SEEDS.items():
@@ -149,26 +146,29 @@ def _check_specs(specs) -> None:
 
 def check_row_labels(policies, train_seeds=None) -> None:
     """Every row of :func:`compare` has its own label: a policy listed twice, or a ``train_seeds`` label that is also
-    one of ``policies``, would share a row's slot (the table showed one row's numbers twice); ``ValueError`` naming it."""
-    seen = set()
+    one of ``policies``, would share a row's slot (the table showed one row's numbers twice); ``ValueError`` naming it.
+    A model is the same whatever its spelling (``rl`` and ``rl:policies/pretrained/rl_s0.zip``, another path to the file:
+    :func:`policies.shipped.model_of`)."""
+    seen, models = set(), {}
     for p in policies:
         if p in seen:
             raise ValueError(f"policies lists {p!r} twice; valid: each policy once")
         seen.add(p)
+        key = model_of(p)   # (rl beside rl:policies/pretrained/rl_s0.zip: two rows of one model)
+        if key is not None and key in models:
+            raise ValueError(f"policies lists the model {p!r} twice (also as {models[key]!r}); valid: each policy once")
+        models.setdefault(key, p)
     for label, specs in (train_seeds or {}).items():
         if label in seen:
             raise ValueError(f"train_seeds label {label!r} is also one of the policies; valid: a label that names no "
                              f"listed policy (the policies: {', '.join(map(str, policies))})")
         models = {}
         for sp in specs:   # the same model file twice made "2 seeds" with a zero-width interval
-            kind, colon, path = str(sp).partition(":")
-            if not (colon and os.path.isfile(path)):   # (a classical policy listed twice: the tests' fixture of a group)
-                continue
-            key = (kind, os.path.realpath(path))
-            if key in models:
+            key = model_of(sp)   # (None: a classical policy listed twice, the tests' fixture of a group)
+            if key is not None and key in models:
                 raise ValueError(f"train_seeds {label!r} lists the model {sp!r} twice (also as {models[key]!r}); valid: "
                                  "each model file once (a row over N seeds needs N models)")
-            models[key] = sp
+            models.setdefault(key, sp)
 
 
 def run_policy(name: str, scenario: str, episodes: int, seed: int, config=None) -> EpisodeTraces:

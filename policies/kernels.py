@@ -47,9 +47,12 @@ def _target_v2(params, cmd, vl):
     return min(max(v2, 0.0), _FOUR_OVER_PI * vl)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _duty(v2, vl):
-    """``wpt_receiver.sbar.duty_from_v2_clipped``."""
+    """``wpt_receiver.sbar.duty_from_v2_clipped``: its result at every input, VL = 0, negative, NaN and infinite ones
+    included (numpy's error model: IEEE division, v2 / 0 is +-inf or NaN as in the Python function's numpy path;
+    numba's default raised ZeroDivisionError at VL = 0), within the last bit of numpy's own ``arcsin`` elsewhere
+    (this ``asin`` is the C library's, as ``math.asin``; ``tests/test_loose_ends_evening.py``)."""
     s = min(max(1.0 - v2 / (_FOUR_OVER_PI * vl), 0.0), 1.0)
     return _TWO_OVER_PI * math.asin(s)
 

@@ -50,6 +50,8 @@ import numpy as np
 
 from mission_sim.contract import OBS_INDEX, PolicyContext, denormalise_obs
 
+from .shipped import default_model
+
 __all__ = ["BASES", "check_base", "HISTORY", "HORIZON", "stop_features", "target_sequences", "predict", "sequences_from", "save_model", "load_model",
            "choose_targets", "fit", "OracleImitationPolicy", "PRETRAINED_ORACLE_IMITATION", "FEATURE_NAMES"]
 
@@ -57,7 +59,7 @@ __all__ = ["BASES", "check_base", "HISTORY", "HORIZON", "stop_features", "target
 HISTORY = 8
 #: steps after the stop whose duties are predicted (20 ms: the longest window after its stop)
 HORIZON = 200
-PRETRAINED_ORACLE_IMITATION = Path(__file__).parent / "pretrained" / "oracle_imitation_s0.npz"
+PRETRAINED_ORACLE_IMITATION = default_model("oracle_imitation")
 
 _I2, _VL, _IB, _IL, _SOC, _CMD, _D, _T = (OBS_INDEX[k] for k in (
     "i2_amp_a", "battery_v", "battery_current_a", "rect_current_a", "soc", "charge_cmd_a", "last_d_short",

@@ -8,18 +8,17 @@ trained with ``--residual-base-budget``).
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from mission_sim.contract import PolicyContext, duty_to_action
 
 from .budgeted import BudgetedModelBasedPolicy
 from .rl import RLPolicy
+from .shipped import default_model
 
 __all__ = ["ResidualPolicy", "PRETRAINED_RESIDUAL"]
 
-PRETRAINED_RESIDUAL = Path(__file__).parent / "pretrained" / "residual_s0.zip"   # seeds _s0.._s4 shipped
+PRETRAINED_RESIDUAL = default_model("residual")   # seeds _s0.._s4 shipped
 
 
 def residual_obs(obs: np.ndarray, d_base: np.ndarray) -> np.ndarray:

@@ -25,11 +25,12 @@ from mission_sim.contract import CONTROL_PERIOD_RANGE, OBS_DIM, PolicyContext, a
 from mission_sim.validation import real_number
 
 from .inference import export_actor, load_ppo_actor
+from .shipped import default_model
 
 __all__ = ["RLPolicy", "PRETRAINED", "PRETRAINED_LAGRANGIAN", "load_meta", "ALGOS"]
 
-PRETRAINED = Path(__file__).parent / "pretrained" / "rl_s0.zip"   # unconstrained PPO, seeds _s0.._s4 shipped
-PRETRAINED_LAGRANGIAN = Path(__file__).parent / "pretrained" / "ppo_lagrangian_s0.zip"   # seeds _s0.._s4 shipped
+PRETRAINED = default_model("rl")   # unconstrained PPO, seeds _s0.._s4 shipped (policies.shipped: the one table)
+PRETRAINED_LAGRANGIAN = default_model("ppo_lagrangian")   # seeds _s0.._s4 shipped
 ALGOS = ("ppo", "sac", "td3", "dqn")
 
 

@@ -30,13 +30,12 @@ Parts:
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from mission_sim.contract import OBS_INDEX, PolicyContext, denormalise_obs_field, duty_to_action
 
 from .mpc import MPCPolicy
+from .shipped import default_model
 
 __all__ = ["BudgetScheduledMPC", "BudgetLatch", "SlowBudgetVecEnv", "SlowBudgetPolicy", "budget_of_action",
            "parse_budget_range", "BUDGET_RANGE", "PRETRAINED_SLOW_BUDGET", "EVERY"]
@@ -46,7 +45,7 @@ EVERY = ("window", "step")
 
 #: default range of the learned budget [measured overshoot fraction]
 BUDGET_RANGE = (0.0, 0.15)
-PRETRAINED_SLOW_BUDGET = Path(__file__).parent / "pretrained" / "slow_budget_s0.zip"   # seeds _s0.._s4 shipped
+PRETRAINED_SLOW_BUDGET = default_model("slow_budget")   # seeds _s0.._s4 shipped
 
 
 def parse_budget_range(text) -> tuple[float, float]:

@@ -24,7 +24,6 @@ Writes into ``out_dir``:
 from __future__ import annotations
 
 import json
-import math
 import os
 from collections.abc import Mapping
 from dataclasses import asdict, fields
@@ -33,8 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from mission_sim.files import atomic_output
-from mission_sim.validation import SEED_RANGE, Range, check_number
-from mission_sim.train_options import ONLY_WITH, unused_option
+from mission_sim.validation import check_number
+from mission_sim.train_options import ONLY_WITH, RANGES, unused_option
 
 from .rl import ALGOS
 
@@ -180,18 +179,14 @@ def plot_learning_curve(monitor_csv, out_png, title: str, eval_curve=None) -> Pa
     return out_png
 
 
-#: train()'s whole-number options and their ranges (those of ``dronewpt train``'s --seed, --eval-episodes, ...)
-_COUNTS = (("seed", SEED_RANGE), ("eval_episodes", Range(1, math.inf, integer=True)),
-           ("eval_every", Range(1, math.inf, integer=True)), ("checkpoint_every", Range(1, math.inf, integer=True)))
-
-
 def _check_counts(o: dict) -> None:
     """train()'s ``seed``, ``eval_episodes``, ``eval_every``, ``checkpoint_every`` and ``lambda_lr`` (``o``: its
-    keyword arguments) in dronewpt train's ranges (seed 1.5 ran seed 1, eval_every=0 was taken, ...)."""
-    for key, rng in _COUNTS:
-        check_number(key, o[key], rng)
+    keyword arguments) in dronewpt train's ranges, one table (:data:`mission_sim.train_options.RANGES`; seed 1.5 ran
+    seed 1, eval_every=0 was taken, ...)."""
+    for key in ("seed", "eval_episodes", "eval_every", "checkpoint_every"):
+        check_number(key, o[key], RANGES[key])
     if o.get("lambda_lr") is not None:
-        check_number("lambda_lr", o["lambda_lr"], Range(0, math.inf, lo_open=True, hi_open=True))
+        check_number("lambda_lr", o["lambda_lr"], RANGES["lambda_lr"])
 
 
 def _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, extra=None):
@@ -213,8 +208,7 @@ def _check_args(algo, timesteps, n_envs, vec, lagrangian, residual, scenario, ex
         opt, algos, why = bad
         value = residual if opt == "residual" else x[opt]
         raise ValueError(f"algo={algo!r} is invalid with {opt}={value!r}; valid values: {', '.join(algos)} ({why})")
-    if int(n_envs) != n_envs or not 1 <= n_envs <= 1024:
-        raise ValueError(f"n_envs={n_envs!r} is invalid; valid range: integer 1..1024")
+    check_number("n_envs", n_envs, RANGES["n_envs"])
     if vec not in VEC_PATHS:
         raise ValueError(f"vec={vec!r} is invalid; valid values: {', '.join(VEC_PATHS)}")
     if (lagrangian or residual) and vec != "batched":

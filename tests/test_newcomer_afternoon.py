@@ -55,7 +55,8 @@ LOGS = ROOT / "tests" / "data" / "flightlogs"
 def model_zip(tmp_path):
     """A copy of the shipped PPO ``rl_s0.zip`` without its JSON (each test writes its own)."""
     z = tmp_path / "mine.zip"
-    shutil.copy(ROOT / "policies" / "pretrained" / "rl_s0.zip", z)
+    from policies.shipped import default_model
+    shutil.copy(default_model("rl"), z)
     return z
 
 

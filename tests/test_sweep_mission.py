@@ -65,10 +65,9 @@ def test_a_corrupt_rl_model_zip_is_one_line_for_mission_compare_and_sweep(tmp_pa
     zipfile.BadZipFile with a traceback, exit 1, in sweep, mission --policy and compare alike."""
     import shutil
     import zipfile
-    from pathlib import Path
-
     import policies
-    shipped = Path(policies.__file__).parent / "pretrained" / "rl_s0.zip"
+    from policies.shipped import default_model
+    shipped = default_model("rl")
     bad = tmp_path / "bad.zip"
     if content == "cut":
         bad.write_bytes(shipped.read_bytes()[:3000])

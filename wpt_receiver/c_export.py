@@ -35,7 +35,7 @@ import numpy as np
 
 from .envelope import steady_state
 from .inverse_controller import InverseModelController, LowPassFilter
-from .params import TABLE_I, LinkParams
+from .params import TABLE_I, LinkParams, warn_off_resonance
 from .sbar import duty_from_v2_clipped
 
 __all__ = ["ControllerSpec", "controller_spec", "generate_c", "count_ops", "python_duties", "float32_duty_bound",
@@ -78,7 +78,9 @@ class ControllerSpec:
 def controller_spec(params: LinkParams = TABLE_I, control_period_s: float | None = None,
                     lpf: LowPassFilter = LowPassFilter()) -> ControllerSpec:
     """The numbers of the Python controller for ``params`` at ``control_period_s`` (default: the
-    rectifier period T = 1/(2f), one duty per half cycle as in the paper)."""
+    rectifier period T = 1/(2f), one duty per half cycle as in the paper); warns an ``f_hz`` far off the coils'
+    resonance (:func:`wpt_receiver.params.warn_off_resonance`)."""
+    warn_off_resonance(params)
     ctl = InverseModelController(params, control_period_s, lpf, n=1)
     ad, bd, cd, dd = ctl.discrete_ss
     wlm = params.omega_rad_s * params.lm_h   # policies.classical._link_constants, same expression order

@@ -318,12 +318,38 @@ class CouplingModel:
         return self._grid[1:]
 
     # ----------------------------------------------------------------- exact
+    def clearance_m(self, tilt_rad=0.0):
+        """The height [m] of the receiver coil's centre over the pad coil's plane at or below which their wires
+        touch when it is over the pad coil (:meth:`check_clearance`): the two wire radii plus the tilted receiver's
+        drop, its largest turn radius x ``|sin tilt_rad|`` (flat coils). Broadcasts over ``tilt_rad``."""
+        return self.tx.wire_radius_m + self.rx.wire_radius_m + max(self.rx.radius_m) * np.abs(np.sin(tilt_rad))
+
+    def check_clearance(self, dx_m, dy_m, dz_m, tilt_rad=0.0) -> None:
+        """``ValueError`` naming the first pose (broadcast arrays or numbers) whose receiver coil is at or below the
+        pad coil's plane, within :meth:`clearance_m` of it, while over it (a lateral offset ``hypot(dx_m, dy_m)``
+        below the two outer radii): the coils would touch. The one rule of :meth:`lm_h`, :meth:`lm_exact_h` and
+        ``dronewpt coupling --dz`` (the command's own copy until 2026-11-27 evening, which also refused poses beside
+        the pad); checked at their entry on the poses given (numpy, a few passes), never in the compiled lookup."""
+        dx, dy, dz, tilt = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (dx_m, dy_m, dz_m, tilt_rad)))
+        gap = self.clearance_m(tilt)
+        low = dz <= gap   # (NaN: False here; _rx_frame names it)
+        if not low.any():
+            return
+        reach = self.tx.outer_radius_m + self.rx.outer_radius_m
+        bad = low & (np.hypot(dx, dy) < reach)
+        if bad.any():
+            i = np.flatnonzero(bad.ravel())[0]
+            raise ValueError(f"dz_m={float(dz.flat[i])!r} is invalid; valid range: > {float(gap.flat[i]):.4g} m (the "
+                             f"coils would touch), or a lateral offset hypot(dx_m, dy_m) >= {reach:.4g} m")
+
     def lm_exact_h(self, dx_m, dy_m, dz_m, tilt_rad=0.0, *, n_theta: int | None = None,
                    tilt_axis_rad=math.pi / 2):
         """Lm [H] by the loop integral of the exact (elliptic-integral) vector potential.
 
-        Scalar or array poses (broadcast); slow (N_tx x N_rx x n_theta elliptic integrals per pose).
+        Scalar or array poses (broadcast); slow (N_tx x N_rx x n_theta elliptic integrals per pose). A pose whose
+        coils would touch is refused (:meth:`check_clearance`).
         """
+        self.check_clearance(dx_m, dy_m, dz_m, tilt_rad)
         n = self.n_theta if n_theta is None else int(n_theta)
         pts, tan, w = _loop_points(self.rx, n)
         return self._flux(dx_m, dy_m, dz_m, tilt_rad, tilt_axis_rad, pts, tan, w, self._a_exact)
@@ -404,7 +430,9 @@ class CouplingModel:
         Up to :data:`MEMO_MAX_POSES` poses the result is kept in the disk cache keyed by the poses'
         bytes (a mission re-run on the same path, with any policy, battery or link, then needs
         neither the table nor numba: ~0.5 s of start-up); the newest :data:`MEMO_ENTRIES` are kept.
+        A pose whose coils would touch is refused (:meth:`check_clearance`).
         """
+        self.check_clearance(dx_m, dy_m, dz_m, tilt_rad)
         rot, org = _rx_frame(dx_m, dy_m, dz_m, tilt_rad, tilt_axis_rad)
         shape = org.shape[:-1]
         rot, org = np.ascontiguousarray(rot.reshape(-1, 3, 3)), np.ascontiguousarray(org.reshape(-1, 3))

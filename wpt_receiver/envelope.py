@@ -29,6 +29,8 @@ __all__ = [
     "state_matrices",
     "g22",
     "steady_state",
+    "check_v2",
+    "check_lm",
     "zoh_discretise",
     "EnvelopeLink",
     "simulate",
@@ -90,16 +92,53 @@ def g22(p: LinkParams):
     return signal.TransferFunction([-c.alpha2, -c.beta2], [1.0, 2 * c.zeta * c.omega_n, c.omega_n**2])
 
 
+def check_v2(v2_v, sequence: bool = False) -> None:
+    """``v2_v`` [V] all finite (``sequence``: also a non-empty 1-D sequence, :func:`simulate`'s input), else a
+    ``ValueError`` naming the first bad value: the one rule of :func:`simulate` and :func:`steady_state` (a NaN V2
+    gave NaN currents)."""
+    if type(v2_v) is float and not sequence and math.isfinite(v2_v):   # (the common scalar call: no numpy)
+        return
+    v2 = np.asarray(v2_v, dtype=float)
+    # (min and max: two reductions, no temporary array; a NaN propagates into both)
+    if (sequence and (v2.ndim != 1 or len(v2) == 0)) or (v2.size and not (math.isfinite(v2.min())
+                                                                            and math.isfinite(v2.max()))):
+        bad = v2.ravel()[~np.isfinite(v2.ravel())]
+        what = f"v2_v={float(bad[0])!r}" if bad.size else f"v2_v of shape {v2.shape}"
+        raise ValueError(f"{what} is invalid; valid: {'a non-empty 1-D sequence of ' if sequence else ''}finite V2 "
+                         "amplitudes [V]")
+
+
+def check_lm(p: LinkParams, lm_h, zero_ok: bool = False) -> None:
+    """``lm_h`` [H] (a number or an array) inside ``(0, sqrt(L1 L2))``, 0 < k < 1 (``zero_ok``: from 0 on, where the
+    steady state is regular), else a ``ValueError`` naming the first bad value: the one rule of :func:`simulate`,
+    :func:`steady_state` (a negative Lm ran) and :class:`EnvelopeLink`."""
+    lm_max = math.sqrt(p.l1_h * p.l2_h)
+    lm = lm_h if type(lm_h) is float else np.asarray(lm_h, dtype=float)   # (a Python float: no numpy)
+    # the extremes (two reductions, no temporary array); a NaN fails every comparison and propagates into both
+    lo, hi = (lm, lm) if type(lm) is float else (lm.min(), lm.max()) if lm.size else (lm_max / 2, lm_max / 2)
+    if (lo >= 0.0 if zero_ok else lo > 0.0) and hi < lm_max:
+        return
+    lm = np.asarray(lm, dtype=float)
+    bad = lm[~(((lm >= 0) if zero_ok else (lm > 0)) & (lm < lm_max))]   # (inf failed on an empty index once)
+    raise ValueError(f"lm_h={float(bad.flat[0])!r} is invalid; valid range: {'[' if zero_ok else '('}0, "
+                     f"{lm_max:.6g}) H ({'0 <=' if zero_ok else '0 <'} k < 1)")
+
+
 def steady_state(p: LinkParams, v2_v, lm_h=None, v1_v=None):
     """Closed-form steady amplitudes ``(I1, I2)`` [A] for constant V1 and V2 (phasor solution).
 
     ``R1 I1 + w Lm I2 = V1`` and ``-w Lm I1 + R2 I2 = -V2`` give
     ``I2 = (w Lm V1 - R1 V2) / det`` and ``I1 = (R2 V1 + w Lm V2) / det`` with
     ``det = R1 R2 + (w Lm)^2`` (regular at Lm = 0: I1 = V1/R1, I2 = -V2/R2).
-    RM is ``v2_v = (4/pi) VL``; SM is ``v2_v = 0``. Broadcasts over arrays.
+    RM is ``v2_v = (4/pi) VL``; SM is ``v2_v = 0``. Broadcasts over arrays. Refused (``ValueError``, naming the first
+    bad value): a V2 that is not finite (:func:`check_v2`), an Lm outside ``[0, sqrt(L1 L2))`` (:func:`check_lm`),
+    a V1 outside ``(0, inf)`` (:func:`wpt_receiver.params.check_v1`).
     """
+    check_v2(v2_v)
+    if lm_h is not None:
+        check_lm(p, lm_h, zero_ok=True)
     lm = p.lm_h if lm_h is None else np.asarray(lm_h, dtype=float)
-    v1 = p.v1_amp_v if v1_v is None else np.asarray(v1_v, dtype=float)
+    v1 = p.v1_amp_v if v1_v is None else np.asarray(check_v1(v1_v), dtype=float)
     v2 = np.asarray(v2_v, dtype=float)
     wlm = p.omega_rad_s * lm
     det = p.r1_ohm * p.r2_ohm + wlm**2
@@ -255,11 +294,7 @@ class EnvelopeLink:
                 return
         if not np.isfinite(dt_s) or dt_s <= 0:
             raise ValueError(f"dt_s={dt_s!r} is invalid; valid range: (0, inf)")
-        lm_max = np.sqrt(self.params.l1_h * self.params.l2_h)
-        bad = ~(np.isfinite(lm) & (lm > 0) & (lm < lm_max))   # inf used to fail on an empty index here
-        if np.any(bad):
-            raise ValueError(f"lm_h={float(lm[bad].flat[0])!r} is invalid; valid range: (0, {lm_max:.6g}) H "
-                             f"(0 < k < 1)")
+        check_lm(self.params, lm)
         self._dt, self._lm = float(dt_s), lm.copy()
         xt = self._real()
         a, b = state_matrices(self.params, lm)
@@ -323,14 +358,13 @@ def simulate(params: LinkParams, v2_v, dt_s: float, x0=None, lm_h=None, v1_v=Non
     ``x0`` defaults to the closed-form steady state for ``v2_v[0]``.
     """
     v2 = np.asarray(v2_v, dtype=float)
-    if v2.ndim != 1 or len(v2) == 0 or not np.all(np.isfinite(v2)):
-        bad = v2.ravel()[~np.isfinite(v2.ravel())]
-        what = f"v2_v={float(bad[0])!r}" if bad.size else f"v2_v of shape {v2.shape}"
-        raise ValueError(f"{what} is invalid; valid: a non-empty 1-D sequence of finite V2 amplitudes [V]")
+    check_v2(v2, sequence=True)
     if not (np.isfinite(dt_s) and dt_s > 0):
         raise ValueError(f"dt_s={dt_s!r} is invalid; valid range: (0, inf) s")
-    if lm_h is not None and not (np.isfinite(lm_h) and 0 < lm_h < np.sqrt(params.l1_h * params.l2_h)):
-        raise ValueError(f"lm_h={lm_h!r} is invalid; valid range: (0, {np.sqrt(params.l1_h * params.l2_h):.6g}) H")
+    if lm_h is not None:
+        if np.ndim(lm_h):   # (one Lm for the run)
+            raise ValueError(f"lm_h of shape {np.shape(lm_h)} is invalid; valid: one number [H]")
+        check_lm(params, lm_h)
     a, b = state_matrices(params, lm_h)
     ad, bd = zoh_discretise(a, b, dt_s)
     v1 = params.v1_amp_v if v1_v is None else check_v1(v1_v)

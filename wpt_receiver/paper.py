@@ -19,7 +19,7 @@ from .envelope import simulate, steady_state
 from .inverse_controller import LowPassFilter
 from .metrics import TransitionMetrics, transition_metrics
 from .notices import warn
-from .params import TABLE_I, LinkParams
+from .params import TABLE_I, LinkParams, warn_off_resonance
 from .references import TRAJECTORIES, reference_duty
 from .sbar import v2_from_duty
 
@@ -149,6 +149,7 @@ def run_paper(params: LinkParams = TABLE_I, model: str = "envelope", t_switch_s:
     if model not in MODELS:
         raise ValueError(f"model={model!r} is invalid; valid values: {', '.join(sorted(MODELS))}")
     period = params.rectifier_period_s if control_period_s is None else float(control_period_s)
+    warn_off_resonance(params)   # (first: a far-off f_hz is often why the range warnings below fire)
     reason = envelope_range_problem(params) if model == "envelope" else None
     if reason is not None:
         warn(reason)

@@ -12,7 +12,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-__all__ = ["LinkParams", "TABLE_I", "FREQUENCY_TOLERANCE", "resonance_warning"]
+__all__ = ["LinkParams", "TABLE_I", "FREQUENCY_TOLERANCE", "resonance_warning", "warn_off_resonance"]
 
 
 @dataclass(frozen=True)
@@ -104,10 +104,22 @@ TABLE_I = LinkParams()
 FREQUENCY_TOLERANCE = 2.0
 
 
-def check_v1(v1_v) -> float:
+def check_v1(v1_v):
     """``v1_v`` [V], the inverter's fundamental amplitude, as a float after checking it is in (0, inf) (a NaN gave a
-    NaN run or duty, a negative V1 short mode, without a word): one rule for :func:`wpt_receiver.envelope.simulate`
-    and :meth:`wpt_receiver.inverse_controller.InverseModelController.reset`."""
+    NaN run or duty, a negative V1 short mode, without a word): one rule for :func:`wpt_receiver.envelope.simulate`,
+    :func:`~wpt_receiver.envelope.steady_state` and :meth:`wpt_receiver.inverse_controller.InverseModelController.reset`.
+    An array (``steady_state`` broadcasts) is checked elementwise and returned as a float array, naming the first bad
+    value."""
+    if isinstance(v1_v, (np.ndarray, list, tuple)) and np.ndim(v1_v) > 0:
+        try:
+            v = np.asarray(v1_v, dtype=float)
+        except (TypeError, ValueError):
+            v = np.array([math.nan])
+        bad = ~((v > 0) & (v < np.inf))
+        if np.any(bad):
+            raise ValueError(f"v1_v={float(v[bad].flat[0])!r} is invalid; valid range: (0, inf) V (the inverter's "
+                             "fundamental)")
+        return v
     try:
         v = float(v1_v)
     except (TypeError, ValueError):
@@ -156,3 +168,15 @@ def resonance_warning(p: LinkParams, what: str = "f_hz") -> str | None:
             f"secondary current V1/(2 pi f Lm) scales as 1/f, {1.0 / ratio:.3g}x its value at {f0:.6g} Hz "
             f"(outside the factor {tol:g} where it halves or doubles); valid: {what} in [{f0 / tol:.6g}, "
             f"{f0 * tol:.6g}] Hz, or coils made for it")
+
+
+def warn_off_resonance(p: LinkParams) -> None:
+    """:func:`resonance_warning` of ``p`` (naming ``f_hz``) as a :class:`~wpt_receiver.notices.DronewptWarning`, once,
+    when it has one: the one rule of the library's entry points that take a link (:func:`wpt_receiver.paper.run_paper`,
+    :func:`wpt_receiver.c_export.controller_spec`, :func:`wpt_receiver.switching.netlist.netlist`, the envs), which
+    ``dronewpt paper`` / ``netlist`` / ``export-controller --link f_hz`` print as they are (the CLI's own copy until
+    2026-11-27 evening; a mission's ``link.f_hz`` is :mod:`mission_sim.setup_warnings`')."""
+    text = resonance_warning(p)
+    if text is not None:
+        from .notices import warn
+        warn(text)

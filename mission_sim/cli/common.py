@@ -176,6 +176,24 @@ def int_in(name, lo: int, hi: int | None = None, why: str = ""):
     return conv
 
 
+def range_arg(name, rng):
+    """argparse type of a number option whose range is the library's (a :class:`mission_sim.validation.Range`, e.g.
+    :data:`mission_sim.train_options.RANGES`): an integer range in :func:`int_in`'s words, else a number inside it;
+    every error naming the value and ``rng.text()``, the library's words."""
+    if rng.integer:
+        return int_in(name, int(rng.lo), None if rng.hi == float("inf") else int(rng.hi))
+
+    def conv(text):
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name}={text!r} is not a number") from None
+        if not rng.contains(v):
+            raise argparse.ArgumentTypeError(f"{name}={text!r} is invalid; valid range: {rng.text()}")
+        return v
+    return conv
+
+
 def nonneg_int(name, hi: int | None = None):
     """argparse type: an integer >= 0 (and <= ``hi``), errors naming the value and the range."""
     return int_in(name, 0, hi)

@@ -18,6 +18,7 @@ from .common import (
     path_arg,
     policy_names,
     prepare_out_dir,
+    range_arg,
     scenario_names,
     seed_int,
     show_progress,
@@ -32,6 +33,7 @@ _CLI_ONLY_WITH_DEFAULTS = {"imitation_epochs": 60}
 
 
 def _add_train(sub):
+    from ..train_options import RANGES   # (numpy-free: train()'s ranges, read by its parser too)
     p = sub.add_parser("train", help="train an RL mode-switching policy (stable-baselines3)",
                        description="Train PPO, SAC or TD3 on dronewpt/SbarCharging-v0 or DQN on the discrete (ON-OFF) "
                                    "variant on the batched env adapter; optionally Lagrangian (episode cost against a "
@@ -43,8 +45,8 @@ def _add_train(sub):
     p.add_argument("--algo", choices=("ppo", "sac", "td3", "dqn"), required=True)
     p.add_argument("--timesteps", type=int, required=True, help="environment steps to train for")
     p.add_argument("--out", type=path_arg("--out"), required=True, help="output folder")
-    p.add_argument("--seed", type=seed_int(), default=0, help="seed, 0 .. 2^32-1 (default 0)")
-    p.add_argument("--n-envs", type=int_in("n-envs", 1, 1024), default=64,
+    p.add_argument("--seed", type=range_arg("seed", RANGES["seed"]), default=0, help="seed, 0 .. 2^32-1 (default 0)")
+    p.add_argument("--n-envs", type=range_arg("n-envs", RANGES["n_envs"]), default=64,
                    help="parallel windows of the batched env, 1 .. 1024 (default 64)")
     lazy_names_help(p.add_argument("--scenario", default="random"),
                     "training scenario (default random: domain randomisation)", scenario_names)
@@ -63,7 +65,7 @@ def _add_train(sub):
     p.add_argument("--lagrangian", action="store_true", help="learn a multiplier of the episode cost against --budget")
     p.add_argument("--budget", type=float_arg("--budget", positive=True), default=None,
                    help="mean episode cost allowed (default: the ramp policy's on the training scenario)")
-    p.add_argument("--lambda-lr", type=float_arg("--lambda-lr", positive=True),
+    p.add_argument("--lambda-lr", type=range_arg("--lambda-lr", RANGES["lambda_lr"]),
                    help="multiplier step per rollout at a cost 100 %% over budget (default 50)")
     p.add_argument("--probe-episodes", type=int,
                    help="deterministic windows the multiplier's cost is measured on after every rollout "
@@ -101,11 +103,11 @@ def _add_train(sub):
     p.add_argument("--imitation-mask", metavar="FIELD,...",
                    help="observation fields hidden from the student (default last_d_short; add i2_amp_a,"
                         "battery_current_a,rect_current_a for a feed-forward student; '' for none)")
-    p.add_argument("--eval-every", type=int_in("eval-every", 1), default=50_000,
+    p.add_argument("--eval-every", type=range_arg("eval-every", RANGES["eval_every"]), default=50_000,
                    help="env steps between evaluations (default 50000)")
-    p.add_argument("--eval-episodes", type=int_in("eval-episodes", 1), default=32,
+    p.add_argument("--eval-episodes", type=range_arg("eval-episodes", RANGES["eval_episodes"]), default=32,
                    help="held-out evaluation windows (default 32)")
-    p.add_argument("--checkpoint-every", type=int_in("checkpoint-every", 1), default=100_000,
+    p.add_argument("--checkpoint-every", type=range_arg("checkpoint-every", RANGES["checkpoint_every"]), default=100_000,
                    help="env steps between checkpoints (default 100000)")
     p.add_argument("--resume", type=path_arg("--resume"), default=None, metavar="CHECKPOINT.zip",
                    help="continue from a checkpoint of checkpoints/ (its VecNormalize statistics next to it)")
@@ -387,8 +389,10 @@ def _check_compare(args, pols, scns, groups):
     from policies.compare import EPISODES, check_row_labels, seed_range
     try:
         check_row_labels(pols, groups)
-    except ValueError as exc:
-        raise CliError(f"--train-seeds: {exc}" if groups else str(exc)) from None
+    except ValueError as exc:   # (policies lists the model 'rl:...' twice (also as 'rl'): the --policies' own)
+        text = str(exc)
+        raise CliError("--" + text if text.startswith("policies ") else f"--train-seeds: {text}" if groups
+                       else text) from None
     for p_ in pols + tuple(sp for specs in groups.values() for sp in specs):
         if p_.split(":", 1)[0] not in available():
             raise CliError(f"--policies {p_!r} is invalid; valid values: {', '.join(available())} (or rl:PATH)")

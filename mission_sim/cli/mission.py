@@ -49,13 +49,13 @@ def _cmd_coupling(args) -> int:
     from wpt_receiver.coupling import NOMINAL_GAP_M, default_coupling
     m = default_coupling()
     dz = NOMINAL_GAP_M if args.dz is None else args.dz
-    min_dz = m.tx.wire_radius_m + m.rx.wire_radius_m + max(m.rx.radius_m) * abs(math.sin(math.radians(args.tilt_deg)))
-    if dz <= min_dz:
-        raise CliError(f"--dz {dz!r} is invalid; valid range: > {min_dz:.4g} m (the coils would touch)")
     if abs(args.tilt_deg) >= 90:
         raise CliError(f"--tilt-deg {args.tilt_deg!r} is invalid; valid range: (-90, 90)")
     tilt = math.radians(args.tilt_deg)
-    lm = float((m.lm_exact_h if args.exact else m.lm_h)(args.dx, args.dy, dz, tilt))
+    try:   # (coils that would touch: the library's rule, CouplingModel.check_clearance, in the flags' words)
+        lm = float((m.lm_exact_h if args.exact else m.lm_h)(args.dx, args.dy, dz, tilt))
+    except ValueError as exc:
+        raise CliError(str(exc).replace("dz_m=", "--dz ").replace("hypot(dx_m, dy_m)", "hypot(--dx, --dy)")) from None
     tx, rx = m.turn_positions(args.dx, args.dy, dz, tilt)
     out = {"dx_m": args.dx, "dy_m": args.dy, "dz_m": dz, "tilt_rad": tilt, "lm_h": lm, "l1_h": m.l1_h,
            "l2_h": m.l2_h, "k": float(m.k(lm)), "tx_turns": tx, "rx_turns": rx}

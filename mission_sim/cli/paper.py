@@ -46,10 +46,7 @@ def _cmd_paper(args) -> int:
     args.out = figures_out(args, "out/paper")
     params = _link_params(args.link)
     link_text = _link_text(params)
-    reason = paper.modal_range_problem(params) if args.model == "modal" else None
-    if reason is not None:
-        import sys
-        print("dronewpt paper: warning: " + reason.replace("model='switching'", "--model switching"), file=sys.stderr)
+    reason = paper.modal_range_problem(params) if args.model == "modal" else None   # (run_paper warns it)
     t_switch = 1e-3
     if not args.no_plot:
         prepare_out_dir(args.out)
@@ -61,7 +58,7 @@ def _cmd_paper(args) -> int:
         warnings.simplefilter("always", RuntimeWarning)
         runs = paper.run_paper(params, model=args.model, t_switch_s=t_switch, t_end_s=args.t_end,
                                control_period_s=args.control_period)
-    _print_warnings(caught, skip=reason)
+    _print_warnings(caught, range_problem=reason is not None)
     figs = []
     if not args.no_plot:
         from ..figures import paper as figures
@@ -103,20 +100,23 @@ def _row(r, t_switch: float, model: str) -> dict:
     return row
 
 
-def _print_warnings(caught, skip=None) -> None:
-    """The RuntimeWarnings of a run as ``dronewpt paper: warning: ...`` lines (``skip``: one printed already);
-    any other warning caught with them is shown as Python shows it."""
-    import sys
+def _print_warnings(caught, range_problem: bool = False) -> None:
+    """The RuntimeWarnings of a run as ``dronewpt paper: warning: ...`` lines in the order raised, each distinct one
+    once (the library's: a far-off f_hz, the model's range, per trajectory); any other warning caught with them is
+    shown as Python shows it. ``range_problem``: the exact-mode range warning is among them (the per-trajectory
+    "not physical" ones would only repeat it)."""
     import warnings
-    for w in caught:   # after the range warning, the per-trajectory "not physical" ones would only repeat it
-        if skip is not None and "exact-mode run is not physical" in str(w.message):
+
+    from .notices import say_warning
+    for w in caught:
+        if range_problem and "exact-mode run is not physical" in str(w.message):
             continue
         if not issubclass(w.category, RuntimeWarning):   # not the model's: Python's own display, as uncaught
             warnings.showwarning(w.message, w.category, w.filename, w.lineno)
-        elif str(w.message) != skip:
+        else:
             text = (str(w.message).replace("t_end_s=", "--t-end ").replace("(default 31e-3 s)", "(--t-end, default 0.031 s)")
                     .replace("model='switching'", "--model switching"))
-            print(f"dronewpt paper: warning: {text}", file=sys.stderr)
+            say_warning("paper", text)
 
 
 def _link_text(params) -> str:

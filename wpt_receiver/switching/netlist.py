@@ -27,7 +27,7 @@ import math
 
 from ..devices import DeviceSet
 from ..envelope import steady_state
-from ..params import TABLE_I
+from ..params import TABLE_I, warn_off_resonance
 
 __all__ = ["T_STEP_S", "T_END_S", "initial_state", "netlist"]
 
@@ -72,8 +72,10 @@ def netlist(p=TABLE_I, dv: DeviceSet = DeviceSet(), label: str = "ideal", dead_t
             t_step_s: float = T_STEP_S, t_end_s: float = T_END_S, d_short: float | None = None) -> str:
     """ngspice netlist of the scenario (module docstring): ``dead_time_s=None`` models the inverter
     as a square-wave source, a number [s] as a full bridge with that dead time; ``d_short`` the SBAR
-    duty from ``t_step_s`` on (None: 1, the gate stays on)."""
+    duty from ``t_step_s`` on (None: 1, the gate stays on). Warns an ``f_hz`` far off the coils' resonance
+    (:func:`wpt_receiver.params.warn_off_resonance`)."""
     _check(p, t_step_s, t_end_s, d_short, dead_time_s)
+    warn_off_resonance(p)
     w, T = p.omega_rad_s, p.rectifier_period_s
     c1, c2 = 1 / (w * w * p.l1_h), 1 / (w * w * p.l2_h)
     i10, vc10, i20, vc20 = initial_state(p, dv)
