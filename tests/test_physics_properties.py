@@ -15,7 +15,7 @@ import math
 import mpmath
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, example, given, settings
+from hypothesis import HealthCheck, Phase, assume, example, given, settings
 from hypothesis import strategies as st
 
 from wpt_receiver import LinkParams, simulate, state_matrices, steady_state, zoh_discretise
@@ -325,3 +325,76 @@ def test_coaxial_lm_falls_with_height_and_stays_below_sqrt_l1_l2(dz):
     z = z[np.diff(z, prepend=-1.0) > 1e-6]
     for lm in (m.lm_h(0 * z, 0 * z, z), m.lm_exact_h(0 * z, 0 * z, z)):
         assert np.all(np.diff(lm) < 0) and lm[0] < math.sqrt(m.l1_h * m.l2_h) and lm[-1] > 0
+
+
+# ============================================================================ a mission's bookkeeping
+def _short_mission(**over):
+    """A short mission over one pad (start 1 m before it, 1 m cruise height, land 1 m past it) with ``over``
+    as ``--set`` overrides; returns (cfg, result) of the model-based policy."""
+    from mission_sim.config import apply_overrides, config_from_dict, config_to_dict, load_config, policy_context
+    from mission_sim.world.runner import run_mission
+    from policies import make
+    d = apply_overrides(config_to_dict(load_config()), {
+        "mission.start_x_m": -1.0, "mission.cruise_altitude_m": 1.0, "mission.land_x_m": 1.0,
+        "sim.traj_dt_s": 0.05, **over})
+    d["pads"] = d["pads"][:1]
+    cfg = config_from_dict(d)
+    return cfg, run_mission(cfg, make("model_based", policy_context(cfg)))
+
+
+def _ocv_cell(soc):
+    """Chen & Rincon-Mora's OCV(SoC) per cell, as mission_sim/world/battery.py's notes give it."""
+    return -1.031 * np.exp(-35 * soc) + 3.685 + 0.2156 * soc - 0.1178 * soc ** 2 + 0.3201 * soc ** 3
+
+
+#: a mission is ~0.3 s: six each, and no shrinking (a failing mission example took hypothesis > 5 min to shrink)
+MISSION_SETTINGS = dict(SETTINGS, max_examples=6, phases=[Phase.explicit, Phase.reuse, Phase.generate])
+
+
+@settings(**MISSION_SETTINGS)
+@given(soc=st.floats(0.3, 0.95), hover=st.floats(0.5, 3.0), avionics=st.floats(0.0, 60.0),
+       cap=st.floats(0.8, 3.0), vdc=st.floats(20.0, 40.0), gap=st.floats(0.12, 0.2))
+def test_mission_bookkeeping_closes_from_its_rows(soc, hover, avionics, cap, vdc, gap):
+    """From the time series alone (not the summary's own residuals), for random short missions in PLAUSIBLE's
+    ranges: the SoC moves by the charge the battery current carries (soc_k = soc_k-1 + I_k dt_k / Q, to 1e-12);
+    each row's battery node closes (rectifier DC = OCV dQ + R0, R1 losses + C1 energy + propulsion and avionics, to
+    1e-9 J of the row's flows); the chemistry's energy is n OCV(soc at the step's start) dQ with OCV written here
+    from the battery notes (to 1e-12 of the largest row; the last, partial step's tiny dQ is 3e-9 off relative); the pad's energy is the link's losses plus the rectifier's DC, summed
+    over the mission (the link at rest at both ends, to 1e-9 of the pad's energy) and the summary says the same
+    sums; propulsion is its power times dt. The hover gap stays below 0.2 m: higher, k is under the pad's
+    switch-on threshold (0.075) and nothing is charged."""
+    cfg, res = _short_mission(**{"battery.initial_soc": soc, "pads.0.hover_time_s": hover,
+                                 "drone.avionics_w": avionics, "battery.capacity_ah": cap, "link.vdc_v": vdc,
+                                 "mission.hover_gap_m": gap})
+    ts, s = res.timeseries, res.summary
+    q = cfg.battery.capacity_ah * 3600.0
+    soc_prev = np.concatenate([[soc], ts["soc"].to_numpy()[:-1]])
+    dq = (ts["battery_current_a"] * ts["dt_s"]).to_numpy()
+    np.testing.assert_allclose(ts["soc"].to_numpy(), soc_prev + dq / q, rtol=0, atol=1e-12)
+    assert s["final_soc"] == pytest.approx(soc + dq.sum() / q, abs=1e-12)
+    node = ts[["e_battery_chem_j", "e_battery_r0_j", "e_battery_r1_j", "e_battery_c1_j", "e_propulsion_j"]]
+    scale = np.abs(node).sum(axis=1).to_numpy() + np.abs(ts["e_rectifier_j"]).to_numpy()
+    assert np.all(np.abs(ts["e_rectifier_j"].to_numpy() - node.sum(axis=1).to_numpy()) <= 1e-9 * scale + 1e-12)
+    chem = cfg.battery.n_series * _ocv_cell(soc_prev) * dq
+    np.testing.assert_allclose(ts["e_battery_chem_j"].to_numpy(), chem, rtol=1e-12, atol=1e-12 * np.abs(chem).max())
+    np.testing.assert_allclose(ts["e_propulsion_j"], ts["propulsion_w"] * ts["dt_s"], rtol=1e-12, atol=1e-12)
+    link = ["e_coil_loss_j", "e_inverter_switches_j", "e_rectifier_diodes_j", "e_rectifier_switches_j",
+            "e_rectifier_j"]
+    e_src = ts["e_source_j"].sum()
+    assert e_src > 0 and abs(ts["i2_amp_a"].iloc[-1]) < 1e-6
+    assert abs(e_src - ts[link].to_numpy().sum()) <= 1e-9 * e_src
+    assert s["energy_from_source_j"] == pytest.approx(e_src, rel=1e-12)
+    assert s["rectifier_output_j"] == pytest.approx(ts["e_rectifier_j"].sum(), rel=1e-12)
+
+
+@settings(**MISSION_SETTINGS)
+@given(soc=st.floats(0.3, 0.95), hover=st.floats(0.5, 3.0), avionics=st.floats(0.0, 40.0), more=st.floats(1.0, 40.0))
+def test_more_hover_power_ends_with_less_charge(soc, hover, avionics, more):
+    """All else equal, a drone that draws more power (avionics +1..40 W) ends the same mission with a lower SoC
+    (strictly: the charger's command follows the load over the pad, but the flight to and from it is on the
+    pack), and draws more from the pad."""
+    base = {"battery.initial_soc": soc, "pads.0.hover_time_s": hover}
+    _, lo = _short_mission(**base, **{"drone.avionics_w": avionics})
+    _, hi = _short_mission(**base, **{"drone.avionics_w": avionics + more})
+    assert hi.summary["final_soc"] < lo.summary["final_soc"]
+    assert hi.summary["propulsion_energy_j"] > lo.summary["propulsion_energy_j"]
