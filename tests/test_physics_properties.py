@@ -398,3 +398,36 @@ def test_more_hover_power_ends_with_less_charge(soc, hover, avionics, more):
     _, hi = _short_mission(**base, **{"drone.avionics_w": avionics + more})
     assert hi.summary["final_soc"] < lo.summary["final_soc"]
     assert hi.summary["propulsion_energy_j"] > lo.summary["propulsion_energy_j"]
+
+
+# ============================================================================ environments
+ENV_INFO = ("i2_a", "i2_peak_a", "i1_a", "d_short", "v2_v", "rect_current_a", "battery_v", "battery_current_a", "soc",
+            "charge_cmd_a", "lm_h", "energy_j", "cost", "overcurrent", "episode_cost")
+
+
+@settings(max_examples=8, **SETTINGS)
+@given(seed=st.integers(0, 2**32 - 2), scenario=st.sampled_from(["nominal", "random", "windy", "battery_low"]),
+       link=st.sampled_from(["modal", "envelope"]), act_seed=st.integers(0, 2**31))
+def test_vector_env_runs_the_single_envs_trajectories(seed, scenario, link, act_seed):
+    """At a random seed, scenario, link and action sequence, the vector env's two windows are the single envs seeded
+    seed, seed + 1 (observations to 1e-6, rewards and every info value to 1e-9), and each step's info is consistent
+    with itself: overcurrent = max(peak I2 / rated - 1, 0), the rectifier's DC current >= 0 (it only absorbs), SoC
+    in [0, 1]."""
+    from envs import EnvConfig, SbarChargingEnv, SbarChargingVectorEnv
+    cfg = EnvConfig(n_steps=40, link_model=link)
+    acts = np.random.default_rng(act_seed).uniform(-1, 1, (cfg.n_steps, 2, 1)).astype(np.float32)
+    venv = SbarChargingVectorEnv(num_envs=2, scenario=scenario, config=cfg)
+    vobs, _ = venv.reset(seed=seed)
+    singles = [SbarChargingEnv(scenario=scenario, config=cfg) for _ in range(2)]
+    sobs = [e.reset(seed=seed + i)[0] for i, e in enumerate(singles)]
+    np.testing.assert_allclose(vobs, np.stack(sobs), atol=1e-6)
+    for k in range(cfg.n_steps):
+        vobs, vr, _, _, vinfo = venv.step(acts[k])
+        for i, e in enumerate(singles):
+            o, r, _, _, info = e.step(acts[k, i])
+            np.testing.assert_allclose(vobs[i], o, atol=1e-6)
+            assert vr[i] == pytest.approx(r, rel=1e-9, abs=1e-12)
+            for key in ENV_INFO:
+                assert vinfo[key][i] == pytest.approx(info[key], rel=1e-9, abs=1e-12), key
+            assert info["overcurrent"] == pytest.approx(max(info["i2_peak_a"] / cfg.rated_i2_a - 1.0, 0.0), abs=1e-12)
+            assert info["rect_current_a"] >= 0.0 and 0.0 <= info["soc"] <= 1.0

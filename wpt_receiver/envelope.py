@@ -155,14 +155,15 @@ def zoh_discretise(a, b, dt_s: float):
     ainv[..., 1, 0] = -a[..., 1, 0]
     ainv /= det[..., None, None]
     bd = ainv @ (ad - eye) @ b
-    adt = a * dt_s
+    dt = np.asarray(dt_s, dtype=float)[..., None, None]    # a step per link, or one for all
+    adt = a * dt
     tiny = np.max(np.abs(adt), axis=(-2, -1)) < _SERIES_MAX
     if np.any(tiny):   # int_0^dt e^{As} ds = dt sum_n (A dt)^n / (n+1)!, n <= 11: truncation < 0.1^12 / 13! ~ 2e-22
-        at = np.broadcast_to(adt, np.broadcast_shapes(adt.shape, np.shape(b)))[tiny]
+        at = adt[tiny]
         phi = eye + at / 12.0
         for n in range(11, 1, -1):
             phi = eye + (at @ phi) / n
-        bd[tiny] = dt_s * (phi @ b)
+        bd[tiny] = np.broadcast_to(dt, tiny.shape + (1, 1))[tiny] * (phi @ b)
     return ad, bd
 
 
