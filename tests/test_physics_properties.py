@@ -392,12 +392,14 @@ def test_mission_bookkeeping_closes_from_its_rows(soc, hover, avionics, cap, vdc
 def test_more_hover_power_ends_with_less_charge(soc, hover, avionics, more):
     """All else equal, a drone that draws more power (avionics +1..40 W) ends the same mission with a lower SoC
     (strictly: the charger's command follows the load over the pad, but the flight to and from it is on the
-    pack), and draws more from the pad."""
+    pack), and its loads draw exactly the extra power over the whole mission, motors on or off (to 1e-9)."""
     base = {"battery.initial_soc": soc, "pads.0.hover_time_s": hover}
     _, lo = _short_mission(**base, **{"drone.avionics_w": avionics})
     _, hi = _short_mission(**base, **{"drone.avionics_w": avionics + more})
     assert hi.summary["final_soc"] < lo.summary["final_soc"]
-    assert hi.summary["propulsion_energy_j"] > lo.summary["propulsion_energy_j"]
+    extra = hi.summary["propulsion_energy_j"] - lo.summary["propulsion_energy_j"]
+    assert extra == pytest.approx(more * lo.summary["sim_time_s"], rel=1e-9)
+    assert hi.summary["sim_time_s"] == lo.summary["sim_time_s"]
 
 
 # ============================================================================ environments
