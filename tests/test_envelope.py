@@ -202,3 +202,15 @@ def test_averaged_device_losses_match_switching_model(d):
     p_in = 0.5 * rectifier_v2_devices(d, P.vl_v, i2s, dv) * i2s
     p_out = P.vl_v * rectifier_current(d, i2s) + avg["rectifier_diodes"] + avg["rectifier_switches"]
     assert p_in == pytest.approx(p_out, rel=1e-12)
+
+
+def test_zoh_with_a_step_per_link_equals_one_call_per_link():
+    """``dt_s`` as an array (the envs' three step lengths in one call), some steps short enough for Bd's series
+    (||A dt|| < 0.1), others not: each link's (Ad, Bd) is that of its own scalar call, to the bit."""
+    a, b = state_matrices(P, np.array([6e-6, 5e-6, 4e-6]))
+    dt = np.array([1e-7, 1e-4, 5.88e-6])
+    ad, bd = zoh_discretise(a, b, dt)
+    for i in range(3):
+        ad1, bd1 = zoh_discretise(a[i:i + 1], b, dt[i])
+        np.testing.assert_array_equal(ad[i], ad1[0])
+        np.testing.assert_array_equal(bd[i], bd1[0])
