@@ -35,7 +35,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
-from mission_sim.validation import Range, check_number, real_array, shown
+from mission_sim.validation import SEED_RANGE, Range, check_number, real_array, shown
 
 from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config, kernel_function
 from .layout import INFO
@@ -247,18 +247,17 @@ class SbarChargingVectorEnv(VectorEnv):
         return obs[idx]
 
     def reset(self, *, seed=None, options: dict | None = None):
-        super().reset(seed=seed if seed is None or np.ndim(seed) == 0 else int(seed[0]))
         n = self.num_envs
-        if seed is None:
-            seeds = [None] * n
-        elif np.ndim(seed) == 0:
-            seeds = [int(seed) + i for i in range(n)]
-        else:
-            seeds = [int(s) for s in seed]
+        if seed is None or np.ndim(seed) == 0:
+            super().reset(seed=seed)
+            seeds = [None] * n if seed is None else [int(seed) + i for i in range(n)]
+        else:   # one per sub-environment; None: that one's generator goes on (as SyncVectorEnv's env.reset(seed=None))
+            seeds = [None if s is None else check_number(f"seed[{i}]", s, SEED_RANGE) for i, s in enumerate(seed)]
             if len(seeds) != n:
-                raise ValueError(f"seed has {len(seeds)} entries; valid: one int or num_envs={n} ints")
-        if seed is not None or not self._started:
-            self._rngs = [seeding.np_random(s)[0] for s in seeds]
+                raise ValueError(f"seed has {len(seeds)} entries; valid: one int or num_envs={n} ints (or None)")
+            super().reset(seed=seeds[0])
+        # a sub-environment without a seed keeps its generator (a new one from the OS's entropy at the first reset)
+        self._rngs = [r if s is None and r is not None else seeding.np_random(s)[0] for s, r in zip(seeds, self._rngs)]
         obs, info = self._start(self._ar, options)
         self._prev_done[:] = False
         self._started = True
