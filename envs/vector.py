@@ -3,7 +3,9 @@
 Sub-environment ``i`` owns its own generator (seeded ``seed + i`` like
 :class:`gymnasium.vector.SyncVectorEnv`), so the batched env reproduces ``num_envs`` single
 environments seeded the same way. Autoreset: ``NEXT_STEP`` (the step after an episode ended resets
-that sub-environment, returns its first observation, reward 0, and ignores its action).
+that sub-environment, returns its first observation, reward 0, and ignores its action) in the env's scenario:
+``reset(options={"scenario": ...})`` sets the scenario of the windows that reset starts only, as
+``SyncVectorEnv``'s autoreset calls its single envs' ``reset()`` without options.
 
 The step is one compiled call (:func:`envs.vector_kernel.env_step`, the one implementation of the
 env step, shared with the single env); this module keeps the orchestration: the parts
@@ -208,10 +210,12 @@ class SbarChargingVectorEnv(VectorEnv):
                              link_model=self.config.link_model)
 
     # ------------------------------------------------------------------ episodes
-    def _start(self, idx, options=ScenarioPart.KEEP):
+    def _start(self, idx, options=None):
         """(Re)start the sub-environments ``idx``: each part reset once, in order (scenario draws with their
         generators, plant, objective, observation); returns the observation and info of every row. The
-        scenario is the one of ``options`` (a ``reset``) or the last one (an autoreset)."""
+        scenario is the one of ``options`` (a ``reset``), else the env's: an autoreset or a ``restart`` starts the
+        env's scenario, as gymnasium's ``SyncVectorEnv`` autoresets its single envs without options (until
+        2026-11-27 the windows kept the last ``reset``'s scenario)."""
         sel = self._rows(idx)
         rngs = self._rngs if isinstance(sel, slice) else [self._rngs[i] for i in idx]
         scenario, plant, objective, observation = self.parts

@@ -145,3 +145,29 @@ def test_gymnasium_wrappers_and_vectorisers_give_the_envs_numbers():
         venv.close()
         venv.close()   # twice: nothing to close
     np.testing.assert_array_equal(np.array(runs[0]), np.array(runs[1]))
+
+
+def test_a_reset_options_scenario_holds_for_the_windows_that_reset_starts_as_sync_vector_env():
+    """``reset(options={"scenario": "battery"})`` on the vector env kept "battery" for every autoreset after it, where
+    gymnasium's SyncVectorEnv over the single envs (and SB3's DummyVecEnv after ``set_options``) start the env's own
+    scenario again (the single env's docstring: "for that episode only"); the two diverged at the first autoreset."""
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from envs.sb3_vec import SbarSB3VecEnv
+    cfg = SHORT["envelope"]
+    venv = SbarChargingVectorEnv(2, "nominal", cfg)
+    sync = gym.vector.SyncVectorEnv([lambda: gym.make(envs.ENV_ID, scenario="nominal", config=cfg)] * 2)
+    acts = _actions(2 * cfg.n_steps + 3, (2, 1))
+    np.testing.assert_array_equal(venv.reset(seed=1, options={"scenario": "battery"})[0],
+                                  sync.reset(seed=1, options={"scenario": "battery"})[0])
+    for x in acts:
+        got, want = venv.step(x), sync.step(x)
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[4]["soc"], want[4]["soc"])
+    ours, dummy = SbarSB3VecEnv(2, "nominal", cfg), make_vec_env(envs.ENV_ID, 2, env_kwargs={"config": cfg})
+    for vec in (ours, dummy):
+        vec.seed(3)
+        vec.set_options({"scenario": "battery"})
+    np.testing.assert_array_equal(ours.reset(), dummy.reset())
+    for x in acts:
+        np.testing.assert_array_equal(ours.step(x)[0], dummy.step(x)[0])
