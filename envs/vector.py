@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import time
 from collections import namedtuple
+from collections.abc import Mapping
 
 import numpy as np
 from gymnasium import spaces
@@ -155,6 +156,7 @@ class SbarChargingVectorEnv(VectorEnv):
         self._rngs = [None] * n
         self._draws = None   # the compiled draws (envs.draw_kernel.Draws), made at the first reset
         self._started = False
+        self._last_obs = None   # the last observation returned
         self._obs_scale = OBS_SCALE[:, None]
         self._obs_offset = OBS_OFFSET[:, None]
         serial = n < self.PARALLEL_MIN_ENVS or self.num_threads == 1
@@ -248,6 +250,9 @@ class SbarChargingVectorEnv(VectorEnv):
             raise ValueError(f"restart indices {bad.tolist()} are invalid; valid range: distinct integers 0..{n - 1}")
         obs, _ = self._start(idx)
         self._prev_done[idx] = False
+        if self._last_obs is not None:   # (a copy: the array a step returned is the caller's)
+            self._last_obs = self._last_obs.copy()
+            self._last_obs[idx] = obs[idx]
         return obs[idx]
 
     def reset(self, *, seed=None, options: dict | None = None):
@@ -260,12 +265,35 @@ class SbarChargingVectorEnv(VectorEnv):
             if len(seeds) != n:
                 raise ValueError(f"seed has {len(seeds)} entries; valid: one int or num_envs={n} ints (or None)")
             super().reset(seed=seeds[0])
-        # a sub-environment without a seed keeps its generator (a new one from the OS's entropy at the first reset)
-        self._rngs = [r if s is None and r is not None else seeding.np_random(s)[0] for s, r in zip(seeds, self._rngs)]
-        obs, info = self._start(self._ar, options)
-        self._prev_done[:] = False
+        options, mask = self._reset_mask(options)
+        # a sub-environment without a seed keeps its generator (a new one from the OS's entropy at the first reset), as
+        # does one outside the reset mask
+        self._rngs = [r if (s is None and r is not None) or not m else seeding.np_random(s)[0]
+                      for s, r, m in zip(seeds, self._rngs, np.ones(n, bool) if mask is None else mask)]
+        rows = self._ar if mask is None else np.flatnonzero(mask)
+        obs, info = self._start(rows, options)
+        if mask is not None:   # the other windows go on: their last observation
+            obs = np.where(mask[:, None], obs, self._last_obs)
+        self._prev_done[rows] = False
         self._started = True
+        self._last_obs = obs
         return obs, info
+
+    def _reset_mask(self, options):
+        """``options`` without gymnasium's ``reset_mask`` (a partial reset: the windows where it is True start, the others
+        go on; as ``SyncVectorEnv``) and the mask, None for a reset of every window; a ``ValueError`` naming a mask that
+        is not a bool array of one value per window with one True at least, or one given before the first reset."""
+        if not isinstance(options, Mapping) or "reset_mask" not in options:
+            return options, None
+        options = dict(options)
+        mask, n = options.pop("reset_mask"), self.num_envs
+        if not (isinstance(mask, np.ndarray) and mask.dtype == np.bool_ and mask.shape == (n,) and mask.any()):
+            raise ValueError(f"options['reset_mask']={shown(mask)} is invalid; valid: a numpy bool array of shape ({n},) "
+                             "with at least one True")
+        if not self._started:
+            raise ValueError("options['reset_mask'] is invalid before the first reset; valid: a reset of every window "
+                             "first")
+        return options or None, mask
 
     def step(self, actions):
         if not self._started:
@@ -287,6 +315,7 @@ class SbarChargingVectorEnv(VectorEnv):
             for key, v in info.items():
                 v[sel] = info0[key][sel]
         self._prev_done = truncated.copy()
+        self._last_obs = obs   # (a reset with a reset_mask returns it for the windows that go on)
         return obs, reward, terminated, truncated, info
 
     def _step_parts(self, d):

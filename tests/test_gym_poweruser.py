@@ -171,3 +171,40 @@ def test_a_reset_options_scenario_holds_for_the_windows_that_reset_starts_as_syn
     np.testing.assert_array_equal(ours.reset(), dummy.reset())
     for x in acts:
         np.testing.assert_array_equal(ours.step(x)[0], dummy.step(x)[0])
+
+
+@pytest.mark.parametrize("history", [1, 3])
+def test_a_partial_reset_with_reset_mask_is_sync_vector_envs(history):
+    """gymnasium 1.x's partial reset, ``reset(options={"reset_mask": m})`` (SyncVectorEnv, AsyncVectorEnv and the
+    vector wrappers take it): was ``reset option 'reset_mask' is invalid``; now the windows where ``m`` is True start
+    (with their seeds, the options' scenario), the others go on, as SyncVectorEnv over the single envs."""
+    cfg = SHORT["envelope"]
+    venv = SbarChargingVectorEnv(3, "sense_delay", cfg, history=history)
+    sync = gym.vector.SyncVectorEnv([lambda: gym.make(envs.ENV_ID, scenario="sense_delay", config=cfg,
+                                                      history=history)] * 3)
+    np.testing.assert_array_equal(venv.reset(seed=1)[0], sync.reset(seed=1)[0])
+    resets = {4: (None, {"scenario": "windy"}, [True, False, False]), 9: ([5, 6, 7], {}, [True, False, True]),
+              15: (9, {}, [False, True, True])}
+    for k, x in enumerate(_actions(2 * cfg.n_steps + 3, (3, 1))):
+        got, want = venv.step(x), sync.step(x)
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+        if k in resets:
+            seed, opts, m = resets[k]
+            m = np.array(m)
+            (obs, info), (obs_s, info_s) = (env.reset(seed=seed, options={"reset_mask": m, **opts})
+                                            for env in (venv, sync))
+            np.testing.assert_array_equal(obs, obs_s)
+            np.testing.assert_array_equal(info["soc"][m], info_s["soc"][m])
+
+
+@pytest.mark.parametrize("mask,text", [(np.array([1, 0, 1]), "dtype int64"), ([True, False, True], r"\[True, False, True\]"),
+                                       (np.zeros(3, bool), "dtype bool"), (np.ones(2, bool), r"shape \(2,\)")])
+def test_a_reset_mask_that_is_not_one_bool_per_window_is_named(mask, text):
+    venv = SbarChargingVectorEnv(3, config=SHORT["envelope"])
+    with pytest.raises(ValueError, match="before the first reset"):
+        venv.reset(options={"reset_mask": np.ones(3, bool)})
+    venv.reset(seed=0)
+    with pytest.raises(ValueError, match=rf"options\['reset_mask'\]=.*{text}.* is invalid; valid: a numpy bool array of "
+                                         r"shape \(3,\) with at least one True"):
+        venv.reset(options={"reset_mask": mask})
