@@ -197,7 +197,9 @@ class SbarChargingVectorEnv(VectorEnv):
         return spaces.Box(-1.0, 1.0, (1,), np.float32)
 
     def _duty(self, actions) -> np.ndarray:
-        a = actions if isinstance(actions, np.ndarray) and actions.dtype.kind == "f" else _numbers(actions)
+        # float64 / float32 arrays straight to the compiled duty map; any other (float16, big-endian, long double: numba
+        # has no kernel for them, its TypingError named neither) as float64
+        a = actions if isinstance(actions, np.ndarray) and actions.dtype in _KERNEL_FLOATS else _numbers(actions)
         if a.shape not in self._action_shapes:   # (n, 1) or (n,)
             raise _shape_error(actions, self.num_envs)
         d = np.empty(self.num_envs)
@@ -411,6 +413,10 @@ def _getters():
     if keep:
         _GETTERS[:] = getters
     return getters
+
+
+#: the action dtypes the compiled duty map takes as they are (native byte order)
+_KERNEL_FLOATS = (np.dtype(np.float64), np.dtype(np.float32))
 
 
 def _numbers(actions) -> np.ndarray:

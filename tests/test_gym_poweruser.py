@@ -208,3 +208,17 @@ def test_a_reset_mask_that_is_not_one_bool_per_window_is_named(mask, text):
     with pytest.raises(ValueError, match=rf"options\['reset_mask'\]=.*{text}.* is invalid; valid: a numpy bool array of "
                                          r"shape \(3,\) with at least one True"):
         venv.reset(options={"reset_mask": mask})
+
+
+@pytest.mark.parametrize("dtype", [np.float16, ">f8", np.longdouble])
+def test_vector_env_takes_float_actions_of_any_precision(dtype):
+    """float16, big-endian or long-double actions (a policy's half-precision output, an array read from a file) went
+    to the compiled duty map as they were: numba's ``NotImplementedError: float16`` / ``TypingError: non-precise type
+    pyobject``, after a compile notice; the single env took them. Now the float64 of the same values."""
+    acts = np.array([[-1.0], [0.5], [0.25]])
+    rewards = []
+    for a in (acts, acts.astype(dtype)):
+        venv = SbarChargingVectorEnv(3, config=SHORT["envelope"])
+        venv.reset(seed=0)
+        rewards.append(venv.step(a)[1])
+    np.testing.assert_array_equal(rewards[0], rewards[1])
