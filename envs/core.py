@@ -97,7 +97,8 @@ class RewardWeights:
 class EnvConfig:
     """Fixed settings of an environment (episode randomness lives in the :class:`Scenario`).
 
-    link : the link parameters (Table I); the true Lm replaces ``link.lm_h`` per pose
+    link : the link parameters (Table I; or a dict of LinkParams fields, Table I's for the others); the true Lm
+        replaces ``link.lm_h`` per pose
     dt_s : control period = env step [s] (default 17 rectifier periods = 100 us)
     n_steps : steps per episode (truncation), default 300 (30 ms)
     slow_every : pose / Lm update every this many steps
@@ -164,8 +165,11 @@ class EnvConfig:
             object.__setattr__(self, "reward", _from_mapping(RewardWeights, self.reward, "reward"))
         if not isinstance(self.reward, RewardWeights):
             raise ValueError(f"reward={self.reward!r} is invalid; valid: an envs.RewardWeights or a dict of its fields")
+        if isinstance(self.link, Mapping):   # a dict of LinkParams fields, Table I's for the others (env.spec.to_json's)
+            object.__setattr__(self, "link", TABLE_I.with_(**self.link))
         if not isinstance(self.link, LinkParams):
-            raise ValueError(f"link={self.link!r} is invalid; valid: a wpt_receiver.LinkParams (default TABLE_I)")
+            raise ValueError(f"link={self.link!r} is invalid; valid: a wpt_receiver.LinkParams or a dict of its fields "
+                             "(default TABLE_I)")
         if self.link_model not in LINK_MODELS:
             raise ValueError(f"link_model={self.link_model!r} is invalid; valid values: {', '.join(LINK_MODELS)}")
         for name, rng, note in _RANGES:   # one real number each (YAML 1.1 reads 1e-4 as the string "1e-4")

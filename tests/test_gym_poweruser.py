@@ -222,3 +222,23 @@ def test_vector_env_takes_float_actions_of_any_precision(dtype):
         venv.reset(seed=0)
         rewards.append(venv.step(a)[1])
     np.testing.assert_array_equal(rewards[0], rewards[1])
+
+
+def test_an_env_remade_from_its_spec_json_is_the_same_env():
+    """``EnvSpec.from_json(env.spec.to_json())`` (gymnasium writes an EnvConfig's dataclass fields as dicts) made no
+    env: ``link={...} is invalid; valid: a wpt_receiver.LinkParams``; a config's ``link`` may now be a dict of its
+    fields (Table I's for the others), as ``reward`` a dict of RewardWeights fields."""
+    from gymnasium.envs.registration import EnvSpec
+
+    from wpt_receiver import TABLE_I
+    cfg = EnvConfig(link=TABLE_I.with_(lm_h=5e-6), link_model="envelope", n_steps=12, reward={"overcurrent": 20.0})
+    env = gym.make(envs.ENV_ID, config=cfg, scenario="random")
+    twin = gym.make(EnvSpec.from_json(env.spec.to_json()))
+    assert twin.unwrapped.config == cfg
+    acts = _actions(cfg.n_steps)
+    env.reset(seed=2)
+    twin.reset(seed=2)
+    assert _same(_windows(env, acts, 2), _windows(twin, acts, 2))
+    assert EnvConfig(link={"lm_h": 5e-6}).link == TABLE_I.with_(lm_h=5e-6)
+    with pytest.raises(ValueError, match="'lm' is not a LinkParams field; valid: l1_h, l2_h, lm_h"):
+        EnvConfig(link={"lm": 5e-6})
