@@ -40,7 +40,7 @@ from gymnasium.vector.utils import batch_space
 from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
 from mission_sim.validation import SEED_RANGE, Range, check_number, real_array, shown
 
-from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config, kernel_function
+from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config, kernel_from_ref, kernel_function, kernel_ref
 from .layout import INFO
 from .modal_plant import vector_plant
 from .parts import ObjectivePart, ObservationPart, alias_parts
@@ -164,6 +164,12 @@ class SbarChargingVectorEnv(VectorEnv):
         # auto (num_threads=None, parallel possible): the step times decide between one thread and all
         self._auto = _AutoThreads() if self._threads_auto and self._n_chunks > 1 else None
 
+    def __getstate__(self):   # the compiled duty map by name (envs.core.kernel_ref; the plant's step: its part's)
+        return {**self.__dict__, "_duty_kernel": kernel_ref(self._duty_kernel)}
+
+    def __setstate__(self, state):
+        self.__dict__.update(state, _duty_kernel=kernel_from_ref(state["_duty_kernel"]))
+
     def _reset_chunks(self) -> int:
         """The chunks of an autoreset's compiled parallel parts (draws, command profile): the step's, as the auto
         threads' probes chose (one until they have); numba's threads set when more than one."""
@@ -282,16 +288,17 @@ class SbarChargingVectorEnv(VectorEnv):
         return obs, info
 
     def _reset_mask(self, options):
-        """``options`` without gymnasium's ``reset_mask`` (a partial reset: the windows where it is True start, the others
-        go on; as ``SyncVectorEnv``) and the mask, None for a reset of every window; a ``ValueError`` naming a mask that
-        is not a bool array of one value per window with one True at least, or one given before the first reset."""
+        """``options`` without gymnasium's ``reset_mask`` (a partial reset: the windows where it is True start, the
+        others go on; as ``SyncVectorEnv``) and the mask, None for a reset of every window; a ``ValueError`` naming a
+        mask that is not a bool array of one value per window with one True at least, or one given before the first
+        reset."""
         if not isinstance(options, Mapping) or "reset_mask" not in options:
             return options, None
         options = dict(options)
         mask, n = options.pop("reset_mask"), self.num_envs
         if not (isinstance(mask, np.ndarray) and mask.dtype == np.bool_ and mask.shape == (n,) and mask.any()):
-            raise ValueError(f"options['reset_mask']={shown(mask)} is invalid; valid: a numpy bool array of shape ({n},) "
-                             "with at least one True")
+            raise ValueError(f"options['reset_mask']={shown(mask)} is invalid; valid: a numpy bool array of shape "
+                             f"({n},) with at least one True")
         if not self._started:
             raise ValueError("options['reset_mask'] is invalid before the first reset; valid: a reset of every window "
                              "first")
