@@ -104,7 +104,9 @@ class SbarChargingEnv(gym.Env):
 
     ## Info
     Floats (``reached_short_mode`` a bool), the same keys after ``reset`` (at t = 0, with ``scenario`` and
-    ``t_stop_s`` besides) and after every ``step`` (the step's end); a vector env's are arrays (num_envs,):
+    ``t_stop_s`` besides) and after every ``step`` (the step's end); a vector env's are arrays (num_envs,), its
+    ``reset`` info with ``t_stop_s`` besides (no ``scenario``: the scenario of the windows it started is
+    ``env.parts.scenario.current``):
 
     | Key                  | Unit | Meaning                                                                        |
     |----------------------|------|--------------------------------------------------------------------------------|

@@ -269,3 +269,16 @@ def test_an_env_unpickled_in_another_process_steps_with_the_cached_kernels(make)
     assert out.stdout.split() == [b"True", b"True"]
     twin = pickle.loads(pickle.dumps(env))   # compiled=False: the uncompiled source, by reference too
     assert twin.unwrapped.parts.plant.kernel is env.unwrapped.parts.plant.kernel
+
+
+def test_the_docstring_names_the_keys_a_reset_info_has_besides_a_steps():
+    """The Info section said every reset info has ``scenario`` and ``t_stop_s`` besides the step's keys; the vector
+    env's has ``t_stop_s`` only."""
+    doc = " ".join(SbarChargingEnv.__doc__.split())
+    single = re.search(r"after ``reset`` \(at t = 0, with ``(\w+)`` and ``(\w+)`` besides\)", doc).groups()
+    vector = re.findall(r"``(\w+)``", re.search(r"its ``reset`` info with (.*?) besides", doc).group(1))
+    for env, said in ((SbarChargingEnv(config=SHORT["envelope"]), single),
+                      (SbarChargingVectorEnv(2, config=SHORT["envelope"]), vector)):
+        info0 = env.reset(seed=0)[1]
+        info1 = env.step(env.action_space.sample())[4]
+        assert set(info1) <= set(info0) and sorted(set(info0) - set(info1)) == sorted(said)
