@@ -98,12 +98,15 @@ class SbarChargingEnv(gym.Env):
     | tracking    | ``- abs(I_L - I*) / 7 A``                           | 1              |
     | overcurrent | ``- max(0, I2_pk / I2_rated - 1)``                  | 10             |
 
-    ``info["cost"]`` carries the overcurrent term unweighted (safety-gymnasium style), rated
-    I2 = 15 A by default.
+    ``info["overcurrent"]`` carries the overcurrent term unweighted, rated I2 = 15 A by default;
+    ``info["cost"]`` (safety-gymnasium style) is the domain's constraint, the rise of the running overshoot after
+    the stop (:mod:`envs.objective`; the Info table), not the overcurrent term.
 
     ## Info
     Floats (``reached_short_mode`` a bool), the same keys after ``reset`` (at t = 0, with ``scenario`` and
-    ``t_stop_s`` besides) and after every ``step`` (the step's end); a vector env's are arrays (num_envs,):
+    ``t_stop_s`` besides) and after every ``step`` (the step's end); a vector env's are arrays (num_envs,), its
+    ``reset`` info with ``t_stop_s`` besides (no ``scenario``: the scenario of the windows it started is
+    ``env.parts.scenario.current``):
 
     | Key                  | Unit | Meaning                                                                        |
     |----------------------|------|--------------------------------------------------------------------------------|
@@ -189,16 +192,28 @@ class SbarChargingEnv(gym.Env):
         self._out = np.empty(len(INFO) + 1)
         # the per-step row of the single kernel (command, I2 sensor noise): the scenario part's stores
         self._steps = np.zeros((self._T + 1, 2))
-        self._cmd = self._steps[:, 0]   # the command per step [A] (a view)
         plant = single_plant(c, self._compiled)
         observation = SingleObservation(c, self._peak, self._compiled, self.history)
-        self.parts = Parts(ScenarioPart(self.scenario, self._T, self._dt, self._steps[:, :1], self._steps[:-1, 1:],
-                                        compiled=self._compiled),
+        self.parts = Parts(ScenarioPart(self.scenario, self._T, self._dt, None, None, compiled=self._compiled),
                            plant, SingleObjective(c, plant), observation)
+        self._share_steps()
         # the compiled step's constants, each part's by name, then the observation map and the peak table
         vals = {**plant.constants(self._peak), **self.parts.objective.constants()}
         self._par = np.concatenate([[vals[f] for f in plant.PAR._fields], OBS_SCALE, OBS_OFFSET,
                                     self._peak.kernel_table.ravel()]).astype(float)
+
+    def _share_steps(self) -> None:
+        """The scenario part's stores, command (T + 1, 1) and I2 sensor noise (T, 1), as views of the step rows the
+        compiled step reads (``_steps``). When built, and again after ``copy.deepcopy`` or an unpickling: a copy gives
+        each view an array of its own, and the copy's next windows were stepped on the command and noise of the
+        window it was copied in (only the vector env's parts own their stores)."""
+        self._cmd = self._steps[:, 0]   # the command per step [A] (a view)
+        scenario = self.parts.scenario
+        scenario.cmd, scenario.noise = self._steps[:, :1], self._steps[:-1, 1:]
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._share_steps()
 
     # ------------------------------------------------------------------ interface
     def _make_action_space(self):

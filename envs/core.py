@@ -31,6 +31,7 @@ once in compiled form (:mod:`envs.vector_kernel`) and called by the single and t
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from functools import cached_property
@@ -45,7 +46,7 @@ from wpt_receiver.sbar import rectifier_current, short_weight
 from .layout import BAT, COEF, STATE, XC
 from .plant import battery_operating_point, lm_window_h
 
-__all__ = ["LINK_MODELS", "window_lm", "EnvConfig", "RewardWeights", "Plans", "DetunedPlan", "build_plans", "OBS_SCALE", "OBS_OFFSET", "N_COEF", "N_BAT", "kernel_function", "as_config", "given_config",
+__all__ = ["LINK_MODELS", "window_lm", "EnvConfig", "RewardWeights", "Plans", "DetunedPlan", "build_plans", "OBS_SCALE", "OBS_OFFSET", "N_COEF", "N_BAT", "kernel_function", "kernel_ref", "kernel_from_ref", "as_config", "given_config",
            "CONTROL_PERIOD_RANGE"]
 
 HALF_PI = 0.5 * math.pi
@@ -97,7 +98,8 @@ class RewardWeights:
 class EnvConfig:
     """Fixed settings of an environment (episode randomness lives in the :class:`Scenario`).
 
-    link : the link parameters (Table I); the true Lm replaces ``link.lm_h`` per pose
+    link : the link parameters (Table I; or a dict of LinkParams fields, Table I's for the others); the true Lm
+        replaces ``link.lm_h`` per pose
     dt_s : control period = env step [s] (default 17 rectifier periods = 100 us)
     n_steps : steps per episode (truncation), default 300 (30 ms)
     slow_every : pose / Lm update every this many steps
@@ -164,8 +166,11 @@ class EnvConfig:
             object.__setattr__(self, "reward", _from_mapping(RewardWeights, self.reward, "reward"))
         if not isinstance(self.reward, RewardWeights):
             raise ValueError(f"reward={self.reward!r} is invalid; valid: an envs.RewardWeights or a dict of its fields")
+        if isinstance(self.link, Mapping):   # LinkParams fields, Table I's for the others (env.spec.to_json's form)
+            object.__setattr__(self, "link", TABLE_I.with_(**self.link))
         if not isinstance(self.link, LinkParams):
-            raise ValueError(f"link={self.link!r} is invalid; valid: a wpt_receiver.LinkParams (default TABLE_I)")
+            raise ValueError(f"link={self.link!r} is invalid; valid: a wpt_receiver.LinkParams or a dict of its fields "
+                             "(default TABLE_I)")
         if self.link_model not in LINK_MODELS:
             raise ValueError(f"link_model={self.link_model!r} is invalid; valid values: {', '.join(LINK_MODELS)}")
         for name, rng, note in _RANGES:   # one real number each (YAML 1.1 reads 1e-4 as the string "1e-4")
@@ -305,6 +310,29 @@ def kernel_function(name: str, compiled: bool = True):
     does not load numba)."""
     from .vector_kernel import kernel_function as get
     return get(name, compiled)
+
+
+def kernel_ref(f):
+    """A compiled kernel (numba dispatcher) or its ``py_func`` by module and name, for a pickle: a pickled dispatcher is
+    rebuilt in another process without its disk cache and compiled again (7-9 s a process for the single env's step,
+    2026-11-27); :func:`kernel_from_ref` looks the module's own up again. Anything else is returned as it is."""
+    base = getattr(f, "py_func", f)
+    name, module = getattr(base, "__name__", None), getattr(base, "__module__", None)
+    if module is None or not module.startswith("envs.") or name is None:
+        return f
+    return _KernelRef(module, name, base is not f)
+
+
+def kernel_from_ref(ref):
+    """The kernel :func:`kernel_ref` named (``ref`` itself when it is not a reference)."""
+    if not isinstance(ref, _KernelRef):
+        return ref
+    import importlib
+    f = getattr(importlib.import_module(ref.module), ref.name)
+    return f if ref.compiled else getattr(f, "py_func", f)
+
+
+_KernelRef = namedtuple("_KernelRef", "module name compiled")
 
 
 def _steady_v2(link: LinkParams, lm, il, vl):

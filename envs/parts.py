@@ -39,7 +39,8 @@ import numpy as np
 from mission_sim.contract import OBS_DIM
 from wpt_receiver.sbar import rectifier_current, rectifier_v2_folded
 
-from .core import N_BAT, N_COEF, OBS_OFFSET, OBS_SCALE, EnvConfig, build_plans, kernel_function
+from .core import (N_BAT, N_COEF, OBS_OFFSET, OBS_SCALE, EnvConfig, build_plans, kernel_from_ref, kernel_function,
+                   kernel_ref)
 from .layout import BAT, CCOEF_N, COEF, INFO, PAR, SINGLE, SINGLE_PAR, SLOW, STATE, XC
 from .objective import short_mode_i2_a, stop_step
 from .peaks import LOOKUP_SCALARS
@@ -60,6 +61,12 @@ class PlantPart:
     state_names = STATE._fields
     #: the slots of the compiled step's constants (``constants`` by these names)
     PAR = PAR
+
+    def __getstate__(self):   # (every plant part's: its compiled step by name, envs.core.kernel_ref)
+        return {**self.__dict__, "kernel": kernel_ref(self.kernel)}
+
+    def __setstate__(self, state):
+        self.__dict__.update(state, kernel=kernel_from_ref(state["kernel"]))
 
     def __init__(self, cfg: EnvConfig, n: int, compiled: bool = True):
         S = cfg.n_slow

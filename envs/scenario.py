@@ -416,9 +416,7 @@ class ScenarioPart:
     episode's randomisation): at a reset, the scenario of the options, the draws of the windows that start
     (:func:`draw_episodes`: :data:`DRAWS` and the scenario's ``parts``), the command profile and the
     sensor noise written into the stores ``cmd`` (T + 1, n) and ``noise`` (T, n) (step-major, what the
-    compiled step reads). Stateless between resets except the current scenario (autoresets keep it)."""
-
-    KEEP = object()   # reset(options=KEEP): the current scenario (an autoreset)
+    compiled step reads). Stateless between resets (``current``: the scenario of the windows started last)."""
 
     def __init__(self, default: Scenario, n_steps: int, dt_s: float, cmd: np.ndarray, noise: np.ndarray, fill=None,
                  chunks=None, compiled: bool = True):
@@ -430,11 +428,11 @@ class ScenarioPart:
         self.compiled = compiled   # False: the command profile's source uncompiled (tests)
         self._chunks = 1   # the current reset's chunks (:meth:`_fill_chunks`)
 
-    def reset(self, rngs, idx, options=KEEP) -> Window:
+    def reset(self, rngs, idx, options=None) -> Window:
         """Windows ``idx`` (a slice for all, or indices of the stores' columns) start, drawn with ``rngs``
-        (one generator each); ``options``: the ``reset`` options (``{"scenario": ...}``) or :attr:`KEEP`."""
-        if options is not self.KEEP:
-            self.current = scenario_from_options(options, self.default)
+        (one generator each); ``options``: the ``reset`` options (``{"scenario": ...}``; None: the default scenario,
+        as an autoreset)."""
+        self.current = scenario_from_options(options, self.default)
         scn, T = self.current, self.n_steps
         full = isinstance(idx, slice)
         # the normals drawn times the noise's standard deviation; all windows (the usual autoreset): into the

@@ -3,7 +3,9 @@
 Sub-environment ``i`` owns its own generator (seeded ``seed + i`` like
 :class:`gymnasium.vector.SyncVectorEnv`), so the batched env reproduces ``num_envs`` single
 environments seeded the same way. Autoreset: ``NEXT_STEP`` (the step after an episode ended resets
-that sub-environment, returns its first observation, reward 0, and ignores its action).
+that sub-environment, returns its first observation, reward 0, and ignores its action) in the env's scenario:
+``reset(options={"scenario": ...})`` sets the scenario of the windows that reset starts only, as
+``SyncVectorEnv``'s autoreset calls its single envs' ``reset()`` without options.
 
 The step is one compiled call (:func:`envs.vector_kernel.env_step`, the one implementation of the
 env step, shared with the single env); this module keeps the orchestration: the parts
@@ -27,6 +29,7 @@ from __future__ import annotations
 
 import time
 from collections import namedtuple
+from collections.abc import Mapping
 
 import numpy as np
 from gymnasium import spaces
@@ -35,9 +38,9 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
-from mission_sim.validation import Range, check_number, real_array, shown
+from mission_sim.validation import SEED_RANGE, Range, check_number, real_array, shown
 
-from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config, kernel_function
+from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config, kernel_from_ref, kernel_function, kernel_ref
 from .layout import INFO
 from .modal_plant import vector_plant
 from .parts import ObjectivePart, ObservationPart, alias_parts
@@ -153,12 +156,19 @@ class SbarChargingVectorEnv(VectorEnv):
         self._rngs = [None] * n
         self._draws = None   # the compiled draws (envs.draw_kernel.Draws), made at the first reset
         self._started = False
+        self._last_obs = None   # the last observation returned
         self._obs_scale = OBS_SCALE[:, None]
         self._obs_offset = OBS_OFFSET[:, None]
         serial = n < self.PARALLEL_MIN_ENVS or self.num_threads == 1
         self._n_chunks = 1 if serial else min(self.num_threads * self.CHUNKS_PER_THREAD, max(1, n // 256))
         # auto (num_threads=None, parallel possible): the step times decide between one thread and all
         self._auto = _AutoThreads() if self._threads_auto and self._n_chunks > 1 else None
+
+    def __getstate__(self):   # the compiled duty map by name (envs.core.kernel_ref; the plant's step: its part's)
+        return {**self.__dict__, "_duty_kernel": kernel_ref(self._duty_kernel)}
+
+    def __setstate__(self, state):
+        self.__dict__.update(state, _duty_kernel=kernel_from_ref(state["_duty_kernel"]))
 
     def _reset_chunks(self) -> int:
         """The chunks of an autoreset's compiled parallel parts (draws, command profile): the step's, as the auto
@@ -193,7 +203,9 @@ class SbarChargingVectorEnv(VectorEnv):
         return spaces.Box(-1.0, 1.0, (1,), np.float32)
 
     def _duty(self, actions) -> np.ndarray:
-        a = actions if isinstance(actions, np.ndarray) and actions.dtype.kind == "f" else _numbers(actions)
+        # float64 / float32 arrays straight to the compiled duty map; any other (float16, big-endian, long double: numba
+        # has no kernel for them, its TypingError named neither) as float64
+        a = actions if isinstance(actions, np.ndarray) and actions.dtype in _KERNEL_FLOATS else _numbers(actions)
         if a.shape not in self._action_shapes:   # (n, 1) or (n,)
             raise _shape_error(actions, self.num_envs)
         d = np.empty(self.num_envs)
@@ -208,10 +220,12 @@ class SbarChargingVectorEnv(VectorEnv):
                              link_model=self.config.link_model)
 
     # ------------------------------------------------------------------ episodes
-    def _start(self, idx, options=ScenarioPart.KEEP):
+    def _start(self, idx, options=None):
         """(Re)start the sub-environments ``idx``: each part reset once, in order (scenario draws with their
         generators, plant, objective, observation); returns the observation and info of every row. The
-        scenario is the one of ``options`` (a ``reset``) or the last one (an autoreset)."""
+        scenario is the one of ``options`` (a ``reset``), else the env's: an autoreset or a ``restart`` starts the
+        env's scenario, as gymnasium's ``SyncVectorEnv`` autoresets its single envs without options (until
+        2026-11-27 the windows kept the last ``reset``'s scenario)."""
         sel = self._rows(idx)
         rngs = self._rngs if isinstance(sel, slice) else [self._rngs[i] for i in idx]
         scenario, plant, objective, observation = self.parts
@@ -244,25 +258,51 @@ class SbarChargingVectorEnv(VectorEnv):
             raise ValueError(f"restart indices {bad.tolist()} are invalid; valid range: distinct integers 0..{n - 1}")
         obs, _ = self._start(idx)
         self._prev_done[idx] = False
+        if self._last_obs is not None:   # (a copy: the array a step returned is the caller's)
+            self._last_obs = self._last_obs.copy()
+            self._last_obs[idx] = obs[idx]
         return obs[idx]
 
     def reset(self, *, seed=None, options: dict | None = None):
-        super().reset(seed=seed if seed is None or np.ndim(seed) == 0 else int(seed[0]))
         n = self.num_envs
-        if seed is None:
-            seeds = [None] * n
-        elif np.ndim(seed) == 0:
-            seeds = [int(seed) + i for i in range(n)]
-        else:
-            seeds = [int(s) for s in seed]
+        if seed is None or np.ndim(seed) == 0:
+            super().reset(seed=seed)
+            seeds = [None] * n if seed is None else [int(seed) + i for i in range(n)]
+        else:   # one per sub-environment; None: that one's generator goes on (as SyncVectorEnv's env.reset(seed=None))
+            seeds = [None if s is None else check_number(f"seed[{i}]", s, SEED_RANGE) for i, s in enumerate(seed)]
             if len(seeds) != n:
-                raise ValueError(f"seed has {len(seeds)} entries; valid: one int or num_envs={n} ints")
-        if seed is not None or not self._started:
-            self._rngs = [seeding.np_random(s)[0] for s in seeds]
-        obs, info = self._start(self._ar, options)
-        self._prev_done[:] = False
+                raise ValueError(f"seed has {len(seeds)} entries; valid: one int or num_envs={n} ints (or None)")
+            super().reset(seed=seeds[0])
+        options, mask = self._reset_mask(options)
+        # a sub-environment without a seed keeps its generator (a new one from the OS's entropy at the first reset), as
+        # does one outside the reset mask
+        self._rngs = [r if (s is None and r is not None) or not m else seeding.np_random(s)[0]
+                      for s, r, m in zip(seeds, self._rngs, np.ones(n, bool) if mask is None else mask)]
+        rows = self._ar if mask is None else np.flatnonzero(mask)
+        obs, info = self._start(rows, options)
+        if mask is not None:   # the other windows go on: their last observation
+            obs = np.where(mask[:, None], obs, self._last_obs)
+        self._prev_done[rows] = False
         self._started = True
+        self._last_obs = obs
         return obs, info
+
+    def _reset_mask(self, options):
+        """``options`` without gymnasium's ``reset_mask`` (a partial reset: the windows where it is True start, the
+        others go on; as ``SyncVectorEnv``) and the mask, None for a reset of every window; a ``ValueError`` naming a
+        mask that is not a bool array of one value per window with one True at least, or one given before the first
+        reset."""
+        if not isinstance(options, Mapping) or "reset_mask" not in options:
+            return options, None
+        options = dict(options)
+        mask, n = options.pop("reset_mask"), self.num_envs
+        if not (isinstance(mask, np.ndarray) and mask.dtype == np.bool_ and mask.shape == (n,) and mask.any()):
+            raise ValueError(f"options['reset_mask']={shown(mask)} is invalid; valid: a numpy bool array of shape "
+                             f"({n},) with at least one True")
+        if not self._started:
+            raise ValueError("options['reset_mask'] is invalid before the first reset; valid: a reset of every window "
+                             "first")
+        return options or None, mask
 
     def step(self, actions):
         if not self._started:
@@ -284,6 +324,7 @@ class SbarChargingVectorEnv(VectorEnv):
             for key, v in info.items():
                 v[sel] = info0[key][sel]
         self._prev_done = truncated.copy()
+        self._last_obs = obs   # (a reset with a reset_mask returns it for the windows that go on)
         return obs, reward, terminated, truncated, info
 
     def _step_parts(self, d):
@@ -379,6 +420,10 @@ def _getters():
     if keep:
         _GETTERS[:] = getters
     return getters
+
+
+#: the action dtypes the compiled duty map takes as they are (native byte order)
+_KERNEL_FLOATS = (np.dtype(np.float64), np.dtype(np.float32))
 
 
 def _numbers(actions) -> np.ndarray:

@@ -54,7 +54,7 @@ import numpy as np
 
 from wpt_receiver import TABLE_I, LinkParams
 
-from .validation import Range
+from .validation import Range, check_number
 
 __all__ = ["ObsField", "OBS_FIELDS", "OBS_DIM", "OBS_INDEX", "normalise_obs", "normalise_obs_row", "denormalise_obs",
            "denormalise_obs_field", "action_to_duty", "duty_to_action", "PolicyContext", "Policy",
@@ -100,13 +100,12 @@ _INV_SPAN = 1.0 / (_HI - _LO)
 
 #: the longest observation history (frame stack) a learned policy may ask for [control periods]
 MAX_HISTORY = 32
+HISTORY_RANGE = Range(1, MAX_HISTORY, integer=True)
 
 
 def history_obs_dim(history: int) -> int:
     """Width of a stacked observation of ``history`` frames (``history * OBS_DIM``); ValueError out of 1..MAX_HISTORY."""
-    if int(history) != history or not 1 <= history <= MAX_HISTORY:
-        raise ValueError(f"history={history!r} is invalid; valid range: integer 1..{MAX_HISTORY}")
-    return int(history) * OBS_DIM
+    return check_number("history", history, HISTORY_RANGE) * OBS_DIM   # (True was one frame)
 
 
 _LO_INV = tuple(zip(_LO.tolist(), _INV_SPAN.tolist()))
