@@ -242,29 +242,43 @@ def test_steady_state_still_takes_lm_zero_negative_v2_and_arrays():
 
 
 # ------------------------------------------------------------------ 6. coils that would touch
-@pytest.mark.parametrize("entry", ["lm_h", "lm_exact_h"])
-def test_the_library_refuses_coils_that_would_touch(entry):
-    """``default_coupling().lm_h(0, 0, 0.001)`` gave an Lm for a receiver coil inside the pad coil's wire (and a
-    negative dz one below it); only ``dronewpt coupling --dz`` refused it. Now the library (one rule,
-    ``CouplingModel.check_clearance``), on arrays too, naming the first bad pose; the threshold is the CLI's."""
+def test_the_clearance_rule_is_the_librarys_and_names_the_first_bad_pose():
+    """``CouplingModel.check_clearance``: the threshold ``dronewpt coupling --dz`` had, on arrays too, naming the first
+    bad pose; a pose beside the pad passes."""
     import math
 
     import numpy as np
 
     from wpt_receiver.coupling import default_coupling
     m = default_coupling()
-    f = getattr(m, entry)
     with pytest.raises(ValueError, match=r"^dz_m=0.001 is invalid; valid range: > 0.0034 m \(the coils would touch\), "
                                          r"or a lateral offset hypot\(dx_m, dy_m\) >= 0.3734 m$"):
-        f(0.0, 0.0, 0.001)
+        m.check_clearance(0.0, 0.0, 0.001)
     with pytest.raises(ValueError, match=r"^dz_m=0.1 is invalid; valid range: > 0.1073 m"):
-        f(np.array([0.0, 0.1]), 0.0, np.array([0.2, 0.1]), np.array([0.0, math.radians(60)]))
-    with pytest.raises(ValueError, match=r"^dz_m=-0.5 is invalid"):
-        f(0.2, 0.2, -0.5)
+        m.check_clearance(np.array([0.0, 0.1]), 0.0, np.array([0.2, 0.1]), np.array([0.0, math.radians(60)]))
     gap = m.tx.wire_radius_m + m.rx.wire_radius_m
     assert m.clearance_m(0.0) == gap
-    assert np.isfinite(f(0.0, 0.0, gap * 1.01))   # just above the wires: computed
-    assert np.isfinite(f(2.0, 0.0, 0.001))   # beside the pad: the coils do not touch
+    m.check_clearance(0.0, 0.0, gap * 1.01)   # just above the wires
+    m.check_clearance(2.0, 0.0, 0.001)   # beside the pad: the coils do not touch
+
+
+@pytest.mark.parametrize("entry", ["lm_h", "lm_exact_h"])
+def test_lm_h_computes_every_pose_as_on_main(entry):
+    """``lm_h`` / ``lm_exact_h`` refused a pose below the clearance (loose4 before its review), which a mission's flown
+    poses in wind reach and property tests (coils swapped, dz < 0) use: they compute every pose again, main's numbers
+    bit for bit (968340c's reprs)."""
+    from wpt_receiver.coupling import default_coupling
+    f = getattr(default_coupling(), entry)
+    assert float(f(0.0, 0.0, 0.001)) == 1.8116835038370885e-05   # through the pad coil's wire
+    if entry == "lm_h":
+        assert float(f(0.2, 0.2, -0.5)) == 4.3258231000429593e-07   # below the pad's plane
+        assert float(f(0.0, 0.0, 0.01, 0.5)) == 1.4451462517947623e-05   # tilted below the edge
+
+
+def test_a_mission_in_strong_wind_runs(tmp_path):
+    """``dronewpt mission --set wind.speed_m_s=30`` exited 2 (``dz_m=0.110 is invalid ...``: a flown pose dipped below
+    the clearance rule when lm_h checked it)."""
+    assert main(["mission", "--no-plot", "--set", "wind.speed_m_s=30", "--out", str(tmp_path / "m")]) == 0
 
 
 def test_the_cli_refuses_touching_coils_by_the_librarys_rule(capsys):

@@ -327,9 +327,9 @@ class CouplingModel:
     def check_clearance(self, dx_m, dy_m, dz_m, tilt_rad=0.0) -> None:
         """``ValueError`` naming the first pose (broadcast arrays or numbers) whose receiver coil is at or below the
         pad coil's plane, within :meth:`clearance_m` of it, while over it (a lateral offset ``hypot(dx_m, dy_m)``
-        below the two outer radii): the coils would touch. The one rule of :meth:`lm_h`, :meth:`lm_exact_h` and
-        ``dronewpt coupling --dz`` (the command's own copy until 2026-11-27 evening, which also refused poses beside
-        the pad); checked at their entry on the poses given (numpy, a few passes), never in the compiled lookup."""
+        below the two outer radii): the coils would touch. The one rule of ``dronewpt coupling --dz`` (the command's own copy until 2026-11-27 evening, which also refused
+        poses beside the pad); :meth:`lm_h` and :meth:`lm_exact_h` do not call it (a mission's flown poses in wind dip
+        below it, property tests swap the coils: they compute every pose)."""
         dx, dy, dz, tilt = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (dx_m, dy_m, dz_m, tilt_rad)))
         gap = self.clearance_m(tilt)
         low = dz <= gap   # (NaN: False here; _rx_frame names it)
@@ -346,10 +346,9 @@ class CouplingModel:
                    tilt_axis_rad=math.pi / 2):
         """Lm [H] by the loop integral of the exact (elliptic-integral) vector potential.
 
-        Scalar or array poses (broadcast); slow (N_tx x N_rx x n_theta elliptic integrals per pose). A pose whose
-        coils would touch is refused (:meth:`check_clearance`).
+        Scalar or array poses (broadcast); slow (N_tx x N_rx x n_theta elliptic integrals per pose). Any pose is
+        computed (coils that would touch too: :meth:`check_clearance` is the caller's, e.g. ``dronewpt coupling``).
         """
-        self.check_clearance(dx_m, dy_m, dz_m, tilt_rad)
         n = self.n_theta if n_theta is None else int(n_theta)
         pts, tan, w = _loop_points(self.rx, n)
         return self._flux(dx_m, dy_m, dz_m, tilt_rad, tilt_axis_rad, pts, tan, w, self._a_exact)
@@ -430,9 +429,9 @@ class CouplingModel:
         Up to :data:`MEMO_MAX_POSES` poses the result is kept in the disk cache keyed by the poses'
         bytes (a mission re-run on the same path, with any policy, battery or link, then needs
         neither the table nor numba: ~0.5 s of start-up); the newest :data:`MEMO_ENTRIES` are kept.
-        A pose whose coils would touch is refused (:meth:`check_clearance`).
+        Any pose is computed (coils that would touch too, e.g. a flown pose in wind: :meth:`check_clearance` is the
+        caller's, ``dronewpt coupling`` calls it).
         """
-        self.check_clearance(dx_m, dy_m, dz_m, tilt_rad)
         rot, org = _rx_frame(dx_m, dy_m, dz_m, tilt_rad, tilt_axis_rad)
         shape = org.shape[:-1]
         rot, org = np.ascontiguousarray(rot.reshape(-1, 3, 3)), np.ascontiguousarray(org.reshape(-1, 3))
