@@ -287,3 +287,19 @@ def test_the_cli_refuses_touching_coils_by_the_librarys_rule(capsys):
         "dronewpt coupling: error: --dz 0.01 is invalid; valid range: > 0.0634 m (the coils would touch), or a lateral "
         "offset hypot(--dx, --dy) >= 0.3734 m")
     assert main(["coupling", "--dz", "0.001", "--dx", "2", "--format", "json"]) == 0   # beside the pad (refused before)
+
+
+def test_a_receiver_well_below_the_pad_is_not_called_touching(capsys):
+    """The rule refused any receiver below the pad's plane ("the coils would touch" at dz = -0.5 m): touching is
+    ``abs(dz) <= clearance_m`` (flat coils); ``dronewpt coupling --dz`` below the plane is refused in main's words."""
+    from _cli_helpers import one_error_line
+
+    from wpt_receiver.coupling import default_coupling
+    m = default_coupling()
+    m.check_clearance(0.0, 0.0, -0.5)   # 0.5 m below the pad coil: apart
+    m.check_clearance(0.0, 0.0, -0.0035)   # just beyond the wires, below
+    with pytest.raises(ValueError, match=r"^dz_m=-0.001 is invalid; valid range: < -0.0034 m \(the coils would touch\), "
+                                         r"or a lateral offset hypot\(dx_m, dy_m\) >= 0.3734 m$"):
+        m.check_clearance(0.0, 0.0, -0.001)
+    assert one_error_line(capsys, ["coupling", "--dz", "-0.5"]) == (   # main's line (968340c)
+        "dronewpt coupling: error: --dz -0.5 is invalid; valid range: > 0.0034 m (the coils would touch)")

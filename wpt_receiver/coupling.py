@@ -320,27 +320,37 @@ class CouplingModel:
     # ----------------------------------------------------------------- exact
     def clearance_m(self, tilt_rad=0.0):
         """The height [m] of the receiver coil's centre over the pad coil's plane at or below which their wires
-        touch when it is over the pad coil (:meth:`check_clearance`): the two wire radii plus the tilted receiver's
-        drop, its largest turn radius x ``|sin tilt_rad|`` (flat coils). Broadcasts over ``tilt_rad``."""
+        touch when it is over the pad coil (:meth:`check_clearance`; below the plane, at or above ``-clearance_m``):
+        the two wire radii plus the tilted receiver's drop, its largest turn radius x ``|sin tilt_rad|`` (flat
+        coils). Broadcasts over ``tilt_rad``."""
         return self.tx.wire_radius_m + self.rx.wire_radius_m + max(self.rx.radius_m) * np.abs(np.sin(tilt_rad))
 
+    def _touch_band(self, tilt):
+        """``(lo, hi)``: the receiver centre heights ``lo <= dz <= hi`` at which the coils' wires would touch over the
+        pad coil (:meth:`check_clearance`)."""
+        hi = self.clearance_m(tilt)
+        return -hi, hi
+
     def check_clearance(self, dx_m, dy_m, dz_m, tilt_rad=0.0) -> None:
-        """``ValueError`` naming the first pose (broadcast arrays or numbers) whose receiver coil is at or below the
-        pad coil's plane, within :meth:`clearance_m` of it, while over it (a lateral offset ``hypot(dx_m, dy_m)``
-        below the two outer radii): the coils would touch. The one rule of ``dronewpt coupling --dz`` (the command's own copy until 2026-11-27 evening, which also refused
-        poses beside the pad); :meth:`lm_h` and :meth:`lm_exact_h` do not call it (a mission's flown poses in wind dip
-        below it, property tests swap the coils: they compute every pose)."""
+        """``ValueError`` naming the first pose (broadcast arrays or numbers) whose receiver coil is within
+        :meth:`clearance_m` of the pad coil's plane (``abs(dz_m) <= clearance_m``: above or below it) while over it (a
+        lateral offset ``hypot(dx_m, dy_m)`` below the two outer radii): the coils would touch. The one rule of
+        ``dronewpt coupling --dz`` (the command's own copy until 2026-11-27 evening, which also refused poses beside
+        the pad); :meth:`lm_h` and :meth:`lm_exact_h` do not call it (a mission's flown poses in wind dip below it,
+        property tests swap the coils: they compute every pose)."""
         dx, dy, dz, tilt = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (dx_m, dy_m, dz_m, tilt_rad)))
-        gap = self.clearance_m(tilt)
-        low = dz <= gap   # (NaN: False here; _rx_frame names it)
+        lo, hi = self._touch_band(tilt)
+        low = (lo <= dz) & (dz <= hi)   # (NaN: False here; _rx_frame names it)
         if not low.any():
             return
         reach = self.tx.outer_radius_m + self.rx.outer_radius_m
         bad = low & (np.hypot(dx, dy) < reach)
         if bad.any():
             i = np.flatnonzero(bad.ravel())[0]
-            raise ValueError(f"dz_m={float(dz.flat[i])!r} is invalid; valid range: > {float(gap.flat[i]):.4g} m (the "
-                             f"coils would touch), or a lateral offset hypot(dx_m, dy_m) >= {reach:.4g} m")
+            z, l_, h = float(dz.flat[i]), float(lo.flat[i]), float(hi.flat[i])
+            side = f"> {h:.4g} m" if z >= (l_ + h) / 2 else f"< {l_:.4g} m"   # (the nearer side's bound)
+            raise ValueError(f"dz_m={z!r} is invalid; valid range: {side} (the coils would touch), or a lateral offset "
+                             f"hypot(dx_m, dy_m) >= {reach:.4g} m")
 
     def lm_exact_h(self, dx_m, dy_m, dz_m, tilt_rad=0.0, *, n_theta: int | None = None,
                    tilt_axis_rad=math.pi / 2):
