@@ -303,3 +303,30 @@ def test_a_receiver_well_below_the_pad_is_not_called_touching(capsys):
         m.check_clearance(0.0, 0.0, -0.001)
     assert one_error_line(capsys, ["coupling", "--dz", "-0.5"]) == (   # main's line (968340c)
         "dronewpt coupling: error: --dz -0.5 is invalid; valid range: > 0.0034 m (the coils would touch)")
+
+
+def test_the_clearance_counts_layered_turns():
+    """The clearance ignored the turns' heights ``CoilGeometry.z_m`` (a pad coil's raised layer, a receiver turn
+    below its centre): now the receiver's lowest rim (from ``turn_positions``' centres and normals, independently) is
+    exactly the wires' reach above the pad coil's highest turn at ``clearance_m``; the default flat coils' value is
+    the old one."""
+    import math
+
+    import numpy as np
+
+    from wpt_receiver.coupling import CoilGeometry, CouplingModel, default_coupling
+    tx = CoilGeometry(radius_m=(0.2, 0.2), z_m=(0.0, 0.01), wire_radius_m=0.002)
+    rx = CoilGeometry(radius_m=(0.1, 0.08), z_m=(0.0, -0.01), wire_radius_m=0.001)
+    m = CouplingModel(tx, rx)
+    for tilt in (0.0, 0.3, -0.8):
+        gap = float(m.clearance_m(tilt))
+        _, turns = m.turn_positions(0.0, 0.0, gap, tilt)
+        lowest = min(t["z_m"] - t["radius_m"] * math.sqrt(1 - t["normal"][2] ** 2) for t in turns)
+        assert lowest - max(tx.z_m) - (tx.wire_radius_m + rx.wire_radius_m) == pytest.approx(0.0, abs=1e-15)
+        with pytest.raises(ValueError, match="the coils would touch"):
+            m.check_clearance(0.0, 0.0, gap * (1 - 1e-9), tilt)
+        m.check_clearance(0.0, 0.0, gap * (1 + 1e-9), tilt)
+    with pytest.raises(ValueError, match=r"^dz_m=0.04 is invalid; valid range: > 0.04619 m"):
+        m.check_clearance(0.0, 0.0, 0.04, 0.3)   # the flat rule's 0.0326 m passed it
+    d = default_coupling()
+    assert d.clearance_m(0.3) == d.tx.wire_radius_m + d.rx.wire_radius_m + max(d.rx.radius_m) * abs(math.sin(0.3))

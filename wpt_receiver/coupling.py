@@ -320,16 +320,25 @@ class CouplingModel:
     # ----------------------------------------------------------------- exact
     def clearance_m(self, tilt_rad=0.0):
         """The height [m] of the receiver coil's centre over the pad coil's plane at or below which their wires
-        touch when it is over the pad coil (:meth:`check_clearance`; below the plane, at or above ``-clearance_m``):
-        the two wire radii plus the tilted receiver's drop, its largest turn radius x ``|sin tilt_rad|`` (flat
-        coils). Broadcasts over ``tilt_rad``."""
-        return self.tx.wire_radius_m + self.rx.wire_radius_m + max(self.rx.radius_m) * np.abs(np.sin(tilt_rad))
+        touch when it is over the pad coil (:meth:`check_clearance`): the two wire radii, plus the pad coil's highest
+        turn ``max(tx.z_m)``, plus the receiver's lowest point under its centre,
+        ``max_i(r_i |sin tilt_rad| - z_i cos tilt_rad)`` (turn i of radius ``r_i`` at height ``z_i`` in the receiver's
+        frame, tilted: its centre at ``z_i cos tilt`` and its rim ``r_i |sin tilt|`` lower). Flat coils (every
+        ``z_m`` 0): the wire radii plus the largest turn radius x ``|sin tilt_rad|``. Broadcasts over ``tilt_rad``."""
+        return self._touch_band(tilt_rad)[1]
 
     def _touch_band(self, tilt):
         """``(lo, hi)``: the receiver centre heights ``lo <= dz <= hi`` at which the coils' wires would touch over the
-        pad coil (:meth:`check_clearance`)."""
-        hi = self.clearance_m(tilt)
-        return -hi, hi
+        pad coil (:meth:`check_clearance`): the receiver's height range, its turns' centres ``z_i cos tilt`` plus or
+        minus their rims' ``r_i |sin tilt|``, widened by the two wire radii, meets the pad coil's turns' heights
+        ``[min(tx.z_m), max(tx.z_m)]`` (flat coils: ``lo = -hi``)."""
+        c, s = np.cos(tilt), np.abs(np.sin(tilt))
+        r, z = np.asarray(self.rx.radius_m), np.asarray(self.rx.z_m)
+        rim, centre = np.multiply.outer(s, r), np.multiply.outer(c, z)   # (..., turns)
+        wires = self.tx.wire_radius_m + self.rx.wire_radius_m
+        hi = wires + max(self.tx.z_m) + (rim - centre).max(axis=-1)
+        lo = min(self.tx.z_m) - wires - (rim + centre).max(axis=-1)
+        return lo, hi
 
     def check_clearance(self, dx_m, dy_m, dz_m, tilt_rad=0.0) -> None:
         """``ValueError`` naming the first pose (broadcast arrays or numbers) whose receiver coil is within
