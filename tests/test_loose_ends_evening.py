@@ -330,3 +330,20 @@ def test_the_clearance_counts_layered_turns():
         m.check_clearance(0.0, 0.0, 0.04, 0.3)   # the flat rule's 0.0326 m passed it
     d = default_coupling()
     assert d.clearance_m(0.3) == d.tx.wire_radius_m + d.rx.wire_radius_m + max(d.rx.radius_m) * abs(math.sin(0.3))
+
+
+def test_check_v1_refuses_an_array_where_one_number_is_meant():
+    """``check_v1`` took arrays for ``steady_state``, so ``InverseModelController.reset(v1_v=[38, 38])`` gave a
+    TypeError and ``simulate(v1_v=array)`` a numpy error: main's one-line ValueError again (arrays only for
+    ``steady_state``, ``check_v1(..., array_ok=True)``)."""
+    import numpy as np
+
+    from wpt_receiver import envelope
+    from wpt_receiver.inverse_controller import InverseModelController
+    with pytest.raises(ValueError, match=r"^v1_v=\[38.0, 38.0\] is invalid; valid range: \(0, inf\) V \(the inverter's "
+                                         r"fundamental\)$"):
+        InverseModelController(TABLE_I, n=2).reset(5.0, v1_v=[38.0, 38.0])
+    with pytest.raises(ValueError, match=r"^v1_v=array\(\[38., 38., 38.\]\) is invalid; valid range: \(0, inf\) V"):
+        envelope.simulate(TABLE_I, [1, 2, 3], 1e-6, v1_v=np.array([38.0] * 3))
+    i1, _ = envelope.steady_state(TABLE_I, 10.0, v1_v=np.array([38.0, 20.0]))   # steady_state still broadcasts
+    assert i1.shape == (2,)

@@ -138,7 +138,7 @@ def steady_state(p: LinkParams, v2_v, lm_h=None, v1_v=None):
     if lm_h is not None:
         check_lm(p, lm_h, zero_ok=True)
     lm = p.lm_h if lm_h is None else np.asarray(lm_h, dtype=float)
-    v1 = p.v1_amp_v if v1_v is None else np.asarray(check_v1(v1_v), dtype=float)
+    v1 = p.v1_amp_v if v1_v is None else np.asarray(check_v1(v1_v, array_ok=True), dtype=float)
     v2 = np.asarray(v2_v, dtype=float)
     wlm = p.omega_rad_s * lm
     det = p.r1_ohm * p.r2_ohm + wlm**2

@@ -104,13 +104,13 @@ TABLE_I = LinkParams()
 FREQUENCY_TOLERANCE = 2.0
 
 
-def check_v1(v1_v):
+def check_v1(v1_v, array_ok: bool = False):
     """``v1_v`` [V], the inverter's fundamental amplitude, as a float after checking it is in (0, inf) (a NaN gave a
     NaN run or duty, a negative V1 short mode, without a word): one rule for :func:`wpt_receiver.envelope.simulate`,
     :func:`~wpt_receiver.envelope.steady_state` and :meth:`wpt_receiver.inverse_controller.InverseModelController.reset`.
-    An array (``steady_state`` broadcasts) is checked elementwise and returned as a float array, naming the first bad
-    value."""
-    if isinstance(v1_v, (np.ndarray, list, tuple)) and np.ndim(v1_v) > 0:
+    ``array_ok`` (``steady_state``, which broadcasts): an array is checked elementwise and returned as a float array,
+    naming the first bad value; otherwise (the default) an array is refused as not one number, as before."""
+    if array_ok and isinstance(v1_v, (np.ndarray, list, tuple)) and np.ndim(v1_v) > 0:
         try:
             v = np.asarray(v1_v, dtype=float)
         except (TypeError, ValueError):
