@@ -60,12 +60,14 @@ def test_an_env_on_a_link_far_off_resonance_warns_once():
     (["paper", "--no-plot", "--link", "f_hz=200000"], None),
     (["paper", "--no-plot", "--link", "f_hz=200000", "--link", "vdc_v=5"], "vdc_v / vl_v = 0.167 is below"),
     (["netlist", "--link", "f_hz=200000"], None),
+    (["export-controller", "--link", "f_hz=200000", "--out", "{tmp}/c"], None),
 ])
 def test_the_cli_prints_the_librarys_frequency_warning_once_and_first(capsys, tmp_path, argv, first):
-    """The command line prints the library's line as it is, once, before the model's range warning it explains."""
-    assert main(argv) == 0
+    """The command line prints the library's line once, before the model's range warning it explains, in the flag
+    words the user typed (``--link f_hz``, as main printed it: ``cli.notices.FLAG_WORDS``)."""
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 0
     err = capsys.readouterr().err.splitlines()
-    assert err[0] == f"dronewpt {argv[0]}: warning: {_FREQ}"
+    assert err[0] == f"dronewpt {argv[0]}: warning: " + _FREQ.replace("f_hz", "--link f_hz")
     assert sum("tanks' resonance" in line for line in err) == 1
     if first is not None:
         assert err[1].startswith(f"dronewpt paper: warning: {first}"), err
