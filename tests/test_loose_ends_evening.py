@@ -349,3 +349,27 @@ def test_check_v1_refuses_an_array_where_one_number_is_meant():
         envelope.simulate(TABLE_I, [1, 2, 3], 1e-6, v1_v=np.array([38.0] * 3))
     i1, _ = envelope.steady_state(TABLE_I, 10.0, v1_v=np.array([38.0, 20.0]))   # steady_state still broadcasts
     assert i1.shape == (2,)
+
+
+@pytest.mark.parametrize("size", [1, 8, 32, 33, 100])
+def test_the_cheap_checks_find_a_bad_value_anywhere(size):
+    """``check_v2`` / ``check_lm`` check small arrays on a Python list (``min`` and ``max`` skip a NaN) and larger ones
+    by numpy reductions: the same verdict at any position, a finite V2 whose squares or sum overflow accepted silently."""
+    import numpy as np
+
+    from wpt_receiver.envelope import check_lm, check_v2
+    for pos in {0, size // 2, size - 1}:
+        for bad in (np.nan, np.inf, -np.inf):
+            v2 = np.full(size, 10.0)
+            v2[pos] = bad
+            with pytest.raises(ValueError, match=f"^v2_v={bad!r} is invalid"):
+                check_v2(v2)
+        for bad, zero_ok in ((np.nan, True), (-1e-9, True), (0.0, False), (-0.0, False), (TABLE_I.l1_h, True)):
+            lm = np.full(size, 6e-6)
+            lm[pos] = bad
+            with pytest.raises(ValueError, match=f"^lm_h={bad!r} is invalid"):
+                check_lm(TABLE_I, lm.reshape(1, -1), zero_ok=zero_ok)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_v2(np.full(size, 1.7e308))
+        check_lm(TABLE_I, np.zeros(size), zero_ok=True)
