@@ -111,6 +111,7 @@ def test_the_compiled_duty_is_the_python_one_at_every_input():
     (("rl", "rl:policies/pretrained/rl_s0.zip"), "rl"),
     (("model_based", "residual:policies/pretrained/residual_s0.zip", "residual"), "residual:policies/pretrained/residual_s0.zip"),
     (("oracle_imitation", "oracle_imitation:policies/./pretrained/oracle_imitation_s0.npz"), "oracle_imitation"),
+    (("rl:policies/pretrained/ppo_lagrangian_s0.zip", "ppo_lagrangian"), "rl:policies/pretrained/ppo_lagrangian_s0.zip"),
 ])
 def test_compare_refuses_one_model_listed_under_two_names(pols, also, monkeypatch):
     """``compare(policies=["rl", "rl:policies/pretrained/rl_s0.zip"])`` ran the shipped model twice as two rows: the
