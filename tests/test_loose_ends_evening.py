@@ -1,5 +1,8 @@
 """Loose ends left by earlier sessions (2026-11-27 evening; docs/changes.md, "2026-11-27 evening"): each test fails on
-``main`` (968340c) and passes here, but the guards of valid inputs (``..._still_...``), which pass on both."""
+``main`` (968340c) and passes here, but these, which pass on both (checked by running this file on main's tree): the
+guards of valid inputs (``..._still_...``) and of main's behaviour that loose4's first commits broke and its review
+restored (the CLI's ``--link f_hz`` warning line, ``lm_h`` at every pose, a mission in 30 m/s wind, ``check_v1`` on an
+array)."""
 
 from __future__ import annotations
 
