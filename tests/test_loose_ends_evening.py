@@ -377,3 +377,27 @@ def test_the_cheap_checks_find_a_bad_value_anywhere(size):
         warnings.simplefilter("error")
         check_v2(np.full(size, 1.7e308))
         check_lm(TABLE_I, np.zeros(size), zero_ok=True)
+
+
+def test_linkparams_and_check_lm_share_one_lm_limit():
+    """LinkParams refused ``k >= 1`` (its own comparison) and ``envelope.check_lm`` ``lm >= sqrt(L1 L2)``: one limit
+    (``params.lm_limit_h``), the same verdict at and next to it, on links of other inductances too."""
+    import numpy as np
+
+    from wpt_receiver.envelope import check_lm
+    from wpt_receiver.params import lm_limit_h
+    for p in (TABLE_I, TABLE_I.with_(l1_h=3.3e-5, l2_h=7.1e-6, lm_h=1e-6)):
+        s = lm_limit_h(p)
+        for lm in (np.nextafter(s, 0), s, np.nextafter(s, 1)):
+            lm = float(lm)
+            try:
+                p.with_(lm_h=lm)
+                link_ok = True
+            except ValueError:
+                link_ok = False
+            try:
+                check_lm(p, lm)
+                env_ok = True
+            except ValueError:
+                env_ok = False
+            assert link_ok == env_ok == (lm < s), lm

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .params import LinkParams, check_v1
+from .params import LinkParams, check_v1, lm_limit_h
 
 __all__ = [
     "EnvelopeCoefficients",
@@ -122,7 +122,7 @@ def check_lm(p: LinkParams, lm_h, zero_ok: bool = False) -> None:
     """``lm_h`` [H] (a number or an array) inside ``(0, sqrt(L1 L2))``, 0 < k < 1 (``zero_ok``: from 0 on, where the
     steady state is regular), else a ``ValueError`` naming the first bad value: the one rule of :func:`simulate`,
     :func:`steady_state` (a negative Lm ran) and :class:`EnvelopeLink`."""
-    lm_max = math.sqrt(p.l1_h * p.l2_h)
+    lm_max = lm_limit_h(p)   # (LinkParams' limit)
     if type(lm_h) is float:   # (a Python float: no numpy)
         lo = hi = lm_h
     else:
