@@ -115,7 +115,8 @@ def install(kind: str, seed: int, out_root: Path, rec: dict) -> None:
     """Final model and metadata (plus ``trained``) into policies/pretrained, each under a temp name, renamed."""
     from mission_sim.files import atomic_output
     src = out_root / f"{kind}_s{seed}"
-    dst = ROOT / "policies" / "pretrained" / f"{INSTALL_AS.get(kind, kind)}_s{seed}"
+    from policies.shipped import SHIPPED   # (the shipped names' one table)
+    dst = ROOT / "policies" / "pretrained" / f"{SHIPPED[INSTALL_AS.get(kind, kind)][0]}{seed}"
     meta = json.loads((src / "ppo_sbar.json").read_text())
     meta["trained"] = rec
     with atomic_output(dst.with_suffix(".zip")) as tmp:

@@ -34,7 +34,7 @@ import numpy as np
 from mission_sim.files import atomic_output
 from mission_sim.validation import SEED_RANGE, Range, check_number
 
-from .shipped import PRETRAINED_DIR, SHIPPED, model_of
+from .shipped import OTHER_PLAYERS, PRETRAINED_DIR, SHIPPED, model_of
 from .stats import mean_ci, seed_ci
 from .threads import single_blas_thread
 
@@ -144,6 +144,17 @@ def _check_specs(specs) -> None:
                              "'rl:PATH' (your own class: policies.register(NAME, factory), then NAME)")
 
 
+def _model_file(spec):
+    """The model ``spec`` loads, or None: the real path of its file (:func:`policies.shipped.model_of`), not its kind
+    (``rl:policies/pretrained/ppo_lagrangian_s0.zip`` beside ``ppo_lagrangian`` ran two rows of one file), and the
+    kind only where it plays the file otherwise (:data:`policies.shipped.OTHER_PLAYERS`)."""
+    key = model_of(spec)
+    if key is None:
+        return None
+    kind, path = key
+    return path, kind if kind in OTHER_PLAYERS else None
+
+
 def check_row_labels(policies, train_seeds=None) -> None:
     """Every row of :func:`compare` has its own label: a policy listed twice, or a ``train_seeds`` label that is also
     one of ``policies``, would share a row's slot (the table showed one row's numbers twice); ``ValueError`` naming it.
@@ -154,7 +165,7 @@ def check_row_labels(policies, train_seeds=None) -> None:
         if p in seen:
             raise ValueError(f"policies lists {p!r} twice; valid: each policy once")
         seen.add(p)
-        key = model_of(p)   # (rl beside rl:policies/pretrained/rl_s0.zip: two rows of one model)
+        key = _model_file(p)   # (rl beside rl:policies/pretrained/rl_s0.zip: two rows of one model)
         if key is not None and key in models:
             raise ValueError(f"policies lists the model {p!r} twice (also as {models[key]!r}); valid: each policy once")
         models.setdefault(key, p)
@@ -164,7 +175,7 @@ def check_row_labels(policies, train_seeds=None) -> None:
                              f"listed policy (the policies: {', '.join(map(str, policies))})")
         models = {}
         for sp in specs:   # the same model file twice made "2 seeds" with a zero-width interval
-            key = model_of(sp)   # (None: a classical policy listed twice, the tests' fixture of a group)
+            key = _model_file(sp)   # (None: a classical policy listed twice, the tests' fixture of a group)
             if key is not None and key in models:
                 raise ValueError(f"train_seeds {label!r} lists the model {sp!r} twice (also as {models[key]!r}); valid: "
                                  "each model file once (a row over N seeds needs N models)")

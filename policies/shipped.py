@@ -7,7 +7,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-__all__ = ["PRETRAINED_DIR", "SHIPPED", "default_model", "model_of"]
+__all__ = ["PRETRAINED_DIR", "SHIPPED", "OTHER_PLAYERS", "default_model", "model_of"]
 
 PRETRAINED_DIR = Path(__file__).parent / "pretrained"
 
@@ -16,6 +16,10 @@ PRETRAINED_DIR = Path(__file__).parent / "pretrained"
 SHIPPED = {"rl": ("rl_s", ".zip"), "ppo_lagrangian": ("ppo_lagrangian_s", ".zip"), "residual": ("residual_s", ".zip"),
            "imitation": ("imitation_s", ".zip"), "slow_budget": ("slow_budget_s", ".zip"),
            "oracle_imitation": ("oracle_imitation_s", ".npz"), "oracle_imitation_filtered": ("oracle_imitation_s", ".npz")}
+
+#: kinds that play a file another way than every other kind loading it (``oracle_imitation_filtered``: the
+#: oracle's sequences through a filter): another policy of the same file, its own row in ``compare``
+OTHER_PLAYERS = frozenset({"oracle_imitation_filtered"})
 
 
 def default_model(kind: str) -> Path:

@@ -34,14 +34,11 @@ def _use_py_funcs(monkeypatch):
 
 
 def _poses():
-    """A few poses: hover, offset and tilted, beyond the table, and one dipping below it (25 mm at 0.1 rad: its
-    lowest turn 13 mm over the pad coil's plane, below the table's 20 mm, clear of the pad coil's wire: the centre's
-    clearance there is 15.4 mm; 30 mm at 0.3 rad put that turn through the pad coil, refused since 2026-11-27
-    evening, ``CouplingModel.check_clearance``)."""
+    """A few poses: hover, offset and tilted, beyond the table, and one dipping below it."""
     dx = np.array([0.0, 0.12, -0.31, 1.45, 0.02])
     dy = np.array([0.0, -0.05, 0.2, 0.3, 0.0])
-    dz = np.array([NOMINAL_GAP_M, 0.25, 0.6, 0.4, 0.025])
-    tilt = np.array([0.0, 0.2, -0.35, 0.1, 0.1])
+    dz = np.array([NOMINAL_GAP_M, 0.25, 0.6, 0.4, 0.03])
+    tilt = np.array([0.0, 0.2, -0.35, 0.1, 0.3])
     axis = np.array([math.pi / 2, 0.3, 2.0, 4.0, math.pi / 2])
     return dx, dy, dz, tilt, axis
 

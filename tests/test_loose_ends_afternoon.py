@@ -231,7 +231,7 @@ def test_a_link_far_off_its_tanks_resonance_warns_once(capsys, tmp_path):
     """``netlist --link f_hz=13.56e6`` (and a mission at ``link.f_hz=13.56e6``: peak I2 0.084 A, almost nothing charged) ran
     without a word. One line naming f_hz, the tanks' resonance from L and C and the ratio."""
     assert main(["netlist", "--link", "f_hz=13.56e6", "--out", str(tmp_path / "n.cir")]) == 0
-    assert capsys.readouterr().err.splitlines() == ["dronewpt netlist: warning: " + _FREQ.format(key="f_hz")]
+    assert capsys.readouterr().err.splitlines() == ["dronewpt netlist: warning: " + _FREQ.format(key="--link f_hz")]
     from mission_sim.config import config_from_dict, load_config_dict
     from mission_sim.setup_warnings import mission_warnings
     cfg = config_from_dict({**load_config_dict(), "link": {**load_config_dict()["link"], "f_hz": 13.56e6}})

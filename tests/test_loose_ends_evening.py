@@ -1,5 +1,8 @@
 """Loose ends left by earlier sessions (2026-11-27 evening; docs/changes.md, "2026-11-27 evening"): each test fails on
-``main`` (968340c) and passes here, but the guards of valid inputs (``..._still_...``), which pass on both."""
+``main`` (968340c) and passes here, but these, which pass on both (checked by running this file on main's tree): the
+guards of valid inputs (``..._still_...``) and of main's behaviour that loose4's first commits broke and its review
+restored (the CLI's ``--link f_hz`` warning line, ``lm_h`` at every pose, a mission in 30 m/s wind, ``check_v1`` on an
+array)."""
 
 from __future__ import annotations
 
@@ -60,12 +63,14 @@ def test_an_env_on_a_link_far_off_resonance_warns_once():
     (["paper", "--no-plot", "--link", "f_hz=200000"], None),
     (["paper", "--no-plot", "--link", "f_hz=200000", "--link", "vdc_v=5"], "vdc_v / vl_v = 0.167 is below"),
     (["netlist", "--link", "f_hz=200000"], None),
+    (["export-controller", "--link", "f_hz=200000", "--out", "{tmp}/c"], None),
 ])
 def test_the_cli_prints_the_librarys_frequency_warning_once_and_first(capsys, tmp_path, argv, first):
-    """The command line prints the library's line as it is, once, before the model's range warning it explains."""
-    assert main(argv) == 0
+    """The command line prints the library's line once, before the model's range warning it explains, in the flag
+    words the user typed (``--link f_hz``, as main printed it: ``cli.notices.FLAG_WORDS``)."""
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 0
     err = capsys.readouterr().err.splitlines()
-    assert err[0] == f"dronewpt {argv[0]}: warning: {_FREQ}"
+    assert err[0] == f"dronewpt {argv[0]}: warning: " + _FREQ.replace("f_hz", "--link f_hz")
     assert sum("tanks' resonance" in line for line in err) == 1
     if first is not None:
         assert err[1].startswith(f"dronewpt paper: warning: {first}"), err
@@ -109,6 +114,7 @@ def test_the_compiled_duty_is_the_python_one_at_every_input():
     (("rl", "rl:policies/pretrained/rl_s0.zip"), "rl"),
     (("model_based", "residual:policies/pretrained/residual_s0.zip", "residual"), "residual:policies/pretrained/residual_s0.zip"),
     (("oracle_imitation", "oracle_imitation:policies/./pretrained/oracle_imitation_s0.npz"), "oracle_imitation"),
+    (("rl:policies/pretrained/ppo_lagrangian_s0.zip", "ppo_lagrangian"), "rl:policies/pretrained/ppo_lagrangian_s0.zip"),
 ])
 def test_compare_refuses_one_model_listed_under_two_names(pols, also, monkeypatch):
     """``compare(policies=["rl", "rl:policies/pretrained/rl_s0.zip"])`` ran the shipped model twice as two rows: the
@@ -242,29 +248,43 @@ def test_steady_state_still_takes_lm_zero_negative_v2_and_arrays():
 
 
 # ------------------------------------------------------------------ 6. coils that would touch
-@pytest.mark.parametrize("entry", ["lm_h", "lm_exact_h"])
-def test_the_library_refuses_coils_that_would_touch(entry):
-    """``default_coupling().lm_h(0, 0, 0.001)`` gave an Lm for a receiver coil inside the pad coil's wire (and a
-    negative dz one below it); only ``dronewpt coupling --dz`` refused it. Now the library (one rule,
-    ``CouplingModel.check_clearance``), on arrays too, naming the first bad pose; the threshold is the CLI's."""
+def test_the_clearance_rule_is_the_librarys_and_names_the_first_bad_pose():
+    """``CouplingModel.check_clearance``: the threshold ``dronewpt coupling --dz`` had, on arrays too, naming the first
+    bad pose; a pose beside the pad passes."""
     import math
 
     import numpy as np
 
     from wpt_receiver.coupling import default_coupling
     m = default_coupling()
-    f = getattr(m, entry)
     with pytest.raises(ValueError, match=r"^dz_m=0.001 is invalid; valid range: > 0.0034 m \(the coils would touch\), "
                                          r"or a lateral offset hypot\(dx_m, dy_m\) >= 0.3734 m$"):
-        f(0.0, 0.0, 0.001)
+        m.check_clearance(0.0, 0.0, 0.001)
     with pytest.raises(ValueError, match=r"^dz_m=0.1 is invalid; valid range: > 0.1073 m"):
-        f(np.array([0.0, 0.1]), 0.0, np.array([0.2, 0.1]), np.array([0.0, math.radians(60)]))
-    with pytest.raises(ValueError, match=r"^dz_m=-0.5 is invalid"):
-        f(0.2, 0.2, -0.5)
+        m.check_clearance(np.array([0.0, 0.1]), 0.0, np.array([0.2, 0.1]), np.array([0.0, math.radians(60)]))
     gap = m.tx.wire_radius_m + m.rx.wire_radius_m
     assert m.clearance_m(0.0) == gap
-    assert np.isfinite(f(0.0, 0.0, gap * 1.01))   # just above the wires: computed
-    assert np.isfinite(f(2.0, 0.0, 0.001))   # beside the pad: the coils do not touch
+    m.check_clearance(0.0, 0.0, gap * 1.01)   # just above the wires
+    m.check_clearance(2.0, 0.0, 0.001)   # beside the pad: the coils do not touch
+
+
+@pytest.mark.parametrize("entry", ["lm_h", "lm_exact_h"])
+def test_lm_h_computes_every_pose_as_on_main(entry):
+    """``lm_h`` / ``lm_exact_h`` refused a pose below the clearance (loose4 before its review), which a mission's flown
+    poses in wind reach and property tests (coils swapped, dz < 0) use: they compute every pose again, main's numbers
+    bit for bit (968340c's reprs)."""
+    from wpt_receiver.coupling import default_coupling
+    f = getattr(default_coupling(), entry)
+    assert float(f(0.0, 0.0, 0.001)) == 1.8116835038370885e-05   # through the pad coil's wire
+    if entry == "lm_h":
+        assert float(f(0.2, 0.2, -0.5)) == 4.3258231000429593e-07   # below the pad's plane
+        assert float(f(0.0, 0.0, 0.01, 0.5)) == 1.4451462517947623e-05   # tilted below the edge
+
+
+def test_a_mission_in_strong_wind_runs(tmp_path):
+    """``dronewpt mission --set wind.speed_m_s=30`` exited 2 (``dz_m=0.110 is invalid ...``: a flown pose dipped below
+    the clearance rule when lm_h checked it)."""
+    assert main(["mission", "--no-plot", "--set", "wind.speed_m_s=30", "--out", str(tmp_path / "m")]) == 0
 
 
 def test_the_cli_refuses_touching_coils_by_the_librarys_rule(capsys):
@@ -273,3 +293,111 @@ def test_the_cli_refuses_touching_coils_by_the_librarys_rule(capsys):
         "dronewpt coupling: error: --dz 0.01 is invalid; valid range: > 0.0634 m (the coils would touch), or a lateral "
         "offset hypot(--dx, --dy) >= 0.3734 m")
     assert main(["coupling", "--dz", "0.001", "--dx", "2", "--format", "json"]) == 0   # beside the pad (refused before)
+
+
+def test_a_receiver_well_below_the_pad_is_not_called_touching(capsys):
+    """The rule refused any receiver below the pad's plane ("the coils would touch" at dz = -0.5 m): touching is
+    ``abs(dz) <= clearance_m`` (flat coils); ``dronewpt coupling --dz`` below the plane is refused in main's words."""
+    from _cli_helpers import one_error_line
+
+    from wpt_receiver.coupling import default_coupling
+    m = default_coupling()
+    m.check_clearance(0.0, 0.0, -0.5)   # 0.5 m below the pad coil: apart
+    m.check_clearance(0.0, 0.0, -0.0035)   # just beyond the wires, below
+    with pytest.raises(ValueError, match=r"^dz_m=-0.001 is invalid; valid range: < -0.0034 m \(the coils would touch\), "
+                                         r"or a lateral offset hypot\(dx_m, dy_m\) >= 0.3734 m$"):
+        m.check_clearance(0.0, 0.0, -0.001)
+    assert one_error_line(capsys, ["coupling", "--dz", "-0.5"]) == (   # main's line (968340c)
+        "dronewpt coupling: error: --dz -0.5 is invalid; valid range: > 0.0034 m (the coils would touch)")
+
+
+def test_the_clearance_counts_layered_turns():
+    """The clearance ignored the turns' heights ``CoilGeometry.z_m`` (a pad coil's raised layer, a receiver turn
+    below its centre): now the receiver's lowest rim (from ``turn_positions``' centres and normals, independently) is
+    exactly the wires' reach above the pad coil's highest turn at ``clearance_m``; the default flat coils' value is
+    the old one."""
+    import math
+
+    import numpy as np
+
+    from wpt_receiver.coupling import CoilGeometry, CouplingModel, default_coupling
+    tx = CoilGeometry(radius_m=(0.2, 0.2), z_m=(0.0, 0.01), wire_radius_m=0.002)
+    rx = CoilGeometry(radius_m=(0.1, 0.08), z_m=(0.0, -0.01), wire_radius_m=0.001)
+    m = CouplingModel(tx, rx)
+    for tilt in (0.0, 0.3, -0.8):
+        gap = float(m.clearance_m(tilt))
+        _, turns = m.turn_positions(0.0, 0.0, gap, tilt)
+        lowest = min(t["z_m"] - t["radius_m"] * math.sqrt(1 - t["normal"][2] ** 2) for t in turns)
+        assert lowest - max(tx.z_m) - (tx.wire_radius_m + rx.wire_radius_m) == pytest.approx(0.0, abs=1e-15)
+        with pytest.raises(ValueError, match="the coils would touch"):
+            m.check_clearance(0.0, 0.0, gap * (1 - 1e-9), tilt)
+        m.check_clearance(0.0, 0.0, gap * (1 + 1e-9), tilt)
+    with pytest.raises(ValueError, match=r"^dz_m=0.04 is invalid; valid range: > 0.04619 m"):
+        m.check_clearance(0.0, 0.0, 0.04, 0.3)   # the flat rule's 0.0326 m passed it
+    d = default_coupling()
+    assert d.clearance_m(0.3) == d.tx.wire_radius_m + d.rx.wire_radius_m + max(d.rx.radius_m) * abs(math.sin(0.3))
+
+
+def test_check_v1_refuses_an_array_where_one_number_is_meant():
+    """``check_v1`` took arrays for ``steady_state``, so ``InverseModelController.reset(v1_v=[38, 38])`` gave a
+    TypeError and ``simulate(v1_v=array)`` a numpy error: main's one-line ValueError again (arrays only for
+    ``steady_state``, ``check_v1(..., array_ok=True)``)."""
+    import numpy as np
+
+    from wpt_receiver import envelope
+    from wpt_receiver.inverse_controller import InverseModelController
+    with pytest.raises(ValueError, match=r"^v1_v=\[38.0, 38.0\] is invalid; valid range: \(0, inf\) V \(the inverter's "
+                                         r"fundamental\)$"):
+        InverseModelController(TABLE_I, n=2).reset(5.0, v1_v=[38.0, 38.0])
+    with pytest.raises(ValueError, match=r"^v1_v=array\(\[38., 38., 38.\]\) is invalid; valid range: \(0, inf\) V"):
+        envelope.simulate(TABLE_I, [1, 2, 3], 1e-6, v1_v=np.array([38.0] * 3))
+    i1, _ = envelope.steady_state(TABLE_I, 10.0, v1_v=np.array([38.0, 20.0]))   # steady_state still broadcasts
+    assert i1.shape == (2,)
+
+
+@pytest.mark.parametrize("size", [1, 8, 32, 33, 100])
+def test_the_cheap_checks_find_a_bad_value_anywhere(size):
+    """``check_v2`` / ``check_lm`` check small arrays on a Python list (``min`` and ``max`` skip a NaN) and larger ones
+    by numpy reductions: the same verdict at any position, a finite V2 whose squares or sum overflow accepted silently."""
+    import numpy as np
+
+    from wpt_receiver.envelope import check_lm, check_v2
+    for pos in {0, size // 2, size - 1}:
+        for bad in (np.nan, np.inf, -np.inf):
+            v2 = np.full(size, 10.0)
+            v2[pos] = bad
+            with pytest.raises(ValueError, match=f"^v2_v={bad!r} is invalid"):
+                check_v2(v2)
+        for bad, zero_ok in ((np.nan, True), (-1e-9, True), (0.0, False), (-0.0, False), (TABLE_I.l1_h, True)):
+            lm = np.full(size, 6e-6)
+            lm[pos] = bad
+            with pytest.raises(ValueError, match=f"^lm_h={bad!r} is invalid"):
+                check_lm(TABLE_I, lm.reshape(1, -1), zero_ok=zero_ok)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_v2(np.full(size, 1.7e308))
+        check_lm(TABLE_I, np.zeros(size), zero_ok=True)
+
+
+def test_linkparams_and_check_lm_share_one_lm_limit():
+    """LinkParams refused ``k >= 1`` (its own comparison) and ``envelope.check_lm`` ``lm >= sqrt(L1 L2)``: one limit
+    (``params.lm_limit_h``), the same verdict at and next to it, on links of other inductances too."""
+    import numpy as np
+
+    from wpt_receiver.envelope import check_lm
+    from wpt_receiver.params import lm_limit_h
+    for p in (TABLE_I, TABLE_I.with_(l1_h=3.3e-5, l2_h=7.1e-6, lm_h=1e-6)):
+        s = lm_limit_h(p)
+        for lm in (np.nextafter(s, 0), s, np.nextafter(s, 1)):
+            lm = float(lm)
+            try:
+                p.with_(lm_h=lm)
+                link_ok = True
+            except ValueError:
+                link_ok = False
+            try:
+                check_lm(p, lm)
+                env_ok = True
+            except ValueError:
+                env_ok = False
+            assert link_ok == env_ok == (lm < s), lm

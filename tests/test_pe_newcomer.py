@@ -170,7 +170,7 @@ def test_export_controller_refuses_millions_of_test_vectors(capsys, tmp_path):
     out = tmp_path / "c"
     assert main(["export-controller", "--out", str(out), "--link", "f_hz=2.712e7"]) == 2
     err = capsys.readouterr().err.splitlines()
-    assert "warning: f_hz=2.712e+07 Hz is 319.1x the tanks' resonance" in err[0]   # the frequency warning first
+    assert "warning: --link f_hz=2.712e+07 Hz is 319.1x the tanks' resonance" in err[0]   # the frequency warning first
     assert err[1:] == [
         "dronewpt export-controller: error: control_period_s=1.844e-08 gives 5,207,040 test vectors (6 cases of 16 ms, "
         "one per control period); valid: at most 200,000, i.e. control_period_s >= 4.8e-07 s (--control-period)"]

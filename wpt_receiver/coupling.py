@@ -323,36 +323,54 @@ class CouplingModel:
     # ----------------------------------------------------------------- exact
     def clearance_m(self, tilt_rad=0.0):
         """The height [m] of the receiver coil's centre over the pad coil's plane at or below which their wires
-        touch when it is over the pad coil (:meth:`check_clearance`): the two wire radii plus the tilted receiver's
-        drop, its largest turn radius x ``|sin tilt_rad|`` (flat coils). Broadcasts over ``tilt_rad``."""
-        return self.tx.wire_radius_m + self.rx.wire_radius_m + max(self.rx.radius_m) * np.abs(np.sin(tilt_rad))
+        touch when it is over the pad coil (:meth:`check_clearance`): the two wire radii, plus the pad coil's highest
+        turn ``max(tx.z_m)``, plus the receiver's lowest point under its centre,
+        ``max_i(r_i |sin tilt_rad| - z_i cos tilt_rad)`` (turn i of radius ``r_i`` at height ``z_i`` in the receiver's
+        frame, tilted: its centre at ``z_i cos tilt`` and its rim ``r_i |sin tilt|`` lower). Flat coils (every
+        ``z_m`` 0): the wire radii plus the largest turn radius x ``|sin tilt_rad|``. Broadcasts over ``tilt_rad``."""
+        return self._touch_band(tilt_rad)[1]
+
+    def _touch_band(self, tilt):
+        """``(lo, hi)``: the receiver centre heights ``lo <= dz <= hi`` at which the coils' wires would touch over the
+        pad coil (:meth:`check_clearance`): the receiver's height range, its turns' centres ``z_i cos tilt`` plus or
+        minus their rims' ``r_i |sin tilt|``, widened by the two wire radii, meets the pad coil's turns' heights
+        ``[min(tx.z_m), max(tx.z_m)]`` (flat coils: ``lo = -hi``)."""
+        c, s = np.cos(tilt), np.abs(np.sin(tilt))
+        r, z = np.asarray(self.rx.radius_m), np.asarray(self.rx.z_m)
+        rim, centre = np.multiply.outer(s, r), np.multiply.outer(c, z)   # (..., turns)
+        wires = self.tx.wire_radius_m + self.rx.wire_radius_m
+        hi = wires + max(self.tx.z_m) + (rim - centre).max(axis=-1)
+        lo = min(self.tx.z_m) - wires - (rim + centre).max(axis=-1)
+        return lo, hi
 
     def check_clearance(self, dx_m, dy_m, dz_m, tilt_rad=0.0) -> None:
-        """``ValueError`` naming the first pose (broadcast arrays or numbers) whose receiver coil is at or below the
-        pad coil's plane, within :meth:`clearance_m` of it, while over it (a lateral offset ``hypot(dx_m, dy_m)``
-        below the two outer radii): the coils would touch. The one rule of :meth:`lm_h`, :meth:`lm_exact_h` and
+        """``ValueError`` naming the first pose (broadcast arrays or numbers) whose receiver coil is within
+        :meth:`clearance_m` of the pad coil's plane (``abs(dz_m) <= clearance_m``: above or below it) while over it (a
+        lateral offset ``hypot(dx_m, dy_m)`` below the two outer radii): the coils would touch. The one rule of
         ``dronewpt coupling --dz`` (the command's own copy until 2026-11-27 evening, which also refused poses beside
-        the pad); checked at their entry on the poses given (numpy, a few passes), never in the compiled lookup."""
+        the pad); :meth:`lm_h` and :meth:`lm_exact_h` do not call it (a mission's flown poses in wind dip below it,
+        property tests swap the coils: they compute every pose)."""
         dx, dy, dz, tilt = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (dx_m, dy_m, dz_m, tilt_rad)))
-        gap = self.clearance_m(tilt)
-        low = dz <= gap   # (NaN: False here; _rx_frame names it)
+        lo, hi = self._touch_band(tilt)
+        low = (lo <= dz) & (dz <= hi)   # (NaN: False here; _rx_frame names it)
         if not low.any():
             return
         reach = self.tx.outer_radius_m + self.rx.outer_radius_m
         bad = low & (np.hypot(dx, dy) < reach)
         if bad.any():
             i = np.flatnonzero(bad.ravel())[0]
-            raise ValueError(f"dz_m={float(dz.flat[i])!r} is invalid; valid range: > {float(gap.flat[i]):.4g} m (the "
-                             f"coils would touch), or a lateral offset hypot(dx_m, dy_m) >= {reach:.4g} m")
+            z, l_, h = float(dz.flat[i]), float(lo.flat[i]), float(hi.flat[i])
+            side = f"> {h:.4g} m" if z >= (l_ + h) / 2 else f"< {l_:.4g} m"   # (the nearer side's bound)
+            raise ValueError(f"dz_m={z!r} is invalid; valid range: {side} (the coils would touch), or a lateral offset "
+                             f"hypot(dx_m, dy_m) >= {reach:.4g} m")
 
     def lm_exact_h(self, dx_m, dy_m, dz_m, tilt_rad=0.0, *, n_theta: int | None = None,
                    tilt_axis_rad=math.pi / 2):
         """Lm [H] by the loop integral of the exact (elliptic-integral) vector potential.
 
-        Scalar or array poses (broadcast); slow (N_tx x N_rx x n_theta elliptic integrals per pose). A pose whose
-        coils would touch is refused (:meth:`check_clearance`).
+        Scalar or array poses (broadcast); slow (N_tx x N_rx x n_theta elliptic integrals per pose). Any pose is
+        computed (coils that would touch too: :meth:`check_clearance` is the caller's, e.g. ``dronewpt coupling``).
         """
-        self.check_clearance(dx_m, dy_m, dz_m, tilt_rad)
         n = self.n_theta if n_theta is None else int(n_theta)
         pts, tan, w = _loop_points(self.rx, n)
         return self._flux(dx_m, dy_m, dz_m, tilt_rad, tilt_axis_rad, pts, tan, w, self._a_exact)
@@ -433,9 +451,9 @@ class CouplingModel:
         Up to :data:`MEMO_MAX_POSES` poses the result is kept in the disk cache keyed by the poses'
         bytes (a mission re-run on the same path, with any policy, battery or link, then needs
         neither the table nor numba: ~0.5 s of start-up); the newest :data:`MEMO_ENTRIES` are kept.
-        A pose whose coils would touch is refused (:meth:`check_clearance`).
+        Any pose is computed (coils that would touch too, e.g. a flown pose in wind: :meth:`check_clearance` is the
+        caller's, ``dronewpt coupling`` calls it).
         """
-        self.check_clearance(dx_m, dy_m, dz_m, tilt_rad)
         rot, org = _rx_frame(dx_m, dy_m, dz_m, tilt_rad, tilt_axis_rad)
         shape = org.shape[:-1]
         rot, org = np.ascontiguousarray(rot.reshape(-1, 3, 3)), np.ascontiguousarray(org.reshape(-1, 3))

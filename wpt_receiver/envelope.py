@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .params import LinkParams, check_v1
+from .params import LinkParams, check_v1, lm_limit_h
 
 __all__ = [
     "EnvelopeCoefficients",
@@ -92,6 +92,12 @@ def g22(p: LinkParams):
     return signal.TransferFunction([-c.alpha2, -c.beta2], [1.0, 2 * c.zeta * c.omega_n, c.omega_n**2])
 
 
+#: arrays up to this size are checked on a Python list (``tolist``, ``min``, ``max``, ``sum``: ~0.5 us at 8 values),
+#: larger ones by numpy reductions (~1 us each, whatever the size up to thousands): ``policies.online`` calls
+#: :func:`steady_state` once per step with one value per link (benchmarks/bench_steady_state_checks.py)
+_SMALL = 32
+
+
 def check_v2(v2_v, sequence: bool = False) -> None:
     """``v2_v`` [V] all finite (``sequence``: also a non-empty 1-D sequence, :func:`simulate`'s input), else a
     ``ValueError`` naming the first bad value: the one rule of :func:`simulate` and :func:`steady_state` (a NaN V2
@@ -99,26 +105,39 @@ def check_v2(v2_v, sequence: bool = False) -> None:
     if type(v2_v) is float and not sequence and math.isfinite(v2_v):   # (the common scalar call: no numpy)
         return
     v2 = np.asarray(v2_v, dtype=float)
-    # (min and max: two reductions, no temporary array; a NaN propagates into both)
-    if (sequence and (v2.ndim != 1 or len(v2) == 0)) or (v2.size and not (math.isfinite(v2.min())
-                                                                            and math.isfinite(v2.max()))):
-        bad = v2.ravel()[~np.isfinite(v2.ravel())]
-        what = f"v2_v={float(bad[0])!r}" if bad.size else f"v2_v of shape {v2.shape}"
-        raise ValueError(f"{what} is invalid; valid: {'a non-empty 1-D sequence of ' if sequence else ''}finite V2 "
-                         "amplitudes [V]")
+    shape_ok = not sequence or (v2.ndim == 1 and len(v2) > 0)
+    flat = v2 if v2.ndim == 1 else v2.reshape(-1)
+    if shape_ok and (math.isfinite(sum(flat.tolist())) if flat.size <= _SMALL else
+                     np.logical_and.reduce(np.isfinite(flat))):   # (see _SMALL; a finite sum overflowing: exact look)
+        return
+    bad = flat[~np.isfinite(flat)]
+    if shape_ok and not bad.size:
+        return
+    what = f"v2_v={float(bad[0])!r}" if bad.size else f"v2_v of shape {v2.shape}"
+    raise ValueError(f"{what} is invalid; valid: {'a non-empty 1-D sequence of ' if sequence else ''}finite V2 "
+                     "amplitudes [V]")
 
 
 def check_lm(p: LinkParams, lm_h, zero_ok: bool = False) -> None:
     """``lm_h`` [H] (a number or an array) inside ``(0, sqrt(L1 L2))``, 0 < k < 1 (``zero_ok``: from 0 on, where the
     steady state is regular), else a ``ValueError`` naming the first bad value: the one rule of :func:`simulate`,
     :func:`steady_state` (a negative Lm ran) and :class:`EnvelopeLink`."""
-    lm_max = math.sqrt(p.l1_h * p.l2_h)
-    lm = lm_h if type(lm_h) is float else np.asarray(lm_h, dtype=float)   # (a Python float: no numpy)
-    # the extremes (two reductions, no temporary array); a NaN fails every comparison and propagates into both
-    lo, hi = (lm, lm) if type(lm) is float else (lm.min(), lm.max()) if lm.size else (lm_max / 2, lm_max / 2)
+    lm_max = lm_limit_h(p)   # (LinkParams' limit)
+    if type(lm_h) is float:   # (a Python float: no numpy)
+        lo = hi = lm_h
+    else:
+        lm = np.asarray(lm_h, dtype=float)
+        if lm.size <= _SMALL:   # (Python's min and max skip a NaN: the sum catches it)
+            vals = lm.reshape(-1).tolist()
+            lo, hi = (min(vals), max(vals)) if vals else (lm_max / 2, lm_max / 2)
+            total = sum(vals)
+            if total != total:
+                lo = math.nan
+        else:   # the extremes: two reductions, no temporary array; a NaN propagates into both
+            lo, hi = np.minimum.reduce(lm, axis=None), np.maximum.reduce(lm, axis=None)
     if (lo >= 0.0 if zero_ok else lo > 0.0) and hi < lm_max:
         return
-    lm = np.asarray(lm, dtype=float)
+    lm = np.asarray(lm_h, dtype=float)
     bad = lm[~(((lm >= 0) if zero_ok else (lm > 0)) & (lm < lm_max))]   # (inf failed on an empty index once)
     raise ValueError(f"lm_h={float(bad.flat[0])!r} is invalid; valid range: {'[' if zero_ok else '('}0, "
                      f"{lm_max:.6g}) H ({'0 <=' if zero_ok else '0 <'} k < 1)")
@@ -138,7 +157,7 @@ def steady_state(p: LinkParams, v2_v, lm_h=None, v1_v=None):
     if lm_h is not None:
         check_lm(p, lm_h, zero_ok=True)
     lm = p.lm_h if lm_h is None else np.asarray(lm_h, dtype=float)
-    v1 = p.v1_amp_v if v1_v is None else np.asarray(check_v1(v1_v), dtype=float)
+    v1 = p.v1_amp_v if v1_v is None else np.asarray(check_v1(v1_v, array_ok=True), dtype=float)
     v2 = np.asarray(v2_v, dtype=float)
     wlm = p.omega_rad_s * lm
     det = p.r1_ohm * p.r2_ohm + wlm**2

@@ -15,6 +15,12 @@ import numpy as np
 __all__ = ["LinkParams", "TABLE_I", "FREQUENCY_TOLERANCE", "resonance_warning", "warn_off_resonance"]
 
 
+def lm_limit_h(p) -> float:
+    """The mutual inductance [H] at which the coupling ``k = Lm / sqrt(L1 L2)`` reaches 1 (``p``: a link, anything with
+    ``l1_h`` and ``l2_h``): every valid Lm lies below it (:class:`LinkParams`, :func:`wpt_receiver.envelope.check_lm`)."""
+    return math.sqrt(p.l1_h * p.l2_h)
+
+
 @dataclass(frozen=True)
 class LinkParams:
     """Parameters of the WPT link (paper Table I by default).
@@ -50,8 +56,8 @@ class LinkParams:
             if not math.isfinite(value) or value <= 0.0:
                 raise ValueError(f"{fld.name}={value!r} is invalid; valid range: (0, inf), finite")
             object.__setattr__(self, fld.name, value)
-        k = self.k
-        if k >= 1.0:
+        if not self.lm_h < lm_limit_h(self):   # (the rule of envelope.check_lm too: one limit, one comparison)
+            k = self.k
             raise ValueError(
                 f"coupling k = lm_h/sqrt(l1_h*l2_h) = {k:.4g} (lm_h={self.lm_h!r}) is invalid; "
                 f"valid range: 0 < k < 1, i.e. lm_h < {math.sqrt(self.l1_h * self.l2_h):.6g} H"
@@ -104,13 +110,13 @@ TABLE_I = LinkParams()
 FREQUENCY_TOLERANCE = 2.0
 
 
-def check_v1(v1_v):
+def check_v1(v1_v, array_ok: bool = False):
     """``v1_v`` [V], the inverter's fundamental amplitude, as a float after checking it is in (0, inf) (a NaN gave a
     NaN run or duty, a negative V1 short mode, without a word): one rule for :func:`wpt_receiver.envelope.simulate`,
     :func:`~wpt_receiver.envelope.steady_state` and :meth:`wpt_receiver.inverse_controller.InverseModelController.reset`.
-    An array (``steady_state`` broadcasts) is checked elementwise and returned as a float array, naming the first bad
-    value."""
-    if isinstance(v1_v, (np.ndarray, list, tuple)) and np.ndim(v1_v) > 0:
+    ``array_ok`` (``steady_state``, which broadcasts): an array is checked elementwise and returned as a float array,
+    naming the first bad value; otherwise (the default) an array is refused as not one number, as before."""
+    if array_ok and isinstance(v1_v, (np.ndarray, list, tuple)) and np.ndim(v1_v) > 0:
         try:
             v = np.asarray(v1_v, dtype=float)
         except (TypeError, ValueError):

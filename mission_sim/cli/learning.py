@@ -45,9 +45,9 @@ def _add_train(sub):
     p.add_argument("--algo", choices=("ppo", "sac", "td3", "dqn"), required=True)
     p.add_argument("--timesteps", type=int, required=True, help="environment steps to train for")
     p.add_argument("--out", type=path_arg("--out"), required=True, help="output folder")
-    p.add_argument("--seed", type=range_arg("seed", RANGES["seed"]), default=0, help="seed, 0 .. 2^32-1 (default 0)")
+    p.add_argument("--seed", type=range_arg("seed", RANGES["seed"]), default=0, help=f"seed, {RANGES['seed'].text()} (default 0)")
     p.add_argument("--n-envs", type=range_arg("n-envs", RANGES["n_envs"]), default=64,
-                   help="parallel windows of the batched env, 1 .. 1024 (default 64)")
+                   help=f"parallel windows of the batched env, {RANGES['n_envs'].text()} (default 64)")
     lazy_names_help(p.add_argument("--scenario", default="random"),
                     "training scenario (default random: domain randomisation)", scenario_names)
     p.add_argument("--hyperparams", type=path_arg("--hyperparams"), default=None, metavar="FILE",

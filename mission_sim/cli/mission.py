@@ -49,13 +49,18 @@ def _cmd_coupling(args) -> int:
     from wpt_receiver.coupling import NOMINAL_GAP_M, default_coupling
     m = default_coupling()
     dz = NOMINAL_GAP_M if args.dz is None else args.dz
+    if dz < 0:   # (the receiver over the pad: below its plane refused, in main's words)
+        raise CliError(f"--dz {dz!r} is invalid; valid range: > {float(m.clearance_m(math.radians(args.tilt_deg))):.4g} "
+                       "m (the coils would touch)")
+    try:   # (coils that would touch: the library's rule, CouplingModel.check_clearance, in the flags' words; lm_h
+        #    itself computes any pose)
+        m.check_clearance(args.dx, args.dy, dz, math.radians(args.tilt_deg))
+    except ValueError as exc:
+        raise CliError(str(exc).replace("dz_m=", "--dz ").replace("hypot(dx_m, dy_m)", "hypot(--dx, --dy)")) from None
     if abs(args.tilt_deg) >= 90:
         raise CliError(f"--tilt-deg {args.tilt_deg!r} is invalid; valid range: (-90, 90)")
     tilt = math.radians(args.tilt_deg)
-    try:   # (coils that would touch: the library's rule, CouplingModel.check_clearance, in the flags' words)
-        lm = float((m.lm_exact_h if args.exact else m.lm_h)(args.dx, args.dy, dz, tilt))
-    except ValueError as exc:
-        raise CliError(str(exc).replace("dz_m=", "--dz ").replace("hypot(dx_m, dy_m)", "hypot(--dx, --dy)")) from None
+    lm = float((m.lm_exact_h if args.exact else m.lm_h)(args.dx, args.dy, dz, tilt))
     tx, rx = m.turn_positions(args.dx, args.dy, dz, tilt)
     out = {"dx_m": args.dx, "dy_m": args.dy, "dz_m": dz, "tilt_rad": tilt, "lm_h": lm, "l1_h": m.l1_h,
            "l2_h": m.l2_h, "k": float(m.k(lm)), "tx_turns": tx, "rx_turns": rx}

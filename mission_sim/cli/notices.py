@@ -15,7 +15,7 @@ import os
 import sys
 import warnings
 
-__all__ = ["compile_notices", "warning_lines", "say_warning", "is_dronewpt_warning", "NOTICE_VAR"]
+__all__ = ["compile_notices", "warning_lines", "say_warning", "flag_words", "FLAG_WORDS", "is_dronewpt_warning", "NOTICE_VAR"]
 
 #: :data:`wpt_receiver.notices.NOTICE_VAR` (spelt here: this module does not import the library)
 NOTICE_VAR = "DRONEWPT_COMPILE_NOTICE"
@@ -85,10 +85,31 @@ def warning_lines(command: str):
 _seen: list[set] = []
 
 
+#: the library's words -> the flags the user typed, per command: (regular expression, replacement) applied in order
+#: to each warning :func:`say_warning` prints (``f_hz`` is ``--link f_hz`` where ``--link`` sets it; a mission's
+#: warnings already say ``link.f_hz``, its ``--set`` key)
+_LINK_F = (r"(?<![\w.-])f_hz\b", "--link f_hz")
+FLAG_WORDS = {
+    "paper": (_LINK_F, (r"t_end_s=", "--t-end "), (r"\(default 31e-3 s\)", "(--t-end, default 0.031 s)"),
+              (r"model='switching'", "--model switching")),
+    "netlist": (_LINK_F,),
+    "export-controller": (_LINK_F,),
+}
+
+
+def flag_words(command: str, text: str) -> str:
+    """``text`` (a library warning) in ``dronewpt COMMAND``'s flag words (:data:`FLAG_WORDS`)."""
+    import re
+    for pattern, flag in FLAG_WORDS.get(command, ()):
+        text = re.sub(pattern, flag, text)
+    return text
+
+
 def say_warning(command: str, text: str) -> None:
-    """``dronewpt COMMAND: warning: TEXT`` on stderr (one line), unless the command printed it already (e.g. a
-    summary's ``warnings`` that the library also raised as a ``DronewptWarning``)."""
-    text = " ".join(str(text).split())
+    """``dronewpt COMMAND: warning: TEXT`` on stderr (one line), the library's words in the command's flags
+    (:func:`flag_words`), unless the command printed it already (e.g. a summary's ``warnings`` that the library also
+    raised as a ``DronewptWarning``)."""
+    text = flag_words(command, " ".join(str(text).split()))
     if _seen:
         if text in _seen[-1]:
             return

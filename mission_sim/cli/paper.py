@@ -113,10 +113,8 @@ def _print_warnings(caught, range_problem: bool = False) -> None:
             continue
         if not issubclass(w.category, RuntimeWarning):   # not the model's: Python's own display, as uncaught
             warnings.showwarning(w.message, w.category, w.filename, w.lineno)
-        else:
-            text = (str(w.message).replace("t_end_s=", "--t-end ").replace("(default 31e-3 s)", "(--t-end, default 0.031 s)")
-                    .replace("model='switching'", "--model switching"))
-            say_warning("paper", text)
+        else:   # (in the flags' words: notices.FLAG_WORDS)
+            say_warning("paper", str(w.message))
 
 
 def _link_text(params) -> str:
