@@ -164,6 +164,25 @@ def zoh_discretise(a, b, dt_s: float):
         for n in range(11, 1, -1):
             phi = eye + (at @ phi) / n
         bd[tiny] = np.broadcast_to(dt, tiny.shape + (1, 1))[tiny] * (phi @ b)
+    spec = (q2 > 0) & (qt >= 1.0) & ~tiny   # well-separated real poles: Bd = sum_k expm1(l_k dt) / l_k P_k B
+    if np.any(spec):
+        l2 = (s - qa)[spec]
+        l1 = det[spec] / l2
+        dts = np.broadcast_to(np.asarray(dt_s, dtype=float), spec.shape)[spec]
+        asp = np.broadcast_to(a, spec.shape + (2, 2))[spec]
+        prod = asp[:, 0, 1] * asp[:, 1, 0]
+
+        def proj(lo, den):   # (A - lo I) / den; the smaller diagonal entry from (a00 - lo)(a11 - lo) = a01 a10
+            d0, d1 = asp[:, 0, 0] - lo, asp[:, 1, 1] - lo
+            big0 = np.abs(d0) >= np.abs(d1)
+            d0, d1 = np.where(big0, d0, prod / d1), np.where(big0, prod / d0, d1)
+            pm = asp.copy()
+            pm[:, 0, 0], pm[:, 1, 1] = d0, d1
+            return pm / den[:, None, None]
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):   # np.where evaluates both sides
+            phi = ((np.expm1(l1 * dts) / l1)[:, None, None] * proj(l2, l1 - l2)
+                   + (np.expm1(l2 * dts) / l2)[:, None, None] * proj(l1, l2 - l1))
+        bd[spec] = phi @ b
     return ad, bd
 
 
