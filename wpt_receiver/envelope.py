@@ -121,11 +121,16 @@ def zoh_discretise(a, b, dt_s: float):
     (true for the link: det A = omega_n^2 > 0).
 
     Accuracy (tests/test_physics_properties.py, against a 40-digit matrix exponential): real poles take the slow
-    one as ``det / (s - q)``, not ``s + q`` (a difference of two numbers ~1e9 apart for a stiff link: Bd was up to
-    9e-7 off, now ~1e-10), and ``sinh(qt)`` directly below ``qt = 1`` (``(e^{(s+q)t} - e^{(s-q)t}) / 2`` cancels there); where
-    ``||A dt|| < 0.1``, ``Bd = dt (I + A dt / 2 + ...) B`` by its series (``A^{-1} (Ad - I)`` lost ~eps /
-    ||A dt|| of it: 1.8e-11 at 1 H, 1 Ohm, dt 0.1 us). Table I's links at the rectifier period (||A dt|| ~ 0.5)
-    take neither new branch: their Ad, Bd are the same to the bit.
+    one as ``det / (s - q)``, not ``s + q`` (a difference of two numbers ~1e9 apart for a stiff link), and ``sinh(qt)``
+    directly below ``qt = 1`` (``(e^{(s+q)t} - e^{(s-q)t}) / 2`` cancels there). Bd: where ``||A dt|| < 0.1``,
+    ``Bd = dt (I + A dt / 2 + ...) B`` by its series (``A^{-1} (Ad - I)`` lost ~eps / ||A dt|| of it); real poles
+    with ``qt >= 1`` take ``Bd = sum_k expm1(l_k dt) / l_k P_k B`` with the projectors
+    ``P_k = (A - l_other I) / (l_k - l_other)`` (``A^{-1} (Ad - I)`` cancels in the slow direction when
+    ``|l_slow dt|`` is tiny but ``||A dt||`` large: 2.9e-4 of a Bd column off at L1 1 H, L2 1 nH, k 1e-3, R1 1 uOhm,
+    R2 100 Ohm, 10 kHz, dt 0.1 us, 2.6e-2 at 2.5 ns). Measured over ``LINK_PARAM_RANGES`` (its 64 corners and 600
+    log-uniform links, dt 1 ns..1 s): worst Bd column 1.4e-8 relative (was 6.9e-2), worst Ad entry 2e-7 absolute.
+    Table I's links at the rectifier period (||A dt|| ~ 0.5, complex poles) take neither branch: their Ad, Bd
+    are the same to the bit.
     """
     a = np.asarray(a, dtype=float)
     s = 0.5 * (a[..., 0, 0] + a[..., 1, 1])
