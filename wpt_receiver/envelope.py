@@ -169,7 +169,10 @@ def zoh_discretise(a, b, dt_s: float):
         for n in range(11, 1, -1):
             phi = eye + (at @ phi) / n
         bd[tiny] = np.broadcast_to(dt, tiny.shape + (1, 1))[tiny] * (phi @ b)
-    spec = (q2 > 0) & (qt >= 1.0) & ~tiny   # well-separated real poles: Bd = sum_k expm1(l_k dt) / l_k P_k B
+    # real poles, well separated (qt >= 1, or 2q >= |slow pole|: the projectors' cancellation ~eps ||A|| / 2q is then
+    # below A^-1 (Ad - I)'s ~eps ||A|| / |slow pole|): Bd = sum_k expm1(l_k dt) / l_k P_k B
+    with np.errstate(invalid="ignore", divide="ignore"):
+        spec = (q2 > 0) & ~tiny & ((qt >= 1.0) | (2.0 * qa >= np.abs(det / (s - qa))))
     if np.any(spec):
         l2 = (s - qa)[spec]
         l1 = det[spec] / l2
