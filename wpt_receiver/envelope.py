@@ -175,24 +175,28 @@ def zoh_discretise(a, b, dt_s: float):
     with np.errstate(invalid="ignore", divide="ignore"):
         spec = (q2 > 0) & ~tiny & ((qt >= 1.0) | (2.0 * qa >= np.abs(det / (s - qa))))
     if np.any(spec):
-        l2 = (s - qa)[spec]
-        l1 = det[spec] / l2
-        dts = np.broadcast_to(np.asarray(dt_s, dtype=float), spec.shape)[spec]
-        asp = np.broadcast_to(a, spec.shape + (2, 2))[spec]
-        prod = asp[:, 0, 1] * asp[:, 1, 0]
-
-        def proj(lo, den):   # (A - lo I) / den; the smaller diagonal entry from (a00 - lo)(a11 - lo) = a01 a10
-            d0, d1 = asp[:, 0, 0] - lo, asp[:, 1, 1] - lo
-            big0 = np.abs(d0) >= np.abs(d1)
-            d0, d1 = np.where(big0, d0, prod / d1), np.where(big0, prod / d0, d1)
-            pm = asp.copy()
-            pm[:, 0, 0], pm[:, 1, 1] = d0, d1
-            return pm / den[:, None, None]
-        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):   # np.where evaluates both sides
-            phi = ((np.expm1(l1 * dts) / l1)[:, None, None] * proj(l2, l1 - l2)
-                   + (np.expm1(l2 * dts) / l2)[:, None, None] * proj(l1, l2 - l1))
-        bd[spec] = phi @ b
+        bd[spec] = _real_pole_phi(np.broadcast_to(a, spec.shape + (2, 2))[spec], (s - qa)[spec], det[spec],
+                                  np.broadcast_to(np.asarray(dt_s, dtype=float), spec.shape)[spec]) @ b
     return ad, bd
+
+
+def _real_pole_phi(a, l2, det, dt):
+    """``int_0^dt e^{As} ds = sum_k expm1(l_k dt) / l_k P_k`` for 2x2 ``a`` (N, 2, 2) with real poles ``l2`` (the
+    fast one, s - q) and ``l1 = det / l2`` (the slow one by Vieta); ``P_k = (A - l_other I) / (l_k - l_other)`` with
+    the cancelling diagonal entry taken from ``(a00 - l)(a11 - l) = a01 a10``."""
+    l1 = det / l2
+    prod = a[:, 0, 1] * a[:, 1, 0]
+
+    def proj(lo, den):   # (A - lo I) / den; the smaller diagonal entry from (a00 - lo)(a11 - lo) = a01 a10
+        d0, d1 = a[:, 0, 0] - lo, a[:, 1, 1] - lo
+        big0 = np.abs(d0) >= np.abs(d1)
+        d0, d1 = np.where(big0, d0, prod / d1), np.where(big0, prod / d0, d1)
+        pm = a.copy()
+        pm[:, 0, 0], pm[:, 1, 1] = d0, d1
+        return pm / den[:, None, None]
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):   # np.where evaluates both sides
+        return ((np.expm1(l1 * dt) / l1)[:, None, None] * proj(l2, l1 - l2)
+                + (np.expm1(l2 * dt) / l2)[:, None, None] * proj(l1, l2 - l1))
 
 
 class EnvelopeLink:
