@@ -117,7 +117,8 @@ def zoh_discretise(a, b, dt_s: float):
 
     Uses the closed form ``e^{At} = e^{st} [cosh(qt) I + sinh(qt)/q (A - sI)]`` with
     ``s = tr(A)/2``, ``q = sqrt(s^2 - det A)`` (real or imaginary), vectorised over leading
-    axes, so a batch of 10^5 links discretises in milliseconds. ``A`` must be invertible
+    axes, so a batch of 10^5 links discretises in milliseconds (``B`` (2, 2) or batched like ``A``; ``dt_s`` a
+    scalar or one per link). ``A`` must be invertible
     (true for the link: det A = omega_n^2 > 0).
 
     Accuracy (tests/test_physics_properties.py, against a 40-digit matrix exponential): real poles take the slow
@@ -169,15 +170,23 @@ def zoh_discretise(a, b, dt_s: float):
         phi = eye + at / 12.0
         for n in range(11, 1, -1):
             phi = eye + (at @ phi) / n
-        bd[tiny] = np.broadcast_to(dt, tiny.shape + (1, 1))[tiny] * (phi @ b)
+        bd[tiny] = np.broadcast_to(dt, tiny.shape + (1, 1))[tiny] * (phi @ _rows(b, bd.shape, tiny))
     # real poles, well separated (qt >= 1, or 2q >= |slow pole|: the projectors' cancellation ~eps ||A|| / 2q is then
     # below A^-1 (Ad - I)'s ~eps ||A|| / |slow pole|): Bd = sum_k expm1(l_k dt) / l_k P_k B
     with np.errstate(invalid="ignore", divide="ignore"):
         spec = (q2 > 0) & ~tiny & ((qt >= 1.0) | (2.0 * qa >= np.abs(det / (s - qa))))
     if np.any(spec):
         bd[spec] = _real_pole_phi(np.broadcast_to(a, spec.shape + (2, 2))[spec], (s - qa)[spec], det[spec],
-                                  np.broadcast_to(np.asarray(dt_s, dtype=float), spec.shape)[spec]) @ b
+                                  np.broadcast_to(np.asarray(dt_s, dtype=float), spec.shape)[spec]
+                                  ) @ _rows(b, bd.shape, spec)
     return ad, bd
+
+
+def _rows(b, shape, mask):
+    """``b`` (2, 2), or batched like A: its matrices where ``mask`` is set (a 2x2 ``b`` as it is: the same
+    matmul, the same bits)."""
+    b = np.asarray(b, dtype=float)
+    return b if b.ndim == 2 else np.broadcast_to(b, shape)[mask]
 
 
 def _real_pole_phi(a, l2, det, dt):
