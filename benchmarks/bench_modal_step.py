@@ -2,9 +2,10 @@
 
 Each variant runs N steps in one compiled loop (in-process, per-step time in ns; compile excluded):
 
-* ``eq4``: ``loop_kernel.link_disc`` + ``link_step`` (eq. 4: what the mission kernel did every step
-  before the exact modes, and the envs' link: the 2x2 ZOH from scratch, the step with its energy
-  integrals) with V2 from eq. 9;
+* ``eq4``: ``loop_kernel.link_step`` (eq. 4: what the mission kernel did every step before the exact
+  modes, and the envs' link: the step with its energy integrals) with V2 from eq. 9; its ZOH coefficients
+  from ``loop_kernel.link_disc`` (``wpt_receiver.envelope.zoh_discretise``, Python) once: since 2026-11-27 the
+  2x2 ZOH is not compiled, so its cost per step is no longer in this figure;
 * ``modal``: ``sbar_v2`` (table lookup, v2 with its quadrature) + ``step`` + ``inst_peak``, with
   the mode and ZOH coefficients cached (a fixed Lm and dt, as in most mission and env steps);
 * ``modal_new_lm``: the same plus ``modes`` + ``zoh`` every step (Lm changing each step, as in the
@@ -30,12 +31,11 @@ from wpt_receiver import modal_kernel as mk
 
 
 @njit(cache=True)
-def _eq4(c, lm, dt, n):
+def _eq4(c, dd, lm, dt, n):
     acc, a0, a1 = 0.0, 0.0, 0.0
     for k in range(n):
         d = 0.5 + 0.4 * math.sin(1e-3 * k)
         v2 = 4.0 / math.pi * 30.0 * (1.0 - math.sin(0.5 * math.pi * d))
-        dd = lk.link_disc(c, lm, dt)
         a0, a1, e_src, e_coil, e_rect, int_i2, p11, p22 = lk.link_step(c, dd, lm, dt, a0, a1, 38.2, v2)
         acc += e_src + abs(a1)
     return acc
@@ -67,9 +67,10 @@ def run(steps: int = 1_000_000) -> dict:
     mc, zc = np.empty(mk.N_MODES_C, complex), np.empty(mk.N_ZOH_C, complex)
     mk.modes(lc, p.lm_h, mc)
     mk.zoh(mc, dt, zc)
+    dd = lk.link_disc(c, p.lm_h, dt)
     tab = mk.modal_table(p)
     res = {"steps": steps, "load_avg_1min": os.getloadavg()[0]}
-    runs = {"eq4": lambda n: _eq4(c, p.lm_h, dt, n),
+    runs = {"eq4": lambda n: _eq4(c, dd, p.lm_h, dt, n),
             "modal": lambda n: _modal(lc, mc, zc, tab, p.lm_h, dt, n, False),
             "modal_new_lm": lambda n: _modal(lc, mc, zc, tab, p.lm_h, dt, n, True)}
     for name, fn in runs.items():

@@ -214,3 +214,28 @@ def test_zoh_with_a_step_per_link_equals_one_call_per_link():
         ad1, bd1 = zoh_discretise(a[i:i + 1], b, dt[i])
         np.testing.assert_array_equal(ad[i], ad1[0])
         np.testing.assert_array_equal(bd[i], bd1[0])
+
+
+def test_zoh_with_a_b_per_link_equals_one_call_per_link():
+    """``B`` batched like ``A`` ((64, 2, 2): a link's own L1, L2) with a step per link, through all three Bd
+    branches (the closed form, the series below ||A dt|| = 0.1, the real-pole projectors): each link's (Ad, Bd)
+    is that of its own call, to the bit (a batched B raised in the two branches before)."""
+    rng = np.random.default_rng(8)
+    links = [LinkParams(l1_h=l1, l2_h=l2, lm_h=k * math.sqrt(l1 * l2), r1_ohm=r1, r2_ohm=r2, f_hz=f)
+             for l1, l2, k, r1, r2, f in zip(10 ** rng.uniform(-9, 0, 61), 10 ** rng.uniform(-9, 0, 61),
+                                             rng.uniform(1e-3, 0.999, 61), 10 ** rng.uniform(-6, 2, 61),
+                                             10 ** rng.uniform(-6, 2, 61), 10 ** rng.uniform(4, 7.5, 61))]
+    links += [P, LinkParams(l1_h=1.0, l2_h=1e-9, lm_h=1e-3 * math.sqrt(1e-9), r1_ohm=1e-6, r2_ohm=100.0, f_hz=1e4),
+              LinkParams(l1_h=1.0, l2_h=1.0, lm_h=1e-3, r1_ohm=1.0, r2_ohm=1.0, f_hz=1e4)]
+    a = np.array([state_matrices(p)[0] for p in links])
+    b = np.array([state_matrices(p)[1] for p in links])
+    dt = 10 ** rng.uniform(-9, -2, len(links))
+    ad, bd = zoh_discretise(a, b, dt)
+    norm = np.abs(a).max(axis=(1, 2)) * dt
+    s = 0.5 * (a[:, 0, 0] + a[:, 1, 1])
+    real = s * s > a[:, 0, 0] * a[:, 1, 1] - a[:, 0, 1] * a[:, 1, 0]
+    assert np.any(norm < 0.1) and np.any((norm >= 0.1) & real) and np.any((norm >= 0.1) & ~real)
+    for i in range(len(links)):
+        ad1, bd1 = zoh_discretise(a[i:i + 1], b[i], dt[i])
+        np.testing.assert_array_equal(ad[i], ad1[0])
+        np.testing.assert_array_equal(bd[i], bd1[0])

@@ -31,14 +31,17 @@ def log_uniform(lo: float, hi: float):
 
 
 @st.composite
-def links(draw, v_lo=1e-3):
+def links(draw, v_lo=1e-3, corners=False):
     """A LinkParams inside ``LINK_PARAM_RANGES``: L 1 nH .. 1 H, 0 < k < 1, R 1 uOhm .. 100 Ohm, voltages up to
-    1 kV, f 10 kHz .. 30 MHz (log-uniform, so every decade is visited)."""
-    l1, l2 = draw(log_uniform(1e-9, 1.0)), draw(log_uniform(1e-9, 1.0))
-    k = draw(st.floats(1e-3, 0.999))
-    return LinkParams(l1_h=l1, l2_h=l2, lm_h=k * math.sqrt(l1 * l2), r1_ohm=draw(log_uniform(1e-6, 100.0)),
-                      r2_ohm=draw(log_uniform(1e-6, 100.0)), vdc_v=draw(log_uniform(v_lo, 1000.0)),
-                      vl_v=draw(log_uniform(v_lo, 1000.0)), f_hz=draw(log_uniform(1e4, 3e7)))
+    1 kV, f 10 kHz .. 30 MHz (log-uniform, so every decade is visited). ``corners``: each of L1, L2, k, R1, R2, f is
+    a range endpoint half the time (the stiff links live at the corners: log-uniform draws alone never reach them)."""
+    def field(strategy, lo, hi):
+        return draw(st.one_of(st.sampled_from([lo, hi]), strategy) if corners else strategy)
+    l1, l2 = field(log_uniform(1e-9, 1.0), 1e-9, 1.0), field(log_uniform(1e-9, 1.0), 1e-9, 1.0)
+    k = field(st.floats(1e-3, 0.999), 1e-3, 0.999)
+    return LinkParams(l1_h=l1, l2_h=l2, lm_h=k * math.sqrt(l1 * l2), r1_ohm=field(log_uniform(1e-6, 100.0), 1e-6, 100.0),
+                      r2_ohm=field(log_uniform(1e-6, 100.0), 1e-6, 100.0), vdc_v=draw(log_uniform(v_lo, 1000.0)),
+                      vl_v=draw(log_uniform(v_lo, 1000.0)), f_hz=field(log_uniform(1e4, 3e7), 1e4, 3e7))
 
 
 def eq3(p: LinkParams):
@@ -74,7 +77,10 @@ def _expm_mp(m, t):
 
 
 @settings(max_examples=150, **SETTINGS)
-@given(p=links(), dt=log_uniform(1e-7, 1e-2))
+@given(p=links(corners=True), dt=st.one_of(st.sampled_from([1e-7, 1e-2]), log_uniform(1e-7, 1e-2)))
+@example(p=LinkParams(l1_h=1.0, l2_h=1e-9, lm_h=1e-3 * math.sqrt(1e-9), r1_ohm=1e-6, r2_ohm=100.0, f_hz=1e4), dt=1e-7)
+@example(p=LinkParams(l1_h=1.0, l2_h=1e-9, lm_h=1e-3 * math.sqrt(1e-9), r1_ohm=100.0, r2_ohm=1e-6, f_hz=1e4),
+         dt=2.56e-7)
 @example(p=LinkParams(l1_h=0.4564877508293096, l2_h=4.6732334860490155e-08, lm_h=3.5411826829967994e-05,
                       r1_ohm=0.43013477104350856, r2_ohm=77.00676577535725, f_hz=26898.590094515457),
          dt=4.070279424831159e-06)
@@ -85,11 +91,16 @@ def test_zoh_discretisation_against_40_digit_expm(p, dt):
     """zoh_discretise (closed form) against e^{[[A, B], [0, 0]] dt} in 40 digits, over the envelope's step range
     (the control-period range 1e-7 .. 1e-2 s). A float64 evaluation of e^{A dt} has an absolute error of a few eps
     times ||A dt|| (the phase q dt of cos / sin, the exponent s dt), so Ad is held to 16 eps (1 + ||A dt||) absolute;
-    Bd = A^-1 (Ad - I) B column by column to 1e-8 of the column's size. With the fix the remaining error is Ad - I
-    cancelling on a diagonal entry with a tiny |A_jj dt| beside a large ||A dt|| (eps / |A_jj dt|: 1.1e-10 in the
-    third example, a few 1e-9 at L1 = 1 H, R1 = 1 Ohm, L2 = 0.1 uH, dt = 0.1 us; a closed form of int e^{As} ds
-    would remove it: not done); 2.6e-11 over 500 other random links. Before it: 3.8e-8 in the first example, 9e-7
-    in another stiff real-pole link (the slow pole as the difference s + q of two numbers ~1e9 apart)."""
+    Bd column by column to 1e-9 of the column's size plus 4 eps dt |Ad| |B| (the same phase error: e^{A dt} evaluated
+    in float64 is the exact one at a step dt (1 + ~4 eps), which moves Bd by ~4 eps dt Ad B; it dominates only for
+    oscillatory links with q dt >~ 1e5, e.g. L1 1 nH, L2 1 H, 30 MHz, dt 10 ms: 1.7e-7 of a column): 1e-9 is 50 times the worst measured with the spectral
+    Bd (1.9e-11 over LINK_PARAM_RANGES' 64 corners and 600 log-uniform links at dt 0.1 us .. 10 ms), 40 times below
+    the smallest error this test exists for (3.8e-8: the third example before the slow pole by Vieta). The links
+    take each range endpoint half the time (the stiff links are corners: 150 log-uniform draws passed the old real-pole
+    formula). Before the spectral Bd (real poles: sum_k expm1(l_k dt) / l_k P_k B): 2.9e-4 in the first example
+    (L1 1 H, R1 1 uOhm: a stiff real-pole link whose slow pole has |l dt| ~ 1e-13 beside ||A dt|| = 5e3; A^-1 (Ad - I)
+    cancels in that direction), 2.4e-8 in the second (R1 100 Ohm, R2 1 uOhm); before the slow pole by Vieta 3.8e-8
+    in the third, 9e-7 in another."""
     a, b = eq3(p)
     m = np.zeros((4, 4))
     m[:2, :2], m[:2, 2:] = a, b
@@ -99,7 +110,8 @@ def test_zoh_discretisation_against_40_digit_expm(p, dt):
     assert np.abs(ad[0] - ref[:2, :2]).max() <= 16 * EPS * (1.0 + norm)
     for j in range(2):
         col = ref[:2, 2 + j]
-        assert np.abs(bd[0][:, j] - col).max() <= 1e-8 * np.abs(col).max(), (j, bd[0][:, j], col)
+        phase = 4 * EPS * dt * float((np.abs(ref[:2, :2]) @ np.abs(b[:, j])).max())   # dt (1 + 4 eps): dt Ad B
+        assert np.abs(bd[0][:, j] - col).max() <= 1e-9 * np.abs(col).max() + phase, (j, bd[0][:, j], col)
 
 
 def _poles(p):
@@ -146,10 +158,11 @@ def test_envelope_energy_balance_over_a_transient(p, theta, fracs):
     m = np.zeros((4, 4))
     m[:2, :2], m[:2, 2:] = a, b
     nodes = 0.5 * dt * (_GL_X + 1.0)
+    e_nodes = expm(m[None] * nodes[:, None, None])   # e^{M t} at the 24 nodes, one batched call for every step
     e_src = e_loss = e_rect = 0.0
     for k in range(len(v2)):
         z0 = np.array([i1[k], i2[k], p.v1_amp_v, v2[k]])
-        z = np.array([expm(m * tn) @ z0 for tn in nodes])
+        z = e_nodes @ z0
         w = 0.5 * dt * _GL_W
         e_src += 0.5 * p.v1_amp_v * (w @ z[:, 0])
         e_loss += 0.5 * (w @ (p.r1_ohm * z[:, 0] ** 2 + p.r2_ohm * z[:, 1] ** 2))
@@ -283,7 +296,7 @@ def test_lm_of_a_pose_against_an_independent_neumann_integral(dx, dy, lift, tilt
     wire (dy = 0.25 m), which a 24-point loop rule cannot resolve (1.3e-4 at 1 cm above touching, 2e-4 at 2 %
     above it: not tested). Before
     the fix the table was off by up to 1.6e-3 here (and 2 % at a 2.2 cm gap): its spline's lower edge, now left to
-    the exact field (``coupling.EXACT_ABOVE_EDGE_M``). And |Lm| < sqrt(L1 L2) (k < 1)."""
+    the exact field (``coupling.EXACT_ABOVE_EDGE_STEPS``). And |Lm| < sqrt(L1 L2) (k < 1)."""
     from wpt_receiver.coupling import NOMINAL_GAP_M, default_coupling
     m = default_coupling()
     lo = _min_dz(m, tilt) + 0.03
@@ -294,6 +307,23 @@ def test_lm_of_a_pose_against_an_independent_neumann_integral(dx, dy, lift, tilt
     lm = m.lm_h(dx, dy, dz, tilt)
     assert abs(lm - ref) <= 1e-4 * hover
     assert abs(lm) < math.sqrt(m.l1_h * m.l2_h)
+
+
+@pytest.mark.parametrize("step, top, tol", [(5e-3, 0.07, 1e-6), (1e-2, 0.12, 2e-6)])
+def test_lm_table_near_the_pad_is_the_exact_field(step, top, tol):
+    """Near-coaxial poses (offsets <= 2 cm, tilt <= 0.1 rad) at heights 3 cm .. ``top``: ``lm_h`` (table, or the
+    exact field within ``EXACT_ABOVE_EDGE_STEPS`` grid steps of the table's lower edge) equals ``lm_exact_h`` to
+    ``tol`` of the hover Lm. Measured 2.2e-7 at the default 5 mm grid (3-7 cm) and 7.2e-7 at a 10 mm grid
+    (3-12 cm, above its 8 cm band); a 4-step (2 cm) band at 5 mm gives 3.0e-5 at 4.3 cm, a fixed 4 cm band at
+    10 mm 6.1e-5 at 6.6 cm: this test pins the band's height and its scaling with the grid."""
+    from wpt_receiver.coupling import CouplingModel, default_coupling
+    d = default_coupling()
+    m = d if step == 5e-3 else CouplingModel(d.tx, d.rx, grid_step_m=step)
+    rng = np.random.default_rng(3)
+    dz = np.linspace(0.03, top, 41)
+    dx, dy, tilt = (rng.uniform(-w, w, dz.size) for w in (0.02, 0.02, 0.1))
+    err = np.abs(m.lm_h(dx, dy, dz, tilt) - m.lm_exact_h(dx, dy, dz, tilt))
+    assert err.max() <= tol * 6.25e-6, (err.max() / 6.25e-6, dz[err.argmax()])
 
 
 @settings(max_examples=30, **SETTINGS)

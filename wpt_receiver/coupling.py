@@ -51,9 +51,10 @@ __all__ = [
 MEMO_MAX_POSES = 50_000
 #: most ``lm_h`` results kept in the disk cache (the oldest removed beyond)
 MEMO_ENTRIES = 32
-#: :meth:`CouplingModel.lm_h` takes the exact field for a pose whose drone coil comes within this height [m] of the
-#: table's lower edge (8 steps of the default 5 mm grid: below 6 cm over the pad)
-EXACT_ABOVE_EDGE_M = 0.04
+#: :meth:`CouplingModel.lm_h` takes the exact field for a pose whose drone coil comes within this many grid steps
+#: of the table's lower edge (4 cm at the default 5 mm grid: below 6 cm over the pad; 8 cm at a 10 mm grid, whose
+#: spline is off by up to 2.6e-4 of the hover Lm just above a fixed 4 cm band, <= 1.4e-6 above its 8 cm band)
+EXACT_ABOVE_EDGE_STEPS = 8
 
 MU0 = 4e-7 * math.pi  # vacuum permeability [H/m] (pre-2019 exact value; 2019 SI differs by 5e-10)
 
@@ -477,16 +478,17 @@ class CouplingModel:
         return out
 
     def _near_pad(self, rot, org):
-        """Poses (N, 3, 3), (N, 3) whose drone coil comes lower than :data:`EXACT_ABOVE_EDGE_M` above the table's
-        lower edge while within its radius: there the spline (``mode="mirror"``, a zero-slope edge the field
-        does not have) was off by up to 2 % of the hover Lm (receiver 2.2 cm over the pad; 7e-4 at a 3.4 cm hover,
-        the mission's 3 cm floor) against < 3e-7 from this height up (tests/test_physics_properties.py). The coil's
+        """Poses (N, 3, 3), (N, 3) whose drone coil comes lower than :data:`EXACT_ABOVE_EDGE_STEPS` grid steps above
+        the table's lower edge while within its radius: there the spline (``mode="mirror"``, a zero-slope edge the
+        field does not have) was off by up to 2 % of the hover Lm (receiver 2.2 cm over the pad; 7e-4 at a 3.4 cm
+        hover, the mission's 3 cm floor) against <= 6e-7 from this height up at the default 5 mm grid (offsets up to 0.3 m)
+        (tests/test_physics_properties.py). The coil's
         lowest point: ``dz + min_i(R22 z_i - r_i hypot(R20, R21))``; its nearest radius ``|(dx, dy)| - max r_i``."""
-        _, rho_max, z_min, _ = self._grid
+        step, rho_max, z_min, _ = self._grid
         r, z = np.array(self.rx.radius_m), np.array(self.rx.z_m)
         tilt_r = np.hypot(rot[:, 2, 0], rot[:, 2, 1])
         lowest = org[:, 2] + np.min(rot[:, 2, 2, None] * z[None, :] - tilt_r[:, None] * r[None, :], axis=1)
-        return (lowest < z_min + EXACT_ABOVE_EDGE_M) & (np.hypot(org[:, 0], org[:, 1]) - r.max() <= rho_max)
+        return (lowest < z_min + EXACT_ABOVE_EDGE_STEPS * step) & (np.hypot(org[:, 0], org[:, 1]) - r.max() <= rho_max)
 
     def _poses_key(self, rot, org) -> str:
         """Disk-cache key of ``lm_h`` at these poses: the table's key (geometry, grid, code, versions),

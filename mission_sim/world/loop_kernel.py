@@ -5,8 +5,9 @@ modes of eq. 1 with the SBAR's v2 from the harmonic balance (eq. 9 with its quad
 instantaneous peak (:mod:`wpt_receiver.modal_kernel`: modes per Lm and ZOH per dt cached in the work
 array ``lw``, exact energy integrals), the battery ECM step, the CC-CV charger (BMS), the implicit VL
 solve, the depletion cut, the row layout, pad gating and the fine/coarse windows. Eq. 4's 2x2 ZOH
-(:func:`link_disc`, :func:`link_step`, :func:`link_stored_j`) stays as the envs' link model's
-reference (``tests/test_env_devices.py``); the mission loop does not use it. :class:`~.loop.MissionLoop` (Python) only orchestrates: it packs the
+(:func:`link_step`, :func:`link_stored_j`; :func:`link_disc`, plain Python, takes its coefficients from
+:func:`wpt_receiver.envelope.zoh_discretise`) stays as the envs' link model's reference
+(``tests/test_env_devices.py``); the mission loop does not use it. :class:`~.loop.MissionLoop` (Python) only orchestrates: it packs the
 constants and the state (:mod:`.fastpath`), calls :func:`advance`, hands rows over, calls a Python
 policy when the kernel asks for a duty, draws the sensor noise and words the errors.
 
@@ -99,37 +100,22 @@ def _link_a(c, lm_h):
     return -c.st_r1 / (2 * c.l1), -wlm / (2 * c.l1), wlm / (2 * c.l2), -c.st_r2 / (2 * c.l2)
 
 
-@njit(cache=True)
 def link_disc(c, lm_h, dt_s):
-    """Exact ZOH discretisation of eq. 4 over ``dt_s`` (closed-form 2x2 matrix exponential):
-    ``(Ad 00, 01, 10, 11, Bd 00, 01, 10, 11, A^-1 00, 01, 10, 11, m10, m11, g1, g2)``; ``S2 = int I2 dt
-    = m10 I1 + m11 I2 + g1 V1 + g2 V2`` (eq. 4's reference, the envs' link; the mission uses :mod:`wpt_receiver.modal_kernel`)."""
-    a00, a01, a10, a11 = _link_a(c, lm_h)
-    s = 0.5 * (a00 + a11)
+    """The coefficients :func:`link_step` takes for eq. 4 over ``dt_s``, in plain Python from
+    :func:`wpt_receiver.envelope.zoh_discretise` (the one ZOH of the 2x2 link; this module kept a second, compiled
+    copy with the old real-pole form until 2026-11-27): ``(Ad 00, 01, 10, 11, Bd 00, 01, 10, 11, A^-1 00, 01,
+    10, 11, m10, m11, g1, g2)``; ``S2 = int I2 dt = m10 I1 + m11 I2 + g1 V1 + g2 V2`` (eq. 4's reference, the envs'
+    link; the mission uses :mod:`wpt_receiver.modal_kernel`)."""
+    from wpt_receiver.envelope import zoh_discretise
+    c = np.rec.array(np.asarray(c).reshape(1))[0]      # a record (np.void has no attribute access)
+    a00, a01, a10, a11 = _link_a.py_func(c, lm_h)
+    ad, bd = zoh_discretise(np.array([[a00, a01], [a10, a11]]), np.diag([c.b0, c.b1]), dt_s)
     det = a00 * a11 - a01 * a10
-    q2 = s * s - det
-    q = math.sqrt(abs(q2))
-    qt = q * dt_s
-    e = math.exp(s * dt_s)
-    if qt < 1e-8:
-        ec, es = e, e * dt_s
-    elif q2 < 0:
-        ec, es = e * math.cos(qt), e * math.sin(qt) / q
-    else:  # real poles s -/+ q (both negative): e^{st} cosh(qt) without overflowing cosh for long steps
-        ep, em = math.exp((s + q) * dt_s), math.exp((s - q) * dt_s)
-        ec, es = 0.5 * (ep + em), 0.5 * (ep - em) / q
-    d00, d01 = ec + es * (a00 - s), es * a01
-    d10, d11 = es * a10, ec + es * (a11 - s)
     i00, i01, i10, i11 = a11 / det, -a01 / det, -a10 / det, a00 / det
-    m00 = i00 * (d00 - 1) + i01 * d10       # M = A^-1 (Ad - I); Bd = M B
-    m01 = i00 * d01 + i01 * (d11 - 1)
-    m10 = i10 * (d00 - 1) + i11 * d10
-    m11 = i10 * d01 + i11 * (d11 - 1)
-    bd00, bd10 = m00 * c.b0, m10 * c.b0
-    bd01, bd11 = m01 * c.b1, m11 * c.b1
-    g1 = i10 * (bd00 - c.b0 * dt_s) + i11 * bd10    # g = A^-1 (Bd - B dt)
-    g2 = i10 * bd01 + i11 * (bd11 - c.b1 * dt_s)
-    return (d00, d01, d10, d11, bd00, bd01, bd10, bd11, i00, i01, i10, i11, m10, m11, g1, g2)
+    m10, m11 = bd[1, 0] / c.b0, bd[1, 1] / c.b1          # Bd = M B, M = A^-1 (Ad - I), B diagonal
+    g1 = i10 * (bd[0, 0] - c.b0 * dt_s) + i11 * bd[1, 0]   # g = A^-1 (Bd - B dt)
+    g2 = i10 * bd[0, 1] + i11 * (bd[1, 1] - c.b1 * dt_s)
+    return tuple(float(v) for v in (*ad.ravel(), *bd.ravel(), i00, i01, i10, i11, m10, m11, g1, g2))
 
 
 @njit(cache=True)
