@@ -32,16 +32,19 @@ from .common import (
 _CLI_ONLY_WITH_DEFAULTS = {"imitation_epochs": 60}
 
 
+_TRAIN_DESCRIPTION = ("Train PPO, SAC or TD3 on dronewpt/SbarCharging-v0 or DQN on the discrete (ON-OFF) "
+                      "variant on the batched env adapter; optionally Lagrangian (episode cost against a "
+                      "budget) and / or residual on the model-based controller, from a behaviour clone "
+                      "(--imitate) or with a slow-variable action (--slow-budget). Writes the model zip, "
+                      "its metadata JSON, vecnormalize.pkl, the Monitor CSV (return and cost), evaluation "
+                      "on held-out seeds (best model, curve), checkpoints, TensorBoard logs when "
+                      "installed and a learning curve PNG.")
+
+
 def _add_train(sub):
     from ..train_options import RANGES   # (numpy-free: train()'s ranges, read by its parser too)
     p = sub.add_parser("train", help="train an RL mode-switching policy (stable-baselines3)",
-                       description="Train PPO, SAC or TD3 on dronewpt/SbarCharging-v0 or DQN on the discrete (ON-OFF) "
-                                   "variant on the batched env adapter; optionally Lagrangian (episode cost against a "
-                                   "budget) and / or residual on the model-based controller, from a behaviour clone "
-                                   "(--imitate) or with a slow-variable action (--slow-budget). Writes the model zip, "
-                                   "its metadata JSON, vecnormalize.pkl, the Monitor CSV (return and cost), evaluation "
-                                   "on held-out seeds (best model, curve), checkpoints, TensorBoard logs when "
-                                   "installed and a learning curve PNG.")
+                       description=_TRAIN_DESCRIPTION)
     p.add_argument("--algo", choices=("ppo", "sac", "td3", "dqn"), required=True)
     p.add_argument("--timesteps", type=int, required=True, help="environment steps to train for")
     p.add_argument("--out", type=path_arg("--out"), required=True, help="output folder")
