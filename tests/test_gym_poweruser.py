@@ -87,6 +87,27 @@ def test_vector_env_names_a_seed_list_entry_that_is_not_a_seed(seed, text):
         venv.reset(seed=seed)
 
 
+@pytest.mark.parametrize("seed,text", [(True, "seed=True"), (1.5, r"seed=1\.5"), (-1, "seed=-1"), (2**32, "seed=4294967296"),
+                                       (2**32 - 2, "seed=4294967294")])
+def test_vector_env_checks_a_scalar_seed_as_a_seed_list(seed, text):
+    """A scalar seed had none of the list form's checks: True was seed 1, 2**32 passed (its list form refused), 2**32 - 2
+    gave sub-environment seeds above SEED_RANGE; now its seeds ``seed .. seed + num_envs - 1`` must all be seeds."""
+    venv = SbarChargingVectorEnv(3, config=SHORT["envelope"])
+    with pytest.raises(ValueError, match=text + r" is invalid; valid range: integer 0\.\.4294967293 \(sub-environment seeds "
+                                                r"go up to seed \+ num_envs - 1, num_envs=3\)"):
+        venv.reset(seed=seed)
+    top = 2**32 - 3   # the last seed of three: the list form's seeds
+    np.testing.assert_array_equal(venv.reset(seed=top)[0], venv.reset(seed=[top, top + 1, top + 2])[0])
+
+
+def test_vector_env_takes_a_numpy_integer_seed():
+    """``reset(seed=np.int64(3))`` raised gymnasium's 'Seed must be a python integer'; now seed 3."""
+    venv = SbarChargingVectorEnv(3, config=SHORT["envelope"])
+    want = venv.reset(seed=3)[0]
+    np.testing.assert_array_equal(venv.reset(seed=np.int64(3))[0], want)
+    np.testing.assert_array_equal(venv.reset(seed=np.uint32(3))[0], want)
+
+
 @pytest.mark.parametrize("make", [lambda h: SbarChargingEnv(history=h), lambda h: SbarChargingVectorEnv(2, history=h)])
 def test_history_true_is_refused(make):
     """``history=True`` was one frame, silently (as a bool is refused everywhere a number is asked for)."""
