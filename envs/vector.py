@@ -249,6 +249,8 @@ class SbarChargingVectorEnv(VectorEnv):
             raise ValueError(f"restart indices {shown(idx)} are invalid; valid: distinct integers 0..{self.num_envs - 1} "
                              "(for a mask m: np.flatnonzero(m))")
         idx = np.asarray(given, dtype=np.int64).reshape(-1)
+        if not self._started:   # (no generators yet: an AttributeError on NoneType)
+            raise _before_reset("restart")
         if idx.size == 0:   # nothing to start (the plans of no window are not built)
             return np.empty((0,) + self.single_observation_space.shape, np.float32)
         n = self.num_envs
@@ -303,8 +305,7 @@ class SbarChargingVectorEnv(VectorEnv):
             raise ValueError(f"options['reset_mask']={shown(mask)} is invalid; valid: a numpy bool array of shape "
                              f"({n},) with at least one True")
         if not self._started:
-            raise ValueError("options['reset_mask'] is invalid before the first reset; valid: a reset of every window "
-                             "first")
+            raise _before_reset("options['reset_mask']")
         return options or None, mask
 
     def step(self, actions):
@@ -427,6 +428,11 @@ def _getters():
 
 #: the action dtypes the compiled duty map takes as they are (native byte order)
 _KERNEL_FLOATS = (np.dtype(np.float64), np.dtype(np.float32))
+
+
+def _before_reset(what: str) -> ValueError:
+    """The one error of what needs a reset of every window first (a partial reset, ``restart``)."""
+    return ValueError(f"{what} is invalid before the first reset; valid: a reset of every window first")
 
 
 def _numbers(actions) -> np.ndarray:

@@ -231,6 +231,15 @@ def test_a_reset_mask_that_is_not_one_bool_per_window_is_named(mask, text):
         venv.reset(options={"reset_mask": mask})
 
 
+def test_restart_before_the_first_reset_is_named_as_a_partial_reset():
+    """``restart([0])`` before any reset raised ``AttributeError: 'NoneType' object ...``; now the partial reset's line."""
+    venv = SbarChargingVectorEnv(3, config=SHORT["envelope"])
+    with pytest.raises(ValueError, match=r"^restart is invalid before the first reset; valid: a reset of every window first$"):
+        venv.restart([0])
+    venv.reset(seed=0)
+    assert venv.restart([0]).shape == (1, venv.single_observation_space.shape[0])
+
+
 @pytest.mark.parametrize("dtype", [np.float16, ">f8", np.longdouble])
 def test_vector_env_takes_float_actions_of_any_precision(dtype):
     """float16, big-endian or long-double actions (a policy's half-precision output, an array read from a file) went
