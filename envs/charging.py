@@ -17,7 +17,7 @@ from .modal_plant import single_plant
 from .parts import SingleObjective, SingleObservation, alias_parts
 from .peaks import PeakLookup
 from .render import draw_envelope
-from .scenario import ScenarioPart, get_scenario
+from .scenario import ENV_SCENARIO, ScenarioPart, get_scenario
 from .vector import Parts
 
 __all__ = ["SbarChargingEnv", "SbarChargingDiscreteEnv"]
@@ -168,10 +168,11 @@ class SbarChargingEnv(gym.Env):
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
+    scenario = ENV_SCENARIO
 
     def __init__(self, scenario="nominal", render_mode: str | None = None, config: EnvConfig | dict | None = None,
                  compiled: bool | None = None, history: int = 1):
-        self.scenario = get_scenario(scenario)
+        scenario = get_scenario(scenario)
         self.config = as_config(config)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode={render_mode!r} is invalid; valid values: None, 'rgb_array'")
@@ -194,7 +195,7 @@ class SbarChargingEnv(gym.Env):
         self._steps = np.zeros((self._T + 1, 2))
         plant = single_plant(c, self._compiled)
         observation = SingleObservation(c, self._peak, self._compiled, self.history)
-        self.parts = Parts(ScenarioPart(self.scenario, self._T, self._dt, None, None, compiled=self._compiled),
+        self.parts = Parts(ScenarioPart(scenario, self._T, self._dt, None, None, compiled=self._compiled),
                            plant, SingleObjective(c, plant), observation)
         self._share_steps()
         # the compiled step's constants, each part's by name, then the observation map and the peak table

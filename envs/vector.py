@@ -45,7 +45,7 @@ from .layout import INFO
 from .modal_plant import vector_plant
 from .parts import ObjectivePart, ObservationPart, alias_parts
 from .peaks import PeakLookup
-from .scenario import ScenarioPart, get_scenario
+from .scenario import ENV_SCENARIO, ScenarioPart, get_scenario
 
 __all__ = ["SbarChargingVectorEnv", "SbarChargingDiscreteVectorEnv", "Parts"]
 
@@ -119,7 +119,7 @@ class SbarChargingVectorEnv(VectorEnv):
         self.num_envs = int(num_envs)
         self._action_shapes = ((self.num_envs, 1), (self.num_envs,))   # what step takes (_duty)
         self.render_mode = None
-        self.scenario = get_scenario(scenario)
+        scenario = get_scenario(scenario)
         self.config = c = as_config(config)
         _check_memory(self.num_envs, c.n_steps, c.link_model)
         self.history = history
@@ -130,9 +130,11 @@ class SbarChargingVectorEnv(VectorEnv):
         self.num_threads = _num_threads(num_threads)
         self._threads_auto = num_threads is None
         self._compiled = compiled is None or bool(compiled)
-        self._alloc(c)
+        self._alloc(c, scenario)
 
-    def _alloc(self, c: EnvConfig):
+    scenario = ENV_SCENARIO
+
+    def _alloc(self, c: EnvConfig, scenario):
         """The parts (:mod:`envs.parts`) and the step's constants (named slots: :mod:`envs.layout`)."""
         n, T = self.num_envs, c.n_steps
         self._T, self._M, self._dt = T, c.slow_every, c.dt_s
@@ -143,7 +145,7 @@ class SbarChargingVectorEnv(VectorEnv):
         # the compiled duty map looked up once (not per step); uncompiled: per call (tests swap the source)
         self._duty_kernel = kernel_function("duty_kernel") if self._compiled else None
         # per-step data stored step-major (T, n): a step reads one contiguous row across the envs
-        self.parts = Parts(ScenarioPart(self.scenario, T, c.dt_s, np.zeros((T + 1, n)), np.zeros((T, n)),
+        self.parts = Parts(ScenarioPart(scenario, T, c.dt_s, np.zeros((T + 1, n)), np.zeros((T, n)),
                                         self._fill if self._compiled else None,
                                         self._reset_chunks if self._compiled else None, self._compiled),
                            vector_plant(c, n, self._compiled), ObjectivePart(c, n),

@@ -194,6 +194,36 @@ def test_a_reset_options_scenario_holds_for_the_windows_that_reset_starts_as_syn
         np.testing.assert_array_equal(ours.step(x)[0], dummy.step(x)[0])
 
 
+def test_an_assigned_scenario_is_the_one_later_resets_and_autoresets_start():
+    """``env.scenario = ...`` (SB3's ``set_attr``, a curriculum) was stored and ignored: the windows went on with the
+    constructor's scenario. Now it sets the scenario part's default: resets without options, autoresets and
+    ``restart`` start it, as an env built with it; a bad name is the constructor's message."""
+    from envs.sb3_vec import SbarSB3VecEnv
+    cfg = SHORT["envelope"]
+    acts = _actions(2 * cfg.n_steps + 3, (3, 1))
+    got, want = SbarChargingVectorEnv(3, "nominal", cfg), SbarChargingVectorEnv(3, "battery", cfg)
+    got.reset(seed=1)
+    got.scenario = "battery"
+    assert got.scenario is want.scenario
+    for a, b in zip(got.reset(seed=2), want.reset(seed=2)):
+        assert _same(a, b)
+    for x in acts:   # through two autoresets
+        assert _same(got.step(x), want.step(x))
+    np.testing.assert_array_equal(got.restart([1]), want.restart([1]))
+    with pytest.raises(ValueError, match=r"^scenario='bogus' is invalid; valid values: nominal, "):
+        got.scenario = "bogus"
+    assert got.scenario is want.scenario
+    ours, theirs = SbarSB3VecEnv(3, "nominal", cfg), SbarSB3VecEnv(3, "battery", cfg)   # SB3's set_attr forwards it
+    ours.set_attr("scenario", "battery")
+    ours.seed(5), theirs.seed(5)
+    np.testing.assert_array_equal(ours.reset(), theirs.reset())
+    for x in acts:
+        assert _same(ours.step(x), theirs.step(x))
+    single = SbarChargingEnv("nominal", config=cfg)   # the single env's too (gymnasium's set_attr)
+    single.scenario = {"base": "battery"}
+    assert _same(single.reset(seed=3), SbarChargingEnv("battery", config=cfg).reset(seed=3))
+
+
 @pytest.mark.parametrize("history", [1, 3])
 def test_a_partial_reset_with_reset_mask_is_sync_vector_envs(history):
     """gymnasium 1.x's partial reset, ``reset(options={"reset_mask": m})`` (SyncVectorEnv, AsyncVectorEnv and the
