@@ -106,7 +106,9 @@ class SbarChargingEnv(gym.Env):
     Floats (``reached_short_mode`` a bool), the same keys after ``reset`` (at t = 0, with ``scenario`` and
     ``t_stop_s`` besides) and after every ``step`` (the step's end); a vector env's are arrays (num_envs,), its
     ``reset`` info with ``t_stop_s`` besides (no ``scenario``: the scenario of the windows it started is
-    ``env.parts.scenario.current``):
+    ``env.parts.scenario.current``). After a partial reset (``options={"reset_mask": m}``) only the info rows where
+    ``m`` is True are meaningful (a fresh reset's); the others are not (neither gymnasium ``SyncVectorEnv``'s zeros
+    with a ``_key`` mask nor the last step's values):
 
     | Key                  | Unit | Meaning                                                                        |
     |----------------------|------|--------------------------------------------------------------------------------|

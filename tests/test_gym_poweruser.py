@@ -249,6 +249,27 @@ def test_a_partial_reset_with_reset_mask_is_sync_vector_envs(history):
             np.testing.assert_array_equal(info["soc"][m], info_s["soc"][m])
 
 
+def test_a_partial_reset_keeps_the_others_observations_and_gives_a_fresh_resets_info_where_the_mask_is_true():
+    """What docs/envs.md ("Options") and the Info docstring promise of a partial reset: the windows outside the mask keep
+    their last observation, and the info rows inside it are a fresh reset's (the rows outside are documented as not
+    meaningful)."""
+    cfg = SHORT["envelope"]
+    doc = " ".join(SbarChargingEnv.__doc__.split())
+    assert "only the info rows where ``m`` is True are meaningful" in doc
+    venv, fresh = SbarChargingVectorEnv(3, "random", cfg), SbarChargingVectorEnv(3, "random", cfg)
+    venv.reset(seed=1)
+    for x in _actions(5, (3, 1)):
+        last = venv.step(x)[0].copy()
+    m = np.array([False, True, False])
+    obs, info = venv.reset(seed=[None, 8, None], options={"reset_mask": m, "scenario": "windy"})
+    obs0, info0 = fresh.reset(seed=[7, 8, 9], options={"scenario": "windy"})
+    np.testing.assert_array_equal(obs[~m], last[~m])
+    np.testing.assert_array_equal(obs[m], obs0[m])
+    assert sorted(info) == sorted(info0)
+    for key in info:
+        np.testing.assert_array_equal(info[key][m], info0[key][m], err_msg=key)
+
+
 @pytest.mark.parametrize("mask,text", [(np.array([1, 0, 1]), "dtype int64"), ([True, False, True], r"\[True, False, True\]"),
                                        (np.zeros(3, bool), "dtype bool"), (np.ones(2, bool), r"shape \(2,\)")])
 def test_a_reset_mask_that_is_not_one_bool_per_window_is_named(mask, text):
