@@ -8,7 +8,7 @@ import numpy as np
 import gymnasium as gym
 from gymnasium import spaces
 
-from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
+from mission_sim.contract import OBS_DIM, PolicyContext, check_history, history_obs_dim
 from mission_sim.validation import real_array, shown
 
 from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config
@@ -179,7 +179,7 @@ class SbarChargingEnv(gym.Env):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode={render_mode!r} is invalid; valid values: None, 'rgb_array'")
         self.render_mode = render_mode
-        self.history = history
+        self.history = history = check_history(history)   # (2.0 was stored as a float)
         self.observation_space = spaces.Box(-1.0, 1.0, (history_obs_dim(history),), np.float32)
         self.action_space = self._make_action_space()
         c = self.config

@@ -37,7 +37,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
+from mission_sim.contract import OBS_DIM, PolicyContext, check_history, history_obs_dim
 from mission_sim.validation import SEED_RANGE, Range, check_number, real_array, seed_range, shown
 
 from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config, kernel_from_ref, kernel_function, kernel_ref
@@ -122,7 +122,7 @@ class SbarChargingVectorEnv(VectorEnv):
         scenario = get_scenario(scenario)
         self.config = c = as_config(config)
         _check_memory(self.num_envs, c.n_steps, c.link_model)
-        self.history = history
+        self.history = history = check_history(history)   # (2.0 was stored as a float)
         self.single_observation_space = spaces.Box(-1.0, 1.0, (history_obs_dim(history),), np.float32)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.single_action_space = self._make_action_space()

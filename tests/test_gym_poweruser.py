@@ -352,6 +352,15 @@ def test_an_env_unpickled_in_another_process_steps_with_the_cached_kernels(make)
     assert twin.unwrapped.parts.plant.kernel is env.unwrapped.parts.plant.kernel
 
 
+def test_history_is_stored_as_the_checked_int_and_its_range_exported():
+    """``history=2.0`` passed and was stored as a float; ``HISTORY_RANGE`` was not in the contract's ``__all__``."""
+    import mission_sim.contract as contract
+    assert {"HISTORY_RANGE", "check_history"} <= set(contract.__all__)
+    for env in (SbarChargingEnv(config=SHORT["envelope"], history=2.0),
+                SbarChargingVectorEnv(2, config=SHORT["envelope"], history=np.int64(2))):
+        assert type(env.history) is int and env.history == 2
+
+
 def test_the_docstring_names_the_keys_a_reset_info_has_besides_a_steps():
     """The Info section said every reset info has ``scenario`` and ``t_stop_s`` besides the step's keys; the vector
     env's has ``t_stop_s`` only."""
