@@ -361,6 +361,26 @@ def test_history_is_stored_as_the_checked_int_and_its_range_exported():
         assert type(env.history) is int and env.history == 2
 
 
+def test_sb3_adapter_passes_none_seed_entries_on_as_dummy_vec_env():
+    """The SB3 adapter's reset made a None seed entry seed 0; DummyVecEnv resets that sub-env with ``seed=None`` (its
+    generator goes on), and so does the vector env now."""
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from envs.sb3_vec import SbarSB3VecEnv
+    cfg = SHORT["envelope"]
+    ours, dummy = SbarSB3VecEnv(3, "random", cfg), make_vec_env(envs.ENV_ID, 3, env_kwargs={"config": cfg,
+                                                                                           "scenario": "random"})
+    acts = _actions(cfg.n_steps + 3, (3, 1))
+    for vec in (ours, dummy):
+        vec.seed(3)
+    np.testing.assert_array_equal(ours.reset(), dummy.reset())
+    for vec in (ours, dummy):
+        vec._seeds = [11, None, 13]   # (VecEnv.seed sets every entry; a user's or a subclass's list may hold None)
+    np.testing.assert_array_equal(ours.reset(), dummy.reset())
+    for x in acts:
+        np.testing.assert_array_equal(ours.step(x)[0], dummy.step(x)[0])
+
+
 def test_the_docstring_names_the_keys_a_reset_info_has_besides_a_steps():
     """The Info section said every reset info has ``scenario`` and ``t_stop_s`` besides the step's keys; the vector
     env's has ``t_stop_s`` only."""
