@@ -8,7 +8,7 @@ import numpy as np
 import gymnasium as gym
 from gymnasium import spaces
 
-from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
+from mission_sim.contract import OBS_DIM, PolicyContext, check_history, history_obs_dim
 from mission_sim.validation import real_array, shown
 
 from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config
@@ -17,7 +17,7 @@ from .modal_plant import single_plant
 from .parts import SingleObjective, SingleObservation, alias_parts
 from .peaks import PeakLookup
 from .render import draw_envelope
-from .scenario import ScenarioPart, get_scenario
+from .scenario import ENV_SCENARIO, ScenarioPart, get_scenario
 from .vector import Parts
 
 __all__ = ["SbarChargingEnv", "SbarChargingDiscreteEnv"]
@@ -106,7 +106,9 @@ class SbarChargingEnv(gym.Env):
     Floats (``reached_short_mode`` a bool), the same keys after ``reset`` (at t = 0, with ``scenario`` and
     ``t_stop_s`` besides) and after every ``step`` (the step's end); a vector env's are arrays (num_envs,), its
     ``reset`` info with ``t_stop_s`` besides (no ``scenario``: the scenario of the windows it started is
-    ``env.parts.scenario.current``):
+    ``env.parts.scenario.current``). After a partial reset (``options={"reset_mask": m}``) only the info rows where
+    ``m`` is True are meaningful (a fresh reset's); the others are not (neither gymnasium ``SyncVectorEnv``'s zeros
+    with a ``_key`` mask nor the last step's values):
 
     | Key                  | Unit | Meaning                                                                        |
     |----------------------|------|--------------------------------------------------------------------------------|
@@ -168,15 +170,16 @@ class SbarChargingEnv(gym.Env):
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
+    scenario = ENV_SCENARIO
 
     def __init__(self, scenario="nominal", render_mode: str | None = None, config: EnvConfig | dict | None = None,
                  compiled: bool | None = None, history: int = 1):
-        self.scenario = get_scenario(scenario)
+        scenario = get_scenario(scenario)
         self.config = as_config(config)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode={render_mode!r} is invalid; valid values: None, 'rgb_array'")
         self.render_mode = render_mode
-        self.history = history
+        self.history = history = check_history(history)   # (2.0 was stored as a float)
         self.observation_space = spaces.Box(-1.0, 1.0, (history_obs_dim(history),), np.float32)
         self.action_space = self._make_action_space()
         c = self.config
@@ -194,7 +197,7 @@ class SbarChargingEnv(gym.Env):
         self._steps = np.zeros((self._T + 1, 2))
         plant = single_plant(c, self._compiled)
         observation = SingleObservation(c, self._peak, self._compiled, self.history)
-        self.parts = Parts(ScenarioPart(self.scenario, self._T, self._dt, None, None, compiled=self._compiled),
+        self.parts = Parts(ScenarioPart(scenario, self._T, self._dt, None, None, compiled=self._compiled),
                            plant, SingleObjective(c, plant), observation)
         self._share_steps()
         # the compiled step's constants, each part's by name, then the observation map and the peak table

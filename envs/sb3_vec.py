@@ -71,7 +71,8 @@ class SbarSB3VecEnv(VecEnv):
     def reset(self):
         if self.reset_seed is not None:
             self.seed(self.reset_seed)
-        seeds = None if all(s is None for s in self._seeds) else [0 if s is None else int(s) for s in self._seeds]
+        # one per sub-env, None: its generator goes on (DummyVecEnv's env.reset(seed=None); was seed 0)
+        seeds = None if all(s is None for s in self._seeds) else list(self._seeds)
         opts = self._options[0] or None
         obs, _ = self.venv.reset(seed=seeds, options=opts)
         self._reset_seeds()

@@ -452,3 +452,18 @@ class ScenarioPart:
     def _fill_chunks(self, rngs, u, noise, scale) -> bool:
         """:func:`draw_episodes`' ``fill``: the part's ``fill`` in the current reset's chunks (was a lambda built per reset)."""
         return self.fill(rngs, u, noise, scale, self._chunks)
+
+
+def _env_scenario(env) -> Scenario:
+    return env.parts.scenario.default
+
+
+def _set_env_scenario(env, scenario) -> None:
+    env.parts.scenario.default = get_scenario(scenario)
+
+
+#: an env's ``scenario``: its scenario part's default, the scenario its resets without options, autoresets and
+#: ``restart`` start; assigning it (SB3's ``set_attr("scenario", ...)``, gymnasium's ``set_attr``, a curriculum) sets
+#: that default for every later start (a name, a :class:`Scenario` or a dict, as the constructor's: :func:`get_scenario`)
+ENV_SCENARIO = property(_env_scenario, _set_env_scenario, doc="The scenario the env's resets without options start "
+                        "(its scenario part's default); assignable: a name, a Scenario or a dict, as the constructor's.")

@@ -37,15 +37,15 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from mission_sim.contract import OBS_DIM, PolicyContext, history_obs_dim
-from mission_sim.validation import SEED_RANGE, Range, check_number, real_array, shown
+from mission_sim.contract import OBS_DIM, PolicyContext, check_history, history_obs_dim
+from mission_sim.validation import SEED_RANGE, Range, check_number, real_array, seed_range, shown
 
 from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config, kernel_from_ref, kernel_function, kernel_ref
 from .layout import INFO
 from .modal_plant import vector_plant
 from .parts import ObjectivePart, ObservationPart, alias_parts
 from .peaks import PeakLookup
-from .scenario import ScenarioPart, get_scenario
+from .scenario import ENV_SCENARIO, ScenarioPart, get_scenario
 
 __all__ = ["SbarChargingVectorEnv", "SbarChargingDiscreteVectorEnv", "Parts"]
 
@@ -119,10 +119,10 @@ class SbarChargingVectorEnv(VectorEnv):
         self.num_envs = int(num_envs)
         self._action_shapes = ((self.num_envs, 1), (self.num_envs,))   # what step takes (_duty)
         self.render_mode = None
-        self.scenario = get_scenario(scenario)
+        scenario = get_scenario(scenario)
         self.config = c = as_config(config)
         _check_memory(self.num_envs, c.n_steps, c.link_model)
-        self.history = history
+        self.history = history = check_history(history)   # (2.0 was stored as a float)
         self.single_observation_space = spaces.Box(-1.0, 1.0, (history_obs_dim(history),), np.float32)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.single_action_space = self._make_action_space()
@@ -130,9 +130,11 @@ class SbarChargingVectorEnv(VectorEnv):
         self.num_threads = _num_threads(num_threads)
         self._threads_auto = num_threads is None
         self._compiled = compiled is None or bool(compiled)
-        self._alloc(c)
+        self._alloc(c, scenario)
 
-    def _alloc(self, c: EnvConfig):
+    scenario = ENV_SCENARIO
+
+    def _alloc(self, c: EnvConfig, scenario):
         """The parts (:mod:`envs.parts`) and the step's constants (named slots: :mod:`envs.layout`)."""
         n, T = self.num_envs, c.n_steps
         self._T, self._M, self._dt = T, c.slow_every, c.dt_s
@@ -143,7 +145,7 @@ class SbarChargingVectorEnv(VectorEnv):
         # the compiled duty map looked up once (not per step); uncompiled: per call (tests swap the source)
         self._duty_kernel = kernel_function("duty_kernel") if self._compiled else None
         # per-step data stored step-major (T, n): a step reads one contiguous row across the envs
-        self.parts = Parts(ScenarioPart(self.scenario, T, c.dt_s, np.zeros((T + 1, n)), np.zeros((T, n)),
+        self.parts = Parts(ScenarioPart(scenario, T, c.dt_s, np.zeros((T + 1, n)), np.zeros((T, n)),
                                         self._fill if self._compiled else None,
                                         self._reset_chunks if self._compiled else None, self._compiled),
                            vector_plant(c, n, self._compiled), ObjectivePart(c, n),
@@ -249,6 +251,8 @@ class SbarChargingVectorEnv(VectorEnv):
             raise ValueError(f"restart indices {shown(idx)} are invalid; valid: distinct integers 0..{self.num_envs - 1} "
                              "(for a mask m: np.flatnonzero(m))")
         idx = np.asarray(given, dtype=np.int64).reshape(-1)
+        if not self._started:   # (no generators yet: an AttributeError on NoneType)
+            raise _before_reset("restart")
         if idx.size == 0:   # nothing to start (the plans of no window are not built)
             return np.empty((0,) + self.single_observation_space.shape, np.float32)
         n = self.num_envs
@@ -265,9 +269,12 @@ class SbarChargingVectorEnv(VectorEnv):
 
     def reset(self, *, seed=None, options: dict | None = None):
         n = self.num_envs
-        if seed is None or np.ndim(seed) == 0:
+        if seed is None or np.ndim(seed) == 0:   # seed .. seed + n - 1, all seeds (a numpy int passed on as an int)
+            if seed is not None:
+                seed = check_number("seed", seed, seed_range(n),
+                                    f" (sub-environment seeds go up to seed + num_envs - 1, num_envs={n})" if n > 1 else "")
             super().reset(seed=seed)
-            seeds = [None] * n if seed is None else [int(seed) + i for i in range(n)]
+            seeds = [None] * n if seed is None else [seed + i for i in range(n)]
         else:   # one per sub-environment; None: that one's generator goes on (as SyncVectorEnv's env.reset(seed=None))
             seeds = [None if s is None else check_number(f"seed[{i}]", s, SEED_RANGE) for i, s in enumerate(seed)]
             if len(seeds) != n:
@@ -300,8 +307,7 @@ class SbarChargingVectorEnv(VectorEnv):
             raise ValueError(f"options['reset_mask']={shown(mask)} is invalid; valid: a numpy bool array of shape "
                              f"({n},) with at least one True")
         if not self._started:
-            raise ValueError("options['reset_mask'] is invalid before the first reset; valid: a reset of every window "
-                             "first")
+            raise _before_reset("options['reset_mask']")
         return options or None, mask
 
     def step(self, actions):
@@ -424,6 +430,11 @@ def _getters():
 
 #: the action dtypes the compiled duty map takes as they are (native byte order)
 _KERNEL_FLOATS = (np.dtype(np.float64), np.dtype(np.float32))
+
+
+def _before_reset(what: str) -> ValueError:
+    """The one error of what needs a reset of every window first (a partial reset, ``restart``)."""
+    return ValueError(f"{what} is invalid before the first reset; valid: a reset of every window first")
 
 
 def _numbers(actions) -> np.ndarray:

@@ -58,7 +58,7 @@ from .validation import Range, check_number
 
 __all__ = ["ObsField", "OBS_FIELDS", "OBS_DIM", "OBS_INDEX", "normalise_obs", "normalise_obs_row", "denormalise_obs",
            "denormalise_obs_field", "action_to_duty", "duty_to_action", "PolicyContext", "Policy",
-           "POLICY_KERNEL_SIGNATURE", "MAX_HISTORY", "history_obs_dim", "LINK_MODELS", "CONTROL_PERIOD_RANGE"]
+           "POLICY_KERNEL_SIGNATURE", "MAX_HISTORY", "HISTORY_RANGE", "check_history", "history_obs_dim", "LINK_MODELS", "CONTROL_PERIOD_RANGE"]
 
 #: the plant's link models a policy may run on (:attr:`PolicyContext.link_model`, ``envs.EnvConfig.link_model``,
 #: ``--link``): eq. 4's envelope, the exact modes (the mission's link, the envs' default since 2026-11-26). The one list.
@@ -103,9 +103,15 @@ MAX_HISTORY = 32
 HISTORY_RANGE = Range(1, MAX_HISTORY, integer=True)
 
 
+def check_history(history) -> int:
+    """``history`` (frames stacked) as an int; ValueError out of 1..MAX_HISTORY (True was one frame, 2.0 stored as a
+    float)."""
+    return check_number("history", history, HISTORY_RANGE)
+
+
 def history_obs_dim(history: int) -> int:
     """Width of a stacked observation of ``history`` frames (``history * OBS_DIM``); ValueError out of 1..MAX_HISTORY."""
-    return check_number("history", history, HISTORY_RANGE) * OBS_DIM   # (True was one frame)
+    return check_history(history) * OBS_DIM
 
 
 _LO_INV = tuple(zip(_LO.tolist(), _INV_SPAN.tolist()))

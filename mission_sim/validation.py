@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 __all__ = ["check_positive", "read_toml_file", "Range", "check_range", "check_regular_file", "shown", "real_array",
-           "real_number", "check_number", "check_number_fields", "YAML_NUMBER_NOTE", "SEED_RANGE"]
+           "real_number", "check_number", "check_number_fields", "YAML_NUMBER_NOTE", "SEED_RANGE", "seed_range"]
 
 
 @dataclass(frozen=True)
@@ -66,6 +66,12 @@ ALT_RANGE = Range(0.0, 5000.0, "m above home")
 #: a random seed: what numpy's legacy seeding accepts (``--seed``, ``train(seed=)``, ``compare``'s, an SB3 adapter's
 #: ``reset_seed``; one range for all)
 SEED_RANGE = Range(0, 2**32 - 1, integer=True)
+
+
+def seed_range(count: int) -> Range:
+    """The seeds whose run of ``count`` seeds ``seed .. seed + count - 1`` stays in :data:`SEED_RANGE` (``--seed``,
+    ``compare``'s episodes, a vector env's sub-environments)."""
+    return Range(SEED_RANGE.lo, SEED_RANGE.hi + 1 - count, integer=True)
 
 YAML_NUMBER_NOTE = "a number, not a string (YAML 1.1 reads 1e-4 as a string: write 1.0e-4)"
 

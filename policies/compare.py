@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mission_sim.files import atomic_output
-from mission_sim.validation import SEED_RANGE, Range, check_number
+from mission_sim.validation import Range, check_number, seed_range
 
 from .shipped import OTHER_PLAYERS, PRETRAINED_DIR, SHIPPED, model_of
 from .stats import mean_ci, seed_ci
@@ -107,11 +107,6 @@ def _rollout(pol, venv, seeds):
 
 #: episodes per scenario of :func:`compare` / :func:`run_policy` and ``dronewpt compare --episodes`` (one table)
 EPISODES = Range(1, 100_000, integer=True)
-
-
-def seed_range(episodes: int) -> Range:
-    """The seeds whose episode seeds ``seed .. seed + episodes - 1`` stay in :data:`SEED_RANGE` (``--seed`` too)."""
-    return Range(SEED_RANGE.lo, SEED_RANGE.hi + 1 - episodes, integer=True)
 
 
 def check_episodes(episodes, seed) -> tuple[int, int]:

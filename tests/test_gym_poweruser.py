@@ -87,6 +87,27 @@ def test_vector_env_names_a_seed_list_entry_that_is_not_a_seed(seed, text):
         venv.reset(seed=seed)
 
 
+@pytest.mark.parametrize("seed,text", [(True, "seed=True"), (1.5, r"seed=1\.5"), (-1, "seed=-1"), (2**32, "seed=4294967296"),
+                                       (2**32 - 2, "seed=4294967294")])
+def test_vector_env_checks_a_scalar_seed_as_a_seed_list(seed, text):
+    """A scalar seed had none of the list form's checks: True was seed 1, 2**32 passed (its list form refused), 2**32 - 2
+    gave sub-environment seeds above SEED_RANGE; now its seeds ``seed .. seed + num_envs - 1`` must all be seeds."""
+    venv = SbarChargingVectorEnv(3, config=SHORT["envelope"])
+    with pytest.raises(ValueError, match=text + r" is invalid; valid range: integer 0\.\.4294967293 \(sub-environment seeds "
+                                                r"go up to seed \+ num_envs - 1, num_envs=3\)"):
+        venv.reset(seed=seed)
+    top = 2**32 - 3   # the last seed of three: the list form's seeds
+    np.testing.assert_array_equal(venv.reset(seed=top)[0], venv.reset(seed=[top, top + 1, top + 2])[0])
+
+
+def test_vector_env_takes_a_numpy_integer_seed():
+    """``reset(seed=np.int64(3))`` raised gymnasium's 'Seed must be a python integer'; now seed 3."""
+    venv = SbarChargingVectorEnv(3, config=SHORT["envelope"])
+    want = venv.reset(seed=3)[0]
+    np.testing.assert_array_equal(venv.reset(seed=np.int64(3))[0], want)
+    np.testing.assert_array_equal(venv.reset(seed=np.uint32(3))[0], want)
+
+
 @pytest.mark.parametrize("make", [lambda h: SbarChargingEnv(history=h), lambda h: SbarChargingVectorEnv(2, history=h)])
 def test_history_true_is_refused(make):
     """``history=True`` was one frame, silently (as a bool is refused everywhere a number is asked for)."""
@@ -173,6 +194,36 @@ def test_a_reset_options_scenario_holds_for_the_windows_that_reset_starts_as_syn
         np.testing.assert_array_equal(ours.step(x)[0], dummy.step(x)[0])
 
 
+def test_an_assigned_scenario_is_the_one_later_resets_and_autoresets_start():
+    """``env.scenario = ...`` (SB3's ``set_attr``, a curriculum) was stored and ignored: the windows went on with the
+    constructor's scenario. Now it sets the scenario part's default: resets without options, autoresets and
+    ``restart`` start it, as an env built with it; a bad name is the constructor's message."""
+    from envs.sb3_vec import SbarSB3VecEnv
+    cfg = SHORT["envelope"]
+    acts = _actions(2 * cfg.n_steps + 3, (3, 1))
+    got, want = SbarChargingVectorEnv(3, "nominal", cfg), SbarChargingVectorEnv(3, "battery", cfg)
+    got.reset(seed=1)
+    got.scenario = "battery"
+    assert got.scenario is want.scenario
+    for a, b in zip(got.reset(seed=2), want.reset(seed=2)):
+        assert _same(a, b)
+    for x in acts:   # through two autoresets
+        assert _same(got.step(x), want.step(x))
+    np.testing.assert_array_equal(got.restart([1]), want.restart([1]))
+    with pytest.raises(ValueError, match=r"^scenario='bogus' is invalid; valid values: nominal, "):
+        got.scenario = "bogus"
+    assert got.scenario is want.scenario
+    ours, theirs = SbarSB3VecEnv(3, "nominal", cfg), SbarSB3VecEnv(3, "battery", cfg)   # SB3's set_attr forwards it
+    ours.set_attr("scenario", "battery")
+    ours.seed(5), theirs.seed(5)
+    np.testing.assert_array_equal(ours.reset(), theirs.reset())
+    for x in acts:
+        assert _same(ours.step(x), theirs.step(x))
+    single = SbarChargingEnv("nominal", config=cfg)   # the single env's too (gymnasium's set_attr)
+    single.scenario = {"base": "battery"}
+    assert _same(single.reset(seed=3), SbarChargingEnv("battery", config=cfg).reset(seed=3))
+
+
 @pytest.mark.parametrize("history", [1, 3])
 def test_a_partial_reset_with_reset_mask_is_sync_vector_envs(history):
     """gymnasium 1.x's partial reset, ``reset(options={"reset_mask": m})`` (SyncVectorEnv, AsyncVectorEnv and the
@@ -198,6 +249,27 @@ def test_a_partial_reset_with_reset_mask_is_sync_vector_envs(history):
             np.testing.assert_array_equal(info["soc"][m], info_s["soc"][m])
 
 
+def test_a_partial_reset_keeps_the_others_observations_and_gives_a_fresh_resets_info_where_the_mask_is_true():
+    """What docs/envs.md ("Options") and the Info docstring promise of a partial reset: the windows outside the mask keep
+    their last observation, and the info rows inside it are a fresh reset's (the rows outside are documented as not
+    meaningful)."""
+    cfg = SHORT["envelope"]
+    doc = " ".join(SbarChargingEnv.__doc__.split())
+    assert "only the info rows where ``m`` is True are meaningful" in doc
+    venv, fresh = SbarChargingVectorEnv(3, "random", cfg), SbarChargingVectorEnv(3, "random", cfg)
+    venv.reset(seed=1)
+    for x in _actions(5, (3, 1)):
+        last = venv.step(x)[0].copy()
+    m = np.array([False, True, False])
+    obs, info = venv.reset(seed=[None, 8, None], options={"reset_mask": m, "scenario": "windy"})
+    obs0, info0 = fresh.reset(seed=[7, 8, 9], options={"scenario": "windy"})
+    np.testing.assert_array_equal(obs[~m], last[~m])
+    np.testing.assert_array_equal(obs[m], obs0[m])
+    assert sorted(info) == sorted(info0)
+    for key in info:
+        np.testing.assert_array_equal(info[key][m], info0[key][m], err_msg=key)
+
+
 @pytest.mark.parametrize("mask,text", [(np.array([1, 0, 1]), "dtype int64"), ([True, False, True], r"\[True, False, True\]"),
                                        (np.zeros(3, bool), "dtype bool"), (np.ones(2, bool), r"shape \(2,\)")])
 def test_a_reset_mask_that_is_not_one_bool_per_window_is_named(mask, text):
@@ -208,6 +280,15 @@ def test_a_reset_mask_that_is_not_one_bool_per_window_is_named(mask, text):
     with pytest.raises(ValueError, match=rf"options\['reset_mask'\]=.*{text}.* is invalid; valid: a numpy bool array of "
                                          r"shape \(3,\) with at least one True"):
         venv.reset(options={"reset_mask": mask})
+
+
+def test_restart_before_the_first_reset_is_named_as_a_partial_reset():
+    """``restart([0])`` before any reset raised ``AttributeError: 'NoneType' object ...``; now the partial reset's line."""
+    venv = SbarChargingVectorEnv(3, config=SHORT["envelope"])
+    with pytest.raises(ValueError, match=r"^restart is invalid before the first reset; valid: a reset of every window first$"):
+        venv.restart([0])
+    venv.reset(seed=0)
+    assert venv.restart([0]).shape == (1, venv.single_observation_space.shape[0])
 
 
 @pytest.mark.parametrize("dtype", [np.float16, ">f8", np.longdouble])
@@ -269,6 +350,35 @@ def test_an_env_unpickled_in_another_process_steps_with_the_cached_kernels(make)
     assert out.stdout.split() == [b"True", b"True"]
     twin = pickle.loads(pickle.dumps(env))   # compiled=False: the uncompiled source, by reference too
     assert twin.unwrapped.parts.plant.kernel is env.unwrapped.parts.plant.kernel
+
+
+def test_history_is_stored_as_the_checked_int_and_its_range_exported():
+    """``history=2.0`` passed and was stored as a float; ``HISTORY_RANGE`` was not in the contract's ``__all__``."""
+    import mission_sim.contract as contract
+    assert {"HISTORY_RANGE", "check_history"} <= set(contract.__all__)
+    for env in (SbarChargingEnv(config=SHORT["envelope"], history=2.0),
+                SbarChargingVectorEnv(2, config=SHORT["envelope"], history=np.int64(2))):
+        assert type(env.history) is int and env.history == 2
+
+
+def test_sb3_adapter_passes_none_seed_entries_on_as_dummy_vec_env():
+    """The SB3 adapter's reset made a None seed entry seed 0; DummyVecEnv resets that sub-env with ``seed=None`` (its
+    generator goes on), and so does the vector env now."""
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from envs.sb3_vec import SbarSB3VecEnv
+    cfg = SHORT["envelope"]
+    ours, dummy = SbarSB3VecEnv(3, "random", cfg), make_vec_env(envs.ENV_ID, 3, env_kwargs={"config": cfg,
+                                                                                           "scenario": "random"})
+    acts = _actions(cfg.n_steps + 3, (3, 1))
+    for vec in (ours, dummy):
+        vec.seed(3)
+    np.testing.assert_array_equal(ours.reset(), dummy.reset())
+    for vec in (ours, dummy):
+        vec._seeds = [11, None, 13]   # (VecEnv.seed sets every entry; a user's or a subclass's list may hold None)
+    np.testing.assert_array_equal(ours.reset(), dummy.reset())
+    for x in acts:
+        np.testing.assert_array_equal(ours.step(x)[0], dummy.step(x)[0])
 
 
 def test_the_docstring_names_the_keys_a_reset_info_has_besides_a_steps():

@@ -469,7 +469,7 @@ def test_a_vector_env_too_large_for_the_machine_is_refused_before_it_allocates(n
     fits (the machine's memory set here: 16 GiB)."""
     from envs import vector
     monkeypatch.setattr(vector, "_physical_memory", lambda: 16 * 2**30)
-    monkeypatch.setattr(vector.SbarChargingVectorEnv, "_alloc", lambda self, c: pytest.fail("allocated"))
+    monkeypatch.setattr(vector.SbarChargingVectorEnv, "_alloc", lambda self, c, scenario: pytest.fail("allocated"))
     per = vector.BYTES_PER_ENV_STEP[EnvConfig().link_model] * (EnvConfig().n_steps + 1)
     with pytest.raises(ValueError) as e:
         SbarChargingVectorEnv(n, "random")
@@ -534,7 +534,7 @@ def test_a_large_vector_env_is_not_refused_where_the_machine_memory_is_unknown(u
         monkeypatch.setattr(os, "sysconf", lambda k: -1 if k == "SC_PHYS_PAGES" else sysconf(k))
         assert vector._physical_memory() is None
 
-    def alloc(self, c):
+    def alloc(self, c, scenario):
         raise _Allocating
     monkeypatch.setattr(vector.SbarChargingVectorEnv, "_alloc", alloc)
     for n in (1, 10**7):
