@@ -38,7 +38,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from mission_sim.contract import OBS_DIM, PolicyContext, check_history, history_obs_dim
-from mission_sim.validation import SEED_RANGE, Range, check_number, real_array, seed_range, shown
+from mission_sim.validation import SEED_RANGE, Range, check_first_seed, check_number, real_array, shown
 
 from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config, kernel_from_ref, kernel_function, kernel_ref
 from .layout import INFO
@@ -271,8 +271,7 @@ class SbarChargingVectorEnv(VectorEnv):
         n = self.num_envs
         if seed is None or np.ndim(seed) == 0:   # seed .. seed + n - 1, all seeds (a numpy int passed on as an int)
             if seed is not None:
-                seed = check_number("seed", seed, seed_range(n),
-                                    f" (sub-environment seeds go up to seed + num_envs - 1, num_envs={n})" if n > 1 else "")
+                seed = check_first_seed(seed, n, "sub-environment", "num_envs")
             super().reset(seed=seed)
             seeds = [None] * n if seed is None else [seed + i for i in range(n)]
         else:   # one per sub-environment; None: that one's generator goes on (as SyncVectorEnv's env.reset(seed=None))

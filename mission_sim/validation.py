@@ -11,7 +11,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 __all__ = ["check_positive", "read_toml_file", "Range", "check_range", "check_regular_file", "shown", "real_array",
-           "real_number", "check_number", "check_number_fields", "YAML_NUMBER_NOTE", "SEED_RANGE", "seed_range"]
+           "real_number", "check_number", "check_number_fields", "YAML_NUMBER_NOTE", "SEED_RANGE", "seed_range",
+           "check_first_seed"]
 
 
 @dataclass(frozen=True)
@@ -72,6 +73,13 @@ def seed_range(count: int) -> Range:
     """The seeds whose run of ``count`` seeds ``seed .. seed + count - 1`` stays in :data:`SEED_RANGE` (``--seed``,
     ``compare``'s episodes, a vector env's sub-environments)."""
     return Range(SEED_RANGE.lo, SEED_RANGE.hi + 1 - count, integer=True)
+
+
+def check_first_seed(seed, count: int, runs: str, count_name: str) -> int:
+    """``seed`` as an int when ``seed .. seed + count - 1`` are all seeds (:func:`seed_range`); else one ``ValueError``
+    naming it, with ``runs`` (e.g. ``"episode"``) and ``count_name`` (e.g. ``"episodes"``) when ``count > 1``."""
+    return check_number("seed", seed, seed_range(count),
+                        f" ({runs} seeds go up to seed + {count_name} - 1, {count_name}={count})" if count > 1 else "")
 
 YAML_NUMBER_NOTE = "a number, not a string (YAML 1.1 reads 1e-4 as a string: write 1.0e-4)"
 

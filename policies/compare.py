@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mission_sim.files import atomic_output
-from mission_sim.validation import Range, check_number, seed_range
+from mission_sim.validation import Range, check_first_seed, check_number
 
 from .shipped import OTHER_PLAYERS, PRETRAINED_DIR, SHIPPED, model_of
 from .stats import mean_ci, seed_ci
@@ -114,8 +114,7 @@ def check_episodes(episodes, seed) -> tuple[int, int]:
     seed + episodes - 1`` are whole numbers in 0..2^32-1 (:func:`compare`'s and :func:`run_policies`'); else one
     ``ValueError`` naming the value and its range (``run_policy(..., 0, ...)`` said "num_envs=0", 1.5 ran 1)."""
     n = check_number("episodes", episodes, EPISODES)
-    s = check_number("seed", seed, seed_range(n),
-                     f" (episode seeds go up to seed + episodes - 1, episodes={n})" if n > 1 else "")
+    s = check_first_seed(seed, n, "episode", "episodes")
     return n, s
 
 
@@ -155,26 +154,30 @@ def check_row_labels(policies, train_seeds=None) -> None:
     one of ``policies``, would share a row's slot (the table showed one row's numbers twice); ``ValueError`` naming it.
     A model is the same whatever its spelling (``rl`` and ``rl:policies/pretrained/rl_s0.zip``, another path to the file:
     :func:`policies.shipped.model_of`)."""
-    seen, models = set(), {}
+    seen = set()
     for p in policies:
         if p in seen:
             raise ValueError(f"policies lists {p!r} twice; valid: each policy once")
         seen.add(p)
-        key = _model_file(p)   # (rl beside rl:policies/pretrained/rl_s0.zip: two rows of one model)
-        if key is not None and key in models:
-            raise ValueError(f"policies lists the model {p!r} twice (also as {models[key]!r}); valid: each policy once")
-        models.setdefault(key, p)
+    _each_model_once(policies, "policies lists the model {} twice (also as {}); valid: each policy once")
     for label, specs in (train_seeds or {}).items():
         if label in seen:
             raise ValueError(f"train_seeds label {label!r} is also one of the policies; valid: a label that names no "
                              f"listed policy (the policies: {', '.join(map(str, policies))})")
-        models = {}
-        for sp in specs:   # the same model file twice made "2 seeds" with a zero-width interval
-            key = _model_file(sp)   # (None: a classical policy listed twice, the tests' fixture of a group)
-            if key is not None and key in models:
-                raise ValueError(f"train_seeds {label!r} lists the model {sp!r} twice (also as {models[key]!r}); valid: "
-                                 "each model file once (a row over N seeds needs N models)")
-            models.setdefault(key, sp)
+        # (the same model file twice made "2 seeds" with a zero-width interval)
+        _each_model_once(specs, f"train_seeds {label!r} lists the model {{}} twice (also as {{}}); valid: each model "
+                                "file once (a row over N seeds needs N models)")
+
+
+def _each_model_once(specs, message: str) -> None:
+    """``ValueError(message.format(spec, earlier))`` (both repr'd) at the first of ``specs`` that loads a model file an
+    earlier one loads (:func:`_model_file`; a spec loading none, e.g. a classical policy, is not compared)."""
+    models = {}
+    for sp in specs:
+        key = _model_file(sp)
+        if key is not None and key in models:
+            raise ValueError(message.format(repr(sp), repr(models[key])))
+        models.setdefault(key, sp)
 
 
 def run_policy(name: str, scenario: str, episodes: int, seed: int, config=None) -> EpisodeTraces:

@@ -76,9 +76,10 @@ def _mission_steady(devices, duty, vl, lm):
     c = 4 / math.pi * (1 - math.sin(math.pi / 2 * duty))
     w = duty + math.sin(math.pi * duty) / math.pi
     x, dt = (0.0, 0.0), 1e-4
+    dd = link_disc(st, lm, dt)   # (lm and dt held: the coefficients once)
     for _ in range(2000):
         v2 = c * (vl + dev.rect_vf_v) + (dev.short_r_ohm - dev.rect_rd_ohm) * w * x[1]
-        y0, y1, e_src, _, _, int_i2 = link_step(st, link_disc(st, lm, dt), lm, dt, *x, p.v1_amp_v, v2)[:6]
+        y0, y1, e_src, _, _, int_i2 = link_step(st, dd, lm, dt, *x, p.v1_amp_v, v2)[:6]
         x = (y0, y1)
     return x[0], x[1], vl * 0.5 * c * int_i2 / e_src
 

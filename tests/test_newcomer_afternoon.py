@@ -423,7 +423,8 @@ def test_compare_cli_reads_the_librarys_episodes_and_seed_ranges(capsys, monkeyp
     import policies.compare as pc
     from mission_sim.validation import Range
     monkeypatch.setattr(pc, "EPISODES", Range(1, 5, integer=True))
-    monkeypatch.setattr(pc, "seed_range", lambda n: Range(0, 10 - n, integer=True))
+    import mission_sim.validation as mv   # (seed_range's home since 2026-11-27 evening: the envs use it too)
+    monkeypatch.setattr(mv, "seed_range", lambda n: Range(0, 10 - n, integer=True))
     base = ["compare", "--policies", "step", "--scenarios", "nominal", "--no-plot", "--no-frontier"]
     assert _one_error_line(capsys, base + ["--episodes", "6"]) == ("dronewpt compare: error: --episodes 6 is invalid; "
                                                                    "valid range: integer 1..5")

@@ -337,12 +337,17 @@ class CouplingModel:
         minus their rims' ``r_i |sin tilt|``, widened by the two wire radii, meets the pad coil's turns' heights
         ``[min(tx.z_m), max(tx.z_m)]`` (flat coils: ``lo = -hi``)."""
         c, s = np.cos(tilt), np.abs(np.sin(tilt))
-        r, z = np.asarray(self.rx.radius_m), np.asarray(self.rx.z_m)
-        rim, centre = np.multiply.outer(s, r), np.multiply.outer(c, z)   # (..., turns)
         wires = self.tx.wire_radius_m + self.rx.wire_radius_m
-        hi = wires + max(self.tx.z_m) + (rim - centre).max(axis=-1)
-        lo = min(self.tx.z_m) - wires - (rim + centre).max(axis=-1)
+        hi = wires + max(self.tx.z_m) + self._rx_drop(c, s)
+        lo = min(self.tx.z_m) - wires - self._rx_drop(-c, s)   # (-c: the highest point above the centre)
         return lo, hi
+
+    def _rx_drop(self, c, s):
+        """How far [m] the receiver coil reaches below its centre, tilted with ``c = cos tilt``, ``s = |sin tilt|``
+        (arrays): ``max_i(r_i s - z_i c)`` over its turns (radius ``r_i`` at height ``z_i`` in its frame). The one
+        source of :meth:`_touch_band` (with ``-c``: how far it reaches above) and :meth:`_near_pad`."""
+        r, z = np.asarray(self.rx.radius_m), np.asarray(self.rx.z_m)
+        return (np.multiply.outer(s, r) - np.multiply.outer(c, z)).max(axis=-1)
 
     def check_clearance(self, dx_m, dy_m, dz_m, tilt_rad=0.0) -> None:
         """``ValueError`` naming the first pose (broadcast arrays or numbers) whose receiver coil is within
@@ -470,9 +475,10 @@ class CouplingModel:
         """Lm [H] of the poses ``rot`` (N, 3, 3), ``org`` (N, 3) by :func:`.coupling_kernel.flux_table`."""
         from .coupling_kernel import flux_table
         out, below = flux_table(*self._table_args(), rot, org, self._flat_pts, self._flat_tan, float(self._w))
+        near = self._near_pad(rot, org)
+        below &= ~near     # (a near pose's field is the exact one, whole: not the table's mix first)
         if np.any(below):  # the exact field at the points below the table, the table elsewhere
             out[below] = self._flux_poses(rot[below], org[below], self._pts, self._tan, self._w, self._a_table)
-        near = self._near_pad(rot, org)
         if np.any(near):   # the spline's lower edge: the exact field for the whole pose
             out[near] = self._flux_poses(rot[near], org[near], self._pts, self._tan, self._w, self._a_exact)
         return out
@@ -483,12 +489,11 @@ class CouplingModel:
         field does not have) was off by up to 2 % of the hover Lm (receiver 2.2 cm over the pad; 7e-4 at a 3.4 cm
         hover, the mission's 3 cm floor) against <= 6e-7 from this height up at the default 5 mm grid (offsets up to 0.3 m)
         (tests/test_physics_properties.py). The coil's
-        lowest point: ``dz + min_i(R22 z_i - r_i hypot(R20, R21))``; its nearest radius ``|(dx, dy)| - max r_i``."""
+        lowest point: ``dz - max_i(r_i hypot(R20, R21) - z_i R22)`` (:meth:`_rx_drop`); its nearest radius ``|(dx, dy)| - max r_i``."""
         step, rho_max, z_min, _ = self._grid
-        r, z = np.array(self.rx.radius_m), np.array(self.rx.z_m)
-        tilt_r = np.hypot(rot[:, 2, 0], rot[:, 2, 1])
-        lowest = org[:, 2] + np.min(rot[:, 2, 2, None] * z[None, :] - tilt_r[:, None] * r[None, :], axis=1)
-        return (lowest < z_min + EXACT_ABOVE_EDGE_STEPS * step) & (np.hypot(org[:, 0], org[:, 1]) - r.max() <= rho_max)
+        lowest = org[:, 2] - self._rx_drop(rot[:, 2, 2], np.hypot(rot[:, 2, 0], rot[:, 2, 1]))
+        return ((lowest < z_min + EXACT_ABOVE_EDGE_STEPS * step)
+                & (np.hypot(org[:, 0], org[:, 1]) - max(self.rx.radius_m) <= rho_max))
 
     def _poses_key(self, rot, org) -> str:
         """Disk-cache key of ``lm_h`` at these poses: the table's key (geometry, grid, code, versions),

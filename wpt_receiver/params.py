@@ -56,11 +56,11 @@ class LinkParams:
             if not math.isfinite(value) or value <= 0.0:
                 raise ValueError(f"{fld.name}={value!r} is invalid; valid range: (0, inf), finite")
             object.__setattr__(self, fld.name, value)
-        if not self.lm_h < lm_limit_h(self):   # (the rule of envelope.check_lm too: one limit, one comparison)
-            k = self.k
+        lim = lm_limit_h(self)
+        if not self.lm_h < lim:   # (the rule of envelope.check_lm too: one limit, one comparison)
             raise ValueError(
-                f"coupling k = lm_h/sqrt(l1_h*l2_h) = {k:.4g} (lm_h={self.lm_h!r}) is invalid; "
-                f"valid range: 0 < k < 1, i.e. lm_h < {math.sqrt(self.l1_h * self.l2_h):.6g} H"
+                f"coupling k = lm_h/sqrt(l1_h*l2_h) = {self.k:.4g} (lm_h={self.lm_h!r}) is invalid; "
+                f"valid range: 0 < k < 1, i.e. lm_h < {lim:.6g} H"
             )
 
     # ------------------------------------------------------------------ derived

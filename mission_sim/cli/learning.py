@@ -12,7 +12,6 @@ from .common import (
     add_progress_flag,
     figures_out,
     float_arg,
-    int_in,
     lazy_names_help,
     name_list,
     path_arg,
@@ -389,7 +388,9 @@ def _shipped_seed_rows(pols: tuple):
 def _check_compare(args, pols, scns, groups):
     from envs import SCENARIOS
     from policies import available
-    from policies.compare import EPISODES, check_row_labels, seed_range
+    from policies.compare import EPISODES, check_row_labels
+
+    from ..validation import seed_range
     try:
         check_row_labels(pols, groups)
     except ValueError as exc:   # (policies lists the model 'rl:...' twice (also as 'rl'): the --policies' own)

@@ -56,7 +56,8 @@ def _cmd_coupling(args) -> int:
         #    itself computes any pose)
         m.check_clearance(args.dx, args.dy, dz, math.radians(args.tilt_deg))
     except ValueError as exc:
-        raise CliError(str(exc).replace("dz_m=", "--dz ").replace("hypot(dx_m, dy_m)", "hypot(--dx, --dy)")) from None
+        from .notices import flag_words
+        raise CliError(flag_words("coupling", str(exc))) from None
     if abs(args.tilt_deg) >= 90:
         raise CliError(f"--tilt-deg {args.tilt_deg!r} is invalid; valid range: (-90, 90)")
     tilt = math.radians(args.tilt_deg)

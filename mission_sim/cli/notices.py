@@ -86,7 +86,7 @@ _seen: list[set] = []
 
 
 #: the library's words -> the flags the user typed, per command: (regular expression, replacement) applied in order
-#: to each warning :func:`say_warning` prints (``f_hz`` is ``--link f_hz`` where ``--link`` sets it; a mission's
+#: to each warning :func:`say_warning` prints and to some errors (``f_hz`` is ``--link f_hz`` where ``--link`` sets it; a mission's
 #: warnings already say ``link.f_hz``, its ``--set`` key)
 _LINK_F = (r"(?<![\w.-])f_hz\b", "--link f_hz")
 FLAG_WORDS = {
@@ -94,6 +94,7 @@ FLAG_WORDS = {
               (r"model='switching'", "--model switching")),
     "netlist": (_LINK_F,),
     "export-controller": (_LINK_F,),
+    "coupling": ((r"dz_m=", "--dz "), (r"hypot\(dx_m, dy_m\)", "hypot(--dx, --dy)")),
 }
 
 
