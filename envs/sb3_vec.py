@@ -122,6 +122,11 @@ class SbarSB3VecEnv(VecEnv):
         return [value for _ in self._indices(indices)]
 
     def set_attr(self, attr_name: str, value, indices=None) -> None:
+        """The batched env's attribute, shared by every window: ``indices`` must be None or all of them (a part of them
+        switched every window, silently)."""
+        if indices is not None and sorted(set(self._indices(indices))) != list(range(self.num_envs)):
+            raise ValueError(f"set_attr({attr_name!r}, indices={indices!r}) is invalid; valid: indices=None or every "
+                             f"window 0..{self.num_envs - 1} (the batched env's attributes are shared by its windows)")
         setattr(self.venv, attr_name, value)
 
     def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs):

@@ -21,9 +21,20 @@ import math
 import numpy as np
 from numba import njit
 
+import mission_sim.contract as _contract
 from mission_sim.contract import _LO_HALF, OBS_INDEX, POLICY_KERNEL_SIGNATURE
+from wpt_receiver.kernel_cache import drop_stale_cache
 
 __all__ = ["step_kernel", "ramp_kernel", "model_based_kernel", "KERNELS"]
+
+
+def _here():
+    """This file, for :func:`wpt_receiver.kernel_cache.drop_stale_cache`."""
+
+
+# numba's cache of this module holds the contract's constants (the observation's slots and scales): dropped when
+# mission_sim/contract.py changes (numba keys the cache on this file alone; the ahead-of-time mission module keys on both)
+drop_stale_cache(_here, [_contract])
 
 _I_CMD, _I_VL = OBS_INDEX["charge_cmd_a"], OBS_INDEX["battery_v"]
 _CMD_LO, _CMD_HALF = _LO_HALF[_I_CMD]

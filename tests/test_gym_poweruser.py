@@ -392,3 +392,17 @@ def test_the_docstring_names_the_keys_a_reset_info_has_besides_a_steps():
         info0 = env.reset(seed=0)[1]
         info1 = env.step(env.action_space.sample())[4]
         assert set(info1) <= set(info0) and sorted(set(info0) - set(info1)) == sorted(said)
+
+
+def test_sb3_set_attr_on_part_of_the_windows_is_refused():
+    """``SbarSB3VecEnv.set_attr(name, value, indices=[0])`` switched every window (the batched env's attributes are
+    shared): refused with one line; None or every window sets it."""
+    from envs.sb3_vec import SbarSB3VecEnv
+    v = SbarSB3VecEnv(3, "nominal", EnvConfig(link_model="envelope"))
+    with pytest.raises(ValueError, match=r"^set_attr\('scenario', indices=\[0\]\) is invalid; valid: indices=None or "
+                                         r"every window 0\.\.2 "):
+        v.set_attr("scenario", "battery", indices=[0])
+    assert v.get_attr("scenario")[0].name == "nominal"
+    v.set_attr("scenario", "battery", indices=[2, 0, 1])
+    assert v.get_attr("scenario")[0].name == "battery"
+    v.close()
