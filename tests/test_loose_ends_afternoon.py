@@ -335,17 +335,6 @@ def test_the_kernels_numba_cache_depends_on_the_mode_rules_and_the_circuit():
     ``circuit.py``'s constants: its ``drop_stale_cache`` must name both (removing it, or either file, failed no test).
     A fresh process records the dependencies each module declares at its import (``kernel_cache.drop_stale_cache``
     swapped for a recorder before ``compiled`` is imported)."""
-    import subprocess
-    import sys
-    code = ("import json, os\n"
-            "import wpt_receiver.kernel_cache as kc\n"
-            "seen = {}\n"
-            "def record(here, modules):\n"
-            "    seen[os.path.basename(here.__code__.co_filename)] = [os.path.basename(str(getattr(m, '__file__', m)))"
-            " for m in modules]\n"
-            "    return False\n"
-            "kc.drop_stale_cache = record\n"
-            "import wpt_receiver.switching.compiled\n"
-            "print(json.dumps(seen))\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert sorted(json.loads(out)["compiled.py"]) == ["circuit.py", "mode_rules.py"], out
+    from _cache_deps import declared_cache_deps
+    seen = declared_cache_deps("wpt_receiver.switching.compiled")
+    assert sorted(seen["compiled.py"]) == ["circuit.py", "mode_rules.py"], seen

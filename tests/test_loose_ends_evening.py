@@ -411,18 +411,6 @@ def test_the_policy_kernels_numba_cache_depends_on_the_contract():
     policies reading the old slots until ``kernels.py`` itself changed. Its ``drop_stale_cache`` names the contract (a
     fresh process records what each module declares at its import, ``kernel_cache.drop_stale_cache`` swapped for a
     recorder first)."""
-    import json
-    import subprocess
-    import sys
-    code = ("import json, os\n"
-            "import wpt_receiver.kernel_cache as kc\n"
-            "seen = {}\n"
-            "def record(here, modules):\n"
-            "    seen[os.path.basename(here.__code__.co_filename)] = [os.path.basename(str(getattr(m, '__file__', m)))"
-            " for m in modules]\n"
-            "    return False\n"
-            "kc.drop_stale_cache = record\n"
-            "import policies.kernels\n"
-            "print(json.dumps(seen))\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert json.loads(out).get("kernels.py") == ["contract.py"], out
+    from _cache_deps import declared_cache_deps
+    seen = declared_cache_deps("policies.kernels")
+    assert seen.get("kernels.py") == ["contract.py"], seen
