@@ -100,7 +100,7 @@ def test_envelope_currents_match_the_switching_model(d):
     i1 = float(steady_state(pe, rectifier_v2_folded(d, P.vl_v, i2, DV))[0])
     n = 400
     env = envelope_currents(np.arange(1, n + 1) * T / 4, np.full(n, T / 4), np.full(n, d), np.full(n, i1),
-                            np.full(n, i2), exact["peak_i2_a"], DV, window_s=20 * T)
+                            np.full(n, i2), exact["peak_i2_a"], DV, window_s=20 * T, vl_v=P.vl_v, f_hz=P.f_hz)
     for key in ("diode_rms_a", "diode_avg_a", "switch_rms_a", "conduction_loss_w"):
         assert env[key] == pytest.approx(exact[key], rel=0.03), key
 

@@ -265,13 +265,16 @@ def _window_mean_max(t_end_s, dt_s, y, window_s: float) -> float:
 
 
 def envelope_currents(t_end_s, dt_s, d_short, i1_amp_a, i2_amp_a, peak_i2_a: float, devices: DeviceSet,
-                      window_s: float = 1e-3) -> dict:
+                      window_s: float = 1e-3, *, vl_v, f_hz: float) -> dict:
     """:func:`rectifier_currents` from an envelope run (a mission's time series: one row per step,
     values at the step's end held over the step): with ``w`` = the short window's share of
     ``<i2^2>`` (:func:`wpt_receiver.sbar.short_weight`), an upper diode carries ``<i^2> =
     (I2^2/2)(1 - w)/2`` and ``<i> = I_L/2``, a lower switch the short, ``(I2^2/2) w``, plus its body
     diode's half; the loss is :func:`wpt_receiver.sbar.conduction_losses` (rectifier groups).
-    ``peak_i2_a`` is the run's instantaneous peak (e.g. the mission's ``peak_i2_a``)."""
+    ``peak_i2_a`` is the run's instantaneous peak (e.g. the mission's ``peak_i2_a``). ``vl_v`` [V] (a number or
+    one per step, e.g. the mission's ``battery_v``) and ``f_hz`` [Hz] are the run's battery voltage and inverter
+    frequency, for the SBAR's edge energies (:func:`wpt_receiver.edge_losses.averaged_edge_losses`; they were Table
+    I's 30 V and 85 kHz whatever the run's link until 2026-11-27 night)."""
     from .sbar import conduction_losses, rectifier_current, short_weight
     d, i2 = np.asarray(d_short, dtype=float), np.asarray(i2_amp_a, dtype=float)
     w, sq = short_weight(d), 0.5 * i2 * i2
@@ -282,18 +285,23 @@ def envelope_currents(t_end_s, dt_s, d_short, i1_amp_a, i2_amp_a, peak_i2_a: flo
             "diode_avg_a": _window_mean_max(*args, 0.5 * rectifier_current(d, np.abs(i2)), window_s),
             "switch_rms_a": math.sqrt(_window_mean_max(*args, sq * w + 0.5 * sq * (1 - w), window_s)),
             "short_rms_a": math.sqrt(_window_mean_max(*args, sq * w, window_s)),
-            "switching_loss_w": _window_mean_max(*args, _edge_w(d, i2, devices), window_s),
+            "switching_loss_w": _window_mean_max(*args, _edge_w(d, i2, devices, vl_v, f_hz), window_s),
             "conduction_loss_w": _window_mean_max(*args, loss["rectifier_diodes"] + loss["rectifier_switches"],
                                                   window_s)}
 
 
-def _edge_w(d, i2, devices):
-    """Averaged SBAR edge power [W] (:func:`wpt_receiver.edge_losses.averaged_edge_losses`, Table I
-    frequency and VL = 30 V) along an envelope run."""
+def _edge_w(d, i2, devices, vl_v, f_hz: float):
+    """Averaged SBAR edge power [W] (:func:`wpt_receiver.edge_losses.averaged_edge_losses`) along an envelope run
+    at battery voltage ``vl_v`` [V] (a number or one per step) and inverter frequency ``f_hz`` [Hz]."""
     from .edge_losses import averaged_edge_losses
-    from .params import TABLE_I
-    return averaged_edge_losses(d, i2, TABLE_I.vl_v, devices, TABLE_I.rectifier_period_s,
-                                TABLE_I.omega_rad_s)["rectifier_w"]
+    vl = np.asarray(vl_v, dtype=float)
+    f = float(f_hz)
+    if not (np.all(np.isfinite(vl)) and np.all(vl > 0)):
+        bad = vl[~(np.isfinite(vl) & (vl > 0))] if vl.ndim else vl
+        raise ValueError(f"vl_v={float(np.ravel(bad)[0])!r} is invalid; valid range: (0, inf) V")
+    if not (math.isfinite(f) and f > 0):
+        raise ValueError(f"f_hz={f_hz!r} is invalid; valid range: (0, inf) Hz")
+    return averaged_edge_losses(d, i2, vl, devices, 0.5 / f, 2.0 * math.pi * f)["rectifier_w"]
 
 
 def paper_policy(name: str, params: LinkParams, t_switch_s: float = 1e-3, t_end_s: float = 10e-3):

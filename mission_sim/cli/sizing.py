@@ -124,7 +124,8 @@ def _size_mission(name, cfg, base, args) -> dict:
     from wpt_receiver import TABLE_I
     # the open-load voltage study on Table I's coils (the design point) with the mission's link settings
     params = res.config.link.link_params(TABLE_I.l1_h, TABLE_I.l2_h, TABLE_I.lm_h)
-    row = select_parts(lambda dv: envelope_currents(*cols, peak, dv), params, base, _rules(args))
+    vl, f = ts["battery_v"].to_numpy(), res.config.link.f_hz   # (the edges block the run's pack voltage)
+    row = select_parts(lambda dv: envelope_currents(*cols, peak, dv, vl_v=vl, f_hz=f), params, base, _rules(args))
     return {"policy": name, **{c: row.get(c) for c in _COLUMNS}}
 
 
