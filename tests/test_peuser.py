@@ -54,3 +54,64 @@ def test_envelope_currents_refuses_a_bad_vl():
         envelope_currents([1e-5], [1e-5], [0.5], [1.0], [1.0], 1.0, DV, vl_v=-1.0, f_hz=85e3)
     with pytest.raises(ValueError, match=r"f_hz=0.0 is invalid"):
         envelope_currents([1e-5], [1e-5], [0.5], [1.0], [1.0], 1.0, DV, vl_v=7.4, f_hz=0.0)
+
+
+def _rm_sm(p):
+    """Eq. 4-5's closed-form steady I2 [A] in RM (V2 = (4/pi) VL) and SM (V2 = 0), written out by hand."""
+    wlm, v1, v2 = 2 * math.pi * p.f_hz * p.lm_h, 4 / math.pi * p.vdc_v, 4 / math.pi * p.vl_v
+    det = p.r1_ohm * p.r2_ohm + wlm * wlm
+    return (wlm * v1 - p.r1_ohm * v2) / det, wlm * v1 / det
+
+
+def test_tolerance_runner_takes_its_own_link():
+    """``ToleranceRunner(link=...)`` (``dronewpt tolerance --link``) draws around that link: its nominal draw is the
+    link's eq. 4-5 RM state (6S: 5.3412 A, (2/pi) VL I2 = 75.49 W) and its step's peak the envelope's (12.35 A);
+    the runner and ``tolerance`` took Table I's whatever the user's link (11.07 A, 211 W)."""
+    from mission_sim.studies.tolerance import ToleranceRunner, tolerance_cases
+    from wpt_receiver import TABLE_I
+    from wpt_receiver.paper import run_paper
+    from wpt_receiver.tolerance import SCALES, Spreads
+    nominal = ToleranceRunner("ideal", link=LINK_6S)({"draw": -1, **dict.fromkeys(SCALES, 1.0)})
+    rm, _ = _rm_sm(LINK_6S)
+    assert nominal["rm_i2_a"] == pytest.approx(rm, rel=1e-9)
+    assert nominal["rm_power_w"] == pytest.approx(2 / math.pi * LINK_6S.vl_v * rm, rel=1e-9)
+    step = run_paper(LINK_6S, model="envelope", trajectories=("step",))[0].metrics.max_current_a
+    assert nominal["step_peak_a"] == pytest.approx(step, rel=0.01)
+    # Table I's case ids are those of before; another link's differ (a store never mixes links)
+    sp = Spreads()
+    assert [c.case_id for c in tolerance_cases(sp, 3, 0, "ideal", TABLE_I)] == \
+        [c.case_id for c in tolerance_cases(sp, 3, 0, "ideal")]
+    assert not {c.case_id for c in tolerance_cases(sp, 3, 0, "ideal", LINK_6S)} & \
+        {c.case_id for c in tolerance_cases(sp, 3, 0, "ideal")}
+
+
+def test_cli_sizing_on_own_link(capsys):
+    """``dronewpt sizing --link`` sizes the user's link (it sized Table I's whatever the user's): on the 2S link the
+    step's instantaneous peak (switching model, schottky) is near eq. 4's envelope peak for that link (34.07 A;
+    Table I's step is 50.8 A), the JSON names the link, and the voltage rating follows the 7.4 V pack (1.1 x its
+    open-load peak, far below Table I's 34.6 V)."""
+    import json
+
+    from mission_sim.cli import main
+    from wpt_receiver.paper import run_paper
+    args = [f"--link=l1_h={LINK_2S.l1_h!r}", f"--link=l2_h={LINK_2S.l2_h!r}", f"--link=lm_h={LINK_2S.lm_h!r}",
+            "--link=r1_ohm=0.1", "--link=r2_ohm=0.03", "--link=vdc_v=48", "--link=vl_v=7.4"]
+    assert main(["sizing", *args, "--policies", "step", "--t-end", "0.003", "--no-plot", "--no-progress",
+                 "--format", "json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["link"]["vl_v"] == 7.4 and out["link"]["vdc_v"] == 48.0
+    row = out["rows"][0]
+    env = run_paper(LINK_2S, model="envelope", trajectories=("step",))[0].metrics.max_current_a
+    assert row["peak_i2_a"] == pytest.approx(env, rel=0.05)
+    assert row["required_rating_a"] == pytest.approx(1.25 * row["peak_i2_a"], rel=0.01)   # (the preset's run)
+    assert 7.4 < row["v_worst_v"] < 15.0
+    assert row["required_v_rating_v"] == pytest.approx(1.1 * row["v_worst_v"])
+
+
+def test_cli_sizing_link_needs_the_paper_source(capsys):
+    from mission_sim.cli import main
+    assert main(["sizing", "--source", "mission", "--link", "vl_v=7.4", "--no-plot"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--link is invalid with --source mission; valid: --source paper" in err[0]
+    assert main(["sizing", "--link", "vl_v=-3", "--no-plot"]) == 2
+    assert "vl_v" in capsys.readouterr().err

@@ -1,10 +1,10 @@
 """Component tolerances: one production receiver (L1, L2, C1, C2, Lm, R off nominal) per draw.
 
-A draw scales the Table I link: ``L1, L2, Lm, R1, R2`` by ``1 + e`` and the series capacitors
-(chosen for resonance at the nominal L and f) by ``1 + e``, each ``e`` uniform in ``[-s, s]``
-(:class:`Spreads`; uniform over the tolerance band: every value a datasheet's "+-5 %" allows
-is equally likely, more pessimistic than a normal with 3 sigma at the band edge). The inverter
-keeps 85 kHz. The controllers are designed on the nominal link (the paper's feed-forward: the
+A draw scales the nominal link (Table I by default, any :class:`~wpt_receiver.params.LinkParams`):
+``L1, L2, Lm, R1, R2`` by ``1 + e`` and the series capacitors (chosen for resonance at the nominal L and f)
+by ``1 + e``, each ``e`` uniform in ``[-s, s]`` (:class:`Spreads`; uniform over the tolerance band: every value a
+datasheet's "+-5 %" allows is equally likely, more pessimistic than a normal with 3 sigma at the band edge). The
+inverter keeps the nominal ``f_hz``. The controllers are designed on the nominal link (the paper's feed-forward: the
 same duty sequence for every draw).
 
 Model: the complex envelope of :func:`wpt_receiver.envelope.complex_envelope_matrices` (both

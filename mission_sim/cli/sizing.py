@@ -36,6 +36,9 @@ def _add_sizing(sub):
     p.add_argument("--config", type=path_arg("--config"), default=None, help="mission TOML for --source mission (default: embedded)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="mission config override for --source mission (repeatable)")
+    p.add_argument("--link", action="append", default=[], metavar="KEY=VALUE",
+                   help="for --source paper: a link parameter other than Table I (repeatable), e.g. vl_v=7.4; keys: "
+                        "l1_h, l2_h, lm_h, r1_ohm, r2_ohm, vdc_v, vl_v, f_hz (missions: --set link.*, battery.*)")
     p.add_argument("--devices", default="schottky", help="device preset for the first run and the inverter "
                    "(default schottky; see wpt_receiver/parts.toml)")
     p.add_argument("--margin", type=float_arg("margin", positive=True, lo=1.0, hi=10.0), default=1.25,
@@ -67,7 +70,6 @@ def _rules(args):
 def _rows(args):
     from tqdm import tqdm
 
-    from wpt_receiver import TABLE_I
     from wpt_receiver.devices import preset
     from wpt_receiver.references import TRAJECTORIES
     from wpt_receiver.sizing import size_policies
@@ -75,19 +77,31 @@ def _rows(args):
         base = preset(args.devices)
     except ValueError as e:
         raise CliError(f"--devices: {e}") from None
+    _paper_link(args)   # (a bad --link, or --link with a mission source: refused before anything runs)
     if args.source == "mission":
         return _mission_rows(args, base)
     if args.source == "sweep":
         return _sweep_rows(args, base)
     names = _names(args, TRAJECTORIES, "step,ramp,proposed")
+    params = _paper_link(args)
     _kernels_from_cache()
     bar = tqdm(total=len(names), desc="sizing", disable=not show_progress(args), file=sys.stderr)
     with bar:
-        rows = size_policies(names, TABLE_I, base, _rules(args), t_end_s=args.t_end,
+        rows = size_policies(names, params, base, _rules(args), t_end_s=args.t_end,
                              progress=lambda: bar.update(1))
     return [{"policy": r["policy"], **{c: r.get(c) for c in _COLUMNS}, "v_case": r.get("v_case"),
              "edge_ring_peak_v": r.get("edge_ring_peak_v"), "turn_off_peak_a": r.get("turn_off_peak_a")} for r in rows]
 
+
+
+def _paper_link(args):
+    """The link of ``--source paper``: Table I with ``--link`` (as ``paper`` / ``netlist`` take it); ``--link``
+    with another source is refused (a mission's link is its config's)."""
+    from .controller import _link_params
+    if args.link and args.source != "paper":
+        raise CliError(f"--link is invalid with --source {args.source}; valid: --source paper (a mission's link: "
+                       "--set link.KEY=VALUE, battery.n_series=N)")
+    return _link_params(args.link)
 
 
 def _kernels_from_cache() -> None:
@@ -154,6 +168,7 @@ def _sweep_rows(args, base):
 
 
 def _cmd_sizing(args) -> int:
+    from .paper import _link_text
     args.out = figures_out(args, "out/sizing")
     if not args.no_plot:
         prepare_out_dir(args.out)  # before the simulation: a bad folder costs nothing
@@ -161,22 +176,24 @@ def _cmd_sizing(args) -> int:
     figs = []
     if not args.no_plot:
         from ..figures.sizing import plot_sizing
-        what = {"paper": "Table I link", "mission": "missions", "sweep": f"worst cases of sweep {args.sweep}"}[args.source]
+        what = {"paper": f"{_link_text(_paper_link(args))} link", "mission": "missions",
+                "sweep": f"worst cases of sweep {args.sweep}"}[args.source]
         figs.append(plot_sizing(rows, args.out / "sizing.png",
                                 f"SBAR sizing, {what}, devices {args.devices}, margin {args.margin:g}"))
         if args.source == "paper":
-            from wpt_receiver import TABLE_I
             from wpt_receiver.devices import preset
             from wpt_receiver.sizing import open_load_study
 
             from ..figures.sizing import plot_open_load
-            figs.append(plot_open_load(open_load_study(TABLE_I, preset(args.devices), _rules(args)),
+            figs.append(plot_open_load(open_load_study(_paper_link(args), preset(args.devices), _rules(args)),
                                        args.out / "open_load.png", rows[0]["required_v_rating_v"]))
     if args.format == "json":
-        print(json.dumps({"source": args.source, "devices": args.devices, "margin": args.margin, "rows": rows,
+        link = {"link": dict(vars(_paper_link(args)))} if args.source == "paper" else {}
+        print(json.dumps({"source": args.source, "devices": args.devices, "margin": args.margin, **link, "rows": rows,
                           "figures": figs}))
         return 0
-    model = {"paper": "switching model, RM -> SM", "mission": "missions, exact-mode link + ripple peak",
+    model = {"paper": f"switching model, RM -> SM, {_link_text(_paper_link(args))}",
+             "mission": "missions, exact-mode link + ripple peak",
              "sweep": f"worst case per policy of sweep {args.sweep}, re-run, exact-mode link + ripple peak"}[args.source]
     print(f"SBAR sizing ({model}, devices {args.devices}, rating = {args.margin:g} x peak |i2|; "
           "RMS and loss over the worst 1 ms)")

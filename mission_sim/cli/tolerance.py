@@ -11,8 +11,8 @@ from .common import CliError, add_progress_flag, float_arg, int_in, nonneg_int, 
 def _add_tolerance(sub):
     p = sub.add_parser("tolerance", help="yield of the receiver under component tolerances (Monte Carlo)",
                        description="Draw L1, L2, C1, C2, Lm, R1, R2 uniformly within their tolerance bands around "
-                                   "Table I (controllers designed on the nominal link), and report the distribution "
-                                   "of the RM power, link efficiency, and the step and model-based peak |i2| "
+                                   "Table I or --link's link (controllers designed on the nominal link), and report "
+                                   "the distribution of the RM power, link efficiency, and the step and model-based peak |i2| "
                                    "(fundamental, complex envelope model), and the yield: RM power >= --min-power x "
                                    "nominal and peak <= --margin x the nominal peak. Runs on the sweep engine "
                                    "(Dask, resumable store in --out).")
@@ -24,6 +24,9 @@ def _add_tolerance(sub):
     p.add_argument("--spread-lm", type=spread, default=0.05, help="Lm tolerance (default 0.05)")
     p.add_argument("--spread-r", type=spread, default=0.10, help="R1, R2 tolerance (default 0.10)")
     p.add_argument("--devices", default="ideal", help="device preset folded into the link (default ideal)")
+    p.add_argument("--link", action="append", default=[], metavar="KEY=VALUE",
+                   help="the nominal link other than Table I (repeatable), e.g. vl_v=7.4; keys: l1_h, l2_h, lm_h, "
+                        "r1_ohm, r2_ohm, vdc_v, vl_v, f_hz (C1, C2 tuned to its L1, L2 at f_hz)")
     p.add_argument("--margin", type=float_arg("margin", positive=True, lo=1.0, hi=10.0), default=1.25,
                    help="rating = margin x the nominal peak of each controller, 1 .. 10 (default 1.25)")
     p.add_argument("--min-power", type=float_arg("min-power", positive=True, lo=0.01, hi=1.0), default=0.9,
@@ -52,14 +55,17 @@ def _cmd_tolerance(args) -> int:
         spreads = Spreads(args.spread_c, args.spread_l, args.spread_lm, args.spread_r)
     except ValueError as exc:
         raise CliError(str(exc).replace("spread ", "--spread-").replace("=", " ")) from None
+    from .controller import _link_params
+    link = _link_params(args.link)
     prepare_out_dir(args.out)   # a file in its place, read-only: one line before any work (was "[Errno 30] ...")
-    runner = ToleranceRunner(args.devices).with_transitions()  # shipped to the workers, built once here
+    runner = ToleranceRunner(args.devices, link=link).with_transitions()  # shipped to the workers, built once here
     nominal = _nominal(runner)
     factory = None if args.workers == 0 else functools.partial(dask_client, None, args.workers)
-    res = sweep.run_sweep(tolerance_cases(spreads, args.draws, args.seed, args.devices), runner, args.out,
+    res = sweep.run_sweep(tolerance_cases(spreads, args.draws, args.seed, args.devices, link), runner, args.out,
                           client_factory=factory, progress=show_progress(args), progress_desc="tolerance")
     summary = summarise(res.results, nominal, args.margin, args.min_power)
-    summary.update(spreads=vars(spreads), seed=args.seed, devices=args.devices, wall_s=res.wall_s, n_run=res.n_run)
+    summary.update(spreads=vars(spreads), seed=args.seed, devices=args.devices, wall_s=res.wall_s, n_run=res.n_run,
+                   link=dict(vars(link)))
     with atomic_output(args.out / "summary.json") as tmp:
         tmp.write_text(json.dumps(summary, indent=1, default=float) + "\n")
     if args.format == "json":
@@ -79,6 +85,9 @@ def _print(s: dict, args) -> None:
     print(f"tolerance Monte Carlo: {s['n']} draws (seed {args.seed}), uniform +-{100 * sp['c']:g} % C1 C2, "
           f"+-{100 * sp['l']:g} % L1 L2, +-{100 * sp['lm']:g} % Lm, +-{100 * sp['r']:g} % R1 R2; devices "
           f"{args.devices}; {s['n_run']} run in {s['wall_s']:.1f} s")
+    from .paper import _link_text
+    from wpt_receiver import LinkParams
+    print(f"nominal link: {_link_text(LinkParams(**s['link']))}")
     print(f"{'metric':<18} {'nominal':>9} {'p1':>9} {'p5':>9} {'p50':>9} {'p95':>9} {'p99':>9}")
     for m, unit in (("rm_power_w", "W"), ("efficiency", ""), ("rm_i2_a", "A"), ("step_peak_a", "A"),
                     ("proposed_peak_a", "A")):

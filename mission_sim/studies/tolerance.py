@@ -21,18 +21,26 @@ __all__ = ["ToleranceRunner", "tolerance_cases", "summarise", "METRICS"]
 METRICS = ("rm_power_w", "efficiency", "rm_i2_a", "step_peak_a", "proposed_peak_a")
 
 
-_TRANSITIONS: dict = {}  # devices name -> TransitionSet, built once per process (driver or worker)
+_TRANSITIONS: dict = {}  # (devices name, link) -> TransitionSet, built once per process (driver or worker)
 
 
-def _transitions(devices_name: str):
-    """The nominal duty sequences for ``devices_name``, built on first use in this process (~1.6 s of
-    CPU with the scipy.signal import): a Dask task unpickles a fresh runner, so the cache lives here,
-    not on the runner."""
-    ts = _TRANSITIONS.get(devices_name)
+def _link(link):
+    """The nominal link of a runner: ``link`` (a :class:`wpt_receiver.LinkParams`), Table I when None."""
+    if link is None:
+        from wpt_receiver import TABLE_I
+        return TABLE_I
+    return link
+
+
+def _transitions(devices_name: str, link=None):
+    """The nominal duty sequences for ``devices_name`` on ``link`` (None: Table I), built on first use in this
+    process (~1.6 s of CPU with the scipy.signal import): a Dask task unpickles a fresh runner, so the cache lives
+    here, not on the runner."""
+    ts = _TRANSITIONS.get((devices_name, link))
     if ts is None:
         from wpt_receiver.devices import preset
         from wpt_receiver.tolerance import TransitionSet
-        ts = _TRANSITIONS[devices_name] = TransitionSet.build(devices=preset(devices_name))
+        ts = _TRANSITIONS[(devices_name, link)] = TransitionSet.build(_link(link), devices=preset(devices_name))
     return ts
 
 
@@ -48,15 +56,16 @@ class ToleranceRunner:
 
     devices_name: str = "ideal"
     transitions: object = field(default=None, repr=False, compare=False)
+    link: object = None   # the nominal link (a wpt_receiver.LinkParams; None: Table I) the draws scatter around
 
     def with_transitions(self) -> "ToleranceRunner":
         """This runner carrying its duty sequences (built here, once)."""
-        return ToleranceRunner(self.devices_name, _transitions(self.devices_name))
+        return ToleranceRunner(self.devices_name, _transitions(self.devices_name, self.link), self.link)
 
     def __call__(self, params: dict) -> dict:
         from wpt_receiver.tolerance import SCALES, draw_link, draw_metrics
-        p, c1, c2 = draw_link([params[k] for k in SCALES])
-        return draw_metrics(p, c1, c2, self.transitions or _transitions(self.devices_name))
+        p, c1, c2 = draw_link([params[k] for k in SCALES], _link(self.link))
+        return draw_metrics(p, c1, c2, self.transitions or _transitions(self.devices_name, self.link))
 
     def warm(self) -> None:
         """The nominal draw once: imports, the duty sequences, numba's cache of the transient."""
@@ -64,12 +73,15 @@ class ToleranceRunner:
         self({"draw": -1, **dict.fromkeys(SCALES, 1.0)})
 
 
-def tolerance_cases(spreads, n: int, seed: int, devices_name: str) -> list[Case]:
-    """The draws as sweep cases (scale factors rounded to 12 digits in the params: stable ids)."""
+def tolerance_cases(spreads, n: int, seed: int, devices_name: str, link=None) -> list[Case]:
+    """The draws as sweep cases (scale factors rounded to 12 digits in the params: stable ids). ``link``: the nominal
+    link (None or Table I: the ids as before; another link is part of every id, so a store never mixes links)."""
+    from wpt_receiver import TABLE_I
     from wpt_receiver.tolerance import SCALES, draw_scales
     scales = np.round(draw_scales(spreads, n, seed), 12)
+    own = {} if link is None or link == TABLE_I else {"link": {k: float(v) for k, v in vars(link).items()}}
     base = canonical_json({"spreads": [spreads.c, spreads.l, spreads.lm, spreads.r], "seed": int(seed),
-                           "devices": devices_name, "study": "tolerance v1"})
+                           "devices": devices_name, "study": "tolerance v1", **own})
     cases = []
     for j, row in enumerate(scales):
         params = {"draw": j, **{k: float(v) for k, v in zip(SCALES, row)}}
