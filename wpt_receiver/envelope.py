@@ -144,7 +144,8 @@ def check_lm(p: LinkParams, lm_h, zero_ok: bool = False) -> None:
 
 
 def steady_state(p: LinkParams, v2_v, lm_h=None, v1_v=None):
-    """Closed-form steady amplitudes ``(I1, I2)`` [A] for constant V1 and V2 (phasor solution).
+    """Closed-form steady amplitudes ``(I1, I2)`` [A] for constant V1 and V2 [V] (phasor solution; eq. 3 with
+    d/dt = 0, i.e. eq. 5 at s = 0).
 
     ``R1 I1 + w Lm I2 = V1`` and ``-w Lm I1 + R2 I2 = -V2`` give
     ``I2 = (w Lm V1 - R1 V2) / det`` and ``I1 = (R2 V1 + w Lm V2) / det`` with

@@ -11,13 +11,14 @@ __all__ = ["TransitionMetrics", "transition_metrics"]
 
 @dataclass(frozen=True)
 class TransitionMetrics:
-    rm_current_a: float        # I2 amplitude just before the switch
-    final_current_a: float     # I2 amplitude at the end of the window (mean of the last 2 %)
-    max_current_a: float       # max I2 amplitude after the switch
-    overshoot_pct: float       # (max - final) / final * 100
-    settling_time_s: float     # time after the switch until |I2 - final| stays within 2 % of final
-    peak_i1_a: float           # max primary amplitude after the switch
-    energy_to_battery_j: float  # integral of V2 I2 / 2 after the switch (fundamental power)
+    rm_current_a: float        # I2 amplitude just before the switch [A]
+    final_current_a: float     # I2 amplitude at the end of the window (mean of the last 2 %) [A]
+    max_current_a: float       # max I2 amplitude after the switch [A]
+    overshoot_pct: float       # (max - final) / final * 100 [%]
+    settling_time_s: float     # time after the switch until |I2 - final| stays within 2 % of final [s] (0: never
+                               # outside the band, e.g. a link whose RM and SM currents differ by less than 2 %)
+    peak_i1_a: float           # max primary amplitude after the switch [A]
+    energy_to_battery_j: float  # integral of V2 I2 / 2 after the switch (fundamental power) [J]
 
     def as_dict(self) -> dict:
         return asdict(self)
