@@ -115,3 +115,30 @@ def test_cli_sizing_link_needs_the_paper_source(capsys):
     assert len(err) == 1 and "--link is invalid with --source mission; valid: --source paper" in err[0]
     assert main(["sizing", "--link", "vl_v=-3", "--no-plot"]) == 2
     assert "vl_v" in capsys.readouterr().err
+
+
+def test_sizing_devices_block_the_links_own_voltages():
+    """The devices' charge-equivalent capacitances (the edge energies' C V^2 / 2) were taken at Table I's 30 V
+    whatever the link (``devices.V_BLOCK_V``): ``link_preset`` and the sizing's parts take the SBAR's at the link's
+    VL and the inverter's at its Vdc, by the abrupt-junction law ``Q(V) = 2 C0 phi (sqrt(1 + V/phi) - 1)`` of
+    ``charge_equivalent_f`` (a 2S pack: the SBAR node 2.96 nF, not 1.67 nF); Table I keeps ``preset``'s."""
+    from wpt_receiver import TABLE_I
+    from wpt_receiver.devices import charge_equivalent_f, link_preset, parts
+    from wpt_receiver.sizing import SizingRules, select_parts
+    row_sw = parts()["switch"][parts()["preset"]["schottky"]["rect_switch"]]
+    row_inv = parts()["switch"][parts()["preset"]["schottky"]["inv_switch"]]
+    dv = link_preset("schottky", LINK_2S)
+    assert dv.rect_switch.coss_f == pytest.approx(charge_equivalent_f(row_sw["coss_ref_f"], row_sw["coss_ref_v"], 7.4),
+                                                  rel=1e-12)
+    assert dv.inv_switch.coss_f == pytest.approx(charge_equivalent_f(row_inv["coss_ref_f"], row_inv["coss_ref_v"], 48.0),
+                                                 rel=1e-12)
+    assert dv.rect_switch.coss_f > 1.5 * DV.rect_switch.coss_f   # the law: C_Q rises at low voltage
+    assert link_preset("schottky", TABLE_I) == DV
+    # the sizing's candidate parts, paralleled, block the link's VL too (a constant measure: no simulation)
+    cur = {"peak_i2_a": 20.0, "diode_rms_a": 8.0, "diode_avg_a": 5.0, "switch_rms_a": 10.0, "short_rms_a": 6.0,
+           "switching_loss_w": 0.2, "conduction_loss_w": 5.0}
+    row = select_parts(lambda d: dict(cur), LINK_2S, dv, SizingRules(), v_worst_v=10.0)
+    sw = parts()["switch"][row["part"].split("/")[1].split("x")[0]]
+    n = int(row["part"].rsplit("x", 1)[1])
+    assert row["devices"].rect_switch.coss_f == pytest.approx(
+        n * charge_equivalent_f(sw["coss_ref_f"], sw["coss_ref_v"], 7.4), rel=1e-12)

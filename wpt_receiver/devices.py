@@ -35,10 +35,11 @@ from dataclasses import dataclass, fields
 from functools import cached_property, lru_cache
 from importlib import resources
 
-__all__ = ["Diode", "Switch", "DeviceSet", "IDEAL", "parts", "preset", "preset_names", "device_set",
+__all__ = ["Diode", "Switch", "DeviceSet", "IDEAL", "parts", "preset", "link_preset", "preset_names", "device_set",
            "charge_equivalent_f", "diode_from_row", "switch_from_row", "V_BLOCK_V"]
 
-V_BLOCK_V = 30.0   # default blocking voltage for the charge-equivalent capacitances: Table I's VL [V]
+V_BLOCK_V = 30.0   # default blocking voltage for the charge-equivalent capacitances: Table I's VL [V] (and Vdc);
+#                    a link of its own: :func:`link_preset` (the rectifier's at its VL, the inverter's at its Vdc)
 
 
 def _check_nonneg(obj) -> None:
@@ -201,18 +202,23 @@ def _row(kind: str, name: str) -> dict:
 
 
 def device_set(rect_diode: str, rect_switch: str, inv_switch: str, name: str | None = None, tj_c=None,
-               v_block_v: float = V_BLOCK_V) -> DeviceSet:
-    """A :class:`DeviceSet` from part names of the shipped table (at junction temperature ``tj_c``)."""
+               v_block_v: float = V_BLOCK_V, v_block_inv_v: float | None = None) -> DeviceSet:
+    """A :class:`DeviceSet` from part names of the shipped table (at junction temperature ``tj_c``); the rectifier's
+    capacitances charge-equivalent at ``v_block_v`` [V], the inverter switch's at ``v_block_inv_v`` [V] (None: the
+    same)."""
+    v_inv = v_block_v if v_block_inv_v is None else v_block_inv_v
     return DeviceSet(diode_from_row(_row("diode", rect_diode), 1, tj_c, v_block_v),
                      switch_from_row(_row("switch", rect_switch), 1, tj_c, v_block_v),
-                     switch_from_row(_row("switch", inv_switch), 1, tj_c, v_block_v),
+                     switch_from_row(_row("switch", inv_switch), 1, tj_c, v_inv),
                      name or f"{rect_diode}/{rect_switch}/{inv_switch}")
 
 
-def preset(name: str, tj_c=None, v_block_v: float = V_BLOCK_V) -> DeviceSet:
+def preset(name: str, tj_c=None, v_block_v: float = V_BLOCK_V, v_block_inv_v: float | None = None) -> DeviceSet:
     """Named device set: ``"ideal"`` (the paper's circuit) or a preset of ``parts.toml``; ``tj_c``
     [C] moves the conduction values to that junction temperature (``None``: the table's values,
-    125 C Schottky data and 25 C MOSFET data); ``v_block_v`` sets the charge-equivalent capacitances."""
+    125 C Schottky data and 25 C MOSFET data); ``v_block_v`` [V] sets the rectifier's charge-equivalent
+    capacitances, ``v_block_inv_v`` [V] the inverter switch's (None: ``v_block_v``; both default to Table I's 30 V:
+    a link of its own takes :func:`link_preset`)."""
     if name == "ideal":
         return IDEAL
     row = parts()["preset"].get(name)
@@ -220,7 +226,19 @@ def preset(name: str, tj_c=None, v_block_v: float = V_BLOCK_V) -> DeviceSet:
         raise ValueError(f"device preset {name!r} is unknown; valid: {', '.join(preset_names())}")
     if tj_c is not None and not (math.isfinite(tj_c) and -55.0 <= tj_c <= 200.0):
         raise ValueError(f"tj_c={tj_c!r} is invalid; valid range: [-55, 200] C")
-    return device_set(row["rect_diode"], row["rect_switch"], row["inv_switch"], name, tj_c, v_block_v)
+    for what, v in (("v_block_v", v_block_v), ("v_block_inv_v", v_block_inv_v)):
+        if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise ValueError(f"{what}={v!r} is invalid; valid range: (0, inf) V")
+    return device_set(row["rect_diode"], row["rect_switch"], row["inv_switch"], name, tj_c, v_block_v, v_block_inv_v)
+
+
+def link_preset(name: str, params, tj_c=None) -> DeviceSet:
+    """:func:`preset` ``name`` on the link ``params`` (a :class:`wpt_receiver.params.LinkParams`): the SBAR's
+    devices block its battery voltage ``vl_v``, the inverter's switches its ``vdc_v``, so their charge-equivalent
+    capacitances (:func:`charge_equivalent_f`; the edge energies of :mod:`wpt_receiver.edge_losses`) are taken there
+    instead of at Table I's 30 V (a 2S pack, 7.4 V: the SBAR node's Coss + Cj 2.96 nF, not 1.67 nF). Table I gives
+    :func:`preset`'s devices."""
+    return preset(name, tj_c, v_block_v=params.vl_v, v_block_inv_v=params.vdc_v)
 
 
 def envelope_params(params, devices: DeviceSet):

@@ -45,7 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .devices import DeviceSet, diode_from_row, parts, switch_from_row
+from .devices import V_BLOCK_V, DeviceSet, diode_from_row, parts, switch_from_row
 from .params import LinkParams
 
 __all__ = ["SizingRules", "open_load_study", "rectifier_currents", "envelope_currents", "candidates", "size_policy", "select_parts",
@@ -134,21 +134,24 @@ def candidates(required_a: float, v_min_v: float, kind: str) -> list[dict]:
     return out
 
 
-def _paralleled(base: DeviceSet, diode: dict, switch: dict, tj=None) -> DeviceSet:
+def _paralleled(base: DeviceSet, diode: dict, switch: dict, tj=None, v_block_v: float = V_BLOCK_V) -> DeviceSet:
     """The rectifier built from ``n`` paralleled dies of each part (inverter kept from ``base``),
-    at junction temperatures ``tj = (diode C, switch C)`` (``None``: the table's values)."""
+    at junction temperatures ``tj = (diode C, switch C)`` (``None``: the table's values), blocking ``v_block_v`` [V]
+    (the link's VL: their charge-equivalent capacitances)."""
     nd, ns = diode["n"], switch["n"]
     td, ts = (None, None) if tj is None else tj
-    return DeviceSet(diode_from_row(diode, nd, td), switch_from_row(switch, ns, ts),
+    return DeviceSet(diode_from_row(diode, nd, td, v_block_v), switch_from_row(switch, ns, ts, v_block_v),
                      base.inv_switch, f"{diode['name']}x{nd}/{switch['name']}x{ns}")
 
 
-def settle_losses(cur: dict, diode: dict, switch: dict, base: DeviceSet, rules: "SizingRules") -> dict:
+def settle_losses(cur: dict, diode: dict, switch: dict, base: DeviceSet, rules: "SizingRules",
+                  v_block_v: float = V_BLOCK_V) -> dict:
     """Junction temperatures and losses of one rectifier (two diode positions of ``diode["n"]``
     legs, two switch positions of ``switch["n"]`` dies) for the currents ``cur``
     (:func:`rectifier_currents` keys): per position ``P_d = Vf0(Tj) I_avg + Rd(Tj) I_rms^2`` and
     ``P_s = Vf0_body(Tj) I_avg + Rd_body I_rms^2 + Ron(Tj) I_short^2 + switching / 2``, settled by
-    :func:`wpt_receiver.thermal.settle_junctions` on a sink at ``t_amb_c + dt_sink_k``."""
+    :func:`wpt_receiver.thermal.settle_junctions` on a sink at ``t_amb_c + dt_sink_k``; ``v_block_v`` [V]: the
+    link's VL (:func:`_paralleled`)."""
     from .thermal import settle_junctions
     nd, ns = diode["n"], switch["n"]
     ia, ir2 = cur["diode_avg_a"], cur["diode_rms_a"] ** 2
@@ -156,7 +159,7 @@ def settle_losses(cur: dict, diode: dict, switch: dict, base: DeviceSet, rules: 
     p_sw = 0.5 * cur.get("switching_loss_w", 0.0)
 
     def losses(tj):
-        dv = _paralleled(base, diode, switch, (tj["diode"], tj["switch"]))
+        dv = _paralleled(base, diode, switch, (tj["diode"], tj["switch"]), v_block_v)
         d, s = dv.rect_diode, dv.rect_switch
         pd = d.vf0_v * ia + d.rd_ohm * ir2
         ps = s.body.vf0_v * ia + s.body.rd_ohm * ir2 + s.ron_ohm * sh2 + p_sw
@@ -184,7 +187,8 @@ def select_parts(measure, params: LinkParams, base: DeviceSet, rules: SizingRule
     >= ``v_margin`` x the simulated worst blocking voltage (``v_worst_v``; default: the open-load
     study of :func:`wpt_receiver.switching.stress.voltage_stress`; the ring of the largest hard
     turn-off with ``l_stray_h`` is reported as ``edge_ring_peak_v``, not rated: see the docs), every combination of shipped
-    parts meeting both, losses settled at the junction temperatures (:func:`settle_losses`), mass =
+    parts meeting both (their capacitances charge-equivalent at ``params.vl_v``), losses settled at the junction
+    temperatures (:func:`settle_losses`), mass =
     devices + heat sink for conduction + switching loss. A combination whose junctions run away is
     skipped (``thermal_rejected`` counts them)."""
     from .thermal import ThermalRunaway
@@ -201,10 +205,10 @@ def select_parts(measure, params: LinkParams, base: DeviceSet, rules: SizingRule
             dev_mass = 2 * dio["n"] * dio["mass_g"] / dio["legs"] + 2 * sw["n"] * sw["mass_g"] / sw["legs"]
             if best is not None and dev_mass >= best["mass_g"]:
                 continue  # the sink only adds: cannot beat the best
-            dv = _paralleled(base, dio, sw)
+            dv = _paralleled(base, dio, sw, v_block_v=params.vl_v)
             cur = measure(dv)
             try:
-                th = settle_losses(cur, dio, sw, base, rules)
+                th = settle_losses(cur, dio, sw, base, rules, params.vl_v)
             except ThermalRunaway:
                 rejected += 1
                 continue

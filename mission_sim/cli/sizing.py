@@ -70,7 +70,7 @@ def _rules(args):
 def _rows(args):
     from tqdm import tqdm
 
-    from wpt_receiver.devices import preset
+    from wpt_receiver.devices import link_preset, preset
     from wpt_receiver.references import TRAJECTORIES
     from wpt_receiver.sizing import size_policies
     try:
@@ -84,6 +84,7 @@ def _rows(args):
         return _sweep_rows(args, base)
     names = _names(args, TRAJECTORIES, "step,ramp,proposed")
     params = _paper_link(args)
+    base = link_preset(args.devices, params)   # (the capacitances at the link's VL and Vdc: Table I's 30 V = preset's)
     _kernels_from_cache()
     bar = tqdm(total=len(names), desc="sizing", disable=not show_progress(args), file=sys.stderr)
     with bar:
@@ -181,11 +182,12 @@ def _cmd_sizing(args) -> int:
         figs.append(plot_sizing(rows, args.out / "sizing.png",
                                 f"SBAR sizing, {what}, devices {args.devices}, margin {args.margin:g}"))
         if args.source == "paper":
-            from wpt_receiver.devices import preset
+            from wpt_receiver.devices import link_preset
             from wpt_receiver.sizing import open_load_study
 
             from ..figures.sizing import plot_open_load
-            figs.append(plot_open_load(open_load_study(_paper_link(args), preset(args.devices), _rules(args)),
+            link = _paper_link(args)
+            figs.append(plot_open_load(open_load_study(link, link_preset(args.devices, link), _rules(args)),
                                        args.out / "open_load.png", rows[0]["required_v_rating_v"]))
     if args.format == "json":
         link = {"link": dict(vars(_paper_link(args)))} if args.source == "paper" else {}
