@@ -142,3 +142,20 @@ def test_sizing_devices_block_the_links_own_voltages():
     n = int(row["part"].rsplit("x", 1)[1])
     assert row["devices"].rect_switch.coss_f == pytest.approx(
         n * charge_equivalent_f(sw["coss_ref_f"], sw["coss_ref_v"], 7.4), rel=1e-12)
+
+
+def test_paper_md_own_link_recipe_runs_as_pasted(capsys):
+    """docs/paper.md's "Your own link, from Python" block runs as pasted and prints the numbers its comment states;
+    its eq. 4-5 currents are the hand calculation's."""
+    import re
+    from pathlib import Path
+    text = (Path(__file__).parent.parent / "docs" / "paper.md").read_text()
+    block = re.search(r"\*\*Your own link, from Python\*\*.*?```python\n(.*?)```", text, re.S).group(1)
+    ns = {}
+    exec(compile(block, "docs/paper.md", "exec"), ns)   # noqa: S102 (the doc's own code)
+    printed = capsys.readouterr().out.strip().splitlines()
+    stated = re.search(r"# (envelope \[.*)", block).group(1).split("; ")
+    assert [line.replace(",", "") for line in printed] == [s.replace(",", "") for s in stated]
+    rm, sm = _rm_sm(LINK_6S)
+    assert float(ns["rm"]) == pytest.approx(rm, rel=1e-12) and round(rm, 4) == 5.3412
+    assert float(ns["sm"]) == pytest.approx(sm, rel=1e-12) and round(sm, 4) == 5.3940
