@@ -67,7 +67,8 @@ def steady_junctions(name: str, params, d_short: float, t_amb_c: float = 40.0, d
     ``d_short`` on link ``params``), with the averaged models: the fundamental currents of eq. 4 with
     the devices folded in at the current temperatures, :func:`wpt_receiver.sbar.conduction_losses`
     and :func:`wpt_receiver.edge_losses.averaged_edge_losses`, per device (two rectifier diodes, two
-    rectifier switches, four inverter switches on one sink). The result's ``tj_c`` can be given to
+    rectifier switches, four inverter switches on one sink; their capacitances charge-equivalent at the link's VL
+    and Vdc, as :func:`wpt_receiver.devices.link_preset`). The result's ``tj_c`` can be given to
     the mission (``link.device_tj_c``) or an env (``EnvConfig.device_tj_c``). Returns
     :func:`settle_junctions`' dict plus ``i1_a``, ``i2_a``."""
     import numpy as np
@@ -90,9 +91,9 @@ def steady_junctions(name: str, params, d_short: float, t_amb_c: float = 40.0, d
     state = {}
 
     def losses(tj):
-        dv = DeviceSet(diode_from_row(rows["rect_diode"], 1, tj["rect_diode"]),
-                       switch_from_row(rows["rect_switch"], 1, tj["rect_switch"]),
-                       switch_from_row(rows["inv_switch"], 1, tj["inv_switch"]), name)
+        dv = DeviceSet(diode_from_row(rows["rect_diode"], 1, tj["rect_diode"], params.vl_v),   # (the capacitances
+                       switch_from_row(rows["rect_switch"], 1, tj["rect_switch"], params.vl_v),  # at the link's own
+                       switch_from_row(rows["inv_switch"], 1, tj["inv_switch"], params.vdc_v), name)  # VL and Vdc)
         v2 = 4 / np.pi * (params.vl_v + dv.rect_vf_v) * (1 - np.sin(0.5 * np.pi * d_short))
         i1, i2 = (float(abs(v)) for v in steady_state(envelope_params(params, dv), v2))
         c = conduction_losses(d_short, i1, i2, dv)
