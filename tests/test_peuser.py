@@ -174,3 +174,18 @@ def test_steady_junctions_take_the_links_own_capacitances():
     assert sw.coss_f == pytest.approx(charge_equivalent_f(row["coss_ref_f"], row["coss_ref_v"], 48.0), rel=1e-12)
     per_switch = (2 * sw.ron_ohm * 0.5 * out["i1_a"] ** 2 + 2 * sw.coss_f * p.vdc_v ** 2 / p.rectifier_period_s) / 4
     assert out["loss_w"]["inv_switch"] == pytest.approx(per_switch, rel=1e-6)   # (tj is a fixed point to ~1e-8)
+
+
+def test_cli_paper_on_own_link_says_the_paper_columns_are_table_i(capsys):
+    """``paper --link``: the "paper max / paper OS" columns are Table II's (Table I) beside the user's link; the table
+    says so (Table I's output has no such line), and the envelope rows are the hand calculation's."""
+    from mission_sim.cli import main
+    args = ["paper", "--model", "envelope", "--no-plot", "--link", "vdc_v=48", "--link", "vl_v=7.4"]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "not this link's" in out
+    p = LinkParams(vdc_v=48.0, vl_v=7.4)
+    rm, sm = _rm_sm(p)
+    assert f"{rm:>5.2f} A {sm:>5.2f} A" in out.splitlines()[2]
+    assert main(["paper", "--model", "envelope", "--no-plot"]) == 0
+    assert "not this link's" not in capsys.readouterr().out

@@ -64,7 +64,10 @@ def _switching_plant(params: LinkParams, d_short: np.ndarray, control_period_s: 
 
 def modal_plant(params: LinkParams, d_short: np.ndarray, control_period_s: float):
     """The exact-mode envelope with the SBAR's balanced v2, compiled (:func:`wpt_receiver.modal_kernel.simulate`,
-    imported on first use; within 0.1 % of the switching model's peaks on the three trajectories).
+    imported on first use; within 0.1 % of the switching model's peaks on the three trajectories at Table I; on a
+    link whose envelope beats fast, k ~ 0.2-0.25, the step's peak differs by 1-2 % (it depends on where in the
+    carrier cycle the SBAR shorts, which an envelope does not resolve), the ramp and proposed within 0.3 %:
+    docs/robustness.md, "Own links (2026-11-27 night)").
 
     Like the switching plant, ``i2_a`` is the instantaneous peak |i2| [A] (fundamental + ripple) per
     control period, ``i2_fund_a`` the fundamental's amplitude, ``v2_v`` the fundamental of v2 in

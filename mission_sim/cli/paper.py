@@ -148,6 +148,8 @@ def _print_table(runs, rows, model: str, link_text: str = "Table I") -> None:
               "peak |i2| the paper's Table II measures: --model modal (default) or switching")
     final_src = "the closed-form SM current" if model == "envelope" else f"the {model} model's final amplitude"
     print(f"overshoot = (max - final) / final; the paper's final value is 10.5 A, ours is {final_src}")
+    if link_text != "Table I":   # (the columns beside an own link's numbers are not that link's)
+        print("paper max / paper OS: the paper's Table II on its Table I link, for reference; not this link's")
 
 
 def _check_waveforms(args) -> None:
