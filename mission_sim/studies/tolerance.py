@@ -106,7 +106,11 @@ def summarise(df: pd.DataFrame, nominal: dict, margin: float = 1.25, min_power_f
     when its RM power is at least ``min_power_frac`` of the nominal and its peak |J2| is within the
     rating ``margin`` x the nominal peak of that controller (the receiver sized for the nominal
     link, as ``sizing`` does). Yields with 95 % Wilson intervals. Peak percentiles are over the draws
-    that transfer power in RM (the others have NaN peaks)."""
+    that transfer power in RM (the others have NaN peaks). A nominal link that transfers no power in RM is refused
+    (its yields would count every draw as delivering 0.9 x 0 W)."""
+    if not nominal["rm_power_w"] > 0:
+        raise ValueError(f"nominal rm_power_w={nominal['rm_power_w']!r} is invalid; valid range: (0, inf) W (a nominal "
+                         "link that conducts in RM: emf margin above 1)")
     ok = df[df["status"] == "ok"]
     dist = {m: {q: float(np.nanpercentile(ok[m].to_numpy(float), q)) for q in (1, 5, 25, 50, 75, 95, 99)}
             | {"mean": float(np.nanmean(ok[m].to_numpy(float))), "n": int(np.isfinite(ok[m].to_numpy(float)).sum())}
