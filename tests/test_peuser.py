@@ -207,3 +207,25 @@ def test_tolerance_refuses_a_nominal_link_that_blocks_in_rm(tmp_path, capsys):
     import pandas as pd
     with pytest.raises(ValueError, match=r"nominal rm_power_w=0.0 is invalid"):
         summarise(pd.DataFrame({"status": []}), {"rm_power_w": 0.0})
+
+
+@pytest.mark.parametrize("n_series", [4, 8])
+def test_cli_sizing_from_a_mission_rates_at_the_packs_own_voltage(capsys, n_series):
+    """``sizing --source mission`` ran its open-load study and took the parts' capacitances at Table I's 30 V
+    whatever the pack (``LinkConfig.link_params``' default ``vl_v``): a worst blocking voltage of 31.50 V on the
+    default 8S pack at 32.28-32.87 V (below the pack's own voltage) and on a 4S pack alike, a 34.6 V rating for a
+    ~17 V pack. Now at the run's highest ``battery_v``: the worst blocking voltage lies above it, within 10 %."""
+    import json
+
+    from mission_sim.cli import main
+    from mission_sim.cli.mission import make_policy
+    from mission_sim.config import apply_overrides, config_from_dict, load_config_dict
+    from mission_sim.world.runner import run_mission
+    sets = {"battery.n_series": n_series, "mission.hover_time_s": 10.0}
+    assert main(["sizing", "--source", "mission", "--policies", "ramp", "--no-plot", "--no-progress", "--format",
+                 "json", *(f"--set={k}={v}" for k, v in sets.items())]) == 0
+    row = json.loads(capsys.readouterr().out)["rows"][0]
+    cfg = config_from_dict(apply_overrides(load_config_dict(), {**sets, "link.devices": "schottky"}))
+    vmax = float(run_mission(cfg, make_policy("ramp", cfg)).timeseries["battery_v"].max())
+    assert vmax < row["v_worst_v"] < 1.1 * vmax
+    assert row["required_v_rating_v"] == pytest.approx(1.1 * row["v_worst_v"])

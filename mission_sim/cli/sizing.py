@@ -137,11 +137,25 @@ def _size_mission(name, cfg, base, args) -> dict:
     ts, peak = res.timeseries, res.summary["peak_i2_a"]
     cols = [ts[c].to_numpy() for c in ("t_s", "dt_s", "d_short", "i1_amp_a", "i2_amp_a")]
     from wpt_receiver import TABLE_I
-    # the open-load voltage study on Table I's coils (the design point) with the mission's link settings
-    params = res.config.link.link_params(TABLE_I.l1_h, TABLE_I.l2_h, TABLE_I.lm_h)
-    vl, f = ts["battery_v"].to_numpy(), res.config.link.f_hz   # (the edges block the run's pack voltage)
-    row = select_parts(lambda dv: envelope_currents(*cols, peak, dv, vl_v=vl, f_hz=f), params, base, _rules(args))
+    from wpt_receiver.devices import link_preset
+    vl, f = ts["battery_v"].to_numpy(), res.config.link.f_hz   # (the edges block each step's pack voltage)
+    # the open-load voltage study and the parts' capacitances on Table I's coils (the design point) with the
+    # mission's link settings at the run's highest pack voltage (module docstring: _mission_vl_v)
+    params = res.config.link.link_params(TABLE_I.l1_h, TABLE_I.l2_h, TABLE_I.lm_h, vl_v=_mission_vl_v(vl))
+    dev = link_preset(base.name, params)
+    row = select_parts(lambda dv: envelope_currents(*cols, peak, dv, vl_v=vl, f_hz=f), params, dev, _rules(args))
     return {"policy": name, **{c: row.get(c) for c in _COLUMNS}}
+
+
+def _mission_vl_v(battery_v) -> float:
+    """The battery voltage [V] a mission row is sized at (the open-load study and the parts' charge-equivalent
+    capacitances): the highest ``battery_v`` of the run the row is sized from (``--source sweep``: the re-run worst
+    case's own run; the sweep stores summaries, not voltages). The highest, because the open-load fault's worst
+    blocking voltage rises with the pack voltage at the disconnect (the tank's energy lands on top of VL): the
+    part must block the worst moment of the run, and its capacitances are taken at the voltage that study runs at.
+    (Until 2026-11-27 night: Table I's 30 V whatever the pack, e.g. 31.50 V worst blocking voltage on the default
+    mission's 8S pack at 32.3-32.9 V.) The edge energies still take each step's own ``battery_v``."""
+    return float(battery_v.max())
 
 
 def _sweep_rows(args, base):
