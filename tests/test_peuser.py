@@ -229,3 +229,60 @@ def test_cli_sizing_from_a_mission_rates_at_the_packs_own_voltage(capsys, n_seri
     vmax = float(run_mission(cfg, make_policy("ramp", cfg)).timeseries["battery_v"].max())
     assert vmax < row["v_worst_v"] < 1.1 * vmax
     assert row["required_v_rating_v"] == pytest.approx(1.1 * row["v_worst_v"])
+
+
+def test_envelope_currents_and_preset_refuse_bad_numbers_in_one_line():
+    """Bad numbers were numpy's "fp and xp are not of the same length." (a ``vl_v`` of the wrong length), Python's
+    "could not convert string to float" (``f_hz='x'``); ``preset`` refused a numpy integer ``v_block_v`` and took
+    ``True`` as 1 V, and its "ideal" checked nothing. Now one line naming the value and the range (LinkParams'
+    number check, ``params.positive_number``), numpy numbers taken, bools refused."""
+    from wpt_receiver.devices import IDEAL
+    from wpt_receiver.sizing import envelope_currents
+    cols = ([1e-5, 2e-5], [1e-5, 1e-5], [0.5, 0.5], [1.0, 1.0], [1.0, 1.0], 1.0, DV)
+    with pytest.raises(ValueError, match=r"^vl_v of shape \(3,\) is invalid; valid: a number or a 1-D sequence of "
+                                         r"2 \(one per step\)$"):
+        envelope_currents(*cols, vl_v=np.full(3, 7.4), f_hz=85e3)
+    with pytest.raises(ValueError, match=r"^f_hz='x' is not a number; valid range: \(0, inf\) Hz$"):
+        envelope_currents(*cols, vl_v=7.4, f_hz="x")
+    with pytest.raises(ValueError, match=r"^vl_v=-2.0 is invalid; valid range: \(0, inf\) V, finite$"):
+        envelope_currents(*cols, vl_v=[7.4, -2.0], f_hz=85e3)
+    ok = envelope_currents(*cols, vl_v=np.float32(7.4), f_hz=np.int64(85000))
+    assert ok["switching_loss_w"] == pytest.approx(envelope_currents(*cols, vl_v=7.4, f_hz=85e3)["switching_loss_w"],
+                                                   rel=1e-6)
+    assert preset("schottky", v_block_v=np.int64(30)) == preset("schottky")
+    for name, kw, msg in (("schottky", {"v_block_v": True}, r"^v_block_v=True is not a number; valid range: \(0, inf\) V$"),
+                          ("ideal", {"v_block_v": -1}, r"^v_block_v=-1.0 is invalid; valid range: \(0, inf\) V, finite$"),
+                          ("schottky", {"v_block_inv_v": "x"}, r"^v_block_inv_v='x' is not a number")):
+        with pytest.raises(ValueError, match=msg):
+            preset(name, **kw)
+    assert preset("ideal", v_block_v=7.4) is IDEAL
+
+
+def test_edge_periods_have_one_source(monkeypatch):
+    """The SBAR's averaged edge power divides by the rectifier period and its recovery term takes omega: the sizing
+    (``envelope_currents``) and the mission's ``add_edges`` wrote ``0.5 / f`` and ``2 pi f`` again. Both now read
+    ``LinkParams.rectifier_period_s`` / ``omega_rad_s``: a change there moves both alike (a doubled period halves
+    the edge power)."""
+    from types import SimpleNamespace
+
+    from mission_sim.world.loop import _COL, MissionLoop
+    from wpt_receiver import TABLE_I
+    from wpt_receiver.sizing import envelope_currents
+    n = 8
+    cols = (np.arange(1, n + 1) * 1e-4, np.full(n, 1e-4), np.full(n, 0.4), np.full(n, 5.0), np.full(n, 12.0), 12.0,
+            DV)
+    arr = np.zeros((n, max(_COL.values()) + 1))
+    for k, v in (("v1_v", 38.0), ("dt_s", 1e-4), ("d_short", 0.4), ("i2_amp_a", 12.0), ("battery_v", 32.5)):
+        arr[:, _COL[k]] = v
+
+    def both():
+        loop = SimpleNamespace(base=TABLE_I, dev=DV, lk=SimpleNamespace(f_hz=TABLE_I.f_hz, vdc_v=TABLE_I.vdc_v),
+                               edge_j=(0.0, 0.0))
+        MissionLoop.add_edges(loop, arr)
+        return (envelope_currents(*cols, vl_v=32.5, f_hz=TABLE_I.f_hz)["switching_loss_w"], loop.edge_j[0])
+    before = both()
+    assert before[0] > 0 and before[1] > 0
+    monkeypatch.setattr(type(TABLE_I), "rectifier_period_s", property(lambda p: 1.0 / p.f_hz))
+    after = both()
+    assert after[0] == pytest.approx(before[0] / 2, rel=1e-9)
+    assert after[1] == pytest.approx(before[1] / 2, rel=1e-9)

@@ -219,6 +219,10 @@ def preset(name: str, tj_c=None, v_block_v: float = V_BLOCK_V, v_block_inv_v: fl
     125 C Schottky data and 25 C MOSFET data); ``v_block_v`` [V] sets the rectifier's charge-equivalent
     capacitances, ``v_block_inv_v`` [V] the inverter switch's (None: ``v_block_v``; both default to Table I's 30 V:
     a link of its own takes :func:`link_preset`)."""
+    from .params import positive_number
+    v_block_v = positive_number("v_block_v", v_block_v, "V")   # (checked for "ideal" too: one API, one rule)
+    if v_block_inv_v is not None:
+        v_block_inv_v = positive_number("v_block_inv_v", v_block_inv_v, "V")
     if name == "ideal":
         return IDEAL
     row = parts()["preset"].get(name)
@@ -226,9 +230,6 @@ def preset(name: str, tj_c=None, v_block_v: float = V_BLOCK_V, v_block_inv_v: fl
         raise ValueError(f"device preset {name!r} is unknown; valid: {', '.join(preset_names())}")
     if tj_c is not None and not (math.isfinite(tj_c) and -55.0 <= tj_c <= 200.0):
         raise ValueError(f"tj_c={tj_c!r} is invalid; valid range: [-55, 200] C")
-    for what, v in (("v_block_v", v_block_v), ("v_block_inv_v", v_block_inv_v)):
-        if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-            raise ValueError(f"{what}={v!r} is invalid; valid range: (0, inf) V")
     return device_set(row["rect_diode"], row["rect_switch"], row["inv_switch"], name, tj_c, v_block_v, v_block_inv_v)
 
 

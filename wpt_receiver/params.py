@@ -12,7 +12,48 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-__all__ = ["LinkParams", "TABLE_I", "FREQUENCY_TOLERANCE", "resonance_warning", "warn_off_resonance"]
+__all__ = ["LinkParams", "TABLE_I", "FREQUENCY_TOLERANCE", "resonance_warning", "warn_off_resonance", "positive_number",
+           "positive_numbers"]
+
+
+def positive_number(name: str, value, unit: str = "") -> float:
+    """``value`` as a float after checking it is one finite number > 0 (a Python or numpy number; a bool is refused:
+    float(True) = 1.0 would pass as 1 H, 1 ohm, 1 Hz, 1 V): the check of every :class:`LinkParams` field, for any
+    other link quantity too (:func:`positive_numbers` for one per step). The error is one line naming ``name``, the
+    value and the range, in ``unit`` when given."""
+    rng = f"(0, inf){' ' + unit if unit else ''}"
+    if isinstance(value, (bool, np.bool_)) or (isinstance(value, np.ndarray) and value.ndim):
+        raise ValueError(f"{name}={value!r} is not a number; valid range: {rng}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}={value!r} is not a number; valid range: {rng}") from None
+    if not math.isfinite(v) or v <= 0.0:
+        raise ValueError(f"{name}={v!r} is invalid; valid range: {rng}, finite")
+    return v
+
+
+def positive_numbers(name: str, values, unit: str = "", size: int | None = None):
+    """:func:`positive_number` for a number or a 1-D sequence of them (e.g. one per step of a run: ``size`` of them
+    when given): the float (a number) or float array, after checking every entry; the error names the first bad entry
+    (or the length, or the type) and the valid range."""
+    if np.ndim(values) == 0:
+        return positive_number(name, values, unit)
+    if (values.dtype.kind == "b" if isinstance(values, np.ndarray)
+            else any(isinstance(v, (bool, np.bool_)) for v in np.ravel(np.asarray(values, dtype=object)))):
+        raise ValueError(f"{name} holds a bool; valid: numbers in (0, inf){' ' + unit if unit else ''}")
+    try:
+        v = np.asarray(values, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} holds a value that is not a number; valid range: (0, inf)"
+                         f"{' ' + unit if unit else ''}") from None
+    if v.ndim != 1 or (size is not None and v.size != size):
+        want = "a number or a 1-D sequence" + ("" if size is None else f" of {size} (one per step)")
+        raise ValueError(f"{name} of shape {v.shape} is invalid; valid: {want}")
+    bad = ~(np.isfinite(v) & (v > 0))
+    if np.any(bad):
+        positive_number(name, float(v[bad][0]), unit)   # (raises, naming the first bad entry)
+    return v
 
 
 def lm_limit_h(p) -> float:
@@ -46,16 +87,7 @@ class LinkParams:
 
     def __post_init__(self) -> None:
         for fld in fields(self):
-            value = getattr(self, fld.name)
-            if isinstance(value, (bool, np.bool_)):   # float(True) = 1.0 would pass as 1 H, 1 ohm, 1 Hz
-                raise ValueError(f"{fld.name}={value!r} is not a number; valid range: (0, inf)")
-            try:
-                value = float(value)
-            except (TypeError, ValueError):
-                raise ValueError(f"{fld.name}={value!r} is not a number; valid range: (0, inf)") from None
-            if not math.isfinite(value) or value <= 0.0:
-                raise ValueError(f"{fld.name}={value!r} is invalid; valid range: (0, inf), finite")
-            object.__setattr__(self, fld.name, value)
+            object.__setattr__(self, fld.name, positive_number(fld.name, getattr(self, fld.name)))
         lim = lm_limit_h(self)
         if not self.lm_h < lim:   # (the rule of envelope.check_lm too: one limit, one comparison)
             raise ValueError(

@@ -279,8 +279,11 @@ def envelope_currents(t_end_s, dt_s, d_short, i1_amp_a, i2_amp_a, peak_i2_a: flo
     one per step, e.g. the mission's ``battery_v``) and ``f_hz`` [Hz] are the run's battery voltage and inverter
     frequency, for the SBAR's edge energies (:func:`wpt_receiver.edge_losses.averaged_edge_losses`; they were Table
     I's 30 V and 85 kHz whatever the run's link until 2026-11-27 night)."""
+    from .params import positive_number, positive_numbers
     from .sbar import conduction_losses, rectifier_current, short_weight
     d, i2 = np.asarray(d_short, dtype=float), np.asarray(i2_amp_a, dtype=float)
+    vl_v = positive_numbers("vl_v", vl_v, "V", size=np.size(t_end_s))   # (a number, or one per step)
+    f_hz = positive_number("f_hz", f_hz, "Hz")
     w, sq = short_weight(d), 0.5 * i2 * i2
     loss = conduction_losses(d, np.asarray(i1_amp_a, dtype=float), i2, devices)
     args = (t_end_s, dt_s)
@@ -298,14 +301,9 @@ def _edge_w(d, i2, devices, vl_v, f_hz: float):
     """Averaged SBAR edge power [W] (:func:`wpt_receiver.edge_losses.averaged_edge_losses`) along an envelope run
     at battery voltage ``vl_v`` [V] (a number or one per step) and inverter frequency ``f_hz`` [Hz]."""
     from .edge_losses import averaged_edge_losses
-    vl = np.asarray(vl_v, dtype=float)
-    f = float(f_hz)
-    if not (np.all(np.isfinite(vl)) and np.all(vl > 0)):
-        bad = vl[~(np.isfinite(vl) & (vl > 0))] if vl.ndim else vl
-        raise ValueError(f"vl_v={float(np.ravel(bad)[0])!r} is invalid; valid range: (0, inf) V")
-    if not (math.isfinite(f) and f > 0):
-        raise ValueError(f"f_hz={f_hz!r} is invalid; valid range: (0, inf) Hz")
-    return averaged_edge_losses(d, i2, vl, devices, 0.5 / f, 2.0 * math.pi * f)["rectifier_w"]
+    from .params import TABLE_I
+    link = TABLE_I.with_(f_hz=f_hz)   # (its periods at f_hz: one source of T and omega; f_hz checked before)
+    return averaged_edge_losses(d, i2, vl_v, devices, link.rectifier_period_s, link.omega_rad_s)["rectifier_w"]
 
 
 def paper_policy(name: str, params: LinkParams, t_switch_s: float = 1e-3, t_end_s: float = 10e-3):

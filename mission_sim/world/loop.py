@@ -92,7 +92,7 @@ class MissionLoop:
         self.k_off = cfg.coupling.tx_min_k
         self.ramp_rate = self.v1_nom / lk.tx_ramp_s if lk.tx_ramp_s > 0 else math.inf
         self.rated = lk.rated_i2_a
-        self.t_rect = 0.5 / base.f_hz
+        self.t_rect = base.rectifier_period_s
         self.inv_sqrt_l1l2 = 1.0 / math.sqrt(model.l1_h * model.l2_h)
         self.samples = MissionSamples(cfg, traj, charge, lm_all)   # lm_all: per sample, a constant or None
         self.consts = self.state = None
@@ -277,9 +277,9 @@ class MissionLoop:
         if not on.any():
             return
         dt = arr[:, _COL["dt_s"]] * on
-        f = self.lk.f_hz
+        b = self.base   # (the link's periods: LinkParams' one source of T and omega)
         e = averaged_edge_losses(arr[:, _COL["d_short"]], arr[:, _COL["i2_amp_a"]], arr[:, _COL["battery_v"]], self.dev,
-                                 0.5 / f, 2 * math.pi * f, vdc_v=self.lk.vdc_v)
+                                 b.rectifier_period_s, b.omega_rad_s, vdc_v=self.lk.vdc_v)
         self.edge_j = (math.fsum([self.edge_j[0], *(np.asarray(e["rectifier_w"]) * dt).tolist()]),
                        math.fsum([self.edge_j[1], *(np.broadcast_to(e["inverter_w"], dt.shape) * dt).tolist()]))
 
