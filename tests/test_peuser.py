@@ -286,3 +286,25 @@ def test_edge_periods_have_one_source(monkeypatch):
     after = both()
     assert after[0] == pytest.approx(before[0] / 2, rel=1e-9)
     assert after[1] == pytest.approx(before[1] / 2, rel=1e-9)
+
+
+def test_size_policies_takes_a_preset_name_on_the_users_link():
+    """From Python, ``size_policies(names, own_link, preset("schottky"))`` sized with the capacitances at Table I's
+    30 V (the CLI's ``sizing --link`` used ``link_preset``): the name is now the natural call (the preset on the link:
+    the SBAR node's C at 7.4 V, so a larger C V^2 / 2 edge than 30 V's capacitances give at the same current), and a
+    30 V preset on another link warns, naming ``link_preset``."""
+    import warnings
+
+    from wpt_receiver.devices import link_preset
+    from wpt_receiver.notices import DronewptWarning
+    from wpt_receiver.sizing import link_devices, open_load_study
+    assert link_devices("schottky", LINK_2S) == link_preset("schottky", LINK_2S) != DV
+    with pytest.warns(DronewptWarning, match=r"capacitances at Table I's 30 V.*link_preset\('schottky', params\)"):
+        assert link_devices(DV, LINK_2S) is DV
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        from wpt_receiver import TABLE_I
+        link_devices(DV, TABLE_I)                                   # (Table I: the preset is the link's)
+        link_devices(link_preset("schottky", LINK_2S), LINK_2S)
+        by_name = open_load_study(LINK_2S, "schottky")
+    assert by_name == open_load_study(LINK_2S, link_preset("schottky", LINK_2S))

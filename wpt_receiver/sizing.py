@@ -48,7 +48,7 @@ import numpy as np
 from .devices import V_BLOCK_V, DeviceSet, diode_from_row, parts, switch_from_row
 from .params import LinkParams
 
-__all__ = ["SizingRules", "open_load_study", "rectifier_currents", "envelope_currents", "candidates", "size_policy", "select_parts",
+__all__ = ["SizingRules", "link_devices", "open_load_study", "rectifier_currents", "envelope_currents", "candidates", "size_policy", "select_parts",
            "paper_policy", "size_policies"]
 
 
@@ -174,13 +174,32 @@ def settle_losses(cur: dict, diode: dict, switch: dict, base: DeviceSet, rules: 
             "thermal_iterations": out["iterations"]}
 
 
-def size_policy(run, params: LinkParams, base: DeviceSet, rules: SizingRules = SizingRules()) -> dict:
+def link_devices(base, params: LinkParams) -> DeviceSet:
+    """The device set the sizing runs ``params`` with: ``base`` a preset's name (``"schottky"``: the natural call) is
+    :func:`wpt_receiver.devices.link_preset` on the link, the capacitances at its VL and Vdc; a
+    :class:`~wpt_receiver.devices.DeviceSet` is taken as given, with a :class:`~wpt_receiver.notices.DronewptWarning`
+    when it is a preset's at Table I's 30 V (``preset(name)``) on a link with another VL or Vdc (its capacitances,
+    so the edge energies and the open-load study, would be 30 V's: pass the name, or ``link_preset(name, params)``)."""
+    from .devices import IDEAL, link_preset, preset, preset_names
+    if isinstance(base, str):
+        return link_preset(base, params)
+    if (base != IDEAL and base.name in preset_names() and (params.vl_v, params.vdc_v) != (V_BLOCK_V, V_BLOCK_V)
+            and base == preset(base.name)):
+        from .notices import warn
+        warn(f"devices {base.name!r} have their capacitances at Table I's {V_BLOCK_V:g} V, the link blocks VL = "
+             f"{params.vl_v:g} V, Vdc = {params.vdc_v:g} V; pass the preset's name {base.name!r} or "
+             f"link_preset({base.name!r}, params)")
+    return base
+
+
+def size_policy(run, params: LinkParams, base, rules: SizingRules = SizingRules()) -> dict:
     """Size the rectifier for one policy. ``run(devices) -> SwitchingResult`` simulates the
-    policy's duty sequence with a device set. Returns the row of the sizing table."""
+    policy's duty sequence with a device set; ``base``: a preset's name or a device set (:func:`link_devices`).
+    Returns the row of the sizing table."""
     return select_parts(lambda dv: rectifier_currents(run(dv), rules.window_s), params, base, rules)
 
 
-def select_parts(measure, params: LinkParams, base: DeviceSet, rules: SizingRules = SizingRules(),
+def select_parts(measure, params: LinkParams, base, rules: SizingRules = SizingRules(),
                  v_worst_v: float | None = None) -> dict:
     """The lightest rectifier for ``measure(devices) -> currents`` (the keys of
     :func:`rectifier_currents`): rating = margin x the peak measured with ``base``, voltage rating
@@ -190,8 +209,9 @@ def select_parts(measure, params: LinkParams, base: DeviceSet, rules: SizingRule
     parts meeting both (their capacitances charge-equivalent at ``params.vl_v``), losses settled at the junction
     temperatures (:func:`settle_losses`), mass =
     devices + heat sink for conduction + switching loss. A combination whose junctions run away is
-    skipped (``thermal_rejected`` counts them)."""
+    skipped (``thermal_rejected`` counts them). ``base``: a preset's name or a device set (:func:`link_devices`)."""
     from .thermal import ThermalRunaway
+    base = link_devices(base, params)
     first = measure(base)
     required = rules.margin * first["peak_i2_a"]
     stress = None
@@ -228,10 +248,11 @@ def select_parts(measure, params: LinkParams, base: DeviceSet, rules: SizingRule
     return best
 
 
-def open_load_study(params: LinkParams, base: DeviceSet, rules: SizingRules = SizingRules()) -> dict:
+def open_load_study(params: LinkParams, base, rules: SizingRules = SizingRules()) -> dict:
     """The open-load voltage study the sizing rates against (cached per link, devices and rules):
-    :func:`wpt_receiver.switching.stress.voltage_stress` without the edge ring."""
-    return _stress(params, base, rules, {})
+    :func:`wpt_receiver.switching.stress.voltage_stress` without the edge ring; ``base``: a preset's name or a device
+    set (:func:`link_devices`)."""
+    return _stress(params, link_devices(base, params), rules, {})
 
 
 def _stress(params: LinkParams, base: DeviceSet, rules: SizingRules, cur: dict) -> dict:
@@ -323,10 +344,12 @@ def paper_policy(name: str, params: LinkParams, t_switch_s: float = 1e-3, t_end_
     return run
 
 
-def size_policies(names, params: LinkParams, base: DeviceSet, rules: SizingRules = SizingRules(),
+def size_policies(names, params: LinkParams, base, rules: SizingRules = SizingRules(),
                   t_switch_s: float = 1e-3, t_end_s: float = 10e-3, progress=None) -> list[dict]:
-    """Sizing rows (:func:`size_policy`) for the paper's transitions ``names``; ``progress`` is an
-    optional callable advanced once per policy."""
+    """Sizing rows (:func:`size_policy`) for the paper's transitions ``names`` on the link ``params`` with the devices
+    ``base``: a preset's name (``size_policies(names, my_link, "schottky")``: the preset on the link,
+    :func:`wpt_receiver.devices.link_preset`) or a device set (a Table I ``preset(name)`` on another link warns:
+    :func:`link_devices`, in :func:`select_parts`); ``progress`` is an optional callable advanced once per policy."""
     rows = []
     for name in names:
         row = size_policy(paper_policy(name, params, t_switch_s, t_end_s), params, base, rules)
