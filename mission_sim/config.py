@@ -64,9 +64,11 @@ class LinkConfig:
             raise ValueError(f"devices={self.devices!r} is invalid; valid values: {', '.join(preset_names())}")
 
     def device_set(self):
-        """The :class:`wpt_receiver.devices.DeviceSet` of the ``devices`` preset (``parts.toml``)."""
+        """The :class:`wpt_receiver.devices.DeviceSet` of the ``devices`` preset (``parts.toml``), the inverter
+        switch's Coss charge-equivalent at ``vdc_v`` (the SBAR's capacitance is taken at each step's battery voltage
+        where it acts, the edge energies: ``MissionLoop.add_edges``)."""
         from wpt_receiver.devices import preset
-        return preset(self.devices, tj_c=self.device_tj_c or None)
+        return preset(self.devices, tj_c=self.device_tj_c or None, v_block_inv_v=self.vdc_v)
 
     def link_params(self, l1_h: float, l2_h: float, lm_h: float, vl_v: float = 30.0) -> LinkParams:
         return LinkParams(l1_h=l1_h, l2_h=l2_h, lm_h=lm_h, r1_ohm=self.r1_ohm, r2_ohm=self.r2_ohm,

@@ -276,7 +276,8 @@ def test_edge_periods_have_one_source(monkeypatch):
         arr[:, _COL[k]] = v
 
     def both():
-        loop = SimpleNamespace(base=TABLE_I, dev=DV, lk=SimpleNamespace(f_hz=TABLE_I.f_hz, vdc_v=TABLE_I.vdc_v),
+        loop = SimpleNamespace(base=TABLE_I, dev=DV, lk=SimpleNamespace(devices="schottky", f_hz=TABLE_I.f_hz,
+                                                                        vdc_v=TABLE_I.vdc_v),
                                edge_j=(0.0, 0.0))
         MissionLoop.add_edges(loop, arr)
         return (envelope_currents(*cols, vl_v=32.5, f_hz=TABLE_I.f_hz)["switching_loss_w"], loop.edge_j[0])
@@ -308,3 +309,32 @@ def test_size_policies_takes_a_preset_name_on_the_users_link():
         link_devices(link_preset("schottky", LINK_2S), LINK_2S)
         by_name = open_load_study(LINK_2S, "schottky")
     assert by_name == open_load_study(LINK_2S, link_preset("schottky", LINK_2S))
+
+
+def test_mission_edges_take_each_steps_own_battery_voltage():
+    """A mission's SBAR edge energies (``MissionLoop.add_edges``, the summary's ``edge_losses_rectifier_j``) took the
+    node capacitance at Table I's 30 V whatever the pack (``LinkConfig.device_set``): now at each step's
+    ``battery_v`` (``devices.rect_node_c_f``; the default mission 88.97 -> 88.15 J, its time series unchanged), the
+    same energy as ``link_preset`` at that voltage gives; the inverter's Coss at the mission's ``vdc_v``."""
+    from types import SimpleNamespace
+
+    from mission_sim.config import LinkConfig
+    from mission_sim.world.loop import _COL, MissionLoop
+    from wpt_receiver import TABLE_I
+    from wpt_receiver.devices import link_preset, rect_node_c_f
+    from wpt_receiver.edge_losses import averaged_edge_losses
+    assert rect_node_c_f("schottky", 30.0) == DV.rect_switch.coss_f + DV.rect_diode.c_f
+    assert rect_node_c_f("schottky", np.array([7.4, 30.0]))[1] == pytest.approx(rect_node_c_f("schottky", 30.0),
+                                                                                rel=1e-15)
+    assert rect_node_c_f("schottky", 7.4) == pytest.approx(2.96e-9, rel=0.01)
+    n, vl = 6, np.array([7.4, 7.6, 7.8, 8.0, 8.2, 8.4])
+    arr = np.zeros((n, max(_COL.values()) + 1))
+    for k, v in (("v1_v", 38.0), ("dt_s", 1e-4), ("d_short", 0.4), ("i2_amp_a", 12.0), ("battery_v", vl)):
+        arr[:, _COL[k]] = v
+    loop = SimpleNamespace(base=TABLE_I, dev=DV, lk=SimpleNamespace(devices="schottky", f_hz=85e3, vdc_v=30.0),
+                           edge_j=(0.0, 0.0))
+    MissionLoop.add_edges(loop, arr)
+    want = sum(averaged_edge_losses(0.4, 12.0, v, link_preset("schottky", TABLE_I.with_(vl_v=v)),
+                                    TABLE_I.rectifier_period_s, TABLE_I.omega_rad_s)["rectifier_w"] * 1e-4 for v in vl)
+    assert loop.edge_j[0] == pytest.approx(want, rel=1e-12)
+    assert LinkConfig(vdc_v=48.0).device_set().inv_switch == link_preset("schottky", LINK_2S).inv_switch

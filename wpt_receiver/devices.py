@@ -36,7 +36,7 @@ from functools import cached_property, lru_cache
 from importlib import resources
 
 __all__ = ["Diode", "Switch", "DeviceSet", "IDEAL", "parts", "preset", "link_preset", "preset_names", "device_set",
-           "charge_equivalent_f", "diode_from_row", "switch_from_row", "V_BLOCK_V"]
+           "charge_equivalent_f", "rect_node_c_f", "diode_from_row", "switch_from_row", "V_BLOCK_V"]
 
 V_BLOCK_V = 30.0   # default blocking voltage for the charge-equivalent capacitances: Table I's VL [V] (and Vdc);
 #                    a link of its own: :func:`link_preset` (the rectifier's at its VL, the inverter's at its Vdc)
@@ -149,11 +149,32 @@ def preset_names() -> list[str]:
 def charge_equivalent_f(c_ref_f: float, v_ref_v: float, v_v: float, phi_v: float = 0.5) -> float:
     """Charge-equivalent capacitance [F] over ``0 .. v_v`` of a junction capacitance given as
     ``c_ref_f`` at ``v_ref_v``, with the abrupt-junction law ``C(v) = C0 / sqrt(1 + v / phi)``:
-    ``Q(V) = 2 C0 phi (sqrt(1 + V/phi) - 1)``, returned as ``Q / V``."""
+    ``Q(V) = 2 C0 phi (sqrt(1 + V/phi) - 1)``, returned as ``Q / V``; ``v_v`` a number or an array (one per step)."""
+    if isinstance(v_v, (list, tuple)) or getattr(v_v, "ndim", 0):
+        import numpy as np
+        v = np.asarray(v_v, dtype=float)
+        if c_ref_f <= 0.0:
+            return np.zeros(v.shape)
+        c0 = c_ref_f * math.sqrt(1.0 + v_ref_v / phi_v)
+        return 2.0 * c0 * phi_v * (np.sqrt(1.0 + v / phi_v) - 1.0) / v
     if c_ref_f <= 0.0:
         return 0.0
     c0 = c_ref_f * math.sqrt(1.0 + v_ref_v / phi_v)
     return 2.0 * c0 * phi_v * (math.sqrt(1.0 + v_v / phi_v) - 1.0) / v_v
+
+
+def rect_node_c_f(name: str, v_block_v):
+    """The SBAR node's capacitance [F] of preset ``name`` (its rectifier switch's Coss + diode's Cj, one die each, as
+    :func:`preset` builds them), charge-equivalent at ``v_block_v`` [V]: a number or one per step (a mission's
+    ``battery_v``, for its edge energies at each step's own voltage); 0 for "ideal"."""
+    if name == "ideal":
+        return 0.0 * v_block_v
+    row = parts()["preset"].get(name)
+    if row is None:
+        raise ValueError(f"device preset {name!r} is unknown; valid: {', '.join(preset_names())}")
+    sw, dio = _row("switch", row["rect_switch"]), _row("diode", row["rect_diode"])
+    return (charge_equivalent_f(sw.get("coss_ref_f", 0.0), sw.get("coss_ref_v", 1.0), v_block_v)
+            + charge_equivalent_f(dio.get("cj_ref_f", 0.0), dio.get("cj_ref_v", 1.0), v_block_v))
 
 
 def _tt_s(qrr_c: float, didt_a_s: float) -> float:

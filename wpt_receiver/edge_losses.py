@@ -43,17 +43,25 @@ EDGE_KEYS = ("rect_turn_on_j", "rect_turn_off_j", "rect_recovery_j", "inv_turn_o
              "inv_recovery_j")
 
 
-def turn_off_energy(v_v, i_a, t_f_s: float, c_f: float):
+def turn_off_energy(v_v, i_a, t_f_s: float, c_f):
     """Overlap energy [J] of a channel whose current ``i_a`` falls linearly to 0 in ``t_f_s`` while
     the excess charges the node capacitance ``c_f`` from 0 towards the clamp ``v_v`` [V].
 
     ``v(t) = I t^2 / (2 t_f C)`` until ``t_1 = sqrt(2 t_f C V / I)``, then clamped at ``V``;
-    ``E = int_0^t_f v(t) I (1 - t/t_f) dt``. Vectorised over ``v_v`` and ``i_a`` (>= 0)."""
+    ``E = int_0^t_f v(t) I (1 - t/t_f) dt``. Vectorised over ``v_v``, ``i_a`` (>= 0) and ``c_f`` [F]."""
     v, i = np.asarray(v_v, dtype=float), np.abs(np.asarray(i_a, dtype=float))
     if t_f_s <= 0:
         return np.zeros(np.broadcast(v, i).shape) + 0.0
+    if np.ndim(c_f):   # (one capacitance per entry, e.g. per step of a mission at its own battery voltage)
+        c = np.asarray(c_f, dtype=float)
+        return np.where(c > 0, _turn_off_c(v, i, t_f_s, np.where(c > 0, c, 1.0)), 0.5 * v * i * t_f_s)
     if c_f <= 0:
         return 0.5 * v * i * t_f_s
+    return _turn_off_c(v, i, t_f_s, c_f)
+
+
+def _turn_off_c(v, i, t_f_s: float, c_f):
+    """:func:`turn_off_energy` for a capacitance ``c_f`` > 0 (a number or one per entry)."""
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):   # a subnormal I: t1 = inf, u = 1
         t1 = np.sqrt(2.0 * t_f_s * c_f * v / np.where(i > 0, i, 1.0))
     u = np.minimum(t1 / t_f_s, 1.0)                          # share of the fall before the clamp
@@ -160,19 +168,21 @@ def edge_energies(res, t_a: float | None = None, t_b: float | None = None) -> di
 
 
 def averaged_edge_losses(d_short, i2_amp_a, vl_v: float, devices, rectifier_period_s: float, omega_rad_s: float,
-                         *, i1_amp_a=0.0, vdc_v: float = 0.0) -> dict:
+                         *, i1_amp_a=0.0, vdc_v: float = 0.0, c_rect_f=None) -> dict:
     """Closed-form mean edge power [W] for fundamental amplitudes (the averaged counterpart of
     :func:`edge_energies`): with ``i2 = I2 cos(theta)`` and the short window centred on the peak
     (eq. 9's placement), each rectifier period has one hard turn-on and one hard turn-off at
     ``|i| = |I2| cos(pi d / 2)`` (for ``0 < d < 1``) and one natural commutation at slope
     ``omega |I2|``. The inverter (``i1 = I1 sin``, commutating at the current zero) is counted as
     hard-switched at zero current: ``2 Coss Vdc^2`` per commutation (an upper bound; ZVS when the
-    tank is inductive). Keys ``rectifier_w``, ``inverter_w``. Vectorised over ``d_short``, ``i2_amp_a``."""
+    tank is inductive). Keys ``rectifier_w``, ``inverter_w``. Vectorised over ``d_short``, ``i2_amp_a``.
+    ``c_rect_f`` [F]: the SBAR node's capacitance (switch Coss + diode Cj; a number or one per entry, e.g. at each
+    step's own battery voltage: :func:`wpt_receiver.devices.rect_node_c_f`); ``None``: the devices' own."""
     d = np.asarray(d_short, dtype=float)
     i2 = np.abs(np.asarray(i2_amp_a, dtype=float))
     sw, dio = devices.rect_switch, devices.rect_diode
     v = vl_v + devices.rect_vf_v
-    c = sw.coss_f + dio.c_f
+    c = sw.coss_f + dio.c_f if c_rect_f is None else c_rect_f
     edge = (d > 0) & (d < 1)
     i_edge = i2 * np.cos(0.5 * np.pi * d)
     e = np.where(edge, 0.5 * c * v * v + sw.eon_j_va * v * i_edge + turn_off_energy(v, i_edge, 2 * sw.eoff_j_va, c), 0.0)

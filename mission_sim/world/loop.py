@@ -270,16 +270,20 @@ class MissionLoop:
     def add_edges(self, arr) -> None:
         """Accumulate the switching-edge energies [J] of a block of rows into :attr:`edge_j`
         (rectifier, inverter): :func:`wpt_receiver.edge_losses.averaged_edge_losses` at each step's
-        duty, |I2| and battery voltage while the pad is on (SBAR: hard gate edges, recovery;
-        inverter: hard-switched Coss, an upper bound)."""
+        duty, |I2| and battery voltage while the pad is on, the SBAR node's capacitance at that battery voltage
+        (:func:`wpt_receiver.devices.rect_node_c_f`; it was Table I's 30 V's until 2026-11-27 night) (SBAR: hard gate
+        edges, recovery; inverter: hard-switched Coss at the link's Vdc, an upper bound)."""
+        from wpt_receiver.devices import rect_node_c_f
         from wpt_receiver.edge_losses import averaged_edge_losses
         on = arr[:, _COL["v1_v"]] > 0
         if not on.any():
             return
         dt = arr[:, _COL["dt_s"]] * on
         b = self.base   # (the link's periods: LinkParams' one source of T and omega)
-        e = averaged_edge_losses(arr[:, _COL["d_short"]], arr[:, _COL["i2_amp_a"]], arr[:, _COL["battery_v"]], self.dev,
-                                 b.rectifier_period_s, b.omega_rad_s, vdc_v=self.lk.vdc_v)
+        vl = arr[:, _COL["battery_v"]]   # (the SBAR blocks each step's own pack voltage: its capacitance there)
+        e = averaged_edge_losses(arr[:, _COL["d_short"]], arr[:, _COL["i2_amp_a"]], vl, self.dev,
+                                 b.rectifier_period_s, b.omega_rad_s, vdc_v=self.lk.vdc_v,
+                                 c_rect_f=rect_node_c_f(self.lk.devices, vl))
         self.edge_j = (math.fsum([self.edge_j[0], *(np.asarray(e["rectifier_w"]) * dt).tolist()]),
                        math.fsum([self.edge_j[1], *(np.broadcast_to(e["inverter_w"], dt.shape) * dt).tolist()]))
 
