@@ -2,10 +2,14 @@
 tests before did not hold, run through the readers the commands use (tests/data/flightlogs/SOURCES.md and
 tests/data/missions/SOURCES.md, "Added 2026-11-27 night", for each file's origin and licence)."""
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from _flightlogs import log_path
+from test_mission_files import enu_xy
 from mission_sim.mavlink.logs import read_log
 
 PX4_EVENTS = "pyulog_sample_px4_events.ulg"   # PX4 SITL (v1.15 dev), arms, hops to ~2 m; battery_status current -1
@@ -22,3 +26,52 @@ def test_px4_unknown_battery_current_is_not_a_charge():
     log = read_log(log_path(PX4_EVENTS))
     assert len(log.position) == 109 and log.duration_s == pytest.approx(31.1, abs=0.05)
     assert log.battery_source is None and len(log.battery) == 0
+
+
+# ------------------------------------------------------------------------------------------- mission plans
+MISSIONS = Path(__file__).resolve().parent / "data" / "missions"
+
+
+def test_qgc_plan_with_older_items_reads_their_coordinate():
+    """QGroundControl's own SectionTest.plan keeps its items in QGC's older form: p1..p4 in "params", [lat, lon, alt]
+    in "coordinate" (QGC still reads it, MissionItem::_convertJsonV2ToV3). It was refused ("params=[0, 0, 0, None] is
+    invalid; valid: 7 numbers"); now it flies its take-off to 20 m and its three waypoints (the mount-control item 3
+    does not move the vehicle)."""
+    from mission_sim.plans.items import read_mission
+    from mission_sim.plans.route import route_from_items
+    doc = json.loads((MISSIONS / "qgc_section_test.plan").read_text())
+    raw = read_mission(MISSIONS / "qgc_section_test.plan")
+    route = route_from_items(raw)
+    home = tuple(doc["mission"]["plannedHomePosition"])
+    assert [w["action"] for w in route] == ["takeoff", "waypoint", "waypoint", "waypoint"]
+    for w, i in zip(route[1:], (1, 2, 4)):
+        lat, lon, alt = doc["mission"]["items"][i]["coordinate"]
+        e, n = enu_xy(lat, lon, home)
+        assert (w["x_m"], w["y_m"], w["z_m"]) == pytest.approx((e, n, alt), abs=0.02)
+    assert route[3]["x_m"] == pytest.approx(312.0, abs=0.5) and route[3]["y_m"] == pytest.approx(-86.3, abs=0.5)
+
+
+def test_qgc_structure_scan_flies_the_waypoints_qgc_generates():
+    """A structure scan in a plan holds only its inputs (QGC generates the waypoints when it loads the plan): it was
+    refused ("has no generated waypoints ... save the plan after the survey was generated", which no save does).
+    Now: entrance at 50 m, 2 layers (StartFromTop: 100 - 25/2 = 87.5 m, then 62.5 m), each around the structure's
+    polygon offset 50 m outwards and back to its first vertex, exit at 50 m."""
+    from mission_sim.mavlink.geodesy import geodetic_to_enu
+    from mission_sim.plans.items import read_mission
+    from mission_sim.plans.route import route_from_items
+    doc = json.loads((MISSIONS / "mavsdk_structure_scan.plan").read_text())
+    scan = doc["mission"]["items"][1]
+    raw = read_mission(MISSIONS / "mavsdk_structure_scan.plan")
+    route = route_from_items(raw)
+    z = [w["z_m"] for w in route]
+    assert z == [50.0] + [87.5] * 5 + [62.5] * 5 + [50.0]
+    xy = np.array([(w["x_m"], w["y_m"]) for w in route])
+    ring = xy[1:5]
+    assert np.allclose(xy[5], xy[1]) and np.allclose(xy[6:11], xy[1:6]) and np.allclose(xy[0], xy[1])
+    poly = np.array(scan["polygon"])
+    s = np.column_stack(geodetic_to_enu(poly[:, 0], poly[:, 1], raw.home.alt_m, raw.home)[:2])
+    for i in range(4):   # flight edge i runs DistanceToSurface = 50 m outside structure edge i, parallel to it
+        a, b = ring[i], ring[(i + 1) % 4]
+        u = (b - a) / np.linalg.norm(b - a)
+        for p in (s[i], s[(i + 1) % 4]):
+            assert -(u[0] * (p - a)[1] - u[1] * (p - a)[0]) == pytest.approx(50.0, abs=0.05)

@@ -10,7 +10,8 @@ it: the position in ``mission.items`` of a .plan, the sequence number of a .wayp
 Formats (checked against QGroundControl's and ArduPilot's own files in tests/data/missions):
 
 * ``.plan``: JSON, ``fileType`` "Plan", ``mission.items`` of ``SimpleItem`` (``command``,
-  ``frame``, ``params`` = [p1, p2, p3, p4, lat, lon, alt]) and ``ComplexItem`` (survey /
+  ``frame``, ``params`` = [p1, p2, p3, p4, lat, lon, alt], or QGC's older items: ``params`` = [p1..p4] and
+  ``coordinate`` = [lat, lon, alt]) and ``ComplexItem`` (survey /
   corridor / structure scan: their generated ``TransectStyleComplexItem.Items`` when present,
   else the ``VisualTransectPoints`` at the camera's ``DistanceToSurface``),
   ``mission.plannedHomePosition`` = [lat, lon, alt AMSL].
@@ -141,8 +142,16 @@ def _simple(it, where: str, name: str) -> MissionItem:
     if not isinstance(it, dict):
         raise ValueError(f"{name}: {where} is not a JSON object")
     params = it.get("params")
+    coord = it.get("coordinate")
+    if isinstance(params, list) and len(params) == 4 and coord is not None:
+        # an item as QGroundControl saved it before its item version 3 (QGC 3.2-3.3 plans, its own SectionTest.plan):
+        # p1..p4 in "params", [lat, lon, alt] in "coordinate"; QGC reads it (MissionItem::_convertJsonV2ToV3)
+        if not isinstance(coord, list) or len(coord) != 3:
+            raise ValueError(f"{name}: {where}: coordinate={coord!r} is invalid; valid: [lat, lon, alt]")
+        params = params + coord
     if not isinstance(params, list) or len(params) != 7:
-        raise ValueError(f"{name}: {where}: params={params!r} is invalid; valid: 7 numbers (p1..p4, lat, lon, alt)")
+        raise ValueError(f"{name}: {where}: params={params!r} is invalid; valid: 7 numbers (p1..p4, lat, lon, alt), "
+                         "or 4 (p1..p4) beside a \"coordinate\" [lat, lon, alt] (QGroundControl's older plans)")
     try:
         p = [_num(v) for v in params]
         cmd, frame = it["command"], it.get("frame", 0)
@@ -166,6 +175,8 @@ def _plan_item(it, where: str, name: str) -> list[MissionItem]:
     sub = tsc.get("Items") or it.get("Items") or it.get("items")
     if isinstance(sub, list) and sub:
         return [_simple(s, f"{where} ({ctype}), generated item {j}", name) for j, s in enumerate(sub)]
+    if ctype == "StructureScan" and isinstance(it, dict):   # QGC saves its inputs only, never its waypoints
+        return _structure_scan(it, f"{where} ({ctype})", name)
     pts = tsc.get("VisualTransectPoints")
     cam = tsc.get("CameraCalc") or {}
     alt = cam.get("DistanceToSurface", tsc.get("Altitude"))
@@ -179,6 +190,72 @@ def _plan_item(it, where: str, name: str) -> list[MissionItem]:
     raise ValueError(f"{name}: {where}: complex item {ctype!r} has no generated waypoints (TransectStyleComplexItem "
                      "Items or VisualTransectPoints with a CameraCalc DistanceToSurface); valid: save the plan "
                      "from QGroundControl after the survey was generated")
+
+
+def _structure_scan(it: dict, where: str, name: str) -> list[MissionItem]:
+    """The waypoints QGroundControl generates for a structure scan (``StructureScanComplexItem::appendMissionItems``;
+    a plan holds only the scan's inputs): the structure's polygon offset outwards by the camera's
+    ``DistanceToSurface`` (``QGCMapPolygon::offset``: each edge moved out, new vertices where the moved edges meet, in
+    a tangent plane at vertex 0), flown around (every vertex and back to the first) once per layer, the layers
+    ``AdjustedFootprintFrontal`` apart from half of it above ``ScanBottomAlt`` up (or half of it below
+    ``StructureHeight`` down with ``StartFromTop``), entered and left at vertex 0 at ``EntranceAltitude``; heights
+    above home (QGC writes them in frame 3). Its camera and ROI items do not move the vehicle and are left out."""
+    from ..mavlink.geodesy import enu_to_geodetic, geodetic_to_enu
+    cam = it.get("CameraCalc") if isinstance(it.get("CameraCalc"), dict) else {}
+    vals = {}
+    for key, src in (("EntranceAltitude", it), ("ScanBottomAlt", it), ("StructureHeight", it), ("Layers", it),
+                     ("DistanceToSurface", cam), ("AdjustedFootprintFrontal", cam)):
+        v = src.get(key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+            raise ValueError(f"{name}: {where}: {key}={v!r} is invalid; valid: a number (QGroundControl saves it"
+                             f"{' in CameraCalc' if src is cam else ''})")
+        vals[key] = float(v)
+    layers, step, gap = vals["Layers"], vals["AdjustedFootprintFrontal"], vals["DistanceToSurface"]
+    if layers != int(layers) or not 1 <= layers <= 1000:
+        raise ValueError(f"{name}: {where}: Layers={layers:g} is invalid; valid: an integer in [1, 1000]")
+    if step <= 0 or gap < 0:
+        bad = f"AdjustedFootprintFrontal={step:g}" if step <= 0 else f"DistanceToSurface={gap:g}"
+        raise ValueError(f"{name}: {where}: CameraCalc {bad} is invalid; valid range: "
+                         f"{'(0, inf) m' if step <= 0 else '[0, inf) m'}")
+    poly = it.get("polygon")
+    try:
+        ll = np.array([[_num(c[0]), _num(c[1])] for c in poly], dtype=float)
+        if len(ll) < 3 or not np.all(np.isfinite(ll)):
+            raise ValueError("fewer than 3 vertices")
+        origin = GeoPoint(float(ll[0, 0]), float(ll[0, 1]), 0.0)
+    except (TypeError, ValueError, IndexError, KeyError) as exc:
+        raise ValueError(f"{name}: {where}: polygon is invalid ({exc}); valid: 3 or more [lat, lon] vertices") from None
+    e, n, _ = geodetic_to_enu(ll[:, 0], ll[:, 1], 0.0, origin)
+    xy = np.column_stack([e, n])
+    sign = -1.0 if np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1]) > 0 else 1.0
+    d = np.roll(xy, -1, axis=0) - xy                       # edge i: vertex i -> i + 1
+    length = np.linalg.norm(d, axis=1)
+    if np.any(length < 1e-6):
+        raise ValueError(f"{name}: {where}: polygon has two equal consecutive vertices; valid: a simple polygon")
+    out = sign * np.column_stack([-d[:, 1], d[:, 0]]) / length[:, None]   # outward normal (left of a clockwise edge)
+    p0 = xy + gap * out                                    # the offset edges: p0 + t d
+    flight = []
+    for i in range(len(xy)):                               # vertex i: offset edges i - 1 and i meet
+        a, da, b, db = p0[i - 1], d[i - 1], p0[i], d[i]
+        den = da[0] * db[1] - da[1] * db[0]
+        if abs(den) < 1e-9 * length[i - 1] * length[i]:    # (parallel: the shared vertex moved out)
+            flight.append(b)
+            continue
+        t = ((b[0] - a[0]) * db[1] - (b[1] - a[1]) * db[0]) / den
+        flight.append(a + t * da)
+    flight = np.array(flight)
+    lat, lon, _ = enu_to_geodetic(flight[:, 0], flight[:, 1], 0.0, origin)
+    top = bool(it.get("StartFromTop", False))
+    alt0 = vals["StructureHeight"] - step / 2 if top else vals["ScanBottomAlt"] + step / 2
+    items = [MissionItem(f"{where}, entrance", NAV_WAYPOINT, 3, (0.0,) * 4, float(lat[0]), float(lon[0]),
+                         vals["EntranceAltitude"])]
+    for k in range(int(layers)):
+        alt = alt0 - k * step if top else alt0 + k * step
+        items += [MissionItem(f"{where}, layer {k} vertex {j % len(lat)}", NAV_WAYPOINT, 3, (0.0,) * 4,
+                              float(lat[j % len(lat)]), float(lon[j % len(lat)]), alt) for j in range(len(lat) + 1)]
+    items.append(MissionItem(f"{where}, exit", NAV_WAYPOINT, 3, (0.0,) * 4, float(lat[0]), float(lon[0]),
+                             vals["EntranceAltitude"]))
+    return items
 
 
 # -------------------------------------------------------------------------------- .waypoints
