@@ -38,13 +38,19 @@ MAX_FROM_HOME_M = 100e3   # items farther from home than this are refused (the c
 #: DO_REPEAT_SERVO, DO_SET_ROI_LOCATION, DO_SET_ROI_NONE, DO_CONTROL_VIDEO, DO_SET_ROI,
 #: DO_DIGICAM_CONFIGURE, DO_DIGICAM_CONTROL, DO_MOUNT_CONFIGURE, DO_MOUNT_CONTROL,
 #: DO_SET_CAM_TRIGG_DIST, DO_SET_CAM_TRIGG_INTERVAL, SET_CAMERA_MODE, DO_GIMBAL_MANAGER_PITCHYAW,
-#: IMAGE_START_CAPTURE, IMAGE_STOP_CAPTURE, VIDEO_START_CAPTURE, VIDEO_STOP_CAPTURE
+#: IMAGE_START_CAPTURE, IMAGE_STOP_CAPTURE, VIDEO_START_CAPTURE, VIDEO_STOP_CAPTURE; since 2026-11-27 night also
+#: CONDITION_DELAY, CONDITION_DISTANCE (they hold back the next DO command, not the vehicle), DO_LAND_START and JUMP_TAG
+#: (markers flown through), DO_FENCE_ENABLE, DO_GRIPPER (a payload released: its mass is not taken off the drone's),
+#: DO_SET_RESUME_REPEAT_DIST, DO_SPRAYER, DO_MOUNT_CONTROL_QUAT, SET_CAMERA_ZOOM, SET_CAMERA_FOCUS,
+#: DO_GIMBAL_MANAGER_CONFIGURE, DO_WINCH (a winch moves the payload)
 IGNORED_COMMANDS = frozenset({115, 181, 182, 183, 184, 195, 197, 200, 201, 202, 203, 204, 205, 206, 214, 530, 1000,
-                              2000, 2001, 2500, 2501})
+                              2000, 2001, 2500, 2501,
+                              112, 114, 189, 600, 207, 211, 215, 216, 220, 531, 532, 1001, 42600})
 _NAV = {NAV_WAYPOINT: "waypoint", NAV_LOITER_TIME: "loiter", NAV_RTL: "rtl", NAV_LAND: "land", NAV_TAKEOFF: "takeoff"}
 _AMSL_FRAMES, _RELATIVE_FRAMES = (0, 5), (3, 6)
 _SUPPORTED = ("NAV_WAYPOINT (16), NAV_LOITER_TIME (19), NAV_RETURN_TO_LAUNCH (20), NAV_LAND (21), NAV_TAKEOFF (22), "
-              "DO_CHANGE_SPEED (178) and commands that do not move the vehicle (camera, gimbal, servo, ROI, yaw)")
+              "DO_CHANGE_SPEED (178) and commands that do not move the vehicle (camera, gimbal, servo, relay, ROI, yaw, "
+              "gripper, winch, sprayer, fence enable, conditions, markers)")
 
 
 def command_name(cmd: int) -> str:
