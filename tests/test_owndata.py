@@ -94,3 +94,29 @@ def test_px4_package_delivery_plan_flies_past_its_gripper_item():
     for w, i in zip(route, (0, 1, 3)):
         e, n = enu_xy(*doc["mission"]["items"][i]["params"][4:6], home)
         assert (w["x_m"], w["y_m"]) == pytest.approx((e, n), abs=0.02)
+
+
+@pytest.mark.parametrize("edit, needles", [
+    (lambda scan: scan.update(complexItemType="fwLandingPattern"),
+     ["item 1: complex item 'fwLandingPattern' is not supported; supported complex items: survey, CorridorScan, "
+      "StructureScan"]),
+    (lambda scan: scan.pop("Layers"), ["item 1 (StructureScan): Layers=None is invalid; valid: a number"]),
+    (lambda scan: scan["CameraCalc"].update(AdjustedFootprintFrontal=0),
+     ["CameraCalc AdjustedFootprintFrontal=0 is invalid; valid range: (0, inf) m"]),
+    (lambda scan: scan.update(polygon=scan["polygon"][:2]), ["polygon is invalid (fewer than 3 vertices)"]),
+])
+def test_complex_items_that_cannot_be_flown_are_one_line_errors(capsys, tmp_path, edit, needles):
+    """The structure-scan plan with one input broken, or its complex item another kind: one line naming the item and
+    the bad value, exit 2, nothing simulated (a landing pattern was told to "save the plan after the survey was
+    generated", which does not help: QGC saves its inputs only)."""
+    from mission_sim.cli import main
+    doc = json.loads((MISSIONS / "mavsdk_structure_scan.plan").read_text())
+    edit(doc["mission"]["items"][1])
+    plan = tmp_path / "scan.plan"
+    plan.write_text(json.dumps(doc))
+    assert main(["mission", "--plan", str(plan), "--no-plot", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    for n in needles:
+        assert n in err, err
+    assert not (tmp_path / "out").exists()

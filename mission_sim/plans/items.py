@@ -42,6 +42,8 @@ NAV_WAYPOINT, NAV_LOITER_TIME, NAV_RTL, NAV_LAND, NAV_TAKEOFF = 16, 19, 20, 21, 
 FLOWN_TOLERANCE_M = 3.0        # decimation: the flown route stays within this of the GPS track
 FLOWN_HOLD_S = 5.0             # slower than HOVER_M_S for this long: a loiter item in the flown route
 HOVER_M_S = 0.5
+#: QGC's complex items that save their generated waypoints (TransectStyleComplexItem); a StructureScan saves its inputs
+_TRANSECT_TYPES = ("survey", "CorridorScan")
 FLOWN_GROUND_M = 1.0           # a decimated track point lower than this above home is on the ground (a landing)
 
 
@@ -187,6 +189,9 @@ def _plan_item(it, where: str, name: str) -> list[MissionItem]:
                                 _num(p[0]), _num(p[1]), float(alt)) for j, p in enumerate(pts)]
         except (TypeError, ValueError, IndexError, KeyError) as exc:
             raise ValueError(f"{name}: {where} ({ctype}): VisualTransectPoints are invalid: {exc}") from None
+    if ctype not in _TRANSECT_TYPES:   # (a landing pattern keeps its inputs only, as a structure scan: no save helps)
+        raise ValueError(f"{name}: {where}: complex item {ctype!r} is not supported; supported complex items: "
+                         f"{', '.join(_TRANSECT_TYPES)}, StructureScan")
     raise ValueError(f"{name}: {where}: complex item {ctype!r} has no generated waypoints (TransectStyleComplexItem "
                      "Items or VisualTransectPoints with a CameraCalc DistanceToSurface); valid: save the plan "
                      "from QGroundControl after the survey was generated")
