@@ -120,3 +120,28 @@ def test_complex_items_that_cannot_be_flown_are_one_line_errors(capsys, tmp_path
     for n in needles:
         assert n in err, err
     assert not (tmp_path / "out").exists()
+
+
+# ------------------------------------------------------------------------------------------------ DO_JUMP
+def _flown(path):
+    from mission_sim.plans.items import read_mission
+    from mission_sim.plans.route import _unrolled
+    raw = read_mission(path)
+    return raw, [it.where for it in _unrolled(raw)]
+
+
+def test_do_jump_loops_are_flown_as_ardupilot_flies_them():
+    """DO_JUMP (param1 the target, param2 the number of jumps) was refused; ArduPilot's and PX4's missions loop
+    with it. ArduPilot's CAN-GPS copter mission jumps from row 10 back to row 8 once; the ArduPlane mission that
+    pymavlink's test.BIN logged (CMD records) jumps from item 6 to item 2 three times: items 2-5 flown 4 times, then
+    its landing sequence."""
+    raw, order = _flown(MISSIONS / "ardupilot_can_gps_copter_mission.waypoints")
+    assert order == [f"row {r}" for r in (1, 2, 3, 4, 5, 6, 7, 8, 9, 8, 9, 11, 12)]
+    raw, order = _flown(log_path("pymavlink_test.BIN"))
+    assert raw.items[5].command == 177 and raw.items[5].params[:2] == (2.0, 3.0)
+    assert order == [f"item {i}" for i in [1] + [2, 3, 4, 5] * 4 + [7, 8, 9, 10, 11]]
+    from mission_sim.plans.route import route_from_items
+    route = route_from_items(raw)
+    assert [w["action"] for w in route] == ["takeoff"] + ["waypoint"] * 19 + ["land"]
+    lap = np.array([(w["x_m"], w["y_m"]) for w in route[1:5]])
+    assert np.allclose(np.array([(w["x_m"], w["y_m"]) for w in route[13:17]]), lap)   # the 4th lap = the 1st

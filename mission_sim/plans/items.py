@@ -61,6 +61,7 @@ class MissionItem:
     lat_deg: float
     lon_deg: float
     alt_m: float
+    jump_id: int | None = None   # what a DO_JUMP's param1 names it by: a .plan's doJumpId, a row's / a log's sequence no.
 
 
 @dataclass(frozen=True)
@@ -163,7 +164,9 @@ def _simple(it, where: str, name: str) -> MissionItem:
         raise ValueError(f"{name}: {where} has no \"command\"") from None
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{name}: {where}: {exc}") from None
-    return MissionItem(where, cmd, frame, tuple(p[:4]), p[4], p[5], p[6])
+    jid = it.get("doJumpId")
+    jid = jid if isinstance(jid, int) and not isinstance(jid, bool) else None
+    return MissionItem(where, cmd, frame, tuple(p[:4]), p[4], p[5], p[6], jid)
 
 
 def _plan_item(it, where: str, name: str) -> list[MissionItem]:
@@ -291,7 +294,7 @@ def read_wpl(path) -> RawMission:
         raise ValueError(f"{name}: missing home: row 0 (the home position, AMSL) is not the first row")
     seq0, _, _, _, lat, lon, alt = rows[0]
     home = _home(lat, lon, alt, name, "home (row 0)")
-    items = tuple(MissionItem(f"row {r[0]}", r[1], r[2], r[3], r[4], r[5], r[6]) for r in rows[1:])
+    items = tuple(MissionItem(f"row {r[0]}", r[1], r[2], r[3], r[4], r[5], r[6], r[0]) for r in rows[1:])
     return RawMission(name, home, items)
 
 
@@ -342,7 +345,7 @@ def uploaded_mission(path) -> RawMission:
         _, _, _, lat, lon, alt = found.pop(0)
         home = (lat, lon, alt)
         seqs = seqs[1:]
-    items = tuple(MissionItem(f"item {s}", *found[s][:3], *found[s][3:]) for s in seqs)
+    items = tuple(MissionItem(f"item {s}", *found[s][:3], *found[s][3:], s) for s in seqs)
     return RawMission(path.name, None if home is None else _home(*home, path.name, "home"), items)
 
 

@@ -10,7 +10,8 @@ terrain model). As ArduCopter does (``ModeAuto::loc_from_cmd``), latitude = long
 Commands: NAV_WAYPOINT (16; param1 > 0 = hold seconds: a loiter), NAV_LOITER_TIME (19, param1
 seconds), NAV_RETURN_TO_LAUNCH (20: climb to at least :data:`RTL_ALT_M`, fly home, land),
 NAV_LAND (21), NAV_TAKEOFF (22, vertical), DO_CHANGE_SPEED (178, param2 m/s: the speed of the
-following legs). Commands that do not move the vehicle (camera, gimbal, servo, relay, ROI, yaw:
+following legs), DO_JUMP (177, param1 the target, param2 the number of jumps: the loop unrolled, :func:`_unrolled`).
+Commands that do not move the vehicle (camera, gimbal, servo, relay, ROI, yaw:
 :data:`IGNORED_COMMANDS`) are skipped; any other command is an error naming it and its item.
 A loiter within ``mission.pad_radius_m`` of a pad (horizontally) and at least
 :data:`CHARGE_CLEARANCE_M` above it becomes a charging hover over that pad (waypoint action
@@ -31,6 +32,8 @@ __all__ = ["apply_mission_files", "check_file_keys", "mission_home", "route_from
            "RTL_ALT_M", "IGNORED_COMMANDS"]
 
 DO_CHANGE_SPEED = 178
+DO_JUMP = 177
+MAX_ROUTE_ITEMS = 100_000   # a route with DO_JUMP loops unrolled: at most this many items flown
 CHARGE_CLEARANCE_M = 1.0   # a loiter becomes a charging hover only this far above the pad (it descends to it)
 RTL_ALT_M = 15.0   # ArduCopter's RTL_ALT default (1500 cm): RTL climbs to at least this height
 MAX_FROM_HOME_M = 100e3   # items farther from home than this are refused (the config's positions: within 1e5 m)
@@ -49,7 +52,7 @@ IGNORED_COMMANDS = frozenset({115, 181, 182, 183, 184, 195, 197, 200, 201, 202, 
 _NAV = {NAV_WAYPOINT: "waypoint", NAV_LOITER_TIME: "loiter", NAV_RTL: "rtl", NAV_LAND: "land", NAV_TAKEOFF: "takeoff"}
 _AMSL_FRAMES, _RELATIVE_FRAMES = (0, 5), (3, 6)
 _SUPPORTED = ("NAV_WAYPOINT (16), NAV_LOITER_TIME (19), NAV_RETURN_TO_LAUNCH (20), NAV_LAND (21), NAV_TAKEOFF (22), "
-              "DO_CHANGE_SPEED (178) and commands that do not move the vehicle (camera, gimbal, servo, relay, ROI, yaw, "
+              "DO_JUMP (177), DO_CHANGE_SPEED (178) and commands that do not move the vehicle (camera, gimbal, servo, relay, ROI, yaw, "
               "gripper, winch, sprayer, fence enable, conditions, markers)")
 
 
@@ -153,6 +156,48 @@ class _Builder:
             self.add("loiter" if kind == "loiter" or hold > 0 else "waypoint", x, y, z, hold)
 
 
+def _unrolled(raw: RawMission):
+    """The items of ``raw`` in the order they are flown, DO_JUMP (177) followed as ArduPilot's and PX4's missions follow
+    it: param1 names the target (a .plan's doJumpId, a .waypoints row, a log's sequence number), param2 the number of
+    jumps; each DO_JUMP counts its own jumps over the whole mission (an inner loop is not re-armed by an outer one).
+    Refused (one line naming the item): a jump that repeats forever (-1), a target the mission does not hold, a loop
+    of more than :data:`MAX_ROUTE_ITEMS` items."""
+    items = raw.items
+    index: dict[int, int] = {}
+    for k, it in enumerate(items):
+        if it.jump_id is not None:
+            index.setdefault(it.jump_id, k)
+    jumps: dict[int, int] = {}
+    k = n = 0
+    while k < len(items):
+        it = items[k]
+        n += 1
+        if n > MAX_ROUTE_ITEMS:
+            raise ValueError(f"{raw.source}: {it.where}: the DO_JUMP loops give more than {MAX_ROUTE_ITEMS} items to "
+                             "fly; valid: fewer repeats (DO_JUMP param2)")
+        if it.command != DO_JUMP:
+            yield it
+            k += 1
+            continue
+        target, repeat = it.params[0], it.params[1]
+        if not (math.isfinite(repeat) and repeat == int(repeat) and repeat >= -1):
+            raise ValueError(f"{raw.source}: {it.where}: DO_JUMP repeat count param2={repeat:g} is invalid; valid: an "
+                             "integer >= 0")
+        if repeat == -1:
+            raise ValueError(f"{raw.source}: {it.where}: DO_JUMP repeats forever (param2 = -1): the route would never "
+                             "end; valid: a repeat count >= 0")
+        if not (math.isfinite(target) and target == int(target) and int(target) in index):
+            ids = sorted(index)
+            raise ValueError(f"{raw.source}: {it.where}: DO_JUMP target param1={target:g} is not an item of the "
+                             f"mission; valid: {ids[0]}..{ids[-1]}" if ids else f"{raw.source}: {it.where}: DO_JUMP "
+                             f"target param1={target:g} is not an item of the mission")
+        if jumps.get(k, 0) < repeat:
+            jumps[k] = jumps.get(k, 0) + 1
+            k = index[int(target)]
+        else:
+            k += 1
+
+
 def route_from_items(raw: RawMission, pads_xyz=(), pad_radius_m: float = 5.0) -> list[dict]:
     """The ``[[waypoints]]`` dicts of ``raw`` (pad frame about ``raw.home``); loiters within
     ``pad_radius_m`` of a pad in ``pads_xyz`` ((x, y, z) in the pad frame) become "charge"."""
@@ -160,7 +205,7 @@ def route_from_items(raw: RawMission, pads_xyz=(), pad_radius_m: float = 5.0) ->
         raise ValueError(f"{raw.source}: missing home position (a .plan's plannedHomePosition, row 0 of a "
                          ".waypoints file, a log's HOME_POSITION); the pad frame is about home")
     b = _Builder(raw, pads_xyz, pad_radius_m)
-    for it in raw.items:
+    for it in _unrolled(raw):
         b.item(it)
     if not b.out:
         raise ValueError(f"{raw.source}: no waypoints: {len(raw.items)} item(s), none that moves the vehicle "
