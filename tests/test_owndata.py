@@ -145,3 +145,24 @@ def test_do_jump_loops_are_flown_as_ardupilot_flies_them():
     assert [w["action"] for w in route] == ["takeoff"] + ["waypoint"] * 19 + ["land"]
     lap = np.array([(w["x_m"], w["y_m"]) for w in route[1:5]])
     assert np.allclose(np.array([(w["x_m"], w["y_m"]) for w in route[13:17]]), lap)   # the 4th lap = the 1st
+
+
+# ------------------------------------------------------------------------------------ logs that never flew
+@pytest.mark.parametrize("name", ["amc_backend_log_80k.bin", "pymavlink_test.BIN"])
+def test_a_log_that_never_armed_has_no_flown_route(capsys, tmp_path, name):
+    """ArduCopter 4.6.2 on a Pixhawk 4 (0.4 s, 2 fixes, BAT 16.4 V) and ArduPlane 3.8 (1.1 s, 5 fixes), both on the
+    ground, never armed: `mission --plan LOG` (no uploaded mission, or `from_log = "flown"`) made a route of the GPS
+    drift on the ground (a 1 s "flight", 25 J of propulsion); `replay` marks such a track NOT FLOWN. Now one line,
+    exit 2."""
+    from mission_sim.cli import main
+    log = read_log(log_path(name))
+    assert log.armed_periods == [] and len(log.position) >= 2 and len(log.battery) >= 4
+    assert 16.3 < log.battery["voltage_v"].median() < 16.6 if name.startswith("amc") else 12.3 < \
+        log.battery["voltage_v"].median() < 12.5
+    argv = ["mission", "--plan", str(log_path(name)), "--no-plot", "--out", str(tmp_path / "out")]
+    if name == "pymavlink_test.BIN":   # (it holds an uploaded mission: the flown track on request)
+        argv += ["--set", "mission.from_log=flown"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and f"{name}: no flown track: the vehicle never armed" in err, err
+    assert not (tmp_path / "out").exists()

@@ -384,9 +384,12 @@ def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
     log = read_log(path)
     pos = log.position
     periods = log.armed_periods
-    if periods:
-        t = pos["t_s"].to_numpy(float)
-        pos = pos[(t >= periods[0][0]) & (t <= periods[-1][1])]
+    if not periods:   # (all its fixes were the GPS drifting on the ground: a route of it flew a drift, 1 s of "flight")
+        raise ValueError(f"{Path(path).name}: no flown track: the vehicle never armed in the log (armed state from "
+                         f"{log.armed_source or 'no armed-state record and no motor output'}); valid: the log of a "
+                         "flight, or a log holding an uploaded mission")
+    t = pos["t_s"].to_numpy(float)
+    pos = pos[(t >= periods[0][0]) & (t <= periods[-1][1])]
     if len(pos) < 2:
         raise ValueError(f"{Path(path).name}: no flown track: {len(pos)} usable position(s) (GPS fix >= 3) while armed")
     lat, lon, alt = (pos[c].to_numpy(float) for c in ("lat_deg", "lon_deg", "alt_m"))
