@@ -204,7 +204,9 @@ def _structure_scan(it: dict, where: str, name: str) -> list[MissionItem]:
     """The waypoints QGroundControl generates for a structure scan (``StructureScanComplexItem::appendMissionItems``;
     a plan holds only the scan's inputs): the structure's polygon offset outwards by the camera's
     ``DistanceToSurface`` (``QGCMapPolygon::offset``: each edge moved out, new vertices where the moved edges meet, in
-    a tangent plane at vertex 0), flown around (every vertex and back to the first) once per layer, the layers
+    a tangent plane at vertex 0; QGC moves each edge to its left, which is outwards for the clockwise polygons its
+    editor saves: here outwards whatever the winding), flown around (every vertex and back to the first) once per
+    layer, the layers
     ``AdjustedFootprintFrontal`` apart from half of it above ``ScanBottomAlt`` up (or half of it below
     ``StructureHeight`` down with ``StartFromTop``), entered and left at vertex 0 at ``EntranceAltitude``; heights
     above home (QGC writes them in frame 3). Its camera and ROI items do not move the vehicle and are left out."""
