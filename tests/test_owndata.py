@@ -166,3 +166,34 @@ def test_a_log_that_never_armed_has_no_flown_route(capsys, tmp_path, name):
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and f"{name}: no flown track: the vehicle never armed" in err, err
     assert not (tmp_path / "out").exists()
+
+
+# ------------------------------------------------------------------------- a log that starts in the air
+PX4_ESC = "px4_ulog_rs_esc_status_log.ulg"   # PX4 v1.9 on a Pixhawk (FMU v3), 6S, 26-74 A: logging began in flight
+
+
+def test_a_log_that_starts_in_the_air_is_about_the_ground_it_lands_on():
+    """A real PX4 flight logged from 4 s after take-off (armed from its first record, 6-7 m up, climbs to ~10 m,
+    lands at the end, 26-74 A): the pad, the first armed position, was in the air, every height below it (the whole
+    descent) was clipped to 0, and `replay` said "max 3.1 m above the pad" and 22 s airborne of 38.8 s armed. Now the
+    default pad is the lowest point of that flight (its landing): the heights span the log's own altitude range, and
+    one warning says so."""
+    from pyulog import ULog
+
+    from mission_sim.mavlink.replay import AIRBORNE_M, default_pad, replay_warnings, track_from_log
+    u = ULog(str(log_path(PX4_ESC)))
+    gp = next(d.data for d in u.data_list if d.name == "vehicle_global_position")
+    b = next(d.data for d in u.data_list if d.name == "battery_status")
+    assert b["current_a"].min() > 25 and 21.5 < b["voltage_v"].min() < b["voltage_v"].max() < 22.7
+    log = read_log(log_path(PX4_ESC))
+    assert log.starts_armed and len(log.armed_periods) == 1
+    pad = default_pad(log)
+    assert pad.alt_m == pytest.approx(float(gp["alt"].min()), abs=0.01)          # 426.37 m: the landing
+    track = track_from_log(log)
+    span = float(gp["alt"].max() - gp["alt"].min())                               # 10.2 m
+    assert track.height_m.max() == pytest.approx(span, abs=0.3) and span > 9.5
+    airborne = track.armed & (track.height_m > AIRBORNE_M)
+    t_air = float(np.sum(np.diff(track.t_s)[airborne[:-1]]))
+    assert 30 < t_air < 38.8                                                      # (it was 22 s)
+    warn = replay_warnings(log, track)
+    assert any("starts armed 7.1 m above the lowest point of its first flight" in w for w in warn), warn

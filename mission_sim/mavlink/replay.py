@@ -188,8 +188,32 @@ def replay_span(log: FlightLog, window: tuple[float, float] | None = None,
     return (float(a), float(b)), {**info, "replayed_segment": k + 1, "segment_span_s": [round(a, 3), round(b, 3)]}
 
 
+STARTS_AIRBORNE_M = 5.0   # a log that starts armed and goes this much lower in its first flight started in the air
+
+
+def _airborne_start(log: FlightLog):
+    """(first armed position's index, lowest position's index in the first armed period, metres between them) when
+    the log starts armed and its first flight goes more than :data:`STARTS_AIRBORNE_M` (beyond GPS height noise) below
+    its first position: logging began in the air (a PX4 log of a flight already under way), so the first armed
+    position is no take-off spot; else None."""
+    pos, periods = log.position, log.armed_periods
+    if not (log.starts_armed and periods and len(pos)):
+        return None
+    t = pos["t_s"].to_numpy()
+    first = np.flatnonzero((t >= periods[0][0]) & (t <= periods[0][1]))
+    if len(first) < 2:
+        return None
+    alt = pos["alt_m"].to_numpy(float)[first]
+    k = int(np.argmin(alt))
+    drop = float(alt[0] - alt[k])
+    return (int(first[0]), int(first[k]), drop) if drop > STARTS_AIRBORNE_M else None
+
+
 def default_pad(log: FlightLog) -> GeoPoint:
-    """The first position at or after the first arming (the take-off spot), else the first position."""
+    """The first position at or after the first arming (the take-off spot), else the first position. A log that starts
+    armed in the air (:func:`_airborne_start`: its first flight goes more than :data:`STARTS_AIRBORNE_M` below its
+    first position) has no take-off spot: the lowest position of that flight (its landing) is taken instead, so that
+    heights are above the ground it landed on, not above where logging began (its track was clipped to 0 there)."""
     pos = log.position
     if len(pos) == 0:
         raise _no_position(log, " in the log" if not log.errors else "")
@@ -198,6 +222,9 @@ def default_pad(log: FlightLog) -> GeoPoint:
     if periods:
         after = np.flatnonzero(pos["t_s"].to_numpy() >= periods[0][0])
         i = int(after[0]) if len(after) else len(pos) - 1
+    start = _airborne_start(log)
+    if start is not None:
+        i = start[1]
     row = pos.iloc[i]
     return GeoPoint(float(row.lat_deg), float(row.lon_deg), float(row.alt_m))
 
@@ -482,6 +509,12 @@ def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
                    "truncated log? the replay covers only what was recorded")
     if log.errors:
         out.append(f"{log.path.name}: reading stopped early: {log.errors[0]}")
+    start = _airborne_start(log)
+    if start is not None:
+        t0 = float(log.position["t_s"].iloc[start[0]])
+        out.append(f"{log.path.name}: the log starts armed {start[2]:.1f} m above the lowest point of its first flight "
+                   f"(logging began in the air at {t0:.1f} s): heights are about that lowest point (its landing), the "
+                   "default pad; give --pad=LAT,LON,ALT for another")
     if not np.any(track.armed):
         out.append(f"{log.path.name}: the vehicle never armed in the replayed part: the track is marked NOT FLOWN "
                    "(its distance and height are GPS drift on the ground; nothing here was a flight)")
