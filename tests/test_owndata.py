@@ -197,3 +197,18 @@ def test_a_log_that_starts_in_the_air_is_about_the_ground_it_lands_on():
     assert 30 < t_air < 38.8                                                      # (it was 22 s)
     warn = replay_warnings(log, track)
     assert any("starts armed 7.1 m above the lowest point of its first flight" in w for w in warn), warn
+
+
+@pytest.mark.parametrize("name, needle", [
+    ("pymavlink_fence-110.txt", "row 1: command NAV_FENCE_POLYGON_VERTEX_INCLUSION (5001) is a geofence polygon vertex, "
+     "not a mission item: the file is a geofence or rally-point list"),
+    ("pymavlink_rally-110.txt", "row 1: command NAV_RALLY_POINT (5100) is a rally point, not a mission item"),
+])
+def test_a_fence_or_rally_file_given_as_the_mission_says_what_it_is(capsys, tmp_path, name, needle):
+    """pymavlink's QGC WPL 110 fence and rally lists (Mission Planner's format for them) as --plan: refused as before,
+    but the line says the file is a fence / rally list (it said the command "is not supported" and listed the
+    mission commands)."""
+    from mission_sim.cli import main
+    assert main(["mission", "--plan", str(MISSIONS / name), "--no-plot", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and needle in err, err

@@ -51,6 +51,9 @@ IGNORED_COMMANDS = frozenset({115, 181, 182, 183, 184, 195, 197, 200, 201, 202, 
                               112, 114, 189, 600, 207, 211, 215, 216, 220, 531, 532, 1001, 42600})
 _NAV = {NAV_WAYPOINT: "waypoint", NAV_LOITER_TIME: "loiter", NAV_RTL: "rtl", NAV_LAND: "land", NAV_TAKEOFF: "takeoff"}
 _AMSL_FRAMES, _RELATIVE_FRAMES = (0, 5), (3, 6)
+#: MAV_CMD_NAV_FENCE_* and MAV_CMD_NAV_RALLY_POINT: the items of a fence or rally list, not of a mission
+_FENCE_RALLY = {5000: "geofence return point", 5001: "geofence polygon vertex", 5002: "geofence polygon vertex",
+                5003: "geofence circle", 5004: "geofence circle", 5100: "rally point"}
 _SUPPORTED = ("NAV_WAYPOINT (16), NAV_LOITER_TIME (19), NAV_RETURN_TO_LAUNCH (20), NAV_LAND (21), NAV_TAKEOFF (22), "
               "DO_JUMP (177), DO_CHANGE_SPEED (178) and commands that do not move the vehicle (camera, gimbal, servo, relay, ROI, yaw, "
               "gripper, winch, sprayer, fence enable, conditions, markers)")
@@ -134,6 +137,10 @@ class _Builder:
         if it.command in IGNORED_COMMANDS:
             return
         kind = _NAV.get(it.command)
+        if kind is None and it.command in _FENCE_RALLY:
+            self.fail(it, f"command {command_name(it.command)} ({it.command}) is a {_FENCE_RALLY[it.command]}, not a "
+                          "mission item: the file is a geofence or rally-point list (as Mission Planner saves them); "
+                          "valid: the mission's own file (its waypoints)")
         if kind is None:
             self.fail(it, f"command {command_name(it.command)} ({it.command}) is not supported; supported: {_SUPPORTED}")
         if kind == "rtl":
