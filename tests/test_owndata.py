@@ -212,3 +212,47 @@ def test_a_fence_or_rally_file_given_as_the_mission_says_what_it_is(capsys, tmp_
     assert main(["mission", "--plan", str(MISSIONS / name), "--no-plot", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and needle in err, err
+
+
+# ------------------------------------------------------------------------------------------ flown routes
+def test_flown_route_hovers_only_where_the_log_hovered_in_the_air(monkeypatch):
+    """The flown route counted every slow sample of a decimated leg as hovering, ground time included. log171 (one
+    armed period from 61 s, take-off at ~78 s): the armed wait on the ground became a 9.6 s hover at 3 m, its loiters
+    held 35.4 s (25.8 s now). On the dronekit tlog (7 armed periods) a leg spanning a landing, 77 s disarmed on the
+    ground and the next take-off became a 70 s hover at 5 m: 142.6 s of loiters (11.6 s now), a 556 s route (442 s now)
+    for 429.5 s armed. Each loiter's hold is now at most the time the log spent slower than 0.5 m/s in the air (1 m or
+    more above the take-off spot) on its leg."""
+    import mission_sim.mavlink.logs as logs
+    from mission_sim.mavlink.geodesy import geodetic_to_enu
+    from mission_sim.plans.items import NAV_LOITER_TIME, read_mission
+    log = read_log(log_path("dronekit-la-testdata_log171.bin"))
+    monkeypatch.setattr(logs, "read_log", lambda path: log)          # (one read of the log)
+    raw = read_mission(log_path("dronekit-la-testdata_log171.bin"), "flown")
+    (a0, a1), = log.armed_periods
+    pos = log.position[(log.position["t_s"] >= a0) & (log.position["t_s"] <= a1)]
+    t = pos["t_s"].to_numpy(float)
+    e, n, u = geodetic_to_enu(pos["lat_deg"].to_numpy(), pos["lon_deg"].to_numpy(), pos["alt_m"].to_numpy(), raw.home)
+    u = np.maximum(u, 0.0)
+    air = u >= 1.0
+    dt = np.diff(t)
+    slow = (np.hypot(np.hypot(np.diff(e), np.diff(n)), np.diff(u)) / np.maximum(dt, 1e-9) < 0.5) & (dt < 10)
+    prev, loiters = 0, []
+    for it in raw.items:
+        k = int(it.where.split()[-1]) if it.where.startswith("track point") else len(t) - 1
+        if it.command == NAV_LOITER_TIME:
+            in_air = float(np.sum(dt[prev:k][slow[prev:k] & air[prev:k] & air[prev + 1:k + 1]]))
+            loiters.append((it.params[0], in_air))
+        prev = k
+    assert loiters and all(hold <= in_air + 1e-9 for hold, in_air in loiters), loiters
+    assert 20 < sum(h for h, _ in loiters) < 30     # (35.4 s before)
+
+
+def test_flown_route_keeps_a_hop_lower_than_the_decimation_tolerance():
+    """PX4's SITL hop to 2.1 m (pyulog's sample_px4_events.ulg) lies within the 3 m decimation tolerance of the
+    ground: the flown route was one landing where it stood (1.2 s of mission). Every take-off and landing (the track
+    crossing 1 m) is kept now: the route takes off and lands."""
+    from mission_sim.plans.items import read_mission
+    from mission_sim.plans.route import route_from_items
+    route = route_from_items(read_mission(log_path(PX4_EVENTS), "flown"))
+    assert [w["action"] for w in route][-1] == "land"
+    assert any(w["action"] == "waypoint" and w["z_m"] >= 1.0 for w in route)

@@ -377,8 +377,9 @@ def _decimate(p: np.ndarray, tol: float) -> np.ndarray:
 
 def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
     """The route a log flew: its GPS track (fix >= 3, implausible fixes rejected) over the armed time,
-    decimated to waypoints within ``tolerance_m`` of the track (Ramer-Douglas-Peucker), stops of at
-    least :data:`FLOWN_HOLD_S` as loiter items, points on the ground as landings (the route takes off
+    decimated to waypoints within ``tolerance_m`` of the track (Ramer-Douglas-Peucker; every take-off and landing, the
+    track crossing :data:`FLOWN_GROUND_M`, kept), stops of at least :data:`FLOWN_HOLD_S` in the air as loiter items,
+    points on the ground as landings (the route takes off
     again at the next airborne point; time spent on the ground is not kept), a landing at the end;
     home = the replay's take-off spot (:func:`mission_sim.mavlink.replay.default_pad`: the first armed position, or
     for a log that starts armed in the air the lowest point of its first flight)."""
@@ -401,14 +402,16 @@ def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
     e, n, u = geodetic_to_enu(lat, lon, alt, home)
     p = np.column_stack([e, n, np.maximum(u, 0.0)])
     t = pos["t_s"].to_numpy(float)
-    keep = _decimate(p, tolerance_m)
+    air = p[:, 2] >= FLOWN_GROUND_M
+    cross = np.flatnonzero(air[1:] != air[:-1])   # each take-off and landing kept: a flight lower than the tolerance
+    keep = np.union1d(_decimate(p, tolerance_m), np.concatenate([cross, cross + 1]))   # (a 2 m hop) was dropped whole
     items = []
     for a, b in zip(keep[:-1], keep[1:]):
         if p[b, 2] < FLOWN_GROUND_M:   # on the ground: a landing (the next airborne point takes off again)
             if not items or items[-1].command != NAV_LAND:
                 items.append(MissionItem(f"track point {b}", NAV_LAND, 0, (0.0,) * 4, lat[b], lon[b], home.alt_m))
             continue
-        hold = _stop_time(p[a:b + 1], t[a:b + 1])
+        hold = _stop_time(p[a:b + 1], t[a:b + 1], air[a:b + 1])
         cmd, p1 = (NAV_LOITER_TIME, hold) if hold >= FLOWN_HOLD_S else (NAV_WAYPOINT, 0.0)
         items.append(MissionItem(f"track point {b}", cmd, 0, (p1, 0.0, 0.0, 0.0), lat[b], lon[b], home.alt_m + p[b, 2]))
     if not items or items[-1].command != NAV_LAND:
@@ -416,10 +419,11 @@ def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
     return RawMission(f"{Path(path).name} (flown track)", home, tuple(items))
 
 
-def _stop_time(p: np.ndarray, t: np.ndarray) -> float:
-    """Seconds spent slower than :data:`HOVER_M_S` on one decimated leg (its hovering)."""
+def _stop_time(p: np.ndarray, t: np.ndarray, air: np.ndarray) -> float:
+    """Seconds spent slower than :data:`HOVER_M_S` in the air (``air`` at both ends of a step) on one decimated leg (its
+    hovering; time sitting on the ground is no hover)."""
     if len(t) < 2:
         return 0.0
     dt = np.diff(t)
     v = np.linalg.norm(np.diff(p, axis=0), axis=1) / np.maximum(dt, 1e-9)
-    return float(np.sum(dt[(v < HOVER_M_S) & (dt < 10.0)]))
+    return float(np.sum(dt[(v < HOVER_M_S) & (dt < 10.0) & air[:-1] & air[1:]]))
