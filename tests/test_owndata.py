@@ -218,8 +218,8 @@ def test_a_fence_or_rally_file_given_as_the_mission_says_what_it_is(capsys, tmp_
 def test_flown_route_hovers_only_where_the_log_hovered_in_the_air(monkeypatch):
     """The flown route counted every slow sample of a decimated leg as hovering, ground time included. log171 (one
     armed period from 61 s, take-off at ~78 s): the armed wait on the ground became a 9.6 s hover at 3 m, its loiters
-    held 35.4 s (25.8 s now). On the dronekit tlog (7 armed periods) a leg spanning a landing, 77 s disarmed on the
-    ground and the next take-off became a 70 s hover at 5 m: 142.6 s of loiters (11.6 s now), a 556 s route (442 s now)
+    held 35.4 s (25.8 s now). On the dronekit tlog (7 armed periods) a leg from 853 s to 930 s (a landing, 66 s
+    disarmed on the ground, the next take-off) became a 70 s hover at 5 m: 142.6 s of loiters (11.6 s now), a 556 s route (442 s now)
     for 429.5 s armed. Each loiter's hold is now at most the time the log spent slower than 0.5 m/s in the air (1 m or
     more above the take-off spot) on its leg."""
     import mission_sim.mavlink.logs as logs
