@@ -256,3 +256,28 @@ def test_flown_route_keeps_a_hop_lower_than_the_decimation_tolerance():
     route = route_from_items(read_mission(log_path(PX4_EVENTS), "flown"))
     assert [w["action"] for w in route][-1] == "land"
     assert any(w["action"] == "waypoint" and w["z_m"] >= 1.0 for w in route)
+
+
+def test_nav_delay_in_the_air_is_a_hover_where_the_vehicle_is(tmp_path):
+    """ArduPilot's NavDelay test mission: take-off to 20 m, a waypoint, NAV_DELAY 60 s, RTL. It was refused
+    ("NAV_DELAY (93) is not supported"); ArduCopter holds its position for the delay: a 60 s loiter there (over a pad:
+    a charging hover, as any loiter). A delay before the take-off or until a time of day (param1 < 0): one line."""
+    from mission_sim.plans.items import read_mission
+    from mission_sim.plans.route import route_from_items
+    path = MISSIONS / "ardupilot_copter_nav_delay.waypoints"
+    route = route_from_items(read_mission(path))
+    assert [(w["action"], w["hold_s"]) for w in route] == [("takeoff", 0), ("waypoint", 0), ("loiter", 60.0),
+                                                          ("waypoint", 0), ("land", 0)]
+    assert (route[2]["x_m"], route[2]["y_m"], route[2]["z_m"]) == (route[1]["x_m"], route[1]["y_m"], 20.0)
+    pads = [(route[1]["x_m"], route[1]["y_m"], 0.0)]
+    charged = route_from_items(read_mission(path), pads)
+    assert charged[2]["action"] == "charge" and charged[2]["pad"] == 0 and charged[2]["hold_s"] == 60.0
+    lines = path.read_text().splitlines(keepends=True)
+    assert "\t93\t60.000000\t" in lines[4]
+    for bad, needle in ((lines[4].replace("\t60.000000\t", "\t-1.000000\t", 1), "NAV_DELAY param1=-1 is not supported"),
+                        (None, "NAV_DELAY on the ground is not supported")):
+        p = tmp_path / "delay.waypoints"   # (the delay's value made -1; the delay moved before the take-off)
+        p.write_text("".join(lines[:4] + [bad] + lines[5:]) if bad else "".join(lines[:2] + [lines[4]] + lines[2:4]
+                                                                               + lines[5:]))
+        with pytest.raises(ValueError, match=needle):
+            route_from_items(read_mission(p))

@@ -9,7 +9,8 @@ terrain model). As ArduCopter does (``ModeAuto::loc_from_cmd``), latitude = long
 
 Commands: NAV_WAYPOINT (16; param1 > 0 = hold seconds: a loiter), NAV_LOITER_TIME (19, param1
 seconds), NAV_RETURN_TO_LAUNCH (20: climb to at least :data:`RTL_ALT_M`, fly home, land),
-NAV_LAND (21), NAV_TAKEOFF (22, vertical), DO_CHANGE_SPEED (178, param2 m/s: the speed of the
+NAV_LAND (21), NAV_TAKEOFF (22, vertical), NAV_DELAY (93, param1 seconds: a hover where the vehicle is, in the air
+only), DO_CHANGE_SPEED (178, param2 m/s: the speed of the
 following legs), DO_JUMP (177, param1 the target, param2 the number of jumps: the loop unrolled, :func:`_unrolled`).
 Commands that do not move the vehicle (camera, gimbal, servo, relay, ROI, yaw:
 :data:`IGNORED_COMMANDS`) are skipped; any other command is an error naming it and its item.
@@ -32,6 +33,7 @@ __all__ = ["apply_mission_files", "check_file_keys", "mission_home", "route_from
            "RTL_ALT_M", "IGNORED_COMMANDS"]
 
 DO_CHANGE_SPEED = 178
+NAV_DELAY = 93
 DO_JUMP = 177
 MAX_ROUTE_ITEMS = 100_000   # a route with DO_JUMP loops unrolled: at most this many items flown
 CHARGE_CLEARANCE_M = 1.0   # a loiter becomes a charging hover only this far above the pad (it descends to it)
@@ -55,7 +57,7 @@ _AMSL_FRAMES, _RELATIVE_FRAMES = (0, 5), (3, 6)
 _FENCE_RALLY = {5000: "geofence return point", 5001: "geofence polygon vertex", 5002: "geofence polygon vertex",
                 5003: "geofence circle", 5004: "geofence circle", 5100: "rally point"}
 _SUPPORTED = ("NAV_WAYPOINT (16), NAV_LOITER_TIME (19), NAV_RETURN_TO_LAUNCH (20), NAV_LAND (21), NAV_TAKEOFF (22), "
-              "DO_JUMP (177), DO_CHANGE_SPEED (178) and commands that do not move the vehicle (camera, gimbal, servo, relay, ROI, yaw, "
+              "NAV_DELAY (93), DO_JUMP (177), DO_CHANGE_SPEED (178) and commands that do not move the vehicle (camera, gimbal, servo, relay, ROI, yaw, "
               "gripper, winch, sprayer, fence enable, conditions, markers)")
 
 
@@ -135,6 +137,18 @@ class _Builder:
                 self.speed = float(v)
             return
         if it.command in IGNORED_COMMANDS:
+            return
+        if it.command == NAV_DELAY:   # ArduCopter / PX4: hold position (in the air) for param1 seconds
+            delay = it.params[0]
+            if not math.isfinite(delay) or delay < 0:
+                self.fail(it, f"NAV_DELAY param1={delay:g} is not supported (a negative delay waits for a time of day, "
+                              "params 2-4); valid: a delay in seconds, param1 >= 0")
+            if self.z <= 0:
+                self.fail(it, "NAV_DELAY on the ground is not supported (the route keeps no time on the ground); valid: "
+                              "a NAV_DELAY after the take-off")
+            self.in_range(it, "NAV_DELAY param1", delay, HOLD_RANGE, "waypoints.hold_s")
+            if delay > 0:
+                self.add("loiter", self.x, self.y, self.z, delay)
             return
         kind = _NAV.get(it.command)
         if kind is None and it.command in _FENCE_RALLY:
