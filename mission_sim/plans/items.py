@@ -61,7 +61,7 @@ class MissionItem:
     lat_deg: float
     lon_deg: float
     alt_m: float
-    jump_id: int | None = None   # what a DO_JUMP's param1 names it by: a .plan's doJumpId, a row's / a log's sequence no.
+    jump_id: int | None = None   # what a DO_JUMP names it by: a .plan's doJumpId, a row's / log's sequence no.
 
 
 @dataclass(frozen=True)

@@ -57,8 +57,8 @@ _AMSL_FRAMES, _RELATIVE_FRAMES = (0, 5), (3, 6)
 _FENCE_RALLY = {5000: "geofence return point", 5001: "geofence polygon vertex", 5002: "geofence polygon vertex",
                 5003: "geofence circle", 5004: "geofence circle", 5100: "rally point"}
 _SUPPORTED = ("NAV_WAYPOINT (16), NAV_LOITER_TIME (19), NAV_RETURN_TO_LAUNCH (20), NAV_LAND (21), NAV_TAKEOFF (22), "
-              "NAV_DELAY (93), DO_JUMP (177), DO_CHANGE_SPEED (178) and commands that do not move the vehicle (camera, gimbal, servo, relay, ROI, yaw, "
-              "gripper, winch, sprayer, fence enable, conditions, markers)")
+              "NAV_DELAY (93), DO_JUMP (177), DO_CHANGE_SPEED (178) and commands that do not move the vehicle "
+              "(camera, gimbal, servo, relay, ROI, yaw, gripper, winch, sprayer, fence enable, conditions, markers)")
 
 
 def command_name(cmd: int) -> str:
@@ -141,11 +141,11 @@ class _Builder:
         if it.command == NAV_DELAY:   # ArduCopter / PX4: hold position (in the air) for param1 seconds
             delay = it.params[0]
             if not math.isfinite(delay) or delay < 0:
-                self.fail(it, f"NAV_DELAY param1={delay:g} is not supported (a negative delay waits for a time of day, "
-                              "params 2-4); valid: a delay in seconds, param1 >= 0")
+                self.fail(it, f"NAV_DELAY param1={delay:g} is not supported (a negative delay waits for a time of "
+                              "day, params 2-4); valid: a delay in seconds, param1 >= 0")
             if self.z <= 0:
-                self.fail(it, "NAV_DELAY on the ground is not supported (the route keeps no time on the ground); valid: "
-                              "a NAV_DELAY after the take-off")
+                self.fail(it, "NAV_DELAY on the ground is not supported (the route keeps no time on the ground); "
+                              "valid: a NAV_DELAY after the take-off")
             self.in_range(it, "NAV_DELAY param1", delay, HOLD_RANGE, "waypoints.hold_s")
             if delay > 0:
                 self.add("loiter", self.x, self.y, self.z, delay)
