@@ -11,10 +11,11 @@ Formats (checked against QGroundControl's and ArduPilot's own files in tests/dat
 
 * ``.plan``: JSON, ``fileType`` "Plan", ``mission.items`` of ``SimpleItem`` (``command``,
   ``frame``, ``params`` = [p1, p2, p3, p4, lat, lon, alt], or QGC's older items: ``params`` = [p1..p4] and
-  ``coordinate`` = [lat, lon, alt]) and ``ComplexItem`` (survey /
-  corridor / structure scan: their generated ``TransectStyleComplexItem.Items`` when present,
-  else the ``VisualTransectPoints`` at the camera's ``DistanceToSurface``),
-  ``mission.plannedHomePosition`` = [lat, lon, alt AMSL].
+  ``coordinate`` = [lat, lon, alt]) and ``ComplexItem`` (survey / corridor scan: their generated
+  ``TransectStyleComplexItem.Items`` when present, else the ``VisualTransectPoints`` at the camera's
+  ``DistanceToSurface``; a structure scan, which keeps only its inputs: the waypoints QGC generates,
+  :func:`_structure_scan`), ``mission.plannedHomePosition`` = [lat, lon, alt AMSL]. Each item keeps its ``doJumpId``
+  (a .waypoints row and a log item their sequence number) for DO_JUMP.
 * ``.waypoints`` / ``.txt``: first line ``QGC WPL 110``, then one row per item: index, current,
   frame, command, p1, p2, p3, p4, lat, lon, alt, autocontinue (tabs); row 0 is home (AMSL).
 * a ``.tlog``: the last MISSION_ITEM_INT / MISSION_ITEM of each sequence number (a mission is
