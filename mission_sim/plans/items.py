@@ -382,7 +382,7 @@ def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
     track crossing :data:`FLOWN_GROUND_M`, kept), stops of at least :data:`FLOWN_HOLD_S` in the air as loiter items,
     points on the ground as landings (the route takes off
     again at the next airborne point; time spent on the ground is not kept), a landing at the end;
-    home = the replay's take-off spot (:func:`mission_sim.mavlink.replay.default_pad`: the first armed position, or
+    home = the replay's take-off spot (:func:`mission_sim.mavlink.takeoff.default_pad`: the first armed position, or
     for a log that starts armed in the air the lowest point of its first flight)."""
     from ..mavlink.geodesy import geodetic_to_enu
     from ..mavlink.logs import read_log
@@ -398,7 +398,7 @@ def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
     if len(pos) < 2:
         raise ValueError(f"{Path(path).name}: no flown track: {len(pos)} usable position(s) (GPS fix >= 3) while armed")
     lat, lon, alt = (pos[c].to_numpy(float) for c in ("lat_deg", "lon_deg", "alt_m"))
-    from ..mavlink.replay import default_pad
+    from ..mavlink.takeoff import default_pad
     home = default_pad(log)   # the first armed position; a log that starts in the air: where its first flight landed
     e, n, u = geodetic_to_enu(lat, lon, alt, home)
     p = np.column_stack([e, n, np.maximum(u, 0.0)])
