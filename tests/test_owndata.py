@@ -196,7 +196,40 @@ def test_a_log_that_starts_in_the_air_is_about_the_ground_it_lands_on():
     t_air = float(np.sum(np.diff(track.t_s)[airborne[:-1]]))
     assert 30 < t_air < 38.8                                                      # (it was 22 s)
     warn = replay_warnings(log, track)
-    assert any("starts armed 7.1 m above the lowest point of its first flight" in w for w in warn), warn
+    assert any("starts armed 7.1 m above where its first flight ends" in w for w in warn), warn
+
+
+PX4_BENCH = "pyulog_sample_log_small.ulg"   # PX4 on the bench, armed from its first record, disarmed at 5.5 s
+
+
+def test_a_log_that_starts_armed_on_high_ground_keeps_its_take_off_spot():
+    """2026-11-27 night review: "starts armed and its first flight goes > 5 m below its first position" also matched a
+    take-off from high ground that flies down into a valley (PX4 logs start at arming: many start armed on the ground).
+    pyulog's bench log (armed from its first record, disarmed at 5.5 s) with the middle fifth of its track 8 m lower:
+    the pad moved from 66.8 m AMSL (the first armed position) to 55.8 m, the valley's floor, with a warning calling it
+    "its landing". Now the first armed position is compared with the end of the first armed period (the disarm, on the
+    ground: 62.9 m, 3.9 m lower, GPS drift): the pad stays; and a log that ends armed (its end may be in the air) never
+    moves it."""
+    import dataclasses
+
+    from mission_sim.mavlink.replay import replay_warnings, track_from_log
+    from mission_sim.mavlink.takeoff import _airborne_start, default_pad
+    log = read_log(log_path(PX4_BENCH))
+    assert log.starts_armed and len(log.armed_periods) == 1 and not log.armed["armed"].iloc[-1]
+    pos = log.position.copy()
+    n = len(pos)
+    pos.loc[2 * n // 5:3 * n // 5 - 1, "alt_m"] -= 8.0                       # a valley in the middle of the flight
+    valley = dataclasses.replace(log, position=pos)
+    first = float(log.position["alt_m"].iloc[0])                              # 66.8 m, armed at the first record
+    assert first - float(pos["alt_m"].min()) > 8 and _airborne_start(valley) is None
+    assert default_pad(valley).alt_m == pytest.approx(first)                  # (was 58.8 m: the valley)
+    assert not any("starts armed" in w for w in replay_warnings(valley, track_from_log(valley)))
+    # the real flight that starts in the air, cut before its disarm: no landing to measure against, the pad stays
+    esc = read_log(log_path(PX4_ESC))
+    assert _airborne_start(esc) is not None
+    cut = dataclasses.replace(esc, armed=esc.armed[esc.armed["armed"]])
+    assert cut.armed_periods[0][1] == esc.duration_s and _airborne_start(cut) is None
+    assert default_pad(cut).alt_m == pytest.approx(float(esc.position["alt_m"].iloc[2]))   # the first armed position
 
 
 @pytest.mark.parametrize("name, needle", [

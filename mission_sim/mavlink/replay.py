@@ -434,10 +434,11 @@ def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
         out.append(f"{log.path.name}: reading stopped early: {log.errors[0]}")
     start = _airborne_start(log)
     if start is not None:
-        t0 = float(log.position["t_s"].iloc[start[0]])
-        out.append(f"{log.path.name}: the log starts armed {start[2]:.1f} m above the lowest point of its first flight "
-                   f"(logging began in the air at {t0:.1f} s): heights are about that lowest point (its landing), the "
-                   "default pad; give --pad=LAT,LON,ALT for another")
+        t0, t1 = (float(log.position["t_s"].iloc[k]) for k in start[:2])
+        out.append(f"{log.path.name}: the log starts armed {start[2]:.1f} m above where its first flight ends (its "
+                   f"first armed position at {t0:.1f} s against its last before the disarm, at {t1:.1f} s): logging "
+                   "began in the air, or the vehicle landed lower than it took off; heights are about that landing "
+                   "spot, the default pad; give --pad=LAT,LON,ALT for another")
     if not np.any(track.armed):
         out.append(f"{log.path.name}: the vehicle never armed in the replayed part: the track is marked NOT FLOWN "
                    "(its distance and height are GPS drift on the ground; nothing here was a flight)")
