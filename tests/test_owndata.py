@@ -149,14 +149,15 @@ def test_do_jump_loops_are_flown_as_ardupilot_flies_them():
 
 # ------------------------------------------------------------------------------------ logs that never flew
 @pytest.mark.parametrize("name", ["amc_backend_log_80k.bin", "pymavlink_test.BIN"])
-def test_a_log_that_never_armed_has_no_flown_route(capsys, tmp_path, name):
+def test_a_ground_log_has_no_flown_route(capsys, tmp_path, name):
     """ArduCopter 4.6.2 on a Pixhawk 4 (0.4 s, 2 fixes, BAT 16.4 V) and ArduPlane 3.8 (1.1 s, 5 fixes), both on the
-    ground, never armed: `mission --plan LOG` (no uploaded mission, or `from_log = "flown"`) made a route of the GPS
-    drift on the ground (a 1 s "flight", 25 J of propulsion); `replay` marks such a track NOT FLOWN. Now one line,
-    exit 2."""
+    ground, with no armed-state record and no motor output (the armed state is unknown): `mission --plan LOG` (no
+    uploaded mission, or `from_log = "flown"`) made a route of the GPS drift on the ground (a 1 s "flight", 25 J of
+    propulsion); `replay` marks such a track NOT FLOWN. Now one line, exit 2: the track never rises 1 m above its
+    first position."""
     from mission_sim.cli import main
     log = read_log(log_path(name))
-    assert log.armed_periods == [] and len(log.position) >= 2 and len(log.battery) >= 4
+    assert log.armed_periods == [] and log.armed_source is None and len(log.position) >= 2 and len(log.battery) >= 4
     assert 16.3 < log.battery["voltage_v"].median() < 16.6 if name.startswith("amc") else 12.3 < \
         log.battery["voltage_v"].median() < 12.5
     argv = ["mission", "--plan", str(log_path(name)), "--no-plot", "--out", str(tmp_path / "out")]
@@ -164,8 +165,51 @@ def test_a_log_that_never_armed_has_no_flown_route(capsys, tmp_path, name):
         argv += ["--set", "mission.from_log=flown"]
     assert main(argv) == 2
     err = capsys.readouterr().err
-    assert len(err.strip().splitlines()) == 1 and f"{name}: no flown track: the vehicle never armed" in err, err
+    assert len(err.strip().splitlines()) == 1 and f"{name}: no flown track: the armed state is unknown" in err, err
+    assert "never rises 1 m above its first position (max 0.0" in err, err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_log_that_never_armed_has_no_flown_route(monkeypatch):
+    """A log whose armed-state records say disarmed throughout (the ArduCopter ground log given a HEARTBEAT-like
+    disarmed record): "the vehicle never armed", naming where the armed state came from."""
+    import dataclasses
+
+    import pandas as pd
+
+    import mission_sim.mavlink.logs as logs
+    from mission_sim.plans.items import read_mission
+    full = read_log(log_path("amc_backend_log_80k.bin"))
+    log = dataclasses.replace(full, armed=pd.DataFrame({"t_s": [0.0], "armed": [False]}), armed_source="HEARTBEAT")
+    monkeypatch.setattr(logs, "read_log", lambda path: log)
+    with pytest.raises(ValueError, match=r"^amc_backend_log_80k.bin: no flown track: the vehicle never armed in the "
+                                         r"log \(armed state from HEARTBEAT\)"):
+        read_mission(log_path("amc_backend_log_80k.bin"), "flown")
+
+
+def test_a_log_with_unknown_armed_state_flies_its_whole_track(monkeypatch):
+    """A log with no armed-state record and no motor output (``armed_source`` None: the armed state is unknown, not
+    "never armed") was refused by `mission --plan LOG` as "the vehicle never armed"; before the never-armed rule it
+    flew its whole GPS track. It does again, with one warning saying the armed state is unknown. log171 with its
+    armed-state records taken out: the whole track, from its first fix (the 27 s on the ground before arming
+    included)."""
+    import dataclasses
+
+    import mission_sim.mavlink.logs as logs
+    from mission_sim.plans.items import NAV_LAND, read_mission
+    from wpt_receiver.notices import DronewptWarning
+    full = read_log(log_path("dronekit-la-testdata_log171.bin"))
+    log = dataclasses.replace(full, armed=full.armed.iloc[0:0], armed_source=None)
+    assert log.armed_periods == [] and full.armed_periods[0][0] > full.position["t_s"].iloc[0] + 25
+    monkeypatch.setattr(logs, "read_log", lambda path: log)
+    with pytest.warns(DronewptWarning, match="the armed state is unknown .*whole GPS track") as rec:
+        raw = read_mission(log_path("dronekit-la-testdata_log171.bin"), "flown")
+    assert len(rec) == 1
+    first = log.position.iloc[0]
+    assert (raw.home.lat_deg, raw.home.lon_deg, raw.home.alt_m) == (first.lat_deg, first.lon_deg, first.alt_m)
+    assert raw.items[-1].command == NAV_LAND and len(raw.items) > 5
+    monkeypatch.setattr(logs, "read_log", lambda path: full)        # (with its armed state: the armed time only)
+    assert read_mission(log_path("dronekit-la-testdata_log171.bin"), "flown").home != raw.home
 
 
 # ------------------------------------------------------------------------- a log that starts in the air
