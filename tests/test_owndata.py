@@ -338,7 +338,9 @@ def test_flown_route_keeps_a_hop_lower_than_the_decimation_tolerance():
 def test_nav_delay_in_the_air_is_a_hover_where_the_vehicle_is(tmp_path):
     """ArduPilot's NavDelay test mission: take-off to 20 m, a waypoint, NAV_DELAY 60 s, RTL. It was refused
     ("NAV_DELAY (93) is not supported"); ArduCopter holds its position for the delay: a 60 s loiter there (over a pad:
-    a charging hover, as any loiter). A delay before the take-off or until a time of day (param1 < 0): one line."""
+    a charging hover, as any loiter). A delay before the take-off or until a time of day (param1 < 0, or 0 with a time
+    in params 2-4: ArduPilot's do_nav_delay takes only param1 > 0 as seconds): one line; param1 = 0 with params 2-4
+    zero: no delay."""
     from mission_sim.plans.items import read_mission
     from mission_sim.plans.route import route_from_items
     path = MISSIONS / "ardupilot_copter_nav_delay.waypoints"
@@ -351,10 +353,22 @@ def test_nav_delay_in_the_air_is_a_hover_where_the_vehicle_is(tmp_path):
     assert charged[2]["action"] == "charge" and charged[2]["pad"] == 0 and charged[2]["hold_s"] == 60.0
     lines = path.read_text().splitlines(keepends=True)
     assert "\t93\t60.000000\t" in lines[4]
-    for bad, needle in ((lines[4].replace("\t60.000000\t", "\t-1.000000\t", 1), "NAV_DELAY param1=-1 is not supported"),
+    def delay(p1, hour=0, minute=0, second=0):   # row 3 with params 1-4 replaced
+        f = lines[4].split("\t")
+        return "\t".join(f[:4] + [f"{v:f}" for v in (p1, hour, minute, second)] + f[8:])
+
+    p = tmp_path / "delay.waypoints"
+    for bad, needle in ((delay(0, 12, 30), r"NAV_DELAY param1=0 with params 2-4 = \(12, 30, 0\) waits for a time of"),
+                        (delay(-1), r"NAV_DELAY param1=-1 with params 2-4 = \(0, 0, 0\) waits for a time of day"),
                         (None, "NAV_DELAY on the ground is not supported")):
-        p = tmp_path / "delay.waypoints"   # (the delay's value made -1; the delay moved before the take-off)
+        # (the delay's value made 0 with 12:30 UTC, ArduPilot's do_nav_delay: a time of day, it was flown as
+        # no delay; made -1; the delay moved before the take-off)
         p.write_text("".join(lines[:4] + [bad] + lines[5:]) if bad else "".join(lines[:2] + [lines[4]] + lines[2:4]
                                                                                + lines[5:]))
         with pytest.raises(ValueError, match=needle):
             route_from_items(read_mission(p))
+    # param1 = 0 with params 2-4 zero: no delay, skipped, also before the take-off (it was refused there)
+    for order in ((0, 1, 2, 3, 4, 5), (0, 1, 4, 2, 3, 5)):
+        rows = lines[:4] + [delay(0)] + lines[5:]
+        p.write_text("".join(rows[k] for k in order))
+        assert [w["action"] for w in route_from_items(read_mission(p))] == ["takeoff", "waypoint", "waypoint", "land"]

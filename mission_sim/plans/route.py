@@ -9,8 +9,8 @@ terrain model). As ArduCopter does (``ModeAuto::loc_from_cmd``), latitude = long
 
 Commands: NAV_WAYPOINT (16; param1 > 0 = hold seconds: a loiter), NAV_LOITER_TIME (19, param1
 seconds), NAV_RETURN_TO_LAUNCH (20: climb to at least :data:`RTL_ALT_M`, fly home, land),
-NAV_LAND (21), NAV_TAKEOFF (22, vertical), NAV_DELAY (93, param1 seconds: a hover where the vehicle is, in the air
-only), DO_CHANGE_SPEED (178, param2 m/s: the speed of the
+NAV_LAND (21), NAV_TAKEOFF (22, vertical), NAV_DELAY (93, param1 > 0 seconds: a hover where the vehicle is, in the
+air only; param1 = 0 with params 2-4 zero: no delay; else a time of day, refused), DO_CHANGE_SPEED (178, param2 m/s: the speed of the
 following legs), DO_JUMP (177, param1 the target, param2 the number of jumps: the loop unrolled, :func:`_unrolled`).
 Commands that do not move the vehicle (camera, gimbal, servo, relay, ROI, yaw:
 :data:`IGNORED_COMMANDS`) are skipped; any other command is an error naming it and its item.
@@ -129,6 +129,24 @@ class _Builder:
         self.out.append(wp)
         self.x, self.y, self.z = x, y, (0.0 if action == "land" else z)
 
+    def nav_delay(self, it):
+        """NAV_DELAY (93): ArduCopter's ``do_nav_delay`` takes only param1 > 0 as a delay in seconds (a hover where the
+        vehicle is, in the air only); any other param1 waits for the UTC time of day in params 2-4, refused, except
+        param1 = 0 with params 2-4 zero or unset: no delay (skipped)."""
+        delay = it.params[0]
+        clock = [0.0 if math.isnan(v) else v for v in it.params[1:4]]   # hour, minute, second UTC (unset: 0)
+        if math.isfinite(delay) and delay == 0 and not any(clock):
+            return
+        if not math.isfinite(delay) or delay <= 0:
+            self.fail(it, f"NAV_DELAY param1={delay:g} with params 2-4 = ({', '.join(f'{v:g}' for v in clock)}) waits "
+                          "for a time of day (UTC hour, minute, second: ArduPilot's do_nav_delay takes only param1 > 0 "
+                          "as seconds), not supported; valid: param1 > 0 seconds (or 0 with params 2-4 zero: no delay)")
+        if self.z <= 0:
+            self.fail(it, "NAV_DELAY on the ground is not supported (the route keeps no time on the ground); "
+                          "valid: a NAV_DELAY after the take-off")
+        self.in_range(it, "NAV_DELAY param1", delay, HOLD_RANGE, "waypoints.hold_s")
+        self.add("loiter", self.x, self.y, self.z, delay)
+
     def item(self, it):
         if it.command == DO_CHANGE_SPEED:
             v = it.params[1]
@@ -139,16 +157,7 @@ class _Builder:
         if it.command in IGNORED_COMMANDS:
             return
         if it.command == NAV_DELAY:   # ArduCopter / PX4: hold position (in the air) for param1 seconds
-            delay = it.params[0]
-            if not math.isfinite(delay) or delay < 0:
-                self.fail(it, f"NAV_DELAY param1={delay:g} is not supported (a negative delay waits for a time of "
-                              "day, params 2-4); valid: a delay in seconds, param1 >= 0")
-            if self.z <= 0:
-                self.fail(it, "NAV_DELAY on the ground is not supported (the route keeps no time on the ground); "
-                              "valid: a NAV_DELAY after the take-off")
-            self.in_range(it, "NAV_DELAY param1", delay, HOLD_RANGE, "waypoints.hold_s")
-            if delay > 0:
-                self.add("loiter", self.x, self.y, self.z, delay)
+            self.nav_delay(it)
             return
         kind = _NAV.get(it.command)
         if kind is None and it.command in _FENCE_RALLY:
