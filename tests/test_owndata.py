@@ -241,6 +241,20 @@ def test_a_log_that_starts_in_the_air_is_about_the_ground_it_lands_on():
     assert 30 < t_air < 38.8                                                      # (it was 22 s)
     warn = replay_warnings(log, track)
     assert any("starts armed 7.1 m above where its first flight ends" in w for w in warn), warn
+    # its flown route (`mission --plan LOG`): at ~10 m, 41.2 s (docs/changes.md; 33.4 s at ~3 m about the air)
+    from mission_sim.plans.items import read_mission
+    from mission_sim.plans.route import route_from_items
+    route = route_from_items(read_mission(log_path(PX4_ESC), "flown"))
+    assert 9.5 < max(w["z_m"] for w in route) < 10.5
+
+
+def test_a_log_that_starts_in_the_air_flies_its_route_as_documented(tmp_path):
+    """docs/changes.md's number for the px4-ulog-rs flight's flown route: 41.2 s (the reviewer found 41.8 s written)."""
+    from mission_sim.cli import main
+    assert main(["mission", "--plan", str(log_path(PX4_ESC)), "--no-plot", "--out", str(tmp_path / "out")]) == 0
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["sim_time_s"] == pytest.approx(41.2, abs=0.05)
+    assert "flown route is 41.2 s at ~10 m" in (Path(__file__).resolve().parents[1] / "docs" / "changes.md").read_text()
 
 
 PX4_BENCH = "pyulog_sample_log_small.ulg"   # PX4 on the bench, armed from its first record, disarmed at 5.5 s
