@@ -338,6 +338,21 @@ def test_flown_route_hovers_only_where_the_log_hovered_in_the_air(monkeypatch):
     assert 20 < sum(h for h, _ in loiters) < 30     # (35.4 s before)
 
 
+def test_flown_route_stop_time_counts_only_time_in_the_air():
+    """``_stop_time``'s ``air`` mask alone (the route test above passes without it: every take-off and landing is kept,
+    so a decimated leg spans ground and air only on a one-step take-off). A leg shaped as log171's start: 9.6 s armed
+    and still on the ground, a 0.5 s step up to 3 m, 6 s hovering there, a 0.4 s dash away: 6 s of hover (with the
+    ground wait counted, 15.6 s)."""
+    from mission_sim.plans.items import FLOWN_GROUND_M, FLOWN_HOLD_S, _stop_time
+    t = np.r_[np.arange(0.0, 9.61, 0.4), 10.1 + np.arange(0.0, 6.01, 0.4), 16.5]
+    z = np.r_[np.zeros(25), np.full(16, 3.0), 3.0]
+    x = np.r_[np.zeros(41), 10.0]
+    p = np.column_stack([x, np.zeros_like(x), z])
+    hold = _stop_time(p, t, p[:, 2] >= FLOWN_GROUND_M)
+    assert hold == pytest.approx(6.0, abs=1e-9) and hold >= FLOWN_HOLD_S
+    assert _stop_time(p[:25], t[:25], np.zeros(25, bool)) == 0.0   # all on the ground: no hover
+
+
 def test_flown_route_keeps_a_hop_lower_than_the_decimation_tolerance():
     """PX4's SITL hop to 2.1 m (pyulog's sample_px4_events.ulg) lies within the 3 m decimation tolerance of the
     ground: the flown route was one landing where it stood (1.2 s of mission). Every take-off and landing (the track
