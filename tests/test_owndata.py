@@ -100,9 +100,20 @@ def test_px4_package_delivery_plan_flies_past_its_gripper_item():
     (lambda scan: scan.update(complexItemType="fwLandingPattern"),
      ["item 1: complex item 'fwLandingPattern' is not supported; supported complex items: survey, CorridorScan, "
       "StructureScan"]),
-    (lambda scan: scan.pop("Layers"), ["item 1 (StructureScan): Layers=None is invalid; valid: a number"]),
+    (lambda scan: scan.pop("Layers"), ["item 1 (StructureScan): Layers=None is invalid; valid range: integer 1..1000 "
+                                       "(QGroundControl saves it)"]),
     (lambda scan: scan["CameraCalc"].update(AdjustedFootprintFrontal=0),
-     ["CameraCalc AdjustedFootprintFrontal=0 is invalid; valid range: (0, inf) m"]),
+     ["CameraCalc.AdjustedFootprintFrontal=0 is invalid; valid range: (0, inf) m"]),
+    # (2026-11-27 night review: the scan's own checks, not validation's shared ones; "false" flew the scan from the top,
+    # a CameraCalc that is no object was read as {}, a negative height passed the scan and failed as a waypoint's)
+    (lambda scan: scan.update(StartFromTop="false"),
+     ['item 1 (StructureScan): StartFromTop="false" is invalid; valid: true or false (a JSON boolean)']),
+    (lambda scan: scan.update(CameraCalc="50 m"),
+     ['item 1 (StructureScan): CameraCalc="50 m" is invalid; valid: a JSON object {...}']),
+    (lambda scan: scan.update(EntranceAltitude=-5),
+     ["item 1 (StructureScan): EntranceAltitude=-5 is invalid; valid range: [0, 5000] m above home"]),
+    (lambda scan: scan.update(Layers="2"), ["item 1 (StructureScan): Layers='2' is invalid; valid range: integer "
+                                            "1..1000"]),
     (lambda scan: scan.update(polygon=scan["polygon"][:2]), ["polygon is invalid (fewer than 3 vertices)"]),
 ])
 def test_complex_items_that_cannot_be_flown_are_one_line_errors(capsys, tmp_path, edit, needles):
@@ -401,3 +412,22 @@ def test_nav_delay_in_the_air_is_a_hover_where_the_vehicle_is(tmp_path):
         rows = lines[:4] + [delay(0)] + lines[5:]
         p.write_text("".join(rows[k] for k in order))
         assert [w["action"] for w in route_from_items(read_mission(p))] == ["takeoff", "waypoint", "waypoint", "land"]
+
+
+def test_do_jump_to_a_missing_target_names_the_ids_the_mission_holds(tmp_path):
+    """A .plan's doJumpIds can have gaps: the DO_JUMP error said "valid: 1..9", suggesting ids the mission lacks. PX4's
+    package-delivery plan with its doJumpIds 1, 3, 7, 9 and a DO_JUMP (id 10) to 5: the ids are named."""
+    from mission_sim.plans.items import read_mission
+    from mission_sim.plans.route import _jump_ids, route_from_items
+    doc = json.loads((MISSIONS / "px4_triangle_gripper_package_delivery.plan").read_text())
+    items = doc["mission"]["items"]
+    for it, jid in zip(items, (1, 3, 7, 9)):
+        it["doJumpId"] = jid
+    items.append({"type": "SimpleItem", "command": 177, "frame": 2, "doJumpId": 10, "autoContinue": True,
+                  "params": [5, 1, 0, 0, 0, 0, 0]})
+    plan = tmp_path / "jump.plan"
+    plan.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=r"DO_JUMP target param1=5 is not an item of the mission; valid: one of 1, 3, "
+                                         r"7, 9, 10$"):
+        route_from_items(read_mission(plan))
+    assert _jump_ids(list(range(2, 26, 2))) == "one of 2, 4, 6, 8, 10, 12, 14, 16, ... (12 ids, the last 24)"

@@ -28,12 +28,14 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..mavlink.geodesy import GeoPoint
+from ..validation import ALT_RANGE, Range, check_number
 
 __all__ = ["MissionItem", "RawMission", "read_mission", "read_plan", "read_wpl", "uploaded_mission",
            "flown_mission", "LOG_SUFFIXES"]
@@ -201,6 +203,24 @@ def _plan_item(it, where: str, name: str) -> list[MissionItem]:
                      "from QGroundControl after the survey was generated")
 
 
+#: a structure scan's numeric inputs: (key, "CameraCalc." when it is the camera's, range); heights above home as a
+#: route waypoint's (:data:`~mission_sim.validation.ALT_RANGE`)
+_SCAN_INPUTS = (("EntranceAltitude", "", ALT_RANGE), ("ScanBottomAlt", "", ALT_RANGE), ("StructureHeight", "", ALT_RANGE),
+                ("Layers", "", Range(1, 1000, integer=True)),
+                ("DistanceToSurface", "CameraCalc.", Range(0.0, math.inf, "m", hi_open=True)),
+                ("AdjustedFootprintFrontal", "CameraCalc.", Range(0.0, math.inf, "m", lo_open=True, hi_open=True)))
+
+
+def _json_object(value, what: str) -> dict:
+    """``value`` (absent, null: ``{}``) when it is a JSON object; else ``ValueError`` naming ``what`` and the value as the
+    file spells it (a ``true`` or a list there was an AttributeError traceback)."""
+    if value is None or value == {}:
+        return {}
+    if not isinstance(value, dict):
+        raise ValueError(f"{what}={json.dumps(value)[:60]} is invalid; valid: a JSON object {{...}}")
+    return value
+
+
 def _structure_scan(it: dict, where: str, name: str) -> list[MissionItem]:
     """The waypoints QGroundControl generates for a structure scan (``StructureScanComplexItem::appendMissionItems``;
     a plan holds only the scan's inputs): the structure's polygon offset outwards by the camera's
@@ -212,22 +232,19 @@ def _structure_scan(it: dict, where: str, name: str) -> list[MissionItem]:
     ``StructureHeight`` down with ``StartFromTop``), entered and left at vertex 0 at ``EntranceAltitude``; heights
     above home (QGC writes them in frame 3). Its camera and ROI items do not move the vehicle and are left out."""
     from ..mavlink.geodesy import enu_to_geodetic, geodetic_to_enu
-    cam = it.get("CameraCalc") if isinstance(it.get("CameraCalc"), dict) else {}
+    cam = _json_object(it.get("CameraCalc"), f"{name}: {where}: CameraCalc")
     vals = {}
-    for key, src in (("EntranceAltitude", it), ("ScanBottomAlt", it), ("StructureHeight", it), ("Layers", it),
-                     ("DistanceToSurface", cam), ("AdjustedFootprintFrontal", cam)):
-        v = src.get(key)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
-            raise ValueError(f"{name}: {where}: {key}={v!r} is invalid; valid: a number (QGroundControl saves it"
-                             f"{' in CameraCalc' if src is cam else ''})")
-        vals[key] = float(v)
+    for key, src, rng in _SCAN_INPUTS:
+        value = (cam if src else it).get(key)
+        try:
+            vals[key] = check_number(f"{src}{key}", value, rng, " (QGroundControl saves it)" if value is None else "")
+        except ValueError as exc:
+            raise ValueError(f"{name}: {where}: {exc}") from None
     layers, step, gap = vals["Layers"], vals["AdjustedFootprintFrontal"], vals["DistanceToSurface"]
-    if layers != int(layers) or not 1 <= layers <= 1000:
-        raise ValueError(f"{name}: {where}: Layers={layers:g} is invalid; valid: an integer in [1, 1000]")
-    if step <= 0 or gap < 0:
-        bad = f"AdjustedFootprintFrontal={step:g}" if step <= 0 else f"DistanceToSurface={gap:g}"
-        raise ValueError(f"{name}: {where}: CameraCalc {bad} is invalid; valid range: "
-                         f"{'(0, inf) m' if step <= 0 else '[0, inf) m'}")
+    top = it.get("StartFromTop", False)
+    if not isinstance(top, bool):   # (bool("false") is True: the scan was flown from the top)
+        raise ValueError(f"{name}: {where}: StartFromTop={json.dumps(top)[:60]} is invalid; valid: true or false (a "
+                         "JSON boolean)")
     poly = it.get("polygon")
     try:
         ll = np.array([[_num(c[0]), _num(c[1])] for c in poly], dtype=float)
@@ -256,7 +273,6 @@ def _structure_scan(it: dict, where: str, name: str) -> list[MissionItem]:
         flight.append(a + t * da)
     flight = np.array(flight)
     lat, lon, _ = enu_to_geodetic(flight[:, 0], flight[:, 1], 0.0, origin)
-    top = bool(it.get("StartFromTop", False))
     alt0 = vals["StructureHeight"] - step / 2 if top else vals["ScanBottomAlt"] + step / 2
     items = [MissionItem(f"{where}, entrance", NAV_WAYPOINT, 3, (0.0,) * 4, float(lat[0]), float(lon[0]),
                          vals["EntranceAltitude"])]

@@ -217,15 +217,22 @@ def _unrolled(raw: RawMission):
             raise ValueError(f"{raw.source}: {it.where}: DO_JUMP repeats forever (param2 = -1): the route would never "
                              "end; valid: a repeat count >= 0")
         if not (math.isfinite(target) and target == int(target) and int(target) in index):
-            ids = sorted(index)
             raise ValueError(f"{raw.source}: {it.where}: DO_JUMP target param1={target:g} is not an item of the "
-                             f"mission; valid: {ids[0]}..{ids[-1]}" if ids else f"{raw.source}: {it.where}: DO_JUMP "
-                             f"target param1={target:g} is not an item of the mission")
+                             f"mission; valid: {_jump_ids(sorted(index))}")
         if jumps.get(k, 0) < repeat:
             jumps[k] = jumps.get(k, 0) + 1
             k = index[int(target)]
         else:
             k += 1
+
+
+def _jump_ids(ids: list[int], shown: int = 8) -> str:
+    """The jump targets a mission holds, named (a .plan's doJumpIds can have gaps: "1..9" suggested ids it lacks):
+    all of them up to ``shown``, else the first ``shown`` and how many."""
+    if not ids:
+        return "none: the mission has no item a DO_JUMP can name"
+    more = f", ... ({len(ids)} ids, the last {ids[-1]})" if len(ids) > shown else ""
+    return f"one of {', '.join(map(str, ids[:shown]))}{more}"
 
 
 def route_from_items(raw: RawMission, pads_xyz=(), pad_radius_m: float = 5.0) -> list[dict]:
