@@ -231,8 +231,8 @@ def test_a_log_that_starts_in_the_air_is_about_the_ground_it_lands_on():
     """A real PX4 flight logged from 4 s after take-off (armed from its first record, 6-7 m up, climbs to ~10 m,
     lands at the end, 26-74 A): the pad, the first armed position, was in the air, every height below it (the whole
     descent) was clipped to 0, and `replay` said "max 3.1 m above the pad" and 22 s airborne of 38.8 s armed. Now the
-    default pad is the lowest point of that flight (its landing): the heights span the log's own altitude range, and
-    one warning says so."""
+    default pad is where that flight ends (its last position before the disarm, its landing, here also its lowest):
+    the heights span the log's own altitude range, and one warning says so."""
     from pyulog import ULog
 
     from mission_sim.mavlink.replay import AIRBORNE_M, default_pad, replay_warnings, track_from_log
