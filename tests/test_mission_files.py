@@ -268,7 +268,7 @@ def test_malformed_json(capsys, tmp_path):
 
 
 @pytest.mark.parametrize("name,needles", [
-    ("ardupilot_can_gps_copter_mission.waypoints", ("row 10", "DO_JUMP (177)", "not supported")),
+    ("ardupilot_cmac_copter_circuit.waypoints", ("row 6", "DO_JUMP repeats forever (param2 = -1)", "never end")),
     ("qgc_ardupilot_sitl_copter.plan", ("item 7", "frame 10", "terrain")),
 ])
 def test_unsupported_items_in_real_files(capsys, tmp_path, name, needles):

@@ -11,7 +11,7 @@ import pandas as pd
 
 from .armed import armed_periods
 
-__all__ = ["FlightLog", "clean_time", "good_timestamps", "TIME_SPIKE_S", "POSITION_COLUMNS", "ATTITUDE_COLUMNS", "ARMED_COLUMNS", "BATTERY_COLUMNS"]
+__all__ = ["FlightLog", "NoPositionError", "LogParseError", "check_decoded", "clean_time", "good_timestamps", "TIME_SPIKE_S", "POSITION_COLUMNS", "ATTITUDE_COLUMNS", "ARMED_COLUMNS", "BATTERY_COLUMNS"]
 
 POSITION_COLUMNS = ("t_s", "lat_deg", "lon_deg", "alt_m")
 ATTITUDE_COLUMNS = ("t_s", "roll_rad", "pitch_rad")
@@ -93,3 +93,42 @@ def good_timestamps(ts: np.ndarray) -> np.ndarray:
         if 0.0 <= ts[i] - last <= TIME_SPIKE_S:
             good[i] = True
     return good
+
+
+class NoPositionError(ValueError):
+    """The log holds fewer than two usable (GPS fix >= 3) positions."""
+
+
+class LogParseError(NoPositionError):
+    """pymavlink (or pyulog) failed on the log before any usable position: says what failed."""
+
+
+def check_decoded(log: FlightLog) -> None:
+    """:class:`NoPositionError` saying what the file is when not one good record was decoded from it (an empty file, a
+    text file, a log cut before its first record): "0 usable position sample(s)" said nothing of that."""
+    if log.errors or log.n_records > log.bad_frames:
+        return
+    try:
+        size = log.path.stat().st_size
+    except OSError:
+        size = -1
+    bad = f", {log.bad_frames} corrupt frame(s)" if log.bad_frames else ""
+    what = ("the file is empty (0 bytes)" if size == 0 else
+            f"no readable record in its {size} bytes{bad}: cut short before its first record, or not a flight log")
+    raise NoPositionError(f"{log.path.name}: no usable position (GPS fix >= 3): {what}; valid: a MAVLink .tlog, a "
+                          "DataFlash .bin or a PX4 .ulg")
+
+
+def _no_position(log: FlightLog, detail: str) -> NoPositionError:
+    """The error for a log without enough positions: the parser's own error first if it failed."""
+    check_decoded(log)
+    if log.errors:
+        return LogParseError(f"{log.path.name}: the log could not be parsed: {log.errors[0]} "
+                             f"({log.n_records} records decoded before it{detail})")
+    rejected = sum(log.gps_rejected.values())
+    why = f"; {rejected} implausible fixes rejected ({_fmt_counts(log.gps_rejected)})" if rejected else ""
+    return NoPositionError(f"{log.path.name}: no usable position (GPS fix >= 3){detail}{why}")
+
+
+def _fmt_counts(counts: dict) -> str:
+    return ", ".join(f"{k} {v}" for k, v in counts.items() if v)

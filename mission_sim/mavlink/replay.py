@@ -27,7 +27,10 @@ import pandas as pd
 from ..validation import window_ok
 from ..world import budget as _budget
 from .geodesy import GeoPoint, geodetic_to_enu
+from .flightlog import (LogParseError, NoPositionError, _fmt_counts, _no_position,  # noqa: F401 (re-exported)
+                        check_decoded)
 from .logs import FlightLog, read_log
+from .takeoff import STARTS_AIRBORNE_M, _airborne_start, default_pad  # noqa: F401 (one source: takeoff.py)
 
 __all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "with_ground_gap", "flight_stats",
            "logged_energy_j", "compare_power", "fit_mass_kg", "resample_track", "replay_trajectory", "ReplayResult", "replay_log", "parse_window",
@@ -41,45 +44,6 @@ AIRBORNE_M = 1.0                  # armed and this high above the pad counts as 
 MIN_DT_S = 0.05                   # closer position samples are dropped (velocity by differences)
 _MAX_GAP_S = 10.0                 # samples further apart are not integrated across
 _EDGE_S = 1e-3                    # a battery sample this close outside the track's ends is in it (float rounding)
-
-
-class NoPositionError(ValueError):
-    """The log holds fewer than two usable (GPS fix >= 3) positions."""
-
-
-class LogParseError(NoPositionError):
-    """pymavlink (or pyulog) failed on the log before any usable position: says what failed."""
-
-
-def check_decoded(log: FlightLog) -> None:
-    """:class:`NoPositionError` saying what the file is when not one good record was decoded from it (an empty file, a
-    text file, a log cut before its first record): "0 usable position sample(s)" said nothing of that."""
-    if log.errors or log.n_records > log.bad_frames:
-        return
-    try:
-        size = log.path.stat().st_size
-    except OSError:
-        size = -1
-    bad = f", {log.bad_frames} corrupt frame(s)" if log.bad_frames else ""
-    what = ("the file is empty (0 bytes)" if size == 0 else
-            f"no readable record in its {size} bytes{bad}: cut short before its first record, or not a flight log")
-    raise NoPositionError(f"{log.path.name}: no usable position (GPS fix >= 3): {what}; valid: a MAVLink .tlog, a "
-                          "DataFlash .bin or a PX4 .ulg")
-
-
-def _no_position(log: FlightLog, detail: str) -> NoPositionError:
-    """The error for a log without enough positions: the parser's own error first if it failed."""
-    check_decoded(log)
-    if log.errors:
-        return LogParseError(f"{log.path.name}: the log could not be parsed: {log.errors[0]} "
-                             f"({log.n_records} records decoded before it{detail})")
-    rejected = sum(log.gps_rejected.values())
-    why = f"; {rejected} implausible fixes rejected ({_fmt_counts(log.gps_rejected)})" if rejected else ""
-    return NoPositionError(f"{log.path.name}: no usable position (GPS fix >= 3){detail}{why}")
-
-
-def _fmt_counts(counts: dict) -> str:
-    return ", ".join(f"{k} {v}" for k, v in counts.items() if v)
 
 
 @dataclass(frozen=True)
@@ -186,20 +150,6 @@ def replay_span(log: FlightLog, window: tuple[float, float] | None = None,
     k = choose_segment(log) if segment is None else segment - 1
     a, b = spans[k]
     return (float(a), float(b)), {**info, "replayed_segment": k + 1, "segment_span_s": [round(a, 3), round(b, 3)]}
-
-
-def default_pad(log: FlightLog) -> GeoPoint:
-    """The first position at or after the first arming (the take-off spot), else the first position."""
-    pos = log.position
-    if len(pos) == 0:
-        raise _no_position(log, " in the log" if not log.errors else "")
-    i = 0
-    periods = log.armed_periods
-    if periods:
-        after = np.flatnonzero(pos["t_s"].to_numpy() >= periods[0][0])
-        i = int(after[0]) if len(after) else len(pos) - 1
-    row = pos.iloc[i]
-    return GeoPoint(float(row.lat_deg), float(row.lon_deg), float(row.alt_m))
 
 
 def track_from_log(log: FlightLog, pad: GeoPoint | None = None, ground_gap_m: float = 0.0,
@@ -482,6 +432,13 @@ def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
                    "truncated log? the replay covers only what was recorded")
     if log.errors:
         out.append(f"{log.path.name}: reading stopped early: {log.errors[0]}")
+    start = _airborne_start(log)
+    if start is not None:
+        t0, t1 = (float(log.position["t_s"].iloc[k]) for k in start[:2])
+        out.append(f"{log.path.name}: the log starts armed {start[2]:.1f} m above where its first flight ends (its "
+                   f"first armed position at {t0:.1f} s against its last before the disarm, at {t1:.1f} s): logging "
+                   "began in the air, or the vehicle landed lower than it took off; heights are about that landing "
+                   "spot, the default pad; give --pad=LAT,LON,ALT for another")
     if not np.any(track.armed):
         out.append(f"{log.path.name}: the vehicle never armed in the replayed part: the track is marked NOT FLOWN "
                    "(its distance and height are GPS drift on the ground; nothing here was a flight)")

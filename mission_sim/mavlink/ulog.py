@@ -12,7 +12,8 @@ position     vehicle_global_position (lat, lon [deg], alt [m AMSL]); else vehicl
 attitude     vehicle_attitude quaternion q[0..3] (w, x, y, z) -> roll, pitch [rad]
 armed        vehicle_status.arming_state (2 = ARMED), else actuator_armed.armed, else
              actuator_outputs (motor PWM, armed.py)
-battery      battery_status voltage_v [V], current_a [A, + = discharging]
+battery      battery_status voltage_v [V], current_a [A, + = discharging]; current_a = -1 is PX4's
+             "unknown" (battery_status.msg; PX4's simulated battery), as SYS_STATUS's -1: not a charge
 ===========  ==============================================================================
 
 Time: ``t_s`` = (timestamp - the log's start timestamp) [s]. The logger writes the current
@@ -40,6 +41,7 @@ from .gpsclean import reject_outliers
 __all__ = ["read_ulog"]
 
 _ARMING_STATE_ARMED = 2
+_CURRENT_UNKNOWN_A = -1.0   # battery_status.current_a: "-1 if unknown" (PX4's battery_status.msg)
 
 
 class _Topics:
@@ -140,7 +142,10 @@ def _battery(top: _Topics):
     b = top("battery_status", "voltage_v", "current_a")
     if b is None:
         return pd.DataFrame(columns=list(BATTERY_COLUMNS)), None
+    b = b.assign(current_a=b["current_a"].where(b["current_a"] != _CURRENT_UNKNOWN_A))   # (-1: unknown, not -1 A)
     b = b[np.isfinite(b["voltage_v"]) & np.isfinite(b["current_a"]) & (b["voltage_v"] > 0)]
+    if not len(b):   # (as the MAVLink logs: no source without a value, so replay and calibrate say "no battery data")
+        return pd.DataFrame(columns=list(BATTERY_COLUMNS)), None
     return clean_time(b.assign(power_w=b["voltage_v"] * b["current_a"]), BATTERY_COLUMNS), "battery_status"
 
 

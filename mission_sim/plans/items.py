@@ -10,10 +10,12 @@ it: the position in ``mission.items`` of a .plan, the sequence number of a .wayp
 Formats (checked against QGroundControl's and ArduPilot's own files in tests/data/missions):
 
 * ``.plan``: JSON, ``fileType`` "Plan", ``mission.items`` of ``SimpleItem`` (``command``,
-  ``frame``, ``params`` = [p1, p2, p3, p4, lat, lon, alt]) and ``ComplexItem`` (survey /
-  corridor / structure scan: their generated ``TransectStyleComplexItem.Items`` when present,
-  else the ``VisualTransectPoints`` at the camera's ``DistanceToSurface``),
-  ``mission.plannedHomePosition`` = [lat, lon, alt AMSL].
+  ``frame``, ``params`` = [p1, p2, p3, p4, lat, lon, alt], or QGC's older items: ``params`` = [p1..p4] and
+  ``coordinate`` = [lat, lon, alt]) and ``ComplexItem`` (survey / corridor scan: their generated
+  ``TransectStyleComplexItem.Items`` when present, else the ``VisualTransectPoints`` at the camera's
+  ``DistanceToSurface``; a structure scan, which keeps only its inputs: the waypoints QGC generates,
+  :func:`_structure_scan`), ``mission.plannedHomePosition`` = [lat, lon, alt AMSL]. Each item keeps its ``doJumpId``
+  (a .waypoints row and a log item their sequence number) for DO_JUMP.
 * ``.waypoints`` / ``.txt``: first line ``QGC WPL 110``, then one row per item: index, current,
   frame, command, p1, p2, p3, p4, lat, lon, alt, autocontinue (tabs); row 0 is home (AMSL).
 * a ``.tlog``: the last MISSION_ITEM_INT / MISSION_ITEM of each sequence number (a mission is
@@ -26,12 +28,14 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..mavlink.geodesy import GeoPoint
+from ..validation import ALT_RANGE, Range, check_number
 
 __all__ = ["MissionItem", "RawMission", "read_mission", "read_plan", "read_wpl", "uploaded_mission",
            "flown_mission", "LOG_SUFFIXES"]
@@ -41,6 +45,8 @@ NAV_WAYPOINT, NAV_LOITER_TIME, NAV_RTL, NAV_LAND, NAV_TAKEOFF = 16, 19, 20, 21, 
 FLOWN_TOLERANCE_M = 3.0        # decimation: the flown route stays within this of the GPS track
 FLOWN_HOLD_S = 5.0             # slower than HOVER_M_S for this long: a loiter item in the flown route
 HOVER_M_S = 0.5
+#: QGC's complex items that save their generated waypoints (TransectStyleComplexItem); a StructureScan saves its inputs
+_TRANSECT_TYPES = ("survey", "CorridorScan")
 FLOWN_GROUND_M = 1.0           # a decimated track point lower than this above home is on the ground (a landing)
 
 
@@ -58,6 +64,7 @@ class MissionItem:
     lat_deg: float
     lon_deg: float
     alt_m: float
+    jump_id: int | None = None   # what a DO_JUMP names it by: a .plan's doJumpId, a row's / log's sequence no.
 
 
 @dataclass(frozen=True)
@@ -141,8 +148,16 @@ def _simple(it, where: str, name: str) -> MissionItem:
     if not isinstance(it, dict):
         raise ValueError(f"{name}: {where} is not a JSON object")
     params = it.get("params")
+    coord = it.get("coordinate")
+    if isinstance(params, list) and len(params) == 4 and coord is not None:
+        # an item as QGroundControl saved it before its item version 3 (QGC 3.2-3.3 plans, its own SectionTest.plan):
+        # p1..p4 in "params", [lat, lon, alt] in "coordinate"; QGC reads it (MissionItem::_convertJsonV2ToV3)
+        if not isinstance(coord, list) or len(coord) != 3:
+            raise ValueError(f"{name}: {where}: coordinate={coord!r} is invalid; valid: [lat, lon, alt]")
+        params = params + coord
     if not isinstance(params, list) or len(params) != 7:
-        raise ValueError(f"{name}: {where}: params={params!r} is invalid; valid: 7 numbers (p1..p4, lat, lon, alt)")
+        raise ValueError(f"{name}: {where}: params={params!r} is invalid; valid: 7 numbers (p1..p4, lat, lon, alt), "
+                         "or 4 (p1..p4) beside a \"coordinate\" [lat, lon, alt] (QGroundControl's older plans)")
     try:
         p = [_num(v) for v in params]
         cmd, frame = it["command"], it.get("frame", 0)
@@ -152,7 +167,9 @@ def _simple(it, where: str, name: str) -> MissionItem:
         raise ValueError(f"{name}: {where} has no \"command\"") from None
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{name}: {where}: {exc}") from None
-    return MissionItem(where, cmd, frame, tuple(p[:4]), p[4], p[5], p[6])
+    jid = it.get("doJumpId")
+    jid = jid if isinstance(jid, int) and not isinstance(jid, bool) else None
+    return MissionItem(where, cmd, frame, tuple(p[:4]), p[4], p[5], p[6], jid)
 
 
 def _plan_item(it, where: str, name: str) -> list[MissionItem]:
@@ -166,6 +183,8 @@ def _plan_item(it, where: str, name: str) -> list[MissionItem]:
     sub = tsc.get("Items") or it.get("Items") or it.get("items")
     if isinstance(sub, list) and sub:
         return [_simple(s, f"{where} ({ctype}), generated item {j}", name) for j, s in enumerate(sub)]
+    if ctype == "StructureScan" and isinstance(it, dict):   # QGC saves its inputs only, never its waypoints
+        return _structure_scan(it, f"{where} ({ctype})", name)
     pts = tsc.get("VisualTransectPoints")
     cam = tsc.get("CameraCalc") or {}
     alt = cam.get("DistanceToSurface", tsc.get("Altitude"))
@@ -176,9 +195,94 @@ def _plan_item(it, where: str, name: str) -> list[MissionItem]:
                                 _num(p[0]), _num(p[1]), float(alt)) for j, p in enumerate(pts)]
         except (TypeError, ValueError, IndexError, KeyError) as exc:
             raise ValueError(f"{name}: {where} ({ctype}): VisualTransectPoints are invalid: {exc}") from None
+    if ctype not in _TRANSECT_TYPES:   # (a landing pattern keeps its inputs only, as a structure scan: no save helps)
+        raise ValueError(f"{name}: {where}: complex item {ctype!r} is not supported; supported complex items: "
+                         f"{', '.join(_TRANSECT_TYPES)}, StructureScan")
     raise ValueError(f"{name}: {where}: complex item {ctype!r} has no generated waypoints (TransectStyleComplexItem "
                      "Items or VisualTransectPoints with a CameraCalc DistanceToSurface); valid: save the plan "
                      "from QGroundControl after the survey was generated")
+
+
+#: a structure scan's numeric inputs: (key, "CameraCalc." when it is the camera's, range); heights above home as a
+#: route waypoint's (:data:`~mission_sim.validation.ALT_RANGE`)
+_SCAN_INPUTS = (("EntranceAltitude", "", ALT_RANGE), ("ScanBottomAlt", "", ALT_RANGE), ("StructureHeight", "", ALT_RANGE),
+                ("Layers", "", Range(1, 1000, integer=True)),
+                ("DistanceToSurface", "CameraCalc.", Range(0.0, math.inf, "m", hi_open=True)),
+                ("AdjustedFootprintFrontal", "CameraCalc.", Range(0.0, math.inf, "m", lo_open=True, hi_open=True)))
+
+
+def _json_object(value, what: str) -> dict:
+    """``value`` (absent, null: ``{}``) when it is a JSON object; else ``ValueError`` naming ``what`` and the value as the
+    file spells it (a ``true`` or a list there was an AttributeError traceback)."""
+    if value is None or value == {}:
+        return {}
+    if not isinstance(value, dict):
+        raise ValueError(f"{what}={json.dumps(value)[:60]} is invalid; valid: a JSON object {{...}}")
+    return value
+
+
+def _structure_scan(it: dict, where: str, name: str) -> list[MissionItem]:
+    """The waypoints QGroundControl generates for a structure scan (``StructureScanComplexItem::appendMissionItems``;
+    a plan holds only the scan's inputs): the structure's polygon offset outwards by the camera's
+    ``DistanceToSurface`` (``QGCMapPolygon::offset``: each edge moved out, new vertices where the moved edges meet, in
+    a tangent plane at vertex 0; QGC moves each edge to its left, which is outwards for the clockwise polygons its
+    editor saves: here outwards whatever the winding), flown around (every vertex and back to the first) once per
+    layer, the layers
+    ``AdjustedFootprintFrontal`` apart from half of it above ``ScanBottomAlt`` up (or half of it below
+    ``StructureHeight`` down with ``StartFromTop``), entered and left at vertex 0 at ``EntranceAltitude``; heights
+    above home (QGC writes them in frame 3). Its camera and ROI items do not move the vehicle and are left out."""
+    from ..mavlink.geodesy import enu_to_geodetic, geodetic_to_enu
+    cam = _json_object(it.get("CameraCalc"), f"{name}: {where}: CameraCalc")
+    vals = {}
+    for key, src, rng in _SCAN_INPUTS:
+        value = (cam if src else it).get(key)
+        try:
+            vals[key] = check_number(f"{src}{key}", value, rng, " (QGroundControl saves it)" if value is None else "")
+        except ValueError as exc:
+            raise ValueError(f"{name}: {where}: {exc}") from None
+    layers, step, gap = vals["Layers"], vals["AdjustedFootprintFrontal"], vals["DistanceToSurface"]
+    top = it.get("StartFromTop", False)
+    if not isinstance(top, bool):   # (bool("false") is True: the scan was flown from the top)
+        raise ValueError(f"{name}: {where}: StartFromTop={json.dumps(top)[:60]} is invalid; valid: true or false (a "
+                         "JSON boolean)")
+    poly = it.get("polygon")
+    try:
+        ll = np.array([[_num(c[0]), _num(c[1])] for c in poly], dtype=float)
+        if len(ll) < 3 or not np.all(np.isfinite(ll)):
+            raise ValueError("fewer than 3 vertices")
+        origin = GeoPoint(float(ll[0, 0]), float(ll[0, 1]), 0.0)
+    except (TypeError, ValueError, IndexError, KeyError) as exc:
+        raise ValueError(f"{name}: {where}: polygon is invalid ({exc}); valid: 3 or more [lat, lon] vertices") from None
+    e, n, _ = geodetic_to_enu(ll[:, 0], ll[:, 1], 0.0, origin)
+    xy = np.column_stack([e, n])
+    sign = -1.0 if np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1]) > 0 else 1.0
+    d = np.roll(xy, -1, axis=0) - xy                       # edge i: vertex i -> i + 1
+    length = np.linalg.norm(d, axis=1)
+    if np.any(length < 1e-6):
+        raise ValueError(f"{name}: {where}: polygon has two equal consecutive vertices; valid: a simple polygon")
+    out = sign * np.column_stack([-d[:, 1], d[:, 0]]) / length[:, None]   # outward normal (left of a clockwise edge)
+    p0 = xy + gap * out                                    # the offset edges: p0 + t d
+    flight = []
+    for i in range(len(xy)):                               # vertex i: offset edges i - 1 and i meet
+        a, da, b, db = p0[i - 1], d[i - 1], p0[i], d[i]
+        den = da[0] * db[1] - da[1] * db[0]
+        if abs(den) < 1e-9 * length[i - 1] * length[i]:    # (parallel: the shared vertex moved out)
+            flight.append(b)
+            continue
+        t = ((b[0] - a[0]) * db[1] - (b[1] - a[1]) * db[0]) / den
+        flight.append(a + t * da)
+    flight = np.array(flight)
+    lat, lon, _ = enu_to_geodetic(flight[:, 0], flight[:, 1], 0.0, origin)
+    alt0 = vals["StructureHeight"] - step / 2 if top else vals["ScanBottomAlt"] + step / 2
+    items = [MissionItem(f"{where}, entrance", NAV_WAYPOINT, 3, (0.0,) * 4, float(lat[0]), float(lon[0]),
+                         vals["EntranceAltitude"])]
+    for k in range(int(layers)):
+        alt = alt0 - k * step if top else alt0 + k * step
+        items += [MissionItem(f"{where}, layer {k} vertex {j % len(lat)}", NAV_WAYPOINT, 3, (0.0,) * 4,
+                              float(lat[j % len(lat)]), float(lon[j % len(lat)]), alt) for j in range(len(lat) + 1)]
+    items.append(MissionItem(f"{where}, exit", NAV_WAYPOINT, 3, (0.0,) * 4, float(lat[0]), float(lon[0]),
+                             vals["EntranceAltitude"]))
+    return items
 
 
 # -------------------------------------------------------------------------------- .waypoints
@@ -209,7 +313,7 @@ def read_wpl(path) -> RawMission:
         raise ValueError(f"{name}: missing home: row 0 (the home position, AMSL) is not the first row")
     seq0, _, _, _, lat, lon, alt = rows[0]
     home = _home(lat, lon, alt, name, "home (row 0)")
-    items = tuple(MissionItem(f"row {r[0]}", r[1], r[2], r[3], r[4], r[5], r[6]) for r in rows[1:])
+    items = tuple(MissionItem(f"row {r[0]}", r[1], r[2], r[3], r[4], r[5], r[6], r[0]) for r in rows[1:])
     return RawMission(name, home, items)
 
 
@@ -260,7 +364,7 @@ def uploaded_mission(path) -> RawMission:
         _, _, _, lat, lon, alt = found.pop(0)
         home = (lat, lon, alt)
         seqs = seqs[1:]
-    items = tuple(MissionItem(f"item {s}", *found[s][:3], *found[s][3:]) for s in seqs)
+    items = tuple(MissionItem(f"item {s}", *found[s][:3], *found[s][3:], s) for s in seqs)
     return RawMission(path.name, None if home is None else _home(*home, path.name, "home"), items)
 
 
@@ -290,33 +394,46 @@ def _decimate(p: np.ndarray, tol: float) -> np.ndarray:
 
 def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
     """The route a log flew: its GPS track (fix >= 3, implausible fixes rejected) over the armed time,
-    decimated to waypoints within ``tolerance_m`` of the track (Ramer-Douglas-Peucker), stops of at
-    least :data:`FLOWN_HOLD_S` as loiter items, points on the ground as landings (the route takes off
+    decimated to waypoints within ``tolerance_m`` of the track (Ramer-Douglas-Peucker; every take-off and landing, the
+    track crossing :data:`FLOWN_GROUND_M`, kept), stops of at least :data:`FLOWN_HOLD_S` in the air as loiter items,
+    points on the ground as landings (the route takes off
     again at the next airborne point; time spent on the ground is not kept), a landing at the end;
-    home = the first armed position."""
+    home = the replay's take-off spot (:func:`mission_sim.mavlink.takeoff.default_pad`: the first armed position, or
+    for a log that starts armed in the air where its first armed period ends). A log that never armed has none
+    (``ValueError``); one whose armed state is unknown flies its whole track (:func:`_unknown_armed_state`)."""
     from ..mavlink.geodesy import geodetic_to_enu
     from ..mavlink.logs import read_log
     log = read_log(path)
     pos = log.position
     periods = log.armed_periods
+    name = Path(path).name
+    if log.armed_source is not None and not periods:   # (its fixes were GPS drift on the ground: 1 s of "flight")
+        raise ValueError(f"{name}: no flown track: the vehicle never armed in the log (armed state from "
+                         f"{log.armed_source}); valid: the log of a flight, or a log holding an uploaded mission")
     if periods:
         t = pos["t_s"].to_numpy(float)
         pos = pos[(t >= periods[0][0]) & (t <= periods[-1][1])]
     if len(pos) < 2:
-        raise ValueError(f"{Path(path).name}: no flown track: {len(pos)} usable position(s) (GPS fix >= 3) while armed")
+        raise ValueError(f"{name}: no flown track: {len(pos)} usable position(s) (GPS fix >= 3)"
+                         + (" while armed" if periods else ""))
     lat, lon, alt = (pos[c].to_numpy(float) for c in ("lat_deg", "lon_deg", "alt_m"))
-    home = GeoPoint(float(lat[0]), float(lon[0]), float(alt[0]))
+    from ..mavlink.takeoff import default_pad
+    home = default_pad(log)   # the first armed position; a log that starts in the air: where its first flight ended
     e, n, u = geodetic_to_enu(lat, lon, alt, home)
     p = np.column_stack([e, n, np.maximum(u, 0.0)])
+    if log.armed_source is None:   # no armed-state record and no motor output: the whole track (as before 2026-11-27)
+        _unknown_armed_state(name, float(p[:, 2].max()))
     t = pos["t_s"].to_numpy(float)
-    keep = _decimate(p, tolerance_m)
+    air = p[:, 2] >= FLOWN_GROUND_M
+    cross = np.flatnonzero(air[1:] != air[:-1])   # each take-off and landing kept: a flight lower than the tolerance
+    keep = np.union1d(_decimate(p, tolerance_m), np.concatenate([cross, cross + 1]))   # (a 2 m hop) was dropped whole
     items = []
     for a, b in zip(keep[:-1], keep[1:]):
         if p[b, 2] < FLOWN_GROUND_M:   # on the ground: a landing (the next airborne point takes off again)
             if not items or items[-1].command != NAV_LAND:
                 items.append(MissionItem(f"track point {b}", NAV_LAND, 0, (0.0,) * 4, lat[b], lon[b], home.alt_m))
             continue
-        hold = _stop_time(p[a:b + 1], t[a:b + 1])
+        hold = _stop_time(p[a:b + 1], t[a:b + 1], air[a:b + 1])
         cmd, p1 = (NAV_LOITER_TIME, hold) if hold >= FLOWN_HOLD_S else (NAV_WAYPOINT, 0.0)
         items.append(MissionItem(f"track point {b}", cmd, 0, (p1, 0.0, 0.0, 0.0), lat[b], lon[b], home.alt_m + p[b, 2]))
     if not items or items[-1].command != NAV_LAND:
@@ -324,10 +441,25 @@ def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
     return RawMission(f"{Path(path).name} (flown track)", home, tuple(items))
 
 
-def _stop_time(p: np.ndarray, t: np.ndarray) -> float:
-    """Seconds spent slower than :data:`HOVER_M_S` on one decimated leg (its hovering)."""
+def _unknown_armed_state(name: str, top_m: float) -> None:
+    """A log whose armed state is unknown (no armed-state record and no motor output, ``armed_source`` None) flies its
+    whole GPS track, with a warning (it is not "never armed": refusing it as such broke logs that flew); a track that
+    never rises :data:`FLOWN_GROUND_M` above its first position (``top_m``) was on the ground: ``ValueError``."""
+    what = "the armed state is unknown (no armed-state record and no motor output in the log)"
+    if top_m < FLOWN_GROUND_M:   # (the GPS drift on the ground flew as a 1 s route)
+        raise ValueError(f"{name}: no flown track: {what} and its GPS track never rises {FLOWN_GROUND_M:g} m above its "
+                         f"first position (max {top_m:.2f} m): a log on the ground; valid: the log of a flight, or a "
+                         "log holding an uploaded mission")
+    from wpt_receiver.notices import warn
+    warn(f"{name}: {what}: the flown route is its whole GPS track, time on the ground included (with armed-state "
+         "records, HEARTBEAT / vehicle_status / EV, or motor outputs it is the armed time only)")
+
+
+def _stop_time(p: np.ndarray, t: np.ndarray, air: np.ndarray) -> float:
+    """Seconds spent slower than :data:`HOVER_M_S` in the air (``air`` at both ends of a step) on one decimated leg (its
+    hovering; time sitting on the ground is no hover)."""
     if len(t) < 2:
         return 0.0
     dt = np.diff(t)
     v = np.linalg.norm(np.diff(p, axis=0), axis=1) / np.maximum(dt, 1e-9)
-    return float(np.sum(dt[(v < HOVER_M_S) & (dt < 10.0)]))
+    return float(np.sum(dt[(v < HOVER_M_S) & (dt < 10.0) & air[:-1] & air[1:]]))

@@ -9,8 +9,10 @@ terrain model). As ArduCopter does (``ModeAuto::loc_from_cmd``), latitude = long
 
 Commands: NAV_WAYPOINT (16; param1 > 0 = hold seconds: a loiter), NAV_LOITER_TIME (19, param1
 seconds), NAV_RETURN_TO_LAUNCH (20: climb to at least :data:`RTL_ALT_M`, fly home, land),
-NAV_LAND (21), NAV_TAKEOFF (22, vertical), DO_CHANGE_SPEED (178, param2 m/s: the speed of the
-following legs). Commands that do not move the vehicle (camera, gimbal, servo, relay, ROI, yaw:
+NAV_LAND (21), NAV_TAKEOFF (22, vertical), NAV_DELAY (93, param1 > 0 seconds: a hover where the vehicle is, in the
+air only; param1 = 0 with params 2-4 zero: no delay; else a time of day, refused), DO_CHANGE_SPEED (178, param2 m/s: the speed of the
+following legs), DO_JUMP (177, param1 the target, param2 the number of jumps: the loop unrolled, :func:`_unrolled`).
+Commands that do not move the vehicle (camera, gimbal, servo, relay, ROI, yaw:
 :data:`IGNORED_COMMANDS`) are skipped; any other command is an error naming it and its item.
 A loiter within ``mission.pad_radius_m`` of a pad (horizontally) and at least
 :data:`CHARGE_CLEARANCE_M` above it becomes a charging hover over that pad (waypoint action
@@ -31,6 +33,9 @@ __all__ = ["apply_mission_files", "check_file_keys", "mission_home", "route_from
            "RTL_ALT_M", "IGNORED_COMMANDS"]
 
 DO_CHANGE_SPEED = 178
+NAV_DELAY = 93
+DO_JUMP = 177
+MAX_ROUTE_ITEMS = 100_000   # a route with DO_JUMP loops unrolled: at most this many items flown
 CHARGE_CLEARANCE_M = 1.0   # a loiter becomes a charging hover only this far above the pad (it descends to it)
 RTL_ALT_M = 15.0   # ArduCopter's RTL_ALT default (1500 cm): RTL climbs to at least this height
 MAX_FROM_HOME_M = 100e3   # items farther from home than this are refused (the config's positions: within 1e5 m)
@@ -38,13 +43,22 @@ MAX_FROM_HOME_M = 100e3   # items farther from home than this are refused (the c
 #: DO_REPEAT_SERVO, DO_SET_ROI_LOCATION, DO_SET_ROI_NONE, DO_CONTROL_VIDEO, DO_SET_ROI,
 #: DO_DIGICAM_CONFIGURE, DO_DIGICAM_CONTROL, DO_MOUNT_CONFIGURE, DO_MOUNT_CONTROL,
 #: DO_SET_CAM_TRIGG_DIST, DO_SET_CAM_TRIGG_INTERVAL, SET_CAMERA_MODE, DO_GIMBAL_MANAGER_PITCHYAW,
-#: IMAGE_START_CAPTURE, IMAGE_STOP_CAPTURE, VIDEO_START_CAPTURE, VIDEO_STOP_CAPTURE
+#: IMAGE_START_CAPTURE, IMAGE_STOP_CAPTURE, VIDEO_START_CAPTURE, VIDEO_STOP_CAPTURE; since 2026-11-27 night also
+#: CONDITION_DELAY, CONDITION_DISTANCE (they hold back the next DO command, not the vehicle), DO_LAND_START and JUMP_TAG
+#: (markers flown through), DO_FENCE_ENABLE, DO_GRIPPER (a payload released: its mass is not taken off the drone's),
+#: DO_SET_RESUME_REPEAT_DIST, DO_SPRAYER, DO_MOUNT_CONTROL_QUAT, SET_CAMERA_ZOOM, SET_CAMERA_FOCUS,
+#: DO_GIMBAL_MANAGER_CONFIGURE, DO_WINCH (a winch moves the payload)
 IGNORED_COMMANDS = frozenset({115, 181, 182, 183, 184, 195, 197, 200, 201, 202, 203, 204, 205, 206, 214, 530, 1000,
-                              2000, 2001, 2500, 2501})
+                              2000, 2001, 2500, 2501,
+                              112, 114, 189, 600, 207, 211, 215, 216, 220, 531, 532, 1001, 42600})
 _NAV = {NAV_WAYPOINT: "waypoint", NAV_LOITER_TIME: "loiter", NAV_RTL: "rtl", NAV_LAND: "land", NAV_TAKEOFF: "takeoff"}
 _AMSL_FRAMES, _RELATIVE_FRAMES = (0, 5), (3, 6)
+#: MAV_CMD_NAV_FENCE_* and MAV_CMD_NAV_RALLY_POINT: the items of a fence or rally list, not of a mission
+_FENCE_RALLY = {5000: "geofence return point", 5001: "geofence polygon vertex", 5002: "geofence polygon vertex",
+                5003: "geofence circle", 5004: "geofence circle", 5100: "rally point"}
 _SUPPORTED = ("NAV_WAYPOINT (16), NAV_LOITER_TIME (19), NAV_RETURN_TO_LAUNCH (20), NAV_LAND (21), NAV_TAKEOFF (22), "
-              "DO_CHANGE_SPEED (178) and commands that do not move the vehicle (camera, gimbal, servo, ROI, yaw)")
+              "NAV_DELAY (93), DO_JUMP (177), DO_CHANGE_SPEED (178) and commands that do not move the vehicle "
+              "(camera, gimbal, servo, relay, ROI, yaw, gripper, winch, sprayer, fence enable, conditions, markers)")
 
 
 def command_name(cmd: int) -> str:
@@ -115,6 +129,24 @@ class _Builder:
         self.out.append(wp)
         self.x, self.y, self.z = x, y, (0.0 if action == "land" else z)
 
+    def nav_delay(self, it):
+        """NAV_DELAY (93): ArduCopter's ``do_nav_delay`` takes only param1 > 0 as a delay in seconds (a hover where the
+        vehicle is, in the air only); any other param1 waits for the UTC time of day in params 2-4, refused, except
+        param1 = 0 with params 2-4 zero or unset: no delay (skipped)."""
+        delay = it.params[0]
+        clock = [0.0 if math.isnan(v) else v for v in it.params[1:4]]   # hour, minute, second UTC (unset: 0)
+        if math.isfinite(delay) and delay == 0 and not any(clock):
+            return
+        if not math.isfinite(delay) or delay <= 0:
+            self.fail(it, f"NAV_DELAY param1={delay:g} with params 2-4 = ({', '.join(f'{v:g}' for v in clock)}) waits "
+                          "for a time of day (UTC hour, minute, second: ArduPilot's do_nav_delay takes only param1 > 0 "
+                          "as seconds), not supported; valid: param1 > 0 seconds (or 0 with params 2-4 zero: no delay)")
+        if self.z <= 0:
+            self.fail(it, "NAV_DELAY on the ground is not supported (the route keeps no time on the ground); "
+                          "valid: a NAV_DELAY after the take-off")
+        self.in_range(it, "NAV_DELAY param1", delay, HOLD_RANGE, "waypoints.hold_s")
+        self.add("loiter", self.x, self.y, self.z, delay)
+
     def item(self, it):
         if it.command == DO_CHANGE_SPEED:
             v = it.params[1]
@@ -124,7 +156,14 @@ class _Builder:
             return
         if it.command in IGNORED_COMMANDS:
             return
+        if it.command == NAV_DELAY:   # ArduCopter / PX4: hold position (in the air) for param1 seconds
+            self.nav_delay(it)
+            return
         kind = _NAV.get(it.command)
+        if kind is None and it.command in _FENCE_RALLY:
+            self.fail(it, f"command {command_name(it.command)} ({it.command}) is a {_FENCE_RALLY[it.command]}, not a "
+                          "mission item: the file is a geofence or rally-point list (as Mission Planner saves them); "
+                          "valid: the mission's own file (its waypoints)")
         if kind is None:
             self.fail(it, f"command {command_name(it.command)} ({it.command}) is not supported; supported: {_SUPPORTED}")
         if kind == "rtl":
@@ -147,6 +186,55 @@ class _Builder:
             self.add("loiter" if kind == "loiter" or hold > 0 else "waypoint", x, y, z, hold)
 
 
+def _unrolled(raw: RawMission):
+    """The items of ``raw`` in the order they are flown, DO_JUMP (177) followed as ArduPilot's and PX4's missions follow
+    it: param1 names the target (a .plan's doJumpId, a .waypoints row, a log's sequence number), param2 the number of
+    jumps; each DO_JUMP counts its own jumps over the whole mission (an inner loop is not re-armed by an outer one).
+    Refused (one line naming the item): a jump that repeats forever (-1), a target the mission does not hold, a loop
+    of more than :data:`MAX_ROUTE_ITEMS` items."""
+    items = raw.items
+    index: dict[int, int] = {}
+    for k, it in enumerate(items):
+        if it.jump_id is not None:
+            index.setdefault(it.jump_id, k)
+    jumps: dict[int, int] = {}
+    k = n = 0
+    while k < len(items):
+        it = items[k]
+        n += 1
+        if n > MAX_ROUTE_ITEMS:
+            raise ValueError(f"{raw.source}: {it.where}: the DO_JUMP loops give more than {MAX_ROUTE_ITEMS} items to "
+                             "fly; valid: fewer repeats (DO_JUMP param2)")
+        if it.command != DO_JUMP:
+            yield it
+            k += 1
+            continue
+        target, repeat = it.params[0], it.params[1]
+        if not (math.isfinite(repeat) and repeat == int(repeat) and repeat >= -1):
+            raise ValueError(f"{raw.source}: {it.where}: DO_JUMP repeat count param2={repeat:g} is invalid; valid: an "
+                             "integer >= 0")
+        if repeat == -1:
+            raise ValueError(f"{raw.source}: {it.where}: DO_JUMP repeats forever (param2 = -1): the route would never "
+                             "end; valid: a repeat count >= 0")
+        if not (math.isfinite(target) and target == int(target) and int(target) in index):
+            raise ValueError(f"{raw.source}: {it.where}: DO_JUMP target param1={target:g} is not an item of the "
+                             f"mission; valid: {_jump_ids(sorted(index))}")
+        if jumps.get(k, 0) < repeat:
+            jumps[k] = jumps.get(k, 0) + 1
+            k = index[int(target)]
+        else:
+            k += 1
+
+
+def _jump_ids(ids: list[int], shown: int = 8) -> str:
+    """The jump targets a mission holds, named (a .plan's doJumpIds can have gaps: "1..9" suggested ids it lacks):
+    all of them up to ``shown``, else the first ``shown`` and how many."""
+    if not ids:
+        return "none: the mission has no item a DO_JUMP can name"
+    more = f", ... ({len(ids)} ids, the last {ids[-1]})" if len(ids) > shown else ""
+    return f"one of {', '.join(map(str, ids[:shown]))}{more}"
+
+
 def route_from_items(raw: RawMission, pads_xyz=(), pad_radius_m: float = 5.0) -> list[dict]:
     """The ``[[waypoints]]`` dicts of ``raw`` (pad frame about ``raw.home``); loiters within
     ``pad_radius_m`` of a pad in ``pads_xyz`` ((x, y, z) in the pad frame) become "charge"."""
@@ -154,7 +242,7 @@ def route_from_items(raw: RawMission, pads_xyz=(), pad_radius_m: float = 5.0) ->
         raise ValueError(f"{raw.source}: missing home position (a .plan's plannedHomePosition, row 0 of a "
                          ".waypoints file, a log's HOME_POSITION); the pad frame is about home")
     b = _Builder(raw, pads_xyz, pad_radius_m)
-    for it in raw.items:
+    for it in _unrolled(raw):
         b.item(it)
     if not b.out:
         raise ValueError(f"{raw.source}: no waypoints: {len(raw.items)} item(s), none that moves the vehicle "
