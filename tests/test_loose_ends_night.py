@@ -23,3 +23,28 @@ def test_train_history_is_checked_by_the_contracts_rule(capsys, tmp_path, monkey
     with pytest.raises(ValueError, match=r"^history=33 is invalid; valid range: integer 1\.\.4$"):
         contract.check_history(33)
     assert not out.exists()
+
+
+# ------------------------------------------------------------------ 2. coupling --dz below the pad: the library's rule
+def test_a_receiver_below_the_pad_is_refused_by_the_library_too(capsys):
+    """``dronewpt coupling`` refused a negative ``--dz`` by its own check; now
+    ``CouplingModel.check_clearance(..., above_pad=True)`` holds that rule and its words (the command calls it), so
+    Python refuses it too, with the command's message (beside the pad as over it); without ``above_pad`` the rule is
+    the touching band alone, as before."""
+    import math
+
+    from wpt_receiver.coupling import default_coupling
+    m = default_coupling()
+    for dx in (0.0, 2.0):
+        with pytest.raises(ValueError, match=r"^dz_m=-0.5 is invalid; valid range: > 0.0034 m \(the coils would "
+                                             r"touch\)$"):
+            m.check_clearance(dx, 0.0, -0.5, above_pad=True)
+        assert one_error_line(capsys, ["coupling", "--dz", "-0.5", "--dx", str(dx)]) == (
+            "dronewpt coupling: error: --dz -0.5 is invalid; valid range: > 0.0034 m (the coils would touch)")
+    gap = float(m.clearance_m(math.radians(10)))
+    with pytest.raises(ValueError, match=rf"^dz_m=-0.001 is invalid; valid range: > {gap:.4g} m"):
+        m.check_clearance(0.0, 0.0, -0.001, math.radians(10), above_pad=True)
+    with pytest.raises(ValueError, match=r"^dz_m=-0.01 is invalid"):   # the first bad pose of an array
+        m.check_clearance(0.0, 0.0, [0.2, -0.01, 0.001], above_pad=True)
+    m.check_clearance(0.0, 0.0, -0.5)   # the touching rule alone: apart
+    m.check_clearance(2.0, 0.0, 0.001, above_pad=True)   # above the plane, beside the pad: computed

@@ -49,12 +49,9 @@ def _cmd_coupling(args) -> int:
     from wpt_receiver.coupling import NOMINAL_GAP_M, default_coupling
     m = default_coupling()
     dz = NOMINAL_GAP_M if args.dz is None else args.dz
-    if dz < 0:   # (the receiver over the pad: below its plane refused, in main's words)
-        raise CliError(f"--dz {dz!r} is invalid; valid range: > {float(m.clearance_m(math.radians(args.tilt_deg))):.4g} "
-                       "m (the coils would touch)")
-    try:   # (coils that would touch: the library's rule, CouplingModel.check_clearance, in the flags' words; lm_h
-        #    itself computes any pose)
-        m.check_clearance(args.dx, args.dy, dz, math.radians(args.tilt_deg))
+    try:   # (coils that would touch, a receiver below the pad's plane: the library's rule,
+        #    CouplingModel.check_clearance, in the flags' words; lm_h itself computes any pose)
+        m.check_clearance(args.dx, args.dy, dz, math.radians(args.tilt_deg), above_pad=True)
     except ValueError as exc:
         from .notices import flag_words
         raise CliError(flag_words("coupling", str(exc))) from None
