@@ -76,3 +76,29 @@ def test_float_arg_is_range_arg_of_its_range(kwargs, rng, monkeypatch):
         conv("nan")
     with pytest.raises(argparse.ArgumentTypeError, match=r"^x='a' is not a number$"):
         conv("a")
+
+
+# ------------------------------------------------------------------ 4. replay's summary file: one spelling each
+@pytest.mark.parametrize("pads", [True, False])
+def test_replays_summary_file_is_spelt_once(capsys, tmp_path, monkeypatch, pads):
+    """``replay`` / ``replay --pads`` spelt ``replay_summary.json`` / ``refly_summary.json`` three times each (cleared,
+    written, listed); now one constant each (``cli.mavlink.REPLAY_SUMMARY``, ``cli.refly.REFLY_SUMMARY``): renamed
+    there, the file is cleared, written and listed under the new name, nothing under the old."""
+    import json
+    from pathlib import Path
+
+    from mission_sim.cli import main, mavlink, refly
+    data = Path(__file__).parent / "data"
+    name = "renamed_summary.json"
+    monkeypatch.setattr(refly if pads else mavlink, "REFLY_SUMMARY" if pads else "REPLAY_SUMMARY", name)
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / name).write_text("stale")   # a former run's: cleared before the run, then written last
+    argv = ["replay", str(data / "flightlogs" / "dronekit-python_flight.tlog"), "--window", "440,620", "--out", str(out),
+            "--no-plot", "--no-progress"]
+    assert main(argv + (["--pads", str(data / "missions" / "dronekit_flight_pads.csv")] if pads else [])) == 0
+    wrote = [ln.removeprefix("wrote ") for ln in capsys.readouterr().out.splitlines() if ln.startswith("wrote ")]
+    assert wrote[-1] == str(out / name)
+    assert "final_soc_refly" in json.loads((out / name).read_text()) if pads else "final_soc" in json.loads(
+        (out / name).read_text())
+    assert not (out / "refly_summary.json").exists() and not (out / "replay_summary.json").exists()
