@@ -102,3 +102,28 @@ def test_replays_summary_file_is_spelt_once(capsys, tmp_path, monkeypatch, pads)
     assert "final_soc_refly" in json.loads((out / name).read_text()) if pads else "final_soc" in json.loads(
         (out / name).read_text())
     assert not (out / "refly_summary.json").exists() and not (out / "replay_summary.json").exists()
+
+
+# ------------------------------------------------------------------ 5. an unpickled env's kernels: one lookup
+@pytest.mark.parametrize("link", ["envelope", "modal"])
+@pytest.mark.parametrize("compiled", [True, False])
+def test_an_unpickled_envs_kernels_come_from_its_modules_kernel_function(link, compiled, monkeypatch):
+    """``envs.core.kernel_from_ref`` repeated ``kernel_function``'s lookup (the module's name, then the dispatcher or
+    its ``py_func``); now it calls the module's own ``kernel_function``: swapped there, an unpickled env's step and
+    duty map are what it gives."""
+    import pickle
+
+    from envs import modal_step, vector_kernel
+    from envs.vector import SbarChargingVectorEnv
+    env = SbarChargingVectorEnv(2, config={"link_model": link}, compiled=compiled)
+    state = pickle.dumps(env)
+    asked = []
+    for mod in (vector_kernel, modal_step):
+        real = mod.kernel_function
+        monkeypatch.setattr(mod, "kernel_function", lambda name, c=True, real=real, mod=mod:
+                            asked.append((mod.__name__, name, c)) or real(name, c))
+    twin = pickle.loads(state)
+    step = "envs.modal_step" if link == "modal" else "envs.vector_kernel"
+    assert (step, "env_step", compiled) in asked
+    assert ("envs.vector_kernel", "duty_kernel", True) in asked if compiled else True
+    assert twin.parts.plant.kernel is env.parts.plant.kernel
