@@ -127,3 +127,25 @@ def test_an_unpickled_envs_kernels_come_from_its_modules_kernel_function(link, c
     assert (step, "env_step", compiled) in asked
     assert ("envs.vector_kernel", "duty_kernel", True) in asked if compiled else True
     assert twin.parts.plant.kernel is env.parts.plant.kernel
+
+
+# ------------------------------------------------------------------ 6. zoh_discretise: the slow pole once
+def test_the_real_pole_branch_takes_zoh_discretises_slow_pole(monkeypatch):
+    """``zoh_discretise`` computed a stiff link's slow pole ``det / (s - q)`` three times (for ``Ad``, for the
+    branch's test and inside ``_real_pole_phi``); now once, handed to ``_real_pole_phi``: the branch gets that array,
+    bit for bit (its results were compared with the former function's to the bit when changed)."""
+    import math
+
+    import numpy as np
+
+    from wpt_receiver import LinkParams, envelope
+    p = LinkParams(l1_h=1.0, l2_h=1e-9, lm_h=1e-3 * math.sqrt(1e-9), r1_ohm=1e-6, r2_ohm=100.0, f_hz=1e4)
+    a, b = envelope.state_matrices(p)
+    seen = []
+    real = envelope._real_pole_phi
+    monkeypatch.setattr(envelope, "_real_pole_phi", lambda *args: seen.append(args) or real(*args))
+    envelope.zoh_discretise(a, b, 1e-7)
+    assert len(seen) == 1
+    aa, l2, l1, _ = seen[0]
+    det = aa[:, 0, 0] * aa[:, 1, 1] - aa[:, 0, 1] * aa[:, 1, 0]
+    assert np.array_equal(l1, det / l2) and abs(l1[0]) < abs(l2[0])   # the slow pole, as computed for Ad

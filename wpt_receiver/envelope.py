@@ -203,8 +203,10 @@ def zoh_discretise(a, b, dt_s: float):
     e = np.exp(s * dt_s)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         # real poles s -/+ q: e^{st} cosh(qt) = (e^{(s+q)t} + e^{(s-q)t})/2, no overflow for long steps; the slow
-        # pole s + q as det / (s - q) (Vieta) when s < 0, free of the cancellation of s + q
-        slow = np.where(s < 0, det / (s - qa), s + qa)
+        # pole s + q as det / (s - q) (Vieta) when s < 0, free of the cancellation of s + q (computed once: the
+        # projectors' branch below takes it too)
+        vieta = det / (s - qa)
+        slow = np.where(s < 0, vieta, s + qa)
         ep, em = np.exp(slow * dt_s), np.exp((s - qa) * dt_s)
         short = qt < 1.0
         c = np.where(osc, e * np.cos(qt), np.where(short, e * np.cosh(qt), 0.5 * (ep + em)))
@@ -231,10 +233,10 @@ def zoh_discretise(a, b, dt_s: float):
         bd[tiny] = np.broadcast_to(dt, tiny.shape + (1, 1))[tiny] * (phi @ _rows(b, bd.shape, tiny))
     # real poles, well separated (qt >= 1, or 2q >= |slow pole|: the projectors' cancellation ~eps ||A|| / 2q is then
     # below A^-1 (Ad - I)'s ~eps ||A|| / |slow pole|): Bd = sum_k expm1(l_k dt) / l_k P_k B
-    with np.errstate(invalid="ignore", divide="ignore"):
-        spec = (q2 > 0) & ~tiny & ((qt >= 1.0) | (2.0 * qa >= np.abs(det / (s - qa))))
+    with np.errstate(invalid="ignore"):
+        spec = (q2 > 0) & ~tiny & ((qt >= 1.0) | (2.0 * qa >= np.abs(vieta)))
     if np.any(spec):
-        bd[spec] = _real_pole_phi(np.broadcast_to(a, spec.shape + (2, 2))[spec], (s - qa)[spec], det[spec],
+        bd[spec] = _real_pole_phi(np.broadcast_to(a, spec.shape + (2, 2))[spec], (s - qa)[spec], vieta[spec],
                                   np.broadcast_to(np.asarray(dt_s, dtype=float), spec.shape)[spec]
                                   ) @ _rows(b, bd.shape, spec)
     return ad, bd
@@ -247,11 +249,10 @@ def _rows(b, shape, mask):
     return b if b.ndim == 2 else np.broadcast_to(b, shape)[mask]
 
 
-def _real_pole_phi(a, l2, det, dt):
+def _real_pole_phi(a, l2, l1, dt):
     """``int_0^dt e^{As} ds = sum_k expm1(l_k dt) / l_k P_k`` for 2x2 ``a`` (N, 2, 2) with real poles ``l2`` (the
-    fast one, s - q) and ``l1 = det / l2`` (the slow one by Vieta); ``P_k = (A - l_other I) / (l_k - l_other)`` with
-    the cancelling diagonal entry taken from ``(a00 - l)(a11 - l) = a01 a10``."""
-    l1 = det / l2
+    fast one, s - q) and ``l1`` (the slow one, ``det / l2`` by Vieta: :func:`zoh_discretise`'s); ``P_k = (A - l_other
+    I) / (l_k - l_other)`` with the cancelling diagonal entry taken from ``(a00 - l)(a11 - l) = a01 a10``."""
     prod = a[:, 0, 1] * a[:, 1, 0]
 
     def proj(lo, den):   # (A - lo I) / den; the smaller diagonal entry from (a00 - lo)(a11 - lo) = a01 a10
