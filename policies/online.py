@@ -27,6 +27,7 @@ import numpy as np
 
 from mission_sim.contract import OBS_INDEX, PolicyContext, denormalise_obs
 from wpt_receiver import InverseModelController, LowPassFilter, duty_from_v2_clipped, steady_state
+from wpt_receiver.envelope import _steady_state   # (the control step's: steady_state's checks run where inputs enter)
 
 from .classical import target_v2
 
@@ -128,7 +129,8 @@ class OnlineLmModelBasedPolicy:
         if len(moved):
             self._build(moved, self._out[moved])  # start where they were: at the V2* they last gave
         v2_target = target_v2(self.ctx, cmd, vl, lm_h=self._lm_ctl)
-        ref = steady_state(link, v2_target, lm_h=self._lm_ctl)[1]
+        # (unchecked: the Lm is a controller's, checked by LinkParams when it was built; target_v2 clips V2)
+        ref = _steady_state(link, v2_target, self._lm_ctl, link.v1_amp_v)[1]
         u = ref - self._i2sm
         self._out = np.einsum("nk,nk->n", self._c, self._x) + self._d * u
         self._x = np.einsum("nij,nj->ni", self._a, self._x) + self._b * u[:, None]

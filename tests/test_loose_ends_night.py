@@ -149,3 +149,40 @@ def test_the_real_pole_branch_takes_zoh_discretises_slow_pole(monkeypatch):
     aa, l2, l1, _ = seen[0]
     det = aa[:, 0, 0] * aa[:, 1, 1] - aa[:, 0, 1] * aa[:, 1, 0]
     assert np.array_equal(l1, det / l2) and abs(l1[0]) < abs(l2[0])   # the slow pole, as computed for Ad
+
+
+# ------------------------------------------------------------------ 7. model_based_online: no input checks per step
+def test_the_online_policys_control_step_skips_steady_states_checks(monkeypatch):
+    """``model_based_online`` called the public ``steady_state`` every control step, whose input checks (V2 finite, Lm
+    in [0, sqrt(L1 L2))) cost ~2 us each; now its step calls the unchecked ``envelope._steady_state`` (its Lm was
+    checked by ``LinkParams`` when its controller was built, its V2 is ``target_v2``'s clipped value): the checks run
+    at the builds only, and the duties are the public function's to the bit."""
+    import numpy as np
+
+    import policies
+    from mission_sim.contract import OBS_DIM
+    from wpt_receiver import envelope
+    calls = {"v2": 0, "lm": 0}
+    for key, name in (("v2", "check_v2"), ("lm", "check_lm")):
+        real = getattr(envelope, name)
+        monkeypatch.setattr(envelope, name, lambda *a, real=real, key=key, **k: calls.__setitem__(key, calls[key] + 1)
+                            or real(*a, **k))
+    rng = np.random.default_rng(7)
+    obs = np.clip(rng.normal(0.0, 0.3, (200, 3, OBS_DIM)), -1, 1)
+    pol = policies.make("model_based_online")
+    pol.reset(3)
+    duties, quiet = [], 0
+    for o in obs:
+        before, built = dict(calls), pol.rebuilds
+        duties.append(pol.act(o))
+        if pol.rebuilds == built:   # a step without a controller build: no check of steady_state's ran
+            assert calls == before
+            quiet += 1
+    assert quiet > 100 and calls["v2"] > 0   # (the builds checked theirs)
+    duties = np.array(duties)
+    # the same steps on the public, checked steady_state: the same bits
+    monkeypatch.setattr(policies.online, "_steady_state",
+                        lambda p, v2, lm, v1: envelope.steady_state(p, v2, lm_h=lm, v1_v=v1))
+    ref = policies.make("model_based_online")
+    ref.reset(3)
+    assert np.array_equal(np.array([ref.act(o) for o in obs]), duties, equal_nan=True)

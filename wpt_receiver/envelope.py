@@ -158,7 +158,13 @@ def steady_state(p: LinkParams, v2_v, lm_h=None, v1_v=None):
         check_lm(p, lm_h, zero_ok=True)
     lm = p.lm_h if lm_h is None else np.asarray(lm_h, dtype=float)
     v1 = p.v1_amp_v if v1_v is None else np.asarray(check_v1(v1_v, array_ok=True), dtype=float)
-    v2 = np.asarray(v2_v, dtype=float)
+    return _steady_state(p, np.asarray(v2_v, dtype=float), lm, v1)
+
+
+def _steady_state(p: LinkParams, v2, lm, v1):
+    """:func:`steady_state`'s arithmetic without its checks (~2 us a call): ``v2``, ``lm``, ``v1`` float arrays or
+    floats that the caller checked where they entered (``policies.online``'s control step: its Lm is a controller's,
+    built through :class:`LinkParams`, its V2 the clipped ``target_v2``)."""
     wlm = p.omega_rad_s * lm
     det = p.r1_ohm * p.r2_ohm + wlm**2
     i2 = (wlm * v1 - p.r1_ohm * v2) / det
