@@ -186,3 +186,49 @@ def test_the_online_policys_control_step_skips_steady_states_checks(monkeypatch)
     ref = policies.make("model_based_online")
     ref.reset(3)
     assert np.array_equal(np.array([ref.act(o) for o in obs]), duties, equal_nan=True)
+
+
+# ------------------------------------------------------------------ 8. the vector env: render, episode length
+def test_the_vector_env_renders_none_with_gymnasiums_warning():
+    """``render()`` on the vector env raised gymnasium's ``NotImplementedError``; a vector env made with
+    ``render_mode=None`` returns None with a warning (gymnasium's ``CartPoleVectorEnv``), as the single env does."""
+    import warnings
+
+    import gymnasium
+
+    import envs
+    venv = gymnasium.make_vec(envs.ENV_ID, num_envs=2, vectorization_mode="vector_entry_point")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert venv.render() is None
+    assert any("render a single env" in str(w.message) for w in caught)
+
+
+@pytest.mark.parametrize("link", ["envelope", "modal"])
+def test_make_vec_takes_max_episode_steps_as_make_does(link):
+    """``gymnasium.make_vec(ID, ..., max_episode_steps=N)`` hands N to the vector env, which refused it (TypeError:
+    an unexpected keyword); now it truncates each window after ``min(N, n_steps)`` steps, as the single env's
+    ``TimeLimit`` does, the steps before the cut the same bits as without it, and autoresets after."""
+    import gymnasium
+    import numpy as np
+
+    import envs
+    kw = dict(num_envs=3, vectorization_mode="vector_entry_point", config={"link_model": link})
+    cut, full = gymnasium.make_vec(envs.ENV_ID, max_episode_steps=5, **kw), gymnasium.make_vec(envs.ENV_ID, **kw)
+    a = np.zeros((3, 1))
+    (o1, _), (o2, _) = cut.reset(seed=4), full.reset(seed=4)
+    assert np.array_equal(o1, o2)
+    for k in range(1, 6):
+        r1, r2 = cut.step(a), full.step(a)
+        for x, y in zip(r1[:3], r2[:3]):
+            assert np.array_equal(x, y)
+        assert r1[3].all() == (k == 5) and not r2[3].any()
+    o1 = cut.step(a)[0]   # the autoreset: a new window's first observation
+    assert not np.array_equal(o1, full.step(a)[0])
+    assert cut.unwrapped.max_episode_steps == 5 and full.unwrapped.max_episode_steps is None
+    long = gymnasium.make_vec(envs.ENV_ID, max_episode_steps=10_000, **kw)   # beyond n_steps: n_steps decides
+    long.reset(seed=4)
+    assert [bool(long.step(a)[3].all()) for _ in range(300)] == [False] * 299 + [True]
+    with pytest.raises(ValueError, match=r"^max_episode_steps=0 is invalid; valid range: integer >= 1 \(or None: "
+                                         r"n_steps\)$"):
+        gymnasium.make_vec(envs.ENV_ID, max_episode_steps=0, **kw)
