@@ -232,3 +232,35 @@ def test_make_vec_takes_max_episode_steps_as_make_does(link):
     with pytest.raises(ValueError, match=r"^max_episode_steps=0 is invalid; valid range: integer >= 1 \(or None: "
                                          r"n_steps\)$"):
         gymnasium.make_vec(envs.ENV_ID, max_episode_steps=0, **kw)
+
+
+# ------------------------------------------------------------------ 9. a peak above the devices' current rating
+def test_the_devices_current_rating_is_the_lowest_of_the_parts_carrying_i2():
+    from wpt_receiver.devices import current_rating
+    assert current_rating("schottky") == (15.0, "30CTT045", "rectifier diode")
+    assert current_rating("sic") == (50.0, "C5D50065D", "rectifier diode")
+    assert current_rating("ideal") is None
+
+
+def test_a_mission_whose_peak_exceeds_the_rating_says_so(capsys, tmp_path):
+    """docs/mission.md's gust example peaked at 19.5 A, above the 15 A rating of the default devices' rectifier diode
+    (30CTT045, ``parts.toml``), without a word; now the run warns (``run_mission``: a ``DronewptWarning``; the CLI one
+    line on stderr), naming the peak, the rating and the part. The default mission (13.3 A) and ideal devices do not."""
+    import json
+
+    from mission_sim.cli import main
+    argv = ["mission", "--set", "wind.gust_sigma_m_s=3", "--set", "pads.0.hover_time_s=30", "--no-plot", "--format",
+            "json", "--no-progress", "--out", str(tmp_path / "g")]
+    assert main(argv) == 0
+    cap = capsys.readouterr()
+    peak = json.loads(cap.out)["peak_i2_a"]
+    assert peak > 15.0
+    assert cap.err.splitlines() == [
+        f"dronewpt mission: warning: the peak secondary current {peak:.4g} A is above the 15 A current rating of the "
+        "rectifier diode 30CTT045 (link.devices=schottky; wpt_receiver/parts.toml): the part would be overstressed; "
+        "valid: a peak <= 15 A, or parts rated for it (dronewpt sizing)"]
+    assert main(argv[:-1] + [str(tmp_path / "i"), "--set", "link.devices=ideal"]) == 0
+    assert capsys.readouterr().err == ""
+    assert main(["mission", "--no-plot", "--format", "json", "--no-progress", "--out", str(tmp_path / "d")]) == 0
+    cap = capsys.readouterr()
+    assert json.loads(cap.out)["peak_i2_a"] < 15.0 and cap.err == ""

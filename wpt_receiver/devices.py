@@ -36,7 +36,7 @@ from functools import cached_property, lru_cache
 from importlib import resources
 
 __all__ = ["Diode", "Switch", "DeviceSet", "IDEAL", "parts", "preset", "preset_names", "device_set",
-           "charge_equivalent_f", "diode_from_row", "switch_from_row", "V_BLOCK_V"]
+           "charge_equivalent_f", "diode_from_row", "switch_from_row", "V_BLOCK_V", "current_rating"]
 
 V_BLOCK_V = 30.0   # default blocking voltage for the charge-equivalent capacitances: Table I's VL [V]
 
@@ -221,6 +221,23 @@ def preset(name: str, tj_c=None, v_block_v: float = V_BLOCK_V) -> DeviceSet:
     if tj_c is not None and not (math.isfinite(tj_c) and -55.0 <= tj_c <= 200.0):
         raise ValueError(f"tj_c={tj_c!r} is invalid; valid range: [-55, 200] C")
     return device_set(row["rect_diode"], row["rect_switch"], row["inv_switch"], name, tj_c, v_block_v)
+
+
+def current_rating(name: str) -> tuple[float, str, str] | None:
+    """``(rating_a, part, position)`` of the lowest current rating [A] among preset ``name``'s parts that carry the
+    secondary current: the SBAR's upper diode (a leg: ``parts.toml``'s ``rating_a`` is per leg) and lower switch (a
+    die), one of each per conducting position (:func:`device_set`'s ``n = 1``), so each carries the whole ``|i2|``
+    while it conducts; ``position`` is ``"rectifier diode"`` or ``"rectifier switch"``. None for ``"ideal"`` (no
+    parts). The rule :func:`wpt_receiver.sizing.candidates` sizes against (a rating covering the peak), for a run's
+    peak to be checked against (a mission's: ``mission_sim.setup_warnings.device_rating_warning``)."""
+    if name == "ideal":
+        return None
+    row = parts()["preset"].get(name)
+    if row is None:
+        raise ValueError(f"device preset {name!r} is unknown; valid: {', '.join(preset_names())}")
+    held = [(_row("diode", row["rect_diode"])["rating_a"], row["rect_diode"], "rectifier diode"),
+            (_row("switch", row["rect_switch"])["rating_a"], row["rect_switch"], "rectifier switch")]
+    return min(held, key=lambda h: h[0])
 
 
 def envelope_params(params, devices: DeviceSet):
