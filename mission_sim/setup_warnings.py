@@ -17,18 +17,13 @@ each by the command line.
   predicts with it: a policy says so with a class attribute ``uses_link_model = True`` (``mpc``,
   ``model_based_budget``, ``slow_budget``, ``oracle_imitation_filtered``; not part of the
   :class:`~mission_sim.contract.Policy` protocol's required members).
-
-And one checked after the run, on its result (raised by ``run_mission`` too, after the run):
-
-* :func:`device_rating_warning`: the run's peak secondary current (the summary's instantaneous ``peak_i2_a``) above
-  the current rating of a part of ``link.devices`` that carries it (:func:`wpt_receiver.devices.current_rating`).
 """
 
 from __future__ import annotations
 
 import math
 
-__all__ = ["link_range_warning", "link_frequency_warning", "device_rating_warning", "unreached_pad_warnings", "far_pad_warnings", "energised_pads", "policy_link_warning", "mission_warnings",
+__all__ = ["link_range_warning", "link_frequency_warning", "unreached_pad_warnings", "far_pad_warnings", "energised_pads", "policy_link_warning", "mission_warnings",
            "mission_link_params", "MISSION_LINK_MODEL", "PAD_HEIGHT_WARN_M", "HOME_ORIGIN", "REPLAY_ORIGIN"]
 
 #: the link model every mission runs (:mod:`mission_sim.world.loop_kernel` steps :mod:`wpt_receiver.modal_kernel`)
@@ -163,21 +158,6 @@ def policy_link_warning(cfg, policy) -> str | None:
     return (f"the policy {name!r} predicts with link_model={model!r}, the mission runs {MISSION_LINK_MODEL!r} (the "
             "exact-mode link): it assumes another plant than it controls; valid: make it with "
             "mission_sim.config.policy_context(cfg)")
-
-
-def device_rating_warning(cfg, peak_i2_a: float) -> str | None:
-    """One line when a run's peak secondary current ``peak_i2_a`` [A] (its summary's, instantaneous) is above the
-    current rating of the ``link.devices`` part that carries it (the lowest: :func:`wpt_receiver.devices.current_rating`;
-    ``dronewpt sizing`` wants the rating at 1.25 x the peak), naming the peak, the rating and the part; else None
-    (also for ``link.devices = "ideal"``: no parts)."""
-    from wpt_receiver.devices import current_rating
-    held = current_rating(cfg.link.devices)
-    if held is None or not peak_i2_a > held[0]:
-        return None
-    rating, part, position = held
-    return (f"the peak secondary current {peak_i2_a:.4g} A is above the {rating:g} A current rating of the "
-            f"{position} {part} (link.devices={cfg.link.devices}; wpt_receiver/parts.toml): the part would be "
-            f"overstressed; valid: a peak <= {rating:g} A, or parts rated for it (dronewpt sizing)")
 
 
 def mission_warnings(cfg, policy=None, own_route: bool = True, replay: bool = False) -> list[str]:

@@ -213,31 +213,39 @@ def preset(name: str, tj_c=None, v_block_v: float = V_BLOCK_V) -> DeviceSet:
     """Named device set: ``"ideal"`` (the paper's circuit) or a preset of ``parts.toml``; ``tj_c``
     [C] moves the conduction values to that junction temperature (``None``: the table's values,
     125 C Schottky data and 25 C MOSFET data); ``v_block_v`` sets the charge-equivalent capacitances."""
-    if name == "ideal":
-        return IDEAL
-    row = parts()["preset"].get(name)
+    row = _preset_row(name)
     if row is None:
-        raise ValueError(f"device preset {name!r} is unknown; valid: {', '.join(preset_names())}")
+        return IDEAL
     if tj_c is not None and not (math.isfinite(tj_c) and -55.0 <= tj_c <= 200.0):
         raise ValueError(f"tj_c={tj_c!r} is invalid; valid range: [-55, 200] C")
     return device_set(row["rect_diode"], row["rect_switch"], row["inv_switch"], name, tj_c, v_block_v)
 
 
 def current_rating(name: str) -> tuple[float, str, str] | None:
-    """``(rating_a, part, position)`` of the lowest current rating [A] among preset ``name``'s parts that carry the
-    secondary current: the SBAR's upper diode (a leg: ``parts.toml``'s ``rating_a`` is per leg) and lower switch (a
-    die), one of each per conducting position (:func:`device_set`'s ``n = 1``), so each carries the whole ``|i2|``
-    while it conducts; ``position`` is ``"rectifier diode"`` or ``"rectifier switch"``. None for ``"ideal"`` (no
-    parts). The rule :func:`wpt_receiver.sizing.candidates` sizes against (a rating covering the peak), for a run's
-    peak to be checked against (a mission's: ``mission_sim.setup_warnings.device_rating_warning``)."""
+    """``(rating_a, part, position)`` of the lowest continuous current rating [A] among preset ``name``'s parts that
+    carry the secondary current: the SBAR's upper diode (a leg: ``parts.toml``'s ``rating_a`` is per leg, the
+    datasheet's average I_F(AV) for the Schottky rectifiers) and lower switch (a die), one of each per conducting
+    position (:func:`device_set`'s ``n = 1``), so each carries the whole ``|i2|`` while it conducts; ``position`` is
+    ``"rectifier diode"`` or ``"rectifier switch"``. None for ``"ideal"`` (no parts). A mission's summary reports it
+    beside its peak (``rectifier_rating_a``, ``rectifier_rating_part``); :func:`wpt_receiver.sizing.select_parts`
+    asks each part's rating to cover ``SizingRules.margin`` x the peak."""
+    row = _preset_row(name)
+    if row is None:
+        return None
+    held = [(_row("diode", row["rect_diode"])["rating_a"], row["rect_diode"], "rectifier diode"),
+            (_row("switch", row["rect_switch"])["rating_a"], row["rect_switch"], "rectifier switch")]
+    return min(held, key=lambda h: h[0])
+
+
+def _preset_row(name: str) -> dict | None:
+    """``parts.toml``'s ``[preset.NAME]`` row of ``name``; None for ``"ideal"`` (no parts); ``ValueError`` naming
+    the valid names for an unknown one (:func:`preset` and :func:`current_rating`'s one lookup)."""
     if name == "ideal":
         return None
     row = parts()["preset"].get(name)
     if row is None:
         raise ValueError(f"device preset {name!r} is unknown; valid: {', '.join(preset_names())}")
-    held = [(_row("diode", row["rect_diode"])["rating_a"], row["rect_diode"], "rectifier diode"),
-            (_row("switch", row["rect_switch"])["rating_a"], row["rect_switch"], "rectifier switch")]
-    return min(held, key=lambda h: h[0])
+    return row
 
 
 def envelope_params(params, devices: DeviceSet):

@@ -102,8 +102,7 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     ``warn``: before the run, :func:`mission_sim.setup_warnings.mission_warnings` as
     :class:`wpt_receiver.notices.DronewptWarning` (a link outside the exact-mode model's checked range, a pad the
     route never energises, a policy made for another link model; none with ``charge=False``); False skips them (a
-    sweep warns once per study); after the run, a peak secondary current above the devices' current rating
-    (:func:`mission_sim.setup_warnings.device_rating_warning`). ``own_route``: whether the pads are checked against ``cfg``'s route (None: when
+    sweep warns once per study). ``own_route``: whether the pads are checked against ``cfg``'s route (None: when
     no ``trajectory`` is given, a given one is taken for a replay's, its pads about the replay's pad frame origin;
     True for a trajectory planned from ``cfg``, e.g. ``plan_mission(cfg)``; False for a replayed one, or when the
     caller said it already). A pad far above or below its frame's origin warns whatever the route.
@@ -124,13 +123,6 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
         raise NonFiniteError(f"{exc} (a non-finite value in the run; " + (
             f"the inputs that differ from the default mission, farthest first: {', '.join(keys)})" if keys else
             "with the default mission's inputs)")) from None
-    if warn and charge:   # after the run: its peak against the devices' current rating
-        from wpt_receiver.notices import warn as raise_warning
-
-        from ..setup_warnings import device_rating_warning
-        text = device_rating_warning(cfg, res.summary["peak_i2_a"])
-        if text is not None:
-            raise_warning(text)
     return res
 
 
