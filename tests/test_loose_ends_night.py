@@ -154,9 +154,9 @@ def test_the_real_pole_branch_takes_zoh_discretises_slow_pole(monkeypatch):
 # ------------------------------------------------------------------ 7. model_based_online: no input checks per step
 def test_the_online_policys_control_step_skips_steady_states_checks(monkeypatch):
     """``model_based_online`` called the public ``steady_state`` every control step, whose input checks (V2 finite, Lm
-    in [0, sqrt(L1 L2))) cost ~2 us each; now its step calls the unchecked ``envelope._steady_state`` (its Lm was
-    checked by ``LinkParams`` when its controller was built, its V2 is ``target_v2``'s clipped value): the checks run
-    at the builds only, and the duties are the public function's to the bit."""
+    in [0, sqrt(L1 L2))) cost ~2 us each; now its step calls the public, unchecked ``envelope.steady_state_unchecked``
+    (its Lm was checked by ``LinkParams`` when its controller was built, its V2* comes from observations it checks
+    finite): the checks run at the builds only, and the duties are the public function's to the bit."""
     import numpy as np
 
     import policies
@@ -181,11 +181,40 @@ def test_the_online_policys_control_step_skips_steady_states_checks(monkeypatch)
     assert quiet > 100 and calls["v2"] > 0   # (the builds checked theirs)
     duties = np.array(duties)
     # the same steps on the public, checked steady_state: the same bits
-    monkeypatch.setattr(policies.online, "_steady_state",
+    monkeypatch.setattr(policies.online, "steady_state_unchecked",
                         lambda p, v2, lm, v1: envelope.steady_state(p, v2, lm_h=lm, v1_v=v1))
     ref = policies.make("model_based_online")
     ref.reset(3)
-    assert np.array_equal(np.array([ref.act(o) for o in obs]), duties, equal_nan=True)
+    assert np.array_equal(np.array([ref.act(o) for o in obs]), duties)
+    assert "steady_state_unchecked" in envelope.__all__ and "unchecked" not in envelope.steady_state.__name__
+
+
+@pytest.mark.parametrize("field, receiver", [("battery_v", 0), ("charge_cmd_a", 1), ("i2_amp_a", 2),
+                                             ("last_d_short", 0)])
+def test_the_online_policy_refuses_a_non_finite_observation_where_it_arrives(field, receiver):
+    """A NaN ``battery_v`` gave NaN duties for every later step (the estimator and the controllers poisoned until
+    ``reset``), a NaN ``charge_cmd_a`` a NaN duty and, the next step, ``v2_v=nan is invalid`` from the bumpless
+    rebuild (an internal value); now any non-finite field the controller reads is refused at its step, naming the
+    field, the receiver and the range, before any state moves: the steps after it are those of a run without it."""
+    import numpy as np
+
+    import policies
+    from mission_sim.contract import OBS_DIM, OBS_INDEX
+    n = 1 if receiver == 0 and field != "battery_v" else 3
+    obs = np.clip(np.random.default_rng(3).normal(0.0, 0.3, (60, n, OBS_DIM)), -1, 1)
+    clean, hit = policies.make("model_based_online"), policies.make("model_based_online")
+    clean.reset(n)
+    hit.reset(n)
+    want = np.array([clean.act(o) for o in obs])
+    got = [hit.act(o) for o in obs[:20]]
+    for bad in (np.nan, np.inf):
+        o = obs[20].copy()
+        o[receiver, OBS_INDEX[field]] = bad
+        with pytest.raises(ValueError, match=rf"^observation {field}={bad!r} \(receiver {receiver}\) is invalid; valid "
+                                             r"range: finite, \[-1, 1\] normalised \("):
+            hit.act(o)
+    got += [hit.act(o) for o in obs[20:]]
+    assert np.array_equal(np.array(got), want) and np.isfinite(want).all()
 
 
 # ------------------------------------------------------------------ 8. the vector env: render, episode length

@@ -29,6 +29,7 @@ __all__ = [
     "state_matrices",
     "g22",
     "steady_state",
+    "steady_state_unchecked",
     "check_v2",
     "check_lm",
     "zoh_discretise",
@@ -151,20 +152,23 @@ def steady_state(p: LinkParams, v2_v, lm_h=None, v1_v=None):
     ``det = R1 R2 + (w Lm)^2`` (regular at Lm = 0: I1 = V1/R1, I2 = -V2/R2).
     RM is ``v2_v = (4/pi) VL``; SM is ``v2_v = 0``. Broadcasts over arrays. Refused (``ValueError``, naming the first
     bad value): a V2 that is not finite (:func:`check_v2`), an Lm outside ``[0, sqrt(L1 L2))`` (:func:`check_lm`),
-    a V1 outside ``(0, inf)`` (:func:`wpt_receiver.params.check_v1`).
+    a V1 outside ``(0, inf)`` (:func:`wpt_receiver.params.check_v1`); then :func:`steady_state_unchecked`.
     """
     check_v2(v2_v)
     if lm_h is not None:
         check_lm(p, lm_h, zero_ok=True)
     lm = p.lm_h if lm_h is None else np.asarray(lm_h, dtype=float)
     v1 = p.v1_amp_v if v1_v is None else np.asarray(check_v1(v1_v, array_ok=True), dtype=float)
-    return _steady_state(p, np.asarray(v2_v, dtype=float), lm, v1)
+    return steady_state_unchecked(p, np.asarray(v2_v, dtype=float), lm, v1)
 
 
-def _steady_state(p: LinkParams, v2, lm, v1):
-    """:func:`steady_state`'s arithmetic without its checks (~2 us a call): ``v2``, ``lm``, ``v1`` float arrays or
-    floats that the caller checked where they entered (``policies.online``'s control step: its Lm is a controller's,
-    built through :class:`LinkParams`, its V2 the clipped ``target_v2``)."""
+def steady_state_unchecked(p: LinkParams, v2, lm, v1):
+    """:func:`steady_state`'s arithmetic without any input check (~2 us a call less), for a caller's inner loop.
+
+    The caller guarantees what :func:`steady_state` would check: ``v2`` [V] finite, ``lm`` [H] in ``[0, sqrt(L1
+    L2))``, ``v1`` [V] finite and > 0 (floats or float arrays; broadcast). Nothing is refused here: a NaN or an Lm at
+    or above the coils' limit gives NaN or meaningless currents. (``policies.online``'s control step: its Lm is a
+    controller's, checked by :class:`LinkParams` when it was built, its V2 from observations it checked finite.)"""
     wlm = p.omega_rad_s * lm
     det = p.r1_ohm * p.r2_ohm + wlm**2
     i2 = (wlm * v1 - p.r1_ohm * v2) / det
