@@ -77,6 +77,12 @@ def _physical_memory() -> int | None:
     return have if have > 0 else None   # (sysconf's -1: unknown; it refused every num_envs)
 
 
+def _no_cut(max_episode_steps) -> bool:
+    """Whether ``max_episode_steps`` is gymnasium's ``-1`` ("no TimeLimit"; a bool is not a number of steps)."""
+    return not isinstance(max_episode_steps, bool) and isinstance(max_episode_steps, int | float | np.number) \
+        and max_episode_steps == -1
+
+
 def _check_memory(num_envs: int, n_steps: int, link_model: str) -> None:
     """``ValueError`` before anything is allocated when ``num_envs`` windows of ``n_steps`` would need more memory
     than the machine has (``SbarChargingVectorEnv(10**7)`` ended in numpy's ``MemoryError`` after seconds of
@@ -102,7 +108,8 @@ class SbarChargingVectorEnv(VectorEnv):
     Episode length, as the single env's: each window truncates itself after ``EnvConfig.n_steps`` steps, so the
     id registers no ``max_episode_steps``; ``max_episode_steps=N`` (``gymnasium.make_vec(ID, ..., max_episode_steps=N)``
     passes it here) truncates each window after ``min(N, n_steps)`` steps, as ``gymnasium.make(ID,
-    max_episode_steps=N)``'s ``TimeLimit`` cuts a single env's (the window itself is drawn for ``n_steps``).
+    max_episode_steps=N)``'s ``TimeLimit`` cuts a single env's (the window itself is drawn for ``n_steps``); None and
+    ``-1`` cut nothing (``gymnasium.make``'s ``-1``: no ``TimeLimit``).
     ``render()`` returns None with gymnasium's warning (the vector env has no render mode): render a single env."""
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -130,8 +137,9 @@ class SbarChargingVectorEnv(VectorEnv):
         self.config = c = as_config(config)
         _check_memory(self.num_envs, c.n_steps, c.link_model)
         #: steps a window runs before it is truncated: n_steps, or fewer with max_episode_steps (a TimeLimit's cut)
-        self.max_episode_steps = None if max_episode_steps is None else check_number(
-            "max_episode_steps", max_episode_steps, Range(1, math.inf, integer=True), " (or None: n_steps)")
+        # (None and -1: no cut, as gymnasium.make's "max_episode_steps=-1 will not apply the wrapper")
+        self.max_episode_steps = None if max_episode_steps is None or _no_cut(max_episode_steps) else check_number(
+            "max_episode_steps", max_episode_steps, Range(1, math.inf, integer=True), " (or None / -1: n_steps)")
         self.history = history = check_history(history)   # (2.0 was stored as a float)
         self.single_observation_space = spaces.Box(-1.0, 1.0, (history_obs_dim(history),), np.float32)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)

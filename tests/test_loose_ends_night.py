@@ -258,9 +258,26 @@ def test_make_vec_takes_max_episode_steps_as_make_does(link):
     long = gymnasium.make_vec(envs.ENV_ID, max_episode_steps=10_000, **kw)   # beyond n_steps: n_steps decides
     long.reset(seed=4)
     assert [bool(long.step(a)[3].all()) for _ in range(300)] == [False] * 299 + [True]
-    with pytest.raises(ValueError, match=r"^max_episode_steps=0 is invalid; valid range: integer >= 1 \(or None: "
-                                         r"n_steps\)$"):
-        gymnasium.make_vec(envs.ENV_ID, max_episode_steps=0, **kw)
+    for bad in (0, -2, True):
+        with pytest.raises(ValueError, match=rf"^max_episode_steps={bad!r} is invalid; valid range: integer >= 1 \(or "
+                                             r"None / -1: n_steps\)$"):
+            gymnasium.make_vec(envs.ENV_ID, max_episode_steps=bad, **kw)
+
+
+def test_max_episode_steps_minus_one_cuts_nothing_as_make_does():
+    """``gymnasium.make(ID, max_episode_steps=-1)`` applies no ``TimeLimit``; ``make_vec(..., max_episode_steps=-1)``
+    said ``max_episode_steps=-1 is invalid``: now -1 (as None) cuts nothing, the window runs its ``n_steps``."""
+    import gymnasium
+    import numpy as np
+
+    import envs
+    single = gymnasium.make(envs.ENV_ID, max_episode_steps=-1)
+    assert "TimeLimit" not in str(single)
+    venv = gymnasium.make_vec(envs.ENV_ID, num_envs=2, vectorization_mode="vector_entry_point", max_episode_steps=-1)
+    assert venv.unwrapped.max_episode_steps is None
+    venv.reset(seed=1)
+    a = np.zeros((2, 1))
+    assert [bool(venv.step(a)[3].all()) for _ in range(300)] == [False] * 299 + [True]
 
 
 # ------------------------------------------------------------------ 9. the rectifier's rating beside the peak
