@@ -78,6 +78,21 @@ def test_float_arg_is_range_arg_of_its_range(kwargs, rng, monkeypatch):
         conv("a")
 
 
+@pytest.mark.parametrize("lo, hi, text", [(-5.0, float("inf"), "(0, inf)"), (-5.0, 10.0, "(0, 10]"),
+                                          (0.0, 10.0, "(0, 10]")])
+def test_a_positive_float_arg_is_above_zero_whatever_lo(lo, hi, text):
+    """``float_arg(positive=True)`` with ``lo < 0`` took ``(lo, hi]`` (negative values and 0) once it became
+    ``range_arg`` of a ``Range(lo, ...)``; main, and the docstring, refuse them: "> 0 if positive" whatever ``lo``."""
+    import argparse
+
+    from mission_sim.cli.common import float_arg
+    conv = float_arg("x", positive=True, lo=lo, hi=hi)
+    for bad in ("-1", "0", "-5"):
+        with pytest.raises(argparse.ArgumentTypeError, match=rf"^x='{bad}' is invalid; valid range: {re.escape(text)}$"):
+            conv(bad)
+    assert conv("1e-9") == 1e-9 and conv("10") == 10.0
+
+
 # ------------------------------------------------------------------ 4. replay's summary file: one spelling each
 @pytest.mark.parametrize("pads", [True, False])
 def test_replays_summary_file_is_spelt_once(capsys, tmp_path, monkeypatch, pads):

@@ -103,11 +103,12 @@ def scenario_names() -> list[str]:
 
 def float_arg(name, positive=False, lo=0.0, hi=float("inf")):
     """argparse type: a finite float (in ``[lo, hi]`` and > 0 if ``positive``), errors naming the value and range:
-    :func:`range_arg` of that :class:`~mission_sim.validation.Range` (``(0, hi]`` for ``lo`` 0, ``finite`` when not
+    :func:`range_arg` of that :class:`~mission_sim.validation.Range` (``(0, hi]`` for ``lo <= 0``, ``finite`` when not
     ``positive``)."""
     from ..validation import Range
     inf = float("inf")
-    rng = Range(lo, hi, lo_open=lo <= 0, hi_open=hi == inf) if positive else Range(-inf, inf, lo_open=True, hi_open=True)
+    rng = Range(max(lo, 0.0), hi, lo_open=lo <= 0, hi_open=hi == inf) if positive else \
+        Range(-inf, inf, lo_open=True, hi_open=True)   # (positive: > 0 whatever lo; a lo <= 0 is 0, open)
     return range_arg(name, rng)
 
 
