@@ -161,7 +161,8 @@ class SbarChargingEnv(gym.Env):
     their complex envelope on eq. 4's link, their C1, C2 in the link constants on the exact-mode link.
     ``terminated`` is always False and the env truncates itself after ``n_steps``, so the registration has no
     ``max_episode_steps`` (``env.spec.max_episode_steps`` is None; ``gymnasium.make(..., max_episode_steps=N)``
-    adds a ``TimeLimit`` that cuts windows shorter).
+    adds a ``TimeLimit`` that cuts windows shorter; the vector env, ``gymnasium.make_vec(..., max_episode_steps=N)``,
+    cuts its windows after ``min(N, n_steps)`` steps alike).
 
     ## Parts
     ``env.parts`` = (scenario, plant, objective, observation) (:mod:`envs.parts`, docs/envs.md): ``reset``

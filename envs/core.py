@@ -31,6 +31,7 @@ once in compiled form (:mod:`envs.vector_kernel`) and called by the single and t
 from __future__ import annotations
 
 import math
+import sys
 from collections import namedtuple
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
@@ -315,21 +316,23 @@ def kernel_function(name: str, compiled: bool = True):
 def kernel_ref(f):
     """A compiled kernel (numba dispatcher) or its ``py_func`` by module and name, for a pickle: a pickled dispatcher is
     rebuilt in another process without its disk cache and compiled again (7-9 s a process for the single env's step,
-    2026-11-27); :func:`kernel_from_ref` looks the module's own up again. Anything else is returned as it is."""
+    2026-11-27); :func:`kernel_from_ref` looks the module's own up again, by that module's ``kernel_function`` (the
+    env step's modules: :mod:`envs.vector_kernel`, :mod:`envs.modal_step`). Anything else is returned as it is."""
     base = getattr(f, "py_func", f)
     name, module = getattr(base, "__name__", None), getattr(base, "__module__", None)
-    if module is None or not module.startswith("envs.") or name is None:
+    if module is None or not module.startswith("envs.") or name is None \
+            or not hasattr(sys.modules.get(module), "kernel_function"):
         return f
     return _KernelRef(module, name, base is not f)
 
 
 def kernel_from_ref(ref):
-    """The kernel :func:`kernel_ref` named (``ref`` itself when it is not a reference)."""
+    """The kernel :func:`kernel_ref` named (``ref`` itself when it is not a reference): its module's
+    ``kernel_function(name, compiled)``, the one lookup."""
     if not isinstance(ref, _KernelRef):
         return ref
     import importlib
-    f = getattr(importlib.import_module(ref.module), ref.name)
-    return f if ref.compiled else getattr(f, "py_func", f)
+    return importlib.import_module(ref.module).kernel_function(ref.name, ref.compiled)
 
 
 _KernelRef = namedtuple("_KernelRef", "module name compiled")

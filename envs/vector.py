@@ -27,12 +27,13 @@ step runs parallel; its plans (numpy) on the calling thread.
 
 from __future__ import annotations
 
+import math
 import time
 from collections import namedtuple
 from collections.abc import Mapping
 
 import numpy as np
-from gymnasium import spaces
+from gymnasium import logger, spaces
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
@@ -76,6 +77,12 @@ def _physical_memory() -> int | None:
     return have if have > 0 else None   # (sysconf's -1: unknown; it refused every num_envs)
 
 
+def _no_cut(max_episode_steps) -> bool:
+    """Whether ``max_episode_steps`` is gymnasium's ``-1`` ("no TimeLimit"; a bool is not a number of steps)."""
+    return not isinstance(max_episode_steps, bool) and isinstance(max_episode_steps, int | float | np.number) \
+        and max_episode_steps == -1
+
+
 def _check_memory(num_envs: int, n_steps: int, link_model: str) -> None:
     """``ValueError`` before anything is allocated when ``num_envs`` windows of ``n_steps`` would need more memory
     than the machine has (``SbarChargingVectorEnv(10**7)`` ended in numpy's ``MemoryError`` after seconds of
@@ -96,7 +103,14 @@ class SbarChargingVectorEnv(VectorEnv):
     ``compiled=False`` runs the compiled step's own source uncompiled (``py_func``: slow, for tests);
     ``num_threads``: threads of the parallel step (1..numba's thread count; default: one or all,
     chosen by measured step times); ``history=K``: the observation is the last K frames stacked, oldest
-    first (K * 8 values; the observation part's frame stack, :mod:`envs.history`)."""
+    first (K * 8 values; the observation part's frame stack, :mod:`envs.history`).
+
+    Episode length, as the single env's: each window truncates itself after ``EnvConfig.n_steps`` steps, so the
+    id registers no ``max_episode_steps``; ``max_episode_steps=N`` (``gymnasium.make_vec(ID, ..., max_episode_steps=N)``
+    passes it here) truncates each window after ``min(N, n_steps)`` steps, as ``gymnasium.make(ID,
+    max_episode_steps=N)``'s ``TimeLimit`` cuts a single env's (the window itself is drawn for ``n_steps``); None and
+    ``-1`` cut nothing (``gymnasium.make``'s ``-1``: no ``TimeLimit``).
+    ``render()`` returns None with gymnasium's warning (the vector env has no render mode): render a single env."""
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
     #: fewer sub-environments than this step on the calling thread
@@ -106,7 +120,7 @@ class SbarChargingVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, scenario="nominal", config: EnvConfig | dict | None = None,
                  render_mode: str | None = None, compiled: bool | None = None, num_threads: int | None = None,
-                 history: int = 1):
+                 history: int = 1, max_episode_steps: int | None = None):
         try:   # (True made one env)
             whole = not isinstance(num_envs, bool) and int(num_envs) == num_envs >= 1
         except (TypeError, ValueError, OverflowError):
@@ -122,6 +136,10 @@ class SbarChargingVectorEnv(VectorEnv):
         scenario = get_scenario(scenario)
         self.config = c = as_config(config)
         _check_memory(self.num_envs, c.n_steps, c.link_model)
+        #: steps a window runs before it is truncated: n_steps, or fewer with max_episode_steps (a TimeLimit's cut)
+        # (None and -1: no cut, as gymnasium.make's "max_episode_steps=-1 will not apply the wrapper")
+        self.max_episode_steps = None if max_episode_steps is None or _no_cut(max_episode_steps) else check_number(
+            "max_episode_steps", max_episode_steps, Range(1, math.inf, integer=True), " (or None / -1: n_steps)")
         self.history = history = check_history(history)   # (2.0 was stored as a float)
         self.single_observation_space = spaces.Box(-1.0, 1.0, (history_obs_dim(history),), np.float32)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
@@ -152,6 +170,8 @@ class SbarChargingVectorEnv(VectorEnv):
                            ObservationPart(c, n, self._peak, self._compiled, self.history))
         # the compiled step's constants, each part's by name
         vals = {**self.parts.plant.constants(self._peak), **self.parts.objective.constants()}
+        if self.max_episode_steps is not None:   # (the kernel's n_steps is its truncation step alone)
+            vals["n_steps"] = min(self.max_episode_steps, T)
         self._par = np.array([vals[f] for f in self.parts.plant.PAR._fields], dtype=float)
         self._k = np.zeros(n, dtype=np.int64)
         self._prev_done = np.zeros(n, dtype=bool)
@@ -215,6 +235,14 @@ class SbarChargingVectorEnv(VectorEnv):
         if k >= 0:   # NaN would poison the link state and every reward after it
             raise ValueError(f"actions[{k}]={float(a.reshape(-1)[k])!r} is invalid; valid range: [-1, 1] (finite)")
         return d
+
+    def render(self):
+        """None, with gymnasium's warning, as a vector env made with ``render_mode=None`` does (gymnasium's own
+        ``CartPoleVectorEnv``); gymnasium's ``VectorEnv.render`` raised ``NotImplementedError``. This env has no
+        render mode: a single env made with ``render_mode="rgb_array"`` draws a window."""
+        logger.warn("render() called on the vector env, which has no render mode (render_mode=None); render a single "
+                    "env: gymnasium.make(\"dronewpt/SbarCharging-v0\", render_mode=\"rgb_array\")")
+        return None
 
     @property
     def policy_context(self) -> PolicyContext:

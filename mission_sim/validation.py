@@ -40,9 +40,12 @@ class Range:
         return above and below
 
     def text(self) -> str:
-        """``(0, 100] m/s``, ``integer 1..32``, ``integer >= 1``: the text after "valid range:" in every message."""
+        """``(0, 100] m/s``, ``integer 1..32``, ``integer >= 1``, ``finite`` (every real number: ``(-inf, inf)``): the
+        text after "valid range:" in every message."""
         if self.integer:   # no upper end: "integer >= 1", the CLI's words
             body = f"integer >= {int(self.lo)}" if math.isinf(self.hi) else f"integer {int(self.lo)}..{int(self.hi)}"
+        elif self.lo == -math.inf and self.hi == math.inf and self.lo_open and self.hi_open:
+            body = "finite"
         else:
             body = f"{'(' if self.lo_open else '['}{self.lo:.6g}, {self.hi:.6g}{')' if self.hi_open else ']'}"
         return f"{body} {self.unit}".rstrip()

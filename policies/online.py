@@ -23,14 +23,32 @@ term ``-(alpha2/omega_n^2) dV2/dt`` (4.2e-5 A per V/s with Table I) besides the 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from mission_sim.contract import OBS_INDEX, PolicyContext, denormalise_obs
+from mission_sim.contract import OBS_FIELDS, OBS_INDEX, PolicyContext, denormalise_obs
 from wpt_receiver import InverseModelController, LowPassFilter, duty_from_v2_clipped, steady_state
+from wpt_receiver.envelope import steady_state_unchecked
 
 from .classical import target_v2
 
 __all__ = ["lm_from_steady_state", "OnlineLmModelBasedPolicy"]
+
+#: the observation fields the controller reads (its estimator, its reference, its V2 and duty)
+READS = ("i2_amp_a", "battery_v", "charge_cmd_a", "last_d_short")
+_READ_COLS = [OBS_INDEX[name] for name in READS]
+
+
+def _refuse_non_finite(obs) -> None:
+    """``ValueError`` naming the first non-finite value of a field in :data:`READS` of ``obs`` (normalised, one row
+    per receiver), its receiver and the valid range."""
+    for name, j in zip(READS, _READ_COLS):
+        bad = np.flatnonzero(~np.isfinite(obs[:, j]))
+        if len(bad):
+            f = OBS_FIELDS[j]
+            raise ValueError(f"observation {name}={float(obs[bad[0], j])!r} (receiver {int(bad[0])}) is invalid; "
+                             f"valid range: finite, [-1, 1] normalised ({f.lo:g}..{f.hi:g} {f.unit})")
 
 
 def lm_from_steady_state(link, i2_a, v2_v, v1_v=None):
@@ -94,12 +112,19 @@ class OnlineLmModelBasedPolicy:
             self.rebuilds += 1
 
     def act(self, obs):
+        """The duties for observations ``obs`` (normalised, one row per receiver). A non-finite value of a field the
+        controller reads (:data:`READS`) is refused (``ValueError`` naming the field, the receiver and the valid
+        range) before any state moves: a NaN would poison the estimator and the controllers until :meth:`reset`."""
         phys = denormalise_obs(np.atleast_2d(obs))
         i2 = phys[:, OBS_INDEX["i2_amp_a"]]
         vl = phys[:, OBS_INDEX["battery_v"]]
         cmd = phys[:, OBS_INDEX["charge_cmd_a"]]
-        v2 = 4.0 / np.pi * vl * (1.0 - np.sin(0.5 * np.pi * phys[:, OBS_INDEX["last_d_short"]]))
+        d_last = phys[:, OBS_INDEX["last_d_short"]]
         n = len(i2)
+        if not (math.isfinite(i2[0]) and math.isfinite(vl[0]) and math.isfinite(cmd[0]) and math.isfinite(d_last[0])
+                if n == 1 else np.isfinite(phys[:, _READ_COLS]).all()):
+            _refuse_non_finite(np.atleast_2d(obs))
+        v2 = 4.0 / np.pi * vl * (1.0 - np.sin(0.5 * np.pi * d_last))
         link = self.ctx.link
         fresh = self._x is None or len(self._x) != n
         if fresh:
@@ -128,7 +153,9 @@ class OnlineLmModelBasedPolicy:
         if len(moved):
             self._build(moved, self._out[moved])  # start where they were: at the V2* they last gave
         v2_target = target_v2(self.ctx, cmd, vl, lm_h=self._lm_ctl)
-        ref = steady_state(link, v2_target, lm_h=self._lm_ctl)[1]
+        # (unchecked: the Lm is a controller's, checked by LinkParams when it was built; V2* is target_v2's of the
+        # observations checked finite above, and finite inputs give a finite V2*)
+        ref = steady_state_unchecked(link, v2_target, self._lm_ctl, link.v1_amp_v)[1]
         u = ref - self._i2sm
         self._out = np.einsum("nk,nk->n", self._c, self._x) + self._d * u
         self._x = np.einsum("nij,nj->ni", self._a, self._x) + self._b * u[:, None]

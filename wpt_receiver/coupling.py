@@ -349,23 +349,27 @@ class CouplingModel:
         r, z = np.asarray(self.rx.radius_m), np.asarray(self.rx.z_m)
         return (np.multiply.outer(s, r) - np.multiply.outer(c, z)).max(axis=-1)
 
-    def check_clearance(self, dx_m, dy_m, dz_m, tilt_rad=0.0) -> None:
+    def check_clearance(self, dx_m, dy_m, dz_m, tilt_rad=0.0, *, above_pad: bool = False) -> None:
         """``ValueError`` naming the first pose (broadcast arrays or numbers) whose receiver coil is within
         :meth:`clearance_m` of the pad coil's plane (``abs(dz_m) <= clearance_m``: above or below it) while over it (a
-        lateral offset ``hypot(dx_m, dy_m)`` below the two outer radii): the coils would touch. The one rule of
-        ``dronewpt coupling --dz`` (the command's own copy until 2026-11-27 evening, which also refused poses beside
-        the pad); :meth:`lm_h` and :meth:`lm_exact_h` do not call it (a mission's flown poses in wind dip below it,
-        property tests swap the coils: they compute every pose)."""
+        lateral offset ``hypot(dx_m, dy_m)`` below the two outer radii): the coils would touch. ``above_pad=True``:
+        the receiver is a drone's, above the pad, so a ``dz_m`` below 0 is refused too, wherever it is (``valid range:
+        > clearance_m``). The one rule of ``dronewpt coupling --dz`` (which calls it with ``above_pad=True``; its own
+        copies until 2026-11-27 evening, and of the sign until night); :meth:`lm_h` and :meth:`lm_exact_h` do not call
+        it (a mission's flown poses in wind dip below it, property tests swap the coils: they compute every pose)."""
         dx, dy, dz, tilt = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (dx_m, dy_m, dz_m, tilt_rad)))
         lo, hi = self._touch_band(tilt)
         low = (lo <= dz) & (dz <= hi)   # (NaN: False here; _rx_frame names it)
-        if not low.any():
+        below = (dz < 0) if above_pad else np.zeros(dz.shape, bool)
+        if not (low.any() or below.any()):
             return
         reach = self.tx.outer_radius_m + self.rx.outer_radius_m
-        bad = low & (np.hypot(dx, dy) < reach)
+        bad = below | (low & (np.hypot(dx, dy) < reach))
         if bad.any():
             i = np.flatnonzero(bad.ravel())[0]
             z, l_, h = float(dz.flat[i]), float(lo.flat[i]), float(hi.flat[i])
+            if below.flat[i]:   # (below the pad's plane: no lateral offset makes it a drone's pose)
+                raise ValueError(f"dz_m={z!r} is invalid; valid range: > {h:.4g} m (the coils would touch)")
             side = f"> {h:.4g} m" if z >= (l_ + h) / 2 else f"< {l_:.4g} m"   # (the nearer side's bound)
             raise ValueError(f"dz_m={z!r} is invalid; valid range: {side} (the coils would touch), or a lateral offset "
                              f"hypot(dx_m, dy_m) >= {reach:.4g} m")

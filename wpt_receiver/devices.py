@@ -36,7 +36,8 @@ from functools import cached_property, lru_cache
 from importlib import resources
 
 __all__ = ["Diode", "Switch", "DeviceSet", "IDEAL", "parts", "preset", "link_preset", "preset_names", "device_set",
-           "charge_equivalent_f", "rect_node_c_f", "diode_from_row", "switch_from_row", "V_BLOCK_V"]
+           "charge_equivalent_f", "rect_node_c_f", "diode_from_row", "switch_from_row", "V_BLOCK_V",
+           "current_rating"]
 
 V_BLOCK_V = 30.0   # default blocking voltage for the charge-equivalent capacitances: Table I's VL [V] (and Vdc);
 #                    a link of its own: :func:`link_preset` (the rectifier's at its VL, the inverter's at its Vdc)
@@ -244,11 +245,9 @@ def preset(name: str, tj_c=None, v_block_v: float = V_BLOCK_V, v_block_inv_v: fl
     v_block_v = positive_number("v_block_v", v_block_v, "V")   # (checked for "ideal" too: one API, one rule)
     if v_block_inv_v is not None:
         v_block_inv_v = positive_number("v_block_inv_v", v_block_inv_v, "V")
-    if name == "ideal":
-        return IDEAL
-    row = parts()["preset"].get(name)
+    row = _preset_row(name)
     if row is None:
-        raise ValueError(f"device preset {name!r} is unknown; valid: {', '.join(preset_names())}")
+        return IDEAL
     if tj_c is not None and not (math.isfinite(tj_c) and -55.0 <= tj_c <= 200.0):
         raise ValueError(f"tj_c={tj_c!r} is invalid; valid range: [-55, 200] C")
     return device_set(row["rect_diode"], row["rect_switch"], row["inv_switch"], name, tj_c, v_block_v, v_block_inv_v)
@@ -261,6 +260,33 @@ def link_preset(name: str, params, tj_c=None) -> DeviceSet:
     instead of at Table I's 30 V (a 2S pack, 7.4 V: the SBAR node's Coss + Cj 2.96 nF, not 1.67 nF). Table I gives
     :func:`preset`'s devices."""
     return preset(name, tj_c, v_block_v=params.vl_v, v_block_inv_v=params.vdc_v)
+
+
+def current_rating(name: str) -> tuple[float, str, str] | None:
+    """``(rating_a, part, position)`` of the lowest continuous current rating [A] among preset ``name``'s parts that
+    carry the secondary current: the SBAR's upper diode (a leg: ``parts.toml``'s ``rating_a`` is per leg, the
+    datasheet's average I_F(AV) for the Schottky rectifiers) and lower switch (a die), one of each per conducting
+    position (:func:`device_set`'s ``n = 1``), so each carries the whole ``|i2|`` while it conducts; ``position`` is
+    ``"rectifier diode"`` or ``"rectifier switch"``. None for ``"ideal"`` (no parts). A mission's summary reports it
+    beside its peak (``rectifier_rating_a``, ``rectifier_rating_part``); :func:`wpt_receiver.sizing.select_parts`
+    asks each part's rating to cover ``SizingRules.margin`` x the peak."""
+    row = _preset_row(name)
+    if row is None:
+        return None
+    held = [(_row("diode", row["rect_diode"])["rating_a"], row["rect_diode"], "rectifier diode"),
+            (_row("switch", row["rect_switch"])["rating_a"], row["rect_switch"], "rectifier switch")]
+    return min(held, key=lambda h: h[0])
+
+
+def _preset_row(name: str) -> dict | None:
+    """``parts.toml``'s ``[preset.NAME]`` row of ``name``; None for ``"ideal"`` (no parts); ``ValueError`` naming
+    the valid names for an unknown one (:func:`preset` and :func:`current_rating`'s one lookup)."""
+    if name == "ideal":
+        return None
+    row = parts()["preset"].get(name)
+    if row is None:
+        raise ValueError(f"device preset {name!r} is unknown; valid: {', '.join(preset_names())}")
+    return row
 
 
 def envelope_params(params, devices: DeviceSet):

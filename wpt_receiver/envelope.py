@@ -29,6 +29,7 @@ __all__ = [
     "state_matrices",
     "g22",
     "steady_state",
+    "steady_state_unchecked",
     "check_v2",
     "check_lm",
     "zoh_discretise",
@@ -152,14 +153,23 @@ def steady_state(p: LinkParams, v2_v, lm_h=None, v1_v=None):
     ``det = R1 R2 + (w Lm)^2`` (regular at Lm = 0: I1 = V1/R1, I2 = -V2/R2).
     RM is ``v2_v = (4/pi) VL``; SM is ``v2_v = 0``. Broadcasts over arrays. Refused (``ValueError``, naming the first
     bad value): a V2 that is not finite (:func:`check_v2`), an Lm outside ``[0, sqrt(L1 L2))`` (:func:`check_lm`),
-    a V1 outside ``(0, inf)`` (:func:`wpt_receiver.params.check_v1`).
+    a V1 outside ``(0, inf)`` (:func:`wpt_receiver.params.check_v1`); then :func:`steady_state_unchecked`.
     """
     check_v2(v2_v)
     if lm_h is not None:
         check_lm(p, lm_h, zero_ok=True)
     lm = p.lm_h if lm_h is None else np.asarray(lm_h, dtype=float)
     v1 = p.v1_amp_v if v1_v is None else np.asarray(check_v1(v1_v, array_ok=True), dtype=float)
-    v2 = np.asarray(v2_v, dtype=float)
+    return steady_state_unchecked(p, np.asarray(v2_v, dtype=float), lm, v1)
+
+
+def steady_state_unchecked(p: LinkParams, v2, lm, v1):
+    """:func:`steady_state`'s arithmetic without any input check (~2 us a call less), for a caller's inner loop.
+
+    The caller guarantees what :func:`steady_state` would check: ``v2`` [V] finite, ``lm`` [H] in ``[0, sqrt(L1
+    L2))``, ``v1`` [V] finite and > 0 (floats or float arrays; broadcast). Nothing is refused here: a NaN or an Lm at
+    or above the coils' limit gives NaN or meaningless currents. (``policies.online``'s control step: its Lm is a
+    controller's, checked by :class:`LinkParams` when it was built, its V2 from observations it checked finite.)"""
     wlm = p.omega_rad_s * lm
     det = p.r1_ohm * p.r2_ohm + wlm**2
     i2 = (wlm * v1 - p.r1_ohm * v2) / det
@@ -204,8 +214,10 @@ def zoh_discretise(a, b, dt_s: float):
     e = np.exp(s * dt_s)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         # real poles s -/+ q: e^{st} cosh(qt) = (e^{(s+q)t} + e^{(s-q)t})/2, no overflow for long steps; the slow
-        # pole s + q as det / (s - q) (Vieta) when s < 0, free of the cancellation of s + q
-        slow = np.where(s < 0, det / (s - qa), s + qa)
+        # pole s + q as det / (s - q) (Vieta) when s < 0, free of the cancellation of s + q (computed once: the
+        # projectors' branch below takes it too)
+        vieta = det / (s - qa)
+        slow = np.where(s < 0, vieta, s + qa)
         ep, em = np.exp(slow * dt_s), np.exp((s - qa) * dt_s)
         short = qt < 1.0
         c = np.where(osc, e * np.cos(qt), np.where(short, e * np.cosh(qt), 0.5 * (ep + em)))
@@ -232,10 +244,10 @@ def zoh_discretise(a, b, dt_s: float):
         bd[tiny] = np.broadcast_to(dt, tiny.shape + (1, 1))[tiny] * (phi @ _rows(b, bd.shape, tiny))
     # real poles, well separated (qt >= 1, or 2q >= |slow pole|: the projectors' cancellation ~eps ||A|| / 2q is then
     # below A^-1 (Ad - I)'s ~eps ||A|| / |slow pole|): Bd = sum_k expm1(l_k dt) / l_k P_k B
-    with np.errstate(invalid="ignore", divide="ignore"):
-        spec = (q2 > 0) & ~tiny & ((qt >= 1.0) | (2.0 * qa >= np.abs(det / (s - qa))))
+    with np.errstate(invalid="ignore"):
+        spec = (q2 > 0) & ~tiny & ((qt >= 1.0) | (2.0 * qa >= np.abs(vieta)))
     if np.any(spec):
-        bd[spec] = _real_pole_phi(np.broadcast_to(a, spec.shape + (2, 2))[spec], (s - qa)[spec], det[spec],
+        bd[spec] = _real_pole_phi(np.broadcast_to(a, spec.shape + (2, 2))[spec], (s - qa)[spec], vieta[spec],
                                   np.broadcast_to(np.asarray(dt_s, dtype=float), spec.shape)[spec]
                                   ) @ _rows(b, bd.shape, spec)
     return ad, bd
@@ -248,11 +260,10 @@ def _rows(b, shape, mask):
     return b if b.ndim == 2 else np.broadcast_to(b, shape)[mask]
 
 
-def _real_pole_phi(a, l2, det, dt):
+def _real_pole_phi(a, l2, l1, dt):
     """``int_0^dt e^{As} ds = sum_k expm1(l_k dt) / l_k P_k`` for 2x2 ``a`` (N, 2, 2) with real poles ``l2`` (the
-    fast one, s - q) and ``l1 = det / l2`` (the slow one by Vieta); ``P_k = (A - l_other I) / (l_k - l_other)`` with
-    the cancelling diagonal entry taken from ``(a00 - l)(a11 - l) = a01 a10``."""
-    l1 = det / l2
+    fast one, s - q) and ``l1`` (the slow one, ``det / l2`` by Vieta: :func:`zoh_discretise`'s); ``P_k = (A - l_other
+    I) / (l_k - l_other)`` with the cancelling diagonal entry taken from ``(a00 - l)(a11 - l) = a01 a10``."""
     prod = a[:, 0, 1] * a[:, 1, 0]
 
     def proj(lo, den):   # (A - lo I) / den; the smaller diagonal entry from (a00 - lo)(a11 - lo) = a01 a10

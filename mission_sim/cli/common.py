@@ -102,21 +102,14 @@ def scenario_names() -> list[str]:
 
 
 def float_arg(name, positive=False, lo=0.0, hi=float("inf")):
-    """argparse type: a finite float (in ``[lo, hi]`` and > 0 if ``positive``), errors naming the value and range."""
-    if positive:
-        valid = f"[{lo:g}, {hi:g}]" if lo > 0 else (f"(0, {hi:g}]" if hi < float("inf") else "(0, inf)")
-    else:
-        valid = "finite"
-
-    def conv(text):
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name}={text!r} is not a number") from None
-        if v != v or abs(v) == float("inf") or (positive and not (0 < v <= hi and v >= lo)):
-            raise argparse.ArgumentTypeError(f"{name}={text!r} is invalid; valid range: {valid}")
-        return v
-    return conv
+    """argparse type: a finite float (in ``[lo, hi]`` and > 0 if ``positive``), errors naming the value and range:
+    :func:`range_arg` of that :class:`~mission_sim.validation.Range` (``(0, hi]`` for ``lo <= 0``, ``finite`` when not
+    ``positive``)."""
+    from ..validation import Range
+    inf = float("inf")
+    rng = Range(max(lo, 0.0), hi, lo_open=lo <= 0, hi_open=hi == inf) if positive else \
+        Range(-inf, inf, lo_open=True, hi_open=True)   # (positive: > 0 whatever lo; a lo <= 0 is 0, open)
+    return range_arg(name, rng)
 
 
 def positive_float(name):

@@ -23,6 +23,10 @@ from .common import (
     write_mission,
 )
 
+#: the file ``replay`` (without ``--pads``) writes its summary to, last (present = complete), under ``--out``; the one
+#: spelling (``replay --pads``'s: :data:`mission_sim.cli.refly.REFLY_SUMMARY`)
+REPLAY_SUMMARY = "replay_summary.json"
+
 
 def _mav_common(p):
     lazy_names_help(p.add_argument("--policy", default="model_based"), "receiver policy (default model_based)",
@@ -171,7 +175,8 @@ def _cmd_replay(args) -> int:
     s["log"] = str(args.log)
     s["policy"] = args.policy
     s["drone_mass_kg"] = cfg.drone.mass_kg
-    (args.out / "replay_summary.json").unlink(missing_ok=True)  # written last: present = complete
+    summary = args.out / REPLAY_SUMMARY
+    summary.unlink(missing_ok=True)  # written last: present = complete
     files = write_mission(res.mission, args.out / "mission", plots=not args.no_plot, progress=show_progress(args))
     if res.power_table is not None:
         with atomic_output(args.out / "power_comparison.csv") as tmp:
@@ -185,7 +190,7 @@ def _cmd_replay(args) -> int:
             files.append(replay_figures.plot_power_comparison(res, args.out / "power.png", title))
     s["files"] = files
     s = _mav_json_safe(s)
-    with atomic_output(args.out / "replay_summary.json") as tmp:
+    with atomic_output(summary) as tmp:
         tmp.write_text(json.dumps(s, indent=2, allow_nan=False))
     if args.format == "json":
         print(json.dumps(s, allow_nan=False))
@@ -208,7 +213,7 @@ def _cmd_replay(args) -> int:
     elif not s.get("battery_source"):
         print("the log has no battery data (no SYS_STATUS / BATTERY_STATUS / CURR / BAT / PX4 battery_status values "
               "with a known voltage and current)")
-    for f in [*files, args.out / "replay_summary.json"]:   # the summary too (written last), as mission lists its
+    for f in [*files, summary]:   # the summary too (written last), as mission lists its
         print(f"wrote {f}")
     return 0
 

@@ -49,12 +49,9 @@ def _cmd_coupling(args) -> int:
     from wpt_receiver.coupling import NOMINAL_GAP_M, default_coupling
     m = default_coupling()
     dz = NOMINAL_GAP_M if args.dz is None else args.dz
-    if dz < 0:   # (the receiver over the pad: below its plane refused, in main's words)
-        raise CliError(f"--dz {dz!r} is invalid; valid range: > {float(m.clearance_m(math.radians(args.tilt_deg))):.4g} "
-                       "m (the coils would touch)")
-    try:   # (coils that would touch: the library's rule, CouplingModel.check_clearance, in the flags' words; lm_h
-        #    itself computes any pose)
-        m.check_clearance(args.dx, args.dy, dz, math.radians(args.tilt_deg))
+    try:   # (coils that would touch, a receiver below the pad's plane: the library's rule,
+        #    CouplingModel.check_clearance, in the flags' words; lm_h itself computes any pose)
+        m.check_clearance(args.dx, args.dy, dz, math.radians(args.tilt_deg), above_pad=True)
     except ValueError as exc:
         from .notices import flag_words
         raise CliError(flag_words("coupling", str(exc))) from None
@@ -367,6 +364,18 @@ def _figures_and_summary(res, out: Path, plots: bool, thinned=None, worker=None)
     return files + [str(out / "summary.json")]
 
 
+def _rating_row(s: dict) -> list[tuple[str, str, str]]:
+    """The rectifier's continuous current rating beside the peak, and what ``dronewpt sizing`` asks of it (the margin:
+    ``wpt_receiver.sizing.SizingRules``'s); none for ideal devices (no parts)."""
+    if s.get("rectifier_rating_a") is None:
+        return []
+    from wpt_receiver.sizing import SizingRules
+    m = SizingRules.margin
+    return [("rectifier current rating", f"{s['rectifier_rating_a']:g}",
+             f"A continuous, {s['rectifier_rating_part']} (peak I2 {s['peak_i2_a']:.2f} A; dronewpt sizing requires "
+             f"a rating >= {m:g} x peak = {m * s['peak_i2_a']:.2f} A)")]
+
+
 def _print_mission(s: dict, files) -> None:
     rows = [
         ("policy", s["policy"], ""),
@@ -388,6 +397,7 @@ def _print_mission(s: dict, files) -> None:
         ("peak I2", f"{s['peak_i2_a']:.2f}",
          f"A instantaneous (envelope {s['peak_i2_envelope_a']:.2f} A; rated {s['rated_i2_a']:g} A)"),
         ("time above rated", f"{s['time_above_rated_s'] * 1e3:.2f}", "ms"),
+        *_rating_row(s),
         ("pad on", f"{s['charge_time_s']:.1f}", "s"),
         ("flight time gain", f"{s['flight_time_gain_s']:.1f}", "s of hover"),
         ("steps fine / coarse", f"{s['fine_steps']} / {s['coarse_steps']}", f"({s['fine_windows']} fine windows)"),

@@ -95,6 +95,7 @@ FLAG_WORDS = {
     "netlist": (_LINK_F,),
     "export-controller": (_LINK_F,),
     "coupling": ((r"dz_m=", "--dz "), (r"hypot\(dx_m, dy_m\)", "hypot(--dx, --dy)")),
+    "train": ((r"(?<![\w.-])history=", "--history "),),
 }
 
 

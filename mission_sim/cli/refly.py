@@ -14,7 +14,10 @@ from pathlib import Path
 
 from .common import CliError, mass_override, parse_set, prepare_out_dir, show_progress, write_mission
 
-__all__ = ["cmd_refly"]
+__all__ = ["cmd_refly", "REFLY_SUMMARY"]
+
+#: the file ``replay --pads`` writes its summary to, last (present = complete), under ``--out``; the one spelling
+REFLY_SUMMARY = "refly_summary.json"
 
 
 def _config(args, track):
@@ -64,13 +67,14 @@ def cmd_refly(args) -> int:
     res = refly_log(log, cfg, policy, pad=track.pad, ground_gap_m=args.ground_gap, window=window,
                     reach_m=args.reach, progress=show_progress(args), plan=plan)
     s = {**res.summary, "policy": args.policy, "drone_mass_kg": cfg.drone.mass_kg, "pads_file": str(args.pads)}
-    (args.out / "refly_summary.json").unlink(missing_ok=True)  # written last: present = complete
+    summary = args.out / REFLY_SUMMARY
+    summary.unlink(missing_ok=True)  # written last: present = complete
     files = write_mission(res.refly, args.out / "refly", plots=False)
     if not args.no_plot:
         from ..figures.refly import plot_refly
         files.append(plot_refly(res, args.out / "refly.png", f"{args.log.name}: re-flown with pads from {args.pads.name}"))
     s["files"] = files
-    with atomic_output(args.out / "refly_summary.json") as tmp:
+    with atomic_output(summary) as tmp:
         tmp.write_text(json.dumps(s, indent=2, allow_nan=False, default=float))
     from .notices import say_warning
     for w in s["warnings"]:
@@ -78,11 +82,11 @@ def cmd_refly(args) -> int:
     if args.format == "json":
         print(json.dumps(s, allow_nan=False, default=float))
         return 0
-    _print(args, s, cfg)
+    _print(args, s, cfg, summary)
     return 0
 
 
-def _print(args, s: dict, cfg) -> None:
+def _print(args, s: dict, cfg, summary: Path) -> None:
     for k in s["skipped_pads"]:
         print(f"dronewpt replay: warning: pad {k['pad']} is {k['distance_m']:.0f} m from the airborne track "
               f"(--reach {args.reach:g} m): not visited", file=sys.stderr)
@@ -101,5 +105,5 @@ def _print(args, s: dict, cfg) -> None:
     print(f"flight time gain {s['flight_time_gain_s']:+.1f} s of hover against the logged flight "
           f"({s['net_battery_energy_gain_j'] / 1e3:+.2f} kJ usable battery energy), "
           f"{s['flight_time_gain_vs_refly_without_charging_s']:+.1f} s against the same re-flight with the pads off")
-    for f in [*s["files"], args.out / "refly_summary.json"]:   # the summary too (written last), as mission lists its
+    for f in [*s["files"], summary]:   # the summary too (written last), as mission lists its
         print(f"wrote {f}")

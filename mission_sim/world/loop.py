@@ -218,6 +218,7 @@ class MissionLoop:
             "peak_i2_envelope_a": float(ks.peak_env),
             "rated_i2_a": self.rated,
             "time_above_rated_s": float(ks.above),
+            **self.rating_summary(),
             "flight_time_gain_s": 0.0,
             "fine_steps": int(ks.n_fine),
             "coarse_steps": int(ks.n_coarse),
@@ -225,6 +226,16 @@ class MissionLoop:
             "fine_windows_cut": int(ks.n_cut),
             "charge_time_s": st.sums["charge_time_s"],
         }
+
+    def rating_summary(self) -> dict:
+        """The rectifier's continuous current rating [A] and its part (:func:`wpt_receiver.devices.current_rating`
+        of ``link.devices``: the lowest of its diode leg's and switch's), to read beside ``peak_i2_a``
+        (``dronewpt sizing`` asks it to cover ``wpt_receiver.sizing.SizingRules.margin`` x the peak); None for
+        ``ideal`` devices."""
+        from wpt_receiver.devices import current_rating
+        held = current_rating(self.lk.devices)
+        return {"rectifier_rating_a": None if held is None else float(held[0]),
+                "rectifier_rating_part": None if held is None else held[1]}
 
     def energy_summary(self) -> dict:
         """Energies [J] (exact sums), per device group, efficiency and the two balances.
