@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ..mavlink.geodesy import GeoPoint
+from ..validation import Range, check_number
 
 __all__ = ["MissionItem", "RawMission", "read_mission", "read_plan", "read_wpl", "uploaded_mission",
            "flown_mission", "LOG_SUFFIXES"]
@@ -182,6 +183,11 @@ def _plan_item(it, where: str, name: str) -> list[MissionItem]:
 
 
 # -------------------------------------------------------------------------------- .waypoints
+#: a QGC WPL row's integer fields: (column, name, range): MISSION_ITEM's seq and command (uint16), frame (uint8)
+_WPL_INTS = ((0, "index", Range(0, 65535, integer=True)), (2, "frame", Range(0, 255, integer=True)),
+             (3, "command", Range(0, 65535, integer=True)))
+
+
 def read_wpl(path) -> RawMission:
     """A ``QGC WPL 110`` text file (ArduPilot, Mission Planner, QGC); row 0 is home."""
     path = Path(path)
@@ -204,7 +210,10 @@ def read_wpl(path) -> RawMission:
             v = [float(x) for x in f]
         except ValueError:
             raise ValueError(f"{name}: line {ln}: a field is not a number: {text.strip()[:80]!r}") from None
-        rows.append((int(v[0]), int(v[3]), int(v[2]), tuple(v[4:8]), v[8], v[9], v[10]))
+        # (index, frame, command are MAVLink integers: nan gave "cannot convert float NaN to integer", naming no file,
+        #  inf an OverflowError traceback, 16.5 was taken as 16)
+        seq, frame, cmd = (check_number(f"{name}: line {ln}: {what}", v[i], rng) for i, what, rng in _WPL_INTS)
+        rows.append((seq, cmd, frame, tuple(v[4:8]), v[8], v[9], v[10]))
     if not rows or rows[0][0] != 0:
         raise ValueError(f"{name}: missing home: row 0 (the home position, AMSL) is not the first row")
     seq0, _, _, _, lat, lon, alt = rows[0]
