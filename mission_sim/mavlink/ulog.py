@@ -153,13 +153,31 @@ def _t0_epoch_s(top: _Topics) -> float:
     return float(g["time_utc_usec"].iloc[i] * 1e-6 - g["t_s"].iloc[i])
 
 
+def _ulog_class():
+    """pyulog's ``ULog``, except that a corrupt message header whose message runs past the end of the file ends the
+    parse: in the definitions section pyulog (1.3) then seeks back 2 + the header's size, more than it read, and
+    re-reads the same bytes forever (a truncated log with a flipped byte hung ``replay`` / ``mission --plan``)."""
+    import os
+
+    from pyulog import ULog
+
+    class CutSafeULog(ULog):
+        def _check_packet_corruption(self, header):
+            corrupt = super()._check_packet_corruption(header)
+            fh = self._file_handle
+            if corrupt and fh.tell() >= os.fstat(fh.fileno()).st_size:   # at the end: nothing left to resync on
+                return False   # (pyulog then skips the message: the end of the file)
+            return corrupt
+    return CutSafeULog
+
+
 def read_ulog(path) -> FlightLog:
     """Read a PX4 ULog into a :class:`FlightLog`; a pyulog failure is reported in ``errors``."""
-    from pyulog import ULog
+    ulog = _ulog_class()
     path = Path(path)
     try:
         with open(path, "rb") as fh:   # (given a name, pyulog left its file open when the parse failed: a ResourceWarning)
-            top = _Topics(ULog(fh))
+            top = _Topics(ulog(fh))
     except Exception as exc:  # noqa: BLE001 -- untrusted bytes: report what failed
         empty = clean_time(pd.DataFrame(), POSITION_COLUMNS)
         return FlightLog(path=path, kind="ulog", t0_epoch_s=float("nan"), duration_s=0.0, position=empty,
