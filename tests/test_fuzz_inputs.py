@@ -18,6 +18,7 @@ for what it found are at the end.
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import os
@@ -270,7 +271,7 @@ def mutated_json(draw, text: str):
         if path and draw(st.integers(0, 4)) == 0:
             doc = _replace(doc, path, None, delete=True)
         else:
-            doc = _replace(doc, path, draw(st.sampled_from(JSON_VALUES)))
+            doc = _replace(doc, path, copy.deepcopy(draw(st.sampled_from(JSON_VALUES))))   # (a shared [] mutated later)
     return json.dumps(doc)
 
 
@@ -329,7 +330,22 @@ def mutated_wpl(draw, text: str):
     return "\n".join(lines) + "\n"
 
 
-PLANS = {p.name: p.read_text() for p in MISSIONS.glob("*.plan")}
+def _survey_plan() -> str:
+    """The square plan with a survey (a ComplexItem with its VisualTransectPoints and CameraCalc) and a corridor scan
+    (its generated TransectStyleComplexItem Items) inserted after the take-off: the shipped plans have none."""
+    doc = json.loads((MISSIONS / "qgc_simple_square.plan").read_text())
+    items = doc["mission"]["items"]
+    survey = {"type": "ComplexItem", "complexItemType": "survey", "TransectStyleComplexItem": {
+        "CameraCalc": {"DistanceToSurface": 25, "DistanceToSurfaceRelative": True},
+        "VisualTransectPoints": [[47.3980, 8.5450], [47.3982, 8.5452], [47.3984, 8.5450]]}}
+    corridor = {"type": "ComplexItem", "complexItemType": "CorridorScan", "TransectStyleComplexItem": {
+        "Items": [{"type": "SimpleItem", "command": 16, "frame": 3, "params": [0, 0, 0, None, 47.3981, 8.5455, 22]},
+                  {"type": "SimpleItem", "command": 16, "frame": 3, "params": [0, 0, 0, None, 47.3983, 8.5457, 22]}]}}
+    doc["mission"]["items"] = [items[0], survey, corridor, *items[1:]]
+    return json.dumps(doc)
+
+
+PLANS = {**{p.name: p.read_text() for p in MISSIONS.glob("*.plan")}, "survey.plan": _survey_plan()}
 WPLS = {p.name: p.read_text() for p in MISSIONS.glob("*.waypoints")}
 
 
@@ -344,7 +360,7 @@ def mission_files(draw):
         name = draw(st.sampled_from(sorted(WPLS)))
         return ".waypoints", draw(mutated_wpl(WPLS[name])).encode()
     name = draw(st.sampled_from(sorted([*PLANS, *WPLS])))
-    return Path(name).suffix, draw(mangled_bytes((MISSIONS / name).read_bytes()))
+    return Path(name).suffix, draw(mangled_bytes({**PLANS, **WPLS}[name].encode()))
 
 
 def _dry_run(folder: Path, extra: list[str]):

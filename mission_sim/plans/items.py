@@ -163,14 +163,14 @@ def _plan_item(it, where: str, name: str) -> list[MissionItem]:
     if kind != "ComplexItem":
         raise ValueError(f"{name}: {where}: type={kind!r} is invalid; valid: SimpleItem, ComplexItem")
     ctype = it.get("complexItemType", "?")
-    tsc = it.get("TransectStyleComplexItem") or {}
+    tsc = _json_object(it.get("TransectStyleComplexItem"), f"{name}: {where} ({ctype}): TransectStyleComplexItem")
     sub = tsc.get("Items") or it.get("Items") or it.get("items")
     if isinstance(sub, list) and sub:
         return [_simple(s, f"{where} ({ctype}), generated item {j}", name) for j, s in enumerate(sub)]
     pts = tsc.get("VisualTransectPoints")
-    cam = tsc.get("CameraCalc") or {}
+    cam = _json_object(tsc.get("CameraCalc"), f"{name}: {where} ({ctype}): CameraCalc")
     alt = cam.get("DistanceToSurface", tsc.get("Altitude"))
-    if isinstance(pts, list) and pts and isinstance(alt, (int, float)):
+    if isinstance(pts, list) and pts and isinstance(alt, (int, float)) and not isinstance(alt, bool):
         frame = 3 if cam.get("DistanceToSurfaceRelative", True) else 0
         try:
             return [MissionItem(f"{where} ({ctype}), transect point {j}", NAV_WAYPOINT, frame, (0.0,) * 4,
@@ -180,6 +180,16 @@ def _plan_item(it, where: str, name: str) -> list[MissionItem]:
     raise ValueError(f"{name}: {where}: complex item {ctype!r} has no generated waypoints (TransectStyleComplexItem "
                      "Items or VisualTransectPoints with a CameraCalc DistanceToSurface); valid: save the plan "
                      "from QGroundControl after the survey was generated")
+
+
+def _json_object(value, what: str) -> dict:
+    """``value`` (absent, null: ``{}``) when it is a JSON object; else ``ValueError`` naming ``what`` and the value as the
+    file spells it (a ``true`` or a list there was an AttributeError traceback)."""
+    if value is None or value == {}:
+        return {}
+    if not isinstance(value, dict):
+        raise ValueError(f"{what}={json.dumps(value)[:60]} is invalid; valid: a JSON object {{...}}")
+    return value
 
 
 # -------------------------------------------------------------------------------- .waypoints
