@@ -500,3 +500,93 @@ def test_fuzzed_flight_logs_are_refused_in_one_line_naming_them(folder, f, comma
     _check(argv, rc, out, err, allowed=(0, 2, "reached"), names=(path.name,))
     if rc == 2:
         assert not created, (argv, created)
+
+
+# ----------------------------------------------------------------------------- 2b. study files and sweep folders
+def _toml(doc: dict) -> str:
+    """``doc`` as TOML, every top-level key an inline value (keys quoted: a dotted key is one key)."""
+    def val(v):
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, float):
+            return "nan" if v != v else "inf" if v == math.inf else "-inf" if v == -math.inf else repr(v)
+        if isinstance(v, int):
+            return str(v) if -2**63 <= v < 2**63 else json.dumps(str(v))
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, list):
+            return "[" + ", ".join(val(x) for x in v if x is not None) + "]"
+        return "{" + ", ".join(f"{json.dumps(str(k))} = {val(x)}" for k, x in v.items() if x is not None) + "}"
+    if not isinstance(doc, dict):   # (the whole document replaced: not TOML)
+        return json.dumps(doc)
+    return "".join(f"{json.dumps(str(k))} = {val(v)}\n" for k, v in doc.items() if v is not None)
+
+
+STUDIES = {p.name: p for p in (ROOT / "examples").glob("study_*.toml")}
+
+
+@st.composite
+def study_files(draw):
+    """A shipped study (its paths made absolute) with 1-3 fields replaced by :data:`JSON_VALUES` or deleted."""
+    import tomllib
+    name = draw(st.sampled_from(sorted(STUDIES)))
+    doc = tomllib.loads(STUDIES[name].read_text())
+    for key in ("log", "pads"):
+        if key in doc.get("replay", {}):
+            doc["replay"][key] = str((ROOT / "examples" / doc["replay"][key]).resolve())
+    return _toml(json.loads(draw(mutated_json(json.dumps(doc)))))
+
+
+@settings(FUZZ, max_examples=_n(80))
+@given(text=study_files())
+def test_fuzzed_study_files_are_refused_in_one_line(folder, text, monkeypatch):
+    """``sweep STUDY --workers 0`` with a mutated shipped study (any field, not only the grid: a section that is
+    not a table, a base that is not a path, a window of strings): reached (the sweep stubbed) or one line naming the
+    study's key or file; nothing created."""
+    import mission_sim.studies.sweep as sweep_mod
+
+    monkeypatch.setattr(sweep_mod, "run_sweep", _stub)
+    path = folder / "fuzz_study.toml"
+    path.write_text(text)
+    argv = ["sweep", path.name, "--out", "fuzz_sweep", "--workers", "0", "--no-plot", "--no-progress"]
+    before = _snapshot(folder)
+    try:
+        rc, out, err = _run(argv, folder)
+        created = sorted(_snapshot(folder) - before)
+    finally:
+        _restore(folder, before)
+    event(f"study: {rc}")
+    _check(argv, rc, out, err, allowed=(2, "reached"), names=(path.name, "[", "study", "policy", "pads", "--"))
+    if rc == 2:
+        assert not created, (argv, created)
+
+
+@st.composite
+def manifests(draw):
+    """A sweep folder's ``sweep.json``: a real manifest's fields replaced or deleted, or its bytes mangled."""
+    man = {"study": "study_small", "n_cases": 48, "fingerprint": "0123456789abcdef", "physics_code": "abc",
+           "doc": {"study": {"name": "study_small"}, "grid": {"policy": ["step"], "pads.1.x_m": [20.0]}}}
+    if draw(st.booleans()):
+        return draw(mangled_bytes(json.dumps(man).encode()))
+    return draw(mutated_json(json.dumps(man))).encode()
+
+
+@settings(FUZZ, max_examples=_n(40))
+@given(data=manifests(), command=st.sampled_from(["status", "sizing"]))
+def test_fuzzed_sweep_manifests_are_refused_in_one_line(folder, data, command):
+    """``sweep --status DIR`` and ``sizing --source sweep --sweep DIR`` over a folder whose sweep.json is damaged:
+    a result, or one line naming the folder or its sweep.json."""
+    d = folder / "fuzz_sweep_dir"
+    d.mkdir(exist_ok=True)
+    (d / "sweep.json").write_bytes(data)
+    argv = (["sweep", "--status", d.name] if command == "status" else
+            ["sizing", "--source", "sweep", "--sweep", d.name, "--no-plot", "--no-progress"])
+    before = _snapshot(folder)
+    try:
+        rc, out, err = _run(argv, folder)
+        created = sorted(_snapshot(folder) - before)
+    finally:
+        _restore(folder, before)
+    event(f"manifest {command}: {rc}")
+    _check(argv, rc, out, err, allowed=(0, 2), names=(d.name, "sweep.json"))
+    assert not created, (argv, created)

@@ -292,6 +292,8 @@ def _parse_head(head: dict, base_dir):
         raise ValueError(f"[study] allow_single = {allow_single!r} is invalid; valid: true or false")
     base_path = None
     if head.get("base") not in (None, "", "default"):
+        if not isinstance(head["base"], str):   # (base = 3 was a TypeError traceback)
+            raise ValueError(f"[study] base = {head['base']!r} is invalid; valid: a mission TOML's path (string)")
         base_path = Path(head["base"])
         if not base_path.is_absolute() and base_dir is not None:
             base_path = Path(base_dir) / base_path
@@ -365,6 +367,9 @@ def parse_study(doc: dict, name: str = "study", base_dir=None) -> Study:
     if unknown:
         raise ValueError(f"study section [{unknown[0]}] is unknown; valid sections: "
                          + ", ".join(f"[{s}]" for s in _SECTIONS))
+    for sec in ("study", "fixed", "grid", "monte_carlo", "report"):   # ([replay]: its own message below)
+        if sec in doc and not isinstance(doc[sec], dict):   # (grid = 3 was an AttributeError traceback)
+            raise ValueError(f"[{sec}] = {doc[sec]!r} is invalid; valid: a table, [{sec}] and its keys")
     head, base_path, runner, allow_single = _parse_head(doc.get("study", {}), base_dir)
     replay = None
     if "replay" in doc:
@@ -380,6 +385,8 @@ def parse_study(doc: dict, name: str = "study", base_dir=None) -> Study:
     bad = sorted(set(mc) - {"n", "seed", "params"})
     if bad:
         raise ValueError(f"[monte_carlo] key {bad[0]!r} is unknown; valid keys: n, seed, params")
+    if not isinstance(mc.get("params", {}), dict):
+        raise ValueError(f"[monte_carlo] params = {mc['params']!r} is invalid; valid: a table, [monte_carlo.params]")
     mc_params = {k: _distribution(k, v) for k, v in _flatten(mc.get("params", {}), "", "monte_carlo.params").items()}
     mc_n = mc.get("n", 1 if mc_params else 0)
     if isinstance(mc_n, bool) or not isinstance(mc_n, int) or mc_n < 0 or (mc_params and mc_n < 1):
