@@ -590,3 +590,133 @@ def test_fuzzed_sweep_manifests_are_refused_in_one_line(folder, data, command):
     event(f"manifest {command}: {rc}")
     _check(argv, rc, out, err, allowed=(0, 2), names=(d.name, "sweep.json"))
     assert not created, (argv, created)
+
+
+# ----------------------------------------------------------------------------- 3. what the fuzz found (each fails on the code before)
+WPL = "QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.0\t1\n{row}\n"
+ROW = ["1", "0", "3", "16", "0", "0", "0", "0", "47.398742", "8.546594", "20", "1"]
+
+
+def _wpl_row(col: int, value: str) -> str:
+    f = list(ROW)
+    f[col] = value
+    return WPL.format(row="\t".join(f))
+
+
+@pytest.mark.parametrize("col,value,text", [
+    (3, "inf", "w.waypoints: line 3: command=inf is invalid; valid range: integer 0..65535"),
+    (3, "16.5", "w.waypoints: line 3: command=16.5 is invalid; valid range: integer 0..65535"),
+    (0, "nan", "w.waypoints: line 3: index=nan is invalid; valid range: integer 0..65535"),
+    (2, "-inf", "w.waypoints: line 3: frame=-inf is invalid; valid range: integer 0..255"),
+], ids=["command inf (OverflowError traceback)", "command 16.5 (taken as 16)", "index nan (no file named)",
+        "frame -inf"])
+def test_a_waypoints_integer_field_that_is_not_an_integer_is_refused(folder, col, value, text):
+    (folder / "w.waypoints").write_text(_wpl_row(col, value))
+    argv, rc, out, err, created = _dry_run(folder, ["--plan", "w.waypoints"])
+    assert rc == 2 and err.strip().splitlines() == [f"dronewpt mission: error: {text}"], err
+    assert "Traceback" not in err and not created
+
+
+@pytest.mark.parametrize("col,value", [(8, "1e308"), (9, "inf")])
+def test_a_far_off_latitude_is_refused_without_a_numpy_warning(folder, col, value):
+    """Latitude 1e308 / longitude inf in a mission item: numpy's overflow RuntimeWarning (two more stderr lines) came
+    before the one-line error (the ENU conversion ran before the range check)."""
+    import warnings
+    (folder / "w.waypoints").write_text(_wpl_row(col, value))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        argv, rc, out, err, created = _dry_run(folder, ["--plan", "w.waypoints"])
+    assert rc == 2 and "w.waypoints: row 1: l" in err and len(err.strip().splitlines()) == 1, err
+    assert [str(w.message) for w in caught if issubclass(w.category, RuntimeWarning)] == []
+
+
+def test_the_plan_note_is_not_printed_before_a_refusal(folder):
+    """``--plan`` without ``--pads`` and a bad ``--policy``: the note on the built-in pads came first, two lines."""
+    argv, rc, out, err, created = _dry_run(folder, ["--plan", "square.plan", "--policy", "bogus"])
+    lines = err.strip().splitlines()
+    assert rc == 2 and len(lines) == 1 and lines[0].startswith("dronewpt mission: error: --policy 'bogus'"), err
+    argv, rc, out, err, created = _dry_run(folder, ["--plan", "square.plan"])   # a valid run still says it
+    assert rc == 0 and "note: --plan without --pads keeps the built-in mission's 2 pads" in err
+
+
+def test_a_refused_command_leaves_no_output_folder(folder):
+    """``calibrate`` on a log without battery data: its --out folder was made before the log was read, and stayed."""
+    shutil.copy(LOGS / "uavlogviewer_vtol_sitl.tlog", folder / "vtol.tlog")
+    try:
+        argv = ["calibrate", "vtol.tlog", "--out", "new_cal/sub/drone.toml", "--no-plot"]
+        rc, out, err = _run(argv, folder)
+        assert rc == 2 and "the log has no battery data" in err and len(err.strip().splitlines()) == 1, err
+        assert not (folder / "new_cal").exists()
+        (folder / "kept").mkdir()   # a folder that was there before stays
+        rc, out, err = _run(["calibrate", "vtol.tlog", "--out", "kept/drone.toml", "--no-plot"], folder)
+        assert rc == 2 and (folder / "kept").is_dir()
+    finally:
+        (folder / "vtol.tlog").unlink()
+        shutil.rmtree(folder / "kept", ignore_errors=True)
+
+
+def test_a_cut_ulog_with_a_corrupt_header_does_not_hang(folder):
+    """A ULog whose last message header is corrupt (size > 10,000) and cut by the end of the file: pyulog 1.3 sought
+    back 2 + that size, into the messages before it, and read them again forever (``replay``, ``mission --plan``)."""
+    import struct
+    pad = (struct.pack("<HB", 50, ord("Z")) + bytes(50)) * 420   # unknown messages: skipped
+    (folder / "cut.ulg").write_bytes(b"ULog\x01\x12\x35\x01" + bytes(8) + pad + struct.pack("<HB", 20000, ord("Z")) +
+                                     b"abc")
+    try:
+        argv, rc, out, err, created = _dry_run(folder, ["--plan", "cut.ulg"])   # (_run: a 30 s alarm fails the test)
+        assert rc == 2 and err.strip().splitlines() == [
+            "dronewpt mission: error: cut.ulg: no flown track: 0 usable position(s) (GPS fix >= 3) while armed"], err
+    finally:
+        (folder / "cut.ulg").unlink()
+
+
+def test_a_set_item_without_a_key_is_refused_in_the_flags_words(folder):
+    argv, rc, out, err, created = _dry_run(folder, ["--set", "=3"])
+    assert rc == 2 and err.strip() == ("dronewpt mission: error: --set '=3' is invalid; valid form: KEY=VALUE (e.g. "
+                                       "battery.capacity_ah=2.0)"), err
+
+
+def test_a_complex_item_whose_tables_are_not_objects_is_refused(folder):
+    for key, value, text in (("TransectStyleComplexItem", True, "TransectStyleComplexItem=true"),
+                             ("CameraCalc", [1, 2], "CameraCalc=[1, 2]")):
+        doc = json.loads(_survey_plan())
+        item = doc["mission"]["items"][1]
+        if key == "CameraCalc":
+            item["TransectStyleComplexItem"]["CameraCalc"] = value
+        else:
+            item[key] = value
+        (folder / "c.plan").write_text(json.dumps(doc))
+        argv, rc, out, err, created = _dry_run(folder, ["--plan", "c.plan"])
+        assert rc == 2 and err.strip() == (f"dronewpt mission: error: c.plan: item 1 (survey): {text} is invalid; "
+                                           "valid: a JSON object {...}"), err
+
+
+@pytest.mark.parametrize("text,message", [
+    ("grid = 3\n", "[grid] = 3 is invalid; valid: a table, [grid] and its keys"),
+    ("monte_carlo = 2\n", "[monte_carlo] = 2 is invalid; valid: a table, [monte_carlo] and its keys"),
+    ("[monte_carlo]\nn = 3\nparams = 2\n", "[monte_carlo] params = 2 is invalid; valid: a table, [monte_carlo.params]"),
+    ("[study]\nbase = 3\n[grid]\npolicy = [\"step\"]\n", "[study] base = 3 is invalid; valid: a mission TOML's path"),
+], ids=["grid = 3", "monte_carlo = 2", "params = 2", "base = 3"])
+def test_a_study_section_of_the_wrong_type_is_refused(folder, text, message, monkeypatch):
+    import mission_sim.studies.sweep as sweep_mod
+    monkeypatch.setattr(sweep_mod, "run_sweep", _stub)
+    (folder / "s.toml").write_text(text)
+    rc, out, err = _run(["sweep", "s.toml", "--out", "s_out", "--workers", "0", "--no-plot"], folder)
+    assert rc == 2 and len(err.strip().splitlines()) == 1 and message in err, err
+    assert not (folder / "s_out").exists()
+
+
+@pytest.mark.parametrize("manifest,what", [
+    ("{}", "no 'study' (the study's name)"), ("[]", "not a JSON object"),
+    ('{"study": "s", "fingerprint": "f", "doc": {}}', "its study: study 's' varies nothing"),
+    ('{"study": "s", "fingerprint": "f", "doc": {"study": null}}', None),
+], ids=["{}", "[]", "doc {}", "doc's study null"])
+def test_a_damaged_sweep_manifest_is_refused_naming_it(folder, manifest, what):
+    d = folder / "damaged"
+    d.mkdir(exist_ok=True)
+    (d / "sweep.json").write_text(manifest)
+    for argv in (["sweep", "--status", "damaged"], ["sizing", "--source", "sweep", "--sweep", "damaged", "--no-plot"]):
+        rc, out, err = _run(argv, folder)
+        assert rc == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err, (argv, err)
+        if what is not None and argv[0] == "sweep":
+            assert f"'damaged/sweep.json' is not a valid sweep manifest ({what}" in err, err
