@@ -655,6 +655,53 @@ def test_a_refused_command_leaves_no_output_folder(folder):
         shutil.rmtree(folder / "kept", ignore_errors=True)
 
 
+@pytest.mark.parametrize("argv,kept", [
+    (["calibrate", "vtol.tlog", "--out", "nonexist/../keep_me/drone.toml", "--no-plot"], "keep_me"),
+    (["calibrate", "vtol.tlog", "--out", "{abs}/nonexist/../keep_me/drone.toml", "--no-plot"], "keep_me"),
+    (["calibrate", "vtol.tlog", "--out", "nx/../user/empty_sub/drone.toml", "--no-plot"], "user/empty_sub"),
+    (["telemetry", "--connect", "none", "--tlog", "nx/../tl_empty/x.tlog", "--policy", "bogus"], "tl_empty"),
+], ids=["nonexist/../keep_me", "absolute", "nested user/empty_sub", "telemetry --tlog nx/../tl_empty"])
+def test_a_refused_command_keeps_the_users_folders_named_after_dotdot(folder, argv, kept):
+    """An out path with ``..`` after a missing folder: every level missing before ``mkdir(parents=True)`` was
+    recorded as made by the command, ``nonexist/..`` and ``nonexist/../keep_me`` too, and the refusal (exit 2)
+    removed the user's own empty ``keep_me`` (prepare_out_dir; reviewer's finding on the clifuzz branch)."""
+    shutil.copy(LOGS / "uavlogviewer_vtol_sitl.tlog", folder / "vtol.tlog")
+    (folder / kept).mkdir(parents=True)
+    before = _snapshot(folder)
+    try:
+        rc, out, err = _run([a.replace("{abs}", str(folder)) for a in argv], folder)
+        assert rc == 2 and len(err.strip().splitlines()) == 1, err
+        assert (folder / kept).is_dir(), f"the refused command removed the user's folder {kept!r}"
+        assert _snapshot(folder) == before, sorted(_snapshot(folder) ^ before)   # its own 'nonexist' removed
+    finally:
+        _restore(folder, before)
+        (folder / "vtol.tlog").unlink()
+        shutil.rmtree(folder / kept.split("/")[0], ignore_errors=True)
+
+
+def test_a_folder_made_meanwhile_by_another_run_is_not_removed(folder, monkeypatch):
+    """A folder another run makes between this run's check and its mkdir is not this run's: a refusal keeps it
+    (it was recorded as made here and removed). The other run is a patched ``Path.mkdir`` that makes it first."""
+    import pathlib
+    shutil.copy(LOGS / "uavlogviewer_vtol_sitl.tlog", folder / "vtol.tlog")
+    real = pathlib.Path.mkdir
+    race = folder / "race"
+
+    def mkdir(self, *a, **k):
+        if self.name == "race" and not race.exists():
+            os.mkdir(race)   # the other run, just before ours
+        return real(self, *a, **k)
+
+    monkeypatch.setattr(pathlib.Path, "mkdir", mkdir)
+    try:
+        rc, out, err = _run(["calibrate", "vtol.tlog", "--out", "race/drone.toml", "--no-plot"], folder)
+        assert rc == 2 and "the log has no battery data" in err, err
+        assert race.is_dir(), "the refused command removed a folder another run had made"
+    finally:
+        (folder / "vtol.tlog").unlink()
+        shutil.rmtree(race, ignore_errors=True)
+
+
 def test_a_cut_ulog_with_a_corrupt_header_does_not_hang(folder):
     """A ULog whose last message header is corrupt (size > 10,000) and cut by the end of the file: pyulog 1.3 sought
     back 2 + that size, into the messages before it, and read them again forever (``replay``, ``mission --plan``)."""

@@ -299,6 +299,24 @@ def remove_created_dirs() -> None:
             pass
 
 
+def _make_dirs(path: Path) -> None:
+    """``mkdir -p path``, recording in :data:`_CREATED` only the folders this call made: each missing level is made
+    with a plain ``mkdir`` (no ``exist_ok``), outermost first, and recorded only when that call succeeded. A level
+    that exists, or that appears meanwhile (another run made it: ``FileExistsError``), is not ours and is never
+    removed. The levels are the path as spelled, ``..`` included: ``new/../keep_me`` makes ``new`` (recorded) and
+    then finds ``new/..`` and ``new/../keep_me`` existing (not recorded). (Recording every level missing before one
+    ``mkdir(parents=True)`` recorded ``new/..`` and ``new/../keep_me`` too, and a refused command then removed the
+    user's empty ``keep_me``.)"""
+    for level in (*reversed(path.parents), path):
+        if level.name in ("", ".", "..") or level.is_dir():
+            continue   # the root, '.', '..': never made here; an existing folder: not ours
+        try:
+            level.mkdir()
+        except FileExistsError:
+            continue   # made meanwhile by someone else (or a file: the next level or the probe says so)
+        _CREATED.append(level)
+
+
 def prepare_out_dir(path, flag: str = "--out") -> Path:
     """Create the output folder ``path`` now, before any simulation, and check that files can be
     written there; ``CliError`` naming the flag and the path otherwise (a file in its place, no
@@ -306,9 +324,7 @@ def prepare_out_dir(path, flag: str = "--out") -> Path:
     later (:func:`remove_created_dirs`)."""
     path = check_out_dir(path, flag)
     try:
-        missing = [p for p in (path, *path.parents) if not p.exists()]
-        path.mkdir(parents=True, exist_ok=True)
-        _CREATED.extend(reversed(missing))
+        _make_dirs(path)
         probe = path / f".dronewpt-write-test.{os.getpid()}"
         probe.write_bytes(b"")
         probe.unlink()
