@@ -702,13 +702,65 @@ def test_a_folder_made_meanwhile_by_another_run_is_not_removed(folder, monkeypat
         shutil.rmtree(race, ignore_errors=True)
 
 
+def _cut_ulog() -> bytes:
+    """A ULog whose last message header (in its definitions section) is corrupt (size 20,000) and cut by the end."""
+    import struct
+    pad = (struct.pack("<HB", 50, ord("Z")) + bytes(50)) * 420   # unknown messages: skipped
+    return b"ULog\x01\x12\x35\x01" + bytes(8) + pad + struct.pack("<HB", 20000, ord("Z")) + b"abc"
+
+
+def test_the_cut_ulog_guard_is_the_one_pyulog_calls(folder, monkeypatch):
+    """``CutSafeULog`` overrides pyulog's private ``_check_packet_corruption``: a pyulog that renamed it would skip the
+    guard silently and hang (caught only by an alarm). Here the override must run on the cut log and decide the end."""
+    from mission_sim.mavlink import ulog as ulog_mod
+    cls = ulog_mod._ulog_class()
+    assert cls.__name__ == "CutSafeULog", "pyulog's internals changed: the cut-log guard is off"
+    decided, real = [], cls._check_packet_corruption
+
+    def spy(self, header):
+        decided.append(real(self, header))
+        return decided[-1]
+
+    monkeypatch.setattr(cls, "_check_packet_corruption", spy)
+    (folder / "cut.ulg").write_bytes(_cut_ulog())
+    try:
+        log = ulog_mod.read_ulog(folder / "cut.ulg")
+    finally:
+        (folder / "cut.ulg").unlink()
+    assert decided and decided[-1] is False, decided   # the corrupt, cut header: ended by the override
+    assert log.errors == [], log.errors
+
+
+def test_a_pyulog_without_the_hooked_internals_is_said(folder, monkeypatch):
+    """A pyulog without ``ULog._check_packet_corruption``: plain ``ULog`` and a RuntimeWarning naming it (not a guard
+    that is never called); without ``ULog._file_handle``: the override raises, the log's error names it."""
+    import pyulog
+
+    from mission_sim.mavlink import ulog as ulog_mod
+
+    class Renamed:   # a pyulog whose ULog has neither
+        def __init__(self, fh):
+            self._check_packet_corruption(None)
+
+    monkeypatch.setattr(pyulog, "ULog", Renamed)
+    ulog_mod._ulog_class.cache_clear()
+    try:
+        with pytest.warns(RuntimeWarning, match="no ULog._check_packet_corruption"):
+            assert ulog_mod._ulog_class() is Renamed
+        ulog_mod._ulog_class.cache_clear()
+        Renamed._check_packet_corruption = lambda self, header: True
+        (folder / "cut.ulg").write_bytes(_cut_ulog())
+        log = ulog_mod.read_ulog(folder / "cut.ulg")
+        assert len(log.errors) == 1 and "has no ULog._file_handle" in log.errors[0], log.errors
+    finally:
+        (folder / "cut.ulg").unlink(missing_ok=True)
+        ulog_mod._ulog_class.cache_clear()
+
+
 def test_a_cut_ulog_with_a_corrupt_header_does_not_hang(folder):
     """A ULog whose last message header is corrupt (size > 10,000) and cut by the end of the file: pyulog 1.3 sought
     back 2 + that size, into the messages before it, and read them again forever (``replay``, ``mission --plan``)."""
-    import struct
-    pad = (struct.pack("<HB", 50, ord("Z")) + bytes(50)) * 420   # unknown messages: skipped
-    (folder / "cut.ulg").write_bytes(b"ULog\x01\x12\x35\x01" + bytes(8) + pad + struct.pack("<HB", 20000, ord("Z")) +
-                                     b"abc")
+    (folder / "cut.ulg").write_bytes(_cut_ulog())
     try:
         argv, rc, out, err, created = _dry_run(folder, ["--plan", "cut.ulg"])   # (_run: a 30 s alarm fails the test)
         assert rc == 2 and err.strip().splitlines() == [
