@@ -806,10 +806,12 @@ def test_a_study_section_of_the_wrong_type_is_refused(folder, text, message, mon
 
 
 @pytest.mark.parametrize("manifest,what", [
-    ("{}", "no 'study' (the study's name)"), ("[]", "not a JSON object"),
+    ("{}", "no 'study' (a string, the study's name)"), ("[]", "not a JSON object"),
+    ('{"study": 3, "fingerprint": "f", "doc": {}}', "'study' = 3 is invalid; valid: a string, the study's name)"),
+    ('{"study": "s", "fingerprint": "f", "doc": [1]}', "'doc' = [1] is invalid; valid: a JSON object, the study)"),
     ('{"study": "s", "fingerprint": "f", "doc": {}}', "its study: study 's' varies nothing"),
     ('{"study": "s", "fingerprint": "f", "doc": {"study": null}}', None),
-], ids=["{}", "[]", "doc {}", "doc's study null"])
+], ids=["{}", "[]", "study 3 (was: no 'study')", "doc a list", "doc {}", "doc's study null"])
 def test_a_damaged_sweep_manifest_is_refused_naming_it(folder, manifest, what):
     d = folder / "damaged"
     d.mkdir(exist_ok=True)

@@ -132,9 +132,9 @@ def read_manifest(out_dir, flag: str = "--status") -> dict:
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ValueError(f"{str(path)!r} is not a valid sweep manifest ({exc})") from None
     # (valid JSON of another shape, {} or [] or a manifest cut to some keys, was a KeyError / TypeError traceback)
-    what = ("not a JSON object" if not isinstance(man, dict) else
-            next((f"no {key!r} ({kind})" for key, types, kind in _MANIFEST_KEYS if not isinstance(man.get(key), types)),
-                 None))
+    what = "not a JSON object" if not isinstance(man, dict) else next(
+        (_manifest_key_problem(man, key, types, kind) for key, types, kind in _MANIFEST_KEYS
+         if not isinstance(man.get(key), types)), None)
     if what:
         raise ValueError(f"{str(path)!r} is not a valid sweep manifest ({what}); valid: the sweep.json a dronewpt "
                          "sweep wrote")
@@ -142,8 +142,16 @@ def read_manifest(out_dir, flag: str = "--status") -> dict:
 
 
 #: the keys every reader of a manifest takes, their types and how a message names them
-_MANIFEST_KEYS = (("study", str, "the study's name"), ("fingerprint", str, "the base mission's fingerprint"),
-                  ("doc", dict, "the study as a JSON object"))
+_MANIFEST_KEYS = (("study", str, "a string, the study's name"), ("fingerprint", str, "a string, the base mission's "
+                                                                                         "fingerprint"),
+                  ("doc", dict, "a JSON object, the study"))
+
+
+def _manifest_key_problem(man: dict, key: str, types, kind: str) -> str:
+    """What is wrong with manifest key ``key``: missing, or its value (as JSON spells it) and what is valid."""
+    if key not in man:
+        return f"no {key!r} ({kind})"
+    return f"{key!r} = {json.dumps(man[key])} is invalid; valid: {kind}"
 
 
 def sweep_status(out_dir) -> SweepStatus:
