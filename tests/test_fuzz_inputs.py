@@ -27,19 +27,19 @@ import tempfile
 from pathlib import Path
 
 import pytest
-from hypothesis import HealthCheck, event, given, settings
+from hypothesis import event, given, settings
 from hypothesis import strategies as st
 
 from mission_sim import config as mconfig
-from test_fuzz_cli import _WORK, SUBPARSERS, _run, _stub, _temporaries
+from test_fuzz_cli import FUZZ as CLI_FUZZ
+from test_fuzz_cli import _WORK, SUBPARSERS, _check_outcome, _run, _stub, _temporaries
 
 ROOT = Path(__file__).resolve().parents[1]
 MISSIONS = ROOT / "tests" / "data" / "missions"
 LOGS = ROOT / "tests" / "data" / "flightlogs"
 #: ``DRONEWPT_FUZZ_SCALE=N``: N times the draws, random ones (a search by hand); CI: the same draws every run
 SCALE = int(os.environ.get("DRONEWPT_FUZZ_SCALE", "1"))
-FUZZ = settings(deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
-                derandomize=SCALE == 1)
+FUZZ = settings(CLI_FUZZ, derandomize=SCALE == 1)   # test_fuzz_cli's settings, at random when scaled
 
 
 def _n(k: int) -> int:
@@ -112,21 +112,14 @@ def _spellings(token: str) -> set[str]:
 
 
 def _check(argv, rc, out, err, allowed=(0, 2, 3, "reached"), names=()):
-    """The outcome rules of the module docstring; ``names``: more spellings that count as naming the bad value
-    (a file's name)."""
-    assert "Traceback" not in err and "Traceback" not in out, (argv, err)
-    assert rc in allowed, (argv, rc, err)
-    if rc == 2:
-        lines = err.strip().splitlines()
-        assert len(lines) == 1, (argv, err)
-        assert lines[0].startswith("dronewpt"), (argv, err)
-        msg = lines[0].split(": error: ", 1)[-1]
-        if msg.startswith("the following arguments are required: "):   # argparse's, naming what is missing
-            return
-        spellings = {s for t in argv[1:] for s in _spellings(t)} | set(names)
-        sp = SUBPARSERS.get(argv[0])   # an option the command needs and was not given, named
-        spellings |= {o for o in (sp._option_string_actions if sp else ()) if o.startswith("--") and o not in argv}
-        assert any(s in msg for s in spellings), ("names no token of the command line", argv, lines[0])
+    """test_fuzz_cli's outcome rules (no traceback, an allowed status, one ``dronewpt`` line) with this file's naming
+    rule: the message names a token of the command line (``names``: more spellings that count, a file's name)."""
+    spellings = {s for t in argv[1:] for s in _spellings(t)} | set(names)
+    sp = SUBPARSERS.get(argv[0])   # an option the command needs and was not given, named
+    spellings |= {o for o in (sp._option_string_actions if sp else ()) if o.startswith("--") and o not in argv}
+    _check_outcome(argv, rc, out, err, allowed, names_it=lambda msg: (
+        msg.startswith("the following arguments are required: ")   # argparse's, naming what is missing
+        or any(s in msg for s in spellings)))
 
 
 # ----------------------------------------------------------------------------- 1. command lines
@@ -790,10 +783,23 @@ def test_a_complex_item_whose_tables_are_not_objects_is_refused(folder):
                                            "valid: a JSON object {...}"), err
 
 
+@pytest.mark.parametrize("value,text", [(5, "5"), (None, "null")])
+def test_a_generated_item_that_is_not_an_object_is_said_like_the_tables(folder, value, text):
+    """A corridor scan's generated item that is not a JSON object: the wording of ``_json_object`` (it said
+    ``... is not a JSON object``, a second wording of the same check); null is refused too."""
+    doc = json.loads(_survey_plan())
+    doc["mission"]["items"][2]["TransectStyleComplexItem"]["Items"][0] = value
+    (folder / "c.plan").write_text(json.dumps(doc))
+    argv, rc, out, err, created = _dry_run(folder, ["--plan", "c.plan"])
+    assert rc == 2 and err.strip() == (f"dronewpt mission: error: c.plan: item 2 (CorridorScan), generated item 0={text}"
+                                       " is invalid; valid: a JSON object {...}"), err
+
+
 @pytest.mark.parametrize("text,message", [
-    ("grid = 3\n", "[grid] = 3 is invalid; valid: a table, [grid] and its keys"),
-    ("monte_carlo = 2\n", "[monte_carlo] = 2 is invalid; valid: a table, [monte_carlo] and its keys"),
-    ("[monte_carlo]\nn = 3\nparams = 2\n", "[monte_carlo] params = 2 is invalid; valid: a table, [monte_carlo.params]"),
+    ("grid = 3\n", "[grid] = 3 is invalid; valid type: table ([grid] and its keys)"),
+    ("monte_carlo = 2\n", "[monte_carlo] = 2 is invalid; valid type: table ([monte_carlo] and its keys)"),
+    ("[monte_carlo]\nn = 3\nparams = 2\n",
+     "[monte_carlo] params = 2 is invalid; valid type: table ([monte_carlo.params])"),
     ("[study]\nbase = 3\n[grid]\npolicy = [\"step\"]\n", "[study] base = 3 is invalid; valid: a mission TOML's path"),
 ], ids=["grid = 3", "monte_carlo = 2", "params = 2", "base = 3"])
 def test_a_study_section_of_the_wrong_type_is_refused(folder, text, message, monkeypatch):

@@ -139,8 +139,7 @@ def read_plan(path) -> RawMission:
 
 
 def _simple(it, where: str, name: str) -> MissionItem:
-    if not isinstance(it, dict):
-        raise ValueError(f"{name}: {where} is not a JSON object")
+    _json_object(it, f"{name}: {where}", absent_ok=False)
     params = it.get("params")
     if not isinstance(params, list) or len(params) != 7:
         raise ValueError(f"{name}: {where}: params={params!r} is invalid; valid: 7 numbers (p1..p4, lat, lon, alt)")
@@ -182,10 +181,10 @@ def _plan_item(it, where: str, name: str) -> list[MissionItem]:
                      "from QGroundControl after the survey was generated")
 
 
-def _json_object(value, what: str) -> dict:
-    """``value`` (absent, null: ``{}``) when it is a JSON object; else ``ValueError`` naming ``what`` and the value as the
-    file spells it (a ``true`` or a list there was an AttributeError traceback)."""
-    if value is None or value == {}:
+def _json_object(value, what: str, absent_ok: bool = True) -> dict:
+    """``value`` (absent, null: ``{}`` when ``absent_ok``) when it is a JSON object; else ``ValueError`` naming ``what``
+    and the value as the file spells it (a ``true`` or a list there was an AttributeError traceback)."""
+    if absent_ok and (value is None or value == {}):
         return {}
     if not isinstance(value, dict):
         raise ValueError(f"{what}={json.dumps(value)[:60]} is invalid; valid: a JSON object {{...}}")
