@@ -25,7 +25,8 @@ from wpt_receiver.coupling import NOMINAL_GAP_M
 from .world.battery import BatteryParams, CcCvParams
 from .world.power import DroneParams
 from .validation import (ALT_RANGE, CRUISE_ALTITUDE_RANGE, HOLD_RANGE, HOVER_GAP_RANGE, PAD_RADIUS_RANGE,
-                         SPEED_RANGE, Range, check_number_fields, check_positive, check_range, read_toml_file)
+                         SPEED_RANGE, Range, check_number_fields, check_positive, check_range, check_table,
+                         read_toml_file)
 from .world.wind import WindParams
 
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
@@ -457,8 +458,7 @@ def _coerce(section: str, cls, name: str, value):
 
 
 def _build(section: str, cls, d):
-    if not isinstance(d, dict):
-        raise ValueError(f"{section}={d!r} is invalid; valid type: table")
+    check_table(section, d)
     names = {f.name for f in fields(cls)}
     for k in d:
         if k not in names:
@@ -480,8 +480,7 @@ def _build(section: str, cls, d):
 
 def config_from_dict(d: dict) -> MissionConfig:
     """Validated :class:`MissionConfig` from a plain dict (as parsed from TOML)."""
-    if not isinstance(d, dict):
-        raise ValueError(f"config={d!r} is invalid; valid type: table")
+    check_table("config", d)
     valid = {"seed", "pads", "waypoints", *_SECTIONS}
     for k in d:
         if k not in valid:
@@ -633,8 +632,7 @@ def apply_overrides(d: dict, overrides: dict) -> dict:
         if parts[1] not in names:
             raise ValueError(f"override key {key!r} is invalid; valid keys of [{parts[0]}]: {', '.join(sorted(names))}")
         section = out.setdefault(parts[0], {})
-        if not isinstance(section, dict):  # the config file gave a value where the table belongs
-            raise ValueError(f"{parts[0]}={section!r} is invalid; valid type: table")
+        check_table(parts[0], section)   # the config file gave a value where the table belongs
         section[parts[1]] = value
     return out
 

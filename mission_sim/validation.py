@@ -12,7 +12,7 @@ from pathlib import Path
 
 __all__ = ["check_positive", "read_toml_file", "Range", "check_range", "check_regular_file", "shown", "real_array",
            "real_number", "check_number", "check_number_fields", "YAML_NUMBER_NOTE", "SEED_RANGE", "seed_range",
-           "check_first_seed"]
+           "check_first_seed", "check_table"]
 
 
 @dataclass(frozen=True)
@@ -144,6 +144,15 @@ def check_number(key: str, value, rng: Range, note: str = ""):
 #: the annotations of a dataclass's number fields (``from __future__ import annotations``: strings) -> the type
 #: a message asks for
 _NUMBER_FIELDS = {"float": "number", "int": "integer", "float | None": "number", "int | None": "integer"}
+
+
+def check_table(name: str, value, hint: str = "", eq: str = "=") -> dict:
+    """``value`` when it is a table (a dict); else ``ValueError("<name>=<value> is invalid; valid type: table
+    (<hint>)")``: the one wording of a config file's, a study's or an override's section that is not a table
+    (``eq``: how the file spells the assignment, ``" = "`` in a study's ``[grid] = 3``)."""
+    if not isinstance(value, dict):
+        raise ValueError(f"{name}{eq}{shown(value)} is invalid; valid type: table" + (f" ({hint})" if hint else ""))
+    return value
 
 
 def check_number_fields(obj, prefix: str = "") -> None:

@@ -174,14 +174,17 @@ def _temporaries(folder: Path) -> list[str]:
     return [str(p) for p in folder.rglob("*") if ".tmp" in p.name or p.name.startswith(".dronewpt-write-test")]
 
 
-def _check_outcome(argv, rc, out, err, allowed=(0, 2, 3, "reached")):
+def _check_outcome(argv, rc, out, err, allowed=(0, 2, 3, "reached"), names_it=None):
+    """No traceback, an allowed exit status, and for 2 one ``dronewpt`` line whose message names what was bad:
+    ``names_it(message)`` is true (default: it matches :data:`NAMES_SOMETHING`)."""
     assert "Traceback" not in err and "Traceback" not in out, (argv, err)
     assert rc in allowed, (argv, rc, err)
     if rc == 2:
         lines = err.strip().splitlines()
         assert len(lines) == 1, (argv, err)
         assert lines[0].startswith("dronewpt"), (argv, err)
-        assert NAMES_SOMETHING.search(lines[0].split("error:", 1)[-1]), (argv, lines[0])
+        msg = lines[0].split("error:", 1)[-1].strip()
+        assert (names_it or NAMES_SOMETHING.search)(msg), ("names nothing", argv, lines[0])
 
 
 @pytest.fixture(scope="module")
@@ -366,6 +369,13 @@ SHORT_KEYS = {"wind.speed_m_s", "wind.gust_sigma_m_s", "battery.initial_soc", "b
               "mission.cruise_speed_m_s", "link.r2_ohm", "battery.n_series", "drone.avionics_w"}
 
 
+#: the alarm of a short-mission draw: there only to catch a hang (which never ends), so far above the slowest
+#: honest draw. That draw is the first one, with empty caches (a changed loop source invalidates numba's): it compiles
+#: the loop and the policy kernels and builds the link tables, 51.3 s of CPU on a quiet machine (11.1 s with numba's
+#: cache warm, 1.0 s with both warm; 2026-11-27). The former 60 s tripped once at load ~5 (2 workers on 2 cores).
+SHORT_MISSION_ALARM_S = 600
+
+
 @settings(FUZZ, max_examples=12)
 @given(values=st.lists(st.sampled_from([(s, n, r) for s, n, r in SCHEMA if f"{s}.{n}" in SHORT_KEYS])
                        .flatmap(lambda t: st.tuples(st.just(f"{t[0]}.{t[1]}"), _numbers(t[2]))), max_size=3),
@@ -378,7 +388,7 @@ def test_fuzzed_short_missions_run_or_fail_in_one_line(folder, values, policy):
             "--policy", policy, *_set_args((k, repr(v) if isinstance(v, float) and math.isfinite(v) else
                                             ("nan" if v != v else "inf" if v == math.inf else "-inf"
                                              if v == -math.inf else str(v))) for k, v in values)]
-    rc, out, err = _run(argv, folder, timeout_s=60)
+    rc, out, err = _run(argv, folder, timeout_s=SHORT_MISSION_ALARM_S)
     _check_outcome(argv, rc, out, err, allowed=(0, 2, 3))
     if rc in (0, 3):
         s = json.loads(out)

@@ -67,8 +67,13 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     """Run one command (``argv``: the arguments, None for ``sys.argv[1:]``) and return its exit status."""
     from ..signals import interrupts_raised
+    from .common import forget_created_dirs, remove_created_dirs
+    forget_created_dirs()
     with interrupts_raised():  # SIGTERM like Ctrl-C: temporary files removed, one line, 143 (130 for SIGINT)
-        return _main(argv)
+        rc = _main(argv)
+    if rc == 2:   # refused: an output folder made before the refusal is removed again (when still empty)
+        remove_created_dirs()
+    return rc
 
 
 def console_main() -> int:

@@ -126,7 +126,7 @@ def parse_set(items, flag: str = "--set"):
     import tomllib
     out = {}
     for item in items or ():
-        if "=" not in item:
+        if "=" not in item or not item.split("=", 1)[0].strip():   # (no key: "override key '' is invalid")
             raise CliError(f"{flag} {item!r} is invalid; valid form: KEY=VALUE (e.g. "
                            f"{'n_steps=200' if flag == '--env' else 'battery.capacity_ah=2.0'})")
         key, text = item.split("=", 1)
@@ -271,13 +271,53 @@ def figures_out(args, default: str) -> Path:
     return Path(default) if args.out is None else args.out
 
 
+#: the folders :func:`prepare_out_dir` created in this command, outermost first: a command refused afterwards (exit
+#: status 2) removes those still empty (:func:`remove_created_dirs`), so that a refused input leaves nothing behind
+_CREATED: list[Path] = []
+
+
+def forget_created_dirs() -> None:
+    """A new command starts: no folder created yet (:data:`_CREATED`)."""
+    _CREATED.clear()
+
+
+def remove_created_dirs() -> None:
+    """Remove the folders this command created (:func:`prepare_out_dir`) that are still empty, innermost first; a
+    folder holding anything stays. For a refused command: a check after the output folder was made (a log without
+    battery data, a bad ``--policy`` after ``telemetry --tlog DIR/x.tlog``) left it behind, empty."""
+    while _CREATED:
+        try:
+            _CREATED.pop().rmdir()
+        except OSError:   # not empty, gone, not ours to remove: left as it is
+            pass
+
+
+def _make_dirs(path: Path) -> None:
+    """``mkdir -p path``, recording in :data:`_CREATED` only the folders this call made: each missing level is made
+    with a plain ``mkdir`` (no ``exist_ok``), outermost first, and recorded only when that call succeeded. A level
+    that exists, or that appears meanwhile (another run made it: ``FileExistsError``), is not ours and is never
+    removed. The levels are the path as spelled, ``..`` included: ``new/../keep_me`` makes ``new`` (recorded) and
+    then finds ``new/..`` and ``new/../keep_me`` existing (not recorded). (Recording every level missing before one
+    ``mkdir(parents=True)`` recorded ``new/..`` and ``new/../keep_me`` too, and a refused command then removed the
+    user's empty ``keep_me``.)"""
+    for level in (*reversed(path.parents), path):
+        if level.name in ("", ".", "..") or level.is_dir():
+            continue   # the root, '.', '..': never made here; an existing folder: not ours
+        try:
+            level.mkdir()
+        except FileExistsError:
+            continue   # made meanwhile by someone else (or a file: the next level or the probe says so)
+        _CREATED.append(level)
+
+
 def prepare_out_dir(path, flag: str = "--out") -> Path:
     """Create the output folder ``path`` now, before any simulation, and check that files can be
     written there; ``CliError`` naming the flag and the path otherwise (a file in its place, no
-    permission, a read-only file system)."""
+    permission, a read-only file system). The folders it creates are removed again if the command is refused
+    later (:func:`remove_created_dirs`)."""
     path = check_out_dir(path, flag)
     try:
-        path.mkdir(parents=True, exist_ok=True)
+        _make_dirs(path)
         probe = path / f".dronewpt-write-test.{os.getpid()}"
         probe.write_bytes(b"")
         probe.unlink()

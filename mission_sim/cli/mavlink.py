@@ -22,6 +22,7 @@ from .common import (
     show_progress,
     write_mission,
 )
+from .mission import say_pads_note
 
 #: the file ``replay`` (without ``--pads``) writes its summary to, last (present = complete), under ``--out``; the one
 #: spelling (``replay --pads``'s: :data:`mission_sim.cli.refly.REFLY_SUMMARY`)
@@ -65,10 +66,10 @@ def _mav_config(args, overrides=None, single_pad=False):
         from ..config import check_file_route_keys
         check_file_route_keys(args.config, cfg, file_keys, given)   # (--set's and the file's own: a route flies its
         # own heights; replay's single pad flies the log)
-        from .mission import default_pads_notice
-        args.pads_noted = default_pads_notice(getattr(args, "command", "telemetry"), getattr(args, "plan", None),
-                                              getattr(args, "mission_pads", None), d, given,
-                                              "a config file with your own [[pads]]", cfg)
+        from .mission import default_pads_notice, note_pads
+        note_pads(args, default_pads_notice(getattr(args, "command", "telemetry"), getattr(args, "plan", None),
+                                            getattr(args, "mission_pads", None), d, given,
+                                            "a config file with your own [[pads]]", cfg))   # said after the checks
     return cfg
 
 
@@ -363,6 +364,7 @@ def _cmd_telemetry(args) -> int:
     check_run_size(cfg, force=args.force, frame=True)   # the stream needs the whole series in memory
     policy = _mav_policy(cfg, args.policy)
     conn = _open_link(connect, args)                    # refused, port taken: said before the simulation
+    say_pads_note(args)
     try:
         traj = plan_mission(cfg)
         res = run_mission(cfg, policy, trajectory=traj, progress=show_progress(args),   # cfg's own route
@@ -426,6 +428,7 @@ def _cmd_telemetry_follow(args, connect, home) -> int:
     except BaseException:
         vin.close()
         raise
+    say_pads_note(args)
     from ..world.runner import run_mission
     try:
         st = follow.follow(args.follow, cfg, policy, run_mission, out_conn=out,

@@ -150,26 +150,41 @@ def mission_config(args):
     cfg = mconfig.config_from_dict(mconfig.apply_overrides(d, overrides) if overrides else d)
     mconfig.check_file_route_keys(args.config, cfg, file_keys, given)   # (--set's and the file's own: a route flies
     # its own heights)
-    args.pads_noted = (not getattr(args, "no_charge", False)   # (pads never energised: nothing to say about them)
-                       and default_pads_notice(getattr(args, "command", "mission"), getattr(args, "plan", None),
-                                               getattr(args, "pads", None), d, overrides,
-                                               "--no-charge to fly it without charging", cfg))
+    note_pads(args, None if getattr(args, "no_charge", False) else   # (pads never energised: nothing to say)
+              default_pads_notice(getattr(args, "command", "mission"), getattr(args, "plan", None),
+                                  getattr(args, "pads", None), d, overrides, "--no-charge to fly it without charging",
+                                  cfg))
     check_run_size(cfg, force=getattr(args, "force", False))
     return cfg
 
 
-def default_pads_notice(command: str, plan, pads, d: dict, overrides: dict, none_hint: str, cfg=None) -> bool:
+def note_pads(args, note: str | None) -> None:
+    """Keep :func:`default_pads_notice`'s ``note`` for :func:`say_pads_note`; ``args.pads_noted``: there is one (the
+    run then skips its own warnings about unreached pads)."""
+    args.pads_note, args.pads_noted = note, note is not None
+
+
+def say_pads_note(args) -> None:
+    """Print the note kept by :func:`note_pads`, once, when every input has been checked: a refused input is one
+    line (a bad ``--policy``, a run too large, an unwritable ``--out`` after the note gave two)."""
+    note = getattr(args, "pads_note", None)
+    if note is not None:
+        print(note, file=sys.stderr)
+        args.pads_note = None
+
+
+def default_pads_notice(command: str, plan, pads, d: dict, overrides: dict, none_hint: str, cfg=None) -> str | None:
     """``--plan`` without ``--pads`` (and no pads of the user's: a config's ``[[pads]]`` or ``pads_file``, a ``--set
-    pads.*``): one line on stderr saying the built-in mission's pads are kept, about the plan's home, which of them
-    the plan's route charges at (``cfg``'s, :func:`mission_sim.setup_warnings.energised_pads`: the run's own
+    pads.*``): the one line for stderr saying the built-in mission's pads are kept, about the plan's home, which of
+    them the plan's route charges at (``cfg``'s, :func:`mission_sim.setup_warnings.energised_pads`: the run's own
     warnings about unreached pads would repeat it; the caller skips them) and how to give one's own or none
-    (``none_hint``). True when it printed the line."""
+    (``none_hint``); None when there is nothing to say. Printed by :func:`say_pads_note` after the checks."""
     if plan is None or pads is not None or any(str(k).startswith("pads.") for k in overrides):
-        return False
+        return None
     from ..config import DEFAULT_MISSION_TOML
     default = tomllib.loads(DEFAULT_MISSION_TOML)["pads"]
     if d.get("pads") != default:
-        return False
+        return None
     where = " and ".join(f"({p.get('x_m', 0.0):g}, {p.get('y_m', 0.0):g})" for p in default)
     reached = ""
     if cfg is not None:
@@ -177,11 +192,9 @@ def default_pads_notice(command: str, plan, pads, d: dict, overrides: dict, none
         hit = sorted(energised_pads(cfg))
         reached = ("; the plan's route charges at none of them" if not hit else "" if len(hit) == len(default) else
                    f"; the plan's route charges at pad {', '.join(map(str, hit))} only")
-    print(f"dronewpt {command}: note: --plan without --pads keeps the built-in mission's {len(default)} pads, at "
-          f"{where} m about the plan's home{reached} (a loiter within mission.pad_radius_m of one charges there); "
-          f"give your own with --pads FILE (CSV lat,lon[,alt][,hover_time_s] or GeoJSON), or {none_hint}",
-          file=sys.stderr)
-    return True
+    return (f"dronewpt {command}: note: --plan without --pads keeps the built-in mission's {len(default)} pads, at "
+            f"{where} m about the plan's home{reached} (a loiter within mission.pad_radius_m of one charges there); "
+            f"give your own with --pads FILE (CSV lat,lon[,alt][,hover_time_s] or GeoJSON), or {none_hint}")
 
 
 def make_policy(name: str, cfg):
@@ -225,8 +238,10 @@ def _checked_run(args, started, worker) -> int:
         est = estimate_run(cfg)
         stored_every_s(args.every, est)   # --every checked (and a default thinning said) as the run does
         check_out_dir(args.out)   # a file in --out's place refused as the run refuses it (nothing created)
+        say_pads_note(args)
         return _print_estimate(est, args)
     prepare_out_dir(args.out)
+    say_pads_note(args)   # (every input checked: a refused one is one line)
     jit = not (aot.enable() and aot.covers(aot.policy_entry(pol)))   # else no numba (mission_sim.world.aot)
     if jit:
         prepare()   # numba's start-up without importing the scipy.linalg package (~0.3 s)

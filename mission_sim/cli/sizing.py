@@ -118,10 +118,11 @@ def _mission_rows(args, base):
 
     import policies
 
-    from .mission import mission_config
+    from .mission import mission_config, say_pads_note
     names = _names(args, policies.available(), "step,ramp,model_based")
     args.set = [*args.set, f"link.devices={base.name}"]
     cfg = mission_config(args)
+    say_pads_note(args)
     return [_size_mission(name, cfg, base, args)
             for name in tqdm(names, desc="sizing missions", disable=not show_progress(args), file=sys.stderr)]
 

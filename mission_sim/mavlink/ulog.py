@@ -27,6 +27,7 @@ table and counted in ``bad_frames``. Epoch time comes from the GPS (time_utc_use
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -158,13 +159,55 @@ def _t0_epoch_s(top: _Topics) -> float:
     return float(g["time_utc_usec"].iloc[i] * 1e-6 - g["t_s"].iloc[i])
 
 
+#: the pyulog version ``CutSafeULog`` was tested with (its private ``ULog._check_packet_corruption(header)`` and
+#: ``ULog._file_handle``). Upstream: PX4/pyulog PR #31 (2018, merged) added the corruption check and the rewind to
+#: just after a corrupt header that loops here; PR #32 proposed the same rewind (closed for #31); PR #44 (2019, merged)
+#: added the sync-message recovery beside it.
+PYULOG_TESTED = "1.3.0"
+
+
+@functools.cache
+def _ulog_class():
+    """pyulog's ``ULog``, except that a corrupt message header whose message runs past the end of the file ends the
+    parse: in the definitions section pyulog (1.3) then seeks back 2 + the header's size, more than it read, and
+    re-reads the same bytes forever (a truncated log with a flipped byte hung ``replay`` / ``mission --plan``).
+
+    The override hooks pyulog's private internals (:data:`PYULOG_TESTED`), so a pyulog that renamed them must not
+    pass silently (the hang back, caught only by a test's alarm): without ``_check_packet_corruption`` this returns
+    plain ``ULog`` and says so in a ``RuntimeWarning``; without ``_file_handle`` the override raises, and the log is
+    reported unreadable naming it (``tests/test_fuzz_inputs.py`` asserts the override runs on a cut log)."""
+    import os
+    import warnings
+    from importlib.metadata import version
+
+    from pyulog import ULog
+
+    if not callable(getattr(ULog, "_check_packet_corruption", None)):
+        warnings.warn(f"pyulog {version('pyulog')} has no ULog._check_packet_corruption (pyulog "
+                      f"{PYULOG_TESTED} had): a ULog cut after a corrupt message header may hang; reading ULogs "
+                      "with plain pyulog", RuntimeWarning, stacklevel=2)
+        return ULog
+
+    class CutSafeULog(ULog):
+        def _check_packet_corruption(self, header):
+            corrupt = super()._check_packet_corruption(header)
+            fh = getattr(self, "_file_handle", None)
+            if fh is None:
+                raise RuntimeError(f"pyulog {version('pyulog')} has no ULog._file_handle (pyulog "
+                                   f"{PYULOG_TESTED} had); dronewpt's CutSafeULog needs it")
+            if corrupt and fh.tell() >= os.fstat(fh.fileno()).st_size:   # at the end: nothing left to resync on
+                return False   # (pyulog then skips the message: the end of the file)
+            return corrupt
+    return CutSafeULog
+
+
 def read_ulog(path) -> FlightLog:
     """Read a PX4 ULog into a :class:`FlightLog`; a pyulog failure is reported in ``errors``."""
-    from pyulog import ULog
+    ulog = _ulog_class()
     path = Path(path)
     try:
         with open(path, "rb") as fh:   # (given a name, pyulog left its file open when the parse failed: a ResourceWarning)
-            top = _Topics(ULog(fh))
+            top = _Topics(ulog(fh))
     except Exception as exc:  # noqa: BLE001 -- untrusted bytes: report what failed
         empty = clean_time(pd.DataFrame(), POSITION_COLUMNS)
         return FlightLog(path=path, kind="ulog", t0_epoch_s=float("nan"), duration_s=0.0, position=empty,

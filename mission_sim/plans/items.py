@@ -145,8 +145,7 @@ def read_plan(path) -> RawMission:
 
 
 def _simple(it, where: str, name: str) -> MissionItem:
-    if not isinstance(it, dict):
-        raise ValueError(f"{name}: {where} is not a JSON object")
+    _json_object(it, f"{name}: {where}", absent_ok=False)
     params = it.get("params")
     coord = it.get("coordinate")
     if isinstance(params, list) and len(params) == 4 and coord is not None:
@@ -179,16 +178,16 @@ def _plan_item(it, where: str, name: str) -> list[MissionItem]:
     if kind != "ComplexItem":
         raise ValueError(f"{name}: {where}: type={kind!r} is invalid; valid: SimpleItem, ComplexItem")
     ctype = it.get("complexItemType", "?")
-    tsc = it.get("TransectStyleComplexItem") or {}
+    tsc = _json_object(it.get("TransectStyleComplexItem"), f"{name}: {where} ({ctype}): TransectStyleComplexItem")
     sub = tsc.get("Items") or it.get("Items") or it.get("items")
     if isinstance(sub, list) and sub:
         return [_simple(s, f"{where} ({ctype}), generated item {j}", name) for j, s in enumerate(sub)]
     if ctype == "StructureScan" and isinstance(it, dict):   # QGC saves its inputs only, never its waypoints
         return _structure_scan(it, f"{where} ({ctype})", name)
     pts = tsc.get("VisualTransectPoints")
-    cam = tsc.get("CameraCalc") or {}
+    cam = _json_object(tsc.get("CameraCalc"), f"{name}: {where} ({ctype}): CameraCalc")
     alt = cam.get("DistanceToSurface", tsc.get("Altitude"))
-    if isinstance(pts, list) and pts and isinstance(alt, (int, float)):
+    if isinstance(pts, list) and pts and isinstance(alt, (int, float)) and not isinstance(alt, bool):
         frame = 3 if cam.get("DistanceToSurfaceRelative", True) else 0
         try:
             return [MissionItem(f"{where} ({ctype}), transect point {j}", NAV_WAYPOINT, frame, (0.0,) * 4,
@@ -211,10 +210,10 @@ _SCAN_INPUTS = (("EntranceAltitude", "", ALT_RANGE), ("ScanBottomAlt", "", ALT_R
                 ("AdjustedFootprintFrontal", "CameraCalc.", Range(0.0, math.inf, "m", lo_open=True, hi_open=True)))
 
 
-def _json_object(value, what: str) -> dict:
-    """``value`` (absent, null: ``{}``) when it is a JSON object; else ``ValueError`` naming ``what`` and the value as the
-    file spells it (a ``true`` or a list there was an AttributeError traceback)."""
-    if value is None or value == {}:
+def _json_object(value, what: str, absent_ok: bool = True) -> dict:
+    """``value`` (absent, null: ``{}`` when ``absent_ok``) when it is a JSON object; else ``ValueError`` naming ``what``
+    and the value as the file spells it (a ``true`` or a list there was an AttributeError traceback)."""
+    if absent_ok and (value is None or value == {}):
         return {}
     if not isinstance(value, dict):
         raise ValueError(f"{what}={json.dumps(value)[:60]} is invalid; valid: a JSON object {{...}}")
@@ -286,6 +285,11 @@ def _structure_scan(it: dict, where: str, name: str) -> list[MissionItem]:
 
 
 # -------------------------------------------------------------------------------- .waypoints
+#: a QGC WPL row's integer fields: (column, name, range): MISSION_ITEM's seq and command (uint16), frame (uint8)
+_WPL_INTS = ((0, "index", Range(0, 65535, integer=True)), (2, "frame", Range(0, 255, integer=True)),
+             (3, "command", Range(0, 65535, integer=True)))
+
+
 def read_wpl(path) -> RawMission:
     """A ``QGC WPL 110`` text file (ArduPilot, Mission Planner, QGC); row 0 is home."""
     path = Path(path)
@@ -308,7 +312,10 @@ def read_wpl(path) -> RawMission:
             v = [float(x) for x in f]
         except ValueError:
             raise ValueError(f"{name}: line {ln}: a field is not a number: {text.strip()[:80]!r}") from None
-        rows.append((int(v[0]), int(v[3]), int(v[2]), tuple(v[4:8]), v[8], v[9], v[10]))
+        # (index, frame, command are MAVLink integers: nan gave "cannot convert float NaN to integer", naming no file,
+        #  inf an OverflowError traceback, 16.5 was taken as 16)
+        seq, frame, cmd = (check_number(f"{name}: line {ln}: {what}", v[i], rng) for i, what, rng in _WPL_INTS)
+        rows.append((seq, cmd, frame, tuple(v[4:8]), v[8], v[9], v[10]))
     if not rows or rows[0][0] != 0:
         raise ValueError(f"{name}: missing home: row 0 (the home position, AMSL) is not the first row")
     seq0, _, _, _, lat, lon, alt = rows[0]

@@ -100,8 +100,8 @@ class _Builder:
             x, y = self.x, self.y
         else:
             try:
+                GeoPoint(it.lat_deg, it.lon_deg)   # first: a latitude 1e308 made numpy warn (two more lines)
                 e, n, _ = geodetic_to_enu(it.lat_deg, it.lon_deg, home.alt_m, home)
-                GeoPoint(it.lat_deg, it.lon_deg)
             except ValueError as exc:
                 self.fail(it, str(exc))
             x, y = float(e), float(n)

@@ -128,15 +128,40 @@ def read_manifest(out_dir, flag: str = "--status") -> dict:
         raise FileNotFoundError(f"{flag} {str(out_dir)!r} is not a sweep folder (no {MANIFEST}); "
                                 "valid: the --out folder of a sweep")
     try:
-        return json.loads(path.read_text())
+        man = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ValueError(f"{str(path)!r} is not a valid sweep manifest ({exc})") from None
+    # (valid JSON of another shape, {} or [] or a manifest cut to some keys, was a KeyError / TypeError traceback)
+    what = "not a JSON object" if not isinstance(man, dict) else next(
+        (_manifest_key_problem(man, key, types, kind) for key, types, kind in _MANIFEST_KEYS
+         if not isinstance(man.get(key), types)), None)
+    if what:
+        raise ValueError(f"{str(path)!r} is not a valid sweep manifest ({what}); valid: the sweep.json a dronewpt "
+                         "sweep wrote")
+    return man
+
+
+#: the keys every reader of a manifest takes, their types and how a message names them
+_MANIFEST_KEYS = (("study", str, "a string, the study's name"), ("fingerprint", str, "a string, the base mission's "
+                                                                                         "fingerprint"),
+                  ("doc", dict, "a JSON object, the study"))
+
+
+def _manifest_key_problem(man: dict, key: str, types, kind: str) -> str:
+    """What is wrong with manifest key ``key``: missing, or its value (as JSON spells it) and what is valid."""
+    if key not in man:
+        return f"no {key!r} ({kind})"
+    return f"{key!r} = {json.dumps(man[key])} is invalid; valid: {kind}"
 
 
 def sweep_status(out_dir) -> SweepStatus:
     """Counts of the study recorded in ``out_dir/sweep.json`` against the rows stored in ``out_dir``."""
     man = read_manifest(out_dir)
-    study = parse_study(man["doc"], name=man["study"])
+    try:
+        study = parse_study(man["doc"], name=man["study"])
+    except ValueError as exc:   # (a damaged manifest's study: "varies nothing ... add parameters" named no folder)
+        raise ValueError(f"{str(Path(out_dir) / MANIFEST)!r} is not a valid sweep manifest (its study: {exc}); valid: "
+                         "the sweep.json a dronewpt sweep wrote") from None
     state = CaseStore(out_dir).state()
     ok = failed = n = 0
     for case in case_space(study, man["fingerprint"]):

@@ -78,7 +78,7 @@ from typing import Any
 
 import numpy as np
 
-from ..validation import window_ok
+from ..validation import check_table, window_ok
 from . import DEFAULT_MAX_CASES
 
 __all__ = ["Study", "Case", "CaseSpace", "Linspace", "load_study", "parse_study", "expand_cases", "case_space",
@@ -292,6 +292,8 @@ def _parse_head(head: dict, base_dir):
         raise ValueError(f"[study] allow_single = {allow_single!r} is invalid; valid: true or false")
     base_path = None
     if head.get("base") not in (None, "", "default"):
+        if not isinstance(head["base"], str):   # (base = 3 was a TypeError traceback)
+            raise ValueError(f"[study] base = {head['base']!r} is invalid; valid: a mission TOML's path (string)")
         base_path = Path(head["base"])
         if not base_path.is_absolute() and base_dir is not None:
             base_path = Path(base_dir) / base_path
@@ -311,8 +313,7 @@ def _number(v) -> bool:
 def _parse_replay(rep, base_dir) -> dict:
     """The ``[replay]`` table, checked (types and ranges; the files are read by the replay runner), its
     paths resolved against ``base_dir``."""
-    if not isinstance(rep, dict):
-        raise ValueError(f"[replay] = {rep!r} is invalid; valid: a table with log = 'flight.tlog'")
+    check_table("[replay]", rep, "[replay] with log = 'flight.tlog'", eq=" = ")
     bad = sorted(set(rep) - set(_REPLAY_KEYS))
     if bad:
         raise ValueError(f"[replay] key {bad[0]!r} is unknown; valid keys: {', '.join(_REPLAY_KEYS)}")
@@ -365,6 +366,9 @@ def parse_study(doc: dict, name: str = "study", base_dir=None) -> Study:
     if unknown:
         raise ValueError(f"study section [{unknown[0]}] is unknown; valid sections: "
                          + ", ".join(f"[{s}]" for s in _SECTIONS))
+    for sec in ("study", "fixed", "grid", "monte_carlo", "report"):   # ([replay]: its own message below)
+        if sec in doc:   # (grid = 3 was an AttributeError traceback)
+            check_table(f"[{sec}]", doc[sec], f"[{sec}] and its keys", eq=" = ")
     head, base_path, runner, allow_single = _parse_head(doc.get("study", {}), base_dir)
     replay = None
     if "replay" in doc:
@@ -380,6 +384,7 @@ def parse_study(doc: dict, name: str = "study", base_dir=None) -> Study:
     bad = sorted(set(mc) - {"n", "seed", "params"})
     if bad:
         raise ValueError(f"[monte_carlo] key {bad[0]!r} is unknown; valid keys: n, seed, params")
+    check_table("[monte_carlo] params", mc.get("params", {}), "[monte_carlo.params]", eq=" = ")
     mc_params = {k: _distribution(k, v) for k, v in _flatten(mc.get("params", {}), "", "monte_carlo.params").items()}
     mc_n = mc.get("n", 1 if mc_params else 0)
     if isinstance(mc_n, bool) or not isinstance(mc_n, int) or mc_n < 0 or (mc_params and mc_n < 1):

@@ -44,10 +44,11 @@ def worst_cases(out_dir, metric: str = "peak_i2_a", base: dict | None = None) ->
     fingerprint when given. ``ValueError`` naming the folder when it holds no sweep, no ok rows, no
     ``metric`` column, or was run on another base mission or with a custom case runner."""
     man = read_manifest(out_dir, "--sweep")
-    if man.get("doc", {}).get("study", {}).get("runner"):
-        raise ValueError(f"sweep {str(out_dir)!r} ran a custom case runner ({man['doc']['study']['runner']}); "
+    head = man["doc"].get("study")   # (a damaged manifest's "study": null was an AttributeError traceback)
+    if isinstance(head, dict) and head.get("runner"):
+        raise ValueError(f"sweep {str(out_dir)!r} ran a custom case runner ({head['runner']}); "
                          "valid: a sweep of missions")
-    if man.get("doc", {}).get("replay"):   # (said "ran on base mission ...; valid: the study's base mission")
+    if man["doc"].get("replay"):   # (said "ran on base mission ...; valid: the study's base mission")
         raise ValueError(f"sweep {str(out_dir)!r} replayed a flight log ([replay] section), its cases are not "
                          "missions to re-run; valid: a sweep of missions")
     if base is not None and base_fingerprint(base) != man["fingerprint"]:
