@@ -757,7 +757,7 @@ def test_a_cut_ulog_with_a_corrupt_header_does_not_hang(folder):
     try:
         argv, rc, out, err, created = _dry_run(folder, ["--plan", "cut.ulg"])   # (_run: a 30 s alarm fails the test)
         assert rc == 2 and err.strip().splitlines() == [
-            "dronewpt mission: error: cut.ulg: no flown track: 0 usable position(s) (GPS fix >= 3) while armed"], err
+            "dronewpt mission: error: cut.ulg: no flown track: 0 usable position(s) (GPS fix >= 3)"], err   # (no armed state read)
     finally:
         (folder / "cut.ulg").unlink()
 
