@@ -259,10 +259,17 @@ def test_a_log_that_starts_in_the_air_is_about_the_ground_it_lands_on():
     assert 9.5 < max(w["z_m"] for w in route) < 10.5
 
 
-def test_a_log_that_starts_in_the_air_flies_its_route_as_documented(tmp_path):
-    """docs/changes.md's number for the px4-ulog-rs flight's flown route: 41.2 s (the reviewer found 41.8 s written)."""
+def test_a_log_that_starts_in_the_air_flies_its_route_as_documented(tmp_path, capsys):
+    """docs/changes.md's number for the px4-ulog-rs flight's flown route: 41.2 s (the reviewer found 41.8 s written);
+    and `mission --plan LOG` says its home moved to the landing (426.37 m, not the first fix's 432.05 m), with replay's
+    warning, one text (mavlink.takeoff.starts_airborne_warning): it said nothing (review of the night's merge)."""
     from mission_sim.cli import main
+    from mission_sim.mavlink.takeoff import starts_airborne_warning
     assert main(["mission", "--plan", str(log_path(PX4_ESC)), "--no-plot", "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    text = starts_airborne_warning(read_log(log_path(PX4_ESC)))
+    assert "starts armed 7.1 m above where its first flight ends" in text and "mission --plan" in text
+    assert err.count(text) == 1, err
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["sim_time_s"] == pytest.approx(41.2, abs=0.05)
     assert "flown route is 41.2 s at ~10 m" in (Path(__file__).resolve().parents[1] / "docs" / "changes.md").read_text()

@@ -30,7 +30,8 @@ from .geodesy import GeoPoint, geodetic_to_enu
 from .flightlog import (LogParseError, NoPositionError, _fmt_counts, _no_position,  # noqa: F401 (re-exported)
                         check_decoded)
 from .logs import FlightLog, read_log
-from .takeoff import STARTS_AIRBORNE_M, _airborne_start, default_pad  # noqa: F401 (one source: takeoff.py)
+from .takeoff import (  # noqa: F401 (one source: takeoff.py)
+    STARTS_AIRBORNE_M, _airborne_start, default_pad, starts_airborne_warning)
 
 __all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "with_ground_gap", "flight_stats",
            "logged_energy_j", "compare_power", "fit_mass_kg", "resample_track", "replay_trajectory", "ReplayResult", "replay_log", "parse_window",
@@ -432,13 +433,9 @@ def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
                    "truncated log? the replay covers only what was recorded")
     if log.errors:
         out.append(f"{log.path.name}: reading stopped early: {log.errors[0]}")
-    start = _airborne_start(log)
-    if start is not None:
-        t0, t1 = (float(log.position["t_s"].iloc[k]) for k in start[:2])
-        out.append(f"{log.path.name}: the log starts armed {start[2]:.1f} m above where its first flight ends (its "
-                   f"first armed position at {t0:.1f} s against its last before the disarm, at {t1:.1f} s): logging "
-                   "began in the air, or the vehicle landed lower than it took off; heights are about that landing "
-                   "spot, the default pad; give --pad=LAT,LON,ALT for another")
+    airborne = starts_airborne_warning(log)
+    if airborne is not None:
+        out.append(airborne)
     if not np.any(track.armed):
         out.append(f"{log.path.name}: the vehicle never armed in the replayed part: the track is marked NOT FLOWN "
                    "(its distance and height are GPS drift on the ground; nothing here was a flight)")

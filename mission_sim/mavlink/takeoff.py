@@ -12,7 +12,7 @@ import numpy as np
 from .flightlog import FlightLog, _no_position
 from .geodesy import GeoPoint
 
-__all__ = ["STARTS_AIRBORNE_M", "default_pad"]
+__all__ = ["STARTS_AIRBORNE_M", "default_pad", "starts_airborne_warning"]
 
 STARTS_AIRBORNE_M = 5.0   # a log that starts armed this much above where its first flight's disarm is started in the air
 LANDED_GAP_S = 5.0        # the last position of the first armed period must be this close to its disarm (on the ground)
@@ -43,6 +43,21 @@ def _airborne_start(log: FlightLog):
     alt = pos["alt_m"].to_numpy(float)
     drop = float(alt[first[0]] - alt[first[-1]])
     return (int(first[0]), int(first[-1]), drop) if drop > STARTS_AIRBORNE_M else None
+
+
+def starts_airborne_warning(log: FlightLog) -> str | None:
+    """The one warning (one source: ``replay`` / ``calibrate``'s :func:`mission_sim.mavlink.replay.replay_warnings` and
+    ``mission --plan LOG``'s :func:`mission_sim.plans.items.flown_mission`) for a log whose take-off spot
+    :func:`default_pad` moved to where its first flight ends (:func:`_airborne_start`); None when it did not."""
+    start = _airborne_start(log)
+    if start is None:
+        return None
+    t0, t1 = (float(log.position["t_s"].iloc[k]) for k in start[:2])
+    return (f"{log.path.name}: the log starts armed {start[2]:.1f} m above where its first flight ends (its first "
+            f"armed position at {t0:.1f} s against its last before the disarm, at {t1:.1f} s): logging began in the "
+            "air, or the vehicle landed lower than it took off; heights are about that landing spot (replay's default "
+            "pad, the flown route's home); replay takes --pad=LAT,LON,ALT for another, mission --plan LOG has no "
+            "other home")
 
 
 def default_pad(log: FlightLog) -> GeoPoint:

@@ -424,8 +424,12 @@ def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
         raise ValueError(f"{name}: no flown track: {len(pos)} usable position(s) (GPS fix >= 3)"
                          + (" while armed" if periods else ""))
     lat, lon, alt = (pos[c].to_numpy(float) for c in ("lat_deg", "lon_deg", "alt_m"))
-    from ..mavlink.takeoff import default_pad
+    from ..mavlink.takeoff import default_pad, starts_airborne_warning
     home = default_pad(log)   # the first armed position; a log that starts in the air: where its first flight ended
+    airborne = starts_airborne_warning(log)   # (then said, as replay says it)
+    if airborne is not None:
+        from wpt_receiver.notices import warn
+        warn(airborne)
     e, n, u = geodetic_to_enu(lat, lon, alt, home)
     p = np.column_stack([e, n, np.maximum(u, 0.0)])
     if log.armed_source is None:   # no armed-state record and no motor output: the whole track (as before 2026-11-27)
