@@ -48,7 +48,7 @@ def _cmd_tolerance(args) -> int:
     from ..files import atomic_output
     from ..studies import sweep
     from ..studies.cluster import dask_client
-    from ..studies.tolerance import ToleranceRunner, summarise, tolerance_cases
+    from ..studies.tolerance import ToleranceRunner, nominal_link_problem, summarise, tolerance_cases
     if args.devices not in preset_names():
         raise CliError(f"--devices {args.devices!r} is invalid; valid values: {', '.join(preset_names())}")
     try:
@@ -57,13 +57,12 @@ def _cmd_tolerance(args) -> int:
         raise CliError(str(exc).replace("spread ", "--spread-").replace("=", " ")) from None
     from .controller import _link_params
     link = _link_params(args.link)
+    problem = nominal_link_problem(link, args.devices)   # closed form, before the folder and any simulation
+    if problem is not None:
+        raise CliError(f"--link: {problem}")
     prepare_out_dir(args.out)   # a file in its place, read-only: one line before any work (was "[Errno 30] ...")
     runner = ToleranceRunner(args.devices, link=link).with_transitions()  # shipped to the workers, built once here
     nominal = _nominal(runner)
-    if not nominal["rm_power_w"] > 0:   # (yields against 0.9 x 0 W: 100 % of draws "passed", peaks NaN)
-        raise CliError(f"--link: the nominal link transfers no power in RM (emf margin {nominal['clamp_margin']:.3g}, "
-                       "the induced emf over the battery clamp |E| / (V2 |G22|), is not above 1); valid: a nominal "
-                       "link whose emf margin exceeds 1 (a higher vdc_v or lm_h, a lower vl_v or r1_ohm)")
     factory = None if args.workers == 0 else functools.partial(dask_client, None, args.workers)
     res = sweep.run_sweep(tolerance_cases(spreads, args.draws, args.seed, args.devices, link), runner, args.out,
                           client_factory=factory, progress=show_progress(args), progress_desc="tolerance")

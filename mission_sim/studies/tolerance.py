@@ -16,7 +16,7 @@ import pandas as pd
 
 from .study import Case, canonical_json, case_id
 
-__all__ = ["ToleranceRunner", "tolerance_cases", "summarise", "METRICS"]
+__all__ = ["ToleranceRunner", "tolerance_cases", "summarise", "nominal_link_problem", "METRICS"]
 
 METRICS = ("rm_power_w", "efficiency", "rm_i2_a", "step_peak_a", "proposed_peak_a")
 
@@ -30,6 +30,25 @@ def _link(link):
         from wpt_receiver import TABLE_I
         return TABLE_I
     return link
+
+
+def nominal_link_problem(link=None, devices_name: str = "ideal", clamp_margin: float | None = None) -> str | None:
+    """Why a nominal link gives no tolerance study, or None: it transfers no power in RM (its yields would count every
+    draw as delivering 0.9 x 0 W, its peaks NaN). The rule is the paper's (:func:`wpt_receiver.paper.rm_emf_margin`,
+    :func:`wpt_receiver.paper.envelope_range_problem`): the rectifier conducts iff the emf margin, ``clamp_margin`` of
+    the closed-form RM state :func:`wpt_receiver.rm_state.rm_steady` with the study's devices, is above 1. Computed
+    from ``link`` (None: Table I) and ``devices_name`` (~0.1 ms, nothing simulated) unless ``clamp_margin`` is given
+    (a nominal draw's). One message for ``dronewpt tolerance --link`` (before anything is prepared) and
+    :func:`summarise`."""
+    if clamp_margin is None:
+        from wpt_receiver.devices import preset
+        from wpt_receiver.rm_state import rm_steady
+        clamp_margin = float(rm_steady(_link(link), None, None, preset(devices_name))["clamp_margin"])
+    if clamp_margin > 1.0:
+        return None
+    return (f"the nominal link transfers no power in RM: its emf margin {clamp_margin:.3g} (the induced emf over the "
+            "battery clamp, |E| / (V2 |G22|)) is not above 1; valid: a nominal link whose emf margin exceeds 1 (a "
+            "higher vdc_v or lm_h, a lower vl_v or r1_ohm)")
 
 
 def _transitions(devices_name: str, link=None):
@@ -107,10 +126,10 @@ def summarise(df: pd.DataFrame, nominal: dict, margin: float = 1.25, min_power_f
     rating ``margin`` x the nominal peak of that controller (the receiver sized for the nominal
     link, as ``sizing`` does). Yields with 95 % Wilson intervals. Peak percentiles are over the draws
     that transfer power in RM (the others have NaN peaks). A nominal link that transfers no power in RM is refused
-    (its yields would count every draw as delivering 0.9 x 0 W)."""
-    if not nominal["rm_power_w"] > 0:
-        raise ValueError(f"nominal rm_power_w={nominal['rm_power_w']!r} is invalid; valid range: (0, inf) W (a nominal "
-                         "link that conducts in RM: emf margin above 1)")
+    (:func:`nominal_link_problem`)."""
+    problem = nominal_link_problem(clamp_margin=nominal["clamp_margin"])
+    if problem is not None:
+        raise ValueError(problem)
     ok = df[df["status"] == "ok"]
     dist = {m: {q: float(np.nanpercentile(ok[m].to_numpy(float), q)) for q in (1, 5, 25, 50, 75, 95, 99)}
             | {"mean": float(np.nanmean(ok[m].to_numpy(float))), "n": int(np.isfinite(ok[m].to_numpy(float)).sum())}
