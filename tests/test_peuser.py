@@ -6,6 +6,7 @@ other than Table I, each check against a closed form or the event-exact switchin
 """
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -345,3 +346,22 @@ def test_mission_edges_take_each_steps_own_battery_voltage():
                                     TABLE_I.rectifier_period_s, TABLE_I.omega_rad_s)["rectifier_w"] * 1e-4 for v in vl)
     assert loop.edge_j[0] == pytest.approx(want, rel=1e-12)
     assert LinkConfig(vdc_v=48.0).device_set().inv_switch == link_preset("schottky", LINK_2S).inv_switch
+
+
+@pytest.mark.parametrize("bad, said", [(0, "v_block_v=0.0 is invalid"), (-1, "v_block_v=-1.0 is invalid"),
+                                       (float("nan"), "v_block_v=nan is invalid"), (True, "v_block_v=True"),
+                                       ([30.0, 0.0], "v_block_v=0.0 is invalid")])
+def test_rect_node_capacitance_checks_its_voltage_and_shares_the_presets_source(bad, said):
+    """Review of the merge: ``rect_node_c_f`` had no input check (0: ZeroDivisionError, -1: math domain error, NaN:
+    NaN capacitance) and its own copy of the preset lookup and capacitance sum; now ``params.positive_numbers``' one
+    line (for "ideal" too, as ``preset``) and ``device_set``'s per-part capacitances: bit-identical to the preset's
+    devices at any voltage, a number or one per step."""
+    from wpt_receiver.devices import charge_equivalent_f, preset, rect_node_c_f
+    for name in ("schottky", "ideal"):
+        with pytest.raises(ValueError, match=r"^" + re.escape(said) + r".*valid range: \(0, inf\) V"):
+            rect_node_c_f(name, bad)
+    for v in (7.4, 22.2, 30.0, 33.6):
+        dv = preset("schottky", v_block_v=v)
+        assert rect_node_c_f("schottky", v) == dv.rect_switch.coss_f + dv.rect_diode.c_f
+        assert rect_node_c_f("schottky", np.array([v]))[0] == rect_node_c_f("schottky", v)
+        assert charge_equivalent_f(900e-12, 5.0, np.array([v]))[0] == charge_equivalent_f(900e-12, 5.0, v)

@@ -153,29 +153,40 @@ def charge_equivalent_f(c_ref_f: float, v_ref_v: float, v_v: float, phi_v: float
     ``Q(V) = 2 C0 phi (sqrt(1 + V/phi) - 1)``, returned as ``Q / V``; ``v_v`` a number or an array (one per step)."""
     if isinstance(v_v, (list, tuple)) or getattr(v_v, "ndim", 0):
         import numpy as np
-        v = np.asarray(v_v, dtype=float)
+        v, sqrt = np.asarray(v_v, dtype=float), np.sqrt
         if c_ref_f <= 0.0:
             return np.zeros(v.shape)
-        c0 = c_ref_f * math.sqrt(1.0 + v_ref_v / phi_v)
-        return 2.0 * c0 * phi_v * (np.sqrt(1.0 + v / phi_v) - 1.0) / v
-    if c_ref_f <= 0.0:
-        return 0.0
+    else:
+        v, sqrt = v_v, math.sqrt
+        if c_ref_f <= 0.0:
+            return 0.0
     c0 = c_ref_f * math.sqrt(1.0 + v_ref_v / phi_v)
-    return 2.0 * c0 * phi_v * (math.sqrt(1.0 + v_v / phi_v) - 1.0) / v_v
+    return 2.0 * c0 * phi_v * (sqrt(1.0 + v / phi_v) - 1.0) / v
+
+
+def _cj_f(row: dict, v_block_v):
+    """One die of ``parts.toml`` diode ``row``: its junction capacitance charge-equivalent at ``v_block_v`` [F] (a
+    number or an array); :func:`diode_from_row`'s and :func:`rect_node_c_f`'s one source."""
+    return charge_equivalent_f(row.get("cj_ref_f", 0.0), row.get("cj_ref_v", 1.0), v_block_v)
+
+
+def _coss_f(row: dict, v_block_v):
+    """One die of ``parts.toml`` switch ``row``: its Coss charge-equivalent at ``v_block_v`` [F] (a number or an
+    array); :func:`switch_from_row`'s and :func:`rect_node_c_f`'s one source."""
+    return charge_equivalent_f(row.get("coss_ref_f", 0.0), row.get("coss_ref_v", 1.0), v_block_v)
 
 
 def rect_node_c_f(name: str, v_block_v):
     """The SBAR node's capacitance [F] of preset ``name`` (its rectifier switch's Coss + diode's Cj, one die each, as
-    :func:`preset` builds them), charge-equivalent at ``v_block_v`` [V]: a number or one per step (a mission's
-    ``battery_v``, for its edge energies at each step's own voltage); 0 for "ideal"."""
-    if name == "ideal":
-        return 0.0 * v_block_v
-    row = parts()["preset"].get(name)
+    :func:`preset` builds them: :func:`_coss_f`, :func:`_cj_f`), charge-equivalent at ``v_block_v`` [V]: a number or
+    one per step (a mission's ``battery_v``, for its edge energies at each step's own voltage), each finite and > 0
+    (:func:`wpt_receiver.params.positive_numbers`); 0 for "ideal"."""
+    from .params import positive_numbers
+    v = positive_numbers("v_block_v", v_block_v, "V")
+    row = _preset_row(name)
     if row is None:
-        raise ValueError(f"device preset {name!r} is unknown; valid: {', '.join(preset_names())}")
-    sw, dio = _row("switch", row["rect_switch"]), _row("diode", row["rect_diode"])
-    return (charge_equivalent_f(sw.get("coss_ref_f", 0.0), sw.get("coss_ref_v", 1.0), v_block_v)
-            + charge_equivalent_f(dio.get("cj_ref_f", 0.0), dio.get("cj_ref_v", 1.0), v_block_v))
+        return 0.0 * v
+    return _coss_f(_row("switch", row["rect_switch"]), v) + _cj_f(_row("diode", row["rect_diode"]), v)
 
 
 def _tt_s(qrr_c: float, didt_a_s: float) -> float:
@@ -198,7 +209,7 @@ def diode_from_row(row: dict, n: int = 1, tj_c=None, v_block_v: float = V_BLOCK_
     """A rectifier :class:`Diode` of ``n`` paralleled legs of a ``parts.toml`` diode row at junction
     temperature ``tj_c`` [C] (``None``: the row's ``t_ref_c`` values) blocking ``v_block_v``."""
     return Diode(_at(row, "vf0_v", "vf0_tc_v_k", tj_c), _at(row, "rd_ohm", "rd_tc_per_k", tj_c, True) / n,
-                 n * charge_equivalent_f(row.get("cj_ref_f", 0.0), row.get("cj_ref_v", 1.0), v_block_v), 0.0)
+                 n * _cj_f(row, v_block_v), 0.0)
 
 
 def switch_from_row(row: dict, n: int = 1, tj_c=None, v_block_v: float = V_BLOCK_V) -> Switch:
@@ -212,8 +223,8 @@ def switch_from_row(row: dict, n: int = 1, tj_c=None, v_block_v: float = V_BLOCK
     vf = row["body_vf0_v"] + (0.0 if tj_c is None else row.get("body_vf0_tc_v_k", 0.0) * (float(tj_c) - 25.0))
     body = Diode(max(vf, 0.0), row["body_rd_ohm"] / n, 0.0, _tt_s(row.get("qrr_c", 0.0), row.get("qrr_didt_a_s", 0.0)))
     va = row.get("e_ref_v", 1.0) * row.get("e_ref_a", 1.0)
-    return Switch(ron / n, body, n * charge_equivalent_f(row.get("coss_ref_f", 0.0), row.get("coss_ref_v", 1.0), v_block_v),
-                  row.get("eon_ref_j", 0.0) / va, row.get("eoff_ref_j", 0.0) / va)
+    return Switch(ron / n, body, n * _coss_f(row, v_block_v), row.get("eon_ref_j", 0.0) / va,
+                  row.get("eoff_ref_j", 0.0) / va)
 
 
 def _row(kind: str, name: str) -> dict:
