@@ -348,10 +348,10 @@ def test_check_v1_refuses_an_array_where_one_number_is_meant():
 
     from wpt_receiver import envelope
     from wpt_receiver.inverse_controller import InverseModelController
-    with pytest.raises(ValueError, match=r"^v1_v=\[38.0, 38.0\] is invalid; valid range: \(0, inf\) V \(the inverter's "
+    with pytest.raises(ValueError, match=r"^v1_v=\[38.0, 38.0\] is not a number; valid range: \(0, inf\) V \(the inverter's "
                                          r"fundamental\)$"):
         InverseModelController(TABLE_I, n=2).reset(5.0, v1_v=[38.0, 38.0])
-    with pytest.raises(ValueError, match=r"^v1_v=array\(\[38., 38., 38.\]\) is invalid; valid range: \(0, inf\) V"):
+    with pytest.raises(ValueError, match=r"^v1_v=array\(\[38., 38., 38.\]\) is not a number; valid range: \(0, inf\) V"):
         envelope.simulate(TABLE_I, [1, 2, 3], 1e-6, v1_v=np.array([38.0] * 3))
     i1, _ = envelope.steady_state(TABLE_I, 10.0, v1_v=np.array([38.0, 20.0]))   # steady_state still broadcasts
     assert i1.shape == (2,)

@@ -11,7 +11,7 @@ import re
 import numpy as np
 import pytest
 
-from wpt_receiver import LinkParams
+from wpt_receiver import TABLE_I, LinkParams
 from wpt_receiver.devices import envelope_params, preset
 
 LINK_2S = LinkParams(l1_h=100e-6, l2_h=20e-6, lm_h=0.1 * math.sqrt(100e-6 * 20e-6), r1_ohm=0.10, r2_ohm=0.03,
@@ -252,14 +252,14 @@ def test_envelope_currents_and_preset_refuse_bad_numbers_in_one_line():
         envelope_currents(*cols, vl_v=np.full(3, 7.4), f_hz=85e3)
     with pytest.raises(ValueError, match=r"^f_hz='x' is not a number; valid range: \(0, inf\) Hz$"):
         envelope_currents(*cols, vl_v=7.4, f_hz="x")
-    with pytest.raises(ValueError, match=r"^vl_v=-2.0 is invalid; valid range: \(0, inf\) V, finite$"):
+    with pytest.raises(ValueError, match=r"^vl_v=-2.0 is invalid; valid range: \(0, inf\) V$"):
         envelope_currents(*cols, vl_v=[7.4, -2.0], f_hz=85e3)
     ok = envelope_currents(*cols, vl_v=np.float32(7.4), f_hz=np.int64(85000))
     assert ok["switching_loss_w"] == pytest.approx(envelope_currents(*cols, vl_v=7.4, f_hz=85e3)["switching_loss_w"],
                                                    rel=1e-6)
     assert preset("schottky", v_block_v=np.int64(30)) == preset("schottky")
     for name, kw, msg in (("schottky", {"v_block_v": True}, r"^v_block_v=True is not a number; valid range: \(0, inf\) V$"),
-                          ("ideal", {"v_block_v": -1}, r"^v_block_v=-1.0 is invalid; valid range: \(0, inf\) V, finite$"),
+                          ("ideal", {"v_block_v": -1}, r"^v_block_v=-1.0 is invalid; valid range: \(0, inf\) V$"),
                           ("schottky", {"v_block_inv_v": "x"}, r"^v_block_inv_v='x' is not a number")):
         with pytest.raises(ValueError, match=msg):
             preset(name, **kw)
@@ -365,3 +365,25 @@ def test_rect_node_capacitance_checks_its_voltage_and_shares_the_presets_source(
         assert rect_node_c_f("schottky", v) == dv.rect_switch.coss_f + dv.rect_diode.c_f
         assert rect_node_c_f("schottky", np.array([v]))[0] == rect_node_c_f("schottky", v)
         assert charge_equivalent_f(900e-12, 5.0, np.array([v]))[0] == charge_equivalent_f(900e-12, 5.0, v)
+
+
+@pytest.mark.parametrize("array_ok", [False, True])
+def test_check_v1_is_the_positive_number_check(array_ok):
+    """Review of the merge: ``params.check_v1`` and ``params.positive_number`` were two checks of one rule that
+    differed on bools (``check_v1(True)`` took 1 V). Now ``check_v1`` is ``positive_number`` (``positive_numbers`` for
+    ``steady_state``'s arrays): a bool refused, one wording (the range, then what V1 is)."""
+    from wpt_receiver.envelope import steady_state
+    from wpt_receiver.params import check_v1, positive_number
+    for bad in (True, np.bool_(True)):
+        with pytest.raises(ValueError, match=r"^v1_v=(True|np\.True_) is not a number; valid range: \(0, inf\) V \(the "
+                                             r"inverter's fundamental\)$"):
+            check_v1(bad, array_ok=array_ok)
+    with pytest.raises(ValueError) as a:
+        check_v1(-1.0, array_ok=array_ok)
+    with pytest.raises(ValueError) as b:
+        positive_number("v1_v", -1.0, "V", "the inverter's fundamental")
+    assert str(a.value) == str(b.value) == "v1_v=-1.0 is invalid; valid range: (0, inf) V (the inverter's fundamental)"
+    assert check_v1(np.float32(38.0), array_ok=array_ok) == 38.0
+    with pytest.raises(ValueError, match=r"^v1_v holds a bool"):
+        steady_state(TABLE_I, 10.0, v1_v=[38.0, True])
+    assert steady_state(TABLE_I, 10.0, v1_v=np.full((2, 3), 38.0))[0].shape == (2, 3)   # (any shape broadcasts)

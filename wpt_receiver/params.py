@@ -16,12 +16,12 @@ __all__ = ["LinkParams", "TABLE_I", "FREQUENCY_TOLERANCE", "resonance_warning", 
            "positive_numbers"]
 
 
-def positive_number(name: str, value, unit: str = "") -> float:
+def positive_number(name: str, value, unit: str = "", what: str = "") -> float:
     """``value`` as a float after checking it is one finite number > 0 (a Python or numpy number; a bool is refused:
     float(True) = 1.0 would pass as 1 H, 1 ohm, 1 Hz, 1 V): the check of every :class:`LinkParams` field, for any
-    other link quantity too (:func:`positive_numbers` for one per step). The error is one line naming ``name``, the
-    value and the range, in ``unit`` when given."""
-    rng = f"(0, inf){' ' + unit if unit else ''}"
+    other link quantity too (:func:`positive_numbers` for one per step; :func:`check_v1`). The error is one line naming
+    ``name``, the value and the range ``(0, inf)``, in ``unit`` when given, ``what`` after it in brackets."""
+    rng = f"(0, inf){' ' + unit if unit else ''}{f' ({what})' if what else ''}"
     if isinstance(value, (bool, np.bool_)) or (isinstance(value, np.ndarray) and value.ndim):
         raise ValueError(f"{name}={value!r} is not a number; valid range: {rng}")
     try:
@@ -29,30 +29,32 @@ def positive_number(name: str, value, unit: str = "") -> float:
     except (TypeError, ValueError):
         raise ValueError(f"{name}={value!r} is not a number; valid range: {rng}") from None
     if not math.isfinite(v) or v <= 0.0:
-        raise ValueError(f"{name}={v!r} is invalid; valid range: {rng}, finite")
+        raise ValueError(f"{name}={v!r} is invalid; valid range: {rng}")
     return v
 
 
-def positive_numbers(name: str, values, unit: str = "", size: int | None = None):
+def positive_numbers(name: str, values, unit: str = "", size: int | None = None, what: str = "",
+                     any_shape: bool = False):
     """:func:`positive_number` for a number or a 1-D sequence of them (e.g. one per step of a run: ``size`` of them
-    when given): the float (a number) or float array, after checking every entry; the error names the first bad entry
-    (or the length, or the type) and the valid range."""
+    when given; ``any_shape``: an array of any shape, for a function that broadcasts): the float (a number) or float
+    array, after checking every entry; the error names the first bad entry (or the length, or the type) and the valid
+    range."""
     if np.ndim(values) == 0:
-        return positive_number(name, values, unit)
+        return positive_number(name, values, unit, what)
+    rng = f"(0, inf){' ' + unit if unit else ''}{f' ({what})' if what else ''}"
     if (values.dtype.kind == "b" if isinstance(values, np.ndarray)
             else any(isinstance(v, (bool, np.bool_)) for v in np.ravel(np.asarray(values, dtype=object)))):
-        raise ValueError(f"{name} holds a bool; valid: numbers in (0, inf){' ' + unit if unit else ''}")
+        raise ValueError(f"{name} holds a bool; valid range: {rng}")
     try:
         v = np.asarray(values, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} holds a value that is not a number; valid range: (0, inf)"
-                         f"{' ' + unit if unit else ''}") from None
-    if v.ndim != 1 or (size is not None and v.size != size):
+        raise ValueError(f"{name} holds a value that is not a number; valid range: {rng}") from None
+    if not any_shape and (v.ndim != 1 or (size is not None and v.size != size)):
         want = "a number or a 1-D sequence" + ("" if size is None else f" of {size} (one per step)")
         raise ValueError(f"{name} of shape {v.shape} is invalid; valid: {want}")
     bad = ~(np.isfinite(v) & (v > 0))
     if np.any(bad):
-        positive_number(name, float(v[bad][0]), unit)   # (raises, naming the first bad entry)
+        positive_number(name, float(v[bad].flat[0]), unit, what)   # (raises, naming the first bad entry)
     return v
 
 
@@ -145,26 +147,14 @@ FREQUENCY_TOLERANCE = 2.0
 def check_v1(v1_v, array_ok: bool = False):
     """``v1_v`` [V], the inverter's fundamental amplitude, as a float after checking it is in (0, inf) (a NaN gave a
     NaN run or duty, a negative V1 short mode, without a word): one rule for :func:`wpt_receiver.envelope.simulate`,
-    :func:`~wpt_receiver.envelope.steady_state` and :meth:`wpt_receiver.inverse_controller.InverseModelController.reset`.
-    ``array_ok`` (``steady_state``, which broadcasts): an array is checked elementwise and returned as a float array,
-    naming the first bad value; otherwise (the default) an array is refused as not one number, as before."""
-    if array_ok and isinstance(v1_v, (np.ndarray, list, tuple)) and np.ndim(v1_v) > 0:
-        try:
-            v = np.asarray(v1_v, dtype=float)
-        except (TypeError, ValueError):
-            v = np.array([math.nan])
-        bad = ~((v > 0) & (v < np.inf))
-        if np.any(bad):
-            raise ValueError(f"v1_v={float(v[bad].flat[0])!r} is invalid; valid range: (0, inf) V (the inverter's "
-                             "fundamental)")
-        return v
-    try:
-        v = float(v1_v)
-    except (TypeError, ValueError):
-        v = math.nan
-    if not 0 < v < np.inf:
-        raise ValueError(f"v1_v={v1_v!r} is invalid; valid range: (0, inf) V (the inverter's fundamental)")
-    return v
+    :func:`~wpt_receiver.envelope.steady_state` and :meth:`wpt_receiver.inverse_controller.InverseModelController.reset`,
+    :func:`positive_number`'s (a bool refused, as for every link quantity). ``array_ok`` (``steady_state``, which
+    broadcasts): an array of any shape is checked elementwise and returned as a float array, naming the first bad
+    value (:func:`positive_numbers`); otherwise (the default) an array is refused as not one number."""
+    what = "the inverter's fundamental"
+    if array_ok:
+        return positive_numbers("v1_v", v1_v, "V", what=what, any_shape=True)
+    return positive_number("v1_v", v1_v, "V", what)
 
 
 def check_control_period(control_period_s, shown=None) -> float:
