@@ -438,3 +438,25 @@ def test_do_jump_to_a_missing_target_names_the_ids_the_mission_holds(tmp_path):
                                          r"7, 9, 10$"):
         route_from_items(read_mission(plan))
     assert _jump_ids(list(range(2, 26, 2))) == "one of 2, 4, 6, 8, 10, 12, 14, 16, ... (12 ids, the last 24)"
+
+
+@pytest.mark.parametrize("repeat, said", [
+    (2.5, "DO_JUMP repeat count param2=2.5 is invalid; valid range: integer >= 0"),
+    (-2.0, "DO_JUMP repeat count param2=-2.0 is invalid; valid range: integer >= 0"),
+    (float("nan"), "DO_JUMP repeat count param2=nan is invalid; valid range: integer >= 0"),
+    (-1.0, "DO_JUMP repeats forever (param2 = -1): the route would never end; valid range: integer >= 0"),
+    (1e6, "the DO_JUMP loops give more than 100,000 items to fly"),
+])
+def test_do_jump_repeat_count_is_checked_in_the_projects_words(repeat, said):
+    """Review of the merge: the repeat count's check was written by hand ("valid: an integer >= 0", not
+    ``validation.check_number``'s "valid range: integer >= 0") and the item limit printed "100000" where the docs say
+    "100,000"."""
+    from mission_sim.plans.items import MissionItem, RawMission
+    from mission_sim.plans.route import _unrolled
+    nan = float("nan")
+    wp = [MissionItem(f"item {k}", 16, 3, (nan,) * 4, 0.0, 0.0, 10.0, jump_id=k) for k in (1, 2)]
+    jump = MissionItem("item 3", 177, 3, (1.0, repeat, nan, nan), nan, nan, nan, jump_id=3)
+    with pytest.raises(ValueError) as exc:
+        list(_unrolled(RawMission("m.plan", None, (*wp, jump))))
+    assert str(exc.value).startswith("m.plan: item ") and said in str(exc.value), str(exc.value)
+    assert "\n" not in str(exc.value)

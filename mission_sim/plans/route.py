@@ -25,7 +25,8 @@ import math
 from pathlib import Path
 
 from ..mavlink.geodesy import GeoPoint, geodetic_to_enu
-from ..validation import ALT_RANGE, HOLD_RANGE, PAD_RADIUS_RANGE, SPEED_RANGE, check_number
+from ..validation import (ALT_RANGE, HOLD_RANGE, PAD_RADIUS_RANGE, SPEED_RANGE,
+                          Range, check_number)
 from .items import LOG_SUFFIXES, NAV_LAND, NAV_LOITER_TIME, NAV_RTL, NAV_TAKEOFF, NAV_WAYPOINT, RawMission, read_mission
 from .pads import read_pads
 
@@ -36,6 +37,7 @@ DO_CHANGE_SPEED = 178
 NAV_DELAY = 93
 DO_JUMP = 177
 MAX_ROUTE_ITEMS = 100_000   # a route with DO_JUMP loops unrolled: at most this many items flown
+JUMP_REPEATS = Range(0, math.inf, integer=True)   # a DO_JUMP's param2, the number of jumps (-1, forever: refused)
 CHARGE_CLEARANCE_M = 1.0   # a loiter becomes a charging hover only this far above the pad (it descends to it)
 RTL_ALT_M = 15.0   # ArduCopter's RTL_ALT default (1500 cm): RTL climbs to at least this height
 MAX_FROM_HOME_M = 100e3   # items farther from home than this are refused (the config's positions: within 1e5 m)
@@ -203,19 +205,20 @@ def _unrolled(raw: RawMission):
         it = items[k]
         n += 1
         if n > MAX_ROUTE_ITEMS:
-            raise ValueError(f"{raw.source}: {it.where}: the DO_JUMP loops give more than {MAX_ROUTE_ITEMS} items to "
+            raise ValueError(f"{raw.source}: {it.where}: the DO_JUMP loops give more than {MAX_ROUTE_ITEMS:,} items to "
                              "fly; valid: fewer repeats (DO_JUMP param2)")
         if it.command != DO_JUMP:
             yield it
             k += 1
             continue
         target, repeat = it.params[0], it.params[1]
-        if not (math.isfinite(repeat) and repeat == int(repeat) and repeat >= -1):
-            raise ValueError(f"{raw.source}: {it.where}: DO_JUMP repeat count param2={repeat:g} is invalid; valid: an "
-                             "integer >= 0")
         if repeat == -1:
             raise ValueError(f"{raw.source}: {it.where}: DO_JUMP repeats forever (param2 = -1): the route would never "
-                             "end; valid: a repeat count >= 0")
+                             f"end; valid range: {JUMP_REPEATS.text()}")
+        try:
+            check_number("param2", repeat, JUMP_REPEATS)
+        except ValueError as exc:
+            raise ValueError(f"{raw.source}: {it.where}: DO_JUMP repeat count {exc}") from None
         if not (math.isfinite(target) and target == int(target) and int(target) in index):
             raise ValueError(f"{raw.source}: {it.where}: DO_JUMP target param1={target:g} is not an item of the "
                              f"mission; valid: {_jump_ids(sorted(index))}")
