@@ -42,13 +42,15 @@ _READ_COLS = [OBS_INDEX[name] for name in READS]
 
 def _refuse_non_finite(obs) -> None:
     """``ValueError`` naming the first non-finite value of a field in :data:`READS` of ``obs`` (normalised, one row
-    per receiver), its receiver and the valid range."""
+    per receiver), its receiver and what is checked: finite (a value outside the normalised [-1, 1] is taken, as the
+    controller takes it: only what would poison its state is refused)."""
     for name, j in zip(READS, _READ_COLS):
         bad = np.flatnonzero(~np.isfinite(obs[:, j]))
         if len(bad):
             f = OBS_FIELDS[j]
             raise ValueError(f"observation {name}={float(obs[bad[0], j])!r} (receiver {int(bad[0])}) is invalid; "
-                             f"valid range: finite, [-1, 1] normalised ({f.lo:g}..{f.hi:g} {f.unit})")
+                             f"valid range: finite (normalised: -1..1 is {f.lo:g}..{f.hi:g}"
+                             + ("" if f.unit == "-" else f" {f.unit}") + ")")
 
 
 def lm_from_steady_state(link, i2_a, v2_v, v1_v=None):
