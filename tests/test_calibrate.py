@@ -125,6 +125,11 @@ def test_cli_log_without_battery_is_one_line_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "no battery data" in err and "uavlogviewer_vtol_sitl.tlog" in err
     assert not out.exists()
+    # the battery sources named as replay names them: one list, the reader's (mavlink.logs.BATTERY_SOURCES)
+    from mission_sim.mavlink.logs import BATTERY_SOURCES
+    assert f"({BATTERY_SOURCES})" in err and BATTERY_SOURCES.startswith("BATTERY_STATUS / SYS_STATUS / BAT / CURR")
+    assert main(["replay", str(log_path("uavlogviewer_vtol_sitl.tlog")), "--out", str(tmp_path / "r")]) == 0
+    assert f"the log has no battery data (no {BATTERY_SOURCES} values" in capsys.readouterr().out
     bad = tmp_path / "bad.toml"
     bad.write_text("[drone]\nmass_kg = 1.5\n[battery]\ncapacity_ah = 2\n")
     assert main(["mission", "--drone", str(bad), "--no-plot", "--out", str(tmp_path / "m")]) == 2

@@ -212,8 +212,8 @@ def _cmd_replay(args) -> int:
     elif c:
         print(f"no airborne battery samples to compare ({c['battery_source']})")
     elif not s.get("battery_source"):
-        print("the log has no battery data (no SYS_STATUS / BATTERY_STATUS / CURR / BAT / PX4 battery_status values "
-              "with a known voltage and current)")
+        from ..mavlink.logs import BATTERY_SOURCES
+        print(f"the log has no battery data (no {BATTERY_SOURCES} values with a known voltage and current)")
     for f in [*files, summary]:   # the summary too (written last), as mission lists its
         print(f"wrote {f}")
     return 0

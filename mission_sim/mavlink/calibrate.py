@@ -105,8 +105,9 @@ def _velocities(track) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _no_battery(log: FlightLog, what: str) -> NoBatteryError:
+    from .logs import BATTERY_SOURCES
     return NoBatteryError(f"{log.path.name}: {what}; calibrate needs the flight battery's voltage and current "
-                          "(BAT / CURR / SYS_STATUS / BATTERY_STATUS / PX4 battery_status) while airborne")
+                          f"({BATTERY_SOURCES}) while airborne")
 
 
 def calibration_samples(log: FlightLog, window=None, segment=None) -> CalibrationSamples:

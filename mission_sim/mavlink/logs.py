@@ -44,7 +44,8 @@ from .flightlog import (TIME_SPIKE_S as _TIME_SPIKE_S, ARMED_COLUMNS, ATTITUDE_C
 from .clock import ClockMap, fit_clock, identity_clock
 from .gpsclean import reject_outliers
 
-__all__ = ["mavutil", "FlightLog", "read_log", "armed_periods", "POSITION_COLUMNS", "BATTERY_COLUMNS"]
+__all__ = ["mavutil", "FlightLog", "read_log", "armed_periods", "POSITION_COLUMNS", "BATTERY_COLUMNS",
+           "BATTERY_SOURCES"]
 
 
 _MAV_AUTOPILOT_INVALID = 8          # ground stations and companions send heartbeats with this
@@ -362,10 +363,18 @@ def _armed(tab: _Tables):
     return inferred, source, starts_armed(inferred)
 
 
+#: the battery tables a log is read from, the first with values taken: (table, the name a message gives it); a PX4
+#: ULog's battery_status fills BATTERY_STATUS's table
+_BATTERY_TABLES = (("battery_status", "BATTERY_STATUS"), ("sys_status", "SYS_STATUS"), ("df_bat", "BAT"),
+                   ("df_curr", "CURR"))
+#: what a message names as the battery sources (``replay``'s "no battery data", ``calibrate``'s refusal): one spelling
+BATTERY_SOURCES = " / ".join(label for _, label in _BATTERY_TABLES) + " / PX4 battery_status"
+
+
 def _battery(tab: _Tables):
-    """(battery table, source) from the first of BATTERY_STATUS, SYS_STATUS, BAT, CURR with values."""
-    for name, label in (("battery_status", "BATTERY_STATUS"), ("sys_status", "SYS_STATUS"),
-                        ("df_bat", "BAT"), ("df_curr", "CURR")):
+    """(battery table, source) from the first of :data:`_BATTERY_TABLES` (BATTERY_STATUS, SYS_STATUS, BAT, CURR) with
+    values."""
+    for name, label in _BATTERY_TABLES:
         df = tab.vehicle(name)
         if "battery_id" in df and len(df):
             df = df[df["battery_id"] == df["battery_id"].min()]
