@@ -460,3 +460,16 @@ def test_do_jump_repeat_count_is_checked_in_the_projects_words(repeat, said):
         list(_unrolled(RawMission("m.plan", None, (*wp, jump))))
     assert str(exc.value).startswith("m.plan: item ") and said in str(exc.value), str(exc.value)
     assert "\n" not in str(exc.value)
+
+
+def test_a_ulog_gives_its_flown_track_never_an_uploaded_mission():
+    """Review of the merge: README said `mission --plan` flies "the mission in a .tlog / .bin / .ulg"; a .ulg's mission
+    is not read (uploaded_mission opens it with pymavlink's .tlog reader, which finds no MAVLink mission items): "auto"
+    flies its track, "uploaded" is refused. README and docs/mission_files.md say so."""
+    from mission_sim.plans.items import read_mission, uploaded_mission
+    assert uploaded_mission(log_path(PX4_ESC)).items == ()
+    assert all(it.where.startswith("track") for it in read_mission(log_path(PX4_ESC)).items)
+    with pytest.raises(ValueError, match="holds no uploaded mission"):
+        read_mission(log_path(PX4_ESC), "uploaded")
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    assert "/ `.ulg`, with pads" not in readme and "any `.ulg`, whose mission is not\nread" in readme
