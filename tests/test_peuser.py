@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from wpt_receiver import TABLE_I, LinkParams
-from wpt_receiver.devices import envelope_params, preset
+from wpt_receiver.devices import preset
 
 LINK_2S = LinkParams(l1_h=100e-6, l2_h=20e-6, lm_h=0.1 * math.sqrt(100e-6 * 20e-6), r1_ohm=0.10, r2_ohm=0.03,
                      vdc_v=48.0, vl_v=7.4, f_hz=85e3)
@@ -26,26 +26,13 @@ def test_envelope_switching_loss_on_a_2s_link_matches_the_switching_model(d):
     """``sizing.envelope_currents`` (``sizing --source mission``) took the SBAR's edge energies at Table I's 30 V
     and 85 kHz whatever the run: on a 2S pack (7.4 V) 0.768 W at d = 0.5 against the switching model's exact edges
     0.217 W (3.5x). With the run's VL and f: 0.2166 W."""
-    from wpt_receiver.envelope import steady_state
-    from wpt_receiver.sbar import rectifier_v2_folded
-    from wpt_receiver.sizing import envelope_currents, rectifier_currents
-    from wpt_receiver.switching import SwitchingConfig, SwitchingLink
-    p, T = LINK_2S, LINK_2S.rectifier_period_s
-    link = SwitchingLink(p, SwitchingConfig(devices=DV))
-    exact = rectifier_currents(link.run(link.schedule(0.0, 40 * T, d), link.periodic_steady_state(d)),
-                               window_s=20 * T, per_half_cycle=256)
-    pe = envelope_params(p, DV)
-    i2 = float(steady_state(pe, rectifier_v2_folded(d, p.vl_v, 20.0, DV))[1])
-    i1 = float(steady_state(pe, rectifier_v2_folded(d, p.vl_v, i2, DV))[0])
-    n = 400
-    env = envelope_currents(np.arange(1, n + 1) * T / 4, np.full(n, T / 4), np.full(n, d), np.full(n, i1),
-                            np.full(n, i2), exact["peak_i2_a"], DV, window_s=20 * T, vl_v=p.vl_v, f_hz=p.f_hz)
+    from _envelope_sizing import envelope_against_switching
+    exact, envelope = envelope_against_switching(LINK_2S, DV, d, 20.0)
+    env = envelope()
     assert env["switching_loss_w"] == pytest.approx(exact["switching_loss_w"], rel=0.05)
     assert env["conduction_loss_w"] == pytest.approx(exact["conduction_loss_w"], rel=0.03)
     # a per-step VL (a mission's battery_v) is the same as the number when constant
-    env_rows = envelope_currents(np.arange(1, n + 1) * T / 4, np.full(n, T / 4), np.full(n, d), np.full(n, i1),
-                                 np.full(n, i2), exact["peak_i2_a"], DV, window_s=20 * T, vl_v=np.full(n, p.vl_v),
-                                 f_hz=p.f_hz)
+    env_rows = envelope(np.full(400, LINK_2S.vl_v))
     assert env_rows["switching_loss_w"] == pytest.approx(env["switching_loss_w"], rel=1e-12)
 
 

@@ -88,19 +88,9 @@ def test_cli_sizing_json(capsys, tmp_path):
 def test_envelope_currents_match_the_switching_model(d):
     """Averaged device currents and loss from the envelope (what mission sizing uses) against the
     exact switching waveform at a constant duty (devices: schottky)."""
-    from wpt_receiver.devices import envelope_params
-    from wpt_receiver.envelope import steady_state
-    from wpt_receiver.sbar import rectifier_v2_folded
-    from wpt_receiver.sizing import envelope_currents
-    link = SwitchingLink(P, SwitchingConfig(devices=DV))
-    res = link.run(link.schedule(0.0, 40 * T, d), link.periodic_steady_state(d))
-    exact = rectifier_currents(res, window_s=20 * T, per_half_cycle=256)
-    pe = envelope_params(P, DV)
-    i2 = float(steady_state(pe, rectifier_v2_folded(d, P.vl_v, 11.0, DV))[1])
-    i1 = float(steady_state(pe, rectifier_v2_folded(d, P.vl_v, i2, DV))[0])
-    n = 400
-    env = envelope_currents(np.arange(1, n + 1) * T / 4, np.full(n, T / 4), np.full(n, d), np.full(n, i1),
-                            np.full(n, i2), exact["peak_i2_a"], DV, window_s=20 * T, vl_v=P.vl_v, f_hz=P.f_hz)
+    from _envelope_sizing import envelope_against_switching
+    exact, envelope = envelope_against_switching(P, DV, d, 11.0)
+    env = envelope()
     for key in ("diode_rms_a", "diode_avg_a", "switch_rms_a", "conduction_loss_w"):
         assert env[key] == pytest.approx(exact[key], rel=0.03), key
 
