@@ -91,6 +91,17 @@ def _restore(folder: Path, before: set[str]) -> list[str]:
     return new
 
 
+def _run_undone(argv: list[str], folder: Path):
+    """``_run`` in ``folder``, then what it created there removed again: ``(rc, out, err, created)``."""
+    before = _snapshot(folder)
+    try:
+        rc, out, err = _run(argv, folder)
+        created = sorted(_snapshot(folder) - before)
+    finally:
+        _restore(folder, before)
+    return rc, out, err, created
+
+
 def _spellings(token: str) -> set[str]:
     """The ways a message may name a command-line token: as given, stripped, its repr, an option without its
     dashes, a ``KEY=VALUE``'s key, a number as Python prints it, a path as :class:`Path` prints it."""
@@ -358,12 +369,7 @@ def mission_files(draw):
 
 def _dry_run(folder: Path, extra: list[str]):
     argv = ["mission", "--dry-run", "--format", "json", "--no-progress", "--out", "dry_out", *extra]
-    before = _snapshot(folder)
-    try:
-        rc, out, err = _run(argv, folder)
-        created = sorted(_snapshot(folder) - before)
-    finally:
-        _restore(folder, before)
+    rc, out, err, created = _run_undone(argv, folder)
     return argv, rc, out, err, created
 
 
@@ -483,12 +489,7 @@ def test_fuzzed_flight_logs_are_refused_in_one_line_naming_them(folder, f, comma
         monkeypatch.setattr(cal, "calibrate_log", _stub)
         monkeypatch.setattr(rep, "replay_log", _stub)
         argv = [command, path.name, "--no-plot", "--out", "log_out/d.toml" if command == "calibrate" else "log_out"]
-        before = _snapshot(folder)
-        try:
-            rc, out, err = _run([*argv, *(["--no-progress"] if command == "replay" else [])], folder)
-            created = sorted(_snapshot(folder) - before)
-        finally:
-            _restore(folder, before)
+        rc, out, err, created = _run_undone([*argv, *(["--no-progress"] if command == "replay" else [])], folder)
     event(f"{command} log: {rc}")
     _check(argv, rc, out, err, allowed=(0, 2, "reached"), names=(path.name,))
     if rc == 2:
@@ -542,12 +543,7 @@ def test_fuzzed_study_files_are_refused_in_one_line(folder, text, monkeypatch):
     path = folder / "fuzz_study.toml"
     path.write_text(text)
     argv = ["sweep", path.name, "--out", "fuzz_sweep", "--workers", "0", "--no-plot", "--no-progress"]
-    before = _snapshot(folder)
-    try:
-        rc, out, err = _run(argv, folder)
-        created = sorted(_snapshot(folder) - before)
-    finally:
-        _restore(folder, before)
+    rc, out, err, created = _run_undone(argv, folder)
     event(f"study: {rc}")
     _check(argv, rc, out, err, allowed=(2, "reached"), names=(path.name, "[", "study", "policy", "pads", "--"))
     if rc == 2:
@@ -574,12 +570,7 @@ def test_fuzzed_sweep_manifests_are_refused_in_one_line(folder, data, command):
     (d / "sweep.json").write_bytes(data)
     argv = (["sweep", "--status", d.name] if command == "status" else
             ["sizing", "--source", "sweep", "--sweep", d.name, "--no-plot", "--no-progress"])
-    before = _snapshot(folder)
-    try:
-        rc, out, err = _run(argv, folder)
-        created = sorted(_snapshot(folder) - before)
-    finally:
-        _restore(folder, before)
+    rc, out, err, created = _run_undone(argv, folder)
     event(f"manifest {command}: {rc}")
     _check(argv, rc, out, err, allowed=(0, 2), names=(d.name, "sweep.json"))
     assert not created, (argv, created)
