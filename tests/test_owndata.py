@@ -223,6 +223,47 @@ def test_a_log_with_unknown_armed_state_flies_its_whole_track(monkeypatch):
     assert read_mission(log_path("dronekit-la-testdata_log171.bin"), "flown").home != raw.home
 
 
+@pytest.mark.parametrize("name", ["amc_backend_log_80k.bin", "pymavlink_test.BIN"])
+def test_replay_refuses_a_ground_log_whose_armed_state_is_unknown_as_mission_plan_does(capsys, tmp_path, name):
+    """`replay` of a ground log with no armed-state record and no motor output said "never armed" and marked the
+    track NOT FLOWN (exit 0), while `mission --plan LOG` refuses it: the armed state is unknown, not "never armed". One
+    rule now (:func:`mission_sim.mavlink.takeoff.flown_periods`): the same one-line refusal, exit 2, nothing written."""
+    from mission_sim.cli import main
+    assert main(["replay", str(log_path(name)), "--no-plot", "--no-progress", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and f"{name}: no flown track: the armed state is unknown" in err, err
+    assert "never rises 1 m above its first position (max 0.0" in err and "never armed" not in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_replay_of_a_log_with_unknown_armed_state_counts_its_whole_track_as_flown(capsys):
+    """log171 with its armed-state records taken out (``armed_source`` None): `replay` marked it never armed (0 s
+    armed, NOT FLOWN); now its whole track is armed (the rule `mission --plan LOG` flies, one source:
+    :func:`~mission_sim.mavlink.takeoff.flown_periods`), with one warning saying the armed state is unknown, and the log
+    facts say so."""
+    import dataclasses
+
+    from mission_sim.cli.mavlink import _print_log_facts
+    from mission_sim.mavlink.replay import flight_stats, replay_warnings, track_from_log
+    from mission_sim.mavlink.takeoff import flown_periods
+    full = read_log(log_path("dronekit-la-testdata_log171.bin"))
+    log = dataclasses.replace(full, armed=full.armed.iloc[0:0], armed_source=None)
+    t = log.position["t_s"].to_numpy(float)
+    assert flown_periods(log) == [(t.min(), t.max())] and flown_periods(full) == full.armed_periods
+    track = track_from_log(log)
+    assert track.armed.all()
+    stats = flight_stats(log, track)
+    assert stats["flown"] and stats["armed_time_s"] == pytest.approx(float(track.t_s[-1]), abs=0.5)
+    assert stats["armed_time_s"] > full.armed_time_s + 25   # (the 27 s on the ground before arming included)
+    warns = replay_warnings(log, track)
+    assert not any("never armed" in w or "NOT FLOWN" in w for w in warns), warns
+    assert sum("the armed state is unknown" in w and "whole GPS track" in w for w in warns) == 1, warns
+    _print_log_facts(log.path.name, stats)
+    out = capsys.readouterr().out
+    assert "never armed" not in out and "NOT FLOWN" not in out and "the armed state is unknown" in out, out
+    assert not any("armed state is unknown" in w for w in replay_warnings(full, track_from_log(full)))
+
+
 # ------------------------------------------------------------------------- a log that starts in the air
 PX4_ESC = "px4_ulog_rs_esc_status_log.ulg"   # PX4 v1.9 on a Pixhawk (FMU v3), 6S, 26-74 A: logging began in flight
 

@@ -161,7 +161,9 @@ def _cmd_replay(args) -> int:
         raise CliError(f"--ground-gap {args.ground_gap!r} is invalid; valid range: [0, 1] m")
     log = read_log(args.log)
     span, _ = replay_span(log, window, args.segment)
-    track_from_log(log, pad=pad, window=span)  # no usable position: one-line error before any simulation
+    from ..mavlink.replay import unknown_armed_check
+    # no usable position, or the armed state unknown on the ground: one-line error before any simulation
+    unknown_armed_check(log, track_from_log(log, pad=pad, window=span))
     cfg = _mav_config(args, mass_override(args), single_pad=True)
     policy = _mav_policy(cfg, args.policy)
     prepare_out_dir(args.out)
@@ -224,7 +226,8 @@ def _print_log_facts(name: str, s: dict) -> None:
     rejected = s.get("gps_rejected") or {}
     n_rej = sum(rejected.values())
     detail = f" ({', '.join(f'{k} {v}' for k, v in rejected.items() if v)})" if n_rej else ""
-    source = s.get("armed_source") or "no armed-state record and no motor output: never armed"
+    source = s.get("armed_source") or ("no armed-state record and no motor output: the armed state is unknown, the "
+                                       "whole track counted as flown")
     print(f"{name}: {s['duration_s']:.1f} s logged, {s['n_position_samples']} positions "
           f"({s['bad_frames']} bad frames skipped, {n_rej} implausible GPS fixes rejected{detail}), "
           f"{s['distance_m']:.0f} m flown, max {s['max_alt_m']:.1f} m above the pad")

@@ -31,7 +31,7 @@ from .flightlog import (LogParseError, NoPositionError, _fmt_counts, _no_positio
                         check_decoded)
 from .logs import FlightLog, read_log
 from .takeoff import (  # noqa: F401 (one source: takeoff.py)
-    STARTS_AIRBORNE_M, _airborne_start, default_pad, starts_airborne_warning)
+    STARTS_AIRBORNE_M, _airborne_start, default_pad, flown_periods, starts_airborne_warning, unknown_armed_state)
 
 __all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "with_ground_gap", "flight_stats",
            "logged_energy_j", "compare_power", "fit_mass_kg", "resample_track", "replay_trajectory", "ReplayResult", "replay_log", "parse_window",
@@ -183,7 +183,7 @@ def track_from_log(log: FlightLog, pad: GeoPoint | None = None, ground_gap_m: fl
     clipped = int(np.sum(tilt > MAX_TILT_RAD))
     return FlightTrack(t_s=t_log - t_log[0], pos_m=np.column_stack([e, n, height + ground_gap_m]),
                        tilt_rad=np.minimum(tilt, MAX_TILT_RAD), height_m=height, t_offset_s=float(t_log[0]),
-                       pad=pad, ground_gap_m=float(ground_gap_m), armed=_in_periods(t_log, log.armed_periods),
+                       pad=pad, ground_gap_m=float(ground_gap_m), armed=_in_periods(t_log, flown_periods(log)),
                        n_tilt_clipped=clipped)
 
 
@@ -249,7 +249,7 @@ def flight_stats(log: FlightLog, track: FlightTrack) -> dict:
     whole log's (what the log says)."""
     seg = np.diff(track.pos_m, axis=0)
     t0, t1 = track.t_offset_s, track.t_offset_s + float(track.t_s[-1])
-    periods = [(max(a, t0), min(b, t1)) for a, b in log.armed_periods if b > t0 and a < t1]
+    periods = [(max(a, t0), min(b, t1)) for a, b in flown_periods(log) if b > t0 and a < t1]
     return {
         "duration_s": float(log.duration_s),
         "position_span_s": float(track.t_s[-1]),
@@ -314,7 +314,7 @@ def compare_power(log: FlightLog, track: FlightTrack, sim_t_s, propulsion_w) -> 
     b = bat[(bat["t_s"] >= sim_t[0] - _EDGE_S) & (bat["t_s"] <= sim_t[-1] + _EDGE_S)]
     t = b["t_s"].to_numpy(float)
     height = np.interp(t, track.t_s + track.t_offset_s, track.height_m) if len(t) else np.zeros(0)
-    armed = _in_periods(t, log.armed_periods)
+    armed = _in_periods(t, flown_periods(log))
     table = pd.DataFrame({"t_s": t, "logged_w": b["power_w"].to_numpy(float),
                           "voltage_v": b["voltage_v"].to_numpy(float), "current_a": b["current_a"].to_numpy(float),
                           "model_w": np.interp(t, sim_t, model_w) if len(t) else np.zeros(0),
@@ -423,6 +423,17 @@ FAR_PAD_M = 10_000.0  # a pad farther than this from the whole track is almost s
 GAP_WARN_S = 10.0     # positions missing longer than this while armed: the replay invents a straight line
 
 
+def unknown_armed_check(log: FlightLog, track: FlightTrack) -> str | None:
+    """None when ``log``'s armed state is known; unknown (``armed_source`` None): the warning that its whole track
+    counts as flown (:func:`flown_periods`, the rule of the flown route `mission --plan LOG`), or ``ValueError`` when the
+    replayed track never rises :data:`~mission_sim.mavlink.takeoff.UNKNOWN_GROUND_M` above the pad (its GPS drift on
+    the ground was said "never armed ... NOT FLOWN"; the armed state is unknown, not "never armed")."""
+    if log.armed_source is not None:
+        return None
+    above = "its first position" if track.pad == default_pad(log) else "the pad"
+    return unknown_armed_state(log.path.name, float(np.max(track.height_m)), above)
+
+
 def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
     """One-line warnings about a replay that runs but may not mean what the user thinks: a log that
     ends while the vehicle is still armed (a truncated log, or a crash), and a pad far from the
@@ -436,7 +447,12 @@ def replay_warnings(log: FlightLog, track: FlightTrack) -> list[str]:
     airborne = starts_airborne_warning(log)
     if airborne is not None:
         out.append(airborne)
-    if not np.any(track.armed):
+    if log.armed_source is None:   # the whole track counts as armed (flown_periods); replay refuses a ground log
+        try:
+            out.append(unknown_armed_check(log, track))
+        except ValueError as e:   # (the studies and the re-flight list it)
+            out.append(str(e))
+    elif not np.any(track.armed):
         out.append(f"{log.path.name}: the vehicle never armed in the replayed part: the track is marked NOT FLOWN "
                    "(its distance and height are GPS drift on the ground; nothing here was a flight)")
     gaps = np.flatnonzero((np.diff(track.t_s) > GAP_WARN_S) & track.armed[:-1] & track.armed[1:])
@@ -534,6 +550,7 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
         ground_gap_m = cfg.mission.hover_gap_m
     window, span_info = replay_span(log, window, segment)
     track = track_from_log(log, pad=pad, ground_gap_m=ground_gap_m, window=window)
+    unknown_armed_check(log, track)   # the armed state unknown and the track on the ground: ValueError
     grid = resample_track(track, cfg.sim.traj_dt_s)
     traj = replay_trajectory(grid)
     cols = _PowerColumns()

@@ -12,7 +12,36 @@ import numpy as np
 from .flightlog import FlightLog, _no_position
 from .geodesy import GeoPoint
 
-__all__ = ["STARTS_AIRBORNE_M", "default_pad", "starts_airborne_warning"]
+__all__ = ["STARTS_AIRBORNE_M", "UNKNOWN_GROUND_M", "default_pad", "flown_periods", "starts_airborne_warning",
+           "unknown_armed_state"]
+
+#: a log whose armed state is unknown and whose track never rises this much above its first position (or the pad) was
+#: on the ground (the flown route's and the replay's refusal: :func:`unknown_armed_state`)
+UNKNOWN_GROUND_M = 1.0
+
+
+def flown_periods(log: FlightLog) -> list[tuple[float, float]]:
+    """The periods (log seconds) of ``log`` that count as flown, one rule for the flown route
+    (:func:`mission_sim.plans.items.flown_mission`) and the replay: its armed periods when its armed state is known
+    (``armed_source`` set; none for a log that never armed), else (no armed-state record and no motor output, the armed
+    state unknown) its whole GPS track, first to last position (checked by :func:`unknown_armed_state`)."""
+    if log.armed_source is not None:
+        return list(log.armed_periods)
+    t = log.position["t_s"].to_numpy(float)
+    return [(float(t.min()), float(t.max()))] if len(t) else []
+
+
+def unknown_armed_state(name: str, top_m: float, above: str = "its first position") -> str:
+    """For a log whose armed state is unknown (``armed_source`` None; :func:`flown_periods` is its whole track): the
+    warning saying so, or ``ValueError`` when the track never rises :data:`UNKNOWN_GROUND_M` above ``above`` (its
+    highest point ``top_m``): a log on the ground (its GPS drift would fly as a 1 s route, or replay as a flight)."""
+    what = "the armed state is unknown (no armed-state record and no motor output in the log)"
+    if not top_m >= UNKNOWN_GROUND_M:
+        raise ValueError(f"{name}: no flown track: {what} and its GPS track never rises {UNKNOWN_GROUND_M:g} m above "
+                         f"{above} (max {top_m:.2f} m): a log on the ground; valid: the log of a flight, or a "
+                         "log holding an uploaded mission")
+    return (f"{name}: {what}: its whole GPS track counts as flown, time on the ground included (with armed-state "
+            "records, HEARTBEAT / vehicle_status / EV, or motor outputs it is the armed time only)")
 
 STARTS_AIRBORNE_M = 5.0   # a log that starts armed this much above where its first flight's disarm is started in the air
 LANDED_GAP_S = 5.0        # the last position of the first armed period must be this close to its disarm (on the ground)

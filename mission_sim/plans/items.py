@@ -407,12 +407,14 @@ def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
     again at the next airborne point; time spent on the ground is not kept), a landing at the end;
     home = the replay's take-off spot (:func:`mission_sim.mavlink.takeoff.default_pad`: the first armed position, or
     for a log that starts armed in the air where its first armed period ends). A log that never armed has none
-    (``ValueError``); one whose armed state is unknown flies its whole track (:func:`_unknown_armed_state`)."""
+    (``ValueError``); one whose armed state is unknown flies its whole track
+    (:func:`~mission_sim.mavlink.takeoff.flown_periods`, :func:`~mission_sim.mavlink.takeoff.unknown_armed_state`)."""
     from ..mavlink.geodesy import geodetic_to_enu
     from ..mavlink.logs import read_log
     log = read_log(path)
     pos = log.position
-    periods = log.armed_periods
+    from ..mavlink.takeoff import flown_periods, unknown_armed_state
+    periods = flown_periods(log)   # the armed periods; the armed state unknown: the whole track (one rule with replay)
     name = Path(path).name
     if log.armed_source is not None and not periods:   # (its fixes were GPS drift on the ground: 1 s of "flight")
         raise ValueError(f"{name}: no flown track: the vehicle never armed in the log (armed state from "
@@ -422,7 +424,7 @@ def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
         pos = pos[(t >= periods[0][0]) & (t <= periods[-1][1])]
     if len(pos) < 2:
         raise ValueError(f"{name}: no flown track: {len(pos)} usable position(s) (GPS fix >= 3)"
-                         + (" while armed" if periods else ""))
+                         + (" while armed" if log.armed_periods else ""))
     lat, lon, alt = (pos[c].to_numpy(float) for c in ("lat_deg", "lon_deg", "alt_m"))
     from ..mavlink.takeoff import default_pad, starts_airborne_warning
     home = default_pad(log)   # the first armed position; a log that starts in the air: where its first flight ended
@@ -433,7 +435,8 @@ def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
     e, n, u = geodetic_to_enu(lat, lon, alt, home)
     p = np.column_stack([e, n, np.maximum(u, 0.0)])
     if log.armed_source is None:   # no armed-state record and no motor output: the whole track (as before 2026-11-27)
-        _unknown_armed_state(name, float(p[:, 2].max()))
+        from wpt_receiver.notices import warn
+        warn(unknown_armed_state(name, float(p[:, 2].max())))
     t = pos["t_s"].to_numpy(float)
     air = p[:, 2] >= FLOWN_GROUND_M
     cross = np.flatnonzero(air[1:] != air[:-1])   # each take-off and landing kept: a flight lower than the tolerance
@@ -450,20 +453,6 @@ def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
     if not items or items[-1].command != NAV_LAND:
         items.append(MissionItem("track end", NAV_LAND, 0, (0.0,) * 4, lat[-1], lon[-1], home.alt_m))
     return RawMission(f"{Path(path).name} (flown track)", home, tuple(items))
-
-
-def _unknown_armed_state(name: str, top_m: float) -> None:
-    """A log whose armed state is unknown (no armed-state record and no motor output, ``armed_source`` None) flies its
-    whole GPS track, with a warning (it is not "never armed": refusing it as such broke logs that flew); a track that
-    never rises :data:`FLOWN_GROUND_M` above its first position (``top_m``) was on the ground: ``ValueError``."""
-    what = "the armed state is unknown (no armed-state record and no motor output in the log)"
-    if top_m < FLOWN_GROUND_M:   # (the GPS drift on the ground flew as a 1 s route)
-        raise ValueError(f"{name}: no flown track: {what} and its GPS track never rises {FLOWN_GROUND_M:g} m above its "
-                         f"first position (max {top_m:.2f} m): a log on the ground; valid: the log of a flight, or a "
-                         "log holding an uploaded mission")
-    from wpt_receiver.notices import warn
-    warn(f"{name}: {what}: the flown route is its whole GPS track, time on the ground included (with armed-state "
-         "records, HEARTBEAT / vehicle_status / EV, or motor outputs it is the armed time only)")
 
 
 def _stop_time(p: np.ndarray, t: np.ndarray, air: np.ndarray) -> float:
