@@ -41,8 +41,10 @@ def _add_sizing(sub):
                         "l1_h, l2_h, lm_h, r1_ohm, r2_ohm, vdc_v, vl_v, f_hz (missions: --set link.*, battery.*)")
     p.add_argument("--devices", default="schottky", help="device preset for the first run and the inverter "
                    "(default schottky; see wpt_receiver/parts.toml)")
-    p.add_argument("--margin", type=float_arg("margin", positive=True, lo=1.0, hi=10.0), default=1.25,
-                   help="required rating = margin x worst-case |i2|, 1 .. 10 (default 1.25)")
+    margin = p.add_argument("--margin", type=float_arg("margin", positive=True, lo=1.0, hi=10.0), default=None,
+                            help="required rating = margin x worst-case |i2|, 1 .. 10 (default: the sizing rules')")
+    margin.lazy_help = lambda: (f"required rating = margin x worst-case |i2|, 1 .. 10 (default {_default_margin():g}, "
+                                "wpt_receiver.sizing.SizingRules)")   # (numpy only for --help: the rules' module)
     p.add_argument("--t-end", type=float_arg("t-end", positive=True, lo=3e-3, hi=0.1), default=10e-3,
                    help="end of the run in s, switch at 1 ms, 0.003 .. 0.1 (default 0.01)")
     p.add_argument("--t-protect", type=float_arg("t-protect", positive=True, lo=1e-7, hi=0.1), default=1e-4,
@@ -60,6 +62,13 @@ def _add_sizing(sub):
 
 def _names(args, valid, default):
     return name_list(default if args.policies is None else args.policies, "--policies", valid)
+
+
+def _default_margin() -> float:
+    """The rating margin of :class:`wpt_receiver.sizing.SizingRules` (one source: `--margin`'s default and its help
+    were a copy of it, 1.25; its module imports numpy, so not when the parsers are built)."""
+    from wpt_receiver.sizing import SizingRules
+    return float(SizingRules().margin)
 
 
 def _rules(args):
@@ -185,6 +194,8 @@ def _sweep_rows(args, base):
 
 def _cmd_sizing(args) -> int:
     from .paper import _link_text
+    if args.margin is None:
+        args.margin = _default_margin()
     args.out = figures_out(args, "out/sizing")
     if not args.no_plot:
         prepare_out_dir(args.out)  # before the simulation: a bad folder costs nothing
