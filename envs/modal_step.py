@@ -68,7 +68,7 @@ from wpt_receiver.kernel_cache import drop_stale_cache
 from .layout import (CZ_FAST, CZ_FASTH, CZ_KEY, CZ_LEVEL_N, CZ_LEVELS, CZ_MODES, CZ_RPAR, CZ_SAMPLE, CZ_STEP, CZ_SUB,
                      FAST, MPAR, MSINGLE_PAR, REFINE_LEVELS_CAP,
                      MSTATE, SINGLE, SLOW, STATE)
-from .vector_kernel import _battery, _objective, _put_info, _put_obs, _reward, _t_since, single_finish
+from .vector_kernel import compiled_or_python, _battery, _objective, _put_info, _put_obs, _reward, _t_since, single_finish
 
 __all__ = ["env_step", "step_kernel", "single_step", "start_link", "kernel_function"]
 
@@ -90,9 +90,9 @@ _DELTA_RATIO2 = 1.44
 
 
 def kernel_function(name: str, compiled: bool = True):
-    """This module's ``name``, as :func:`envs.vector_kernel.kernel_function` gives that module's."""
-    f = globals()[name]
-    return f if compiled else getattr(f, "py_func", f)
+    """This module's ``name``, as :func:`envs.vector_kernel.kernel_function` gives that module's (the one pick:
+    :func:`envs.vector_kernel.compiled_or_python`)."""
+    return compiled_or_python(globals()[name], compiled)
 
 
 # ---------------------------------------------------------------------- the link (exact modes)

@@ -45,7 +45,7 @@ from wpt_receiver.kernel_cache import drop_stale_cache
 from .objective import SHORT_MODE_IL_A, SHORT_MODE_WITHIN_S
 
 __all__ = ["env_step", "step_kernel", "duty_kernel", "single_step", "single_finish", "inst_peak_rows", "obs_rows", "INFO_ROWS",
-           "kernel_function"]
+           "kernel_function", "compiled_or_python"]
 
 
 def _here():
@@ -73,12 +73,18 @@ _SUB_COLS = np.array([COEF.h00, COEF.h01, COEF.f0, COEF.g01, COEF.h10, COEF.h11,
 _U = np.uint64
 
 
+def compiled_or_python(f, compiled: bool = True):
+    """``f`` (a numba dispatcher or a plain function) as given, or with ``compiled=False`` the same source run by the
+    interpreter (its ``py_func``; a plain function is itself): the one pick both modules' :func:`kernel_function` make
+    (:func:`envs.modal_step.kernel_function` held its own copy)."""
+    return f if compiled else getattr(f, "py_func", f)
+
+
 def kernel_function(name: str, compiled: bool = True):
     """The function ``name`` of this module: compiled, or with ``compiled=False`` the same source run
     by the interpreter (its ``py_func``; looked up in the module at each call, so a test may swap the
-    module's functions and constants)."""
-    f = globals()[name]
-    return f if compiled else getattr(f, "py_func", f)
+    module's functions and constants): :func:`compiled_or_python`."""
+    return compiled_or_python(globals()[name], compiled)
 
 
 @njit(cache=True)
