@@ -59,6 +59,8 @@ def cmd_refly(args) -> int:
         from ..mavlink.replay import replay_span
         window = replay_span(log, window, args.segment)[0]
     track = track_from_log(log, pad=pad, window=window)
+    from ..mavlink.replay import unknown_armed_check
+    unknown_armed_check(log, track)   # the armed state unknown and the track on the ground: refused, as replay does
     cfg = _config(args, track)
     policy = make_policy(args.policy, cfg)
     plan = plan_refly(log, cfg, pad=track.pad, ground_gap_m=args.ground_gap, window=window, reach_m=args.reach,
