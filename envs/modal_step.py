@@ -68,7 +68,8 @@ from wpt_receiver.kernel_cache import drop_stale_cache
 from .layout import (CZ_FAST, CZ_FASTH, CZ_KEY, CZ_LEVEL_N, CZ_LEVELS, CZ_MODES, CZ_RPAR, CZ_SAMPLE, CZ_STEP, CZ_SUB,
                      FAST, MPAR, MSINGLE_PAR, REFINE_LEVELS_CAP,
                      MSTATE, SINGLE, SLOW, STATE)
-from .vector_kernel import compiled_or_python, _battery, _objective, _put_info, _put_obs, _reward, _t_since, single_finish
+from .vector_kernel import (_battery, _objective, _put_info, _put_obs, _reward, _t_since, compiled_or_python,
+                            single_finish)
 
 __all__ = ["env_step", "step_kernel", "single_step", "start_link", "kernel_function"]
 

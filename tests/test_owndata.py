@@ -235,7 +235,8 @@ def test_replay_refuses_a_ground_log_whose_armed_state_is_unknown_as_mission_pla
     assert "never rises 1 m above its first position (max 0.0" in err and "never armed" not in err, err
     assert not (tmp_path / "out").exists()
     pads = Path(__file__).parent / "data" / "missions" / "dronekit_flight_pads.csv"   # (`replay --pads`: the same)
-    assert main(["replay", str(log_path(name)), "--pads", str(pads), "--no-progress", "--out", str(tmp_path / "o")]) == 2
+    argv = ["replay", str(log_path(name)), "--pads", str(pads), "--no-progress", "--out", str(tmp_path / "o")]
+    assert main(argv) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and f"{name}: no flown track: the armed state is unknown" in err, err
 

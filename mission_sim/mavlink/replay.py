@@ -425,9 +425,9 @@ GAP_WARN_S = 10.0     # positions missing longer than this while armed: the repl
 
 def unknown_armed_check(log: FlightLog, track: FlightTrack) -> str | None:
     """None when ``log``'s armed state is known; unknown (``armed_source`` None): the warning that its whole track
-    counts as flown (:func:`flown_periods`, the rule of the flown route `mission --plan LOG`), or ``ValueError`` when the
-    replayed track never rises :data:`~mission_sim.mavlink.takeoff.UNKNOWN_GROUND_M` above the pad (its GPS drift on
-    the ground was said "never armed ... NOT FLOWN"; the armed state is unknown, not "never armed")."""
+    counts as flown (:func:`flown_periods`, the rule of the flown route `mission --plan LOG`), or ``ValueError``
+    when the replayed track never rises :data:`~mission_sim.mavlink.takeoff.UNKNOWN_GROUND_M` above the pad (its
+    GPS drift on the ground was said "never armed ... NOT FLOWN"; the armed state is unknown, not "never armed")."""
     if log.armed_source is not None:
         return None
     above = "its first position" if track.pad == default_pad(log) else "the pad"
