@@ -11,6 +11,7 @@ import pytest
 from _flightlogs import log_path
 from test_mission_files import enu_xy
 from mission_sim.mavlink.logs import read_log
+from wpt_receiver.notices import DronewptWarning
 
 PX4_EVENTS = "pyulog_sample_px4_events.ulg"   # PX4 SITL (v1.15 dev), arms, hops to ~2 m; battery_status current -1
 
@@ -301,7 +302,8 @@ def test_a_log_that_starts_in_the_air_is_about_the_ground_it_lands_on():
     # its flown route (`mission --plan LOG`): at ~10 m, 41.2 s (docs/changes.md; 33.4 s at ~3 m about the air)
     from mission_sim.plans.items import read_mission
     from mission_sim.plans.route import route_from_items
-    route = route_from_items(read_mission(log_path(PX4_ESC), "flown"))
+    with pytest.warns(DronewptWarning, match="starts armed 7.1 m above"):   # (mission --plan says it too)
+        route = route_from_items(read_mission(log_path(PX4_ESC), "flown"))
     assert 9.5 < max(w["z_m"] for w in route) < 10.5
 
 
@@ -514,7 +516,8 @@ def test_a_ulog_gives_its_flown_track_never_an_uploaded_mission():
     flies its track, "uploaded" is refused. README and docs/mission_files.md say so."""
     from mission_sim.plans.items import read_mission, uploaded_mission
     assert uploaded_mission(log_path(PX4_ESC)).items == ()
-    assert all(it.where.startswith("track") for it in read_mission(log_path(PX4_ESC)).items)
+    with pytest.warns(DronewptWarning, match="starts armed"):
+        assert all(it.where.startswith("track") for it in read_mission(log_path(PX4_ESC)).items)
     with pytest.raises(ValueError, match="holds no uploaded mission"):
         read_mission(log_path(PX4_ESC), "uploaded")
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
