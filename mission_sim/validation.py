@@ -105,7 +105,10 @@ def shown(value) -> str:
     shape, dtype = getattr(value, "shape", None), getattr(value, "dtype", None)
     if shape is not None and dtype is not None and math.prod(shape) > 1:
         return f"array of shape {tuple(shape)}, dtype {dtype}"
-    return " ".join(repr(value).split()) if "\n" in repr(value) else repr(value)
+    text = " ".join(repr(value).split()) if "\n" in repr(value) else repr(value)
+    if isinstance(value, (list, tuple, set, dict)) and len(text) > 80:   # (a 10,000-item list was a 59 kB line)
+        return f"{text[:60]}... ({len(value)} items)"
+    return text
 
 
 def real_array(value):

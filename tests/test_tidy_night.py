@@ -69,3 +69,20 @@ def test_sizing_no_plot_writes_no_folder(monkeypatch, tmp_path, capsys):
     row = out["rows"][0]
     assert row["required_rating_a"] == pytest.approx(SizingRules().margin * row["peak_i2_a"], rel=0.01)
     assert list(tmp_path.iterdir()) == []
+
+
+
+def test_a_long_value_is_cut_in_a_one_line_error():
+    """Review of the night's merge: a 10,000-item list where a table belongs gave a 59 kB "one line"
+    (``validation.check_table`` via ``shown``), and a sweep.json whose ``study`` is a 20,000-item list a 129 kB one."""
+    import pytest
+
+    from mission_sim.studies.status import _manifest_key_problem
+    from mission_sim.validation import check_table, shown
+
+    with pytest.raises(ValueError) as exc:
+        check_table("[grid]", list(range(10000)), "x", eq=" = ")
+    assert len(str(exc.value)) < 200 and "(10000 items)" in str(exc.value)
+    assert shown([1, 2]) == "[1, 2]" and shown("a" * 100) == repr("a" * 100)   # short containers and strings whole
+    text = _manifest_key_problem({"study": list(range(20000))}, "study", str, "a string")
+    assert len(text) < 150 and text.startswith("'study' = [0, 1, 2") and text.endswith("valid: a string")

@@ -151,7 +151,8 @@ def _manifest_key_problem(man: dict, key: str, types, kind: str) -> str:
     """What is wrong with manifest key ``key``: missing, or its value (as JSON spells it) and what is valid."""
     if key not in man:
         return f"no {key!r} ({kind})"
-    return f"{key!r} = {json.dumps(man[key])} is invalid; valid: {kind}"
+    text = json.dumps(man[key])   # (cut as a .plan's JSON values are: a 20,000-item list was a 129 kB line)
+    return f"{key!r} = {text if len(text) <= 80 else text[:60] + '...'} is invalid; valid: {kind}"
 
 
 def sweep_status(out_dir) -> SweepStatus:
