@@ -15,10 +15,8 @@ from .geodesy import GeoPoint
 __all__ = ["STARTS_AIRBORNE_M", "UNKNOWN_GROUND_M", "default_pad", "flown_periods", "starts_airborne_warning",
            "unknown_armed_state"]
 
-#: heights below this above home are the ground: a flown route's track point lower than it is a landing
-#: (:data:`mission_sim.plans.items.FLOWN_GROUND_M`, this value), and a log whose armed state is unknown and whose track
-#: never rises this much above its first position (or the pad) was on the ground (the flown route's and the replay's
-#: refusal: :func:`unknown_armed_state`)
+#: a log whose armed state is unknown and whose track never rises this much above its first position (or the pad) was
+#: on the ground (the flown route's and the replay's refusal: :func:`unknown_armed_state`)
 UNKNOWN_GROUND_M = 1.0
 
 

@@ -35,7 +35,6 @@ from pathlib import Path
 import numpy as np
 
 from ..mavlink.geodesy import GeoPoint
-from ..mavlink.takeoff import UNKNOWN_GROUND_M
 from ..validation import ALT_RANGE, Range, check_number
 
 __all__ = ["MissionItem", "RawMission", "read_mission", "read_plan", "read_wpl", "uploaded_mission",
@@ -48,7 +47,7 @@ FLOWN_HOLD_S = 5.0             # slower than HOVER_M_S for this long: a loiter i
 HOVER_M_S = 0.5
 #: QGC's complex items that save their generated waypoints (TransectStyleComplexItem); a StructureScan saves its inputs
 _TRANSECT_TYPES = ("survey", "CorridorScan")
-FLOWN_GROUND_M = UNKNOWN_GROUND_M   # a decimated track point lower than this above home is on the ground (a landing)
+FLOWN_GROUND_M = 1.0           # a decimated track point lower than this above home is on the ground (a landing)
 
 
 @dataclass(frozen=True)
