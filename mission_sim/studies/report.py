@@ -76,9 +76,17 @@ def _axes(df: pd.DataFrame, study: Study) -> tuple[str | None, str | None]:
     x = study.report.get("x") or next((k for k in varied if _numeric(df[k])), None)
     hue = study.report.get("hue")
     if hue is None:
-        hue = next((k for k in varied if k != x), None)
-        if hue is None and POLICY_KEY in df.columns and df[POLICY_KEY].nunique() > 1:
-            hue = POLICY_KEY
+        policies = POLICY_KEY in df.columns and df[POLICY_KEY].nunique() > 1
+        if x in study.grid:
+            # one line per hue value: another grid axis, else the policy; never a Monte Carlo parameter, whose every
+            # draw became a line of its own (a legend of n random values; 2026-11-28, before: the first other varied key)
+            hue = next((k for k in varied if k != x and k in study.grid), None)
+            if hue is None and policies:
+                hue = POLICY_KEY
+        else:   # x drawn at random: a scatter, coloured by another varied parameter
+            hue = next((k for k in varied if k != x), None)
+            if hue is None and policies:
+                hue = POLICY_KEY
     return x, hue
 
 
@@ -123,7 +131,7 @@ def _plot_tradeoff(df, study, x, hue, metric, path) -> str:
             g = d.assign(_y=pd.to_numeric(d[metric], errors="coerce")).groupby(x)["_y"]
             mean, lo, hi = g.mean(), g.min(), g.max()
             color = cmap(i / max(len(groups) - 1, 1))
-            label = None if h is None else f"{_label(hue)} = {h}"
+            label = None if h is None else f"{_label(hue)} = {h:.6g}" if isinstance(h, float) else f"{_label(hue)} = {h}"
             ax.plot(mean.index, mean.values, "o-", color=color, label=label)
             if (hi - lo).abs().max() > 0:
                 ax.fill_between(mean.index, lo.values, hi.values, color=color, alpha=0.15, lw=0)
