@@ -35,3 +35,44 @@ def test_sweep_plot_keeps_an_explicit_hue_and_a_scatter_over_draws():
     assert _axes(_rows(), _study({"hue": "wind.speed_m_s"}))[1] == "wind.speed_m_s"
     # x drawn at random (a scatter): coloured by the other varied parameter, as before
     assert _axes(_rows(), _study({"x": "wind.speed_m_s"})) == ("wind.speed_m_s", "battery.capacity_ah")
+
+
+# --- pads files a newcomer brings ------------------------------------------------------------------------------------
+
+import json  # noqa: E402
+import re  # noqa: E402
+
+import pytest  # noqa: E402
+
+from mission_sim.plans.pads import read_pads  # noqa: E402
+
+
+@pytest.mark.parametrize("column", ["alt_ft", "Alt (ft)", "height", "elevation_m", "z"])
+def test_pads_csv_altitude_under_another_name_is_refused(tmp_path, column):
+    """`name,lat,lon,alt_ft` was read with every pad on the home's ground (the column ignored without a word)."""
+    f = tmp_path / "pads.csv"
+    f.write_text(f"name,lat,lon,{column}\nA,47.3982819,8.5469211,1600\n")
+    with pytest.raises(ValueError, match=rf"pads.csv: column {re.escape(repr(column.lower()))} looks like a pad altitude.*valid: "
+                                         r"a column alt in metres above mean sea level"):
+        read_pads(f)
+
+
+def test_pads_csv_other_columns_still_ignored(tmp_path):
+    f = tmp_path / "pads.csv"
+    f.write_text("name,lat,lon,alt,height_note,zone\nA,47.3982819,8.5469211,490.5,roof,3\n")
+    (pad,) = read_pads(f)
+    assert pad.point.alt_m == 490.5
+    f.write_text("name,lat,lon,zone,note\nA,47.3982819,8.5469211,3,x\n")
+    assert read_pads(f)[0].point.alt_m is None
+
+
+def test_a_plan_given_as_pads_is_named(tmp_path):
+    """`--pads survey.plan` said 'feature 0: geometry type null is not supported; valid: Point, MultiPoint'."""
+    f = tmp_path / "survey.plan"
+    f.write_text(json.dumps({"fileType": "Plan", "mission": {"items": []}, "version": 1}))
+    with pytest.raises(ValueError, match=r"survey.plan: a JSON object without a GeoJSON \"type\" \(a QGroundControl "
+                                         r"\.plan: give it as --plan / mission.file\), not a pads file"):
+        read_pads(f)
+    # a feature without its "type" but with a geometry is still read
+    f.write_text(json.dumps({"geometry": {"type": "Point", "coordinates": [8.5, 47.4]}}))
+    assert read_pads(f)[0].point.lat_deg == 47.4

@@ -72,6 +72,8 @@ def _csv(text: str, name: str) -> tuple[GeoPad, ...]:
         raise ValueError(f"{name}: header {','.join(head)!r} has no lat / lon column; valid: a CSV header "
                          "lat,lon[,alt][,hover_time_s] (or a GeoJSON FeatureCollection of Points)")
     _check_other_columns(head, f"{name}: column")
+    if col["alt"] is None:
+        _check_altitude_like(head, f"{name}: column")
     out = []
     for i, r in rows[1:]:   # i: the line in the file (blank lines counted)
         if any(c.strip() for c in r[len(head):]):   # (a value past the header's columns was dropped without a word)
@@ -103,6 +105,24 @@ def _check_other_columns(head, what: str) -> None:
             raise ValueError(f"{what} {c!r} is unknown (did you mean {field!r}?); {_CSV_VALID}")
 
 
+#: first words of a name that holds a height under another name or unit (``alt_ft``, ``altitude (ft)``, ``height``,
+#: ``elevation_m``, ``z``): with no ``alt`` column its values were dropped without a word, the pad on the home's ground
+_ALT_WORDS = frozenset({"alt", "altitude", "height", "hgt", "elev", "elevation", "ele", "amsl", "agl", "z"})
+
+
+def _check_altitude_like(head, what: str) -> None:
+    """A file without a pad altitude column (:data:`_ALIASES` ``alt``) whose other column looks like one
+    (:data:`_ALT_WORDS`: ``alt_ft``, ``height``, ``elevation``; 2026-11-28, they were ignored): ``ValueError`` naming it.
+    ``what``: the error's start (the file and ``column``)."""
+    import re
+    for c in head:
+        words = re.split(r"[^a-z0-9]+", c.strip().lower())
+        if words and words[0] in _ALT_WORDS:
+            raise ValueError(f"{what} {c!r} looks like a pad altitude but is not read (the pads would be on the "
+                             "home's ground); valid: a column alt in metres above mean sea level (feet x 0.3048; a "
+                             "height above ground: add the ground's altitude AMSL), or no such column")
+
+
 def _near_field(name: str, names=_KNOWN) -> str | None:
     """The pad value (a key of :data:`_ALIASES`) one of whose ``names`` ``name`` nearly matches (a misspelling), or
     None."""
@@ -111,11 +131,23 @@ def _near_field(name: str, names=_KNOWN) -> str | None:
     return next(k for k, al in _ALIASES.items() if near[0] in al) if near else None
 
 
+#: the GeoJSON ``type`` of a pads file's top-level object (the geometries other than Point / MultiPoint are refused
+#: by name further on)
+_GEOJSON_TYPES = ("FeatureCollection", "Feature", "Point", "MultiPoint", "LineString", "MultiLineString", "Polygon",
+                  "MultiPolygon", "GeometryCollection")
+
+
 def _geojson(text: str, name: str) -> tuple[GeoPad, ...]:
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
         raise ValueError(f"{name}: malformed JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
+    if doc.get("type") not in _GEOJSON_TYPES and "geometry" not in doc:   # (a QGC .plan given as the pads: "feature 0:
+        # geometry type null is not supported"; a feature without its "type" but with a geometry is read, as before)
+        plan = " (a QGroundControl .plan: give it as --plan / mission.file)" if doc.get("fileType") == "Plan" else ""
+        raise ValueError(f"{name}: a JSON object without a GeoJSON \"type\"{plan}, not a pads file; valid: a GeoJSON "
+                         "FeatureCollection of Point / MultiPoint features (or one Feature or geometry), or a CSV "
+                         "lat,lon[,alt][,hover_time_s]")
     feats = doc.get("features") if doc.get("type") == "FeatureCollection" else [doc]
     if not isinstance(feats, list):
         raise ValueError(f"{name}: \"features\" is not a list")
