@@ -541,3 +541,20 @@ def test_a_log_whose_reader_fails_to_build_leaves_no_file_open(tmp_path):
             uploaded_mission(bad)
         gc.collect()
     assert not [w for w in caught if issubclass(w.category, ResourceWarning)], [str(w.message) for w in caught]
+
+
+def test_replay_prints_the_peak_current_against_its_rating(tmp_path, capsys):
+    """A replay printed energies and SoC but not the secondary current: the dronekit tlog's 19.6 A against the 15 A
+    rating (the drone armed on the pad before take-off) was in the JSON only (2026-11-28, three newcomers)."""
+    import json
+
+    from mission_sim.cli import main
+    rc = main(["replay", str(log_path("dronekit-python_flight.tlog")), "--out", str(tmp_path / "r"), "--no-plot",
+               "--no-progress"])
+    assert rc == 0
+    out = capsys.readouterr().out
+    s = json.loads((tmp_path / "r" / "replay_summary.json").read_text())
+    m = json.loads((tmp_path / "r" / "mission" / "summary.json").read_text())
+    assert s["peak_i2_a"] > m["rated_i2_a"] == 15.0 and m["time_above_rated_s"] > 0
+    assert (f"peak I2 {s['peak_i2_a']:.2f} A instantaneous (rated 15 A: ABOVE it for "
+            f"{1e3 * m['time_above_rated_s']:.2f} ms)") in out

@@ -350,3 +350,15 @@ def write_mission(result, out_dir, plots: bool, progress: bool = False) -> list[
     if plots:
         from ..figures.mission import plot_mission as figures
     return [str(f) for f in result.write(out_dir, figures=figures, progress=progress, csv=True)]
+
+
+def peak_i2_line(peak_a: float, rated_a, above_s) -> str:
+    """The replay's line on the secondary coil current against its rating (2026-11-28: a replay printed none, and
+    the dronekit tlog's 19.6 A against the 15 A rating, on the pad before take-off, was only in the JSON)."""
+    line = f"peak I2 {peak_a:.2f} A instantaneous"
+    if rated_a is None:
+        return line
+    line += f" (rated {rated_a:g} A"
+    if peak_a > rated_a:
+        line += f": ABOVE it for {1e3 * (above_s or 0.0):.2f} ms"
+    return line + ")"

@@ -12,7 +12,7 @@ import json
 import sys
 from pathlib import Path
 
-from .common import CliError, mass_override, parse_set, prepare_out_dir, show_progress, write_mission
+from .common import CliError, mass_override, parse_set, peak_i2_line, prepare_out_dir, show_progress, write_mission
 
 __all__ = ["cmd_refly", "REFLY_SUMMARY"]
 
@@ -101,7 +101,8 @@ def _print(args, s: dict, cfg, summary: Path) -> None:
     print(f"flight {s['logged_flight_time_s']:.0f} s logged -> {s['refly_time_s']:.0f} s re-flown "
           f"(+{s['detour_time_s']:.0f} s of detours, {s['detour_propulsion_j'] / 1e3:+.1f} kJ propulsion)")
     print(f"pads on {s['charge_time_s']:.0f} s: {s['energy_from_pads_j'] / 1e3:.1f} kJ from the pads, "
-          f"{s['battery_charge_in_j'] / 1e3:.1f} kJ into the battery")
+          f"{s['battery_charge_in_j'] / 1e3:.1f} kJ into the battery; "
+          + peak_i2_line(s["peak_i2_a"], s.get("rated_i2_a"), s.get("time_above_rated_s")))
     print(f"final SoC {s['final_soc_logged_flight']:.3f} logged flight -> {s['final_soc_refly']:.3f} re-flight "
           f"({s['final_soc_refly_without_charging']:.3f} with the pads off)")
     print(f"flight time gain {s['flight_time_gain_s']:+.1f} s of hover against the logged flight "
