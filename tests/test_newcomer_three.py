@@ -76,3 +76,23 @@ def test_a_plan_given_as_pads_is_named(tmp_path):
     # a feature without its "type" but with a geometry is still read
     f.write_text(json.dumps({"geometry": {"type": "Point", "coordinates": [8.5, 47.4]}}))
     assert read_pads(f)[0].point.lat_deg == 47.4
+
+
+# --- southern latitudes on the command line --------------------------------------------------------------------------
+
+def test_negative_latitude_pairs_are_values():
+    """`replay LOG --pad -35.36,149.16` and `telemetry --home -35.36,149.16,584` (ArduPilot SITL's own home is at
+    -35.36) failed on Python 3.11 / 3.12 with "argument --pad: expected one argument": argparse took the value for an
+    option; only `--pad=-35.36,...` worked."""
+    from mission_sim.cli import build_parser
+    p = build_parser()
+    assert p.parse_args(["replay", "x.tlog", "--pad", "-35.3623,149.1657"]).pad is not None
+    assert p.parse_args(["telemetry", "--home", "-35.363261,149.165230,584", "--connect", "none"]).home is not None
+    assert p.parse_args(["replay", "x.tlog", "--window", "-5,10"]).window is not None   # (refused later, by range)
+
+
+def test_negative_latitude_home_streams(tmp_path, capsys):
+    from mission_sim.cli import main
+    rc = main(["telemetry", "--home", "-35.363261,149.165230,584", "--connect", "none", "--tlog",
+               str(tmp_path / "t.tlog"), "--duration", "1", "--speed", "inf", "--no-progress"])
+    assert rc == 0 and (tmp_path / "t.tlog").stat().st_size > 1000

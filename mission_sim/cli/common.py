@@ -27,6 +27,14 @@ def _nearest(arg: str, parser) -> list:
 class OneLineParser(argparse.ArgumentParser):
     """argparse with its usage errors on one line (``dronewpt mission: error: ... (see --help)``), exit 2."""
 
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # A value starting with '-' and a digit is a value, as Python 3.13's argparse reads it: on 3.11 / 3.12
+        # `--home -35.36,149.16,584` or `--pad -35.36,149.16` (southern latitudes, SITL's own home) failed with
+        # "expected one argument" (only a plain number such as -35.36 was taken as one); 2026-11-28
+        import re
+        self._negative_number_matcher = re.compile(r"-\.?\d")
+
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
