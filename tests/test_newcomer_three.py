@@ -96,3 +96,17 @@ def test_negative_latitude_home_streams(tmp_path, capsys):
     rc = main(["telemetry", "--home", "-35.363261,149.165230,584", "--connect", "none", "--tlog",
                str(tmp_path / "t.tlog"), "--duration", "1", "--speed", "inf", "--no-progress"])
     assert rc == 0 and (tmp_path / "t.tlog").stat().st_size > 1000
+
+
+# --- an RL researcher's step count -----------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("text, hint", [("1e4", " (write 10000)"), ("10k", "")])
+def test_train_timesteps_not_an_integer_names_the_range(capsys, text, hint):
+    """`dronewpt train --timesteps 1e4` said "argument --timesteps: invalid int value: '1e4'" (no range, no way on)."""
+    from mission_sim.cli import main
+    with pytest.raises(SystemExit) as e:
+        main(["train", "--algo", "ppo", "--timesteps", text, "--out", "x"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"dronewpt train: error: argument --timesteps: timesteps='{text}' is not an integer; valid range: "
+                   f"integer >= 0{hint} (see dronewpt train --help)")

@@ -170,7 +170,12 @@ def int_in(name, lo: int, hi: int | None = None, why: str = ""):
         try:
             v = int(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{name}={text!r} is not an integer; valid range: {valid}") from None
+            try:   # 1e5, as SB3's examples write a step count: named with its integer spelling (2026-11-28)
+                f = float(text)
+                hint = f" (write {int(f)})" if f.is_integer() and abs(f) < 1e18 else ""
+            except ValueError:
+                hint = ""
+            raise argparse.ArgumentTypeError(f"{name}={text!r} is not an integer; valid range: {valid}{hint}") from None
         if v < lo or (hi is not None and v > hi):
             raise argparse.ArgumentTypeError(f"{name}={text!r} is invalid; valid range: {valid}")
         return v

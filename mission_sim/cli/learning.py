@@ -12,6 +12,7 @@ from .common import (
     add_progress_flag,
     figures_out,
     float_arg,
+    int_in,
     lazy_names_help,
     name_list,
     path_arg,
@@ -45,7 +46,8 @@ def _add_train(sub):
     p = sub.add_parser("train", help="train an RL mode-switching policy (stable-baselines3)",
                        description=_TRAIN_DESCRIPTION)
     p.add_argument("--algo", choices=("ppo", "sac", "td3", "dqn"), required=True)
-    p.add_argument("--timesteps", type=int, required=True, help="environment steps to train for")
+    p.add_argument("--timesteps", type=int_in("timesteps", 0), required=True,
+                   help="environment steps to train for, an integer (1e5: write 100000 or 100_000)")
     p.add_argument("--out", type=path_arg("--out"), required=True, help="output folder")
     p.add_argument("--seed", type=range_arg("seed", RANGES["seed"]), default=0, help=f"seed, {RANGES['seed'].text()} (default 0)")
     p.add_argument("--n-envs", type=range_arg("n-envs", RANGES["n_envs"]), default=64,
