@@ -110,3 +110,23 @@ def test_train_timesteps_not_an_integer_names_the_range(capsys, text, hint):
     err = capsys.readouterr().err.strip()
     assert err == (f"dronewpt train: error: argument --timesteps: timesteps='{text}' is not an integer; valid range: "
                    f"integer >= 0{hint} (see dronewpt train --help)")
+
+
+# --- `mission --config`, as the other commands spell it --------------------------------------------------------------
+
+def test_mission_takes_config_as_telemetry_does(tmp_path, capsys):
+    """`dronewpt telemetry --config m.toml` works; `dronewpt mission --config m.toml` was "unrecognized argument
+    '--config'" (mission took its config only as the positional argument)."""
+    from mission_sim.cli import main
+    m = tmp_path / "m.toml"
+    m.write_text("[mission]\ncruise_speed_m_s = 2.0\n")
+    assert main(["mission", "--config", str(m), "--dry-run", "--format", "json"]) == 0
+    by_option = capsys.readouterr().out
+    assert main(["mission", str(m), "--dry-run", "--format", "json"]) == 0
+    assert capsys.readouterr().out == by_option
+    assert main(["mission", "--dry-run", "--format", "json"]) == 0
+    assert capsys.readouterr().out != by_option          # the file was read: a slower cruise than the default
+    other = tmp_path / "other.toml"
+    other.write_text("")
+    assert main(["mission", str(other), "--config", str(m), "--dry-run"]) == 2
+    assert "name two mission files; valid: one of them" in capsys.readouterr().err

@@ -92,6 +92,8 @@ def _add_mission(sub):
                                    "status 0: done; 2: bad input (one line on stderr); 3: the battery was "
                                    "depleted, the mission ended there (results written).")
     p.add_argument("config", nargs="?", type=path_arg("config file"), default=None, help="mission TOML (default: embedded default)")
+    p.add_argument("--config", dest="config_option", type=path_arg("--config"), default=None, metavar="CONFIG",
+                   help="the same as CONFIG, as telemetry, calibrate and sizing take it")
     add_plan_args(p)
     lazy_names_help(p.add_argument("--policy", default="model_based"), "receiver policy (default model_based)",
                     policy_names)
@@ -218,7 +220,19 @@ def _cmd_mission(args) -> int:
     return startup_gc_paused(_mission_command, args)   # (cli/common.py: the collector off through the start-up)
 
 
+def _config_option(args) -> None:
+    """``--config FILE`` (telemetry's, calibrate's and sizing's spelling; ``mission --config`` was an unrecognized
+    argument, 2026-11-28) as the positional CONFIG; both, naming different files: ``CliError``."""
+    opt = getattr(args, "config_option", None)
+    if opt is None:
+        return
+    if args.config is not None and Path(args.config).resolve() != Path(opt).resolve():
+        raise CliError(f"config {str(args.config)!r} and --config {str(opt)!r} name two mission files; valid: one of them")
+    args.config = opt
+
+
 def _mission_command(args, started) -> int:
+    _config_option(args)
     worker = _figure_worker(args)   # first: matplotlib imports in the child while this process checks and runs
     try:
         return _checked_run(args, started, worker)
