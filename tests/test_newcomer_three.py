@@ -130,3 +130,32 @@ def test_mission_takes_config_as_telemetry_does(tmp_path, capsys):
     other.write_text("")
     assert main(["mission", str(other), "--config", str(m), "--dry-run"]) == 2
     assert "name two mission files; valid: one of them" in capsys.readouterr().err
+
+
+# --- compare's table ---------------------------------------------------------------------------------------------------
+
+def _row(scenario, policy, over, ret, d=None):
+    r = {"scenario": scenario, "policy": policy, "train_seeds": 1, "reached_short_mode": 1.0, "peak_i2_a": 12.5,
+         "energy_before_stop_j": 1.4, "tracking_rmse_a": 0.7}
+    for k, v in (("overshoot_pct", over), ("energy_after_stop_j", 0.5), ("return", ret), ("d_return", d)):
+        if v is not None:
+            r[k], r[k + "_lo"], r[k + "_hi"] = v, v - abs(v) * 0.3, v + abs(v) * 0.3
+    return r
+
+
+def test_compare_table_columns_line_up(capsys):
+    """`dronewpt compare --episodes 5`: scenario names longer than 12 characters (lm_drift_fast, sense_delay_long)
+    and intervals wider than their column (197.98 [150.16, 244.68], -1830.2 [-1886.1, -1768.5]) shifted the rest of
+    their rows: the peak I2 of one row stood under another's E before."""
+    import argparse
+
+    from mission_sim.cli.learning import _print_compare
+    rows = [_row("nominal", "model_based", 2.96, 31.3), _row("nominal", "step", 197.98, 2.4, -28.9),
+            _row("sense_delay_long", "random", 370.54, -1830.2, -1861.4)]
+    _print_compare(rows, [], argparse.Namespace(episodes=5, seed=1000, link="envelope", oracle_windows=0))
+    lines = capsys.readouterr().out.splitlines()
+    hdr = next(i for i, s in enumerate(lines) if s.startswith("scenario"))
+    table = lines[hdr:hdr + 2 + len(rows)]
+    assert len({len(s) for s in table}) == 1                    # every row as wide as the header
+    col = table[0].index("peak I2 A") + len("peak I2 A")        # right-aligned: each row's 12.50 ends there
+    assert all(s[col - 5:col] == "12.50" for s in table[2:])

@@ -502,16 +502,21 @@ def _print_compare(rows, sweep, args):
     if _link_name(args) == "modal":
         print("plant: the exact-mode link (the default; --link envelope for eq. 4's); mpc predicts with its modes "
               "(policies.mpc_modal), model_based_budget plans its after-stop duties with them (policies.budget_modal)")
-    hdr = (f"{'scenario':<12} {'policy':<24} {'seeds':>5} {'overshoot %':>20} {'in SM':>5} {'peak I2 A':>8} "
-           f"{'E before J':>10} {'E after J':>20} {'track A':>6} {'return':>22} {'d return vs model_based':>24}")
+    # column widths from the cells (2026-11-28: lm_drift_fast, sense_delay_long and intervals such as
+    # 197.98 [150.16, 244.68] overran the fixed widths and shifted the rest of their rows)
+    cells = [(r["scenario"], r["policy"][:24], _ci(r, "overshoot_pct"), _ci(r, "energy_after_stop_j", fmt="{:.3f}"),
+              _ci(r, "return", fmt="{:.1f}"), _ci(r, "d_return", fmt="{:.1f}") if "d_return" in r else "(reference)")
+             for r in rows]
+    w = [max([n, *(len(c[i]) for c in cells)]) for i, n in enumerate((12, 24, 20, 20, 22, 24))]
+    hdr = (f"{'scenario':<{w[0]}} {'policy':<{w[1]}} {'seeds':>5} {'overshoot %':>{w[2]}} {'in SM':>5} "
+           f"{'peak I2 A':>9} {'E before J':>10} {'E after J':>{w[3]}} {'track A':>7} {'return':>{w[4]}} "
+           f"{'d return vs model_based':>{w[5]}}")
     print(hdr)
     print("-" * len(hdr))
-    for r in rows:
-        d = _ci(r, "d_return", fmt="{:.1f}") if "d_return" in r else "(reference)"
-        print(f"{r['scenario']:<12} {r['policy'][:24]:<24} {r['train_seeds']:>5} {_ci(r, 'overshoot_pct'):>20} "
-              f"{r['reached_short_mode']:>5.2f} {r['peak_i2_a']:>8.2f} {r['energy_before_stop_j']:>10.3f} "
-              f"{_ci(r, 'energy_after_stop_j', fmt='{:.3f}'):>20} {r['tracking_rmse_a']:>6.2f} "
-              f"{_ci(r, 'return', fmt='{:.1f}'):>22} {d:>24}")
+    for r, (scn, pol, over, after, ret, d) in zip(rows, cells):
+        print(f"{scn:<{w[0]}} {pol:<{w[1]}} {r['train_seeds']:>5} {over:>{w[2]}} "
+              f"{r['reached_short_mode']:>5.2f} {r['peak_i2_a']:>9.2f} {r['energy_before_stop_j']:>10.3f} "
+              f"{after:>{w[3]}} {r['tracking_rmse_a']:>7.2f} {ret:>{w[4]}} {d:>{w[5]}}")
     print("overshoot = peak |I2| after the stop over the true link's short-mode I2, minus 1; in SM = fraction of "
           "episodes with I_L < 0.5 A from 14 ms after the stop on; E after = energy delivered after the stop")
     gaps = [r for r in rows if "oracle_gap_pct" in r]
