@@ -159,3 +159,41 @@ def test_compare_table_columns_line_up(capsys):
     assert len({len(s) for s in table}) == 1                    # every row as wide as the header
     col = table[0].index("peak I2 A") + len("peak I2 A")        # right-aligned: each row's 12.50 ends there
     assert all(s[col - 5:col] == "12.50" for s in table[2:])
+
+
+# --- a sweep started inside a checkout ---------------------------------------------------------------------------------
+
+def test_forkserver_workers_import_the_drivers_packages(tmp_path):
+    """The sweep's forkserver (Dask's workers fork from it) preloaded `mission_sim` from the current folder: Python
+    3.11's forkserver ignores the sys.path it is handed and runs as `python -c` (current folder first). Started from
+    a folder holding another `mission_sim` (a clone, beside an installed copy), the workers ran that one. Here the
+    folder holds a stand-in package; the workers must import the driver's."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    (tmp_path / "mission_sim").mkdir()
+    (tmp_path / "mission_sim" / "__init__.py").write_text("STAND_IN = True\n")
+    (tmp_path / "drv").mkdir()
+    script = tmp_path / "drv" / "driver.py"
+    script.write_text(
+        "import multiprocessing as mp, sys\n"
+        "def where():\n"
+        "    import sys\n"
+        "    return sys.modules['mission_sim'].__file__\n"
+        "if __name__ == '__main__':\n"
+        "    import mission_sim\n"
+        "    from mission_sim.studies.cluster import _start_forkserver\n"
+        "    _start_forkserver()\n"
+        "    with mp.get_context('forkserver').Pool(1) as p:\n"
+        "        print(mission_sim.__file__)\n"
+        "        print(p.apply(where))\n")
+    env = {**os.environ, "PYTHONPATH": str(repo)}
+    r = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    driver, worker = r.stdout.split()[-2:]
+    assert driver == str(repo / "mission_sim" / "__init__.py")
+    assert worker == driver          # before: tmp_path/mission_sim/__init__.py, the stand-in
