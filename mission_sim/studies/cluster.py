@@ -89,12 +89,13 @@ def _start_forkserver() -> None:
     ctx.set_forkserver_preload(list(dict.fromkeys(multiprocessing.forkserver._forkserver._preload_modules
                                                   + list(FORKSERVER_PRELOAD))))
     resource_tracker.ensure_running()  # spawned by the forkserver's start otherwise: not in the shield
-    with _sigint_shielded(), _environ({**_pre_spawn_environ(), **_driver_path_environ()}):  # a Ctrl-C meanwhile
-        multiprocessing.forkserver.ensure_running()                                         # is raised on leaving
+    # a Ctrl-C meanwhile is raised on leaving
+    with _sigint_shielded(), _environ({**_pre_spawn_environ(), **_driver_path_environ()}):
+        multiprocessing.forkserver.ensure_running()
 
 
 def _driver_path_environ() -> dict[str, str]:
-    """The forkserver imports :data:`FORKSERVER_PRELOAD` on the driver's ``sys.path``: Python 3.11/3.12's forkserver
+    """The forkserver imports :data:`FORKSERVER_PRELOAD` on the driver's ``sys.path``: Python 3.11's forkserver
     (``python -c``) ignores the ``sys_path`` it is handed and puts the current folder first, so a sweep started inside
     a checkout ran its workers on the checkout's ``mission_sim`` while the driver ran the installed one (2026-11-28:
     a fresh venv's first sweep from the clone compiled every kernel again, under the clone's path). ``PYTHONSAFEPATH``
