@@ -165,9 +165,12 @@ def test_compare_table_columns_line_up(capsys):
 
 def test_forkserver_workers_import_the_drivers_packages(tmp_path):
     """The sweep's forkserver (Dask's workers fork from it) preloaded `mission_sim` from the current folder: Python
-    3.11's forkserver ignores the sys.path it is handed and runs as `python -c` (current folder first). Started from
-    a folder holding another `mission_sim` (a clone, beside an installed copy), the workers ran that one. Here the
-    folder holds a stand-in package; the workers must import the driver's."""
+    <= 3.13's forkserver ignores the sys.path it is handed and runs as `python -c` (current folder first). Started
+    from a folder holding another `mission_sim` (a clone, beside an installed copy), the workers ran that one. Here
+    the folder holds a stand-in package; the workers must import the driver's. The PYTHONSAFEPATH / PYTHONPATH the
+    forkserver is started with must not reach the workers: they see the driver's, and a script a worker runs with
+    `python helper/script.py` imports its sibling module (ModuleNotFoundError under the safe path)."""
+    import json
     import os
     import subprocess
     import sys
@@ -176,24 +179,35 @@ def test_forkserver_workers_import_the_drivers_packages(tmp_path):
     repo = Path(__file__).resolve().parents[1]
     (tmp_path / "mission_sim").mkdir()
     (tmp_path / "mission_sim" / "__init__.py").write_text("STAND_IN = True\n")
+    (tmp_path / "helper").mkdir()
+    (tmp_path / "helper" / "sibling.py").write_text("VALUE = 42\n")
+    (tmp_path / "helper" / "script.py").write_text("import sibling\nprint(sibling.VALUE)\n")
     (tmp_path / "drv").mkdir()
     script = tmp_path / "drv" / "driver.py"
     script.write_text(
-        "import multiprocessing as mp, sys\n"
+        "import json, multiprocessing as mp, sys\n"
         "def where():\n"
-        "    import sys\n"
-        "    return sys.modules['mission_sim'].__file__\n"
+        "    import os, subprocess, sys\n"
+        "    r = subprocess.run([sys.executable, 'helper/script.py'], capture_output=True, text=True)\n"
+        "    return [sys.modules['mission_sim'].__file__, os.environ.get('PYTHONSAFEPATH'),\n"
+        "            os.environ.get('PYTHONPATH'), os.environ.get('DRONEWPT_FORKSERVER_RESTORE'),\n"
+        "            r.stdout.strip() or r.stderr.strip().splitlines()[-1]]\n"
         "if __name__ == '__main__':\n"
         "    import mission_sim\n"
         "    from mission_sim.studies.cluster import _start_forkserver\n"
         "    _start_forkserver()\n"
         "    with mp.get_context('forkserver').Pool(1) as p:\n"
-        "        print(mission_sim.__file__)\n"
-        "        print(p.apply(where))\n")
-    env = {**os.environ, "PYTHONPATH": str(repo)}
+        "        print(json.dumps([mission_sim.__file__, p.apply(where)]))\n")
+    user_path = os.pathsep.join([str(repo), str(tmp_path / "user_entry")])
+    env = {**os.environ, "PYTHONPATH": user_path}
+    env.pop("PYTHONSAFEPATH", None)
     r = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True, text=True,
                        timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
-    driver, worker = r.stdout.split()[-2:]
+    driver, (worker, safe_path, python_path, restore, helper_out) = json.loads(r.stdout.splitlines()[-1])
     assert driver == str(repo / "mission_sim" / "__init__.py")
     assert worker == driver          # before: tmp_path/mission_sim/__init__.py, the stand-in
+    assert safe_path is None         # the driver's: unset (was "1")
+    assert python_path == user_path  # the driver's (was the driver's whole sys.path)
+    assert restore is None
+    assert helper_out == "42"        # was: ModuleNotFoundError: No module named 'sibling'

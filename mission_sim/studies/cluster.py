@@ -44,8 +44,9 @@ __all__ = ["dask_client", "quiet_logs", "CLOSE_TIMEOUT_S", "INTERRUPT_CLOSE_TIME
 CLOSE_TIMEOUT_S = 10.0
 INTERRUPT_CLOSE_TIMEOUT_S = 1.0
 _NOISY = ("distributed", "tornado", "asyncio", "bokeh")
-#: modules the workers' forkserver imports once (every worker is forked with them loaded)
-FORKSERVER_PRELOAD = ("mission_sim.studies.sweep", "numba")
+#: modules the workers' forkserver imports once (every worker is forked with them loaded); the last one puts back the
+#: driver's PYTHONSAFEPATH / PYTHONPATH (:func:`_driver_path_environ`) before any worker is forked
+FORKSERVER_PRELOAD = ("mission_sim.studies.sweep", "numba", "mission_sim.studies._forkserver_env")
 #: Dask settings of the local cluster (scheduler, nannies and workers read them at their start)
 LOCAL_CLUSTER_CONFIG = {
     "distributed.worker.profile.enabled": False,  # stack sampling of the task thread every 10 ms
@@ -95,13 +96,20 @@ def _start_forkserver() -> None:
 
 
 def _driver_path_environ() -> dict[str, str]:
-    """The forkserver imports :data:`FORKSERVER_PRELOAD` on the driver's ``sys.path``: Python 3.11's forkserver
+    """The forkserver imports :data:`FORKSERVER_PRELOAD` on the driver's ``sys.path``: Python <= 3.13's forkserver
     (``python -c``) ignores the ``sys_path`` it is handed and puts the current folder first, so a sweep started inside
     a checkout ran its workers on the checkout's ``mission_sim`` while the driver ran the installed one (2026-11-28:
     a fresh venv's first sweep from the clone compiled every kernel again, under the clone's path). ``PYTHONSAFEPATH``
-    drops the current folder, ``PYTHONPATH`` gives the driver's entries in the driver's order."""
+    drops the current folder, ``PYTHONPATH`` gives the driver's entries in the driver's order. Their previous values
+    travel in ``DRONEWPT_FORKSERVER_RESTORE``: the last preloaded module (:mod:`._forkserver_env`) puts them back in
+    the forkserver's environment, so the workers (and the Pythons they start) see the driver's originals."""
+    import json
     import sys
-    return {"PYTHONSAFEPATH": "1", "PYTHONPATH": os.pathsep.join(os.path.abspath(e) if e == "" else e for e in sys.path)}
+
+    from ._forkserver_env import RESTORE_VAR
+
+    return {"PYTHONSAFEPATH": "1", "PYTHONPATH": os.pathsep.join(os.path.abspath(e) if e == "" else e for e in sys.path),
+            RESTORE_VAR: json.dumps({k: os.environ.get(k) for k in ("PYTHONSAFEPATH", "PYTHONPATH")})}
 
 
 def _pre_spawn_environ() -> dict[str, str]:
