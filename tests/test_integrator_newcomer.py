@@ -556,5 +556,17 @@ def test_replay_prints_the_peak_current_against_its_rating(tmp_path, capsys):
     s = json.loads((tmp_path / "r" / "replay_summary.json").read_text())
     m = json.loads((tmp_path / "r" / "mission" / "summary.json").read_text())
     assert s["peak_i2_a"] > m["rated_i2_a"] == 15.0 and m["time_above_rated_s"] > 0
-    assert (f"peak I2 {s['peak_i2_a']:.2f} A instantaneous (rated 15 A: ABOVE it for "
-            f"{1e3 * m['time_above_rated_s']:.2f} ms)") in out
+    assert (f"peak I2 {s['peak_i2_a']:.2f} A instantaneous (envelope {m['peak_i2_envelope_a']:.2f} A; rated 15 A; "
+            f"ABOVE it {1e3 * m['time_above_rated_s']:.2f} ms)") in out
+
+
+def test_peak_line_says_above_by_the_time_above_the_rating():
+    """The time above the rating is the fundamental's (envelope's): ABOVE went by the instantaneous peak (ripple
+    included), so a peak over the rating with no time above it read "ABOVE it for 0.00 ms" and 2 ms above with the
+    instantaneous peak under it read as within (reviewer, 2026-11-28)."""
+    from mission_sim.cli.common import peak_i2_line
+    assert peak_i2_line(15.2, 14.1, 15.0, 0.0) == ("peak I2 15.20 A instantaneous (envelope 14.10 A; rated 15 A; "
+                                                   "above it 0.00 ms)")
+    assert peak_i2_line(14.9, 15.3, 15.0, 0.002) == ("peak I2 14.90 A instantaneous (envelope 15.30 A; rated 15 A; "
+                                                     "ABOVE it 2.00 ms)")
+    assert peak_i2_line(14.9, None, None, None) == "peak I2 14.90 A instantaneous"

@@ -85,8 +85,14 @@ def test_replay_lists_every_file_it_wrote_its_summary_last(capsys, tmp_path, pad
     out = tmp_path / "o"
     argv = ["replay", str(LOG), "--window", "440,620", "--out", str(out), "--no-plot", "--no-progress"]
     assert main(argv + (["--pads", str(PADS)] if pads else [])) == 0
-    wrote = [ln.removeprefix("wrote ") for ln in capsys.readouterr().out.splitlines() if ln.startswith("wrote ")]
+    text = capsys.readouterr().out
+    wrote = [ln.removeprefix("wrote ") for ln in text.splitlines() if ln.startswith("wrote ")]
     assert wrote[-1] == str(out / ("refly_summary.json" if pads else "replay_summary.json"))
+    if pads:  # the re-flight's peak current against its rating, as `mission` words it (11.9 A, none of it above 15 A)
+        s = json.loads((out / "refly_summary.json").read_text())
+        assert s["peak_i2_a"] >= s["peak_i2_envelope_a"] > 0 and s["time_above_rated_s"] == 0
+        assert (f"; peak I2 {s['peak_i2_a']:.2f} A instantaneous (envelope {s['peak_i2_envelope_a']:.2f} A; "
+                f"rated {s['rated_i2_a']:g} A; above it 0.00 ms)") in text
     on_disk = {str(p) for p in out.rglob("*") if p.is_file() and not p.name.startswith(".")}
     assert sorted(wrote) == sorted(on_disk)
 

@@ -365,13 +365,14 @@ def write_mission(result, out_dir, plots: bool, progress: bool = False) -> list[
     return [str(f) for f in result.write(out_dir, figures=figures, progress=progress, csv=True)]
 
 
-def peak_i2_line(peak_a: float, rated_a, above_s) -> str:
+def peak_i2_line(peak_a: float, envelope_a, rated_a, above_s) -> str:
     """The replay's line on the secondary coil current against its rating (2026-11-28: a replay printed none, and
-    the dronekit tlog's 19.6 A against the 15 A rating, on the pad before take-off, was only in the JSON)."""
+    the dronekit tlog's 19.6 A against the 15 A rating, on the pad before take-off, was only in the JSON), worded as
+    ``dronewpt mission``'s row. The time above the rating is the fundamental's (envelope's,
+    ``loop_kernel._track_peak``), so ABOVE goes by that time, not by the instantaneous peak (ripple included)."""
     line = f"peak I2 {peak_a:.2f} A instantaneous"
-    if rated_a is None:
-        return line
-    line += f" (rated {rated_a:g} A"
-    if peak_a > rated_a:
-        line += f": ABOVE it for {1e3 * (above_s or 0.0):.2f} ms"
-    return line + ")"
+    parts = [] if envelope_a is None else [f"envelope {envelope_a:.2f} A"]
+    if rated_a is not None:
+        above_s = above_s or 0.0
+        parts += [f"rated {rated_a:g} A", f"{'ABOVE' if above_s > 0 else 'above'} it {1e3 * above_s:.2f} ms"]
+    return line + (f" ({'; '.join(parts)})" if parts else "")

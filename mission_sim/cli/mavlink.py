@@ -203,7 +203,8 @@ def _cmd_replay(args) -> int:
     print(f"mission world: rectifier output {s['rectifier_output_j']:.0f} J ({s['battery_charge_in_j']:.0f} J into "
           f"the battery while charging), propulsion {s['propulsion_energy_j']:.0f} J "
           f"(model, {cfg.drone.mass_kg:g} kg drone), final SoC {s['final_soc']:.3f}")
-    print(peak_i2_line(s["peak_i2_a"], res.mission.summary.get("rated_i2_a"), res.mission.summary.get("time_above_rated_s")))
+    ms = res.mission.summary
+    print(peak_i2_line(s["peak_i2_a"], ms.get("peak_i2_envelope_a"), ms.get("rated_i2_a"), ms.get("time_above_rated_s")))
     c = s.get("power_comparison")
     if c and "logged_mean_w" in c:
         def f(key, spec, scale=1.0):

@@ -102,7 +102,8 @@ def _print(args, s: dict, cfg, summary: Path) -> None:
           f"(+{s['detour_time_s']:.0f} s of detours, {s['detour_propulsion_j'] / 1e3:+.1f} kJ propulsion)")
     print(f"pads on {s['charge_time_s']:.0f} s: {s['energy_from_pads_j'] / 1e3:.1f} kJ from the pads, "
           f"{s['battery_charge_in_j'] / 1e3:.1f} kJ into the battery; "
-          + peak_i2_line(s["peak_i2_a"], s.get("rated_i2_a"), s.get("time_above_rated_s")))
+          + peak_i2_line(s["peak_i2_a"], s.get("peak_i2_envelope_a"), s.get("rated_i2_a"),
+                         s.get("time_above_rated_s")))
     print(f"final SoC {s['final_soc_logged_flight']:.3f} logged flight -> {s['final_soc_refly']:.3f} re-flight "
           f"({s['final_soc_refly_without_charging']:.3f} with the pads off)")
     print(f"flight time gain {s['flight_time_gain_s']:+.1f} s of hover against the logged flight "
