@@ -109,7 +109,24 @@ def test_train_timesteps_not_an_integer_names_the_range(capsys, text, hint):
     assert e.value.code == 2
     err = capsys.readouterr().err.strip()
     assert err == (f"dronewpt train: error: argument --timesteps: timesteps='{text}' is not an integer; valid range: "
-                   f"integer >= 0{hint} (see dronewpt train --help)")
+                   f"integer >= 1 (0 with --imitate){hint} (see dronewpt train --help)")
+
+
+def test_train_timesteps_one_range_text(capsys, tmp_path):
+    """`--timesteps 1e4` said "valid range: integer >= 0", then `--timesteps 0` (no --imitate) was refused with ">= 1"
+    (reviewer, 2026-11-28): every refusal of a step count gives the same range."""
+    from mission_sim.cli import main
+    errs = []
+    for text in ("-5", "0"):
+        try:
+            rc = main(["train", "--algo", "ppo", "--timesteps", text, "--out", str(tmp_path / "x")])
+        except SystemExit as e:
+            rc = e.code
+        assert rc == 2
+        errs.append(capsys.readouterr().err.strip())
+    assert [e.split("valid range: ")[1].removesuffix(" (see dronewpt train --help)") for e in errs] == [
+        "integer >= 1 (0 with --imitate)"] * 2, errs
+    assert not (tmp_path / "x").exists()
 
 
 # --- `mission --config`, as the other commands spell it --------------------------------------------------------------

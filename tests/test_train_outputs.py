@@ -193,7 +193,7 @@ def test_cli_train_refuses_an_option_without_the_one_that_uses_it(flag, value, s
 
 @pytest.mark.parametrize("argv, error", [
     (["--lambda-lr", "10"], "--lambda-lr 10.0 is only used with --lagrangian"),
-    (["--timesteps", "0"], "--timesteps 0 is invalid; valid range: >= 1"),
+    (["--timesteps", "0"], "--timesteps 0 is invalid; valid range: integer >= 1 (0 with --imitate)"),
     (["--imitate", "mpc", "--dagger", "-1"], "--dagger -1 is invalid; valid range: >= 0"),
     (["--action-filter", "1.5"], "--action-filter 1.5 is invalid; valid range: [0, 1)"),
     (["--lagrangian", "--probe-episodes", "2000"], "--probe-episodes 2000 is invalid; valid range: 0..1024")])

@@ -161,10 +161,16 @@ def mass_override(args) -> dict:
     return {"drone.mass_kg": args.mass}
 
 
-def int_in(name, lo: int, hi: int | None = None, why: str = ""):
+#: ``train --timesteps``: 0 (no RL steps) is valid only after a behaviour clone; the parser takes >= 0, the train
+#: checks (``cli.learning._check_train``) the rest; both say this
+TRAIN_TIMESTEPS_RANGE = "integer >= 1 (0 with --imitate)"
+
+
+def int_in(name, lo: int, hi: int | None = None, why: str = "", valid: str | None = None):
     """argparse type: an integer in ``lo..hi`` (``hi`` None: no upper end; underscores allowed: 1_000),
-    every error naming the value and the one range text (``why`` follows it, e.g. " (4 per CPU)")."""
-    valid = (f"integer >= {lo}" if hi is None else f"integer {lo}..{hi}") + why
+    every error naming the value and the one range text (``why`` follows it, e.g. " (4 per CPU)"; ``valid``: the
+    whole text instead, where a later check narrows ``lo..hi``, e.g. :data:`TRAIN_TIMESTEPS_RANGE`)."""
+    valid = valid or (f"integer >= {lo}" if hi is None else f"integer {lo}..{hi}") + why
 
     def conv(text):
         try:

@@ -12,6 +12,7 @@ from .common import (
     add_progress_flag,
     figures_out,
     float_arg,
+    TRAIN_TIMESTEPS_RANGE,
     int_in,
     lazy_names_help,
     name_list,
@@ -46,7 +47,7 @@ def _add_train(sub):
     p = sub.add_parser("train", help="train an RL mode-switching policy (stable-baselines3)",
                        description=_TRAIN_DESCRIPTION)
     p.add_argument("--algo", choices=("ppo", "sac", "td3", "dqn"), required=True)
-    p.add_argument("--timesteps", type=int_in("timesteps", 0), required=True,
+    p.add_argument("--timesteps", type=int_in("timesteps", 0, valid=TRAIN_TIMESTEPS_RANGE), required=True,
                    help="environment steps to train for, an integer (1e5: write 100000 or 100_000)")
     p.add_argument("--out", type=path_arg("--out"), required=True, help="output folder")
     p.add_argument("--seed", type=range_arg("seed", RANGES["seed"]), default=0, help=f"seed, {RANGES['seed'].text()} (default 0)")
@@ -184,7 +185,7 @@ def _check_train(args):
     _only_with(args)
     lo = 0 if args.imitate else 1
     if args.timesteps < lo:
-        raise CliError(f"--timesteps {args.timesteps} is invalid; valid range: >= {lo}")
+        raise CliError(f"--timesteps {args.timesteps} is invalid; valid range: {TRAIN_TIMESTEPS_RANGE}")
     for flag, v, lo in (("--dagger", args.dagger, 0), ("--imitation-episodes", args.imitation_episodes, 1),
                         ("--imitation-epochs", args.imitation_epochs, 1)):
         if v is not None and v < lo:
