@@ -47,7 +47,7 @@ import pytest  # noqa: E402
 from mission_sim.plans.pads import read_pads  # noqa: E402
 
 
-@pytest.mark.parametrize("column", ["alt_ft", "Alt (ft)", "height", "elevation_m", "z"])
+@pytest.mark.parametrize("column", ["alt_ft", "Alt (ft)", "height", "elevation_m", "z", "height_m_agl", "Hgt (feet)"])
 def test_pads_csv_altitude_under_another_name_is_refused(tmp_path, column):
     """`name,lat,lon,alt_ft` was read with every pad on the home's ground (the column ignored without a word)."""
     f = tmp_path / "pads.csv"
@@ -64,6 +64,16 @@ def test_pads_csv_other_columns_still_ignored(tmp_path):
     assert pad.point.alt_m == 490.5
     f.write_text("name,lat,lon,zone,note\nA,47.3982819,8.5469211,3,x\n")
     assert read_pads(f)[0].point.alt_m is None
+
+
+@pytest.mark.parametrize("column", ["height_note", "z_index", "agl_note", "elevation_source"])
+def test_pads_csv_column_only_starting_like_a_height_is_ordinary(tmp_path, column):
+    """`name,lat,lon,height_note` was refused as a pad altitude (only the name's first word was looked at), though a
+    file with an alt column reads height_note as an ordinary column (reviewer, 2026-11-28)."""
+    f = tmp_path / "pads.csv"
+    f.write_text(f"name,lat,lon,{column}\nA,47.3982819,8.5469211,roof\n")
+    (pad,) = read_pads(f)
+    assert pad.point.alt_m is None and pad.point.lat_deg == 47.3982819
 
 
 def test_a_plan_given_as_pads_is_named(tmp_path):

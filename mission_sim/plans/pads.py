@@ -108,16 +108,20 @@ def _check_other_columns(head, what: str) -> None:
 #: first words of a name that holds a height under another name or unit (``alt_ft``, ``altitude (ft)``, ``height``,
 #: ``elevation_m``, ``z``): with no ``alt`` column its values were dropped without a word, the pad on the home's ground
 _ALT_WORDS = frozenset({"alt", "altitude", "height", "hgt", "elev", "elevation", "ele", "amsl", "agl", "z"})
+#: what may follow such a first word in a height's name (a unit, a reference): ``height_note``, ``z_index``,
+#: ``agl_note`` are ordinary columns (ignored, as any other), not heights
+_ALT_UNIT_WORDS = frozenset({"", "ft", "feet", "foot", "m", "meter", "meters", "metre", "metres", "amsl", "msl", "agl"})
 
 
 def _check_altitude_like(head, what: str) -> None:
     """A file without a pad altitude column (:data:`_ALIASES` ``alt``) whose other column looks like one
-    (:data:`_ALT_WORDS`: ``alt_ft``, ``height``, ``elevation``; 2026-11-28, they were ignored): ``ValueError`` naming it.
-    ``what``: the error's start (the file and ``column``)."""
+    (:data:`_ALT_WORDS` followed by nothing but :data:`_ALT_UNIT_WORDS`: ``alt_ft``, ``Alt (ft)``, ``height``,
+    ``elevation_m``; 2026-11-28, they were ignored): ``ValueError`` naming it. ``what``: the error's start (the file
+    and ``column``)."""
     import re
     for c in head:
         words = re.split(r"[^a-z0-9]+", c.strip().lower())
-        if words and words[0] in _ALT_WORDS:
+        if words and words[0] in _ALT_WORDS and all(w in _ALT_UNIT_WORDS for w in words[1:]):
             raise ValueError(f"{what} {c!r} looks like a pad altitude but is not read (the pads would be on the "
                              "home's ground); valid: a column alt in metres above mean sea level (feet x 0.3048; a "
                              "height above ground: add the ground's altitude AMSL), or no such column")
