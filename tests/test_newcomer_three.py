@@ -110,7 +110,8 @@ def test_negative_latitude_home_streams(tmp_path, capsys):
 
 # --- an RL researcher's step count -----------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("text, hint", [("1e4", " (write 10000)"), ("10k", "")])
+@pytest.mark.parametrize("text, hint", [("1e4", " (write 10000)"), ("10k", ""), ("-1e4", "")])   # -1e4: no
+# "(write -10000)", itself out of range
 def test_train_timesteps_not_an_integer_names_the_range(capsys, text, hint):
     """`dronewpt train --timesteps 1e4` said "argument --timesteps: invalid int value: '1e4'" (no range, no way on)."""
     from mission_sim.cli import main

@@ -178,7 +178,8 @@ def int_in(name, lo: int, hi: int | None = None, why: str = "", valid: str | Non
         except ValueError:
             try:   # 1e5, as SB3's examples write a step count: named with its integer spelling (2026-11-28)
                 f = float(text)
-                hint = f" (write {int(f)})" if f.is_integer() and abs(f) < 1e18 else ""
+                ok = f.is_integer() and abs(f) < 1e18 and lo <= f and (hi is None or f <= hi)
+                hint = f" (write {int(f)})" if ok else ""   # (not for -1e4: that integer is out of range too)
             except ValueError:
                 hint = ""
             raise argparse.ArgumentTypeError(f"{name}={text!r} is not an integer; valid range: {valid}{hint}") from None
