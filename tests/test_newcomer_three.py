@@ -92,7 +92,7 @@ def test_a_plan_given_as_pads_is_named(tmp_path):
 
 def test_negative_latitude_pairs_are_values():
     """`replay LOG --pad -35.36,149.16` and `telemetry --home -35.36,149.16,584` (ArduPilot SITL's own home is at
-    -35.36) failed on Python 3.11 / 3.12 with "argument --pad: expected one argument": argparse took the value for an
+    -35.36) failed on Python 3.11 - 3.13.0 with "argument --pad: expected one argument": argparse took the value for an
     option; only `--pad=-35.36,...` worked."""
     from mission_sim.cli import build_parser
     p = build_parser()

@@ -29,7 +29,7 @@ class OneLineParser(argparse.ArgumentParser):
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        # A value starting with '-' and a digit is a value, as Python 3.13's argparse reads it: on 3.11 / 3.12
+        # A value starting with '-' and a digit is a value, as CPython's newer argparse (3.14) reads it: on 3.11 - 3.13.0
         # `--home -35.36,149.16,584` or `--pad -35.36,149.16` (southern latitudes, SITL's own home) failed with
         # "expected one argument" (only a plain number such as -35.36 was taken as one); 2026-11-28
         import re
