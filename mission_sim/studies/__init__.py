@@ -9,6 +9,7 @@
 ``sweep``          the engine: lazy cases in chunks with back-pressure, results into the store
 ``store``          the Parquet store: parts by count or age, incremental merges, compaction
 ``cluster``        a Dask client that starts and stops quietly and fast
+                   (``_forkserver_env``: the workers get the driver's PYTHONPATH back)
 ``status``         the sweep's manifest and ``--status`` (done, failed, pending)
 ``report``         summary and error tables, trade-off plots of a sweep's results
 ``worst_cases``    per policy the stored case with the largest peak, rebuilt for re-running (sizing)
