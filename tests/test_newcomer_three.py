@@ -81,7 +81,13 @@ def test_a_plan_given_as_pads_is_named(tmp_path):
     f = tmp_path / "survey.plan"
     f.write_text(json.dumps({"fileType": "Plan", "mission": {"items": []}, "version": 1}))
     with pytest.raises(ValueError, match=r"survey.plan: a JSON object without a GeoJSON \"type\" \(a QGroundControl "
-                                         r"\.plan: give it as --plan / mission.file\), not a pads file"):
+                                         r"\.plan: give it as mission / telemetry --plan, or mission.file\), not a "
+                                         r"pads file"):
+        read_pads(f)
+    # a "type" that is not GeoJSON's is named (it was told it had none)
+    f.write_text(json.dumps({"type": "Topology", "objects": {}}))
+    with pytest.raises(ValueError, match=r"survey.plan: type 'Topology' is not GeoJSON's, not a pads file; valid: a "
+                                         r"GeoJSON FeatureCollection"):
         read_pads(f)
     # a feature without its "type" but with a geometry is still read
     f.write_text(json.dumps({"geometry": {"type": "Point", "coordinates": [8.5, 47.4]}}))

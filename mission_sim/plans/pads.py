@@ -148,8 +148,12 @@ def _geojson(text: str, name: str) -> tuple[GeoPad, ...]:
         raise ValueError(f"{name}: malformed JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
     if doc.get("type") not in _GEOJSON_TYPES and "geometry" not in doc:   # (a QGC .plan given as the pads: "feature 0:
         # geometry type null is not supported"; a feature without its "type" but with a geometry is read, as before)
-        plan = " (a QGroundControl .plan: give it as --plan / mission.file)" if doc.get("fileType") == "Plan" else ""
-        raise ValueError(f"{name}: a JSON object without a GeoJSON \"type\"{plan}, not a pads file; valid: a GeoJSON "
+        plan = (" (a QGroundControl .plan: give it as mission / telemetry --plan, or mission.file)"
+                if doc.get("fileType") == "Plan" else "")
+        what = ("a JSON object without a GeoJSON \"type\"" if doc.get("type") is None
+                else f"type {doc['type']!r} is not GeoJSON's" if isinstance(doc.get("type"), str)
+                else f"\"type\" {json.dumps(doc['type'])} is not GeoJSON's")
+        raise ValueError(f"{name}: {what}{plan}, not a pads file; valid: a GeoJSON "
                          "FeatureCollection of Point / MultiPoint features (or one Feature or geometry), or a CSV "
                          "lat,lon[,alt][,hover_time_s]")
     feats = doc.get("features") if doc.get("type") == "FeatureCollection" else [doc]
