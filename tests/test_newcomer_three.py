@@ -37,6 +37,21 @@ def test_sweep_plot_keeps_an_explicit_hue_and_a_scatter_over_draws():
     assert _axes(_rows(), _study({"x": "wind.speed_m_s"})) == ("wind.speed_m_s", "battery.capacity_ah")
 
 
+def test_sweep_plot_hue_is_never_a_one_value_axis():
+    """A one-value [grid] axis (`drone.mass_kg = [1.0]`, listed before the others) counts as varied: it became the
+    hue, one line with the policies averaged into it (reviewer, 2026-11-28)."""
+    doc = {"study": {"name": "mine"},
+           "grid": {"drone.mass_kg": [1.0], "battery.capacity_ah": [2.0, 4.0], "policy": ["step", "model_based"]},
+           "monte_carlo": {"n": 3, "seed": 1, "params": {"wind.speed_m_s": {"uniform": [0.0, 6.0]}}}}
+    study = parse_study(doc)
+    assert "drone.mass_kg" in study.varied_keys
+    rows = _rows().assign(**{"drone.mass_kg": 1.0})
+    assert _axes(rows, study) == ("battery.capacity_ah", "policy")
+    # a scatter over the draws: coloured by the grid axis that varies, not the one-value one
+    doc["report"] = {"x": "wind.speed_m_s"}
+    assert _axes(rows, parse_study(doc)) == ("wind.speed_m_s", "battery.capacity_ah")
+
+
 # --- pads files a newcomer brings ------------------------------------------------------------------------------------
 
 import json  # noqa: E402

@@ -77,14 +77,16 @@ def _axes(df: pd.DataFrame, study: Study) -> tuple[str | None, str | None]:
     hue = study.report.get("hue")
     if hue is None:
         policies = POLICY_KEY in df.columns and df[POLICY_KEY].nunique() > 1
+        # a hue takes more than one value (a one-value [grid] axis is "varied" too; it became a one-line legend)
+        others = [k for k in varied if k != x and df[k].nunique() > 1]
         if x in study.grid:
             # one line per hue value: another grid axis, else the policy; never a Monte Carlo parameter, whose every
             # draw became a line of its own (a legend of n random values; 2026-11-28, before: the first other varied key)
-            hue = next((k for k in varied if k != x and k in study.grid), None)
+            hue = next((k for k in others if k in study.grid), None)
             if hue is None and policies:
                 hue = POLICY_KEY
         else:   # x drawn at random: a scatter, coloured by another varied parameter
-            hue = next((k for k in varied if k != x), None)
+            hue = next(iter(others), None)
             if hue is None and policies:
                 hue = POLICY_KEY
     return x, hue
