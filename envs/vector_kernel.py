@@ -38,6 +38,7 @@ import os
 import numpy as np
 from numba import njit, prange
 
+from .duty_sine import sin_cos_half_pi
 from .layout import BAT, COEF, INFO, PAR, SINGLE, SINGLE_PAR, SLOW, STATE, XC
 
 from wpt_receiver.kernel_cache import drop_stale_cache
@@ -54,14 +55,16 @@ def _here():
 
 # numba's cache of this module holds the layout's / objective's constants:
 # dropped when those files change (numba keys the cache on this file alone)
-drop_stale_cache(_here, [os.path.join(os.path.dirname(__file__), f) for f in ("layout.py", "objective.py")])
+drop_stale_cache(_here, [os.path.join(os.path.dirname(__file__), f) for f in ("layout.py", "objective.py", "duty_sine.py")])
 
 #: rows of the info block the kernel fills, in order
 INFO_ROWS = INFO._fields
 _FOUR_OVER_PI = 4.0 / np.pi
-_HALF_PI = 0.5 * np.pi
+_TWO_OVER_PI = 2.0 / np.pi
+#: ``(sin(pi d/2), cos(pi d/2))`` of a duty: :func:`envs.duty_sine.sin_cos_half_pi` compiled (inlined: no libm call)
+_sin_cos = njit(cache=True, inline="always")(sin_cos_half_pi)
 _SM_LATE_S = SHORT_MODE_WITHIN_S - 1e-12
-#: sub-environments per block of a chunk (the three passes' scratch: 22 doubles each, in L2). Each pass call takes and
+#: sub-environments per block of a chunk (the three passes' scratch: 23 doubles each, in L2). Each pass call takes and
 #: drops a reference to every array argument (atomic operations on counts both threads share): 512 instead of 128
 #: windows per block took 4.7-7.0 % off the kernel's one-thread CPU at N = 4,096 (medians, load 2.5-3.7; 2,048: no
 #: further gain)
@@ -121,34 +124,36 @@ def _sbar(vc, d, dr):
     """The SBAR's V2 terms (eq. 9, :func:`wpt_receiver.sbar.rectifier_v2_folded`): the clamp's
     magnitude ``(4/pi) VC (1 - sin(pi/2 d))`` [V] for the clamp voltage ``VC = VL + Vf`` and the short
     window's excess resistance ``dR w(d)`` [ohm], ``w(d) = d + sin(pi d)/pi`` (``sin(pi d) = 2 s
-    cos(pi d/2)``, d in [0, 1]); ``V2 = mag sign(I2) + rx I2``."""
-    return _sbar_s(vc, math.sin(_HALF_PI * d), d, dr)
+    cos(pi d/2)``, d in [0, 1]; both by :func:`envs.duty_sine.sin_cos_half_pi`); ``V2 = mag sign(I2) + rx I2``."""
+    s, c = _sin_cos(d)
+    return _sbar_s(vc, s, c, d, dr)
 
 
 @njit(cache=True, inline="always")
-def _sbar_s(vc, s, d, dr):
-    """:func:`_sbar` with ``s = sin(pi/2 d)`` given (the vector step takes the sines of a block in a loop of
-    their own: independent calls the CPU overlaps, the rest of the link step without a call)."""
-    return _FOUR_OVER_PI * vc * (1.0 - s), dr * (d + 2.0 * s * math.sqrt(1.0 - s * s) / math.pi)
+def _sbar_s(vc, s, c, d, dr):
+    """:func:`_sbar` with ``s = sin(pi/2 d)``, ``c = cos(pi/2 d)`` given (the vector step takes them for a block in
+    a loop of its own, which the CPU overlaps across windows)."""
+    return _FOUR_OVER_PI * vc * (1.0 - s), dr * (d + _TWO_OVER_PI * s * c)
 
 
 @njit(cache=True)
 def _link_step(i1, i2, vl, d, c, r, vf, dr):
-    """:func:`_link_step_s` with the sine of the duty taken here (the single env's step)."""
-    return _link_step_s(i1, i2, vl, d, math.sin(_HALF_PI * d), c, r, vf, dr)
+    """:func:`_link_step_s` with the duty's sine and cosine taken here (the single env's step)."""
+    s, co = _sin_cos(d)
+    return _link_step_s(i1, i2, vl, d, s, co, c, r, vf, dr)
 
 
 @njit(cache=True, inline="always")
-def _link_step_s(i1, i2, vl, d, s, c, r, vf, dr):
+def _link_step_s(i1, i2, vl, d, s, co, c, r, vf, dr):
     """One control period of the envelope link (paper eq. 4, exact ZOH coefficients ``c``, :data:`COEF`)
-    with duty ``d`` held (``s = sin(pi/2 d)``), the coefficients ``c[r]`` (row ``r`` of a table: no row view),
+    with duty ``d`` held (``s = sin(pi/2 d)``, ``co = cos(pi/2 d)``), the coefficients ``c[r]`` (row ``r`` of a table: no row view),
     the devices ``vf`` [V], ``dr`` [ohm]: ``(i1n, i2n, pk, il, v2, split, |V2c|, rx)``. ``pk`` the largest |I2|
     at mid-step and at the end, ``il`` the SBAR output current (the clamp's ``V2c I2 / (2 VC)``, Simpson's
     rule on I2), ``v2`` the V2 applied; ``split``: the I2 envelope changes sign within the step (re-done in
     rectifier-period sub-steps, :func:`_substep`, with the clamp's |V2c| and the short-window excess
     ``rx I2``)."""
     vc = vl + vf
-    mag, rx = _sbar_s(vc, s, d, dr)
+    mag, rx = _sbar_s(vc, s, co, d, dr)
     v2c = mag * _sign(i2)
     v2 = v2c + rx * i2
     i2m = c[r, COEF.m10] * i1 + c[r, COEF.m11] * i2 + c[r, COEF.me1] + c[r, COEF.mb11] * v2
@@ -370,8 +375,8 @@ def _link_pass(lo, hi, d, state, k, j, coef_tab, coef_ix, slow_every, n_sub, vf,
     m = 0
     sub = n_sub > 1
     ulo = _U(lo)
-    for e in range(ulo, _U(hi)):   # the sines first: independent calls, overlapped
-        sc[7, e - ulo] = math.sin(_HALF_PI * d[e])
+    for e in range(ulo, _U(hi)):   # the duty's sines and cosines first: a short loop, overlapped across windows
+        sc[7, e - ulo], sc[8, e - ulo] = _sin_cos(d[e])
     for e in range(ulo, _U(hi)):
         q = e - ulo
         kk = k[e]
@@ -382,7 +387,8 @@ def _link_pass(lo, hi, d, state, k, j, coef_tab, coef_ix, slow_every, n_sub, vf,
                                                                              ccoef[e, jj], vf, dr, v1, n_sub)
             continue
         i1n, i2n, pk, il, v2, split, vm, rx = _link_step_s(state[STATE.i1, e], state[STATE.i2, e], state[STATE.vl, e],
-                                                           d[e], sc[7, q], coef_tab, coef_ix[jj, e], vf, dr)
+                                                           d[e], sc[7, q], sc[8, q], coef_tab, coef_ix[jj, e],
+                                                           vf, dr)
         sc[0, q], sc[1, q], sc[2, q], sc[3, q], sc[4, q] = i1n, i2n, pk, il, v2
         # noted without a branch (about half the steps split, at random): the slot m is written
         # every time and kept when the step splits
@@ -460,7 +466,7 @@ def _chunk(lo, hi, d, state, k, j, coef_tab, coef_ix, bat, cmd_all, noise_all, l
     """The step of sub-environments ``[lo, hi)``: the three passes (module docstring) on blocks of
     :data:`_BLOCK` sub-environments (their scratch in cache, few pass calls)."""
     nb = min(_BLOCK, hi - lo)
-    sc, idx = np.empty((8, nb)), np.empty(nb, dtype=np.int64)
+    sc, idx = np.empty((9, nb)), np.empty(nb, dtype=np.int64)
     w, h = np.empty((6, nb)), np.empty((8, nb))
     vf, dr = par[PAR.vf], par[PAR.dr]
     for b0 in range(lo, hi, _BLOCK):
