@@ -32,13 +32,30 @@ sys.path.insert(0, str(ROOT))
 
 
 def load_revision(rev: str):
-    """``envs/vector_kernel.py`` of git revision ``rev`` as the module ``envs._vk_<rev>``."""
+    """``envs/vector_kernel.py`` of git revision ``rev`` as the module ``envs._vk_<rev>``, with that revision's
+    ``layout.py``, ``objective.py`` and (where it has one) ``duty_sine.py`` beside it (numba's cache keys on them) and
+    imported by the kernel as modules of their own (``envs._vk_<rev>_layout``, ...): the kernel's relative imports of
+    them are rewritten, so a revision whose layout differs from this tree's (e.g. a renamed slot) runs its own. The
+    captured arguments are this tree's: a slot whose meaning changed between the trees gives different outputs,
+    not a different cost."""
     import envs
 
     tmp = Path(tempfile.mkdtemp(prefix=f"vk_{rev}_"))
-    for f in ("vector_kernel.py", "layout.py", "objective.py"):
-        src = subprocess.run(["git", "show", f"{rev}:envs/{f}"], cwd=ROOT, check=True, capture_output=True).stdout
-        (tmp / f).write_bytes(src)
+    src = subprocess.run(["git", "show", f"{rev}:envs/vector_kernel.py"], cwd=ROOT, check=True,
+                         capture_output=True).stdout.decode()
+    for dep in ("layout", "objective", "duty_sine"):
+        got = subprocess.run(["git", "show", f"{rev}:envs/{dep}.py"], cwd=ROOT, capture_output=True)
+        if got.returncode:
+            continue   # (duty_sine.py is new in the eighth pass)
+        (tmp / f"{dep}.py").write_bytes(got.stdout)
+        name = f"envs._vk_{rev}_{dep}"
+        spec = importlib.util.spec_from_file_location(name, tmp / f"{dep}.py")
+        mod = importlib.util.module_from_spec(spec)
+        mod.__package__ = envs.__name__
+        sys.modules[name] = mod
+        spec.loader.exec_module(mod)
+        src = src.replace(f"from .{dep} import", f"from ._vk_{rev}_{dep} import")
+    (tmp / "vector_kernel.py").write_text(src)
     name = f"envs._vk_{rev}"
     spec = importlib.util.spec_from_file_location(name, tmp / "vector_kernel.py")
     mod = importlib.util.module_from_spec(spec)
