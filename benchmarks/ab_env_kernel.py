@@ -32,13 +32,30 @@ sys.path.insert(0, str(ROOT))
 
 
 def load_revision(rev: str):
-    """``envs/vector_kernel.py`` of git revision ``rev`` as the module ``envs._vk_<rev>``."""
+    """``envs/vector_kernel.py`` of git revision ``rev`` as the module ``envs._vk_<rev>``, with that revision's
+    ``layout.py``, ``objective.py`` and (where it has one) ``duty_sine.py`` beside it (numba's cache keys on them) and
+    imported by the kernel as modules of their own (``envs._vk_<rev>_layout``, ...): the kernel's relative imports of
+    them are rewritten, so a revision whose layout differs from this tree's (e.g. a renamed slot) runs its own. The
+    captured arguments are this tree's: a slot whose meaning changed between the trees gives different outputs,
+    not a different cost."""
     import envs
 
     tmp = Path(tempfile.mkdtemp(prefix=f"vk_{rev}_"))
-    for f in ("vector_kernel.py", "layout.py", "objective.py"):
-        src = subprocess.run(["git", "show", f"{rev}:envs/{f}"], cwd=ROOT, check=True, capture_output=True).stdout
-        (tmp / f).write_bytes(src)
+    src = subprocess.run(["git", "show", f"{rev}:envs/vector_kernel.py"], cwd=ROOT, check=True,
+                         capture_output=True).stdout.decode()
+    for dep in ("layout", "objective", "duty_sine"):
+        got = subprocess.run(["git", "show", f"{rev}:envs/{dep}.py"], cwd=ROOT, capture_output=True)
+        if got.returncode:
+            continue   # (duty_sine.py is new in the eighth pass)
+        (tmp / f"{dep}.py").write_bytes(got.stdout)
+        name = f"envs._vk_{rev}_{dep}"
+        spec = importlib.util.spec_from_file_location(name, tmp / f"{dep}.py")
+        mod = importlib.util.module_from_spec(spec)
+        mod.__package__ = envs.__name__
+        sys.modules[name] = mod
+        spec.loader.exec_module(mod)
+        src = src.replace(f"from .{dep} import", f"from ._vk_{rev}_{dep} import")
+    (tmp / "vector_kernel.py").write_text(src)
     name = f"envs._vk_{rev}"
     spec = importlib.util.spec_from_file_location(name, tmp / "vector_kernel.py")
     mod = importlib.util.module_from_spec(spec)
@@ -70,14 +87,17 @@ def _rebuild(args, it):
     return out
 
 
-def capture(n: int, scenario: str, warm: int):
+def capture(n: int, scenario: str, warm: int, kernel=None):
     """One ``env_step`` call of the vector env (one thread) after ``warm`` random steps: ``(args, snapshot,
     mutated)``: the call's arguments on private copies, the copies' values before the call, and the indices
-    of the arrays the call changes."""
+    of the arrays the call changes. ``kernel``: the ``env_step`` that steps the env up to the captured call (default
+    this tree's; another revision's when the two kernels' trajectories differ, e.g. in which windows they split)."""
     from envs import EnvConfig
     from envs.vector import SbarChargingVectorEnv
 
     env = SbarChargingVectorEnv(n, scenario=scenario, num_threads=1, config=EnvConfig(link_model="envelope"))   # eq. 4's kernel
+    if kernel is not None:
+        env.parts.plant.kernel = kernel
     env.reset(seed=1)
     rng = np.random.default_rng(0)
     for _ in range(warm):
@@ -98,11 +118,11 @@ def capture(n: int, scenario: str, warm: int):
     return args, work, snap, mutated
 
 
-def run(n: int, rev_mod, calls: int, scenario: str, warm: int) -> dict:
+def run(n: int, rev_mod, calls: int, scenario: str, warm: int, trajectory: str = "this") -> dict:
     """Same-bits check and alternating timing of this tree's kernel and ``rev_mod``'s at width ``n``."""
     from envs.vector_kernel import env_step as new
 
-    args, work, snap, mutated = capture(n, scenario, warm)
+    args, work, snap, mutated = capture(n, scenario, warm, rev_mod.env_step if trajectory == "revision" else None)
 
     def restore():
         for i in mutated:
@@ -132,11 +152,13 @@ def main(argv=None):
     ap.add_argument("--calls", type=int, default=300)
     ap.add_argument("--scenario", default="nominal")
     ap.add_argument("--warm", type=int, default=120, help="random steps before the captured one (default 120)")
+    ap.add_argument("--trajectory", choices=("this", "revision"), default="this",
+                    help="whose kernel steps the env up to the captured call (default this tree's)")
     a = ap.parse_args(argv)
     print(f"load average before: {os.getloadavg()[0]:.2f}")
     mod = load_revision(a.rev)
     for n in a.n:
-        r = run(n, mod, a.calls, a.scenario, a.warm)
+        r = run(n, mod, a.calls, a.scenario, a.warm, a.trajectory)
         print(f"N = {n}: outputs the same to the bit: {r['same_bits']}; thread CPU ns per env-step (min / q25 / "
               f"median of {a.calls}): {a.rev} " + " / ".join(f"{x:.1f}" for x in r["revision"])
               + ", this tree " + " / ".join(f"{x:.1f}" for x in r["this tree"]), flush=True)

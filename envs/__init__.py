@@ -34,6 +34,8 @@ Modules, in the order data flows:
 ``peaks``          the instantaneous peak: envelope peak + the SBAR's harmonic excess (table)
 ``vector_kernel``  THE env step, once, compiled (numba): link, sub-steps, detuned tank, peak,
                    battery, reward, objective, observation, info; parallel over sub-envs
+``duty_sine``      sin(pi d/2) and cos(pi d/2) of the duty by two polynomials (no libm call; numba-free): the
+                   SBAR's duty terms of ``vector_kernel``'s step
 ``modal_plant``    the plant's link model chosen per env (``EnvConfig.link_model``): the
                    mission's exact-mode link (default) or eq. 4's envelope (plans, plant parts)
 ``modal_step``     the env step on the exact-mode link, compiled (numba): the link's modes,

@@ -268,12 +268,12 @@ class Plans:
     by name: :mod:`envs.layout`). The command and the sensor noise are the scenario part's
     (:class:`envs.scenario.Window`), the short-mode current and the stop step the objective's."""
 
-    coef: np.ndarray | None  # (n, S, 20) ZOH coefficients per slow segment (envs.layout.COEF); None: table only
+    coef: np.ndarray | None  # (n, S, N_COEF) ZOH coefficients per slow segment (envs.layout.COEF); None: table only
     lm_h: np.ndarray         # (n, S) true Lm per slow segment
     battery: np.ndarray      # (n, 9) battery row per episode (envs.layout.BAT)
     state0: np.ndarray       # (n, 6) initial link and battery state (envs.layout.STATE)
     detuned: DetunedPlan | None = None   # detuned windows (envs.detuned)
-    zoh: np.ndarray | None = None        # (U, 20) the coefficients of each distinct Lm: coef = zoh[coef_ix]
+    zoh: np.ndarray | None = None        # (U, N_COEF) the coefficients of each distinct Lm: coef = zoh[coef_ix]
     coef_ix: np.ndarray | None = None    # (n, S) row of ``zoh`` per window and slow segment
 
 
@@ -411,7 +411,7 @@ def _detuned_plans(link, lm, c1_rel, c2_rel, vl0, d0, cfg: EnvConfig):
 
 
 def _zoh_coefficients(link: LinkParams, lm, cfg: EnvConfig) -> np.ndarray:
-    """The ZOH coefficients (:data:`envs.layout.COEF`) of the step for every Lm in ``lm`` (flattened, (n*S, 20))."""
+    """The ZOH coefficients (:data:`envs.layout.COEF`) of the step for every Lm in ``lm`` (flattened, (n*S, 23))."""
     a, b = state_matrices(link, lm.ravel())
     n = len(a)
     # the three step lengths (step, half step, sub-step) in one call: elementwise, the same numbers
@@ -420,9 +420,15 @@ def _zoh_coefficients(link: LinkParams, lm, cfg: EnvConfig) -> np.ndarray:
     ad, am, ah = ad3[:n], ad3[n:2 * n], ad3[2 * n:]
     bd, bm, bh = bd3[:n], bd3[n:2 * n], bd3[2 * n:]
     v1 = link.v1_amp_v
-    # columns: Ad00 Ad01 Ad10 Ad11, Bd00 V1, Bd10 V1, Bd01, Bd11, Am10 Am11, Bm10 V1, Bm11, the same 8 for Ah, Bh
+    # the blocked step (I2 = 0 held by V2 = -(A10 I1 + B10 V1) / B11; eq. 4's B10 = 0 and B01 = 0, so
+    # V2 = A10 I1 / -B11 = w Lm I1 and dI1/dt = A00 I1 + B00 V1 alone): exact over dt
+    a00 = a[:, 0, 0]
+    ka = np.exp(a00 * cfg.dt_s)
+    blocked = np.stack([ka, (ka - 1.0) * (b[0, 0] * v1) / a00, a[:, 1, 0] / -b[1, 1]], axis=1)
+    # columns: Ad00 Ad01 Ad10 Ad11, Bd00 V1, Bd10 V1, Bd01, Bd11, Am10 Am11, Bm10 V1, Bm11, the same 8 for Ah, Bh,
+    # the blocked step's three
     return np.concatenate([ad.reshape(n, 4), bd[:, :, 0] * v1, bd[:, :, 1], am[:, 1, :], bm[:, 1, :1] * v1,
-                           bm[:, 1, 1:], ah.reshape(n, 4), bh[:, :, 0] * v1, bh[:, :, 1]], axis=1)
+                           bm[:, 1, 1:], ah.reshape(n, 4), bh[:, :, 0] * v1, bh[:, :, 1], blocked], axis=1)
 
 
 def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig):

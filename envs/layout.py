@@ -27,10 +27,11 @@ STATE = fields("State", "i1 i2 vl soc vrc d")
 #: the start, R0 [ohm], the RC branch's decay and gain [ohm] per step, SoC per A per step, hover draw [A],
 #: the DC bus's decay per step
 BAT = fields("Battery", "ocv0 docv soc0 r0 rc_decay rc_gain dsoc i_load bus_decay")
-#: the 20 ZOH coefficients of a slow segment (:func:`envs.core._zoh_coefficients`): the step ``dt``
-#: (Ad, Bd V1 as e0 e1, Bd's V2 column as b01 b11), the half step's I2 row (m10 m11 me1 mb11) and the
-#: rectifier-period sub-step (h, f = Bh V1, g = Bh's V2 column)
-COEF = fields("Coef", "a00 a01 a10 a11 e0 e1 b01 b11 m10 m11 me1 mb11 h00 h01 h10 h11 f0 f1 g01 g11")
+#: the 23 ZOH coefficients of a slow segment (:func:`envs.core._zoh_coefficients`): the step ``dt``
+#: (Ad, Bd V1 as e0 e1, Bd's V2 column as b01 b11), the half step's I2 row (m10 m11 me1 mb11), the
+#: rectifier-period sub-step (h, f = Bh V1, g = Bh's V2 column) and the blocked step (I2 held at 0 by the
+#: rectifier: I1 -> ka I1 + ke over ``dt``, the V2 that holds I2 at 0 ``wlm I1`` = w Lm I1)
+COEF = fields("Coef", "a00 a01 a10 a11 e0 e1 b01 b11 m10 m11 me1 mb11 h00 h01 h10 h11 f0 f1 g01 g11 ka ke wlm")
 #: the detuned tank's complex envelope (four real states, :mod:`envs.detuned`)
 XC = fields("ComplexState", "re_j1 re_j2 im_j1 im_j2")
 #: coefficients of one detuned sub-step: Ad (4 x 4) then Bd (4 x 4), row-major

@@ -108,7 +108,7 @@ class PlantPart:
         return p
 
     def _put_table(self, idx, zoh, ix):
-        """The windows ``idx`` read the coefficient rows ``zoh`` (U, 20) by ``ix`` (len(idx), S): all windows
+        """The windows ``idx`` read the coefficient rows ``zoh`` (U, N_COEF) by ``ix`` (len(idx), S): all windows
         (a slice) replace the table; some append to it, the rows no window reads dropped when it is full."""
         if isinstance(idx, slice):
             self.coef_tab, self.tab_used = zoh, len(zoh)

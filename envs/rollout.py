@@ -184,7 +184,7 @@ def _drop_stale():
     from wpt_receiver.kernel_cache import drop_stale_cache
     from wpt_receiver.modal_link import SOURCES
     here = Path(__file__).parent
-    deps = [here / f for f in ("vector_kernel.py", "layout.py", "objective.py", "modal_step.py")]
+    deps = [here / f for f in ("vector_kernel.py", "layout.py", "objective.py", "modal_step.py", "duty_sine.py")]
     drop_stale_cache(_here, deps + list(SOURCES))
     _CHECKED.append(True)
 

@@ -38,6 +38,7 @@ import os
 import numpy as np
 from numba import njit, prange
 
+from .duty_sine import sin_cos_half_pi
 from .layout import BAT, COEF, INFO, PAR, SINGLE, SINGLE_PAR, SLOW, STATE, XC
 
 from wpt_receiver.kernel_cache import drop_stale_cache
@@ -54,14 +55,16 @@ def _here():
 
 # numba's cache of this module holds the layout's / objective's constants:
 # dropped when those files change (numba keys the cache on this file alone)
-drop_stale_cache(_here, [os.path.join(os.path.dirname(__file__), f) for f in ("layout.py", "objective.py")])
+drop_stale_cache(_here, [os.path.join(os.path.dirname(__file__), f) for f in ("layout.py", "objective.py", "duty_sine.py")])
 
 #: rows of the info block the kernel fills, in order
 INFO_ROWS = INFO._fields
 _FOUR_OVER_PI = 4.0 / np.pi
-_HALF_PI = 0.5 * np.pi
+_TWO_OVER_PI = 2.0 / np.pi
+#: ``(sin(pi d/2), cos(pi d/2))`` of a duty: :func:`envs.duty_sine.sin_cos_half_pi` compiled (inlined: no libm call)
+_sin_cos = njit(cache=True, inline="always")(sin_cos_half_pi)
 _SM_LATE_S = SHORT_MODE_WITHIN_S - 1e-12
-#: sub-environments per block of a chunk (the three passes' scratch: 22 doubles each, in L2). Each pass call takes and
+#: sub-environments per block of a chunk (the three passes' scratch: 24 doubles each, in L2). Each pass call takes and
 #: drops a reference to every array argument (atomic operations on counts both threads share): 512 instead of 128
 #: windows per block took 4.7-7.0 % off the kernel's one-thread CPU at N = 4,096 (medians, load 2.5-3.7; 2,048: no
 #: further gain)
@@ -121,52 +124,69 @@ def _sbar(vc, d, dr):
     """The SBAR's V2 terms (eq. 9, :func:`wpt_receiver.sbar.rectifier_v2_folded`): the clamp's
     magnitude ``(4/pi) VC (1 - sin(pi/2 d))`` [V] for the clamp voltage ``VC = VL + Vf`` and the short
     window's excess resistance ``dR w(d)`` [ohm], ``w(d) = d + sin(pi d)/pi`` (``sin(pi d) = 2 s
-    cos(pi d/2)``, d in [0, 1]); ``V2 = mag sign(I2) + rx I2``."""
-    return _sbar_s(vc, math.sin(_HALF_PI * d), d, dr)
+    cos(pi d/2)``, d in [0, 1]; both by :func:`envs.duty_sine.sin_cos_half_pi`); ``V2 = mag sign(I2) + rx I2``."""
+    s, c = _sin_cos(d)
+    return _sbar_s(vc, s, c, d, dr)
 
 
 @njit(cache=True, inline="always")
-def _sbar_s(vc, s, d, dr):
-    """:func:`_sbar` with ``s = sin(pi/2 d)`` given (the vector step takes the sines of a block in a loop of
-    their own: independent calls the CPU overlaps, the rest of the link step without a call)."""
-    return _FOUR_OVER_PI * vc * (1.0 - s), dr * (d + 2.0 * s * math.sqrt(1.0 - s * s) / math.pi)
+def _sbar_s(vc, s, c, d, dr):
+    """:func:`_sbar` with ``s = sin(pi/2 d)``, ``c = cos(pi/2 d)`` given (the vector step takes them for a block in
+    a loop of its own, which the CPU overlaps across windows)."""
+    return _FOUR_OVER_PI * vc * (1.0 - s), dr * (d + _TWO_OVER_PI * s * c)
 
 
 @njit(cache=True)
 def _link_step(i1, i2, vl, d, c, r, vf, dr):
-    """:func:`_link_step_s` with the sine of the duty taken here (the single env's step)."""
-    return _link_step_s(i1, i2, vl, d, math.sin(_HALF_PI * d), c, r, vf, dr)
+    """:func:`_link_step_s` with the duty's sine and cosine taken here (the single env's step)."""
+    s, co = _sin_cos(d)
+    return _link_step_s(i1, i2, vl, d, s, co, c, r, vf, dr)
 
 
 @njit(cache=True, inline="always")
-def _link_step_s(i1, i2, vl, d, s, c, r, vf, dr):
+def _link_step_s(i1, i2, vl, d, s, co, c, r, vf, dr):
     """One control period of the envelope link (paper eq. 4, exact ZOH coefficients ``c``, :data:`COEF`)
-    with duty ``d`` held (``s = sin(pi/2 d)``), the coefficients ``c[r]`` (row ``r`` of a table: no row view),
+    with duty ``d`` held (``s = sin(pi/2 d)``, ``co = cos(pi/2 d)``), the coefficients ``c[r]`` (row ``r`` of a table: no row view),
     the devices ``vf`` [V], ``dr`` [ohm]: ``(i1n, i2n, pk, il, v2, split, |V2c|, rx)``. ``pk`` the largest |I2|
     at mid-step and at the end, ``il`` the SBAR output current (the clamp's ``V2c I2 / (2 VC)``, Simpson's
     rule on I2), ``v2`` the V2 applied; ``split``: the I2 envelope changes sign within the step (re-done in
     rectifier-period sub-steps, :func:`_substep`, with the clamp's |V2c| and the short-window excess
     ``rx I2``)."""
     vc = vl + vf
-    mag, rx = _sbar_s(vc, s, d, dr)
-    v2c = mag * _sign(i2)
+    mag, rx = _sbar_s(vc, s, co, d, dr)
+    sg = _sign(i2)
+    if sg == 0.0:   # the rectifier blocked at the last step's end (I2 = 0): blocked through this step while the emf
+        # w Lm I1 stays within the clamp (I1 monotone over the step: its ends decide); else released (split below: the
+        # sub-steps take the release and the short window's excess rx I2 as I2 grows from 0)
+        i1b = c[r, COEF.ka] * i1 + c[r, COEF.ke]
+        v2h = c[r, COEF.wlm] * i1
+        if abs(v2h) <= mag and abs(c[r, COEF.wlm] * i1b) <= mag:
+            return i1b, 0.0, 0.0, 0.0, v2h, False, mag, rx
+    v2c = mag * sg
     v2 = v2c + rx * i2
     i2m = c[r, COEF.m10] * i1 + c[r, COEF.m11] * i2 + c[r, COEF.me1] + c[r, COEF.mb11] * v2
     i1n = c[r, COEF.a00] * i1 + c[r, COEF.a01] * i2 + c[r, COEF.e0] + c[r, COEF.b01] * v2
     i2n = c[r, COEF.a10] * i1 + c[r, COEF.a11] * i2 + c[r, COEF.e1] + c[r, COEF.b11] * v2
     il = v2c * (i2 + 4.0 * i2m + i2n) / (12.0 * vc)
     pk = max(abs(i2m), abs(i2n))
-    return i1n, i2n, pk, il, v2, (i2m * v2c < 0.0 or i2n * v2c < 0.0), abs(v2c), rx
+    return i1n, i2n, pk, il, v2, (i2m * v2c < 0.0 or i2n * v2c < 0.0 or sg == 0.0), mag, rx
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _substep(i1, a, vm, rx, pk, tot, h00, h01, f0, g01, h10, h11, f1, g11):
-    """One rectifier-period sub-step (V2 = |V2c| sign(I2) + rx I2 at its start): ``(i1, i2, peak |I2|,
-    sum of |I2| means)`` after it (mean |I2| on the linear sub-step from a to b: (|a| + |b|)/2, or
-    (a^2 + b^2) / (2 (|a| + |b|)) when it crosses zero)."""
-    v2 = vm * _sign(a) + rx * a
-    b = h10 * i1 + h11 * a + f1 + g11 * v2
-    i1 = h00 * i1 + h01 * a + f0 + g01 * v2
+def _substep(i1, a, vm, rx, pk, tot, h00, h01, f0, g01, h10, h11, f1, g11, ig):
+    """One rectifier-period sub-step, the clamp taken implicitly: V2 = |V2c| sign(I2 at the sub-step's end) + rx I2
+    (rx I2 at its start), and where neither sign is consistent (|the end I2 with the clamp's part of V2 at 0| <=
+    |g11| |V2c|) the rectifier blocks: I2 = 0 at the end, V2's clamp part the one that holds it there (within the
+    clamp; the diode rectifier's set-valued V2 at I2 = 0, as :func:`_clamp_implicit` for a detuned tank); ``ig`` =
+    -1 / g11 (g11 < 0: V2 opposes I2). Without a branch: the end I2 is the soft threshold of the one with the clamp's
+    part of V2 at 0, and that part its clip to the clamp. Returns
+    ``(i1, i2, peak |I2|, sum of |I2| means)`` after it (mean |I2| on the linear sub-step from a to b: (|a| + |b|)/2,
+    or (a^2 + b^2) / (2 (|a| + |b|)) when it crosses zero)."""
+    xr = rx * a
+    b0 = h10 * i1 + h11 * a + f1 + g11 * xr
+    b = math.copysign(max(abs(b0) + g11 * vm, 0.0), b0)   # 0 when blocked
+    v2 = min(max(b0 * ig, -vm), vm)
+    i1 = h00 * i1 + h01 * a + f0 + g01 * (v2 + xr)
     mb = abs(b)
     if mb > pk:
         pk = mb
@@ -182,9 +202,10 @@ def _substeps_one(i1, i2, vm, rx, vc, c, r, n_sub):
     """One split step re-done in ``n_sub`` sub-steps (``vc`` the clamp voltage VL + Vf): ``(i1, i2,
     peak |I2|, mean I_L)``, the numbers of :func:`_substep_pass` for one sub-environment."""
     pk, tot = -1.0, 0.0
+    ig = -1.0 / c[r, COEF.g11]
     for _ in range(n_sub):
         i1, i2, pk, tot = _substep(i1, i2, vm, rx, pk, tot, c[r, COEF.h00], c[r, COEF.h01], c[r, COEF.f0],
-                                   c[r, COEF.g01], c[r, COEF.h10], c[r, COEF.h11], c[r, COEF.f1], c[r, COEF.g11])
+                                   c[r, COEF.g01], c[r, COEF.h10], c[r, COEF.h11], c[r, COEF.f1], c[r, COEF.g11], ig)
     return i1, i2, pk, vm * tot / (2.0 * n_sub * vc)
 
 
@@ -370,8 +391,8 @@ def _link_pass(lo, hi, d, state, k, j, coef_tab, coef_ix, slow_every, n_sub, vf,
     m = 0
     sub = n_sub > 1
     ulo = _U(lo)
-    for e in range(ulo, _U(hi)):   # the sines first: independent calls, overlapped
-        sc[7, e - ulo] = math.sin(_HALF_PI * d[e])
+    for e in range(ulo, _U(hi)):   # the duty's sines and cosines first: a short loop, overlapped across windows
+        sc[7, e - ulo], sc[8, e - ulo] = _sin_cos(d[e])
     for e in range(ulo, _U(hi)):
         q = e - ulo
         kk = k[e]
@@ -382,7 +403,8 @@ def _link_pass(lo, hi, d, state, k, j, coef_tab, coef_ix, slow_every, n_sub, vf,
                                                                              ccoef[e, jj], vf, dr, v1, n_sub)
             continue
         i1n, i2n, pk, il, v2, split, vm, rx = _link_step_s(state[STATE.i1, e], state[STATE.i2, e], state[STATE.vl, e],
-                                                           d[e], sc[7, q], coef_tab, coef_ix[jj, e], vf, dr)
+                                                           d[e], sc[7, q], sc[8, q], coef_tab, coef_ix[jj, e],
+                                                           vf, dr)
         sc[0, q], sc[1, q], sc[2, q], sc[3, q], sc[4, q] = i1n, i2n, pk, il, v2
         # noted without a branch (about half the steps split, at random): the slot m is written
         # every time and kept when the step splits
@@ -397,7 +419,7 @@ def _substep_pass(lo, idx, m, state, j, coef_tab, coef_ix, n_sub, vf, sc, w, h):
     """Pass 2: the split steps ``idx[:m]`` re-done in ``n_sub`` sub-steps (:func:`_substep`), the sub-step
     loop outside; results into ``sc`` (the clamp's |V2c| and the excess rx those of pass 1: a split
     step has sign(I2) = +-1, so |V2c| is the sub-steps' magnitude to the bit; no second sine). ``w``
-    (6, >= m) i1, i2, |V2c|, peak |I2| (from -1), sum of |I2| means (from 0), rx and ``h`` (8, >= m)
+    (6, >= m) i1, i2, |V2c|, peak |I2| (from -1), sum of |I2| means (from 0), rx and ``h`` (9, >= m)
     the sub-step coefficients: scratch."""
     for q in range(_U(m)):
         e = idx[q]
@@ -406,11 +428,12 @@ def _substep_pass(lo, idx, m, state, j, coef_tab, coef_ix, n_sub, vf, sc, w, h):
         row = coef_ix[j[e], e]
         for r in range(8):
             h[r, q] = coef_tab[row, _SUB_COLS[r]]
+        h[8, q] = -1.0 / h[7, q]
     for _ in range(n_sub):
         for q in range(_U(m)):
             w[0, q], w[1, q], w[3, q], w[4, q] = _substep(w[0, q], w[1, q], w[2, q], w[5, q], w[3, q], w[4, q],
                                                           h[0, q], h[1, q], h[2, q], h[3, q], h[4, q], h[5, q],
-                                                          h[6, q], h[7, q])
+                                                          h[6, q], h[7, q], h[8, q])
     for q in range(m):
         e = idx[q]
         p = e - lo
@@ -460,8 +483,8 @@ def _chunk(lo, hi, d, state, k, j, coef_tab, coef_ix, bat, cmd_all, noise_all, l
     """The step of sub-environments ``[lo, hi)``: the three passes (module docstring) on blocks of
     :data:`_BLOCK` sub-environments (their scratch in cache, few pass calls)."""
     nb = min(_BLOCK, hi - lo)
-    sc, idx = np.empty((8, nb)), np.empty(nb, dtype=np.int64)
-    w, h = np.empty((6, nb)), np.empty((8, nb))
+    sc, idx = np.empty((9, nb)), np.empty(nb, dtype=np.int64)
+    w, h = np.empty((6, nb)), np.empty((9, nb))
     vf, dr = par[PAR.vf], par[PAR.dr]
     for b0 in range(lo, hi, _BLOCK):
         b1 = min(b0 + _BLOCK, hi)
@@ -479,7 +502,7 @@ def env_step(d, state, k, j, coef_tab, coef_ix, bat, cmd_all, noise_all, lm_all,
     parallel (``n_chunks = 1``: one chunk on the calling thread, no thread pool). ``state`` (:data:`STATE`,
     (6, n)) and the step index ``k`` / slow index ``j`` are updated in place, and so are the
     objective's running values in ``ep`` (:func:`_finish_pass`); the ZOH coefficients of slow segment
-    ``j`` of sub-environment ``e`` are ``coef_tab[coef_ix[j, e]]`` (``coef_tab`` (U, 20) one row per
+    ``j`` of sub-environment ``e`` are ``coef_tab[coef_ix[j, e]]`` (``coef_tab`` (U, N_COEF) one row per
     distinct Lm, ``coef_ix`` (S, n) step-major);
     ``bat`` (:data:`BAT`, (9, n)); ``cmd_all`` (T + 1, n), ``noise_all`` (T, n), ``lm_all`` (S, n)
     step-major; ``cx`` the detuned windows (:func:`_link_pass`). ``obs`` (n, 8) float32, ``reward``,

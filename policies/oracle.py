@@ -226,7 +226,7 @@ class _FloorProblem(_Problem):
 #: with). The base and start policies' modules enter the key as well (:func:`_policy_files`): the base sets the
 #: state at the stop, a start the local optimum the search finds.
 _ROLLOUT_SOURCES = (
-    ("envs", ("core.py", "detuned.py", "layout.py", "modal_plant.py", "modal_step.py", "objective.py", "parts.py",
+    ("envs", ("core.py", "detuned.py", "duty_sine.py", "layout.py", "modal_plant.py", "modal_step.py", "objective.py", "parts.py",
               "peaks.py", "plant.py", "rollout.py", "scenario.py", "sensing.py", "vector.py", "vector_kernel.py")),
     ("wpt_receiver", ("coupling.py", "devices.py", "envelope.py", "inverse_controller.py", "lti.py",
                       "modal_kernel.py", "params.py", "parts.toml", "sbar.py")),

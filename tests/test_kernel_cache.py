@@ -70,3 +70,23 @@ def test_a_changed_dependency_reaches_the_cached_caller(tmp_path, guard):
         assert run(2) == 12                                   # and cached again (the stamp matches)
     else:
         assert got == 11                                      # numba's documented limitation: stale
+
+
+def test_the_env_replays_stamp_covers_what_the_env_kernel_compiles_in(monkeypatch):
+    """:mod:`envs.rollout`'s replay loop compiles in :mod:`envs.vector_kernel`'s step, and with it every envs module
+    that kernel imports (``envs/duty_sine.py``'s sine is inlined there): its stamp lists them all, so a change to
+    any of them drops the replay's cache (it once lacked ``duty_sine.py``)."""
+    import ast
+    from pathlib import Path
+
+    import envs.rollout as rollout
+    from wpt_receiver import kernel_cache
+
+    src = Path(rollout.__file__).with_name("vector_kernel.py")
+    needed = {src.name} | {f"{n.module}.py" for n in ast.walk(ast.parse(src.read_text()))
+                           if isinstance(n, ast.ImportFrom) and n.level == 1}
+    seen = []
+    monkeypatch.setattr(kernel_cache, "drop_stale_cache", lambda here, deps: seen.extend(Path(d).name for d in deps))
+    monkeypatch.setattr(rollout, "_CHECKED", [])
+    rollout._drop_stale()
+    assert needed <= set(seen), needed - set(seen)

@@ -11,7 +11,7 @@ from policies import oracle
 
 def test_the_key_covers_the_sources_of_the_rollouts_step():
     names = {(f.parent.name, f.name) for f in oracle._rollout_files()}
-    for need in [("envs", "vector_kernel.py"), ("envs", "detuned.py"), ("envs", "modal_step.py"), ("envs", "core.py"),
+    for need in [("envs", "vector_kernel.py"), ("envs", "duty_sine.py"), ("envs", "detuned.py"), ("envs", "modal_step.py"), ("envs", "core.py"),
                  ("envs", "layout.py"), ("envs", "rollout.py"), ("wpt_receiver", "modal_kernel.py"),
                  ("wpt_receiver", "sbar.py"), ("wpt_receiver", "inverse_controller.py"), ("wpt_receiver", "parts.toml")]:
         assert need in names
