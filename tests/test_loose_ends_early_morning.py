@@ -1,0 +1,59 @@
+"""Loose ends of 2026-11-28 early morning: `sizing`'s defaults from the sizing rules (all of them), one story for
+logs with an unknown armed state (`replay`, `mission --plan`, `calibrate`), one ground height, the policies' VL."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+
+def _patched_rules(monkeypatch, **fields):
+    """``wpt_receiver.sizing.SizingRules`` with other defaults ``fields``."""
+    import wpt_receiver.sizing as sizing
+    rules = dataclasses.make_dataclass("SizingRules", [(k, float, dataclasses.field(default=v)) for k, v in
+                                                       fields.items()], bases=(sizing.SizingRules,), frozen=True)
+    monkeypatch.setattr(sizing, "SizingRules", rules)
+    return rules
+
+
+def _row() -> dict:
+    """A stub sizing row (the table's columns)."""
+    from mission_sim.cli.sizing import _COLUMNS
+    return {c: 1.0 for c in _COLUMNS} | {"policy": "step", "part": "x", "v_case": None, "edge_ring_peak_v": 2.0,
+                                         "turn_off_peak_a": 3.0}
+
+
+def test_sizing_t_protect_and_c_out_defaults_and_help_come_from_the_sizing_rules(monkeypatch, capsys):
+    """`sizing --t-protect` and `--c-out` had defaults 1e-4 s and 4.7e-3 F, copies of ``SizingRules``' (only
+    ``--margin`` read the rules): other rules' defaults are now what a run without the options sizes with, and what
+    --help says; a given value still wins."""
+    import mission_sim.cli.sizing as cli_sizing
+    from mission_sim.cli import main
+    rules = _patched_rules(monkeypatch, margin=1.5, t_protect_s=2.5e-4, c_out_f=1e-3, v_margin=1.2)
+    sized = []   # (the rules each run sizes with; the rows are stubbed: no simulation)
+    monkeypatch.setattr(cli_sizing, "_rows", lambda args: sized.append(cli_sizing._rules(args)) or [_row()])
+    assert main(["sizing", "--no-plot"]) == 0
+    assert sized.pop() == rules()
+    assert main(["sizing", "--no-plot", "--t-protect", "3e-5", "--c-out", "2e-3"]) == 0
+    assert sized.pop() == rules(t_protect_s=3e-5, c_out_f=2e-3)
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        main(["sizing", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "(default 0.00025, wpt_receiver.sizing.SizingRules); the voltage rating is 1.2 x" in text
+    assert "(default 0.001, wpt_receiver.sizing.SizingRules)" in text
+    assert "1e-4" not in text and "4.7e-3" not in text and "0.0047" not in text
+
+
+def test_sizing_table_prints_the_rules_it_sized_with(monkeypatch, capsys):
+    """The table's footer said "ambient 40 C, sink +50 K", "V rating = 1.1 x" and "8 nH", copies of the rules'
+    defaults: it prints the rules the rows were sized with (the rows are stubbed: no simulation)."""
+    import mission_sim.cli.sizing as cli_sizing
+    from mission_sim.cli import main
+    _patched_rules(monkeypatch, t_amb_c=25.0, dt_sink_k=30.0, v_margin=1.3, l_stray_h=5e-9)
+    monkeypatch.setattr(cli_sizing, "_rows", lambda args: [_row()])
+    assert main(["sizing", "--no-plot"]) == 0
+    out = capsys.readouterr().out
+    assert "(ambient 25 C, sink +30 K); V rating = 1.3 x the simulated" in out
+    assert "with 5 nH stray loop inductance" in out and "1.1 x" not in out
