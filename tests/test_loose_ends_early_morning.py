@@ -57,3 +57,26 @@ def test_sizing_table_prints_the_rules_it_sized_with(monkeypatch, capsys):
     out = capsys.readouterr().out
     assert "(ambient 25 C, sink +30 K); V rating = 1.3 x the simulated" in out
     assert "with 5 nH stray loop inductance" in out and "1.1 x" not in out
+
+
+# --------------------------------------------------------------- logs whose armed state is unknown: one story
+FLIGHTLOGS = __import__("pathlib").Path(__file__).parent / "data" / "flightlogs"
+GROUND_LOGS = ["amc_backend_log_80k.bin", "pymavlink_test.BIN"]   # on the ground, no armed-state record (SOURCES.md)
+
+
+@pytest.mark.parametrize("name", GROUND_LOGS)
+def test_refusals_of_a_ground_log_with_unknown_armed_state_offer_what_each_command_takes(capsys, tmp_path, name):
+    """`replay`'s refusal of such a log ended "valid: the log of a flight, or a log holding an uploaded mission",
+    which only `mission --plan` flies: `replay` now offers the log of a flight; `mission --plan` still both."""
+    from mission_sim.cli import main
+    assert main(["replay", str(FLIGHTLOGS / name), "--no-plot", "--no-progress", "--out", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "no flown track: the armed state is unknown" in err and err.endswith("valid: the log of a flight"), err
+    argv = ["mission", "--plan", str(FLIGHTLOGS / name), "--no-plot", "--out", str(tmp_path / "m")]
+    if name == "pymavlink_test.BIN":   # (it holds an uploaded mission: the flown track on request)
+        argv += ["--set", "mission.from_log=flown"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "no flown track: the armed state is unknown" in err
+    assert err.endswith("valid: the log of a flight, or a log holding an uploaded mission"), err
+    assert list(tmp_path.iterdir()) == []

@@ -413,12 +413,12 @@ def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
     from ..mavlink.logs import read_log
     log = read_log(path)
     pos = log.position
-    from ..mavlink.takeoff import flown_periods, unknown_armed_state
+    from ..mavlink.takeoff import VALID_FLIGHT, flown_periods, unknown_armed_state
     periods = flown_periods(log)   # the armed periods; the armed state unknown: the whole track (one rule with replay)
     name = Path(path).name
     if log.armed_source is not None and not periods:   # (its fixes were GPS drift on the ground: 1 s of "flight")
         raise ValueError(f"{name}: no flown track: the vehicle never armed in the log (armed state from "
-                         f"{log.armed_source}); valid: the log of a flight, or a log holding an uploaded mission")
+                         f"{log.armed_source}); valid: {VALID_FLIGHT}, or a log holding an uploaded mission")
     if periods:
         t = pos["t_s"].to_numpy(float)
         pos = pos[(t >= periods[0][0]) & (t <= periods[-1][1])]
@@ -436,7 +436,8 @@ def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
     p = np.column_stack([e, n, np.maximum(u, 0.0)])
     if log.armed_source is None:   # no armed-state record and no motor output: the whole track (as before 2026-11-27)
         from wpt_receiver.notices import warn
-        warn(unknown_armed_state(name, float(p[:, 2].max())))
+        warn(unknown_armed_state(name, float(p[:, 2].max()), valid=f"{VALID_FLIGHT}, or a log holding an uploaded "
+                                 "mission"))
     t = pos["t_s"].to_numpy(float)
     air = p[:, 2] >= FLOWN_GROUND_M
     cross = np.flatnonzero(air[1:] != air[:-1])   # each take-off and landing kept: a flight lower than the tolerance
