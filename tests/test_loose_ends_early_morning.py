@@ -80,3 +80,20 @@ def test_refusals_of_a_ground_log_with_unknown_armed_state_offer_what_each_comma
     assert "no flown track: the armed state is unknown" in err
     assert err.endswith("valid: the log of a flight, or a log holding an uploaded mission"), err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_replay_figures_shade_what_the_replay_counts_as_flown():
+    """The replay figures shaded ``log.armed_periods`` under "armed": nothing for a log whose armed state is unknown
+    (log171 with its armed-state records taken out), whose whole track the replay flies (and matplotlib warned of an
+    empty legend). They shade the flown time, labelled as such; a log with its armed state: its armed periods."""
+    import dataclasses
+
+    from mission_sim.figures.replay import _shaded_periods
+    from mission_sim.mavlink.logs import read_log
+    from mission_sim.mavlink.takeoff import flown_periods
+    full = read_log(FLIGHTLOGS / "dronekit-la-testdata_log171.bin")
+    log = dataclasses.replace(full, armed=full.armed.iloc[0:0], armed_source=None)
+    periods, label = _shaded_periods(log)
+    t = log.position["t_s"].to_numpy(float)
+    assert periods == flown_periods(log) == [(t.min(), t.max())] and "armed state unknown" in label
+    assert _shaded_periods(full) == (full.armed_periods, "armed") and len(full.armed_periods) >= 1

@@ -259,14 +259,20 @@ def test_replay_of_a_log_with_unknown_armed_state_counts_its_whole_track_as_flow
     track = track_from_log(log)
     assert track.armed.all()
     stats = flight_stats(log, track)
-    assert stats["flown"] and stats["armed_time_s"] == pytest.approx(float(track.t_s[-1]), abs=0.5)
-    assert stats["armed_time_s"] > full.armed_time_s + 25   # (the 27 s on the ground before arming included)
+    assert stats["flown"] and stats["flown_time_s"] == pytest.approx(float(track.t_s[-1]), abs=0.5)
+    assert stats["flown_time_s"] > full.armed_time_s + 25   # (the 27 s on the ground before arming included)
+    # (2026-11-28: no armed time is claimed for it: "armed_time_s" gave the whole track, "log_armed_time_s" 0)
+    assert stats["armed_time_s"] is None and stats["armed_periods_s"] is None and stats["log_armed_time_s"] is None
+    known = flight_stats(full, track_from_log(full))
+    assert known["armed_time_s"] == known["flown_time_s"] == pytest.approx(full.armed_time_s, abs=1.0)
+    assert known["armed_periods_s"] == known["flown_periods_s"] and known["log_armed_time_s"] == full.armed_time_s
     warns = replay_warnings(log, track)
     assert not any("never armed" in w or "NOT FLOWN" in w for w in warns), warns
     assert sum("the armed state is unknown" in w and "whole GPS track" in w for w in warns) == 1, warns
     _print_log_facts(log.path.name, stats)
     out = capsys.readouterr().out
     assert "never armed" not in out and "NOT FLOWN" not in out and "the armed state is unknown" in out, out
+    assert f"the whole replayed track, {stats['flown_time_s']:.1f} s, counted as flown" in out and "armed 0.0" not in out
     assert not any("armed state is unknown" in w for w in replay_warnings(full, track_from_log(full)))
 
 

@@ -244,12 +244,19 @@ def _min_spacing(t, min_dt) -> np.ndarray:
 
 
 def flight_stats(log: FlightLog, track: FlightTrack) -> dict:
-    """Log and track facts for the summary (times in s, lengths in m). ``armed_time_s`` is the armed
-    time within the replayed track (it starts and ends at a GPS fix), ``log_armed_time_s`` the
-    whole log's (what the log says)."""
+    """Log and track facts for the summary (times in s, lengths in m). ``flown_time_s`` / ``flown_periods_s``: the
+    time the replay counts as flown within the replayed track (it starts and ends at a GPS fix;
+    :func:`~mission_sim.mavlink.takeoff.flown_periods`). ``armed_time_s`` / ``armed_periods_s``: the armed time within
+    the replayed track, ``log_armed_time_s`` the whole log's (what the log says); when the log's armed state is
+    known these are the flown ones, when it is unknown (``armed_source`` None) all three are None: the replay counts
+    the whole track as flown, the log says nothing of arming (they gave the whole track as "armed" until 2026-11-28,
+    and ``log_armed_time_s`` 0)."""
     seg = np.diff(track.pos_m, axis=0)
     t0, t1 = track.t_offset_s, track.t_offset_s + float(track.t_s[-1])
     periods = [(max(a, t0), min(b, t1)) for a, b in flown_periods(log) if b > t0 and a < t1]
+    flown_s = float(sum(b - a for a, b in periods))
+    shown = [[round(a, 3), round(b, 3)] for a, b in periods]
+    known = log.armed_source is not None
     return {
         "duration_s": float(log.duration_s),
         "position_span_s": float(track.t_s[-1]),
@@ -257,9 +264,11 @@ def flight_stats(log: FlightLog, track: FlightTrack) -> dict:
         "horizontal_distance_m": float(np.sum(np.linalg.norm(seg[:, :2], axis=1))),
         "max_alt_m": float(np.max(track.height_m)),
         "max_range_m": float(np.max(np.linalg.norm(track.pos_m[:, :2], axis=1))),
-        "armed_time_s": float(sum(b - a for a, b in periods)),
-        "armed_periods_s": [[round(a, 3), round(b, 3)] for a, b in periods],
-        "log_armed_time_s": float(log.armed_time_s),
+        "flown_time_s": flown_s,
+        "flown_periods_s": shown,
+        "armed_time_s": flown_s if known else None,
+        "armed_periods_s": shown if known else None,
+        "log_armed_time_s": float(log.armed_time_s) if known else None,
         "armed_source": log.armed_source,
         "starts_armed": bool(log.starts_armed),
         "gps_rejected": {k: int(v) for k, v in log.gps_rejected.items()},
@@ -267,7 +276,7 @@ def flight_stats(log: FlightLog, track: FlightTrack) -> dict:
         "n_position_samples": int(len(track.t_s)),
         "bad_frames": int(log.bad_frames),
         "reboots": int(log.reboots),
-        "flown": bool(sum(b - a for a, b in periods) > 0),
+        "flown": bool(flown_s > 0),
         "tilt_clipped_samples": int(track.n_tilt_clipped),
         "pad": {"lat_deg": track.pad.lat_deg, "lon_deg": track.pad.lon_deg, "alt_m": track.pad.alt_m},
     }
