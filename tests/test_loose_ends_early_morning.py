@@ -97,3 +97,46 @@ def test_replay_figures_shade_what_the_replay_counts_as_flown():
     t = log.position["t_s"].to_numpy(float)
     assert periods == flown_periods(log) == [(t.min(), t.max())] and "armed state unknown" in label
     assert _shaded_periods(full) == (full.armed_periods, "armed") and len(full.armed_periods) >= 1
+
+
+def test_calibrate_takes_the_replays_flown_rule_for_a_log_with_unknown_armed_state():
+    """`calibrate` read ``log.armed_periods``: a log whose armed state is unknown (log171 with its armed-state records
+    taken out) had no armed sample, so 0 airborne samples ("only 0 battery samples while airborne") and every sample
+    "disarmed" (avionics). It takes the replay's rule now (:func:`~mission_sim.mavlink.takeoff.flown_periods`): the
+    whole track is armed, with one warning, no sample is known disarmed, the airborne samples hold every airborne
+    sample of the log with its armed state (1507; 1536 with the 27 s before arming), and the fitted equivalent mass
+    is within 2 % of that log's (1.80 kg both)."""
+    import dataclasses
+
+    from mission_sim.config import load_config
+    from mission_sim.mavlink.calibrate import calibrate_log, calibration_samples
+    from mission_sim.mavlink.logs import read_log
+    from wpt_receiver.notices import DronewptWarning
+    full = read_log(FLIGHTLOGS / "dronekit-la-testdata_log171.bin")
+    log = dataclasses.replace(full, armed=full.armed.iloc[0:0], armed_source=None)
+    known = calibration_samples(full).table
+    with pytest.warns(DronewptWarning, match="the armed state is unknown .*whole GPS track") as rec:
+        tab = calibration_samples(log).table
+    assert len(rec) == 1
+    assert not tab["disarmed"].any() and known["disarmed"].sum() > 100
+    assert set(known["t_s"][known["airborne"]]) <= set(tab["t_s"][tab["airborne"]])
+    assert known["airborne"].sum() <= tab["airborne"].sum() <= known["airborne"].sum() * 1.05
+    drone = load_config().drone
+    with pytest.warns(DronewptWarning):
+        mass = calibrate_log(log, drone).drone.mass_kg
+    assert mass == pytest.approx(calibrate_log(full, drone).drone.mass_kg, rel=0.02)
+
+
+@pytest.mark.parametrize("name", GROUND_LOGS)
+def test_calibrate_refuses_a_ground_log_with_unknown_armed_state_as_replay_does(capsys, tmp_path, name):
+    """Such a log on the ground: `replay` refuses it ("no flown track: the armed state is unknown ... never rises 1 m
+    above its first position"), `calibrate` said "only 0 battery samples while airborne ... calibrate needs the
+    flight battery's voltage and current", as if the battery data were missing. Now the replay's line, exit 2,
+    nothing written."""
+    from mission_sim.cli import main
+    assert main(["replay", str(FLIGHTLOGS / name), "--no-plot", "--no-progress", "--out", str(tmp_path / "r")]) == 2
+    said = capsys.readouterr().err.strip().split("error: ", 1)[1]
+    assert main(["calibrate", str(FLIGHTLOGS / name), "--no-plot", "--out", str(tmp_path / "c" / "d.toml")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.split("error: ", 1)[1] == said, (err, said)
+    assert "never rises 1 m above its first position" in said and list(tmp_path.iterdir()) == []
