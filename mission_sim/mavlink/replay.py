@@ -26,6 +26,7 @@ import pandas as pd
 
 from ..validation import window_ok
 from ..world import budget as _budget
+from . import ground
 from .geodesy import GeoPoint, geodetic_to_enu
 from .flightlog import (LogParseError, NoPositionError, _fmt_counts, _no_position,  # noqa: F401 (re-exported)
                         check_decoded)
@@ -41,7 +42,6 @@ __all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "w
 
 MAX_TILT_RAD = np.radians(85.0)   # the mission world takes |tilt| < 90 deg; beyond is upside down
 HOVER_SPEED_M_S = 0.3             # slower than this counts as hovering (pads may energise)
-AIRBORNE_M = 1.0                  # armed and this high above the pad counts as airborne (GPS height noise ~1 m)
 MIN_DT_S = 0.05                   # closer position samples are dropped (velocity by differences)
 _MAX_GAP_S = 10.0                 # samples further apart are not integrated across
 _EDGE_S = 1e-3                    # a battery sample this close outside the track's ends is in it (float rounding)
@@ -309,7 +309,7 @@ def compare_power(log: FlightLog, track: FlightTrack, sim_t_s, propulsion_w) -> 
 
     The model is sampled at each battery record's time (linear interpolation of the simulator's
     time series, mapped back to log time with ``track.t_offset_s``). Compared while *airborne*:
-    armed and more than :data:`AIRBORNE_M` above the pad (armed on the ground the motors idle,
+    armed and more than :data:`~mission_sim.mavlink.ground.GROUND_M` above the pad (armed on the ground the motors idle,
     while the model, which knows no ground contact, gives hover power; disarmed the logged
     power is the avionics alone). Returns the per-sample table and a summary:
 
@@ -327,7 +327,7 @@ def compare_power(log: FlightLog, track: FlightTrack, sim_t_s, propulsion_w) -> 
     table = pd.DataFrame({"t_s": t, "logged_w": b["power_w"].to_numpy(float),
                           "voltage_v": b["voltage_v"].to_numpy(float), "current_a": b["current_a"].to_numpy(float),
                           "model_w": np.interp(t, sim_t, model_w) if len(t) else np.zeros(0),
-                          "height_m": height, "armed": armed, "airborne": armed & (height > AIRBORNE_M)})
+                          "height_m": height, "armed": armed, "airborne": armed & (height > ground.GROUND_M)})
     table["error_w"] = table["model_w"] - table["logged_w"]
     a = table[table["airborne"]]
     out: dict = {"battery_source": log.battery_source, "n_samples_airborne": int(len(a)),
@@ -435,7 +435,7 @@ GAP_WARN_S = 10.0     # positions missing longer than this while armed: the repl
 def unknown_armed_check(log: FlightLog, track: FlightTrack) -> str | None:
     """None when ``log``'s armed state is known; unknown (``armed_source`` None): the warning that its whole track
     counts as flown (:func:`flown_periods`, the rule of the flown route `mission --plan LOG`), or ``ValueError``
-    when the replayed track never rises :data:`~mission_sim.mavlink.takeoff.UNKNOWN_GROUND_M` above the pad (its
+    when the replayed track never rises :data:`~mission_sim.mavlink.ground.GROUND_M` above the pad (its
     GPS drift on the ground was said "never armed ... NOT FLOWN"; the armed state is unknown, not "never armed")."""
     if log.armed_source is not None:
         return None
