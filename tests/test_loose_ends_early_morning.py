@@ -180,3 +180,37 @@ def test_one_ground_height_for_replay_calibrate_refly_and_the_flown_route(monkey
     assert 0 < high["airborne"].sum() < air["airborne"].sum() and high["height_m"][high["airborne"]].min() > 6.0
     monkeypatch.setattr(ground, "GROUND_M", 20.0)   # above its whole flight: no sample to leave for a pad from
     assert plan_detours(track, np.zeros((1, 3)), [1.0]) == ([], [(0, math.inf)])
+
+
+# ------------------------------------------------------------------------------------ the policies' VL
+def test_the_policies_link_carries_the_mission_packs_voltage():
+    """``policy_context(cfg).link.vl_v`` was Table I's 30 V whatever the pack (the default 8S pack runs at
+    32.28-32.90 V): it is the charger's CV voltage ``n_series * cv_cell_v`` (the setup warnings' link, one source),
+    inside the voltage the pack has in the mission; a 4S pack's is 16.4 V."""
+    from mission_sim.config import apply_overrides, config_from_dict, load_config, load_config_dict, policy_context
+    from mission_sim.setup_warnings import mission_link_params
+    from mission_sim.world.runner import run_mission
+    import policies
+    cfg = load_config()
+    ctx = policy_context(cfg)
+    assert ctx.link == mission_link_params(cfg)
+    assert ctx.link.vl_v == pytest.approx(cfg.battery.n_series * cfg.charger.cv_cell_v)
+    v = run_mission(cfg, policies.make("step", ctx), warn=False).timeseries["battery_v"].to_numpy()
+    assert v.min() <= ctx.link.vl_v <= v.max() and v.min() > 32.0   # (32.28-32.90 V; 30 V was below all of it)
+    four = config_from_dict(apply_overrides(load_config_dict(None), {"battery.n_series": 4}))
+    assert policy_context(four).link.vl_v == pytest.approx(4 * four.charger.cv_cell_v)
+
+
+def test_mpc_with_a_budget_stays_under_its_rating_in_the_default_mission():
+    """The modal MPC builds its clamp table at the context's VL (``policies.mpc_modal.v2_frame_table``); at 30 V,
+    below the pack, ``mpc:0.02`` peaked at 32.5 A in the default mission (rated 15 A; at 29 V 32.3 A); with the
+    pack's voltage in its context it peaks at 13.31 A, as ``mpc`` and ``model_based`` do."""
+    pytest.importorskip("daqp")
+    from mission_sim.config import load_config, policy_context
+    from mission_sim.world.runner import run_mission
+    import policies
+    cfg = load_config()
+    s = run_mission(cfg, policies.make("mpc:0.02", policy_context(cfg)), warn=False, frame=False).summary
+    ref = run_mission(cfg, policies.make("model_based", policy_context(cfg)), warn=False, frame=False).summary
+    assert s["peak_i2_a"] < cfg.link.rated_i2_a
+    assert s["peak_i2_a"] == pytest.approx(ref["peak_i2_a"], rel=0.01)
