@@ -43,6 +43,7 @@ def test_sizing_t_protect_and_c_out_defaults_and_help_come_from_the_sizing_rules
     text = " ".join(capsys.readouterr().out.split())
     assert "(default 0.00025, wpt_receiver.sizing.SizingRules); the voltage rating is 1.2 x" in text
     assert "(default 0.001, wpt_receiver.sizing.SizingRules)" in text
+    assert "x worst-case |i2|, 1 .. 10 (default 1.5, wpt_receiver.sizing.SizingRules)" in text and "1.25" not in text
     assert "1e-4" not in text and "4.7e-3" not in text and "0.0047" not in text
 
 
