@@ -645,12 +645,21 @@ def hover_inductances(coupling: CouplingConfig, hover_gap_m: float) -> tuple[flo
     return model.l1_h, model.l2_h, float(model.lm_h(0.0, 0.0, hover_gap_m))
 
 
+def mission_link_params(cfg: MissionConfig):
+    """The mission's link as :class:`wpt_receiver.LinkParams` at the hover pose (Lm at ``(0, 0,
+    mission.hover_gap_m)``) and at the pack's highest voltage, the charger's CV voltage
+    ``battery.n_series * charger.cv_cell_v`` (the setup warnings' link: the lowest Vdc/VL and emf margin of the run;
+    the policies' link, :func:`policy_context`)."""
+    l1_h, l2_h, lm_h = hover_inductances(cfg.coupling, cfg.mission.hover_gap_m)
+    return cfg.link.link_params(l1_h, l2_h, lm_h, vl_v=cfg.battery.n_series * cfg.charger.cv_cell_v)
+
+
 def policy_context(cfg: MissionConfig):
     """The :class:`~mission_sim.contract.PolicyContext` that ``run_mission`` expects for ``cfg``.
 
     The receiver's assumed link is the mission's link at the nominal hover pose (coil inductances of the coupling
     model, Lm at ``(0, 0, mission.hover_gap_m)``) and the pack's charging voltage, the charger's CV voltage
-    ``battery.n_series * charger.cv_cell_v`` (:func:`mission_sim.setup_warnings.mission_link_params`, one source);
+    ``battery.n_series * charger.cv_cell_v`` (:func:`mission_link_params`, the setup warnings' link too);
     ``control_period_s = sim.control_period_s`` and ``rated_i2_a = link.rated_i2_a``; ``link_model="modal"``:
     every mission runs the exact-mode link (:mod:`mission_sim.world.loop_kernel` steps
     :mod:`wpt_receiver.modal_kernel`; there is no eq. 4 link in a mission), so a model-predictive
@@ -666,7 +675,6 @@ def policy_context(cfg: MissionConfig):
     32.3, 32.6, 32.8 or 33.5 V).
     """
     from .contract import PolicyContext
-    from .setup_warnings import mission_link_params
 
     return PolicyContext(link=mission_link_params(cfg),
                          control_period_s=cfg.sim.control_period_s, rated_i2_a=cfg.link.rated_i2_a,

@@ -31,12 +31,10 @@ MISSION_LINK_MODEL = "modal"
 
 
 def mission_link_params(cfg):
-    """The mission's link as :class:`wpt_receiver.LinkParams` at the hover pose (Lm at ``(0, 0,
-    mission.hover_gap_m)``, as :func:`mission_sim.config.policy_context`) and at the pack's highest voltage, the
-    charger's CV voltage ``battery.n_series * charger.cv_cell_v`` (the lowest Vdc/VL and emf margin of the run)."""
-    from .config import hover_inductances
-    l1_h, l2_h, lm_h = hover_inductances(cfg.coupling, cfg.mission.hover_gap_m)
-    return cfg.link.link_params(l1_h, l2_h, lm_h, vl_v=cfg.battery.n_series * cfg.charger.cv_cell_v)
+    """The mission's link at the hover pose and the pack's CV voltage: :func:`mission_sim.config.mission_link_params`
+    (there, beside :func:`mission_sim.config.policy_context`, which gives the policies the same link)."""
+    from .config import mission_link_params
+    return mission_link_params(cfg)
 
 
 def link_range_warning(cfg) -> str | None:
