@@ -215,3 +215,29 @@ def test_mpc_with_a_budget_stays_under_its_rating_in_the_default_mission():
     ref = run_mission(cfg, policies.make("model_based", policy_context(cfg)), warn=False, frame=False).summary
     assert s["peak_i2_a"] < cfg.link.rated_i2_a
     assert s["peak_i2_a"] == pytest.approx(ref["peak_i2_a"], rel=0.01)
+
+
+def test_the_modal_mpc_shares_one_sbar_table_across_pack_voltages(monkeypatch):
+    """The modal MPC's SBAR table (1.1 MB, seconds to build on a disk-cache miss) was built from the whole link,
+    its VL included, so each pack voltage cost a table of its own: it is now the table at LinkParams' default VL,
+    the one the mission loop uses, shared by links that differ only in VL (no table is built or read for a second
+    voltage); the clamp stays at each link's own ``VL + Vf``."""
+    import dataclasses
+
+    from wpt_receiver import modal_kernel as mk
+    from wpt_receiver.devices import preset
+    from wpt_receiver.params import LinkParams
+    from policies import mpc_modal
+    base = LinkParams()
+    a, b = (dataclasses.replace(base, vl_v=v) for v in (31.3, 33.1))
+    for cached in (mpc_modal._link_modes, mpc_modal._sbar_table):   # as in a fresh process
+        cached.cache_clear()
+    built = []
+    real = mk.modal_table
+    monkeypatch.setattr(mk, "modal_table", lambda link, dev: built.append(link.vl_v) or real(link, dev))
+    tab_a, tab_b = mpc_modal._link_modes(a, "schottky")[1], mpc_modal._link_modes(b, "schottky")[1]
+    assert tab_a is tab_b and built == [LinkParams().vl_v]
+    assert (tab_a == real(dataclasses.replace(base, vl_v=LinkParams().vl_v), preset("schottky"))).all()
+    vf = preset("schottky").rect_vf_v
+    assert mpc_modal.v2_frame_table(a, "schottky")[2] == pytest.approx(31.3 + vf)
+    assert mpc_modal.v2_frame_table(b, "schottky")[2] == pytest.approx(33.1 + vf)
