@@ -241,3 +241,18 @@ def test_the_modal_mpc_shares_one_sbar_table_across_pack_voltages(monkeypatch):
     vf = preset("schottky").rect_vf_v
     assert mpc_modal.v2_frame_table(a, "schottky")[2] == pytest.approx(31.3 + vf)
     assert mpc_modal.v2_frame_table(b, "schottky")[2] == pytest.approx(33.1 + vf)
+
+
+def test_the_envs_peak_table_is_shared_across_pack_voltages():
+    """``envs.peaks.peak_table`` tabulates the ripple excess at its own VL grid (27, 31, 35 V) whatever the link's
+    VL, yet was keyed on the whole link: each pack voltage in a policy context cost the MPC a second table (4.7 s
+    of its 5 s ``make``). Links that differ only in VL now get one table, equal to the one at the default VL."""
+    import dataclasses
+
+    from envs import peaks
+    from wpt_receiver.devices import preset
+    from wpt_receiver.params import LinkParams
+    dev = preset("schottky")
+    a, b = (dataclasses.replace(LinkParams(), vl_v=v) for v in (31.3, 33.1))
+    assert peaks.peak_table(a, dev) is peaks.peak_table(b, dev) is peaks.peak_table(LinkParams(), dev)
+    assert peaks.PeakLookup(a, dev).table is peaks.PeakLookup(b, dev).table
