@@ -147,7 +147,8 @@ def test_calibrate_refuses_a_ground_log_with_unknown_armed_state_as_replay_does(
 def test_one_ground_height_for_replay_calibrate_refly_and_the_flown_route(monkeypatch):
     """"Below this height above the take-off spot is the ground" was four 1.0 m constants (plans.items
     FLOWN_GROUND_M, mavlink.takeoff UNKNOWN_GROUND_M, mavlink.replay AIRBORNE_M, plans.refly AIRBORNE_M "as the
-    replay's"): one now, :data:`mission_sim.mavlink.ground.GROUND_M`; set to another value, every user follows it."""
+    replay's"): one now, :data:`mission_sim.mavlink.ground.GROUND_M`; set to another value, every user follows it
+    (the refusals, the flown route's landings, replay's and calibrate's airborne samples, refly's detours)."""
     import math
 
     import numpy as np
@@ -155,7 +156,7 @@ def test_one_ground_height_for_replay_calibrate_refly_and_the_flown_route(monkey
     from mission_sim.mavlink import ground
     from mission_sim.mavlink.calibrate import calibration_samples
     from mission_sim.mavlink.logs import read_log
-    from mission_sim.mavlink.replay import track_from_log, unknown_armed_check
+    from mission_sim.mavlink.replay import compare_power, track_from_log, unknown_armed_check
     from mission_sim.plans.items import read_mission
     from mission_sim.plans.refly import plan_detours
     from wpt_receiver.notices import DronewptWarning
@@ -168,17 +169,23 @@ def test_one_ground_height_for_replay_calibrate_refly_and_the_flown_route(monkey
     air = calibration_samples(flight).table
     track = track_from_log(flight)
     assert len(plan_detours(track, np.zeros((1, 3)), [1.0])[0]) == 1
+    compared = compare_power(flight, track, track.t_s, np.zeros(len(track.t_s)))[1]["n_samples_airborne"]
 
     monkeypatch.setattr(ground, "GROUND_M", 0.01)   # below the ground log's 0.05 m: replay and the route fly it
     assert "the armed state is unknown" in unknown_armed_check(log, track_from_log(log))
     with pytest.warns(DronewptWarning, match="the armed state is unknown"):
-        assert read_mission(ground_log, "flown").items
+        items = read_mission(ground_log, "flown").items
+    # the route's own take-off / landing split follows too (plans.items.flown_mission): its 0.05 m rise is a
+    # flight with a waypoint (MAV_CMD_NAV_WAYPOINT 16) before the landing (21), not one landing
+    assert {i.command for i in items} == {16, 21} and items[-1].command == 21
     monkeypatch.setattr(ground, "GROUND_M", 0.5)    # (the refusal names the one value)
     with pytest.raises(ValueError, match=r"never rises 0.5 m above its first position \(max 0.05"):
         read_mission(ground_log, "flown")
     monkeypatch.setattr(ground, "GROUND_M", 6.0)    # above most of log171's flight: fewer airborne samples
     high = calibration_samples(flight).table
     assert 0 < high["airborne"].sum() < air["airborne"].sum() and high["height_m"][high["airborne"]].min() > 6.0
+    table, summary = compare_power(flight, track, track.t_s, np.zeros(len(track.t_s)))   # replay's airborne samples
+    assert 0 < summary["n_samples_airborne"] < compared and table["height_m"][table["airborne"]].min() > 6.0
     monkeypatch.setattr(ground, "GROUND_M", 20.0)   # above its whole flight: no sample to leave for a pad from
     assert plan_detours(track, np.zeros((1, 3)), [1.0]) == ([], [(0, math.inf)])
 
