@@ -45,6 +45,7 @@ def test_sizing_t_protect_and_c_out_defaults_and_help_come_from_the_sizing_rules
     assert "(default 0.001, wpt_receiver.sizing.SizingRules)" in text
     assert "x worst-case |i2|, 1 .. 10 (default 1.5, wpt_receiver.sizing.SizingRules)" in text and "1.25" not in text
     assert "1e-4" not in text and "4.7e-3" not in text and "0.0047" not in text
+    assert "1.1 x" not in text   # the description names the rules' v_margin, not a copy of its value
 
 
 def test_sizing_table_prints_the_rules_it_sized_with(monkeypatch, capsys):

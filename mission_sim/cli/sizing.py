@@ -19,8 +19,8 @@ def _add_sizing(sub):
                        description="Simulate the RM -> SM transition of each policy with the switching model and "
                                    "real devices (--source mission: whole missions; --source sweep: a sweep's "
                                    "worst case per policy); size the SBAR: worst-case instantaneous |i2|, device "
-                                   "RMS currents, required rating (margin x peak), voltage rating (1.1 x the "
-                                   "simulated open-load peak), smallest-mass combination of shipped parts, "
+                                   "RMS currents, required rating (margin x peak), voltage rating (the sizing "
+                                   "rules' v_margin x the simulated open-load peak), smallest-mass combination of shipped parts, "
                                    "conduction and switching losses at the settled junction temperatures and "
                                    "rectifier mass (devices + plate-fin heat sink).")
     p.add_argument("--source", choices=("paper", "mission", "sweep"), default="paper",
