@@ -81,11 +81,6 @@ def _default(field: str) -> float:
     return float(getattr(SizingRules(), field))
 
 
-def _default_margin() -> float:
-    """The rating margin of :class:`wpt_receiver.sizing.SizingRules` (`--margin`'s default)."""
-    return _default("margin")
-
-
 def _resolve_rules_defaults(args) -> None:
     """Each of ``--margin``, ``--t-protect``, ``--c-out`` not given: the rules' value (:data:`_RULES_OPTIONS`)."""
     for dest, field in _RULES_OPTIONS.items():
