@@ -30,14 +30,13 @@ import os
 import statistics
 import time
 
-from mission_sim.config import apply_overrides, config_from_dict, config_to_dict, load_config
-from mission_sim.contract import PolicyContext
+from mission_sim.config import apply_overrides, config_from_dict, config_to_dict, load_config, policy_context
 from mission_sim.world.runner import run_mission
 from policies import make
 
 
 def _policy(cfg, name):
-    return make(name, PolicyContext(control_period_s=cfg.sim.control_period_s, rated_i2_a=cfg.link.rated_i2_a))
+    return make(name, policy_context(cfg))   # the mission's link (its pack's VL, the exact-mode model), as run_mission expects
 
 
 def single_rate_wall_per_sim_s(name: str) -> float:

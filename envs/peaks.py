@@ -43,10 +43,18 @@ _VLC, _INV_IMAX = LOOKUP_SCALARS
 _CACHE_VERSION = "env-peak-table v1"
 
 
-@lru_cache(maxsize=8)
 def peak_table(link, devices) -> np.ndarray:
     """The excess table (len(VL_GRID_V), N_D, N_I) [A] for a link (its nominal Lm) and a
-    :class:`wpt_receiver.devices.DeviceSet`; from the disk cache when there, else built (~1.3 s)."""
+    :class:`wpt_receiver.devices.DeviceSet`; from the disk cache when there, else built (~1.3-4.7 s). The
+    table is at :data:`VL_GRID_V`, whatever the link's own VL: links that differ only in VL share one (keyed at
+    ``LinkParams``' default VL)."""
+    from wpt_receiver.params import LinkParams
+    return _peak_table(link.with_(vl_v=LinkParams().vl_v), devices)
+
+
+@lru_cache(maxsize=8)
+def _peak_table(link, devices) -> np.ndarray:
+    """:func:`peak_table` of a link at ``LinkParams``' default VL."""
     from wpt_receiver import diskcache
     key = f"{_CACHE_VERSION} {link!r} {devices!r} vl={VL_GRID_V} i2max={I2_MAX_A} n={N_D}x{N_I}"
     shape = (len(VL_GRID_V), N_D, N_I)

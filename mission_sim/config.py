@@ -645,20 +645,38 @@ def hover_inductances(coupling: CouplingConfig, hover_gap_m: float) -> tuple[flo
     return model.l1_h, model.l2_h, float(model.lm_h(0.0, 0.0, hover_gap_m))
 
 
+def mission_link_params(cfg: MissionConfig):
+    """The mission's link as :class:`wpt_receiver.LinkParams` at the hover pose (Lm at ``(0, 0,
+    mission.hover_gap_m)``) and at the pack's highest voltage, the charger's CV voltage
+    ``battery.n_series * charger.cv_cell_v`` (the setup warnings' link: the lowest Vdc/VL and emf margin of the run;
+    the policies' link, :func:`policy_context`)."""
+    l1_h, l2_h, lm_h = hover_inductances(cfg.coupling, cfg.mission.hover_gap_m)
+    return cfg.link.link_params(l1_h, l2_h, lm_h, vl_v=cfg.battery.n_series * cfg.charger.cv_cell_v)
+
+
 def policy_context(cfg: MissionConfig):
     """The :class:`~mission_sim.contract.PolicyContext` that ``run_mission`` expects for ``cfg``.
 
-    The receiver's assumed link is the Table I-like model at the nominal hover pose (coil
-    inductances of the coupling model, Lm at ``(0, 0, mission.hover_gap_m)``),
+    The receiver's assumed link is the mission's link at the nominal hover pose (coil inductances of the coupling
+    model, Lm at ``(0, 0, mission.hover_gap_m)``) and the pack's charging voltage, the charger's CV voltage
+    ``battery.n_series * charger.cv_cell_v`` (:func:`mission_link_params`, the setup warnings' link too);
     ``control_period_s = sim.control_period_s`` and ``rated_i2_a = link.rated_i2_a``; ``link_model="modal"``:
     every mission runs the exact-mode link (:mod:`mission_sim.world.loop_kernel` steps
     :mod:`wpt_receiver.modal_kernel`; there is no eq. 4 link in a mission), so a model-predictive
     policy (``mpc``) predicts with the modes.
+
+    The link's VL is what the modal MPC builds its clamp table at (:func:`policies.mpc_modal.v2_frame_table`: the
+    SBAR's V2 at ``Vc0 = VL + Vf``, scaled by ``Vc / Vc0`` to the observed pack voltage) and the budgeted policies
+    their plant (:func:`policies.budget_modal._plant`); the others take the pack voltage from the observation (the
+    default mission's ``step``, ``model_based`` and ``model_based_budget:0.02`` are bit-identical at 30 and 32.8 V).
+    Until 2026-11-28 it
+    was Table I's 30 V, below the default 8S pack's 32.28-32.90 V in flight: the table's V2 was off by up to
+    0.47 V there (0 at its own VL), and ``mpc:0.02`` peaked at 32.5 A in the default mission (13.31 A with VL at
+    32.3, 32.6, 32.8 or 33.5 V).
     """
     from .contract import PolicyContext
 
-    l1_h, l2_h, lm_h = hover_inductances(cfg.coupling, cfg.mission.hover_gap_m)
-    return PolicyContext(link=cfg.link.link_params(l1_h, l2_h, lm_h),
+    return PolicyContext(link=mission_link_params(cfg),
                          control_period_s=cfg.sim.control_period_s, rated_i2_a=cfg.link.rated_i2_a,
                          link_model="modal")
 

@@ -24,19 +24,17 @@ from __future__ import annotations
 import math
 
 __all__ = ["link_range_warning", "link_frequency_warning", "unreached_pad_warnings", "far_pad_warnings", "energised_pads", "policy_link_warning", "mission_warnings",
-           "mission_link_params", "MISSION_LINK_MODEL", "PAD_HEIGHT_WARN_M", "HOME_ORIGIN", "REPLAY_ORIGIN"]
+           "mission_link_params", "MISSION_LINK_MODEL", "POLICY_VL_TOL_V", "PAD_HEIGHT_WARN_M", "HOME_ORIGIN", "REPLAY_ORIGIN"]
 
 #: the link model every mission runs (:mod:`mission_sim.world.loop_kernel` steps :mod:`wpt_receiver.modal_kernel`)
 MISSION_LINK_MODEL = "modal"
 
 
 def mission_link_params(cfg):
-    """The mission's link as :class:`wpt_receiver.LinkParams` at the hover pose (Lm at ``(0, 0,
-    mission.hover_gap_m)``, as :func:`mission_sim.config.policy_context`) and at the pack's highest voltage, the
-    charger's CV voltage ``battery.n_series * charger.cv_cell_v`` (the lowest Vdc/VL and emf margin of the run)."""
-    from .config import hover_inductances
-    l1_h, l2_h, lm_h = hover_inductances(cfg.coupling, cfg.mission.hover_gap_m)
-    return cfg.link.link_params(l1_h, l2_h, lm_h, vl_v=cfg.battery.n_series * cfg.charger.cv_cell_v)
+    """The mission's link at the hover pose and the pack's CV voltage: :func:`mission_sim.config.mission_link_params`
+    (there, beside :func:`mission_sim.config.policy_context`, which gives the policies the same link)."""
+    from .config import mission_link_params
+    return mission_link_params(cfg)
 
 
 def link_range_warning(cfg) -> str | None:
@@ -146,18 +144,35 @@ def far_pad_warnings(cfg, origin: str = HOME_ORIGIN) -> list[str]:
             for i, pad in enumerate(cfg.pads) if abs(pad.z_m) > PAD_HEIGHT_WARN_M]
 
 
+#: how far below the pack's CV voltage a link-model policy's context VL may be before it warns [V] (the default 8S
+#: pack flies at 32.28-32.90 V, its CV voltage 32.8 V; ``mpc:0.02`` with VL 31 V peaked at 13.63 A, 29-30 V at
+#: 32.3-32.5 A, 2.2x its 15 A rating)
+POLICY_VL_TOL_V = 1.0
+
+
 def policy_link_warning(cfg, policy) -> str | None:
     """One line when ``policy`` predicts with its context's link model (``uses_link_model``: ``mpc``,
     ``model_based_budget``, ...) and that (``policy.ctx.link_model``) is not the mission's (a standalone
     ``PolicyContext()`` is eq. 4's ``"envelope"``: ``mpc`` would predict with eq. 4 on the mission's exact-mode
-    link), else None. A policy that does not read it (``model_based``, ``step``, ...) runs the same either way."""
-    model = getattr(getattr(policy, "ctx", None), "link_model", None)
-    if not getattr(policy, "uses_link_model", False) or not isinstance(model, str) or model == MISSION_LINK_MODEL:
+    link), or its context's link VL is more than :data:`POLICY_VL_TOL_V` below the mission's pack (its CV voltage,
+    :func:`mission_link_params`: a hand-made ``PolicyContext(link_model="modal")`` keeps Table I's 30 V, and the
+    modal MPC's clamp is then too low), else None. A policy that does not read it (``model_based``, ``step``, ...)
+    runs the same either way."""
+    ctx = getattr(policy, "ctx", None)
+    model = getattr(ctx, "link_model", None)
+    if not getattr(policy, "uses_link_model", False) or not isinstance(model, str):
         return None
     name = getattr(policy, "name", type(policy).__name__)
-    return (f"the policy {name!r} predicts with link_model={model!r}, the mission runs {MISSION_LINK_MODEL!r} (the "
-            "exact-mode link): it assumes another plant than it controls; valid: make it with "
-            "mission_sim.config.policy_context(cfg)")
+    if model != MISSION_LINK_MODEL:
+        return (f"the policy {name!r} predicts with link_model={model!r}, the mission runs {MISSION_LINK_MODEL!r} (the "
+                "exact-mode link): it assumes another plant than it controls; valid: make it with "
+                "mission_sim.config.policy_context(cfg)")
+    vl, pack = getattr(getattr(ctx, "link", None), "vl_v", None), mission_link_params(cfg).vl_v
+    if isinstance(vl, (int, float)) and vl < pack - POLICY_VL_TOL_V:
+        return (f"the policy {name!r} predicts with its link at VL = {vl:g} V, the mission's pack charges to "
+                f"{pack:g} V: its clamp is too low and it may overshoot its current rating; valid: a context VL within "
+                f"{POLICY_VL_TOL_V:g} V below the pack's, as mission_sim.config.policy_context(cfg) makes it")
+    return None
 
 
 def mission_warnings(cfg, policy=None, own_route: bool = True, replay: bool = False) -> list[str]:

@@ -411,6 +411,31 @@ def test_run_mission_warns_on_a_policy_that_predicts_with_another_link_model():
     assert policy_link_warning(cfg, policies.make("model_based")) is None
 
 
+def test_a_link_model_policy_whose_context_vl_is_below_the_pack_warns():
+    """A hand-made ``PolicyContext(link_model="modal")`` keeps Table I's 30 V while the default 8S pack charges to
+    32.8 V: ``mpc:0.02`` then clamps too low and peaked at 32.5 A (2.2x its 15 A rating) without a word. It warns
+    when the context's VL is more than 1 V below the pack's CV voltage; ``policy_context(cfg)`` (the pack's
+    voltage) and a VL within 1 V do not; a policy that reads no link model (``model_based``) never does."""
+    pytest.importorskip("daqp")
+    import dataclasses
+
+    from mission_sim.contract import PolicyContext
+    from mission_sim.setup_warnings import mission_warnings, policy_link_warning
+    cfg = load_config()
+    hand = PolicyContext(link_model="modal", control_period_s=cfg.sim.control_period_s, rated_i2_a=15.0)
+    assert hand.link.vl_v == 30.0
+    msg = policy_link_warning(cfg, policies.make("mpc:0.02", hand))
+    assert msg == ("the policy 'mpc:0.02' predicts with its link at VL = 30 V, the mission's pack charges to 32.8 V: "
+                   "its clamp is too low and it may overshoot its current rating; valid: a context VL within 1 V "
+                   "below the pack's, as mission_sim.config.policy_context(cfg) makes it")
+    assert msg in mission_warnings(cfg, policies.make("mpc:0.02", hand))
+    ctx = policy_context(cfg)
+    assert policy_link_warning(cfg, policies.make("mpc:0.02", ctx)) is None
+    near = dataclasses.replace(ctx, link=ctx.link.with_(vl_v=ctx.link.vl_v - 0.9))
+    assert policy_link_warning(cfg, policies.make("mpc:0.02", near)) is None
+    assert policy_link_warning(cfg, policies.make("model_based", hand)) is None
+
+
 # ------------------------------------------------------------------ 5. CSV on request, as the CLI
 def test_mission_result_write_has_no_csv_unless_asked(tmp_path):
     cfg = load_config()

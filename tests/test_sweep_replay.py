@@ -86,17 +86,11 @@ def _sweep(study, out, *extra) -> int:
                  "--format", "json", *extra])
 
 
-def _flat(d: dict, prefix="") -> dict:
-    """The replay command's JSON as the sweep's columns: nested tables dotted, lists counted."""
-    out = {}
-    for k, v in d.items():
-        if isinstance(v, dict):
-            out.update(_flat(v, f"{prefix}{k}."))
-        elif isinstance(v, list):
-            out[f"{prefix}n_{k}"] = len(v)
-        else:
-            out[f"{prefix}{k}"] = v
-    return out
+def _flat(d: dict) -> dict:
+    """The replay command's JSON as the sweep's columns (the sweep's own flattening: nested tables dotted, lists
+    counted)."""
+    from mission_sim.studies.replay_cases import _flat as flat
+    return flat(d)
 
 
 def _assert_row_equals_command(row: pd.Series, cmd: dict, min_numbers: int) -> None:
@@ -682,3 +676,14 @@ def test_sizing_from_a_replay_sweep_says_it_is_a_replay(tmp_path, capsys):
 ])
 def test_a_window_in_a_message_is_the_study_files_words(msg, words):
     assert replay_cases._study_words(msg) == words
+
+
+def test_a_null_periods_list_keeps_its_counted_column():
+    """A replay summary's ``*_periods_s`` lists become ``n_<key>`` columns; ``armed_periods_s`` is null for a log
+    whose armed state is unknown, and was then stored as ``armed_periods_s`` (another column than every other
+    log's): it is ``n_armed_periods_s`` = null. Other nulls keep their own name."""
+    from mission_sim.studies.replay_cases import _flat
+    got = _flat({"armed_periods_s": None, "flown_periods_s": [[0.0, 1.0], [2.0, 3.0]], "armed_time_s": None,
+                 "facts": {"log_armed_periods_s": None}})
+    assert got == {"n_armed_periods_s": None, "n_flown_periods_s": 2, "armed_time_s": None,
+                   "facts.n_log_armed_periods_s": None}

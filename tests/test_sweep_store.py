@@ -195,3 +195,34 @@ def test_an_edit_of_the_mission_case_runner_changes_the_physics_code_hash(monkey
     assert len(after) == 16 and after != before
     monkeypatch.undo()
     assert physics_code_hash(replay) == before
+
+
+@pytest.mark.parametrize("source", ["mission_sim/config.py", "mission_sim/contract.py", "policies/mpc_modal.py",
+                                    "policies/pretrained/rl_s0.zip"])
+@pytest.mark.parametrize("replay", [False, True])
+def test_an_edit_of_the_config_or_a_policy_changes_the_physics_code_hash(monkeypatch, source, replay):
+    """A mission's numbers also depend on its configuration and the policies' context built from it
+    (``mission_sim/config.py``, ``contract.py``) and on the policy that flies it (the ``policies`` package and its
+    shipped models): an edit of one changes the physics-code hash, so a sweep resumed after, e.g., a change of the
+    MPC is refused instead of mixing old and new rows. The hash finds ``policies`` without importing it."""
+    import sys
+
+    from mission_sim.studies.status import physics_code_hash
+    root = pathlib.Path(__file__).resolve().parents[1]
+    target = (root / source).resolve()
+    assert target.is_file()
+    before = physics_code_hash(replay)
+    read_bytes = pathlib.Path.read_bytes
+
+    def edited(self):
+        data = read_bytes(self)
+        return data + b"# edited\n" if pathlib.Path(self).resolve() == target else data
+
+    monkeypatch.setattr(pathlib.Path, "read_bytes", edited)
+    after = physics_code_hash(replay)
+    assert len(after) == 16 and after != before
+    monkeypatch.undo()
+    assert physics_code_hash(replay) == before
+    if "policies" not in sys.modules:   # this test process may have imported it elsewhere; if not, still not
+        physics_code_hash(replay)
+        assert "policies" not in sys.modules

@@ -40,15 +40,15 @@ def test_sizing_margin_default_and_help_come_from_the_sizing_rules(monkeypatch, 
 
     import wpt_receiver.sizing as sizing
     from mission_sim.cli import main
-    from mission_sim.cli.sizing import _default_margin
-    assert _default_margin() == sizing.SizingRules().margin
+    from mission_sim.cli.sizing import _default
+    assert _default("margin") == sizing.SizingRules().margin
     with pytest.raises(SystemExit):
         main(["sizing", "--help"])
     assert f"(default {sizing.SizingRules().margin:g}, wpt_receiver.sizing.SizingRules)" in " ".join(
         capsys.readouterr().out.split())
     monkeypatch.setattr(sizing, "SizingRules", dataclasses.make_dataclass(
         "SizingRules", [("margin", float, dataclasses.field(default=1.5))], bases=(sizing.SizingRules,), frozen=True))
-    assert _default_margin() == 1.5
+    assert _default("margin") == 1.5
     with pytest.raises(SystemExit):
         main(["sizing", "--help"])
     assert "(default 1.5, wpt_receiver.sizing.SizingRules)" in " ".join(capsys.readouterr().out.split())

@@ -229,14 +229,16 @@ def _print_log_facts(name: str, s: dict) -> None:
     rejected = s.get("gps_rejected") or {}
     n_rej = sum(rejected.values())
     detail = f" ({', '.join(f'{k} {v}' for k, v in rejected.items() if v)})" if n_rej else ""
-    source = s.get("armed_source") or ("no armed-state record and no motor output: the armed state is unknown, the "
-                                       "whole track counted as flown")
     print(f"{name}: {s['duration_s']:.1f} s logged, {s['n_position_samples']} positions "
           f"({s['bad_frames']} bad frames skipped, {n_rej} implausible GPS fixes rejected{detail}), "
           f"{s['distance_m']:.0f} m flown, max {s['max_alt_m']:.1f} m above the pad")
-    print(f"armed {s['log_armed_time_s']:.1f} s in the log, {s['armed_time_s']:.1f} s in "
-          f"{len(s['armed_periods_s'])} period(s) of the replayed track, from {source}"
-          + (" (armed from the start of the log)" if s.get("starts_armed") else ""))
+    if s.get("armed_source"):
+        print(f"armed {s['log_armed_time_s']:.1f} s in the log, {s['armed_time_s']:.1f} s in "
+              f"{len(s['armed_periods_s'])} period(s) of the replayed track, from {s['armed_source']}"
+              + (" (armed from the start of the log)" if s.get("starts_armed") else ""))
+    else:   # (no armed time to give: the log says nothing of arming)
+        print(f"the armed state is unknown (no armed-state record and no motor output): the whole replayed track, "
+              f"{s['flown_time_s']:.1f} s, counted as flown")
     if s.get("segments", 1) > 1:
         seg = s.get("replayed_segment")
         what = f"boot segment {seg} of {s['segments']} replayed" if seg else f"--window within {s['segments']} boot segments"

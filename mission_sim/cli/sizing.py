@@ -19,8 +19,8 @@ def _add_sizing(sub):
                        description="Simulate the RM -> SM transition of each policy with the switching model and "
                                    "real devices (--source mission: whole missions; --source sweep: a sweep's "
                                    "worst case per policy); size the SBAR: worst-case instantaneous |i2|, device "
-                                   "RMS currents, required rating (margin x peak), voltage rating (1.1 x the "
-                                   "simulated open-load peak), smallest-mass combination of shipped parts, "
+                                   "RMS currents, required rating (margin x peak), voltage rating (the sizing "
+                                   "rules' v_margin x the simulated open-load peak), smallest-mass combination of shipped parts, "
                                    "conduction and switching losses at the settled junction temperatures and "
                                    "rectifier mass (devices + plate-fin heat sink).")
     p.add_argument("--source", choices=("paper", "mission", "sweep"), default="paper",
@@ -41,17 +41,15 @@ def _add_sizing(sub):
                         "l1_h, l2_h, lm_h, r1_ohm, r2_ohm, vdc_v, vl_v, f_hz (missions: --set link.*, battery.*)")
     p.add_argument("--devices", default="schottky", help="device preset for the first run and the inverter "
                    "(default schottky; see wpt_receiver/parts.toml)")
-    margin = p.add_argument("--margin", type=float_arg("margin", positive=True, lo=1.0, hi=10.0), default=None,
-                            help="required rating = margin x worst-case |i2|, 1 .. 10 (default: the sizing rules')")
-    margin.lazy_help = lambda: (f"required rating = margin x worst-case |i2|, 1 .. 10 (default {_default_margin():g}, "
-                                "wpt_receiver.sizing.SizingRules)")   # (numpy only for --help: the rules' module)
+    _rules_arg(p, "--margin", "margin", float_arg("margin", positive=True, lo=1.0, hi=10.0),
+               "required rating = margin x worst-case |i2|, 1 .. 10")
     p.add_argument("--t-end", type=float_arg("t-end", positive=True, lo=3e-3, hi=0.1), default=10e-3,
                    help="end of the run in s, switch at 1 ms, 0.003 .. 0.1 (default 0.01)")
-    p.add_argument("--t-protect", type=float_arg("t-protect", positive=True, lo=1e-7, hi=0.1), default=1e-4,
-                   help="open-load study: time from the battery disconnect to the protective short, s "
-                        "(1e-7 .. 0.1, default 1e-4); the voltage rating is 1.1 x the simulated peak")
-    p.add_argument("--c-out", type=float_arg("c-out", positive=True, lo=1e-7, hi=1.0), default=4.7e-3,
-                   help="open-load study: rectifier output capacitor, F (1e-7 .. 1, default 4.7e-3)")
+    _rules_arg(p, "--t-protect", "t_protect_s", float_arg("t-protect", positive=True, lo=1e-7, hi=0.1),
+               "open-load study: time from the battery disconnect to the protective short, s, 1e-7 .. 0.1",
+               lambda: f"; the voltage rating is {_default('v_margin'):g} x the simulated peak")
+    _rules_arg(p, "--c-out", "c_out_f", float_arg("c-out", positive=True, lo=1e-7, hi=1.0),
+               "open-load study: rectifier output capacitor, F, 1e-7 .. 1")
     p.add_argument("--format", choices=("table", "json"), default="table")
     p.add_argument("--out", type=path_arg("--out"), default=None,
                    help="folder for the figure (default out/sizing; not with --no-plot)")
@@ -64,11 +62,30 @@ def _names(args, valid, default):
     return name_list(default if args.policies is None else args.policies, "--policies", valid)
 
 
-def _default_margin() -> float:
-    """The rating margin of :class:`wpt_receiver.sizing.SizingRules` (one source: `--margin`'s default and its help
-    were a copy of it, 1.25; its module imports numpy, so not when the parsers are built)."""
+#: the options whose default is a field of :class:`wpt_receiver.sizing.SizingRules`: option dest -> field
+_RULES_OPTIONS = {"margin": "margin", "t_protect": "t_protect_s", "c_out": "c_out_f"}
+
+
+def _rules_arg(p, flag: str, field: str, type_, text: str, tail=lambda: "") -> None:
+    """An option whose default is the ``field`` of :class:`wpt_receiver.sizing.SizingRules` (one source: the
+    defaults of ``--margin``, ``--t-protect`` and ``--c-out`` and their help were copies of it, 1.25, 1e-4 s and
+    4.7e-3 F). None at parse, the rules' value in the command (:func:`_resolve_rules_defaults`); the help names the
+    value only when shown (``lazy_help``: the rules' module imports numpy, not when the parsers are built)."""
+    action = p.add_argument(flag, type=type_, default=None, help=f"{text} (default: the sizing rules')")
+    action.lazy_help = lambda: f"{text} (default {_default(field):g}, wpt_receiver.sizing.SizingRules){tail()}"
+
+
+def _default(field: str) -> float:
+    """The default ``field`` of :class:`wpt_receiver.sizing.SizingRules`."""
     from wpt_receiver.sizing import SizingRules
-    return float(SizingRules().margin)
+    return float(getattr(SizingRules(), field))
+
+
+def _resolve_rules_defaults(args) -> None:
+    """Each of ``--margin``, ``--t-protect``, ``--c-out`` not given: the rules' value (:data:`_RULES_OPTIONS`)."""
+    for dest, field in _RULES_OPTIONS.items():
+        if getattr(args, dest) is None:
+            setattr(args, dest, _default(field))
 
 
 def _rules(args):
@@ -194,8 +211,7 @@ def _sweep_rows(args, base):
 
 def _cmd_sizing(args) -> int:
     from .paper import _link_text
-    if args.margin is None:
-        args.margin = _default_margin()
+    _resolve_rules_defaults(args)
     args.out = figures_out(args, "out/sizing")
     if not args.no_plot:
         prepare_out_dir(args.out)  # before the simulation: a bad folder costs nothing
@@ -233,10 +249,13 @@ def _cmd_sizing(args) -> int:
               f"{r['tj_diode_c']:>6.1f} C {r['tj_switch_c']:>4.1f} C {r['required_v_rating_v']:>6.1f} V "
               f"{r['mass_g']:>5.1f} g  {r['part']}")
     r0 = rows[0]
-    print(f"losses at the settled junction temperatures (ambient 40 C, sink +50 K); V rating = 1.1 x the simulated "
+    rules = _rules(args)   # (the printed rules are the ones sized with)
+    print(f"losses at the settled junction temperatures (ambient {rules.t_amb_c:g} C, sink +{rules.dt_sink_k:g} K); "
+          f"V rating = {rules.v_margin:g} x the simulated "
           f"worst blocking voltage {r0['v_worst_v']:.2f} V" + (f" ({r0['v_case']})" if r0.get("v_case") else ""))
     if r0.get("edge_ring_peak_v") is not None:
-        print("ring of the largest hard turn-off with 8 nH stray loop inductance (edge model checked against ngspice; "
+        print(f"ring of the largest hard turn-off with {rules.l_stray_h * 1e9:g} nH stray loop inductance (edge model "
+              "checked against ngspice; "
               "reported, not rated: snubber / layout / Schottky avalanche): " + ", ".join(
                   f"{r['policy']} {r['edge_ring_peak_v']:.1f} V at {r['turn_off_peak_a']:.1f} A" for r in rows))
     for r in rows:

@@ -13,16 +13,25 @@ from .common import save_figure  # noqa: E402
 __all__ = ["plot_replay", "plot_power_comparison"]
 
 
-def _shade_armed(ax, periods, offset_s):
+def _shaded_periods(log) -> tuple[list, str]:
+    """(periods, label) shaded on the time axes: the armed periods, or for a log whose armed state is unknown the
+    time the replay counts as flown (:func:`~mission_sim.mavlink.takeoff.flown_periods`: its whole track)."""
+    from ..mavlink.takeoff import flown_periods
+    if log.armed_source is not None:
+        return log.armed_periods, "armed"
+    return flown_periods(log), "counted as flown (armed state unknown)"
+
+
+def _shade_armed(ax, log, offset_s):
+    periods, label = _shaded_periods(log)
     for i, (a, b) in enumerate(periods):
         ax.axvspan(a - offset_s, b - offset_s, color="tab:orange", alpha=0.12, lw=0,
-                   label="armed" if i == 0 else None)
+                   label=label if i == 0 else None)
 
 
 def plot_replay(result, path, title: str = "") -> str:
     """Track in plan, height, Lm / I2 and state of charge over the replayed flight."""
     tr, ts = result.track, result.mission.timeseries
-    periods = result.log.armed_periods
     fig, ax = plt.subplots(2, 2, figsize=(12, 7.5))
     a = ax[0, 0]
     a.plot(tr.pos_m[:, 0], tr.pos_m[:, 1], lw=0.8)
@@ -32,10 +41,11 @@ def plot_replay(result, path, title: str = "") -> str:
     a.legend(), a.grid(alpha=0.3)
     a = ax[0, 1]
     a.plot(tr.t_s, tr.height_m, lw=0.8)
-    _shade_armed(a, periods, tr.t_offset_s)
+    _shade_armed(a, result.log, tr.t_offset_s)
     a.set_xlabel("time [s]"), a.set_ylabel("height above pad [m]"), a.grid(alpha=0.3), a.legend()
-    a.set_title(f"max {result.summary['max_alt_m']:.1f} m, armed {result.summary['armed_time_s']:.0f} s "
-                f"({result.log.armed_source or 'no armed record'})", fontsize=9)
+    armed = (f"armed {result.summary['armed_time_s']:.0f} s ({result.log.armed_source})" if result.log.armed_source
+             else f"flown {result.summary['flown_time_s']:.0f} s (armed state unknown: the whole track)")
+    a.set_title(f"max {result.summary['max_alt_m']:.1f} m, {armed}", fontsize=9)
     a = ax[1, 0]
     a.plot(ts["t_s"], ts["lm_h"] * 1e6, color="tab:blue", lw=0.8)
     a.set_xlabel("time [s]"), a.set_ylabel("Lm [uH]", color="tab:blue"), a.grid(alpha=0.3)
@@ -45,7 +55,7 @@ def plot_replay(result, path, title: str = "") -> str:
     a.set_title("coupling and secondary current")
     a = ax[1, 1]
     a.plot(ts["t_s"], ts["soc"], lw=0.8)
-    _shade_armed(a, periods, tr.t_offset_s)
+    _shade_armed(a, result.log, tr.t_offset_s)
     a.set_xlabel("time [s]"), a.set_ylabel("state of charge"), a.grid(alpha=0.3)
     a.set_title(f"rectifier out {result.summary['rectifier_output_j'] / 1e3:.2f} kJ, "
                 f"propulsion {result.summary['propulsion_energy_j'] / 1e3:.1f} kJ")
@@ -67,7 +77,7 @@ def plot_power_comparison(result, path, title: str = "") -> str:
     if np.isfinite(cmp.get("best_fit_scale", np.nan)):
         a.plot(t, tab["model_w"] * cmp["best_fit_scale"], lw=0.7, ls="--",
                label=f"model x {cmp['best_fit_scale']:.2f} (least squares)")
-    _shade_armed(a, result.log.armed_periods, off)
+    _shade_armed(a, result.log, off)
     a.set_ylabel("power [W]"), a.grid(alpha=0.3), a.legend(fontsize=8)
     if "energy_error_rel" in cmp:
         a.set_title(f"airborne: logged {cmp['logged_mean_w']:.0f} W mean, model {cmp['model_mean_w']:.0f} W "

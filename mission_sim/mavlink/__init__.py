@@ -10,6 +10,7 @@
 ``gpsclean``   rejection of implausible GPS fixes (quality, altitude, jumps), counted
 ``geodesy``    geodetic <-> local ENU about a pad, the ``--pad`` text format
 ``takeoff``    a log's take-off spot: the replay's default pad, the flown route's home
+``ground``     the height above the take-off spot below which the vehicle is on the ground (one constant)
 ``replay``     a real flight log through the mission world: track about a pad, logged vs model
 ``telemetry``  live MAVLink 2 telemetry of a simulated mission, .tlog writer
 ``follow``     drive the mission world from a live vehicle's positions (``--follow``)

@@ -8,8 +8,11 @@ grid of :data:`GRID_DT_S`, differentiated by a Savitzky-Golay filter (:data:`SMO
 quadratic: GPS noise of ~0.1 m at 5 Hz would otherwise give metres per second). The speed is the
 logged airspeed where the vehicle has an airspeed sensor (``FlightLog.airspeed``), else the GPS
 ground speed taken as airspeed (the shipped logs with a battery have no sensor; wind unknown).
-Samples are *airborne* (armed and more than ``AIRBORNE_M`` above the pad) or *disarmed* (the
-motors off: the logged power is the avionics alone).
+Samples are *airborne* (armed and more than ``ground.GROUND_M`` above the pad) or *disarmed* (the
+motors off: the logged power is the avionics alone). Armed is the replay's rule
+(:func:`~mission_sim.mavlink.takeoff.flown_periods`): a log whose armed state is unknown (no armed-state record and no
+motor output) counts its whole track as armed, with a warning, and has no disarmed samples; one whose track never
+rises 1 m is refused as ``replay`` refuses it (:func:`~mission_sim.mavlink.replay.unknown_armed_check`).
 
 Split: the airborne samples in time order, the first :data:`TRAIN_FRACTION` of the airborne time
 trains, the rest is held out (and the disarmed samples before the split train the avionics).
@@ -44,8 +47,10 @@ import numpy as np
 import pandas as pd
 
 from ..world.power import DroneParams, propulsion_power_w
+from . import ground
 from .logs import FlightLog
-from .replay import AIRBORNE_M, _in_periods, check_decoded, replay_span, track_from_log
+from .replay import _in_periods, check_decoded, replay_span, track_from_log, unknown_armed_check
+from .takeoff import flown_periods
 
 __all__ = ["check_mass", "NoBatteryError", "CalibrationSamples", "Calibration", "calibration_samples", "fit_drone",
            "calibrate_log", "heldout_energy", "drone_toml", "read_drone_toml", "BOUNDS", "TRAIN_FRACTION"]
@@ -117,12 +122,17 @@ def calibration_samples(log: FlightLog, window=None, segment=None) -> Calibratio
         raise _no_battery(log, "the log has no battery data")
     window, info = replay_span(log, window, segment)
     track = track_from_log(log, window=window)
+    unknown = unknown_armed_check(log, track)   # the armed state unknown and the track on the ground: ValueError
+    if unknown is not None:
+        from wpt_receiver.notices import warn
+        warn(unknown)
     tg, speed, climb, height = _velocities(track)
     bat = log.battery
     t0, t1 = track.t_offset_s, track.t_offset_s + float(track.t_s[-1])
     bat = bat[(bat["t_s"] >= t0) & (bat["t_s"] <= t1)]
     t = bat["t_s"].to_numpy(float)
-    armed = _in_periods(t, log.armed_periods)
+    armed = _in_periods(t, flown_periods(log))   # (replay's rule: the armed state unknown, the whole track)
+    known = log.armed_source is not None          # (unknown: no sample is known to be disarmed)
     h = np.interp(t - t0, tg, height)
     speed_at, source = np.interp(t - t0, tg, speed), "GPS ground speed"
     arsp = log.airspeed
@@ -131,10 +141,10 @@ def calibration_samples(log: FlightLog, window=None, segment=None) -> Calibratio
     info = {**info, "speed_source": source}
     tab = pd.DataFrame({"t_s": t, "power_w": bat["power_w"].to_numpy(float),
                         "speed_m_s": speed_at, "climb_m_s": np.interp(t - t0, tg, climb),
-                        "height_m": h, "airborne": armed & (h > AIRBORNE_M), "disarmed": ~armed})
+                        "height_m": h, "airborne": armed & (h > ground.GROUND_M), "disarmed": ~armed & known})
     air = tab[tab["airborne"]]
     if len(air) < 20:
-        raise _no_battery(log, f"only {len(air)} battery samples while airborne (armed and > {AIRBORNE_M:g} m "
+        raise _no_battery(log, f"only {len(air)} battery samples while airborne (armed and > {ground.GROUND_M:g} m "
                           "above the take-off spot), need at least 20")
     ta = air["t_s"].to_numpy()
     dt = np.diff(ta)

@@ -26,6 +26,7 @@ import pandas as pd
 
 from ..validation import window_ok
 from ..world import budget as _budget
+from . import ground
 from .geodesy import GeoPoint, geodetic_to_enu
 from .flightlog import (LogParseError, NoPositionError, _fmt_counts, _no_position,  # noqa: F401 (re-exported)
                         check_decoded)
@@ -41,7 +42,6 @@ __all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "w
 
 MAX_TILT_RAD = np.radians(85.0)   # the mission world takes |tilt| < 90 deg; beyond is upside down
 HOVER_SPEED_M_S = 0.3             # slower than this counts as hovering (pads may energise)
-AIRBORNE_M = 1.0                  # armed and this high above the pad counts as airborne (GPS height noise ~1 m)
 MIN_DT_S = 0.05                   # closer position samples are dropped (velocity by differences)
 _MAX_GAP_S = 10.0                 # samples further apart are not integrated across
 _EDGE_S = 1e-3                    # a battery sample this close outside the track's ends is in it (float rounding)
@@ -244,12 +244,19 @@ def _min_spacing(t, min_dt) -> np.ndarray:
 
 
 def flight_stats(log: FlightLog, track: FlightTrack) -> dict:
-    """Log and track facts for the summary (times in s, lengths in m). ``armed_time_s`` is the armed
-    time within the replayed track (it starts and ends at a GPS fix), ``log_armed_time_s`` the
-    whole log's (what the log says)."""
+    """Log and track facts for the summary (times in s, lengths in m). ``flown_time_s`` / ``flown_periods_s``: the
+    time the replay counts as flown within the replayed track (it starts and ends at a GPS fix;
+    :func:`~mission_sim.mavlink.takeoff.flown_periods`). ``armed_time_s`` / ``armed_periods_s``: the armed time within
+    the replayed track, ``log_armed_time_s`` the whole log's (what the log says); when the log's armed state is
+    known these are the flown ones, when it is unknown (``armed_source`` None) all three are None: the replay counts
+    the whole track as flown, the log says nothing of arming (they gave the whole track as "armed" until 2026-11-28,
+    and ``log_armed_time_s`` 0)."""
     seg = np.diff(track.pos_m, axis=0)
     t0, t1 = track.t_offset_s, track.t_offset_s + float(track.t_s[-1])
     periods = [(max(a, t0), min(b, t1)) for a, b in flown_periods(log) if b > t0 and a < t1]
+    flown_s = float(sum(b - a for a, b in periods))
+    shown = [[round(a, 3), round(b, 3)] for a, b in periods]
+    known = log.armed_source is not None
     return {
         "duration_s": float(log.duration_s),
         "position_span_s": float(track.t_s[-1]),
@@ -257,9 +264,11 @@ def flight_stats(log: FlightLog, track: FlightTrack) -> dict:
         "horizontal_distance_m": float(np.sum(np.linalg.norm(seg[:, :2], axis=1))),
         "max_alt_m": float(np.max(track.height_m)),
         "max_range_m": float(np.max(np.linalg.norm(track.pos_m[:, :2], axis=1))),
-        "armed_time_s": float(sum(b - a for a, b in periods)),
-        "armed_periods_s": [[round(a, 3), round(b, 3)] for a, b in periods],
-        "log_armed_time_s": float(log.armed_time_s),
+        "flown_time_s": flown_s,
+        "flown_periods_s": shown,
+        "armed_time_s": flown_s if known else None,
+        "armed_periods_s": shown if known else None,
+        "log_armed_time_s": float(log.armed_time_s) if known else None,
         "armed_source": log.armed_source,
         "starts_armed": bool(log.starts_armed),
         "gps_rejected": {k: int(v) for k, v in log.gps_rejected.items()},
@@ -267,7 +276,7 @@ def flight_stats(log: FlightLog, track: FlightTrack) -> dict:
         "n_position_samples": int(len(track.t_s)),
         "bad_frames": int(log.bad_frames),
         "reboots": int(log.reboots),
-        "flown": bool(sum(b - a for a, b in periods) > 0),
+        "flown": bool(flown_s > 0),
         "tilt_clipped_samples": int(track.n_tilt_clipped),
         "pad": {"lat_deg": track.pad.lat_deg, "lon_deg": track.pad.lon_deg, "alt_m": track.pad.alt_m},
     }
@@ -300,7 +309,7 @@ def compare_power(log: FlightLog, track: FlightTrack, sim_t_s, propulsion_w) -> 
 
     The model is sampled at each battery record's time (linear interpolation of the simulator's
     time series, mapped back to log time with ``track.t_offset_s``). Compared while *airborne*:
-    armed and more than :data:`AIRBORNE_M` above the pad (armed on the ground the motors idle,
+    armed and more than :data:`~mission_sim.mavlink.ground.GROUND_M` above the pad (armed on the ground the motors idle,
     while the model, which knows no ground contact, gives hover power; disarmed the logged
     power is the avionics alone). Returns the per-sample table and a summary:
 
@@ -318,7 +327,7 @@ def compare_power(log: FlightLog, track: FlightTrack, sim_t_s, propulsion_w) -> 
     table = pd.DataFrame({"t_s": t, "logged_w": b["power_w"].to_numpy(float),
                           "voltage_v": b["voltage_v"].to_numpy(float), "current_a": b["current_a"].to_numpy(float),
                           "model_w": np.interp(t, sim_t, model_w) if len(t) else np.zeros(0),
-                          "height_m": height, "armed": armed, "airborne": armed & (height > AIRBORNE_M)})
+                          "height_m": height, "armed": armed, "airborne": armed & (height > ground.GROUND_M)})
     table["error_w"] = table["model_w"] - table["logged_w"]
     a = table[table["airborne"]]
     out: dict = {"battery_source": log.battery_source, "n_samples_airborne": int(len(a)),
@@ -426,7 +435,7 @@ GAP_WARN_S = 10.0     # positions missing longer than this while armed: the repl
 def unknown_armed_check(log: FlightLog, track: FlightTrack) -> str | None:
     """None when ``log``'s armed state is known; unknown (``armed_source`` None): the warning that its whole track
     counts as flown (:func:`flown_periods`, the rule of the flown route `mission --plan LOG`), or ``ValueError``
-    when the replayed track never rises :data:`~mission_sim.mavlink.takeoff.UNKNOWN_GROUND_M` above the pad (its
+    when the replayed track never rises :data:`~mission_sim.mavlink.ground.GROUND_M` above the pad (its
     GPS drift on the ground was said "never armed ... NOT FLOWN"; the armed state is unknown, not "never armed")."""
     if log.armed_source is not None:
         return None

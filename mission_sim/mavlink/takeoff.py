@@ -9,15 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import ground
 from .flightlog import FlightLog, _no_position
 from .geodesy import GeoPoint
 
-__all__ = ["STARTS_AIRBORNE_M", "UNKNOWN_GROUND_M", "default_pad", "flown_periods", "starts_airborne_warning",
-           "unknown_armed_state"]
+__all__ = ["STARTS_AIRBORNE_M", "VALID_FLIGHT", "default_pad", "flown_periods",
+           "starts_airborne_warning", "unknown_armed_state"]
 
-#: a log whose armed state is unknown and whose track never rises this much above its first position (or the pad) was
-#: on the ground (the flown route's and the replay's refusal: :func:`unknown_armed_state`)
-UNKNOWN_GROUND_M = 1.0
 
 
 def flown_periods(log: FlightLog) -> list[tuple[float, float]]:
@@ -31,15 +29,21 @@ def flown_periods(log: FlightLog) -> list[tuple[float, float]]:
     return [(float(t.min()), float(t.max()))] if len(t) else []
 
 
-def unknown_armed_state(name: str, top_m: float, above: str = "its first position") -> str:
+#: what a command that reads a log's flown track takes instead of a log on the ground (:func:`unknown_armed_state`)
+VALID_FLIGHT = "the log of a flight"
+
+
+def unknown_armed_state(name: str, top_m: float, above: str = "its first position", valid: str = VALID_FLIGHT) -> str:
     """For a log whose armed state is unknown (``armed_source`` None; :func:`flown_periods` is its whole track): the
-    warning saying so, or ``ValueError`` when the track never rises :data:`UNKNOWN_GROUND_M` above ``above`` (its
-    highest point ``top_m``): a log on the ground (its GPS drift would fly as a 1 s route, or replay as a flight)."""
+    warning saying so, or ``ValueError`` when the track never rises :data:`~mission_sim.mavlink.ground.GROUND_M`
+    above ``above`` (its
+    highest point ``top_m``): a log on the ground (its GPS drift would fly as a 1 s route, or replay as a flight).
+    ``valid``: what the command takes instead (``replay`` and ``calibrate``: the log of a flight; ``mission --plan
+    LOG`` also a log holding an uploaded mission, which only it flies)."""
     what = "the armed state is unknown (no armed-state record and no motor output in the log)"
-    if not top_m >= UNKNOWN_GROUND_M:
-        raise ValueError(f"{name}: no flown track: {what} and its GPS track never rises {UNKNOWN_GROUND_M:g} m above "
-                         f"{above} (max {top_m:.2f} m): a log on the ground; valid: the log of a flight, or a "
-                         "log holding an uploaded mission")
+    if not top_m >= ground.GROUND_M:
+        raise ValueError(f"{name}: no flown track: {what} and its GPS track never rises {ground.GROUND_M:g} m above "
+                         f"{above} (max {top_m:.2f} m): a log on the ground; valid: {valid}")
     return (f"{name}: {what}: its whole GPS track counts as flown, time on the ground included (with armed-state "
             "records, HEARTBEAT / vehicle_status / EV, or motor outputs it is the armed time only)")
 

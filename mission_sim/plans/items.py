@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..mavlink import ground
 from ..mavlink.geodesy import GeoPoint
 from ..validation import ALT_RANGE, Range, check_number
 
@@ -47,7 +48,6 @@ FLOWN_HOLD_S = 5.0             # slower than HOVER_M_S for this long: a loiter i
 HOVER_M_S = 0.5
 #: QGC's complex items that save their generated waypoints (TransectStyleComplexItem); a StructureScan saves its inputs
 _TRANSECT_TYPES = ("survey", "CorridorScan")
-FLOWN_GROUND_M = 1.0           # a decimated track point lower than this above home is on the ground (a landing)
 
 
 @dataclass(frozen=True)
@@ -402,7 +402,7 @@ def _decimate(p: np.ndarray, tol: float) -> np.ndarray:
 def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
     """The route a log flew: its GPS track (fix >= 3, implausible fixes rejected) over the armed time,
     decimated to waypoints within ``tolerance_m`` of the track (Ramer-Douglas-Peucker; every take-off and landing, the
-    track crossing :data:`FLOWN_GROUND_M`, kept), stops of at least :data:`FLOWN_HOLD_S` in the air as loiter items,
+    track crossing :data:`~mission_sim.mavlink.ground.GROUND_M`, kept), stops of at least :data:`FLOWN_HOLD_S` in the air as loiter items,
     points on the ground as landings (the route takes off
     again at the next airborne point; time spent on the ground is not kept), a landing at the end;
     home = the replay's take-off spot (:func:`mission_sim.mavlink.takeoff.default_pad`: the first armed position, or
@@ -413,12 +413,12 @@ def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
     from ..mavlink.logs import read_log
     log = read_log(path)
     pos = log.position
-    from ..mavlink.takeoff import flown_periods, unknown_armed_state
+    from ..mavlink.takeoff import VALID_FLIGHT, flown_periods, unknown_armed_state
     periods = flown_periods(log)   # the armed periods; the armed state unknown: the whole track (one rule with replay)
     name = Path(path).name
     if log.armed_source is not None and not periods:   # (its fixes were GPS drift on the ground: 1 s of "flight")
         raise ValueError(f"{name}: no flown track: the vehicle never armed in the log (armed state from "
-                         f"{log.armed_source}); valid: the log of a flight, or a log holding an uploaded mission")
+                         f"{log.armed_source}); valid: {VALID_FLIGHT}, or a log holding an uploaded mission")
     if periods:
         t = pos["t_s"].to_numpy(float)
         pos = pos[(t >= periods[0][0]) & (t <= periods[-1][1])]
@@ -436,14 +436,15 @@ def flown_mission(path, tolerance_m: float = FLOWN_TOLERANCE_M) -> RawMission:
     p = np.column_stack([e, n, np.maximum(u, 0.0)])
     if log.armed_source is None:   # no armed-state record and no motor output: the whole track (as before 2026-11-27)
         from wpt_receiver.notices import warn
-        warn(unknown_armed_state(name, float(p[:, 2].max())))
+        warn(unknown_armed_state(name, float(p[:, 2].max()), valid=f"{VALID_FLIGHT}, or a log holding an uploaded "
+                                 "mission"))
     t = pos["t_s"].to_numpy(float)
-    air = p[:, 2] >= FLOWN_GROUND_M
+    air = p[:, 2] >= ground.GROUND_M   # (below it: on the ground, a landing)
     cross = np.flatnonzero(air[1:] != air[:-1])   # each take-off and landing kept: a flight lower than the tolerance
     keep = np.union1d(_decimate(p, tolerance_m), np.concatenate([cross, cross + 1]))   # (a 2 m hop) was dropped whole
     items = []
     for a, b in zip(keep[:-1], keep[1:]):
-        if p[b, 2] < FLOWN_GROUND_M:   # on the ground: a landing (the next airborne point takes off again)
+        if p[b, 2] < ground.GROUND_M:   # on the ground: a landing (the next airborne point takes off again)
             if not items or items[-1].command != NAV_LAND:
                 items.append(MissionItem(f"track point {b}", NAV_LAND, 0, (0.0,) * 4, lat[b], lon[b], home.alt_m))
             continue

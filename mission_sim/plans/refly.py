@@ -24,11 +24,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..mavlink import ground
+
 __all__ = ["Detour", "plan_detours", "refly_track", "ReflyResult", "refly_base", "plan_refly", "refly_log",
            "DEFAULT_REACH_M", "check_refly_size"]
 
 DEFAULT_REACH_M = 500.0   # a pad farther than this (horizontally) from the airborne track is not visited
-AIRBORNE_M = 1.0          # height above the take-off spot that counts as airborne (as the replay's)
 
 
 @dataclass(frozen=True)
@@ -44,7 +45,7 @@ class Detour:
 def plan_detours(track, pads_xyz: np.ndarray, hover_s, reach_m: float = DEFAULT_REACH_M):
     """Detours (sorted by track sample) and the skipped pads as (index, distance_m): each pad is
     visited from the airborne, armed sample horizontally closest to it, if within ``reach_m``."""
-    air = np.flatnonzero(track.armed & (track.height_m > AIRBORNE_M))
+    air = np.flatnonzero(track.armed & (track.height_m > ground.GROUND_M))   # (airborne: as the replay's)
     if len(air) == 0:
         return [], [(k, math.inf) for k in range(len(pads_xyz))]
     out, skipped = [], []
@@ -193,7 +194,7 @@ def plan_refly(log, cfg, *, pad=None, ground_gap_m=None, window=None, reach_m: f
         where = "the log" if window is None else f"the window {window[0]:g}..{window[1]:g} s"
         if segment is not None:
             where = f"boot segment {segment} ({where[4:]})"
-        raise ValueError(f"{log.path.name}: the vehicle is not airborne (armed and more than {AIRBORNE_M:g} m above "
+        raise ValueError(f"{log.path.name}: the vehicle is not airborne (armed and more than {ground.GROUND_M:g} m above "
                          f"the take-off spot) anywhere in {where}, so there is no track to make a detour from; valid: "
                          "a --window or --segment in which it flew")
     if not detours:

@@ -120,13 +120,17 @@ def _study_words(msg: str) -> str:
 
 def _flat(summary: dict, prefix: str = "") -> dict:
     """The summary's numbers, flags and texts as flat columns (nested tables as ``outer.inner``; lists are
-    left out but counted: ``n_detours``, ``n_warnings``, ...)."""
+    left out but counted: ``n_detours``, ``n_warnings``, ...). A list key whose value may be null (``*_periods_s``:
+    ``armed_periods_s`` of a log whose armed state is unknown) keeps its counted column, ``n_<key>``, null then, so a
+    sweep's column does not depend on the log."""
     out = {}
     for k, v in summary.items():
         if isinstance(v, dict):
             out.update(_flat(v, f"{prefix}{k}."))
         elif isinstance(v, (list, tuple)):
             out[f"{prefix}n_{k}"] = len(v)
+        elif v is None and k.endswith("_periods_s"):
+            out[f"{prefix}n_{k}"] = None
         elif v is None or isinstance(v, (bool, int, float, str)):
             out[f"{prefix}{k}"] = v
     return out

@@ -44,18 +44,30 @@ class SweepStatus:
 
 def physics_code_hash(replay: bool = False) -> str:
     """sha256 (16 hex digits) of the sources that compute a mission's numbers: :mod:`wpt_receiver` and
-    :mod:`mission_sim.world` (link, devices, battery, the compiled loop) and the case runner that turns a case's
-    values into the mission it runs (:mod:`mission_sim.studies.mission_cases`); with ``replay`` also those that
-    turn a log into a replay or a re-flight (:mod:`mission_sim.mavlink`, :mod:`mission_sim.plans`) and the replay
-    runner that decides what a case gives them (:mod:`mission_sim.studies.replay_cases`: origin, options). A sweep
-    folder records it, so a resume by another version of that code is refused instead of mixing old and
-    new results."""
+    :mod:`mission_sim.world` (link, devices, battery, the compiled loop), the mission's configuration and the
+    policies' context built from it (:mod:`mission_sim.config`, :mod:`mission_sim.contract`), the policies
+    (the :mod:`policies` package's sources and its shipped pre-trained models, ``policies/pretrained/*.zip``,
+    ``*.json``, ``*.npz``; found with :func:`importlib.util.find_spec`, not imported, since ``mission_sim`` never
+    imports ``policies``) and the case runner that turns a case's values into the mission it runs
+    (:mod:`mission_sim.studies.mission_cases`); with ``replay`` also those that turn a log into a replay or a
+    re-flight (:mod:`mission_sim.mavlink`, :mod:`mission_sim.plans`) and the replay runner that decides what a
+    case gives them (:mod:`mission_sim.studies.replay_cases`: origin, options). A sweep folder records it, so a
+    resume by another version of that code is refused instead of mixing old and new results."""
+    import importlib.util
+
     from wpt_receiver.kernel_cache import dependency_hash
     import wpt_receiver
     pkg = Path(__file__).resolve().parents[1]
-    roots = (Path(wpt_receiver.__file__).parent, pkg / "world") + ((pkg / "mavlink", pkg / "plans") if replay else ())
+    roots = [Path(wpt_receiver.__file__).parent, pkg / "world"] + ([pkg / "mavlink", pkg / "plans"] if replay else [])
+    spec = importlib.util.find_spec("policies")
+    policies = Path(spec.origin).parent if spec is not None and spec.origin else None
+    if policies is not None:
+        roots.append(policies)
     files = sorted((f for root in roots for f in root.rglob("*.py")), key=lambda f: (f.parent.name, f.name))
-    files += [pkg / "studies" / "mission_cases.py"] + ([pkg / "studies" / "replay_cases.py"] if replay else [])
+    if policies is not None:   # the shipped models (~3.7 MB, a few ms to hash)
+        files += sorted(f for ext in ("zip", "json", "npz") for f in (policies / "pretrained").glob(f"*.{ext}"))
+    files += [pkg / "config.py", pkg / "contract.py", pkg / "studies" / "mission_cases.py"]
+    files += [pkg / "studies" / "replay_cases.py"] if replay else []
     return dependency_hash(files)[:16]
 
 

@@ -79,6 +79,13 @@ class MissionLoop:
         self.sim, self.lk = sim, lk = cfg.sim, cfg.link
         model = cfg.coupling.model()
         self.l1, self.l2 = model.l1_h, model.l2_h
+        # (its VL is LinkParams' default 30 V, whatever the pack: each step clamps at its own battery_v + Vf, the link
+        # constants hold no VL, and the SBAR table (wpt_receiver.modal_kernel.build_table) holds VL only through the
+        # inverter's harmonics against the clamp. Measured 2026-11-28 with the table built at the pack's CV voltage
+        # instead: the default 8S mission (pack 32.28-32.90 V; table at 32.8 V) step peak 31.2757 -> 31.2766 A,
+        # charge in 4083.40 -> 4083.35 J; a 4S pack (15.90-16.53 V; table at 16.4 V) step 31.070 -> 31.062 A,
+        # model_based 13.203 -> 13.196 A, energies within 1e-5. Left at 30 V: the table's disk-cache key holds the
+        # whole link. The policies' link carries the pack's voltage: config.policy_context)
         self.base = base = lk.link_params(model.l1_h, model.l2_h, float(model.lm_h(0.0, 0.0, cfg.mission.hover_gap_m)))
         # devices, averaged (wpt_receiver.sbar.rectifier_v2_devices): the inverter's 2 Ron and the
         # rectifying path's Rd fold into R1 / R2 of the link; the forward drops add to the clamp VL;
