@@ -170,14 +170,15 @@ def link_stored_j(c, a0, a1):
 
 
 @njit(cache=True)
-def _track_peak(st, c, lk, i2c, d, dt_each, vl):
+def _track_peak(st, c, lk, i2c, d, dt_each, vl, live):
     """Running peaks: of the i2 fundamental |I2| (and the duty there), of the instantaneous |i2| (the
-    SBAR's harmonic ripple added, :func:`wpt_receiver.modal_kernel.inst_peak` at the clamp ``VL + Vf``;
-    the pad off: no ripple), and the time |I2| is above rated (``dt_each`` per value)."""
+    SBAR's harmonic ripple added, :func:`wpt_receiver.modal_kernel.inst_peak` at the clamp ``VL + Vf``, while
+    it conducts, ``live``: :func:`_sbar_live`; else no ripple), and the time |I2| is above rated (``dt_each`` per
+    value)."""
     a = abs(i2c)
     if a > st.peak_env:
         st.peak_env, st.peak_d = a, d
-    pk = inst_peak(lk[0], lk[1], d, i2c, vl + c.vf) if st.v1 > 0.0 else a
+    pk = inst_peak(lk[0], lk[1], d, i2c, vl + c.vf) if live else a
     if pk > st.peak_inst:
         st.peak_inst = pk
     if a > c.rated:
@@ -282,12 +283,30 @@ def _coefs(lk, lm_h, dt, role):
 
 
 @njit(cache=True)
-def _sbar_v2(st, c, lk, mc, zc, v1c):
+def _ringing(st, c):
+    """The coil currents at the last step's end have not died out (|I1| or |I2| >= ``settle_i2_tol_a``)."""
+    return st.x0 >= c.settle_i2_tol or abs(st.x1) >= c.settle_i2_tol
+
+
+@njit(cache=True)
+def _sbar_live(st, c, fine):
+    """Whether the SBAR's v2 acts in a step: with the pad on, and in fine steps after the pad's V1 has reached 0
+    while the coil currents still flow (:func:`_ringing`). The receiver does not know the pad is off: its diodes
+    conduct while i2 flows and it keeps its duty, so the tanks' energy left at the end of the V1 ramp is rectified
+    into the battery. (Before 2026-11-28 v2 was 0, a shorted secondary, from that step: with the primary shorted too
+    (V1 = 0, the inverter's zero vector) the two tanks rang freely and the primary's energy beat into the secondary
+    within ~1/(2 k f) = 80 us at k = 0.075: I2 5.9 A in the primary became 17 A in the secondary, docs/mission.md.)
+    Coarse steps with the pad off keep v2 = 0 (no current flows: the fine window does not end while it does)."""
+    return st.v1 > 0.0 or (fine and _ringing(st, c))
+
+
+@njit(cache=True)
+def _sbar_v2(st, c, lk, mc, zc, v1c, live):
     """SBAR input of the step: ``(F, v2x)`` with ``V2 = F VL + v2x`` held over it: the clamp part per volt
     (eq. 9 with its quadrature, at the last VL; the commutation implicit,
     :func:`wpt_receiver.modal_kernel.sbar_implicit`) plus the forward drops and the shorted switches'
-    excess ``(2 Ron - Rd) w(d) I2``; 0 with the pad off."""
-    if st.v1 <= 0.0:
+    excess ``(2 Ron - Rd) w(d) I2``; 0 when the SBAR does not act (``live`` False: :func:`_sbar_live`)."""
+    if not live:
         return 0j, 0j
     d = st.d
     ws = c.dr_short * short_weight(d)
@@ -310,7 +329,8 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
     lm_eff = lm if lm > 0 else 1e-12
     mc, zc = _coefs(lk, lm_eff, dt, 0)
     v1c = complex(0.0, -v1)          # v1 = V1 sin(w t)
-    f, v2x = _sbar_v2(st, c, lk, mc, zc, v1c)
+    live = _sbar_live(st, c, fine)
+    f, v2x = _sbar_v2(st, c, lk, mc, zc, v1c, live)
     il0, il1 = rect_affine(mc, zc, dt, st.z, v1c, f, v2x)
     vl = _solve_vl(st, c, dt, il0, il1, p_prop)
     if math.isnan(vl):
@@ -327,7 +347,7 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
         zq = z.copy()
         for _ in range(nq - 1):
             advance_z(mc, zc4, zq, v1c, v2)
-            _track_peak(st, c, lk, phasors(mc, zq, v1c, v2)[1], d, dt / nq, vl)
+            _track_peak(st, c, lk, phasors(mc, zq, v1c, v2)[1], d, dt / nq, vl, live)
     out = np.empty(9)
     modal_step(lc, mc, zc, dt, z, v1c, v2, out)
     i_l = rect_current_a(f, complex(out[2], out[3]), dt)
@@ -338,7 +358,7 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
         st.tmp_ib = i_b
         return _NEED_DEPLETE
     i1n, i2n = phasors(mc, z, v1c, v2)
-    _track_peak(st, c, lk, i2n, d, dt / nq if fine else dt, vl)
+    _track_peak(st, c, lk, i2n, d, dt / nq if fine else dt, vl, live)
     a2 = abs(i2n)
     y0, y1 = abs(i1n), (a2 if i2n.real >= 0.0 else -a2)
     st.z[:] = z
@@ -460,7 +480,7 @@ def _fine_step(s, c, lk, rows, t0, dt, lm, p_prop, row_k):
     ``refine_tol`` of |I2| is redone in pieces (:func:`_sub_step`, the env's criterion): near a tolerance the
     stepping depends on the last bits of the state, as the env's does (docs/performance.md)."""
     st = s[0]
-    if st.v1 > 0.0 and st.d < 1.0:
+    if _sbar_live(st, c, True) and st.d < 1.0:
         k_sub = math.ceil(dt / c.t_rect - 1e-9) if dt > 1.5 * c.t_rect else 1
         h = dt / k_sub
         n0 = st.n_rows
@@ -471,7 +491,7 @@ def _fine_step(s, c, lk, rows, t0, dt, lm, p_prop, row_k):
                 return r
         _merge_rows(s[0], rows, n0)
         return OK
-    return _step_d(s, c, lk, rows, t0, dt, lm, p_prop, row_k, True)   # short mode or pad off: V2 = 0 or blocked
+    return _step_d(s, c, lk, rows, t0, dt, lm, p_prop, row_k, True)   # short mode, or pad off and no current: V2 = 0
 
 
 @njit(cache=True)
@@ -579,7 +599,7 @@ def _window_done(st, c, lk, t, d_prev, lm):
     if t >= st.fine_until_min and (dv < c.settle_duty_tol or st.v1 == 0.0) and not _answering(st) \
             and _settled(st, c, lk, lm):
         st.in_fine = False
-    elif t >= st.fine_deadline and st.v1 == (c.v1_nom if st.tx_on else 0.0):
+    elif t >= st.fine_deadline and st.v1 == (c.v1_nom if st.tx_on else 0.0) and not (st.v1 == 0.0 and _ringing(st, c)):
         st.in_fine = False
         st.n_cut += 1
 
