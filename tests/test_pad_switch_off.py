@@ -106,8 +106,11 @@ def test_protection_never_rectifies_backwards(drift_off):
     # from V1 = 0 to the end (the whole ring-down, until the currents have died out): no step returns energy
     # from the battery through the rectifier, no negative device loss (the sliding SBAR envelope at d = 0.59 and
     # the always-conducting clamp at d = 0 both did: -66.5 uJ / -11 mJ)
+    # (the first step books the feedthrough's stored-energy jump at V1's change to the rectifier: tens of nJ at most,
+    # -11 nJ in the gust example; 1e-5 of the primary's stored energy w1 = 3.8 mJ)
+    w1 = 0.5 * hover_inductances(cfg.coupling, cfg.mission.hover_gap_m)[0] * ts["i1_amp_a"].iloc[off - 1] ** 2
     for col in ("e_rectifier_j", "e_rectifier_diodes_j", "e_rectifier_switches_j"):
-        assert ts[col].to_numpy()[off:].min() >= -1e-12, col
+        assert ts[col].to_numpy()[off:].min() >= -1e-5 * w1, col
     assert np.abs(ts["i2_amp_a"].to_numpy()[off:]).max() < 0.05
     assert res.summary["peak_i2_a"] < cfg.link.rated_i2_a and res.summary["time_above_rated_s"] == 0.0
     # the currents die out (the window ends; no ringing left for the coarse steps)
