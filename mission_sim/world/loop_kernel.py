@@ -396,7 +396,8 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
     st.x0, st.x1, st.soc, st.vrc, st.p11, st.p22 = y0, y1, soc, vrc, out[4], out[5]
     st.last_vl, st.last_ib, st.last_il = vl, i_b, i_l
     e_out = vl * i_l * dt
-    v2_row = (v2 * i2n.conjugate()).real / a2 if a2 > 0.0 else v2.real   # v2's fundamental in phase with i2
+    # v2's fundamental in phase with i2 (while the protection's diodes block, |I2| ~ 1e-10 A: its phase is rounding)
+    v2_row = (v2 * i2n.conjugate()).real / a2 if a2 > (1e-6 if (live and v1 == 0.0) else 0.0) else v2.real
     _write_row(st, c, rows, (t0 + dt, dt, float(row_k), lm, v1, y0, y1, d, v2_row, i_l, vl, i_b, soc, st.cmd,
                              1.0 if fine else 0.0, out[6]), out[7] + out[8] - jump - e_out, i_l * dt,
                short_weight(d), e_out, e_chem, e_r0, e_r1, e_c1, vl * i_p * dt)
