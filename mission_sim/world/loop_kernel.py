@@ -173,12 +173,13 @@ def link_stored_j(c, a0, a1):
 def _track_peak(st, c, lk, i2c, d, dt_each, vl, live):
     """Running peaks: of the i2 fundamental |I2| (and the duty there), of the instantaneous |i2| (the
     SBAR's harmonic ripple added, :func:`wpt_receiver.modal_kernel.inst_peak` at the clamp ``VL + Vf``, while
-    it conducts, ``live``: :func:`_sbar_live`; else no ripple), and the time |I2| is above rated (``dt_each`` per
+    it conducts, ``live``: :func:`_sbar_live`, and not blocked by the protection; else no ripple), and the time
+    |I2| is above rated (``dt_each`` per
     value)."""
     a = abs(i2c)
     if a > st.peak_env:
         st.peak_env, st.peak_d = a, d
-    pk = inst_peak(lk[0], lk[1], d, i2c, vl + c.vf) if live else a
+    pk = inst_peak(lk[0], lk[1], d, i2c, vl + c.vf) if live and (st.v1 > 0.0 or a > 1e-6) else a
     if pk > st.peak_inst:
         st.peak_inst = pk
     if a > c.rated:
