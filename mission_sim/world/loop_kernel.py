@@ -174,8 +174,7 @@ def _track_peak(st, c, lk, i2c, d, dt_each, vl, live):
     """Running peaks: of the i2 fundamental |I2| (and the duty there), of the instantaneous |i2| (the
     SBAR's harmonic ripple added, :func:`wpt_receiver.modal_kernel.inst_peak` at the clamp ``VL + Vf``, while
     it conducts, ``live``: :func:`_sbar_live`, and not blocked by the protection; else no ripple), and the time
-    |I2| is above rated (``dt_each`` per
-    value)."""
+    |I2| is above rated (``dt_each`` per value)."""
     a = abs(i2c)
     if a > st.peak_env:
         st.peak_env, st.peak_d = a, d
