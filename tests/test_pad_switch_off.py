@@ -3,7 +3,7 @@ time-domain switching model (:class:`wpt_receiver.switching.SwitchingLink`; docs
 
 When the pad's V1 has reached 0 after its ramp and the coil currents still ring, the receiver's protection holds the
 SBAR at d = 0 (plain diode rectification; ``sim.rectify_after_pad_off``, default true). From the drift run's state at
-that step (I1 5.7 A, I2 ~ 0, k = 0.066 at the drifted position) the secondary's emf w Lm I1 = 15 V is below the
+that step (I1 5.7 A, I2 ~ 0, k = 0.0748 at the drifted position) the secondary's emf w Lm I1 = 15 V is below the
 clamp's fundamental (4/pi)(VL + Vf) = 42.6 V: the diodes block, I2 stays 0 and I1 decays in R1 (+ the inverter's
 2 Ron). The switching model (exact, event-located, the same devices, V1 ~ 0) is the reference. With the option off
 the loop shorts the secondary from that step (v2 = 0, the model before 2026-11-28): the two tanks ring freely and the
