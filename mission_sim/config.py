@@ -196,7 +196,15 @@ class WaypointConfig:
 
 @dataclass(frozen=True)
 class SimConfig:
-    """Multi-rate stepping (see mission_sim/runner.py)."""
+    """Multi-rate stepping (see mission_sim/runner.py).
+
+    ``settle_i2_tol_a``: a fine window settles when I2 is this close to its steady state; with the pad off, when
+    |I1| and |I2| are both below it (the coil currents have died out).
+    ``rectify_after_pad_off``: when the pad's V1 has reached 0 after its ramp and the coil currents still ring
+    (|I1| or |I2| >= ``settle_i2_tol_a``), the receiver's protection holds the SBAR at d = 0 (plain diode
+    rectification) until they have died out; the rows record the applied duty. False: v2 = 0 from that step (a
+    shorted secondary, the model before 2026-11-28: the short-mode / upper case of the switch-off's I2 peak,
+    docs/mission.md "Pad switch-off")."""
 
     control_period_s: float = 1e-4
     traj_dt_s: float = 0.2
@@ -212,9 +220,12 @@ class SimConfig:
     cmd_deadband_a: float = 0.25
     bms_period_s: float = 4.0
     tx_off_delay_s: float = 0.025
+    rectify_after_pad_off: bool = True
 
     def __post_init__(self):
         check_number_fields(self)
+        if not isinstance(self.rectify_after_pad_off, bool):
+            raise ValueError(f"rectify_after_pad_off={self.rectify_after_pad_off!r} is invalid; valid values: true, false")
         check_positive(self, "control_period_s", "traj_dt_s", "flight_dt_s", "min_fine_s", "max_fine_s",
                   "settle_duty_tol", "duty_event_tol", "lm_rel_tol", "coarse_policy_period_s", "settle_i2_tol_a", "bms_period_s")
         check_positive(self, "i2_noise_a", "cmd_deadband_a", "tx_off_delay_s", allow_zero=True)
@@ -444,6 +455,10 @@ def _coerce(section: str, cls, name: str, value):
     if ftype == "str":
         if not isinstance(value, str):
             raise ValueError(f"{key}={value!r} is invalid; valid type: string")
+        return value
+    if ftype == "bool":
+        if not isinstance(value, bool):
+            raise ValueError(f"{key}={value!r} is invalid; valid values: true, false")
         return value
     if ftype == "int":   # numbers.Real: numpy's integers and floats too (np.arange, np.linspace)
         if isinstance(value, bool) or not isinstance(value, numbers.Real) or (

@@ -87,6 +87,7 @@ def pack_constants(loop) -> np.ndarray:
         "lm_rel_tol": sim.lm_rel_tol, "coarse_period": sim.coarse_policy_period_s,
         "duty_event_tol": sim.duty_event_tol, "settle_duty_tol": sim.settle_duty_tol,
         "settle_i2_tol": sim.settle_i2_tol_a, "noise_a": sim.i2_noise_a,
+        "rectify_off": sim.rectify_after_pad_off,
         "obs_lo": _LO, "obs_inv": _INV_SPAN,
         "row_margin": math.ceil(loop.dtc / loop.t_rect) * 2 ** REFINE_LEVELS + 3,
         "refine_tol": REFINE_TOL, "refine_levels": REFINE_LEVELS,

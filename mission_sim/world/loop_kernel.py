@@ -56,7 +56,7 @@ import numpy as np
 from numba import from_dtype, njit, types
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
-from wpt_receiver.modal_kernel import (N_ZOH_C, advance_z, inst_peak, modes, phasors, readout,
+from wpt_receiver.modal_kernel import (N_ZOH_C, advance_z, end_i2, inst_peak, modes, phasors, readout,
                                        rect_affine, rect_current_a, refine_level, sbar_implicit, short_weight,
                                        steady_modes, stored_energy_j, zoh)
 from wpt_receiver.modal_kernel import step as modal_step
@@ -170,14 +170,15 @@ def link_stored_j(c, a0, a1):
 
 
 @njit(cache=True)
-def _track_peak(st, c, lk, i2c, d, dt_each, vl):
+def _track_peak(st, c, lk, i2c, d, dt_each, vl, live):
     """Running peaks: of the i2 fundamental |I2| (and the duty there), of the instantaneous |i2| (the
-    SBAR's harmonic ripple added, :func:`wpt_receiver.modal_kernel.inst_peak` at the clamp ``VL + Vf``;
-    the pad off: no ripple), and the time |I2| is above rated (``dt_each`` per value)."""
+    SBAR's harmonic ripple added, :func:`wpt_receiver.modal_kernel.inst_peak` at the clamp ``VL + Vf``, while
+    it conducts, ``live``: :func:`_sbar_live`, and not blocked by the protection; else no ripple), and the time
+    |I2| is above rated (``dt_each`` per value)."""
     a = abs(i2c)
     if a > st.peak_env:
         st.peak_env, st.peak_d = a, d
-    pk = inst_peak(lk[0], lk[1], d, i2c, vl + c.vf) if st.v1 > 0.0 else a
+    pk = inst_peak(lk[0], lk[1], d, i2c, vl + c.vf) if live and (st.v1 > 0.0 or a > 1e-6) else a
     if pk > st.peak_inst:
         st.peak_inst = pk
     if a > c.rated:
@@ -282,14 +283,60 @@ def _coefs(lk, lm_h, dt, role):
 
 
 @njit(cache=True)
-def _sbar_v2(st, c, lk, mc, zc, v1c):
+def _ringing(st, c):
+    """The coil currents at the last step's end have not died out (|I1| or |I2| >= ``settle_i2_tol_a``)."""
+    return st.x0 >= c.settle_i2_tol or abs(st.x1) >= c.settle_i2_tol
+
+
+@njit(cache=True)
+def _protecting(st, c):
+    """The receiver's protection holds the SBAR at d = 0 (plain diode rectification: both low-side switches off):
+    the pad's V1 has reached 0 after its ramp while the coil currents still ring (:func:`_ringing`), with
+    ``sim.rectify_after_pad_off`` (default). The receiver sees its input collapse; the tanks' energy then goes into
+    the battery through the diodes until the currents have died out. The policy's duty is held, not applied: the
+    rows record the applied duty (0). With the option off, v2 = 0 from the step V1 reaches 0 (a shorted secondary,
+    the model before 2026-11-28: the two shorted tanks ring freely and the primary's energy beats into the secondary
+    within ~1/(2 k f) = 79 us at k = 0.075; the short-mode / upper case, docs/mission.md "Pad switch-off")."""
+    return c.rectify_off and st.v1 == 0.0 and _ringing(st, c)
+
+
+@njit(cache=True)
+def _sbar_live(st, c, fine):
+    """Whether the SBAR's v2 acts in a step: with the pad on, and in fine steps while the protection holds d = 0
+    after the pad's V1 has reached 0 (:func:`_protecting`). Otherwise v2 = 0 (the pad off: no current flows, or
+    with ``sim.rectify_after_pad_off`` false the shorted secondary). Coarse steps with the pad off keep v2 = 0 (the
+    fine window does not end while the protection holds: :func:`_window_done`)."""
+    return st.v1 > 0.0 or (fine and _protecting(st, c))
+
+
+@njit(cache=True)
+def _applied_duty(st, c, live):
+    """The duty the SBAR applies in a step: the policy's, or 0 while the protection holds (:func:`_protecting`;
+    ``live`` with V1 = 0 is exactly that case)."""
+    return 0.0 if (live and st.v1 == 0.0) else st.d
+
+
+@njit(cache=True)
+def _sbar_v2(st, c, lk, mc, zc, v1c, live, d):
     """SBAR input of the step: ``(F, v2x)`` with ``V2 = F VL + v2x`` held over it: the clamp part per volt
     (eq. 9 with its quadrature, at the last VL; the commutation implicit,
     :func:`wpt_receiver.modal_kernel.sbar_implicit`) plus the forward drops and the shorted switches'
-    excess ``(2 Ron - Rd) w(d) I2``; 0 with the pad off."""
-    if st.v1 <= 0.0:
+    excess ``(2 Ron - Rd) w(d) I2`` at the applied duty ``d`` (:func:`_applied_duty`); 0 when the SBAR does not act
+    (``live`` False: :func:`_sbar_live`)."""
+    if not live:
         return 0j, 0j
-    d = st.d
+    if st.v1 == 0.0:
+        # the protection (d = 0, diodes only) after the pad's switch-off: the diodes block when the V2 that holds
+        # the step's end I2 at 0 lies within the clamp's fundamental (4/pi)(VL + Vf) (the secondary's emf w Lm I1
+        # is below it: discontinuous conduction; the envelope's always-conducting clamp there flips its sign
+        # step to step, ringing at ~2 A and rectifying backwards); else they conduct (the clamp, below)
+        vc = st.last_vl + c.vf
+        z0, z1 = complex(st.z[0], st.z[1]), complex(st.z[2], st.z[3])
+        q0 = end_i2(mc, zc, z0, z1, v1c, 0j)
+        vb = -q0 / (end_i2(mc, zc, z0, z1, v1c, 1.0 + 0j) - q0)
+        if abs(vb) <= 4.0 / math.pi * vc:
+            f = vb / vc
+            return f, f * c.vf
     ws = c.dr_short * short_weight(d)
     f, i2e, _ = sbar_implicit(lk[0], lk[1], mc, zc, complex(st.z[0], st.z[1]), complex(st.z[2], st.z[3]), v1c,
                            complex(st.v2re, st.v2im), d, st.last_vl + c.vf, ws)
@@ -302,15 +349,18 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
     implicitly; writes a row. OK, ERR_POWER, or _NEED_DEPLETE (SoC < 0: nothing written, I_b in tmp_ib).
 
     The SBAR's v2 follows i2's phase (its clamp part per volt ``F``, eq. 9 with the quadrature of the
-    shifted commutation); with the pad off the diodes block and the coil currents ring down in R1, R2.
+    shifted commutation), with the pad on, and at d = 0 (the protection, blocking or conducting) in fine steps while
+    the coil currents ring after the pad's V1 reached 0 (:func:`_sbar_live`, :func:`_protecting`); otherwise v2 = 0.
     The link energies close per step with ``W`` at the step's inputs; the stored energy of the
     feedthrough when the inputs change between steps (``jump``) is booked to the rectifier."""
     lc, tab, lw = lk
-    v1, d = st.v1, st.d
+    v1 = st.v1
     lm_eff = lm if lm > 0 else 1e-12
     mc, zc = _coefs(lk, lm_eff, dt, 0)
     v1c = complex(0.0, -v1)          # v1 = V1 sin(w t)
-    f, v2x = _sbar_v2(st, c, lk, mc, zc, v1c)
+    live = _sbar_live(st, c, fine)
+    d = _applied_duty(st, c, live)   # the row records it
+    f, v2x = _sbar_v2(st, c, lk, mc, zc, v1c, live, d)
     il0, il1 = rect_affine(mc, zc, dt, st.z, v1c, f, v2x)
     vl = _solve_vl(st, c, dt, il0, il1, p_prop)
     if math.isnan(vl):
@@ -327,7 +377,7 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
         zq = z.copy()
         for _ in range(nq - 1):
             advance_z(mc, zc4, zq, v1c, v2)
-            _track_peak(st, c, lk, phasors(mc, zq, v1c, v2)[1], d, dt / nq, vl)
+            _track_peak(st, c, lk, phasors(mc, zq, v1c, v2)[1], d, dt / nq, vl, live)
     out = np.empty(9)
     modal_step(lc, mc, zc, dt, z, v1c, v2, out)
     i_l = rect_current_a(f, complex(out[2], out[3]), dt)
@@ -338,7 +388,7 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
         st.tmp_ib = i_b
         return _NEED_DEPLETE
     i1n, i2n = phasors(mc, z, v1c, v2)
-    _track_peak(st, c, lk, i2n, d, dt / nq if fine else dt, vl)
+    _track_peak(st, c, lk, i2n, d, dt / nq if fine else dt, vl, live)
     a2 = abs(i2n)
     y0, y1 = abs(i1n), (a2 if i2n.real >= 0.0 else -a2)
     st.z[:] = z
@@ -346,7 +396,8 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
     st.x0, st.x1, st.soc, st.vrc, st.p11, st.p22 = y0, y1, soc, vrc, out[4], out[5]
     st.last_vl, st.last_ib, st.last_il = vl, i_b, i_l
     e_out = vl * i_l * dt
-    v2_row = (v2 * i2n.conjugate()).real / a2 if a2 > 0.0 else v2.real   # v2's fundamental in phase with i2
+    # v2's fundamental in phase with i2 (while the protection's diodes block, |I2| ~ 1e-10 A: its phase is rounding)
+    v2_row = (v2 * i2n.conjugate()).real / a2 if a2 > (1e-6 if (live and v1 == 0.0) else 0.0) else v2.real
     _write_row(st, c, rows, (t0 + dt, dt, float(row_k), lm, v1, y0, y1, d, v2_row, i_l, vl, i_b, soc, st.cmd,
                              1.0 if fine else 0.0, out[6]), out[7] + out[8] - jump - e_out, i_l * dt,
                short_weight(d), e_out, e_chem, e_r0, e_r1, e_c1, vl * i_p * dt)
@@ -460,7 +511,8 @@ def _fine_step(s, c, lk, rows, t0, dt, lm, p_prop, row_k):
     ``refine_tol`` of |I2| is redone in pieces (:func:`_sub_step`, the env's criterion): near a tolerance the
     stepping depends on the last bits of the state, as the env's does (docs/performance.md)."""
     st = s[0]
-    if st.v1 > 0.0 and st.d < 1.0:
+    live = _sbar_live(st, c, True)
+    if live and _applied_duty(st, c, live) < 1.0:
         k_sub = math.ceil(dt / c.t_rect - 1e-9) if dt > 1.5 * c.t_rect else 1
         h = dt / k_sub
         n0 = st.n_rows
@@ -471,7 +523,7 @@ def _fine_step(s, c, lk, rows, t0, dt, lm, p_prop, row_k):
                 return r
         _merge_rows(s[0], rows, n0)
         return OK
-    return _step_d(s, c, lk, rows, t0, dt, lm, p_prop, row_k, True)   # short mode or pad off: V2 = 0 or blocked
+    return _step_d(s, c, lk, rows, t0, dt, lm, p_prop, row_k, True)   # short mode, or pad off and not protecting: V2 = 0
 
 
 @njit(cache=True)
@@ -547,7 +599,7 @@ def _settled(st, c, lk, lm):
     if abs(v1 - (c.v1_nom if st.tx_on else 0.0)) > 0.0:
         return False
     if v1 == 0.0:
-        return abs(st.x0) < tol and abs(st.x1) < tol
+        return not _ringing(st, c)
     mc = _modes_of(lk, lm if lm > 0 else 1e-12)
     v1c, v2 = complex(0.0, -v1), complex(st.v2re, st.v2im)
     zs0, zs1 = steady_modes(mc, v1c, v2)
@@ -574,12 +626,13 @@ def _window_done(st, c, lk, t, d_prev, lm):
 
     Not while the receiver is shorted under a positive charge command (:func:`_answering`): the policy
     has not answered the command yet, and outside the window it would be called once per
-    ``coarse_policy_period_s`` instead of once per control period."""
+    ``coarse_policy_period_s`` instead of once per control period. Not at the deadline while the protection holds
+    d = 0 after the pad's switch-off (:func:`_protecting`: bounded by the ring-down)."""
     dv = abs(math.sin(0.5 * math.pi * st.d) - math.sin(0.5 * math.pi * d_prev))
     if t >= st.fine_until_min and (dv < c.settle_duty_tol or st.v1 == 0.0) and not _answering(st) \
             and _settled(st, c, lk, lm):
         st.in_fine = False
-    elif t >= st.fine_deadline and st.v1 == (c.v1_nom if st.tx_on else 0.0):
+    elif t >= st.fine_deadline and st.v1 == (c.v1_nom if st.tx_on else 0.0) and not _protecting(st, c):
         st.in_fine = False
         st.n_cut += 1
 

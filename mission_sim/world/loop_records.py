@@ -69,7 +69,7 @@ CONST_DTYPE = np.dtype([
     # sim.*
     ("tx_off_delay", "f8"), ("bms_period", "f8"), ("cmd_deadband", "f8"), ("min_fine", "f8"), ("max_fine", "f8"),
     ("flight_dt", "f8"), ("lm_rel_tol", "f8"), ("coarse_period", "f8"), ("duty_event_tol", "f8"),
-    ("settle_duty_tol", "f8"), ("settle_i2_tol", "f8"), ("noise_a", "f8"),
+    ("settle_duty_tol", "f8"), ("settle_i2_tol", "f8"), ("noise_a", "f8"), ("rectify_off", "?"),
     # the contract's normalisation of the observation (lo, 1 / span)
     ("obs_lo", "f8", (OBS_DIM,)), ("obs_inv", "f8", (OBS_DIM,)),
     # most rows one iteration can write (a fine step split into rectifier periods, each in up to 2^levels pieces)

@@ -18,7 +18,10 @@ Loop (one drone, one receiver):
    phase ends. On and off are linear V1 ramps over ``link.tx_ramp_s`` (soft start), always
    simulated in fine steps. Before a planned switch-off the charge command drops to 0 first and
    the pad stays on ``sim.tx_off_delay_s`` so the receiver reaches short mode under power
-   [``_gate_pad``; per fine step inside ``_fine_begin``].
+   [``_gate_pad``; per fine step inside ``_fine_begin``]. After the ramp's end, while the coil currents ring,
+   the receiver's protection holds the SBAR at d = 0 (diodes only; ``sim.rectify_after_pad_off``, default
+   true; the rows record the applied duty); false: v2 = 0, a shorted secondary (the model before 2026-11-28:
+   the primary's energy beats into it within a step, docs/mission.md "Pad switch-off") [``_protecting``].
 3. **Battery management** (CC-CV, :mod:`~mission_sim.world.battery`) sets the charge command
    ``I_L*`` every ``sim.bms_period_s`` (load current + CC/CV battery current; when full the load current less
    the CV law's current above CV, the charger's power path; a new charge cycle at each pad switch-on); changes
@@ -45,7 +48,8 @@ called once per step) run around every event: pad ramps, command changes, a duty
 by the policy, fast Lm changes with the pad on. A fine window lasts at least ``min_fine_s`` and
 ends when the SBAR output ``1 - sin(pi d / 2)`` (= V2 / ((4/pi) VL), eq. 9) moves less than
 ``settle_duty_tol`` per step and I2 is within ``settle_i2_tol_a`` of the steady state for the held
-inputs (or after ``max_fine_s``); with the pad off it ends once the coil currents have died out.
+inputs (or after ``max_fine_s``); with the pad off it ends once the coil currents have died out (not before, even at ``max_fine_s``, while the
+protection holds d = 0).
 It does not end while the receiver is shorted (d = 1) under a positive charge command: no charging
 controller rests there, and a stateful policy may be moving behind the clip (``model_based_budget``'s
 V2* below 0 V after a stop): the receiver's DSP runs it every control period until it answers, so does
