@@ -389,7 +389,6 @@ def _link_pass(lo, hi, d, state, k, j, coef_tab, coef_ix, slow_every, n_sub, vf,
     detuned, xc, ccoef, v1 = cx
     has_cx = detuned.shape[0] > 0
     m = 0
-    sub = n_sub > 1
     ulo = _U(lo)
     for e in range(ulo, _U(hi)):   # the duty's sines and cosines first: a short loop, overlapped across windows
         sc[7, e - ulo], sc[8, e - ulo] = _sin_cos(d[e])
@@ -410,7 +409,7 @@ def _link_pass(lo, hi, d, state, k, j, coef_tab, coef_ix, slow_every, n_sub, vf,
         # every time and kept when the step splits
         idx[m] = e
         sc[5, m], sc[6, m] = vm, rx
-        m += split & sub
+        m += split
     return m
 
 
@@ -544,7 +543,7 @@ def single_step(k, d, st, steps, slow, par, obs, out, cc):
         i1, i2, pk, il, v2 = _complex_step(x, vl_old, d, cc[j], vf, dr, par[P.v1], n_sub)
     else:
         i1, i2, pk, il, v2, split, vm, rx = _link_step(st[SINGLE.i1], st[SINGLE.i2], vl_old, d, slow, j, vf, dr)
-        if n_sub > 1 and split:
+        if split:   # also at n_sub = 1 (dt_s <= one rectifier period): the one sub-step takes the clamp implicitly
             i1, i2, pk, il = _substeps_one(st[SINGLE.i1], st[SINGLE.i2], vm, rx, vl_old + vf, slow, j, n_sub)
     pk_env = pk
     ptab = par[len(P) + 16:].reshape((int(par[P.nd]), int(par[P.ni]), int(par[P.nq])))
