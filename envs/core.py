@@ -419,6 +419,11 @@ def _zoh_coefficients(link: LinkParams, lm, cfg: EnvConfig) -> np.ndarray:
     ad3, bd3 = zoh_discretise(np.concatenate([a, a, a]), b, dt)
     ad, am, ah = ad3[:n], ad3[n:2 * n], ad3[2 * n:]
     bd, bm, bh = bd3[:n], bd3[n:2 * n], bd3[2 * n:]
+    bad = np.flatnonzero(bh[:, 1, 1] >= 0.0)   # the implicit clamp's g11 (envs.vector_kernel._substep) must be < 0
+    if bad.size:
+        raise ValueError(f"Lm = {lm.ravel()[bad[0]]:.4g} H with n_sub = {cfg.n_sub} (sub-step {cfg.dt_s / cfg.n_sub:.3g} s) "
+                         f"gives the sub-step's g11 = {bh[bad[0], 1, 1]:.3g} >= 0; valid: sub-steps of at most one "
+                         f"rectifier period, n_sub >= {math.ceil(cfg.dt_s / link.rectifier_period_s - 1e-9)}")
     v1 = link.v1_amp_v
     # the blocked step (I2 = 0 held by V2 = -(A10 I1 + B10 V1) / B11; eq. 4's B10 = 0 and B01 = 0, so
     # V2 = A10 I1 / -B11 = w Lm I1 and dI1/dt = A00 I1 + B00 V1 alone): exact over dt

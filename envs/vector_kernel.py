@@ -178,7 +178,11 @@ def _substep(i1, a, vm, rx, pk, tot, h00, h01, f0, g01, h10, h11, f1, g11, ig):
     (rx I2 at its start), and where neither sign is consistent (|the end I2 with the clamp's part of V2 at 0| <=
     |g11| |V2c|) the rectifier blocks: I2 = 0 at the end, V2's clamp part the one that holds it there (within the
     clamp; the diode rectifier's set-valued V2 at I2 = 0, as :func:`_clamp_implicit` for a detuned tank); ``ig`` =
-    -1 / g11 (g11 < 0: V2 opposes I2). Without a branch: the end I2 is the soft threshold of the one with the clamp's
+    -1 / g11 (g11 < 0: V2 opposes I2; with g11 >= 0 the soft threshold would pump energy). g11 < 0 holds because
+    the sub-step ``h`` is at most one rectifier period, ``h <= pi/w``: eq. 4's tanks exchange energy at
+    ``w_n = k w / 2`` (``k = Lm / sqrt(L1 L2) < 1``), so ``w_n h < pi/2``, and g11 = -sin(w_n h) / (2 L2 w_n) (the
+    lossless tank; the resistances damp it) is < 0 for ``w_n h < pi``; :func:`envs.core._zoh_coefficients` raises
+    if a table has g11 >= 0 (a patched, too small n_sub). Without a branch: the end I2 is the soft threshold of the one with the clamp's
     part of V2 at 0, and that part its clip to the clamp. Returns
     ``(i1, i2, peak |I2|, sum of |I2| means)`` after it (mean |I2| on the linear sub-step from a to b: (|a| + |b|)/2,
     or (a^2 + b^2) / (2 (|a| + |b|)) when it crosses zero)."""

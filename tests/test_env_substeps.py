@@ -23,7 +23,9 @@ ENVELOPE = EnvConfig(link_model="envelope")
 def _energy(monkeypatch, n_sub, scenario, n=64, steps=300, seed=11):
     """Total rectified energy [J] of ``n`` windows of the vector env over one episode of uniform random actions
     (a new duty every step), the link's sub-steps patched to ``n_sub`` (the sub-step coefficients are made for
-    ``dt / n_sub`` from the same property, :func:`envs.core._zoh_coefficients`)."""
+    ``dt / n_sub`` from the same property, :func:`envs.core._zoh_coefficients`). ``n_sub`` = 5 (sub-steps of 3.4
+    rectifier periods) is valid only while these windows' Lm < 3.9e-5 H (the sub-step's g11 < 0; above it
+    ``_zoh_coefficients`` raises, :func:`test_too_few_substeps_for_the_coupling_are_refused`)."""
     monkeypatch.setattr(EnvConfig, "n_sub", property(lambda self: n_sub))
     env = SbarChargingVectorEnv(n, scenario, ENVELOPE)
     env.reset(seed=seed)
@@ -139,3 +141,18 @@ def test_the_single_env_blocks_at_one_rectifier_period():
     i1 = st[SINGLE.i1]
     info = env.step(duty0)[4]
     assert info["i2_a"] == 0.0 and info["v2_v"] == pytest.approx(wlm * i1, rel=1e-12)
+
+
+def test_too_few_substeps_for_the_coupling_are_refused(monkeypatch):
+    """The implicit clamp needs the sub-step's g11 (I2 per volt of V2) < 0, true for sub-steps of at most one
+    rectifier period (envs.vector_kernel._substep); 5 sub-steps of the 100 us step (3.4 periods) lose it at Lm ~
+    3.9e-5 H, and the coefficients are refused with the Lm and n_sub named."""
+    from envs.core import _zoh_coefficients
+    from envs.layout import COEF
+    cfg = EnvConfig(link_model="envelope")
+    lm = np.array([1e-5, 3.8e-5, 6.6e-5])
+    assert np.all(_zoh_coefficients(cfg.link, lm, cfg)[:, COEF.g11] < 0.0)   # 17: every Lm up to k ~ 1
+    monkeypatch.setattr(EnvConfig, "n_sub", property(lambda self: 5))
+    assert np.all(_zoh_coefficients(cfg.link, lm[:2], cfg)[:, COEF.g11] < 0.0)
+    with pytest.raises(ValueError, match=r"^Lm = 6\.6e-05 H with n_sub = 5 .* g11 = .* >= 0; valid: .* n_sub >= 17$"):
+        _zoh_coefficients(cfg.link, lm, cfg)
