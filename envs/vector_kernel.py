@@ -286,7 +286,10 @@ def _complex_step(x, vl, d, cc, vf, dr, v1, n_sub):
 def _inst_peak(pk, d, vl, tab, vlc, inv_imax):
     """Instantaneous peak [A] (:mod:`envs.peaks`) for the envelope peak ``pk``, duty ``d``, battery
     voltage ``vl``: bilinear in (duty, sqrt(pk / I2_MAX_A)) on the (n_d, n_i, 2) table of
-    :func:`envs.peaks.fold_vl`, then ``pk + A + B (VL - vlc)``."""
+    :func:`envs.peaks.fold_vl`, then ``pk + A + B (VL - vlc)``; 0 for ``pk`` = 0 (the rectifier blocked the whole
+    step: no current, where the table's row at pk = 0 would give its 0.25-1.0 A ripple excess)."""
+    if pk == 0.0:
+        return 0.0
     nd, ni = tab.shape[0], tab.shape[1]
     x = d * (nd - 1)
     y = math.sqrt(min(pk * inv_imax, 1.0)) * (ni - 1)

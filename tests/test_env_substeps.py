@@ -84,6 +84,8 @@ def test_a_blocked_window_holds_i2_at_zero_until_the_emf_exceeds_the_clamp():
         assert max(abs(i1), abs(i1_end)) * wlm < clamp()   # (the setup is in the band)
         info = env.step(duty0)[4]
         assert info["i2_a"] == 0.0 and info["rect_current_a"] == 0.0 and info["energy_j"] == 0.0
+        # no current, no peak (the peak table's row at envelope 0 would add its 0.25-1.0 A ripple excess)
+        assert info["i2_peak_envelope_a"] == 0.0 and info["i2_peak_a"] == 0.0
         assert info["v2_v"] == pytest.approx(wlm * i1, rel=1e-12)
         assert info["i1_a"] == pytest.approx(i1_end, rel=1e-12, abs=1e-12)
     # released: this step's end emf would exceed the clamp, so I2 grows
@@ -104,6 +106,8 @@ def _energy_blocked(monkeypatch, n_sub, scenario, dt_s, n=64, steps=300, seed=11
         info = env.step(rng.uniform(-1.0, 1.0, (n, 1)).astype(np.float32))[4]
         total += info["energy_j"].sum()
         blocked += int(np.sum(info["i2_a"] == 0.0))
+        # a step blocked throughout has no current, so no instantaneous peak either
+        assert np.all(info["i2_peak_a"][info["i2_peak_envelope_a"] == 0.0] == 0.0)
     monkeypatch.undo()
     return total, blocked / (n * steps)
 
