@@ -44,13 +44,13 @@ from mission_sim.validation import YAML_NUMBER_NOTE, Range, check_number
 from wpt_receiver import TABLE_I, LinkParams, duty_from_v2_clipped, state_matrices, steady_state, zoh_discretise
 from wpt_receiver.sbar import rectifier_current, short_weight
 
+from .duty_sine import sin_cos_half_pi
 from .layout import BAT, COEF, STATE, XC
 from .plant import battery_operating_point, lm_window_h
 
 __all__ = ["LINK_MODELS", "window_lm", "EnvConfig", "RewardWeights", "Plans", "DetunedPlan", "build_plans", "OBS_SCALE", "OBS_OFFSET", "N_COEF", "N_BAT", "kernel_function", "kernel_ref", "kernel_from_ref", "as_config", "given_config",
            "CONTROL_PERIOD_RANGE"]
 
-HALF_PI = 0.5 * math.pi
 FOUR_OVER_PI = 4.0 / math.pi
 N_COEF = len(COEF)
 N_BAT = len(BAT)
@@ -403,7 +403,7 @@ def _detuned_plans(link, lm, c1_rel, c2_rel, vl0, d0, cfg: EnvConfig):
     uk, back = np.unique(keys, axis=0, return_inverse=True)
     coef = zoh_complex(link, uk[:, 0], uk[:, 1], uk[:, 2], cfg.dt_s / cfg.n_sub)[back.ravel()].reshape(n, S, 32)
     vf, dr = cfg.device_terms
-    v2 = FOUR_OVER_PI * (vl0 + vf) * (1.0 - np.sin(HALF_PI * d0))
+    v2 = FOUR_OVER_PI * (vl0 + vf) * (1.0 - sin_cos_half_pi(d0)[0])
     j1, j2 = complex_steady(link, lm[:, 0], c1, c2, v2, dr * short_weight(d0))
     xc0 = np.empty((n, len(XC)))
     xc0[:, XC.re_j1], xc0[:, XC.re_j2], xc0[:, XC.im_j1], xc0[:, XC.im_j2] = j1.real, j2.real, j1.imag, j2.imag
@@ -419,6 +419,11 @@ def _zoh_coefficients(link: LinkParams, lm, cfg: EnvConfig) -> np.ndarray:
     ad3, bd3 = zoh_discretise(np.concatenate([a, a, a]), b, dt)
     ad, am, ah = ad3[:n], ad3[n:2 * n], ad3[2 * n:]
     bd, bm, bh = bd3[:n], bd3[n:2 * n], bd3[2 * n:]
+    bad = np.flatnonzero(bh[:, 1, 1] >= 0.0)   # the implicit clamp's g11 (envs.vector_kernel._substep) must be < 0
+    if bad.size:
+        raise ValueError(f"Lm = {lm.ravel()[bad[0]]:.4g} H with n_sub = {cfg.n_sub} (sub-step {cfg.dt_s / cfg.n_sub:.3g} s) "
+                         f"gives the sub-step's g11 = {bh[bad[0], 1, 1]:.3g} >= 0; valid: sub-steps of at most one "
+                         f"rectifier period, n_sub >= {math.ceil(cfg.dt_s / link.rectifier_period_s - 1e-9)}")
     v1 = link.v1_amp_v
     # the blocked step (I2 = 0 held by V2 = -(A10 I1 + B10 V1) / B11; eq. 4's B10 = 0 and B01 = 0, so
     # V2 = A10 I1 / -B11 = w Lm I1 and dI1/dt = A00 I1 + B00 V1 alone): exact over dt
@@ -447,7 +452,7 @@ def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig):
         il = v2 * i2 / (2.0 * (vl + vf))
         vl = ocv + (r0 + r1) * (il - i_load)
     d0 = duty_from_v2_clipped(v2, vl + vf)
-    v2 = FOUR_OVER_PI * (vl + vf) * (1.0 - np.sin(HALF_PI * d0))
+    v2 = FOUR_OVER_PI * (vl + vf) * (1.0 - sin_cos_half_pi(d0)[0])
     # steady state with V2 = v2 + dr w(d0) I2 (eq. 4; i2 > 0: V2 <= RM's, below w Lm V1 / R1)
     r2e = link.r2_ohm + dr * short_weight(d0)
     wlm = link.omega_rad_s * np.asarray(lm0, dtype=float)

@@ -149,9 +149,9 @@ def _link_step_s(i1, i2, vl, d, s, co, c, r, vf, dr):
     with duty ``d`` held (``s = sin(pi/2 d)``, ``co = cos(pi/2 d)``), the coefficients ``c[r]`` (row ``r`` of a table: no row view),
     the devices ``vf`` [V], ``dr`` [ohm]: ``(i1n, i2n, pk, il, v2, split, |V2c|, rx)``. ``pk`` the largest |I2|
     at mid-step and at the end, ``il`` the SBAR output current (the clamp's ``V2c I2 / (2 VC)``, Simpson's
-    rule on I2), ``v2`` the V2 applied; ``split``: the I2 envelope changes sign within the step (re-done in
-    rectifier-period sub-steps, :func:`_substep`, with the clamp's |V2c| and the short-window excess
-    ``rx I2``)."""
+    rule on I2), ``v2`` the V2 applied; ``split``: the I2 envelope changes sign within the step, or the step
+    started blocked (I2 = 0) and the rectifier released (either re-done in rectifier-period sub-steps,
+    :func:`_substep`, with the clamp's |V2c| and the short-window excess ``rx I2``)."""
     vc = vl + vf
     mag, rx = _sbar_s(vc, s, co, d, dr)
     sg = _sign(i2)
@@ -178,7 +178,11 @@ def _substep(i1, a, vm, rx, pk, tot, h00, h01, f0, g01, h10, h11, f1, g11, ig):
     (rx I2 at its start), and where neither sign is consistent (|the end I2 with the clamp's part of V2 at 0| <=
     |g11| |V2c|) the rectifier blocks: I2 = 0 at the end, V2's clamp part the one that holds it there (within the
     clamp; the diode rectifier's set-valued V2 at I2 = 0, as :func:`_clamp_implicit` for a detuned tank); ``ig`` =
-    -1 / g11 (g11 < 0: V2 opposes I2). Without a branch: the end I2 is the soft threshold of the one with the clamp's
+    -1 / g11 (g11 < 0: V2 opposes I2; with g11 >= 0 the soft threshold would pump energy). g11 < 0 holds
+    because the sub-step ``h`` is at most one rectifier period, ``h <= pi/w``: eq. 4's tanks exchange energy at
+    ``w_n = k w / 2`` (``k = Lm / sqrt(L1 L2) < 1``), so ``w_n h < pi/2``, and g11 = -sin(w_n h) / (2 L2 w_n)
+    (the lossless tank; the resistances damp it) is < 0 for ``w_n h < pi``; :func:`envs.core._zoh_coefficients`
+    raises if a table has g11 >= 0 (a patched, too small n_sub). Without a branch: the end I2 is the soft threshold of the one with the clamp's
     part of V2 at 0, and that part its clip to the clamp. Returns
     ``(i1, i2, peak |I2|, sum of |I2| means)`` after it (mean |I2| on the linear sub-step from a to b: (|a| + |b|)/2,
     or (a^2 + b^2) / (2 (|a| + |b|)) when it crosses zero)."""
@@ -282,7 +286,10 @@ def _complex_step(x, vl, d, cc, vf, dr, v1, n_sub):
 def _inst_peak(pk, d, vl, tab, vlc, inv_imax):
     """Instantaneous peak [A] (:mod:`envs.peaks`) for the envelope peak ``pk``, duty ``d``, battery
     voltage ``vl``: bilinear in (duty, sqrt(pk / I2_MAX_A)) on the (n_d, n_i, 2) table of
-    :func:`envs.peaks.fold_vl`, then ``pk + A + B (VL - vlc)``."""
+    :func:`envs.peaks.fold_vl`, then ``pk + A + B (VL - vlc)``; 0 for ``pk`` = 0 (the rectifier blocked the whole
+    step: no current, where the table's row at pk = 0 would give its 0.25-1.0 A ripple excess)."""
+    if pk == 0.0:
+        return 0.0
     nd, ni = tab.shape[0], tab.shape[1]
     x = d * (nd - 1)
     y = math.sqrt(min(pk * inv_imax, 1.0)) * (ni - 1)
@@ -389,7 +396,6 @@ def _link_pass(lo, hi, d, state, k, j, coef_tab, coef_ix, slow_every, n_sub, vf,
     detuned, xc, ccoef, v1 = cx
     has_cx = detuned.shape[0] > 0
     m = 0
-    sub = n_sub > 1
     ulo = _U(lo)
     for e in range(ulo, _U(hi)):   # the duty's sines and cosines first: a short loop, overlapped across windows
         sc[7, e - ulo], sc[8, e - ulo] = _sin_cos(d[e])
@@ -410,15 +416,16 @@ def _link_pass(lo, hi, d, state, k, j, coef_tab, coef_ix, slow_every, n_sub, vf,
         # every time and kept when the step splits
         idx[m] = e
         sc[5, m], sc[6, m] = vm, rx
-        m += split & sub
+        m += split
     return m
 
 
 @njit(cache=True, error_model="numpy")
 def _substep_pass(lo, idx, m, state, j, coef_tab, coef_ix, n_sub, vf, sc, w, h):
     """Pass 2: the split steps ``idx[:m]`` re-done in ``n_sub`` sub-steps (:func:`_substep`), the sub-step
-    loop outside; results into ``sc`` (the clamp's |V2c| and the excess rx those of pass 1: a split
-    step has sign(I2) = +-1, so |V2c| is the sub-steps' magnitude to the bit; no second sine). ``w``
+    loop outside; results into ``sc`` (the clamp's |V2c| and the excess rx those of pass 1: |V2c| does not depend
+    on sign(I2), so pass 1's magnitude is the sub-steps' to the bit whether the split step starts at I2 != 0 or
+    at I2 = 0, a release; no second sine). ``w``
     (6, >= m) i1, i2, |V2c|, peak |I2| (from -1), sum of |I2| means (from 0), rx and ``h`` (9, >= m)
     the sub-step coefficients: scratch."""
     for q in range(_U(m)):
@@ -544,7 +551,7 @@ def single_step(k, d, st, steps, slow, par, obs, out, cc):
         i1, i2, pk, il, v2 = _complex_step(x, vl_old, d, cc[j], vf, dr, par[P.v1], n_sub)
     else:
         i1, i2, pk, il, v2, split, vm, rx = _link_step(st[SINGLE.i1], st[SINGLE.i2], vl_old, d, slow, j, vf, dr)
-        if n_sub > 1 and split:
+        if split:   # also at n_sub = 1 (dt_s <= one rectifier period): the one sub-step takes the clamp implicitly
             i1, i2, pk, il = _substeps_one(st[SINGLE.i1], st[SINGLE.i2], vm, rx, vl_old + vf, slow, j, n_sub)
     pk_env = pk
     ptab = par[len(P) + 16:].reshape((int(par[P.nd]), int(par[P.ni]), int(par[P.nq])))

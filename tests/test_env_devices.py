@@ -35,7 +35,11 @@ def test_ideal_devices_reproduce_the_env_before_devices(compiled):
     explicit sub-steps being wrong there. With the duty held no step of these windows changes I2's sign, so no step
     is re-done in sub-steps and the old and new link are the same arithmetic: the comparison is again only about
     what this test is for (ideal devices == no devices). Regenerated on ffada78's tree by
-    ``benchmarks/record_env_ideal_golden.py`` (its docstring has the command)."""
+    ``benchmarks/record_env_ideal_golden.py`` (its docstring has the command).
+
+    So the held-duty golden never splits: ideal == no devices on the sub-step path (split steps, blocking) is not
+    compared here; it is covered only structurally, by ``device_terms == (0, 0)`` for ``"ideal"`` (the sub-steps
+    take the devices only through ``vf`` and ``dr``)."""
     if compiled:
         pytest.importorskip("numba")
     g = np.load(GOLDEN)
