@@ -23,11 +23,13 @@ from policies import make
 RING_S = 1.5e-3   # the compared ring-down: 15 control periods, a third of I1's decay time 2 L1 / (R1 + 2 Ron)
 
 
-def _drift(rectify):
+def _drift(rectify, **link):
     """Hover over pad 0 at the nominal gap, then drift sideways at 0.1 m/s (still 'hover': an energising phase)
-    until k falls below tx_min_k: the pad switches off unplanned, V1 ramps down over link.tx_ramp_s."""
+    until k falls below tx_min_k: the pad switches off unplanned, V1 ramps down over link.tx_ramp_s (``link``:
+    overrides of the config's link section)."""
     cfg = load_config()
-    cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, rectify_after_pad_off=rectify))
+    cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, rectify_after_pad_off=rectify),
+                              link=dataclasses.replace(cfg.link, **link))
     t = np.arange(0.0, 6.0, 0.05)
     pos = np.zeros((len(t), 3))
     pos[:, 2] = cfg.mission.hover_gap_m
@@ -130,6 +132,29 @@ def test_without_the_protection_the_secondary_is_shorted(drift_off, drift_short)
     assert (ts["v2_v"].to_numpy()[off:off + 10] == 0.0).all()
     assert res.summary["peak_i2_a"] > cfg.link.rated_i2_a
     assert drift_off[1].summary["peak_i2_a"] < cfg.link.rated_i2_a < res.summary["peak_i2_a"]
+
+
+def test_a_slow_ring_down_is_carried_by_coarse_steps():
+    """Ideal devices and r1_ohm = 1e-3: the primary's ring-down time 2 L1 / R1 is ~0.1 s, 1000 control periods.
+    Once the protection's diodes block (I2 held at 0) coarse steps carry it, so the fine window ends at
+    sim.max_fine_s as with the option off (before: 18,093 rows after the switch-off, I1 still 0.14 A at the run's
+    end); the physics holds (I2 ~ 0, the energy balance to rounding, the currents die out)."""
+    on = _drift(True, devices="ideal", r1_ohm=1e-3)
+    off = _drift(False, devices="ideal", r1_ohm=1e-3)
+    n_on, n_off = (len(r.timeseries) - k for _, r, _, k in (on, off))
+    assert n_on < 1.5 * n_off            # 230 vs 206 rows
+    cfg, res, _, k = on
+    ts = res.timeseries
+    assert np.abs(ts["i2_amp_a"].to_numpy()[k:]).max() < 1e-6
+    assert res.summary["energy_balance_error_rel"] < 1e-12
+    assert ts["e_rectifier_j"].to_numpy()[k:].min() >= -1e-9
+    # coarse rows while the primary still rings (I1 > 0.1 A), the diodes blocking in them: I1 decays as the lone
+    # primary's exp(-R1 t / (2 L1)) (no Ron: ideal devices) to the run's end, 1.9 s later (0.0214 vs 0.0216 of I1 at
+    # the first V1 = 0 row; a v2 held over each whole coarse step instead drains it within 0.06 s into R2)
+    i1, t = ts["i1_amp_a"].to_numpy(), ts["t_s"].to_numpy()
+    assert ((i1[k:] > 0.1) & ~ts["fine"].to_numpy()[k:]).any()
+    l1 = hover_inductances(cfg.coupling, cfg.mission.hover_gap_m)[0]
+    assert i1[-1] / i1[k] == pytest.approx(np.exp(-cfg.link.r1_ohm / (2 * l1) * (t[-1] - t[k])), rel=0.02)
 
 
 @pytest.mark.parametrize("value", [1, "true", None])
