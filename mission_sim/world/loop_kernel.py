@@ -171,15 +171,15 @@ def link_stored_j(c, a0, a1):
 
 
 @njit(cache=True)
-def _track_peak(st, c, lk, i2c, d, dt_each, vl, live):
+def _track_peak(st, c, lk, i2c, d, dt_each, vl, live, blocked):
     """Running peaks: of the i2 fundamental |I2| (and the duty there), of the instantaneous |i2| (the
     SBAR's harmonic ripple added, :func:`wpt_receiver.modal_kernel.inst_peak` at the clamp ``VL + Vf``, while
-    it conducts, ``live``: :func:`_sbar_live`, and not blocked by the protection; else no ripple), and the time
-    |I2| is above rated (``dt_each`` per value)."""
+    it conducts, ``live``: :func:`_sbar_live`, and not ``blocked`` by the protection: :func:`_sbar_v2`; else no
+    ripple), and the time |I2| is above rated (``dt_each`` per value)."""
     a = abs(i2c)
     if a > st.peak_env:
         st.peak_env, st.peak_d = a, d
-    pk = inst_peak(lk[0], lk[1], d, i2c, vl + c.vf) if live and (st.v1 > 0.0 or a > 1e-6) else a
+    pk = inst_peak(lk[0], lk[1], d, i2c, vl + c.vf) if live and not blocked else a
     if pk > st.peak_inst:
         st.peak_inst = pk
     if a > c.rated:
@@ -379,7 +379,7 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
         zq = z.copy()
         for _ in range(nq - 1):
             advance_z(mc, zc4, zq, v1c, v2)
-            _track_peak(st, c, lk, phasors(mc, zq, v1c, v2)[1], d, dt / nq, vl, live)
+            _track_peak(st, c, lk, phasors(mc, zq, v1c, v2)[1], d, dt / nq, vl, live, blocked)
     out = np.empty(9)
     modal_step(lc, mc, zc, dt, z, v1c, v2, out)
     i_l = rect_current_a(f, complex(out[2], out[3]), dt)
@@ -390,7 +390,7 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
         st.tmp_ib = i_b
         return _NEED_DEPLETE
     i1n, i2n = phasors(mc, z, v1c, v2)
-    _track_peak(st, c, lk, i2n, d, dt / nq if fine else dt, vl, live)
+    _track_peak(st, c, lk, i2n, d, dt / nq if fine else dt, vl, live, blocked)
     a2 = abs(i2n)
     y0, y1 = abs(i1n), (a2 if i2n.real >= 0.0 else -a2)
     st.z[:] = z
@@ -399,7 +399,7 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
     st.last_vl, st.last_ib, st.last_il, st.prot_blocked = vl, i_b, i_l, blocked
     e_out = vl * i_l * dt
     # v2's fundamental in phase with i2 (while the protection's diodes block, |I2| ~ 1e-10 A: its phase is rounding)
-    v2_row = (v2 * i2n.conjugate()).real / a2 if a2 > (1e-6 if (live and v1 == 0.0) else 0.0) else v2.real
+    v2_row = (v2 * i2n.conjugate()).real / a2 if a2 > 0.0 and not blocked else v2.real
     _write_row(st, c, rows, (t0 + dt, dt, float(row_k), lm, v1, y0, y1, d, v2_row, i_l, vl, i_b, soc, st.cmd,
                              1.0 if fine else 0.0, out[6]), out[7] + out[8] - jump - e_out, i_l * dt,
                short_weight(d), e_out, e_chem, e_r0, e_r1, e_c1, vl * i_p * dt)
