@@ -56,7 +56,7 @@ import numpy as np
 from numba import from_dtype, njit, types
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
-from wpt_receiver.modal_kernel import (N_ZOH_C, advance_z, end_i2, inst_peak, modes, phasors, readout,
+from wpt_receiver.modal_kernel import (N_ZOH_C, advance_z, end_i2_affine, inst_peak, modes, phasors, readout,
                                        rect_affine, rect_current_a, refine_level, sbar_implicit, short_weight,
                                        steady_modes, stored_energy_j, zoh)
 from wpt_receiver.modal_kernel import step as modal_step
@@ -334,9 +334,9 @@ def _sbar_v2(st, c, lk, mc, zc, v1c, live, d):
         # step to step, ringing at ~2 A and rectifying backwards); else they conduct (the clamp, below)
         vc = st.last_vl + c.vf
         z0, z1 = complex(st.z[0], st.z[1]), complex(st.z[2], st.z[3])
-        q0 = end_i2(mc, zc, z0, z1, v1c, 0j)
-        vb = -q0 / (end_i2(mc, zc, z0, z1, v1c, 1.0 + 0j) - q0)
-        if abs(vb) <= 4.0 / math.pi * vc:
+        q0, q1 = end_i2_affine(mc, zc, z0, z1, v1c)
+        vb = -q0 / q1
+        if abs(vb) <= _FOUR_PI * vc:
             f = vb / vc
             return f, f * c.vf, True
     ws = c.dr_short * short_weight(d)
