@@ -164,3 +164,13 @@ def test_the_option_is_a_boolean(value):
         config_from_dict(d)
     assert config_from_dict(apply_overrides(config_to_dict(load_config()),
                                             {"sim.rectify_after_pad_off": False})).sim.rectify_after_pad_off is False
+
+
+@pytest.mark.parametrize("value", [np.bool_(False), np.bool_(True)])
+def test_the_option_takes_numpy_bools(value):
+    """A sweep's grid (np.array([True, False])) hands numpy's bool: accepted through the overrides and the
+    dataclass, stored as a Python bool (the config hashes and dumps it as TOML)."""
+    cfg = config_from_dict(apply_overrides(config_to_dict(load_config()), {"sim.rectify_after_pad_off": value}))
+    assert type(cfg.sim.rectify_after_pad_off) is bool and cfg.sim.rectify_after_pad_off == bool(value)
+    sim = dataclasses.replace(load_config().sim, rectify_after_pad_off=value)
+    assert type(sim.rectify_after_pad_off) is bool and sim.rectify_after_pad_off == bool(value)
