@@ -329,9 +329,13 @@ def _sbar_v2(st, c, lk, mc, zc, v1c, live, d):
         return 0j, 0j, False
     if st.v1 == 0.0:
         # the protection (d = 0, diodes only) after the pad's switch-off: the diodes block when the V2 that holds
-        # the step's end I2 at 0 lies within the clamp's fundamental (4/pi)(VL + Vf) (the secondary's emf w Lm I1
-        # is below it: discontinuous conduction; the envelope's always-conducting clamp there flips its sign
-        # step to step, ringing at ~2 A and rectifying backwards); else they conduct (the clamp, below)
+        # the step's end I2 at 0 lies within the clamp's fundamental (4/pi)(VL + Vf): the envelope's
+        # always-conducting clamp cannot carry current below it (there it flips its sign step to step, ringing at
+        # ~2 A and rectifying backwards); else they conduct (the clamp, below). Real diodes conduct
+        # (discontinuously) once the emf w Lm I1 passes VL + Vf, neglected here: SwitchingLink from I2 = 0 at
+        # emf / (VL + Vf) 1.1 / 1.2 / 1.27 gives 0.13 / 0.58 / 1.17 A, 0.3 / 3.2 / 7.4 % of the primary's stored
+        # energy into the battery; a d = 0 drift switch-off at 1.22: 1.2 of 26 mJ vs the kernel's 0.4 mJ
+        # (tests/test_pad_switch_off.py, docs/mission.md "Pad switch-off")
         vc = st.last_vl + c.vf
         z0, z1 = complex(st.z[0], st.z[1]), complex(st.z[2], st.z[3])
         q0, q1 = end_i2_affine(mc, zc, z0, z1, v1c)
