@@ -19,6 +19,8 @@ from dataclasses import asdict, dataclass, field, fields
 from importlib import resources
 from pathlib import Path
 
+import numpy as np
+
 from wpt_receiver import LinkParams
 from wpt_receiver.coupling import NOMINAL_GAP_M
 
@@ -224,8 +226,9 @@ class SimConfig:
 
     def __post_init__(self):
         check_number_fields(self)
-        if not isinstance(self.rectify_after_pad_off, bool):
+        if not isinstance(self.rectify_after_pad_off, (bool, np.bool_)):   # numpy's bool too (a sweep's grid)
             raise ValueError(f"rectify_after_pad_off={self.rectify_after_pad_off!r} is invalid; valid values: true, false")
+        object.__setattr__(self, "rectify_after_pad_off", bool(self.rectify_after_pad_off))
         check_positive(self, "control_period_s", "traj_dt_s", "flight_dt_s", "min_fine_s", "max_fine_s",
                   "settle_duty_tol", "duty_event_tol", "lm_rel_tol", "coarse_policy_period_s", "settle_i2_tol_a", "bms_period_s")
         check_positive(self, "i2_noise_a", "cmd_deadband_a", "tx_off_delay_s", allow_zero=True)
@@ -456,10 +459,10 @@ def _coerce(section: str, cls, name: str, value):
         if not isinstance(value, str):
             raise ValueError(f"{key}={value!r} is invalid; valid type: string")
         return value
-    if ftype == "bool":
-        if not isinstance(value, bool):
+    if ftype == "bool":   # numpy's bool too (a sweep's grid), as a Python bool
+        if not isinstance(value, (bool, np.bool_)):
             raise ValueError(f"{key}={value!r} is invalid; valid values: true, false")
-        return value
+        return bool(value)
     if ftype == "int":   # numbers.Real: numpy's integers and floats too (np.arange, np.linspace)
         if isinstance(value, bool) or not isinstance(value, numbers.Real) or (
                 not math.isfinite(value)) or int(value) != value:

@@ -74,7 +74,7 @@ from .devices import IDEAL, DeviceSet
 from .params import LinkParams
 from .sbar import check_duty_run
 
-__all__ = ["link_constants", "modes", "zoh", "step", "steady_modes", "readout", "advance_z", "phasors", "stored_energy_j", "sbar_v2", "sbar_edge", "sbar_shift", "sbar_clamp_f", "sbar_implicit", "end_i2", "blocking_v2", "short_weight", "inst_peak",
+__all__ = ["link_constants", "modes", "zoh", "step", "steady_modes", "readout", "advance_z", "phasors", "stored_energy_j", "sbar_v2", "sbar_edge", "sbar_shift", "sbar_clamp_f", "sbar_implicit", "end_i2", "end_i2_affine", "blocking_v2", "short_weight", "inst_peak",
            "build_table", "modal_table", "run_duties", "held_peak", "steady_state", "rect_current_a", "rect_affine", "N_MODES_C", "N_ZOH_C",
            "LC_NAMES", "refine_level", "REFINE_TOL", "REFINE_LEVELS"]
 
@@ -471,6 +471,14 @@ def end_i2(mc, zc, z0, z1, v1, v2):
 
 
 @njit(cache=True)
+def end_i2_affine(mc, zc, z0, z1, v1):
+    """The step's end I2 phasor as affine in the held V2, ``i2_end = q0 + q1 V2``: ``(q0, q1)`` [A, A/V]
+    (:func:`end_i2` at V2 = 0 and per volt)."""
+    q0 = end_i2(mc, zc, z0, z1, v1, 0j)
+    return q0, end_i2(mc, zc, z0, z1, v1, 1.0 + 0j) - q0
+
+
+@njit(cache=True)
 def _edge_gap(lc, tab, d, e, sgn, vc, ws, q0, q1, den):
     """``e - e_end`` [rad]: the commutation angle ``e`` against the one of the step's end i2 when the v2
     of ``e`` is held (:func:`sbar_implicit`)."""
@@ -525,8 +533,7 @@ def sbar_implicit(lc, tab, mc, zc, z0, z1, v1, v2_held, d_short, vc_v, ws, e_gue
     vc = vc_v
     i2a = readout(mc, 1, z0, z1, v1, v2_held)
     sgn = -1.0 if i2a.real < 0.0 else 1.0
-    q0 = end_i2(mc, zc, z0, z1, v1, 0j)
-    q1 = end_i2(mc, zc, z0, z1, v1, 1.0 + 0j) - q0
+    q0, q1 = end_i2_affine(mc, zc, z0, z1, v1)
     den = 1.0 - ws * q1
     wd = 0.5 * math.pi * min(max(d, 0.0), 1.0)
     lo, hi = wd, math.pi - wd

@@ -56,7 +56,7 @@ import numpy as np
 from numba import from_dtype, njit, types
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
-from wpt_receiver.modal_kernel import (N_ZOH_C, advance_z, end_i2, inst_peak, modes, phasors, readout,
+from wpt_receiver.modal_kernel import (N_ZOH_C, advance_z, end_i2_affine, inst_peak, modes, phasors, readout,
                                        rect_affine, rect_current_a, refine_level, sbar_implicit, short_weight,
                                        steady_modes, stored_energy_j, zoh)
 from wpt_receiver.modal_kernel import step as modal_step
@@ -87,6 +87,7 @@ __all__ = ["advance", "advance_for", "link_disc", "link_step", "link_stored_j", 
 
 _E0, _N_ENERGY = 15, 11   # the rows' energy columns (e_source_j .. e_rectifier_switches_j, loop._COLUMNS)
 _SOC_COL = 12
+_FINE_COL = 14
 _FOUR_PI = 4.0 / math.pi
 _F8 = types.float64[::1]
 POLICY_FN = types.FunctionType(types.float64(_F8, _F8, _F8))
@@ -170,15 +171,15 @@ def link_stored_j(c, a0, a1):
 
 
 @njit(cache=True)
-def _track_peak(st, c, lk, i2c, d, dt_each, vl, live):
+def _track_peak(st, c, lk, i2c, d, dt_each, vl, live, blocked):
     """Running peaks: of the i2 fundamental |I2| (and the duty there), of the instantaneous |i2| (the
     SBAR's harmonic ripple added, :func:`wpt_receiver.modal_kernel.inst_peak` at the clamp ``VL + Vf``, while
-    it conducts, ``live``: :func:`_sbar_live`, and not blocked by the protection; else no ripple), and the time
-    |I2| is above rated (``dt_each`` per value)."""
+    it conducts, ``live``: :func:`_sbar_live`, and not ``blocked`` by the protection: :func:`_sbar_v2`; else no
+    ripple), and the time |I2| is above rated (``dt_each`` per value)."""
     a = abs(i2c)
     if a > st.peak_env:
         st.peak_env, st.peak_d = a, d
-    pk = inst_peak(lk[0], lk[1], d, i2c, vl + c.vf) if live and (st.v1 > 0.0 or a > 1e-6) else a
+    pk = inst_peak(lk[0], lk[1], d, i2c, vl + c.vf) if live and not blocked else a
     if pk > st.peak_inst:
         st.peak_inst = pk
     if a > c.rated:
@@ -305,7 +306,8 @@ def _sbar_live(st, c, fine):
     """Whether the SBAR's v2 acts in a step: with the pad on, and in fine steps while the protection holds d = 0
     after the pad's V1 has reached 0 (:func:`_protecting`). Otherwise v2 = 0 (the pad off: no current flows, or
     with ``sim.rectify_after_pad_off`` false the shorted secondary). Coarse steps with the pad off keep v2 = 0 (the
-    fine window does not end while the protection holds: :func:`_window_done`)."""
+    fine window does not end while the protection's diodes conduct: :func:`_window_done`; once they block, a coarse
+    step carries the ring-down in fine pieces, one row: :func:`_coarse_step`)."""
     return st.v1 > 0.0 or (fine and _protecting(st, c))
 
 
@@ -324,23 +326,27 @@ def _sbar_v2(st, c, lk, mc, zc, v1c, live, d):
     excess ``(2 Ron - Rd) w(d) I2`` at the applied duty ``d`` (:func:`_applied_duty`); 0 when the SBAR does not act
     (``live`` False: :func:`_sbar_live`)."""
     if not live:
-        return 0j, 0j
+        return 0j, 0j, False
     if st.v1 == 0.0:
         # the protection (d = 0, diodes only) after the pad's switch-off: the diodes block when the V2 that holds
-        # the step's end I2 at 0 lies within the clamp's fundamental (4/pi)(VL + Vf) (the secondary's emf w Lm I1
-        # is below it: discontinuous conduction; the envelope's always-conducting clamp there flips its sign
-        # step to step, ringing at ~2 A and rectifying backwards); else they conduct (the clamp, below)
+        # the step's end I2 at 0 lies within the clamp's fundamental (4/pi)(VL + Vf): the envelope's
+        # always-conducting clamp cannot carry current below it (there it flips its sign step to step, ringing at
+        # ~2 A and rectifying backwards); else they conduct (the clamp, below). Real diodes conduct
+        # (discontinuously) once the emf w Lm I1 passes VL + Vf, neglected here: SwitchingLink from I2 = 0 at
+        # emf / (VL + Vf) 1.1 / 1.2 / 1.27 gives 0.13 / 0.58 / 1.17 A, 0.3 / 3.2 / 7.4 % of the primary's stored
+        # energy into the battery; a d = 0 drift switch-off at 1.22: 1.2 of 26 mJ vs the kernel's 0.4 mJ
+        # (tests/test_pad_switch_off.py, docs/mission.md "Pad switch-off")
         vc = st.last_vl + c.vf
         z0, z1 = complex(st.z[0], st.z[1]), complex(st.z[2], st.z[3])
-        q0 = end_i2(mc, zc, z0, z1, v1c, 0j)
-        vb = -q0 / (end_i2(mc, zc, z0, z1, v1c, 1.0 + 0j) - q0)
-        if abs(vb) <= 4.0 / math.pi * vc:
+        q0, q1 = end_i2_affine(mc, zc, z0, z1, v1c)
+        vb = -q0 / q1
+        if abs(vb) <= _FOUR_PI * vc:
             f = vb / vc
-            return f, f * c.vf
+            return f, f * c.vf, True
     ws = c.dr_short * short_weight(d)
     f, i2e, _ = sbar_implicit(lk[0], lk[1], mc, zc, complex(st.z[0], st.z[1]), complex(st.z[2], st.z[3]), v1c,
                            complex(st.v2re, st.v2im), d, st.last_vl + c.vf, ws)
-    return f, f * c.vf + ws * i2e
+    return f, f * c.vf + ws * i2e, False
 
 
 @njit(cache=True)
@@ -360,7 +366,7 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
     v1c = complex(0.0, -v1)          # v1 = V1 sin(w t)
     live = _sbar_live(st, c, fine)
     d = _applied_duty(st, c, live)   # the row records it
-    f, v2x = _sbar_v2(st, c, lk, mc, zc, v1c, live, d)
+    f, v2x, blocked = _sbar_v2(st, c, lk, mc, zc, v1c, live, d)
     il0, il1 = rect_affine(mc, zc, dt, st.z, v1c, f, v2x)
     vl = _solve_vl(st, c, dt, il0, il1, p_prop)
     if math.isnan(vl):
@@ -377,7 +383,7 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
         zq = z.copy()
         for _ in range(nq - 1):
             advance_z(mc, zc4, zq, v1c, v2)
-            _track_peak(st, c, lk, phasors(mc, zq, v1c, v2)[1], d, dt / nq, vl, live)
+            _track_peak(st, c, lk, phasors(mc, zq, v1c, v2)[1], d, dt / nq, vl, live, blocked)
     out = np.empty(9)
     modal_step(lc, mc, zc, dt, z, v1c, v2, out)
     i_l = rect_current_a(f, complex(out[2], out[3]), dt)
@@ -388,16 +394,16 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
         st.tmp_ib = i_b
         return _NEED_DEPLETE
     i1n, i2n = phasors(mc, z, v1c, v2)
-    _track_peak(st, c, lk, i2n, d, dt / nq if fine else dt, vl, live)
+    _track_peak(st, c, lk, i2n, d, dt / nq if fine else dt, vl, live, blocked)
     a2 = abs(i2n)
     y0, y1 = abs(i1n), (a2 if i2n.real >= 0.0 else -a2)
     st.z[:] = z
     st.v2re, st.v2im, st.w_end = v2.real, v2.imag, stored_energy_j(lc, mc, z, v1c, v2, lm_eff)
     st.x0, st.x1, st.soc, st.vrc, st.p11, st.p22 = y0, y1, soc, vrc, out[4], out[5]
-    st.last_vl, st.last_ib, st.last_il = vl, i_b, i_l
+    st.last_vl, st.last_ib, st.last_il, st.prot_blocked = vl, i_b, i_l, blocked
     e_out = vl * i_l * dt
     # v2's fundamental in phase with i2 (while the protection's diodes block, |I2| ~ 1e-10 A: its phase is rounding)
-    v2_row = (v2 * i2n.conjugate()).real / a2 if a2 > (1e-6 if (live and v1 == 0.0) else 0.0) else v2.real
+    v2_row = (v2 * i2n.conjugate()).real / a2 if a2 > 0.0 and not blocked else v2.real
     _write_row(st, c, rows, (t0 + dt, dt, float(row_k), lm, v1, y0, y1, d, v2_row, i_l, vl, i_b, soc, st.cmd,
                              1.0 if fine else 0.0, out[6]), out[7] + out[8] - jump - e_out, i_l * dt,
                short_weight(d), e_out, e_chem, e_r0, e_r1, e_c1, vl * i_p * dt)
@@ -463,6 +469,35 @@ def _step_d(s, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
     if r == _NEED_DEPLETE:
         return _deplete(s, c, lk, rows, t0, dt, lm, p_prop, row_k, fine)
     return r
+
+
+@njit(cache=True)
+def _coarse_step(s, c, lk, rows, t0, dt, lm, p_prop, row_k):
+    """A coarse step (:func:`_step_d`); while the protection holds d = 0 with its diodes blocking
+    (``prot_blocked``: I2 held at 0, the primary decays on its own in R1 + 2 Ron over 2 L1 / (R1 + 2 Ron), up to
+    seconds with small R1) it is carried in fine steps of at most ``dtc`` (:func:`_fine_step`, the blocked v2
+    decided per step: a v2 held over a long step cannot keep I2 at 0 within it, the beat would drain the primary
+    into R2) until the currents have died out, then one step with v2 = 0; merged into one row (a coarse row:
+    ``fine`` 0), so the fine window ends at ``max_fine_s`` (:func:`_window_done`) and the rows stay bounded."""
+    st = s[0]
+    if not (_protecting(st, c) and st.prot_blocked):
+        return _step_d(s, c, lk, rows, t0, dt, lm, p_prop, row_k, False)
+    n0 = st.n_rows
+    t, t_end = t0, t0 + dt
+    while t < t_end - 1e-12:
+        st = s[0]
+        if _protecting(st, c):
+            h = min(c.dtc, t_end - t)
+            r = _fine_step(s, c, lk, rows, t, h, lm, p_prop, row_k)
+        else:
+            h = t_end - t
+            r = _step_d(s, c, lk, rows, t, h, lm, p_prop, row_k, False)
+        _merge_rows(s[0], rows, n0)
+        rows[n0, _FINE_COL] = 0.0
+        if r != OK:
+            return r
+        t += h
+    return OK
 
 
 @njit(cache=True)
@@ -627,12 +662,14 @@ def _window_done(st, c, lk, t, d_prev, lm):
     Not while the receiver is shorted under a positive charge command (:func:`_answering`): the policy
     has not answered the command yet, and outside the window it would be called once per
     ``coarse_policy_period_s`` instead of once per control period. Not at the deadline while the protection holds
-    d = 0 after the pad's switch-off (:func:`_protecting`: bounded by the ring-down)."""
+    d = 0 after the pad's switch-off with its diodes conducting (:func:`_protecting`; once they block, coarse steps
+    carry the ring-down: :func:`_coarse_step`)."""
     dv = abs(math.sin(0.5 * math.pi * st.d) - math.sin(0.5 * math.pi * d_prev))
     if t >= st.fine_until_min and (dv < c.settle_duty_tol or st.v1 == 0.0) and not _answering(st) \
             and _settled(st, c, lk, lm):
         st.in_fine = False
-    elif t >= st.fine_deadline and st.v1 == (c.v1_nom if st.tx_on else 0.0) and not _protecting(st, c):
+    elif t >= st.fine_deadline and st.v1 == (c.v1_nom if st.tx_on else 0.0) \
+            and not (_protecting(st, c) and not st.prot_blocked):
         st.in_fine = False
         st.n_cut += 1
 
@@ -718,7 +755,7 @@ def _interval(s, c, lk, smp, rows, noise, obs, fn, params, pstate):
             _coarse_duty(st, c, d)
         if st.sub == 2:
             if not st.in_fine:
-                r = _step_d(s, c, lk, rows, st.t, t_next - st.t, lm, p_k, k, False)
+                r = _coarse_step(s, c, lk, rows, st.t, t_next - st.t, lm, p_k, k)
                 if r != OK:
                     return r
                 st = s[0]
@@ -802,7 +839,7 @@ def _quiet_flight(s, c, lk, smp, rows, k, t_k):
     acc = 0.0
     for i in range(k - k0, j - k0):
         acc += smp[i].p * (smp[i + 1].t - smp[i].t)
-    r = _step_d(s, c, lk, rows, t_k, dt, smp[k - k0].lm, acc / dt, k, False)
+    r = _coarse_step(s, c, lk, rows, t_k, dt, smp[k - k0].lm, acc / dt, k)
     if r == OK:
         st = s[0]
         st.n_coarse += 1

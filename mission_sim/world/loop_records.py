@@ -44,6 +44,8 @@ STATE_DTYPE = np.dtype([
     ("soc", "f8"), ("vrc", "f8"), ("last_vl", "f8"), ("last_ib", "f8"), ("last_il", "f8"), ("cv", "?"), ("full", "?"),
     # fine window: inside one, its earliest end and its deadline [s]
     ("in_fine", "?"), ("fine_until_min", "f8"), ("fine_deadline", "f8"),
+    # the protection's diodes blocked in the last step (loop_kernel._sbar_v2; coarse steps carry it then)
+    ("prot_blocked", "?"),
     # peak |I2| of the envelope [A], the duty there, time above rated [s]
     ("peak_env", "f8"), ("peak_d", "f8"), ("above", "f8"),
     ("n_fine", "i8"), ("n_coarse", "i8"), ("n_windows", "i8"), ("n_cut", "i8"), ("n_rows", "i8"),
