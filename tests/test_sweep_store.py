@@ -181,9 +181,14 @@ def test_an_edit_of_the_mission_case_runner_changes_the_physics_code_hash(monkey
     resume by another version of it is refused instead of mixing stale rows with new ones. The edit is seen
     through the real ``dependency_hash`` (the file's bytes as read, one comment line added)."""
     from mission_sim.studies import mission_cases
+    _assert_an_edit_changes_the_hash(monkeypatch, pathlib.Path(mission_cases.__file__).resolve(), replay)
+
+
+def _assert_an_edit_changes_the_hash(monkeypatch, target, replay):
+    """The physics-code hash with ``target``'s bytes as read plus one comment line differs from the hash before, and
+    is the same again once the edit is undone (the real ``dependency_hash`` reads the files)."""
     from mission_sim.studies.status import physics_code_hash
     before = physics_code_hash(replay)
-    target = pathlib.Path(mission_cases.__file__).resolve()
     read_bytes = pathlib.Path.read_bytes
 
     def edited(self):
@@ -211,18 +216,7 @@ def test_an_edit_of_the_config_or_a_policy_changes_the_physics_code_hash(monkeyp
     root = pathlib.Path(__file__).resolve().parents[1]
     target = (root / source).resolve()
     assert target.is_file()
-    before = physics_code_hash(replay)
-    read_bytes = pathlib.Path.read_bytes
-
-    def edited(self):
-        data = read_bytes(self)
-        return data + b"# edited\n" if pathlib.Path(self).resolve() == target else data
-
-    monkeypatch.setattr(pathlib.Path, "read_bytes", edited)
-    after = physics_code_hash(replay)
-    assert len(after) == 16 and after != before
-    monkeypatch.undo()
-    assert physics_code_hash(replay) == before
+    _assert_an_edit_changes_the_hash(monkeypatch, target, replay)
     if "policies" not in sys.modules:   # this test process may have imported it elsewhere; if not, still not
         physics_code_hash(replay)
         assert "policies" not in sys.modules
