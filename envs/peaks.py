@@ -48,8 +48,7 @@ def peak_table(link, devices) -> np.ndarray:
     :class:`wpt_receiver.devices.DeviceSet`; from the disk cache when there, else built (~1.3-4.7 s). The
     table is at :data:`VL_GRID_V`, whatever the link's own VL: links that differ only in VL share one (keyed at
     ``LinkParams``' default VL)."""
-    from wpt_receiver.params import LinkParams
-    return _peak_table(link.with_(vl_v=LinkParams().vl_v), devices)
+    return _peak_table(link.at_default_vl(), devices)
 
 
 @lru_cache(maxsize=8)

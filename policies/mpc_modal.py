@@ -39,7 +39,6 @@ the MPC on the modal plant at its floor.
 
 from __future__ import annotations
 
-from dataclasses import replace
 from functools import lru_cache
 
 import numpy as np
@@ -49,15 +48,9 @@ __all__ = ["ModalModel", "v2_frame_table"]
 _N_D = 201          # duty grid of the residual table (quadratic towards d = 1, where the quadrature is steep)
 
 
-def _table_link(link):
-    """``link`` at ``LinkParams``' default VL: the link the SBAR table is built for (:func:`_sbar_table`)."""
-    from wpt_receiver.params import LinkParams
-    return replace(link, vl_v=LinkParams().vl_v)
-
-
 @lru_cache(maxsize=4)
 def _sbar_table(table_link, devices_name: str):
-    """The SBAR table (:func:`wpt_receiver.modal_kernel.modal_table`) of ``table_link`` (:func:`_table_link`: at
+    """The SBAR table (:func:`wpt_receiver.modal_kernel.modal_table`) of ``table_link`` (``LinkParams.at_default_vl``: at
     ``LinkParams``' default VL, as the mission loop's, ``mission_sim.world.loop``; the table holds VL only through
     the inverter's harmonics against the clamp, the clamp itself is each caller's ``VL + Vf``). Links that differ
     only in their pack voltage share one table (1.1 MB; built in seconds on a disk-cache miss)."""
@@ -75,7 +68,7 @@ def _link_modes(link, devices_name: str):
     from wpt_receiver import modal_kernel as mk
     from wpt_receiver.devices import preset
     dev = preset(devices_name)
-    lc, tab = mk.link_constants(link, dev), _sbar_table(_table_link(link), devices_name)
+    lc, tab = mk.link_constants(link, dev), _sbar_table(link.at_default_vl(), devices_name)
     mc = np.empty(mk.N_MODES_C, dtype=np.complex128)
     mk.modes(lc, link.lm_h, mc)
     return lc, tab, mc, dev

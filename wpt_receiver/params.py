@@ -132,6 +132,12 @@ class LinkParams:
             raise ValueError(f"{bad[0]!r} is not a LinkParams field; valid: {', '.join(names)}")
         return replace(self, **changes)
 
+    def at_default_vl(self) -> "LinkParams":
+        """This link at ``LinkParams``' default VL: the key of tables that hold the pack voltage only on their own
+        grid or through the inverter's harmonics (the env's peak table, the modal MPC's SBAR table), so that links
+        differing only in VL share one."""
+        return self.with_(vl_v=type(self)().vl_v)
+
 
 TABLE_I = LinkParams()
 
