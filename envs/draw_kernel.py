@@ -69,7 +69,7 @@ class Draws:
     by another Python thread meanwhile."""
 
     def __init__(self):
-        self._bgs, self._ids, self._addr, self._shared = [], [], None, False
+        self._bgs, self._addr, self._shared = [], None, False
 
     def __getstate__(self):
         return {}   # addresses are this process's and these objects': never carried to a copy
@@ -83,9 +83,9 @@ class Draws:
         if not set(map(type, rngs)) <= _GENERATOR:   # (C-level loops: faster than a generator expression)
             return False
         bgs = list(map(_BIT_GENERATOR, rngs))
-        ids = list(map(id, bgs))   # compared by identity (the last ones are held: their ids are not reused)
-        if ids != self._ids:
-            self._bgs, self._ids, self._addr = bgs, ids, bitgen_addresses(rngs)
+        # compared by identity with the last ones (held, so no other object takes their place; a C-level loop)
+        if len(bgs) != len(self._bgs) or not all(map(operator.is_, bgs, self._bgs)):
+            self._bgs, self._addr = bgs, bitgen_addresses(rngs)
             self._shared = self._addr is not None and len(np.unique(self._addr)) < len(self._addr)
         if self._addr is None:
             return False

@@ -372,7 +372,7 @@ class SbarChargingVectorEnv(VectorEnv):
         if chunks > 1:
             _set_threads(self.num_threads)
         scenario, plant, objective, observation = self.parts
-        t0 = time.perf_counter()
+        t0 = time.perf_counter() if self._auto is not None else 0.0   # (the clock only for the auto threads' probes)
         plant.step(d, self._k, scenario, objective, self._par, self._peak.kernel_table, obs, reward, truncated, block,
                    chunks)
         if self._auto is not None:
