@@ -372,11 +372,12 @@ class SbarChargingVectorEnv(VectorEnv):
         if chunks > 1:
             _set_threads(self.num_threads)
         scenario, plant, objective, observation = self.parts
-        t0 = time.perf_counter() if self._auto is not None else 0.0   # (the clock only for the auto threads' probes)
+        probing = self._auto is not None and self._auto.probing()
+        t0 = time.perf_counter() if probing else 0.0   # (the clock only in the auto threads' probe steps)
         plant.step(d, self._k, scenario, objective, self._par, self._peak.kernel_table, obs, reward, truncated, block,
                    chunks)
         if self._auto is not None:
-            self._auto.record(chunks, time.perf_counter() - t0)
+            self._auto.record(chunks, time.perf_counter() - t0 if probing else 0.0)
         obs, info = observation.step(obs, block, objective.step())
         return obs, reward, truncated, info
 
@@ -399,6 +400,10 @@ class _AutoThreads:
         if s < self.PROBE:
             return 1 if s % 2 == 0 else par
         return self.best
+
+    def probing(self) -> bool:
+        """True in the steps whose times :meth:`record` keeps (the probes)."""
+        return self.step % self.PERIOD < self.PROBE
 
     def record(self, chunks: int, dt: float) -> None:
         s = self.step % self.PERIOD

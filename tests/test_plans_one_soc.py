@@ -44,3 +44,6 @@ def test_initial_state_with_one_soc_equals_each_window_started_alone(scenario_so
     soc2[3] = 0.9
     b2, s2 = _initial_state(link, lm0, soc2, load, cmd0, cfg)
     assert b2[4].tobytes() == battery[4].tobytes() and b2[3].tobytes() != battery[3].tobytes()
+    # ... and the moved window gets its own circuit (a shortcut firing on different SoCs would give it the others')
+    b3, s3 = _initial_state(link, lm0[3:4], soc2[3:4], load[3:4], cmd0[3:4], cfg)
+    assert b2[3].tobytes() == b3[0].tobytes() and s2[3].tobytes() == s3[0].tobytes()
