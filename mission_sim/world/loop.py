@@ -106,6 +106,9 @@ class MissionLoop:
         self.rows = []
         self.blocks = []
         self.stats = RowStats(_COLUMNS, self.bp.initial_soc)
+        if self.samples.mass_changes:   # the propulsion energy after the first release that drops payload
+            drops = np.flatnonzero(np.diff(np.concatenate([[traj.takeoff_mass_kg], traj.mass_after_kg])) != 0)
+            self.stats.split_at(float(traj.release_t_s[drops[0]]))
         self.edge_j = (0.0, 0.0)      # switching-edge energies [J], rectifier and inverter (add_edges)
 
     def run(self, progress: bool = False) -> MissionResult:
@@ -200,6 +203,8 @@ class MissionLoop:
         df.insert(7, "tx_on", df["v1_v"].to_numpy() > 0)
         dts = df["dt_s"].to_numpy()
         df["propulsion_w"] = df["e_propulsion_j"] / dts
+        if self.cfg.drone.payload_kg > 0:   # (a payload: the mass each row flew, dropped at its releases)
+            df["mass_kg"] = self.samples.row_mass_kg(ri)
         df["p_source_w"] = df["e_source_j"] / dts
         df["p_coil_loss_w"] = df["e_coil_loss_j"] / dts
         df["p_battery_loss_w"] = (df["e_battery_r0_j"] + df["e_battery_r1_j"]) / dts
@@ -232,7 +237,27 @@ class MissionLoop:
             "fine_windows": int(ks.n_windows),
             "fine_windows_cut": int(ks.n_cut),
             "charge_time_s": st.sums["charge_time_s"],
+            **self.payload_summary(),
         }
+
+    def payload_summary(self) -> dict:
+        """With a payload (``drone.payload_kg`` > 0): the take-off and landing masses [kg], the release times [s]
+        and the propulsion energy [J] before and after the first release that dropped payload (split at the step
+        holding it: a quiet-flight step merging samples across it, at most ``sim.flight_dt_s``, counts before);
+        nothing otherwise."""
+        drone, smp = self.cfg.drone, self.samples
+        if not drone.payload_kg > 0:
+            return {}
+        traj = smp.traj
+        times = [float(t) for t in getattr(traj, "release_t_s", ())]
+        out = {"takeoff_mass_kg": float(drone.total_mass_kg),
+               "landing_mass_kg": float(getattr(traj, "final_mass_kg", drone.total_mass_kg)),
+               "payload_release_times_s": times}
+        if smp.mass_changes:
+            after = self.stats.sums_after
+            out["propulsion_energy_before_release_j"] = self.stats.sums["e_propulsion_j"] - after
+            out["propulsion_energy_after_release_j"] = after
+        return out
 
     def rating_summary(self) -> dict:
         """The rectifier's continuous current rating [A] and its part (:func:`wpt_receiver.devices.current_rating`

@@ -116,6 +116,12 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     if warn and charge:   # (pads never energised: neither the link nor the pads matter)
         replay = trajectory is not None and own_route is None   # (its pads about the replay's frame origin)
         warn_setup(cfg, policy, own_route=trajectory is None if own_route is None else bool(own_route), replay=replay)
+    elif warn and (trajectory is None if own_route is None else own_route):   # (the payload's, charged or not)
+        from wpt_receiver.notices import warn as say
+
+        from ..setup_warnings import payload_warnings
+        for text in payload_warnings(cfg):
+            say(text)
     try:
         res = _run_mission(cfg, policy, trajectory, charge, progress, compiled, frame, sink)
         bad = [k for k, v in res.summary.items() if isinstance(v, float) and not np.isfinite(v)]
@@ -176,7 +182,8 @@ def _run_mission(cfg, policy, trajectory, charge, progress, compiled, frame=True
     if charge:  # its summary only; its pads never energise, so Lm does not enter it (0: no coupling table)
         base = _simulate(cfg, policy, traj, False, False, 0.0, compiled, frame=False)
         res.summary["flight_time_gain_s"] = flight_time_gain_s(cfg, res.summary["final_soc"],
-                                                               base.summary["final_soc"]) \
+                                                               base.summary["final_soc"],
+                                                               getattr(traj, "final_mass_kg", None)) \
             + res.summary["sim_time_s"] - base.summary["sim_time_s"]  # a depleted run ends early
     else:
         res.summary["flight_time_gain_s"] = 0.0
@@ -189,12 +196,14 @@ def _run_mission(cfg, policy, trajectory, charge, progress, compiled, frame=True
     return res
 
 
-def flight_time_gain_s(cfg, final_soc_charged: float, final_soc_uncharged: float) -> float:
+def flight_time_gain_s(cfg, final_soc_charged: float, final_soc_uncharged: float,
+                       mass_kg: float | None = None) -> float:
     """Extra hover time [s] the charged mission ends with: the difference of the usable chemical
-    energy left (``n Q int_0^SoC OCV``) divided by the electrical hover power. (A run that depletes
+    energy left (``n Q int_0^SoC OCV``) divided by the electrical hover power at the mass the mission ends with
+    (``mass_kg``, the landing mass after any payload release; None: the take-off mass). (A run that depletes
     its battery ends there at SoC 0; :func:`run_mission` adds the difference of the two runs' ends.)"""
     e = cfg.battery.usable_energy_j
-    return float((e(final_soc_charged) - e(final_soc_uncharged)) / hover_power_w(cfg.drone))
+    return float((e(final_soc_charged) - e(final_soc_uncharged)) / hover_power_w(cfg.drone, mass_kg))
 
 
 def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_all=None,

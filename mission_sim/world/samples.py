@@ -140,6 +140,23 @@ class MissionSamples:
         if self.uniform is None:
             self.uniform = uniform_spacing(traj.t_s)
         self.last: SampleChunk | None = None
+        #: whether the mass flown changes on the way (a planned route's payload release:
+        #: :meth:`~.trajectory.PlannedTrajectory.mass_at`); else every sample flies ``drone.total_mass_kg``
+        self.mass_changes = bool(getattr(traj, "mass_changes", False))
+
+    def mass_kg(self, t_s) -> np.ndarray:
+        """The total mass [kg] flown at the sample times ``t_s`` (the trajectory's mass schedule; the take-off mass
+        ``drone.total_mass_kg`` throughout for a trajectory without one, a replay's)."""
+        if self.mass_changes:
+            return self.traj.mass_at(t_s)
+        return np.full(np.shape(t_s), float(self.cfg.drone.total_mass_kg))
+
+    def row_mass_kg(self, rows_k) -> np.ndarray:
+        """The total mass [kg] of the samples ``rows_k`` (global indices): the mass a step's row flew."""
+        ri = np.asarray(rows_k, dtype=np.int64)
+        if not self.mass_changes:
+            return np.full(len(ri), float(self.cfg.drone.total_mass_kg))
+        return self.traj.mass_at(ri * self.traj.dt)
 
     @property
     def t_first_s(self) -> float:
@@ -157,7 +174,9 @@ class MissionSamples:
         vel = gradient_rows(win.pos_m, win.t_s, self.uniform)[k0 - a:k0 - a + k1 - k0]
         tr = self.traj.chunk(k0, k1) if (a, b) != (k0, k1) else win
         p_w = np.asarray(propulsion_from(self.cfg.drone, vel, tr.wind_m_s, tr.phase,
-                                         getattr(self.traj, "motors_off_phases", ())), dtype=float).reshape(-1)
+                                         getattr(self.traj, "motors_off_phases", ()),
+                                         self.mass_kg(tr.t_s) if self.mass_changes else None),
+                         dtype=float).reshape(-1)
         if self.lm_given is None:
             lm = lm_along(self.cfg, self.model, tr)[0]
         elif np.ndim(self.lm_given):

@@ -47,6 +47,11 @@ class RowStats:
         self.min_soc = self.max_soc = float(initial_soc)
         self.vl_on_max = -math.inf
         self.n_rows = 0
+        self.t_split, self.sums_after = None, 0.0
+
+    def split_at(self, t_s: float) -> None:
+        """Also sum the propulsion energy of the steps starting at or after ``t_s`` [s] (:attr:`sums_after`)."""
+        self.t_split = float(t_s)
 
     def add(self, arr: np.ndarray) -> None:
         """Take one block ``arr`` (n, 26)."""
@@ -62,6 +67,9 @@ class RowStats:
         soc = arr[:, c["soc"]]
         self.min_soc, self.max_soc = min(self.min_soc, float(soc.min())), max(self.max_soc, float(soc.max()))
         self.n_rows += len(arr)
+        if self.t_split is not None:
+            late = arr[:, c["t_s"]] - dt >= self.t_split - 1e-9   # (a row's t_s is its step's end)
+            self.sums_after = math.fsum([self.sums_after, *arr[late, c["e_propulsion_j"]].tolist()])
         if on.any():
             self.vl_on_max = max(self.vl_on_max, float(vl[on].max()))
 
@@ -77,6 +85,8 @@ def _derived(loop, arr: np.ndarray) -> dict:
         out[name] = col[name].astype(bool) if name == "fine" else col[name]
     dts = col["dt_s"]
     out["propulsion_w"] = col["e_propulsion_j"] / dts
+    if loop.cfg.drone.payload_kg > 0:   # (as MissionLoop.timeseries: the mass each row flew)
+        out["mass_kg"] = loop.samples.row_mass_kg(ri)
     out["p_source_w"] = col["e_source_j"] / dts
     out["p_coil_loss_w"] = col["e_coil_loss_j"] / dts
     out["p_battery_loss_w"] = (col["e_battery_r0_j"] + col["e_battery_r1_j"]) / dts

@@ -20,6 +20,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from .power import payload_after_releases as _payload_left
 from .power import propulsion_power_w
 from .wind import drag_force_n, hover_error_m, tilt_from_force, wind_series
 
@@ -118,12 +119,13 @@ class Trajectory:
         return propulsion_from(drone, self.velocity_m_s(), self.wind_m_s, self.phase, self.motors_off_phases)
 
 
-def propulsion_from(drone, vel_m_s, wind_m_s, phase=None, motors_off=()) -> np.ndarray:
+def propulsion_from(drone, vel_m_s, wind_m_s, phase=None, motors_off=(), mass_kg=None) -> np.ndarray:
     """Electrical propulsion power (N,) [W] at velocities (N, 3) [m/s] in winds (N, 3) [m/s]
     (momentum theory, :func:`.power.propulsion_power_w`; airspeed = |v_xy - wind_xy|); samples
-    whose ``phase`` is one of ``motors_off`` draw ``drone.avionics_w`` only."""
+    whose ``phase`` is one of ``motors_off`` draw ``drone.avionics_w`` only. ``mass_kg``: the total mass per
+    sample (N,) [kg] (a payload dropped on the way), None for the take-off mass ``drone.total_mass_kg``."""
     air = np.hypot(vel_m_s[:, 0] - wind_m_s[:, 0], vel_m_s[:, 1] - wind_m_s[:, 1])
-    p = propulsion_power_w(drone, air, vel_m_s[:, 2])
+    p = propulsion_power_w(drone, air, vel_m_s[:, 2], mass_kg=mass_kg)
     if len(motors_off) and phase is not None:
         p = np.where(np.isin(np.asarray(phase, dtype=object), list(motors_off)), float(drone.avionics_w), p)
     return p
@@ -172,6 +174,7 @@ class _Path:
         self.m, self.pos, self.segs = m, np.asarray(start, dtype=float), []
         self.ground, self.grounds = 0.0, []
         self.keys = []   # per segment: the route's (key, value) that set a move's speed or a hold's time, else None
+        self.releases = []   # payload releases: (segment index they precede, count), in route order
 
     def move(self, p1, phase, speed_m_s=None, speed_key=None):
         p1 = np.asarray(p1, dtype=float)
@@ -227,7 +230,11 @@ def _route_segments(cfg):
     m = cfg.mission
     path = _Path(m, [m.start_x_m, m.start_y_m, 0.0])
     speed = key = None
+    pending = 0   # the releases of the waypoint before: when it is done, before the segments of the next
     for i, wp in enumerate(cfg.waypoints):
+        if pending:
+            path.releases.append((len(path.segs), pending))
+        pending = int(wp.release)
         if wp.speed_m_s is not None:
             speed, key = wp.speed_m_s, (f"waypoints.{i}.speed_m_s", wp.speed_m_s)
         x, y, z = wp.x_m, wp.y_m, wp.z_m
@@ -255,6 +262,8 @@ def _route_segments(cfg):
             path.hold(key[1], "charge", key)
             path.move([x, y, z], "depart")
             path.ground = 0.0
+    if pending:
+        path.releases.append((len(path.segs), pending))
     if path.pos[2] > 0.0:
         path.move([path.pos[0], path.pos[1], 0.0], "land")
     path.hold(1.0, "ground")
@@ -315,6 +324,7 @@ class PlannedTrajectory:
             starts.append(t0)
             t0 += seg[3]
         self._starts = np.array(starts)  # accumulated as plan_mission always did (the masks' bounds)
+        self._mass_schedule(path.releases, t0)
         self._gens0 = []
         for _ in range(3):   # the x, y and z gust streams, drawn one after the other from rng
             self._gens0.append(_clone(rng))
@@ -325,6 +335,31 @@ class PlannedTrajectory:
         self.uniform_spacing = _uniform_grid(self.n, self.dt)
         self._full = None
         self._restart()
+
+    def _mass_schedule(self, releases, t_end: float) -> None:
+        """The payload releases of the route as times and the total mass after each: ``release_t_s`` (n,) [s] (the
+        start of the segment after the released-at waypoint; the end of the route after the last), ``mass_after_kg``
+        (n,) [kg] (:func:`.power.payload_after_releases`), ``empty_releases`` (how many found no payload left);
+        :meth:`mass_at` reads them."""
+        drone = self.cfg.drone
+        times = [float(self._starts[j]) if j < len(self._starts) else t_end for j, n in releases for _ in range(n)]
+        left, self.empty_releases = _payload_left(drone, len(times))
+        self.release_t_s = np.array(times, dtype=float)
+        self.mass_after_kg = np.array([drone.mass_kg + x for x in left], dtype=float)
+        self.takeoff_mass_kg = drone.total_mass_kg
+        self.final_mass_kg = float(self.mass_after_kg[-1]) if len(times) else self.takeoff_mass_kg
+
+    @property
+    def mass_changes(self) -> bool:
+        """Whether the mass flown changes along the route (a release that drops payload)."""
+        return bool(len(self.release_t_s)) and self.final_mass_kg != self.takeoff_mass_kg
+
+    def mass_at(self, t_s) -> np.ndarray:
+        """The total mass [kg] flown at times ``t_s`` (the sample times: a sample at or after a release flies without
+        what it dropped; the power and the hold are held over the sample, so the drop is on the sample grid)."""
+        t = np.asarray(t_s, dtype=float)
+        table = np.concatenate([[self.takeoff_mass_kg], self.mass_after_kg])
+        return table[np.searchsorted(self.release_t_s, t, side="right")]
 
     def _restart(self):
         self._gens = [_clone(g) for g in self._gens0]
@@ -384,7 +419,7 @@ class PlannedTrajectory:
         wp, cfg = self.cfg.wind, self.cfg
         force = drag_force_n(wp, wind, vel)
         force_mean = drag_force_n(wp, self._mean_wind[None, :], vel)
-        mass = cfg.drone.total_mass_kg
+        mass = self.mass_at(t) if self.mass_changes else cfg.drone.total_mass_kg
         err = hover_error_m(wp, force - force_mean, mass, self.dt, state=self._hold_z)
         on_ground = code == PHASES.index("ground")
         err[on_ground] = 0.0

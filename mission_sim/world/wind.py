@@ -119,7 +119,8 @@ def hover_error_m(p: WindParams, force_n: np.ndarray, mass_kg: float, dt_s: floa
     f = np.asarray(force_n, dtype=float)
     if len(f) == 0:
         return np.zeros((0, 3))
-    dev = f / mass_kg
+    m = np.asarray(mass_kg, dtype=float)
+    dev = f / (m[:, None] if m.ndim else mass_kg)   # (a mass per sample: a payload dropped on the way)
     num, den = hold_filter(p, dt_s)
     return lfilter(num, den, dev, axis=0, state=state)
 
@@ -132,7 +133,8 @@ def tilt_from_force(mass_kg: float, accel_m_s2: np.ndarray, force_n: np.ndarray)
     """
     a = np.asarray(accel_m_s2, dtype=float)
     f = np.asarray(force_n, dtype=float)
-    h = mass_kg * a[:, :2] - f[:, :2]
+    m = np.asarray(mass_kg, dtype=float)
+    h = (m[:, None] if m.ndim else mass_kg) * a[:, :2] - f[:, :2]   # (a mass per sample: a payload dropped)
     v = mass_kg * (G_M_S2 + a[:, 2]) - f[:, 2]
     tilt = np.arctan2(np.hypot(h[:, 0], h[:, 1]), np.maximum(v, 1e-9))
     axis = np.arctan2(h[:, 1], h[:, 0]) + 0.5 * math.pi

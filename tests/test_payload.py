@@ -1,0 +1,216 @@
+"""Payload carried from take-off and dropped at a route's releases (DO_GRIPPER release, DO_WINCH deliver,
+``[[waypoints]] release``): the mass schedule, the power at the current mass, the plan reader, bad inputs."""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mission_sim.config import apply_overrides, config_from_dict, load_config_dict, policy_context
+from mission_sim.plans.items import MissionItem, RawMission
+from mission_sim.plans.route import route_from_items
+from mission_sim.mavlink.geodesy import GeoPoint
+from mission_sim.world.power import DroneParams, hover_power_w, propulsion_power_w
+
+MISSIONS = Path(__file__).parent / "data" / "missions"
+PX4_DELIVERY = MISSIONS / "px4_triangle_gripper_package_delivery.plan"
+
+
+# ------------------------------------------------------------------ the power model at the current mass
+def test_hover_power_goes_as_mass_to_the_1_5():
+    """Momentum theory: hover shaft power = (m g)^1.5 / sqrt(2 rho A) / FM, so (P - avionics) scales as m^1.5;
+    propulsion_power_w's Newton solution at rest with a mass array gives the same numbers."""
+    p = DroneParams()
+    masses = np.array([0.5, 1.0, 1.5, 2.0, 3.7])
+    base = hover_power_w(p, 1.0) - p.avionics_w
+    for m in masses:
+        assert hover_power_w(p, m) - p.avionics_w == pytest.approx(base * m**1.5, rel=1e-12)
+    at_rest = propulsion_power_w(p, np.zeros(5), np.zeros(5), mass_kg=masses)
+    assert at_rest == pytest.approx([hover_power_w(p, m) for m in masses], rel=1e-12)
+    # the take-off mass when none is given: mass_kg + payload_kg
+    q = DroneParams(payload_kg=0.5)
+    assert hover_power_w(q) == hover_power_w(p, 1.5)
+
+
+def test_mass_argument_is_the_params_mass():
+    """A mass per sample gives, sample by sample, what a DroneParams of that total mass gives (one formula: the
+    mass only enters as the weight), in forward flight, climb and descent."""
+    p = DroneParams(payload_kg=0.7)
+    v, vz = np.array([0.0, 3.0, 8.0, 12.0, 5.0]), np.array([0.0, 2.0, -1.0, 0.0, -3.0])
+    m = np.array([1.7, 1.7, 1.0, 1.2, 1.0])
+    got = propulsion_power_w(p, v, vz, mass_kg=m)
+    want = [propulsion_power_w(dc.replace(p, mass_kg=mi, payload_kg=0.0), vi, vzi) for mi, vi, vzi in zip(m, v, vz)]
+    assert got == pytest.approx(want, rel=1e-13)
+    assert got[2] < propulsion_power_w(p, 8.0, -1.0)   # lighter: less power
+
+
+def test_payload_after_releases_parcels_and_all_at_once():
+    from mission_sim.world.power import payload_after_releases
+    left, empty = payload_after_releases(DroneParams(payload_kg=0.9, release_kg=0.3), 4)
+    assert left[:2] == pytest.approx([0.6, 0.3]) and left[2] == 0.0 and left[3] == 0.0   # exactly 0: no 5e-17 left
+    assert empty == 1
+    left, empty = payload_after_releases(DroneParams(payload_kg=0.9), 2)   # release_kg 0: all at the first
+    assert left == [0.0, 0.0] and empty == 1
+    assert payload_after_releases(DroneParams(payload_kg=0.5, release_kg=0.2), 3) == (pytest.approx([0.3, 0.1, 0.0]), 0)
+    assert payload_after_releases(DroneParams(), 1) == ([0.0], 1)
+
+
+# ------------------------------------------------------------------ the plan reader
+def _item(where, command, p2=0.0, lat=0.0, lon=0.0, alt=float("nan"), frame=3):
+    return MissionItem(where, command, frame, (0.0, p2, 0.0, 0.0), lat, lon, alt)
+
+
+def _raw(*items):
+    return RawMission("test.plan", GeoPoint(47.0, 8.0, 400.0), tuple(items))
+
+
+def test_px4_delivery_plan_releases_after_its_landing():
+    """PX4's package-delivery plan (waypoint, NAV_LAND, DO_GRIPPER release, waypoint): one release on the landing,
+    at its touch-down (the segment after it is the take-off to 10 m)."""
+    from mission_sim.plans.items import read_mission
+    doc = json.loads(PX4_DELIVERY.read_text())
+    assert doc["mission"]["items"][2]["command"] == 211 and doc["mission"]["items"][2]["params"][1] == 0
+    route = route_from_items(read_mission(PX4_DELIVERY))
+    assert [w.get("release", 0) for w in route] == [0, 1, 0]
+    assert route[1]["action"] == "land"
+
+
+@pytest.mark.parametrize("command, action, released", [
+    (211, 0.0, True),             # GRIPPER_ACTION_RELEASE
+    (211, float("nan"), True),    # unset param2: 0, as the autopilots read it
+    (211, 1.0, False),            # GRIPPER_ACTION_GRAB: adds nothing (the mass picked up is not known)
+    (211, 2.0, False),            # GRIPPER_ACTION_HOLD
+    (42600, 4.0, True),           # WINCH_DELIVER: lower, release, reel up
+    (42600, 0.0, False),          # WINCH_RELAXED
+    (42600, 1.0, False),          # WINCH_RELATIVE_LENGTH_CONTROL: the payload still hangs on the line
+    (42600, 8.0, False),          # WINCH_ABANDON_LINE
+])
+def test_release_commands(command, action, released):
+    raw = _raw(_item("item 0", 22, alt=10.0), _item("item 1", 16, lat=47.0005, lon=8.0, alt=10.0),
+               _item("item 2", command, p2=action), _item("item 3", 16, lat=47.001, lon=8.0, alt=10.0),
+               _item("item 4", 211, p2=1.0))
+    route = route_from_items(raw)
+    assert [w.get("release", 0) for w in route] == [0, int(released), 0]
+
+
+def test_two_releases_on_one_waypoint_and_before_any_nav_item():
+    raw = _raw(_item("item 0", 22, alt=10.0), _item("item 1", 211), _item("item 2", 42600, p2=4.0),
+               _item("item 3", 21))
+    assert [w.get("release", 0) for w in route_from_items(raw)] == [2, 0]
+    with pytest.raises(ValueError, match=r"^test\.plan: item 0: DO_GRIPPER \(211\) releases the payload before the "
+                                         r"first navigation item.*valid: a release after"):
+        route_from_items(_raw(_item("item 0", 211), _item("item 1", 22, alt=10.0)))
+
+
+# ------------------------------------------------------------------ the mission: the drop's energy
+def _hover_route_cfg(release: int, payload_kg: float, hold_after_s: float = 100.0):
+    """Take off to 10 m, hover 20 s, ``release`` payload releases, hover ``hold_after_s``, land; no wind (the hover
+    is exactly at rest: momentum theory's closed form)."""
+    d = load_config_dict()
+    d["waypoints"] = [{"action": "takeoff", "z_m": 10.0},
+                      {"action": "loiter", "x_m": -15.0, "z_m": 10.0, "hold_s": 20.0, "release": release},
+                      {"action": "loiter", "x_m": -15.0, "z_m": 10.0, "hold_s": hold_after_s},
+                      {"action": "land", "x_m": -15.0}]
+    d["wind"].update(speed_m_s=0.0, gust_sigma_m_s=0.0)
+    d["drone"]["payload_kg"] = payload_kg
+    return config_from_dict(d)
+
+
+def _run(cfg):
+    import policies
+    from mission_sim.world.runner import run_mission
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        res = run_mission(cfg, policies.make("step", policy_context(cfg)), charge=False)
+    return res, [str(w.message) for w in rec]
+
+
+def test_drop_saves_the_closed_form_hover_energy():
+    """0.5 kg dropped after a 20 s hover: over the 100 s hover after it the propulsion energy is lower than the same
+    mission's without the drop by (P_h(1.5 kg) - P_h(1.0 kg)) x the hover time, P_h = momentum theory's hover power
+    (to rounding: the hover is at rest); before the drop the two runs draw the same; after it the drone draws what
+    the payload-free drone draws, row by row."""
+    drop, _ = _run(_hover_route_cfg(1, 0.5))
+    keep, _ = _run(_hover_route_cfg(0, 0.5))
+    bare, _ = _run(_hover_route_cfg(0, 0.0))
+    t_r = drop.trajectory.release_t_s[0]
+    start = drop.timeseries["t_s"] - drop.timeseries["dt_s"]
+    assert drop.trajectory.release_t_s.tolist() == [t_r] and 20.0 < t_r < 30.0
+    for a, b in ((drop, keep), (drop, bare)):
+        assert np.array_equal(a.timeseries["t_s"], b.timeseries["t_s"])   # the same steps (the pads never on)
+    before = (drop.timeseries["t_s"] <= t_r).to_numpy()   # (steps ending by the drop; a merged one may hold it)
+    window = ((start >= t_r + 1.0) & (drop.timeseries["t_s"] <= t_r + 99.0)).to_numpy()
+    e = {k: r.timeseries["e_propulsion_j"].to_numpy() for k, r in (("drop", drop), ("keep", keep), ("bare", bare))}
+    dt = drop.timeseries["dt_s"].to_numpy()
+    assert np.array_equal(e["drop"][before], e["keep"][before])
+    p = drop.config.drone
+    closed = (hover_power_w(p, 1.5) - hover_power_w(p, 1.0)) * dt[window].sum()
+    assert dt[window].sum() > 95.0
+    assert e["keep"][window].sum() - e["drop"][window].sum() == pytest.approx(closed, rel=1e-9)
+    assert closed > 5000.0   # (~76 W x 98 s: the drop is worth kJ)
+    after = (start >= t_r).to_numpy()
+    assert np.array_equal(e["drop"][after], e["bare"][after])
+    # the summary's split, the mass column, the landing mass
+    s = drop.summary
+    assert s["takeoff_mass_kg"] == 1.5 and s["landing_mass_kg"] == 1.0 and s["payload_release_times_s"] == [t_r]
+    assert s["propulsion_energy_before_release_j"] == pytest.approx(e["drop"][~after].sum(), rel=1e-12)
+    assert s["propulsion_energy_after_release_j"] == pytest.approx(e["drop"][after].sum(), rel=1e-12)
+    assert keep.summary["propulsion_energy_j"] - s["propulsion_energy_j"] > closed   # (and the landing's share)
+    mass = drop.timeseries["mass_kg"].to_numpy()
+    assert set(mass[~after]) == {1.5} and set(mass[after]) == {1.0}
+    assert "mass_kg" not in bare.timeseries and "takeoff_mass_kg" not in bare.summary
+
+
+def test_payload_zero_flies_as_before():
+    """Payload 0: a route's release changes no sample's power (the take-off mass path, no mass schedule) and warns
+    once that nothing is dropped; no mass column, no payload keys."""
+    from mission_sim.world.samples import MissionSamples
+    from mission_sim.world.trajectory import PlannedTrajectory
+    with_r, without = _hover_route_cfg(1, 0.0), _hover_route_cfg(0, 0.0)
+    a, b = (MissionSamples(c, PlannedTrajectory(c), False, 0.0) for c in (with_r, without))
+    assert not a.mass_changes
+    assert np.array_equal(a.chunk(0, a.n).p_w, b.chunk(0, b.n).p_w)
+    res, said = _run(with_r)
+    assert len([w for w in said if "payload" in w]) == 1
+    assert "drone.payload_kg = 0: nothing is dropped" in said[0]
+    assert "mass_kg" not in res.timeseries
+
+
+def test_more_releases_than_parcels_warn_once():
+    d = load_config_dict()
+    d["waypoints"] = [{"action": "takeoff", "z_m": 10.0}, {"action": "loiter", "z_m": 10.0, "hold_s": 2.0, "release": 3},
+                      {"action": "land"}]
+    cfg = config_from_dict(apply_overrides(d, {"drone.payload_kg": 0.4, "drone.release_kg": 0.2}))
+    from mission_sim.setup_warnings import payload_warnings
+    said = payload_warnings(cfg)
+    assert len(said) == 1 and said[0].startswith("1 of the route's 3 payload releases find no payload left")
+
+
+# ------------------------------------------------------------------ bad inputs
+@pytest.mark.parametrize("key, value, needle", [
+    ("drone.payload_kg", -0.5, "drone.payload_kg=-0.5 is invalid; valid range: [0, 1000] kg"),
+    ("drone.release_kg", -0.1, "drone.release_kg=-0.1 is invalid; valid range: [0, 1000] kg"),
+    ("drone.release_kg", 0.3, "drone.release_kg=0.3 is invalid; valid range: [0, payload_kg=0.0] kg"),
+])
+def test_bad_payload_values(key, value, needle):
+    with pytest.raises(ValueError) as exc:
+        config_from_dict(apply_overrides(load_config_dict(), {key: value}))
+    assert str(exc.value).startswith(needle) and "\n" not in str(exc.value)
+
+
+def test_bad_release_count():
+    d = load_config_dict()
+    d["waypoints"] = [{"action": "takeoff", "z_m": 10.0, "release": -1}]
+    with pytest.raises(ValueError, match=r"^waypoints\.0\.release=-1 is invalid; valid range: integer 0\.\.1000$"):
+        config_from_dict(d)
+
+
+def test_cli_negative_payload_is_one_line(capsys):
+    from _cli_helpers import one_error_line
+    line = one_error_line(capsys, ["mission", "--dry-run", "--set", "drone.payload_kg=-1"])
+    assert "drone.payload_kg=-1" in line and "valid range: [0, 1000] kg" in line
