@@ -178,15 +178,18 @@ def policy_link_warning(cfg, policy) -> str | None:
     return None
 
 
-def mission_warnings(cfg, policy=None, own_route: bool = True, replay: bool = False) -> list[str]:
+def mission_warnings(cfg, policy=None, own_route: bool = True, replay: bool = False,
+                     payload: bool | None = None) -> list[str]:
     """Every setup warning of a mission (``own_route``: ``cfg``'s route is flown, not a replayed trajectory, so its
     pads can be checked against it; ``replay``: the trajectory is a replay's, whose pad frame origin is the take-off
-    spot or ``--pad``, not the mission's home). A far pad warns whatever the route."""
+    spot or ``--pad``, not the mission's home; ``payload``: ``cfg``'s route is flown, so its payload releases are
+    (None: unless ``replay``; :func:`payload_warnings`). A far pad warns whatever the route."""
     out = [w for w in (link_range_warning(cfg), link_frequency_warning(cfg),
                        policy_link_warning(cfg, policy) if policy is not None else None) if w is not None]
     out += far_pad_warnings(cfg, REPLAY_ORIGIN if replay else HOME_ORIGIN)
     if own_route:
         out += unreached_pad_warnings(cfg)
+    if (not replay) if payload is None else payload:
         out += payload_warnings(cfg)
     return out
 

@@ -138,9 +138,9 @@ def test_drop_saves_the_closed_form_hover_energy():
     drop, _ = _run(_hover_route_cfg(1, 0.5))
     keep, _ = _run(_hover_route_cfg(0, 0.5))
     bare, _ = _run(_hover_route_cfg(0, 0.0))
-    t_r = drop.trajectory.release_t_s[0]
+    t_r = drop.trajectory.mass.release_t_s[0]
     start = drop.timeseries["t_s"] - drop.timeseries["dt_s"]
-    assert drop.trajectory.release_t_s.tolist() == [t_r] and 20.0 < t_r < 30.0
+    assert drop.trajectory.mass.release_t_s.tolist() == [t_r] and 20.0 < t_r < 30.0
     for a, b in ((drop, keep), (drop, bare)):
         assert np.array_equal(a.timeseries["t_s"], b.timeseries["t_s"])   # the same steps (the pads never on)
     before = (drop.timeseries["t_s"] <= t_r).to_numpy()   # (steps ending by the drop; a merged one may hold it)
@@ -164,6 +164,25 @@ def test_drop_saves_the_closed_form_hover_energy():
     mass = drop.timeseries["mass_kg"].to_numpy()
     assert set(mass[~after]) == {1.5} and set(mass[after]) == {1.0}
     assert "mass_kg" not in bare.timeseries and "takeoff_mass_kg" not in bare.summary
+    # flight_time_gain_s's hover power: the landing mass's (the gain is 0 here: no charging)
+    from mission_sim.world.runner import flight_time_gain_s
+    cfg = drop.config
+    assert flight_time_gain_s(cfg, 0.9, 0.8, 1.0) / flight_time_gain_s(cfg, 0.9, 0.8) == pytest.approx(
+        hover_power_w(p, 1.5) / hover_power_w(p, 1.0), rel=1e-12)
+
+
+def test_materialised_plan_keeps_the_drop():
+    """``plan_mission`` (all samples at once: ``dronewpt telemetry``'s trajectory) carries the mass schedule: the run
+    over it draws what the run planning in blocks draws."""
+    import policies
+    from mission_sim.world.runner import run_mission
+    from mission_sim.world.trajectory import plan_mission
+    cfg = _hover_route_cfg(1, 0.5, hold_after_s=10.0)
+    pol = policies.make("step", policy_context(cfg))
+    a = run_mission(cfg, pol, charge=False)
+    b = run_mission(cfg, pol, trajectory=plan_mission(cfg), own_route=True, charge=False)
+    assert b.summary["propulsion_energy_j"] == a.summary["propulsion_energy_j"]
+    assert b.summary["landing_mass_kg"] == 1.0
 
 
 def test_payload_zero_flies_as_before():
@@ -178,6 +197,9 @@ def test_payload_zero_flies_as_before():
     res, said = _run(with_r)
     assert len([w for w in said if "payload" in w]) == 1
     assert "drone.payload_kg = 0: nothing is dropped" in said[0]
+    from mission_sim.setup_warnings import mission_warnings   # (the charged run's and a study's set: it is in there)
+    assert sum("nothing is dropped" in w for w in mission_warnings(with_r, own_route=False)) == 1
+    assert not any("payload" in w for w in mission_warnings(with_r, replay=True))   # a replay flies the log's track
     assert "mass_kg" not in res.timeseries
 
 

@@ -106,9 +106,10 @@ class MissionLoop:
         self.rows = []
         self.blocks = []
         self.stats = RowStats(_COLUMNS, self.bp.initial_soc)
-        if self.samples.mass_changes:   # the propulsion energy after the first release that drops payload
-            drops = np.flatnonzero(np.diff(np.concatenate([[traj.takeoff_mass_kg], traj.mass_after_kg])) != 0)
-            self.stats.split_at(float(traj.release_t_s[drops[0]]))
+        sched = self.samples.schedule
+        if sched is not None:   # the propulsion energy after the first release that drops payload
+            drops = np.flatnonzero(np.diff(np.concatenate([[sched.takeoff_mass_kg], sched.mass_after_kg])) != 0)
+            self.stats.split_at(float(sched.release_t_s[drops[0]]))
         self.edge_j = (0.0, 0.0)      # switching-edge energies [J], rectifier and inverter (add_edges)
 
     def run(self, progress: bool = False) -> MissionResult:
@@ -248,10 +249,10 @@ class MissionLoop:
         drone, smp = self.cfg.drone, self.samples
         if not drone.payload_kg > 0:
             return {}
-        traj = smp.traj
-        times = [float(t) for t in getattr(traj, "release_t_s", ())]
+        sched = getattr(smp.traj, "mass", None)
+        times = [] if sched is None else [float(t) for t in sched.release_t_s]
         out = {"takeoff_mass_kg": float(drone.total_mass_kg),
-               "landing_mass_kg": float(getattr(traj, "final_mass_kg", drone.total_mass_kg)),
+               "landing_mass_kg": float(drone.total_mass_kg if sched is None else sched.final_mass_kg),
                "payload_release_times_s": times}
         if smp.mass_changes:
             after = self.stats.sums_after

@@ -113,10 +113,12 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     """
     check_run_args(cfg, policy)
     check_policy_context(cfg, policy)
+    planned = trajectory is None or getattr(trajectory, "mass", None) is not None   # cfg's route (its releases) flown
     if warn and charge:   # (pads never energised: neither the link nor the pads matter)
         replay = trajectory is not None and own_route is None   # (its pads about the replay's frame origin)
-        warn_setup(cfg, policy, own_route=trajectory is None if own_route is None else bool(own_route), replay=replay)
-    elif warn and (trajectory is None if own_route is None else own_route):   # (the payload's, charged or not)
+        warn_setup(cfg, policy, own_route=trajectory is None if own_route is None else bool(own_route), replay=replay,
+                   payload=planned)
+    elif warn and planned:   # (the payload's, charged or not)
         from wpt_receiver.notices import warn as say
 
         from ..setup_warnings import payload_warnings
@@ -136,13 +138,13 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     return res
 
 
-def warn_setup(cfg, policy, own_route: bool = True, replay: bool = False) -> None:
+def warn_setup(cfg, policy, own_route: bool = True, replay: bool = False, payload: bool | None = None) -> None:
     """:func:`mission_sim.setup_warnings.mission_warnings` of the mission, each a
     :class:`~wpt_receiver.notices.DronewptWarning` pointed at the caller outside dronewpt."""
     from wpt_receiver.notices import warn
 
     from ..setup_warnings import mission_warnings
-    for text in mission_warnings(cfg, policy, own_route, replay):
+    for text in mission_warnings(cfg, policy, own_route, replay, payload):
         warn(text)
 
 
@@ -183,7 +185,7 @@ def _run_mission(cfg, policy, trajectory, charge, progress, compiled, frame=True
         base = _simulate(cfg, policy, traj, False, False, 0.0, compiled, frame=False)
         res.summary["flight_time_gain_s"] = flight_time_gain_s(cfg, res.summary["final_soc"],
                                                                base.summary["final_soc"],
-                                                               getattr(traj, "final_mass_kg", None)) \
+                                                               _final_mass_kg(traj)) \
             + res.summary["sim_time_s"] - base.summary["sim_time_s"]  # a depleted run ends early
     else:
         res.summary["flight_time_gain_s"] = 0.0
@@ -194,6 +196,12 @@ def _run_mission(cfg, policy, trajectory, charge, progress, compiled, frame=True
     res.summary["wall_s"] = time.perf_counter() - wall0
     res.summary["realtime_factor"] = res.summary["sim_time_s"] / max(res.summary["wall_s"], 1e-12)
     return res
+
+
+def _final_mass_kg(traj) -> float | None:
+    """The mass a planned route ends with (its :class:`~.trajectory.MassSchedule`); None without one."""
+    sched = getattr(traj, "mass", None)
+    return None if sched is None else sched.final_mass_kg
 
 
 def flight_time_gain_s(cfg, final_soc_charged: float, final_soc_uncharged: float,

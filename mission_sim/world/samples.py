@@ -140,23 +140,23 @@ class MissionSamples:
         if self.uniform is None:
             self.uniform = uniform_spacing(traj.t_s)
         self.last: SampleChunk | None = None
-        #: whether the mass flown changes on the way (a planned route's payload release:
-        #: :meth:`~.trajectory.PlannedTrajectory.mass_at`); else every sample flies ``drone.total_mass_kg``
-        self.mass_changes = bool(getattr(traj, "mass_changes", False))
+        #: the route's :class:`~.trajectory.MassSchedule` when the mass flown changes on the way (a planned route's
+        #: payload release), else None: every sample flies ``drone.total_mass_kg`` (a replay's trajectory too)
+        sched = getattr(traj, "mass", None)
+        self.schedule = sched if sched is not None and sched.changes else None
+        self.mass_changes = self.schedule is not None
 
     def mass_kg(self, t_s) -> np.ndarray:
-        """The total mass [kg] flown at the sample times ``t_s`` (the trajectory's mass schedule; the take-off mass
-        ``drone.total_mass_kg`` throughout for a trajectory without one, a replay's)."""
+        """The total mass [kg] flown at the sample times ``t_s``."""
         if self.mass_changes:
-            return self.traj.mass_at(t_s)
+            return self.schedule.at(t_s)
         return np.full(np.shape(t_s), float(self.cfg.drone.total_mass_kg))
 
     def row_mass_kg(self, rows_k) -> np.ndarray:
         """The total mass [kg] of the samples ``rows_k`` (global indices): the mass a step's row flew."""
-        ri = np.asarray(rows_k, dtype=np.int64)
-        if not self.mass_changes:
-            return np.full(len(ri), float(self.cfg.drone.total_mass_kg))
-        return self.traj.mass_at(ri * self.traj.dt)
+        if self.mass_changes:
+            return self.schedule.at_samples(rows_k)
+        return np.full(len(np.asarray(rows_k)), float(self.cfg.drone.total_mass_kg))
 
     @property
     def t_first_s(self) -> float:

@@ -24,7 +24,7 @@ from .power import payload_after_releases as _payload_left
 from .power import propulsion_power_w
 from .wind import drag_force_n, hover_error_m, tilt_from_force, wind_series
 
-__all__ = ["Trajectory", "PlannedTrajectory", "plan_mission", "PHASES", "PLAN_BLOCK"]
+__all__ = ["Trajectory", "PlannedTrajectory", "MassSchedule", "plan_mission", "PHASES", "PLAN_BLOCK"]
 
 PHASES = ("ground", "takeoff", "transit", "approach", "charge", "depart", "land", "hover", "flight")
 
@@ -280,6 +280,47 @@ def plan_mission(cfg, rng: np.random.Generator | None = None) -> Trajectory:
     return PlannedTrajectory(cfg, rng).materialise()
 
 
+@dataclass(frozen=True)
+class MassSchedule:
+    """The total mass flown along a planned route: ``takeoff_mass_kg`` (``drone.mass_kg + payload_kg``) until the
+    first release, ``mass_after_kg[i]`` from ``release_t_s[i]`` [s] on (:func:`.power.payload_after_releases`);
+    ``empty_releases``: how many releases found no payload left; ``dt_s``: the plan's sample period (sample k
+    is at ``k dt_s``). A sample at or after a release flies without what it dropped (the power and the hold are
+    held over the sample, so the drop lands on the sample grid)."""
+
+    takeoff_mass_kg: float
+    release_t_s: np.ndarray
+    mass_after_kg: np.ndarray
+    empty_releases: int
+    dt_s: float
+
+    @classmethod
+    def of(cls, drone, release_t_s, dt_s: float) -> "MassSchedule":
+        left, empty = _payload_left(drone, len(release_t_s))
+        return cls(float(drone.total_mass_kg), np.array(release_t_s, dtype=float),
+                   np.array([drone.mass_kg + x for x in left], dtype=float), empty, float(dt_s))
+
+    @property
+    def final_mass_kg(self) -> float:
+        """The mass the route ends with (the landing mass)."""
+        return float(self.mass_after_kg[-1]) if len(self.mass_after_kg) else self.takeoff_mass_kg
+
+    @property
+    def changes(self) -> bool:
+        """Whether the mass changes along the route (a release that drops payload); else every sample flies
+        the take-off mass (and the power model is called as without a schedule: the same numbers)."""
+        return self.final_mass_kg != self.takeoff_mass_kg
+
+    def at(self, t_s) -> np.ndarray:
+        """The total mass [kg] at the sample times ``t_s``."""
+        table = np.concatenate([[self.takeoff_mass_kg], self.mass_after_kg])
+        return table[np.searchsorted(self.release_t_s, np.asarray(t_s, dtype=float), side="right")]
+
+    def at_samples(self, k) -> np.ndarray:
+        """The total mass [kg] of the samples ``k`` (indices on the plan's grid)."""
+        return self.at(np.asarray(k, dtype=np.int64) * self.dt_s)
+
+
 #: samples per block a :class:`PlannedTrajectory` generates (and keeps the last few of)
 PLAN_BLOCK = 1 << 15
 _PHASE_NAMES = np.array(PHASES, dtype=object)
@@ -337,29 +378,17 @@ class PlannedTrajectory:
         self._restart()
 
     def _mass_schedule(self, releases, t_end: float) -> None:
-        """The payload releases of the route as times and the total mass after each: ``release_t_s`` (n,) [s] (the
-        start of the segment after the released-at waypoint; the end of the route after the last), ``mass_after_kg``
-        (n,) [kg] (:func:`.power.payload_after_releases`), ``empty_releases`` (how many found no payload left);
-        :meth:`mass_at` reads them."""
-        drone = self.cfg.drone
+        """:attr:`mass`: the :class:`MassSchedule` of the route's payload releases (each at the start of the segment
+        after its waypoint; the end of the route after the last)."""
         times = [float(self._starts[j]) if j < len(self._starts) else t_end for j, n in releases for _ in range(n)]
-        left, self.empty_releases = _payload_left(drone, len(times))
-        self.release_t_s = np.array(times, dtype=float)
-        self.mass_after_kg = np.array([drone.mass_kg + x for x in left], dtype=float)
-        self.takeoff_mass_kg = drone.total_mass_kg
-        self.final_mass_kg = float(self.mass_after_kg[-1]) if len(times) else self.takeoff_mass_kg
+        self.mass = MassSchedule.of(self.cfg.drone, times, self.dt)
 
     @property
     def mass_changes(self) -> bool:
-        """Whether the mass flown changes along the route (a release that drops payload)."""
-        return bool(len(self.release_t_s)) and self.final_mass_kg != self.takeoff_mass_kg
+        return self.mass.changes
 
     def mass_at(self, t_s) -> np.ndarray:
-        """The total mass [kg] flown at times ``t_s`` (the sample times: a sample at or after a release flies without
-        what it dropped; the power and the hold are held over the sample, so the drop is on the sample grid)."""
-        t = np.asarray(t_s, dtype=float)
-        table = np.concatenate([[self.takeoff_mass_kg], self.mass_after_kg])
-        return table[np.searchsorted(self.release_t_s, t, side="right")]
+        return self.mass.at(t_s)
 
     def _restart(self):
         self._gens = [_clone(g) for g in self._gens0]
@@ -387,8 +416,9 @@ class PlannedTrajectory:
         raise AttributeError(name)
 
     def materialise(self) -> Trajectory:
-        """All samples as one :class:`Trajectory`."""
+        """All samples as one :class:`Trajectory` (with the route's :class:`MassSchedule` as its ``mass``)."""
         full = Trajectory(*_parts(self.chunk(0, self.n)))
+        full.mass = self.mass
         self._restart()   # the blocks are in ``full`` now
         return full
 
@@ -419,7 +449,7 @@ class PlannedTrajectory:
         wp, cfg = self.cfg.wind, self.cfg
         force = drag_force_n(wp, wind, vel)
         force_mean = drag_force_n(wp, self._mean_wind[None, :], vel)
-        mass = self.mass_at(t) if self.mass_changes else cfg.drone.total_mass_kg
+        mass = self.mass.at(t) if self.mass.changes else cfg.drone.total_mass_kg
         err = hover_error_m(wp, force - force_mean, mass, self.dt, state=self._hold_z)
         on_ground = code == PHASES.index("ground")
         err[on_ground] = 0.0
