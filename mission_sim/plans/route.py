@@ -356,6 +356,12 @@ def apply_mission_files(d: dict, base_dir=None, mission_file=None, pads_file=Non
         pads = [(p.get("x_m", 0.0), p.get("y_m", 0.0), p.get("z_m", 0.0)) for p in out.get("pads") or []
                 if isinstance(p, dict)]
         out["waypoints"] = route_from_items(raw, pads, float(radius))
+        if raw.fence:   # a .plan's geofence: warnings only (the route is flown as planned)
+            from wpt_receiver.notices import warn
+
+            from .fence import fence_warnings
+            for text in fence_warnings(raw.fence, raw.rally, raw.home, out["waypoints"], raw.source):
+                warn(text)
         out["mission"].update(file=str(mf), start_x_m=0.0, start_y_m=0.0)
         last = out["waypoints"][-1]
         out["mission"].update(land_x_m=last["x_m"], land_y_m=last["y_m"])

@@ -1,0 +1,199 @@
+"""A QGroundControl ``.plan``'s geofence and rally points, and whether a route stays inside the fence.
+
+A ``.plan``'s ``geoFence`` (version 2: ``polygons`` of ``{"inclusion": bool, "polygon": [[lat, lon], ...]}`` and
+``circles`` of ``{"inclusion": bool, "circle": {"center": [lat, lon], "radius": m}}``; version 1: one inclusion
+``"polygon"``) and ``rallyPoints`` (``points``: [lat, lon, alt AMSL]) are read by :func:`read_plan_fence` into
+:class:`GeoZone` records (geodetic); :func:`local_zones` puts them in the pad frame (ENU about home). The route is
+flown as planned whatever the fence says (no fence action is simulated); :func:`fence_warnings` names, per zone,
+the first leg of the route (the horizontal polyline home -> waypoints) that leaves an inclusion zone or enters an
+exclusion zone, and each rally point outside the fence. Each inclusion zone is checked on its own, as ArduPilot
+does (the vehicle inside every inclusion zone); PX4 asks for one of them, so a plan with several inclusion zones may
+warn where PX4 would not breach. The fence's altitude limits are parameters of the vehicle, not in the plan.
+
+The geometry (:func:`route_breaches`) is pure: even-odd point in polygon, proper segment crossings, the distance
+of a segment from a circle's centre; a point on an edge counts as inside.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..mavlink.geodesy import GeoPoint, geodetic_to_enu
+
+__all__ = ["GeoZone", "Zone", "read_plan_fence", "local_zones", "route_breaches", "fence_warnings"]
+
+
+@dataclass(frozen=True)
+class GeoZone:
+    """A fence zone of a plan, geodetic: ``kind`` "polygon" (``points``: (lat, lon) vertices, degrees) or "circle"
+    (``points``: its centre, ``radius_m``); ``inclusion``: stay inside (True) or outside (False); ``name``: how
+    the warnings call it ("inclusion polygon 1": its index among the plan's polygons / circles)."""
+
+    kind: str
+    inclusion: bool
+    points: tuple
+    radius_m: float = 0.0
+    name: str = ""
+
+
+@dataclass(frozen=True)
+class Zone:
+    """A fence zone in the pad frame: ``xy_m`` (n, 2) polygon vertices or the circle's centre (1, 2) [m]."""
+
+    kind: str
+    inclusion: bool
+    xy_m: np.ndarray
+    radius_m: float
+    name: str
+
+
+def _latlon(v, name: str, what: str) -> tuple[float, float]:
+    if not (isinstance(v, list) and len(v) >= 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                       and math.isfinite(x) for x in v[:2])):
+        raise ValueError(f"{name}: {what}={v!r} is invalid; valid: [lat, lon] in degrees")
+    try:
+        GeoPoint(float(v[0]), float(v[1]))   # (latitude / longitude ranges: one line naming the value)
+    except ValueError as exc:
+        raise ValueError(f"{name}: {what}={v!r} is invalid: {exc}") from None
+    return float(v[0]), float(v[1])
+
+
+def read_plan_fence(doc: dict, name: str) -> tuple[tuple[GeoZone, ...], tuple[tuple[float, float, float], ...]]:
+    """The geofence zones and the rally points (lat, lon, alt AMSL) of a ``.plan``'s JSON ``doc`` (none when absent);
+    a malformed entry is a ``ValueError`` naming the file ``name`` and the entry."""
+    zones: list[GeoZone] = []
+    fence = doc.get("geoFence")
+    if isinstance(fence, dict):
+        polys = fence.get("polygons")
+        if polys is None and isinstance(fence.get("polygon"), list):   # version 1: one inclusion polygon
+            polys = [{"inclusion": True, "polygon": fence["polygon"]}] if fence["polygon"] else []
+        for i, p in enumerate(polys or []):
+            where = f"geoFence.polygons[{i}]"
+            if not isinstance(p, dict) or not isinstance(p.get("polygon"), list):
+                raise ValueError(f"{name}: {where} is invalid; valid: {{\"inclusion\": true|false, \"polygon\": "
+                                 "[[lat, lon], ...]}")
+            pts = tuple(_latlon(v, name, f"{where}.polygon[{j}]") for j, v in enumerate(p["polygon"]))
+            if len(pts) < 3:
+                raise ValueError(f"{name}: {where} has {len(pts)} vertices; valid: 3 or more")
+            inc = p.get("inclusion", True)
+            if not isinstance(inc, bool):
+                raise ValueError(f"{name}: {where}.inclusion={inc!r} is invalid; valid: true, false")
+            zones.append(GeoZone("polygon", inc, pts, 0.0, f"{'inclusion' if inc else 'exclusion'} polygon {i}"))
+        for i, c in enumerate(fence.get("circles") or []):
+            where = f"geoFence.circles[{i}]"
+            circle = c.get("circle") if isinstance(c, dict) else None
+            r = circle.get("radius") if isinstance(circle, dict) else None
+            if not (isinstance(r, (int, float)) and not isinstance(r, bool) and math.isfinite(r) and r > 0):
+                raise ValueError(f"{name}: {where} is invalid; valid: {{\"inclusion\": true|false, \"circle\": "
+                                 "{\"center\": [lat, lon], \"radius\": metres > 0}}")
+            inc = c.get("inclusion", True)
+            if not isinstance(inc, bool):
+                raise ValueError(f"{name}: {where}.inclusion={inc!r} is invalid; valid: true, false")
+            centre = _latlon(circle.get("center"), name, f"{where}.circle.center")
+            zones.append(GeoZone("circle", inc, (centre,), float(r), f"{'inclusion' if inc else 'exclusion'} circle {i}"))
+    rally = []
+    points = doc.get("rallyPoints", {}).get("points") if isinstance(doc.get("rallyPoints"), dict) else None
+    for i, v in enumerate(points or []):
+        lat, lon = _latlon(v, name, f"rallyPoints.points[{i}]")
+        alt = v[2] if len(v) > 2 and isinstance(v[2], (int, float)) and not isinstance(v[2], bool) else math.nan
+        rally.append((lat, lon, float(alt)))
+    return tuple(zones), tuple(rally)
+
+
+def local_zones(zones, home: GeoPoint) -> list[Zone]:
+    """:class:`GeoZone` records in the pad frame about ``home`` (ENU metres, horizontal)."""
+    out = []
+    for z in zones:
+        xy = np.array([geodetic_to_enu(lat, lon, home.alt_m, home)[:2] for lat, lon in z.points], dtype=float)
+        out.append(Zone(z.kind, z.inclusion, xy, z.radius_m, z.name))
+    return out
+
+
+def _inside_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Even-odd rule: which of the points (n, 2) are inside the polygon (m, 2) (a point on an edge: inside)."""
+    x, y = pts[:, 0:1], pts[:, 1:2]
+    a, b = poly, np.roll(poly, -1, axis=0)
+    ax, ay, bx, by = a[:, 0], a[:, 1], b[:, 0], b[:, 1]
+    straddle = (ay > y) != (by > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xc = ax + (y - ay) * (bx - ax) / (by - ay)
+    inside = (np.sum(straddle & (x < xc), axis=1) % 2) == 1
+    return inside | _on_boundary(pts, poly)
+
+
+def _on_boundary(pts: np.ndarray, poly: np.ndarray, tol_m: float = 1e-6) -> np.ndarray:
+    a, b = poly, np.roll(poly, -1, axis=0)
+    return np.array([np.min(_seg_distance(p, a, b)) <= tol_m for p in pts], dtype=bool)
+
+
+def _seg_distance(p, a, b) -> np.ndarray:
+    """Distance of point ``p`` (2,) from segments ``a``-``b`` ((k, 2) each)."""
+    d = b - a
+    den = np.einsum("ij,ij->i", d, d)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(den > 0, np.einsum("ij,ij->i", p - a, d) / den, 0.0)
+    q = a + np.clip(t, 0.0, 1.0)[:, None] * d
+    return np.hypot(*(p - q).T)
+
+
+def _cross(o, a, b) -> np.ndarray:
+    return (a[..., 0] - o[..., 0]) * (b[..., 1] - o[..., 1]) - (a[..., 1] - o[..., 1]) * (b[..., 0] - o[..., 0])
+
+
+def _crosses(p, q, poly: np.ndarray) -> bool:
+    """Whether segment ``p``-``q`` properly crosses an edge of the polygon (endpoints strictly on both sides)."""
+    a, b = poly, np.roll(poly, -1, axis=0)
+    d1, d2 = _cross(a, b, p[None]), _cross(a, b, q[None])
+    d3, d4 = _cross(p[None], q[None], a), _cross(p[None], q[None], b)
+    return bool(np.any((d1 * d2 < 0) & (d3 * d4 < 0)))
+
+
+def route_breaches(route_xy, zones) -> list[tuple[Zone, int]]:
+    """Per zone the first leg ``k`` (route point k -> k + 1; a one-point route: its point, k = 0) of the horizontal
+    polyline ``route_xy`` (n, 2) [m] that leaves an inclusion zone or enters an exclusion zone: ``(zone, k)``, in
+    the order of ``zones``; zones the route respects are left out."""
+    pts = np.asarray(route_xy, dtype=float).reshape(-1, 2)
+    legs = [(pts[k], pts[k + 1]) for k in range(len(pts) - 1)] or [(pts[0], pts[0])]
+    out = []
+    for z in zones:
+        for k, (p, q) in enumerate(legs):
+            if z.kind == "circle":
+                c = z.xy_m[0]
+                if z.inclusion:
+                    bad = max(math.hypot(*(p - c)), math.hypot(*(q - c))) > z.radius_m   # (a disc is convex)
+                else:
+                    bad = float(_seg_distance(c, p[None], q[None])[0]) < z.radius_m
+            else:
+                ends = _inside_polygon(np.array([p, q]), z.xy_m)
+                bad = (not ends.all()) if z.inclusion else bool(ends.any())
+                bad = bad or _crosses(p, q, z.xy_m)
+            if bad:
+                out.append((z, k))
+                break
+    return out
+
+
+def fence_warnings(zones, rally, home: GeoPoint, route: list[dict], name: str) -> list[str]:
+    """One line per fence zone the route of ``[[waypoints]]`` dicts ``route`` (from home, (0, 0)) leaves (inclusion)
+    or enters (exclusion), naming the leg; one per rally point outside the fence (``rally``: (lat, lon, alt))."""
+    if not zones:
+        return []
+    local = local_zones(zones, home)
+    xy = [(0.0, 0.0)] + [(float(w["x_m"]), float(w["y_m"])) for w in route]
+    out = []
+    for z, k in route_breaches(xy, local):
+        a, b = xy[k], xy[min(k + 1, len(xy) - 1)]
+        leg = "from home" if k == 0 else f"from route point {k - 1}"
+        verb = "leaves" if z.inclusion else "enters"
+        out.append(f"{name}: the route {verb} the plan's geofence {z.name} on the leg {leg} ({a[0]:.0f}, {a[1]:.0f}) m "
+                   f"to route point {k} ({b[0]:.0f}, {b[1]:.0f}) m (pad frame, ENU about home); the route is flown as "
+                   "planned (no fence action is simulated): valid: a route inside the fence")
+    for i, (lat, lon, _) in enumerate(rally):
+        p = local_zones([GeoZone("circle", True, ((lat, lon),), 1.0)], home)[0].xy_m
+        for z, _k in route_breaches(p, local):
+            out.append(f"{name}: rally point {i} ({lat:.6f}, {lon:.6f}) is {'outside' if z.inclusion else 'inside'} "
+                       f"the plan's geofence {z.name}")
+    return out
