@@ -9,7 +9,8 @@ loop, :class:`~mission_sim.world.loop.MissionLoop`, twice: charged and uncharged
 Loop (one drone, one receiver):
 
 1. **Trajectory samples** (``sim.traj_dt_s``): pose -> Lm(pose) of the nearest pad (lookup table,
-   held over the sample), propulsion power (momentum theory, held over the sample), phase
+   held over the sample), propulsion power (momentum theory at the sample's mass: the route's payload releases,
+   :class:`~.trajectory.MassSchedule`; held over the sample), phase
    [:class:`~.samples.MissionSamples`, chunk by chunk as the loop advances (:func:`.fastpath.window`);
    ``loop_kernel.advance`` -> ``_begin_sample`` per sample].
 2. **Pad gating** (transmitter side): the pad energises only in a "charge"/"hover" phase (the
@@ -106,7 +107,8 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     ``warn``: before the run, :func:`mission_sim.setup_warnings.mission_warnings` as
     :class:`wpt_receiver.notices.DronewptWarning` (a link outside the exact-mode model's checked range, a pad the
     route never energises, a policy made for another link model; none with ``charge=False``); False skips them (a
-    sweep warns once per study). ``own_route``: whether the pads are checked against ``cfg``'s route (None: when
+    sweep warns once per study); a route's payload release with no payload left to drop warns with or without
+    ``charge`` (:func:`mission_sim.setup_warnings.payload_warnings`; when the route flown is ``cfg``'s). ``own_route``: whether the pads are checked against ``cfg``'s route (None: when
     no ``trajectory`` is given, a given one is taken for a replay's, its pads about the replay's pad frame origin;
     True for a trajectory planned from ``cfg``, e.g. ``plan_mission(cfg)``; False for a replayed one, or when the
     caller said it already). A pad far above or below its frame's origin warns whatever the route.
