@@ -410,8 +410,9 @@ def _payload_rows(s: dict) -> list:
     and after the first release that dropped payload."""
     if "takeoff_mass_kg" not in s:
         return []
-    times = s["payload_release_times_s"]
-    when = f"released at t = {', '.join(f'{t:.1f}' for t in times)} s" if times else "never released"
+    n = s["payload_releases"]
+    when = (f"{n} release{'s' if n > 1 else ''}, the first at t = {s['first_release_t_s']:.1f} s" if n else
+            "never released")
     rows = [("mass take-off -> landing", f"{s['takeoff_mass_kg']:g} -> {s['landing_mass_kg']:g}", f"kg ({when})")]
     if "propulsion_energy_after_release_j" in s:
         rows.append(("propulsion before / after drop", f"{s['propulsion_energy_before_release_j']:.1f} / "

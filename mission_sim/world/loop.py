@@ -242,7 +242,8 @@ class MissionLoop:
         }
 
     def payload_summary(self) -> dict:
-        """With a payload (``drone.payload_kg`` > 0): the take-off and landing masses [kg], the release times [s]
+        """With a payload (``drone.payload_kg`` > 0): the take-off and landing masses [kg], the number of releases
+        and the time of the first [s] (None without one; scalars only: a sweep stores the summary as columns)
         and the propulsion energy [J] before and after the first release that dropped payload (split at the step
         holding it: a quiet-flight step merging samples across it, at most ``sim.flight_dt_s``, counts before);
         nothing otherwise."""
@@ -253,7 +254,7 @@ class MissionLoop:
         times = [] if sched is None else [float(t) for t in sched.release_t_s]
         out = {"takeoff_mass_kg": float(drone.total_mass_kg),
                "landing_mass_kg": float(drone.total_mass_kg if sched is None else sched.final_mass_kg),
-               "payload_release_times_s": times}
+               "payload_releases": len(times), "first_release_t_s": times[0] if times else None}
         if smp.mass_changes:
             after = self.stats.sums_after
             out["propulsion_energy_before_release_j"] = self.stats.sums["e_propulsion_j"] - after
