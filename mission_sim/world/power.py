@@ -24,7 +24,7 @@ Payload: ``payload_kg`` is carried from take-off (total mass ``mass_kg + payload
 releases (``[[waypoints]] release``, a mission file's DO_GRIPPER release / DO_WINCH deliver) drop
 ``release_kg`` each (0: all that is left) in route order, :func:`payload_after_releases`. The power model takes
 the current mass (``mass_kg=`` of :func:`propulsion_power_w` / :func:`hover_power_w`; the planned trajectory's
-mass schedule, :meth:`mission_sim.world.trajectory.PlannedTrajectory.mass_at`); hover power goes as
+mass schedule, :class:`mission_sim.world.trajectory.MassSchedule`); hover power goes as
 ``m^1.5`` (momentum theory, the profile power taken at the same hover induced velocity).
 """
 
