@@ -119,9 +119,49 @@ def test_fence_versions_rally_and_bad_entries():
     assert len(fence_warnings(zones, (), home, route, "v1.plan")) == 1
     with pytest.raises(ValueError, match=r"^x\.plan: geoFence\.circles\[0\] is invalid; valid: .*radius"):
         read_plan_fence({"geoFence": {"circles": [{"circle": {"center": [47, 8], "radius": -5}}]}}, "x.plan")
-    with pytest.raises(ValueError, match=r"^x\.plan: geoFence\.polygons\[0\] has 2 vertices; valid: 3 or more$"):
+    with pytest.raises(ValueError, match=r"^x\.plan: geoFence\.polygons\[0\]\.polygon has 2 vertices; valid: 3 or more$"):
         read_plan_fence({"geoFence": {"polygons": [{"inclusion": True, "polygon": [[47, 8], [47, 8.1]]}]}}, "x.plan")
     with pytest.raises(ValueError, match=r"^x\.plan: geoFence\.polygons\[0\]\.polygon\[1\]=\[95, 8\] is invalid"):
         read_plan_fence({"geoFence": {"polygons": [{"polygon": [[47, 8], [95, 8], [47, 8.1]]}]}}, "x.plan")
     assert math.isnan(read_plan_fence({"rallyPoints": {"points": [[47, 8]]}}, "x.plan")[1][0][2])
     assert isinstance(zones[0], GeoZone)
+
+
+@pytest.mark.parametrize("doc, said", [
+    ({"geoFence": {"polygons": 5}}, r"geoFence\.polygons=5 is invalid; valid: a list or null"),
+    ({"geoFence": {"circles": 3.5}}, r"geoFence\.circles=3\.5 is invalid; valid: a list or null"),
+    ({"geoFence": {"polygons": [], "circles": {"a": 1}}}, r"geoFence\.circles=\{'a': 1\} is invalid"),
+    ({"rallyPoints": {"points": 7}}, r"rallyPoints\.points=7 is invalid; valid: a list or null"),
+    ({"rallyPoints": [1, 2]}, r"rallyPoints=\[1, 2\] is invalid; valid: an object"),
+    ({"geoFence": []}, r"geoFence=\[\] is invalid; valid: an object"),
+    ({"geoFence": 4}, r"geoFence=4 is invalid; valid: an object"),
+    ({"geoFence": {"version": 1, "polygon": {"lat": 47}}}, r"geoFence\.polygon=\{'lat': 47\} is invalid; valid: a list"),
+    # a version 1 fence's errors name its own key (geoFence.polygon), not a v2 key the file lacks
+    ({"geoFence": {"version": 1, "polygon": [[47, 8], [95, 8], [47, 8.1]]}}, r"geoFence\.polygon\[1\]=\[95, 8\] is invalid"),
+    ({"geoFence": {"version": 1, "polygon": [[47, 8], [47, 8.1]]}}, r"geoFence\.polygon has 2 vertices; valid: 3 or more$"),
+])
+def test_malformed_fence_containers_refused_in_one_line(doc, said):
+    with pytest.raises(ValueError, match=r"^x\.plan: " + said) as exc:
+        read_plan_fence(doc, "x.plan")
+    assert "\n" not in str(exc.value)
+
+
+def test_null_fence_containers_read_as_absent():
+    assert read_plan_fence({"geoFence": None, "rallyPoints": None}, "x.plan") == ((), ())
+    assert read_plan_fence({"geoFence": {"polygons": None, "circles": None, "polygon": []},
+                            "rallyPoints": {"points": None}}, "x.plan") == ((), ())
+
+
+def test_cli_refuses_a_number_as_polygons_in_one_line(tmp_path):
+    """``dronewpt mission --plan X.plan --dry-run`` with ``geoFence.polygons`` a number: exit 2, one line, no traceback."""
+    import subprocess
+    import sys
+    doc = json.loads((MISSIONS / "px4_geofence_avoid.plan").read_text())
+    doc["geoFence"]["polygons"] = 3
+    plan = tmp_path / "bad.plan"
+    plan.write_text(json.dumps(doc))
+    r = subprocess.run([sys.executable, "-m", "mission_sim.cli", "mission", "--plan", str(plan), "--dry-run"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2, r.stderr
+    assert "Traceback" not in r.stderr
+    assert "geoFence.polygons=3 is invalid; valid: a list or null" in r.stderr

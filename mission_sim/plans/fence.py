@@ -61,42 +61,63 @@ def _latlon(v, name: str, what: str) -> tuple[float, float]:
     return float(v[0]), float(v[1])
 
 
+def _short(v) -> str:
+    r = repr(v)
+    return r if len(r) <= 60 else r[:57] + "..."
+
+
+def _list_or_none(obj: dict, key: str, name: str, where: str):
+    """``obj[key]`` when it is a list or absent / null (None); anything else: a one-line ``ValueError``."""
+    v = obj.get(key)
+    if v is None or isinstance(v, list):
+        return v
+    raise ValueError(f"{name}: {where}.{key}={_short(v)} is invalid; valid: a list or null")
+
+
 def read_plan_fence(doc: dict, name: str) -> tuple[tuple[GeoZone, ...], tuple[tuple[float, float, float], ...]]:
     """The geofence zones and the rally points (lat, lon, alt AMSL) of a ``.plan``'s JSON ``doc`` (none when absent);
     a malformed entry is a ``ValueError`` naming the file ``name`` and the entry."""
     zones: list[GeoZone] = []
     fence = doc.get("geoFence")
-    if isinstance(fence, dict):
-        polys = fence.get("polygons")
-        if polys is None and isinstance(fence.get("polygon"), list):   # version 1: one inclusion polygon
-            polys = [{"inclusion": True, "polygon": fence["polygon"]}] if fence["polygon"] else []
-        for i, p in enumerate(polys or []):
-            where = f"geoFence.polygons[{i}]"
-            if not isinstance(p, dict) or not isinstance(p.get("polygon"), list):
-                raise ValueError(f"{name}: {where} is invalid; valid: {{\"inclusion\": true|false, \"polygon\": "
-                                 "[[lat, lon], ...]}")
-            pts = tuple(_latlon(v, name, f"{where}.polygon[{j}]") for j, v in enumerate(p["polygon"]))
-            if len(pts) < 3:
-                raise ValueError(f"{name}: {where} has {len(pts)} vertices; valid: 3 or more")
-            inc = p.get("inclusion", True)
-            if not isinstance(inc, bool):
-                raise ValueError(f"{name}: {where}.inclusion={inc!r} is invalid; valid: true, false")
-            zones.append(GeoZone("polygon", inc, pts, 0.0, f"{'inclusion' if inc else 'exclusion'} polygon {i}"))
-        for i, c in enumerate(fence.get("circles") or []):
-            where = f"geoFence.circles[{i}]"
-            circle = c.get("circle") if isinstance(c, dict) else None
-            r = circle.get("radius") if isinstance(circle, dict) else None
-            if not (isinstance(r, (int, float)) and not isinstance(r, bool) and math.isfinite(r) and r > 0):
-                raise ValueError(f"{name}: {where} is invalid; valid: {{\"inclusion\": true|false, \"circle\": "
-                                 "{\"center\": [lat, lon], \"radius\": metres > 0}}")
-            inc = c.get("inclusion", True)
-            if not isinstance(inc, bool):
-                raise ValueError(f"{name}: {where}.inclusion={inc!r} is invalid; valid: true, false")
-            centre = _latlon(circle.get("center"), name, f"{where}.circle.center")
-            zones.append(GeoZone("circle", inc, (centre,), float(r), f"{'inclusion' if inc else 'exclusion'} circle {i}"))
+    if fence is not None and not isinstance(fence, dict):
+        raise ValueError(f"{name}: geoFence={_short(fence)} is invalid; valid: an object "
+                         "{\"polygons\": [...], \"circles\": [...]} or absent")
+    fence = fence or {}
+    polys = _list_or_none(fence, "polygons", name, "geoFence")
+    if polys is None and fence.get("polygon") is not None:   # version 1: one inclusion polygon
+        v1 = _list_or_none(fence, "polygon", name, "geoFence")
+        polys = [("geoFence", {"inclusion": True, "polygon": v1})] if v1 else []
+    else:
+        polys = [(f"geoFence.polygons[{i}]", p) for i, p in enumerate(polys or [])]
+    for i, (where, p) in enumerate(polys):
+        if not isinstance(p, dict) or not isinstance(p.get("polygon"), list):
+            raise ValueError(f"{name}: {where} is invalid; valid: {{\"inclusion\": true|false, \"polygon\": "
+                             "[[lat, lon], ...]}")
+        pts = tuple(_latlon(v, name, f"{where}.polygon[{j}]") for j, v in enumerate(p["polygon"]))
+        if len(pts) < 3:
+            raise ValueError(f"{name}: {where}.polygon has {len(pts)} vertices; valid: 3 or more")
+        inc = p.get("inclusion", True)
+        if not isinstance(inc, bool):
+            raise ValueError(f"{name}: {where}.inclusion={inc!r} is invalid; valid: true, false")
+        zones.append(GeoZone("polygon", inc, pts, 0.0, f"{'inclusion' if inc else 'exclusion'} polygon {i}"))
+    for i, c in enumerate(_list_or_none(fence, "circles", name, "geoFence") or []):
+        where = f"geoFence.circles[{i}]"
+        circle = c.get("circle") if isinstance(c, dict) else None
+        r = circle.get("radius") if isinstance(circle, dict) else None
+        if not (isinstance(r, (int, float)) and not isinstance(r, bool) and math.isfinite(r) and r > 0):
+            raise ValueError(f"{name}: {where} is invalid; valid: {{\"inclusion\": true|false, \"circle\": "
+                             "{\"center\": [lat, lon], \"radius\": metres > 0}}")
+        inc = c.get("inclusion", True)
+        if not isinstance(inc, bool):
+            raise ValueError(f"{name}: {where}.inclusion={inc!r} is invalid; valid: true, false")
+        centre = _latlon(circle.get("center"), name, f"{where}.circle.center")
+        zones.append(GeoZone("circle", inc, (centre,), float(r), f"{'inclusion' if inc else 'exclusion'} circle {i}"))
     rally = []
-    points = doc.get("rallyPoints", {}).get("points") if isinstance(doc.get("rallyPoints"), dict) else None
-    for i, v in enumerate(points or []):
+    rp = doc.get("rallyPoints")
+    if rp is not None and not isinstance(rp, dict):
+        raise ValueError(f"{name}: rallyPoints={_short(rp)} is invalid; valid: an object {{\"points\": "
+                         "[[lat, lon, alt], ...]} or absent")
+    for i, v in enumerate(_list_or_none(rp or {}, "points", name, "rallyPoints") or []):
         lat, lon = _latlon(v, name, f"rallyPoints.points[{i}]")
         alt = v[2] if len(v) > 2 and isinstance(v[2], (int, float)) and not isinstance(v[2], bool) else math.nan
         rally.append((lat, lon, float(alt)))
