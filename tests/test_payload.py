@@ -261,3 +261,30 @@ def test_lighter_drone_is_pushed_further_by_the_gusts():
     dev_drop, dev_keep = drop.pos_m[late] - hold, keep.pos_m[late] - hold
     assert np.abs(dev_keep).max() > 0.01   # (the gusts move it: default wind, 0.6 m/s gusts)
     assert dev_drop == pytest.approx(1.5 * dev_keep, rel=1e-6, abs=1e-9)
+
+
+def test_config_dict_and_sweep_fingerprint_of_a_config_without_release_as_before():
+    """The payload keys (``drone.release_kg``, a waypoint's ``release``) are left out of ``config_to_dict`` at 0: a
+    base mission without a release has the dict, hence the sweep fingerprint, it had before them (f911edc: every
+    other key), so an older sweep folder is not refused as another base mission; the raw default TOML (a replay
+    study's base) lacks ``release_kg`` too. A release or a release_kg is kept (and round-trips)."""
+    import hashlib
+    from mission_sim.config import OMITTED_AT_DEFAULT, config_to_dict
+    from mission_sim.studies.study import canonical_json
+    from mission_sim.studies.worst_cases import base_fingerprint
+    cfg = config_from_dict(load_config_dict(None))
+    full = dc.asdict(cfg)
+    before = {**full, "pads": [{k: v for k, v in p.items() if v is not None} for p in full["pads"]],
+              "waypoints": [{k: v for k, v in w.items() if v is not None and k not in OMITTED_AT_DEFAULT["waypoints"]}
+                            for w in full["waypoints"]],
+              "drone": {k: v for k, v in full["drone"].items() if k not in OMITTED_AT_DEFAULT["drone"]}}
+    assert "release_kg" in full["drone"] and "release_kg" not in before["drone"]
+    assert config_to_dict(cfg) == before
+    assert base_fingerprint(config_to_dict(cfg)) == hashlib.sha256(canonical_json(before).encode()).hexdigest()[:16]
+    assert "release_kg" not in load_config_dict(None)["drone"]
+    d = apply_overrides(load_config_dict(None), {"drone.payload_kg": 0.9, "drone.release_kg": 0.3})
+    d["waypoints"] = [{"action": "takeoff", "x_m": 0.0, "y_m": 0.0, "z_m": 5.0, "release": 2},
+                      {"action": "land", "x_m": 0.0, "y_m": 0.0, "z_m": 5.0}]
+    out = config_to_dict(config_from_dict(d))
+    assert out["drone"]["release_kg"] == 0.3 and [w.get("release") for w in out["waypoints"]] == [2, None]
+    assert config_from_dict(out) == config_from_dict(d)
