@@ -173,7 +173,7 @@ class WaypointConfig:
     back; "land" flies to (x, y) at the current height and descends to the ground (z = 0).
     ``speed_m_s``: the horizontal speed limit from here on (None: ``mission.cruise_speed_m_s``).
     ``release``: how many payload releases happen when this waypoint is done (after its hold, charge or landing;
-    a mission file's DO_GRIPPER release / DO_WINCH deliver items after it): each drops ``drone.release_kg`` (0:
+    a mission file's DO_GRIPPER release items after it): each drops ``drone.release_kg`` (0:
     all the payload left), so the drone flies on lighter (:func:`mission_sim.world.power.payload_after_releases`).
     """
 

@@ -14,7 +14,7 @@ each by the command line.
   or loiter's hover inside its coupling range, the run's own rule): it charges nothing.
 * :func:`far_pad_warnings`: a pad more than 120 m above or below home (an altitude in another frame or unit).
 * :func:`payload_warnings`: a route's payload release (``[[waypoints]] release``, a mission file's DO_GRIPPER
-  release / DO_WINCH deliver) with no payload left to drop (``drone.payload_kg = 0``, or more releases than
+  release) with no payload left to drop (``drone.payload_kg = 0``, or more releases than
   ``payload_kg / release_kg`` parcels): it drops nothing.
 * :func:`policy_link_warning`: a policy made for another link model than the mission's (``"modal"``), if it
   predicts with it: a policy says so with a class attribute ``uses_link_model = True`` (``mpc``,
@@ -207,7 +207,7 @@ def payload_warnings(cfg) -> list[str]:
     if not empty:
         return []
     if drone.payload_kg == 0:
-        return [f"the route releases a payload {n} time(s) (DO_GRIPPER release / DO_WINCH deliver, [[waypoints]] "
+        return [f"the route releases a payload {n} time(s) (DO_GRIPPER release, [[waypoints]] "
                 "release) but drone.payload_kg = 0: nothing is dropped, the drone flies at drone.mass_kg throughout; "
                 "valid: drone.payload_kg > 0 (the payload carried from take-off, kg) for a delivery's lighter return"]
     each = ("drone.release_kg = 0: the first release drops all of it" if drone.release_kg == 0 else

@@ -1,4 +1,4 @@
-"""Payload carried from take-off and dropped at a route's releases (DO_GRIPPER release, DO_WINCH deliver,
+"""Payload carried from take-off and dropped at a route's releases (DO_GRIPPER release,
 ``[[waypoints]] release``): the mass schedule, the power at the current mass, the plan reader, bad inputs."""
 
 from __future__ import annotations
@@ -85,12 +85,13 @@ def test_px4_delivery_plan_releases_after_its_landing():
     (211, float("nan"), True),    # unset param2: 0, as the autopilots read it
     (211, 1.0, False),            # GRIPPER_ACTION_GRAB: adds nothing (the mass picked up is not known)
     (211, 2.0, False),            # GRIPPER_ACTION_HOLD
-    (42600, 4.0, True),           # WINCH_DELIVER: lower, release, reel up
+    (42600, 4.0, False),          # WINCH_DELIVER: the autopilots drop nothing on it in a mission (warned)
     (42600, 0.0, False),          # WINCH_RELAXED
     (42600, 1.0, False),          # WINCH_RELATIVE_LENGTH_CONTROL: the payload still hangs on the line
     (42600, 8.0, False),          # WINCH_ABANDON_LINE
 ])
 def test_release_commands(command, action, released):
+    warnings.simplefilter("ignore")   # (WINCH_DELIVER warns: test_winch_deliver_warns_once_and_drops_nothing)
     raw = _raw(_item("item 0", 22, alt=10.0), _item("item 1", 16, lat=47.0005, lon=8.0, alt=10.0),
                _item("item 2", command, p2=action), _item("item 3", 16, lat=47.001, lon=8.0, alt=10.0),
                _item("item 4", 211, p2=1.0))
@@ -99,12 +100,28 @@ def test_release_commands(command, action, released):
 
 
 def test_two_releases_on_one_waypoint_and_before_any_nav_item():
-    raw = _raw(_item("item 0", 22, alt=10.0), _item("item 1", 211), _item("item 2", 42600, p2=4.0),
+    raw = _raw(_item("item 0", 22, alt=10.0), _item("item 1", 211), _item("item 2", 211, p2=float("nan")),
                _item("item 3", 21))
     assert [w.get("release", 0) for w in route_from_items(raw)] == [2, 0]
     with pytest.raises(ValueError, match=r"^test\.plan: item 0: DO_GRIPPER \(211\) releases the payload before the "
                                          r"first navigation item.*valid: a release after"):
         route_from_items(_raw(_item("item 0", 211), _item("item 1", 22, alt=10.0)))
+
+
+def test_winch_deliver_warns_once_and_drops_nothing():
+    """DO_WINCH WINCH_DELIVER: the MAVLink spec's "lower, release, reel up", but neither ArduCopter (do_winch) nor PX4
+    drops a payload on it in a mission: no release, one warning naming the items and saying so."""
+    from wpt_receiver.notices import DronewptWarning
+    raw = _raw(_item("item 0", 22, alt=10.0), _item("item 1", 42600, p2=4.0), _item("item 2", 42600, p2=4.0),
+               _item("item 3", 21), _item("item 4", 42600, p2=1.0))
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        route = route_from_items(raw)
+    assert [w.get("release", 0) for w in route] == [0, 0]
+    said = [str(w.message) for w in rec if issubclass(w.category, DronewptWarning)]
+    assert len(said) == 1 and said[0].startswith("test.plan: item 1, item 2: DO_WINCH (42600) WINCH_DELIVER drops "
+                                                 "no payload here: ArduCopter")
+    assert "MAVLink spec" in said[0] and "valid: a DO_GRIPPER release after it" in said[0]
 
 
 # ------------------------------------------------------------------ the mission: the drop's energy

@@ -9,7 +9,7 @@
 ``pads``    charging pads from a CSV (lat, lon[, alt][, hover_time_s]) or GeoJSON Points file
 ``route``   items -> the config's ``[[waypoints]]`` in the pad frame (ENU about home, with
             :mod:`mission_sim.mavlink.geodesy`), pads -> ``[[pads]]``, loiters at a pad ->
-            charging hovers, payload releases (DO_GRIPPER release, DO_WINCH deliver) counted on the
+            charging hovers, payload releases (DO_GRIPPER release; not DO_WINCH deliver) counted on the
             waypoint before them; :func:`~mission_sim.plans.route.apply_mission_files` (config loading)
 ``refly``   what-if re-flight of a logged flight with pads added (``replay LOG --pads FILE``)
 ==========  ==================================================================================

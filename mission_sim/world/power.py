@@ -21,7 +21,7 @@ flat-plate area 0.02 m^2, avionics 8 W. These are assumptions of typical values,
 airframe's measurements; hover electrical power comes out at ~99 W.
 
 Payload: ``payload_kg`` is carried from take-off (total mass ``mass_kg + payload_kg``); a route's payload
-releases (``[[waypoints]] release``, a mission file's DO_GRIPPER release / DO_WINCH deliver) drop
+releases (``[[waypoints]] release``, a mission file's DO_GRIPPER release) drop
 ``release_kg`` each (0: all that is left) in route order, :func:`payload_after_releases`. The power model takes
 the current mass (``mass_kg=`` of :func:`propulsion_power_w` / :func:`hover_power_w`; the planned trajectory's
 mass schedule, :class:`mission_sim.world.trajectory.MassSchedule`); hover power goes as
