@@ -189,6 +189,33 @@ def test_drop_saves_the_closed_form_hover_energy():
         hover_power_w(p, 1.5) / hover_power_w(p, 1.0), rel=1e-12)
 
 
+def test_trajectory_planned_for_other_masses_is_refused():
+    """A trajectory keeps the mass schedule of the config it was planned from; run with a drone that gives other
+    masses (planned with payload 0.5 kg and a drop, run with none; or the other way round) it is refused in one line
+    rather than flying the planning masses silently. The same masses: runs (and draws what planning in the run
+    draws); a route without a release under both drones flies the run's drone.total_mass_kg, as before."""
+    import policies
+    from mission_sim.world.runner import run_mission
+    from mission_sim.world.trajectory import plan_mission
+    drop, none = _hover_route_cfg(1, 0.5, hold_after_s=10.0), _hover_route_cfg(1, 0.0, hold_after_s=10.0)
+    for planned, run in ((drop, none), (none, drop)):
+        pol = policies.make("step", policy_context(run))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            with pytest.raises(ValueError, match=r"^the trajectory was planned for (1\.5 kg, 1 kg from t = [\d.]+ s|"
+                                                 r"1 kg throughout), the run's drone flies .*; valid: a trajectory "
+                                                 r"planned from the run's config") as exc:
+                run_mission(run, pol, trajectory=plan_mission(planned), charge=False)
+        assert "\n" not in str(exc.value)
+    pol = policies.make("step", policy_context(drop))
+    a = run_mission(drop, pol, trajectory=plan_mission(drop), charge=False)
+    b = run_mission(drop, pol, charge=False)
+    assert a.summary["propulsion_energy_j"] == pytest.approx(b.summary["propulsion_energy_j"], rel=1e-12)
+    light, heavy = _hover_route_cfg(0, 0.0, hold_after_s=10.0), _hover_route_cfg(0, 0.5, hold_after_s=10.0)
+    r = run_mission(heavy, policies.make("step", policy_context(heavy)), trajectory=plan_mission(light), charge=False)
+    assert r.summary["propulsion_energy_j"] > b.summary["propulsion_energy_j"]   # (1.5 kg throughout)
+
+
 def test_materialised_plan_keeps_the_drop():
     """``plan_mission`` (all samples at once: ``dronewpt telemetry``'s trajectory) carries the mass schedule: the run
     over it draws what the run planning in blocks draws."""

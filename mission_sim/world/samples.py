@@ -143,6 +143,8 @@ class MissionSamples:
         #: the route's :class:`~.trajectory.MassSchedule` when the mass flown changes on the way (a planned route's
         #: payload release), else None: every sample flies ``drone.total_mass_kg`` (a replay's trajectory too)
         sched = getattr(traj, "mass", None)
+        if sched is not None:
+            sched.check_drone(cfg.drone)   # (one source: the run's drone; a trajectory planned for other masses refused)
         self.schedule = sched if sched is not None and sched.changes else None
         self.mass_changes = self.schedule is not None
 

@@ -311,6 +311,29 @@ class MassSchedule:
         the take-off mass (and the power model is called as without a schedule: the same numbers)."""
         return self.final_mass_kg != self.takeoff_mass_kg
 
+    def check_drone(self, drone) -> None:
+        """One-line ``ValueError`` when ``drone`` (a run's ``cfg.drone``) gives other masses at these releases than
+        the ones planned (the schedule and the positions' hold were planned for them: re-plan with the run's
+        config, ``plan_mission(cfg)``). A route whose mass changes under neither drone flies the run's
+        ``drone.total_mass_kg`` throughout, as without a schedule."""
+        mine = MassSchedule.of(drone, self.release_t_s, self.dt_s)
+        if not (self.changes or mine.changes):
+            return
+        if mine.takeoff_mass_kg == self.takeoff_mass_kg and np.array_equal(mine.mass_after_kg, self.mass_after_kg):
+            return
+        raise ValueError(f"the trajectory was planned for {self.describe()}, the run's drone flies {mine.describe()} "
+                         f"(drone.mass_kg={drone.mass_kg:g}, payload_kg={drone.payload_kg:g}, "
+                         f"release_kg={drone.release_kg:g}); valid: a trajectory planned from the run's config "
+                         "(plan_mission(cfg))")
+
+    def describe(self) -> str:
+        """``1.5 kg, 1 kg from t = 28.5 s``: the masses flown, for messages."""
+        out, last = f"{self.takeoff_mass_kg:g} kg", self.takeoff_mass_kg
+        for t, m in zip(self.release_t_s, self.mass_after_kg):
+            if m != last:
+                out, last = out + f", {m:g} kg from t = {t:g} s", m
+        return out if last != self.takeoff_mass_kg else out + " throughout"
+
     def at(self, t_s) -> np.ndarray:
         """The total mass [kg] at the sample times ``t_s``."""
         table = np.concatenate([[self.takeoff_mass_kg], self.mass_after_kg])
