@@ -216,6 +216,27 @@ def test_trajectory_planned_for_other_masses_is_refused():
     assert r.summary["propulsion_energy_j"] > b.summary["propulsion_energy_j"]   # (1.5 kg throughout)
 
 
+def test_trajectory_propulsion_w_follows_the_mass_schedule():
+    """``Trajectory.propulsion_w`` (the materialised plan's) draws what the run draws: the hover before the drop at
+    1.5 kg, after it at 1.0 kg (momentum theory's closed form: at rest, no wind), not the take-off mass throughout;
+    a drone that does not give the plan's masses is refused as by the run."""
+    from mission_sim.world.trajectory import plan_mission
+    cfg = _hover_route_cfg(1, 0.5, hold_after_s=10.0)
+    tr = plan_mission(cfg)
+    p = tr.propulsion_w(cfg.drone)
+    t_r = tr.mass.release_t_s[0]
+    hover = tr.phase == "hover"
+    speed = np.linalg.norm(tr.velocity_m_s(), axis=1)
+    still = hover & (speed < 1e-9)
+    before, after = still & (tr.t_s < t_r - 1.0), still & (tr.t_s > t_r + 1.0)
+    assert before.sum() > 80 and after.sum() > 40
+    assert np.allclose(p[before], hover_power_w(cfg.drone, 1.5), rtol=1e-12)
+    assert np.allclose(p[after], hover_power_w(cfg.drone, 1.0), rtol=1e-12)
+    assert hover_power_w(cfg.drone, 1.5) - hover_power_w(cfg.drone, 1.0) > 50.0
+    with pytest.raises(ValueError, match=r"^the trajectory was planned for 1\.5 kg, 1 kg from t"):
+        tr.propulsion_w(_hover_route_cfg(1, 0.0).drone)
+
+
 def test_materialised_plan_keeps_the_drop():
     """``plan_mission`` (all samples at once: ``dronewpt telemetry``'s trajectory) carries the mass schedule: the run
     over it draws what the run planning in blocks draws."""

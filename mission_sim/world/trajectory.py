@@ -115,8 +115,15 @@ class Trajectory:
     motors_off_phases: ClassVar[tuple[str, ...]] = ("ground",)
 
     def propulsion_w(self, drone) -> np.ndarray:
-        """Electrical propulsion power (N,) [W] from momentum theory (airspeed = |v_xy - wind_xy|)."""
-        return propulsion_from(drone, self.velocity_m_s(), self.wind_m_s, self.phase, self.motors_off_phases)
+        """Electrical propulsion power (N,) [W] from momentum theory (airspeed = |v_xy - wind_xy|) at each sample's
+        mass: a planned route's :class:`MassSchedule` (``mass``, set by :meth:`PlannedTrajectory.materialise`;
+        ``drone`` must give its masses, :meth:`MassSchedule.check_drone`), else ``drone.total_mass_kg``: the
+        power a run over this trajectory draws (``world.samples.MissionSamples``)."""
+        sched = getattr(self, "mass", None)
+        if sched is not None:
+            sched.check_drone(drone)
+        return propulsion_from(drone, self.velocity_m_s(), self.wind_m_s, self.phase, self.motors_off_phases,
+                               sched.at(self.t_s) if sched is not None and sched.changes else None)
 
 
 def propulsion_from(drone, vel_m_s, wind_m_s, phase=None, motors_off=(), mass_kg=None) -> np.ndarray:
