@@ -73,6 +73,34 @@ def test_concave_inclusion_polygon_caught_between_two_inside_points():
     assert route_breaches([(5, 5), (40, 5)], [u])[0][1] == 0   # an end outside
 
 
+def test_legs_through_corners_and_along_edges():
+    """The leg (-5, -5) -> (15, 15) across the square (0, 0)-(10, 10) through two of its corners crosses no edge
+    properly and has both ends outside: it enters the exclusion square (missed before) and leaves the inclusion one.
+    A leg touching one vertex from outside, through one vertex into the inside, along an edge, and along an edge
+    beyond its end: the boundary belongs to the zone."""
+    sq = [(0, 0), (10, 0), (10, 10), (0, 10)]
+    inc, exc = _poly("in", True, *sq), _poly("ex", False, *sq)
+    diagonal = [(-5, -5), (15, 15)]
+    assert route_breaches(diagonal, [exc]) == [(exc, 0)]
+    assert route_breaches(diagonal, [inc]) == [(inc, 0)]
+    touch = [(-5, 5), (5, -5)]                     # touches the corner (0, 0) only, from outside
+    assert route_breaches(touch, [exc]) == [(exc, 0)] and route_breaches(touch, [inc]) == [(inc, 0)]
+    miss = [(-5, 4.9), (4.9, -5)]                  # 0.07 m short of that corner
+    assert route_breaches(miss, [exc]) == []
+    into = [(-5, -5), (5, 5)]                      # through the corner into the square
+    assert route_breaches(into, [exc]) == [(exc, 0)] and route_breaches(into, [inc]) == [(inc, 0)]
+    corner_to_corner = [(0, 0), (10, 10)]          # inside: the diagonal, vertex to vertex
+    assert route_breaches(corner_to_corner, [inc]) == [] and route_breaches(corner_to_corner, [exc]) == [(exc, 0)]
+    along = [(0, 0), (10, 0)]                      # along the bottom edge
+    assert route_breaches(along, [inc]) == [] and route_breaches(along, [exc]) == [(exc, 0)]
+    beyond = [(2, 0), (15, 0)]                     # along the edge, then past its end: outside
+    assert route_breaches(beyond, [inc]) == [(inc, 0)]
+    # a concave polygon: a leg from one reflex vertex to the other stays on the boundary / inside
+    u = _poly("u", True, (0, 0), (30, 0), (30, 30), (20, 30), (20, 10), (10, 10), (10, 30), (0, 30))
+    assert route_breaches([(5, 10), (25, 10)], [u]) == []        # along the notch's bottom edge (and inside)
+    assert route_breaches([(5, 20), (25, 20)], [u]) == [(u, 0)]  # across the notch
+
+
 def test_circles_inclusion_and_exclusion():
     inc = _circle("inclusion circle 0", True, (0, 0), 100)
     exc = _circle("exclusion circle 0", False, (50, 0), 10)
@@ -91,13 +119,21 @@ def test_geometry_agrees_with_shapely():
     inc, exc = _poly("in", True, *verts), _poly("ex", False, *verts)
     circ = _circle("c", False, (30, 25), 12.0)
     poly, disc = Polygon(verts), Point(30, 25).buffer(12.0, quad_segs=4096)
+    fat = poly.buffer(1e-7, join_style="mitre")
     seen = {True: 0, False: 0}
-    for _ in range(400):
-        a, b = rng.uniform(-10, 70, 2), rng.uniform(-10, 70, 2)
+    # random legs, and deliberate ones through the vertices (random legs never hit one): vertex to vertex, and
+    # from a random point through a vertex to twice as far
+    v = np.array(verts, dtype=float)
+    legs = [(rng.uniform(-10, 70, 2), rng.uniform(-10, 70, 2)) for _ in range(400)]
+    legs += [(v[i], v[j]) for i in range(len(v)) for j in range(len(v)) if i != j]
+    legs += [(a, 2 * v[i] - a) for i in range(len(v)) for a in rng.uniform(-10, 70, (10, 2))]
+    for a, b in legs:
         seg = LineString([a, b])
-        leaves = not poly.contains(seg)
+        # (the boundary belongs to the zone, within the reader's 1 um: a leg through a vertex v computed as 2 v - a
+        # misses it by ~1e-14 m in floating point)
+        leaves = not fat.covers(seg)
         assert bool(route_breaches([a, b], [inc])) == leaves
-        assert bool(route_breaches([a, b], [exc])) == poly.intersects(seg)
+        assert bool(route_breaches([a, b], [exc])) == (poly.distance(seg) <= 1e-6)
         d = seg.distance(Point(30, 25))
         if abs(d - 12.0) > 1e-3:   # (the buffered disc is a polygon: not at its rim)
             assert bool(route_breaches([a, b], [circ])) == (d < 12.0)

@@ -10,8 +10,12 @@ exclusion zone, and each rally point outside the fence. Each inclusion zone is c
 does (the vehicle inside every inclusion zone); PX4 asks for one of them, so a plan with several inclusion zones may
 warn where PX4 would not breach. The fence's altitude limits are parameters of the vehicle, not in the plan.
 
-The geometry (:func:`route_breaches`) is pure: even-odd point in polygon, proper segment crossings, the distance
-of a segment from a circle's centre; a point on an edge counts as inside.
+The geometry (:func:`route_breaches`) is pure: a leg is split wherever it meets a polygon's edges (crossings,
+touching points at vertices, the ends of a stretch along an edge) and each piece's midpoint is tested by the
+even-odd rule; the distance of a segment from a circle's centre. The boundary belongs to the zone (a point on an
+edge counts as inside): a leg along an edge or through a vertex stays inside an inclusion zone and enters an
+exclusion zone (as shapely's ``covers`` / ``intersects``). A circle's rim: inside an inclusion circle, outside an
+exclusion one (a leg tangent to it does not enter).
 """
 
 from __future__ import annotations
@@ -160,16 +164,48 @@ def _seg_distance(p, a, b) -> np.ndarray:
     return np.hypot(*(p - q).T)
 
 
-def _cross(o, a, b) -> np.ndarray:
-    return (a[..., 0] - o[..., 0]) * (b[..., 1] - o[..., 1]) - (a[..., 1] - o[..., 1]) * (b[..., 0] - o[..., 0])
+def _split_params(p, q, poly: np.ndarray, tol_m: float = 1e-6) -> np.ndarray:
+    """The parameters t in [0, 1] (sorted, with 0 and 1) where segment ``p`` + t (``q`` - ``p``) meets an edge of the
+    polygon: proper crossings, touching points (a vertex on the leg, the leg's end on an edge) and the ends of an
+    overlap with an edge the leg runs along. Between two of them the leg is wholly inside, outside or on an edge."""
+    d = q - p
+    length = math.hypot(*d)
+    ts = [0.0, 1.0]
+    if length == 0.0:
+        return np.array([0.0])
+    a, e = poly, np.roll(poly, -1, axis=0) - poly
+    den = d[0] * e[:, 1] - d[1] * e[:, 0]                       # cross(d, e)
+    ap = a - p
+    t_num = ap[:, 0] * e[:, 1] - ap[:, 1] * e[:, 0]               # cross(a - p, e)
+    s_num = ap[:, 0] * d[1] - ap[:, 1] * d[0]                     # cross(a - p, d)
+    e_len = np.hypot(e[:, 0], e[:, 1])
+    eps_t, parallel = tol_m / length, np.abs(den) <= 1e-12 * length * np.maximum(e_len, 1e-300)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t, s = t_num / den, s_num / den
+    eps_s = tol_m / np.maximum(e_len, 1e-300)
+    hit = ~parallel & (t >= -eps_t) & (t <= 1 + eps_t) & (s >= -eps_s) & (s <= 1 + eps_s)
+    ts.extend(np.clip(t[hit], 0.0, 1.0).tolist())
+    # an edge along the leg (collinear: a within tol of the leg's line): its ends projected on the leg
+    on_line = parallel & (np.abs(s_num) <= tol_m * length)
+    for k in np.flatnonzero(on_line):
+        for v in (a[k], a[k] + e[k]):
+            tv = float(np.dot(v - p, d) / (length * length))
+            if -eps_t <= tv <= 1 + eps_t:
+                ts.append(min(max(tv, 0.0), 1.0))
+    return np.unique(np.array(ts))
 
 
-def _crosses(p, q, poly: np.ndarray) -> bool:
-    """Whether segment ``p``-``q`` properly crosses an edge of the polygon (endpoints strictly on both sides)."""
-    a, b = poly, np.roll(poly, -1, axis=0)
-    d1, d2 = _cross(a, b, p[None]), _cross(a, b, q[None])
-    d3, d4 = _cross(p[None], q[None], a), _cross(p[None], q[None], b)
-    return bool(np.any((d1 * d2 < 0) & (d3 * d4 < 0)))
+def _leg_breaches_polygon(p, q, poly: np.ndarray, inclusion: bool) -> bool:
+    """Whether leg ``p``-``q`` leaves the inclusion polygon / enters the exclusion polygon ``poly``: the leg split
+    at every meeting with the polygon's edges (:func:`_split_params`), each split point and each piece's midpoint
+    tested (the boundary belongs to the zone: a leg running along an edge, or touching a vertex, stays inside an
+    inclusion zone and enters an exclusion zone)."""
+    t = _split_params(p, q, poly)
+    mids = (t[:-1] + t[1:]) / 2.0
+    probe = np.concatenate([t, mids])
+    pts = p[None, :] + probe[:, None] * (q - p)[None, :]
+    inside = _inside_polygon(pts, poly)   # (an edge's points count as inside)
+    return bool(not inside.all()) if inclusion else bool(inside.any())
 
 
 def route_breaches(route_xy, zones) -> list[tuple[Zone, int]]:
@@ -188,9 +224,7 @@ def route_breaches(route_xy, zones) -> list[tuple[Zone, int]]:
                 else:
                     bad = float(_seg_distance(c, p[None], q[None])[0]) < z.radius_m
             else:
-                ends = _inside_polygon(np.array([p, q]), z.xy_m)
-                bad = (not ends.all()) if z.inclusion else bool(ends.any())
-                bad = bad or _crosses(p, q, z.xy_m)
+                bad = _leg_breaches_polygon(p, q, z.xy_m, z.inclusion)
             if bad:
                 out.append((z, k))
                 break
