@@ -353,3 +353,29 @@ def test_config_dict_and_sweep_fingerprint_of_a_config_without_release_as_before
     out = config_to_dict(config_from_dict(d))
     assert out["drone"]["release_kg"] == 0.3 and [w.get("release") for w in out["waypoints"]] == [2, None]
     assert config_from_dict(out) == config_from_dict(d)
+
+
+def test_a_sweep_warns_once_of_a_release_without_payload(tmp_path):
+    """A study over a delivery route (a release) whose cases carry no payload in some: the cases run with
+    ``warn=False`` (warned once per study, as run_mission's docstring says), and the study's lines counted no payload
+    warning. Now one line: 1 of 2 cases, with the run's own message as the example."""
+    import policies
+    from mission_sim.setup_warnings import payload_warnings
+    from mission_sim.studies.prepare import prepare_study
+    from mission_sim.studies.study import load_study
+    from wpt_receiver.notices import DronewptWarning
+    base = tmp_path / "base.toml"
+    base.write_text('[wind]\nspeed_m_s = 0.0\ngust_sigma_m_s = 0.0\n'
+                    '[[waypoints]]\naction = "takeoff"\nz_m = 10.0\n'
+                    '[[waypoints]]\naction = "loiter"\nx_m = -15.0\nz_m = 10.0\nhold_s = 5.0\nrelease = 1\n'
+                    '[[waypoints]]\naction = "land"\nx_m = -15.0\n')
+    (tmp_path / "s.toml").write_text(f'[study]\nname = "drop"\nbase = {str(base)!r}\n'
+                                     '[grid]\n"drone.payload_kg" = [0.0, 0.5]\n')
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        prepare_study(load_study(tmp_path / "s.toml"), policies.make, policies.available())
+    said = [str(w.message) for w in caught if issubclass(w.category, DronewptWarning)]
+    cfg = _hover_route_cfg(1, 0.0)
+    said = [s for s in said if "pad their route never energises" not in s]   # (the base's pad: another kind)
+    assert said == ["1 of 2 cases of study 'drop' have a payload release with no payload left to drop, e.g.: "
+                    + payload_warnings(cfg)[0]]
