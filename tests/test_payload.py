@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses as dc
 import json
+import math
 import warnings
 from pathlib import Path
 
@@ -379,3 +380,26 @@ def test_a_sweep_warns_once_of_a_release_without_payload(tmp_path):
     said = [s for s in said if "pad their route never energises" not in s]   # (the base's pad: another kind)
     assert said == ["1 of 2 cases of study 'drop' have a payload release with no payload left to drop, e.g.: "
                     + payload_warnings(cfg)[0]]
+
+
+def test_tilt_after_the_drop_is_the_lighter_drones():
+    """Steady 5 m/s wind, no gusts, hovering at rest: the thrust leans into the drag F, tilt = atan2(F, m g), at
+    1.5 kg before the drop and 1.0 kg after it (0.0416 / 0.0624 rad: the lighter drone leans further); planning the
+    tilt with the take-off mass throughout would keep 0.0416 rad after the drop."""
+    from mission_sim.config import config_to_dict
+    from mission_sim.world.trajectory import plan_mission
+    from mission_sim.world.wind import G_M_S2, drag_force_n
+    d = config_to_dict(_hover_route_cfg(1, 0.5, hold_after_s=20.0))
+    d["wind"].update(speed_m_s=5.0, gust_sigma_m_s=0.0)
+    cfg = config_from_dict(d)
+    tr = plan_mission(cfg)
+    t_r = tr.mass.release_t_s[0]
+    speed = np.linalg.norm(tr.velocity_m_s(), axis=1)
+    still = (tr.phase == "hover") & (speed < 1e-9)
+    assert np.ptp(tr.wind_m_s[still], axis=0).max() == 0.0 and np.linalg.norm(tr.wind_m_s[still][0]) == 5.0
+    force = drag_force_n(cfg.wind, tr.wind_m_s[still][:1], np.zeros((1, 3)))[0]
+    for sel, m in ((still & (tr.t_s < t_r - 1.0), 1.5), (still & (tr.t_s > t_r + 1.0), 1.0)):
+        assert sel.sum() > 40
+        want = math.atan2(math.hypot(force[0], force[1]), m * G_M_S2 - force[2])
+        assert np.allclose(tr.tilt_rad[sel], want, rtol=1e-12, atol=0)
+    assert tr.tilt_rad[still & (tr.t_s > t_r + 1.0)][0] > 1.4 * tr.tilt_rad[still & (tr.t_s < t_r - 1.0)][0]
