@@ -177,8 +177,16 @@ def test_drop_saves_the_closed_form_hover_energy():
     s = drop.summary
     assert s["takeoff_mass_kg"] == 1.5 and s["landing_mass_kg"] == 1.0
     assert s["payload_releases"] == 1 and s["first_release_t_s"] == t_r
-    assert s["propulsion_energy_before_release_j"] == pytest.approx(e["drop"][~after].sum(), rel=1e-12)
-    assert s["propulsion_energy_after_release_j"] == pytest.approx(e["drop"][after].sum(), rel=1e-12)
+    # the split is at the drop's sample: the quiet-flight step merging the hover's samples across it (start before
+    # t_r, end after) is split by its samples' powers, the hover at 1.0 kg from t_r (on the sample grid here) on
+    across = ((start < t_r) & (drop.timeseries["t_s"] > t_r)).to_numpy()
+    assert across.sum() == 1 and (t_r / drop.config.sim.traj_dt_s) % 1 == pytest.approx(0, abs=1e-9)
+    end = float(drop.timeseries["t_s"].to_numpy()[across][0])
+    share = hover_power_w(p, 1.0) * (end - t_r)
+    assert e["drop"][across][0] == pytest.approx(hover_power_w(p, 1.5) * (t_r - start.to_numpy()[across][0]) + share,
+                                                 rel=1e-12)
+    assert s["propulsion_energy_before_release_j"] == pytest.approx(e["drop"][~after].sum() - share, rel=1e-12)
+    assert s["propulsion_energy_after_release_j"] == pytest.approx(e["drop"][after].sum() + share, rel=1e-12)
     assert keep.summary["propulsion_energy_j"] - s["propulsion_energy_j"] > closed   # (and the landing's share)
     mass = drop.timeseries["mass_kg"].to_numpy()
     assert set(mass[~after]) == {1.5} and set(mass[after]) == {1.0}

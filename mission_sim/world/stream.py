@@ -48,9 +48,12 @@ class RowStats:
         self.vl_on_max = -math.inf
         self.n_rows = 0
         self.t_split, self.sums_after = None, 0.0
+        self.straddle = None   # (start, end) [s] of the step holding t_split inside it (a merged quiet-flight step)
 
     def split_at(self, t_s: float) -> None:
-        """Also sum the propulsion energy of the steps starting at or after ``t_s`` [s] (:attr:`sums_after`)."""
+        """Also sum the propulsion energy of the steps starting at or after ``t_s`` [s] (:attr:`sums_after`) and
+        keep the bounds of the step holding ``t_s`` inside it (:attr:`straddle`: its share after ``t_s`` is the
+        caller's to add, from the samples)."""
         self.t_split = float(t_s)
 
     def add(self, arr: np.ndarray) -> None:
@@ -68,8 +71,12 @@ class RowStats:
         self.min_soc, self.max_soc = min(self.min_soc, float(soc.min())), max(self.max_soc, float(soc.max()))
         self.n_rows += len(arr)
         if self.t_split is not None:
-            late = arr[:, c["t_s"]] - dt >= self.t_split - 1e-9   # (a row's t_s is its step's end)
+            end = arr[:, c["t_s"]]   # (a row's t_s is its step's end)
+            late = end - dt >= self.t_split - 1e-9
             self.sums_after = math.fsum([self.sums_after, *arr[late, c["e_propulsion_j"]].tolist()])
+            across = np.flatnonzero(~late & (end > self.t_split + 1e-9))
+            if len(across):
+                self.straddle = (float(end[across[0]] - dt[across[0]]), float(end[across[0]]))
         if on.any():
             self.vl_on_max = max(self.vl_on_max, float(vl[on].max()))
 
