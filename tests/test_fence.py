@@ -43,6 +43,7 @@ def test_px4_geofence_plan_rtl_leg_crosses_both_exclusion_zones():
     assert "enters the plan's geofence exclusion polygon 0 on the leg from route point 3" in said[0]
     assert "enters the plan's geofence exclusion circle 0 on the leg from route point 3" in said[1]
     assert all("to route point 4 (0, 0) m" in s for s in said)
+    assert all("route points are [[waypoints]] indices, not the plan's item numbers" in s for s in said)
     assert [w["action"] for w in d["waypoints"]][4:] == ["waypoint", "land"]   # the RTL: over home, land
     # the leg's closest approach to the circle's centre: inside the 111 m radius
     from mission_sim.plans.fence import local_zones

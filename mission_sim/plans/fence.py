@@ -233,7 +233,8 @@ def route_breaches(route_xy, zones) -> list[tuple[Zone, int]]:
 
 def fence_warnings(zones, rally, home: GeoPoint, route: list[dict], name: str) -> list[str]:
     """One line per fence zone the route of ``[[waypoints]]`` dicts ``route`` (from home, (0, 0)) leaves (inclusion)
-    or enters (exclusion), naming the leg; one per rally point outside the fence (``rally``: (lat, lon, alt))."""
+    or enters (exclusion), naming the leg by its route points (indices of ``route``, the ``[[waypoints]]`` the plan
+    became: not the plan's item numbers, as the message says); one per rally point outside the fence (``rally``: (lat, lon, alt))."""
     if not zones:
         return []
     local = local_zones(zones, home)
@@ -244,8 +245,9 @@ def fence_warnings(zones, rally, home: GeoPoint, route: list[dict], name: str) -
         leg = "from home" if k == 0 else f"from route point {k - 1}"
         verb = "leaves" if z.inclusion else "enters"
         out.append(f"{name}: the route {verb} the plan's geofence {z.name} on the leg {leg} ({a[0]:.0f}, {a[1]:.0f}) m "
-                   f"to route point {k} ({b[0]:.0f}, {b[1]:.0f}) m (pad frame, ENU about home); the route is flown as "
-                   "planned (no fence action is simulated): valid: a route inside the fence")
+                   f"to route point {k} ({b[0]:.0f}, {b[1]:.0f}) m (pad frame, ENU about home; route points are "
+                   "[[waypoints]] indices, not the plan's item numbers); the route is flown as planned (no fence "
+                   "action is simulated): valid: a route inside the fence")
     for i, (lat, lon, _) in enumerate(rally):
         p = local_zones([GeoZone("circle", True, ((lat, lon),), 1.0)], home)[0].xy_m
         for z, _k in route_breaches(p, local):
