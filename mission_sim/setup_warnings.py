@@ -13,6 +13,9 @@ each by the command line.
 * :func:`unreached_pad_warnings`: a pad the route never energises (:func:`energised_pads`: no charging hover
   or loiter's hover inside its coupling range, the run's own rule): it charges nothing.
 * :func:`far_pad_warnings`: a pad more than 120 m above or below home (an altitude in another frame or unit).
+* :func:`payload_warnings`: a route's payload release (``[[waypoints]] release``, a mission file's DO_GRIPPER
+  release) with no payload left to drop (``drone.payload_kg = 0``, or more releases than
+  ``payload_kg / release_kg`` parcels): it drops nothing.
 * :func:`policy_link_warning`: a policy made for another link model than the mission's (``"modal"``), if it
   predicts with it: a policy says so with a class attribute ``uses_link_model = True`` (``mpc``,
   ``model_based_budget``, ``slow_budget``, ``oracle_imitation_filtered``; not part of the
@@ -23,7 +26,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["link_range_warning", "link_frequency_warning", "unreached_pad_warnings", "far_pad_warnings", "energised_pads", "policy_link_warning", "mission_warnings",
+__all__ = ["link_range_warning", "link_frequency_warning", "unreached_pad_warnings", "payload_warnings", "far_pad_warnings", "energised_pads", "policy_link_warning", "mission_warnings",
            "mission_link_params", "MISSION_LINK_MODEL", "POLICY_VL_TOL_V", "PAD_HEIGHT_WARN_M", "HOME_ORIGIN", "REPLAY_ORIGIN"]
 
 #: the link model every mission runs (:mod:`mission_sim.world.loop_kernel` steps :mod:`wpt_receiver.modal_kernel`)
@@ -175,13 +178,40 @@ def policy_link_warning(cfg, policy) -> str | None:
     return None
 
 
-def mission_warnings(cfg, policy=None, own_route: bool = True, replay: bool = False) -> list[str]:
+def mission_warnings(cfg, policy=None, own_route: bool = True, replay: bool = False,
+                     payload: bool | None = None) -> list[str]:
     """Every setup warning of a mission (``own_route``: ``cfg``'s route is flown, not a replayed trajectory, so its
     pads can be checked against it; ``replay``: the trajectory is a replay's, whose pad frame origin is the take-off
-    spot or ``--pad``, not the mission's home). A far pad warns whatever the route."""
+    spot or ``--pad``, not the mission's home; ``payload``: ``cfg``'s route is flown, so its payload releases are
+    (None: unless ``replay``; :func:`payload_warnings`). A far pad warns whatever the route."""
     out = [w for w in (link_range_warning(cfg), link_frequency_warning(cfg),
                        policy_link_warning(cfg, policy) if policy is not None else None) if w is not None]
     out += far_pad_warnings(cfg, REPLAY_ORIGIN if replay else HOME_ORIGIN)
     if own_route:
         out += unreached_pad_warnings(cfg)
+    if (not replay) if payload is None else payload:
+        out += payload_warnings(cfg)
     return out
+
+
+def payload_warnings(cfg) -> list[str]:
+    """One line when releases of ``cfg``'s route find no payload left to drop (:func:`mission_sim.world.power.
+    payload_after_releases`): ``drone.payload_kg = 0`` (the default: a delivery plan flown without its payload's
+    mass), or more releases than ``payload_kg / release_kg`` parcels."""
+    from .world.power import payload_after_releases
+    n = sum(int(wp.release) for wp in cfg.waypoints)
+    if not n:
+        return []
+    drone = cfg.drone
+    _, empty = payload_after_releases(drone, n)
+    if not empty:
+        return []
+    if drone.payload_kg == 0:
+        return [f"the route releases a payload {n} time(s) (DO_GRIPPER release, [[waypoints]] "
+                "release) but drone.payload_kg = 0: nothing is dropped, the drone flies at drone.mass_kg throughout; "
+                "valid: drone.payload_kg > 0 (the payload carried from take-off, kg) for a delivery's lighter return"]
+    each = ("drone.release_kg = 0: the first release drops all of it" if drone.release_kg == 0 else
+            f"drone.release_kg = {drone.release_kg:g} kg each")
+    return [f"{empty} of the route's {n} payload releases find no payload left (drone.payload_kg = {drone.payload_kg:g} "
+            f"kg, {each}): they drop nothing; valid: drone.release_kg = one parcel's mass and drone.payload_kg = "
+            "release_kg x the number of releases"]

@@ -112,6 +112,11 @@ def test_cli_writes_a_drone_toml_that_mission_takes(tmp_path, capsys):
     from mission_sim.cli.mission import mission_config
     cfg = mission_config(Namespace(config=None, set=["drone.avionics_w=3"], drone=out, force=False))
     assert cfg.drone.mass_kg == pytest.approx(drone["drone.mass_kg"]) and cfg.drone.avionics_w == 3.0   # --set wins
+    # the airframe only: a config's payload stays (the file wrote payload_kg = 0 over it until 2026-11-28)
+    assert "drone.payload_kg" not in drone and "drone.release_kg" not in drone
+    mine = tmp_path / "delivery.toml"
+    mine.write_text("[drone]\npayload_kg = 0.4\n")
+    assert mission_config(Namespace(config=mine, set=[], drone=out, force=False)).drone.payload_kg == 0.4
     from mission_sim.cli.mavlink import _mav_config                  # replay / telemetry: --drone, then --mass
     cfg = _mav_config(Namespace(config=None, set=[], drone=out), {"drone.mass_kg": 2.5}, single_pad=True)
     assert cfg.drone.mass_kg == 2.5 and cfg.drone.flat_plate_area_m2 == pytest.approx(drone["drone.flat_plate_area_m2"])

@@ -80,9 +80,9 @@ def test_qgc_structure_scan_flies_the_waypoints_qgc_generates():
 
 def test_px4_package_delivery_plan_flies_past_its_gripper_item():
     """PX4's package-delivery test plan: a waypoint at 5 m, a landing 40 m on, DO_GRIPPER (release), a waypoint at
-    10 m. The gripper item was refused ("command DO_GRIPPER (211) is not supported"): it does not move the vehicle
-    and is skipped as camera and servo items are (the released payload's mass is not taken off the drone). The route
-    lands and takes off again."""
+    10 m. The gripper item was refused ("command DO_GRIPPER (211) is not supported"): it does not move the vehicle.
+    Since 2026-11-28 its release is counted on the landing before it (``release``: the payload's mass is taken off
+    the drone there, tests/test_payload.py). The route lands and takes off again."""
     from mission_sim.plans.items import read_mission
     from mission_sim.plans.route import IGNORED_COMMANDS, route_from_items
     doc = json.loads((MISSIONS / "px4_triangle_gripper_package_delivery.plan").read_text())
@@ -91,6 +91,7 @@ def test_px4_package_delivery_plan_flies_past_its_gripper_item():
     route = route_from_items(raw)
     assert 211 in IGNORED_COMMANDS
     assert [(w["action"], w["z_m"]) for w in route] == [("waypoint", 5.0), ("land", 0.0), ("waypoint", 10.0)]
+    assert [w.get("release", 0) for w in route] == [0, 1, 0]
     home = tuple(doc["mission"]["plannedHomePosition"])
     for w, i in zip(route, (0, 1, 3)):
         e, n = enu_xy(*doc["mission"]["items"][i]["params"][4:6], home)

@@ -405,6 +405,21 @@ def _rating_row(s: dict) -> list[tuple[str, str, str]]:
              f"a rating >= {m:g} x peak = {m * s['peak_i2_a']:.2f} A)")]
 
 
+def _payload_rows(s: dict) -> list:
+    """The payload's rows (a mission with ``drone.payload_kg`` > 0): the masses, and the propulsion energy before
+    and after the first release that dropped payload."""
+    if "takeoff_mass_kg" not in s:
+        return []
+    n = s["payload_releases"]
+    when = (f"{n} release{'s' if n > 1 else ''}, the first at t = {s['first_release_t_s']:.1f} s" if n else
+            "never released")
+    rows = [("mass take-off -> landing", f"{s['takeoff_mass_kg']:g} -> {s['landing_mass_kg']:g}", f"kg ({when})")]
+    if "propulsion_energy_after_release_j" in s:
+        rows.append(("propulsion before / after drop", f"{s['propulsion_energy_before_release_j']:.1f} / "
+                     f"{s['propulsion_energy_after_release_j']:.1f}", "J"))
+    return rows
+
+
 def _print_mission(s: dict, files) -> None:
     rows = [
         ("policy", s["policy"], ""),
@@ -420,6 +435,7 @@ def _print_mission(s: dict, files) -> None:
          f"J ({s['devices']}: inverter switches {s['inverter_switches_loss_j']:.1f}, rectifier diodes "
          f"{s['rectifier_diodes_loss_j']:.1f}, rectifier switches {s['rectifier_switches_loss_j']:.1f})"),
         ("propulsion energy", f"{s['propulsion_energy_j']:.1f}", "J"),
+        *_payload_rows(s),
         ("energy balance error", f"{s['energy_balance_error_rel']:.2e}", "relative"),
         ("SoC start -> end", f"{s['initial_soc']:.4f} -> {s['final_soc']:.4f}",
          f"(without charging {s['final_soc_without_charging']:.4f}; full: {s['battery_full']})"),

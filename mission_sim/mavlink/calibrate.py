@@ -256,8 +256,14 @@ def calibrate_log(log: FlightLog, base: DroneParams, mass_kg: float | None = Non
     return Calibration(drone=drone, default=base, samples=samples, report=out)
 
 
+#: DroneParams keys of the mission's load, not of the airframe: not written by :func:`drone_toml` (``--drone FILE``
+#: laid over a config kept the file's ``payload_kg = 0`` over the config's payload until 2026-11-28)
+MISSION_LOAD_KEYS = ("payload_kg", "release_kg")
+
+
 def drone_toml(cal: Calibration) -> str:
-    """The ``[drone]`` TOML of a calibration (every DroneParams key), the fit's facts as comments."""
+    """The ``[drone]`` TOML of a calibration (every DroneParams key but the mission's load,
+    :data:`MISSION_LOAD_KEYS`), the fit's facts as comments."""
     r = cal.report
     lines = [f"# drone power model calibrated by `dronewpt calibrate` from {r['log']} ({r['battery_source']})",
              f"# held-out energy error: calibrated {100 * r['calibrated_heldout_energy_error_rel']:+.1f} %, "
@@ -265,8 +271,11 @@ def drone_toml(cal: Calibration) -> str:
              "# mass " + ("fixed (--mass)" if r["mass_fixed"] else "fitted as the equivalent mass (figure of merit "
                                                                   f"held near {FM_PRIOR} by a prior)"),
              "# use: dronewpt mission --drone THIS.toml / replay --drone / telemetry --drone, or as a sweep's base",
+             "# payload_kg / release_kg not written: the mission's payload is its config's",
              "[drone]"]
     for f in fields(DroneParams):
+        if f.name in MISSION_LOAD_KEYS:
+            continue
         v = getattr(cal.drone, f.name)
         lines.append(f"{f.name} = {v:d}" if isinstance(v, int) else f"{f.name} = {float(v):.6g}")
     return "\n".join(lines) + "\n"

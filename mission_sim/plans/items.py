@@ -69,11 +69,15 @@ class MissionItem:
 
 @dataclass(frozen=True)
 class RawMission:
-    """Items of one mission file and its home (None: the file has none)."""
+    """Items of one mission file and its home (None: the file has none); a ``.plan``'s geofence zones
+    (:class:`~mission_sim.plans.fence.GeoZone`) and rally points ((lat, lon, alt AMSL)), read since 2026-11-28
+    (:mod:`mission_sim.plans.fence`: warnings only, the route is flown as planned)."""
 
     source: str
     home: GeoPoint | None
     items: tuple
+    fence: tuple = ()
+    rally: tuple = ()
 
 
 def _num(v) -> float:
@@ -141,7 +145,9 @@ def read_plan(path) -> RawMission:
     items = []
     for i, it in enumerate(mission["items"]):
         items += _plan_item(it, f"item {i}", name)
-    return RawMission(name, home, tuple(items))
+    from .fence import read_plan_fence
+    fence, rally = read_plan_fence(doc, name)
+    return RawMission(name, home, tuple(items), fence, rally)
 
 
 def _simple(it, where: str, name: str) -> MissionItem:

@@ -14,6 +14,17 @@ air only; param1 = 0 with params 2-4 zero: no delay; else a time of day, refused
 following legs), DO_JUMP (177, param1 the target, param2 the number of jumps: the loop unrolled, :func:`_unrolled`).
 Commands that do not move the vehicle (camera, gimbal, servo, relay, ROI, yaw:
 :data:`IGNORED_COMMANDS`) are skipped; any other command is an error naming it and its item.
+Payload releases (:func:`release_of`): DO_GRIPPER (211) with param2 = 0 (GRIPPER_ACTION_RELEASE) counts one release
+on the waypoint before it (``release`` of its ``[[waypoints]]`` dict: as ArduPilot and PX4 run a DO item once the nav
+item before it is done). Each release drops ``drone.release_kg`` of ``drone.payload_kg``
+(:func:`mission_sim.world.power.payload_after_releases`). A gripper grab (param2 = 1) or hold (2) adds or drops
+nothing (the mass picked up is not known: carry it from take-off in ``payload_kg`` instead). DO_WINCH (42600) is
+not a release, not even WINCH_DELIVER (param2 = 4), which the MAVLink spec describes as "lower, release, reel up":
+the autopilots do not drop a payload on it in a mission (ArduCopter's ``ModeAuto::do_winch`` handles relaxed, length
+and rate control only; PX4 supports grippers, not winches, for package delivery), and the simulator follows the
+autopilots: a route holding a winch deliver warns once that it drops nothing (count it with a DO_GRIPPER release
+after it, or ``release = 1`` on the ``[[waypoints]]`` entry). A release before the first navigation item is refused
+(it would drop the payload on the ground before take-off).
 A loiter within ``mission.pad_radius_m`` of a pad (horizontally) and at least
 :data:`CHARGE_CLEARANCE_M` above it becomes a charging hover over that pad (waypoint action
 "charge": descend to the pad, charge, climb back).
@@ -31,7 +42,7 @@ from .items import LOG_SUFFIXES, NAV_LAND, NAV_LOITER_TIME, NAV_RTL, NAV_TAKEOFF
 from .pads import read_pads
 
 __all__ = ["apply_mission_files", "check_file_keys", "mission_home", "route_from_items", "pads_to_local", "command_name",
-           "RTL_ALT_M", "IGNORED_COMMANDS"]
+           "release_of", "winch_deliver_of", "RTL_ALT_M", "IGNORED_COMMANDS"]
 
 DO_CHANGE_SPEED = 178
 NAV_DELAY = 93
@@ -47,9 +58,10 @@ MAX_FROM_HOME_M = 100e3   # items farther from home than this are refused (the c
 #: DO_SET_CAM_TRIGG_DIST, DO_SET_CAM_TRIGG_INTERVAL, SET_CAMERA_MODE, DO_GIMBAL_MANAGER_PITCHYAW,
 #: IMAGE_START_CAPTURE, IMAGE_STOP_CAPTURE, VIDEO_START_CAPTURE, VIDEO_STOP_CAPTURE; since 2026-11-27 night also
 #: CONDITION_DELAY, CONDITION_DISTANCE (they hold back the next DO command, not the vehicle), DO_LAND_START and JUMP_TAG
-#: (markers flown through), DO_FENCE_ENABLE, DO_GRIPPER (a payload released: its mass is not taken off the drone's),
-#: DO_SET_RESUME_REPEAT_DIST, DO_SPRAYER, DO_MOUNT_CONTROL_QUAT, SET_CAMERA_ZOOM, SET_CAMERA_FOCUS,
-#: DO_GIMBAL_MANAGER_CONFIGURE, DO_WINCH (a winch moves the payload)
+#: (markers flown through), DO_FENCE_ENABLE, DO_GRIPPER (since 2026-11-28 a release drops the payload:
+#: :func:`release_of`; grab and hold change nothing), DO_SET_RESUME_REPEAT_DIST, DO_SPRAYER, DO_MOUNT_CONTROL_QUAT,
+#: SET_CAMERA_ZOOM, SET_CAMERA_FOCUS, DO_GIMBAL_MANAGER_CONFIGURE, DO_WINCH (no payload drop, not even its deliver
+#: action: the autopilots do not drop one, :func:`winch_deliver_of` warns)
 IGNORED_COMMANDS = frozenset({115, 181, 182, 183, 184, 195, 197, 200, 201, 202, 203, 204, 205, 206, 214, 530, 1000,
                               2000, 2001, 2500, 2501,
                               112, 114, 189, 600, 207, 211, 215, 216, 220, 531, 532, 1001, 42600})
@@ -61,6 +73,27 @@ _FENCE_RALLY = {5000: "geofence return point", 5001: "geofence polygon vertex", 
 _SUPPORTED = ("NAV_WAYPOINT (16), NAV_LOITER_TIME (19), NAV_RETURN_TO_LAUNCH (20), NAV_LAND (21), NAV_TAKEOFF (22), "
               "NAV_DELAY (93), DO_JUMP (177), DO_CHANGE_SPEED (178) and commands that do not move the vehicle "
               "(camera, gimbal, servo, relay, ROI, yaw, gripper, winch, sprayer, fence enable, conditions, markers)")
+
+
+def _action(it) -> float:
+    """A DO item's param2 (unset: 0, as the autopilots read a missing param)."""
+    return it.params[1] if len(it.params) > 1 and math.isfinite(it.params[1]) else 0.0
+
+
+def release_of(it) -> bool:
+    """Whether mission item ``it`` releases the payload: DO_GRIPPER with param2 = GRIPPER_ACTION_RELEASE (0; unset
+    counts as 0, as the autopilots read a missing param). Not DO_WINCH (:func:`winch_deliver_of`)."""
+    from ..mavlink.logs import mavutil
+    mav = mavutil().mavlink
+    return it.command == mav.MAV_CMD_DO_GRIPPER and _action(it) == mav.GRIPPER_ACTION_RELEASE
+
+
+def winch_deliver_of(it) -> bool:
+    """Whether ``it`` is DO_WINCH with param2 = WINCH_DELIVER (4): no payload drop here (the autopilots drop none in
+    a mission), a warning (:func:`route_from_items`)."""
+    from ..mavlink.logs import mavutil
+    mav = mavutil().mavlink
+    return it.command == mav.MAV_CMD_DO_WINCH and _action(it) == mav.WINCH_DELIVER
 
 
 def command_name(cmd: int) -> str:
@@ -149,7 +182,18 @@ class _Builder:
         self.in_range(it, "NAV_DELAY param1", delay, HOLD_RANGE, "waypoints.hold_s")
         self.add("loiter", self.x, self.y, self.z, delay)
 
+    def release(self, it):
+        """A payload release (:func:`release_of`): one more on the waypoint flown before it."""
+        if not self.out:
+            self.fail(it, f"{command_name(it.command)} ({it.command}) releases the payload before the first "
+                          "navigation item: it would be dropped on the ground before take-off; valid: a release "
+                          "after a waypoint, loiter or land item (or no payload: leave the item out)")
+        self.out[-1]["release"] = self.out[-1].get("release", 0) + 1
+
     def item(self, it):
+        if release_of(it):
+            self.release(it)
+            return
         if it.command == DO_CHANGE_SPEED:
             v = it.params[1]
             if math.isfinite(v) and v > 0:   # (-1, 0, unset: no change, as ArduCopter)
@@ -250,6 +294,13 @@ def route_from_items(raw: RawMission, pads_xyz=(), pad_radius_m: float = 5.0) ->
     if not b.out:
         raise ValueError(f"{raw.source}: no waypoints: {len(raw.items)} item(s), none that moves the vehicle "
                          f"(supported: {_SUPPORTED})")
+    delivers = [it.where for it in raw.items if winch_deliver_of(it)]
+    if delivers:
+        from wpt_receiver.notices import warn
+        warn(f"{raw.source}: {', '.join(delivers[:3])}{' ...' if len(delivers) > 3 else ''}: DO_WINCH (42600) "
+             "WINCH_DELIVER drops no payload here: ArduCopter (ModeAuto::do_winch) and PX4 do not release one on it in "
+             "a mission (the MAVLink spec's 'lower, release, reel up' is not what they fly), so the payload stays on "
+             "board; valid: a DO_GRIPPER release after it, or release = 1 on the [[waypoints]] entry")
     return b.out
 
 
@@ -326,6 +377,12 @@ def apply_mission_files(d: dict, base_dir=None, mission_file=None, pads_file=Non
         pads = [(p.get("x_m", 0.0), p.get("y_m", 0.0), p.get("z_m", 0.0)) for p in out.get("pads") or []
                 if isinstance(p, dict)]
         out["waypoints"] = route_from_items(raw, pads, float(radius))
+        if raw.fence:   # a .plan's geofence: warnings only (the route is flown as planned)
+            from wpt_receiver.notices import warn
+
+            from .fence import fence_warnings
+            for text in fence_warnings(raw.fence, raw.rally, raw.home, out["waypoints"], raw.source):
+                warn(text)
         out["mission"].update(file=str(mf), start_x_m=0.0, start_y_m=0.0)
         last = out["waypoints"][-1]
         out["mission"].update(land_x_m=last["x_m"], land_y_m=last["y_m"])

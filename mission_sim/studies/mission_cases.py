@@ -54,16 +54,19 @@ class MissionParamChecker:
         ``policy_context``, so no policy warning), each computed once per distinct value of what it reads (the
         cached section objects: keys of identities, ~1 us a case; ~50 us for each new link, e.g. a Monte Carlo
         draw of ``link.vdc_v``). A far pad (:func:`~mission_sim.setup_warnings.far_pad_warnings`) counts whatever
-        the route, about :attr:`pad_origin` (``run_mission``'s rule)."""
+        the route, about :attr:`pad_origin` (``run_mission``'s rule); a payload release with no payload left
+        (:func:`~mission_sim.setup_warnings.payload_warnings`) when the cases fly the config's route (``run_size``;
+        a replay's route is its log's: none)."""
         from ..setup_warnings import (far_pad_warnings, link_frequency_warning, link_range_warning,
-                                      unreached_pad_warnings)
+                                      payload_warnings, unreached_pad_warnings)
 
         link = (cfg.link, cfg.coupling, cfg.battery.n_series, cfg.charger.cv_cell_v, cfg.mission.hover_gap_m)
         route = (cfg.waypoints, cfg.mission, *cfg.pads) if cfg.waypoints else ()
         self.checked += 1
         checks = [("link", link, link_range_warning), ("freq", (cfg.link, cfg.coupling), link_frequency_warning),
                   ("pad", route, unreached_pad_warnings),
-                  ("far", tuple(cfg.pads), lambda c: far_pad_warnings(c, self.pad_origin))]
+                  ("far", tuple(cfg.pads), lambda c: far_pad_warnings(c, self.pad_origin)),
+                  ("payload", (cfg.drone, cfg.waypoints) if self.run_size else (), payload_warnings)]
         checks += [(kind, what(cfg), check) for kind, _, what, check in self.notes]
         for kind, what, check in checks:
             if not what:
@@ -83,7 +86,8 @@ class MissionParamChecker:
     KINDS = {"link": "a link outside the exact-mode model's checked range",
              "freq": f"a link.f_hz more than a factor {FREQUENCY_TOLERANCE:g} off the coil pair's tanks' resonance",
              "pad": "a pad their route never energises",
-             "far": f"a pad more than {PAD_HEIGHT_WARN_M:g} m above or below its frame's origin"}
+             "far": f"a pad more than {PAD_HEIGHT_WARN_M:g} m above or below its frame's origin",
+             "payload": "a payload release with no payload left to drop"}
 
     def study_warnings(self, name: str) -> list[str]:
         """One line per kind of setup warning (:data:`KINDS`, ``notes``) some of the study's (``name``) checked cases

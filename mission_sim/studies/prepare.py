@@ -12,7 +12,7 @@ import hashlib
 import importlib
 from collections.abc import Callable, Iterable
 
-from .study import DEFAULT_MAX_CASES, POLICY_KEY, CaseSpace, Study, canonical_json, case_id, case_space, check_size
+from .study import DEFAULT_MAX_CASES, POLICY_KEY, CaseSpace, Study, case_id, case_space, check_size
 
 __all__ = ["prepare_study", "check_cases", "warn_study", "import_factory", "MAX_LISTED_ERRORS"]
 
@@ -51,8 +51,9 @@ def _runner(study: Study, make_policy: Callable | None, policy_names):
     base = config_to_dict(config_from_dict(d))
     check_file_route_keys(study.base_path, base, file_keys)   # (the cases fly its route: its own pattern keys change
     # nothing)
+    from .worst_cases import base_fingerprint
     runner = MissionCaseRunner(base, make_policy, policy_names)
-    return runner, hashlib.sha256(canonical_json(base).encode()).hexdigest()[:16]
+    return runner, base_fingerprint(base)
 
 
 def _error_message(space: CaseSpace, errors: dict, n_bad: int) -> str:

@@ -106,6 +106,10 @@ class MissionLoop:
         self.rows = []
         self.blocks = []
         self.stats = RowStats(_COLUMNS, self.bp.initial_soc)
+        sched = self.samples.schedule
+        if sched is not None:   # the propulsion energy after the first release that drops payload
+            drops = np.flatnonzero(np.diff(np.concatenate([[sched.takeoff_mass_kg], sched.mass_after_kg])) != 0)
+            self.stats.split_at(float(sched.release_t_s[drops[0]]))
         self.edge_j = (0.0, 0.0)      # switching-edge energies [J], rectifier and inverter (add_edges)
 
     def run(self, progress: bool = False) -> MissionResult:
@@ -200,6 +204,8 @@ class MissionLoop:
         df.insert(7, "tx_on", df["v1_v"].to_numpy() > 0)
         dts = df["dt_s"].to_numpy()
         df["propulsion_w"] = df["e_propulsion_j"] / dts
+        if self.cfg.drone.payload_kg > 0:   # (a payload: the mass each row flew, dropped at its releases)
+            df["mass_kg"] = self.samples.row_mass_kg(ri)
         df["p_source_w"] = df["e_source_j"] / dts
         df["p_coil_loss_w"] = df["e_coil_loss_j"] / dts
         df["p_battery_loss_w"] = (df["e_battery_r0_j"] + df["e_battery_r1_j"]) / dts
@@ -232,7 +238,52 @@ class MissionLoop:
             "fine_windows": int(ks.n_windows),
             "fine_windows_cut": int(ks.n_cut),
             "charge_time_s": st.sums["charge_time_s"],
+            **self.payload_summary(),
         }
+
+    def payload_summary(self) -> dict:
+        """With a payload (``drone.payload_kg`` > 0): the take-off and landing masses [kg], the number of releases
+        and the time of the first [s] (None without one; scalars only: a sweep stores the summary as columns)
+        and the propulsion energy [J] before and after the first release that dropped payload (split at the sample
+        the mass changes on: a quiet-flight step merging samples across it is split by its samples' powers, held
+        over each sample as the loop holds them, :meth:`_share_after`); nothing otherwise."""
+        drone, smp = self.cfg.drone, self.samples
+        if not drone.payload_kg > 0:
+            return {}
+        sched = getattr(smp.traj, "mass", None)
+        times = [] if sched is None else [float(t) for t in sched.release_t_s]
+        out = {"takeoff_mass_kg": float(drone.total_mass_kg),
+               "landing_mass_kg": float(drone.total_mass_kg if sched is None else sched.final_mass_kg),
+               "payload_releases": len(times), "first_release_t_s": times[0] if times else None}
+        if smp.mass_changes:
+            after = self.stats.sums_after
+            if self.stats.straddle is not None:
+                after = math.fsum([after, self._share_after(*self.stats.straddle, self.stats.t_split)])
+            out["propulsion_energy_before_release_j"] = self.stats.sums["e_propulsion_j"] - after
+            out["propulsion_energy_after_release_j"] = after
+        return out
+
+    def _share_after(self, start_s: float, end_s: float, t_release_s: float) -> float:
+        """The propulsion energy [J] of the step ``[start_s, end_s]`` from the first sample at or after
+        ``t_release_s`` on (the first at the lighter mass, :class:`~.trajectory.MassSchedule`): each sample's power
+        held over its period, as the loop integrates it (:meth:`.samples.MissionSamples.chunk`)."""
+        smp = self.samples
+        sched = smp.schedule
+        dt = sched.dt_s
+        k_drop = max(int(math.floor(t_release_s / dt)) - 1, 0)
+        while sched.at_samples([k_drop])[0] == sched.takeoff_mass_kg:   # (the schedule's own rule: one or two steps)
+            k_drop += 1
+        k_end = min(int(math.ceil(end_s / dt - 1e-9)), smp.n)
+        if k_end <= k_drop:
+            return 0.0
+        last = smp.last
+        try:
+            c = smp.chunk(k_drop, k_end)
+        finally:
+            smp.last = last   # (pose() reads the loop's last chunk)
+        t0 = np.maximum(c.t_s, start_s)
+        t1 = np.minimum(c.t_s + dt, end_s)
+        return math.fsum((c.p_w * np.maximum(t1 - t0, 0.0)).tolist())
 
     def rating_summary(self) -> dict:
         """The rectifier's continuous current rating [A] and its part (:func:`wpt_receiver.devices.current_rating`

@@ -19,6 +19,13 @@ measure 0.5-0.65 in static tests: Brandt & Selig, "Propeller performance data at
 numbers", AIAA 2011-1255), motor x ESC efficiency 0.8 (typical of small BLDC drives),
 flat-plate area 0.02 m^2, avionics 8 W. These are assumptions of typical values, not one
 airframe's measurements; hover electrical power comes out at ~99 W.
+
+Payload: ``payload_kg`` is carried from take-off (total mass ``mass_kg + payload_kg``); a route's payload
+releases (``[[waypoints]] release``, a mission file's DO_GRIPPER release) drop
+``release_kg`` each (0: all that is left) in route order, :func:`payload_after_releases`. The power model takes
+the current mass (``mass_kg=`` of :func:`propulsion_power_w` / :func:`hover_power_w`; the planned trajectory's
+mass schedule, :class:`mission_sim.world.trajectory.MassSchedule`); hover power goes as
+``m^1.5`` (momentum theory, the profile power taken at the same hover induced velocity).
 """
 
 from __future__ import annotations
@@ -30,17 +37,23 @@ import numpy as np
 
 from ..validation import Range, check_number, check_number_fields, check_positive
 
-__all__ = ["DroneParams", "propulsion_power_w", "hover_power_w", "G_M_S2"]
+__all__ = ["DroneParams", "propulsion_power_w", "hover_power_w", "payload_after_releases", "G_M_S2"]
 
 G_M_S2 = 9.80665
 
 
 @dataclass(frozen=True)
 class DroneParams:
-    """Multirotor parameters (SI). See module notes for where the defaults come from."""
+    """Multirotor parameters (SI). See module notes for where the defaults come from.
+
+    ``mass_kg``: the drone ready to fly (airframe, battery, receiver) [kg]; ``payload_kg``: the payload carried
+    from take-off [kg]; ``release_kg``: the payload mass dropped at each release of the route [kg] (0: the first
+    release drops all of it; e.g. three 0.3 kg parcels: ``payload_kg = 0.9``, ``release_kg = 0.3``), at most
+    ``payload_kg``."""
 
     mass_kg: float = 1.0
     payload_kg: float = 0.0
+    release_kg: float = 0.0
     n_rotors: int = 4
     rotor_radius_m: float = 0.127
     figure_of_merit: float = 0.6
@@ -52,7 +65,10 @@ class DroneParams:
     def __post_init__(self):
         check_number_fields(self)
         check_positive(self, "mass_kg", "rotor_radius_m", "flat_plate_area_m2", "air_density_kg_m3")
-        check_positive(self, "payload_kg", "avionics_w", allow_zero=True)
+        check_positive(self, "payload_kg", "release_kg", "avionics_w", allow_zero=True)
+        if self.release_kg > self.payload_kg:
+            raise ValueError(f"release_kg={self.release_kg!r} is invalid; valid range: [0, payload_kg="
+                             f"{self.payload_kg!r}] kg (the mass dropped at each payload release; 0: all of it)")
         for name in ("figure_of_merit", "drive_efficiency"):
             v = float(getattr(self, name))
             if not 0 < v <= 1:
@@ -70,13 +86,18 @@ class DroneParams:
         return self.n_rotors * math.pi * self.rotor_radius_m**2
 
 
-def propulsion_power_w(p: DroneParams, airspeed_m_s, climb_rate_m_s=0.0):
-    """Electrical propulsion power [W] at horizontal airspeed [m/s] and climb rate [m/s] (arrays broadcast)."""
+def propulsion_power_w(p: DroneParams, airspeed_m_s, climb_rate_m_s=0.0, mass_kg=None):
+    """Electrical propulsion power [W] at horizontal airspeed [m/s] and climb rate [m/s] (arrays broadcast);
+    ``mass_kg``: the total mass flown [kg] (an array broadcast with them: a mass schedule), None for
+    ``p.total_mass_kg`` (the take-off mass)."""
     v = np.abs(np.asarray(airspeed_m_s, dtype=float))
     vz = np.asarray(climb_rate_m_s, dtype=float)
-    v, vz = np.broadcast_arrays(v, vz)
     rho, f, area = p.air_density_kg_m3, p.flat_plate_area_m2, p.disk_area_m2
-    w = p.total_mass_kg * G_M_S2
+    if mass_kg is None:
+        v, vz = np.broadcast_arrays(v, vz)
+        w = p.total_mass_kg * G_M_S2
+    else:
+        v, vz, w = np.broadcast_arrays(v, vz, np.asarray(mass_kg, dtype=float) * G_M_S2)
     d_xy = 0.5 * rho * f * v * v
     d_z = 0.5 * rho * f * vz * np.abs(vz)
     thrust = np.hypot(w + d_z, d_xy)
@@ -88,7 +109,7 @@ def propulsion_power_w(p: DroneParams, airspeed_m_s, climb_rate_m_s=0.0):
         fval = vi * s - vh * vh
         dfdv = s + vi * (vz + vi) / s
         vi = np.maximum(vi - fval / dfdv, 1e-6)
-    vh_hover = math.sqrt(w / (2 * rho * area))
+    vh_hover = np.sqrt(w / (2 * rho * area)) if mass_kg is not None else math.sqrt(w / (2 * rho * area))
     p_induced = thrust * (vi + vz)
     p_induced = np.where(vz < 0, np.maximum(p_induced, 0.5 * w * vh_hover), p_induced)
     p_profile = (1.0 / p.figure_of_merit - 1.0) * w * vh_hover
@@ -97,8 +118,26 @@ def propulsion_power_w(p: DroneParams, airspeed_m_s, climb_rate_m_s=0.0):
     return out if out.ndim else float(out)
 
 
-def hover_power_w(p: DroneParams) -> float:
-    """Electrical hover power [W]: ``T^1.5 / sqrt(2 rho A) / FM / eta + avionics``."""
-    w = p.total_mass_kg * G_M_S2
+def hover_power_w(p: DroneParams, mass_kg: float | None = None) -> float:
+    """Electrical hover power [W]: ``T^1.5 / sqrt(2 rho A) / FM / eta + avionics`` with ``T = m g``, ``m`` =
+    ``mass_kg`` (None: ``p.total_mass_kg``, the take-off mass)."""
+    w = (p.total_mass_kg if mass_kg is None else float(mass_kg)) * G_M_S2
     return w**1.5 / math.sqrt(2 * p.air_density_kg_m3 * p.disk_area_m2) / p.figure_of_merit / p.drive_efficiency \
         + p.avionics_w
+
+
+def payload_after_releases(p: DroneParams, n_releases: int) -> tuple[list[float], int]:
+    """The payload left on board [kg] after each of ``n_releases`` releases in route order (each drops
+    ``p.release_kg``, 0: all that is left; never more than is left), and how many of them found nothing to drop
+    (no payload left: :func:`mission_sim.setup_warnings.payload_warnings` says so). A remainder below 1e-12 of the
+    payload (``0.9 - 3 x 0.3`` in floats) is 0, so the drone after its last parcel weighs ``mass_kg`` exactly."""
+    left, out, empty = float(p.payload_kg), [], 0
+    for _ in range(int(n_releases)):
+        if left <= 0.0:
+            empty += 1
+        drop = left if p.release_kg == 0 else min(p.release_kg, left)
+        left = left - drop
+        if left <= 1e-12 * p.payload_kg:
+            left = 0.0
+        out.append(left)
+    return out, empty

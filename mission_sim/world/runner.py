@@ -9,7 +9,8 @@ loop, :class:`~mission_sim.world.loop.MissionLoop`, twice: charged and uncharged
 Loop (one drone, one receiver):
 
 1. **Trajectory samples** (``sim.traj_dt_s``): pose -> Lm(pose) of the nearest pad (lookup table,
-   held over the sample), propulsion power (momentum theory, held over the sample), phase
+   held over the sample), propulsion power (momentum theory at the sample's mass: the route's payload releases,
+   :class:`~.trajectory.MassSchedule`; held over the sample), phase
    [:class:`~.samples.MissionSamples`, chunk by chunk as the loop advances (:func:`.fastpath.window`);
    ``loop_kernel.advance`` -> ``_begin_sample`` per sample].
 2. **Pad gating** (transmitter side): the pad energises only in a "charge"/"hover" phase (the
@@ -106,16 +107,25 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     ``warn``: before the run, :func:`mission_sim.setup_warnings.mission_warnings` as
     :class:`wpt_receiver.notices.DronewptWarning` (a link outside the exact-mode model's checked range, a pad the
     route never energises, a policy made for another link model; none with ``charge=False``); False skips them (a
-    sweep warns once per study). ``own_route``: whether the pads are checked against ``cfg``'s route (None: when
+    sweep warns once per study); a route's payload release with no payload left to drop warns with or without
+    ``charge`` (:func:`mission_sim.setup_warnings.payload_warnings`; when the route flown is ``cfg``'s). ``own_route``: whether the pads are checked against ``cfg``'s route (None: when
     no ``trajectory`` is given, a given one is taken for a replay's, its pads about the replay's pad frame origin;
     True for a trajectory planned from ``cfg``, e.g. ``plan_mission(cfg)``; False for a replayed one, or when the
     caller said it already). A pad far above or below its frame's origin warns whatever the route.
     """
     check_run_args(cfg, policy)
     check_policy_context(cfg, policy)
+    planned = trajectory is None or getattr(trajectory, "mass", None) is not None   # cfg's route (its releases) flown
     if warn and charge:   # (pads never energised: neither the link nor the pads matter)
         replay = trajectory is not None and own_route is None   # (its pads about the replay's frame origin)
-        warn_setup(cfg, policy, own_route=trajectory is None if own_route is None else bool(own_route), replay=replay)
+        warn_setup(cfg, policy, own_route=trajectory is None if own_route is None else bool(own_route), replay=replay,
+                   payload=planned)
+    elif warn and planned:   # (the payload's, charged or not)
+        from wpt_receiver.notices import warn as say
+
+        from ..setup_warnings import payload_warnings
+        for text in payload_warnings(cfg):
+            say(text)
     try:
         res = _run_mission(cfg, policy, trajectory, charge, progress, compiled, frame, sink)
         bad = [k for k, v in res.summary.items() if isinstance(v, float) and not np.isfinite(v)]
@@ -130,13 +140,13 @@ def run_mission(cfg, policy, *, trajectory: Trajectory | None = None, charge: bo
     return res
 
 
-def warn_setup(cfg, policy, own_route: bool = True, replay: bool = False) -> None:
+def warn_setup(cfg, policy, own_route: bool = True, replay: bool = False, payload: bool | None = None) -> None:
     """:func:`mission_sim.setup_warnings.mission_warnings` of the mission, each a
     :class:`~wpt_receiver.notices.DronewptWarning` pointed at the caller outside dronewpt."""
     from wpt_receiver.notices import warn
 
     from ..setup_warnings import mission_warnings
-    for text in mission_warnings(cfg, policy, own_route, replay):
+    for text in mission_warnings(cfg, policy, own_route, replay, payload):
         warn(text)
 
 
@@ -176,7 +186,8 @@ def _run_mission(cfg, policy, trajectory, charge, progress, compiled, frame=True
     if charge:  # its summary only; its pads never energise, so Lm does not enter it (0: no coupling table)
         base = _simulate(cfg, policy, traj, False, False, 0.0, compiled, frame=False)
         res.summary["flight_time_gain_s"] = flight_time_gain_s(cfg, res.summary["final_soc"],
-                                                               base.summary["final_soc"]) \
+                                                               base.summary["final_soc"],
+                                                               _final_mass_kg(traj)) \
             + res.summary["sim_time_s"] - base.summary["sim_time_s"]  # a depleted run ends early
     else:
         res.summary["flight_time_gain_s"] = 0.0
@@ -189,12 +200,20 @@ def _run_mission(cfg, policy, trajectory, charge, progress, compiled, frame=True
     return res
 
 
-def flight_time_gain_s(cfg, final_soc_charged: float, final_soc_uncharged: float) -> float:
+def _final_mass_kg(traj) -> float | None:
+    """The mass a planned route ends with (its :class:`~.trajectory.MassSchedule`); None without one."""
+    sched = getattr(traj, "mass", None)
+    return None if sched is None else sched.final_mass_kg
+
+
+def flight_time_gain_s(cfg, final_soc_charged: float, final_soc_uncharged: float,
+                       mass_kg: float | None = None) -> float:
     """Extra hover time [s] the charged mission ends with: the difference of the usable chemical
-    energy left (``n Q int_0^SoC OCV``) divided by the electrical hover power. (A run that depletes
+    energy left (``n Q int_0^SoC OCV``) divided by the electrical hover power at the mass the mission ends with
+    (``mass_kg``, the landing mass after any payload release; None: the take-off mass). (A run that depletes
     its battery ends there at SoC 0; :func:`run_mission` adds the difference of the two runs' ends.)"""
     e = cfg.battery.usable_energy_j
-    return float((e(final_soc_charged) - e(final_soc_uncharged)) / hover_power_w(cfg.drone))
+    return float((e(final_soc_charged) - e(final_soc_uncharged)) / hover_power_w(cfg.drone, mass_kg))
 
 
 def _simulate(cfg, policy, traj: Trajectory, charge: bool, progress: bool, lm_all=None,

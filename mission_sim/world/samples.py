@@ -140,6 +140,25 @@ class MissionSamples:
         if self.uniform is None:
             self.uniform = uniform_spacing(traj.t_s)
         self.last: SampleChunk | None = None
+        #: the route's :class:`~.trajectory.MassSchedule` when the mass flown changes on the way (a planned route's
+        #: payload release), else None: every sample flies ``drone.total_mass_kg`` (a replay's trajectory too)
+        sched = getattr(traj, "mass", None)
+        if sched is not None:
+            sched.check_drone(cfg.drone)   # (one source: the run's drone; a trajectory planned for other masses refused)
+        self.schedule = sched if sched is not None and sched.changes else None
+        self.mass_changes = self.schedule is not None
+
+    def mass_kg(self, t_s) -> np.ndarray:
+        """The total mass [kg] flown at the sample times ``t_s``."""
+        if self.mass_changes:
+            return self.schedule.at(t_s)
+        return np.full(np.shape(t_s), float(self.cfg.drone.total_mass_kg))
+
+    def row_mass_kg(self, rows_k) -> np.ndarray:
+        """The total mass [kg] of the samples ``rows_k`` (global indices): the mass a step's row flew."""
+        if self.mass_changes:
+            return self.schedule.at_samples(rows_k)
+        return np.full(len(np.asarray(rows_k)), float(self.cfg.drone.total_mass_kg))
 
     @property
     def t_first_s(self) -> float:
@@ -157,7 +176,9 @@ class MissionSamples:
         vel = gradient_rows(win.pos_m, win.t_s, self.uniform)[k0 - a:k0 - a + k1 - k0]
         tr = self.traj.chunk(k0, k1) if (a, b) != (k0, k1) else win
         p_w = np.asarray(propulsion_from(self.cfg.drone, vel, tr.wind_m_s, tr.phase,
-                                         getattr(self.traj, "motors_off_phases", ())), dtype=float).reshape(-1)
+                                         getattr(self.traj, "motors_off_phases", ()),
+                                         self.mass_kg(tr.t_s) if self.mass_changes else None),
+                         dtype=float).reshape(-1)
         if self.lm_given is None:
             lm = lm_along(self.cfg, self.model, tr)[0]
         elif np.ndim(self.lm_given):

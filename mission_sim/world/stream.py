@@ -47,6 +47,14 @@ class RowStats:
         self.min_soc = self.max_soc = float(initial_soc)
         self.vl_on_max = -math.inf
         self.n_rows = 0
+        self.t_split, self.sums_after = None, 0.0
+        self.straddle = None   # (start, end) [s] of the step holding t_split inside it (a merged quiet-flight step)
+
+    def split_at(self, t_s: float) -> None:
+        """Also sum the propulsion energy of the steps starting at or after ``t_s`` [s] (:attr:`sums_after`) and
+        keep the bounds of the step holding ``t_s`` inside it (:attr:`straddle`: its share after ``t_s`` is the
+        caller's to add, from the samples)."""
+        self.t_split = float(t_s)
 
     def add(self, arr: np.ndarray) -> None:
         """Take one block ``arr`` (n, 26)."""
@@ -62,6 +70,13 @@ class RowStats:
         soc = arr[:, c["soc"]]
         self.min_soc, self.max_soc = min(self.min_soc, float(soc.min())), max(self.max_soc, float(soc.max()))
         self.n_rows += len(arr)
+        if self.t_split is not None:
+            end = arr[:, c["t_s"]]   # (a row's t_s is its step's end)
+            late = end - dt >= self.t_split - 1e-9
+            self.sums_after = math.fsum([self.sums_after, *arr[late, c["e_propulsion_j"]].tolist()])
+            across = np.flatnonzero(~late & (end > self.t_split + 1e-9))
+            if len(across):
+                self.straddle = (float(end[across[0]] - dt[across[0]]), float(end[across[0]]))
         if on.any():
             self.vl_on_max = max(self.vl_on_max, float(vl[on].max()))
 
@@ -77,6 +92,8 @@ def _derived(loop, arr: np.ndarray) -> dict:
         out[name] = col[name].astype(bool) if name == "fine" else col[name]
     dts = col["dt_s"]
     out["propulsion_w"] = col["e_propulsion_j"] / dts
+    if loop.cfg.drone.payload_kg > 0:   # (as MissionLoop.timeseries: the mass each row flew)
+        out["mass_kg"] = loop.samples.row_mass_kg(ri)
     out["p_source_w"] = col["e_source_j"] / dts
     out["p_coil_loss_w"] = col["e_coil_loss_j"] / dts
     out["p_battery_loss_w"] = (col["e_battery_r0_j"] + col["e_battery_r1_j"]) / dts

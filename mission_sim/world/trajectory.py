@@ -20,10 +20,11 @@ from typing import ClassVar
 
 import numpy as np
 
+from .power import payload_after_releases as _payload_left
 from .power import propulsion_power_w
 from .wind import drag_force_n, hover_error_m, tilt_from_force, wind_series
 
-__all__ = ["Trajectory", "PlannedTrajectory", "plan_mission", "PHASES", "PLAN_BLOCK"]
+__all__ = ["Trajectory", "PlannedTrajectory", "MassSchedule", "plan_mission", "PHASES", "PLAN_BLOCK"]
 
 PHASES = ("ground", "takeoff", "transit", "approach", "charge", "depart", "land", "hover", "flight")
 
@@ -114,16 +115,24 @@ class Trajectory:
     motors_off_phases: ClassVar[tuple[str, ...]] = ("ground",)
 
     def propulsion_w(self, drone) -> np.ndarray:
-        """Electrical propulsion power (N,) [W] from momentum theory (airspeed = |v_xy - wind_xy|)."""
-        return propulsion_from(drone, self.velocity_m_s(), self.wind_m_s, self.phase, self.motors_off_phases)
+        """Electrical propulsion power (N,) [W] from momentum theory (airspeed = |v_xy - wind_xy|) at each sample's
+        mass: a planned route's :class:`MassSchedule` (``mass``, set by :meth:`PlannedTrajectory.materialise`;
+        ``drone`` must give its masses, :meth:`MassSchedule.check_drone`), else ``drone.total_mass_kg``: the
+        power a run over this trajectory draws (``world.samples.MissionSamples``)."""
+        sched = getattr(self, "mass", None)
+        if sched is not None:
+            sched.check_drone(drone)
+        return propulsion_from(drone, self.velocity_m_s(), self.wind_m_s, self.phase, self.motors_off_phases,
+                               sched.at(self.t_s) if sched is not None and sched.changes else None)
 
 
-def propulsion_from(drone, vel_m_s, wind_m_s, phase=None, motors_off=()) -> np.ndarray:
+def propulsion_from(drone, vel_m_s, wind_m_s, phase=None, motors_off=(), mass_kg=None) -> np.ndarray:
     """Electrical propulsion power (N,) [W] at velocities (N, 3) [m/s] in winds (N, 3) [m/s]
     (momentum theory, :func:`.power.propulsion_power_w`; airspeed = |v_xy - wind_xy|); samples
-    whose ``phase`` is one of ``motors_off`` draw ``drone.avionics_w`` only."""
+    whose ``phase`` is one of ``motors_off`` draw ``drone.avionics_w`` only. ``mass_kg``: the total mass per
+    sample (N,) [kg] (a payload dropped on the way), None for the take-off mass ``drone.total_mass_kg``."""
     air = np.hypot(vel_m_s[:, 0] - wind_m_s[:, 0], vel_m_s[:, 1] - wind_m_s[:, 1])
-    p = propulsion_power_w(drone, air, vel_m_s[:, 2])
+    p = propulsion_power_w(drone, air, vel_m_s[:, 2], mass_kg=mass_kg)
     if len(motors_off) and phase is not None:
         p = np.where(np.isin(np.asarray(phase, dtype=object), list(motors_off)), float(drone.avionics_w), p)
     return p
@@ -172,6 +181,7 @@ class _Path:
         self.m, self.pos, self.segs = m, np.asarray(start, dtype=float), []
         self.ground, self.grounds = 0.0, []
         self.keys = []   # per segment: the route's (key, value) that set a move's speed or a hold's time, else None
+        self.releases = []   # payload releases: (segment index they precede, count), in route order
 
     def move(self, p1, phase, speed_m_s=None, speed_key=None):
         p1 = np.asarray(p1, dtype=float)
@@ -227,7 +237,11 @@ def _route_segments(cfg):
     m = cfg.mission
     path = _Path(m, [m.start_x_m, m.start_y_m, 0.0])
     speed = key = None
+    pending = 0   # the releases of the waypoint before: when it is done, before the segments of the next
     for i, wp in enumerate(cfg.waypoints):
+        if pending:
+            path.releases.append((len(path.segs), pending))
+        pending = int(wp.release)
         if wp.speed_m_s is not None:
             speed, key = wp.speed_m_s, (f"waypoints.{i}.speed_m_s", wp.speed_m_s)
         x, y, z = wp.x_m, wp.y_m, wp.z_m
@@ -255,6 +269,8 @@ def _route_segments(cfg):
             path.hold(key[1], "charge", key)
             path.move([x, y, z], "depart")
             path.ground = 0.0
+    if pending:
+        path.releases.append((len(path.segs), pending))
     if path.pos[2] > 0.0:
         path.move([path.pos[0], path.pos[1], 0.0], "land")
     path.hold(1.0, "ground")
@@ -269,6 +285,70 @@ def plan_mission(cfg, rng: np.random.Generator | None = None) -> Trajectory:
     materialised (its chunks are the same numbers; it leaves ``rng`` where this did).
     """
     return PlannedTrajectory(cfg, rng).materialise()
+
+
+@dataclass(frozen=True)
+class MassSchedule:
+    """The total mass flown along a planned route: ``takeoff_mass_kg`` (``drone.mass_kg + payload_kg``) until the
+    first release, ``mass_after_kg[i]`` from ``release_t_s[i]`` [s] on (:func:`.power.payload_after_releases`);
+    ``empty_releases``: how many releases found no payload left; ``dt_s``: the plan's sample period (sample k
+    is at ``k dt_s``). A sample at or after a release flies without what it dropped (the power and the hold are
+    held over the sample, so the drop lands on the sample grid)."""
+
+    takeoff_mass_kg: float
+    release_t_s: np.ndarray
+    mass_after_kg: np.ndarray
+    empty_releases: int
+    dt_s: float
+
+    @classmethod
+    def of(cls, drone, release_t_s, dt_s: float) -> "MassSchedule":
+        left, empty = _payload_left(drone, len(release_t_s))
+        return cls(float(drone.total_mass_kg), np.array(release_t_s, dtype=float),
+                   np.array([drone.mass_kg + x for x in left], dtype=float), empty, float(dt_s))
+
+    @property
+    def final_mass_kg(self) -> float:
+        """The mass the route ends with (the landing mass)."""
+        return float(self.mass_after_kg[-1]) if len(self.mass_after_kg) else self.takeoff_mass_kg
+
+    @property
+    def changes(self) -> bool:
+        """Whether the mass changes along the route (a release that drops payload); else every sample flies
+        the take-off mass (and the power model is called as without a schedule: the same numbers)."""
+        return self.final_mass_kg != self.takeoff_mass_kg
+
+    def check_drone(self, drone) -> None:
+        """One-line ``ValueError`` when ``drone`` (a run's ``cfg.drone``) gives other masses at these releases than
+        the ones planned (the schedule and the positions' hold were planned for them: re-plan with the run's
+        config, ``plan_mission(cfg)``). A route whose mass changes under neither drone flies the run's
+        ``drone.total_mass_kg`` throughout, as without a schedule."""
+        mine = MassSchedule.of(drone, self.release_t_s, self.dt_s)
+        if not (self.changes or mine.changes):
+            return
+        if mine.takeoff_mass_kg == self.takeoff_mass_kg and np.array_equal(mine.mass_after_kg, self.mass_after_kg):
+            return
+        raise ValueError(f"the trajectory was planned for {self.describe()}, the run's drone flies {mine.describe()} "
+                         f"(drone.mass_kg={drone.mass_kg:g}, payload_kg={drone.payload_kg:g}, "
+                         f"release_kg={drone.release_kg:g}); valid: a trajectory planned from the run's config "
+                         "(plan_mission(cfg))")
+
+    def describe(self) -> str:
+        """``1.5 kg, 1 kg from t = 28.5 s``: the masses flown, for messages."""
+        out, last = f"{self.takeoff_mass_kg:g} kg", self.takeoff_mass_kg
+        for t, m in zip(self.release_t_s, self.mass_after_kg):
+            if m != last:
+                out, last = out + f", {m:g} kg from t = {t:g} s", m
+        return out if last != self.takeoff_mass_kg else out + " throughout"
+
+    def at(self, t_s) -> np.ndarray:
+        """The total mass [kg] at the sample times ``t_s``."""
+        table = np.concatenate([[self.takeoff_mass_kg], self.mass_after_kg])
+        return table[np.searchsorted(self.release_t_s, np.asarray(t_s, dtype=float), side="right")]
+
+    def at_samples(self, k) -> np.ndarray:
+        """The total mass [kg] of the samples ``k`` (indices on the plan's grid)."""
+        return self.at(np.asarray(k, dtype=np.int64) * self.dt_s)
 
 
 #: samples per block a :class:`PlannedTrajectory` generates (and keeps the last few of)
@@ -315,6 +395,7 @@ class PlannedTrajectory:
             starts.append(t0)
             t0 += seg[3]
         self._starts = np.array(starts)  # accumulated as plan_mission always did (the masks' bounds)
+        self._mass_schedule(path.releases, t0)
         self._gens0 = []
         for _ in range(3):   # the x, y and z gust streams, drawn one after the other from rng
             self._gens0.append(_clone(rng))
@@ -325,6 +406,19 @@ class PlannedTrajectory:
         self.uniform_spacing = _uniform_grid(self.n, self.dt)
         self._full = None
         self._restart()
+
+    def _mass_schedule(self, releases, t_end: float) -> None:
+        """:attr:`mass`: the :class:`MassSchedule` of the route's payload releases (each at the start of the segment
+        after its waypoint; the end of the route after the last)."""
+        times = [float(self._starts[j]) if j < len(self._starts) else t_end for j, n in releases for _ in range(n)]
+        self.mass = MassSchedule.of(self.cfg.drone, times, self.dt)
+
+    @property
+    def mass_changes(self) -> bool:
+        return self.mass.changes
+
+    def mass_at(self, t_s) -> np.ndarray:
+        return self.mass.at(t_s)
 
     def _restart(self):
         self._gens = [_clone(g) for g in self._gens0]
@@ -352,8 +446,9 @@ class PlannedTrajectory:
         raise AttributeError(name)
 
     def materialise(self) -> Trajectory:
-        """All samples as one :class:`Trajectory`."""
+        """All samples as one :class:`Trajectory` (with the route's :class:`MassSchedule` as its ``mass``)."""
         full = Trajectory(*_parts(self.chunk(0, self.n)))
+        full.mass = self.mass
         self._restart()   # the blocks are in ``full`` now
         return full
 
@@ -384,7 +479,7 @@ class PlannedTrajectory:
         wp, cfg = self.cfg.wind, self.cfg
         force = drag_force_n(wp, wind, vel)
         force_mean = drag_force_n(wp, self._mean_wind[None, :], vel)
-        mass = cfg.drone.total_mass_kg
+        mass = self.mass.at(t) if self.mass.changes else cfg.drone.total_mass_kg
         err = hover_error_m(wp, force - force_mean, mass, self.dt, state=self._hold_z)
         on_ground = code == PHASES.index("ground")
         err[on_ground] = 0.0

@@ -108,31 +108,35 @@ def hold_filter(p: WindParams, dt_s: float):
     return np.ravel(num), den
 
 
-def hover_error_m(p: WindParams, force_n: np.ndarray, mass_kg: float, dt_s: float,
+def hover_error_m(p: WindParams, force_n: np.ndarray, mass_kg: float | np.ndarray, dt_s: float,
                   state: list | None = None) -> np.ndarray:
     """Position error (n, 3) [m] of the hold loop driven by a force disturbance (n, 3) [N].
 
     Pass the force *fluctuation* (total drag minus the drag of the mean wind, which the loop's
-    integral action absorbs). ``state`` (three ``[0.0, 0.0]``, one per axis) continues the filter
+    integral action absorbs). ``mass_kg``: the total mass [kg], a number or one per sample (n,) (a payload dropped
+    on the way). ``state`` (three ``[0.0, 0.0]``, one per axis) continues the filter
     across chunks (see :func:`wpt_receiver.lti.lfilter`).
     """
     f = np.asarray(force_n, dtype=float)
     if len(f) == 0:
         return np.zeros((0, 3))
-    dev = f / mass_kg
+    m = np.asarray(mass_kg, dtype=float)
+    dev = f / (m[:, None] if m.ndim else mass_kg)   # (a mass per sample: a payload dropped on the way)
     num, den = hold_filter(p, dt_s)
     return lfilter(num, den, dev, axis=0, state=state)
 
 
-def tilt_from_force(mass_kg: float, accel_m_s2: np.ndarray, force_n: np.ndarray):
+def tilt_from_force(mass_kg: float | np.ndarray, accel_m_s2: np.ndarray, force_n: np.ndarray):
     """Tilt magnitude [rad] and tilt-axis azimuth [rad] of the thrust vector (coil normal).
 
     The thrust's horizontal part is ``m a_xy - F_xy``; the coil normal leans that way. The axis
     azimuth follows :mod:`wpt_receiver.coupling`'s convention (normal leans to azimuth axis - pi/2).
+    ``mass_kg``: the total mass [kg], a number or one per sample (n,).
     """
     a = np.asarray(accel_m_s2, dtype=float)
     f = np.asarray(force_n, dtype=float)
-    h = mass_kg * a[:, :2] - f[:, :2]
+    m = np.asarray(mass_kg, dtype=float)
+    h = (m[:, None] if m.ndim else mass_kg) * a[:, :2] - f[:, :2]   # (a mass per sample: a payload dropped)
     v = mass_kg * (G_M_S2 + a[:, 2]) - f[:, 2]
     tilt = np.arctan2(np.hypot(h[:, 0], h[:, 1]), np.maximum(v, 1e-9))
     axis = np.arctan2(h[:, 1], h[:, 0]) + 0.5 * math.pi
