@@ -52,6 +52,26 @@ def test_sweep_plot_hue_is_never_a_one_value_axis():
     assert _axes(rows, parse_study(doc)) == ("wind.speed_m_s", "battery.capacity_ah")
 
 
+def test_sweep_heat_map_tells_adjacent_cells_and_ticks_apart(monkeypatch, tmp_path):
+    """The heat map wrote each cell's mean with 3 significant figures: two adjacent cells at 12.341 and 12.344 both
+    read '12.3'. Cells and ticks now take the fewest figures (>= 3 / 6) that tell neighbours apart, no float noise."""
+    import mission_sim.studies.report as report
+    figs = []
+    monkeypatch.setattr(report, "save_figure", lambda fig, path: figs.append(fig) or str(path))
+    study = parse_study({"study": {"name": "mine"},
+                         "grid": {"battery.capacity_ah": [2.0, 2.0001, 4.0],
+                                  "wind.speed_m_s": [0.1 + 0.2, 6.0]}})
+    means = {(2.0, 0.1 + 0.2): 12.341, (2.0001, 0.1 + 0.2): 12.344, (4.0, 0.1 + 0.2): 15.0,
+             (2.0, 6.0): 0.5, (2.0001, 6.0): 0.75, (4.0, 6.0): 1.0}
+    rows = pd.DataFrame([{"battery.capacity_ah": c, "wind.speed_m_s": w, "flight_time_gain_s": m, "status": "ok"}
+                         for (c, w), m in means.items()])
+    report.plot_sweep(rows, study, tmp_path)
+    heat = figs[0].axes[1]
+    assert [t.get_text() for t in heat.get_xticklabels()] == ["2", "2.0001", "4"]
+    assert [t.get_text() for t in heat.get_yticklabels()] == ["0.3", "6"]
+    assert sorted(t.get_text() for t in heat.texts) == sorted(["12.341", "12.344", "15", "0.5", "0.75", "1"])
+
+
 # --- pads files a newcomer brings ------------------------------------------------------------------------------------
 
 import json  # noqa: E402
