@@ -612,8 +612,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     model.save(str(zip_path))
     venv.save(str(out / "vecnormalize.pkl"))
     meta = _meta(spec, venv, lag, float(spec["config"].dt_s))
-    meta["final_eval"] = ev.curve[-1] if ev.curve else None
-    meta["final_training"] = _training_episodes(model)
+    meta.update(final_eval=ev.curve[-1] if ev.curve else None, final_training=_training_episodes(model))
     if imitate:
         _imitation_meta(meta, out, start_log_std)
     meta_path = zip_path.with_suffix(".json")
