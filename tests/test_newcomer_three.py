@@ -111,6 +111,28 @@ def test_pads_csv_column_only_starting_like_a_height_is_ordinary(tmp_path, colum
     assert pad.point.alt_m is None and pad.point.lat_deg == 47.3982819
 
 
+@pytest.mark.parametrize("text, items", [('[{"lat": 47.39, "lon": 8.54}]', "1 item"),
+                                         ("[[47.39, 8.54], [47.40, 8.55]]", "2 items"), ("[]", "0 items")])
+def test_a_json_array_given_as_pads_is_named(tmp_path, capsys, text, items):
+    """A JSON array as the pads file was read as a CSV: "pads.json: header '[{\"lat\": 47.39' has no lat / lon
+    column" (2026-11-28). It is named as what it is, with the two forms a pads file has."""
+    from _cli_helpers import one_error_line
+    f = tmp_path / "pads.json"
+    f.write_text(text)
+    line = one_error_line(capsys, ["mission", "--pads", str(f), "--dry-run", "--out", str(tmp_path / "m")])
+    assert line == (f"dronewpt mission: error: pads.json: a JSON array ({items}), not a pads file; valid: a GeoJSON "
+                    'object {"type": "FeatureCollection", "features": [...]} of Point / MultiPoint features '
+                    "(coordinates [lon, lat] or [lon, lat, alt], property hover_time_s), or a CSV with a header "
+                    "lat,lon[,alt][,hover_time_s]")
+    assert not (tmp_path / "m").exists()
+
+
+def test_a_csv_whose_first_cell_starts_with_a_bracket_is_still_a_csv(tmp_path):
+    f = tmp_path / "pads.csv"
+    f.write_text("[note],lat,lon\nA,47.3982819,8.5469211\n")
+    assert read_pads(f)[0].point.lat_deg == 47.3982819
+
+
 def test_a_plan_given_as_pads_is_named(tmp_path):
     """`--pads survey.plan` said 'feature 0: geometry type null is not supported; valid: Point, MultiPoint'."""
     f = tmp_path / "survey.plan"

@@ -32,17 +32,32 @@ class GeoPad:
 
 
 def read_pads(path) -> tuple[GeoPad, ...]:
-    """Pads of a CSV or GeoJSON file (by content: a JSON object, else CSV)."""
+    """Pads of a CSV or GeoJSON file (by content: a JSON object, else CSV; a JSON array is refused)."""
     from ..validation import check_regular_file
     path = check_regular_file(path, "pads file (--pads / mission.pads_file)", "a CSV or GeoJSON file")
     try:
         text = path.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ValueError(f"{path.name}: not a UTF-8 text file: byte {exc.object[exc.start]:#04x} at offset {exc.start}") from None
+    if text.lstrip().startswith("["):
+        _refuse_json_array(text, path.name)
     pads = _geojson(text, path.name) if text.lstrip().startswith("{") else _csv(text, path.name)
     if not 1 <= len(pads) <= MAX_PADS:
         raise ValueError(f"{path.name}: {len(pads)} pads; valid: 1..{MAX_PADS}")
     return pads
+
+
+def _refuse_json_array(text: str, name: str) -> None:
+    """A JSON array is no pads file: said so, with the two forms a pads file has (2026-11-28: it was read as a CSV,
+    "header '[1,2,3]' has no lat / lon column"). Text starting with ``[`` that is not JSON is left to the CSV reader."""
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError:
+        return
+    raise ValueError(f"{name}: a JSON array ({len(doc)} item{'s' * (len(doc) != 1)}), not a pads file; valid: a GeoJSON "
+                     "object {\"type\": \"FeatureCollection\", \"features\": [...]} of Point / MultiPoint features "
+                     "(coordinates [lon, lat] or [lon, lat, alt], property hover_time_s), or a CSV with a header "
+                     "lat,lon[,alt][,hover_time_s]")
 
 
 def _pad(lat, lon, alt, hover, where: str) -> GeoPad:
