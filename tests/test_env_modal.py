@@ -540,6 +540,33 @@ def test_large_transient_peak_converges_with_v2_updates(case):
     assert coarse < 0.95 * min(limit, sw)
 
 
+def _energy_at(cfg, scenario, n=16, steps=300, seed=11):
+    """Total rectified energy [J] of ``n`` windows over one episode of uniform random actions (a new duty every step)."""
+    venv = SbarChargingVectorEnv(n, scenario, cfg, num_threads=1)
+    venv.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    total = sum(venv.step(rng.uniform(-1.0, 1.0, (n, 1)).astype(np.float32))[4]["energy_j"].sum() for _ in range(steps))
+    venv.close()
+    return total
+
+
+@pytest.mark.parametrize("scenario", ["nominal", "random"])
+def test_one_rectifier_period_steps_are_refined_in_transients(scenario):
+    """``dt_s`` = one rectifier period (``n_sub`` = 1): a step away from the steady state is split into its one
+    sub-step, so the sub-step refinement applies, as at 17 (the eq. 4 env's n_sub = 1 fix, tests/test_env_substeps.py).
+    Until 2026-11-28 the split was gated on ``n_sub > 1``: at ``n_sub`` = 1 no step was ever refined and the energy
+    under random duties was 0.34 % (nominal) / 0.58 % (random) below 64 V2 updates per step (measured; the step
+    without refinement, ``v2_refine_levels=0``, is that kernel to the bit); now +0.03 % / -0.01 %. Tolerance 0.1 %."""
+    period = EnvConfig().link.rectifier_period_s
+    one = EnvConfig(link_model="modal", dt_s=period)
+    assert one.modal_n_sub == 1 and one.modal_n_q == 1
+    ref = _energy_at(EnvConfig(link_model="modal", dt_s=period, v2_updates=64), scenario)
+    unrefined = _energy_at(EnvConfig(link_model="modal", dt_s=period, v2_refine_levels=0), scenario)
+    got = _energy_at(one, scenario)
+    assert abs(unrefined - ref) / ref > 0.002   # (the case needs the refinement)
+    assert abs(got - ref) / ref < 0.001, (got, ref, unrefined)
+
+
 def _window_peaks(cfg, acts_or_policy, n=16, seed=1000):
     """Largest instantaneous peak [A] per window of ``n`` nominal windows (seeds ``seed + i``) of the modal env
     with ``cfg``; ``acts_or_policy`` a policy name (its duties are returned) or the (T, n, 1) actions to replay."""
