@@ -6,6 +6,7 @@ Each warning test failed before the change (no warning, no line)."""
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import subprocess
 import sys
@@ -173,9 +174,13 @@ def test_a_sweeps_line_counts_the_cases_with_a_warning_not_one_message(tmp_path)
     with pytest.warns(DronewptWarning) as rec:
         prepare_study(study, policies.make, policies.available())
     msgs = _ours(rec)
-    assert len(msgs) == 1 and msgs[0].startswith(
+    assert len(msgs) == 2 and msgs[0].startswith(
         "4 of 6 cases of study 'hv' have a link outside the exact-mode model's checked range, e.g.: link.vdc_v=20 V "
         "with battery.n_series=32"), msgs
+    # (since 2026-11-28 also: at 40 V the short mode's I2 reaches 15 A at k = 0.0951, above the gate's 0.075)
+    assert msgs[1].startswith("2 of 6 cases of study 'hv' have a coupling.tx_min_k below the coupling where the "
+                              "short-mode I2 reaches link.rated_i2_a, e.g.: coupling.tx_min_k=0.075 is below k = "
+                              "0.09513"), msgs
 
 
 def test_an_env_on_a_link_outside_the_modal_range_warns():
@@ -568,6 +573,61 @@ def test_telemetry_warns_about_an_unreached_pad(capsys, tmp_path):
         "dronewpt telemetry: warning: pad 1 at (226.5, 0.0) m charges nothing: the route never hovers over it (closest "
         "approach 187.4 m); valid: a loiter item within mission.pad_radius_m=5 m of the pad and at least 1 m above it "
         "(it becomes a charging hover), a larger mission.pad_radius_m, or leave the pad out of --pads"], err
+
+
+# ------------------------------------------------------------------ 8. a pad gate below the short mode's rating
+def _folded(cfg):
+    """The mission's link with the devices' on-resistances in R1 (inverter) and the shorted R2 (SBAR)."""
+    from mission_sim.config import mission_link_params
+    dv = cfg.link.device_set()
+    return mission_link_params(cfg).with_(r1_ohm=cfg.link.r1_ohm + dv.inv_r_ohm, r2_ohm=cfg.link.r2_ohm + dv.short_r_ohm)
+
+
+def test_the_default_pad_gate_keeps_the_short_mode_within_the_rating():
+    """At the default coupling.tx_min_k = 0.075 the steady short-mode I2 at full V1 is 14.27 A < 15 A (docs/mission.md:
+    "<= 14.3 A"); it reaches 15 A at k = 0.0713, found here by root search on the steady state itself."""
+    from scipy.optimize import brentq
+
+    from mission_sim.setup_warnings import short_mode_rating_warning
+    from wpt_receiver.envelope import short_mode_rated_k, steady_state
+    cfg = load_config()
+    p, rated = _folded(cfg), cfg.link.rated_i2_a
+    root_l = math.sqrt(p.l1_h * p.l2_h)
+
+    def i2_sm(k):
+        return float(steady_state(p, 0.0, lm_h=k * root_l)[1])
+    assert i2_sm(cfg.coupling.tx_min_k) < rated and i2_sm(cfg.coupling.tx_min_k) == pytest.approx(14.27, abs=0.01)
+    k_rated = brentq(lambda k: i2_sm(k) - rated, 0.01, 0.5, xtol=1e-15)
+    assert short_mode_rated_k(p, rated) == pytest.approx(k_rated, rel=1e-9)
+    assert k_rated == pytest.approx(0.0713, abs=5e-5)
+    assert short_mode_rating_warning(cfg) is None
+    # I2 never reaches a rating above its largest value V1 / (2 sqrt(R1 R2)): no k
+    assert short_mode_rated_k(p, 1.01 * p.v1_amp_v / (2.0 * math.sqrt(p.r1_ohm * p.r2_ohm))) == 0.0
+
+
+@pytest.mark.parametrize("over, warns", [({"coupling.tx_min_k": 0.07}, True), ({"coupling.tx_min_k": 0.0714}, False),
+                                         ({"coupling.tx_min_k": 0.06, "link.vdc_v": 24.0}, False),
+                                         ({"coupling.tx_min_k": 0.075, "link.rated_i2_a": 14.0}, True)])
+def test_a_pad_gate_below_the_short_modes_rating_warns(over, warns):
+    """2026-11-28: ``coupling.tx_min_k`` below the coupling where the short-mode I2 ~ V1/(w Lm) reaches the rating ran
+    without a word (the pad then energises a receiver whose short mode is over-rated). The k is the closed form's
+    from the link (lower with a lower Vdc, higher with a lower rating), not a constant."""
+    from mission_sim.setup_warnings import mission_warnings, short_mode_rating_warning
+    from wpt_receiver.envelope import short_mode_rated_k, steady_state
+    cfg = _cfg(**over)
+    text = short_mode_rating_warning(cfg)
+    assert (text is not None) is warns
+    p = _folded(cfg)
+    k_rated = short_mode_rated_k(p, cfg.link.rated_i2_a)
+    assert (cfg.coupling.tx_min_k < k_rated) is warns
+    if warns:
+        i2 = float(steady_state(p, 0.0, lm_h=cfg.coupling.tx_min_k * math.sqrt(p.l1_h * p.l2_h))[1])
+        assert text.startswith(f"coupling.tx_min_k={cfg.coupling.tx_min_k:.6g} is below k = {k_rated:.4g}, where the "
+                               "receiver's short-mode I2")
+        assert f"reaches link.rated_i2_a={cfg.link.rated_i2_a:g} A" in text and f"up to {i2:.4g} A" in text
+        assert text.endswith(f"valid: coupling.tx_min_k >= {k_rated:.4g} (or a lower link.vdc_v or a higher "
+                             "link.rated_i2_a)")
+        assert mission_warnings(cfg).count(text) == 1
 
 
 # ------------------------------------------------------------------ no noise for normal use

@@ -56,12 +56,13 @@ class MissionParamChecker:
         draw of ``link.vdc_v``). A far pad (:func:`~mission_sim.setup_warnings.far_pad_warnings`) counts whatever
         the route, about :attr:`pad_origin` (``run_mission``'s rule)."""
         from ..setup_warnings import (far_pad_warnings, link_frequency_warning, link_range_warning,
-                                      unreached_pad_warnings)
+                                      short_mode_rating_warning, unreached_pad_warnings)
 
         link = (cfg.link, cfg.coupling, cfg.battery.n_series, cfg.charger.cv_cell_v, cfg.mission.hover_gap_m)
         route = (cfg.waypoints, cfg.mission, *cfg.pads) if cfg.waypoints else ()
         self.checked += 1
         checks = [("link", link, link_range_warning), ("freq", (cfg.link, cfg.coupling), link_frequency_warning),
+                  ("rated", (cfg.link, cfg.coupling), short_mode_rating_warning),
                   ("pad", route, unreached_pad_warnings),
                   ("far", tuple(cfg.pads), lambda c: far_pad_warnings(c, self.pad_origin))]
         checks += [(kind, what(cfg), check) for kind, _, what, check in self.notes]
@@ -82,6 +83,7 @@ class MissionParamChecker:
     #: the kinds of setup warning a study line counts: what the cases have (``notes`` add theirs)
     KINDS = {"link": "a link outside the exact-mode model's checked range",
              "freq": f"a link.f_hz more than a factor {FREQUENCY_TOLERANCE:g} off the coil pair's tanks' resonance",
+             "rated": "a coupling.tx_min_k below the coupling where the short-mode I2 reaches link.rated_i2_a",
              "pad": "a pad their route never energises",
              "far": f"a pad more than {PAD_HEIGHT_WARN_M:g} m above or below its frame's origin"}
 
