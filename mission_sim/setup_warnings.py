@@ -64,19 +64,32 @@ def link_frequency_warning(cfg) -> str | None:
     return resonance_warning(mission_link_params(cfg), "link.f_hz")
 
 
+def _short_mode_link(cfg):
+    """The mission's link (:func:`mission_link_params`) with the devices' on-resistances folded into R1 (the
+    inverter's) and R2 (the shorted SBAR's): the link of :func:`wpt_receiver.envelope.short_mode_rated_k` here."""
+    dv = cfg.link.device_set()
+    return mission_link_params(cfg).with_(r1_ohm=cfg.link.r1_ohm + dv.inv_r_ohm, r2_ohm=cfg.link.r2_ohm + dv.short_r_ohm)
+
+
+def short_mode_rated_coupling(cfg) -> float:
+    """The coupling k at which the steady short-mode I2 at full V1 reaches ``link.rated_i2_a`` (below it I2 is above
+    the rating; 0.0 when it never reaches it): the k of :func:`short_mode_rating_warning` (0.07132 at the defaults)."""
+    from wpt_receiver.envelope import short_mode_rated_k
+    return short_mode_rated_k(_short_mode_link(cfg), cfg.link.rated_i2_a)
+
+
 def short_mode_rating_warning(cfg) -> str | None:
     """One line when ``coupling.tx_min_k`` (the pad switches off only below it) lies below the coupling at which the
     steady short-mode I2 at full V1 (``(4/pi) link.vdc_v``) reaches ``link.rated_i2_a`` (the pad's coils, the
     devices' on-resistances in R1 and in the shorted R2: :func:`wpt_receiver.envelope.short_mode_rated_k`), else
     None: between the two the pad energises a receiver whose short mode carries more than its rating. The default
     0.075 is above it (0.0713 on Table I with the default devices: 14.27 A at k = 0.075)."""
-    from wpt_receiver.envelope import short_mode_rated_k, steady_state
+    from wpt_receiver.envelope import steady_state
 
-    dv = cfg.link.device_set()
-    p = mission_link_params(cfg).with_(r1_ohm=cfg.link.r1_ohm + dv.inv_r_ohm, r2_ohm=cfg.link.r2_ohm + dv.short_r_ohm)
+    p = _short_mode_link(cfg)
     l1_h, l2_h = p.l1_h, p.l2_h   # (the coupling model's coils; the hover pose's Lm is not used)
     rated, k_min = cfg.link.rated_i2_a, cfg.coupling.tx_min_k
-    k_rated = short_mode_rated_k(p, rated)
+    k_rated = short_mode_rated_coupling(cfg)
     if not k_min < k_rated:
         return None
     # the largest short-mode I2 the pad is then on for: at tx_min_k, or at the curve's top sqrt(R1 R2) below it

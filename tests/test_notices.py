@@ -576,52 +576,60 @@ def test_telemetry_warns_about_an_unreached_pad(capsys, tmp_path):
 
 
 # ------------------------------------------------------------------ 8. a pad gate below the short mode's rating
-def _folded(cfg):
-    """The mission's link with the devices' on-resistances in R1 (inverter) and the shorted R2 (SBAR)."""
+def _kernel_short_i2(cfg, k: float) -> float:
+    """|I2| [A] of the mission's exact-mode kernel (wpt_receiver.modal_kernel, the link the mission steps) in its
+    periodic steady state at d = 1 (short mode) on the mission's link and devices at Lm = k sqrt(L1 L2): what the
+    mission simulates, independent of the warning's closed form and of its fold of the devices into R1, R2."""
+    import numpy as np
+
     from mission_sim.config import mission_link_params
-    dv = cfg.link.device_set()
-    return mission_link_params(cfg).with_(r1_ohm=cfg.link.r1_ohm + dv.inv_r_ohm, r2_ohm=cfg.link.r2_ohm + dv.short_r_ohm)
+    from wpt_receiver import modal_kernel as mk
+    p, dv = mission_link_params(cfg), cfg.link.device_set()
+    lc, tab = mk.link_constants(p, dv), mk.modal_table(p, dv)
+    mc, z, v1 = np.zeros(mk.N_MODES_C, dtype=complex), np.zeros(4), -1j * p.v1_amp_v
+    mk.modes(lc, k * math.sqrt(p.l1_h * p.l2_h), mc)
+    v2 = mk.steady_state(lc, mc, tab, 1.0, v1, p.vl_v + dv.rect_vf_v, z)
+    return abs(mk.phasors(mc, z, v1, v2)[1])
 
 
 def test_the_default_pad_gate_keeps_the_short_mode_within_the_rating():
-    """At the default coupling.tx_min_k = 0.075 the steady short-mode I2 at full V1 is 14.27 A < 15 A (docs/mission.md:
-    "<= 14.3 A"); it reaches 15 A at k = 0.0713, found here by root search on the steady state itself."""
-    from scipy.optimize import brentq
-
-    from mission_sim.setup_warnings import short_mode_rating_warning
-    from wpt_receiver.envelope import short_mode_rated_k, steady_state
+    """At the default coupling.tx_min_k = 0.075 the mission's steady short-mode I2 at full V1 is 14.27 A < 15 A
+    (docs/mission.md: "<= 14.3 A"); the warning's k (0.0713) is where the mission's exact-mode kernel gives the
+    rating (measured 15.000000000 A: the closed form and the kernel agree to ~1e-12 A)."""
+    from mission_sim.setup_warnings import short_mode_rated_coupling, short_mode_rating_warning
+    from wpt_receiver.envelope import short_mode_rated_k
     cfg = load_config()
-    p, rated = _folded(cfg), cfg.link.rated_i2_a
-    root_l = math.sqrt(p.l1_h * p.l2_h)
-
-    def i2_sm(k):
-        return float(steady_state(p, 0.0, lm_h=k * root_l)[1])
-    assert i2_sm(cfg.coupling.tx_min_k) < rated and i2_sm(cfg.coupling.tx_min_k) == pytest.approx(14.27, abs=0.01)
-    k_rated = brentq(lambda k: i2_sm(k) - rated, 0.01, 0.5, xtol=1e-15)
-    assert short_mode_rated_k(p, rated) == pytest.approx(k_rated, rel=1e-9)
-    assert k_rated == pytest.approx(0.0713, abs=5e-5)
+    rated, k_rated = cfg.link.rated_i2_a, short_mode_rated_coupling(cfg)
+    assert _kernel_short_i2(cfg, k_rated) == pytest.approx(rated, abs=1e-6)
+    i2 = _kernel_short_i2(cfg, cfg.coupling.tx_min_k)
+    assert i2 < rated and i2 == pytest.approx(14.27, abs=0.01)
+    assert k_rated == pytest.approx(0.0713, abs=5e-5) and k_rated < cfg.coupling.tx_min_k
     assert short_mode_rating_warning(cfg) is None
     # I2 never reaches a rating above its largest value V1 / (2 sqrt(R1 R2)): no k
+    from mission_sim.config import mission_link_params
+    p = mission_link_params(cfg)
     assert short_mode_rated_k(p, 1.01 * p.v1_amp_v / (2.0 * math.sqrt(p.r1_ohm * p.r2_ohm))) == 0.0
 
 
 @pytest.mark.parametrize("over, warns", [({"coupling.tx_min_k": 0.07}, True), ({"coupling.tx_min_k": 0.0714}, False),
                                          ({"coupling.tx_min_k": 0.06, "link.vdc_v": 24.0}, False),
-                                         ({"coupling.tx_min_k": 0.075, "link.rated_i2_a": 14.0}, True)])
+                                         ({"coupling.tx_min_k": 0.075, "link.rated_i2_a": 14.0}, True),
+                                         ({"coupling.tx_min_k": 0.06}, True)])
 def test_a_pad_gate_below_the_short_modes_rating_warns(over, warns):
     """2026-11-28: ``coupling.tx_min_k`` below the coupling where the short-mode I2 ~ V1/(w Lm) reaches the rating ran
-    without a word (the pad then energises a receiver whose short mode is over-rated). The k is the closed form's
-    from the link (lower with a lower Vdc, higher with a lower rating), not a constant."""
-    from mission_sim.setup_warnings import mission_warnings, short_mode_rating_warning
-    from wpt_receiver.envelope import short_mode_rated_k, steady_state
+    without a word (the pad then energises a receiver whose short mode is over-rated). The warning's k is where the
+    mission's exact-mode kernel's steady short-mode |I2| is the rating (lower with a lower Vdc, higher with a lower
+    rating), not a constant; its "up to" current the kernel's at tx_min_k (17.82 A at 0.06)."""
+    from mission_sim.setup_warnings import mission_warnings, short_mode_rated_coupling, short_mode_rating_warning
     cfg = _cfg(**over)
     text = short_mode_rating_warning(cfg)
     assert (text is not None) is warns
-    p = _folded(cfg)
-    k_rated = short_mode_rated_k(p, cfg.link.rated_i2_a)
+    k_rated = short_mode_rated_coupling(cfg)
+    assert _kernel_short_i2(cfg, k_rated) == pytest.approx(cfg.link.rated_i2_a, abs=1e-6)
     assert (cfg.coupling.tx_min_k < k_rated) is warns
     if warns:
-        i2 = float(steady_state(p, 0.0, lm_h=cfg.coupling.tx_min_k * math.sqrt(p.l1_h * p.l2_h))[1])
+        i2 = _kernel_short_i2(cfg, cfg.coupling.tx_min_k)
+        assert i2 > cfg.link.rated_i2_a
         assert text.startswith(f"coupling.tx_min_k={cfg.coupling.tx_min_k:.6g} is below k = {k_rated:.4g}, where the "
                                "receiver's short-mode I2")
         assert f"reaches link.rated_i2_a={cfg.link.rated_i2_a:g} A" in text and f"up to {i2:.4g} A" in text
