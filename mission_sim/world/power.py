@@ -37,13 +37,16 @@ G_M_S2 = 9.80665
 
 #: The values a real multirotor can have for each :class:`DroneParams` field: the config's ``drone.*`` ranges
 #: (:data:`mission_sim.config.PLAUSIBLE`, one source; a mission, replay, sweep or calibrate refuses a value outside
-#: them naming the value and the range). Each admits every real multirotor, from a nano quadrotor (Crazyflie 2.1:
-#: 27 g, 47 mm propellers) and a 0.25 kg micro (~4.7-inch propellers, R 0.06 m) to 15-35 kg heavy lifters (21- to
-#: 33-inch propellers, R 0.27-0.42 m), crop sprayers (54-inch, R 0.69 m; ~100 kg take-off) and passenger
-#: multirotors (up to 18 rotors of R ~1 m, ~900 kg take-off), and calibrate's fit bounds
-#: (``mavlink.calibrate.BOUNDS``); the figures are manufacturers' data sheets, rounded:
+#: them naming the value and the range). They admit the multirotors of up to ~1 t without payload, from a nano
+#: quadrotor (Crazyflie 2.1: 27 g, 47 mm propellers) and a 0.25 kg micro (~4.7-inch propellers, R 0.06 m) to
+#: 15-35 kg heavy lifters (21- to 33-inch propellers, R 0.27-0.42 m), crop sprayers (54-inch, R 0.69 m; ~100 kg
+#: take-off) and the lighter passenger multirotors (up to 18 rotors of R ~1 m, ~900 kg take-off), and calibrate's
+#: fit bounds (``mavlink.calibrate.BOUNDS``); the figures are manufacturers' data sheets, rounded. Not every real
+#: multirotor: heavier passenger craft (Airbus's CityAirbus demonstrator, ~2.2 t take-off) lie above ``mass_kg``'s
+#: 1 t, and a passenger craft's avionics and cabin systems may draw more than ``avionics_w``'s 1 kW (no source
+#: here bounds them):
 #:
-#: * ``mass_kg`` 0.01-1000 kg, ``payload_kg`` 0-1000 kg: those masses;
+#: * ``mass_kg`` 0.01-1000 kg (the vehicle without payload), ``payload_kg`` 0-1000 kg: those masses;
 #: * ``n_rotors`` 1..32 (a single rotor to 18 with margin);
 #: * ``rotor_radius_m`` 0.01-2 m: 20 mm propellers to twice a passenger multirotor's rotor (R = 5 m is a light
 #:   helicopter's main rotor, refused since 2026-11-28; before: 0.01-10 m);
@@ -53,7 +56,8 @@ G_M_S2 = 9.80665
 #:   best large ones ~0.95 (before: 0.05-1);
 #: * ``flat_plate_area_m2`` 1e-4-5 m^2 (frontal area x drag coefficient ~1): a nano quadrotor ~1e-3, the default
 #:   1 kg quad 0.02, a 25 kg lifter ~0.5, a passenger multirotor a few m^2 (before: (0, 100]);
-#: * ``avionics_w`` 0-1000 W: none modelled to a large vehicle's avionics and payload electronics (before: 0-10 kW);
+#: * ``avionics_w`` 0-1000 W: none modelled to a heavy lifter's or sprayer's avionics and payload electronics
+#:   (before: 0-10 kW; a passenger craft's may be above it, see above);
 #: * ``air_density_kg_m3`` 0.05-2: Earth's air from cold sea level (1.4) to far above any multirotor's ceiling.
 #:
 #: :class:`DroneParams` itself checks only what its formulas need (positive, FM and efficiency in (0, 1]): a
