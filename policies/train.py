@@ -346,16 +346,21 @@ def _training_episodes(model) -> dict:
 def final_summary(meta: dict) -> str | None:
     """One line on how a run ended, from its metadata: the last evaluation's mean return and cost with their
     standard deviations over the held-out windows, else (no evaluation was due within the run's steps) the last
-    training episodes'; None for metadata with neither (imitation only, ``timesteps`` 0)."""
+    training episodes'; None for metadata with neither (imitation only, ``timesteps`` 0). A constrained run
+    (``--lagrangian``) adds its budget and whether that mean cost is within it (``; budget 0.05: within`` / ``above``)."""
     ev, tr = meta.get("final_eval"), meta.get("final_training")
+    budget = meta.get("budget") if meta.get("lagrangian") else None
 
     def spread(e, key, std, fmt):
         return f"{e[key]:{fmt}} +- {e[std]:{fmt}}" if std in e else f"{e[key]:{fmt}}"
+
+    def against_budget(e):
+        return "" if budget is None else f"; budget {budget:.4g}: {'within' if e['cost'] <= budget else 'above'}"
     if ev:
         n = (meta.get("eval") or {}).get("episodes")
         return (f"final evaluation at {ev['timesteps']:,} steps ({n} held-out windows): return "
                 f"{spread(ev, 'return_mean', 'return_std', '.4g')}, cost {spread(ev, 'cost', 'cost_std', '.4g')} "
-                f"(mean +- std), in short mode {100 * ev['reached_short_mode']:.0f} %")
+                f"(mean +- std), in short mode {100 * ev['reached_short_mode']:.0f} %{against_budget(ev)}")
     if tr is None:
         return None
     if not tr["episodes"]:
@@ -363,7 +368,7 @@ def final_summary(meta: dict) -> str | None:
                 "return or cost to show (more --timesteps, or --eval-every below them)")
     return (f"no evaluation was due (--eval-every above --timesteps); the last {tr['episodes']} training windows: "
             f"return {spread(tr, 'return_mean', 'return_std', '.4g')}, cost {spread(tr, 'cost', 'cost_std', '.4g')} "
-            "(mean +- std, stochastic actions)")
+            f"(mean +- std, stochastic actions){against_budget(tr)}")
 
 
 def _write_best_meta(folder: Path, meta: dict, ev) -> None:

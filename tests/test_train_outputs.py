@@ -333,6 +333,22 @@ def test_final_summary_is_the_last_evaluation_else_the_last_training_episodes(ru
         {**meta, "final_eval": None, "final_training": {"timesteps": 64, "episodes": 0}})
 
 
+def test_final_summary_of_a_lagrangian_run_states_its_budget(runs):
+    """A constrained run's (``--lagrangian``) summary names its budget and whether the final mean cost is within it
+    (it did not: the reader compared the cost with the budget by hand); an unconstrained run's does not."""
+    from policies.train import final_summary
+    meta = json.loads(runs["res"]["meta"].read_text())
+    ev, b = meta["final_eval"], meta["budget"]
+    assert meta["lagrangian"] and b == 0.05
+    line = final_summary(meta)
+    assert line.endswith(f"; budget 0.05: {'within' if ev['cost'] <= b else 'above'}")
+    for cost, word in ((0.9 * b, "within"), (b, "within"), (1.1 * b, "above")):
+        assert final_summary({**meta, "final_eval": {**ev, "cost": cost}}).endswith(f"; budget 0.05: {word}")
+        tr = {**meta["final_training"], "cost": cost}
+        assert final_summary({**meta, "final_eval": None, "final_training": tr}).endswith(f"; budget 0.05: {word}")
+    assert "budget" not in final_summary(json.loads(runs["ppo"]["meta"].read_text()))
+
+
 def test_cli_train_prints_the_final_summary_last(runs, monkeypatch, tmp_path, capsys):
     import policies.train as ptrain
     from mission_sim.cli import main
