@@ -134,8 +134,8 @@ class EnvConfig:
         V2 follows i2's phase, which moves with the modes' beat (125 us at Table I); fewer updates than
         rectifier periods let the held V2 feed the tank (``tests/test_env_modal.py``): under random duties
         (16 windows x 300 steps) 1 update put the energy 138 % / 450 % off the default's (nominal / random),
-        4 updates 21 %, 8 4.2 %, 16 0.55-1.1 %, so 1 .. n_sub - 1 are refused (2026-11-28). One update per
-        rectifier period alone put a large transient's peak 9-22 % low (docs/performance.md, "Fewer V2
+        2 updates 76-77 %, 4 21-22 %, 8 4.2-4.7 %, 16 0.55-1.1 %, so 1 .. n_sub - 1 are refused (2026-11-28).
+        One update per rectifier period alone put a large transient's peak 9-22 % low (docs/performance.md, "Fewer V2
         updates per modal env step"); the refinement below fixes that where it is needed.
     v2_refine_tol, v2_refine_levels : (modal) a sub-step whose end I2 moved from its start's by more than
         ``v2_refine_tol`` of |I2| is redone in 2^L pieces (L <= ``v2_refine_levels``; 0: never), V2 implicit at
