@@ -2,8 +2,11 @@
 estimator everywhere": a cheaper estimator within 0.5 % of the exact-mode one).
 
 The reference is :mod:`envs.modal_step`'s step as the envs run it (``EnvConfig(link_model="modal")``: 17
-rectifier-period sub-steps, V2 implicit in the commutation at each). The variants are ``EnvConfig`` fields
-(``v2_updates=K``: K sub-steps of equal length, |I2| sampled once per rectifier period within them).
+rectifier-period sub-steps, V2 implicit in the commutation at each). The variants drive the same kernel with K
+sub-steps of equal length per 100 us, |I2| sampled once per rectifier period within them (``n_sub=K``,
+``n_q=ceil(17/K)``): the link runs call ``envs.modal_step._link_step`` with them, the env runs use
+:class:`SubstepConfig` (a study-only ``EnvConfig`` whose ``modal_n_sub`` / ``modal_n_q`` are K's). ``EnvConfig``'s
+``v2_updates`` refuses 1..16 at 100 us since 2026-11-28 (V2 held while i2 turns; this study's findings).
 
 * ``traj``: the paper's three trajectories (step, V2* ramp, proposed; Table I, fixed Lm, stiff 30 V, ideal
   devices, 100 us control period; as ``tests/test_env_modal.py`` runs them): instantaneous and fundamental
@@ -36,6 +39,7 @@ import math
 import os
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -55,11 +59,28 @@ ENV_DT = 17 * P.rectifier_period_s
 TRAJECTORIES = (("step", "v2"), ("ramp", "v2"), ("ramp", "duty"), ("proposed", "v2"))
 
 
+@dataclass(frozen=True, repr=False)
+class SubstepConfig(EnvConfig):
+    """STUDY ONLY: an ``EnvConfig`` whose modal step runs ``study_n_sub`` sub-steps per control period (0: the
+    config's own), |I2| sampled once per rectifier period (``n_q = ceil(n_sub / study_n_sub)``), whatever
+    ``v2_updates`` allows (it refuses fewer updates than rectifier periods)."""
+
+    study_n_sub: int = 0
+
+    @property
+    def modal_n_sub(self) -> int:
+        return self.study_n_sub or super().modal_n_sub
+
+    @property
+    def modal_n_q(self) -> int:
+        return -(-self.n_sub // self.modal_n_sub)
+
+
 def variants(ks, extra=()) -> dict:
-    """``{label: EnvConfig kwargs}``: the reference (``ref``) first, then ``K=k`` per sub-step count."""
+    """``{label: SubstepConfig kwargs}``: the reference (``ref``) first, then ``K=k`` per sub-step count."""
     out = {"ref": dict(v2_refine_levels=0)}   # uniform sub-steps: the kernel before the refinement (modal_refine_study)
     for k in ks:
-        out[f"K={k}"] = dict(v2_updates=k, v2_refine_levels=0)
+        out[f"K={k}"] = dict(study_n_sub=k, v2_refine_levels=0)
     for label, kw in extra:
         out[label] = kw
     return out
@@ -149,7 +170,7 @@ def traj_study(var: dict) -> dict:
         d = trajectory(name, kind)
         runs = {}
         for lab, kw in var.items():
-            c = EnvConfig(**kw)
+            c = SubstepConfig(**kw)
             pk, pe, il = link_run(d, c.modal_n_sub, c.modal_n_q)
             runs[lab] = (pk.max(), pe.max(), il.sum())
         ref = runs["ref"]
@@ -260,12 +281,12 @@ def env_study(var: dict, n: int, seed: int, policies=("model_based", "mpc", "ran
     res = {}
     for sc in scenarios:
         for pol in policies:
-            acts, ref = _record(pol, sc, n, seed, EnvConfig(link_model="modal", **var["ref"]))
+            acts, ref = _record(pol, sc, n, seed, SubstepConfig(link_model="modal", **var["ref"]))
             row = {}
             for lab, kw in var.items():
                 if lab == "ref":
                     continue
-                got = _replay(acts, sc, n, seed, EnvConfig(link_model="modal", **kw))
+                got = _replay(acts, sc, n, seed, SubstepConfig(link_model="modal", **kw))
                 de = 100 * (got["energy"] / ref["energy"] - 1)
                 dp = 100 * (got["peak"] / ref["peak"] - 1)
                 do = 100 * (got["over"] - ref["over"])   # percentage points of overshoot
@@ -299,7 +320,7 @@ def cost_study(var: dict, ns=(1024, 4096), steps=40, warm=20, seed=0) -> dict:
     res = {}
     for n in ns:
         for actions in ("held", "random"):
-            cfgs = {"eq4": EnvConfig(link_model="envelope"), **{lab: EnvConfig(link_model="modal", **kw) for lab, kw in var.items()}}
+            cfgs = {"eq4": EnvConfig(link_model="envelope"), **{lab: SubstepConfig(link_model="modal", **kw) for lab, kw in var.items()}}
             envs, times = {}, {}
             for lab, cfg in cfgs.items():
                 envs[lab] = SbarChargingVectorEnv(num_envs=n, scenario="random", config=cfg, num_threads=1)
@@ -326,7 +347,7 @@ def cost_study(var: dict, ns=(1024, 4096), steps=40, warm=20, seed=0) -> dict:
 
 def finer_cost(n=1024, ks=(17, 34, 68, 136), steps=10, reps=3) -> dict:
     """CPU [ns per env-step] of the link part alone (``benchmarks/profile_modal_step.py``'s replay of captured
-    steps) with ``k`` V2 updates per 100 us (beyond the env's 17, which ``v2_updates`` cannot exceed), one
+    steps) with ``k`` V2 updates per 100 us (17: the env's default; ``v2_updates`` takes 17..1000), one
     sample per sub-step; every window rebuilds its segment (modes and ZOHs for ``k``) in each timed step, the
     same ~1.2 us for every ``k``."""
     import profile_modal_step as pm

@@ -129,10 +129,13 @@ class EnvConfig:
         steady state of the step's inputs (the ringing, and the error of the held V2, stay below it);
         else it runs in ``v2_updates`` sub-steps (``envs.modal_step._link_step``)
     v2_updates : (modal) sub-steps of a step that is not held, V2 updated at each; 0 (default): one per
-        rectifier period, as the mission's fine step; |I2| sampled at least once per rectifier period.
-        V2 follows i2's phase, which moves with the modes' beat (125 us at Table I); fewer updates let
-        the held V2 feed the tank in a large transient (``tests/test_env_modal.py``). One update per
-        rectifier period alone put a large transient's peak 9-22 % low (docs/performance.md, "Fewer V2
+        rectifier period, as the mission's fine step; else :attr:`n_sub` (the rectifier periods per step, 17
+        at the default ``dt_s``) to 1000; |I2| sampled at least once per rectifier period.
+        V2 follows i2's phase, which moves with the modes' beat (125 us at Table I); fewer updates than
+        rectifier periods let the held V2 feed the tank (``tests/test_env_modal.py``): under random duties
+        (16 windows x 300 steps) 1 update put the energy 138 % / 450 % off the default's (nominal / random),
+        2 updates 76-77 %, 4 21-22 %, 8 4.2-4.7 %, 16 0.55-1.1 %, so 1 .. n_sub - 1 are refused (2026-11-28).
+        One update per rectifier period alone put a large transient's peak 9-22 % low (docs/performance.md, "Fewer V2
         updates per modal env step"); the refinement below fixes that where it is needed.
     v2_refine_tol, v2_refine_levels : (modal) a sub-step whose end I2 moved from its start's by more than
         ``v2_refine_tol`` of |I2| is redone in 2^L pieces (L <= ``v2_refine_levels``; 0: never), V2 implicit at
@@ -141,8 +144,9 @@ class EnvConfig:
         ~5x the step's CPU under random actions; (0.02, 5) within ~0.3 %, ~13x. Smooth control on tuned windows
         does not trigger it (nominal ``model_based`` / ``mpc`` windows bit-identical to the unrefined step); on
         detuned windows it does (peaks move by up to ~5 A there: those windows ring). Only with one update per
-        rectifier period or more (``v2_updates`` 0 or >= 17): with 1-16 updates the |I2| samples between updates
-        leave no room for it and it is off (docs/performance.md, "Adaptive refinement of the modal env step").
+        rectifier period or more (``v2_updates`` 0 or >= :attr:`n_sub`, the only values accepted; the kernel,
+        driven with fewer sub-steps than rectifier periods, samples |I2| between updates and does not refine:
+        docs/performance.md, "Adaptive refinement of the modal env step").
         Defaults: :data:`wpt_receiver.modal_kernel.REFINE_TOL` / ``REFINE_LEVELS`` (the mission's too).
     """
 
@@ -179,6 +183,11 @@ class EnvConfig:
             c = check_number(name, v, rng, note + _YAML_NOTE * isinstance(v, str))
             if rng.integer or type(v) not in (int, float):   # whole numbers as int (n_steps=40.0 stepped nothing)
                 object.__setattr__(self, name, c)
+        if 1 <= self.v2_updates < self.n_sub:   # fewer V2 updates than rectifier periods: V2 held while i2 turns
+            hi = f"{self.n_sub}..1000" if self.n_sub <= 1000 else "none above 1000"
+            raise ValueError(f"v2_updates={self.v2_updates!r} is invalid; valid: 0 (one per rectifier period) or {hi} at "
+                             f"dt_s={self.dt_s:.6g} s ({self.n_sub} rectifier periods per step): fewer V2 updates than "
+                             "rectifier periods hold V2 while i2 turns (random duties: energy 0.5-450 % off)")
         if not (self.device_tj_c == 0.0 or 25.0 <= self.device_tj_c <= 175.0):
             raise ValueError(f"device_tj_c={self.device_tj_c!r} is invalid; valid range: 0 (table values) or "
                              "[25, 175] C")

@@ -25,7 +25,7 @@ from wpt_receiver import LinkParams
 from wpt_receiver.coupling import NOMINAL_GAP_M
 
 from .world.battery import BatteryParams, CcCvParams
-from .world.power import DroneParams
+from .world.power import DRONE_RANGES, DroneParams
 from .validation import (ALT_RANGE, CRUISE_ALTITUDE_RANGE, HOLD_RANGE, HOVER_GAP_RANGE, PAD_RADIUS_RANGE,
                          SPEED_RANGE, Range, check_number_fields, check_positive, check_range, check_table,
                          read_toml_file)
@@ -399,12 +399,7 @@ PLAUSIBLE: dict[str, Range] = {
     "coupling.tx_min_k": Range(0.0, 1.0, lo_open=True, hi_open=True),
     "coupling.tx_k_hysteresis": Range(0.0, 1.0, hi_open=True),
     "pads.x_m": _M, "pads.y_m": _M, "pads.z_m": _M, "pads.hover_time_s": HOLD_RANGE,
-    "drone.mass_kg": Range(0.01, 1000.0, "kg"), "drone.payload_kg": Range(0.0, 1000.0, "kg"),
-    "drone.release_kg": Range(0.0, 1000.0, "kg"),
-    "drone.n_rotors": Range(1, 32, integer=True), "drone.rotor_radius_m": Range(0.01, 10.0, "m"),
-    "drone.figure_of_merit": Range(0.05, 1.0), "drone.drive_efficiency": Range(0.05, 1.0),
-    "drone.flat_plate_area_m2": Range(0.0, 100.0, "m^2", lo_open=True), "drone.avionics_w": Range(0.0, 1e4, "W"),
-    "drone.air_density_kg_m3": Range(0.05, 2.0, "kg/m^3"),
+    **{f"drone.{k}": r for k, r in DRONE_RANGES.items()},   # (the physical ranges and their sources: world/power.py)
     "battery.n_series": Range(1, 32, integer=True), "battery.capacity_ah": Range(0.01, 1000.0, "A h"),
     "battery.r0_ohm_cell": Range(1e-6, 1.0, "ohm"), "battery.r1_ohm_cell": Range(1e-6, 1.0, "ohm"),
     "battery.c1_f_cell": Range(1e-3, 1e6, "F"), "battery.initial_soc": Range(0.0, 1.0),

@@ -10,6 +10,9 @@ each by the command line.
 * :func:`link_frequency_warning`: ``link.f_hz`` more than a factor
   :data:`wpt_receiver.params.FREQUENCY_TOLERANCE` off the coil pair's tanks' resonance (85 kHz: Table I's coils
   with their capacitors; at a factor 2 the resonant link's secondary current, 1/f, halves or doubles).
+* :func:`short_mode_rating_warning`: ``coupling.tx_min_k`` below the coupling at which the steady short-mode I2
+  (~ V1 / (w Lm), more as k falls) reaches ``link.rated_i2_a`` at full V1: the pad stays on where a receiver in
+  short mode carries more than its rating (:func:`wpt_receiver.envelope.short_mode_rated_k`, closed form).
 * :func:`unreached_pad_warnings`: a pad the route never energises (:func:`energised_pads`: no charging hover
   or loiter's hover inside its coupling range, the run's own rule): it charges nothing.
 * :func:`far_pad_warnings`: a pad more than 120 m above or below home (an altitude in another frame or unit).
@@ -26,7 +29,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["link_range_warning", "link_frequency_warning", "unreached_pad_warnings", "payload_warnings", "far_pad_warnings", "energised_pads", "policy_link_warning", "mission_warnings",
+__all__ = ["link_range_warning", "link_frequency_warning", "short_mode_rating_warning", "unreached_pad_warnings", "payload_warnings", "far_pad_warnings", "energised_pads", "policy_link_warning", "mission_warnings",
            "mission_link_params", "MISSION_LINK_MODEL", "POLICY_VL_TOL_V", "PAD_HEIGHT_WARN_M", "HOME_ORIGIN", "REPLAY_ORIGIN"]
 
 #: the link model every mission runs (:mod:`mission_sim.world.loop_kernel` steps :mod:`wpt_receiver.modal_kernel`)
@@ -62,6 +65,43 @@ def link_frequency_warning(cfg) -> str | None:
     ``f_hz``, and the resonant link's secondary current scales as 1/f), else None."""
     from wpt_receiver.params import resonance_warning
     return resonance_warning(mission_link_params(cfg), "link.f_hz")
+
+
+def _short_mode_link(cfg):
+    """The mission's link (:func:`mission_link_params`) with the devices' on-resistances folded into R1 (the
+    inverter's) and R2 (the shorted SBAR's): the link of :func:`wpt_receiver.envelope.short_mode_rated_k` here."""
+    dv = cfg.link.device_set()
+    return mission_link_params(cfg).with_(r1_ohm=cfg.link.r1_ohm + dv.inv_r_ohm, r2_ohm=cfg.link.r2_ohm + dv.short_r_ohm)
+
+
+def short_mode_rated_coupling(cfg) -> float:
+    """The coupling k at which the steady short-mode I2 at full V1 reaches ``link.rated_i2_a`` (below it I2 is above
+    the rating; 0.0 when it never reaches it): the k of :func:`short_mode_rating_warning` (0.07132 at the defaults)."""
+    from wpt_receiver.envelope import short_mode_rated_k
+    return short_mode_rated_k(_short_mode_link(cfg), cfg.link.rated_i2_a)
+
+
+def short_mode_rating_warning(cfg) -> str | None:
+    """One line when ``coupling.tx_min_k`` (the pad switches off only below it) lies below the coupling at which the
+    steady short-mode I2 at full V1 (``(4/pi) link.vdc_v``) reaches ``link.rated_i2_a`` (the pad's coils, the
+    devices' on-resistances in R1 and in the shorted R2: :func:`wpt_receiver.envelope.short_mode_rated_k`), else
+    None: between the two the pad energises a receiver whose short mode carries more than its rating. The default
+    0.075 is above it (0.0713 on Table I with the default devices: 14.27 A at k = 0.075)."""
+    from wpt_receiver.envelope import steady_state
+
+    p = _short_mode_link(cfg)
+    l1_h, l2_h = p.l1_h, p.l2_h   # (the coupling model's coils; the hover pose's Lm is not used)
+    rated, k_min = cfg.link.rated_i2_a, cfg.coupling.tx_min_k
+    k_rated = short_mode_rated_coupling(cfg)
+    if not k_min < k_rated:
+        return None
+    # the largest short-mode I2 the pad is then on for: at tx_min_k, or at the curve's top sqrt(R1 R2) below it
+    k_top = math.sqrt(p.r1_ohm * p.r2_ohm) / (p.omega_rad_s * math.sqrt(l1_h * l2_h))
+    i2_max = float(steady_state(p, 0.0, lm_h=max(k_min, k_top) * math.sqrt(l1_h * l2_h))[1])
+    return (f"coupling.tx_min_k={k_min:.6g} is below k = {k_rated:.4g}, where the receiver's short-mode I2 (~ V1/(w "
+            f"Lm), V1 = {p.v1_amp_v:.4g} V at link.vdc_v={cfg.link.vdc_v:g} V) reaches link.rated_i2_a={rated:g} A: "
+            f"the pad stays on down to k = {k_min:.6g}, with up to {i2_max:.4g} A in short mode; valid: "
+            f"coupling.tx_min_k >= {k_rated:.4g} (or a lower link.vdc_v or a higher link.rated_i2_a)")
 
 
 def _distance_to_route(x: float, y: float, pts: list) -> float:
@@ -184,7 +224,7 @@ def mission_warnings(cfg, policy=None, own_route: bool = True, replay: bool = Fa
     pads can be checked against it; ``replay``: the trajectory is a replay's, whose pad frame origin is the take-off
     spot or ``--pad``, not the mission's home; ``payload``: ``cfg``'s route is flown, so its payload releases are
     (None: unless ``replay``; :func:`payload_warnings`). A far pad warns whatever the route."""
-    out = [w for w in (link_range_warning(cfg), link_frequency_warning(cfg),
+    out = [w for w in (link_range_warning(cfg), link_frequency_warning(cfg), short_mode_rating_warning(cfg),
                        policy_link_warning(cfg, policy) if policy is not None else None) if w is not None]
     out += far_pad_warnings(cfg, REPLAY_ORIGIN if replay else HOME_ORIGIN)
     if own_route:

@@ -48,7 +48,7 @@ class ProgressCallback(BaseCallback):
 class CostEvalCallback(EvalCallback):
     """``EvalCallback`` that also averages ``episode_cost`` / ``overshoot`` / ``reached_short_mode`` of
     the evaluation episodes, logs them (``eval/mean_cost`` ...) and writes the curve to
-    ``<log_path>/eval_curve.json`` (timesteps, return mean/std, cost, overshoot, fraction in SM).
+    ``<log_path>/eval_curve.json`` (timesteps, return mean/std, cost mean/std, overshoot, fraction in SM).
 
     With a cost ``budget`` (constrained runs) it also keeps the **best feasible model**: the
     evaluation with the highest mean return among those whose mean cost is within the budget and
@@ -104,11 +104,12 @@ class CostEvalCallback(EvalCallback):
         go_on = super()._on_step()
         if self.eval_freq > 0 and self.n_calls % self.eval_freq == 0 and self._ep:
             c, o, s = (float(np.mean(x)) for x in zip(*self._ep))
+            c_std = float(np.std([e[0] for e in self._ep]))
             self.logger.record("eval/mean_cost", c)
             self.logger.record("eval/mean_overshoot", o)
             self.logger.record("eval/reached_short_mode", s)
             self.curve.append({"timesteps": int(self.num_timesteps), "return_mean": float(self.last_mean_reward),
-                               "return_std": float(np.std(self.evaluations_results[-1])), "cost": c,
+                               "return_std": float(np.std(self.evaluations_results[-1])), "cost": c, "cost_std": c_std,
                                "overshoot": o, "reached_short_mode": s})
             self._keep_if_feasible(self.curve[-1])
             if self.best_model_save_path is not None and self.best_mean_reward > best_before:

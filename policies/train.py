@@ -37,7 +37,7 @@ from mission_sim.train_options import ONLY_WITH, RANGES, unused_option
 
 from .rl import ALGOS
 
-__all__ = ["train", "plot_learning_curve", "DEFAULT_HYPERPARAMS", "env_config", "env_overrides", "EVAL_SEED", "VEC_PATHS",
+__all__ = ["train", "final_summary", "plot_learning_curve", "DEFAULT_HYPERPARAMS", "env_config", "env_overrides", "EVAL_SEED", "VEC_PATHS",
            "ONLY_WITH", "ONLY_WITH_DEFAULTS", "unused_option"]
 
 #: fixed held-out evaluation seeds ``EVAL_SEED + i`` (training seeds are small integers)
@@ -330,6 +330,47 @@ def _callbacks(spec: dict, out: Path, eval_env, penalty, progress: bool):
     return CallbackList(cbs), lag, cbs[2]
 
 
+def _training_episodes(model) -> dict:
+    """The last training episodes SB3 kept (``model.ep_info_buffer``: VecMonitor's ``info["episode"]`` of the
+    last 100 windows, its return unpenalised, with ``episode_cost``): count, mean and std of return and cost."""
+    eps = list(model.ep_info_buffer or ())
+    r = np.array([e["r"] for e in eps], float)
+    c = np.array([e.get("episode_cost", np.nan) for e in eps], float)
+    stats = {"timesteps": int(model.num_timesteps), "episodes": len(eps)}
+    if eps:
+        stats.update(return_mean=float(r.mean()), return_std=float(r.std()), cost=float(c.mean()),
+                     cost_std=float(c.std()))
+    return stats
+
+
+def final_summary(meta: dict) -> str | None:
+    """One line on how a run ended, from its metadata: the last evaluation's mean return and cost with their
+    standard deviations over the held-out windows, else (no evaluation was due within the run's steps) the last
+    training episodes'; None for metadata with neither (imitation only, ``timesteps`` 0). A constrained run
+    (``--lagrangian``) adds its budget and whether that mean cost is within it (``; budget 0.05: within`` / ``above``)."""
+    ev, tr = meta.get("final_eval"), meta.get("final_training")
+    budget = meta.get("budget") if meta.get("lagrangian") else None
+
+    def spread(e, key, std, fmt):
+        return f"{e[key]:{fmt}} +- {e[std]:{fmt}}" if std in e else f"{e[key]:{fmt}}"
+
+    def against_budget(e):
+        return "" if budget is None else f"; budget {budget:.4g}: {'within' if e['cost'] <= budget else 'above'}"
+    if ev:
+        n = (meta.get("eval") or {}).get("episodes")
+        return (f"final evaluation at {ev['timesteps']:,} steps ({n} held-out windows): return "
+                f"{spread(ev, 'return_mean', 'return_std', '.4g')}, cost {spread(ev, 'cost', 'cost_std', '.4g')} "
+                f"(mean +- std), in short mode {100 * ev['reached_short_mode']:.0f} %{against_budget(ev)}")
+    if tr is None:
+        return None
+    if not tr["episodes"]:
+        return (f"no evaluation was due and no training window finished within {tr['timesteps']:,} steps: no "
+                "return or cost to show (more --timesteps, or --eval-every below them)")
+    return (f"no evaluation was due (--eval-every above --timesteps); the last {tr['episodes']} training windows: "
+            f"return {spread(tr, 'return_mean', 'return_std', '.4g')}, cost {spread(tr, 'cost', 'cost_std', '.4g')} "
+            f"(mean +- std, stochastic actions){against_budget(tr)}")
+
+
 def _write_best_meta(folder: Path, meta: dict, ev) -> None:
     """``best_model.json`` (best evaluation return) and, for constrained runs, ``best_feasible_model.json``
     (best return within the budget, every window in short mode): the run's metadata with the normalisation
@@ -576,7 +617,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     model.save(str(zip_path))
     venv.save(str(out / "vecnormalize.pkl"))
     meta = _meta(spec, venv, lag, float(spec["config"].dt_s))
-    meta["final_eval"] = ev.curve[-1] if ev.curve else None
+    meta.update(final_eval=ev.curve[-1] if ev.curve else None, final_training=_training_episodes(model))
     if imitate:
         _imitation_meta(meta, out, start_log_std)
     meta_path = zip_path.with_suffix(".json")

@@ -171,3 +171,23 @@ def test_cli_set_of_a_key_calibrate_does_not_use_is_refused(tmp_path, capsys):
         "dronewpt calibrate: error: --set battery.capacity_ah is not used by calibrate: it fits the [drone] power "
         "model; valid: drone.* keys (e.g. drone.rotor_radius_m=0.12)"]
     assert not out.exists()
+
+
+@pytest.mark.parametrize("name", FLOWN_WITH_BATTERY)
+def test_figure_heldout_shading_ends_with_the_model(name, monkeypatch, tmp_path):
+    """2026-11-28: the held-out shading ran to the log's last battery sample (landed, disarmed), 15-20 s past the
+    last modelled (airborne) sample; it spans the held-out airborne samples exactly."""
+    import matplotlib.patches as mpatches
+
+    import mission_sim.figures.calibrate as figmod
+    figs = []
+    monkeypatch.setattr(figmod, "save_figure", lambda fig, path: figs.append(fig) or str(path))
+    cal = _cal(name)
+    figmod.plot_calibration(cal, tmp_path / "c.png")
+    tab = cal.samples.table
+    held_t = tab.loc[tab["airborne"] & ~tab["train"], "t_s"]
+    assert tab["t_s"].iloc[-1] > held_t.max() + 5.0          # the log goes on after the flight: the case tested
+    spans = [p for p in figs[0].axes[0].patches if p.get_label() == "held out"]   # axvspan: a Rectangle
+    assert len(spans) == 1 and isinstance(spans[0], mpatches.Rectangle)
+    x0, x1 = spans[0].get_x(), spans[0].get_x() + spans[0].get_width()
+    assert x0 == pytest.approx(cal.samples.split_t_s) and x1 == pytest.approx(held_t.max())

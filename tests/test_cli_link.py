@@ -87,18 +87,18 @@ def test_config_dict_states_the_link_always_and_the_modal_step_options_only_off_
     assert repr(EnvConfig(link_model="envelope")) != repr(EnvConfig()) == repr(EnvConfig(link_model="modal"))
     for cfg in (EnvConfig(), EnvConfig(link_model="envelope")):
         assert f"link_model={cfg.link_model!r}" in repr(cfg) and not opt & set(config_dict(cfg))
-    d = config_dict(EnvConfig(link_model="modal", v2_updates=4))
-    assert d["link_model"] == "modal" and d["v2_updates"] == 4 and "hold_tol_a" not in d
+    d = config_dict(EnvConfig(link_model="modal", v2_updates=34))
+    assert d["link_model"] == "modal" and d["v2_updates"] == 34 and "hold_tol_a" not in d
     assert config_dict(EnvConfig(hold_tol_a=2e-3))["hold_tol_a"] == 2e-3
     for cfg in (EnvConfig(), EnvConfig(link_model="envelope", hold_tol_a=5e-3)):
         named = {k for k, _ in cfg.stated_fields()} & opt
         assert named == {k for k in opt if k in repr(cfg)} == set(config_dict(cfg)) & opt
 
 
-@pytest.mark.parametrize("kv, valid", [("v2_updates=2.5", "integer 0..1000"), ("n_steps=300.5", "integer 2..1000000"),
+@pytest.mark.parametrize("kv, valid", [("v2_updates=20.5", "integer 0..1000"), ("n_steps=300.5", "integer 2..1000000"),
                                        ("slow_every=1.5", "integer >= 1")])   # mission_sim.validation.Range's text
 def test_train_env_non_integer_count_is_refused_not_truncated(kv, valid, tmp_path):
-    """``--env v2_updates=2.5`` is refused by EnvConfig's check (one line, exit 2), not trained with int()'s 2."""
+    """``--env v2_updates=20.5`` is refused by EnvConfig's check (one line, exit 2), not trained with int()'s 20."""
     out = _cli("train", "--algo", "ppo", "--timesteps", "1", "--out", str(tmp_path / "run"), "--env", kv)
     assert out.returncode == 2 and "Traceback" not in out.stderr
     lines = out.stderr.strip().splitlines()
@@ -107,6 +107,17 @@ def test_train_env_non_integer_count_is_refused_not_truncated(kv, valid, tmp_pat
     from policies.train import env_config
     key, value = kv.split("=")
     assert getattr(env_config({key: float(value.split(".")[0])}), key) == int(value.split(".")[0])  # whole: taken
+
+
+def test_train_env_fewer_v2_updates_than_rectifier_periods_is_one_line_exit_2(tmp_path):
+    """``--env v2_updates=4`` (1 .. 16 at the default dt_s: V2 held while i2 turns, the energy off by 0.5-450 %
+    under random duties) is refused by EnvConfig's cross-field check: one line naming the value and the valid set,
+    exit 2, nothing written."""
+    out = _cli("train", "--algo", "ppo", "--timesteps", "1", "--out", str(tmp_path / "run"), "--env", "v2_updates=4")
+    assert out.returncode == 2 and "Traceback" not in out.stderr and out.stdout == ""
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and "v2_updates=4 is invalid" in lines[0] and "17..1000 at dt_s=0.0001 s" in lines[0]
+    assert not (tmp_path / "run").exists()
 
 
 def test_train_link_and_env_link_model_conflict_is_one_line_exit_2(tmp_path):

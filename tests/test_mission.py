@@ -63,6 +63,47 @@ def test_config_errors_name_the_key_value_and_range(override, match):
         config_from_dict(d)
 
 
+# (name, mass_kg, n_rotors, rotor_radius_m, figure_of_merit, drive_efficiency, flat_plate_area_m2, avionics_w),
+# rounded data-sheet figures; FM, efficiency, f and avionics estimates of the class
+REAL_MULTIROTORS = [
+    ("nano quad, Crazyflie 2.1", 0.027, 4, 0.0235, 0.35, 0.4, 1e-3, 0.5),
+    ("0.25 kg micro", 0.249, 4, 0.06, 0.5, 0.7, 0.005, 2.0),
+    ("heavy lifter, 21-inch", 15.0, 6, 0.27, 0.7, 0.85, 0.3, 40.0),
+    ("heavy lifter, 33-inch", 35.0, 8, 0.42, 0.75, 0.9, 0.6, 60.0),
+    ("crop sprayer, 54-inch", 100.0, 8, 0.69, 0.75, 0.9, 1.0, 200.0),
+    ("passenger multirotor", 900.0, 18, 1.0, 0.8, 0.95, 3.0, 500.0),
+]
+
+
+@pytest.mark.parametrize("drone", REAL_MULTIROTORS, ids=[d[0] for d in REAL_MULTIROTORS])
+def test_every_real_multirotor_is_a_valid_drone(drone):
+    keys = ("mass_kg", "n_rotors", "rotor_radius_m", "figure_of_merit", "drive_efficiency", "flat_plate_area_m2",
+            "avionics_w")
+    over = {f"drone.{k}": v for k, v in zip(keys, drone[1:])}
+    cfg = config_from_dict(apply_overrides(config_to_dict(load_config()), over))
+    assert cfg.drone.rotor_radius_m == drone[3] and hover_power_w(cfg.drone) > cfg.drone.avionics_w
+
+
+def test_drone_parameters_outside_a_real_multirotors_are_refused_naming_the_range(capsys, tmp_path):
+    """2026-11-28: `drone.rotor_radius_m = 5` (a light helicopter's main rotor) was accepted (valid: 0.01-10 m), as
+    were FM 1 (the ideal rotor), a 5 % drive, a 100 m^2 flat plate and 10 kW of avionics."""
+    from _cli_helpers import one_error_line
+
+    from mission_sim.mavlink.calibrate import BOUNDS
+    from mission_sim.world.power import DRONE_RANGES
+    out = tmp_path / "m"
+    assert one_error_line(capsys, ["mission", "--dry-run", "--out", str(out), "--set", "drone.rotor_radius_m=5"]) == (
+        "dronewpt mission: error: drone.rotor_radius_m=5.0 is invalid; valid range: [0.01, 2] m")
+    assert not out.exists()
+    for key, bad, rng in (("figure_of_merit", 1.0, r"\[0\.2, 0\.9\]"), ("drive_efficiency", 0.05, r"\[0\.2, 0\.98\]"),
+                          ("flat_plate_area_m2", 100.0, r"\[0\.0001, 5\] m\^2"), ("avionics_w", 1e4, r"\[0, 1000\] W")):
+        with pytest.raises(ValueError, match=rf"^drone\.{key}={bad!r} is invalid; valid range: {rng}$"):
+            config_from_dict(apply_overrides(config_to_dict(load_config()), {f"drone.{key}": bad}))
+    # calibrate's fitted drone stays a valid config: its fit bounds inside the ranges
+    for key, (lo, hi) in BOUNDS.items():
+        assert DRONE_RANGES[key].contains(lo) and DRONE_RANGES[key].contains(hi), key
+
+
 def test_unknown_keys_are_named():
     d = config_to_dict(load_config())
     d["battery"]["capacity_mah"] = 1300

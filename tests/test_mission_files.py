@@ -261,6 +261,14 @@ def _bad(capsys, tmp_path, argv, *needles):
     return err[0]
 
 
+def test_deeply_nested_plan_is_one_line(capsys, tmp_path):
+    """A .plan of JSON nested deeper than the parser's recursion (``'[' * 100000``) was a RecursionError traceback."""
+    p = tmp_path / "deep.plan"
+    p.write_text("[" * 100000)
+    _bad(capsys, tmp_path, ["--plan", str(p)], "deep.plan: JSON nested deeper than the reader takes",
+         "not a QGroundControl plan")
+
+
 def test_malformed_json(capsys, tmp_path):
     p = tmp_path / "bad.plan"
     p.write_text('{"fileType": "Plan", "mission": {"items": [}')
@@ -360,6 +368,17 @@ def test_bad_waypoints_text(capsys, tmp_path, text, needles):
     # CSV errors name the file's line (blank lines counted; they were the row's number after blank rows were dropped)
     ("p.csv", "lat,lon\n\n47,8\n\n95,8\n", ("p.csv: line 5: latitude 95.0 is invalid",)),
     ("p.csv", "\nlat,lon\n47,8\n47.0001,8,5\n", ("line 4 has 3 values, the header 2 (lat,lon)",)),
+    # 2026-11-28: JSON nested deeper than the parser's recursion was a RecursionError traceback (an array: the
+    # JSON-array check's json.loads; an object: the GeoJSON reader's), a CSV field over csv's 128 KiB limit a
+    # _csv.Error traceback
+    pytest.param("p.json", "[" * 100000, ("p.json: JSON nested deeper than the reader takes", "not a pads file"),
+                 id="deep-array"),
+    pytest.param("p.json", '{"a":' * 100000, ("p.json: JSON nested deeper than the reader takes", "not a pads file"),
+                 id="deep-object"),
+    pytest.param("p.geojson", '{"type": "FeatureCollection", "features": ' + "[" * 100000,
+                 ("p.geojson: JSON nested deeper than the reader takes",), id="deep-features"),
+    pytest.param("p.csv", "lat,lon\n" + "4" * (128 * 1024 + 1) + ",8\n",
+                 ("p.csv: not a readable CSV: field larger than field limit (131072) at line 2",), id="csv-field-128k"),
 ])
 def test_bad_pads_files(capsys, tmp_path, name, text, needles):
     p = tmp_path / name

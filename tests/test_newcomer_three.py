@@ -52,6 +52,26 @@ def test_sweep_plot_hue_is_never_a_one_value_axis():
     assert _axes(rows, parse_study(doc)) == ("wind.speed_m_s", "battery.capacity_ah")
 
 
+def test_sweep_heat_map_tells_adjacent_cells_and_ticks_apart(monkeypatch, tmp_path):
+    """The heat map wrote each cell's mean with 3 significant figures: two adjacent cells at 12.341 and 12.344 both
+    read '12.3'. Cells and ticks now take the fewest figures (>= 3 / 6) that tell neighbours apart, no float noise."""
+    import mission_sim.studies.report as report
+    figs = []
+    monkeypatch.setattr(report, "save_figure", lambda fig, path: figs.append(fig) or str(path))
+    study = parse_study({"study": {"name": "mine"},
+                         "grid": {"battery.capacity_ah": [2.0, 2.0001, 4.0],
+                                  "wind.speed_m_s": [0.1 + 0.2, 6.0]}})
+    means = {(2.0, 0.1 + 0.2): 12.341, (2.0001, 0.1 + 0.2): 12.344, (4.0, 0.1 + 0.2): 15.0,
+             (2.0, 6.0): 0.5, (2.0001, 6.0): 0.75, (4.0, 6.0): 1.0}
+    rows = pd.DataFrame([{"battery.capacity_ah": c, "wind.speed_m_s": w, "flight_time_gain_s": m, "status": "ok"}
+                         for (c, w), m in means.items()])
+    report.plot_sweep(rows, study, tmp_path)
+    heat = figs[0].axes[1]
+    assert [t.get_text() for t in heat.get_xticklabels()] == ["2", "2.0001", "4"]
+    assert [t.get_text() for t in heat.get_yticklabels()] == ["0.3", "6"]
+    assert sorted(t.get_text() for t in heat.texts) == sorted(["12.341", "12.344", "15", "0.5", "0.75", "1"])
+
+
 # --- pads files a newcomer brings ------------------------------------------------------------------------------------
 
 import json  # noqa: E402
@@ -89,6 +109,28 @@ def test_pads_csv_column_only_starting_like_a_height_is_ordinary(tmp_path, colum
     f.write_text(f"name,lat,lon,{column}\nA,47.3982819,8.5469211,roof\n")
     (pad,) = read_pads(f)
     assert pad.point.alt_m is None and pad.point.lat_deg == 47.3982819
+
+
+@pytest.mark.parametrize("text, items", [('[{"lat": 47.39, "lon": 8.54}]', "1 item"),
+                                         ("[[47.39, 8.54], [47.40, 8.55]]", "2 items"), ("[]", "0 items")])
+def test_a_json_array_given_as_pads_is_named(tmp_path, capsys, text, items):
+    """A JSON array as the pads file was read as a CSV: "pads.json: header '[{\"lat\": 47.39' has no lat / lon
+    column" (2026-11-28). It is named as what it is, with the two forms a pads file has."""
+    from _cli_helpers import one_error_line
+    f = tmp_path / "pads.json"
+    f.write_text(text)
+    line = one_error_line(capsys, ["mission", "--pads", str(f), "--dry-run", "--out", str(tmp_path / "m")])
+    assert line == (f"dronewpt mission: error: pads.json: a JSON array ({items}), not a pads file; valid: a GeoJSON "
+                    'object {"type": "FeatureCollection", "features": [...]} of Point / MultiPoint features '
+                    "(coordinates [lon, lat] or [lon, lat, alt], property hover_time_s), or a CSV with a header "
+                    "lat,lon[,alt][,hover_time_s]")
+    assert not (tmp_path / "m").exists()
+
+
+def test_a_csv_whose_first_cell_starts_with_a_bracket_is_still_a_csv(tmp_path):
+    f = tmp_path / "pads.csv"
+    f.write_text("[note],lat,lon\nA,47.3982819,8.5469211\n")
+    assert read_pads(f)[0].point.lat_deg == 47.3982819
 
 
 def test_a_plan_given_as_pads_is_named(tmp_path):

@@ -300,3 +300,60 @@ def test_train_reads_its_defaults_by_name_and_the_command_line_takes_them_from_t
         main(base + ["--lagrangian", "--imitate", "mpc"])
     assert (taken["lambda_lr"], taken["imitation_episodes"], taken["imitation_epochs"],
             taken["imitation_mask"]) == (7.0, 5, 60, ("last_d_short",))
+
+
+def test_final_summary_is_the_last_evaluation_else_the_last_training_episodes(runs):
+    """2026-11-28: `dronewpt train` ended with the written paths only. The run's metadata now carries the last
+    training episodes SB3 kept (ep_info_buffer) beside the last evaluation, and `final_summary` states the
+    evaluation's return and cost with their spread, else the training episodes'."""
+    import pandas as pd
+
+    from policies.train import final_summary
+    res = runs["ppo"]
+    meta = json.loads(res["meta"].read_text())
+    # the evaluation's return: SB3's own record (evaluations.npz), its last row
+    last = np.load(res["eval_dir"] / "evaluations.npz")["results"][-1]
+    ev = meta["final_eval"]
+    assert ev["return_mean"] == pytest.approx(last.mean()) and ev["return_std"] == pytest.approx(last.std())
+    assert ev["cost_std"] >= 0.0
+    line = final_summary(meta)
+    assert line.startswith(f"final evaluation at {ev['timesteps']:,} steps (4 held-out windows): ")
+    assert f"return {ev['return_mean']:.4g} +- {ev['return_std']:.4g}, cost {ev['cost']:.4g} +- " in line
+    # the training episodes: VecMonitor's CSV, its last (up to) 100 windows, independently of SB3's buffer
+    mon = pd.read_csv(res["monitor"], skiprows=1).tail(100)
+    tr = meta["final_training"]
+    assert tr["episodes"] == len(mon) > 0 and tr["timesteps"] == 8192
+    assert tr["return_mean"] == pytest.approx(mon["r"].mean(), abs=1e-5)
+    assert tr["return_std"] == pytest.approx(mon["r"].std(ddof=0), abs=1e-5)
+    assert tr["cost"] == pytest.approx(mon["episode_cost"].mean(), rel=1e-6)
+    assert tr["cost_std"] == pytest.approx(mon["episode_cost"].std(ddof=0), rel=1e-6)
+    no_eval = final_summary({**meta, "final_eval": None})
+    assert f"the last {len(mon)} training windows: return {tr['return_mean']:.4g} +- {tr['return_std']:.4g}" in no_eval
+    assert "no training window finished" in final_summary(
+        {**meta, "final_eval": None, "final_training": {"timesteps": 64, "episodes": 0}})
+
+
+def test_final_summary_of_a_lagrangian_run_states_its_budget(runs):
+    """A constrained run's (``--lagrangian``) summary names its budget and whether the final mean cost is within it
+    (it did not: the reader compared the cost with the budget by hand); an unconstrained run's does not."""
+    from policies.train import final_summary
+    meta = json.loads(runs["res"]["meta"].read_text())
+    ev, b = meta["final_eval"], meta["budget"]
+    assert meta["lagrangian"] and b == 0.05
+    line = final_summary(meta)
+    assert line.endswith(f"; budget 0.05: {'within' if ev['cost'] <= b else 'above'}")
+    for cost, word in ((0.9 * b, "within"), (b, "within"), (1.1 * b, "above")):
+        assert final_summary({**meta, "final_eval": {**ev, "cost": cost}}).endswith(f"; budget 0.05: {word}")
+        tr = {**meta["final_training"], "cost": cost}
+        assert final_summary({**meta, "final_eval": None, "final_training": tr}).endswith(f"; budget 0.05: {word}")
+    assert "budget" not in final_summary(json.loads(runs["ppo"]["meta"].read_text()))
+
+
+def test_cli_train_prints_the_final_summary_last(runs, monkeypatch, tmp_path, capsys):
+    import policies.train as ptrain
+    from mission_sim.cli import main
+    monkeypatch.setattr(ptrain, "train", lambda *a, **k: runs["ppo"])   # the run above, not a second one
+    assert main(["train", "--algo", "ppo", "--timesteps", "8192", "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out.strip().splitlines()
+    assert out[-1] == ptrain.final_summary(json.loads(runs["ppo"]["meta"].read_text()))
+    assert out[-1].startswith("final evaluation at 8,192 steps")

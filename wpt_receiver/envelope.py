@@ -30,6 +30,7 @@ __all__ = [
     "g22",
     "steady_state",
     "steady_state_unchecked",
+    "short_mode_rated_k",
     "check_v2",
     "check_lm",
     "zoh_discretise",
@@ -175,6 +176,21 @@ def steady_state_unchecked(p: LinkParams, v2, lm, v1):
     i2 = (wlm * v1 - p.r1_ohm * v2) / det
     i1 = (p.r2_ohm * v1 + wlm * v2) / det
     return i1, i2
+
+
+def short_mode_rated_k(p: LinkParams, i2_a: float, v1_v: float | None = None) -> float:
+    """The coupling ``k`` below which the steady short-mode I2 exceeds ``i2_a`` [A] (at V1 ``v1_v``, default
+    ``p.v1_amp_v``; ``p``'s resistances, with any devices' folded in by the caller): :func:`steady_state` at V2 = 0,
+    ``I2 = x V1 / (R1 R2 + x^2)`` with ``x = w Lm = w k sqrt(L1 L2)``, equals ``i2_a`` at the roots of
+    ``i2_a x^2 - V1 x + i2_a R1 R2 = 0``; the larger, ``x = (V1 + sqrt(V1^2 - 4 i2_a^2 R1 R2)) / (2 i2_a)`` (~ V1 /
+    i2_a: the I2 ~ V1 / (w Lm) of a well-coupled pair), bounds from below the couplings where I2 stays within
+    ``i2_a``. 0.0 when I2 never reaches ``i2_a`` (its largest, ``V1 / (2 sqrt(R1 R2))`` at ``x = sqrt(R1 R2)``, is
+    below it)."""
+    v1 = p.v1_amp_v if v1_v is None else float(v1_v)
+    disc = v1 * v1 - 4.0 * i2_a * i2_a * p.r1_ohm * p.r2_ohm
+    if disc < 0.0:
+        return 0.0
+    return (v1 + math.sqrt(disc)) / (2.0 * i2_a) / (p.omega_rad_s * math.sqrt(p.l1_h * p.l2_h))
 
 
 _SERIES_MAX = 0.1   # zoh_discretise: Bd by its series below this ||A dt||

@@ -280,6 +280,10 @@ def _cmd_train(args) -> int:
         raise CliError(str(exc)) from None
     for key, path in res.items():
         print(f"{key}: {path}")
+    from policies.train import final_summary
+    summary = final_summary(json.loads(Path(res["meta"]).read_text())) if "meta" in res else None
+    if summary is not None:
+        print(summary)
     return 0
 
 

@@ -32,7 +32,9 @@ def plot_calibration(cal, path, title: str = "") -> str:
     a.plot(t, p_log, ".", ms=2, color="0.4", label="logged V I")
     a.plot(t[air], p_cal[air], ".", ms=2, color="tab:blue", label="calibrated model (airborne)")
     a.plot(t[air], p_def[air], ".", ms=2, color="tab:red", alpha=0.5, label="default model (airborne)")
-    a.axvspan(cal.samples.split_t_s, t[-1], color="tab:orange", alpha=0.12, lw=0, label="held out")
+    # the held-out airborne samples' span: the model is drawn at airborne samples only, so the shading ends at
+    # the last of them, not at the log's last battery sample (landed, disarmed: 15-20 s later on the shipped logs)
+    a.axvspan(cal.samples.split_t_s, float(t[held].max()), color="tab:orange", alpha=0.12, lw=0, label="held out")
     a.set_xlabel("log time [s]"), a.set_ylabel("electrical power [W]"), a.grid(alpha=0.3)
     a.legend(fontsize=8, markerscale=4)
     a.set_title(f"held-out energy error: calibrated {100 * r['calibrated_heldout_energy_error_rel']:+.1f} %, "

@@ -32,17 +32,42 @@ class GeoPad:
 
 
 def read_pads(path) -> tuple[GeoPad, ...]:
-    """Pads of a CSV or GeoJSON file (by content: a JSON object, else CSV)."""
+    """Pads of a CSV or GeoJSON file (by content: a JSON object, else CSV; a JSON array is refused)."""
     from ..validation import check_regular_file
     path = check_regular_file(path, "pads file (--pads / mission.pads_file)", "a CSV or GeoJSON file")
     try:
         text = path.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ValueError(f"{path.name}: not a UTF-8 text file: byte {exc.object[exc.start]:#04x} at offset {exc.start}") from None
+    if text.lstrip().startswith("["):
+        _refuse_json_array(text, path.name)
     pads = _geojson(text, path.name) if text.lstrip().startswith("{") else _csv(text, path.name)
     if not 1 <= len(pads) <= MAX_PADS:
         raise ValueError(f"{path.name}: {len(pads)} pads; valid: 1..{MAX_PADS}")
     return pads
+
+
+def _refuse_json_array(text: str, name: str) -> None:
+    """A JSON array is no pads file: said so, with the two forms a pads file has (2026-11-28: it was read as a CSV,
+    "header '[1,2,3]' has no lat / lon column"). Text starting with ``[`` that is not JSON is left to the CSV reader."""
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError:
+        return
+    except RecursionError:   # '[' * 100000: the parser's recursion, a traceback until 2026-11-28
+        raise ValueError(_too_deep(name)) from None
+    raise ValueError(f"{name}: a JSON array ({len(doc)} item{'s' * (len(doc) != 1)}), not a pads file; valid: a GeoJSON "
+                     "object {\"type\": \"FeatureCollection\", \"features\": [...]} of Point / MultiPoint features "
+                     "(coordinates [lon, lat] or [lon, lat, alt], property hover_time_s), or a CSV with a header "
+                     "lat,lon[,alt][,hover_time_s]")
+
+
+def _too_deep(name: str) -> str:
+    """The error of a JSON text nested deeper than Python's parser takes (its recursion limit)."""
+    import sys
+    return (f"{name}: JSON nested deeper than the reader takes (about Python's recursion limit, {sys.getrecursionlimit()} "
+            "levels), not a pads file; valid: a GeoJSON FeatureCollection of Point / MultiPoint features, or a CSV "
+            "with a header lat,lon[,alt][,hover_time_s]")
 
 
 def _pad(lat, lon, alt, hover, where: str) -> GeoPad:
@@ -62,7 +87,12 @@ def _pad(lat, lon, alt, hover, where: str) -> GeoPad:
 def _csv(text: str, name: str) -> tuple[GeoPad, ...]:
     reader = csv.reader(io.StringIO(text))
     # (the file's line number of each row: the reader's count after it, less the row's own line breaks in quotes)
-    rows = [(reader.line_num - sum(c.count("\n") for c in r), r) for r in reader]
+    try:
+        rows = [(reader.line_num - sum(c.count("\n") for c in r), r) for r in reader]
+    except csv.Error as exc:   # a field over csv.field_size_limit() (128 KiB): a traceback until 2026-11-28
+        raise ValueError(f"{name}: not a readable CSV: {exc} at line {reader.line_num}; valid: a CSV header "
+                         "lat,lon[,alt][,hover_time_s] and rows of numbers (or a GeoJSON FeatureCollection of "
+                         "Points)") from None
     rows = [(n, r) for n, r in rows if any(c.strip() for c in r)]
     if not rows:
         raise ValueError(f"{name}: empty pads file; valid: a CSV header lat,lon[,alt][,hover_time_s] and rows")
@@ -146,6 +176,8 @@ def _geojson(text: str, name: str) -> tuple[GeoPad, ...]:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
         raise ValueError(f"{name}: malformed JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
+    except RecursionError:   # '{"a":' * 100000: the parser's recursion, a traceback until 2026-11-28
+        raise ValueError(_too_deep(name)) from None
     if doc.get("type") not in _GEOJSON_TYPES and "geometry" not in doc:   # (a QGC .plan given as the pads: "feature 0:
         # geometry type null is not supported"; a feature without its "type" but with a geometry is read, as before)
         plan = (" (a QGroundControl .plan: give it as mission / telemetry --plan, or mission.file)"

@@ -120,6 +120,31 @@ def _label(key: str) -> str:
     return {"policy": "policy"}.get(key, key)
 
 
+def _consecutive(n: int) -> list[tuple[int, int]]:
+    """Index pairs of neighbouring ticks of a sorted axis."""
+    return [(i, i + 1) for i in range(n - 1)]
+
+
+def _adjacent_cells(rows: int, cols: int) -> list[tuple[int, int]]:
+    """Index pairs (into the row-major cells) of a heat map's horizontally and vertically adjacent cells."""
+    idx = np.arange(rows * cols).reshape(rows, cols)
+    return [*zip(idx[:, :-1].ravel(), idx[:, 1:].ravel()), *zip(idx[:-1, :].ravel(), idx[1:, :].ravel())]
+
+
+def _distinct_labels(values, pairs, min_sig: int, max_sig: int) -> list[str]:
+    """``values`` as text, floats with one number of significant figures for all: the fewest in
+    [``min_sig``, ``max_sig``] at which each pair (indices into ``values``: neighbouring ticks, adjacent cells) of
+    different values prints differently (2026-11-28: the cells' fixed 3 figures printed 12.341 and 12.344 both as
+    '12.3'). ``max_sig`` bounds the digits, so float noise (0.1 + 0.2) never shows; other values as ``str``."""
+    def text(v, n):
+        return f"{v:.{n}g}" if isinstance(v, float) else str(v)
+    differ = [(a, b) for a, b in pairs if isinstance(values[a], float) and isinstance(values[b], float)
+              and np.isfinite(values[a]) and np.isfinite(values[b]) and values[a] != values[b]]
+    n = next((n for n in range(min_sig, max_sig) if all(text(values[a], n) != text(values[b], n) for a, b in differ)),
+             max_sig)
+    return [text(v, n) for v in values]
+
+
 def _plot_tradeoff(df, study, x, hue, metric, path) -> str:
     both_grid = hue is not None and x in study.grid and hue in study.grid and len(study.grid[hue]) > 1 \
         and len(study.grid[x]) > 1
@@ -153,11 +178,12 @@ def _plot_tradeoff(df, study, x, hue, metric, path) -> str:
         ax = axes[0, 1]
         piv = df.assign(_y=y).pivot_table(index=hue, columns=x, values="_y", aggfunc="mean")
         im = ax.imshow(piv.values, origin="lower", aspect="auto", cmap="viridis")
-        ax.set_xticks(range(piv.shape[1]), [f"{v:g}" if isinstance(v, float) else str(v) for v in piv.columns])
-        ax.set_yticks(range(piv.shape[0]), [f"{v:g}" if isinstance(v, float) else str(v) for v in piv.index])
+        ax.set_xticks(range(piv.shape[1]), _distinct_labels(list(piv.columns), _consecutive(piv.shape[1]), 6, 12))
+        ax.set_yticks(range(piv.shape[0]), _distinct_labels(list(piv.index), _consecutive(piv.shape[0]), 6, 12))
+        cells = _distinct_labels(list(piv.values.ravel()), _adjacent_cells(*piv.shape), 3, 6)
         for (i, j), v in np.ndenumerate(piv.values):
             if np.isfinite(v):
-                ax.text(j, i, f"{v:.3g}", ha="center", va="center", fontsize=7, color="w")
+                ax.text(j, i, cells[i * piv.shape[1] + j], ha="center", va="center", fontsize=7, color="w")
         fig.colorbar(im, ax=ax, label="mean")
         ax.set_xlabel(x)
         ax.set_ylabel(hue)

@@ -355,8 +355,11 @@ def _step(st, c, lk, rows, t0, dt, lm, p_prop, row_k, fine):
     implicitly; writes a row. OK, ERR_POWER, or _NEED_DEPLETE (SoC < 0: nothing written, I_b in tmp_ib).
 
     The SBAR's v2 follows i2's phase (its clamp part per volt ``F``, eq. 9 with the quadrature of the
-    shifted commutation), with the pad on, and at d = 0 (the protection, blocking or conducting) in fine steps while
-    the coil currents ring after the pad's V1 reached 0 (:func:`_sbar_live`, :func:`_protecting`); otherwise v2 = 0.
+    shifted commutation), with the pad on, and at d = 0 (the protection, blocking or conducting) while the coil
+    currents ring after the pad's V1 reached 0 (:func:`_protecting`) in a step taken with ``fine``
+    (:func:`_sbar_live`): the fine window's steps while the protection's diodes conduct (the window does not end then:
+    :func:`_window_done`), and once they block the pieces of at most ``dtc`` in which a coarse step carries the
+    ring-down, merged into its one coarse row (:func:`_coarse_step`); otherwise v2 = 0.
     The link energies close per step with ``W`` at the step's inputs; the stored energy of the
     feedthrough when the inputs change between steps (``jump``) is booked to the rectifier."""
     lc, tab, lw = lk

@@ -37,14 +37,53 @@ import numpy as np
 
 from ..validation import Range, check_number, check_number_fields, check_positive
 
-__all__ = ["DroneParams", "propulsion_power_w", "hover_power_w", "payload_after_releases", "G_M_S2"]
+__all__ = ["DroneParams", "DRONE_RANGES", "propulsion_power_w", "hover_power_w", "payload_after_releases", "G_M_S2"]
 
 G_M_S2 = 9.80665
 
 
+#: The values a real multirotor can have for each :class:`DroneParams` field: the config's ``drone.*`` ranges
+#: (:data:`mission_sim.config.PLAUSIBLE`, one source; a mission, replay, sweep or calibrate refuses a value outside
+#: them naming the value and the range). They admit the multirotors of up to ~1 t without payload, from a nano
+#: quadrotor (Crazyflie 2.1: 27 g, 47 mm propellers) and a 0.25 kg micro (~4.7-inch propellers, R 0.06 m) to
+#: 15-35 kg heavy lifters (21- to 33-inch propellers, R 0.27-0.42 m), crop sprayers (54-inch, R 0.69 m; ~100 kg
+#: take-off) and the lighter passenger multirotors (up to 18 rotors of R ~1 m, ~900 kg take-off), and calibrate's
+#: fit bounds (``mavlink.calibrate.BOUNDS``); the figures are manufacturers' data sheets, rounded. Not every real
+#: multirotor: heavier passenger craft (Airbus's CityAirbus demonstrator, ~2.2 t take-off) lie above ``mass_kg``'s
+#: 1 t, and a passenger craft's avionics and cabin systems may draw more than ``avionics_w``'s 1 kW (no source
+#: here bounds them):
+#:
+#: * ``mass_kg`` 0.01-1000 kg (the vehicle without payload), ``payload_kg`` and ``release_kg`` 0-1000 kg: those
+#:   masses (``release_kg`` at most ``payload_kg``: :class:`DroneParams`);
+#: * ``n_rotors`` 1..32 (a single rotor to 18 with margin);
+#: * ``rotor_radius_m`` 0.01-2 m: 20 mm propellers to twice a passenger multirotor's rotor (R = 5 m is a light
+#:   helicopter's main rotor, refused since 2026-11-28; before: 0.01-10 m);
+#: * ``figure_of_merit`` 0.2-0.9: micro propellers at low Reynolds numbers ~0.3-0.5, small propellers 0.5-0.65
+#:   (Brandt & Selig, above), full-scale rotors 0.7-0.8 (Leishman ch. 2); 1 is the ideal rotor (before: 0.05-1);
+#: * ``drive_efficiency`` (motor x ESC) 0.2-0.98: brushed coreless micro motors ~0.3-0.6, BLDC drives 0.7-0.9, the
+#:   best large ones ~0.95 (before: 0.05-1);
+#: * ``flat_plate_area_m2`` 1e-4-5 m^2 (frontal area x drag coefficient ~1): a nano quadrotor ~1e-3, the default
+#:   1 kg quad 0.02, a 25 kg lifter ~0.5, a passenger multirotor a few m^2 (before: (0, 100]);
+#: * ``avionics_w`` 0-1000 W: none modelled to a heavy lifter's or sprayer's avionics and payload electronics
+#:   (before: 0-10 kW; a passenger craft's may be above it, see above);
+#: * ``air_density_kg_m3`` 0.05-2: Earth's air from cold sea level (1.4) to far above any multirotor's ceiling.
+#:
+#: :class:`DroneParams` itself checks only what its formulas need (positive, FM and efficiency in (0, 1]): a
+#: physics test may build the ideal rotor (FM 1, f -> 0); a config cannot.
+DRONE_RANGES: dict[str, Range] = {
+    "mass_kg": Range(0.01, 1000.0, "kg"), "payload_kg": Range(0.0, 1000.0, "kg"),
+    "release_kg": Range(0.0, 1000.0, "kg"),
+    "n_rotors": Range(1, 32, integer=True), "rotor_radius_m": Range(0.01, 2.0, "m"),
+    "figure_of_merit": Range(0.2, 0.9), "drive_efficiency": Range(0.2, 0.98),
+    "flat_plate_area_m2": Range(1e-4, 5.0, "m^2"), "avionics_w": Range(0.0, 1000.0, "W"),
+    "air_density_kg_m3": Range(0.05, 2.0, "kg/m^3"),
+}
+
+
 @dataclass(frozen=True)
 class DroneParams:
-    """Multirotor parameters (SI). See module notes for where the defaults come from.
+    """Multirotor parameters (SI). See module notes for where the defaults come from; a config's values must also lie
+    in :data:`DRONE_RANGES` (the physical ranges, with their sources).
 
     ``mass_kg``: the drone ready to fly (airframe, battery, receiver) [kg]; ``payload_kg``: the payload carried
     from take-off [kg]; ``release_kg``: the payload mass dropped at each release of the route [kg] (0: the first
