@@ -172,7 +172,8 @@ def _main(argv=None) -> int:
 def _interrupted(who: str, exc: KeyboardInterrupt) -> int:
     """One line for an interrupt and its exit status (130 for SIGINT, 143 for SIGTERM)."""
     from ..signals import exit_status, signal_name
-    print(f"{who}: interrupted ({signal_name(exc)})", file=sys.stderr)
+    notes = "".join(f"; {note}" for note in getattr(exc, "__notes__", ()))   # e.g. where a cut stream's frames are
+    print(f"{who}: interrupted ({signal_name(exc)}){notes}", file=sys.stderr)
     return exit_status(exc)
 
 

@@ -446,6 +446,12 @@ def _cmd_telemetry_follow(args, connect, home) -> int:
     finally:
         if out is not None:
             telemetry.close_link(out)
+    if st.positions == 0:   # nothing simulated, nothing written (an existing --tlog untouched): said, not exit 0
+        raise CliError(f"--follow {args.follow}: no position arrived in {st.wall_s:.1f} s (--follow-time "
+                       f"{args.follow_time:g}), nothing was simulated" + (f" and {args.tlog!r} was not written"
+                                                                           if args.tlog else "")
+                       + "; valid: a vehicle or SITL sending GLOBAL_POSITION_INT with a GPS fix to that address "
+                         "(e.g. ArduPilot SITL --out udp:HOST:PORT, MAVProxy --out udpout:HOST:PORT)")
     print(f"followed {st.positions} live positions over {st.wall_s:.1f} s in {st.chunks} chunk(s); sent "
           f"{st.frames} frames to {connect or 'no link'}" + (f"; wrote {args.tlog}" if args.tlog else ""))
     _warn_undelivered(connect, st.frames, st.delivered)

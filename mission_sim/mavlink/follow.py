@@ -198,6 +198,7 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
             frames += n
             delivered += n_out
 
+    ended = False
     try:
         while n_msgs < max_messages and time.monotonic() < wall0 + max_wall_s \
                 and not idle:
@@ -224,12 +225,17 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
         if last_tick:                           # then the vehicle lands and disarms, as in `telemetry`
             queue.extend((last_tick[0][0] + dt, row, True) for dt, row in landing_rows(last_tick[0][1]))
         send_due(math.inf)                      # and everything still queued, without waiting
+        ended = True
+    except BaseException as exc:
+        if writer is not None:
+            writer.abort(exc)   # the frames so far as NAME.partial.tlog, an existing NAME left as it was
+        raise
     finally:
         vin.close()
         if own_out:
             close_link(out)
-        if writer is not None:
-            writer.close()
+        if writer is not None and ended:
+            writer.close()      # no position came, no frame: no file (an existing one untouched)
     return FollowStats(positions=len(sim.t) if sim else 0, chunks=sim.chunks if sim else 0, frames=frames,
                        delivered=delivered,
                        wall_s=time.monotonic() - wall0, final_soc=sim.final_soc if sim else None, home=home)

@@ -52,7 +52,9 @@ Every network loop here is bounded in both message count and wall time.
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
 import re
 import struct
 import time
@@ -174,13 +176,27 @@ def check_ids(sysid: int, compid: int) -> tuple[int, int]:
 
 
 class TlogWriter:
-    """Append MAVLink frames to a .tlog (8-byte big-endian microsecond timestamp + frame)."""
+    """Append MAVLink frames to a .tlog (8-byte big-endian microsecond timestamp + frame).
+
+    The frames go to a temporary file beside ``path`` (as every output of the project): :meth:`close` renames it
+    to ``path`` when the stream ended; :meth:`abort` (an interrupt, an error) keeps the frames streamed so far as
+    ``STEM.partial.tlog`` beside it. Either way an existing ``path`` is replaced only by a stream that ended, and
+    a stream that wrote no frame leaves no file at all (``telemetry --follow`` with no vehicle had replaced an
+    existing recording by an empty file). ``kept``: where the frames are after close / abort (None: nowhere).
+    """
 
     def __init__(self, path):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fh = open(self.path, "wb")
+        self.tmp = self.path.with_name(f".{self.path.stem}.tmp{os.getpid()}{self.path.suffix}")
+        self._fh = open(self.tmp, "wb")
         self.n_frames = 0
+        self.kept: Path | None = None
+
+    @property
+    def partial_path(self) -> Path:
+        """Where :meth:`abort` keeps an interrupted stream's frames."""
+        return self.path.with_name(f"{self.path.stem}.partial{self.path.suffix}")
 
     def write(self, frame: bytes, t_epoch_s: float) -> None:
         try:
@@ -189,17 +205,43 @@ class TlogWriter:
             raise storage_error(exc, self.path) or exc from None
         self.n_frames += 1
 
-    def close(self) -> None:
+    def _finish(self, target: Path) -> None:
+        if self._fh.closed:
+            return
         try:
             self._fh.close()  # flushes the buffer: a full disk may show here
+            if self.n_frames:
+                os.replace(self.tmp, target)
+                self.kept = target
         except OSError as exc:
             raise storage_error(exc, self.path) or exc from None
+        finally:
+            with contextlib.suppress(OSError):
+                self.tmp.unlink(missing_ok=True)
+
+    def close(self) -> None:
+        """The stream ended: its frames become ``path`` (none written: no file, an existing one untouched)."""
+        self._finish(self.path)
+
+    def abort(self, exc: BaseException | None = None) -> None:
+        """The stream was cut (``exc``): its frames so far are kept as :attr:`partial_path`, ``path`` is left as it
+        was; ``exc`` gets a note saying so (the CLI's interrupt line prints it)."""
+        try:
+            self._finish(self.partial_path)
+        except OSError:
+            return
+        if exc is not None and self.kept is not None and hasattr(exc, "add_note"):
+            exc.add_note(f"the {self.n_frames} frames streamed before it are in {str(self.kept)!r} "
+                         f"({str(self.path)!r} left as it was)")
 
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, exc_type, exc, tb):
+        if exc is None:
+            self.close()
+        else:
+            self.abort(exc)
 
 
 def drawn_totals(ts: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
@@ -597,6 +639,7 @@ def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=n_ticks, unit="tick", desc="telemetry")
+    ended = False
     try:
         for sim_s, row, hb in events:
             if math.isfinite(speed):
@@ -611,8 +654,13 @@ def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.
                 counts[msg.get_type()] = counts.get(msg.get_type(), 0) + 1
             if bar is not None and not hb:
                 bar.update(1)
-    finally:
+        ended = True
+    except BaseException as exc:
         if writer is not None:
+            writer.abort(exc)   # the frames so far as NAME.partial.tlog, an existing NAME left as it was
+        raise
+    finally:
+        if writer is not None and ended:
             writer.close()
         if own:
             close_link(conn)

@@ -1,0 +1,102 @@
+"""A demanding newcomer's second pass (2026-11-28 small hours, branch newcomer2): the cases found on the surfaces the
+first pass did not cover (telemetry --follow, the stream's .tlog, TOML files saved with a BOM, ...), each fixed.
+docs/robustness.md, "A demanding newcomer's second pass (2026-11-28)"."""
+
+from __future__ import annotations
+
+import math
+import socket
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from mission_sim.cli import main
+from mission_sim.mavlink.logs import read_log
+
+
+def _free_port():
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _series(duration_s=3.0, dt=0.05):
+    """A short mission-shaped time series (circle at 3 m, battery discharging)."""
+    t = np.arange(0.0, duration_s + 1e-9, dt)
+    n = len(t)
+    return pd.DataFrame({"t_s": t, "x_m": 3.0 * np.cos(t), "y_m": 3.0 * np.sin(t), "z_m": 0.2 + 0.4 * t,
+                         "lm_h": np.full(n, 6.25e-6), "i2_amp_a": np.zeros(n), "d_short": np.zeros(n),
+                         "battery_v": np.full(n, 29.6), "battery_current_a": np.full(n, -6.0),
+                         "soc": 0.9 - 1e-4 * t, "i1_amp_a": np.zeros(n), "rect_current_a": np.zeros(n),
+                         "charge_cmd_a": np.zeros(n), "tx_on": np.zeros(n, bool), "propulsion_w": np.full(n, 100.0),
+                         "phase": np.full(n, "transit")})
+
+
+def _hidden(folder):
+    return sorted(p.name for p in folder.iterdir() if p.name.startswith("."))
+
+
+# ------------------------------------------------------------------ the stream's .tlog: nothing lost
+def test_follow_with_no_vehicle_is_an_error_and_leaves_an_existing_tlog_as_it_was(tmp_path, capsys):
+    """`telemetry --follow udpin:...` with nothing sending: was exit 0, "followed 0 live positions", and the
+    existing --tlog (a recording of 28,924 bytes) replaced by an empty file. Now one line naming the address,
+    exit 2, the old recording byte for byte, no temporary file."""
+    tlog = tmp_path / "flight.tlog"
+    tlog.write_bytes(b"an earlier recording")
+    port = _free_port()
+    rc = main(["telemetry", "--follow", f"udpin:127.0.0.1:{port}", "--follow-time", "0.5", "--connect", "none",
+               "--tlog", str(tlog)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1, err
+    assert f"--follow udpin:127.0.0.1:{port}: no position arrived" in err[0] and "was not written" in err[0]
+    assert tlog.read_bytes() == b"an earlier recording"
+    assert _hidden(tmp_path) == [] and sorted(p.name for p in tmp_path.iterdir()) == ["flight.tlog"]
+
+
+def test_an_interrupted_stream_keeps_its_frames_beside_and_the_old_tlog_as_it_was(tmp_path, monkeypatch):
+    """Ctrl-C during `telemetry --tlog X` replaced an existing X by the frames streamed until then. Now X stays as
+    it was, the frames so far are a readable X.partial.tlog, and the interrupt carries a note naming it."""
+    from mission_sim.mavlink import telemetry
+
+    tlog = tmp_path / "x.tlog"
+    tlog.write_bytes(b"an earlier recording")
+    real, calls = telemetry.encode_tick, []
+
+    def cut(mav, row):
+        calls.append(1)
+        if len(calls) == 12:
+            raise KeyboardInterrupt
+        return real(mav, row)
+    monkeypatch.setattr(telemetry, "encode_tick", cut)
+    with pytest.raises(KeyboardInterrupt) as info:
+        telemetry.stream(_series(), tlog=tlog, rate_hz=5.0, speed=math.inf, start_epoch_s=1.7e9)
+    assert tlog.read_bytes() == b"an earlier recording"
+    partial = tmp_path / "x.partial.tlog"
+    assert any(str(partial) in note for note in info.value.__notes__)
+    log = read_log(partial)
+    assert log.bad_frames == 0 and 8 <= len(log.position) <= 11   # the 11 ticks sent before the cut
+    assert _hidden(tmp_path) == []
+
+
+def test_a_stream_that_ends_replaces_the_tlog_and_leaves_no_partial(tmp_path):
+    from mission_sim.mavlink import telemetry
+
+    tlog = tmp_path / "x.tlog"
+    tlog.write_bytes(b"an earlier recording")
+    st = telemetry.stream(_series(), tlog=tlog, rate_hz=5.0, speed=math.inf, start_epoch_s=1.7e9)
+    log = read_log(tlog)
+    assert st.ticks == 16 and len(log.position) == st.ticks and log.bad_frames == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.tlog"]
+
+
+def test_tlog_writer_with_no_frame_writes_no_file(tmp_path):
+    from mission_sim.mavlink.telemetry import TlogWriter
+
+    old = tmp_path / "old.tlog"
+    old.write_bytes(b"kept")
+    for name in ("old.tlog", "new.tlog"):
+        w = TlogWriter(tmp_path / name)
+        w.close()
+        assert w.kept is None
+    assert old.read_bytes() == b"kept" and not (tmp_path / "new.tlog").exists() and _hidden(tmp_path) == []
