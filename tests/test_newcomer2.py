@@ -49,7 +49,7 @@ def test_follow_with_no_vehicle_is_an_error_and_leaves_an_existing_tlog_as_it_wa
                "--tlog", str(tlog)])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1, err
-    assert f"--follow udpin:127.0.0.1:{port}: no position arrived" in err[0] and "was not written" in err[0]
+    assert f"--follow udpin:127.0.0.1:{port}: no position arrived" in err[0] and f"{str(tlog)!r} was not written" in err[0]
     assert tlog.read_bytes() == b"an earlier recording"
     assert _hidden(tmp_path) == [] and sorted(p.name for p in tmp_path.iterdir()) == ["flight.tlog"]
 
@@ -100,3 +100,42 @@ def test_tlog_writer_with_no_frame_writes_no_file(tmp_path):
         w.close()
         assert w.kept is None
     assert old.read_bytes() == b"kept" and not (tmp_path / "new.tlog").exists() and _hidden(tmp_path) == []
+
+
+# ------------------------------------------------------------------ TOML files saved with a byte-order mark
+BOM = b"\xef\xbb\xbf"
+
+
+@pytest.mark.parametrize("crlf", [False, True])
+def test_toml_files_with_a_byte_order_mark_are_read(tmp_path, crlf):
+    """A mission, study or --drone TOML saved as "UTF-8 with BOM" (Windows Notepad, PowerShell) was refused as
+    "not valid TOML: Invalid statement (at line 1, column 1)"; it is read as the same file without the mark (with
+    Windows line endings too): the values in it, not the defaults."""
+    from mission_sim.config import load_config
+    from mission_sim.mavlink.calibrate import read_drone_toml
+    from mission_sim.studies.study import case_space, load_study
+
+    def write(name, text):
+        if crlf:
+            text = text.replace("\n", "\r\n")
+        (tmp_path / name).write_bytes(BOM + text.encode())
+        (tmp_path / f"plain_{name}").write_bytes(text.encode())
+        return tmp_path / name, tmp_path / f"plain_{name}"
+
+    mission, plain = write("m.toml", "[battery]\ncapacity_ah = 5.5\n[drone]\nmass_kg = 1.7\n")
+    cfg = load_config(mission)
+    assert cfg.battery.capacity_ah == 5.5 and cfg.drone.mass_kg == 1.7 and cfg == load_config(plain)
+    drone, plain = write("d.toml", "[drone]\nmass_kg = 1.7\nflat_plate_area_m2 = 0.05\n")
+    assert read_drone_toml(drone) == {"drone.mass_kg": 1.7, "drone.flat_plate_area_m2": 0.05} == read_drone_toml(plain)
+    study, plain = write("s.toml", '[study]\nname = "s"\n[grid]\n"wind.speed_m_s" = [1.0, 2.0, 3.0]\n')
+    a, b = load_study(study), load_study(plain)
+    assert [c.params for c in case_space(a)] == [c.params for c in case_space(b)]
+    assert [c.params["wind.speed_m_s"] for c in case_space(a)] == [1.0, 2.0, 3.0]
+
+
+def test_a_toml_file_with_a_bad_byte_after_the_mark_is_still_refused(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_bytes(BOM + b"[battery]\ncapacity_ah = \xff\n")
+    assert main(["mission", str(bad), "--dry-run"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "is not a UTF-8 text (TOML) file: byte 0xff" in err[0], err

@@ -448,7 +448,7 @@ def _cmd_telemetry_follow(args, connect, home) -> int:
             telemetry.close_link(out)
     if st.positions == 0:   # nothing simulated, nothing written (an existing --tlog untouched): said, not exit 0
         raise CliError(f"--follow {args.follow}: no position arrived in {st.wall_s:.1f} s (--follow-time "
-                       f"{args.follow_time:g}), nothing was simulated" + (f" and {args.tlog!r} was not written"
+                       f"{args.follow_time:g}), nothing was simulated" + (f" and {str(args.tlog)!r} was not written"
                                                                            if args.tlog else "")
                        + "; valid: a vehicle or SITL sending GLOBAL_POSITION_INT with a GPS fix to that address "
                          "(e.g. ArduPilot SITL --out udp:HOST:PORT, MAVProxy --out udpout:HOST:PORT)")
