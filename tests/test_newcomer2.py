@@ -139,3 +139,42 @@ def test_a_toml_file_with_a_bad_byte_after_the_mark_is_still_refused(tmp_path, c
     assert main(["mission", str(bad), "--dry-run"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "is not a UTF-8 text (TOML) file: byte 0xff" in err[0], err
+
+
+# ------------------------------------------------------------------ a .tlog whose receive stamps do not advance
+def _restamp(src, dst, stamp):
+    """``src`` with every frame's 8-byte receive stamp replaced by ``stamp(k, t)`` (k: record number)."""
+    import struct
+
+    from mission_sim.mavlink.logs import mavutil
+    reader = mavutil().mavlink_connection(str(src))
+    with open(dst, "wb") as out:
+        k = 0
+        while (msg := reader.recv_msg()) is not None:
+            out.write(struct.pack(">Q", int(round(stamp(k, msg._timestamp) * 1e6))) + msg.get_msgbuf())
+            k += 1
+    reader.close()
+
+
+@pytest.mark.parametrize("stamp", ["first", "zero"])
+def test_a_tlog_with_one_receive_stamp_on_every_frame_is_put_on_the_vehicle_clock(tmp_path, stamp):
+    """A .tlog whose 8-byte receive stamps are all the same (or 0: a writer without a clock) read as "0.0 s logged",
+    every battery and heartbeat record at one instant, never armed, no airborne power to compare (and scipy's
+    "invalid value encountered in sqrt" on stderr). The positions carry time_boot_ms: the records without it are
+    now placed by record order between them, and the log reads as the original within a frame interval."""
+    from mission_sim.mavlink import telemetry
+
+    good = tmp_path / "good.tlog"
+    telemetry.stream(_series(duration_s=12.0), tlog=good, rate_hz=5.0, speed=math.inf, start_epoch_s=1.7e9)
+    bad = tmp_path / "bad.tlog"
+    _restamp(good, bad, (lambda k, t: 1.7e9) if stamp == "first" else (lambda k, t: 0.0))
+    a, b = read_log(good), read_log(bad)
+    assert "do not advance" in b.clock.source and "do not advance" not in a.clock.source
+    assert len(b.position) == len(a.position) == 61
+    np.testing.assert_allclose(b.position["t_s"], a.position["t_s"], atol=1e-6)   # by time_boot_ms, as before
+    assert len(b.battery) == len(a.battery) >= 12                                 # was 1 (all at one instant)
+    np.testing.assert_allclose(b.battery["t_s"], a.battery["t_s"], atol=0.21)     # one tick of 5 Hz
+    # armed from the start; the landing heartbeats after the last position (up to 1 s) have no boot-stamped record
+    # after them and stay at the last one's time
+    assert a.armed_time_s - 1.05 <= b.armed_time_s <= a.armed_time_s and b.armed_time_s > 11.0
+    assert b.duration_s == pytest.approx(a.duration_s, abs=1.1)                   # the landing rows after the last tick

@@ -79,6 +79,9 @@ class BootSegment:
     #: step and the first after it (record numbers, receive times) and the step [s]; receive times
     #: after a step are taken back by the sum of the steps so far (:meth:`unstep`)
     steps: tuple = ()
+    #: the receive timestamps do not advance (a log written with one stamp, or 0, on every frame): records without
+    #: a boot time are placed by record order between the boot-stamped ones (:meth:`ClockMap.map`)
+    by_record: bool = False
 
     def unstep(self, rec, recv) -> np.ndarray:
         """Receive times ``recv`` of records ``rec`` of this segment with its receive-clock :attr:`steps`
@@ -135,7 +138,10 @@ class ClockMap:
             m = seg == k
             r = s.unstep(rec[m], recv[m])
             out[m] = s.recv_to_t(r)
-            if k < len(self.anchors) and len(self.anchors[k][0]) >= 1 and s.slope != 1.0:
+            if k < len(self.anchors) and len(self.anchors[k][0]) >= 1 and s.by_record:
+                x, y = self.anchors[k]   # (record numbers, boot times): no receive clock to place them by
+                out[m] = s.boot_to_t(np.interp(rec[m], x, y))
+            elif k < len(self.anchors) and len(self.anchors[k][0]) >= 1 and s.slope != 1.0:
                 x, y = self.anchors[k]
                 # between nodes: interpolated; beyond them: the fitted rate from the end node
                 est = np.interp(r, x, y) + np.minimum(r - x[0], 0.0) / s.slope + np.maximum(r - x[-1], 0.0) / s.slope
@@ -235,8 +241,15 @@ def fit_clock(rec, recv, boot) -> ClockMap:
     for k, (i, j) in enumerate(zip(bounds[:-1], bounds[1:])):
         steps = _recv_steps(rec[i:j], recv[i:j], boot[i:j])
         seg_recv = _unstep(steps, rec[i:j], recv[i:j])
-        anchors.append(_anchors(seg_recv, boot[i:j]))
-        a, b, b_fit = _theil_sen(boot[i:j], seg_recv)
+        # the receive clock does not advance against the boot clock (slower than any rate a fit accepts): no clock to
+        # place the battery and heartbeat records by (they all landed at one instant: "0.0 s logged", never armed)
+        frozen = np.ptp(boot[i:j]) >= 1.0 and np.ptp(seg_recv) < _SLOPE_RANGE[0] * np.ptp(boot[i:j])
+        if frozen:
+            anchors.append(_anchors(rec[i:j].astype(float), boot[i:j]))
+            a, b, b_fit = float(seg_recv[0] - boot[i]), 1.0, float("nan")   # the segment starts at its first record
+        else:
+            anchors.append(_anchors(seg_recv, boot[i:j]))
+            a, b, b_fit = _theil_sen(boot[i:j], seg_recv)
         r_k = float(recv[i])
         if k == 0:
             t_start = r_k / b        # t(recv = 0) = 0
@@ -246,7 +259,11 @@ def fit_clock(rec, recv, boot) -> ClockMap:
             # the receive clock set back across the reboot (or two logs joined): the boot starts where the last ended
             t_start = max(t_start, float(prev.boot_to_t(prev.boot_end_s)))
         segments.append(BootSegment(k, int(rec[i]), r_k, t_start, b, a, float(boot[i]), float(boot[j - 1]), j - i, b_fit,
-                                    steps))
+                                    steps, frozen))
+    if any(s.by_record for s in segments):
+        return ClockMap(tuple(segments), anchors=tuple(anchors),
+                        source="vehicle boot clock (time_boot_ms; the log's receive timestamps do not advance: records "
+                               "without a boot time placed by record order)")
     rates = sorted({round(s.rate, 3) for s in segments})
     return ClockMap(tuple(segments), anchors=tuple(anchors), source=f"vehicle boot clock (time_boot_ms; rate {', '.join(f'{r:g}' for r in rates)} "
                                      "x the receive clock, Theil-Sen fit)")
