@@ -178,3 +178,27 @@ def test_a_tlog_with_one_receive_stamp_on_every_frame_is_put_on_the_vehicle_cloc
     # after them and stay at the last one's time
     assert a.armed_time_s - 1.05 <= b.armed_time_s <= a.armed_time_s and b.armed_time_s > 11.0
     assert b.duration_s == pytest.approx(a.duration_s, abs=1.1)                   # the landing rows after the last tick
+
+
+# ------------------------------------------------------------------ a pads file with a row pasted twice
+@pytest.mark.parametrize("suffix", ["csv", "geojson"])
+def test_a_pad_listed_twice_is_refused(tmp_path, suffix):
+    """`replay LOG --pads FILE` with a row pasted twice flew a detour to each copy and charged twice (120 s instead
+    of 60 s, +18.1 s of flight time gained instead of +9.0 s, no word). Now one line naming both pads; pads 0.1 m
+    apart or more are still two pads."""
+    from mission_sim.plans.pads import read_pads
+
+    def write(points):
+        f = tmp_path / f"p.{suffix}"
+        if suffix == "csv":
+            f.write_text("lat,lon\n" + "".join(f"{lat},{lon}\n" for lat, lon in points))
+        else:
+            import json
+            f.write_text(json.dumps({"type": "FeatureCollection", "features": [
+                {"type": "Feature", "properties": {}, "geometry": {"type": "Point", "coordinates": [lon, lat]}}
+                for lat, lon in points]}))
+        return f
+    with pytest.raises(ValueError, match=r"pads 1 and 3 are 0\.0[0-9] m apart: one pad listed twice"):
+        read_pads(write([(-35.36208, 149.1658531), (-35.3622242, 149.1656661), (-35.3620805, 149.1658531)]))
+    ok = read_pads(write([(-35.36208, 149.1658531), (-35.362082, 149.1658531)]))   # 0.22 m apart: two pads
+    assert len(ok) == 2

@@ -42,7 +42,29 @@ def read_pads(path) -> tuple[GeoPad, ...]:
     pads = _geojson(text, path.name) if text.lstrip().startswith("{") else _csv(text, path.name)
     if not 1 <= len(pads) <= MAX_PADS:
         raise ValueError(f"{path.name}: {len(pads)} pads; valid: 1..{MAX_PADS}")
+    _check_distinct(pads, path.name)
     return pads
+
+
+#: two pads closer than this (horizontally) are one pad listed twice: a re-flight made a detour to each and charged
+#: there twice (`replay --pads` with a row pasted twice: 120 s of charging and twice the flight time gained, no word)
+SAME_PAD_M = 0.1
+
+
+def _check_distinct(pads, name: str) -> None:
+    """``ValueError`` naming the first two pads (1-based, file order) closer than :data:`SAME_PAD_M`."""
+    import numpy as np
+
+    from ..mavlink.geodesy import geodetic_to_enu
+    ref = GeoPoint(pads[0].point.lat_deg, pads[0].point.lon_deg, 0.0)
+    e, n, _ = geodetic_to_enu(np.array([p.point.lat_deg for p in pads]), np.array([p.point.lon_deg for p in pads]),
+                              np.zeros(len(pads)), ref)
+    d = np.hypot(np.subtract.outer(e, e), np.subtract.outer(n, n))
+    close = np.argwhere(np.triu(d < SAME_PAD_M, k=1))
+    if len(close):
+        i, j = (int(v) for v in close[0])
+        raise ValueError(f"{name}: pads {i + 1} and {j + 1} are {d[i, j]:.2f} m apart: one pad listed twice (a "
+                         f"re-flight would charge at it twice); valid: pads at least {SAME_PAD_M:g} m apart")
 
 
 def _pad(lat, lon, alt, hover, where: str) -> GeoPad:
