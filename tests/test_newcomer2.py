@@ -202,3 +202,18 @@ def test_a_pad_listed_twice_is_refused(tmp_path, suffix):
         read_pads(write([(-35.36208, 149.1658531), (-35.3622242, 149.1656661), (-35.3620805, 149.1658531)]))
     ok = read_pads(write([(-35.36208, 149.1658531), (-35.362082, 149.1658531)]))   # 0.22 m apart: two pads
     assert len(ok) == 2
+
+
+def test_a_tlog_stamped_in_nanoseconds_is_said_as_such(tmp_path, capsys):
+    """Every frame good, every 8-byte stamp in nanoseconds (beyond 2100): was "no readable record in its 7 kB,
+    N corrupt frame(s): cut short before its first record, or not a flight log"; now the stamps are named."""
+    from mission_sim.mavlink import telemetry
+
+    good = tmp_path / "good.tlog"
+    telemetry.stream(_series(duration_s=4.0), tlog=good, rate_hz=5.0, speed=math.inf, start_epoch_s=1.7e9)
+    bad = tmp_path / "ns.tlog"
+    _restamp(good, bad, lambda k, t: t * 1e3)   # microseconds * 1000
+    assert main(["replay", str(bad), "--no-plot", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "records has an implausible timestamp (the first 1.7e+12 s since 1970" in err[0], err
+    assert "corrupt frame" not in err[0] and not (tmp_path / "o").exists()
