@@ -217,3 +217,22 @@ def test_a_tlog_stamped_in_nanoseconds_is_said_as_such(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "records has an implausible timestamp (the first 1.7e+12 s since 1970" in err[0], err
     assert "corrupt frame" not in err[0] and not (tmp_path / "o").exists()
+
+
+# ------------------------------------------------------------------ calibrate: a current sensor the wrong way round
+def test_calibrate_refuses_a_log_whose_airborne_battery_power_is_negative(tmp_path, capsys):
+    """The log171 .bin with its current's sign inverted (a sensor wired or configured backwards) was fitted to mass
+    0.1 kg, f 1e-4 m^2, avionics 0 W (three bounds), held-out error nan, and the [drone] TOML written with a warning on
+    stdout. Now refused, one line naming the median power; the same log the right way round still calibrates."""
+    from mission_sim.mavlink.calibrate import NoBatteryError, calibrate_log
+    from mission_sim.world.power import DroneParams
+    from _flightlogs import DATA_DIR
+
+    path = DATA_DIR / "dronekit-la-testdata_log171.bin"
+    log = read_log(path)
+    good = calibrate_log(log, DroneParams())
+    assert abs(good.report["calibrated_heldout_energy_error_rel"]) < 0.02
+    log.battery = log.battery.assign(current_a=-log.battery["current_a"], power_w=-log.battery["power_w"])
+    with pytest.raises(NoBatteryError, match=r"battery power while airborne is not positive \(median -\d+ W over \d+ "
+                                             r"samples\): the logged current's sign is inverted"):
+        calibrate_log(log, DroneParams())
