@@ -236,3 +236,58 @@ def test_calibrate_refuses_a_log_whose_airborne_battery_power_is_negative(tmp_pa
     with pytest.raises(NoBatteryError, match=r"battery power while airborne is not positive \(median -\d+ W over \d+ "
                                              r"samples\): the logged current's sign is inverted"):
         calibrate_log(log, DroneParams())
+
+
+# ------------------------------------------------------------------ --follow: one implausible position from the vehicle
+class _FakeVehicle:
+    """A --follow input: GLOBAL_POSITION_INT-like messages at 10 Hz of wall time (lat / lon in 1e-7 deg, alt mm)."""
+
+    def __init__(self, positions):
+        import time
+        self.queue, self.next, self.time = list(positions), None, time
+
+    def recv_match(self, type=None, blocking=True, timeout=None):
+        if not self.queue:
+            self.time.sleep(timeout or 0.0)
+            return None
+        self.time.sleep(0.1)
+        k, lat, lon, alt = self.queue.pop(0)
+        return type and __import__("types").SimpleNamespace(time_boot_ms=100 * k, lat=lat, lon=lon, alt=alt)
+
+    def close(self):
+        pass
+
+
+def _track(n, bad=()):
+    lat0, lon0 = -35.363261, 149.165230
+    out = []
+    for k in range(n):
+        lat, lon = lat0 + 2e-6 * k, lon0
+        if k in bad:
+            lat, lon = lon, lat          # a sender with latitude and longitude swapped in one frame
+        out.append((k, int(round(lat * 1e7)), int(round(lon * 1e7)), 589_000))
+    return out
+
+
+def test_follow_skips_an_implausible_position_and_says_so(monkeypatch, tmp_path, capsys):
+    """One frame with latitude 149 deg (swapped, corrupt, INT32_MAX) ended the whole --follow session: `error:
+    latitude 149.16522999999998 is invalid` (not even saying it came from the vehicle). Now it is skipped and counted,
+    one warning names it; the rest is followed. All of them implausible: exit 2 naming the first."""
+    from mission_sim.mavlink import follow
+
+    tlog = tmp_path / "f.tlog"
+    monkeypatch.setattr(follow, "open_follow", lambda connect: _FakeVehicle(_track(20, bad={3})))
+    rc = main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--follow-time", "20", "--follow-idle", "0.3",
+               "--connect", "none", "--tlog", str(tlog)])
+    out, err = capsys.readouterr()
+    assert rc == 0 and "followed 19 live positions" in out, (out, err)
+    assert err.strip().splitlines() == ["dronewpt telemetry: warning: --follow udpin:127.0.0.1:14999: 1 implausible "
+                                        "position(s) skipped (the first: latitude 149.16523 is invalid; valid range: "
+                                        "(-90, 90) degrees)"]
+    assert len(read_log(tlog).position) >= 10
+    monkeypatch.setattr(follow, "open_follow", lambda connect: _FakeVehicle(_track(3, bad={0, 1, 2})))
+    rc = main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--follow-time", "2", "--connect", "none",
+               "--tlog", str(tmp_path / "g.tlog")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "no usable position in" in err[0] and "3 implausible position(s)" in err[0]
+    assert not (tmp_path / "g.tlog").exists()

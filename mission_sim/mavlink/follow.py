@@ -49,6 +49,8 @@ class FollowStats:
     final_soc: float | None
     home: GeoPoint | None
     delivered: int = 0      # frames that went to a peer on the out link (telemetry.write_frame)
+    rejected: int = 0       # positions outside the Earth's ranges skipped (a corrupt frame, INT32_MAX = unknown)
+    first_rejected: str = ""   # why the first of them was (GeoPoint's one-line error)
 
 
 def _chunk_config(cfg, soc):
@@ -179,7 +181,8 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
     writer = TlogWriter(tlog) if tlog is not None else None
     wall0, epoch0 = time.monotonic(), time.time()
     clock, sim, queue = _Clock(), None, []        # queue: (send at wall offset, row, is_heartbeat)
-    frames = n_msgs = delivered = 0
+    frames = n_msgs = delivered = rejected = 0
+    first_rejected = ""
     last_rx, idle = wall0, False
     last_tick = []                              # (time, row) of the latest tick queued
 
@@ -207,7 +210,14 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
             n_msgs += 1
             # idle only when nothing is waiting (a slow chunk must not drop the positions queued meanwhile)
             idle = msg is None and sim is not None and time.monotonic() - last_rx > idle_timeout_s
+            point = None
             if msg is not None and not (msg.lat == 0 and msg.lon == 0):
+                try:   # the ranges of a GeoPoint: one implausible frame is skipped, not the end of the session
+                    point = GeoPoint(msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1e3)   # (/: the message's digits)
+                except ValueError as exc:
+                    rejected += 1
+                    first_rejected = first_rejected or str(exc)
+            if point is not None:
                 last_rx = time.monotonic()
                 if home is None:
                     home = GeoPoint(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3)
@@ -238,4 +248,5 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
             writer.close()      # no position came, no frame: no file (an existing one untouched)
     return FollowStats(positions=len(sim.t) if sim else 0, chunks=sim.chunks if sim else 0, frames=frames,
                        delivered=delivered,
-                       wall_s=time.monotonic() - wall0, final_soc=sim.final_soc if sim else None, home=home)
+                       wall_s=time.monotonic() - wall0, final_soc=sim.final_soc if sim else None, home=home,
+                       rejected=rejected, first_rejected=first_rejected)
