@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from ..mavlink.geodesy import GeoPoint
 from ..validation import HOLD_RANGE, check_range
 
-__all__ = ["GeoPad", "read_pads", "MAX_PADS"]
+__all__ = ["GeoPad", "read_pads", "check_distinct", "MAX_PADS", "SAME_PAD_M"]
 
 MAX_PADS = 100
 _ALIASES = {"lat": ("lat", "lat_deg", "latitude"), "lon": ("lon", "lon_deg", "lng", "long", "longitude"),
@@ -42,7 +42,6 @@ def read_pads(path) -> tuple[GeoPad, ...]:
     pads = _geojson(text, path.name) if text.lstrip().startswith("{") else _csv(text, path.name)
     if not 1 <= len(pads) <= MAX_PADS:
         raise ValueError(f"{path.name}: {len(pads)} pads; valid: 1..{MAX_PADS}")
-    _check_distinct(pads, path.name)
     return pads
 
 
@@ -51,8 +50,11 @@ def read_pads(path) -> tuple[GeoPad, ...]:
 SAME_PAD_M = 0.1
 
 
-def _check_distinct(pads, name: str) -> None:
-    """``ValueError`` naming the first two pads (1-based, file order) closer than :data:`SAME_PAD_M`."""
+def check_distinct(pads, name: str) -> None:
+    """``ValueError`` naming the first two pads (1-based, file order) closer than :data:`SAME_PAD_M`. For a
+    re-flight's pads only (:func:`~mission_sim.plans.refly.refly_base`), where each pad is one detour and one charge;
+    :func:`read_pads` does not check it: the built-in pattern of ``mission --pads`` visits the pads in file order, so
+    A, B, A is a route there."""
     import numpy as np
 
     from ..mavlink.geodesy import geodetic_to_enu
