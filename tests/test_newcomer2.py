@@ -102,6 +102,48 @@ def test_tlog_writer_with_no_frame_writes_no_file(tmp_path):
     assert old.read_bytes() == b"kept" and not (tmp_path / "new.tlog").exists() and _hidden(tmp_path) == []
 
 
+def test_a_stream_whose_tlog_cannot_be_renamed_keeps_its_frames_and_names_them(tmp_path, monkeypatch):
+    """The frames went to a hidden temporary file renamed at the end; a rename that failed (Windows: X.tlog open in a
+    ground station; X a folder) deleted it: every frame of a live flight lost. Now they are streamed into a visible
+    X.partial.tlog (a kill leaves them there too), which stays when the rename fails, named in the error; X as it
+    was. An earlier X.partial.tlog is not overwritten: the next one is X.partial.2.tlog."""
+    import os
+
+    from mission_sim.mavlink import telemetry
+
+    tlog = tmp_path / "x.tlog"
+    tlog.write_bytes(b"an earlier recording")
+    (tmp_path / "x.partial.tlog").write_bytes(b"an earlier partial recording")
+
+    def refused(src, dst):
+        raise PermissionError(13, "The process cannot access the file because it is being used by another process")
+    monkeypatch.setattr(os, "replace", refused)
+    with pytest.raises(OSError) as info:
+        telemetry.stream(_series(), tlog=tlog, rate_hz=5.0, speed=math.inf, start_epoch_s=1.7e9)
+    kept = tmp_path / "x.partial.2.tlog"
+    msg = str(info.value)
+    assert f"frames streamed are in {str(kept)!r}" in msg and "being used by another process" in msg, msg
+    monkeypatch.undo()
+    log = read_log(kept)
+    assert log.bad_frames == 0 and len(log.position) == 16          # every tick streamed
+    assert tlog.read_bytes() == b"an earlier recording"
+    assert (tmp_path / "x.partial.tlog").read_bytes() == b"an earlier partial recording"
+    assert _hidden(tmp_path) == []
+
+
+def test_a_streaming_tlog_is_visible_while_it_is_written(tmp_path):
+    """After a SIGKILL the frames sat in a hidden .x.tmpPID.tlog; they are written to x.partial.tlog from the
+    first frame on."""
+    from mission_sim.mavlink.telemetry import TlogWriter
+
+    w = TlogWriter(tmp_path / "x.tlog")
+    w.write(b"\xfd" + bytes(20), 1.7e9)
+    w._fh.flush()
+    assert _hidden(tmp_path) == [] and (tmp_path / "x.partial.tlog").stat().st_size == 29
+    w.close()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.tlog"]
+
+
 # ------------------------------------------------------------------ TOML files saved with a byte-order mark
 BOM = b"\xef\xbb\xbf"
 
