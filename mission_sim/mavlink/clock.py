@@ -223,6 +223,12 @@ def _recv_steps(rec: np.ndarray, recv: np.ndarray, boot: np.ndarray) -> tuple:
     return ()
 
 
+def _span(x: np.ndarray) -> float:
+    """The span of ``x`` between its 5th and 95th percentiles (a few corrupt values do not widen it)."""
+    lo, hi = np.percentile(x, [5.0, 95.0])
+    return float(hi - lo)
+
+
 def fit_clock(rec, recv, boot) -> ClockMap:
     """The :class:`ClockMap` of a .tlog from its boot-stamped records: record numbers ``rec``,
     receive times ``recv`` [s from the log start] and boot times ``boot`` [s] (any order; sorted
@@ -243,7 +249,9 @@ def fit_clock(rec, recv, boot) -> ClockMap:
         seg_recv = _unstep(steps, rec[i:j], recv[i:j])
         # the receive clock does not advance against the boot clock (slower than any rate a fit accepts): no clock to
         # place the battery and heartbeat records by (they all landed at one instant: "0.0 s logged", never armed)
-        frozen = np.ptp(boot[i:j]) >= 1.0 and np.ptp(seg_recv) < _SLOPE_RANGE[0] * np.ptp(boot[i:j])
+        # (spans between the 5th and 95th percentiles: one corrupt time_boot_ms, 4e9 ms, made the boot span huge)
+        span_boot, span_recv = _span(boot[i:j]), _span(seg_recv)
+        frozen = span_boot >= 1.0 and span_recv < _SLOPE_RANGE[0] * span_boot
         if frozen:
             anchors.append(_anchors(rec[i:j].astype(float), boot[i:j]))
             a, b, b_fit = float(seg_recv[0] - boot[i]), 1.0, float("nan")   # the segment starts at its first record
