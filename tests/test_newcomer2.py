@@ -339,15 +339,34 @@ class _FakeVehicle:
         pass
 
 
-def _track(n, bad=()):
-    lat0, lon0 = -35.363261, 149.165230
+def _track(n, bad=(), lat0=-35.363261, lon0=149.165230, alt_bad=()):
     out = []
     for k in range(n):
         lat, lon = lat0 + 2e-6 * k, lon0
         if k in bad:
             lat, lon = lon, lat          # a sender with latitude and longitude swapped in one frame
-        out.append((k, int(round(lat * 1e7)), int(round(lon * 1e7)), 589_000))
+        out.append((k, int(round(lat * 1e7)), int(round(lon * 1e7)), 589_000 * (10 if k in alt_bad else 1)))
     return out
+
+
+def test_follow_skips_an_impossible_jump(monkeypatch, tmp_path, capsys):
+    """At Zurich (47.4 N, 8.5 E) latitude and longitude swapped in one frame are both in range: the frame was taken,
+    the drone flew ~5,200 km in 0.1 s and the session ended with 'battery cannot supply ... 5.58e19 W'. An altitude in
+    cm (5,890 m for 589 m) passed too. Both are now skipped as jumps no vehicle makes (gpsclean's bounds, the time
+    between the frames) and counted; the session goes on."""
+    from mission_sim.mavlink import follow
+
+    tlog = tmp_path / "z.tlog"
+    monkeypatch.setattr(follow, "open_follow",
+                        lambda connect: _FakeVehicle(_track(20, bad={6}, lat0=47.4, lon0=8.5, alt_bad={12})))
+    rc = main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--follow-time", "20", "--follow-idle", "0.3",
+               "--connect", "none", "--tlog", str(tlog)])
+    out, err = capsys.readouterr()
+    assert rc == 0 and "followed 18 live positions" in out, (out, err)
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "2 implausible position(s) skipped (the first: a jump of" in lines[0], lines
+    pos = read_log(tlog).position
+    assert len(pos) >= 10 and pos["lat_deg"].between(47.39, 47.41).all() and pos["lon_deg"].between(8.49, 8.51).all()
 
 
 def test_follow_skips_an_implausible_position_and_says_so(monkeypatch, tmp_path, capsys):

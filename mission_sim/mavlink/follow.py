@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geodesy import GeoPoint, geodetic_to_enu
+from .gpsclean import MAX_SPEED_M_S, MAX_VSPEED_M_S, SLACK_M
 from .logs import mavutil
 from .telemetry import (TlogWriter, check_connect, close_link, check_ids, drawn_totals, encode_tick, heartbeat_msgs,
                         landing_rows, mavlink_table, open_link, schedule, send_msgs)
@@ -155,6 +156,20 @@ class _Clock:
         return tb + self.offset
 
 
+def _jump(last, now) -> str:
+    """'' if a vehicle could have moved from ``last`` to ``now`` (each (boot s, arrival s, e, n, u), metres in one
+    frame), else why not: farther than gpsclean's bounds (:data:`~mission_sim.mavlink.gpsclean.SLACK_M` +
+    :data:`~mission_sim.mavlink.gpsclean.MAX_SPEED_M_S` dt horizontally, ``MAX_VSPEED_M_S`` dt vertically) with dt the
+    longer of the vehicle's and the arrival clock's time between them (a reboot sets the vehicle's back)."""
+    dt = max(now[0] - last[0], now[1] - last[1], 0.0)
+    d_h, d_v = math.hypot(now[2] - last[2], now[3] - last[3]), abs(now[4] - last[4])
+    if d_h <= SLACK_M + MAX_SPEED_M_S * dt and d_v <= SLACK_M + MAX_VSPEED_M_S * dt:
+        return ""
+    return (f"a jump of {d_h:.4g} m horizontally, {d_v:.4g} m vertically in {dt:.3g} s from the last position; valid: "
+            f"at most {SLACK_M:g} m + {MAX_SPEED_M_S:g} m/s x dt horizontally, {SLACK_M:g} m + {MAX_VSPEED_M_S:g} m/s x dt "
+            "vertically")
+
+
 def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None = None, rate_hz: float = 10.0,
            home: GeoPoint | None = None, tlog=None, max_wall_s: float = 60.0, chunk_s: float = 1.0,
            max_messages: int = 1_000_000, idle_timeout_s: float = 10.0, out_conn=None, in_conn=None,
@@ -185,6 +200,7 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
     first_rejected = ""
     last_rx, idle = wall0, False
     last_tick = []                              # (time, row) of the latest tick queued
+    last_ok = []                                # (boot s, arrival monotonic s, e, n, u) of the last accepted position
 
     def enqueue(events):
         for t, row, hb in events:
@@ -217,6 +233,15 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
                 except ValueError as exc:
                     rejected += 1
                     first_rejected = first_rejected or str(exc)
+            if point is not None and last_ok:
+                # a jump no vehicle makes since the last accepted position (latitude and longitude swapped at
+                # Zurich, 47.4 / 8.5, are both in range): skipped and counted, as above
+                e, n, u = geodetic_to_enu(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, home)
+                jump = _jump(last_ok, (msg.time_boot_ms * 1e-3, time.monotonic(), float(e), float(n), float(u)))
+                if jump:
+                    point = None
+                    rejected += 1
+                    first_rejected = first_rejected or jump
             if point is not None:
                 last_rx = time.monotonic()
                 if home is None:
@@ -226,6 +251,7 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
                 if sim is None:
                     sim = ChunkedMission(cfg, policy, run_mission, home, rate_hz)
                 e, n, u = geodetic_to_enu(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, home)
+                last_ok[:] = [msg.time_boot_ms * 1e-3, last_rx, float(e), float(n), float(u)]
                 sim.add(clock(msg.time_boot_ms, last_rx - wall0), (e, n, max(float(u), 0.0) + sim.gap))
             if sim is not None and sim.pending_s() >= chunk_s:
                 enqueue(sim.simulate())
