@@ -198,7 +198,7 @@ def _restamp(src, dst, stamp):
     reader.close()
 
 
-@pytest.mark.parametrize("stamp", ["first", "zero"])
+@pytest.mark.parametrize("stamp", ["first", "zero", "ms", "s"])
 def test_a_tlog_with_one_receive_stamp_on_every_frame_is_put_on_the_vehicle_clock(tmp_path, stamp):
     """A .tlog whose 8-byte receive stamps are all the same (or 0: a writer without a clock) read as "0.0 s logged",
     every battery and heartbeat record at one instant, never armed, no airborne power to compare (and scipy's
@@ -209,7 +209,8 @@ def test_a_tlog_with_one_receive_stamp_on_every_frame_is_put_on_the_vehicle_cloc
     good = tmp_path / "good.tlog"
     telemetry.stream(_series(duration_s=12.0), tlog=good, rate_hz=5.0, speed=math.inf, start_epoch_s=1.7e9)
     bad = tmp_path / "bad.tlog"
-    _restamp(good, bad, (lambda k, t: 1.7e9) if stamp == "first" else (lambda k, t: 0.0))
+    _restamp(good, bad, {"first": lambda k, t: 1.7e9, "zero": lambda k, t: 0.0, "ms": lambda k, t: t * 1e-3,
+                         "s": lambda k, t: t * 1e-6}[stamp])   # (ms, s: the value written in the us field)
     a, b = read_log(good), read_log(bad)
     assert "do not advance" in b.clock.source and "do not advance" not in a.clock.source
     assert len(b.position) == len(a.position) == 61

@@ -55,6 +55,10 @@ RECV_STEP_S = 5.0         # receive minus boot time stepping by more than this i
 DRIFT_SNAP = 1e-3         # |b - 1| up to this (1000 ppm, beyond any crystal) is link latency, not a faster clock
 FIT_MAX_POINTS = 600      # Theil-Sen is O(n^2): fit on this many evenly spread samples per segment
 _SLOPE_RANGE = (1e-3, 1e3)  # receive seconds per vehicle second accepted from a fit (else 1)
+#: receive seconds per vehicle second (5-95 % spans) below this: the receive stamps do not advance (one value, 0, or
+#: milliseconds / seconds written in the microsecond field: 1e-3 / 1e-6, which sat on the fit's edge) and the records
+#: are placed by record order. Twice the fit's lower bound: a SITL run up to 500x faster than real time is still fitted.
+FROZEN_RATIO = 2 * _SLOPE_RANGE[0]
 
 
 @dataclass(frozen=True)
@@ -251,7 +255,7 @@ def fit_clock(rec, recv, boot) -> ClockMap:
         # place the battery and heartbeat records by (they all landed at one instant: "0.0 s logged", never armed)
         # (spans between the 5th and 95th percentiles: one corrupt time_boot_ms, 4e9 ms, made the boot span huge)
         span_boot, span_recv = _span(boot[i:j]), _span(seg_recv)
-        frozen = span_boot >= 1.0 and span_recv < _SLOPE_RANGE[0] * span_boot
+        frozen = span_boot >= 1.0 and span_recv < FROZEN_RATIO * span_boot
         if frozen:
             anchors.append(_anchors(rec[i:j].astype(float), boot[i:j]))
             a, b, b_fit = float(seg_recv[0] - boot[i]), 1.0, float("nan")   # the segment starts at its first record
@@ -270,7 +274,8 @@ def fit_clock(rec, recv, boot) -> ClockMap:
                                     steps, frozen))
     if any(s.by_record for s in segments):
         return ClockMap(tuple(segments), anchors=tuple(anchors),
-                        source="vehicle boot clock (time_boot_ms; the log's receive timestamps do not advance: records "
+                        source="vehicle boot clock (time_boot_ms; the log's receive timestamps do not advance, or advance "
+                               f"less than {FROZEN_RATIO:g} s per vehicle second (ms written as us?): records "
                                "without a boot time placed by record order)")
     rates = sorted({round(s.rate, 3) for s in segments})
     return ClockMap(tuple(segments), anchors=tuple(anchors), source=f"vehicle boot clock (time_boot_ms; rate {', '.join(f'{r:g}' for r in rates)} "
