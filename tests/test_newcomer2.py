@@ -144,6 +144,30 @@ def test_a_streaming_tlog_is_visible_while_it_is_written(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["x.tlog"]
 
 
+@pytest.mark.parametrize("error", [OSError, ValueError])
+def test_a_stream_cut_by_an_error_names_its_partial_tlog(tmp_path, monkeypatch, capsys, error):
+    """An OSError / ValueError during `telemetry --tlog X` kept the frames so far in X.partial.tlog, but only the
+    interrupt line printed the note naming it: the error line said nothing of it."""
+    from _cli_helpers import one_error_line
+    from mission_sim.mavlink import telemetry
+
+    tlog = tmp_path / "x.tlog"
+    real, calls = telemetry.encode_tick, []
+
+    def cut(mav, row):
+        calls.append(1)
+        if len(calls) == 12:
+            raise error("the link went away")
+        return real(mav, row)
+    monkeypatch.setattr(telemetry, "encode_tick", cut)
+    err = one_error_line(capsys, ["telemetry", "--connect", "none", "--tlog", str(tlog), "--speed", "inf",
+                                  "--duration", "5", "--no-progress"])
+    partial = tmp_path / "x.partial.tlog"
+    assert err.startswith("dronewpt telemetry: error: the link went away; the ") and \
+        f"frames streamed before it are in {str(partial)!r}" in err, err
+    assert len(read_log(partial).position) >= 8 and not tlog.exists()
+
+
 # ------------------------------------------------------------------ TOML files saved with a byte-order mark
 BOM = b"\xef\xbb\xbf"
 
