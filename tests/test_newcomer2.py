@@ -342,6 +342,12 @@ def test_calibrate_refuses_a_log_whose_airborne_battery_power_is_negative(tmp_pa
     with pytest.raises(NoBatteryError, match=r"battery power while airborne is not positive \(median -\d+ W over \d+ "
                                              r"samples\): the logged current's sign is inverted"):
         calibrate_log(log, DroneParams())
+    # a current of 0 throughout (no sensor) is no inverted sign: said as such
+    log.battery = log.battery.assign(current_a=0.0, power_w=0.0)
+    with pytest.raises(NoBatteryError, match=r"battery power while airborne is 0 W \(median over \d+ samples\): the "
+                                             r"logged current is 0 \(no current sensor\?\)") as info:
+        calibrate_log(log, DroneParams())
+    assert "inverted" not in str(info.value)
 
 
 # ------------------------------------------------------------------ --follow: one implausible position from the vehicle
