@@ -39,6 +39,16 @@ radio link: ``b`` = 1 within crystal drift) ``t`` is the receive clock; at a veh
 times faster, ``b = 1 / s`` and every sample -- battery too -- is on the vehicle's seconds, in
 which its power was drawn. DataFlash and ULog logs are stamped by the vehicle alone and need
 no map (:func:`identity_clock`).
+
+Record-order mode (:attr:`BootSegment.by_record`): when a segment's receive stamps do not advance against its boot
+clock -- the spans between the 5th and 95th percentiles (one corrupt value widens neither) give less than
+:data:`FROZEN_RATIO` receive seconds per vehicle second over at least 1 s of boot time: one stamp or 0 on every
+frame, or milliseconds / seconds written in the microsecond field -- there is no receive clock to place the records
+without a boot time by. They are placed by **record order** instead: a record's boot time is interpolated in its
+record number between the boot-stamped records around it (boot times smoothed and non-decreasing, as above). Its
+limitation: records before the segment's first boot-stamped record, or after its last, have no neighbour on that
+side and collapse onto its time (a landing's trailing heartbeats and battery samples all land at the last position's
+instant, so the log's duration and disarm edge are the last position's, up to the length of that tail short).
 """
 
 from __future__ import annotations
@@ -48,7 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["BootSegment", "ClockMap", "fit_clock", "identity_clock", "REBOOT_DROP_S", "FIT_MAX_POINTS", "DRIFT_SNAP",
-           "RECV_STEP_S"]
+           "RECV_STEP_S", "FROZEN_RATIO"]
 
 REBOOT_DROP_S = 10.0      # a time_boot drop this large is a reboot, not jitter between message types
 RECV_STEP_S = 5.0         # receive minus boot time stepping by more than this is the ground station's clock set
