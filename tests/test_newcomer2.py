@@ -168,6 +168,41 @@ def test_a_stream_cut_by_an_error_names_its_partial_tlog(tmp_path, monkeypatch, 
     assert len(read_log(partial).position) >= 8 and not tlog.exists()
 
 
+@pytest.mark.parametrize("frames_before", [0, 3])
+def test_a_full_disk_names_the_partial_tlog_only_when_it_holds_frames(tmp_path, frames_before):
+    """A full disk while streaming: the error names X.partial.tlog where the frames so far are kept; with none
+    written the partial file is removed and the error says nothing partial was left."""
+    import errno
+
+    from mission_sim.files import OutputError
+    from mission_sim.mavlink.telemetry import TlogWriter
+
+    class FullDisk:
+        closed = False
+
+        def write(self, data):
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+        def close(self):
+            self.closed = True
+    w = TlogWriter(tmp_path / "t.tlog")
+    for k in range(frames_before):
+        w.write(b"\xfd" + bytes(20), 1.7e9 + k)
+    w._fh.flush()
+    real, w._fh = w._fh, FullDisk()
+    with pytest.raises(OutputError, match="no space left on the device") as info:
+        w.write(b"\xfd" + bytes(20), 1.8e9)
+    real.close()
+    w.abort(info.value)
+    partial = tmp_path / "t.partial.tlog"
+    if frames_before:
+        assert f"what was written before it is in {str(partial)!r}" in str(info.value)
+        assert partial.stat().st_size == 29 * frames_before
+    else:
+        assert "nothing partial was left" in str(info.value) and not partial.exists()
+    assert not (tmp_path / "t.tlog").exists()
+
+
 # ------------------------------------------------------------------ TOML files saved with a byte-order mark
 BOM = b"\xef\xbb\xbf"
 

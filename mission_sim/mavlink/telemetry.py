@@ -208,8 +208,8 @@ class TlogWriter:
     def write(self, frame: bytes, t_epoch_s: float) -> None:
         try:
             self._fh.write(struct.pack(">Q", int(round(t_epoch_s * 1e6))) + frame)
-        except OSError as exc:  # a full disk: the file named (the frames written so far stay a valid log)
-            raise storage_error(exc, self.path, self.partial_path) or exc from None
+        except OSError as exc:  # a full disk: the file named (the frames written so far stay a valid log; none: removed)
+            raise storage_error(exc, self.path, self.partial_path if self.n_frames else None) or exc from None
         self.n_frames += 1
 
     def _close_file(self) -> bool:
