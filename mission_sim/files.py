@@ -18,7 +18,7 @@ from pathlib import Path
 
 from .signals import raise_lost
 
-__all__ = ["atomic_output", "OutputError", "storage_error", "folder_lock", "FolderBusy"]
+__all__ = ["atomic_output", "rename_into_place", "OutputError", "storage_error", "folder_lock", "FolderBusy"]
 
 #: errors of the storage, not of the data: reported as :class:`OutputError` naming the file
 _STORAGE_ERRNOS = {errno.ENOSPC: "no space left on the device", errno.EFBIG: "file too large (the file-size "
@@ -28,23 +28,35 @@ _STORAGE_ERRNOS = {errno.ENOSPC: "no space left on the device", errno.EFBIG: "fi
 
 class OutputError(OSError):
     """An output file could not be written (disk full, file-size limit, quota, I/O error): one line
-    naming the file; its temporary file has been removed."""
+    naming the file; its temporary file has been removed, or (``kept``, the stream's .tlog) is kept and named."""
 
-    def __init__(self, path, err: int, reason: str):
+    def __init__(self, path, err: int, reason: str, kept=None):
         super().__init__(err, reason, str(path))
         self.path, self.reason = Path(path), reason
+        self.kept = None if kept is None else Path(kept)
 
     def __str__(self) -> str:
-        return f"cannot write {str(self.path)!r}: {self.reason}; nothing partial was left"
+        left = "nothing partial was left" if self.kept is None else \
+            f"what was written before it is in {str(self.kept)!r}"
+        return f"cannot write {str(self.path)!r}: {self.reason}; {left}"
 
     def __reduce__(self):   # pickled as itself (from a figure worker process), not as OSError's arguments
-        return type(self), (self.path, self.errno, self.reason)
+        return type(self), (self.path, self.errno, self.reason, self.kept)
 
 
-def storage_error(exc: OSError, path) -> OutputError | None:
-    """``exc`` as an :class:`OutputError` naming ``path`` if it is a storage error, else None."""
+def storage_error(exc: OSError, path, kept=None) -> OutputError | None:
+    """``exc`` as an :class:`OutputError` naming ``path`` (and ``kept``, where what was written stays) if it is a
+    storage error, else None."""
     reason = _STORAGE_ERRNOS.get(getattr(exc, "errno", None))
-    return None if reason is None else OutputError(path, exc.errno, reason)
+    return None if reason is None else OutputError(path, exc.errno, reason, kept)
+
+
+def rename_into_place(tmp, path) -> None:
+    """``os.replace(tmp, path)`` after :func:`~mission_sim.signals.raise_lost` (an interrupt a callback swallowed:
+    nothing is renamed into place after it): the last step of :func:`atomic_output` and of the stream's .tlog
+    (:class:`mission_sim.mavlink.telemetry.TlogWriter`)."""
+    raise_lost()
+    os.replace(tmp, path)
 
 
 @contextmanager
@@ -61,8 +73,7 @@ def atomic_output(path, tmp_name: str | None = None, fsync: bool = False):
         if fsync:
             with open(tmp, "rb+") as fh:
                 os.fsync(fh.fileno())
-        raise_lost()   # an interrupt a callback swallowed: nothing is renamed into place after it
-        os.replace(tmp, path)
+        rename_into_place(tmp, path)
     except OutputError:
         raise
     except OSError as exc:

@@ -218,7 +218,9 @@ def read_toml_file(path, what: str = "config file") -> dict:
     TOML (with the parser's line and column), ``OSError`` when it cannot be read."""
     path = check_regular_file(path, what, "a TOML file")
     try:
-        text = path.read_bytes().decode("utf-8")
+        # utf-8-sig: a byte-order mark (Windows Notepad's "UTF-8 with BOM", PowerShell's Out-File) is read past, not
+        # "Invalid statement (at line 1, column 1)"; tomllib refuses it and the file is otherwise good TOML
+        text = path.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ValueError(f"{what} {str(path)!r} is not a UTF-8 text (TOML) file: byte {exc.object[exc.start]:#04x} "
                          f"at offset {exc.start}") from None

@@ -26,7 +26,8 @@ def fake_follow(monkeypatch) -> dict:
 
     def fake(*a, **kw):
         seen.update(kw)
-        return follow.FollowStats(positions=0, chunks=0, frames=0, wall_s=0.0, final_soc=None, home=kw["home"])
+        # one position followed (none is exit 2 since 2026-11-28: tests/test_newcomer2.py)
+        return follow.FollowStats(positions=1, chunks=1, frames=0, wall_s=0.0, final_soc=None, home=kw["home"])
     monkeypatch.setattr(follow, "follow", fake)
     monkeypatch.setattr(follow, "open_follow", lambda connect: type("C", (), {"close": lambda self: None})())
     return seen

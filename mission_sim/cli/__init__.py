@@ -156,10 +156,10 @@ def _main(argv=None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except OutputError as exc:  # disk full, file-size limit: the file named, its temporary file removed
-        print(f"dronewpt {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+        print(f"dronewpt {args.command}: error: {_one_line(exc)}{_notes(exc)}", file=sys.stderr)
         return 4
     except (CliError, ValueError, FileNotFoundError, OSError) as exc:
-        print(f"dronewpt {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+        print(f"dronewpt {args.command}: error: {_one_line(exc)}{_notes(exc)}", file=sys.stderr)
         return 2
     except MemoryError as exc:  # numpy names the size: "Unable to allocate 37.3 GiB for an array ..."
         print(f"dronewpt {args.command}: error: out of memory: {_one_line(exc) or 'allocation failed'} "
@@ -172,8 +172,13 @@ def _main(argv=None) -> int:
 def _interrupted(who: str, exc: KeyboardInterrupt) -> int:
     """One line for an interrupt and its exit status (130 for SIGINT, 143 for SIGTERM)."""
     from ..signals import exit_status, signal_name
-    print(f"{who}: interrupted ({signal_name(exc)})", file=sys.stderr)
+    print(f"{who}: interrupted ({signal_name(exc)}){_notes(exc)}", file=sys.stderr)
     return exit_status(exc)
+
+
+def _notes(exc: BaseException) -> str:
+    """The exception's notes (e.g. where a cut stream's frames are), each after '; ', on the one line."""
+    return "".join(f"; {_one_line(note)}" for note in getattr(exc, "__notes__", ()))
 
 
 def _one_line(exc: BaseException) -> str:

@@ -446,7 +446,21 @@ def _cmd_telemetry_follow(args, connect, home) -> int:
     finally:
         if out is not None:
             telemetry.close_link(out)
+    skipped = (f"{st.rejected} implausible position(s) skipped (the first: {st.first_rejected})" if st.rejected
+               else "")
+    if st.positions == 0:   # nothing simulated, nothing written (an existing --tlog untouched): said, not exit 0
+        if st.rejected:
+            raise CliError(f"--follow {args.follow}: no usable position in {st.wall_s:.1f} s: {skipped}; nothing was "
+                           "simulated" + (f" and {str(args.tlog)!r} was not written" if args.tlog else "")
+                           + "; valid: GLOBAL_POSITION_INT with lat, lon in 1e-7 degrees and alt in mm AMSL")
+        raise CliError(f"--follow {args.follow}: no position arrived in {st.wall_s:.1f} s (--follow-time "
+                       f"{args.follow_time:g}), nothing was simulated" + (f" and {str(args.tlog)!r} was not written"
+                                                                           if args.tlog else "")
+                       + "; valid: a vehicle or SITL sending GLOBAL_POSITION_INT with a GPS fix to that address "
+                         "(e.g. ArduPilot SITL --out udp:HOST:PORT, MAVProxy --out udpout:HOST:PORT)")
     print(f"followed {st.positions} live positions over {st.wall_s:.1f} s in {st.chunks} chunk(s); sent "
           f"{st.frames} frames to {connect or 'no link'}" + (f"; wrote {args.tlog}" if args.tlog else ""))
     _warn_undelivered(connect, st.frames, st.delivered)
+    if skipped:
+        print(f"dronewpt telemetry: warning: --follow {args.follow}: {skipped}", file=sys.stderr)
     return 0

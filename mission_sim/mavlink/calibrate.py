@@ -146,6 +146,14 @@ def calibration_samples(log: FlightLog, window=None, segment=None) -> Calibratio
     if len(air) < 20:
         raise _no_battery(log, f"only {len(air)} battery samples while airborne (armed and > {ground.GROUND_M:g} m "
                           "above the take-off spot), need at least 20")
+    med = float(np.median(air["power_w"]))
+    if med == 0.0:   # (not a sign: a current sensor absent or reading 0)
+        raise _no_battery(log, f"the battery power while airborne is 0 W (median over {len(air)} samples): the logged "
+                               "current is 0 (no current sensor?); valid: a log with the battery current measured")
+    if med < 0.0:   # was fitted: mass 0.1 kg, f 1e-4 m^2, avionics 0 W (every bound), a [drone] TOML written
+        raise _no_battery(log, f"the battery power while airborne is not positive (median {med:.0f} W over {len(air)} "
+                               "samples): the logged current's sign is inverted (a current sensor wired or configured "
+                               "backwards), or the battery charges in flight; valid: a current > 0 while discharging")
     ta = air["t_s"].to_numpy()
     dt = np.diff(ta)
     cum = np.concatenate([[0.0], np.cumsum(np.where(dt < _MAX_GAP_S, dt, 0.0))])

@@ -39,6 +39,16 @@ radio link: ``b`` = 1 within crystal drift) ``t`` is the receive clock; at a veh
 times faster, ``b = 1 / s`` and every sample -- battery too -- is on the vehicle's seconds, in
 which its power was drawn. DataFlash and ULog logs are stamped by the vehicle alone and need
 no map (:func:`identity_clock`).
+
+Record-order mode (:attr:`BootSegment.by_record`): when a segment's receive stamps do not advance against its boot
+clock -- the spans between the 5th and 95th percentiles (one corrupt value widens neither) give less than
+:data:`FROZEN_RATIO` receive seconds per vehicle second over at least 1 s of boot time: one stamp or 0 on every
+frame, or milliseconds / seconds written in the microsecond field -- there is no receive clock to place the records
+without a boot time by. They are placed by **record order** instead: a record's boot time is interpolated in its
+record number between the boot-stamped records around it (boot times smoothed and non-decreasing, as above). Its
+limitation: records before the segment's first boot-stamped record, or after its last, have no neighbour on that
+side and collapse onto its time (a landing's trailing heartbeats and battery samples all land at the last position's
+instant, so the log's duration and disarm edge are the last position's, up to the length of that tail short).
 """
 
 from __future__ import annotations
@@ -48,13 +58,17 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["BootSegment", "ClockMap", "fit_clock", "identity_clock", "REBOOT_DROP_S", "FIT_MAX_POINTS", "DRIFT_SNAP",
-           "RECV_STEP_S"]
+           "RECV_STEP_S", "FROZEN_RATIO"]
 
 REBOOT_DROP_S = 10.0      # a time_boot drop this large is a reboot, not jitter between message types
 RECV_STEP_S = 5.0         # receive minus boot time stepping by more than this is the ground station's clock set
 DRIFT_SNAP = 1e-3         # |b - 1| up to this (1000 ppm, beyond any crystal) is link latency, not a faster clock
 FIT_MAX_POINTS = 600      # Theil-Sen is O(n^2): fit on this many evenly spread samples per segment
 _SLOPE_RANGE = (1e-3, 1e3)  # receive seconds per vehicle second accepted from a fit (else 1)
+#: receive seconds per vehicle second (5-95 % spans) below this: the receive stamps do not advance (one value, 0, or
+#: milliseconds / seconds written in the microsecond field: 1e-3 / 1e-6, which sat on the fit's edge) and the records
+#: are placed by record order. Twice the fit's lower bound: a SITL run up to 500x faster than real time is still fitted.
+FROZEN_RATIO = 2 * _SLOPE_RANGE[0]
 
 
 @dataclass(frozen=True)
@@ -79,6 +93,9 @@ class BootSegment:
     #: step and the first after it (record numbers, receive times) and the step [s]; receive times
     #: after a step are taken back by the sum of the steps so far (:meth:`unstep`)
     steps: tuple = ()
+    #: the receive timestamps do not advance (a log written with one stamp, or 0, on every frame): records without
+    #: a boot time are placed by record order between the boot-stamped ones (:meth:`ClockMap.map`)
+    by_record: bool = False
 
     def unstep(self, rec, recv) -> np.ndarray:
         """Receive times ``recv`` of records ``rec`` of this segment with its receive-clock :attr:`steps`
@@ -135,7 +152,10 @@ class ClockMap:
             m = seg == k
             r = s.unstep(rec[m], recv[m])
             out[m] = s.recv_to_t(r)
-            if k < len(self.anchors) and len(self.anchors[k][0]) >= 1 and s.slope != 1.0:
+            if k < len(self.anchors) and len(self.anchors[k][0]) >= 1 and s.by_record:
+                x, y = self.anchors[k]   # (record numbers, boot times): no receive clock to place them by
+                out[m] = s.boot_to_t(np.interp(rec[m], x, y))
+            elif k < len(self.anchors) and len(self.anchors[k][0]) >= 1 and s.slope != 1.0:
                 x, y = self.anchors[k]
                 # between nodes: interpolated; beyond them: the fitted rate from the end node
                 est = np.interp(r, x, y) + np.minimum(r - x[0], 0.0) / s.slope + np.maximum(r - x[-1], 0.0) / s.slope
@@ -217,6 +237,12 @@ def _recv_steps(rec: np.ndarray, recv: np.ndarray, boot: np.ndarray) -> tuple:
     return ()
 
 
+def _span(x: np.ndarray) -> float:
+    """The span of ``x`` between its 5th and 95th percentiles (a few corrupt values do not widen it)."""
+    lo, hi = np.percentile(x, [5.0, 95.0])
+    return float(hi - lo)
+
+
 def fit_clock(rec, recv, boot) -> ClockMap:
     """The :class:`ClockMap` of a .tlog from its boot-stamped records: record numbers ``rec``,
     receive times ``recv`` [s from the log start] and boot times ``boot`` [s] (any order; sorted
@@ -235,8 +261,17 @@ def fit_clock(rec, recv, boot) -> ClockMap:
     for k, (i, j) in enumerate(zip(bounds[:-1], bounds[1:])):
         steps = _recv_steps(rec[i:j], recv[i:j], boot[i:j])
         seg_recv = _unstep(steps, rec[i:j], recv[i:j])
-        anchors.append(_anchors(seg_recv, boot[i:j]))
-        a, b, b_fit = _theil_sen(boot[i:j], seg_recv)
+        # the receive clock does not advance against the boot clock (slower than any rate a fit accepts): no clock to
+        # place the battery and heartbeat records by (they all landed at one instant: "0.0 s logged", never armed)
+        # (spans between the 5th and 95th percentiles: one corrupt time_boot_ms, 4e9 ms, made the boot span huge)
+        span_boot, span_recv = _span(boot[i:j]), _span(seg_recv)
+        frozen = span_boot >= 1.0 and span_recv < FROZEN_RATIO * span_boot
+        if frozen:
+            anchors.append(_anchors(rec[i:j].astype(float), boot[i:j]))
+            a, b, b_fit = float(seg_recv[0] - boot[i]), 1.0, float("nan")   # the segment starts at its first record
+        else:
+            anchors.append(_anchors(seg_recv, boot[i:j]))
+            a, b, b_fit = _theil_sen(boot[i:j], seg_recv)
         r_k = float(recv[i])
         if k == 0:
             t_start = r_k / b        # t(recv = 0) = 0
@@ -246,7 +281,12 @@ def fit_clock(rec, recv, boot) -> ClockMap:
             # the receive clock set back across the reboot (or two logs joined): the boot starts where the last ended
             t_start = max(t_start, float(prev.boot_to_t(prev.boot_end_s)))
         segments.append(BootSegment(k, int(rec[i]), r_k, t_start, b, a, float(boot[i]), float(boot[j - 1]), j - i, b_fit,
-                                    steps))
+                                    steps, frozen))
+    if any(s.by_record for s in segments):
+        return ClockMap(tuple(segments), anchors=tuple(anchors),
+                        source="vehicle boot clock (time_boot_ms; the log's receive timestamps do not advance, or advance "
+                               f"less than {FROZEN_RATIO:g} s per vehicle second (ms written as us?): records "
+                               "without a boot time placed by record order)")
     rates = sorted({round(s.rate, 3) for s in segments})
     return ClockMap(tuple(segments), anchors=tuple(anchors), source=f"vehicle boot clock (time_boot_ms; rate {', '.join(f'{r:g}' for r in rates)} "
                                      "x the receive clock, Theil-Sen fit)")

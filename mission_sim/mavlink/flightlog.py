@@ -45,6 +45,9 @@ class FlightLog:
     gps_rejected: dict = field(default_factory=dict)  # implausible fixes rejected, by reason (gpsclean.py)
     clock: object = None           # the log's time base (clock.ClockMap); None: the log's own clock, one segment
     airspeed: pd.DataFrame | None = None   # t_s, airspeed_m_s from an airspeed sensor (logs.py); None / empty: none
+    #: records whose own timestamp is outside 1970..2100 (counted in bad_frames too) and the first such stamp [s]
+    bad_time: int = 0
+    first_bad_time_s: float = float("nan")
 
     @property
     def segments(self) -> list[tuple[float, float]]:
@@ -115,6 +118,10 @@ def check_decoded(log: FlightLog) -> None:
     bad = f", {log.bad_frames} corrupt frame(s)" if log.bad_frames else ""
     what = ("the file is empty (0 bytes)" if size == 0 else
             f"no readable record in its {size} bytes{bad}: cut short before its first record, or not a flight log")
+    if size > 0 and log.n_records and log.bad_time == log.n_records:   # the frames decode; only their stamps are wrong
+        what = (f"every one of its {log.n_records} records has an implausible timestamp (the first "
+                f"{log.first_bad_time_s:.6g} s since 1970, outside 1970..2100: nanoseconds? a .tlog stamps each frame "
+                "with 8-byte big-endian microseconds since 1970)")
     raise NoPositionError(f"{log.path.name}: no usable position (GPS fix >= 3): {what}; valid: a MAVLink .tlog, a "
                           "DataFlash .bin or a PX4 .ulg")
 

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geodesy import GeoPoint, geodetic_to_enu
+from .gpsclean import MAX_SPEED_M_S, MAX_VSPEED_M_S, SLACK_M
 from .logs import mavutil
 from .telemetry import (TlogWriter, check_connect, close_link, check_ids, drawn_totals, encode_tick, heartbeat_msgs,
                         landing_rows, mavlink_table, open_link, schedule, send_msgs)
@@ -49,6 +50,8 @@ class FollowStats:
     final_soc: float | None
     home: GeoPoint | None
     delivered: int = 0      # frames that went to a peer on the out link (telemetry.write_frame)
+    rejected: int = 0       # positions outside the Earth's ranges skipped (a corrupt frame, INT32_MAX = unknown)
+    first_rejected: str = ""   # why the first of them was (GeoPoint's one-line error)
 
 
 def _chunk_config(cfg, soc):
@@ -153,15 +156,65 @@ class _Clock:
         return tb + self.offset
 
 
+def _jump(last, now) -> str:
+    """'' if a vehicle could have moved from ``last`` to ``now`` (each (boot s, arrival s, e, n, u), metres in one
+    frame), else why not: farther than gpsclean's bounds (:data:`~mission_sim.mavlink.gpsclean.SLACK_M` +
+    :data:`~mission_sim.mavlink.gpsclean.MAX_SPEED_M_S` dt horizontally, ``MAX_VSPEED_M_S`` dt vertically) with dt the
+    longer of the vehicle's and the arrival clock's time between them (a reboot sets the vehicle's back)."""
+    dt = max(now[0] - last[0], now[1] - last[1], 0.0)
+    d_h, d_v = math.hypot(now[2] - last[2], now[3] - last[3]), abs(now[4] - last[4])
+    if d_h <= SLACK_M + MAX_SPEED_M_S * dt and d_v <= SLACK_M + MAX_VSPEED_M_S * dt:
+        return ""
+    return (f"a jump of {d_h:.4g} m horizontally, {d_v:.4g} m vertically in {dt:.3g} s from the last position; valid: "
+            f"at most {SLACK_M:g} m + {MAX_SPEED_M_S:g} m/s x dt horizontally, "
+            f"{SLACK_M:g} m + {MAX_VSPEED_M_S:g} m/s x dt vertically")
+
+
+class _Positions:
+    """The vehicle's positions as :func:`follow` takes them: :meth:`take` gives a GLOBAL_POSITION_INT's (e, n, u) in
+    metres about ``home`` (None: the first position taken; no altitude: the first one's), or None for a frame without
+    a fix (lat = lon = 0) or an implausible one, skipped and counted (``rejected``; ``first_rejected`` says why): one
+    outside :class:`GeoPoint`'s ranges, or an impossible jump from the last position taken (:func:`_jump`: latitude
+    and longitude swapped at Zurich, 47.4 / 8.5, are both in range). One such frame ended the session."""
+
+    def __init__(self, home: GeoPoint | None):
+        self.home, self.rejected, self.first_rejected = home, 0, ""
+        self.last: tuple | None = None   # (boot s, arrival s, e, n, u) of the last position taken
+
+    def take(self, msg, arrival_s: float):
+        if msg.lat == 0 and msg.lon == 0:
+            return None
+        lat, lon, alt = msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3
+        try:
+            GeoPoint(msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1e3)   # (/: the message's digits in the error)
+            why = ""
+        except ValueError as exc:
+            why = str(exc)
+        if not why and self.last is not None:
+            e, n, u = geodetic_to_enu(lat, lon, alt, self.home)
+            why = _jump(self.last, (msg.time_boot_ms * 1e-3, arrival_s, float(e), float(n), float(u)))
+        if why:
+            self.rejected += 1
+            self.first_rejected = self.first_rejected or why
+            return None
+        if self.home is None:
+            self.home = GeoPoint(lat, lon, alt)
+        elif self.home.alt_m is None:
+            self.home = GeoPoint(self.home.lat_deg, self.home.lon_deg, alt)
+        e, n, u = (float(v) for v in geodetic_to_enu(lat, lon, alt, self.home))
+        self.last = (msg.time_boot_ms * 1e-3, arrival_s, e, n, u)
+        return e, n, u
+
+
 def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None = None, rate_hz: float = 10.0,
            home: GeoPoint | None = None, tlog=None, max_wall_s: float = 60.0, chunk_s: float = 1.0,
            max_messages: int = 1_000_000, idle_timeout_s: float = 10.0, out_conn=None, in_conn=None,
            sysid: int = 1, compid: int = 1) -> FollowStats:
     """Drive the mission world from a live vehicle's GLOBAL_POSITION_INT and stream the result.
 
-    Positions from ``follow_connect`` (e.g. ``udpin:127.0.0.1:14551``; lat = lon = 0, i.e. no fix,
-    skipped) are timed by the vehicle's clock (:class:`_Clock`) and converted to the pad frame
-    about ``home`` (None: the first position received is the pad). Every ``chunk_s`` seconds the
+    Positions from ``follow_connect`` (e.g. ``udpin:127.0.0.1:14551``; no fix or implausible: skipped,
+    :class:`_Positions`) are timed by the vehicle's clock (:class:`_Clock`) and converted to the pad frame about
+    ``home`` (None: the first position received is the pad). Every ``chunk_s`` seconds the
     new stretch runs through :class:`ChunkedMission` and its telemetry is sent at ``rate_hz``,
     ``chunk_s`` behind the vehicle. The loop ends after ``max_wall_s`` seconds, ``max_messages``
     received messages or ``idle_timeout_s`` without a position once positions have come (before the
@@ -171,14 +224,13 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
     messages are lost). ``sysid`` / ``compid``: the simulated vehicle's MAVLink ids.
     """
     sysid, compid = check_ids(sysid, compid)
-    mu = mavutil()
     vin = in_conn if in_conn is not None else open_follow(follow_connect)
     own_out = out_conn is None and connect is not None
     out = open_link(connect, sysid, compid) if own_out else out_conn
-    mav = mu.mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+    mav = mavutil().mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
     writer = TlogWriter(tlog) if tlog is not None else None
     wall0, epoch0 = time.monotonic(), time.time()
-    clock, sim, queue = _Clock(), None, []        # queue: (send at wall offset, row, is_heartbeat)
+    clock, sim, queue, positions = _Clock(), None, [], _Positions(home)   # queue: (send at, row, is heartbeat)
     frames = n_msgs = delivered = 0
     last_rx, idle = wall0, False
     last_tick = []                              # (time, row) of the latest tick queued
@@ -198,24 +250,20 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
             frames += n
             delivered += n_out
 
+    ended = False
     try:
-        while n_msgs < max_messages and time.monotonic() < wall0 + max_wall_s \
-                and not idle:
+        while n_msgs < max_messages and time.monotonic() < wall0 + max_wall_s and not idle:
             wait = 0.05 if not queue else max(0.0, min(0.05, wall0 + queue[0][0] - time.monotonic()))
             msg = vin.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=wait)
             n_msgs += 1
             # idle only when nothing is waiting (a slow chunk must not drop the positions queued meanwhile)
             idle = msg is None and sim is not None and time.monotonic() - last_rx > idle_timeout_s
-            if msg is not None and not (msg.lat == 0 and msg.lon == 0):
+            enu = None if msg is None else positions.take(msg, time.monotonic())
+            if enu is not None:
                 last_rx = time.monotonic()
-                if home is None:
-                    home = GeoPoint(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3)
-                elif home.alt_m is None:
-                    home = GeoPoint(home.lat_deg, home.lon_deg, msg.alt * 1e-3)
                 if sim is None:
-                    sim = ChunkedMission(cfg, policy, run_mission, home, rate_hz)
-                e, n, u = geodetic_to_enu(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, home)
-                sim.add(clock(msg.time_boot_ms, last_rx - wall0), (e, n, max(float(u), 0.0) + sim.gap))
+                    sim = ChunkedMission(cfg, policy, run_mission, positions.home, rate_hz)
+                sim.add(clock(msg.time_boot_ms, last_rx - wall0), (enu[0], enu[1], max(enu[2], 0.0) + sim.gap))
             if sim is not None and sim.pending_s() >= chunk_s:
                 enqueue(sim.simulate())
             send_due(time.monotonic())
@@ -224,12 +272,17 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
         if last_tick:                           # then the vehicle lands and disarms, as in `telemetry`
             queue.extend((last_tick[0][0] + dt, row, True) for dt, row in landing_rows(last_tick[0][1]))
         send_due(math.inf)                      # and everything still queued, without waiting
+        ended = True
+    except BaseException as exc:
+        if writer is not None:
+            writer.abort(exc)   # the frames so far as NAME.partial.tlog, an existing NAME left as it was
+        raise
     finally:
         vin.close()
         if own_out:
             close_link(out)
-        if writer is not None:
-            writer.close()
+        if writer is not None and ended:
+            writer.close()      # no position came, no frame: no file (an existing one untouched)
     return FollowStats(positions=len(sim.t) if sim else 0, chunks=sim.chunks if sim else 0, frames=frames,
-                       delivered=delivered,
-                       wall_s=time.monotonic() - wall0, final_soc=sim.final_soc if sim else None, home=home)
+                       delivered=delivered, wall_s=time.monotonic() - wall0, final_soc=sim.final_soc if sim else None,
+                       home=positions.home, rejected=positions.rejected, first_rejected=positions.first_rejected)

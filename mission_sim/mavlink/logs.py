@@ -196,6 +196,9 @@ def _collect(reader, kind: str, raw: dict, stats: dict) -> None:
         if msg is None:
             return
         t = getattr(msg, "_timestamp", None)
+        if isinstance(t, (int, float)) and not _T_MIN_S <= t <= _T_MAX_S and msg.get_type() != "BAD_DATA":
+            stats["bad_time"] = stats.get("bad_time", 0) + 1   # a frame that decodes, with a stamp out of range
+            stats.setdefault("first_bad_time", float(t))
         t = float(t) if isinstance(t, (int, float)) and _T_MIN_S <= t <= _T_MAX_S else float("nan")
         rec = len(stats["ts"])
         stats["ts"].append(t)
@@ -423,5 +426,6 @@ def _assemble(path: Path, kind: str, raw: dict, stats: dict, errors: list[str]) 
                      mavlink_frames=dict(stats["versions"]), reboots=reboots, fix_checked=fix_checked,
                      vehicle=tab.ids, errors=errors, armed_source=armed_source, starts_armed=starts_armed,
                      gps_rejected=rejected, clock=tab.clock if kind == "tlog" else None,
-                     airspeed=_airspeed(tab))
+                     airspeed=_airspeed(tab), bad_time=int(stats.get("bad_time", 0)),
+                     first_bad_time_s=float(stats.get("first_bad_time", float("nan"))))
 

@@ -52,6 +52,7 @@ Every network loop here is bounded in both message count and wall time.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import re
 import struct
@@ -62,7 +63,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..files import storage_error
+from ..files import rename_into_place, storage_error
 from .geodesy import GeoPoint, enu_to_geodetic
 from .logs import mavutil
 
@@ -174,32 +175,99 @@ def check_ids(sysid: int, compid: int) -> tuple[int, int]:
 
 
 class TlogWriter:
-    """Append MAVLink frames to a .tlog (8-byte big-endian microsecond timestamp + frame)."""
+    """Append MAVLink frames to a .tlog (8-byte big-endian microsecond timestamp + frame).
+
+    The frames go to a visible ``STEM.partial.tlog`` beside ``path`` (``STEM.partial.2.tlog``, ... when an earlier
+    one is there: it is never overwritten) as they are streamed: after an interrupt, an error or a kill the frames
+    so far are there, a readable log. :meth:`close` (the stream ended) renames it to ``path``
+    (:func:`~mission_sim.files.rename_into_place`); if that fails (``path`` open in a ground station on Windows, a
+    folder) the partial file stays and the one-line error names it. :meth:`abort` (an interrupt, an error) leaves
+    it where it is and notes its name on the exception. Either way an existing ``path`` is replaced only by a stream
+    that ended, and a stream that wrote no frame leaves no file at all (``telemetry --follow`` with no vehicle had
+    replaced an existing recording by an empty file). ``kept``: where the frames are after close / abort (None:
+    nowhere).
+    """
 
     def __init__(self, path):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fh = open(self.path, "wb")
+        for k in range(1, 10_000):
+            self.partial_path = self.path.with_name(
+                f"{self.path.stem}.partial{'' if k == 1 else f'.{k}'}{self.path.suffix}")
+            try:
+                self._fh = open(self.partial_path, "xb")   # (an earlier partial file is kept, never overwritten)
+                break
+            except FileExistsError:
+                continue
+        else:
+            raise ValueError(f"{str(self.path)!r}: 9,999 earlier partial recordings {self.path.stem}.partial*."
+                             f"{self.path.suffix} beside it; valid: move them away")
         self.n_frames = 0
+        self.kept: Path | None = None
 
     def write(self, frame: bytes, t_epoch_s: float) -> None:
         try:
             self._fh.write(struct.pack(">Q", int(round(t_epoch_s * 1e6))) + frame)
-        except OSError as exc:  # a full disk: the file named (the frames written so far stay a valid log)
-            raise storage_error(exc, self.path) or exc from None
+        except OSError as exc:  # a full disk: the file named (the frames written so far stay a valid log; none: removed)
+            raise storage_error(exc, self.path, self.partial_path if self.n_frames else None) or exc from None
         self.n_frames += 1
 
-    def close(self) -> None:
+    def _close_file(self) -> bool:
+        """Close the partial file (False: it was already); with no frame written, remove it."""
+        if self._fh.closed:
+            return False
         try:
             self._fh.close()  # flushes the buffer: a full disk may show here
         except OSError as exc:
-            raise storage_error(exc, self.path) or exc from None
+            raise storage_error(exc, self.path, self.partial_path) or exc from None
+        finally:
+            if self.n_frames:
+                self.kept = self.partial_path
+            else:
+                with contextlib.suppress(OSError):
+                    self.partial_path.unlink(missing_ok=True)
+        return True
+
+    def _where(self, before: str = "") -> str:
+        return f"the {self.n_frames} frames streamed{before} are in {str(self.partial_path)!r}"
+
+    def close(self) -> None:
+        """The stream ended: its frames become ``path`` (none written: no file, an existing one untouched). A
+        rename that fails keeps them in :attr:`partial_path`, named in the error."""
+        if not self._close_file() or not self.n_frames:
+            return
+        try:
+            rename_into_place(self.partial_path, self.path)
+        except OSError as exc:
+            raise OSError(f"cannot rename the stream's .tlog to {str(self.path)!r}: {exc.strerror or exc}; "
+                          f"{self._where()} ({str(self.path)!r} left as it was)") from None
+        except KeyboardInterrupt as exc:   # an interrupt a callback swallowed: not renamed after it
+            self._note(exc)
+            raise
+        self.kept = self.path
+
+    def _note(self, exc: BaseException | None) -> None:
+        if exc is not None and self.kept == self.partial_path and hasattr(exc, "add_note") and \
+                getattr(exc, "kept", None) is None:
+            exc.add_note(f"{self._where(' before it')} ({str(self.path)!r} left as it was)")
+
+    def abort(self, exc: BaseException | None = None) -> None:
+        """The stream was cut (``exc``): its frames so far stay in :attr:`partial_path`, ``path`` is left as it
+        was; ``exc`` gets a note saying so (the CLI's error and interrupt lines print it)."""
+        try:
+            self._close_file()
+        except OSError:
+            pass
+        self._note(exc)
 
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, exc_type, exc, tb):
+        if exc is None:
+            self.close()
+        else:
+            self.abort(exc)
 
 
 def drawn_totals(ts: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
@@ -597,6 +665,7 @@ def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=n_ticks, unit="tick", desc="telemetry")
+    ended = False
     try:
         for sim_s, row, hb in events:
             if math.isfinite(speed):
@@ -611,8 +680,13 @@ def stream(ts: pd.DataFrame, *, connect: str | None = None, rate_hz: float = 10.
                 counts[msg.get_type()] = counts.get(msg.get_type(), 0) + 1
             if bar is not None and not hb:
                 bar.update(1)
-    finally:
+        ended = True
+    except BaseException as exc:
         if writer is not None:
+            writer.abort(exc)   # the frames so far as NAME.partial.tlog, an existing NAME left as it was
+        raise
+    finally:
+        if writer is not None and ended:
             writer.close()
         if own:
             close_link(conn)

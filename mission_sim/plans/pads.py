@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from ..mavlink.geodesy import GeoPoint
 from ..validation import HOLD_RANGE, check_range
 
-__all__ = ["GeoPad", "read_pads", "MAX_PADS"]
+__all__ = ["GeoPad", "read_pads", "check_distinct", "MAX_PADS", "SAME_PAD_M"]
 
 MAX_PADS = 100
 _ALIASES = {"lat": ("lat", "lat_deg", "latitude"), "lon": ("lon", "lon_deg", "lng", "long", "longitude"),
@@ -68,6 +68,30 @@ def _too_deep(name: str) -> str:
     return (f"{name}: JSON nested deeper than the reader takes (about Python's recursion limit, {sys.getrecursionlimit()} "
             "levels), not a pads file; valid: a GeoJSON FeatureCollection of Point / MultiPoint features, or a CSV "
             "with a header lat,lon[,alt][,hover_time_s]")
+
+
+#: two pads closer than this (horizontally) are one pad listed twice: a re-flight made a detour to each and charged
+#: there twice (`replay --pads` with a row pasted twice: 120 s of charging and twice the flight time gained, no word)
+SAME_PAD_M = 0.1
+
+
+def check_distinct(pads, name: str) -> None:
+    """``ValueError`` naming the first two pads (1-based, file order) closer than :data:`SAME_PAD_M`. For a
+    re-flight's pads only (:func:`~mission_sim.plans.refly.refly_base`), where each pad is one detour and one charge;
+    :func:`read_pads` does not check it: the built-in pattern of ``mission --pads`` visits the pads in file order, so
+    A, B, A is a route there."""
+    import numpy as np
+
+    from ..mavlink.geodesy import geodetic_to_enu
+    ref = GeoPoint(pads[0].point.lat_deg, pads[0].point.lon_deg, 0.0)
+    e, n, _ = geodetic_to_enu(np.array([p.point.lat_deg for p in pads]), np.array([p.point.lon_deg for p in pads]),
+                              np.zeros(len(pads)), ref)
+    d = np.hypot(np.subtract.outer(e, e), np.subtract.outer(n, n))
+    close = np.argwhere(np.triu(d < SAME_PAD_M, k=1))
+    if len(close):
+        i, j = (int(v) for v in close[0])
+        raise ValueError(f"{name}: pads {i + 1} and {j + 1} are {d[i, j]:.2f} m apart: one pad listed twice (a "
+                         f"re-flight would charge at it twice); valid: pads at least {SAME_PAD_M:g} m apart")
 
 
 def _pad(lat, lon, alt, hover, where: str) -> GeoPad:

@@ -151,7 +151,9 @@ def refly_base(base: dict, pads, origin, pads_name: str = "pads") -> dict:
     ``dronewpt sweep`` both build their missions here."""
     import copy
 
+    from .pads import check_distinct
     from .route import pads_to_local
+    check_distinct(pads, pads_name)           # (a pad listed twice: a detour to each copy, charged twice)
     d = copy.deepcopy(base)
     d["waypoints"] = []                       # the log is the route
     d["mission"]["file"] = ""
