@@ -10,7 +10,7 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["check_positive", "read_toml_file", "Range", "check_range", "check_regular_file", "shown", "real_array",
+__all__ = ["check_positive", "read_toml_file", "json_too_deep", "Range", "check_range", "check_regular_file", "shown", "real_array",
            "real_number", "check_number", "check_number_fields", "YAML_NUMBER_NOTE", "SEED_RANGE", "seed_range",
            "check_first_seed", "check_table"]
 
@@ -210,6 +210,14 @@ def check_positive(obj, *names: str, allow_zero: bool = False) -> None:
         v = float(getattr(obj, name))
         if not (math.isfinite(v) and (v >= 0 if allow_zero else v > 0)):
             raise ValueError(f"{name}={v!r} is invalid; valid range: {'[0' if allow_zero else '(0'}, inf)")
+
+
+def json_too_deep(name: str, what: str, valid: str) -> str:
+    """The one-line error of a JSON file ``name`` nested deeper than Python's parser takes (its ``RecursionError``:
+    a traceback until 2026-11-28): not ``what``, with its ``valid`` form."""
+    import sys
+    return (f"{name}: JSON nested deeper than the reader takes (about Python's recursion limit, {sys.getrecursionlimit()} "
+            f"levels), not {what}; valid: {valid}")
 
 
 def read_toml_file(path, what: str = "config file") -> dict:

@@ -132,10 +132,9 @@ def read_plan(path) -> RawMission:
     except json.JSONDecodeError as exc:
         raise ValueError(f"{name}: malformed JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
     except RecursionError:   # '[' * 100000: the parser's recursion, a traceback until 2026-11-28
-        import sys
-        raise ValueError(f"{name}: JSON nested deeper than the reader takes (about Python's recursion limit, "
-                         f"{sys.getrecursionlimit()} levels), not a QGroundControl plan; valid: a JSON object with "
-                         "\"fileType\": \"Plan\"") from None
+        from ..validation import json_too_deep
+        raise ValueError(json_too_deep(name, "a QGroundControl plan", "a JSON object with \"fileType\": \"Plan\"")) \
+            from None
     if not isinstance(doc, dict) or doc.get("fileType") != "Plan":
         raise ValueError(f"{name}: not a QGroundControl plan; valid: a JSON object with \"fileType\": \"Plan\"")
     mission = doc.get("mission")

@@ -14,7 +14,7 @@ import json
 from dataclasses import dataclass
 
 from ..mavlink.geodesy import GeoPoint
-from ..validation import HOLD_RANGE, check_range
+from ..validation import HOLD_RANGE, check_range, json_too_deep
 
 __all__ = ["GeoPad", "read_pads", "check_distinct", "MAX_PADS", "SAME_PAD_M"]
 
@@ -64,10 +64,8 @@ def _refuse_json_array(text: str, name: str) -> None:
 
 def _too_deep(name: str) -> str:
     """The error of a JSON text nested deeper than Python's parser takes (its recursion limit)."""
-    import sys
-    return (f"{name}: JSON nested deeper than the reader takes (about Python's recursion limit, {sys.getrecursionlimit()} "
-            "levels), not a pads file; valid: a GeoJSON FeatureCollection of Point / MultiPoint features, or a CSV "
-            "with a header lat,lon[,alt][,hover_time_s]")
+    return json_too_deep(name, "a pads file", "a GeoJSON FeatureCollection of Point / MultiPoint features, or a CSV "
+                         "with a header lat,lon[,alt][,hover_time_s]")
 
 
 #: two pads closer than this (horizontally) are one pad listed twice: a re-flight made a detour to each and charged
