@@ -274,14 +274,44 @@ def _check_physics(run):
     assert s["final_soc"] > s["final_soc_without_charging"]
 
 
+def _private_numba_cache(dest: Path) -> dict:
+    """A ``NUMBA_CACHE_DIR`` of a test's own at ``dest``, seeded with the numba cache files (``.nbi``, ``.nbc``,
+    ``.deps``) of the repository's packages from where this process's numba keeps them (the sources'
+    ``__pycache__``, or the ``NUMBA_CACHE_DIR`` set), laid out as numba's user-provided locator reads them.
+
+    Only this test's processes write there: in the shared cache another xdist worker compiling an overload of the same
+    kernel at the same moment can replace the index another process just saved (numba's index update is a
+    load-modify-replace, not a lock), so a later run misses and compiles (CI, 2026-11-28: the registries loaded)."""
+    import shutil
+
+    from numba.core.caching import UserProvidedCacheLocator
+    shared = os.environ.get("NUMBA_CACHE_DIR")
+    for pkg in ("wpt_receiver", "mission_sim", "envs", "policies"):
+        for init in (ROOT / pkg).rglob("__init__.py"):
+            sub = UserProvidedCacheLocator.get_suitable_cache_subpath(str(init))
+            src = Path(shared) / sub if shared else init.parent / "__pycache__"
+            if not src.is_dir():
+                continue
+            (dest / sub).mkdir(parents=True, exist_ok=True)
+            for f in src.iterdir():
+                if f.suffix in (".nbi", ".nbc", ".deps"):
+                    try:
+                        shutil.copy2(f, dest / sub / f.name)
+                    except OSError:   # (replaced or removed by another worker meanwhile: a miss, compiled then)
+                        pass
+    return {"NUMBA_CACHE_DIR": str(dest)}
+
+
 def test_mission_loads_its_kernels_without_registries_and_runs_the_same_bits(tmp_path):
     """The default mission with each kernel policy (and a Python one): the same summary and time series to the bit
     with and without the hook, the loop loaded from the cache either way, numba's registries never loaded with the
-    hook (the compiled policies go to the cached loop as first-class functions all the same)."""
+    hook (the compiled policies go to the cached loop as first-class functions all the same). The runs use a numba
+    cache of their own (:func:`_private_numba_cache`), filled by the first."""
     from policies.kernels import KERNELS
     assert set(KERNELS) <= set(_KERNEL_POLICIES)
-    plain = _missions("plain", tmp_path / "plain", 0, _KERNEL_POLICIES)   # also warms the caches (first run)
-    lazy = _missions("lazy", tmp_path / "lazy", 0, _KERNEL_POLICIES)
+    own = _private_numba_cache(tmp_path / "numba")
+    plain = _missions("plain", tmp_path / "plain", 0, _KERNEL_POLICIES, **own)   # also warms the cache (first run)
+    lazy = _missions("lazy", tmp_path / "lazy", 0, _KERNEL_POLICIES, **own)
     assert lazy["hook"] and not plain["hook"]
     assert plain["registries"] and not lazy["registries"] and not any(lazy["at_loop"])
     assert lazy["loop_hits"] == 2          # both overloads of the loop (compiled policy, Python policy) from the cache
