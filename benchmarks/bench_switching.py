@@ -11,7 +11,8 @@ step's peak of i2).
 method. Each rung of ``LADDER`` is run (``--spice-repeat`` times, median and range) and its five
 numbers are compared with a converged run of the same netlist (``CONVERGED``: gear, ``tmax =
 T/4000``, ``reltol = 1e-7``). The rung the ratio is quoted at is the cheapest one whose numbers are
-*all* within ``--tol`` (0.1 %) of converged: equal accuracy, since the switching model is an exact
+*all* within ``--tol`` (0.1 %) of converged (cheapest by CPU time: ngspice's as a child process, the model's
+``time.process_time``; wall times are printed too, but on a shared machine they move with its load): equal accuracy, since the switching model is an exact
 solution between events (its own distance from converged ngspice is printed beside it). A peer at
 an over-tight tolerance would inflate the ratio; a peer at a loose one would flatter SPICE.
 
@@ -54,7 +55,8 @@ T = TABLE_I.rectifier_period_s
 #: from T/1000, 0.125 %, to T/2000, 0.023 %, and quoted the ratio at a rung ~4x tighter than the criterion; trap at
 #: reltol 1e-6 is there so that trap's error is its step's, not its tolerance's)
 LADDER = (("trap T/50", "trap", 50, 1e-3), ("trap T/100", "trap", 100, 1e-3), ("trap T/200", "trap", 200, 1e-3),
-          ("trap T/400, reltol 1e-6", "trap", 400, 1e-6), ("trap T/800, reltol 1e-6", "trap", 800, 1e-6),
+          ("trap T/400, reltol 1e-6", "trap", 400, 1e-6), ("trap T/500, reltol 1e-6", "trap", 500, 1e-6),
+          ("trap T/600, reltol 1e-6", "trap", 600, 1e-6), ("trap T/800, reltol 1e-6", "trap", 800, 1e-6),
           ("gear T/200", "gear", 200, 1e-6), ("gear T/500", "gear", 500, 1e-6),
           ("gear T/1000 (the stored netlists')", "gear", 1000, 1e-6), ("gear T/1100", "gear", 1100, 1e-6),
           ("gear T/1250", "gear", 1250, 1e-6), ("gear T/1500", "gear", 1500, 1e-6), ("gear T/2000", "gear", 2000, 1e-6))
@@ -82,13 +84,21 @@ def _stats(xs):
 
 def _spice_rung(rung, repeat: int) -> dict:
     label, method, div, reltol = rung
-    text, times, vals = _netlist(method, div, reltol), [], None
+    text, times, cpus, vals = _netlist(method, div, reltol), [], [], None
     for _ in range(repeat):
         with tempfile.TemporaryDirectory() as tmp:
-            t0 = time.perf_counter()
+            c0, t0 = _children_cpu(), time.perf_counter()
             vals = _spice.run_ngspice(text, Path(tmp))
             times.append(time.perf_counter() - t0)
-    return {"label": label, "values": vals, "time": _stats(times)}
+            cpus.append(_children_cpu() - c0)
+    return {"label": label, "values": vals, "time": _stats(times), "cpu": _stats(cpus)}
+
+
+def _children_cpu() -> float:
+    """User + system CPU seconds of this process's waited-for children (ngspice runs as one)."""
+    import resource
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
 
 
 def _errors(vals: dict, ref: dict) -> dict:
@@ -130,22 +140,23 @@ def bench_model(repeat: int) -> dict:
     x0[:4] = _spice.initial_state(TABLE_I, link.cfg.devices)
     x0[-1] = 1.0
     _model_measure(link, x0)                              # warm-up: numba compile or cache load
-    times, vals = [], None
+    times, cpus, vals = [], [], None
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        c0, t0 = time.process_time(), time.perf_counter()
         vals = _model_measure(link, x0)
         times.append(time.perf_counter() - t0)
-    return {"values": vals, "time": _stats(times), "times": times}
+        cpus.append(time.process_time() - c0)
+    return {"values": vals, "time": _stats(times), "times": times, "cpu": _stats(cpus), "cpus": cpus}
 
 
-def run(repeat: int = 7, spice_repeat: int = 3, tol: float = 1e-3, only=None) -> dict:
+def run(repeat: int = 7, spice_repeat: int = 3, tol: float = 1e-3, only=None, converged=None) -> dict:
     """The model, the converged run and the ladder (``only``: the labels of the rungs to run, all when None); the
     model is timed again after the ladder and its two sets of times pooled (the ladder takes minutes on a shared
     machine whose load moves)."""
     load0 = os.getloadavg()
     out = {"load_before": load0, "tol": tol, "model": bench_model(repeat)}
     if shutil.which("ngspice") is not None:
-        conv = _spice_rung(CONVERGED, 1)
+        conv = _spice_rung(CONVERGED, 1) if converged is None else converged
         out["converged"] = conv
         out["model"]["errors"] = _errors(out["model"]["values"], conv["values"])
         rungs = []
@@ -156,9 +167,10 @@ def run(repeat: int = 7, spice_repeat: int = 3, tol: float = 1e-3, only=None) ->
             rungs.append(r)
         out["ladder"] = rungs
         ok = [r for r in rungs if r["max_error"] <= tol]
-        out["equal_accuracy"] = min(ok, key=lambda r: r["time"]["median_s"])["label"] if ok else None
+        out["equal_accuracy"] = min(ok, key=lambda r: r["cpu"]["median_s"])["label"] if ok else None
         again = bench_model(repeat)
         out["model"]["time"] = _stats(out["model"].pop("times") + again["times"])
+        out["model"]["cpu"] = _stats(out["model"].pop("cpus") + again["cpus"])
     out["load_after"] = os.getloadavg()
     return out
 
@@ -174,15 +186,23 @@ def _report(r: dict) -> None:
         return
     err = max(r["model"]["errors"].values())
     print(f"; max error vs converged ngspice {err * 100:.3f} %")
+    mc = r["model"].get("cpu")
+    if mc is not None:
+        print(f"  switching model CPU: {mc['median_s'] * 1e3:.2f} ms (range {mc['min_s'] * 1e3:.2f}-{mc['max_s'] * 1e3:.2f})")
     print(f"  {r['converged']['label']}: {r['converged']['time']['median_s']:.1f} s")
-    print(f"  {'ngspice setting':36s} {'median s':>9s} {'range s':>13s} {'max err %':>9s} {'model x (range)':>20s}  worst")
+    print(f"  {'ngspice setting':36s} {'median s':>9s} {'range s':>13s} {'max err %':>9s} {'model x (range)':>20s} "
+          f"{'CPU s':>8s} {'CPU model x (range)':>22s}  worst")
     for g in r["ladder"]:
         t = g["time"]
         ratio = t["median_s"] / m["median_s"]
         lo, hi = t["min_s"] / m["max_s"], t["max_s"] / m["min_s"]
+        c = g.get("cpu")
+        cpu = (f"{c['median_s']:8.3f} {c['median_s'] / mc['median_s']:8.0f}x ({c['min_s'] / mc['max_s']:.0f}-"
+               f"{c['max_s'] / mc['min_s']:.0f}x)" if c and mc else "")
         mark = "  <- equal accuracy" if g["label"] == r["equal_accuracy"] else ""
         print(f"  {g['label']:36s} {t['median_s']:9.3f} {t['min_s']:6.3f}-{t['max_s']:<6.3f} "
-              f"{g['max_error'] * 100:9.3f} {ratio:8.0f}x ({lo:.0f}-{hi:.0f}x)  {max(g['errors'], key=g['errors'].get)}{mark}")
+              f"{g['max_error'] * 100:9.3f} {ratio:8.0f}x ({lo:.0f}-{hi:.0f}x) {cpu:>32s}  "
+              f"{max(g['errors'], key=g['errors'].get)}{mark}")
     if r["equal_accuracy"] is None:
         print(f"  no rung is within {r['tol'] * 100:g} % of converged on every quantity")
 
@@ -192,16 +212,25 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=7, help="switching-model runs (after one warm-up)")
     ap.add_argument("--spice-repeat", type=int, default=3, help="ngspice runs per rung of the ladder")
     ap.add_argument("--tol", type=float, default=1e-3, help="equal accuracy: every quantity within this of converged")
-    ap.add_argument("--only", default=None, help="comma-separated rung labels to run (default: the whole ladder)")
+    ap.add_argument("--only", action="append", default=None, metavar="LABEL",
+                    help="a rung's label to run (repeatable; default: the whole ladder)")
+    ap.add_argument("--converged", default=None, metavar="JSON",
+                    help="reuse the converged run of an earlier --json output (its values; ~3-4 min saved)")
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
     only = None
     if a.only is not None:
-        only = [x.strip() for x in a.only.split(",") if x.strip()]
+        only = [x.strip() for x in a.only]
         unknown = [x for x in only if x not in {r[0] for r in LADDER}]
         if unknown:
             ap.error(f"--only {unknown[0]!r}: not a rung; valid: {', '.join(r[0] for r in LADDER)}")
-    r = run(a.repeat, a.spice_repeat, a.tol, only)
+    conv = None
+    if a.converged is not None:
+        try:
+            conv = json.loads(Path(a.converged).read_text())["converged"]
+        except (OSError, ValueError, KeyError) as e:
+            ap.error(f"--converged {a.converged}: not an earlier --json output with a converged run ({e})")
+    r = run(a.repeat, a.spice_repeat, a.tol, only, conv)
     if a.json:
         print(json.dumps(r, indent=1))
     else:
