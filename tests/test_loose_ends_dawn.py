@@ -1,0 +1,44 @@
+"""Loose ends left by the small hours' sessions (2026-11-28, 01:35-04:35 UTC: payload drops, newcomer2), fixed on
+branch loose8 (docs/changes.md, "2026-11-28, 04:35-07:35 UTC"): each test fails on the branch's start (dd62b62) and
+passes here; its docstring says what it checks."""
+
+from __future__ import annotations
+
+import pytest
+
+from mission_sim.cli import main
+
+
+# ------------------------------------------------------------------ --follow: a bad first fix is not the reference
+@pytest.mark.parametrize("bad, skipped", [({0}, 1), ({1}, 2)])
+def test_follow_recovers_from_a_bad_first_fix(monkeypatch, tmp_path, capsys, bad, skipped):
+    """Latitude and longitude swapped at Zurich (both in range) in the first frame became the reference: every good
+    frame after it was skipped as a 5,200 km jump ('followed 1 live positions', 19 skipped). Now the reference is
+    taken once CONFIRM (3) positions in a row agree: the bad fix is skipped and the rest followed. A bad second frame
+    costs the good first one too (one of the two is wrong: both dropped), not the session."""
+    from mission_sim.mavlink import follow
+    from mission_sim.mavlink.logs import read_log
+    from test_newcomer2 import _FakeVehicle, _track
+
+    tlog = tmp_path / "z.tlog"
+    monkeypatch.setattr(follow, "open_follow", lambda connect: _FakeVehicle(_track(20, bad=bad, lat0=47.4, lon0=8.5)))
+    rc = main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--follow-time", "20", "--follow-idle", "0.3",
+               "--connect", "none", "--tlog", str(tlog)])
+    out, err = capsys.readouterr()
+    assert rc == 0 and f"followed {20 - skipped} live positions" in out, (out, err)
+    assert f"{skipped} implausible position(s) skipped (the first: a jump of" in err, err
+    pos = read_log(tlog).position
+    assert len(pos) >= 10 and pos["lat_deg"].between(47.39, 47.41).all() and pos["lon_deg"].between(8.49, 8.51).all()
+
+
+def test_follow_takes_a_short_stream_that_never_reached_the_confirmation():
+    """Two agreeing positions and the stream ends: both are taken (flush), nothing contradicted them."""
+    import types
+    from mission_sim.mavlink.follow import CONFIRM, _Positions
+    pos = _Positions(None)
+    msgs = [types.SimpleNamespace(time_boot_ms=100 * k, lat=473_000_000 + 20 * k, lon=85_000_000, alt=400_000)
+            for k in range(CONFIRM - 1)]
+    assert [pos.take(m, 0.1 * k) for k, m in enumerate(msgs)] == [[]] * (CONFIRM - 1)
+    taken = pos.flush()
+    assert [t for t, _, _ in taken] == [0, 100][:CONFIRM - 1] and pos.rejected == 0
+    assert taken[0][2] == (0.0, 0.0, 0.0) and 0.2 < taken[1][2][1] < 0.25     # 2e-6 deg north: 0.22 m
