@@ -42,3 +42,38 @@ def test_follow_takes_a_short_stream_that_never_reached_the_confirmation():
     taken = pos.flush()
     assert [t for t, _, _ in taken] == [0, 100][:CONFIRM - 1] and pos.rejected == 0
     assert taken[0][2] == (0.0, 0.0, 0.0) and 0.2 < taken[1][2][1] < 0.25     # 2e-6 deg north: 0.22 m
+
+
+# ------------------------------------------------------------------ mass_kg of the row holding a payload drop
+def test_mission_series_mass_of_the_row_holding_the_drop_is_its_steps_mean(tmp_path, capsys):
+    """PX4's delivery plan with 0.5 kg: the 1 s quiet-flight step [28, 29] s holds the drop (t = 28.5 s). Its row's
+    mass_kg read 1.5 (its first sample's) while its energy was 0.6 s at 1.5 kg and 0.4 s at 1.0 kg (the summary's
+    split: the samples from 28.6 s on fly light). Now the time-weighted mean of the samples' masses, as the energy is
+    split: 1.3 kg, in the written parquet (the stream's path) as in run_mission's frame."""
+    import json
+    from pathlib import Path
+
+    import pandas as pd
+
+    from mission_sim.world.power import DroneParams, hover_power_w
+
+    plan = Path(__file__).parent / "data" / "missions" / "px4_triangle_gripper_package_delivery.plan"
+    rc = main(["mission", "--plan", str(plan), "--set", "drone.payload_kg=0.5", "--no-plot", "--no-progress",
+               "--out", str(tmp_path)])
+    capsys.readouterr()
+    assert rc == 0
+    d = pd.read_parquet(tmp_path / "timeseries.parquet")
+    s = json.loads((tmp_path / "summary.json").read_text())
+    t_r = s["first_release_t_s"]
+    start = (d["t_s"] - d["dt_s"]).to_numpy()
+    across = (start < t_r) & (d["t_s"].to_numpy() > t_r)
+    assert across.sum() == 1
+    row = d[across].iloc[0]
+    m = float(row["mass_kg"])
+    assert 1.0 < m < 1.5 and set(d["mass_kg"][start + 1e-9 >= row["t_s"]]) == {1.0}
+    assert set(d["mass_kg"][d["t_s"] <= t_r]) == {1.5}
+    # the time the row's mass says it flew light (1.5 -> 1.0 kg) holds the energy the summary puts after the drop:
+    # ~ the 1.0 kg hover's power over it (a slow climb: within 5 %)
+    light_s = (1.5 - m) / 0.5 * row["dt_s"]
+    e_in_row = s["propulsion_energy_after_release_j"] - d["e_propulsion_j"][start >= row["t_s"] - 1e-9].sum()
+    assert light_s > 0.2 and e_in_row == pytest.approx(hover_power_w(DroneParams(), 1.0) * light_s, rel=0.05)
