@@ -549,14 +549,16 @@ OMITTED_AT_DEFAULT = {"drone": ("release_kg",), "waypoints": ("release",)}
 
 
 def config_to_dict(cfg: MissionConfig) -> dict:
-    """Plain dict (TOML-ready: no None values) of a :class:`MissionConfig`; the keys of :data:`OMITTED_AT_DEFAULT`
-    only when not 0 (reading the dict back gives the same config)."""
+    """Plain dict (TOML-ready: no None values: ``drone.max_takeoff_mass_kg`` unset is left out) of a
+    :class:`MissionConfig`; the keys of :data:`OMITTED_AT_DEFAULT` only when not 0 (reading the dict back gives the
+    same config)."""
     out = asdict(cfg)
     out["pads"] = [{k: v for k, v in p.items() if v is not None} for p in out["pads"]]
     out["waypoints"] = [{k: v for k, v in w.items() if v is not None and not (k in OMITTED_AT_DEFAULT["waypoints"]
                                                                              and v == 0)}
                         for w in out["waypoints"]]
-    out["drone"] = {k: v for k, v in out["drone"].items() if not (k in OMITTED_AT_DEFAULT["drone"] and v == 0)}
+    out["drone"] = {k: v for k, v in out["drone"].items() if v is not None and not (k in OMITTED_AT_DEFAULT["drone"]
+                                                                                   and v == 0)}
     return out
 
 

@@ -77,3 +77,41 @@ def test_mission_series_mass_of_the_row_holding_the_drop_is_its_steps_mean(tmp_p
     light_s = (1.5 - m) / 0.5 * row["dt_s"]
     e_in_row = s["propulsion_energy_after_release_j"] - d["e_propulsion_j"][start >= row["t_s"] - 1e-9].sum()
     assert light_s > 0.2 and e_in_row == pytest.approx(hover_power_w(DroneParams(), 1.0) * light_s, rel=0.05)
+
+
+# ------------------------------------------------------------------ a payload the drone cannot lift
+def test_max_takeoff_mass_refuses_a_payload_above_it(capsys, tmp_path):
+    """The power model knows no thrust limit (momentum theory gives a power for any mass; only the battery's maximum
+    power stops a run): 5 kg on the default 1 kg quad flew 87.6 s until the battery gave out. ``drone.
+    max_takeoff_mass_kg`` (unset by default: no limit, the default mission's dict and fingerprint unchanged) refuses
+    a take-off mass above it, one line naming both, nothing written; at or below it the drone flies."""
+    import dataclasses as dc
+
+    from _cli_helpers import one_error_line
+
+    from mission_sim.config import apply_overrides, config_from_dict, config_to_dict, load_config
+    from mission_sim.world.power import DroneParams
+
+    out = tmp_path / "m"
+    assert one_error_line(capsys, ["mission", "--dry-run", "--out", str(out), "--set", "drone.payload_kg=5",
+                                   "--set", "drone.max_takeoff_mass_kg=3"]) == (
+        "dronewpt mission: error: drone.payload_kg=5.0 is invalid: the take-off mass mass_kg + payload_kg = 6 kg is "
+        "above max_takeoff_mass_kg=3.0 kg; valid range: [0, 2] kg (a payload the drone can lift)")
+    assert not out.exists()
+    base = config_to_dict(load_config())
+    assert "max_takeoff_mass_kg" not in base["drone"]      # unset: left out (TOML has no null), as before
+    ok = config_from_dict(apply_overrides(base, {"drone.payload_kg": 2.0, "drone.max_takeoff_mass_kg": 3.0}))
+    assert ok.drone.total_mass_kg == 3.0 and config_to_dict(ok)["drone"]["max_takeoff_mass_kg"] == 3.0
+    assert config_from_dict(config_to_dict(ok)) == ok
+    with pytest.raises(ValueError, match=r"^payload_kg=2\.5 is invalid: .* = 3\.5 kg is above max_takeoff_mass_kg"):
+        dc.replace(ok.drone, payload_kg=2.5)   # (a MissionConfig changed in Python: the same check)
+    with pytest.raises(ValueError, match=r"^mass_kg=4\.0 is invalid; valid range: \(0, max_takeoff_mass_kg=3\.0\]"):
+        DroneParams(mass_kg=4.0, max_takeoff_mass_kg=3.0)
+    # calibrate's [drone] TOML writes the limit when set, no line when unset
+    from types import SimpleNamespace
+
+    from mission_sim.mavlink.calibrate import drone_toml
+    report = {"log": "x", "battery_source": "y", "calibrated_heldout_energy_error_rel": 0.0,
+              "default_heldout_energy_error_rel": 0.0, "mass_fixed": True}
+    assert "max_takeoff_mass_kg" not in drone_toml(SimpleNamespace(report=report, drone=DroneParams()))
+    assert "max_takeoff_mass_kg = 3\n" in drone_toml(SimpleNamespace(report=report, drone=ok.drone))

@@ -285,6 +285,8 @@ def drone_toml(cal: Calibration) -> str:
         if f.name in MISSION_LOAD_KEYS:
             continue
         v = getattr(cal.drone, f.name)
+        if v is None:       # (max_takeoff_mass_kg unset: no limit, no line)
+            continue
         lines.append(f"{f.name} = {v:d}" if isinstance(v, int) else f"{f.name} = {float(v):.6g}")
     return "\n".join(lines) + "\n"
 
