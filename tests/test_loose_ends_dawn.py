@@ -115,3 +115,71 @@ def test_max_takeoff_mass_refuses_a_payload_above_it(capsys, tmp_path):
               "default_heldout_energy_error_rel": 0.0, "mass_fixed": True}
     assert "max_takeoff_mass_kg" not in drone_toml(SimpleNamespace(report=report, drone=DroneParams()))
     assert "max_takeoff_mass_kg = 3\n" in drone_toml(SimpleNamespace(report=report, drone=ok.drone))
+
+
+# ------------------------------------------------------------------ NAV_PAYLOAD_PLACE (94)
+def _place_plan(path, p1=0.0, place_alt=0.0):
+    """Take off to 10 m, a waypoint 40 m north, NAV_PAYLOAD_PLACE 40 m east of it (max descent p1), RTL."""
+    import json
+    lat0, lon0 = 47.397742, 8.545594
+    def item(cmd, lat=0.0, lon=0.0, alt=0.0, p1=0.0, frame=3):
+        return {"type": "SimpleItem", "command": cmd, "frame": frame, "autoContinue": True,
+                "params": [p1, 0, 0, None, lat, lon, alt]}
+    items = [item(22, alt=10.0), item(16, lat0 + 40 / 111_200, lon0, 10.0),
+             item(94, lat0 + 40 / 111_200, lon0 + 40 / 75_100, place_alt, p1=p1), item(20)]
+    path.write_text(json.dumps({"fileType": "Plan", "version": 1, "groundStation": "QGroundControl",
+                                "mission": {"version": 2, "firmwareType": 3, "vehicleType": 2, "items": items,
+                                            "plannedHomePosition": [lat0, lon0, 488.0]},
+                                "geoFence": {"version": 2, "polygons": [], "circles": []},
+                                "rallyPoints": {"version": 2, "points": []}}))
+    return path
+
+
+def test_payload_place_descends_releases_at_the_ground_and_climbs_back(tmp_path, capsys):
+    """NAV_PAYLOAD_PLACE was 'command NAV_PAYLOAD_PLACE (94) is not supported' (exit 2). ArduCopter flies it: to its
+    position at the current height (the item's altitude unused), down until the payload touches the ground, release,
+    back up. Now the route does that (the ground at home's altitude), one warning naming what is not modelled; a max
+    descent (param1) that stops above the ground releases nothing (ArduCopter completes the item without releasing),
+    warned. The run: one release at the bottom, the drone back at 10 m after it."""
+    import json
+    import warnings
+
+    import pandas as pd
+
+    from mission_sim.plans.items import read_mission
+    from mission_sim.plans.route import route_from_items
+    from wpt_receiver.notices import DronewptWarning
+
+    plan = _place_plan(tmp_path / "place.plan", place_alt=25.0)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        route = route_from_items(read_mission(plan))
+    said = [str(w.message) for w in rec if issubclass(w.category, DronewptWarning)]
+    assert [(w["action"], round(w["x_m"]), round(w["y_m"]), w["z_m"], w.get("release", 0)) for w in route][1:5] == [
+        ("waypoint", 0, 40, 10.0, 0), ("waypoint", 40, 40, 10.0, 0), ("waypoint", 40, 40, 0.0, 1),
+        ("waypoint", 40, 40, 10.0, 0)]
+    assert len(said) == 1 and "NAV_PAYLOAD_PLACE (94) flown as ArduCopter flies it" in said[0]
+    assert "not modelled: the payload's hang below the drone" in said[0]
+    # a max descent of 4 m from 10 m: no release there
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        route = route_from_items(read_mission(_place_plan(tmp_path / "short.plan", p1=4.0)))
+    assert [w["z_m"] for w in route][3:5] == [6.0, 10.0] and not any(w.get("release") for w in route)
+    assert any("max descent stops above the ground" in str(w.message) for w in rec)
+    # the mission: dropped at the bottom
+    rc = main(["mission", "--plan", str(plan), "--set", "drone.payload_kg=0.5", "--no-plot", "--no-progress",
+               "--out", str(tmp_path / "o")])
+    out, err = capsys.readouterr()
+    assert rc == 0, err
+    assert "warning: " in err and "NAV_PAYLOAD_PLACE (94) flown as ArduCopter" in err
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert s["payload_releases"] == 1 and s["landing_mass_kg"] == 1.0
+    d = pd.read_parquet(tmp_path / "o" / "timeseries.parquet")
+    at = d["t_s"].sub(s["first_release_t_s"]).abs().idxmin()
+    assert d["z_m"][at] < 0.5 and d["x_m"][at] == pytest.approx(40, abs=1) and d["z_m"][at:].max() > 9.9
+    # on the ground: refused
+    raw = read_mission(plan)
+    import dataclasses as dc
+    raw = dc.replace(raw, items=(raw.items[2],) + raw.items)
+    with pytest.raises(ValueError, match=r"NAV_PAYLOAD_PLACE on the ground is not supported"):
+        route_from_items(raw)
