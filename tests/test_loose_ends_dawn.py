@@ -183,3 +183,41 @@ def test_payload_place_descends_releases_at_the_ground_and_climbs_back(tmp_path,
     raw = dc.replace(raw, items=(raw.items[2],) + raw.items)
     with pytest.raises(ValueError, match=r"NAV_PAYLOAD_PLACE on the ground is not supported"):
         route_from_items(raw)
+
+
+# ------------------------------------------------------------------ DRONEWPT_CACHE_DIR that cannot be used
+@pytest.mark.parametrize("kind", ["file", "under_a_file"])
+def test_an_unusable_cache_dir_is_said_once_per_process_tree(tmp_path, kind):
+    """DRONEWPT_CACHE_DIR set to a file (or below one) turned the disk cache off silently: every run rebuilt the
+    coupling tables and the ahead-of-time build (the default mission: 33 s of wall time instead of 0.8 s), no word.
+    Now one warning on stderr at import naming the setting, why, and what is used instead; the processes started
+    after it (spawned and forked workers importing the package again) do not repeat it. A usable folder: silent."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    afile = tmp_path / "cache_is_a_file"
+    afile.write_text("")
+    target = afile if kind == "file" else afile / "sub"
+    script = tmp_path / "workers.py"
+    script.write_text("import multiprocessing as mp\nimport wpt_receiver\n\n"
+                      "def f(_):\n    import wpt_receiver\n    return 1\n\n"
+                      "if __name__ == '__main__':\n"
+                      "    for method in ('spawn', 'fork'):\n"
+                      "        with mp.get_context(method).Pool(2) as pool:\n"
+                      "            assert sum(pool.map(f, range(4))) == 4\n")
+    root = str(Path(__file__).resolve().parents[1])
+    env = {**os.environ, "DRONEWPT_CACHE_DIR": str(target), "PYTHONPATH": root}
+    env.pop("DRONEWPT_CACHE_DIR_WARNED", None)
+    run = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    said = [ln for ln in run.stderr.splitlines() if "DRONEWPT_CACHE_DIR=" in ln]
+    why = "is a file, not a folder" if kind == "file" else f"cannot be made: {str(afile)!r} is a file"
+    assert said == [f"dronewpt: warning: DRONEWPT_CACHE_DIR={str(target)!r} {why}: the disk cache is off (the coupling "
+                    "tables and the mission loop's ahead-of-time build are rebuilt in every run: tens of seconds "
+                    "each); valid: a folder this user can write (or DRONEWPT_CACHE_DIR= empty to turn the cache off "
+                    "without this warning)"], run.stderr
+    ok = subprocess.run([sys.executable, "-c", "import wpt_receiver"], capture_output=True, text=True, timeout=300,
+                        env={**env, "DRONEWPT_CACHE_DIR": str(tmp_path / "fine" / "cache")})
+    assert ok.returncode == 0 and "DRONEWPT_CACHE_DIR" not in ok.stderr, ok.stderr

@@ -42,6 +42,11 @@ from .kernel_cache import place_numba_cache
 
 place_numba_cache(__path__[0])      # an installed copy: numba's cache in dronewpt's disk cache, not site-packages
 
+from .diskcache import warn_unusable
+from .kernel_cache import numba_fallback
+
+warn_unusable(numba_fallback())     # DRONEWPT_CACHE_DIR a file or not writable: said once (not silently ignored)
+
 from .notices import listen_for_compilation
 
 listen_for_compilation()            # one notice when numba first compiles one of our kernels (a silent ~40 s)
