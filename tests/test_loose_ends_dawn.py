@@ -221,3 +221,28 @@ def test_an_unusable_cache_dir_is_said_once_per_process_tree(tmp_path, kind):
     ok = subprocess.run([sys.executable, "-c", "import wpt_receiver"], capture_output=True, text=True, timeout=300,
                         env={**env, "DRONEWPT_CACHE_DIR": str(tmp_path / "fine" / "cache")})
     assert ok.returncode == 0 and "DRONEWPT_CACHE_DIR" not in ok.stderr, ok.stderr
+
+
+# ------------------------------------------------------------------ earlier partial recordings beside a stream's .tlog
+def test_telemetry_names_earlier_partial_recordings_and_keeps_them(tmp_path, capsys):
+    """Streams cut short leave X.partial.tlog, X.partial.2.tlog, ... (never overwritten, never deleted: they are
+    recordings); they piled up unnoticed. A stream that finds some says so in one line naming them, and still
+    leaves them byte for byte; no earlier partial: nothing said."""
+    tlog = tmp_path / "x.tlog"
+    kept = {tmp_path / "x.partial.tlog": b"one", tmp_path / "x.partial.3.tlog": b"three",
+            tmp_path / "x.partial.abc.tlog": b"not ours", tmp_path / "y.partial.tlog": b"other target"}
+    for p, data in kept.items():
+        p.write_bytes(data)
+    rc = main(["telemetry", "--connect", "none", "--tlog", str(tlog), "--duration", "1"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 0 and tlog.stat().st_size > 0
+    assert err == [f"dronewpt telemetry: warning: {str(tlog)!r}: 2 earlier partial recording(s) beside it, from "
+                   "streams cut short, kept as they are: 'x.partial.tlog', 'x.partial.3.tlog'; this stream writes "
+                   "'x.partial.2.tlog' (renamed to 'x.tlog' when it ends); valid: move or delete them once read "
+                   "(dronewpt never does)"], err
+    assert all(p.read_bytes() == data for p, data in kept.items())
+    assert not (tmp_path / "x.partial.2.tlog").exists()
+    for p in list(kept)[:2]:
+        p.unlink()
+    rc = main(["telemetry", "--connect", "none", "--tlog", str(tlog), "--duration", "1"])
+    assert rc == 0 and capsys.readouterr().err == ""
