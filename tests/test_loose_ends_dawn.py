@@ -246,3 +246,25 @@ def test_telemetry_names_earlier_partial_recordings_and_keeps_them(tmp_path, cap
         p.unlink()
     rc = main(["telemetry", "--connect", "none", "--tlog", str(tlog), "--duration", "1"])
     assert rc == 0 and capsys.readouterr().err == ""
+
+
+# ------------------------------------------------------------------ train: imitation only ends with a summary line
+def test_train_imitation_only_ends_with_a_summary_line(tmp_path, capsys):
+    """``train --imitate T --timesteps 0`` ended with the file lines and no summary (final_summary had no evaluation
+    and no training episodes to show). Now one line from the clone's record: teacher, fits, samples, the last fit's
+    RMS action error (as in imitation.json), and the compare command that evaluates it; nothing re-evaluated."""
+    pytest.importorskip("stable_baselines3")
+    import json
+    out = tmp_path / "imit"
+    rc = main(["train", "--algo", "ppo", "--timesteps", "0", "--imitate", "model_based", "--dagger", "1",
+               "--imitation-episodes", "2", "--imitation-epochs", "1", "--scenario", "nominal", "--no-progress",
+               "--out", str(out)])
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert rc == 0
+    log = json.loads((out / "imitation.json").read_text())
+    assert len(log) == 2
+    assert lines[-1] == (f"imitation only (--timesteps 0): model_based cloned in 2 fit(s) (1 DAgger iteration(s)), "
+                         f"{log[-1]['samples']:,} samples, the last fit's RMS action error "
+                         f"{log[-1]['train_rms_action']:.4g} on its training data; nothing was evaluated: `dronewpt "
+                         f"compare --policies imitation:{out / 'ppo_sbar.zip'},model_based` measures it against its "
+                         "teacher")
