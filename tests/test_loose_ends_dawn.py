@@ -268,3 +268,38 @@ def test_train_imitation_only_ends_with_a_summary_line(tmp_path, capsys):
                          f"{log[-1]['train_rms_action']:.4g} on its training data; nothing was evaluated: `dronewpt "
                          f"compare --policies imitation:{out / 'ppo_sbar.zip'},model_based` measures it against its "
                          "teacher")
+
+
+# ------------------------------------------------------------------ pads files: long values cut in the one-line error
+@pytest.mark.parametrize("doc, said", [
+    ({"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {},
+                                                 "geometry": {"type": "Point", "coordinates": "COORDS"}}]},
+     "feature 0: coordinates [[8.5, 47.4], [8.50001, 47.4], [8.50002, 47.4], [8.50003, 47... (2000 items) are invalid; "
+     "valid: [lon, lat] or [lon, lat, alt], JSON numbers"),
+    ({"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {"hover_time_s": "COORDS"},
+                                                 "geometry": {"type": "Point", "coordinates": [8.5, 47.4]}}]},
+     "feature 0: hover_time_s=[[8.5, 47.4], [8.50001, 47.4], [8.50002, 47.4], [8.50003, 47... (2000 items) is "
+     "invalid; valid range: [0, 1e+06] s, a JSON number"),
+    ({"type": "F" * 5000, "features": []},
+     "type '" + "F" * 59 + "... (5000 characters) is not GeoJSON's, not a pads file; valid: a GeoJSON "
+     "FeatureCollection of Point / MultiPoint features (or one Feature or geometry), or a CSV lat,lon[,alt]"
+     "[,hover_time_s]"),
+    ("lat,lon,hover_time_s\n47.4,8.5," + "9" * 3000 + "\n",
+     "line 2: hover_time_s='" + "9" * 59 + "... (3000 characters) is invalid; valid range: [0, 1e+06] s"),
+])
+def test_pads_file_errors_cut_a_long_value(tmp_path, capsys, doc, said):
+    """A 2,000-point coordinate array given as a Point's coordinates (or as hover_time_s) was echoed whole: a 34 kB
+    error line; a 3,000-digit hover time in a CSV, a 5,000-character "type", 3-5 kB. Now the value's first 60
+    characters and its size; the key, the feature or line, and the valid range stay."""
+    import json
+
+    from _cli_helpers import one_error_line
+    coords = [[round(8.5 + i * 1e-5, 5), 47.4] for i in range(2000)]
+    if isinstance(doc, str):
+        path = tmp_path / "pads.csv"
+        path.write_text(doc)
+    else:
+        path = tmp_path / "pads.geojson"
+        path.write_text(json.dumps(doc).replace('"COORDS"', json.dumps(coords)))
+    line = one_error_line(capsys, ["mission", "--dry-run", "--pads", str(path), "--out", str(tmp_path / "o")])
+    assert line == f"dronewpt mission: error: {path.name}: {said}" and len(line) < 400
