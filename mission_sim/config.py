@@ -545,20 +545,20 @@ def section_from_dict(section: str, d: dict):
 #: Keys added after sweeps were stored (2026-11-28: the payload drop), left out of :func:`config_to_dict` at their
 #: default 0: a base mission without a payload release keeps the dict, hence the sweep fingerprint
 #: (:func:`mission_sim.studies.worst_cases.base_fingerprint`), it had before them, so an older sweep folder resumes.
-OMITTED_AT_DEFAULT = {"drone": ("release_kg",), "waypoints": ("release",)}
+#: ``drone.max_takeoff_mass_kg`` (2026-11-28 04:35 UTC) is left out when unset (None: TOML has no null).
+OMITTED_AT_DEFAULT = {"drone": ("release_kg", "max_takeoff_mass_kg"), "waypoints": ("release",)}
 
 
 def config_to_dict(cfg: MissionConfig) -> dict:
-    """Plain dict (TOML-ready: no None values: ``drone.max_takeoff_mass_kg`` unset is left out) of a
-    :class:`MissionConfig`; the keys of :data:`OMITTED_AT_DEFAULT` only when not 0 (reading the dict back gives the
-    same config)."""
+    """Plain dict (TOML-ready: no None values) of a :class:`MissionConfig`; the keys of :data:`OMITTED_AT_DEFAULT`
+    only when not 0 / None (reading the dict back gives the same config)."""
     out = asdict(cfg)
     out["pads"] = [{k: v for k, v in p.items() if v is not None} for p in out["pads"]]
     out["waypoints"] = [{k: v for k, v in w.items() if v is not None and not (k in OMITTED_AT_DEFAULT["waypoints"]
                                                                              and v == 0)}
                         for w in out["waypoints"]]
-    out["drone"] = {k: v for k, v in out["drone"].items() if v is not None and not (k in OMITTED_AT_DEFAULT["drone"]
-                                                                                   and v == 0)}
+    out["drone"] = {k: v for k, v in out["drone"].items() if not (k in OMITTED_AT_DEFAULT["drone"]
+                                                                  and (v is None or v == 0))}
     return out
 
 

@@ -42,10 +42,13 @@ from .kernel_cache import place_numba_cache
 
 place_numba_cache(__path__[0])      # an installed copy: numba's cache in dronewpt's disk cache, not site-packages
 
-from .diskcache import warn_unusable
-from .kernel_cache import numba_fallback
+import os as _os
 
-warn_unusable(numba_fallback())     # DRONEWPT_CACHE_DIR a file or not writable: said once (not silently ignored)
+if _os.environ.get("DRONEWPT_CACHE_DIR"):   # a file or a folder that cannot be written: said once, not ignored silently
+    from .diskcache import warn_unusable
+    from .kernel_cache import numba_fallback
+    warn_unusable(numba_fallback())
+del _os
 
 from .notices import listen_for_compilation
 
