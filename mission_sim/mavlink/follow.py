@@ -251,7 +251,7 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
 
     Positions from ``follow_connect`` (e.g. ``udpin:127.0.0.1:14551``; no fix or implausible: skipped,
     :class:`_Positions`) are timed by the vehicle's clock (:class:`_Clock`) and converted to the pad frame about
-    ``home`` (None: the first position received is the pad). Every ``chunk_s`` seconds the
+    ``home`` (None: the first position taken is the pad, :class:`_Positions`). Every ``chunk_s`` seconds the
     new stretch runs through :class:`ChunkedMission` and its telemetry is sent at ``rate_hz``,
     ``chunk_s`` behind the vehicle. The loop ends after ``max_wall_s`` seconds, ``max_messages``
     received messages or ``idle_timeout_s`` without a position once positions have come (before the

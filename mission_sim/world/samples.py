@@ -168,12 +168,12 @@ class MissionSamples:
         end = np.asarray(end_s, dtype=float)
         start = end - np.asarray(dt_s, dtype=float)
         dt = sched.dt_s
-        for t_release in sched.release_t_s:
-            for j in np.flatnonzero((start < t_release - 1e-9) & (end > t_release + 1e-9)):
-                k = np.arange(max(int(math.floor(start[j] / dt)) - 1, 0), int(math.ceil(end[j] / dt)) + 1)
-                t_k = k * dt
-                held = np.maximum(np.minimum(t_k + dt, end[j]) - np.maximum(t_k, start[j]), 0.0)
-                out[j] = float(np.dot(held, sched.at(t_k)) / held.sum())
+        last = sched.at_samples(np.maximum(np.ceil(end / dt - 1e-9).astype(np.int64) - 1, 0))   # the step's last sample
+        for j in np.flatnonzero(last != out):   # (the samples' masses differ within the step: a drop inside it)
+            k = np.arange(max(int(math.floor(start[j] / dt)) - 1, 0), int(math.ceil(end[j] / dt)) + 1)
+            t_k = k * dt
+            held = np.maximum(np.minimum(t_k + dt, end[j]) - np.maximum(t_k, start[j]), 0.0)
+            out[j] = float(np.dot(held, sched.at(t_k)) / held.sum())
         return out
 
     @property
