@@ -303,3 +303,25 @@ def test_pads_file_errors_cut_a_long_value(tmp_path, capsys, doc, said):
         path.write_text(json.dumps(doc).replace('"COORDS"', json.dumps(coords)))
     line = one_error_line(capsys, ["mission", "--dry-run", "--pads", str(path), "--out", str(tmp_path / "o")])
     assert line == f"dronewpt mission: error: {path.name}: {said}" and len(line) < 400
+
+
+def test_follow_with_two_positions_ends_after_the_idle_time(monkeypatch, tmp_path, capsys):
+    """A vehicle that sends 2 positions (fewer than CONFIRM) and stops: they are followed once --follow-idle passes,
+    not only at --follow-time (they are held for the reference, and count as come). Counted in polls of the vehicle
+    (each waits 0.05 s when nothing comes): ~10 after 0.5 s idle, ~600 had it waited the 30 s."""
+    from mission_sim.mavlink import follow
+    from test_newcomer2 import _FakeVehicle, _track
+
+    class Counting(_FakeVehicle):
+        polls = 0
+
+        def recv_match(self, *a, **k):
+            Counting.polls += 1
+            return super().recv_match(*a, **k)
+
+    monkeypatch.setattr(follow, "open_follow", lambda connect: Counting(_track(2, lat0=47.4, lon0=8.5)))
+    rc = main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--follow-time", "30", "--follow-idle", "0.5",
+               "--connect", "none", "--tlog", str(tmp_path / "two.tlog")])
+    out = capsys.readouterr().out
+    assert rc == 0 and "followed 2 live positions" in out, out
+    assert Counting.polls < 200, Counting.polls

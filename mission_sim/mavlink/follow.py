@@ -301,11 +301,13 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
             msg = vin.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=wait)
             n_msgs += 1
             # idle only when nothing is waiting (a slow chunk must not drop the positions queued meanwhile)
-            idle = msg is None and sim is not None and time.monotonic() - last_rx > idle_timeout_s
+            # (positions held for the first reference count as come: a vehicle that stops after 2 is idle too)
+            idle = msg is None and (sim is not None or bool(positions.held)) and \
+                time.monotonic() - last_rx > idle_timeout_s
             taken = [] if msg is None else positions.take(msg, time.monotonic())
-            if taken:
+            if taken or (msg is not None and positions.held):
                 last_rx = time.monotonic()
-                add(taken)
+            add(taken)
             if sim is not None and sim.pending_s() >= chunk_s:
                 enqueue(sim.simulate())
             send_due(time.monotonic())
