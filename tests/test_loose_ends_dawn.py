@@ -325,3 +325,32 @@ def test_follow_with_two_positions_ends_after_the_idle_time(monkeypatch, tmp_pat
     out = capsys.readouterr().out
     assert rc == 0 and "followed 2 live positions" in out, out
     assert Counting.polls < 200, Counting.polls
+
+
+def test_an_installed_copy_names_where_numba_s_cache_went(tmp_path):
+    """An installed copy (its package folder in site-packages) with DRONEWPT_CACHE_DIR a file: numba's cache goes to
+    a private temporary folder (place_numba_cache, as before); the warning names that folder too. In a fresh
+    interpreter (place_numba_cache sets NUMBA_CACHE_DIR for the process)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    afile = tmp_path / "c"
+    afile.write_text("")
+    pkg = tmp_path / "lib" / "site-packages" / "wpt_receiver"
+    pkg.mkdir(parents=True)
+    code = ("import os\nfrom wpt_receiver.kernel_cache import place_numba_cache, numba_fallback\n"
+            "from wpt_receiver.diskcache import WARNED_VAR, warn_unusable\n"
+            "os.environ.pop(WARNED_VAR)\n"   # (the checkout's own import said it, without a numba folder to name)
+            f"folder = place_numba_cache({str(pkg)!r})\n"
+            "assert folder is not None and folder == numba_fallback() and os.environ['NUMBA_CACHE_DIR'] == str(folder)\n"
+            "print(warn_unusable(numba_fallback()))\nprint(folder)\n")
+    root = str(Path(__file__).resolve().parents[1])
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "DRONEWPT_CACHE_DIR_WARNED")}
+    env.update(DRONEWPT_CACHE_DIR=str(afile), PYTHONPATH=root)
+    run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    *_, said, folder = run.stdout.strip().splitlines()
+    assert said.startswith(f"dronewpt: warning: DRONEWPT_CACHE_DIR={str(afile)!r} is a file, not a folder: the disk "
+                           "cache is off") and f", numba's cache is in {folder!r};" in said
