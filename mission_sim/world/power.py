@@ -83,6 +83,19 @@ DRONE_RANGES: dict[str, Range] = {
 }
 
 
+#: relative tolerance of the take-off mass check: 0.1 + 0.2 is 0.30000000000000004 in binary, not above a 0.3 kg limit
+MTOM_REL_TOL = 1e-9
+
+
+def above_max_takeoff(mass_kg: float, payload_kg: float, max_takeoff_mass_kg: float | None) -> bool:
+    """True when ``mass_kg + payload_kg`` is above ``max_takeoff_mass_kg`` (None: no limit) by more than rounding
+    (:data:`MTOM_REL_TOL`): the one test of :class:`DroneParams` and of the fitted masses of replay / calibrate."""
+    if max_takeoff_mass_kg is None:
+        return False
+    total = float(mass_kg) + float(payload_kg)
+    return total > max_takeoff_mass_kg and not math.isclose(total, max_takeoff_mass_kg, rel_tol=MTOM_REL_TOL)
+
+
 @dataclass(frozen=True)
 class DroneParams:
     """Multirotor parameters (SI). See module notes for where the defaults come from; a config's values must also lie
@@ -121,13 +134,13 @@ class DroneParams:
         mtom = self.max_takeoff_mass_kg
         if mtom is not None:
             check_positive(self, "max_takeoff_mass_kg")
-            if self.mass_kg > mtom:
-                raise ValueError(f"mass_kg={self.mass_kg!r} is invalid; valid range: (0, max_takeoff_mass_kg="
-                                 f"{mtom!r}] kg (the airframe's maximum take-off mass)")
-            if self.mass_kg + self.payload_kg > mtom:
+            if above_max_takeoff(self.mass_kg, 0.0, mtom):
+                raise ValueError(f"mass_kg={self.mass_kg!r} is invalid; valid range: [{DRONE_RANGES['mass_kg'].lo:g}, "
+                                 f"max_takeoff_mass_kg={mtom!r}] kg (the airframe's maximum take-off mass)")
+            if above_max_takeoff(self.mass_kg, self.payload_kg, mtom):
                 raise ValueError(f"payload_kg={self.payload_kg!r} is invalid: the take-off mass mass_kg + payload_kg "
                                  f"= {self.mass_kg + self.payload_kg:g} kg is above max_takeoff_mass_kg={mtom!r} kg; "
-                                 f"valid range: [0, {mtom - self.mass_kg:g}] kg (a payload the drone can lift)")
+                                 f"valid range: [0, {max(mtom - self.mass_kg, 0.0):g}] kg (a payload the drone can lift)")
         for name in ("figure_of_merit", "drive_efficiency"):
             v = float(getattr(self, name))
             if not 0 < v <= 1:
