@@ -95,3 +95,14 @@ def test_a_take_off_mass_equal_to_the_limit_up_to_rounding_is_accepted(tmp_path,
         DroneParams(mass_kg=0.1, payload_kg=0.2001, max_takeoff_mass_kg=0.3)
     with pytest.raises(ValueError, match=r"mass_kg=0.5 is invalid; valid range: \[0.01, max_takeoff_mass_kg=0.3\]"):
         DroneParams(mass_kg=0.5, max_takeoff_mass_kg=0.3)
+
+
+# ------------------------------------------------------------------------------ one-line errors: the cut
+def test_a_string_is_cut_only_beyond_the_larger_string_limit():
+    """loose8's clipped cut every text over 80 characters, strings too, against test_tidy_night's pin (a 100-character
+    string shown whole). The rule now: containers and other reprs cut beyond 80 characters, strings beyond 200 (a
+    name or path a user typed stays whole; a 3,000-digit paste does not)."""
+    from mission_sim.validation import CLIP_HEAD, CLIP_STRING_AT, shown
+    assert shown("a" * 100) == repr("a" * 100) and shown("a" * (CLIP_STRING_AT - 2)) == repr("a" * (CLIP_STRING_AT - 2))
+    assert shown("a" * CLIP_STRING_AT) == "'" + "a" * (CLIP_HEAD - 1) + f"... ({CLIP_STRING_AT} characters)"
+    assert shown(list(range(30))).endswith("... (30 items)") and shown(list(range(20))) == repr(list(range(20)))
