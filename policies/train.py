@@ -363,15 +363,18 @@ def final_summary(meta: dict, model: str | None = None) -> str | None:
         return (f"final evaluation at {ev['timesteps']:,} steps ({n} held-out windows): return "
                 f"{spread(ev, 'return_mean', 'return_std', '.4g')}, cost {spread(ev, 'cost', 'cost_std', '.4g')} "
                 f"(mean +- std), in short mode {100 * ev['reached_short_mode']:.0f} %{against_budget(ev)}")
+    import shlex   # (the command shown can be pasted: a model path with a space is quoted)
+
     im = meta.get("imitation")
     if tr is None and im and im.get("iterations") and not meta.get("timesteps"):
         last = im["iterations"][-1]
         fits = len(im["iterations"])
         teacher = im.get("teacher", "?")
+        policies = shlex.quote(f"imitation:{model or 'MODEL.zip'},{teacher}")
         return (f"imitation only (--timesteps 0): {teacher} cloned in {fits} fit(s) ({fits - 1} DAgger "
                 f"iteration(s)), {last['samples']:,} samples, the last fit's RMS action error {last['train_rms_action']:.4g} "
                 f"on its training data; nothing was evaluated: `dronewpt compare --policies "
-                f"imitation:{model or 'MODEL.zip'},{teacher}` measures it against its teacher")
+                f"{policies}` measures it against its teacher")
     if tr is None:
         return None
     if not tr["episodes"]:

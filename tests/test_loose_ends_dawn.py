@@ -249,25 +249,53 @@ def test_telemetry_names_earlier_partial_recordings_and_keeps_them(tmp_path, cap
 
 
 # ------------------------------------------------------------------ train: imitation only ends with a summary line
-def test_train_imitation_only_ends_with_a_summary_line(tmp_path, capsys):
+def _imitation_meta(teacher="model_based", iterations=((1200, 0.0812), (2400, 0.04567))):
+    """The metadata an imitation-only run writes (policies.imitation._save): timesteps 0, the fits' log."""
+    return {"algo": "ppo", "timesteps": 0, "imitation": {
+        "teacher": teacher, "dagger": len(iterations) - 1,
+        "iterations": [{"iteration": k, "samples": n, "train_rms_action": rms} for k, (n, rms) in enumerate(iterations)]}}
+
+
+def test_train_imitation_only_summary_line_is_made_from_the_clone_s_record():
     """``train --imitate T --timesteps 0`` ended with the file lines and no summary (final_summary had no evaluation
     and no training episodes to show). Now one line from the clone's record: teacher, fits, samples, the last fit's
-    RMS action error (as in imitation.json), and the compare command that evaluates it; nothing re-evaluated."""
-    pytest.importorskip("stable_baselines3")
+    RMS action error (as in imitation.json), and the compare command that evaluates it (its argument quoted for a
+    shell: a model path with a space); nothing re-evaluated. (A synthetic record: the real run took 92 s.)"""
+    from policies.train import final_summary
+    line = final_summary(_imitation_meta(), "/runs/my run/ppo_sbar.zip")
+    assert line == ("imitation only (--timesteps 0): model_based cloned in 2 fit(s) (1 DAgger iteration(s)), 2,400 "
+                    "samples, the last fit's RMS action error 0.04567 on its training data; nothing was evaluated: "
+                    "`dronewpt compare --policies 'imitation:/runs/my run/ppo_sbar.zip,model_based'` measures it "
+                    "against its teacher")
+    assert "--policies imitation:MODEL.zip,mpc`" in final_summary(_imitation_meta("mpc", ((10, 0.5),)))
+    assert final_summary({**_imitation_meta(), "timesteps": 5000}) is None   # fine-tuned: not imitation only
+
+
+def test_train_imitation_only_cli_prints_the_summary_last(monkeypatch, tmp_path, capsys):
+    """The CLI path: train's written metadata read back, the summary printed after the file lines, with the model's
+    path (train() itself monkeypatched: the clone's fitting is not what this checks)."""
     import json
+
+    import policies
+    import policies.train as train_mod
+    seen = {}
+
+    def fake_train(algo, timesteps, out_dir, **kw):
+        seen.update(kw, algo=algo, timesteps=timesteps)
+        meta = tmp_path / "imit" / "ppo_sbar.json"
+        meta.write_text(json.dumps(_imitation_meta()))
+        return {"model": str(tmp_path / "imit" / "ppo_sbar.zip"), "meta": str(meta)}
+
+    monkeypatch.setattr(policies, "require_sb3", lambda: None)
+    monkeypatch.setattr(train_mod, "train", fake_train)
     out = tmp_path / "imit"
     rc = main(["train", "--algo", "ppo", "--timesteps", "0", "--imitate", "model_based", "--dagger", "1",
                "--imitation-episodes", "2", "--imitation-epochs", "1", "--scenario", "nominal", "--no-progress",
                "--out", str(out)])
     lines = capsys.readouterr().out.strip().splitlines()
-    assert rc == 0
-    log = json.loads((out / "imitation.json").read_text())
-    assert len(log) == 2
-    assert lines[-1] == (f"imitation only (--timesteps 0): model_based cloned in 2 fit(s) (1 DAgger iteration(s)), "
-                         f"{log[-1]['samples']:,} samples, the last fit's RMS action error "
-                         f"{log[-1]['train_rms_action']:.4g} on its training data; nothing was evaluated: `dronewpt "
-                         f"compare --policies imitation:{out / 'ppo_sbar.zip'},model_based` measures it against its "
-                         "teacher")
+    assert rc == 0 and seen["timesteps"] == 0 and seen["imitate"] == "model_based" and seen["dagger"] == 1
+    assert lines[-1] == train_mod.final_summary(_imitation_meta(), str(out / "ppo_sbar.zip"))
+    assert lines[-1].startswith("imitation only (--timesteps 0): model_based cloned in 2 fit(s)")
 
 
 # ------------------------------------------------------------------ pads files: long values cut in the one-line error
