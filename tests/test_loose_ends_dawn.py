@@ -118,7 +118,7 @@ def test_max_takeoff_mass_refuses_a_payload_above_it(capsys, tmp_path):
 
 
 # ------------------------------------------------------------------ NAV_PAYLOAD_PLACE (94)
-def _place_plan(path, p1=0.0, place_alt=0.0):
+def _place_plan(path, p1=0.0, place_alt=0.0, place_frame=3):
     """Take off to 10 m, a waypoint 40 m north, NAV_PAYLOAD_PLACE 40 m east of it (max descent p1), RTL."""
     import json
     lat0, lon0 = 47.397742, 8.545594
@@ -126,7 +126,7 @@ def _place_plan(path, p1=0.0, place_alt=0.0):
         return {"type": "SimpleItem", "command": cmd, "frame": frame, "autoContinue": True,
                 "params": [p1, 0, 0, None, lat, lon, alt]}
     items = [item(22, alt=10.0), item(16, lat0 + 40 / 111_200, lon0, 10.0),
-             item(94, lat0 + 40 / 111_200, lon0 + 40 / 75_100, place_alt, p1=p1), item(20)]
+             item(94, lat0 + 40 / 111_200, lon0 + 40 / 75_100, place_alt, p1=p1, frame=place_frame), item(20)]
     path.write_text(json.dumps({"fileType": "Plan", "version": 1, "groundStation": "QGroundControl",
                                 "mission": {"version": 2, "firmwareType": 3, "vehicleType": 2, "items": items,
                                             "plannedHomePosition": [lat0, lon0, 488.0]},

@@ -106,3 +106,56 @@ def test_a_string_is_cut_only_beyond_the_larger_string_limit():
     assert shown("a" * 100) == repr("a" * 100) and shown("a" * (CLIP_STRING_AT - 2)) == repr("a" * (CLIP_STRING_AT - 2))
     assert shown("a" * CLIP_STRING_AT) == "'" + "a" * (CLIP_HEAD - 1) + f"... ({CLIP_STRING_AT} characters)"
     assert shown(list(range(30))).endswith("... (30 items)") and shown(list(range(20))) == repr(list(range(20)))
+
+
+# ------------------------------------------------------------------------------ NAV_PAYLOAD_PLACE's altitude
+@pytest.mark.parametrize("alt, frame", [(-50.0, 3), (-50.0, 10), (1e6, 0), (25.0, 11)])
+def test_payload_place_s_unused_altitude_and_frame_are_not_checked(tmp_path, alt, frame):
+    """ArduCopter flies NAV_PAYLOAD_PLACE to its position at the current height (the item's altitude unused, as the
+    docs say); loose8 still checked that altitude and its frame: alt -50 (frame 3) or a terrain frame (10) refused the
+    mission. Now only x / y are taken: the same route as with altitude 0 in frame 3."""
+    import warnings
+
+    from mission_sim.plans.items import read_mission
+    from mission_sim.plans.route import route_from_items
+    from test_loose_ends_dawn import _place_plan
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        want = route_from_items(read_mission(_place_plan(tmp_path / "a.plan")))
+        got = route_from_items(read_mission(_place_plan(tmp_path / "b.plan", place_alt=alt, place_frame=frame)))
+    assert got == want
+    assert [(w["z_m"], w.get("release", 0)) for w in got][3:5] == [(0.0, 1), (10.0, 0)]
+
+
+def test_payload_place_warning_names_each_item_once_under_do_jump_and_says_the_descent_speed(tmp_path):
+    """A DO_JUMP repeating a NAV_PAYLOAD_PLACE named it once per flight of it ('item 2, item 2, item 2'); the list of
+    what is not modelled lacked the descent speed (PLDP_SPEED_DN / LAND_SPEED); the payload-0 warning named
+    DO_GRIPPER and [[waypoints]] releases, not the place items that make releases too."""
+    import json
+    import warnings
+
+    from mission_sim.config import config_from_dict, load_config_dict
+    from mission_sim.plans.items import read_mission
+    from mission_sim.plans.route import route_from_items
+    from mission_sim.setup_warnings import payload_warnings
+    from test_loose_ends_dawn import _place_plan
+    path = _place_plan(tmp_path / "loop.plan")
+    doc = json.loads(path.read_text())
+    items = doc["mission"]["items"]
+    for k, it in enumerate(items):
+        it["doJumpId"] = k + 1
+    items.insert(3, {"type": "SimpleItem", "command": 177, "frame": 2, "autoContinue": True, "doJumpId": 9,
+                     "params": [2, 2, 0, 0, 0, 0, 0]})   # back to the waypoint (doJumpId 2), twice
+    path.write_text(json.dumps(doc))
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        route = route_from_items(read_mission(path))
+    assert sum(int(w.get("release", 0)) for w in route) == 3   # the place flown 3 times
+    said = [str(w.message) for w in rec if "NAV_PAYLOAD_PLACE (94) flown" in str(w.message)]
+    assert len(said) == 1
+    where = said[0].split(": ")[1]
+    assert where == ", ".join(dict.fromkeys(where.split(", "))) and len(where.split(", ")) == 1, where
+    assert "PLDP_SPEED_DN" in said[0] and "LAND_SPEED" in said[0]
+    cfg = config_from_dict({**load_config_dict(None), "waypoints": route})
+    (line,) = payload_warnings(cfg)
+    assert "3 time(s)" in line and "NAV_PAYLOAD_PLACE" in line and "drone.payload_kg = 0" in line

@@ -69,7 +69,7 @@ IGNORED_COMMANDS = frozenset({115, 181, 182, 183, 184, 195, 197, 200, 201, 202, 
                               2000, 2001, 2500, 2501,
                               112, 114, 189, 600, 207, 211, 215, 216, 220, 531, 532, 1001, 42600})
 _NAV = {NAV_WAYPOINT: "waypoint", NAV_LOITER_TIME: "loiter", NAV_RTL: "rtl", NAV_LAND: "land", NAV_TAKEOFF: "takeoff"}
-_AMSL_FRAMES, _RELATIVE_FRAMES = (0, 5), (3, 6)
+_AMSL_FRAMES, _RELATIVE_FRAMES, _TERRAIN_FRAMES = (0, 5), (3, 6), (10, 11)
 #: MAV_CMD_NAV_FENCE_* and MAV_CMD_NAV_RALLY_POINT: the items of a fence or rally list, not of a mission
 _FENCE_RALLY = {5000: "geofence return point", 5001: "geofence polygon vertex", 5002: "geofence polygon vertex",
                 5003: "geofence circle", 5004: "geofence circle", 5100: "rally point"}
@@ -128,11 +128,15 @@ class _Builder:
         if not rng.contains(value):
             self.fail(it, f"{what}={value:g} is invalid; valid range: {rng.text()} ({key})")
 
-    def where_to(self, it):
-        """(x, y, z) of a nav item in the pad frame; "here" for lat = lon = 0 and for alt 0 / unset."""
+    def where_to(self, it, xy_only: bool = False):
+        """(x, y, z) of a nav item in the pad frame; "here" for lat = lon = 0 and for alt 0 / unset. ``xy_only``: an
+        item whose altitude is not used (NAV_PAYLOAD_PLACE): any global frame (terrain-relative too), the altitude
+        neither read nor checked (z: the current height)."""
         home = self.raw.home
-        if it.frame not in _AMSL_FRAMES + _RELATIVE_FRAMES:
-            kind = "terrain-relative altitude" if it.frame in (10, 11) else "not a global frame"
+        if xy_only and it.frame in _AMSL_FRAMES + _RELATIVE_FRAMES + _TERRAIN_FRAMES:
+            pass
+        elif it.frame not in _AMSL_FRAMES + _RELATIVE_FRAMES:
+            kind = "terrain-relative altitude" if it.frame in _TERRAIN_FRAMES else "not a global frame"
             self.fail(it, f"frame {it.frame} ({kind}) is not supported; valid frames: 0 / 5 (AMSL), 3 / 6 "
                           "(relative to home)")
         here = (it.lat_deg == 0 and it.lon_deg == 0) or math.isnan(it.lat_deg) or math.isnan(it.lon_deg)
@@ -148,7 +152,7 @@ class _Builder:
             if math.hypot(x, y) > MAX_FROM_HOME_M:   # the pad frame is a tangent plane about home
                 self.fail(it, f"({it.lat_deg:g}, {it.lon_deg:g}) is {math.hypot(x, y) / 1e3:.0f} km from home; valid: "
                               f"within {MAX_FROM_HOME_M / 1e3:g} km of home (a longer route: one mission per part)")
-        if math.isnan(it.alt_m) or it.alt_m == 0:
+        if xy_only or math.isnan(it.alt_m) or it.alt_m == 0:
             return x, y, self.z
         z = it.alt_m - home.alt_m if it.frame in _AMSL_FRAMES else it.alt_m
         if not ALT_RANGE.contains(z):   # ([[waypoints]] z_m's range)
@@ -199,7 +203,7 @@ class _Builder:
                           "the payload touches down); valid: a NAV_PAYLOAD_PLACE after the take-off")
         limit = it.params[0] if math.isfinite(it.params[0]) else 0.0
         self.in_range(it, "NAV_PAYLOAD_PLACE max descent param1", limit, PLACE_DESCENT_RANGE, "0: no limit")
-        x, y, _ = self.where_to(it)
+        x, y, _ = self.where_to(it, xy_only=True)   # (its altitude unused: not checked, any global frame)
         start = self.z
         if (x, y) != (self.x, self.y):
             self.add("waypoint", x, y, start)
@@ -339,8 +343,9 @@ def route_from_items(raw: RawMission, pads_xyz=(), pad_radius_m: float = 5.0) ->
         warn(f"{raw.source}: {_some(b.placed)}: NAV_PAYLOAD_PLACE (94) flown as ArduCopter flies it (to its position at "
              "the current height, a descent until the payload touches down, the release, a climb back) with the "
              "ground at home's altitude (no terrain model) and the touchdown when the drone reaches it; not modelled: "
-             "the payload's hang below the drone, the touchdown detection and the autopilot's delays around the "
-             "release (PLDP_* parameters)")
+             "the payload's hang below the drone, the touchdown detection, the descent speed (PLDP_SPEED_DN, "
+             "LAND_SPEED: the route flies mission.descent_rate_m_s) and the autopilot's delays around the release "
+             "(PLDP_* parameters)")
     if b.unplaced:
         from wpt_receiver.notices import warn
         warn(f"{raw.source}: {_some(b.unplaced)}: NAV_PAYLOAD_PLACE's max descent stops above the ground, so the "
@@ -350,7 +355,9 @@ def route_from_items(raw: RawMission, pads_xyz=(), pad_radius_m: float = 5.0) ->
 
 
 def _some(where: list[str]) -> str:
-    """The first three of ``where`` (items), and ``...`` when there are more."""
+    """The first three of ``where`` (items, each once: a DO_JUMP loop flies an item again), and ``...`` when there are
+    more."""
+    where = list(dict.fromkeys(where))
     return ", ".join(where[:3]) + (" ..." if len(where) > 3 else "")
 
 
