@@ -159,3 +159,50 @@ def test_payload_place_warning_names_each_item_once_under_do_jump_and_says_the_d
     cfg = config_from_dict({**load_config_dict(None), "waypoints": route})
     (line,) = payload_warnings(cfg)
     assert "3 time(s)" in line and "NAV_PAYLOAD_PLACE" in line and "drone.payload_kg = 0" in line
+
+
+# ------------------------------------------------------------------------------ --follow: the end of a short stream
+def _fix(k, lat, lon=85_000_000):
+    import types
+    return types.SimpleNamespace(time_boot_ms=100 * k, lat=lat, lon=lon, alt=400_000)
+
+
+@pytest.mark.parametrize("n_good", [1, 2])
+def test_follow_flush_keeps_the_longest_agreeing_run_not_a_contradicting_last_fix(n_good):
+    """good, (good,) swapped, end of stream: the swapped fix contradicted the good ones, which were dropped, and
+    flush took the swapped one as the reference (home at 8.5 N, 47.3 E). Now flush takes the longest agreeing run (the
+    earlier one on a tie: the later one is what contradicted it), the swapped fix counted as skipped instead."""
+    from mission_sim.mavlink.follow import _Positions
+    pos = _Positions(None)
+    msgs = [_fix(k, 473_000_000 + 20 * k) for k in range(n_good)] + [_fix(n_good, 85_000_000, 473_000_000)]
+    assert all(pos.take(m, 0.1 * k) == [] for k, m in enumerate(msgs))
+    taken = pos.flush()
+    assert [t for t, _, _ in taken] == [100 * k for k in range(n_good)]
+    assert pos.home.lat_deg == pytest.approx(47.3) and pos.home.lon_deg == pytest.approx(8.5)
+    assert pos.rejected == 1
+    # a position after the flush is judged against the good ones: the swapped frame again is a jump
+    assert pos.take(_fix(9, 85_000_000, 473_000_000), 0.9) == [] and pos.rejected == 2
+
+
+def test_follow_idle_timer_is_not_reset_by_no_fix_frames(monkeypatch, tmp_path, capsys):
+    """Two positions held for the reference, then frames without a fix (lat = lon = 0) now and then: each reset the
+    idle timer, so --follow-idle never ended the session (it ran to --follow-time). Now only a position held or taken
+    resets it. Counted in polls of the vehicle (no wall-clock assert): ~20 at 0.5 s idle, ~100 per --follow-time s."""
+    from mission_sim.mavlink import follow
+    from test_newcomer2 import _FakeVehicle, _track
+
+    class NoFixAfter(_FakeVehicle):
+        polls = 0
+
+        def recv_match(self, type=None, blocking=True, timeout=None):
+            NoFixAfter.polls += 1
+            if self.queue or NoFixAfter.polls % 2:
+                return super().recv_match(type, blocking, timeout)
+            return _fix(0, 0, 0)   # no fix, between empty polls
+
+    monkeypatch.setattr(follow, "open_follow", lambda connect: NoFixAfter(_track(2, lat0=47.4, lon0=8.5)))
+    rc = main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--follow-time", "5", "--follow-idle", "0.5",
+               "--connect", "none", "--tlog", str(tmp_path / "two.tlog")])
+    out = capsys.readouterr().out
+    assert rc == 0 and "followed 2 live positions" in out, out
+    assert NoFixAfter.polls < 100, NoFixAfter.polls

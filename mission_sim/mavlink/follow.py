@@ -187,13 +187,15 @@ class _Positions:
     The first reference is confirmed: positions are held until :data:`CONFIRM` consecutive ones agree (each a
     plausible move from the one before), then all of them are taken at once; a position that does not agree with the
     one held before it drops those held (counted as skipped) and starts anew from it. So a bad first fix followed by
-    good ones costs that fix, not the session. :meth:`flush` takes what is held when the stream ends before
-    :data:`CONFIRM` positions came (nothing contradicted them)."""
+    good ones costs that fix, not the session. :meth:`flush` takes the longest agreeing run when the stream ends before
+    :data:`CONFIRM` positions came: those held, or a run dropped earlier when it is longer (or as long: the later run
+    contradicted it), so that good, good, swapped, end takes the two good ones and skips the swapped one."""
 
     def __init__(self, home: GeoPoint | None):
         self.home, self.rejected, self.first_rejected = home, 0, ""
         self.last: tuple | None = None   # (boot s, arrival s, e, n, u) of the last position taken
         self.held: list = []             # before the first reference: (msg time_boot_ms, arrival s, lat, lon, alt, enu0)
+        self.dropped: list = []          # the longest run dropped so far (the earliest of equal ones), for flush
 
     def _skip(self, why: str, n: int = 1) -> None:
         self.rejected += n
@@ -217,6 +219,8 @@ class _Positions:
                 why = _jump((prev[0] * 1e-3, prev[1], *prev[5]), (msg.time_boot_ms * 1e-3, arrival_s, e, n, u))
                 if why:   # one of the two is wrong: those held so far are dropped, the new one starts anew
                     self._skip(why.replace("from the last position", "between the first positions"), len(self.held))
+                    if len(self.held) > len(self.dropped):
+                        self.dropped = self.held
                     self.held = []
                     return self.take(msg, arrival_s)
             self.held.append(now)
@@ -229,8 +233,15 @@ class _Positions:
         return [self._accept(msg.time_boot_ms, arrival_s, lat, lon, alt)]
 
     def flush(self) -> list:
-        """The positions held (not yet confirmed by :data:`CONFIRM` in a row), taken; [] if none."""
+        """The positions held (not yet confirmed by :data:`CONFIRM` in a row), taken; [] if none. Without a reference
+        yet, the longest agreeing run: a run dropped earlier at least as long as those held is taken instead (it was
+        counted as skipped; those held are counted instead): a position that contradicted earlier ones is not made
+        the reference."""
         held, self.held = self.held, []
+        if self.last is None and self.dropped and len(self.dropped) >= len(held):
+            self.rejected += len(held) - len(self.dropped)
+            held = self.dropped
+        self.dropped = []
         return [self._accept(tb, arrival, lat, lon, alt) for tb, arrival, lat, lon, alt, _ in held]
 
     def _accept(self, time_boot_ms, arrival_s, lat, lon, alt):
@@ -304,9 +315,10 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
             # (positions held for the first reference count as come: a vehicle that stops after 2 is idle too)
             idle = msg is None and (sim is not None or bool(positions.held)) and \
                 time.monotonic() - last_rx > idle_timeout_s
+            before = positions.held[-1] if positions.held else None
             taken = [] if msg is None else positions.take(msg, time.monotonic())
-            if taken or (msg is not None and positions.held):
-                last_rx = time.monotonic()
+            if taken or (positions.held and positions.held[-1] is not before):   # taken or held: not a no-fix frame,
+                last_rx = time.monotonic()                                       # nor a skipped one
             add(taken)
             if sim is not None and sim.pending_s() >= chunk_s:
                 enqueue(sim.simulate())
