@@ -314,7 +314,7 @@ def test_train_imitation_only_cli_prints_the_summary_last(monkeypatch, tmp_path,
      "[,hover_time_s]"),
     ("lat,lon,hover_time_s\n47.4,8.5," + "9" * 3000 + "\n",
      "line 2: hover_time_s='" + "9" * 59 + "... (3000 characters) is invalid; valid range: [0, 1e+06] s"),
-])
+], ids=["coordinates", "hover_time_s-array", "type-5000-chars", "csv-hover-3000-digits"])
 def test_pads_file_errors_cut_a_long_value(tmp_path, capsys, doc, said):
     """A 2,000-point coordinate array given as a Point's coordinates (or as hover_time_s) was echoed whole: a 34 kB
     error line; a 3,000-digit hover time in a CSV, a 5,000-character "type", 3-5 kB. Now the value's first 60
