@@ -28,7 +28,7 @@ from .world.battery import BatteryParams, CcCvParams
 from .world.power import DRONE_RANGES, DroneParams
 from .validation import (ALT_RANGE, CRUISE_ALTITUDE_RANGE, HOLD_RANGE, HOVER_GAP_RANGE, PAD_RADIUS_RANGE,
                          SPEED_RANGE, Range, check_number_fields, check_positive, check_range, check_table,
-                         read_toml_file)
+                         read_toml_file, shown)
 from .world.wind import WindParams
 
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
@@ -461,21 +461,21 @@ def _coerce(section: str, cls, name: str, value):
     key = f"{section}.{name}"
     if ftype == "str":
         if not isinstance(value, str):
-            raise ValueError(f"{key}={value!r} is invalid; valid type: string")
+            raise ValueError(f"{key}={shown(value)} is invalid; valid type: string")
         return value
     if ftype == "bool":   # numpy's bool too (a sweep's grid), as a Python bool
         if not isinstance(value, (bool, np.bool_)):
-            raise ValueError(f"{key}={value!r} is invalid; valid values: true, false")
+            raise ValueError(f"{key}={shown(value)} is invalid; valid values: true, false")
         return bool(value)
     if ftype == "int":   # numbers.Real: numpy's integers and floats too (np.arange, np.linspace)
         if isinstance(value, bool) or not isinstance(value, numbers.Real) or (
                 not math.isfinite(value)) or int(value) != value:
-            raise ValueError(f"{key}={value!r} is invalid; valid type: integer")
+            raise ValueError(f"{key}={shown(value)} is invalid; valid type: integer")
         return int(value)
     if value is None and "None" in ftype:
         return None
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ValueError(f"{key}={value!r} is invalid; valid type: number")
+        raise ValueError(f"{key}={shown(value)} is invalid; valid type: number")
     return float(value)
 
 

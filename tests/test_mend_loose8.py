@@ -206,3 +206,19 @@ def test_follow_idle_timer_is_not_reset_by_no_fix_frames(monkeypatch, tmp_path, 
     out = capsys.readouterr().out
     assert rc == 0 and "followed 2 live positions" in out, out
     assert NoFixAfter.polls < 100, NoFixAfter.polls
+
+
+# ------------------------------------------------------------------------------ --set: a 5,000-digit value
+def test_set_with_a_value_of_more_digits_than_python_reads_names_the_key_and_range(tmp_path, capsys):
+    """`--set drone.payload_kg=<5000 digits>` said Python's 'Exceeds the limit (4300 digits) for integer string
+    conversion' without the key; now one line naming --set, the key, the value cut and the key's range (exit 2). A
+    4,000-character non-number is cut too (it was echoed whole: a 4 kB line)."""
+    from _cli_helpers import one_error_line
+    line = one_error_line(capsys, ["mission", "--dry-run", "--out", str(tmp_path / "o"),
+                                   "--set", "drone.payload_kg=" + "1" * 5000])
+    assert line == ("dronewpt mission: error: --set drone.payload_kg=" + "1" * 60 + "... (5000 characters) is invalid: "
+                    "an integer of more than 4300 digits; valid range: [0, 1000] kg")
+    line = one_error_line(capsys, ["mission", "--dry-run", "--out", str(tmp_path / "o"),
+                                   "--set", "drone.payload_kg=" + "ab" * 2000])
+    assert line.startswith("dronewpt mission: error: drone.payload_kg='abab") and len(line) < 200
+    assert line.endswith("... (4000 characters) is invalid; valid type: number")
