@@ -105,7 +105,7 @@ def test_max_takeoff_mass_refuses_a_payload_above_it(capsys, tmp_path):
     assert config_from_dict(config_to_dict(ok)) == ok
     with pytest.raises(ValueError, match=r"^payload_kg=2\.5 is invalid: .* = 3\.5 kg is above max_takeoff_mass_kg"):
         dc.replace(ok.drone, payload_kg=2.5)   # (a MissionConfig changed in Python: the same check)
-    with pytest.raises(ValueError, match=r"^mass_kg=4\.0 is invalid; valid range: \(0, max_takeoff_mass_kg=3\.0\]"):
+    with pytest.raises(ValueError, match=r"^mass_kg=4\.0 is invalid; valid range: \[0\.01, max_takeoff_mass_kg=3\.0\]"):
         DroneParams(mass_kg=4.0, max_takeoff_mass_kg=3.0)
     # calibrate's [drone] TOML writes the limit when set, no line when unset
     from types import SimpleNamespace
