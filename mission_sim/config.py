@@ -28,7 +28,7 @@ from .world.battery import BatteryParams, CcCvParams
 from .world.power import DRONE_RANGES, DroneParams
 from .validation import (ALT_RANGE, CRUISE_ALTITUDE_RANGE, HOLD_RANGE, HOVER_GAP_RANGE, PAD_RADIUS_RANGE,
                          SPEED_RANGE, Range, check_number_fields, check_positive, check_range, check_table,
-                         read_toml_file)
+                         read_toml_file, shown)
 from .world.wind import WindParams
 
 __all__ = ["DEFAULT_MISSION_TOML", "LinkConfig", "CouplingConfig", "PadConfig", "MissionPlan", "SimConfig",
@@ -461,21 +461,21 @@ def _coerce(section: str, cls, name: str, value):
     key = f"{section}.{name}"
     if ftype == "str":
         if not isinstance(value, str):
-            raise ValueError(f"{key}={value!r} is invalid; valid type: string")
+            raise ValueError(f"{key}={shown(value)} is invalid; valid type: string")
         return value
     if ftype == "bool":   # numpy's bool too (a sweep's grid), as a Python bool
         if not isinstance(value, (bool, np.bool_)):
-            raise ValueError(f"{key}={value!r} is invalid; valid values: true, false")
+            raise ValueError(f"{key}={shown(value)} is invalid; valid values: true, false")
         return bool(value)
     if ftype == "int":   # numbers.Real: numpy's integers and floats too (np.arange, np.linspace)
         if isinstance(value, bool) or not isinstance(value, numbers.Real) or (
                 not math.isfinite(value)) or int(value) != value:
-            raise ValueError(f"{key}={value!r} is invalid; valid type: integer")
+            raise ValueError(f"{key}={shown(value)} is invalid; valid type: integer")
         return int(value)
     if value is None and "None" in ftype:
         return None
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ValueError(f"{key}={value!r} is invalid; valid type: number")
+        raise ValueError(f"{key}={shown(value)} is invalid; valid type: number")
     return float(value)
 
 
@@ -545,18 +545,20 @@ def section_from_dict(section: str, d: dict):
 #: Keys added after sweeps were stored (2026-11-28: the payload drop), left out of :func:`config_to_dict` at their
 #: default 0: a base mission without a payload release keeps the dict, hence the sweep fingerprint
 #: (:func:`mission_sim.studies.worst_cases.base_fingerprint`), it had before them, so an older sweep folder resumes.
-OMITTED_AT_DEFAULT = {"drone": ("release_kg",), "waypoints": ("release",)}
+#: ``drone.max_takeoff_mass_kg`` (2026-11-28 04:35 UTC) is left out when unset (None: TOML has no null).
+OMITTED_AT_DEFAULT = {"drone": ("release_kg", "max_takeoff_mass_kg"), "waypoints": ("release",)}
 
 
 def config_to_dict(cfg: MissionConfig) -> dict:
     """Plain dict (TOML-ready: no None values) of a :class:`MissionConfig`; the keys of :data:`OMITTED_AT_DEFAULT`
-    only when not 0 (reading the dict back gives the same config)."""
+    only when not 0 / None (reading the dict back gives the same config)."""
     out = asdict(cfg)
     out["pads"] = [{k: v for k, v in p.items() if v is not None} for p in out["pads"]]
     out["waypoints"] = [{k: v for k, v in w.items() if v is not None and not (k in OMITTED_AT_DEFAULT["waypoints"]
                                                                              and v == 0)}
                         for w in out["waypoints"]]
-    out["drone"] = {k: v for k, v in out["drone"].items() if not (k in OMITTED_AT_DEFAULT["drone"] and v == 0)}
+    out["drone"] = {k: v for k, v in out["drone"].items() if not (k in OMITTED_AT_DEFAULT["drone"]
+                                                                  and (v is None or v == 0))}
     return out
 
 

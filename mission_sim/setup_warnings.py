@@ -247,7 +247,7 @@ def payload_warnings(cfg) -> list[str]:
     if not empty:
         return []
     if drone.payload_kg == 0:
-        return [f"the route releases a payload {n} time(s) (DO_GRIPPER release, [[waypoints]] "
+        return [f"the route releases a payload {n} time(s) (DO_GRIPPER release, NAV_PAYLOAD_PLACE, [[waypoints]] "
                 "release) but drone.payload_kg = 0: nothing is dropped, the drone flies at drone.mass_kg throughout; "
                 "valid: drone.payload_kg > 0 (the payload carried from take-off, kg) for a delivery's lighter return"]
     each = ("drone.release_kg = 0: the first release drops all of it" if drone.release_kg == 0 else

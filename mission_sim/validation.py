@@ -96,7 +96,7 @@ def window_ok(t0, t1, hi: float = math.inf) -> bool:
 def check_range(key: str, value, rng: Range) -> None:
     """``ValueError("key=value is invalid; valid range: <rng.text()>")`` unless ``rng`` contains ``value``."""
     if not rng.contains(value):
-        raise ValueError(f"{key}={value!r} is invalid; valid range: {rng.text()}")
+        raise ValueError(f"{key}={shown(value)} is invalid; valid range: {rng.text()}")   # (shown: one short line)
 
 
 def shown(value) -> str:
@@ -106,9 +106,29 @@ def shown(value) -> str:
     if shape is not None and dtype is not None and math.prod(shape) > 1:
         return f"array of shape {tuple(shape)}, dtype {dtype}"
     text = " ".join(repr(value).split()) if "\n" in repr(value) else repr(value)
-    if isinstance(value, (list, tuple, set, dict)) and len(text) > 80:   # (a 10,000-item list was a 59 kB line)
-        return f"{text[:60]}... ({len(value)} items)"
-    return text
+    return clipped(text, value)
+
+
+#: a value's text longer than this is cut in a one-line error (:func:`clipped`); a string's limit is larger
+CLIP_AT, CLIP_STRING_AT, CLIP_HEAD = 80, 200, 60
+
+
+def clipped(text: str, value=None) -> str:
+    """``text`` (``value`` as a message spells it: its repr, its JSON) cut to its first 60 characters when longer than
+    80 (:data:`CLIP_AT`), or for a string value (str, bytes) longer than 200 (:data:`CLIP_STRING_AT`: a name, a path or
+    a header a user typed is shown whole; a pasted 3,000-digit number is not), with how long ``value`` is:
+    ``[[8.5, 47.4], [8.50001, 47.4], ...... (2000 items)`` (a 10,000-item list was a 59 kB line; a pads file's 2,000-point
+    coordinate array, a 34 kB one), ``'9999...... (3000 characters)``."""
+    string = isinstance(value, (str, bytes))
+    if len(text) <= (CLIP_STRING_AT if string else CLIP_AT):
+        return text
+    if isinstance(value, (list, tuple, set, dict)):
+        size = f"{len(value)} items"
+    elif string:
+        size = f"{len(value)} characters"
+    else:
+        size = f"{len(text)} characters"
+    return f"{text[:CLIP_HEAD]}... ({size})"
 
 
 def real_array(value):

@@ -343,10 +343,12 @@ def _training_episodes(model) -> dict:
     return stats
 
 
-def final_summary(meta: dict) -> str | None:
+def final_summary(meta: dict, model: str | None = None) -> str | None:
     """One line on how a run ended, from its metadata: the last evaluation's mean return and cost with their
     standard deviations over the held-out windows, else (no evaluation was due within the run's steps) the last
-    training episodes'; None for metadata with neither (imitation only, ``timesteps`` 0). A constrained run
+    training episodes'; imitation only (``timesteps`` 0: no RL step, no evaluation), the clone's fit: its teacher,
+    fits, samples and the last fit's RMS action error on its training data, and how to evaluate it (``model``: its
+    file, for the ``compare`` command shown); None for metadata with none of them. A constrained run
     (``--lagrangian``) adds its budget and whether that mean cost is within it (``; budget 0.05: within`` / ``above``)."""
     ev, tr = meta.get("final_eval"), meta.get("final_training")
     budget = meta.get("budget") if meta.get("lagrangian") else None
@@ -361,6 +363,18 @@ def final_summary(meta: dict) -> str | None:
         return (f"final evaluation at {ev['timesteps']:,} steps ({n} held-out windows): return "
                 f"{spread(ev, 'return_mean', 'return_std', '.4g')}, cost {spread(ev, 'cost', 'cost_std', '.4g')} "
                 f"(mean +- std), in short mode {100 * ev['reached_short_mode']:.0f} %{against_budget(ev)}")
+    import shlex   # (the command shown can be pasted: a model path with a space is quoted)
+
+    im = meta.get("imitation")
+    if tr is None and im and im.get("iterations") and not meta.get("timesteps"):
+        last = im["iterations"][-1]
+        fits = len(im["iterations"])
+        teacher = im.get("teacher", "?")
+        policies = shlex.quote(f"imitation:{model or 'MODEL.zip'},{teacher}")
+        return (f"imitation only (--timesteps 0): {teacher} cloned in {fits} fit(s) ({fits - 1} DAgger "
+                f"iteration(s)), {last['samples']:,} samples, the last fit's RMS action error {last['train_rms_action']:.4g} "
+                f"on its training data; nothing was evaluated: `dronewpt compare --policies "
+                f"{policies}` measures it against its teacher")
     if tr is None:
         return None
     if not tr["episodes"]:

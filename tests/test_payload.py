@@ -189,7 +189,11 @@ def test_drop_saves_the_closed_form_hover_energy():
     assert s["propulsion_energy_after_release_j"] == pytest.approx(e["drop"][after].sum() + share, rel=1e-12)
     assert keep.summary["propulsion_energy_j"] - s["propulsion_energy_j"] > closed   # (and the landing's share)
     mass = drop.timeseries["mass_kg"].to_numpy()
-    assert set(mass[~after]) == {1.5} and set(mass[after]) == {1.0}
+    assert set(mass[~after & ~across]) == {1.5} and set(mass[after]) == {1.0}
+    # the row holding the drop: the mass averaged over its step as its energy is (it read 1.5, its first sample's)
+    t0 = start.to_numpy()[across][0]
+    assert mass[across][0] == pytest.approx((1.5 * (t_r - t0) + 1.0 * (end - t_r)) / (end - t0), rel=1e-12)
+    assert 1.0 < mass[across][0] < 1.5
     assert "mass_kg" not in bare.timeseries and "takeoff_mass_kg" not in bare.summary
     # flight_time_gain_s's hover power: the landing mass's (the gain is 0 here: no charging)
     from mission_sim.world.runner import flight_time_gain_s

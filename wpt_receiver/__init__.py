@@ -42,6 +42,14 @@ from .kernel_cache import place_numba_cache
 
 place_numba_cache(__path__[0])      # an installed copy: numba's cache in dronewpt's disk cache, not site-packages
 
+import os as _os
+
+if _os.environ.get("DRONEWPT_CACHE_DIR"):   # a file or a folder that cannot be written: said once, not ignored silently
+    from .diskcache import warn_unusable
+    from .kernel_cache import numba_fallback
+    warn_unusable(numba_fallback())
+del _os
+
 from .notices import listen_for_compilation
 
 listen_for_compilation()            # one notice when numba first compiles one of our kernels (a silent ~40 s)

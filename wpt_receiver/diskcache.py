@@ -20,9 +20,13 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["cache_dir", "key_digest", "load", "store", "prune", "installed_version", "package_version"]
+__all__ = ["cache_dir", "key_digest", "load", "store", "prune", "installed_version", "package_version",
+           "unusable_reason", "warn_unusable"]
 
 ENV_VAR = "DRONEWPT_CACHE_DIR"
+#: set (to the ``DRONEWPT_CACHE_DIR`` warned about) once :func:`warn_unusable` has said so: the processes started
+#: after it (a sweep's workers, forked or spawned: they inherit the environment) do not say it again
+WARNED_VAR = "DRONEWPT_CACHE_DIR_WARNED"
 
 
 def cache_dir() -> Path | None:
@@ -32,6 +36,50 @@ def cache_dir() -> Path | None:
         return Path(env).expanduser() if env.strip() else None
     xdg = os.environ.get("XDG_CACHE_HOME", "").strip()
     return (Path(xdg) if xdg else Path.home() / ".cache") / "dronewpt"
+
+
+def unusable_reason(folder: Path) -> str | None:
+    """Why ``folder`` cannot hold the cache (``"is a file, not a folder"``, ``"cannot be written"``, ``"cannot be
+    made: '/x' is a file"`` ...), or None when it can be (or made where it is missing). A few ``stat`` calls, no
+    write (it runs at import)."""
+    folder = Path(folder).absolute()
+    if folder.exists():
+        if not folder.is_dir():
+            return "is a file, not a folder"
+        return None if os.access(folder, os.W_OK | os.X_OK) else "is a folder this user cannot write to"
+    parent = folder.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        return f"cannot be made: {str(parent)!r} is a file"
+    if not os.access(parent, os.W_OK | os.X_OK):
+        return f"cannot be made: {str(parent)!r} cannot be written"
+    return None
+
+
+def warn_unusable(numba_folder: Path | None = None) -> str | None:
+    """One warning on stderr (the ``dronewpt`` logger's, as the compile notice) when ``$DRONEWPT_CACHE_DIR`` is set to
+    a place the cache cannot use (a file, a folder that cannot be written or made): the user's setting would
+    otherwise be ignored silently, each run rebuilding what the cache holds (the coupling tables, the mission loop's
+    ahead-of-time build: ~33 s instead of ~1 s for the default mission). ``numba_folder``: where numba's cache went
+    instead (an installed copy, :func:`~wpt_receiver.kernel_cache.place_numba_cache`). Said once per process tree
+    (:data:`WARNED_VAR`); the run goes on. Returns the text, or None when nothing was said."""
+    env = os.environ.get(ENV_VAR)
+    if not env or not env.strip() or os.environ.get(WARNED_VAR) == env:
+        return None
+    why = unusable_reason(Path(env).expanduser())
+    if why is None:
+        return None
+    instead = "the disk cache is off (the coupling tables and the mission loop's ahead-of-time build are rebuilt " \
+              "in every run: tens of seconds each)"
+    if numba_folder is not None:
+        instead += f", numba's cache is in {str(numba_folder)!r}"
+    text = (f"dronewpt: warning: {ENV_VAR}={env!r} {why}: {instead}; valid: a folder this user can write (or "
+            f"{ENV_VAR}= empty to turn the cache off without this warning)")
+    os.environ[WARNED_VAR] = env
+    import logging
+    logging.getLogger("dronewpt").warning(text)
+    return text
 
 
 def key_digest(key: str) -> str:

@@ -64,6 +64,15 @@ def _private_temporary() -> Path | None:
         return None
 
 
+_state: dict = {"fallback": None}
+
+
+def numba_fallback() -> Path | None:
+    """The private temporary folder :func:`place_numba_cache` gave numba's cache because dronewpt's cache folder could
+    not be written, or None."""
+    return _state["fallback"]
+
+
 def place_numba_cache(package_dir) -> Path | None:
     """For an installed copy (``package_dir``'s parent is a ``site-packages`` / ``dist-packages`` folder) and no
     ``NUMBA_CACHE_DIR`` of the user's: numba's cache root becomes ``<dronewpt's disk cache>/numba`` (the process's
@@ -83,6 +92,7 @@ def place_numba_cache(package_dir) -> Path | None:
         folder = _private_temporary()
         if folder is None:
             return None
+        _state["fallback"] = folder      # (said by diskcache.warn_unusable, once)
     os.environ[NUMBA_CACHE_VAR] = str(folder)
     config = sys.modules.get("numba.core.config")
     if config is not None and not getattr(config, "CACHE_DIR", ""):
@@ -90,7 +100,7 @@ def place_numba_cache(package_dir) -> Path | None:
     return folder
 
 
-__all__ = ["drop_stale_cache", "dependency_hash", "place_numba_cache"]
+__all__ = ["drop_stale_cache", "dependency_hash", "place_numba_cache", "numba_fallback"]
 
 
 def dependency_hash(modules) -> str:

@@ -100,6 +100,8 @@ def _print_calibration(r: dict, out: Path, files) -> None:
     print(f"held-out energy error: calibrated {100 * r['calibrated_heldout_energy_error_rel']:+.1f} %, default model "
           f"{100 * r['default_heldout_energy_error_rel']:+.1f} %; RMS {r['calibrated_heldout_rms_w']:.0f} W "
           f"(default {r['default_heldout_rms_w']:.0f} W)")
+    for w in r.get("warnings", ()):
+        print(f"warning: {w}")
     if r["at_bound"]:
         print(f"warning: at a bound of its physical range: {', '.join(r['at_bound'])}")
     print(f"wrote {out} (use: dronewpt mission --drone {out})")

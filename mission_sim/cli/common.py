@@ -142,11 +142,26 @@ def parse_set(items, flag: str = "--set"):
             value = tomllib.loads(f"v = {text}")["v"]
         except tomllib.TOMLDecodeError:
             value = text
+        except ValueError:   # an integer over Python's 4,300 digits: was "Exceeds the limit (4300 digits)", no key
+            raise CliError(_too_many_digits(flag, key.strip(), text)) from None
         key = key.strip()
         if key in out and repr(out[key]) != repr(value) and out[key] != value:   # (the last one won without a word)
             raise CliError(f"{flag} {key} is given twice ({out[key]!r} and {value!r}); valid: each key once")
         out[key] = value
     return out
+
+
+def _too_many_digits(flag: str, key: str, text: str) -> str:
+    """The one line for ``KEY=TEXT`` whose integer has more digits than Python converts (``sys.get_int_max_str_digits``):
+    the key, the value cut, and the key's range when it is a config key."""
+    import sys
+
+    from ..config import PLAUSIBLE
+    from ..validation import clipped
+    rng = PLAUSIBLE.get(key)
+    valid = f"valid range: {rng.text()}" if rng is not None else "valid: a number"
+    return (f"{flag} {key}={clipped(text.strip(), text.strip())} is invalid: an integer of more than "
+            f"{sys.get_int_max_str_digits()} digits; {valid}")
 
 
 def mass_override(args) -> dict:

@@ -281,7 +281,8 @@ def _cmd_train(args) -> int:
     for key, path in res.items():
         print(f"{key}: {path}")
     from policies.train import final_summary
-    summary = final_summary(json.loads(Path(res["meta"]).read_text())) if "meta" in res else None
+    summary = final_summary(json.loads(Path(res["meta"]).read_text()), str(res.get("model", "MODEL.zip"))) \
+        if "meta" in res else None
     if summary is not None:
         print(summary)
     return 0

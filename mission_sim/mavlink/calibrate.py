@@ -46,7 +46,7 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 import pandas as pd
 
-from ..world.power import DroneParams, propulsion_power_w
+from ..world.power import DroneParams, above_max_takeoff, propulsion_power_w
 from . import ground
 from .logs import FlightLog
 from .replay import _in_periods, check_decoded, replay_span, track_from_log, unknown_armed_check
@@ -195,6 +195,8 @@ def fit_drone(samples: CalibrationSamples, base: DroneParams, mass_kg: float | N
 
     if mass_kg is not None:
         mass_kg = check_mass(mass_kg)
+    mtom = base.max_takeoff_mass_kg   # trial masses with the take-off limit off (the bounds reach 50 kg); said after
+    base = replace(base, max_takeoff_mass_kg=None)
     tab = samples.table[samples.table["train"]]
     air, dis = tab[tab["airborne"]], tab[tab["disarmed"]]
     if mass_kg is not None:
@@ -213,7 +215,23 @@ def fit_drone(samples: CalibrationSamples, base: DroneParams, mass_kg: float | N
     scale = LOSS_SCALE * max(float(np.median(np.abs(air["power_w"]))), 1.0)
     res = least_squares(_residuals, x0, bounds=(lo, hi), loss="soft_l1", f_scale=1.0, x_scale="jac",
                         args=(names, base, air, dis, priors, scale))
-    return _params(res.x, base, names), res, priors
+    fitted = _params(res.x, base, names)
+    if not above_max_takeoff(fitted.mass_kg, fitted.payload_kg, mtom):
+        fitted = replace(fitted, max_takeoff_mass_kg=mtom)   # (above it: left unset, see max_takeoff_warning)
+    return fitted, res, priors
+
+
+def max_takeoff_warning(fitted: DroneParams, base: DroneParams) -> str | None:
+    """The one-line warning when the fitted mass plus the config's payload is above the config's
+    ``drone.max_takeoff_mass_kg`` (the fitted drone then has none: the written TOML leaves the key out, which
+    ``mission --drone`` would refuse); None otherwise."""
+    mtom = base.max_takeoff_mass_kg
+    if not above_max_takeoff(fitted.mass_kg, fitted.payload_kg, mtom):
+        return None
+    load = f" + payload_kg {fitted.payload_kg:g} kg" if fitted.payload_kg else ""
+    return (f"the fitted mass_kg {fitted.mass_kg:.3f} kg{load} is above drone.max_takeoff_mass_kg={mtom:g} kg: "
+            "max_takeoff_mass_kg left out of the written [drone] TOML (the fitted mass is the model's equivalent "
+            "mass; --mass KG fixes the weighed one)")
 
 
 def heldout_energy(table: pd.DataFrame, drone: DroneParams, mask) -> tuple[float, float]:
@@ -252,6 +270,7 @@ def calibrate_log(log: FlightLog, base: DroneParams, mass_kg: float | None = Non
            "loss": "soft_l1", "optimizer_status": int(res.status), "optimizer_message": str(res.message),
            "fitted": {p: float(getattr(drone, p)) for p in PARAMS},
            "default": {p: float(getattr(base, p)) for p in PARAMS},
+           "warnings": [w for w in (max_takeoff_warning(drone, base),) if w],
            "at_bound": [p for p in PARAMS if np.isclose(getattr(drone, p), BOUNDS[p][0]) or np.isclose(getattr(drone, p), BOUNDS[p][1])]}
     for name, d in (("calibrated", drone), ("default", base)):
         for part, mask in (("heldout", held), ("train", train)):
@@ -285,6 +304,8 @@ def drone_toml(cal: Calibration) -> str:
         if f.name in MISSION_LOAD_KEYS:
             continue
         v = getattr(cal.drone, f.name)
+        if v is None:       # (max_takeoff_mass_kg unset: no limit, no line)
+            continue
         lines.append(f"{f.name} = {v:d}" if isinstance(v, int) else f"{f.name} = {float(v):.6g}")
     return "\n".join(lines) + "\n"
 

@@ -170,40 +170,88 @@ def _jump(last, now) -> str:
             f"{SLACK_M:g} m + {MAX_VSPEED_M_S:g} m/s x dt vertically")
 
 
+#: consecutive positions that must agree (each a plausible move from the one before) before the first is taken as the
+#: reference later jumps are judged against: one implausible but in-range first fix (latitude and longitude swapped
+#: at Zurich) had become the reference, and every good position after it was skipped as a jump
+CONFIRM = 3
+
+
 class _Positions:
-    """The vehicle's positions as :func:`follow` takes them: :meth:`take` gives a GLOBAL_POSITION_INT's (e, n, u) in
-    metres about ``home`` (None: the first position taken; no altitude: the first one's), or None for a frame without
-    a fix (lat = lon = 0) or an implausible one, skipped and counted (``rejected``; ``first_rejected`` says why): one
-    outside :class:`GeoPoint`'s ranges, or an impossible jump from the last position taken (:func:`_jump`: latitude
-    and longitude swapped at Zurich, 47.4 / 8.5, are both in range). One such frame ended the session."""
+    """The vehicle's positions as :func:`follow` takes them: :meth:`take` gives the GLOBAL_POSITION_INTs newly taken,
+    each as (time_boot_ms, arrival s, (e, n, u) in metres about ``home``) (``home`` None: the first position taken; no
+    altitude: the first one's). A frame without a fix (lat = lon = 0) is skipped; an implausible one is skipped and
+    counted (``rejected``; ``first_rejected`` says why): one outside :class:`GeoPoint`'s ranges, or an impossible jump
+    from the last position taken (:func:`_jump`: latitude and longitude swapped at Zurich, 47.4 / 8.5, are both in
+    range). One such frame ended the session.
+
+    The first reference is confirmed: positions are held until :data:`CONFIRM` consecutive ones agree (each a
+    plausible move from the one before), then all of them are taken at once; a position that does not agree with the
+    one held before it drops those held (counted as skipped) and starts anew from it. So a bad first fix followed by
+    good ones costs that fix, not the session. :meth:`flush` takes the longest agreeing run when the stream ends before
+    :data:`CONFIRM` positions came: those held, or a run dropped earlier when it is longer (or as long: the later run
+    contradicted it), so that good, good, swapped, end takes the two good ones and skips the swapped one."""
 
     def __init__(self, home: GeoPoint | None):
         self.home, self.rejected, self.first_rejected = home, 0, ""
         self.last: tuple | None = None   # (boot s, arrival s, e, n, u) of the last position taken
+        self.held: list = []             # before the first reference: (msg time_boot_ms, arrival s, lat, lon, alt, enu0)
+        self.dropped: list = []          # the longest run dropped so far (the earliest of equal ones), for flush
 
-    def take(self, msg, arrival_s: float):
+    def _skip(self, why: str, n: int = 1) -> None:
+        self.rejected += n
+        self.first_rejected = self.first_rejected or why
+
+    def take(self, msg, arrival_s: float) -> list:
         if msg.lat == 0 and msg.lon == 0:
-            return None
+            return []
         lat, lon, alt = msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3
         try:
             GeoPoint(msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1e3)   # (/: the message's digits in the error)
-            why = ""
         except ValueError as exc:
-            why = str(exc)
-        if not why and self.last is not None:
-            e, n, u = geodetic_to_enu(lat, lon, alt, self.home)
-            why = _jump(self.last, (msg.time_boot_ms * 1e-3, arrival_s, float(e), float(n), float(u)))
+            self._skip(str(exc))
+            return []
+        if self.last is None:     # no reference yet: held until CONFIRM in a row agree
+            origin = GeoPoint(*self.held[0][2:5]) if self.held else GeoPoint(lat, lon, alt)
+            e, n, u = (float(v) for v in geodetic_to_enu(lat, lon, alt, origin))
+            now = (msg.time_boot_ms, arrival_s, lat, lon, alt, (e, n, u))
+            if self.held:
+                prev = self.held[-1]
+                why = _jump((prev[0] * 1e-3, prev[1], *prev[5]), (msg.time_boot_ms * 1e-3, arrival_s, e, n, u))
+                if why:   # one of the two is wrong: those held so far are dropped, the new one starts anew
+                    self._skip(why.replace("from the last position", "between the first positions"), len(self.held))
+                    if len(self.held) > len(self.dropped):
+                        self.dropped = self.held
+                    self.held = []
+                    return self.take(msg, arrival_s)
+            self.held.append(now)
+            return self.flush() if len(self.held) >= CONFIRM else []
+        e, n, u = geodetic_to_enu(lat, lon, alt, self.home)
+        why = _jump(self.last, (msg.time_boot_ms * 1e-3, arrival_s, float(e), float(n), float(u)))
         if why:
-            self.rejected += 1
-            self.first_rejected = self.first_rejected or why
-            return None
+            self._skip(why)
+            return []
+        return [self._accept(msg.time_boot_ms, arrival_s, lat, lon, alt)]
+
+    def flush(self) -> list:
+        """The positions held (not yet confirmed by :data:`CONFIRM` in a row), taken; [] if none. Without a reference
+        yet, the longest agreeing run: a run dropped earlier at least as long as those held is taken instead (it was
+        counted as skipped; those held are counted instead): a position that contradicted earlier ones is not made
+        the reference."""
+        held, self.held = self.held, []
+        if self.last is None and self.dropped and len(self.dropped) >= len(held):
+            self.rejected += len(held) - len(self.dropped)
+            held = self.dropped
+        self.dropped = []
+        return [self._accept(tb, arrival, lat, lon, alt) for tb, arrival, lat, lon, alt, _ in held]
+
+    def _accept(self, time_boot_ms, arrival_s, lat, lon, alt):
         if self.home is None:
             self.home = GeoPoint(lat, lon, alt)
         elif self.home.alt_m is None:
             self.home = GeoPoint(self.home.lat_deg, self.home.lon_deg, alt)
         e, n, u = (float(v) for v in geodetic_to_enu(lat, lon, alt, self.home))
-        self.last = (msg.time_boot_ms * 1e-3, arrival_s, e, n, u)
-        return e, n, u
+        self.last = (time_boot_ms * 1e-3, arrival_s, e, n, u)
+        return time_boot_ms, arrival_s, (e, n, u)
 
 
 def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None = None, rate_hz: float = 10.0,
@@ -214,7 +262,7 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
 
     Positions from ``follow_connect`` (e.g. ``udpin:127.0.0.1:14551``; no fix or implausible: skipped,
     :class:`_Positions`) are timed by the vehicle's clock (:class:`_Clock`) and converted to the pad frame about
-    ``home`` (None: the first position received is the pad). Every ``chunk_s`` seconds the
+    ``home`` (None: the first position taken is the pad, :class:`_Positions`). Every ``chunk_s`` seconds the
     new stretch runs through :class:`ChunkedMission` and its telemetry is sent at ``rate_hz``,
     ``chunk_s`` behind the vehicle. The loop ends after ``max_wall_s`` seconds, ``max_messages``
     received messages or ``idle_timeout_s`` without a position once positions have come (before the
@@ -241,6 +289,13 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
             if not hb:
                 last_tick[:] = [(t + chunk_s, row)]
 
+    def add(taken):
+        nonlocal sim
+        for time_boot_ms, arrival_s, enu in taken:
+            if sim is None:
+                sim = ChunkedMission(cfg, policy, run_mission, positions.home, rate_hz)
+            sim.add(clock(time_boot_ms, arrival_s - wall0), (enu[0], enu[1], max(enu[2], 0.0) + sim.gap))
+
     def send_due(now):
         nonlocal frames, delivered
         while queue and wall0 + queue[0][0] <= now:
@@ -257,16 +312,18 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
             msg = vin.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=wait)
             n_msgs += 1
             # idle only when nothing is waiting (a slow chunk must not drop the positions queued meanwhile)
-            idle = msg is None and sim is not None and time.monotonic() - last_rx > idle_timeout_s
-            enu = None if msg is None else positions.take(msg, time.monotonic())
-            if enu is not None:
-                last_rx = time.monotonic()
-                if sim is None:
-                    sim = ChunkedMission(cfg, policy, run_mission, positions.home, rate_hz)
-                sim.add(clock(msg.time_boot_ms, last_rx - wall0), (enu[0], enu[1], max(enu[2], 0.0) + sim.gap))
+            # (positions held for the first reference count as come: a vehicle that stops after 2 is idle too)
+            idle = msg is None and (sim is not None or bool(positions.held)) and \
+                time.monotonic() - last_rx > idle_timeout_s
+            before = positions.held[-1] if positions.held else None
+            taken = [] if msg is None else positions.take(msg, time.monotonic())
+            if taken or (positions.held and positions.held[-1] is not before):   # taken or held: not a no-fix frame,
+                last_rx = time.monotonic()                                       # nor a skipped one
+            add(taken)
             if sim is not None and sim.pending_s() >= chunk_s:
                 enqueue(sim.simulate())
             send_due(time.monotonic())
+        add(positions.flush())                  # positions held for want of CONFIRM in a row: nothing contradicted them
         if sim is not None and sim.pending_s() > 0:
             enqueue(sim.simulate())             # the last, partial chunk
         if last_tick:                           # then the vehicle lands and disarms, as in `telemetry`

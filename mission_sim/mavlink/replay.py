@@ -35,7 +35,7 @@ from .takeoff import (  # noqa: F401 (one source: takeoff.py)
     STARTS_AIRBORNE_M, _airborne_start, default_pad, flown_periods, starts_airborne_warning, unknown_armed_state)
 
 __all__ = ["NoPositionError", "FlightTrack", "default_pad", "track_from_log", "with_ground_gap", "flight_stats",
-           "logged_energy_j", "compare_power", "fit_mass_kg", "resample_track", "replay_trajectory", "ReplayResult", "replay_log", "parse_window",
+           "logged_energy_j", "compare_power", "fit_mass_kg", "equivalent_mass_warning", "resample_track", "replay_trajectory", "ReplayResult", "replay_log", "parse_window",
            "battery_voltage_warning", "warn_battery_voltage", "replay_summary_warnings",
            "choose_segment", "replay_span"]
 
@@ -363,7 +363,8 @@ def fit_mass_kg(traj, drone, target_energy_j: float, t_s, mask, runner_energy_j:
     """Drone mass [kg] that makes the model's propulsion energy over ``mask`` equal ``target_energy_j``.
 
     ``traj`` is the replayed :class:`~mission_sim.world.trajectory.Trajectory`; ``t_s``, ``mask`` the
-    comparison samples (trajectory time). Bisection on [0.05, 50] kg (energy rises with mass);
+    comparison samples (trajectory time). Bisection on [0.05, 50] kg (energy rises with mass), whatever
+    ``drone.max_takeoff_mass_kg`` (:func:`equivalent_mass_warning` says when the result is above it);
     nan if the target is outside that range. ``runner_energy_j``: the runner's modelled energy
     over the same samples at ``drone.mass_kg``; the target is scaled by the ratio of the
     trajectory's to the runner's energy there (the runner holds the power over its steps), so
@@ -379,8 +380,8 @@ def fit_mass_kg(traj, drone, target_energy_j: float, t_s, mask, runner_energy_j:
     dt = np.diff(t_s)
     seg = mask[1:] & mask[:-1] & (dt < _MAX_GAP_S)
 
-    def energy(m):
-        p = np.interp(t_s, traj.t_s, traj.propulsion_w(replace(drone, mass_kg=m)))
+    def energy(m):   # trial masses with the take-off limit off: 50 kg is a bracket, not a drone the user gave
+        p = np.interp(t_s, traj.t_s, traj.propulsion_w(replace(drone, mass_kg=m, max_takeoff_mass_kg=None)))
         return float(np.sum((0.5 * (p[1:] + p[:-1]) * dt)[seg]))
 
     if runner_energy_j is not None and np.isfinite(runner_energy_j) and runner_energy_j > 0:
@@ -392,6 +393,19 @@ def fit_mass_kg(traj, drone, target_energy_j: float, t_s, mask, runner_energy_j:
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if energy(mid) < target_energy_j else (lo, mid)
     return 0.5 * (lo + hi)
+
+
+def equivalent_mass_warning(name: str, mass_kg: float, drone) -> str | None:
+    """The one-line warning when the equivalent mass ``mass_kg`` (:func:`fit_mass_kg`) plus ``drone.payload_kg`` is
+    above ``drone.max_takeoff_mass_kg`` (None when unset, below it or nan)."""
+    from ..world.power import above_max_takeoff
+    mtom = drone.max_takeoff_mass_kg
+    if not np.isfinite(mass_kg) or not above_max_takeoff(mass_kg, drone.payload_kg, mtom):
+        return None
+    load = f" + payload_kg {drone.payload_kg:g} kg" if drone.payload_kg else ""
+    return (f"{name}: the equivalent mass {mass_kg:.2f} kg{load} is above drone.max_takeoff_mass_kg={mtom:g} kg: the "
+            "model needs more than the airframe's maximum take-off mass to match the logged energy (the drone "
+            "spends more than the config's drone would; check its figure_of_merit, drive_efficiency, avionics_w)")
 
 
 def replay_trajectory(track: FlightTrack):
@@ -596,5 +610,8 @@ def replay_log(log, cfg, policy, *, pad: GeoPoint | None = None, ground_gap_m: f
         cmp["equivalent_mass_kg"] = fit_mass_kg(traj, cfg.drone, cmp.get("logged_energy_airborne_j", np.nan),
                                                 table["t_s"].to_numpy() - track.t_offset_s, air,
                                                 cmp.get("model_energy_airborne_j"))
+        heavy = equivalent_mass_warning(log.path.name, cmp["equivalent_mass_kg"], cfg.drone)
+        if heavy is not None:
+            summary["warnings"].append(heavy)
         summary["power_comparison"] = cmp
     return ReplayResult(log=log, track=track, mission=mission, summary=summary, power_table=table)

@@ -204,6 +204,26 @@ class TlogWriter:
                              f"{self.path.suffix} beside it; valid: move them away")
         self.n_frames = 0
         self.kept: Path | None = None
+        self.earlier = self.earlier_partials()
+        if self.earlier:   # never deleted (they are recordings): named, once, so the user can deal with them
+            from wpt_receiver.notices import warn
+            names = ", ".join(repr(p.name) for p in self.earlier[:4]) + (" ..." if len(self.earlier) > 4 else "")
+            warn(f"{str(self.path)!r}: {len(self.earlier)} earlier partial recording(s) beside it, from streams cut "
+                 f"short, kept as they are: {names}; this stream writes {self.partial_path.name!r} (renamed to "
+                 f"{self.path.name!r} when it ends); valid: move or delete them once read (dronewpt never does)")
+
+    def earlier_partials(self) -> list[Path]:
+        """The partial recordings of ``path`` from earlier streams (``STEM.partial.tlog``, ``STEM.partial.N.tlog``)
+        other than this stream's, in order of N."""
+        import glob
+        stem, suffix = self.path.stem, self.path.suffix
+        name = re.compile(re.escape(stem) + r"\.partial(?:\.(\d+))?" + re.escape(suffix))
+        found = []
+        for p in self.path.parent.glob(f"{glob.escape(stem)}.partial*{glob.escape(suffix)}"):
+            m = name.fullmatch(p.name)
+            if m and p != self.partial_path:
+                found.append((int(m.group(1) or 1), p))
+        return [p for _, p in sorted(found)]
 
     def write(self, frame: bytes, t_epoch_s: float) -> None:
         try:

@@ -14,7 +14,7 @@ import json
 from dataclasses import dataclass
 
 from ..mavlink.geodesy import GeoPoint
-from ..validation import HOLD_RANGE, check_range, json_too_deep
+from ..validation import HOLD_RANGE, check_range, clipped, json_too_deep, shown
 
 __all__ = ["GeoPad", "read_pads", "check_distinct", "MAX_PADS", "SAME_PAD_M"]
 
@@ -96,7 +96,7 @@ def _pad(lat, lon, alt, hover, where: str) -> GeoPad:
     try:
         vals = [None if v is None else float(v) for v in (lat, lon, alt, hover)]
     except (TypeError, ValueError):
-        raise ValueError(f"{where}: lat={lat!r}, lon={lon!r}, alt={alt!r}, hover_time_s={hover!r}: not numbers; valid: a number each") from None
+        raise ValueError(f"{where}: lat={shown(lat)}, lon={shown(lon)}, alt={shown(alt)}, hover_time_s={shown(hover)}: not numbers; valid: a number each") from None
     # the config's range of a hover time (this said [0, inf) s; 1e308 then failed as pads.0.hover_time_s, no file named)
     if vals[3] is not None:
         check_range(f"{where}: hover_time_s", hover, HOLD_RANGE)
@@ -121,7 +121,7 @@ def _csv(text: str, name: str) -> tuple[GeoPad, ...]:
     head = [c.strip().lower() for c in rows[0][1]]
     col = {k: next((head.index(a) for a in al if a in head), None) for k, al in _ALIASES.items()}
     if col["lat"] is None or col["lon"] is None:
-        raise ValueError(f"{name}: header {','.join(head)!r} has no lat / lon column; valid: a CSV header "
+        raise ValueError(f"{name}: header {shown(','.join(head))} has no lat / lon column; valid: a CSV header "
                          "lat,lon[,alt][,hover_time_s] (or a GeoJSON FeatureCollection of Points)")
     _check_other_columns(head, f"{name}: column")
     if col["alt"] is None:
@@ -154,7 +154,7 @@ def _check_other_columns(head, what: str) -> None:
     for c in head:
         field = None if c in _KNOWN else _near_field(c, _KNOWN)
         if field:
-            raise ValueError(f"{what} {c!r} is unknown (did you mean {field!r}?); {_CSV_VALID}")
+            raise ValueError(f"{what} {shown(c)} is unknown (did you mean {field!r}?); {_CSV_VALID}")
 
 
 #: first words of a name that holds a height under another name or unit (``alt_ft``, ``altitude (ft)``, ``height``,
@@ -174,7 +174,7 @@ def _check_altitude_like(head, what: str) -> None:
     for c in head:
         words = re.split(r"[^a-z0-9]+", c.strip().lower())
         if words and words[0] in _ALT_WORDS and all(w in _ALT_UNIT_WORDS for w in words[1:]):
-            raise ValueError(f"{what} {c!r} looks like a pad altitude but is not read (the pads would be on the "
+            raise ValueError(f"{what} {shown(c)} looks like a pad altitude but is not read (the pads would be on the "
                              "home's ground); valid: a column alt in metres above mean sea level (feet x 0.3048; a "
                              "height above ground: add the ground's altitude AMSL), or no such column")
 
@@ -205,8 +205,8 @@ def _geojson(text: str, name: str) -> tuple[GeoPad, ...]:
         plan = (" (a QGroundControl .plan: give it as mission / telemetry --plan, or mission.file)"
                 if doc.get("fileType") == "Plan" else "")
         what = ("a JSON object without a GeoJSON \"type\"" if doc.get("type") is None
-                else f"type {doc['type']!r} is not GeoJSON's" if isinstance(doc.get("type"), str)
-                else f"\"type\" {json.dumps(doc['type'])} is not GeoJSON's")
+                else f"type {shown(doc['type'])} is not GeoJSON's" if isinstance(doc.get("type"), str)
+                else f"\"type\" {_json_shown(doc['type'])} is not GeoJSON's")
         raise ValueError(f"{name}: {what}{plan}, not a pads file; valid: a GeoJSON "
                          "FeatureCollection of Point / MultiPoint features (or one Feature or geometry), or a CSV "
                          "lat,lon[,alt][,hover_time_s]")
@@ -267,7 +267,7 @@ _JSON_TYPES = {dict: "object", list: "array", str: "string", int: "number", floa
 def _json_shown(v) -> str:
     """``v`` (read by ``json.load``) as the file spells it: ``null``, ``true``, ``"8.5"`` (Python's ``None``, ``True``,
     ``'8.5'`` are not in the file)."""
-    return json.dumps(v)
+    return clipped(json.dumps(v), v)   # (a 2,000-point coordinate array was a 34 kB line)
 
 
 def _json_number(v) -> bool:
@@ -285,7 +285,7 @@ def _check_geojson_properties(props, flat: bool, what: str) -> None:
         if c == "hover_time_s" or not isinstance(c, str):
             continue
         if _near_field(c.lower(), _ALIASES["hover_time_s"]):
-            raise ValueError(f"{what} {c!r} is unknown (did you mean 'hover_time_s'?); {_GEOJSON_VALID}")
+            raise ValueError(f"{what} {shown(c)} is unknown (did you mean 'hover_time_s'?); {_GEOJSON_VALID}")
         if flat and c.lower() in _ALIASES["alt"]:
-            raise ValueError(f"{what} {c!r} is ignored (did you mean the coordinates' alt? the feature's coordinates are "
+            raise ValueError(f"{what} {shown(c)} is ignored (did you mean the coordinates' alt? the feature's coordinates are "
                              f"2-D, [lon, lat], the pad would be on the ground); {_GEOJSON_VALID}")

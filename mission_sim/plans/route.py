@@ -46,6 +46,9 @@ __all__ = ["apply_mission_files", "check_file_keys", "mission_home", "route_from
 
 DO_CHANGE_SPEED = 178
 NAV_DELAY = 93
+NAV_PAYLOAD_PLACE = 94
+#: NAV_PAYLOAD_PLACE's param1, the largest descent [m] (0 or unset: no limit; ArduPilot's AP_Mission stores it in cm)
+PLACE_DESCENT_RANGE = Range(0.0, 5000.0, "m")
 DO_JUMP = 177
 MAX_ROUTE_ITEMS = 100_000   # a route with DO_JUMP loops unrolled: at most this many items flown
 JUMP_REPEATS = Range(0, math.inf, integer=True)   # a DO_JUMP's param2, the number of jumps (-1, forever: refused)
@@ -66,12 +69,12 @@ IGNORED_COMMANDS = frozenset({115, 181, 182, 183, 184, 195, 197, 200, 201, 202, 
                               2000, 2001, 2500, 2501,
                               112, 114, 189, 600, 207, 211, 215, 216, 220, 531, 532, 1001, 42600})
 _NAV = {NAV_WAYPOINT: "waypoint", NAV_LOITER_TIME: "loiter", NAV_RTL: "rtl", NAV_LAND: "land", NAV_TAKEOFF: "takeoff"}
-_AMSL_FRAMES, _RELATIVE_FRAMES = (0, 5), (3, 6)
+_AMSL_FRAMES, _RELATIVE_FRAMES, _TERRAIN_FRAMES = (0, 5), (3, 6), (10, 11)
 #: MAV_CMD_NAV_FENCE_* and MAV_CMD_NAV_RALLY_POINT: the items of a fence or rally list, not of a mission
 _FENCE_RALLY = {5000: "geofence return point", 5001: "geofence polygon vertex", 5002: "geofence polygon vertex",
                 5003: "geofence circle", 5004: "geofence circle", 5100: "rally point"}
 _SUPPORTED = ("NAV_WAYPOINT (16), NAV_LOITER_TIME (19), NAV_RETURN_TO_LAUNCH (20), NAV_LAND (21), NAV_TAKEOFF (22), "
-              "NAV_DELAY (93), DO_JUMP (177), DO_CHANGE_SPEED (178) and commands that do not move the vehicle "
+              "NAV_DELAY (93), NAV_PAYLOAD_PLACE (94), DO_JUMP (177), DO_CHANGE_SPEED (178) and commands that do not move the vehicle "
               "(camera, gimbal, servo, relay, ROI, yaw, gripper, winch, sprayer, fence enable, conditions, markers)")
 
 
@@ -113,6 +116,8 @@ class _Builder:
         self.x = self.y = self.z = 0.0
         self.speed = None
         self.out: list[dict] = []
+        self.placed: list[str] = []      # NAV_PAYLOAD_PLACE items flown (warned: what is not modelled)
+        self.unplaced: list[str] = []    # those whose max descent stops above the ground (no release)
 
     def fail(self, it, text: str):
         raise ValueError(f"{self.name}: {it.where}: {text}")
@@ -123,11 +128,15 @@ class _Builder:
         if not rng.contains(value):
             self.fail(it, f"{what}={value:g} is invalid; valid range: {rng.text()} ({key})")
 
-    def where_to(self, it):
-        """(x, y, z) of a nav item in the pad frame; "here" for lat = lon = 0 and for alt 0 / unset."""
+    def where_to(self, it, xy_only: bool = False):
+        """(x, y, z) of a nav item in the pad frame; "here" for lat = lon = 0 and for alt 0 / unset. ``xy_only``: an
+        item whose altitude is not used (NAV_PAYLOAD_PLACE): any global frame (terrain-relative too), the altitude
+        neither read nor checked (z: the current height)."""
         home = self.raw.home
-        if it.frame not in _AMSL_FRAMES + _RELATIVE_FRAMES:
-            kind = "terrain-relative altitude" if it.frame in (10, 11) else "not a global frame"
+        if xy_only and it.frame in _AMSL_FRAMES + _RELATIVE_FRAMES + _TERRAIN_FRAMES:
+            pass
+        elif it.frame not in _AMSL_FRAMES + _RELATIVE_FRAMES:
+            kind = "terrain-relative altitude" if it.frame in _TERRAIN_FRAMES else "not a global frame"
             self.fail(it, f"frame {it.frame} ({kind}) is not supported; valid frames: 0 / 5 (AMSL), 3 / 6 "
                           "(relative to home)")
         here = (it.lat_deg == 0 and it.lon_deg == 0) or math.isnan(it.lat_deg) or math.isnan(it.lon_deg)
@@ -143,7 +152,7 @@ class _Builder:
             if math.hypot(x, y) > MAX_FROM_HOME_M:   # the pad frame is a tangent plane about home
                 self.fail(it, f"({it.lat_deg:g}, {it.lon_deg:g}) is {math.hypot(x, y) / 1e3:.0f} km from home; valid: "
                               f"within {MAX_FROM_HOME_M / 1e3:g} km of home (a longer route: one mission per part)")
-        if math.isnan(it.alt_m) or it.alt_m == 0:
+        if xy_only or math.isnan(it.alt_m) or it.alt_m == 0:
             return x, y, self.z
         z = it.alt_m - home.alt_m if it.frame in _AMSL_FRAMES else it.alt_m
         if not ALT_RANGE.contains(z):   # ([[waypoints]] z_m's range)
@@ -182,6 +191,31 @@ class _Builder:
         self.in_range(it, "NAV_DELAY param1", delay, HOLD_RANGE, "waypoints.hold_s")
         self.add("loiter", self.x, self.y, self.z, delay)
 
+    def payload_place(self, it):
+        """NAV_PAYLOAD_PLACE (94) as ArduCopter flies it (``ModeAuto::do_payload_place``): to the item's position at the
+        current height (its altitude is not used; lat = lon = 0: where the vehicle is), a descent until the payload
+        touches the ground, the release, a climb back to the height it started from. The ground is home's (z = 0: no
+        terrain model) and the payload is taken to touch it when the drone reaches it (the hang below the drone is not
+        known). param1 > 0 limits the descent [m]: a limit that stops above the ground releases nothing (ArduCopter
+        completes the item without releasing). Refused on the ground (before the take-off, after a landing)."""
+        if self.z <= 0:
+            self.fail(it, "NAV_PAYLOAD_PLACE on the ground is not supported (the vehicle descends from the air until "
+                          "the payload touches down); valid: a NAV_PAYLOAD_PLACE after the take-off")
+        limit = it.params[0] if math.isfinite(it.params[0]) else 0.0
+        self.in_range(it, "NAV_PAYLOAD_PLACE max descent param1", limit, PLACE_DESCENT_RANGE, "0: no limit")
+        x, y, _ = self.where_to(it, xy_only=True)   # (its altitude unused: not checked, any global frame)
+        start = self.z
+        if (x, y) != (self.x, self.y):
+            self.add("waypoint", x, y, start)
+        bottom = max(start - limit, 0.0) if limit > 0 else 0.0
+        self.add("waypoint", x, y, bottom)
+        if bottom <= 0.0:
+            self.out[-1]["release"] = self.out[-1].get("release", 0) + 1
+        else:
+            self.unplaced.append(f"{it.where} (param1 = {limit:g} m from {start:g} m)")
+        self.add("waypoint", x, y, start)
+        self.placed.append(it.where)
+
     def release(self, it):
         """A payload release (:func:`release_of`): one more on the waypoint flown before it."""
         if not self.out:
@@ -204,6 +238,9 @@ class _Builder:
             return
         if it.command == NAV_DELAY:   # ArduCopter / PX4: hold position (in the air) for param1 seconds
             self.nav_delay(it)
+            return
+        if it.command == NAV_PAYLOAD_PLACE:   # ArduCopter: descend until the payload touches down, release, climb
+            self.payload_place(it)
             return
         kind = _NAV.get(it.command)
         if kind is None and it.command in _FENCE_RALLY:
@@ -301,7 +338,27 @@ def route_from_items(raw: RawMission, pads_xyz=(), pad_radius_m: float = 5.0) ->
              "WINCH_DELIVER drops no payload here: ArduCopter (ModeAuto::do_winch) and PX4 do not release one on it in "
              "a mission (the MAVLink spec's 'lower, release, reel up' is not what they fly), so the payload stays on "
              "board; valid: a DO_GRIPPER release after it, or release = 1 on the [[waypoints]] entry")
+    if b.placed:
+        from wpt_receiver.notices import warn
+        warn(f"{raw.source}: {_some(b.placed)}: NAV_PAYLOAD_PLACE (94) flown as ArduCopter flies it (to its position at "
+             "the current height, a descent until the payload touches down, the release, a climb back) with the "
+             "ground at home's altitude (no terrain model) and the touchdown when the drone reaches it; not modelled: "
+             "the payload's hang below the drone, the touchdown detection, the descent speed (PLDP_SPEED_DN, "
+             "LAND_SPEED: the route flies mission.descent_rate_m_s) and the autopilot's delays around the release "
+             "(PLDP_* parameters)")
+    if b.unplaced:
+        from wpt_receiver.notices import warn
+        warn(f"{raw.source}: {_some(b.unplaced)}: NAV_PAYLOAD_PLACE's max descent stops above the ground, so the "
+             "payload is not released there (ArduCopter completes the item without releasing); valid: param1 = 0 (no "
+             "limit) or at least the height above home")
     return b.out
+
+
+def _some(where: list[str]) -> str:
+    """The first three of ``where`` (items, each once: a DO_JUMP loop flies an item again), and ``...`` when there are
+    more."""
+    where = list(dict.fromkeys(where))
+    return ", ".join(where[:3]) + (" ..." if len(where) > 3 else "")
 
 
 def pads_to_local(pads, ref: GeoPoint, name: str = "pads", what: str = "the mission's home") -> list[dict]:

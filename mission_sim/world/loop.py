@@ -205,7 +205,7 @@ class MissionLoop:
         dts = df["dt_s"].to_numpy()
         df["propulsion_w"] = df["e_propulsion_j"] / dts
         if self.cfg.drone.payload_kg > 0:   # (a payload: the mass each row flew, dropped at its releases)
-            df["mass_kg"] = self.samples.row_mass_kg(ri)
+            df["mass_kg"] = self.samples.row_mass_kg(ri, df["t_s"].to_numpy(), dts)
         df["p_source_w"] = df["e_source_j"] / dts
         df["p_coil_loss_w"] = df["e_coil_loss_j"] / dts
         df["p_battery_loss_w"] = (df["e_battery_r0_j"] + df["e_battery_r1_j"]) / dts

@@ -67,6 +67,8 @@ G_M_S2 = 9.80665
 #: * ``avionics_w`` 0-1000 W: none modelled to a heavy lifter's or sprayer's avionics and payload electronics
 #:   (before: 0-10 kW; a passenger craft's may be above it, see above);
 #: * ``air_density_kg_m3`` 0.05-2: Earth's air from cold sea level (1.4) to far above any multirotor's ceiling.
+#: * ``max_takeoff_mass_kg`` 0.01-2000 kg (``mass_kg`` + ``payload_kg`` at their largest), unset by default: the
+#:   airframe's maximum take-off mass from its data sheet, when the user gives it (see :class:`DroneParams`).
 #:
 #: :class:`DroneParams` itself checks only what its formulas need (positive, FM and efficiency in (0, 1]): a
 #: physics test may build the ideal rotor (FM 1, f -> 0); a config cannot.
@@ -77,7 +79,21 @@ DRONE_RANGES: dict[str, Range] = {
     "figure_of_merit": Range(0.2, 0.9), "drive_efficiency": Range(0.2, 0.98),
     "flat_plate_area_m2": Range(1e-4, 5.0, "m^2"), "avionics_w": Range(0.0, 1000.0, "W"),
     "air_density_kg_m3": Range(0.05, 2.0, "kg/m^3"),
+    "max_takeoff_mass_kg": Range(0.01, 2000.0, "kg"),
 }
+
+
+#: relative tolerance of the take-off mass check: 0.1 + 0.2 is 0.30000000000000004 in binary, not above a 0.3 kg limit
+MTOM_REL_TOL = 1e-9
+
+
+def above_max_takeoff(mass_kg: float, payload_kg: float, max_takeoff_mass_kg: float | None) -> bool:
+    """True when ``mass_kg + payload_kg`` is above ``max_takeoff_mass_kg`` (None: no limit) by more than rounding
+    (:data:`MTOM_REL_TOL`): the one test of :class:`DroneParams` and of the fitted masses of replay / calibrate."""
+    if max_takeoff_mass_kg is None:
+        return False
+    total = float(mass_kg) + float(payload_kg)
+    return total > max_takeoff_mass_kg and not math.isclose(total, max_takeoff_mass_kg, rel_tol=MTOM_REL_TOL)
 
 
 @dataclass(frozen=True)
@@ -88,7 +104,13 @@ class DroneParams:
     ``mass_kg``: the drone ready to fly (airframe, battery, receiver) [kg]; ``payload_kg``: the payload carried
     from take-off [kg]; ``release_kg``: the payload mass dropped at each release of the route [kg] (0: the first
     release drops all of it; e.g. three 0.3 kg parcels: ``payload_kg = 0.9``, ``release_kg = 0.3``), at most
-    ``payload_kg``."""
+    ``payload_kg``.
+
+    ``max_takeoff_mass_kg``: the airframe's maximum take-off mass [kg] (its data sheet's), or None (the default):
+    no limit. The power model has none of its own: momentum theory gives a power for any mass, and nothing here
+    knows the motors', propellers' or ESCs' limits (only the battery's maximum power stops a run, at the first
+    sample it cannot supply), so a payload the drone cannot lift was flown. When set, a take-off mass
+    ``mass_kg + payload_kg`` above it is refused (one line naming both); no default is assumed without a source."""
 
     mass_kg: float = 1.0
     payload_kg: float = 0.0
@@ -100,6 +122,7 @@ class DroneParams:
     flat_plate_area_m2: float = 0.02
     avionics_w: float = 8.0
     air_density_kg_m3: float = 1.225
+    max_takeoff_mass_kg: float | None = None
 
     def __post_init__(self):
         check_number_fields(self)
@@ -108,6 +131,16 @@ class DroneParams:
         if self.release_kg > self.payload_kg:
             raise ValueError(f"release_kg={self.release_kg!r} is invalid; valid range: [0, payload_kg="
                              f"{self.payload_kg!r}] kg (the mass dropped at each payload release; 0: all of it)")
+        mtom = self.max_takeoff_mass_kg
+        if mtom is not None:
+            check_positive(self, "max_takeoff_mass_kg")
+            if above_max_takeoff(self.mass_kg, 0.0, mtom):
+                raise ValueError(f"mass_kg={self.mass_kg!r} is invalid; valid range: [{DRONE_RANGES['mass_kg'].lo:g}, "
+                                 f"max_takeoff_mass_kg={mtom!r}] kg (the airframe's maximum take-off mass)")
+            if above_max_takeoff(self.mass_kg, self.payload_kg, mtom):
+                raise ValueError(f"payload_kg={self.payload_kg!r} is invalid: the take-off mass mass_kg + payload_kg "
+                                 f"= {self.mass_kg + self.payload_kg:g} kg is above max_takeoff_mass_kg={mtom!r} kg; "
+                                 f"valid range: [0, {max(mtom - self.mass_kg, 0.0):g}] kg (a payload the drone can lift)")
         for name in ("figure_of_merit", "drive_efficiency"):
             v = float(getattr(self, name))
             if not 0 < v <= 1:

@@ -154,11 +154,27 @@ class MissionSamples:
             return self.schedule.at(t_s)
         return np.full(np.shape(t_s), float(self.cfg.drone.total_mass_kg))
 
-    def row_mass_kg(self, rows_k) -> np.ndarray:
-        """The total mass [kg] of the samples ``rows_k`` (global indices): the mass a step's row flew."""
-        if self.mass_changes:
-            return self.schedule.at_samples(rows_k)
-        return np.full(len(np.asarray(rows_k)), float(self.cfg.drone.total_mass_kg))
+    def row_mass_kg(self, rows_k, end_s, dt_s) -> np.ndarray:
+        """The total mass [kg] each row flew: rows ``rows_k`` (the global index of each step's first sample), steps
+        ``[end_s - dt_s, end_s]``. The mass of the row's first sample, but for a step holding a payload release inside
+        it (a quiet-flight step merging samples across the drop): there the mean over the step of the samples' masses,
+        each held over its sample period as the loop holds its power (:meth:`chunk`), so weighted by time as the
+        row's energy columns are and the summary's ``propulsion_energy_before_release_j`` / ``_after_release_j`` split
+        it (that row's mass had been its first sample's, the take-off mass, over a step mostly flown lighter)."""
+        if not self.mass_changes:
+            return np.full(len(np.asarray(rows_k)), float(self.cfg.drone.total_mass_kg))
+        sched = self.schedule
+        out = sched.at_samples(rows_k).astype(float)
+        end = np.asarray(end_s, dtype=float)
+        start = end - np.asarray(dt_s, dtype=float)
+        dt = sched.dt_s
+        last = sched.at_samples(np.maximum(np.ceil(end / dt - 1e-9).astype(np.int64) - 1, 0))   # the step's last sample
+        for j in np.flatnonzero(last != out):   # (the samples' masses differ within the step: a drop inside it)
+            k = np.arange(max(int(math.floor(start[j] / dt)) - 1, 0), int(math.ceil(end[j] / dt)) + 1)
+            t_k = k * dt
+            held = np.maximum(np.minimum(t_k + dt, end[j]) - np.maximum(t_k, start[j]), 0.0)
+            out[j] = float(np.dot(held, sched.at(t_k)) / held.sum())
+        return out
 
     @property
     def t_first_s(self) -> float:

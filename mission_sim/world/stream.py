@@ -93,7 +93,7 @@ def _derived(loop, arr: np.ndarray) -> dict:
     dts = col["dt_s"]
     out["propulsion_w"] = col["e_propulsion_j"] / dts
     if loop.cfg.drone.payload_kg > 0:   # (as MissionLoop.timeseries: the mass each row flew)
-        out["mass_kg"] = loop.samples.row_mass_kg(ri)
+        out["mass_kg"] = loop.samples.row_mass_kg(ri, col["t_s"], dts)
     out["p_source_w"] = col["e_source_j"] / dts
     out["p_coil_loss_w"] = col["e_coil_loss_j"] / dts
     out["p_battery_loss_w"] = (col["e_battery_r0_j"] + col["e_battery_r1_j"]) / dts
