@@ -169,7 +169,15 @@ def available() -> list[str]:
 
 
 def make(name: str, ctx: PolicyContext | None = None, **kwargs) -> Policy:
-    """A fresh policy by name (``"rl:PATH"`` loads an SB3 model file); ``ValueError`` naming the valid names."""
+    """A fresh policy by name (``"rl:PATH"`` loads an SB3 model file); ``ValueError`` naming the valid names.
+
+    ``"mpc:B"``: B (a fraction) is the measured (instantaneous-peak) overshoot allowed, or the window's floor if
+    that is higher. ``"model_based_budget:B"``: on the exact-mode link (``ctx.link_model == "modal"``, the envs'
+    default) B is the measured overshoot allowed above the floor of the controller's own after-stop plans *as its
+    search predicts it* at the stop (the policy's ``predicted_floor``; measured 0.25 B to B + 0.4 points above it on
+    nominal windows, ``tests/test_budget_modal.py``; that floor lies above the window's oracle floor); on eq. 4's
+    link it is the relaxation of the reference after the stop, measured about B + 3.3 points
+    (:class:`policies.budgeted.BudgetedModelBasedPolicy`)."""
     if not isinstance(name, str):   # (None, a policy object: an AttributeError on .partition)
         raise ValueError(f"policy={name!r:.80} is invalid; valid: a name, one of {', '.join(available())} (or rl:PATH)")
     if ctx is not None and not isinstance(ctx, PolicyContext):

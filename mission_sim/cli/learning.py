@@ -524,6 +524,15 @@ def _print_compare(rows, sweep, args):
               f"{after:>{w[3]}} {r['tracking_rmse_a']:>7.2f} {ret:>{w[4]}} {d:>{w[5]}}")
     print("overshoot = peak |I2| after the stop over the true link's short-mode I2, minus 1; in SM = fraction of "
           "episodes with I_L < 0.5 A from 14 ms after the stop on; E after = energy delivered after the stop")
+    if any(r["policy"].startswith("model_based_budget") for r in rows) or sweep:
+        if _link_name(args) == "modal":
+            print("model_based_budget:b: b = overshoot allowed above the floor of the controller's own after-stop "
+                  "plans, as its search predicts it at the stop (measured 0.25 b to b + 0.4 points above that floor; "
+                  "the window's oracle floor is lower); mpc:b: b = the measured overshoot allowed")
+        else:
+            print("model_based_budget:b: b = the relaxation of the controller's reference after the stop, (1 + b) "
+                  "I2_sm: eq. 4's envelope promise, not the measured overshoot (about b + 3.3 points on nominal); "
+                  "mpc:b: b = the measured overshoot allowed")
     gaps = [r for r in rows if "oracle_gap_pct" in r]
     if gaps:
         print(f"gap to the oracle ({gaps[0]['scenario']}, first {args.oracle_windows} windows; energy after the stop "
