@@ -71,22 +71,26 @@ def test_budget_is_measured_overshoot_above_the_floor(runs):
 
 
 #: windows and budgets of the documented-meaning test; the band of (measured overshoot - predicted floor F) in points:
-#: at most b + BAND_ABOVE_PTS (the prediction's error and the running max's tooth slope between its grid points) and at
-#: least BAND_BELOW_FRAC x b (the search stops below the first plan that predicts more than F + b, which on a saw-tooth
-#: P(r) can lie well below the target). Measured on windows 1000-1019 (2026-11-28): 0.31-1.00 / 0.46-1.85 / 2.48-3.74 /
-#: 5.77-10.31 points at b = 0.01 / 0.02 / 0.05 / 0.1 (means 0.68 / 1.38 / 2.94 / 9.07); eq. 4's r = b on the same
-#: plant and stops: above the band.
+#: at most b + BAND_ABOVE_PTS (the running max's tooth slope between its grid points, up to ~0.4 point, plus the
+#: prediction's error against the closed loop, up to ~0.2 point: policies/budget_modal.py's docstring), above
+#: BAND_BELOW_FRAC x b in every window and at least BAND_MEAN_FRAC x b on average over the windows (the search stops
+#: below the first plan that predicts more than F + b, which on a saw-tooth P(r) can lie well below the target; with
+#: r forced to 0, the paper's controller, overshoot - F is -0.2..+0.01 points and both lower clauses fail). Measured
+#: on windows 1000-1019 (2026-11-28): 0.31-1.00 / 0.46-1.85 / 2.48-3.74 / 5.77-10.31 points at b = 0.01 / 0.02 /
+#: 0.05 / 0.1 (means 0.68 / 1.38 / 2.94 / 9.07: 68 / 69 / 59 / 91 % of b; the least window 0.23 b, window 1008 at
+#: b = 0.02); eq. 4's r = b on the same plant and stops: above the band.
 MEANING_WINDOWS, MEANING_BUDGETS = 6, (0.01, 0.02, 0.05, 0.1)
-BAND_ABOVE_PTS, BAND_BELOW_FRAC = 0.4, 0.25
+BAND_ABOVE_PTS, BAND_BELOW_FRAC, BAND_MEAN_FRAC = 0.6, 0.1, 0.5
 
 
 def test_budget_means_measured_overshoot_above_its_predicted_floor():
     """What ``model_based_budget:b`` documents on the exact-mode link (policies.make, compare --help, the class
-    docstring): b is the measured overshoot allowed above the floor F of the controller's own after-stop plans as
-    its search predicts them at the stop (``predicted_floor``). On nominal windows 1000-1005, for every window and
-    b: b * BAND_BELOW_FRAC <= measured overshoot - F <= b + BAND_ABOVE_PTS points, every window in short mode; F is
-    the same at every b (a property of the stop, not of the budget). Eq. 4's relaxation r = b on the same plant and
-    windows (the budget read as eq. 4's reference relaxation) leaves the band at b = 0.02 in most windows."""
+    docstring): b is the measured overshoot allowed above the floor F the controller predicts for its own after-stop
+    plans at the stop (``predicted_floor``). On nominal windows 1000-1005, for every b: measured overshoot - F <= b +
+    BAND_ABOVE_PTS points and > BAND_BELOW_FRAC x b in every window, and its mean over the windows >= BAND_MEAN_FRAC x
+    b; every window in short mode; F is the same at every b (a property of the stop, not of the budget). Eq. 4's
+    relaxation r = b on the same plant and windows (the budget read as eq. 4's reference relaxation) leaves the band
+    at b = 0.02 in most windows."""
     from envs import SbarChargingVectorEnv
     from policies.compare import _rollout
 
@@ -104,7 +108,8 @@ def test_budget_means_measured_overshoot_above_its_predicted_floor():
         assert np.all(np.isfinite(f)) and np.all(f > 0.0)
         above = over - 100.0 * f
         assert np.all(above <= 100.0 * b + BAND_ABOVE_PTS), (b, above)
-        assert np.all(above >= BAND_BELOW_FRAC * 100.0 * b), (b, above)
+        assert np.all(above > BAND_BELOW_FRAC * 100.0 * b), (b, above)
+        assert np.mean(above) >= BAND_MEAN_FRAC * 100.0 * b, (b, above)
         floors.append(f)
     assert np.all(np.array(floors) == floors[0])
     over4, f4 = run(0.02, eq4=True)
@@ -112,7 +117,7 @@ def test_budget_means_measured_overshoot_above_its_predicted_floor():
     assert np.mean(over4 - 100.0 * floors[0] > 2.0 + BAND_ABOVE_PTS) > 0.5
 
 
-@pytest.mark.parametrize("link,says", [("modal", "above the floor of the controller's own after-stop plans"),
+@pytest.mark.parametrize("link,says", [("modal", "allowed above F, the overshoot the controller predicts at the stop"),
                                         ("envelope", "relaxation of the controller's reference")])
 def test_compare_says_what_the_budget_is(capsys, link, says):
     """`dronewpt compare` with a model_based_budget row (or the budgeted sweep) prints what b is on its link (the
@@ -132,7 +137,8 @@ def test_compare_says_what_the_budget_is(capsys, link, says):
     _print_compare([{**row, "policy": "model_based"}], [], ns)
     assert "model_based_budget:b" not in capsys.readouterr().out
     help_text = " ".join(policy_names())
-    assert "above the floor of the controller's own after-stop plans" in help_text and "relaxation" in help_text
+    assert "allowed above F, the overshoot the controller predicts at the stop" in help_text
+    assert "relaxation" in help_text and "100 B + 3.3 %" in help_text
 
 
 def test_budget_orders_overshoot_and_energy(runs):
