@@ -50,10 +50,11 @@ the same ``r*`` on all 1,500 stops of the modal ``compare --episodes 100`` (2026
 What remains is the non-linear SBAR step itself (~0.2 us per sub-step, 17 sub-steps per control period, up to 200
 periods while a plan has not reached duty 1), needed whole for every fine point below ``r*``.
 
-The budget is then *the measured overshoot above the floor of the controller's own plans*, as the prediction
-sees it (a window's oracle floor is lower: docs/modal_policies.md, section "`model_based_budget:b` on the
-modal link"). ``b = 0`` stays the paper's controller (``r = 0``, no prediction), as on eq. 4. Bad inputs (a
-non-finite or non-positive battery voltage, a last duty outside [0, 1], a non-finite controller state or
+The budget is then *the measured overshoot above F*, the floor of the controller's own plans as the prediction
+sees it: in practice its r = 0 plan's prediction (the paper's controller; every stop of nominal windows 1000-1019),
+within 0.2 point of ``model_based``'s measured overshoot (a window's oracle floor is lower: docs/modal_policies.md,
+section "`model_based_budget:b` on the modal link"). ``b = 0`` stays the paper's controller (``r = 0``, no
+prediction), as on eq. 4. Bad inputs (a non-finite or non-positive battery voltage, a last duty outside [0, 1], a non-finite controller state or
 budget) raise :class:`ValueError` naming the value and its valid range; a non-finite prediction counts as
 above the target (the scan stops there).
 """
