@@ -52,14 +52,16 @@ def _independent_oracle(window: int, budget: float, cfg):
 
 #: the oracle's energy after the stop at a fixed policy's measured overshoot, at most this fraction of the policy's
 #: (per window). From the margins docs quote: issue 21's independent search on eq. 4's link delivered 30 % less than
-#: model_based, 23 % less than model_based_budget:0.02 and 37 % less than ramp (20-window means; here rounded down to
-#: 30 / 20 / 30 %); the README's modal gaps: 48 % (model_based), 46 % (ramp), 29 % (mpc), 9.6 % (oracle_imitation,
-#: 5 seeds; 3 % here). The MPC at b = 0.05 on eq. 4's link is held to the bound alone (its gap is 5.6 % on window
-#: 1000). Measured 2026-11-28 (independent oracle / policy, per window): eq. 4 model_based 0.52 / 0.54,
-#: model_based_budget:0.02 0.77 / 0.74, ramp 0.65 / 0.47, mpc:0.05 0.94 / 0.78 (windows 1000 / 1001); modal (window
-#: 1001) model_based 0.53, ramp 0.38, mpc 0.44, oracle_imitation_s1 0.95.
-BOUND_FACTOR = {"model_based": 0.70, "model_based_budget:0.02": 0.80, "ramp": 0.70, "mpc:0.05": 1.0, "mpc": 0.80,
-                "oracle_imitation": 0.97}
+#: model_based, 23 % less than model_based_budget:0.02 and 37 % less than ramp (20-window means; here 30 / 15 / 30 %
+#: less, model_based_budget:0.02's with room for its per-window ratios, 0.77 / 0.74, near its mean); the README's
+#: modal gaps: 48 % (model_based), 46 % (ramp), 29 % (mpc). The MPC at b = 0.05 on eq. 4's link and the shipped
+#: clone of the oracle (oracle_imitation) on the modal link are held to the bound alone (factor 1.0: a tighter one
+#: for the clone would test the clone's quality, not the oracle; the MPC's gap is 5.6 % on window 1000). Measured
+#: 2026-11-28 (independent oracle / policy, per window): eq. 4 model_based 0.52 / 0.54, model_based_budget:0.02
+#: 0.77 / 0.74, ramp 0.65 / 0.47, mpc:0.05 0.94 / 0.78 (windows 1000 / 1001); modal (window 1001) model_based 0.53,
+#: ramp 0.38, mpc 0.44, oracle_imitation_s1 0.95.
+BOUND_FACTOR = {"model_based": 0.70, "model_based_budget:0.02": 0.85, "ramp": 0.70, "mpc:0.05": 1.0, "mpc": 0.80,
+                "oracle_imitation": 1.0}
 
 
 def _factor(name: str) -> float:
@@ -73,11 +75,14 @@ def test_oracle_bounds_fixed_policies(budgeted, tmp_path, monkeypatch):
     most ``BOUND_FACTOR`` times the policy's energy after the stop (the margins the docs quote).
 
     What it catches (checked 2026-11-28 by weakening policies/oracle.py): an oracle that does not move from its starts
-    (``_MAXITER = 0``: 1.34-2.03 times the policy's energy for model_based_budget:0.02, ramp and mpc:0.05); one start,
-    one SLSQP pass of one iteration (model_based_budget:0.02 0.84 / 0.88, ramp 0.77, mpc:0.05 1.04 on window 1000);
-    the floor's sequence left out of the starts (no feasible sequence within model_based's 1.69 % on window 1001: the
-    budgeted controller's sequences start above it). It does not catch a search cut to 2-3 iterations (within 1.5 %
-    of the full oracle's energy on these windows: SLSQP gains most in its first steps)."""
+    (``_MAXITER = 0``: 1.34-2.03 times the policy's energy for model_based_budget:0.02, ramp and mpc:0.05); one
+    default start (with the floor's), one SLSQP pass of one iteration (start model_based_budget:0.01: ratios on
+    windows 1000 / 1001 model_based_budget:0.02 0.84 / 0.88, ramp 0.77 / 0.65, mpc:0.05 1.04 / 0.98: caught by all
+    three, model_based_budget:0.02 on window 1001, the others on 1000; start model_based_budget:0.05: 0.90 / 0.97,
+    0.69 / 0.55, 1.10 / 1.07: caught by model_based_budget:0.02 and mpc:0.05); the floor's sequence left out of the
+    starts (no feasible sequence within model_based's 1.69 % on window 1001: the budgeted controller's sequences start
+    above it). It does not catch a search cut to 2-3 iterations (within 1.5 % of the full oracle's energy on these
+    windows: SLSQP gains most in its first steps)."""
     monkeypatch.setenv("DRONEWPT_CACHE_DIR", str(tmp_path))
     for name, tr in budgeted.items():
         for i in range(2):
@@ -205,7 +210,8 @@ def test_oracle_bounds_fixed_policies_on_the_modal_link(modal_fixed, tmp_path, m
     """On the exact-mode link, window 1001: the oracle solved from its default starts and the window's floor (not from
     the policy's sequence, ``_independent_oracle``), at each fixed policy's own measured overshoot, is feasible, in
     short mode, within it, and delivers at most ``BOUND_FACTOR`` times the policy's energy after the stop: the
-    paper's controller, ramp, the MPC and a shipped clone of the oracle (0.53 / 0.38 / 0.44 / 0.95 measured).
+    paper's controller, ramp and the MPC (0.53 / 0.38 / 0.44 measured); a shipped clone of the oracle is held to the
+    bound alone (factor 1.0, measured 0.95: a tighter factor would test the clone's quality, not the oracle).
 
     What it catches (checked 2026-11-28 by weakening policies/oracle.py): an oracle that does not move from its
     starts (``_MAXITER = 0``: 1.00 times model_based's energy); eq. 4's difference step on this link
