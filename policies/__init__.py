@@ -169,7 +169,16 @@ def available() -> list[str]:
 
 
 def make(name: str, ctx: PolicyContext | None = None, **kwargs) -> Policy:
-    """A fresh policy by name (``"rl:PATH"`` loads an SB3 model file); ``ValueError`` naming the valid names."""
+    """A fresh policy by name (``"rl:PATH"`` loads an SB3 model file); ``ValueError`` naming the valid names.
+
+    ``"mpc:B"``: B (a fraction) is the measured (instantaneous-peak) overshoot allowed, or the window's floor if
+    that is higher. ``"model_based_budget:B"``: on the exact-mode link (``ctx.link_model == "modal"``, the envs'
+    default) B is the measured overshoot allowed above F, the overshoot the controller predicts at the stop for its
+    B = 0 plan (the paper's controller; the policy's ``predicted_floor``; within 0.2 point of ``model_based``'s
+    measured overshoot on nominal windows, and above the window's oracle floor). Measured on nominal windows
+    1000-1019: 0.23 B to B + 0.31 points above F (B in points, 100 B; B = 0.02: 0.46-1.85 points), at most B + 0.6
+    points (``tests/test_budget_modal.py``). On eq. 4's link B is the relaxation of the reference after the stop,
+    the measured overshoot about 100 B + 3.3 % (:class:`policies.budgeted.BudgetedModelBasedPolicy`)."""
     if not isinstance(name, str):   # (None, a policy object: an AttributeError on .partition)
         raise ValueError(f"policy={name!r:.80} is invalid; valid: a name, one of {', '.join(available())} (or rl:PATH)")
     if ctx is not None and not isinstance(ctx, PolicyContext):

@@ -50,10 +50,11 @@ the same ``r*`` on all 1,500 stops of the modal ``compare --episodes 100`` (2026
 What remains is the non-linear SBAR step itself (~0.2 us per sub-step, 17 sub-steps per control period, up to 200
 periods while a plan has not reached duty 1), needed whole for every fine point below ``r*``.
 
-The budget is then *the measured overshoot above the floor of the controller's own plans*, as the prediction
-sees it (a window's oracle floor is lower: docs/modal_policies.md, section "`model_based_budget:b` on the
-modal link"). ``b = 0`` stays the paper's controller (``r = 0``, no prediction), as on eq. 4. Bad inputs (a
-non-finite or non-positive battery voltage, a last duty outside [0, 1], a non-finite controller state or
+The budget is then *the measured overshoot above F*, the floor of the controller's own plans as the prediction
+sees it: in practice its r = 0 plan's prediction (the paper's controller; every stop of nominal windows 1000-1019),
+within 0.2 point of ``model_based``'s measured overshoot (a window's oracle floor is lower: docs/modal_policies.md,
+section "`model_based_budget:b` on the modal link"). ``b = 0`` stays the paper's controller (``r = 0``, no
+prediction), as on eq. 4. Bad inputs (a non-finite or non-positive battery voltage, a last duty outside [0, 1], a non-finite controller state or
 budget) raise :class:`ValueError` naming the value and its valid range; a non-finite prediction counts as
 above the target (the scan stops there).
 """
@@ -65,7 +66,7 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["relaxation", "predicted_overshoot", "R_MAX", "R_STEP", "HORIZON_S"]
+__all__ = ["relaxation", "plan", "predicted_overshoot", "R_MAX", "R_STEP", "HORIZON_S"]
 
 #: the largest relaxation of the reference searched (fraction of I2_sm)
 R_MAX = 0.5
@@ -333,6 +334,13 @@ def relaxation(budget, link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v) ->
     """``r*`` (module docstring) of one receiver at its stop: the controller's state ``x0``, its input ``u0 +
     r du`` after the stop (``du`` = I2_sm of the assumed model [A]), the last duty ``d_prev`` and the battery
     voltage ``vl_v`` [V]. ``r*`` is a multiple of :data:`R_STEP` in ``[0, R_MAX]``."""
+    return plan(budget, link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v)[0]
+
+
+def plan(budget, link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v) -> tuple[float, float]:
+    """``(r*, F)`` of one receiver at its stop (arguments as :func:`relaxation`): the relaxation and the floor ``F``
+    of the controller's own plans as the prediction sees it (a fraction: the least predicted measured overshoot on
+    the coarse grid; NaN if no plan was finite). The budget is the measured overshoot allowed above ``F``."""
     _check(budget, d_prev, vl_v, x0)
     stop = _stop_plans(link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v)
     coarse = np.linspace(0.0, R_MAX, _N_GRID)
@@ -345,4 +353,4 @@ def relaxation(budget, link, devices, dt_s, ctl_ss, x0, u0, du, d_prev, vl_v) ->
     r_end = coarse[int(np.argmax(above))] if above.any() else R_MAX
     n_fine = int(round(r_end / R_STEP))
     r_best = stop.first_above(target, n_fine) - 1
-    return round(max(0, r_best) * R_STEP, 12)
+    return round(max(0, r_best) * R_STEP, 12), (float(np.nanmin(pc)) if np.any(np.isfinite(pc)) else float("nan"))

@@ -1,5 +1,6 @@
 """The per-window oracle (policies.oracle), the fast duty replay (envs.rollout) and the MPC baseline
-(policies.mpc): the oracle is a bound on the fixed policies it starts from, the replay is the env,
+(policies.mpc): the oracle, solved from its own starts (not the policy's), bounds the fixed policies by the margins
+the docs quote, the replay is the env,
 the MPC with the true model and budget 0 stays within the window's floor. The first tests are eq. 4's oracle, replay
 and MPC on eq. 4's link (``EQ4``, pinned since the envs' default became the exact-mode link on 2026-11-26); the
 exact-mode link's are at the end (and in tests/test_mpc_modal.py, tests/test_rollout_modal.py)."""
@@ -39,24 +40,60 @@ def test_replay_reproduces_the_closed_loop(budgeted):
         assert r.ratios.max(axis=1)[0] == pytest.approx(r.overshoot[0], abs=1e-12)
 
 
+def _independent_oracle(window: int, budget: float, cfg):
+    """The oracle of ``window`` at ``budget`` from the starts that do not depend on the policy it is compared with:
+    :data:`policies.oracle.DEFAULT_STARTS` and the window's floor sequence (the frontier's start set,
+    :func:`policies.oracle.oracle_frontier`). Not seeded with the policy's own sequence (``compare``'s gap is, so
+    there "oracle <= policy" holds by construction: the search keeps its start when it finds nothing better)."""
+    from policies.oracle import oracle_floor, oracle_window
+    floor = oracle_floor("nominal", window, cfg)
+    return oracle_window("nominal", window, budget, config=cfg, extra_starts=(floor.duties,))
+
+
+#: the oracle's energy after the stop at a fixed policy's measured overshoot, at most this fraction of the policy's
+#: (per window). From the margins docs quote: issue 21's independent search on eq. 4's link delivered 30 % less than
+#: model_based, 23 % less than model_based_budget:0.02 and 37 % less than ramp (20-window means; here 30 / 15 / 30 %
+#: less, model_based_budget:0.02's with room for its per-window ratios, 0.77 / 0.74, near its mean); the README's
+#: modal gaps: 48 % (model_based), 46 % (ramp), 29 % (mpc). The MPC at b = 0.05 on eq. 4's link and the shipped
+#: clone of the oracle (oracle_imitation) on the modal link are held to the bound alone (factor 1.0: a tighter one
+#: for the clone would test the clone's quality, not the oracle; the MPC's gap is 5.6 % on window 1000). Measured
+#: 2026-11-28 (independent oracle / policy, per window): eq. 4 model_based 0.52 / 0.54, model_based_budget:0.02
+#: 0.77 / 0.74, ramp 0.65 / 0.47, mpc:0.05 0.94 / 0.78 (windows 1000 / 1001); modal (window 1001) model_based 0.53,
+#: ramp 0.38, mpc 0.44, oracle_imitation_s1 0.95.
+BOUND_FACTOR = {"model_based": 0.70, "model_based_budget:0.02": 0.85, "ramp": 0.70, "mpc:0.05": 1.0, "mpc": 0.80,
+                "oracle_imitation": 1.0}
+
+
+def _factor(name: str) -> float:
+    return BOUND_FACTOR[name] if name in BOUND_FACTOR else BOUND_FACTOR[name.partition(":")[0]]
+
+
 def test_oracle_bounds_fixed_policies(budgeted, tmp_path, monkeypatch):
-    """At each policy's own measured overshoot the oracle delivers no more energy after the stop, within
-    the budget and in short mode, for every fixed policy here (the MPC included); the paper's and the budgeted
-    controller are beaten by a margin (they are not optimal)."""
+    """The oracle is a bound that its own search finds: solved from its default starts and the window's floor
+    (never from the policy's sequence, ``_independent_oracle``), at each fixed policy's own measured overshoot, on
+    nominal windows 1000-1001 of eq. 4's link, it is feasible, in short mode, within that overshoot, and delivers at
+    most ``BOUND_FACTOR`` times the policy's energy after the stop (the margins the docs quote).
+
+    What it catches (checked 2026-11-28 by weakening policies/oracle.py): an oracle that does not move from its starts
+    (``_MAXITER = 0``: 1.34-2.03 times the policy's energy for model_based_budget:0.02, ramp and mpc:0.05); one
+    default start (with the floor's), one SLSQP pass of one iteration (start model_based_budget:0.01: ratios on
+    windows 1000 / 1001 model_based_budget:0.02 0.84 / 0.88, ramp 0.77 / 0.65, mpc:0.05 1.04 / 0.98: caught by all
+    three, model_based_budget:0.02 on window 1001, the others on 1000; start model_based_budget:0.05: 0.90 / 0.97,
+    0.69 / 0.55, 1.10 / 1.07: caught by model_based_budget:0.02 and mpc:0.05); the floor's sequence left out of the
+    starts (no feasible sequence within model_based's 1.69 % on window 1001: the budgeted controller's sequences start
+    above it). It does not catch a search cut to 2-3 iterations (within 1.5 % of the full oracle's energy on these
+    windows: SLSQP gains most in its first steps)."""
     monkeypatch.setenv("DRONEWPT_CACHE_DIR", str(tmp_path))
-    from policies.oracle import oracle_window
     for name, tr in budgeted.items():
-        i = 0
-        b = tr.metrics["overshoot_pct"][i] / 100.0
-        o = oracle_window("nominal", 1000 + i, b, starts=(), config=EQ4, extra_starts=(tr.d_short[:, i],))
-        assert o.feasible and o.reached_short_mode
-        assert o.overshoot <= b + 1e-12
-        assert o.energy_after_stop_j <= tr.metrics["energy_after_stop_j"][i]
-        if name.startswith("model_based"):
-            assert o.energy_after_stop_j < 0.9 * tr.metrics["energy_after_stop_j"][i]
-        # replaying the oracle's sequence gives what it claims (the cache holds the duties)
-        r = DutyRollout("nominal", 1000 + i, EQ4).run(o.duties)
-        assert r.energy_after_stop_j[0] == pytest.approx(o.energy_after_stop_j, rel=1e-9)
+        for i in range(2):
+            b, e = tr.metrics["overshoot_pct"][i] / 100.0, tr.metrics["energy_after_stop_j"][i]
+            o = _independent_oracle(1000 + i, b, EQ4)
+            assert o.feasible and o.reached_short_mode, (name, i)
+            assert o.overshoot <= b + 1e-12
+            assert o.energy_after_stop_j <= _factor(name) * e, (name, i, o.energy_after_stop_j / e)
+            # replaying the oracle's sequence gives what it claims (the cache holds the duties)
+            r = DutyRollout("nominal", 1000 + i, EQ4).run(o.duties)
+            assert r.energy_after_stop_j[0] == pytest.approx(o.energy_after_stop_j, rel=1e-9)
 
 
 #: tolerance [percentage points] of the MPC's measured overshoot above the floor (its Kalman estimate from the
@@ -170,21 +207,25 @@ def modal_fixed():
 
 
 def test_oracle_bounds_fixed_policies_on_the_modal_link(modal_fixed, tmp_path, monkeypatch):
-    """On the exact-mode link, at each policy's own measured overshoot (window 1001) the oracle started from that
-    policy's sequence delivers no more energy after the stop, within the budget and in short mode, and beats the
-    paper's controller and the clone by a margin (the search moves from its start: with eq. 4's difference step
-    it stalled there, 0.16 % below the clone, docs/rl.md)."""
+    """On the exact-mode link, window 1001: the oracle solved from its default starts and the window's floor (not from
+    the policy's sequence, ``_independent_oracle``), at each fixed policy's own measured overshoot, is feasible, in
+    short mode, within it, and delivers at most ``BOUND_FACTOR`` times the policy's energy after the stop: the
+    paper's controller, ramp and the MPC (0.53 / 0.38 / 0.44 measured); a shipped clone of the oracle is held to the
+    bound alone (factor 1.0, measured 0.95: a tighter factor would test the clone's quality, not the oracle).
+
+    What it catches (checked 2026-11-28 by weakening policies/oracle.py): an oracle that does not move from its
+    starts (``_MAXITER = 0``: 1.00 times model_based's energy); eq. 4's difference step on this link
+    (``_FD_STEP_MODAL = 2e-3``: 2.08 times the clone's, the search stalled, docs/rl.md "Why the oracle stalled on the
+    exact-mode link"). Not a search cut to one or two iterations (0.56 / 0.49 / 0.46 / 0.96 with one: within every
+    factor here), nor the floor's sequence left out of the starts on this window."""
     monkeypatch.setenv("DRONEWPT_CACHE_DIR", str(tmp_path))
-    from policies.oracle import oracle_window
     cfg, runs = modal_fixed
     i = 1
     for name, tr in runs.items():
         b, e = tr.metrics["overshoot_pct"][i] / 100.0, tr.metrics["energy_after_stop_j"][i]
-        o = oracle_window("nominal", 1000 + i, b, starts=(), config=cfg, extra_starts=(tr.d_short[:, i],))
-        assert o.feasible and o.reached_short_mode and o.overshoot <= b + 1e-12
-        assert o.energy_after_stop_j <= e
-        if name.startswith(("model_based", "oracle_imitation")):
-            assert o.energy_after_stop_j < 0.97 * e, name
+        o = _independent_oracle(1000 + i, b, cfg)
+        assert o.feasible and o.reached_short_mode and o.overshoot <= b + 1e-12, name
+        assert o.energy_after_stop_j <= _factor(name) * e, (name, o.energy_after_stop_j / e)
         r = DutyRollout("nominal", 1000 + i, cfg).run(o.duties)
         assert r.energy_after_stop_j[0] == pytest.approx(o.energy_after_stop_j, rel=1e-9)
 
