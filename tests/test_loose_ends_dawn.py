@@ -22,7 +22,7 @@ def test_follow_recovers_from_a_bad_first_fix(monkeypatch, tmp_path, capsys, bad
 
     tlog = tmp_path / "z.tlog"
     monkeypatch.setattr(follow, "open_follow", lambda connect: _FakeVehicle(_track(20, bad=bad, lat0=47.4, lon0=8.5)))
-    rc = main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--follow-time", "20", "--follow-idle", "0.3",
+    rc = main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--follow-time", "120", "--follow-idle", "0.3",
                "--connect", "none", "--tlog", str(tlog)])
     out, err = capsys.readouterr()
     assert rc == 0 and f"followed {20 - skipped} live positions" in out, (out, err)

@@ -201,7 +201,7 @@ def test_follow_idle_timer_is_not_reset_by_no_fix_frames(monkeypatch, tmp_path, 
             return _fix(0, 0, 0)   # no fix, between empty polls
 
     monkeypatch.setattr(follow, "open_follow", lambda connect: NoFixAfter(_track(2, lat0=47.4, lon0=8.5)))
-    rc = main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--follow-time", "5", "--follow-idle", "0.5",
+    rc = main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--follow-time", "60", "--follow-idle", "0.5",
                "--connect", "none", "--tlog", str(tmp_path / "two.tlog")])
     out = capsys.readouterr().out
     assert rc == 0 and "followed 2 live positions" in out, out

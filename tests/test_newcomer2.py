@@ -425,7 +425,7 @@ def test_follow_skips_an_impossible_jump(monkeypatch, tmp_path, capsys):
     tlog = tmp_path / "z.tlog"
     monkeypatch.setattr(follow, "open_follow",
                         lambda connect: _FakeVehicle(_track(20, bad={6}, lat0=47.4, lon0=8.5, alt_bad={12})))
-    rc = main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--follow-time", "20", "--follow-idle", "0.3",
+    rc = main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--follow-time", "120", "--follow-idle", "0.3",
                "--connect", "none", "--tlog", str(tlog)])
     out, err = capsys.readouterr()
     assert rc == 0 and "followed 18 live positions" in out, (out, err)
@@ -443,7 +443,7 @@ def test_follow_skips_an_implausible_position_and_says_so(monkeypatch, tmp_path,
 
     tlog = tmp_path / "f.tlog"
     monkeypatch.setattr(follow, "open_follow", lambda connect: _FakeVehicle(_track(20, bad={3})))
-    rc = main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--follow-time", "20", "--follow-idle", "0.3",
+    rc = main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--follow-time", "120", "--follow-idle", "0.3",
                "--connect", "none", "--tlog", str(tlog)])
     out, err = capsys.readouterr()
     assert rc == 0 and "followed 19 live positions" in out, (out, err)

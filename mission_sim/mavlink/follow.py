@@ -254,6 +254,20 @@ class _Positions:
         return time_boot_ms, arrival_s, (e, n, u)
 
 
+def _poll(vin, positions, wait, simulating, last_rx, idle_timeout_s):
+    """One receive of at most ``wait`` s: ``(taken, last_rx, idle)``. Idle only when nothing came (a slow chunk must
+    not drop the positions queued meanwhile) and positions have come (those held for the first reference count: a
+    vehicle that stops after 2 is idle too); ``last_rx`` moves only when a position was taken or held (not on a
+    no-fix frame, nor a skipped one)."""
+    msg = vin.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=wait)
+    idle = msg is None and (simulating or bool(positions.held)) and time.monotonic() - last_rx > idle_timeout_s
+    before = positions.held[-1] if positions.held else None
+    taken = [] if msg is None else positions.take(msg, time.monotonic())
+    if taken or (positions.held and positions.held[-1] is not before):
+        last_rx = time.monotonic()
+    return taken, last_rx, idle
+
+
 def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None = None, rate_hz: float = 10.0,
            home: GeoPoint | None = None, tlog=None, max_wall_s: float = 60.0, chunk_s: float = 1.0,
            max_messages: int = 1_000_000, idle_timeout_s: float = 10.0, out_conn=None, in_conn=None,
@@ -264,10 +278,9 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
     :class:`_Positions`) are timed by the vehicle's clock (:class:`_Clock`) and converted to the pad frame about
     ``home`` (None: the first position taken is the pad, :class:`_Positions`). Every ``chunk_s`` seconds the
     new stretch runs through :class:`ChunkedMission` and its telemetry is sent at ``rate_hz``,
-    ``chunk_s`` behind the vehicle. The loop ends after ``max_wall_s`` seconds, ``max_messages``
-    received messages or ``idle_timeout_s`` without a position once positions have come (before the
-    first one it waits up to ``max_wall_s``: a vehicle may boot after the follower); then the last partial chunk is
-    simulated and everything still queued is sent at once. ``in_conn``: a connection from
+    ``chunk_s`` behind the vehicle. The loop ends after ``max_wall_s`` seconds, ``max_messages`` received messages
+    or ``idle_timeout_s`` without a position once positions have come (before the first one it waits up to
+    ``max_wall_s``: a vehicle may boot after the follower); then the last chunk runs and the queue is sent at once. ``in_conn``: a connection from
     :func:`open_follow` opened earlier (bind before slow set-up work, or the vehicle's first
     messages are lost). ``sysid`` / ``compid``: the simulated vehicle's MAVLink ids.
     """
@@ -309,16 +322,8 @@ def follow(follow_connect: str, cfg, policy, run_mission, *, connect: str | None
     try:
         while n_msgs < max_messages and time.monotonic() < wall0 + max_wall_s and not idle:
             wait = 0.05 if not queue else max(0.0, min(0.05, wall0 + queue[0][0] - time.monotonic()))
-            msg = vin.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=wait)
+            taken, last_rx, idle = _poll(vin, positions, wait, sim is not None, last_rx, idle_timeout_s)
             n_msgs += 1
-            # idle only when nothing is waiting (a slow chunk must not drop the positions queued meanwhile)
-            # (positions held for the first reference count as come: a vehicle that stops after 2 is idle too)
-            idle = msg is None and (sim is not None or bool(positions.held)) and \
-                time.monotonic() - last_rx > idle_timeout_s
-            before = positions.held[-1] if positions.held else None
-            taken = [] if msg is None else positions.take(msg, time.monotonic())
-            if taken or (positions.held and positions.held[-1] is not before):   # taken or held: not a no-fix frame,
-                last_rx = time.monotonic()                                       # nor a skipped one
             add(taken)
             if sim is not None and sim.pending_s() >= chunk_s:
                 enqueue(sim.simulate())
