@@ -20,7 +20,7 @@ import signal
 import sys
 import threading
 
-__all__ = ["Interrupted", "interrupts_raised", "interrupts_deferred", "raise_lost", "HANDLED", "exit_status", "signal_name",
+__all__ = ["Interrupted", "interrupts_raised", "interrupts_deferred", "interrupts_requested", "raise_lost", "HANDLED", "exit_status", "signal_name",
            "blocked_across_fork", "unblock_in_child"]
 
 #: the signals turned into :class:`Interrupted`
@@ -116,6 +116,33 @@ def interrupts_deferred():
             signal.signal(s, h)
     if caught:
         raise Interrupted(caught[0])
+
+
+@contextlib.contextmanager
+def interrupts_requested():
+    """While inside, the first SIGINT or SIGTERM is a request, not an exception: its number is appended to the
+    yielded list, which the body polls to stop at a point of its choosing (``dronewpt train`` stops its SB3 run
+    at the next environment step and saves the model so far); a second one raises :class:`Interrupted` at once.
+    A signal whose handler is the default or ignored (SIGTERM outside ``dronewpt``) is left alone; outside the main
+    thread it does nothing. The previous handlers are restored on leaving; the caller raises the request."""
+    caught: list[int] = []
+    if not _in_main_thread():
+        yield caught
+        return
+
+    def request(signum, frame):
+        if caught:
+            raise Interrupted(signum)
+        caught.append(signum)
+    old = {s: signal.getsignal(s) for s in HANDLED}
+    old = {s: h for s, h in old.items() if h not in (signal.SIG_DFL, signal.SIG_IGN, None)}
+    for s in old:
+        signal.signal(s, request)
+    try:
+        yield caught
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
 
 
 @contextlib.contextmanager

@@ -19,6 +19,11 @@ Writes into ``out_dir``:
   with cost, ``best_model.zip``), ``checkpoints/`` (``CheckpointCallback`` with the VecNormalize
   statistics; ``resume=`` continues from one), ``tb/`` when tensorboard is installed,
 * ``learning_curve.png``.
+
+Ctrl-C / SIGTERM during the RL stage (the first one; a second raises at once) stops SB3 at the next environment step
+and saves the model so far as ``<name>_interrupted.zip`` + ``.json`` (``interrupted``: signal, steps, of how many) +
+``<name>_interrupted_vecnormalize.pkl`` (a policy, and ``resume=`` goes on from it) and the best models' metadata,
+then raises :class:`mission_sim.signals.Interrupted` with a note naming them.
 """
 
 from __future__ import annotations
@@ -309,10 +314,10 @@ def _build(spec: dict, out: Path, resume):
     return venv, eval_env, model, penalty
 
 
-def _callbacks(spec: dict, out: Path, eval_env, penalty, progress: bool):
+def _callbacks(spec: dict, out: Path, eval_env, penalty, progress: bool, requests: list):
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
 
-    from .callbacks import CostEvalCallback, ProgressCallback
+    from .callbacks import CostEvalCallback, ProgressCallback, StopOnRequest
     from .constrained import LagrangeCallback
 
     n = spec["n_envs"]
@@ -327,6 +332,7 @@ def _callbacks(spec: dict, out: Path, eval_env, penalty, progress: bool):
         probe = _base_env(spec, spec["probe_episodes"], None) if spec["probe_episodes"] else None
         lag = LagrangeCallback(penalty, spec["budget"], lr=spec["lambda_lr"], path=out / "lagrange.json", probe=probe)
         cbs.append(lag)
+    cbs.append(StopOnRequest(requests))   # Ctrl-C / SIGTERM: stop at the next step, the model saved (train())
     return CallbackList(cbs), lag, cbs[2]
 
 
@@ -610,14 +616,24 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
         resume = res["model"]
     venv, eval_env, model, penalty = _build(spec, out, resume)
     start_log_std = float(model.policy.log_std.detach().mean()) if imitate else None   # PPO's start: the clone's
-    cbs, lag, ev = _callbacks(spec, out, eval_env, penalty, progress)
-    todo = spec["timesteps"] - (model.num_timesteps if resume is not None else 0)   # SB3 adds num_timesteps on resume
-    model.learn(total_timesteps=max(todo, 1), callback=cbs, reset_num_timesteps=resume is None)
-    zip_path = out / f"{spec['name']}.zip"
+    from mission_sim.signals import Interrupted, interrupts_requested, signal_name
+    with interrupts_requested() as requests:   # Ctrl-C / SIGTERM: stop at the next step and keep the model so far
+        cbs, lag, ev = _callbacks(spec, out, eval_env, penalty, progress, requests)
+        todo = spec["timesteps"] - (model.num_timesteps if resume is not None else 0)   # SB3 adds num_timesteps on resume
+        model.learn(total_timesteps=max(todo, 1), callback=cbs, reset_num_timesteps=resume is None)
+    stopped = requests[0] if requests else None
+    # an interrupted run's model goes beside the final one's name (an earlier run's final model in --out is kept):
+    # <name>_interrupted.zip + .json (usable as rl: / residual:) + _vecnormalize.pkl (--resume finds it)
+    name = spec["name"] + ("_interrupted" if stopped else "")
+    zip_path = out / f"{name}.zip"
+    norm_path = out / (f"{name}_vecnormalize.pkl" if stopped else "vecnormalize.pkl")
     model.save(str(zip_path))
-    venv.save(str(out / "vecnormalize.pkl"))
+    venv.save(str(norm_path))
     meta = _meta(spec, venv, lag, float(spec["config"].dt_s))
     meta.update(final_eval=ev.curve[-1] if ev.curve else None, final_training=_training_episodes(model))
+    if stopped:
+        meta["interrupted"] = {"signal": signal_name(Interrupted(stopped)), "timesteps": int(model.num_timesteps),
+                               "of": int(spec["timesteps"])}
     if imitate:
         _imitation_meta(meta, out, start_log_std)
     meta_path = zip_path.with_suffix(".json")
@@ -625,9 +641,16 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     _write_best_meta(out / "eval", meta, ev)
     venv.close()
     mon = out / "monitor.monitor.csv"
-    res = {"model": zip_path, "meta": meta_path, "vecnormalize": out / "vecnormalize.pkl", "monitor": mon,
+    res = {"model": zip_path, "meta": meta_path, "vecnormalize": norm_path, "monitor": mon,
            **({"clone": out / f"{CLONE_NAME}.zip"} if imitate else {}), **_written_dirs({"eval_dir": out / "eval", "checkpoints": out / "checkpoints"})}
     if mon.is_file():
         res["learning_curve"] = plot_learning_curve(mon, out / "learning_curve.png",
                                                     f"{algo.upper()} on {spec['env_id']} ({scenario})", ev.curve)
+    if stopped:
+        exc = Interrupted(stopped)
+        exc.add_note(f"trained {model.num_timesteps:,} of {spec['timesteps']:,} steps; the model so far is "
+                     f"'{zip_path}' with its metadata (compare --policies "
+                     f"{'residual' if spec['residual'] else 'rl'}:{zip_path}); to go on, the same command with "
+                     f"--resume {zip_path}")
+        raise exc
     return res

@@ -1,0 +1,63 @@
+"""A demanding newcomer's third pass (2026-11-28): sweep, sizing, tolerance, netlist, export-controller, coupling,
+paper, warmup, the flags of compare and train, and the Python API from a notebook. Each test fails on the tree
+before its fix (docs/robustness.md, "A demanding newcomer's third pass")."""
+
+import json
+import signal
+
+import numpy as np
+import pytest
+
+SMALL = dict(n_steps=64, batch_size=256, n_epochs=2, policy_kwargs=dict(net_arch=[16, 16], log_std_init=-2.0))
+
+
+# --------------------------------------------------------------------------- train: Ctrl-C keeps the model so far
+def test_an_interrupted_training_keeps_its_model_usable_and_resumable(tmp_path, monkeypatch):
+    """Ctrl-C (or SIGTERM) 9 env steps into ``train`` ended the run with nothing but the checkpoints and an
+    ``eval/best_model.zip`` without its metadata (neither usable as ``rl:``): the steps since the last checkpoint
+    (up to --checkpoint-every, 100,000 by default) were lost. Now the first signal stops SB3 at the next step and
+    the model so far is saved beside the final one's name (an earlier run's final model is kept), with its metadata
+    (``interrupted``) and statistics: a ``rl:`` policy, and ``resume=`` goes on from it to the total."""
+    pytest.importorskip("stable_baselines3")
+    import stable_baselines3 as sb3
+
+    import policies
+    from policies import callbacks
+    from policies.train import train
+
+    earlier = tmp_path / "ppo_sbar.zip"
+    earlier.write_bytes(b"an earlier run's final model")
+    step = callbacks.ProgressCallback._on_step
+
+    def ctrl_c_at_call_9(self):
+        if self.n_calls == 9:
+            signal.raise_signal(signal.SIGINT)
+        return step(self)
+    monkeypatch.setattr(callbacks.ProgressCallback, "_on_step", ctrl_c_at_call_9)
+    kw = dict(seed=1, n_envs=16, scenario="nominal", progress=False, hyperparams=SMALL, eval_every=64,
+              eval_episodes=4, checkpoint_every=10**6)
+    with pytest.raises(KeyboardInterrupt) as e:
+        train("ppo", 4096, tmp_path, **kw)
+    # SB3 stops at the step that saw the request: 9 steps of 16 windows
+    model = tmp_path / "ppo_sbar_interrupted.zip"
+    assert model.is_file() and earlier.read_bytes() == b"an earlier run's final model"
+    meta = json.loads(model.with_suffix(".json").read_text())
+    assert meta["interrupted"] == {"signal": "SIGINT", "timesteps": 144, "of": 4096}
+    assert sb3.PPO.load(str(model), device="cpu").num_timesteps == 144
+    assert "144 of 4,096 steps" in e.value.__notes__[0] and f"--resume {model}" in e.value.__notes__[0]
+    # the best evaluated model so far has its metadata too (written only at the end of a whole run before)
+    assert (tmp_path / "eval" / "best_model.json").is_file()
+    # usable as a policy: one window's duties in [0, 1]
+    from envs import SbarChargingEnv
+    env = SbarChargingEnv("nominal")
+    pol = policies.make(f"rl:{model}")
+    obs, _ = env.reset(seed=3)
+    pol.reset()
+    d = [float(np.asarray(pol.act(obs)).ravel()[0])]
+    assert 0.0 <= d[0] <= 1.0
+    # and resumable to the total (the signal no longer sent)
+    monkeypatch.setattr(callbacks.ProgressCallback, "_on_step", step)
+    res = train("ppo", 512, tmp_path, resume=model, **kw)
+    # on from 144: one PPO rollout (64 steps x 16 windows) reaches the 512
+    assert sb3.PPO.load(str(res["model"]), device="cpu").num_timesteps == 144 + 1024
+    assert "interrupted" not in json.loads(res["meta"].read_text())
