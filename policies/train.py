@@ -557,6 +557,20 @@ def _written_dirs(dirs: dict) -> dict:
     return out
 
 
+def earlier_run(out_dir) -> str | None:
+    """What of an earlier training run ``out_dir`` holds (its models ``*.zip``, its ``monitor.monitor.csv``), as
+    a short text, or None: a new run there would replace them (``train`` refuses it unless it resumes)."""
+    out = Path(out_dir)
+    if not out.is_dir():
+        return None
+    held = sorted(p.name for p in out.glob("*.zip") if p.is_file())
+    if (out / "monitor.monitor.csv").is_file():
+        held.append("monitor.monitor.csv")
+    if not held:
+        return None
+    return ", ".join(held[:3]) + (f" and {len(held) - 3} more" if len(held) > 3 else "")
+
+
 def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64, scenario: str = "random",
           progress: bool = True, hyperparams: dict | None = None, hyperparams_file=None, env=None,
           cost: str = "overshoot", lagrangian: bool = False, budget: float | None = None, lambda_lr: float | None = None,
@@ -602,6 +616,10 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     spec = _spec(algo, timesteps, opts)
     _one_thread_each()
     out = Path(out_dir)
+    held = None if resume is not None else earlier_run(out)
+    if held:   # (a second run into the same folder replaced the first one's model and logs without a word)
+        raise ValueError(f"out_dir={str(out)!r} holds an earlier training run ({held}), which this run would "
+                         "replace; valid: a new folder, resume=<one of its models> to go on training it, or remove it")
     out.mkdir(parents=True, exist_ok=True)
     if importlib.util.find_spec("tensorboard") is not None:
         spec["tb"] = str(out / "tb")

@@ -16,7 +16,7 @@ def test_an_interrupted_training_keeps_its_model_usable_and_resumable(tmp_path, 
     """Ctrl-C (or SIGTERM) 9 env steps into ``train`` ended the run with nothing but the checkpoints and an
     ``eval/best_model.zip`` without its metadata (neither usable as ``rl:``): the steps since the last checkpoint
     (up to --checkpoint-every, 100,000 by default) were lost. Now the first signal stops SB3 at the next step and
-    the model so far is saved beside the final one's name (an earlier run's final model is kept), with its metadata
+    the model so far is saved beside the final one's name, with its metadata
     (``interrupted``) and statistics: a ``rl:`` policy, and ``resume=`` goes on from it to the total."""
     pytest.importorskip("stable_baselines3")
     import stable_baselines3 as sb3
@@ -25,8 +25,6 @@ def test_an_interrupted_training_keeps_its_model_usable_and_resumable(tmp_path, 
     from policies import callbacks
     from policies.train import train
 
-    earlier = tmp_path / "ppo_sbar.zip"
-    earlier.write_bytes(b"an earlier run's final model")
     step = callbacks.ProgressCallback._on_step
 
     def ctrl_c_at_call_9(self):
@@ -40,7 +38,7 @@ def test_an_interrupted_training_keeps_its_model_usable_and_resumable(tmp_path, 
         train("ppo", 4096, tmp_path, **kw)
     # SB3 stops at the step that saw the request: 9 steps of 16 windows
     model = tmp_path / "ppo_sbar_interrupted.zip"
-    assert model.is_file() and earlier.read_bytes() == b"an earlier run's final model"
+    assert model.is_file() and not (tmp_path / "ppo_sbar.zip").exists()
     meta = json.loads(model.with_suffix(".json").read_text())
     assert meta["interrupted"] == {"signal": "SIGINT", "timesteps": 144, "of": 4096}
     assert sb3.PPO.load(str(model), device="cpu").num_timesteps == 144
@@ -61,3 +59,28 @@ def test_an_interrupted_training_keeps_its_model_usable_and_resumable(tmp_path, 
     # on from 144: one PPO rollout (64 steps x 16 windows) reaches the 512
     assert sb3.PPO.load(str(res["model"]), device="cpu").num_timesteps == 144 + 1024
     assert "interrupted" not in json.loads(res["meta"].read_text())
+
+
+# --------------------------------------------------------------------------- train: --out of an earlier run
+def _earlier_run(folder):
+    folder.mkdir()
+    for name, data in (("ppo_sbar.zip", b"an earlier run's model"), ("monitor.monitor.csv", b"#{}\nr,l,t\n")):
+        (folder / name).write_bytes(data)
+    return {p.name: p.read_bytes() for p in folder.iterdir()}
+
+
+def test_train_refuses_an_out_folder_holding_an_earlier_run(tmp_path, capsys):
+    """``dronewpt train --out t2`` a second time replaced the first run's ``ppo_sbar.zip`` (150,000 steps of
+    training) and its monitor log with the new run's, exit 0, no word. Now refused (the command line before anything
+    is built, ``train()`` alike), unless it resumes; a folder without a model or monitor log is still taken."""
+    pytest.importorskip("stable_baselines3")
+    from _cli_helpers import one_error_line
+
+    from policies.train import train
+    before = _earlier_run(tmp_path / "t2")
+    line = one_error_line(capsys, ["train", "--algo", "ppo", "--timesteps", "10", "--out", str(tmp_path / "t2"),
+                                   "--no-progress"])
+    assert "holds an earlier training run (ppo_sbar.zip, monitor.monitor.csv)" in line and "--resume" in line
+    with pytest.raises(ValueError, match="holds an earlier training run"):
+        train("ppo", 10, tmp_path / "t2", progress=False)
+    assert {p.name: p.read_bytes() for p in (tmp_path / "t2").iterdir()} == before
