@@ -84,3 +84,39 @@ def test_train_refuses_an_out_folder_holding_an_earlier_run(tmp_path, capsys):
     with pytest.raises(ValueError, match="holds an earlier training run"):
         train("ppo", 10, tmp_path / "t2", progress=False)
     assert {p.name: p.read_bytes() for p in (tmp_path / "t2").iterdir()} == before
+
+
+# --------------------------------------------------------------------------- sweep: a policy's model retrained
+def test_a_sweep_over_a_model_file_refuses_to_resume_once_the_model_changed(tmp_path, monkeypatch):
+    """A study with ``policy = ["rl:PATH"]`` resumed after PATH was retrained (another model at the same path)
+    printed ``2 cases, 2 already done, 0 run``: the old model's rows as the new model's numbers (a case's id holds
+    the spec, not the model). Now the model and its metadata are recorded in sweep.json (sha256, as a replay study's
+    log) and the resume is refused naming the file; the model as it was resumes."""
+    pytest.importorskip("stable_baselines3")
+    import shutil
+
+    import policies
+    from mission_sim.studies.prepare import prepare_study
+    from mission_sim.studies.status import check_same_study, write_manifest
+    from mission_sim.studies.study import parse_study
+
+    pre = policies.__file__.rsplit("/", 1)[0] + "/pretrained/"
+    for ext in ("zip", "json"):
+        shutil.copy(pre + f"rl_s0.{ext}", tmp_path / f"mine.{ext}")
+    doc = {"study": {"name": "mine"}, "grid": {"policy": ["step", f"rl:{tmp_path / 'mine.zip'}"]}}
+    out = tmp_path / "sweep"
+
+    def prepared():
+        st = parse_study(doc)
+        runner, cases, fp = prepare_study(st, policies.make, policies.available(), warn=False)
+        return st, runner, cases, fp
+    st, runner, cases, fp = prepared()
+    assert set(runner.input_files) == {f"policy rl:{tmp_path / 'mine.zip'}", f"policy rl:{tmp_path / 'mine.zip'} metadata"}
+    write_manifest(out, st, fp, len(cases), runner.input_files)
+    shutil.copy(pre + "rl_s1.zip", tmp_path / "mine.zip")   # retrained into the same path
+    st, runner, cases, fp = prepared()
+    with pytest.raises(ValueError, match=r"over another file: policy rl:.*mine.zip' changed since it ran"):
+        check_same_study(out, st, fp, len(cases), runner.input_files)
+    shutil.copy(pre + "rl_s0.zip", tmp_path / "mine.zip")   # as it was: resumes
+    st, runner, cases, fp = prepared()
+    check_same_study(out, st, fp, len(cases), runner.input_files)
