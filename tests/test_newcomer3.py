@@ -120,3 +120,21 @@ def test_a_sweep_over_a_model_file_refuses_to_resume_once_the_model_changed(tmp_
     shutil.copy(pre + "rl_s0.zip", tmp_path / "mine.zip")   # as it was: resumes
     st, runner, cases, fp = prepared()
     check_same_study(out, st, fp, len(cases), runner.input_files)
+
+
+# --------------------------------------------------------------------------- sweep: missions that ran dry
+def test_a_sweep_counts_the_missions_that_ended_with_the_battery_depleted(tmp_path, capsys):
+    """``dronewpt mission`` ends a depleted mission with exit 3; a sweep of 4 missions, 3 of them depleted (a pad
+    10 km away, an empty start), said ``4 ok, 0 failed`` and averaged them into the table with no word. Now the line
+    and the table (``battery depleted``, also in summary.csv and --format json) count them."""
+    from mission_sim.cli import main
+    study = tmp_path / "f1.toml"
+    study.write_text('[study]\nname = "f1"\n[grid]\n"pads.1.x_m" = [40.0, 10000.0]\n'
+                     '"battery.initial_soc" = [0.5, 0.0]\n')
+    assert main(["sweep", str(study), "--out", str(tmp_path / "o"), "--workers", "0", "--no-plot",
+                 "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "4 ok (3 with the battery depleted: battery_depleted in the rows), 0 failed" in out
+    import pandas as pd
+    table = pd.read_csv(tmp_path / "o" / "summary.csv", index_col=0)
+    assert table.loc["all", "battery depleted"] == 3
