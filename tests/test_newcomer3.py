@@ -138,3 +138,34 @@ def test_a_sweep_counts_the_missions_that_ended_with_the_battery_depleted(tmp_pa
     import pandas as pd
     table = pd.read_csv(tmp_path / "o" / "summary.csv", index_col=0)
     assert table.loc["all", "battery depleted"] == 3
+
+
+# --------------------------------------------------------------------------- Python API from a notebook
+@pytest.mark.parametrize("kw, where", [
+    ({"n_steps": 100}, "n_steps is an EnvConfig field: config={'n_steps': 100}"),
+    ({"link_model": "envelope"}, "link_model is an EnvConfig field: config={'link_model': 'envelope'}"),
+    ({"overcurrent": 20}, "overcurrent is a reward weight: config={'reward': {'overcurrent': 20}}"),
+    ({"bogus": 1}, "valid keywords: scenario, render_mode, config, compiled, history")])
+def test_gymnasium_make_with_an_env_config_field_says_where_it_goes(kw, where):
+    """``gymnasium.make(ENV_ID, n_steps=100)`` (the EnvConfig fields as keywords, as many envs take them) said
+    ``SbarChargingEnv.__init__() got an unexpected keyword argument 'n_steps'``, no word of ``config=``; now the
+    valid keywords and, for a config field or reward weight, the ``config={...}`` it belongs in (the vector env too)."""
+    import gymnasium as gym
+
+    import envs
+    with pytest.raises(TypeError, match=r"keyword argument '\w+' is unknown; valid keywords: ") as e:
+        gym.make(envs.ENV_ID, **kw)
+    assert where in str(e.value)
+    with pytest.raises(TypeError) as e:
+        gym.make_vec(envs.ENV_ID, num_envs=2, vectorization_mode="vector_entry_point", **kw)
+    assert "SbarChargingVectorEnv: keyword argument" in str(e.value) and "valid keywords: num_envs," in str(e.value)
+    assert "config={" not in where or where in str(e.value)
+
+
+def test_run_paper_takes_one_trajectory_by_name():
+    """``run_paper(trajectories="step")`` iterated the string: ``trajectory='s' is invalid``; now one trajectory:
+    the step's envelope peak, Table II's 50.51 A (eq. 4's model, run_paper's default)."""
+    from wpt_receiver.paper import run_paper
+    runs = run_paper(trajectories="step")
+    assert [r.trajectory for r in runs] == ["step"]
+    assert runs[0].metrics.max_current_a == pytest.approx(50.51, abs=0.01)
