@@ -169,3 +169,17 @@ def test_run_paper_takes_one_trajectory_by_name():
     runs = run_paper(trajectories="step")
     assert [r.trajectory for r in runs] == ["step"]
     assert runs[0].metrics.max_current_a == pytest.approx(50.51, abs=0.01)
+
+
+# --------------------------------------------------------------------------- a list split by the shell
+@pytest.mark.parametrize("argv, shown", [
+    (["compare", "--policies", "step,", "ramp", "--no-plot"], "(a space after the comma in 'step,'? a list is one "
+                                                             "argument: step,ramp, or quote it)"),
+    (["sizing", "--policies", "step,", "ramp", "--no-plot"], "argument: step,ramp"),
+    (["compare", "--scenarios", "nominal,", "windy", "--no-plot"], "argument: nominal,windy")])
+def test_a_list_split_at_a_space_after_its_comma_says_so(argv, shown, capsys):
+    """``compare --policies step, ramp`` said ``unrecognized argument 'ramp'`` alone; a newcomer reads the list as
+    given. Now the line points at the space after the comma."""
+    from _cli_helpers import one_error_line
+    line = one_error_line(capsys, argv)
+    assert f"unrecognized argument '{argv[3]}' (a space after the comma in '{argv[2]}'?" in line and shown in line
