@@ -183,3 +183,27 @@ def test_a_list_split_at_a_space_after_its_comma_says_so(argv, shown, capsys):
     from _cli_helpers import one_error_line
     line = one_error_line(capsys, argv)
     assert f"unrecognized argument '{argv[3]}' (a space after the comma in '{argv[2]}'?" in line and shown in line
+
+
+# --------------------------------------------------------------------------- a study's value spec misspelt
+@pytest.mark.parametrize("section, text, shown", [
+    ("grid", '"pads.1.hover_time_s" = {range = [30, 60, 10]}',
+     "[grid] 'pads.1.hover_time_s' = {range = ...} is invalid; valid: a list of values, or {linspace = [start, stop, "
+     "num]}"),
+    ("grid", 'pads.1.hover_time_s = {arange = [30, 60, 10]}', "[grid] 'pads.1.hover_time_s' = {arange = ...}"),
+    ("grid", '"pads.1.hover_time_s" = {linspace = [30, 60], num = 3}',
+     "[grid] 'pads.1.hover_time_s' = {linspace = ..., num = ...} is invalid"),
+    ("monte_carlo.params", '"wind.speed_m_s" = {randint = [0, 6]}',
+     "[monte_carlo.params] 'wind.speed_m_s' = {randint = ...} is invalid; valid: one of {uniform = [...]}")])
+def test_a_study_value_spec_that_is_not_one_is_named_as_a_spec(section, text, shown):
+    """``"pads.1.hover_time_s" = {range = [30, 60, 10]}`` (numpy's / Python's word for a grid) was flattened into a key:
+    ``override key 'pads.1.hover_time_s.range' is invalid; valid form: pads.<index>.<key>``, about a key the user
+    never wrote; now the value is named with the specs the section takes. A nested table of real keys
+    (``link = {devices = [...]}``) is still a dotted key."""
+    from mission_sim.studies.study import parse_study
+    import tomllib
+    doc = tomllib.loads(f"[{section}]\n{text}\n" + ("[monte_carlo]\nn = 2\n" if "monte" in section else ""))
+    with pytest.raises(ValueError) as e:
+        parse_study(doc)
+    assert shown in str(e.value)
+    assert parse_study({"grid": {"link": {"devices": ["ideal", "sic"]}}}).grid == {"link.devices": ["ideal", "sic"]}
