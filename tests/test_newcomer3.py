@@ -4,6 +4,7 @@ before its fix (docs/robustness.md, "A demanding newcomer's third pass")."""
 
 import json
 import signal
+import threading
 
 import numpy as np
 import pytest
@@ -12,7 +13,18 @@ SMALL = dict(n_steps=64, batch_size=256, n_epochs=2, policy_kwargs=dict(net_arch
 
 
 # --------------------------------------------------------------------------- train: Ctrl-C keeps the model so far
-def test_an_interrupted_training_keeps_its_model_usable_and_resumable(tmp_path, monkeypatch):
+@pytest.fixture
+def sigint_raises():
+    """SIGINT raising KeyboardInterrupt (Python's default) for the test, whatever pytest started with: a background
+    job, nohup or a CI wrapper starts Python with SIGINT ignored, which ``interrupts_requested`` leaves alone."""
+    if threading.current_thread() is not threading.main_thread():
+        pytest.skip("signal handlers can only be set in the main thread")
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, old)
+
+
+def test_an_interrupted_training_keeps_its_model_usable_and_resumable(tmp_path, monkeypatch, sigint_raises):
     """Ctrl-C (or SIGTERM) 9 env steps into ``train`` ended the run with nothing but the checkpoints and an
     ``eval/best_model.zip`` without its metadata (neither usable as ``rl:``): the steps since the last checkpoint
     (up to --checkpoint-every, 100,000 by default) were lost. Now the first signal stops SB3 at the next step and
