@@ -557,18 +557,40 @@ def _written_dirs(dirs: dict) -> dict:
     return out
 
 
-def earlier_run(out_dir) -> str | None:
-    """What of an earlier training run ``out_dir`` holds (its models ``*.zip``, its ``monitor.monitor.csv``), as
-    a short text, or None: a new run there would replace them (``train`` refuses it unless it resumes)."""
+def earlier_run(out_dir, name: str = "ppo_sbar") -> str | None:
+    """What of an earlier training run ``out_dir`` holds that a run writing model ``name`` there would replace
+    (``name``.zip, ``name``_interrupted.zip, ``monitor.monitor.csv``, files in ``eval/`` or ``checkpoints/``), as a
+    short text, or None (``train`` refuses such a folder unless it resumes). Other files (notes.zip) do not count."""
     out = Path(out_dir)
     if not out.is_dir():
         return None
-    held = sorted(p.name for p in out.glob("*.zip") if p.is_file())
-    if (out / "monitor.monitor.csv").is_file():
-        held.append("monitor.monitor.csv")
+    held = [f for f in (f"{name}.zip", f"{name}_interrupted.zip", "monitor.monitor.csv") if (out / f).is_file()]
+    held += [f"{d}/" for d in ("eval", "checkpoints") if (out / d).is_dir() and any((out / d).iterdir())]
     if not held:
         return None
     return ", ".join(held[:3]) + (f" and {len(held) - 3} more" if len(held) > 3 else "")
+
+
+#: a run's learning-curve files, which SB3 starts afresh (VecMonitor opens its csv with "w", EvalCallback its
+#: arrays empty): moved aside on --resume into a folder that holds them (:func:`_keep_curves`)
+CURVE_FILES = ("monitor.monitor.csv", "eval/eval_curve.json", "eval/evaluations.npz")
+
+
+def _keep_curves(out: Path) -> list:
+    """Move the learning-curve files of the run being resumed aside (:func:`mission_sim.files.move_aside`,
+    ``monitor.monitor.prev-<UTC time>.csv``): the resumed run writes its own from its start. Returns the new paths."""
+    from mission_sim.files import move_aside
+    return [move_aside(out / f) for f in CURVE_FILES if (out / f).is_file()]
+
+
+def _policy_prefix(spec: dict) -> str:
+    """The policies.make prefix of the model a spec trains (``rl:``, ``residual:``, ``slow_budget:``)."""
+    return "slow_budget" if spec.get("slow_budget") else "residual" if spec["residual"] else "rl"
+
+
+#: written to stderr at the first Ctrl-C / SIGTERM of a training run
+STOP_NOTICE = ("{signal}: stopping at the next step to save the model so far; another Ctrl-C before the saving "
+               "starts abandons it")
 
 
 def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64, scenario: str = "random",
@@ -616,11 +638,12 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     spec = _spec(algo, timesteps, opts)
     _one_thread_each()
     out = Path(out_dir)
-    held = None if resume is not None else earlier_run(out)
+    held = None if resume is not None else earlier_run(out, spec["name"])
     if held:   # (a second run into the same folder replaced the first one's model and logs without a word)
         raise ValueError(f"out_dir={str(out)!r} holds an earlier training run ({held}), which this run would "
                          "replace; valid: a new folder, resume=<one of its models> to go on training it, or remove it")
     out.mkdir(parents=True, exist_ok=True)
+    kept = _keep_curves(out) if resume is not None else []
     if importlib.util.find_spec("tensorboard") is not None:
         spec["tb"] = str(out / "tb")
     if resume is not None and (out / "lagrange.json").is_file():
@@ -634,8 +657,8 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
         resume = res["model"]
     venv, eval_env, model, penalty = _build(spec, out, resume)
     start_log_std = float(model.policy.log_std.detach().mean()) if imitate else None   # PPO's start: the clone's
-    from mission_sim.signals import Interrupted, interrupts_requested, signal_name
-    with interrupts_requested() as requests:   # Ctrl-C / SIGTERM: stop at the next step and keep the model so far
+    from mission_sim.signals import Interrupted, interrupts_deferred, interrupts_requested, signal_name
+    with interrupts_requested(STOP_NOTICE) as requests:   # Ctrl-C / SIGTERM: stop at the next step, keep the model
         cbs, lag, ev = _callbacks(spec, out, eval_env, penalty, progress, requests)
         todo = spec["timesteps"] - (model.num_timesteps if resume is not None else 0)   # SB3 adds num_timesteps on resume
         model.learn(total_timesteps=max(todo, 1), callback=cbs, reset_num_timesteps=resume is None)
@@ -645,6 +668,31 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     name = spec["name"] + ("_interrupted" if stopped else "")
     zip_path = out / f"{name}.zip"
     norm_path = out / (f"{name}_vecnormalize.pkl" if stopped else "vecnormalize.pkl")
+    late = None
+    try:
+        with interrupts_deferred():   # a signal during the saving is raised once all is saved, not half-way
+            res = _save(spec, out, model, venv, lag, ev, zip_path, norm_path, stopped, imitate, start_log_std)
+    except Interrupted as exc:
+        late = exc.signum
+    if stopped or late:
+        exc = Interrupted(stopped or late)
+        done = (f"trained {model.num_timesteps:,} of {spec['timesteps']:,} steps" if stopped else
+                f"trained all {model.num_timesteps:,} steps (the signal came while saving)")
+        note = (f"{done}; the model is saved: '{zip_path}' with its metadata (compare --policies "
+                f"{_policy_prefix(spec)}:{zip_path})")
+        if stopped:
+            note += (f"; to go on, the same command with --resume {zip_path} (it moves this run's learning-curve "
+                     "files, monitor.monitor.csv and eval/eval_curve.json, aside as *.prev-<UTC time>.*)")
+        exc.add_note(note)
+        raise exc
+    if kept:   # (the CLI prints each entry: where the resumed run's learning curve went)
+        res["earlier_curves"] = ", ".join(str(k) for k in kept)
+    return res
+
+
+def _save(spec, out, model, venv, lag, ev, zip_path, norm_path, stopped, imitate, start_log_std) -> dict:
+    """Save the model, its statistics, metadata, the best models' metadata and the learning curve; the paths."""
+    from mission_sim.signals import Interrupted, signal_name
     model.save(str(zip_path))
     venv.save(str(norm_path))
     meta = _meta(spec, venv, lag, float(spec["config"].dt_s))
@@ -656,19 +704,14 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
         _imitation_meta(meta, out, start_log_std)
     meta_path = zip_path.with_suffix(".json")
     meta_path.write_text(json.dumps(meta, indent=2))
-    _write_best_meta(out / "eval", meta, ev)
+    # the best evaluated model is a whole model, not the interrupted one
+    _write_best_meta(out / "eval", {k: v for k, v in meta.items() if k != "interrupted"}, ev)
     venv.close()
     mon = out / "monitor.monitor.csv"
     res = {"model": zip_path, "meta": meta_path, "vecnormalize": norm_path, "monitor": mon,
            **({"clone": out / f"{CLONE_NAME}.zip"} if imitate else {}), **_written_dirs({"eval_dir": out / "eval", "checkpoints": out / "checkpoints"})}
     if mon.is_file():
         res["learning_curve"] = plot_learning_curve(mon, out / "learning_curve.png",
-                                                    f"{algo.upper()} on {spec['env_id']} ({scenario})", ev.curve)
-    if stopped:
-        exc = Interrupted(stopped)
-        exc.add_note(f"trained {model.num_timesteps:,} of {spec['timesteps']:,} steps; the model so far is "
-                     f"'{zip_path}' with its metadata (compare --policies "
-                     f"{'residual' if spec['residual'] else 'rl'}:{zip_path}); to go on, the same command with "
-                     f"--resume {zip_path}")
-        raise exc
+                                                    f"{spec['algo'].upper()} on {spec['env_id']} ({spec['scenario']})",
+                                                    ev.curve)
     return res

@@ -24,30 +24,39 @@ def sigint_raises():
     signal.signal(signal.SIGINT, old)
 
 
-def test_an_interrupted_training_keeps_its_model_usable_and_resumable(tmp_path, monkeypatch, sigint_raises):
+def test_an_interrupted_training_keeps_its_model_usable_and_resumable(tmp_path, monkeypatch, capfd, sigint_raises):
     """Ctrl-C (or SIGTERM) 9 env steps into ``train`` ended the run with nothing but the checkpoints and an
     ``eval/best_model.zip`` without its metadata (neither usable as ``rl:``): the steps since the last checkpoint
-    (up to --checkpoint-every, 100,000 by default) were lost. Now the first signal stops SB3 at the next step and
-    the model so far is saved beside the final one's name, with its metadata
-    (``interrupted``) and statistics: a ``rl:`` policy, and ``resume=`` goes on from it to the total."""
+    (up to --checkpoint-every, 100,000 by default) were lost. Now the first signal stops SB3 at the next step (one
+    line on stderr says so) and the model so far is saved beside the final one's name, with its metadata
+    (``interrupted``) and statistics: a ``rl:`` policy, and ``resume=`` goes on from it to the total. A second Ctrl-C
+    while saving no longer cuts the saving short (it is raised after, with the note naming the model), and the
+    resume moves the first run's learning-curve files aside instead of starting them afresh over them."""
     pytest.importorskip("stable_baselines3")
     import stable_baselines3 as sb3
 
     import policies
-    from policies import callbacks
+    from policies import callbacks, train as train_mod
     from policies.train import train
 
     step = callbacks.ProgressCallback._on_step
+    best_meta = train_mod._write_best_meta
 
     def ctrl_c_at_call_9(self):
         if self.n_calls == 9:
             signal.raise_signal(signal.SIGINT)
         return step(self)
+
+    def ctrl_c_again_while_saving(*a):   # the second Ctrl-C, half-way through the saving
+        signal.raise_signal(signal.SIGINT)
+        return best_meta(*a)
     monkeypatch.setattr(callbacks.ProgressCallback, "_on_step", ctrl_c_at_call_9)
-    kw = dict(seed=1, n_envs=16, scenario="nominal", progress=False, hyperparams=SMALL, eval_every=64,
-              eval_episodes=4, checkpoint_every=10**6)
+    monkeypatch.setattr(train_mod, "_write_best_meta", ctrl_c_again_while_saving)
+    kw = dict(seed=1, n_envs=16, scenario="nominal", progress=False, hyperparams=SMALL, eval_episodes=4,
+              checkpoint_every=10**6)
     with pytest.raises(KeyboardInterrupt) as e:
-        train("ppo", 4096, tmp_path, **kw)
+        train("ppo", 4096, tmp_path, eval_every=64, **kw)
+    assert "SIGINT: stopping at the next step to save the model so far" in capfd.readouterr().err
     # SB3 stops at the step that saw the request: 9 steps of 16 windows
     model = tmp_path / "ppo_sbar_interrupted.zip"
     assert model.is_file() and not (tmp_path / "ppo_sbar.zip").exists()
@@ -55,8 +64,14 @@ def test_an_interrupted_training_keeps_its_model_usable_and_resumable(tmp_path, 
     assert meta["interrupted"] == {"signal": "SIGINT", "timesteps": 144, "of": 4096}
     assert sb3.PPO.load(str(model), device="cpu").num_timesteps == 144
     assert "144 of 4,096 steps" in e.value.__notes__[0] and f"--resume {model}" in e.value.__notes__[0]
-    # the best evaluated model so far has its metadata too (written only at the end of a whole run before)
-    assert (tmp_path / "eval" / "best_model.json").is_file()
+    assert f"rl:{model}" in e.value.__notes__[0]
+    # the best evaluated model so far has its metadata too (written only at the end of a whole run before; the
+    # second Ctrl-C cut the saving there), without the interrupted model's `interrupted`
+    best = json.loads((tmp_path / "eval" / "best_model.json").read_text())
+    assert "interrupted" not in best and best["selected_at"]["timesteps"] in (64, 128)
+    assert (tmp_path / "learning_curve.png").is_file()
+    first_curve = (tmp_path / "eval" / "eval_curve.json").read_text()
+    first_monitor = (tmp_path / "monitor.monitor.csv").read_text()
     # usable as a policy: one window's duties in [0, 1]
     from envs import SbarChargingEnv
     env = SbarChargingEnv("nominal")
@@ -65,12 +80,26 @@ def test_an_interrupted_training_keeps_its_model_usable_and_resumable(tmp_path, 
     pol.reset()
     d = [float(np.asarray(pol.act(obs)).ravel()[0])]
     assert 0.0 <= d[0] <= 1.0
-    # and resumable to the total (the signal no longer sent)
+    # and resumable to the total (the signal no longer sent; no evaluation due)
     monkeypatch.setattr(callbacks.ProgressCallback, "_on_step", step)
-    res = train("ppo", 512, tmp_path, resume=model, **kw)
+    monkeypatch.setattr(train_mod, "_write_best_meta", best_meta)
+    res = train("ppo", 512, tmp_path, resume=model, eval_every=10**9, **kw)
     # on from 144: one PPO rollout (64 steps x 16 windows) reaches the 512
     assert sb3.PPO.load(str(res["model"]), device="cpu").num_timesteps == 144 + 1024
     assert "interrupted" not in json.loads(res["meta"].read_text())
+    # the first run's learning curve kept beside, not overwritten by the resumed run's
+    assert [p.read_text() for p in (tmp_path / "eval").glob("eval_curve.prev-*.json")] == [first_curve]
+    assert [p.read_text() for p in tmp_path.glob("monitor.monitor.prev-*.csv")] == [first_monitor]
+    assert "eval_curve.prev-" in res["earlier_curves"]
+    assert (tmp_path / "monitor.monitor.csv").read_text() != first_monitor
+
+
+def test_an_interrupt_note_names_the_policy_prefix_of_the_trained_kind():
+    """The interrupt note said ``rl:PATH`` for every model, also a --slow-budget one (``slow_budget:PATH``)."""
+    from policies.train import _policy_prefix
+    assert [_policy_prefix(s) for s in ({"residual": False, "slow_budget": None}, {"residual": True},
+                                        {"residual": False, "slow_budget": (0.0, 2.0)})] == \
+        ["rl", "residual", "slow_budget"]
 
 
 # --------------------------------------------------------------------------- train: --out of an earlier run
@@ -96,6 +125,16 @@ def test_train_refuses_an_out_folder_holding_an_earlier_run(tmp_path, capsys):
     with pytest.raises(ValueError, match="holds an earlier training run"):
         train("ppo", 10, tmp_path / "t2", progress=False)
     assert {p.name: p.read_bytes() for p in (tmp_path / "t2").iterdir()} == before
+    # only what this run would replace counts: notes.zip or another model's name does not, eval/ with files does
+    from policies.train import earlier_run
+    other = tmp_path / "t3"
+    other.mkdir()
+    (other / "notes.zip").write_bytes(b"PK")
+    (other / "sac_sbar.zip").write_bytes(b"PK")
+    (other / "eval").mkdir()
+    assert earlier_run(other, "ppo_sbar") is None
+    (other / "eval" / "best_model.zip").write_bytes(b"PK")
+    assert earlier_run(other, "ppo_sbar") == "eval/"
 
 
 # --------------------------------------------------------------------------- sweep: a policy's model retrained
@@ -188,7 +227,8 @@ def test_run_paper_takes_one_trajectory_by_name():
     (["compare", "--policies", "step,", "ramp", "--no-plot"], "(a space after the comma in 'step,'? a list is one "
                                                              "argument: step,ramp, or quote it)"),
     (["sizing", "--policies", "step,", "ramp", "--no-plot"], "argument: step,ramp"),
-    (["compare", "--scenarios", "nominal,", "windy", "--no-plot"], "argument: nominal,windy")])
+    (["compare", "--scenarios", "nominal,", "windy", "--no-plot"], "argument: nominal,windy"),
+    (["compare", "--policies", "step,", "ramp,", "mpc", "--no-plot"], "argument: step,ramp,mpc, or quote")])
 def test_a_list_split_at_a_space_after_its_comma_says_so(argv, shown, capsys):
     """``compare --policies step, ramp`` said ``unrecognized argument 'ramp'`` alone; a newcomer reads the list as
     given. Now the line points at the space after the comma."""

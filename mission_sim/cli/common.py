@@ -59,9 +59,13 @@ class OneLineParser(argparse.ArgumentParser):
                 hint = f" (did you mean {sub.prog} {after[0]}? a command's options go after its name)"
             at = argv.index(extras[0]) if extras[0] in argv else -1
             if not hint and at > 0 and argv[at - 1].endswith(",") and not extras[0].startswith("-"):
-                # `--policies step, ramp`: the shell split the list at the space
+                # `--policies step, ramp, mpc`: the shell split the list at the spaces; joined while a part ends in ','
+                joined, k = argv[at - 1] + argv[at], at
+                while joined.endswith(",") and k + 1 < len(argv) and not argv[k + 1].startswith("-"):
+                    k += 1
+                    joined += argv[k]
                 hint = (f" (a space after the comma in {argv[at - 1]!r}? a list is one argument: "
-                        f"{argv[at - 1]}{extras[0]}, or quote it)")
+                        f"{joined}, or quote it)")
             self.exit(2, f"{cmd.prog}: error: unrecognized argument {extras[0]!r}{hint}; valid: the options and "
                          f"arguments of {cmd.prog} --help\n")
         return ns
