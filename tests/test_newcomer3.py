@@ -94,6 +94,28 @@ def test_an_interrupted_training_keeps_its_model_usable_and_resumable(tmp_path, 
     assert (tmp_path / "monitor.monitor.csv").read_text() != first_monitor
 
 
+def test_a_deferred_section_leaves_an_ignored_sigint_ignored():
+    """``interrupts_deferred`` (now over train's saving) turned a SIGINT that the process ignores (nohup, a
+    background job) into an ``Interrupted`` on leaving; an ignored signal stays ignored, a handled one is raised."""
+    if threading.current_thread() is not threading.main_thread():
+        pytest.skip("signal handlers can only be set in the main thread")
+    from mission_sim.signals import Interrupted, interrupts_deferred
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        try:
+            with interrupts_deferred():
+                signal.raise_signal(signal.SIGINT)
+        except KeyboardInterrupt:   # (not let through: pytest would end the session)
+            pytest.fail("an ignored SIGINT was raised on leaving interrupts_deferred")
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        with pytest.raises(Interrupted):
+            with interrupts_deferred():
+                signal.raise_signal(signal.SIGINT)
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
 def test_an_interrupt_note_names_the_policy_prefix_of_the_trained_kind():
     """The interrupt note said ``rl:PATH`` for every model, also a --slow-budget one (``slow_budget:PATH``)."""
     from policies.train import _policy_prefix
