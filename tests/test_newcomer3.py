@@ -9,7 +9,7 @@ import threading
 import numpy as np
 import pytest
 
-SMALL = dict(n_steps=64, batch_size=256, n_epochs=2, policy_kwargs=dict(net_arch=[16, 16], log_std_init=-2.0))
+SMALL = dict(n_steps=32, batch_size=256, n_epochs=2, policy_kwargs=dict(net_arch=[16, 16], log_std_init=-2.0))
 
 
 # --------------------------------------------------------------------------- train: Ctrl-C keeps the model so far
@@ -55,7 +55,7 @@ def test_an_interrupted_training_keeps_its_model_usable_and_resumable(tmp_path, 
     kw = dict(seed=1, n_envs=16, scenario="nominal", progress=False, hyperparams=SMALL, eval_episodes=4,
               checkpoint_every=10**6)
     with pytest.raises(KeyboardInterrupt) as e:
-        train("ppo", 4096, tmp_path, eval_every=64, **kw)
+        train("ppo", 4096, tmp_path, eval_every=128, **kw)   # one evaluation, at call 8
     assert "SIGINT: stopping at the next step to save the model so far" in capfd.readouterr().err
     # SB3 stops at the step that saw the request: 9 steps of 16 windows
     model = tmp_path / "ppo_sbar_interrupted.zip"
@@ -68,7 +68,7 @@ def test_an_interrupted_training_keeps_its_model_usable_and_resumable(tmp_path, 
     # the best evaluated model so far has its metadata too (written only at the end of a whole run before; the
     # second Ctrl-C cut the saving there), without the interrupted model's `interrupted`
     best = json.loads((tmp_path / "eval" / "best_model.json").read_text())
-    assert "interrupted" not in best and best["selected_at"]["timesteps"] in (64, 128)
+    assert "interrupted" not in best and best["selected_at"]["timesteps"] == 128
     assert (tmp_path / "learning_curve.png").is_file()
     first_curve = (tmp_path / "eval" / "eval_curve.json").read_text()
     first_monitor = (tmp_path / "monitor.monitor.csv").read_text()
@@ -84,8 +84,8 @@ def test_an_interrupted_training_keeps_its_model_usable_and_resumable(tmp_path, 
     monkeypatch.setattr(callbacks.ProgressCallback, "_on_step", step)
     monkeypatch.setattr(train_mod, "_write_best_meta", best_meta)
     res = train("ppo", 512, tmp_path, resume=model, eval_every=10**9, **kw)
-    # on from 144: one PPO rollout (64 steps x 16 windows) reaches the 512
-    assert sb3.PPO.load(str(res["model"]), device="cpu").num_timesteps == 144 + 1024
+    # on from 144: one PPO rollout (32 steps x 16 windows) reaches the 512
+    assert sb3.PPO.load(str(res["model"]), device="cpu").num_timesteps == 144 + 512
     assert "interrupted" not in json.loads(res["meta"].read_text())
     # the first run's learning curve kept beside, not overwritten by the resumed run's
     assert [p.read_text() for p in (tmp_path / "eval").glob("eval_curve.prev-*.json")] == [first_curve]
