@@ -96,8 +96,14 @@ def _children_cpu() -> float:
 
 
 def train_seed(kind: str, seed: int, timesteps: int, budget, out_root: Path, link: str = "envelope") -> dict:
-    """Run one seed's command (niced) into ``out_root/<kind>_s<seed>``; returns the run's record."""
+    """Run one seed's command (niced) into ``out_root/<kind>_s<seed>``; returns the run's record. A folder of an
+    earlier run there is moved aside first (``<kind>_s<seed>.prev-<UTC time>``, said on stderr): ``dronewpt train``
+    refuses an --out holding an earlier run, and the script's rerun failed with the reason only in the seed's log."""
     out = out_root / f"{kind}_s{seed}"
+    if out.exists():
+        from mission_sim.files import move_aside
+        moved = move_aside(out)
+        print(f"retrain_shipped: moved the earlier run's {out} aside to {moved.name}", file=sys.stderr, flush=True)
     rel = out.relative_to(ROOT) if out.is_relative_to(ROOT) else out
     budget_text = "" if budget is None else f"{budget:g}"   # rl: no {budget} in its command
     cmd = KINDS[kind].format(timesteps=timesteps, seed=seed, budget=budget_text) + f" --link {link} --out {rel}"

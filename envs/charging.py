@@ -11,7 +11,7 @@ from gymnasium import spaces
 from mission_sim.contract import OBS_DIM, PolicyContext, check_history, history_obs_dim
 from mission_sim.validation import real_array, shown
 
-from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config
+from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config, refuse_unknown_kwargs
 from .layout import INFO
 from .modal_plant import single_plant
 from .parts import SingleObjective, SingleObservation, alias_parts
@@ -174,7 +174,9 @@ class SbarChargingEnv(gym.Env):
     scenario = ENV_SCENARIO
 
     def __init__(self, scenario="nominal", render_mode: str | None = None, config: EnvConfig | dict | None = None,
-                 compiled: bool | None = None, history: int = 1):
+                 compiled: bool | None = None, history: int = 1, **unknown):
+        refuse_unknown_kwargs(type(self).__name__, unknown,   # (Python's bare "unexpected keyword argument 'n_steps'")
+                              ("scenario", "render_mode", "config", "compiled", "history"))
         scenario = get_scenario(scenario)
         self.config = as_config(config)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:

@@ -309,6 +309,22 @@ def as_config(config) -> "EnvConfig":
     raise ValueError(f"config={config!r} is invalid; valid: an envs.EnvConfig, a dict of its fields or None")
 
 
+def refuse_unknown_kwargs(cls_name: str, unknown: dict, valid: tuple) -> None:
+    """A ``TypeError`` (what Python raises for an unexpected keyword, and what ``gymnasium.make`` passes on) naming
+    the first keyword of ``unknown`` and the valid ones; an :class:`EnvConfig` or :class:`RewardWeights` field
+    given as a keyword (``gymnasium.make(ENV_ID, n_steps=100)``) is shown where it goes (``config={...}``)."""
+    if not unknown:
+        return
+    from dataclasses import fields
+    key, value = next(iter(unknown.items()))
+    where = ""
+    if key in {f.name for f in fields(EnvConfig)}:
+        where = f"; {key} is an EnvConfig field: config={{{key!r}: {value!r}}}"
+    elif key in {f.name for f in fields(RewardWeights)}:
+        where = f"; {key} is a reward weight: config={{'reward': {{{key!r}: {value!r}}}}}"
+    raise TypeError(f"{cls_name}: keyword argument {key!r} is unknown; valid keywords: {', '.join(valid)}{where}")
+
+
 def given_config(config):
     """``config`` for a function whose own default is None: None stays None, an EnvConfig stays, a dict of its fields
     becomes one (:func:`as_config`; hashable, and the oracle's cache keys hold its repr)."""

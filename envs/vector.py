@@ -41,7 +41,8 @@ from gymnasium.vector.utils import batch_space
 from mission_sim.contract import OBS_DIM, PolicyContext, check_history, history_obs_dim
 from mission_sim.validation import SEED_RANGE, Range, check_first_seed, check_number, real_array, shown
 
-from .core import OBS_OFFSET, OBS_SCALE, EnvConfig, as_config, kernel_from_ref, kernel_function, kernel_ref
+from .core import (OBS_OFFSET, OBS_SCALE, EnvConfig, as_config, kernel_from_ref, kernel_function, kernel_ref,
+                   refuse_unknown_kwargs)
 from .layout import INFO
 from .modal_plant import vector_plant
 from .parts import ObjectivePart, ObservationPart, alias_parts
@@ -120,7 +121,9 @@ class SbarChargingVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, scenario="nominal", config: EnvConfig | dict | None = None,
                  render_mode: str | None = None, compiled: bool | None = None, num_threads: int | None = None,
-                 history: int = 1, max_episode_steps: int | None = None):
+                 history: int = 1, max_episode_steps: int | None = None, **unknown):
+        refuse_unknown_kwargs(type(self).__name__, unknown, ("num_envs", "scenario", "config", "render_mode", "compiled",
+                                                             "num_threads", "history", "max_episode_steps"))
         try:   # (True made one env)
             whole = not isinstance(num_envs, bool) and int(num_envs) == num_envs >= 1
         except (TypeError, ValueError, OverflowError):

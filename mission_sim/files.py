@@ -18,7 +18,8 @@ from pathlib import Path
 
 from .signals import raise_lost
 
-__all__ = ["atomic_output", "rename_into_place", "OutputError", "storage_error", "folder_lock", "FolderBusy"]
+__all__ = ["atomic_output", "rename_into_place", "OutputError", "storage_error", "folder_lock", "FolderBusy",
+           "move_aside"]
 
 #: errors of the storage, not of the data: reported as :class:`OutputError` naming the file
 _STORAGE_ERRNOS = {errno.ENOSPC: "no space left on the device", errno.EFBIG: "file too large (the file-size "
@@ -84,6 +85,23 @@ def atomic_output(path, tmp_name: str | None = None, fsync: bool = False):
     finally:
         with contextlib.suppress(OSError):
             tmp.unlink(missing_ok=True)
+
+
+def move_aside(path, when: float | None = None) -> Path:
+    """Rename ``path`` (a file or a folder) to a free name beside it marked with the UTC time, so that a new run
+    can write its own without replacing it: ``monitor.monitor.prev-20261128T054800Z.csv`` (a file keeps its
+    suffix), ``ppo_s0.prev-20261128T054800Z`` (a folder); ``-2``, ``-3``, ... appended if that name is taken.
+    Returns the new path."""
+    import time
+    path = Path(path)
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(when))
+    stem, suffix = (path.name, "") if path.is_dir() else (path.stem, path.suffix)
+    for k in range(1, 1000):
+        new = path.with_name(f"{stem}.prev-{stamp}{'' if k == 1 else f'-{k}'}{suffix}")
+        if not new.exists():
+            os.rename(path, new)
+            return new
+    raise FileExistsError(f"no free name to move {str(path)!r} aside")
 
 
 class FolderBusy(ValueError):

@@ -16,11 +16,12 @@ parent's stack in the child, which would then run the parent's code.
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import sys
 import threading
 
-__all__ = ["Interrupted", "interrupts_raised", "interrupts_deferred", "raise_lost", "HANDLED", "exit_status", "signal_name",
+__all__ = ["Interrupted", "interrupts_raised", "interrupts_deferred", "interrupts_requested", "raise_lost", "HANDLED", "exit_status", "signal_name",
            "blocked_across_fork", "unblock_in_child"]
 
 #: the signals turned into :class:`Interrupted`
@@ -103,12 +104,14 @@ def interrupts_deferred():
     """While inside, SIGINT and SIGTERM are recorded, not raised; on leaving (after the body has
     finished, e.g. assigned the cluster it started so that it can be closed) the first one is raised
     as :class:`Interrupted`. Python runs handlers in the main thread whichever thread took the
-    signal, so none is lost."""
+    signal, so none is lost. An ignored signal (``SIG_IGN``) is left alone."""
     if not _in_main_thread():
         yield
         return
     caught: list[int] = []
-    old = {s: signal.signal(s, lambda signum, frame: caught.append(signum)) for s in HANDLED}
+    # an ignored signal (SIGINT under nohup or a shell's background job) stays ignored, not raised on leaving
+    held = [s for s in HANDLED if signal.getsignal(s) is not signal.SIG_IGN]
+    old = {s: signal.signal(s, lambda signum, frame: caught.append(signum)) for s in held}
     try:
         yield
     finally:
@@ -116,6 +119,40 @@ def interrupts_deferred():
             signal.signal(s, h)
     if caught:
         raise Interrupted(caught[0])
+
+
+@contextlib.contextmanager
+def interrupts_requested(notice: str | None = None):
+    """While inside, the first SIGINT or SIGTERM is a request, not an exception: its number is appended to the
+    yielded list, which the body polls to stop at a point of its choosing (``dronewpt train`` stops its SB3 run
+    at the next environment step and saves the model so far); a second one raises :class:`Interrupted` at once.
+    A signal whose handler is the default or ignored (SIGTERM outside ``dronewpt``) is left alone; outside the main
+    thread it does nothing. The previous handlers are restored on leaving; the caller raises the request.
+    ``notice``: one line written to stderr on the first signal (``{signal}`` is replaced by its name), with
+    ``os.write`` (no buffered stream entered again from inside a handler)."""
+    caught: list[int] = []
+    if not _in_main_thread():
+        yield caught
+        return
+
+    def request(signum, frame):
+        if caught:
+            raise Interrupted(signum)
+        caught.append(signum)
+        if notice:
+            try:
+                os.write(2, (notice.replace("{signal}", signal.Signals(signum).name) + "\n").encode())
+            except OSError:   # stderr closed: the request stands
+                pass
+    old = {s: signal.getsignal(s) for s in HANDLED}
+    old = {s: h for s, h in old.items() if h not in (signal.SIG_DFL, signal.SIG_IGN, None)}
+    for s in old:
+        signal.signal(s, request)
+    try:
+        yield caught
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
 
 
 @contextlib.contextmanager

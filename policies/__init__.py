@@ -169,7 +169,16 @@ def available() -> list[str]:
 
 
 def make(name: str, ctx: PolicyContext | None = None, **kwargs) -> Policy:
-    """A fresh policy by name (``"rl:PATH"`` loads an SB3 model file); ``ValueError`` naming the valid names.
+    """A fresh policy by name; ``ValueError`` naming the valid names.
+
+    ``name``: one of :func:`available` (``step``, ``ramp``, ``model_based`` (the paper's controller), ``mpc``, ``rl``
+    (the shipped model), ...), ``NAME:PATH`` for a model file (``rl:PATH``, ``residual:PATH``: a model
+    ``dronewpt train`` wrote, its metadata ``.json`` beside it) or ``model_based_budget:B`` / ``mpc:B`` (an overshoot
+    budget B in [0, 1]). ``ctx``: what the policy is made for (the link it assumes, the control period [s], the
+    rated I2 [A], the plant's link model): ``mission_sim.config.policy_context(cfg)`` for a mission, an env's
+    ``env.policy_context`` for that env, None for :class:`~mission_sim.contract.PolicyContext`'s defaults (Table I's
+    link, a 100 us control period, 15 A). The policy acts on the observation contract of :mod:`mission_sim.contract`
+    (``reset()``, then ``act(obs)``: the short duty d_short in [0, 1]).
 
     ``"mpc:B"``: B (a fraction) is the measured (instantaneous-peak) overshoot allowed, or the window's floor if
     that is higher. ``"model_based_budget:B"``: on the exact-mode link (``ctx.link_model == "modal"``, the envs'

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
-__all__ = ["ProgressCallback", "CostEvalCallback"]
+__all__ = ["ProgressCallback", "CostEvalCallback", "StopOnRequest"]
 
 
 class ProgressCallback(BaseCallback):
@@ -43,6 +43,19 @@ class ProgressCallback(BaseCallback):
 
     def _on_training_end(self):
         self.bar.close()
+
+
+class StopOnRequest(BaseCallback):
+    """Ends ``learn`` at the next environment step once ``requests`` (the list
+    :func:`mission_sim.signals.interrupts_requested` yields) holds a signal: SB3's own way to stop a run early
+    (``_on_step`` returning False), so the model is whole (no gradient step cut half-way) and can be saved."""
+
+    def __init__(self, requests: list):
+        super().__init__()
+        self.requests = requests
+
+    def _on_step(self) -> bool:
+        return not self.requests
 
 
 class CostEvalCallback(EvalCallback):

@@ -19,6 +19,11 @@ Writes into ``out_dir``:
   with cost, ``best_model.zip``), ``checkpoints/`` (``CheckpointCallback`` with the VecNormalize
   statistics; ``resume=`` continues from one), ``tb/`` when tensorboard is installed,
 * ``learning_curve.png``.
+
+Ctrl-C / SIGTERM during the RL stage (the first one; a second raises at once) stops SB3 at the next environment step
+and saves the model so far as ``<name>_interrupted.zip`` + ``.json`` (``interrupted``: signal, steps, of how many) +
+``<name>_interrupted_vecnormalize.pkl`` (a policy, and ``resume=`` goes on from it) and the best models' metadata,
+then raises :class:`mission_sim.signals.Interrupted` with a note naming them.
 """
 
 from __future__ import annotations
@@ -309,10 +314,10 @@ def _build(spec: dict, out: Path, resume):
     return venv, eval_env, model, penalty
 
 
-def _callbacks(spec: dict, out: Path, eval_env, penalty, progress: bool):
+def _callbacks(spec: dict, out: Path, eval_env, penalty, progress: bool, requests: list):
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
 
-    from .callbacks import CostEvalCallback, ProgressCallback
+    from .callbacks import CostEvalCallback, ProgressCallback, StopOnRequest
     from .constrained import LagrangeCallback
 
     n = spec["n_envs"]
@@ -327,6 +332,7 @@ def _callbacks(spec: dict, out: Path, eval_env, penalty, progress: bool):
         probe = _base_env(spec, spec["probe_episodes"], None) if spec["probe_episodes"] else None
         lag = LagrangeCallback(penalty, spec["budget"], lr=spec["lambda_lr"], path=out / "lagrange.json", probe=probe)
         cbs.append(lag)
+    cbs.append(StopOnRequest(requests))   # Ctrl-C / SIGTERM: stop at the next step, the model saved (train())
     return CallbackList(cbs), lag, cbs[2]
 
 
@@ -565,6 +571,42 @@ def _written_dirs(dirs: dict) -> dict:
     return out
 
 
+def earlier_run(out_dir, name: str = "ppo_sbar") -> str | None:
+    """What of an earlier training run ``out_dir`` holds that a run writing model ``name`` there would replace
+    (``name``.zip, ``name``_interrupted.zip, ``monitor.monitor.csv``, files in ``eval/`` or ``checkpoints/``), as a
+    short text, or None (``train`` refuses such a folder unless it resumes). Other files (notes.zip) do not count."""
+    out = Path(out_dir)
+    if not out.is_dir():
+        return None
+    held = [f for f in (f"{name}.zip", f"{name}_interrupted.zip", "monitor.monitor.csv") if (out / f).is_file()]
+    held += [f"{d}/" for d in ("eval", "checkpoints") if (out / d).is_dir() and any((out / d).iterdir())]
+    if not held:
+        return None
+    return ", ".join(held[:3]) + (f" and {len(held) - 3} more" if len(held) > 3 else "")
+
+
+#: a run's learning-curve files, which SB3 starts afresh (VecMonitor opens its csv with "w", EvalCallback its
+#: arrays empty): moved aside on --resume into a folder that holds them (:func:`_keep_curves`)
+CURVE_FILES = ("monitor.monitor.csv", "eval/eval_curve.json", "eval/evaluations.npz")
+
+
+def _keep_curves(out: Path) -> list:
+    """Move the learning-curve files of the run being resumed aside (:func:`mission_sim.files.move_aside`,
+    ``monitor.monitor.prev-<UTC time>.csv``): the resumed run writes its own from its start. Returns the new paths."""
+    from mission_sim.files import move_aside
+    return [move_aside(out / f) for f in CURVE_FILES if (out / f).is_file()]
+
+
+def _policy_prefix(spec: dict) -> str:
+    """The policies.make prefix of the model a spec trains (``rl:``, ``residual:``, ``slow_budget:``)."""
+    return "slow_budget" if spec.get("slow_budget") else "residual" if spec["residual"] else "rl"
+
+
+#: written to stderr at the first Ctrl-C / SIGTERM of a training run
+STOP_NOTICE = ("{signal}: stopping at the next step to save the model so far; another Ctrl-C before the saving "
+               "starts abandons it")
+
+
 def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64, scenario: str = "random",
           progress: bool = True, hyperparams: dict | None = None, hyperparams_file=None, env=None,
           cost: str = "overshoot", lagrangian: bool = False, budget: float | None = None, lambda_lr: float | None = None,
@@ -610,7 +652,12 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     spec = _spec(algo, timesteps, opts)
     _one_thread_each()
     out = Path(out_dir)
+    held = None if resume is not None else earlier_run(out, spec["name"])
+    if held:   # (a second run into the same folder replaced the first one's model and logs without a word)
+        raise ValueError(f"out_dir={str(out)!r} holds an earlier training run ({held}), which this run would "
+                         "replace; valid: a new folder, resume=<one of its models> to go on training it, or remove it")
     out.mkdir(parents=True, exist_ok=True)
+    kept = _keep_curves(out) if resume is not None else []
     if importlib.util.find_spec("tensorboard") is not None:
         spec["tb"] = str(out / "tb")
     if resume is not None and (out / "lagrange.json").is_file():
@@ -624,24 +671,61 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
         resume = res["model"]
     venv, eval_env, model, penalty = _build(spec, out, resume)
     start_log_std = float(model.policy.log_std.detach().mean()) if imitate else None   # PPO's start: the clone's
-    cbs, lag, ev = _callbacks(spec, out, eval_env, penalty, progress)
-    todo = spec["timesteps"] - (model.num_timesteps if resume is not None else 0)   # SB3 adds num_timesteps on resume
-    model.learn(total_timesteps=max(todo, 1), callback=cbs, reset_num_timesteps=resume is None)
-    zip_path = out / f"{spec['name']}.zip"
+    from mission_sim.signals import Interrupted, interrupts_deferred, interrupts_requested, signal_name
+    with interrupts_requested(STOP_NOTICE) as requests:   # Ctrl-C / SIGTERM: stop at the next step, keep the model
+        cbs, lag, ev = _callbacks(spec, out, eval_env, penalty, progress, requests)
+        todo = spec["timesteps"] - (model.num_timesteps if resume is not None else 0)   # SB3 adds num_timesteps on resume
+        model.learn(total_timesteps=max(todo, 1), callback=cbs, reset_num_timesteps=resume is None)
+    stopped = requests[0] if requests else None
+    # an interrupted run's model goes beside the final one's name (an earlier run's final model in --out is kept):
+    # <name>_interrupted.zip + .json (usable as rl: / residual:) + _vecnormalize.pkl (--resume finds it)
+    name = spec["name"] + ("_interrupted" if stopped else "")
+    zip_path = out / f"{name}.zip"
+    norm_path = out / (f"{name}_vecnormalize.pkl" if stopped else "vecnormalize.pkl")
+    late = None
+    try:
+        with interrupts_deferred():   # a signal during the saving is raised once all is saved, not half-way
+            res = _save(spec, out, model, venv, lag, ev, zip_path, norm_path, stopped, imitate, start_log_std)
+    except Interrupted as exc:
+        late = exc.signum
+    if stopped or late:
+        exc = Interrupted(stopped or late)
+        done = (f"trained {model.num_timesteps:,} of {spec['timesteps']:,} steps" if stopped else
+                f"trained all {model.num_timesteps:,} steps (the signal came while saving)")
+        note = (f"{done}; the model is saved: '{zip_path}' with its metadata (compare --policies "
+                f"{_policy_prefix(spec)}:{zip_path})")
+        if stopped:
+            note += (f"; to go on, the same command with --resume {zip_path} (it moves this run's learning-curve "
+                     "files, monitor.monitor.csv and eval/eval_curve.json, aside as *.prev-<UTC time>.*)")
+        exc.add_note(note)
+        raise exc
+    if kept:   # (the CLI prints each entry: where the resumed run's learning curve went)
+        res["earlier_curves"] = ", ".join(str(k) for k in kept)
+    return res
+
+
+def _save(spec, out, model, venv, lag, ev, zip_path, norm_path, stopped, imitate, start_log_std) -> dict:
+    """Save the model, its statistics, metadata, the best models' metadata and the learning curve; the paths."""
+    from mission_sim.signals import Interrupted, signal_name
     model.save(str(zip_path))
-    venv.save(str(out / "vecnormalize.pkl"))
+    venv.save(str(norm_path))
     meta = _meta(spec, venv, lag, float(spec["config"].dt_s))
     meta.update(final_eval=ev.curve[-1] if ev.curve else None, final_training=_training_episodes(model))
+    if stopped:
+        meta["interrupted"] = {"signal": signal_name(Interrupted(stopped)), "timesteps": int(model.num_timesteps),
+                               "of": int(spec["timesteps"])}
     if imitate:
         _imitation_meta(meta, out, start_log_std)
     meta_path = zip_path.with_suffix(".json")
     meta_path.write_text(json.dumps(meta, indent=2))
-    _write_best_meta(out / "eval", meta, ev)
+    # the best evaluated model is a whole model, not the interrupted one
+    _write_best_meta(out / "eval", {k: v for k, v in meta.items() if k != "interrupted"}, ev)
     venv.close()
     mon = out / "monitor.monitor.csv"
-    res = {"model": zip_path, "meta": meta_path, "vecnormalize": out / "vecnormalize.pkl", "monitor": mon,
+    res = {"model": zip_path, "meta": meta_path, "vecnormalize": norm_path, "monitor": mon,
            **({"clone": out / f"{CLONE_NAME}.zip"} if imitate else {}), **_written_dirs({"eval_dir": out / "eval", "checkpoints": out / "checkpoints"})}
     if mon.is_file():
         res["learning_curve"] = plot_learning_curve(mon, out / "learning_curve.png",
-                                                    f"{algo.upper()} on {spec['env_id']} ({scenario})", ev.curve)
+                                                    f"{spec['algo'].upper()} on {spec['env_id']} ({spec['scenario']})",
+                                                    ev.curve)
     return res

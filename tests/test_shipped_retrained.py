@@ -235,3 +235,26 @@ def test_bench_train_refuses_bad_links(links):
                        cwd=root, capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and f"--links {links!r} is invalid" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
+
+
+def test_retrain_script_moves_an_earlier_seed_folder_aside(tmp_path, monkeypatch, capsys):
+    """A rerun of the script trained into out/retrain/<kind>_s<k> again, which ``dronewpt train`` refuses as an
+    earlier run (the reason only in the seed's log, exit 1). Now the earlier folder is moved aside first, said on
+    stderr, and the command gets a fresh folder."""
+    import subprocess
+    rs = _retrain_script()
+    earlier = tmp_path / "rl_s3"
+    earlier.mkdir()
+    (earlier / "ppo_sbar.zip").write_bytes(b"the first run's model")
+    seen = []
+
+    def run(cmd, **kw):   # the training command: what it would find in its --out
+        seen.append(earlier.exists())
+        return subprocess.CompletedProcess(cmd, 0)
+    monkeypatch.setattr(rs.subprocess, "run", run)
+    monkeypatch.setattr(rs, "_commit", lambda: "x")
+    assert rs.train_seed("rl", 3, 1000, None, tmp_path)["returncode"] == 0
+    assert seen == [False]
+    [moved] = tmp_path.glob("rl_s3.prev-*")
+    assert (moved / "ppo_sbar.zip").read_bytes() == b"the first run's model"
+    assert f"aside to {moved.name}" in capsys.readouterr().err

@@ -463,10 +463,13 @@ class EnvelopeLink:
 
 
 def simulate(params: LinkParams, v2_v, dt_s: float, x0=None, lm_h=None, v1_v=None):
-    """Simulate one link for a V2 sequence held over steps of ``dt_s``.
+    """Simulate one link (eq. 4, the fundamental envelope) for a V2 sequence held over steps of ``dt_s``.
 
-    Returns ``(t_s, i1_a, i2_a)`` of length ``len(v2_v) + 1`` (the initial state first).
-    ``x0`` defaults to the closed-form steady state for ``v2_v[0]``.
+    ``v2_v``: the rectifier's fundamental amplitudes [V], one per step (zero-order hold, exact discretisation);
+    ``dt_s`` [s]; ``lm_h`` [H] replaces ``params.lm_h`` for the run, ``v1_v`` [V] the inverter's fundamental
+    amplitude (default ``params.v1_amp_v``, (4/pi) Vdc). Returns ``(t_s, i1_a, i2_a)`` [s, A, A] of length
+    ``len(v2_v) + 1`` (the initial state first). ``x0``: the (I1, I2) amplitudes [A] at t = 0, default the
+    closed-form steady state for ``v2_v[0]`` (:func:`steady_state`).
     """
     v2 = np.asarray(v2_v, dtype=float)
     check_v2(v2, sequence=True)

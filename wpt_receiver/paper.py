@@ -146,8 +146,23 @@ MODELS: dict[str, Callable] = {"envelope": envelope_plant, "switching": _switchi
 def run_paper(params: LinkParams = TABLE_I, model: str = "envelope", t_switch_s: float = 1e-3,
               t_end_s: float = 31e-3, control_period_s: float | None = None,
               lpf: LowPassFilter = LowPassFilter(), trajectories=TRAJECTORIES, ramp_kind: str = "v2") -> list[PaperRun]:
-    """Run the step, ramp and proposed trajectories through plant ``model``."""
+    """Run the step, ramp and proposed V2* trajectories (RM -> SM at ``t_switch_s``) through plant ``model``;
+    one :class:`PaperRun` per trajectory (time series in s, A, V; ``metrics``: Table II's columns).
+
+    ``params``: the link (Table I by default; SI units: H, ohm, V, Hz). ``model``: ``"envelope"`` (eq. 4, the
+    fundamental only; the default here, for the closed forms), ``"modal"`` (exact modes + the SBAR ripple: the
+    instantaneous peak Table II measures; ``dronewpt paper``'s default) or ``"switching"`` (the circuit, slow).
+    ``t_switch_s`` / ``t_end_s``: the switch and the window's end [s] (defaults 1 ms, 31 ms). ``control_period_s``:
+    the controller's update period [s] (default the rectifier period 1/(2 f)). ``lpf``: the proposed controller's
+    low-pass Q (time constant [s], order). ``trajectories``: a subset of ``("step", "ramp", "proposed")`` (one name
+    alone is taken as one trajectory). ``ramp_kind``: ``"v2"`` ramps V2* (the paper's Fig. 6b), ``"duty"`` d_short.
+    The proposed trajectory is the paper's controller: the I2 reference (RM -> SM step) low-passed by Q, through
+    G22^-1 (eq. 8) to V2* and eq. 9's f^-1 to the duty. Warns (:class:`~wpt_receiver.notices.DronewptWarning`) when the link is outside a model's
+    checked range or I2 has not settled by ``t_end_s``."""
     import time
+
+    if isinstance(trajectories, str):   # ("step" iterated as 's', 't', ...: "trajectory='s' is invalid")
+        trajectories = (trajectories,)
 
     if model not in MODELS:
         raise ValueError(f"model={model!r} is invalid; valid values: {', '.join(sorted(MODELS))}")

@@ -57,6 +57,15 @@ class OneLineParser(argparse.ArgumentParser):
             after = _nearest(extras[0], sub) if not near and cmd is self and sub is not None else []
             if after:
                 hint = f" (did you mean {sub.prog} {after[0]}? a command's options go after its name)"
+            at = argv.index(extras[0]) if extras[0] in argv else -1
+            if not hint and at > 0 and argv[at - 1].endswith(",") and not extras[0].startswith("-"):
+                # `--policies step, ramp, mpc`: the shell split the list at the spaces; joined while a part ends in ','
+                joined, k = argv[at - 1] + argv[at], at
+                while joined.endswith(",") and k + 1 < len(argv) and not argv[k + 1].startswith("-"):
+                    k += 1
+                    joined += argv[k]
+                hint = (f" (a space after the comma in {argv[at - 1]!r}? a list is one argument: "
+                        f"{joined}, or quote it)")
             self.exit(2, f"{cmd.prog}: error: unrecognized argument {extras[0]!r}{hint}; valid: the options and "
                          f"arguments of {cmd.prog} --help\n")
         return ns

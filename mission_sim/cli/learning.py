@@ -262,8 +262,13 @@ def _cmd_train(args) -> int:
 
         from policies.hyperparams import load_hyperparams
         load_hyperparams(args.hyperparams, getattr(sb3, args.algo.upper()))
+    from policies.train import earlier_run, train
+    held = None if args.resume is not None else earlier_run(args.out, f"{args.algo}_sbar")
+    if held:   # (it replaced an earlier run's model and logs without a word)
+        raise CliError(f"--out {str(args.out)!r} holds an earlier training run ({held}), which this run would "
+                       "replace; valid: a new --out folder, --resume <one of its models> to go on training it, "
+                       "or remove the folder")
     prepare_out_dir(args.out)
-    from policies.train import train
     try:
         res = train(args.algo, args.timesteps, args.out, seed=args.seed, n_envs=args.n_envs, scenario=args.scenario,
                     progress=show_progress(args), hyperparams_file=args.hyperparams, env=env, cost=args.cost,

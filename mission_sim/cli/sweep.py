@@ -178,8 +178,10 @@ def _report(args, st, res) -> None:
                           "figures": figs}))
         return
     rate = f" in {res.wall_s:.1f} s ({res.cases_per_s:.2f} cases/s)" if res.n_run else ""
+    depleted = int(table.loc["all", "battery depleted"]) if "battery depleted" in table else 0
+    depleted = f" ({depleted} with the battery depleted: battery_depleted in the rows)" if depleted else ""
     print(f"study {st.name}: {res.n_cases} cases, {res.n_skipped} already done, {res.n_run} run{rate}, "
-          f"{res.n_ok} ok, {res.n_error} failed; results in {args.out / 'cases'}")
+          f"{res.n_ok} ok{depleted}, {res.n_error} failed; results in {args.out / 'cases'}")
     if not table.empty:
         with pd.option_context("display.width", 200, "display.max_columns", 40,
                                "display.float_format", "{:.4g}".format):

@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import hashlib
 import importlib
+from pathlib import Path
 from collections.abc import Callable, Iterable
 
 from .study import DEFAULT_MAX_CASES, POLICY_KEY, CaseSpace, Study, case_id, case_space, check_size
 
-__all__ = ["prepare_study", "check_cases", "warn_study", "import_factory", "MAX_LISTED_ERRORS"]
+__all__ = ["prepare_study", "check_cases", "warn_study", "import_factory", "policy_files", "MAX_LISTED_ERRORS"]
 
 MAX_LISTED_ERRORS = 20  # distinct errors named in the message (the count of the others follows)
 _IDS_PER_ERROR = 3
@@ -54,6 +55,29 @@ def _runner(study: Study, make_policy: Callable | None, policy_names):
     from .worst_cases import base_fingerprint
     runner = MissionCaseRunner(base, make_policy, policy_names)
     return runner, base_fingerprint(base)
+
+
+def policy_files(study: Study) -> dict:
+    """The model files the study's policies read (``rl:PATH``, ``residual:PATH``, ...: a spec whose part after ':'
+    names a file, and that file's metadata ``.json`` beside it), as ``{"policy rl:PATH": {"path", "sha256"}, ...}``
+    for the sweep's manifest: a case's id holds the spec, not the model, so a model retrained into the same path
+    would otherwise resume on the old model's rows (:func:`~mission_sim.studies.status.check_same_study` names it)."""
+    specs = []
+    if POLICY_KEY in study.fixed:
+        specs.append(study.fixed[POLICY_KEY])
+    specs += list(study.grid.get(POLICY_KEY, ()))
+    if POLICY_KEY in study.mc_params:
+        specs += list(study.mc_params[POLICY_KEY][1])
+    out = {}
+    for spec in dict.fromkeys(s for s in specs if isinstance(s, str)):
+        _, colon, arg = spec.partition(":")
+        path = Path(arg) if colon and arg else None
+        if path is None or not path.is_file():
+            continue
+        for what, f in ((f"policy {spec}", path), (f"policy {spec} metadata", path.with_suffix(".json"))):
+            if f.is_file():
+                out[what] = {"path": str(f), "sha256": hashlib.sha256(f.read_bytes()).hexdigest()}
+    return out
 
 
 def _error_message(space: CaseSpace, errors: dict, n_bad: int) -> str:
@@ -111,6 +135,9 @@ def prepare_study(study: Study, make_policy: Callable | None = None, policy_name
     """
     check_size(study, max_cases)
     runner, fingerprint = _runner(study, make_policy, policy_names)
+    models = policy_files(study) if not study.runner else {}
+    if models:   # recorded in sweep.json with a replay study's log and pads (dronewpt sweep reads input_files)
+        runner.input_files = {**(getattr(runner, "input_files", None) or {}), **models}
     cases = case_space(study, fingerprint)
     validate = getattr(runner, "validate_keys", None)
     if validate is not None and len(cases):

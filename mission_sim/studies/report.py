@@ -38,7 +38,8 @@ def _metric_columns(df: pd.DataFrame, study: Study) -> list[str]:
 
 
 def summary_table(df: pd.DataFrame, study: Study) -> pd.DataFrame:
-    """One row per policy (and ``all``): case counts and the mean / max of the main metrics."""
+    """One row per policy (and ``all``): case counts (errors; missions that ended with the battery depleted, when
+    the rows say) and the mean / max of the main metrics."""
     if df.empty:
         return pd.DataFrame()
     ok = df[df["status"] == "ok"]
@@ -51,6 +52,8 @@ def summary_table(df: pd.DataFrame, study: Study) -> pd.DataFrame:
     rows = []
     for name, d_all, d_ok in groups:
         row = {"group": name, "cases": len(d_all), "errors": int((d_all["status"] == "error").sum())}
+        if "battery_depleted" in d_ok:   # (a mission's exit 3: counted, not folded silently into the means)
+            row["battery depleted"] = int(d_ok["battery_depleted"].fillna(False).astype(bool).sum())
         for m in metrics:
             v = pd.to_numeric(d_ok[m], errors="coerce") if m in d_ok else pd.Series(dtype=float)
             row[f"{m} mean"] = float(v.mean()) if v.notna().any() else np.nan

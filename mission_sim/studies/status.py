@@ -102,6 +102,11 @@ def check_same_study(out_dir, study: Study, fingerprint: str, n_cases: int, inpu
     if not (Path(out_dir) / MANIFEST).is_file():
         return
     old, new = read_manifest(out_dir, "--out"), _manifest(study, fingerprint, n_cases, inputs)
+    changed = _changed_input(old, new) if old.get("doc") == new["doc"] else None
+    if changed and old.get("fingerprint") == new["fingerprint"]:   # a policy's model file (not in the fingerprint)
+        raise ValueError(f"--out {str(out_dir)!r} holds this study's results over another file: {changed}; its rows "
+                         "are the old model's and a case's id holds the policy's name, not the model, so a resume "
+                         "would run nothing; valid: a new --out folder, or the file as it was to resume")
     if old.get("doc") == new["doc"] and old.get("fingerprint") == new["fingerprint"]:
         if old.get("physics_code") == new["physics_code"]:
             return
@@ -110,7 +115,6 @@ def check_same_study(out_dir, study: Study, fingerprint: str, n_cases: int, inpu
                          f"{new['physics_code']}); valid: a new --out folder, or --force to resume it anyway "
                          "(old and new results then mix)")
     what = "another base mission" if old.get("doc") == new["doc"] else "other parameters"
-    changed = _changed_input(old, new) if old.get("doc") == new["doc"] else None
     if changed:
         raise ValueError(f"--out {str(out_dir)!r} holds this study's results over another file: {changed}; valid: a "
                          "new --out folder, the file as it was to resume, or --force to add this study's cases to it "

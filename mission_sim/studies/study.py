@@ -199,11 +199,28 @@ def load_study(path) -> Study:
     return parse_study(doc, name=path.stem, base_dir=path.parent)
 
 
+#: what a value's spec is not, but a newcomer writes for one (numpy's and Python's names): refused naming the valid
+#: specs, not flattened into a key (``"pads.1.x_m" = {range = [...]}`` was "override key 'pads.1.x_m.range' is invalid")
+_NOT_SPECS = ("range", "arange", "logspace", "geomspace", "values", "list", "linear", "randint", "choices",
+              "lognormal", "gauss", "random", "rand", "randn", "grid")
+
+
+def _valid_specs(where: str) -> str:
+    if where == "grid":
+        return "a list of values, or {linspace = [start, stop, num]}"
+    if where == "monte_carlo.params":
+        return "one of " + ", ".join(f"{{{d} = [...]}}" for d in DISTRIBUTIONS)
+    return "a number, string or boolean"
+
+
 def _flatten(d: dict, prefix: str, where: str) -> dict:
     """Nested tables -> dotted keys; a one-key table naming a spec (``{uniform = [...]}``) is a value."""
     out = {}
     for k, v in d.items():
         key = f"{prefix}{k}"
+        if isinstance(v, dict) and (set(v) & set(_NOT_SPECS) or (len(v) > 1 and set(v) & set(_SPECS))):
+            text = ", ".join(f"{a} = ..." for a in v)
+            raise ValueError(f"[{where}] {key!r} = {{{text}}} is invalid; valid: {_valid_specs(where)}")
         if isinstance(v, dict) and not (len(v) == 1 and next(iter(v)) in _SPECS):
             if not v:
                 raise ValueError(f"[{where}] {key!r} is an empty table; give it a value")
