@@ -335,9 +335,12 @@ def test_a_missions_summary_reports_the_rectifiers_rating_beside_the_peak(capsys
     assert cap.err == "" and s["peak_i2_a"] > 10.0
     assert (s["rectifier_rating_a"], s["rectifier_rating_part"]) == (15.0, "30CTT045")
     line = [x for x in cap.out.splitlines() if x.startswith("rectifier current rating")]
+    # (2026-11-28: the part below the rule ends the row in a warning with the shortfall, at the patched margin)
+    short = 1.5 * s["peak_i2_a"] - 15.0
     assert len(line) == 1 and line[0].split(None, 4)[3:] == [
         "15", f"A continuous, 30CTT045 (peak I2 {s['peak_i2_a']:.2f} A; dronewpt sizing requires a rating >= 1.5 x "
-              f"peak = {1.5 * s['peak_i2_a']:.2f} A)"], line
+              f"peak = {1.5 * s['peak_i2_a']:.2f} A); warning: 30CTT045 is {short:.2f} A ({100 * short / 15:.1f} %) "
+              "below that rule: `dronewpt sizing --source mission` parallels its legs"], line
     assert main(["mission", "--set", "link.devices=ideal", "--no-plot", "--format", "json", "--no-progress", "--out",
                  str(tmp_path / "i")]) == 0
     cap = capsys.readouterr()

@@ -401,7 +401,7 @@ def _rating_row(s: dict) -> list[tuple[str, str, str]]:
     if s.get("rectifier_rating_a") is None:
         return []
     from wpt_receiver.sizing import SizingRules, rating_shortfall
-    rules = SizingRules()
+    rules = SizingRules(margin=SizingRules.margin)   # (the class's margin: a patched one moves the row)
     text = (f"A continuous, {s['rectifier_rating_part']} (peak I2 {s['peak_i2_a']:.2f} A; dronewpt sizing requires "
             f"a rating >= {rules.margin:g} x peak = {rules.required_rating_a(s['peak_i2_a']):.2f} A)")
     short = rating_shortfall(s["devices"], s["peak_i2_a"], rules)
