@@ -146,6 +146,12 @@ class ModelBasedPolicy(_CommandPolicy):
     """The paper's inverse-model controller (Fig. 5) driven by the charge command."""
 
     name = "model_based"
+    #: how far its RM -> SM transition's instantaneous |i2| peaks above the steady short-mode I2 (a fraction): 4.6 %,
+    #: the harmonic ripple at the intermediate duties it passes (its fundamental overshoots by 0.0 %; switching model,
+    #: Table I: 11.95 A against 11.41 A, docs/devices.md "Detuning"). Read by the mission's setup warning on
+    #: ``coupling.tx_min_k`` (:func:`mission_sim.setup_warnings.short_mode_rating_warning`); not part of the
+    #: :class:`~mission_sim.contract.Policy` protocol.
+    rm_sm_overshoot = 0.046
 
     def __init__(self, ctx: PolicyContext = PolicyContext(), lpf: LowPassFilter = LowPassFilter()):
         super().__init__(ctx)

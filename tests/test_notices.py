@@ -638,6 +638,40 @@ def test_a_pad_gate_below_the_short_modes_rating_warns(over, warns):
         assert mission_warnings(cfg).count(text) == 1
 
 
+def test_the_pad_gate_warning_bounds_the_policys_transition_peak():
+    """2026-11-28: the warning bounded the steady short-mode I2 only; a policy's RM -> SM transition peaks above it
+    (model_based declares 4.6 %: ``rm_sm_overshoot``). Closed form: the k where ``(1 + os) I2_SM(k)`` is the rating
+    is ``short_mode_rated_k`` at ``rating / (1 + os)``, and the steady state (eq. 4 at V2 = 0) times ``1 + os`` is the
+    rating there; the bound rises with os. With model_based, tx_min_k = 0.073 (above the steady bound 0.0713, below
+    0.0746) warns, with no policy or one that declares nothing it does not; the default 0.075 stays quiet."""
+    from mission_sim.config import mission_link_params  # noqa: F401 (the link the warning checks)
+    from mission_sim.setup_warnings import (_short_mode_link, mission_warnings, policy_overshoot,
+                                            short_mode_rated_coupling, short_mode_rating_warning)
+    from wpt_receiver.envelope import short_mode_rated_k, steady_state
+    cfg = load_config()
+    mb = policies.make("model_based", policy_context(cfg))
+    step = policies.make("step", policy_context(cfg))
+    os_ = policy_overshoot(mb)
+    assert os_ == pytest.approx(0.046) and policy_overshoot(step) == 0.0 and policy_overshoot(None) == 0.0
+    p, rated = _short_mode_link(cfg), cfg.link.rated_i2_a
+    k_os = short_mode_rated_coupling(cfg, os_)
+    assert k_os == short_mode_rated_k(p, rated / (1 + os_))
+    lm = k_os * math.sqrt(p.l1_h * p.l2_h)
+    assert (1 + os_) * float(steady_state(p, 0.0, lm_h=lm)[1]) == pytest.approx(rated, rel=1e-12)
+    k0 = short_mode_rated_coupling(cfg)
+    assert k0 < k_os < short_mode_rated_coupling(cfg, 0.1) and k_os == pytest.approx(0.0746, abs=5e-5)
+    with pytest.raises(ValueError, match=r"overshoot=-0.1 is invalid; valid range: \[0, inf\)"):
+        short_mode_rated_k(p, rated, overshoot=-0.1)
+    # the default gate is above both; 0.073 is between them
+    assert short_mode_rating_warning(cfg, mb) is None
+    mid = _cfg(**{"coupling.tx_min_k": 0.073})
+    assert k0 < 0.073 < k_os
+    text = short_mode_rating_warning(mid, mb)
+    assert text is not None and f"valid: coupling.tx_min_k >= {k_os:.4g}" in text and "'model_based'" in text
+    assert short_mode_rating_warning(mid) is None and short_mode_rating_warning(mid, step) is None
+    assert mission_warnings(mid, mb).count(text) == 1 and text not in mission_warnings(mid)
+
+
 # ------------------------------------------------------------------ no noise for normal use
 def test_the_default_mission_warns_nothing(capsys, tmp_path):
     cfg = load_config()
