@@ -54,7 +54,11 @@ def _ngspice_values(text: str, workdir: Path, name: str, timeout_s: float) -> di
 
 def run_ngspice(text: str, workdir: Path) -> dict:
     """Run ngspice in batch mode and return the measurements (``KEYS``)."""
-    vals = _ngspice_values(text, workdir, "check.cir", 900)
+    return keys_from_values(_ngspice_values(text, workdir, "check.cir", 900))
+
+
+def keys_from_values(vals: dict) -> dict:
+    """``KEYS`` from a netlist's ``.meas`` values (:func:`_ngspice_values`)."""
     # I(VSENSE) flows from C2 into the SBAR's B node: i2 of the model flows out of A, i.e. -I(VSENSE)
     peak = lambda n, s: max(abs(vals[f"{n}_{s}_max"]), abs(vals[f"{n}_{s}_min"]))  # noqa: E731
     return {"rm_i2_a": peak("rm", "i2"), "step_peak_a": peak("step", "i2"), "sm_i2_a": peak("sm", "i2"),
@@ -371,10 +375,21 @@ def bridge_energy_netlist(name: str = "schottky", p=TABLE_I) -> str:
     return bridge_netlist(name).replace(".end\n", "".join(meas) + ".end\n")
 
 
+def bridge_energy_sha1(name: str = "schottky") -> str:
+    """SHA-1 of :func:`bridge_energy_netlist`'s text (stored in ``bridge_energy.json``: a changed netlist is caught
+    without ngspice)."""
+    import hashlib
+    return hashlib.sha1(bridge_energy_netlist(name).encode()).hexdigest()
+
+
+def bridge_energy_values(vals: dict) -> dict:
+    """The ``esrc_*``, ``eret_*``, ``ebat_*`` [J] of a :func:`bridge_energy_netlist`'s ``.meas`` values."""
+    return {k: v for k, v in vals.items() if k.startswith(("esrc_", "eret_", "ebat_"))}
+
+
 def run_ngspice_bridge_energy(text: str, workdir: Path) -> dict:
     """Run a :func:`bridge_energy_netlist`: its ``esrc_*``, ``eret_*``, ``ebat_*`` [J]."""
-    vals = _ngspice_values(text, workdir, "bridge_energy.cir", 3600)
-    return {k: v for k, v in vals.items() if k.startswith(("esrc_", "eret_", "ebat_"))}
+    return bridge_energy_values(_ngspice_values(text, workdir, "bridge_energy.cir", 3600))
 
 
 def bridge_energy_model(dv: DeviceSet, p=TABLE_I, samples_per_period: int = 4000) -> dict:
@@ -409,7 +424,8 @@ def main_bridge_energy() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         got = run_ngspice_bridge_energy(bridge_energy_netlist("schottky"), Path(tmp))
     (HERE / "bridge_energy.json").write_text(json.dumps({"preset": "schottky", "dead_time_s": BRIDGE_DEAD_TIME_S,
-                                                         "periods": BRIDGE_ENERGY_PERIODS, "ngspice": got},
+                                                         "periods": BRIDGE_ENERGY_PERIODS,
+                                                         "netlist_sha1": bridge_energy_sha1("schottky"), "ngspice": got},
                                                         indent=1) + "\n")
     print(got)
 
