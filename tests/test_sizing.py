@@ -220,11 +220,13 @@ def test_the_default_preset_below_the_rule_is_said_with_the_shortfall():
     # the sic preset's 50 A parts carry the default peak; a larger margin moves the edge
     assert rating_shortfall("sic", peak) is None
     assert rating_shortfall("schottky", 11.92, SizingRules(margin=1.3)) is not None
-    # the mission's row: one warning with the shortfall; none below the edge
+    # the mission's row: one note with the shortfall, said to be conservative, no "warning"; none below the edge
     row = {"devices": "schottky", "peak_i2_a": peak, "rectifier_rating_a": leg, "rectifier_rating_part": "30CTT045"}
     text = _rating_row(row)[0][2]
-    assert text.count("warning") == 1 and f"{rules.margin * peak - leg:.2f} A" in text
-    assert "warning" not in _rating_row({**row, "peak_i2_a": 11.92})[0][2]
+    assert "warning" not in text and text.endswith(
+        f"; note: {rules.margin * peak - leg:.2f} A (11.0 %) below dronewpt sizing's rule (1.25 x peak against the "
+        "part's average rating, conservative): dronewpt sizing --source mission parallels 2 legs")
+    assert "note" not in _rating_row({**row, "peak_i2_a": 11.92})[0][2]
     # the sizing table's line: the policies below the rule, each with its shortfall
     rows = [{"policy": "step", "required_rating_a": 39.09}, {"policy": "proposed", "required_rating_a": 14.9},
             {"policy": "model_based", "required_rating_a": rules.margin * peak}]
