@@ -212,7 +212,9 @@ def _sweep_rows(args, base):
 def _preset_shortfall(devices: str, rows, rules) -> str | None:
     """One line when the preset's own rectifier parts (one leg / die per position) are below a row's required rating
     (:func:`wpt_receiver.sizing.rating_shortfall` at the row's peak with the preset, ``required_rating_a / margin``):
-    the default mission's ``schottky`` (30CTT045, 15 A) at model_based's 13.32 A peak is 1.64 A short of 16.64 A."""
+    the default mission's ``schottky`` (30CTT045, 15 A) at model_based's 13.32 A peak is 1.64 A short of 16.64 A.
+    (Not the row's ``peak_i2_a``: with ``--source paper`` that is the peak with the parts the row chose, measured
+    again with their resistances; the rule rated the preset's own peak, which ``required_rating_a`` carries.)"""
     from wpt_receiver.sizing import rating_shortfall
     below = [(r["policy"], s) for r in rows
              if (s := rating_shortfall(devices, r["required_rating_a"] / rules.margin, rules)) is not None]
