@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["link_range_warning", "link_frequency_warning", "short_mode_rating_warning", "policy_overshoot", "reachable_coupling", "unreached_pad_warnings", "payload_warnings", "far_pad_warnings", "energised_pads", "policy_link_warning", "mission_warnings",
+__all__ = ["link_range_warning", "link_frequency_warning", "short_mode_rating_warning", "policy_overshoot", "reachable_coupling", "ring_down_warning", "RING_DOWN_WARN_S", "unreached_pad_warnings", "payload_warnings", "far_pad_warnings", "energised_pads", "policy_link_warning", "mission_warnings",
            "mission_link_params", "MISSION_LINK_MODEL", "POLICY_VL_TOL_V", "PAD_HEIGHT_WARN_M", "HOME_ORIGIN", "REPLAY_ORIGIN"]
 
 #: the link model every mission runs (:mod:`mission_sim.world.loop_kernel` steps :mod:`wpt_receiver.modal_kernel`)
@@ -163,6 +163,30 @@ def short_mode_rating_warning(cfg, policy=None) -> str | None:
     return f"{head}; valid: coupling.tx_min_k >= {k_rated:.4g} (or {limits} at k = {k_min:.6g})"
 
 
+#: a pad switch-off's ring-down time constant [s] above which the mission warns that it runs slowly
+RING_DOWN_WARN_S = 1.0
+
+
+def ring_down_warning(cfg) -> str | None:
+    """One line when the primary's ring-down after a pad switch-off, ``tau = 2 L1 / (R1 + 2 Ron)`` (the diodes
+    blocked, I2 = 0; ``link.r1_ohm`` plus the inverter's two on-resistances), is longer than
+    :data:`RING_DOWN_WARN_S`: the mission carries it in control-period pieces (~ ``tau ln(I1 / sim.settle_i2_tol_a) /
+    sim.control_period_s`` per switch-off), so a run takes minutes, not seconds (docs/mission.md, "Compute at the low
+    end of link.r1_ohm": ideal devices, 207 s at R1 = 1e-4 ohm, tau 4.7 s), else None. Only ``ideal`` devices leave it
+    uncapped (the ``schottky`` preset's 2 Ron = 0.02 ohm caps it at 24 ms)."""
+    p = mission_link_params(cfg)
+    inv = cfg.link.device_set().inv_r_ohm
+    tau = 2.0 * p.l1_h / (p.r1_ohm + inv)
+    if not tau > RING_DOWN_WARN_S:
+        return None
+    r1_min = max(2.0 * p.l1_h / RING_DOWN_WARN_S - inv, 0.0)
+    return (f"link.r1_ohm={cfg.link.r1_ohm:g} ohm with link.devices={cfg.link.devices!r} (inverter 2 Ron = {inv:g} "
+            f"ohm): after a pad switch-off the primary rings down with tau = 2 L1 / (R1 + 2 Ron) = {tau:.3g} s, which "
+            f"the mission steps in control-period pieces, so the run may take minutes (docs/mission.md, compute at the "
+            f"low end of link.r1_ohm); valid for tau <= {RING_DOWN_WARN_S:g} s: link.r1_ohm >= {r1_min:.3g} or "
+            "devices with on-resistance (e.g. link.devices=schottky)")
+
+
 def _distance_to_route(x: float, y: float, pts: list) -> float:
     """Horizontal distance [m] of (x, y) to the polyline through ``pts`` ((x, y) pairs)."""
     if len(pts) == 1:
@@ -284,7 +308,7 @@ def mission_warnings(cfg, policy=None, own_route: bool = True, replay: bool = Fa
     spot or ``--pad``, not the mission's home; ``payload``: ``cfg``'s route is flown, so its payload releases are
     (None: unless ``replay``; :func:`payload_warnings`). A far pad warns whatever the route."""
     out = [w for w in (link_range_warning(cfg), link_frequency_warning(cfg), short_mode_rating_warning(cfg, policy),
-                       policy_link_warning(cfg, policy) if policy is not None else None) if w is not None]
+                       ring_down_warning(cfg), policy_link_warning(cfg, policy) if policy is not None else None) if w is not None]
     out += far_pad_warnings(cfg, REPLAY_ORIGIN if replay else HOME_ORIGIN)
     if own_route:
         out += unreached_pad_warnings(cfg)

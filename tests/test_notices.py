@@ -751,6 +751,26 @@ def test_the_ramp_declares_its_overshoot_and_a_silent_policy_is_named():
             policy_overshoot(Odd())
 
 
+def test_a_slow_ring_down_at_a_tiny_r1_with_ideal_devices_warns():
+    """Later 2026-11-28: after a pad switch-off the primary rings down with tau = 2 L1 / (R1 + 2 Ron), which the
+    mission steps in control-period pieces (docs/mission.md: ideal devices, 207 s of compute at R1 = 1e-4 ohm). Above
+    1 s it warns, with the R1 that brings tau to 1 s; the schottky preset's 2 Ron (0.02 ohm) caps it at any R1, and
+    R1 = 1e-3 (tau 0.47 s, test_pad_switch_off's drift test) is quiet."""
+    from mission_sim.config import mission_link_params
+    from mission_sim.setup_warnings import RING_DOWN_WARN_S, mission_warnings, ring_down_warning
+    ideal = {"link.devices": "ideal"}
+    l1 = mission_link_params(load_config()).l1_h
+    r1_edge = 2 * l1 / RING_DOWN_WARN_S
+    assert ring_down_warning(load_config()) is None and ring_down_warning(_cfg(**{"link.r1_ohm": 1e-6})) is None
+    assert ring_down_warning(_cfg(**ideal, **{"link.r1_ohm": 1e-3})) is None
+    assert ring_down_warning(_cfg(**ideal, **{"link.r1_ohm": 1.01 * r1_edge})) is None
+    assert ring_down_warning(_cfg(**ideal, **{"link.r1_ohm": 0.99 * r1_edge})) is not None
+    cfg = _cfg(**ideal, **{"link.r1_ohm": 1e-4})
+    text = ring_down_warning(cfg)
+    assert f"tau = 2 L1 / (R1 + 2 Ron) = {2 * l1 / 1e-4:.3g} s" in text and "4.72 s" in text
+    assert f"link.r1_ohm >= {r1_edge:.3g}" in text and mission_warnings(cfg).count(text) == 1
+
+
 # ------------------------------------------------------------------ no noise for normal use
 def test_the_default_mission_warns_nothing(capsys, tmp_path):
     cfg = load_config()

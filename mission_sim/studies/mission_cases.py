@@ -60,13 +60,15 @@ class MissionParamChecker:
         (:func:`~mission_sim.setup_warnings.payload_warnings`) when the cases fly the config's route (``run_size``;
         a replay's route is its log's: none)."""
         from ..setup_warnings import (far_pad_warnings, link_frequency_warning, link_range_warning,
-                                      payload_warnings, short_mode_rating_warning, unreached_pad_warnings)
+                                      payload_warnings, ring_down_warning, short_mode_rating_warning,
+                                      unreached_pad_warnings)
 
         link = (cfg.link, cfg.coupling, cfg.battery.n_series, cfg.charger.cv_cell_v, cfg.mission.hover_gap_m)
         route = (cfg.waypoints, cfg.mission, *cfg.pads) if cfg.waypoints else ()
         self.checked += 1
         checks = [("link", link, link_range_warning), ("freq", (cfg.link, cfg.coupling), link_frequency_warning),
                   ("rated", (cfg.link, cfg.coupling, policy), lambda c: short_mode_rating_warning(c, policy)),
+                  ("ring", (cfg.link, cfg.coupling), ring_down_warning),
                   ("pad", route, unreached_pad_warnings),
                   ("far", tuple(cfg.pads), lambda c: far_pad_warnings(c, self.pad_origin)),
                   ("payload", (cfg.drone, cfg.waypoints) if self.run_size else (), payload_warnings)]
@@ -89,6 +91,7 @@ class MissionParamChecker:
     KINDS = {"link": "a link outside the exact-mode model's checked range",
              "freq": f"a link.f_hz more than a factor {FREQUENCY_TOLERANCE:g} off the coil pair's tanks' resonance",
              "rated": "a coupling.tx_min_k below the coupling where the short-mode I2 reaches link.rated_i2_a",
+             "ring": "a pad switch-off ring-down slower than 1 s (tau = 2 L1 / (R1 + 2 Ron))",
              "pad": "a pad their route never energises",
              "far": f"a pad more than {PAD_HEIGHT_WARN_M:g} m above or below its frame's origin",
              "payload": "a payload release with no payload left to drop"}
