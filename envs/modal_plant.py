@@ -31,7 +31,7 @@ from wpt_receiver.params import warn_off_resonance
 from .core import OBS_OFFSET, OBS_SCALE, DetunedPlan, EnvConfig, Plans, _initial_state, window_lm
 from .layout import BAT, MPAR, MSINGLE_PAR, MSTATE, N_CZ, SINGLE, SLOW, STATE
 from .parts import PlantPart, SinglePlant
-from .plant import battery_operating_point
+from .plant import ENV_BATTERY
 
 __all__ = ["ModalPlans", "build_modal_plans", "ModalPlantPart", "ModalSinglePlant", "vector_plant", "single_plant",
            "warn_link_range"]
@@ -114,7 +114,7 @@ def build_modal_plans(win, cfg: EnvConfig) -> ModalPlans:
         lc[:, LC_C1], lc[:, LC_C2] = detuned.c1_f, detuned.c2_f
     soc0 = np.asarray(draws.soc0, dtype=float)
     battery, state0 = _initial_state(link, lm[:, 0], soc0, win.load_w, win.cmd_a[:, 0], cfg)
-    r1 = np.broadcast_to(battery_operating_point(soc0)[3], (n,))
+    r1 = np.full(n, ENV_BATTERY.r1_ohm)   # (the pack's RC resistance is a constant: envs.plant.battery_operating_point's)
     ms0, start, vl0, vrc0 = _link_start(cfg, lc, lm[:, 0], state0[:, STATE.d], battery, r1, state0[:, STATE.vl])
     state0[:, STATE.i1], state0[:, STATE.i2], state0[:, STATE.vl], state0[:, STATE.vrc] = start[0], start[1], vl0, vrc0
     return ModalPlans(None, lm, battery, state0, detuned, lc=lc, mstate0=ms0, start=start)

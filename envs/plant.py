@@ -35,7 +35,7 @@ from mission_sim.world.wind import WindParams, drag_force_n, hover_error_m, tilt
 from wpt_receiver.coupling import NOMINAL_GAP_M, default_coupling
 
 __all__ = ["RECORD_DT_S", "RECORD_S", "GUST_INTENSITY", "lm_record", "lm_window_h", "LM_WINDOW_RANGE", "battery_operating_point",
-           "default_hover_power_w"]
+           "ENV_BATTERY", "default_hover_power_w"]
 
 LM_WINDOW_RANGE = (0.75, 1.5)
 RECORD_DT_S = 0.02
@@ -43,7 +43,8 @@ RECORD_S = 60.0
 WARMUP_S = 10.0
 GUST_INTENSITY = 0.2    # gust sigma / mean wind speed (turbulence intensity; 0.6 at 3 m/s as WindParams)
 _DRONE = DroneParams()
-_BATTERY = BatteryParams()
+#: the envs' pack (:class:`mission_sim.world.battery.BatteryParams` defaults): :func:`battery_operating_point`'s
+ENV_BATTERY = BatteryParams()
 
 
 @lru_cache(maxsize=64)
@@ -126,7 +127,7 @@ def _interp_rows(xp, fp, x, j):
     return np.where(x >= xp[-1], fp[:, -1:], val)
 
 
-def battery_operating_point(soc, params: BatteryParams = _BATTERY):
+def battery_operating_point(soc, params: BatteryParams = ENV_BATTERY):
     """The pack's equivalent circuit at ``soc`` (vectorised): ``(ocv_v, docv_dsoc_v, r0_ohm, r1_ohm,
     tau1_s, capacity_ah)``, arrays of shape (n,)."""
     s = np.asarray(soc, dtype=float)

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["link_range_warning", "link_frequency_warning", "short_mode_rating_warning", "unreached_pad_warnings", "payload_warnings", "far_pad_warnings", "energised_pads", "policy_link_warning", "mission_warnings",
+__all__ = ["link_range_warning", "link_frequency_warning", "short_mode_rating_warning", "policy_overshoot", "reachable_coupling", "ring_down_warning", "RING_DOWN_WARN_S", "unreached_pad_warnings", "payload_warnings", "far_pad_warnings", "energised_pads", "policy_link_warning", "mission_warnings",
            "mission_link_params", "MISSION_LINK_MODEL", "POLICY_VL_TOL_V", "PAD_HEIGHT_WARN_M", "HOME_ORIGIN", "REPLAY_ORIGIN"]
 
 #: the link model every mission runs (:mod:`mission_sim.world.loop_kernel` steps :mod:`wpt_receiver.modal_kernel`)
@@ -74,34 +74,117 @@ def _short_mode_link(cfg):
     return mission_link_params(cfg).with_(r1_ohm=cfg.link.r1_ohm + dv.inv_r_ohm, r2_ohm=cfg.link.r2_ohm + dv.short_r_ohm)
 
 
-def short_mode_rated_coupling(cfg) -> float:
-    """The coupling k at which the steady short-mode I2 at full V1 reaches ``link.rated_i2_a`` (below it I2 is above
-    the rating; 0.0 when it never reaches it): the k of :func:`short_mode_rating_warning` (0.07132 at the defaults)."""
+def short_mode_rated_coupling(cfg, overshoot: float = 0.0) -> float:
+    """The coupling k at which the steady short-mode I2 at full V1, times ``1 + overshoot``, reaches
+    ``link.rated_i2_a`` (below it the peak is above the rating; 0.0 when it never reaches it): the k of
+    :func:`short_mode_rating_warning` (0.07132 at the defaults, steady; 0.07457 with model_based's 4.6 %)."""
     from wpt_receiver.envelope import short_mode_rated_k
-    return short_mode_rated_k(_short_mode_link(cfg), cfg.link.rated_i2_a)
+    return short_mode_rated_k(_short_mode_link(cfg), cfg.link.rated_i2_a, overshoot=overshoot)
 
 
-def short_mode_rating_warning(cfg) -> str | None:
+def policy_overshoot(policy) -> float:
+    """The fraction by which ``policy``'s RM -> SM transition peaks above the steady short-mode I2, as it declares it
+    (a class attribute ``rm_sm_overshoot``, measured at Table I and at the warning's operating point, the larger:
+    ``model_based`` 0.046, ``ramp`` 0.0865); 0.0 for None or a policy that declares nothing (the steady state is then
+    what is bounded: :func:`short_mode_rating_warning` says so). A declared value that is not a number >= 0 (negative,
+    NaN, a string) raises ``ValueError`` naming it."""
+    if policy is None or not hasattr(policy, "rm_sm_overshoot"):
+        return 0.0
+    os_ = policy.rm_sm_overshoot
+    if isinstance(os_, bool) or not isinstance(os_, (int, float)) or not (math.isfinite(os_) and os_ >= 0):
+        raise ValueError(f"policy {_policy_name(policy)!r}: rm_sm_overshoot={os_!r} is invalid; valid range: [0, inf) "
+                         "(a fraction of the steady short-mode I2)")
+    return float(os_)
+
+
+def _policy_name(policy) -> str:
+    return getattr(policy, "name", type(policy).__name__)
+
+
+def reachable_coupling(cfg) -> float:
+    """The largest coupling ``coupling.tx_min_k`` can usefully gate at: the coupling model's k at contact (the
+    receiver coil centred over the pad coil, wires touching: 0.271 for the default pair), and below
+    ``1 - coupling.tx_k_hysteresis`` (the config's range for the gate)."""
+    model = cfg.coupling.model()
+    k_contact = float(model.k(float(model.lm_h(0.0, 0.0, model.clearance_m()))))
+    return min(k_contact, 1.0 - cfg.coupling.tx_k_hysteresis)
+
+
+def short_mode_rating_warning(cfg, policy=None) -> str | None:
     """One line when ``coupling.tx_min_k`` (the pad switches off only below it) lies below the coupling at which the
-    steady short-mode I2 at full V1 (``(4/pi) link.vdc_v``) reaches ``link.rated_i2_a`` (the pad's coils, the
-    devices' on-resistances in R1 and in the shorted R2: :func:`wpt_receiver.envelope.short_mode_rated_k`), else
-    None: between the two the pad energises a receiver whose short mode carries more than its rating. The default
-    0.075 is above it (0.0713 on Table I with the default devices: 14.27 A at k = 0.075)."""
+    short-mode I2 at full V1 (``(4/pi) link.vdc_v``; the pad's coils, the devices' on-resistances in R1 and in the
+    shorted R2: :func:`wpt_receiver.envelope.short_mode_rated_k`) reaches ``link.rated_i2_a`` at the peak of
+    ``policy``'s RM -> SM transition: the steady I2 times ``1 +`` its declared overshoot (:func:`policy_overshoot`,
+    figures measured at Table I's link and at the warning's operating point; none declared: the steady state, and
+    the line says so), else None: between the two the pad energises a receiver whose transition into short mode
+    peaks above its rating. The default 0.075 is above it (0.0713 steady on Table I with the default devices, 14.27 A
+    at k = 0.075; 0.0746 with model_based's 4.6 %, 14.92 A; with ramp's 8.65 % 0.0775: the default gate warns).
+
+    The remedies are closed forms: the steady short-mode I2 is proportional to V1 (eq. 4 at V2 = 0), so the largest
+    ``link.vdc_v`` that keeps the peak within the rating at the gate is ``vdc * rated / ((1 + os) I2)`` (31.55 V
+    steady, 30.16 V with 4.6 % at the defaults), and the rating the gate needs is ``(1 + os) I2``. When the k that
+    keeps it within the rating is at or above what the coils reach (:func:`reachable_coupling`: k at contact, 0.271
+    for the default pair; e.g. ``link.vdc_v=900`` asks for k >= 2.24), no pad gate does: the line says so and gives
+    only those two.
+
+    A step into short mode from rectification is not bounded here: eq. 4 puts its peak at 4.7-4.8 x the steady I2
+    (67.5 A at k = 0.075, 43.0 A at 0.12), above the rating at every coupling a pad serves, which no gate fixes (the
+    mission's ``time above rated`` and the sizing report it; docs/mission.md)."""
     from wpt_receiver.envelope import steady_state
 
     p = _short_mode_link(cfg)
     l1_h, l2_h = p.l1_h, p.l2_h   # (the coupling model's coils; the hover pose's Lm is not used)
     rated, k_min = cfg.link.rated_i2_a, cfg.coupling.tx_min_k
-    k_rated = short_mode_rated_coupling(cfg)
+    os_ = policy_overshoot(policy)
+    k_rated = short_mode_rated_coupling(cfg, os_)
     if not k_min < k_rated:
         return None
     # the largest short-mode I2 the pad is then on for: at tx_min_k, or at the curve's top sqrt(R1 R2) below it
     k_top = math.sqrt(p.r1_ohm * p.r2_ohm) / (p.omega_rad_s * math.sqrt(l1_h * l2_h))
     i2_max = float(steady_state(p, 0.0, lm_h=max(k_min, k_top) * math.sqrt(l1_h * l2_h))[1])
-    return (f"coupling.tx_min_k={k_min:.6g} is below k = {k_rated:.4g}, where the receiver's short-mode I2 (~ V1/(w "
-            f"Lm), V1 = {p.v1_amp_v:.4g} V at link.vdc_v={cfg.link.vdc_v:g} V) reaches link.rated_i2_a={rated:g} A: "
-            f"the pad stays on down to k = {k_min:.6g}, with up to {i2_max:.4g} A in short mode; valid: "
-            f"coupling.tx_min_k >= {k_rated:.4g} (or a lower link.vdc_v or a higher link.rated_i2_a)")
+    i2_peak = (1 + os_) * i2_max
+    vdc_max = cfg.link.vdc_v * rated / i2_peak   # (I2 is proportional to V1)
+    if policy is None:
+        peak = ""
+    elif os_ == 0.0:
+        peak = f" (steady I2 only; policy {_policy_name(policy)!r} declares no transition overshoot)"
+    else:
+        peak = (f" plus the policy {_policy_name(policy)!r} RM -> SM transition's overshoot ({100 * os_:.3g} %, "
+                "measured at Table I)")
+    up_to = f"{i2_max:.4g} A" if os_ == 0.0 else f"{i2_max:.4g} A steady, {i2_peak:.4g} A at the peak"
+    head = (f"coupling.tx_min_k={k_min:.6g} is below k = {k_rated:.4g}, where the receiver's short-mode I2 (~ V1/(w "
+            f"Lm), V1 = {p.v1_amp_v:.4g} V at link.vdc_v={cfg.link.vdc_v:g} V){peak} reaches "
+            f"link.rated_i2_a={rated:g} A: the pad stays on down to k = {k_min:.6g}, with up to {up_to} in short mode")
+    limits = f"link.vdc_v <= {vdc_max:.4g} V or link.rated_i2_a >= {i2_peak:.4g} A"
+    k_reach = reachable_coupling(cfg)
+    if k_rated >= k_reach:
+        return (f"{head}; k = {k_rated:.4g} is at or above what the coils reach (k {k_reach:.3g} at contact), so no "
+                f"pad gate keeps it within the rating; valid: {limits} (at the gate's k = {k_min:.6g})")
+    return f"{head}; valid: coupling.tx_min_k >= {k_rated:.4g} (or {limits} at k = {k_min:.6g})"
+
+
+#: a pad switch-off's ring-down time constant [s] above which the mission warns that it runs slowly
+RING_DOWN_WARN_S = 1.0
+
+
+def ring_down_warning(cfg) -> str | None:
+    """One line when the primary's ring-down after a pad switch-off, ``tau = 2 L1 / (R1 + 2 Ron)`` (the diodes
+    blocked, I2 = 0; ``link.r1_ohm`` plus the inverter's two on-resistances), is longer than
+    :data:`RING_DOWN_WARN_S`: the mission carries it in control-period pieces (~ ``tau ln(I1 / sim.settle_i2_tol_a) /
+    sim.control_period_s`` per switch-off), so a run takes minutes, not seconds (docs/mission.md, "Compute at the low
+    end of link.r1_ohm": ideal devices, 207 s at R1 = 1e-4 ohm, tau 4.7 s), else None. Only ``ideal`` devices leave it
+    uncapped (the ``schottky`` preset's 2 Ron = 0.02 ohm caps it at 24 ms)."""
+    p = mission_link_params(cfg)
+    inv = cfg.link.device_set().inv_r_ohm
+    tau = 2.0 * p.l1_h / (p.r1_ohm + inv)
+    if not tau > RING_DOWN_WARN_S:
+        return None
+    r1_min = max(2.0 * p.l1_h / RING_DOWN_WARN_S - inv, 0.0)
+    return (f"link.r1_ohm={cfg.link.r1_ohm:g} ohm with link.devices={cfg.link.devices!r} (inverter 2 Ron = {inv:g} "
+            f"ohm): after a pad switch-off the primary rings down with tau = 2 L1 / (R1 + 2 Ron) = {tau:.3g} s, which "
+            f"the mission steps in control-period pieces, so the run may take minutes (docs/mission.md, compute at the "
+            f"low end of link.r1_ohm); valid for tau <= {RING_DOWN_WARN_S:g} s: link.r1_ohm >= {r1_min:.3g} or "
+            "devices with on-resistance (e.g. link.devices=schottky)")
 
 
 def _distance_to_route(x: float, y: float, pts: list) -> float:
@@ -224,8 +307,8 @@ def mission_warnings(cfg, policy=None, own_route: bool = True, replay: bool = Fa
     pads can be checked against it; ``replay``: the trajectory is a replay's, whose pad frame origin is the take-off
     spot or ``--pad``, not the mission's home; ``payload``: ``cfg``'s route is flown, so its payload releases are
     (None: unless ``replay``; :func:`payload_warnings`). A far pad warns whatever the route."""
-    out = [w for w in (link_range_warning(cfg), link_frequency_warning(cfg), short_mode_rating_warning(cfg),
-                       policy_link_warning(cfg, policy) if policy is not None else None) if w is not None]
+    out = [w for w in (link_range_warning(cfg), link_frequency_warning(cfg), short_mode_rating_warning(cfg, policy),
+                       ring_down_warning(cfg), policy_link_warning(cfg, policy) if policy is not None else None) if w is not None]
     out += far_pad_warnings(cfg, REPLAY_ORIGIN if replay else HOME_ORIGIN)
     if own_route:
         out += unreached_pad_warnings(cfg)

@@ -125,6 +125,13 @@ class RampPolicy(_CommandPolicy):
     """Move V2* towards the target at the paper's ramp rate ((4/pi) VL per 2 L1/R1)."""
 
     name = "ramp"
+    #: how far its RM -> SM transition's instantaneous |i2| peaks above the steady short-mode I2 (a fraction), the
+    #: larger of two ``dronewpt paper --no-plot`` measurements (modal model): 10.27 % at Table I (12.59 A against
+    #: 11.41 A) and 8.65 % at the pad-gate warning's operating point (``--link lm_h=4.98e-6 --link vl_v=32.8``:
+    #: 15.57 A against 14.33 A, above the 15 A rating at the default gate). Read by the mission's setup warning on
+    #: ``coupling.tx_min_k`` (:func:`mission_sim.setup_warnings.short_mode_rating_warning`); not part of the
+    #: :class:`~mission_sim.contract.Policy` protocol.
+    rm_sm_overshoot = 0.1027
 
     def act(self, obs):
         cmd, vl = self._measure(obs)
@@ -146,6 +153,14 @@ class ModelBasedPolicy(_CommandPolicy):
     """The paper's inverse-model controller (Fig. 5) driven by the charge command."""
 
     name = "model_based"
+    #: how far its RM -> SM transition's instantaneous |i2| peaks above the steady short-mode I2 (a fraction): 4.6 %,
+    #: the harmonic ripple at the intermediate duties it passes (its fundamental overshoots by 0.0 %; switching and
+    #: modal model, Table I: 11.95 A against 11.41 A, docs/devices.md "Detuning"; 3.65 % at the pad-gate warning's
+    #: operating point, ``dronewpt paper --no-plot --link lm_h=4.98e-6 --link vl_v=32.8``: Table I's is the larger,
+    #: the one declared). Read by the mission's setup warning on
+    #: ``coupling.tx_min_k`` (:func:`mission_sim.setup_warnings.short_mode_rating_warning`); not part of the
+    #: :class:`~mission_sim.contract.Policy` protocol.
+    rm_sm_overshoot = 0.046
 
     def __init__(self, ctx: PolicyContext = PolicyContext(), lpf: LowPassFilter = LowPassFilter()):
         super().__init__(ctx)

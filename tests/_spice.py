@@ -54,7 +54,11 @@ def _ngspice_values(text: str, workdir: Path, name: str, timeout_s: float) -> di
 
 def run_ngspice(text: str, workdir: Path) -> dict:
     """Run ngspice in batch mode and return the measurements (``KEYS``)."""
-    vals = _ngspice_values(text, workdir, "check.cir", 900)
+    return keys_from_values(_ngspice_values(text, workdir, "check.cir", 900))
+
+
+def keys_from_values(vals: dict) -> dict:
+    """``KEYS`` from a netlist's ``.meas`` values (:func:`_ngspice_values`)."""
     # I(VSENSE) flows from C2 into the SBAR's B node: i2 of the model flows out of A, i.e. -I(VSENSE)
     peak = lambda n, s: max(abs(vals[f"{n}_{s}_max"]), abs(vals[f"{n}_{s}_min"]))  # noqa: E731
     return {"rm_i2_a": peak("rm", "i2"), "step_peak_a": peak("step", "i2"), "sm_i2_a": peak("sm", "i2"),
@@ -345,6 +349,87 @@ def main_ring() -> None:
     print(res)
 
 
+# ============================================================ source energy of the full bridge (body-diode return)
+#: the windows (model time) of the bridge's energy check: the last 40 rectifier periods before the step (RM) and
+#: before the end (SM)
+BRIDGE_ENERGY_PERIODS = 40
+
+
+def bridge_energy_windows(p=TABLE_I) -> dict:
+    """``{"rm": (a, b), "sm": (a, b)}`` [s, model time] of :func:`bridge_energy_netlist`'s integrals."""
+    n = BRIDGE_ENERGY_PERIODS * p.rectifier_period_s
+    return {"rm": (T_STEP_S - n, T_STEP_S), "sm": (T_END_S - n, T_END_S)}
+
+
+def bridge_energy_netlist(name: str = "schottky", p=TABLE_I) -> str:
+    """:func:`bridge_netlist` with ``.meas INTEG`` of the DC source's net energy ``esrc_<w>`` (int Vdc i_dc), the
+    part it takes back ``eret_<w>`` (int max(-Vdc i_dc, 0): the body diodes freewheeling into Vdc in the dead time
+    and whenever i1 runs against the driven diagonal) and the battery's ``ebat_<w>`` over each window of
+    :func:`bridge_energy_windows` (SPICE time = model time - T/2)."""
+    meas = []
+    for w, (a, b) in bridge_energy_windows(p).items():
+        a, b = a - p.rectifier_period_s / 2, b - p.rectifier_period_s / 2
+        meas += [f".meas tran esrc_{w} INTEG par('-{p.vdc_v!r}*i(VDC)') from={a!r} to={b!r}\n",
+                 f".meas tran eret_{w} INTEG par('max({p.vdc_v!r}*i(VDC),0)') from={a!r} to={b!r}\n",
+                 f".meas tran ebat_{w} INTEG par('-{p.vl_v!r}*i(VL)') from={a!r} to={b!r}\n"]
+    return bridge_netlist(name).replace(".end\n", "".join(meas) + ".end\n")
+
+
+def bridge_energy_sha1(name: str = "schottky") -> str:
+    """SHA-1 of :func:`bridge_energy_netlist`'s text (stored in ``bridge_energy.json``: a changed netlist is caught
+    without ngspice)."""
+    import hashlib
+    return hashlib.sha1(bridge_energy_netlist(name).encode()).hexdigest()
+
+
+def bridge_energy_values(vals: dict) -> dict:
+    """The ``esrc_*``, ``eret_*``, ``ebat_*`` [J] of a :func:`bridge_energy_netlist`'s ``.meas`` values."""
+    return {k: v for k, v in vals.items() if k.startswith(("esrc_", "eret_", "ebat_"))}
+
+
+def run_ngspice_bridge_energy(text: str, workdir: Path) -> dict:
+    """Run a :func:`bridge_energy_netlist`: its ``esrc_*``, ``eret_*``, ``ebat_*`` [J]."""
+    return bridge_energy_values(_ngspice_values(text, workdir, "bridge_energy.cir", 3600))
+
+
+def bridge_energy_model(dv: DeviceSet, p=TABLE_I, samples_per_period: int = 4000) -> dict:
+    """The same energies from the switching model with the bridge's dead time (closed-form ``energy_balance``; the
+    returned part from ``samples_per_period`` samples of the source current per rectifier period), plus its
+    balance residual and device groups per window: ``{"<key>_<w>": J}``."""
+    from scipy.integrate import trapezoid
+
+    from wpt_receiver.switching import SwitchingConfig, SwitchingLink
+    link = SwitchingLink(p, SwitchingConfig(devices=dv, dead_time_s=BRIDGE_DEAD_TIME_S))
+    x0 = np.zeros(link.cir.m)
+    x0[:4] = initial_state(p, dv)
+    x0[-1] = 1.0
+    res = _run_step(link, x0)
+    rows, out = res.circuit.rows, {}
+    for w, (a, b) in bridge_energy_windows(p).items():
+        e = res.energy_balance(a, b)
+        out.update({f"esrc_{w}": e["source_j"], f"ebat_{w}": e["battery_j"], f"resid_{w}": e["residual_j"],
+                    f"inverter_diodes_{w}": e["inverter_diodes_loss_j"],
+                    f"inverter_switches_{w}": e["inverter_switches_loss_j"]})
+        ts = np.linspace(a, b, samples_per_period * BRIDGE_ENERGY_PERIODS + 1)
+        x, k = res.states(ts)
+        i_src = np.einsum("ij,ij->i", np.array([rows[kk]["i_src"] for kk in k]), x)
+        out[f"eret_{w}"] = float(trapezoid(np.maximum(-p.vdc_v * i_src, 0.0), x=ts))
+    return out
+
+
+def main_bridge_energy() -> None:
+    """Regenerate ``bridge_energy.json`` (ngspice, ~3 min): ``python tests/_spice.py bridge_energy``."""
+    import json
+    import tempfile
+    with tempfile.TemporaryDirectory() as tmp:
+        got = run_ngspice_bridge_energy(bridge_energy_netlist("schottky"), Path(tmp))
+    (HERE / "bridge_energy.json").write_text(json.dumps({"preset": "schottky", "dead_time_s": BRIDGE_DEAD_TIME_S,
+                                                         "periods": BRIDGE_ENERGY_PERIODS,
+                                                         "netlist_sha1": bridge_energy_sha1("schottky"), "ngspice": got},
+                                                        indent=1) + "\n")
+    print(got)
+
+
 if __name__ == "__main__":
     import sys
-    {"efficiency": main_efficiency, "ring": main_ring}.get(sys.argv[1] if len(sys.argv) > 1 else "", main)()
+    {"efficiency": main_efficiency, "ring": main_ring, "bridge_energy": main_bridge_energy}.get(sys.argv[1] if len(sys.argv) > 1 else "", main)()

@@ -194,3 +194,44 @@ def test_edge_turn_off_energy_limits():
     assert float(turn_off_energy(30.0, 10.0, 10e-9, 1e-9)) < 0.5 * 30 * 10 * 10e-9
     assert float(turn_off_energy(30.0, 10.0, 10e-9, 1e-12)) == pytest.approx(0.5 * 30 * 10 * 10e-9, rel=0.05)
     assert edge_ring(10.0, 10e-9, 1e-9)["overshoot_v"] == pytest.approx(10 * math.sqrt(10.0))
+
+
+# ------------------------------------------------------------------ the default preset against the sizing rule
+def test_the_default_preset_below_the_rule_is_said_with_the_shortfall():
+    """2026-11-28: the default mission's peak (13.32 A, model_based) asks for 1.25 x 13.32 = 16.65 A; the ``schottky``
+    preset's rectifier diode (30CTT045, 15 A per leg: the datasheet's I_F(AV)) is below it. ``rating_shortfall``
+    says by how much (the rule from ``SizingRules.required_rating_a``, the one ``select_parts`` rates with), the
+    mission's rating row and ``dronewpt sizing``'s table say it once; a part that meets the rule says nothing."""
+    from mission_sim.cli.mission import _rating_row
+    from mission_sim.cli.sizing import _preset_shortfall
+    from wpt_receiver.devices import parts
+    from wpt_receiver.sizing import SizingRules, rating_shortfall
+    rules = SizingRules()
+    leg = parts()["diode"]["30CTT045"]["rating_a"]
+    peak = 13.32
+    s = rating_shortfall("schottky", peak)
+    assert s["part"] == "30CTT045" and s["position"] == "rectifier diode" and s["rating_a"] == leg
+    assert s["required_a"] == pytest.approx(rules.margin * peak, rel=1e-15)
+    assert s["shortfall_a"] == pytest.approx(rules.margin * peak - leg, rel=1e-12) and s["shortfall_a"] > 0
+    assert s["shortfall_rel"] == pytest.approx((rules.margin * peak - leg) / leg, rel=1e-12)
+    # the rule's edge: a peak of exactly rating / margin meets it; the paper's proposed 11.92 A too; no parts, nothing
+    assert rating_shortfall("schottky", leg / rules.margin) is None
+    assert rating_shortfall("schottky", 11.92) is None and rating_shortfall("ideal", 50.0) is None
+    # the sic preset's 50 A parts carry the default peak; a larger margin moves the edge
+    assert rating_shortfall("sic", peak) is None
+    assert rating_shortfall("schottky", 11.92, SizingRules(margin=1.3)) is not None
+    # the mission's row: one note with the shortfall, said to be conservative, no "warning"; none below the edge
+    row = {"devices": "schottky", "peak_i2_a": peak, "rectifier_rating_a": leg, "rectifier_rating_part": "30CTT045"}
+    text = _rating_row(row)[0][2]
+    assert "warning" not in text and text.endswith(
+        f"; note: {rules.margin * peak - leg:.2f} A (11.0 %) below dronewpt sizing's rule (1.25 x peak against the "
+        "part's average rating, conservative): dronewpt sizing --source mission parallels 2 legs")
+    assert "note" not in _rating_row({**row, "peak_i2_a": 11.92})[0][2]
+    # the sizing table's line: the policies below the rule, each with its shortfall
+    rows = [{"policy": "step", "required_rating_a": 39.09}, {"policy": "proposed", "required_rating_a": 14.9},
+            {"policy": "model_based", "required_rating_a": rules.margin * peak}]
+    line = _preset_shortfall("schottky", rows, rules)
+    assert line.count("warning") == 1 and "step (39.09 A, 24.09 A short)" in line
+    assert f"model_based ({rules.margin * peak:.2f} A, {rules.margin * peak - leg:.2f} A short)" in line
+    assert "proposed" not in line
+    assert _preset_shortfall("schottky", rows[1:2], rules) is None

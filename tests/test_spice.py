@@ -9,8 +9,9 @@ import json
 import shutil
 
 import pytest
-from _spice import (BRIDGE_DEAD_TIME_S, BRIDGE_PRESETS, HERE, KEYS, PRESETS, bridge_netlist, netlist, netlist_path,
-                    run_ngspice, switching_measure)
+from _spice import (BRIDGE_DEAD_TIME_S, BRIDGE_PRESETS, HERE, KEYS, PRESETS, _ngspice_values, bridge_energy_netlist,
+                    bridge_energy_values, bridge_netlist, keys_from_values, netlist, netlist_path, run_ngspice,
+                    switching_measure)
 
 from wpt_receiver.devices import preset
 
@@ -88,11 +89,23 @@ def test_dead_time_really_moves_the_spice_numbers(name):
 @pytest.mark.skipif(shutil.which("ngspice") is None, reason="ngspice not installed")
 def test_ngspice_rerun_full_bridge_matches_model_and_reference(tmp_path):
     """Re-simulate the stored Schottky full-bridge netlist: ngspice reproduces the stored numbers
-    and the switching model with the same dead time is within 0.5 % of the live run."""
-    got, sw = run_ngspice(netlist_path("schottky", bridge=True).read_text(), tmp_path), _model_with_dead_time("schottky")
+    and the switching model with the same dead time is within 0.5 % of the live run. The run is of
+    ``bridge_energy_netlist`` (the stored netlist plus the source / battery energy ``.meas``, the
+    stored netlist's own lines unchanged): the same run reproduces ``bridge_energy.json``'s energies
+    (one ngspice run for both; test_spice_bridge_energy compares the model with the stored ones)."""
+    stored = netlist_path("schottky", bridge=True).read_text()
+    text = bridge_energy_netlist("schottky")
+    assert text.startswith(stored.removesuffix(".end\n")) and text.endswith(".end\n")
+    vals = _ngspice_values(text, tmp_path, "check.cir", 3600)
+    got, sw = keys_from_values(vals), _model_with_dead_time("schottky")
     for key in KEYS:
         assert got[key] == pytest.approx(BRIDGE["schottky"][key], rel=1e-4), key
         assert sw[key] == pytest.approx(got[key], rel=0.005), (key, sw[key], got[key])
+    energies = json.loads((HERE / "bridge_energy.json").read_text())["ngspice"]
+    e = bridge_energy_values(vals)
+    assert set(e) == set(energies)
+    for k, v in energies.items():
+        assert e[k] == pytest.approx(v, rel=1e-4, abs=1e-9), k
 
 
 # ---------------------------------------------------------------- the public writer, dronewpt netlist

@@ -178,19 +178,23 @@ def steady_state_unchecked(p: LinkParams, v2, lm, v1):
     return i1, i2
 
 
-def short_mode_rated_k(p: LinkParams, i2_a: float, v1_v: float | None = None) -> float:
-    """The coupling ``k`` below which the steady short-mode I2 exceeds ``i2_a`` [A] (at V1 ``v1_v``, default
-    ``p.v1_amp_v``; ``p``'s resistances, with any devices' folded in by the caller): :func:`steady_state` at V2 = 0,
-    ``I2 = x V1 / (R1 R2 + x^2)`` with ``x = w Lm = w k sqrt(L1 L2)``, equals ``i2_a`` at the roots of
-    ``i2_a x^2 - V1 x + i2_a R1 R2 = 0``; the larger, ``x = (V1 + sqrt(V1^2 - 4 i2_a^2 R1 R2)) / (2 i2_a)`` (~ V1 /
-    i2_a: the I2 ~ V1 / (w Lm) of a well-coupled pair), bounds from below the couplings where I2 stays within
-    ``i2_a``. 0.0 when I2 never reaches ``i2_a`` (its largest, ``V1 / (2 sqrt(R1 R2))`` at ``x = sqrt(R1 R2)``, is
-    below it)."""
+def short_mode_rated_k(p: LinkParams, i2_a: float, v1_v: float | None = None, overshoot: float = 0.0) -> float:
+    """The coupling ``k`` below which the steady short-mode I2, times ``1 + overshoot``, exceeds ``i2_a`` [A] (at V1
+    ``v1_v``, default ``p.v1_amp_v``; ``p``'s resistances, with any devices' folded in by the caller): :func:`steady_state`
+    at V2 = 0, ``I2 = x V1 / (R1 R2 + x^2)`` with ``x = w Lm = w k sqrt(L1 L2)``, equals ``I = i2_a / (1 + overshoot)``
+    at the roots of ``I x^2 - V1 x + I R1 R2 = 0``; the larger, ``x = (V1 + sqrt(V1^2 - 4 I^2 R1 R2)) / (2 I)`` (~ V1 /
+    I: the I2 ~ V1 / (w Lm) of a well-coupled pair), bounds from below the couplings where I2 stays within ``I``. 0.0
+    when I2 never reaches ``I`` (its largest, ``V1 / (2 sqrt(R1 R2))`` at ``x = sqrt(R1 R2)``, is below it).
+    ``overshoot`` (>= 0, a fraction): how far a transition into short mode peaks above the steady I2 (the peak
+    ``(1 + overshoot) I2`` is what is bounded; 0: the steady state)."""
+    if not (math.isfinite(overshoot) and overshoot >= 0.0):
+        raise ValueError(f"overshoot={overshoot!r} is invalid; valid range: [0, inf)")
     v1 = p.v1_amp_v if v1_v is None else float(v1_v)
-    disc = v1 * v1 - 4.0 * i2_a * i2_a * p.r1_ohm * p.r2_ohm
+    i_a = i2_a / (1.0 + overshoot)
+    disc = v1 * v1 - 4.0 * i_a * i_a * p.r1_ohm * p.r2_ohm
     if disc < 0.0:
         return 0.0
-    return (v1 + math.sqrt(disc)) / (2.0 * i2_a) / (p.omega_rad_s * math.sqrt(p.l1_h * p.l2_h))
+    return (v1 + math.sqrt(disc)) / (2.0 * i_a) / (p.omega_rad_s * math.sqrt(p.l1_h * p.l2_h))
 
 
 _SERIES_MAX = 0.1   # zoh_discretise: Bd by its series below this ||A dt||

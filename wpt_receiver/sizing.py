@@ -48,7 +48,7 @@ import numpy as np
 from .devices import V_BLOCK_V, DeviceSet, diode_from_row, parts, switch_from_row
 from .params import LinkParams
 
-__all__ = ["SizingRules", "link_devices", "open_load_study", "rectifier_currents", "envelope_currents", "candidates", "size_policy", "select_parts",
+__all__ = ["SizingRules", "rating_shortfall", "link_devices", "open_load_study", "rectifier_currents", "envelope_currents", "candidates", "size_policy", "select_parts",
            "paper_policy", "size_policies"]
 
 
@@ -77,6 +77,12 @@ class SizingRules:
         if self.margin < 1.0:
             raise ValueError(f"margin={self.margin!r} is invalid; valid range: [1, inf)")
 
+    def required_rating_a(self, peak_i2_a: float) -> float:
+        """The continuous current rating [A] a rectifier part must have for a peak ``|i2|`` of ``peak_i2_a`` [A]:
+        ``margin * peak_i2_a`` (module docstring; the one source of the rule: :func:`select_parts`, the mission's
+        rating row, :func:`rating_shortfall`)."""
+        return self.margin * float(peak_i2_a)
+
     def sink_mass_g(self, loss_w: float) -> float:
         """Plate-fin heat-sink mass [g] for a loss [W] (module docstring)."""
         area = max(loss_w, 0.0) / (self.h_w_m2k * self.dt_sink_k)
@@ -88,6 +94,26 @@ def _window_max(y, n):
     n = max(1, min(int(n), len(y)))
     c = np.concatenate([[0.0], np.cumsum(y)])
     return float(np.max(c[n:] - c[:-n]) / n)
+
+
+def rating_shortfall(devices: str, peak_i2_a: float, rules: SizingRules = SizingRules()) -> dict | None:
+    """How far the preset ``devices``' own rectifier parts (one leg / die per position,
+    :func:`wpt_receiver.devices.current_rating`: the lowest of its diode leg's and switch's continuous rating) fall
+    below the sizing rule for a peak ``|i2|`` of ``peak_i2_a`` [A] (:meth:`SizingRules.required_rating_a`):
+    ``{"rating_a", "part", "position", "required_a", "shortfall_a", "shortfall_rel"}``, or None when the part meets
+    the rule (or ``ideal``: no parts). The default mission: ``schottky``'s 30CTT045 (15 A per leg, the datasheet's
+    I_F(AV)) at a 13.32 A peak: 16.64 A required, 1.64 A (11.0 % of its rating) short; :func:`select_parts` then parallels two
+    legs per position (docs/devices.md, "The default preset against the rule")."""
+    from .devices import current_rating
+    held = current_rating(devices)
+    if held is None:
+        return None
+    rating, part, position = held
+    required = rules.required_rating_a(peak_i2_a)
+    if rating >= required:
+        return None
+    return {"rating_a": float(rating), "part": part, "position": position, "required_a": required,
+            "shortfall_a": required - rating, "shortfall_rel": (required - rating) / rating}
 
 
 def rectifier_currents(res, window_s: float = 1e-3, per_half_cycle: int = 64) -> dict:
@@ -213,7 +239,7 @@ def select_parts(measure, params: LinkParams, base, rules: SizingRules = SizingR
     from .thermal import ThermalRunaway
     base = link_devices(base, params)
     first = measure(base)
-    required = rules.margin * first["peak_i2_a"]
+    required = rules.required_rating_a(first["peak_i2_a"])
     stress = None
     if v_worst_v is None:
         stress = _stress(params, base, rules, first)

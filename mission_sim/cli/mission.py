@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sys
 import tomllib
 from pathlib import Path
@@ -394,15 +395,24 @@ def _figures_and_summary(res, out: Path, plots: bool, thinned=None, worker=None)
 
 
 def _rating_row(s: dict) -> list[tuple[str, str, str]]:
-    """The rectifier's continuous current rating beside the peak, and what ``dronewpt sizing`` asks of it (the margin:
-    ``wpt_receiver.sizing.SizingRules``'s); none for ideal devices (no parts)."""
+    """The rectifier's continuous current rating beside the peak, and what ``dronewpt sizing`` asks of it (the rule:
+    ``wpt_receiver.sizing.SizingRules.required_rating_a``); a part below it gets a note in the same row, by how much
+    and that the rule is conservative (it compares a millisecond peak with the part's average rating I_F(AV)), not a
+    warning (:func:`wpt_receiver.sizing.rating_shortfall`: the default mission's 30CTT045, 1.64 A short); none for
+    ideal devices (no parts)."""
     if s.get("rectifier_rating_a") is None:
         return []
-    from wpt_receiver.sizing import SizingRules
-    m = SizingRules.margin
-    return [("rectifier current rating", f"{s['rectifier_rating_a']:g}",
-             f"A continuous, {s['rectifier_rating_part']} (peak I2 {s['peak_i2_a']:.2f} A; dronewpt sizing requires "
-             f"a rating >= {m:g} x peak = {m * s['peak_i2_a']:.2f} A)")]
+    from wpt_receiver.sizing import SizingRules, rating_shortfall
+    rules = SizingRules(margin=SizingRules.margin)   # (the class's margin: a patched one moves the row)
+    text = (f"A continuous, {s['rectifier_rating_part']} (peak I2 {s['peak_i2_a']:.2f} A; dronewpt sizing requires "
+            f"a rating >= {rules.margin:g} x peak = {rules.required_rating_a(s['peak_i2_a']):.2f} A)")
+    short = rating_shortfall(s["devices"], s["peak_i2_a"], rules)
+    if short is not None:
+        text += (f"; note: {short['shortfall_a']:.2f} A ({100 * short['shortfall_rel']:.1f} %) below dronewpt sizing's "
+                 f"rule ({rules.margin:g} x peak against the part's average rating, conservative): "
+                 f"dronewpt sizing --source mission parallels {math.ceil(short['required_a'] / short['rating_a'])} "
+                 "legs")
+    return [("rectifier current rating", f"{s['rectifier_rating_a']:g}", text)]
 
 
 def _payload_rows(s: dict) -> list:

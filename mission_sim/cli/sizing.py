@@ -209,6 +209,24 @@ def _sweep_rows(args, base):
     return rows
 
 
+def _preset_shortfall(devices: str, rows, rules) -> str | None:
+    """One line when the preset's own rectifier parts (one leg / die per position) are below a row's required rating
+    (:func:`wpt_receiver.sizing.rating_shortfall` at the row's peak with the preset, ``required_rating_a / margin``):
+    the default mission's ``schottky`` (30CTT045, 15 A) at model_based's 13.32 A peak is 1.64 A short of 16.64 A.
+    (Not the row's ``peak_i2_a``: with ``--source paper`` that is the peak with the parts the row chose, measured
+    again with their resistances; the rule rated the preset's own peak, which ``required_rating_a`` carries.)"""
+    from wpt_receiver.sizing import rating_shortfall
+    below = [(r["policy"], s) for r in rows
+             if (s := rating_shortfall(devices, r["required_rating_a"] / rules.margin, rules)) is not None]
+    if not below:
+        return None
+    s0 = below[0][1]
+    return (f"warning: devices {devices}'s own {s0['position']} {s0['part']} is rated {s0['rating_a']:g} A, below the "
+            "required rating of " + ", ".join(f"{p} ({s['required_a']:.2f} A, {s['shortfall_a']:.2f} A short)"
+                                              for p, s in below)
+            + ": the parts above parallel it (or take another part)")
+
+
 def _cmd_sizing(args) -> int:
     from .paper import _link_text
     _resolve_rules_defaults(args)
@@ -250,6 +268,9 @@ def _cmd_sizing(args) -> int:
               f"{r['mass_g']:>5.1f} g  {r['part']}")
     r0 = rows[0]
     rules = _rules(args)   # (the printed rules are the ones sized with)
+    short = _preset_shortfall(args.devices, rows, rules)
+    if short:
+        print(short)
     print(f"losses at the settled junction temperatures (ambient {rules.t_amb_c:g} C, sink +{rules.dt_sink_k:g} K); "
           f"V rating = {rules.v_margin:g} x the simulated "
           f"worst blocking voltage {r0['v_worst_v']:.2f} V" + (f" ({r0['v_case']})" if r0.get("v_case") else ""))

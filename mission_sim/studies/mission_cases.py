@@ -49,22 +49,26 @@ class MissionParamChecker:
         self.warned: dict[str, list] = {}        # kind of setup warning -> [cases with one, an example message]
         self.checked = 0                         # cases whose values passed
 
-    def _note(self, cfg) -> None:
+    def _note(self, cfg, policy=None) -> None:
         """Count ``cfg``'s setup warnings (:mod:`mission_sim.setup_warnings`; its cases are made with
-        ``policy_context``, so no policy warning), each computed once per distinct value of what it reads (the
+        ``policy_context``, so no policy warning; the pad gate's against the case's ``policy``'s declared RM -> SM
+        overshoot, as ``dronewpt mission`` checks it: :func:`~mission_sim.setup_warnings.short_mode_rating_warning`),
+        each computed once per distinct value of what it reads (the
         cached section objects: keys of identities, ~1 us a case; ~50 us for each new link, e.g. a Monte Carlo
         draw of ``link.vdc_v``). A far pad (:func:`~mission_sim.setup_warnings.far_pad_warnings`) counts whatever
         the route, about :attr:`pad_origin` (``run_mission``'s rule); a payload release with no payload left
         (:func:`~mission_sim.setup_warnings.payload_warnings`) when the cases fly the config's route (``run_size``;
         a replay's route is its log's: none)."""
         from ..setup_warnings import (far_pad_warnings, link_frequency_warning, link_range_warning,
-                                      payload_warnings, short_mode_rating_warning, unreached_pad_warnings)
+                                      payload_warnings, ring_down_warning, short_mode_rating_warning,
+                                      unreached_pad_warnings)
 
         link = (cfg.link, cfg.coupling, cfg.battery.n_series, cfg.charger.cv_cell_v, cfg.mission.hover_gap_m)
         route = (cfg.waypoints, cfg.mission, *cfg.pads) if cfg.waypoints else ()
         self.checked += 1
         checks = [("link", link, link_range_warning), ("freq", (cfg.link, cfg.coupling), link_frequency_warning),
-                  ("rated", (cfg.link, cfg.coupling), short_mode_rating_warning),
+                  ("rated", (cfg.link, cfg.coupling, policy), lambda c: short_mode_rating_warning(c, policy)),
+                  ("ring", (cfg.link, cfg.coupling), ring_down_warning),
                   ("pad", route, unreached_pad_warnings),
                   ("far", tuple(cfg.pads), lambda c: far_pad_warnings(c, self.pad_origin)),
                   ("payload", (cfg.drone, cfg.waypoints) if self.run_size else (), payload_warnings)]
@@ -87,6 +91,7 @@ class MissionParamChecker:
     KINDS = {"link": "a link outside the exact-mode model's checked range",
              "freq": f"a link.f_hz more than a factor {FREQUENCY_TOLERANCE:g} off the coil pair's tanks' resonance",
              "rated": "a coupling.tx_min_k below the coupling where the short-mode I2 reaches link.rated_i2_a",
+             "ring": "a pad switch-off ring-down slower than 1 s (tau = 2 L1 / (R1 + 2 Ron))",
              "pad": "a pad their route never energises",
              "far": f"a pad more than {PAD_HEIGHT_WARN_M:g} m above or below its frame's origin",
              "payload": "a payload release with no payload left to drop"}
@@ -135,7 +140,9 @@ class MissionParamChecker:
                 self._sizes[key] = str(exc).replace("; use --force to run it anyway", "")
         return self._sizes[key]
 
-    def __call__(self, overrides: dict) -> str | None:
+    def __call__(self, overrides: dict, policy=None) -> str | None:
+        """None if the case's ``overrides`` build its mission (its setup warnings counted, the pad gate's against
+        ``policy``, a policy object or None), else the error."""
         groups: dict[str, dict] = {}
         for k, v in overrides.items():
             sec, _, name = str(k).rpartition(".")
@@ -153,7 +160,7 @@ class MissionParamChecker:
             return str(exc)
         err = self._size_error(cfg) if self.run_size else None
         if err is None:
-            self._note(cfg)
+            self._note(cfg, policy)
         return err
 
 
@@ -175,9 +182,10 @@ class MissionCaseRunner:
         self.policy_names = None if policy_names is None else tuple(policy_names)
         self._checker = None
         self._specs: dict[str, str | None] = {}   # a policy spec -> its error (None: valid), made once
+        self._made: dict = {}   # a policy spec -> a policy made with the default context (its declared overshoot)
 
     def __getstate__(self):  # the checker's caches stay on the driver
-        return {**self.__dict__, "_checker": None, "_specs": {}}
+        return {**self.__dict__, "_checker": None, "_specs": {}, "_made": {}}
 
     def config(self, params: dict):
         from ..config import apply_overrides, config_from_dict
@@ -209,7 +217,19 @@ class MissionCaseRunner:
         if self._checker is None:
             self._checker = MissionParamChecker(self.base, self._check_run_size, self.setup_notes(),
                                                 self._pad_origin)
-        return self._checker({k: v for k, v in params.items() if k != POLICY_KEY})
+        return self._checker({k: v for k, v in params.items() if k != POLICY_KEY}, self._policy_for_notes(policy))
+
+    def _policy_for_notes(self, spec):
+        """The case's policy as the setup warnings read it (its name and declared ``rm_sm_overshoot``), made once per
+        spec with the default context; None when it cannot be made (its error is the case's own)."""
+        if not isinstance(spec, str):
+            return None
+        if spec not in self._made:
+            try:
+                self._made[spec] = self.make_policy(spec, None)
+            except Exception:   # noqa: BLE001 (the case reports it when it runs)
+                self._made[spec] = None
+        return self._made[spec]
 
     def _policy_error(self, policy) -> str | None:
         """None if ``policy`` is a valid name or spec (``model_based_budget:0.02``, ``rl:PATH``, as ``--policy``

@@ -227,11 +227,11 @@ class MissionLoop:
             "battery_full": bool(ks.full),
             "min_soc": float(min(st.min_soc, bp.initial_soc)),
             **self.depletion_summary(),
-            "peak_i2_a": self.instantaneous_peak(),
+            "peak_i2_a": (peak_i2_a := self.instantaneous_peak()),
             "peak_i2_envelope_a": float(ks.peak_env),
             "rated_i2_a": self.rated,
             "time_above_rated_s": float(ks.above),
-            **self.rating_summary(),
+            **self.rating_summary(peak_i2_a),
             "flight_time_gain_s": 0.0,
             "fine_steps": int(ks.n_fine),
             "coarse_steps": int(ks.n_coarse),
@@ -285,15 +285,18 @@ class MissionLoop:
         t1 = np.minimum(c.t_s + dt, end_s)
         return math.fsum((c.p_w * np.maximum(t1 - t0, 0.0)).tolist())
 
-    def rating_summary(self) -> dict:
+    def rating_summary(self, peak_i2_a: float) -> dict:
         """The rectifier's continuous current rating [A] and its part (:func:`wpt_receiver.devices.current_rating`
-        of ``link.devices``: the lowest of its diode leg's and switch's), to read beside ``peak_i2_a``
-        (``dronewpt sizing`` asks it to cover ``wpt_receiver.sizing.SizingRules.margin`` x the peak); None for
-        ``ideal`` devices."""
+        of ``link.devices``: the lowest of its diode leg's and switch's), to read beside ``peak_i2_a``, None for
+        ``ideal`` devices; and ``rectifier_required_a``, the rating ``dronewpt sizing``'s rule asks of a part for
+        that peak (:meth:`wpt_receiver.sizing.SizingRules.required_rating_a`: ``margin`` x the peak, conservative:
+        a millisecond peak against the part's average rating)."""
         from wpt_receiver.devices import current_rating
+        from wpt_receiver.sizing import SizingRules
         held = current_rating(self.lk.devices)
         return {"rectifier_rating_a": None if held is None else float(held[0]),
-                "rectifier_rating_part": None if held is None else held[1]}
+                "rectifier_rating_part": None if held is None else held[1],
+                "rectifier_required_a": SizingRules(margin=SizingRules.margin).required_rating_a(peak_i2_a)}
 
     def energy_summary(self) -> dict:
         """Energies [J] (exact sums), per device group, efficiency and the two balances.
