@@ -652,10 +652,7 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     spec = _spec(algo, timesteps, opts)
     _one_thread_each()
     out = Path(out_dir)
-    held = None if resume is not None else earlier_run(out, spec["name"])
-    if held:   # (a second run into the same folder replaced the first one's model and logs without a word)
-        raise ValueError(f"out_dir={str(out)!r} holds an earlier training run ({held}), which this run would "
-                         "replace; valid: a new folder, resume=<one of its models> to go on training it, or remove it")
+    _refuse_earlier_run(out, spec["name"], resume)
     out.mkdir(parents=True, exist_ok=True)
     kept = _keep_curves(out) if resume is not None else []
     if importlib.util.find_spec("tensorboard") is not None:
@@ -671,17 +668,14 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
         resume = res["model"]
     venv, eval_env, model, penalty = _build(spec, out, resume)
     start_log_std = float(model.policy.log_std.detach().mean()) if imitate else None   # PPO's start: the clone's
-    from mission_sim.signals import Interrupted, interrupts_deferred, interrupts_requested, signal_name
+    from mission_sim.signals import Interrupted, interrupts_deferred, interrupts_requested
     with interrupts_requested(STOP_NOTICE) as requests:   # Ctrl-C / SIGTERM: stop at the next step, keep the model
         cbs, lag, ev = _callbacks(spec, out, eval_env, penalty, progress, requests)
         todo = spec["timesteps"] - (model.num_timesteps if resume is not None else 0)   # SB3 adds num_timesteps on resume
         model.learn(total_timesteps=max(todo, 1), callback=cbs, reset_num_timesteps=resume is None)
-    stopped = requests[0] if requests else None
-    # an interrupted run's model goes beside the final one's name (an earlier run's final model in --out is kept):
-    # <name>_interrupted.zip + .json (usable as rl: / residual:) + _vecnormalize.pkl (--resume finds it)
-    name = spec["name"] + ("_interrupted" if stopped else "")
-    zip_path = out / f"{name}.zip"
-    norm_path = out / (f"{name}_vecnormalize.pkl" if stopped else "vecnormalize.pkl")
+    stopped = requests[0] if requests else None   # interrupted: <name>_interrupted.zip + .json + _vecnormalize.pkl
+    zip_path = out / (spec["name"] + ("_interrupted.zip" if stopped else ".zip"))
+    norm_path = out / (spec["name"] + "_interrupted_vecnormalize.pkl" if stopped else "vecnormalize.pkl")
     late = None
     try:
         with interrupts_deferred():   # a signal during the saving is raised once all is saved, not half-way
@@ -689,19 +683,35 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
     except Interrupted as exc:
         late = exc.signum
     if stopped or late:
-        exc = Interrupted(stopped or late)
-        done = (f"trained {model.num_timesteps:,} of {spec['timesteps']:,} steps" if stopped else
-                f"trained all {model.num_timesteps:,} steps (the signal came while saving)")
-        note = (f"{done}; the model is saved: '{zip_path}' with its metadata (compare --policies "
-                f"{_policy_prefix(spec)}:{zip_path})")
-        if stopped:
-            note += (f"; to go on, the same command with --resume {zip_path} (it moves this run's learning-curve "
-                     "files, monitor.monitor.csv and eval/eval_curve.json, aside as *.prev-<UTC time>.*)")
-        exc.add_note(note)
-        raise exc
+        raise _interrupted(spec, model.num_timesteps, zip_path, stopped, late)
     if kept:   # (the CLI prints each entry: where the resumed run's learning curve went)
         res["earlier_curves"] = ", ".join(str(k) for k in kept)
     return res
+
+
+def _refuse_earlier_run(out: Path, name: str, resume) -> None:
+    """A ``ValueError`` when ``out`` holds an earlier run of ``name`` and this is not a resume (a second run into the
+    same folder replaced the first one's model and logs without a word)."""
+    held = None if resume is not None else earlier_run(out, name)
+    if held:
+        raise ValueError(f"out_dir={str(out)!r} holds an earlier training run ({held}), which this run would "
+                         "replace; valid: a new folder, resume=<one of its models> to go on training it, or remove it")
+
+
+def _interrupted(spec: dict, steps: int, zip_path: Path, stopped, late):
+    """The ``Interrupted`` of a run stopped by a signal (``stopped``) or signalled while saving (``late``), with the
+    note that names the saved model and how to go on."""
+    from mission_sim.signals import Interrupted
+    exc = Interrupted(stopped or late)
+    done = (f"trained {steps:,} of {spec['timesteps']:,} steps" if stopped else
+            f"trained all {steps:,} steps (the signal came while saving)")
+    note = (f"{done}; the model is saved: '{zip_path}' with its metadata (compare --policies "
+            f"{_policy_prefix(spec)}:{zip_path})")
+    if stopped:
+        note += (f"; to go on, the same command with --resume {zip_path} (it moves this run's learning-curve "
+                 "files, monitor.monitor.csv and eval/eval_curve.json, aside as *.prev-<UTC time>.*)")
+    exc.add_note(note)
+    return exc
 
 
 def _save(spec, out, model, venv, lag, ev, zip_path, norm_path, stopped, imitate, start_log_std) -> dict:
