@@ -337,7 +337,6 @@ def test_follow_with_two_positions_ends_after_the_idle_time(monkeypatch, tmp_pat
     """A vehicle that sends 2 positions (fewer than CONFIRM) and stops: they are followed once --follow-idle passes,
     not only at --follow-time (they are held for the reference, and count as come). Counted in polls of the vehicle
     (each waits 0.05 s when nothing comes): ~10 after 0.5 s idle, ~600 had it waited the 30 s."""
-    from mission_sim.mavlink import follow
     from test_newcomer2 import _FakeVehicle, _track
 
     class Counting(_FakeVehicle):
@@ -347,12 +346,19 @@ def test_follow_with_two_positions_ends_after_the_idle_time(monkeypatch, tmp_pat
             Counting.polls += 1
             return super().recv_match(*a, **k)
 
-    monkeypatch.setattr(follow, "open_follow", lambda connect: Counting(_track(2, lat0=47.4, lon0=8.5)))
-    rc = main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--follow-time", "30", "--follow-idle", "0.5",
-               "--connect", "none", "--tlog", str(tmp_path / "two.tlog")])
+    follow_two_positions(monkeypatch, tmp_path, capsys, Counting(_track(2, lat0=47.4, lon0=8.5)), 30)
+    assert Counting.polls < 200, Counting.polls
+
+
+def follow_two_positions(monkeypatch, tmp_path, capsys, vehicle, follow_time_s):
+    """``telemetry --follow`` of ``vehicle`` (a fake whose track holds 2 positions), --follow-idle 0.5 s: both are
+    followed (exit 0)."""
+    from mission_sim.mavlink import follow
+    monkeypatch.setattr(follow, "open_follow", lambda connect: vehicle)
+    rc = main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--follow-time", str(follow_time_s), "--follow-idle",
+               "0.5", "--connect", "none", "--tlog", str(tmp_path / "two.tlog")])
     out = capsys.readouterr().out
     assert rc == 0 and "followed 2 live positions" in out, out
-    assert Counting.polls < 200, Counting.polls
 
 
 def test_an_installed_copy_names_where_numba_s_cache_went(tmp_path):

@@ -188,7 +188,6 @@ def test_follow_idle_timer_is_not_reset_by_no_fix_frames(monkeypatch, tmp_path, 
     """Two positions held for the reference, then frames without a fix (lat = lon = 0) now and then: each reset the
     idle timer, so --follow-idle never ended the session (it ran to --follow-time). Now only a position held or taken
     resets it. Counted in polls of the vehicle (no wall-clock assert): ~20 at 0.5 s idle, ~100 per --follow-time s."""
-    from mission_sim.mavlink import follow
     from test_newcomer2 import _FakeVehicle, _track
 
     class NoFixAfter(_FakeVehicle):
@@ -200,11 +199,8 @@ def test_follow_idle_timer_is_not_reset_by_no_fix_frames(monkeypatch, tmp_path, 
                 return super().recv_match(type, blocking, timeout)
             return _fix(0, 0, 0)   # no fix, between empty polls
 
-    monkeypatch.setattr(follow, "open_follow", lambda connect: NoFixAfter(_track(2, lat0=47.4, lon0=8.5)))
-    rc = main(["telemetry", "--follow", "udpin:127.0.0.1:14999", "--follow-time", "60", "--follow-idle", "0.5",
-               "--connect", "none", "--tlog", str(tmp_path / "two.tlog")])
-    out = capsys.readouterr().out
-    assert rc == 0 and "followed 2 live positions" in out, out
+    from test_loose_ends_dawn import follow_two_positions
+    follow_two_positions(monkeypatch, tmp_path, capsys, NoFixAfter(_track(2, lat0=47.4, lon0=8.5)), 60)
     assert NoFixAfter.polls < 100, NoFixAfter.polls
 
 
