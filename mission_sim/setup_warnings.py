@@ -105,8 +105,8 @@ def reachable_coupling(cfg) -> float:
     """The largest coupling ``coupling.tx_min_k`` can usefully gate at: the coupling model's k at contact (the
     receiver coil centred over the pad coil, wires touching: 0.271 for the default pair), and below
     ``1 - coupling.tx_k_hysteresis`` (the config's range for the gate)."""
-    model = cfg.coupling.model()
-    k_contact = float(model.k(float(model.lm_h(0.0, 0.0, model.clearance_m()))))
+    model = cfg.coupling.model()   # (the closed form at contact: a mission on a known path loads no coupling kernel)
+    k_contact = float(model.k(model.lm_centred_h(model.clearance_m())))
     return min(k_contact, 1.0 - cfg.coupling.tx_k_hysteresis)
 
 

@@ -22,7 +22,8 @@ DATA_DIR = Path(__file__).resolve().parent / "data" / "flightlogs"
 #: tests/conftest.py runs them under :func:`log_guard`, tests/test_mavlink_selfcontained.py checks the list
 LOG_TESTS = ("test_mavlink_io.py", "test_cli_replay_errors.py", "test_replay_integration.py",
              "test_mavlink_armed.py", "test_mavlink_ulog.py", "test_telemetry_loopback.py", "test_mavlink_clock.py",
-             "test_calibrate.py", "test_integrator_newcomer.py", "test_owndata.py", "test_newcomer2.py")
+             "test_calibrate.py", "test_integrator_newcomer.py", "test_owndata.py", "test_newcomer2.py",
+             "test_mend_loose8.py")
 LOG_SUFFIXES = (".tlog", ".bin", ".ulg", "SOURCES.md")
 
 

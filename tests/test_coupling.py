@@ -131,3 +131,15 @@ def test_table_near_the_pad_gives_the_exact_field(pose):
     ref = m.lm_exact_h(*pose, n_theta=96)
     assert m.lm_h(*pose) == pytest.approx(m.lm_exact_h(*pose), rel=1e-12)
     assert abs(m.lm_h(*pose) - ref) < 2e-5 * 6.25e-6
+
+
+def test_lm_centred_is_the_table_lm_over_the_pad_centre():
+    """``CouplingModel.lm_centred_h`` (Maxwell's coaxial formula over the turn pairs: what the pad-gate warning's
+    'what the coils reach' reads, without the compiled table) equals ``lm_h`` of the centred, level receiver from
+    contact to 10 cm, and falls with the height."""
+    from wpt_receiver.coupling import default_coupling
+    m = default_coupling()
+    dz = np.array([m.clearance_m(), 0.02, 0.05, 0.1])
+    centred = np.array([m.lm_centred_h(float(z)) for z in dz])
+    assert centred == pytest.approx([float(m.lm_h(0.0, 0.0, float(z))) for z in dz], rel=1e-12)
+    assert np.all(np.diff(centred) < 0)

@@ -104,7 +104,7 @@ def lazy_names_help(action, text: str, names) -> None:
     """Give ``action`` (from ``add_argument``) the help ``text; one of: <names()>``, computed only when
     the help is shown (``names`` imports policies / envs, which takes a second or two)."""
     action.help = text
-    action.lazy_help = lambda: names_help(text, names())
+    action.lazy_help = lambda: names_help(text, [n.replace("%", "%%") for n in names()])   # (argparse %-formats help)
 
 
 def policy_names() -> list[str]:
