@@ -77,7 +77,7 @@ def _short_mode_link(cfg):
 def short_mode_rated_coupling(cfg, overshoot: float = 0.0) -> float:
     """The coupling k at which the steady short-mode I2 at full V1, times ``1 + overshoot``, reaches
     ``link.rated_i2_a`` (below it the peak is above the rating; 0.0 when it never reaches it): the k of
-    :func:`short_mode_rating_warning` (0.07132 at the defaults, steady; 0.07457 with model_based's 4.6 %)."""
+    :func:`short_mode_rating_warning` (0.07132 at the defaults, steady; 0.07461 with model_based's 4.6 %)."""
     from wpt_receiver.envelope import short_mode_rated_k
     return short_mode_rated_k(_short_mode_link(cfg), cfg.link.rated_i2_a, overshoot=overshoot)
 
@@ -85,7 +85,7 @@ def short_mode_rated_coupling(cfg, overshoot: float = 0.0) -> float:
 def policy_overshoot(policy) -> float:
     """The fraction by which ``policy``'s RM -> SM transition peaks above the steady short-mode I2, as it declares it
     (a class attribute ``rm_sm_overshoot``, measured at Table I and at the warning's operating point, the larger:
-    ``model_based`` 0.046, ``ramp`` 0.0865); 0.0 for None or a policy that declares nothing (the steady state is then
+    ``model_based`` 0.046, ``ramp`` 0.1027); 0.0 for None or a policy that declares nothing (the steady state is then
     what is bounded: :func:`short_mode_rating_warning` says so). A declared value that is not a number >= 0 (negative,
     NaN, a string) raises ``ValueError`` naming it."""
     if policy is None or not hasattr(policy, "rm_sm_overshoot"):
@@ -118,7 +118,7 @@ def short_mode_rating_warning(cfg, policy=None) -> str | None:
     figures measured at Table I's link and at the warning's operating point; none declared: the steady state, and
     the line says so), else None: between the two the pad energises a receiver whose transition into short mode
     peaks above its rating. The default 0.075 is above it (0.0713 steady on Table I with the default devices, 14.27 A
-    at k = 0.075; 0.0746 with model_based's 4.6 %, 14.92 A; with ramp's 8.65 % 0.0775: the default gate warns).
+    at k = 0.075; 0.0746 with model_based's 4.6 %, 14.92 A; with ramp's 10.27 % 0.0787: the default gate warns).
 
     The remedies are closed forms: the steady short-mode I2 is proportional to V1 (eq. 4 at V2 = 0), so the largest
     ``link.vdc_v`` that keeps the peak within the rating at the gate is ``vdc * rated / ((1 + os) I2)`` (31.55 V

@@ -691,7 +691,11 @@ def train(algo: str, timesteps: int, out_dir, *, seed: int = 0, n_envs: int = 64
 
 def _refuse_earlier_run(out: Path, name: str, resume) -> None:
     """A ``ValueError`` when ``out`` holds an earlier run of ``name`` and this is not a resume (a second run into the
-    same folder replaced the first one's model and logs without a word)."""
+    same folder replaced the first one's model and logs without a word); for a resume, its statistics file checked
+    (``FileNotFoundError``) before the earlier run's curves are moved aside (a wrong ``resume`` moved them, then
+    failed)."""
+    if resume is not None:
+        _checkpoint_pkl(Path(resume))
     held = None if resume is not None else earlier_run(out, name)
     if held:
         raise ValueError(f"out_dir={str(out)!r} holds an earlier training run ({held}), which this run would "
@@ -709,7 +713,8 @@ def _interrupted(spec: dict, steps: int, zip_path: Path, stopped, late):
             f"{_policy_prefix(spec)}:{zip_path})")
     if stopped:
         note += (f"; to go on, the same command with --resume {zip_path} (it moves this run's learning-curve "
-                 "files, monitor.monitor.csv and eval/eval_curve.json, aside as *.prev-<UTC time>.*)")
+                 "files, monitor.monitor.csv, eval/eval_curve.json and eval/evaluations.npz, aside as *.prev-<UTC "
+                 "time>.*)")
     exc.add_note(note)
     return exc
 

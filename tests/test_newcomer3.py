@@ -281,3 +281,17 @@ def test_a_study_value_spec_that_is_not_one_is_named_as_a_spec(section, text, sh
         parse_study(doc)
     assert shown in str(e.value)
     assert parse_study({"grid": {"link": {"devices": ["ideal", "sic"]}}}).grid == {"link.devices": ["ideal", "sic"]}
+
+
+def test_a_resume_from_a_model_without_its_statistics_leaves_the_earlier_curves_in_place(tmp_path):
+    """``train(resume=...)`` checks the model's VecNormalize statistics before it moves the folder's learning-curve
+    files aside: a wrong resume (no statistics beside it) had moved monitor.monitor.csv and eval/eval_curve.json to
+    *.prev-* and then failed, so the rerun resumed without them (a re-read of 2026-11-28)."""
+    from policies.train import train
+    (tmp_path / "monitor.monitor.csv").write_text("#\n")
+    (tmp_path / "eval").mkdir()
+    (tmp_path / "eval" / "eval_curve.json").write_text("[]")
+    (tmp_path / "wrong.zip").write_bytes(b"PK")
+    with pytest.raises(FileNotFoundError, match="no VecNormalize statistics"):
+        train("ppo", 100, tmp_path, resume=str(tmp_path / "wrong.zip"), progress=False)
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["eval", "eval_curve.json", "monitor.monitor.csv", "wrong.zip"]

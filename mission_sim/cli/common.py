@@ -74,7 +74,7 @@ class OneLineParser(argparse.ArgumentParser):
         for action in self._actions:  # help texts listing names that need a slow import: only for --help
             fill = getattr(action, "lazy_help", None)
             if fill is not None:
-                action.help, action.lazy_help = fill(), None
+                action.help, action.lazy_help = fill().replace("%", "%%"), None   # (argparse %-formats help texts)
         return super().format_help()
 
 
@@ -104,7 +104,7 @@ def lazy_names_help(action, text: str, names) -> None:
     """Give ``action`` (from ``add_argument``) the help ``text; one of: <names()>``, computed only when
     the help is shown (``names`` imports policies / envs, which takes a second or two)."""
     action.help = text
-    action.lazy_help = lambda: names_help(text, [n.replace("%", "%%") for n in names()])   # (argparse %-formats help)
+    action.lazy_help = lambda: names_help(text, names())
 
 
 def policy_names() -> list[str]:
