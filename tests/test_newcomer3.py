@@ -295,3 +295,15 @@ def test_a_resume_from_a_model_without_its_statistics_leaves_the_earlier_curves_
     with pytest.raises(FileNotFoundError, match="no VecNormalize statistics"):
         train("ppo", 100, tmp_path, resume=str(tmp_path / "wrong.zip"), progress=False)
     assert sorted(p.name for p in tmp_path.rglob("*")) == ["eval", "eval_curve.json", "monitor.monitor.csv", "wrong.zip"]
+
+
+def test_a_budget_after_the_colon_is_not_taken_for_a_model_file(tmp_path, monkeypatch):
+    """``mpc:0.05`` names a budget: a file called ``0.05`` in the working folder is not recorded (hashed) as the
+    policy's model; ``rl:PATH`` is (a re-read of 2026-11-28)."""
+    from mission_sim.studies.prepare import policy_files
+    from mission_sim.studies.study import parse_study
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "0.05").write_text("not a model")
+    (tmp_path / "m.zip").write_bytes(b"PK")
+    st = parse_study({"study": {"name": "b"}, "grid": {"policy": ["mpc:0.05", "rl:m.zip"]}})
+    assert set(policy_files(st)) == {"policy rl:m.zip"}

@@ -57,6 +57,14 @@ def _runner(study: Study, make_policy: Callable | None, policy_names):
     return runner, base_fingerprint(base)
 
 
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def policy_files(study: Study) -> dict:
     """The model files the study's policies read (``rl:PATH``, ``residual:PATH``, ...: a spec whose part after ':'
     names a file, and that file's metadata ``.json`` beside it), as ``{"policy rl:PATH": {"path", "sha256"}, ...}``
@@ -71,7 +79,7 @@ def policy_files(study: Study) -> dict:
     out = {}
     for spec in dict.fromkeys(s for s in specs if isinstance(s, str)):
         _, colon, arg = spec.partition(":")
-        path = Path(arg) if colon and arg else None
+        path = Path(arg) if colon and arg and not _is_number(arg) else None   # (mpc:0.05: a budget, not a file)
         if path is None or not path.is_file():
             continue
         for what, f in ((f"policy {spec}", path), (f"policy {spec} metadata", path.with_suffix(".json"))):
