@@ -46,7 +46,7 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 import pandas as pd
 
-from ..world.power import DroneParams, above_max_takeoff, propulsion_power_w
+from ..world.power import DroneParams, above_max_takeoff, propulsion_power_w, takeoff_excess
 from . import ground
 from .logs import FlightLog
 from .replay import _in_periods, check_decoded, replay_span, track_from_log, unknown_armed_check
@@ -225,12 +225,10 @@ def max_takeoff_warning(fitted: DroneParams, base: DroneParams) -> str | None:
     """The one-line warning when the fitted mass plus the config's payload is above the config's
     ``drone.max_takeoff_mass_kg`` (the fitted drone then has none: the written TOML leaves the key out, which
     ``mission --drone`` would refuse); None otherwise."""
-    mtom = base.max_takeoff_mass_kg
-    if not above_max_takeoff(fitted.mass_kg, fitted.payload_kg, mtom):
+    head = takeoff_excess("the fitted mass_kg", fitted.mass_kg, fitted.payload_kg, base.max_takeoff_mass_kg)
+    if head is None:
         return None
-    load = f" + payload_kg {fitted.payload_kg:g} kg" if fitted.payload_kg else ""
-    return (f"the fitted mass_kg {fitted.mass_kg:.3f} kg{load} is above drone.max_takeoff_mass_kg={mtom:g} kg: "
-            "max_takeoff_mass_kg left out of the written [drone] TOML (the fitted mass is the model's equivalent "
+    return (f"{head}: max_takeoff_mass_kg left out of the written [drone] TOML (the fitted mass is the model's equivalent "
             "mass; --mass KG fixes the weighed one)")
 
 

@@ -398,13 +398,12 @@ def fit_mass_kg(traj, drone, target_energy_j: float, t_s, mask, runner_energy_j:
 def equivalent_mass_warning(name: str, mass_kg: float, drone) -> str | None:
     """The one-line warning when the equivalent mass ``mass_kg`` (:func:`fit_mass_kg`) plus ``drone.payload_kg`` is
     above ``drone.max_takeoff_mass_kg`` (None when unset, below it or nan)."""
-    from ..world.power import above_max_takeoff
-    mtom = drone.max_takeoff_mass_kg
-    if not np.isfinite(mass_kg) or not above_max_takeoff(mass_kg, drone.payload_kg, mtom):
+    from ..world.power import takeoff_excess
+    head = takeoff_excess(f"{name}: the equivalent mass", float(mass_kg), drone.payload_kg, drone.max_takeoff_mass_kg,
+                          fmt=".2f")
+    if head is None:
         return None
-    load = f" + payload_kg {drone.payload_kg:g} kg" if drone.payload_kg else ""
-    return (f"{name}: the equivalent mass {mass_kg:.2f} kg{load} is above drone.max_takeoff_mass_kg={mtom:g} kg: the "
-            "model needs more than the airframe's maximum take-off mass to match the logged energy (the drone "
+    return (f"{head}: the model needs more than the airframe's maximum take-off mass to match the logged energy (the drone "
             "spends more than the config's drone would; check its figure_of_merit, drive_efficiency, avionics_w)")
 
 

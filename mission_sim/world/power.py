@@ -37,7 +37,7 @@ import numpy as np
 
 from ..validation import Range, check_number, check_number_fields, check_positive
 
-__all__ = ["DroneParams", "DRONE_RANGES", "propulsion_power_w", "hover_power_w", "payload_after_releases", "G_M_S2"]
+__all__ = ["takeoff_excess", "DroneParams", "DRONE_RANGES", "propulsion_power_w", "hover_power_w", "payload_after_releases", "G_M_S2"]
 
 G_M_S2 = 9.80665
 
@@ -85,6 +85,17 @@ DRONE_RANGES: dict[str, Range] = {
 
 #: relative tolerance of the take-off mass check: 0.1 + 0.2 is 0.30000000000000004 in binary, not above a 0.3 kg limit
 MTOM_REL_TOL = 1e-9
+
+
+def takeoff_excess(label: str, mass_kg: float, payload_kg: float, max_takeoff_mass_kg: float | None,
+                   fmt: str = ".3f") -> str | None:
+    """``"<label> M kg [+ payload_kg P kg] is above drone.max_takeoff_mass_kg=L kg"`` when ``mass_kg + payload_kg`` is
+    above the limit (:func:`above_max_takeoff`), else None (also for a mass that is not finite): the head of replay's
+    and calibrate's warnings about a fitted mass."""
+    if not math.isfinite(mass_kg) or not above_max_takeoff(mass_kg, payload_kg, max_takeoff_mass_kg):
+        return None
+    load = f" + payload_kg {payload_kg:g} kg" if payload_kg else ""
+    return f"{label} {mass_kg:{fmt}} kg{load} is above drone.max_takeoff_mass_kg={max_takeoff_mass_kg:g} kg"
 
 
 def above_max_takeoff(mass_kg: float, payload_kg: float, max_takeoff_mass_kg: float | None) -> bool:
