@@ -38,9 +38,10 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
+sys.path[:0] = [str(ROOT), str(ROOT / "tests"), str(ROOT / "benchmarks")]
 
 import _spice  # noqa: E402  (the repository's netlist generator, ngspice runner and model measure)
+from _cpu import children_cpu  # noqa: E402
 
 from wpt_receiver import TABLE_I  # noqa: E402
 from wpt_receiver.switching import SwitchingConfig, SwitchingLink  # noqa: E402
@@ -85,18 +86,12 @@ def _spice_rung(rung, repeat: int) -> dict:
     text, times, cpus, vals = _netlist(method, div, reltol), [], [], None
     for _ in range(repeat):
         with tempfile.TemporaryDirectory() as tmp:
-            c0, t0 = _children_cpu(), time.perf_counter()
+            c0, t0 = children_cpu(), time.perf_counter()
             vals = _spice.run_ngspice(text, Path(tmp))
             times.append(time.perf_counter() - t0)
-            cpus.append(_children_cpu() - c0)
+            cpus.append(children_cpu() - c0)
     return {"label": label, "values": vals, "time": _stats(times), "cpu": _stats(cpus)}
 
-
-def _children_cpu() -> float:
-    """User + system CPU seconds of this process's waited-for children (ngspice runs as one)."""
-    import resource
-    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return ru.ru_utime + ru.ru_stime
 
 
 def _errors(vals: dict, ref: dict) -> dict:

@@ -32,6 +32,9 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from _cpu import children_cpu  # noqa: E402
 
 #: the training command of each shipped kind (docs/rl.md, "Shipped learned policies")
 KINDS = {
@@ -88,12 +91,6 @@ def _load() -> float:
     return float(Path("/proc/loadavg").read_text().split()[0]) if Path("/proc/loadavg").is_file() else float("nan")
 
 
-def _children_cpu() -> float:
-    """User + system CPU seconds of the finished child processes (the training runs)."""
-    import resource
-    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return ru.ru_utime + ru.ru_stime
-
 
 def train_seed(kind: str, seed: int, timesteps: int, budget, out_root: Path, link: str = "envelope") -> dict:
     """Run one seed's command (niced) into ``out_root/<kind>_s<seed>``; returns the run's record. A folder of an
@@ -109,10 +106,10 @@ def train_seed(kind: str, seed: int, timesteps: int, budget, out_root: Path, lin
     cmd = KINDS[kind].format(timesteps=timesteps, seed=seed, budget=budget_text) + f" --link {link} --out {rel}"
     rec = {"commit": _commit(), "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()), "command": cmd,
            "load_avg_1min_before": _load()}
-    t0, c0 = time.time(), _children_cpu()
+    t0, c0 = time.time(), children_cpu()
     with open(out_root / f"{kind}_s{seed}.log", "w") as log:
         rc = subprocess.run(["nice", "-n", "10", *cmd.split()], cwd=ROOT, stdout=log, stderr=subprocess.STDOUT).returncode
-    rec.update(wall_s=round(time.time() - t0, 1), cpu_s=round(_children_cpu() - c0, 1), load_avg_1min_after=_load(),
+    rec.update(wall_s=round(time.time() - t0, 1), cpu_s=round(children_cpu() - c0, 1), load_avg_1min_after=_load(),
                returncode=rc)
     return rec
 
